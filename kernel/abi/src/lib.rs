@@ -1,0 +1,17 @@
+//! The kernel's ABI: the only kernel types user space and the loader see.
+//!
+//! What lives here is a contract between separately built programs (loader, kernel, system
+//! software, partitions, host tools) and must stay stable: the boot-information block the
+//! loader hands the kernel ([`boot`]), the system-image archive format ([`sysimg`]) and the
+//! checksum they use ([`crc32`]). It must never contain kernel policy or anything that needs
+//! an allocator (the `std` feature adds host-side writers only).
+#![no_std]
+#![forbid(unsafe_op_in_unsafe_fn)]
+#![deny(unsafe_code)]
+
+#[cfg(feature = "std")]
+extern crate std;
+
+pub mod boot;
+pub mod crc32;
+pub mod sysimg;

@@ -1,0 +1,285 @@
+//! ACPI table discovery: RSDP -> XSDT/RSDT -> MADT (local APIC, IOAPICs, interrupt source
+//! overrides, CPUs) and HPET. Pure parsing over a [`PhysMemory`] view, so it is host-tested
+//! with synthetic tables; every table is length- and checksum-checked before use.
+
+extern crate alloc;
+
+use alloc::vec::Vec;
+
+/// Read access to physical memory (the direct map on the target).
+pub trait PhysMemory {
+    /// `len` bytes at physical address `phys`, or `None` if not mapped.
+    fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]>;
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IoApicInfo {
+    pub id: u8,
+    pub address: u64,
+    pub gsi_base: u32,
+}
+
+/// An ISA IRQ that the firmware wired to a different global system interrupt.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InterruptOverride {
+    pub isa_irq: u8,
+    pub gsi: u32,
+    pub flags: u16,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct AcpiInfo {
+    pub revision: u8,
+    pub local_apic_address: u64,
+    /// APIC IDs of enabled (or online-capable) processors.
+    pub cpu_apic_ids: Vec<u8>,
+    pub io_apics: Vec<IoApicInfo>,
+    pub overrides: Vec<InterruptOverride>,
+    pub hpet_address: Option<u64>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum AcpiError {
+    NoRsdp,
+    BadRsdp(&'static str),
+    Unmapped(u64),
+    BadTable([u8; 4], &'static str),
+    NoMadt,
+}
+
+impl core::fmt::Display for AcpiError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoRsdp => write!(f, "the firmware reported no ACPI RSDP"),
+            Self::BadRsdp(why) => write!(f, "invalid RSDP: {why}"),
+            Self::Unmapped(at) => write!(f, "ACPI table at {at:#x} is outside mapped memory"),
+            Self::BadTable(sig, why) => {
+                write!(f, "ACPI table {}: {why}", core::str::from_utf8(sig).unwrap_or("????"))
+            }
+            Self::NoMadt => write!(f, "no MADT (APIC table): cannot find the interrupt controllers"),
+        }
+    }
+}
+
+fn checksum_ok(bytes: &[u8]) -> bool {
+    bytes.iter().fold(0u8, |sum, b| sum.wrapping_add(*b)) == 0
+}
+
+fn u16_at(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([b[at], b[at + 1]])
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    (u32_at(b, at) as u64) | ((u32_at(b, at + 4) as u64) << 32)
+}
+
+const HEADER_LEN: usize = 36;
+
+/// A checked system-description table (header + body).
+fn table(mem: &impl PhysMemory, phys: u64) -> Result<([u8; 4], &[u8]), AcpiError> {
+    let header = mem.bytes(phys, HEADER_LEN).ok_or(AcpiError::Unmapped(phys))?;
+    let mut signature = [0u8; 4];
+    signature.copy_from_slice(&header[0..4]);
+    let len = u32_at(header, 4) as usize;
+    if len < HEADER_LEN {
+        return Err(AcpiError::BadTable(signature, "length shorter than its header"));
+    }
+    let bytes = mem.bytes(phys, len).ok_or(AcpiError::Unmapped(phys))?;
+    if !checksum_ok(bytes) {
+        return Err(AcpiError::BadTable(signature, "checksum mismatch"));
+    }
+    Ok((signature, bytes))
+}
+
+pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
+    if rsdp == 0 {
+        return Err(AcpiError::NoRsdp);
+    }
+    let v1 = mem.bytes(rsdp, 20).ok_or(AcpiError::Unmapped(rsdp))?;
+    if &v1[0..8] != b"RSD PTR " {
+        return Err(AcpiError::BadRsdp("bad signature"));
+    }
+    if !checksum_ok(v1) {
+        return Err(AcpiError::BadRsdp("checksum mismatch"));
+    }
+    let revision = v1[15];
+    // Revision 2+ has a 64-bit XSDT; otherwise use the 32-bit RSDT.
+    let (root, entry_size) = if revision >= 2 {
+        let v2 = mem.bytes(rsdp, 36).ok_or(AcpiError::Unmapped(rsdp))?;
+        if !checksum_ok(v2) {
+            return Err(AcpiError::BadRsdp("extended checksum mismatch"));
+        }
+        (u64_at(v2, 24), 8)
+    } else {
+        (u32_at(v1, 16) as u64, 4)
+    };
+    let (signature, root_table) = table(mem, root)?;
+    if signature != *b"XSDT" && signature != *b"RSDT" {
+        return Err(AcpiError::BadTable(signature, "root table is neither XSDT nor RSDT"));
+    }
+    let mut info = AcpiInfo { revision, ..AcpiInfo::default() };
+    let mut found_madt = false;
+    for entry in root_table[HEADER_LEN..].chunks_exact(entry_size) {
+        let phys = if entry_size == 8 { u64_at(entry, 0) } else { u32_at(entry, 0) as u64 };
+        let (signature, body) = table(mem, phys)?;
+        match &signature {
+            b"APIC" => {
+                parse_madt(body, &mut info)?;
+                found_madt = true;
+            }
+            b"HPET" => {
+                if body.len() < 52 {
+                    return Err(AcpiError::BadTable(signature, "too short"));
+                }
+                // Generic address structure at 40: space id 0 = system memory.
+                if body[40] == 0 {
+                    info.hpet_address = Some(u64_at(body, 44));
+                }
+            }
+            _ => {}
+        }
+    }
+    if !found_madt {
+        return Err(AcpiError::NoMadt);
+    }
+    Ok(info)
+}
+
+fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
+    const SIG: [u8; 4] = *b"APIC";
+    if madt.len() < 44 {
+        return Err(AcpiError::BadTable(SIG, "too short"));
+    }
+    info.local_apic_address = u32_at(madt, 36) as u64;
+    let mut at = 44;
+    while at + 2 <= madt.len() {
+        let (kind, len) = (madt[at], madt[at + 1] as usize);
+        if len < 2 || at + len > madt.len() {
+            return Err(AcpiError::BadTable(SIG, "entry length runs past the table"));
+        }
+        let e = &madt[at..at + len];
+        match (kind, len) {
+            // Processor local APIC: enabled (bit 0) or online capable (bit 1).
+            (0, 8) if u32_at(e, 4) & 0b11 != 0 => info.cpu_apic_ids.push(e[3]),
+            (1, 12) => info.io_apics.push(IoApicInfo { id: e[2], address: u32_at(e, 4) as u64, gsi_base: u32_at(e, 8) }),
+            (2, 10) => info.overrides.push(InterruptOverride { isa_irq: e[3], gsi: u32_at(e, 4), flags: u16_at(e, 8) }),
+            (5, 12) => info.local_apic_address = u64_at(e, 4),
+            _ => {}
+        }
+        at += len;
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::BTreeMap;
+
+    /// Physical memory made of placed byte blobs.
+    #[derive(Default)]
+    struct Fake(BTreeMap<u64, Vec<u8>>);
+
+    impl PhysMemory for Fake {
+        fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]> {
+            let (base, blob) = self.0.range(..=phys).next_back()?;
+            let off = (phys - base) as usize;
+            blob.get(off..off + len)
+        }
+    }
+
+    fn seal(mut t: Vec<u8>) -> Vec<u8> {
+        let sum = t.iter().fold(0u8, |s, b| s.wrapping_add(*b));
+        t[9] = t[9].wrapping_sub(sum);
+        t
+    }
+
+    fn sdt(signature: &[u8; 4], body: &[u8]) -> Vec<u8> {
+        let mut t = vec![0u8; HEADER_LEN];
+        t[0..4].copy_from_slice(signature);
+        t[4..8].copy_from_slice(&((HEADER_LEN + body.len()) as u32).to_le_bytes());
+        t.extend_from_slice(body);
+        seal(t)
+    }
+
+    fn rsdp_v2(xsdt: u64) -> Vec<u8> {
+        let mut r = vec![0u8; 36];
+        r[0..8].copy_from_slice(b"RSD PTR ");
+        r[15] = 2;
+        r[24..32].copy_from_slice(&xsdt.to_le_bytes());
+        let s1 = r[..20].iter().fold(0u8, |s, b| s.wrapping_add(*b));
+        r[8] = r[8].wrapping_sub(s1);
+        let s2 = r.iter().fold(0u8, |s, b| s.wrapping_add(*b));
+        r[32] = r[32].wrapping_sub(s2);
+        r
+    }
+
+    fn madt() -> Vec<u8> {
+        let mut body = vec![0u8; 8];
+        body[0..4].copy_from_slice(&0xfee0_0000u32.to_le_bytes());
+        body.extend_from_slice(&[0, 8, 0, 0, 1, 0, 0, 0]); // CPU 0, enabled
+        body.extend_from_slice(&[0, 8, 1, 1, 0, 0, 0, 0]); // CPU 1, disabled
+        body.extend_from_slice(&[1, 12, 7, 0, 0, 0, 0xc0, 0xfe, 0, 0, 0, 0]); // IOAPIC 7
+        body.extend_from_slice(&[2, 10, 0, 0, 2, 0, 0, 0, 0, 0]); // IRQ0 -> GSI2
+        sdt(b"APIC", &body)
+    }
+
+    fn hpet() -> Vec<u8> {
+        let mut body = vec![0u8; 20];
+        body[4] = 0; // system memory
+        body[8..16].copy_from_slice(&0xfed0_0000u64.to_le_bytes());
+        sdt(b"HPET", &body)
+    }
+
+    fn system(tables: Vec<Vec<u8>>) -> Fake {
+        let mut mem = Fake::default();
+        let mut xsdt_body = Vec::new();
+        for (i, t) in tables.into_iter().enumerate() {
+            let at = 0x10_0000 + i as u64 * 0x1000;
+            xsdt_body.extend_from_slice(&at.to_le_bytes());
+            mem.0.insert(at, t);
+        }
+        mem.0.insert(0x9000, sdt(b"XSDT", &xsdt_body));
+        mem.0.insert(0xe0000, rsdp_v2(0x9000));
+        mem
+    }
+
+    #[test]
+    fn finds_interrupt_controllers_and_hpet() {
+        let mem = system(vec![madt(), hpet()]);
+        let info = parse(0xe0000, &mem).unwrap();
+        assert_eq!(info.local_apic_address, 0xfee0_0000);
+        assert_eq!(info.cpu_apic_ids, vec![0]);
+        assert_eq!(info.io_apics, vec![IoApicInfo { id: 7, address: 0xfec0_0000, gsi_base: 0 }]);
+        assert_eq!(info.overrides, vec![InterruptOverride { isa_irq: 0, gsi: 2, flags: 0 }]);
+        assert_eq!(info.hpet_address, Some(0xfed0_0000));
+    }
+
+    #[test]
+    fn rejects_bad_checksums_and_missing_tables() {
+        assert_eq!(parse(0, &Fake::default()), Err(AcpiError::NoRsdp));
+        let mut mem = system(vec![madt()]);
+        mem.0.get_mut(&0x10_0000).unwrap()[40] ^= 0xff;
+        assert_eq!(parse(0xe0000, &mem), Err(AcpiError::BadTable(*b"APIC", "checksum mismatch")));
+        let mem = system(vec![hpet()]);
+        assert_eq!(parse(0xe0000, &mem), Err(AcpiError::NoMadt));
+        let mut mem = system(vec![madt()]);
+        mem.0.get_mut(&0xe0000).unwrap()[0] = b'X';
+        assert_eq!(parse(0xe0000, &mem), Err(AcpiError::BadRsdp("bad signature")));
+    }
+
+    #[test]
+    fn truncated_madt_entry_is_an_error_not_a_panic() {
+        let mut body = vec![0u8; 8];
+        body.extend_from_slice(&[1, 40, 0, 0]); // claims 40 bytes, has 4
+        let mem = system(vec![sdt(b"APIC", &body)]);
+        assert_eq!(
+            parse(0xe0000, &mem),
+            Err(AcpiError::BadTable(*b"APIC", "entry length runs past the table"))
+        );
+    }
+}

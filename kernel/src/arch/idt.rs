@@ -1,0 +1,256 @@
+//! The IDT and the interrupt/exception entry stubs (stable-Rust naked functions).
+//!
+//! Every stub pushes a uniform [`TrapFrame`] (a dummy error code where the CPU pushes none,
+//! then the vector) and calls [`dispatch`]. CPU exceptions in the kernel are fatal: they are
+//! reported (vector name, error code, RIP, RSP, CR2 for #PF, all registers) and the run ends
+//! with the failure exit.
+
+use super::gdt;
+use crate::kprintln;
+use core::arch::naked_asm;
+use spin::Lazy;
+use x86_64::VirtAddr;
+use x86_64::instructions::tables::lidt;
+use x86_64::structures::DescriptorTablePointer;
+
+/// Vector of the local APIC timer.
+pub const TIMER_VECTOR: u8 = 0x30;
+/// Vector the local APIC uses for spurious interrupts (must end in 0xf on old CPUs).
+pub const SPURIOUS_VECTOR: u8 = 0xff;
+
+/// Register state saved by the entry stubs, lowest address first.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct TrapFrame {
+    pub r15: u64,
+    pub r14: u64,
+    pub r13: u64,
+    pub r12: u64,
+    pub r11: u64,
+    pub r10: u64,
+    pub r9: u64,
+    pub r8: u64,
+    pub rbp: u64,
+    pub rdi: u64,
+    pub rsi: u64,
+    pub rdx: u64,
+    pub rcx: u64,
+    pub rbx: u64,
+    pub rax: u64,
+    pub vector: u64,
+    pub error_code: u64,
+    // Pushed by the CPU.
+    pub rip: u64,
+    pub cs: u64,
+    pub rflags: u64,
+    pub rsp: u64,
+    pub ss: u64,
+}
+
+/// Short mnemonic and description of each architectural exception vector.
+pub fn exception_name(vector: u64) -> (&'static str, &'static str) {
+    const NAMES: [(&str, &str); 32] = [
+        ("#DE", "divide error"),
+        ("#DB", "debug"),
+        ("NMI", "non-maskable interrupt"),
+        ("#BP", "breakpoint"),
+        ("#OF", "overflow"),
+        ("#BR", "bound range exceeded"),
+        ("#UD", "invalid opcode"),
+        ("#NM", "device not available"),
+        ("#DF", "double fault"),
+        ("#CSO", "coprocessor segment overrun"),
+        ("#TS", "invalid TSS"),
+        ("#NP", "segment not present"),
+        ("#SS", "stack-segment fault"),
+        ("#GP", "general protection fault"),
+        ("#PF", "page fault"),
+        ("#15", "reserved"),
+        ("#MF", "x87 floating-point error"),
+        ("#AC", "alignment check"),
+        ("#MC", "machine check"),
+        ("#XM", "SIMD floating-point exception"),
+        ("#VE", "virtualization exception"),
+        ("#CP", "control protection"),
+        ("#22", "reserved"),
+        ("#23", "reserved"),
+        ("#24", "reserved"),
+        ("#25", "reserved"),
+        ("#26", "reserved"),
+        ("#27", "reserved"),
+        ("#HV", "hypervisor injection"),
+        ("#VC", "VMM communication"),
+        ("#SX", "security exception"),
+        ("#31", "reserved"),
+    ];
+    NAMES.get(vector as usize).copied().unwrap_or(("#??", "not an exception"))
+}
+
+#[unsafe(naked)]
+unsafe extern "sysv64" fn common_entry() {
+    naked_asm!(
+        "push rax", "push rbx", "push rcx", "push rdx", "push rsi", "push rdi", "push rbp",
+        "push r8", "push r9", "push r10", "push r11", "push r12", "push r13", "push r14", "push r15",
+        "mov rdi, rsp",
+        "cld",
+        "call {dispatch}",
+        "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
+        "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
+        "add rsp, 16",
+        "iretq",
+        dispatch = sym dispatch,
+    )
+}
+
+macro_rules! stub {
+    ($name:ident, $vector:expr, error_code) => {
+        #[unsafe(naked)]
+        unsafe extern "sysv64" fn $name() {
+            naked_asm!("push {v}", "jmp {c}", v = const $vector, c = sym common_entry)
+        }
+    };
+    ($name:ident, $vector:expr) => {
+        #[unsafe(naked)]
+        unsafe extern "sysv64" fn $name() {
+            naked_asm!("push 0", "push {v}", "jmp {c}", v = const $vector, c = sym common_entry)
+        }
+    };
+}
+
+stub!(vec0, 0);
+stub!(vec1, 1);
+stub!(vec2, 2);
+stub!(vec3, 3);
+stub!(vec4, 4);
+stub!(vec5, 5);
+stub!(vec6, 6);
+stub!(vec7, 7);
+stub!(vec8, 8, error_code);
+stub!(vec9, 9);
+stub!(vec10, 10, error_code);
+stub!(vec11, 11, error_code);
+stub!(vec12, 12, error_code);
+stub!(vec13, 13, error_code);
+stub!(vec14, 14, error_code);
+stub!(vec15, 15);
+stub!(vec16, 16);
+stub!(vec17, 17, error_code);
+stub!(vec18, 18);
+stub!(vec19, 19);
+stub!(vec20, 20);
+stub!(vec21, 21, error_code);
+stub!(vec22, 22);
+stub!(vec23, 23);
+stub!(vec24, 24);
+stub!(vec25, 25);
+stub!(vec26, 26);
+stub!(vec27, 27);
+stub!(vec28, 28);
+stub!(vec29, 29, error_code);
+stub!(vec30, 30, error_code);
+stub!(vec31, 31);
+stub!(legacy_pic, super::pic::VECTOR_BASE);
+stub!(timer, TIMER_VECTOR);
+stub!(spurious, SPURIOUS_VECTOR);
+
+type Stub = unsafe extern "sysv64" fn();
+
+const EXCEPTION_STUBS: [Stub; 32] = [
+    vec0, vec1, vec2, vec3, vec4, vec5, vec6, vec7, vec8, vec9, vec10, vec11, vec12, vec13, vec14, vec15,
+    vec16, vec17, vec18, vec19, vec20, vec21, vec22, vec23, vec24, vec25, vec26, vec27, vec28, vec29,
+    vec30, vec31,
+];
+
+/// One 16-byte interrupt-gate descriptor.
+#[repr(C)]
+#[derive(Clone, Copy, Default)]
+struct Gate {
+    offset_low: u16,
+    selector: u16,
+    ist: u8,
+    attributes: u8,
+    offset_mid: u16,
+    offset_high: u32,
+    reserved: u32,
+}
+
+impl Gate {
+    /// Present, DPL 0, 64-bit interrupt gate (interrupts stay off in the handler).
+    fn interrupt(handler: Stub, ist: u16) -> Self {
+        let addr = handler as *const () as u64;
+        Gate {
+            offset_low: addr as u16,
+            selector: gdt::selectors().kernel_code.0,
+            ist: ist as u8,
+            attributes: 0x8e,
+            offset_mid: (addr >> 16) as u16,
+            offset_high: (addr >> 32) as u32,
+            reserved: 0,
+        }
+    }
+}
+
+#[repr(C, align(16))]
+struct Idt([Gate; 256]);
+
+static IDT: Lazy<Idt> = Lazy::new(|| {
+    let mut idt = Idt([Gate::default(); 256]);
+    for (vector, stub) in EXCEPTION_STUBS.into_iter().enumerate() {
+        let ist = match vector {
+            2 => gdt::NMI_IST,
+            8 => gdt::DOUBLE_FAULT_IST,
+            18 => gdt::MACHINE_CHECK_IST,
+            _ => 0,
+        };
+        idt.0[vector] = Gate::interrupt(stub, ist);
+    }
+    for v in 0..16 {
+        idt.0[(super::pic::VECTOR_BASE + v) as usize] = Gate::interrupt(legacy_pic, 0);
+    }
+    idt.0[TIMER_VECTOR as usize] = Gate::interrupt(timer, 0);
+    idt.0[SPURIOUS_VECTOR as usize] = Gate::interrupt(spurious, 0);
+    idt
+});
+
+pub fn init() {
+    let idt: &'static Idt = &IDT;
+    let pointer = DescriptorTablePointer {
+        limit: (core::mem::size_of::<Idt>() - 1) as u16,
+        base: VirtAddr::new(idt as *const Idt as u64),
+    };
+    // SAFETY: the IDT is a static that lives forever and every present gate points to a stub.
+    unsafe { lidt(&pointer) };
+}
+
+extern "sysv64" fn dispatch(frame: &mut TrapFrame) {
+    match frame.vector {
+        0..=31 => fatal_exception(frame),
+        v if v == TIMER_VECTOR as u64 => {
+            crate::time::on_timer_interrupt();
+            super::lapic::end_of_interrupt();
+        }
+        // Masked legacy PIC: only spurious IRQ 7/15 can arrive; they need no EOI.
+        v if v == super::pic::VECTOR_BASE as u64 => {}
+        v if v == SPURIOUS_VECTOR as u64 => {}
+        other => panic!("unexpected interrupt vector {other:#x}"),
+    }
+}
+
+fn fatal_exception(frame: &TrapFrame) -> ! {
+    crate::log::force_unlock();
+    let (mnemonic, description) = exception_name(frame.vector);
+    let mode = if frame.cs & 3 == 3 { "user" } else { "kernel" };
+    kprintln!(
+        "EXCEPTION {mnemonic} ({description}, vector {}) error={:#x} in {mode} mode",
+        frame.vector,
+        frame.error_code
+    );
+    let cr2 = x86_64::registers::control::Cr2::read_raw();
+    kprintln!("  rip={:#018x} rsp={:#018x} cr2={cr2:#018x} rflags={:#x}", frame.rip, frame.rsp, frame.rflags);
+    kprintln!("  rax={:#018x} rbx={:#018x} rcx={:#018x} rdx={:#018x}", frame.rax, frame.rbx, frame.rcx, frame.rdx);
+    kprintln!("  rsi={:#018x} rdi={:#018x} rbp={:#018x} r8 ={:#018x}", frame.rsi, frame.rdi, frame.rbp, frame.r8);
+    kprintln!("  r9 ={:#018x} r10={:#018x} r11={:#018x} r12={:#018x}", frame.r9, frame.r10, frame.r11, frame.r12);
+    kprintln!("  r13={:#018x} r14={:#018x} r15={:#018x}", frame.r13, frame.r14, frame.r15);
+    kprintln!("kernel: fatal exception, halting with failure");
+    crate::qemu::exit(crate::qemu::ExitCode::Failure)
+}

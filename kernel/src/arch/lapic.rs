@@ -1,0 +1,89 @@
+//! Local APIC (xAPIC, MMIO through the direct map): enable, timer, end-of-interrupt.
+
+use crate::mem::phys_to_virt;
+use core::ptr::NonNull;
+use core::sync::atomic::{AtomicU64, Ordering};
+use volatile::VolatilePtr;
+
+const ID: usize = 0x20;
+const VERSION: usize = 0x30;
+const TASK_PRIORITY: usize = 0x80;
+const EOI: usize = 0xb0;
+const SPURIOUS: usize = 0xf0;
+const LVT_TIMER: usize = 0x320;
+const LVT_LINT0: usize = 0x350;
+const LVT_LINT1: usize = 0x360;
+const LVT_ERROR: usize = 0x370;
+const TIMER_INITIAL: usize = 0x380;
+const TIMER_CURRENT: usize = 0x390;
+const TIMER_DIVIDE: usize = 0x3e0;
+
+const LVT_MASKED: u32 = 1 << 16;
+const TIMER_PERIODIC: u32 = 1 << 17;
+/// Divide configuration 0b0011 = divide by 16.
+const DIVIDE_BY_16: u32 = 0x3;
+pub const TIMER_DIVISOR: u64 = 16;
+
+/// Virtual address of the register page; 0 until [`init`].
+static BASE: AtomicU64 = AtomicU64::new(0);
+
+fn register(offset: usize) -> VolatilePtr<'static, u32> {
+    let base = BASE.load(Ordering::Relaxed);
+    assert!(base != 0, "local APIC used before init");
+    // SAFETY: `base` is the direct-map address of the APIC register page found via ACPI;
+    // every offset used here is a 16-byte-aligned 32-bit register inside that page.
+    unsafe { VolatilePtr::new(NonNull::new_unchecked((base as usize + offset) as *mut u32)) }
+}
+
+fn read(offset: usize) -> u32 {
+    register(offset).read()
+}
+
+fn write(offset: usize, value: u32) {
+    register(offset).write(value)
+}
+
+/// Enables the local APIC at physical address `phys` with every local interrupt masked.
+pub fn init(phys: u64) -> (u32, u32) {
+    // IA32_APIC_BASE bit 11: global enable (firmware normally leaves it on).
+    const IA32_APIC_BASE: u32 = 0x1b;
+    let mut msr = x86_64::registers::model_specific::Msr::new(IA32_APIC_BASE);
+    // SAFETY: setting the global-enable bit of an APIC that exists (MADT listed it).
+    unsafe { msr.write(msr.read() | (1 << 11)) };
+    BASE.store(phys_to_virt(phys), Ordering::Relaxed);
+    write(TASK_PRIORITY, 0);
+    write(LVT_TIMER, LVT_MASKED);
+    write(LVT_LINT0, LVT_MASKED);
+    write(LVT_LINT1, LVT_MASKED);
+    write(LVT_ERROR, LVT_MASKED);
+    write(SPURIOUS, 0x100 | super::idt::SPURIOUS_VECTOR as u32);
+    (read(ID) >> 24, read(VERSION) & 0xff)
+}
+
+pub fn end_of_interrupt() {
+    write(EOI, 0);
+}
+
+/// Starts a masked one-shot count from the maximum; used for calibration.
+pub fn start_calibration_count() {
+    write(TIMER_DIVIDE, DIVIDE_BY_16);
+    write(LVT_TIMER, LVT_MASKED);
+    write(TIMER_INITIAL, u32::MAX);
+}
+
+/// Ticks (after the divider) since [`start_calibration_count`].
+pub fn calibration_ticks() -> u64 {
+    (u32::MAX - read(TIMER_CURRENT)) as u64
+}
+
+/// Fires `vector` every `ticks` timer ticks (after the divider).
+pub fn start_periodic(vector: u8, ticks: u32) {
+    write(TIMER_DIVIDE, DIVIDE_BY_16);
+    write(LVT_TIMER, TIMER_PERIODIC | vector as u32);
+    write(TIMER_INITIAL, ticks.max(1));
+}
+
+pub fn stop_timer() {
+    write(LVT_TIMER, LVT_MASKED);
+    write(TIMER_INITIAL, 0);
+}

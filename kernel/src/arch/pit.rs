@@ -1,0 +1,29 @@
+//! The 8254 PIT, used only as a known clock for calibration: channel 2 counts down once
+//! with its gate driven through port 0x61, without interrupts.
+
+use super::cpu::{inb, outb, rdtsc};
+
+pub const FREQUENCY_HZ: u64 = 1_193_182;
+
+/// Busy-waits `ms` milliseconds (at most 50) on PIT channel 2 and returns the TSC ticks
+/// that passed, or `None` if the PIT never signalled (no PIT present).
+pub fn tsc_ticks_for_ms(ms: u64) -> Option<u64> {
+    let count = (FREQUENCY_HZ * ms.min(50) / 1000) as u16;
+    let gate = inb(0x61);
+    outb(0x61, (gate & !0x02) | 0x01); // gate on, speaker off
+    outb(0x43, 0b1011_0000); // channel 2, lobyte/hibyte, mode 0, binary
+    outb(0x42, count as u8);
+    outb(0x42, (count >> 8) as u8);
+    // Restart the count by toggling the gate.
+    let g = inb(0x61);
+    outb(0x61, g & !0x01);
+    outb(0x61, g | 0x01);
+    let start = rdtsc();
+    // OUT2 (bit 5) goes high when the count reaches zero. Give up after 10^7 polls (seconds even under emulation).
+    for _ in 0..10_000_000u64 {
+        if inb(0x61) & 0x20 != 0 {
+            return Some(rdtsc() - start);
+        }
+    }
+    None
+}

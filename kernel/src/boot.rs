@@ -1,0 +1,255 @@
+//! The boot sequence, from the loader's hand-off to "ready". Each step logs what it found so
+//! the serial log doubles as a hardware report.
+
+use crate::acpi::{self, PhysMemory};
+use crate::arch::{cpu, gdt, hpet::Hpet, idt, ioapic::IoApic, lapic, pic, pit};
+use crate::heap::BootHeap;
+use crate::mem::frames::{FrameAllocator, FrameLinks};
+use crate::mem::{PAGE_SIZE, phys_to_virt};
+use crate::{kprintln, time};
+use abi::boot::{BootInfo, MemoryKind, MemoryRegion};
+use abi::sysimg::SystemImage;
+use spin::{Mutex, Once};
+
+pub const VERSION: &str = env!("CARGO_PKG_VERSION");
+
+/// Frames handed out by the kernel. Low memory (< 1 MiB) is never used.
+pub static FRAMES: Once<Mutex<FrameAllocator>> = Once::new();
+const FRAME_FLOOR: u64 = 0x10_0000;
+
+/// Frame links through the direct map.
+pub struct DirectMapLinks;
+
+impl FrameLinks for DirectMapLinks {
+    fn next(&self, frame: u64) -> u64 {
+        // SAFETY: `frame` is a free frame owned by the allocator, mapped by the direct map.
+        unsafe { (phys_to_virt(frame) as *const u64).read() }
+    }
+    fn set_next(&mut self, frame: u64, next: u64) {
+        // SAFETY: as above; the frame is free, so nothing else reads or writes it.
+        unsafe { (phys_to_virt(frame) as *mut u64).write(next) }
+    }
+}
+
+/// Physical memory seen through the direct map, limited to what the loader mapped.
+struct DirectMap {
+    size: u64,
+}
+
+impl PhysMemory for DirectMap {
+    fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]> {
+        if phys.checked_add(len as u64)? > self.size {
+            return None;
+        }
+        // SAFETY: the range lies inside the direct map (checked above), which maps all of it
+        // read/write for the kernel's lifetime; ACPI tables are not written concurrently.
+        Some(unsafe { core::slice::from_raw_parts(phys_to_virt(phys) as *const u8, len) })
+    }
+}
+
+/// The loader's identity-mapped trampoline is the only lower-half mapping; dropping the whole
+/// lower half of the PML4 leaves user space an empty half.
+fn drop_lower_half() {
+    let (frame, _) = x86_64::registers::control::Cr3::read();
+    let pml4 = phys_to_virt(frame.start_address().as_u64()) as *mut u64;
+    for slot in 0..256 {
+        // SAFETY: `pml4` is the live top-level table (through the direct map); clearing
+        // lower-half slots only unmaps the trampoline, which is no longer executing.
+        unsafe { pml4.add(slot).write(0) };
+    }
+    x86_64::instructions::tlb::flush_all();
+}
+
+pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
+    let entry_tsc = cpu::rdtsc();
+    drop_lower_half();
+    time::set_boot_tsc(entry_tsc);
+    crate::log::init();
+    // A first TSC estimate from the PIT so that every log line carries a real timestamp.
+    match pit::tsc_ticks_for_ms(10) {
+        Some(ticks) => time::set_tsc_hz(ticks * 100),
+        None => panic!("PIT did not count: no reference clock to calibrate the TSC"),
+    }
+    kprintln!("Warden partitioning microkernel {VERSION} (x86_64, UEFI)");
+
+    // SAFETY: the loader passes the direct-map address of a BootInfo it filled in.
+    let info: &BootInfo = unsafe { &*(boot_info as *const BootInfo) };
+    if let Err(why) = info.check() {
+        panic!("boot info rejected: {why}");
+    }
+    kprintln!(
+        "boot: loader handed over {} us before entry; lower half unmapped",
+        time::ticks_to_ns(entry_tsc.wrapping_sub(info.tsc_at_handoff), time::tsc_hz()) / 1000
+    );
+
+    gdt::init();
+    idt::init();
+    kprintln!("cpu: GDT, TSS (IST for #DF, NMI, #MC) and IDT loaded");
+    heap.init();
+
+    // SAFETY: the loader placed `memory_region_count` regions at `memory_regions` (physical),
+    // inside BOOT_INFO memory that stays reserved and unmodified.
+    let regions: &[MemoryRegion] = unsafe {
+        core::slice::from_raw_parts(
+            phys_to_virt(info.memory_regions) as *const MemoryRegion,
+            info.memory_region_count as usize,
+        )
+    };
+    log_memory_summary(regions);
+    let frames = FrameAllocator::new(regions, FRAME_FLOOR);
+    kprintln!(
+        "memory: frame allocator manages {} frames ({} MiB){}",
+        frames.total_frames(),
+        frames.total_frames() * PAGE_SIZE >> 20,
+        if frames.ignored_ranges() > 0 { " (some ranges ignored: too many)" } else { "" }
+    );
+    FRAMES.call_once(|| Mutex::new(frames));
+
+    pic::remap_and_mask();
+    let direct_map = DirectMap { size: info.direct_map_size };
+    let acpi = acpi::parse(info.rsdp, &direct_map).unwrap_or_else(|e| panic!("ACPI: {e}"));
+    kprintln!(
+        "acpi: revision {}, {} CPU(s), {} IOAPIC(s), {} ISA override(s), HPET {}",
+        acpi.revision,
+        acpi.cpu_apic_ids.len(),
+        acpi.io_apics.len(),
+        acpi.overrides.len(),
+        if acpi.hpet_address.is_some() { "present" } else { "absent" }
+    );
+    let (apic_id, apic_version) = lapic::init(acpi.local_apic_address);
+    kprintln!("apic: local APIC id {apic_id} version {apic_version:#x} at {:#x}; legacy PIC masked", acpi.local_apic_address);
+    for io in &acpi.io_apics {
+        // SAFETY: the address comes from the MADT's IOAPIC entry.
+        let ioapic = unsafe { IoApic::new(io.address) };
+        ioapic.mask_all();
+        kprintln!("apic: IOAPIC id {} at {:#x}, GSI {}..{}, all lines masked", io.id, io.address, io.gsi_base, io.gsi_base + ioapic.line_count() - 1);
+    }
+
+    let apic_timer_hz = calibrate(acpi.hpet_address);
+    prove_timer(apic_timer_hz);
+
+    // SAFETY: the loader copied system.img to SYSTEM_IMAGE frames that stay reserved; the
+    // direct map covers them.
+    let image_bytes = unsafe {
+        core::slice::from_raw_parts(phys_to_virt(info.system_image.start) as *const u8, info.system_image.len as usize)
+    };
+    let image = SystemImage::parse(image_bytes).unwrap_or_else(|e| panic!("system.img: {e}"));
+    kprintln!("sysimg: {} bytes, {} entries", image.size(), image.len());
+    for entry in image.entries() {
+        kprintln!("sysimg:   {:<24} {:>8} bytes", entry.name, entry.data.len());
+    }
+
+    kprintln!("heap: {} bytes of {} KiB used at boot; sealed", heap.used(), crate::heap::BOOT_HEAP_SIZE / 1024);
+    heap.seal();
+    kprintln!("kernel: ready");
+
+    #[cfg(feature = "test-hooks")]
+    crate::test_hooks::run(&image, apic_timer_hz);
+
+    idle()
+}
+
+fn log_memory_summary(regions: &[MemoryRegion]) {
+    let kinds = [
+        MemoryKind::USABLE,
+        MemoryKind::LOADER,
+        MemoryKind::KERNEL,
+        MemoryKind::PAGE_TABLES,
+        MemoryKind::SYSTEM_IMAGE,
+        MemoryKind::BOOT_INFO,
+        MemoryKind::ACPI_RECLAIMABLE,
+        MemoryKind::ACPI_NVS,
+        MemoryKind::FIRMWARE_RUNTIME,
+        MemoryKind::MMIO,
+        MemoryKind::RESERVED,
+    ];
+    // Firmware "reserved" ranges include address space that is not RAM (e.g. PCIe ECAM).
+    let ram: u64 = regions
+        .iter()
+        .filter(|r| r.kind != MemoryKind::MMIO && r.kind != MemoryKind::RESERVED)
+        .map(|r| r.pages)
+        .sum();
+    kprintln!("memory: {} regions, {} MiB of RAM", regions.len(), ram * PAGE_SIZE >> 20);
+    for kind in kinds {
+        let pages: u64 = regions.iter().filter(|r| r.kind == kind).map(|r| r.pages).sum();
+        if pages > 0 {
+            kprintln!("memory:   {:<16} {:>8} KiB", kind.name(), pages * PAGE_SIZE / 1024);
+        }
+    }
+    let unknown = regions.iter().filter(|r| r.kind.name() == "unknown").count();
+    if unknown > 0 {
+        kprintln!("memory:   {unknown} region(s) of unknown kind treated as reserved");
+    }
+}
+
+/// Measures TSC and APIC-timer frequencies over 20 ms of a reference clock (HPET if ACPI
+/// lists one, else the PIT). Returns APIC timer ticks per second (after its divider).
+fn calibrate(hpet_address: Option<u64>) -> u64 {
+    const WINDOW_MS: u64 = 20;
+    // SAFETY: the address comes from the ACPI HPET table.
+    let hpet = hpet_address.and_then(|a| unsafe { Hpet::new(a) });
+    let (reference, tsc_ticks, apic_ticks) = match &hpet {
+        Some(hpet) => {
+            let wait = hpet.frequency_hz() * WINDOW_MS / 1000;
+            lapic::start_calibration_count();
+            let (h0, t0) = (hpet.counter(), cpu::rdtsc());
+            hpet.wait_until(h0, wait);
+            let (t1, a1) = (cpu::rdtsc(), lapic::calibration_ticks());
+            ("HPET", t1 - t0, a1)
+        }
+        None => {
+            lapic::start_calibration_count();
+            let tsc = pit::tsc_ticks_for_ms(WINDOW_MS).unwrap_or_else(|| panic!("PIT did not count"));
+            ("PIT", tsc, lapic::calibration_ticks())
+        }
+    };
+    lapic::stop_timer();
+    let tsc_hz = tsc_ticks * 1000 / WINDOW_MS;
+    let apic_hz = apic_ticks * 1000 / WINDOW_MS;
+    time::set_tsc_hz(tsc_hz);
+    kprintln!(
+        "timer: calibrated against {reference} over {WINDOW_MS} ms: TSC {}.{:03} MHz, APIC timer {}.{:03} MHz (bus {} MHz / {})",
+        tsc_hz / 1_000_000,
+        tsc_hz / 1000 % 1000,
+        apic_hz / 1_000_000,
+        apic_hz / 1000 % 1000,
+        apic_hz * lapic::TIMER_DIVISOR / 1_000_000,
+        lapic::TIMER_DIVISOR
+    );
+    if apic_hz == 0 {
+        panic!("APIC timer did not count during calibration");
+    }
+    apic_hz
+}
+
+/// Runs the APIC timer at `rate_hz` until `count` interrupts arrived; returns the elapsed ns.
+/// Panics if they do not arrive within a generous bound, so a dead timer cannot go unnoticed.
+pub fn count_timer_interrupts(apic_timer_hz: u64, rate_hz: u64, count: u64) -> u64 {
+    let start_count = time::timer_interrupts();
+    let start = time::since_boot_ns();
+    let deadline = start + 2_000_000_000 + count * 20_000_000_000 / rate_hz;
+    lapic::start_periodic(idt::TIMER_VECTOR, (apic_timer_hz / rate_hz) as u32);
+    while time::timer_interrupts() - start_count < count {
+        // Enable interrupts and halt atomically (sti; hlt) so no tick is lost in between.
+        x86_64::instructions::interrupts::enable_and_hlt();
+        x86_64::instructions::interrupts::disable();
+        if time::since_boot_ns() > deadline {
+            panic!("timer interrupts stopped: {} of {count} arrived", time::timer_interrupts() - start_count);
+        }
+    }
+    lapic::stop_timer();
+    time::since_boot_ns() - start
+}
+
+fn prove_timer(apic_timer_hz: u64) {
+    const TICKS: u64 = 10;
+    let ns = count_timer_interrupts(apic_timer_hz, 1000, TICKS);
+    kprintln!("timer: {TICKS} interrupts at 1 kHz took {}.{:03} ms", ns / 1_000_000, ns / 1000 % 1000);
+}
+
+/// Nothing left to do on this CPU: sleep until an interrupt (none is enabled yet).
+fn idle() -> ! {
+    loop {
+        x86_64::instructions::interrupts::enable_and_hlt();
+    }
+}

@@ -1,0 +1,48 @@
+//! The kernel binary: the entry point the loader jumps to, the panic handler and the boot
+//! heap. Everything else lives in the library (`kernel::*`) so pure logic is host-testable.
+#![no_std]
+#![no_main]
+#![forbid(unsafe_op_in_unsafe_fn)]
+
+use kernel::{boot, heap, kprintln, log, qemu};
+
+const BOOT_STACK_SIZE: usize = 64 * 1024;
+
+#[repr(C, align(16))]
+struct BootStack([u8; BOOT_STACK_SIZE]);
+
+/// The one kernel stack (the kernel is non-preemptible; see DESIGN.md section 6).
+static mut BOOT_STACK: BootStack = BootStack([0; BOOT_STACK_SIZE]);
+
+#[global_allocator]
+static HEAP: heap::BootHeap = heap::BootHeap::new();
+
+/// Entry from the loader: `rdi` = virtual address of the `BootInfo`, interrupts off, the
+/// loader's stack unmapped. Sets up our stack before touching memory, then never returns.
+#[unsafe(no_mangle)]
+#[unsafe(naked)]
+pub unsafe extern "sysv64" fn _start(boot_info: u64) -> ! {
+    core::arch::naked_asm!(
+        "lea rsp, [rip + {stack} + {size}]",
+        "xor ebp, ebp",
+        "call {main}",
+        "ud2",
+        stack = sym BOOT_STACK,
+        size = const BOOT_STACK_SIZE,
+        main = sym kernel_entry,
+    )
+}
+
+extern "sysv64" fn kernel_entry(boot_info: u64) -> ! {
+    boot::start(boot_info, &HEAP)
+}
+
+#[panic_handler]
+fn panic(info: &core::panic::PanicInfo) -> ! {
+    log::force_unlock();
+    match info.location() {
+        Some(at) => kprintln!("KERNEL PANIC at {}:{}:{}: {}", at.file(), at.line(), at.column(), info.message()),
+        None => kprintln!("KERNEL PANIC: {}", info.message()),
+    }
+    qemu::exit(qemu::ExitCode::Failure)
+}

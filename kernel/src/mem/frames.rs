@@ -1,0 +1,186 @@
+//! Physical frame allocator over the loader's memory map.
+//!
+//! O(1) in both directions and without a heap: never-used frames are taken from the usable
+//! ranges with a bump pointer; freed frames form an intrusive list (each free frame stores
+//! the address of the next one in its first 8 bytes, written through [`FrameLinks`], which
+//! is the direct map on the target and a table in host tests). Only [`MemoryKind::USABLE`]
+//! memory at or above a floor is ever handed out: loader, kernel, page tables, system image,
+//! boot info, ACPI and firmware regions stay reserved.
+
+use abi::boot::{MemoryKind, MemoryRegion};
+
+const PAGE: u64 = 4096;
+
+/// At most this many usable ranges are managed; more are reported as ignored.
+pub const MAX_RANGES: usize = 64;
+
+/// How the allocator reads and writes the link stored in a free frame.
+pub trait FrameLinks {
+    fn next(&self, frame: u64) -> u64;
+    fn set_next(&mut self, frame: u64, next: u64);
+}
+
+#[derive(Clone, Copy, Default, Debug)]
+struct Range {
+    next: u64,
+    end: u64,
+}
+
+/// Sentinel for "no frame" in the free list (frame 0 is below every floor we accept).
+const NONE: u64 = 0;
+
+#[derive(Debug)]
+pub struct FrameAllocator {
+    ranges: [Range; MAX_RANGES],
+    range_count: usize,
+    /// Index of the first range whose bump pointer may still have frames.
+    current: usize,
+    free_list: u64,
+    free_frames: u64,
+    total_frames: u64,
+    ignored_ranges: usize,
+}
+
+impl FrameAllocator {
+    /// Manages the usable regions of `regions` above `floor` (page-aligned inward).
+    pub fn new(regions: &[MemoryRegion], floor: u64) -> Self {
+        let floor = floor.max(PAGE);
+        let mut a = FrameAllocator {
+            ranges: [Range::default(); MAX_RANGES],
+            range_count: 0,
+            current: 0,
+            free_list: NONE,
+            free_frames: 0,
+            total_frames: 0,
+            ignored_ranges: 0,
+        };
+        for r in regions.iter().filter(|r| r.kind == MemoryKind::USABLE) {
+            let start = r.start.max(floor).next_multiple_of(PAGE);
+            let end = r.end() & !(PAGE - 1);
+            if start >= end {
+                continue;
+            }
+            if a.range_count == MAX_RANGES {
+                a.ignored_ranges += 1;
+                continue;
+            }
+            a.ranges[a.range_count] = Range { next: start, end };
+            a.range_count += 1;
+            a.total_frames += (end - start) / PAGE;
+        }
+        a.free_frames = a.total_frames;
+        a
+    }
+
+    pub fn allocate(&mut self, links: &impl FrameLinks) -> Option<u64> {
+        if self.free_list != NONE {
+            let frame = self.free_list;
+            self.free_list = links.next(frame);
+            self.free_frames -= 1;
+            return Some(frame);
+        }
+        while self.current < self.range_count {
+            let range = &mut self.ranges[self.current];
+            if range.next < range.end {
+                let frame = range.next;
+                range.next += PAGE;
+                self.free_frames -= 1;
+                return Some(frame);
+            }
+            self.current += 1;
+        }
+        None
+    }
+
+    /// Returns a frame previously obtained from [`allocate`](Self::allocate).
+    pub fn free(&mut self, frame: u64, links: &mut impl FrameLinks) {
+        debug_assert!(frame % PAGE == 0 && frame != NONE);
+        links.set_next(frame, self.free_list);
+        self.free_list = frame;
+        self.free_frames += 1;
+    }
+
+    pub fn free_frames(&self) -> u64 {
+        self.free_frames
+    }
+
+    pub fn total_frames(&self) -> u64 {
+        self.total_frames
+    }
+
+    pub fn ignored_ranges(&self) -> usize {
+        self.ignored_ranges
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::HashMap;
+
+    #[derive(Default)]
+    struct FakeLinks(HashMap<u64, u64>);
+
+    impl FrameLinks for FakeLinks {
+        fn next(&self, frame: u64) -> u64 {
+            self.0[&frame]
+        }
+        fn set_next(&mut self, frame: u64, next: u64) {
+            self.0.insert(frame, next);
+        }
+    }
+
+    fn region(start: u64, pages: u64, kind: MemoryKind) -> MemoryRegion {
+        MemoryRegion { start, pages, kind, _reserved: 0 }
+    }
+
+    #[test]
+    fn hands_out_only_usable_frames_above_the_floor() {
+        let map = [
+            region(0, 16, MemoryKind::USABLE),           // below the 1 MiB floor
+            region(0x10_0000, 2, MemoryKind::USABLE),    // 2 frames
+            region(0x10_2000, 4, MemoryKind::KERNEL),    // reserved
+            region(0x20_0000, 1, MemoryKind::SYSTEM_IMAGE),
+            region(0x30_0000, 3, MemoryKind::USABLE),    // 3 frames
+            region(0x40_0000, 8, MemoryKind::ACPI_RECLAIMABLE),
+        ];
+        let mut a = FrameAllocator::new(&map, 0x10_0000);
+        assert_eq!(a.total_frames(), 5);
+        let links = FakeLinks::default();
+        let got: Vec<u64> = std::iter::from_fn(|| a.allocate(&links)).collect();
+        assert_eq!(got, vec![0x10_0000, 0x10_1000, 0x30_0000, 0x30_1000, 0x30_2000]);
+        assert_eq!(a.free_frames(), 0);
+        assert_eq!(a.allocate(&links), None);
+    }
+
+    #[test]
+    fn freed_frames_are_reused_last_in_first_out() {
+        let map = [region(0x10_0000, 4, MemoryKind::USABLE)];
+        let mut a = FrameAllocator::new(&map, 0x10_0000);
+        let mut links = FakeLinks::default();
+        let f1 = a.allocate(&links).unwrap();
+        let f2 = a.allocate(&links).unwrap();
+        a.free(f1, &mut links);
+        a.free(f2, &mut links);
+        assert_eq!(a.free_frames(), 4);
+        assert_eq!(a.allocate(&links), Some(f2));
+        assert_eq!(a.allocate(&links), Some(f1));
+        assert_eq!(a.allocate(&links), Some(0x10_2000));
+    }
+
+    #[test]
+    fn unaligned_regions_are_trimmed_inward() {
+        let map = [region(0x10_0800, 3, MemoryKind::USABLE)]; // 0x100800..0x103800
+        let a = FrameAllocator::new(&map, 0);
+        assert_eq!(a.total_frames(), 2); // 0x101000, 0x102000
+    }
+
+    #[test]
+    fn too_many_ranges_are_counted_not_lost_silently() {
+        let map: Vec<MemoryRegion> =
+            (0..MAX_RANGES as u64 + 3).map(|i| region(0x100_0000 + i * 0x2000, 1, MemoryKind::USABLE)).collect();
+        let a = FrameAllocator::new(&map, 0);
+        assert_eq!(a.ignored_ranges(), 3);
+        assert_eq!(a.total_frames(), MAX_RANGES as u64);
+    }
+}

@@ -1,0 +1,53 @@
+//! Time since boot from the TSC, once calibrated; the count of timer interrupts.
+
+use core::sync::atomic::{AtomicU64, Ordering};
+
+static TSC_AT_BOOT: AtomicU64 = AtomicU64::new(0);
+static TSC_HZ: AtomicU64 = AtomicU64::new(0);
+static TIMER_INTERRUPTS: AtomicU64 = AtomicU64::new(0);
+
+/// Converts a TSC tick count to nanoseconds (0 while the frequency is unknown).
+pub fn ticks_to_ns(ticks: u64, hz: u64) -> u64 {
+    if hz == 0 {
+        return 0;
+    }
+    (ticks as u128 * 1_000_000_000 / hz as u128) as u64
+}
+
+pub fn set_boot_tsc(tsc: u64) {
+    TSC_AT_BOOT.store(tsc, Ordering::Relaxed);
+}
+
+pub fn set_tsc_hz(hz: u64) {
+    TSC_HZ.store(hz, Ordering::Relaxed);
+}
+
+pub fn tsc_hz() -> u64 {
+    TSC_HZ.load(Ordering::Relaxed)
+}
+
+pub fn since_boot_ns() -> u64 {
+    let ticks = crate::arch::cpu::rdtsc().wrapping_sub(TSC_AT_BOOT.load(Ordering::Relaxed));
+    ticks_to_ns(ticks, tsc_hz())
+}
+
+pub fn on_timer_interrupt() {
+    TIMER_INTERRUPTS.fetch_add(1, Ordering::Relaxed);
+}
+
+pub fn timer_interrupts() -> u64 {
+    TIMER_INTERRUPTS.load(Ordering::Relaxed)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ticks_to_ns;
+
+    #[test]
+    fn converts_ticks_without_overflow() {
+        assert_eq!(ticks_to_ns(0, 0), 0);
+        assert_eq!(ticks_to_ns(3_000_000_000, 3_000_000_000), 1_000_000_000);
+        // A year of ticks at 5 GHz does not overflow.
+        assert_eq!(ticks_to_ns(5_000_000_000 * 31_536_000, 5_000_000_000), 31_536_000 * 1_000_000_000);
+    }
+}

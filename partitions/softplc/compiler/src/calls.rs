@@ -1,0 +1,377 @@
+//! Calls of user FUNCTIONs and function block instances (argument binding, parameter
+//! passing through the callee's frame, outputs `=>`).
+
+use plc_vm::isa::{Builtin, MemType, Opcode};
+
+use crate::ast::*;
+use crate::codegen::{Gen, Loc, Place, mem_type};
+use crate::diagnostics::Span;
+use crate::sema::VarDef;
+use crate::types::*;
+
+/// One argument bound to a parameter.
+struct Bound<'e> {
+    param: VarDef,
+    value: &'e Expr,
+    output: bool,
+}
+
+impl Gen<'_> {
+    pub(crate) fn call(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Type {
+        if let ExprKind::Name(n) = &callee.kind {
+            let is_var = self.prog.pous[self.cur].var(&n.name).is_some() || self.prog.global(&n.name).is_some();
+            if !is_var {
+                if let Some(&pi) = self.prog.pou_by_name.get(&n.name) {
+                    return match self.prog.pous[pi].kind {
+                        PouKind::Function => self.call_function(pi, args, span),
+                        _ => {
+                            let msg = format!("`{}` is a type; call an instance of it", n.text);
+                            self.error(n.span, msg);
+                            Type::Error
+                        }
+                    };
+                }
+                if let Some(t) = self.std_call(&n.name, n, args, span) {
+                    return t;
+                }
+                let msg = format!("unknown function `{}`", n.text);
+                self.error(n.span, msg);
+                for a in args {
+                    self.infer(&a.value);
+                }
+                return Type::Error;
+            }
+        }
+        let Some(p) = self.place(callee) else { return Type::Error };
+        match p.ty.clone() {
+            Type::Fb(pi) => {
+                self.call_fb(p, pi, args, span);
+                Type::Void
+            }
+            Type::Error => Type::Error,
+            other => {
+                let msg = format!("{} is not callable", self.tname(&other));
+                self.error(callee.span, msg);
+                if matches!(p.loc, Loc::Ind(_)) {
+                    self.op(Opcode::Drop);
+                }
+                Type::Error
+            }
+        }
+    }
+
+    /// Binds call arguments to parameters: positional ones in declaration order of the
+    /// inputs and in-outs, named ones by name.
+    fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg]) -> Vec<Bound<'e>> {
+        let pou_name = self.prog.pous[pi].text.clone();
+        let params: Vec<VarDef> = self.prog.pous[pi].params().cloned().collect();
+        let mut out: Vec<Bound<'e>> = Vec::new();
+        let mut named_seen = false;
+        for (i, a) in args.iter().enumerate() {
+            let param = match &a.name {
+                Some(n) => {
+                    named_seen = true;
+                    let v = self.prog.pous[pi].vars.iter().find(|v| v.name == n.name).cloned();
+                    match v {
+                        Some(v) if a.output && v.kind == VarKind::Output && v.name != self.prog.pous[pi].name => v,
+                        Some(v) if !a.output && matches!(v.kind, VarKind::Input | VarKind::InOut) => v,
+                        Some(_) => {
+                            let msg = if a.output {
+                                format!("`{}` is not an output of {pou_name} (use `:=` for inputs)", n.text)
+                            } else {
+                                format!("`{}` is not an input of {pou_name} (use `=>` for outputs)", n.text)
+                            };
+                            self.error(n.span, msg);
+                            continue;
+                        }
+                        None => {
+                            let msg = format!("{pou_name} has no parameter `{}`", n.text);
+                            self.error(n.span, msg);
+                            continue;
+                        }
+                    }
+                }
+                None => {
+                    if named_seen {
+                        self.error(a.span, "positional arguments must come before named ones");
+                        continue;
+                    }
+                    match params.get(i) {
+                        Some(p) => p.clone(),
+                        None => {
+                            let msg = format!("too many arguments: {pou_name} takes {}", params.len());
+                            self.error(a.span, msg);
+                            continue;
+                        }
+                    }
+                }
+            };
+            if out.iter().any(|b| b.param.name == param.name) {
+                let msg = format!("parameter `{}` given twice", param.text);
+                self.error(a.span, msg);
+                continue;
+            }
+            out.push(Bound { param, value: &a.value, output: a.output });
+        }
+        out
+    }
+
+    fn call_fb(&mut self, inst: Place, pi: usize, args: &[Arg], span: Span) {
+        self.calls.push((self.cur, pi, span));
+        // A dynamic instance address is parked in a static temporary while arguments are stored.
+        let base = match inst.loc {
+            Loc::Ind(o) => {
+                let t = self.temp_cell();
+                if o != 0 {
+                    self.emit(|b| {
+                        b.push_u32(o);
+                        b.op(Opcode::Add);
+                    });
+                }
+                self.emit(|b| b.st_abs(MemType::U32, t));
+                Err(t)
+            }
+            l => Ok(l),
+        };
+        let member = |g: &mut Self, off: u32| -> Loc {
+            match base {
+                Ok(Loc::Abs(a)) => Loc::Abs(a + off),
+                Ok(Loc::Rel(o)) => Loc::Rel(o + off),
+                Ok(Loc::Ind(_)) => unreachable!("dynamic bases are parked"),
+                Err(t) => {
+                    g.emit(|b| b.ld_abs(MemType::U32, t));
+                    Loc::Ind(off)
+                }
+            }
+        };
+        let bound = self.bind_args(pi, args);
+        for a in bound.iter().filter(|a| !a.output) {
+            if a.param.kind == VarKind::InOut {
+                let loc = member(self, a.param.offset);
+                self.inout_address(a.value, &a.param.ty);
+                let p = Place { loc, ty: Type::Elem(Elem::UDInt), writable: true };
+                self.store_checked(&p);
+            } else {
+                let loc = member(self, a.param.offset);
+                let p = Place { loc, ty: a.param.ty.clone(), writable: true };
+                self.store_expr(&p, a.value, a.value.span);
+            }
+        }
+        let missing_inout = self.prog.pous[pi].vars.iter().find(|v| v.kind == VarKind::InOut && !bound.iter().any(|b| b.param.name == v.name)).map(|v| v.text.clone());
+        if let Some(m) = missing_inout {
+            let msg = format!("VAR_IN_OUT parameter `{m}` must be connected");
+            self.error(span, msg);
+        }
+        match base {
+            Ok(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
+            Ok(Loc::Rel(o)) => self.emit(|b| b.lea_rel(o)),
+            Ok(Loc::Ind(_)) => {}
+            Err(t) => self.emit(|b| b.ld_abs(MemType::U32, t)),
+        }
+        let id = self.pou_ids[pi];
+        self.emit(|b| b.call(id));
+        for a in bound.iter().filter(|a| a.output) {
+            let src = member(self, a.param.offset);
+            let src = Place { loc: src, ty: a.param.ty.clone(), writable: false };
+            self.copy_out(src, a.value);
+        }
+    }
+
+    /// Pushes the address of an in-out argument (which must be a variable of the same type).
+    fn inout_address(&mut self, e: &Expr, ty: &Type) {
+        match self.place(e) {
+            Some(p) => {
+                if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
+                    let msg = format!("VAR_IN_OUT argument must be a {} variable, found {}", self.tname(ty), self.tname(&p.ty));
+                    self.error(e.span, msg);
+                }
+                self.addr_of(&p);
+            }
+            None => self.emit(|b| b.push_i32(0)),
+        }
+    }
+
+    /// `param => target` after a call: copies the output `src` into the target variable.
+    fn copy_out(&mut self, src: Place, target: &Expr) {
+        let Some(dst) = self.place(target) else {
+            if matches!(src.loc, Loc::Ind(_)) {
+                self.op(Opcode::Drop);
+            }
+            return;
+        };
+        // A dynamic source address was pushed before the target's; keep the order valid by
+        // loading the source first only when the target is static.
+        match (&src.loc, &dst.loc) {
+            (Loc::Ind(_), Loc::Ind(_)) => {
+                self.error(target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
+                self.op(Opcode::Drop);
+                self.op(Opcode::Drop);
+                return;
+            }
+            _ => {}
+        }
+        if !dst.writable {
+            self.error(target.span, "output target is not writable");
+        }
+        match &dst.ty {
+            Type::String(_) => {
+                self.aggregate_operands(&src, &dst);
+                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+            }
+            t if t.elem().is_some() => {
+                let st = src.ty.clone();
+                self.load(&src);
+                self.coerce(&st, &dst.ty.clone(), target.span);
+                if let Loc::Ind(_) = src.loc {
+                    // value computed from a dynamic source; target is static here.
+                }
+                self.store_checked(&dst);
+            }
+            _ => {
+                self.aggregate_operands(&src, &dst);
+                let (size, _) = self.prog.size_align(&dst.ty);
+                self.emit(|b| b.copy(size));
+            }
+        }
+    }
+
+    /// Pushes `[dst_addr src_addr]` for a string assignment or block copy, whichever of the
+    /// two has its base address already on the stack.
+    fn aggregate_operands(&mut self, src: &Place, dst: &Place) {
+        if matches!(src.loc, Loc::Ind(_)) {
+            self.addr_of(src);
+            self.addr_of(dst);
+            self.op(Opcode::Swap);
+        } else {
+            self.addr_of(dst);
+            self.addr_of(src);
+        }
+    }
+
+    fn call_function(&mut self, pi: usize, args: &[Arg], span: Span) -> Type {
+        self.calls.push((self.cur, pi, span));
+        let (frame, pristine) = self.frames.get(pi).copied().unwrap_or((Some(0), Some(0)));
+        let (frame, pristine) = (frame.unwrap_or(0), pristine.unwrap_or(0));
+        let bound = self.bind_args(pi, args);
+        let inputs: Vec<&Bound> = bound.iter().filter(|b| !b.output).collect();
+        // Evaluate all inputs first: a nested call of the same function must not clobber
+        // parameters already stored in the shared static frame.
+        for a in &inputs {
+            match a.param.kind {
+                VarKind::InOut => self.inout_address(a.value, &a.param.ty),
+                _ => match &a.param.ty {
+                    Type::String(_) => {
+                        let t = self.expr(a.value, Some(&a.param.ty));
+                        if !t.is_string() && !t.is_error() {
+                            let msg = format!("type mismatch: expected STRING, found {}", self.tname(&t));
+                            self.error(a.value.span, msg);
+                        }
+                    }
+                    Type::Array(_) | Type::Struct(_) => {
+                        let t = self.expr(a.value, Some(&a.param.ty));
+                        if t != a.param.ty && !t.is_error() {
+                            let msg = format!("type mismatch: expected {}, found {}", self.tname(&a.param.ty), self.tname(&t));
+                            self.error(a.value.span, msg);
+                        }
+                    }
+                    ty => {
+                        let ty = ty.clone();
+                        self.value_to(a.value, &ty);
+                        if let Type::Subrange(_, lo, hi) = ty {
+                            self.emit(|b| b.chk_range_s(lo, hi));
+                        }
+                    }
+                },
+            }
+        }
+        for a in inputs.iter().rev() {
+            let addr = frame + a.param.offset;
+            match (&a.param.kind, &a.param.ty) {
+                (VarKind::InOut, _) => self.emit(|b| b.st_abs(MemType::U32, addr)),
+                (_, Type::String(_)) => self.emit(|b| {
+                    b.push_u32(addr);
+                    b.swap();
+                    b.call_builtin(Builtin::StrAssign);
+                }),
+                (_, Type::Array(_) | Type::Struct(_)) => {
+                    let (size, _) = self.prog.size_align(&a.param.ty);
+                    self.emit(|b| {
+                        b.push_u32(addr);
+                        b.swap();
+                        b.copy(size);
+                    });
+                }
+                (_, ty) => {
+                    if let Some(e) = ty.elem() {
+                        self.emit(|b| b.st_abs(mem_type(e), addr));
+                    } else {
+                        self.op(Opcode::Drop);
+                    }
+                }
+            }
+        }
+        // Unconnected inputs get their declared initial values.
+        let vars = self.prog.pous[pi].vars.clone();
+        for v in &vars {
+            if bound.iter().any(|b| b.param.name == v.name) {
+                continue;
+            }
+            match v.kind {
+                VarKind::Input => {
+                    let (size, _) = self.prog.size_align(&v.ty);
+                    self.emit(|b| {
+                        b.push_u32(frame + v.offset);
+                        b.push_u32(pristine + v.offset);
+                        b.copy(size);
+                    });
+                }
+                VarKind::InOut => {
+                    let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
+                    self.error(span, msg);
+                }
+                _ => {}
+            }
+        }
+        let id = self.pou_ids[pi];
+        self.emit(|b| {
+            b.push_u32(frame);
+            b.call(id);
+        });
+        for a in bound.iter().filter(|a| a.output) {
+            let src = Place { loc: Loc::Abs(frame + a.param.offset), ty: a.param.ty.clone(), writable: false };
+            self.copy_out(src, a.value);
+        }
+        let rt = self.prog.pous[pi].return_type.clone().unwrap_or(Type::Void);
+        let ret_off = self.prog.pous[pi].vars.first().map_or(0, |v| v.offset);
+        let addr = frame + ret_off;
+        match &rt {
+            Type::String(n) => {
+                // Copy so that a second call in the same expression cannot overwrite it.
+                let t = self.temp_string(*n);
+                self.emit(|b| {
+                    b.push_u32(t);
+                    b.push_u32(addr);
+                    b.call_builtin(Builtin::StrAssign);
+                    b.push_u32(t);
+                });
+            }
+            Type::Array(_) | Type::Struct(_) => {
+                let (size, al) = self.prog.size_align(&rt);
+                let t = self.alloc_static(size, al);
+                self.emit(|b| {
+                    b.push_u32(t);
+                    b.push_u32(addr);
+                    b.copy(size);
+                    b.push_u32(t);
+                });
+            }
+            Type::Void | Type::Error => {}
+            t => {
+                if let Some(e) = t.elem() {
+                    self.emit(|b| b.ld_abs(mem_type(e), addr));
+                }
+            }
+        }
+        rt
+    }
+}

@@ -1,0 +1,424 @@
+//! Hand-written lexer for IEC 61131-3 Structured Text.
+//!
+//! Keywords and identifiers are case-insensitive; identifiers are kept upper-cased for lookup
+//! and with their original spelling for messages. Typed literals (`INT#5`, `T#1s`, `16#FF`)
+//! are recognised here so the parser sees one token per literal.
+
+use crate::diagnostics::{Diagnostic, Span};
+
+#[derive(Debug, Clone, PartialEq)]
+pub enum Tok {
+    /// Identifier or keyword: (UPPER-CASED, original spelling).
+    Ident(String, String),
+    /// Integer literal (magnitude; a sign is a unary operator).
+    Int(u128),
+    Real(f64),
+    /// Duration literal in nanoseconds.
+    Time(i128),
+    Str(String),
+    /// `TYPE#` prefix of a typed literal such as `INT#5` or `Color#Red`.
+    TypePrefix(String, String),
+    Assign,    // :=
+    Arrow,     // =>
+    Colon,     // :
+    Semi,      // ;
+    Comma,     // ,
+    Dot,       // .
+    DotDot,    // ..
+    LParen,    // (
+    RParen,    // )
+    LBracket,  // [
+    RBracket,  // ]
+    Plus,      // +
+    Minus,     // -
+    Star,      // *
+    Slash,     // /
+    Power,     // **
+    Eq,        // =
+    Ne,        // <>
+    Lt,        // <
+    Le,        // <=
+    Gt,        // >
+    Ge,        // >=
+    Amp,       // &
+    Eof,
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct Token {
+    pub tok: Tok,
+    pub span: Span,
+}
+
+/// Splits `text` into tokens. Lexical errors are reported and the offending character skipped,
+/// so one bad character does not hide the errors after it.
+pub fn lex(file: u32, text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
+    let mut lx = Lexer { file, src: text.as_bytes(), text, pos: 0, out: Vec::new(), diags };
+    lx.run();
+    lx.out
+}
+
+struct Lexer<'a> {
+    file: u32,
+    src: &'a [u8],
+    text: &'a str,
+    pos: usize,
+    out: Vec<Token>,
+    diags: &'a mut Vec<Diagnostic>,
+}
+
+impl Lexer<'_> {
+    fn peek(&self, ahead: usize) -> u8 {
+        self.src.get(self.pos + ahead).copied().unwrap_or(0)
+    }
+
+    fn span(&self, start: usize) -> Span {
+        Span::new(self.file, start, self.pos)
+    }
+
+    fn error(&mut self, start: usize, msg: impl Into<String>) {
+        let span = Span::new(self.file, start, self.pos.max(start + 1).min(self.src.len().max(start)));
+        self.diags.push(Diagnostic::error(span, msg));
+    }
+
+    fn push(&mut self, tok: Tok, start: usize) {
+        let span = self.span(start);
+        self.out.push(Token { tok, span });
+    }
+
+    fn run(&mut self) {
+        while self.pos < self.src.len() {
+            let c = self.peek(0);
+            let start = self.pos;
+            match c {
+                b' ' | b'\t' | b'\r' | b'\n' | 0x0c => self.pos += 1,
+                b'(' if self.peek(1) == b'*' => self.block_comment(b'(', b'*', b')'),
+                b'/' if self.peek(1) == b'*' => self.block_comment(b'/', b'*', b'/'),
+                b'/' if self.peek(1) == b'/' => {
+                    while self.pos < self.src.len() && self.peek(0) != b'\n' {
+                        self.pos += 1;
+                    }
+                }
+                b'{' => {
+                    // Pragmas carry no meaning for this compiler.
+                    while self.pos < self.src.len() && self.peek(0) != b'}' {
+                        self.pos += 1;
+                    }
+                    if self.pos >= self.src.len() {
+                        self.error(start, "unterminated pragma `{`");
+                    } else {
+                        self.pos += 1;
+                    }
+                }
+                b'\'' => self.string(),
+                b'0'..=b'9' => self.number(),
+                c if c == b'_' || c.is_ascii_alphabetic() => self.ident(),
+                _ => self.punct(),
+            }
+        }
+        let end = self.src.len();
+        self.out.push(Token { tok: Tok::Eof, span: Span::new(self.file, end, end) });
+    }
+
+    fn block_comment(&mut self, open0: u8, open1: u8, close: u8) {
+        let start = self.pos;
+        self.pos += 2;
+        let mut depth = 1;
+        while self.pos < self.src.len() {
+            if self.peek(0) == open0 && self.peek(1) == open1 {
+                depth += 1;
+                self.pos += 2;
+            } else if self.peek(0) == open1 && self.peek(1) == close {
+                depth -= 1;
+                self.pos += 2;
+                if depth == 0 {
+                    return;
+                }
+            } else {
+                self.pos += 1;
+            }
+        }
+        self.pos = start + 2;
+        self.error(start, "unterminated comment");
+        self.pos = self.src.len();
+    }
+
+    fn string(&mut self) {
+        let start = self.pos;
+        self.pos += 1;
+        let mut value = String::new();
+        loop {
+            if self.pos >= self.src.len() || self.peek(0) == b'\n' {
+                self.error(start, "unterminated string literal");
+                return;
+            }
+            let c = self.peek(0);
+            if c == b'\'' {
+                self.pos += 1;
+                break;
+            }
+            if c == b'$' {
+                let e = self.peek(1);
+                self.pos += 2;
+                match e.to_ascii_uppercase() {
+                    b'$' => value.push('$'),
+                    b'\'' => value.push('\''),
+                    b'"' => value.push('"'),
+                    b'L' | b'N' => value.push('\n'),
+                    b'P' => value.push('\x0c'),
+                    b'R' => value.push('\r'),
+                    b'T' => value.push('\t'),
+                    h if h.is_ascii_hexdigit() && self.peek(0).is_ascii_hexdigit() => {
+                        let hex = [h, self.peek(0)];
+                        self.pos += 1;
+                        let s = std::str::from_utf8(&hex).unwrap_or("0");
+                        value.push(u8::from_str_radix(s, 16).unwrap_or(0) as char);
+                    }
+                    _ => {
+                        let at = self.pos - 2;
+                        self.diags.push(Diagnostic::error(
+                            Span::new(self.file, at, at + 2),
+                            "invalid escape sequence in string literal",
+                        ));
+                    }
+                }
+                continue;
+            }
+            // Copy one whole UTF-8 character.
+            let ch = self.text[self.pos..].chars().next().unwrap_or('?');
+            value.push(ch);
+            self.pos += ch.len_utf8();
+        }
+        self.push(Tok::Str(value), start);
+    }
+
+    /// Digits with `_` separators in the given radix; returns the digit text without separators.
+    fn digits(&mut self, radix: u32) -> String {
+        let mut s = String::new();
+        while self.pos < self.src.len() {
+            let c = self.peek(0);
+            if c == b'_' {
+                self.pos += 1;
+            } else if (c as char).is_digit(radix) {
+                s.push(c as char);
+                self.pos += 1;
+            } else {
+                break;
+            }
+        }
+        s
+    }
+
+    fn number(&mut self) {
+        let start = self.pos;
+        let int = self.digits(10);
+        if self.peek(0) == b'#' {
+            // Based integer: 2#1010, 8#17, 16#FF.
+            self.pos += 1;
+            let radix: u32 = int.parse().unwrap_or(0);
+            if ![2, 8, 16].contains(&radix) {
+                self.error(start, format!("unsupported number base {radix} (use 2, 8 or 16)"));
+                self.digits(16);
+                self.push(Tok::Int(0), start);
+                return;
+            }
+            let d = self.digits(radix);
+            match u128::from_str_radix(&d, radix) {
+                Ok(v) if !d.is_empty() => self.push(Tok::Int(v), start),
+                _ => {
+                    self.error(start, "invalid based integer literal");
+                    self.push(Tok::Int(0), start);
+                }
+            }
+            return;
+        }
+        let mut is_real = false;
+        let mut text = int;
+        if self.peek(0) == b'.' && self.peek(1).is_ascii_digit() {
+            is_real = true;
+            self.pos += 1;
+            text.push('.');
+            text.push_str(&self.digits(10));
+        }
+        if matches!(self.peek(0), b'e' | b'E')
+            && (self.peek(1).is_ascii_digit()
+                || (matches!(self.peek(1), b'+' | b'-') && self.peek(2).is_ascii_digit()))
+        {
+            is_real = true;
+            text.push('e');
+            self.pos += 1;
+            if matches!(self.peek(0), b'+' | b'-') {
+                text.push(self.peek(0) as char);
+                self.pos += 1;
+            }
+            text.push_str(&self.digits(10));
+        }
+        if is_real {
+            let v = text.parse::<f64>().unwrap_or(0.0);
+            self.push(Tok::Real(v), start);
+        } else {
+            match text.parse::<u128>() {
+                Ok(v) => self.push(Tok::Int(v), start),
+                Err(_) => {
+                    self.error(start, "integer literal too large");
+                    self.push(Tok::Int(0), start);
+                }
+            }
+        }
+    }
+
+    fn ident(&mut self) {
+        let start = self.pos;
+        while self.pos < self.src.len() && (self.peek(0) == b'_' || self.peek(0).is_ascii_alphanumeric()) {
+            self.pos += 1;
+        }
+        let orig = self.text[start..self.pos].to_string();
+        let upper = orig.to_ascii_uppercase();
+        if self.peek(0) == b'#' {
+            self.pos += 1;
+            if matches!(upper.as_str(), "T" | "TIME" | "LTIME") {
+                self.duration(start);
+            } else {
+                self.push(Tok::TypePrefix(upper, orig), start);
+            }
+            return;
+        }
+        self.push(Tok::Ident(upper, orig), start);
+    }
+
+    /// Duration after `T#`: `[-]` then components like `1d2h3m4s5ms6us7ns`, each optionally
+    /// fractional (`1.5s`), with `_` separators.
+    fn duration(&mut self, start: usize) {
+        let negative = if self.peek(0) == b'-' {
+            self.pos += 1;
+            true
+        } else {
+            false
+        };
+        let mut total: f64 = 0.0;
+        let mut exact: i128 = 0;
+        let mut any = false;
+        loop {
+            if self.peek(0) == b'_' {
+                self.pos += 1;
+                continue;
+            }
+            if !self.peek(0).is_ascii_digit() {
+                break;
+            }
+            let int = self.digits(10);
+            let mut frac = String::new();
+            if self.peek(0) == b'.' && self.peek(1).is_ascii_digit() {
+                self.pos += 1;
+                frac = self.digits(10);
+            }
+            let ustart = self.pos;
+            while self.peek(0).is_ascii_alphabetic() {
+                self.pos += 1;
+            }
+            let unit = self.text[ustart..self.pos].to_ascii_lowercase();
+            let scale: i128 = match unit.as_str() {
+                "d" => 86_400_000_000_000,
+                "h" => 3_600_000_000_000,
+                "m" => 60_000_000_000,
+                "s" => 1_000_000_000,
+                "ms" => 1_000_000,
+                "us" => 1_000,
+                "ns" => 1,
+                _ => {
+                    self.error(ustart, format!("unknown time unit `{unit}` (use d, h, m, s, ms, us, ns)"));
+                    0
+                }
+            };
+            let whole: i128 = int.parse::<i128>().unwrap_or(i128::MAX / 2);
+            exact = exact.saturating_add(whole.saturating_mul(scale));
+            if !frac.is_empty() {
+                let f: f64 = format!("0.{frac}").parse().unwrap_or(0.0);
+                total += f * scale as f64;
+            }
+            any = true;
+        }
+        if !any {
+            self.error(start, "malformed duration literal (expected e.g. T#1s500ms)");
+        }
+        let mut ns = exact.saturating_add(total.round() as i128);
+        if negative {
+            ns = -ns;
+        }
+        if ns > i64::MAX as i128 || ns < i64::MIN as i128 {
+            self.error(start, "duration literal out of range");
+            ns = 0;
+        }
+        self.push(Tok::Time(ns), start);
+    }
+
+    fn punct(&mut self) {
+        let start = self.pos;
+        let two = [self.peek(0), self.peek(1)];
+        let tok2 = match &two {
+            b":=" => Some(Tok::Assign),
+            b"=>" => Some(Tok::Arrow),
+            b".." => Some(Tok::DotDot),
+            b"**" => Some(Tok::Power),
+            b"<>" => Some(Tok::Ne),
+            b"<=" => Some(Tok::Le),
+            b">=" => Some(Tok::Ge),
+            _ => None,
+        };
+        if let Some(t) = tok2 {
+            self.pos += 2;
+            self.push(t, start);
+            return;
+        }
+        let tok = match two[0] {
+            b':' => Tok::Colon,
+            b';' => Tok::Semi,
+            b',' => Tok::Comma,
+            b'.' => Tok::Dot,
+            b'(' => Tok::LParen,
+            b')' => Tok::RParen,
+            b'[' => Tok::LBracket,
+            b']' => Tok::RBracket,
+            b'+' => Tok::Plus,
+            b'-' => Tok::Minus,
+            b'*' => Tok::Star,
+            b'/' => Tok::Slash,
+            b'=' => Tok::Eq,
+            b'<' => Tok::Lt,
+            b'>' => Tok::Gt,
+            b'&' => Tok::Amp,
+            _ => {
+                let ch = self.text[self.pos..].chars().next().unwrap_or('?');
+                self.pos += ch.len_utf8();
+                self.error(start, format!("unexpected character `{ch}`"));
+                return;
+            }
+        };
+        self.pos += 1;
+        self.push(tok, start);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn toks(s: &str) -> Vec<Tok> {
+        let mut d = Vec::new();
+        let t = lex(0, s, &mut d);
+        assert!(d.is_empty(), "{d:?}");
+        t.into_iter().map(|t| t.tok).collect()
+    }
+
+    #[test]
+    fn literals() {
+        assert_eq!(toks("16#FF")[0], Tok::Int(255));
+        assert_eq!(toks("2#1010_1010")[0], Tok::Int(170));
+        assert_eq!(toks("1.5E3")[0], Tok::Real(1500.0));
+        assert_eq!(toks("T#1s500ms")[0], Tok::Time(1_500_000_000));
+        assert_eq!(toks("t#-1.5s")[0], Tok::Time(-1_500_000_000));
+        assert_eq!(toks("'a$'b$N'")[0], Tok::Str("a'b\n".into()));
+        assert_eq!(toks("INT#5")[0], Tok::TypePrefix("INT".into(), "INT".into()));
+        assert_eq!(toks("x (* c (* n *) *) := 1")[1], Tok::Assign);
+    }
+}

@@ -1,0 +1,968 @@
+//! Recursive-descent parser (Pratt for expressions) producing the [`ast`](crate::ast).
+//!
+//! Errors are reported into the diagnostic list and the parser resynchronises at the next
+//! statement or declaration boundary, so one run reports several independent errors.
+
+use crate::ast::*;
+use crate::diagnostics::{Diagnostic, Span};
+use crate::lexer::{Tok, Token};
+
+/// Marker: an error was reported, the caller should recover.
+#[derive(Debug)]
+struct Fail;
+type PResult<T> = Result<T, Fail>;
+
+/// Words that cannot be used as identifiers.
+const RESERVED: &[&str] = &[
+    "PROGRAM", "END_PROGRAM", "FUNCTION", "END_FUNCTION", "FUNCTION_BLOCK", "END_FUNCTION_BLOCK",
+    "VAR", "VAR_INPUT", "VAR_OUTPUT", "VAR_IN_OUT", "VAR_GLOBAL", "VAR_EXTERNAL", "VAR_TEMP",
+    "END_VAR", "CONSTANT", "RETAIN", "TYPE", "END_TYPE", "STRUCT", "END_STRUCT", "ARRAY", "OF",
+    "IF", "THEN", "ELSIF", "ELSE", "END_IF", "CASE", "END_CASE", "FOR", "TO", "BY", "DO",
+    "END_FOR", "WHILE", "END_WHILE", "REPEAT", "UNTIL", "END_REPEAT", "EXIT", "RETURN", "AND",
+    "OR", "XOR", "NOT", "MOD", "TRUE", "FALSE", "CONFIGURATION", "END_CONFIGURATION", "RESOURCE",
+    "END_RESOURCE", "TASK", "WITH", "ON", "__TRY", "__CATCH", "__FINALLY", "__ENDTRY",
+];
+
+/// Keywords that end a statement list.
+const STMT_END: &[&str] = &[
+    "END_IF", "ELSIF", "ELSE", "END_CASE", "END_FOR", "END_WHILE", "UNTIL", "END_REPEAT",
+    "END_PROGRAM", "END_FUNCTION", "END_FUNCTION_BLOCK", "__CATCH", "__FINALLY", "__ENDTRY",
+];
+
+pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
+    let mut p = Parser { toks: tokens, pos: 0, diags, in_case: 0 };
+    p.unit()
+}
+
+struct Parser<'a> {
+    toks: Vec<Token>,
+    pos: usize,
+    diags: &'a mut Vec<Diagnostic>,
+    /// Depth of CASE bodies: there a `label :` ends the current statement list.
+    in_case: u32,
+}
+
+fn describe(t: &Tok) -> String {
+    match t {
+        Tok::Ident(_, o) => format!("`{o}`"),
+        Tok::Int(v) => format!("number `{v}`"),
+        Tok::Real(v) => format!("number `{v}`"),
+        Tok::Time(_) => "duration literal".into(),
+        Tok::Str(_) => "string literal".into(),
+        Tok::TypePrefix(_, o) => format!("`{o}#`"),
+        Tok::Eof => "end of file".into(),
+        other => format!("`{}`", punct_text(other)),
+    }
+}
+
+fn punct_text(t: &Tok) -> &'static str {
+    match t {
+        Tok::Assign => ":=",
+        Tok::Arrow => "=>",
+        Tok::Colon => ":",
+        Tok::Semi => ";",
+        Tok::Comma => ",",
+        Tok::Dot => ".",
+        Tok::DotDot => "..",
+        Tok::LParen => "(",
+        Tok::RParen => ")",
+        Tok::LBracket => "[",
+        Tok::RBracket => "]",
+        Tok::Plus => "+",
+        Tok::Minus => "-",
+        Tok::Star => "*",
+        Tok::Slash => "/",
+        Tok::Power => "**",
+        Tok::Eq => "=",
+        Tok::Ne => "<>",
+        Tok::Lt => "<",
+        Tok::Le => "<=",
+        Tok::Gt => ">",
+        Tok::Ge => ">=",
+        Tok::Amp => "&",
+        _ => "?",
+    }
+}
+
+impl Parser<'_> {
+    fn tok(&self) -> &Tok {
+        &self.toks[self.pos.min(self.toks.len() - 1)].tok
+    }
+
+    fn tok_at(&self, ahead: usize) -> &Tok {
+        &self.toks[(self.pos + ahead).min(self.toks.len() - 1)].tok
+    }
+
+    fn span(&self) -> Span {
+        self.toks[self.pos.min(self.toks.len() - 1)].span
+    }
+
+    fn prev_span(&self) -> Span {
+        self.toks[self.pos.saturating_sub(1).min(self.toks.len() - 1)].span
+    }
+
+    fn bump(&mut self) {
+        if self.pos < self.toks.len() - 1 {
+            self.pos += 1;
+        }
+    }
+
+    fn at_eof(&self) -> bool {
+        matches!(self.tok(), Tok::Eof)
+    }
+
+    fn is_kw(&self, kw: &str) -> bool {
+        matches!(self.tok(), Tok::Ident(u, _) if u == kw)
+    }
+
+    fn is_kw_at(&self, ahead: usize, kw: &str) -> bool {
+        matches!(self.tok_at(ahead), Tok::Ident(u, _) if u == kw)
+    }
+
+    fn eat_kw(&mut self, kw: &str) -> bool {
+        if self.is_kw(kw) {
+            self.bump();
+            true
+        } else {
+            false
+        }
+    }
+
+    fn eat(&mut self, t: &Tok) -> bool {
+        if self.tok() == t {
+            self.bump();
+            true
+        } else {
+            false
+        }
+    }
+
+    fn error_here(&mut self, expected: &str) -> Fail {
+        let msg = format!("expected {expected}, found {}", describe(self.tok()));
+        let span = self.span();
+        self.diags.push(Diagnostic::error(span, msg).with_label(format!("expected {expected}")));
+        Fail
+    }
+
+    fn expect_kw(&mut self, kw: &str) -> PResult<()> {
+        if self.eat_kw(kw) { Ok(()) } else { Err(self.error_here(&format!("`{kw}`"))) }
+    }
+
+    fn expect(&mut self, t: Tok) -> PResult<()> {
+        if self.eat(&t) { Ok(()) } else { Err(self.error_here(&format!("`{}`", punct_text(&t)))) }
+    }
+
+    fn ident(&mut self) -> PResult<Ident> {
+        if let Tok::Ident(u, o) = self.tok().clone() {
+            if !RESERVED.contains(&u.as_str()) {
+                let span = self.span();
+                self.bump();
+                return Ok(Ident { name: u, text: o, span });
+            }
+        }
+        Err(self.error_here("an identifier"))
+    }
+
+    /// Skips tokens until just after a `;` or before one of `stops` (or EOF).
+    fn recover(&mut self, stops: &[&str]) {
+        loop {
+            match self.tok() {
+                Tok::Eof => return,
+                Tok::Semi => {
+                    self.bump();
+                    return;
+                }
+                Tok::Ident(u, _) if stops.contains(&u.as_str()) => return,
+                _ => self.bump(),
+            }
+        }
+    }
+
+    // ----- top level -------------------------------------------------------------------
+
+    fn unit(&mut self) -> Unit {
+        let mut unit = Unit::default();
+        const TOP: &[&str] =
+            &["PROGRAM", "FUNCTION", "FUNCTION_BLOCK", "TYPE", "VAR_GLOBAL", "CONFIGURATION"];
+        while !self.at_eof() {
+            let start = self.pos;
+            let ok = if self.is_kw("PROGRAM") || self.is_kw("FUNCTION") || self.is_kw("FUNCTION_BLOCK") {
+                self.pou().map(|p| unit.pous.push(p))
+            } else if self.is_kw("TYPE") {
+                self.type_block(&mut unit.types)
+            } else if self.is_kw("VAR_GLOBAL") {
+                self.var_block().map(|b| unit.globals.push(b))
+            } else if self.is_kw("CONFIGURATION") {
+                self.configuration(&mut unit)
+            } else {
+                Err(self.error_here("PROGRAM, FUNCTION, FUNCTION_BLOCK, TYPE, VAR_GLOBAL or CONFIGURATION"))
+            };
+            if ok.is_err() {
+                // Skip to the next top-level keyword.
+                if self.pos == start {
+                    self.bump();
+                }
+                while !self.at_eof() && !TOP.iter().any(|k| self.is_kw(k)) {
+                    self.bump();
+                }
+            }
+        }
+        unit
+    }
+
+    fn pou(&mut self) -> PResult<Pou> {
+        let start = self.span();
+        let (kind, end_kw) = if self.eat_kw("PROGRAM") {
+            (PouKind::Program, "END_PROGRAM")
+        } else if self.eat_kw("FUNCTION_BLOCK") {
+            (PouKind::FunctionBlock, "END_FUNCTION_BLOCK")
+        } else {
+            self.expect_kw("FUNCTION")?;
+            (PouKind::Function, "END_FUNCTION")
+        };
+        let name = self.ident()?;
+        let mut return_type = None;
+        if kind == PouKind::Function {
+            if self.eat(&Tok::Colon) {
+                return_type = Some(self.type_ref()?);
+            } else {
+                return Err(self.error_here("`:` and the function's return type"));
+            }
+        }
+        let mut var_blocks = Vec::new();
+        while self.is_var_block_start() {
+            match self.var_block() {
+                Ok(b) => var_blocks.push(b),
+                Err(Fail) => {
+                    while !self.at_eof() && !self.is_kw("END_VAR") && !self.is_kw(end_kw) {
+                        self.bump();
+                    }
+                    self.eat_kw("END_VAR");
+                }
+            }
+        }
+        let body = self.stmt_list();
+        if !self.eat_kw(end_kw) {
+            let f = self.error_here(&format!("`{end_kw}`"));
+            // Leave the offending token for the top-level loop only if it starts a new unit.
+            if !self.is_kw("PROGRAM") && !self.is_kw("FUNCTION") && !self.is_kw("FUNCTION_BLOCK") {
+                self.bump();
+            }
+            let _ = f;
+        }
+        Ok(Pou { kind, name, return_type, var_blocks, body, span: start.to(self.prev_span()) })
+    }
+
+    fn is_var_block_start(&self) -> bool {
+        ["VAR", "VAR_INPUT", "VAR_OUTPUT", "VAR_IN_OUT", "VAR_GLOBAL", "VAR_EXTERNAL", "VAR_TEMP"]
+            .iter()
+            .any(|k| self.is_kw(k))
+    }
+
+    fn var_block(&mut self) -> PResult<VarBlock> {
+        let start = self.span();
+        let kind = match self.tok() {
+            Tok::Ident(u, _) => match u.as_str() {
+                "VAR" => VarKind::Local,
+                "VAR_INPUT" => VarKind::Input,
+                "VAR_OUTPUT" => VarKind::Output,
+                "VAR_IN_OUT" => VarKind::InOut,
+                "VAR_GLOBAL" => VarKind::Global,
+                "VAR_EXTERNAL" => VarKind::External,
+                "VAR_TEMP" => VarKind::Temp,
+                _ => return Err(self.error_here("a VAR block")),
+            },
+            _ => return Err(self.error_here("a VAR block")),
+        };
+        self.bump();
+        let mut constant = false;
+        let mut retain = false;
+        loop {
+            if self.eat_kw("CONSTANT") {
+                constant = true;
+            } else if self.eat_kw("RETAIN") {
+                retain = true;
+            } else if self.eat_kw("NON_RETAIN") {
+            } else {
+                break;
+            }
+        }
+        let mut decls = Vec::new();
+        while !self.is_kw("END_VAR") && !self.at_eof() {
+            if self.is_var_block_start() || self.is_kw("END_PROGRAM") || self.is_kw("END_FUNCTION_BLOCK") || self.is_kw("END_FUNCTION") {
+                return Err(self.error_here("`END_VAR`"));
+            }
+            match self.var_decl() {
+                Ok(d) => decls.push(d),
+                Err(Fail) => self.recover(&["END_VAR"]),
+            }
+        }
+        self.expect_kw("END_VAR")?;
+        Ok(VarBlock { kind, constant, retain, decls, span: start.to(self.prev_span()) })
+    }
+
+    fn var_decl(&mut self) -> PResult<VarDecl> {
+        let start = self.span();
+        let mut names = vec![self.ident()?];
+        while self.eat(&Tok::Comma) {
+            names.push(self.ident()?);
+        }
+        if self.is_kw("AT") {
+            return Err(self.error_here("`:` (located variables `AT %...` are not supported)"));
+        }
+        self.expect(Tok::Colon)?;
+        let ty = self.type_ref()?;
+        let init = if self.eat(&Tok::Assign) { Some(self.init()?) } else { None };
+        self.expect(Tok::Semi)?;
+        Ok(VarDecl { names, ty, init, span: start.to(self.prev_span()) })
+    }
+
+    fn type_block(&mut self, out: &mut Vec<TypeDecl>) -> PResult<()> {
+        self.expect_kw("TYPE")?;
+        while !self.is_kw("END_TYPE") && !self.at_eof() {
+            let r = (|| -> PResult<TypeDecl> {
+                let name = self.ident()?;
+                self.expect(Tok::Colon)?;
+                let ty = self.type_ref()?;
+                let init = if self.eat(&Tok::Assign) { Some(self.init()?) } else { None };
+                self.expect(Tok::Semi)?;
+                Ok(TypeDecl { name, ty, init })
+            })();
+            match r {
+                Ok(d) => out.push(d),
+                Err(Fail) => {
+                    // A broken STRUCT must be skipped as a whole.
+                    let mut depth = 0;
+                    while !self.at_eof() && !self.is_kw("END_TYPE") {
+                        if self.is_kw("STRUCT") {
+                            depth += 1;
+                        } else if self.is_kw("END_STRUCT") {
+                            depth -= 1;
+                        } else if depth <= 0 && matches!(self.tok(), Tok::Semi) {
+                            self.bump();
+                            break;
+                        }
+                        self.bump();
+                    }
+                }
+            }
+        }
+        self.expect_kw("END_TYPE")
+    }
+
+    fn type_ref(&mut self) -> PResult<TypeRef> {
+        let start = self.span();
+        if self.eat_kw("ARRAY") {
+            self.expect(Tok::LBracket)?;
+            let mut dims = Vec::new();
+            loop {
+                let lo = self.expr()?;
+                self.expect(Tok::DotDot)?;
+                let hi = self.expr()?;
+                dims.push((lo, hi));
+                if !self.eat(&Tok::Comma) {
+                    break;
+                }
+            }
+            self.expect(Tok::RBracket)?;
+            self.expect_kw("OF")?;
+            let elem = self.type_ref()?;
+            return Ok(TypeRef::Array { dims, elem: Box::new(elem), span: start.to(self.prev_span()) });
+        }
+        if self.eat_kw("STRUCT") {
+            let mut members = Vec::new();
+            while !self.is_kw("END_STRUCT") && !self.at_eof() {
+                match self.var_decl() {
+                    Ok(d) => members.push(d),
+                    Err(Fail) => self.recover(&["END_STRUCT", "END_TYPE"]),
+                }
+            }
+            self.expect_kw("END_STRUCT")?;
+            return Ok(TypeRef::Struct { members, span: start.to(self.prev_span()) });
+        }
+        if self.eat(&Tok::LParen) {
+            let mut values = Vec::new();
+            loop {
+                let id = self.ident()?;
+                let v = if self.eat(&Tok::Assign) { Some(self.expr()?) } else { None };
+                values.push((id, v));
+                if !self.eat(&Tok::Comma) {
+                    break;
+                }
+            }
+            self.expect(Tok::RParen)?;
+            return Ok(TypeRef::Enum { values, span: start.to(self.prev_span()) });
+        }
+        if self.is_kw("STRING") {
+            self.bump();
+            let len = if self.eat(&Tok::LBracket) {
+                let e = self.expr()?;
+                self.expect(Tok::RBracket)?;
+                Some(Box::new(e))
+            } else if self.eat(&Tok::LParen) {
+                let e = self.expr()?;
+                self.expect(Tok::RParen)?;
+                Some(Box::new(e))
+            } else {
+                None
+            };
+            return Ok(TypeRef::String(len, start.to(self.prev_span())));
+        }
+        let base = self.ident()?;
+        if self.eat(&Tok::LParen) {
+            let lo = self.expr()?;
+            self.expect(Tok::DotDot)?;
+            let hi = self.expr()?;
+            self.expect(Tok::RParen)?;
+            return Ok(TypeRef::Subrange {
+                base,
+                lo: Box::new(lo),
+                hi: Box::new(hi),
+                span: start.to(self.prev_span()),
+            });
+        }
+        Ok(TypeRef::Named(base))
+    }
+
+    fn init(&mut self) -> PResult<Init> {
+        let start = self.span();
+        if self.eat(&Tok::LBracket) {
+            let mut items = Vec::new();
+            if !matches!(self.tok(), Tok::RBracket) {
+                loop {
+                    // `n(value)` repeats value n times; `n()` repeats the default.
+                    if let (Tok::Int(n), Tok::LParen) = (self.tok().clone(), self.tok_at(1).clone()) {
+                        self.bump();
+                        self.bump();
+                        let value = if matches!(self.tok(), Tok::RParen) { None } else { Some(self.init()?) };
+                        self.expect(Tok::RParen)?;
+                        items.push(ArrayInitItem { repeat: n.min(1 << 24) as u64, value });
+                    } else {
+                        items.push(ArrayInitItem { repeat: 1, value: Some(self.init()?) });
+                    }
+                    if !self.eat(&Tok::Comma) {
+                        break;
+                    }
+                }
+            }
+            self.expect(Tok::RBracket)?;
+            return Ok(Init::Array(items, start.to(self.prev_span())));
+        }
+        if matches!(self.tok(), Tok::LParen)
+            && matches!(self.tok_at(1), Tok::Ident(..))
+            && matches!(self.tok_at(2), Tok::Assign)
+        {
+            self.bump();
+            let mut fields = Vec::new();
+            loop {
+                let name = self.ident()?;
+                self.expect(Tok::Assign)?;
+                let v = self.init()?;
+                fields.push((name, v));
+                if !self.eat(&Tok::Comma) {
+                    break;
+                }
+            }
+            self.expect(Tok::RParen)?;
+            return Ok(Init::Struct(fields, start.to(self.prev_span())));
+        }
+        Ok(Init::Expr(self.expr()?))
+    }
+
+    fn configuration(&mut self, unit: &mut Unit) -> PResult<()> {
+        self.expect_kw("CONFIGURATION")?;
+        let name = self.ident()?;
+        let mut config = Configuration { name, resources: Vec::new() };
+        // Tasks and programs declared directly in the configuration form an implicit resource.
+        let mut implicit =
+            Resource { name: config.name.clone(), tasks: Vec::new(), programs: Vec::new() };
+        while !self.is_kw("END_CONFIGURATION") && !self.at_eof() {
+            if self.is_kw("VAR_GLOBAL") {
+                let b = self.var_block()?;
+                unit.globals.push(b);
+            } else if self.eat_kw("RESOURCE") {
+                let rname = self.ident()?;
+                if self.eat_kw("ON") {
+                    self.ident()?;
+                }
+                let mut res = Resource { name: rname, tasks: Vec::new(), programs: Vec::new() };
+                while !self.is_kw("END_RESOURCE") && !self.at_eof() {
+                    if self.is_kw("VAR_GLOBAL") {
+                        let b = self.var_block()?;
+                        unit.globals.push(b);
+                    } else if self.resource_item(&mut res).is_err() {
+                        self.recover(&["END_RESOURCE", "TASK", "PROGRAM"]);
+                    }
+                }
+                self.expect_kw("END_RESOURCE")?;
+                config.resources.push(res);
+            } else if self.resource_item(&mut implicit).is_err() {
+                self.recover(&["END_CONFIGURATION", "TASK", "PROGRAM", "RESOURCE"]);
+            }
+        }
+        self.expect_kw("END_CONFIGURATION")?;
+        if !implicit.tasks.is_empty() || !implicit.programs.is_empty() {
+            config.resources.push(implicit);
+        }
+        unit.configs.push(config);
+        Ok(())
+    }
+
+    fn resource_item(&mut self, res: &mut Resource) -> PResult<()> {
+        if self.eat_kw("TASK") {
+            let name = self.ident()?;
+            let mut task = TaskDecl { name, interval: None, single: None, priority: None };
+            self.expect(Tok::LParen)?;
+            loop {
+                let key = self.ident()?;
+                self.expect(Tok::Assign)?;
+                let v = self.expr()?;
+                match key.name.as_str() {
+                    "INTERVAL" => task.interval = Some(v),
+                    "SINGLE" => task.single = Some(v),
+                    "PRIORITY" => task.priority = Some(v),
+                    _ => {
+                        self.diags.push(Diagnostic::error(
+                            key.span,
+                            format!("unknown task property `{}` (expected INTERVAL, SINGLE or PRIORITY)", key.text),
+                        ));
+                    }
+                }
+                if !self.eat(&Tok::Comma) {
+                    break;
+                }
+            }
+            self.expect(Tok::RParen)?;
+            self.expect(Tok::Semi)?;
+            res.tasks.push(task);
+            Ok(())
+        } else if self.eat_kw("PROGRAM") {
+            let instance = self.ident()?;
+            let task = if self.eat_kw("WITH") { Some(self.ident()?) } else { None };
+            self.expect(Tok::Colon)?;
+            let program_type = self.ident()?;
+            if self.eat(&Tok::LParen) {
+                // Parameter connections to globals are not supported; skip them.
+                while !matches!(self.tok(), Tok::RParen | Tok::Eof | Tok::Semi) {
+                    self.bump();
+                }
+                self.expect(Tok::RParen)?;
+            }
+            self.expect(Tok::Semi)?;
+            res.programs.push(ProgramBinding { instance, task, program_type });
+            Ok(())
+        } else {
+            Err(self.error_here("TASK, PROGRAM, RESOURCE or END_CONFIGURATION"))
+        }
+    }
+
+    // ----- statements ------------------------------------------------------------------
+
+    fn at_stmt_end(&self) -> bool {
+        if self.at_eof() {
+            return true;
+        }
+        if let Tok::Ident(u, _) = self.tok() {
+            if STMT_END.contains(&u.as_str()) {
+                return true;
+            }
+            if ["END_CONFIGURATION", "PROGRAM", "FUNCTION", "FUNCTION_BLOCK", "TYPE", "CONFIGURATION", "VAR_GLOBAL"]
+                .contains(&u.as_str())
+            {
+                return true;
+            }
+        }
+        self.in_case > 0 && self.looks_like_case_label()
+    }
+
+    /// `1, 2..5, Red :` — literals, names, ranges and commas followed by a lone `:`.
+    fn looks_like_case_label(&self) -> bool {
+        let mut i = 0;
+        loop {
+            match self.tok_at(i) {
+                Tok::Colon => return i > 0,
+                Tok::Int(_) | Tok::Minus | Tok::Plus | Tok::DotDot | Tok::Comma | Tok::TypePrefix(..) | Tok::Dot => {}
+                Tok::Ident(u, _) if !RESERVED.contains(&u.as_str()) => {}
+                _ => return false,
+            }
+            i += 1;
+        }
+    }
+
+    fn stmt_list(&mut self) -> Vec<Stmt> {
+        let mut out = Vec::new();
+        while !self.at_stmt_end() {
+            let before = self.pos;
+            match self.stmt() {
+                Ok(s) => out.push(s),
+                Err(Fail) => {
+                    self.recover(STMT_END);
+                    if self.pos == before {
+                        self.bump();
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    fn stmt(&mut self) -> PResult<Stmt> {
+        let start = self.span();
+        let kind = if self.eat(&Tok::Semi) {
+            return Ok(Stmt { kind: StmtKind::Empty, span: start });
+        } else if self.eat_kw("IF") {
+            let mut branches = Vec::new();
+            let cond = self.expr()?;
+            self.expect_kw("THEN")?;
+            let body = self.stmt_list();
+            branches.push((cond, body));
+            let mut else_body = None;
+            loop {
+                if self.eat_kw("ELSIF") {
+                    let c = self.expr()?;
+                    self.expect_kw("THEN")?;
+                    let b = self.stmt_list();
+                    branches.push((c, b));
+                } else if self.eat_kw("ELSE") {
+                    else_body = Some(self.stmt_list());
+                } else {
+                    break;
+                }
+            }
+            self.expect_kw("END_IF")?;
+            StmtKind::If { branches, else_body }
+        } else if self.eat_kw("CASE") {
+            let selector = self.expr()?;
+            self.expect_kw("OF")?;
+            let mut arms = Vec::new();
+            let mut else_body = None;
+            self.in_case += 1;
+            let r = (|| -> PResult<()> {
+                while !self.is_kw("END_CASE") && !self.at_eof() {
+                    if self.eat_kw("ELSE") {
+                        self.in_case -= 1;
+                        else_body = Some(self.stmt_list());
+                        self.in_case += 1;
+                        break;
+                    }
+                    let mut labels = Vec::new();
+                    loop {
+                        let a = self.expr()?;
+                        if self.eat(&Tok::DotDot) {
+                            let b = self.expr()?;
+                            labels.push(CaseLabel::Range(a, b));
+                        } else {
+                            labels.push(CaseLabel::Value(a));
+                        }
+                        if !self.eat(&Tok::Comma) {
+                            break;
+                        }
+                    }
+                    self.expect(Tok::Colon)?;
+                    let body = self.stmt_list();
+                    arms.push(CaseArm { labels, body });
+                }
+                Ok(())
+            })();
+            self.in_case -= 1;
+            r?;
+            self.expect_kw("END_CASE")?;
+            StmtKind::Case { selector, arms, else_body }
+        } else if self.eat_kw("FOR") {
+            let var = self.ident()?;
+            self.expect(Tok::Assign)?;
+            let from = self.expr()?;
+            self.expect_kw("TO")?;
+            let to = self.expr()?;
+            let by = if self.eat_kw("BY") { Some(self.expr()?) } else { None };
+            self.expect_kw("DO")?;
+            let saved = std::mem::take(&mut self.in_case);
+            let body = self.stmt_list();
+            self.in_case = saved;
+            self.expect_kw("END_FOR")?;
+            StmtKind::For { var, from, to, by, body }
+        } else if self.eat_kw("WHILE") {
+            let cond = self.expr()?;
+            self.expect_kw("DO")?;
+            let saved = std::mem::take(&mut self.in_case);
+            let body = self.stmt_list();
+            self.in_case = saved;
+            self.expect_kw("END_WHILE")?;
+            StmtKind::While { cond, body }
+        } else if self.eat_kw("REPEAT") {
+            let saved = std::mem::take(&mut self.in_case);
+            let body = self.stmt_list();
+            self.in_case = saved;
+            self.expect_kw("UNTIL")?;
+            let until = self.expr()?;
+            self.expect_kw("END_REPEAT")?;
+            StmtKind::Repeat { body, until }
+        } else if self.eat_kw("EXIT") {
+            StmtKind::Exit
+        } else if self.eat_kw("RETURN") {
+            StmtKind::Return
+        } else if self.eat_kw("__TRY") {
+            let saved = std::mem::take(&mut self.in_case);
+            let body = self.stmt_list();
+            let mut catch_var = None;
+            let mut catch_body = Vec::new();
+            let mut finally_body = Vec::new();
+            if self.eat_kw("__CATCH") {
+                if self.eat(&Tok::LParen) {
+                    catch_var = Some(self.ident()?);
+                    self.expect(Tok::RParen)?;
+                }
+                catch_body = self.stmt_list();
+            }
+            if self.eat_kw("__FINALLY") {
+                finally_body = self.stmt_list();
+            }
+            self.in_case = saved;
+            self.expect_kw("__ENDTRY")?;
+            StmtKind::Try { body, catch_var, catch_body, finally_body }
+        } else {
+            if let Tok::Ident(u, _) = self.tok() {
+                if RESERVED.contains(&u.as_str()) {
+                    return Err(self.error_here("a statement"));
+                }
+            }
+            let target = self.expr()?;
+            if self.eat(&Tok::Assign) {
+                let value = self.expr()?;
+                StmtKind::Assign { target, value }
+            } else if matches!(target.kind, ExprKind::Call { .. }) {
+                StmtKind::Call(target)
+            } else {
+                return Err(self.error_here("`:=`"));
+            }
+        };
+        let span = start.to(self.prev_span());
+        if !self.eat(&Tok::Semi) {
+            return Err(self.error_here("`;`"));
+        }
+        Ok(Stmt { kind, span })
+    }
+
+    // ----- expressions -----------------------------------------------------------------
+
+    pub(crate) fn expr(&mut self) -> PResult<Expr> {
+        self.binary(0)
+    }
+
+    fn binop(&self) -> Option<(BinOp, u8)> {
+        let op = match self.tok() {
+            Tok::Ident(u, _) => match u.as_str() {
+                "OR" => BinOp::Or,
+                "XOR" => BinOp::Xor,
+                "AND" => BinOp::And,
+                "MOD" => BinOp::Mod,
+                _ => return None,
+            },
+            Tok::Amp => BinOp::And,
+            Tok::Eq => BinOp::Eq,
+            Tok::Ne => BinOp::Ne,
+            Tok::Lt => BinOp::Lt,
+            Tok::Le => BinOp::Le,
+            Tok::Gt => BinOp::Gt,
+            Tok::Ge => BinOp::Ge,
+            Tok::Plus => BinOp::Add,
+            Tok::Minus => BinOp::Sub,
+            Tok::Star => BinOp::Mul,
+            Tok::Slash => BinOp::Div,
+            Tok::Power => BinOp::Pow,
+            _ => return None,
+        };
+        let prec = match op {
+            BinOp::Or => 1,
+            BinOp::Xor => 2,
+            BinOp::And => 3,
+            BinOp::Eq | BinOp::Ne => 4,
+            BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => 5,
+            BinOp::Add | BinOp::Sub => 6,
+            BinOp::Mul | BinOp::Div | BinOp::Mod => 7,
+            BinOp::Pow => 9,
+        };
+        Some((op, prec))
+    }
+
+    /// Precedence climbing; all binary operators are left-associative (IEC 61131-3 table 71).
+    fn binary(&mut self, min_prec: u8) -> PResult<Expr> {
+        let mut lhs = self.unary()?;
+        while let Some((op, prec)) = self.binop() {
+            if prec < min_prec {
+                break;
+            }
+            self.bump();
+            let rhs = if op == BinOp::Pow { self.power_operand()? } else { self.binary(prec + 1)? };
+            let span = lhs.span.to(rhs.span);
+            lhs = Expr { kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span };
+        }
+        Ok(lhs)
+    }
+
+    /// Right operand of `**`: binds tighter than unary minus, but `2 ** -1` is accepted.
+    fn power_operand(&mut self) -> PResult<Expr> {
+        if matches!(self.tok(), Tok::Minus) || self.is_kw("NOT") {
+            return self.unary();
+        }
+        self.postfix()
+    }
+
+    fn unary(&mut self) -> PResult<Expr> {
+        let start = self.span();
+        let op = if matches!(self.tok(), Tok::Minus) {
+            Some(UnOp::Neg)
+        } else if self.is_kw("NOT") {
+            Some(UnOp::Not)
+        } else if matches!(self.tok(), Tok::Plus) {
+            self.bump();
+            return self.unary();
+        } else {
+            None
+        };
+        if let Some(op) = op {
+            self.bump();
+            // The operand of a unary operator may itself be a power expression: -2**2 = -(2**2).
+            let mut operand = self.unary()?;
+            while matches!(self.tok(), Tok::Power) {
+                self.bump();
+                let rhs = self.power_operand()?;
+                let span = operand.span.to(rhs.span);
+                operand = Expr { kind: ExprKind::Binary(BinOp::Pow, Box::new(operand), Box::new(rhs)), span };
+            }
+            let span = start.to(operand.span);
+            return Ok(Expr { kind: ExprKind::Unary(op, Box::new(operand)), span });
+        }
+        self.postfix()
+    }
+
+    fn postfix(&mut self) -> PResult<Expr> {
+        let mut e = self.primary()?;
+        loop {
+            if matches!(self.tok(), Tok::Dot) {
+                self.bump();
+                let member = self.ident()?;
+                let span = e.span.to(member.span);
+                e = Expr { kind: ExprKind::Member(Box::new(e), member), span };
+            } else if matches!(self.tok(), Tok::LBracket) {
+                self.bump();
+                let mut idx = vec![self.expr()?];
+                while self.eat(&Tok::Comma) {
+                    idx.push(self.expr()?);
+                }
+                self.expect(Tok::RBracket)?;
+                let span = e.span.to(self.prev_span());
+                e = Expr { kind: ExprKind::Index(Box::new(e), idx), span };
+            } else if matches!(self.tok(), Tok::LParen) && matches!(e.kind, ExprKind::Name(_) | ExprKind::Member(..) | ExprKind::Index(..)) {
+                self.bump();
+                let mut args = Vec::new();
+                if !matches!(self.tok(), Tok::RParen) {
+                    loop {
+                        args.push(self.arg()?);
+                        if !self.eat(&Tok::Comma) {
+                            break;
+                        }
+                    }
+                }
+                self.expect(Tok::RParen)?;
+                let span = e.span.to(self.prev_span());
+                e = Expr { kind: ExprKind::Call { callee: Box::new(e), args }, span };
+            } else {
+                return Ok(e);
+            }
+        }
+    }
+
+    fn arg(&mut self) -> PResult<Arg> {
+        let start = self.span();
+        if let Tok::Ident(..) = self.tok() {
+            if matches!(self.tok_at(1), Tok::Assign | Tok::Arrow) {
+                let output = matches!(self.tok_at(1), Tok::Arrow);
+                let name = self.ident()?;
+                self.bump();
+                let value = self.expr()?;
+                return Ok(Arg { name: Some(name), output, value, span: start.to(self.prev_span()) });
+            }
+        }
+        let value = self.expr()?;
+        Ok(Arg { name: None, output: false, span: value.span, value })
+    }
+
+    fn primary(&mut self) -> PResult<Expr> {
+        let span = self.span();
+        let kind = match self.tok().clone() {
+            Tok::Int(v) => ExprKind::Int(v),
+            Tok::Real(v) => ExprKind::Real(v),
+            Tok::Time(v) => ExprKind::Time(v),
+            Tok::Str(s) => ExprKind::Str(s),
+            Tok::LParen => {
+                self.bump();
+                let e = self.expr()?;
+                self.expect(Tok::RParen)?;
+                return Ok(Expr { kind: e.kind, span: span.to(self.prev_span()) });
+            }
+            Tok::TypePrefix(u, o) => {
+                self.bump();
+                let ty = Ident { name: u, text: o, span };
+                let neg = self.eat(&Tok::Minus);
+                let vspan = self.span();
+                let mut value = match self.tok().clone() {
+                    Tok::Int(v) => Expr { kind: ExprKind::Int(v), span: vspan },
+                    Tok::Real(v) => Expr { kind: ExprKind::Real(v), span: vspan },
+                    Tok::Str(s) => Expr { kind: ExprKind::Str(s), span: vspan },
+                    Tok::Ident(u, _) if u == "TRUE" => Expr { kind: ExprKind::Bool(true), span: vspan },
+                    Tok::Ident(u, _) if u == "FALSE" => Expr { kind: ExprKind::Bool(false), span: vspan },
+                    Tok::Ident(u, o) if !neg && !RESERVED.contains(&u.as_str()) => {
+                        Expr { kind: ExprKind::Name(Ident { name: u, text: o, span: vspan }), span: vspan }
+                    }
+                    _ => return Err(self.error_here("a literal after the type prefix")),
+                };
+                self.bump();
+                if neg {
+                    value = Expr { kind: ExprKind::Unary(UnOp::Neg, Box::new(value)), span: vspan };
+                }
+                let full = span.to(self.prev_span());
+                return Ok(Expr { kind: ExprKind::Typed(ty, Box::new(value)), span: full });
+            }
+            Tok::Ident(u, o) => {
+                match u.as_str() {
+                    "TRUE" => ExprKind::Bool(true),
+                    "FALSE" => ExprKind::Bool(false),
+                    _ if RESERVED.contains(&u.as_str()) => return Err(self.error_here("an expression")),
+                    _ => ExprKind::Name(Ident { name: u, text: o, span }),
+                }
+            }
+            _ => return Err(self.error_here("an expression")),
+        };
+        self.bump();
+        Ok(Expr { kind, span })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::lexer::lex;
+
+    fn parse_src(s: &str) -> (Unit, Vec<Diagnostic>) {
+        let mut d = Vec::new();
+        let t = lex(0, s, &mut d);
+        let u = parse(t, &mut d);
+        (u, d)
+    }
+
+    #[test]
+    fn precedence() {
+        let (u, d) = parse_src("PROGRAM P VAR x : INT; END_VAR x := -2 ** 2 + 3 * 4; END_PROGRAM");
+        assert!(d.is_empty(), "{d:?}");
+        let StmtKind::Assign { value, .. } = &u.pous[0].body[0].kind else { panic!() };
+        let ExprKind::Binary(BinOp::Add, l, _) = &value.kind else { panic!("{value:?}") };
+        assert!(matches!(l.kind, ExprKind::Unary(UnOp::Neg, _)));
+    }
+
+    #[test]
+    fn recovers_multiple_errors() {
+        let (_, d) = parse_src("PROGRAM P\nVAR x : INT; END_VAR\nx := ;\nx := 1 +;\nx := 2;\nEND_PROGRAM");
+        assert_eq!(d.len(), 2, "{d:?}");
+    }
+}

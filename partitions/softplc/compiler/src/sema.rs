@@ -1,0 +1,826 @@
+//! Semantic analysis of declarations: resolves TYPE declarations, lays out the variables of
+//! every POU (frames) and of the globals, evaluates constant expressions (array bounds,
+//! subrange limits, string lengths, CASE labels, task properties) and checks the
+//! CONFIGURATION. Statement bodies are checked while generating code (`codegen`).
+//!
+//! Memory model: every variable has a static home. Globals and program instances live at
+//! fixed addresses; an FB instance is a region inside its owner; a FUNCTION has one static
+//! frame (IEC forbids recursion, which is checked). A POU body addresses its own variables
+//! relative to the frame base register.
+
+use std::collections::HashMap;
+use std::rc::Rc;
+
+use crate::ast::*;
+use crate::diagnostics::{Diagnostics, Span};
+use crate::types::*;
+
+#[derive(Debug, Clone)]
+pub struct StructDef {
+    pub name: String,
+    pub members: Vec<VarDef>,
+    pub size: u32,
+    pub align: u32,
+}
+
+#[derive(Debug, Clone)]
+pub struct EnumDef {
+    pub name: String,
+    pub values: Vec<(String, i64)>,
+}
+
+/// A declared variable (or struct member) with its resolved type and offset within its frame
+/// (or absolute address for globals).
+#[derive(Debug, Clone)]
+pub struct VarDef {
+    pub name: String,
+    pub text: String,
+    pub span: Span,
+    pub ty: Type,
+    pub offset: u32,
+    pub kind: VarKind,
+    pub constant: bool,
+    pub init: Option<Init>,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum LayoutState {
+    NotStarted,
+    InProgress,
+    Done,
+}
+
+#[derive(Debug)]
+pub struct PouDef {
+    pub kind: PouKind,
+    pub name: String,
+    pub text: String,
+    pub span: Span,
+    /// Index of the declaration in the unit's POU list.
+    pub ast: usize,
+    /// Variables in frame order: inputs and in-outs first (callers write those), then the rest.
+    pub vars: Vec<VarDef>,
+    pub return_type: Option<Type>,
+    pub frame_size: u32,
+    /// Offset where the part of the frame that is re-initialised on every call starts
+    /// (functions: everything after the parameters; FBs/programs: the VAR_TEMP region).
+    pub reinit_start: u32,
+    /// Whether this POU comes from the built-in prelude.
+    pub builtin: bool,
+    state: LayoutState,
+}
+
+impl PouDef {
+    pub fn var(&self, name: &str) -> Option<&VarDef> {
+        self.vars.iter().find(|v| v.name == name)
+    }
+
+    /// Positional parameters (inputs, then in-outs, then outputs in declaration order is what
+    /// IEC prescribes for non-formal calls; we use declaration order of inputs and in-outs).
+    pub fn params(&self) -> impl Iterator<Item = &VarDef> {
+        self.vars.iter().filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
+    }
+}
+
+/// A task after checking the configuration.
+#[derive(Debug, Clone)]
+pub struct TaskDef {
+    pub name: String,
+    /// Cyclic interval in ns (0 for a pure event task).
+    pub interval_ns: i64,
+    /// Global BOOL variable whose rising edge triggers the task (SINGLE).
+    pub single: Option<String>,
+    pub priority: u32,
+    /// Program instances (instance name, POU index) in declaration order.
+    pub programs: Vec<(String, usize)>,
+}
+
+/// A program instance with its static address.
+#[derive(Debug, Clone)]
+pub struct ProgramInstance {
+    /// Name used to print its variables (`Main` or the configured instance name).
+    pub name: String,
+    pub pou: usize,
+    pub addr: u32,
+}
+
+/// Constant value of a constant expression.
+#[derive(Debug, Clone, PartialEq)]
+pub enum ConstVal {
+    Int(i128),
+    Real(f64),
+    Bool(bool),
+    Time(i128),
+    Str(String),
+}
+
+/// The analysed compilation: all declarations resolved and laid out.
+#[derive(Debug, Default)]
+pub struct Program {
+    pub structs: Vec<StructDef>,
+    pub enums: Vec<EnumDef>,
+    pub aliases: HashMap<String, (Type, Option<Init>)>,
+    pub pous: Vec<PouDef>,
+    pub pou_by_name: HashMap<String, usize>,
+    /// Globals with absolute addresses in `offset`.
+    pub globals: Vec<VarDef>,
+    pub instances: Vec<ProgramInstance>,
+    pub tasks: Vec<TaskDef>,
+    pub has_configuration: bool,
+    /// Bytes of data memory allocated so far (globals, instances, function frames, ...).
+    pub data_size: u32,
+}
+
+pub fn align_up(v: u32, a: u32) -> u32 {
+    let a = a.max(1);
+    v.div_ceil(a) * a
+}
+
+impl Program {
+    pub fn size_align(&self, ty: &Type) -> (u32, u32) {
+        match ty {
+            Type::Elem(e) | Type::Subrange(e, ..) => (e.size(), e.size()),
+            Type::Enum(_) | Type::Exception => (4, 4),
+            Type::String(n) => (4 + n, 2),
+            Type::Array(a) => {
+                let (s, al) = self.size_align(&a.elem);
+                let stride = align_up(s, al);
+                let total = (stride as u64).saturating_mul(a.len()).min(u32::MAX as u64 / 2) as u32;
+                (total, al)
+            }
+            Type::Struct(i) => (self.structs[*i].size, self.structs[*i].align),
+            Type::Fb(i) => (self.pous[*i].frame_size, 8),
+            Type::Void | Type::Error => (0, 1),
+        }
+    }
+
+    pub fn stride(&self, ty: &Type) -> u32 {
+        let (s, a) = self.size_align(ty);
+        align_up(s, a)
+    }
+
+    pub fn type_name(&self, ty: &Type) -> String {
+        match ty {
+            Type::Elem(e) => e.name().to_string(),
+            Type::String(n) => format!("STRING[{n}]"),
+            Type::Array(a) => {
+                let dims: Vec<String> = a.dims.iter().map(|(l, h)| format!("{l}..{h}")).collect();
+                format!("ARRAY[{}] OF {}", dims.join(","), self.type_name(&a.elem))
+            }
+            Type::Struct(i) => self.structs[*i].name.clone(),
+            Type::Enum(i) => self.enums[*i].name.clone(),
+            Type::Subrange(e, lo, hi) => format!("{}({lo}..{hi})", e.name()),
+            Type::Fb(i) => self.pous[*i].text.clone(),
+            Type::Exception => "__EXCEPTION".into(),
+            Type::Void => "no value".into(),
+            Type::Error => "?".into(),
+        }
+    }
+
+    pub fn global(&self, name: &str) -> Option<&VarDef> {
+        self.globals.iter().find(|g| g.name == name)
+    }
+
+    /// Finds an enumeration value by bare name: (enum index, value).
+    pub fn enum_value(&self, name: &str) -> Option<(usize, i64)> {
+        self.enums.iter().enumerate().find_map(|(i, e)| {
+            e.values.iter().find(|(n, _)| n == name).map(|(_, v)| (i, *v))
+        })
+    }
+
+    /// Reserves `size` bytes of data memory aligned to `align`; returns the address.
+    pub fn alloc(&mut self, size: u32, align: u32) -> u32 {
+        let addr = align_up(self.data_size, align.max(1));
+        self.data_size = addr.saturating_add(size);
+        addr
+    }
+}
+
+/// Analyses all declarations of `unit`; `prelude_pous` counts the leading POUs of the unit
+/// that come from the prelude.
+pub fn analyse(unit: &Unit, prelude_pous: usize, program_override: Option<&str>, diags: &mut Diagnostics) -> Program {
+    let mut s = Sema { unit, prog: Program::default(), diags, type_state: HashMap::new() };
+    s.declare_types();
+    s.declare_pous(prelude_pous);
+    for i in 0..s.prog.pous.len() {
+        s.layout_pou(i);
+    }
+    s.declare_globals();
+    s.configure(program_override);
+    s.prog
+}
+
+struct Sema<'a> {
+    unit: &'a Unit,
+    prog: Program,
+    diags: &'a mut Diagnostics,
+    /// Resolution state of named TYPE declarations (cycle detection).
+    type_state: HashMap<String, LayoutState>,
+}
+
+/// Scope used to look up names inside constant expressions.
+pub trait ConstScope {
+    fn constant(&self, name: &str) -> Option<ConstVal>;
+}
+
+impl ConstScope for () {
+    fn constant(&self, _: &str) -> Option<ConstVal> {
+        None
+    }
+}
+
+/// Evaluates a constant expression; `None` (without a diagnostic) when it is not constant.
+pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<ConstVal> {
+    use ConstVal::*;
+    Some(match &e.kind {
+        ExprKind::Int(v) => Int(*v as i128),
+        ExprKind::Real(v) => Real(*v),
+        ExprKind::Bool(b) => Bool(*b),
+        ExprKind::Time(t) => Time(*t),
+        ExprKind::Str(s) => Str(s.clone()),
+        ExprKind::Typed(ty, inner) => {
+            if let Some(elem) = Elem::from_name(&ty.name) {
+                let v = const_eval(prog, scope, inner)?;
+                match (v, elem) {
+                    (Int(i), e) if e.is_real() => Real(i as f64),
+                    (Int(i), Elem::Bool) => Bool(i != 0),
+                    (v, _) => v,
+                }
+            } else if let ExprKind::Name(n) = &inner.kind {
+                let ei = prog.enums.iter().position(|en| en.name == ty.name)?;
+                Int(prog.enums[ei].values.iter().find(|(vn, _)| *vn == n.name)?.1 as i128)
+            } else {
+                return None;
+            }
+        }
+        ExprKind::Name(n) => {
+            if let Some(v) = scope.constant(&n.name) {
+                return Some(v);
+            }
+            if let Some(g) = prog.global(&n.name) {
+                if g.constant {
+                    if let Some(Init::Expr(ie)) = &g.init {
+                        return const_eval(prog, &(), ie);
+                    }
+                }
+                return None;
+            }
+            Int(prog.enum_value(&n.name)?.1 as i128)
+        }
+        ExprKind::Unary(UnOp::Neg, x) => match const_eval(prog, scope, x)? {
+            Int(i) => Int(-i),
+            Real(r) => Real(-r),
+            Time(t) => Time(-t),
+            _ => return None,
+        },
+        ExprKind::Unary(UnOp::Not, x) => match const_eval(prog, scope, x)? {
+            Bool(b) => Bool(!b),
+            Int(i) => Int(!i),
+            _ => return None,
+        },
+        ExprKind::Binary(op, a, b) => {
+            let a = const_eval(prog, scope, a)?;
+            let b = const_eval(prog, scope, b)?;
+            match (a, b) {
+                (Int(x), Int(y)) => match op {
+                    BinOp::Add => Int(x.checked_add(y)?),
+                    BinOp::Sub => Int(x.checked_sub(y)?),
+                    BinOp::Mul => Int(x.checked_mul(y)?),
+                    BinOp::Div if y != 0 => Int(x.checked_div(y)?),
+                    BinOp::Mod if y != 0 => Int(x.checked_rem(y)?),
+                    BinOp::And => Int(x & y),
+                    BinOp::Or => Int(x | y),
+                    BinOp::Xor => Int(x ^ y),
+                    BinOp::Eq => Bool(x == y),
+                    BinOp::Ne => Bool(x != y),
+                    BinOp::Lt => Bool(x < y),
+                    BinOp::Le => Bool(x <= y),
+                    BinOp::Gt => Bool(x > y),
+                    BinOp::Ge => Bool(x >= y),
+                    _ => return None,
+                },
+                (Real(x), Real(y)) => match op {
+                    BinOp::Add => Real(x + y),
+                    BinOp::Sub => Real(x - y),
+                    BinOp::Mul => Real(x * y),
+                    BinOp::Div => Real(x / y),
+                    _ => return None,
+                },
+                (Time(x), Time(y)) => match op {
+                    BinOp::Add => Time(x.checked_add(y)?),
+                    BinOp::Sub => Time(x.checked_sub(y)?),
+                    _ => return None,
+                },
+                (Bool(x), Bool(y)) => match op {
+                    BinOp::And => Bool(x & y),
+                    BinOp::Or => Bool(x | y),
+                    BinOp::Xor => Bool(x ^ y),
+                    _ => return None,
+                },
+                _ => return None,
+            }
+        }
+        _ => return None,
+    })
+}
+
+/// Local constants of a POU being declared (for bounds like `ARRAY[1..N]` with a VAR CONSTANT N).
+struct LocalConsts<'a> {
+    prog: &'a Program,
+    vars: &'a [VarDef],
+}
+
+impl ConstScope for LocalConsts<'_> {
+    fn constant(&self, name: &str) -> Option<ConstVal> {
+        let v = self.vars.iter().find(|v| v.name == name && v.constant)?;
+        match &v.init {
+            Some(Init::Expr(e)) => const_eval(self.prog, &(), e),
+            _ => None,
+        }
+    }
+}
+
+impl Sema<'_> {
+    fn declare_types(&mut self) {
+        for d in &self.unit.types {
+            if self.type_state.contains_key(&d.name.name) || Elem::from_name(&d.name.name).is_some() {
+                self.diags.error(d.name.span, format!("type `{}` is already defined", d.name.text));
+                continue;
+            }
+            self.type_state.insert(d.name.name.clone(), LayoutState::NotStarted);
+        }
+        for i in 0..self.unit.types.len() {
+            let name = self.unit.types[i].name.name.clone();
+            self.resolve_named_type(&name, self.unit.types[i].name.span);
+        }
+    }
+
+    fn declare_pous(&mut self, prelude_pous: usize) {
+        for (i, p) in self.unit.pous.iter().enumerate() {
+            if self.prog.pou_by_name.contains_key(&p.name.name) || self.type_state.contains_key(&p.name.name) {
+                self.diags.error(p.name.span, format!("`{}` is already defined", p.name.text));
+                continue;
+            }
+            self.prog.pou_by_name.insert(p.name.name.clone(), self.prog.pous.len());
+            self.prog.pous.push(PouDef {
+                kind: p.kind,
+                name: p.name.name.clone(),
+                text: p.name.text.clone(),
+                span: p.name.span,
+                ast: i,
+                vars: Vec::new(),
+                return_type: None,
+                frame_size: 0,
+                reinit_start: 0,
+                builtin: i < prelude_pous,
+                state: LayoutState::NotStarted,
+            });
+        }
+    }
+
+    /// Resolves a TYPE declaration by name (on demand, so declarations may come in any order).
+    fn resolve_named_type(&mut self, name: &str, use_span: Span) -> Option<Type> {
+        if let Some((t, _)) = self.prog.aliases.get(name) {
+            return Some(t.clone());
+        }
+        match self.type_state.get(name) {
+            None => return None,
+            Some(LayoutState::InProgress) => {
+                self.diags.error(use_span, format!("type `{name}` is defined in terms of itself"));
+                return Some(Type::Error);
+            }
+            Some(LayoutState::Done) => return Some(Type::Error),
+            Some(LayoutState::NotStarted) => {}
+        }
+        self.type_state.insert(name.to_string(), LayoutState::InProgress);
+        let decl = self.unit.types.iter().find(|d| d.name.name == name)?;
+        let ty = match &decl.ty {
+            TypeRef::Enum { values, .. } => {
+                let mut vals: Vec<(String, i64)> = Vec::new();
+                let mut next = 0i64;
+                for (id, v) in values {
+                    let value = match v {
+                        Some(e) => match const_eval(&self.prog, &(), e) {
+                            Some(ConstVal::Int(i)) => i as i64,
+                            _ => {
+                                self.diags.error(e.span, "enumeration value must be a constant integer");
+                                next
+                            }
+                        },
+                        None => next,
+                    };
+                    if vals.iter().any(|(n, _)| *n == id.name) {
+                        self.diags.error(id.span, format!("duplicate enumeration value `{}`", id.text));
+                    }
+                    vals.push((id.name.clone(), value));
+                    next = value + 1;
+                }
+                self.prog.enums.push(EnumDef { name: decl.name.text.clone(), values: vals });
+                Type::Enum(self.prog.enums.len() - 1)
+            }
+            TypeRef::Struct { members, .. } => {
+                let idx = self.prog.structs.len();
+                self.prog.structs.push(StructDef { name: decl.name.text.clone(), members: Vec::new(), size: 0, align: 1 });
+                let mut defs = Vec::new();
+                let mut off = 0u32;
+                let mut align = 1;
+                for m in members {
+                    let mty = self.resolve_type(&m.ty, &[]);
+                    if matches!(mty, Type::Fb(_)) {
+                        self.diags.error(m.ty.span(), "function block instances cannot be structure members");
+                    }
+                    let (sz, al) = self.prog.size_align(&mty);
+                    for n in &m.names {
+                        if defs.iter().any(|d: &VarDef| d.name == n.name) {
+                            self.diags.error(n.span, format!("duplicate member `{}`", n.text));
+                        }
+                        off = align_up(off, al);
+                        defs.push(VarDef {
+                            name: n.name.clone(),
+                            text: n.text.clone(),
+                            span: n.span,
+                            ty: mty.clone(),
+                            offset: off,
+                            kind: VarKind::Local,
+                            constant: false,
+                            init: m.init.clone(),
+                        });
+                        off = off.saturating_add(sz);
+                        align = align.max(al);
+                    }
+                }
+                let s = &mut self.prog.structs[idx];
+                s.members = defs;
+                s.size = align_up(off, align);
+                s.align = align;
+                Type::Struct(idx)
+            }
+            other => self.resolve_type(other, &[]),
+        };
+        self.type_state.insert(name.to_string(), LayoutState::Done);
+        self.prog.aliases.insert(name.to_string(), (ty.clone(), decl.init.clone()));
+        Some(ty)
+    }
+
+    fn const_int(&mut self, e: &Expr, locals: &[VarDef], what: &str) -> Option<i64> {
+        let scope = LocalConsts { prog: &self.prog, vars: locals };
+        match const_eval(&self.prog, &scope, e) {
+            Some(ConstVal::Int(v)) if v >= i64::MIN as i128 && v <= i64::MAX as i128 => Some(v as i64),
+            _ => {
+                self.diags.error(e.span, format!("{what} must be a constant integer expression"));
+                None
+            }
+        }
+    }
+
+    /// Resolves a type reference; `locals` supplies constants of the enclosing POU.
+    pub(crate) fn resolve_type(&mut self, t: &TypeRef, locals: &[VarDef]) -> Type {
+        match t {
+            TypeRef::Named(id) => {
+                if let Some(e) = Elem::from_name(&id.name) {
+                    return Type::Elem(e);
+                }
+                match id.name.as_str() {
+                    "STRING" => return Type::String(DEFAULT_STRING_LEN),
+                    "__EXCEPTION" => return Type::Exception,
+                    "WSTRING" | "LTIME" | "DATE" | "TIME_OF_DAY" | "TOD" | "DATE_AND_TIME" | "DT" | "CHAR" | "WCHAR" => {
+                        self.diags.error(id.span, format!("type `{}` is not supported", id.text));
+                        return Type::Error;
+                    }
+                    _ => {}
+                }
+                if let Some(t) = self.resolve_named_type(&id.name, id.span) {
+                    return t;
+                }
+                if let Some(&i) = self.prog.pou_by_name.get(&id.name) {
+                    if self.prog.pous[i].kind == PouKind::FunctionBlock {
+                        self.layout_pou(i);
+                        return Type::Fb(i);
+                    }
+                    self.diags.error(id.span, format!("`{}` is not a data type or function block", id.text));
+                    return Type::Error;
+                }
+                self.diags.error(id.span, format!("unknown type `{}`", id.text));
+                Type::Error
+            }
+            TypeRef::String(len, _) => match len {
+                None => Type::String(DEFAULT_STRING_LEN),
+                Some(e) => match self.const_int(e, locals, "string length") {
+                    Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
+                    Some(_) => {
+                        self.diags.error(e.span, "string length must be between 1 and 65000");
+                        Type::Error
+                    }
+                    None => Type::Error,
+                },
+            },
+            TypeRef::Array { dims, elem, .. } => {
+                let elem_ty = self.resolve_type(elem, locals);
+                let mut out = Vec::new();
+                for (lo, hi) in dims {
+                    let l = self.const_int(lo, locals, "array bound");
+                    let h = self.const_int(hi, locals, "array bound");
+                    match (l, h) {
+                        (Some(l), Some(h)) if h >= l && (h - l) < (1 << 24) => out.push((l, h)),
+                        (Some(_), Some(_)) => {
+                            self.diags.error(lo.span.to(hi.span), "array upper bound must be >= lower bound (and the array not absurdly large)");
+                            return Type::Error;
+                        }
+                        _ => return Type::Error,
+                    }
+                }
+                let arr = ArrayType { dims: out, elem: elem_ty };
+                let (sz, al) = self.prog.size_align(&arr.elem);
+                if (align_up(sz, al) as u64).saturating_mul(arr.len()) > (1 << 26) {
+                    self.diags.error(t.span(), "array too large");
+                    return Type::Error;
+                }
+                Type::Array(Rc::new(arr))
+            }
+            TypeRef::Subrange { base, lo, hi, .. } => {
+                let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
+                    self.diags.error(base.span, "subrange base type must be an integer type");
+                    return Type::Error;
+                };
+                let l = self.const_int(lo, locals, "subrange bound");
+                let h = self.const_int(hi, locals, "subrange bound");
+                match (l, h) {
+                    (Some(l), Some(h)) if l <= h => {
+                        let (min, max) = e.int_range();
+                        if (l as i128) < min || (h as i128) > max {
+                            self.diags.error(t.span(), format!("subrange exceeds the range of {}", e.name()));
+                        }
+                        Type::Subrange(e, l, h)
+                    }
+                    (Some(_), Some(_)) => {
+                        self.diags.error(t.span(), "subrange lower bound exceeds upper bound");
+                        Type::Error
+                    }
+                    _ => Type::Error,
+                }
+            }
+            TypeRef::Enum { span, .. } | TypeRef::Struct { span, .. } => {
+                self.diags.error(*span, "anonymous enumerations and structures must be declared in a TYPE block");
+                Type::Error
+            }
+        }
+    }
+
+    /// Lays out the frame of POU `i` (recursively for the FB types it contains).
+    fn layout_pou(&mut self, i: usize) {
+        match self.prog.pous[i].state {
+            LayoutState::Done => return,
+            LayoutState::InProgress => {
+                let span = self.prog.pous[i].span;
+                let name = self.prog.pous[i].text.clone();
+                self.diags.error(span, format!("function block `{name}` contains an instance of itself"));
+                return;
+            }
+            LayoutState::NotStarted => {}
+        }
+        self.prog.pous[i].state = LayoutState::InProgress;
+        let ast = &self.unit.pous[self.prog.pous[i].ast];
+        let kind = ast.kind;
+        let mut vars: Vec<VarDef> = Vec::new();
+        if let Some(rt) = &ast.return_type {
+            let t = self.resolve_type(rt, &[]);
+            if matches!(t, Type::Fb(_)) {
+                self.diags.error(rt.span(), "a function cannot return a function block instance");
+            }
+            self.prog.pous[i].return_type = Some(t.clone());
+            // The result variable carries the function's name.
+            vars.push(VarDef {
+                name: ast.name.name.clone(),
+                text: ast.name.text.clone(),
+                span: ast.name.span,
+                ty: t,
+                offset: 0,
+                kind: VarKind::Output,
+                constant: false,
+                init: None,
+            });
+        }
+        for block in &ast.var_blocks {
+            let allowed = match kind {
+                PouKind::Program => !matches!(block.kind, VarKind::InOut),
+                PouKind::FunctionBlock => !matches!(block.kind, VarKind::Global),
+                PouKind::Function => !matches!(block.kind, VarKind::Global | VarKind::External | VarKind::Output) || block.kind == VarKind::Output,
+            };
+            if !allowed || (kind != PouKind::Program && block.kind == VarKind::Global) {
+                self.diags.error(block.span, "this kind of VAR block is not allowed in this POU");
+            }
+            for d in &block.decls {
+                let ty = self.resolve_type(&d.ty, &vars);
+                if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
+                    self.diags.error(d.ty.span(), "function block instances are not allowed inside a FUNCTION");
+                }
+                if block.kind == VarKind::InOut && d.init.is_some() {
+                    self.diags.error(d.span, "VAR_IN_OUT variables cannot have initial values");
+                }
+                if block.constant && d.init.is_none() {
+                    self.diags.error(d.span, "a CONSTANT needs an initial value");
+                }
+                for n in &d.names {
+                    if vars.iter().any(|v| v.name == n.name) {
+                        self.diags.error(n.span, format!("`{}` is declared twice", n.text));
+                        continue;
+                    }
+                    vars.push(VarDef {
+                        name: n.name.clone(),
+                        text: n.text.clone(),
+                        span: n.span,
+                        ty: ty.clone(),
+                        offset: 0,
+                        kind: block.kind,
+                        constant: block.constant,
+                        init: d.init.clone(),
+                    });
+                }
+            }
+        }
+        // Frame order: parameters first, then outputs and locals, temporaries last.
+        let group = |v: &VarDef| match v.kind {
+            VarKind::Input | VarKind::InOut => 0,
+            VarKind::Temp => 2,
+            _ => 1,
+        };
+        let mut off = 0u32;
+        let mut reinit_start = None;
+        for g in 0..3 {
+            for v in vars.iter_mut().filter(|v| group(v) == g) {
+                if v.kind == VarKind::External || v.kind == VarKind::Global {
+                    continue;
+                }
+                let (sz, al) = if v.kind == VarKind::InOut { (4, 4) } else { self.prog.size_align(&v.ty) };
+                off = align_up(off, al);
+                let first_reinit = match kind {
+                    PouKind::Function => g >= 1,
+                    _ => g == 2,
+                };
+                if first_reinit && reinit_start.is_none() {
+                    reinit_start = Some(off);
+                }
+                v.offset = off;
+                off = off.saturating_add(sz);
+            }
+            if g == 0 && kind == PouKind::Function {
+                off = align_up(off, 8);
+                reinit_start = Some(off);
+            }
+        }
+        let frame_size = align_up(off, 8);
+        let p = &mut self.prog.pous[i];
+        p.vars = vars;
+        p.frame_size = frame_size;
+        p.reinit_start = reinit_start.unwrap_or(frame_size);
+        p.state = LayoutState::Done;
+    }
+
+    fn declare_globals(&mut self) {
+        for block in &self.unit.globals {
+            for d in &block.decls {
+                let ty = self.resolve_type(&d.ty, &[]);
+                if block.constant && d.init.is_none() {
+                    self.diags.error(d.span, "a CONSTANT needs an initial value");
+                }
+                for n in &d.names {
+                    if self.prog.global(&n.name).is_some() {
+                        self.diags.error(n.span, format!("global `{}` is declared twice", n.text));
+                        continue;
+                    }
+                    let (sz, al) = self.prog.size_align(&ty);
+                    let addr = self.prog.alloc(sz, al);
+                    self.prog.globals.push(VarDef {
+                        name: n.name.clone(),
+                        text: n.text.clone(),
+                        span: n.span,
+                        ty: ty.clone(),
+                        offset: addr,
+                        kind: VarKind::Global,
+                        constant: block.constant,
+                        init: d.init.clone(),
+                    });
+                }
+            }
+        }
+    }
+
+    fn task_time(&mut self, e: &Expr) -> Option<i64> {
+        match const_eval(&self.prog, &(), e) {
+            Some(ConstVal::Time(t)) if t > 0 => Some(t as i64),
+            _ => {
+                self.diags.error(e.span, "task INTERVAL must be a positive TIME literal such as T#10ms");
+                None
+            }
+        }
+    }
+
+    /// Builds the task list from the CONFIGURATION, or one implicit cyclic task running the
+    /// single PROGRAM (`program_override` picks one when there are several).
+    fn configure(&mut self, program_override: Option<&str>) {
+        let unit = self.unit;
+        if unit.configs.len() > 1 {
+            self.diags.error(unit.configs[1].name.span, "only one CONFIGURATION is supported");
+        }
+        if let Some(cfg) = unit.configs.first() {
+            self.prog.has_configuration = true;
+            for res in &cfg.resources {
+                for t in &res.tasks {
+                    let interval = t.interval.as_ref().and_then(|e| self.task_time(e)).unwrap_or(0);
+                    let single = match &t.single {
+                        Some(Expr { kind: ExprKind::Name(n), .. }) => {
+                            match self.prog.global(&n.name) {
+                                Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
+                                _ => {
+                                    self.diags.error(n.span, "SINGLE must name a global BOOL variable");
+                                    None
+                                }
+                            }
+                        }
+                        Some(e) => {
+                            self.diags.error(e.span, "SINGLE must name a global BOOL variable");
+                            None
+                        }
+                        None => None,
+                    };
+                    if t.interval.is_none() && t.single.is_none() {
+                        self.diags.error(t.name.span, "a task needs INTERVAL or SINGLE");
+                    }
+                    let priority = match &t.priority {
+                        Some(e) => match const_eval(&self.prog, &(), e) {
+                            Some(ConstVal::Int(p)) if (0..=u32::MAX as i128).contains(&p) => p as u32,
+                            _ => {
+                                self.diags.error(e.span, "PRIORITY must be a non-negative integer");
+                                0
+                            }
+                        },
+                        None => 0,
+                    };
+                    if self.prog.tasks.iter().any(|x| x.name == t.name.name) {
+                        self.diags.error(t.name.span, format!("task `{}` is declared twice", t.name.text));
+                    }
+                    self.prog.tasks.push(TaskDef { name: t.name.name.clone(), interval_ns: interval, single, priority, programs: Vec::new() });
+                }
+            }
+            for res in &cfg.resources {
+                for b in &res.programs {
+                    let Some(&pi) = self.prog.pou_by_name.get(&b.program_type.name).filter(|&&i| self.prog.pous[i].kind == PouKind::Program) else {
+                        self.diags.error(b.program_type.span, format!("unknown PROGRAM `{}`", b.program_type.text));
+                        continue;
+                    };
+                    if self.prog.instances.iter().any(|x| x.name.eq_ignore_ascii_case(&b.instance.text)) {
+                        self.diags.error(b.instance.span, format!("program instance `{}` is declared twice", b.instance.text));
+                        continue;
+                    }
+                    let (sz, _) = (self.prog.pous[pi].frame_size, 8);
+                    let addr = self.prog.alloc(sz, 8);
+                    self.prog.instances.push(ProgramInstance { name: b.instance.text.clone(), pou: pi, addr });
+                    let task_idx = match &b.task {
+                        Some(t) => match self.prog.tasks.iter().position(|x| x.name == t.name) {
+                            Some(i) => i,
+                            None => {
+                                self.diags.error(t.span, format!("unknown task `{}`", t.text));
+                                continue;
+                            }
+                        },
+                        None => {
+                            // A program without a task runs cyclically at the base tick.
+                            self.prog.tasks.push(TaskDef { name: format!("__{}", b.instance.name), interval_ns: 0, single: None, priority: u32::MAX, programs: Vec::new() });
+                            self.prog.tasks.len() - 1
+                        }
+                    };
+                    self.prog.tasks[task_idx].programs.push((b.instance.text.clone(), pi));
+                }
+            }
+            return;
+        }
+        let programs: Vec<usize> = (0..self.prog.pous.len()).filter(|&i| self.prog.pous[i].kind == PouKind::Program && !self.prog.pous[i].builtin).collect();
+        let chosen = match program_override {
+            Some(name) => {
+                let up = name.to_ascii_uppercase();
+                match programs.iter().find(|&&i| self.prog.pous[i].name == up) {
+                    Some(&i) => Some(i),
+                    None => {
+                        self.diags.error(Span::default(), format!("there is no PROGRAM named `{name}`"));
+                        None
+                    }
+                }
+            }
+            None => match programs.len() {
+                0 => None,
+                1 => Some(programs[0]),
+                _ => {
+                    let p = &self.prog.pous[programs[1]];
+                    self.diags.error(p.span, "several PROGRAMs and no CONFIGURATION: choose one with --program");
+                    None
+                }
+            },
+        };
+        if let Some(pi) = chosen {
+            let addr = self.prog.alloc(self.prog.pous[pi].frame_size, 8);
+            let name = self.prog.pous[pi].text.clone();
+            self.prog.instances.push(ProgramInstance { name: name.clone(), pou: pi, addr });
+            self.prog.tasks.push(TaskDef { name: "__MAIN".into(), interval_ns: 0, single: None, priority: 0, programs: vec![(name, pi)] });
+        }
+    }
+}

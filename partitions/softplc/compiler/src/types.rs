@@ -1,0 +1,299 @@
+//! The IEC 61131-3 type system as used by the compiler: elementary types, derived types,
+//! memory layout (size/alignment in the VM's byte-addressed data memory) and the implicit
+//! conversion / operator typing rules.
+
+use std::fmt;
+use std::rc::Rc;
+
+/// Elementary types. Integers live sign- or zero-extended in 64-bit stack cells.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash)]
+pub enum Elem {
+    Bool,
+    SInt,
+    Int,
+    DInt,
+    LInt,
+    USInt,
+    UInt,
+    UDInt,
+    ULInt,
+    Byte,
+    Word,
+    DWord,
+    LWord,
+    Real,
+    LReal,
+    Time,
+}
+
+impl Elem {
+    pub const ALL: [Elem; 16] = [
+        Elem::Bool,
+        Elem::SInt,
+        Elem::Int,
+        Elem::DInt,
+        Elem::LInt,
+        Elem::USInt,
+        Elem::UInt,
+        Elem::UDInt,
+        Elem::ULInt,
+        Elem::Byte,
+        Elem::Word,
+        Elem::DWord,
+        Elem::LWord,
+        Elem::Real,
+        Elem::LReal,
+        Elem::Time,
+    ];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Elem::Bool => "BOOL",
+            Elem::SInt => "SINT",
+            Elem::Int => "INT",
+            Elem::DInt => "DINT",
+            Elem::LInt => "LINT",
+            Elem::USInt => "USINT",
+            Elem::UInt => "UINT",
+            Elem::UDInt => "UDINT",
+            Elem::ULInt => "ULINT",
+            Elem::Byte => "BYTE",
+            Elem::Word => "WORD",
+            Elem::DWord => "DWORD",
+            Elem::LWord => "LWORD",
+            Elem::Real => "REAL",
+            Elem::LReal => "LREAL",
+            Elem::Time => "TIME",
+        }
+    }
+
+    pub fn from_name(upper: &str) -> Option<Elem> {
+        Elem::ALL.iter().copied().find(|e| e.name() == upper)
+    }
+
+    pub fn size(self) -> u32 {
+        match self {
+            Elem::Bool | Elem::SInt | Elem::USInt | Elem::Byte => 1,
+            Elem::Int | Elem::UInt | Elem::Word => 2,
+            Elem::DInt | Elem::UDInt | Elem::DWord | Elem::Real => 4,
+            Elem::LInt | Elem::ULInt | Elem::LWord | Elem::LReal | Elem::Time => 8,
+        }
+    }
+
+    pub fn is_signed_int(self) -> bool {
+        matches!(self, Elem::SInt | Elem::Int | Elem::DInt | Elem::LInt)
+    }
+
+    pub fn is_unsigned_int(self) -> bool {
+        matches!(self, Elem::USInt | Elem::UInt | Elem::UDInt | Elem::ULInt)
+    }
+
+    pub fn is_bits(self) -> bool {
+        matches!(self, Elem::Byte | Elem::Word | Elem::DWord | Elem::LWord)
+    }
+
+    /// Integers and bit strings (everything held as an integer that is not BOOL or TIME).
+    pub fn is_integral(self) -> bool {
+        self.is_signed_int() || self.is_unsigned_int() || self.is_bits()
+    }
+
+    pub fn is_real(self) -> bool {
+        matches!(self, Elem::Real | Elem::LReal)
+    }
+
+    pub fn is_numeric(self) -> bool {
+        self.is_integral() || self.is_real()
+    }
+
+    /// Whether cells of this type are sign-extended (vs zero-extended) from memory.
+    pub fn signed_storage(self) -> bool {
+        self.is_signed_int() || self == Elem::Time
+    }
+
+    /// Value range of an integral type.
+    pub fn int_range(self) -> (i128, i128) {
+        let bits = self.size() * 8;
+        if self.is_signed_int() || self == Elem::Time {
+            (-(1i128 << (bits - 1)), (1i128 << (bits - 1)) - 1)
+        } else if self == Elem::Bool {
+            (0, 1)
+        } else {
+            (0, (1i128 << bits) - 1)
+        }
+    }
+
+    /// Rank for implicit widening between integers of the same family.
+    fn rank(self) -> u32 {
+        self.size()
+    }
+}
+
+#[derive(Debug, Clone, PartialEq)]
+pub struct ArrayType {
+    /// (lower, upper) bound of each dimension.
+    pub dims: Vec<(i64, i64)>,
+    pub elem: Type,
+}
+
+impl ArrayType {
+    pub fn len(&self) -> u64 {
+        self.dims.iter().map(|(lo, hi)| (hi - lo + 1).max(0) as u64).product()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// A (possibly derived) data type. Structs, enums and FB types refer to tables in
+/// [`crate::sema::Program`] by index.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Type {
+    Elem(Elem),
+    /// STRING with its maximum length in characters.
+    String(u32),
+    Array(Rc<ArrayType>),
+    Struct(usize),
+    Enum(usize),
+    /// Subrange of an integer type.
+    Subrange(Elem, i64, i64),
+    /// Instance of a function block.
+    Fb(usize),
+    /// `__EXCEPTION`: the trap code delivered to a `__CATCH` handler (held as a DINT).
+    Exception,
+    /// Result of something that has no value (a call of a function without result).
+    Void,
+    /// Type of an expression that already produced an error; accepted everywhere.
+    Error,
+}
+
+pub const DEFAULT_STRING_LEN: u32 = 80;
+
+impl Type {
+    pub const BOOL: Type = Type::Elem(Elem::Bool);
+    pub const INT: Type = Type::Elem(Elem::Int);
+    pub const DINT: Type = Type::Elem(Elem::DInt);
+    pub const LINT: Type = Type::Elem(Elem::LInt);
+    pub const REAL: Type = Type::Elem(Elem::Real);
+    pub const LREAL: Type = Type::Elem(Elem::LReal);
+    pub const TIME: Type = Type::Elem(Elem::Time);
+
+    /// The elementary type values of this type are held as (subranges hold their base type,
+    /// enums and exceptions a DINT).
+    pub fn elem(&self) -> Option<Elem> {
+        match self {
+            Type::Elem(e) => Some(*e),
+            Type::Subrange(e, ..) => Some(*e),
+            Type::Enum(_) | Type::Exception => Some(Elem::DInt),
+            _ => None,
+        }
+    }
+
+    pub fn is_error(&self) -> bool {
+        matches!(self, Type::Error)
+    }
+
+    pub fn is_string(&self) -> bool {
+        matches!(self, Type::String(_))
+    }
+}
+
+/// Result type of an arithmetic operation on two elementary operands, `None` if the mix is
+/// not allowed. Mixed integers widen to the larger type; integers mixed with reals give the real.
+pub fn common_numeric(a: Elem, b: Elem) -> Option<Elem> {
+    if a == b {
+        return Some(a);
+    }
+    match (a.is_real(), b.is_real()) {
+        (true, true) => return Some(Elem::LReal),
+        (true, false) if b.is_integral() => return Some(a),
+        (false, true) if a.is_integral() => return Some(b),
+        _ => {}
+    }
+    if !(a.is_integral() && b.is_integral()) {
+        return None;
+    }
+    let same_family = (a.is_signed_int() && b.is_signed_int())
+        || (a.is_unsigned_int() && b.is_unsigned_int())
+        || (a.is_bits() && b.is_bits());
+    if same_family {
+        return Some(if a.rank() >= b.rank() { a } else { b });
+    }
+    // Signed with unsigned/bits: a signed type that holds both if there is one.
+    let (s, u) = if a.is_signed_int() { (a, b) } else if b.is_signed_int() { (b, a) } else {
+        // unsigned with bits: the larger unsigned
+        let size = a.size().max(b.size());
+        return Some(unsigned_of_size(size));
+    };
+    let need = if s.size() > u.size() { s.size() } else { u.size() * 2 };
+    Some(signed_of_size(need.min(8)))
+}
+
+pub fn signed_of_size(size: u32) -> Elem {
+    match size {
+        1 => Elem::SInt,
+        2 => Elem::Int,
+        4 => Elem::DInt,
+        _ => Elem::LInt,
+    }
+}
+
+pub fn unsigned_of_size(size: u32) -> Elem {
+    match size {
+        1 => Elem::USInt,
+        2 => Elem::UInt,
+        4 => Elem::UDInt,
+        _ => Elem::ULInt,
+    }
+}
+
+/// Whether a value of `from` may be assigned to `to` without an explicit conversion
+/// (IEC 61131-3 implicit widening: no value can be lost).
+pub fn implicit_ok(from: Elem, to: Elem) -> bool {
+    if from == to {
+        return true;
+    }
+    if from.is_signed_int() && to.is_signed_int()
+        || from.is_unsigned_int() && to.is_unsigned_int()
+        || from.is_bits() && to.is_bits()
+    {
+        return to.size() >= from.size();
+    }
+    if from.is_unsigned_int() && to.is_signed_int() {
+        return to.size() > from.size();
+    }
+    if from.is_unsigned_int() && to.is_bits() || from.is_bits() && to.is_unsigned_int() {
+        return to.size() >= from.size();
+    }
+    if from == Elem::Real && to == Elem::LReal {
+        return true;
+    }
+    if from.is_integral() && to.is_real() {
+        // Exact in the mantissa: up to INT for REAL, up to DINT for LREAL. Also allowed is
+        // DINT -> REAL which IEC permits although it may round.
+        return from.size() <= 4 || to == Elem::LReal;
+    }
+    false
+}
+
+impl fmt::Display for Elem {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn widening() {
+        assert_eq!(common_numeric(Elem::Int, Elem::DInt), Some(Elem::DInt));
+        assert_eq!(common_numeric(Elem::Int, Elem::Real), Some(Elem::Real));
+        assert_eq!(common_numeric(Elem::USInt, Elem::Int), Some(Elem::Int));
+        assert_eq!(common_numeric(Elem::Bool, Elem::Int), None);
+        assert!(implicit_ok(Elem::Int, Elem::DInt));
+        assert!(!implicit_ok(Elem::DInt, Elem::Int));
+        assert!(implicit_ok(Elem::DInt, Elem::LReal));
+    }
+}

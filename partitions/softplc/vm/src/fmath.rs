@@ -1,0 +1,454 @@
+//! Floating-point math without `std` (core has no `sqrt`, `sin`, ...): deterministic,
+//! bit-for-bit identical on every platform because it only uses IEEE-754 basic operations.
+//!
+//! `sqrt`, `trunc` and the rounding functions are exact (correctly rounded). The
+//! transcendental functions follow the classic fdlibm polynomial kernels and are accurate to
+//! about 1 ulp for arguments of moderate size; trigonometric argument reduction is a three-part
+//! Cody–Waite reduction, accurate for |x| up to about 1e6 (beyond that precision degrades).
+
+use crate::isa::{MemType, RoundMode};
+
+const TWO52: f64 = 4503599627370496.0;
+
+/// Rounds toward zero.
+pub fn trunc(x: f64) -> f64 {
+    let bits = x.to_bits();
+    let exponent = ((bits >> 52) & 0x7ff) as i32 - 1023;
+    if exponent >= 52 {
+        return x; // already integral (or NaN/inf)
+    }
+    if exponent < 0 {
+        return f64::from_bits(bits & (1 << 63)); // |x| < 1: signed zero
+    }
+    let fraction_mask = (1u64 << (52 - exponent)) - 1;
+    f64::from_bits(bits & !fraction_mask)
+}
+
+/// Rounds to nearest, ties away from zero.
+pub fn round_half_away(x: f64) -> f64 {
+    if !(x.abs() < TWO52) {
+        return x;
+    }
+    let t = trunc(x);
+    // x - t is exact for |x| < 2^52.
+    let diff = x - t;
+    if diff >= 0.5 {
+        t + 1.0
+    } else if diff <= -0.5 {
+        t - 1.0
+    } else {
+        t
+    }
+}
+
+/// Rounds toward negative infinity.
+pub fn floor(x: f64) -> f64 {
+    let t = trunc(x);
+    if t > x { t - 1.0 } else { t }
+}
+
+/// Integer square root of a u128 (largest r with r*r <= n).
+fn isqrt(n: u128) -> u128 {
+    let mut result = 0u128;
+    let mut bit = 1u128 << 126;
+    let mut rest = n;
+    while bit > rest {
+        bit >>= 2;
+    }
+    while bit != 0 {
+        if rest >= result + bit {
+            rest -= result + bit;
+            result = (result >> 1) + bit;
+        } else {
+            result >>= 1;
+        }
+        bit >>= 2;
+    }
+    result
+}
+
+/// Correctly rounded square root (NaN for negative input).
+pub fn sqrt(x: f64) -> f64 {
+    if x.is_nan() || x < 0.0 {
+        return f64::NAN;
+    }
+    if x == 0.0 || x.is_infinite() {
+        return x;
+    }
+    let bits = x.to_bits();
+    let mut exponent = ((bits >> 52) & 0x7ff) as i64;
+    let mut mantissa = bits & ((1 << 52) - 1);
+    if exponent == 0 {
+        let shift = mantissa.leading_zeros() as i64 - 11;
+        mantissa <<= shift;
+        exponent = 1 - shift;
+    } else {
+        mantissa |= 1 << 52;
+    }
+    // x = mantissa * 2^e with mantissa in [2^52, 2^53).
+    let mut e = exponent - 1075;
+    let mut m = mantissa as u128;
+    if e & 1 != 0 {
+        m <<= 1;
+        e -= 1;
+    }
+    let n = m << 54;
+    let root = isqrt(n); // in [2^53, 2^54)
+    let exact = root * root == n;
+    let dropped = root & 1;
+    let mut r = root >> 1;
+    if dropped == 1 && (!exact || r & 1 == 1) {
+        r += 1;
+    }
+    // sqrt(x) = r * 2^(e/2 - 26), r in [2^52, 2^53].
+    let mut e_res = e / 2 - 26;
+    if r == 1 << 53 {
+        r >>= 1;
+        e_res += 1;
+    }
+    let biased = (e_res + 52 + 1023) as u64;
+    f64::from_bits((biased << 52) | (r as u64 & ((1 << 52) - 1)))
+}
+
+/// x * 2^n.
+fn scalbn(mut x: f64, mut n: i32) -> f64 {
+    let two1023 = f64::from_bits(0x7fe0_0000_0000_0000);
+    let two_m1022 = f64::from_bits(0x0010_0000_0000_0000);
+    while n > 1023 {
+        x *= two1023;
+        n -= 1023;
+        if x.is_infinite() {
+            return x;
+        }
+    }
+    while n < -1022 {
+        x *= two_m1022 * TWO52; // 2^-970, keeps precision for subnormal results
+        n += 970;
+        if x == 0.0 {
+            return x;
+        }
+    }
+    x * f64::from_bits(((n + 1023) as u64) << 52)
+}
+
+const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-01;
+const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
+
+/// e^x.
+pub fn exp(x: f64) -> f64 {
+    if x.is_nan() {
+        return x;
+    }
+    if x > 709.782_712_893_384 {
+        return f64::INFINITY;
+    }
+    if x < -745.133_219_101_941_1 {
+        return 0.0;
+    }
+    const INV_LN2: f64 = 1.442_695_040_888_963_387_00e+00;
+    const P1: f64 = 1.666_666_666_666_660_190_37e-01;
+    const P2: f64 = -2.777_777_777_701_559_338_42e-03;
+    const P3: f64 = 6.613_756_321_437_934_361_17e-05;
+    const P4: f64 = -1.653_390_220_546_525_153_90e-06;
+    const P5: f64 = 4.138_136_797_057_238_460_39e-08;
+    let k = round_half_away(x * INV_LN2);
+    let hi = x - k * LN2_HI;
+    let lo = k * LN2_LO;
+    let r = hi - lo;
+    let t = r * r;
+    let c = r - t * (P1 + t * (P2 + t * (P3 + t * (P4 + t * P5))));
+    let y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi);
+    scalbn(y, k as i32)
+}
+
+/// Natural logarithm (NaN for x < 0, -inf for 0).
+pub fn ln(x: f64) -> f64 {
+    if x.is_nan() || x < 0.0 {
+        return f64::NAN;
+    }
+    if x == 0.0 {
+        return f64::NEG_INFINITY;
+    }
+    if x.is_infinite() {
+        return x;
+    }
+    const LG1: f64 = 6.666_666_666_666_735_130e-01;
+    const LG2: f64 = 3.999_999_999_940_941_908e-01;
+    const LG3: f64 = 2.857_142_874_366_239_149e-01;
+    const LG4: f64 = 2.222_219_843_214_978_396e-01;
+    const LG5: f64 = 1.818_357_216_161_805_012e-01;
+    const LG6: f64 = 1.531_383_769_920_937_332e-01;
+    const LG7: f64 = 1.479_819_860_511_658_591e-01;
+    let mut bits = x.to_bits();
+    let mut k: i64 = 0;
+    if bits >> 52 == 0 {
+        // subnormal: scale up
+        bits = (x * TWO52 * 4.0).to_bits();
+        k -= 54;
+    }
+    k += ((bits >> 52) & 0x7ff) as i64 - 1023;
+    let mut m = f64::from_bits((bits & ((1 << 52) - 1)) | (1023 << 52)); // in [1, 2)
+    if m > core::f64::consts::SQRT_2 {
+        m *= 0.5;
+        k += 1;
+    }
+    let f = m - 1.0;
+    let s = f / (2.0 + f);
+    let z = s * s;
+    let w = z * z;
+    let t1 = w * (LG2 + w * (LG4 + w * LG6));
+    let t2 = z * (LG1 + w * (LG3 + w * (LG5 + w * LG7)));
+    let r = t2 + t1;
+    let hfsq = 0.5 * f * f;
+    let dk = k as f64;
+    dk * LN2_HI - ((hfsq - (s * (hfsq + r) + dk * LN2_LO)) - f)
+}
+
+/// Base-10 logarithm; exact for exact powers of ten.
+pub fn log10(x: f64) -> f64 {
+    let r = ln(x) * core::f64::consts::LOG10_E;
+    let n = round_half_away(r);
+    if (r - n).abs() < 1e-9 && (-22.0..=22.0).contains(&n) {
+        let mut p = 1.0;
+        for _ in 0..(n.abs() as i32) {
+            p *= 10.0;
+        }
+        let exact = if n < 0.0 { 1.0 / p } else { p };
+        if exact == x {
+            return n;
+        }
+    }
+    r
+}
+
+fn sin_kernel(x: f64) -> f64 {
+    const S1: f64 = -1.666_666_666_666_663_243_48e-01;
+    const S2: f64 = 8.333_333_333_322_489_461_24e-03;
+    const S3: f64 = -1.984_126_982_985_794_931_34e-04;
+    const S4: f64 = 2.755_731_370_707_006_767_89e-06;
+    const S5: f64 = -2.505_076_025_340_686_341_95e-08;
+    const S6: f64 = 1.589_690_995_211_550_102_21e-10;
+    let z = x * x;
+    let r = S2 + z * (S3 + z * (S4 + z * (S5 + z * S6)));
+    x + z * x * (S1 + z * r)
+}
+
+fn cos_kernel(x: f64) -> f64 {
+    const C1: f64 = 4.166_666_666_666_660_190_37e-02;
+    const C2: f64 = -1.388_888_888_887_410_957_49e-03;
+    const C3: f64 = 2.480_158_728_947_672_941_78e-05;
+    const C4: f64 = -2.755_731_435_139_066_330_35e-07;
+    const C5: f64 = 2.087_572_321_298_174_827_90e-09;
+    const C6: f64 = -1.135_964_755_778_819_482_65e-11;
+    let z = x * x;
+    let r = z * (C1 + z * (C2 + z * (C3 + z * (C4 + z * (C5 + z * C6)))));
+    let hz = 0.5 * z;
+    let w = 1.0 - hz;
+    w + (((1.0 - w) - hz) + z * r)
+}
+
+/// Reduces x to y in [-pi/4, pi/4] with x = n*pi/2 + y; returns (n mod 4, y).
+fn reduce(x: f64) -> (i64, f64) {
+    const PIO2_1: f64 = 1.570_796_326_734_125_614_17e+00;
+    const PIO2_2: f64 = 6.077_100_506_303_965_976_60e-11;
+    const PIO2_3: f64 = 2.022_266_248_711_166_455_80e-21;
+    if x.abs() <= core::f64::consts::FRAC_PI_4 {
+        return (0, x);
+    }
+    let n = round_half_away(x * core::f64::consts::FRAC_2_PI);
+    let y = ((x - n * PIO2_1) - n * PIO2_2) - n * PIO2_3;
+    let quadrant = (n % 4.0) as i64;
+    (quadrant.rem_euclid(4), y)
+}
+
+/// Sine (radians).
+pub fn sin(x: f64) -> f64 {
+    if !x.is_finite() {
+        return f64::NAN;
+    }
+    let (n, y) = reduce(x);
+    match n {
+        0 => sin_kernel(y),
+        1 => cos_kernel(y),
+        2 => -sin_kernel(y),
+        _ => -cos_kernel(y),
+    }
+}
+
+/// Cosine (radians).
+pub fn cos(x: f64) -> f64 {
+    if !x.is_finite() {
+        return f64::NAN;
+    }
+    let (n, y) = reduce(x);
+    match n {
+        0 => cos_kernel(y),
+        1 => -sin_kernel(y),
+        2 => -cos_kernel(y),
+        _ => sin_kernel(y),
+    }
+}
+
+/// Tangent (radians).
+pub fn tan(x: f64) -> f64 {
+    if !x.is_finite() {
+        return f64::NAN;
+    }
+    let (n, y) = reduce(x);
+    let (s, c) = (sin_kernel(y), cos_kernel(y));
+    if n % 2 == 0 { s / c } else { -c / s }
+}
+
+/// Arc tangent.
+pub fn atan(x: f64) -> f64 {
+    const ATAN_HI: [f64; 4] = [
+        4.636_476_090_008_060_935_15e-01,
+        7.853_981_633_974_482_789_99e-01,
+        9.827_937_232_473_290_540_82e-01,
+        1.570_796_326_794_896_558_00e+00,
+    ];
+    const ATAN_LO: [f64; 4] = [
+        2.269_877_745_296_168_709_24e-17,
+        3.061_616_997_868_383_017_93e-17,
+        1.390_331_103_123_099_845_16e-17,
+        6.123_233_995_736_766_035_87e-17,
+    ];
+    const AT: [f64; 11] = [
+        3.333_333_333_333_293_180_27e-01,
+        -1.999_999_999_987_648_324_76e-01,
+        1.428_571_427_250_346_637_11e-01,
+        -1.111_111_040_546_235_578_80e-01,
+        9.090_887_133_436_506_561_96e-02,
+        -7.691_876_205_044_829_994_95e-02,
+        6.661_073_137_387_531_206_69e-02,
+        -5.833_570_133_790_573_486_45e-02,
+        4.976_877_994_615_932_360_17e-02,
+        -3.653_157_274_421_691_552_70e-02,
+        1.628_582_011_536_578_236_23e-02,
+    ];
+    if x.is_nan() {
+        return x;
+    }
+    let negative = x < 0.0;
+    let mut ax = x.abs();
+    if ax >= 7.378_697_629_483_821e19 {
+        let r = ATAN_HI[3] + ATAN_LO[3];
+        return if negative { -r } else { r };
+    }
+    let id: i32;
+    if ax < 0.4375 {
+        id = -1;
+    } else if ax < 1.1875 {
+        if ax < 0.6875 {
+            id = 0;
+            ax = (2.0 * ax - 1.0) / (2.0 + ax);
+        } else {
+            id = 1;
+            ax = (ax - 1.0) / (ax + 1.0);
+        }
+    } else if ax < 2.4375 {
+        id = 2;
+        ax = (ax - 1.5) / (1.0 + 1.5 * ax);
+    } else {
+        id = 3;
+        ax = -1.0 / ax;
+    }
+    let z = ax * ax;
+    let w = z * z;
+    let s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))));
+    let s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))));
+    let r = if id < 0 {
+        ax - ax * (s1 + s2)
+    } else {
+        let i = id as usize;
+        ATAN_HI[i] - ((ax * (s1 + s2) - ATAN_LO[i]) - ax)
+    };
+    if negative { -r } else { r }
+}
+
+/// Arc sine (NaN outside [-1, 1]).
+pub fn asin(x: f64) -> f64 {
+    if !(-1.0..=1.0).contains(&x) {
+        return f64::NAN;
+    }
+    if x.abs() == 1.0 {
+        return if x > 0.0 { core::f64::consts::FRAC_PI_2 } else { -core::f64::consts::FRAC_PI_2 };
+    }
+    atan(x / sqrt((1.0 - x) * (1.0 + x)))
+}
+
+/// Arc cosine (NaN outside [-1, 1]).
+pub fn acos(x: f64) -> f64 {
+    if !(-1.0..=1.0).contains(&x) {
+        return f64::NAN;
+    }
+    if x == -1.0 {
+        return core::f64::consts::PI;
+    }
+    2.0 * atan(sqrt((1.0 - x) / (1.0 + x)))
+}
+
+/// base^exponent; `None` for 0 to a negative power and a negative base to a non-integer power.
+pub fn pow(base: f64, exponent: f64) -> Option<f64> {
+    if base.is_nan() || exponent.is_nan() {
+        return Some(f64::NAN);
+    }
+    if exponent == 0.0 {
+        return Some(1.0);
+    }
+    let integral = trunc(exponent) == exponent;
+    if base == 0.0 {
+        return if exponent < 0.0 { None } else { Some(0.0) };
+    }
+    if integral && exponent.abs() <= 1024.0 {
+        // Exact for results representable after few multiplications (2^10, 3^4, ...).
+        let mut n = exponent.abs() as u32;
+        let mut factor = base;
+        let mut acc = 1.0;
+        while n > 0 {
+            if n & 1 == 1 {
+                acc *= factor;
+            }
+            factor *= factor;
+            n >>= 1;
+        }
+        return Some(if exponent < 0.0 { 1.0 / acc } else { acc });
+    }
+    if base < 0.0 {
+        if !integral {
+            return None;
+        }
+        let magnitude = exp(exponent * ln(-base));
+        let odd = floor(exponent * 0.5) * 2.0 != exponent;
+        return Some(if odd { -magnitude } else { magnitude });
+    }
+    Some(exp(exponent * ln(base)))
+}
+
+/// Converts a float to an integer cell of type `target` with rounding `mode`;
+/// `None` for NaN, infinities and values outside the target range.
+pub fn float_to_int(x: f64, target: MemType, mode: RoundMode) -> Option<u64> {
+    if !x.is_finite() {
+        return None;
+    }
+    let r = match mode {
+        RoundMode::Truncate => trunc(x),
+        RoundMode::NearestTiesAway => round_half_away(x),
+    };
+    // Exact power-of-two bounds: lo <= r < hi_exclusive.
+    let (lo, hi_exclusive): (f64, f64) = match target {
+        MemType::I8 => (-128.0, 128.0),
+        MemType::I16 => (-32768.0, 32768.0),
+        MemType::I32 => (-2147483648.0, 2147483648.0),
+        MemType::I64 => (-9223372036854775808.0, 9223372036854775808.0),
+        MemType::U8 => (0.0, 256.0),
+        MemType::U16 => (0.0, 65536.0),
+        MemType::U32 => (0.0, 4294967296.0),
+        MemType::U64 => (0.0, 18446744073709551616.0),
+        MemType::F32 | MemType::F64 => return None,
+    };
+    if !(r >= lo && r < hi_exclusive) {
+        return None;
+    }
+    Some(if r < 0.0 { r as i64 as u64 } else { r as u64 })
+}

@@ -1,0 +1,996 @@
+//! The bytecode image format (version 1), its zero-copy parser and (feature `alloc`) a builder.
+//!
+//! All integers are little-endian. Layout:
+//!
+//! ```text
+//! offset size  field
+//! 0      4     magic "PLCB"
+//! 4      2     version (= 1)
+//! 6      2     header length (= 88)
+//! 8      4     data_size: bytes of data memory the program needs
+//! 12     4     reserved (0)
+//! 16     72    section table: 9 x (offset u32, length u32), offsets from the image start,
+//!              in this order: CODE, CONSTS, INIT, POUS, TASKS, VARS, SRCLOCS, FILES, NAMES
+//! ```
+//!
+//! Sections:
+//! * `CODE`: the instructions (see [`crate::isa`]), decodable linearly from offset 0.
+//! * `CONSTS`: constant pool, `u64` cells (for `PUSH_CONST`).
+//! * `INIT`: initial data memory bytes `0..len` (`len <= data_size`); the rest is zeroed.
+//! * `POUS`: 20-byte records `name_off u32, name_len u16, arg_cells u8, ret_cells u8,
+//!   code_start u32, code_len u32, frame_size u32`.
+//! * `TASKS`: 32-byte records `name_off u32, name_len u16, kind u8 (0 cyclic, 1 event),
+//!   priority u8, pou u16, reserved u16, instance_base u32, watchdog_budget u32 (instructions per
+//!   cycle, 0 = [`DEFAULT_WATCHDOG_BUDGET`]), interval_ns u64, reserved u32`.
+//! * `VARS`: 16-byte records `name_off u32, name_len u16, type u8 ([`VarType`]), flags u8
+//!   ([`VAR_FLAG_RETAIN`], [`VAR_FLAG_CONSTANT`]), address u32, size u32` — the monitor map.
+//! * `SRCLOCS`: 16-byte records `code_offset u32, line u32, column u32, file u16, reserved u16`,
+//!   sorted by code offset; an entry covers code up to the next entry's offset.
+//! * `FILES`: 8-byte records `name_off u32, name_len u16, reserved u16`.
+//! * `NAMES`: UTF-8 string blob referenced by the `name_off/name_len` fields.
+//!
+//! [`Image::parse`] checks only the structure (sizes, section bounds, record multiples); the
+//! semantic checks are [`crate::verify`]'s job.
+
+use crate::isa::{read_u16, read_u32, read_u64};
+
+/// Image magic.
+pub const MAGIC: [u8; 4] = *b"PLCB";
+/// Format version this crate reads and writes.
+pub const VERSION: u16 = 1;
+/// Number of sections in the section table.
+pub const SECTION_COUNT: usize = 9;
+/// Header length in bytes.
+pub const HEADER_LEN: usize = 16 + SECTION_COUNT * 8;
+/// POU record size.
+pub const POU_RECORD: usize = 20;
+/// Task record size.
+pub const TASK_RECORD: usize = 32;
+/// Variable record size.
+pub const VAR_RECORD: usize = 16;
+/// Source-location record size.
+pub const SRCLOC_RECORD: usize = 16;
+/// File record size.
+pub const FILE_RECORD: usize = 8;
+/// Watchdog budget (instructions per cycle) used when a task record says 0.
+pub const DEFAULT_WATCHDOG_BUDGET: u32 = 1_000_000;
+/// Variable flag: RETAIN.
+pub const VAR_FLAG_RETAIN: u8 = 1;
+/// Variable flag: CONSTANT (force is refused).
+pub const VAR_FLAG_CONSTANT: u8 = 2;
+
+/// Section indices in the section table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[repr(usize)]
+pub enum Section {
+    /// Instructions.
+    Code = 0,
+    /// Constant pool.
+    Consts = 1,
+    /// Initial data.
+    Init = 2,
+    /// POU table.
+    Pous = 3,
+    /// Task table.
+    Tasks = 4,
+    /// Variable map.
+    Vars = 5,
+    /// Source locations.
+    SrcLocs = 6,
+    /// Source file names.
+    Files = 7,
+    /// Name blob.
+    Names = 8,
+}
+
+/// Why [`Image::parse`] rejected the bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ImageError {
+    /// Fewer bytes than the header.
+    TooShort,
+    /// Magic is not "PLCB".
+    BadMagic,
+    /// Unsupported version.
+    UnsupportedVersion(u16),
+    /// Header length field is not [`HEADER_LEN`].
+    BadHeaderLength(u16),
+    /// A section lies (partly) outside the image.
+    SectionOutOfBounds(Section),
+    /// A record section's length is not a multiple of its record size.
+    RaggedSection(Section),
+    /// The INIT section is longer than `data_size`.
+    InitLargerThanData,
+}
+
+impl core::fmt::Display for ImageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            ImageError::TooShort => write!(f, "image shorter than its {HEADER_LEN}-byte header"),
+            ImageError::BadMagic => write!(f, "bad magic (expected \"PLCB\")"),
+            ImageError::UnsupportedVersion(v) => write!(f, "unsupported image version {v} (expected {VERSION})"),
+            ImageError::BadHeaderLength(l) => write!(f, "header length {l} (expected {HEADER_LEN})"),
+            ImageError::SectionOutOfBounds(s) => write!(f, "section {s:?} lies outside the image"),
+            ImageError::RaggedSection(s) => write!(f, "section {s:?} length is not a multiple of its record size"),
+            ImageError::InitLargerThanData => write!(f, "INIT section longer than data_size"),
+        }
+    }
+}
+
+/// Monitor type of a variable-map entry.
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum VarType {
+    /// BOOL (1 byte, 0/1).
+    Bool = 0,
+    /// SINT.
+    SInt = 1,
+    /// INT.
+    Int = 2,
+    /// DINT.
+    DInt = 3,
+    /// LINT.
+    LInt = 4,
+    /// USINT.
+    USInt = 5,
+    /// UINT.
+    UInt = 6,
+    /// UDINT.
+    UDInt = 7,
+    /// ULINT.
+    ULInt = 8,
+    /// REAL.
+    Real = 9,
+    /// LREAL.
+    LReal = 10,
+    /// TIME (i64 nanoseconds).
+    Time = 11,
+    /// STRING (header + bytes, see [`crate::isa::Builtin`]).
+    String = 12,
+    /// BYTE.
+    Byte = 13,
+    /// WORD.
+    Word = 14,
+    /// DWORD.
+    DWord = 15,
+    /// LWORD.
+    LWord = 16,
+}
+
+impl VarType {
+    /// Decodes a type byte.
+    pub const fn from_u8(byte: u8) -> Option<VarType> {
+        use VarType::*;
+        Some(match byte {
+            0 => Bool,
+            1 => SInt,
+            2 => Int,
+            3 => DInt,
+            4 => LInt,
+            5 => USInt,
+            6 => UInt,
+            7 => UDInt,
+            8 => ULInt,
+            9 => Real,
+            10 => LReal,
+            11 => Time,
+            12 => String,
+            13 => Byte,
+            14 => Word,
+            15 => DWord,
+            16 => LWord,
+            _ => return None,
+        })
+    }
+
+    /// The storage type of a scalar (`None` for STRING).
+    pub const fn mem_type(self) -> Option<crate::isa::MemType> {
+        use crate::isa::MemType as M;
+        use VarType::*;
+        Some(match self {
+            Bool | USInt | Byte => M::U8,
+            SInt => M::I8,
+            Int => M::I16,
+            DInt => M::I32,
+            LInt | Time => M::I64,
+            UInt | Word => M::U16,
+            UDInt | DWord => M::U32,
+            ULInt | LWord => M::U64,
+            Real => M::F32,
+            LReal => M::F64,
+            String => return None,
+        })
+    }
+}
+
+/// A POU table entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Pou<'a> {
+    /// Name ("" when the name reference is invalid; the verifier rejects such images).
+    pub name: &'a str,
+    /// Cells the callee receives on its stack.
+    pub arg_cells: u8,
+    /// Cells the callee leaves on return.
+    pub ret_cells: u8,
+    /// First code offset.
+    pub code_start: u32,
+    /// Code length in bytes.
+    pub code_len: u32,
+    /// Bytes of the data frame addressed by LD_REL/ST_REL/LEA_REL.
+    pub frame_size: u32,
+}
+
+/// Task activation kind.
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TaskKind {
+    /// Runs every `interval_ns`.
+    Cyclic = 0,
+    /// Runs on an event (SINGLE).
+    Event = 1,
+}
+
+/// A task table entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Task<'a> {
+    /// Task name.
+    pub name: &'a str,
+    /// Raw kind byte (see [`TaskKind`]).
+    pub kind: u8,
+    /// IEC priority (lower runs first).
+    pub priority: u8,
+    /// POU run each cycle (arg_cells = ret_cells = 0).
+    pub pou: u16,
+    /// Frame base for the POU (the program instance's data block).
+    pub instance_base: u32,
+    /// Instruction budget per cycle (0 = [`DEFAULT_WATCHDOG_BUDGET`]).
+    pub watchdog_budget: u32,
+    /// Cycle interval in nanoseconds (cyclic tasks).
+    pub interval_ns: u64,
+}
+
+impl Task<'_> {
+    /// The effective instruction budget.
+    pub fn budget(&self) -> u32 {
+        if self.watchdog_budget == 0 { DEFAULT_WATCHDOG_BUDGET } else { self.watchdog_budget }
+    }
+}
+
+/// A variable-map entry.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Var<'a> {
+    /// Full name, e.g. `Main.x`, `pf.n`, `g`.
+    pub name: &'a str,
+    /// Raw type byte (see [`VarType`]).
+    pub ty: u8,
+    /// Flags ([`VAR_FLAG_RETAIN`], [`VAR_FLAG_CONSTANT`]).
+    pub flags: u8,
+    /// Absolute data address.
+    pub addr: u32,
+    /// Size in bytes (for STRING: 4 + max length).
+    pub size: u32,
+}
+
+/// A source location (file index into the FILES section, 1-based line and column).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SourceLocation {
+    /// Index into the file table.
+    pub file: u16,
+    /// Line (1-based).
+    pub line: u32,
+    /// Column (1-based).
+    pub column: u32,
+}
+
+/// A parsed image: borrowed views of the sections (no copies, no allocation).
+#[derive(Clone, Copy, Debug)]
+pub struct Image<'a> {
+    data_size: u32,
+    sections: [&'a [u8]; SECTION_COUNT],
+}
+
+impl<'a> Image<'a> {
+    /// Parses and structurally checks an image.
+    pub fn parse(bytes: &'a [u8]) -> Result<Image<'a>, ImageError> {
+        if bytes.len() < HEADER_LEN {
+            return Err(ImageError::TooShort);
+        }
+        if bytes[0..4] != MAGIC {
+            return Err(ImageError::BadMagic);
+        }
+        let version = read_u16(bytes, 4);
+        if version != VERSION {
+            return Err(ImageError::UnsupportedVersion(version));
+        }
+        let header_len = read_u16(bytes, 6);
+        if header_len as usize != HEADER_LEN {
+            return Err(ImageError::BadHeaderLength(header_len));
+        }
+        let data_size = read_u32(bytes, 8);
+        const KINDS: [Section; SECTION_COUNT] = [
+            Section::Code,
+            Section::Consts,
+            Section::Init,
+            Section::Pous,
+            Section::Tasks,
+            Section::Vars,
+            Section::SrcLocs,
+            Section::Files,
+            Section::Names,
+        ];
+        let mut sections: [&'a [u8]; SECTION_COUNT] = [&[]; SECTION_COUNT];
+        for (i, kind) in KINDS.iter().enumerate() {
+            let offset = read_u32(bytes, 16 + i * 8) as usize;
+            let len = read_u32(bytes, 20 + i * 8) as usize;
+            let end = offset.checked_add(len).ok_or(ImageError::SectionOutOfBounds(*kind))?;
+            let section = bytes.get(offset..end).ok_or(ImageError::SectionOutOfBounds(*kind))?;
+            let record = match kind {
+                Section::Consts => 8,
+                Section::Pous => POU_RECORD,
+                Section::Tasks => TASK_RECORD,
+                Section::Vars => VAR_RECORD,
+                Section::SrcLocs => SRCLOC_RECORD,
+                Section::Files => FILE_RECORD,
+                _ => 1,
+            };
+            if section.len() % record != 0 {
+                return Err(ImageError::RaggedSection(*kind));
+            }
+            sections[i] = section;
+        }
+        if sections[Section::Init as usize].len() > data_size as usize {
+            return Err(ImageError::InitLargerThanData);
+        }
+        Ok(Image { data_size, sections })
+    }
+
+    fn section(&self, section: Section) -> &'a [u8] {
+        self.sections[section as usize]
+    }
+
+    /// Bytes of data memory the program needs.
+    pub fn data_size(&self) -> u32 {
+        self.data_size
+    }
+
+    /// The code section.
+    pub fn code(&self) -> &'a [u8] {
+        self.section(Section::Code)
+    }
+
+    /// Initial data bytes (prefix of data memory; the rest starts zeroed).
+    pub fn init_data(&self) -> &'a [u8] {
+        self.section(Section::Init)
+    }
+
+    /// Number of constant-pool cells.
+    pub fn const_count(&self) -> usize {
+        self.section(Section::Consts).len() / 8
+    }
+
+    /// Constant-pool cell `index`.
+    pub fn constant(&self, index: usize) -> Option<u64> {
+        (index < self.const_count()).then(|| read_u64(self.section(Section::Consts), index * 8))
+    }
+
+    /// Resolves a name reference; `None` when out of the blob or not UTF-8.
+    pub fn name_at(&self, offset: u32, len: u16) -> Option<&'a str> {
+        let start = offset as usize;
+        let bytes = self.section(Section::Names).get(start..start.checked_add(len as usize)?)?;
+        core::str::from_utf8(bytes).ok()
+    }
+
+    fn record(&self, section: Section, size: usize, index: usize) -> Option<&'a [u8]> {
+        let start = index.checked_mul(size)?;
+        self.section(section).get(start..start.checked_add(size)?)
+    }
+
+    /// Raw name reference of a record (offset 0: name_off u32, offset 4: name_len u16).
+    pub(crate) fn record_name_ref(&self, section: Section, index: usize) -> Option<(u32, u16)> {
+        let size = match section {
+            Section::Pous => POU_RECORD,
+            Section::Tasks => TASK_RECORD,
+            Section::Vars => VAR_RECORD,
+            Section::Files => FILE_RECORD,
+            _ => return None,
+        };
+        let r = self.record(section, size, index)?;
+        Some((read_u32(r, 0), read_u16(r, 4)))
+    }
+
+    /// Number of POUs.
+    pub fn pou_count(&self) -> usize {
+        self.section(Section::Pous).len() / POU_RECORD
+    }
+
+    /// POU `index`.
+    pub fn pou(&self, index: usize) -> Option<Pou<'a>> {
+        let r = self.record(Section::Pous, POU_RECORD, index)?;
+        Some(Pou {
+            name: self.name_at(read_u32(r, 0), read_u16(r, 4)).unwrap_or(""),
+            arg_cells: r[6],
+            ret_cells: r[7],
+            code_start: read_u32(r, 8),
+            code_len: read_u32(r, 12),
+            frame_size: read_u32(r, 16),
+        })
+    }
+
+    /// Number of tasks.
+    pub fn task_count(&self) -> usize {
+        self.section(Section::Tasks).len() / TASK_RECORD
+    }
+
+    /// Task `index`.
+    pub fn task(&self, index: usize) -> Option<Task<'a>> {
+        let r = self.record(Section::Tasks, TASK_RECORD, index)?;
+        Some(Task {
+            name: self.name_at(read_u32(r, 0), read_u16(r, 4)).unwrap_or(""),
+            kind: r[6],
+            priority: r[7],
+            pou: read_u16(r, 8),
+            instance_base: read_u32(r, 12),
+            watchdog_budget: read_u32(r, 16),
+            interval_ns: read_u64(r, 20),
+        })
+    }
+
+    /// Number of variable-map entries.
+    pub fn var_count(&self) -> usize {
+        self.section(Section::Vars).len() / VAR_RECORD
+    }
+
+    /// Variable-map entry `index`.
+    pub fn var(&self, index: usize) -> Option<Var<'a>> {
+        let r = self.record(Section::Vars, VAR_RECORD, index)?;
+        Some(Var {
+            name: self.name_at(read_u32(r, 0), read_u16(r, 4)).unwrap_or(""),
+            ty: r[6],
+            flags: r[7],
+            addr: read_u32(r, 8),
+            size: read_u32(r, 12),
+        })
+    }
+
+    /// Looks a variable up by exact name (linear scan; monitors are not hot paths).
+    pub fn find_var(&self, name: &str) -> Option<Var<'a>> {
+        (0..self.var_count()).filter_map(|i| self.var(i)).find(|v| v.name == name)
+    }
+
+    /// Number of source-location records.
+    pub fn srcloc_count(&self) -> usize {
+        self.section(Section::SrcLocs).len() / SRCLOC_RECORD
+    }
+
+    /// Source-location record `index` as (code offset, location).
+    pub fn srcloc(&self, index: usize) -> Option<(u32, SourceLocation)> {
+        let r = self.record(Section::SrcLocs, SRCLOC_RECORD, index)?;
+        Some((
+            read_u32(r, 0),
+            SourceLocation { line: read_u32(r, 4), column: read_u32(r, 8), file: read_u16(r, 12) },
+        ))
+    }
+
+    /// The source location covering `code_offset` (the last record at or before it).
+    pub fn source_location(&self, code_offset: u32) -> Option<SourceLocation> {
+        // Binary search for the number of records with offset <= code_offset.
+        let (mut lo, mut hi) = (0usize, self.srcloc_count());
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            match self.srcloc(mid) {
+                Some((offset, _)) if offset <= code_offset => lo = mid + 1,
+                _ => hi = mid,
+            }
+        }
+        lo.checked_sub(1).and_then(|i| self.srcloc(i)).map(|(_, loc)| loc)
+    }
+
+    /// Number of source files.
+    pub fn file_count(&self) -> usize {
+        self.section(Section::Files).len() / FILE_RECORD
+    }
+
+    /// Name of source file `index`.
+    pub fn file_name(&self, index: u16) -> Option<&'a str> {
+        let (off, len) = self.record_name_ref(Section::Files, index as usize)?;
+        self.name_at(off, len)
+    }
+}
+
+#[cfg(any(feature = "alloc", test))]
+pub use builder::*;
+
+#[cfg(any(feature = "alloc", test))]
+mod builder {
+    //! [`ImageBuilder`]: emit code with labels and fix-ups, then serialize an image.
+    use super::*;
+    use crate::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
+    use alloc::string::String;
+    use alloc::vec::Vec;
+
+    /// A forward-referenceable code position.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub struct Label(u32);
+
+    /// A POU declared in the builder (index into the POU table).
+    #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+    pub struct PouId(pub u16);
+
+    /// Why [`ImageBuilder::build`] failed.
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub enum BuildError {
+        /// A label was used but never bound.
+        UnboundLabel(u32),
+        /// A declared POU was never given code (`begin_pou`/`end_pou`).
+        PouWithoutCode(String),
+        /// A section or the image exceeds u32 sizes.
+        TooLarge,
+    }
+
+    impl core::fmt::Display for BuildError {
+        fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+            match self {
+                BuildError::UnboundLabel(l) => write!(f, "label {l} used but never bound"),
+                BuildError::PouWithoutCode(n) => write!(f, "POU {n} declared but has no code"),
+                BuildError::TooLarge => write!(f, "image too large"),
+            }
+        }
+    }
+
+    /// Task parameters for [`ImageBuilder::add_task`].
+    #[derive(Clone, Debug, PartialEq, Eq)]
+    pub struct TaskDef {
+        /// Task name.
+        pub name: String,
+        /// Activation kind.
+        pub kind: TaskKind,
+        /// IEC priority (lower runs first).
+        pub priority: u8,
+        /// Program POU (must have 0 arg and 0 result cells).
+        pub pou: PouId,
+        /// Frame base of the program instance.
+        pub instance_base: u32,
+        /// Cycle interval in ns.
+        pub interval_ns: u64,
+        /// Instruction budget per cycle (0 = default).
+        pub watchdog_budget: u32,
+    }
+
+    struct PouDef {
+        name: String,
+        arg_cells: u8,
+        ret_cells: u8,
+        frame_size: u32,
+        code_start: Option<u32>,
+        code_end: Option<u32>,
+    }
+
+    /// Builds an image. Emit helpers append one instruction each at the current code offset.
+    #[derive(Default)]
+    pub struct ImageBuilder {
+        code: Vec<u8>,
+        consts: Vec<u64>,
+        init: Vec<u8>,
+        data_size: u32,
+        pous: Vec<PouDef>,
+        tasks: Vec<u8>,
+        vars: Vec<u8>,
+        srclocs: Vec<u8>,
+        files: Vec<u8>,
+        names: Vec<u8>,
+        labels: Vec<Option<u32>>,
+        fixups: Vec<(usize, Label)>,
+    }
+
+    impl ImageBuilder {
+        /// An empty builder.
+        pub fn new() -> Self {
+            Self::default()
+        }
+
+        fn name_ref(&mut self, name: &str) -> (u32, u16) {
+            let off = self.names.len() as u32;
+            let len = name.len().min(u16::MAX as usize);
+            self.names.extend_from_slice(&name.as_bytes()[..len]);
+            (off, len as u16)
+        }
+
+        // ---- data ----
+
+        /// Ensures data memory is at least `size` bytes.
+        pub fn reserve_data(&mut self, size: u32) {
+            self.data_size = self.data_size.max(size);
+        }
+
+        /// Current data size.
+        pub fn data_size(&self) -> u32 {
+            self.data_size
+        }
+
+        /// Bump-allocates `size` bytes aligned to `align` (a power of two) and returns the address.
+        pub fn alloc_data(&mut self, size: u32, align: u32) -> u32 {
+            let align = align.max(1);
+            let addr = self.data_size.div_ceil(align) * align;
+            self.data_size = addr + size;
+            addr
+        }
+
+        /// Sets initial bytes at `addr` (grows data memory if needed).
+        pub fn set_init(&mut self, addr: u32, bytes: &[u8]) {
+            let end = addr as usize + bytes.len();
+            if self.init.len() < end {
+                self.init.resize(end, 0);
+            }
+            self.init[addr as usize..end].copy_from_slice(bytes);
+            self.reserve_data(end as u32);
+        }
+
+        /// Writes the initial header of a STRING[max_len] at `addr` with initial text `text`
+        /// (truncated to `max_len`).
+        pub fn init_string(&mut self, addr: u32, max_len: u16, text: &str) {
+            let len = text.len().min(max_len as usize);
+            let mut bytes = Vec::with_capacity(4 + max_len as usize);
+            bytes.extend_from_slice(&max_len.to_le_bytes());
+            bytes.extend_from_slice(&(len as u16).to_le_bytes());
+            bytes.extend_from_slice(&text.as_bytes()[..len]);
+            bytes.resize(4 + max_len as usize, 0);
+            self.set_init(addr, &bytes);
+        }
+
+        /// Adds a constant-pool cell (deduplicated) and returns its index.
+        pub fn add_const(&mut self, cell: u64) -> u16 {
+            if let Some(i) = self.consts.iter().position(|&c| c == cell) {
+                return i as u16;
+            }
+            self.consts.push(cell);
+            (self.consts.len() - 1) as u16
+        }
+
+        // ---- tables ----
+
+        /// Declares a POU (so calls can be emitted before its body).
+        pub fn declare_pou(&mut self, name: &str, arg_cells: u8, ret_cells: u8, frame_size: u32) -> PouId {
+            self.pous.push(PouDef {
+                name: name.into(),
+                arg_cells,
+                ret_cells,
+                frame_size,
+                code_start: None,
+                code_end: None,
+            });
+            PouId((self.pous.len() - 1) as u16)
+        }
+
+        /// Changes a declared POU's frame size (e.g. once its layout is known).
+        pub fn set_frame_size(&mut self, pou: PouId, frame_size: u32) {
+            self.pous[pou.0 as usize].frame_size = frame_size;
+        }
+
+        /// Starts the POU's code at the current offset.
+        pub fn begin_pou(&mut self, pou: PouId) {
+            self.pous[pou.0 as usize].code_start = Some(self.code.len() as u32);
+        }
+
+        /// Ends the POU's code at the current offset (its last instruction should be RET or JMP).
+        pub fn end_pou(&mut self, pou: PouId) {
+            self.pous[pou.0 as usize].code_end = Some(self.code.len() as u32);
+        }
+
+        /// Adds a task and returns its index.
+        pub fn add_task(&mut self, task: &TaskDef) -> usize {
+            let (off, len) = self.name_ref(&task.name);
+            let r = &mut self.tasks;
+            r.extend_from_slice(&off.to_le_bytes());
+            r.extend_from_slice(&len.to_le_bytes());
+            r.push(task.kind as u8);
+            r.push(task.priority);
+            r.extend_from_slice(&task.pou.0.to_le_bytes());
+            r.extend_from_slice(&0u16.to_le_bytes());
+            r.extend_from_slice(&task.instance_base.to_le_bytes());
+            r.extend_from_slice(&task.watchdog_budget.to_le_bytes());
+            r.extend_from_slice(&task.interval_ns.to_le_bytes());
+            r.extend_from_slice(&0u32.to_le_bytes());
+            self.tasks.len() / TASK_RECORD - 1
+        }
+
+        /// Adds a variable-map entry (`size` = width for scalars, 4 + max_len for STRING).
+        pub fn add_var(&mut self, name: &str, ty: VarType, flags: u8, addr: u32, size: u32) {
+            let (off, len) = self.name_ref(name);
+            let r = &mut self.vars;
+            r.extend_from_slice(&off.to_le_bytes());
+            r.extend_from_slice(&len.to_le_bytes());
+            r.push(ty as u8);
+            r.push(flags);
+            r.extend_from_slice(&addr.to_le_bytes());
+            r.extend_from_slice(&size.to_le_bytes());
+        }
+
+        /// Adds a source file name and returns its index.
+        pub fn add_file(&mut self, name: &str) -> u16 {
+            let (off, len) = self.name_ref(name);
+            self.files.extend_from_slice(&off.to_le_bytes());
+            self.files.extend_from_slice(&len.to_le_bytes());
+            self.files.extend_from_slice(&0u16.to_le_bytes());
+            (self.files.len() / FILE_RECORD - 1) as u16
+        }
+
+        /// Records that code emitted from now on comes from `file:line:column`.
+        pub fn source_location(&mut self, file: u16, line: u32, column: u32) {
+            let offset = self.code.len() as u32;
+            // Replace a record at the same offset so the table stays strictly sorted.
+            if self.srclocs.len() >= SRCLOC_RECORD {
+                let last = self.srclocs.len() - SRCLOC_RECORD;
+                if read_u32(&self.srclocs, last) == offset {
+                    self.srclocs.truncate(last);
+                }
+            }
+            let r = &mut self.srclocs;
+            r.extend_from_slice(&offset.to_le_bytes());
+            r.extend_from_slice(&line.to_le_bytes());
+            r.extend_from_slice(&column.to_le_bytes());
+            r.extend_from_slice(&file.to_le_bytes());
+            r.extend_from_slice(&0u16.to_le_bytes());
+        }
+
+        // ---- labels ----
+
+        /// A new unbound label.
+        pub fn new_label(&mut self) -> Label {
+            self.labels.push(None);
+            Label((self.labels.len() - 1) as u32)
+        }
+
+        /// Binds `label` to the current code offset.
+        pub fn bind(&mut self, label: Label) {
+            self.labels[label.0 as usize] = Some(self.code.len() as u32);
+        }
+
+        /// The current code offset.
+        pub fn code_offset(&self) -> u32 {
+            self.code.len() as u32
+        }
+
+        // ---- emission ----
+
+        /// Appends raw bytes (for tests of the verifier).
+        pub fn emit_raw(&mut self, bytes: &[u8]) {
+            self.code.extend_from_slice(bytes);
+        }
+
+        /// Emits an instruction without operands (panics in debug if `op` has operands).
+        pub fn op(&mut self, op: Opcode) {
+            debug_assert!(op.operands().is_empty(), "{} needs operands", op.mnemonic());
+            self.code.push(op as u8);
+        }
+
+        fn op_target(&mut self, op: Opcode, target: Label) {
+            self.code.push(op as u8);
+            self.fixups.push((self.code.len(), target));
+            self.code.extend_from_slice(&0u32.to_le_bytes());
+        }
+
+        fn op_type_addr(&mut self, op: Opcode, ty: MemType, addr: u32) {
+            self.code.push(op as u8);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+        }
+
+        /// NOP.
+        pub fn nop(&mut self) {
+            self.op(Opcode::Nop);
+        }
+        /// PUSH_I32 (sign-extended).
+        pub fn push_i32(&mut self, v: i32) {
+            self.code.push(Opcode::PushI32 as u8);
+            self.code.extend_from_slice(&v.to_le_bytes());
+        }
+        /// PUSH_U32 (zero-extended).
+        pub fn push_u32(&mut self, v: u32) {
+            self.code.push(Opcode::PushU32 as u8);
+            self.code.extend_from_slice(&v.to_le_bytes());
+        }
+        /// PUSH_I64.
+        pub fn push_i64(&mut self, v: i64) {
+            self.code.push(Opcode::PushI64 as u8);
+            self.code.extend_from_slice(&v.to_le_bytes());
+        }
+        /// Pushes an integer with the shortest encoding.
+        pub fn push_int(&mut self, v: i64) {
+            if let Ok(small) = i32::try_from(v) {
+                self.push_i32(small);
+            } else if let Ok(small) = u32::try_from(v) {
+                self.push_u32(small);
+            } else {
+                self.push_i64(v);
+            }
+        }
+        /// Pushes a REAL.
+        pub fn push_f32(&mut self, v: f32) {
+            self.push_u32(v.to_bits());
+        }
+        /// Pushes an LREAL.
+        pub fn push_f64(&mut self, v: f64) {
+            self.push_i64(v.to_bits() as i64);
+        }
+        /// PUSH_CONST.
+        pub fn push_const(&mut self, index: u16) {
+            self.code.push(Opcode::PushConst as u8);
+            self.code.extend_from_slice(&index.to_le_bytes());
+        }
+        /// DROP.
+        pub fn drop_(&mut self) {
+            self.op(Opcode::Drop);
+        }
+        /// DUP.
+        pub fn dup(&mut self) {
+            self.op(Opcode::Dup);
+        }
+        /// SWAP.
+        pub fn swap(&mut self) {
+            self.op(Opcode::Swap);
+        }
+        /// OVER.
+        pub fn over(&mut self) {
+            self.op(Opcode::Over);
+        }
+        /// LD_ABS.
+        pub fn ld_abs(&mut self, ty: MemType, addr: u32) {
+            self.op_type_addr(Opcode::LdAbs, ty, addr);
+        }
+        /// ST_ABS.
+        pub fn st_abs(&mut self, ty: MemType, addr: u32) {
+            self.op_type_addr(Opcode::StAbs, ty, addr);
+        }
+        /// LD_REL.
+        pub fn ld_rel(&mut self, ty: MemType, offset: u32) {
+            self.op_type_addr(Opcode::LdRel, ty, offset);
+        }
+        /// ST_REL.
+        pub fn st_rel(&mut self, ty: MemType, offset: u32) {
+            self.op_type_addr(Opcode::StRel, ty, offset);
+        }
+        /// LD_IND.
+        pub fn ld_ind(&mut self, ty: MemType, offset: u32) {
+            self.op_type_addr(Opcode::LdInd, ty, offset);
+        }
+        /// ST_IND.
+        pub fn st_ind(&mut self, ty: MemType, offset: u32) {
+            self.op_type_addr(Opcode::StInd, ty, offset);
+        }
+        /// LEA_REL.
+        pub fn lea_rel(&mut self, offset: u32) {
+            self.code.push(Opcode::LeaRel as u8);
+            self.code.extend_from_slice(&offset.to_le_bytes());
+        }
+        /// COPY.
+        pub fn copy(&mut self, len: u32) {
+            self.code.push(Opcode::Copy as u8);
+            self.code.extend_from_slice(&len.to_le_bytes());
+        }
+        /// NOW.
+        pub fn now(&mut self) {
+            self.op(Opcode::Now);
+        }
+        /// ROL/ROR/SEXT/ZEXT with a width operand.
+        pub fn op_width(&mut self, op: Opcode, width: u8) {
+            debug_assert!(matches!(op, Opcode::Rol | Opcode::Ror | Opcode::Sext | Opcode::Zext));
+            self.code.push(op as u8);
+            self.code.push(width);
+        }
+        /// F32_TO_INT / F64_TO_INT.
+        pub fn float_to_int(&mut self, op: Opcode, target: MemType, mode: RoundMode) {
+            debug_assert!(matches!(op, Opcode::F32ToInt | Opcode::F64ToInt));
+            self.code.push(op as u8);
+            self.code.push(target as u8);
+            self.code.push(mode as u8);
+        }
+        /// JMP.
+        pub fn jmp(&mut self, target: Label) {
+            self.op_target(Opcode::Jmp, target);
+        }
+        /// JZ.
+        pub fn jz(&mut self, target: Label) {
+            self.op_target(Opcode::Jz, target);
+        }
+        /// JNZ.
+        pub fn jnz(&mut self, target: Label) {
+            self.op_target(Opcode::Jnz, target);
+        }
+        /// CALL.
+        pub fn call(&mut self, pou: PouId) {
+            self.code.push(Opcode::Call as u8);
+            self.code.extend_from_slice(&pou.0.to_le_bytes());
+        }
+        /// RET.
+        pub fn ret(&mut self) {
+            self.op(Opcode::Ret);
+        }
+        /// CALL_BUILTIN.
+        pub fn call_builtin(&mut self, builtin: Builtin) {
+            self.code.push(Opcode::CallBuiltin as u8);
+            self.code.extend_from_slice(&(builtin as u16).to_le_bytes());
+        }
+        fn op_range(&mut self, op: Opcode, lo: u64, hi: u64) {
+            self.code.push(op as u8);
+            self.code.extend_from_slice(&lo.to_le_bytes());
+            self.code.extend_from_slice(&hi.to_le_bytes());
+        }
+        /// CHK_INDEX.
+        pub fn chk_index(&mut self, lo: i64, hi: i64) {
+            self.op_range(Opcode::ChkIndex, lo as u64, hi as u64);
+        }
+        /// CHK_RANGE_S.
+        pub fn chk_range_s(&mut self, lo: i64, hi: i64) {
+            self.op_range(Opcode::ChkRangeS, lo as u64, hi as u64);
+        }
+        /// CHK_RANGE_U.
+        pub fn chk_range_u(&mut self, lo: u64, hi: u64) {
+            self.op_range(Opcode::ChkRangeU, lo, hi);
+        }
+        /// TRY_BEGIN with its handler label.
+        pub fn try_begin(&mut self, handler: Label) {
+            self.op_target(Opcode::TryBegin, handler);
+        }
+        /// TRY_END.
+        pub fn try_end(&mut self) {
+            self.op(Opcode::TryEnd);
+        }
+        /// THROW.
+        pub fn throw(&mut self, trap: Trap) {
+            self.code.push(Opcode::Throw as u8);
+            self.code.push(trap.code());
+        }
+        /// RETHROW.
+        pub fn rethrow(&mut self) {
+            self.op(Opcode::Rethrow);
+        }
+
+        /// Resolves labels and serializes the image.
+        pub fn build(&self) -> Result<Vec<u8>, BuildError> {
+            let mut code = self.code.clone();
+            for &(at, label) in &self.fixups {
+                let target = self.labels[label.0 as usize].ok_or(BuildError::UnboundLabel(label.0))?;
+                code[at..at + 4].copy_from_slice(&target.to_le_bytes());
+            }
+            let mut names = self.names.clone();
+            let mut pous = Vec::with_capacity(self.pous.len() * POU_RECORD);
+            for pou in &self.pous {
+                let (Some(start), Some(end)) = (pou.code_start, pou.code_end) else {
+                    return Err(BuildError::PouWithoutCode(pou.name.clone()));
+                };
+                let off = names.len() as u32;
+                let len = pou.name.len().min(u16::MAX as usize);
+                names.extend_from_slice(&pou.name.as_bytes()[..len]);
+                pous.extend_from_slice(&off.to_le_bytes());
+                pous.extend_from_slice(&(len as u16).to_le_bytes());
+                pous.push(pou.arg_cells);
+                pous.push(pou.ret_cells);
+                pous.extend_from_slice(&start.to_le_bytes());
+                pous.extend_from_slice(&end.saturating_sub(start).to_le_bytes());
+                pous.extend_from_slice(&pou.frame_size.to_le_bytes());
+            }
+            let consts: Vec<u8> = self.consts.iter().flat_map(|c| c.to_le_bytes()).collect();
+            let sections: [&[u8]; SECTION_COUNT] =
+                [&code, &consts, &self.init, &pous, &self.tasks, &self.vars, &self.srclocs, &self.files, &names];
+            let total: usize = HEADER_LEN + sections.iter().map(|s| s.len()).sum::<usize>();
+            if total > u32::MAX as usize {
+                return Err(BuildError::TooLarge);
+            }
+            let mut out = Vec::with_capacity(total);
+            out.extend_from_slice(&MAGIC);
+            out.extend_from_slice(&VERSION.to_le_bytes());
+            out.extend_from_slice(&(HEADER_LEN as u16).to_le_bytes());
+            out.extend_from_slice(&self.data_size.to_le_bytes());
+            out.extend_from_slice(&0u32.to_le_bytes());
+            let mut offset = HEADER_LEN as u32;
+            for s in sections {
+                out.extend_from_slice(&offset.to_le_bytes());
+                out.extend_from_slice(&(s.len() as u32).to_le_bytes());
+                offset += s.len() as u32;
+            }
+            for s in sections {
+                out.extend_from_slice(s);
+            }
+            Ok(out)
+        }
+    }
+}

@@ -1,0 +1,668 @@
+//! The instruction set: opcodes, operand encodings, memory/value types, traps and builtins.
+//!
+//! Every instruction is one opcode byte followed by fixed-size little-endian immediates
+//! (see [`Operands`]). Code offsets in jump/handler operands are absolute offsets into the
+//! code section. The operand stack holds 64-bit cells:
+//!
+//! * integers: two's complement `i64` (unsigned values zero-extended into the cell);
+//! * `REAL` (f32): the f32 bit pattern in the low 32 bits, upper 32 bits zero;
+//! * `LREAL` (f64): the f64 bit pattern;
+//! * `BOOL`: 0 or 1; `TIME`: `i64` nanoseconds; addresses: unsigned byte offsets into data memory.
+//!
+//! Stack effects are written `[before] -> [after]` with the top of stack on the right.
+//! "May trap" lists the [`Trap`]s an instruction can raise; every data access may raise
+//! [`Trap::InvalidAddress`] when its (dynamic) address is outside data memory, every push may
+//! raise [`Trap::StackOverflow`] when the operand stack is full.
+
+/// Operand layout of an instruction (all immediates little-endian).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Operands {
+    /// No operands.
+    None,
+    /// `i32` immediate.
+    I32,
+    /// `u32` immediate.
+    U32,
+    /// `i64` immediate.
+    I64,
+    /// `u16` index (constant pool, POU table or builtin table).
+    Index16,
+    /// [`MemType`] byte then `u32` address/offset.
+    TypeAddr,
+    /// One width byte: 8, 16, 32 (and 64 for rotates).
+    Width,
+    /// [`MemType`] byte (an integer type) then [`RoundMode`] byte.
+    TypeMode,
+    /// `u32` absolute code offset (jump target or handler).
+    Target,
+    /// Two `i64` immediates: inclusive lower and upper bound.
+    Range,
+    /// One trap code byte.
+    TrapCode,
+}
+
+impl Operands {
+    /// Number of immediate bytes following the opcode byte.
+    pub const fn len(self) -> usize {
+        match self {
+            Operands::None => 0,
+            Operands::I32 | Operands::U32 | Operands::Target => 4,
+            Operands::I64 => 8,
+            Operands::Index16 | Operands::TypeMode => 2,
+            Operands::TypeAddr => 5,
+            Operands::Width | Operands::TrapCode => 1,
+            Operands::Range => 16,
+        }
+    }
+
+    /// True when the instruction has no immediates.
+    pub const fn is_empty(self) -> bool {
+        self.len() == 0
+    }
+}
+
+macro_rules! opcodes {
+    ($( $(#[doc = $doc:literal])* $name:ident = $val:literal, $mnemonic:literal, $operands:ident; )*) => {
+        /// An instruction opcode (the first byte of every instruction).
+        #[repr(u8)]
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum Opcode {
+            $( $(#[doc = $doc])* $name = $val, )*
+        }
+
+        impl Opcode {
+            /// Every opcode, in numeric order.
+            pub const ALL: &'static [Opcode] = &[$(Opcode::$name),*];
+
+            /// Decodes an opcode byte; `None` for unassigned values.
+            pub const fn from_u8(byte: u8) -> Option<Opcode> {
+                match byte {
+                    $( $val => Some(Opcode::$name), )*
+                    _ => None,
+                }
+            }
+
+            /// The operand layout that follows the opcode byte.
+            pub const fn operands(self) -> Operands {
+                match self {
+                    $( Opcode::$name => Operands::$operands, )*
+                }
+            }
+
+            /// The assembler mnemonic (e.g. `"LD_ABS"`).
+            pub const fn mnemonic(self) -> &'static str {
+                match self {
+                    $( Opcode::$name => $mnemonic, )*
+                }
+            }
+
+            /// Total encoded size of the instruction in bytes.
+            pub const fn size(self) -> usize {
+                1 + self.operands().len()
+            }
+        }
+    };
+}
+
+opcodes! {
+    /// `[] -> []`. Does nothing.
+    Nop = 0x00, "NOP", None;
+    /// `[] -> [imm]`: pushes the `i32` immediate sign-extended to 64 bits.
+    PushI32 = 0x01, "PUSH_I32", I32;
+    /// `[] -> [imm]`: pushes the `u32` immediate zero-extended (also used for REAL bit patterns).
+    PushU32 = 0x02, "PUSH_U32", U32;
+    /// `[] -> [imm]`: pushes the 64-bit immediate (also used for LREAL bit patterns).
+    PushI64 = 0x03, "PUSH_I64", I64;
+    /// `[] -> [const[idx]]`: pushes constant-pool cell `idx` (verified to exist).
+    PushConst = 0x04, "PUSH_CONST", Index16;
+    /// `[a] -> []`.
+    Drop = 0x05, "DROP", None;
+    /// `[a] -> [a a]`.
+    Dup = 0x06, "DUP", None;
+    /// `[a b] -> [b a]`.
+    Swap = 0x07, "SWAP", None;
+    /// `[a b] -> [a b a]`.
+    Over = 0x08, "OVER", None;
+
+    /// `[] -> [v]`: loads a value of the given type from absolute address `addr` (sign/zero
+    /// extension per type). The verifier checks `addr + width <= data_size`.
+    LdAbs = 0x10, "LD_ABS", TypeAddr;
+    /// `[v] -> []`: stores `v` truncated to the type's width at absolute address `addr`.
+    StAbs = 0x11, "ST_ABS", TypeAddr;
+    /// `[] -> [v]`: loads from `base + off` (frame-relative; the verifier checks
+    /// `off + width <= frame_size` of the enclosing POU, CALL checks the frame fits in data).
+    LdRel = 0x12, "LD_REL", TypeAddr;
+    /// `[v] -> []`: stores to `base + off`.
+    StRel = 0x13, "ST_REL", TypeAddr;
+    /// `[addr] -> [v]`: loads from `addr + off`. May trap: INVALID_ADDRESS.
+    LdInd = 0x14, "LD_IND", TypeAddr;
+    /// `[addr v] -> []`: stores `v` at `addr + off`. May trap: INVALID_ADDRESS.
+    StInd = 0x15, "ST_IND", TypeAddr;
+    /// `[] -> [base + off]`: address of a frame variable (VAR_IN_OUT arguments, arrays in FBs).
+    LeaRel = 0x16, "LEA_REL", U32;
+    /// `[dst src] -> []`: copies `len` bytes (memmove semantics; struct/array assignment).
+    /// May trap: INVALID_ADDRESS.
+    Copy = 0x17, "COPY", U32;
+    /// `[] -> [now]`: the cycle time in nanoseconds (constant during a cycle).
+    Now = 0x18, "NOW", None;
+
+    /// `[a b] -> [a + b]` wrapping 64-bit.
+    Add = 0x20, "ADD", None;
+    /// `[a b] -> [a - b]` wrapping.
+    Sub = 0x21, "SUB", None;
+    /// `[a b] -> [a * b]` wrapping.
+    Mul = 0x22, "MUL", None;
+    /// `[a b] -> [a / b]` signed, truncating; `i64::MIN / -1` wraps. May trap: DIVISION_BY_ZERO.
+    DivS = 0x23, "DIV_S", None;
+    /// `[a b] -> [a / b]` unsigned. May trap: DIVISION_BY_ZERO.
+    DivU = 0x24, "DIV_U", None;
+    /// `[a b] -> [a rem b]` signed (sign of the dividend, `MIN mod -1 = 0`). May trap: DIVISION_BY_ZERO.
+    ModS = 0x25, "MOD_S", None;
+    /// `[a b] -> [a rem b]` unsigned. May trap: DIVISION_BY_ZERO.
+    ModU = 0x26, "MOD_U", None;
+    /// `[a] -> [-a]` wrapping.
+    Neg = 0x27, "NEG", None;
+    /// `[a] -> [|a|]` signed, wrapping (`|MIN| = MIN`).
+    AbsS = 0x28, "ABS_S", None;
+    /// `[a b] -> [a & b]`.
+    And = 0x29, "AND", None;
+    /// `[a b] -> [a | b]`.
+    Or = 0x2A, "OR", None;
+    /// `[a b] -> [a ^ b]`.
+    Xor = 0x2B, "XOR", None;
+    /// `[a] -> [!a]` bitwise complement (stores truncate it to the declared width).
+    Not = 0x2C, "NOT", None;
+    /// `[a] -> [a == 0]`: boolean negation (result 0 or 1).
+    NotBool = 0x2D, "NOT_BOOL", None;
+    /// `[a n] -> [a << n]`; `n` is taken unsigned, `n >= 64` gives 0.
+    Shl = 0x2E, "SHL", None;
+    /// `[a n] -> [a >> n]` logical; `n >= 64` gives 0.
+    ShrU = 0x2F, "SHR_U", None;
+    /// `[a n] -> [a >> n]` arithmetic; `n >= 64` gives the sign fill.
+    ShrS = 0x30, "SHR_S", None;
+    /// `[a n] -> [rotl_w(a, n mod w)]`: rotates the low `w` bits (w = 8/16/32/64); result zero-extended.
+    Rol = 0x31, "ROL", Width;
+    /// `[a n] -> [rotr_w(a, n mod w)]`.
+    Ror = 0x32, "ROR", Width;
+    /// `[a] -> [sign_extend_w(a)]` for w = 8/16/32: wraps a value to a signed declared width.
+    Sext = 0x33, "SEXT", Width;
+    /// `[a] -> [a & (2^w - 1)]` for w = 8/16/32: wraps a value to an unsigned declared width.
+    Zext = 0x34, "ZEXT", Width;
+
+    /// `[a b] -> [a == b]` (0/1), integer/bit-pattern equality.
+    Eq = 0x38, "EQ", None;
+    /// `[a b] -> [a != b]`.
+    Ne = 0x39, "NE", None;
+    /// `[a b] -> [a < b]` signed.
+    LtS = 0x3A, "LT_S", None;
+    /// `[a b] -> [a <= b]` signed.
+    LeS = 0x3B, "LE_S", None;
+    /// `[a b] -> [a > b]` signed.
+    GtS = 0x3C, "GT_S", None;
+    /// `[a b] -> [a >= b]` signed.
+    GeS = 0x3D, "GE_S", None;
+    /// `[a b] -> [a < b]` unsigned.
+    LtU = 0x3E, "LT_U", None;
+    /// `[a b] -> [a <= b]` unsigned.
+    LeU = 0x3F, "LE_U", None;
+    /// `[a b] -> [a > b]` unsigned.
+    GtU = 0x40, "GT_U", None;
+    /// `[a b] -> [a >= b]` unsigned.
+    GeU = 0x41, "GE_U", None;
+    /// `[g a b] -> [if g != 0 { b } else { a }]` (IEC SEL).
+    Sel = 0x42, "SEL", None;
+
+    /// `[a b] -> [a + b]` in f32.
+    AddF32 = 0x50, "ADD_F32", None;
+    /// `[a b] -> [a - b]` in f32.
+    SubF32 = 0x51, "SUB_F32", None;
+    /// `[a b] -> [a * b]` in f32.
+    MulF32 = 0x52, "MUL_F32", None;
+    /// `[a b] -> [a / b]` in f32. May trap: DIVISION_BY_ZERO when `b == 0.0`.
+    DivF32 = 0x53, "DIV_F32", None;
+    /// `[a] -> [-a]` in f32.
+    NegF32 = 0x54, "NEG_F32", None;
+    /// `[a b] -> [a == b]` f32 (IEEE: NaN is unequal to everything).
+    EqF32 = 0x55, "EQ_F32", None;
+    /// `[a b] -> [a != b]` f32.
+    NeF32 = 0x56, "NE_F32", None;
+    /// `[a b] -> [a < b]` f32.
+    LtF32 = 0x57, "LT_F32", None;
+    /// `[a b] -> [a <= b]` f32.
+    LeF32 = 0x58, "LE_F32", None;
+    /// `[a b] -> [a > b]` f32.
+    GtF32 = 0x59, "GT_F32", None;
+    /// `[a b] -> [a >= b]` f32.
+    GeF32 = 0x5A, "GE_F32", None;
+    /// `[a b] -> [a + b]` in f64.
+    AddF64 = 0x60, "ADD_F64", None;
+    /// `[a b] -> [a - b]` in f64.
+    SubF64 = 0x61, "SUB_F64", None;
+    /// `[a b] -> [a * b]` in f64.
+    MulF64 = 0x62, "MUL_F64", None;
+    /// `[a b] -> [a / b]` in f64. May trap: DIVISION_BY_ZERO when `b == 0.0`.
+    DivF64 = 0x63, "DIV_F64", None;
+    /// `[a] -> [-a]` in f64.
+    NegF64 = 0x64, "NEG_F64", None;
+    /// `[a b] -> [a == b]` f64.
+    EqF64 = 0x65, "EQ_F64", None;
+    /// `[a b] -> [a != b]` f64.
+    NeF64 = 0x66, "NE_F64", None;
+    /// `[a b] -> [a < b]` f64.
+    LtF64 = 0x67, "LT_F64", None;
+    /// `[a b] -> [a <= b]` f64.
+    LeF64 = 0x68, "LE_F64", None;
+    /// `[a b] -> [a > b]` f64.
+    GtF64 = 0x69, "GT_F64", None;
+    /// `[a b] -> [a >= b]` f64.
+    GeF64 = 0x6A, "GE_F64", None;
+
+    /// `[i] -> [f32(i)]` from signed integer (round to nearest).
+    IToF32S = 0x70, "I_TO_F32_S", None;
+    /// `[i] -> [f32(i)]` from unsigned integer.
+    IToF32U = 0x71, "I_TO_F32_U", None;
+    /// `[i] -> [f64(i)]` from signed integer.
+    IToF64S = 0x72, "I_TO_F64_S", None;
+    /// `[i] -> [f64(i)]` from unsigned integer.
+    IToF64U = 0x73, "I_TO_F64_U", None;
+    /// `[f32] -> [f64]` (exact).
+    F32ToF64 = 0x74, "F32_TO_F64", None;
+    /// `[f64] -> [f32]` (round to nearest even; overflow gives infinity).
+    F64ToF32 = 0x75, "F64_TO_F32", None;
+    /// `[f32] -> [int]`: converts to the integer [`MemType`] operand using the [`RoundMode`]
+    /// operand. May trap: NUMERIC_ERROR for NaN, infinities and results outside the target type.
+    F32ToInt = 0x76, "F32_TO_INT", TypeMode;
+    /// `[f64] -> [int]`: as [`Opcode::F32ToInt`] from f64.
+    F64ToInt = 0x77, "F64_TO_INT", TypeMode;
+
+    /// `[] -> []`: jumps to the absolute code offset (same POU, instruction start).
+    Jmp = 0x80, "JMP", Target;
+    /// `[c] -> []`: jumps when `c == 0`.
+    Jz = 0x81, "JZ", Target;
+    /// `[c] -> []`: jumps when `c != 0`.
+    Jnz = 0x82, "JNZ", Target;
+    /// `[args.. base] -> [results..]`: calls POU `idx` with data frame base `base`; the
+    /// `arg_cells` cells below `base` become the callee's initial stack, the callee's
+    /// `ret_cells` are left on return. May trap: CALL_DEPTH, INVALID_ADDRESS (frame outside data).
+    Call = 0x83, "CALL", Index16;
+    /// Returns from the current POU (the stack must hold exactly `ret_cells` cells of this
+    /// frame, checked by the verifier). Returning from the task's POU ends the cycle.
+    Ret = 0x84, "RET", None;
+    /// `[args..] -> [results..]`: calls builtin `id` (see [`Builtin`] for cell counts and traps).
+    CallBuiltin = 0x85, "CALL_BUILTIN", Index16;
+    /// `[i] -> [i]`: traps INDEX_OUT_OF_BOUNDS unless `lo <= i <= hi` (signed).
+    ChkIndex = 0x88, "CHK_INDEX", Range;
+    /// `[v] -> [v]`: traps SUBRANGE_VIOLATION unless `lo <= v <= hi` (signed).
+    ChkRangeS = 0x89, "CHK_RANGE_S", Range;
+    /// `[v] -> [v]`: traps SUBRANGE_VIOLATION unless `lo <= v <= hi` (bounds and value unsigned).
+    ChkRangeU = 0x8A, "CHK_RANGE_U", Range;
+
+    /// `[] -> []`: pushes a try frame (handler, stack depth, call depth). On a catchable trap
+    /// the VM restores the stack to the recorded depth, pushes the trap code and jumps to
+    /// `handler` (same POU; stack depth at handler = depth at TRY_BEGIN + 1). May trap:
+    /// STACK_OVERFLOW when the try-frame store is full.
+    TryBegin = 0x90, "TRY_BEGIN", Target;
+    /// `[] -> []`: pops the innermost try frame (the verifier checks pairing per POU).
+    TryEnd = 0x91, "TRY_END", None;
+    /// `[] -> []`: raises trap `code` (any catchable trap code).
+    Throw = 0x92, "THROW", TrapCode;
+    /// `[code] -> []`: re-raises a caught trap code; 0 does nothing (no exception); a code
+    /// that is not a catchable trap raises NUMERIC_ERROR.
+    Rethrow = 0x93, "RETHROW", None;
+}
+
+/// Typed data-memory access width and extension rule for loads/stores and float->int targets.
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum MemType {
+    /// 8-bit signed (SINT).
+    I8 = 0,
+    /// 16-bit signed (INT).
+    I16 = 1,
+    /// 32-bit signed (DINT).
+    I32 = 2,
+    /// 64-bit signed (LINT, TIME).
+    I64 = 3,
+    /// 8-bit unsigned (USINT, BYTE, BOOL).
+    U8 = 4,
+    /// 16-bit unsigned (UINT, WORD).
+    U16 = 5,
+    /// 32-bit unsigned (UDINT, DWORD).
+    U32 = 6,
+    /// 64-bit unsigned (ULINT, LWORD).
+    U64 = 7,
+    /// REAL (f32 bits, zero-extended into the cell).
+    F32 = 8,
+    /// LREAL (f64 bits).
+    F64 = 9,
+}
+
+impl MemType {
+    /// Every type, in numeric order.
+    pub const ALL: [MemType; 10] = [
+        MemType::I8,
+        MemType::I16,
+        MemType::I32,
+        MemType::I64,
+        MemType::U8,
+        MemType::U16,
+        MemType::U32,
+        MemType::U64,
+        MemType::F32,
+        MemType::F64,
+    ];
+
+    /// Decodes a type byte.
+    pub const fn from_u8(byte: u8) -> Option<MemType> {
+        if (byte as usize) < Self::ALL.len() { Some(Self::ALL[byte as usize]) } else { None }
+    }
+
+    /// Width in bytes.
+    pub const fn width(self) -> usize {
+        match self {
+            MemType::I8 | MemType::U8 => 1,
+            MemType::I16 | MemType::U16 => 2,
+            MemType::I32 | MemType::U32 | MemType::F32 => 4,
+            MemType::I64 | MemType::U64 | MemType::F64 => 8,
+        }
+    }
+
+    /// True for the eight integer types (valid float->int conversion targets).
+    pub const fn is_integer(self) -> bool {
+        !matches!(self, MemType::F32 | MemType::F64)
+    }
+
+    /// Converts little-endian bytes (exactly `width()` of them) into a cell, sign- or
+    /// zero-extending as the type demands.
+    pub fn cell_from_le(self, bytes: &[u8]) -> u64 {
+        let mut raw = [0u8; 8];
+        let n = self.width().min(bytes.len());
+        raw[..n].copy_from_slice(&bytes[..n]);
+        let unsigned = u64::from_le_bytes(raw);
+        match self {
+            MemType::I8 => unsigned as u8 as i8 as i64 as u64,
+            MemType::I16 => unsigned as u16 as i16 as i64 as u64,
+            MemType::I32 => unsigned as u32 as i32 as i64 as u64,
+            _ => unsigned,
+        }
+    }
+
+    /// The low `width()` bytes of a cell, little-endian (the store truncation).
+    pub fn cell_to_le(self, cell: u64) -> [u8; 8] {
+        cell.to_le_bytes()
+    }
+}
+
+/// Rounding rule of float->integer conversions.
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum RoundMode {
+    /// Toward zero (IEC `TRUNC`).
+    Truncate = 0,
+    /// To nearest, ties away from zero (IEC `REAL_TO_INT`: 2.5 -> 3, -2.5 -> -3).
+    NearestTiesAway = 1,
+}
+
+impl RoundMode {
+    /// Decodes a rounding-mode byte.
+    pub const fn from_u8(byte: u8) -> Option<RoundMode> {
+        match byte {
+            0 => Some(RoundMode::Truncate),
+            1 => Some(RoundMode::NearestTiesAway),
+            _ => None,
+        }
+    }
+}
+
+/// A run-time error detected by the VM. Codes are stable (they are the values an
+/// `e : __EXCEPTION` variable receives); 0 means "no exception".
+#[repr(u8)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Trap {
+    /// Integer (or float) division or modulo by zero.
+    DivisionByZero = 1,
+    /// CHK_INDEX failed: array index outside its declared bounds.
+    IndexOutOfBounds = 2,
+    /// CHK_RANGE_* failed: value outside a subrange type.
+    SubrangeViolation = 3,
+    /// The cycle's instruction budget is exhausted. Not catchable: it always ends the cycle.
+    Watchdog = 4,
+    /// CALL would exceed the call-frame capacity.
+    CallDepth = 5,
+    /// The operand stack (or try-frame store) is full.
+    StackOverflow = 6,
+    /// Math domain error: SQRT of a negative, LN/LOG of <= 0, ASIN/ACOS outside [-1, 1],
+    /// EXPT of 0 to a negative or of a negative to a non-integer power, float->integer
+    /// conversion of NaN/infinity/out-of-range, STRING_TO_* of a malformed string.
+    NumericError = 7,
+    /// A dynamic data address (indirect access, CALL frame, string operand) is outside data memory.
+    InvalidAddress = 8,
+}
+
+impl Trap {
+    /// Every trap, by code.
+    pub const ALL: [Trap; 8] = [
+        Trap::DivisionByZero,
+        Trap::IndexOutOfBounds,
+        Trap::SubrangeViolation,
+        Trap::Watchdog,
+        Trap::CallDepth,
+        Trap::StackOverflow,
+        Trap::NumericError,
+        Trap::InvalidAddress,
+    ];
+
+    /// The stable numeric code.
+    pub const fn code(self) -> u8 {
+        self as u8
+    }
+
+    /// Decodes a trap code (`None` for 0 and unknown codes).
+    pub const fn from_code(code: u64) -> Option<Trap> {
+        if code >= 1 && code <= Self::ALL.len() as u64 { Some(Self::ALL[code as usize - 1]) } else { None }
+    }
+
+    /// The IEC-style name, e.g. `"DIVISION_BY_ZERO"`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            Trap::DivisionByZero => "DIVISION_BY_ZERO",
+            Trap::IndexOutOfBounds => "INDEX_OUT_OF_BOUNDS",
+            Trap::SubrangeViolation => "SUBRANGE_VIOLATION",
+            Trap::Watchdog => "WATCHDOG",
+            Trap::CallDepth => "CALL_DEPTH",
+            Trap::StackOverflow => "STACK_OVERFLOW",
+            Trap::NumericError => "NUMERIC_ERROR",
+            Trap::InvalidAddress => "INVALID_ADDRESS",
+        }
+    }
+
+    /// Whether a try frame can catch this trap (everything but WATCHDOG, which must
+    /// terminate the cycle so that an endless loop inside `__TRY` cannot hang the task).
+    pub const fn is_catchable(self) -> bool {
+        !matches!(self, Trap::Watchdog)
+    }
+}
+
+impl core::fmt::Display for Trap {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+macro_rules! builtins {
+    ($( $(#[doc = $doc:literal])* $name:ident = $val:literal, $mnemonic:literal, $args:literal, $results:literal; )*) => {
+        /// Standard functions reachable through `CALL_BUILTIN id`. Argument cells are pushed
+        /// left to right (first argument deepest); `args()`/`results()` give the stack effect.
+        ///
+        /// String arguments are **addresses** of string variables in data memory, laid out as
+        /// `max_len: u16 LE, cur_len: u16 LE, bytes[max_len]` (so a `STRING[n]` occupies
+        /// `4 + n` bytes and its initial value must have `max_len = n`). Results written to a
+        /// `dst` string are truncated to its `max_len`; `dst` may alias an argument. Length and
+        /// position arguments are clamped (negative counts as 0, positions beyond the string
+        /// to its end) instead of trapping; positions are 1-based as in IEC.
+        #[repr(u16)]
+        #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+        pub enum Builtin {
+            $( $(#[doc = $doc])* $name = $val, )*
+        }
+
+        impl Builtin {
+            /// Every builtin.
+            pub const ALL: &'static [Builtin] = &[$(Builtin::$name),*];
+
+            /// Decodes a builtin id.
+            pub const fn from_u16(id: u16) -> Option<Builtin> {
+                match id {
+                    $( $val => Some(Builtin::$name), )*
+                    _ => None,
+                }
+            }
+
+            /// Number of argument cells popped.
+            pub const fn args(self) -> usize {
+                match self { $( Builtin::$name => $args, )* }
+            }
+
+            /// Number of result cells pushed.
+            pub const fn results(self) -> usize {
+                match self { $( Builtin::$name => $results, )* }
+            }
+
+            /// The IEC-ish name.
+            pub const fn mnemonic(self) -> &'static str {
+                match self { $( Builtin::$name => $mnemonic, )* }
+            }
+        }
+    };
+}
+
+builtins! {
+    /// LREAL SQRT. NUMERIC_ERROR for x < 0.
+    SqrtF64 = 1, "SQRT_LREAL", 1, 1;
+    /// LREAL LN. NUMERIC_ERROR for x <= 0.
+    LnF64 = 2, "LN_LREAL", 1, 1;
+    /// LREAL LOG (base 10). NUMERIC_ERROR for x <= 0.
+    LogF64 = 3, "LOG_LREAL", 1, 1;
+    /// LREAL EXP (overflow gives +inf).
+    ExpF64 = 4, "EXP_LREAL", 1, 1;
+    /// LREAL SIN (radians).
+    SinF64 = 5, "SIN_LREAL", 1, 1;
+    /// LREAL COS.
+    CosF64 = 6, "COS_LREAL", 1, 1;
+    /// LREAL TAN.
+    TanF64 = 7, "TAN_LREAL", 1, 1;
+    /// LREAL ASIN. NUMERIC_ERROR outside [-1, 1].
+    AsinF64 = 8, "ASIN_LREAL", 1, 1;
+    /// LREAL ACOS. NUMERIC_ERROR outside [-1, 1].
+    AcosF64 = 9, "ACOS_LREAL", 1, 1;
+    /// LREAL ATAN.
+    AtanF64 = 10, "ATAN_LREAL", 1, 1;
+    /// `[base exp] -> [base ** exp]` LREAL. NUMERIC_ERROR for 0 ** negative and negative ** non-integer.
+    ExptF64 = 11, "EXPT_LREAL", 2, 1;
+    /// LREAL ABS.
+    AbsF64 = 12, "ABS_LREAL", 1, 1;
+    /// REAL SQRT (computed in f64, rounded to f32). NUMERIC_ERROR for x < 0.
+    SqrtF32 = 33, "SQRT_REAL", 1, 1;
+    /// REAL LN.
+    LnF32 = 34, "LN_REAL", 1, 1;
+    /// REAL LOG.
+    LogF32 = 35, "LOG_REAL", 1, 1;
+    /// REAL EXP.
+    ExpF32 = 36, "EXP_REAL", 1, 1;
+    /// REAL SIN.
+    SinF32 = 37, "SIN_REAL", 1, 1;
+    /// REAL COS.
+    CosF32 = 38, "COS_REAL", 1, 1;
+    /// REAL TAN.
+    TanF32 = 39, "TAN_REAL", 1, 1;
+    /// REAL ASIN.
+    AsinF32 = 40, "ASIN_REAL", 1, 1;
+    /// REAL ACOS.
+    AcosF32 = 41, "ACOS_REAL", 1, 1;
+    /// REAL ATAN.
+    AtanF32 = 42, "ATAN_REAL", 1, 1;
+    /// REAL EXPT.
+    ExptF32 = 43, "EXPT_REAL", 2, 1;
+    /// REAL ABS.
+    AbsF32 = 44, "ABS_REAL", 1, 1;
+
+    /// `[s] -> [len]`.
+    StrLen = 100, "LEN", 1, 1;
+    /// `[dst src] -> []`: string assignment (truncating).
+    StrAssign = 101, "STRING_ASSIGN", 2, 0;
+    /// `[dst a b] -> []`: dst := CONCAT(a, b).
+    StrConcat = 102, "CONCAT", 3, 0;
+    /// `[dst a n] -> []`: dst := LEFT(a, n).
+    StrLeft = 103, "LEFT", 3, 0;
+    /// `[dst a n] -> []`: dst := RIGHT(a, n).
+    StrRight = 104, "RIGHT", 3, 0;
+    /// `[dst a n p] -> []`: dst := MID(a, n, p) (n characters from position p).
+    StrMid = 105, "MID", 4, 0;
+    /// `[dst a b p] -> []`: dst := INSERT(a, b, p) (b inserted after position p).
+    StrInsert = 106, "INSERT", 4, 0;
+    /// `[dst a n p] -> []`: dst := DELETE(a, n, p) (n characters deleted from position p).
+    StrDelete = 107, "DELETE", 4, 0;
+    /// `[dst a b n p] -> []`: dst := REPLACE(a, b, n, p) (n characters from p replaced by b).
+    StrReplace = 108, "REPLACE", 5, 0;
+    /// `[a b] -> [pos]`: FIND(a, b), 1-based position of the first b in a, 0 if none.
+    StrFind = 109, "FIND", 2, 1;
+    /// `[a b] -> [-1|0|1]`: lexicographic byte comparison of a and b.
+    StrCompare = 110, "STRING_COMPARE", 2, 1;
+    /// `[dst v] -> []`: decimal text of a signed integer.
+    StrFromI64 = 111, "INT_TO_STRING", 2, 0;
+    /// `[dst v] -> []`: decimal text of an unsigned integer.
+    StrFromU64 = 112, "UINT_TO_STRING", 2, 0;
+    /// `[dst v] -> []`: shortest round-trip text of a REAL, always with a '.' (e.g. `4.0`).
+    StrFromF32 = 113, "REAL_TO_STRING", 2, 0;
+    /// `[dst v] -> []`: shortest round-trip text of an LREAL.
+    StrFromF64 = 114, "LREAL_TO_STRING", 2, 0;
+    /// `[dst v] -> []`: `TRUE` / `FALSE`.
+    StrFromBool = 115, "BOOL_TO_STRING", 2, 0;
+    /// `[dst v] -> []`: TIME literal such as `T#1s500ms` (`T#0s` for zero).
+    StrFromTime = 116, "TIME_TO_STRING", 2, 0;
+    /// `[s] -> [v]`: parses a decimal integer (optional sign, surrounding spaces allowed).
+    /// NUMERIC_ERROR when malformed or outside i64.
+    StrToI64 = 117, "STRING_TO_INT", 1, 1;
+    /// `[s] -> [f64]`: parses a real number. NUMERIC_ERROR when malformed.
+    StrToF64 = 118, "STRING_TO_LREAL", 1, 1;
+}
+
+/// Reads a little-endian `u16` at `at` (caller guarantees bounds).
+pub(crate) fn read_u16(bytes: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([bytes[at], bytes[at + 1]])
+}
+
+/// Reads a little-endian `u32` at `at` (caller guarantees bounds).
+pub(crate) fn read_u32(bytes: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
+}
+
+/// Reads a little-endian `u64` at `at` (caller guarantees bounds).
+pub(crate) fn read_u64(bytes: &[u8], at: usize) -> u64 {
+    let mut raw = [0u8; 8];
+    raw.copy_from_slice(&bytes[at..at + 8]);
+    u64::from_le_bytes(raw)
+}
+
+/// Fixed stack effect `(pops, pushes)` of an opcode; `None` for CALL, RET and CALL_BUILTIN,
+/// whose effect depends on the POU/builtin table.
+pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
+    use Opcode::*;
+    Some(match op {
+        Nop | Jmp | TryBegin | TryEnd | Throw => (0, 0),
+        PushI32 | PushU32 | PushI64 | PushConst | LdAbs | LdRel | LeaRel | Now => (0, 1),
+        Drop | StAbs | StRel | Jz | Jnz | Rethrow => (1, 0),
+        Dup => (1, 2),
+        Swap => (2, 2),
+        Over => (2, 3),
+        LdInd | Neg | AbsS | Not | NotBool | Sext | Zext | NegF32 | NegF64 | IToF32S | IToF32U | IToF64S
+        | IToF64U | F32ToF64 | F64ToF32 | F32ToInt | F64ToInt | ChkIndex | ChkRangeS | ChkRangeU => (1, 1),
+        StInd | Copy => (2, 0),
+        Add | Sub | Mul | DivS | DivU | ModS | ModU | And | Or | Xor | Shl | ShrU | ShrS | Rol | Ror | Eq | Ne
+        | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | AddF32 | SubF32 | MulF32 | DivF32 | EqF32 | NeF32
+        | LtF32 | LeF32 | GtF32 | GeF32 | AddF64 | SubF64 | MulF64 | DivF64 | EqF64 | NeF64 | LtF64 | LeF64
+        | GtF64 | GeF64 => (2, 1),
+        Sel => (3, 1),
+        Call | Ret | CallBuiltin => return None,
+    })
+}

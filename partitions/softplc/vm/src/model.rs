@@ -1,0 +1,650 @@
+//! The executable reference model of the instruction semantics.
+//!
+//! Deliberately simple and written independently of [`crate::vm`]: the state is plain
+//! `Vec`s (code, data memory, operand stack, call stack, try stack) plus registers, every
+//! instruction is decoded from raw bytes in one big `match`, and the "a trapping instruction
+//! has no effect" rule is implemented by working on a copy of the operand stack that is only
+//! committed when the instruction succeeds. It shares with the VM only the ISA definitions,
+//! the table parser ([`Image`]) and the standard-function library ([`crate::builtins`],
+//! [`crate::fmath`]), which have their own tests.
+//!
+//! Use it side by side with the VM: same image, same limits, then compare
+//! [`Model::data`], [`Model::stack`], [`Model::pc`] and the cycle results.
+
+use crate::image::Image;
+use crate::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
+use alloc::vec;
+use alloc::vec::Vec;
+
+/// Outcome of a model cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ModelCycle {
+    /// Completed after this many instructions, with this many caught traps.
+    Completed {
+        /// Instructions executed.
+        instructions: u32,
+        /// Traps caught.
+        caught: u32,
+    },
+    /// Uncaught trap at a code offset.
+    Faulted {
+        /// The trap.
+        trap: Trap,
+        /// Code offset of the trapping instruction.
+        pc: u32,
+    },
+    /// Refused: the task is faulted or does not exist.
+    Refused,
+}
+
+/// The reference machine.
+pub struct Model<'a> {
+    image: Image<'a>,
+    code: Vec<u8>,
+    data: Vec<u8>,
+    stack: Vec<u64>,
+    calls: Vec<(u32, u32)>,
+    tries: Vec<(u32, usize, usize, u32)>,
+    pc: u32,
+    base: u32,
+    stack_limit: usize,
+    call_limit: usize,
+    try_limit: usize,
+    faulted: Vec<bool>,
+}
+
+fn imm_u16(code: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([code[at], code[at + 1]])
+}
+fn imm_u32(code: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes(code[at..at + 4].try_into().unwrap())
+}
+fn imm_u64(code: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(code[at..at + 8].try_into().unwrap())
+}
+
+impl<'a> Model<'a> {
+    /// A model of a **verified** image with the given limits (the lengths of the VM's
+    /// `Memory::stack`, `Memory::calls`, `Memory::tries`).
+    pub fn new(image: &crate::verify::VerifiedImage<'a>, stack_limit: usize, call_limit: usize, try_limit: usize) -> Self {
+        let image = *image.image();
+        let mut data = vec![0u8; image.data_size() as usize];
+        data[..image.init_data().len()].copy_from_slice(image.init_data());
+        Model {
+            code: image.code().to_vec(),
+            data,
+            stack: Vec::new(),
+            calls: Vec::new(),
+            tries: Vec::new(),
+            pc: 0,
+            base: 0,
+            stack_limit,
+            call_limit,
+            try_limit,
+            faulted: vec![false; image.task_count()],
+            image,
+        }
+    }
+
+    /// Data memory.
+    pub fn data(&self) -> &[u8] {
+        &self.data
+    }
+
+    /// Data memory, writable.
+    pub fn data_mut(&mut self) -> &mut [u8] {
+        &mut self.data
+    }
+
+    /// Operand stack (bottom first).
+    pub fn stack(&self) -> &[u64] {
+        &self.stack
+    }
+
+    /// Program counter.
+    pub fn pc(&self) -> u32 {
+        self.pc
+    }
+
+    /// Call depth.
+    pub fn call_depth(&self) -> usize {
+        self.calls.len()
+    }
+
+    /// Open try frames.
+    pub fn try_depth(&self) -> usize {
+        self.tries.len()
+    }
+
+    /// Clears a task's fault.
+    pub fn reset_task(&mut self, task: usize) {
+        if let Some(f) = self.faulted.get_mut(task) {
+            *f = false;
+        }
+    }
+
+    /// Runs one cycle of `task` at `now_ns` with an instruction budget (the task's unless overridden).
+    pub fn run_cycle(&mut self, task: usize, now_ns: i64, budget_override: Option<u32>) -> ModelCycle {
+        let Some(entry) = self.image.task(task) else { return ModelCycle::Refused };
+        if self.faulted[task] {
+            return ModelCycle::Refused;
+        }
+        let budget = budget_override.unwrap_or(entry.budget());
+        let pou = self.image.pou(entry.pou as usize).unwrap();
+        self.stack.clear();
+        self.tries.clear();
+        self.calls = vec![(u32::MAX, 0)];
+        self.base = entry.instance_base;
+        self.pc = pou.code_start;
+        let mut executed = 0u32;
+        let mut caught = 0u32;
+        loop {
+            if executed == budget {
+                self.faulted[task] = true;
+                return ModelCycle::Faulted { trap: Trap::Watchdog, pc: self.pc };
+            }
+            executed += 1;
+            match self.execute(now_ns) {
+                Ok(true) => return ModelCycle::Completed { instructions: executed, caught },
+                Ok(false) => {}
+                Err(trap) => {
+                    if self.handle(trap) {
+                        caught += 1;
+                    } else {
+                        self.faulted[task] = true;
+                        return ModelCycle::Faulted { trap, pc: self.pc };
+                    }
+                }
+            }
+        }
+    }
+
+    fn handle(&mut self, first: Trap) -> bool {
+        let mut trap = first;
+        while trap != Trap::Watchdog {
+            let Some((handler, depth, call_depth, base)) = self.tries.pop() else { return false };
+            self.stack.truncate(depth);
+            self.calls.truncate(call_depth);
+            self.base = base;
+            if self.stack.len() < self.stack_limit {
+                self.stack.push(trap as u64);
+                self.pc = handler;
+                return true;
+            }
+            trap = Trap::StackOverflow;
+        }
+        false
+    }
+
+    fn addr_ok(&self, address: u64, len: u64) -> bool {
+        address.checked_add(len).is_some_and(|end| end <= self.data.len() as u64)
+    }
+
+    fn read(&self, ty: MemType, address: u64) -> Result<u64, Trap> {
+        let width = ty.width() as u64;
+        if !self.addr_ok(address, width) {
+            return Err(Trap::InvalidAddress);
+        }
+        let mut v: u64 = 0;
+        for i in 0..width {
+            v |= (self.data[(address + i) as usize] as u64) << (8 * i);
+        }
+        // sign extension for the signed narrow types
+        Ok(match ty {
+            MemType::I8 => v as i8 as i64 as u64,
+            MemType::I16 => v as i16 as i64 as u64,
+            MemType::I32 => v as i32 as i64 as u64,
+            _ => v,
+        })
+    }
+
+    fn write(&mut self, ty: MemType, address: u64, value: u64) -> Result<(), Trap> {
+        let width = ty.width() as u64;
+        if !self.addr_ok(address, width) {
+            return Err(Trap::InvalidAddress);
+        }
+        for i in 0..width {
+            self.data[(address + i) as usize] = (value >> (8 * i)) as u8;
+        }
+        Ok(())
+    }
+
+    /// Executes one instruction; Ok(true) when the cycle ended.
+    fn execute(&mut self, now_ns: i64) -> Result<bool, Trap> {
+        let code = self.code.clone();
+        let pc = self.pc as usize;
+        let op = Opcode::from_u8(code[pc]).unwrap();
+        let i = pc + 1;
+        let mut next = (pc + 1 + op.operands().len()) as u32;
+        // Work on a copy so that a trap leaves the stack untouched.
+        let mut s = self.stack.clone();
+        let limit = self.stack_limit;
+        let push = |s: &mut Vec<u64>, v: u64| -> Result<(), Trap> {
+            if s.len() >= limit {
+                return Err(Trap::StackOverflow);
+            }
+            s.push(v);
+            Ok(())
+        };
+        fn pop(s: &mut Vec<u64>) -> u64 {
+            s.pop().unwrap()
+        }
+        let b2 = |x: bool| if x { 1u64 } else { 0 };
+        let r32 = |c: u64| f32::from_bits(c as u32);
+        let c32 = |f: f32| f.to_bits() as u64;
+        let r64 = f64::from_bits;
+        let mut ended = false;
+        match op {
+            Opcode::Nop => {}
+            Opcode::PushI32 => push(&mut s, imm_u32(&code, i) as i32 as i64 as u64)?,
+            Opcode::PushU32 => push(&mut s, imm_u32(&code, i) as u64)?,
+            Opcode::PushI64 => push(&mut s, imm_u64(&code, i))?,
+            Opcode::PushConst => push(&mut s, self.image.constant(imm_u16(&code, i) as usize).unwrap())?,
+            Opcode::Drop => {
+                pop(&mut s);
+            }
+            Opcode::Dup => {
+                let a = *s.last().unwrap();
+                push(&mut s, a)?;
+            }
+            Opcode::Swap => {
+                let n = s.len();
+                s.swap(n - 1, n - 2);
+            }
+            Opcode::Over => {
+                let a = s[s.len() - 2];
+                push(&mut s, a)?;
+            }
+            Opcode::LdAbs => {
+                let v = self.read(MemType::from_u8(code[i]).unwrap(), imm_u32(&code, i + 1) as u64)?;
+                push(&mut s, v)?;
+            }
+            Opcode::StAbs => {
+                let v = pop(&mut s);
+                self.write(MemType::from_u8(code[i]).unwrap(), imm_u32(&code, i + 1) as u64, v)?;
+            }
+            Opcode::LdRel => {
+                let a = self.base as u64 + imm_u32(&code, i + 1) as u64;
+                let v = self.read(MemType::from_u8(code[i]).unwrap(), a)?;
+                push(&mut s, v)?;
+            }
+            Opcode::StRel => {
+                let v = pop(&mut s);
+                let a = self.base as u64 + imm_u32(&code, i + 1) as u64;
+                self.write(MemType::from_u8(code[i]).unwrap(), a, v)?;
+            }
+            Opcode::LdInd => {
+                let a = pop(&mut s).checked_add(imm_u32(&code, i + 1) as u64).ok_or(Trap::InvalidAddress)?;
+                let v = self.read(MemType::from_u8(code[i]).unwrap(), a)?;
+                push(&mut s, v)?;
+            }
+            Opcode::StInd => {
+                let v = pop(&mut s);
+                let a = pop(&mut s).checked_add(imm_u32(&code, i + 1) as u64).ok_or(Trap::InvalidAddress)?;
+                self.write(MemType::from_u8(code[i]).unwrap(), a, v)?;
+            }
+            Opcode::LeaRel => push(&mut s, self.base as u64 + imm_u32(&code, i) as u64)?,
+            Opcode::Copy => {
+                let len = imm_u32(&code, i) as u64;
+                let src = pop(&mut s);
+                let dst = pop(&mut s);
+                if !self.addr_ok(src, len) || !self.addr_ok(dst, len) {
+                    return Err(Trap::InvalidAddress);
+                }
+                let tmp: Vec<u8> = self.data[src as usize..(src + len) as usize].to_vec();
+                self.data[dst as usize..(dst + len) as usize].copy_from_slice(&tmp);
+            }
+            Opcode::Now => push(&mut s, now_ns as u64)?,
+            Opcode::Add
+            | Opcode::Sub
+            | Opcode::Mul
+            | Opcode::DivS
+            | Opcode::DivU
+            | Opcode::ModS
+            | Opcode::ModU
+            | Opcode::And
+            | Opcode::Or
+            | Opcode::Xor
+            | Opcode::Shl
+            | Opcode::ShrU
+            | Opcode::ShrS
+            | Opcode::Eq
+            | Opcode::Ne
+            | Opcode::LtS
+            | Opcode::LeS
+            | Opcode::GtS
+            | Opcode::GeS
+            | Opcode::LtU
+            | Opcode::LeU
+            | Opcode::GtU
+            | Opcode::GeU => {
+                let b = pop(&mut s);
+                let a = pop(&mut s);
+                let (x, y) = (a as i64, b as i64);
+                let r = match op {
+                    Opcode::Add => x.wrapping_add(y) as u64,
+                    Opcode::Sub => x.wrapping_sub(y) as u64,
+                    Opcode::Mul => x.wrapping_mul(y) as u64,
+                    Opcode::DivS | Opcode::DivU | Opcode::ModS | Opcode::ModU if b == 0 => {
+                        return Err(Trap::DivisionByZero);
+                    }
+                    Opcode::DivS => {
+                        if x == i64::MIN && y == -1 {
+                            i64::MIN as u64
+                        } else {
+                            (x / y) as u64
+                        }
+                    }
+                    Opcode::ModS => {
+                        if y == -1 {
+                            0
+                        } else {
+                            (x % y) as u64
+                        }
+                    }
+                    Opcode::DivU => a / b,
+                    Opcode::ModU => a % b,
+                    Opcode::And => a & b,
+                    Opcode::Or => a | b,
+                    Opcode::Xor => a ^ b,
+                    Opcode::Shl => {
+                        if b >= 64 {
+                            0
+                        } else {
+                            a << b
+                        }
+                    }
+                    Opcode::ShrU => {
+                        if b >= 64 {
+                            0
+                        } else {
+                            a >> b
+                        }
+                    }
+                    Opcode::ShrS => {
+                        if b >= 64 {
+                            if x < 0 { u64::MAX } else { 0 }
+                        } else {
+                            (x >> b) as u64
+                        }
+                    }
+                    Opcode::Eq => b2(a == b),
+                    Opcode::Ne => b2(a != b),
+                    Opcode::LtS => b2(x < y),
+                    Opcode::LeS => b2(x <= y),
+                    Opcode::GtS => b2(x > y),
+                    Opcode::GeS => b2(x >= y),
+                    Opcode::LtU => b2(a < b),
+                    Opcode::LeU => b2(a <= b),
+                    Opcode::GtU => b2(a > b),
+                    _ => b2(a >= b),
+                };
+                s.push(r);
+            }
+            Opcode::Neg => {
+                let a = pop(&mut s) as i64;
+                s.push(0i64.wrapping_sub(a) as u64);
+            }
+            Opcode::AbsS => {
+                let a = pop(&mut s) as i64;
+                s.push(if a < 0 { 0i64.wrapping_sub(a) as u64 } else { a as u64 });
+            }
+            Opcode::Not => {
+                let a = pop(&mut s);
+                s.push(a ^ u64::MAX);
+            }
+            Opcode::NotBool => {
+                let a = pop(&mut s);
+                s.push(b2(a == 0));
+            }
+            Opcode::Rol | Opcode::Ror => {
+                let w = code[i] as u64;
+                let n = pop(&mut s) % w;
+                let a = pop(&mut s);
+                let mask = if w == 64 { u64::MAX } else { (1u64 << w) - 1 };
+                let mut v = a & mask;
+                // rotate one bit at a time: obviously correct
+                for _ in 0..n {
+                    v = if op == Opcode::Rol {
+                        ((v << 1) & mask) | (v >> (w - 1))
+                    } else {
+                        (v >> 1) | ((v & 1) << (w - 1))
+                    };
+                }
+                s.push(v);
+            }
+            Opcode::Sext => {
+                let a = pop(&mut s);
+                s.push(match code[i] {
+                    8 => a as u8 as i8 as i64 as u64,
+                    16 => a as u16 as i16 as i64 as u64,
+                    _ => a as u32 as i32 as i64 as u64,
+                });
+            }
+            Opcode::Zext => {
+                let a = pop(&mut s);
+                s.push(match code[i] {
+                    8 => a as u8 as u64,
+                    16 => a as u16 as u64,
+                    _ => a as u32 as u64,
+                });
+            }
+            Opcode::Sel => {
+                let b = pop(&mut s);
+                let a = pop(&mut s);
+                let g = pop(&mut s);
+                s.push(if g == 0 { a } else { b });
+            }
+            Opcode::AddF32
+            | Opcode::SubF32
+            | Opcode::MulF32
+            | Opcode::DivF32
+            | Opcode::EqF32
+            | Opcode::NeF32
+            | Opcode::LtF32
+            | Opcode::LeF32
+            | Opcode::GtF32
+            | Opcode::GeF32 => {
+                let y = r32(pop(&mut s));
+                let x = r32(pop(&mut s));
+                s.push(match op {
+                    Opcode::AddF32 => c32(x + y),
+                    Opcode::SubF32 => c32(x - y),
+                    Opcode::MulF32 => c32(x * y),
+                    Opcode::DivF32 => {
+                        if y == 0.0 {
+                            return Err(Trap::DivisionByZero);
+                        }
+                        c32(x / y)
+                    }
+                    Opcode::EqF32 => b2(x == y),
+                    Opcode::NeF32 => b2(x != y),
+                    Opcode::LtF32 => b2(x < y),
+                    Opcode::LeF32 => b2(x <= y),
+                    Opcode::GtF32 => b2(x > y),
+                    _ => b2(x >= y),
+                });
+            }
+            Opcode::AddF64
+            | Opcode::SubF64
+            | Opcode::MulF64
+            | Opcode::DivF64
+            | Opcode::EqF64
+            | Opcode::NeF64
+            | Opcode::LtF64
+            | Opcode::LeF64
+            | Opcode::GtF64
+            | Opcode::GeF64 => {
+                let y = r64(pop(&mut s));
+                let x = r64(pop(&mut s));
+                s.push(match op {
+                    Opcode::AddF64 => (x + y).to_bits(),
+                    Opcode::SubF64 => (x - y).to_bits(),
+                    Opcode::MulF64 => (x * y).to_bits(),
+                    Opcode::DivF64 => {
+                        if y == 0.0 {
+                            return Err(Trap::DivisionByZero);
+                        }
+                        (x / y).to_bits()
+                    }
+                    Opcode::EqF64 => b2(x == y),
+                    Opcode::NeF64 => b2(x != y),
+                    Opcode::LtF64 => b2(x < y),
+                    Opcode::LeF64 => b2(x <= y),
+                    Opcode::GtF64 => b2(x > y),
+                    _ => b2(x >= y),
+                });
+            }
+            Opcode::NegF32 => {
+                let a = pop(&mut s);
+                s.push(c32(-r32(a)));
+            }
+            Opcode::NegF64 => {
+                let a = pop(&mut s);
+                s.push((-r64(a)).to_bits());
+            }
+            Opcode::IToF32S => {
+                let a = pop(&mut s);
+                s.push(c32(a as i64 as f32));
+            }
+            Opcode::IToF32U => {
+                let a = pop(&mut s);
+                s.push(c32(a as f32));
+            }
+            Opcode::IToF64S => {
+                let a = pop(&mut s);
+                s.push((a as i64 as f64).to_bits());
+            }
+            Opcode::IToF64U => {
+                let a = pop(&mut s);
+                s.push((a as f64).to_bits());
+            }
+            Opcode::F32ToF64 => {
+                let a = pop(&mut s);
+                s.push((r32(a) as f64).to_bits());
+            }
+            Opcode::F64ToF32 => {
+                let a = pop(&mut s);
+                s.push(c32(r64(a) as f32));
+            }
+            Opcode::F32ToInt | Opcode::F64ToInt => {
+                let a = pop(&mut s);
+                let x = if op == Opcode::F32ToInt { r32(a) as f64 } else { r64(a) };
+                let ty = MemType::from_u8(code[i]).unwrap();
+                let mode = RoundMode::from_u8(code[i + 1]).unwrap();
+                s.push(model_float_to_int(x, ty, mode)?);
+            }
+            Opcode::Jmp => next = imm_u32(&code, i),
+            Opcode::Jz => {
+                if pop(&mut s) == 0 {
+                    next = imm_u32(&code, i);
+                }
+            }
+            Opcode::Jnz => {
+                if pop(&mut s) != 0 {
+                    next = imm_u32(&code, i);
+                }
+            }
+            Opcode::Call => {
+                let callee = self.image.pou(imm_u16(&code, i) as usize).unwrap();
+                if self.calls.len() >= self.call_limit {
+                    return Err(Trap::CallDepth);
+                }
+                let base = pop(&mut s);
+                if !self.addr_ok(base, callee.frame_size as u64) {
+                    return Err(Trap::InvalidAddress);
+                }
+                self.calls.push((next, self.base));
+                self.base = base as u32;
+                next = callee.code_start;
+            }
+            Opcode::Ret => {
+                let (ret, base) = self.calls.pop().unwrap();
+                if self.calls.is_empty() {
+                    ended = true;
+                    next = self.pc;
+                } else {
+                    next = ret;
+                    self.base = base;
+                }
+            }
+            Opcode::CallBuiltin => {
+                let b = Builtin::from_u16(imm_u16(&code, i)).unwrap();
+                let args: Vec<u64> = s.split_off(s.len() - b.args());
+                if let Some(r) = crate::builtins::call(b, &args, &mut self.data)? {
+                    s.push(r);
+                }
+            }
+            Opcode::ChkIndex | Opcode::ChkRangeS => {
+                let v = *s.last().unwrap() as i64;
+                let lo = imm_u64(&code, i) as i64;
+                let hi = imm_u64(&code, i + 8) as i64;
+                if v < lo || v > hi {
+                    return Err(if op == Opcode::ChkIndex { Trap::IndexOutOfBounds } else { Trap::SubrangeViolation });
+                }
+            }
+            Opcode::ChkRangeU => {
+                let v = *s.last().unwrap();
+                if v < imm_u64(&code, i) || v > imm_u64(&code, i + 8) {
+                    return Err(Trap::SubrangeViolation);
+                }
+            }
+            Opcode::TryBegin => {
+                if self.tries.len() >= self.try_limit {
+                    return Err(Trap::StackOverflow);
+                }
+                self.tries.push((imm_u32(&code, i), s.len(), self.calls.len(), self.base));
+            }
+            Opcode::TryEnd => {
+                self.tries.pop();
+            }
+            Opcode::Throw => return Err(Trap::from_code(code[i] as u64).unwrap()),
+            Opcode::Rethrow => {
+                let c = pop(&mut s);
+                if c != 0 {
+                    let trap = Trap::from_code(c).filter(|t| *t != Trap::Watchdog).unwrap_or(Trap::NumericError);
+                    return Err(trap);
+                }
+            }
+        }
+        self.stack = s;
+        self.pc = next;
+        Ok(ended)
+    }
+}
+
+/// Float -> integer conversion written independently of `fmath::float_to_int`: compares
+/// against the target range in f64 after rounding with the same (exact) rounding functions.
+fn model_float_to_int(x: f64, ty: MemType, mode: RoundMode) -> Result<u64, Trap> {
+    if x.is_nan() || x.is_infinite() {
+        return Err(Trap::NumericError);
+    }
+    let r = match mode {
+        RoundMode::Truncate => crate::fmath::trunc(x),
+        RoundMode::NearestTiesAway => {
+            let t = crate::fmath::trunc(x);
+            let f = x - t;
+            if f >= 0.5 {
+                t + 1.0
+            } else if f <= -0.5 {
+                t - 1.0
+            } else {
+                t
+            }
+        }
+    };
+    let bits = ty.width() as i32 * 8;
+    let signed = matches!(ty, MemType::I8 | MemType::I16 | MemType::I32 | MemType::I64);
+    let two = |e: i32| {
+        let mut v = 1.0f64;
+        for _ in 0..e {
+            v *= 2.0;
+        }
+        v
+    };
+    let (lo, hi) = if signed { (-two(bits - 1), two(bits - 1)) } else { (0.0, two(bits)) };
+    if r < lo || r >= hi {
+        return Err(Trap::NumericError);
+    }
+    Ok(if signed { r as i64 as u64 } else { r as u64 })
+}

@@ -1,0 +1,585 @@
+//! The verifier: the only way to obtain a [`VerifiedImage`], the only thing the VM executes.
+//!
+//! Checks, in order: every instruction of the code section decodes (linear sweep from 0:
+//! known opcode, complete operands, valid type/width/mode/trap bytes, existing constant, POU
+//! and builtin indices, absolute data operands inside `data_size`); then per POU: its code
+//! range is inside the code and on instruction boundaries, frame-relative operands are inside
+//! its frame, jump and handler targets are instruction starts inside the same POU, and an
+//! abstract interpretation over all paths finds, for every reachable instruction, one operand
+//! stack depth and one try-nesting depth (equal at merge points, no underflow, at most
+//! [`MAX_POU_STACK`] cells, at most [`MAX_TRY_NESTING`] try frames, `RET` with exactly
+//! `ret_cells` cells and no open try frame, no fall-through past the POU's end); finally the
+//! task table, variable map, file table and source-location table.
+//!
+//! The abstract interpretation needs one `u32` of scratch per code byte; [`verify_with_scratch`]
+//! takes it from the caller (no allocation), [`verify`] (feature `alloc`) allocates it.
+
+use crate::image::{Image, Section, TASK_RECORD, VarType};
+use crate::isa::{Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect};
+
+/// Operand-stack cells one POU activation may use (abstract depth limit).
+pub const MAX_POU_STACK: u32 = 1024;
+/// Try frames one POU may nest.
+pub const MAX_TRY_NESTING: u32 = 64;
+/// Maximum number of tasks in an image.
+pub const MAX_TASKS: usize = 32;
+/// Maximum code size (scratch state packs offsets into 31 bits).
+pub const MAX_CODE_LEN: usize = 1 << 30;
+
+/// An image that passed [`verify`]. Only this can be executed.
+#[derive(Clone, Copy, Debug)]
+pub struct VerifiedImage<'a> {
+    image: Image<'a>,
+}
+
+impl<'a> VerifiedImage<'a> {
+    /// The underlying image.
+    pub fn image(&self) -> &Image<'a> {
+        &self.image
+    }
+}
+
+/// Where a verification error was found.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Site {
+    /// A code offset.
+    Code(u32),
+    /// A POU table entry.
+    Pou(usize),
+    /// A task table entry.
+    Task(usize),
+    /// A variable-map entry.
+    Var(usize),
+    /// A source-location record.
+    SrcLoc(usize),
+    /// A file record.
+    File(usize),
+    /// The image as a whole.
+    Image,
+}
+
+/// What is wrong.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Reason {
+    /// Unassigned opcode byte.
+    BadOpcode(u8),
+    /// The instruction's operands run past the end of the code.
+    TruncatedInstruction,
+    /// Invalid [`MemType`] byte (or a float type where an integer type is needed).
+    BadType(u8),
+    /// Invalid width byte for ROL/ROR/SEXT/ZEXT.
+    BadWidth(u8),
+    /// Invalid rounding-mode byte.
+    BadRoundMode(u8),
+    /// THROW of something that is not a catchable trap code.
+    BadTrapCode(u8),
+    /// PUSH_CONST index beyond the constant pool.
+    UnknownConstant(u16),
+    /// CALL of a POU index beyond the POU table.
+    UnknownPou(u16),
+    /// CALL_BUILTIN of an unknown id.
+    UnknownBuiltin(u16),
+    /// LD_ABS/ST_ABS outside data memory.
+    AddressOutsideData {
+        /// First byte accessed.
+        address: u64,
+        /// Bytes accessed.
+        width: u32,
+        /// Data size.
+        data_size: u32,
+    },
+    /// LD_REL/ST_REL/LEA_REL outside the POU's frame.
+    OffsetOutsideFrame {
+        /// Frame offset.
+        offset: u64,
+        /// Frame size of the POU.
+        frame_size: u32,
+    },
+    /// Jump or handler target outside the POU's code.
+    TargetOutsidePou(u32),
+    /// Jump or handler target in the middle of an instruction.
+    TargetInsideInstruction(u32),
+    /// Popping more cells than the stack holds.
+    StackUnderflow {
+        /// Depth before the instruction.
+        depth: u32,
+        /// Cells needed.
+        needed: u32,
+    },
+    /// Stack deeper than [`MAX_POU_STACK`].
+    StackTooDeep(u32),
+    /// Two paths reach an instruction with different stack depths.
+    StackMismatch {
+        /// Depth recorded first.
+        expected: u32,
+        /// Depth on the other path.
+        found: u32,
+    },
+    /// Two paths reach an instruction with different try nesting.
+    TryNestingMismatch {
+        /// Nesting recorded first.
+        expected: u32,
+        /// Nesting on the other path.
+        found: u32,
+    },
+    /// TRY_END without an open try frame.
+    TryEndWithoutTry,
+    /// Try nesting beyond [`MAX_TRY_NESTING`].
+    TryTooDeep,
+    /// RET with a stack depth other than the POU's `ret_cells`.
+    ReturnDepth {
+        /// `ret_cells`.
+        expected: u32,
+        /// Actual depth.
+        found: u32,
+    },
+    /// RET while a try frame of this POU is still open.
+    ReturnInsideTry,
+    /// Execution can run past the last instruction of the POU.
+    FallsOffEnd,
+    /// POU code range outside the code section or empty.
+    PouRangeOutsideCode,
+    /// POU code range does not start/end on an instruction boundary.
+    PouRangeMisaligned,
+    /// A name reference is outside the name blob or not UTF-8.
+    BadName,
+    /// More than [`MAX_TASKS`] tasks.
+    TooManyTasks,
+    /// Task POU index beyond the POU table.
+    TaskUnknownPou(u16),
+    /// Task POU takes arguments or returns results.
+    TaskPouSignature,
+    /// Task kind byte is not cyclic/event.
+    BadTaskKind(u8),
+    /// Instance frame `[base, base + frame_size)` outside data memory.
+    FrameOutsideData,
+    /// Unknown variable type byte.
+    BadVarType(u8),
+    /// Variable outside data memory.
+    VarOutsideData,
+    /// Variable size does not fit its type.
+    VarSizeMismatch,
+    /// Source-location table not sorted by code offset.
+    SrcLocUnsorted,
+    /// Source location beyond the code or naming an unknown file.
+    SrcLocInvalid,
+    /// Scratch buffer shorter than the code.
+    ScratchTooSmall,
+    /// Code larger than [`MAX_CODE_LEN`].
+    CodeTooLarge,
+}
+
+/// A verification failure: where and why.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct VerifyError {
+    /// Where.
+    pub site: Site,
+    /// Why.
+    pub reason: Reason,
+}
+
+impl core::fmt::Display for Site {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Site::Code(o) => write!(f, "at code offset {o}"),
+            Site::Pou(i) => write!(f, "in POU table entry {i}"),
+            Site::Task(i) => write!(f, "in task table entry {i}"),
+            Site::Var(i) => write!(f, "in variable map entry {i}"),
+            Site::SrcLoc(i) => write!(f, "in source-location entry {i}"),
+            Site::File(i) => write!(f, "in file table entry {i}"),
+            Site::Image => write!(f, "in image"),
+        }
+    }
+}
+
+impl core::fmt::Display for Reason {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Reason::BadOpcode(b) => write!(f, "unknown opcode 0x{b:02x}"),
+            Reason::TruncatedInstruction => write!(f, "instruction operands run past the end of the code"),
+            Reason::BadType(b) => write!(f, "invalid type operand {b}"),
+            Reason::BadWidth(b) => write!(f, "invalid width operand {b}"),
+            Reason::BadRoundMode(b) => write!(f, "invalid rounding mode {b}"),
+            Reason::BadTrapCode(b) => write!(f, "invalid trap code {b}"),
+            Reason::UnknownConstant(i) => write!(f, "constant {i} does not exist"),
+            Reason::UnknownPou(i) => write!(f, "call of unknown POU {i}"),
+            Reason::UnknownBuiltin(i) => write!(f, "call of unknown builtin {i}"),
+            Reason::AddressOutsideData { address, width, data_size } => {
+                write!(f, "access of {width} bytes at data address {address} outside data memory of {data_size} bytes")
+            }
+            Reason::OffsetOutsideFrame { offset, frame_size } => {
+                write!(f, "frame offset {offset} outside the POU frame of {frame_size} bytes")
+            }
+            Reason::TargetOutsidePou(t) => write!(f, "jump target {t} outside the POU"),
+            Reason::TargetInsideInstruction(t) => write!(f, "jump target {t} is inside an instruction"),
+            Reason::StackUnderflow { depth, needed } => {
+                write!(f, "stack underflow: needs {needed} cells, stack holds {depth}")
+            }
+            Reason::StackTooDeep(d) => write!(f, "stack depth {d} exceeds the limit {MAX_POU_STACK}"),
+            Reason::StackMismatch { expected, found } => {
+                write!(f, "stack depth {found} differs from {expected} on another path")
+            }
+            Reason::TryNestingMismatch { expected, found } => {
+                write!(f, "try nesting {found} differs from {expected} on another path")
+            }
+            Reason::TryEndWithoutTry => write!(f, "TRY_END without open TRY_BEGIN"),
+            Reason::TryTooDeep => write!(f, "try nesting exceeds the limit {MAX_TRY_NESTING}"),
+            Reason::ReturnDepth { expected, found } => {
+                write!(f, "RET with {found} cells on the stack, POU returns {expected}")
+            }
+            Reason::ReturnInsideTry => write!(f, "RET inside an open try block"),
+            Reason::FallsOffEnd => write!(f, "execution falls off the end of the POU"),
+            Reason::PouRangeOutsideCode => write!(f, "POU code range empty or outside the code"),
+            Reason::PouRangeMisaligned => write!(f, "POU code range not on instruction boundaries"),
+            Reason::BadName => write!(f, "name reference invalid or not UTF-8"),
+            Reason::TooManyTasks => write!(f, "more than {MAX_TASKS} tasks"),
+            Reason::TaskUnknownPou(i) => write!(f, "task runs unknown POU {i}"),
+            Reason::TaskPouSignature => write!(f, "task POU must take 0 argument and 0 result cells"),
+            Reason::BadTaskKind(k) => write!(f, "unknown task kind {k}"),
+            Reason::FrameOutsideData => write!(f, "instance frame outside data memory"),
+            Reason::BadVarType(t) => write!(f, "unknown variable type {t}"),
+            Reason::VarOutsideData => write!(f, "variable outside data memory"),
+            Reason::VarSizeMismatch => write!(f, "variable size does not match its type"),
+            Reason::SrcLocUnsorted => write!(f, "source locations not sorted by code offset"),
+            Reason::SrcLocInvalid => write!(f, "source location beyond the code or with unknown file"),
+            Reason::ScratchTooSmall => write!(f, "verifier scratch buffer shorter than the code"),
+            Reason::CodeTooLarge => write!(f, "code section too large"),
+        }
+    }
+}
+
+impl core::fmt::Display for VerifyError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "{}: {}", self.site, self.reason)
+    }
+}
+
+fn err<T>(site: Site, reason: Reason) -> Result<T, VerifyError> {
+    Err(VerifyError { site, reason })
+}
+
+/// Verifies an image, allocating the scratch buffer.
+#[cfg(any(feature = "alloc", test))]
+pub fn verify<'a>(image: &Image<'a>) -> Result<VerifiedImage<'a>, VerifyError> {
+    let mut scratch = alloc::vec![0u32; image.code().len()];
+    verify_with_scratch(image, &mut scratch)
+}
+
+// Scratch encoding per code byte: bit 31 = instruction start; bit 30 = state known;
+// bits 0..16 = stack depth; bits 16..24 = try nesting.
+const INSN_START: u32 = 1 << 31;
+const KNOWN: u32 = 1 << 30;
+
+fn pack(depth: u32, tries: u32) -> u32 {
+    KNOWN | depth | (tries << 16)
+}
+
+/// Verifies an image using caller-provided scratch (`scratch.len() >= code length`).
+pub fn verify_with_scratch<'a>(image: &Image<'a>, scratch: &mut [u32]) -> Result<VerifiedImage<'a>, VerifyError> {
+    let code = image.code();
+    if code.len() > MAX_CODE_LEN {
+        return err(Site::Image, Reason::CodeTooLarge);
+    }
+    if scratch.len() < code.len() {
+        return err(Site::Image, Reason::ScratchTooSmall);
+    }
+    let scratch = &mut scratch[..code.len()];
+    scratch.fill(0);
+    sweep_code(image, scratch)?;
+    for index in 0..image.pou_count() {
+        check_pou(image, index, scratch)?;
+    }
+    check_tables(image)?;
+    Ok(VerifiedImage { image: *image })
+}
+
+/// Linear sweep: decodes every instruction, checks operands that need no POU context and
+/// marks instruction starts.
+fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError> {
+    let code = image.code();
+    let data_size = image.data_size();
+    let mut pc = 0usize;
+    while pc < code.len() {
+        let site = Site::Code(pc as u32);
+        let Some(op) = Opcode::from_u8(code[pc]) else {
+            return err(site, Reason::BadOpcode(code[pc]));
+        };
+        if pc + op.size() > code.len() {
+            return err(site, Reason::TruncatedInstruction);
+        }
+        scratch[pc] = INSN_START;
+        let imm = pc + 1;
+        match op.operands() {
+            Operands::TypeAddr => {
+                let ty = MemType::from_u8(code[imm]).ok_or(VerifyError { site, reason: Reason::BadType(code[imm]) })?;
+                if matches!(op, Opcode::LdAbs | Opcode::StAbs) {
+                    let address = read_u32(code, imm + 1) as u64;
+                    if address + ty.width() as u64 > data_size as u64 {
+                        return err(
+                            site,
+                            Reason::AddressOutsideData { address, width: ty.width() as u32, data_size },
+                        );
+                    }
+                }
+            }
+            Operands::Width => {
+                let width = code[imm];
+                let ok = match op {
+                    Opcode::Rol | Opcode::Ror => matches!(width, 8 | 16 | 32 | 64),
+                    _ => matches!(width, 8 | 16 | 32),
+                };
+                if !ok {
+                    return err(site, Reason::BadWidth(width));
+                }
+            }
+            Operands::TypeMode => {
+                match MemType::from_u8(code[imm]) {
+                    Some(ty) if ty.is_integer() => {}
+                    _ => return err(site, Reason::BadType(code[imm])),
+                }
+                if RoundMode::from_u8(code[imm + 1]).is_none() {
+                    return err(site, Reason::BadRoundMode(code[imm + 1]));
+                }
+            }
+            Operands::TrapCode => match Trap::from_code(code[imm] as u64) {
+                Some(trap) if trap.is_catchable() => {}
+                _ => return err(site, Reason::BadTrapCode(code[imm])),
+            },
+            Operands::Index16 => {
+                let index = read_u16(code, imm);
+                match op {
+                    Opcode::PushConst if index as usize >= image.const_count() => {
+                        return err(site, Reason::UnknownConstant(index));
+                    }
+                    Opcode::Call if index as usize >= image.pou_count() => return err(site, Reason::UnknownPou(index)),
+                    Opcode::CallBuiltin if Builtin::from_u16(index).is_none() => {
+                        return err(site, Reason::UnknownBuiltin(index));
+                    }
+                    _ => {}
+                }
+            }
+            _ => {}
+        }
+        pc += op.size();
+    }
+    Ok(())
+}
+
+fn check_pou(image: &Image<'_>, index: usize, scratch: &mut [u32]) -> Result<(), VerifyError> {
+    let code = image.code();
+    let pou = image.pou(index).ok_or(VerifyError { site: Site::Pou(index), reason: Reason::PouRangeOutsideCode })?;
+    let (off, len) = image.record_name_ref(Section::Pous, index).unwrap_or((u32::MAX, 0));
+    if image.name_at(off, len).is_none() {
+        return err(Site::Pou(index), Reason::BadName);
+    }
+    let start = pou.code_start as usize;
+    let end = start + pou.code_len as usize;
+    if pou.code_len == 0 || end > code.len() {
+        return err(Site::Pou(index), Reason::PouRangeOutsideCode);
+    }
+    if scratch[start] & INSN_START == 0 || (end < code.len() && scratch[end] & INSN_START == 0) {
+        return err(Site::Pou(index), Reason::PouRangeMisaligned);
+    }
+    for cell in &mut scratch[start..end] {
+        *cell &= INSN_START;
+    }
+    scratch[start] |= pack(pou.arg_cells as u32, 0);
+    // Fixpoint over linear passes: each pass propagates states forward; backward jumps may
+    // need another pass. Terminates because states only go from unknown to known.
+    loop {
+        let mut changed = false;
+        let mut pc = start;
+        while pc < end {
+            let op = Opcode::from_u8(code[pc]).expect("swept");
+            let state = scratch[pc];
+            if state & KNOWN != 0 {
+                let depth = state & 0xFFFF;
+                let tries = (state >> 16) & 0xFF;
+                changed |= step(image, &pou, pc, op, depth, tries, start, end, scratch)?;
+            }
+            pc += op.size();
+        }
+        if !changed {
+            return Ok(());
+        }
+    }
+}
+
+/// Checks one instruction in abstract state (depth, tries) and merges its successors' states.
+#[allow(clippy::too_many_arguments)]
+fn step(
+    image: &Image<'_>,
+    pou: &crate::image::Pou<'_>,
+    pc: usize,
+    op: Opcode,
+    depth: u32,
+    tries: u32,
+    start: usize,
+    end: usize,
+    scratch: &mut [u32],
+) -> Result<bool, VerifyError> {
+    let code = image.code();
+    let site = Site::Code(pc as u32);
+    let imm = pc + 1;
+    // Frame-relative operands must lie inside this POU's frame.
+    match op {
+        Opcode::LdRel | Opcode::StRel => {
+            let ty = MemType::from_u8(code[imm]).expect("swept");
+            let offset = read_u32(code, imm + 1) as u64;
+            if offset + ty.width() as u64 > pou.frame_size as u64 {
+                return err(site, Reason::OffsetOutsideFrame { offset, frame_size: pou.frame_size });
+            }
+        }
+        Opcode::LeaRel => {
+            let offset = read_u32(code, imm) as u64;
+            if offset > pou.frame_size as u64 {
+                return err(site, Reason::OffsetOutsideFrame { offset, frame_size: pou.frame_size });
+            }
+        }
+        _ => {}
+    }
+    let (pops, pushes) = match op {
+        Opcode::Call => {
+            let callee = image.pou(read_u16(code, imm) as usize).expect("swept");
+            (1 + callee.arg_cells as u32, callee.ret_cells as u32)
+        }
+        Opcode::CallBuiltin => {
+            let builtin = Builtin::from_u16(read_u16(code, imm)).expect("swept");
+            (builtin.args() as u32, builtin.results() as u32)
+        }
+        Opcode::Ret => {
+            if tries != 0 {
+                return err(site, Reason::ReturnInsideTry);
+            }
+            if depth != pou.ret_cells as u32 {
+                return err(site, Reason::ReturnDepth { expected: pou.ret_cells as u32, found: depth });
+            }
+            return Ok(false);
+        }
+        _ => stack_effect(op).expect("fixed effect"),
+    };
+    if depth < pops {
+        return err(site, Reason::StackUnderflow { depth, needed: pops });
+    }
+    let after = depth - pops + pushes;
+    if after > MAX_POU_STACK {
+        return err(site, Reason::StackTooDeep(after));
+    }
+    let mut changed = false;
+    let mut flow = |target: usize, depth: u32, tries: u32, jump: bool| -> Result<(), VerifyError> {
+        if target >= end || target < start {
+            return if jump {
+                err(site, Reason::TargetOutsidePou(target as u32))
+            } else {
+                err(site, Reason::FallsOffEnd)
+            };
+        }
+        if scratch[target] & INSN_START == 0 {
+            return err(site, Reason::TargetInsideInstruction(target as u32));
+        }
+        let known = scratch[target];
+        if known & KNOWN == 0 {
+            scratch[target] |= pack(depth, tries);
+            changed = true;
+            return Ok(());
+        }
+        let (expected_depth, expected_tries) = (known & 0xFFFF, (known >> 16) & 0xFF);
+        if expected_depth != depth {
+            return err(site, Reason::StackMismatch { expected: expected_depth, found: depth });
+        }
+        if expected_tries != tries {
+            return err(site, Reason::TryNestingMismatch { expected: expected_tries, found: tries });
+        }
+        Ok(())
+    };
+    let next = pc + op.size();
+    match op {
+        Opcode::Jmp => flow(read_u32(code, imm) as usize, after, tries, true)?,
+        Opcode::Jz | Opcode::Jnz => {
+            flow(read_u32(code, imm) as usize, after, tries, true)?;
+            flow(next, after, tries, false)?;
+        }
+        Opcode::TryBegin => {
+            if tries + 1 > MAX_TRY_NESTING {
+                return err(site, Reason::TryTooDeep);
+            }
+            // The handler runs with the try frame popped and the trap code pushed.
+            if after + 1 > MAX_POU_STACK {
+                return err(site, Reason::StackTooDeep(after + 1));
+            }
+            flow(read_u32(code, imm) as usize, after + 1, tries, true)?;
+            flow(next, after, tries + 1, false)?;
+        }
+        Opcode::TryEnd => {
+            if tries == 0 {
+                return err(site, Reason::TryEndWithoutTry);
+            }
+            flow(next, after, tries - 1, false)?;
+        }
+        Opcode::Throw => {}
+        _ => flow(next, after, tries, false)?,
+    }
+    Ok(changed)
+}
+
+fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
+    let data_size = image.data_size() as u64;
+    if image.task_count() > MAX_TASKS {
+        return err(Site::Image, Reason::TooManyTasks);
+    }
+    for index in 0..image.task_count() {
+        let site = Site::Task(index);
+        let task = image.task(index).expect("counted");
+        let (off, len) = image.record_name_ref(Section::Tasks, index).expect("counted");
+        if image.name_at(off, len).is_none() {
+            return err(site, Reason::BadName);
+        }
+        if task.kind > 1 {
+            return err(site, Reason::BadTaskKind(task.kind));
+        }
+        let pou = image.pou(task.pou as usize).ok_or(VerifyError { site, reason: Reason::TaskUnknownPou(task.pou) })?;
+        if pou.arg_cells != 0 || pou.ret_cells != 0 {
+            return err(site, Reason::TaskPouSignature);
+        }
+        if task.instance_base as u64 + pou.frame_size as u64 > data_size {
+            return err(site, Reason::FrameOutsideData);
+        }
+    }
+    debug_assert_eq!(TASK_RECORD, 32);
+    for index in 0..image.var_count() {
+        let site = Site::Var(index);
+        let var = image.var(index).expect("counted");
+        let (off, len) = image.record_name_ref(Section::Vars, index).expect("counted");
+        if image.name_at(off, len).is_none() {
+            return err(site, Reason::BadName);
+        }
+        let ty = VarType::from_u8(var.ty).ok_or(VerifyError { site, reason: Reason::BadVarType(var.ty) })?;
+        if var.addr as u64 + var.size as u64 > data_size {
+            return err(site, Reason::VarOutsideData);
+        }
+        let size_ok = match ty.mem_type() {
+            Some(mem) => var.size as usize == mem.width(),
+            None => (4..=4 + u16::MAX as u32).contains(&var.size),
+        };
+        if !size_ok {
+            return err(site, Reason::VarSizeMismatch);
+        }
+    }
+    for index in 0..image.file_count() {
+        if image.file_name(index as u16).is_none() {
+            return err(Site::File(index), Reason::BadName);
+        }
+    }
+    let mut previous = 0u32;
+    for index in 0..image.srcloc_count() {
+        let (offset, loc) = image.srcloc(index).expect("counted");
+        if offset < previous {
+            return err(Site::SrcLoc(index), Reason::SrcLocUnsorted);
+        }
+        previous = offset;
+        if offset as usize > image.code().len() || loc.file as usize >= image.file_count() {
+            return err(Site::SrcLoc(index), Reason::SrcLocInvalid);
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,29 @@
+//! QEMU scenario harness: boots the ESP that `cargo xtask test` assembled for a scenario
+//! (from `tests/scenarios/NAME.toml`) and hands the outcome to the test's assertions.
+//! Run the scenarios through `cargo xtask test [FILTER]`, which builds the images first.
+
+use std::time::Duration;
+use xtask::qemu::{self, Outcome, RunOptions};
+use xtask::scenario;
+
+/// Boots scenario `name` and returns what happened.
+pub fn boot(name: &str) -> Outcome {
+    let manifest = scenario::scenarios_dir().join(format!("{name}.toml"));
+    let s = scenario::load(&manifest).unwrap_or_else(|e| panic!("{e:#}"));
+    let dir = scenario::output_dir().join(name);
+    let esp = dir.join("esp");
+    assert!(esp.join("system.img").is_file(), "no image for scenario {name}: run `cargo xtask test {name}`");
+    let tools = xtask::tools::ensure_qemu().unwrap_or_else(|e| panic!("{e:#}"));
+    qemu::run(&tools, &RunOptions {
+        esp,
+        timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
+        echo: false,
+        work_dir: dir.join("state"),
+    })
+    .unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"))
+}
+
+/// Panics with the full transcript unless `cond` holds.
+pub fn check(outcome: &Outcome, cond: bool, what: &str) {
+    assert!(cond, "{what}\n{}", outcome.transcript());
+}

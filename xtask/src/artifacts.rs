@@ -1,0 +1,74 @@
+//! Builds the bare-metal artifacts: the UEFI loader, the kernel and syssw, each for its target.
+
+use anyhow::{Context, Result, bail};
+use std::path::PathBuf;
+use std::process::Command;
+
+/// What goes into an ESP besides the system image's other entries.
+#[derive(Clone, Debug)]
+pub struct Artifacts {
+    pub loader: PathBuf,
+    pub kernel: PathBuf,
+    pub syssw: PathBuf,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KernelVariant {
+    /// The image users run: no test code at all.
+    Production,
+    /// With `test-hooks` (scenario images only); built in its own target directory so the
+    /// production kernel is never overwritten by it.
+    TestHooks,
+}
+
+fn cargo() -> Command {
+    let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    cmd.current_dir(crate::workspace_root());
+    cmd
+}
+
+fn run(mut cmd: Command, what: &str) -> Result<()> {
+    let status = cmd.status().with_context(|| format!("cannot run cargo to build {what}"))?;
+    if !status.success() {
+        bail!("building {what} failed ({status})");
+    }
+    Ok(())
+}
+
+pub fn build(release: bool, variant: KernelVariant) -> Result<Artifacts> {
+    crate::tools::ensure_rust_targets()?;
+    let profile = if release { "release" } else { "debug" };
+    let target = crate::target_dir();
+
+    let mut cmd = cargo();
+    cmd.args(["build", "--quiet", "-p", "loader", "--target", "x86_64-unknown-uefi"]);
+    if release {
+        cmd.arg("--release");
+    }
+    run(cmd, "the UEFI loader")?;
+
+    let kernel_target = match variant {
+        KernelVariant::Production => target.clone(),
+        KernelVariant::TestHooks => target.join("test-hooks"),
+    };
+    let mut cmd = cargo();
+    cmd.args(["build", "--quiet", "-p", "kernel", "--target", "x86_64-unknown-none", "--target-dir"]);
+    cmd.arg(&kernel_target);
+    if release {
+        cmd.arg("--release");
+    }
+    if variant == KernelVariant::TestHooks {
+        cmd.args(["--features", "test-hooks"]);
+    }
+    run(cmd, "the kernel")?;
+
+    let mut cmd = cargo();
+    cmd.args(["build", "--quiet", "-p", "syssw", "--profile", "user"]);
+    run(cmd, "syssw")?;
+
+    Ok(Artifacts {
+        loader: target.join("x86_64-unknown-uefi").join(profile).join("loader.efi"),
+        kernel: kernel_target.join("x86_64-unknown-none").join(profile).join("kernel"),
+        syssw: target.join("user").join("syssw"),
+    })
+}

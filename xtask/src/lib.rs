@@ -1,0 +1,27 @@
+//! Build, image, run and test tooling for the whole system (host only).
+//!
+//! The library part is shared with the QEMU scenario tests (`tests/`): building the
+//! bare-metal artifacts ([`artifacts`]), assembling an ESP folder with `system.img`
+//! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
+//! and capturing the serial log ([`qemu`]), and reading scenario manifests ([`scenario`]).
+#![forbid(unsafe_op_in_unsafe_fn)]
+#![deny(unsafe_code)]
+
+pub mod artifacts;
+pub mod esp;
+pub mod qemu;
+pub mod scenario;
+pub mod tools;
+
+use std::path::PathBuf;
+
+/// The workspace root (xtask lives one level below it).
+pub fn workspace_root() -> PathBuf {
+    let manifest = PathBuf::from(env!("CARGO_MANIFEST_DIR"));
+    manifest.parent().expect("xtask lives inside the workspace").to_path_buf()
+}
+
+/// `target/` of the workspace (honours CARGO_TARGET_DIR).
+pub fn target_dir() -> PathBuf {
+    std::env::var_os("CARGO_TARGET_DIR").map(PathBuf::from).unwrap_or_else(|| workspace_root().join("target"))
+}

@@ -1,0 +1,153 @@
+//! `cargo xtask` — build, run and test the system. See README.md for the commands.
+//!
+//! Exit codes: 0 success; 1 failure (build error, failed test, crashed or hung system).
+
+use anyhow::{Result, bail};
+use clap::{Parser, Subcommand};
+use std::path::PathBuf;
+use std::process::{Command, ExitCode};
+use std::time::Duration;
+use xtask::artifacts::{self, KernelVariant};
+use xtask::qemu::{self, Ending, RunOptions};
+use xtask::{esp, scenario, tools};
+
+#[derive(Parser)]
+#[command(name = "cargo xtask", about = "Build, run and test the partitioning system")]
+struct Cli {
+    #[command(subcommand)]
+    command: Cmd,
+}
+
+#[derive(Subcommand)]
+enum Cmd {
+    /// Build the loader, the kernel and the system software.
+    Build {
+        #[arg(long)]
+        release: bool,
+    },
+    /// Build everything and boot it under QEMU with COM1 on this terminal.
+    Run {
+        /// System description to put in system.img.
+        #[arg(long, default_value = "config/systems/default.toml")]
+        config: PathBuf,
+        /// Stop after SECS; exit 0 only if the system reached "ready" and was still running
+        /// without a crash.
+        #[arg(long, value_name = "SECS")]
+        timeout: Option<u64>,
+        #[arg(long)]
+        release: bool,
+    },
+    /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
+    Test {
+        filter: Option<String>,
+    },
+}
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Cmd::Build { release } => artifacts::build(release, KernelVariant::Production).map(|a| {
+            println!("loader: {}\nkernel: {}\nsyssw:  {}", a.loader.display(), a.kernel.display(), a.syssw.display());
+            true
+        }),
+        Cmd::Run { config, timeout, release } => run(config, timeout, release),
+        Cmd::Test { filter } => test(filter.as_deref()),
+    };
+    match result {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::FAILURE,
+        Err(e) => {
+            eprintln!("xtask: error: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// Markers of a crash in the kernel log.
+const CRASH_MARKERS: &[&str] = &["KERNEL PANIC", "EXCEPTION "];
+const READY_MARKER: &str = "kernel: ready";
+
+fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let config = xtask::workspace_root().join(config);
+    if !config.is_file() {
+        bail!("configuration file {} not found", config.display());
+    }
+    let artifacts = artifacts::build(release, KernelVariant::Production)?;
+    let esp_dir = xtask::target_dir().join("esp").join("run");
+    esp::assemble(&esp_dir, &artifacts, &esp::standard_entries(&artifacts, Some(&config)))?;
+    eprintln!("xtask: booting {} under QEMU{}", esp_dir.display(), match timeout {
+        Some(t) => format!(" for {t} s"),
+        None => " (stop with Ctrl-C)".into(),
+    });
+    let outcome = qemu::run(&qemu, &RunOptions {
+        esp: esp_dir.clone(),
+        timeout: timeout.map(Duration::from_secs),
+        echo: true,
+        work_dir: xtask::target_dir().join("esp").join("run-state"),
+    })?;
+    let crashed = outcome.lines.iter().any(|l| CRASH_MARKERS.iter().any(|m| l.contains(m)));
+    let ready = outcome.line(READY_MARKER).is_some();
+    let verdict = match &outcome.ending {
+        Ending::Exited(qemu::EXIT_SUCCESS) => Ok("the system exited with success"),
+        Ending::Exited(qemu::EXIT_FAILURE) => Err("the system exited with failure".to_string()),
+        Ending::TimedOut if crashed => Err("the system crashed".to_string()),
+        Ending::TimedOut if !ready => Err(format!("the system did not reach '{READY_MARKER}' (hung at boot)")),
+        Ending::TimedOut => Ok("the system was still running at the timeout"),
+        Ending::Aborted(line) => Err(format!("boot failed: {line}")),
+        Ending::Exited(code) => Err(format!("QEMU exited with {code} (triple fault or QEMU error)\n{}", outcome.stderr)),
+        Ending::Killed => Err("QEMU was killed".to_string()),
+    };
+    match verdict {
+        Ok(msg) => {
+            eprintln!("xtask: {msg}");
+            Ok(true)
+        }
+        Err(msg) => {
+            eprintln!("xtask: FAILED: {msg}");
+            Ok(false)
+        }
+    }
+}
+
+fn cargo_test(args: &[&str]) -> Result<bool> {
+    let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
+    cmd.current_dir(xtask::workspace_root()).arg("test").args(args);
+    eprintln!("xtask: cargo test {}", args.join(" "));
+    Ok(cmd.status()?.success())
+}
+
+fn test(filter: Option<&str>) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let _ = qemu;
+    // Host unit tests: every host crate, plus the kernel's pure logic (its library part).
+    let host_ok = cargo_test(&[
+        "--workspace",
+        "--exclude", "kernel",
+        "--exclude", "loader",
+        "--exclude", "syssw",
+        "--exclude", "scenarios",
+    ])? & cargo_test(&["-p", "kernel", "--lib"])?;
+    if !host_ok {
+        eprintln!("xtask: host tests failed; QEMU scenarios not run");
+        return Ok(false);
+    }
+
+    let scenarios = scenario::all(filter)?;
+    if scenarios.is_empty() {
+        bail!("no QEMU scenario matches {:?}", filter.unwrap_or(""));
+    }
+    let artifacts = artifacts::build(false, KernelVariant::TestHooks)?;
+    for s in &scenarios {
+        let mut entries = esp::standard_entries(&artifacts, s.manifest.config.as_ref().map(|c| xtask::workspace_root().join(c)).as_deref());
+        if let Some(hook) = &s.manifest.hook {
+            entries.push(esp::ImageEntry::Bytes { name: "test/hook".into(), data: hook.clone().into_bytes() });
+        }
+        esp::assemble(&scenario::output_dir().join(&s.name).join("esp"), &artifacts, &entries)?;
+    }
+    let mut args = vec!["-p", "scenarios", "--"];
+    if let Some(f) = filter {
+        args.push(f);
+    }
+    cargo_test(&args)
+}

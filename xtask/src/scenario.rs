@@ -1,0 +1,67 @@
+//! QEMU scenarios: `tests/scenarios/NAME.toml` says what to put in the image; the Rust test
+//! of the same name in `tests/` says what must happen. Format:
+//!
+//! ```toml
+//! description = "boot reaches ready and exits with success"
+//! hook = "exit-on-ready"        # kernel test hook (system image entry `test/hook`)
+//! config = "config/systems/default.toml"   # optional, relative to the workspace root
+//! timeout_secs = 60             # optional, default 60
+//! ```
+
+use anyhow::{Context, Result};
+use serde::Deserialize;
+use std::path::{Path, PathBuf};
+
+#[derive(Clone, Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    pub description: String,
+    #[serde(default)]
+    pub hook: Option<String>,
+    #[serde(default)]
+    pub config: Option<PathBuf>,
+    #[serde(default = "default_timeout")]
+    pub timeout_secs: u64,
+}
+
+fn default_timeout() -> u64 {
+    60
+}
+
+#[derive(Clone, Debug)]
+pub struct Scenario {
+    pub name: String,
+    pub manifest: Manifest,
+}
+
+pub fn scenarios_dir() -> PathBuf {
+    crate::workspace_root().join("tests").join("scenarios")
+}
+
+/// Where `cargo xtask test` puts each scenario's ESP and run files.
+pub fn output_dir() -> PathBuf {
+    crate::target_dir().join("scenarios")
+}
+
+pub fn load(path: &Path) -> Result<Scenario> {
+    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let manifest: Manifest = toml::from_str(&text).with_context(|| format!("invalid scenario manifest {}", path.display()))?;
+    let name = path.file_stem().context("scenario file without a name")?.to_string_lossy().into_owned();
+    Ok(Scenario { name, manifest })
+}
+
+/// All scenarios, sorted by name, whose name contains `filter`.
+pub fn all(filter: Option<&str>) -> Result<Vec<Scenario>> {
+    let mut out = Vec::new();
+    for entry in std::fs::read_dir(scenarios_dir()).context("cannot list tests/scenarios")? {
+        let path = entry?.path();
+        if path.extension().is_some_and(|e| e == "toml") {
+            let scenario = load(&path)?;
+            if filter.is_none_or(|f| scenario.name.contains(f)) {
+                out.push(scenario);
+            }
+        }
+    }
+    out.sort_by(|a, b| a.name.cmp(&b.name));
+    Ok(out)
+}
