@@ -54,9 +54,16 @@ impl core::fmt::Display for AcpiError {
             Self::BadRsdp(why) => write!(f, "invalid RSDP: {why}"),
             Self::Unmapped(at) => write!(f, "ACPI table at {at:#x} is outside mapped memory"),
             Self::BadTable(sig, why) => {
-                write!(f, "ACPI table {}: {why}", core::str::from_utf8(sig).unwrap_or("????"))
+                write!(
+                    f,
+                    "ACPI table {}: {why}",
+                    core::str::from_utf8(sig).unwrap_or("????")
+                )
             }
-            Self::NoMadt => write!(f, "no MADT (APIC table): cannot find the interrupt controllers"),
+            Self::NoMadt => write!(
+                f,
+                "no MADT (APIC table): cannot find the interrupt controllers"
+            ),
         }
     }
 }
@@ -81,12 +88,17 @@ const HEADER_LEN: usize = 36;
 
 /// A checked system-description table (header + body).
 fn table(mem: &impl PhysMemory, phys: u64) -> Result<([u8; 4], &[u8]), AcpiError> {
-    let header = mem.bytes(phys, HEADER_LEN).ok_or(AcpiError::Unmapped(phys))?;
+    let header = mem
+        .bytes(phys, HEADER_LEN)
+        .ok_or(AcpiError::Unmapped(phys))?;
     let mut signature = [0u8; 4];
     signature.copy_from_slice(&header[0..4]);
     let len = u32_at(header, 4) as usize;
     if len < HEADER_LEN {
-        return Err(AcpiError::BadTable(signature, "length shorter than its header"));
+        return Err(AcpiError::BadTable(
+            signature,
+            "length shorter than its header",
+        ));
     }
     let bytes = mem.bytes(phys, len).ok_or(AcpiError::Unmapped(phys))?;
     if !checksum_ok(bytes) {
@@ -119,12 +131,22 @@ pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
     };
     let (signature, root_table) = table(mem, root)?;
     if signature != *b"XSDT" && signature != *b"RSDT" {
-        return Err(AcpiError::BadTable(signature, "root table is neither XSDT nor RSDT"));
+        return Err(AcpiError::BadTable(
+            signature,
+            "root table is neither XSDT nor RSDT",
+        ));
     }
-    let mut info = AcpiInfo { revision, ..AcpiInfo::default() };
+    let mut info = AcpiInfo {
+        revision,
+        ..AcpiInfo::default()
+    };
     let mut found_madt = false;
     for entry in root_table[HEADER_LEN..].chunks_exact(entry_size) {
-        let phys = if entry_size == 8 { u64_at(entry, 0) } else { u32_at(entry, 0) as u64 };
+        let phys = if entry_size == 8 {
+            u64_at(entry, 0)
+        } else {
+            u32_at(entry, 0) as u64
+        };
         let (signature, body) = table(mem, phys)?;
         match &signature {
             b"APIC" => {
@@ -165,8 +187,16 @@ fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
         match (kind, len) {
             // Processor local APIC: enabled (bit 0) or online capable (bit 1).
             (0, 8) if u32_at(e, 4) & 0b11 != 0 => info.cpu_apic_ids.push(e[3]),
-            (1, 12) => info.io_apics.push(IoApicInfo { id: e[2], address: u32_at(e, 4) as u64, gsi_base: u32_at(e, 8) }),
-            (2, 10) => info.overrides.push(InterruptOverride { isa_irq: e[3], gsi: u32_at(e, 4), flags: u16_at(e, 8) }),
+            (1, 12) => info.io_apics.push(IoApicInfo {
+                id: e[2],
+                address: u32_at(e, 4) as u64,
+                gsi_base: u32_at(e, 8),
+            }),
+            (2, 10) => info.overrides.push(InterruptOverride {
+                isa_irq: e[3],
+                gsi: u32_at(e, 4),
+                flags: u16_at(e, 8),
+            }),
             (5, 12) => info.local_apic_address = u64_at(e, 4),
             _ => {}
         }
@@ -254,8 +284,22 @@ mod tests {
         let info = parse(0xe0000, &mem).unwrap();
         assert_eq!(info.local_apic_address, 0xfee0_0000);
         assert_eq!(info.cpu_apic_ids, vec![0]);
-        assert_eq!(info.io_apics, vec![IoApicInfo { id: 7, address: 0xfec0_0000, gsi_base: 0 }]);
-        assert_eq!(info.overrides, vec![InterruptOverride { isa_irq: 0, gsi: 2, flags: 0 }]);
+        assert_eq!(
+            info.io_apics,
+            vec![IoApicInfo {
+                id: 7,
+                address: 0xfec0_0000,
+                gsi_base: 0
+            }]
+        );
+        assert_eq!(
+            info.overrides,
+            vec![InterruptOverride {
+                isa_irq: 0,
+                gsi: 2,
+                flags: 0
+            }]
+        );
         assert_eq!(info.hpet_address, Some(0xfed0_0000));
     }
 
@@ -264,12 +308,18 @@ mod tests {
         assert_eq!(parse(0, &Fake::default()), Err(AcpiError::NoRsdp));
         let mut mem = system(vec![madt()]);
         mem.0.get_mut(&0x10_0000).unwrap()[40] ^= 0xff;
-        assert_eq!(parse(0xe0000, &mem), Err(AcpiError::BadTable(*b"APIC", "checksum mismatch")));
+        assert_eq!(
+            parse(0xe0000, &mem),
+            Err(AcpiError::BadTable(*b"APIC", "checksum mismatch"))
+        );
         let mem = system(vec![hpet()]);
         assert_eq!(parse(0xe0000, &mem), Err(AcpiError::NoMadt));
         let mut mem = system(vec![madt()]);
         mem.0.get_mut(&0xe0000).unwrap()[0] = b'X';
-        assert_eq!(parse(0xe0000, &mem), Err(AcpiError::BadRsdp("bad signature")));
+        assert_eq!(
+            parse(0xe0000, &mem),
+            Err(AcpiError::BadRsdp("bad signature"))
+        );
     }
 
     #[test]
@@ -279,7 +329,10 @@ mod tests {
         let mem = system(vec![sdt(b"APIC", &body)]);
         assert_eq!(
             parse(0xe0000, &mem),
-            Err(AcpiError::BadTable(*b"APIC", "entry length runs past the table"))
+            Err(AcpiError::BadTable(
+                *b"APIC",
+                "entry length runs past the table"
+            ))
         );
     }
 }

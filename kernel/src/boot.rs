@@ -100,13 +100,19 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     kprintln!(
         "memory: frame allocator manages {} frames ({} MiB){}",
         frames.total_frames(),
-        frames.total_frames() * PAGE_SIZE >> 20,
-        if frames.ignored_ranges() > 0 { " (some ranges ignored: too many)" } else { "" }
+        (frames.total_frames() * PAGE_SIZE) >> 20,
+        if frames.ignored_ranges() > 0 {
+            " (some ranges ignored: too many)"
+        } else {
+            ""
+        }
     );
     FRAMES.call_once(|| Mutex::new(frames));
 
     pic::remap_and_mask();
-    let direct_map = DirectMap { size: info.direct_map_size };
+    let direct_map = DirectMap {
+        size: info.direct_map_size,
+    };
     let acpi = acpi::parse(info.rsdp, &direct_map).unwrap_or_else(|e| panic!("ACPI: {e}"));
     kprintln!(
         "acpi: revision {}, {} CPU(s), {} IOAPIC(s), {} ISA override(s), HPET {}",
@@ -114,15 +120,28 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         acpi.cpu_apic_ids.len(),
         acpi.io_apics.len(),
         acpi.overrides.len(),
-        if acpi.hpet_address.is_some() { "present" } else { "absent" }
+        if acpi.hpet_address.is_some() {
+            "present"
+        } else {
+            "absent"
+        }
     );
     let (apic_id, apic_version) = lapic::init(acpi.local_apic_address);
-    kprintln!("apic: local APIC id {apic_id} version {apic_version:#x} at {:#x}; legacy PIC masked", acpi.local_apic_address);
+    kprintln!(
+        "apic: local APIC id {apic_id} version {apic_version:#x} at {:#x}; legacy PIC masked",
+        acpi.local_apic_address
+    );
     for io in &acpi.io_apics {
         // SAFETY: the address comes from the MADT's IOAPIC entry.
         let ioapic = unsafe { IoApic::new(io.address) };
         ioapic.mask_all();
-        kprintln!("apic: IOAPIC id {} at {:#x}, GSI {}..{}, all lines masked", io.id, io.address, io.gsi_base, io.gsi_base + ioapic.line_count() - 1);
+        kprintln!(
+            "apic: IOAPIC id {} at {:#x}, GSI {}..{}, all lines masked",
+            io.id,
+            io.address,
+            io.gsi_base,
+            io.gsi_base + ioapic.line_count() - 1
+        );
     }
 
     let apic_timer_hz = calibrate(acpi.hpet_address);
@@ -131,7 +150,10 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     // SAFETY: the loader copied system.img to SYSTEM_IMAGE frames that stay reserved; the
     // direct map covers them.
     let image_bytes = unsafe {
-        core::slice::from_raw_parts(phys_to_virt(info.system_image.start) as *const u8, info.system_image.len as usize)
+        core::slice::from_raw_parts(
+            phys_to_virt(info.system_image.start) as *const u8,
+            info.system_image.len as usize,
+        )
     };
     let image = SystemImage::parse(image_bytes).unwrap_or_else(|e| panic!("system.img: {e}"));
     kprintln!("sysimg: {} bytes, {} entries", image.size(), image.len());
@@ -139,7 +161,11 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         kprintln!("sysimg:   {:<24} {:>8} bytes", entry.name, entry.data.len());
     }
 
-    kprintln!("heap: {} bytes of {} KiB used at boot; sealed", heap.used(), crate::heap::BOOT_HEAP_SIZE / 1024);
+    kprintln!(
+        "heap: {} bytes of {} KiB used at boot; sealed",
+        heap.used(),
+        crate::heap::BOOT_HEAP_SIZE / 1024
+    );
     heap.seal();
     kprintln!("kernel: ready");
 
@@ -169,14 +195,29 @@ fn log_memory_summary(regions: &[MemoryRegion]) {
         .filter(|r| r.kind != MemoryKind::MMIO && r.kind != MemoryKind::RESERVED)
         .map(|r| r.pages)
         .sum();
-    kprintln!("memory: {} regions, {} MiB of RAM", regions.len(), ram * PAGE_SIZE >> 20);
+    kprintln!(
+        "memory: {} regions, {} MiB of RAM",
+        regions.len(),
+        (ram * PAGE_SIZE) >> 20
+    );
     for kind in kinds {
-        let pages: u64 = regions.iter().filter(|r| r.kind == kind).map(|r| r.pages).sum();
+        let pages: u64 = regions
+            .iter()
+            .filter(|r| r.kind == kind)
+            .map(|r| r.pages)
+            .sum();
         if pages > 0 {
-            kprintln!("memory:   {:<16} {:>8} KiB", kind.name(), pages * PAGE_SIZE / 1024);
+            kprintln!(
+                "memory:   {:<16} {:>8} KiB",
+                kind.name(),
+                pages * PAGE_SIZE / 1024
+            );
         }
     }
-    let unknown = regions.iter().filter(|r| r.kind.name() == "unknown").count();
+    let unknown = regions
+        .iter()
+        .filter(|r| r.kind.name() == "unknown")
+        .count();
     if unknown > 0 {
         kprintln!("memory:   {unknown} region(s) of unknown kind treated as reserved");
     }
@@ -199,7 +240,8 @@ fn calibrate(hpet_address: Option<u64>) -> u64 {
         }
         None => {
             lapic::start_calibration_count();
-            let tsc = pit::tsc_ticks_for_ms(WINDOW_MS).unwrap_or_else(|| panic!("PIT did not count"));
+            let tsc =
+                pit::tsc_ticks_for_ms(WINDOW_MS).unwrap_or_else(|| panic!("PIT did not count"));
             ("PIT", tsc, lapic::calibration_ticks())
         }
     };
@@ -234,7 +276,10 @@ pub fn count_timer_interrupts(apic_timer_hz: u64, rate_hz: u64, count: u64) -> u
         x86_64::instructions::interrupts::enable_and_hlt();
         x86_64::instructions::interrupts::disable();
         if time::since_boot_ns() > deadline {
-            panic!("timer interrupts stopped: {} of {count} arrived", time::timer_interrupts() - start_count);
+            panic!(
+                "timer interrupts stopped: {} of {count} arrived",
+                time::timer_interrupts() - start_count
+            );
         }
     }
     lapic::stop_timer();
@@ -244,7 +289,11 @@ pub fn count_timer_interrupts(apic_timer_hz: u64, rate_hz: u64, count: u64) -> u
 fn prove_timer(apic_timer_hz: u64) {
     const TICKS: u64 = 10;
     let ns = count_timer_interrupts(apic_timer_hz, 1000, TICKS);
-    kprintln!("timer: {TICKS} interrupts at 1 kHz took {}.{:03} ms", ns / 1_000_000, ns / 1000 % 1000);
+    kprintln!(
+        "timer: {TICKS} interrupts at 1 kHz took {}.{:03} ms",
+        ns / 1_000_000,
+        ns / 1000 % 1000
+    );
 }
 
 /// Nothing left to do on this CPU: sleep until an interrupt (none is enabled yet).

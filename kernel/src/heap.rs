@@ -30,7 +30,10 @@ impl Default for BootHeap {
 
 impl BootHeap {
     pub const fn new() -> Self {
-        Self { heap: Mutex::new(Heap::empty()), sealed: AtomicBool::new(false) }
+        Self {
+            heap: Mutex::new(Heap::empty()),
+            sealed: AtomicBool::new(false),
+        }
     }
 
     /// Hands the static storage to the allocator. Called once, first thing at boot.
@@ -57,9 +60,15 @@ impl BootHeap {
 unsafe impl GlobalAlloc for BootHeap {
     unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
         if self.sealed.load(Ordering::Relaxed) {
-            panic!("kernel heap allocation of {} bytes after boot", layout.size());
+            panic!(
+                "kernel heap allocation of {} bytes after boot",
+                layout.size()
+            );
         }
-        self.heap.lock().allocate_first_fit(layout).map_or(core::ptr::null_mut(), |p| p.as_ptr())
+        self.heap
+            .lock()
+            .allocate_first_fit(layout)
+            .map_or(core::ptr::null_mut(), |p| p.as_ptr())
     }
 
     unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {

@@ -19,6 +19,9 @@ static HEAP: heap::BootHeap = heap::BootHeap::new();
 
 /// Entry from the loader: `rdi` = virtual address of the `BootInfo`, interrupts off, the
 /// loader's stack unmapped. Sets up our stack before touching memory, then never returns.
+///
+/// # Safety
+/// Only the loader may call this, exactly once, with the boot-info address in `rdi`.
 #[unsafe(no_mangle)]
 #[unsafe(naked)]
 pub unsafe extern "sysv64" fn _start(boot_info: u64) -> ! {
@@ -41,7 +44,13 @@ extern "sysv64" fn kernel_entry(boot_info: u64) -> ! {
 fn panic(info: &core::panic::PanicInfo) -> ! {
     log::force_unlock();
     match info.location() {
-        Some(at) => kprintln!("KERNEL PANIC at {}:{}:{}: {}", at.file(), at.line(), at.column(), info.message()),
+        Some(at) => kprintln!(
+            "KERNEL PANIC at {}:{}:{}: {}",
+            at.file(),
+            at.line(),
+            at.column(),
+            info.message()
+        ),
         None => kprintln!("KERNEL PANIC: {}", info.message()),
     }
     qemu::exit(qemu::ExitCode::Failure)

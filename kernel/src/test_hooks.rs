@@ -12,7 +12,9 @@ use abi::sysimg::SystemImage;
 pub const UNMAPPED_ADDRESS: u64 = 0x0000_0dea_dbee_f000;
 
 pub fn run(image: &SystemImage, apic_timer_hz: u64) {
-    let Some(entry) = image.find("test/hook") else { return };
+    let Some(entry) = image.find("test/hook") else {
+        return;
+    };
     let hook = core::str::from_utf8(entry.data).unwrap_or("").trim();
     kprintln!("test: running hook '{hook}'");
     let mut words = hook.split_whitespace();
@@ -21,10 +23,14 @@ pub fn run(image: &SystemImage, apic_timer_hz: u64) {
         (Some("page-fault"), None) => {
             // SAFETY: deliberately unsound: the read must fault; the #PF handler never returns.
             let value = unsafe { core::ptr::read_volatile(UNMAPPED_ADDRESS as *const u64) };
-            panic!("read of unmapped address {UNMAPPED_ADDRESS:#x} returned {value:#x} instead of faulting");
+            panic!(
+                "read of unmapped address {UNMAPPED_ADDRESS:#x} returned {value:#x} instead of faulting"
+            );
         }
         (Some("timer"), Some(n)) => {
-            let count: u64 = n.parse().unwrap_or_else(|_| panic!("test hook: bad count '{n}'"));
+            let count: u64 = n
+                .parse()
+                .unwrap_or_else(|_| panic!("test hook: bad count '{n}'"));
             let ns = boot::count_timer_interrupts(apic_timer_hz, 1000, count);
             kprintln!("test: timer fired {count} times in {} us", ns / 1000);
             exit(ExitCode::Success)

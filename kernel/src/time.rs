@@ -48,6 +48,9 @@ mod tests {
         assert_eq!(ticks_to_ns(0, 0), 0);
         assert_eq!(ticks_to_ns(3_000_000_000, 3_000_000_000), 1_000_000_000);
         // A year of ticks at 5 GHz does not overflow.
-        assert_eq!(ticks_to_ns(5_000_000_000 * 31_536_000, 5_000_000_000), 31_536_000 * 1_000_000_000);
+        assert_eq!(
+            ticks_to_ns(5_000_000_000 * 31_536_000, 5_000_000_000),
+            31_536_000 * 1_000_000_000
+        );
     }
 }

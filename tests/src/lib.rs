@@ -12,14 +12,20 @@ pub fn boot(name: &str) -> Outcome {
     let s = scenario::load(&manifest).unwrap_or_else(|e| panic!("{e:#}"));
     let dir = scenario::output_dir().join(name);
     let esp = dir.join("esp");
-    assert!(esp.join("system.img").is_file(), "no image for scenario {name}: run `cargo xtask test {name}`");
+    assert!(
+        esp.join("system.img").is_file(),
+        "no image for scenario {name}: run `cargo xtask test {name}`"
+    );
     let tools = xtask::tools::ensure_qemu().unwrap_or_else(|e| panic!("{e:#}"));
-    qemu::run(&tools, &RunOptions {
-        esp,
-        timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
-        echo: false,
-        work_dir: dir.join("state"),
-    })
+    qemu::run(
+        &tools,
+        &RunOptions {
+            esp,
+            timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
+            echo: false,
+            work_dir: dir.join("state"),
+        },
+    )
     .unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"))
 }
 

@@ -16,12 +16,19 @@ fn boot_ready() {
         "sysimg:   syssw",
         "kernel: ready",
     ] {
-        check(&o, o.line(line).is_some(), &format!("missing serial line containing {line:?}"));
+        check(
+            &o,
+            o.line(line).is_some(),
+            &format!("missing serial line containing {line:?}"),
+        );
     }
     // Every kernel line carries a timestamp "[SSSS.UUUUUU] ".
     let first = o.lines.iter().position(|l| l.contains("Warden")).unwrap();
     for line in &o.lines[first..] {
-        let ok = line.len() > 14 && line.starts_with('[') && line.as_bytes()[12] == b']' && line[1..12].trim().contains('.');
+        let ok = line.len() > 14
+            && line.starts_with('[')
+            && line.as_bytes()[12] == b']'
+            && line[1..12].trim().contains('.');
         check(&o, ok, &format!("kernel line without timestamp: {line:?}"));
     }
 }
@@ -29,21 +36,47 @@ fn boot_ready() {
 #[test]
 fn kernel_page_fault() {
     let o = boot("kernel_page_fault");
-    check(&o, o.ending == Ending::Exited(EXIT_FAILURE), "expected failure exit (35)");
+    check(
+        &o,
+        o.ending == Ending::Exited(EXIT_FAILURE),
+        "expected failure exit (35)",
+    );
     let report = o.line("EXCEPTION ").unwrap_or_default();
-    check(&o, report.contains("#PF (page fault, vector 14)"), "expected a #PF report with its vector");
-    check(&o, report.contains("in kernel mode"), "expected the fault to be attributed to kernel mode");
+    check(
+        &o,
+        report.contains("#PF (page fault, vector 14)"),
+        "expected a #PF report with its vector",
+    );
+    check(
+        &o,
+        report.contains("in kernel mode"),
+        "expected the fault to be attributed to kernel mode",
+    );
     let regs = o.line("  rip=").unwrap_or_default();
-    check(&o, regs.contains("cr2=0x00000deadbeef000"), "expected CR2 = the unmapped test address");
-    check(&o, regs.contains("rip=0xffffffff8"), "expected RIP inside the kernel image");
-    check(&o, o.line("kernel: ready").is_some(), "the fault must come after a complete boot");
+    check(
+        &o,
+        regs.contains("cr2=0x00000deadbeef000"),
+        "expected CR2 = the unmapped test address",
+    );
+    check(
+        &o,
+        regs.contains("rip=0xffffffff8"),
+        "expected RIP inside the kernel image",
+    );
+    check(
+        &o,
+        o.line("kernel: ready").is_some(),
+        "the fault must come after a complete boot",
+    );
 }
 
 #[test]
 fn timer_interrupts() {
     let o = boot("timer_interrupts");
     check(&o, o.succeeded(), "expected success exit (33)");
-    let line = o.line("test: timer fired 200 times in ").unwrap_or_default();
+    let line = o
+        .line("test: timer fired 200 times in ")
+        .unwrap_or_default();
     let micros: u64 = line
         .split("in ")
         .nth(1)
@@ -51,5 +84,9 @@ fn timer_interrupts() {
         .unwrap_or(0);
     // 200 periods of 1 ms cannot complete in less than ~200 ms if the timer is programmed
     // right (10% slack for calibration error); an upper bound would only measure the host.
-    check(&o, micros >= 180_000, &format!("200 ticks at 1 kHz took only {micros} us"));
+    check(
+        &o,
+        micros >= 180_000,
+        &format!("200 ticks at 1 kHz took only {micros} us"),
+    );
 }

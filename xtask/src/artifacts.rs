@@ -28,7 +28,9 @@ fn cargo() -> Command {
 }
 
 fn run(mut cmd: Command, what: &str) -> Result<()> {
-    let status = cmd.status().with_context(|| format!("cannot run cargo to build {what}"))?;
+    let status = cmd
+        .status()
+        .with_context(|| format!("cannot run cargo to build {what}"))?;
     if !status.success() {
         bail!("building {what} failed ({status})");
     }
@@ -41,7 +43,14 @@ pub fn build(release: bool, variant: KernelVariant) -> Result<Artifacts> {
     let target = crate::target_dir();
 
     let mut cmd = cargo();
-    cmd.args(["build", "--quiet", "-p", "loader", "--target", "x86_64-unknown-uefi"]);
+    cmd.args([
+        "build",
+        "--quiet",
+        "-p",
+        "loader",
+        "--target",
+        "x86_64-unknown-uefi",
+    ]);
     if release {
         cmd.arg("--release");
     }
@@ -52,7 +61,15 @@ pub fn build(release: bool, variant: KernelVariant) -> Result<Artifacts> {
         KernelVariant::TestHooks => target.join("test-hooks"),
     };
     let mut cmd = cargo();
-    cmd.args(["build", "--quiet", "-p", "kernel", "--target", "x86_64-unknown-none", "--target-dir"]);
+    cmd.args([
+        "build",
+        "--quiet",
+        "-p",
+        "kernel",
+        "--target",
+        "x86_64-unknown-none",
+        "--target-dir",
+    ]);
     cmd.arg(&kernel_target);
     if release {
         cmd.arg("--release");
@@ -67,8 +84,14 @@ pub fn build(release: bool, variant: KernelVariant) -> Result<Artifacts> {
     run(cmd, "syssw")?;
 
     Ok(Artifacts {
-        loader: target.join("x86_64-unknown-uefi").join(profile).join("loader.efi"),
-        kernel: kernel_target.join("x86_64-unknown-none").join(profile).join("kernel"),
+        loader: target
+            .join("x86_64-unknown-uefi")
+            .join(profile)
+            .join("loader.efi"),
+        kernel: kernel_target
+            .join("x86_64-unknown-none")
+            .join(profile)
+            .join("kernel"),
         syssw: target.join("user").join("syssw"),
     })
 }

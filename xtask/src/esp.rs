@@ -18,7 +18,12 @@ pub fn build_system_image(entries: &[ImageEntry]) -> Result<Vec<u8>> {
     for entry in entries {
         let (name, data) = match entry {
             ImageEntry::File { name, path } => {
-                let data = fs::read(path).with_context(|| format!("cannot read {} for system image entry {name:?}", path.display()))?;
+                let data = fs::read(path).with_context(|| {
+                    format!(
+                        "cannot read {} for system image entry {name:?}",
+                        path.display()
+                    )
+                })?;
                 (name, data)
             }
             ImageEntry::Bytes { name, data } => (name, data.clone()),
@@ -48,8 +53,14 @@ pub fn assemble(dir: &Path, artifacts: &Artifacts, entries: &[ImageEntry]) -> Re
 pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Vec<ImageEntry> {
     let mut entries = Vec::new();
     if let Some(config) = config {
-        entries.push(ImageEntry::File { name: "config.toml".into(), path: config.to_path_buf() });
+        entries.push(ImageEntry::File {
+            name: "config.toml".into(),
+            path: config.to_path_buf(),
+        });
     }
-    entries.push(ImageEntry::File { name: "syssw".into(), path: artifacts.syssw.clone() });
+    entries.push(ImageEntry::File {
+        name: "syssw".into(),
+        path: artifacts.syssw.clone(),
+    });
     entries
 }

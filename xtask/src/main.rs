@@ -12,7 +12,10 @@ use xtask::qemu::{self, Ending, RunOptions};
 use xtask::{esp, scenario, tools};
 
 #[derive(Parser)]
-#[command(name = "cargo xtask", about = "Build, run and test the partitioning system")]
+#[command(
+    name = "cargo xtask",
+    about = "Build, run and test the partitioning system"
+)]
 struct Cli {
     #[command(subcommand)]
     command: Cmd,
@@ -38,19 +41,26 @@ enum Cmd {
         release: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
-    Test {
-        filter: Option<String>,
-    },
+    Test { filter: Option<String> },
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Cmd::Build { release } => artifacts::build(release, KernelVariant::Production).map(|a| {
-            println!("loader: {}\nkernel: {}\nsyssw:  {}", a.loader.display(), a.kernel.display(), a.syssw.display());
+            println!(
+                "loader: {}\nkernel: {}\nsyssw:  {}",
+                a.loader.display(),
+                a.kernel.display(),
+                a.syssw.display()
+            );
             true
         }),
-        Cmd::Run { config, timeout, release } => run(config, timeout, release),
+        Cmd::Run {
+            config,
+            timeout,
+            release,
+        } => run(config, timeout, release),
         Cmd::Test { filter } => test(filter.as_deref()),
     };
     match result {
@@ -75,27 +85,46 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     }
     let artifacts = artifacts::build(release, KernelVariant::Production)?;
     let esp_dir = xtask::target_dir().join("esp").join("run");
-    esp::assemble(&esp_dir, &artifacts, &esp::standard_entries(&artifacts, Some(&config)))?;
-    eprintln!("xtask: booting {} under QEMU{}", esp_dir.display(), match timeout {
-        Some(t) => format!(" for {t} s"),
-        None => " (stop with Ctrl-C)".into(),
-    });
-    let outcome = qemu::run(&qemu, &RunOptions {
-        esp: esp_dir.clone(),
-        timeout: timeout.map(Duration::from_secs),
-        echo: true,
-        work_dir: xtask::target_dir().join("esp").join("run-state"),
-    })?;
-    let crashed = outcome.lines.iter().any(|l| CRASH_MARKERS.iter().any(|m| l.contains(m)));
+    esp::assemble(
+        &esp_dir,
+        &artifacts,
+        &esp::standard_entries(&artifacts, Some(&config)),
+    )?;
+    eprintln!(
+        "xtask: booting {} under QEMU{}",
+        esp_dir.display(),
+        match timeout {
+            Some(t) => format!(" for {t} s"),
+            None => " (stop with Ctrl-C)".into(),
+        }
+    );
+    let outcome = qemu::run(
+        &qemu,
+        &RunOptions {
+            esp: esp_dir.clone(),
+            timeout: timeout.map(Duration::from_secs),
+            echo: true,
+            work_dir: xtask::target_dir().join("esp").join("run-state"),
+        },
+    )?;
+    let crashed = outcome
+        .lines
+        .iter()
+        .any(|l| CRASH_MARKERS.iter().any(|m| l.contains(m)));
     let ready = outcome.line(READY_MARKER).is_some();
     let verdict = match &outcome.ending {
         Ending::Exited(qemu::EXIT_SUCCESS) => Ok("the system exited with success"),
         Ending::Exited(qemu::EXIT_FAILURE) => Err("the system exited with failure".to_string()),
         Ending::TimedOut if crashed => Err("the system crashed".to_string()),
-        Ending::TimedOut if !ready => Err(format!("the system did not reach '{READY_MARKER}' (hung at boot)")),
+        Ending::TimedOut if !ready => Err(format!(
+            "the system did not reach '{READY_MARKER}' (hung at boot)"
+        )),
         Ending::TimedOut => Ok("the system was still running at the timeout"),
         Ending::Aborted(line) => Err(format!("boot failed: {line}")),
-        Ending::Exited(code) => Err(format!("QEMU exited with {code} (triple fault or QEMU error)\n{}", outcome.stderr)),
+        Ending::Exited(code) => Err(format!(
+            "QEMU exited with {code} (triple fault or QEMU error)\n{}",
+            outcome.stderr
+        )),
         Ending::Killed => Err("QEMU was killed".to_string()),
     };
     match verdict {
@@ -112,7 +141,9 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
 
 fn cargo_test(args: &[&str]) -> Result<bool> {
     let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
-    cmd.current_dir(xtask::workspace_root()).arg("test").args(args);
+    cmd.current_dir(xtask::workspace_root())
+        .arg("test")
+        .args(args);
     eprintln!("xtask: cargo test {}", args.join(" "));
     Ok(cmd.status()?.success())
 }
@@ -123,10 +154,14 @@ fn test(filter: Option<&str>) -> Result<bool> {
     // Host unit tests: every host crate, plus the kernel's pure logic (its library part).
     let host_ok = cargo_test(&[
         "--workspace",
-        "--exclude", "kernel",
-        "--exclude", "loader",
-        "--exclude", "syssw",
-        "--exclude", "scenarios",
+        "--exclude",
+        "kernel",
+        "--exclude",
+        "loader",
+        "--exclude",
+        "syssw",
+        "--exclude",
+        "scenarios",
     ])? & cargo_test(&["-p", "kernel", "--lib"])?;
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
@@ -139,11 +174,25 @@ fn test(filter: Option<&str>) -> Result<bool> {
     }
     let artifacts = artifacts::build(false, KernelVariant::TestHooks)?;
     for s in &scenarios {
-        let mut entries = esp::standard_entries(&artifacts, s.manifest.config.as_ref().map(|c| xtask::workspace_root().join(c)).as_deref());
+        let mut entries = esp::standard_entries(
+            &artifacts,
+            s.manifest
+                .config
+                .as_ref()
+                .map(|c| xtask::workspace_root().join(c))
+                .as_deref(),
+        );
         if let Some(hook) = &s.manifest.hook {
-            entries.push(esp::ImageEntry::Bytes { name: "test/hook".into(), data: hook.clone().into_bytes() });
+            entries.push(esp::ImageEntry::Bytes {
+                name: "test/hook".into(),
+                data: hook.clone().into_bytes(),
+            });
         }
-        esp::assemble(&scenario::output_dir().join(&s.name).join("esp"), &artifacts, &entries)?;
+        esp::assemble(
+            &scenario::output_dir().join(&s.name).join("esp"),
+            &artifacts,
+            &entries,
+        )?;
     }
     let mut args = vec!["-p", "scenarios", "--"];
     if let Some(f) = filter {

@@ -57,7 +57,10 @@ impl Outcome {
 
     /// The first line containing `needle`.
     pub fn line(&self, needle: &str) -> Option<&str> {
-        self.lines.iter().map(String::as_str).find(|l| l.contains(needle))
+        self.lines
+            .iter()
+            .map(String::as_str)
+            .find(|l| l.contains(needle))
     }
 
     /// The serial log followed by QEMU's stderr, for failure messages.
@@ -74,11 +77,32 @@ impl Outcome {
 
 pub fn command(qemu: &Qemu, esp: &Path, vars: &Path) -> Command {
     let mut cmd = Command::new(&qemu.binary);
-    cmd.args(["-nodefaults", "-machine", "q35", "-m", "512M", "-cpu", "qemu64", "-display", "none", "-no-reboot"]);
-    cmd.arg("-drive").arg(format!("if=pflash,format=raw,readonly=on,file={}", qemu.ovmf_code.display()));
-    cmd.arg("-drive").arg(format!("if=pflash,format=raw,file={}", vars.display()));
-    cmd.arg("-drive").arg(format!("format=raw,file=fat:rw:{}", esp.display()));
-    cmd.args(["-serial", "stdio", "-device", "isa-debug-exit,iobase=0xf4,iosize=0x04"]);
+    cmd.args([
+        "-nodefaults",
+        "-machine",
+        "q35",
+        "-m",
+        "512M",
+        "-cpu",
+        "qemu64",
+        "-display",
+        "none",
+        "-no-reboot",
+    ]);
+    cmd.arg("-drive").arg(format!(
+        "if=pflash,format=raw,readonly=on,file={}",
+        qemu.ovmf_code.display()
+    ));
+    cmd.arg("-drive")
+        .arg(format!("if=pflash,format=raw,file={}", vars.display()));
+    cmd.arg("-drive")
+        .arg(format!("format=raw,file=fat:rw:{}", esp.display()));
+    cmd.args([
+        "-serial",
+        "stdio",
+        "-device",
+        "isa-debug-exit,iobase=0xf4,iosize=0x04",
+    ]);
     cmd
 }
 
@@ -90,7 +114,8 @@ fn stop(child: &mut Child) {
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
     std::fs::create_dir_all(&options.work_dir)?;
     let vars = options.work_dir.join("OVMF_VARS.fd");
-    std::fs::copy(&qemu.ovmf_vars, &vars).with_context(|| format!("cannot copy {}", qemu.ovmf_vars.display()))?;
+    std::fs::copy(&qemu.ovmf_vars, &vars)
+        .with_context(|| format!("cannot copy {}", qemu.ovmf_vars.display()))?;
     let mut child = command(qemu, &options.esp, &vars)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
@@ -105,8 +130,14 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
         let mut reader = BufReader::new(stdout);
         let mut buf = Vec::new();
         // Firmware output may contain escape sequences and invalid UTF-8: read raw bytes.
-        while reader.read_until(b'\n', &mut buf).map(|n| n > 0).unwrap_or(false) {
-            let line = String::from_utf8_lossy(&buf).trim_end_matches(['\n', '\r']).to_string();
+        while reader
+            .read_until(b'\n', &mut buf)
+            .map(|n| n > 0)
+            .unwrap_or(false)
+        {
+            let line = String::from_utf8_lossy(&buf)
+                .trim_end_matches(['\n', '\r'])
+                .to_string();
             if tx.send(line).is_err() {
                 break;
             }
@@ -123,7 +154,9 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
     let mut lines = Vec::new();
     let deadline = options.timeout.map(|t| started + t);
     let ending = loop {
-        let wait = deadline.map(|d| d.saturating_duration_since(Instant::now())).unwrap_or(Duration::from_secs(3600));
+        let wait = deadline
+            .map(|d| d.saturating_duration_since(Instant::now()))
+            .unwrap_or(Duration::from_secs(3600));
         match rx.recv_timeout(wait) {
             Ok(line) => {
                 if options.echo {
@@ -149,5 +182,10 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
         }
     };
     let stderr = stderr_reader.join().unwrap_or_default();
-    Ok(Outcome { ending, lines, stderr, elapsed: started.elapsed() })
+    Ok(Outcome {
+        ending,
+        lines,
+        stderr,
+        elapsed: started.elapsed(),
+    })
 }

@@ -44,9 +44,15 @@ pub fn output_dir() -> PathBuf {
 }
 
 pub fn load(path: &Path) -> Result<Scenario> {
-    let text = std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
-    let manifest: Manifest = toml::from_str(&text).with_context(|| format!("invalid scenario manifest {}", path.display()))?;
-    let name = path.file_stem().context("scenario file without a name")?.to_string_lossy().into_owned();
+    let text =
+        std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
+    let manifest: Manifest = toml::from_str(&text)
+        .with_context(|| format!("invalid scenario manifest {}", path.display()))?;
+    let name = path
+        .file_stem()
+        .context("scenario file without a name")?
+        .to_string_lossy()
+        .into_owned();
     Ok(Scenario { name, manifest })
 }
 

@@ -19,16 +19,30 @@ pub struct Qemu {
 
 fn find_in_path(name: &str) -> Option<PathBuf> {
     let path = std::env::var_os("PATH")?;
-    std::env::split_paths(&path).map(|dir| dir.join(name)).find(|p| p.is_file())
+    std::env::split_paths(&path)
+        .map(|dir| dir.join(name))
+        .find(|p| p.is_file())
 }
 
 /// (code, vars) pairs in the places Debian/Ubuntu/Fedora packages put them.
 fn find_ovmf() -> Option<(PathBuf, PathBuf)> {
     const PAIRS: &[(&str, &str)] = &[
-        ("/usr/share/OVMF/OVMF_CODE.fd", "/usr/share/OVMF/OVMF_VARS.fd"),
-        ("/usr/share/OVMF/OVMF_CODE_4M.fd", "/usr/share/OVMF/OVMF_VARS_4M.fd"),
-        ("/usr/share/edk2/ovmf/OVMF_CODE.fd", "/usr/share/edk2/ovmf/OVMF_VARS.fd"),
-        ("/usr/share/edk2-ovmf/x64/OVMF_CODE.fd", "/usr/share/edk2-ovmf/x64/OVMF_VARS.fd"),
+        (
+            "/usr/share/OVMF/OVMF_CODE.fd",
+            "/usr/share/OVMF/OVMF_VARS.fd",
+        ),
+        (
+            "/usr/share/OVMF/OVMF_CODE_4M.fd",
+            "/usr/share/OVMF/OVMF_VARS_4M.fd",
+        ),
+        (
+            "/usr/share/edk2/ovmf/OVMF_CODE.fd",
+            "/usr/share/edk2/ovmf/OVMF_VARS.fd",
+        ),
+        (
+            "/usr/share/edk2-ovmf/x64/OVMF_CODE.fd",
+            "/usr/share/edk2-ovmf/x64/OVMF_VARS.fd",
+        ),
     ];
     PAIRS
         .iter()
@@ -38,7 +52,11 @@ fn find_ovmf() -> Option<(PathBuf, PathBuf)> {
 }
 
 fn is_root() -> bool {
-    Command::new("id").arg("-u").output().map(|o| String::from_utf8_lossy(&o.stdout).trim() == "0").unwrap_or(false)
+    Command::new("id")
+        .arg("-u")
+        .output()
+        .map(|o| String::from_utf8_lossy(&o.stdout).trim() == "0")
+        .unwrap_or(false)
 }
 
 fn install_packages() -> Result<()> {
@@ -49,7 +67,11 @@ fn install_packages() -> Result<()> {
         );
     }
     eprintln!("xtask: QEMU/OVMF missing; running apt-get update && {install}");
-    let ok = Command::new("apt-get").args(["update", "-qq"]).status().map(|s| s.success()).unwrap_or(false)
+    let ok = Command::new("apt-get")
+        .args(["update", "-qq"])
+        .status()
+        .map(|s| s.success())
+        .unwrap_or(false)
         && Command::new("apt-get")
             .args(["install", "-y", "-qq"])
             .args(APT_PACKAGES)
@@ -67,19 +89,33 @@ pub fn ensure_qemu() -> Result<Qemu> {
     if find_in_path("qemu-system-x86_64").is_none() || find_ovmf().is_none() {
         install_packages()?;
     }
-    let binary = find_in_path("qemu-system-x86_64").context("qemu-system-x86_64 still not found in PATH")?;
-    let (ovmf_code, ovmf_vars) = find_ovmf().context("OVMF firmware still not found (looked in /usr/share/OVMF)")?;
-    Ok(Qemu { binary, ovmf_code, ovmf_vars })
+    let binary =
+        find_in_path("qemu-system-x86_64").context("qemu-system-x86_64 still not found in PATH")?;
+    let (ovmf_code, ovmf_vars) =
+        find_ovmf().context("OVMF firmware still not found (looked in /usr/share/OVMF)")?;
+    Ok(Qemu {
+        binary,
+        ovmf_code,
+        ovmf_vars,
+    })
 }
 
 /// Makes sure rustup has the bare-metal targets (rust-toolchain.toml lists them, but
 /// rustup does not always install them on its own, e.g. with RUSTUP_AUTO_INSTALL=0).
 pub fn ensure_rust_targets() -> Result<()> {
-    let Ok(out) = Command::new("rustup").args(["target", "list", "--installed"]).current_dir(crate::workspace_root()).output() else {
+    let Ok(out) = Command::new("rustup")
+        .args(["target", "list", "--installed"])
+        .current_dir(crate::workspace_root())
+        .output()
+    else {
         return Ok(()); // no rustup: assume a toolchain that has the targets
     };
     let installed = String::from_utf8_lossy(&out.stdout);
-    let missing: Vec<&str> = RUST_TARGETS.iter().copied().filter(|t| !installed.lines().any(|l| l.trim() == *t)).collect();
+    let missing: Vec<&str> = RUST_TARGETS
+        .iter()
+        .copied()
+        .filter(|t| !installed.lines().any(|l| l.trim() == *t))
+        .collect();
     if missing.is_empty() {
         return Ok(());
     }

@@ -200,8 +200,29 @@ mod tests {
         };
         assert!(good.check().is_ok());
         assert!(BootInfo { magic: 0, ..good }.check().is_err());
-        assert!(BootInfo { version: 99, ..good }.check().is_err());
-        assert!(BootInfo { direct_map_base: 0, ..good }.check().is_err());
-        assert!(BootInfo { memory_region_count: 0, ..good }.check().is_err());
+        assert!(
+            BootInfo {
+                version: 99,
+                ..good
+            }
+            .check()
+            .is_err()
+        );
+        assert!(
+            BootInfo {
+                direct_map_base: 0,
+                ..good
+            }
+            .check()
+            .is_err()
+        );
+        assert!(
+            BootInfo {
+                memory_region_count: 0,
+                ..good
+            }
+            .check()
+            .is_err()
+        );
     }
 }

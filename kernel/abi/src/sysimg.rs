@@ -53,19 +53,29 @@ impl core::fmt::Display for SysImgError {
         match *self {
             Self::TooShort => write!(f, "shorter than its header and entry table"),
             Self::BadMagic => write!(f, "bad magic (not a system image)"),
-            Self::UnsupportedVersion(v) => write!(f, "unsupported version {v} (expected {VERSION})"),
+            Self::UnsupportedVersion(v) => {
+                write!(f, "unsupported version {v} (expected {VERSION})")
+            }
             Self::TooManyEntries(n) => write!(f, "{n} entries (at most {MAX_ENTRIES})"),
             Self::SizeMismatch { declared, actual } => {
                 write!(f, "header says {declared} bytes but {actual} are present")
             }
             Self::ChecksumMismatch { stored, computed } => {
-                write!(f, "checksum mismatch (stored {stored:#010x}, computed {computed:#010x}): image is damaged")
+                write!(
+                    f,
+                    "checksum mismatch (stored {stored:#010x}, computed {computed:#010x}): image is damaged"
+                )
             }
             Self::BadEntryName(i) => write!(f, "entry {i}: name is empty or not UTF-8"),
             Self::DuplicateName(i) => write!(f, "entry {i}: duplicate name"),
             Self::EntryOutOfBounds(i) => write!(f, "entry {i}: data lies outside the image"),
-            Self::EntryMisaligned(i) => write!(f, "entry {i}: data not aligned to {DATA_ALIGN} bytes"),
-            Self::EntriesOverlap(i) => write!(f, "entry {i}: data overlaps the table or the previous entry"),
+            Self::EntryMisaligned(i) => {
+                write!(f, "entry {i}: data not aligned to {DATA_ALIGN} bytes")
+            }
+            Self::EntriesOverlap(i) => write!(
+                f,
+                "entry {i}: data overlaps the table or the previous entry"
+            ),
         }
     }
 }
@@ -128,7 +138,10 @@ impl<'a> SystemImage<'a> {
         let total = read_u64(bytes, 16);
         let table_end = HEADER_SIZE + count * ENTRY_SIZE;
         if total > bytes.len() as u64 || (total as usize) < table_end {
-            return Err(SysImgError::SizeMismatch { declared: total, actual: bytes.len() as u64 });
+            return Err(SysImgError::SizeMismatch {
+                declared: total,
+                actual: bytes.len() as u64,
+            });
         }
         let bytes = &bytes[..total as usize];
         let stored = read_u32(bytes, 24);
@@ -146,11 +159,13 @@ impl<'a> SystemImage<'a> {
             }
             let offset = read_u64(raw, NAME_SIZE);
             let size = read_u64(raw, NAME_SIZE + 8);
-            let end = offset.checked_add(size).ok_or(SysImgError::EntryOutOfBounds(i))?;
+            let end = offset
+                .checked_add(size)
+                .ok_or(SysImgError::EntryOutOfBounds(i))?;
             if end > total {
                 return Err(SysImgError::EntryOutOfBounds(i));
             }
-            if offset as usize % DATA_ALIGN != 0 {
+            if !(offset as usize).is_multiple_of(DATA_ALIGN) {
                 return Err(SysImgError::EntryMisaligned(i));
             }
             if (offset as usize) < previous_end {
@@ -185,7 +200,11 @@ impl<'a> SystemImage<'a> {
         let name = entry_name(&raw[..NAME_SIZE]).unwrap_or("");
         let offset = read_u64(raw, NAME_SIZE) as usize;
         let size = read_u64(raw, NAME_SIZE + 8) as usize;
-        Entry { name, offset, data: &self.bytes[offset..offset + size] }
+        Entry {
+            name,
+            offset,
+            data: &self.bytes[offset..offset + size],
+        }
     }
 
     pub fn entries(&self) -> impl Iterator<Item = Entry<'a>> + '_ {
@@ -202,8 +221,8 @@ impl<'a> SystemImage<'a> {
 pub mod builder {
     use super::*;
     use std::string::{String, ToString};
-    use std::{format, vec};
     use std::vec::Vec;
+    use std::{format, vec};
 
     /// Collects named entries and writes a version-1 image.
     #[derive(Default)]
@@ -219,7 +238,9 @@ pub mod builder {
         /// Adds an entry; names must be 1..=47 bytes, unique, without NUL.
         pub fn add(&mut self, name: &str, data: Vec<u8>) -> Result<&mut Self, String> {
             if name.is_empty() || name.len() >= NAME_SIZE || name.contains('\0') {
-                return Err(format!("system image entry name {name:?} must be 1..{NAME_SIZE} bytes without NUL"));
+                return Err(format!(
+                    "system image entry name {name:?} must be 1..{NAME_SIZE} bytes without NUL"
+                ));
             }
             if self.entries.iter().any(|(n, _)| n == name) {
                 return Err(format!("system image entry {name:?} added twice"));
@@ -239,8 +260,10 @@ pub mod builder {
             for (i, (name, data)) in self.entries.iter().enumerate() {
                 let at = HEADER_SIZE + i * ENTRY_SIZE;
                 out[at..at + name.len()].copy_from_slice(name.as_bytes());
-                out[at + NAME_SIZE..at + NAME_SIZE + 8].copy_from_slice(&(offset as u64).to_le_bytes());
-                out[at + NAME_SIZE + 8..at + ENTRY_SIZE].copy_from_slice(&(data.len() as u64).to_le_bytes());
+                out[at + NAME_SIZE..at + NAME_SIZE + 8]
+                    .copy_from_slice(&(offset as u64).to_le_bytes());
+                out[at + NAME_SIZE + 8..at + ENTRY_SIZE]
+                    .copy_from_slice(&(data.len() as u64).to_le_bytes());
                 out.resize(offset, 0);
                 out.extend_from_slice(data);
                 offset = align(out.len());
@@ -298,24 +321,36 @@ mod tests {
     #[test]
     fn rejects_damage() {
         let good = sample();
-        assert_eq!(SystemImage::parse(&good[..10]).unwrap_err(), SysImgError::TooShort);
+        assert_eq!(
+            SystemImage::parse(&good[..10]).unwrap_err(),
+            SysImgError::TooShort
+        );
         let mut b = good.clone();
         b[0] = b'X';
         assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::BadMagic);
         let mut b = good.clone();
         b[8] = 2;
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::UnsupportedVersion(2));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::UnsupportedVersion(2)
+        );
         let mut b = good.clone();
         let last = b.len() - 1;
         b[last] ^= 1;
-        assert!(matches!(SystemImage::parse(&b).unwrap_err(), SysImgError::ChecksumMismatch { .. }));
+        assert!(matches!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::ChecksumMismatch { .. }
+        ));
         assert!(matches!(
             SystemImage::parse(&good[..good.len() - 1]).unwrap_err(),
             SysImgError::SizeMismatch { .. }
         ));
         let mut b = good.clone();
         b[12..16].copy_from_slice(&1000u32.to_le_bytes());
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::TooManyEntries(1000));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::TooManyEntries(1000)
+        );
     }
 
     #[test]
@@ -327,28 +362,47 @@ mod tests {
         b[entry(1)..entry(1) + 6].copy_from_slice(b"config");
         b[entry(1) + 6..entry(1) + 6 + 1].copy_from_slice(b"\0");
         reseal(&mut b);
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::DuplicateName(1));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::DuplicateName(1)
+        );
         // Empty name.
         let mut b = good.clone();
         b[entry(0)..entry(0) + NAME_SIZE].fill(0);
         reseal(&mut b);
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::BadEntryName(0));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::BadEntryName(0)
+        );
         // Data beyond the end.
         let mut b = good.clone();
         b[entry(1) + NAME_SIZE + 8..entry(1) + ENTRY_SIZE].copy_from_slice(&u64::MAX.to_le_bytes());
         reseal(&mut b);
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::EntryOutOfBounds(1));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::EntryOutOfBounds(1)
+        );
         // Misaligned data.
         let mut b = good.clone();
         b[entry(0) + NAME_SIZE..entry(0) + NAME_SIZE + 8].copy_from_slice(&4097u64.to_le_bytes());
         reseal(&mut b);
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::EntryMisaligned(0));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::EntryMisaligned(0)
+        );
         // Second entry starting inside the first.
         let mut b = good.clone();
-        let first = u64::from_le_bytes(b[entry(0) + NAME_SIZE..entry(0) + NAME_SIZE + 8].try_into().unwrap());
+        let first = u64::from_le_bytes(
+            b[entry(0) + NAME_SIZE..entry(0) + NAME_SIZE + 8]
+                .try_into()
+                .unwrap(),
+        );
         b[entry(1) + NAME_SIZE..entry(1) + NAME_SIZE + 8].copy_from_slice(&first.to_le_bytes());
         reseal(&mut b);
-        assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::EntriesOverlap(1));
+        assert_eq!(
+            SystemImage::parse(&b).unwrap_err(),
+            SysImgError::EntriesOverlap(1)
+        );
     }
 
     #[test]

@@ -76,17 +76,22 @@ fn load() -> Result<core::convert::Infallible, String> {
     // The trampoline runs the instruction after `mov cr3` from its physical address, so its
     // page(s) must be identity-mapped in the new tables; the kernel drops them at once.
     let trampoline_start = (enter_kernel as *const () as u64) & !(PAGE - 1);
-    let trampoline = PhysRange { start: trampoline_start, len: 2 * PAGE };
+    let trampoline = PhysRange {
+        start: trampoline_start,
+        len: 2 * PAGE,
+    };
     for page in 0..2 {
         let addr = trampoline_start + page * PAGE;
         tables.map_page(addr, addr, PageFlags::empty())?;
     }
 
     // Room for the final memory map: today's entry count plus slack for what exit adds.
-    let map_now = boot::memory_map(MemoryType::LOADER_DATA).map_err(|e| format!("cannot read the memory map: {e:?}"))?;
+    let map_now = boot::memory_map(MemoryType::LOADER_DATA)
+        .map_err(|e| format!("cannot read the memory map: {e:?}"))?;
     let region_capacity = map_now.len() + 64;
     drop(map_now);
-    let info_bytes = core::mem::size_of::<BootInfo>() + region_capacity * core::mem::size_of::<MemoryRegion>();
+    let info_bytes =
+        core::mem::size_of::<BootInfo>() + region_capacity * core::mem::size_of::<MemoryRegion>();
     let info_pages = (info_bytes as u64).div_ceil(PAGE) as usize;
     let info_phys = allocate(MemoryKind::BOOT_INFO, info_pages)?;
     let regions_phys = info_phys + core::mem::size_of::<BootInfo>() as u64;
@@ -117,7 +122,12 @@ fn load() -> Result<core::convert::Infallible, String> {
         tsc_at_handoff: 0,
     };
     // SAFETY: `info_phys` is the start of our BOOT_INFO allocation, suitably aligned (page).
-    unsafe { (info_phys as *mut BootInfo).write(BootInfo { tsc_at_handoff: rdtsc(), ..info }) };
+    unsafe {
+        (info_phys as *mut BootInfo).write(BootInfo {
+            tsc_at_handoff: rdtsc(),
+            ..info
+        })
+    };
     core::mem::forget(final_map);
 
     // SAFETY: the kernel relies on NX (non-executable data) and on CR0.WP (read-only pages are
@@ -149,7 +159,10 @@ fn rdtsc() -> u64 {
 fn check_cpu() -> Result<(), String> {
     let cr4 = x86_64::registers::control::Cr4::read_raw();
     if cr4 & (1 << 12) != 0 {
-        return Err("the firmware enabled 5-level paging (CR4.LA57); this kernel needs 4-level paging".into());
+        return Err(
+            "the firmware enabled 5-level paging (CR4.LA57); this kernel needs 4-level paging"
+                .into(),
+        );
     }
     Ok(())
 }
@@ -160,15 +173,26 @@ fn read_file(name: &CStr16) -> Result<alloc::vec::Vec<u8>, String> {
     let mut fs = uefi::fs::FileSystem::new(fs);
     fs.read(name).map_err(|e| match e {
         uefi::fs::Error::Io(io) if io.uefi_error.status() == Status::NOT_FOUND => {
-            format!("{name} not found on the ESP (expected next to EFI/BOOT/BOOTX64.EFI's volume root)")
+            format!(
+                "{name} not found on the ESP (expected next to EFI/BOOT/BOOTX64.EFI's volume root)"
+            )
         }
         other => format!("cannot read {name} from the ESP: {other}"),
     })
 }
 
 fn allocate(kind: MemoryKind, pages: usize) -> Result<u64, String> {
-    let ptr = boot::allocate_pages(AllocateType::AnyPages, MemoryType::custom(kind.uefi_type()), pages)
-        .map_err(|e| format!("out of memory allocating {pages} pages for {}: {e:?}", kind.name()))?;
+    let ptr = boot::allocate_pages(
+        AllocateType::AnyPages,
+        MemoryType::custom(kind.uefi_type()),
+        pages,
+    )
+    .map_err(|e| {
+        format!(
+            "out of memory allocating {pages} pages for {}: {e:?}",
+            kind.name()
+        )
+    })?;
     // SAFETY: fresh allocation of `pages` pages, identity-mapped by the firmware.
     unsafe { core::ptr::write_bytes(ptr.as_ptr(), 0, pages * PAGE as usize) };
     Ok(ptr.as_ptr() as u64)
@@ -194,17 +218,31 @@ fn load_kernel(file: &[u8], tables: &mut PageTableBuilder) -> Result<(u64, u64),
         if segment.get_type() != Ok(SegmentType::Load) || segment.mem_size() == 0 {
             continue;
         }
-        let (vaddr, memsz, filesz, offset) =
-            (segment.virtual_addr(), segment.mem_size(), segment.file_size(), segment.offset());
+        let (vaddr, memsz, filesz, offset) = (
+            segment.virtual_addr(),
+            segment.mem_size(),
+            segment.file_size(),
+            segment.offset(),
+        );
         let flags = segment.flags();
         if flags.is_write() && flags.is_execute() {
-            return Err(format!("kernel segment at {vaddr:#x} is writable and executable (W^X)"));
+            return Err(format!(
+                "kernel segment at {vaddr:#x} is writable and executable (W^X)"
+            ));
         }
         if vaddr < KERNEL_BASE || vaddr.checked_add(memsz).is_none() {
-            return Err(format!("kernel segment at {vaddr:#x} lies outside the top 2 GiB"));
+            return Err(format!(
+                "kernel segment at {vaddr:#x} lies outside the top 2 GiB"
+            ));
         }
-        if filesz > memsz || offset.checked_add(filesz).is_none_or(|end| end > file.len() as u64) {
-            return Err(format!("kernel segment at {vaddr:#x} has inconsistent sizes"));
+        if filesz > memsz
+            || offset
+                .checked_add(filesz)
+                .is_none_or(|end| end > file.len() as u64)
+        {
+            return Err(format!(
+                "kernel segment at {vaddr:#x} has inconsistent sizes"
+            ));
         }
         let first_page = vaddr & !(PAGE - 1);
         let pages = (vaddr + memsz - first_page).div_ceil(PAGE);
@@ -235,7 +273,9 @@ fn load_kernel(file: &[u8], tables: &mut PageTableBuilder) -> Result<(u64, u64),
         pages_used += pages;
     }
     if !entry_mapped_executable {
-        return Err(format!("kernel entry point {entry:#x} is not inside an executable segment"));
+        return Err(format!(
+            "kernel entry point {entry:#x} is not inside an executable segment"
+        ));
     }
     Ok((entry, pages_used))
 }
@@ -248,39 +288,58 @@ fn copy_system_image(image: &[u8]) -> Result<PhysRange, String> {
     let phys = allocate(MemoryKind::SYSTEM_IMAGE, pages as usize)?;
     // SAFETY: `phys` has room for `pages * PAGE >= image.len()` bytes.
     unsafe { core::ptr::copy_nonoverlapping(image.as_ptr(), phys as *mut u8, image.len()) };
-    Ok(PhysRange { start: phys, len: image.len() as u64 })
+    Ok(PhysRange {
+        start: phys,
+        len: image.len() as u64,
+    })
 }
 
 fn find_rsdp() -> u64 {
     uefi::system::with_config_table(|entries| {
-        let find = |guid| entries.iter().find(|e| e.guid == guid).map(|e| e.address as u64);
-        find(ConfigTableEntry::ACPI2_GUID).or_else(|| find(ConfigTableEntry::ACPI_GUID)).unwrap_or(0)
+        let find = |guid| {
+            entries
+                .iter()
+                .find(|e| e.guid == guid)
+                .map(|e| e.address as u64)
+        };
+        find(ConfigTableEntry::ACPI2_GUID)
+            .or_else(|| find(ConfigTableEntry::ACPI_GUID))
+            .unwrap_or(0)
     })
 }
 
 /// Bytes of physical address space to direct-map: everything the memory map lists, and at
 /// least 4 GiB so the local APIC, IOAPIC and HPET are reachable; rounded up to 1 GiB.
 fn direct_map_size() -> Result<u64, String> {
-    let map = boot::memory_map(MemoryType::LOADER_DATA).map_err(|e| format!("cannot read the memory map: {e:?}"))?;
-    let highest = map.entries().map(|d| d.phys_start + d.page_count * PAGE).max().unwrap_or(0);
+    let map = boot::memory_map(MemoryType::LOADER_DATA)
+        .map_err(|e| format!("cannot read the memory map: {e:?}"))?;
+    let highest = map
+        .entries()
+        .map(|d| d.phys_start + d.page_count * PAGE)
+        .max()
+        .unwrap_or(0);
     let size = highest.max(4 << 30).div_ceil(1 << 30) << 30;
     // One PML4 slot of direct map per 512 GiB; keep well clear of the kernel image's slot.
     if size > 64 << 40 {
-        return Err(format!("physical address space of {size:#x} bytes is larger than the 64 TiB direct map"));
+        return Err(format!(
+            "physical address space of {size:#x} bytes is larger than the 64 TiB direct map"
+        ));
     }
     Ok(size)
 }
 
 fn kind_of(ty: MemoryType) -> MemoryKind {
     match ty {
-        MemoryType::CONVENTIONAL | MemoryType::BOOT_SERVICES_CODE | MemoryType::BOOT_SERVICES_DATA => {
-            MemoryKind::USABLE
-        }
+        MemoryType::CONVENTIONAL
+        | MemoryType::BOOT_SERVICES_CODE
+        | MemoryType::BOOT_SERVICES_DATA => MemoryKind::USABLE,
         MemoryType::LOADER_CODE | MemoryType::LOADER_DATA => MemoryKind::LOADER,
         MemoryType::ACPI_RECLAIM => MemoryKind::ACPI_RECLAIMABLE,
         MemoryType::ACPI_NON_VOLATILE => MemoryKind::ACPI_NVS,
         MemoryType::MMIO | MemoryType::MMIO_PORT_SPACE => MemoryKind::MMIO,
-        MemoryType::RUNTIME_SERVICES_CODE | MemoryType::RUNTIME_SERVICES_DATA => MemoryKind::FIRMWARE_RUNTIME,
+        MemoryType::RUNTIME_SERVICES_CODE | MemoryType::RUNTIME_SERVICES_DATA => {
+            MemoryKind::FIRMWARE_RUNTIME
+        }
         other => {
             let ours = [
                 MemoryKind::KERNEL,
@@ -288,7 +347,9 @@ fn kind_of(ty: MemoryType) -> MemoryKind {
                 MemoryKind::SYSTEM_IMAGE,
                 MemoryKind::BOOT_INFO,
             ];
-            ours.into_iter().find(|k| k.uefi_type() == other.0).unwrap_or(MemoryKind::RESERVED)
+            ours.into_iter()
+                .find(|k| k.uefi_type() == other.0)
+                .unwrap_or(MemoryKind::RESERVED)
         }
     }
 }
@@ -298,7 +359,12 @@ fn kind_of(ty: MemoryType) -> MemoryKind {
 fn convert_memory_map(map: &impl MemoryMap, out: &mut [MemoryRegion]) -> usize {
     let mut count = 0;
     for desc in map.entries() {
-        let region = MemoryRegion { start: desc.phys_start, pages: desc.page_count, kind: kind_of(desc.ty), _reserved: 0 };
+        let region = MemoryRegion {
+            start: desc.phys_start,
+            pages: desc.page_count,
+            kind: kind_of(desc.ty),
+            _reserved: 0,
+        };
         // Insertion keeps `out` sorted by start; the firmware map is nearly sorted already.
         let mut at = count;
         while at > 0 && out[at - 1].start > region.start {

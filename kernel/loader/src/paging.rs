@@ -55,7 +55,9 @@ fn index(virt: u64, level: u32) -> usize {
 
 impl PageTableBuilder {
     pub fn new() -> Result<Self, String> {
-        Ok(Self { root: allocate(MemoryKind::PAGE_TABLES, 1)? })
+        Ok(Self {
+            root: allocate(MemoryKind::PAGE_TABLES, 1)?,
+        })
     }
 
     pub fn root(&self) -> u64 {
@@ -81,7 +83,9 @@ impl PageTableBuilder {
         }
         let leaf = &mut table(t)[index(virt, 0)];
         if *leaf & PRESENT != 0 {
-            return Err(format!("page {virt:#x} mapped twice (overlapping kernel segments?)"));
+            return Err(format!(
+                "page {virt:#x} mapped twice (overlapping kernel segments?)"
+            ));
         }
         *leaf = phys | PRESENT | flags.0;
         Ok(())

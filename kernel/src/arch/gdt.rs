@@ -31,7 +31,10 @@ pub struct Selectors {
 
 static TSS: Lazy<TaskStateSegment> = Lazy::new(|| {
     let mut tss = TaskStateSegment::new();
-    for (slot, ist) in [DOUBLE_FAULT_IST, NMI_IST, MACHINE_CHECK_IST].into_iter().enumerate() {
+    for (slot, ist) in [DOUBLE_FAULT_IST, NMI_IST, MACHINE_CHECK_IST]
+        .into_iter()
+        .enumerate()
+    {
         // SAFETY: only the address of the static is taken; the stacks are used exclusively by
         // the CPU when it delivers the corresponding exception.
         let base = unsafe { core::ptr::addr_of!(IST_STACKS[slot]) } as u64;
@@ -47,7 +50,16 @@ static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
     let user_data = gdt.append(Descriptor::user_data_segment());
     let user_code = gdt.append(Descriptor::user_code_segment());
     let tss = gdt.append(Descriptor::tss_segment(&TSS));
-    (gdt, Selectors { kernel_code, kernel_data, user_data, user_code, tss })
+    (
+        gdt,
+        Selectors {
+            kernel_code,
+            kernel_data,
+            user_data,
+            user_code,
+            tss,
+        },
+    )
 });
 
 pub fn init() {

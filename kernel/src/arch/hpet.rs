@@ -18,7 +18,10 @@ impl Hpet {
     /// # Safety
     /// `phys` must be the register base of an HPET (from the ACPI HPET table).
     pub unsafe fn new(phys: u64) -> Option<Self> {
-        let mut hpet = Self { base: phys_to_virt(phys), period_fs: 0 };
+        let mut hpet = Self {
+            base: phys_to_virt(phys),
+            period_fs: 0,
+        };
         hpet.period_fs = hpet.register(CAPABILITIES).read() >> 32;
         // The specification caps the period at 100 ns; 0 or more means no usable HPET.
         if hpet.period_fs == 0 || hpet.period_fs > 100_000_000 {
@@ -32,7 +35,11 @@ impl Hpet {
     fn register(&self, offset: usize) -> VolatilePtr<'_, u64> {
         // SAFETY: `base` maps the HPET register block (constructor contract); the offsets are
         // 64-bit registers of its general block.
-        unsafe { VolatilePtr::new(NonNull::new_unchecked((self.base as usize + offset) as *mut u64)) }
+        unsafe {
+            VolatilePtr::new(NonNull::new_unchecked(
+                (self.base as usize + offset) as *mut u64,
+            ))
+        }
     }
 
     pub fn frequency_hz(&self) -> u64 {

@@ -83,7 +83,10 @@ pub fn exception_name(vector: u64) -> (&'static str, &'static str) {
         ("#SX", "security exception"),
         ("#31", "reserved"),
     ];
-    NAMES.get(vector as usize).copied().unwrap_or(("#??", "not an exception"))
+    NAMES
+        .get(vector as usize)
+        .copied()
+        .unwrap_or(("#??", "not an exception"))
 }
 
 #[unsafe(naked)]
@@ -156,9 +159,9 @@ stub!(spurious, SPURIOUS_VECTOR);
 type Stub = unsafe extern "sysv64" fn();
 
 const EXCEPTION_STUBS: [Stub; 32] = [
-    vec0, vec1, vec2, vec3, vec4, vec5, vec6, vec7, vec8, vec9, vec10, vec11, vec12, vec13, vec14, vec15,
-    vec16, vec17, vec18, vec19, vec20, vec21, vec22, vec23, vec24, vec25, vec26, vec27, vec28, vec29,
-    vec30, vec31,
+    vec0, vec1, vec2, vec3, vec4, vec5, vec6, vec7, vec8, vec9, vec10, vec11, vec12, vec13, vec14,
+    vec15, vec16, vec17, vec18, vec19, vec20, vec21, vec22, vec23, vec24, vec25, vec26, vec27,
+    vec28, vec29, vec30, vec31,
 ];
 
 /// One 16-byte interrupt-gate descriptor.
@@ -246,11 +249,39 @@ fn fatal_exception(frame: &TrapFrame) -> ! {
         frame.error_code
     );
     let cr2 = x86_64::registers::control::Cr2::read_raw();
-    kprintln!("  rip={:#018x} rsp={:#018x} cr2={cr2:#018x} rflags={:#x}", frame.rip, frame.rsp, frame.rflags);
-    kprintln!("  rax={:#018x} rbx={:#018x} rcx={:#018x} rdx={:#018x}", frame.rax, frame.rbx, frame.rcx, frame.rdx);
-    kprintln!("  rsi={:#018x} rdi={:#018x} rbp={:#018x} r8 ={:#018x}", frame.rsi, frame.rdi, frame.rbp, frame.r8);
-    kprintln!("  r9 ={:#018x} r10={:#018x} r11={:#018x} r12={:#018x}", frame.r9, frame.r10, frame.r11, frame.r12);
-    kprintln!("  r13={:#018x} r14={:#018x} r15={:#018x}", frame.r13, frame.r14, frame.r15);
+    kprintln!(
+        "  rip={:#018x} rsp={:#018x} cr2={cr2:#018x} rflags={:#x}",
+        frame.rip,
+        frame.rsp,
+        frame.rflags
+    );
+    kprintln!(
+        "  rax={:#018x} rbx={:#018x} rcx={:#018x} rdx={:#018x}",
+        frame.rax,
+        frame.rbx,
+        frame.rcx,
+        frame.rdx
+    );
+    kprintln!(
+        "  rsi={:#018x} rdi={:#018x} rbp={:#018x} r8 ={:#018x}",
+        frame.rsi,
+        frame.rdi,
+        frame.rbp,
+        frame.r8
+    );
+    kprintln!(
+        "  r9 ={:#018x} r10={:#018x} r11={:#018x} r12={:#018x}",
+        frame.r9,
+        frame.r10,
+        frame.r11,
+        frame.r12
+    );
+    kprintln!(
+        "  r13={:#018x} r14={:#018x} r15={:#018x}",
+        frame.r13,
+        frame.r14,
+        frame.r15
+    );
     kprintln!("kernel: fatal exception, halting with failure");
     crate::qemu::exit(crate::qemu::ExitCode::Failure)
 }

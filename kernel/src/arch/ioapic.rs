@@ -19,13 +19,19 @@ impl IoApic {
     /// # Safety
     /// `phys` must be the register base of an IOAPIC (as listed in the MADT).
     pub unsafe fn new(phys: u64) -> Self {
-        Self { base: phys_to_virt(phys) }
+        Self {
+            base: phys_to_virt(phys),
+        }
     }
 
     fn register(&self, offset: usize) -> VolatilePtr<'_, u32> {
         // SAFETY: `base` maps the IOAPIC's register page (constructor contract); offsets are
         // the two architectural 32-bit registers.
-        unsafe { VolatilePtr::new(NonNull::new_unchecked((self.base as usize + offset) as *mut u32)) }
+        unsafe {
+            VolatilePtr::new(NonNull::new_unchecked(
+                (self.base as usize + offset) as *mut u32,
+            ))
+        }
     }
 
     fn read(&self, index: u32) -> u32 {

@@ -94,7 +94,7 @@ impl FrameAllocator {
 
     /// Returns a frame previously obtained from [`allocate`](Self::allocate).
     pub fn free(&mut self, frame: u64, links: &mut impl FrameLinks) {
-        debug_assert!(frame % PAGE == 0 && frame != NONE);
+        debug_assert!(frame.is_multiple_of(PAGE) && frame != NONE);
         links.set_next(frame, self.free_list);
         self.free_list = frame;
         self.free_frames += 1;
@@ -131,24 +131,32 @@ mod tests {
     }
 
     fn region(start: u64, pages: u64, kind: MemoryKind) -> MemoryRegion {
-        MemoryRegion { start, pages, kind, _reserved: 0 }
+        MemoryRegion {
+            start,
+            pages,
+            kind,
+            _reserved: 0,
+        }
     }
 
     #[test]
     fn hands_out_only_usable_frames_above_the_floor() {
         let map = [
-            region(0, 16, MemoryKind::USABLE),           // below the 1 MiB floor
-            region(0x10_0000, 2, MemoryKind::USABLE),    // 2 frames
-            region(0x10_2000, 4, MemoryKind::KERNEL),    // reserved
+            region(0, 16, MemoryKind::USABLE),        // below the 1 MiB floor
+            region(0x10_0000, 2, MemoryKind::USABLE), // 2 frames
+            region(0x10_2000, 4, MemoryKind::KERNEL), // reserved
             region(0x20_0000, 1, MemoryKind::SYSTEM_IMAGE),
-            region(0x30_0000, 3, MemoryKind::USABLE),    // 3 frames
+            region(0x30_0000, 3, MemoryKind::USABLE), // 3 frames
             region(0x40_0000, 8, MemoryKind::ACPI_RECLAIMABLE),
         ];
         let mut a = FrameAllocator::new(&map, 0x10_0000);
         assert_eq!(a.total_frames(), 5);
         let links = FakeLinks::default();
         let got: Vec<u64> = std::iter::from_fn(|| a.allocate(&links)).collect();
-        assert_eq!(got, vec![0x10_0000, 0x10_1000, 0x30_0000, 0x30_1000, 0x30_2000]);
+        assert_eq!(
+            got,
+            vec![0x10_0000, 0x10_1000, 0x30_0000, 0x30_1000, 0x30_2000]
+        );
         assert_eq!(a.free_frames(), 0);
         assert_eq!(a.allocate(&links), None);
     }
@@ -177,8 +185,9 @@ mod tests {
 
     #[test]
     fn too_many_ranges_are_counted_not_lost_silently() {
-        let map: Vec<MemoryRegion> =
-            (0..MAX_RANGES as u64 + 3).map(|i| region(0x100_0000 + i * 0x2000, 1, MemoryKind::USABLE)).collect();
+        let map: Vec<MemoryRegion> = (0..MAX_RANGES as u64 + 3)
+            .map(|i| region(0x100_0000 + i * 0x2000, 1, MemoryKind::USABLE))
+            .collect();
         let a = FrameAllocator::new(&map, 0);
         assert_eq!(a.ignored_ranges(), 3);
         assert_eq!(a.total_frames(), MAX_RANGES as u64);
