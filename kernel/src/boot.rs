@@ -161,6 +161,16 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         kprintln!("sysimg:   {:<24} {:>8} bytes", entry.name, entry.data.len());
     }
 
+    let Some(syssw) = image.find("syssw") else {
+        panic!("system.img has no 'syssw' entry (the root task)")
+    };
+    crate::arch::cpu::enable_sse_for_user();
+    crate::arch::syscall::init();
+    let entry =
+        crate::task::create_root(syssw.data, info.system_image.start, info.system_image.len)
+            .unwrap_or_else(|e| panic!("cannot create the root task from 'syssw': {e:?}"));
+    kprintln!("task: root task 'syssw' loaded, entry {entry:#x}");
+
     kprintln!(
         "heap: {} bytes of {} KiB used at boot; sealed",
         heap.used(),
@@ -172,7 +182,15 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     #[cfg(feature = "test-hooks")]
     crate::test_hooks::run(&image, apic_timer_hz);
 
-    idle()
+    // SAFETY: the root task's address space is active and maps `entry` and its stack.
+    unsafe {
+        crate::arch::usermode::enter_user(
+            entry,
+            abi::syscall::ROOT_STACK_TOP - 8,
+            abi::syscall::ROOT_SYSTEM_IMAGE_BASE,
+            info.system_image.len,
+        )
+    }
 }
 
 fn log_memory_summary(regions: &[MemoryRegion]) {
@@ -297,7 +315,9 @@ fn prove_timer(apic_timer_hz: u64) {
 }
 
 /// Nothing left to do on this CPU: sleep until an interrupt (none is enabled yet).
-fn idle() -> ! {
+pub fn idle() -> ! {
+    #[cfg(feature = "test-hooks")]
+    crate::test_hooks::on_idle();
     loop {
         x86_64::instructions::interrupts::enable_and_hlt();
     }

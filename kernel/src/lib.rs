@@ -17,6 +17,8 @@ pub mod heap;
 pub mod log;
 pub mod mem;
 pub mod qemu;
+pub mod syscall;
+pub mod task;
 pub mod time;
 
 #[cfg(feature = "test-hooks")]

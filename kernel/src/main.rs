@@ -4,15 +4,8 @@
 #![no_main]
 #![forbid(unsafe_op_in_unsafe_fn)]
 
+use kernel::arch::stack::{KERNEL_STACK, KERNEL_STACK_SIZE};
 use kernel::{boot, heap, kprintln, log, qemu};
-
-const BOOT_STACK_SIZE: usize = 64 * 1024;
-
-#[repr(C, align(16))]
-struct BootStack([u8; BOOT_STACK_SIZE]);
-
-/// The one kernel stack (the kernel is non-preemptible; see DESIGN.md section 6).
-static mut BOOT_STACK: BootStack = BootStack([0; BOOT_STACK_SIZE]);
 
 #[global_allocator]
 static HEAP: heap::BootHeap = heap::BootHeap::new();
@@ -30,8 +23,8 @@ pub unsafe extern "sysv64" fn _start(boot_info: u64) -> ! {
         "xor ebp, ebp",
         "call {main}",
         "ud2",
-        stack = sym BOOT_STACK,
-        size = const BOOT_STACK_SIZE,
+        stack = sym KERNEL_STACK,
+        size = const KERNEL_STACK_SIZE,
         main = sym kernel_entry,
     )
 }

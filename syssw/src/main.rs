@@ -4,25 +4,29 @@
 //! resource (memory, I/O ports, time windows, kernel memory) to the partitions, own the
 //! inter-partition ports and the health monitor. It must never allocate after start-up.
 //!
-//! Stage: the kernel does not start user tasks yet (boot foundation); this binary is packed
-//! into `system.img` so the image layout and the user-mode build are exercised end to end.
+//! Stage: the kernel starts it as the root task with the system image mapped read-only; it
+//! checks the image and reports what it holds. Partitions come with the configuration.
 #![no_std]
 #![no_main]
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
 
-// SAFETY: `_start` is the ELF entry symbol; nothing else defines it (no C start files).
-#[allow(unsafe_code)]
-#[unsafe(no_mangle)]
-pub extern "C" fn _start() -> ! {
-    loop {
-        core::hint::spin_loop();
-    }
-}
+use user_rt::abi::sysimg::SystemImage;
+use user_rt::println;
 
-#[panic_handler]
-fn panic(_: &core::panic::PanicInfo) -> ! {
-    loop {
-        core::hint::spin_loop();
+user_rt::entry!(main);
+
+fn main(image_base: u64, image_len: u64) {
+    let bytes = user_rt::system_image(image_base, image_len);
+    match SystemImage::parse(bytes) {
+        Ok(image) => println!(
+            "syssw: root task started; system image {} bytes, {} entries",
+            image.size(),
+            image.len()
+        ),
+        Err(e) => {
+            println!("syssw: system image rejected: {e}");
+            let _ = user_rt::sys::system_halt(false);
+        }
     }
 }

@@ -95,3 +95,21 @@ pub fn build(release: bool, variant: KernelVariant) -> Result<Artifacts> {
         syssw: target.join("user").join("syssw"),
     })
 }
+
+/// Builds user-mode programs (syssw's kind of binary: freestanding static ELF, `user`
+/// profile) by package name and returns their paths, in order.
+pub fn build_user_programs(packages: &[String]) -> Result<Vec<PathBuf>> {
+    if packages.is_empty() {
+        return Ok(Vec::new());
+    }
+    let mut cmd = cargo();
+    cmd.args(["build", "--quiet", "--profile", "user"]);
+    for p in packages {
+        cmd.args(["-p", p]);
+    }
+    run(cmd, &format!("user programs {}", packages.join(", ")))?;
+    Ok(packages
+        .iter()
+        .map(|p| crate::target_dir().join("user").join(p))
+        .collect())
+}

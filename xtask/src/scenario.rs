@@ -6,6 +6,9 @@
 //! hook = "exit-on-ready"        # kernel test hook (system image entry `test/hook`)
 //! config = "config/systems/default.toml"   # optional, relative to the workspace root
 //! timeout_secs = 60             # optional, default 60
+//! root_task = "test-usermode"   # optional: a test program (package under tests/programs)
+//!                               # replaces syssw as the root task
+//! entries = { "test/mode" = "kernel-read" }   # optional extra system-image entries (text)
 //! ```
 
 use anyhow::{Context, Result};
@@ -22,6 +25,10 @@ pub struct Manifest {
     pub config: Option<PathBuf>,
     #[serde(default = "default_timeout")]
     pub timeout_secs: u64,
+    #[serde(default)]
+    pub root_task: Option<String>,
+    #[serde(default)]
+    pub entries: std::collections::BTreeMap<String, String>,
 }
 
 fn default_timeout() -> u64 {

@@ -40,6 +40,8 @@ static TSS: Lazy<TaskStateSegment> = Lazy::new(|| {
         let base = unsafe { core::ptr::addr_of!(IST_STACKS[slot]) } as u64;
         tss.interrupt_stack_table[ist as usize - 1] = VirtAddr::new(base + IST_STACK_SIZE as u64);
     }
+    // Interrupts and exceptions from ring 3 start on the (one) kernel stack.
+    tss.privilege_stack_table[0] = VirtAddr::new(super::stack::top());
     tss
 });
 

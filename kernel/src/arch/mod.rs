@@ -10,3 +10,6 @@ pub mod lapic;
 pub mod pic;
 pub mod pit;
 pub mod serial;
+pub mod stack;
+pub mod syscall;
+pub mod usermode;

@@ -1,0 +1,100 @@
+//! Test program run as the root task: checks the user-mode basics and each system call's
+//! success and error paths, then ends the run. With argument `kernel-read` (system image
+//! entry `test/mode`) it instead reads kernel memory, which must fault.
+#![no_std]
+#![no_main]
+#![forbid(unsafe_op_in_unsafe_fn)]
+
+use user_rt::abi::syscall::{Call, DEBUG_WRITE_MAX, Error};
+use user_rt::abi::sysimg::SystemImage;
+use user_rt::{println, sys};
+
+user_rt::entry!(main);
+
+fn expect(what: &str, ok: bool) {
+    if ok {
+        println!("check ok: {what}");
+    } else {
+        println!("check FAILED: {what}");
+        let _ = sys::system_halt(false);
+    }
+}
+
+fn main(image_base: u64, image_len: u64) {
+    let image =
+        SystemImage::parse(user_rt::system_image(image_base, image_len)).expect("system image");
+    let mode = image.find("test/mode").map(|e| e.data).unwrap_or(b"");
+    if mode == b"kernel-read" {
+        println!("reading kernel memory at 0xffffffff80000000");
+        #[allow(unsafe_code)]
+        // SAFETY: deliberately invalid: the kernel half is supervisor-only, so this must fault.
+        let value = unsafe { core::ptr::read_volatile(0xffff_ffff_8000_0000 as *const u64) };
+        expect(
+            &format_args!("kernel memory unreadable (read {value:#x})")
+                .as_str()
+                .unwrap_or("kernel memory unreadable"),
+            false,
+        );
+        return;
+    }
+
+    expect(
+        "debug_write of a user buffer",
+        sys::debug_write(b"hello from ring 3").is_ok(),
+    );
+    let t0 = sys::clock();
+    let t1 = sys::clock();
+    expect("clock is monotonic and running", t1 >= t0 && t0 > 0);
+    expect(
+        "debug_write of a kernel address is BadAddress",
+        sys::debug_write(unsafe_kernel_slice()) == Err(Error::BadAddress),
+    );
+    let (rax, ..) = sys::raw(Call::DebugWrite as u64, 0, 16, 0, 0);
+    expect(
+        "debug_write of a null pointer is BadAddress",
+        rax == Error::BadAddress as u64,
+    );
+    let (rax, ..) = sys::raw(
+        Call::DebugWrite as u64,
+        image_base,
+        DEBUG_WRITE_MAX + 1,
+        0,
+        0,
+    );
+    expect(
+        "debug_write longer than the limit is InvalidArgument",
+        rax == Error::InvalidArgument as u64,
+    );
+    let (rax, ..) = sys::raw(999, 0, 0, 0, 0);
+    expect(
+        "unknown call number is InvalidCall",
+        rax == Error::InvalidCall as u64,
+    );
+    let (rax, ..) = sys::raw(Call::SystemHalt as u64, 7, 0, 0, 0);
+    expect(
+        "system_halt with a bad outcome is InvalidArgument",
+        rax == Error::InvalidArgument as u64,
+    );
+
+    // Callee-saved registers and SSE state survive a system call.
+    let x = core::hint::black_box(1.5f64);
+    let before = core::hint::black_box(x * 3.0);
+    sys::clock();
+    expect(
+        "floating point works and survives a syscall",
+        before == 4.5 && x * x == 2.25,
+    );
+
+    println!("all user-mode checks passed");
+    let _ = sys::system_halt(true);
+}
+
+/// A slice pointing into the kernel half: only its address is passed to the kernel, which
+/// must refuse it; it is never dereferenced here.
+fn unsafe_kernel_slice() -> &'static [u8] {
+    #[allow(unsafe_code)]
+    // SAFETY: never read by this program; the kernel checks the range before copying.
+    unsafe {
+        core::slice::from_raw_parts(0xffff_ffff_8000_0000 as *const u8, 8)
+    }
+}
