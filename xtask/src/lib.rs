@@ -8,6 +8,7 @@
 #![deny(unsafe_code)]
 
 pub mod artifacts;
+pub mod bench;
 pub mod esp;
 pub mod qemu;
 pub mod scenario;

@@ -40,6 +40,9 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
+    /// Run the benchmarks (kernel under QEMU, soft-PLC VM on the host); writes
+    /// target/bench/report.json.
+    Bench,
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
         filter: Option<String>,
@@ -66,6 +69,7 @@ fn main() -> ExitCode {
             timeout,
             release,
         } => run(config, timeout, release),
+        Cmd::Bench => bench(),
         Cmd::Test {
             filter,
             scenarios_only,
@@ -214,4 +218,45 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
         args.push(f);
     }
     cargo_test(&args)
+}
+
+fn bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let mut artifacts = artifacts::build(true, KernelVariant::Production)?;
+    artifacts.syssw = artifacts::build_user_programs(&["bench-kernel".to_string()])?.remove(0);
+    let dir = xtask::target_dir().join("bench");
+    let esp_dir = esp::assemble(
+        &dir.join("esp"),
+        &artifacts,
+        &esp::standard_entries(&artifacts, None),
+    )?;
+    eprintln!("xtask: booting the kernel benchmark system");
+    let outcome = qemu::run(
+        &qemu,
+        &RunOptions {
+            esp: esp_dir,
+            timeout: Some(Duration::from_secs(300)),
+            echo: false,
+            work_dir: dir.join("state"),
+        },
+    )?;
+    if !outcome.succeeded() {
+        bail!(
+            "the benchmark system did not finish cleanly\n{}",
+            outcome.transcript()
+        );
+    }
+    let mut metrics: Vec<_> = outcome
+        .lines
+        .iter()
+        .filter_map(|l| xtask::bench::parse_line(l))
+        .collect();
+    eprintln!("xtask: running the host benchmarks");
+    metrics.extend(xtask::bench::host_metrics()?);
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report(&metrics)?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
 }

@@ -1,0 +1,128 @@
+//! `cargo xtask bench`: boots the kernel benchmark system and runs the host benchmarks,
+//! prints one line per metric and writes `target/bench/report.json`.
+//!
+//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio> samples=<n>`.
+
+use anyhow::{Context, Result, bail};
+use serde::Serialize;
+use std::process::Command;
+
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct Metric {
+    pub name: String,
+    pub median: f64,
+    pub min: f64,
+    pub max: f64,
+    pub unit: String,
+    pub samples: u64,
+}
+
+/// Parses the `bench ...` part of a line (anything before `bench ` is ignored, so kernel-log
+/// prefixes do not matter). `None` for lines that are not metrics.
+pub fn parse_line(line: &str) -> Option<Metric> {
+    let rest = &line[line.find("bench ")? + "bench ".len()..];
+    let mut words = rest.split_whitespace();
+    let name = words.next()?.to_string();
+    let mut m = Metric {
+        name,
+        median: f64::NAN,
+        min: f64::NAN,
+        max: f64::NAN,
+        unit: String::new(),
+        samples: 0,
+    };
+    for word in words {
+        let (key, value) = word.split_once('=')?;
+        match key {
+            "median" => m.median = value.parse().ok()?,
+            "min" => m.min = value.parse().ok()?,
+            "max" => m.max = value.parse().ok()?,
+            "unit" => m.unit = value.to_string(),
+            "samples" => m.samples = value.parse().ok()?,
+            _ => return None,
+        }
+    }
+    let complete = !m.median.is_nan()
+        && !m.min.is_nan()
+        && !m.max.is_nan()
+        && !m.unit.is_empty()
+        && m.samples > 0;
+    complete.then_some(m)
+}
+
+pub fn format_line(m: &Metric) -> String {
+    format!(
+        "bench {} median={} min={} max={} unit={} samples={}",
+        m.name, m.median, m.min, m.max, m.unit, m.samples
+    )
+}
+
+/// Runs the host-side benchmark binaries that exist (the soft-PLC VM's).
+pub fn host_metrics() -> Result<Vec<Metric>> {
+    let root = crate::workspace_root();
+    if !root
+        .join("partitions/softplc/compiler/src/bin/plc-bench.rs")
+        .exists()
+    {
+        return Ok(Vec::new());
+    }
+    let out = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
+        .current_dir(&root)
+        .args([
+            "run",
+            "--quiet",
+            "--release",
+            "-p",
+            "plc-compiler",
+            "--bin",
+            "plc-bench",
+        ])
+        .output()
+        .context("cannot run plc-bench")?;
+    if !out.status.success() {
+        bail!("plc-bench failed: {}", String::from_utf8_lossy(&out.stderr));
+    }
+    Ok(String::from_utf8_lossy(&out.stdout)
+        .lines()
+        .filter_map(parse_line)
+        .collect())
+}
+
+pub fn write_report(metrics: &[Metric]) -> Result<std::path::PathBuf> {
+    let dir = crate::target_dir().join("bench");
+    std::fs::create_dir_all(&dir)?;
+    let path = dir.join("report.json");
+    std::fs::write(&path, serde_json::to_string_pretty(metrics)?)?;
+    Ok(path)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_metric_lines_with_any_prefix() {
+        let m = parse_line("[   1.0] [syssw] bench null_syscall median=1200 min=900 max=40000 unit=cycles samples=10000").unwrap();
+        assert_eq!(m.name, "null_syscall");
+        assert_eq!(
+            (m.median, m.min, m.max, m.samples),
+            (1200.0, 900.0, 40000.0, 10000)
+        );
+        assert_eq!(m.unit, "cycles");
+        assert_eq!(
+            format_line(&m),
+            "bench null_syscall median=1200 min=900 max=40000 unit=cycles samples=10000"
+        );
+        let r =
+            parse_line("bench plc_vm_pid_ratio median=2.5 min=2.1 max=3.75 unit=ratio samples=50")
+                .unwrap();
+        assert_eq!(r.median, 2.5);
+    }
+
+    #[test]
+    fn ignores_other_lines_and_incomplete_metrics() {
+        assert!(parse_line("kernel: ready").is_none());
+        assert!(parse_line("bench x median=1 unit=ns").is_none());
+        assert!(parse_line("bench x median=1 min=1 max=1 unit=ns samples=1 bogus=2").is_none());
+    }
+}
