@@ -207,11 +207,12 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
                 data: text.clone().into_bytes(),
             });
         }
-        esp::assemble(
+        let esp_dir = esp::assemble(
             &scenario::output_dir().join(&s.name).join("esp"),
             &artifacts,
             &entries,
         )?;
+        s.manifest.damage(&esp_dir)?;
     }
     let mut args = vec!["-p", "scenarios", "--"];
     if let Some(f) = filter {

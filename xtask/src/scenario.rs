@@ -9,6 +9,8 @@
 //! root_task = "test-usermode"   # optional: a test program (package under tests/programs)
 //!                               # replaces syssw as the root task
 //! entries = { "test/mode" = "kernel-read" }   # optional extra system-image entries (text)
+//! remove_files = ["kernel.elf"] # optional: ESP files to delete (loader error tests)
+//! corrupt_system_image = true   # optional: flip a byte of system.img after building it
 //! ```
 
 use anyhow::{Context, Result};
@@ -29,6 +31,28 @@ pub struct Manifest {
     pub root_task: Option<String>,
     #[serde(default)]
     pub entries: std::collections::BTreeMap<String, String>,
+    #[serde(default)]
+    pub remove_files: Vec<PathBuf>,
+    #[serde(default)]
+    pub corrupt_system_image: bool,
+}
+
+impl Manifest {
+    /// Applies the deliberate damage the manifest asks for to an assembled ESP.
+    pub fn damage(&self, esp: &Path) -> Result<()> {
+        for file in &self.remove_files {
+            std::fs::remove_file(esp.join(file))
+                .with_context(|| format!("cannot remove {} from the ESP", file.display()))?;
+        }
+        if self.corrupt_system_image {
+            let path = esp.join("system.img");
+            let mut bytes = std::fs::read(&path)?;
+            let last = bytes.len() - 1;
+            bytes[last] ^= 0xff;
+            std::fs::write(&path, bytes)?;
+        }
+        Ok(())
+    }
 }
 
 fn default_timeout() -> u64 {
