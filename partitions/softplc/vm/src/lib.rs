@@ -35,13 +35,52 @@
 //! * **Builtins** (`CALL_BUILTIN id`, [`isa::Builtin`]): math for REAL/LREAL and STRING functions
 //!   working on string variables in data memory (`max_len u16, len u16, bytes[max_len]`).
 //! * **Checks**: `CHK_INDEX lo hi` (INDEX_OUT_OF_BOUNDS), `CHK_RANGE_S/U lo hi`
-//!   (SUBRANGE_VIOLATION) leave the checked value on the stack.
+//!   (SUBRANGE_VIOLATION) leave the checked value on the stack; `INDEX lo hi stride` computes an
+//!   array element address with the index check in one instruction.
+//! * **Fused forms** (`INDEX`, `ADD_IMM`, `JUMP_IF`, `JUMP_IF_NOT`) exist only to cut dispatches;
+//!   the builder produces them from the plain sequences automatically.
+//!
+//! # Semantics worth knowing
+//!
+//! * A trapping instruction has **no effect**: the stack, data memory and `pc` are as before it
+//!   (a fault reports that `pc`; a caught trap then unwinds as described above).
+//! * The watchdog counts executed instructions; the budget is exact (a cycle of N instructions
+//!   needs a budget >= N).
+//! * Float division by zero traps DIVISION_BY_ZERO (rather than producing infinity);
+//!   float->integer conversions trap NUMERIC_ERROR for NaN, infinities and out-of-range values;
+//!   `REAL_TO_INT`-style rounding is to nearest with ties **away from zero** (2.5 -> 3).
+//! * Everything is deterministic: the math library ([`fmath`]) uses only IEEE basic operations.
+//!
+//! # Limits
+//!
+//! | what | limit |
+//! |---|---|
+//! | operand stack | `Memory::stack.len()` cells (STACK_OVERFLOW); per POU activation at most [`verify::MAX_POU_STACK`] (verifier) |
+//! | call depth | `Memory::calls.len()` frames including the task's own (CALL_DEPTH) |
+//! | open try blocks | `Memory::tries.len()` (STACK_OVERFLOW); per POU [`verify::MAX_TRY_NESTING`] (verifier) |
+//! | tasks | [`verify::MAX_TASKS`] |
+//! | string results | [`builtins::MAX_STRING_LEN`] bytes |
+//! | data memory | `u32` addresses |
 //!
 //! # Using it
 //!
-//! Compiler: [`image::ImageBuilder`] (feature `alloc`) → bytes. Runtime: [`image::Image::parse`]
-//! → [`verify::verify`] → [`vm::Machine::new`] with caller-provided memory → `run_cycle`.
-//! The executable reference model is [`model`] (feature `model`, needs `alloc`).
+//! Compiler: `image::ImageBuilder` (feature `alloc`) → bytes. Runtime: [`image::Image::parse`]
+//! → `verify::verify` (feature `alloc`) or [`verify::verify_with_scratch`] (no allocation) →
+//! [`vm::Machine::new`] with caller-provided memory → [`vm::Machine::run_cycle`]; monitor with
+//! [`vm::Machine::read_var`] / [`vm::Machine::write_var`]. The executable reference model is
+//! `model::Model` (feature `model`, needs `alloc`).
+//!
+//! ```text
+//! let image = Image::parse(&bytes)?;
+//! let verified = plc_vm::verify::verify(&image)?;
+//! let mut data = vec![0u8; image.data_size() as usize];
+//! let (mut stack, mut calls, mut tries) = ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+//! let mut machine = Machine::new(verified, Memory { data: &mut data, stack: &mut stack, calls: &mut calls, tries: &mut tries })?;
+//! match machine.run_cycle(0, now_ns) {
+//!     Ok(stats) => {}
+//!     Err(fault) => { /* set safe outputs; fault.trap, fault.location */ }
+//! }
+//! ```
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
@@ -52,18 +91,21 @@ extern crate alloc;
 #[cfg(test)]
 extern crate std;
 
+pub mod builtins;
+pub mod fmath;
 pub mod image;
 pub mod isa;
 pub mod verify;
-pub mod builtins;
-pub mod fmath;
 pub mod vm;
 
 pub use image::{Image, ImageError};
 pub use isa::{Builtin, MemType, Opcode, RoundMode, Trap};
-pub use verify::{VerifiedImage, VerifyError, verify_with_scratch};
 #[cfg(any(feature = "alloc", test))]
 pub use verify::verify;
+pub use verify::{VerifiedImage, VerifyError, verify_with_scratch};
 pub use vm::{CallFrame, CycleStats, Fault, Machine, Memory, TryFrame, Value};
 #[cfg(any(feature = "model", test))]
 pub mod model;
+
+#[cfg(test)]
+mod tests;

@@ -4,15 +4,18 @@
 //! `Vec`s (code, data memory, operand stack, call stack, try stack) plus registers, every
 //! instruction is decoded from raw bytes in one big `match`, and the "a trapping instruction
 //! has no effect" rule is implemented by working on a copy of the operand stack that is only
-//! committed when the instruction succeeds. It shares with the VM only the ISA definitions,
-//! the table parser ([`Image`]) and the standard-function library ([`crate::builtins`],
-//! [`crate::fmath`]), which have their own tests.
+//! committed when the instruction succeeds. The STRING builtins are re-implemented here
+//! with `Vec`s and `format!` ([`string_builtin`]); the model shares with the VM only the ISA
+//! definitions, the table parser ([`Image`]), the math library ([`crate::fmath`], tested
+//! against `std`) and the float formatting of `*_TO_STRING` (core's `Display`).
 //!
 //! Use it side by side with the VM: same image, same limits, then compare
 //! [`Model::data`], [`Model::stack`], [`Model::pc`] and the cycle results.
 
 use crate::image::Image;
 use crate::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
+use alloc::format;
+use alloc::string::String;
 use alloc::vec;
 use alloc::vec::Vec;
 
@@ -40,7 +43,6 @@ pub enum ModelCycle {
 /// The reference machine.
 pub struct Model<'a> {
     image: Image<'a>,
-    code: Vec<u8>,
     data: Vec<u8>,
     stack: Vec<u64>,
     calls: Vec<(u32, u32)>,
@@ -66,12 +68,16 @@ fn imm_u64(code: &[u8], at: usize) -> u64 {
 impl<'a> Model<'a> {
     /// A model of a **verified** image with the given limits (the lengths of the VM's
     /// `Memory::stack`, `Memory::calls`, `Memory::tries`).
-    pub fn new(image: &crate::verify::VerifiedImage<'a>, stack_limit: usize, call_limit: usize, try_limit: usize) -> Self {
+    pub fn new(
+        image: &crate::verify::VerifiedImage<'a>,
+        stack_limit: usize,
+        call_limit: usize,
+        try_limit: usize,
+    ) -> Self {
         let image = *image.image();
         let mut data = vec![0u8; image.data_size() as usize];
         data[..image.init_data().len()].copy_from_slice(image.init_data());
         Model {
-            code: image.code().to_vec(),
             data,
             stack: Vec::new(),
             calls: Vec::new(),
@@ -124,8 +130,15 @@ impl<'a> Model<'a> {
     }
 
     /// Runs one cycle of `task` at `now_ns` with an instruction budget (the task's unless overridden).
-    pub fn run_cycle(&mut self, task: usize, now_ns: i64, budget_override: Option<u32>) -> ModelCycle {
-        let Some(entry) = self.image.task(task) else { return ModelCycle::Refused };
+    pub fn run_cycle(
+        &mut self,
+        task: usize,
+        now_ns: i64,
+        budget_override: Option<u32>,
+    ) -> ModelCycle {
+        let Some(entry) = self.image.task(task) else {
+            return ModelCycle::Refused;
+        };
         if self.faulted[task] {
             return ModelCycle::Refused;
         }
@@ -141,11 +154,19 @@ impl<'a> Model<'a> {
         loop {
             if executed == budget {
                 self.faulted[task] = true;
-                return ModelCycle::Faulted { trap: Trap::Watchdog, pc: self.pc };
+                return ModelCycle::Faulted {
+                    trap: Trap::Watchdog,
+                    pc: self.pc,
+                };
             }
             executed += 1;
             match self.execute(now_ns) {
-                Ok(true) => return ModelCycle::Completed { instructions: executed, caught },
+                Ok(true) => {
+                    return ModelCycle::Completed {
+                        instructions: executed,
+                        caught,
+                    };
+                }
                 Ok(false) => {}
                 Err(trap) => {
                     if self.handle(trap) {
@@ -162,7 +183,9 @@ impl<'a> Model<'a> {
     fn handle(&mut self, first: Trap) -> bool {
         let mut trap = first;
         while trap != Trap::Watchdog {
-            let Some((handler, depth, call_depth, base)) = self.tries.pop() else { return false };
+            let Some((handler, depth, call_depth, base)) = self.tries.pop() else {
+                return false;
+            };
             self.stack.truncate(depth);
             self.calls.truncate(call_depth);
             self.base = base;
@@ -177,7 +200,9 @@ impl<'a> Model<'a> {
     }
 
     fn addr_ok(&self, address: u64, len: u64) -> bool {
-        address.checked_add(len).is_some_and(|end| end <= self.data.len() as u64)
+        address
+            .checked_add(len)
+            .is_some_and(|end| end <= self.data.len() as u64)
     }
 
     fn read(&self, ty: MemType, address: u64) -> Result<u64, Trap> {
@@ -211,7 +236,7 @@ impl<'a> Model<'a> {
 
     /// Executes one instruction; Ok(true) when the cycle ended.
     fn execute(&mut self, now_ns: i64) -> Result<bool, Trap> {
-        let code = self.code.clone();
+        let code: &'a [u8] = self.image.code();
         let pc = self.pc as usize;
         let op = Opcode::from_u8(code[pc]).unwrap();
         let i = pc + 1;
@@ -236,10 +261,13 @@ impl<'a> Model<'a> {
         let mut ended = false;
         match op {
             Opcode::Nop => {}
-            Opcode::PushI32 => push(&mut s, imm_u32(&code, i) as i32 as i64 as u64)?,
-            Opcode::PushU32 => push(&mut s, imm_u32(&code, i) as u64)?,
-            Opcode::PushI64 => push(&mut s, imm_u64(&code, i))?,
-            Opcode::PushConst => push(&mut s, self.image.constant(imm_u16(&code, i) as usize).unwrap())?,
+            Opcode::PushI32 => push(&mut s, imm_u32(code, i) as i32 as i64 as u64)?,
+            Opcode::PushU32 => push(&mut s, imm_u32(code, i) as u64)?,
+            Opcode::PushI64 => push(&mut s, imm_u64(code, i))?,
+            Opcode::PushConst => push(
+                &mut s,
+                self.image.constant(imm_u16(code, i) as usize).unwrap(),
+            )?,
             Opcode::Drop => {
                 pop(&mut s);
             }
@@ -256,36 +284,47 @@ impl<'a> Model<'a> {
                 push(&mut s, a)?;
             }
             Opcode::LdAbs => {
-                let v = self.read(MemType::from_u8(code[i]).unwrap(), imm_u32(&code, i + 1) as u64)?;
+                let v = self.read(
+                    MemType::from_u8(code[i]).unwrap(),
+                    imm_u32(code, i + 1) as u64,
+                )?;
                 push(&mut s, v)?;
             }
             Opcode::StAbs => {
                 let v = pop(&mut s);
-                self.write(MemType::from_u8(code[i]).unwrap(), imm_u32(&code, i + 1) as u64, v)?;
+                self.write(
+                    MemType::from_u8(code[i]).unwrap(),
+                    imm_u32(code, i + 1) as u64,
+                    v,
+                )?;
             }
             Opcode::LdRel => {
-                let a = self.base as u64 + imm_u32(&code, i + 1) as u64;
+                let a = self.base as u64 + imm_u32(code, i + 1) as u64;
                 let v = self.read(MemType::from_u8(code[i]).unwrap(), a)?;
                 push(&mut s, v)?;
             }
             Opcode::StRel => {
                 let v = pop(&mut s);
-                let a = self.base as u64 + imm_u32(&code, i + 1) as u64;
+                let a = self.base as u64 + imm_u32(code, i + 1) as u64;
                 self.write(MemType::from_u8(code[i]).unwrap(), a, v)?;
             }
             Opcode::LdInd => {
-                let a = pop(&mut s).checked_add(imm_u32(&code, i + 1) as u64).ok_or(Trap::InvalidAddress)?;
+                let a = pop(&mut s)
+                    .checked_add(imm_u32(code, i + 1) as u64)
+                    .ok_or(Trap::InvalidAddress)?;
                 let v = self.read(MemType::from_u8(code[i]).unwrap(), a)?;
                 push(&mut s, v)?;
             }
             Opcode::StInd => {
                 let v = pop(&mut s);
-                let a = pop(&mut s).checked_add(imm_u32(&code, i + 1) as u64).ok_or(Trap::InvalidAddress)?;
+                let a = pop(&mut s)
+                    .checked_add(imm_u32(code, i + 1) as u64)
+                    .ok_or(Trap::InvalidAddress)?;
                 self.write(MemType::from_u8(code[i]).unwrap(), a, v)?;
             }
-            Opcode::LeaRel => push(&mut s, self.base as u64 + imm_u32(&code, i) as u64)?,
+            Opcode::LeaRel => push(&mut s, self.base as u64 + imm_u32(code, i) as u64)?,
             Opcode::Copy => {
-                let len = imm_u32(&code, i) as u64;
+                let len = imm_u32(code, i) as u64;
                 let src = pop(&mut s);
                 let dst = pop(&mut s);
                 if !self.addr_ok(src, len) || !self.addr_ok(dst, len) {
@@ -387,7 +426,11 @@ impl<'a> Model<'a> {
             }
             Opcode::AbsS => {
                 let a = pop(&mut s) as i64;
-                s.push(if a < 0 { 0i64.wrapping_sub(a) as u64 } else { a as u64 });
+                s.push(if a < 0 {
+                    0i64.wrapping_sub(a) as u64
+                } else {
+                    a as u64
+                });
             }
             Opcode::Not => {
                 let a = pop(&mut s);
@@ -529,24 +572,28 @@ impl<'a> Model<'a> {
             }
             Opcode::F32ToInt | Opcode::F64ToInt => {
                 let a = pop(&mut s);
-                let x = if op == Opcode::F32ToInt { r32(a) as f64 } else { r64(a) };
+                let x = if op == Opcode::F32ToInt {
+                    r32(a) as f64
+                } else {
+                    r64(a)
+                };
                 let ty = MemType::from_u8(code[i]).unwrap();
                 let mode = RoundMode::from_u8(code[i + 1]).unwrap();
                 s.push(model_float_to_int(x, ty, mode)?);
             }
-            Opcode::Jmp => next = imm_u32(&code, i),
+            Opcode::Jmp => next = imm_u32(code, i),
             Opcode::Jz => {
                 if pop(&mut s) == 0 {
-                    next = imm_u32(&code, i);
+                    next = imm_u32(code, i);
                 }
             }
             Opcode::Jnz => {
                 if pop(&mut s) != 0 {
-                    next = imm_u32(&code, i);
+                    next = imm_u32(code, i);
                 }
             }
             Opcode::Call => {
-                let callee = self.image.pou(imm_u16(&code, i) as usize).unwrap();
+                let callee = self.image.pou(imm_u16(code, i) as usize).unwrap();
                 if self.calls.len() >= self.call_limit {
                     return Err(Trap::CallDepth);
                 }
@@ -569,31 +616,64 @@ impl<'a> Model<'a> {
                 }
             }
             Opcode::CallBuiltin => {
-                let b = Builtin::from_u16(imm_u16(&code, i)).unwrap();
+                let b = Builtin::from_u16(imm_u16(code, i)).unwrap();
                 let args: Vec<u64> = s.split_off(s.len() - b.args());
-                if let Some(r) = crate::builtins::call(b, &args, &mut self.data)? {
+                let result = if (b as u16) < 100 {
+                    crate::builtins::call(b, &args, &mut self.data)?
+                } else {
+                    string_builtin(b, &args, &mut self.data)?
+                };
+                if let Some(r) = result {
                     s.push(r);
                 }
             }
             Opcode::ChkIndex | Opcode::ChkRangeS => {
                 let v = *s.last().unwrap() as i64;
-                let lo = imm_u64(&code, i) as i64;
-                let hi = imm_u64(&code, i + 8) as i64;
+                let lo = imm_u64(code, i) as i64;
+                let hi = imm_u64(code, i + 8) as i64;
                 if v < lo || v > hi {
-                    return Err(if op == Opcode::ChkIndex { Trap::IndexOutOfBounds } else { Trap::SubrangeViolation });
+                    return Err(if op == Opcode::ChkIndex {
+                        Trap::IndexOutOfBounds
+                    } else {
+                        Trap::SubrangeViolation
+                    });
                 }
             }
             Opcode::ChkRangeU => {
                 let v = *s.last().unwrap();
-                if v < imm_u64(&code, i) || v > imm_u64(&code, i + 8) {
+                if v < imm_u64(code, i) || v > imm_u64(code, i + 8) {
                     return Err(Trap::SubrangeViolation);
                 }
+            }
+            Opcode::AddImm => {
+                let a = pop(&mut s) as i64;
+                s.push(a.wrapping_add(imm_u32(code, i) as i32 as i64) as u64);
+            }
+            Opcode::JumpIf | Opcode::JumpIfNot => {
+                let b = pop(&mut s);
+                let a = pop(&mut s);
+                let holds = model_compare(code[i], a, b);
+                if holds == (op == Opcode::JumpIf) {
+                    next = imm_u32(code, i + 1);
+                }
+            }
+            Opcode::Index => {
+                let lo = imm_u64(code, i) as i64;
+                let hi = imm_u64(code, i + 8) as i64;
+                let stride = imm_u32(code, i + 16) as i64;
+                let index = pop(&mut s) as i64;
+                let base = pop(&mut s) as i64;
+                if index < lo || index > hi {
+                    return Err(Trap::IndexOutOfBounds);
+                }
+                s.push(base.wrapping_add(index.wrapping_sub(lo).wrapping_mul(stride)) as u64);
             }
             Opcode::TryBegin => {
                 if self.tries.len() >= self.try_limit {
                     return Err(Trap::StackOverflow);
                 }
-                self.tries.push((imm_u32(&code, i), s.len(), self.calls.len(), self.base));
+                self.tries
+                    .push((imm_u32(code, i), s.len(), self.calls.len(), self.base));
             }
             Opcode::TryEnd => {
                 self.tries.pop();
@@ -602,7 +682,9 @@ impl<'a> Model<'a> {
             Opcode::Rethrow => {
                 let c = pop(&mut s);
                 if c != 0 {
-                    let trap = Trap::from_code(c).filter(|t| *t != Trap::Watchdog).unwrap_or(Trap::NumericError);
+                    let trap = Trap::from_code(c)
+                        .filter(|t| *t != Trap::Watchdog)
+                        .unwrap_or(Trap::NumericError);
                     return Err(trap);
                 }
             }
@@ -610,6 +692,38 @@ impl<'a> Model<'a> {
         self.stack = s;
         self.pc = next;
         Ok(ended)
+    }
+}
+
+/// A comparison opcode byte applied to two cells (the model's own table, not `isa::compare`).
+fn model_compare(cmp: u8, a: u64, b: u64) -> bool {
+    let (x, y) = (a as i64, b as i64);
+    let (f, g) = (f32::from_bits(a as u32), f32::from_bits(b as u32));
+    let (d, e) = (f64::from_bits(a), f64::from_bits(b));
+    match Opcode::from_u8(cmp).unwrap() {
+        Opcode::Eq => a == b,
+        Opcode::Ne => a != b,
+        Opcode::LtS => x < y,
+        Opcode::LeS => x <= y,
+        Opcode::GtS => x > y,
+        Opcode::GeS => x >= y,
+        Opcode::LtU => a < b,
+        Opcode::LeU => a <= b,
+        Opcode::GtU => a > b,
+        Opcode::GeU => a >= b,
+        Opcode::EqF32 => f == g,
+        Opcode::NeF32 => f != g,
+        Opcode::LtF32 => f < g,
+        Opcode::LeF32 => f <= g,
+        Opcode::GtF32 => f > g,
+        Opcode::GeF32 => f >= g,
+        Opcode::EqF64 => d == e,
+        Opcode::NeF64 => d != e,
+        Opcode::LtF64 => d < e,
+        Opcode::LeF64 => d <= e,
+        Opcode::GtF64 => d > e,
+        Opcode::GeF64 => d >= e,
+        other => unreachable!("verified comparison, got {other:?}"),
     }
 }
 
@@ -642,9 +756,212 @@ fn model_float_to_int(x: f64, ty: MemType, mode: RoundMode) -> Result<u64, Trap>
         }
         v
     };
-    let (lo, hi) = if signed { (-two(bits - 1), two(bits - 1)) } else { (0.0, two(bits)) };
+    let (lo, hi) = if signed {
+        (-two(bits - 1), two(bits - 1))
+    } else {
+        (0.0, two(bits))
+    };
     if r < lo || r >= hi {
         return Err(Trap::NumericError);
     }
     Ok(if signed { r as i64 as u64 } else { r as u64 })
+}
+
+/// Reads the string variable at `address`: (capacity, text).
+fn read_string(data: &[u8], address: u64) -> Result<(usize, Vec<u8>), Trap> {
+    if address >= data.len() as u64 || data.len() as u64 - address < 4 {
+        return Err(Trap::InvalidAddress);
+    }
+    let a = address as usize;
+    let capacity = u16::from_le_bytes([data[a], data[a + 1]]) as usize;
+    let current = u16::from_le_bytes([data[a + 2], data[a + 3]]) as usize;
+    if a + 4 + capacity > data.len() {
+        return Err(Trap::InvalidAddress);
+    }
+    let len = if current > capacity {
+        capacity
+    } else {
+        current
+    };
+    Ok((capacity, data[a + 4..a + 4 + len].to_vec()))
+}
+
+/// Clamps a signed cell into `lo..=hi`.
+fn clamp(cell: u64, lo: usize, hi: usize) -> usize {
+    let v = cell as i64;
+    if v < lo as i64 {
+        lo
+    } else if v > hi as i64 {
+        hi
+    } else {
+        v as usize
+    }
+}
+
+fn decimal_with_point(text: String) -> String {
+    if text.contains('.') || text.contains("inf") || text.contains("NaN") {
+        text
+    } else {
+        text + ".0"
+    }
+}
+
+fn time_literal(ns: i64) -> String {
+    if ns == 0 {
+        return "T#0s".into();
+    }
+    let mut out = String::from(if ns < 0 { "T#-" } else { "T#" });
+    let mut rest = ns.unsigned_abs();
+    let units: [(&str, u64); 7] = [
+        ("d", 24 * 3600 * 1_000_000_000),
+        ("h", 3600 * 1_000_000_000),
+        ("m", 60 * 1_000_000_000),
+        ("s", 1_000_000_000),
+        ("ms", 1_000_000),
+        ("us", 1_000),
+        ("ns", 1),
+    ];
+    for (unit, size) in units {
+        if rest >= size {
+            out += &format!("{}{unit}", rest / size);
+            rest %= size;
+        }
+    }
+    out
+}
+
+fn parse_integer(text: &[u8]) -> Option<i64> {
+    let t = core::str::from_utf8(text).ok()?.trim();
+    let (negative, body) = match (t.strip_prefix('-'), t.strip_prefix('+')) {
+        (Some(rest), _) => (true, rest),
+        (None, Some(rest)) => (false, rest),
+        _ => (false, t),
+    };
+    if body.is_empty()
+        || body.starts_with('_')
+        || body.ends_with('_')
+        || !body.chars().all(|c| c.is_ascii_digit() || c == '_')
+    {
+        return None;
+    }
+    let digits: String = body.chars().filter(|c| *c != '_').collect();
+    let signed = if negative {
+        format!("-{digits}")
+    } else {
+        digits
+    };
+    signed.parse::<i64>().ok()
+}
+
+/// Independent implementation of the STRING builtins (ids >= 100), written from the
+/// documentation of [`Builtin`].
+pub fn string_builtin(
+    builtin: Builtin,
+    args: &[u64],
+    data: &mut [u8],
+) -> Result<Option<u64>, Trap> {
+    use Builtin::*;
+    match builtin {
+        StrLen => return Ok(Some(read_string(data, args[0])?.1.len() as u64)),
+        StrFind => {
+            let (_, a) = read_string(data, args[0])?;
+            let (_, b) = read_string(data, args[1])?;
+            let mut found = 0;
+            if !b.is_empty() && b.len() <= a.len() {
+                for start in 0..=a.len() - b.len() {
+                    if a[start..start + b.len()] == b[..] {
+                        found = start + 1;
+                        break;
+                    }
+                }
+            }
+            return Ok(Some(found as u64));
+        }
+        StrCompare => {
+            let (_, a) = read_string(data, args[0])?;
+            let (_, b) = read_string(data, args[1])?;
+            let r: i64 = if a < b {
+                -1
+            } else if a > b {
+                1
+            } else {
+                0
+            };
+            return Ok(Some(r as u64));
+        }
+        StrToI64 => {
+            let (_, a) = read_string(data, args[0])?;
+            return parse_integer(&a)
+                .map(|v| Some(v as u64))
+                .ok_or(Trap::NumericError);
+        }
+        StrToF64 => {
+            let (_, a) = read_string(data, args[0])?;
+            let text = core::str::from_utf8(&a).map_err(|_| Trap::NumericError)?;
+            return text
+                .trim()
+                .parse::<f64>()
+                .map(|v| Some(v.to_bits()))
+                .map_err(|_| Trap::NumericError);
+        }
+        _ => {}
+    }
+    let (capacity, _) = read_string(data, args[0])?;
+    let mut result: Vec<u8> = match builtin {
+        StrAssign => read_string(data, args[1])?.1,
+        StrConcat => {
+            let mut a = read_string(data, args[1])?.1;
+            a.extend(read_string(data, args[2])?.1);
+            a
+        }
+        StrLeft => {
+            let a = read_string(data, args[1])?.1;
+            let n = clamp(args[2], 0, a.len());
+            a[..n].to_vec()
+        }
+        StrRight => {
+            let a = read_string(data, args[1])?.1;
+            let n = clamp(args[2], 0, a.len());
+            a[a.len() - n..].to_vec()
+        }
+        StrMid => {
+            let a = read_string(data, args[1])?.1;
+            let p = clamp(args[3], 1, a.len() + 1);
+            let n = clamp(args[2], 0, a.len() + 1 - p);
+            a[p - 1..p - 1 + n].to_vec()
+        }
+        StrInsert => {
+            let a = read_string(data, args[1])?.1;
+            let b = read_string(data, args[2])?.1;
+            let p = clamp(args[3], 0, a.len());
+            [&a[..p], &b[..], &a[p..]].concat()
+        }
+        StrDelete | StrReplace => {
+            let a = read_string(data, args[1])?.1;
+            let (b, n_cell, p_cell) = if builtin == StrReplace {
+                (read_string(data, args[2])?.1, args[3], args[4])
+            } else {
+                (Vec::new(), args[2], args[3])
+            };
+            let p = clamp(p_cell, 1, a.len() + 1);
+            let n = clamp(n_cell, 0, a.len() + 1 - p);
+            [&a[..p - 1], &b[..], &a[p - 1 + n..]].concat()
+        }
+        StrFromI64 => format!("{}", args[1] as i64).into_bytes(),
+        StrFromU64 => format!("{}", args[1]).into_bytes(),
+        StrFromF32 => {
+            decimal_with_point(format!("{}", f32::from_bits(args[1] as u32))).into_bytes()
+        }
+        StrFromF64 => decimal_with_point(format!("{}", f64::from_bits(args[1]))).into_bytes(),
+        StrFromBool => (if args[1] == 0 { "FALSE" } else { "TRUE" })
+            .as_bytes()
+            .to_vec(),
+        StrFromTime => time_literal(args[1] as i64).into_bytes(),
+        _ => unreachable!("math builtins are not string builtins"),
+    };
+    result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
+    let a = args[0] as usize;
+    data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
+    data[a + 4..a + 4 + result.len()].copy_from_slice(&result);
+    Ok(None)
 }

@@ -11,11 +11,14 @@
 //! `ret_cells` cells and no open try frame, no fall-through past the POU's end); finally the
 //! task table, variable map, file table and source-location table.
 //!
-//! The abstract interpretation needs one `u32` of scratch per code byte; [`verify_with_scratch`]
-//! takes it from the caller (no allocation), [`verify`] (feature `alloc`) allocates it.
+//! The abstract interpretation visits every instruction once (a worklist) and needs two `u32`
+//! of scratch per code byte (state + worklist); [`verify_with_scratch`]
+//! takes it from the caller (no allocation), `verify` (feature `alloc`) allocates it.
 
 use crate::image::{Image, Section, TASK_RECORD, VarType};
-use crate::isa::{Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect};
+use crate::isa::{
+    Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect,
+};
 
 /// Operand-stack cells one POU activation may use (abstract depth limit).
 pub const MAX_POU_STACK: u32 = 1024;
@@ -26,7 +29,7 @@ pub const MAX_TASKS: usize = 32;
 /// Maximum code size (scratch state packs offsets into 31 bits).
 pub const MAX_CODE_LEN: usize = 1 << 30;
 
-/// An image that passed [`verify`]. Only this can be executed.
+/// An image that passed the verifier ([`verify_with_scratch`] or `verify`). Only this can be executed.
 #[derive(Clone, Copy, Debug)]
 pub struct VerifiedImage<'a> {
     image: Image<'a>,
@@ -73,6 +76,8 @@ pub enum Reason {
     BadRoundMode(u8),
     /// THROW of something that is not a catchable trap code.
     BadTrapCode(u8),
+    /// JUMP_IF/JUMP_IF_NOT with an operand that is not a comparison opcode.
+    BadComparison(u8),
     /// PUSH_CONST index beyond the constant pool.
     UnknownConstant(u16),
     /// CALL of a POU index beyond the POU table.
@@ -163,7 +168,7 @@ pub enum Reason {
     SrcLocUnsorted,
     /// Source location beyond the code or naming an unknown file.
     SrcLocInvalid,
-    /// Scratch buffer shorter than the code.
+    /// Scratch buffer shorter than twice the code.
     ScratchTooSmall,
     /// Code larger than [`MAX_CODE_LEN`].
     CodeTooLarge,
@@ -196,36 +201,65 @@ impl core::fmt::Display for Reason {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match *self {
             Reason::BadOpcode(b) => write!(f, "unknown opcode 0x{b:02x}"),
-            Reason::TruncatedInstruction => write!(f, "instruction operands run past the end of the code"),
+            Reason::TruncatedInstruction => {
+                write!(f, "instruction operands run past the end of the code")
+            }
             Reason::BadType(b) => write!(f, "invalid type operand {b}"),
             Reason::BadWidth(b) => write!(f, "invalid width operand {b}"),
             Reason::BadRoundMode(b) => write!(f, "invalid rounding mode {b}"),
             Reason::BadTrapCode(b) => write!(f, "invalid trap code {b}"),
+            Reason::BadComparison(b) => write!(f, "operand 0x{b:02x} is not a comparison opcode"),
             Reason::UnknownConstant(i) => write!(f, "constant {i} does not exist"),
             Reason::UnknownPou(i) => write!(f, "call of unknown POU {i}"),
             Reason::UnknownBuiltin(i) => write!(f, "call of unknown builtin {i}"),
-            Reason::AddressOutsideData { address, width, data_size } => {
-                write!(f, "access of {width} bytes at data address {address} outside data memory of {data_size} bytes")
+            Reason::AddressOutsideData {
+                address,
+                width,
+                data_size,
+            } => {
+                write!(
+                    f,
+                    "access of {width} bytes at data address {address} outside data memory of {data_size} bytes"
+                )
             }
             Reason::OffsetOutsideFrame { offset, frame_size } => {
-                write!(f, "frame offset {offset} outside the POU frame of {frame_size} bytes")
+                write!(
+                    f,
+                    "frame offset {offset} outside the POU frame of {frame_size} bytes"
+                )
             }
             Reason::TargetOutsidePou(t) => write!(f, "jump target {t} outside the POU"),
-            Reason::TargetInsideInstruction(t) => write!(f, "jump target {t} is inside an instruction"),
-            Reason::StackUnderflow { depth, needed } => {
-                write!(f, "stack underflow: needs {needed} cells, stack holds {depth}")
+            Reason::TargetInsideInstruction(t) => {
+                write!(f, "jump target {t} is inside an instruction")
             }
-            Reason::StackTooDeep(d) => write!(f, "stack depth {d} exceeds the limit {MAX_POU_STACK}"),
+            Reason::StackUnderflow { depth, needed } => {
+                write!(
+                    f,
+                    "stack underflow: needs {needed} cells, stack holds {depth}"
+                )
+            }
+            Reason::StackTooDeep(d) => {
+                write!(f, "stack depth {d} exceeds the limit {MAX_POU_STACK}")
+            }
             Reason::StackMismatch { expected, found } => {
-                write!(f, "stack depth {found} differs from {expected} on another path")
+                write!(
+                    f,
+                    "stack depth {found} differs from {expected} on another path"
+                )
             }
             Reason::TryNestingMismatch { expected, found } => {
-                write!(f, "try nesting {found} differs from {expected} on another path")
+                write!(
+                    f,
+                    "try nesting {found} differs from {expected} on another path"
+                )
             }
             Reason::TryEndWithoutTry => write!(f, "TRY_END without open TRY_BEGIN"),
             Reason::TryTooDeep => write!(f, "try nesting exceeds the limit {MAX_TRY_NESTING}"),
             Reason::ReturnDepth { expected, found } => {
-                write!(f, "RET with {found} cells on the stack, POU returns {expected}")
+                write!(
+                    f,
+                    "RET with {found} cells on the stack, POU returns {expected}"
+                )
             }
             Reason::ReturnInsideTry => write!(f, "RET inside an open try block"),
             Reason::FallsOffEnd => write!(f, "execution falls off the end of the POU"),
@@ -234,15 +268,21 @@ impl core::fmt::Display for Reason {
             Reason::BadName => write!(f, "name reference invalid or not UTF-8"),
             Reason::TooManyTasks => write!(f, "more than {MAX_TASKS} tasks"),
             Reason::TaskUnknownPou(i) => write!(f, "task runs unknown POU {i}"),
-            Reason::TaskPouSignature => write!(f, "task POU must take 0 argument and 0 result cells"),
+            Reason::TaskPouSignature => {
+                write!(f, "task POU must take 0 argument and 0 result cells")
+            }
             Reason::BadTaskKind(k) => write!(f, "unknown task kind {k}"),
             Reason::FrameOutsideData => write!(f, "instance frame outside data memory"),
             Reason::BadVarType(t) => write!(f, "unknown variable type {t}"),
             Reason::VarOutsideData => write!(f, "variable outside data memory"),
             Reason::VarSizeMismatch => write!(f, "variable size does not match its type"),
             Reason::SrcLocUnsorted => write!(f, "source locations not sorted by code offset"),
-            Reason::SrcLocInvalid => write!(f, "source location beyond the code or with unknown file"),
-            Reason::ScratchTooSmall => write!(f, "verifier scratch buffer shorter than the code"),
+            Reason::SrcLocInvalid => {
+                write!(f, "source location beyond the code or with unknown file")
+            }
+            Reason::ScratchTooSmall => {
+                write!(f, "verifier scratch buffer shorter than twice the code")
+            }
             Reason::CodeTooLarge => write!(f, "code section too large"),
         }
     }
@@ -261,7 +301,7 @@ fn err<T>(site: Site, reason: Reason) -> Result<T, VerifyError> {
 /// Verifies an image, allocating the scratch buffer.
 #[cfg(any(feature = "alloc", test))]
 pub fn verify<'a>(image: &Image<'a>) -> Result<VerifiedImage<'a>, VerifyError> {
-    let mut scratch = alloc::vec![0u32; image.code().len()];
+    let mut scratch = alloc::vec![0u32; 2 * image.code().len()];
     verify_with_scratch(image, &mut scratch)
 }
 
@@ -274,20 +314,23 @@ fn pack(depth: u32, tries: u32) -> u32 {
     KNOWN | depth | (tries << 16)
 }
 
-/// Verifies an image using caller-provided scratch (`scratch.len() >= code length`).
-pub fn verify_with_scratch<'a>(image: &Image<'a>, scratch: &mut [u32]) -> Result<VerifiedImage<'a>, VerifyError> {
+/// Verifies an image using caller-provided scratch (`scratch.len() >= 2 * code length`).
+pub fn verify_with_scratch<'a>(
+    image: &Image<'a>,
+    scratch: &mut [u32],
+) -> Result<VerifiedImage<'a>, VerifyError> {
     let code = image.code();
     if code.len() > MAX_CODE_LEN {
         return err(Site::Image, Reason::CodeTooLarge);
     }
-    if scratch.len() < code.len() {
+    if scratch.len() < 2 * code.len() {
         return err(Site::Image, Reason::ScratchTooSmall);
     }
-    let scratch = &mut scratch[..code.len()];
-    scratch.fill(0);
-    sweep_code(image, scratch)?;
+    let (states, worklist) = scratch[..2 * code.len()].split_at_mut(code.len());
+    states.fill(0);
+    sweep_code(image, states)?;
     for index in 0..image.pou_count() {
-        check_pou(image, index, scratch)?;
+        check_pou(image, index, states, worklist)?;
     }
     check_tables(image)?;
     Ok(VerifiedImage { image: *image })
@@ -311,13 +354,20 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
         let imm = pc + 1;
         match op.operands() {
             Operands::TypeAddr => {
-                let ty = MemType::from_u8(code[imm]).ok_or(VerifyError { site, reason: Reason::BadType(code[imm]) })?;
+                let ty = MemType::from_u8(code[imm]).ok_or(VerifyError {
+                    site,
+                    reason: Reason::BadType(code[imm]),
+                })?;
                 if matches!(op, Opcode::LdAbs | Opcode::StAbs) {
                     let address = read_u32(code, imm + 1) as u64;
                     if address + ty.width() as u64 > data_size as u64 {
                         return err(
                             site,
-                            Reason::AddressOutsideData { address, width: ty.width() as u32, data_size },
+                            Reason::AddressOutsideData {
+                                address,
+                                width: ty.width() as u32,
+                                data_size,
+                            },
                         );
                     }
                 }
@@ -341,6 +391,10 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     return err(site, Reason::BadRoundMode(code[imm + 1]));
                 }
             }
+            Operands::CompareTarget => match Opcode::from_u8(code[imm]) {
+                Some(cmp) if cmp.is_comparison() => {}
+                _ => return err(site, Reason::BadComparison(code[imm])),
+            },
             Operands::TrapCode => match Trap::from_code(code[imm] as u64) {
                 Some(trap) if trap.is_catchable() => {}
                 _ => return err(site, Reason::BadTrapCode(code[imm])),
@@ -351,7 +405,9 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     Opcode::PushConst if index as usize >= image.const_count() => {
                         return err(site, Reason::UnknownConstant(index));
                     }
-                    Opcode::Call if index as usize >= image.pou_count() => return err(site, Reason::UnknownPou(index)),
+                    Opcode::Call if index as usize >= image.pou_count() => {
+                        return err(site, Reason::UnknownPou(index));
+                    }
                     Opcode::CallBuiltin if Builtin::from_u16(index).is_none() => {
                         return err(site, Reason::UnknownBuiltin(index));
                     }
@@ -365,15 +421,25 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
     Ok(())
 }
 
-fn check_pou(image: &Image<'_>, index: usize, scratch: &mut [u32]) -> Result<(), VerifyError> {
+fn check_pou(
+    image: &Image<'_>,
+    index: usize,
+    scratch: &mut [u32],
+    worklist: &mut [u32],
+) -> Result<(), VerifyError> {
     let code = image.code();
-    let pou = image.pou(index).ok_or(VerifyError { site: Site::Pou(index), reason: Reason::PouRangeOutsideCode })?;
-    let (off, len) = image.record_name_ref(Section::Pous, index).unwrap_or((u32::MAX, 0));
+    let pou = image.pou(index).ok_or(VerifyError {
+        site: Site::Pou(index),
+        reason: Reason::PouRangeOutsideCode,
+    })?;
+    let (off, len) = image
+        .record_name_ref(Section::Pous, index)
+        .unwrap_or((u32::MAX, 0));
     if image.name_at(off, len).is_none() {
         return err(Site::Pou(index), Reason::BadName);
     }
     let start = pou.code_start as usize;
-    let end = start + pou.code_len as usize;
+    let end = start.saturating_add(pou.code_len as usize);
     if pou.code_len == 0 || end > code.len() {
         return err(Site::Pou(index), Reason::PouRangeOutsideCode);
     }
@@ -384,25 +450,27 @@ fn check_pou(image: &Image<'_>, index: usize, scratch: &mut [u32]) -> Result<(),
         *cell &= INSN_START;
     }
     scratch[start] |= pack(pou.arg_cells as u32, 0);
-    // Fixpoint over linear passes: each pass propagates states forward; backward jumps may
-    // need another pass. Terminates because states only go from unknown to known.
-    loop {
-        let mut changed = false;
-        let mut pc = start;
-        while pc < end {
-            let op = Opcode::from_u8(code[pc]).expect("swept");
-            let state = scratch[pc];
-            if state & KNOWN != 0 {
-                let depth = state & 0xFFFF;
-                let tries = (state >> 16) & 0xFF;
-                changed |= step(image, &pou, pc, op, depth, tries, start, end, scratch)?;
-            }
-            pc += op.size();
-        }
-        if !changed {
-            return Ok(());
+    // Worklist: an instruction is pushed when its state becomes known, which happens once,
+    // so every reachable instruction is checked exactly once and the list never holds more
+    // entries than there are instructions.
+    worklist[0] = start as u32;
+    let mut pending = 1usize;
+    while pending > 0 {
+        pending -= 1;
+        let pc = worklist[pending] as usize;
+        let op = Opcode::from_u8(code[pc]).expect("swept");
+        let state = scratch[pc];
+        let depth = state & 0xFFFF;
+        let tries = (state >> 16) & 0xFF;
+        for target in step(image, &pou, pc, op, depth, tries, start, end, scratch)?
+            .into_iter()
+            .flatten()
+        {
+            worklist[pending] = target as u32;
+            pending += 1;
         }
     }
+    Ok(())
 }
 
 /// Checks one instruction in abstract state (depth, tries) and merges its successors' states.
@@ -417,7 +485,7 @@ fn step(
     start: usize,
     end: usize,
     scratch: &mut [u32],
-) -> Result<bool, VerifyError> {
+) -> Result<[Option<usize>; 2], VerifyError> {
     let code = image.code();
     let site = Site::Code(pc as u32);
     let imm = pc + 1;
@@ -427,13 +495,25 @@ fn step(
             let ty = MemType::from_u8(code[imm]).expect("swept");
             let offset = read_u32(code, imm + 1) as u64;
             if offset + ty.width() as u64 > pou.frame_size as u64 {
-                return err(site, Reason::OffsetOutsideFrame { offset, frame_size: pou.frame_size });
+                return err(
+                    site,
+                    Reason::OffsetOutsideFrame {
+                        offset,
+                        frame_size: pou.frame_size,
+                    },
+                );
             }
         }
         Opcode::LeaRel => {
             let offset = read_u32(code, imm) as u64;
             if offset > pou.frame_size as u64 {
-                return err(site, Reason::OffsetOutsideFrame { offset, frame_size: pou.frame_size });
+                return err(
+                    site,
+                    Reason::OffsetOutsideFrame {
+                        offset,
+                        frame_size: pou.frame_size,
+                    },
+                );
             }
         }
         _ => {}
@@ -452,20 +532,32 @@ fn step(
                 return err(site, Reason::ReturnInsideTry);
             }
             if depth != pou.ret_cells as u32 {
-                return err(site, Reason::ReturnDepth { expected: pou.ret_cells as u32, found: depth });
+                return err(
+                    site,
+                    Reason::ReturnDepth {
+                        expected: pou.ret_cells as u32,
+                        found: depth,
+                    },
+                );
             }
-            return Ok(false);
+            return Ok([None, None]);
         }
         _ => stack_effect(op).expect("fixed effect"),
     };
     if depth < pops {
-        return err(site, Reason::StackUnderflow { depth, needed: pops });
+        return err(
+            site,
+            Reason::StackUnderflow {
+                depth,
+                needed: pops,
+            },
+        );
     }
     let after = depth - pops + pushes;
     if after > MAX_POU_STACK {
         return err(site, Reason::StackTooDeep(after));
     }
-    let mut changed = false;
+    let mut discovered = [None, None];
     let mut flow = |target: usize, depth: u32, tries: u32, jump: bool| -> Result<(), VerifyError> {
         if target >= end || target < start {
             return if jump {
@@ -480,15 +572,28 @@ fn step(
         let known = scratch[target];
         if known & KNOWN == 0 {
             scratch[target] |= pack(depth, tries);
-            changed = true;
+            let slot = if discovered[0].is_none() { 0 } else { 1 };
+            discovered[slot] = Some(target);
             return Ok(());
         }
         let (expected_depth, expected_tries) = (known & 0xFFFF, (known >> 16) & 0xFF);
         if expected_depth != depth {
-            return err(site, Reason::StackMismatch { expected: expected_depth, found: depth });
+            return err(
+                site,
+                Reason::StackMismatch {
+                    expected: expected_depth,
+                    found: depth,
+                },
+            );
         }
         if expected_tries != tries {
-            return err(site, Reason::TryNestingMismatch { expected: expected_tries, found: tries });
+            return err(
+                site,
+                Reason::TryNestingMismatch {
+                    expected: expected_tries,
+                    found: tries,
+                },
+            );
         }
         Ok(())
     };
@@ -497,6 +602,10 @@ fn step(
         Opcode::Jmp => flow(read_u32(code, imm) as usize, after, tries, true)?,
         Opcode::Jz | Opcode::Jnz => {
             flow(read_u32(code, imm) as usize, after, tries, true)?;
+            flow(next, after, tries, false)?;
+        }
+        Opcode::JumpIf | Opcode::JumpIfNot => {
+            flow(read_u32(code, imm + 1) as usize, after, tries, true)?;
             flow(next, after, tries, false)?;
         }
         Opcode::TryBegin => {
@@ -519,7 +628,7 @@ fn step(
         Opcode::Throw => {}
         _ => flow(next, after, tries, false)?,
     }
-    Ok(changed)
+    Ok(discovered)
 }
 
 fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
@@ -530,14 +639,19 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
     for index in 0..image.task_count() {
         let site = Site::Task(index);
         let task = image.task(index).expect("counted");
-        let (off, len) = image.record_name_ref(Section::Tasks, index).expect("counted");
+        let (off, len) = image
+            .record_name_ref(Section::Tasks, index)
+            .expect("counted");
         if image.name_at(off, len).is_none() {
             return err(site, Reason::BadName);
         }
         if task.kind > 1 {
             return err(site, Reason::BadTaskKind(task.kind));
         }
-        let pou = image.pou(task.pou as usize).ok_or(VerifyError { site, reason: Reason::TaskUnknownPou(task.pou) })?;
+        let pou = image.pou(task.pou as usize).ok_or(VerifyError {
+            site,
+            reason: Reason::TaskUnknownPou(task.pou),
+        })?;
         if pou.arg_cells != 0 || pou.ret_cells != 0 {
             return err(site, Reason::TaskPouSignature);
         }
@@ -549,11 +663,16 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
     for index in 0..image.var_count() {
         let site = Site::Var(index);
         let var = image.var(index).expect("counted");
-        let (off, len) = image.record_name_ref(Section::Vars, index).expect("counted");
+        let (off, len) = image
+            .record_name_ref(Section::Vars, index)
+            .expect("counted");
         if image.name_at(off, len).is_none() {
             return err(site, Reason::BadName);
         }
-        let ty = VarType::from_u8(var.ty).ok_or(VerifyError { site, reason: Reason::BadVarType(var.ty) })?;
+        let ty = VarType::from_u8(var.ty).ok_or(VerifyError {
+            site,
+            reason: Reason::BadVarType(var.ty),
+        })?;
         if var.addr as u64 + var.size as u64 > data_size {
             return err(site, Reason::VarOutsideData);
         }

@@ -22,7 +22,10 @@ pub struct CallFrame {
 
 impl CallFrame {
     /// An empty frame, to initialise runtime-provided arrays.
-    pub const EMPTY: CallFrame = CallFrame { return_pc: 0, saved_base: 0 };
+    pub const EMPTY: CallFrame = CallFrame {
+        return_pc: 0,
+        saved_base: 0,
+    };
 }
 
 /// An open `TRY_BEGIN`.
@@ -36,7 +39,12 @@ pub struct TryFrame {
 
 impl TryFrame {
     /// An empty frame, to initialise runtime-provided arrays.
-    pub const EMPTY: TryFrame = TryFrame { handler: 0, stack_depth: 0, call_depth: 0, base: 0 };
+    pub const EMPTY: TryFrame = TryFrame {
+        handler: 0,
+        stack_depth: 0,
+        call_depth: 0,
+        base: 0,
+    };
 }
 
 /// Memory the runtime provides.
@@ -119,6 +127,21 @@ pub enum VarError {
     TypeMismatch,
     /// The variable is CONSTANT.
     Constant,
+    /// STRING variables can be written but not forced.
+    NotForceable,
+    /// All [`MAX_FORCES`] force slots are in use.
+    TooManyForces,
+}
+
+/// How many variables can be forced at the same time.
+pub const MAX_FORCES: usize = 16;
+
+/// A forced scalar: its bytes are re-written at the start and at the end of every cycle.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+struct Forced {
+    addr: u32,
+    len: u8,
+    bytes: [u8; 8],
 }
 
 /// Internal control-flow outcome of one instruction.
@@ -142,6 +165,7 @@ pub struct Machine<'a, 'm> {
     now_ns: i64,
     faults: [Option<Fault>; MAX_TASKS],
     budget_override: [Option<u32>; MAX_TASKS],
+    forces: [Option<Forced>; MAX_FORCES],
 }
 
 impl<'a, 'm> Machine<'a, 'm> {
@@ -150,7 +174,10 @@ impl<'a, 'm> Machine<'a, 'm> {
         let image = *image.image();
         let needed = image.data_size();
         if memory.data.len() < needed as usize {
-            return Err(SetupError::DataTooSmall { needed, given: memory.data.len() });
+            return Err(SetupError::DataTooSmall {
+                needed,
+                given: memory.data.len(),
+            });
         }
         if memory.stack.is_empty() || memory.calls.is_empty() {
             return Err(SetupError::NoStackOrFrames);
@@ -169,12 +196,14 @@ impl<'a, 'm> Machine<'a, 'm> {
             now_ns: 0,
             faults: [None; MAX_TASKS],
             budget_override: [None; MAX_TASKS],
+            forces: [None; MAX_FORCES],
         };
         machine.reset();
         Ok(machine)
     }
 
-    /// Cold restart: re-initialises data memory, clears all faults and registers.
+    /// Cold restart: re-initialises data memory, clears all faults and registers (forced
+    /// variables stay forced and are re-applied at the next cycle).
     pub fn reset(&mut self) {
         let init = self.image.init_data();
         self.data[..init.len()].copy_from_slice(init);
@@ -244,21 +273,38 @@ impl<'a, 'm> Machine<'a, 'm> {
     /// Runs one cycle of `task` at time `now_ns` (TIME, nanoseconds).
     pub fn run_cycle(&mut self, task: usize, now_ns: i64) -> Result<CycleStats, Fault> {
         let Some(entry) = self.image.task(task) else {
-            return Err(Fault { trap: Trap::InvalidAddress, task, code_offset: 0, location: None, refused: true });
+            return Err(Fault {
+                trap: Trap::InvalidAddress,
+                task,
+                code_offset: 0,
+                location: None,
+                refused: true,
+            });
         };
         if let Some(fault) = self.faults[task] {
-            return Err(Fault { refused: true, ..fault });
+            return Err(Fault {
+                refused: true,
+                ..fault
+            });
         }
-        let pou = self.image.pou(entry.pou as usize).expect("verified task POU");
+        let pou = self
+            .image
+            .pou(entry.pou as usize)
+            .expect("verified task POU");
         let budget = self.budget_override[task].unwrap_or(entry.budget());
+        self.apply_forces();
         self.now_ns = now_ns;
         self.sp = 0;
         self.try_depth = 0;
-        self.calls[0] = CallFrame { return_pc: u32::MAX, saved_base: 0 };
+        self.calls[0] = CallFrame {
+            return_pc: u32::MAX,
+            saved_base: 0,
+        };
         self.call_depth = 1;
         self.base = entry.instance_base;
         self.pc = pou.code_start;
         let mut stats = CycleStats::default();
+        let code: &'a [u8] = self.image.code();
         loop {
             if stats.instructions >= budget {
                 return Err(self.fault(task, Trap::Watchdog));
@@ -267,9 +313,12 @@ impl<'a, 'm> Machine<'a, 'm> {
             // A trapping instruction has no effect: its pops are undone (pops never overwrite
             // cells, and no instruction pushes before it can still trap).
             let sp_before = self.sp;
-            match self.step() {
+            match self.step(code) {
                 Ok(Flow::Next) => {}
-                Ok(Flow::EndOfCycle) => return Ok(stats),
+                Ok(Flow::EndOfCycle) => {
+                    self.apply_forces();
+                    return Ok(stats);
+                }
                 Err(trap) => {
                     self.sp = sp_before;
                     if !self.catch(trap) {
@@ -282,6 +331,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     }
 
     fn fault(&mut self, task: usize, trap: Trap) -> Fault {
+        self.apply_forces();
         let fault = Fault {
             trap,
             task,
@@ -315,7 +365,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         }
     }
 
-    #[inline]
+    #[inline(always)]
     fn push(&mut self, value: u64) -> Result<(), Trap> {
         let slot = self.stack.get_mut(self.sp).ok_or(Trap::StackOverflow)?;
         *slot = value;
@@ -323,7 +373,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         Ok(())
     }
 
-    #[inline]
+    #[inline(always)]
     fn pop(&mut self) -> u64 {
         // The verifier guarantees the depth; a defensive 0 keeps an impossible underflow panic-free.
         if self.sp == 0 {
@@ -333,13 +383,14 @@ impl<'a, 'm> Machine<'a, 'm> {
         self.stack[self.sp]
     }
 
-    #[inline]
+    #[inline(always)]
     fn pop2(&mut self) -> (u64, u64) {
         let b = self.pop();
         let a = self.pop();
         (a, b)
     }
 
+    #[inline(always)]
     fn load(&self, ty: MemType, address: u64) -> Result<u64, Trap> {
         let start = usize::try_from(address).map_err(|_| Trap::InvalidAddress)?;
         let bytes = start
@@ -349,20 +400,28 @@ impl<'a, 'm> Machine<'a, 'm> {
         Ok(ty.cell_from_le(bytes))
     }
 
+    #[inline(always)]
     fn store(&mut self, ty: MemType, address: u64, value: u64) -> Result<(), Trap> {
+        fn put<const N: usize>(data: &mut [u8], start: usize, value: u64) -> Result<(), Trap> {
+            let end = start.checked_add(N).ok_or(Trap::InvalidAddress)?;
+            let bytes = data.get_mut(start..end).ok_or(Trap::InvalidAddress)?;
+            let mut raw = [0u8; N];
+            raw.copy_from_slice(&value.to_le_bytes()[..N]);
+            bytes.copy_from_slice(&raw);
+            Ok(())
+        }
         let start = usize::try_from(address).map_err(|_| Trap::InvalidAddress)?;
-        let width = ty.width();
-        let bytes = start
-            .checked_add(width)
-            .and_then(|end| self.data.get_mut(start..end))
-            .ok_or(Trap::InvalidAddress)?;
-        bytes.copy_from_slice(&value.to_le_bytes()[..width]);
-        Ok(())
+        match ty.width() {
+            1 => put::<1>(self.data, start, value),
+            2 => put::<2>(self.data, start, value),
+            4 => put::<4>(self.data, start, value),
+            _ => put::<8>(self.data, start, value),
+        }
     }
 
     /// Executes the instruction at `pc`. On error `pc` still points at the instruction.
-    fn step(&mut self) -> Result<Flow, Trap> {
-        let code = self.image.code();
+    #[inline(always)]
+    fn step(&mut self, code: &'a [u8]) -> Result<Flow, Trap> {
         let pc = self.pc as usize;
         let op = Opcode::from_u8(code[pc]).expect("verified opcode");
         let imm = pc + 1;
@@ -377,7 +436,11 @@ impl<'a, 'm> Machine<'a, 'm> {
             PushI32 => self.push(read_u32(code, imm) as i32 as i64 as u64)?,
             PushU32 => self.push(read_u32(code, imm) as u64)?,
             PushI64 => self.push(read_u64(code, imm))?,
-            PushConst => self.push(self.image.constant(read_u16(code, imm) as usize).expect("verified"))?,
+            PushConst => self.push(
+                self.image
+                    .constant(read_u16(code, imm) as usize)
+                    .expect("verified"),
+            )?,
             Drop => {
                 self.pop();
             }
@@ -413,21 +476,29 @@ impl<'a, 'm> Machine<'a, 'm> {
             }
             LdInd => {
                 let ty = MemType::from_u8(code[imm]).expect("verified");
-                let address = self.pop().checked_add(read_u32(code, imm + 1) as u64).ok_or(Trap::InvalidAddress)?;
+                let address = self
+                    .pop()
+                    .checked_add(read_u32(code, imm + 1) as u64)
+                    .ok_or(Trap::InvalidAddress)?;
                 let v = self.load(ty, address)?;
                 self.push(v)?;
             }
             StInd => {
                 let ty = MemType::from_u8(code[imm]).expect("verified");
                 let (address, v) = self.pop2();
-                let address = address.checked_add(read_u32(code, imm + 1) as u64).ok_or(Trap::InvalidAddress)?;
+                let address = address
+                    .checked_add(read_u32(code, imm + 1) as u64)
+                    .ok_or(Trap::InvalidAddress)?;
                 self.store(ty, address, v)?;
             }
             LeaRel => self.push(self.base as u64 + read_u32(code, imm) as u64)?,
             Copy => {
                 let len = read_u32(code, imm) as u64;
                 let (dst, src) = self.pop2();
-                let in_data = |a: u64| a.checked_add(len).is_some_and(|end| end <= self.data.len() as u64);
+                let in_data = |a: u64| {
+                    a.checked_add(len)
+                        .is_some_and(|end| end <= self.data.len() as u64)
+                };
                 if !in_data(dst) || !in_data(src) {
                     return Err(Trap::InvalidAddress);
                 }
@@ -435,8 +506,8 @@ impl<'a, 'm> Machine<'a, 'm> {
                 self.data.copy_within(src..src + len, dst);
             }
             Now => self.push(self.now_ns as u64)?,
-            Add | Sub | Mul | And | Or | Xor | Shl | ShrU | ShrS | Eq | Ne | LtS | LeS | GtS | GeS | LtU | LeU
-            | GtU | GeU => {
+            Add | Sub | Mul | And | Or | Xor | Shl | ShrU | ShrS | Eq | Ne | LtS | LeS | GtS
+            | GeS | LtU | LeU | GtU | GeU => {
                 let (a, b) = self.pop2();
                 let (sa, sb) = (a as i64, b as i64);
                 let r = match op {
@@ -495,7 +566,11 @@ impl<'a, 'm> Machine<'a, 'm> {
                 let width = code[imm] as u32;
                 let a = self.pop();
                 let shift = 64 - width;
-                let r = if op == Sext { (((a << shift) as i64) >> shift) as u64 } else { (a << shift) >> shift };
+                let r = if op == Sext {
+                    (((a << shift) as i64) >> shift) as u64
+                } else {
+                    (a << shift) >> shift
+                };
                 self.push(r)?;
             }
             Sel => {
@@ -572,7 +647,11 @@ impl<'a, 'm> Machine<'a, 'm> {
                 let target = MemType::from_u8(code[imm]).expect("verified");
                 let mode = RoundMode::from_u8(code[imm + 1]).expect("verified");
                 let a = self.pop();
-                let x = if op == F32ToInt { f32_of(a) as f64 } else { f64_of(a) };
+                let x = if op == F32ToInt {
+                    f32_of(a) as f64
+                } else {
+                    f64_of(a)
+                };
                 match crate::fmath::float_to_int(x, target, mode) {
                     Some(r) => self.push(r)?,
                     None => {
@@ -592,16 +671,25 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
             }
             Call => {
-                let callee = self.image.pou(read_u16(code, imm) as usize).expect("verified");
+                let callee = self
+                    .image
+                    .pou(read_u16(code, imm) as usize)
+                    .expect("verified");
                 let base = self.stack[self.sp - 1];
                 if self.call_depth >= self.calls.len() {
                     return Err(Trap::CallDepth);
                 }
-                if base.checked_add(callee.frame_size as u64).is_none_or(|end| end > self.data.len() as u64) {
+                if base
+                    .checked_add(callee.frame_size as u64)
+                    .is_none_or(|end| end > self.data.len() as u64)
+                {
                     return Err(Trap::InvalidAddress);
                 }
                 self.pop();
-                self.calls[self.call_depth] = CallFrame { return_pc: next, saved_base: self.base };
+                self.calls[self.call_depth] = CallFrame {
+                    return_pc: next,
+                    saved_base: self.base,
+                };
                 self.call_depth += 1;
                 self.base = base as u32;
                 self.pc = callee.code_start;
@@ -638,11 +726,40 @@ impl<'a, 'm> Machine<'a, 'm> {
                     (lo as i64) <= (v as i64) && (v as i64) <= (hi as i64)
                 };
                 if !ok {
-                    return Err(if op == ChkIndex { Trap::IndexOutOfBounds } else { Trap::SubrangeViolation });
+                    return Err(if op == ChkIndex {
+                        Trap::IndexOutOfBounds
+                    } else {
+                        Trap::SubrangeViolation
+                    });
                 }
             }
+            AddImm => {
+                let a = self.pop();
+                self.push(a.wrapping_add(read_u32(code, imm) as i32 as i64 as u64))?;
+            }
+            JumpIf | JumpIfNot => {
+                let cmp = Opcode::from_u8(code[imm]).expect("verified");
+                let (a, b) = self.pop2();
+                if crate::isa::compare(cmp, a, b) == (op == JumpIf) {
+                    self.pc = read_u32(code, imm + 1);
+                    return Ok(Flow::Next);
+                }
+            }
+            Index => {
+                let (lo, hi) = (read_u64(code, imm) as i64, read_u64(code, imm + 8) as i64);
+                let stride = read_u32(code, imm + 16) as u64;
+                let (base, i) = self.pop2();
+                if (i as i64) < lo || (i as i64) > hi {
+                    return Err(Trap::IndexOutOfBounds);
+                }
+                let offset = (i as i64).wrapping_sub(lo) as u64;
+                self.push(base.wrapping_add(offset.wrapping_mul(stride)))?;
+            }
             TryBegin => {
-                let slot = self.tries.get_mut(self.try_depth).ok_or(Trap::StackOverflow)?;
+                let slot = self
+                    .tries
+                    .get_mut(self.try_depth)
+                    .ok_or(Trap::StackOverflow)?;
                 *slot = TryFrame {
                     handler: read_u32(code, imm),
                     stack_depth: self.sp as u32,
@@ -682,7 +799,9 @@ impl<'a, 'm> Machine<'a, 'm> {
         let Some(mem) = ty.mem_type() else {
             let bytes = &self.data[at..at + var.size as usize];
             let capacity = var.size as usize - 4;
-            let len = (read_u16(bytes, 2) as usize).min(capacity).min(read_u16(bytes, 0) as usize);
+            let len = (read_u16(bytes, 2) as usize)
+                .min(capacity)
+                .min(read_u16(bytes, 0) as usize);
             return Value::String(&bytes[4..4 + len]);
         };
         let cell = mem.cell_from_le(&self.data[at..at + mem.width()]);
@@ -696,8 +815,9 @@ impl<'a, 'm> Machine<'a, 'm> {
         }
     }
 
-    /// Writes ("forces") a variable by name. Integers are truncated to the variable's width;
-    /// strings to its capacity. `Int`/`UInt` are accepted for any integer type.
+    /// Writes a variable by name (once; the program may change it again). Integers are
+    /// truncated to the variable's width; strings to its capacity. `Int`/`UInt` are accepted
+    /// for any integer type, `Int` also for TIME.
     pub fn write_var(&mut self, name: &str, value: Value<'_>) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
         if var.flags & VAR_FLAG_CONSTANT != 0 {
@@ -705,37 +825,119 @@ impl<'a, 'm> Machine<'a, 'm> {
         }
         let ty = VarType::from_u8(var.ty).expect("verified");
         let at = var.addr as usize;
-        let Some(mem) = ty.mem_type() else {
-            let Value::String(text) = value else { return Err(VarError::TypeMismatch) };
+        if ty.mem_type().is_none() {
+            let Value::String(text) = value else {
+                return Err(VarError::TypeMismatch);
+            };
             let capacity = (var.size as usize - 4).min(read_u16(self.data, at) as usize);
             let len = text.len().min(capacity);
             self.data[at + 2..at + 4].copy_from_slice(&(len as u16).to_le_bytes());
             self.data[at + 4..at + 4 + len].copy_from_slice(&text[..len]);
             return Ok(());
+        }
+        let forced = Self::encode_scalar(&var, ty, value)?;
+        self.write_forced(&forced);
+        Ok(())
+    }
+
+    /// Forces a scalar variable: writes it now and re-writes it at the start and at the end
+    /// of every cycle until [`Machine::unforce_var`] (so the program sees the forced value and
+    /// so does the monitor after the cycle). Re-forcing a forced variable replaces the value.
+    pub fn force_var(&mut self, name: &str, value: Value<'_>) -> Result<(), VarError> {
+        let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
+        if var.flags & VAR_FLAG_CONSTANT != 0 {
+            return Err(VarError::Constant);
+        }
+        let ty = VarType::from_u8(var.ty).expect("verified");
+        if ty.mem_type().is_none() {
+            return Err(VarError::NotForceable);
+        }
+        let forced = Self::encode_scalar(&var, ty, value)?;
+        let slot = match self
+            .forces
+            .iter()
+            .position(|f| f.is_some_and(|f| f.addr == var.addr))
+        {
+            Some(existing) => existing,
+            None => self
+                .forces
+                .iter()
+                .position(Option::is_none)
+                .ok_or(VarError::TooManyForces)?,
         };
+        self.forces[slot] = Some(forced);
+        self.write_forced(&forced);
+        Ok(())
+    }
+
+    /// Ends forcing of a variable (its current value stays). Not forced: no effect.
+    pub fn unforce_var(&mut self, name: &str) -> Result<(), VarError> {
+        let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
+        for slot in &mut self.forces {
+            if slot.is_some_and(|f| f.addr == var.addr) {
+                *slot = None;
+            }
+        }
+        Ok(())
+    }
+
+    /// Ends all forcing.
+    pub fn clear_forces(&mut self) {
+        self.forces = [None; MAX_FORCES];
+    }
+
+    fn encode_scalar(var: &Var<'_>, ty: VarType, value: Value<'_>) -> Result<Forced, VarError> {
+        let mem = ty.mem_type().ok_or(VarError::NotForceable)?;
         let cell = match (ty, value) {
             (VarType::Bool, Value::Bool(b)) => b as u64,
             (VarType::Real, Value::Real(r)) => r.to_bits() as u64,
             (VarType::LReal, Value::LReal(r)) => r.to_bits(),
             (VarType::Time, Value::Time(t) | Value::Int(t)) => t as u64,
-            (VarType::Bool | VarType::Real | VarType::LReal | VarType::Time, _) => return Err(VarError::TypeMismatch),
+            (VarType::Bool | VarType::Real | VarType::LReal | VarType::Time, _) => {
+                return Err(VarError::TypeMismatch);
+            }
             (_, Value::Int(i)) => i as u64,
             (_, Value::UInt(u)) => u,
             _ => return Err(VarError::TypeMismatch),
         };
-        self.data[at..at + mem.width()].copy_from_slice(&cell.to_le_bytes()[..mem.width()]);
-        Ok(())
+        Ok(Forced {
+            addr: var.addr,
+            len: mem.width() as u8,
+            bytes: cell.to_le_bytes(),
+        })
+    }
+
+    fn write_forced(&mut self, forced: &Forced) {
+        let at = forced.addr as usize;
+        let len = forced.len as usize;
+        self.data[at..at + len].copy_from_slice(&forced.bytes[..len]);
+    }
+
+    fn apply_forces(&mut self) {
+        for slot in 0..MAX_FORCES {
+            if let Some(forced) = self.forces[slot] {
+                self.write_forced(&forced);
+            }
+        }
     }
 }
 
 /// Rotates the low `width` bits of `value` by `amount mod width`; the result is zero-extended.
 pub(crate) fn rotate(value: u64, amount: u64, width: u32, left: bool) -> u64 {
-    let mask = if width == 64 { u64::MAX } else { (1u64 << width) - 1 };
+    let mask = if width == 64 {
+        u64::MAX
+    } else {
+        (1u64 << width) - 1
+    };
     let v = value & mask;
     let n = (amount % width as u64) as u32;
     if n == 0 {
         return v;
     }
-    let r = if left { (v << n) | (v >> (width - n)) } else { (v >> n) | (v << (width - n)) };
+    let r = if left {
+        (v << n) | (v >> (width - n))
+    } else {
+        (v >> n) | (v << (width - n))
+    };
     r & mask
 }

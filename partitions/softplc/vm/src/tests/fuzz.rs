@@ -1,0 +1,184 @@
+//! Property tests: `Image::parse`, `verify` and (for images that verify) the VM never panic,
+//! on arbitrary bytes and on mutations of valid images.
+
+use super::differential::random_program;
+use super::*;
+use proptest::prelude::*;
+
+/// Parses, verifies and — if it verifies — runs a few cycles: must never panic.
+fn exercise(bytes: &[u8]) {
+    let Ok(image) = Image::parse(bytes) else {
+        return;
+    };
+    // Accessors on unverified images must be total as well.
+    for i in 0..image.pou_count().min(64) {
+        let _ = image.pou(i);
+    }
+    for i in 0..image.var_count().min(64) {
+        let _ = image.var(i);
+    }
+    let _ = image.source_location(u32::MAX);
+    let _ = image.constant(usize::MAX);
+    let Ok(verified) = verify(&image) else { return };
+    let mut data = vec![0u8; image.data_size().min(1 << 20) as usize];
+    let mut stack = [0u64; STACK];
+    let mut calls = [CallFrame::EMPTY; CALLS];
+    let mut tries = [TryFrame::EMPTY; TRIES];
+    let Ok(mut vm) = Machine::new(
+        verified,
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    ) else {
+        return;
+    };
+    for task in 0..image.task_count().min(4) {
+        vm.set_watchdog_budget(task, Some(5_000));
+        let _ = vm.run_cycle(task, 0);
+    }
+}
+
+fn mutate(mut bytes: Vec<u8>, edits: &[(usize, u8)], cut: Option<usize>) -> Vec<u8> {
+    for &(at, value) in edits {
+        if !bytes.is_empty() {
+            let at = at % bytes.len();
+            bytes[at] = value;
+        }
+    }
+    if let Some(cut) = cut {
+        let len = bytes.len();
+        bytes.truncate(cut % (len + 1));
+    }
+    bytes
+}
+
+/// String builtins: the library and the model's independent implementation agree on
+/// random strings, positions, lengths and (sometimes invalid) addresses.
+fn string_case(
+    texts: &[(u16, Vec<u8>)],
+    builtin_index: usize,
+    picks: &[u8],
+    numbers: &[i64],
+) -> Result<(), TestCaseError> {
+    use crate::isa::Builtin;
+    let string_builtins: Vec<Builtin> = Builtin::ALL
+        .iter()
+        .copied()
+        .filter(|b| (*b as u16) >= 100)
+        .collect();
+    let builtin = string_builtins[builtin_index % string_builtins.len()];
+    // Three string variables at 0, 40, 80 (capacity up to 32), data 124 bytes.
+    let mut data = vec![0u8; 124];
+    let addresses = [0u64, 40, 80, 122, 1000];
+    for (slot, (capacity, text)) in texts.iter().enumerate() {
+        let at = slot * 40;
+        let capacity = capacity % 33;
+        data[at..at + 2].copy_from_slice(&capacity.to_le_bytes());
+        data[at + 2..at + 4].copy_from_slice(&(text.len() as u16).to_le_bytes());
+        let n = text.len().min(36);
+        data[at + 4..at + 4 + n].copy_from_slice(&text[..n]);
+    }
+    let mut args = Vec::new();
+    for i in 0..builtin.args() {
+        // Dst and string operands are addresses; numeric operands are numbers.
+        let numeric = match builtin {
+            Builtin::StrLeft | Builtin::StrRight => i == 2,
+            Builtin::StrMid | Builtin::StrDelete => i >= 2,
+            Builtin::StrInsert => i == 3,
+            Builtin::StrReplace => i >= 3,
+            Builtin::StrFromI64
+            | Builtin::StrFromU64
+            | Builtin::StrFromF32
+            | Builtin::StrFromF64
+            | Builtin::StrFromBool
+            | Builtin::StrFromTime => i == 1,
+            _ => false,
+        };
+        args.push(if numeric {
+            numbers[i % numbers.len()] as u64
+        } else {
+            addresses[picks[i % picks.len()] as usize % addresses.len()]
+        });
+    }
+    let mut library_data = data.clone();
+    let library = crate::builtins::call(builtin, &args, &mut library_data);
+    let mut model_data = data;
+    let model = crate::model::string_builtin(builtin, &args, &mut model_data);
+    prop_assert_eq!(library, model, "{:?} {:?}", builtin, args);
+    prop_assert_eq!(library_data, model_data, "{:?} {:?}", builtin, args);
+    Ok(())
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig { cases: 2000, failure_persistence: None, ..ProptestConfig::default() })]
+
+    #[test]
+    fn string_builtins_agree_with_the_model(
+        texts in proptest::collection::vec(
+            (any::<u16>(), proptest::collection::vec(
+                prop_oneof![Just(b'a'), Just(b'b'), Just(b' '), Just(b'1'), Just(b'-'), Just(b'_'), any::<u8>()],
+                0..36,
+            )),
+            3,
+        ),
+        builtin_index in any::<usize>(),
+        picks in proptest::collection::vec(any::<u8>(), 1..6),
+        numbers in proptest::collection::vec(
+            prop_oneof![-3i64..40, any::<i64>(), Just(i64::MIN), Just(0i64)],
+            1..6,
+        ),
+    ) {
+        string_case(&texts, builtin_index, &picks, &numbers)?;
+    }
+
+    #[test]
+    fn parse_and_verify_never_panic_on_arbitrary_bytes(bytes in proptest::collection::vec(any::<u8>(), 0..400)) {
+        exercise(&bytes);
+    }
+
+    #[test]
+    fn parse_and_verify_never_panic_on_arbitrary_bytes_behind_a_valid_header(
+        tail in proptest::collection::vec(any::<u8>(), 0..300),
+        lens in proptest::collection::vec(0u32..64, 9),
+    ) {
+        // A correct header with arbitrary (mostly in-bounds) sections.
+        let mut bytes = Vec::new();
+        bytes.extend_from_slice(b"PLCB");
+        bytes.extend_from_slice(&1u16.to_le_bytes());
+        bytes.extend_from_slice(&(crate::image::HEADER_LEN as u16).to_le_bytes());
+        bytes.extend_from_slice(&256u32.to_le_bytes());
+        bytes.extend_from_slice(&0u32.to_le_bytes());
+        let mut offset = crate::image::HEADER_LEN as u32;
+        for len in &lens {
+            bytes.extend_from_slice(&offset.to_le_bytes());
+            bytes.extend_from_slice(&len.to_le_bytes());
+            offset += len;
+        }
+        bytes.extend_from_slice(&tail);
+        exercise(&bytes);
+    }
+
+    #[test]
+    fn parse_verify_and_run_never_panic_on_mutated_valid_images(
+        seed in 0u64..1_000_000,
+        edits in proptest::collection::vec((any::<usize>(), any::<u8>()), 1..6),
+        cut in proptest::option::of(any::<usize>()),
+    ) {
+        let bytes = mutate(random_program(seed), &edits, cut);
+        exercise(&bytes);
+    }
+}
+
+#[test]
+fn single_byte_mutations_of_a_valid_image_never_panic() {
+    // Exhaustive over positions for one program, a few values each.
+    let bytes = random_program(7);
+    for at in 0..bytes.len() {
+        for value in [0u8, 1, 0x7F, 0x80, 0xFF, bytes[at].wrapping_add(1)] {
+            exercise(&mutate(bytes.clone(), &[(at, value)], None));
+        }
+    }
+}
