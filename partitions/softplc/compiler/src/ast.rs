@@ -78,10 +78,25 @@ pub enum TypeRef {
     Named(Ident),
     /// `STRING` or `STRING[n]` / `STRING(n)`.
     String(Option<Box<Expr>>, Span),
-    Array { dims: Vec<(Expr, Expr)>, elem: Box<TypeRef>, span: Span },
-    Subrange { base: Ident, lo: Box<Expr>, hi: Box<Expr>, span: Span },
-    Enum { values: Vec<(Ident, Option<Expr>)>, span: Span },
-    Struct { members: Vec<VarDecl>, span: Span },
+    Array {
+        dims: Vec<(Expr, Expr)>,
+        elem: Box<TypeRef>,
+        span: Span,
+    },
+    Subrange {
+        base: Ident,
+        lo: Box<Expr>,
+        hi: Box<Expr>,
+        span: Span,
+    },
+    Enum {
+        values: Vec<(Ident, Option<Expr>)>,
+        span: Span,
+    },
+    Struct {
+        members: Vec<VarDecl>,
+        span: Span,
+    },
 }
 
 impl TypeRef {
@@ -158,17 +173,44 @@ pub struct Stmt {
 
 #[derive(Debug, Clone)]
 pub enum StmtKind {
-    Assign { target: Expr, value: Expr },
+    Assign {
+        target: Expr,
+        value: Expr,
+    },
     /// A call used as a statement: FB instance call or function call.
     Call(Expr),
-    If { branches: Vec<(Expr, Vec<Stmt>)>, else_body: Option<Vec<Stmt>> },
-    Case { selector: Expr, arms: Vec<CaseArm>, else_body: Option<Vec<Stmt>> },
-    For { var: Ident, from: Expr, to: Expr, by: Option<Expr>, body: Vec<Stmt> },
-    While { cond: Expr, body: Vec<Stmt> },
-    Repeat { body: Vec<Stmt>, until: Expr },
+    If {
+        branches: Vec<(Expr, Vec<Stmt>)>,
+        else_body: Option<Vec<Stmt>>,
+    },
+    Case {
+        selector: Expr,
+        arms: Vec<CaseArm>,
+        else_body: Option<Vec<Stmt>>,
+    },
+    For {
+        var: Ident,
+        from: Expr,
+        to: Expr,
+        by: Option<Expr>,
+        body: Vec<Stmt>,
+    },
+    While {
+        cond: Expr,
+        body: Vec<Stmt>,
+    },
+    Repeat {
+        body: Vec<Stmt>,
+        until: Expr,
+    },
     Exit,
     Return,
-    Try { body: Vec<Stmt>, catch_var: Option<Ident>, catch_body: Vec<Stmt>, finally_body: Vec<Stmt> },
+    Try {
+        body: Vec<Stmt>,
+        catch_var: Option<Ident>,
+        catch_body: Vec<Stmt>,
+        finally_body: Vec<Stmt>,
+    },
     Empty,
 }
 
@@ -202,7 +244,10 @@ pub enum ExprKind {
     Name(Ident),
     Member(Box<Expr>, Ident),
     Index(Box<Expr>, Vec<Expr>),
-    Call { callee: Box<Expr>, args: Vec<Arg> },
+    Call {
+        callee: Box<Expr>,
+        args: Vec<Arg>,
+    },
     Unary(UnOp, Box<Expr>),
     Binary(BinOp, Box<Expr>, Box<Expr>),
     /// Placeholder produced after a syntax error so parsing can continue.

@@ -17,10 +17,24 @@ struct Bound<'e> {
 }
 
 impl Gen<'_> {
-    pub(crate) fn call(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Type {
+    pub(crate) fn call(
+        &mut self,
+        callee: &Expr,
+        args: &[Arg],
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
         if let ExprKind::Name(n) = &callee.kind {
-            let is_var = self.prog.pous[self.cur].var(&n.name).is_some() || self.prog.global(&n.name).is_some();
-            if !is_var {
+            // A variable is only callable when it is an FB instance; otherwise the name refers
+            // to a function even if a variable happens to have the same name.
+            let var_ty = match self.prog.pous[self.cur].var(&n.name) {
+                Some(v) => Some(v.ty.clone()),
+                None => self.prog.global(&n.name).map(|g| g.ty.clone()),
+            };
+            let is_fb_var = matches!(var_ty, Some(Type::Fb(_)));
+            let is_function =
+                self.prog.pou_by_name.contains_key(&n.name) || Self::is_std_function(&n.name);
+            if !is_fb_var && (var_ty.is_none() || is_function) {
                 if let Some(&pi) = self.prog.pou_by_name.get(&n.name) {
                     return match self.prog.pous[pi].kind {
                         PouKind::Function => self.call_function(pi, args, span),
@@ -31,7 +45,7 @@ impl Gen<'_> {
                         }
                     };
                 }
-                if let Some(t) = self.std_call(&n.name, n, args, span) {
+                if let Some(t) = self.std_call(&n.name, n, args, expected, span) {
                     return t;
                 }
                 let msg = format!("unknown function `{}`", n.text);
@@ -42,7 +56,9 @@ impl Gen<'_> {
                 return Type::Error;
             }
         }
-        let Some(p) = self.place(callee) else { return Type::Error };
+        let Some(p) = self.place(callee) else {
+            return Type::Error;
+        };
         match p.ty.clone() {
             Type::Fb(pi) => {
                 self.call_fb(p, pi, args, span);
@@ -71,15 +87,35 @@ impl Gen<'_> {
             let param = match &a.name {
                 Some(n) => {
                     named_seen = true;
-                    let v = self.prog.pous[pi].vars.iter().find(|v| v.name == n.name).cloned();
+                    let v = self.prog.pous[pi]
+                        .vars
+                        .iter()
+                        .find(|v| v.name == n.name)
+                        .cloned();
                     match v {
-                        Some(v) if a.output && v.kind == VarKind::Output && v.name != self.prog.pous[pi].name => v,
-                        Some(v) if !a.output && matches!(v.kind, VarKind::Input | VarKind::InOut) => v,
+                        Some(v)
+                            if a.output
+                                && v.kind == VarKind::Output
+                                && v.name != self.prog.pous[pi].name =>
+                        {
+                            v
+                        }
+                        Some(v)
+                            if !a.output && matches!(v.kind, VarKind::Input | VarKind::InOut) =>
+                        {
+                            v
+                        }
                         Some(_) => {
                             let msg = if a.output {
-                                format!("`{}` is not an output of {pou_name} (use `:=` for inputs)", n.text)
+                                format!(
+                                    "`{}` is not an output of {pou_name} (use `:=` for inputs)",
+                                    n.text
+                                )
                             } else {
-                                format!("`{}` is not an input of {pou_name} (use `=>` for outputs)", n.text)
+                                format!(
+                                    "`{}` is not an input of {pou_name} (use `=>` for outputs)",
+                                    n.text
+                                )
                             };
                             self.error(n.span, msg);
                             continue;
@@ -99,7 +135,8 @@ impl Gen<'_> {
                     match params.get(i) {
                         Some(p) => p.clone(),
                         None => {
-                            let msg = format!("too many arguments: {pou_name} takes {}", params.len());
+                            let msg =
+                                format!("too many arguments: {pou_name} takes {}", params.len());
                             self.error(a.span, msg);
                             continue;
                         }
@@ -111,7 +148,11 @@ impl Gen<'_> {
                 self.error(a.span, msg);
                 continue;
             }
-            out.push(Bound { param, value: &a.value, output: a.output });
+            out.push(Bound {
+                param,
+                value: &a.value,
+                output: a.output,
+            });
         }
         out
     }
@@ -149,15 +190,27 @@ impl Gen<'_> {
             if a.param.kind == VarKind::InOut {
                 let loc = member(self, a.param.offset);
                 self.inout_address(a.value, &a.param.ty);
-                let p = Place { loc, ty: Type::Elem(Elem::UDInt), writable: true };
+                let p = Place {
+                    loc,
+                    ty: Type::Elem(Elem::UDInt),
+                    writable: true,
+                };
                 self.store_checked(&p);
             } else {
                 let loc = member(self, a.param.offset);
-                let p = Place { loc, ty: a.param.ty.clone(), writable: true };
+                let p = Place {
+                    loc,
+                    ty: a.param.ty.clone(),
+                    writable: true,
+                };
                 self.store_expr(&p, a.value, a.value.span);
             }
         }
-        let missing_inout = self.prog.pous[pi].vars.iter().find(|v| v.kind == VarKind::InOut && !bound.iter().any(|b| b.param.name == v.name)).map(|v| v.text.clone());
+        let missing_inout = self.prog.pous[pi]
+            .vars
+            .iter()
+            .find(|v| v.kind == VarKind::InOut && !bound.iter().any(|b| b.param.name == v.name))
+            .map(|v| v.text.clone());
         if let Some(m) = missing_inout {
             let msg = format!("VAR_IN_OUT parameter `{m}` must be connected");
             self.error(span, msg);
@@ -172,7 +225,11 @@ impl Gen<'_> {
         self.emit(|b| b.call(id));
         for a in bound.iter().filter(|a| a.output) {
             let src = member(self, a.param.offset);
-            let src = Place { loc: src, ty: a.param.ty.clone(), writable: false };
+            let src = Place {
+                loc: src,
+                ty: a.param.ty.clone(),
+                writable: false,
+            };
             self.copy_out(src, a.value);
         }
     }
@@ -182,7 +239,11 @@ impl Gen<'_> {
         match self.place(e) {
             Some(p) => {
                 if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
-                    let msg = format!("VAR_IN_OUT argument must be a {} variable, found {}", self.tname(ty), self.tname(&p.ty));
+                    let msg = format!(
+                        "VAR_IN_OUT argument must be a {} variable, found {}",
+                        self.tname(ty),
+                        self.tname(&p.ty)
+                    );
                     self.error(e.span, msg);
                 }
                 self.addr_of(&p);
@@ -201,14 +262,11 @@ impl Gen<'_> {
         };
         // A dynamic source address was pushed before the target's; keep the order valid by
         // loading the source first only when the target is static.
-        match (&src.loc, &dst.loc) {
-            (Loc::Ind(_), Loc::Ind(_)) => {
-                self.error(target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
-                self.op(Opcode::Drop);
-                self.op(Opcode::Drop);
-                return;
-            }
-            _ => {}
+        if let (Loc::Ind(_), Loc::Ind(_)) = (&src.loc, &dst.loc) {
+            self.error(target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
+            self.op(Opcode::Drop);
+            self.op(Opcode::Drop);
+            return;
         }
         if !dst.writable {
             self.error(target.span, "output target is not writable");
@@ -263,14 +321,19 @@ impl Gen<'_> {
                     Type::String(_) => {
                         let t = self.expr(a.value, Some(&a.param.ty));
                         if !t.is_string() && !t.is_error() {
-                            let msg = format!("type mismatch: expected STRING, found {}", self.tname(&t));
+                            let msg =
+                                format!("type mismatch: expected STRING, found {}", self.tname(&t));
                             self.error(a.value.span, msg);
                         }
                     }
                     Type::Array(_) | Type::Struct(_) => {
                         let t = self.expr(a.value, Some(&a.param.ty));
                         if t != a.param.ty && !t.is_error() {
-                            let msg = format!("type mismatch: expected {}, found {}", self.tname(&a.param.ty), self.tname(&t));
+                            let msg = format!(
+                                "type mismatch: expected {}, found {}",
+                                self.tname(&a.param.ty),
+                                self.tname(&t)
+                            );
                             self.error(a.value.span, msg);
                         }
                     }
@@ -338,7 +401,11 @@ impl Gen<'_> {
             b.call(id);
         });
         for a in bound.iter().filter(|a| a.output) {
-            let src = Place { loc: Loc::Abs(frame + a.param.offset), ty: a.param.ty.clone(), writable: false };
+            let src = Place {
+                loc: Loc::Abs(frame + a.param.offset),
+                ty: a.param.ty.clone(),
+                writable: false,
+            };
             self.copy_out(src, a.value);
         }
         let rt = self.prog.pous[pi].return_type.clone().unwrap_or(Type::Void);

@@ -99,7 +99,12 @@ impl ConstScope for PouConsts<'_> {
 }
 
 impl<'a> Gen<'a> {
-    pub fn new(prog: &'a mut Program, unit: &'a Unit, sources: &'a SourceMap, diags: &'a mut Diagnostics) -> Gen<'a> {
+    pub fn new(
+        prog: &'a mut Program,
+        unit: &'a Unit,
+        sources: &'a SourceMap,
+        diags: &'a mut Diagnostics,
+    ) -> Gen<'a> {
         let mut b = ImageBuilder::new();
         let file_ids = sources.files.iter().map(|f| b.add_file(&f.name)).collect();
         Gen {
@@ -220,7 +225,10 @@ impl<'a> Gen<'a> {
     }
 
     fn consts(&self) -> PouConsts<'_> {
-        PouConsts { prog: self.prog, vars: &self.prog.pous[self.cur].vars }
+        PouConsts {
+            prog: self.prog,
+            vars: &self.prog.pous[self.cur].vars,
+        }
     }
 
     pub fn const_value(&self, e: &Expr) -> Option<ConstVal> {
@@ -230,37 +238,65 @@ impl<'a> Gen<'a> {
     // ----- initial values ------------------------------------------------------------
 
     /// Writes the initial value of a variable of type `ty` at `addr` into the INIT image.
-    pub fn write_init(&mut self, addr: u32, ty: &Type, init: Option<&Init>, scope_pou: Option<usize>) {
-        self.ensure_init(addr + self.prog.size_align(ty).0);
+    pub fn write_init(
+        &mut self,
+        addr: u32,
+        ty: &Type,
+        init: Option<&Init>,
+        scope_pou: Option<usize>,
+    ) {
+        let size = self.prog.size_align(ty).0;
+        if self.prog.data_overflow || addr.saturating_add(size) > crate::sema::MAX_DATA {
+            return;
+        }
+        self.ensure_init(addr + size);
         match ty {
             Type::Elem(_) | Type::Subrange(..) | Type::Enum(_) | Type::Exception => {
                 let elem = ty.elem().unwrap_or(Elem::DInt);
                 let value = match init {
                     Some(Init::Expr(e)) => {
                         let v = match scope_pou {
-                            Some(p) => const_eval(self.prog, &PouConsts { prog: self.prog, vars: &self.prog.pous[p].vars }, e),
+                            Some(p) => const_eval(
+                                self.prog,
+                                &PouConsts {
+                                    prog: self.prog,
+                                    vars: &self.prog.pous[p].vars,
+                                },
+                                e,
+                            ),
                             None => const_eval(self.prog, &(), e),
                         };
                         match v {
                             Some(v) => v,
                             None => {
-                                self.diags.error(e.span, "initial value must be a constant expression");
+                                self.diags
+                                    .error(e.span, "initial value must be a constant expression");
                                 return;
                             }
                         }
                     }
                     Some(other) => {
-                        self.diags.error(other.span(), format!("a value of type {} cannot be initialised with an aggregate", self.tname(ty)));
+                        self.diags.error(
+                            other.span(),
+                            format!(
+                                "a value of type {} cannot be initialised with an aggregate",
+                                self.tname(ty)
+                            ),
+                        );
                         return;
                     }
                     None => match ty {
                         Type::Subrange(_, lo, _) => ConstVal::Int(*lo as i128),
-                        Type::Enum(i) => ConstVal::Int(self.prog.enums[*i].values.first().map_or(0, |v| v.1) as i128),
+                        Type::Enum(i) => ConstVal::Int(
+                            self.prog.enums[*i].values.first().map_or(0, |v| v.1) as i128,
+                        ),
                         _ => return,
                     },
                 };
                 let span = init.map(|i| i.span()).unwrap_or_default();
-                let Some(cell) = self.const_cell(&value, ty, elem, span) else { return };
+                let Some(cell) = self.const_cell(&value, ty, elem, span) else {
+                    return;
+                };
                 let w = elem.size() as usize;
                 let bytes = cell.to_le_bytes();
                 self.write_bytes(addr, &bytes[..w]);
@@ -270,12 +306,16 @@ impl<'a> Gen<'a> {
                     Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
                         Some(ConstVal::Str(s)) => s,
                         _ => {
-                            self.diags.error(e.span, "STRING initial value must be a string literal");
+                            self.diags
+                                .error(e.span, "STRING initial value must be a string literal");
                             String::new()
                         }
                     },
                     Some(other) => {
-                        self.diags.error(other.span(), "STRING initial value must be a string literal");
+                        self.diags.error(
+                            other.span(),
+                            "STRING initial value must be a string literal",
+                        );
                         String::new()
                     }
                     None => String::new(),
@@ -301,12 +341,18 @@ impl<'a> Gen<'a> {
                         }
                         let given: u64 = items.iter().map(|i| i.repeat).sum();
                         if given > count {
-                            self.diags.error(*span, format!("too many initial values: the array has {count} elements"));
+                            self.diags.error(
+                                *span,
+                                format!("too many initial values: the array has {count} elements"),
+                            );
                         }
                     }
-                    Some(Init::Expr(e)) if count == 1 => values.push(Some(init.unwrap_or(&Init::Expr(e.clone())))),
+                    Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
                     Some(other) => {
-                        self.diags.error(other.span(), "array initial value must be written `[v1, v2, n(v)]`");
+                        self.diags.error(
+                            other.span(),
+                            "array initial value must be written `[v1, v2, n(v)]`",
+                        );
                     }
                     None => {}
                 }
@@ -322,18 +368,27 @@ impl<'a> Gen<'a> {
                 let fields: Vec<(Ident, Init)> = match init {
                     Some(Init::Struct(f, _)) => f.clone(),
                     Some(other) => {
-                        self.diags.error(other.span(), "structure initial value must be written `(member := value, ...)`");
+                        self.diags.error(
+                            other.span(),
+                            "structure initial value must be written `(member := value, ...)`",
+                        );
                         Vec::new()
                     }
                     None => Vec::new(),
                 };
                 for (n, _) in &fields {
                     if !members.iter().any(|m| m.name == n.name) {
-                        self.diags.error(n.span, format!("`{}` is not a member of {}", n.text, self.tname(ty)));
+                        self.diags.error(
+                            n.span,
+                            format!("`{}` is not a member of {}", n.text, self.tname(ty)),
+                        );
                     }
                 }
                 for m in &members {
-                    let given = fields.iter().find(|(n, _)| n.name == m.name).map(|(_, i)| i.clone());
+                    let given = fields
+                        .iter()
+                        .find(|(n, _)| n.name == m.name)
+                        .map(|(_, i)| i.clone());
                     let v = given.or_else(|| m.init.clone());
                     self.write_init(addr + m.offset, &m.ty, v.as_ref(), None);
                 }
@@ -342,22 +397,34 @@ impl<'a> Gen<'a> {
                 let fields: Vec<(Ident, Init)> = match init {
                     Some(Init::Struct(f, _)) => f.clone(),
                     Some(other) => {
-                        self.diags.error(other.span(), "function block initial values must be written `(input := value, ...)`");
+                        self.diags.error(
+                            other.span(),
+                            "function block initial values must be written `(input := value, ...)`",
+                        );
                         Vec::new()
                     }
                     None => Vec::new(),
                 };
                 let vars = self.prog.pous[*pi].vars.clone();
                 for (n, _) in &fields {
-                    if !vars.iter().any(|m| m.name == n.name && matches!(m.kind, VarKind::Input | VarKind::Output | VarKind::Local)) {
-                        self.diags.error(n.span, format!("`{}` is not a variable of {}", n.text, self.tname(ty)));
+                    if !vars.iter().any(|m| {
+                        m.name == n.name
+                            && matches!(m.kind, VarKind::Input | VarKind::Output | VarKind::Local)
+                    }) {
+                        self.diags.error(
+                            n.span,
+                            format!("`{}` is not a variable of {}", n.text, self.tname(ty)),
+                        );
                     }
                 }
                 for v in &vars {
                     if matches!(v.kind, VarKind::External | VarKind::Global | VarKind::InOut) {
                         continue;
                     }
-                    let given = fields.iter().find(|(n, _)| n.name == v.name).map(|(_, i)| i.clone());
+                    let given = fields
+                        .iter()
+                        .find(|(n, _)| n.name == v.name)
+                        .map(|(_, i)| i.clone());
                     let iv = given.or_else(|| v.init.clone());
                     self.write_init(addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
                 }
@@ -406,7 +473,7 @@ impl<'a> Gen<'a> {
     pub fn generate(&mut self) {
         for i in 0..self.prog.pous.len() {
             let p = &self.prog.pous[i];
-            let id = self.b.declare_pou(&p.text, 0, 0, p.frame_size.max(0));
+            let id = self.b.declare_pou(&p.text, 0, 0, p.frame_size);
             self.pou_ids.push(id);
         }
         // Static storage: globals and program instances are already allocated by sema.
@@ -424,8 +491,16 @@ impl<'a> Gen<'a> {
             let p = &self.prog.pous[i];
             let size = p.frame_size;
             let needs_pristine = p.reinit_start < size || p.kind == PouKind::Function;
-            let frame = if p.kind == PouKind::Function { Some(self.alloc_static(size.max(8), 8)) } else { None };
-            let pristine = if needs_pristine { Some(self.alloc_static(size, 8)) } else { None };
+            let frame = if p.kind == PouKind::Function {
+                Some(self.alloc_static(size.max(8), 8))
+            } else {
+                None
+            };
+            let pristine = if needs_pristine {
+                Some(self.alloc_static(size, 8))
+            } else {
+                None
+            };
             for addr in [frame, pristine].into_iter().flatten() {
                 self.write_init(addr, &Type::Fb(i), None, None);
             }
@@ -433,7 +508,9 @@ impl<'a> Gen<'a> {
         }
         self.frames = frames;
         for i in 0..self.prog.pous.len() {
-            let pristine = self.frames[i].1.filter(|_| self.prog.pous[i].reinit_start < self.prog.pous[i].frame_size);
+            let pristine = self.frames[i]
+                .1
+                .filter(|_| self.prog.pous[i].reinit_start < self.prog.pous[i].frame_size);
             self.gen_pou(i, pristine);
         }
         self.check_recursion();
@@ -473,7 +550,12 @@ impl<'a> Gen<'a> {
         }
         // Depth-first search for a cycle; report the call that closes it.
         let mut state = vec![0u8; n];
-        fn dfs(v: usize, adj: &[Vec<(usize, Span)>], state: &mut [u8], found: &mut Option<(usize, Span)>) {
+        fn dfs(
+            v: usize,
+            adj: &[Vec<(usize, Span)>],
+            state: &mut [u8],
+            found: &mut Option<(usize, Span)>,
+        ) {
             state[v] = 1;
             for &(w, span) in &adj[v] {
                 if found.is_some() {
@@ -495,7 +577,10 @@ impl<'a> Gen<'a> {
                 dfs(v, &adj, &mut state, &mut found);
                 if let Some((w, span)) = found {
                     let name = self.prog.pous[w].text.clone();
-                    self.diags.error(span, format!("recursive call of `{name}` (IEC 61131-3 forbids recursion)"));
+                    self.diags.error(
+                        span,
+                        format!("recursive call of `{name}` (IEC 61131-3 forbids recursion)"),
+                    );
                     return;
                 }
             }
@@ -521,7 +606,10 @@ impl<'a> Gen<'a> {
                     self.op(Opcode::Drop);
                 }
             }
-            StmtKind::If { branches, else_body } => {
+            StmtKind::If {
+                branches,
+                else_body,
+            } => {
                 let end = self.label();
                 for (cond, body) in branches {
                     let next = self.label();
@@ -536,15 +624,28 @@ impl<'a> Gen<'a> {
                 }
                 self.bind(end);
             }
-            StmtKind::Case { selector, arms, else_body } => self.case(selector, arms, else_body.as_deref()),
-            StmtKind::For { var, from, to, by, body } => self.for_loop(var, from, to, by.as_ref(), body),
+            StmtKind::Case {
+                selector,
+                arms,
+                else_body,
+            } => self.case(selector, arms, else_body.as_deref()),
+            StmtKind::For {
+                var,
+                from,
+                to,
+                by,
+                body,
+            } => self.for_loop(var, from, to, by.as_ref(), body),
             StmtKind::While { cond, body } => {
                 let top = self.label();
                 let exit = self.label();
                 self.bind(top);
                 self.condition(cond);
                 self.emit(|b| b.jz(exit));
-                self.loops.push(LoopCtx { exit, try_depth: self.try_depth });
+                self.loops.push(LoopCtx {
+                    exit,
+                    try_depth: self.try_depth,
+                });
                 self.stmts(body);
                 self.loops.pop();
                 self.emit(|b| b.jmp(top));
@@ -554,7 +655,10 @@ impl<'a> Gen<'a> {
                 let top = self.label();
                 let exit = self.label();
                 self.bind(top);
-                self.loops.push(LoopCtx { exit, try_depth: self.try_depth });
+                self.loops.push(LoopCtx {
+                    exit,
+                    try_depth: self.try_depth,
+                });
                 self.stmts(body);
                 self.loops.pop();
                 self.set_location(until.span);
@@ -580,13 +684,22 @@ impl<'a> Gen<'a> {
                     self.emit(|b| b.jmp(r));
                 }
             }
-            StmtKind::Try { body, catch_var, catch_body, finally_body } => {
-                self.try_stmt(body, catch_var.as_ref(), catch_body, finally_body)
-            }
+            StmtKind::Try {
+                body,
+                catch_var,
+                catch_body,
+                finally_body,
+            } => self.try_stmt(body, catch_var.as_ref(), catch_body, finally_body),
         }
     }
 
-    fn try_stmt(&mut self, body: &[Stmt], catch_var: Option<&Ident>, catch_body: &[Stmt], finally_body: &[Stmt]) {
+    fn try_stmt(
+        &mut self,
+        body: &[Stmt],
+        catch_var: Option<&Ident>,
+        catch_body: &[Stmt],
+        finally_body: &[Stmt],
+    ) {
         let has_catch = catch_var.is_some() || !catch_body.is_empty();
         let handler = self.label();
         let finally = self.label();
@@ -605,13 +718,22 @@ impl<'a> Gen<'a> {
         if has_catch {
             match catch_var {
                 Some(v) => {
-                    let e = Expr { kind: ExprKind::Name(v.clone()), span: v.span };
+                    let e = Expr {
+                        kind: ExprKind::Name(v.clone()),
+                        span: v.span,
+                    };
                     match self.place(&e) {
-                        Some(p) if matches!(p.ty, Type::Exception) || p.ty.elem().is_some_and(|e| e.is_integral()) => {
+                        Some(p)
+                            if matches!(p.ty, Type::Exception)
+                                || p.ty.elem().is_some_and(|e| e.is_integral()) =>
+                        {
                             self.store_top(&p)
                         }
                         Some(p) => {
-                            let msg = format!("exception variable must be declared `: __EXCEPTION`, not {}", self.tname(&p.ty));
+                            let msg = format!(
+                                "exception variable must be declared `: __EXCEPTION`, not {}",
+                                self.tname(&p.ty)
+                            );
                             self.error(v.span, msg);
                             self.op(Opcode::Drop);
                         }
@@ -661,12 +783,18 @@ impl<'a> Gen<'a> {
 
     fn case(&mut self, selector: &Expr, arms: &[CaseArm], else_body: Option<&[Stmt]>) {
         let st = self.expr(selector, None);
-        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error) || st.elem().is_some_and(|e| e.is_integral());
+        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error)
+            || st.elem().is_some_and(|e| e.is_integral());
         if !ok {
-            let msg = format!("CASE selector must be an integer or enumeration, found {}", self.tname(&st));
+            let msg = format!(
+                "CASE selector must be an integer or enumeration, found {}",
+                self.tname(&st)
+            );
             self.error(selector.span, msg);
         }
-        let signed = st.elem().is_none_or(|e| e.signed_storage() || !e.is_integral() || e.size() < 8);
+        let signed = st
+            .elem()
+            .is_none_or(|e| e.signed_storage() || !e.is_integral() || e.size() < 8);
         let end = self.label();
         let mut arm_labels = Vec::new();
         let mut seen: Vec<(i128, i128, Span)> = Vec::new();
@@ -680,9 +808,14 @@ impl<'a> Gen<'a> {
                 };
                 let lo = self.case_label_value(lo_e, &st);
                 let hi = self.case_label_value(hi_e, &st);
-                let (Some(lo), Some(hi)) = (lo, hi) else { continue };
+                let (Some(lo), Some(hi)) = (lo, hi) else {
+                    continue;
+                };
                 if lo > hi {
-                    self.error(lo_e.span.to(hi_e.span), "empty CASE range (lower bound exceeds upper bound)");
+                    self.error(
+                        lo_e.span.to(hi_e.span),
+                        "empty CASE range (lower bound exceeds upper bound)",
+                    );
                 }
                 if let Some(prev) = seen.iter().find(|(a, b, _)| lo <= *b && *a <= hi) {
                     let _ = prev;
@@ -697,7 +830,11 @@ impl<'a> Gen<'a> {
                         b.jnz(l);
                     });
                 } else {
-                    let (ge, le) = if signed { (Opcode::GeS, Opcode::LeS) } else { (Opcode::GeU, Opcode::LeU) };
+                    let (ge, le) = if signed {
+                        (Opcode::GeS, Opcode::LeS)
+                    } else {
+                        (Opcode::GeU, Opcode::LeU)
+                    };
                     self.emit(|b| {
                         b.dup();
                         b.push_int(lo as i64);
@@ -727,30 +864,46 @@ impl<'a> Gen<'a> {
 
     fn case_label_value(&mut self, e: &Expr, sel: &Type) -> Option<i128> {
         // Enumeration labels may be bare value names of the selector's enumeration.
-        if let (Type::Enum(ei), ExprKind::Name(n)) = (sel, &e.kind) {
-            if let Some((_, v)) = self.prog.enums[*ei].values.iter().find(|(vn, _)| *vn == n.name) {
-                return Some(*v as i128);
-            }
+        if let (Type::Enum(ei), ExprKind::Name(n)) = (sel, &e.kind)
+            && let Some((_, v)) = self.prog.enums[*ei]
+                .values
+                .iter()
+                .find(|(vn, _)| *vn == n.name)
+        {
+            return Some(*v as i128);
         }
-        if let (Type::Exception, ExprKind::Name(n)) = (sel, &e.kind) {
-            if let Some(t) = Trap::ALL.iter().find(|t| t.name() == n.name) {
-                return Some(t.code() as i128);
-            }
+        if let (Type::Exception, ExprKind::Name(n)) = (sel, &e.kind)
+            && let Some(t) = Trap::ALL.iter().find(|t| t.name() == n.name)
+        {
+            return Some(t.code() as i128);
         }
         match self.const_value(e) {
             Some(ConstVal::Int(v)) => Some(v),
             _ => {
-                self.error(e.span, "CASE label must be a constant integer or enumeration value");
+                self.error(
+                    e.span,
+                    "CASE label must be a constant integer or enumeration value",
+                );
                 None
             }
         }
     }
 
     fn for_loop(&mut self, var: &Ident, from: &Expr, to: &Expr, by: Option<&Expr>, body: &[Stmt]) {
-        let ve = Expr { kind: ExprKind::Name(var.clone()), span: var.span };
+        let ve = Expr {
+            kind: ExprKind::Name(var.clone()),
+            span: var.span,
+        };
         let Some(vp) = self.place(&ve) else { return };
-        let Some(elem) = vp.ty.elem().filter(|e| e.is_integral() && !matches!(vp.ty, Type::Enum(_))) else {
-            let msg = format!("FOR control variable must be an integer, found {}", self.tname(&vp.ty));
+        let Some(elem) = vp
+            .ty
+            .elem()
+            .filter(|e| e.is_integral() && !matches!(vp.ty, Type::Enum(_)))
+        else {
+            let msg = format!(
+                "FOR control variable must be an integer, found {}",
+                self.tname(&vp.ty)
+            );
             self.error(var.span, msg);
             return;
         };
@@ -783,7 +936,11 @@ impl<'a> Gen<'a> {
             self.emit(|b| b.st_abs(MemType::I64, step_slot));
         }
         let signed = elem.signed_storage() || elem.size() < 8;
-        let (le, ge) = if signed { (Opcode::LeS, Opcode::GeS) } else { (Opcode::LeU, Opcode::GeU) };
+        let (le, ge) = if signed {
+            (Opcode::LeS, Opcode::GeS)
+        } else {
+            (Opcode::LeU, Opcode::GeU)
+        };
         let top = self.label();
         let exit = self.label();
         self.bind(top);
@@ -829,7 +986,10 @@ impl<'a> Gen<'a> {
                 });
             }
         }
-        self.loops.push(LoopCtx { exit, try_depth: self.try_depth });
+        self.loops.push(LoopCtx {
+            exit,
+            try_depth: self.try_depth,
+        });
         self.stmts(body);
         self.loops.pop();
         load_var(self);
@@ -856,7 +1016,10 @@ impl<'a> Gen<'a> {
             return;
         };
         if !p.writable {
-            self.error(target.span, "cannot assign to a constant or an input of another POU");
+            self.error(
+                target.span,
+                "cannot assign to a constant or an input of another POU",
+            );
         }
         self.store_expr(&p, value, target.span);
     }
@@ -927,13 +1090,22 @@ impl<'a> Gen<'a> {
                 let bp = self.place(base)?;
                 match &bp.ty {
                     Type::Struct(si) => {
-                        let Some(mem) = self.prog.structs[*si].members.iter().find(|x| x.name == m.name).cloned() else {
+                        let Some(mem) = self.prog.structs[*si]
+                            .members
+                            .iter()
+                            .find(|x| x.name == m.name)
+                            .cloned()
+                        else {
                             let msg = format!("{} has no member `{}`", self.tname(&bp.ty), m.text);
                             self.error(m.span, msg);
                             self.drop_place(&bp);
                             return None;
                         };
-                        Some(Place { loc: offset_loc(bp.loc, mem.offset), ty: mem.ty, writable: bp.writable })
+                        Some(Place {
+                            loc: offset_loc(bp.loc, mem.offset),
+                            ty: mem.ty,
+                            writable: bp.writable,
+                        })
                     }
                     Type::Fb(pi) => {
                         let pi = *pi;
@@ -942,16 +1114,26 @@ impl<'a> Gen<'a> {
                             Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
                                 // Outputs are read-only from outside; inputs may be set before a call.
                                 let writable = bp.writable && v.kind == VarKind::Input;
-                                Some(Place { loc: offset_loc(bp.loc, v.offset), ty: v.ty, writable })
+                                Some(Place {
+                                    loc: offset_loc(bp.loc, v.offset),
+                                    ty: v.ty,
+                                    writable,
+                                })
                             }
                             Some(_) => {
-                                let msg = format!("`{}` is not an input or output of {}", m.text, self.prog.pous[pi].text);
+                                let msg = format!(
+                                    "`{}` is not an input or output of {}",
+                                    m.text, self.prog.pous[pi].text
+                                );
                                 self.error(m.span, msg);
                                 self.drop_place(&bp);
                                 None
                             }
                             None => {
-                                let msg = format!("{} has no input or output `{}`", self.prog.pous[pi].text, m.text);
+                                let msg = format!(
+                                    "{} has no input or output `{}`",
+                                    self.prog.pous[pi].text, m.text
+                                );
                                 self.error(m.span, msg);
                                 self.drop_place(&bp);
                                 None
@@ -984,7 +1166,11 @@ impl<'a> Gen<'a> {
                     return None;
                 };
                 if idx.len() != arr.dims.len() {
-                    let msg = format!("array has {} dimension(s) but {} index(es) given", arr.dims.len(), idx.len());
+                    let msg = format!(
+                        "array has {} dimension(s) but {} index(es) given",
+                        arr.dims.len(),
+                        idx.len()
+                    );
                     self.error(e.span, msg);
                     self.drop_place(&bp);
                     return None;
@@ -1011,7 +1197,8 @@ impl<'a> Gen<'a> {
                     match c {
                         Some(v) => {
                             if *v < lo as i128 || *v > hi as i128 {
-                                let msg = format!("index {v} is outside the array bounds {lo}..{hi}");
+                                let msg =
+                                    format!("index {v} is outside the array bounds {lo}..{hi}");
                                 self.error(idx[d].span, msg);
                             } else {
                                 static_off += (*v as i64 - lo) * strides[d];
@@ -1021,7 +1208,11 @@ impl<'a> Gen<'a> {
                     }
                 }
                 if !dynamic {
-                    return Some(Place { loc: offset_loc(bp.loc, static_off as u32), ty: arr.elem.clone(), writable: bp.writable });
+                    return Some(Place {
+                        loc: offset_loc(bp.loc, static_off as u32),
+                        ty: arr.elem.clone(),
+                        writable: bp.writable,
+                    });
                 }
                 let base_off = match bp.loc {
                     Loc::Abs(a) => {
@@ -1040,8 +1231,11 @@ impl<'a> Gen<'a> {
                     }
                     let (lo, hi) = arr.dims[d];
                     let t = self.expr(&idx[d], Some(&Type::DINT));
-                    if !t.is_error() && !t.elem().is_some_and(|e| e.is_integral()) || matches!(t, Type::Enum(_)) {
-                        let msg = format!("array index must be an integer, found {}", self.tname(&t));
+                    if !t.is_error() && !t.elem().is_some_and(|e| e.is_integral())
+                        || matches!(t, Type::Enum(_))
+                    {
+                        let msg =
+                            format!("array index must be an integer, found {}", self.tname(&t));
                         self.error(idx[d].span, msg);
                     }
                     let stride = strides[d];
@@ -1058,7 +1252,11 @@ impl<'a> Gen<'a> {
                         b.op(Opcode::Add);
                     });
                 }
-                Some(Place { loc: Loc::Ind(base_off + static_off as u32), ty: arr.elem.clone(), writable: bp.writable })
+                Some(Place {
+                    loc: Loc::Ind(base_off + static_off as u32),
+                    ty: arr.elem.clone(),
+                    writable: bp.writable,
+                })
             }
             _ => {
                 self.error(e.span, "expected a variable");
@@ -1077,13 +1275,22 @@ impl<'a> Gen<'a> {
         let pou = &self.prog.pous[self.cur];
         if let Some(v) = pou.var(&n.name).cloned() {
             return match v.kind {
-                VarKind::External => match self.prog.global(&n.name) {
+                VarKind::External => match self.prog.global(&n.name).cloned() {
                     Some(g) => {
                         if g.ty != v.ty && !v.ty.is_error() && !g.ty.is_error() {
-                            let msg = format!("VAR_EXTERNAL `{}` declared as {} but the global is {}", v.text, self.tname(&v.ty), self.tname(&g.ty));
+                            let msg = format!(
+                                "VAR_EXTERNAL `{}` declared as {} but the global is {}",
+                                v.text,
+                                self.tname(&v.ty),
+                                self.tname(&g.ty)
+                            );
                             self.error(v.span, msg);
                         }
-                        Some(Place { loc: Loc::Abs(g.offset), ty: g.ty.clone(), writable: !g.constant && !v.constant })
+                        Some(Place {
+                            loc: Loc::Abs(g.offset),
+                            ty: g.ty.clone(),
+                            writable: !g.constant && !v.constant,
+                        })
                     }
                     None => {
                         let msg = format!("VAR_EXTERNAL `{}` has no matching VAR_GLOBAL", v.text);
@@ -1093,17 +1300,25 @@ impl<'a> Gen<'a> {
                 },
                 VarKind::InOut => {
                     self.emit(|b| b.ld_rel(MemType::U32, v.offset));
-                    Some(Place { loc: Loc::Ind(0), ty: v.ty, writable: true })
+                    Some(Place {
+                        loc: Loc::Ind(0),
+                        ty: v.ty,
+                        writable: true,
+                    })
                 }
                 _ => Some(Place {
                     loc: Loc::Rel(v.offset),
                     ty: v.ty,
-                    writable: !v.constant && !(pou.kind == PouKind::Function && v.kind == VarKind::Input && false),
+                    writable: !v.constant,
                 }),
             };
         }
         if let Some(g) = self.prog.global(&n.name) {
-            return Some(Place { loc: Loc::Abs(g.offset), ty: g.ty.clone(), writable: !g.constant });
+            return Some(Place {
+                loc: Loc::Abs(g.offset),
+                ty: g.ty.clone(),
+                writable: !g.constant,
+            });
         }
         let msg = format!("unknown variable `{}`", n.text);
         self.error(n.span, msg);
@@ -1155,20 +1370,44 @@ impl<'a> Gen<'a> {
     }
 
     /// Whether `e` is built only from untyped numeric literals (it adapts to its context).
-    fn is_flexible(e: &Expr) -> bool {
+    pub(crate) fn is_flexible(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Int(_) | ExprKind::Real(_) => true,
+            // Numeric standard functions of literals are as untyped as the literals.
+            ExprKind::Call { callee, args } => match &callee.kind {
+                ExprKind::Name(n) => {
+                    const GENERIC: &[&str] = &[
+                        "ABS", "SQRT", "LN", "LOG", "EXP", "SIN", "COS", "TAN", "ASIN", "ACOS",
+                        "ATAN", "EXPT", "MAX", "MIN", "LIMIT",
+                    ];
+                    GENERIC.contains(&n.name.as_str())
+                        && !args.is_empty()
+                        && args
+                            .iter()
+                            .all(|a| !a.output && Self::is_flexible(&a.value))
+                }
+                _ => false,
+            },
             ExprKind::Unary(UnOp::Neg, x) => Self::is_flexible(x),
-            ExprKind::Binary(op, a, b) if !matches!(op, BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge) => {
+            ExprKind::Binary(op, a, b)
+                if !matches!(
+                    op,
+                    BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+                ) =>
+            {
                 Self::is_flexible(a) && Self::is_flexible(b)
             }
             _ => false,
         }
     }
 
-    fn has_real_literal(e: &Expr) -> bool {
+    pub(crate) fn has_real_literal(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Real(_) => true,
+            ExprKind::Call { callee, args } => {
+                matches!(&callee.kind, ExprKind::Name(n) if !["ABS", "MAX", "MIN", "LIMIT"].contains(&n.name.as_str()))
+                    || args.iter().any(|a| Self::has_real_literal(&a.value))
+            }
             ExprKind::Unary(_, x) => Self::has_real_literal(x),
             ExprKind::Binary(_, a, b) => Self::has_real_literal(a) || Self::has_real_literal(b),
             _ => false,
@@ -1188,25 +1427,44 @@ impl<'a> Gen<'a> {
         }
         match (from, to) {
             (Type::String(_), Type::String(_)) => return,
-            (Type::Subrange(a, ..), _) if to.elem() == Some(*a) && !matches!(to, Type::Enum(_) | Type::Exception) => return,
+            (Type::Subrange(a, ..), _)
+                if to.elem() == Some(*a) && !matches!(to, Type::Enum(_) | Type::Exception) =>
+            {
+                return;
+            }
             _ => {}
         }
         let (Some(f), Some(t)) = (from.elem(), to.elem()) else {
-            let msg = format!("type mismatch: expected {}, found {}", self.tname(to), self.tname(from));
+            let msg = format!(
+                "type mismatch: expected {}, found {}",
+                self.tname(to),
+                self.tname(from)
+            );
             self.error(span, msg);
             return;
         };
         let enumish = |x: &Type| matches!(x, Type::Enum(_) | Type::Exception);
         if enumish(from) || enumish(to) {
-            let msg = format!("type mismatch: expected {}, found {}", self.tname(to), self.tname(from));
+            let msg = format!(
+                "type mismatch: expected {}, found {}",
+                self.tname(to),
+                self.tname(from)
+            );
             self.error(span, msg);
             return;
         }
         if !implicit_ok(f, t) {
             let msg = if f.is_numeric() && t.is_numeric() {
-                format!("cannot convert {} to {} implicitly (use {}_TO_{})", f, t, f, t)
+                format!(
+                    "cannot convert {} to {} implicitly (use {}_TO_{})",
+                    f, t, f, t
+                )
             } else {
-                format!("type mismatch: expected {}, found {}", self.tname(to), self.tname(from))
+                format!(
+                    "type mismatch: expected {}, found {}",
+                    self.tname(to),
+                    self.tname(from)
+                )
             };
             self.error(span, msg);
             return;
@@ -1266,13 +1524,29 @@ impl<'a> Gen<'a> {
                 };
                 self.op(op);
             }
-            (true, true) => self.op(if f == Elem::Real { Opcode::F32ToF64 } else { Opcode::F64ToF32 }),
+            (true, true) => self.op(if f == Elem::Real {
+                Opcode::F32ToF64
+            } else {
+                Opcode::F64ToF32
+            }),
             (true, false) => {
-                let op = if f == Elem::Real { Opcode::F32ToInt } else { Opcode::F64ToInt };
+                let op = if f == Elem::Real {
+                    Opcode::F32ToInt
+                } else {
+                    Opcode::F64ToInt
+                };
                 if t == Elem::Bool {
-                    let zero_op = if f == Elem::Real { Opcode::NeF32 } else { Opcode::NeF64 };
+                    let zero_op = if f == Elem::Real {
+                        Opcode::NeF32
+                    } else {
+                        Opcode::NeF64
+                    };
                     self.emit(|b| {
-                        if f == Elem::Real { b.push_f32(0.0) } else { b.push_f64(0.0) }
+                        if f == Elem::Real {
+                            b.push_f32(0.0)
+                        } else {
+                            b.push_f64(0.0)
+                        }
                         b.op(zero_op);
                     });
                 } else if t == Elem::Time {
@@ -1301,7 +1575,11 @@ impl<'a> Gen<'a> {
                 b.op(Opcode::And);
             });
         } else if w < 64 && !e.is_real() {
-            let op = if e.is_signed_int() { Opcode::Sext } else { Opcode::Zext };
+            let op = if e.is_signed_int() {
+                Opcode::Sext
+            } else {
+                Opcode::Zext
+            };
             self.emit(|b| b.op_width(op, w));
         }
     }
@@ -1338,14 +1616,18 @@ impl<'a> Gen<'a> {
             ExprKind::Typed(ty, inner) => self.typed_literal(ty, inner, e.span),
             ExprKind::Name(n) => {
                 // Variables shadow enumeration values.
-                let is_var = self.prog.pous[self.cur].var(&n.name).is_some() || self.prog.global(&n.name).is_some();
+                let is_var = self.prog.pous[self.cur].var(&n.name).is_some()
+                    || self.prog.global(&n.name).is_some();
                 if !is_var {
-                    if let Some(Type::Enum(ei)) = expected {
-                        if let Some((_, v)) = self.prog.enums[*ei].values.iter().find(|(vn, _)| *vn == n.name) {
-                            let v = *v;
-                            self.push_int(v);
-                            return Type::Enum(*ei);
-                        }
+                    if let Some(Type::Enum(ei)) = expected
+                        && let Some((_, v)) = self.prog.enums[*ei]
+                            .values
+                            .iter()
+                            .find(|(vn, _)| *vn == n.name)
+                    {
+                        let v = *v;
+                        self.push_int(v);
+                        return Type::Enum(*ei);
                     }
                     if let Some((ei, v)) = self.prog.enum_value(&n.name) {
                         self.push_int(v);
@@ -1371,7 +1653,7 @@ impl<'a> Gen<'a> {
                 }
                 None => Type::Error,
             },
-            ExprKind::Call { callee, args } => self.call(callee, args, e.span),
+            ExprKind::Call { callee, args } => self.call(callee, args, expected, e.span),
             ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),
         }
@@ -1446,8 +1728,14 @@ impl<'a> Gen<'a> {
         if ty.name == "STRING" {
             return self.expr(inner, None);
         }
-        if let (Some((Type::Enum(ei), _)), ExprKind::Name(n)) = (self.prog.aliases.get(&ty.name).cloned(), &inner.kind) {
-            if let Some((_, v)) = self.prog.enums[ei].values.iter().find(|(vn, _)| *vn == n.name) {
+        if let (Some((Type::Enum(ei), _)), ExprKind::Name(n)) =
+            (self.prog.aliases.get(&ty.name).cloned(), &inner.kind)
+        {
+            if let Some((_, v)) = self.prog.enums[ei]
+                .values
+                .iter()
+                .find(|(vn, _)| *vn == n.name)
+            {
                 let v = *v;
                 self.push_int(v);
                 return Type::Enum(ei);
@@ -1456,7 +1744,10 @@ impl<'a> Gen<'a> {
             self.error(n.span, msg);
             return Type::Error;
         }
-        self.error(ty.span, format!("unknown type `{}` in typed literal", ty.text));
+        self.error(
+            ty.span,
+            format!("unknown type `{}` in typed literal", ty.text),
+        );
         Type::Error
     }
 
@@ -1468,14 +1759,25 @@ impl<'a> Gen<'a> {
             }
             if let ExprKind::Real(_) = x.kind {
                 let t = self.expr(x, expected);
-                self.op(if t == Type::REAL { Opcode::NegF32 } else { Opcode::NegF64 });
+                self.op(if t == Type::REAL {
+                    Opcode::NegF32
+                } else {
+                    Opcode::NegF64
+                });
                 return t;
             }
         }
         let t = self.expr(x, expected);
-        let Some(e) = t.elem().filter(|_| !matches!(t, Type::Enum(_) | Type::Exception)) else {
+        let Some(e) = t
+            .elem()
+            .filter(|_| !matches!(t, Type::Enum(_) | Type::Exception))
+        else {
             if !t.is_error() {
-                let msg = format!("operator {} cannot be applied to {}", if op == UnOp::Neg { "-" } else { "NOT" }, self.tname(&t));
+                let msg = format!(
+                    "operator {} cannot be applied to {}",
+                    if op == UnOp::Neg { "-" } else { "NOT" },
+                    self.tname(&t)
+                );
                 self.error(span, msg);
             }
             return Type::Error;
@@ -1537,9 +1839,14 @@ impl<'a> Gen<'a> {
                 (x, y)
             }
             (None, None) => {
-                let num = expected.and_then(|t| t.elem()).filter(|e| e.is_numeric() && !matches!(expected, Some(Type::Enum(_))));
+                let num = expected
+                    .and_then(|t| t.elem())
+                    .filter(|e| e.is_numeric() && !matches!(expected, Some(Type::Enum(_))));
+                let any_real = Self::has_real_literal(a) || Self::has_real_literal(b);
+                // Integer literals stay integers (5 / 2 = 2 even when assigned to a REAL);
+                // real literals take a REAL context's precision.
                 let t = match num {
-                    Some(e) if !Self::has_real_literal(a) && !Self::has_real_literal(b) || e.is_real() => Type::Elem(e),
+                    Some(e) if e.is_real() == any_real => Type::Elem(e),
                     _ => {
                         if Self::has_real_literal(a) || Self::has_real_literal(b) {
                             Type::LREAL
@@ -1553,16 +1860,31 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn binary(&mut self, op: BinOp, a: &Expr, b: &Expr, expected: Option<&Type>, span: Span) -> Type {
+    fn binary(
+        &mut self,
+        op: BinOp,
+        a: &Expr,
+        b: &Expr,
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
         let (ta, tb) = self.operand_type(a, b, expected);
         if ta.is_error() || tb.is_error() {
             self.expr(a, None);
             self.expr(b, None);
             return Type::Error;
         }
-        let is_cmp = matches!(op, BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge);
+        let is_cmp = matches!(
+            op,
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+        );
         let mismatch = |g: &mut Self| {
-            let msg = format!("operator {} cannot be applied to {} and {}", op.symbol(), g.tname(&ta), g.tname(&tb));
+            let msg = format!(
+                "operator {} cannot be applied to {} and {}",
+                op.symbol(),
+                g.tname(&ta),
+                g.tname(&tb)
+            );
             g.error(span, msg);
             Type::Error
         };
@@ -1591,13 +1913,20 @@ impl<'a> Gen<'a> {
             self.op(cmp_op(op, true));
             return Type::BOOL;
         }
-        let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else { return mismatch(self) };
+        let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else {
+            return mismatch(self);
+        };
         // TIME arithmetic.
         if ea == Elem::Time || eb == Elem::Time {
             let result = match op {
                 _ if is_cmp && ea == eb => Type::BOOL,
                 BinOp::Add | BinOp::Sub if ea == eb => Type::TIME,
-                BinOp::Mul if ea == Elem::Time && eb.is_integral() || eb == Elem::Time && ea.is_integral() => Type::TIME,
+                BinOp::Mul
+                    if ea == Elem::Time && eb.is_integral()
+                        || eb == Elem::Time && ea.is_integral() =>
+                {
+                    Type::TIME
+                }
                 BinOp::Div if ea == Elem::Time && eb.is_integral() => Type::TIME,
                 BinOp::Mul | BinOp::Div if ea == Elem::Time && eb.is_real() => Type::TIME,
                 _ => return mismatch(self),
@@ -1607,12 +1936,26 @@ impl<'a> Gen<'a> {
                 self.expr(a, Some(&ta));
                 self.op(Opcode::IToF64S);
                 self.value_to(b, &Type::LREAL);
-                self.op(if op == BinOp::Mul { Opcode::MulF64 } else { Opcode::DivF64 });
-                self.emit(|bb| bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway));
+                self.op(if op == BinOp::Mul {
+                    Opcode::MulF64
+                } else {
+                    Opcode::DivF64
+                });
+                self.emit(|bb| {
+                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
+                });
                 return result;
             }
-            let sa = if ea == Elem::Time { ta.clone() } else { Type::LINT };
-            let sb = if eb == Elem::Time { tb.clone() } else { Type::LINT };
+            let sa = if ea == Elem::Time {
+                ta.clone()
+            } else {
+                Type::LINT
+            };
+            let sb = if eb == Elem::Time {
+                tb.clone()
+            } else {
+                Type::LINT
+            };
             self.value_to_any(a, &ta, &sa);
             self.value_to_any(b, &tb, &sb);
             self.op(match op {
@@ -1655,7 +1998,9 @@ impl<'a> Gen<'a> {
             }
             return mismatch(self);
         }
-        let Some(mut ct) = common_numeric(ea, eb) else { return mismatch(self) };
+        let Some(mut ct) = common_numeric(ea, eb) else {
+            return mismatch(self);
+        };
         if op == BinOp::Pow && !ct.is_real() {
             // Integer ** integer: computed in LREAL, rounded back.
             let rt = Type::Elem(ct);
@@ -1668,7 +2013,11 @@ impl<'a> Gen<'a> {
             return rt;
         }
         if op == BinOp::Pow {
-            ct = if ct == Elem::Real { Elem::Real } else { Elem::LReal };
+            ct = if ct == Elem::Real {
+                Elem::Real
+            } else {
+                Elem::LReal
+            };
         }
         let tt = Type::Elem(ct);
         self.value_to_any(a, &ta, &tt);
@@ -1693,7 +2042,8 @@ impl<'a> Gen<'a> {
                     _ => Opcode::GeF64,
                 }
             } else {
-                cmp_op(op, !(ct.size() == 8 && !ct.is_signed_int()))
+                // Only 64-bit unsigned values can exceed i64; narrower ones are zero-extended.
+                cmp_op(op, ct.size() != 8 || ct.is_signed_int())
             };
             self.op(opc);
             return Type::BOOL;
@@ -1727,8 +2077,20 @@ impl<'a> Gen<'a> {
                     BinOp::Add => Opcode::Add,
                     BinOp::Sub => Opcode::Sub,
                     BinOp::Mul => Opcode::Mul,
-                    BinOp::Div => if signed { Opcode::DivS } else { Opcode::DivU },
-                    BinOp::Mod => if signed { Opcode::ModS } else { Opcode::ModU },
+                    BinOp::Div => {
+                        if signed {
+                            Opcode::DivS
+                        } else {
+                            Opcode::DivU
+                        }
+                    }
+                    BinOp::Mod => {
+                        if signed {
+                            Opcode::ModS
+                        } else {
+                            Opcode::ModU
+                        }
+                    }
                     _ => return mismatch(self),
                 });
                 self.wrap(ct);
@@ -1748,10 +2110,11 @@ impl<'a> Gen<'a> {
 }
 
 fn offset_loc(l: Loc, off: u32) -> Loc {
+    // Wrapping: only programs that already failed the data-size check can get near u32::MAX.
     match l {
-        Loc::Abs(a) => Loc::Abs(a + off),
-        Loc::Rel(o) => Loc::Rel(o + off),
-        Loc::Ind(o) => Loc::Ind(o + off),
+        Loc::Abs(a) => Loc::Abs(a.wrapping_add(off)),
+        Loc::Rel(o) => Loc::Rel(o.wrapping_add(off)),
+        Loc::Ind(o) => Loc::Ind(o.wrapping_add(off)),
     }
 }
 

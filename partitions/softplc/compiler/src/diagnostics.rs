@@ -15,12 +15,20 @@ pub struct Span {
 
 impl Span {
     pub fn new(file: u32, start: usize, end: usize) -> Span {
-        Span { file, start: start as u32, end: end as u32 }
+        Span {
+            file,
+            start: start as u32,
+            end: end as u32,
+        }
     }
 
     /// The smallest span covering both `self` and `other` (same file assumed).
     pub fn to(self, other: Span) -> Span {
-        Span { file: self.file, start: self.start.min(other.start), end: self.end.max(other.end) }
+        Span {
+            file: self.file,
+            start: self.start.min(other.start),
+            end: self.end.max(other.end),
+        }
     }
 }
 
@@ -38,7 +46,11 @@ impl SourceFile {
         let text = text.into();
         let mut line_starts = vec![0];
         line_starts.extend(text.match_indices('\n').map(|(i, _)| i + 1));
-        SourceFile { name: name.into(), text, line_starts }
+        SourceFile {
+            name: name.into(),
+            text,
+            line_starts,
+        }
     }
 
     /// 1-based line and column (column counted in characters) of a byte offset.
@@ -49,7 +61,10 @@ impl SourceFile {
             Err(i) => i - 1,
         };
         let start = self.line_starts[line];
-        let col = self.text.get(start..offset).map_or(offset - start, |s| s.chars().count());
+        let col = self
+            .text
+            .get(start..offset)
+            .map_or(offset - start, |s| s.chars().count());
         (line + 1, col + 1)
     }
 }
@@ -89,7 +104,11 @@ pub struct Diagnostic {
 
 impl Diagnostic {
     pub fn error(span: Span, message: impl Into<String>) -> Diagnostic {
-        Diagnostic { span, message: message.into(), label: None }
+        Diagnostic {
+            span,
+            message: message.into(),
+            label: None,
+        }
     }
 
     pub fn with_label(mut self, label: impl Into<String>) -> Diagnostic {
@@ -113,7 +132,11 @@ pub struct Diagnostics {
 impl Diagnostics {
     pub fn push(&mut self, d: Diagnostic) {
         // Cascading errors at the very same place add noise, not information.
-        if !self.list.iter().any(|e| e.span == d.span && e.message == d.message) {
+        if !self
+            .list
+            .iter()
+            .any(|e| e.span == d.span && e.message == d.message)
+        {
             self.list.push(d);
         }
     }
@@ -134,18 +157,38 @@ pub fn render(sources: &SourceMap, diags: &[Diagnostic], color: bool) -> String 
     let mut out = String::new();
     for d in diags {
         let file = sources.file(d.span.file);
-        let start = (d.span.start as usize).min(file.text.len());
-        let end = (d.span.end as usize).clamp(start, file.text.len());
-        out.push_str(&format!("{}: error: {}\n", sources.location(d.span), d.message));
+        let mut start = (d.span.start as usize).min(file.text.len());
+        while !file.text.is_char_boundary(start) {
+            start -= 1;
+        }
+        let mut end = (d.span.end as usize).clamp(start, file.text.len());
+        while !file.text.is_char_boundary(end) {
+            end += 1;
+        }
+        out.push_str(&format!(
+            "{}: error: {}\n",
+            sources.location(d.span),
+            d.message
+        ));
         let label = Label::new((file.name.clone(), start..end))
             .with_message(d.label.clone().unwrap_or_else(|| d.message.clone()));
         let report = Report::build(ReportKind::Error, (file.name.clone(), start..end))
-            .with_config(Config::default().with_index_type(IndexType::Byte).with_color(color))
+            .with_config(
+                Config::default()
+                    .with_index_type(IndexType::Byte)
+                    .with_color(color),
+            )
             .with_message(&d.message)
             .with_label(label)
             .finish();
         let mut buf = Vec::new();
-        if report.write((file.name.clone(), Source::from(file.text.as_str())), &mut buf).is_ok() {
+        if report
+            .write(
+                (file.name.clone(), Source::from(file.text.as_str())),
+                &mut buf,
+            )
+            .is_ok()
+        {
             out.push_str(&String::from_utf8_lossy(&buf));
         }
     }

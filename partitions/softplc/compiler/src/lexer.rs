@@ -18,29 +18,29 @@ pub enum Tok {
     Str(String),
     /// `TYPE#` prefix of a typed literal such as `INT#5` or `Color#Red`.
     TypePrefix(String, String),
-    Assign,    // :=
-    Arrow,     // =>
-    Colon,     // :
-    Semi,      // ;
-    Comma,     // ,
-    Dot,       // .
-    DotDot,    // ..
-    LParen,    // (
-    RParen,    // )
-    LBracket,  // [
-    RBracket,  // ]
-    Plus,      // +
-    Minus,     // -
-    Star,      // *
-    Slash,     // /
-    Power,     // **
-    Eq,        // =
-    Ne,        // <>
-    Lt,        // <
-    Le,        // <=
-    Gt,        // >
-    Ge,        // >=
-    Amp,       // &
+    Assign,   // :=
+    Arrow,    // =>
+    Colon,    // :
+    Semi,     // ;
+    Comma,    // ,
+    Dot,      // .
+    DotDot,   // ..
+    LParen,   // (
+    RParen,   // )
+    LBracket, // [
+    RBracket, // ]
+    Plus,     // +
+    Minus,    // -
+    Star,     // *
+    Slash,    // /
+    Power,    // **
+    Eq,       // =
+    Ne,       // <>
+    Lt,       // <
+    Le,       // <=
+    Gt,       // >
+    Ge,       // >=
+    Amp,      // &
     Eof,
 }
 
@@ -53,7 +53,14 @@ pub struct Token {
 /// Splits `text` into tokens. Lexical errors are reported and the offending character skipped,
 /// so one bad character does not hide the errors after it.
 pub fn lex(file: u32, text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
-    let mut lx = Lexer { file, src: text.as_bytes(), text, pos: 0, out: Vec::new(), diags };
+    let mut lx = Lexer {
+        file,
+        src: text.as_bytes(),
+        text,
+        pos: 0,
+        out: Vec::new(),
+        diags,
+    };
     lx.run();
     lx.out
 }
@@ -77,7 +84,11 @@ impl Lexer<'_> {
     }
 
     fn error(&mut self, start: usize, msg: impl Into<String>) {
-        let span = Span::new(self.file, start, self.pos.max(start + 1).min(self.src.len().max(start)));
+        let mut end = self.pos.max(start + 1).min(self.src.len().max(start));
+        while !self.text.is_char_boundary(end) {
+            end += 1;
+        }
+        let span = Span::new(self.file, start, end);
         self.diags.push(Diagnostic::error(span, msg));
     }
 
@@ -117,7 +128,10 @@ impl Lexer<'_> {
             }
         }
         let end = self.src.len();
-        self.out.push(Token { tok: Tok::Eof, span: Span::new(self.file, end, end) });
+        self.out.push(Token {
+            tok: Tok::Eof,
+            span: Span::new(self.file, end, end),
+        });
     }
 
     fn block_comment(&mut self, open0: u8, open1: u8, close: u8) {
@@ -158,26 +172,26 @@ impl Lexer<'_> {
                 break;
             }
             if c == b'$' {
-                let e = self.peek(1);
-                self.pos += 2;
+                let at = self.pos;
+                let e = self.text[self.pos + 1..].chars().next().unwrap_or('\0');
+                self.pos += 1 + e.len_utf8().min(self.src.len() - self.pos - 1);
                 match e.to_ascii_uppercase() {
-                    b'$' => value.push('$'),
-                    b'\'' => value.push('\''),
-                    b'"' => value.push('"'),
-                    b'L' | b'N' => value.push('\n'),
-                    b'P' => value.push('\x0c'),
-                    b'R' => value.push('\r'),
-                    b'T' => value.push('\t'),
+                    '$' => value.push('$'),
+                    '\'' => value.push('\''),
+                    '"' => value.push('"'),
+                    'L' | 'N' => value.push('\n'),
+                    'P' => value.push('\x0c'),
+                    'R' => value.push('\r'),
+                    'T' => value.push('\t'),
                     h if h.is_ascii_hexdigit() && self.peek(0).is_ascii_hexdigit() => {
-                        let hex = [h, self.peek(0)];
+                        let hex = [h as u8, self.peek(0)];
                         self.pos += 1;
                         let s = std::str::from_utf8(&hex).unwrap_or("0");
                         value.push(u8::from_str_radix(s, 16).unwrap_or(0) as char);
                     }
                     _ => {
-                        let at = self.pos - 2;
                         self.diags.push(Diagnostic::error(
-                            Span::new(self.file, at, at + 2),
+                            Span::new(self.file, at, self.pos),
                             "invalid escape sequence in string literal",
                         ));
                     }
@@ -217,7 +231,10 @@ impl Lexer<'_> {
             self.pos += 1;
             let radix: u32 = int.parse().unwrap_or(0);
             if ![2, 8, 16].contains(&radix) {
-                self.error(start, format!("unsupported number base {radix} (use 2, 8 or 16)"));
+                self.error(
+                    start,
+                    format!("unsupported number base {radix} (use 2, 8 or 16)"),
+                );
                 self.digits(16);
                 self.push(Tok::Int(0), start);
                 return;
@@ -269,7 +286,9 @@ impl Lexer<'_> {
 
     fn ident(&mut self) {
         let start = self.pos;
-        while self.pos < self.src.len() && (self.peek(0) == b'_' || self.peek(0).is_ascii_alphanumeric()) {
+        while self.pos < self.src.len()
+            && (self.peek(0) == b'_' || self.peek(0).is_ascii_alphanumeric())
+        {
             self.pos += 1;
         }
         let orig = self.text[start..self.pos].to_string();
@@ -326,7 +345,10 @@ impl Lexer<'_> {
                 "us" => 1_000,
                 "ns" => 1,
                 _ => {
-                    self.error(ustart, format!("unknown time unit `{unit}` (use d, h, m, s, ms, us, ns)"));
+                    self.error(
+                        ustart,
+                        format!("unknown time unit `{unit}` (use d, h, m, s, ms, us, ns)"),
+                    );
                     0
                 }
             };
@@ -339,7 +361,10 @@ impl Lexer<'_> {
             any = true;
         }
         if !any {
-            self.error(start, "malformed duration literal (expected e.g. T#1s500ms)");
+            self.error(
+                start,
+                "malformed duration literal (expected e.g. T#1s500ms)",
+            );
         }
         let mut ns = exact.saturating_add(total.round() as i128);
         if negative {
@@ -418,7 +443,10 @@ mod tests {
         assert_eq!(toks("T#1s500ms")[0], Tok::Time(1_500_000_000));
         assert_eq!(toks("t#-1.5s")[0], Tok::Time(-1_500_000_000));
         assert_eq!(toks("'a$'b$N'")[0], Tok::Str("a'b\n".into()));
-        assert_eq!(toks("INT#5")[0], Tok::TypePrefix("INT".into(), "INT".into()));
+        assert_eq!(
+            toks("INT#5")[0],
+            Tok::TypePrefix("INT".into(), "INT".into())
+        );
         assert_eq!(toks("x (* c (* n *) *) := 1")[1], Tok::Assign);
     }
 }

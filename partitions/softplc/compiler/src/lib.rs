@@ -1,3 +1,234 @@
 //! IEC 61131-3 Structured Text compiler (host): source -> verified plc-vm bytecode image.
+//!
+//! Pipeline: [`lexer`] -> [`parser`] ([`ast`]) -> [`sema`] (declarations, types, layout) ->
+//! [`codegen`] (body checking + emission via `plc_vm::image::ImageBuilder`) -> image.
+//! The standard function blocks come from an ST [`PRELUDE`] compiled with every program.
+//! [`run`] is the host runner behind `plcc run`.
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
+
+pub mod ast;
+mod calls;
+pub mod codegen;
+pub mod diagnostics;
+pub mod lexer;
+pub mod monitor;
+pub mod parser;
+pub mod run;
+pub mod sema;
+mod stdfuncs;
+pub mod types;
+
+use diagnostics::{Diagnostic, Diagnostics, SourceMap};
+
+/// ST source of the standard function blocks (TON, TOF, TP, CTU, CTD, CTUD, R_TRIG, F_TRIG, SR, RS).
+pub const PRELUDE: &str = include_str!("prelude.st");
+
+/// Name under which the prelude appears in the source map.
+pub const PRELUDE_NAME: &str = "<prelude>";
+
+/// Compiler options.
+#[derive(Debug, Clone, Default)]
+pub struct Options {
+    /// Program to run when there is no CONFIGURATION and several PROGRAMs.
+    pub program: Option<String>,
+}
+
+/// A task as the host runner schedules it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaskInfo {
+    pub name: String,
+    /// Cyclic interval in ns; 0 means "every base tick" (no CONFIGURATION, or no task given).
+    pub interval_ns: i64,
+    /// Data address of the global BOOL whose rising edge triggers an event (SINGLE) task.
+    pub single_addr: Option<u32>,
+    pub priority: u32,
+    /// Index of the task record in the image (one record per program instance).
+    pub image_tasks: Vec<usize>,
+}
+
+/// Result of a successful compilation.
+#[derive(Debug, Clone)]
+pub struct Compiled {
+    pub image: Vec<u8>,
+    /// Every printable variable (scalars and strings, including struct members, array
+    /// elements and FB instance variables), with its full name.
+    pub vars: Vec<monitor::MonitorVar>,
+    pub tasks: Vec<TaskInfo>,
+    pub has_configuration: bool,
+}
+
+/// Compiles the given `(file name, source)` pairs. On failure returns the diagnostics together
+/// with the source map needed to render them.
+pub fn compile(
+    files: &[(String, String)],
+    opts: &Options,
+) -> Result<(Compiled, SourceMap), (Vec<Diagnostic>, SourceMap)> {
+    let mut sources = SourceMap::default();
+    for (name, text) in files {
+        sources.add(name.clone(), text.clone());
+    }
+    let prelude_id = sources.add(PRELUDE_NAME, PRELUDE);
+    let mut raw: Vec<Diagnostic> = Vec::new();
+    let mut unit = {
+        let toks = lexer::lex(prelude_id, PRELUDE, &mut raw);
+        parser::parse(toks, &mut raw)
+    };
+    let prelude_pous = unit.pous.len();
+    for (i, (_, text)) in files.iter().enumerate() {
+        let toks = lexer::lex(i as u32, text, &mut raw);
+        let u = parser::parse(toks, &mut raw);
+        unit.pous.extend(u.pous);
+        unit.types.extend(u.types);
+        unit.globals.extend(u.globals);
+        unit.configs.extend(u.configs);
+    }
+    let mut diags = Diagnostics::default();
+    for d in raw {
+        diags.push(d);
+    }
+    let mut prog = sema::analyse(&unit, prelude_pous, opts.program.as_deref(), &mut diags);
+    if prog.instances.is_empty() && diags.is_empty() {
+        diags.error(
+            diagnostics::Span::new(0, 0, 0),
+            "no PROGRAM to run (declare a PROGRAM or a CONFIGURATION)",
+        );
+    }
+    let mut generator = codegen::Gen::new(&mut prog, &unit, &sources, &mut diags);
+    generator.generate();
+    let task_records: usize = generator.prog.tasks.iter().map(|t| t.programs.len()).sum();
+    if task_records > plc_vm::verify::MAX_TASKS {
+        let span = unit
+            .configs
+            .first()
+            .map(|c| c.name.span)
+            .unwrap_or_default();
+        generator.diags.error(
+            span,
+            format!(
+                "too many program instances: the VM runs at most {}",
+                plc_vm::verify::MAX_TASKS
+            ),
+        );
+    }
+    if generator.prog.data_overflow {
+        let span = generator
+            .prog
+            .instances
+            .first()
+            .map(|i| generator.prog.pous[i.pou].span)
+            .unwrap_or_default();
+        generator.diags.error(
+            span,
+            format!(
+                "the program needs more than {} MiB of data memory",
+                sema::MAX_DATA >> 20
+            ),
+        );
+    }
+    let mut b = std::mem::take(&mut generator.b);
+    let init = std::mem::take(&mut generator.init);
+    let pou_ids = generator.pou_ids.clone();
+    drop(generator);
+    if !diags.is_empty() {
+        let mut list = diags.list;
+        list.sort_by_key(|d| (d.span.file, d.span.start));
+        return Err((list, sources));
+    }
+    b.set_init(0, &init);
+    b.reserve_data(prog.data_size.max(8));
+    let mut tasks = Vec::new();
+    let mut image_task = 0usize;
+    for t in &prog.tasks {
+        let mut info = TaskInfo {
+            name: t.name.clone(),
+            interval_ns: t.interval_ns,
+            single_addr: t
+                .single
+                .as_ref()
+                .and_then(|g| prog.global(g))
+                .map(|g| g.offset),
+            priority: t.priority,
+            image_tasks: Vec::new(),
+        };
+        for (inst_name, pi) in &t.programs {
+            let Some(inst) = prog.instances.iter().find(|i| &i.name == inst_name) else {
+                continue;
+            };
+            b.add_task(&plc_vm::image::TaskDef {
+                name: format!("{}.{}", t.name, inst_name),
+                kind: if t.single.is_some() {
+                    plc_vm::image::TaskKind::Event
+                } else {
+                    plc_vm::image::TaskKind::Cyclic
+                },
+                priority: t.priority.min(255) as u8,
+                pou: pou_ids[*pi],
+                instance_base: inst.addr,
+                interval_ns: t.interval_ns.max(0) as u64,
+                watchdog_budget: 0,
+            });
+            info.image_tasks.push(image_task);
+            image_task += 1;
+        }
+        tasks.push(info);
+    }
+    let vars = monitor::variable_map(&prog);
+    for v in &vars {
+        if let Some(vt) = v.kind.var_type() {
+            b.add_var(
+                &v.name,
+                vt,
+                if v.constant {
+                    plc_vm::image::VAR_FLAG_CONSTANT
+                } else {
+                    0
+                },
+                v.addr,
+                v.size,
+            );
+        }
+    }
+    let image = match b.build() {
+        Ok(i) => i,
+        Err(e) => {
+            let d = Diagnostic::error(
+                diagnostics::Span::new(0, 0, 0),
+                format!("internal error building the image: {e}"),
+            );
+            return Err((vec![d], sources));
+        }
+    };
+    // The VM's verifier is the final judge; a rejection here is a compiler bug.
+    if let Err(e) = verify_image(&image) {
+        let d = Diagnostic::error(
+            diagnostics::Span::new(0, 0, 0),
+            format!("internal error: generated image rejected by the verifier: {e}"),
+        );
+        return Err((vec![d], sources));
+    }
+    Ok((
+        Compiled {
+            image,
+            vars,
+            tasks,
+            has_configuration: prog.has_configuration,
+        },
+        sources,
+    ))
+}
+
+/// Parses and verifies an image, returning the verifier's reason on failure.
+pub fn verify_image(image: &[u8]) -> Result<(), String> {
+    let parsed = plc_vm::image::Image::parse(image).map_err(|e| e.to_string())?;
+    plc_vm::verify::verify(&parsed).map_err(|e| e.to_string())?;
+    Ok(())
+}
+
+/// Compiles and renders any diagnostics as text (used by `plcc check` and tests).
+pub fn check(files: &[(String, String)], opts: &Options) -> Result<(), String> {
+    match compile(files, opts) {
+        Ok(_) => Ok(()),
+        Err((diags, sources)) => Err(diagnostics::render(&sources, &diags, false)),
+    }
+}

@@ -14,23 +14,93 @@ type PResult<T> = Result<T, Fail>;
 
 /// Words that cannot be used as identifiers.
 const RESERVED: &[&str] = &[
-    "PROGRAM", "END_PROGRAM", "FUNCTION", "END_FUNCTION", "FUNCTION_BLOCK", "END_FUNCTION_BLOCK",
-    "VAR", "VAR_INPUT", "VAR_OUTPUT", "VAR_IN_OUT", "VAR_GLOBAL", "VAR_EXTERNAL", "VAR_TEMP",
-    "END_VAR", "CONSTANT", "RETAIN", "TYPE", "END_TYPE", "STRUCT", "END_STRUCT", "ARRAY", "OF",
-    "IF", "THEN", "ELSIF", "ELSE", "END_IF", "CASE", "END_CASE", "FOR", "TO", "BY", "DO",
-    "END_FOR", "WHILE", "END_WHILE", "REPEAT", "UNTIL", "END_REPEAT", "EXIT", "RETURN", "AND",
-    "OR", "XOR", "NOT", "MOD", "TRUE", "FALSE", "CONFIGURATION", "END_CONFIGURATION", "RESOURCE",
-    "END_RESOURCE", "TASK", "WITH", "ON", "__TRY", "__CATCH", "__FINALLY", "__ENDTRY",
+    "PROGRAM",
+    "END_PROGRAM",
+    "FUNCTION",
+    "END_FUNCTION",
+    "FUNCTION_BLOCK",
+    "END_FUNCTION_BLOCK",
+    "VAR",
+    "VAR_INPUT",
+    "VAR_OUTPUT",
+    "VAR_IN_OUT",
+    "VAR_GLOBAL",
+    "VAR_EXTERNAL",
+    "VAR_TEMP",
+    "END_VAR",
+    "CONSTANT",
+    "RETAIN",
+    "TYPE",
+    "END_TYPE",
+    "STRUCT",
+    "END_STRUCT",
+    "ARRAY",
+    "OF",
+    "IF",
+    "THEN",
+    "ELSIF",
+    "ELSE",
+    "END_IF",
+    "CASE",
+    "END_CASE",
+    "FOR",
+    "TO",
+    "BY",
+    "DO",
+    "END_FOR",
+    "WHILE",
+    "END_WHILE",
+    "REPEAT",
+    "UNTIL",
+    "END_REPEAT",
+    "EXIT",
+    "RETURN",
+    "AND",
+    "OR",
+    "XOR",
+    "NOT",
+    "MOD",
+    "TRUE",
+    "FALSE",
+    "CONFIGURATION",
+    "END_CONFIGURATION",
+    "RESOURCE",
+    "END_RESOURCE",
+    "TASK",
+    "WITH",
+    "ON",
+    "__TRY",
+    "__CATCH",
+    "__FINALLY",
+    "__ENDTRY",
 ];
 
 /// Keywords that end a statement list.
 const STMT_END: &[&str] = &[
-    "END_IF", "ELSIF", "ELSE", "END_CASE", "END_FOR", "END_WHILE", "UNTIL", "END_REPEAT",
-    "END_PROGRAM", "END_FUNCTION", "END_FUNCTION_BLOCK", "__CATCH", "__FINALLY", "__ENDTRY",
+    "END_IF",
+    "ELSIF",
+    "ELSE",
+    "END_CASE",
+    "END_FOR",
+    "END_WHILE",
+    "UNTIL",
+    "END_REPEAT",
+    "END_PROGRAM",
+    "END_FUNCTION",
+    "END_FUNCTION_BLOCK",
+    "__CATCH",
+    "__FINALLY",
+    "__ENDTRY",
 ];
 
 pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
-    let mut p = Parser { toks: tokens, pos: 0, diags, in_case: 0 };
+    let mut p = Parser {
+        toks: tokens,
+        pos: 0,
+        diags,
+        in_case: 0,
+        depth: 0,
+    };
     p.unit()
 }
 
@@ -40,10 +110,17 @@ struct Parser<'a> {
     diags: &'a mut Vec<Diagnostic>,
     /// Depth of CASE bodies: there a `label :` ends the current statement list.
     in_case: u32,
+    /// Current nesting of expressions and statements (bounded so that no input can
+    /// exhaust the native stack of the compiler).
+    depth: u32,
 }
+
+/// Maximum nesting of expressions/statements.
+const MAX_DEPTH: u32 = 150;
 
 fn describe(t: &Tok) -> String {
     match t {
+        Tok::Ident(u, o) if RESERVED.contains(&u.as_str()) => format!("keyword `{o}`"),
         Tok::Ident(_, o) => format!("`{o}`"),
         Tok::Int(v) => format!("number `{v}`"),
         Tok::Real(v) => format!("number `{v}`"),
@@ -115,10 +192,6 @@ impl Parser<'_> {
         matches!(self.tok(), Tok::Ident(u, _) if u == kw)
     }
 
-    fn is_kw_at(&self, ahead: usize, kw: &str) -> bool {
-        matches!(self.tok_at(ahead), Tok::Ident(u, _) if u == kw)
-    }
-
     fn eat_kw(&mut self, kw: &str) -> bool {
         if self.is_kw(kw) {
             self.bump();
@@ -140,25 +213,38 @@ impl Parser<'_> {
     fn error_here(&mut self, expected: &str) -> Fail {
         let msg = format!("expected {expected}, found {}", describe(self.tok()));
         let span = self.span();
-        self.diags.push(Diagnostic::error(span, msg).with_label(format!("expected {expected}")));
+        self.diags
+            .push(Diagnostic::error(span, msg).with_label(format!("expected {expected}")));
         Fail
     }
 
     fn expect_kw(&mut self, kw: &str) -> PResult<()> {
-        if self.eat_kw(kw) { Ok(()) } else { Err(self.error_here(&format!("`{kw}`"))) }
+        if self.eat_kw(kw) {
+            Ok(())
+        } else {
+            Err(self.error_here(&format!("`{kw}`")))
+        }
     }
 
     fn expect(&mut self, t: Tok) -> PResult<()> {
-        if self.eat(&t) { Ok(()) } else { Err(self.error_here(&format!("`{}`", punct_text(&t)))) }
+        if self.eat(&t) {
+            Ok(())
+        } else {
+            Err(self.error_here(&format!("`{}`", punct_text(&t))))
+        }
     }
 
     fn ident(&mut self) -> PResult<Ident> {
-        if let Tok::Ident(u, o) = self.tok().clone() {
-            if !RESERVED.contains(&u.as_str()) {
-                let span = self.span();
-                self.bump();
-                return Ok(Ident { name: u, text: o, span });
-            }
+        if let Tok::Ident(u, o) = self.tok().clone()
+            && !RESERVED.contains(&u.as_str())
+        {
+            let span = self.span();
+            self.bump();
+            return Ok(Ident {
+                name: u,
+                text: o,
+                span,
+            });
         }
         Err(self.error_here("an identifier"))
     }
@@ -182,11 +268,20 @@ impl Parser<'_> {
 
     fn unit(&mut self) -> Unit {
         let mut unit = Unit::default();
-        const TOP: &[&str] =
-            &["PROGRAM", "FUNCTION", "FUNCTION_BLOCK", "TYPE", "VAR_GLOBAL", "CONFIGURATION"];
+        const TOP: &[&str] = &[
+            "PROGRAM",
+            "FUNCTION",
+            "FUNCTION_BLOCK",
+            "TYPE",
+            "VAR_GLOBAL",
+            "CONFIGURATION",
+        ];
         while !self.at_eof() {
             let start = self.pos;
-            let ok = if self.is_kw("PROGRAM") || self.is_kw("FUNCTION") || self.is_kw("FUNCTION_BLOCK") {
+            let ok = if self.is_kw("PROGRAM")
+                || self.is_kw("FUNCTION")
+                || self.is_kw("FUNCTION_BLOCK")
+            {
                 self.pou().map(|p| unit.pous.push(p))
             } else if self.is_kw("TYPE") {
                 self.type_block(&mut unit.types)
@@ -195,7 +290,9 @@ impl Parser<'_> {
             } else if self.is_kw("CONFIGURATION") {
                 self.configuration(&mut unit)
             } else {
-                Err(self.error_here("PROGRAM, FUNCTION, FUNCTION_BLOCK, TYPE, VAR_GLOBAL or CONFIGURATION"))
+                Err(self.error_here(
+                    "PROGRAM, FUNCTION, FUNCTION_BLOCK, TYPE, VAR_GLOBAL or CONFIGURATION",
+                ))
             };
             if ok.is_err() {
                 // Skip to the next top-level keyword.
@@ -250,13 +347,28 @@ impl Parser<'_> {
             }
             let _ = f;
         }
-        Ok(Pou { kind, name, return_type, var_blocks, body, span: start.to(self.prev_span()) })
+        Ok(Pou {
+            kind,
+            name,
+            return_type,
+            var_blocks,
+            body,
+            span: start.to(self.prev_span()),
+        })
     }
 
     fn is_var_block_start(&self) -> bool {
-        ["VAR", "VAR_INPUT", "VAR_OUTPUT", "VAR_IN_OUT", "VAR_GLOBAL", "VAR_EXTERNAL", "VAR_TEMP"]
-            .iter()
-            .any(|k| self.is_kw(k))
+        [
+            "VAR",
+            "VAR_INPUT",
+            "VAR_OUTPUT",
+            "VAR_IN_OUT",
+            "VAR_GLOBAL",
+            "VAR_EXTERNAL",
+            "VAR_TEMP",
+        ]
+        .iter()
+        .any(|k| self.is_kw(k))
     }
 
     fn var_block(&mut self) -> PResult<VarBlock> {
@@ -289,16 +401,30 @@ impl Parser<'_> {
         }
         let mut decls = Vec::new();
         while !self.is_kw("END_VAR") && !self.at_eof() {
-            if self.is_var_block_start() || self.is_kw("END_PROGRAM") || self.is_kw("END_FUNCTION_BLOCK") || self.is_kw("END_FUNCTION") {
+            if self.is_var_block_start()
+                || self.is_kw("END_PROGRAM")
+                || self.is_kw("END_FUNCTION_BLOCK")
+                || self.is_kw("END_FUNCTION")
+            {
                 return Err(self.error_here("`END_VAR`"));
             }
+            let before = self.pos;
             match self.var_decl() {
                 Ok(d) => decls.push(d),
                 Err(Fail) => self.recover(&["END_VAR"]),
             }
+            if self.pos == before {
+                self.bump();
+            }
         }
         self.expect_kw("END_VAR")?;
-        Ok(VarBlock { kind, constant, retain, decls, span: start.to(self.prev_span()) })
+        Ok(VarBlock {
+            kind,
+            constant,
+            retain,
+            decls,
+            span: start.to(self.prev_span()),
+        })
     }
 
     fn var_decl(&mut self) -> PResult<VarDecl> {
@@ -312,9 +438,18 @@ impl Parser<'_> {
         }
         self.expect(Tok::Colon)?;
         let ty = self.type_ref()?;
-        let init = if self.eat(&Tok::Assign) { Some(self.init()?) } else { None };
+        let init = if self.eat(&Tok::Assign) {
+            Some(self.init()?)
+        } else {
+            None
+        };
         self.expect(Tok::Semi)?;
-        Ok(VarDecl { names, ty, init, span: start.to(self.prev_span()) })
+        Ok(VarDecl {
+            names,
+            ty,
+            init,
+            span: start.to(self.prev_span()),
+        })
     }
 
     fn type_block(&mut self, out: &mut Vec<TypeDecl>) -> PResult<()> {
@@ -324,7 +459,11 @@ impl Parser<'_> {
                 let name = self.ident()?;
                 self.expect(Tok::Colon)?;
                 let ty = self.type_ref()?;
-                let init = if self.eat(&Tok::Assign) { Some(self.init()?) } else { None };
+                let init = if self.eat(&Tok::Assign) {
+                    Some(self.init()?)
+                } else {
+                    None
+                };
                 self.expect(Tok::Semi)?;
                 Ok(TypeDecl { name, ty, init })
             })();
@@ -351,6 +490,25 @@ impl Parser<'_> {
     }
 
     fn type_ref(&mut self) -> PResult<TypeRef> {
+        self.guarded(|p| p.type_ref_inner())
+    }
+
+    /// Runs `f` one nesting level deeper, failing once [`MAX_DEPTH`] is exceeded.
+    fn guarded<T>(&mut self, f: impl FnOnce(&mut Self) -> PResult<T>) -> PResult<T> {
+        self.depth += 1;
+        let r = if self.depth > MAX_DEPTH {
+            let span = self.span();
+            self.diags
+                .push(Diagnostic::error(span, "nested too deeply"));
+            Err(Fail)
+        } else {
+            f(self)
+        };
+        self.depth -= 1;
+        r
+    }
+
+    fn type_ref_inner(&mut self) -> PResult<TypeRef> {
         let start = self.span();
         if self.eat_kw("ARRAY") {
             self.expect(Tok::LBracket)?;
@@ -367,31 +525,52 @@ impl Parser<'_> {
             self.expect(Tok::RBracket)?;
             self.expect_kw("OF")?;
             let elem = self.type_ref()?;
-            return Ok(TypeRef::Array { dims, elem: Box::new(elem), span: start.to(self.prev_span()) });
+            return Ok(TypeRef::Array {
+                dims,
+                elem: Box::new(elem),
+                span: start.to(self.prev_span()),
+            });
         }
         if self.eat_kw("STRUCT") {
             let mut members = Vec::new();
             while !self.is_kw("END_STRUCT") && !self.at_eof() {
+                if self.is_kw("END_TYPE") {
+                    break;
+                }
+                let before = self.pos;
                 match self.var_decl() {
                     Ok(d) => members.push(d),
                     Err(Fail) => self.recover(&["END_STRUCT", "END_TYPE"]),
                 }
+                if self.pos == before {
+                    self.bump();
+                }
             }
             self.expect_kw("END_STRUCT")?;
-            return Ok(TypeRef::Struct { members, span: start.to(self.prev_span()) });
+            return Ok(TypeRef::Struct {
+                members,
+                span: start.to(self.prev_span()),
+            });
         }
         if self.eat(&Tok::LParen) {
             let mut values = Vec::new();
             loop {
                 let id = self.ident()?;
-                let v = if self.eat(&Tok::Assign) { Some(self.expr()?) } else { None };
+                let v = if self.eat(&Tok::Assign) {
+                    Some(self.expr()?)
+                } else {
+                    None
+                };
                 values.push((id, v));
                 if !self.eat(&Tok::Comma) {
                     break;
                 }
             }
             self.expect(Tok::RParen)?;
-            return Ok(TypeRef::Enum { values, span: start.to(self.prev_span()) });
+            return Ok(TypeRef::Enum {
+                values,
+                span: start.to(self.prev_span()),
+            });
         }
         if self.is_kw("STRING") {
             self.bump();
@@ -425,20 +604,35 @@ impl Parser<'_> {
     }
 
     fn init(&mut self) -> PResult<Init> {
+        self.guarded(|p| p.init_inner())
+    }
+
+    fn init_inner(&mut self) -> PResult<Init> {
         let start = self.span();
         if self.eat(&Tok::LBracket) {
             let mut items = Vec::new();
             if !matches!(self.tok(), Tok::RBracket) {
                 loop {
                     // `n(value)` repeats value n times; `n()` repeats the default.
-                    if let (Tok::Int(n), Tok::LParen) = (self.tok().clone(), self.tok_at(1).clone()) {
+                    if let (Tok::Int(n), Tok::LParen) = (self.tok().clone(), self.tok_at(1).clone())
+                    {
                         self.bump();
                         self.bump();
-                        let value = if matches!(self.tok(), Tok::RParen) { None } else { Some(self.init()?) };
+                        let value = if matches!(self.tok(), Tok::RParen) {
+                            None
+                        } else {
+                            Some(self.init()?)
+                        };
                         self.expect(Tok::RParen)?;
-                        items.push(ArrayInitItem { repeat: n.min(1 << 24) as u64, value });
+                        items.push(ArrayInitItem {
+                            repeat: n.min(1 << 24) as u64,
+                            value,
+                        });
                     } else {
-                        items.push(ArrayInitItem { repeat: 1, value: Some(self.init()?) });
+                        items.push(ArrayInitItem {
+                            repeat: 1,
+                            value: Some(self.init()?),
+                        });
                     }
                     if !self.eat(&Tok::Comma) {
                         break;
@@ -472,10 +666,16 @@ impl Parser<'_> {
     fn configuration(&mut self, unit: &mut Unit) -> PResult<()> {
         self.expect_kw("CONFIGURATION")?;
         let name = self.ident()?;
-        let mut config = Configuration { name, resources: Vec::new() };
+        let mut config = Configuration {
+            name,
+            resources: Vec::new(),
+        };
         // Tasks and programs declared directly in the configuration form an implicit resource.
-        let mut implicit =
-            Resource { name: config.name.clone(), tasks: Vec::new(), programs: Vec::new() };
+        let mut implicit = Resource {
+            name: config.name.clone(),
+            tasks: Vec::new(),
+            programs: Vec::new(),
+        };
         while !self.is_kw("END_CONFIGURATION") && !self.at_eof() {
             if self.is_kw("VAR_GLOBAL") {
                 let b = self.var_block()?;
@@ -485,19 +685,36 @@ impl Parser<'_> {
                 if self.eat_kw("ON") {
                     self.ident()?;
                 }
-                let mut res = Resource { name: rname, tasks: Vec::new(), programs: Vec::new() };
-                while !self.is_kw("END_RESOURCE") && !self.at_eof() {
+                let mut res = Resource {
+                    name: rname,
+                    tasks: Vec::new(),
+                    programs: Vec::new(),
+                };
+                while !self.is_kw("END_RESOURCE")
+                    && !self.at_eof()
+                    && !self.is_kw("END_CONFIGURATION")
+                {
+                    let before = self.pos;
                     if self.is_kw("VAR_GLOBAL") {
                         let b = self.var_block()?;
                         unit.globals.push(b);
                     } else if self.resource_item(&mut res).is_err() {
                         self.recover(&["END_RESOURCE", "TASK", "PROGRAM"]);
                     }
+                    if self.pos == before {
+                        self.bump();
+                    }
                 }
                 self.expect_kw("END_RESOURCE")?;
                 config.resources.push(res);
-            } else if self.resource_item(&mut implicit).is_err() {
-                self.recover(&["END_CONFIGURATION", "TASK", "PROGRAM", "RESOURCE"]);
+            } else {
+                let before = self.pos;
+                if self.resource_item(&mut implicit).is_err() {
+                    self.recover(&["END_CONFIGURATION", "TASK", "PROGRAM", "RESOURCE"]);
+                }
+                if self.pos == before {
+                    self.bump();
+                }
             }
         }
         self.expect_kw("END_CONFIGURATION")?;
@@ -511,7 +728,12 @@ impl Parser<'_> {
     fn resource_item(&mut self, res: &mut Resource) -> PResult<()> {
         if self.eat_kw("TASK") {
             let name = self.ident()?;
-            let mut task = TaskDecl { name, interval: None, single: None, priority: None };
+            let mut task = TaskDecl {
+                name,
+                interval: None,
+                single: None,
+                priority: None,
+            };
             self.expect(Tok::LParen)?;
             loop {
                 let key = self.ident()?;
@@ -538,7 +760,11 @@ impl Parser<'_> {
             Ok(())
         } else if self.eat_kw("PROGRAM") {
             let instance = self.ident()?;
-            let task = if self.eat_kw("WITH") { Some(self.ident()?) } else { None };
+            let task = if self.eat_kw("WITH") {
+                Some(self.ident()?)
+            } else {
+                None
+            };
             self.expect(Tok::Colon)?;
             let program_type = self.ident()?;
             if self.eat(&Tok::LParen) {
@@ -549,7 +775,11 @@ impl Parser<'_> {
                 self.expect(Tok::RParen)?;
             }
             self.expect(Tok::Semi)?;
-            res.programs.push(ProgramBinding { instance, task, program_type });
+            res.programs.push(ProgramBinding {
+                instance,
+                task,
+                program_type,
+            });
             Ok(())
         } else {
             Err(self.error_here("TASK, PROGRAM, RESOURCE or END_CONFIGURATION"))
@@ -566,8 +796,16 @@ impl Parser<'_> {
             if STMT_END.contains(&u.as_str()) {
                 return true;
             }
-            if ["END_CONFIGURATION", "PROGRAM", "FUNCTION", "FUNCTION_BLOCK", "TYPE", "CONFIGURATION", "VAR_GLOBAL"]
-                .contains(&u.as_str())
+            if [
+                "END_CONFIGURATION",
+                "PROGRAM",
+                "FUNCTION",
+                "FUNCTION_BLOCK",
+                "TYPE",
+                "CONFIGURATION",
+                "VAR_GLOBAL",
+            ]
+            .contains(&u.as_str())
             {
                 return true;
             }
@@ -581,7 +819,13 @@ impl Parser<'_> {
         loop {
             match self.tok_at(i) {
                 Tok::Colon => return i > 0,
-                Tok::Int(_) | Tok::Minus | Tok::Plus | Tok::DotDot | Tok::Comma | Tok::TypePrefix(..) | Tok::Dot => {}
+                Tok::Int(_)
+                | Tok::Minus
+                | Tok::Plus
+                | Tok::DotDot
+                | Tok::Comma
+                | Tok::TypePrefix(..)
+                | Tok::Dot => {}
                 Tok::Ident(u, _) if !RESERVED.contains(&u.as_str()) => {}
                 _ => return false,
             }
@@ -607,9 +851,26 @@ impl Parser<'_> {
     }
 
     fn stmt(&mut self) -> PResult<Stmt> {
+        self.depth += 1;
+        let r = if self.depth > MAX_DEPTH {
+            let span = self.span();
+            self.diags
+                .push(Diagnostic::error(span, "statements nested too deeply"));
+            Err(Fail)
+        } else {
+            self.stmt_inner()
+        };
+        self.depth -= 1;
+        r
+    }
+
+    fn stmt_inner(&mut self) -> PResult<Stmt> {
         let start = self.span();
         let kind = if self.eat(&Tok::Semi) {
-            return Ok(Stmt { kind: StmtKind::Empty, span: start });
+            return Ok(Stmt {
+                kind: StmtKind::Empty,
+                span: start,
+            });
         } else if self.eat_kw("IF") {
             let mut branches = Vec::new();
             let cond = self.expr()?;
@@ -630,7 +891,10 @@ impl Parser<'_> {
                 }
             }
             self.expect_kw("END_IF")?;
-            StmtKind::If { branches, else_body }
+            StmtKind::If {
+                branches,
+                else_body,
+            }
         } else if self.eat_kw("CASE") {
             let selector = self.expr()?;
             self.expect_kw("OF")?;
@@ -667,20 +931,34 @@ impl Parser<'_> {
             self.in_case -= 1;
             r?;
             self.expect_kw("END_CASE")?;
-            StmtKind::Case { selector, arms, else_body }
+            StmtKind::Case {
+                selector,
+                arms,
+                else_body,
+            }
         } else if self.eat_kw("FOR") {
             let var = self.ident()?;
             self.expect(Tok::Assign)?;
             let from = self.expr()?;
             self.expect_kw("TO")?;
             let to = self.expr()?;
-            let by = if self.eat_kw("BY") { Some(self.expr()?) } else { None };
+            let by = if self.eat_kw("BY") {
+                Some(self.expr()?)
+            } else {
+                None
+            };
             self.expect_kw("DO")?;
             let saved = std::mem::take(&mut self.in_case);
             let body = self.stmt_list();
             self.in_case = saved;
             self.expect_kw("END_FOR")?;
-            StmtKind::For { var, from, to, by, body }
+            StmtKind::For {
+                var,
+                from,
+                to,
+                by,
+                body,
+            }
         } else if self.eat_kw("WHILE") {
             let cond = self.expr()?;
             self.expect_kw("DO")?;
@@ -719,12 +997,17 @@ impl Parser<'_> {
             }
             self.in_case = saved;
             self.expect_kw("__ENDTRY")?;
-            StmtKind::Try { body, catch_var, catch_body, finally_body }
+            StmtKind::Try {
+                body,
+                catch_var,
+                catch_body,
+                finally_body,
+            }
         } else {
-            if let Tok::Ident(u, _) = self.tok() {
-                if RESERVED.contains(&u.as_str()) {
-                    return Err(self.error_here("a statement"));
-                }
+            if let Tok::Ident(u, _) = self.tok()
+                && RESERVED.contains(&u.as_str())
+            {
+                return Err(self.error_here("a statement"));
             }
             let target = self.expr()?;
             if self.eat(&Tok::Assign) {
@@ -746,7 +1029,17 @@ impl Parser<'_> {
     // ----- expressions -----------------------------------------------------------------
 
     pub(crate) fn expr(&mut self) -> PResult<Expr> {
-        self.binary(0)
+        self.depth += 1;
+        let r = if self.depth > MAX_DEPTH {
+            let span = self.span();
+            self.diags
+                .push(Diagnostic::error(span, "expression nested too deeply"));
+            Err(Fail)
+        } else {
+            self.binary(0)
+        };
+        self.depth -= 1;
+        r
     }
 
     fn binop(&self) -> Option<(BinOp, u8)> {
@@ -793,9 +1086,16 @@ impl Parser<'_> {
                 break;
             }
             self.bump();
-            let rhs = if op == BinOp::Pow { self.power_operand()? } else { self.binary(prec + 1)? };
+            let rhs = if op == BinOp::Pow {
+                self.power_operand()?
+            } else {
+                self.binary(prec + 1)?
+            };
             let span = lhs.span.to(rhs.span);
-            lhs = Expr { kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)), span };
+            lhs = Expr {
+                kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
+                span,
+            };
         }
         Ok(lhs)
     }
@@ -816,22 +1116,48 @@ impl Parser<'_> {
             Some(UnOp::Not)
         } else if matches!(self.tok(), Tok::Plus) {
             self.bump();
-            return self.unary();
+            self.depth += 1;
+            let r = if self.depth > MAX_DEPTH {
+                let span = self.span();
+                self.diags
+                    .push(Diagnostic::error(span, "expression nested too deeply"));
+                Err(Fail)
+            } else {
+                self.unary()
+            };
+            self.depth -= 1;
+            return r;
         } else {
             None
         };
         if let Some(op) = op {
             self.bump();
             // The operand of a unary operator may itself be a power expression: -2**2 = -(2**2).
-            let mut operand = self.unary()?;
+            self.depth += 1;
+            if self.depth > MAX_DEPTH {
+                self.depth -= 1;
+                let span = self.span();
+                self.diags
+                    .push(Diagnostic::error(span, "expression nested too deeply"));
+                return Err(Fail);
+            }
+            let operand = self.unary();
+            self.depth -= 1;
+            let mut operand = operand?;
             while matches!(self.tok(), Tok::Power) {
                 self.bump();
                 let rhs = self.power_operand()?;
                 let span = operand.span.to(rhs.span);
-                operand = Expr { kind: ExprKind::Binary(BinOp::Pow, Box::new(operand), Box::new(rhs)), span };
+                operand = Expr {
+                    kind: ExprKind::Binary(BinOp::Pow, Box::new(operand), Box::new(rhs)),
+                    span,
+                };
             }
             let span = start.to(operand.span);
-            return Ok(Expr { kind: ExprKind::Unary(op, Box::new(operand)), span });
+            return Ok(Expr {
+                kind: ExprKind::Unary(op, Box::new(operand)),
+                span,
+            });
         }
         self.postfix()
     }
@@ -843,7 +1169,10 @@ impl Parser<'_> {
                 self.bump();
                 let member = self.ident()?;
                 let span = e.span.to(member.span);
-                e = Expr { kind: ExprKind::Member(Box::new(e), member), span };
+                e = Expr {
+                    kind: ExprKind::Member(Box::new(e), member),
+                    span,
+                };
             } else if matches!(self.tok(), Tok::LBracket) {
                 self.bump();
                 let mut idx = vec![self.expr()?];
@@ -852,8 +1181,16 @@ impl Parser<'_> {
                 }
                 self.expect(Tok::RBracket)?;
                 let span = e.span.to(self.prev_span());
-                e = Expr { kind: ExprKind::Index(Box::new(e), idx), span };
-            } else if matches!(self.tok(), Tok::LParen) && matches!(e.kind, ExprKind::Name(_) | ExprKind::Member(..) | ExprKind::Index(..)) {
+                e = Expr {
+                    kind: ExprKind::Index(Box::new(e), idx),
+                    span,
+                };
+            } else if matches!(self.tok(), Tok::LParen)
+                && matches!(
+                    e.kind,
+                    ExprKind::Name(_) | ExprKind::Member(..) | ExprKind::Index(..)
+                )
+            {
                 self.bump();
                 let mut args = Vec::new();
                 if !matches!(self.tok(), Tok::RParen) {
@@ -866,7 +1203,13 @@ impl Parser<'_> {
                 }
                 self.expect(Tok::RParen)?;
                 let span = e.span.to(self.prev_span());
-                e = Expr { kind: ExprKind::Call { callee: Box::new(e), args }, span };
+                e = Expr {
+                    kind: ExprKind::Call {
+                        callee: Box::new(e),
+                        args,
+                    },
+                    span,
+                };
             } else {
                 return Ok(e);
             }
@@ -875,17 +1218,27 @@ impl Parser<'_> {
 
     fn arg(&mut self) -> PResult<Arg> {
         let start = self.span();
-        if let Tok::Ident(..) = self.tok() {
-            if matches!(self.tok_at(1), Tok::Assign | Tok::Arrow) {
-                let output = matches!(self.tok_at(1), Tok::Arrow);
-                let name = self.ident()?;
-                self.bump();
-                let value = self.expr()?;
-                return Ok(Arg { name: Some(name), output, value, span: start.to(self.prev_span()) });
-            }
+        if let Tok::Ident(..) = self.tok()
+            && matches!(self.tok_at(1), Tok::Assign | Tok::Arrow)
+        {
+            let output = matches!(self.tok_at(1), Tok::Arrow);
+            let name = self.ident()?;
+            self.bump();
+            let value = self.expr()?;
+            return Ok(Arg {
+                name: Some(name),
+                output,
+                value,
+                span: start.to(self.prev_span()),
+            });
         }
         let value = self.expr()?;
-        Ok(Arg { name: None, output: false, span: value.span, value })
+        Ok(Arg {
+            name: None,
+            output: false,
+            span: value.span,
+            value,
+        })
     }
 
     fn primary(&mut self) -> PResult<Expr> {
@@ -899,39 +1252,74 @@ impl Parser<'_> {
                 self.bump();
                 let e = self.expr()?;
                 self.expect(Tok::RParen)?;
-                return Ok(Expr { kind: e.kind, span: span.to(self.prev_span()) });
+                return Ok(Expr {
+                    kind: e.kind,
+                    span: span.to(self.prev_span()),
+                });
             }
             Tok::TypePrefix(u, o) => {
                 self.bump();
-                let ty = Ident { name: u, text: o, span };
+                let ty = Ident {
+                    name: u,
+                    text: o,
+                    span,
+                };
                 let neg = self.eat(&Tok::Minus);
                 let vspan = self.span();
                 let mut value = match self.tok().clone() {
-                    Tok::Int(v) => Expr { kind: ExprKind::Int(v), span: vspan },
-                    Tok::Real(v) => Expr { kind: ExprKind::Real(v), span: vspan },
-                    Tok::Str(s) => Expr { kind: ExprKind::Str(s), span: vspan },
-                    Tok::Ident(u, _) if u == "TRUE" => Expr { kind: ExprKind::Bool(true), span: vspan },
-                    Tok::Ident(u, _) if u == "FALSE" => Expr { kind: ExprKind::Bool(false), span: vspan },
-                    Tok::Ident(u, o) if !neg && !RESERVED.contains(&u.as_str()) => {
-                        Expr { kind: ExprKind::Name(Ident { name: u, text: o, span: vspan }), span: vspan }
-                    }
+                    Tok::Int(v) => Expr {
+                        kind: ExprKind::Int(v),
+                        span: vspan,
+                    },
+                    Tok::Real(v) => Expr {
+                        kind: ExprKind::Real(v),
+                        span: vspan,
+                    },
+                    Tok::Str(s) => Expr {
+                        kind: ExprKind::Str(s),
+                        span: vspan,
+                    },
+                    Tok::Ident(u, _) if u == "TRUE" => Expr {
+                        kind: ExprKind::Bool(true),
+                        span: vspan,
+                    },
+                    Tok::Ident(u, _) if u == "FALSE" => Expr {
+                        kind: ExprKind::Bool(false),
+                        span: vspan,
+                    },
+                    Tok::Ident(u, o) if !neg && !RESERVED.contains(&u.as_str()) => Expr {
+                        kind: ExprKind::Name(Ident {
+                            name: u,
+                            text: o,
+                            span: vspan,
+                        }),
+                        span: vspan,
+                    },
                     _ => return Err(self.error_here("a literal after the type prefix")),
                 };
                 self.bump();
                 if neg {
-                    value = Expr { kind: ExprKind::Unary(UnOp::Neg, Box::new(value)), span: vspan };
+                    value = Expr {
+                        kind: ExprKind::Unary(UnOp::Neg, Box::new(value)),
+                        span: vspan,
+                    };
                 }
                 let full = span.to(self.prev_span());
-                return Ok(Expr { kind: ExprKind::Typed(ty, Box::new(value)), span: full });
+                return Ok(Expr {
+                    kind: ExprKind::Typed(ty, Box::new(value)),
+                    span: full,
+                });
             }
-            Tok::Ident(u, o) => {
-                match u.as_str() {
-                    "TRUE" => ExprKind::Bool(true),
-                    "FALSE" => ExprKind::Bool(false),
-                    _ if RESERVED.contains(&u.as_str()) => return Err(self.error_here("an expression")),
-                    _ => ExprKind::Name(Ident { name: u, text: o, span }),
-                }
-            }
+            Tok::Ident(u, o) => match u.as_str() {
+                "TRUE" => ExprKind::Bool(true),
+                "FALSE" => ExprKind::Bool(false),
+                _ if RESERVED.contains(&u.as_str()) => return Err(self.error_here("an expression")),
+                _ => ExprKind::Name(Ident {
+                    name: u,
+                    text: o,
+                    span,
+                }),
+            },
             _ => return Err(self.error_here("an expression")),
         };
         self.bump();
@@ -955,14 +1343,19 @@ mod tests {
     fn precedence() {
         let (u, d) = parse_src("PROGRAM P VAR x : INT; END_VAR x := -2 ** 2 + 3 * 4; END_PROGRAM");
         assert!(d.is_empty(), "{d:?}");
-        let StmtKind::Assign { value, .. } = &u.pous[0].body[0].kind else { panic!() };
-        let ExprKind::Binary(BinOp::Add, l, _) = &value.kind else { panic!("{value:?}") };
+        let StmtKind::Assign { value, .. } = &u.pous[0].body[0].kind else {
+            panic!()
+        };
+        let ExprKind::Binary(BinOp::Add, l, _) = &value.kind else {
+            panic!("{value:?}")
+        };
         assert!(matches!(l.kind, ExprKind::Unary(UnOp::Neg, _)));
     }
 
     #[test]
     fn recovers_multiple_errors() {
-        let (_, d) = parse_src("PROGRAM P\nVAR x : INT; END_VAR\nx := ;\nx := 1 +;\nx := 2;\nEND_PROGRAM");
+        let (_, d) =
+            parse_src("PROGRAM P\nVAR x : INT; END_VAR\nx := ;\nx := 1 +;\nx := 2;\nEND_PROGRAM");
         assert_eq!(d.len(), 2, "{d:?}");
     }
 }

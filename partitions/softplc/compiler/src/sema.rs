@@ -26,7 +26,10 @@ pub struct StructDef {
 #[derive(Debug, Clone)]
 pub struct EnumDef {
     pub name: String,
+    /// (UPPER-CASED name, value).
     pub values: Vec<(String, i64)>,
+    /// Value names as written, for printing.
+    pub display: Vec<String>,
 }
 
 /// A declared variable (or struct member) with its resolved type and offset within its frame
@@ -78,7 +81,9 @@ impl PouDef {
     /// Positional parameters (inputs, then in-outs, then outputs in declaration order is what
     /// IEC prescribes for non-formal calls; we use declaration order of inputs and in-outs).
     pub fn params(&self) -> impl Iterator<Item = &VarDef> {
-        self.vars.iter().filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
+        self.vars
+            .iter()
+            .filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
     }
 }
 
@@ -129,7 +134,12 @@ pub struct Program {
     pub has_configuration: bool,
     /// Bytes of data memory allocated so far (globals, instances, function frames, ...).
     pub data_size: u32,
+    /// Set when an allocation would exceed [`MAX_DATA`] (reported as an error).
+    pub data_overflow: bool,
 }
+
+/// Upper limit of data memory for one program (the PLC partition is small).
+pub const MAX_DATA: u32 = 16 << 20;
 
 pub fn align_up(v: u32, a: u32) -> u32 {
     let a = a.max(1);
@@ -145,7 +155,9 @@ impl Program {
             Type::Array(a) => {
                 let (s, al) = self.size_align(&a.elem);
                 let stride = align_up(s, al);
-                let total = (stride as u64).saturating_mul(a.len()).min(u32::MAX as u64 / 2) as u32;
+                let total = (stride as u64)
+                    .saturating_mul(a.len())
+                    .min(u32::MAX as u64 / 2) as u32;
                 (total, al)
             }
             Type::Struct(i) => (self.structs[*i].size, self.structs[*i].align),
@@ -184,28 +196,48 @@ impl Program {
     /// Finds an enumeration value by bare name: (enum index, value).
     pub fn enum_value(&self, name: &str) -> Option<(usize, i64)> {
         self.enums.iter().enumerate().find_map(|(i, e)| {
-            e.values.iter().find(|(n, _)| n == name).map(|(_, v)| (i, *v))
+            e.values
+                .iter()
+                .find(|(n, _)| n == name)
+                .map(|(_, v)| (i, *v))
         })
     }
 
     /// Reserves `size` bytes of data memory aligned to `align`; returns the address.
     pub fn alloc(&mut self, size: u32, align: u32) -> u32 {
         let addr = align_up(self.data_size, align.max(1));
-        self.data_size = addr.saturating_add(size);
+        let end = addr.saturating_add(size);
+        if end > MAX_DATA {
+            self.data_overflow = true;
+            return 0;
+        }
+        self.data_size = end;
         addr
     }
 }
 
 /// Analyses all declarations of `unit`; `prelude_pous` counts the leading POUs of the unit
 /// that come from the prelude.
-pub fn analyse(unit: &Unit, prelude_pous: usize, program_override: Option<&str>, diags: &mut Diagnostics) -> Program {
-    let mut s = Sema { unit, prog: Program::default(), diags, type_state: HashMap::new() };
+pub fn analyse(
+    unit: &Unit,
+    prelude_pous: usize,
+    program_override: Option<&str>,
+    diags: &mut Diagnostics,
+) -> Program {
+    let mut s = Sema {
+        unit,
+        prog: Program::default(),
+        diags,
+        type_state: HashMap::new(),
+    };
     s.declare_types();
     s.declare_pous(prelude_pous);
+    // Globals first: their CONSTANTs may size arrays in POUs (FB types they use are laid
+    // out on demand).
+    s.declare_globals();
     for i in 0..s.prog.pous.len() {
         s.layout_pou(i);
     }
-    s.declare_globals();
     s.configure(program_override);
     s.prog
 }
@@ -248,7 +280,11 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                 }
             } else if let ExprKind::Name(n) = &inner.kind {
                 let ei = prog.enums.iter().position(|en| en.name == ty.name)?;
-                Int(prog.enums[ei].values.iter().find(|(vn, _)| *vn == n.name)?.1 as i128)
+                Int(prog.enums[ei]
+                    .values
+                    .iter()
+                    .find(|(vn, _)| *vn == n.name)?
+                    .1 as i128)
             } else {
                 return None;
             }
@@ -258,10 +294,10 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                 return Some(v);
             }
             if let Some(g) = prog.global(&n.name) {
-                if g.constant {
-                    if let Some(Init::Expr(ie)) = &g.init {
-                        return const_eval(prog, &(), ie);
-                    }
+                if g.constant
+                    && let Some(Init::Expr(ie)) = &g.init
+                {
+                    return const_eval(prog, &(), ie);
                 }
                 return None;
             }
@@ -341,13 +377,33 @@ impl ConstScope for LocalConsts<'_> {
 }
 
 impl Sema<'_> {
+    /// The initial value written in a variable declaration, or else the default of its
+    /// named TYPE (`TYPE Color : (Red, Green) := Green; END_TYPE`).
+    fn init_of(&self, ty: &TypeRef, init: &Option<Init>) -> Option<Init> {
+        if init.is_some() {
+            return init.clone();
+        }
+        match ty {
+            TypeRef::Named(id) => {
+                let decl = self.unit.types.iter().find(|d| d.name.name == id.name)?;
+                self.init_of(&decl.ty, &decl.init)
+            }
+            _ => None,
+        }
+    }
+
     fn declare_types(&mut self) {
         for d in &self.unit.types {
-            if self.type_state.contains_key(&d.name.name) || Elem::from_name(&d.name.name).is_some() {
-                self.diags.error(d.name.span, format!("type `{}` is already defined", d.name.text));
+            if self.type_state.contains_key(&d.name.name) || Elem::from_name(&d.name.name).is_some()
+            {
+                self.diags.error(
+                    d.name.span,
+                    format!("type `{}` is already defined", d.name.text),
+                );
                 continue;
             }
-            self.type_state.insert(d.name.name.clone(), LayoutState::NotStarted);
+            self.type_state
+                .insert(d.name.name.clone(), LayoutState::NotStarted);
         }
         for i in 0..self.unit.types.len() {
             let name = self.unit.types[i].name.name.clone();
@@ -357,11 +413,16 @@ impl Sema<'_> {
 
     fn declare_pous(&mut self, prelude_pous: usize) {
         for (i, p) in self.unit.pous.iter().enumerate() {
-            if self.prog.pou_by_name.contains_key(&p.name.name) || self.type_state.contains_key(&p.name.name) {
-                self.diags.error(p.name.span, format!("`{}` is already defined", p.name.text));
+            if self.prog.pou_by_name.contains_key(&p.name.name)
+                || self.type_state.contains_key(&p.name.name)
+            {
+                self.diags
+                    .error(p.name.span, format!("`{}` is already defined", p.name.text));
                 continue;
             }
-            self.prog.pou_by_name.insert(p.name.name.clone(), self.prog.pous.len());
+            self.prog
+                .pou_by_name
+                .insert(p.name.name.clone(), self.prog.pous.len());
             self.prog.pous.push(PouDef {
                 kind: p.kind,
                 name: p.name.name.clone(),
@@ -386,53 +447,81 @@ impl Sema<'_> {
         match self.type_state.get(name) {
             None => return None,
             Some(LayoutState::InProgress) => {
-                self.diags.error(use_span, format!("type `{name}` is defined in terms of itself"));
+                let text = self
+                    .unit
+                    .types
+                    .iter()
+                    .find(|d| d.name.name == name)
+                    .map_or(name, |d| d.name.text.as_str());
+                self.diags.error(
+                    use_span,
+                    format!("type `{text}` is defined in terms of itself"),
+                );
                 return Some(Type::Error);
             }
             Some(LayoutState::Done) => return Some(Type::Error),
             Some(LayoutState::NotStarted) => {}
         }
-        self.type_state.insert(name.to_string(), LayoutState::InProgress);
+        self.type_state
+            .insert(name.to_string(), LayoutState::InProgress);
         let decl = self.unit.types.iter().find(|d| d.name.name == name)?;
         let ty = match &decl.ty {
             TypeRef::Enum { values, .. } => {
                 let mut vals: Vec<(String, i64)> = Vec::new();
+                let display: Vec<String> = values.iter().map(|(id, _)| id.text.clone()).collect();
                 let mut next = 0i64;
                 for (id, v) in values {
                     let value = match v {
                         Some(e) => match const_eval(&self.prog, &(), e) {
                             Some(ConstVal::Int(i)) => i as i64,
                             _ => {
-                                self.diags.error(e.span, "enumeration value must be a constant integer");
+                                self.diags
+                                    .error(e.span, "enumeration value must be a constant integer");
                                 next
                             }
                         },
                         None => next,
                     };
                     if vals.iter().any(|(n, _)| *n == id.name) {
-                        self.diags.error(id.span, format!("duplicate enumeration value `{}`", id.text));
+                        self.diags.error(
+                            id.span,
+                            format!("duplicate enumeration value `{}`", id.text),
+                        );
                     }
                     vals.push((id.name.clone(), value));
-                    next = value + 1;
+                    next = value.wrapping_add(1);
                 }
-                self.prog.enums.push(EnumDef { name: decl.name.text.clone(), values: vals });
+                self.prog.enums.push(EnumDef {
+                    name: decl.name.text.clone(),
+                    values: vals,
+                    display,
+                });
                 Type::Enum(self.prog.enums.len() - 1)
             }
             TypeRef::Struct { members, .. } => {
                 let idx = self.prog.structs.len();
-                self.prog.structs.push(StructDef { name: decl.name.text.clone(), members: Vec::new(), size: 0, align: 1 });
+                self.prog.structs.push(StructDef {
+                    name: decl.name.text.clone(),
+                    members: Vec::new(),
+                    size: 0,
+                    align: 1,
+                });
                 let mut defs = Vec::new();
                 let mut off = 0u32;
                 let mut align = 1;
                 for m in members {
                     let mty = self.resolve_type(&m.ty, &[]);
                     if matches!(mty, Type::Fb(_)) {
-                        self.diags.error(m.ty.span(), "function block instances cannot be structure members");
+                        self.diags.error(
+                            m.ty.span(),
+                            "function block instances cannot be structure members",
+                        );
                     }
                     let (sz, al) = self.prog.size_align(&mty);
                     for n in &m.names {
                         if defs.iter().any(|d: &VarDef| d.name == n.name) {
-                            self.diags.error(n.span, format!("duplicate member `{}`", n.text));
+                            self.diags
+                                .error(n.span, format!("duplicate member `{}`", n.text));
                         }
                         off = align_up(off, al);
                         defs.push(VarDef {
@@ -443,7 +532,7 @@ impl Sema<'_> {
                             offset: off,
                             kind: VarKind::Local,
                             constant: false,
-                            init: m.init.clone(),
+                            init: self.init_of(&m.ty, &m.init),
                         });
                         off = off.saturating_add(sz);
                         align = align.max(al);
@@ -458,16 +547,26 @@ impl Sema<'_> {
             other => self.resolve_type(other, &[]),
         };
         self.type_state.insert(name.to_string(), LayoutState::Done);
-        self.prog.aliases.insert(name.to_string(), (ty.clone(), decl.init.clone()));
+        self.prog
+            .aliases
+            .insert(name.to_string(), (ty.clone(), decl.init.clone()));
         Some(ty)
     }
 
     fn const_int(&mut self, e: &Expr, locals: &[VarDef], what: &str) -> Option<i64> {
-        let scope = LocalConsts { prog: &self.prog, vars: locals };
+        let scope = LocalConsts {
+            prog: &self.prog,
+            vars: locals,
+        };
         match const_eval(&self.prog, &scope, e) {
-            Some(ConstVal::Int(v)) if v >= i64::MIN as i128 && v <= i64::MAX as i128 => Some(v as i64),
+            Some(ConstVal::Int(v)) if v >= i64::MIN as i128 && v <= i64::MAX as i128 => {
+                Some(v as i64)
+            }
             _ => {
-                self.diags.error(e.span, format!("{what} must be a constant integer expression"));
+                self.diags.error(
+                    e.span,
+                    format!("{what} must be a constant integer expression"),
+                );
                 None
             }
         }
@@ -483,8 +582,10 @@ impl Sema<'_> {
                 match id.name.as_str() {
                     "STRING" => return Type::String(DEFAULT_STRING_LEN),
                     "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" | "LTIME" | "DATE" | "TIME_OF_DAY" | "TOD" | "DATE_AND_TIME" | "DT" | "CHAR" | "WCHAR" => {
-                        self.diags.error(id.span, format!("type `{}` is not supported", id.text));
+                    "WSTRING" | "LTIME" | "DATE" | "TIME_OF_DAY" | "TOD" | "DATE_AND_TIME"
+                    | "DT" | "CHAR" | "WCHAR" => {
+                        self.diags
+                            .error(id.span, format!("type `{}` is not supported", id.text));
                         return Type::Error;
                     }
                     _ => {}
@@ -497,10 +598,14 @@ impl Sema<'_> {
                         self.layout_pou(i);
                         return Type::Fb(i);
                     }
-                    self.diags.error(id.span, format!("`{}` is not a data type or function block", id.text));
+                    self.diags.error(
+                        id.span,
+                        format!("`{}` is not a data type or function block", id.text),
+                    );
                     return Type::Error;
                 }
-                self.diags.error(id.span, format!("unknown type `{}`", id.text));
+                self.diags
+                    .error(id.span, format!("unknown type `{}`", id.text));
                 Type::Error
             }
             TypeRef::String(len, _) => match len {
@@ -508,7 +613,8 @@ impl Sema<'_> {
                 Some(e) => match self.const_int(e, locals, "string length") {
                     Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
                     Some(_) => {
-                        self.diags.error(e.span, "string length must be between 1 and 65000");
+                        self.diags
+                            .error(e.span, "string length must be between 1 and 65000");
                         Type::Error
                     }
                     None => Type::Error,
@@ -521,7 +627,11 @@ impl Sema<'_> {
                     let l = self.const_int(lo, locals, "array bound");
                     let h = self.const_int(hi, locals, "array bound");
                     match (l, h) {
-                        (Some(l), Some(h)) if h >= l && (h - l) < (1 << 24) => out.push((l, h)),
+                        (Some(l), Some(h))
+                            if h >= l && h.checked_sub(l).is_some_and(|d| d < (1 << 24)) =>
+                        {
+                            out.push((l, h))
+                        }
                         (Some(_), Some(_)) => {
                             self.diags.error(lo.span.to(hi.span), "array upper bound must be >= lower bound (and the array not absurdly large)");
                             return Type::Error;
@@ -529,9 +639,12 @@ impl Sema<'_> {
                         _ => return Type::Error,
                     }
                 }
-                let arr = ArrayType { dims: out, elem: elem_ty };
+                let arr = ArrayType {
+                    dims: out,
+                    elem: elem_ty,
+                };
                 let (sz, al) = self.prog.size_align(&arr.elem);
-                if (align_up(sz, al) as u64).saturating_mul(arr.len()) > (1 << 26) {
+                if (align_up(sz, al) as u64).saturating_mul(arr.len()) > MAX_DATA as u64 {
                     self.diags.error(t.span(), "array too large");
                     return Type::Error;
                 }
@@ -539,7 +652,8 @@ impl Sema<'_> {
             }
             TypeRef::Subrange { base, lo, hi, .. } => {
                 let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
-                    self.diags.error(base.span, "subrange base type must be an integer type");
+                    self.diags
+                        .error(base.span, "subrange base type must be an integer type");
                     return Type::Error;
                 };
                 let l = self.const_int(lo, locals, "subrange bound");
@@ -548,19 +662,26 @@ impl Sema<'_> {
                     (Some(l), Some(h)) if l <= h => {
                         let (min, max) = e.int_range();
                         if (l as i128) < min || (h as i128) > max {
-                            self.diags.error(t.span(), format!("subrange exceeds the range of {}", e.name()));
+                            self.diags.error(
+                                t.span(),
+                                format!("subrange exceeds the range of {}", e.name()),
+                            );
                         }
                         Type::Subrange(e, l, h)
                     }
                     (Some(_), Some(_)) => {
-                        self.diags.error(t.span(), "subrange lower bound exceeds upper bound");
+                        self.diags
+                            .error(t.span(), "subrange lower bound exceeds upper bound");
                         Type::Error
                     }
                     _ => Type::Error,
                 }
             }
             TypeRef::Enum { span, .. } | TypeRef::Struct { span, .. } => {
-                self.diags.error(*span, "anonymous enumerations and structures must be declared in a TYPE block");
+                self.diags.error(
+                    *span,
+                    "anonymous enumerations and structures must be declared in a TYPE block",
+                );
                 Type::Error
             }
         }
@@ -573,7 +694,10 @@ impl Sema<'_> {
             LayoutState::InProgress => {
                 let span = self.prog.pous[i].span;
                 let name = self.prog.pous[i].text.clone();
-                self.diags.error(span, format!("function block `{name}` contains an instance of itself"));
+                self.diags.error(
+                    span,
+                    format!("function block `{name}` contains an instance of itself"),
+                );
                 return;
             }
             LayoutState::NotStarted => {}
@@ -585,7 +709,10 @@ impl Sema<'_> {
         if let Some(rt) = &ast.return_type {
             let t = self.resolve_type(rt, &[]);
             if matches!(t, Type::Fb(_)) {
-                self.diags.error(rt.span(), "a function cannot return a function block instance");
+                self.diags.error(
+                    rt.span(),
+                    "a function cannot return a function block instance",
+                );
             }
             self.prog.pous[i].return_type = Some(t.clone());
             // The result variable carries the function's name.
@@ -604,25 +731,39 @@ impl Sema<'_> {
             let allowed = match kind {
                 PouKind::Program => !matches!(block.kind, VarKind::InOut),
                 PouKind::FunctionBlock => !matches!(block.kind, VarKind::Global),
-                PouKind::Function => !matches!(block.kind, VarKind::Global | VarKind::External | VarKind::Output) || block.kind == VarKind::Output,
+                PouKind::Function => {
+                    !matches!(
+                        block.kind,
+                        VarKind::Global | VarKind::External | VarKind::Output
+                    ) || block.kind == VarKind::Output
+                }
             };
             if !allowed || (kind != PouKind::Program && block.kind == VarKind::Global) {
-                self.diags.error(block.span, "this kind of VAR block is not allowed in this POU");
+                self.diags.error(
+                    block.span,
+                    "this kind of VAR block is not allowed in this POU",
+                );
             }
             for d in &block.decls {
                 let ty = self.resolve_type(&d.ty, &vars);
                 if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
-                    self.diags.error(d.ty.span(), "function block instances are not allowed inside a FUNCTION");
+                    self.diags.error(
+                        d.ty.span(),
+                        "function block instances are not allowed inside a FUNCTION",
+                    );
                 }
                 if block.kind == VarKind::InOut && d.init.is_some() {
-                    self.diags.error(d.span, "VAR_IN_OUT variables cannot have initial values");
+                    self.diags
+                        .error(d.span, "VAR_IN_OUT variables cannot have initial values");
                 }
                 if block.constant && d.init.is_none() {
-                    self.diags.error(d.span, "a CONSTANT needs an initial value");
+                    self.diags
+                        .error(d.span, "a CONSTANT needs an initial value");
                 }
                 for n in &d.names {
                     if vars.iter().any(|v| v.name == n.name) {
-                        self.diags.error(n.span, format!("`{}` is declared twice", n.text));
+                        self.diags
+                            .error(n.span, format!("`{}` is declared twice", n.text));
                         continue;
                     }
                     vars.push(VarDef {
@@ -633,7 +774,7 @@ impl Sema<'_> {
                         offset: 0,
                         kind: block.kind,
                         constant: block.constant,
-                        init: d.init.clone(),
+                        init: self.init_of(&d.ty, &d.init),
                     });
                 }
             }
@@ -651,7 +792,11 @@ impl Sema<'_> {
                 if v.kind == VarKind::External || v.kind == VarKind::Global {
                     continue;
                 }
-                let (sz, al) = if v.kind == VarKind::InOut { (4, 4) } else { self.prog.size_align(&v.ty) };
+                let (sz, al) = if v.kind == VarKind::InOut {
+                    (4, 4)
+                } else {
+                    self.prog.size_align(&v.ty)
+                };
                 off = align_up(off, al);
                 let first_reinit = match kind {
                     PouKind::Function => g >= 1,
@@ -681,11 +826,13 @@ impl Sema<'_> {
             for d in &block.decls {
                 let ty = self.resolve_type(&d.ty, &[]);
                 if block.constant && d.init.is_none() {
-                    self.diags.error(d.span, "a CONSTANT needs an initial value");
+                    self.diags
+                        .error(d.span, "a CONSTANT needs an initial value");
                 }
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
-                        self.diags.error(n.span, format!("global `{}` is declared twice", n.text));
+                        self.diags
+                            .error(n.span, format!("global `{}` is declared twice", n.text));
                         continue;
                     }
                     let (sz, al) = self.prog.size_align(&ty);
@@ -698,7 +845,7 @@ impl Sema<'_> {
                         offset: addr,
                         kind: VarKind::Global,
                         constant: block.constant,
-                        init: d.init.clone(),
+                        init: self.init_of(&d.ty, &d.init),
                     });
                 }
             }
@@ -709,7 +856,10 @@ impl Sema<'_> {
         match const_eval(&self.prog, &(), e) {
             Some(ConstVal::Time(t)) if t > 0 => Some(t as i64),
             _ => {
-                self.diags.error(e.span, "task INTERVAL must be a positive TIME literal such as T#10ms");
+                self.diags.error(
+                    e.span,
+                    "task INTERVAL must be a positive TIME literal such as T#10ms",
+                );
                 None
             }
         }
@@ -720,88 +870,145 @@ impl Sema<'_> {
     fn configure(&mut self, program_override: Option<&str>) {
         let unit = self.unit;
         if unit.configs.len() > 1 {
-            self.diags.error(unit.configs[1].name.span, "only one CONFIGURATION is supported");
+            self.diags.error(
+                unit.configs[1].name.span,
+                "only one CONFIGURATION is supported",
+            );
         }
         if let Some(cfg) = unit.configs.first() {
             self.prog.has_configuration = true;
             for res in &cfg.resources {
                 for t in &res.tasks {
-                    let interval = t.interval.as_ref().and_then(|e| self.task_time(e)).unwrap_or(0);
+                    let interval = t
+                        .interval
+                        .as_ref()
+                        .and_then(|e| self.task_time(e))
+                        .unwrap_or(0);
                     let single = match &t.single {
-                        Some(Expr { kind: ExprKind::Name(n), .. }) => {
-                            match self.prog.global(&n.name) {
-                                Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
-                                _ => {
-                                    self.diags.error(n.span, "SINGLE must name a global BOOL variable");
-                                    None
-                                }
+                        Some(Expr {
+                            kind: ExprKind::Name(n),
+                            ..
+                        }) => match self.prog.global(&n.name) {
+                            Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
+                            _ => {
+                                self.diags
+                                    .error(n.span, "SINGLE must name a global BOOL variable");
+                                None
                             }
-                        }
+                        },
                         Some(e) => {
-                            self.diags.error(e.span, "SINGLE must name a global BOOL variable");
+                            self.diags
+                                .error(e.span, "SINGLE must name a global BOOL variable");
                             None
                         }
                         None => None,
                     };
                     if t.interval.is_none() && t.single.is_none() {
-                        self.diags.error(t.name.span, "a task needs INTERVAL or SINGLE");
+                        self.diags
+                            .error(t.name.span, "a task needs INTERVAL or SINGLE");
                     }
                     let priority = match &t.priority {
                         Some(e) => match const_eval(&self.prog, &(), e) {
-                            Some(ConstVal::Int(p)) if (0..=u32::MAX as i128).contains(&p) => p as u32,
+                            Some(ConstVal::Int(p)) if (0..=u32::MAX as i128).contains(&p) => {
+                                p as u32
+                            }
                             _ => {
-                                self.diags.error(e.span, "PRIORITY must be a non-negative integer");
+                                self.diags
+                                    .error(e.span, "PRIORITY must be a non-negative integer");
                                 0
                             }
                         },
                         None => 0,
                     };
                     if self.prog.tasks.iter().any(|x| x.name == t.name.name) {
-                        self.diags.error(t.name.span, format!("task `{}` is declared twice", t.name.text));
+                        self.diags.error(
+                            t.name.span,
+                            format!("task `{}` is declared twice", t.name.text),
+                        );
                     }
-                    self.prog.tasks.push(TaskDef { name: t.name.name.clone(), interval_ns: interval, single, priority, programs: Vec::new() });
+                    self.prog.tasks.push(TaskDef {
+                        name: t.name.name.clone(),
+                        interval_ns: interval,
+                        single,
+                        priority,
+                        programs: Vec::new(),
+                    });
                 }
             }
             for res in &cfg.resources {
                 for b in &res.programs {
-                    let Some(&pi) = self.prog.pou_by_name.get(&b.program_type.name).filter(|&&i| self.prog.pous[i].kind == PouKind::Program) else {
-                        self.diags.error(b.program_type.span, format!("unknown PROGRAM `{}`", b.program_type.text));
+                    let Some(&pi) = self
+                        .prog
+                        .pou_by_name
+                        .get(&b.program_type.name)
+                        .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
+                    else {
+                        self.diags.error(
+                            b.program_type.span,
+                            format!("unknown PROGRAM `{}`", b.program_type.text),
+                        );
                         continue;
                     };
-                    if self.prog.instances.iter().any(|x| x.name.eq_ignore_ascii_case(&b.instance.text)) {
-                        self.diags.error(b.instance.span, format!("program instance `{}` is declared twice", b.instance.text));
+                    if self
+                        .prog
+                        .instances
+                        .iter()
+                        .any(|x| x.name.eq_ignore_ascii_case(&b.instance.text))
+                    {
+                        self.diags.error(
+                            b.instance.span,
+                            format!("program instance `{}` is declared twice", b.instance.text),
+                        );
                         continue;
                     }
                     let (sz, _) = (self.prog.pous[pi].frame_size, 8);
                     let addr = self.prog.alloc(sz, 8);
-                    self.prog.instances.push(ProgramInstance { name: b.instance.text.clone(), pou: pi, addr });
+                    self.prog.instances.push(ProgramInstance {
+                        name: b.instance.text.clone(),
+                        pou: pi,
+                        addr,
+                    });
                     let task_idx = match &b.task {
                         Some(t) => match self.prog.tasks.iter().position(|x| x.name == t.name) {
                             Some(i) => i,
                             None => {
-                                self.diags.error(t.span, format!("unknown task `{}`", t.text));
+                                self.diags
+                                    .error(t.span, format!("unknown task `{}`", t.text));
                                 continue;
                             }
                         },
                         None => {
                             // A program without a task runs cyclically at the base tick.
-                            self.prog.tasks.push(TaskDef { name: format!("__{}", b.instance.name), interval_ns: 0, single: None, priority: u32::MAX, programs: Vec::new() });
+                            self.prog.tasks.push(TaskDef {
+                                name: format!("__{}", b.instance.name),
+                                interval_ns: 0,
+                                single: None,
+                                priority: u32::MAX,
+                                programs: Vec::new(),
+                            });
                             self.prog.tasks.len() - 1
                         }
                     };
-                    self.prog.tasks[task_idx].programs.push((b.instance.text.clone(), pi));
+                    self.prog.tasks[task_idx]
+                        .programs
+                        .push((b.instance.text.clone(), pi));
                 }
             }
             return;
         }
-        let programs: Vec<usize> = (0..self.prog.pous.len()).filter(|&i| self.prog.pous[i].kind == PouKind::Program && !self.prog.pous[i].builtin).collect();
+        let programs: Vec<usize> = (0..self.prog.pous.len())
+            .filter(|&i| self.prog.pous[i].kind == PouKind::Program && !self.prog.pous[i].builtin)
+            .collect();
         let chosen = match program_override {
             Some(name) => {
                 let up = name.to_ascii_uppercase();
                 match programs.iter().find(|&&i| self.prog.pous[i].name == up) {
                     Some(&i) => Some(i),
                     None => {
-                        self.diags.error(Span::default(), format!("there is no PROGRAM named `{name}`"));
+                        self.diags.error(
+                            Span::default(),
+                            format!("there is no PROGRAM named `{name}`"),
+                        );
                         None
                     }
                 }
@@ -811,7 +1018,10 @@ impl Sema<'_> {
                 1 => Some(programs[0]),
                 _ => {
                     let p = &self.prog.pous[programs[1]];
-                    self.diags.error(p.span, "several PROGRAMs and no CONFIGURATION: choose one with --program");
+                    self.diags.error(
+                        p.span,
+                        "several PROGRAMs and no CONFIGURATION: choose one with --program",
+                    );
                     None
                 }
             },
@@ -819,8 +1029,18 @@ impl Sema<'_> {
         if let Some(pi) = chosen {
             let addr = self.prog.alloc(self.prog.pous[pi].frame_size, 8);
             let name = self.prog.pous[pi].text.clone();
-            self.prog.instances.push(ProgramInstance { name: name.clone(), pou: pi, addr });
-            self.prog.tasks.push(TaskDef { name: "__MAIN".into(), interval_ns: 0, single: None, priority: 0, programs: vec![(name, pi)] });
+            self.prog.instances.push(ProgramInstance {
+                name: name.clone(),
+                pou: pi,
+                addr,
+            });
+            self.prog.tasks.push(TaskDef {
+                name: "__MAIN".into(),
+                interval_ns: 0,
+                single: None,
+                priority: 0,
+                programs: vec![(name, pi)],
+            });
         }
     }
 }

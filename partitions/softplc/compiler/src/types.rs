@@ -137,7 +137,10 @@ pub struct ArrayType {
 
 impl ArrayType {
     pub fn len(&self) -> u64 {
-        self.dims.iter().map(|(lo, hi)| (hi - lo + 1).max(0) as u64).product()
+        self.dims
+            .iter()
+            .map(|(lo, hi)| (hi - lo + 1).max(0) as u64)
+            .product()
     }
 
     pub fn is_empty(&self) -> bool {
@@ -220,12 +223,20 @@ pub fn common_numeric(a: Elem, b: Elem) -> Option<Elem> {
         return Some(if a.rank() >= b.rank() { a } else { b });
     }
     // Signed with unsigned/bits: a signed type that holds both if there is one.
-    let (s, u) = if a.is_signed_int() { (a, b) } else if b.is_signed_int() { (b, a) } else {
+    let (s, u) = if a.is_signed_int() {
+        (a, b)
+    } else if b.is_signed_int() {
+        (b, a)
+    } else {
         // unsigned with bits: the larger unsigned
         let size = a.size().max(b.size());
         return Some(unsigned_of_size(size));
     };
-    let need = if s.size() > u.size() { s.size() } else { u.size() * 2 };
+    let need = if s.size() > u.size() {
+        s.size()
+    } else {
+        u.size() * 2
+    };
     Some(signed_of_size(need.min(8)))
 }
 

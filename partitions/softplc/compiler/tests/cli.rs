@@ -1,0 +1,139 @@
+//! `plcc` command-line behaviour: exit codes, `build` output, diagnostics format.
+
+use std::process::Command;
+
+fn plcc() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_plcc"))
+}
+
+fn write(name: &str, text: &str) -> std::path::PathBuf {
+    let dir = std::env::temp_dir().join(format!("plcc-cli-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let p = dir.join(name);
+    std::fs::write(&p, text).unwrap();
+    p
+}
+
+const OK: &str = "PROGRAM Main VAR x : INT; END_VAR x := x + 2; END_PROGRAM";
+
+#[test]
+fn check_exit_codes() {
+    let good = write("good.st", OK);
+    assert_eq!(
+        plcc().arg("check").arg(&good).status().unwrap().code(),
+        Some(0)
+    );
+    let bad = write(
+        "bad.st",
+        "PROGRAM Main\nVAR x : INT; END_VAR\nx := y;\nx := ;\nEND_PROGRAM\n",
+    );
+    let out = plcc().arg("check").arg(&bad).output().unwrap();
+    assert_eq!(out.status.code(), Some(1));
+    let err = String::from_utf8_lossy(&out.stderr);
+    // Several errors, each with file:line:column, the source line and a marker.
+    assert!(
+        err.contains("bad.st:3:6: error: unknown variable `y`"),
+        "{err}"
+    );
+    assert!(
+        err.contains("bad.st:4:6: error: expected an expression"),
+        "{err}"
+    );
+    assert!(err.contains("x := y;"), "{err}");
+}
+
+#[test]
+fn usage_errors_exit_2() {
+    assert_eq!(plcc().arg("run").status().unwrap().code(), Some(2));
+    assert_eq!(plcc().arg("frobnicate").status().unwrap().code(), Some(2));
+    let good = write("good2.st", OK);
+    assert_eq!(
+        plcc()
+            .args(["run", "--cycles", "x"])
+            .arg(&good)
+            .status()
+            .unwrap()
+            .code(),
+        Some(2)
+    );
+    assert_eq!(
+        plcc()
+            .arg("run")
+            .arg(&good)
+            .args(["--print", "Main.nope"])
+            .status()
+            .unwrap()
+            .code(),
+        Some(2)
+    );
+    assert_eq!(
+        plcc()
+            .arg("run")
+            .arg(&good)
+            .args(["--interval", "fast"])
+            .status()
+            .unwrap()
+            .code(),
+        Some(2)
+    );
+}
+
+#[test]
+fn build_writes_a_verifiable_image() {
+    let good = write("good3.st", OK);
+    let out = good.with_extension("img");
+    assert_eq!(
+        plcc()
+            .arg("build")
+            .arg(&good)
+            .arg("-o")
+            .arg(&out)
+            .status()
+            .unwrap()
+            .code(),
+        Some(0)
+    );
+    let bytes = std::fs::read(&out).unwrap();
+    plc_compiler::verify_image(&bytes).unwrap();
+    let image = plc_vm::image::Image::parse(&bytes).unwrap();
+    assert!(image.find_var("Main.x").is_some());
+}
+
+#[test]
+fn run_prints_cycles() {
+    let good = write("good4.st", OK);
+    let out = plcc()
+        .arg("run")
+        .arg(&good)
+        .args(["--cycles", "3", "--print", "Main.x"])
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout),
+        "cycle 1: Main.x=2\ncycle 2: Main.x=4\ncycle 3: Main.x=6\n"
+    );
+    assert_eq!(out.status.code(), Some(0));
+}
+
+#[test]
+fn multiple_files() {
+    let a = write(
+        "lib.st",
+        "FUNCTION Twice : INT VAR_INPUT v : INT; END_VAR Twice := v * 2; END_FUNCTION",
+    );
+    let b = write(
+        "main.st",
+        "PROGRAM Main VAR x : INT := 1; END_VAR x := Twice(x); END_PROGRAM",
+    );
+    let out = plcc()
+        .arg("run")
+        .arg(&a)
+        .arg(&b)
+        .args(["--cycles", "2", "--print", "Main.x"])
+        .output()
+        .unwrap();
+    assert_eq!(
+        String::from_utf8_lossy(&out.stdout),
+        "cycle 1: Main.x=2\ncycle 2: Main.x=4\n"
+    );
+}
