@@ -490,16 +490,17 @@ impl Parser<'_> {
     }
 
     fn type_ref(&mut self) -> PResult<TypeRef> {
-        self.guarded(|p| p.type_ref_inner())
+        self.guarded("types", |p| p.type_ref_inner())
     }
 
-    /// Runs `f` one nesting level deeper, failing once [`MAX_DEPTH`] is exceeded.
-    fn guarded<T>(&mut self, f: impl FnOnce(&mut Self) -> PResult<T>) -> PResult<T> {
+    /// Runs `f` one nesting level deeper, failing with "`what` nested too deeply" once
+    /// [`MAX_DEPTH`] is exceeded.
+    fn guarded<T>(&mut self, what: &str, f: impl FnOnce(&mut Self) -> PResult<T>) -> PResult<T> {
         self.depth += 1;
         let r = if self.depth > MAX_DEPTH {
             let span = self.span();
             self.diags
-                .push(Diagnostic::error(span, "nested too deeply"));
+                .push(Diagnostic::error(span, format!("{what} nested too deeply")));
             Err(Fail)
         } else {
             f(self)
@@ -604,7 +605,7 @@ impl Parser<'_> {
     }
 
     fn init(&mut self) -> PResult<Init> {
-        self.guarded(|p| p.init_inner())
+        self.guarded("initialisers", |p| p.init_inner())
     }
 
     fn init_inner(&mut self) -> PResult<Init> {
@@ -851,17 +852,7 @@ impl Parser<'_> {
     }
 
     fn stmt(&mut self) -> PResult<Stmt> {
-        self.depth += 1;
-        let r = if self.depth > MAX_DEPTH {
-            let span = self.span();
-            self.diags
-                .push(Diagnostic::error(span, "statements nested too deeply"));
-            Err(Fail)
-        } else {
-            self.stmt_inner()
-        };
-        self.depth -= 1;
-        r
+        self.guarded("statements", |p| p.stmt_inner())
     }
 
     fn stmt_inner(&mut self) -> PResult<Stmt> {
@@ -1029,17 +1020,7 @@ impl Parser<'_> {
     // ----- expressions -----------------------------------------------------------------
 
     pub(crate) fn expr(&mut self) -> PResult<Expr> {
-        self.depth += 1;
-        let r = if self.depth > MAX_DEPTH {
-            let span = self.span();
-            self.diags
-                .push(Diagnostic::error(span, "expression nested too deeply"));
-            Err(Fail)
-        } else {
-            self.binary(0)
-        };
-        self.depth -= 1;
-        r
+        self.guarded("expression", |p| p.binary(0))
     }
 
     fn binop(&self) -> Option<(BinOp, u8)> {
@@ -1116,34 +1097,14 @@ impl Parser<'_> {
             Some(UnOp::Not)
         } else if matches!(self.tok(), Tok::Plus) {
             self.bump();
-            self.depth += 1;
-            let r = if self.depth > MAX_DEPTH {
-                let span = self.span();
-                self.diags
-                    .push(Diagnostic::error(span, "expression nested too deeply"));
-                Err(Fail)
-            } else {
-                self.unary()
-            };
-            self.depth -= 1;
-            return r;
+            return self.guarded("expression", |p| p.unary());
         } else {
             None
         };
         if let Some(op) = op {
             self.bump();
             // The operand of a unary operator may itself be a power expression: -2**2 = -(2**2).
-            self.depth += 1;
-            if self.depth > MAX_DEPTH {
-                self.depth -= 1;
-                let span = self.span();
-                self.diags
-                    .push(Diagnostic::error(span, "expression nested too deeply"));
-                return Err(Fail);
-            }
-            let operand = self.unary();
-            self.depth -= 1;
-            let mut operand = operand?;
+            let mut operand = self.guarded("expression", |p| p.unary())?;
             while matches!(self.tok(), Tok::Power) {
                 self.bump();
                 let rhs = self.power_operand()?;
