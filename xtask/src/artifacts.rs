@@ -21,7 +21,8 @@ pub enum KernelVariant {
     TestHooks,
 }
 
-fn cargo() -> Command {
+/// `cargo` (the one running xtask, if any) with the workspace root as working directory.
+pub fn cargo() -> Command {
     let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
     cmd.current_dir(crate::workspace_root());
     cmd

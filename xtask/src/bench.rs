@@ -5,7 +5,6 @@
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
-use std::process::Command;
 
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Metric {
@@ -66,8 +65,7 @@ pub fn host_metrics() -> Result<Vec<Metric>> {
     {
         return Ok(Vec::new());
     }
-    let out = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()))
-        .current_dir(&root)
+    let out = crate::artifacts::cargo()
         .args([
             "run",
             "--quiet",

@@ -5,7 +5,7 @@
 use anyhow::{Result, bail};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
-use std::process::{Command, ExitCode};
+use std::process::ExitCode;
 use std::time::Duration;
 use xtask::artifacts::{self, KernelVariant};
 use xtask::qemu::{self, Ending, RunOptions};
@@ -152,10 +152,8 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
 }
 
 fn cargo_test(args: &[&str]) -> Result<bool> {
-    let mut cmd = Command::new(std::env::var_os("CARGO").unwrap_or_else(|| "cargo".into()));
-    cmd.current_dir(xtask::workspace_root())
-        .arg("test")
-        .args(args);
+    let mut cmd = artifacts::cargo();
+    cmd.arg("test").args(args);
     eprintln!("xtask: cargo test {}", args.join(" "));
     Ok(cmd.status()?.success())
 }
