@@ -1,5 +1,5 @@
-//! syssw is a freestanding static executable (no libc, no start files) for the host target:
-//! it gets hardware floating point, and the kernel loads it as the root task.
+//! Build script shared by every user-mode binary (syssw, partitions, test programs; each
+//! names it with `build = ...`): a freestanding static executable, no libc, no start files.
 fn main() {
     println!("cargo:rustc-link-arg-bins=-nostartfiles");
     println!("cargo:rustc-link-arg-bins=-nodefaultlibs");
