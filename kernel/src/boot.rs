@@ -8,6 +8,7 @@ use crate::mem::frames::{FrameAllocator, FrameLinks};
 use crate::mem::{PAGE_SIZE, phys_to_virt};
 use crate::{kprintln, time};
 use abi::boot::{BootInfo, MemoryKind, MemoryRegion};
+use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
 use abi::sysimg::SystemImage;
 use spin::{Mutex, Once};
 
@@ -96,17 +97,33 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         )
     };
     log_memory_summary(regions);
-    let frames = FrameAllocator::new(regions, FRAME_FLOOR);
+    let mut user_memory = [PhysRegion::default(); ROOT_INFO_MAX_REGIONS];
+    let user_memory_count;
+    let mut frames = FrameAllocator::new(regions, FRAME_FLOOR);
+    // The kernel keeps a pool for page tables (1/8 of RAM, 16..128 MiB); the rest is user
+    // memory the root task hands out.
+    let keep = (frames.total_frames() / 8).clamp(4096, 32768);
+    let mut ranges = [(0u64, 0u64); ROOT_INFO_MAX_REGIONS];
+    let count = frames.split_off_beyond(keep, &mut ranges);
+    for (slot, &(start, end)) in user_memory.iter_mut().zip(&ranges[..count]) {
+        *slot = PhysRegion {
+            start,
+            pages: (end - start) / PAGE_SIZE,
+        };
+    }
+    let user_pages: u64 = user_memory[..count].iter().map(|r| r.pages).sum();
     kprintln!(
-        "memory: frame allocator manages {} frames ({} MiB){}",
+        "memory: kernel pool {} frames ({} MiB); user memory {} MiB in {count} range(s){}",
         frames.total_frames(),
         (frames.total_frames() * PAGE_SIZE) >> 20,
+        (user_pages * PAGE_SIZE) >> 20,
         if frames.ignored_ranges() > 0 {
             " (some ranges ignored: too many)"
         } else {
             ""
         }
     );
+    user_memory_count = count;
     FRAMES.call_once(|| Mutex::new(frames));
 
     pic::remap_and_mask();
@@ -166,10 +183,23 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     };
     crate::arch::cpu::enable_sse_for_user();
     crate::arch::syscall::init();
-    let entry =
-        crate::task::create_root(syssw.data, info.system_image.start, info.system_image.len)
-            .unwrap_or_else(|e| panic!("cannot create the root task from 'syssw': {e:?}"));
-    kprintln!("task: root task 'syssw' loaded, entry {entry:#x}");
+    {
+        let mut k = crate::arch::entry::KERNEL.lock();
+        let entry = crate::task::create_root(
+            &mut k,
+            syssw.data,
+            info.system_image.start,
+            info.system_image.len,
+            &user_memory[..user_memory_count],
+        )
+        .unwrap_or_else(|e| panic!("cannot create the root task from 'syssw': {e:?}"));
+        kprintln!(
+            "task: root task 'syssw' loaded, entry {entry:#x}; root partition quota {} pages, {} threads, {} tasks",
+            k.rps[0].quota.pages,
+            k.rps[0].quota.threads,
+            k.rps[0].quota.tasks
+        );
+    }
 
     kprintln!(
         "heap: {} bytes of {} KiB used at boot; sealed",
@@ -182,15 +212,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     #[cfg(feature = "test-hooks")]
     crate::test_hooks::run(&image, apic_timer_hz);
 
-    // SAFETY: the root task's address space is active and maps `entry` and its stack.
-    unsafe {
-        crate::arch::usermode::enter_user(
-            entry,
-            abi::syscall::ROOT_STACK_TOP - 8,
-            abi::syscall::ROOT_SYSTEM_IMAGE_BASE,
-            info.system_image.len,
-        )
-    }
+    crate::arch::entry::enter_user_mode()
 }
 
 fn log_memory_summary(regions: &[MemoryRegion]) {
@@ -267,6 +289,7 @@ fn calibrate(hpet_address: Option<u64>) -> u64 {
     let tsc_hz = tsc_ticks * 1000 / WINDOW_MS;
     let apic_hz = apic_ticks * 1000 / WINDOW_MS;
     time::set_tsc_hz(tsc_hz);
+    lapic::set_timer_hz(apic_hz);
     kprintln!(
         "timer: calibrated against {reference} over {WINDOW_MS} ms: TSC {}.{:03} MHz, APIC timer {}.{:03} MHz (bus {} MHz / {})",
         tsc_hz / 1_000_000,
@@ -314,11 +337,3 @@ fn prove_timer(apic_timer_hz: u64) {
     );
 }
 
-/// Nothing left to do on this CPU: sleep until an interrupt (none is enabled yet).
-pub fn idle() -> ! {
-    #[cfg(feature = "test-hooks")]
-    crate::test_hooks::on_idle();
-    loop {
-        x86_64::instructions::interrupts::enable_and_hlt();
-    }
-}

@@ -13,12 +13,18 @@
 pub mod acpi;
 pub mod arch;
 pub mod boot;
+pub mod fault;
 pub mod heap;
+pub mod ipc;
 pub mod log;
 pub mod mem;
 pub mod qemu;
+pub mod rp;
+pub mod sched;
+pub mod state;
 pub mod syscall;
 pub mod task;
+pub mod thread;
 pub mod time;
 
 #[cfg(feature = "test-hooks")]

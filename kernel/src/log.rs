@@ -2,6 +2,7 @@
 //! `[SSSS.UUUUUU] text` — seconds and microseconds since kernel entry, then the message.
 
 use crate::arch::serial::{COM1, Uart};
+#[cfg(not(test))]
 use core::fmt::Write;
 use spin::Mutex;
 
@@ -20,8 +21,10 @@ pub fn force_unlock() {
     }
 }
 
+#[cfg(not(test))]
 struct Writer<'a>(&'a Uart);
 
+#[cfg(not(test))]
 impl Write for Writer<'_> {
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
         for byte in s.bytes() {
@@ -36,6 +39,12 @@ pub fn timestamp_parts(ns: u64) -> (u64, u64) {
     (ns / 1_000_000_000, (ns % 1_000_000_000) / 1_000)
 }
 
+#[cfg(test)]
+pub fn print_line(args: core::fmt::Arguments) {
+    std::println!("{args}");
+}
+
+#[cfg(not(test))]
 pub fn print_line(args: core::fmt::Arguments) {
     let (secs, micros) = timestamp_parts(crate::time::since_boot_ns());
     let uart = SERIAL.lock();

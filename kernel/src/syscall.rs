@@ -1,70 +1,370 @@
-//! System-call dispatch (the ABI is documented in `abi::syscall`).
+//! System-call dispatch: argument decoding, ability and right checks, then the object
+//! operations in [`state`](crate::state) and [`ipc`](crate::ipc). The ABI (numbers,
+//! registers, errors) is documented once, in `abi::syscall`.
 
-use crate::arch::syscall::SyscallFrame;
-use crate::task::CURRENT;
-use crate::{kprintln, qemu};
-use abi::syscall::{Abilities, Call, DEBUG_WRITE_MAX, Error};
+use crate::ipc::deadline;
+use crate::kprintln;
+use crate::rp::Amount;
+use crate::state::{Kernel, Source};
+use crate::thread::{Fault, State};
+use abi::ipc::{IPC_BUFFER_SIZE, LABEL_SYSCALL, MessageTag, VECTOR_SYSCALL};
+use abi::syscall::{
+    Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_PRIORITY, PageRights, TASK_NAME_MAX,
+    ThreadAttribute, USER_END,
+};
 
-pub fn dispatch(frame: &mut SyscallFrame) {
-    let result = match Call::from_raw(frame.rax) {
-        None => Err(Error::InvalidCall),
-        Some(call) => handle(call, frame),
-    };
-    frame.rax = match result {
-        Ok(()) => Error::Ok as u64,
-        Err(e) => e as u64,
-    };
+/// What the entry glue must do after a kernel operation.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Schedule and return to user mode.
+    Continue,
+    /// Stop the machine (system_halt, or a fault nobody can handle).
+    Halt { success: bool },
 }
 
-fn require(ability: Abilities) -> Result<(), Error> {
-    let current = CURRENT.lock();
-    let task = current
-        .as_ref()
-        .expect("system call without a current task");
-    if task.abilities.contains(ability) {
-        Ok(())
-    } else {
-        Err(Error::AbilityDenied)
+/// The six argument registers of thread `t`.
+fn args(k: &Kernel, t: usize) -> [u64; 6] {
+    let c = &k.threads[t].context;
+    [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9]
+}
+
+/// A `syscall` of thread `t` at time `now` (its registers are in its context).
+pub fn on_syscall(k: &mut Kernel, t: usize, now: u64) -> Outcome {
+    let task = k.threads[t].task;
+    if !k.tasks[task].abilities.contains(Abilities::NATIVE_SYSCALLS) {
+        let fault = Fault {
+            label: LABEL_SYSCALL,
+            vector: VECTOR_SYSCALL,
+            error_code: 0,
+            address: 0,
+        };
+        return crate::fault::deliver_or_report(k, t, fault);
+    }
+    let raw = k.threads[t].context.rax;
+    let result = match Call::from_raw(raw) {
+        None => Err(Error::InvalidCall),
+        Some(call) => handle(k, t, call, now),
+    };
+    match result {
+        Ok(Some(halt)) => halt,
+        Ok(None) => Outcome::Continue,
+        Err(e) => {
+            k.threads[t].context.rax = e as u64;
+            Outcome::Continue
+        }
     }
 }
 
-fn handle(call: Call, frame: &mut SyscallFrame) -> Result<(), Error> {
+/// Sets `rax` = Ok for calls that completed (blocking calls set it when they end).
+fn done(k: &mut Kernel, t: usize) -> Result<Option<Outcome>, Error> {
+    k.threads[t].context.rax = Error::Ok as u64;
+    Ok(None)
+}
+
+fn rights(bits: u64) -> Result<PageRights, Error> {
+    PageRights::from_bits(bits).ok_or(Error::InvalidArgument)
+}
+
+fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outcome>, Error> {
+    let task = k.threads[t].task;
+    let a = args(k, t);
     match call {
         Call::DebugWrite => {
-            require(Abilities::DEBUG_LOG)?;
-            let (ptr, len) = (frame.rdi, frame.rsi);
+            k.require(task, Abilities::DEBUG_LOG)?;
+            let (ptr, len) = (a[0], a[1]);
             if len > DEBUG_WRITE_MAX {
                 return Err(Error::InvalidArgument);
             }
             let mut buf = [0u8; DEBUG_WRITE_MAX as usize];
             let text = &mut buf[..len as usize];
-            let current = CURRENT.lock();
-            let task = current.as_ref().expect("current task");
-            if !task.space.copy_from_user(ptr, text) {
+            if !k.tasks[task].space.copy_from_user(ptr, text) {
                 return Err(Error::BadAddress);
             }
             let text = core::str::from_utf8(text).unwrap_or("<invalid UTF-8>");
-            kprintln!("[{}] {}", task.name, text.trim_end_matches('\n'));
-            Ok(())
+            kprintln!("[{}] {}", k.tasks[task].name(), text.trim_end_matches('\n'));
+            done(k, t)
         }
         Call::Clock => {
-            frame.rdi = crate::time::since_boot_ns();
-            Ok(())
+            k.threads[t].context.rdi = now;
+            done(k, t)
         }
         Call::ThreadExit => {
-            let name = CURRENT.lock().as_ref().map_or("?", |t| t.name);
-            kprintln!("kernel: thread of task {name} exited; no runnable thread left, idling");
-            crate::boot::idle()
+            kprintln!("kernel: thread of task {} exited", k.tasks[task].name());
+            k.kill_thread(t);
+            Ok(None)
         }
         Call::SystemHalt => {
-            require(Abilities::SYSTEM_HALT)?;
-            let code = match frame.rdi {
-                0 => qemu::ExitCode::Success,
-                1 => qemu::ExitCode::Failure,
+            k.require(task, Abilities::SYSTEM_HALT)?;
+            let success = match a[0] {
+                0 => true,
+                1 => false,
                 _ => return Err(Error::InvalidArgument),
             };
-            kprintln!("kernel: halt requested by user space ({code:?})");
-            qemu::exit(code)
+            kprintln!(
+                "kernel: halt requested by user space ({})",
+                if success { "Success" } else { "Failure" }
+            );
+            Ok(Some(Outcome::Halt { success }))
+        }
+        Call::Yield => {
+            k.run.rotate(t);
+            done(k, t)
+        }
+
+        Call::TaskCreate => {
+            k.require(task, Abilities::CREATE_TASK)?;
+            let abilities = Abilities::from_bits(a[0]).ok_or(Error::InvalidArgument)?;
+            let mcp = u8::try_from(a[1]).map_err(|_| Error::McpExceeded)?;
+            let rp = match a[2] {
+                0 => k.tasks[task].rp,
+                n => {
+                    let rp = usize::try_from(n - 1)
+                        .ok()
+                        .filter(|&r| r < k.rps.len() && k.rps[r].in_use)
+                        .ok_or(Error::NoSuchObject)?;
+                    if rp != k.tasks[task].rp {
+                        k.require(task, Abilities::PARTITION_CONTROL)?;
+                        if k.rps[rp].owner != task {
+                            return Err(Error::NotPermitted);
+                        }
+                    }
+                    rp
+                }
+            };
+            if a[4] > TASK_NAME_MAX {
+                return Err(Error::InvalidArgument);
+            }
+            let mut name = [0u8; TASK_NAME_MAX as usize];
+            let name = &mut name[..a[4] as usize];
+            if !k.tasks[task].space.copy_from_user(a[3], name) {
+                return Err(Error::BadAddress);
+            }
+            let name = core::str::from_utf8(name).map_err(|_| Error::InvalidArgument)?;
+            let child = k.create_task(task, abilities, mcp, rp, name)?;
+            k.threads[t].context.rdi = k.task_id(child);
+            done(k, t)
+        }
+        Call::TaskKill => {
+            k.require(task, Abilities::CREATE_TASK)?;
+            let target = k.task(a[0])?;
+            if target == task || !k.is_within(target, task) {
+                return Err(Error::NotPermitted);
+            }
+            k.destroy_task(target);
+            done(k, t)
+        }
+        Call::TaskAllowSend => {
+            k.require(task, Abilities::CREATE_TASK)?;
+            let from = k.controlled_task(task, a[0])?;
+            let to = k.controlled_task(task, a[1])?;
+            k.tasks[from].send_to |= 1 << to;
+            done(k, t)
+        }
+
+        Call::ThreadCreate => {
+            k.require(task, Abilities::CREATE_THREAD)?;
+            let target = k.controlled_task(task, a[0])?;
+            let priority = u8::try_from(a[3]).map_err(|_| Error::McpExceeded)?;
+            let tp = k.threads[t].time_partition;
+            let new = k.create_thread(target, a[1], a[2], priority, tp, a[4])?;
+            k.threads[t].context.rdi = k.thread_id(new);
+            done(k, t)
+        }
+        Call::ThreadStart => {
+            k.require(task, Abilities::CREATE_THREAD)?;
+            let target = k.controlled_thread(t, a[0])?;
+            if k.threads[target].state != State::Inactive {
+                return Err(Error::InvalidArgument);
+            }
+            k.set_state(target, State::Ready);
+            done(k, t)
+        }
+        Call::ThreadSuspend | Call::ThreadResume => {
+            let target = k.controlled_thread(t, a[0])?;
+            k.set_suspended(target, call == Call::ThreadSuspend);
+            done(k, t)
+        }
+        Call::ThreadKill => {
+            let target = k.controlled_thread(t, a[0])?;
+            k.kill_thread(target);
+            if target != t {
+                done(k, t)?;
+            }
+            Ok(None)
+        }
+        Call::ThreadSet => {
+            let target = k.controlled_thread(t, a[0])?;
+            set_attribute(k, task, target, a[1], a[2])?;
+            done(k, t)
+        }
+        Call::ThreadSelf => {
+            k.threads[t].context.rdi = k.thread_id(t);
+            k.threads[t].context.rsi = k.task_id(task);
+            done(k, t)
+        }
+
+        Call::Map | Call::MapPhysical => {
+            let source = if call == Call::Map {
+                k.require(task, Abilities::MAP)?;
+                Source::Virtual(a[1])
+            } else {
+                k.require(task, Abilities::PHYSICAL_MEMORY)?;
+                Source::Physical(a[1])
+            };
+            let target = k.controlled_task(task, a[0])?;
+            k.map(task, target, source, a[2], a[3], rights(a[4])?)?;
+            done(k, t)
+        }
+        Call::Unmap => {
+            k.require(task, Abilities::MAP)?;
+            let target = k.controlled_task(task, a[0])?;
+            k.unmap(target, a[1], a[2])?;
+            done(k, t)
+        }
+        Call::Protect => {
+            k.require(task, Abilities::MAP)?;
+            let target = k.controlled_task(task, a[0])?;
+            k.protect(target, a[1], a[2], rights(a[3])?)?;
+            done(k, t)
+        }
+
+        Call::Send | Call::Call => {
+            let dest = k.thread(a[0])?;
+            if !k.may_send(task, k.threads[dest].task) {
+                return Err(Error::NotPermitted);
+            }
+            if !MessageTag(a[2]).is_valid() {
+                return Err(Error::InvalidArgument);
+            }
+            k.send(t, dest, call == Call::Call, deadline(now, a[1]), a[1] == 0);
+            Ok(None)
+        }
+        Call::Receive => {
+            let from = match a[0] {
+                0 => None,
+                id => Some(k.thread(id)?),
+            };
+            k.receive(t, from, deadline(now, a[1]), a[1] == 0);
+            Ok(None)
+        }
+        Call::ReplyWait | Call::Reply => {
+            if !MessageTag(a[2]).is_valid() {
+                return Err(Error::InvalidArgument);
+            }
+            if a[0] != 0 {
+                let caller = k.thread(a[0]).map_err(|_| Error::NotWaiting)?;
+                k.reply(t, caller)?;
+            }
+            if call == Call::ReplyWait {
+                k.receive(t, None, deadline(now, a[1]), a[1] == 0);
+                Ok(None)
+            } else {
+                done(k, t)
+            }
+        }
+
+        Call::NotifySignal => {
+            let target = k.thread(a[0])?;
+            if !k.may_send(task, k.threads[target].task) {
+                return Err(Error::NotPermitted);
+            }
+            k.signal(target, a[1]);
+            done(k, t)
+        }
+        Call::NotifyWait => {
+            k.wait_notify(t, a[0], deadline(now, a[1]), a[1] == 0);
+            Ok(None)
+        }
+
+        Call::RpCreate => {
+            k.require(task, Abilities::PARTITION_CONTROL)?;
+            let rp = k.rp_create(
+                task,
+                Amount {
+                    tasks: a[0],
+                    threads: a[1],
+                    pages: a[2],
+                },
+            )?;
+            k.threads[t].context.rdi = rp as u64 + 1;
+            done(k, t)
+        }
+        Call::RpInfo => {
+            let rp = match a[0] {
+                0 => k.tasks[task].rp,
+                n => usize::try_from(n - 1)
+                    .ok()
+                    .filter(|&r| r < k.rps.len() && k.rps[r].in_use)
+                    .ok_or(Error::NoSuchObject)?,
+            };
+            let r = k.rps[rp];
+            let c = &mut k.threads[t].context;
+            c.rdi = r.used.pages;
+            c.rsi = r.quota.pages;
+            c.rdx = (r.used.threads & 0xffff)
+                | (r.quota.threads & 0xffff) << 16
+                | (r.used.tasks & 0xffff) << 32
+                | (r.quota.tasks & 0xffff) << 48;
+            done(k, t)
+        }
+        Call::SetHealthMonitor => {
+            k.require(task, Abilities::PARTITION_CONTROL)?;
+            let monitor = k.thread(a[0])?;
+            if task != 0 || k.threads[monitor].task != 0 {
+                return Err(Error::NotPermitted);
+            }
+            k.health_monitor = a[0];
+            done(k, t)
+        }
+    }
+}
+
+fn set_attribute(
+    k: &mut Kernel,
+    caller_task: usize,
+    target: usize,
+    attribute: u64,
+    value: u64,
+) -> Result<(), Error> {
+    match ThreadAttribute::from_raw(attribute).ok_or(Error::InvalidArgument)? {
+        ThreadAttribute::Priority => {
+            let priority = u8::try_from(value).map_err(|_| Error::McpExceeded)?;
+            debug_assert!(priority <= MAX_PRIORITY);
+            k.set_priority(target, priority)
+        }
+        ThreadAttribute::ExceptionHandler => {
+            if value != 0 {
+                let handler = k.thread(value)?;
+                if !k.is_within(k.threads[target].task, k.threads[handler].task) {
+                    return Err(Error::NotPermitted);
+                }
+            }
+            k.threads[target].exception_handler = value;
+            Ok(())
+        }
+        ThreadAttribute::IpcBuffer => {
+            let space = k.tasks[k.threads[target].task].space;
+            if value != 0 && (value % 8 != 0 || !space.accessible(value, IPC_BUFFER_SIZE, true)) {
+                return Err(Error::BadAddress);
+            }
+            k.threads[target].ipc_buffer = value;
+            Ok(())
+        }
+        ThreadAttribute::FsBase | ThreadAttribute::GsBase => {
+            if value >= USER_END {
+                return Err(Error::InvalidArgument);
+            }
+            if attribute == ThreadAttribute::FsBase as u64 {
+                k.threads[target].fs_base = value;
+            } else {
+                k.threads[target].gs_base = value;
+            }
+            k.reload_bases |= k.current == Some(target);
+            Ok(())
+        }
+        ThreadAttribute::TimePartition => {
+            k.require(caller_task, Abilities::SCHEDULING)?;
+            k.set_time_partition(target, u8::try_from(value).map_err(|_| Error::InvalidArgument)?)
         }
     }
 }

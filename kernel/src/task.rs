@@ -1,23 +1,54 @@
-//! Tasks. At this stage: the root task, created from syssw's ELF in the system image with
-//! every ability, the system image mapped read-only and a stack.
+//! Task control blocks and loading the root task from syssw's ELF.
 
-use crate::mem::paging::{AddressSpace, MapError, Rights};
+use crate::mem::paging::{AddressSpace, MapError};
 use crate::mem::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
-use abi::syscall::{
-    Abilities, ROOT_STACK_SIZE, ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
+use abi::root::{
+    PhysRegion, ROOT_INFO_MAGIC, ROOT_INFO_MAX_REGIONS, ROOT_INFO_VERSION, RootInfo,
 };
-use spin::Mutex;
+use abi::syscall::{
+    Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
+    ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
+};
 use xmas_elf::ElfFile;
 use xmas_elf::program::Type as SegmentType;
 
+#[derive(Clone, Copy)]
 pub struct Task {
-    pub name: &'static str,
-    pub space: AddressSpace,
+    pub in_use: bool,
+    pub generation: u16,
+    pub name: [u8; 16],
+    pub name_len: u8,
+    pub parent: Option<usize>,
     pub abilities: Abilities,
+    pub mcp: u8,
+    /// Resource partition slot it belongs to and is charged to.
+    pub rp: usize,
+    pub space: AddressSpace,
+    /// Bit i set: threads of this task may send to threads of task slot i.
+    pub send_to: u64,
+    /// Page-table frames charged to the resource partition (returned when it dies).
+    pub pages_charged: u64,
 }
 
-/// The task whose thread runs now (single CPU, one thread so far).
-pub static CURRENT: Mutex<Option<Task>> = Mutex::new(None);
+impl Task {
+    pub const FREE: Self = Self {
+        in_use: false,
+        generation: 0,
+        name: [0; 16],
+        name_len: 0,
+        parent: None,
+        abilities: Abilities::empty(),
+        mcp: 0,
+        rp: 0,
+        space: AddressSpace::NONE,
+        send_to: 0,
+        pages_charged: 0,
+    };
+
+    pub fn name(&self) -> &str {
+        core::str::from_utf8(&self.name[..self.name_len as usize]).unwrap_or("?")
+    }
+}
 
 /// Why the root task could not be created.
 #[derive(Debug)]
@@ -33,11 +64,10 @@ impl From<MapError> for LoadError {
     }
 }
 
-/// Loads `elf` into a fresh address space: each `PT_LOAD` segment into new frames with its
-/// rights (W^X enforced). Returns the space and the entry point.
-pub fn load_elf(elf: &[u8]) -> Result<(AddressSpace, u64), LoadError> {
+/// Loads `elf` into `space`: each `PT_LOAD` segment into new frames with its rights (W^X
+/// enforced). Returns the entry point.
+pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> {
     let file = ElfFile::new(elf).map_err(LoadError::Elf)?;
-    let mut space = AddressSpace::new()?;
     for segment in file.program_iter() {
         if segment.get_type() != Ok(SegmentType::Load) || segment.mem_size() == 0 {
             continue;
@@ -65,10 +95,9 @@ pub fn load_elf(elf: &[u8]) -> Result<(AddressSpace, u64), LoadError> {
         {
             return Err(LoadError::Segment(vaddr, "file range outside the ELF"));
         }
-        let rights = Rights {
-            write: flags.is_write(),
-            execute: flags.is_execute(),
-        };
+        let mut rights = PageRights::empty();
+        rights.set(PageRights::WRITE, flags.is_write());
+        rights.set(PageRights::EXECUTE, flags.is_execute());
         let mut page = vaddr & !(PAGE_SIZE - 1);
         while page < end {
             let frame = alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?;
@@ -94,40 +123,83 @@ pub fn load_elf(elf: &[u8]) -> Result<(AddressSpace, u64), LoadError> {
             page += PAGE_SIZE;
         }
     }
-    Ok((space, file.header.pt2.entry_point()))
+    Ok(file.header.pt2.entry_point())
 }
 
-/// Creates the root task from `syssw` and maps the system image (physical `image_phys`,
-/// `image_len` bytes) read-only plus a zeroed stack. Returns the entry point.
-pub fn create_root(syssw: &[u8], image_phys: u64, image_len: u64) -> Result<u64, LoadError> {
-    let (mut space, entry) = load_elf(syssw)?;
-    let read_only = Rights {
-        write: false,
-        execute: false,
-    };
+/// Creates the root task (slot 0) in resource partition 0 from syssw's ELF: the system
+/// image (`image_phys`, `image_len` bytes) read-only at `ROOT_SYSTEM_IMAGE_BASE`, the
+/// [`RootInfo`] page listing `user_memory`, a zeroed stack, and its first thread, ready.
+/// The root partition's quota is all kernel memory left afterwards.
+pub fn create_root(
+    k: &mut crate::state::Kernel,
+    syssw: &[u8],
+    image_phys: u64,
+    image_len: u64,
+    user_memory: &[PhysRegion],
+) -> Result<u64, LoadError> {
+    use crate::rp::{Amount, ResourcePartition};
+    use crate::state::{MAX_TASKS, MAX_THREADS};
+    let mut space = AddressSpace::new()?;
+    let entry = load_elf(syssw, &mut space)?;
     for offset in (0..image_len.max(1)).step_by(PAGE_SIZE as usize) {
         space.map(
             ROOT_SYSTEM_IMAGE_BASE + offset,
             image_phys + offset,
-            read_only,
+            PageRights::empty(),
         )?;
     }
-    let read_write = Rights {
-        write: true,
-        execute: false,
+    let mut info = RootInfo {
+        magic: ROOT_INFO_MAGIC,
+        version: ROOT_INFO_VERSION,
+        region_count: user_memory.len().min(ROOT_INFO_MAX_REGIONS) as u32,
+        tsc_hz: crate::time::tsc_hz(),
+        kernel_pages: 0,
+        kernel_threads: MAX_THREADS as u64,
+        kernel_tasks: MAX_TASKS as u64,
+        regions: [PhysRegion::default(); ROOT_INFO_MAX_REGIONS],
     };
-    for page in (ROOT_STACK_TOP - ROOT_STACK_SIZE..ROOT_STACK_TOP).step_by(PAGE_SIZE as usize) {
-        space.map(
-            page,
-            alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?,
-            read_write,
-        )?;
+    for (slot, region) in info.regions.iter_mut().zip(user_memory) {
+        *slot = *region;
     }
-    space.activate();
-    *CURRENT.lock() = Some(Task {
-        name: "syssw",
-        space,
+    for page in (ROOT_STACK_TOP - ROOT_STACK_SIZE..ROOT_STACK_TOP).step_by(PAGE_SIZE as usize) {
+        let frame = alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?;
+        space.map(page, frame, PageRights::WRITE)?;
+    }
+    let info_frame = alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?;
+    space.map(ROOT_INFO_BASE, info_frame, PageRights::empty())?;
+    // Everything the root task itself needed is allocated: the rest is the root quota.
+    info.kernel_pages = crate::mem::free_frames();
+    // SAFETY: a fresh frame (direct-mapped, 4 KiB) and RootInfo fits in a page.
+    unsafe { (phys_to_virt(info_frame) as *mut RootInfo).write(info) };
+
+    k.user_memory_count = info.region_count as usize;
+    k.user_memory = info.regions;
+    k.rps[0] = ResourcePartition::new(
+        0,
+        Amount {
+            tasks: MAX_TASKS as u64,
+            threads: MAX_THREADS as u64,
+            pages: info.kernel_pages,
+        },
+    );
+    k.rps[0].charge(Amount::tasks(1)).expect("fresh quota");
+    let mut task = Task {
+        in_use: true,
         abilities: Abilities::all(),
-    });
+        mcp: MAX_PRIORITY,
+        rp: 0,
+        space,
+        send_to: 1,
+        ..Task::FREE
+    };
+    task.name[..5].copy_from_slice(b"syssw");
+    task.name_len = 5;
+    k.tasks[0] = task;
+    let thread = k
+        .create_thread(0, entry, ROOT_STACK_TOP - 8, ROOT_PRIORITY, 0, ROOT_SYSTEM_IMAGE_BASE)
+        .expect("fresh tables");
+    k.threads[thread].context.rsi = image_len;
+    k.threads[thread].context.rdx = ROOT_INFO_BASE;
+    k.set_state(thread, crate::thread::State::Ready);
     Ok(entry)
 }

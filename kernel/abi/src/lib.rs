@@ -3,8 +3,9 @@
 //! What lives here is a contract between separately built programs (loader, kernel, system
 //! software, partitions, host tools) and must stay stable: the boot-information block the
 //! loader hands the kernel ([`boot`]), the system-image archive format ([`sysimg`]) and the
-//! checksum they use ([`crc32`]), and the system-call interface ([`syscall`]). It must never contain kernel policy or anything that needs
-//! an allocator (the `std` feature adds host-side writers only).
+//! checksum they use ([`crc32`]), the system-call interface ([`syscall`]), the IPC and
+//! exception message layout ([`ipc`]) and the root task's start information ([`root`]).
+//! It must never contain kernel policy or anything that needs an allocator (the `std` feature adds host-side writers only).
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
@@ -14,5 +15,7 @@ extern crate std;
 
 pub mod boot;
 pub mod crc32;
+pub mod ipc;
+pub mod root;
 pub mod syscall;
 pub mod sysimg;

@@ -3,29 +3,51 @@
 //! Register convention (`syscall` instruction): `rax` = call number ([`Call`]); arguments in
 //! `rdi`, `rsi`, `rdx`, `r10`, `r8`, `r9` (`r10` instead of `rcx`, which `syscall`
 //! overwrites). On return `rax` = [`Error`] code (0 = success) and results, if any, in
-//! `rdi`, `rsi`, `rdx`. `rcx` and `r11` are clobbered; all other registers, including the
-//! FPU/SSE state, are preserved.
+//! `rdi`, `rsi`, `rdx`, `r10`, `r8`, `r9` (only the registers a call documents change).
+//! `rcx` and `r11` are clobbered; all other registers, the FPU/SSE state and the FS/GS bases
+//! are preserved.
 //!
 //! Every call lists the [`Abilities`] it needs; a caller lacking one gets
-//! [`Error::AbilityDenied`] and nothing changes.
+//! [`Error::AbilityDenied`] and nothing changes. Any call that fails changes nothing.
+//! Objects are named by [`ThreadId`], [`TaskId`] and resource-partition numbers; `0` means
+//! "the caller's own" where a call says so.
+//!
+//! **Control rights** flow down the task tree: a task may operate on itself and on its
+//! descendants (children, grandchildren, ...), never on its ancestors or siblings.
 //!
 //! Root-task start convention: the kernel starts the first thread of the root task (syssw)
 //! at its ELF entry with `rdi` = user address of the read-only mapped system image
-//! ([`ROOT_SYSTEM_IMAGE_BASE`]), `rsi` = its size in bytes, and `rsp` =
+//! ([`ROOT_SYSTEM_IMAGE_BASE`]), `rsi` = its size in bytes, `rdx` = address of the read-only
+//! [`RootInfo`](crate::root::RootInfo) page ([`ROOT_INFO_BASE`]) and `rsp` =
 //! [`ROOT_STACK_TOP`] - 8 (as if `call`ed, so the SysV stack alignment holds) in a
-//! [`ROOT_STACK_SIZE`]-byte stack.
+//! [`ROOT_STACK_SIZE`]-byte stack. It runs at priority [`ROOT_PRIORITY`] in time partition 0
+//! with every ability, MCP [`MAX_PRIORITY`] and the root resource partition (number 1).
 
 use bitflags::bitflags;
 
 /// Where the kernel maps `system.img` (read-only) in the root task.
 pub const ROOT_SYSTEM_IMAGE_BASE: u64 = 0x0000_7000_0000_0000;
+/// Where the kernel maps the [`RootInfo`](crate::root::RootInfo) page in the root task.
+pub const ROOT_INFO_BASE: u64 = 0x0000_6fff_ffff_f000;
 /// Top of the root task's initial stack (exclusive).
 pub const ROOT_STACK_TOP: u64 = 0x0000_7fff_ffff_0000;
 pub const ROOT_STACK_SIZE: u64 = 64 * 1024;
+/// Priority of the root task's first thread.
+pub const ROOT_PRIORITY: u8 = 200;
 /// Lowest address user mappings may use (page 0 stays unmapped to catch null pointers).
 pub const USER_MIN: u64 = 0x1000;
 /// One past the highest user address (the canonical lower half).
 pub const USER_END: u64 = 0x0000_8000_0000_0000;
+/// Priorities run from 0 (lowest) to this (highest).
+pub const MAX_PRIORITY: u8 = 255;
+/// Most pages one map/unmap/protect call handles (bounds the time spent in the kernel).
+pub const MAP_MAX_PAGES: u64 = 512;
+/// Longest text one `debug_write` accepts.
+pub const DEBUG_WRITE_MAX: u64 = 512;
+/// Longest task name (bytes).
+pub const TASK_NAME_MAX: u64 = 15;
+/// `timeout` value meaning "wait forever"; `0` means "do not wait" (poll).
+pub const TIMEOUT_INFINITE: u64 = u64::MAX;
 
 /// System-call numbers.
 #[repr(u64)]
@@ -36,29 +58,213 @@ pub enum Call {
     /// Ability: `DEBUG_LOG`. Errors: `BadAddress` (buffer not readable user memory),
     /// `InvalidArgument` (too long).
     DebugWrite = 1,
-    /// `clock() -> ns`: nanoseconds since boot (monotonic) in `rdi`. Ability: none.
+    /// `clock() -> rdi = ns`: nanoseconds since boot (monotonic). Ability: none.
     Clock = 2,
-    /// `thread_exit()`: ends the calling thread; does not return. Ability: none.
+    /// `thread_exit()`: ends the calling thread (as `thread_kill` of itself); does not
+    /// return. Ability: none.
     ThreadExit = 3,
     /// `system_halt(outcome)`: stops the machine; `outcome` 0 = success, 1 = failure (under
     /// QEMU: exit 33 / 35). Ability: `SYSTEM_HALT`. Errors: `InvalidArgument`.
     SystemHalt = 4,
+    /// `yield()`: moves the caller behind the other ready threads of its priority.
+    /// Ability: none.
+    Yield = 5,
+
+    /// `task_create(abilities, mcp, rp, name_ptr, name_len) -> rdi = task`: a new child
+    /// task of the caller with an empty address space and no threads. `rp` = resource
+    /// partition it belongs to and is charged to (0 = the caller's; another one needs
+    /// `PARTITION_CONTROL` and must have been created by the caller's task). Costs one task
+    /// and one page (its top-level page table) of that partition's quota.
+    /// Ability: `CREATE_TASK`. Errors: `AbilityDenied` (`abilities` not a subset of the
+    /// caller's), `McpExceeded` (`mcp` above the caller's), `NoSuchObject` (`rp`),
+    /// `NotPermitted` (`rp` not the caller's to use), `QuotaExceeded`, `BadAddress`,
+    /// `InvalidArgument` (name too long or not UTF-8, unknown ability bits).
+    TaskCreate = 10,
+    /// `task_kill(task)`: destroys a descendant task, its threads and all its descendants;
+    /// their kernel memory returns to their resource partitions. Threads waiting on them
+    /// get `PeerGone`. Ability: `CREATE_TASK`. Errors: `NoSuchObject`, `NotPermitted` (not
+    /// a strict descendant).
+    TaskKill = 11,
+    /// `task_allow_send(from, to)`: lets threads of task `from` send IPC and notifications
+    /// to threads of task `to` (0 = the caller's task, for either). Both must be the
+    /// caller's task or its descendants. By default a task may send to itself, its parent
+    /// and its children only. Ability: `CREATE_TASK`. Errors: `NoSuchObject`,
+    /// `NotPermitted`.
+    TaskAllowSend = 12,
+
+    /// `thread_create(task, entry, stack, priority, arg) -> rdi = thread`: a new thread of
+    /// `task` (0 = own task; else a descendant), inactive until `thread_start`; it will
+    /// start at `entry` with `rsp` = `stack`, `rdi` = `arg`, in the creator's time
+    /// partition, without an exception handler. Costs one thread of the quota of the
+    /// task's resource partition. Ability: `CREATE_THREAD`. Errors: `McpExceeded`
+    /// (priority above the task's MCP), `NoSuchObject`, `NotPermitted`, `QuotaExceeded`,
+    /// `InvalidArgument` (entry or stack outside user space).
+    ThreadCreate = 20,
+    /// `thread_start(thread)`: makes an inactive thread ready. Ability: `CREATE_THREAD`.
+    /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (already started).
+    ThreadStart = 21,
+    /// `thread_suspend(thread)`: the thread stops being scheduled (an IPC it waits for
+    /// still completes). Ability: none beyond control rights. Errors: `NoSuchObject`,
+    /// `NotPermitted`.
+    ThreadSuspend = 22,
+    /// `thread_resume(thread)`: undoes `thread_suspend`. Errors as `thread_suspend`.
+    ThreadResume = 23,
+    /// `thread_kill(thread)`: destroys a thread; its kernel memory returns to its resource
+    /// partition. Killing oneself is `thread_exit`. Errors: `NoSuchObject`, `NotPermitted`.
+    ThreadKill = 24,
+    /// `thread_set(thread, attribute, value)`: sets one [`ThreadAttribute`] of a thread of
+    /// the caller's task or of a descendant (0 = the calling thread).
+    /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (unknown attribute, value
+    /// out of range), and per attribute as documented there.
+    ThreadSet = 25,
+    /// `thread_self() -> rdi = thread, rsi = task`. Ability: none.
+    ThreadSelf = 26,
+
+    /// `map(task, source, destination, pages, rights)`: maps `pages` pages starting at the
+    /// caller's page `source` into `task` (0 = own; else a descendant) at `destination`,
+    /// with `rights` ([`PageRights`]) that must not exceed the source pages' rights. Page
+    /// tables are charged to `task`'s resource partition. All-or-nothing. Ability: `MAP`.
+    /// Errors: `InvalidArgument` (unaligned, zero or more than [`MAP_MAX_PAGES`] pages,
+    /// destination outside user space), `BadAddress` (a source page unmapped or with fewer
+    /// rights), `AlreadyMapped`, `QuotaExceeded`, `NoSuchObject`, `NotPermitted`.
+    Map = 30,
+    /// `map_physical(task, physical, destination, pages, rights)`: like `map`, with
+    /// physical frames as the source; they must lie in memory the kernel handed to the root
+    /// task ([`RootInfo`](crate::root::RootInfo)). Ability: `PHYSICAL_MEMORY`. Errors as
+    /// `map`, with `BadAddress` for frames outside the handed-out memory.
+    MapPhysical = 31,
+    /// `unmap(task, address, pages)`: removes the mappings of `pages` pages (unmapped ones
+    /// are skipped). Ability: `MAP`. Errors: `InvalidArgument`, `NoSuchObject`,
+    /// `NotPermitted`.
+    Unmap = 32,
+    /// `protect(task, address, pages, rights)`: reduces the rights of mapped pages to
+    /// `rights` (rights are never added: map again for that). Ability: `MAP`.
+    /// Errors: `InvalidArgument`, `BadAddress` (a page unmapped), `NoSuchObject`,
+    /// `NotPermitted`.
+    Protect = 33,
+
+    /// `send(thread, timeout, tag, w0, w1, w2)`: waits until `thread` receives the message
+    /// ([`ipc`](crate::ipc)): tag + three words in registers, `tag.len()` bytes and
+    /// `tag.items()` map items from the caller's IPC buffer. Senders queue by priority
+    /// (FIFO within one). Ability: none; the caller's task needs the right to send to the
+    /// receiver's task. Errors: `NoSuchObject`, `NotPermitted` (no communication right),
+    /// `TimedOut`, `PeerGone` (receiver killed), `BadAddress` (own IPC buffer), and for
+    /// map items `InvalidArgument`/`BadAddress`/`AlreadyMapped`/`QuotaExceeded`.
+    Send = 40,
+    /// `receive(from, timeout) -> rdi = sender, rdx = tag, r10/r8/r9 = words`: waits for a
+    /// message from `from` (0 = anyone). The data and received map items are in the IPC
+    /// buffer. If the sender used `call`, the receiver must answer with `reply` or
+    /// `reply_wait`. Errors: `TimedOut`, `NoSuchObject` (`from`), `PeerGone`, `BadAddress`
+    /// (no writable IPC buffer).
+    Receive = 41,
+    /// `call(thread, timeout, tag, w0, w1, w2) -> as receive`: `send`, then waits for the
+    /// reply of that thread, atomically; `timeout` bounds both phases together.
+    /// Errors: those of `send` and `receive`.
+    Call = 42,
+    /// `reply_wait(caller, timeout, tag, w0, w1, w2) -> as receive`: replies to `caller`
+    /// (0 = reply to no one) then receives from anyone. Errors: `NotWaiting` (the caller is
+    /// not waiting for a reply from this thread; nothing is received then) and those of
+    /// `receive`.
+    ReplyWait = 43,
+    /// `reply(caller, _, tag, w0, w1, w2)`: replies without waiting. Errors: `NotWaiting`.
+    Reply = 44,
+
+    /// `notify_signal(thread, bits)`: sets notification bits of `thread`, waking it if it
+    /// waits for any of them. Needs the right to send to the thread's task. Errors:
+    /// `NoSuchObject`, `NotPermitted`.
+    NotifySignal = 50,
+    /// `notify_wait(mask, timeout) -> rdi = bits`: waits until one of `mask`'s bits is set
+    /// (mask 0: just sleep for `timeout`), returns and clears the set bits of `mask`.
+    /// Errors: `TimedOut`.
+    NotifyWait = 51,
+
+    /// `rp_create(tasks, threads, pages) -> rdi = rp`: a new resource partition with the
+    /// given quota, carved out of the caller's partition's free quota. Ability:
+    /// `PARTITION_CONTROL`. Errors: `QuotaExceeded`, `OutOfResources` (all partition slots
+    /// used).
+    RpCreate = 60,
+    /// `rp_info(rp) -> rdi = pages used, rsi = pages quota, rdx = threads used | threads
+    /// quota << 16 | tasks used << 32 | tasks quota << 48` (0 = the caller's partition).
+    /// Errors: `NoSuchObject`.
+    RpInfo = 61,
+    /// `set_health_monitor(thread)`: a thread of the root task that receives
+    /// [`LABEL_FAULT_REPORT`](crate::ipc::LABEL_FAULT_REPORT) messages for faults of threads
+    /// without an exception handler. Ability: `PARTITION_CONTROL`, caller in the root task.
+    /// Errors: `NoSuchObject`, `NotPermitted` (not a root-task thread).
+    SetHealthMonitor = 62,
 }
 
 impl Call {
     pub fn from_raw(raw: u64) -> Option<Self> {
+        use self::Call as C;
         Some(match raw {
-            1 => Self::DebugWrite,
-            2 => Self::Clock,
-            3 => Self::ThreadExit,
-            4 => Self::SystemHalt,
+            1 => C::DebugWrite,
+            2 => C::Clock,
+            3 => C::ThreadExit,
+            4 => C::SystemHalt,
+            5 => C::Yield,
+            10 => C::TaskCreate,
+            11 => C::TaskKill,
+            12 => C::TaskAllowSend,
+            20 => C::ThreadCreate,
+            21 => C::ThreadStart,
+            22 => C::ThreadSuspend,
+            23 => C::ThreadResume,
+            24 => C::ThreadKill,
+            25 => C::ThreadSet,
+            26 => C::ThreadSelf,
+            30 => C::Map,
+            31 => C::MapPhysical,
+            32 => C::Unmap,
+            33 => C::Protect,
+            40 => C::Send,
+            41 => C::Receive,
+            42 => C::Call,
+            43 => C::ReplyWait,
+            44 => C::Reply,
+            50 => C::NotifySignal,
+            51 => C::NotifyWait,
+            60 => C::RpCreate,
+            61 => C::RpInfo,
+            62 => C::SetHealthMonitor,
             _ => return None,
         })
     }
 }
 
-/// Longest text one `debug_write` accepts.
-pub const DEBUG_WRITE_MAX: u64 = 512;
+/// Attributes `thread_set` can change.
+#[repr(u64)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ThreadAttribute {
+    /// Scheduling priority, at most the thread's task's MCP (else `McpExceeded`).
+    Priority = 1,
+    /// The thread that receives this thread's exception messages (0 = none). Must belong
+    /// to the same task or to an ancestor task.
+    ExceptionHandler = 2,
+    /// User address of the thread's [`IpcBuffer`](crate::ipc::IpcBuffer) (8-byte aligned,
+    /// 0 = none); checked to be mapped writable when set and whenever IPC uses it.
+    IpcBuffer = 3,
+    /// FS base (a canonical user address), e.g. for a guest's `arch_prctl(ARCH_SET_FS)`.
+    FsBase = 4,
+    /// GS base (a canonical user address).
+    GsBase = 5,
+    /// Time partition (0 = background). Needs `SCHEDULING`.
+    TimePartition = 6,
+}
+
+impl ThreadAttribute {
+    pub fn from_raw(raw: u64) -> Option<Self> {
+        Some(match raw {
+            1 => Self::Priority,
+            2 => Self::ExceptionHandler,
+            3 => Self::IpcBuffer,
+            4 => Self::FsBase,
+            5 => Self::GsBase,
+            6 => Self::TimePartition,
+            _ => return None,
+        })
+    }
+}
 
 /// Error codes returned in `rax`.
 #[repr(u64)]
@@ -67,22 +273,52 @@ pub enum Error {
     Ok = 0,
     /// The call number does not exist.
     InvalidCall = 1,
-    /// The caller's task lacks the ability the call needs.
+    /// The caller's task lacks the ability the call needs (or asked to give more abilities
+    /// than it has).
     AbilityDenied = 2,
     /// An argument is out of range.
     InvalidArgument = 3,
-    /// A buffer is not (entirely) mapped user memory with the rights the call needs.
+    /// A buffer or page is not (entirely) mapped user memory with the rights the call needs.
     BadAddress = 4,
+    /// No thread, task or resource partition has this identifier (any more).
+    NoSuchObject = 5,
+    /// The object exists but is not the caller's to use (control or communication right).
+    NotPermitted = 6,
+    /// A priority above the maximum controlled priority.
+    McpExceeded = 7,
+    /// The resource partition's kernel-memory quota is used up.
+    QuotaExceeded = 8,
+    /// A destination page is already mapped.
+    AlreadyMapped = 9,
+    /// The timeout expired (immediately, for a zero timeout) before the operation could
+    /// happen.
+    TimedOut = 10,
+    /// The peer was killed while the caller waited for it.
+    PeerGone = 11,
+    /// A reply to a thread that is not waiting for one from the caller.
+    NotWaiting = 12,
+    /// A fixed kernel table (e.g. resource-partition slots) is full.
+    OutOfResources = 13,
 }
 
 impl Error {
     pub fn from_raw(raw: u64) -> Option<Self> {
+        use Error::*;
         Some(match raw {
-            0 => Self::Ok,
-            1 => Self::InvalidCall,
-            2 => Self::AbilityDenied,
-            3 => Self::InvalidArgument,
-            4 => Self::BadAddress,
+            0 => Ok,
+            1 => InvalidCall,
+            2 => AbilityDenied,
+            3 => InvalidArgument,
+            4 => BadAddress,
+            5 => NoSuchObject,
+            6 => NotPermitted,
+            7 => McpExceeded,
+            8 => QuotaExceeded,
+            9 => AlreadyMapped,
+            10 => TimedOut,
+            11 => PeerGone,
+            12 => NotWaiting,
+            13 => OutOfResources,
             _ => return None,
         })
     }
@@ -106,4 +342,35 @@ bitflags! {
         /// thread's exception handler (paravirtualized guests).
         const NATIVE_SYSCALLS = 1 << 10;
     }
+}
+
+bitflags! {
+    /// Rights of a user page; every mapped page is readable.
+    #[derive(Clone, Copy, Debug, PartialEq, Eq)]
+    pub struct PageRights: u64 {
+        const WRITE = 1 << 0;
+        const EXECUTE = 1 << 1;
+    }
+}
+
+/// A thread identifier: slot index in bits 0..16, generation in bits 16..32 (so a stale
+/// identifier of a killed thread never names its successor in the slot). Never 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct ThreadId(pub u64);
+
+/// A task identifier, encoded like [`ThreadId`]. Never 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct TaskId(pub u64);
+
+/// Packs a slot index and generation into an identifier (shared by threads and tasks).
+pub const fn make_id(index: usize, generation: u16) -> u64 {
+    ((generation as u64) << 16) | (index as u64 + 1)
+}
+
+/// Splits an identifier into (slot index, generation); `None` for 0 or stray high bits.
+pub const fn split_id(id: u64) -> Option<(usize, u16)> {
+    if id == 0 || id >> 32 != 0 || id & 0xffff == 0 {
+        return None;
+    }
+    Some(((id & 0xffff) as usize - 1, (id >> 16) as u16))
 }

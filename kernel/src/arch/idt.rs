@@ -180,12 +180,17 @@ struct Gate {
 impl Gate {
     /// Present, DPL 0, 64-bit interrupt gate (interrupts stay off in the handler).
     fn interrupt(handler: Stub, ist: u16) -> Self {
+        Self::with_dpl(handler, ist, 0)
+    }
+
+    /// `dpl` 3 lets user code raise the vector with `int n` (breakpoint, overflow).
+    fn with_dpl(handler: Stub, ist: u16, dpl: u8) -> Self {
         let addr = handler as *const () as u64;
         Gate {
             offset_low: addr as u16,
             selector: gdt::selectors().kernel_code.0,
             ist: ist as u8,
-            attributes: 0x8e,
+            attributes: 0x8e | (dpl << 5),
             offset_mid: (addr >> 16) as u16,
             offset_high: (addr >> 32) as u32,
             reserved: 0,
@@ -205,7 +210,8 @@ static IDT: Lazy<Idt> = Lazy::new(|| {
             18 => gdt::MACHINE_CHECK_IST,
             _ => 0,
         };
-        idt.0[vector] = Gate::interrupt(stub, ist);
+        let dpl = if vector == 3 || vector == 4 { 3 } else { 0 };
+        idt.0[vector] = Gate::with_dpl(stub, ist, dpl);
     }
     for v in 0..16 {
         idt.0[(super::pic::VECTOR_BASE + v) as usize] = Gate::interrupt(legacy_pic, 0);
@@ -226,11 +232,16 @@ pub fn init() {
 }
 
 extern "sysv64" fn dispatch(frame: &mut TrapFrame) {
+    let from_user = frame.cs & 3 == 3;
     match frame.vector {
+        // NMI, double fault, machine check: hardware trouble, never a thread's business.
+        2 | 8 | 18 => fatal_exception(frame),
+        0..=31 if from_user => super::entry::on_user_exception(frame.vector, frame.error_code),
         0..=31 => fatal_exception(frame),
         v if v == TIMER_VECTOR as u64 => {
             crate::time::on_timer_interrupt();
             super::lapic::end_of_interrupt();
+            super::entry::on_timer(from_user);
         }
         // Masked legacy PIC: only spurious IRQ 7/15 can arrive; they need no EOI.
         v if v == super::pic::VECTOR_BASE as u64 => {}
@@ -255,6 +266,13 @@ fn fatal_exception(frame: &TrapFrame) -> ! {
         frame.rsp,
         frame.rflags
     );
+    log_registers(frame);
+    kprintln!("kernel: fatal exception, halting with failure");
+    crate::qemu::exit(crate::qemu::ExitCode::Failure)
+}
+
+/// Logs the general registers of a frame (four lines).
+pub fn log_registers(frame: &TrapFrame) {
     kprintln!(
         "  rax={:#018x} rbx={:#018x} rcx={:#018x} rdx={:#018x}",
         frame.rax,
@@ -282,6 +300,4 @@ fn fatal_exception(frame: &TrapFrame) -> ! {
         frame.r14,
         frame.r15
     );
-    kprintln!("kernel: fatal exception, halting with failure");
-    crate::qemu::exit(crate::qemu::ExitCode::Failure)
 }

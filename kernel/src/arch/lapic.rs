@@ -83,6 +83,28 @@ pub fn start_periodic(vector: u8, ticks: u32) {
     write(TIMER_INITIAL, ticks.max(1));
 }
 
+/// APIC timer ticks per second (after the divider), set by calibration.
+static TIMER_HZ: AtomicU64 = AtomicU64::new(0);
+
+pub fn set_timer_hz(hz: u64) {
+    TIMER_HZ.store(hz, Ordering::Relaxed);
+}
+
+/// One timer interrupt at `deadline` (ns since boot; `u64::MAX` = none). A deadline beyond
+/// the counter's range fires early; the handler then simply programs the rest.
+pub fn one_shot_at(deadline: u64) {
+    if deadline == u64::MAX {
+        stop_timer();
+        return;
+    }
+    let delta = deadline.saturating_sub(crate::time::since_boot_ns());
+    let ticks = (delta as u128 * TIMER_HZ.load(Ordering::Relaxed) as u128 / 1_000_000_000)
+        .clamp(1, u32::MAX as u128) as u32;
+    write(TIMER_DIVIDE, DIVIDE_BY_16);
+    write(LVT_TIMER, super::idt::TIMER_VECTOR as u32);
+    write(TIMER_INITIAL, ticks);
+}
+
 pub fn stop_timer() {
     write(LVT_TIMER, LVT_MASKED);
     write(TIMER_INITIAL, 0);

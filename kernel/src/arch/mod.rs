@@ -2,6 +2,8 @@
 //! Keep each file thin; decisions belong to the portable modules.
 
 pub mod cpu;
+pub mod entry;
+pub mod fpu;
 pub mod gdt;
 pub mod hpet;
 pub mod idt;
@@ -12,4 +14,3 @@ pub mod pit;
 pub mod serial;
 pub mod stack;
 pub mod syscall;
-pub mod usermode;

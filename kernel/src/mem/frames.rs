@@ -100,6 +100,28 @@ impl FrameAllocator {
         self.free_frames += 1;
     }
 
+    /// Keeps the first `keep` never-used frames for the kernel and hands the rest of the
+    /// usable memory out as page-aligned `(start, end)` ranges (at most `out.len()`; the
+    /// count is returned). Only valid before the first allocation.
+    pub fn split_off_beyond(&mut self, keep: u64, out: &mut [(u64, u64)]) -> usize {
+        debug_assert!(self.free_frames == self.total_frames && self.current == 0);
+        let (mut kept, mut n) = (0, 0);
+        for range in &mut self.ranges[..self.range_count] {
+            let frames = (range.end - range.next) / PAGE;
+            let take = frames.min(keep - kept);
+            kept += take;
+            let split = range.next + take * PAGE;
+            if split < range.end && n < out.len() {
+                out[n] = (split, range.end);
+                n += 1;
+            }
+            range.end = split;
+        }
+        self.total_frames = kept;
+        self.free_frames = kept;
+        n
+    }
+
     pub fn free_frames(&self) -> u64 {
         self.free_frames
     }
@@ -174,6 +196,23 @@ mod tests {
         assert_eq!(a.allocate(&links), Some(f2));
         assert_eq!(a.allocate(&links), Some(f1));
         assert_eq!(a.allocate(&links), Some(0x10_2000));
+    }
+
+    #[test]
+    fn split_keeps_the_first_frames_and_hands_out_the_rest() {
+        let map = [
+            region(0x10_0000, 4, MemoryKind::USABLE),
+            region(0x30_0000, 4, MemoryKind::USABLE),
+        ];
+        let mut a = FrameAllocator::new(&map, 0x10_0000);
+        let mut out = [(0, 0); 4];
+        let n = a.split_off_beyond(5, &mut out);
+        assert_eq!(&out[..n], &[(0x30_1000, 0x30_4000)]);
+        assert_eq!(a.total_frames(), 5);
+        let links = FakeLinks::default();
+        let got: Vec<u64> = std::iter::from_fn(|| a.allocate(&links)).collect();
+        assert_eq!(got.len(), 5);
+        assert_eq!(got[4], 0x30_0000);
     }
 
     #[test]

@@ -1,22 +1,27 @@
 //! Physical memory: the direct map and the frame allocator.
+//!
+//! On the target every physical address is reached through the loader's direct map. In host
+//! unit tests "physical memory" is an arena of [`test_arena::FRAMES`] frames, so page
+//! tables, address spaces and the object logic built on them run unchanged on the host.
 
 pub mod frames;
+pub mod paging;
 
+#[cfg(not(test))]
 use abi::boot::DIRECT_MAP_BASE;
 
 pub const PAGE_SIZE: u64 = 4096;
 
 /// Kernel virtual address of physical address `phys` (through the loader's direct map).
+#[cfg(not(test))]
 pub const fn phys_to_virt(phys: u64) -> u64 {
     DIRECT_MAP_BASE + phys
 }
 
-/// Physical address behind a direct-map address.
-pub const fn virt_to_phys(virt: u64) -> u64 {
-    virt - DIRECT_MAP_BASE
+#[cfg(test)]
+pub fn phys_to_virt(phys: u64) -> u64 {
+    test_arena::base() + phys
 }
-
-pub mod paging;
 
 /// A zeroed frame from the kernel's allocator.
 pub fn alloc_zeroed_frame() -> Option<u64> {
@@ -28,4 +33,60 @@ pub fn alloc_zeroed_frame() -> Option<u64> {
     // covers it.
     unsafe { core::ptr::write_bytes(phys_to_virt(frame) as *mut u8, 0, PAGE_SIZE as usize) };
     Some(frame)
+}
+
+/// Returns a frame obtained from [`alloc_zeroed_frame`].
+pub fn free_frame(frame: u64) {
+    if let Some(frames) = crate::boot::FRAMES.get() {
+        frames.lock().free(frame, &mut crate::boot::DirectMapLinks);
+    }
+}
+
+/// Frames the kernel allocator can still hand out.
+pub fn free_frames() -> u64 {
+    crate::boot::FRAMES
+        .get()
+        .map_or(0, |f| f.lock().free_frames())
+}
+
+#[cfg(test)]
+pub mod test_arena {
+    //! Host-test physical memory: a leaked, page-aligned arena whose frames the global
+    //! frame allocator hands out (frame addresses are offsets into the arena).
+    use super::PAGE_SIZE;
+    use abi::boot::{MemoryKind, MemoryRegion};
+    use std::sync::OnceLock;
+
+    pub const FRAMES: u64 = 8192;
+    static BASE: OnceLock<u64> = OnceLock::new();
+
+    pub fn base() -> u64 {
+        *BASE.get_or_init(|| {
+            let layout =
+                std::alloc::Layout::from_size_align((FRAMES * PAGE_SIZE) as usize, 4096).unwrap();
+            // SAFETY: non-zero size; the arena is leaked on purpose (lives for the test run).
+            let p = unsafe { std::alloc::alloc_zeroed(layout) };
+            assert!(!p.is_null());
+            p as u64
+        })
+    }
+
+    static EXCLUSIVE: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+    /// Installs the arena as the kernel's frame allocator (idempotent) and serialises the
+    /// tests that use it, so frame counts they measure are their own.
+    pub fn init() -> std::sync::MutexGuard<'static, ()> {
+        let guard = EXCLUSIVE.lock().unwrap_or_else(|e| e.into_inner());
+        base();
+        crate::boot::FRAMES.call_once(|| {
+            let region = MemoryRegion {
+                start: PAGE_SIZE,
+                pages: FRAMES - 1,
+                kind: MemoryKind::USABLE,
+                _reserved: 0,
+            };
+            spin::Mutex::new(super::frames::FrameAllocator::new(&[region], PAGE_SIZE))
+        });
+        guard
+    }
 }

@@ -1,8 +1,11 @@
 //! User address spaces: a PML4 per task whose kernel half (slots 256..511) is shared with
 //! the kernel's and supervisor-only; user mappings get the U bit and their own rights.
+//! Page-table frames come from the kernel allocator; the caller charges them to a resource
+//! partition *before* mapping ([`AddressSpace::tables_needed`]), so a map never fails half
+//! way for lack of memory.
 
-use super::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
-use abi::syscall::{USER_END, USER_MIN};
+use super::{PAGE_SIZE, alloc_zeroed_frame, free_frame, phys_to_virt};
+use abi::syscall::{PageRights, USER_END, USER_MIN};
 
 const PRESENT: u64 = 1;
 const WRITABLE: u64 = 1 << 1;
@@ -11,13 +14,6 @@ const HUGE: u64 = 1 << 7;
 const NO_EXECUTE: u64 = 1 << 63;
 const ADDRESS: u64 = 0x000f_ffff_ffff_f000;
 
-/// Rights of a user page.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Rights {
-    pub write: bool,
-    pub execute: bool,
-}
-
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum MapError {
     OutOfMemory,
@@ -25,6 +21,8 @@ pub enum MapError {
     AlreadyMapped,
 }
 
+/// A task's address space (by its top-level table); 0 = none.
+#[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct AddressSpace {
     root: u64,
 }
@@ -39,13 +37,35 @@ fn index(virt: u64, level: u32) -> usize {
     ((virt >> (12 + 9 * level)) & 511) as usize
 }
 
+/// True if `[start, start + pages pages)` is page-aligned user space (never the kernel half).
+pub fn is_user_range(start: u64, pages: u64) -> bool {
+    start % PAGE_SIZE == 0
+        && start >= USER_MIN
+        && pages
+            .checked_mul(PAGE_SIZE)
+            .and_then(|len| start.checked_add(len))
+            .is_some_and(|end| end <= USER_END)
+}
+
+fn leaf_bits(rights: PageRights) -> u64 {
+    PRESENT
+        | USER
+        | if rights.contains(PageRights::WRITE) { WRITABLE } else { 0 }
+        | if rights.contains(PageRights::EXECUTE) { 0 } else { NO_EXECUTE }
+}
+
 impl AddressSpace {
-    /// A new, empty user half sharing the current kernel half.
+    pub const NONE: Self = Self { root: 0 };
+
+    /// A new, empty user half sharing the kernel half.
     pub fn new() -> Result<Self, MapError> {
         let root = alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?;
-        let (current, _) = x86_64::registers::control::Cr3::read();
-        let kernel = table(current.start_address().as_u64());
-        table(root)[256..].copy_from_slice(&kernel[256..]);
+        #[cfg(not(test))]
+        {
+            let (current, _) = x86_64::registers::control::Cr3::read();
+            let kernel = table(current.start_address().as_u64());
+            table(root)[256..].copy_from_slice(&kernel[256..]);
+        }
         Ok(Self { root })
     }
 
@@ -53,35 +73,95 @@ impl AddressSpace {
         self.root
     }
 
-    /// Maps the user page `virt` to frame `phys`.
-    pub fn map(&mut self, virt: u64, phys: u64, rights: Rights) -> Result<(), MapError> {
-        if !(USER_MIN..USER_END).contains(&virt) || virt % PAGE_SIZE != 0 {
-            return Err(MapError::NotUserAddress);
-        }
+    pub fn is_none(&self) -> bool {
+        self.root == 0
+    }
+
+    /// The leaf entry of `virt`, creating missing tables if `create`.
+    fn leaf(&self, virt: u64, create: bool) -> Result<Option<&'static mut u64>, MapError> {
         let mut t = self.root;
         for level in (1..4).rev() {
             let entry = &mut table(t)[index(virt, level)];
             if *entry & PRESENT == 0 {
+                if !create {
+                    return Ok(None);
+                }
                 *entry =
                     alloc_zeroed_frame().ok_or(MapError::OutOfMemory)? | PRESENT | WRITABLE | USER;
             }
             t = *entry & ADDRESS;
         }
-        let leaf = &mut table(t)[index(virt, 0)];
+        Ok(Some(&mut table(t)[index(virt, 0)]))
+    }
+
+    /// Page-table frames a map of `pages` pages at `virt` would allocate.
+    pub fn tables_needed(&self, virt: u64, pages: u64) -> u64 {
+        let mut needed = 0;
+        // The last table (by level and covering range) counted as "to be created".
+        let mut counted = [u64::MAX; 4];
+        for page in 0..pages {
+            let at = virt + page * PAGE_SIZE;
+            let mut t = self.root;
+            for level in (1..4).rev() {
+                let entry = if t == 0 { 0 } else { table(t)[index(at, level)] };
+                if entry & PRESENT == 0 {
+                    // Each missing level below this one is missing too.
+                    for l in (1..=level).rev() {
+                        let span = at >> (12 + 9 * l);
+                        if counted[l as usize] != span {
+                            counted[l as usize] = span;
+                            needed += 1;
+                        }
+                    }
+                    break;
+                }
+                t = entry & ADDRESS;
+            }
+        }
+        needed
+    }
+
+    /// Maps the user page `virt` to frame `phys`.
+    pub fn map(&mut self, virt: u64, phys: u64, rights: PageRights) -> Result<(), MapError> {
+        if !is_user_range(virt, 1) {
+            return Err(MapError::NotUserAddress);
+        }
+        let leaf = self.leaf(virt, true)?.expect("created");
         if *leaf & PRESENT != 0 {
             return Err(MapError::AlreadyMapped);
         }
-        *leaf = phys
-            | PRESENT
-            | USER
-            | if rights.write { WRITABLE } else { 0 }
-            | if rights.execute { 0 } else { NO_EXECUTE };
+        *leaf = (phys & ADDRESS) | leaf_bits(rights);
         Ok(())
     }
 
+    /// Removes the mapping of `virt`; returns the frame it mapped.
+    pub fn unmap(&mut self, virt: u64) -> Option<u64> {
+        let leaf = self.leaf(virt, false).ok()??;
+        if *leaf & PRESENT == 0 {
+            return None;
+        }
+        let frame = *leaf & ADDRESS;
+        *leaf = 0;
+        self.flush(virt);
+        Some(frame)
+    }
+
+    /// Changes the rights of a mapped page.
+    pub fn set_rights(&mut self, virt: u64, rights: PageRights) -> bool {
+        let Ok(Some(leaf)) = self.leaf(virt, false) else {
+            return false;
+        };
+        if *leaf & PRESENT == 0 {
+            return false;
+        }
+        *leaf = (*leaf & ADDRESS) | leaf_bits(rights);
+        self.flush(virt);
+        true
+    }
+
     /// The frame and rights behind user address `virt`, if it is a present user page.
-    pub fn translate(&self, virt: u64) -> Option<(u64, Rights)> {
-        if !(USER_MIN..USER_END).contains(&virt) {
+    pub fn translate(&self, virt: u64) -> Option<(u64, PageRights)> {
+        if self.root == 0 || !(USER_MIN..USER_END).contains(&virt) {
             return None;
         }
         let mut t = self.root;
@@ -91,10 +171,9 @@ impl AddressSpace {
                 return None;
             }
             if level == 0 {
-                let rights = Rights {
-                    write: entry & WRITABLE != 0,
-                    execute: entry & NO_EXECUTE == 0,
-                };
+                let mut rights = PageRights::empty();
+                rights.set(PageRights::WRITE, entry & WRITABLE != 0);
+                rights.set(PageRights::EXECUTE, entry & NO_EXECUTE == 0);
                 return Some((entry & ADDRESS, rights));
             }
             t = entry & ADDRESS;
@@ -102,28 +181,133 @@ impl AddressSpace {
         None
     }
 
-    /// Copies user memory at `ptr` into `out`; `false` if any byte is not a present user page.
-    pub fn copy_from_user(&self, ptr: u64, out: &mut [u8]) -> bool {
+    /// Calls `f(kernel_address, len)` for each page-bounded piece of the user range,
+    /// checking rights first; `false` (and no call at all) if any page is missing.
+    fn pieces(&self, ptr: u64, len: usize, write: bool, mut f: impl FnMut(u64, usize)) -> bool {
+        if !self.accessible(ptr, len, write) {
+            return false;
+        }
         let mut done = 0;
-        while done < out.len() {
-            let at = ptr.wrapping_add(done as u64);
-            let Some((frame, _)) = self.translate(at & !(PAGE_SIZE - 1)) else {
-                return false;
-            };
-            let offset = (at % PAGE_SIZE) as usize;
-            let n = (PAGE_SIZE as usize - offset).min(out.len() - done);
-            // SAFETY: `frame` is a present user frame, mapped by the direct map; the copy stays
-            // inside it (offset + n <= PAGE_SIZE).
-            let src = unsafe {
-                core::slice::from_raw_parts((phys_to_virt(frame) as *const u8).add(offset), n)
-            };
-            out[done..done + n].copy_from_slice(src);
+        while done < len {
+            let at = ptr + done as u64;
+            let (frame, _) = self.translate(at & !(PAGE_SIZE - 1)).expect("checked");
+            let offset = at % PAGE_SIZE;
+            let n = ((PAGE_SIZE - offset) as usize).min(len - done);
+            f(phys_to_virt(frame) + offset, n);
             done += n;
         }
         true
     }
 
+    /// True if every byte of `[ptr, ptr + len)` is mapped user memory (writable if `write`).
+    pub fn accessible(&self, ptr: u64, len: usize, write: bool) -> bool {
+        let Some(end) = ptr.checked_add(len as u64) else {
+            return false;
+        };
+        if len == 0 {
+            return true;
+        }
+        let mut page = ptr & !(PAGE_SIZE - 1);
+        while page < end {
+            match self.translate(page) {
+                Some((_, r)) if !write || r.contains(PageRights::WRITE) => {}
+                _ => return false,
+            }
+            page += PAGE_SIZE;
+        }
+        true
+    }
+
+    /// Copies user memory at `ptr` into `out`; `false` if any byte is not a present user page.
+    pub fn copy_from_user(&self, ptr: u64, out: &mut [u8]) -> bool {
+        let mut done = 0;
+        self.pieces(ptr, out.len(), false, |src, n| {
+            // SAFETY: `src..src + n` lies inside one present user frame (direct map).
+            let s = unsafe { core::slice::from_raw_parts(src as *const u8, n) };
+            out[done..done + n].copy_from_slice(s);
+            done += n;
+        })
+    }
+
+    /// Copies `data` to user memory at `ptr`; `false` (nothing written) unless all of it is
+    /// writable user memory.
+    pub fn copy_to_user(&self, ptr: u64, data: &[u8]) -> bool {
+        let mut done = 0;
+        self.pieces(ptr, data.len(), true, |dst, n| {
+            // SAFETY: `dst..dst + n` lies inside one present, writable user frame.
+            let d = unsafe { core::slice::from_raw_parts_mut(dst as *mut u8, n) };
+            d.copy_from_slice(&data[done..done + n]);
+            done += n;
+        })
+    }
+
+    /// Copies `len` bytes from `src` in `self` to `dst` in `to` (both checked first).
+    pub fn copy_to_space(&self, src: u64, to: &AddressSpace, dst: u64, len: usize) -> bool {
+        if !self.accessible(src, len, false) || !to.accessible(dst, len, true) {
+            return false;
+        }
+        let mut chunk = [0u8; 256];
+        let mut done = 0;
+        while done < len {
+            let n = chunk.len().min(len - done);
+            let ok = self.copy_from_user(src + done as u64, &mut chunk[..n])
+                && to.copy_to_user(dst + done as u64, &chunk[..n]);
+            debug_assert!(ok, "checked above");
+            done += n;
+        }
+        true
+    }
+
+    /// Frees every page-table frame of the user half and the top-level table; returns how
+    /// many frames that was. Mapped frames themselves are not the kernel's and stay.
+    pub fn destroy(&mut self) -> u64 {
+        if self.root == 0 {
+            return 0;
+        }
+        fn free_level(t: u64, level: u32) -> u64 {
+            let mut freed = 0;
+            if level > 0 {
+                for entry in table(t).iter().copied() {
+                    if entry & PRESENT != 0 {
+                        freed += free_level(entry & ADDRESS, level - 1);
+                    }
+                }
+            }
+            free_frame(t);
+            freed + 1
+        }
+        let mut freed = 0;
+        for slot in 0..256 {
+            let entry = table(self.root)[slot];
+            if entry & PRESENT != 0 {
+                freed += free_level(entry & ADDRESS, 2);
+            }
+        }
+        free_frame(self.root);
+        self.root = 0;
+        freed + 1
+    }
+
+    pub fn is_active(&self) -> bool {
+        #[cfg(not(test))]
+        {
+            let (current, _) = x86_64::registers::control::Cr3::read();
+            current.start_address().as_u64() == self.root
+        }
+        #[cfg(test)]
+        false
+    }
+
+    fn flush(&self, virt: u64) {
+        if self.is_active() {
+            #[cfg(not(test))]
+            x86_64::instructions::tlb::flush(x86_64::VirtAddr::new(virt));
+        }
+        let _ = virt;
+    }
+
     pub fn activate(&self) {
+        #[cfg(not(test))]
         // SAFETY: the root maps the kernel half identically to the current tables.
         unsafe {
             x86_64::registers::control::Cr3::write(
@@ -133,5 +317,69 @@ impl AddressSpace {
                 x86_64::registers::control::Cr3Flags::empty(),
             )
         };
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::mem::test_arena;
+
+    const RW: PageRights = PageRights::WRITE;
+
+    #[test]
+    fn precount_matches_what_map_allocates() {
+        let _arena = test_arena::init();
+        let mut space = AddressSpace::new().unwrap();
+        for (virt, pages) in [
+            (0x40_0000u64, 3u64),
+            (0x40_3000, 600),                 // crosses a 2 MiB boundary
+            (0x7f_ffe0_0000, 4),              // another 1 GiB and 512 GiB region
+            (0x0000_7fff_ffff_f000 - 0x1000, 1), // top of user space
+        ] {
+            let needed = space.tables_needed(virt, pages);
+            let before = crate::mem::free_frames();
+            for p in 0..pages {
+                space.map(virt + p * PAGE_SIZE, 0x1000, RW).unwrap();
+            }
+            assert_eq!(before - crate::mem::free_frames(), needed, "at {virt:#x}");
+            assert_eq!(space.tables_needed(virt, pages), 0);
+        }
+        let freed = space.destroy();
+        assert!(freed > 5);
+    }
+
+    #[test]
+    fn rights_unmap_and_copies() {
+        let _arena = test_arena::init();
+        let mut space = AddressSpace::new().unwrap();
+        let frame = crate::mem::alloc_zeroed_frame().unwrap();
+        space.map(0x1000, frame, PageRights::empty()).unwrap();
+        assert_eq!(space.map(0x1000, frame, RW), Err(MapError::AlreadyMapped));
+        assert_eq!(
+            space.map(0xffff_8000_0000_0000, frame, RW),
+            Err(MapError::NotUserAddress)
+        );
+        assert!(!space.copy_to_user(0x1000, b"hi"), "read-only page");
+        assert!(space.set_rights(0x1000, RW));
+        assert!(space.copy_to_user(0x1ffe, b"hi"));
+        let mut out = [0u8; 2];
+        assert!(space.copy_from_user(0x1ffe, &mut out));
+        assert_eq!(&out, b"hi");
+        assert!(!space.copy_from_user(0x1fff, &mut out), "crosses into an unmapped page");
+        assert_eq!(space.unmap(0x1000), Some(frame));
+        assert_eq!(space.translate(0x1000), None);
+        assert_eq!(space.unmap(0x1000), None);
+        space.destroy();
+        crate::mem::free_frame(frame);
+    }
+
+    #[test]
+    fn user_range_check_rejects_kernel_and_overflow() {
+        assert!(is_user_range(0x1000, 1));
+        assert!(!is_user_range(0, 1));
+        assert!(!is_user_range(0x1001, 1));
+        assert!(!is_user_range(USER_END - 0x1000, 2));
+        assert!(!is_user_range(0x1000, u64::MAX / 2));
     }
 }

@@ -1,32 +1,55 @@
-//! System-call stubs (register convention in `abi::syscall`).
+//! System-call stubs and typed wrappers (register convention in `abi::syscall`).
 
-use abi::syscall::{Call, Error};
+use abi::ipc::MessageTag;
+use abi::syscall::{Abilities, Call, Error, PageRights, TaskId, ThreadAttribute, ThreadId};
 use core::arch::asm;
 
-/// Raw call: returns (`rax`, `rdi`, `rsi`, `rdx`) after the call.
+/// Registers after a call: `rax` and the six argument/result registers.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Regs {
+    pub rax: u64,
+    pub rdi: u64,
+    pub rsi: u64,
+    pub rdx: u64,
+    pub r10: u64,
+    pub r8: u64,
+    pub r9: u64,
+}
+
+/// Raw call with all six argument registers.
 #[inline(always)]
-pub fn raw(call: u64, a0: u64, a1: u64, a2: u64, a3: u64) -> (u64, u64, u64, u64) {
-    let (rax, rdi, rsi, rdx);
-    // SAFETY: `syscall` transfers to the kernel, which preserves every register except
-    // rax/rdi/rsi/rdx (results, declared as outputs), rcx and r11 (clobbered, declared) and
-    // touches no memory of ours that Rust knows about except through pointers we passed.
+pub fn raw6(call: u64, a: [u64; 6]) -> Regs {
+    let mut r = Regs::default();
+    // SAFETY: `syscall` transfers to the kernel, which changes only rax and the six
+    // argument registers (declared in/out), rcx and r11 (clobbered, declared), and touches
+    // no memory of ours except through pointers we passed for that purpose.
     unsafe {
         asm!(
             "syscall",
-            inlateout("rax") call => rax,
-            inlateout("rdi") a0 => rdi,
-            inlateout("rsi") a1 => rsi,
-            inlateout("rdx") a2 => rdx,
-            in("r10") a3,
+            inlateout("rax") call => r.rax,
+            inlateout("rdi") a[0] => r.rdi,
+            inlateout("rsi") a[1] => r.rsi,
+            inlateout("rdx") a[2] => r.rdx,
+            inlateout("r10") a[3] => r.r10,
+            inlateout("r8") a[4] => r.r8,
+            inlateout("r9") a[5] => r.r9,
             lateout("rcx") _,
             lateout("r11") _,
             options(nostack),
         );
     }
-    (rax, rdi, rsi, rdx)
+    r
 }
 
-fn status(rax: u64) -> Result<(), Error> {
+/// Raw call: returns (`rax`, `rdi`, `rsi`, `rdx`) after the call.
+#[inline(always)]
+pub fn raw(call: u64, a0: u64, a1: u64, a2: u64, a3: u64) -> (u64, u64, u64, u64) {
+    let r = raw6(call, [a0, a1, a2, a3, 0, 0]);
+    (r.rax, r.rdi, r.rsi, r.rdx)
+}
+
+/// `rax` as a result.
+pub fn status(rax: u64) -> Result<(), Error> {
     match Error::from_raw(rax) {
         Some(Error::Ok) => Ok(()),
         Some(e) => Err(e),
@@ -34,17 +57,17 @@ fn status(rax: u64) -> Result<(), Error> {
     }
 }
 
+fn call(c: Call, a: [u64; 6]) -> Result<Regs, Error> {
+    let r = raw6(c as u64, a);
+    status(r.rax).map(|()| r)
+}
+
 pub fn debug_write(text: &[u8]) -> Result<(), Error> {
-    status(
-        raw(
-            Call::DebugWrite as u64,
-            text.as_ptr() as u64,
-            text.len() as u64,
-            0,
-            0,
-        )
-        .0,
+    call(
+        Call::DebugWrite,
+        [text.as_ptr() as u64, text.len() as u64, 0, 0, 0, 0],
     )
+    .map(drop)
 }
 
 /// Nanoseconds since boot.
@@ -59,14 +82,252 @@ pub fn thread_exit() -> ! {
 
 /// Ends the run (success or failure); returns only if the caller may not halt.
 pub fn system_halt(success: bool) -> Result<(), Error> {
-    status(
-        raw(
-            Call::SystemHalt as u64,
-            if success { 0 } else { 1 },
+    call(Call::SystemHalt, [if success { 0 } else { 1 }, 0, 0, 0, 0, 0]).map(drop)
+}
+
+pub fn yield_now() {
+    raw(Call::Yield as u64, 0, 0, 0, 0);
+}
+
+pub fn task_create(
+    abilities: Abilities,
+    mcp: u8,
+    rp: u64,
+    name: &str,
+) -> Result<TaskId, Error> {
+    call(
+        Call::TaskCreate,
+        [
+            abilities.bits(),
+            mcp as u64,
+            rp,
+            name.as_ptr() as u64,
+            name.len() as u64,
             0,
-            0,
-            0,
-        )
-        .0,
+        ],
     )
+    .map(|r| TaskId(r.rdi))
+}
+
+pub fn task_kill(task: TaskId) -> Result<(), Error> {
+    call(Call::TaskKill, [task.0, 0, 0, 0, 0, 0]).map(drop)
+}
+
+/// Lets `from` send to `to` (`None` = the caller's task).
+pub fn task_allow_send(from: Option<TaskId>, to: Option<TaskId>) -> Result<(), Error> {
+    call(
+        Call::TaskAllowSend,
+        [from.map_or(0, |t| t.0), to.map_or(0, |t| t.0), 0, 0, 0, 0],
+    )
+    .map(drop)
+}
+
+/// A new inactive thread in `task` (`None` = own task).
+pub fn thread_create(
+    task: Option<TaskId>,
+    entry: u64,
+    stack: u64,
+    priority: u8,
+    arg: u64,
+) -> Result<ThreadId, Error> {
+    call(
+        Call::ThreadCreate,
+        [task.map_or(0, |t| t.0), entry, stack, priority as u64, arg, 0],
+    )
+    .map(|r| ThreadId(r.rdi))
+}
+
+fn on_thread(c: Call, thread: ThreadId) -> Result<(), Error> {
+    call(c, [thread.0, 0, 0, 0, 0, 0]).map(drop)
+}
+
+pub fn thread_start(thread: ThreadId) -> Result<(), Error> {
+    on_thread(Call::ThreadStart, thread)
+}
+
+pub fn thread_suspend(thread: ThreadId) -> Result<(), Error> {
+    on_thread(Call::ThreadSuspend, thread)
+}
+
+pub fn thread_resume(thread: ThreadId) -> Result<(), Error> {
+    on_thread(Call::ThreadResume, thread)
+}
+
+pub fn thread_kill(thread: ThreadId) -> Result<(), Error> {
+    on_thread(Call::ThreadKill, thread)
+}
+
+/// Sets an attribute of `thread` (`None` = the calling thread).
+pub fn thread_set(
+    thread: Option<ThreadId>,
+    attribute: ThreadAttribute,
+    value: u64,
+) -> Result<(), Error> {
+    call(
+        Call::ThreadSet,
+        [thread.map_or(0, |t| t.0), attribute as u64, value, 0, 0, 0],
+    )
+    .map(drop)
+}
+
+/// The calling thread and its task.
+pub fn thread_self() -> (ThreadId, TaskId) {
+    let r = raw6(Call::ThreadSelf as u64, [0; 6]);
+    (ThreadId(r.rdi), TaskId(r.rsi))
+}
+
+pub fn map(
+    task: Option<TaskId>,
+    source: u64,
+    destination: u64,
+    pages: u64,
+    rights: PageRights,
+) -> Result<(), Error> {
+    call(
+        Call::Map,
+        [task.map_or(0, |t| t.0), source, destination, pages, rights.bits(), 0],
+    )
+    .map(drop)
+}
+
+pub fn map_physical(
+    task: Option<TaskId>,
+    physical: u64,
+    destination: u64,
+    pages: u64,
+    rights: PageRights,
+) -> Result<(), Error> {
+    call(
+        Call::MapPhysical,
+        [task.map_or(0, |t| t.0), physical, destination, pages, rights.bits(), 0],
+    )
+    .map(drop)
+}
+
+pub fn unmap(task: Option<TaskId>, address: u64, pages: u64) -> Result<(), Error> {
+    call(Call::Unmap, [task.map_or(0, |t| t.0), address, pages, 0, 0, 0]).map(drop)
+}
+
+pub fn protect(
+    task: Option<TaskId>,
+    address: u64,
+    pages: u64,
+    rights: PageRights,
+) -> Result<(), Error> {
+    call(
+        Call::Protect,
+        [task.map_or(0, |t| t.0), address, pages, rights.bits(), 0, 0],
+    )
+    .map(drop)
+}
+
+/// A message in registers: tag and three words.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Message {
+    pub tag: MessageTag,
+    pub words: [u64; 3],
+}
+
+impl Message {
+    pub const fn new(label: u32, words: [u64; 3]) -> Self {
+        Self {
+            tag: MessageTag::new(label, 0, 0),
+            words,
+        }
+    }
+}
+
+/// A received message and who sent it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Received {
+    pub sender: ThreadId,
+    pub message: Message,
+}
+
+fn ipc(c: Call, peer: u64, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
+    call(
+        c,
+        [peer, timeout_ns, m.tag.0, m.words[0], m.words[1], m.words[2]],
+    )
+    .map(|r| Received {
+        sender: ThreadId(r.rdi),
+        message: Message {
+            tag: MessageTag(r.rdx),
+            words: [r.r10, r.r8, r.r9],
+        },
+    })
+}
+
+/// Timeouts in ns; `abi::syscall::TIMEOUT_INFINITE` waits forever, 0 polls.
+pub fn send(to: ThreadId, timeout_ns: u64, m: &Message) -> Result<(), Error> {
+    ipc(Call::Send, to.0, timeout_ns, m).map(drop)
+}
+
+pub fn receive(from: Option<ThreadId>, timeout_ns: u64) -> Result<Received, Error> {
+    ipc(
+        Call::Receive,
+        from.map_or(0, |t| t.0),
+        timeout_ns,
+        &Message::default(),
+    )
+}
+
+pub fn ipc_call(to: ThreadId, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
+    ipc(Call::Call, to.0, timeout_ns, m)
+}
+
+pub fn reply_wait(
+    caller: Option<ThreadId>,
+    timeout_ns: u64,
+    m: &Message,
+) -> Result<Received, Error> {
+    ipc(Call::ReplyWait, caller.map_or(0, |t| t.0), timeout_ns, m)
+}
+
+pub fn reply(caller: ThreadId, m: &Message) -> Result<(), Error> {
+    ipc(Call::Reply, caller.0, 0, m).map(drop)
+}
+
+pub fn notify_signal(thread: ThreadId, bits: u64) -> Result<(), Error> {
+    call(Call::NotifySignal, [thread.0, bits, 0, 0, 0, 0]).map(drop)
+}
+
+/// Waits for any bit of `mask`; returns (and clears) the bits of `mask` that were set.
+pub fn notify_wait(mask: u64, timeout_ns: u64) -> Result<u64, Error> {
+    call(Call::NotifyWait, [mask, timeout_ns, 0, 0, 0, 0]).map(|r| r.rdi)
+}
+
+/// Sleeps for `ns` nanoseconds.
+pub fn sleep(ns: u64) {
+    let _ = notify_wait(0, ns);
+}
+
+pub fn rp_create(tasks: u16, threads: u16, pages: u64) -> Result<u64, Error> {
+    call(Call::RpCreate, [tasks as u64, threads as u64, pages, 0, 0, 0]).map(|r| r.rdi)
+}
+
+/// Usage of a resource partition (0 = the caller's).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RpUsage {
+    pub pages_used: u64,
+    pub pages_quota: u64,
+    pub threads_used: u16,
+    pub threads_quota: u16,
+    pub tasks_used: u16,
+    pub tasks_quota: u16,
+}
+
+pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
+    call(Call::RpInfo, [rp, 0, 0, 0, 0, 0]).map(|r| RpUsage {
+        pages_used: r.rdi,
+        pages_quota: r.rsi,
+        threads_used: r.rdx as u16,
+        threads_quota: (r.rdx >> 16) as u16,
+        tasks_used: (r.rdx >> 32) as u16,
+        tasks_quota: (r.rdx >> 48) as u16,
+    })
+}
+
+pub fn set_health_monitor(thread: ThreadId) -> Result<(), Error> {
+    call(Call::SetHealthMonitor, [thread.0, 0, 0, 0, 0, 0]).map(drop)
 }

@@ -1,0 +1,191 @@
+//! Kernel entry and exit for user threads.
+//!
+//! Every entry from ring 3 (`syscall`, interrupt, exception) leaves the same [`TrapFrame`]
+//! at the same place: the top of the one kernel stack ([`frame`]). The glue copies it into
+//! the running thread's control block, lets the portable code decide, then copies the
+//! chosen thread's registers back into the frame and returns through it. A `syscall` entry
+//! returns with `sysret` when the frame allows it (`rcx` = `rip`, `r11` = `rflags`, as for
+//! any thread that entered by `syscall`), else with `iretq`, which restores every register.
+//!
+//! With nothing to run the CPU halts with interrupts enabled *inside* the exit path; an
+//! interrupt then arrives in ring 0 below the frame, updates the kernel state and returns
+//! to the halt loop, which looks again.
+
+use super::idt::TrapFrame;
+use super::stack::{KERNEL_STACK, KERNEL_STACK_SIZE};
+use crate::state::Kernel;
+use crate::syscall::Outcome;
+use crate::{fault, qemu, time};
+use core::arch::naked_asm;
+use core::sync::atomic::{AtomicBool, Ordering};
+use spin::{Mutex, MutexGuard};
+
+/// The kernel's objects. Locked once per entry; never held while halting.
+pub static KERNEL: Mutex<Kernel> = Mutex::new(Kernel::new());
+
+/// Size of the user frame at the top of the kernel stack.
+pub const FRAME_SIZE: usize = core::mem::size_of::<TrapFrame>();
+
+/// Set once user mode runs; before that, timer interrupts only count (boot calibration).
+static RUNNING: AtomicBool = AtomicBool::new(false);
+
+static mut USER_RSP: u64 = 0;
+
+/// The user frame of the current entry.
+fn frame() -> &'static mut TrapFrame {
+    let at = super::stack::top() - FRAME_SIZE as u64;
+    // SAFETY: the top FRAME_SIZE bytes of the kernel stack are reserved for the frame (boot
+    // runs below them) and only the entry paths, serialised by the non-preemptible kernel,
+    // use it.
+    unsafe { &mut *(at as *mut TrapFrame) }
+}
+
+#[unsafe(naked)]
+pub(super) unsafe extern "sysv64" fn syscall_entry() {
+    naked_asm!(
+        "mov [rip + {user_rsp}], rsp",
+        "lea rsp, [rip + {stack} + {size}]",
+        // The same layout an interrupt from ring 3 leaves (see TrapFrame).
+        "push {user_ss}",
+        "push qword ptr [rip + {user_rsp}]",
+        "push r11",
+        "push {user_cs}",
+        "push rcx",
+        "push 0",
+        "push {vector}",
+        "push rax", "push rbx", "push rcx", "push rdx", "push rsi", "push rdi", "push rbp",
+        "push r8", "push r9", "push r10", "push r11", "push r12", "push r13", "push r14", "push r15",
+        "cld",
+        "call {handler}",
+        "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
+        "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
+        "add rsp, 16",
+        // sysret restores rip from rcx and rflags from r11: only if they match the frame.
+        "cmp rcx, [rsp]",
+        "jne 2f",
+        "cmp r11, [rsp + 16]",
+        "jne 2f",
+        "mov rsp, [rsp + 24]",
+        "sysretq",
+        "2:",
+        "iretq",
+        user_rsp = sym USER_RSP,
+        stack = sym KERNEL_STACK,
+        size = const KERNEL_STACK_SIZE,
+        user_ss = const crate::state::USER_SS,
+        user_cs = const crate::state::USER_CS,
+        vector = const abi::ipc::VECTOR_SYSCALL,
+        handler = sym on_syscall,
+    )
+}
+
+extern "sysv64" fn on_syscall() {
+    let mut k = KERNEL.lock();
+    let t = k.current.expect("syscall without a current thread");
+    k.threads[t].context = *frame();
+    let outcome = crate::syscall::on_syscall(&mut k, t, time::since_boot_ns());
+    finish(k, outcome);
+}
+
+/// A CPU exception in ring 3 (frame at the top of the stack).
+pub fn on_user_exception(vector: u64, error_code: u64) {
+    let cr2 = x86_64::registers::control::Cr2::read_raw();
+    let mut k = KERNEL.lock();
+    let t = k.current.expect("user exception without a current thread");
+    k.threads[t].context = *frame();
+    let outcome = fault::on_exception(&mut k, t, vector, error_code, cr2);
+    finish(k, outcome);
+}
+
+/// The timer interrupt: time out waits; from ring 3 this may switch threads.
+pub fn on_timer(from_user: bool) {
+    if !RUNNING.load(Ordering::Relaxed) {
+        return;
+    }
+    let mut k = KERNEL.lock();
+    if from_user {
+        let t = k.current.expect("user interrupt without a current thread");
+        k.threads[t].context = *frame();
+    }
+    k.expire_timeouts(time::since_boot_ns());
+    if from_user {
+        finish(k, Outcome::Continue);
+    } else {
+        program_timer(&mut k);
+    }
+}
+
+fn program_timer(k: &mut Kernel) {
+    if k.timer_dirty {
+        k.timer_dirty = false;
+        super::lapic::one_shot_at(k.next_deadline);
+    }
+}
+
+/// Picks the next thread and loads it into the frame, halting until one is ready.
+fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
+    if let Outcome::Halt { success } = outcome {
+        qemu::exit(if success {
+            qemu::ExitCode::Success
+        } else {
+            qemu::ExitCode::Failure
+        });
+    }
+    loop {
+        program_timer(&mut k);
+        if let Some(next) = k.choose() {
+            switch_to(&mut k, next);
+            return;
+        }
+        #[cfg(feature = "test-hooks")]
+        if k.next_deadline == crate::thread::NEVER {
+            crate::test_hooks::on_idle();
+        }
+        drop(k);
+        // Enable interrupts and halt atomically (sti; hlt), so no wake-up is missed.
+        x86_64::instructions::interrupts::enable_and_hlt();
+        x86_64::instructions::interrupts::disable();
+        k = KERNEL.lock();
+    }
+}
+
+fn switch_to(k: &mut Kernel, next: usize) {
+    if k.current != Some(next) || k.reload_bases {
+        if k.current != Some(next) {
+            if let Some(previous) = k.current {
+                super::fpu::save(&mut k.threads[previous].fpu);
+            }
+            super::fpu::restore(&k.threads[next].fpu);
+            let space = k.tasks[k.threads[next].task].space;
+            if !space.is_active() {
+                space.activate();
+            }
+            k.current = Some(next);
+        }
+        let th = &k.threads[next];
+        super::fpu::set_bases(th.fs_base, th.gs_base);
+        k.reload_bases = false;
+    }
+    *frame() = k.threads[next].context;
+}
+
+/// Leaves the boot path for user mode: runs the first ready thread (the root task).
+pub fn enter_user_mode() -> ! {
+    RUNNING.store(true, Ordering::Relaxed);
+    finish(KERNEL.lock(), Outcome::Continue);
+    let at = super::stack::top() - FRAME_SIZE as u64;
+    // SAFETY: the frame holds a complete user context (just loaded by `finish`); the boot
+    // stack below it is abandoned for good.
+    unsafe { restore_frame(at) }
+}
+
+#[unsafe(naked)]
+unsafe extern "sysv64" fn restore_frame(frame: u64) -> ! {
+    naked_asm!(
+        "mov rsp, rdi",
+        "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
+        "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
+        "add rsp, 16",
+        "iretq",
+    )
+}

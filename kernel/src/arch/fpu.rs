@@ -1,0 +1,30 @@
+//! Per-thread FPU/SSE state and FS/GS bases. The kernel itself is soft-float and never
+//! touches these registers, so they hold the running thread's values until a switch.
+
+use crate::thread::FpuState;
+use core::arch::asm;
+use x86_64::registers::model_specific::Msr;
+
+const IA32_FS_BASE: u32 = 0xc000_0100;
+const IA32_GS_BASE: u32 = 0xc000_0101;
+
+pub fn save(area: &mut FpuState) {
+    // SAFETY: FXSAVE writes 512 bytes to a 16-byte-aligned area, which FpuState is.
+    unsafe { asm!("fxsave64 [{}]", in(reg) area.0.as_mut_ptr(), options(nostack)) };
+}
+
+pub fn restore(area: &FpuState) {
+    // SAFETY: the area holds an FXSAVE image (from `save` or `FpuState::initial`, whose
+    // reserved bits are zero and MXCSR valid), so FXRSTOR cannot fault.
+    unsafe { asm!("fxrstor64 [{}]", in(reg) area.0.as_ptr(), options(nostack, readonly)) };
+}
+
+/// Loads a thread's FS and GS bases (canonical user addresses, checked by the callers).
+pub fn set_bases(fs: u64, gs: u64) {
+    // SAFETY: writing the base MSRs only changes what user-mode FS/GS accesses address;
+    // the kernel uses neither segment.
+    unsafe {
+        Msr::new(IA32_FS_BASE).write(fs);
+        Msr::new(IA32_GS_BASE).write(gs);
+    }
+}

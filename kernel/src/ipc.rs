@@ -1,0 +1,376 @@
+//! Synchronous IPC (send, receive, call, reply), notifications and exception messages.
+//!
+//! A message travels directly from the sender's registers and IPC buffer to the receiver's
+//! (no kernel buffer, no allocation). Every transfer is checked completely before anything
+//! changes, and a failure is blamed on one side: a sender-side problem fails the send and
+//! leaves the receiver waiting; a receiver-side problem fails the receive and leaves the
+//! sender queued.
+
+use crate::mem::PAGE_SIZE;
+use crate::mem::paging::is_user_range;
+use crate::state::{Kernel, MAX_THREADS, USER_RFLAGS};
+use crate::thread::{Fault, NEVER, State};
+use abi::ipc::{
+    EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET,
+    LABEL_FAULT_REPORT, MAP_ITEM_GRANT, MapItem, MessageTag, REPLY_KILL, REPLY_RESUME,
+    ReceiveWindow, Registers, USER_RFLAGS_MASK,
+};
+use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, USER_END};
+
+/// Which side of a transfer could not take part.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Blame {
+    Sender(Error),
+    Receiver(Error),
+}
+
+/// Absolute deadline of a timeout given at `now` (0 = poll, handled by the callers).
+pub fn deadline(now: u64, timeout: u64) -> u64 {
+    if timeout == TIMEOUT_INFINITE {
+        NEVER
+    } else {
+        now.saturating_add(timeout)
+    }
+}
+
+fn read_struct<const N: usize>(k: &Kernel, t: usize, at: u64) -> Option<[u8; N]> {
+    let mut out = [0u8; N];
+    let th = &k.threads[t];
+    (th.ipc_buffer != 0 && k.tasks[th.task].space.copy_from_user(at, &mut out)).then_some(out)
+}
+
+fn item_from(bytes: &[u8]) -> MapItem {
+    MapItem {
+        source: u64::from_ne_bytes(bytes[0..8].try_into().unwrap()),
+        pages: u32::from_ne_bytes(bytes[8..12].try_into().unwrap()),
+        flags: u32::from_ne_bytes(bytes[12..16].try_into().unwrap()),
+    }
+}
+
+impl Kernel {
+    /// The registers of an exception message for thread `t`.
+    pub fn exception_message(&self, t: usize, fault: Fault) -> ExceptionMessage {
+        let th = &self.threads[t];
+        let c = &th.context;
+        ExceptionMessage {
+            vector: fault.vector,
+            error_code: fault.error_code,
+            fault_address: fault.address,
+            thread: self.thread_id(t),
+            task: self.task_id(th.task),
+            registers: Registers {
+                rax: c.rax,
+                rbx: c.rbx,
+                rcx: c.rcx,
+                rdx: c.rdx,
+                rsi: c.rsi,
+                rdi: c.rdi,
+                rbp: c.rbp,
+                rsp: c.rsp,
+                r8: c.r8,
+                r9: c.r9,
+                r10: c.r10,
+                r11: c.r11,
+                r12: c.r12,
+                r13: c.r13,
+                r14: c.r14,
+                r15: c.r15,
+                rip: c.rip,
+                rflags: c.rflags,
+                fs_base: th.fs_base,
+                gs_base: th.gs_base,
+            },
+        }
+    }
+
+    /// Moves the message of `from` (its registers, or its fault) to `to`.
+    pub fn deliver(&mut self, from: usize, to: usize) -> Result<(), Blame> {
+        let (tag, words);
+        if let Some(fault) = self.threads[from].fault {
+            let bytes = self.exception_message(from, fault).to_bytes();
+            let receiver = &self.threads[to];
+            let space = self.tasks[receiver.task].space;
+            if receiver.ipc_buffer == 0 || !space.copy_to_user(receiver.ipc_buffer, &bytes) {
+                return Err(Blame::Receiver(Error::BadAddress));
+            }
+            tag = MessageTag::new(fault.label, EXCEPTION_MESSAGE_SIZE, 0);
+            words = [fault.vector, fault.error_code, fault.address];
+        } else {
+            let c = &self.threads[from].context;
+            tag = MessageTag(c.rdx);
+            words = [c.r10, c.r8, c.r9];
+            if !tag.is_valid() {
+                return Err(Blame::Sender(Error::InvalidArgument));
+            }
+            self.transfer_payload(from, to, tag)?;
+        }
+        let sender_id = self.thread_id(from);
+        let c = &mut self.threads[to].context;
+        c.rdi = sender_id;
+        c.rdx = tag.0;
+        c.r10 = words[0];
+        c.r8 = words[1];
+        c.r9 = words[2];
+        Ok(())
+    }
+
+    /// Copies the data bytes and maps the items of a message, all checks first.
+    fn transfer_payload(&mut self, from: usize, to: usize, tag: MessageTag) -> Result<(), Blame> {
+        let (s, r) = (&self.threads[from], &self.threads[to]);
+        let (s_space, r_space) = (self.tasks[s.task].space, self.tasks[r.task].space);
+        let (s_buf, r_buf) = (s.ipc_buffer, r.ipc_buffer);
+        if tag.is_empty() && tag.items() == 0 {
+            return Ok(());
+        }
+        if s_buf == 0 || !s_space.accessible(s_buf, tag.len(), false) {
+            return Err(Blame::Sender(Error::BadAddress));
+        }
+        if r_buf == 0 || !r_space.accessible(r_buf, tag.len(), true) {
+            return Err(Blame::Receiver(Error::BadAddress));
+        }
+        // Map items: read and check them all.
+        let mut items = [MapItem::default(); IPC_MAX_ITEMS];
+        let mut total = 0u64;
+        if tag.items() > 0 {
+            let raw: [u8; 16 * IPC_MAX_ITEMS] =
+                read_struct(self, from, s_buf + IPC_ITEMS_OFFSET as u64)
+                    .ok_or(Blame::Sender(Error::BadAddress))?;
+            let window: [u8; 16] = read_struct(self, to, r_buf + IPC_WINDOW_OFFSET as u64)
+                .ok_or(Blame::Receiver(Error::BadAddress))?;
+            let window = ReceiveWindow {
+                base: u64::from_ne_bytes(window[0..8].try_into().unwrap()),
+                pages: u64::from_ne_bytes(window[8..16].try_into().unwrap()),
+            };
+            for (i, item) in items.iter_mut().take(tag.items()).enumerate() {
+                *item = item_from(&raw[i * 16..i * 16 + 16]);
+                let rights_bits = (item.flags & !MAP_ITEM_GRANT) as u64;
+                if item.pages == 0
+                    || !is_user_range(item.source, item.pages as u64)
+                    || PageRights::from_bits(rights_bits).is_none()
+                {
+                    return Err(Blame::Sender(Error::InvalidArgument));
+                }
+                total += item.pages as u64;
+            }
+            if total > MAP_MAX_PAGES
+                || total > window.pages
+                || !is_user_range(window.base, window.pages.max(1))
+            {
+                return Err(Blame::Sender(Error::InvalidArgument));
+            }
+            let mut dest = window.base;
+            for item in &items[..tag.items()] {
+                let rights = PageRights::from_bits_truncate(item.flags as u64);
+                for p in 0..item.pages as u64 {
+                    match s_space.translate(item.source + p * PAGE_SIZE) {
+                        Some((_, have)) if have.contains(rights) => {}
+                        _ => return Err(Blame::Sender(Error::BadAddress)),
+                    }
+                    if r_space.translate(dest).is_some() {
+                        return Err(Blame::Sender(Error::AlreadyMapped));
+                    }
+                    dest += PAGE_SIZE;
+                }
+            }
+            self.charge_tables(r.task, window.base, total)
+                .map_err(Blame::Sender)?;
+            // Commit the mappings.
+            let (s_task, r_task) = (self.threads[from].task, self.threads[to].task);
+            let mut dest = window.base;
+            for item in &items[..tag.items()] {
+                let rights = PageRights::from_bits_truncate(item.flags as u64);
+                for p in 0..item.pages as u64 {
+                    let src = item.source + p * PAGE_SIZE;
+                    let (frame, _) = self.tasks[s_task].space.translate(src).expect("checked");
+                    self.tasks[r_task]
+                        .space
+                        .map(dest, frame, rights)
+                        .expect("checked and charged");
+                    if item.flags & MAP_ITEM_GRANT != 0 {
+                        self.tasks[s_task].space.unmap(src);
+                    }
+                    dest += PAGE_SIZE;
+                }
+            }
+        }
+        let copied = s_space.copy_to_space(s_buf, &r_space, r_buf, tag.len());
+        debug_assert!(copied, "checked above");
+        Ok(())
+    }
+
+    /// `send`/`call` from thread `t` to `dest` (rights already checked), or an exception
+    /// message if `t` has a fault pending.
+    pub fn send(&mut self, t: usize, dest: usize, call: bool, deadline: u64, poll: bool) {
+        if let State::Receiving { from } = self.threads[dest].state
+            && from.is_none_or(|f| f == t)
+        {
+            match self.deliver(t, dest) {
+                Ok(()) => {
+                    self.wake(dest, Error::Ok);
+                    self.after_delivery(t, dest, call, deadline);
+                    return;
+                }
+                Err(Blame::Sender(e)) => {
+                    self.threads[t].context.rax = e as u64;
+                    return;
+                }
+                Err(Blame::Receiver(e)) => self.wake(dest, e),
+            }
+        }
+        if poll {
+            self.threads[t].context.rax = Error::TimedOut as u64;
+            return;
+        }
+        self.block(t, State::Sending { to: dest, call }, deadline);
+        self.enqueue_sender(dest, t);
+    }
+
+    /// The sender's side once its message arrived: a call now waits for the reply.
+    fn after_delivery(&mut self, sender: usize, receiver: usize, call: bool, deadline: u64) {
+        if call {
+            self.block(sender, State::WaitingReply { from: receiver }, deadline);
+        } else {
+            self.wake(sender, Error::Ok);
+        }
+    }
+
+    /// `receive` by thread `t` (from `from` only, if given).
+    pub fn receive(&mut self, t: usize, from: Option<usize>, deadline: u64, poll: bool) {
+        // Bounded: each failed sender leaves the queue.
+        for _ in 0..MAX_THREADS {
+            let Some(s) = self.first_sender(t, from) else {
+                break;
+            };
+            match self.deliver(s, t) {
+                Ok(()) => {
+                    self.unqueue_sender(t, s);
+                    let call = matches!(self.threads[s].state, State::Sending { call: true, .. });
+                    let s_deadline = self.threads[s].deadline;
+                    self.after_delivery(s, t, call, s_deadline);
+                    self.threads[t].context.rax = Error::Ok as u64;
+                    return;
+                }
+                Err(Blame::Sender(e)) => {
+                    self.unqueue_sender(t, s);
+                    self.wake(s, e);
+                }
+                Err(Blame::Receiver(e)) => {
+                    self.threads[t].context.rax = e as u64;
+                    return;
+                }
+            }
+        }
+        if poll {
+            self.threads[t].context.rax = Error::TimedOut as u64;
+            return;
+        }
+        self.block(t, State::Receiving { from }, deadline);
+    }
+
+    /// `reply` from thread `t` to `caller`. On success `t`'s `rax` is `Ok`.
+    pub fn reply(&mut self, t: usize, caller: usize) -> Result<(), Error> {
+        if self.threads[caller].state != (State::WaitingReply { from: t }) {
+            return Err(Error::NotWaiting);
+        }
+        if self.threads[caller].fault.is_some() {
+            return self.answer_fault(t, caller);
+        }
+        match self.deliver(t, caller) {
+            Ok(()) => self.wake(caller, Error::Ok),
+            Err(Blame::Sender(e)) => return Err(e),
+            Err(Blame::Receiver(e)) => self.wake(caller, e),
+        }
+        Ok(())
+    }
+
+    /// The handler `t` answers the exception message of `faulted`: resume (with the
+    /// registers of the reply, if it carries them) or kill.
+    fn answer_fault(&mut self, t: usize, faulted: usize) -> Result<(), Error> {
+        let tag = MessageTag(self.threads[t].context.rdx);
+        match tag.label() {
+            REPLY_KILL => {
+                self.kill_thread(faulted);
+                Ok(())
+            }
+            REPLY_RESUME => {
+                if tag.len() >= EXCEPTION_MESSAGE_SIZE {
+                    let bytes: [u8; EXCEPTION_MESSAGE_SIZE] =
+                        read_struct(self, t, self.threads[t].ipc_buffer)
+                            .ok_or(Error::BadAddress)?;
+                    let m = ExceptionMessage::from_bytes(&bytes).ok_or(Error::BadAddress)?;
+                    self.set_registers(faulted, &m.registers)?;
+                }
+                let th = &mut self.threads[faulted];
+                th.fault = None;
+                th.deadline = NEVER;
+                self.set_state(faulted, State::Ready);
+                Ok(())
+            }
+            _ => Err(Error::InvalidArgument),
+        }
+    }
+
+    /// Loads edited registers into a thread, keeping it in user mode with IF set.
+    fn set_registers(&mut self, t: usize, r: &Registers) -> Result<(), Error> {
+        if r.rip >= USER_END || r.fs_base >= USER_END || r.gs_base >= USER_END {
+            return Err(Error::InvalidArgument);
+        }
+        let th = &mut self.threads[t];
+        let c = &mut th.context;
+        (c.rax, c.rbx, c.rcx, c.rdx) = (r.rax, r.rbx, r.rcx, r.rdx);
+        (c.rsi, c.rdi, c.rbp, c.rsp) = (r.rsi, r.rdi, r.rbp, r.rsp);
+        (c.r8, c.r9, c.r10, c.r11) = (r.r8, r.r9, r.r10, r.r11);
+        (c.r12, c.r13, c.r14, c.r15) = (r.r12, r.r13, r.r14, r.r15);
+        c.rip = r.rip;
+        c.rflags = (r.rflags & USER_RFLAGS_MASK) | USER_RFLAGS;
+        th.fs_base = r.fs_base;
+        th.gs_base = r.gs_base;
+        Ok(())
+    }
+
+    /// A fault of thread `t`: blocks it on an exception message to its handler, or to the
+    /// health monitor. `false` if there is neither (the caller decides what then).
+    pub fn raise_fault(&mut self, t: usize, mut fault: Fault) -> bool {
+        let handler = match self.thread(self.threads[t].exception_handler) {
+            Ok(h) if h != t => h,
+            _ => match self.thread(self.health_monitor) {
+                Ok(h) if h != t => {
+                    fault.label = LABEL_FAULT_REPORT;
+                    h
+                }
+                _ => return false,
+            },
+        };
+        self.threads[t].fault = Some(fault);
+        self.send(t, handler, true, NEVER, false);
+        true
+    }
+
+    /// `notify_signal` (rights already checked).
+    pub fn signal(&mut self, target: usize, bits: u64) {
+        let th = &mut self.threads[target];
+        th.notify_bits |= bits;
+        if let State::WaitingNotify { mask } = th.state
+            && th.notify_bits & mask != 0
+        {
+            th.context.rdi = th.notify_bits & mask;
+            th.notify_bits &= !mask;
+            self.wake(target, Error::Ok);
+        }
+    }
+
+    /// `notify_wait` by thread `t`.
+    pub fn wait_notify(&mut self, t: usize, mask: u64, deadline: u64, poll: bool) {
+        let th = &mut self.threads[t];
+        let got = th.notify_bits & mask;
+        if got != 0 {
+            th.notify_bits &= !mask;
+            th.context.rdi = got;
+            th.context.rax = Error::Ok as u64;
+        } else if poll {
+            th.context.rax = Error::TimedOut as u64;
+        } else {
+            self.block(t, State::WaitingNotify { mask }, deadline);
+        }
+    }
+}

@@ -1,0 +1,145 @@
+//! Resource partitions: kernel-memory quotas.
+//!
+//! Every kernel object (task, thread) and every page-table frame is charged to one
+//! partition. A new partition's quota is carved out of its creator's free quota, so the
+//! quotas of all partitions together never exceed what the kernel reserved at boot, and
+//! exhausting one partition can never make an allocation in another fail.
+
+use abi::syscall::Error;
+
+/// Amounts of the three kinds of kernel memory.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Amount {
+    pub tasks: u64,
+    pub threads: u64,
+    pub pages: u64,
+}
+
+impl Amount {
+    pub const fn tasks(n: u64) -> Self {
+        Self {
+            tasks: n,
+            threads: 0,
+            pages: 0,
+        }
+    }
+    pub const fn threads(n: u64) -> Self {
+        Self {
+            tasks: 0,
+            threads: n,
+            pages: 0,
+        }
+    }
+    pub const fn pages(n: u64) -> Self {
+        Self {
+            tasks: 0,
+            threads: 0,
+            pages: n,
+        }
+    }
+    fn plus(self, o: Self) -> Self {
+        Self {
+            tasks: self.tasks + o.tasks,
+            threads: self.threads + o.threads,
+            pages: self.pages + o.pages,
+        }
+    }
+    fn fits_in(self, o: Self) -> bool {
+        self.tasks <= o.tasks && self.threads <= o.threads && self.pages <= o.pages
+    }
+    fn minus(self, o: Self) -> Self {
+        Self {
+            tasks: self.tasks - o.tasks,
+            threads: self.threads - o.threads,
+            pages: self.pages - o.pages,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, Default)]
+pub struct ResourcePartition {
+    pub in_use: bool,
+    /// The task slot that created it (may place children in it).
+    pub owner: usize,
+    pub quota: Amount,
+    /// Charged by objects and page tables of this partition.
+    pub used: Amount,
+    /// Handed on to partitions created from this one.
+    pub carved: Amount,
+}
+
+impl ResourcePartition {
+    pub fn new(owner: usize, quota: Amount) -> Self {
+        Self {
+            in_use: true,
+            owner,
+            quota,
+            used: Amount::default(),
+            carved: Amount::default(),
+        }
+    }
+
+    pub fn free(&self) -> Amount {
+        self.quota.minus(self.used.plus(self.carved))
+    }
+
+    /// Charges `amount`, or fails with `QuotaExceeded` and changes nothing.
+    pub fn charge(&mut self, amount: Amount) -> Result<(), Error> {
+        if !amount.fits_in(self.free()) {
+            return Err(Error::QuotaExceeded);
+        }
+        self.used = self.used.plus(amount);
+        Ok(())
+    }
+
+    pub fn release(&mut self, amount: Amount) {
+        debug_assert!(amount.fits_in(self.used), "release more than charged");
+        self.used = self.used.minus(amount);
+    }
+
+    /// Moves `quota` of the free quota into a new partition owned by `owner`.
+    pub fn carve(&mut self, owner: usize, quota: Amount) -> Result<Self, Error> {
+        if !quota.fits_in(self.free()) {
+            return Err(Error::QuotaExceeded);
+        }
+        self.carved = self.carved.plus(quota);
+        Ok(Self::new(owner, quota))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn charges_within_quota_only() {
+        let mut rp = ResourcePartition::new(0, Amount { tasks: 1, threads: 2, pages: 3 });
+        rp.charge(Amount::threads(2)).unwrap();
+        assert_eq!(rp.charge(Amount::threads(1)), Err(Error::QuotaExceeded));
+        assert_eq!(
+            rp.charge(Amount { tasks: 1, threads: 0, pages: 4 }),
+            Err(Error::QuotaExceeded),
+            "all or nothing"
+        );
+        assert_eq!(rp.used, Amount::threads(2));
+        rp.release(Amount::threads(1));
+        rp.charge(Amount::threads(1)).unwrap();
+    }
+
+    #[test]
+    fn carving_isolates_partitions() {
+        let mut root = ResourcePartition::new(0, Amount { tasks: 4, threads: 8, pages: 100 });
+        let mut a = root.carve(1, Amount { tasks: 1, threads: 2, pages: 10 }).unwrap();
+        let mut b = root.carve(1, Amount { tasks: 1, threads: 2, pages: 10 }).unwrap();
+        assert_eq!(
+            root.carve(1, Amount::pages(81)).err(),
+            Some(Error::QuotaExceeded),
+            "only 80 pages left"
+        );
+        while a.charge(Amount::pages(1)).is_ok() {}
+        assert_eq!(a.used.pages, 10);
+        b.charge(Amount::pages(10)).unwrap();
+        root.charge(Amount::pages(80)).unwrap();
+        assert_eq!(root.charge(Amount::pages(1)), Err(Error::QuotaExceeded));
+    }
+}

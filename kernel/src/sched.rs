@@ -1,0 +1,224 @@
+//! Ready queues: fixed priorities 0..=255, FIFO within a priority, O(1) choice.
+//!
+//! One set of queues per time partition. The eligible threads at any instant are those of
+//! time partition 0 (background) plus those of the active partition, if any; the highest
+//! priority wins, and on equal priority the active partition's thread wins over the
+//! background. Queues are intrusive doubly-linked lists over thread slot indices, with a
+//! 256-bit bitmap per partition for the non-empty priorities, so enqueue, dequeue and
+//! choice are constant time. The running thread stays at the head of its queue: a
+//! preempted thread resumes before its peers, and [`RunQueues::rotate`] implements yield.
+
+pub const PRIORITIES: usize = 256;
+pub const TIME_PARTITIONS: usize = 16;
+const NIL: u16 = u16::MAX;
+
+#[derive(Clone, Copy)]
+struct Queue {
+    head: u16,
+    tail: u16,
+}
+
+const EMPTY: Queue = Queue {
+    head: NIL,
+    tail: NIL,
+};
+
+struct Partition {
+    queues: [Queue; PRIORITIES],
+    bitmap: [u64; PRIORITIES / 64],
+}
+
+pub struct RunQueues<const THREADS: usize> {
+    partitions: [Partition; TIME_PARTITIONS],
+    next: [u16; THREADS],
+    prev: [u16; THREADS],
+    /// Where each queued thread is (priority, time partition); `None` when not queued.
+    place: [Option<(u8, u8)>; THREADS],
+}
+
+impl<const THREADS: usize> Default for RunQueues<THREADS> {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl<const THREADS: usize> RunQueues<THREADS> {
+    pub const fn new() -> Self {
+        assert!(THREADS < NIL as usize);
+        Self {
+            partitions: [const {
+                Partition {
+                    queues: [EMPTY; PRIORITIES],
+                    bitmap: [0; PRIORITIES / 64],
+                }
+            }; TIME_PARTITIONS],
+            next: [NIL; THREADS],
+            prev: [NIL; THREADS],
+            place: [None; THREADS],
+        }
+    }
+
+    pub fn is_queued(&self, thread: usize) -> bool {
+        self.place[thread].is_some()
+    }
+
+    /// Appends `thread` to the tail of its priority's queue (no-op if already queued).
+    pub fn enqueue(&mut self, thread: usize, priority: u8, partition: u8) {
+        if self.is_queued(thread) {
+            return;
+        }
+        let p = &mut self.partitions[partition as usize];
+        let q = &mut p.queues[priority as usize];
+        self.prev[thread] = q.tail;
+        self.next[thread] = NIL;
+        if q.tail == NIL {
+            q.head = thread as u16;
+        } else {
+            self.next[q.tail as usize] = thread as u16;
+        }
+        q.tail = thread as u16;
+        p.bitmap[priority as usize / 64] |= 1 << (priority % 64);
+        self.place[thread] = Some((priority, partition));
+    }
+
+    /// Takes `thread` out of its queue (no-op if not queued).
+    pub fn remove(&mut self, thread: usize) {
+        let Some((priority, partition)) = self.place[thread].take() else {
+            return;
+        };
+        let p = &mut self.partitions[partition as usize];
+        let q = &mut p.queues[priority as usize];
+        let (prev, next) = (self.prev[thread], self.next[thread]);
+        if prev == NIL {
+            q.head = next;
+        } else {
+            self.next[prev as usize] = next;
+        }
+        if next == NIL {
+            q.tail = prev;
+        } else {
+            self.prev[next as usize] = prev;
+        }
+        if q.head == NIL {
+            p.bitmap[priority as usize / 64] &= !(1 << (priority % 64));
+        }
+    }
+
+    /// Moves a queued thread to the tail of its queue (yield).
+    pub fn rotate(&mut self, thread: usize) {
+        if let Some((priority, partition)) = self.place[thread] {
+            self.remove(thread);
+            self.enqueue(thread, priority, partition);
+        }
+    }
+
+    fn highest(&self, partition: usize) -> Option<(u8, usize)> {
+        let p = &self.partitions[partition];
+        for word in (0..p.bitmap.len()).rev() {
+            if p.bitmap[word] != 0 {
+                let priority = word * 64 + 63 - p.bitmap[word].leading_zeros() as usize;
+                return Some((priority as u8, p.queues[priority].head as usize));
+            }
+        }
+        None
+    }
+
+    /// The thread to run: the highest priority among time partition 0 and `active`.
+    pub fn choose(&self, active: Option<u8>) -> Option<usize> {
+        let background = self.highest(0);
+        let foreground = active.filter(|&a| a != 0).and_then(|a| self.highest(a as usize));
+        match (foreground, background) {
+            (Some((fp, ft)), Some((bp, _))) if fp >= bp => Some(ft),
+            (_, Some((_, bt))) => Some(bt),
+            (Some((_, ft)), None) => Some(ft),
+            (None, None) => None,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    #[test]
+    fn highest_priority_first_then_fifo() {
+        let mut q = RunQueues::<8>::new();
+        q.enqueue(1, 10, 0);
+        q.enqueue(2, 20, 0);
+        q.enqueue(3, 20, 0);
+        assert_eq!(q.choose(None), Some(2));
+        q.rotate(2);
+        assert_eq!(q.choose(None), Some(3));
+        q.remove(3);
+        q.remove(2);
+        assert_eq!(q.choose(None), Some(1));
+        q.remove(1);
+        assert_eq!(q.choose(None), None);
+    }
+
+    #[test]
+    fn only_background_and_active_partition_are_eligible() {
+        let mut q = RunQueues::<8>::new();
+        q.enqueue(1, 50, 1);
+        q.enqueue(2, 10, 0);
+        q.enqueue(3, 99, 2);
+        assert_eq!(q.choose(None), Some(2));
+        assert_eq!(q.choose(Some(1)), Some(1));
+        assert_eq!(q.choose(Some(2)), Some(3));
+        q.enqueue(4, 50, 0);
+        assert_eq!(q.choose(Some(1)), Some(1), "equal priority: active partition wins");
+        q.enqueue(5, 51, 0);
+        assert_eq!(q.choose(Some(1)), Some(5), "a higher background thread wins");
+    }
+
+    /// Operations on the queues, checked against a plain list model.
+    #[derive(Debug, Clone)]
+    enum Op {
+        Enqueue(usize, u8, u8),
+        Remove(usize),
+        Rotate(usize),
+    }
+
+    fn op() -> impl Strategy<Value = Op> {
+        prop_oneof![
+            (0..16usize, any::<u8>(), 0..3u8).prop_map(|(t, p, tp)| Op::Enqueue(t, p, tp)),
+            (0..16usize).prop_map(Op::Remove),
+            (0..16usize).prop_map(Op::Rotate),
+        ]
+    }
+
+    proptest! {
+        #[test]
+        fn matches_a_list_model(ops in proptest::collection::vec(op(), 0..200), active in 0..3u8) {
+            let mut q = RunQueues::<16>::new();
+            // Model: arrival order of (thread, priority, partition).
+            let mut model: Vec<(usize, u8, u8)> = Vec::new();
+            for op in ops {
+                match op {
+                    Op::Enqueue(t, p, tp) => {
+                        q.enqueue(t, p, tp);
+                        if !model.iter().any(|e| e.0 == t) { model.push((t, p, tp)); }
+                    }
+                    Op::Remove(t) => { q.remove(t); model.retain(|e| e.0 != t); }
+                    Op::Rotate(t) => {
+                        q.rotate(t);
+                        if let Some(i) = model.iter().position(|e| e.0 == t) {
+                            let e = model.remove(i);
+                            model.push(e);
+                        }
+                    }
+                }
+                let eligible = |e: &&(usize, u8, u8)| e.2 == 0 || (active != 0 && e.2 == active);
+                let best = model.iter().filter(eligible).map(|e| e.1).max();
+                let expected = best.map(|b| {
+                    // Active partition wins ties; FIFO within a partition and priority.
+                    model.iter().filter(eligible).filter(|e| e.1 == b)
+                        .min_by_key(|e| (e.2 == 0, model.iter().position(|x| x.0 == e.0)))
+                        .unwrap().0
+                });
+                prop_assert_eq!(q.choose(Some(active)), expected);
+            }
+        }
+    }
+}
