@@ -98,7 +98,6 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     };
     log_memory_summary(regions);
     let mut user_memory = [PhysRegion::default(); ROOT_INFO_MAX_REGIONS];
-    let user_memory_count;
     let mut frames = FrameAllocator::new(regions, FRAME_FLOOR);
     // The kernel keeps a pool for page tables (1/8 of RAM, 16..128 MiB); the rest is user
     // memory the root task hands out.
@@ -123,7 +122,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
             ""
         }
     );
-    user_memory_count = count;
+    let user_memory_count = count;
     FRAMES.call_once(|| Mutex::new(frames));
 
     pic::remap_and_mask();
@@ -336,4 +335,3 @@ fn prove_timer(apic_timer_hz: u64) {
         ns / 1000 % 1000
     );
 }
-

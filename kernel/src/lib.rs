@@ -27,5 +27,8 @@ pub mod task;
 pub mod thread;
 pub mod time;
 
+#[cfg(test)]
+mod tests;
+
 #[cfg(feature = "test-hooks")]
 pub mod test_hooks;

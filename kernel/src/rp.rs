@@ -113,11 +113,22 @@ mod tests {
 
     #[test]
     fn charges_within_quota_only() {
-        let mut rp = ResourcePartition::new(0, Amount { tasks: 1, threads: 2, pages: 3 });
+        let mut rp = ResourcePartition::new(
+            0,
+            Amount {
+                tasks: 1,
+                threads: 2,
+                pages: 3,
+            },
+        );
         rp.charge(Amount::threads(2)).unwrap();
         assert_eq!(rp.charge(Amount::threads(1)), Err(Error::QuotaExceeded));
         assert_eq!(
-            rp.charge(Amount { tasks: 1, threads: 0, pages: 4 }),
+            rp.charge(Amount {
+                tasks: 1,
+                threads: 0,
+                pages: 4
+            }),
             Err(Error::QuotaExceeded),
             "all or nothing"
         );
@@ -128,9 +139,34 @@ mod tests {
 
     #[test]
     fn carving_isolates_partitions() {
-        let mut root = ResourcePartition::new(0, Amount { tasks: 4, threads: 8, pages: 100 });
-        let mut a = root.carve(1, Amount { tasks: 1, threads: 2, pages: 10 }).unwrap();
-        let mut b = root.carve(1, Amount { tasks: 1, threads: 2, pages: 10 }).unwrap();
+        let mut root = ResourcePartition::new(
+            0,
+            Amount {
+                tasks: 4,
+                threads: 8,
+                pages: 100,
+            },
+        );
+        let mut a = root
+            .carve(
+                1,
+                Amount {
+                    tasks: 1,
+                    threads: 2,
+                    pages: 10,
+                },
+            )
+            .unwrap();
+        let mut b = root
+            .carve(
+                1,
+                Amount {
+                    tasks: 1,
+                    threads: 2,
+                    pages: 10,
+                },
+            )
+            .unwrap();
         assert_eq!(
             root.carve(1, Amount::pages(81)).err(),
             Some(Error::QuotaExceeded),

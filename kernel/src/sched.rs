@@ -126,7 +126,9 @@ impl<const THREADS: usize> RunQueues<THREADS> {
     /// The thread to run: the highest priority among time partition 0 and `active`.
     pub fn choose(&self, active: Option<u8>) -> Option<usize> {
         let background = self.highest(0);
-        let foreground = active.filter(|&a| a != 0).and_then(|a| self.highest(a as usize));
+        let foreground = active
+            .filter(|&a| a != 0)
+            .and_then(|a| self.highest(a as usize));
         match (foreground, background) {
             (Some((fp, ft)), Some((bp, _))) if fp >= bp => Some(ft),
             (_, Some((_, bt))) => Some(bt),
@@ -167,9 +169,17 @@ mod tests {
         assert_eq!(q.choose(Some(1)), Some(1));
         assert_eq!(q.choose(Some(2)), Some(3));
         q.enqueue(4, 50, 0);
-        assert_eq!(q.choose(Some(1)), Some(1), "equal priority: active partition wins");
+        assert_eq!(
+            q.choose(Some(1)),
+            Some(1),
+            "equal priority: active partition wins"
+        );
         q.enqueue(5, 51, 0);
-        assert_eq!(q.choose(Some(1)), Some(5), "a higher background thread wins");
+        assert_eq!(
+            q.choose(Some(1)),
+            Some(5),
+            "a higher background thread wins"
+        );
     }
 
     /// Operations on the queues, checked against a plain list model.

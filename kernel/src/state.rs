@@ -410,8 +410,7 @@ impl Kernel {
         if priority > self.tasks[task].mcp {
             return Err(Error::McpExceeded);
         }
-        if entry >= USER_END || stack > USER_END || time_partition as usize >= TIME_PARTITIONS
-        {
+        if entry >= USER_END || stack > USER_END || time_partition as usize >= TIME_PARTITIONS {
             return Err(Error::InvalidArgument);
         }
         let slot = self
@@ -475,9 +474,7 @@ impl Kernel {
                     self.wake(other, Error::PeerGone);
                 }
                 State::WaitingReply { from } if from == t => self.wake(other, Error::PeerGone),
-                State::Receiving { from: Some(f) } if f == t => {
-                    self.wake(other, Error::PeerGone)
-                }
+                State::Receiving { from: Some(f) } if f == t => self.wake(other, Error::PeerGone),
                 _ => {}
             }
         }
@@ -552,11 +549,12 @@ impl Kernel {
         }
         let frame_of = |k: &Self, i: u64| -> Result<u64, Error> {
             match source {
-                Source::Virtual(base) => match k.tasks[caller].space.translate(base + i * PAGE_SIZE)
-                {
-                    Some((frame, have)) if have.contains(rights) => Ok(frame),
-                    _ => Err(Error::BadAddress),
-                },
+                Source::Virtual(base) => {
+                    match k.tasks[caller].space.translate(base + i * PAGE_SIZE) {
+                        Some((frame, have)) if have.contains(rights) => Ok(frame),
+                        _ => Err(Error::BadAddress),
+                    }
+                }
                 Source::Physical(base) => Ok(base + i * PAGE_SIZE),
             }
         };

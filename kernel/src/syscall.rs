@@ -9,8 +9,7 @@ use crate::state::{Kernel, Source};
 use crate::thread::{Fault, State};
 use abi::ipc::{IPC_BUFFER_SIZE, LABEL_SYSCALL, MessageTag, VECTOR_SYSCALL};
 use abi::syscall::{
-    Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_PRIORITY, PageRights, TASK_NAME_MAX,
-    ThreadAttribute, USER_END,
+    Abilities, Call, DEBUG_WRITE_MAX, Error, PageRights, TASK_NAME_MAX, ThreadAttribute, USER_END,
 };
 
 /// What the entry glue must do after a kernel operation.
@@ -329,7 +328,6 @@ fn set_attribute(
     match ThreadAttribute::from_raw(attribute).ok_or(Error::InvalidArgument)? {
         ThreadAttribute::Priority => {
             let priority = u8::try_from(value).map_err(|_| Error::McpExceeded)?;
-            debug_assert!(priority <= MAX_PRIORITY);
             k.set_priority(target, priority)
         }
         ThreadAttribute::ExceptionHandler => {
@@ -344,7 +342,9 @@ fn set_attribute(
         }
         ThreadAttribute::IpcBuffer => {
             let space = k.tasks[k.threads[target].task].space;
-            if value != 0 && (value % 8 != 0 || !space.accessible(value, IPC_BUFFER_SIZE, true)) {
+            if value != 0
+                && (!value.is_multiple_of(8) || !space.accessible(value, IPC_BUFFER_SIZE, true))
+            {
                 return Err(Error::BadAddress);
             }
             k.threads[target].ipc_buffer = value;
@@ -364,7 +364,10 @@ fn set_attribute(
         }
         ThreadAttribute::TimePartition => {
             k.require(caller_task, Abilities::SCHEDULING)?;
-            k.set_time_partition(target, u8::try_from(value).map_err(|_| Error::InvalidArgument)?)
+            k.set_time_partition(
+                target,
+                u8::try_from(value).map_err(|_| Error::InvalidArgument)?,
+            )
         }
     }
 }

@@ -2,9 +2,7 @@
 
 use crate::mem::paging::{AddressSpace, MapError};
 use crate::mem::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
-use abi::root::{
-    PhysRegion, ROOT_INFO_MAGIC, ROOT_INFO_MAX_REGIONS, ROOT_INFO_VERSION, RootInfo,
-};
+use abi::root::{PhysRegion, ROOT_INFO_MAGIC, ROOT_INFO_MAX_REGIONS, ROOT_INFO_VERSION, RootInfo};
 use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
     ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
@@ -196,7 +194,14 @@ pub fn create_root(
     task.name_len = 5;
     k.tasks[0] = task;
     let thread = k
-        .create_thread(0, entry, ROOT_STACK_TOP - 8, ROOT_PRIORITY, 0, ROOT_SYSTEM_IMAGE_BASE)
+        .create_thread(
+            0,
+            entry,
+            ROOT_STACK_TOP - 8,
+            ROOT_PRIORITY,
+            0,
+            ROOT_SYSTEM_IMAGE_BASE,
+        )
         .expect("fresh tables");
     k.threads[thread].context.rsi = image_len;
     k.threads[thread].context.rdx = ROOT_INFO_BASE;

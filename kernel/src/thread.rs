@@ -15,10 +15,19 @@ pub enum State {
     Inactive,
     Ready,
     /// Queued on `to`'s send queue; a `call` (or an exception) then waits for the reply.
-    Sending { to: usize, call: bool },
-    WaitingReply { from: usize },
-    Receiving { from: Option<usize> },
-    WaitingNotify { mask: u64 },
+    Sending {
+        to: usize,
+        call: bool,
+    },
+    WaitingReply {
+        from: usize,
+    },
+    Receiving {
+        from: Option<usize>,
+    },
+    WaitingNotify {
+        mask: u64,
+    },
 }
 
 /// A fault the thread is blocked on (delivered as an exception message).

@@ -58,6 +58,8 @@ pub mod test_arena {
     use std::sync::OnceLock;
 
     pub const FRAMES: u64 = 8192;
+    /// The upper half of the arena is "user memory" (never handed out by the allocator).
+    pub const USER_BASE: u64 = FRAMES / 2 * PAGE_SIZE;
     static BASE: OnceLock<u64> = OnceLock::new();
 
     pub fn base() -> u64 {
@@ -81,7 +83,7 @@ pub mod test_arena {
         crate::boot::FRAMES.call_once(|| {
             let region = MemoryRegion {
                 start: PAGE_SIZE,
-                pages: FRAMES - 1,
+                pages: FRAMES / 2 - 1,
                 kind: MemoryKind::USABLE,
                 _reserved: 0,
             };

@@ -39,7 +39,7 @@ fn index(virt: u64, level: u32) -> usize {
 
 /// True if `[start, start + pages pages)` is page-aligned user space (never the kernel half).
 pub fn is_user_range(start: u64, pages: u64) -> bool {
-    start % PAGE_SIZE == 0
+    start.is_multiple_of(PAGE_SIZE)
         && start >= USER_MIN
         && pages
             .checked_mul(PAGE_SIZE)
@@ -50,8 +50,16 @@ pub fn is_user_range(start: u64, pages: u64) -> bool {
 fn leaf_bits(rights: PageRights) -> u64 {
     PRESENT
         | USER
-        | if rights.contains(PageRights::WRITE) { WRITABLE } else { 0 }
-        | if rights.contains(PageRights::EXECUTE) { 0 } else { NO_EXECUTE }
+        | if rights.contains(PageRights::WRITE) {
+            WRITABLE
+        } else {
+            0
+        }
+        | if rights.contains(PageRights::EXECUTE) {
+            0
+        } else {
+            NO_EXECUTE
+        }
 }
 
 impl AddressSpace {
@@ -103,7 +111,11 @@ impl AddressSpace {
             let at = virt + page * PAGE_SIZE;
             let mut t = self.root;
             for level in (1..4).rev() {
-                let entry = if t == 0 { 0 } else { table(t)[index(at, level)] };
+                let entry = if t == 0 {
+                    0
+                } else {
+                    table(t)[index(at, level)]
+                };
                 if entry & PRESENT == 0 {
                     // Each missing level below this one is missing too.
                     for l in (1..=level).rev() {
@@ -333,8 +345,8 @@ mod tests {
         let mut space = AddressSpace::new().unwrap();
         for (virt, pages) in [
             (0x40_0000u64, 3u64),
-            (0x40_3000, 600),                 // crosses a 2 MiB boundary
-            (0x7f_ffe0_0000, 4),              // another 1 GiB and 512 GiB region
+            (0x40_3000, 600),                    // crosses a 2 MiB boundary
+            (0x7f_ffe0_0000, 4),                 // another 1 GiB and 512 GiB region
             (0x0000_7fff_ffff_f000 - 0x1000, 1), // top of user space
         ] {
             let needed = space.tables_needed(virt, pages);
@@ -366,7 +378,10 @@ mod tests {
         let mut out = [0u8; 2];
         assert!(space.copy_from_user(0x1ffe, &mut out));
         assert_eq!(&out, b"hi");
-        assert!(!space.copy_from_user(0x1fff, &mut out), "crosses into an unmapped page");
+        assert!(
+            !space.copy_from_user(0x1fff, &mut out),
+            "crosses into an unmapped page"
+        );
         assert_eq!(space.unmap(0x1000), Some(frame));
         assert_eq!(space.translate(0x1000), None);
         assert_eq!(space.unmap(0x1000), None);

@@ -1,0 +1,660 @@
+//! Host tests of the kernel's object logic, driven through the system-call dispatcher
+//! exactly as user threads would drive it (registers in, registers out). Page tables and
+//! "user memory" live in the host-test arena (`mem::test_arena`).
+
+use crate::mem::{PAGE_SIZE, test_arena};
+use crate::rp::{Amount, ResourcePartition};
+use crate::state::{Kernel, Source};
+use crate::syscall::{Outcome, on_syscall};
+use crate::task::Task;
+use crate::thread::{Fault, State};
+use abi::ipc::*;
+use abi::root::PhysRegion;
+use abi::syscall::{Abilities, Call, Error, PageRights, TIMEOUT_INFINITE, ThreadAttribute};
+
+struct Fixture {
+    k: Box<Kernel>,
+    next_user_frame: u64,
+    _arena: std::sync::MutexGuard<'static, ()>,
+}
+
+const BUFFER_AT: u64 = 0x10_0000;
+
+impl Fixture {
+    fn new() -> Self {
+        let arena = test_arena::init();
+        let mut k = Box::new(Kernel::new());
+        k.rps[0] = ResourcePartition::new(
+            0,
+            Amount {
+                tasks: 64,
+                threads: 256,
+                pages: 1000,
+            },
+        );
+        k.rps[0].charge(Amount::tasks(1)).unwrap();
+        let mut root = Task {
+            in_use: true,
+            abilities: Abilities::all(),
+            mcp: 255,
+            space: crate::mem::paging::AddressSpace::new().unwrap(),
+            send_to: 1,
+            ..Task::FREE
+        };
+        root.name[..4].copy_from_slice(b"root");
+        root.name_len = 4;
+        k.tasks[0] = root;
+        k.user_memory[0] = PhysRegion {
+            start: test_arena::USER_BASE,
+            pages: test_arena::FRAMES / 2,
+        };
+        k.user_memory_count = 1;
+        Self {
+            k,
+            next_user_frame: test_arena::USER_BASE,
+            _arena: arena,
+        }
+    }
+
+    /// A started thread of `task` with an IPC buffer (2 pages at BUFFER_AT + 16 KiB * n).
+    fn thread(&mut self, task: usize, priority: u8) -> usize {
+        let t = self
+            .k
+            .create_thread(task, 0x1000, 0x2000, priority, 0, 0)
+            .unwrap();
+        self.k.set_state(t, State::Ready);
+        let at = BUFFER_AT + t as u64 * 0x4000;
+        if self.k.tasks[task].space.translate(at).is_none() {
+            self.give(task, at, 2, PageRights::WRITE);
+        }
+        self.k.threads[t].ipc_buffer = at;
+        t
+    }
+
+    /// Maps `pages` fresh user frames into `task` at `at`.
+    fn give(&mut self, task: usize, at: u64, pages: u64, rights: PageRights) {
+        let frame = self.next_user_frame;
+        self.next_user_frame += pages * PAGE_SIZE;
+        self.k
+            .map(0, task, Source::Physical(frame), at, pages, rights)
+            .unwrap();
+    }
+
+    fn task(&mut self, parent: usize, abilities: Abilities, mcp: u8) -> usize {
+        self.k
+            .create_task(parent, abilities, mcp, self.k.tasks[parent].rp, "t")
+            .unwrap()
+    }
+
+    /// Thread `t` makes system call `call`; returns `rax` (meaningful unless it blocked).
+    fn sys(&mut self, t: usize, call: Call, a: [u64; 6]) -> u64 {
+        let c = &mut self.k.threads[t].context;
+        c.rax = call as u64;
+        [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
+        assert_eq!(on_syscall(&mut self.k, t, 0), Outcome::Continue);
+        self.k.threads[t].context.rax
+    }
+
+    fn id(&self, t: usize) -> u64 {
+        self.k.thread_id(t)
+    }
+
+    fn write(&self, t: usize, at: u64, data: &[u8]) {
+        let task = self.k.threads[t].task;
+        assert!(self.k.tasks[task].space.copy_to_user(at, data));
+    }
+
+    fn read(&self, t: usize, at: u64, len: usize) -> Vec<u8> {
+        let task = self.k.threads[t].task;
+        let mut out = vec![0; len];
+        assert!(self.k.tasks[task].space.copy_from_user(at, &mut out));
+        out
+    }
+}
+
+const OK: u64 = Error::Ok as u64;
+
+fn err(e: Error) -> u64 {
+    e as u64
+}
+
+#[test]
+fn abilities_and_mcp_bound_children() {
+    let mut f = Fixture::new();
+    let root = f.thread(0, 200);
+    let weak = f.task(0, Abilities::DEBUG_LOG | Abilities::NATIVE_SYSCALLS, 100);
+    let w = f.thread(weak, 50);
+    // More abilities than the parent has.
+    let bits = (Abilities::DEBUG_LOG | Abilities::MAP).bits();
+    assert_eq!(
+        f.sys(w, Call::TaskCreate, [bits, 10, 0, 0, 0, 0]),
+        err(Error::AbilityDenied)
+    );
+    // The weak task lacks CREATE_THREAD and CREATE_TASK.
+    assert_eq!(
+        f.sys(w, Call::ThreadCreate, [0, 0x1000, 0x2000, 10, 0, 0]),
+        err(Error::AbilityDenied)
+    );
+    // MCP: task above the parent's, thread above the task's, priority change above it.
+    let all = Abilities::all().bits();
+    let at = root_name(&mut f, root);
+    assert_eq!(
+        f.sys(root, Call::TaskCreate, [all, 256, 0, at, 1, 0]),
+        err(Error::McpExceeded)
+    );
+    let wid = f.k.task_id(weak);
+    assert_eq!(
+        f.sys(root, Call::ThreadCreate, [wid, 0x1000, 0x2000, 101, 0, 0]),
+        err(Error::McpExceeded)
+    );
+    assert_eq!(
+        f.sys(root, Call::ThreadCreate, [wid, 0x1000, 0x2000, 100, 0, 0]),
+        OK
+    );
+    let wt = f.id(w);
+    let prio = ThreadAttribute::Priority as u64;
+    assert_eq!(
+        f.sys(root, Call::ThreadSet, [wt, prio, 101, 0, 0, 0]),
+        err(Error::McpExceeded)
+    );
+    assert_eq!(f.sys(root, Call::ThreadSet, [wt, prio, 99, 0, 0, 0]), OK);
+    assert_eq!(f.k.threads[w].priority, 99);
+    // Children cannot control their parent.
+    let rt = f.id(root);
+    assert_eq!(
+        f.sys(w, Call::ThreadSuspend, [rt, 0, 0, 0, 0, 0]),
+        err(Error::NotPermitted)
+    );
+}
+
+/// Writes a one-byte task name into the root's buffer; returns its address.
+fn root_name(f: &mut Fixture, root: usize) -> u64 {
+    let at = f.k.threads[root].ipc_buffer;
+    f.write(root, at, b"c");
+    at
+}
+
+#[test]
+fn thread_lifecycle_and_stale_ids() {
+    let mut f = Fixture::new();
+    let root = f.thread(0, 200);
+    assert_eq!(
+        f.sys(root, Call::ThreadCreate, [0, 0x1000, 0x2000, 10, 7, 0]),
+        OK
+    );
+    let id = f.k.threads[root].context.rdi;
+    let t = f.k.thread(id).unwrap();
+    assert_eq!(f.k.threads[t].state, State::Inactive);
+    assert_eq!(f.k.threads[t].context.rdi, 7, "argument in rdi");
+    assert_eq!(f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]), OK);
+    assert_eq!(
+        f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]),
+        err(Error::InvalidArgument)
+    );
+    assert!(f.k.run.is_queued(t));
+    assert_eq!(f.sys(root, Call::ThreadSuspend, [id, 0, 0, 0, 0, 0]), OK);
+    assert!(!f.k.run.is_queued(t));
+    assert_eq!(f.sys(root, Call::ThreadResume, [id, 0, 0, 0, 0, 0]), OK);
+    assert!(f.k.run.is_queued(t));
+    let used = f.k.rps[0].used.threads;
+    assert_eq!(f.sys(root, Call::ThreadKill, [id, 0, 0, 0, 0, 0]), OK);
+    assert_eq!(f.k.rps[0].used.threads, used - 1);
+    assert_eq!(
+        f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]),
+        err(Error::NoSuchObject)
+    );
+    assert_eq!(
+        f.sys(root, Call::ThreadKill, [0xdead_0000, 0, 0, 0, 0, 0]),
+        err(Error::NoSuchObject)
+    );
+}
+
+#[test]
+fn exhausting_one_partition_leaves_the_other_working() {
+    let mut f = Fixture::new();
+    let root = f.thread(0, 200);
+    let quota = |threads, pages| [2, threads, pages, 0, 0, 0];
+    assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
+    let a = f.k.threads[root].context.rdi;
+    assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
+    let b = f.k.threads[root].context.rdi;
+    assert_eq!(
+        f.sys(root, Call::RpCreate, quota(1000, 8)),
+        err(Error::QuotaExceeded)
+    );
+    let at = root_name(&mut f, root);
+    let all = Abilities::all().bits();
+    assert_eq!(f.sys(root, Call::TaskCreate, [all, 100, a, at, 1, 0]), OK);
+    let ta = f.k.threads[root].context.rdi;
+    assert_eq!(f.sys(root, Call::TaskCreate, [all, 100, b, at, 1, 0]), OK);
+    let tb = f.k.threads[root].context.rdi;
+    let create = |task| [task, 0x1000, 0x2000, 10, 0, 0];
+    assert_eq!(f.sys(root, Call::ThreadCreate, create(ta)), OK);
+    assert_eq!(f.sys(root, Call::ThreadCreate, create(ta)), OK);
+    assert_eq!(
+        f.sys(root, Call::ThreadCreate, create(ta)),
+        err(Error::QuotaExceeded)
+    );
+    // Page tables: the first page of a fresh space needs 3 tables; 8 - 1 (PML4) = 7 left.
+    let (ita, itb) = (f.k.task(ta).unwrap(), f.k.task(tb).unwrap());
+    let phys = test_arena::USER_BASE;
+    let map = |task, at| [task, phys, at, 1, 0, 0];
+    assert_eq!(f.sys(root, Call::MapPhysical, map(ta, 0x1000)), OK);
+    assert_eq!(
+        f.sys(root, Call::MapPhysical, map(ta, 0x4000_0000)),
+        OK,
+        "2 more tables"
+    );
+    assert_eq!(
+        f.sys(root, Call::MapPhysical, map(ta, 0x80_0000_0000)),
+        err(Error::QuotaExceeded)
+    );
+    assert_eq!(
+        f.k.tasks[ita].space.translate(0x80_0000_0000),
+        None,
+        "nothing changed"
+    );
+    // B is untouched by A's exhaustion.
+    assert_eq!(f.sys(root, Call::ThreadCreate, create(tb)), OK);
+    assert_eq!(f.sys(root, Call::MapPhysical, map(tb, 0x1000)), OK);
+    assert!(f.k.tasks[itb].space.translate(0x1000).is_some());
+    // Killing A returns everything.
+    assert_eq!(f.sys(root, Call::TaskKill, [ta, 0, 0, 0, 0, 0]), OK);
+    let rp_a = a as usize - 1;
+    assert_eq!(f.k.rps[rp_a].used, Amount::default());
+}
+
+#[test]
+fn map_protect_unmap_rules() {
+    let mut f = Fixture::new();
+    let root = f.thread(0, 200);
+    let child = f.task(0, Abilities::all(), 100);
+    let cid = f.k.task_id(child);
+    let ro = PageRights::empty().bits();
+    let rw = PageRights::WRITE.bits();
+    f.give(0, 0x50_0000, 2, PageRights::empty());
+    // More rights than the source has.
+    assert_eq!(
+        f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_0000, 2, rw, 0]),
+        err(Error::BadAddress)
+    );
+    assert_eq!(
+        f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_0001, 2, ro, 0]),
+        err(Error::InvalidArgument)
+    );
+    assert_eq!(
+        f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_0000, 0, ro, 0]),
+        err(Error::InvalidArgument)
+    );
+    assert_eq!(
+        f.sys(
+            root,
+            Call::Map,
+            [cid, 0x50_0000, 0xffff_8000_0000_0000, 1, ro, 0]
+        ),
+        err(Error::InvalidArgument)
+    );
+    assert_eq!(
+        f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_0000, 3, ro, 0]),
+        err(Error::BadAddress),
+        "third page unmapped"
+    );
+    assert_eq!(
+        f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_0000, 2, ro, 0]),
+        OK
+    );
+    assert_eq!(
+        f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_1000, 1, ro, 0]),
+        err(Error::AlreadyMapped)
+    );
+    // Physical memory outside what the root was given (the kernel pool) is refused.
+    assert_eq!(
+        f.sys(root, Call::MapPhysical, [cid, 0x1000, 0x70_0000, 1, rw, 0]),
+        err(Error::BadAddress)
+    );
+    // Protect only removes rights.
+    f.give(0, 0x51_0000, 1, PageRights::WRITE);
+    assert_eq!(
+        f.sys(
+            root,
+            Call::Protect,
+            [
+                0,
+                0x51_0000,
+                1,
+                (PageRights::WRITE | PageRights::EXECUTE).bits(),
+                0,
+                0
+            ]
+        ),
+        err(Error::BadAddress)
+    );
+    assert_eq!(f.sys(root, Call::Protect, [0, 0x51_0000, 1, ro, 0, 0]), OK);
+    assert_eq!(
+        f.k.tasks[0].space.translate(0x51_0000).unwrap().1,
+        PageRights::empty()
+    );
+    assert_eq!(f.sys(root, Call::Unmap, [cid, 0x60_0000, 2, 0, 0, 0]), OK);
+    assert_eq!(f.k.tasks[child].space.translate(0x60_0000), None);
+    // No MAP ability, no map.
+    let weak = f.task(0, Abilities::NATIVE_SYSCALLS, 10);
+    let w = f.thread(weak, 5);
+    assert_eq!(
+        f.sys(w, Call::Unmap, [0, 0x60_0000, 1, 0, 0, 0]),
+        err(Error::AbilityDenied)
+    );
+}
+
+#[test]
+fn call_reply_with_data_and_words() {
+    let mut f = Fixture::new();
+    let client = f.thread(0, 100);
+    let server_task = f.task(0, Abilities::all(), 200);
+    let server = f.thread(server_task, 150);
+    // The server waits first.
+    f.sys(server, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    assert_eq!(f.k.threads[server].state, State::Receiving { from: None });
+    let (cbuf, sbuf) = (
+        f.k.threads[client].ipc_buffer,
+        f.k.threads[server].ipc_buffer,
+    );
+    f.write(client, cbuf, b"hello server");
+    let tag = MessageTag::new(7, 12, 0).0;
+    let sid = f.id(server);
+    f.sys(client, Call::Call, [sid, TIMEOUT_INFINITE, tag, 1, 2, 3]);
+    assert_eq!(
+        f.k.threads[client].state,
+        State::WaitingReply { from: server }
+    );
+    let c = f.k.threads[server].context;
+    assert_eq!(
+        (c.rax, c.rdi, c.rdx, c.r10, c.r8, c.r9),
+        (OK, f.id(client), tag, 1, 2, 3)
+    );
+    assert_eq!(f.read(server, sbuf, 12), b"hello server");
+    // Reply and wait for the next request.
+    f.write(server, sbuf, b"ok");
+    let cid = f.id(client);
+    f.sys(
+        server,
+        Call::ReplyWait,
+        [cid, TIMEOUT_INFINITE, MessageTag::new(9, 2, 0).0, 4, 5, 6],
+    );
+    assert_eq!(f.k.threads[server].state, State::Receiving { from: None });
+    let c = f.k.threads[client].context;
+    assert_eq!(
+        (c.rax, c.rdx, c.r10, c.r8, c.r9),
+        (OK, MessageTag::new(9, 2, 0).0, 4, 5, 6)
+    );
+    assert_eq!(f.read(client, cbuf, 2), b"ok");
+    assert_eq!(f.k.threads[client].state, State::Ready);
+    // A reply to a thread not waiting for one.
+    assert_eq!(
+        f.sys(client, Call::Reply, [sid, 0, 0, 0, 0, 0]),
+        err(Error::NotWaiting)
+    );
+}
+
+#[test]
+fn senders_queue_by_priority_then_fifo() {
+    let mut f = Fixture::new();
+    let receiver = f.thread(0, 10);
+    let rid = f.id(receiver);
+    let senders: Vec<usize> = [30, 50, 30, 40].iter().map(|&p| f.thread(0, p)).collect();
+    for (i, &s) in senders.iter().enumerate() {
+        f.sys(s, Call::Send, [rid, TIMEOUT_INFINITE, 0, i as u64, 0, 0]);
+        assert!(matches!(f.k.threads[s].state, State::Sending { .. }));
+    }
+    let mut order = vec![];
+    for _ in 0..4 {
+        assert_eq!(f.sys(receiver, Call::Receive, [0, 0, 0, 0, 0, 0]), OK);
+        order.push(f.k.threads[receiver].context.r10);
+    }
+    assert_eq!(
+        order,
+        vec![1, 3, 0, 2],
+        "50, 40, then the two 30s in arrival order"
+    );
+    assert_eq!(
+        f.sys(receiver, Call::Receive, [0, 0, 0, 0, 0, 0]),
+        err(Error::TimedOut),
+        "poll"
+    );
+    for s in senders {
+        assert_eq!(f.k.threads[s].context.rax, OK);
+    }
+}
+
+#[test]
+fn timeouts_expire_at_their_deadline() {
+    let mut f = Fixture::new();
+    let a = f.thread(0, 10);
+    let b = f.thread(0, 10);
+    f.sys(a, Call::Receive, [0, 1000, 0, 0, 0, 0]);
+    let bid = f.id(b);
+    f.sys(b, Call::NotifyWait, [1, 500, 0, 0, 0, 0]);
+    assert_eq!(f.k.next_deadline, 500);
+    f.k.expire_timeouts(499);
+    assert_eq!(f.k.threads[a].state, State::Receiving { from: None });
+    f.k.expire_timeouts(500);
+    assert_eq!(f.k.threads[b].state, State::Ready);
+    assert_eq!(f.k.threads[b].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.next_deadline, 1000);
+    f.k.expire_timeouts(1000);
+    assert_eq!(f.k.threads[a].context.rax, err(Error::TimedOut));
+    // A queued sender times out and leaves the queue.
+    let aid = f.id(a);
+    f.sys(b, Call::Send, [aid, 10, 0, 0, 0, 0]);
+    f.k.expire_timeouts(10);
+    assert_eq!(f.k.threads[b].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.first_sender(a, None), None);
+    let _ = bid;
+}
+
+#[test]
+fn communication_rights_restrict_senders() {
+    let mut f = Fixture::new();
+    let root = f.thread(0, 200);
+    let x = f.task(0, Abilities::all(), 100);
+    let y = f.task(0, Abilities::all(), 100);
+    let tx = f.thread(x, 50);
+    let ty = f.thread(y, 50);
+    let yid = f.id(ty);
+    assert_eq!(
+        f.sys(tx, Call::Send, [yid, 0, 0, 0, 0, 0]),
+        err(Error::NotPermitted)
+    );
+    assert_eq!(
+        f.sys(tx, Call::NotifySignal, [yid, 1, 0, 0, 0, 0]),
+        err(Error::NotPermitted)
+    );
+    let (xid, yid_task) = (f.k.task_id(x), f.k.task_id(y));
+    assert_eq!(
+        f.sys(tx, Call::TaskAllowSend, [0, yid_task, 0, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "not its own to grant"
+    );
+    assert_eq!(
+        f.sys(root, Call::TaskAllowSend, [xid, yid_task, 0, 0, 0, 0]),
+        OK
+    );
+    assert_eq!(
+        f.sys(tx, Call::Send, [yid, 0, 0, 0, 0, 0]),
+        err(Error::TimedOut),
+        "allowed now; nobody receives"
+    );
+    assert_eq!(f.sys(tx, Call::NotifySignal, [yid, 0b100, 0, 0, 0, 0]), OK);
+    assert_eq!(f.sys(ty, Call::NotifyWait, [0b110, 0, 0, 0, 0, 0]), OK);
+    assert_eq!(f.k.threads[ty].context.rdi, 0b100);
+}
+
+#[test]
+fn map_and_grant_items() {
+    let mut f = Fixture::new();
+    let sender = f.thread(0, 10);
+    let rtask = f.task(0, Abilities::all(), 100);
+    let receiver = f.thread(rtask, 10);
+    f.give(0, 0x70_0000, 2, PageRights::WRITE);
+    f.write(sender, 0x70_0000, b"shared");
+    // Window in the receiver's buffer; items in the sender's.
+    let window = BUFFER_AT + receiver as u64 * 0x4000 + IPC_WINDOW_OFFSET as u64;
+    let mut w = 0x90_0000u64.to_ne_bytes().to_vec();
+    w.extend(4u64.to_ne_bytes());
+    f.write(receiver, window, &w);
+    let items = BUFFER_AT + sender as u64 * 0x4000 + IPC_ITEMS_OFFSET as u64;
+    let mut it = 0x70_0000u64.to_ne_bytes().to_vec();
+    it.extend(1u32.to_ne_bytes());
+    it.extend((PageRights::WRITE.bits() as u32).to_ne_bytes());
+    it.extend(0x70_1000u64.to_ne_bytes());
+    it.extend(1u32.to_ne_bytes());
+    it.extend(MAP_ITEM_GRANT.to_ne_bytes());
+    f.write(sender, items, &it);
+    f.sys(receiver, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    let rid = f.id(receiver);
+    assert_eq!(
+        f.sys(
+            sender,
+            Call::Send,
+            [rid, 0, MessageTag::new(1, 0, 2).0, 0, 0, 0]
+        ),
+        OK
+    );
+    assert_eq!(f.read(receiver, 0x90_0000, 6), b"shared");
+    assert!(
+        f.k.tasks[0].space.translate(0x70_0000).is_some(),
+        "mapped: sender keeps it"
+    );
+    assert!(
+        f.k.tasks[0].space.translate(0x70_1000).is_none(),
+        "granted: sender lost it"
+    );
+    assert_eq!(
+        f.k.tasks[rtask].space.translate(0x90_1000).unwrap().1,
+        PageRights::empty()
+    );
+    // Mapping into occupied window pages fails for the sender; the receiver keeps waiting.
+    f.sys(receiver, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    assert_eq!(
+        f.sys(
+            sender,
+            Call::Send,
+            [rid, 0, MessageTag::new(1, 0, 1).0, 0, 0, 0]
+        ),
+        err(Error::AlreadyMapped)
+    );
+    assert_eq!(f.k.threads[receiver].state, State::Receiving { from: None });
+}
+
+#[test]
+fn exception_round_trip_with_edited_registers() {
+    let mut f = Fixture::new();
+    let handler = f.thread(0, 200);
+    let child = f.task(0, Abilities::all(), 100);
+    let t = f.thread(child, 50);
+    f.k.threads[t].exception_handler = f.id(handler);
+    f.k.threads[t].context.rip = 0x40_1000;
+    f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    let fault = Fault {
+        label: LABEL_EXCEPTION,
+        vector: 6,
+        error_code: 0,
+        address: 0,
+    };
+    assert!(f.k.raise_fault(t, fault));
+    assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
+    let c = f.k.threads[handler].context;
+    assert_eq!(MessageTag(c.rdx).label(), LABEL_EXCEPTION);
+    let bytes = f.read(
+        handler,
+        BUFFER_AT + handler as u64 * 0x4000,
+        EXCEPTION_MESSAGE_SIZE,
+    );
+    let mut m = ExceptionMessage::from_bytes(&bytes).unwrap();
+    assert_eq!(
+        (m.vector, m.registers.rip, m.thread),
+        (6, 0x40_1000, f.id(t))
+    );
+    m.registers.rip += 2;
+    m.registers.rax = 0x1234;
+    m.registers.rflags = u64::MAX; // IOPL and friends must not get through
+    f.write(handler, BUFFER_AT + handler as u64 * 0x4000, &m.to_bytes());
+    let tid = f.id(t);
+    let tag = MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0).0;
+    assert_eq!(f.sys(handler, Call::Reply, [tid, 0, tag, 0, 0, 0]), OK);
+    let c = f.k.threads[t].context;
+    assert_eq!((c.rip, c.rax), (0x40_1002, 0x1234));
+    assert_eq!(c.rflags & !USER_RFLAGS_MASK, 0x202, "IF on, IOPL 0");
+    assert_eq!(f.k.threads[t].state, State::Ready);
+    // Second fault: kill.
+    assert!(f.k.raise_fault(t, fault));
+    f.sys(handler, Call::Receive, [0, 0, 0, 0, 0, 0]);
+    let kill = MessageTag::new(REPLY_KILL, 0, 0).0;
+    assert_eq!(f.sys(handler, Call::Reply, [tid, 0, kill, 0, 0, 0]), OK);
+    assert!(f.k.threads[t].is_free());
+}
+
+#[test]
+fn syscalls_of_non_native_tasks_go_to_the_handler() {
+    let mut f = Fixture::new();
+    let handler = f.thread(0, 200);
+    let guest = f.task(0, Abilities::DEBUG_LOG, 100);
+    let t = f.thread(guest, 50);
+    f.k.threads[t].exception_handler = f.id(handler);
+    f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    f.sys(t, Call::Clock, [0; 6]);
+    assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
+    let c = f.k.threads[handler].context;
+    assert_eq!(MessageTag(c.rdx).label(), LABEL_SYSCALL);
+    assert_eq!(c.r10, VECTOR_SYSCALL);
+}
+
+#[test]
+fn faults_without_handler_go_to_the_health_monitor_or_kill() {
+    let mut f = Fixture::new();
+    let monitor = f.thread(0, 200);
+    let child = f.task(0, Abilities::all(), 100);
+    let t = f.thread(child, 50);
+    let fault = Fault {
+        label: LABEL_EXCEPTION,
+        vector: 14,
+        error_code: 4,
+        address: 0xdead,
+    };
+    assert_eq!(
+        crate::fault::on_exception(&mut f.k, t, 14, 4, 0xdead),
+        Outcome::Continue
+    );
+    assert!(f.k.threads[t].is_free(), "no handler, no monitor: killed");
+    let t = f.thread(child, 50);
+    let root = monitor;
+    let mid = f.id(monitor);
+    assert_eq!(
+        f.sys(root, Call::SetHealthMonitor, [mid, 0, 0, 0, 0, 0]),
+        OK
+    );
+    f.sys(monitor, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    assert!(f.k.raise_fault(t, fault));
+    let c = f.k.threads[monitor].context;
+    assert_eq!(MessageTag(c.rdx).label(), LABEL_FAULT_REPORT);
+    assert_eq!((c.r10, c.r8, c.r9), (14, 4, 0xdead));
+}
+
+#[test]
+fn killing_a_server_releases_its_clients() {
+    let mut f = Fixture::new();
+    let server = f.thread(0, 10);
+    let queued = f.thread(0, 20);
+    let waiting = f.thread(0, 20);
+    let sid = f.id(server);
+    f.sys(server, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    f.sys(waiting, Call::Call, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    f.sys(queued, Call::Send, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    assert_eq!(
+        f.k.threads[waiting].state,
+        State::WaitingReply { from: server }
+    );
+    assert!(matches!(f.k.threads[queued].state, State::Sending { .. }));
+    f.k.kill_thread(server);
+    assert_eq!(f.k.threads[waiting].context.rax, err(Error::PeerGone));
+    assert_eq!(f.k.threads[queued].context.rax, err(Error::PeerGone));
+}
