@@ -26,6 +26,7 @@ pub mod syscall;
 pub mod task;
 pub mod thread;
 pub mod time;
+pub mod timepart;
 
 #[cfg(test)]
 mod tests;

@@ -9,7 +9,7 @@
 //! preempted thread resumes before its peers, and [`RunQueues::rotate`] implements yield.
 
 pub const PRIORITIES: usize = 256;
-pub const TIME_PARTITIONS: usize = 16;
+pub const TIME_PARTITIONS: usize = abi::syscall::TIME_PARTITIONS as usize;
 const NIL: u16 = u16::MAX;
 
 #[derive(Clone, Copy)]

@@ -12,6 +12,7 @@ use crate::rp::{Amount, ResourcePartition};
 use crate::sched::{RunQueues, TIME_PARTITIONS};
 use crate::task::Task;
 use crate::thread::{EMPTY_CONTEXT, FpuState, NEVER, NIL, State, Thread};
+use crate::timepart::TimeTable;
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
 use abi::syscall::{
     Abilities, Error, MAP_MAX_PAGES, PageRights, TASK_NAME_MAX, USER_END, make_id, split_id,
@@ -56,6 +57,16 @@ pub struct Kernel {
     pub timer_dirty: bool,
     /// The running thread's FS/GS base changed and must be reloaded on exit.
     pub reload_bases: bool,
+    /// Schedules of time windows.
+    pub time: TimeTable,
+    /// Absolute time of the next window boundary (`NEVER` without a schedule).
+    pub next_boundary: u64,
+    /// CPU time per time partition (ns), and time with nothing to run.
+    pub cpu_ns: [u64; TIME_PARTITIONS],
+    pub idle_ns: u64,
+    /// Time partition of the thread that ran since `last_account` (None: idle).
+    pub running_partition: Option<u8>,
+    pub last_account: u64,
 }
 
 impl Default for Kernel {
@@ -85,6 +96,12 @@ impl Kernel {
             next_deadline: NEVER,
             timer_dirty: false,
             reload_bases: false,
+            time: TimeTable::new(),
+            next_boundary: NEVER,
+            cpu_ns: [0; TIME_PARTITIONS],
+            idle_ns: 0,
+            running_partition: None,
+            last_account: 0,
         }
     }
 
@@ -205,6 +222,39 @@ impl Kernel {
         self.run.choose(self.active_partition)
     }
 
+    /// A timer event at `now`: time-outs and window boundaries.
+    pub fn on_timer(&mut self, now: u64) {
+        if now >= self.next_deadline {
+            self.expire_timeouts(now);
+        }
+        if now >= self.next_boundary {
+            self.update_window(now);
+        }
+    }
+
+    /// Recomputes the active window (after a boundary or a schedule change).
+    pub fn update_window(&mut self, now: u64) {
+        let position = self.time.advance(now);
+        self.active_partition = position.partition;
+        self.next_boundary = position.next_boundary;
+        self.timer_dirty = true;
+    }
+
+    /// When the timer must fire next.
+    pub fn next_event(&self) -> u64 {
+        self.next_deadline.min(self.next_boundary)
+    }
+
+    /// Charges the time since the last call to the partition that ran (or to idle).
+    pub fn account(&mut self, now: u64) {
+        let delta = now.saturating_sub(self.last_account);
+        self.last_account = now;
+        match self.running_partition {
+            Some(p) => self.cpu_ns[p as usize] += delta,
+            None => self.idle_ns += delta,
+        }
+    }
+
     /// Times out every blocked thread whose deadline is at or before `now` and recomputes
     /// the next deadline. Bounded by the thread table.
     pub fn expire_timeouts(&mut self, now: u64) {
@@ -233,6 +283,7 @@ impl Kernel {
             }
             State::WaitingReply { .. } | State::Receiving { .. } => self.wake(t, error),
             State::WaitingNotify { .. } => self.wake(t, error),
+            State::Sleeping => self.wake(t, Error::Ok),
             State::Free | State::Inactive | State::Ready => self.threads[t].deadline = NEVER,
         }
     }

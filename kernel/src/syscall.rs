@@ -7,9 +7,11 @@ use crate::kprintln;
 use crate::rp::Amount;
 use crate::state::{Kernel, Source};
 use crate::thread::{Fault, State};
+use crate::timepart::{Schedule, Window};
 use abi::ipc::{IPC_BUFFER_SIZE, LABEL_SYSCALL, MessageTag, VECTOR_SYSCALL};
 use abi::syscall::{
-    Abilities, Call, DEBUG_WRITE_MAX, Error, PageRights, TASK_NAME_MAX, ThreadAttribute, USER_END,
+    Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_SCHEDULES, MAX_WINDOWS, PageRights, TASK_NAME_MAX,
+    TIME_PARTITIONS, ThreadAttribute, USER_END,
 };
 
 /// What the entry glue must do after a kernel operation.
@@ -108,6 +110,13 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
         Call::Yield => {
             k.run.rotate(t);
             done(k, t)
+        }
+        Call::SleepUntil => {
+            k.threads[t].context.rax = Error::Ok as u64;
+            if a[0] > now {
+                k.block(t, State::Sleeping, a[0]);
+            }
+            Ok(None)
         }
 
         Call::TaskCreate => {
@@ -306,6 +315,10 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
                 | (r.quota.tasks & 0xffff) << 48;
             done(k, t)
         }
+        Call::ScheduleSet | Call::ScheduleSwitch | Call::PartitionInfo => {
+            time_call(k, t, call, a, now)?;
+            done(k, t)
+        }
         Call::SetHealthMonitor => {
             k.require(task, Abilities::PARTITION_CONTROL)?;
             let monitor = k.thread(a[0])?;
@@ -316,6 +329,63 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
             done(k, t)
         }
     }
+}
+
+fn time_call(k: &mut Kernel, t: usize, call: Call, a: [u64; 6], now: u64) -> Result<(), Error> {
+    let task = k.threads[t].task;
+    match call {
+        Call::ScheduleSet => {
+            k.require(task, Abilities::SCHEDULING)?;
+            let (slot, major, ptr, count) = (a[0], a[1], a[2], a[3]);
+            if slot >= MAX_SCHEDULES || count > MAX_WINDOWS {
+                return Err(Error::InvalidArgument);
+            }
+            let mut windows = [Window::default(); MAX_WINDOWS as usize];
+            for (i, w) in windows.iter_mut().take(count as usize).enumerate() {
+                let mut raw = [0u8; 24];
+                let at = ptr.checked_add(i as u64 * 24).ok_or(Error::BadAddress)?;
+                if !k.tasks[task].space.copy_from_user(at, &mut raw) {
+                    return Err(Error::BadAddress);
+                }
+                let word = |n: usize| u64::from_ne_bytes(raw[n * 8..n * 8 + 8].try_into().unwrap());
+                *w = Window {
+                    offset: word(0),
+                    duration: word(1),
+                    partition: u8::try_from(word(2)).map_err(|_| Error::InvalidArgument)?,
+                };
+            }
+            let schedule = Schedule::new(major, &windows[..count as usize])
+                .map_err(|_| Error::InvalidArgument)?;
+            k.time
+                .install(slot as usize, schedule)
+                .map_err(|_| Error::NotPermitted)
+        }
+        Call::ScheduleSwitch => {
+            k.require(task, Abilities::SCHEDULING)?;
+            if slot_ok(a[0]) && k.time.switch_to(a[0] as usize, now) {
+                k.update_window(now);
+                Ok(())
+            } else {
+                Err(Error::InvalidArgument)
+            }
+        }
+        _ => {
+            let tp = u8::try_from(a[0])
+                .ok()
+                .filter(|&p| (p as u64) < TIME_PARTITIONS)
+                .ok_or(Error::InvalidArgument)?;
+            let (start, length) = k.time.next_window(tp, now).unwrap_or((u64::MAX, 0));
+            let (cpu, idle, frames) = (k.cpu_ns[tp as usize], k.idle_ns, k.time.frames);
+            let active = k.active_partition.unwrap_or(0) as u64;
+            let c = &mut k.threads[t].context;
+            (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);
+            Ok(())
+        }
+    }
+}
+
+fn slot_ok(slot: u64) -> bool {
+    slot < MAX_SCHEDULES
 }
 
 fn set_attribute(

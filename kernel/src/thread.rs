@@ -28,6 +28,8 @@ pub enum State {
     WaitingNotify {
         mask: u64,
     },
+    /// `sleep_until`: ends at the deadline, successfully.
+    Sleeping,
 }
 
 /// A fault the thread is blocked on (delivered as an exception message).

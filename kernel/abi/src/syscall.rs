@@ -69,6 +69,9 @@ pub enum Call {
     /// `yield()`: moves the caller behind the other ready threads of its priority.
     /// Ability: none.
     Yield = 5,
+    /// `sleep_until(time)`: blocks until `clock()` >= `time` (ns since boot); returns at
+    /// once for a past time. Ability: none.
+    SleepUntil = 6,
 
     /// `task_create(abilities, mcp, rp, name_ptr, name_len) -> rdi = task`: a new child
     /// task of the caller with an empty address space and no threads. `rp` = resource
@@ -192,6 +195,42 @@ pub enum Call {
     /// without an exception handler. Ability: `PARTITION_CONTROL`, caller in the root task.
     /// Errors: `NoSuchObject`, `NotPermitted` (not a root-task thread).
     SetHealthMonitor = 62,
+
+    /// `schedule_set(slot, major_frame, windows, count)`: stores time schedule `slot`
+    /// (< [`MAX_SCHEDULES`]): a major frame in ns and `count` (<= [`MAX_WINDOWS`])
+    /// [`WindowSpec`]s at user address `windows`, sorted by offset, disjoint, inside the
+    /// frame, each for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
+    /// no windows). The running or pending schedule cannot be replaced. Ability:
+    /// `SCHEDULING`. Errors: `InvalidArgument` (slot, frame, windows), `BadAddress`,
+    /// `NotPermitted` (slot in use).
+    ScheduleSet = 70,
+    /// `schedule_switch(slot)`: runs schedule `slot`; the first schedule starts at once,
+    /// later switches take effect at the next major-frame boundary. Ability: `SCHEDULING`.
+    /// Errors: `InvalidArgument` (empty slot).
+    ScheduleSwitch = 71,
+    /// `partition_info(tp) -> rdi = active time partition (0 in a gap or without a
+    /// schedule), rsi = start of tp's current or next window (ns since boot; u64::MAX if it
+    /// has none), rdx = that window's length (ns), r10 = CPU time threads of tp used (ns),
+    /// r8 = time the CPU was idle (ns), r9 = major frames started`. Ability: none. Errors:
+    /// `InvalidArgument` (tp out of range).
+    PartitionInfo = 72,
+}
+
+/// Number of time partitions (0 = background).
+pub const TIME_PARTITIONS: u64 = 16;
+/// Schedule slots and windows per schedule.
+pub const MAX_SCHEDULES: u64 = 4;
+pub const MAX_WINDOWS: u64 = 32;
+
+/// One window of a schedule, as `schedule_set` reads it from user memory.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WindowSpec {
+    /// Start within the major frame (ns).
+    pub offset: u64,
+    pub duration: u64,
+    /// Time partition 1..TIME_PARTITIONS.
+    pub partition: u64,
 }
 
 impl Call {
@@ -203,6 +242,7 @@ impl Call {
             3 => C::ThreadExit,
             4 => C::SystemHalt,
             5 => C::Yield,
+            6 => C::SleepUntil,
             10 => C::TaskCreate,
             11 => C::TaskKill,
             12 => C::TaskAllowSend,
@@ -227,6 +267,9 @@ impl Call {
             60 => C::RpCreate,
             61 => C::RpInfo,
             62 => C::SetHealthMonitor,
+            70 => C::ScheduleSet,
+            71 => C::ScheduleSwitch,
+            72 => C::PartitionInfo,
             _ => return None,
         })
     }

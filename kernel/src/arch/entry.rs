@@ -83,7 +83,9 @@ extern "sysv64" fn on_syscall() {
     let mut k = KERNEL.lock();
     let t = k.current.expect("syscall without a current thread");
     k.threads[t].context = *frame();
-    let outcome = crate::syscall::on_syscall(&mut k, t, time::since_boot_ns());
+    let now = time::since_boot_ns();
+    k.account(now);
+    let outcome = crate::syscall::on_syscall(&mut k, t, now);
     finish(k, outcome);
 }
 
@@ -93,6 +95,7 @@ pub fn on_user_exception(vector: u64, error_code: u64) {
     let mut k = KERNEL.lock();
     let t = k.current.expect("user exception without a current thread");
     k.threads[t].context = *frame();
+    k.account(time::since_boot_ns());
     let outcome = fault::on_exception(&mut k, t, vector, error_code, cr2);
     finish(k, outcome);
 }
@@ -107,7 +110,8 @@ pub fn on_timer(from_user: bool) {
         let t = k.current.expect("user interrupt without a current thread");
         k.threads[t].context = *frame();
     }
-    k.expire_timeouts(time::since_boot_ns());
+    k.account(time::since_boot_ns());
+    k.on_timer(time::since_boot_ns());
     if from_user {
         finish(k, Outcome::Continue);
     } else {
@@ -118,7 +122,7 @@ pub fn on_timer(from_user: bool) {
 fn program_timer(k: &mut Kernel) {
     if k.timer_dirty {
         k.timer_dirty = false;
-        super::lapic::one_shot_at(k.next_deadline);
+        super::lapic::one_shot_at(k.next_event());
     }
 }
 
@@ -135,10 +139,12 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
         program_timer(&mut k);
         if let Some(next) = k.choose() {
             switch_to(&mut k, next);
+            k.running_partition = Some(k.threads[next].time_partition);
             return;
         }
+        k.running_partition = None;
         #[cfg(feature = "test-hooks")]
-        if k.next_deadline == crate::thread::NEVER {
+        if k.next_event() == crate::thread::NEVER {
             crate::test_hooks::on_idle();
         }
         drop(k);
@@ -146,6 +152,7 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
         x86_64::instructions::interrupts::enable_and_hlt();
         x86_64::instructions::interrupts::disable();
         k = KERNEL.lock();
+        k.account(time::since_boot_ns());
     }
 }
 

@@ -331,3 +331,54 @@ pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
 pub fn set_health_monitor(thread: ThreadId) -> Result<(), Error> {
     call(Call::SetHealthMonitor, [thread.0, 0, 0, 0, 0, 0]).map(drop)
 }
+
+/// Blocks until `clock()` >= `time` (ns since boot).
+pub fn sleep_until(time: u64) {
+    let _ = call(Call::SleepUntil, [time, 0, 0, 0, 0, 0]);
+}
+
+/// Stores time schedule `slot`.
+pub fn schedule_set(
+    slot: u64,
+    major_frame_ns: u64,
+    windows: &[abi::syscall::WindowSpec],
+) -> Result<(), Error> {
+    call(
+        Call::ScheduleSet,
+        [
+            slot,
+            major_frame_ns,
+            windows.as_ptr() as u64,
+            windows.len() as u64,
+            0,
+            0,
+        ],
+    )
+    .map(drop)
+}
+
+pub fn schedule_switch(slot: u64) -> Result<(), Error> {
+    call(Call::ScheduleSwitch, [slot, 0, 0, 0, 0, 0]).map(drop)
+}
+
+/// What `partition_info` reports (see `abi::syscall::Call::PartitionInfo`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PartitionInfo {
+    pub active: u64,
+    pub next_window_start: u64,
+    pub window_length: u64,
+    pub cpu_ns: u64,
+    pub idle_ns: u64,
+    pub frames: u64,
+}
+
+pub fn partition_info(tp: u64) -> Result<PartitionInfo, Error> {
+    call(Call::PartitionInfo, [tp, 0, 0, 0, 0, 0]).map(|r| PartitionInfo {
+        active: r.rdi,
+        next_window_start: r.rsi,
+        window_length: r.rdx,
+        cpu_ns: r.r10,
+        idle_ns: r.r8,
+        frames: r.r9,
+    })
+}

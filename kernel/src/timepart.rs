@@ -1,0 +1,344 @@
+//! ARINC 653 time partitioning: schedules of windows in a major frame.
+//!
+//! A schedule is a major frame (ns) and up to [`MAX_WINDOWS`] windows, each an offset and
+//! duration inside the frame that belongs to one time partition (1..[`TIME_PARTITIONS`]).
+//! Time partition 0 is the background: it never owns a window and is always eligible. The
+//! root task installs up to [`MAX_SCHEDULES`] schedules; the first one installed starts at
+//! once, a switch to another takes effect at the next major-frame boundary, never mid-frame.
+//!
+//! [`TimeTable::advance`] is the whole decision: given the time, which partition's window is
+//! active and when the next boundary is. It is pure and host-tested against a model.
+
+use crate::sched::TIME_PARTITIONS;
+
+pub const MAX_WINDOWS: usize = abi::syscall::MAX_WINDOWS as usize;
+pub const MAX_SCHEDULES: usize = abi::syscall::MAX_SCHEDULES as usize;
+
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Window {
+    pub offset: u64,
+    pub duration: u64,
+    pub partition: u8,
+}
+
+impl Window {
+    fn end(&self) -> u64 {
+        self.offset + self.duration
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Schedule {
+    pub major_frame: u64,
+    pub windows: [Window; MAX_WINDOWS],
+    pub count: usize,
+}
+
+/// Why a schedule was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ScheduleError {
+    /// Zero major frame, zero-length window, or too many windows.
+    Empty,
+    /// A window starts before the previous one ends (they must be sorted, disjoint).
+    Overlap(usize),
+    /// A window ends after the major frame.
+    BeyondFrame(usize),
+    /// A window for partition 0 (background) or an unknown partition.
+    BadPartition(usize),
+}
+
+impl Schedule {
+    pub fn new(major_frame: u64, windows: &[Window]) -> Result<Self, ScheduleError> {
+        if major_frame == 0 || windows.len() > MAX_WINDOWS {
+            return Err(ScheduleError::Empty);
+        }
+        let mut previous_end = 0;
+        for (i, w) in windows.iter().enumerate() {
+            if w.duration == 0 {
+                return Err(ScheduleError::Empty);
+            }
+            if w.partition == 0 || w.partition as usize >= TIME_PARTITIONS {
+                return Err(ScheduleError::BadPartition(i));
+            }
+            if w.offset < previous_end {
+                return Err(ScheduleError::Overlap(i));
+            }
+            if w.offset
+                .checked_add(w.duration)
+                .is_none_or(|e| e > major_frame)
+            {
+                return Err(ScheduleError::BeyondFrame(i));
+            }
+            previous_end = w.end();
+        }
+        let mut s = Self {
+            major_frame,
+            windows: [Window::default(); MAX_WINDOWS],
+            count: windows.len(),
+        };
+        s.windows[..windows.len()].copy_from_slice(windows);
+        Ok(s)
+    }
+
+    fn windows(&self) -> &[Window] {
+        &self.windows[..self.count]
+    }
+
+    /// The window containing frame position `pos` (if any) and the next boundary after
+    /// `pos` (a window start or end, or the frame end), relative to the frame start.
+    fn at(&self, pos: u64) -> (Option<usize>, u64) {
+        for (i, w) in self.windows().iter().enumerate() {
+            if pos < w.offset {
+                return (None, w.offset);
+            }
+            if pos < w.end() {
+                return (Some(i), w.end());
+            }
+        }
+        (None, self.major_frame)
+    }
+}
+
+/// Where the schedule stands.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Position {
+    /// The partition whose window is active (None: a gap, only background runs).
+    pub partition: Option<u8>,
+    /// Index of the active window in the running schedule.
+    pub window: Option<usize>,
+    /// Absolute time of the next boundary ([`u64::MAX`] without a schedule).
+    pub next_boundary: u64,
+    /// Absolute start of the current major frame.
+    pub frame_start: u64,
+}
+
+pub struct TimeTable {
+    schedules: [Option<Schedule>; MAX_SCHEDULES],
+    running: Option<usize>,
+    pending: Option<usize>,
+    frame_start: u64,
+    /// Major frames started so far (for tests and statistics).
+    pub frames: u64,
+    /// Schedule switches performed.
+    pub switches: u64,
+}
+
+impl Default for TimeTable {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+impl TimeTable {
+    pub const fn new() -> Self {
+        Self {
+            schedules: [None; MAX_SCHEDULES],
+            running: None,
+            pending: None,
+            frame_start: 0,
+            frames: 0,
+            switches: 0,
+        }
+    }
+
+    /// Stores schedule `slot` (replacing an idle one; the running one cannot be replaced).
+    pub fn install(&mut self, slot: usize, schedule: Schedule) -> Result<(), ScheduleError> {
+        if slot >= MAX_SCHEDULES || self.running == Some(slot) || self.pending == Some(slot) {
+            return Err(ScheduleError::Empty);
+        }
+        self.schedules[slot] = Some(schedule);
+        Ok(())
+    }
+
+    /// Asks for schedule `slot`: at once if none runs, else from the next frame boundary.
+    pub fn switch_to(&mut self, slot: usize, now: u64) -> bool {
+        if slot >= MAX_SCHEDULES || self.schedules[slot].is_none() {
+            return false;
+        }
+        if self.running.is_none() {
+            self.running = Some(slot);
+            self.frame_start = now;
+            self.frames = 1;
+        } else {
+            self.pending = Some(slot);
+        }
+        true
+    }
+
+    pub fn running(&self) -> Option<usize> {
+        self.running
+    }
+
+    pub fn schedule(&self, slot: usize) -> Option<&Schedule> {
+        self.schedules.get(slot)?.as_ref()
+    }
+
+    /// Moves to time `now` (never backwards) and reports the position.
+    pub fn advance(&mut self, now: u64) -> Position {
+        let Some(mut slot) = self.running else {
+            return Position {
+                partition: None,
+                window: None,
+                next_boundary: u64::MAX,
+                frame_start: now,
+            };
+        };
+        let mut major = self.schedules[slot].expect("running").major_frame;
+        if now >= self.frame_start + major {
+            // The first boundary passed applies a pending switch; skip whole frames after.
+            self.frame_start += major;
+            self.frames += 1;
+            if let Some(next) = self.pending.take() {
+                slot = next;
+                self.running = Some(next);
+                self.switches += 1;
+                major = self.schedules[slot].expect("installed").major_frame;
+            }
+            if now >= self.frame_start + major {
+                let skipped = (now - self.frame_start) / major;
+                self.frame_start += skipped * major;
+                self.frames += skipped;
+            }
+        }
+        let schedule = self.schedules[slot].as_ref().expect("running");
+        let (window, next) = schedule.at(now - self.frame_start);
+        Position {
+            partition: window.map(|w| schedule.windows[w].partition),
+            window,
+            next_boundary: self.frame_start + next,
+            frame_start: self.frame_start,
+        }
+    }
+
+    /// Next activation (absolute start) and length of a window of `partition` at or after
+    /// `now`, within the running schedule (current window included if it is active now).
+    pub fn next_window(&self, partition: u8, now: u64) -> Option<(u64, u64)> {
+        let schedule = self.schedules[self.running?].as_ref()?;
+        // The table is advanced on every timer event, so `now` is in this frame or the next.
+        for frame in 0..2 {
+            let base = self.frame_start + frame * schedule.major_frame;
+            for w in schedule.windows() {
+                if w.partition == partition && base + w.end() > now {
+                    return Some((base + w.offset, w.duration));
+                }
+            }
+        }
+        None
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use proptest::prelude::*;
+
+    fn w(offset: u64, duration: u64, partition: u8) -> Window {
+        Window {
+            offset,
+            duration,
+            partition,
+        }
+    }
+
+    #[test]
+    fn validation_names_the_bad_window() {
+        assert_eq!(Schedule::new(0, &[]), Err(ScheduleError::Empty));
+        assert_eq!(
+            Schedule::new(100, &[w(0, 50, 1), w(40, 10, 2)]),
+            Err(ScheduleError::Overlap(1))
+        );
+        assert_eq!(
+            Schedule::new(100, &[w(90, 20, 1)]),
+            Err(ScheduleError::BeyondFrame(0))
+        );
+        assert_eq!(
+            Schedule::new(100, &[w(0, 10, 0)]),
+            Err(ScheduleError::BadPartition(0))
+        );
+        assert!(Schedule::new(100, &[w(0, 50, 1), w(50, 50, 2)]).is_ok());
+    }
+
+    #[test]
+    fn windows_gaps_and_boundaries() {
+        let mut t = TimeTable::new();
+        t.install(
+            0,
+            Schedule::new(100, &[w(10, 30, 1), w(60, 20, 2)]).unwrap(),
+        )
+        .unwrap();
+        assert!(t.switch_to(0, 1000));
+        let p = t.advance(1000);
+        assert_eq!((p.partition, p.next_boundary), (None, 1010));
+        let p = t.advance(1010);
+        assert_eq!((p.partition, p.next_boundary), (Some(1), 1040));
+        let p = t.advance(1045);
+        assert_eq!((p.partition, p.next_boundary), (None, 1060));
+        let p = t.advance(1079);
+        assert_eq!((p.partition, p.next_boundary), (Some(2), 1080));
+        let p = t.advance(1100);
+        assert_eq!(
+            (p.partition, p.next_boundary, p.frame_start),
+            (None, 1110, 1100)
+        );
+        assert_eq!(t.next_window(2, 1100), Some((1160, 20)));
+        assert_eq!(t.next_window(1, 1115), Some((1110, 30)), "active now");
+        assert_eq!(t.next_window(1, 1141), Some((1210, 30)), "next frame");
+    }
+
+    #[test]
+    fn a_switch_waits_for_the_frame_boundary() {
+        let mut t = TimeTable::new();
+        t.install(0, Schedule::new(100, &[w(0, 100, 1)]).unwrap())
+            .unwrap();
+        t.install(1, Schedule::new(50, &[w(0, 50, 2)]).unwrap())
+            .unwrap();
+        t.switch_to(0, 0);
+        t.advance(30);
+        assert!(t.switch_to(1, 30));
+        assert_eq!(t.advance(99).partition, Some(1), "not mid-frame");
+        let p = t.advance(100);
+        assert_eq!(
+            (p.partition, p.frame_start, p.next_boundary),
+            (Some(2), 100, 150)
+        );
+        assert_eq!(t.switches, 1);
+        assert_eq!(
+            t.install(1, Schedule::new(10, &[w(0, 1, 3)]).unwrap()),
+            Err(ScheduleError::Empty)
+        );
+    }
+
+    proptest! {
+        /// Against a model: the active partition at any time is the one whose window (in
+        /// the frame containing that time) contains it; boundaries are never skipped.
+        #[test]
+        fn matches_a_model(
+            raw in proptest::collection::vec((1u64..50, 1u64..50, 1u8..4), 1..6),
+            steps in proptest::collection::vec(1u64..200, 1..100),
+        ) {
+            let mut windows = vec![];
+            let mut at = 0;
+            for (gap, duration, partition) in raw {
+                windows.push(w(at + gap, duration, partition));
+                at += gap + duration;
+            }
+            let major = at + 7;
+            let s = Schedule::new(major, &windows).unwrap();
+            let mut t = TimeTable::new();
+            t.install(0, s).unwrap();
+            t.switch_to(0, 5);
+            let mut now = 5;
+            let mut boundary = t.advance(now).next_boundary;
+            for step in steps {
+                // Never jump past a boundary (the kernel is woken at each one).
+                now = (now + step).min(boundary);
+                let p = t.advance(now);
+                let pos = (now - 5) % major;
+                let expected = windows.iter().find(|w| w.offset <= pos && pos < w.end()).map(|w| w.partition);
+                prop_assert_eq!(p.partition, expected);
+                prop_assert!(p.next_boundary > now);
+                boundary = p.next_boundary;
+            }
+        }
+    }
+}
