@@ -18,6 +18,12 @@ use abi::syscall::{
     Abilities, Error, MAP_MAX_PAGES, PageRights, TASK_NAME_MAX, USER_END, make_id, split_id,
 };
 
+/// Byte `index` of an I/O bitmap frame.
+fn io_byte(frame: u64, index: usize) -> u8 {
+    // SAFETY: `frame` is a bitmap frame owned by a task; index < 4096 by construction.
+    unsafe { *((crate::mem::phys_to_virt(frame) + index as u64) as *const u8) }
+}
+
 pub const MAX_THREADS: usize = 256;
 pub const MAX_TASKS: usize = 64;
 pub const MAX_RPS: usize = 16;
@@ -67,6 +73,8 @@ pub struct Kernel {
     /// Time partition of the thread that ran since `last_account` (None: idle).
     pub running_partition: Option<u8>,
     pub last_account: u64,
+    /// Raw id of the task whose I/O bitmap is in the TSS (0: ports disabled).
+    pub io_loaded: u64,
 }
 
 impl Default for Kernel {
@@ -102,6 +110,7 @@ impl Kernel {
             idle_ns: 0,
             running_partition: None,
             last_account: 0,
+            io_loaded: 0,
         }
     }
 
@@ -428,7 +437,16 @@ impl Kernel {
             }
         }
         let rp = self.tasks[task].rp;
-        let freed = self.tasks[task].space.destroy();
+        let mut freed = self.tasks[task].space.destroy();
+        for frame in self.tasks[task].io_bitmap {
+            if frame != 0 {
+                crate::mem::free_frame(frame);
+                freed += 1;
+            }
+        }
+        if self.io_loaded == self.task_id(task) {
+            self.io_loaded = 0;
+        }
         debug_assert_eq!(freed, self.tasks[task].pages_charged);
         self.rps[rp].release(Amount {
             tasks: 1,
@@ -566,6 +584,81 @@ impl Kernel {
         self.run.remove(t);
         self.threads[t].time_partition = partition;
         self.requeue(t);
+        Ok(())
+    }
+
+    // ----- I/O ports --------------------------------------------------------------------
+
+    /// True if `task` may use `port` (the root: every port but the kernel's).
+    pub fn holds_port(&self, task: usize, port: u16) -> bool {
+        if task == 0 {
+            return !abi::syscall::KERNEL_PORTS
+                .iter()
+                .any(|&(lo, hi)| (lo..=hi).contains(&port));
+        }
+        let frame = self.tasks[task].io_bitmap[port as usize / 32768];
+        frame != 0 && {
+            let bit = port as usize % 32768;
+            io_byte(frame, bit / 8) & (1 << (bit % 8)) == 0
+        }
+    }
+
+    /// Grants ports `first..first + count` of `caller` to the descendant `target`.
+    pub fn io_grant(
+        &mut self,
+        caller: usize,
+        target: usize,
+        first: u64,
+        count: u64,
+    ) -> Result<(), Error> {
+        if count == 0 || first.checked_add(count).is_none_or(|end| end > 0x1_0000) {
+            return Err(Error::InvalidArgument);
+        }
+        if target == caller || !self.is_within(target, caller) {
+            return Err(Error::NotPermitted);
+        }
+        let ports = first as u16..=(first + count - 1) as u16;
+        if !ports.clone().all(|p| self.holds_port(caller, p)) {
+            return Err(Error::NotPermitted);
+        }
+        if self.tasks[target].io_bitmap[0] == 0 {
+            self.rps[self.tasks[target].rp].charge(Amount::pages(2))?;
+            let frames = [
+                crate::mem::alloc_zeroed_frame(),
+                crate::mem::alloc_zeroed_frame(),
+            ];
+            let [Some(a), Some(b)] = frames else {
+                // Cannot happen within the reserved pool; undo and refuse.
+                frames
+                    .into_iter()
+                    .flatten()
+                    .for_each(crate::mem::free_frame);
+                self.rps[self.tasks[target].rp].release(Amount::pages(2));
+                return Err(Error::OutOfResources);
+            };
+            for frame in [a, b] {
+                // SAFETY: a fresh frame, direct-mapped, 4 KiB: "every port denied".
+                unsafe {
+                    core::ptr::write_bytes(
+                        crate::mem::phys_to_virt(frame) as *mut u8,
+                        0xff,
+                        PAGE_SIZE as usize,
+                    )
+                };
+            }
+            self.tasks[target].io_bitmap = [a, b];
+            self.tasks[target].pages_charged += 2;
+        }
+        for port in ports {
+            let frame = self.tasks[target].io_bitmap[port as usize / 32768];
+            let bit = port as usize % 32768;
+            let byte = crate::mem::phys_to_virt(frame) + (bit / 8) as u64;
+            // SAFETY: inside the task's bitmap frame (bit / 8 < 4096), direct-mapped.
+            unsafe { *(byte as *mut u8) &= !(1 << (bit % 8)) };
+        }
+        if self.io_loaded == self.task_id(target) {
+            self.io_loaded = 0;
+        }
         Ok(())
     }
 

@@ -319,6 +319,12 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
             time_call(k, t, call, a, now)?;
             done(k, t)
         }
+        Call::IoGrant => {
+            k.require(task, Abilities::IO_PORTS)?;
+            let target = k.task(a[0])?;
+            k.io_grant(task, target, a[1], a[2])?;
+            done(k, t)
+        }
         Call::SetHealthMonitor => {
             k.require(task, Abilities::PARTITION_CONTROL)?;
             let monitor = k.thread(a[0])?;

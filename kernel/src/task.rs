@@ -24,8 +24,11 @@ pub struct Task {
     pub space: AddressSpace,
     /// Bit i set: threads of this task may send to threads of task slot i.
     pub send_to: u64,
-    /// Page-table frames charged to the resource partition (returned when it dies).
+    /// Page-table and I/O-bitmap frames charged to the resource partition (returned when
+    /// it dies).
     pub pages_charged: u64,
+    /// The two frames of its I/O permission bitmap (0: no ports).
+    pub io_bitmap: [u64; 2],
 }
 
 impl Task {
@@ -41,6 +44,7 @@ impl Task {
         space: AddressSpace::NONE,
         send_to: 0,
         pages_charged: 0,
+        io_bitmap: [0; 2],
     };
 
     pub fn name(&self) -> &str {

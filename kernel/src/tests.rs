@@ -658,3 +658,43 @@ fn killing_a_server_releases_its_clients() {
     assert_eq!(f.k.threads[waiting].context.rax, err(Error::PeerGone));
     assert_eq!(f.k.threads[queued].context.rax, err(Error::PeerGone));
 }
+
+#[test]
+fn io_ports_are_granted_down_the_tree_only() {
+    let mut f = Fixture::new();
+    let root = f.thread(0, 200);
+    let before = f.k.rps[0].used.pages;
+    let child = f.task(0, Abilities::all(), 100);
+    let grandchild = f.task(child, Abilities::all(), 100);
+    let c = f.thread(child, 50);
+    let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
+    assert_eq!(
+        f.sys(root, Call::IoGrant, [cid, 0x3f8, 8, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "COM1 is the kernel's"
+    );
+    assert_eq!(
+        f.sys(root, Call::IoGrant, [cid, 0xfff0, 0x20, 0, 0, 0]),
+        err(Error::InvalidArgument)
+    );
+    let pages = f.k.rps[0].used.pages;
+    assert_eq!(f.sys(root, Call::IoGrant, [cid, 0x2f8, 8, 0, 0, 0]), OK);
+    assert_eq!(f.k.rps[0].used.pages, pages + 2, "bitmap charged");
+    assert!(f.k.holds_port(child, 0x2f8) && f.k.holds_port(child, 0x2ff));
+    assert!(!f.k.holds_port(child, 0x300) && !f.k.holds_port(child, 0x2f7));
+    assert_eq!(
+        f.sys(c, Call::IoGrant, [gid, 0x2f8, 9, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "0x300 not held"
+    );
+    assert_eq!(f.sys(c, Call::IoGrant, [gid, 0x2fc, 4, 0, 0, 0]), OK);
+    assert!(f.k.holds_port(grandchild, 0x2fc) && !f.k.holds_port(grandchild, 0x2f8));
+    let rt = f.k.task_id(0);
+    assert_eq!(
+        f.sys(c, Call::IoGrant, [rt, 0x2f8, 1, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "not upwards"
+    );
+    f.k.destroy_task(child);
+    assert_eq!(f.k.rps[0].used.pages, before, "bitmaps and tables returned");
+}

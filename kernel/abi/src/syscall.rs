@@ -214,7 +214,26 @@ pub enum Call {
     /// r8 = time the CPU was idle (ns), r9 = major frames started`. Ability: none. Errors:
     /// `InvalidArgument` (tp out of range).
     PartitionInfo = 72,
+
+    /// `io_grant(task, first_port, count)`: lets a descendant task use I/O ports
+    /// `first_port..first_port + count` from ring 3 (enforced by the TSS I/O permission
+    /// bitmap; any other port access raises #GP, delivered like every fault). The caller
+    /// must hold the ports itself (the root task holds all except the kernel's:
+    /// [`KERNEL_PORTS`]). The first grant to a task costs 2 pages of its partition's quota.
+    /// Ability: `IO_PORTS`. Errors: `InvalidArgument` (empty range or beyond 0xffff),
+    /// `NotPermitted` (not a strict descendant, or ports the caller does not hold),
+    /// `QuotaExceeded`, `NoSuchObject`.
+    IoGrant = 80,
 }
+
+/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit).
+pub const KERNEL_PORTS: [(u16, u16); 5] = [
+    (0x20, 0x21),
+    (0x40, 0x43),
+    (0xa0, 0xa1),
+    (0x3f8, 0x3ff),
+    (0xf4, 0xf4),
+];
 
 /// Number of time partitions (0 = background).
 pub const TIME_PARTITIONS: u64 = 16;
@@ -270,6 +289,7 @@ impl Call {
             70 => C::ScheduleSet,
             71 => C::ScheduleSwitch,
             72 => C::PartitionInfo,
+            80 => C::IoGrant,
             _ => return None,
         })
     }

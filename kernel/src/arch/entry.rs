@@ -169,11 +169,34 @@ fn switch_to(k: &mut Kernel, next: usize) {
             }
             k.current = Some(next);
         }
+        load_io_permissions(k, k.threads[next].task);
         let th = &k.threads[next];
         super::fpu::set_bases(th.fs_base, th.gs_base);
         k.reload_bases = false;
     }
     *frame() = k.threads[next].context;
+}
+
+/// Puts `task`'s I/O bitmap into the TSS, copying 8 KiB only if another task's is there.
+fn load_io_permissions(k: &mut Kernel, task: usize) {
+    let id = k.task_id(task);
+    if k.io_loaded == id {
+        return;
+    }
+    let [lo, hi] = k.tasks[task].io_bitmap;
+    if lo == 0 {
+        if k.io_loaded != 0 {
+            super::gdt::load_io_bitmap(None);
+            k.io_loaded = 0;
+        }
+        return;
+    }
+    // SAFETY: the task's bitmap frames, direct-mapped, 4 KiB each, not written meanwhile.
+    let half = |frame: u64| unsafe {
+        core::slice::from_raw_parts(crate::mem::phys_to_virt(frame) as *const u8, 4096)
+    };
+    super::gdt::load_io_bitmap(Some([half(lo), half(hi)]));
+    k.io_loaded = id;
 }
 
 /// Leaves the boot path for user mode: runs the first ready thread (the root task).

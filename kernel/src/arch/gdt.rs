@@ -29,8 +29,33 @@ pub struct Selectors {
     pub tss: SegmentSelector,
 }
 
-static TSS: Lazy<TaskStateSegment> = Lazy::new(|| {
-    let mut tss = TaskStateSegment::new();
+/// Bytes of the I/O permission bitmap (one bit per port, 0 = allowed).
+pub const IOMAP_BYTES: usize = 8192;
+
+/// The TSS followed directly by its I/O permission bitmap (and the 0xff terminator the CPU
+/// may read past the last byte).
+#[repr(C, align(16))]
+struct TssBlock {
+    tss: TaskStateSegment,
+    iomap: [u8; IOMAP_BYTES + 1],
+}
+
+static mut TSS_BLOCK: TssBlock = TssBlock {
+    tss: TaskStateSegment::new(),
+    iomap: [0xff; IOMAP_BYTES + 1],
+};
+
+/// `iomap_base` that makes the CPU deny every port (beyond the TSS limit).
+const IOMAP_DISABLED: u16 = (core::mem::size_of::<TaskStateSegment>() + IOMAP_BYTES + 1) as u16;
+
+fn tss_block() -> *mut TssBlock {
+    core::ptr::addr_of_mut!(TSS_BLOCK)
+}
+
+fn init_tss() {
+    let block = tss_block();
+    // SAFETY: called once from `init` before the TSS is loaded; nothing else uses it yet.
+    let tss = unsafe { &mut (*block).tss };
     for (slot, ist) in [DOUBLE_FAULT_IST, NMI_IST, MACHINE_CHECK_IST]
         .into_iter()
         .enumerate()
@@ -42,16 +67,47 @@ static TSS: Lazy<TaskStateSegment> = Lazy::new(|| {
     }
     // Interrupts and exceptions from ring 3 start on the (one) kernel stack.
     tss.privilege_stack_table[0] = VirtAddr::new(super::stack::top());
-    tss
-});
+    tss.iomap_base = IOMAP_DISABLED;
+}
+
+/// Loads the running task's I/O permission bitmap, given as its two 4 KiB halves (`None`:
+/// no port allowed, O(1)).
+pub fn load_io_bitmap(bitmap: Option<[&[u8]; 2]>) {
+    let block = tss_block();
+    // SAFETY: the CPU reads the TSS only on privilege changes and port accesses from ring 3,
+    // never while the kernel (interrupts off) updates it; the writes stay inside the block.
+    unsafe {
+        match bitmap {
+            Some([low, high]) => {
+                let iomap = &mut (*block).iomap;
+                iomap[..IOMAP_BYTES / 2].copy_from_slice(low);
+                iomap[IOMAP_BYTES / 2..IOMAP_BYTES].copy_from_slice(high);
+                (*block).tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16;
+            }
+            None => (*block).tss.iomap_base = IOMAP_DISABLED,
+        }
+    }
+}
 
 static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
+    init_tss();
+    let block = tss_block();
+    // SAFETY: the block is a static that lives forever; the descriptor only records its
+    // address and the limit covering TSS and bitmap.
+    let (tss, iomap) = unsafe { (&(*block).tss, &(*block).iomap) };
     let mut gdt = GlobalDescriptorTable::new();
     let kernel_code = gdt.append(Descriptor::kernel_code_segment());
     let kernel_data = gdt.append(Descriptor::kernel_data_segment());
     let user_data = gdt.append(Descriptor::user_data_segment());
     let user_code = gdt.append(Descriptor::user_code_segment());
-    let tss = gdt.append(Descriptor::tss_segment(&TSS));
+    // The descriptor checks that the bitmap follows the TSS; iomap_base is set to it for
+    // the check and back to "disabled" right after (no task owns ports at boot).
+    // SAFETY: as above; nothing runs in ring 3 yet.
+    unsafe { (*block).tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16 };
+    let tss = gdt.append(
+        Descriptor::tss_segment_with_iomap(tss, iomap).expect("bitmap directly follows the TSS"),
+    );
+    load_io_bitmap(None);
     (
         gdt,
         Selectors {

@@ -82,19 +82,18 @@ pub fn thread_exit() -> ! {
 
 /// Ends the run (success or failure); returns only if the caller may not halt.
 pub fn system_halt(success: bool) -> Result<(), Error> {
-    call(Call::SystemHalt, [if success { 0 } else { 1 }, 0, 0, 0, 0, 0]).map(drop)
+    call(
+        Call::SystemHalt,
+        [if success { 0 } else { 1 }, 0, 0, 0, 0, 0],
+    )
+    .map(drop)
 }
 
 pub fn yield_now() {
     raw(Call::Yield as u64, 0, 0, 0, 0);
 }
 
-pub fn task_create(
-    abilities: Abilities,
-    mcp: u8,
-    rp: u64,
-    name: &str,
-) -> Result<TaskId, Error> {
+pub fn task_create(abilities: Abilities, mcp: u8, rp: u64, name: &str) -> Result<TaskId, Error> {
     call(
         Call::TaskCreate,
         [
@@ -132,7 +131,14 @@ pub fn thread_create(
 ) -> Result<ThreadId, Error> {
     call(
         Call::ThreadCreate,
-        [task.map_or(0, |t| t.0), entry, stack, priority as u64, arg, 0],
+        [
+            task.map_or(0, |t| t.0),
+            entry,
+            stack,
+            priority as u64,
+            arg,
+            0,
+        ],
     )
     .map(|r| ThreadId(r.rdi))
 }
@@ -185,7 +191,14 @@ pub fn map(
 ) -> Result<(), Error> {
     call(
         Call::Map,
-        [task.map_or(0, |t| t.0), source, destination, pages, rights.bits(), 0],
+        [
+            task.map_or(0, |t| t.0),
+            source,
+            destination,
+            pages,
+            rights.bits(),
+            0,
+        ],
     )
     .map(drop)
 }
@@ -199,13 +212,24 @@ pub fn map_physical(
 ) -> Result<(), Error> {
     call(
         Call::MapPhysical,
-        [task.map_or(0, |t| t.0), physical, destination, pages, rights.bits(), 0],
+        [
+            task.map_or(0, |t| t.0),
+            physical,
+            destination,
+            pages,
+            rights.bits(),
+            0,
+        ],
     )
     .map(drop)
 }
 
 pub fn unmap(task: Option<TaskId>, address: u64, pages: u64) -> Result<(), Error> {
-    call(Call::Unmap, [task.map_or(0, |t| t.0), address, pages, 0, 0, 0]).map(drop)
+    call(
+        Call::Unmap,
+        [task.map_or(0, |t| t.0), address, pages, 0, 0, 0],
+    )
+    .map(drop)
 }
 
 pub fn protect(
@@ -247,7 +271,9 @@ pub struct Received {
 fn ipc(c: Call, peer: u64, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
     call(
         c,
-        [peer, timeout_ns, m.tag.0, m.words[0], m.words[1], m.words[2]],
+        [
+            peer, timeout_ns, m.tag.0, m.words[0], m.words[1], m.words[2],
+        ],
     )
     .map(|r| Received {
         sender: ThreadId(r.rdi),
@@ -303,7 +329,11 @@ pub fn sleep(ns: u64) {
 }
 
 pub fn rp_create(tasks: u16, threads: u16, pages: u64) -> Result<u64, Error> {
-    call(Call::RpCreate, [tasks as u64, threads as u64, pages, 0, 0, 0]).map(|r| r.rdi)
+    call(
+        Call::RpCreate,
+        [tasks as u64, threads as u64, pages, 0, 0, 0],
+    )
+    .map(|r| r.rdi)
 }
 
 /// Usage of a resource partition (0 = the caller's).
@@ -381,4 +411,9 @@ pub fn partition_info(tp: u64) -> Result<PartitionInfo, Error> {
         idle_ns: r.r8,
         frames: r.r9,
     })
+}
+
+/// Grants I/O ports `first..first + count` to a descendant task.
+pub fn io_grant(task: TaskId, first: u16, count: u32) -> Result<(), Error> {
+    call(Call::IoGrant, [task.0, first as u64, count as u64, 0, 0, 0]).map(drop)
 }
