@@ -1,14 +1,18 @@
 //! The user-mode runtime shared by syssw, partitions and test programs: system-call stubs,
 //! the entry macro, a heap-free line printer, a panic handler, and the `mem*` functions a
-//! freestanding (libc-less) Rust binary needs.
+//! freestanding (libc-less) Rust binary needs; plus IPC-buffer access ([`ipc_buffer`]) and
+//! the mechanism to start the caller's image in child tasks ([`spawn`]).
 //!
 //! It must stay free of policy and of allocation; the only `unsafe` code is the `syscall`
-//! instruction stubs and the `mem*` primitives, each with its justification.
+//! instruction stubs, the `mem*` primitives and raw accesses to memory the kernel maps
+//! (IPC buffers, the own ELF headers, frames being filled), each with its justification.
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
 
+pub mod ipc_buffer;
 pub mod mem;
 pub mod print;
+pub mod spawn;
 pub mod sys;
 
 pub use abi;
@@ -62,3 +66,14 @@ pub fn system_image(base: u64, len: u64) -> &'static [u8] {
 #[allow(unsafe_code)]
 #[unsafe(no_mangle)]
 pub extern "C" fn rust_eh_personality() {}
+
+/// The root task's start information (mapped read-only by the kernel at
+/// `abi::syscall::ROOT_INFO_BASE`). Only valid in the root task.
+pub fn root_info() -> &'static abi::root::RootInfo {
+    #[allow(unsafe_code)]
+    // SAFETY: the kernel maps a RootInfo page read-only at ROOT_INFO_BASE for the life of
+    // the root task (checked by the magic below before use).
+    let info = unsafe { &*(abi::syscall::ROOT_INFO_BASE as *const abi::root::RootInfo) };
+    assert_eq!(info.magic, abi::root::ROOT_INFO_MAGIC, "not the root task");
+    info
+}

@@ -1,15 +1,35 @@
 //! Kernel micro-benchmarks, run as the root task by `cargo xtask bench`. Prints one
-//! `bench NAME median=N min=N max=N unit=cycles samples=N` line per metric.
+//! `bench NAME median=N min=N max=N unit=cycles samples=N` line per metric:
+//!
+//! * `null_syscall`: an unknown call number, the cheapest kernel entry and exit;
+//! * `ipc_roundtrip`: `call` from the root to a server thread in a child task that answers
+//!   from a `reply_wait` loop (register-only messages), measured in the root;
+//! * `exception_roundtrip`: a thread of the root task executes `ud2`; its handler (the
+//!   root's main thread) advances rip by 2 and replies `REPLY_RESUME`; measured in the
+//!   faulting thread from before the fault to after the resume.
 #![no_std]
 #![no_main]
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
 
-use user_rt::{println, sys};
+use core::sync::atomic::{AtomicU64, Ordering};
+use user_rt::abi::ipc::{EXCEPTION_MESSAGE_SIZE, LABEL_EXCEPTION, MessageTag, REPLY_RESUME};
+use user_rt::abi::syscall::{Abilities, TIMEOUT_INFINITE, ThreadAttribute, ThreadId};
+use user_rt::ipc_buffer::IpcBufferRef;
+use user_rt::println;
+use user_rt::spawn::{AddressRange, FramePool, Spawner, words_at};
+use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
 
 const SAMPLES: usize = 10_000;
+const WARMUP: usize = 1000;
+/// Where the spawner takes the root's addresses from.
+const SPAWN_BASE: u64 = 0x0000_1000_0000_0000;
+const SPAWN_END: u64 = 0x0000_2000_0000_0000;
+/// Word index of `rip` in an `ExceptionMessage` (vector, error code, fault address, thread,
+/// task, then rax..r15 = 16 registers, then rip).
+const RIP_WORD: usize = 5 + 16;
 
 fn rdtsc() -> u64 {
     #[allow(unsafe_code)]
@@ -30,18 +50,142 @@ fn report(name: &str, samples: &mut [u32]) {
     );
 }
 
+/// Ends the run as failed with a reason (setup of a benchmark went wrong).
+fn broken(what: &str, detail: impl core::fmt::Debug) -> ! {
+    println!("bench setup failed: {what}: {detail:?}");
+    let _ = sys::system_halt(false);
+    sys::thread_exit()
+}
+
 fn main(_: u64, _: u64) {
+    let mut samples = [0u32; SAMPLES];
+    null_syscall(&mut samples);
+
+    let mut spawner = Spawner::new(
+        FramePool::from_root_info(),
+        AddressRange::new(SPAWN_BASE, SPAWN_END),
+    )
+    .unwrap_or_else(|e| broken("spawner", e));
+    let ipc = spawner
+        .own_ipc_buffer()
+        .unwrap_or_else(|e| broken("root IPC buffer", e));
+    ipc_roundtrip(&mut spawner, &mut samples);
+    exception_roundtrip(&mut spawner, ipc, &mut samples);
+    let _ = sys::system_halt(true);
+}
+
+fn null_syscall(samples: &mut [u32; SAMPLES]) {
     // Warm up caches and the TLB.
-    for _ in 0..1000 {
+    for _ in 0..WARMUP {
         sys::raw(0, 0, 0, 0, 0);
     }
-    let mut samples = [0u32; SAMPLES];
     for s in samples.iter_mut() {
         let t0 = rdtsc();
         // Call number 0 does not exist: the cheapest complete kernel entry and exit.
         sys::raw(0, 0, 0, 0, 0);
         *s = (rdtsc() - t0) as u32;
     }
-    report("null_syscall", &mut samples);
-    let _ = sys::system_halt(true);
+    report("null_syscall", samples);
+}
+
+/// Answers every call with its words, forever.
+extern "C" fn echo_server(_: u64) -> ! {
+    let mut next = sys::receive(None, TIMEOUT_INFINITE);
+    loop {
+        next = match next {
+            Ok(m) => sys::reply_wait(
+                Some(m.sender),
+                TIMEOUT_INFINITE,
+                &Message::new(0, m.message.words),
+            ),
+            Err(_) => sys::receive(None, TIMEOUT_INFINITE),
+        };
+    }
+}
+
+fn ipc_roundtrip(spawner: &mut Spawner, samples: &mut [u32; SAMPLES]) {
+    let task = spawner
+        .create_task(Abilities::NATIVE_SYSCALLS, 255, 0, "bench-server")
+        .unwrap_or_else(|e| broken("server task", e));
+    // Above the root: it starts at once and waits in `receive` before the first call.
+    let server = spawner
+        .thread(Some(task), echo_server, 210, 0, 4)
+        .unwrap_or_else(|e| broken("server thread", e));
+    sys::thread_start(server.id).unwrap_or_else(|e| broken("thread_start", e));
+    let m = Message::new(1, [1, 2, 3]);
+    for _ in 0..WARMUP {
+        sys::ipc_call(server.id, TIMEOUT_INFINITE, &m).unwrap_or_else(|e| broken("call", e));
+    }
+    for s in samples.iter_mut() {
+        let t0 = rdtsc();
+        let r = sys::ipc_call(server.id, TIMEOUT_INFINITE, &m);
+        *s = (rdtsc() - t0) as u32;
+        if r.is_err() {
+            broken("call", r);
+        }
+    }
+    report("ipc_roundtrip", samples);
+    let _ = sys::task_kill(task);
+}
+
+/// Faults `WARMUP + SAMPLES` times (ud2, which the handler skips), recording each round
+/// trip in the words at `arg`; sets the word after the samples when done.
+extern "C" fn faulter(arg: u64) -> ! {
+    #[allow(unsafe_code)]
+    // SAFETY: `arg` is the address of `WARMUP + SAMPLES + 1` words the root mapped for
+    // good in its own task (this thread's task) with `shared_words`; only used atomically.
+    let words = unsafe { words_at(arg, WARMUP + SAMPLES + 1) };
+    for word in &words[..WARMUP + SAMPLES] {
+        let t0 = rdtsc();
+        #[allow(unsafe_code)]
+        // SAFETY: `ud2` raises #UD; the handler resumes 2 bytes later, right after it,
+        // with all registers unchanged.
+        unsafe {
+            core::arch::asm!("ud2", options(nostack))
+        };
+        word.store(rdtsc() - t0, Ordering::Relaxed);
+    }
+    words[WARMUP + SAMPLES].store(1, Ordering::Release);
+    sys::thread_exit()
+}
+
+fn exception_roundtrip(spawner: &mut Spawner, ipc: IpcBufferRef, samples: &mut [u32; SAMPLES]) {
+    let total = WARMUP + SAMPLES;
+    let words: &'static [AtomicU64] = spawner
+        .shared_words(None, total + 1)
+        .unwrap_or_else(|e| broken("sample memory", e));
+    let thread = spawner
+        .thread(None, faulter, 100, words.as_ptr() as u64, 4)
+        .unwrap_or_else(|e| broken("faulting thread", e));
+    let (me, _) = sys::thread_self();
+    sys::thread_set(Some(thread.id), ThreadAttribute::ExceptionHandler, me.0)
+        .unwrap_or_else(|e| broken("thread_set ExceptionHandler", e));
+    sys::thread_start(thread.id).unwrap_or_else(|e| broken("thread_start", e));
+
+    let f: ThreadId = thread.id;
+    let resume = Message {
+        tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
+        words: [0; 3],
+    };
+    let mut next = sys::receive(Some(f), TIMEOUT_INFINITE);
+    for i in 0..total {
+        match next {
+            Ok(m) if m.message.tag.label() == LABEL_EXCEPTION => {}
+            other => broken("exception message", other),
+        }
+        // The message is still in the buffer: skip the 2-byte ud2 and send it back.
+        ipc.set_data_word(RIP_WORD, ipc.data_word(RIP_WORD) + 2);
+        if i + 1 < total {
+            next = sys::reply_wait(Some(f), TIMEOUT_INFINITE, &resume);
+        } else {
+            sys::reply(f, &resume).unwrap_or_else(|e| broken("reply", e));
+        }
+    }
+    while words[total].load(Ordering::Acquire) == 0 {
+        sys::sleep(1_000_000);
+    }
+    for (s, w) in samples.iter_mut().zip(&words[WARMUP..total]) {
+        *s = w.load(Ordering::Relaxed) as u32;
+    }
+    report("exception_roundtrip", samples);
 }

@@ -1,36 +1,60 @@
 //! Test program run as the root task: checks the user-mode basics and each system call's
-//! success and error paths, then ends the run. With argument `kernel-read` (system image
-//! entry `test/mode`) it instead reads kernel memory, which must fault.
+//! success and error paths, then ends the run. The system image entry `test/mode` selects
+//! what it does:
+//!
+//! | mode | checks | module |
+//! |---|---|---|
+//! | (none) | debug_write, clock, invalid calls, SSE state across calls | here |
+//! | `kernel-read` | reads kernel memory, which must fault | here |
+//! | `tasks` | tasks, threads, abilities, MCP, control rights, life cycle, scheduling | [`tasks`] |
+//! | `quota` | resource partitions and their quotas | [`quota`] |
+//! | `memory` | map, map_physical, unmap, protect | [`memory`] |
+//! | `ipc` | synchronous IPC, map/grant items, timeouts, rights, notifications | [`ipc`] |
+//! | `exceptions` | exceptions and forwarded syscalls as IPC, health monitor | [`exceptions`] |
+//! | `no-handler` | a fault without handler or health monitor kills only the thread | [`exceptions`] |
+//!
+//! Every check prints `check ok: <what>` or `check FAILED: <what>` (and ends the run as
+//! failed); a mode that passes prints `all <mode> checks passed` and halts with success.
+//! [`child`] has the machinery for running code in extra threads and child tasks.
 #![no_std]
 #![no_main]
 #![forbid(unsafe_op_in_unsafe_fn)]
 
+mod check;
+mod child;
+mod exceptions;
+mod ipc;
+mod memory;
+mod quota;
+mod tasks;
+
+use check::expect;
 use user_rt::abi::syscall::{Call, DEBUG_WRITE_MAX, Error};
 use user_rt::abi::sysimg::SystemImage;
 use user_rt::{println, sys};
 
 user_rt::entry!(main);
 
-fn expect(what: &str, ok: bool) {
-    if ok {
-        println!("check ok: {what}");
-    } else {
-        println!("check FAILED: {what}");
-        let _ = sys::system_halt(false);
-    }
-}
-
 fn main(image_base: u64, image_len: u64) {
     let image =
         SystemImage::parse(user_rt::system_image(image_base, image_len)).expect("system image");
     let mode = image.find("test/mode").map(|e| e.data).unwrap_or(b"");
+    match mode {
+        b"tasks" => return tasks::run(),
+        b"quota" => return quota::run(),
+        b"memory" => return memory::run(),
+        b"ipc" => return ipc::run(),
+        b"exceptions" => return exceptions::run(),
+        b"no-handler" => return exceptions::run_no_handler(),
+        _ => {}
+    }
     if mode == b"kernel-read" {
         println!("reading kernel memory at 0xffffffff80000000");
         #[allow(unsafe_code)]
         // SAFETY: deliberately invalid: the kernel half is supervisor-only, so this must fault.
         let value = unsafe { core::ptr::read_volatile(0xffff_ffff_8000_0000 as *const u64) };
         expect(
-            &format_args!("kernel memory unreadable (read {value:#x})")
+            format_args!("kernel memory unreadable (read {value:#x})")
                 .as_str()
                 .unwrap_or("kernel memory unreadable"),
             false,
