@@ -24,12 +24,13 @@ pub enum Blame {
     Receiver(Error),
 }
 
-/// Absolute deadline of a timeout given at `now` (0 = poll, handled by the callers).
-pub fn deadline(now: u64, timeout: u64) -> u64 {
+/// Absolute deadline of a timeout starting now (0 = poll, handled by the callers). The
+/// clock is only read for finite timeouts.
+pub fn deadline(clock: fn() -> u64, timeout: u64) -> u64 {
     if timeout == TIMEOUT_INFINITE {
         NEVER
     } else {
-        now.saturating_add(timeout)
+        clock().saturating_add(timeout)
     }
 }
 

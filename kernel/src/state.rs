@@ -67,9 +67,9 @@ pub struct Kernel {
     pub time: TimeTable,
     /// Absolute time of the next window boundary (`NEVER` without a schedule).
     pub next_boundary: u64,
-    /// CPU time per time partition (ns), and time with nothing to run.
-    pub cpu_ns: [u64; TIME_PARTITIONS],
-    pub idle_ns: u64,
+    /// CPU time per time partition and time with nothing to run, in TSC ticks.
+    pub cpu_ticks: [u64; TIME_PARTITIONS],
+    pub idle_ticks: u64,
     /// Time partition of the thread that ran since `last_account` (None: idle).
     pub running_partition: Option<u8>,
     pub last_account: u64,
@@ -106,8 +106,8 @@ impl Kernel {
             reload_bases: false,
             time: TimeTable::new(),
             next_boundary: NEVER,
-            cpu_ns: [0; TIME_PARTITIONS],
-            idle_ns: 0,
+            cpu_ticks: [0; TIME_PARTITIONS],
+            idle_ticks: 0,
             running_partition: None,
             last_account: 0,
             io_loaded: 0,
@@ -254,13 +254,13 @@ impl Kernel {
         self.next_deadline.min(self.next_boundary)
     }
 
-    /// Charges the time since the last call to the partition that ran (or to idle).
+    /// Charges the time since the last call (TSC `now`) to the partition that ran, or idle.
     pub fn account(&mut self, now: u64) {
         let delta = now.saturating_sub(self.last_account);
         self.last_account = now;
         match self.running_partition {
-            Some(p) => self.cpu_ns[p as usize] += delta,
-            None => self.idle_ns += delta,
+            Some(p) => self.cpu_ticks[p as usize] += delta,
+            None => self.idle_ticks += delta,
         }
     }
 

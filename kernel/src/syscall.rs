@@ -29,8 +29,9 @@ fn args(k: &Kernel, t: usize) -> [u64; 6] {
     [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9]
 }
 
-/// A `syscall` of thread `t` at time `now` (its registers are in its context).
-pub fn on_syscall(k: &mut Kernel, t: usize, now: u64) -> Outcome {
+/// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
+/// ns since boot, read only by calls that need it (it costs a division).
+pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
     let task = k.threads[t].task;
     if !k.tasks[task].abilities.contains(Abilities::NATIVE_SYSCALLS) {
         let fault = Fault {
@@ -44,7 +45,7 @@ pub fn on_syscall(k: &mut Kernel, t: usize, now: u64) -> Outcome {
     let raw = k.threads[t].context.rax;
     let result = match Call::from_raw(raw) {
         None => Err(Error::InvalidCall),
-        Some(call) => handle(k, t, call, now),
+        Some(call) => handle(k, t, call, clock),
     };
     match result {
         Ok(Some(halt)) => halt,
@@ -66,7 +67,12 @@ fn rights(bits: u64) -> Result<PageRights, Error> {
     PageRights::from_bits(bits).ok_or(Error::InvalidArgument)
 }
 
-fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outcome>, Error> {
+fn handle(
+    k: &mut Kernel,
+    t: usize,
+    call: Call,
+    clock: fn() -> u64,
+) -> Result<Option<Outcome>, Error> {
     let task = k.threads[t].task;
     let a = args(k, t);
     match call {
@@ -86,7 +92,7 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
             done(k, t)
         }
         Call::Clock => {
-            k.threads[t].context.rdi = now;
+            k.threads[t].context.rdi = clock();
             done(k, t)
         }
         Call::ThreadExit => {
@@ -113,7 +119,7 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
         }
         Call::SleepUntil => {
             k.threads[t].context.rax = Error::Ok as u64;
-            if a[0] > now {
+            if a[0] > clock() {
                 k.block(t, State::Sleeping, a[0]);
             }
             Ok(None)
@@ -244,7 +250,13 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
             if !MessageTag(a[2]).is_valid() {
                 return Err(Error::InvalidArgument);
             }
-            k.send(t, dest, call == Call::Call, deadline(now, a[1]), a[1] == 0);
+            k.send(
+                t,
+                dest,
+                call == Call::Call,
+                deadline(clock, a[1]),
+                a[1] == 0,
+            );
             Ok(None)
         }
         Call::Receive => {
@@ -252,7 +264,7 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
                 0 => None,
                 id => Some(k.thread(id)?),
             };
-            k.receive(t, from, deadline(now, a[1]), a[1] == 0);
+            k.receive(t, from, deadline(clock, a[1]), a[1] == 0);
             Ok(None)
         }
         Call::ReplyWait | Call::Reply => {
@@ -264,7 +276,7 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
                 k.reply(t, caller)?;
             }
             if call == Call::ReplyWait {
-                k.receive(t, None, deadline(now, a[1]), a[1] == 0);
+                k.receive(t, None, deadline(clock, a[1]), a[1] == 0);
                 Ok(None)
             } else {
                 done(k, t)
@@ -280,7 +292,7 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
             done(k, t)
         }
         Call::NotifyWait => {
-            k.wait_notify(t, a[0], deadline(now, a[1]), a[1] == 0);
+            k.wait_notify(t, a[0], deadline(clock, a[1]), a[1] == 0);
             Ok(None)
         }
 
@@ -316,7 +328,7 @@ fn handle(k: &mut Kernel, t: usize, call: Call, now: u64) -> Result<Option<Outco
             done(k, t)
         }
         Call::ScheduleSet | Call::ScheduleSwitch | Call::PartitionInfo => {
-            time_call(k, t, call, a, now)?;
+            time_call(k, t, call, a, clock())?;
             done(k, t)
         }
         Call::IoGrant => {
@@ -381,7 +393,8 @@ fn time_call(k: &mut Kernel, t: usize, call: Call, a: [u64; 6], now: u64) -> Res
                 .filter(|&p| (p as u64) < TIME_PARTITIONS)
                 .ok_or(Error::InvalidArgument)?;
             let (start, length) = k.time.next_window(tp, now).unwrap_or((u64::MAX, 0));
-            let (cpu, idle, frames) = (k.cpu_ns[tp as usize], k.idle_ns, k.time.frames);
+            let ns = |ticks| crate::time::ticks_to_ns(ticks, crate::time::tsc_hz());
+            let (cpu, idle, frames) = (ns(k.cpu_ticks[tp as usize]), ns(k.idle_ticks), k.time.frames);
             let active = k.active_partition.unwrap_or(0) as u64;
             let c = &mut k.threads[t].context;
             (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);

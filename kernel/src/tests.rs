@@ -91,7 +91,7 @@ impl Fixture {
         let c = &mut self.k.threads[t].context;
         c.rax = call as u64;
         [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
-        assert_eq!(on_syscall(&mut self.k, t, 0), Outcome::Continue);
+        assert_eq!(on_syscall(&mut self.k, t, || 0), Outcome::Continue);
         self.k.threads[t].context.rax
     }
 

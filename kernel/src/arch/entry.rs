@@ -83,9 +83,8 @@ extern "sysv64" fn on_syscall() {
     let mut k = KERNEL.lock();
     let t = k.current.expect("syscall without a current thread");
     k.threads[t].context = *frame();
-    let now = time::since_boot_ns();
-    k.account(now);
-    let outcome = crate::syscall::on_syscall(&mut k, t, now);
+    k.account(super::cpu::rdtsc());
+    let outcome = crate::syscall::on_syscall(&mut k, t, time::since_boot_ns);
     finish(k, outcome);
 }
 
@@ -95,7 +94,7 @@ pub fn on_user_exception(vector: u64, error_code: u64) {
     let mut k = KERNEL.lock();
     let t = k.current.expect("user exception without a current thread");
     k.threads[t].context = *frame();
-    k.account(time::since_boot_ns());
+    k.account(super::cpu::rdtsc());
     let outcome = fault::on_exception(&mut k, t, vector, error_code, cr2);
     finish(k, outcome);
 }
@@ -110,7 +109,7 @@ pub fn on_timer(from_user: bool) {
         let t = k.current.expect("user interrupt without a current thread");
         k.threads[t].context = *frame();
     }
-    k.account(time::since_boot_ns());
+    k.account(super::cpu::rdtsc());
     k.on_timer(time::since_boot_ns());
     if from_user {
         finish(k, Outcome::Continue);
@@ -152,7 +151,7 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
         x86_64::instructions::interrupts::enable_and_hlt();
         x86_64::instructions::interrupts::disable();
         k = KERNEL.lock();
-        k.account(time::since_boot_ns());
+        k.account(super::cpu::rdtsc());
     }
 }
 
@@ -202,7 +201,9 @@ fn load_io_permissions(k: &mut Kernel, task: usize) {
 /// Leaves the boot path for user mode: runs the first ready thread (the root task).
 pub fn enter_user_mode() -> ! {
     RUNNING.store(true, Ordering::Relaxed);
-    finish(KERNEL.lock(), Outcome::Continue);
+    let mut k = KERNEL.lock();
+    k.last_account = super::cpu::rdtsc();
+    finish(k, Outcome::Continue);
     let at = super::stack::top() - FRAME_SIZE as u64;
     // SAFETY: the frame holds a complete user context (just loaded by `finish`); the boot
     // stack below it is abandoned for good.
