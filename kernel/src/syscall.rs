@@ -394,7 +394,11 @@ fn time_call(k: &mut Kernel, t: usize, call: Call, a: [u64; 6], now: u64) -> Res
                 .ok_or(Error::InvalidArgument)?;
             let (start, length) = k.time.next_window(tp, now).unwrap_or((u64::MAX, 0));
             let ns = |ticks| crate::time::ticks_to_ns(ticks, crate::time::tsc_hz());
-            let (cpu, idle, frames) = (ns(k.cpu_ticks[tp as usize]), ns(k.idle_ticks), k.time.frames);
+            let (cpu, idle, frames) = (
+                ns(k.cpu_ticks[tp as usize]),
+                ns(k.idle_ticks),
+                k.time.frames,
+            );
             let active = k.active_partition.unwrap_or(0) as u64;
             let c = &mut k.threads[t].context;
             (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);
