@@ -290,8 +290,9 @@ impl Kernel {
                 self.unqueue_sender(to, t);
                 self.wake(t, error);
             }
-            State::WaitingReply { .. } | State::Receiving { .. } => self.wake(t, error),
-            State::WaitingNotify { .. } => self.wake(t, error),
+            State::WaitingReply { .. } | State::Receiving { .. } | State::WaitingNotify { .. } => {
+                self.wake(t, error)
+            }
             State::Sleeping => self.wake(t, Error::Ok),
             State::Free | State::Inactive | State::Ready => self.threads[t].deadline = NEVER,
         }
@@ -348,6 +349,17 @@ impl Kernel {
     }
 
     // ----- resource partitions ----------------------------------------------------------
+
+    /// The resource partition named by user-visible number `id` (slot + 1; 0 = `task`'s).
+    pub fn resource_partition(&self, task: usize, id: u64) -> Result<usize, Error> {
+        match id {
+            0 => Ok(self.tasks[task].rp),
+            n => usize::try_from(n - 1)
+                .ok()
+                .filter(|&r| r < MAX_RPS && self.rps[r].in_use)
+                .ok_or(Error::NoSuchObject),
+        }
+    }
 
     pub fn rp_create(&mut self, caller_task: usize, quota: Amount) -> Result<usize, Error> {
         let slot = self
@@ -666,15 +678,7 @@ impl Kernel {
 
     /// True if the physical range was handed to the root task at boot.
     pub fn is_user_memory(&self, start: u64, pages: u64) -> bool {
-        let Some(end) = pages
-            .checked_mul(PAGE_SIZE)
-            .and_then(|len| start.checked_add(len))
-        else {
-            return false;
-        };
-        self.user_memory[..self.user_memory_count]
-            .iter()
-            .any(|r| start >= r.start && end <= r.start + r.pages * PAGE_SIZE)
+        abi::root::regions_contain(&self.user_memory[..self.user_memory_count], start, pages)
     }
 
     /// Maps `pages` pages from `source` into `target` at `destination`. All-or-nothing:

@@ -129,22 +129,13 @@ fn handle(
             k.require(task, Abilities::CREATE_TASK)?;
             let abilities = Abilities::from_bits(a[0]).ok_or(Error::InvalidArgument)?;
             let mcp = u8::try_from(a[1]).map_err(|_| Error::McpExceeded)?;
-            let rp = match a[2] {
-                0 => k.tasks[task].rp,
-                n => {
-                    let rp = usize::try_from(n - 1)
-                        .ok()
-                        .filter(|&r| r < k.rps.len() && k.rps[r].in_use)
-                        .ok_or(Error::NoSuchObject)?;
-                    if rp != k.tasks[task].rp {
-                        k.require(task, Abilities::PARTITION_CONTROL)?;
-                        if k.rps[rp].owner != task {
-                            return Err(Error::NotPermitted);
-                        }
-                    }
-                    rp
+            let rp = k.resource_partition(task, a[2])?;
+            if rp != k.tasks[task].rp {
+                k.require(task, Abilities::PARTITION_CONTROL)?;
+                if k.rps[rp].owner != task {
+                    return Err(Error::NotPermitted);
                 }
-            };
+            }
             if a[4] > TASK_NAME_MAX {
                 return Err(Error::InvalidArgument);
             }
@@ -310,13 +301,7 @@ fn handle(
             done(k, t)
         }
         Call::RpInfo => {
-            let rp = match a[0] {
-                0 => k.tasks[task].rp,
-                n => usize::try_from(n - 1)
-                    .ok()
-                    .filter(|&r| r < k.rps.len() && k.rps[r].in_use)
-                    .ok_or(Error::NoSuchObject)?,
-            };
+            let rp = k.resource_partition(task, a[0])?;
             let r = k.rps[rp];
             let c = &mut k.threads[t].context;
             c.rdi = r.used.pages;
@@ -380,7 +365,7 @@ fn time_call(k: &mut Kernel, t: usize, call: Call, a: [u64; 6], now: u64) -> Res
         }
         Call::ScheduleSwitch => {
             k.require(task, Abilities::SCHEDULING)?;
-            if slot_ok(a[0]) && k.time.switch_to(a[0] as usize, now) {
+            if a[0] < MAX_SCHEDULES && k.time.switch_to(a[0] as usize, now) {
                 k.update_window(now);
                 Ok(())
             } else {
@@ -405,10 +390,6 @@ fn time_call(k: &mut Kernel, t: usize, call: Call, a: [u64; 6], now: u64) -> Res
             Ok(())
         }
     }
-}
-
-fn slot_ok(slot: u64) -> bool {
-    slot < MAX_SCHEDULES
 }
 
 fn set_attribute(

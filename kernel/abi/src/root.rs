@@ -38,16 +38,22 @@ impl RootInfo {
 
     /// True if `[start, start + pages * 4096)` lies inside one listed region.
     pub fn contains(&self, start: u64, pages: u64) -> bool {
-        let Some(len) = pages.checked_mul(4096) else {
-            return false;
-        };
-        let Some(end) = start.checked_add(len) else {
-            return false;
-        };
-        self.regions()
-            .iter()
-            .any(|r| start >= r.start && end <= r.start + r.pages * 4096)
+        regions_contain(self.regions(), start, pages)
     }
+}
+
+/// True if `[start, start + pages * 4096)` lies inside one of `regions` (the kernel's check
+/// for `map_physical` and the root task's own use the same rule).
+pub fn regions_contain(regions: &[PhysRegion], start: u64, pages: u64) -> bool {
+    let Some(end) = pages
+        .checked_mul(4096)
+        .and_then(|len| start.checked_add(len))
+    else {
+        return false;
+    };
+    regions
+        .iter()
+        .any(|r| start >= r.start && end <= r.start + r.pages * 4096)
 }
 
 const _: () = assert!(core::mem::size_of::<RootInfo>() <= 4096);

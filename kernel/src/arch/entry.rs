@@ -31,9 +31,14 @@ static RUNNING: AtomicBool = AtomicBool::new(false);
 
 static mut USER_RSP: u64 = 0;
 
+/// Where the user frame lives: the top `FRAME_SIZE` bytes of the kernel stack.
+fn frame_address() -> u64 {
+    super::stack::top() - FRAME_SIZE as u64
+}
+
 /// The user frame of the current entry.
 fn frame() -> &'static mut TrapFrame {
-    let at = super::stack::top() - FRAME_SIZE as u64;
+    let at = frame_address();
     // SAFETY: the top FRAME_SIZE bytes of the kernel stack are reserved for the frame (boot
     // runs below them) and only the entry paths, serialised by the non-preemptible kernel,
     // use it.
@@ -204,10 +209,9 @@ pub fn enter_user_mode() -> ! {
     let mut k = KERNEL.lock();
     k.last_account = super::cpu::rdtsc();
     finish(k, Outcome::Continue);
-    let at = super::stack::top() - FRAME_SIZE as u64;
     // SAFETY: the frame holds a complete user context (just loaded by `finish`); the boot
     // stack below it is abandoned for good.
-    unsafe { restore_frame(at) }
+    unsafe { restore_frame(frame_address()) }
 }
 
 #[unsafe(naked)]
