@@ -9,6 +9,7 @@
 
 pub mod artifacts;
 pub mod bench;
+pub mod check_config;
 pub mod esp;
 pub mod qemu;
 pub mod scenario;

@@ -50,6 +50,13 @@ enum Cmd {
         #[arg(long)]
         scenarios_only: bool,
     },
+    /// Validate a system description and print its diagnostics (exit 1 if any).
+    CheckConfig {
+        file: PathBuf,
+        /// Accept any partition image name (default: the workspace's user programs).
+        #[arg(long)]
+        any_image: bool,
+    },
 }
 
 fn main() -> ExitCode {
@@ -74,6 +81,7 @@ fn main() -> ExitCode {
             filter,
             scenarios_only,
         } => test(filter.as_deref(), scenarios_only),
+        Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,

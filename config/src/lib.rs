@@ -1,0 +1,149 @@
+//! System descriptions of Warden: the TOML format, its validation, and the binary form syssw
+//! reads at boot.
+//!
+//! Two halves:
+//! - always (`no_std`, no allocation): the binary configuration decoder [`binary::decode`]
+//!   with its zero-copy views, and the shared vocabulary in [`model`] and [`units`]. This is
+//!   what syssw links (`default-features = false`).
+//! - feature `host` (default): [`load`] parses and validates a TOML description into a
+//!   [`System`], reporting every problem as a [`Diagnostic`] (`file:line:col: key.path:
+//!   reason`); [`binary::encode`] turns a `System` into the blob.
+//!
+//! This crate must never let an inconsistent configuration through: whatever [`load`]
+//! accepts encodes to a blob [`binary::decode`] accepts, and the decoder re-checks every rule
+//! that matters for isolation (indices, limits, reserved resources, budgets) so that a
+//! damaged blob is rejected rather than acted on. The decoder must never panic on any input,
+//! allocate, or trust a count or index it has not checked.
+//!
+//! # The TOML format
+//!
+//! Sizes are bytes: an integer or `"64KiB"`, `"8MiB"`, `"1GiB"` (binary units only; memory
+//! sizes must be whole 4 KiB pages). Durations always carry a unit: `"500ns"`, `"250us"`,
+//! `"2ms"`, `"1s"`. Names are ASCII letters, digits, `_`, `-`, starting with a letter, at most
+//! 31 bytes (partition names at most 15: they name the partition's task). Unknown keys are
+//! errors everywhere.
+//!
+//! ```toml
+//! [system]
+//! name = "demo"                   # optional, default "system"
+//! memory = "512MiB"               # RAM budget (see "Budgets")
+//!
+//! [[schedules]]                   # up to 4; the first is the initial schedule
+//! name = "normal"                 # optional for the first (default "default")
+//! major_frame = "10ms"            # optional: default = end of the last window
+//! [[schedules.windows]]           # up to 32 per schedule; inside the frame, disjoint
+//! partition = "plc"               # a partition that is not background
+//! offset = "0ms"
+//! duration = "2ms"
+//! # A single schedule may also be written as [schedule] + [[schedule.windows]].
+//!
+//! [[shared_memory]]               # up to 32 segments
+//! name = "frame"
+//! size = "64KiB"                  # whole pages
+//!
+//! [partitions.plc]                # up to 15 partitions, kept in file order
+//! image = "softplc"               # user program; system.img entry "partition/softplc"
+//! memory = "8MiB"                 # whole pages, includes the stack
+//! kernel_memory = "256KiB"        # resource-partition page quota, whole pages
+//! stack = "64KiB"                 # optional, default 64KiB
+//! kernel_threads = 16             # optional quota, default 16
+//! kernel_tasks = 1                # optional quota, default 1
+//! max_priority = 150              # MCP, 1..=199 (syssw runs at 200)
+//! priority = 100                  # optional, first thread's priority, default = max_priority
+//! abilities = ["debug_log"]       # optional, see "Abilities"
+//! native_syscalls = true          # optional, default true; a paravirtualized guest says false
+//! time = 1                        # optional: "background" (TP0) or a time partition 1..=15
+//! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
+//! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
+//! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
+//! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
+//! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
+//! health.deadline_missed = "warm_restart"
+//!
+//! [[channels]]
+//! name = "level"                  # optional, default = the `from` text
+//! kind = "sampling"               # 1 source, >= 1 destinations
+//! from = "plant.level"            # an output port ("partition.port")
+//! to = ["plc.level"]              # input ports (a single string is fine too)
+//!
+//! [health]                        # module table: the default for every partition
+//! memory_violation = "idle"
+//! ```
+//!
+//! **Time.** A partition without `time` gets the lowest free time partition if some window
+//! names it, and is an error otherwise ("has no window and is not background"). `time = N`
+//! fixes the number; partitions may share a number (their windows then serve all of them),
+//! and a fixed number must have a window in some schedule. `time = "background"` puts it in
+//! TP0, which runs whenever no window's partition is ready; it cannot have windows.
+//!
+//! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
+//! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,
+//! `debug_log`. `system_halt`, `physical_memory`, `scheduling` and `partition_control` are
+//! syssw's alone and rejected. A partition with `irqs` needs `irq` (to attach them). Turning
+//! `native_syscalls` off makes every `syscall` of the partition an exception message to its
+//! handler; a guest kernel keeps it and creates its processes' tasks without it.
+//!
+//! **Ports and channels.** Ports have `kind` (`sampling` | `queuing`), `direction` (`in` |
+//! `out`), `size` (largest message, 1..=4096 bytes), `depth` (queuing only, 1..=256) and
+//! `refresh` (sampling inputs only: how long a message stays valid). A sampling channel goes
+//! from one output port to one or more input ports; a queuing channel connects exactly one
+//! output to one input. Both ends must have the channel's kind, and each destination's size
+//! must be at least the source's (the receiver can hold every message). Every port belongs to
+//! exactly one channel.
+//!
+//! **Health monitoring.** Errors: `deadline_missed`, `application_error`, `numeric_error`,
+//! `illegal_request`, `stack_overflow`, `memory_violation`, `hardware_fault`, `power_fail`.
+//! Actions: `ignore`, `idle` (stop the partition), `cold_restart`, `warm_restart`,
+//! `shutdown` (stop the module with the failure outcome), `shutdown_success` (stop it with
+//! the success outcome: the expected end of a test scenario). A partition's table overrides
+//! the module's `[health]`; see [`model::HealthTable::resolve`] for the defaults.
+//!
+//! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
+//! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)
+//! are refused; no two partitions may share an I/O port or an IRQ.
+//!
+//! **Budgets.** Partition memory plus shared segments must fit in `memory` minus the kernel's
+//! page-table pool (1/8 of `memory`, 16..128 MiB, [`model::kernel_pool`]) minus a 32 MiB
+//! reserve for the kernel image, firmware, system image and syssw; the `kernel_memory`
+//! quotas together must fit in the pool minus 1 MiB syssw keeps; thread and task quotas must
+//! fit in the kernel's tables (256 threads, 64 tasks) after syssw's share (16, 1).
+//!
+//! **Images.** `load` takes a predicate that says which image names exist; `cargo xtask
+//! check-config` passes the user programs the workspace builds.
+#![no_std]
+#![forbid(unsafe_op_in_unsafe_fn)]
+#![deny(unsafe_code)]
+
+#[cfg(feature = "host")]
+extern crate std;
+
+pub mod binary;
+pub mod model;
+pub mod units;
+
+#[cfg(feature = "host")]
+pub mod diagnostic;
+#[cfg(feature = "host")]
+mod schema;
+#[cfg(feature = "host")]
+pub mod system;
+#[cfg(feature = "host")]
+mod validate;
+
+pub use binary::{DecodeError, SystemView, decode};
+#[cfg(feature = "host")]
+pub use diagnostic::Diagnostic;
+#[cfg(feature = "host")]
+pub use system::System;
+#[cfg(feature = "host")]
+pub use validate::load;
+
+/// Parses, validates and encodes a description in one step (what the image builder needs).
+#[cfg(feature = "host")]
+pub fn compile(
+    file: &str,
+    source: &str,
+    known_images: &dyn Fn(&str) -> bool,
+) -> Result<std::vec::Vec<u8>, std::vec::Vec<Diagnostic>> {
+    load(file, source, known_images).map(|system| binary::encode(&system))
+}

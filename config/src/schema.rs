@@ -1,0 +1,171 @@
+//! The TOML document as serde reads it: the shape only (which keys exist, which types they
+//! have), every value with its source span. Units, ranges, names and cross references are
+//! checked afterwards by [`crate::validate`], which can then report all problems at once.
+
+use serde::Deserialize;
+use serde::de::{self, Deserializer, SeqAccess, Visitor};
+use std::collections::BTreeMap;
+use std::fmt;
+use std::string::{String, ToString};
+use std::vec::Vec;
+use toml::Spanned;
+
+/// A table keyed by names, with the span of each key.
+pub type Named<T> = BTreeMap<Spanned<String>, Spanned<T>>;
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Document {
+    pub system: Spanned<SystemSection>,
+    /// The single-schedule form.
+    pub schedule: Option<Spanned<Schedule>>,
+    #[serde(default)]
+    pub schedules: Vec<Spanned<Schedule>>,
+    #[serde(default)]
+    pub partitions: Named<Partition>,
+    #[serde(default)]
+    pub shared_memory: Vec<Spanned<Segment>>,
+    #[serde(default)]
+    pub channels: Vec<Spanned<Channel>>,
+    #[serde(default)]
+    pub health: Named<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SystemSection {
+    pub name: Option<Spanned<String>>,
+    pub memory: Spanned<Scalar>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Schedule {
+    pub name: Option<Spanned<String>>,
+    pub major_frame: Option<Spanned<Scalar>>,
+    #[serde(default)]
+    pub windows: Vec<Spanned<Window>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Window {
+    pub partition: Spanned<String>,
+    pub offset: Spanned<Scalar>,
+    pub duration: Spanned<Scalar>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Partition {
+    pub image: Spanned<String>,
+    pub memory: Spanned<Scalar>,
+    pub kernel_memory: Spanned<Scalar>,
+    pub stack: Option<Spanned<Scalar>>,
+    pub kernel_threads: Option<Spanned<i64>>,
+    pub kernel_tasks: Option<Spanned<i64>>,
+    pub max_priority: Spanned<i64>,
+    pub priority: Option<Spanned<i64>>,
+    #[serde(default)]
+    pub abilities: Vec<Spanned<String>>,
+    pub native_syscalls: Option<Spanned<bool>>,
+    pub time: Option<Spanned<Scalar>>,
+    #[serde(default)]
+    pub io_ports: Vec<Spanned<Scalar>>,
+    #[serde(default)]
+    pub irqs: Vec<Spanned<i64>>,
+    #[serde(default)]
+    pub shared: Named<String>,
+    #[serde(default)]
+    pub ports: Named<Port>,
+    #[serde(default)]
+    pub health: Named<String>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Port {
+    pub kind: Spanned<String>,
+    pub direction: Spanned<String>,
+    pub size: Spanned<Scalar>,
+    pub depth: Option<Spanned<i64>>,
+    pub refresh: Option<Spanned<Scalar>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Segment {
+    pub name: Spanned<String>,
+    pub size: Spanned<Scalar>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Channel {
+    pub name: Option<Spanned<String>>,
+    pub kind: Spanned<String>,
+    pub from: Spanned<String>,
+    pub to: Spanned<Targets>,
+}
+
+/// A value that may be written as an integer or as a string (sizes, durations, I/O ports,
+/// `time`); what it means is decided by the validator.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Scalar {
+    Int(i64),
+    Str(String),
+}
+
+impl<'de> Deserialize<'de> for Scalar {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct ScalarVisitor;
+        impl Visitor<'_> for ScalarVisitor {
+            type Value = Scalar;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("an integer or a string")
+            }
+            fn visit_i64<E: de::Error>(self, v: i64) -> Result<Scalar, E> {
+                Ok(Scalar::Int(v))
+            }
+            fn visit_u64<E: de::Error>(self, v: u64) -> Result<Scalar, E> {
+                i64::try_from(v)
+                    .map(Scalar::Int)
+                    .map_err(|_| E::custom("integer too large"))
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<Scalar, E> {
+                Ok(Scalar::Str(v.to_string()))
+            }
+        }
+        deserializer.deserialize_any(ScalarVisitor)
+    }
+}
+
+/// `to = "plc.level"` or `to = ["plc.level", "hmi.level"]`.
+#[derive(Debug)]
+pub enum Targets {
+    One(String),
+    Many(Vec<Spanned<String>>),
+}
+
+impl<'de> Deserialize<'de> for Targets {
+    fn deserialize<D: Deserializer<'de>>(deserializer: D) -> Result<Self, D::Error> {
+        struct TargetsVisitor;
+        impl<'de> Visitor<'de> for TargetsVisitor {
+            type Value = Targets;
+            fn expecting(&self, f: &mut fmt::Formatter) -> fmt::Result {
+                f.write_str("a port \"partition.port\" or a list of them")
+            }
+            fn visit_str<E: de::Error>(self, v: &str) -> Result<Targets, E> {
+                Ok(Targets::One(v.to_string()))
+            }
+            fn visit_seq<A: SeqAccess<'de>>(self, mut seq: A) -> Result<Targets, A::Error> {
+                let mut items = Vec::new();
+                while let Some(item) = seq.next_element::<Spanned<String>>()? {
+                    items.push(item);
+                }
+                Ok(Targets::Many(items))
+            }
+        }
+        deserializer.deserialize_any(TargetsVisitor)
+    }
+}

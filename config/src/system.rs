@@ -1,0 +1,176 @@
+//! The validated system (host side): what [`crate::load`] returns and
+//! [`crate::binary::encode`] writes. Every value is already checked and in its final unit
+//! (bytes, nanoseconds, indices); nothing here can be inconsistent.
+
+use crate::binary::SystemView;
+use crate::model::*;
+use abi::syscall::Abilities;
+use std::string::{String, ToString};
+use std::vec::Vec;
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct System {
+    pub name: String,
+    /// RAM budget (bytes).
+    pub memory: u64,
+    /// The first is the initial schedule.
+    pub schedules: Vec<Schedule>,
+    /// In the order of the description.
+    pub partitions: Vec<Partition>,
+    pub segments: Vec<Segment>,
+    pub channels: Vec<Channel>,
+    /// The module health table.
+    pub health: HealthTable,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Schedule {
+    pub name: String,
+    /// ns.
+    pub major_frame: u64,
+    /// Sorted by offset, disjoint, inside the frame.
+    pub windows: Vec<Window>,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Segment {
+    pub name: String,
+    pub size: u64,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Partition {
+    pub name: String,
+    pub image: String,
+    pub memory: u64,
+    pub kernel_memory: u64,
+    pub stack: u64,
+    pub kernel_threads: u32,
+    pub kernel_tasks: u32,
+    pub abilities: Abilities,
+    pub mcp: u8,
+    pub priority: u8,
+    /// 0 = background.
+    pub time_partition: u8,
+    pub io_ports: Vec<IoRange>,
+    pub irqs: IrqMask,
+    pub shared: Vec<Attachment>,
+    pub ports: Vec<Port>,
+    pub health: HealthTable,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Port {
+    pub name: String,
+    pub kind: PortKind,
+    pub direction: Direction,
+    pub size: u32,
+    /// Queuing: messages; sampling: 0.
+    pub depth: u32,
+    /// Sampling input: ns, 0 = none.
+    pub refresh: u64,
+    /// Index into [`System::channels`].
+    pub channel: usize,
+}
+
+/// A port named by partition index and index within the partition.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct PortRef {
+    pub partition: usize,
+    pub port: usize,
+}
+
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Channel {
+    pub name: String,
+    pub kind: PortKind,
+    pub source: PortRef,
+    pub destinations: Vec<PortRef>,
+}
+
+impl System {
+    /// Index of `port` in the flat port table of the binary form.
+    pub fn global_port(&self, port: PortRef) -> usize {
+        self.partitions[..port.partition]
+            .iter()
+            .map(|p| p.ports.len())
+            .sum::<usize>()
+            + port.port
+    }
+
+    pub fn window_count(&self) -> usize {
+        self.schedules.iter().map(|s| s.windows.len()).sum()
+    }
+
+    /// The owned copy of a decoded blob (for tests and tools).
+    pub fn from_view(view: &SystemView<'_>) -> System {
+        let port_ref = |global: usize| {
+            let port = view.port(global);
+            PortRef {
+                partition: port.partition,
+                port: global - view.partition(port.partition).port_indices().start,
+            }
+        };
+        System {
+            name: view.name().to_string(),
+            memory: view.memory(),
+            schedules: view
+                .schedules()
+                .map(|s| Schedule {
+                    name: s.name.to_string(),
+                    major_frame: s.major_frame,
+                    windows: s.windows().collect(),
+                })
+                .collect(),
+            partitions: view
+                .partitions()
+                .map(|p| Partition {
+                    name: p.name.to_string(),
+                    image: p.image.to_string(),
+                    memory: p.memory,
+                    kernel_memory: p.kernel_memory,
+                    stack: p.stack,
+                    kernel_threads: p.kernel_threads,
+                    kernel_tasks: p.kernel_tasks,
+                    abilities: p.abilities,
+                    mcp: p.mcp,
+                    priority: p.priority,
+                    time_partition: p.time_partition,
+                    io_ports: p.io_ports().collect(),
+                    irqs: p.irqs,
+                    shared: p.shared().collect(),
+                    ports: p
+                        .ports()
+                        .map(|t| Port {
+                            name: t.name.to_string(),
+                            kind: t.kind,
+                            direction: t.direction,
+                            size: t.size,
+                            depth: t.depth,
+                            refresh: t.refresh,
+                            channel: t.channel,
+                        })
+                        .collect(),
+                    health: p.health,
+                })
+                .collect(),
+            segments: view
+                .segments()
+                .map(|g| Segment {
+                    name: g.name.to_string(),
+                    size: g.size,
+                })
+                .collect(),
+            channels: view
+                .channels()
+                .map(|c| Channel {
+                    name: c.name.to_string(),
+                    kind: c.kind,
+                    source: port_ref(c.source),
+                    destinations: c.destinations().map(port_ref).collect(),
+                })
+                .collect(),
+            health: view.health(),
+        }
+    }
+}

@@ -1,0 +1,1507 @@
+//! From TOML text to a validated [`System`]: syntax, shape (serde, `deny_unknown_fields`),
+//! then every rule of the format (see the crate documentation), reporting all problems found
+//! with file, line:column, key path and reason.
+//!
+//! Syntax errors are all reported; a shape error (unknown key, wrong type, missing key) stops
+//! at the first, because serde does; the semantic rules after it report everything they find.
+//! Positions point at the offending value, or at the key or table header when the entry
+//! itself is the problem.
+
+use crate::diagnostic::{Diagnostic, KeyPath, Reporter, key_path_at};
+use crate::model::*;
+use crate::schema::{self, Named, Scalar, Targets};
+use crate::system::*;
+use crate::units::{self, Duration, Size};
+use abi::syscall::Abilities;
+use std::string::{String, ToString};
+use std::vec::Vec;
+use std::{format, vec};
+use toml::Spanned;
+
+/// Parses and validates the description `source`. `file` only names the file in messages.
+/// `known_images` says whether a partition image (user program) of that name exists; the
+/// `cargo xtask check-config` command passes the programs the workspace builds.
+pub fn load(
+    file: &str,
+    source: &str,
+    known_images: &dyn Fn(&str) -> bool,
+) -> Result<System, Vec<Diagnostic>> {
+    let (tree, syntax) = toml::de::DeTable::parse_recoverable(source);
+    let mut reporter = Reporter::new(file, source);
+    if !syntax.is_empty() {
+        for e in syntax {
+            let at = e.span().map_or(0, |s| s.start);
+            let path = KeyPath::from_rendered(key_path_at(tree.get_ref(), at));
+            reporter.error(at, &path, format!("TOML syntax: {}", e.message()));
+        }
+        return Err(reporter.finish());
+    }
+    let document: schema::Document = match toml::from_str(source) {
+        Ok(d) => d,
+        Err(e) => {
+            let at = e.span().map_or(0, |s| s.start);
+            let path = KeyPath::from_rendered(key_path_at(tree.get_ref(), at));
+            reporter.error(at, &path, e.message());
+            return Err(reporter.finish());
+        }
+    };
+    let mut v = Validator {
+        r: reporter,
+        known_images,
+    };
+    let system = v.system(&document);
+    if v.r.diagnostics.is_empty() {
+        Ok(system)
+    } else {
+        Err(v.r.finish())
+    }
+}
+
+struct Validator<'s, 'k> {
+    r: Reporter<'s>,
+    known_images: &'k dyn Fn(&str) -> bool,
+}
+
+/// Where a port was declared, for channel checks.
+struct PortDecl {
+    partition: usize,
+    port: usize,
+    key_at: usize,
+    path: KeyPath,
+    /// Channel that uses it, with the offset of that use.
+    used_by: Option<(usize, usize)>,
+    /// False if the declaration itself has errors (channels then skip it silently).
+    valid: bool,
+}
+
+/// How a partition asked for CPU time.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Time {
+    Background,
+    Explicit(u8, usize),
+    Auto,
+    /// `time` has an error (already reported).
+    Invalid,
+}
+
+fn start<T>(s: &Spanned<T>) -> usize {
+    s.span().start
+}
+
+fn list<T: Copy>(items: &[T], name: impl Fn(T) -> &'static str) -> String {
+    items
+        .iter()
+        .map(|&i| name(i))
+        .collect::<Vec<_>>()
+        .join(", ")
+}
+
+/// Named entries in the order of the source (BTreeMaps sort by name).
+fn in_source_order<T>(map: &Named<T>) -> Vec<(&Spanned<String>, &Spanned<T>)> {
+    let mut entries: Vec<_> = map.iter().collect();
+    entries.sort_by_key(|(k, _)| k.span().start);
+    entries
+}
+
+impl Validator<'_, '_> {
+    fn error(&mut self, at: usize, path: &KeyPath, message: impl core::fmt::Display) {
+        self.r.error(at, path, message);
+    }
+
+    fn size(&mut self, value: &Spanned<Scalar>, path: &KeyPath) -> Option<u64> {
+        let parsed = match value.get_ref() {
+            Scalar::Int(i) => units::size_from_integer(*i),
+            Scalar::Str(s) => units::parse_size(s),
+        };
+        match parsed {
+            Ok(bytes) => Some(bytes),
+            Err(e) => {
+                let shown = match value.get_ref() {
+                    Scalar::Int(i) => i.to_string(),
+                    Scalar::Str(s) => format!("{s:?}"),
+                };
+                self.error(start(value), path, format!("invalid size {shown}: {e}"));
+                None
+            }
+        }
+    }
+
+    /// A size that must be a non-zero multiple of 4 KiB.
+    fn page_size(&mut self, value: &Spanned<Scalar>, path: &KeyPath) -> Option<u64> {
+        let bytes = self.size(value, path)?;
+        if bytes == 0 {
+            self.error(start(value), path, "must not be zero");
+            return None;
+        }
+        if !bytes.is_multiple_of(PAGE_SIZE) {
+            let up = bytes.div_ceil(PAGE_SIZE).saturating_mul(PAGE_SIZE);
+            self.error(
+                start(value),
+                path,
+                format!(
+                    "{} is not a multiple of 4 KiB (4096 bytes); memory is given in whole pages, e.g. {}",
+                    Size(bytes),
+                    Size(up)
+                ),
+            );
+            return None;
+        }
+        Some(bytes)
+    }
+
+    fn duration(&mut self, value: &Spanned<Scalar>, path: &KeyPath) -> Option<u64> {
+        let parsed = match value.get_ref() {
+            Scalar::Int(_) => Err(units::UnitError::MissingUnit),
+            Scalar::Str(s) => units::parse_duration(s),
+        };
+        match parsed {
+            Ok(ns) => Some(ns),
+            Err(e) => {
+                let shown = match value.get_ref() {
+                    Scalar::Int(i) => i.to_string(),
+                    Scalar::Str(s) => format!("{s:?}"),
+                };
+                self.error(start(value), path, format!("invalid duration {shown}: {e}"));
+                None
+            }
+        }
+    }
+
+    fn name(&mut self, name: &Spanned<String>, path: &KeyPath, max: usize, what: &str) -> bool {
+        match check_name(name.get_ref(), max) {
+            Ok(()) => true,
+            Err(e) => {
+                self.error(
+                    start(name),
+                    path,
+                    format!("{what} name {:?} {e}", name.get_ref()),
+                );
+                false
+            }
+        }
+    }
+
+    fn health(&mut self, table: &Named<String>, path: &KeyPath) -> HealthTable {
+        let mut out = HealthTable::default();
+        for (error, action) in in_source_order(table) {
+            let here = path.key(error.get_ref());
+            let e = HealthError::from_name(error.get_ref());
+            if e.is_none() {
+                self.error(
+                    start(error),
+                    &here,
+                    format!(
+                        "unknown health error `{}`; known errors: {}",
+                        error.get_ref(),
+                        list(&HealthError::ALL, HealthError::name)
+                    ),
+                );
+            }
+            let a = HealthAction::from_name(action.get_ref());
+            if a.is_none() {
+                self.error(
+                    start(action),
+                    &here,
+                    format!(
+                        "unknown health action `{}`; known actions: {}",
+                        action.get_ref(),
+                        list(&HealthAction::ALL, HealthAction::name)
+                    ),
+                );
+            }
+            if let (Some(e), Some(a)) = (e, a) {
+                out.set(e, a);
+            }
+        }
+        out
+    }
+
+    fn system(&mut self, doc: &schema::Document) -> System {
+        let root = KeyPath::root();
+        let section = doc.system.get_ref();
+        let sys_path = root.key("system");
+        let memory_path = sys_path.key("memory");
+        let memory = self.page_size(&section.memory, &memory_path);
+        let name = match &section.name {
+            Some(n) => {
+                self.name(n, &sys_path.key("name"), NAME_MAX, "system");
+                n.get_ref().clone()
+            }
+            None => "system".to_string(),
+        };
+
+        let segments = self.segments(doc);
+        let (mut partitions, times, mut ports) = self.partitions(doc, &segments);
+        let schedules = self.schedules(doc, &mut partitions, &times);
+        let channels = self.channels(doc, &mut partitions, &mut ports);
+        let health = self.health(&doc.health, &root.key("health"));
+
+        if let Some(memory) = memory {
+            self.budgets(
+                memory,
+                start(&section.memory),
+                &memory_path,
+                &partitions,
+                &segments,
+            );
+        }
+        System {
+            name,
+            memory: memory.unwrap_or(0),
+            schedules,
+            partitions,
+            segments: segments.into_iter().map(|(s, _)| s).collect(),
+            channels,
+            health,
+        }
+    }
+
+    fn segments(&mut self, doc: &schema::Document) -> Vec<(Segment, usize)> {
+        let mut out: Vec<(Segment, usize)> = Vec::new();
+        for (i, seg) in doc.shared_memory.iter().enumerate() {
+            let path = KeyPath::root().key("shared_memory").index(i);
+            let raw = seg.get_ref();
+            if i == MAX_SEGMENTS {
+                self.error(
+                    start(seg),
+                    &path,
+                    format!("too many shared memory segments (at most {MAX_SEGMENTS})"),
+                );
+            }
+            let name_path = path.key("name");
+            self.name(&raw.name, &name_path, NAME_MAX, "segment");
+            if let Some((_, at)) = out.iter().find(|(s, _)| s.name == *raw.name.get_ref()) {
+                let line = self.r.line_of(*at);
+                self.error(
+                    start(&raw.name),
+                    &name_path,
+                    format!(
+                        "shared memory segment `{}` is already defined at line {line}",
+                        raw.name.get_ref()
+                    ),
+                );
+            }
+            let size = self.page_size(&raw.size, &path.key("size")).unwrap_or(0);
+            out.push((
+                Segment {
+                    name: raw.name.get_ref().clone(),
+                    size,
+                },
+                start(&raw.name),
+            ));
+        }
+        out
+    }
+
+    fn partitions(
+        &mut self,
+        doc: &schema::Document,
+        segments: &[(Segment, usize)],
+    ) -> (Vec<Partition>, Vec<Time>, Vec<PortDecl>) {
+        let mut partitions = Vec::new();
+        let mut times = Vec::new();
+        let mut ports = Vec::new();
+        // (range, partition index, offset) of every I/O range and IRQ so far.
+        let mut io_seen: Vec<(IoRange, usize, usize)> = Vec::new();
+        let mut irq_seen: Vec<(u8, usize, usize)> = Vec::new();
+        let mut attachment_total = 0;
+        let base = KeyPath::root().key("partitions");
+        for (index, (key, value)) in in_source_order(&doc.partitions).into_iter().enumerate() {
+            let path = base.key(key.get_ref());
+            let raw = value.get_ref();
+            let name = key.get_ref().clone();
+            if index == MAX_PARTITIONS {
+                self.error(
+                    start(key),
+                    &path,
+                    format!(
+                        "too many partitions (at most {MAX_PARTITIONS}: the kernel has 16 resource partitions and syssw keeps one)"
+                    ),
+                );
+            }
+            self.name(key, &path, PARTITION_NAME_MAX, "partition");
+
+            let image_path = path.key("image");
+            let image = raw.image.get_ref().clone();
+            if self.name(&raw.image, &image_path, NAME_MAX, "image") && !(self.known_images)(&image)
+            {
+                self.error(
+                    start(&raw.image),
+                    &image_path,
+                    format!("unknown image `{image}`: no user program of that name is built"),
+                );
+            }
+            let memory = self.page_size(&raw.memory, &path.key("memory"));
+            let kernel_memory = self
+                .page_size(&raw.kernel_memory, &path.key("kernel_memory"))
+                .unwrap_or(0);
+            let stack_path = path.key("stack");
+            let stack = match &raw.stack {
+                Some(s) => self.page_size(s, &stack_path),
+                None => Some(DEFAULT_STACK),
+            };
+            if let (Some(stack), Some(memory)) = (stack, memory)
+                && stack > memory
+            {
+                let (at, at_path) = match &raw.stack {
+                    Some(s) => (start(s), stack_path),
+                    None => (start(&raw.memory), path.key("memory")),
+                };
+                self.error(
+                    at,
+                    &at_path,
+                    format!(
+                        "the stack of {} does not fit in the partition's memory of {}",
+                        Size(stack),
+                        Size(memory)
+                    ),
+                );
+            }
+            let stack = stack.unwrap_or(0);
+            let kernel_threads = self.quota(
+                raw.kernel_threads.as_ref(),
+                &path.key("kernel_threads"),
+                DEFAULT_KERNEL_THREADS,
+                KERNEL_THREADS - SYSSW_THREADS,
+                "threads",
+            );
+            let kernel_tasks = self.quota(
+                raw.kernel_tasks.as_ref(),
+                &path.key("kernel_tasks"),
+                DEFAULT_KERNEL_TASKS,
+                KERNEL_TASKS - SYSSW_TASKS,
+                "tasks",
+            );
+
+            let mcp_value = *raw.max_priority.get_ref();
+            let mcp = if (i64::from(MCP_MIN)..=i64::from(MCP_MAX)).contains(&mcp_value) {
+                mcp_value as u8
+            } else {
+                self.error(
+                    start(&raw.max_priority),
+                    &path.key("max_priority"),
+                    format!(
+                        "max_priority (MCP) {mcp_value} is not in {MCP_MIN}..={MCP_MAX}: partition threads must stay below syssw's priority {SYSSW_PRIORITY}"
+                    ),
+                );
+                MCP_MAX
+            };
+            let priority = match &raw.priority {
+                Some(p) => {
+                    let value = *p.get_ref();
+                    if (0..=i64::from(mcp)).contains(&value) {
+                        value as u8
+                    } else {
+                        self.error(
+                            start(p),
+                            &path.key("priority"),
+                            format!(
+                                "priority {value} is not in 0..={mcp} (it may not exceed max_priority)"
+                            ),
+                        );
+                        0
+                    }
+                }
+                None => mcp,
+            };
+
+            let abilities = self.abilities(raw, &path);
+            let time = self.time(raw, &path);
+
+            let mut io_ports = Vec::new();
+            for (i, entry) in raw.io_ports.iter().enumerate() {
+                let here = path.key("io_ports").index(i);
+                let Some(range) = self.io_range(entry, &here) else {
+                    continue;
+                };
+                if let Some(kernel) = range.kernel_conflict() {
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!(
+                            "I/O ports {range} include {kernel}, which the kernel keeps for {}",
+                            kernel_port_use(kernel)
+                        ),
+                    );
+                    continue;
+                }
+                if let Some(&(other, owner, at)) =
+                    io_seen.iter().find(|(r, _, _)| r.overlaps(range))
+                {
+                    let line = self.r.line_of(at);
+                    let whose = if owner == index {
+                        "listed already".to_string()
+                    } else {
+                        format!("given to partition `{}`", partitions_name(doc, owner))
+                    };
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!("I/O ports {range} overlap {other}, {whose} at line {line}"),
+                    );
+                    continue;
+                }
+                if io_seen.len() == MAX_IO_RANGES {
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!("too many I/O port ranges (at most {MAX_IO_RANGES} in a system)"),
+                    );
+                    continue;
+                }
+                io_seen.push((range, index, start(entry)));
+                io_ports.push(range);
+            }
+
+            let mut irqs = IrqMask::default();
+            for (i, entry) in raw.irqs.iter().enumerate() {
+                let here = path.key("irqs").index(i);
+                let line_no = *entry.get_ref();
+                if !(0..i64::from(IRQ_LINES)).contains(&line_no) {
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!(
+                            "IRQ {line_no} is not an ISA interrupt line (0..={})",
+                            IRQ_LINES - 1
+                        ),
+                    );
+                    continue;
+                }
+                let line_no = line_no as u8;
+                if !irq_allowed(line_no) {
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!(
+                            "IRQ {line_no} is reserved for {}",
+                            reserved_irq_use(line_no)
+                        ),
+                    );
+                    continue;
+                }
+                if let Some(&(_, owner, at)) = irq_seen.iter().find(|(l, _, _)| *l == line_no) {
+                    let line = self.r.line_of(at);
+                    let whose = if owner == index {
+                        "listed already".to_string()
+                    } else {
+                        format!("given to partition `{}`", partitions_name(doc, owner))
+                    };
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!("IRQ {line_no} is {whose} at line {line}"),
+                    );
+                    continue;
+                }
+                irq_seen.push((line_no, index, start(entry)));
+                irqs.0 |= 1 << line_no;
+            }
+
+            if irqs.0 != 0 && !abilities.contains(Abilities::IRQ) {
+                let first = &raw.irqs[0];
+                self.error(
+                    start(first),
+                    &path.key("irqs"),
+                    "IRQ lines are listed but the partition lacks the `irq` ability it needs to attach them (add \"irq\" to `abilities`)",
+                );
+            }
+
+            let mut shared = Vec::new();
+            for (segment, rights) in in_source_order(&raw.shared) {
+                let here = path.key("shared").key(segment.get_ref());
+                let found = segments
+                    .iter()
+                    .position(|(s, _)| s.name == *segment.get_ref());
+                if found.is_none() {
+                    self.error(
+                        start(segment),
+                        &here,
+                        format!(
+                            "unknown shared memory segment `{}` (define it in [[shared_memory]])",
+                            segment.get_ref()
+                        ),
+                    );
+                }
+                let r = Rights::from_name(rights.get_ref());
+                if r.is_none() {
+                    let why = if matches!(rights.get_ref().as_str(), "rwx" | "wx" | "xw") {
+                        " (writable and executable at once is never allowed)"
+                    } else {
+                        ""
+                    };
+                    self.error(
+                        start(rights),
+                        &here,
+                        format!(
+                            "rights {:?} are not \"r\", \"rw\" or \"rx\"{why}",
+                            rights.get_ref()
+                        ),
+                    );
+                }
+                if let (Some(index), Some(rights)) = (found, r) {
+                    attachment_total += 1;
+                    if attachment_total > MAX_ATTACHMENTS {
+                        self.error(
+                            start(segment),
+                            &here,
+                            format!(
+                                "too many shared memory attachments (at most {MAX_ATTACHMENTS} in a system)"
+                            ),
+                        );
+                    }
+                    shared.push(Attachment {
+                        segment: index,
+                        rights,
+                    });
+                }
+            }
+
+            let mut own_ports = Vec::new();
+            for (port_key, port) in in_source_order(&raw.ports) {
+                let here = path.key("ports").key(port_key.get_ref());
+                self.name(port_key, &here, NAME_MAX, "port");
+                if ports.len() == MAX_PORTS {
+                    self.error(
+                        start(port_key),
+                        &here,
+                        format!("too many ports (at most {MAX_PORTS} in a system)"),
+                    );
+                }
+                let (p, valid) = self.port(port, port_key, &here);
+                ports.push(PortDecl {
+                    partition: index,
+                    port: own_ports.len(),
+                    key_at: start(port_key),
+                    path: here,
+                    used_by: None,
+                    valid,
+                });
+                own_ports.push(p);
+            }
+
+            let health = self.health(&raw.health, &path.key("health"));
+            times.push(time);
+            partitions.push(Partition {
+                name,
+                image,
+                memory: memory.unwrap_or(0),
+                kernel_memory,
+                stack,
+                kernel_threads,
+                kernel_tasks,
+                abilities,
+                mcp,
+                priority,
+                time_partition: 0,
+                io_ports,
+                irqs,
+                shared,
+                ports: own_ports,
+                health,
+            });
+        }
+        (partitions, times, ports)
+    }
+
+    fn quota(
+        &mut self,
+        value: Option<&Spanned<i64>>,
+        path: &KeyPath,
+        default: u32,
+        max: u32,
+        what: &str,
+    ) -> u32 {
+        let Some(value) = value else {
+            return default;
+        };
+        let n = *value.get_ref();
+        if (1..=i64::from(max)).contains(&n) {
+            n as u32
+        } else {
+            self.error(
+                start(value),
+                path,
+                format!("kernel {what} quota {n} is not in 1..={max}"),
+            );
+            default
+        }
+    }
+
+    fn abilities(&mut self, raw: &schema::Partition, path: &KeyPath) -> Abilities {
+        let mut abilities = Abilities::empty();
+        let native = raw.native_syscalls.as_ref().is_none_or(|n| *n.get_ref());
+        if native {
+            abilities |= Abilities::NATIVE_SYSCALLS;
+        }
+        for (i, name) in raw.abilities.iter().enumerate() {
+            let here = path.key("abilities").index(i);
+            let Some(ability) = ability_by_name(name.get_ref()) else {
+                self.error(
+                    start(name),
+                    &here,
+                    format!(
+                        "unknown ability `{}`; partitions may have: {}",
+                        name.get_ref(),
+                        ABILITY_NAMES
+                            .iter()
+                            .filter(|(_, a)| PARTITION_ABILITIES.contains(*a))
+                            .map(|(n, _)| *n)
+                            .collect::<Vec<_>>()
+                            .join(", ")
+                    ),
+                );
+                continue;
+            };
+            if !PARTITION_ABILITIES.contains(ability) {
+                self.error(
+                    start(name),
+                    &here,
+                    format!(
+                        "ability `{}` is reserved for the system software (with it a partition could break the others' isolation)",
+                        name.get_ref()
+                    ),
+                );
+                continue;
+            }
+            if ability == Abilities::NATIVE_SYSCALLS && !native {
+                self.error(
+                    start(name),
+                    &here,
+                    "`native_syscalls` is listed but `native_syscalls = false` is set",
+                );
+                continue;
+            }
+            abilities |= ability;
+        }
+        abilities
+    }
+
+    fn time(&mut self, raw: &schema::Partition, path: &KeyPath) -> Time {
+        let Some(time) = &raw.time else {
+            return Time::Auto;
+        };
+        let here = path.key("time");
+        match time.get_ref() {
+            Scalar::Str(s) if s == "background" => Time::Background,
+            Scalar::Int(n) if (1..i64::from(TIME_PARTITIONS)).contains(n) => {
+                Time::Explicit(*n as u8, start(time))
+            }
+            Scalar::Int(0) => {
+                self.error(
+                    start(time),
+                    &here,
+                    "time partition 0 is the background: write `time = \"background\"`",
+                );
+                Time::Invalid
+            }
+            other => {
+                let shown = match other {
+                    Scalar::Int(n) => n.to_string(),
+                    Scalar::Str(s) => format!("{s:?}"),
+                };
+                self.error(
+                    start(time),
+                    &here,
+                    format!(
+                        "time = {shown} is neither \"background\" nor a time partition number 1..={}",
+                        TIME_PARTITIONS - 1
+                    ),
+                );
+                Time::Invalid
+            }
+        }
+    }
+
+    fn io_range(&mut self, entry: &Spanned<Scalar>, path: &KeyPath) -> Option<IoRange> {
+        fn port(text: &str) -> Option<u16> {
+            let text = text.trim();
+            match text.strip_prefix("0x").or_else(|| text.strip_prefix("0X")) {
+                Some(hex) => u16::from_str_radix(hex, 16).ok(),
+                None => text.parse().ok(),
+            }
+        }
+        let range = match entry.get_ref() {
+            Scalar::Int(n) => u16::try_from(*n)
+                .ok()
+                .map(|p| IoRange { first: p, last: p }),
+            Scalar::Str(s) => match s.split_once('-') {
+                Some((a, b)) => port(a)
+                    .zip(port(b))
+                    .map(|(first, last)| IoRange { first, last }),
+                None => port(s).map(|p| IoRange { first: p, last: p }),
+            },
+        };
+        let shown = match entry.get_ref() {
+            Scalar::Int(n) => n.to_string(),
+            Scalar::Str(s) => format!("{s:?}"),
+        };
+        match range {
+            None => {
+                self.error(
+                    start(entry),
+                    path,
+                    format!(
+                        "invalid I/O port range {shown}: expected a port 0..=0xffff or a range like \"0x2f8-0x2ff\""
+                    ),
+                );
+                None
+            }
+            Some(r) if r.first > r.last => {
+                self.error(
+                    start(entry),
+                    path,
+                    format!("invalid I/O port range {shown}: the first port is above the last"),
+                );
+                None
+            }
+            r => r,
+        }
+    }
+
+    fn port(
+        &mut self,
+        port: &Spanned<schema::Port>,
+        key: &Spanned<String>,
+        path: &KeyPath,
+    ) -> (Port, bool) {
+        let raw = port.get_ref();
+        let kind = PortKind::from_name(raw.kind.get_ref());
+        if kind.is_none() {
+            self.error(
+                start(&raw.kind),
+                &path.key("kind"),
+                format!(
+                    "unknown port kind {:?}: expected \"sampling\" or \"queuing\"",
+                    raw.kind.get_ref()
+                ),
+            );
+        }
+        let direction = Direction::from_name(raw.direction.get_ref());
+        if direction.is_none() {
+            self.error(
+                start(&raw.direction),
+                &path.key("direction"),
+                format!(
+                    "unknown port direction {:?}: expected \"in\" or \"out\"",
+                    raw.direction.get_ref()
+                ),
+            );
+        }
+        let size_path = path.key("size");
+        let size = self.size(&raw.size, &size_path).and_then(|s| {
+            if (1..=u64::from(MAX_MESSAGE_SIZE)).contains(&s) {
+                Some(s as u32)
+            } else {
+                self.error(
+                    start(&raw.size),
+                    &size_path,
+                    format!(
+                        "message size {} is not in 1..={MAX_MESSAGE_SIZE} bytes (one IPC message)",
+                        s
+                    ),
+                );
+                None
+            }
+        });
+        let depth = match (kind, &raw.depth) {
+            (None, _) => None,
+            (Some(PortKind::Queuing), Some(d)) => {
+                let n = *d.get_ref();
+                if (1..=i64::from(MAX_QUEUE_DEPTH)).contains(&n) {
+                    Some(n as u32)
+                } else {
+                    self.error(
+                        start(d),
+                        &path.key("depth"),
+                        format!("queue depth {n} is not in 1..={MAX_QUEUE_DEPTH}"),
+                    );
+                    None
+                }
+            }
+            (Some(PortKind::Queuing), None) => {
+                self.error(
+                    start(port),
+                    path,
+                    "a queuing port needs a `depth` (messages it holds)",
+                );
+                None
+            }
+            (_, Some(d)) => {
+                self.error(
+                    start(d),
+                    &path.key("depth"),
+                    "`depth` is only for queuing ports",
+                );
+                None
+            }
+            (_, None) => Some(0),
+        };
+        let refresh = match &raw.refresh {
+            None => Some(0),
+            Some(r) => {
+                let here = path.key("refresh");
+                if (kind, direction) != (Some(PortKind::Sampling), Some(Direction::In)) {
+                    if kind.is_some() && direction.is_some() {
+                        self.error(
+                            start(r),
+                            &here,
+                            "`refresh` is only for sampling input ports (kind = \"sampling\", direction = \"in\")",
+                        );
+                    }
+                    None
+                } else {
+                    match self.duration(r, &here) {
+                        Some(0) => {
+                            self.error(start(r), &here, "a refresh period must be longer than 0");
+                            None
+                        }
+                        other => other,
+                    }
+                }
+            }
+        };
+        let valid = kind.is_some()
+            && direction.is_some()
+            && size.is_some()
+            && depth.is_some()
+            && refresh.is_some();
+        let port = Port {
+            name: key.get_ref().clone(),
+            kind: kind.unwrap_or(PortKind::Sampling),
+            direction: direction.unwrap_or(Direction::In),
+            size: size.unwrap_or(0),
+            depth: depth.unwrap_or(0),
+            refresh: refresh.unwrap_or(0),
+            channel: usize::MAX,
+        };
+        (port, valid)
+    }
+
+    fn schedules(
+        &mut self,
+        doc: &schema::Document,
+        partitions: &mut [Partition],
+        times: &[Time],
+    ) -> Vec<Schedule> {
+        let root = KeyPath::root();
+        let mut entries: Vec<(KeyPath, &Spanned<schema::Schedule>)> = Vec::new();
+        if let Some(single) = &doc.schedule {
+            if !doc.schedules.is_empty() {
+                self.error(
+                    start(single),
+                    &root.key("schedule"),
+                    "give either one [schedule] or a list of [[schedules]], not both",
+                );
+            }
+            entries.push((root.key("schedule"), single));
+        }
+        for (i, s) in doc.schedules.iter().enumerate() {
+            entries.push((root.key("schedules").index(i), s));
+        }
+
+        // Windows as (schedule, window, partition index, path of the window).
+        let mut schedules = Vec::new();
+        let mut window_owners: Vec<Vec<usize>> = Vec::new();
+        let mut names: Vec<(String, usize)> = Vec::new();
+        // Partitions some window names (even a window with other errors).
+        let mut named = vec![false; partitions.len()];
+        for (i, (path, schedule)) in entries.iter().enumerate() {
+            let raw = schedule.get_ref();
+            if i == MAX_SCHEDULES {
+                self.error(
+                    start(schedule),
+                    path,
+                    format!(
+                        "too many schedules (at most {MAX_SCHEDULES}, the kernel's schedule slots)"
+                    ),
+                );
+            }
+            let name = match &raw.name {
+                Some(n) => {
+                    let name_path = path.key("name");
+                    self.name(n, &name_path, NAME_MAX, "schedule");
+                    if let Some((_, at)) = names.iter().find(|(m, _)| m == n.get_ref()) {
+                        let line = self.r.line_of(*at);
+                        self.error(
+                            start(n),
+                            &name_path,
+                            format!(
+                                "schedule `{}` is already defined at line {line}",
+                                n.get_ref()
+                            ),
+                        );
+                    }
+                    names.push((n.get_ref().clone(), start(n)));
+                    n.get_ref().clone()
+                }
+                None if i == 0 => "default".to_string(),
+                None => {
+                    self.error(
+                        start(schedule),
+                        path,
+                        "every schedule but the first needs a `name` (the first defaults to \"default\")",
+                    );
+                    String::new()
+                }
+            };
+
+            // Valid windows: (offset, duration, partition, index in the source).
+            let mut windows: Vec<(u64, u64, usize, usize)> = Vec::new();
+            for (j, window) in raw.windows.iter().enumerate() {
+                let wpath = path.key("windows").index(j);
+                let w = window.get_ref();
+                if j == MAX_WINDOWS {
+                    self.error(
+                        start(window),
+                        &wpath,
+                        format!("too many windows (at most {MAX_WINDOWS} per schedule)"),
+                    );
+                }
+                let part_path = wpath.key("partition");
+                let partition = partitions
+                    .iter()
+                    .position(|p| p.name == *w.partition.get_ref());
+                match partition {
+                    None => self.error(
+                        start(&w.partition),
+                        &part_path,
+                        format!("unknown partition `{}`", w.partition.get_ref()),
+                    ),
+                    Some(p) if times[p] == Time::Background => self.error(
+                        start(&w.partition),
+                        &part_path,
+                        format!(
+                            "partition `{}` runs in the background (time = \"background\") and cannot have windows",
+                            w.partition.get_ref()
+                        ),
+                    ),
+                    Some(p) => named[p] = true,
+                }
+                let offset = self.duration(&w.offset, &wpath.key("offset"));
+                let duration = self.duration(&w.duration, &wpath.key("duration"));
+                if duration == Some(0) {
+                    self.error(
+                        start(&w.duration),
+                        &wpath.key("duration"),
+                        "a window must last longer than 0",
+                    );
+                    continue;
+                }
+                if let (Some(p), Some(offset), Some(duration)) = (partition, offset, duration) {
+                    if offset.checked_add(duration).is_none() {
+                        self.error(
+                            start(&w.duration),
+                            &wpath.key("duration"),
+                            "window end overflows",
+                        );
+                        continue;
+                    }
+                    if !matches!(times[p], Time::Background | Time::Invalid) {
+                        windows.push((offset, duration, p, j));
+                    }
+                }
+            }
+
+            let major_frame = match &raw.major_frame {
+                Some(f) => {
+                    let fpath = path.key("major_frame");
+                    match self.duration(f, &fpath) {
+                        Some(0) => {
+                            self.error(start(f), &fpath, "the major frame must be longer than 0");
+                            None
+                        }
+                        other => other,
+                    }
+                }
+                None => {
+                    let end = windows.iter().map(|w| w.0 + w.1).max();
+                    if end.is_none() && raw.windows.is_empty() {
+                        self.error(
+                            start(schedule),
+                            path,
+                            "a schedule without windows needs a `major_frame`",
+                        );
+                    }
+                    end
+                }
+            };
+
+            if let Some(frame) = major_frame {
+                windows.retain(|&(offset, duration, _, j)| {
+                    let w = raw.windows[j].get_ref();
+                    let wpath = path.key("windows").index(j);
+                    if offset >= frame {
+                        self.error(
+                            start(&w.offset),
+                            &wpath.key("offset"),
+                            format!(
+                                "the window starts at {}, not inside the major frame of {}",
+                                Duration(offset),
+                                Duration(frame)
+                            ),
+                        );
+                        false
+                    } else if offset + duration > frame {
+                        self.error(
+                            start(&w.duration),
+                            &wpath.key("duration"),
+                            format!(
+                                "the window ends at {}, after the major frame of {}",
+                                Duration(offset + duration),
+                                Duration(frame)
+                            ),
+                        );
+                        false
+                    } else {
+                        true
+                    }
+                });
+            }
+            windows.sort_by_key(|w| (w.0, w.3));
+            let mut latest: Option<(u64, u64, usize)> = None;
+            for &(offset, duration, _, j) in &windows {
+                if let Some((lo, le, lj)) = latest
+                    && offset < le
+                {
+                    let w = raw.windows[j].get_ref();
+                    self.error(
+                        start(&w.offset),
+                        &path.key("windows").index(j).key("offset"),
+                        format!(
+                            "the window {}..{} overlaps window {lj} ({}..{})",
+                            Duration(offset),
+                            Duration(offset + duration),
+                            Duration(lo),
+                            Duration(le)
+                        ),
+                    );
+                }
+                if latest.is_none_or(|(_, le, _)| offset + duration > le) {
+                    latest = Some((offset, offset + duration, j));
+                }
+            }
+            window_owners.push(windows.iter().map(|w| w.2).collect());
+            schedules.push(Schedule {
+                name,
+                major_frame: major_frame.unwrap_or(0),
+                windows: windows
+                    .iter()
+                    .map(|&(offset, duration, _, _)| Window {
+                        offset,
+                        duration,
+                        time_partition: 0,
+                    })
+                    .collect(),
+            });
+        }
+
+        // Time partitions: explicit numbers first, then the lowest free ones in source order.
+        let has_window = |p: usize| named[p];
+        let mut used = [false; TIME_PARTITIONS as usize];
+        for t in times {
+            if let Time::Explicit(n, _) = t {
+                used[*n as usize] = true;
+            }
+        }
+        let base = KeyPath::root().key("partitions");
+        for (p, time) in times.iter().enumerate() {
+            let name = partitions[p].name.clone();
+            let tp = match *time {
+                Time::Background | Time::Invalid => 0,
+                Time::Explicit(n, _) => n,
+                Time::Auto if has_window(p) => {
+                    match (1..TIME_PARTITIONS).find(|&n| !used[n as usize]) {
+                        Some(n) => {
+                            used[n as usize] = true;
+                            n
+                        }
+                        None => {
+                            let at = partition_key_at(doc, &name);
+                            self.error(
+                            at,
+                            &base.key(&name),
+                            format!(
+                                "no time partition left for partition `{name}` (there are {}); let partitions share one with `time = N`",
+                                TIME_PARTITIONS - 1
+                            ),
+                        );
+                            0
+                        }
+                    }
+                }
+                Time::Auto => {
+                    let at = partition_key_at(doc, &name);
+                    self.error(
+                        at,
+                        &base.key(&name),
+                        format!(
+                            "partition `{name}` has no window and is not background (add a window or `time = \"background\"`)"
+                        ),
+                    );
+                    0
+                }
+            };
+            partitions[p].time_partition = tp;
+        }
+        for (p, time) in times.iter().enumerate() {
+            if let Time::Explicit(n, at) = *time {
+                let covered =
+                    (0..partitions.len()).any(|q| named[q] && partitions[q].time_partition == n);
+                if !covered {
+                    let name = partitions[p].name.clone();
+                    self.error(
+                        at,
+                        &base.key(&name).key("time"),
+                        format!(
+                            "time partition {n} of partition `{name}` has no window in any schedule"
+                        ),
+                    );
+                }
+            }
+        }
+        for (schedule, owners) in schedules.iter_mut().zip(&window_owners) {
+            for (window, &owner) in schedule.windows.iter_mut().zip(owners) {
+                window.time_partition = partitions[owner].time_partition;
+            }
+        }
+        schedules
+    }
+
+    fn channels(
+        &mut self,
+        doc: &schema::Document,
+        partitions: &mut [Partition],
+        ports: &mut [PortDecl],
+    ) -> Vec<Channel> {
+        let mut channels: Vec<Channel> = Vec::new();
+        let mut names: Vec<(String, usize)> = Vec::new();
+        for (c, channel) in doc.channels.iter().enumerate() {
+            let path = KeyPath::root().key("channels").index(c);
+            let raw = channel.get_ref();
+            if c == MAX_CHANNELS {
+                self.error(
+                    start(channel),
+                    &path,
+                    format!("too many channels (at most {MAX_CHANNELS})"),
+                );
+            }
+            let kind = PortKind::from_name(raw.kind.get_ref());
+            if kind.is_none() {
+                self.error(
+                    start(&raw.kind),
+                    &path.key("kind"),
+                    format!(
+                        "unknown channel kind {:?}: expected \"sampling\" or \"queuing\"",
+                        raw.kind.get_ref()
+                    ),
+                );
+            }
+            let (name, name_at, name_path) = match &raw.name {
+                Some(n) => {
+                    self.name(n, &path.key("name"), NAME_MAX, "channel");
+                    (n.get_ref().clone(), start(n), path.key("name"))
+                }
+                None if raw.from.get_ref().len() <= NAME_MAX => (
+                    raw.from.get_ref().clone(),
+                    start(&raw.from),
+                    path.key("from"),
+                ),
+                None => (format!("channel{c}"), start(&raw.from), path.key("from")),
+            };
+            if let Some((_, at)) = names.iter().find(|(n, _)| *n == name) {
+                let line = self.r.line_of(*at);
+                self.error(
+                    name_at,
+                    &name_path,
+                    format!("channel name `{name}` is already used at line {line}"),
+                );
+            }
+            names.push((name.clone(), name_at));
+
+            let from_path = path.key("from");
+            let source = self.endpoint(
+                &raw.from,
+                &from_path,
+                c,
+                kind,
+                Direction::Out,
+                None,
+                partitions,
+                ports,
+            );
+            let source_size = source.map(|s| partitions[s.partition].ports[s.port].size);
+            let to_path = path.key("to");
+            let one;
+            let targets: Vec<(&Spanned<String>, KeyPath)> = match raw.to.get_ref() {
+                Targets::One(text) => {
+                    one = Spanned::new(raw.to.span(), text.clone());
+                    vec![(&one, to_path.clone())]
+                }
+                Targets::Many(items) => items
+                    .iter()
+                    .enumerate()
+                    .map(|(i, t)| (t, to_path.index(i)))
+                    .collect(),
+            };
+            let mut destinations = Vec::new();
+            if targets.is_empty() {
+                self.error(
+                    start(&raw.to),
+                    &to_path,
+                    "a channel needs at least one destination",
+                );
+            }
+            if kind == Some(PortKind::Queuing) && targets.len() > 1 {
+                self.error(
+                    start(targets[1].0),
+                    &targets[1].1,
+                    "a queuing channel connects exactly one destination (1:1)",
+                );
+            }
+            for (target, target_path) in &targets {
+                if let Some(d) = self.endpoint(
+                    target,
+                    target_path,
+                    c,
+                    kind,
+                    Direction::In,
+                    source_size,
+                    partitions,
+                    ports,
+                ) {
+                    destinations.push(d);
+                }
+            }
+            let (Some(kind), Some(source)) = (kind, source) else {
+                continue;
+            };
+            if destinations.len() != targets.len() || targets.is_empty() {
+                continue;
+            }
+            let index = channels.len();
+            partitions[source.partition].ports[source.port].channel = index;
+            for d in &destinations {
+                partitions[d.partition].ports[d.port].channel = index;
+            }
+            channels.push(Channel {
+                name,
+                kind,
+                source,
+                destinations,
+            });
+        }
+        for decl in ports.iter() {
+            if decl.used_by.is_none() {
+                let p = &partitions[decl.partition];
+                self.error(
+                    decl.key_at,
+                    &decl.path,
+                    format!(
+                        "port `{}.{}` is connected by no channel",
+                        p.name, p.ports[decl.port].name
+                    ),
+                );
+            }
+        }
+        channels
+    }
+
+    /// Resolves one end of channel `channel` and checks it against the channel.
+    #[allow(clippy::too_many_arguments)]
+    fn endpoint(
+        &mut self,
+        text: &Spanned<String>,
+        path: &KeyPath,
+        channel: usize,
+        kind: Option<PortKind>,
+        direction: Direction,
+        source_size: Option<u32>,
+        partitions: &[Partition],
+        ports: &mut [PortDecl],
+    ) -> Option<PortRef> {
+        let at = start(text);
+        let full = text.get_ref();
+        let Some((partition_name, port_name)) = full.split_once('.') else {
+            self.error(
+                at,
+                path,
+                format!("{full:?} is not a port reference \"partition.port\""),
+            );
+            return None;
+        };
+        let Some(p) = partitions.iter().position(|p| p.name == partition_name) else {
+            self.error(at, path, format!("unknown partition `{partition_name}`"));
+            return None;
+        };
+        let Some(decl) = ports
+            .iter_mut()
+            .find(|d| d.partition == p && partitions[p].ports[d.port].name == port_name)
+        else {
+            self.error(
+                at,
+                path,
+                format!("partition `{partition_name}` has no port `{port_name}`"),
+            );
+            return None;
+        };
+        if !decl.valid {
+            // Its own errors are reported already.
+            decl.used_by.get_or_insert((channel, at));
+            return None;
+        }
+        let port = &partitions[p].ports[decl.port];
+        let port_ref = PortRef {
+            partition: p,
+            port: decl.port,
+        };
+        let mut ok = true;
+        if port.direction != direction {
+            let role = if direction == Direction::Out {
+                "`from`"
+            } else {
+                "`to`"
+            };
+            self.error(
+                at,
+                path,
+                format!(
+                    "`{full}` is an {} port but a channel's {role} must be direction = \"{}\"",
+                    if port.direction == Direction::In {
+                        "input"
+                    } else {
+                        "output"
+                    },
+                    direction.name()
+                ),
+            );
+            ok = false;
+        }
+        if let Some(kind) = kind
+            && port.kind != kind
+        {
+            self.error(
+                at,
+                path,
+                format!(
+                    "`{full}` is a {} port but the channel is {}",
+                    port.kind.name(),
+                    kind.name()
+                ),
+            );
+            ok = false;
+        }
+        if let Some(source_size) = source_size
+            && port.size < source_size
+        {
+            self.error(
+                at,
+                path,
+                format!(
+                    "`{full}` takes messages of at most {} bytes, less than the {source_size} bytes the source may send (a destination's size must be at least the source's)",
+                    port.size
+                ),
+            );
+            ok = false;
+        }
+        match decl.used_by {
+            Some((other, other_at)) => {
+                let line = self.r.line_of(other_at);
+                let which = if other == channel {
+                    "listed already in this channel".to_string()
+                } else {
+                    format!("already connected by channels[{other}]")
+                };
+                self.error(
+                    at,
+                    path,
+                    format!("port `{full}` is {which} at line {line}; every port belongs to exactly one channel"),
+                );
+                ok = false;
+            }
+            None => decl.used_by = Some((channel, at)),
+        }
+        ok.then_some(port_ref)
+    }
+
+    fn budgets(
+        &mut self,
+        memory: u64,
+        at: usize,
+        path: &KeyPath,
+        partitions: &[Partition],
+        segments: &[(Segment, usize)],
+    ) {
+        let total = |sizes: &mut dyn Iterator<Item = u64>| sizes.fold(0u64, u64::saturating_add);
+        let partition_memory = total(&mut partitions.iter().map(|p| p.memory));
+        let segment_memory = total(&mut segments.iter().map(|(s, _)| s.size));
+        let user = partition_memory.saturating_add(segment_memory);
+        if user > user_memory_limit(memory) {
+            self.error(
+                at,
+                path,
+                format!(
+                    "partitions ({}) and shared memory ({}) need {}, but of {} only {} are left for them (minus the kernel pool of {} and a reserve of {} for the kernel, firmware, system image and syssw)",
+                    Size(partition_memory),
+                    Size(segment_memory),
+                    Size(user),
+                    Size(memory),
+                    Size(user_memory_limit(memory)),
+                    Size(kernel_pool(memory)),
+                    Size(SYSTEM_RESERVE)
+                ),
+            );
+        }
+        let kernel = total(&mut partitions.iter().map(|p| p.kernel_memory));
+        if kernel > kernel_memory_limit(memory) {
+            self.error(
+                at,
+                path,
+                format!(
+                    "the partitions' kernel_memory quotas need {}, but the kernel pool of {} (1/8 of memory, 16MiB..128MiB) leaves only {} after syssw's {}",
+                    Size(kernel),
+                    Size(kernel_pool(memory)),
+                    Size(kernel_memory_limit(memory)),
+                    Size(SYSSW_KERNEL_RESERVE)
+                ),
+            );
+        }
+        let threads: u32 = partitions.iter().map(|p| p.kernel_threads).sum();
+        if threads > KERNEL_THREADS - SYSSW_THREADS {
+            self.error(
+                at,
+                path,
+                format!(
+                    "the partitions' kernel_threads quotas add up to {threads}, more than the {} the kernel's thread table leaves after syssw",
+                    KERNEL_THREADS - SYSSW_THREADS
+                ),
+            );
+        }
+        let tasks: u32 = partitions.iter().map(|p| p.kernel_tasks).sum();
+        if tasks > KERNEL_TASKS - SYSSW_TASKS {
+            self.error(
+                at,
+                path,
+                format!(
+                    "the partitions' kernel_tasks quotas add up to {tasks}, more than the {} the kernel's task table leaves after syssw",
+                    KERNEL_TASKS - SYSSW_TASKS
+                ),
+            );
+        }
+    }
+}
+
+/// Name of the `index`-th partition in source order.
+fn partitions_name(doc: &schema::Document, index: usize) -> String {
+    in_source_order(&doc.partitions)
+        .get(index)
+        .map(|(k, _)| k.get_ref().clone())
+        .unwrap_or_default()
+}
+
+fn partition_key_at(doc: &schema::Document, name: &str) -> usize {
+    doc.partitions
+        .keys()
+        .find(|k| k.get_ref() == name)
+        .map_or(0, |k| k.span().start)
+}

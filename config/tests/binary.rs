@@ -1,0 +1,514 @@
+//! The binary form: encode -> decode round trips, and the decoder's behaviour on damaged
+//! or hostile blobs (it must reject them or decode something consistent, never panic).
+
+mod common;
+use abi::crc32::crc32;
+use common::*;
+use config::binary::{self, DecodeError, Table};
+use config::model::{Direction, HealthAction, HealthError, PortKind, Rights};
+use config::{System, decode};
+use proptest::prelude::*;
+
+/// A system using every feature of the format.
+const RICH: &str = r#"[system]
+name = "rich"
+memory = "1GiB"
+
+[[schedules]]
+name = "normal"
+major_frame = "10ms"
+[[schedules.windows]]
+partition = "ctl"
+offset = "0ms"
+duration = "2ms"
+[[schedules.windows]]
+partition = "io"
+offset = "3ms"
+duration = "500us"
+[[schedules.windows]]
+partition = "ctl"
+offset = "5ms"
+duration = "1ms"
+
+[[schedules]]
+name = "safe"
+major_frame = "20ms"
+[[schedules.windows]]
+partition = "io"
+offset = "0ms"
+duration = "1ms"
+
+[[shared_memory]]
+name = "frame"
+size = "64KiB"
+
+[[shared_memory]]
+name = "code"
+size = "8KiB"
+
+[partitions.ctl]
+image = "ctl"
+memory = "8MiB"
+kernel_memory = "256KiB"
+stack = "128KiB"
+kernel_threads = 8
+kernel_tasks = 2
+max_priority = 150
+priority = 120
+abilities = ["create_thread", "debug_log"]
+shared = { frame = "rw", code = "rx" }
+ports.level = { kind = "sampling", direction = "in", size = 16, refresh = "20ms" }
+ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
+health.deadline_missed = "warm_restart"
+health.application_error = "shutdown_success"
+
+[partitions.io]
+image = "io"
+memory = "4MiB"
+kernel_memory = "128KiB"
+max_priority = 140
+abilities = ["io_ports", "irq"]
+io_ports = ["0x60", "0x2f8-0x2ff", 0x378]
+irqs = [3, 7]
+shared = { frame = "r" }
+ports.level = { kind = "sampling", direction = "out", size = 8 }
+ports.cmd = { kind = "queuing", direction = "in", size = 128, depth = 4 }
+
+[partitions.guest]
+image = "guest"
+memory = "64MiB"
+kernel_memory = "1MiB"
+max_priority = 10
+native_syscalls = false
+time = "background"
+ports.level = { kind = "sampling", direction = "in", size = 8 }
+
+[[channels]]
+name = "level"
+kind = "sampling"
+from = "io.level"
+to = ["ctl.level", "guest.level"]
+
+[[channels]]
+kind = "queuing"
+from = "ctl.cmd"
+to = "io.cmd"
+
+[health]
+power_fail = "shutdown"
+memory_violation = "idle"
+"#;
+
+fn rich() -> System {
+    load_ok(RICH)
+}
+
+/// Recomputes the checksum after a deliberate edit, so the test reaches the checks behind it.
+fn reseal(blob: &mut [u8]) {
+    let total = (u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize).min(blob.len());
+    if total >= 16 {
+        let crc = crc32(&blob[16..total]);
+        blob[12..16].copy_from_slice(&crc.to_le_bytes());
+    }
+}
+
+/// Whatever decodes must be consistent: walking it never panics, and encoding its owned copy
+/// gives back exactly the same bytes (the format has one encoding per system).
+fn assert_consistent(blob: &[u8]) {
+    if let Ok(view) = decode(blob) {
+        let system = System::from_view(&view);
+        for p in view.partitions() {
+            let _ = (p.io_ports().count(), p.shared().count(), p.ports().count());
+        }
+        for c in view.channels() {
+            let _ = c.destinations().count();
+        }
+        let again = binary::encode(&system);
+        assert_eq!(again, view.as_bytes(), "re-encoding changed the blob");
+        assert!(decode(&again).is_ok());
+    }
+}
+
+#[test]
+fn round_trip() {
+    let system = rich();
+    let blob = binary::encode(&system);
+    let view = decode(&blob).expect("a validated system decodes");
+    assert_eq!(System::from_view(&view), system);
+
+    // Spot checks of the view API syssw uses.
+    assert_eq!(view.name(), "rich");
+    assert_eq!(view.memory(), 1 << 30);
+    assert_eq!(view.schedule_count(), 2);
+    let normal = view.schedule(0);
+    assert_eq!(normal.name, "normal");
+    assert_eq!(normal.major_frame, 10_000_000);
+    let windows: Vec<_> = normal.windows().map(|w| w.spec()).collect();
+    assert_eq!(windows.len(), 3);
+    assert_eq!(
+        (windows[1].offset, windows[1].duration, windows[1].partition),
+        (3_000_000, 500_000, 2)
+    );
+    let ctl = view.find_partition("ctl").unwrap();
+    assert_eq!((ctl.mcp, ctl.priority, ctl.time_partition), (150, 120, 1));
+    assert_eq!(ctl.stack, 128 << 10);
+    assert!(ctl.is_image_entry("partition/ctl"));
+    let shared: Vec<_> = ctl.shared().collect();
+    assert_eq!(shared[0].rights, Rights::ReadWrite);
+    assert_eq!(view.segment(shared[1].segment).name, "code");
+    assert_eq!(
+        ctl.health.get(HealthError::ApplicationError),
+        Some(HealthAction::ShutdownSuccess)
+    );
+    let io = view.partition(1);
+    let ranges: Vec<String> = io.io_ports().map(|r| r.to_string()).collect();
+    assert_eq!(ranges, ["0x60", "0x2f8-0x2ff", "0x378"]);
+    assert_eq!(io.irqs.lines().collect::<Vec<_>>(), [3, 7]);
+    let guest = view.find_partition("guest").unwrap();
+    assert_eq!(guest.time_partition, 0);
+    assert!(guest.abilities.is_empty());
+    let level = view.channel(0);
+    assert_eq!(level.kind, PortKind::Sampling);
+    let source = view.port(level.source);
+    assert_eq!(
+        (view.partition(source.partition).name, source.name),
+        ("io", "level")
+    );
+    let targets: Vec<_> = level
+        .destinations()
+        .map(|d| {
+            let p = view.port(d);
+            (view.partition(p.partition).name, p.direction, p.channel)
+        })
+        .collect();
+    assert_eq!(
+        targets,
+        [("ctl", Direction::In, 0), ("guest", Direction::In, 0)]
+    );
+    let cmd = ctl.find_port("cmd").unwrap();
+    assert_eq!(
+        (cmd.kind, cmd.depth, cmd.channel),
+        (PortKind::Queuing, 8, 1)
+    );
+    assert_eq!(ctl.find_port("level").unwrap().refresh, 20_000_000);
+    assert_eq!(
+        view.health().get(HealthError::PowerFail),
+        Some(HealthAction::Shutdown)
+    );
+}
+
+#[test]
+fn empty_system_round_trips() {
+    let system = load_ok("[system]\nmemory = \"64MiB\"\n");
+    let blob = binary::encode(&system);
+    assert_eq!(blob.len(), binary::HEADER_SIZE);
+    assert_eq!(System::from_view(&decode(&blob).unwrap()), system);
+}
+
+#[test]
+fn trailing_bytes_are_ignored() {
+    let mut blob = binary::encode(&rich());
+    let len = blob.len();
+    blob.resize(len + 4096, 0xaa);
+    assert_eq!(decode(&blob).unwrap().as_bytes().len(), len);
+}
+
+#[test]
+fn every_truncation_is_rejected() {
+    let blob = binary::encode(&rich());
+    for len in 0..blob.len() {
+        assert!(decode(&blob[..len]).is_err(), "accepted {len} bytes");
+    }
+}
+
+#[test]
+fn every_bit_flip_is_rejected() {
+    let blob = binary::encode(&rich());
+    for at in 0..blob.len() {
+        for bit in 0..8 {
+            let mut b = blob.clone();
+            b[at] ^= 1 << bit;
+            assert!(decode(&b).is_err(), "flip of bit {bit} at {at} accepted");
+        }
+    }
+}
+
+#[test]
+fn resealed_damage_never_panics() {
+    // With a valid checksum the structural checks are all that stand between a damaged blob
+    // and syssw: every single-byte change must be rejected or decode consistently.
+    let blob = binary::encode(&rich());
+    for at in 12..blob.len() {
+        for value in [0x00, 0x01, 0x02, 0x0f, 0x10, 0x7f, 0x80, 0xff] {
+            let mut b = blob.clone();
+            b[at] = value;
+            b[at] ^= if value == blob[at] { 1 } else { 0 };
+            reseal(&mut b);
+            assert_consistent(&b);
+        }
+    }
+}
+
+/// The byte offset of record `index` of a table in `blob` (tables follow the header in the
+/// documented order).
+fn record(blob: &[u8], table: Table, index: usize) -> usize {
+    let count = |i: usize| u16::from_le_bytes([blob[64 + 2 * i], blob[65 + 2 * i]]) as usize;
+    let sizes = [
+        binary::SCHEDULE_SIZE,
+        binary::WINDOW_SIZE,
+        binary::SEGMENT_SIZE,
+        binary::PARTITION_SIZE,
+        binary::IO_RANGE_SIZE,
+        binary::ATTACHMENT_SIZE,
+        binary::PORT_SIZE,
+        binary::CHANNEL_SIZE,
+        binary::DESTINATION_SIZE,
+    ];
+    let order = [
+        Table::Schedule,
+        Table::Window,
+        Table::Segment,
+        Table::Partition,
+        Table::IoRange,
+        Table::Attachment,
+        Table::Port,
+        Table::Channel,
+        Table::Destination,
+    ];
+    let slot = order.iter().position(|&t| t == table).unwrap();
+    let before: usize = (0..slot).map(|i| count(i) * sizes[i]).sum();
+    binary::HEADER_SIZE + before + index * sizes[slot]
+}
+
+fn damaged(edit: impl Fn(&mut Vec<u8>)) -> DecodeError {
+    let mut blob = binary::encode(&rich());
+    edit(&mut blob);
+    reseal(&mut blob);
+    decode(&blob).expect_err("damage accepted")
+}
+
+fn invalid(table: Table, index: usize, what: &str) -> impl Fn(DecodeError) {
+    let what = what.to_string();
+    move |e| match e {
+        DecodeError::Invalid {
+            table: t,
+            index: i,
+            what: w,
+        } => {
+            assert_eq!((t, i), (table, index), "{e}");
+            assert!(w.contains(&what), "{e}");
+        }
+        other => panic!("expected {table:?} {index} {what:?}, got {other:?}"),
+    }
+}
+
+#[test]
+fn header_damage() {
+    let blob = binary::encode(&rich());
+    let mut b = blob.clone();
+    b[0] = b'X';
+    assert_eq!(decode(&b).unwrap_err(), DecodeError::BadMagic);
+    let mut b = blob.clone();
+    b[8] = 2;
+    assert_eq!(decode(&b).unwrap_err(), DecodeError::UnsupportedVersion(2));
+    let mut b = blob.clone();
+    let last = b.len() - 1;
+    b[last] ^= 0x40;
+    assert!(matches!(
+        decode(&b).unwrap_err(),
+        DecodeError::ChecksumMismatch { .. }
+    ));
+    let e = damaged(|b| {
+        let total = b.len() as u32 + 1;
+        b[16..20].copy_from_slice(&total.to_le_bytes());
+    });
+    assert!(matches!(e, DecodeError::TooShort { .. }), "{e:?}");
+    let e = damaged(|b| b[64..66].copy_from_slice(&5u16.to_le_bytes()));
+    assert_eq!(
+        e,
+        DecodeError::TooMany {
+            table: Table::Schedule,
+            count: 5,
+            max: 4
+        }
+    );
+    let e = damaged(|b| b[68..70].copy_from_slice(&1u16.to_le_bytes()));
+    assert!(matches!(e, DecodeError::SizeMismatch { .. }), "{e:?}");
+    invalid(Table::Header, 0, "reserved")(damaged(|b| b[84] = 1));
+    invalid(Table::Header, 0, "module health")(damaged(|b| b[88] = 9));
+}
+
+#[test]
+fn window_damage() {
+    let w = |b: &Vec<u8>, i| record(b, Table::Window, i);
+    // Time partition 0 and 16.
+    invalid(Table::Window, 0, "not in 1..=15")(damaged(|b| {
+        let at = w(b, 0);
+        b[at + 16] = 0;
+    }));
+    invalid(Table::Window, 0, "used by no partition")(damaged(|b| {
+        let at = w(b, 0);
+        b[at + 16] = 9;
+    }));
+    // Window 1 (3ms..3.5ms) moved to start at 1ms overlaps window 0 (0..2ms).
+    invalid(Table::Window, 1, "overlaps")(damaged(|b| {
+        let at = w(b, 1);
+        b[at..at + 8].copy_from_slice(&1_000_000u64.to_le_bytes());
+    }));
+    invalid(Table::Window, 2, "ends after the major frame")(damaged(|b| {
+        let at = w(b, 2);
+        b[at + 8..at + 16].copy_from_slice(&u64::MAX.to_le_bytes());
+    }));
+    invalid(Table::Window, 0, "duration is zero")(damaged(|b| {
+        let at = w(b, 0);
+        b[at + 8..at + 16].fill(0);
+    }));
+}
+
+#[test]
+fn partition_damage() {
+    let p = |b: &Vec<u8>, i| record(b, Table::Partition, i);
+    invalid(Table::Partition, 0, "MCP")(damaged(|b| {
+        let at = p(b, 0);
+        b[at + 108] = 200;
+    }));
+    invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
+        let at = p(b, 0);
+        b[at + 109] = 151;
+    }));
+    invalid(Table::Partition, 1, "reserved for syssw")(damaged(|b| {
+        let at = p(b, 1);
+        b[at + 89] |= 1; // bit 8: SYSTEM_HALT
+    }));
+    invalid(Table::Partition, 1, "IRQ line")(damaged(|b| {
+        let at = p(b, 1);
+        b[at + 104] |= 1 << 4;
+    }));
+    invalid(Table::Partition, 0, "stack larger than memory")(damaged(|b| {
+        let at = p(b, 0);
+        b[at + 80..at + 88].copy_from_slice(&(16u64 << 20).to_le_bytes());
+    }));
+    invalid(Table::Partition, 2, "duplicate name")(damaged(|b| {
+        let (from, to) = (p(b, 0), p(b, 2));
+        let name: Vec<u8> = b[from..from + 32].to_vec();
+        b[to..to + 32].copy_from_slice(&name);
+    }));
+    invalid(Table::Partition, 0, "not UTF-8")(damaged(|b| {
+        let at = p(b, 0);
+        b[at] = 0xff;
+    }));
+    invalid(Table::Partition, 1, "do not tile")(damaged(|b| {
+        let at = p(b, 1);
+        b[at + 128] += 1;
+    }));
+    invalid(Table::Header, 0, "exceed the budget")(damaged(|b| {
+        let at = p(b, 2);
+        b[at + 64..at + 72].copy_from_slice(&(1u64 << 30).to_le_bytes());
+    }));
+}
+
+#[test]
+fn resource_damage() {
+    invalid(Table::IoRange, 1, "the kernel keeps")(damaged(|b| {
+        let at = record(b, Table::IoRange, 1);
+        b[at..at + 2].copy_from_slice(&0x3f8u16.to_le_bytes());
+        b[at + 2..at + 4].copy_from_slice(&0x3f8u16.to_le_bytes());
+    }));
+    invalid(Table::IoRange, 2, "overlaps")(damaged(|b| {
+        let at = record(b, Table::IoRange, 2);
+        b[at..at + 2].copy_from_slice(&0x2f9u16.to_le_bytes());
+        b[at + 2..at + 4].copy_from_slice(&0x2f9u16.to_le_bytes());
+    }));
+    invalid(Table::Attachment, 0, "segment index out of range")(damaged(|b| {
+        let at = record(b, Table::Attachment, 0);
+        b[at] = 7;
+    }));
+    invalid(Table::Attachment, 1, "unknown rights")(damaged(|b| {
+        let at = record(b, Table::Attachment, 1);
+        b[at + 2] = 4;
+    }));
+}
+
+#[test]
+fn port_and_channel_damage() {
+    let t = |b: &Vec<u8>, i| record(b, Table::Port, i);
+    invalid(Table::Port, 0, "channel index out of range")(damaged(|b| {
+        let at = t(b, 0);
+        b[at + 48] = 99;
+    }));
+    invalid(Table::Port, 1, "depth")(damaged(|b| {
+        let at = t(b, 1);
+        b[at + 36..at + 40].fill(0);
+    }));
+    invalid(Table::Port, 0, "refresh period on a port")(damaged(|b| {
+        // ctl.level becomes an output: refresh no longer allowed.
+        let at = t(b, 0);
+        b[at + 51] = 2;
+    }));
+    invalid(Table::Channel, 0, "source is not an output port")(damaged(|b| {
+        let at = record(b, Table::Channel, 0);
+        b[at + 32] = 0; // ctl.level, an input
+    }));
+    invalid(Table::Destination, 0, "smaller than the source")(damaged(|b| {
+        let at = t(b, 0);
+        b[at + 32..at + 36].copy_from_slice(&4u32.to_le_bytes());
+    }));
+    invalid(Table::Channel, 1, "queuing exactly 1")(damaged(|b| {
+        // Move the guest's destination from channel 0 to channel 1.
+        let c0 = record(b, Table::Channel, 0);
+        b[c0 + 36] = 1;
+        let c1 = record(b, Table::Channel, 1);
+        b[c1 + 34] = 1;
+        b[c1 + 36] = 2;
+    }));
+}
+
+#[test]
+fn errors_read_well() {
+    let e = DecodeError::Invalid {
+        table: Table::Window,
+        index: 3,
+        what: "duration is zero",
+    };
+    assert_eq!(
+        e.to_string(),
+        "binary configuration window 3: duration is zero"
+    );
+    assert_eq!(
+        DecodeError::TooShort {
+            needed: 96,
+            actual: 3
+        }
+        .to_string(),
+        "binary configuration truncated: 3 bytes, 96 needed"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2000))]
+
+    #[test]
+    fn random_bytes_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..600)) {
+        let _ = decode(&bytes);
+        // With a valid header and checksum the structure checks run too.
+        let mut b = binary::encode(&rich());
+        let n = bytes.len().min(b.len() - 16);
+        b[16..16 + n].copy_from_slice(&bytes[..n]);
+        reseal(&mut b);
+        assert_consistent(&b);
+    }
+
+    #[test]
+    fn resealed_mutations_decode_consistently(
+        edits in proptest::collection::vec((any::<prop::sample::Index>(), any::<u8>()), 1..6)
+    ) {
+        let mut b = binary::encode(&rich());
+        let len = b.len();
+        for (at, value) in edits {
+            let at = 16 + at.index(len - 16);
+            b[at] = value;
+        }
+        reseal(&mut b);
+        assert_consistent(&b);
+    }
+}

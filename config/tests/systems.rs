@@ -1,0 +1,101 @@
+//! Every description in config/systems/ must validate and survive the binary round trip.
+//! Images are not checked here (any name passes): `cargo xtask check-config` checks them
+//! against the user programs the workspace builds.
+
+mod common;
+use config::System;
+use config::model::{HealthAction, HealthError, IoRange, PortKind};
+use std::path::PathBuf;
+
+fn systems_dir() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("systems")
+}
+
+fn load_file(path: &std::path::Path) -> System {
+    let source = std::fs::read_to_string(path).unwrap();
+    let name = path.display().to_string();
+    match config::load(&name, &source, &common::any_image) {
+        Ok(system) => system,
+        Err(diags) => {
+            let all: Vec<String> = diags.iter().map(|d| d.to_string()).collect();
+            panic!("{name} is invalid:\n{}", all.join("\n"));
+        }
+    }
+}
+
+#[test]
+fn every_system_validates_and_round_trips() {
+    let mut count = 0;
+    for entry in std::fs::read_dir(systems_dir()).unwrap() {
+        let path = entry.unwrap().path();
+        if path.extension().is_none_or(|e| e != "toml") {
+            continue;
+        }
+        let system = load_file(&path);
+        let blob = config::binary::encode(&system);
+        let view = config::decode(&blob)
+            .unwrap_or_else(|e| panic!("{}: the encoded form is rejected: {e}", path.display()));
+        assert_eq!(System::from_view(&view), system, "{}", path.display());
+        count += 1;
+    }
+    assert!(count >= 1, "no system descriptions found");
+}
+
+#[test]
+fn default_system() {
+    let s = load_file(&systems_dir().join("default.toml"));
+    let names: Vec<&str> = s.partitions.iter().map(|p| p.name.as_str()).collect();
+    assert_eq!(names, ["plc", "plant", "guest"]);
+    let [plc, plant, guest] = &s.partitions[..] else {
+        unreachable!()
+    };
+    assert_eq!((plc.image.as_str(), plc.time_partition), ("softplc", 1));
+    assert_eq!((plant.image.as_str(), plant.time_partition), ("plant", 2));
+    assert_eq!((guest.image.as_str(), guest.time_partition), ("guest", 0));
+    assert_eq!(
+        guest.io_ports,
+        [IoRange {
+            first: 0x2f8,
+            last: 0x2ff
+        }]
+    );
+    assert_eq!(guest.irqs.lines().collect::<Vec<_>>(), [3]);
+    let normal = &s.schedules[0];
+    assert_eq!(normal.major_frame, 10_000_000);
+    assert_eq!(
+        (
+            normal.windows[0].offset,
+            normal.windows[0].duration,
+            normal.windows[0].time_partition
+        ),
+        (0, 2_000_000, 1)
+    );
+    // plant.level -> plc.level and plc.valve -> plant.valve.
+    let links: Vec<(String, String)> = s
+        .channels
+        .iter()
+        .map(|c| {
+            assert_eq!(c.kind, PortKind::Sampling);
+            let end = |r: config::system::PortRef| {
+                let p = &s.partitions[r.partition];
+                format!("{}.{}", p.name, p.ports[r.port].name)
+            };
+            (end(c.source), end(c.destinations[0]))
+        })
+        .collect();
+    assert_eq!(
+        links,
+        [
+            ("plant.level".to_string(), "plc.level".to_string()),
+            ("plc.valve".to_string(), "plant.valve".to_string())
+        ]
+    );
+    assert_eq!(
+        plc.health.get(HealthError::DeadlineMissed),
+        Some(HealthAction::WarmRestart)
+    );
+    assert_eq!(
+        s.health.get(HealthError::MemoryViolation),
+        Some(HealthAction::Idle)
+    );
+}

@@ -1,0 +1,148 @@
+//! `cargo xtask check-config FILE`: validates a system description and compiles it to the
+//! binary configuration that goes into `system.img` (see the `config` crate).
+//!
+//! Known images: a partition's `image` names a user program the workspace builds, i.e. a
+//! workspace member whose manifest uses `partitions/rt/user-link.rs` as its build script
+//! (the freestanding user-mode binaries), by package name — the same name
+//! [`crate::artifacts::build_user_programs`] takes and `target/user/<name>` carries. `syssw`
+//! is excluded: it is the root task, never a partition.
+
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+
+/// The user programs partitions may use as images (sorted package names).
+pub fn known_images() -> Result<Vec<String>> {
+    let root = crate::workspace_root();
+    let manifest = std::fs::read_to_string(root.join("Cargo.toml"))
+        .context("cannot read the workspace Cargo.toml")?;
+    let manifest: toml::Table = toml::from_str(&manifest).context("workspace Cargo.toml")?;
+    let members = manifest
+        .get("workspace")
+        .and_then(|w| w.get("members"))
+        .and_then(|m| m.as_array())
+        .context("workspace Cargo.toml has no workspace.members")?;
+    let mut images = Vec::new();
+    for member in members.iter().filter_map(|m| m.as_str()) {
+        let path = root.join(member).join("Cargo.toml");
+        let text = std::fs::read_to_string(&path)
+            .with_context(|| format!("cannot read {}", path.display()))?;
+        let member: toml::Table =
+            toml::from_str(&text).with_context(|| format!("{}", path.display()))?;
+        let package = member.get("package");
+        let build = package
+            .and_then(|p| p.get("build"))
+            .and_then(|b| b.as_str());
+        let name = package.and_then(|p| p.get("name")).and_then(|n| n.as_str());
+        if let (Some(build), Some(name)) = (build, name)
+            && build.ends_with("partitions/rt/user-link.rs")
+            && name != "syssw"
+        {
+            images.push(name.to_string());
+        }
+    }
+    images.sort();
+    Ok(images)
+}
+
+/// `file` as given, or relative to the workspace root if it does not exist as given.
+fn resolve(file: &Path) -> PathBuf {
+    if file.exists() {
+        file.to_path_buf()
+    } else {
+        crate::workspace_root().join(file)
+    }
+}
+
+/// Validates `path` and returns its binary configuration; the error lists every diagnostic.
+/// (For the image builder.)
+pub fn compile(path: &Path) -> Result<Vec<u8>> {
+    let images = known_images()?;
+    let source = std::fs::read_to_string(resolve(path))
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let name = path.display().to_string();
+    match config::compile(&name, &source, &|image| images.iter().any(|i| i == image)) {
+        Ok(blob) => Ok(blob),
+        Err(diagnostics) => {
+            let lines: Vec<String> = diagnostics.iter().map(|d| d.to_string()).collect();
+            bail!("configuration {name} is invalid:\n{}", lines.join("\n"))
+        }
+    }
+}
+
+/// The command: diagnostics on stderr, one per line, then `config FILE: ok (...)` on stdout
+/// or `config FILE: N errors` on stderr. Returns whether the file is valid. With
+/// `any_image`, image names are not checked (for descriptions of programs not written yet).
+pub fn run(file: &Path, any_image: bool) -> Result<bool> {
+    let images = if any_image {
+        Vec::new()
+    } else {
+        known_images()?
+    };
+    let source = std::fs::read_to_string(resolve(file))
+        .with_context(|| format!("cannot read {}", file.display()))?;
+    let name = file.display().to_string();
+    let known = |image: &str| any_image || images.iter().any(|i| i == image);
+    match config::load(&name, &source, &known) {
+        Ok(system) => {
+            // The encoder's output must pass the decoder's own checks.
+            let blob = config::binary::encode(&system);
+            if let Err(e) = config::decode(&blob) {
+                bail!("internal error: {name} validated but its binary form is rejected: {e}");
+            }
+            println!(
+                "config {name}: ok ({} partitions, {} windows, {} channels)",
+                system.partitions.len(),
+                system.window_count(),
+                system.channels.len()
+            );
+            Ok(true)
+        }
+        Err(diagnostics) => {
+            for d in &diagnostics {
+                eprintln!("{d}");
+            }
+            if diagnostics
+                .iter()
+                .any(|d| d.message.starts_with("unknown image"))
+            {
+                eprintln!(
+                    "note: known images (user programs of the workspace): {}",
+                    images.join(", ")
+                );
+            }
+            let n = diagnostics.len();
+            eprintln!("config {name}: {n} error{}", if n == 1 { "" } else { "s" });
+            Ok(false)
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn known_images_are_the_user_programs() {
+        let images = known_images().unwrap();
+        assert!(images.iter().any(|i| i == "test-usermode"), "{images:?}");
+        assert!(!images.iter().any(|i| i == "syssw" || i == "xtask"));
+    }
+
+    #[test]
+    fn compile_reports_every_diagnostic() {
+        let dir = crate::target_dir().join("check-config-test");
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("bad.toml");
+        std::fs::write(
+            &file,
+            "[system]\nmemory = \"64MB\"\n[partitions.p]\nimage = \"nope\"\nmemory = \"1MiB\"\nkernel_memory = \"4KiB\"\nmax_priority = 1\ntime = \"background\"\n",
+        )
+        .unwrap();
+        let error = format!("{:#}", compile(&file).unwrap_err());
+        assert!(error.contains("system.memory"), "{error}");
+        assert!(error.contains("unknown image `nope`"), "{error}");
+        let good = dir.join("good.toml");
+        std::fs::write(&good, "[system]\nmemory = \"64MiB\"\n").unwrap();
+        assert!(config::decode(&compile(&good).unwrap()).is_ok());
+    }
+}
