@@ -27,6 +27,37 @@ pub struct InterruptOverride {
     pub flags: u16,
 }
 
+/// Electrical properties of a global system interrupt.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Signal {
+    pub active_low: bool,
+    pub level_triggered: bool,
+}
+
+/// How input `gsi` is signalled: as an override (MADT flags: polarity bits 0-1, trigger
+/// bits 2-3; 0b11 = active low / level, 0b00 = the bus default) says, else ISA inputs
+/// (< 16) are edge-triggered active high and PCI inputs level-triggered active low.
+pub fn signal_of(gsi: u32, overrides: &[InterruptOverride]) -> Signal {
+    let isa = gsi < 16;
+    let default = Signal {
+        active_low: !isa,
+        level_triggered: !isa,
+    };
+    match overrides.iter().find(|o| o.gsi == gsi) {
+        None => default,
+        Some(o) => Signal {
+            active_low: match o.flags & 3 {
+                0 => default.active_low,
+                p => p == 3,
+            },
+            level_triggered: match (o.flags >> 2) & 3 {
+                0 => default.level_triggered,
+                t => t == 3,
+            },
+        },
+    }
+}
+
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct AcpiInfo {
     pub revision: u8,
@@ -333,6 +364,43 @@ mod tests {
                 *b"APIC",
                 "entry length runs past the table"
             ))
+        );
+    }
+
+    #[test]
+    fn signal_follows_overrides_and_bus_defaults() {
+        use super::{InterruptOverride, Signal, signal_of};
+        let overrides = [
+            InterruptOverride {
+                isa_irq: 0,
+                gsi: 2,
+                flags: 0,
+            },
+            InterruptOverride {
+                isa_irq: 9,
+                gsi: 9,
+                flags: 0b1101,
+            },
+        ];
+        let edge_high = Signal {
+            active_low: false,
+            level_triggered: false,
+        };
+        assert_eq!(signal_of(3, &overrides), edge_high);
+        assert_eq!(signal_of(2, &overrides), edge_high);
+        assert_eq!(
+            signal_of(9, &overrides),
+            Signal {
+                active_low: false,
+                level_triggered: true
+            }
+        );
+        assert_eq!(
+            signal_of(18, &[]),
+            Signal {
+                active_low: true,
+                level_triggered: true
+            }
         );
     }
 }

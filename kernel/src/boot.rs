@@ -158,10 +158,19 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
             io.gsi_base,
             io.gsi_base + ioapic.line_count() - 1
         );
+        if io.gsi_base == 0 {
+            crate::arch::ioapic::install(ioapic, apic_id, &acpi.overrides);
+        }
     }
 
     let apic_timer_hz = calibrate(acpi.hpet_address);
     prove_timer(apic_timer_hz);
+    if lapic::has_tsc_deadline() {
+        lapic::use_tsc_deadline();
+        kprintln!("timer: one-shot in TSC-deadline mode");
+    } else {
+        kprintln!("timer: one-shot count mode (no TSC-deadline mode)");
+    }
 
     // SAFETY: the loader copied system.img to SYSTEM_IMAGE frames that stay reserved; the
     // direct map covers them.

@@ -16,6 +16,7 @@ pub mod boot;
 pub mod fault;
 pub mod heap;
 pub mod ipc;
+pub mod irq;
 pub mod log;
 pub mod mem;
 pub mod qemu;

@@ -75,6 +75,8 @@ pub struct Kernel {
     pub last_account: u64,
     /// Raw id of the task whose I/O bitmap is in the TSS (0: ports disabled).
     pub io_loaded: u64,
+    /// Interrupt lines attached to threads.
+    pub irqs: crate::irq::Irqs,
 }
 
 impl Default for Kernel {
@@ -111,6 +113,7 @@ impl Kernel {
             running_partition: None,
             last_account: 0,
             io_loaded: 0,
+            irqs: crate::irq::Irqs::new(),
         }
     }
 
@@ -233,6 +236,9 @@ impl Kernel {
 
     /// A timer event at `now`: time-outs and window boundaries.
     pub fn on_timer(&mut self, now: u64) {
+        // The one-shot timer has fired: re-arm it even if it fired a little early (its
+        // count is rounded down) and nothing is due yet, or the next event would be missed.
+        self.timer_dirty = true;
         if now >= self.next_deadline {
             self.expire_timeouts(now);
         }
@@ -533,6 +539,7 @@ impl Kernel {
             self.unqueue_sender(to, t);
         }
         self.run.remove(t);
+        self.release_irqs_of(t);
         let id = self.thread_id(t);
         // Everyone waiting for it: its senders, its callers, receivers waiting on it.
         for other in 0..MAX_THREADS {

@@ -92,7 +92,8 @@ fn handle(
             done(k, t)
         }
         Call::Clock => {
-            k.threads[t].context.rdi = clock();
+            let c = &mut k.threads[t].context;
+            (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
             done(k, t)
         }
         Call::ThreadExit => {
@@ -321,6 +322,23 @@ fn handle(
             let target = k.task(a[0])?;
             k.io_grant(task, target, a[1], a[2])?;
             done(k, t)
+        }
+        Call::IrqGrant => {
+            k.require(task, Abilities::IRQ)?;
+            let target = k.task(a[0])?;
+            k.irq_grant(task, target, a[1])?;
+            done(k, t)
+        }
+        Call::IrqAttach | Call::IrqWait | Call::IrqAck | Call::IrqDetach => {
+            k.require(task, Abilities::IRQ)?;
+            k.threads[t].context.rax = Error::Ok as u64;
+            match call {
+                Call::IrqAttach => k.irq_attach(t, a[0], a[1])?,
+                Call::IrqWait => k.irq_wait(t, a[0], deadline(clock, a[1]), a[1] == 0)?,
+                Call::IrqAck => k.irq_ack(t, a[0])?,
+                _ => k.irq_detach(t, a[0])?,
+            }
+            Ok(None)
         }
         Call::SetHealthMonitor => {
             k.require(task, Abilities::PARTITION_CONTROL)?;

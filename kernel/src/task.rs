@@ -29,6 +29,8 @@ pub struct Task {
     pub pages_charged: u64,
     /// The two frames of its I/O permission bitmap (0: no ports).
     pub io_bitmap: [u64; 2],
+    /// Bit n: the task may attach interrupt line n.
+    pub irq_lines: u32,
 }
 
 impl Task {
@@ -45,6 +47,7 @@ impl Task {
         send_to: 0,
         pages_charged: 0,
         io_bitmap: [0; 2],
+        irq_lines: 0,
     };
 
     pub fn name(&self) -> &str {
@@ -192,6 +195,7 @@ pub fn create_root(
         rp: 0,
         space,
         send_to: 1,
+        irq_lines: crate::irq::root_lines(),
         ..Task::FREE
     };
     task.name[..5].copy_from_slice(b"syssw");

@@ -22,6 +22,10 @@ pub fn set_tsc_hz(hz: u64) {
     TSC_HZ.store(hz, Ordering::Relaxed);
 }
 
+pub fn boot_tsc() -> u64 {
+    TSC_AT_BOOT.load(Ordering::Relaxed)
+}
+
 pub fn tsc_hz() -> u64 {
     TSC_HZ.load(Ordering::Relaxed)
 }

@@ -33,3 +33,24 @@ pub fn boot(name: &str) -> Outcome {
 pub fn check(outcome: &Outcome, cond: bool, what: &str) {
     assert!(cond, "{what}\n{}", outcome.transcript());
 }
+
+/// Boots scenario `name`, whose root task is the user-mode test program in `mode`, and
+/// asserts: success exit, no failed check, no panic, each of `checks` as a `check ok:`
+/// line, and the mode's final `all <mode> checks passed` line.
+pub fn passes(name: &str, mode: &str, checks: &[&str]) -> Outcome {
+    let o = boot(name);
+    check(
+        &o,
+        o.line("check FAILED").is_none(),
+        "a check failed (see `check FAILED` in the log)",
+    );
+    check(&o, o.line("panic at ").is_none(), "a user-mode panic");
+    check(&o, o.succeeded(), "expected success exit (33)");
+    for what in checks {
+        let line = format!("check ok: {what}");
+        check(&o, o.line(&line).is_some(), &format!("missing {line:?}"));
+    }
+    let last = format!("all {mode} checks passed");
+    check(&o, o.line(&last).is_some(), &format!("missing {last:?}"));
+    o
+}

@@ -2,28 +2,7 @@
 //! image entry `test/mode`) exercises tasks, threads, resource partitions, memory mapping,
 //! IPC and exceptions, printing `check ok: ...` per check and `all <mode> checks passed`.
 
-use scenarios::{boot, check};
-use xtask::qemu::Outcome;
-
-/// Boots scenario `name` and asserts: success exit, no failed check, each of `checks` as a
-/// `check ok:` line, and the mode's final line.
-fn passes(name: &str, mode: &str, checks: &[&str]) -> Outcome {
-    let o = boot(name);
-    check(
-        &o,
-        o.line("check FAILED").is_none(),
-        "a kernel check failed (see `check FAILED` in the log)",
-    );
-    check(&o, o.line("panic at ").is_none(), "a user-mode panic");
-    check(&o, o.succeeded(), "expected success exit (33)");
-    for what in checks {
-        let line = format!("check ok: {what}");
-        check(&o, o.line(&line).is_some(), &format!("missing {line:?}"));
-    }
-    let last = format!("all {mode} checks passed");
-    check(&o, o.line(&last).is_some(), &format!("missing {last:?}"));
-    o
-}
+use scenarios::{check, passes};
 
 #[test]
 fn kernel_tasks() {

@@ -84,6 +84,7 @@ pub fn command(qemu: &Qemu, esp: &Path, vars: &Path) -> Command {
         "-m",
         "512M",
         "-cpu",
+        // QEMU 7.2's TCG has no TSC-deadline mode: the kernel's timer uses one-shot counts.
         "qemu64",
         "-display",
         "none",
@@ -100,6 +101,10 @@ pub fn command(qemu: &Qemu, esp: &Path, vars: &Path) -> Command {
     cmd.args([
         "-serial",
         "stdio",
+        // COM2 (0x2f8, IRQ 3) exists but goes nowhere: a device user threads can drive
+        // (interrupt tests put it in loopback mode; the guest's console later).
+        "-serial",
+        "null",
         "-device",
         "isa-debug-exit,iobase=0xf4,iosize=0x04",
     ]);
@@ -182,6 +187,8 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
         }
     };
     let stderr = stderr_reader.join().unwrap_or_default();
+    // Kept for reading after a passing run too (scenario logs hold measurements).
+    let _ = std::fs::write(options.work_dir.join("serial.log"), lines.join("\n") + "\n");
     Ok(Outcome {
         ending,
         lines,

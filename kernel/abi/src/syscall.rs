@@ -58,7 +58,10 @@ pub enum Call {
     /// Ability: `DEBUG_LOG`. Errors: `BadAddress` (buffer not readable user memory),
     /// `InvalidArgument` (too long).
     DebugWrite = 1,
-    /// `clock() -> rdi = ns`: nanoseconds since boot (monotonic). Ability: none.
+    /// `clock() -> rdi = ns, rsi = TSC frequency (Hz), rdx = TSC at boot`: nanoseconds
+    /// since boot (monotonic); the other two let a program convert `rdtsc` readings to the
+    /// same time base (ns = (tsc - boot) * 10^9 / Hz) for cycle-exact measurements.
+    /// Ability: none.
     Clock = 2,
     /// `thread_exit()`: ends the calling thread (as `thread_kill` of itself); does not
     /// return. Ability: none.
@@ -224,7 +227,37 @@ pub enum Call {
     /// `NotPermitted` (not a strict descendant, or ports the caller does not hold),
     /// `QuotaExceeded`, `NoSuchObject`.
     IoGrant = 80,
+    /// `irq_grant(task, line)`: lets a descendant task attach interrupt line `line`
+    /// (an IOAPIC input, < [`IRQ_LINES`]). The caller must hold the line itself (the root
+    /// task holds all except [`KERNEL_IRQS`]). Ability: `IRQ`. Errors: `InvalidArgument`
+    /// (line out of range), `NotPermitted` (not a strict descendant, or a line the caller
+    /// does not hold), `NoSuchObject`.
+    IrqGrant = 81,
+    /// `irq_attach(line, bit)`: the calling thread receives interrupt line `line`: when it
+    /// fires, the kernel masks it and sets notification bit `bit` (< 64) of the thread (so
+    /// `irq_wait` or `notify_wait` sees it). The line is unmasked at once. Attaching a line
+    /// the caller already has just changes the bit. A line is detached when its thread
+    /// dies. Ability: `IRQ`. Errors: `InvalidArgument` (line or bit out of range),
+    /// `NotPermitted` (the task does not hold the line, or another thread has it attached).
+    IrqAttach = 82,
+    /// `irq_wait(line, timeout)`: waits until the attached `line` has fired since the
+    /// last wait (and clears that). An interrupt that arrives while the thread's time
+    /// partition is not eligible is latched and seen when it runs again. The line stays
+    /// masked until `irq_ack`. Errors: `NotPermitted` (line not attached to the caller),
+    /// `InvalidArgument`, `TimedOut`.
+    IrqWait = 83,
+    /// `irq_ack(line)`: unmasks the attached `line` after its device was served.
+    /// Errors: `NotPermitted` (not attached to the caller), `InvalidArgument`.
+    IrqAck = 84,
+    /// `irq_detach(line)`: masks the line and releases it. Errors: as `irq_ack`.
+    IrqDetach = 85,
 }
+
+/// Interrupt lines (IOAPIC inputs 0..24; line `n` uses vector `0x40 + n`).
+pub const IRQ_LINES: u64 = 24;
+/// Lines the kernel keeps: 0 and 2 (PIT: ISA IRQ 0 is usually wired to input 2) and 4
+/// (COM1, the kernel log).
+pub const KERNEL_IRQS: [u64; 3] = [0, 2, 4];
 
 /// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit).
 pub const KERNEL_PORTS: [(u16, u16); 5] = [
@@ -290,6 +323,11 @@ impl Call {
             71 => C::ScheduleSwitch,
             72 => C::PartitionInfo,
             80 => C::IoGrant,
+            81 => C::IrqGrant,
+            82 => C::IrqAttach,
+            83 => C::IrqWait,
+            84 => C::IrqAck,
+            85 => C::IrqDetach,
             _ => return None,
         })
     }

@@ -106,6 +106,18 @@ pub fn on_user_exception(vector: u64, error_code: u64) {
 
 /// The timer interrupt: time out waits; from ring 3 this may switch threads.
 pub fn on_timer(from_user: bool) {
+    on_interrupt(from_user, |k| k.on_timer(time::since_boot_ns()));
+}
+
+/// User interrupt line `line` fired (already masked in the IOAPIC).
+pub fn on_line_interrupt(line: usize, from_user: bool) {
+    on_interrupt(from_user, |k| k.irq_fired(line));
+}
+
+/// An interrupt: saves the interrupted thread (from ring 3), lets `event` update the
+/// kernel, then returns to a thread chosen again (from ring 0: to the idle loop in `finish`,
+/// which chooses).
+fn on_interrupt(from_user: bool, event: impl FnOnce(&mut Kernel)) {
     if !RUNNING.load(Ordering::Relaxed) {
         return;
     }
@@ -115,7 +127,7 @@ pub fn on_timer(from_user: bool) {
         k.threads[t].context = *frame();
     }
     k.account(super::cpu::rdtsc());
-    k.on_timer(time::since_boot_ns());
+    event(&mut k);
     if from_user {
         finish(k, Outcome::Continue);
     } else {
@@ -130,6 +142,19 @@ fn program_timer(k: &mut Kernel) {
     }
 }
 
+/// Opens and closes IOAPIC lines until they match what the kernel state wants.
+fn apply_line_masks(k: &mut Kernel) {
+    let changed = k.irqs.unmasked ^ k.irqs.applied;
+    if changed != 0 {
+        for line in 0..crate::irq::LINES {
+            if changed & (1 << line) != 0 {
+                super::ioapic::set_line_masked(line, k.irqs.unmasked & (1 << line) == 0);
+            }
+        }
+        k.irqs.applied = k.irqs.unmasked;
+    }
+}
+
 /// Picks the next thread and loads it into the frame, halting until one is ready.
 fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
     if let Outcome::Halt { success } = outcome {
@@ -139,6 +164,7 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
             qemu::ExitCode::Failure
         });
     }
+    apply_line_masks(&mut k);
     loop {
         program_timer(&mut k);
         if let Some(next) = k.choose() {

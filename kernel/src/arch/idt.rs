@@ -6,6 +6,7 @@
 //! with the failure exit.
 
 use super::gdt;
+use super::ioapic::LINE_VECTOR_BASE;
 use crate::kprintln;
 use core::arch::naked_asm;
 use spin::Lazy;
@@ -154,6 +155,40 @@ stub!(vec30, 30, error_code);
 stub!(vec31, 31);
 stub!(legacy_pic, super::pic::VECTOR_BASE);
 stub!(timer, TIMER_VECTOR);
+
+/// Entry stubs of the user interrupt lines (vector LINE_VECTOR_BASE + n).
+macro_rules! line_stubs {
+    ($($name:ident = $line:expr),* $(,)?) => {
+        $(stub!($name, LINE_VECTOR_BASE as u64 + $line);)*
+        const LINE_STUBS: [Stub; crate::irq::LINES] = [$($name),*];
+    };
+}
+line_stubs!(
+    line0 = 0,
+    line1 = 1,
+    line2 = 2,
+    line3 = 3,
+    line4 = 4,
+    line5 = 5,
+    line6 = 6,
+    line7 = 7,
+    line8 = 8,
+    line9 = 9,
+    line10 = 10,
+    line11 = 11,
+    line12 = 12,
+    line13 = 13,
+    line14 = 14,
+    line15 = 15,
+    line16 = 16,
+    line17 = 17,
+    line18 = 18,
+    line19 = 19,
+    line20 = 20,
+    line21 = 21,
+    line22 = 22,
+    line23 = 23,
+);
 stub!(spurious, SPURIOUS_VECTOR);
 
 type Stub = unsafe extern "sysv64" fn();
@@ -217,6 +252,9 @@ static IDT: Lazy<Idt> = Lazy::new(|| {
         idt.0[(super::pic::VECTOR_BASE + v) as usize] = Gate::interrupt(legacy_pic, 0);
     }
     idt.0[TIMER_VECTOR as usize] = Gate::interrupt(timer, 0);
+    for (line, stub) in LINE_STUBS.into_iter().enumerate() {
+        idt.0[LINE_VECTOR_BASE as usize + line] = Gate::interrupt(stub, 0);
+    }
     idt.0[SPURIOUS_VECTOR as usize] = Gate::interrupt(spurious, 0);
     idt
 });
@@ -242,6 +280,15 @@ extern "sysv64" fn dispatch(frame: &mut TrapFrame) {
             crate::time::on_timer_interrupt();
             super::lapic::end_of_interrupt();
             super::entry::on_timer(from_user);
+        }
+        v if (LINE_VECTOR_BASE as u64..LINE_VECTOR_BASE as u64 + crate::irq::LINES as u64)
+            .contains(&v) =>
+        {
+            let line = (v - LINE_VECTOR_BASE as u64) as usize;
+            // Closed before the EOI, so the line cannot fire again until acknowledged.
+            super::ioapic::set_line_masked(line, true);
+            super::lapic::end_of_interrupt();
+            super::entry::on_line_interrupt(line, from_user);
         }
         // Masked legacy PIC: only spurious IRQ 7/15 can arrive; they need no EOI.
         v if v == super::pic::VECTOR_BASE as u64 => {}

@@ -1,5 +1,7 @@
-//! IOAPIC: found via the MADT; at boot every redirection entry is masked. Later stages
-//! route granted lines to user threads.
+//! IOAPIC: found via the MADT; at boot every redirection entry is masked. The first one
+//! (inputs from 0) carries the lines user threads attach to (`crate::irq`): line n is
+//! routed to vector [`LINE_VECTOR_BASE`] + n on the boot CPU and opened or closed with
+//! [`set_line_masked`].
 
 use crate::mem::phys_to_virt;
 use core::ptr::NonNull;
@@ -11,8 +13,59 @@ const VERSION_REGISTER: u32 = 0x01;
 const REDIRECTION_BASE: u32 = 0x10;
 const MASKED: u32 = 1 << 16;
 
+/// Vector of interrupt line 0.
+pub const LINE_VECTOR_BASE: u8 = 0x40;
+
 pub struct IoApic {
     base: u64,
+}
+
+/// The IOAPIC for lines 0.. and each line's redirection entry (low word, masked).
+struct Lines {
+    apic: IoApic,
+    count: u32,
+    entries: [u32; crate::irq::LINES],
+}
+
+static LINES: spin::Once<Lines> = spin::Once::new();
+
+/// Makes `apic` (whose inputs start at 0) the one for user lines: every line it has gets
+/// its vector, signal properties and destination, and stays masked.
+pub fn install(
+    apic: IoApic,
+    destination_apic_id: u32,
+    overrides: &[crate::acpi::InterruptOverride],
+) {
+    let count = apic.line_count().min(crate::irq::LINES as u32);
+    let mut entries = [MASKED; crate::irq::LINES];
+    for line in 0..count {
+        let signal = crate::acpi::signal_of(line, overrides);
+        entries[line as usize] = MASKED
+            | (LINE_VECTOR_BASE as u32 + line)
+            | (signal.active_low as u32) << 13
+            | (signal.level_triggered as u32) << 15;
+        apic.write(REDIRECTION_BASE + 2 * line + 1, destination_apic_id << 24);
+        apic.write(REDIRECTION_BASE + 2 * line, entries[line as usize]);
+    }
+    LINES.call_once(|| Lines {
+        apic,
+        count,
+        entries,
+    });
+}
+
+/// Opens or closes user line `line` (ignored for lines the IOAPIC does not have).
+pub fn set_line_masked(line: usize, masked: bool) {
+    if let Some(l) = LINES.get()
+        && (line as u32) < l.count
+    {
+        let entry = if masked {
+            l.entries[line]
+        } else {
+            l.entries[line] & !MASKED
+        };
+        l.apic.write(REDIRECTION_BASE + 2 * line as u32, entry);
+    }
 }
 
 impl IoApic {

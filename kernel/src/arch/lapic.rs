@@ -1,8 +1,11 @@
 //! Local APIC (xAPIC, MMIO through the direct map): enable, timer, end-of-interrupt.
+//!
+//! The scheduler's timer is one-shot: in TSC-deadline mode where the CPU has it (the
+//! deadline is an exact TSC value, no rounding to the bus clock), else a one-shot count.
 
 use crate::mem::phys_to_virt;
 use core::ptr::NonNull;
-use core::sync::atomic::{AtomicU64, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use volatile::VolatilePtr;
 
 const ID: usize = 0x20;
@@ -20,6 +23,8 @@ const TIMER_DIVIDE: usize = 0x3e0;
 
 const LVT_MASKED: u32 = 1 << 16;
 const TIMER_PERIODIC: u32 = 1 << 17;
+const TIMER_TSC_DEADLINE: u32 = 2 << 17;
+const IA32_TSC_DEADLINE: u32 = 0x6e0;
 /// Divide configuration 0b0011 = divide by 16.
 const DIVIDE_BY_16: u32 = 0x3;
 pub const TIMER_DIVISOR: u64 = 16;
@@ -85,6 +90,26 @@ pub fn start_periodic(vector: u8, ticks: u32) {
 
 /// APIC timer ticks per second (after the divider), set by calibration.
 static TIMER_HZ: AtomicU64 = AtomicU64::new(0);
+/// The one-shot timer uses TSC-deadline mode.
+static TSC_DEADLINE: AtomicBool = AtomicBool::new(false);
+
+/// Whether the CPU has TSC-deadline mode (CPUID.1:ECX bit 24).
+pub fn has_tsc_deadline() -> bool {
+    let leaf = core::arch::x86_64::__cpuid(1);
+    leaf.ecx & (1 << 24) != 0
+}
+
+/// Makes [`one_shot_at`] use TSC-deadline mode from now on.
+pub fn use_tsc_deadline() {
+    TSC_DEADLINE.store(true, Ordering::Relaxed);
+}
+
+fn write_tsc_deadline(tsc: u64) {
+    let mut msr = x86_64::registers::model_specific::Msr::new(IA32_TSC_DEADLINE);
+    // SAFETY: the MSR exists (CPUID said so before TSC_DEADLINE was set); writing it only
+    // arms or (0) disarms the local timer.
+    unsafe { msr.write(tsc) };
+}
 
 pub fn set_timer_hz(hz: u64) {
     TIMER_HZ.store(hz, Ordering::Relaxed);
@@ -97,6 +122,18 @@ pub fn one_shot_at(deadline: u64) {
         stop_timer();
         return;
     }
+    if TSC_DEADLINE.load(Ordering::Relaxed) {
+        // Rounded up, so the interrupt never comes before the deadline.
+        let hz = crate::time::tsc_hz() as u128;
+        let ticks = (deadline as u128 * hz).div_ceil(1_000_000_000);
+        let tsc = crate::time::boot_tsc().saturating_add(ticks.min(u64::MAX as u128) as u64);
+        write(
+            LVT_TIMER,
+            TIMER_TSC_DEADLINE | super::idt::TIMER_VECTOR as u32,
+        );
+        write_tsc_deadline(tsc.max(1));
+        return;
+    }
     let delta = deadline.saturating_sub(crate::time::since_boot_ns());
     let ticks = (delta as u128 * TIMER_HZ.load(Ordering::Relaxed) as u128 / 1_000_000_000)
         .clamp(1, u32::MAX as u128) as u32;
@@ -106,6 +143,9 @@ pub fn one_shot_at(deadline: u64) {
 }
 
 pub fn stop_timer() {
+    if TSC_DEADLINE.load(Ordering::Relaxed) {
+        write_tsc_deadline(0);
+    }
     write(LVT_TIMER, LVT_MASKED);
     write(TIMER_INITIAL, 0);
 }

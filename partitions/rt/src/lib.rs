@@ -11,9 +11,11 @@
 
 pub mod ipc_buffer;
 pub mod mem;
+pub mod port;
 pub mod print;
 pub mod spawn;
 pub mod sys;
+pub mod window;
 
 pub use abi;
 

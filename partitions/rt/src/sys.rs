@@ -417,3 +417,63 @@ pub fn partition_info(tp: u64) -> Result<PartitionInfo, Error> {
 pub fn io_grant(task: TaskId, first: u16, count: u32) -> Result<(), Error> {
     call(Call::IoGrant, [task.0, first as u64, count as u64, 0, 0, 0]).map(drop)
 }
+
+/// Lets a descendant task attach interrupt line `line`.
+pub fn irq_grant(task: TaskId, line: u64) -> Result<(), Error> {
+    call(Call::IrqGrant, [task.0, line, 0, 0, 0, 0]).map(drop)
+}
+
+/// Attaches interrupt line `line` to the calling thread; it fires as notification `bit`.
+pub fn irq_attach(line: u64, bit: u64) -> Result<(), Error> {
+    call(Call::IrqAttach, [line, bit, 0, 0, 0, 0]).map(drop)
+}
+
+/// Waits until the attached line fired (`TimedOut` after `timeout_ns`; 0 = poll).
+pub fn irq_wait(line: u64, timeout_ns: u64) -> Result<(), Error> {
+    call(Call::IrqWait, [line, timeout_ns, 0, 0, 0, 0]).map(drop)
+}
+
+/// Unmasks the attached line after its device was served.
+pub fn irq_ack(line: u64) -> Result<(), Error> {
+    call(Call::IrqAck, [line, 0, 0, 0, 0, 0]).map(drop)
+}
+
+pub fn irq_detach(line: u64) -> Result<(), Error> {
+    call(Call::IrqDetach, [line, 0, 0, 0, 0, 0]).map(drop)
+}
+
+/// The TSC time base: converts `rdtsc` readings to `clock()` nanoseconds and back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TscBase {
+    pub hz: u64,
+    pub at_boot: u64,
+}
+
+impl TscBase {
+    pub fn get() -> Self {
+        let r = raw6(Call::Clock as u64, [0; 6]);
+        Self {
+            hz: r.rsi,
+            at_boot: r.rdx,
+        }
+    }
+
+    /// The TSC value at `ns` since boot (rounded up, as the kernel's timer is).
+    pub fn tsc_at(&self, ns: u64) -> u64 {
+        self.at_boot + (ns as u128 * self.hz as u128).div_ceil(1_000_000_000) as u64
+    }
+
+    /// TSC ticks as nanoseconds.
+    pub fn ns(&self, ticks: u64) -> u64 {
+        (ticks as u128 * 1_000_000_000 / self.hz.max(1) as u128) as u64
+    }
+}
+
+/// Reads the time-stamp counter (allowed in ring 3).
+pub fn rdtsc() -> u64 {
+    // SAFETY: RDTSC only reads the counter.
+    #[allow(unsafe_code)]
+    unsafe {
+        core::arch::x86_64::_rdtsc()
+    }
+}

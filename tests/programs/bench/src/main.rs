@@ -6,7 +6,13 @@
 //!   from a `reply_wait` loop (register-only messages), measured in the root;
 //! * `exception_roundtrip`: a thread of the root task executes `ud2`; its handler (the
 //!   root's main thread) advances rip by 2 and replies `REPLY_RESUME`; measured in the
-//!   faulting thread from before the fault to after the resume.
+//!   faulting thread from before the fault to after the resume;
+//! * `window_switch` (cycles) and `window_jitter` (ns): a schedule of 1 ms frames with
+//!   TP1 [0, 400 us) and TP2 [500, 900 us); a thread spins in TP1, another in TP2 records,
+//!   for 10,000 window starts, how long after the scheduled start its first instruction ran
+//!   (`user_rt::window`): the cost of the switch (timer deadline to the first user
+//!   instruction of the next partition, including the timer's own delay under QEMU), and
+//!   its spread in ns.
 #![no_std]
 #![no_main]
 #![forbid(unsafe_op_in_unsafe_fn)]
@@ -14,7 +20,7 @@
 
 use core::sync::atomic::{AtomicU64, Ordering};
 use user_rt::abi::ipc::{EXCEPTION_MESSAGE_SIZE, LABEL_EXCEPTION, MessageTag, REPLY_RESUME};
-use user_rt::abi::syscall::{Abilities, TIMEOUT_INFINITE, ThreadAttribute, ThreadId};
+use user_rt::abi::syscall::{Abilities, TIMEOUT_INFINITE, ThreadAttribute, ThreadId, WindowSpec};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
 use user_rt::spawn::{AddressRange, FramePool, Spawner, words_at};
@@ -40,10 +46,14 @@ fn rdtsc() -> u64 {
 }
 
 fn report(name: &str, samples: &mut [u32]) {
+    report_in(name, "cycles", samples);
+}
+
+fn report_in(name: &str, unit: &str, samples: &mut [u32]) {
     samples.sort_unstable();
     let median = samples[samples.len() / 2];
     println!(
-        "bench {name} median={median} min={} max={} unit=cycles samples={}",
+        "bench {name} median={median} min={} max={} unit={unit} samples={}",
         samples[0],
         samples[samples.len() - 1],
         samples.len()
@@ -71,6 +81,7 @@ fn main(_: u64, _: u64) {
         .unwrap_or_else(|e| broken("root IPC buffer", e));
     ipc_roundtrip(&mut spawner, &mut samples);
     exception_roundtrip(&mut spawner, ipc, &mut samples);
+    windows(&mut spawner, &mut samples);
     let _ = sys::system_halt(true);
 }
 
@@ -188,4 +199,87 @@ fn exception_roundtrip(spawner: &mut Spawner, ipc: IpcBufferRef, samples: &mut [
         *s = w.load(Ordering::Relaxed) as u32;
     }
     report("exception_roundtrip", samples);
+}
+
+const WINDOW_FRAME: u64 = 1_000_000;
+/// Header words before the window samples: done flag, outside, missed, pauses.
+const WINDOW_HEADER: usize = 4;
+
+extern "C" fn window_spinner(_: u64) -> ! {
+    loop {
+        core::hint::spin_loop();
+    }
+}
+
+/// Records SAMPLES window starts of TP2 into the words at `arg` (after the header).
+extern "C" fn window_meter(arg: u64) -> ! {
+    #[allow(unsafe_code)]
+    // SAFETY: the root mapped WINDOW_HEADER + SAMPLES words at `arg` in this thread's task
+    // for good; only used atomically.
+    let words = unsafe { words_at(arg, WINDOW_HEADER + SAMPLES) };
+    let seen =
+        user_rt::window::measure_window_starts(2, WINDOW_FRAME, 50_000, &words[WINDOW_HEADER..]);
+    words[1].store(seen.outside, Ordering::Relaxed);
+    words[2].store(seen.missed, Ordering::Relaxed);
+    words[3].store(seen.pauses, Ordering::Relaxed);
+    words[0].store(1, Ordering::Release);
+    loop {
+        core::hint::spin_loop();
+    }
+}
+
+fn windows(spawner: &mut Spawner, samples: &mut [u32; SAMPLES]) {
+    let task = spawner
+        .create_task(Abilities::NATIVE_SYSCALLS, 100, 0, "bench-windows")
+        .unwrap_or_else(|e| broken("window task", e));
+    let words: &'static [AtomicU64] = spawner
+        .shared_words(Some(task), WINDOW_HEADER + SAMPLES)
+        .unwrap_or_else(|e| broken("window sample memory", e));
+    let spin = spawner
+        .thread(Some(task), window_spinner, 100, 0, 4)
+        .unwrap_or_else(|e| broken("spinner", e));
+    let meter = spawner
+        .thread(Some(task), window_meter, 100, words.as_ptr() as u64, 4)
+        .unwrap_or_else(|e| broken("meter", e));
+    for (thread, tp) in [(spin.id, 1), (meter.id, 2)] {
+        sys::thread_set(Some(thread), ThreadAttribute::TimePartition, tp)
+            .unwrap_or_else(|e| broken("thread_set TimePartition", e));
+    }
+    let window = |offset, duration, partition| WindowSpec {
+        offset,
+        duration,
+        partition,
+    };
+    sys::schedule_set(
+        0,
+        WINDOW_FRAME,
+        &[window(0, 400_000, 1), window(500_000, 400_000, 2)],
+    )
+    .unwrap_or_else(|e| broken("schedule_set", e));
+    sys::schedule_switch(0).unwrap_or_else(|e| broken("schedule_switch", e));
+    for thread in [spin.id, meter.id] {
+        sys::thread_start(thread).unwrap_or_else(|e| broken("thread_start", e));
+    }
+    // Sleep through the measurement (the root is in TP0 at a higher priority: waking up
+    // inside TP2's window would count as lateness).
+    sys::sleep(SAMPLES as u64 * WINDOW_FRAME + 50_000_000);
+    while words[0].load(Ordering::Acquire) == 0 {
+        sys::sleep(100_000_000);
+    }
+    let base = sys::TscBase::get();
+    for (s, w) in samples.iter_mut().zip(&words[WINDOW_HEADER..]) {
+        *s = w.load(Ordering::Relaxed).min(u32::MAX as u64) as u32;
+    }
+    report("window_switch", samples);
+    for s in samples.iter_mut() {
+        *s = base.ns(*s as u64) as u32;
+    }
+    report_in("window_jitter", "ns", samples);
+    println!(
+        "windows: {} runs outside the window, {} windows lost, {} pauses inside windows",
+        words[1].load(Ordering::Relaxed),
+        words[2].load(Ordering::Relaxed),
+        words[3].load(Ordering::Relaxed)
+    );
+    let _ = sys::task_kill(task);
 }

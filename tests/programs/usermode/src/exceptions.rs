@@ -161,7 +161,12 @@ worker!(
 );
 
 /// Receives the next exception message from `from` and returns it (from the IPC buffer).
-fn next_exception(lab: &Lab, from: ThreadId, what: &str, label: u32) -> ExceptionMessage {
+pub(crate) fn next_exception(
+    lab: &Lab,
+    from: ThreadId,
+    what: &str,
+    label: u32,
+) -> ExceptionMessage {
     let m = expect_ok(what, sys::receive(Some(from), WAIT));
     let tag = m.message.tag;
     if (m.sender, tag.label(), tag.len()) != (from, label, EXCEPTION_MESSAGE_SIZE) {
@@ -195,7 +200,7 @@ fn resume_with(lab: &Lab, thread: ThreadId, m: &ExceptionMessage) {
     );
 }
 
-fn reply_plain(thread: ThreadId, label: u32) -> Result<(), Error> {
+pub(crate) fn reply_plain(thread: ThreadId, label: u32) -> Result<(), Error> {
     sys::reply(
         thread,
         &Message {

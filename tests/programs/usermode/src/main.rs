@@ -12,6 +12,8 @@
 //! | `ipc` | synchronous IPC, map/grant items, timeouts, rights, notifications | [`ipc`] |
 //! | `exceptions` | exceptions and forwarded syscalls as IPC, health monitor | [`exceptions`] |
 //! | `no-handler` | a fault without handler or health monitor kills only the thread | [`exceptions`] |
+//! | `irq-ports` | interrupts and I/O ports at user level (COM2 in loopback) | [`devices`] |
+//! | `windows` | time partitions: punctual windows, TP0 leftover time, MCP, schedule switch | [`timepart`] |
 //!
 //! Every check prints `check ok: <what>` or `check FAILED: <what>` (and ends the run as
 //! failed); a mode that passes prints `all <mode> checks passed` and halts with success.
@@ -22,11 +24,13 @@
 
 mod check;
 mod child;
+mod devices;
 mod exceptions;
 mod ipc;
 mod memory;
 mod quota;
 mod tasks;
+mod timepart;
 
 use check::expect;
 use user_rt::abi::syscall::{Call, DEBUG_WRITE_MAX, Error};
@@ -46,6 +50,8 @@ fn main(image_base: u64, image_len: u64) {
         b"ipc" => return ipc::run(),
         b"exceptions" => return exceptions::run(),
         b"no-handler" => return exceptions::run_no_handler(),
+        b"windows" => return timepart::run(),
+        b"irq-ports" => return devices::run(),
         _ => {}
     }
     if mode == b"kernel-read" {
