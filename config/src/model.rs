@@ -44,11 +44,14 @@ pub const SYSSW_PRIORITY: u8 = syscall::ROOT_PRIORITY;
 pub const MCP_MIN: u8 = 1;
 pub const MCP_MAX: u8 = SYSSW_PRIORITY - 1;
 
-/// ISA interrupt lines a partition may name: `0..IRQ_LINES`.
-pub const IRQ_LINES: u8 = 24;
-/// Lines the kernel keeps: 0 and 2 (the PIT: ISA IRQ 0 usually arrives on IOAPIC input 2;
-/// on the PIC, 2 is the cascade) and 4 (COM1, the kernel log).
-pub const RESERVED_IRQS: [u8; 3] = [0, 2, 4];
+/// Interrupt lines (IOAPIC inputs) a partition may name: `0..IRQ_LINES` (the kernel's).
+pub const IRQ_LINES: u8 = abi::syscall::IRQ_LINES as u8;
+/// Lines the kernel keeps (`abi::syscall::KERNEL_IRQS`): 0 and 2 (the PIT) and 4 (COM1).
+pub const RESERVED_IRQS: [u8; 3] = [
+    abi::syscall::KERNEL_IRQS[0] as u8,
+    abi::syscall::KERNEL_IRQS[1] as u8,
+    abi::syscall::KERNEL_IRQS[2] as u8,
+];
 
 /// Default stack of a partition's first thread.
 pub const DEFAULT_STACK: u64 = 64 * 1024;
