@@ -809,3 +809,63 @@ fn window_bytes(windows: &[abi::syscall::WindowSpec]) -> &[u8] {
     // SAFETY: WindowSpec is repr(C) of three u64 (no padding); the slice is alive.
     unsafe { std::slice::from_raw_parts(windows.as_ptr().cast(), std::mem::size_of_val(windows)) }
 }
+
+proptest::proptest! {
+    /// Windows, priorities and TP0 together, through the kernel's own timer path: for a
+    /// generated schedule and generated ready threads, at generated instants the thread the
+    /// kernel chooses is the model's: the highest priority among TP0 and the partition whose
+    /// window contains the instant (the window's partition on a tie, FIFO within each).
+    #[test]
+    fn the_kernel_runs_what_the_window_model_says(
+        gaps in proptest::collection::vec((0u64..3, 1u64..4, 1u64..4), 1..5),
+        threads in proptest::collection::vec((0u8..5, 0u8..4), 1..12),
+        steps in proptest::collection::vec(1u64..7, 1..60),
+    ) {
+        let mut f = Fixture::new();
+        let root = f.thread(0, 255);
+        // Windows in ms: a gap, then a window of the given length for the given partition.
+        let mut windows = Vec::new();
+        let mut at = 0;
+        for &(gap, length, partition) in &gaps {
+            at += gap * 1_000_000;
+            windows.push(abi::syscall::WindowSpec { offset: at, duration: length * 1_000_000, partition });
+            at += length * 1_000_000;
+        }
+        let major = at + 1_000_000;
+        f.write(root, BUFFER_AT, window_bytes(&windows));
+        let count = windows.len() as u64;
+        proptest::prop_assert_eq!(f.sys(root, Call::ScheduleSet, [0, major, BUFFER_AT, count, 0, 0]), OK);
+        proptest::prop_assert_eq!(f.sys(root, Call::ScheduleSwitch, [0, 0, 0, 0, 0, 0]), OK);
+        // The root leaves the stage; the generated threads are ready in creation order.
+        f.k.set_state(root, State::Sleeping);
+        let task = f.task(0, Abilities::all(), 255);
+        let made: Vec<(usize, u8, u8)> = threads
+            .iter()
+            .map(|&(tp, priority)| {
+                let priority = 10 + priority * 10;
+                let t = f.k.create_thread(task, 0x1000, 0x2000, priority, 0, 0).unwrap();
+                f.k.set_time_partition(t, tp).unwrap();
+                f.k.set_state(t, State::Ready);
+                (t, tp, priority)
+            })
+            .collect();
+        let mut now = 0;
+        for step in steps {
+            now += step * 500_000;
+            f.k.on_timer(now);
+            let phase = now % major;
+            let active = windows
+                .iter()
+                .find(|w| (w.offset..w.offset + w.duration).contains(&phase))
+                .map(|w| w.partition as u8);
+            let eligible = |&&(_, tp, _): &&(usize, u8, u8)| tp == 0 || Some(tp) == active;
+            let best = made.iter().filter(eligible).map(|&(_, _, p)| p).max();
+            let expected = best.and_then(|p| {
+                let at_best = |tp: u8| made.iter().find(|&&(_, t, q)| q == p && t == tp).map(|&(t, ..)| t);
+                active.filter(|&a| a != 0).and_then(at_best).or_else(|| at_best(0))
+            });
+            proptest::prop_assert_eq!(f.k.active_partition.filter(|&p| p != 0), active, "active window at {}", now);
+            proptest::prop_assert_eq!(f.k.choose(), expected, "chosen thread at {}", now);
+        }
+    }
+}
