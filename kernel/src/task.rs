@@ -7,8 +7,6 @@ use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
     ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
 };
-use xmas_elf::ElfFile;
-use xmas_elf::program::Type as SegmentType;
 
 #[derive(Clone, Copy)]
 pub struct Task {
@@ -58,7 +56,7 @@ impl Task {
 /// Why the root task could not be created.
 #[derive(Debug)]
 pub enum LoadError {
-    Elf(&'static str),
+    Elf(abi::elf::ElfError),
     Segment(u64, &'static str),
     Map(MapError),
 }
@@ -69,47 +67,21 @@ impl From<MapError> for LoadError {
     }
 }
 
-/// Loads `elf` into `space`: each `PT_LOAD` segment into new frames with its rights (W^X
-/// enforced). Returns the entry point.
+/// Loads the `PT_LOAD` segments of `elf` (checked by `abi::elf`) into fresh frames mapped
+/// in `space` with their rights; returns the entry point.
 pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> {
-    let file = ElfFile::new(elf).map_err(LoadError::Elf)?;
-    for segment in file.program_iter() {
-        if segment.get_type() != Ok(SegmentType::Load) || segment.mem_size() == 0 {
-            continue;
-        }
-        let (vaddr, memsz, filesz, offset) = (
-            segment.virtual_addr(),
-            segment.mem_size(),
-            segment.file_size(),
-            segment.offset(),
-        );
-        let flags = segment.flags();
-        if flags.is_write() && flags.is_execute() {
-            return Err(LoadError::Segment(vaddr, "writable and executable (W^X)"));
-        }
-        let end = vaddr
-            .checked_add(memsz)
-            .ok_or(LoadError::Segment(vaddr, "size overflows"))?;
-        if vaddr < USER_MIN || end > USER_END {
-            return Err(LoadError::Segment(vaddr, "outside the user half"));
-        }
-        if filesz > memsz
-            || offset
-                .checked_add(filesz)
-                .is_none_or(|e| e > elf.len() as u64)
-        {
-            return Err(LoadError::Segment(vaddr, "file range outside the ELF"));
-        }
-        let mut rights = PageRights::empty();
-        rights.set(PageRights::WRITE, flags.is_write());
-        rights.set(PageRights::EXECUTE, flags.is_execute());
+    let (entry, segments) =
+        abi::elf::load_segments::<16>(elf, USER_MIN..USER_END).map_err(LoadError::Elf)?;
+    for segment in segments.iter().flatten() {
+        let (vaddr, end) = (segment.vaddr, segment.vaddr + segment.mem_size);
+        let file_end = vaddr + segment.file.len() as u64;
         let mut page = vaddr & !(PAGE_SIZE - 1);
         while page < end {
             let frame = alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?;
             // Copy the part of the file image that falls into this page.
-            let (lo, hi) = (page.max(vaddr), (page + PAGE_SIZE).min(vaddr + filesz));
+            let (lo, hi) = (page.max(vaddr), (page + PAGE_SIZE).min(file_end));
             if lo < hi {
-                let src = &elf[(offset + lo - vaddr) as usize..(offset + hi - vaddr) as usize];
+                let src = &segment.file[(lo - vaddr) as usize..(hi - vaddr) as usize];
                 // SAFETY: fresh frame, direct-mapped; lo - page + len <= PAGE_SIZE.
                 unsafe {
                     core::ptr::copy_nonoverlapping(
@@ -119,7 +91,7 @@ pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> 
                     )
                 };
             }
-            space.map(page, frame, rights).map_err(|e| match e {
+            space.map(page, frame, segment.rights).map_err(|e| match e {
                 MapError::AlreadyMapped => {
                     LoadError::Segment(vaddr, "shares a page with another segment")
                 }
@@ -128,7 +100,7 @@ pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> 
             page += PAGE_SIZE;
         }
     }
-    Ok(file.header.pt2.entry_point())
+    Ok(entry)
 }
 
 /// Creates the root task (slot 0) in resource partition 0 from syssw's ELF: the system

@@ -4,7 +4,7 @@
 //! software, partitions, host tools) and must stay stable: the boot-information block the
 //! loader hands the kernel ([`boot`]), the system-image archive format ([`sysimg`]) and the
 //! checksum they use ([`crc32`]), the system-call interface ([`syscall`]), the IPC and
-//! exception message layout ([`ipc`]) and the root task's start information ([`root`]).
+//! exception message layout ([`ipc`]), the loadable-segment rules of ELF images ([`elf`]) and the root task's start information ([`root`]).
 //! It must never contain kernel policy or anything that needs an allocator (the `std` feature adds host-side writers only).
 #![no_std]
 #![forbid(unsafe_op_in_unsafe_fn)]
@@ -15,6 +15,7 @@ extern crate std;
 
 pub mod boot;
 pub mod crc32;
+pub mod elf;
 pub mod ipc;
 pub mod root;
 pub mod syscall;

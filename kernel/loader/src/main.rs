@@ -30,7 +30,7 @@ use uefi::prelude::*;
 use uefi::table::cfg::ConfigTableEntry;
 use uefi::{CStr16, println};
 use xmas_elf::ElfFile;
-use xmas_elf::program::Type as SegmentType;
+use abi::syscall::PageRights;
 
 const PAGE: u64 = 4096;
 
@@ -214,60 +214,35 @@ fn load_kernel(file: &[u8], tables: &mut PageTableBuilder) -> Result<(u64, u64),
     let entry = header.pt2.entry_point();
     let mut pages_used = 0;
     let mut entry_mapped_executable = false;
-    for segment in elf.program_iter() {
-        if segment.get_type() != Ok(SegmentType::Load) || segment.mem_size() == 0 {
-            continue;
-        }
-        let (vaddr, memsz, filesz, offset) = (
-            segment.virtual_addr(),
-            segment.mem_size(),
-            segment.file_size(),
-            segment.offset(),
-        );
-        let flags = segment.flags();
-        if flags.is_write() && flags.is_execute() {
-            return Err(format!(
-                "kernel segment at {vaddr:#x} is writable and executable (W^X)"
-            ));
-        }
-        if vaddr < KERNEL_BASE || vaddr.checked_add(memsz).is_none() {
-            return Err(format!(
-                "kernel segment at {vaddr:#x} lies outside the top 2 GiB"
-            ));
-        }
-        if filesz > memsz
-            || offset
-                .checked_add(filesz)
-                .is_none_or(|end| end > file.len() as u64)
-        {
-            return Err(format!(
-                "kernel segment at {vaddr:#x} has inconsistent sizes"
-            ));
-        }
+    let (_, segments) = abi::elf::load_segments::<16>(file, KERNEL_BASE..u64::MAX)
+        .map_err(|e| format!("kernel.elf: {e}"))?;
+    for segment in segments.iter().flatten() {
+        let (vaddr, memsz) = (segment.vaddr, segment.mem_size);
         let first_page = vaddr & !(PAGE - 1);
         let pages = (vaddr + memsz - first_page).div_ceil(PAGE);
         let phys = allocate(MemoryKind::KERNEL, pages as usize)?;
         let in_page = (vaddr - first_page) as usize;
         // SAFETY: `phys` has `pages` zeroed pages; the copy stays inside them because
-        // in_page + filesz <= pages * PAGE, and the source range was bounds-checked above.
+        // in_page + file.len() <= pages * PAGE (abi::elf checked file.len() <= memsz).
         unsafe {
             core::ptr::copy_nonoverlapping(
-                file.as_ptr().add(offset as usize),
+                segment.file.as_ptr(),
                 (phys as *mut u8).add(in_page),
-                filesz as usize,
+                segment.file.len(),
             );
         }
+        let executable = segment.rights.contains(PageRights::EXECUTE);
         let mut rights = PageFlags::GLOBAL;
-        if flags.is_write() {
+        if segment.rights.contains(PageRights::WRITE) {
             rights |= PageFlags::WRITABLE;
         }
-        if !flags.is_execute() {
+        if !executable {
             rights |= PageFlags::NO_EXECUTE;
         }
         for page in 0..pages {
             tables.map_page(first_page + page * PAGE, phys + page * PAGE, rights)?;
         }
-        if flags.is_execute() && (vaddr..vaddr + memsz).contains(&entry) {
+        if executable && (vaddr..vaddr + memsz).contains(&entry) {
             entry_mapped_executable = true;
         }
         pages_used += pages;

@@ -11,6 +11,7 @@
 
 pub mod ipc_buffer;
 pub mod mem;
+pub mod partition;
 pub mod port;
 pub mod print;
 pub mod spawn;

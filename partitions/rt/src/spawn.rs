@@ -279,6 +279,26 @@ impl Spawner {
         Ok(())
     }
 
+    /// `pages` physically contiguous frames, zeroed, then filled by `fill(chunk, offset)`
+    /// chunk by chunk (`chunk` is writable memory of the frames starting `offset` bytes
+    /// into them). For loading another program's segments.
+    pub fn filled_frames(
+        &mut self,
+        pages: u64,
+        mut fill: impl FnMut(&mut [u8], u64),
+    ) -> Result<u64, SpawnError> {
+        let physical = self.frames.alloc(pages).ok_or(SpawnError::OutOfFrames)?;
+        self.through_scratch(physical, pages, |va, first, n| {
+            // SAFETY: `through_scratch` just mapped `n` pages writable at `va`, in the
+            // scratch window nobody else uses; the slice lives only during this call.
+            let chunk =
+                unsafe { core::slice::from_raw_parts_mut(va as *mut u8, (n * PAGE_SIZE) as usize) };
+            chunk.fill(0);
+            fill(chunk, first * PAGE_SIZE);
+        })?;
+        Ok(physical)
+    }
+
     /// `pages` zeroed, physically contiguous frames.
     pub fn frames(&mut self, pages: u64) -> Result<u64, SpawnError> {
         let physical = self.frames.alloc(pages).ok_or(SpawnError::OutOfFrames)?;
@@ -440,7 +460,8 @@ impl Spawner {
     }
 }
 
-fn map_physical_chunked(
+/// Maps `pages` frames from `physical` at `address` in `task` (any number of pages).
+pub fn map_physical_chunked(
     task: Option<TaskId>,
     physical: u64,
     address: u64,
