@@ -91,12 +91,14 @@ pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> 
                     )
                 };
             }
-            space.map(page, frame, segment.rights).map_err(|e| match e {
-                MapError::AlreadyMapped => {
-                    LoadError::Segment(vaddr, "shares a page with another segment")
-                }
-                other => LoadError::Map(other),
-            })?;
+            space
+                .map(page, frame, segment.rights)
+                .map_err(|e| match e {
+                    MapError::AlreadyMapped => {
+                        LoadError::Segment(vaddr, "shares a page with another segment")
+                    }
+                    other => LoadError::Map(other),
+                })?;
             page += PAGE_SIZE;
         }
     }

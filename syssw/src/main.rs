@@ -1,32 +1,147 @@
 //! syssw: the system software, the root task (ring 3).
 //!
-//! It will read the static configuration from the system image and distribute every
-//! resource (memory, I/O ports, time windows, kernel memory) to the partitions, own the
-//! inter-partition ports and the health monitor. It must never allocate after start-up.
+//! It distributes every resource of the machine to the partitions exactly as the static
+//! configuration (the `config` entry of system.img, `config::binary`) says: for each
+//! partition a resource partition (kernel-memory quota), a task (abilities, MCP), its image
+//! loaded into zeroed memory with the segments' rights, a stack with the start record
+//! (`user_rt::partition`), I/O-port and interrupt grants, shared-memory segments and the
+//! first thread in its time partition; then it installs the schedules, starts the
+//! partitions and serves as the health monitor. It must never allocate after start-up and
+//! never trusts a partition: everything it gets from one is checked.
 //!
-//! Stage: the kernel starts it as the root task with the system image mapped read-only; it
-//! checks the image and reports what it holds. Partitions come with the configuration.
+//! Log lines (an interface): `syssw: partition NAME: TP<n>|background, MCP m, priority p,
+//! memory used/total KiB, kernel memory k KiB, ports ..., irqs ...` per partition, then
+//! `syssw: N partitions started, schedule NAME (major frame F us, W windows)`; fatal
+//! configuration problems as `syssw: configuration rejected: REASON` followed by a failure
+//! halt.
 #![no_std]
 #![no_main]
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
 
+mod monitor;
+mod partitions;
+
+use user_rt::abi::syscall::{TaskId, ThreadAttribute};
 use user_rt::abi::sysimg::SystemImage;
 use user_rt::println;
+use user_rt::spawn::{AddressRange, FramePool, Spawner};
+use user_rt::sys;
 
 user_rt::entry!(main);
 
+/// syssw's own addresses for scratch mappings.
+const SPAWN_BASE: u64 = 0x0000_1000_0000_0000;
+const SPAWN_END: u64 = 0x0000_2000_0000_0000;
+/// Most partitions and shared segments (the configuration's limits are lower).
+const MAX_PARTITIONS: usize = 16;
+const MAX_SEGMENTS: usize = 32;
+
+fn reject(what: core::fmt::Arguments) -> ! {
+    println!("syssw: configuration rejected: {what}");
+    let _ = sys::system_halt(false);
+    sys::thread_exit()
+}
+
 fn main(image_base: u64, image_len: u64) {
     let bytes = user_rt::system_image(image_base, image_len);
-    match SystemImage::parse(bytes) {
-        Ok(image) => println!(
-            "syssw: root task started; system image {} bytes, {} entries",
-            image.size(),
-            image.len()
-        ),
-        Err(e) => {
-            println!("syssw: system image rejected: {e}");
-            let _ = user_rt::sys::system_halt(false);
-        }
+    let image = SystemImage::parse(bytes)
+        .unwrap_or_else(|e| reject(format_args!("system image damaged: {e}")));
+    println!(
+        "syssw: root task started; system image {} bytes, {} entries",
+        image.size(),
+        image.len()
+    );
+    let Some(config) = image.find("config") else {
+        println!("syssw: no configuration in the system image; nothing to start");
+        return;
+    };
+    let system = config::decode(config.data)
+        .unwrap_or_else(|e| reject(format_args!("binary configuration damaged: {e}")));
+    let mut spawner = Spawner::new(
+        FramePool::from_root_info(),
+        AddressRange::new(SPAWN_BASE, SPAWN_END),
+    )
+    .unwrap_or_else(|e| reject(format_args!("no address space for syssw: {e:?}")));
+    let ipc = spawner
+        .own_ipc_buffer()
+        .unwrap_or_else(|e| reject(format_args!("no IPC buffer for syssw: {e:?}")));
+    let (me, _) = sys::thread_self();
+
+    let mut shared = [0u64; MAX_SEGMENTS];
+    partitions::shared_segments(&mut spawner, &system, &mut shared[..system.segment_count()])
+        .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
+    let mut tasks = [TaskId(0); MAX_PARTITIONS];
+    let mut threads = [user_rt::abi::syscall::ThreadId(0); MAX_PARTITIONS];
+    for p in system.partitions() {
+        let entry = image.entries().find(|e| p.is_image_entry(e.name));
+        let created = entry
+            .ok_or(partitions::LoadError::NoImage)
+            .and_then(|e| partitions::create(&mut spawner, &system, &p, e.data, &shared, me))
+            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+        tasks[p.index] = created.task;
+        threads[p.index] = created.thread;
+        log_partition(&p, created.used);
     }
+    for s in system.schedules() {
+        let mut windows = [user_rt::abi::syscall::WindowSpec::default(); 32];
+        let n = s.window_count();
+        for (w, window) in windows.iter_mut().zip(s.windows()) {
+            *w = window.spec();
+        }
+        sys::schedule_set(s.index as u64, s.major_frame, &windows[..n])
+            .unwrap_or_else(|e| reject(format_args!("schedule {}: {e:?}", s.name)));
+    }
+    if system.schedule_count() > 0 {
+        sys::schedule_switch(0).unwrap_or_else(|e| reject(format_args!("schedule_switch: {e:?}")));
+    }
+    // syssw itself stays in TP0 at its priority: it only runs to serve requests and faults.
+    sys::set_health_monitor(me).unwrap_or_else(|e| reject(format_args!("health monitor: {e:?}")));
+    let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
+    for t in &threads[..system.partition_count()] {
+        sys::thread_start(*t).unwrap_or_else(|e| reject(format_args!("thread_start: {e:?}")));
+    }
+    let first = (system.schedule_count() > 0).then(|| system.schedule(0));
+    println!(
+        "syssw: {} partitions started, schedule {} (major frame {} us, {} windows)",
+        system.partition_count(),
+        first.map_or("none", |s| s.name),
+        first.map_or(0, |s| s.major_frame / 1000),
+        first.map_or(0, |s| s.window_count())
+    );
+    monitor::run(&system, &tasks[..system.partition_count()], ipc);
+}
+
+fn log_partition(p: &config::binary::PartitionView, used: u64) {
+    let mut irqs = [0u8; 24];
+    let mut n = 0;
+    for line in p.irqs.lines() {
+        irqs[n] = line;
+        n += 1;
+    }
+    let mut time = [0u8; 10];
+    let time = match p.time_partition {
+        0 => "background",
+        tp => {
+            time[..2].copy_from_slice(b"TP");
+            let n = if tp >= 10 { 2 } else { 1 };
+            if tp >= 10 {
+                time[2] = b'1';
+            }
+            time[1 + n] = b'0' + tp % 10;
+            core::str::from_utf8(&time[..2 + n]).unwrap_or("TP?")
+        }
+    };
+    println!(
+        "syssw: partition {}: {}, MCP {}, priority {}, memory {}/{} KiB, kernel memory {} KiB, {} I/O range(s), irqs {:?}",
+        p.name,
+        time,
+        p.mcp,
+        p.priority,
+        used / 1024,
+        p.memory / 1024,
+        p.kernel_memory / 1024,
+        p.io_ports().count(),
+        &irqs[..n]
+    );
 }

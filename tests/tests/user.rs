@@ -21,8 +21,14 @@ fn syssw_starts() {
         .unwrap_or_default();
     check(
         &o,
-        started.contains("3 entries"),
-        "syssw must see config.toml, syssw and test/hook",
+        started.contains("2 entries"),
+        "syssw must see syssw and test/hook",
+    );
+    check(
+        &o,
+        o.line("syssw: no configuration in the system image; nothing to start")
+            .is_some(),
+        "syssw must say that it has nothing to start",
     );
     check(
         &o,

@@ -49,18 +49,31 @@ pub fn assemble(dir: &Path, artifacts: &Artifacts, entries: &[ImageEntry]) -> Re
     Ok(dir.to_path_buf())
 }
 
-/// The standard entries: the configuration source (until the binary form exists) and syssw.
-pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Vec<ImageEntry> {
-    let mut entries = Vec::new();
-    if let Some(config) = config {
-        entries.push(ImageEntry::File {
-            name: "config.toml".into(),
-            path: config.to_path_buf(),
-        });
-    }
-    entries.push(ImageEntry::File {
+/// The standard entries: syssw, and for a system description its binary form (`config`,
+/// validated first: an invalid one stops the build with its diagnostics) and the image of
+/// every partition (`partition/<image>`, built here).
+pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Result<Vec<ImageEntry>> {
+    let mut entries = vec![ImageEntry::File {
         name: "syssw".into(),
         path: artifacts.syssw.clone(),
-    });
-    entries
+    }];
+    if let Some(config) = config {
+        let blob = crate::check_config::compile(config)?;
+        let system = config::decode(&blob).map_err(|e| anyhow!("{e}"))?;
+        let mut images: Vec<String> = system.partitions().map(|p| p.image.to_string()).collect();
+        images.sort();
+        images.dedup();
+        let paths = crate::artifacts::build_user_programs(&images)?;
+        for (image, path) in images.iter().zip(paths) {
+            entries.push(ImageEntry::File {
+                name: format!("partition/{image}"),
+                path,
+            });
+        }
+        entries.push(ImageEntry::Bytes {
+            name: "config".into(),
+            data: blob,
+        });
+    }
+    Ok(entries)
 }

@@ -108,7 +108,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     esp::assemble(
         &esp_dir,
         &artifacts,
-        &esp::standard_entries(&artifacts, Some(&config)),
+        &esp::standard_entries(&artifacts, Some(&config))?,
     )?;
     eprintln!(
         "xtask: booting {} under QEMU{}",
@@ -200,7 +200,7 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
                 .as_ref()
                 .map(|c| xtask::workspace_root().join(c))
                 .as_deref(),
-        );
+        )?;
         if let Some(hook) = &s.manifest.hook {
             entries.push(esp::ImageEntry::Bytes {
                 name: "test/hook".into(),
@@ -235,7 +235,7 @@ fn bench() -> Result<bool> {
     let esp_dir = esp::assemble(
         &dir.join("esp"),
         &artifacts,
-        &esp::standard_entries(&artifacts, None),
+        &esp::standard_entries(&artifacts, None)?,
     )?;
     eprintln!("xtask: booting the kernel benchmark system");
     let outcome = qemu::run(

@@ -66,7 +66,10 @@ pub fn load_segments<const N: usize>(
             .checked_add(mem_size)
             .ok_or(ElfError::Segment(vaddr, "size overflows"))?;
         if vaddr < range.start || end > range.end {
-            return Err(ElfError::Segment(vaddr, "outside the allowed address range"));
+            return Err(ElfError::Segment(
+                vaddr,
+                "outside the allowed address range",
+            ));
         }
         let file_end = offset.checked_add(file_size);
         if file_size > mem_size || file_end.is_none_or(|e| e > elf.len() as u64) {

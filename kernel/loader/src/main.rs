@@ -19,6 +19,7 @@ use abi::boot::{
     BOOT_INFO_MAGIC, BOOT_INFO_VERSION, BootInfo, DIRECT_MAP_BASE, KERNEL_BASE, MemoryKind,
     MemoryRegion, PhysRange,
 };
+use abi::syscall::PageRights;
 use abi::sysimg::SystemImage;
 use alloc::format;
 use alloc::string::String;
@@ -30,7 +31,6 @@ use uefi::prelude::*;
 use uefi::table::cfg::ConfigTableEntry;
 use uefi::{CStr16, println};
 use xmas_elf::ElfFile;
-use abi::syscall::PageRights;
 
 const PAGE: u64 = 4096;
 

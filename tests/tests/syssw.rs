@@ -1,0 +1,50 @@
+//! System-software scenarios: syssw builds the partitions a configuration describes.
+
+use scenarios::{boot, check};
+
+#[test]
+fn syssw_partitions() {
+    let o = boot("syssw_partitions");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): windows-b's #UD is configured as shutdown_success",
+    );
+    for line in [
+        "syssw: partition ports-a: TP1, MCP 100, priority 100, memory ",
+        "syssw: partition windows-b: TP2, MCP 100, priority 100, memory ",
+        "syssw: partition background: background, MCP 10, priority 10, memory ",
+        "1 I/O range(s)",
+        "syssw: 3 partitions started, schedule default (major frame 10000 us, 2 windows)",
+        "ports-a: started as partition 0 in TP1",
+        "windows-b: started as partition 1 in TP2",
+        "background: started as partition 2 in TP0",
+        "ports-a: granted port 0x2ff reads back 0x5a",
+        "ports-a: touching port 0x80, which is not granted",
+        "windows-b: ran in 50 of its windows, 0 samples outside them",
+    ] {
+        check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
+    }
+    check(
+        &o,
+        o.line("port 0x80 did not fault").is_none(),
+        "an ungranted port must fault",
+    );
+    let health = |partition: &str, error: &str, action: &str| {
+        o.lines.iter().any(|l| {
+            l.contains("health: t=")
+                && l.contains(&format!("partition={partition} error={error} "))
+                && l.ends_with(&format!("action={action}"))
+        })
+    };
+    check(
+        &o,
+        health("ports-a", "MEMORY_VIOLATION", "idle"),
+        "the #GP of ports-a must be handled as MEMORY_VIOLATION with its configured action idle",
+    );
+    check(
+        &o,
+        health("windows-b", "ILLEGAL_REQUEST", "shutdown_success"),
+        "the #UD of windows-b must be handled as ILLEGAL_REQUEST with action shutdown_success",
+    );
+}
