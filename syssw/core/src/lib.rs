@@ -1,0 +1,33 @@
+//! The pure logic of Warden's system software (syssw, the root task): ARINC 653
+//! inter-partition ports ([`ports`]), the health monitor's decisions and its event log
+//! ([`health`]) and the partitions' operating modes ([`mode`]), with the ARINC 653 return
+//! codes they answer with ([`codes`]).
+//!
+//! syssw itself (`syssw/src`) is thin glue: it receives the partitions' requests and the
+//! kernel's fault reports over IPC, calls into this crate with the caller's partition and
+//! the current time, and carries out what comes back (reply to a thread, restart or stop a
+//! partition, halt the module). Everything here is a plain function of its inputs so that it
+//! can be tested on the host.
+//!
+//! What this crate must never do:
+//! - allocate (no `alloc`): all storage is fixed tables sized by the configuration crate's
+//!   limits, plus caller-provided memory for message buffers ([`ports::arena_size`]);
+//! - make a system call, block, spin or read a clock: time is always an argument
+//!   (nanoseconds since boot, as the kernel's `clock` returns it);
+//! - trust a partition: every port index, length and mode code a partition sends is checked
+//!   and answered with a [`ReturnCode`], never with a panic;
+//! - loop without a bound: every loop runs over a fixed table, a configured count or a
+//!   message length.
+#![cfg_attr(not(test), no_std)]
+#![forbid(unsafe_op_in_unsafe_fn)]
+#![deny(unsafe_code)]
+
+pub mod codes;
+pub mod health;
+pub mod mode;
+pub mod ports;
+
+#[cfg(test)]
+mod testsys;
+
+pub use codes::ReturnCode;
