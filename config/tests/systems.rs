@@ -42,8 +42,8 @@ fn every_system_validates_and_round_trips() {
 }
 
 #[test]
-fn default_system() {
-    let s = load_file(&systems_dir().join("default.toml"));
+fn plc_guest_system() {
+    let s = load_file(&systems_dir().join("plc-guest.toml"));
     let names: Vec<&str> = s.partitions.iter().map(|p| p.name.as_str()).collect();
     assert_eq!(names, ["plc", "plant", "guest"]);
     let [plc, plant, guest] = &s.partitions[..] else {
