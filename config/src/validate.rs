@@ -429,11 +429,7 @@ impl Validator<'_, '_> {
                     io_seen.iter().find(|(r, _, _)| r.overlaps(range))
                 {
                     let line = self.r.line_of(at);
-                    let whose = if owner == index {
-                        "listed already".to_string()
-                    } else {
-                        format!("given to partition `{}`", partitions_name(doc, owner))
-                    };
+                    let whose = holder(doc, owner, index);
                     self.error(
                         start(entry),
                         &here,
@@ -482,11 +478,7 @@ impl Validator<'_, '_> {
                 }
                 if let Some(&(_, owner, at)) = irq_seen.iter().find(|(l, _, _)| *l == line_no) {
                     let line = self.r.line_of(at);
-                    let whose = if owner == index {
-                        "listed already".to_string()
-                    } else {
-                        format!("given to partition `{}`", partitions_name(doc, owner))
-                    };
+                    let whose = holder(doc, owner, index);
                     self.error(
                         start(entry),
                         &here,
@@ -1492,6 +1484,15 @@ impl Validator<'_, '_> {
 }
 
 /// Name of the `index`-th partition in source order.
+/// Who holds a resource partition `index` lists again: itself, or another partition.
+fn holder(doc: &schema::Document, owner: usize, index: usize) -> String {
+    if owner == index {
+        "listed already".to_string()
+    } else {
+        format!("given to partition `{}`", partitions_name(doc, owner))
+    }
+}
+
 fn partitions_name(doc: &schema::Document, index: usize) -> String {
     in_source_order(&doc.partitions)
         .get(index)
