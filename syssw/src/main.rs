@@ -119,23 +119,10 @@ fn log_partition(p: &config::binary::PartitionView, used: u64) {
         irqs[n] = line;
         n += 1;
     }
-    let mut time = [0u8; 10];
-    let time = match p.time_partition {
-        0 => "background",
-        tp => {
-            time[..2].copy_from_slice(b"TP");
-            let n = if tp >= 10 { 2 } else { 1 };
-            if tp >= 10 {
-                time[2] = b'1';
-            }
-            time[1 + n] = b'0' + tp % 10;
-            core::str::from_utf8(&time[..2 + n]).unwrap_or("TP?")
-        }
-    };
     println!(
         "syssw: partition {}: {}, MCP {}, priority {}, memory {}/{} KiB, kernel memory {} KiB, {} I/O range(s), irqs {:?}",
         p.name,
-        time,
+        TimePartition(p.time_partition),
         p.mcp,
         p.priority,
         used / 1024,
@@ -144,4 +131,16 @@ fn log_partition(p: &config::binary::PartitionView, used: u64) {
         p.io_ports().count(),
         &irqs[..n]
     );
+}
+
+/// `background` for TP0, else `TP<n>`.
+struct TimePartition(u8);
+
+impl core::fmt::Display for TimePartition {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self.0 {
+            0 => write!(f, "background"),
+            tp => write!(f, "TP{tp}"),
+        }
+    }
 }

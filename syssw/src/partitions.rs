@@ -8,7 +8,7 @@ use user_rt::abi::elf::load_segments;
 use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
-use user_rt::partition::{START_MAGIC, StartInfo};
+use user_rt::partition::StartInfo;
 use user_rt::spawn::{SpawnError, Spawner, map_physical_chunked};
 use user_rt::sys;
 
@@ -139,39 +139,15 @@ pub fn create(
     }
 
     // The stack, with the start record at its top.
-    let info = StartInfo {
-        magic: START_MAGIC,
-        index: p.index as u64,
-        time_partition: p.time_partition as u64,
-        server: server.0,
-        start_condition: 0,
-        name_len: p.name.len().min(32) as u64,
-        name: {
-            let mut name = [0u8; 32];
-            let n = p.name.len().min(32);
-            name[..n].copy_from_slice(&p.name.as_bytes()[..n]);
-            name
-        },
-    };
-    let record = core::mem::size_of::<StartInfo>() as u64;
+    let info = StartInfo::new(p.index as u64, p.time_partition as u64, server.0, 0, p.name);
+    let record = info.to_bytes();
+    let record_len = record.len() as u64;
     let stack = spawner
         .filled_frames(stack_pages, |chunk, offset| {
-            let at = stack_pages * PAGE - record;
-            if offset <= at && at + record <= offset + chunk.len() as u64 {
-                let bytes = (at - offset) as usize;
-                // The record's bytes (repr(C) integers and a byte array: no padding).
-                let words = [
-                    info.magic,
-                    info.index,
-                    info.time_partition,
-                    info.server,
-                    info.start_condition,
-                    info.name_len,
-                ];
-                for (i, w) in words.iter().enumerate() {
-                    chunk[bytes + i * 8..bytes + i * 8 + 8].copy_from_slice(&w.to_le_bytes());
-                }
-                chunk[bytes + 48..bytes + 80].copy_from_slice(&info.name);
+            let at = stack_pages * PAGE - record_len;
+            if offset <= at && at + record_len <= offset + chunk.len() as u64 {
+                let from = (at - offset) as usize;
+                chunk[from..from + record.len()].copy_from_slice(&record);
             }
         })
         .map_err(LoadError::Spawn)?;
@@ -203,7 +179,7 @@ pub fn create(
         .map_err(LoadError::Spawn)?;
     }
 
-    let start_record = STACK_TOP - record;
+    let start_record = STACK_TOP - record_len;
     // 16-byte aligned below the record, minus 8 as if called.
     let sp = (start_record & !15) - 8;
     debug_assert!(sp < USER_END);

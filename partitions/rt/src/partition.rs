@@ -27,6 +27,46 @@ pub struct StartInfo {
 }
 
 impl StartInfo {
+    /// A record for partition `name` (cut to 32 bytes).
+    pub fn new(
+        index: u64,
+        time_partition: u64,
+        server: u64,
+        start_condition: u64,
+        name: &str,
+    ) -> Self {
+        let n = name.len().min(32);
+        let mut bytes = [0u8; 32];
+        bytes[..n].copy_from_slice(&name.as_bytes()[..n]);
+        Self {
+            magic: START_MAGIC,
+            index,
+            time_partition,
+            server,
+            start_condition,
+            name_len: n as u64,
+            name: bytes,
+        }
+    }
+
+    /// The record as it lies in memory (`repr(C)`: six u64, then the name; no padding).
+    pub fn to_bytes(&self) -> [u8; core::mem::size_of::<StartInfo>()] {
+        let mut out = [0u8; core::mem::size_of::<StartInfo>()];
+        let words = [
+            self.magic,
+            self.index,
+            self.time_partition,
+            self.server,
+            self.start_condition,
+            self.name_len,
+        ];
+        for (chunk, word) in out.chunks_exact_mut(8).zip(words) {
+            chunk.copy_from_slice(&word.to_le_bytes());
+        }
+        out[48..].copy_from_slice(&self.name);
+        out
+    }
+
     /// The record syssw passed in `rdi`, if `address` holds one.
     ///
     /// # Safety

@@ -10,7 +10,7 @@
 //! window start. A `stray` thread touches ports it was not granted and faults (#GP) into
 //! its exception handler, the root.
 
-use crate::check::{expect, expect_eq, expect_err, fail, must};
+use crate::check::{expect, expect_eq, expect_err, expect_ok, fail, must};
 use crate::child::{BASIC, Lab, MS, WAIT, worker};
 use crate::exceptions::{next_exception, reply_plain};
 use user_rt::abi::ipc::{LABEL_EXCEPTION, REPLY_KILL};
@@ -156,8 +156,8 @@ pub fn run() {
         sys::irq_grant(dev, 4),
         Error::NotPermitted,
     );
-    expect_ok_unit("io_grant of COM2's ports", sys::io_grant(dev, COM2, 8));
-    expect_ok_unit("irq_grant of COM2's line 3", sys::irq_grant(dev, LINE));
+    expect_ok("io_grant of COM2's ports", sys::io_grant(dev, COM2, 8));
+    expect_ok("irq_grant of COM2's line 3", sys::irq_grant(dev, LINE));
 
     // An access outside the grant is a #GP, delivered to the handler.
     let s = lab.worker(Some(dev), stray, 100, &[]);
@@ -276,8 +276,4 @@ pub fn run() {
     );
     println!("all irq-ports checks passed");
     let _ = sys::system_halt(true);
-}
-
-fn expect_ok_unit(what: &str, r: Result<(), Error>) {
-    crate::check::expect_ok(what, r);
 }
