@@ -14,7 +14,7 @@
 //! All times are ns since boot unless the name says ticks.
 
 use crate::check::{expect, expect_eq, expect_err, fail, must};
-use crate::child::{BASIC, Lab, MS, worker};
+use crate::child::{BASIC, Block, Lab, MS, worker};
 use core::sync::atomic::{AtomicU64, Ordering};
 use user_rt::abi::syscall::{Error, ThreadAttribute, ThreadId, WindowSpec};
 use user_rt::sys::{self, TscBase, rdtsc};
@@ -51,6 +51,7 @@ const OUTSIDE_BOUND: u64 = FRAMES as u64 / 50;
 // Block words of the workers.
 const A_MODE: usize = 0; // spinner: 1 = spin, 2 = work BUSY then sleep
 const R_LAST_RUN: usize = 0; // spinner: last time it ran
+const R_WORKED: usize = 1; // spinner, phase 2: ns it ran (wake-up to sleep), summed
 const A_FRAME0: usize = 0; // background: a TP1 window start (a frame start)
 const A_BUSY1: usize = 1; // background: end of TP1's busy part within the frame
 const A_BUSY2: usize = 2; // background: 0 = TP2's window is busy, 1 = idle
@@ -79,8 +80,11 @@ worker!(
             let now = now_from(&base);
             b.set_result(R_LAST_RUN, now);
             if b.arg(A_MODE) == 2 {
+                // BUSY of CPU time from when it runs, however late its window started; the
+                // time it ran is recorded, so the root knows what TP1 used.
                 let start = sys::partition_info(1).map_or(now, |i| i.next_window_start);
-                while now_from(&base) < start + BUSY {}
+                while now_from(&base) < now + BUSY {}
+                b.add_result(R_WORKED, now_from(&base) - now);
                 sys::sleep_until(start + MAJOR);
             }
         }
@@ -145,22 +149,27 @@ struct Usage {
     cpu: [u64; 3],
     idle: u64,
     at: u64,
+    /// What the spinner says it ran (phase 2).
+    worked: u64,
 }
 
-fn usage() -> Usage {
+fn usage(spinner: &Block) -> Usage {
     let info = |tp| must("partition_info", sys::partition_info(tp));
     Usage {
         cpu: [info(0).cpu_ns, info(1).cpu_ns, info(2).cpu_ns],
         idle: info(0).idle_ns,
         at: sys::clock(),
+        worked: spinner.result(R_WORKED),
     }
 }
 
-/// Checks each partition's share of the time since `from` (per mille, ±30).
-fn check_shares(what: &str, from: Usage, want: [u64; 3], want_idle: u64) {
-    let to = usage();
+/// Checks each partition's share of the time since `from` (per mille, ±30); `want` gets the
+/// share the spinner says it ran and returns the expected TP0..TP2 and idle shares.
+fn check_shares(what: &str, spinner: &Block, from: Usage, want: impl Fn(u64) -> ([u64; 3], u64)) {
+    let to = usage(spinner);
     let elapsed = to.at - from.at;
     let share = |a: u64, b: u64| (b - a) * 1000 / elapsed;
+    let (want, want_idle) = want(share(from.worked, to.worked));
     let got = [
         share(from.cpu[0], to.cpu[0]),
         share(from.cpu[1], to.cpu[1]),
@@ -262,14 +271,18 @@ pub fn run() {
     meter.start();
 
     // Phase 1: TP1 spins through its windows, TP2 measures, TP0 spins in the gaps.
-    let phase1 = usage();
+    let phase1 = usage(&spin.block);
     sys::sleep(FRAMES as u64 * MAJOR + 20 * MS);
     meter.wait_step(1, "the meter records its window starts");
+    // SAFETY: FRAMES words mapped writable in the root by `lab.shared`.
+    check_lateness(unsafe { words_at(samples_at, FRAMES) }, &base);
+    // A late timer delays a window's start and its end alike: windows move, they do not
+    // shrink, so the shares stay those of the schedule.
     check_shares(
         "TP0 gets exactly the gaps while TP1 and TP2 use their windows",
+        &spin.block,
         phase1,
-        [375, 375, 250],
-        0,
+        |_| ([375, 375, 250], 0),
     );
     let b = &meter.block;
     expect_eq(
@@ -293,8 +306,6 @@ pub fn run() {
         "at most 2% of TP2's windows were lost (to host stalls longer than a window)",
         b.result(R_MISSED) <= OUTSIDE_BOUND,
     );
-    // SAFETY: FRAMES words mapped writable in the root by `lab.shared`.
-    check_lateness(unsafe { words_at(samples_at, FRAMES) }, &base);
     expect_err(
         "a TP0 thread cannot raise itself above its MCP",
         sys::status(back.block.result(R_MCP)),
@@ -322,13 +333,14 @@ pub fn run() {
     meter.block.set_arg(A_STOP, 1);
     spin.block.set_arg(A_MODE, 2);
     sys::sleep(2 * MAJOR);
-    let phase2 = usage();
+    let phase2 = usage(&spin.block);
     sys::sleep(IDLE_FRAMES * MAJOR);
     check_shares(
         "TP0 gets the idle part of TP1's window, TP2's unused window and the gaps",
+        &spin.block,
         phase2,
-        [750, 250, 0],
-        0,
+        // TP1 works 1 ms of each 4 ms frame (250 per mille) plus its calls.
+        |tp1| ([1000 - tp1, tp1, 0], 0),
     );
     expect(
         "the background thread never ran in TP1's busy part",
@@ -338,13 +350,13 @@ pub fn run() {
         "thread_suspend of the background thread",
         sys::thread_suspend(back.id),
     );
-    let phase2b = usage();
+    let phase2b = usage(&spin.block);
     sys::sleep(IDLE_FRAMES * MAJOR);
     check_shares(
         "with TP0 idle too, the unused time is idle time, not given to TP1",
+        &spin.block,
         phase2b,
-        [0, 250, 0],
-        750,
+        |tp1| ([0, tp1, 0], 1000 - tp1),
     );
 
     schedule_switch(&mut lab, &spin, frame0, task_b);
