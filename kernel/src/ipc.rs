@@ -106,8 +106,10 @@ impl Kernel {
             self.transfer_payload(from, to, tag)?;
         }
         let sender_id = self.thread_id(from);
+        let sender_task = self.task_id(self.threads[from].task);
         let c = &mut self.threads[to].context;
         c.rdi = sender_id;
+        c.rsi = sender_task;
         c.rdx = tag.0;
         c.r10 = words[0];
         c.r8 = words[1];

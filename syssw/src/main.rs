@@ -6,8 +6,9 @@
 //! loaded into zeroed memory with the segments' rights, a stack with the start record
 //! (`user_rt::partition`), I/O-port and interrupt grants, shared-memory segments and the
 //! first thread in its time partition; then it installs the schedules, starts the
-//! partitions and serves as the health monitor. It must never allocate after start-up and
-//! never trusts a partition: everything it gets from one is checked.
+//! partitions and serves them ([`server`]: ports, modes, health monitor, restarts). It must
+//! never allocate after start-up and never trusts a partition: everything it gets from one
+//! is checked.
 //!
 //! Log lines (an interface): `syssw: partition NAME: TP<n>|background, MCP m, priority p,
 //! memory used/total KiB, kernel memory k KiB, ports ..., irqs ...` per partition, then
@@ -19,10 +20,10 @@
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
 
-mod monitor;
 mod partitions;
+mod server;
 
-use user_rt::abi::syscall::{TaskId, ThreadAttribute};
+use user_rt::abi::syscall::ThreadAttribute;
 use user_rt::abi::sysimg::SystemImage;
 use user_rt::println;
 use user_rt::spawn::{AddressRange, FramePool, Spawner};
@@ -33,8 +34,7 @@ user_rt::entry!(main);
 /// syssw's own addresses for scratch mappings.
 const SPAWN_BASE: u64 = 0x0000_1000_0000_0000;
 const SPAWN_END: u64 = 0x0000_2000_0000_0000;
-/// Most partitions and shared segments (the configuration's limits are lower).
-const MAX_PARTITIONS: usize = 16;
+/// Most shared segments (the configuration's limit is lower).
 const MAX_SEGMENTS: usize = 32;
 
 fn reject(what: core::fmt::Arguments) -> ! {
@@ -71,17 +71,45 @@ fn main(image_base: u64, image_len: u64) {
     let mut shared = [0u64; MAX_SEGMENTS];
     partitions::shared_segments(&mut spawner, &system, &mut shared[..system.segment_count()])
         .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
-    let mut tasks = [TaskId(0); MAX_PARTITIONS];
-    let mut threads = [user_rt::abi::syscall::ThreadId(0); MAX_PARTITIONS];
+    // Every port buffer, sized once from the configuration: nothing is allocated later.
+    let arena = spawner
+        .own_memory(syssw_core::ports::arena_size(&system))
+        .unwrap_or_else(|e| reject(format_args!("no memory for port buffers: {e:?}")));
+    let ports = syssw_core::ports::Ports::new(&system, arena)
+        .unwrap_or_else(|e| reject(format_args!("ports: {e}")));
+    let mut placed = [const { None }; config::model::MAX_PARTITIONS];
     for p in system.partitions() {
         let entry = image.entries().find(|e| p.is_image_entry(e.name));
-        let created = entry
+        let placement = entry
             .ok_or(partitions::LoadError::NoImage)
-            .and_then(|e| partitions::create(&mut spawner, &system, &p, e.data, &shared, me))
+            .and_then(|e| partitions::place(&mut spawner, &p, e.data))
             .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
-        tasks[p.index] = created.task;
-        threads[p.index] = created.thread;
-        log_partition(&p, created.used);
+        placed[p.index] = Some(server::Partition {
+            placed: placement,
+            instance: None,
+            mode: syssw_core::mode::PartitionMode::boot(),
+        });
+    }
+    let mut server = server::Server {
+        system,
+        spawner,
+        shared: &shared,
+        partitions: placed,
+        ports,
+        created: [false; config::model::MAX_PORTS],
+        health: syssw_core::health::HealthMonitor::new(),
+        ipc,
+        me,
+        message: [0; config::model::MAX_MESSAGE_SIZE as usize],
+    };
+    for p in system.partitions() {
+        server
+            .start(p.index, partitions::Start::Boot)
+            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+        let used = server.partitions[p.index]
+            .as_ref()
+            .map_or(0, |q| q.placed.used);
+        log_partition(&p, used);
     }
     for s in system.schedules() {
         let mut windows = [user_rt::abi::syscall::WindowSpec::default(); 32];
@@ -98,8 +126,11 @@ fn main(image_base: u64, image_len: u64) {
     // syssw itself stays in TP0 at its priority: it only runs to serve requests and faults.
     sys::set_health_monitor(me).unwrap_or_else(|e| reject(format_args!("health monitor: {e:?}")));
     let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
-    for t in &threads[..system.partition_count()] {
-        sys::thread_start(*t).unwrap_or_else(|e| reject(format_args!("thread_start: {e:?}")));
+    for p in server.partitions.iter().flatten() {
+        if let Some(instance) = &p.instance {
+            sys::thread_start(instance.thread)
+                .unwrap_or_else(|e| reject(format_args!("thread_start: {e:?}")));
+        }
     }
     let first = (system.schedule_count() > 0).then(|| system.schedule(0));
     println!(
@@ -109,7 +140,7 @@ fn main(image_base: u64, image_len: u64) {
         first.map_or(0, |s| s.major_frame / 1000),
         first.map_or(0, |s| s.window_count())
     );
-    monitor::run(&system, &tasks[..system.partition_count()], ipc);
+    server.run()
 }
 
 fn log_partition(p: &config::binary::PartitionView, used: u64) {

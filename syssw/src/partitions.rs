@@ -1,10 +1,12 @@
-//! Creating a partition from its configuration: resource partition (kernel-memory quota),
-//! task (abilities, MCP), the image's segments in fresh zeroed memory with their rights, a
-//! stack holding the start record, I/O-port and interrupt grants, shared-memory segments,
-//! and the first thread (inactive until the schedule is installed).
+//! Creating a partition from its configuration, in two steps so that restarts reuse what
+//! was allocated at start-up: [`place`] (once) allocates its memory, loads its image and
+//! creates its resource partition (kernel-memory quota); [`instantiate`] (at start and at
+//! every restart) creates the task (abilities, MCP), maps the segments with their rights
+//! and a stack holding the start record, grants I/O ports and interrupts, maps the
+//! shared-memory segments and creates the first thread (inactive until started).
 
 use config::binary::{PartitionView, SystemView};
-use user_rt::abi::elf::load_segments;
+use user_rt::abi::elf::{LoadSegment as Segment, load_segments};
 use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
@@ -49,12 +51,27 @@ fn kernel<T>(call: &'static str, r: Result<T, Error>) -> Result<T, LoadError> {
     r.map_err(|e| LoadError::Kernel(call, e))
 }
 
-/// A created partition.
-pub struct Partition {
-    pub task: TaskId,
-    pub thread: ThreadId,
+/// Where a partition's memory lies: its frames are syssw's for good, so a restart maps
+/// the same frames again (a cold one reloads them from the image first).
+pub struct Placement {
+    pub rp: u64,
+    elf: &'static [u8],
+    entry: u64,
+    /// Physical base of each loaded segment's frames (in `load_segments` order).
+    segments: [u64; MAX_SEGMENTS],
+    stack: u64,
     /// Bytes of its memory in use (segments + stack).
     pub used: u64,
+    /// The unmapped page below the stack: a fault there is a stack overflow.
+    pub stack_guard: core::ops::Range<u64>,
+}
+
+const MAX_SEGMENTS: usize = 16;
+
+/// A running instance of a partition.
+pub struct Instance {
+    pub task: TaskId,
+    pub thread: ThreadId,
 }
 
 /// Physical frames of each shared-memory segment (allocated once, in configuration order).
@@ -82,21 +99,43 @@ fn shared_address(system: &SystemView, segment: usize) -> u64 {
             * (2 << 30)
 }
 
-pub fn create(
+fn segment_pages(s: &Segment) -> (u64, u64) {
+    let first = s.vaddr / PAGE * PAGE;
+    (first, (s.vaddr + s.mem_size).div_ceil(PAGE) - first / PAGE)
+}
+
+/// Copies a segment's file bytes into its (zeroed) frames, chunk by chunk.
+fn load(spawner: &mut Spawner, s: &Segment, physical: Option<u64>) -> Result<u64, LoadError> {
+    let (first, pages) = segment_pages(s);
+    let at = s.vaddr - first;
+    let fill = |chunk: &mut [u8], offset: u64| {
+        // The file bytes that fall into this chunk of the segment's pages.
+        let (lo, hi) = (
+            offset.max(at),
+            (offset + chunk.len() as u64).min(at + s.file.len() as u64),
+        );
+        if lo < hi {
+            chunk[(lo - offset) as usize..(hi - offset) as usize]
+                .copy_from_slice(&s.file[(lo - at) as usize..(hi - at) as usize]);
+        }
+    };
+    match physical {
+        None => spawner.filled_frames(pages, fill),
+        Some(frames) => spawner.refill_frames(frames, pages, fill).map(|()| frames),
+    }
+    .map_err(LoadError::Spawn)
+}
+
+/// Allocates a partition's memory (zeroed), loads its image and creates its resource
+/// partition: everything a partition owns that outlives its restarts.
+pub fn place(
     spawner: &mut Spawner,
-    system: &SystemView,
     p: &PartitionView,
-    elf: &[u8],
-    shared: &[u64],
-    server: ThreadId,
-) -> Result<Partition, LoadError> {
+    elf: &'static [u8],
+) -> Result<Placement, LoadError> {
     let (entry, segments) =
-        load_segments::<16>(elf, USER_MIN..SHARED_BASE).map_err(LoadError::Image)?;
-    let image_pages: u64 = segments
-        .iter()
-        .flatten()
-        .map(|s| (s.vaddr + s.mem_size).div_ceil(PAGE) - s.vaddr / PAGE)
-        .sum();
+        load_segments::<MAX_SEGMENTS>(elf, USER_MIN..SHARED_BASE).map_err(LoadError::Image)?;
+    let image_pages: u64 = segments.iter().flatten().map(|s| segment_pages(s).1).sum();
     let stack_pages = p.stack / PAGE;
     let needed = (image_pages + stack_pages) * PAGE;
     if needed > p.memory {
@@ -113,37 +152,75 @@ pub fn create(
             p.kernel_memory / PAGE,
         ),
     )?;
+    let mut frames = [0u64; MAX_SEGMENTS];
+    for (slot, s) in frames.iter_mut().zip(segments.iter().flatten()) {
+        *slot = load(spawner, s, None)?;
+    }
+    let stack = spawner.frames(stack_pages).map_err(LoadError::Spawn)?;
+    let stack_base = STACK_TOP - stack_pages * PAGE;
+    Ok(Placement {
+        rp,
+        elf,
+        entry,
+        segments: frames,
+        stack,
+        used: needed,
+        stack_guard: stack_base - PAGE..stack_base,
+    })
+}
+
+/// How an instance starts: at boot, or restarted (cold: memory reloaded from the image;
+/// warm: memory kept as it is).
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Start {
+    Boot,
+    Cold,
+    Warm,
+}
+
+/// Creates a partition's task with its memory, grants and first thread (inactive), for
+/// the start condition `condition` (ARINC START_CONDITION, passed in the start record).
+#[allow(clippy::too_many_arguments)]
+pub fn instantiate(
+    spawner: &mut Spawner,
+    system: &SystemView,
+    p: &PartitionView,
+    placed: &Placement,
+    shared: &[u64],
+    server: ThreadId,
+    start: Start,
+    condition: u64,
+) -> Result<Instance, LoadError> {
+    let (_, segments) = load_segments::<MAX_SEGMENTS>(placed.elf, USER_MIN..SHARED_BASE)
+        .map_err(LoadError::Image)?;
     let task = kernel(
         "task_create",
-        sys::task_create(p.abilities, p.mcp, rp, p.name),
+        sys::task_create(p.abilities, p.mcp, placed.rp, p.name),
     )?;
-    for s in segments.iter().flatten() {
-        let first = s.vaddr / PAGE * PAGE;
-        let pages = (s.vaddr + s.mem_size).div_ceil(PAGE) - first / PAGE;
-        let at = s.vaddr - first;
-        let frames = spawner
-            .filled_frames(pages, |chunk, offset| {
-                // The file bytes that fall into this chunk of the segment's pages.
-                let (lo, hi) = (
-                    offset.max(at),
-                    (offset + chunk.len() as u64).min(at + s.file.len() as u64),
-                );
-                if lo < hi {
-                    chunk[(lo - offset) as usize..(hi - offset) as usize]
-                        .copy_from_slice(&s.file[(lo - at) as usize..(hi - at) as usize]);
-                }
-            })
-            .map_err(LoadError::Spawn)?;
+    for (s, &frames) in segments.iter().flatten().zip(&placed.segments) {
+        if start == Start::Cold {
+            load(spawner, s, Some(frames))?;
+        }
+        let (first, pages) = segment_pages(s);
         map_physical_chunked(Some(task), frames, first, pages, s.rights)
             .map_err(LoadError::Spawn)?;
     }
 
-    // The stack, with the start record at its top.
-    let info = StartInfo::new(p.index as u64, p.time_partition as u64, server.0, 0, p.name);
+    // The stack, zeroed, with the start record at its top.
+    let info = StartInfo::new(
+        p.index as u64,
+        p.time_partition as u64,
+        server.0,
+        condition,
+        p.mcp,
+        p.priority,
+        p.name,
+    );
     let record = info.to_bytes();
     let record_len = record.len() as u64;
-    let stack = spawner
-        .filled_frames(stack_pages, |chunk, offset| {
+    let stack_pages = p.stack / PAGE;
+    spawner
+        .refill_frames(placed.stack, stack_pages, |chunk, offset| {
             let at = stack_pages * PAGE - record_len;
             if offset <= at && at + record_len <= offset + chunk.len() as u64 {
                 let from = (at - offset) as usize;
@@ -151,11 +228,10 @@ pub fn create(
             }
         })
         .map_err(LoadError::Spawn)?;
-    let stack_base = STACK_TOP - stack_pages * PAGE;
     map_physical_chunked(
         Some(task),
-        stack,
-        stack_base,
+        placed.stack,
+        placed.stack_guard.end,
         stack_pages,
         PageRights::WRITE,
     )
@@ -185,7 +261,7 @@ pub fn create(
     debug_assert!(sp < USER_END);
     let thread = kernel(
         "thread_create",
-        sys::thread_create(Some(task), entry, sp, p.priority, start_record),
+        sys::thread_create(Some(task), placed.entry, sp, p.priority, start_record),
     )?;
     kernel(
         "thread_set TimePartition",
@@ -195,9 +271,5 @@ pub fn create(
             p.time_partition as u64,
         ),
     )?;
-    Ok(Partition {
-        task,
-        thread,
-        used: needed,
-    })
+    Ok(Instance { task, thread })
 }

@@ -39,12 +39,23 @@ fn syssw_partitions() {
     };
     check(
         &o,
-        health("ports-a", "MEMORY_VIOLATION", "idle"),
-        "the #GP of ports-a must be handled as MEMORY_VIOLATION with its configured action idle",
+        health("ports-a", "illegal_request", "idle"),
+        "the #GP of ports-a must be handled as illegal_request with its configured action idle",
     );
     check(
         &o,
-        health("windows-b", "ILLEGAL_REQUEST", "shutdown_success"),
-        "the #UD of windows-b must be handled as ILLEGAL_REQUEST with action shutdown_success",
+        o.line("detail=#GP,error=0x0,").is_some(),
+        "the event names the exception",
+    );
+    check(
+        &o,
+        o.line("syssw: partition ports-a: IDLE (NORMAL_START, restart 0)")
+            .is_some(),
+        "the stopped partition's mode change is logged",
+    );
+    check(
+        &o,
+        health("windows-b", "illegal_request", "shutdown_success"),
+        "the #UD of windows-b must be handled as illegal_request with action shutdown_success",
     );
 }

@@ -31,7 +31,7 @@ pub const ROOT_SYSTEM_IMAGE_BASE: u64 = 0x0000_7000_0000_0000;
 pub const ROOT_INFO_BASE: u64 = 0x0000_6fff_ffff_f000;
 /// Top of the root task's initial stack (exclusive).
 pub const ROOT_STACK_TOP: u64 = 0x0000_7fff_ffff_0000;
-pub const ROOT_STACK_SIZE: u64 = 64 * 1024;
+pub const ROOT_STACK_SIZE: u64 = 256 * 1024;
 /// Priority of the root task's first thread.
 pub const ROOT_PRIORITY: u8 = 200;
 /// Lowest address user mappings may use (page 0 stays unmapped to catch null pointers).
@@ -157,7 +157,8 @@ pub enum Call {
     /// `TimedOut`, `PeerGone` (receiver killed), `BadAddress` (own IPC buffer), and for
     /// map items `InvalidArgument`/`BadAddress`/`AlreadyMapped`/`QuotaExceeded`.
     Send = 40,
-    /// `receive(from, timeout) -> rdi = sender, rdx = tag, r10/r8/r9 = words`: waits for a
+    /// `receive(from, timeout) -> rdi = sender, rsi = sender's task, rdx = tag, r10/r8/r9 =
+    /// words`: waits for a
     /// message from `from` (0 = anyone). The data and received map items are in the IPC
     /// buffer. If the sender used `call`, the receiver must answer with `reply` or
     /// `reply_wait`. Errors: `TimedOut`, `NoSuchObject` (`from`), `PeerGone`, `BadAddress`

@@ -14,6 +14,7 @@ pub mod mem;
 pub mod partition;
 pub mod port;
 pub mod print;
+pub mod service;
 pub mod spawn;
 pub mod sys;
 pub mod window;
@@ -42,7 +43,10 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
         Some(at) => println!("panic at {}:{}: {}", at.file(), at.line(), info.message()),
         None => println!("panic: {}", info.message()),
     }
-    // The root task may end the run; anyone else just stops its thread.
+    // A partition reports the panic to syssw's health monitor (APPLICATION_ERROR; the
+    // configured action may stop it); the root task may end the run; anyone else just
+    // stops its thread.
+    service::report_error_bare(service::error::APPLICATION_ERROR);
     let _ = sys::system_halt(false);
     sys::thread_exit()
 }

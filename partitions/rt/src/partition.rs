@@ -19,8 +19,14 @@ pub struct StartInfo {
     pub time_partition: u64,
     /// Raw thread id of syssw's server thread (requests go there by IPC).
     pub server: u64,
-    /// How it was started: 0 = normal start, 1 = cold restart, 2 = warm restart.
+    /// Why it (re)started: ARINC 653 `START_CONDITION_TYPE` (0 = NORMAL_START,
+    /// 1 = PARTITION_RESTART, 2 = HM_MODULE_RESTART, 3 = HM_PARTITION_RESTART); cold or warm
+    /// is its operating mode (`service::PARTITION_STATUS`).
     pub start_condition: u64,
+    /// The task's maximum controlled priority (no thread of it may be above).
+    pub mcp: u64,
+    /// The first thread's priority.
+    pub priority: u64,
     /// Length of `name` in bytes (the partition's name, UTF-8).
     pub name_len: u64,
     pub name: [u8; 32],
@@ -33,6 +39,8 @@ impl StartInfo {
         time_partition: u64,
         server: u64,
         start_condition: u64,
+        mcp: u8,
+        priority: u8,
         name: &str,
     ) -> Self {
         let n = name.len().min(32);
@@ -44,12 +52,14 @@ impl StartInfo {
             time_partition,
             server,
             start_condition,
+            mcp: mcp as u64,
+            priority: priority as u64,
             name_len: n as u64,
             name: bytes,
         }
     }
 
-    /// The record as it lies in memory (`repr(C)`: six u64, then the name; no padding).
+    /// The record as it lies in memory (`repr(C)`: eight u64, then the name; no padding).
     pub fn to_bytes(&self) -> [u8; core::mem::size_of::<StartInfo>()] {
         let mut out = [0u8; core::mem::size_of::<StartInfo>()];
         let words = [
@@ -58,12 +68,14 @@ impl StartInfo {
             self.time_partition,
             self.server,
             self.start_condition,
+            self.mcp,
+            self.priority,
             self.name_len,
         ];
         for (chunk, word) in out.chunks_exact_mut(8).zip(words) {
             chunk.copy_from_slice(&word.to_le_bytes());
         }
-        out[48..].copy_from_slice(&self.name);
+        out[64..].copy_from_slice(&self.name);
         out
     }
 

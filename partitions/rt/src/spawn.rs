@@ -285,9 +285,21 @@ impl Spawner {
     pub fn filled_frames(
         &mut self,
         pages: u64,
-        mut fill: impl FnMut(&mut [u8], u64),
+        fill: impl FnMut(&mut [u8], u64),
     ) -> Result<u64, SpawnError> {
         let physical = self.frames.alloc(pages).ok_or(SpawnError::OutOfFrames)?;
+        self.refill_frames(physical, pages, fill)?;
+        Ok(physical)
+    }
+
+    /// Zeroes `pages` frames from `physical` that this spawner handed out earlier and
+    /// fills them like [`Spawner::filled_frames`] (reloading a restarted program).
+    pub fn refill_frames(
+        &mut self,
+        physical: u64,
+        pages: u64,
+        mut fill: impl FnMut(&mut [u8], u64),
+    ) -> Result<(), SpawnError> {
         self.through_scratch(physical, pages, |va, first, n| {
             // SAFETY: `through_scratch` just mapped `n` pages writable at `va`, in the
             // scratch window nobody else uses; the slice lives only during this call.
@@ -295,8 +307,17 @@ impl Spawner {
                 unsafe { core::slice::from_raw_parts_mut(va as *mut u8, (n * PAGE_SIZE) as usize) };
             chunk.fill(0);
             fill(chunk, first * PAGE_SIZE);
-        })?;
-        Ok(physical)
+        })
+    }
+
+    /// `bytes` (rounded up to pages) of zeroed memory of the caller's own, for good (buffers
+    /// a server sizes once at start-up).
+    pub fn own_memory(&mut self, bytes: usize) -> Result<&'static mut [u8], SpawnError> {
+        let pages = (bytes as u64).div_ceil(PAGE_SIZE).max(1);
+        let address = self.memory(None, pages, PageRights::WRITE, false)?;
+        // SAFETY: `memory` just mapped these pages writable at a fresh address in this task
+        // that nothing else refers to, and they are never unmapped: one exclusive slice.
+        Ok(unsafe { core::slice::from_raw_parts_mut(address as *mut u8, bytes) })
     }
 
     /// `pages` zeroed, physically contiguous frames.

@@ -265,6 +265,8 @@ impl Message {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Received {
     pub sender: ThreadId,
+    /// The sender's task (set by the kernel: a server can trust it).
+    pub sender_task: TaskId,
     pub message: Message,
 }
 
@@ -277,6 +279,7 @@ fn ipc(c: Call, peer: u64, timeout_ns: u64, m: &Message) -> Result<Received, Err
     )
     .map(|r| Received {
         sender: ThreadId(r.rdi),
+        sender_task: TaskId(r.rsi),
         message: Message {
             tag: MessageTag(r.rdx),
             words: [r.r10, r.r8, r.r9],

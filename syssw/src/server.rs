@@ -1,0 +1,502 @@
+//! syssw's service loop: one thread answers the partitions' requests
+//! (`user_rt::service`: partition status and modes, sampling and queuing ports, error
+//! reports, application messages) and the kernel's fault reports, and carries out the
+//! health monitor's decisions (stop, cold/warm restart, module shutdown).
+//!
+//! It runs in time partition 0 above every partition's MCP, so a request is served at
+//! once, inside the caller's window. Requests that wait (queuing ports) are parked in
+//! `syssw_core::ports` and answered later with a deferred `reply`; the receive time-out
+//! is the earliest waiter's deadline, so time-outs are answered on time.
+//!
+//! Log lines (an interface, besides the health monitor's `health: ...` line of
+//! `syssw_core::health`): `syssw: partition NAME: MODE (START_CONDITION, restart N)` on
+//! every mode change and `message: t=<ms>.<us>ms partition=NAME text="..."` for
+//! REPORT_APPLICATION_MESSAGE.
+
+use crate::partitions::{self, Instance, Placement, Start};
+use config::binary::SystemView;
+use config::model::{
+    Direction, HealthError, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind,
+};
+use syssw_core::codes::ReturnCode;
+use syssw_core::health::{
+    Detail, ErrorEvent, Fault, HealthMonitor, Text, classify, write_log_line,
+};
+use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode};
+use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Validity};
+use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
+use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadId};
+use user_rt::ipc_buffer::IpcBufferRef;
+use user_rt::println;
+use user_rt::service as svc;
+use user_rt::spawn::Spawner;
+use user_rt::sys::{self, Message, Received};
+
+/// One configured partition at run time.
+pub struct Partition {
+    pub placed: Placement,
+    /// `None` while it is IDLE.
+    pub instance: Option<Instance>,
+    pub mode: PartitionMode,
+}
+
+pub struct Server<'a> {
+    pub system: SystemView<'a>,
+    pub spawner: Spawner,
+    pub shared: &'a [u64],
+    pub partitions: [Option<Partition>; MAX_PARTITIONS],
+    pub ports: Ports<'a>,
+    /// Ports their partition has created since it last (re)started.
+    pub created: [bool; MAX_PORTS],
+    pub health: HealthMonitor,
+    pub ipc: IpcBufferRef,
+    pub me: ThreadId,
+    /// A request's message, copied out of the IPC buffer before anything else uses it.
+    pub message: [u8; MAX_MESSAGE_SIZE as usize],
+}
+
+/// Replies `code` with `words` and `data` (through syssw's IPC buffer) to `to`. A caller
+/// that is gone (killed while waiting) is no error.
+fn answer(ipc: IpcBufferRef, to: ThreadId, code: ReturnCode, words: [u64; 3], data: &[u8]) {
+    ipc.write_data(0, data);
+    let m = Message {
+        tag: MessageTag::new(code.code() as u32, data.len(), 0),
+        words,
+    };
+    let _ = sys::reply(to, &m);
+}
+
+/// Answers a parked queuing request that finished (sent, received or timed out).
+fn complete(ipc: IpcBufferRef, c: Completion<'_>) {
+    let len = c.message.len() as u64;
+    answer(ipc, ThreadId(c.token), c.code, [len, 0, 0], c.message);
+}
+
+fn direction_code(d: Direction) -> u64 {
+    match d {
+        Direction::Out => svc::DIRECTION_SOURCE,
+        Direction::In => svc::DIRECTION_DESTINATION,
+    }
+}
+
+/// A health record as the core's formatter writes it.
+struct LogLine<'s, 'a>(&'s SystemView<'a>, &'s syssw_core::health::Record);
+
+impl core::fmt::Display for LogLine<'_, '_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write_log_line(f, self.0, self.1)
+    }
+}
+
+impl<'a> Server<'a> {
+    pub fn run(mut self) -> ! {
+        loop {
+            let now = sys::clock();
+            let ipc = self.ipc;
+            let timeout = match self.ports.expire(now, |c| complete(ipc, c)) {
+                Some(deadline) if deadline != NEVER => deadline.saturating_sub(now).max(1),
+                _ => TIMEOUT_INFINITE,
+            };
+            if let Ok(m) = sys::receive(None, timeout) {
+                if m.message.tag.label() == LABEL_FAULT_REPORT {
+                    self.fault(m);
+                } else {
+                    self.request(m);
+                }
+            }
+        }
+    }
+
+    fn partition_of(&self, task: TaskId) -> Option<usize> {
+        self.partitions.iter().position(|p| {
+            p.as_ref()
+                .and_then(|p| p.instance.as_ref())
+                .is_some_and(|i| i.task == task)
+        })
+    }
+
+    fn running(&mut self, index: usize) -> &mut Partition {
+        self.partitions[index]
+            .as_mut()
+            .expect("every configured partition is placed at start-up")
+    }
+
+    fn request(&mut self, m: Received) {
+        let ipc = self.ipc;
+        let Some(index) = self.partition_of(m.sender_task) else {
+            answer(ipc, m.sender, ReturnCode::InvalidParam, [0; 3], &[]);
+            return;
+        };
+        let tag = m.message.tag;
+        if tag.len() > self.message.len() {
+            // Longer than any port's message (the configuration's limit).
+            answer(ipc, m.sender, ReturnCode::InvalidConfig, [0; 3], &[]);
+            return;
+        }
+        let len = tag.len();
+        ipc.read_data(0, &mut self.message[..len]);
+        let [w0, w1, w2] = m.message.words;
+        let now = sys::clock();
+        let reply = |code: ReturnCode, words: [u64; 3]| answer(ipc, m.sender, code, words, &[]);
+        match tag.label() {
+            svc::PARTITION_STATUS => {
+                let (period, duration) = self.period_and_duration(index);
+                let mode = self.running(index).mode;
+                reply(
+                    ReturnCode::NoError,
+                    [
+                        mode.mode() as u64
+                            | (mode.start_condition() as u64) << 8
+                            | (index as u64) << 16,
+                        period,
+                        duration,
+                    ],
+                );
+            }
+            svc::SET_PARTITION_MODE => match self.running(index).mode.request_code(w0) {
+                Err(code) => reply(code, [0; 3]),
+                Ok(ModeChange::Run) => {
+                    self.log_mode(index);
+                    reply(ReturnCode::NoError, [0; 3]);
+                }
+                Ok(change) => self.carry_out(index, change),
+            },
+            svc::CREATE_PORT => {
+                let (code, id) = self.create_port(index, len, w0, w1, w2);
+                reply(code, [id, 0, 0]);
+            }
+            svc::PORT_ID => {
+                let (code, id) = self.port_id(index, len, w0);
+                reply(code, [id, 0, 0]);
+            }
+            _ if !self.port_ready(index, w0) && is_port_request(tag.label()) => {
+                reply(ReturnCode::InvalidParam, [0; 3]);
+            }
+            svc::WRITE_SAMPLING => {
+                let code = self
+                    .ports
+                    .write_sampling(index, w0 as usize, &self.message[..len], now);
+                reply(code, [0; 3]);
+            }
+            svc::READ_SAMPLING => {
+                let s = self
+                    .ports
+                    .read_sampling(index, w0 as usize, now, &mut self.message);
+                let valid = (s.validity == Validity::Valid) as u64;
+                answer(
+                    ipc,
+                    m.sender,
+                    s.code,
+                    [s.len as u64, valid, 0],
+                    &self.message[..s.len],
+                );
+            }
+            svc::SAMPLING_STATUS => match self.ports.sampling_status(index, w0 as usize) {
+                Ok(s) => reply(
+                    ReturnCode::NoError,
+                    [
+                        s.max_message_size as u64 | direction_code(s.direction) << 32,
+                        s.refresh_period,
+                        (s.last_msg_validity == Validity::Valid) as u64,
+                    ],
+                ),
+                Err(code) => reply(code, [0; 3]),
+            },
+            svc::SEND_QUEUING => {
+                let outcome = self.ports.send_queuing(
+                    index,
+                    w0 as usize,
+                    &self.message[..len],
+                    now,
+                    w1,
+                    m.sender.0,
+                    |c| complete(ipc, c),
+                );
+                if let Outcome::Done { code, .. } = outcome {
+                    reply(code, [0; 3]);
+                }
+            }
+            svc::RECEIVE_QUEUING => {
+                let outcome = self.ports.receive_queuing(
+                    index,
+                    w0 as usize,
+                    now,
+                    w1,
+                    m.sender.0,
+                    &mut self.message,
+                    |c| complete(ipc, c),
+                );
+                if let Outcome::Done { code, len } = outcome {
+                    answer(
+                        ipc,
+                        m.sender,
+                        code,
+                        [len as u64, 0, 0],
+                        &self.message[..len],
+                    );
+                }
+            }
+            svc::QUEUING_STATUS => match self.ports.queuing_status(index, w0 as usize) {
+                Ok(s) => reply(
+                    ReturnCode::NoError,
+                    [
+                        s.nb_message as u64 | (s.max_nb_message as u64) << 32,
+                        s.max_message_size as u64 | direction_code(s.direction) << 32,
+                        s.waiting_processes as u64,
+                    ],
+                ),
+                Err(code) => reply(code, [0; 3]),
+            },
+            svc::CLEAR_QUEUING => {
+                let code = self
+                    .ports
+                    .clear_queuing(index, w0 as usize, now, |c| complete(ipc, c));
+                reply(code, [0; 3]);
+            }
+            svc::REPORT_ERROR => match HealthError::ALL.get(w0 as usize) {
+                None => reply(ReturnCode::InvalidParam, [0; 3]),
+                Some(&error) => {
+                    let detail = match len {
+                        0 => Detail::None,
+                        _ => Detail::Text(Text::new(&self.message[..len])),
+                    };
+                    // The reply goes out first when the caller lives on (ignore).
+                    if self.error(index, error, detail) {
+                        reply(ReturnCode::NoError, [0; 3]);
+                    }
+                }
+            },
+            svc::APPLICATION_MESSAGE => {
+                println!(
+                    "message: t={}.{:03}ms partition={} text={}",
+                    now / 1_000_000,
+                    now / 1000 % 1000,
+                    self.system.partition(index).name,
+                    Detail::Text(Text::new(&self.message[..len]))
+                );
+                reply(ReturnCode::NoError, [0; 3]);
+            }
+            _ => reply(ReturnCode::InvalidParam, [0; 3]),
+        }
+    }
+
+    /// A port request's port id names a port this partition has created.
+    fn port_ready(&self, index: usize, id: u64) -> bool {
+        (id as usize) < self.system.port_count()
+            && self.created[id as usize]
+            && self.system.port(id as usize).partition == index
+    }
+
+    /// ARINC CREATE_SAMPLING_PORT / CREATE_QUEUING_PORT: the port must be configured for
+    /// this partition exactly as asked, and the partition still initialising.
+    fn create_port(
+        &mut self,
+        index: usize,
+        len: usize,
+        w0: u64,
+        size: u64,
+        w2: u64,
+    ) -> (ReturnCode, u64) {
+        let Some(port) = self.find_port(index, len, w0 & 0xff) else {
+            return (ReturnCode::InvalidConfig, 0);
+        };
+        let matches = direction_code(port.direction) == (w0 >> 8) & 0xff
+            && port.size as u64 == size
+            && match port.kind {
+                PortKind::Sampling => port.refresh == w2,
+                PortKind::Queuing => port.depth as u64 == w2,
+            };
+        if !matches {
+            return (ReturnCode::InvalidConfig, 0);
+        }
+        let mode = self.running(index).mode.mode();
+        if !matches!(mode, OperatingMode::ColdStart | OperatingMode::WarmStart) {
+            return (ReturnCode::InvalidMode, 0);
+        }
+        if self.created[port.index] {
+            return (ReturnCode::NoAction, port.index as u64);
+        }
+        self.created[port.index] = true;
+        (ReturnCode::NoError, port.index as u64)
+    }
+
+    /// ARINC GET_*_PORT_ID: a created port of this partition by name.
+    fn port_id(&self, index: usize, len: usize, kind: u64) -> (ReturnCode, u64) {
+        match self.find_port(index, len, kind) {
+            Some(p) if self.created[p.index] => (ReturnCode::NoError, p.index as u64),
+            _ => (ReturnCode::InvalidConfig, 0),
+        }
+    }
+
+    fn find_port(
+        &self,
+        index: usize,
+        len: usize,
+        kind: u64,
+    ) -> Option<config::binary::PortView<'a>> {
+        let name = core::str::from_utf8(&self.message[..len]).ok()?;
+        let kind = match kind {
+            svc::KIND_SAMPLING => PortKind::Sampling,
+            svc::KIND_QUEUING => PortKind::Queuing,
+            _ => return None,
+        };
+        self.system
+            .ports()
+            .find(|p| p.partition == index && p.kind == kind && p.name == name)
+    }
+
+    /// ARINC PERIOD and DURATION of a partition: the first schedule's major frame and the
+    /// sum of its windows there (0 and 0 for a background partition).
+    fn period_and_duration(&self, index: usize) -> (u64, u64) {
+        let tp = self.system.partition(index).time_partition;
+        if tp == 0 || self.system.schedule_count() == 0 {
+            return (0, 0);
+        }
+        let s = self.system.schedule(0);
+        let duration = s
+            .windows()
+            .filter(|w| w.time_partition == tp)
+            .map(|w| w.duration)
+            .sum();
+        (s.major_frame, duration)
+    }
+
+    /// A kernel fault report for a thread without its own handler.
+    fn fault(&mut self, m: Received) {
+        let e = self.ipc.exception();
+        let Some(index) = self.partition_of(TaskId(e.task)) else {
+            println!(
+                "health: fault report for unknown task {:#x}; thread killed",
+                e.task
+            );
+            kill_faulted(m.sender);
+            return;
+        };
+        let fault = Fault::from_message(&e);
+        let guard = self.running(index).placed.stack_guard.clone();
+        let error = classify(&fault, guard);
+        if self.error(index, error, Detail::Fault(fault)) {
+            // "ignore": the partition goes on, but the faulting thread cannot.
+            kill_faulted(m.sender);
+        }
+    }
+
+    /// Records and logs an error of partition `index` and carries out the configured
+    /// action. True if the partition is still running as before (the caller may answer).
+    fn error(&mut self, index: usize, error: HealthError, detail: Detail) -> bool {
+        let now = sys::clock();
+        let event = ErrorEvent {
+            partition: Some(index),
+            error,
+            detail,
+        };
+        let record = self.health.report(&self.system, now, event);
+        println!("{}", LogLine(&self.system, &record));
+        let change = self.running(index).mode.apply_health(record.action);
+        if change == ModeChange::None {
+            return true;
+        }
+        self.carry_out(index, change);
+        false
+    }
+
+    /// Does what a mode change demands.
+    fn carry_out(&mut self, index: usize, change: ModeChange) {
+        match change {
+            ModeChange::None | ModeChange::Run => {}
+            ModeChange::Halt { success } => {
+                let _ = sys::system_halt(success);
+            }
+            ModeChange::Stop => {
+                self.stop(index);
+                self.log_mode(index);
+            }
+            ModeChange::Restart { warm } => {
+                self.stop(index);
+                self.log_mode(index);
+                let start = if warm { Start::Warm } else { Start::Cold };
+                if let Err(e) = self.start(index, start) {
+                    println!(
+                        "syssw: partition {}: restart failed: {e}; it stays IDLE",
+                        self.system.partition(index).name
+                    );
+                    self.running(index)
+                        .mode
+                        .apply_health(config::model::HealthAction::Idle);
+                }
+            }
+        }
+    }
+
+    /// Kills the partition's task (every thread of it) and resets its ports.
+    fn stop(&mut self, index: usize) {
+        if let Some(instance) = self.running(index).instance.take() {
+            let _ = sys::task_kill(instance.task);
+        }
+        for p in self.system.ports().filter(|p| p.partition == index) {
+            self.created[p.index] = false;
+        }
+        let ipc = self.ipc;
+        self.ports.reset_partition(index, |c| complete(ipc, c));
+    }
+
+    /// Creates and starts a new instance of the partition (boot or restart).
+    pub fn start(&mut self, index: usize, start: Start) -> Result<(), partitions::LoadError> {
+        let p = self.system.partition(index);
+        let (me, shared, system) = (self.me, self.shared, self.system);
+        let part = self.partitions[index]
+            .as_mut()
+            .expect("every configured partition is placed at start-up");
+        let condition = part.mode.start_condition() as u64;
+        let instance = partitions::instantiate(
+            &mut self.spawner,
+            &system,
+            &p,
+            &part.placed,
+            shared,
+            me,
+            start,
+            condition,
+        )?;
+        if start != Start::Boot {
+            sys::thread_start(instance.thread)
+                .map_err(|e| partitions::LoadError::Kernel("thread_start", e))?;
+        }
+        part.instance = Some(instance);
+        Ok(())
+    }
+
+    fn log_mode(&mut self, index: usize) {
+        let name = self.system.partition(index).name;
+        let mode = self.running(index).mode;
+        println!(
+            "syssw: partition {name}: {} ({}, restart {})",
+            mode.mode().name(),
+            mode.start_condition().name(),
+            mode.restarts()
+        );
+    }
+}
+
+fn is_port_request(label: u32) -> bool {
+    matches!(
+        label,
+        svc::WRITE_SAMPLING
+            | svc::READ_SAMPLING
+            | svc::SAMPLING_STATUS
+            | svc::SEND_QUEUING
+            | svc::RECEIVE_QUEUING
+            | svc::QUEUING_STATUS
+            | svc::CLEAR_QUEUING
+    )
+}
+
+fn kill_faulted(thread: ThreadId) {
+    let _ = sys::reply(
+        thread,
+        &Message {
+            tag: MessageTag::new(REPLY_KILL, 0, 0),
+            words: [0; 3],
+        },
+    );
+}
