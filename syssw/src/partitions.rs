@@ -10,15 +10,13 @@ use user_rt::abi::elf::{LoadSegment as Segment, load_segments};
 use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
-use user_rt::partition::StartInfo;
+use user_rt::partition::{SHARED_BASE, StartInfo};
 use user_rt::spawn::{SpawnError, Spawner, map_physical_chunked};
 use user_rt::sys;
 
 const PAGE: u64 = 4096;
 /// Top of a partition's stack (its start record is at the very top).
 pub const STACK_TOP: u64 = 0x0000_7ff0_0000_0000;
-/// Where shared-memory segments appear, in configuration order (same address everywhere).
-pub const SHARED_BASE: u64 = 0x0000_6000_0000_0000;
 
 /// Why a partition could not be created (with the partition's name, printed by the caller).
 #[derive(Debug)]

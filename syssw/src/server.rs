@@ -4,7 +4,8 @@
 //! health monitor's decisions (stop, cold/warm restart, module shutdown).
 //!
 //! It runs in time partition 0 above every partition's MCP, so a request is served at
-//! once, inside the caller's window. Requests that wait (queuing ports) are parked in
+//! once, inside the caller's window; a restart runs in the restarted partition's own time
+//! partition (its windows pay for the reload). Requests that wait (queuing ports) are parked in
 //! `syssw_core::ports` and answered later with a deferred `reply`; the receive time-out
 //! is the earliest waiter's deadline, so time-outs are answered on time.
 //!
@@ -25,7 +26,7 @@ use syssw_core::health::{
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Validity};
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
-use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadId};
+use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
 use user_rt::service as svc;
@@ -303,7 +304,8 @@ impl<'a> Server<'a> {
         let matches = direction_code(port.direction) == (w0 >> 8) & 0xff
             && port.size as u64 == size
             && match port.kind {
-                PortKind::Sampling => port.refresh == w2,
+                // ARINC: only a destination has a refresh period (a source's is ignored).
+                PortKind::Sampling => port.direction == Direction::Out || port.refresh == w2,
                 PortKind::Queuing => port.depth as u64 == w2,
             };
         if !matches {
@@ -415,7 +417,14 @@ impl<'a> Server<'a> {
                 self.stop(index);
                 self.log_mode(index);
                 let start = if warm { Start::Warm } else { Start::Cold };
-                if let Err(e) = self.start(index, start) {
+                // Reloading and mapping take milliseconds: do it in the partition's own
+                // windows, so a restart never takes time from another partition (requests
+                // of others wait meanwhile; they are served after the restart).
+                let tp = self.system.partition(index).time_partition;
+                let _ = sys::thread_set(None, ThreadAttribute::TimePartition, tp as u64);
+                let started = self.start(index, start);
+                let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
+                if let Err(e) = started {
                     println!(
                         "syssw: partition {}: restart failed: {e}; it stays IDLE",
                         self.system.partition(index).name

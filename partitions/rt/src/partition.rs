@@ -6,6 +6,11 @@
 //! below it, minus 8 (as if called). Everything else the partition needs from syssw comes
 //! through this record.
 
+/// Where syssw maps a partition's shared-memory segments: the first configured segment
+/// here, each next one 2 GiB per started GiB of the ones before further up (the same
+/// address in every partition that has the segment).
+pub const SHARED_BASE: u64 = 0x0000_6000_0000_0000;
+
 /// `StartInfo::magic`.
 pub const START_MAGIC: u64 = u64::from_le_bytes(*b"WRDNPART");
 

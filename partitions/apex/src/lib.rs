@@ -1,0 +1,75 @@
+//! The ARINC 653 partition runtime of Warden: what a partition program links to use the
+//! APEX services through the traits of the [`a653rs`] crate.
+//!
+//! A partition program names [`Warden`] as a653rs's hypervisor type, implements
+//! `a653rs::prelude::Partition<Warden>` and starts with [`partition_entry!`]:
+//!
+//! ```ignore
+//! #![no_std]
+//! #![no_main]
+//! use a653rs::prelude::*;
+//! use apex::Warden;
+//!
+//! struct Demo;
+//! impl Partition<Warden> for Demo {
+//!     fn cold_start(&self, ctx: &mut StartContext<Warden>) { /* create processes, ports */ }
+//!     fn warm_start(&self, ctx: &mut StartContext<Warden>) { self.cold_start(ctx) }
+//! }
+//! fn main() { Demo.run() }
+//! apex::partition_entry!(main);
+//! ```
+//!
+//! The runtime ([`runtime`]) takes the start record syssw passes to the first thread, runs
+//! initialisation on that thread, and maps APEX processes onto threads of the partition's
+//! own task (fixed table, static stacks and IPC buffers). Partition modes, ports and error
+//! reports go to syssw through the request protocol of `user_rt::service`; time comes from
+//! the kernel clock; deadlines are watched by one thread at the task's MCP. A bounded heap
+//! ([`runtime::HEAP_SIZE`] bytes) serves `alloc`.
+//!
+//! What it must never do: fake success (a service it cannot provide answers with the ARINC
+//! code that says so), block while holding its lock, allocate outside its fixed arena, or
+//! trust a reply length from syssw beyond the caller's buffer. It is policy-free towards
+//! the rest of the system: everything it may do is what the partition's task may do
+//! anyway, and syssw checks every request.
+//!
+//! The pure logic ([`table`], [`time`], [`codes`]) builds without the `runtime` feature and
+//! is unit-tested on the host.
+#![no_std]
+#![forbid(unsafe_op_in_unsafe_fn)]
+
+pub mod codes;
+pub mod table;
+pub mod time;
+
+#[cfg(feature = "runtime")]
+pub mod runtime;
+#[cfg(feature = "runtime")]
+mod warden;
+
+pub use a653rs;
+#[cfg(feature = "runtime")]
+pub use warden::Warden;
+
+#[cfg(feature = "runtime")]
+pub use user_rt;
+
+#[cfg(feature = "runtime")]
+#[global_allocator]
+static HEAP: runtime::BoundedHeap = runtime::BoundedHeap;
+
+/// Defines the partition program's ELF entry `_start(start_record)`: sets up the runtime
+/// (IPC buffer, syssw's server, process table, heap), then calls `$main` (a `fn()`, which
+/// usually runs `Partition::run`) on the initialisation thread. The thread ends when the
+/// partition enters NORMAL mode, or when `$main` returns.
+#[cfg(feature = "runtime")]
+#[macro_export]
+macro_rules! partition_entry {
+    ($main:path) => {
+        // SAFETY: `_start` is the ELF entry symbol; no C start files define it.
+        #[allow(unsafe_code)]
+        #[unsafe(no_mangle)]
+        pub extern "C" fn _start(start_record: u64) -> ! {
+            $crate::runtime::start(start_record, $main)
+        }
+    };
+}

@@ -1,0 +1,470 @@
+//! The partition runtime: start-up, the runtime lock, process threads, the deadline
+//! watchdog and the bounded heap. Everything here talks to the kernel (`user_rt::sys`) or
+//! to syssw (`user_rt::service`); the decisions come from [`crate::table`].
+//!
+//! # The runtime lock (priority ceiling)
+//!
+//! All runtime state (process table and heap) lives behind one lock. Threads of a task
+//! have fixed priorities without time slicing, so a spin lock held by a preempted
+//! low-priority thread would make a higher-priority one spin for ever. A thread therefore
+//! raises itself to the task's MCP before it takes the lock and drops back after: no
+//! thread of the partition can preempt it meanwhile (the watchdog and error handler run
+//! at the MCP too, and equal priorities do not preempt), and it never blocks while holding
+//! it. On the single CPU the lock is thus never contended; finding it taken means its
+//! holder died inside (a bug), which panics instead of spinning.
+
+use crate::codes;
+use crate::table::{self, Delivery, ERROR_HANDLER_SLOT, PendingError, SLOTS, STACK_SIZE, Table};
+use crate::time;
+use a653rs::bindings::{ErrorCode, ErrorReturnCode, ProcessId};
+use core::alloc::{GlobalAlloc, Layout};
+use core::ptr::NonNull;
+use core::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+use linked_list_allocator::Heap;
+use spin::mutex::{SpinMutex, SpinMutexGuard};
+use user_rt::abi::ipc::IpcBuffer;
+use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
+use user_rt::ipc_buffer::IpcBufferRef;
+use user_rt::partition::StartInfo;
+use user_rt::service::{self, Reply};
+use user_rt::sys;
+
+/// Bytes of the heap arena.
+pub const HEAP_SIZE: usize = 64 * 1024;
+/// Thread index of the initialisation (main) thread; 0..SLOTS are the process slots.
+pub const MAIN: usize = SLOTS;
+/// Thread index of the deadline watchdog.
+pub const WATCHDOG: usize = SLOTS + 1;
+const THREADS: usize = SLOTS + 2;
+/// Notification bit that wakes the watchdog (an earlier deadline) or a SUSPEND_SELF
+/// (RESUME).
+pub const WAKE_BIT: u64 = 1;
+
+/// One thread stack (16-byte aligned as the SysV ABI wants).
+#[repr(C, align(16))]
+struct Stack([u8; STACK_SIZE]);
+
+// Stacks and IPC buffers are used only through their addresses (by the threads running on
+// them and by the kernel), never through Rust references, so `static mut` with raw
+// addresses is all they need.
+static mut PROCESS_STACKS: [Stack; SLOTS + 1] = [const { Stack([0; STACK_SIZE]) }; SLOTS + 1];
+static mut IPC_BUFFERS: [IpcBuffer; THREADS] = [const { IpcBuffer::new() }; THREADS];
+
+#[repr(C, align(16))]
+struct Arena([u8; HEAP_SIZE]);
+static mut HEAP_ARENA: Arena = Arena([0; HEAP_SIZE]);
+
+struct State {
+    table: Table,
+    heap: Heap,
+    heap_ready: bool,
+}
+
+static STATE: SpinMutex<State> = SpinMutex::new(State {
+    table: Table::EMPTY,
+    heap: Heap::empty(),
+    heap_ready: false,
+});
+
+/// Raw thread ids by thread index (0 = none), readable without the lock: how a thread
+/// finds its own IPC buffer and slot.
+static THREAD_IDS: [AtomicU64; THREADS] = [const { AtomicU64::new(0) }; THREADS];
+static MCP: AtomicU8 = AtomicU8::new(0);
+static TIME_PARTITION: AtomicU64 = AtomicU64::new(0);
+static PARTITION_INDEX: AtomicU64 = AtomicU64::new(0);
+
+/// The start record of the current run (a copy).
+static START_INFO: SpinMutex<Option<StartInfo>> = SpinMutex::new(None);
+
+/// The start record syssw gave this run of the partition (its name, index, time
+/// partition, start condition, MCP).
+pub fn start_info() -> StartInfo {
+    START_INFO.lock().expect("the runtime has started")
+}
+
+pub fn mcp() -> u8 {
+    MCP.load(Ordering::Relaxed)
+}
+
+/// The calling thread's index (MAIN, WATCHDOG or a process slot).
+pub fn own_index() -> Option<usize> {
+    let me = sys::thread_self().0.0;
+    THREAD_IDS
+        .iter()
+        .position(|t| t.load(Ordering::Relaxed) == me)
+}
+
+/// The calling thread's process slot, if it is a process.
+pub fn own_slot() -> Option<usize> {
+    own_index().filter(|&i| i < SLOTS)
+}
+
+fn ipc_address(index: usize) -> u64 {
+    (&raw mut IPC_BUFFERS)
+        .cast::<IpcBuffer>()
+        .wrapping_add(index) as u64
+}
+
+fn stack_top(index: usize) -> u64 {
+    let slot = if index == WATCHDOG { SLOTS } else { index };
+    let base = (&raw mut PROCESS_STACKS).cast::<Stack>().wrapping_add(slot) as u64;
+    // As if called: the SysV ABI expects rsp + 8 to be 16-byte aligned at entry.
+    base + STACK_SIZE as u64 - 8
+}
+
+/// A critical section on the runtime state (see the module documentation).
+pub struct Critical {
+    guard: Option<SpinMutexGuard<'static, State>>,
+    me: u64,
+}
+
+impl Critical {
+    pub fn enter() -> Self {
+        let me = sys::thread_self().0.0;
+        // Before `start` has read the MCP (0) nothing else of the partition runs.
+        if mcp() != 0 {
+            let _ = sys::thread_set(None, ThreadAttribute::Priority, u64::from(mcp()));
+        }
+        let Some(guard) = STATE.try_lock() else {
+            panic!("APEX runtime lock held by a thread that died inside it");
+        };
+        Self {
+            guard: Some(guard),
+            me,
+        }
+    }
+
+    pub fn table(&mut self) -> &mut Table {
+        &mut self.guard.as_mut().expect("held until dropped").table
+    }
+
+    /// Leaves the section and ends the calling thread without dropping its priority first,
+    /// so nothing of the partition runs between (e.g. START reusing its stack).
+    pub fn exit(mut self) -> ! {
+        drop(self.guard.take());
+        core::mem::forget(self);
+        sys::thread_exit()
+    }
+}
+
+impl Drop for Critical {
+    fn drop(&mut self) {
+        if let Some(guard) = self.guard.take() {
+            let priority = guard.table.priority_of_thread(self.me);
+            drop(guard);
+            if mcp() != 0 && priority != mcp() {
+                let _ = sys::thread_set(None, ThreadAttribute::Priority, u64::from(priority));
+            }
+        }
+    }
+}
+
+/// Starts the runtime on the partition's first thread and runs `main` on it (what
+/// [`crate::partition_entry!`] expands to). Ends the thread when `main` returns.
+pub fn start(start_record: u64, main: fn()) -> ! {
+    // SAFETY: syssw starts every partition's first thread with the address of its start
+    // record in rdi (`user_rt::partition`), which `_start` passes on unchanged.
+    let Some(info) = (unsafe { StartInfo::from_start(start_record) }) else {
+        user_rt::println!("apex: no start record from syssw");
+        sys::thread_exit()
+    };
+    let me = sys::thread_self().0;
+    *START_INFO.lock() = Some(*info);
+    MCP.store(info.mcp.min(255) as u8, Ordering::Relaxed);
+    TIME_PARTITION.store(info.time_partition, Ordering::Relaxed);
+    PARTITION_INDEX.store(info.index, Ordering::Relaxed);
+    if let Err(e) = sys::thread_set(None, ThreadAttribute::IpcBuffer, ipc_address(MAIN)) {
+        panic!("apex: cannot register the IPC buffer: {e:?}");
+    }
+    service::set_server(ThreadId(info.server));
+    for id in &THREAD_IDS {
+        id.store(0, Ordering::Relaxed);
+    }
+    THREAD_IDS[MAIN].store(me.0, Ordering::Relaxed);
+    let partition_period = partition_status().map_or(0, |r| r.words[1]);
+    reset_state(Table::new(
+        mcp(),
+        partition_period,
+        me.0,
+        info.priority.min(255) as u8,
+    ));
+    main();
+    sys::thread_exit()
+}
+
+/// A (re)start: every other thread of the partition is gone. After a warm restart the
+/// memory is as it was, so the lock may still be held by a thread that was stopped inside
+/// it, and the heap may be mid-operation then.
+fn reset_state(table: Table) {
+    let was_locked = STATE.is_locked();
+    if was_locked {
+        // SAFETY: the only threads that could hold the lock belonged to the partition's
+        // previous run and no longer exist; this is the only thread of the partition now.
+        unsafe { STATE.force_unlock() };
+    }
+    let mut state = STATE.lock();
+    state.table = table;
+    if !state.heap_ready || was_locked {
+        state.heap = Heap::empty();
+        let arena = (&raw mut HEAP_ARENA).cast::<u8>();
+        // SAFETY: the arena is a static used by nothing but this heap; after a restart with
+        // the lock held, the old heap's blocks are abandoned with it (no thread that owned
+        // them exists any more).
+        unsafe { state.heap.init(arena, HEAP_SIZE) };
+        state.heap_ready = true;
+    }
+}
+
+/// The bounded heap: a fixed arena, first fit. An allocation that does not fit returns
+/// null, and the allocation-error handler panics (reported as APPLICATION_ERROR).
+pub struct BoundedHeap;
+
+// SAFETY: allocations come from the runtime's linked-list heap over the static arena,
+// under the runtime lock; it returns blocks of the requested layout or null.
+unsafe impl GlobalAlloc for BoundedHeap {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        let mut critical = Critical::enter();
+        let state = critical.guard.as_mut().expect("held");
+        state
+            .heap
+            .allocate_first_fit(layout)
+            .map_or(core::ptr::null_mut(), |block| block.as_ptr())
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        let mut critical = Critical::enter();
+        let state = critical.guard.as_mut().expect("held");
+        if let Some(block) = NonNull::new(ptr) {
+            // SAFETY: the caller guarantees `ptr` came from `alloc` with this `layout`.
+            unsafe { state.heap.deallocate(block, layout) };
+        }
+    }
+}
+
+/// Sends a protocol request from the calling thread's IPC buffer; reply data stays there.
+pub fn request(
+    label: u32,
+    words: [u64; 3],
+    data: &[u8],
+) -> Result<(Reply, IpcBufferRef), ErrorReturnCode> {
+    let index = own_index().ok_or(ErrorReturnCode::InvalidMode)?;
+    let server = service::server().ok_or(ErrorReturnCode::NotAvailable)?;
+    // SAFETY: `ipc_address(index)` is the static IPC buffer registered for this thread
+    // (IPC_BUFFER_SIZE bytes, 8-aligned, writable) and nothing takes references to it.
+    let ipc = unsafe { IpcBufferRef::new(ipc_address(index)) };
+    let reply = service::request(server, ipc, label, words, data)
+        .map_err(|_| ErrorReturnCode::NotAvailable)?;
+    Ok((reply, ipc))
+}
+
+/// A request whose reply carries only a code.
+pub fn request_code(label: u32, words: [u64; 3], data: &[u8]) -> Result<Reply, ErrorReturnCode> {
+    let (reply, _) = request(label, words, data)?;
+    codes::from_reply(reply.code)?;
+    Ok(reply)
+}
+
+pub fn partition_status() -> Result<Reply, ErrorReturnCode> {
+    request_code(service::PARTITION_STATUS, [0; 3], &[])
+}
+
+pub fn partition_index() -> u64 {
+    PARTITION_INDEX.load(Ordering::Relaxed)
+}
+
+/// The partition's next release point at or after `now`.
+pub fn release_point(now: u64, partition_period: u64) -> u64 {
+    let tp = TIME_PARTITION.load(Ordering::Relaxed);
+    if tp == 0 {
+        return now;
+    }
+    let window = sys::partition_info(tp).map_or(u64::MAX, |i| i.next_window_start);
+    time::next_release_point(now, window, partition_period)
+}
+
+/// Creates the (inactive) thread of thread index `index` running `entry(index)`.
+pub fn create_thread(
+    index: usize,
+    entry: extern "C" fn(u64) -> !,
+    priority: u8,
+) -> Result<u64, ErrorReturnCode> {
+    let thread = sys::thread_create(
+        None,
+        entry as usize as u64,
+        stack_top(index),
+        priority,
+        index as u64,
+    )
+    .map_err(|_| ErrorReturnCode::InvalidConfig)?;
+    if sys::thread_set(Some(thread), ThreadAttribute::IpcBuffer, ipc_address(index)).is_err() {
+        let _ = sys::thread_kill(thread);
+        return Err(ErrorReturnCode::InvalidConfig);
+    }
+    THREAD_IDS[index].store(thread.0, Ordering::Relaxed);
+    Ok(thread.0)
+}
+
+pub fn forget_thread(index: usize) {
+    THREAD_IDS[index].store(0, Ordering::Relaxed);
+}
+
+/// Wakes the watchdog if `table`'s earliest deadline is before the time it sleeps until.
+pub fn poke_watchdog(table: &mut Table) {
+    if let (Some(deadline), Some(watchdog)) = (table.earliest_deadline(), table.watchdog_thread)
+        && deadline < table.watchdog_armed
+    {
+        table.watchdog_armed = deadline;
+        let _ = sys::notify_signal(ThreadId(watchdog), WAKE_BIT);
+    }
+}
+
+/// Starts the watchdog thread if the table needs one and it does not run yet.
+pub fn ensure_watchdog(table: &mut Table) -> Result<(), ErrorReturnCode> {
+    if table.watchdog_thread.is_some() || !table.needs_watchdog() {
+        return Ok(());
+    }
+    let thread = create_thread(WATCHDOG, watchdog_main, table.mcp)?;
+    table.watchdog_thread = Some(thread);
+    let _ = sys::thread_start(ThreadId(thread));
+    Ok(())
+}
+
+/// The body of every process thread: wait for the release point, run the entry point,
+/// and become dormant when it returns (as STOP_SELF).
+extern "C" fn process_main(slot: u64) -> ! {
+    let slot = slot as usize;
+    let (entry, release) = {
+        let mut critical = Critical::enter();
+        let process = critical.table().get(slot).expect("a started process");
+        (process.attributes.entry_point, process.release)
+    };
+    sys::sleep_until(release);
+    Critical::enter().table().released(slot);
+    entry();
+    stop_self()
+}
+
+/// Creates, registers and starts the thread of process `slot`, released at `release`.
+pub fn launch(table: &mut Table, slot: usize, release: u64) -> Result<(), ErrorReturnCode> {
+    let priority = if slot == ERROR_HANDLER_SLOT {
+        table.mcp
+    } else {
+        table
+            .get(slot)
+            .map_or(1, |p| p.attributes.base_priority as u8)
+    };
+    let thread = create_thread(slot, process_main, priority)?;
+    if slot == ERROR_HANDLER_SLOT {
+        table.activate_error_handler(release, thread)?;
+    } else {
+        table.activate(slot, release, thread)?;
+    }
+    let _ = sys::thread_start(ThreadId(thread));
+    poke_watchdog(table);
+    Ok(())
+}
+
+/// Creates the inactive thread of a process STARTed during initialisation.
+pub fn prepare(table: &mut Table, slot: usize, delay: u64) -> Result<(), ErrorReturnCode> {
+    let priority = table
+        .get(slot)
+        .map_or(1, |p| p.attributes.base_priority as u8);
+    let thread = create_thread(slot, process_main, priority)?;
+    table.make_pending(slot, delay, thread)
+}
+
+/// NORMAL mode was granted: releases the processes STARTed during initialisation and
+/// starts the watchdog. The caller then ends the initialisation thread.
+pub fn begin_normal(table: &mut Table) {
+    let now = sys::clock();
+    let point = release_point(now, table.partition_period);
+    let released = table.begin_normal(now, point);
+    if ensure_watchdog(table).is_err() {
+        user_rt::println!("apex: no thread for the deadline watchdog; deadlines unchecked");
+    }
+    for slot in 0..SLOTS {
+        if released & (1 << slot) != 0
+            && let Some(thread) = table.get(slot).and_then(|p| p.thread)
+        {
+            let _ = sys::thread_start(ThreadId(thread));
+        }
+    }
+    poke_watchdog(table);
+}
+
+/// STOP_SELF of the calling thread (any thread: a non-process just ends).
+pub fn stop_self() -> ! {
+    let slot = own_slot();
+    let mut critical = Critical::enter();
+    if let Some(slot) = slot {
+        let _ = critical.table().stop(slot);
+        forget_thread(slot);
+    }
+    critical.exit()
+}
+
+/// Sends an error where it belongs: the error handler (started if dormant) or syssw's
+/// health monitor (REPORT_ERROR with `text` as detail).
+pub fn raise(code: ErrorCode, process: Option<usize>, text: &[u8]) -> Result<(), ErrorReturnCode> {
+    let id: ProcessId = process.map_or(0, table::id_of);
+    let error = PendingError::new(code, id, text);
+    let delivery = {
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let mut delivery = table.push_error(error, process);
+        if delivery == Delivery::StartHandler
+            && launch(table, ERROR_HANDLER_SLOT, sys::clock()).is_err()
+        {
+            // Without its thread the handler cannot take the error: drop it from the
+            // queue by handing it to the health monitor as well.
+            delivery = Delivery::Monitor;
+        }
+        delivery
+    };
+    if delivery == Delivery::Monitor {
+        request_code(service::REPORT_ERROR, [code as u64, 0, 0], error.text())?;
+    }
+    Ok(())
+}
+
+/// The deadline watchdog: sleeps until the earliest pending deadline; a process that has
+/// not reached its next PERIODIC_WAIT (or REPLENISHed) by then missed it.
+extern "C" fn watchdog_main(_: u64) -> ! {
+    let mut text = [0u8; 64];
+    loop {
+        let (missed, sleep_until) = {
+            let mut critical = Critical::enter();
+            let table = critical.table();
+            let now = sys::clock();
+            let missed = table.take_missed(now).map(|slot| {
+                let name = table
+                    .get(slot)
+                    .map_or(&[][..], |p| codes::name_bytes(&p.attributes.name));
+                (slot, deadline_text(&mut text, name))
+            });
+            let earliest = table.earliest_deadline().unwrap_or(u64::MAX);
+            table.watchdog_armed = earliest;
+            (missed, earliest)
+        };
+        if let Some((slot, length)) = missed {
+            let _ = raise(ErrorCode::DeadlineMissed, Some(slot), &text[..length]);
+            continue;
+        }
+        let timeout = match sleep_until {
+            u64::MAX => time::PROTOCOL_FOREVER,
+            at => at.saturating_sub(sys::clock()),
+        };
+        let _ = sys::notify_wait(WAKE_BIT, timeout);
+    }
+}
+
+/// `process NAME deadline` into `out`; its length.
+fn deadline_text(out: &mut [u8; 64], name: &[u8]) -> usize {
+    let mut length = 0;
+    for part in [&b"process "[..], name, b" deadline"] {
+        let n = part.len().min(out.len() - length);
+        out[length..length + n].copy_from_slice(&part[..n]);
+        length += n;
+    }
+    length
+}

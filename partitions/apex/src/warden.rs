@@ -1,0 +1,610 @@
+//! [`Warden`]: the a653rs APEX traits implemented on the Warden kernel and syssw.
+
+use crate::codes::{self, id_word, name_bytes};
+use crate::runtime::{self, Critical, WAKE_BIT, own_index, own_slot, request, request_code};
+use crate::table::{self, ERROR_HANDLER_SLOT, MAX_PROCESSES, Wait};
+use crate::time::{self, finite, protocol_timeout};
+use a653rs::bindings::*;
+use user_rt::abi::ipc::IPC_DATA_MAX;
+use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
+use user_rt::service;
+use user_rt::sys;
+
+/// The APEX implementation partition programs name as a653rs's hypervisor type
+/// (`impl Partition<Warden> for MyPartition`, `Process<Warden>`, ...).
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Warden;
+
+type Result<T> = core::result::Result<T, ErrorReturnCode>;
+
+impl ApexLimits for Warden {
+    const SYSTEM_LIMIT_NUMBER_OF_PROCESSES: ApexUnsigned = MAX_PROCESSES as ApexUnsigned;
+    const SYSTEM_LIMIT_MESSAGE_SIZE: MessageSize = IPC_DATA_MAX as MessageSize;
+    const SYSTEM_LIMIT_NUMBER_OF_MESSAGES: MessageRange = 256;
+}
+
+// ---------------------------------------------------------------- partition (3.2.2)
+
+impl ApexPartitionP4 for Warden {
+    fn get_partition_status() -> ApexPartitionStatus {
+        // ARINC: never fails. Should syssw not answer, the runtime's own view is reported.
+        let (mode, start_condition, identifier, period, duration) =
+            match runtime::partition_status() {
+                Ok(reply) => (
+                    (reply.words[0] & 0xff) as u32,
+                    ((reply.words[0] >> 8) & 0xff) as u32,
+                    (reply.words[0] >> 16) as i64,
+                    reply.words[1] as i64,
+                    reply.words[2] as i64,
+                ),
+                Err(_) => {
+                    let normal = Critical::enter().table().normal;
+                    let mode = if normal { 3 } else { 1 };
+                    (mode, 0, runtime::partition_index() as i64, 0, 0)
+                }
+            };
+        ApexPartitionStatus {
+            period,
+            duration,
+            identifier,
+            lock_level: 0,
+            operating_mode: OperatingMode::try_from(mode).unwrap_or(OperatingMode::Idle),
+            start_condition: StartCondition::try_from(start_condition)
+                .unwrap_or(StartCondition::NormalStart),
+            num_assigned_cores: 1,
+        }
+    }
+
+    fn set_partition_mode(operating_mode: OperatingMode) -> Result<()> {
+        // IDLE and restarts get no reply when syssw carries them out: this thread is gone.
+        request_code(
+            service::SET_PARTITION_MODE,
+            [operating_mode as u64, 0, 0],
+            &[],
+        )?;
+        if operating_mode != OperatingMode::Normal {
+            return Ok(());
+        }
+        let main = own_index() == Some(runtime::MAIN);
+        let mut critical = Critical::enter();
+        runtime::begin_normal(critical.table());
+        if main {
+            // ARINC: initialisation ends with the switch to NORMAL.
+            critical.exit()
+        }
+        Ok(())
+    }
+}
+
+// ---------------------------------------------------------------- processes (3.3.2)
+
+impl ApexProcessP4 for Warden {
+    fn create_process(attributes: &ApexProcessAttribute) -> Result<ProcessId> {
+        Critical::enter().table().create(attributes)
+    }
+
+    fn start(process_id: ProcessId) -> Result<()> {
+        Self::delayed_start(process_id, 0)
+    }
+}
+
+impl ApexProcessP1 for Warden {
+    fn set_priority(process_id: ProcessId, priority: Priority) -> Result<()> {
+        let caller = own_slot();
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let slot = table.slot(process_id)?;
+        // The caller's own new priority takes effect when it leaves the critical section
+        // (lowering it inside would let others preempt the lock holder).
+        if let Some(thread) = table.set_priority(slot, priority)?
+            && Some(slot) != caller
+        {
+            let _ = sys::thread_set(
+                Some(ThreadId(thread)),
+                ThreadAttribute::Priority,
+                priority as u64,
+            );
+        }
+        Ok(())
+    }
+
+    fn suspend_self(time_out: ApexSystemTime) -> Result<()> {
+        let slot = own_slot().ok_or(ErrorReturnCode::InvalidMode)?;
+        if !Critical::enter().table().suspend_self(slot, time_out)? {
+            return Ok(());
+        }
+        let woken = sys::notify_wait(WAKE_BIT, protocol_timeout(time_out)).is_ok();
+        let (result, stale_wake) = Critical::enter().table().suspend_self_end(slot, woken);
+        if stale_wake {
+            let _ = sys::notify_wait(WAKE_BIT, 0);
+        }
+        result
+    }
+
+    fn suspend(process_id: ProcessId) -> Result<()> {
+        let caller = own_slot();
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let slot = table.slot(process_id)?;
+        let thread = table.suspend(slot, caller)?;
+        let _ = sys::thread_suspend(ThreadId(thread));
+        Ok(())
+    }
+
+    fn resume(process_id: ProcessId) -> Result<()> {
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let slot = table.slot(process_id)?;
+        let resume = table.resume(slot)?;
+        if resume.kernel_resume {
+            let _ = sys::thread_resume(ThreadId(resume.thread));
+        }
+        if resume.notify {
+            let _ = sys::notify_signal(ThreadId(resume.thread), WAKE_BIT);
+        }
+        Ok(())
+    }
+
+    fn stop_self() {
+        runtime::stop_self()
+    }
+
+    fn stop(process_id: ProcessId) -> Result<()> {
+        let caller = own_slot();
+        let mut critical = Critical::enter();
+        let slot = critical.table().slot(process_id)?;
+        if Some(slot) == caller {
+            drop(critical);
+            runtime::stop_self()
+        }
+        if let Some(thread) = critical.table().stop(slot)? {
+            let _ = sys::thread_kill(ThreadId(thread));
+        }
+        runtime::forget_thread(slot);
+        Ok(())
+    }
+
+    fn delayed_start(process_id: ProcessId, delay_time: ApexSystemTime) -> Result<()> {
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let slot = table.check_start(process_id, delay_time)?;
+        let delay = finite(delay_time).unwrap_or(0);
+        if !table.normal {
+            return runtime::prepare(table, slot, delay);
+        }
+        let now = sys::clock();
+        let periodic = table.get(slot).is_some_and(|p| p.periodic().is_some());
+        let point = if periodic {
+            runtime::release_point(now, table.partition_period)
+        } else {
+            now
+        };
+        let release = time::first_release(periodic, now, point, delay);
+        runtime::ensure_watchdog(table)?;
+        runtime::launch(table, slot, release)
+    }
+
+    /// Not supported: preemption locking would need a partition-wide scheduler lock the
+    /// kernel does not offer (processes are plain threads with fixed priorities).
+    fn lock_preemption() -> Result<LockLevel> {
+        Err(ErrorReturnCode::NotAvailable)
+    }
+
+    /// Not supported (see `lock_preemption`).
+    fn unlock_preemption() -> Result<LockLevel> {
+        Err(ErrorReturnCode::NotAvailable)
+    }
+
+    /// INVALID_MODE for the initialisation thread and the watchdog (they are no processes).
+    fn get_my_id() -> Result<ProcessId> {
+        own_slot()
+            .map(table::id_of)
+            .ok_or(ErrorReturnCode::InvalidMode)
+    }
+
+    fn get_process_id(process_name: ProcessName) -> Result<ProcessId> {
+        Critical::enter().table().find(name_bytes(&process_name))
+    }
+
+    fn get_process_status(process_id: ProcessId) -> Result<ApexProcessStatus> {
+        let caller = own_slot();
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let slot = table.slot(process_id)?;
+        table.status(slot, caller)
+    }
+
+    /// One core: only "no preference" and core 0 are valid, during initialisation.
+    fn initialize_process_core_affinity(
+        process_id: ProcessId,
+        processor_core_id: ProcessorCoreId,
+    ) -> Result<()> {
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        table.slot(process_id)?;
+        if table.normal {
+            return Err(ErrorReturnCode::InvalidMode);
+        }
+        if processor_core_id != CORE_AFFINITY_NO_PREFERENCE && processor_core_id != 0 {
+            return Err(ErrorReturnCode::InvalidConfig);
+        }
+        Ok(())
+    }
+
+    fn get_my_processor_core_id() -> ProcessorCoreId {
+        0
+    }
+
+    fn get_my_index() -> Result<ProcessIndex> {
+        own_slot()
+            .map(|slot| slot as ProcessIndex)
+            .ok_or(ErrorReturnCode::InvalidMode)
+    }
+}
+
+// ---------------------------------------------------------------- time (3.4.2)
+
+impl ApexTimeP4 for Warden {
+    fn periodic_wait() -> Result<()> {
+        let slot = own_slot().ok_or(ErrorReturnCode::InvalidMode)?;
+        let release = {
+            let mut critical = Critical::enter();
+            let table = critical.table();
+            let release = table.periodic_wait(slot)?;
+            runtime::poke_watchdog(table);
+            release
+        };
+        sys::sleep_until(release);
+        Critical::enter().table().released(slot);
+        Ok(())
+    }
+
+    fn get_time() -> ApexSystemTime {
+        i64::try_from(sys::clock()).unwrap_or(i64::MAX)
+    }
+}
+
+impl ApexTimeP1 for Warden {
+    fn timed_wait(delay_time: ApexSystemTime) -> Result<()> {
+        let delay = finite(delay_time).ok_or(ErrorReturnCode::InvalidParam)?;
+        let slot = own_slot();
+        if slot == Some(ERROR_HANDLER_SLOT) {
+            return Err(ErrorReturnCode::InvalidMode);
+        }
+        if delay == 0 {
+            // ARINC: a zero delay moves the caller behind its equal-priority peers.
+            sys::yield_now();
+            return Ok(());
+        }
+        let until = sys::clock().saturating_add(delay);
+        with_wait(slot, Wait::Delay, || sys::sleep_until(until));
+        Ok(())
+    }
+
+    fn replenish(budget_time: ApexSystemTime) -> Result<()> {
+        let slot = own_slot().ok_or(ErrorReturnCode::NoAction)?;
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        table.replenish(slot, budget_time, sys::clock())?;
+        runtime::poke_watchdog(table);
+        Ok(())
+    }
+}
+
+/// Runs `wait` with the calling process marked as waiting (ARINC state WAITING).
+fn with_wait<R>(slot: Option<usize>, wait: Wait, f: impl FnOnce() -> R) -> R {
+    if let Some(slot) = slot {
+        Critical::enter().table().set_wait(slot, wait);
+    }
+    let result = f();
+    if let Some(slot) = slot {
+        Critical::enter().table().set_wait(slot, Wait::None);
+    }
+    result
+}
+
+// ---------------------------------------------------------------- ports (3.6.2)
+
+fn direction_word(direction: PortDirection) -> u64 {
+    match direction {
+        PortDirection::Source => service::DIRECTION_SOURCE,
+        PortDirection::Destination => service::DIRECTION_DESTINATION,
+    }
+}
+
+fn direction_of(word: u64) -> Result<PortDirection> {
+    PortDirection::try_from(word as u32).map_err(|_| ErrorReturnCode::NotAvailable)
+}
+
+/// A message the IPC buffer can carry (longer ones exceed every port: INVALID_CONFIG).
+fn check_message(message: &[ApexByte]) -> Result<()> {
+    if message.len() > IPC_DATA_MAX {
+        return Err(ErrorReturnCode::InvalidConfig);
+    }
+    Ok(())
+}
+
+impl ApexSamplingPortP4 for Warden {
+    fn create_sampling_port(
+        sampling_port_name: SamplingPortName,
+        max_message_size: MessageSize,
+        port_direction: PortDirection,
+        refresh_period: ApexSystemTime,
+    ) -> Result<SamplingPortId> {
+        // A source has no refresh period (a653rs passes a dummy one): the protocol's 0.
+        let refresh = match port_direction {
+            PortDirection::Source => 0,
+            PortDirection::Destination => {
+                finite(refresh_period).ok_or(ErrorReturnCode::InvalidConfig)?
+            }
+        };
+        let reply = request_code(
+            service::CREATE_PORT,
+            [
+                service::KIND_SAMPLING | direction_word(port_direction) << 8,
+                u64::from(max_message_size),
+                refresh,
+            ],
+            name_bytes(&sampling_port_name),
+        )?;
+        Ok(reply.words[0] as SamplingPortId)
+    }
+
+    fn write_sampling_message(
+        sampling_port_id: SamplingPortId,
+        message: &[ApexByte],
+    ) -> Result<()> {
+        check_message(message)?;
+        request_code(
+            service::WRITE_SAMPLING,
+            [id_word(sampling_port_id)?, 0, 0],
+            message,
+        )?;
+        Ok(())
+    }
+
+    /// # Safety
+    /// None beyond a653rs's contract: at most `message.len()` bytes are written; a longer
+    /// message is refused with INVALID_PARAM.
+    unsafe fn read_sampling_message(
+        sampling_port_id: SamplingPortId,
+        message: &mut [ApexByte],
+    ) -> Result<(Validity, MessageSize)> {
+        let (reply, ipc) = request(
+            service::READ_SAMPLING,
+            [id_word(sampling_port_id)?, 0, 0],
+            &[],
+        )?;
+        codes::from_reply(reply.code)?;
+        let length = reply.words[0] as usize;
+        if length > message.len() || length > IPC_DATA_MAX {
+            return Err(ErrorReturnCode::InvalidParam);
+        }
+        ipc.read_data(0, &mut message[..length]);
+        let validity = if reply.words[1] == 1 {
+            Validity::Valid
+        } else {
+            Validity::Invalid
+        };
+        Ok((validity, length as MessageSize))
+    }
+}
+
+impl ApexSamplingPortP1 for Warden {
+    fn get_sampling_port_id(sampling_port_name: SamplingPortName) -> Result<SamplingPortId> {
+        let reply = request_code(
+            service::PORT_ID,
+            [service::KIND_SAMPLING, 0, 0],
+            name_bytes(&sampling_port_name),
+        )?;
+        Ok(reply.words[0] as SamplingPortId)
+    }
+
+    fn get_sampling_port_status(
+        sampling_port_id: SamplingPortId,
+    ) -> Result<ApexSamplingPortStatus> {
+        let reply = request_code(
+            service::SAMPLING_STATUS,
+            [id_word(sampling_port_id)?, 0, 0],
+            &[],
+        )?;
+        let [size_direction, refresh, validity] = reply.words;
+        Ok(ApexSamplingPortStatus {
+            refresh_period: i64::try_from(refresh).unwrap_or(INFINITE_TIME_VALUE),
+            max_message_size: size_direction as u32,
+            port_direction: direction_of(size_direction >> 32)?,
+            last_msg_validity: if validity == 1 {
+                Validity::Valid
+            } else {
+                Validity::Invalid
+            },
+        })
+    }
+}
+
+/// Queuing-port calls that may block: not from the error handler (ARINC), and the caller
+/// shows as WAITING meanwhile.
+fn blocking_port_call<R>(time_out: ApexSystemTime, f: impl FnOnce() -> R) -> Result<R> {
+    let slot = own_slot();
+    if time_out == 0 {
+        return Ok(f());
+    }
+    if slot == Some(ERROR_HANDLER_SLOT) {
+        return Err(ErrorReturnCode::InvalidMode);
+    }
+    Ok(with_wait(slot, Wait::Port, f))
+}
+
+impl ApexQueuingPortP4 for Warden {
+    /// syssw queues waiting processes FIFO only (the configuration has no discipline), so
+    /// PRIORITY is refused with INVALID_CONFIG rather than silently served FIFO.
+    fn create_queuing_port(
+        queuing_port_name: QueuingPortName,
+        max_message_size: MessageSize,
+        max_nb_message: MessageRange,
+        port_direction: PortDirection,
+        queuing_discipline: QueuingDiscipline,
+    ) -> Result<QueuingPortId> {
+        if queuing_discipline != QueuingDiscipline::Fifo {
+            return Err(ErrorReturnCode::InvalidConfig);
+        }
+        let reply = request_code(
+            service::CREATE_PORT,
+            [
+                service::KIND_QUEUING | direction_word(port_direction) << 8,
+                u64::from(max_message_size),
+                u64::from(max_nb_message),
+            ],
+            name_bytes(&queuing_port_name),
+        )?;
+        Ok(reply.words[0] as QueuingPortId)
+    }
+
+    fn send_queuing_message(
+        queuing_port_id: QueuingPortId,
+        message: &[ApexByte],
+        time_out: ApexSystemTime,
+    ) -> Result<()> {
+        check_message(message)?;
+        let id = id_word(queuing_port_id)?;
+        blocking_port_call(time_out, || {
+            request_code(
+                service::SEND_QUEUING,
+                [id, protocol_timeout(time_out), 0],
+                message,
+            )
+        })??;
+        Ok(())
+    }
+
+    /// # Safety
+    /// None beyond a653rs's contract: at most `message.len()` bytes are written. A message
+    /// longer than the buffer is refused with INVALID_PARAM (it has left the queue then).
+    /// syssw does not report sender-side overflow, so `QueueOverflow` is always `false`.
+    unsafe fn receive_queuing_message(
+        queuing_port_id: QueuingPortId,
+        time_out: ApexSystemTime,
+        message: &mut [ApexByte],
+    ) -> Result<(MessageSize, QueueOverflow)> {
+        let id = id_word(queuing_port_id)?;
+        let (reply, ipc) = blocking_port_call(time_out, || {
+            request(
+                service::RECEIVE_QUEUING,
+                [id, protocol_timeout(time_out), 0],
+                &[],
+            )
+        })??;
+        codes::from_reply(reply.code)?;
+        let length = reply.words[0] as usize;
+        if length > message.len() || length > IPC_DATA_MAX {
+            return Err(ErrorReturnCode::InvalidParam);
+        }
+        ipc.read_data(0, &mut message[..length]);
+        Ok((length as MessageSize, false))
+    }
+
+    fn get_queuing_port_status(queuing_port_id: QueuingPortId) -> Result<QueuingPortStatus> {
+        let reply = request_code(
+            service::QUEUING_STATUS,
+            [id_word(queuing_port_id)?, 0, 0],
+            &[],
+        )?;
+        let [messages, size_direction, waiting] = reply.words;
+        Ok(QueuingPortStatus {
+            nb_message: messages as u32,
+            max_nb_message: (messages >> 32) as u32,
+            max_message_size: size_direction as u32,
+            port_direction: direction_of(size_direction >> 32)?,
+            waiting_processes: i32::try_from(waiting).unwrap_or(i32::MAX),
+        })
+    }
+
+    fn clear_queuing_port(queuing_port_id: QueuingPortId) -> Result<()> {
+        request_code(
+            service::CLEAR_QUEUING,
+            [id_word(queuing_port_id)?, 0, 0],
+            &[],
+        )?;
+        Ok(())
+    }
+}
+
+impl ApexQueuingPortP1 for Warden {
+    fn get_queuing_port_id(queuing_port_name: QueuingPortName) -> Result<QueuingPortId> {
+        let reply = request_code(
+            service::PORT_ID,
+            [service::KIND_QUEUING, 0, 0],
+            name_bytes(&queuing_port_name),
+        )?;
+        Ok(reply.words[0] as QueuingPortId)
+    }
+}
+
+// ---------------------------------------------------------------- health monitoring (3.8.2)
+
+impl ApexErrorP4 for Warden {
+    fn report_application_message(message: &[ApexByte]) -> Result<()> {
+        if message.len() > MAX_ERROR_MESSAGE_SIZE {
+            return Err(ErrorReturnCode::InvalidParam);
+        }
+        request_code(service::APPLICATION_MESSAGE, [0; 3], message)?;
+        Ok(())
+    }
+
+    fn raise_application_error(error_code: ErrorCode, message: &[ApexByte]) -> Result<()> {
+        if error_code != ErrorCode::ApplicationError || message.len() > MAX_ERROR_MESSAGE_SIZE {
+            return Err(ErrorReturnCode::InvalidParam);
+        }
+        runtime::raise(error_code, own_slot(), message)
+    }
+}
+
+/// The address GET_ERROR_STATUS names for an error outside any process entry point.
+extern "C" fn no_process() {}
+
+impl ApexErrorP1 for Warden {
+    fn create_error_handler(entry_point: SystemAddress, stack_size: StackSize) -> Result<()> {
+        Critical::enter()
+            .table()
+            .create_error_handler(entry_point, stack_size)
+    }
+
+    fn get_error_status() -> Result<ErrorStatus> {
+        let caller = own_slot();
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        let error = table.pop_error(caller)?;
+        let failed_address = table::slot_of(error.process)
+            .and_then(|slot| table.get(slot))
+            .map_or(no_process as SystemAddress, |p| p.attributes.entry_point);
+        Ok(ErrorStatus {
+            failed_address,
+            failed_process_id: error.process,
+            error_code: error.code,
+            length: error.length as ErrorMessageSize,
+            message: error.message,
+        })
+    }
+
+    /// Only PROCESSES_SCHEDULED on core 0 (or no preference): the error handler is a
+    /// thread at the top priority of the partition, other processes are not paused.
+    fn configure_error_handler(
+        concurrency_control: ErrorHandlerConcurrencyControl,
+        processor_core_id: ProcessorCoreId,
+    ) -> Result<()> {
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        if !table.has_error_handler() {
+            return Err(ErrorReturnCode::InvalidConfig);
+        }
+        if table.normal {
+            return Err(ErrorReturnCode::InvalidMode);
+        }
+        if concurrency_control != ErrorHandlerConcurrencyControl::ProcessesScheduled
+            || (processor_core_id != CORE_AFFINITY_NO_PREFERENCE && processor_core_id != 0)
+        {
+            return Err(ErrorReturnCode::InvalidConfig);
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,332 @@
+//! Partition programs for the APEX scenarios, written against the `a653rs` traits only
+//! (through `apex::Warden`, as a partition of DLR's a653rs ecosystem would be). What a
+//! partition does depends on its name:
+//!
+//! * `sender` / `receiver` (scenario `apex_ports`): sampling and queuing messages across
+//!   their windows: validity flips after the refresh period, a full queue refuses
+//!   (NOT_AVAILABLE) or times out, an empty one times out, a blocking receive waits across
+//!   windows; the receiver ends the run with an application error the configuration maps
+//!   to `shutdown_success`;
+//! * `victim` / `intruder` / `restarter` / `overrun` (scenario `apex_health`): the intruder
+//!   writes the victim's shared memory it may only read (MEMORY_VIOLATION) while the victim
+//!   keeps its windows; the restarter shows what a warm and a cold restart keep; a periodic
+//!   process overruns its time capacity (DEADLINE_MISSED); the victim finally raises an
+//!   error configured as `shutdown` (failure exit);
+//! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw.
+//!
+//! Every line it prints starts with the partition's name (an interface for the scenario
+//! tests).
+#![no_std]
+#![no_main]
+#![forbid(unsafe_op_in_unsafe_fn)]
+#![deny(unsafe_code)]
+
+mod bench;
+
+use apex::Warden;
+use apex::a653rs::prelude::*;
+use apex::user_rt::partition::SHARED_BASE;
+use apex::user_rt::println;
+use core::str::FromStr;
+use core::sync::atomic::{AtomicU32, Ordering};
+use core::time::Duration;
+
+/// The major frame of the apex_health system: the period of its periodic processes.
+const FRAME: Duration = Duration::from_millis(20);
+/// The major frame of the apex_ports system.
+const PORTS_FRAME: Duration = Duration::from_millis(100);
+
+fn name(text: &str) -> Name {
+    Name::from_str(text).expect("names here are short")
+}
+
+fn time() -> Duration {
+    <Warden as ApexTimeP4Ext>::get_time().unwrap_duration()
+}
+
+fn periodic_wait() {
+    <Warden as ApexTimeP4Ext>::periodic_wait().expect("PERIODIC_WAIT of a periodic process");
+}
+
+fn raise(text: &[u8]) {
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text);
+}
+
+/// Spins until `GET_TIME` reaches `until` (CPU work that takes wall time).
+fn spin_until(until: Duration) {
+    while time() < until {
+        core::hint::spin_loop();
+    }
+}
+
+/// Creates and starts a process (`period` None = aperiodic).
+fn process(
+    ctx: &mut StartContext<Warden>,
+    process_name: &str,
+    entry: extern "C" fn(),
+    period: Option<Duration>,
+    capacity: Option<Duration>,
+) {
+    let attributes = ProcessAttribute {
+        period: period.map_or(SystemTime::Infinite, SystemTime::Normal),
+        time_capacity: capacity.map_or(SystemTime::Infinite, SystemTime::Normal),
+        entry_point: entry,
+        stack_size: 16 * 1024,
+        base_priority: 10,
+        deadline: Deadline::Soft,
+        name: name(process_name),
+    };
+    let p = ctx
+        .create_process(attributes)
+        .unwrap_or_else(|e| panic!("CREATE_PROCESS {process_name}: {e:?}"));
+    p.start()
+        .unwrap_or_else(|e| panic!("START {process_name}: {e:?}"));
+}
+
+struct Test;
+
+impl Partition<Warden> for Test {
+    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+        let info = apex::runtime::start_info();
+        match info.name() {
+            "sender" => {
+                ctx.create_sampling_port_source(name("level"), 16)
+                    .expect("CREATE_SAMPLING_PORT level");
+                ctx.create_queuing_port_sender(name("cmd"), 32, 2, QueuingDiscipline::Fifo)
+                    .expect("CREATE_QUEUING_PORT cmd");
+                // A port the configuration does not have is refused.
+                let unknown = ctx.create_sampling_port_source(name("nonesuch"), 16);
+                println!("sender: unknown port: {:?}", unknown.err());
+                process(ctx, "produce", produce, Some(PORTS_FRAME), None);
+            }
+            "receiver" => {
+                ctx.create_sampling_port_destination(name("level"), 16, Duration::from_millis(125))
+                    .expect("CREATE_SAMPLING_PORT level");
+                ctx.create_queuing_port_receiver(name("cmd"), 32, 4, QueuingDiscipline::Fifo)
+                    .expect("CREATE_QUEUING_PORT cmd");
+                process(ctx, "consume", consume, Some(PORTS_FRAME), None);
+            }
+            "victim" => process(ctx, "count", count, Some(FRAME), None),
+            "intruder" => process(ctx, "poke", poke, Some(FRAME), None),
+            "overrun" => process(
+                ctx,
+                "work",
+                work,
+                Some(FRAME),
+                Some(Duration::from_millis(2)),
+            ),
+            "restarter" => restarter(ctx),
+            "bench-q" => bench::create(ctx),
+            other => println!("{other}: no role for this partition name"),
+        }
+    }
+
+    fn warm_start(&self, ctx: &mut StartContext<Warden>) {
+        match apex::runtime::start_info().name() {
+            "restarter" => restarter(ctx),
+            _ => self.cold_start(ctx),
+        }
+    }
+}
+
+fn main() {
+    Test.run()
+}
+
+apex::partition_entry!(main);
+
+// ---- apex_ports ----
+
+/// Frame number (1 = the first) of a periodic process of `period` that counts from `first`
+/// (rounded: a job may start a little after its release point, the next one on time).
+fn frame_of(first: Duration, period: Duration) -> u32 {
+    let elapsed = time().saturating_sub(first).as_micros();
+    let period = period.as_micros();
+    ((elapsed + period / 2) / period) as u32 + 1
+}
+
+extern "C" fn produce() {
+    let level = SamplingPortSource::<Warden>::from_name(name("level")).expect("level");
+    let cmd = QueuingPortSender::<Warden>::from_name(name("cmd")).expect("cmd");
+    let first = time();
+    loop {
+        let frame = frame_of(first, PORTS_FRAME);
+        if frame <= 3 {
+            level
+                .send(&frame.to_le_bytes())
+                .expect("WRITE_SAMPLING_MESSAGE");
+        }
+        if frame == 1 {
+            // Fill the channel (2 in the source port + 4 in the destination) without waiting.
+            let mut sent = 0u8;
+            let refused = loop {
+                match cmd.send(&[sent], SystemTime::Normal(Duration::ZERO)) {
+                    Ok(()) => sent += 1,
+                    Err(e) => break e,
+                }
+            };
+            println!("sender: queued {sent} messages, then {refused:?}");
+            let waited = cmd.send(&[99], SystemTime::Normal(Duration::from_millis(1)));
+            println!("sender: send with 1 ms time-out: {:?}", waited.err());
+        }
+        if frame == 5 {
+            cmd.send(&[100], SystemTime::Normal(Duration::ZERO))
+                .expect("SEND_QUEUING_MESSAGE to a waiting receiver");
+        }
+        periodic_wait();
+    }
+}
+
+extern "C" fn consume() {
+    let level = SamplingPortDestination::<Warden>::from_name(name("level")).expect("level");
+    let cmd = QueuingPortReceiver::<Warden>::from_name(name("cmd")).expect("cmd");
+    let mut buf = [0u8; 32];
+    // Frames count from the first sampling message (the receiver may start a frame before
+    // the sender has written anything).
+    let first = loop {
+        match level.receive(&mut buf) {
+            Ok(_) => break time(),
+            Err(e) => println!("receiver: no message yet: {e:?}"),
+        }
+        periodic_wait();
+    };
+    loop {
+        let frame = frame_of(first, PORTS_FRAME);
+        match level.receive(&mut buf) {
+            Ok((validity, msg)) => {
+                let mut word = [0u8; 4];
+                word.copy_from_slice(&msg[..4]);
+                println!(
+                    "receiver: frame {frame} level {} {validity:?}",
+                    u32::from_le_bytes(word)
+                );
+            }
+            Err(e) => println!("receiver: frame {frame} level {e:?}"),
+        }
+        if frame == 1 {
+            let mut got = [0u8; 8];
+            let mut n = 0;
+            let end = loop {
+                match cmd.receive(&mut buf, SystemTime::Normal(Duration::ZERO)) {
+                    Ok((msg, _)) if n < got.len() => {
+                        got[n] = msg[0];
+                        n += 1;
+                    }
+                    Ok(_) => break Error::InvalidConfig,
+                    Err(e) => break e,
+                }
+            };
+            let waited = cmd.receive(&mut buf, SystemTime::Normal(Duration::from_millis(2)));
+            println!("receiver: frame 1 got {:?}, then {end:?}", &got[..n]);
+            println!("receiver: receive with 2 ms time-out: {:?}", waited.err());
+        }
+        if frame == 4 {
+            // Nothing is queued; the sender sends in its next window, 50 ms from now.
+            let start = time();
+            match cmd.receive(&mut buf, SystemTime::Normal(Duration::from_millis(150))) {
+                Ok((msg, _)) => println!(
+                    "receiver: waited across windows for message {} ({} ms)",
+                    msg[0],
+                    (time() - start).as_millis()
+                ),
+                Err(e) => println!("receiver: wait across windows failed: {e:?}"),
+            }
+        }
+        if frame >= 6 {
+            raise(b"ports done");
+        }
+        periodic_wait();
+    }
+}
+
+// ---- apex_health ----
+
+/// The `board` segment: the first (and only) shared segment of the apex_health system.
+const BOARD: u64 = SHARED_BASE;
+
+extern "C" fn count() {
+    let first = time();
+    loop {
+        let frame = frame_of(first, FRAME);
+        #[allow(unsafe_code)]
+        // SAFETY: the configuration maps `board` read-write at SHARED_BASE in this partition.
+        unsafe {
+            core::ptr::write_volatile(BOARD as *mut u32, frame)
+        };
+        if frame.is_multiple_of(10) {
+            println!("victim: frame {frame}");
+        }
+        if frame >= 40 {
+            raise(b"victim done");
+        }
+        periodic_wait();
+    }
+}
+
+extern "C" fn poke() {
+    let first = time();
+    loop {
+        let frame = frame_of(first, FRAME);
+        #[allow(unsafe_code)]
+        // SAFETY: the configuration maps `board` read-only at SHARED_BASE here: reading is
+        // sound; the write below is the fault under test (the kernel stops it).
+        let seen = unsafe { core::ptr::read_volatile(BOARD as *const u32) };
+        println!("intruder: frame {frame} board reads {seen}");
+        if frame == 3 {
+            println!("intruder: writing the victim's board");
+            #[allow(unsafe_code)]
+            // SAFETY: see above: the page is mapped read-only, so this write faults.
+            unsafe {
+                core::ptr::write_volatile(BOARD as *mut u32, 0xdead)
+            };
+            println!("intruder: the write went through");
+        }
+        periodic_wait();
+    }
+}
+
+extern "C" fn work() {
+    let mut job = 0;
+    loop {
+        job += 1;
+        let start = time();
+        // Jobs 20..=22 need 3 ms of their 2 ms capacity, the others 1 ms (the overruns come
+        // after the restarter's restarts, during which syssw serves nobody else).
+        let need = if (20..=22).contains(&job) { 3 } else { 1 };
+        spin_until(start + Duration::from_millis(need));
+        if job == 25 {
+            println!("overrun: job 25 done in time");
+        }
+        periodic_wait();
+    }
+}
+
+/// Starts of the restarter since the image was last loaded: in .bss, so a warm restart
+/// (memory kept) counts on and a cold restart (image reloaded) starts from 0 again.
+static STARTS: AtomicU32 = AtomicU32::new(0);
+
+fn restarter(ctx: &mut StartContext<Warden>) {
+    let starts = STARTS.fetch_add(1, Ordering::Relaxed) + 1;
+    let status = <Test as PartitionExt<Warden>>::get_status();
+    println!(
+        "restarter: start {starts} mode={:?} condition={:?}",
+        status.operating_mode, status.start_condition
+    );
+    match (status.operating_mode, status.start_condition) {
+        (OperatingMode::ColdStart, StartCondition::NormalStart) => {
+            // Fail once NORMAL: the configuration warm-restarts it for that.
+            process(ctx, "fail", fail, None, None);
+        }
+        (OperatingMode::WarmStart, _) => {
+            println!("restarter: asking for a cold start");
+            let refused = <Test as PartitionExt<Warden>>::set_mode(OperatingMode::ColdStart);
+            println!("restarter: SET_PARTITION_MODE(COLD_START) returned {refused:?}");
+        }
+        _ => println!("restarter: settled"),
+    }
+}
+
+extern "C" fn fail() {
+    raise(b"restart me");
+    println!("restarter: still running after the error");
+}
