@@ -373,7 +373,10 @@ fn call_reply_with_data_and_words() {
         (OK, f.id(client), tag, 1, 2, 3)
     );
     let client_task = f.k.task_id(f.k.threads[client].task);
-    assert_eq!(c.rsi, client_task, "the sender's task, for the server to trust");
+    assert_eq!(
+        c.rsi, client_task,
+        "the sender's task, for the server to trust"
+    );
     assert_eq!(f.read(server, sbuf, 12), b"hello server");
     // Reply and wait for the next request.
     f.write(server, sbuf, b"ok");
