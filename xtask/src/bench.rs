@@ -1,4 +1,5 @@
-//! `cargo xtask bench`: boots the kernel benchmark system and runs the host benchmarks,
+//! `cargo xtask bench`: boots the kernel benchmark system and the port benchmark system
+//! (`tests/configs/bench_ports.toml`), runs the host benchmarks,
 //! prints one line per metric and writes `target/bench/report.json`.
 //!
 //! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio> samples=<n>`.

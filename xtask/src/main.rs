@@ -168,9 +168,12 @@ fn cargo_test(args: &[&str]) -> Result<bool> {
 
 fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     tools::ensure_qemu()?;
-    // Host unit tests: the host crates (the workspace's default members), plus the
-    // kernel's pure logic (its library part).
-    let host_ok = scenarios_only || (cargo_test(&[])? & cargo_test(&["-p", "kernel", "--lib"])?);
+    // Host unit tests: the host crates (the workspace's default members), plus the pure
+    // logic of the kernel and of the APEX runtime (their library parts).
+    let host_ok = scenarios_only
+        || (cargo_test(&[])?
+            & cargo_test(&["-p", "kernel", "--lib"])?
+            & cargo_test(&["-p", "apex", "--no-default-features", "--lib"])?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
         return Ok(false);
@@ -229,35 +232,46 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
 
 fn bench() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
-    let mut artifacts = artifacts::build(true, KernelVariant::Production)?;
-    artifacts.syssw = artifacts::build_user_programs(&["bench-kernel".to_string()])?.remove(0);
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let mut kernel_bench = system.clone();
+    kernel_bench.syssw = artifacts::build_user_programs(&["bench-kernel".to_string()])?.remove(0);
     let dir = xtask::target_dir().join("bench");
-    let esp_dir = esp::assemble(
-        &dir.join("esp"),
-        &artifacts,
-        &esp::standard_entries(&artifacts, None)?,
-    )?;
-    eprintln!("xtask: booting the kernel benchmark system");
-    let outcome = qemu::run(
-        &qemu,
-        &RunOptions {
-            esp: esp_dir,
-            timeout: Some(Duration::from_secs(300)),
-            echo: false,
-            work_dir: dir.join("state"),
-        },
-    )?;
-    if !outcome.succeeded() {
-        bail!(
-            "the benchmark system did not finish cleanly\n{}",
-            outcome.transcript()
+    let mut metrics = Vec::new();
+    // The kernel benchmarks run as the root task; the port benchmark is an APEX partition
+    // under the real syssw (`tests/configs/bench_ports.toml`).
+    let ports_config = xtask::workspace_root().join("tests/configs/bench_ports.toml");
+    for (name, artifacts, config) in [
+        ("kernel", &kernel_bench, None),
+        ("ports", &system, Some(ports_config.as_path())),
+    ] {
+        let esp_dir = esp::assemble(
+            &dir.join(name).join("esp"),
+            artifacts,
+            &esp::standard_entries(artifacts, config)?,
+        )?;
+        eprintln!("xtask: booting the {name} benchmark system");
+        let outcome = qemu::run(
+            &qemu,
+            &RunOptions {
+                esp: esp_dir,
+                timeout: Some(Duration::from_secs(300)),
+                echo: false,
+                work_dir: dir.join(name).join("state"),
+            },
+        )?;
+        if !outcome.succeeded() {
+            bail!(
+                "the {name} benchmark system did not finish cleanly\n{}",
+                outcome.transcript()
+            );
+        }
+        metrics.extend(
+            outcome
+                .lines
+                .iter()
+                .filter_map(|l| xtask::bench::parse_line(l)),
         );
     }
-    let mut metrics: Vec<_> = outcome
-        .lines
-        .iter()
-        .filter_map(|l| xtask::bench::parse_line(l))
-        .collect();
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {
