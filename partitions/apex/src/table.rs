@@ -92,6 +92,20 @@ pub struct Process {
 }
 
 impl Process {
+    /// A created process that has not been started.
+    fn dormant(attributes: ApexProcessAttribute, priority: u8) -> Self {
+        Process {
+            attributes,
+            priority,
+            life: Life::Dormant,
+            wait: Wait::None,
+            suspended: false,
+            release: 0,
+            deadline: None,
+            thread: None,
+        }
+    }
+
     pub fn periodic(&self) -> Option<u64> {
         finite(self.attributes.period)
     }
@@ -268,16 +282,7 @@ impl Table {
             attributes.time_capacity,
             self.partition_period,
         )?;
-        self.slots[slot] = Some(Process {
-            attributes: attributes.clone(),
-            priority: priority as u8,
-            life: Life::Dormant,
-            wait: Wait::None,
-            suspended: false,
-            release: 0,
-            deadline: None,
-            thread: None,
-        });
+        self.slots[slot] = Some(Process::dormant(attributes.clone(), priority as u8));
         Ok(id_of(slot))
     }
 
@@ -292,24 +297,16 @@ impl Table {
         if stack as usize > STACK_SIZE {
             return Err(ErrorReturnCode::InvalidConfig);
         }
-        self.slots[ERROR_HANDLER_SLOT] = Some(Process {
-            attributes: ApexProcessAttribute {
-                period: INFINITE_TIME_VALUE,
-                time_capacity: INFINITE_TIME_VALUE,
-                entry_point: entry,
-                stack_size: stack,
-                base_priority: MAX_PRIORITY_VALUE,
-                deadline: Deadline::Soft,
-                name: crate::codes::apex_name(ERROR_HANDLER_NAME),
-            },
-            priority: self.mcp,
-            life: Life::Dormant,
-            wait: Wait::None,
-            suspended: false,
-            release: 0,
-            deadline: None,
-            thread: None,
-        });
+        let attributes = ApexProcessAttribute {
+            period: INFINITE_TIME_VALUE,
+            time_capacity: INFINITE_TIME_VALUE,
+            entry_point: entry,
+            stack_size: stack,
+            base_priority: MAX_PRIORITY_VALUE,
+            deadline: Deadline::Soft,
+            name: crate::codes::apex_name(ERROR_HANDLER_NAME),
+        };
+        self.slots[ERROR_HANDLER_SLOT] = Some(Process::dormant(attributes, self.mcp));
         Ok(())
     }
 
