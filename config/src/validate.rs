@@ -103,6 +103,14 @@ fn in_source_order<T>(map: &Named<T>) -> Vec<(&Spanned<String>, &Spanned<T>)> {
     entries
 }
 
+/// A scalar as the description wrote it (strings quoted), for messages.
+fn shown(value: &Scalar) -> String {
+    match value {
+        Scalar::Int(i) => i.to_string(),
+        Scalar::Str(s) => format!("{s:?}"),
+    }
+}
+
 impl Validator<'_, '_> {
     fn error(&mut self, at: usize, path: &KeyPath, message: impl core::fmt::Display) {
         self.r.error(at, path, message);
@@ -116,10 +124,7 @@ impl Validator<'_, '_> {
         match parsed {
             Ok(bytes) => Some(bytes),
             Err(e) => {
-                let shown = match value.get_ref() {
-                    Scalar::Int(i) => i.to_string(),
-                    Scalar::Str(s) => format!("{s:?}"),
-                };
+                let shown = shown(value.get_ref());
                 self.error(start(value), path, format!("invalid size {shown}: {e}"));
                 None
             }
@@ -157,10 +162,7 @@ impl Validator<'_, '_> {
         match parsed {
             Ok(ns) => Some(ns),
             Err(e) => {
-                let shown = match value.get_ref() {
-                    Scalar::Int(i) => i.to_string(),
-                    Scalar::Str(s) => format!("{s:?}"),
-                };
+                let shown = shown(value.get_ref());
                 self.error(start(value), path, format!("invalid duration {shown}: {e}"));
                 None
             }
