@@ -53,8 +53,9 @@ fn kernel<T>(call: &'static str, r: Result<T, Error>) -> Result<T, LoadError> {
 /// the same frames again (a cold one reloads them from the image first).
 pub struct Placement {
     pub rp: u64,
-    elf: &'static [u8],
     entry: u64,
+    /// The image's loadable segments (their file bytes stay in system.img, for reloads).
+    image: [Option<Segment<'static>>; MAX_SEGMENTS],
     /// Physical base of each loaded segment's frames (in `load_segments` order).
     segments: [u64; MAX_SEGMENTS],
     stack: u64,
@@ -158,8 +159,8 @@ pub fn place(
     let stack_base = STACK_TOP - stack_pages * PAGE;
     Ok(Placement {
         rp,
-        elf,
         entry,
+        image: segments,
         segments: frames,
         stack,
         used: needed,
@@ -189,13 +190,11 @@ pub fn instantiate(
     start: Start,
     condition: u64,
 ) -> Result<Instance, LoadError> {
-    let (_, segments) = load_segments::<MAX_SEGMENTS>(placed.elf, USER_MIN..SHARED_BASE)
-        .map_err(LoadError::Image)?;
     let task = kernel(
         "task_create",
         sys::task_create(p.abilities, p.mcp, placed.rp, p.name),
     )?;
-    for (s, &frames) in segments.iter().flatten().zip(&placed.segments) {
+    for (s, &frames) in placed.image.iter().flatten().zip(&placed.segments) {
         if start == Start::Cold {
             load(spawner, s, Some(frames))?;
         }
