@@ -24,6 +24,7 @@ pub fn boot(name: &str) -> Outcome {
             timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
             echo: false,
             work_dir: dir.join("state"),
+            deterministic_time: s.manifest.deterministic_time,
         },
     )
     .unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"))

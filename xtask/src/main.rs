@@ -125,6 +125,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
             timeout: timeout.map(Duration::from_secs),
             echo: true,
             work_dir: xtask::target_dir().join("esp").join("run-state"),
+            deterministic_time: false,
         },
     )?;
     let crashed = outcome
@@ -257,6 +258,7 @@ fn bench() -> Result<bool> {
                 timeout: Some(Duration::from_secs(300)),
                 echo: false,
                 work_dir: dir.join(name).join("state"),
+                deterministic_time: false,
             },
         )?;
         if !outcome.succeeded() {

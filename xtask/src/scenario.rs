@@ -11,6 +11,8 @@
 //! entries = { "test/mode" = "kernel-read" }   # optional extra system-image entries (text)
 //! remove_files = ["kernel.elf"] # optional: ESP files to delete (loader error tests)
 //! corrupt_system_image = true   # optional: flip a byte of system.img after building it
+//! deterministic_time = true     # optional: QEMU on virtual time (-icount), for scenarios
+//!                               # that assert kernel timing, not measure QEMU's
 //! ```
 
 use anyhow::{Context, Result};
@@ -35,6 +37,8 @@ pub struct Manifest {
     pub remove_files: Vec<PathBuf>,
     #[serde(default)]
     pub corrupt_system_image: bool,
+    #[serde(default)]
+    pub deterministic_time: bool,
 }
 
 impl Manifest {

@@ -56,6 +56,7 @@ fn windows(name: &str, tp: u64) {
     let (mut start, length) = (info.next_window_start, info.window_length);
     let mut previous_end = start;
     let mut outside = 0;
+    let mut first_outside = (0, 0, 0, 0);
     let mut windows = 0;
     while windows < 50 {
         let now = base.ns(rdtsc() - base.at_boot);
@@ -67,10 +68,20 @@ fn windows(name: &str, tp: u64) {
                 start = next;
             }
         } else if now < start && now > previous_end + 1_000_000 {
+            if outside == 0 {
+                first_outside = (now, previous_end, start, windows);
+            }
             outside += 1;
         }
     }
     println!("{name}: ran in {windows} of its windows, {outside} samples outside them");
+    if outside > 0 {
+        let (now, end, next, window) = first_outside;
+        println!(
+            "{name}: first sample outside at {now} ns: {} us after window {window} ended at {end} ns, next starts at {next} ns",
+            (now - end) / 1000
+        );
+    }
 }
 
 fn heartbeat(name: &str, tp: u64) {
