@@ -23,10 +23,10 @@
 mod partitions;
 mod server;
 
+use root_task::spawn::{AddressRange, FramePool, Spawner};
 use user_rt::abi::syscall::ThreadAttribute;
 use user_rt::abi::sysimg::SystemImage;
 use user_rt::println;
-use user_rt::spawn::{AddressRange, FramePool, Spawner};
 use user_rt::sys;
 
 user_rt::entry!(main);
@@ -44,7 +44,7 @@ fn reject(what: core::fmt::Arguments) -> ! {
 }
 
 fn main(image_base: u64, image_len: u64) {
-    let bytes = user_rt::system_image(image_base, image_len);
+    let bytes = root_task::system_image(image_base, image_len);
     let image = SystemImage::parse(bytes)
         .unwrap_or_else(|e| reject(format_args!("system image damaged: {e}")));
     println!(

@@ -6,12 +6,12 @@
 //! shared-memory segments and creates the first thread (inactive until started).
 
 use config::binary::{PartitionView, SystemView};
+use root_task::spawn::{SpawnError, Spawner, map_physical_chunked};
 use user_rt::abi::elf::{LoadSegment as Segment, load_segments};
 use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
 use user_rt::partition::{SHARED_BASE, StartInfo};
-use user_rt::spawn::{SpawnError, Spawner, map_physical_chunked};
 use user_rt::sys;
 
 const PAGE: u64 = 4096;

@@ -19,6 +19,7 @@ use config::binary::SystemView;
 use config::model::{
     Direction, HealthError, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind,
 };
+use root_task::spawn::Spawner;
 use syssw_core::codes::ReturnCode;
 use syssw_core::health::{
     Detail, ErrorEvent, Fault, HealthMonitor, Text, classify, write_log_line,
@@ -30,7 +31,6 @@ use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId}
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
 use user_rt::service as svc;
-use user_rt::spawn::Spawner;
 use user_rt::sys::{self, Message, Received};
 
 /// One configured partition at run time.

@@ -2,7 +2,7 @@
 //! binary configuration that goes into `system.img` (see the `config` crate).
 //!
 //! Known images: a partition's `image` names a user program the workspace builds, i.e. a
-//! workspace member whose manifest uses `partitions/rt/user-link.rs` as its build script
+//! workspace member whose manifest uses `user/link.rs` as its build script
 //! (the freestanding user-mode binaries), by package name — the same name
 //! [`crate::artifacts::build_user_programs`] takes and `target/user/<name>` carries. `syssw`
 //! is excluded: it is the root task, never a partition.
@@ -34,7 +34,7 @@ pub fn known_images() -> Result<Vec<String>> {
             .and_then(|b| b.as_str());
         let name = package.and_then(|p| p.get("name")).and_then(|n| n.as_str());
         if let (Some(build), Some(name)) = (build, name)
-            && build.ends_with("partitions/rt/user-link.rs")
+            && build.ends_with("user/link.rs")
             && name != "syssw"
         {
             images.push(name.to_string());

@@ -19,11 +19,11 @@
 #![deny(unsafe_code)]
 
 use core::sync::atomic::{AtomicU64, Ordering};
+use root_task::spawn::{AddressRange, FramePool, Spawner, words_at};
 use user_rt::abi::ipc::{EXCEPTION_MESSAGE_SIZE, LABEL_EXCEPTION, MessageTag, REPLY_RESUME};
 use user_rt::abi::syscall::{Abilities, TIMEOUT_INFINITE, ThreadAttribute, ThreadId, WindowSpec};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
-use user_rt::spawn::{AddressRange, FramePool, Spawner, words_at};
 use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
@@ -217,8 +217,12 @@ extern "C" fn window_meter(arg: u64) -> ! {
     // SAFETY: the root mapped WINDOW_HEADER + SAMPLES words at `arg` in this thread's task
     // for good; only used atomically.
     let words = unsafe { words_at(arg, WINDOW_HEADER + SAMPLES) };
-    let seen =
-        user_rt::window::measure_window_starts(2, WINDOW_FRAME, 50_000, &words[WINDOW_HEADER..]);
+    let seen = test_support::window::measure_window_starts(
+        2,
+        WINDOW_FRAME,
+        50_000,
+        &words[WINDOW_HEADER..],
+    );
     words[1].store(seen.outside, Ordering::Relaxed);
     words[2].store(seen.missed, Ordering::Relaxed);
     words[3].store(seen.pauses, Ordering::Relaxed);

@@ -15,9 +15,9 @@
 
 use crate::check::{fail, must};
 use core::sync::atomic::{AtomicU64, Ordering};
+use root_task::spawn::{AddressRange, FramePool, SpawnError, Spawner, ThreadEntry, words_at};
 use user_rt::abi::syscall::{Abilities, Error, PageRights, TaskId, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
-use user_rt::spawn::{AddressRange, FramePool, SpawnError, Spawner, ThreadEntry, words_at};
 use user_rt::sys;
 
 /// The longest the root waits for anything a worker should do promptly (ns).

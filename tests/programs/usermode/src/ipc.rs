@@ -6,13 +6,14 @@
 
 use crate::check::{expect, expect_eq, expect_err, expect_ok, must, status};
 use crate::child::{BASIC, BOGUS_ID, LOW, Lab, MS, WAIT, peek, poke, worker};
+use root_task::spawn;
 use user_rt::abi::ipc::{IPC_DATA_MAX, MAP_ITEM_GRANT, MapItem, MessageTag, ReceiveWindow};
 use user_rt::abi::syscall::{
     Abilities, Error, PageRights, ROOT_INFO_BASE, TIMEOUT_INFINITE, TaskId, ThreadAttribute,
     ThreadId,
 };
+use user_rt::println;
 use user_rt::sys::{self, Message, Received};
-use user_rt::{println, spawn};
 
 /// MCP of the peer tasks (room for the priorities of the queueing test).
 const PEER_MCP: u8 = 250;

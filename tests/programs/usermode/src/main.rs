@@ -41,7 +41,7 @@ user_rt::entry!(main);
 
 fn main(image_base: u64, image_len: u64) {
     let image =
-        SystemImage::parse(user_rt::system_image(image_base, image_len)).expect("system image");
+        SystemImage::parse(root_task::system_image(image_base, image_len)).expect("system image");
     let mode = image.find("test/mode").map(|e| e.data).unwrap_or(b"");
     match mode {
         b"tasks" => return tasks::run(),

@@ -5,13 +5,14 @@
 
 use crate::check::{expect, expect_eq, expect_err, expect_ok, must, status};
 use crate::child::{BASIC, BOGUS_ID, CHILD_MCP, LOW, Lab, MS, WAIT, peek, poke, worker};
+use root_task::root_info;
 use user_rt::abi::ipc::{LABEL_EXCEPTION, MessageTag, REPLY_KILL};
 use user_rt::abi::root::RootInfo;
 use user_rt::abi::syscall::{
     Abilities, Error, MAP_MAX_PAGES, PageRights, ROOT_INFO_BASE, TaskId, ThreadAttribute, USER_END,
 };
+use user_rt::println;
 use user_rt::sys::{self, Message};
-use user_rt::{println, root_info};
 
 const PAGE: u64 = 4096;
 const KERNEL_ADDRESS: u64 = 0xffff_ffff_8000_0000;

@@ -23,7 +23,7 @@ const B_PAGES: u64 = 64;
 
 pub fn run() {
     let mut lab = Lab::new();
-    let info = user_rt::root_info();
+    let info = root_task::root_info();
     let root = must("rp_info of the root partition", sys::rp_info(0));
     expect_eq(
         "the root partition's quota is the one RootInfo announces",

@@ -9,10 +9,10 @@ use crate::child::{
     worker,
 };
 use core::sync::atomic::Ordering;
+use root_task::spawn::words_at;
 use user_rt::abi::syscall::{
     Abilities, Call, Error, ROOT_PRIORITY, TaskId, ThreadAttribute, ThreadId,
 };
-use user_rt::spawn::words_at;
 use user_rt::{println, sys};
 
 /// A user address used as the (never used) stack of threads that are never started.

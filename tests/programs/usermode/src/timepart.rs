@@ -16,10 +16,11 @@
 use crate::check::{expect, expect_eq, expect_err, fail, must};
 use crate::child::{BASIC, Block, Lab, MS, worker};
 use core::sync::atomic::{AtomicU64, Ordering};
+use root_task::spawn::words_at;
+use test_support::window::measure_window_starts;
 use user_rt::abi::syscall::{Error, ThreadAttribute, ThreadId, WindowSpec};
+use user_rt::println;
 use user_rt::sys::{self, TscBase, rdtsc};
-use user_rt::window::measure_window_starts;
-use user_rt::{println, spawn::words_at};
 
 const US: u64 = 1000;
 const MAJOR: u64 = 4 * MS;

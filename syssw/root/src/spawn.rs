@@ -20,14 +20,14 @@
 //! sees private copies of the writable segments, so statics are *not* shared with the
 //! creator: share memory explicitly ([`Spawner::memory`] with `share_with_root`).
 
-use crate::ipc_buffer::IpcBufferRef;
-use crate::sys;
 use abi::ipc::IPC_BUFFER_SIZE;
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
 use abi::syscall::{
     Abilities, Call, Error, MAP_MAX_PAGES, PageRights, TaskId, ThreadAttribute, ThreadId,
 };
 use core::sync::atomic::AtomicU64;
+use user_rt::ipc_buffer::IpcBufferRef;
+use user_rt::sys;
 
 pub const PAGE_SIZE: u64 = 4096;
 /// Pages an [`IpcBuffer`](abi::ipc::IpcBuffer) needs.

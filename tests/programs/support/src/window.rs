@@ -2,8 +2,8 @@
 //! window runs after the instant the schedule says the window starts. Used by the
 //! time-partitioning tests and `cargo xtask bench` (window_switch, window_jitter).
 
-use crate::sys::{self, TscBase, rdtsc};
 use core::sync::atomic::{AtomicU64, Ordering};
+use user_rt::sys::{self, TscBase, rdtsc};
 
 /// What [`measure_window_starts`] saw besides the samples.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
