@@ -3,7 +3,8 @@
 //! The library part is shared with the QEMU scenario tests (`tests/`): building the
 //! bare-metal artifacts ([`artifacts`]), assembling an ESP folder with `system.img`
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
-//! and capturing the serial log ([`qemu`]), and reading scenario manifests ([`scenario`]).
+//! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), and the
+//! lint gate ([`lint`]).
 #![forbid(unsafe_op_in_unsafe_fn)]
 #![deny(unsafe_code)]
 
@@ -11,6 +12,7 @@ pub mod artifacts;
 pub mod bench;
 pub mod check_config;
 pub mod esp;
+pub mod lint;
 pub mod qemu;
 pub mod scenario;
 pub mod tools;

@@ -50,6 +50,9 @@ enum Cmd {
         #[arg(long)]
         scenarios_only: bool,
     },
+    /// The lint gate of CI: cargo fmt --check, and clippy -D warnings on the host crates,
+    /// the kernel, the loader and every user-mode program.
+    Lint,
     /// Validate a system description and print its diagnostics (exit 1 if any).
     CheckConfig {
         file: PathBuf,
@@ -81,6 +84,7 @@ fn main() -> ExitCode {
             filter,
             scenarios_only,
         } => test(filter.as_deref(), scenarios_only),
+        Cmd::Lint => xtask::lint::run(),
         Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
     };
     match result {
