@@ -111,8 +111,6 @@
 //! **Images.** `load` takes a predicate that says which image names exist; `cargo xtask
 //! check-config` passes the user programs the workspace builds.
 #![no_std]
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 #[cfg(feature = "host")]
 extern crate std;

@@ -5,8 +5,6 @@
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), and the
 //! lint gate ([`lint`]).
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 pub mod artifacts;
 pub mod bench;

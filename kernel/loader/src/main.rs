@@ -9,7 +9,6 @@
 //! ([`MemoryKind::uefi_type`]) so the final memory map already says who owns what.
 #![no_std]
 #![no_main]
-#![forbid(unsafe_op_in_unsafe_fn)]
 
 extern crate alloc;
 
@@ -50,6 +49,7 @@ fn main() -> Status {
 }
 
 /// Everything up to the jump; returns only on failure.
+#[allow(unsafe_code)] // firmware calls and raw physical memory before the kernel runs
 fn load() -> Result<core::convert::Infallible, String> {
     check_cpu()?;
     let mut tables = PageTableBuilder::new()?;
@@ -130,12 +130,16 @@ fn load() -> Result<core::convert::Infallible, String> {
     };
     core::mem::forget(final_map);
 
-    // SAFETY: the kernel relies on NX (non-executable data) and on CR0.WP (read-only pages are
-    // read-only in ring 0 too); both bits are architectural on every x86_64 CPU.
+    // SAFETY: the kernel relies on NX (non-executable data); EFER.NXE is architectural on
+    // every x86_64 CPU and only makes the NX bit of page-table entries effective.
     unsafe {
         x86_64::registers::model_specific::Efer::update(|f| {
             f.insert(x86_64::registers::model_specific::EferFlags::NO_EXECUTE_ENABLE)
         });
+    }
+    // SAFETY: CR0.WP makes read-only pages read-only in ring 0 too, which the kernel relies
+    // on; the loader itself writes no read-only page from here on.
+    unsafe {
         x86_64::registers::control::Cr0::update(|f| {
             f.insert(x86_64::registers::control::Cr0Flags::WRITE_PROTECT)
         });
@@ -146,11 +150,13 @@ fn load() -> Result<core::convert::Infallible, String> {
 }
 
 /// Switches to the kernel's page tables and jumps to its entry with `rdi` = boot info.
+#[allow(unsafe_code)]
 #[unsafe(naked)]
 unsafe extern "sysv64" fn enter_kernel(pml4: u64, entry: u64, boot_info: u64) -> ! {
     core::arch::naked_asm!("mov cr3, rdi", "mov rdi, rdx", "jmp rsi")
 }
 
+#[allow(unsafe_code)] // firmware calls and raw physical memory before the kernel runs
 fn rdtsc() -> u64 {
     // SAFETY: RDTSC has no side effects and exists on every x86_64 CPU.
     unsafe { core::arch::x86_64::_rdtsc() }
@@ -181,6 +187,7 @@ fn read_file(name: &CStr16) -> Result<alloc::vec::Vec<u8>, String> {
     })
 }
 
+#[allow(unsafe_code)] // firmware calls and raw physical memory before the kernel runs
 fn allocate(kind: MemoryKind, pages: usize) -> Result<u64, String> {
     let ptr = boot::allocate_pages(
         AllocateType::AnyPages,
@@ -200,6 +207,7 @@ fn allocate(kind: MemoryKind, pages: usize) -> Result<u64, String> {
 
 /// Copies every `PT_LOAD` segment into fresh KERNEL pages and maps them with their rights.
 /// Returns the entry point and the number of pages used.
+#[allow(unsafe_code)] // firmware calls and raw physical memory before the kernel runs
 fn load_kernel(file: &[u8], tables: &mut PageTableBuilder) -> Result<(u64, u64), String> {
     let elf = ElfFile::new(file).map_err(|e| format!("kernel.elf is not a valid ELF file: {e}"))?;
     let header = &elf.header;
@@ -227,7 +235,7 @@ fn load_kernel(file: &[u8], tables: &mut PageTableBuilder) -> Result<(u64, u64),
         unsafe {
             core::ptr::copy_nonoverlapping(
                 segment.file.as_ptr(),
-                (phys as *mut u8).add(in_page),
+                (phys as *mut u8).wrapping_add(in_page),
                 segment.file.len(),
             );
         }
@@ -257,6 +265,7 @@ fn load_kernel(file: &[u8], tables: &mut PageTableBuilder) -> Result<(u64, u64),
 
 /// Validates `system.img` (so a damaged image is reported here, clearly) and copies it into
 /// SYSTEM_IMAGE pages.
+#[allow(unsafe_code)] // firmware calls and raw physical memory before the kernel runs
 fn copy_system_image(image: &[u8]) -> Result<PhysRange, String> {
     SystemImage::parse(image).map_err(|e| format!("system.img is invalid: {e}"))?;
     let pages = (image.len() as u64).div_ceil(PAGE).max(1);
@@ -367,6 +376,7 @@ fn convert_memory_map(map: &impl MemoryMap, out: &mut [MemoryRegion]) -> usize {
 }
 
 /// Last-resort report after boot services are gone: raw COM1 output, then halt.
+#[allow(unsafe_code)] // firmware calls and raw physical memory before the kernel runs
 fn halt_with(message: &str) -> ! {
     struct Com1;
     impl Write for Com1 {

@@ -40,13 +40,26 @@ const ADDRESS_MASK: u64 = 0x000f_ffff_ffff_f000;
 const HUGE_PAGE: u64 = 2 << 20;
 
 pub struct PageTableBuilder {
-    root: u64,
+    root: Table,
 }
 
-fn table(phys: u64) -> &'static mut [u64; 512] {
-    // SAFETY: `phys` is a PAGE_TABLES page we allocated and zeroed; the firmware identity-maps
-    // it and nothing else holds a reference while the builder works on it.
-    unsafe { &mut *(phys as *mut [u64; 512]) }
+/// A page-table page this builder allocated (and zeroed). Only this module makes one, from
+/// `allocate` or from an entry it wrote itself, which is what makes [`Table::entries`] safe.
+#[derive(Clone, Copy)]
+struct Table(u64);
+
+impl Table {
+    fn new() -> Result<Self, String> {
+        Ok(Self(allocate(MemoryKind::PAGE_TABLES, 1)?))
+    }
+
+    #[allow(unsafe_code)] // a raw physical page: the tables are built before paging switches
+    fn entries(self) -> &'static mut [u64; 512] {
+        // SAFETY: a `Table` is a PAGE_TABLES page we allocated and zeroed; the firmware
+        // identity-maps it and the builder, which holds no other reference into it while
+        // an entry is written, is its only user.
+        unsafe { &mut *(self.0 as *mut [u64; 512]) }
+    }
 }
 
 fn index(virt: u64, level: u32) -> usize {
@@ -56,32 +69,32 @@ fn index(virt: u64, level: u32) -> usize {
 impl PageTableBuilder {
     pub fn new() -> Result<Self, String> {
         Ok(Self {
-            root: allocate(MemoryKind::PAGE_TABLES, 1)?,
+            root: Table::new()?,
         })
     }
 
     pub fn root(&self) -> u64 {
-        self.root
+        self.root.0
     }
 
     /// Returns the table one level below `entry`, creating it. Intermediate entries are
     /// permissive (writable, executable); the leaf decides the rights.
-    fn next(entry: &mut u64) -> Result<u64, String> {
+    fn next(entry: &mut u64) -> Result<Table, String> {
         if *entry & PRESENT == 0 {
-            *entry = allocate(MemoryKind::PAGE_TABLES, 1)? | PRESENT | WRITABLE;
+            *entry = Table::new()?.0 | PRESENT | WRITABLE;
         } else if *entry & HUGE != 0 {
             return Err("page-table conflict: a 4 KiB mapping inside a huge page".into());
         }
-        Ok(*entry & ADDRESS_MASK)
+        Ok(Table(*entry & ADDRESS_MASK))
     }
 
     /// Maps one 4 KiB page.
     pub fn map_page(&mut self, virt: u64, phys: u64, flags: PageFlags) -> Result<(), String> {
         let mut t = self.root;
         for level in (1..4).rev() {
-            t = Self::next(&mut table(t)[index(virt, level)])?;
+            t = Self::next(&mut t.entries()[index(virt, level)])?;
         }
-        let leaf = &mut table(t)[index(virt, 0)];
+        let leaf = &mut t.entries()[index(virt, 0)];
         if *leaf & PRESENT != 0 {
             return Err(format!(
                 "page {virt:#x} mapped twice (overlapping kernel segments?)"
@@ -98,9 +111,9 @@ impl PageTableBuilder {
             let virt = base + phys;
             let mut t = self.root;
             for level in (2..4).rev() {
-                t = Self::next(&mut table(t)[index(virt, level)])?;
+                t = Self::next(&mut t.entries()[index(virt, level)])?;
             }
-            table(t)[index(virt, 1)] =
+            t.entries()[index(virt, 1)] =
                 phys | PRESENT | WRITABLE | HUGE | PageFlags::GLOBAL.0 | PageFlags::NO_EXECUTE.0;
             phys += HUGE_PAGE;
         }

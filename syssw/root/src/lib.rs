@@ -9,6 +9,7 @@ pub mod spawn;
 
 /// The system image the kernel mapped for the root task (`rdi`/`rsi` at entry, see
 /// `abi::syscall`), as a byte slice.
+#[allow(unsafe_code)] // memory the kernel mapped, not a Rust object
 pub fn system_image(base: u64, len: u64) -> &'static [u8] {
     assert_eq!(
         base,
@@ -22,6 +23,7 @@ pub fn system_image(base: u64, len: u64) -> &'static [u8] {
 
 /// The root task's start information (mapped read-only by the kernel at
 /// `abi::syscall::ROOT_INFO_BASE`). Only valid in the root task.
+#[allow(unsafe_code)] // memory the kernel mapped, not a Rust object
 pub fn root_info() -> &'static abi::root::RootInfo {
     // SAFETY: the kernel maps a RootInfo page read-only at ROOT_INFO_BASE for the life of
     // the root task (checked by the magic below before use).

@@ -20,6 +20,10 @@
 //! sees private copies of the writable segments, so statics are *not* shared with the
 //! creator: share memory explicitly ([`Spawner::memory`] with `share_with_root`).
 
+// Frames being filled through scratch mappings, the own ELF headers and memory shared
+// with child tasks are raw memory: the reason for `unsafe` in this module.
+#![allow(unsafe_code)]
+
 use abi::ipc::IPC_BUFFER_SIZE;
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
 use abi::syscall::{

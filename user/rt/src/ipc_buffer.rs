@@ -3,6 +3,8 @@
 //! The kernel reads and writes the buffer during IPC calls, so no Rust reference to it may
 //! live across a system call. [`IpcBufferRef`] therefore holds only the address and copies
 //! fields in and out with volatile accesses, one call at a time, between system calls.
+// Raw accesses to memory the kernel also writes: the one reason for `unsafe` here.
+#![allow(unsafe_code)]
 
 use abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_DATA_MAX, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS,

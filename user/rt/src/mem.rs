@@ -25,14 +25,16 @@ pub unsafe extern "C" fn memmove(dest: *mut u8, src: *const u8, n: usize) -> *mu
         // SAFETY: as for memcpy; forward copying is safe when dest does not start inside src.
         return unsafe { memcpy(dest, src, n) };
     }
-    // Copy backwards (std + rep movsb from the last byte), then restore DF.
+    // Copy backwards (std + rep movsb from the last byte), then restore DF. (n > 0 here:
+    // with n == 0 the test above is always true.)
+    let (dest_last, src_last) = (dest.wrapping_add(n - 1), src.wrapping_add(n - 1));
     // SAFETY: the caller guarantees both ranges are valid for `n` bytes.
     unsafe {
         asm!(
             "std", "rep movsb", "cld",
             inout("rcx") n => _,
-            inout("rdi") dest.add(n - 1) => _,
-            inout("rsi") src.add(n - 1) => _,
+            inout("rdi") dest_last => _,
+            inout("rsi") src_last => _,
             options(nostack),
         );
     }
@@ -56,8 +58,10 @@ pub unsafe extern "C" fn memset(dest: *mut u8, value: i32, n: usize) -> *mut u8 
 pub unsafe extern "C" fn memcmp(a: *const u8, b: *const u8, n: usize) -> i32 {
     let mut i = 0;
     while i < n {
-        // SAFETY: i < n and the caller guarantees validity for n bytes.
-        let (x, y) = unsafe { (a.add(i).read(), b.add(i).read()) };
+        // SAFETY: i < n and the caller guarantees `a` is valid for n bytes.
+        let x = unsafe { a.wrapping_add(i).read() };
+        // SAFETY: likewise for `b`.
+        let y = unsafe { b.wrapping_add(i).read() };
         if x != y {
             return x as i32 - y as i32;
         }

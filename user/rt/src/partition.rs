@@ -88,6 +88,7 @@ impl StartInfo {
     ///
     /// # Safety
     /// `address` must be the value syssw passed in `rdi` (a readable record).
+    #[allow(unsafe_code)] // the record is raw memory syssw prepared on the stack
     pub unsafe fn from_start(address: u64) -> Option<&'static StartInfo> {
         // SAFETY: the caller guarantees the address came from syssw's start convention.
         let info = unsafe { &*(address as *const StartInfo) };

@@ -18,6 +18,7 @@ pub struct Regs {
 
 /// Raw call with all six argument registers.
 #[inline(always)]
+#[allow(unsafe_code)] // the `syscall` instruction
 pub fn raw6(call: u64, a: [u64; 6]) -> Regs {
     let mut r = Regs::default();
     // SAFETY: `syscall` transfers to the kernel, which changes only rax and the six

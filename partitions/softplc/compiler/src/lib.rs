@@ -4,8 +4,6 @@
 //! [`codegen`] (body checking + emission via `plc_vm::image::ImageBuilder`) -> image.
 //! The standard function blocks come from an ST [`PRELUDE`] compiled with every program.
 //! [`run`] is the host runner behind `plcc run`.
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 pub mod ast;
 mod calls;

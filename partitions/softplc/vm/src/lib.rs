@@ -82,8 +82,6 @@
 //! }
 //! ```
 #![no_std]
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 #![warn(missing_docs)]
 
 #[cfg(any(feature = "alloc", test))]

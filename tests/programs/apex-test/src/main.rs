@@ -18,8 +18,6 @@
 //! tests).
 #![no_std]
 #![no_main]
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 mod bench;
 

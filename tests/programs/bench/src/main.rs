@@ -15,8 +15,6 @@
 //!   its spread in ns.
 #![no_std]
 #![no_main]
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 use core::sync::atomic::{AtomicU64, Ordering};
 use root_task::spawn::{AddressRange, FramePool, Spawner, words_at};

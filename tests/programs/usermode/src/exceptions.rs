@@ -137,25 +137,30 @@ const F_AFTER_KILL: usize = 6;
 worker!(
     /// Raises one exception after the other; the root handles each.
     fn faulter(b, ipc) {
-        // SAFETY (all calls below): the routines touch only registers, the stack and the
-        // (unmapped, faulting) address given; the handler resumes them at their labels.
-        unsafe {
-            b.set_result(F_UD, wt_ud2(0x1111));
-            b.set_step(1);
-            b.set_result(F_PF, wt_pf(UNMAPPED));
-            b.set_step(2);
-            b.set_result(F_BP, wt_int3(0x3333));
-            b.set_step(3);
-            b.set_result(F_DE, wt_div0(7));
-            b.set_step(4);
-            b.set_result(F_FLAGS, wt_flags());
-            b.set_step(5);
-            b.set_result(F_RETRY, wt_ud2(0x5555));
-            b.set_step(6);
-            b.finish();
-            // The handler kills the thread here.
-            wt_ud2(0x6666);
-        }
+        // Each routine touches only registers, the stack and the (unmapped, faulting)
+        // address given; the handler resumes it at its label.
+        // SAFETY: see above (#UD, resumed after the instruction).
+        b.set_result(F_UD, unsafe { wt_ud2(0x1111) });
+        b.set_step(1);
+        // SAFETY: see above (#PF on an unmapped address, resumed after it).
+        b.set_result(F_PF, unsafe { wt_pf(UNMAPPED) });
+        b.set_step(2);
+        // SAFETY: see above (#BP, resumed after int3).
+        b.set_result(F_BP, unsafe { wt_int3(0x3333) });
+        b.set_step(3);
+        // SAFETY: see above (#DE, resumed after the division).
+        b.set_result(F_DE, unsafe { wt_div0(7) });
+        b.set_step(4);
+        // SAFETY: see above (reads and returns the flags).
+        b.set_result(F_FLAGS, unsafe { wt_flags() });
+        b.set_step(5);
+        // SAFETY: see above (#UD again, retried by the handler).
+        b.set_result(F_RETRY, unsafe { wt_ud2(0x5555) });
+        b.set_step(6);
+        b.finish();
+        // The handler kills the thread here.
+        // SAFETY: see above.
+        unsafe { wt_ud2(0x6666) };
         b.set_result(F_AFTER_KILL, 1);
     }
 );

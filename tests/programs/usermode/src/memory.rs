@@ -465,10 +465,9 @@ worker!(
         let page = b.arg(0);
         // SAFETY: arg 0 is a page the root mapped writable into this task (and keeps
         // mapped); it may become read-only, which only makes the write fault.
-        unsafe {
-            b.set_result(0, peek(page));
-            poke(page, 0xabcd);
-        }
+        b.set_result(0, unsafe { peek(page) });
+        // SAFETY: as for the read.
+        unsafe { poke(page, 0xabcd) };
         b.set_step(1);
         b.set_code(1, &sys::notify_wait(1, WAIT));
         b.set_step(2);

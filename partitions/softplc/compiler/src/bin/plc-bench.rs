@@ -1,8 +1,6 @@
 //! `plc-bench`: compiles representative ST programs, runs them on the VM and compares with
 //! the same algorithm in plain Rust. Prints one line per metric:
 //! `bench <name> median=<n> min=<n> max=<n> unit=<ns|ratio> samples=<n>`.
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 use std::hint::black_box;
 use std::time::Instant;

@@ -2,8 +2,6 @@
 //!
 //! Exit codes: 0 success, 1 compile errors (or I/O errors), 2 usage errors, 3 uncaught trap
 //! during `run`.
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
