@@ -120,99 +120,26 @@ pub fn ability_by_name(name: &str) -> Option<Abilities> {
         .map(|&(_, a)| a)
 }
 
-/// Kinds of errors the health monitor handles (ARINC 653 error codes).
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
-pub enum HealthError {
-    DeadlineMissed = 0,
-    ApplicationError = 1,
-    NumericError = 2,
-    IllegalRequest = 3,
-    StackOverflow = 4,
-    MemoryViolation = 5,
-    HardwareFault = 6,
-    PowerFail = 7,
-}
+/// The errors the health monitor handles, the port kinds and directions: the service
+/// protocol's code tables (one definition for the configuration, syssw and the partitions).
+pub use protocol::{Direction, ErrorCode, PortKind};
 
-impl HealthError {
-    /// Number of error kinds (entries of a [`HealthTable`]).
-    pub const COUNT: usize = 8;
-    pub const ALL: [HealthError; Self::COUNT] = [
-        Self::DeadlineMissed,
-        Self::ApplicationError,
-        Self::NumericError,
-        Self::IllegalRequest,
-        Self::StackOverflow,
-        Self::MemoryViolation,
-        Self::HardwareFault,
-        Self::PowerFail,
-    ];
-
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::DeadlineMissed => "deadline_missed",
-            Self::ApplicationError => "application_error",
-            Self::NumericError => "numeric_error",
-            Self::IllegalRequest => "illegal_request",
-            Self::StackOverflow => "stack_overflow",
-            Self::MemoryViolation => "memory_violation",
-            Self::HardwareFault => "hardware_fault",
-            Self::PowerFail => "power_fail",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|e| e.name() == name)
-    }
-}
-
-/// What the health monitor does about an error.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum HealthAction {
-    /// Log it and carry on.
-    Ignore = 1,
-    /// Stop the partition (its threads are suspended; the others run on).
-    Idle = 2,
-    /// Restart the partition from its image with fresh memory.
-    ColdRestart = 3,
-    /// Restart the partition's threads, keeping its memory.
-    WarmRestart = 4,
-    /// Stop the whole module with the failure outcome (QEMU exit 35).
-    Shutdown = 5,
-    /// Stop the whole module with the success outcome (QEMU exit 33): the expected end of a
-    /// test scenario, e.g. a test partition raising `application_error` when it is done.
-    ShutdownSuccess = 6,
-}
-
-impl HealthAction {
-    pub const ALL: [HealthAction; 6] = [
-        Self::Ignore,
-        Self::Idle,
-        Self::ColdRestart,
-        Self::WarmRestart,
-        Self::Shutdown,
-        Self::ShutdownSuccess,
-    ];
-
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Ignore => "ignore",
-            Self::Idle => "idle",
-            Self::ColdRestart => "cold_restart",
-            Self::WarmRestart => "warm_restart",
-            Self::Shutdown => "shutdown",
-            Self::ShutdownSuccess => "shutdown_success",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| a.name() == name)
-    }
-
-    /// The action with binary code `code` (1..=6; 0 means "not set" and is no action).
-    pub fn from_code(code: u8) -> Option<Self> {
-        Self::ALL.into_iter().find(|a| *a as u8 == code)
+codes::code_enum! {
+    /// What the health monitor does about an error (binary code 0 means "not set").
+    pub enum HealthAction: u8 {
+        /// Log it and carry on.
+        Ignore = 1 => "ignore",
+        /// Stop the partition (its threads are suspended; the others run on).
+        Idle = 2 => "idle",
+        /// Restart the partition from its image with fresh memory.
+        ColdRestart = 3 => "cold_restart",
+        /// Restart the partition's threads, keeping its memory.
+        WarmRestart = 4 => "warm_restart",
+        /// Stop the whole module with the failure outcome (QEMU exit 35).
+        Shutdown = 5 => "shutdown",
+        /// Stop the whole module with the success outcome (QEMU exit 33): the expected end of
+        /// a test scenario, e.g. a test partition raising `application_error` when it is done.
+        ShutdownSuccess = 6 => "shutdown_success",
     }
 }
 
@@ -224,14 +151,14 @@ impl HealthAction {
 /// outside any partition takes the module table's entry, else [`HealthAction::Shutdown`];
 /// partition actions (`idle`, `cold_restart`, `warm_restart`) mean `shutdown` there.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
-pub struct HealthTable(pub [Option<HealthAction>; HealthError::COUNT]);
+pub struct HealthTable(pub [Option<HealthAction>; ErrorCode::COUNT]);
 
 impl HealthTable {
-    pub fn get(&self, error: HealthError) -> Option<HealthAction> {
+    pub fn get(&self, error: ErrorCode) -> Option<HealthAction> {
         self.0[error as usize]
     }
 
-    pub fn set(&mut self, error: HealthError, action: HealthAction) {
+    pub fn set(&mut self, error: ErrorCode, action: HealthAction) {
         self.0[error as usize] = Some(action);
     }
 
@@ -240,7 +167,7 @@ impl HealthTable {
     pub fn resolve(
         partition: Option<&HealthTable>,
         module: &HealthTable,
-        error: HealthError,
+        error: ErrorCode,
     ) -> HealthAction {
         match partition {
             Some(table) => table
@@ -258,8 +185,8 @@ impl HealthTable {
     }
 
     /// The 8 action bytes of the binary form (0 = not set).
-    pub fn to_bytes(&self) -> [u8; HealthError::COUNT] {
-        let mut out = [0u8; HealthError::COUNT];
+    pub fn to_bytes(&self) -> [u8; ErrorCode::COUNT] {
+        let mut out = [0u8; ErrorCode::COUNT];
         for (byte, action) in out.iter_mut().zip(self.0) {
             *byte = action.map_or(0, |a| a as u8);
         }
@@ -269,7 +196,7 @@ impl HealthTable {
     /// Parses the 8 action bytes; `None` for an unknown code.
     pub fn from_bytes(bytes: &[u8]) -> Option<Self> {
         let mut table = HealthTable::default();
-        if bytes.len() != HealthError::COUNT {
+        if bytes.len() != ErrorCode::COUNT {
             return None;
         }
         for (slot, &code) in table.0.iter_mut().zip(bytes) {
@@ -282,112 +209,17 @@ impl HealthTable {
     }
 }
 
-/// ARINC 653 port kinds.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum PortKind {
-    /// The latest message overwrites the previous one; readers see the newest.
-    Sampling = 1,
-    /// A FIFO of at most `depth` messages.
-    Queuing = 2,
-}
-
-impl PortKind {
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Sampling => "sampling",
-            Self::Queuing => "queuing",
-        }
+codes::code_enum! {
+    /// Rights of a partition on a shared-memory segment (never writable and executable at
+    /// once).
+    pub enum Rights: u8 {
+        Read = 1 => "r",
+        ReadWrite = 2 => "rw",
+        ReadExecute = 3 => "rx",
     }
-
-    pub fn from_name(name: &str) -> Option<Self> {
-        match name {
-            "sampling" => Some(Self::Sampling),
-            "queuing" => Some(Self::Queuing),
-            _ => None,
-        }
-    }
-
-    pub fn from_code(code: u8) -> Option<Self> {
-        match code {
-            1 => Some(Self::Sampling),
-            2 => Some(Self::Queuing),
-            _ => None,
-        }
-    }
-}
-
-/// Direction of a port, seen from its partition.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Direction {
-    /// The partition receives (ARINC 653 destination port).
-    In = 1,
-    /// The partition sends (ARINC 653 source port).
-    Out = 2,
-}
-
-impl Direction {
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::In => "in",
-            Self::Out => "out",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<Self> {
-        match name {
-            "in" => Some(Self::In),
-            "out" => Some(Self::Out),
-            _ => None,
-        }
-    }
-
-    pub fn from_code(code: u8) -> Option<Self> {
-        match code {
-            1 => Some(Self::In),
-            2 => Some(Self::Out),
-            _ => None,
-        }
-    }
-}
-
-/// Rights of a partition on a shared-memory segment (never writable and executable at once).
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Rights {
-    Read = 1,
-    ReadWrite = 2,
-    ReadExecute = 3,
 }
 
 impl Rights {
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Read => "r",
-            Self::ReadWrite => "rw",
-            Self::ReadExecute => "rx",
-        }
-    }
-
-    pub fn from_name(name: &str) -> Option<Self> {
-        match name {
-            "r" => Some(Self::Read),
-            "rw" => Some(Self::ReadWrite),
-            "rx" => Some(Self::ReadExecute),
-            _ => None,
-        }
-    }
-
-    pub fn from_code(code: u8) -> Option<Self> {
-        match code {
-            1 => Some(Self::Read),
-            2 => Some(Self::ReadWrite),
-            3 => Some(Self::ReadExecute),
-            _ => None,
-        }
-    }
-
     /// The page rights `map` takes for this (every mapped page is readable).
     pub const fn page_rights(self) -> PageRights {
         match self {
@@ -585,7 +417,7 @@ mod tests {
     fn health_resolution() {
         let mut module = HealthTable::default();
         let mut part = HealthTable::default();
-        let e = HealthError::DeadlineMissed;
+        let e = ErrorCode::DeadlineMissed;
         assert_eq!(
             HealthTable::resolve(Some(&part), &module, e),
             HealthAction::Idle

@@ -187,7 +187,7 @@ impl Validator<'_, '_> {
         let mut out = HealthTable::default();
         for (error, action) in in_source_order(table) {
             let here = path.key(error.get_ref());
-            let e = HealthError::from_name(error.get_ref());
+            let e = ErrorCode::from_name(error.get_ref());
             if e.is_none() {
                 self.error(
                     start(error),
@@ -195,7 +195,7 @@ impl Validator<'_, '_> {
                     format!(
                         "unknown health error `{}`; known errors: {}",
                         error.get_ref(),
-                        list(&HealthError::ALL, HealthError::name)
+                        list(&ErrorCode::ALL, ErrorCode::name)
                     ),
                 );
             }

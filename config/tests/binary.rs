@@ -5,7 +5,7 @@ mod common;
 use abi::crc32::crc32;
 use common::*;
 use config::binary::{self, DecodeError, Table};
-use config::model::{Direction, HealthAction, HealthError, PortKind, Rights};
+use config::model::{Direction, ErrorCode, HealthAction, PortKind, Rights};
 use config::{System, decode};
 use proptest::prelude::*;
 
@@ -157,7 +157,7 @@ fn round_trip() {
     assert_eq!(shared[0].rights, Rights::ReadWrite);
     assert_eq!(view.segment(shared[1].segment).name, "code");
     assert_eq!(
-        ctl.health.get(HealthError::ApplicationError),
+        ctl.health.get(ErrorCode::ApplicationError),
         Some(HealthAction::ShutdownSuccess)
     );
     let io = view.partition(1);
@@ -192,7 +192,7 @@ fn round_trip() {
     );
     assert_eq!(ctl.find_port("level").unwrap().refresh, 20_000_000);
     assert_eq!(
-        view.health().get(HealthError::PowerFail),
+        view.health().get(ErrorCode::PowerFail),
         Some(HealthAction::Shutdown)
     );
 }

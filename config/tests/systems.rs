@@ -4,7 +4,7 @@
 
 mod common;
 use config::System;
-use config::model::{HealthAction, HealthError, IoRange, PortKind};
+use config::model::{ErrorCode, HealthAction, IoRange, PortKind};
 use std::path::PathBuf;
 
 fn systems_dir() -> PathBuf {
@@ -91,11 +91,11 @@ fn plc_guest_system() {
         ]
     );
     assert_eq!(
-        plc.health.get(HealthError::DeadlineMissed),
+        plc.health.get(ErrorCode::DeadlineMissed),
         Some(HealthAction::WarmRestart)
     );
     assert_eq!(
-        s.health.get(HealthError::MemoryViolation),
+        s.health.get(ErrorCode::MemoryViolation),
         Some(HealthAction::Idle)
     );
 }

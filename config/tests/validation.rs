@@ -3,7 +3,7 @@
 
 mod common;
 use common::*;
-use config::model::{HealthAction, HealthError, PortKind};
+use config::model::{ErrorCode, HealthAction, PortKind};
 
 #[test]
 fn base_is_valid() {
@@ -1067,11 +1067,11 @@ fn health_tables() {
     ]);
     let s = load_ok(&src);
     assert_eq!(
-        s.partitions[0].health.get(HealthError::DeadlineMissed),
+        s.partitions[0].health.get(ErrorCode::DeadlineMissed),
         Some(HealthAction::WarmRestart)
     );
     assert_eq!(
-        s.health.get(HealthError::ApplicationError),
+        s.health.get(ErrorCode::ApplicationError),
         Some(HealthAction::ShutdownSuccess)
     );
 }

@@ -17,8 +17,6 @@
 //! halt.
 #![no_std]
 #![no_main]
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
 mod partitions;
 mod server;
@@ -100,7 +98,6 @@ fn main(image_base: u64, image_len: u64) {
         health: syssw_core::health::HealthMonitor::new(),
         ipc,
         me,
-        message: [0; config::model::MAX_MESSAGE_SIZE as usize],
     };
     for p in system.partitions() {
         server

@@ -1,6 +1,6 @@
-//! syssw's service loop: one thread answers the partitions' requests
-//! (`user_rt::service`: partition status and modes, sampling and queuing ports, error
-//! reports, application messages) and the kernel's fault reports, and carries out the
+//! syssw's service loop: one thread answers the partitions' requests (the service protocol,
+//! `syssw/protocol`: partition status and modes, sampling and queuing ports, error reports,
+//! application messages) and the kernel's fault reports, and carries out the
 //! health monitor's decisions (stop, cold/warm restart, module shutdown).
 //!
 //! It runs in time partition 0 above every partition's MCP, so a request is served at
@@ -16,21 +16,21 @@
 
 use crate::partitions::{self, Instance, Placement, Start};
 use config::binary::SystemView;
-use config::model::{
-    Direction, HealthError, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind,
-};
+use config::model::{Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind};
 use root_task::spawn::Spawner;
-use syssw_core::codes::ReturnCode;
 use syssw_core::health::{
     Detail, ErrorEvent, Fault, HealthMonitor, Text, classify, write_log_line,
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode};
-use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Validity};
+use syssw_core::ports::{Completion, NEVER, Outcome, Ports};
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
 use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
-use user_rt::service as svc;
+use user_rt::protocol::{
+    PartitionStatus, PortIdReply, QueuingMessage, QueuingStatus, ReplyWords, Request, ReturnCode,
+    SamplingMessage, SamplingStatus, Wire,
+};
 use user_rt::sys::{self, Message, Received};
 
 /// One configured partition at run time.
@@ -52,9 +52,11 @@ pub struct Server<'a> {
     pub health: HealthMonitor,
     pub ipc: IpcBufferRef,
     pub me: ThreadId,
-    /// A request's message, copied out of the IPC buffer before anything else uses it.
-    pub message: [u8; MAX_MESSAGE_SIZE as usize],
 }
+
+/// A request's data (name, message, text), copied out of the IPC buffer before anything
+/// else uses it; a read or receive copies its message here on the way back.
+type Buffer = [u8; MAX_MESSAGE_SIZE as usize];
 
 /// Replies `code` with `words` and `data` (through syssw's IPC buffer) to `to`. A caller
 /// that is gone (killed while waiting) is no error.
@@ -69,15 +71,11 @@ fn answer(ipc: IpcBufferRef, to: ThreadId, code: ReturnCode, words: [u64; 3], da
 
 /// Answers a parked queuing request that finished (sent, received or timed out).
 fn complete(ipc: IpcBufferRef, c: Completion<'_>) {
-    let len = c.message.len() as u64;
-    answer(ipc, ThreadId(c.token), c.code, [len, 0, 0], c.message);
-}
-
-fn direction_code(d: Direction) -> u64 {
-    match d {
-        Direction::Out => svc::DIRECTION_SOURCE,
-        Direction::In => svc::DIRECTION_DESTINATION,
+    let words = QueuingMessage {
+        len: c.message.len() as u64,
     }
+    .to_words();
+    answer(ipc, ThreadId(c.token), c.code, words, c.message);
 }
 
 /// A health record as the core's formatter writes it.
@@ -91,6 +89,7 @@ impl core::fmt::Display for LogLine<'_, '_> {
 
 impl<'a> Server<'a> {
     pub fn run(mut self) -> ! {
+        let mut buffer: Buffer = [0; MAX_MESSAGE_SIZE as usize];
         loop {
             let now = sys::clock();
             let ipc = self.ipc;
@@ -102,7 +101,7 @@ impl<'a> Server<'a> {
                 if m.message.tag.label() == LABEL_FAULT_REPORT {
                     self.fault(m);
                 } else {
-                    self.request(m);
+                    self.request(m, &mut buffer);
                 }
             }
         }
@@ -122,39 +121,50 @@ impl<'a> Server<'a> {
             .expect("every configured partition is placed at start-up")
     }
 
-    fn request(&mut self, m: Received) {
+    fn request(&mut self, m: Received, buffer: &mut Buffer) {
         let ipc = self.ipc;
         let Some(index) = self.partition_of(m.sender_task) else {
             answer(ipc, m.sender, ReturnCode::InvalidParam, [0; 3], &[]);
             return;
         };
         let tag = m.message.tag;
-        if tag.len() > self.message.len() {
+        if tag.len() > buffer.len() {
             // Longer than any port's message (the configuration's limit).
             answer(ipc, m.sender, ReturnCode::InvalidConfig, [0; 3], &[]);
             return;
         }
         let len = tag.len();
-        ipc.read_data(0, &mut self.message[..len]);
-        let [w0, w1, w2] = m.message.words;
+        ipc.read_data(0, &mut buffer[..len]);
         let now = sys::clock();
         let reply = |code: ReturnCode, words: [u64; 3]| answer(ipc, m.sender, code, words, &[]);
-        match tag.label() {
-            svc::PARTITION_STATUS => {
-                let (period, duration) = self.period_and_duration(index);
+        let wire = Wire {
+            label: tag.label(),
+            words: m.message.words,
+            data: &buffer[..len],
+        };
+        let request = match Request::decode(wire) {
+            Ok(request) => request,
+            Err(error) => return reply(error.return_code(), [0; 3]),
+        };
+        if let Some(port) = request.port()
+            && !self.port_ready(index, port)
+        {
+            return reply(ReturnCode::InvalidParam, [0; 3]);
+        }
+        match request {
+            Request::PartitionStatus => {
+                let (period_ns, duration_ns) = self.period_and_duration(index);
                 let mode = self.running(index).mode;
-                reply(
-                    ReturnCode::NoError,
-                    [
-                        mode.mode() as u64
-                            | (mode.start_condition() as u64) << 8
-                            | (index as u64) << 16,
-                        period,
-                        duration,
-                    ],
-                );
+                let status = PartitionStatus {
+                    mode: mode.mode(),
+                    start_condition: mode.start_condition(),
+                    index: index as u64,
+                    period_ns,
+                    duration_ns,
+                };
+                reply(ReturnCode::NoError, status.to_words());
             }
-            svc::SET_PARTITION_MODE => match self.running(index).mode.request_code(w0) {
+            Request::SetPartitionMode { mode } => match self.running(index).mode.request(mode) {
                 Err(code) => reply(code, [0; 3]),
                 Ok(ModeChange::Run) => {
                     self.log_mode(index);
@@ -162,54 +172,67 @@ impl<'a> Server<'a> {
                 }
                 Ok(change) => self.carry_out(index, change),
             },
-            svc::CREATE_PORT => {
-                let (code, id) = self.create_port(index, len, w0, w1, w2);
-                reply(code, [id, 0, 0]);
+            Request::CreatePort {
+                kind,
+                direction,
+                max_message_size,
+                refresh_or_depth,
+                name,
+            } => {
+                let (code, port) = self.create_port(
+                    index,
+                    name,
+                    kind,
+                    direction,
+                    max_message_size,
+                    refresh_or_depth,
+                );
+                reply(code, PortIdReply { port }.to_words());
             }
-            svc::PORT_ID => {
-                let (code, id) = self.port_id(index, len, w0);
-                reply(code, [id, 0, 0]);
+            Request::PortId { kind, name } => {
+                let (code, port) = self.port_id(index, name, kind);
+                reply(code, PortIdReply { port }.to_words());
             }
-            _ if !self.port_ready(index, w0) && is_port_request(tag.label()) => {
-                reply(ReturnCode::InvalidParam, [0; 3]);
-            }
-            svc::WRITE_SAMPLING => {
+            Request::WriteSampling { port, message } => {
                 let code = self
                     .ports
-                    .write_sampling(index, w0 as usize, &self.message[..len], now);
+                    .write_sampling(index, port as usize, message, now);
                 reply(code, [0; 3]);
             }
-            svc::READ_SAMPLING => {
-                let s = self
-                    .ports
-                    .read_sampling(index, w0 as usize, now, &mut self.message);
-                let valid = (s.validity == Validity::Valid) as u64;
-                answer(
-                    ipc,
-                    m.sender,
-                    s.code,
-                    [s.len as u64, valid, 0],
-                    &self.message[..s.len],
-                );
+            Request::ReadSampling { port } => {
+                let s = self.ports.read_sampling(index, port as usize, now, buffer);
+                let words = SamplingMessage {
+                    len: s.len as u64,
+                    validity: s.validity,
+                }
+                .to_words();
+                answer(ipc, m.sender, s.code, words, &buffer[..s.len]);
             }
-            svc::SAMPLING_STATUS => match self.ports.sampling_status(index, w0 as usize) {
-                Ok(s) => reply(
-                    ReturnCode::NoError,
-                    [
-                        s.max_message_size as u64 | direction_code(s.direction) << 32,
-                        s.refresh_period,
-                        (s.last_msg_validity == Validity::Valid) as u64,
-                    ],
-                ),
-                Err(code) => reply(code, [0; 3]),
-            },
-            svc::SEND_QUEUING => {
+            Request::SamplingStatus { port } => {
+                match self.ports.sampling_status(index, port as usize) {
+                    Ok(s) => {
+                        let status = SamplingStatus {
+                            max_message_size: s.max_message_size,
+                            direction: s.direction,
+                            refresh_ns: s.refresh_period,
+                            last_validity: s.last_msg_validity,
+                        };
+                        reply(ReturnCode::NoError, status.to_words());
+                    }
+                    Err(code) => reply(code, [0; 3]),
+                }
+            }
+            Request::SendQueuing {
+                port,
+                timeout,
+                message,
+            } => {
                 let outcome = self.ports.send_queuing(
                     index,
-                    w0 as usize,
-                    &self.message[..len],
+                    port as usize,
+                    message,
                     now,
-                    w1,
+                    timeout,
                     m.sender.0,
                     |c| complete(ipc, c),
                 );
@@ -217,67 +240,62 @@ impl<'a> Server<'a> {
                     reply(code, [0; 3]);
                 }
             }
-            svc::RECEIVE_QUEUING => {
+            Request::ReceiveQueuing { port, timeout } => {
                 let outcome = self.ports.receive_queuing(
                     index,
-                    w0 as usize,
+                    port as usize,
                     now,
-                    w1,
+                    timeout,
                     m.sender.0,
-                    &mut self.message,
+                    buffer,
                     |c| complete(ipc, c),
                 );
                 if let Outcome::Done { code, len } = outcome {
-                    answer(
-                        ipc,
-                        m.sender,
-                        code,
-                        [len as u64, 0, 0],
-                        &self.message[..len],
-                    );
+                    let words = QueuingMessage { len: len as u64 }.to_words();
+                    answer(ipc, m.sender, code, words, &buffer[..len]);
                 }
             }
-            svc::QUEUING_STATUS => match self.ports.queuing_status(index, w0 as usize) {
-                Ok(s) => reply(
-                    ReturnCode::NoError,
-                    [
-                        s.nb_message as u64 | (s.max_nb_message as u64) << 32,
-                        s.max_message_size as u64 | direction_code(s.direction) << 32,
-                        s.waiting_processes as u64,
-                    ],
-                ),
-                Err(code) => reply(code, [0; 3]),
-            },
-            svc::CLEAR_QUEUING => {
+            Request::QueuingStatus { port } => {
+                match self.ports.queuing_status(index, port as usize) {
+                    Ok(s) => {
+                        let status = QueuingStatus {
+                            nb_message: s.nb_message,
+                            max_nb_message: s.max_nb_message,
+                            max_message_size: s.max_message_size,
+                            direction: s.direction,
+                            waiting_processes: s.waiting_processes as u64,
+                        };
+                        reply(ReturnCode::NoError, status.to_words());
+                    }
+                    Err(code) => reply(code, [0; 3]),
+                }
+            }
+            Request::ClearQueuing { port } => {
                 let code = self
                     .ports
-                    .clear_queuing(index, w0 as usize, now, |c| complete(ipc, c));
+                    .clear_queuing(index, port as usize, now, |c| complete(ipc, c));
                 reply(code, [0; 3]);
             }
-            svc::REPORT_ERROR => match HealthError::ALL.get(w0 as usize) {
-                None => reply(ReturnCode::InvalidParam, [0; 3]),
-                Some(&error) => {
-                    let detail = match len {
-                        0 => Detail::None,
-                        _ => Detail::Text(Text::new(&self.message[..len])),
-                    };
-                    // The reply goes out first when the caller lives on (ignore).
-                    if self.error(index, error, detail) {
-                        reply(ReturnCode::NoError, [0; 3]);
-                    }
+            Request::ReportError { error, detail } => {
+                let detail = match detail {
+                    [] => Detail::None,
+                    text => Detail::Text(Text::new(text)),
+                };
+                // The reply goes out first when the caller lives on (ignore).
+                if self.error(index, error, detail) {
+                    reply(ReturnCode::NoError, [0; 3]);
                 }
-            },
-            svc::APPLICATION_MESSAGE => {
+            }
+            Request::ApplicationMessage { text } => {
                 println!(
                     "message: t={}.{:03}ms partition={} text={}",
                     now / 1_000_000,
                     now / 1000 % 1000,
                     self.system.partition(index).name,
-                    Detail::Text(Text::new(&self.message[..len]))
+                    Detail::Text(Text::new(text))
                 );
                 reply(ReturnCode::NoError, [0; 3]);
             }
-            _ => reply(ReturnCode::InvalidParam, [0; 3]),
         }
     }
 
@@ -293,20 +311,23 @@ impl<'a> Server<'a> {
     fn create_port(
         &mut self,
         index: usize,
-        len: usize,
-        w0: u64,
+        name: &[u8],
+        kind: PortKind,
+        direction: Direction,
         size: u64,
-        w2: u64,
+        refresh_or_depth: u64,
     ) -> (ReturnCode, u64) {
-        let Some(port) = self.find_port(index, len, w0 & 0xff) else {
+        let Some(port) = self.find_port(index, name, kind) else {
             return (ReturnCode::InvalidConfig, 0);
         };
-        let matches = direction_code(port.direction) == (w0 >> 8) & 0xff
+        let matches = port.direction == direction
             && port.size as u64 == size
             && match port.kind {
                 // ARINC: only a destination has a refresh period (a source's is ignored).
-                PortKind::Sampling => port.direction == Direction::Out || port.refresh == w2,
-                PortKind::Queuing => port.depth as u64 == w2,
+                PortKind::Sampling => {
+                    port.direction == Direction::Out || port.refresh == refresh_or_depth
+                }
+                PortKind::Queuing => port.depth as u64 == refresh_or_depth,
             };
         if !matches {
             return (ReturnCode::InvalidConfig, 0);
@@ -323,8 +344,8 @@ impl<'a> Server<'a> {
     }
 
     /// ARINC GET_*_PORT_ID: a created port of this partition by name.
-    fn port_id(&self, index: usize, len: usize, kind: u64) -> (ReturnCode, u64) {
-        match self.find_port(index, len, kind) {
+    fn port_id(&self, index: usize, name: &[u8], kind: PortKind) -> (ReturnCode, u64) {
+        match self.find_port(index, name, kind) {
             Some(p) if self.created[p.index] => (ReturnCode::NoError, p.index as u64),
             _ => (ReturnCode::InvalidConfig, 0),
         }
@@ -333,15 +354,10 @@ impl<'a> Server<'a> {
     fn find_port(
         &self,
         index: usize,
-        len: usize,
-        kind: u64,
+        name: &[u8],
+        kind: PortKind,
     ) -> Option<config::binary::PortView<'a>> {
-        let name = core::str::from_utf8(&self.message[..len]).ok()?;
-        let kind = match kind {
-            svc::KIND_SAMPLING => PortKind::Sampling,
-            svc::KIND_QUEUING => PortKind::Queuing,
-            _ => return None,
-        };
+        let name = core::str::from_utf8(name).ok()?;
         self.system
             .ports()
             .find(|p| p.partition == index && p.kind == kind && p.name == name)
@@ -385,7 +401,7 @@ impl<'a> Server<'a> {
 
     /// Records and logs an error of partition `index` and carries out the configured
     /// action. True if the partition is still running as before (the caller may answer).
-    fn error(&mut self, index: usize, error: HealthError, detail: Detail) -> bool {
+    fn error(&mut self, index: usize, error: ErrorCode, detail: Detail) -> bool {
         let now = sys::clock();
         let event = ErrorEvent {
             partition: Some(index),
@@ -485,19 +501,6 @@ impl<'a> Server<'a> {
             mode.restarts()
         );
     }
-}
-
-fn is_port_request(label: u32) -> bool {
-    matches!(
-        label,
-        svc::WRITE_SAMPLING
-            | svc::READ_SAMPLING
-            | svc::SAMPLING_STATUS
-            | svc::SEND_QUEUING
-            | svc::RECEIVE_QUEUING
-            | svc::QUEUING_STATUS
-            | svc::CLEAR_QUEUING
-    )
 }
 
 fn kill_faulted(thread: ThreadId) {

@@ -1,23 +1,58 @@
-//! ARINC 653 return codes and names as the syssw protocol carries them (pure: no system
-//! calls, host-tested).
+//! Conversions between a653rs's APEX types and the service protocol's (`syssw/protocol`),
+//! and ARINC names (pure: no system calls, host-tested). The codes themselves are defined
+//! once, in the protocol crate; a653rs numbers them as ARINC does, and so does the protocol.
 
-use a653rs::bindings::{ApexName, ErrorReturnCode, ReturnCode};
+use a653rs::bindings::{
+    ApexName, ErrorCode as ApexErrorCode, ErrorReturnCode, OperatingMode as ApexMode,
+    PortDirection, Validity as ApexValidity,
+};
+use protocol::{Direction, ErrorCode, OperatingMode, Validity, reply_result};
 
 /// A protocol reply label (an ARINC 653 `RETURN_CODE_TYPE`) as a result.
 ///
 /// A label outside the ARINC range would be a protocol fault of syssw; it is reported as
 /// `NOT_AVAILABLE` (the service could not be performed) rather than trusted or panicked on.
-pub fn from_reply(code: ReturnCode) -> Result<(), ErrorReturnCode> {
-    match code {
-        0 => Ok(()),
-        1 => Err(ErrorReturnCode::NoAction),
-        2 => Err(ErrorReturnCode::NotAvailable),
-        3 => Err(ErrorReturnCode::InvalidParam),
-        4 => Err(ErrorReturnCode::InvalidConfig),
-        5 => Err(ErrorReturnCode::InvalidMode),
-        6 => Err(ErrorReturnCode::TimedOut),
-        _ => Err(ErrorReturnCode::NotAvailable),
+pub fn from_reply(label: u32) -> Result<(), ErrorReturnCode> {
+    match reply_result(label) {
+        Ok(Ok(())) => Ok(()),
+        // In range (the protocol decoded it), so a653rs's decoder cannot panic on it.
+        Ok(Err(code)) => ErrorReturnCode::from(code.code()),
+        Err(_) => Err(ErrorReturnCode::NotAvailable),
     }
+}
+
+/// A port direction as the protocol carries it (ARINC SOURCE = the partition's `out`).
+pub fn direction(direction: PortDirection) -> Direction {
+    match direction {
+        PortDirection::Source => Direction::Out,
+        PortDirection::Destination => Direction::In,
+    }
+}
+
+/// The APEX direction of a protocol direction.
+pub fn port_direction(direction: Direction) -> PortDirection {
+    match direction {
+        Direction::Out => PortDirection::Source,
+        Direction::In => PortDirection::Destination,
+    }
+}
+
+/// The APEX validity of a protocol validity.
+pub fn validity(validity: Validity) -> ApexValidity {
+    match validity {
+        Validity::Valid => ApexValidity::Valid,
+        Validity::Invalid => ApexValidity::Invalid,
+    }
+}
+
+/// The protocol's operating mode for an APEX one (both ARINC-numbered).
+pub fn mode(mode: ApexMode) -> Option<OperatingMode> {
+    OperatingMode::from_u64(mode as u64)
+}
+
+/// The protocol's error code for an APEX one (both ARINC-numbered).
+pub fn error_code(code: ApexErrorCode) -> Option<ErrorCode> {
+    ErrorCode::from_u64(code as u64)
 }
 
 /// The bytes of an ARINC name: up to the first NUL, at most 32.
@@ -51,6 +86,26 @@ mod tests {
         assert_eq!(from_reply(6), Err(ErrorReturnCode::TimedOut));
         assert_eq!(from_reply(7), Err(ErrorReturnCode::NotAvailable));
         assert_eq!(from_reply(u32::MAX), Err(ErrorReturnCode::NotAvailable));
+    }
+
+    #[test]
+    fn apex_and_protocol_codes_agree() {
+        for d in [PortDirection::Source, PortDirection::Destination] {
+            assert_eq!(port_direction(direction(d)), d);
+        }
+        assert_eq!(direction(PortDirection::Source), Direction::Out);
+        assert_eq!(validity(Validity::Valid), ApexValidity::Valid);
+        assert_eq!(validity(Validity::Invalid), ApexValidity::Invalid);
+        assert_eq!(mode(ApexMode::WarmStart), Some(OperatingMode::WarmStart));
+        assert_eq!(mode(ApexMode::Idle), Some(OperatingMode::Idle));
+        assert_eq!(
+            error_code(ApexErrorCode::MemoryViolation),
+            Some(ErrorCode::MemoryViolation)
+        );
+        assert_eq!(
+            error_code(ApexErrorCode::PowerFail),
+            Some(ErrorCode::PowerFail)
+        );
     }
 
     #[test]

@@ -13,6 +13,10 @@
 //! it. On the single CPU the lock is thus never contended; finding it taken means its
 //! holder died inside (a bug), which panics instead of spinning.
 
+// The start record, the static thread stacks and IPC buffers, the heap arena and the global
+// allocator are raw memory: the reason for `unsafe` in this module.
+#![allow(unsafe_code)]
+
 use crate::codes;
 use crate::table::{self, Delivery, ERROR_HANDLER_SLOT, PendingError, SLOTS, STACK_SIZE, Table};
 use crate::time;
@@ -21,6 +25,7 @@ use core::alloc::{GlobalAlloc, Layout};
 use core::ptr::NonNull;
 use core::sync::atomic::{AtomicU8, AtomicU64, Ordering};
 use linked_list_allocator::Heap;
+use protocol::{PartitionStatus, ReplyWords, Request};
 use spin::mutex::{SpinMutex, SpinMutexGuard};
 use user_rt::abi::ipc::IpcBuffer;
 use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
@@ -181,7 +186,7 @@ pub fn start(start_record: u64, main: fn()) -> ! {
         id.store(0, Ordering::Relaxed);
     }
     THREAD_IDS[MAIN].store(me.0, Ordering::Relaxed);
-    let partition_period = partition_status().map_or(0, |r| r.words[1]);
+    let partition_period = partition_status().map_or(0, |s| s.period_ns);
     reset_state(Table::new(
         mcp(),
         partition_period,
@@ -242,30 +247,33 @@ unsafe impl GlobalAlloc for BoundedHeap {
 }
 
 /// Sends a protocol request from the calling thread's IPC buffer; reply data stays there.
-pub fn request(
-    label: u32,
-    words: [u64; 3],
-    data: &[u8],
-) -> Result<(Reply, IpcBufferRef), ErrorReturnCode> {
+pub fn request(request: &Request) -> Result<(Reply, IpcBufferRef), ErrorReturnCode> {
     let index = own_index().ok_or(ErrorReturnCode::InvalidMode)?;
     let server = service::server().ok_or(ErrorReturnCode::NotAvailable)?;
     // SAFETY: `ipc_address(index)` is the static IPC buffer registered for this thread
     // (IPC_BUFFER_SIZE bytes, 8-aligned, writable) and nothing takes references to it.
     let ipc = unsafe { IpcBufferRef::new(ipc_address(index)) };
-    let reply = service::request(server, ipc, label, words, data)
-        .map_err(|_| ErrorReturnCode::NotAvailable)?;
+    let reply =
+        service::request(server, ipc, request).map_err(|_| ErrorReturnCode::NotAvailable)?;
     Ok((reply, ipc))
 }
 
 /// A request whose reply carries only a code.
-pub fn request_code(label: u32, words: [u64; 3], data: &[u8]) -> Result<Reply, ErrorReturnCode> {
-    let (reply, _) = request(label, words, data)?;
-    codes::from_reply(reply.code)?;
+pub fn request_code(request: &Request) -> Result<Reply, ErrorReturnCode> {
+    let (reply, _) = self::request(request)?;
+    codes::from_reply(reply.label)?;
     Ok(reply)
 }
 
-pub fn partition_status() -> Result<Reply, ErrorReturnCode> {
-    request_code(service::PARTITION_STATUS, [0; 3], &[])
+/// The reply words of a request, decoded as `R` (words syssw should never send are
+/// NOT_AVAILABLE: the service could not be performed).
+pub fn request_words<R: ReplyWords>(request: &Request) -> Result<R, ErrorReturnCode> {
+    let reply = request_code(request)?;
+    R::from_words(reply.words).map_err(|_| ErrorReturnCode::NotAvailable)
+}
+
+pub fn partition_status() -> Result<PartitionStatus, ErrorReturnCode> {
+    request_words(&Request::PartitionStatus)
 }
 
 pub fn partition_index() -> u64 {
@@ -422,7 +430,11 @@ pub fn raise(code: ErrorCode, process: Option<usize>, text: &[u8]) -> Result<(),
         delivery
     };
     if delivery == Delivery::Monitor {
-        request_code(service::REPORT_ERROR, [code as u64, 0, 0], error.text())?;
+        let error = Request::ReportError {
+            error: codes::error_code(code).ok_or(ErrorReturnCode::InvalidParam)?,
+            detail: error.text(),
+        };
+        request_code(&error)?;
     }
     Ok(())
 }

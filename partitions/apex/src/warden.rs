@@ -1,13 +1,15 @@
 //! [`Warden`]: the a653rs APEX traits implemented on the Warden kernel and syssw.
 
 use crate::codes::{self, id_word, name_bytes};
-use crate::runtime::{self, Critical, WAKE_BIT, own_index, own_slot, request, request_code};
+use crate::runtime::{
+    self, Critical, WAKE_BIT, own_index, own_slot, request, request_code, request_words,
+};
 use crate::table::{self, ERROR_HANDLER_SLOT, MAX_PROCESSES, Wait};
 use crate::time::{self, finite, protocol_timeout};
 use a653rs::bindings::*;
+use protocol::{PortIdReply, PortKind, QueuingMessage, ReplyWords, Request, SamplingMessage};
 use user_rt::abi::ipc::IPC_DATA_MAX;
 use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
-use user_rt::service;
 use user_rt::sys;
 
 /// The APEX implementation partition programs name as a653rs's hypervisor type
@@ -30,12 +32,12 @@ impl ApexPartitionP4 for Warden {
         // ARINC: never fails. Should syssw not answer, the runtime's own view is reported.
         let (mode, start_condition, identifier, period, duration) =
             match runtime::partition_status() {
-                Ok(reply) => (
-                    (reply.words[0] & 0xff) as u32,
-                    ((reply.words[0] >> 8) & 0xff) as u32,
-                    (reply.words[0] >> 16) as i64,
-                    reply.words[1] as i64,
-                    reply.words[2] as i64,
+                Ok(status) => (
+                    u32::from(status.mode.code()),
+                    u32::from(status.start_condition.code()),
+                    status.index as i64,
+                    status.period_ns as i64,
+                    status.duration_ns as i64,
                 ),
                 Err(_) => {
                     let normal = Critical::enter().table().normal;
@@ -57,11 +59,8 @@ impl ApexPartitionP4 for Warden {
 
     fn set_partition_mode(operating_mode: OperatingMode) -> Result<()> {
         // IDLE and restarts get no reply when syssw carries them out: this thread is gone.
-        request_code(
-            service::SET_PARTITION_MODE,
-            [operating_mode as u64, 0, 0],
-            &[],
-        )?;
+        let mode = codes::mode(operating_mode).ok_or(ErrorReturnCode::InvalidParam)?;
+        request_code(&Request::SetPartitionMode { mode })?;
         if operating_mode != OperatingMode::Normal {
             return Ok(());
         }
@@ -305,17 +304,6 @@ fn with_wait<R>(slot: Option<usize>, wait: Wait, f: impl FnOnce() -> R) -> R {
 
 // ---------------------------------------------------------------- ports (3.6.2)
 
-fn direction_word(direction: PortDirection) -> u64 {
-    match direction {
-        PortDirection::Source => service::DIRECTION_SOURCE,
-        PortDirection::Destination => service::DIRECTION_DESTINATION,
-    }
-}
-
-fn direction_of(word: u64) -> Result<PortDirection> {
-    PortDirection::try_from(word as u32).map_err(|_| ErrorReturnCode::NotAvailable)
-}
-
 /// A message the IPC buffer can carry (longer ones exceed every port: INVALID_CONFIG).
 fn check_message(message: &[ApexByte]) -> Result<()> {
     if message.len() > IPC_DATA_MAX {
@@ -338,16 +326,14 @@ impl ApexSamplingPortP4 for Warden {
                 finite(refresh_period).ok_or(ErrorReturnCode::InvalidConfig)?
             }
         };
-        let reply = request_code(
-            service::CREATE_PORT,
-            [
-                service::KIND_SAMPLING | direction_word(port_direction) << 8,
-                u64::from(max_message_size),
-                refresh,
-            ],
-            name_bytes(&sampling_port_name),
-        )?;
-        Ok(reply.words[0] as SamplingPortId)
+        let reply: PortIdReply = request_words(&Request::CreatePort {
+            kind: PortKind::Sampling,
+            direction: codes::direction(port_direction),
+            max_message_size: u64::from(max_message_size),
+            refresh_or_depth: refresh,
+            name: name_bytes(&sampling_port_name),
+        })?;
+        Ok(reply.port as SamplingPortId)
     }
 
     fn write_sampling_message(
@@ -355,69 +341,56 @@ impl ApexSamplingPortP4 for Warden {
         message: &[ApexByte],
     ) -> Result<()> {
         check_message(message)?;
-        request_code(
-            service::WRITE_SAMPLING,
-            [id_word(sampling_port_id)?, 0, 0],
+        request_code(&Request::WriteSampling {
+            port: id_word(sampling_port_id)?,
             message,
-        )?;
+        })?;
         Ok(())
     }
 
     /// # Safety
     /// None beyond a653rs's contract: at most `message.len()` bytes are written; a longer
     /// message is refused with INVALID_PARAM.
+    #[allow(unsafe_code)] // a653rs declares the method unsafe; its body needs no unsafe
     unsafe fn read_sampling_message(
         sampling_port_id: SamplingPortId,
         message: &mut [ApexByte],
     ) -> Result<(Validity, MessageSize)> {
-        let (reply, ipc) = request(
-            service::READ_SAMPLING,
-            [id_word(sampling_port_id)?, 0, 0],
-            &[],
-        )?;
-        codes::from_reply(reply.code)?;
-        let length = reply.words[0] as usize;
+        let (reply, ipc) = request(&Request::ReadSampling {
+            port: id_word(sampling_port_id)?,
+        })?;
+        codes::from_reply(reply.label)?;
+        let sample =
+            SamplingMessage::from_words(reply.words).map_err(|_| ErrorReturnCode::NotAvailable)?;
+        let length = sample.len as usize;
         if length > message.len() || length > IPC_DATA_MAX {
             return Err(ErrorReturnCode::InvalidParam);
         }
         ipc.read_data(0, &mut message[..length]);
-        let validity = if reply.words[1] == 1 {
-            Validity::Valid
-        } else {
-            Validity::Invalid
-        };
-        Ok((validity, length as MessageSize))
+        Ok((codes::validity(sample.validity), length as MessageSize))
     }
 }
 
 impl ApexSamplingPortP1 for Warden {
     fn get_sampling_port_id(sampling_port_name: SamplingPortName) -> Result<SamplingPortId> {
-        let reply = request_code(
-            service::PORT_ID,
-            [service::KIND_SAMPLING, 0, 0],
-            name_bytes(&sampling_port_name),
-        )?;
-        Ok(reply.words[0] as SamplingPortId)
+        let reply: PortIdReply = request_words(&Request::PortId {
+            kind: PortKind::Sampling,
+            name: name_bytes(&sampling_port_name),
+        })?;
+        Ok(reply.port as SamplingPortId)
     }
 
     fn get_sampling_port_status(
         sampling_port_id: SamplingPortId,
     ) -> Result<ApexSamplingPortStatus> {
-        let reply = request_code(
-            service::SAMPLING_STATUS,
-            [id_word(sampling_port_id)?, 0, 0],
-            &[],
-        )?;
-        let [size_direction, refresh, validity] = reply.words;
+        let status: protocol::SamplingStatus = request_words(&Request::SamplingStatus {
+            port: id_word(sampling_port_id)?,
+        })?;
         Ok(ApexSamplingPortStatus {
-            refresh_period: i64::try_from(refresh).unwrap_or(INFINITE_TIME_VALUE),
-            max_message_size: size_direction as u32,
-            port_direction: direction_of(size_direction >> 32)?,
-            last_msg_validity: if validity == 1 {
-                Validity::Valid
-            } else {
-                Validity::Invalid
-            },
+            refresh_period: i64::try_from(status.refresh_ns).unwrap_or(INFINITE_TIME_VALUE),
+            max_message_size: status.max_message_size,
+            port_direction: codes::port_direction(status.direction),
+            last_msg_validity: codes::validity(status.last_validity),
         })
     }
 }
@@ -448,16 +421,14 @@ impl ApexQueuingPortP4 for Warden {
         if queuing_discipline != QueuingDiscipline::Fifo {
             return Err(ErrorReturnCode::InvalidConfig);
         }
-        let reply = request_code(
-            service::CREATE_PORT,
-            [
-                service::KIND_QUEUING | direction_word(port_direction) << 8,
-                u64::from(max_message_size),
-                u64::from(max_nb_message),
-            ],
-            name_bytes(&queuing_port_name),
-        )?;
-        Ok(reply.words[0] as QueuingPortId)
+        let reply: PortIdReply = request_words(&Request::CreatePort {
+            kind: PortKind::Queuing,
+            direction: codes::direction(port_direction),
+            max_message_size: u64::from(max_message_size),
+            refresh_or_depth: u64::from(max_nb_message),
+            name: name_bytes(&queuing_port_name),
+        })?;
+        Ok(reply.port as QueuingPortId)
     }
 
     fn send_queuing_message(
@@ -468,11 +439,11 @@ impl ApexQueuingPortP4 for Warden {
         check_message(message)?;
         let id = id_word(queuing_port_id)?;
         blocking_port_call(time_out, || {
-            request_code(
-                service::SEND_QUEUING,
-                [id, protocol_timeout(time_out), 0],
+            request_code(&Request::SendQueuing {
+                port: id,
+                timeout: protocol_timeout(time_out),
                 message,
-            )
+            })
         })??;
         Ok(())
     }
@@ -481,6 +452,7 @@ impl ApexQueuingPortP4 for Warden {
     /// None beyond a653rs's contract: at most `message.len()` bytes are written. A message
     /// longer than the buffer is refused with INVALID_PARAM (it has left the queue then).
     /// syssw does not report sender-side overflow, so `QueueOverflow` is always `false`.
+    #[allow(unsafe_code)] // a653rs declares the method unsafe; its body needs no unsafe
     unsafe fn receive_queuing_message(
         queuing_port_id: QueuingPortId,
         time_out: ApexSystemTime,
@@ -488,14 +460,15 @@ impl ApexQueuingPortP4 for Warden {
     ) -> Result<(MessageSize, QueueOverflow)> {
         let id = id_word(queuing_port_id)?;
         let (reply, ipc) = blocking_port_call(time_out, || {
-            request(
-                service::RECEIVE_QUEUING,
-                [id, protocol_timeout(time_out), 0],
-                &[],
-            )
+            request(&Request::ReceiveQueuing {
+                port: id,
+                timeout: protocol_timeout(time_out),
+            })
         })??;
-        codes::from_reply(reply.code)?;
-        let length = reply.words[0] as usize;
+        codes::from_reply(reply.label)?;
+        let received =
+            QueuingMessage::from_words(reply.words).map_err(|_| ErrorReturnCode::NotAvailable)?;
+        let length = received.len as usize;
         if length > message.len() || length > IPC_DATA_MAX {
             return Err(ErrorReturnCode::InvalidParam);
         }
@@ -504,39 +477,33 @@ impl ApexQueuingPortP4 for Warden {
     }
 
     fn get_queuing_port_status(queuing_port_id: QueuingPortId) -> Result<QueuingPortStatus> {
-        let reply = request_code(
-            service::QUEUING_STATUS,
-            [id_word(queuing_port_id)?, 0, 0],
-            &[],
-        )?;
-        let [messages, size_direction, waiting] = reply.words;
+        let status: protocol::QueuingStatus = request_words(&Request::QueuingStatus {
+            port: id_word(queuing_port_id)?,
+        })?;
         Ok(QueuingPortStatus {
-            nb_message: messages as u32,
-            max_nb_message: (messages >> 32) as u32,
-            max_message_size: size_direction as u32,
-            port_direction: direction_of(size_direction >> 32)?,
-            waiting_processes: i32::try_from(waiting).unwrap_or(i32::MAX),
+            nb_message: status.nb_message,
+            max_nb_message: status.max_nb_message,
+            max_message_size: status.max_message_size,
+            port_direction: codes::port_direction(status.direction),
+            waiting_processes: i32::try_from(status.waiting_processes).unwrap_or(i32::MAX),
         })
     }
 
     fn clear_queuing_port(queuing_port_id: QueuingPortId) -> Result<()> {
-        request_code(
-            service::CLEAR_QUEUING,
-            [id_word(queuing_port_id)?, 0, 0],
-            &[],
-        )?;
+        request_code(&Request::ClearQueuing {
+            port: id_word(queuing_port_id)?,
+        })?;
         Ok(())
     }
 }
 
 impl ApexQueuingPortP1 for Warden {
     fn get_queuing_port_id(queuing_port_name: QueuingPortName) -> Result<QueuingPortId> {
-        let reply = request_code(
-            service::PORT_ID,
-            [service::KIND_QUEUING, 0, 0],
-            name_bytes(&queuing_port_name),
-        )?;
-        Ok(reply.words[0] as QueuingPortId)
+        let reply: PortIdReply = request_words(&Request::PortId {
+            kind: PortKind::Queuing,
+            name: name_bytes(&queuing_port_name),
+        })?;
+        Ok(reply.port as QueuingPortId)
     }
 }
 
@@ -547,7 +514,7 @@ impl ApexErrorP4 for Warden {
         if message.len() > MAX_ERROR_MESSAGE_SIZE {
             return Err(ErrorReturnCode::InvalidParam);
         }
-        request_code(service::APPLICATION_MESSAGE, [0; 3], message)?;
+        request_code(&Request::ApplicationMessage { text: message })?;
         Ok(())
     }
 

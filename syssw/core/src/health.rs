@@ -32,7 +32,7 @@
 //!   microseconds within the millisecond as exactly 3 digits (`t=1234.005ms`);
 //! - `<name>`: the partition's configured name, or `-` for a module-level error;
 //! - `<error>` and `<action>`: the configuration's names (`memory_violation`,
-//!   `warm_restart`, ...: [`HealthError::name`], [`HealthAction::name`]);
+//!   `warm_restart`, ...: [`ErrorCode::name`], [`HealthAction::name`]);
 //! - `<detail>` never contains a space: `-` (none); `0x<hex>` (a code); for a CPU
 //!   exception `<#XX>,error=0x<hex>,address=0x<hex>,rip=0x<hex>` where `<#XX>` is the
 //!   mnemonic of [`vector_name`] (`#PF`, `NMI`, ...) or `vector=<decimal>` for a vector
@@ -48,7 +48,7 @@
 //! the glue's, see [`crate::mode`]).
 
 use config::binary::SystemView;
-use config::model::{HealthAction, HealthError, HealthTable, MAX_PARTITIONS};
+use config::model::{ErrorCode, HealthAction, HealthTable, MAX_PARTITIONS};
 use core::fmt::{self, Write};
 use core::ops::Range;
 
@@ -121,8 +121,8 @@ pub fn vector_name(vector: u64) -> Option<&'static str> {
 /// The ARINC 653 error a fault is (see the table in the module documentation).
 /// `stack_guard` is the faulting partition's stack guard range (unmapped pages below its
 /// stack); an empty range if it has none.
-pub fn classify(fault: &Fault, stack_guard: Range<u64>) -> HealthError {
-    use HealthError as E;
+pub fn classify(fault: &Fault, stack_guard: Range<u64>) -> ErrorCode {
+    use ErrorCode as E;
     match fault.vector {
         14 if stack_guard.contains(&fault.address) => E::StackOverflow,
         12 if stack_guard.contains(&fault.rsp) => E::StackOverflow,
@@ -136,11 +136,7 @@ pub fn classify(fault: &Fault, stack_guard: Range<u64>) -> HealthError {
 /// The action for `error` of `partition` (`None`: outside any partition) under the
 /// system's health tables. A partition index the system does not have counts as
 /// module-level (fail safe).
-pub fn decide(
-    system: &SystemView<'_>,
-    partition: Option<usize>,
-    error: HealthError,
-) -> HealthAction {
+pub fn decide(system: &SystemView<'_>, partition: Option<usize>, error: ErrorCode) -> HealthAction {
     let module = system.health();
     match partition.filter(|&p| p < system.partition_count()) {
         Some(p) => HealthTable::resolve(Some(&system.partition(p).health), &module, error),
@@ -227,7 +223,7 @@ impl fmt::Display for Detail {
 pub struct ErrorEvent {
     /// The partition (index in the configuration), `None` for a module-level error.
     pub partition: Option<usize>,
-    pub error: HealthError,
+    pub error: ErrorCode,
     pub detail: Detail,
 }
 
@@ -238,7 +234,7 @@ pub struct Record {
     pub time: u64,
     /// `None` for a module-level error.
     pub partition: Option<usize>,
-    pub error: HealthError,
+    pub error: ErrorCode,
     pub detail: Detail,
     pub action: HealthAction,
 }

@@ -1,7 +1,7 @@
 //! The pure logic of Warden's system software (syssw, the root task): ARINC 653
 //! inter-partition ports ([`ports`]), the health monitor's decisions and its event log
-//! ([`health`]) and the partitions' operating modes ([`mode`]), with the ARINC 653 return
-//! codes they answer with ([`codes`]).
+//! ([`health`]) and the partitions' operating modes ([`mode`]); the codes they answer with
+//! and the requests they serve are the service protocol's (`syssw/protocol`).
 //!
 //! syssw itself (`syssw/src`) is thin glue: it receives the partitions' requests and the
 //! kernel's fault reports over IPC, calls into this crate with the caller's partition and
@@ -19,10 +19,7 @@
 //! - loop without a bound: every loop runs over a fixed table, a configured count or a
 //!   message length.
 #![cfg_attr(not(test), no_std)]
-#![forbid(unsafe_op_in_unsafe_fn)]
-#![deny(unsafe_code)]
 
-pub mod codes;
 pub mod health;
 pub mod mode;
 pub mod ports;
@@ -30,4 +27,4 @@ pub mod ports;
 #[cfg(test)]
 mod testsys;
 
-pub use codes::ReturnCode;
+pub use protocol::ReturnCode;

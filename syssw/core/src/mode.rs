@@ -41,64 +41,8 @@
 //! its start condition and decides what to re-initialise. This module only decides; the
 //! glue reloads.
 
-use crate::codes::ReturnCode;
 use config::model::HealthAction;
-
-/// ARINC 653 `OPERATING_MODE_TYPE` (numeric values as in ARINC 653 Part 1).
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum OperatingMode {
-    Idle = 0,
-    ColdStart = 1,
-    WarmStart = 2,
-    Normal = 3,
-}
-
-impl OperatingMode {
-    pub fn from_code(code: u64) -> Option<Self> {
-        match code {
-            0 => Some(Self::Idle),
-            1 => Some(Self::ColdStart),
-            2 => Some(Self::WarmStart),
-            3 => Some(Self::Normal),
-            _ => None,
-        }
-    }
-
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::Idle => "IDLE",
-            Self::ColdStart => "COLD_START",
-            Self::WarmStart => "WARM_START",
-            Self::Normal => "NORMAL",
-        }
-    }
-}
-
-/// ARINC 653 `START_CONDITION_TYPE`: why the partition is (re)starting.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum StartCondition {
-    /// The module started (boot).
-    NormalStart = 0,
-    /// The partition asked for its restart (SET_PARTITION_MODE).
-    PartitionRestart = 1,
-    /// The health monitor restarted the module.
-    HmModuleRestart = 2,
-    /// The health monitor restarted the partition.
-    HmPartitionRestart = 3,
-}
-
-impl StartCondition {
-    pub const fn name(self) -> &'static str {
-        match self {
-            Self::NormalStart => "NORMAL_START",
-            Self::PartitionRestart => "PARTITION_RESTART",
-            Self::HmModuleRestart => "HM_MODULE_RESTART",
-            Self::HmPartitionRestart => "HM_PARTITION_RESTART",
-        }
-    }
-}
+pub use protocol::{OperatingMode, ReturnCode, StartCondition};
 
 /// What the glue must do after a transition.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -163,14 +107,6 @@ impl PartitionMode {
         self.start_condition = condition;
         self.restarts = self.restarts.saturating_add(1);
         ModeChange::Restart { warm }
-    }
-
-    /// SET_PARTITION_MODE with a raw mode code from the partition.
-    pub fn request_code(&mut self, code: u64) -> Result<ModeChange, ReturnCode> {
-        match OperatingMode::from_code(code) {
-            Some(mode) => self.request(mode),
-            None => Err(ReturnCode::InvalidParam),
-        }
     }
 
     /// SET_PARTITION_MODE(`requested`) from the partition itself (see the table in the
@@ -250,9 +186,9 @@ mod tests {
             (M::Normal, 3),
         ] {
             assert_eq!(mode as u64, code);
-            assert_eq!(M::from_code(code), Some(mode));
+            assert_eq!(M::from_u64(code), Some(mode));
         }
-        assert_eq!(M::from_code(4), None);
+        assert_eq!(M::from_u64(4), None);
         assert_eq!(StartCondition::NormalStart as u8, 0);
         assert_eq!(StartCondition::PartitionRestart as u8, 1);
         assert_eq!(StartCondition::HmModuleRestart as u8, 2);
@@ -345,12 +281,23 @@ mod tests {
 
     #[test]
     fn raw_codes() {
+        use protocol::{DecodeError, Label, Request, Wire};
+        // A mode code ARINC does not define never reaches the state machine: the protocol
+        // refuses it with INVALID_PARAM.
+        for code in [9, u64::MAX] {
+            let wire = Wire {
+                label: Label::SetPartitionMode.code(),
+                words: [code, 0, 0],
+                data: &[],
+            };
+            let error = Request::decode(wire).unwrap_err();
+            assert_eq!(error, DecodeError::UnknownMode(code));
+            assert_eq!(error.return_code(), ReturnCode::InvalidParam);
+        }
         let mut p = PartitionMode::boot();
-        assert_eq!(p.request_code(9), Err(ReturnCode::InvalidParam));
-        assert_eq!(p.request_code(u64::MAX), Err(ReturnCode::InvalidParam));
         assert_eq!(p.mode(), M::ColdStart);
-        assert_eq!(p.request_code(3), Ok(ModeChange::Run));
-        assert_eq!(p.request_code(3), Err(ReturnCode::NoAction));
+        assert_eq!(p.request(M::from_u64(3).unwrap()), Ok(ModeChange::Run));
+        assert_eq!(p.request(M::Normal), Err(ReturnCode::NoAction));
     }
 
     #[test]

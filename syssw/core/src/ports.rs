@@ -95,10 +95,10 @@
 //!
 //! [`MAX_MESSAGE_SIZE`]: config::model::MAX_MESSAGE_SIZE
 
-use crate::codes::ReturnCode;
 use abi::syscall::TIMEOUT_INFINITE;
 use config::binary::{ChannelView, SystemView};
 use config::model::{Direction, MAX_CHANNELS, MAX_PORTS, PortKind};
+use protocol::{ReturnCode, Validity};
 
 /// Most processes waiting on one queuing channel (see the module documentation).
 pub const MAX_WAITERS: usize = 8;
@@ -109,14 +109,6 @@ pub const NEVER: u64 = u64::MAX;
 const LEN_BYTES: usize = 2;
 /// Bytes of a waiter record's header (token, deadline, length, reserved).
 const WAITER_HEADER: usize = 24;
-
-/// ARINC 653 `VALIDITY_TYPE` of a sampling message.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Validity {
-    Invalid = 0,
-    Valid = 1,
-}
 
 /// What [`Ports::read_sampling`] returns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -8,7 +8,6 @@
 //! instruction stubs, the `mem*` primitives and raw accesses to memory the kernel maps
 //! (IPC buffers), each with its justification.
 #![no_std]
-#![forbid(unsafe_op_in_unsafe_fn)]
 
 pub mod ipc_buffer;
 pub mod mem;
@@ -19,6 +18,7 @@ pub mod service;
 pub mod sys;
 
 pub use abi;
+pub use protocol;
 
 /// Defines the ELF entry `_start(arg0, arg1)` that calls `$main(arg0, arg1)` and ends the
 /// thread when it returns.
@@ -45,7 +45,7 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
     // A partition reports the panic to syssw's health monitor (APPLICATION_ERROR; the
     // configured action may stop it); the root task may end the run; anyone else just
     // stops its thread.
-    service::report_error_bare(service::error::APPLICATION_ERROR);
+    service::report_error_bare(protocol::ErrorCode::ApplicationError);
     let _ = sys::system_halt(false);
     sys::thread_exit()
 }

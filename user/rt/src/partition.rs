@@ -26,7 +26,7 @@ pub struct StartInfo {
     pub server: u64,
     /// Why it (re)started: ARINC 653 `START_CONDITION_TYPE` (0 = NORMAL_START,
     /// 1 = PARTITION_RESTART, 2 = HM_MODULE_RESTART, 3 = HM_PARTITION_RESTART); cold or warm
-    /// is its operating mode (`service::PARTITION_STATUS`).
+    /// is its operating mode (`PARTITION_STATUS` of the service protocol).
     pub start_condition: u64,
     /// The task's maximum controlled priority (no thread of it may be above).
     pub mcp: u64,

@@ -1,7 +1,7 @@
 use super::*;
 use crate::testsys::{blob, with};
+use ErrorCode as E;
 use HealthAction as A;
-use HealthError as E;
 use config::decode;
 use std::string::String;
 use std::vec::Vec;

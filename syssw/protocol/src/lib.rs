@@ -1,0 +1,537 @@
+//! The service protocol between partitions and syssw: the one definition of its labels,
+//! word packing, codes and typed requests and replies. syssw decodes requests and encodes
+//! replies with it; the APEX runtime (`partitions/apex`) and the user runtime (`user/rt`)
+//! encode requests and decode replies with it. It is an interface: change it only with
+//! both sides, and keep this table current.
+//!
+//! A request is a synchronous IPC `call` to syssw's server thread (named in the partition's
+//! start record) with the request's label, three words and, where a request says so, data
+//! bytes in the caller's IPC buffer. The caller must `call` with an infinite time-out: a
+//! request that waits (a queuing port) carries its own time-out in a word and syssw answers
+//! when it is done or timed out. The reply's label is an ARINC 653 return code
+//! ([`ReturnCode`]); its words and data are as each request says. syssw never trusts a
+//! request: the caller's partition is the sender task the kernel reports, never a word of
+//! the message; every index and length is checked.
+//!
+//! | label ([`Label`]) | request words / data | reply words / data |
+//! |---|---|---|
+//! | `PARTITION_STATUS` = 1 | – | w0 = mode \| start condition << 8 \| index << 16, w1 = period ns, w2 = duration ns ([`PartitionStatus`]) |
+//! | `SET_PARTITION_MODE` = 2 | w0 = mode ([`OperatingMode`]) | – (no reply for IDLE/restarts: the caller's thread is gone) |
+//! | `CREATE_PORT` = 10 | w0 = kind \| direction << 8, w1 = max message size, w2 = refresh ns (sampling) or depth (queuing); data = name | w0 = port id ([`PortIdReply`]) |
+//! | `PORT_ID` = 11 | w0 = kind; data = name | w0 = port id ([`PortIdReply`]) |
+//! | `WRITE_SAMPLING` = 12 | w0 = port id; data = message | – |
+//! | `READ_SAMPLING` = 13 | w0 = port id | w0 = length, w1 = validity; data = message ([`SamplingMessage`]) |
+//! | `SAMPLING_STATUS` = 14 | w0 = port id | w0 = max size \| direction << 32, w1 = refresh ns, w2 = last validity ([`SamplingStatus`]) |
+//! | `SEND_QUEUING` = 15 | w0 = port id, w1 = time-out ns; data = message | – |
+//! | `RECEIVE_QUEUING` = 16 | w0 = port id, w1 = time-out ns | w0 = length; data = message ([`QueuingMessage`]) |
+//! | `QUEUING_STATUS` = 17 | w0 = port id | w0 = messages \| max messages << 32, w1 = max size \| direction << 32, w2 = waiting processes ([`QueuingStatus`]) |
+//! | `CLEAR_QUEUING` = 18 | w0 = port id | – |
+//! | `REPORT_ERROR` = 20 | w0 = error ([`ErrorCode`]); data = detail text | – (or no reply: the action stopped the caller) |
+//! | `APPLICATION_MESSAGE` = 21 | data = text | – |
+//!
+//! Codes travel as their numbers ([`PortKind`], [`Direction`], [`Validity`], ...; each table
+//! is written once below). Port ids are the ports' global indexes in the configuration; a
+//! port must be created (in COLD_START or WARM_START mode, matching its configuration)
+//! before use. Time-outs: 0 = do not wait, `u64::MAX` = forever, else nanoseconds. Words a
+//! request does not use are ignored.
+//!
+//! Decoding is total: any label, words and data decode to a typed value or to a
+//! [`DecodeError`], which names the return code syssw answers it with. This crate must stay
+//! `no_std`, allocation-free and free of system calls: the IPC itself is the callers' glue.
+#![no_std]
+
+codes::code_enum! {
+    /// A request's IPC label.
+    pub enum Label: u32 {
+        PartitionStatus = 1 => "PARTITION_STATUS",
+        SetPartitionMode = 2 => "SET_PARTITION_MODE",
+        CreatePort = 10 => "CREATE_PORT",
+        PortId = 11 => "PORT_ID",
+        WriteSampling = 12 => "WRITE_SAMPLING",
+        ReadSampling = 13 => "READ_SAMPLING",
+        SamplingStatus = 14 => "SAMPLING_STATUS",
+        SendQueuing = 15 => "SEND_QUEUING",
+        ReceiveQueuing = 16 => "RECEIVE_QUEUING",
+        QueuingStatus = 17 => "QUEUING_STATUS",
+        ClearQueuing = 18 => "CLEAR_QUEUING",
+        ReportError = 20 => "REPORT_ERROR",
+        ApplicationMessage = 21 => "APPLICATION_MESSAGE",
+    }
+}
+
+codes::code_enum! {
+    /// ARINC 653 `RETURN_CODE_TYPE` (the numbering of ARINC 653 Part 1, which a653rs uses
+    /// too): the label of every reply.
+    pub enum ReturnCode: u32 {
+        /// The request was performed.
+        NoError = 0 => "NO_ERROR",
+        /// Nothing to do: the request changed nothing (e.g. reading a sampling port that
+        /// was never written, or setting the mode the partition is already in).
+        NoAction = 1 => "NO_ACTION",
+        /// The resource is not available now and the caller asked not to wait.
+        NotAvailable = 2 => "NOT_AVAILABLE",
+        /// A parameter is wrong (unknown port, port of another partition, empty message, ...).
+        InvalidParam = 3 => "INVALID_PARAM",
+        /// The request is outside what the configuration provides (message longer than the
+        /// port's size, more waiting processes than a port holds).
+        InvalidConfig = 4 => "INVALID_CONFIG",
+        /// The request does not fit the object's mode (sending on a destination port, a warm
+        /// start from cold start, ...).
+        InvalidMode = 5 => "INVALID_MODE",
+        /// The caller waited and its time-out expired.
+        TimedOut = 6 => "TIMED_OUT",
+    }
+}
+
+codes::code_enum! {
+    /// ARINC 653 `OPERATING_MODE_TYPE`.
+    pub enum OperatingMode: u8 {
+        Idle = 0 => "IDLE",
+        ColdStart = 1 => "COLD_START",
+        WarmStart = 2 => "WARM_START",
+        Normal = 3 => "NORMAL",
+    }
+}
+
+codes::code_enum! {
+    /// ARINC 653 `START_CONDITION_TYPE`: why the partition is (re)starting.
+    pub enum StartCondition: u8 {
+        /// The module started (boot).
+        NormalStart = 0 => "NORMAL_START",
+        /// The partition asked for its restart (SET_PARTITION_MODE).
+        PartitionRestart = 1 => "PARTITION_RESTART",
+        /// The health monitor restarted the module.
+        HmModuleRestart = 2 => "HM_MODULE_RESTART",
+        /// The health monitor restarted the partition.
+        HmPartitionRestart = 3 => "HM_PARTITION_RESTART",
+    }
+}
+
+codes::code_enum! {
+    /// ARINC 653 `ERROR_CODE_TYPE`: the errors the health monitor handles, as REPORT_ERROR
+    /// carries them, as the configuration's health tables name them and as the health
+    /// monitor's log line prints them.
+    pub enum ErrorCode: u8 {
+        DeadlineMissed = 0 => "deadline_missed",
+        ApplicationError = 1 => "application_error",
+        NumericError = 2 => "numeric_error",
+        IllegalRequest = 3 => "illegal_request",
+        StackOverflow = 4 => "stack_overflow",
+        MemoryViolation = 5 => "memory_violation",
+        HardwareFault = 6 => "hardware_fault",
+        PowerFail = 7 => "power_fail",
+    }
+}
+
+codes::code_enum! {
+    /// ARINC 653 port kinds (also the configuration's `kind`).
+    pub enum PortKind: u8 {
+        /// The latest message overwrites the previous one; readers see the newest.
+        Sampling = 1 => "sampling",
+        /// A FIFO of at most `depth` messages.
+        Queuing = 2 => "queuing",
+    }
+}
+
+codes::code_enum! {
+    /// Direction of a port, seen from its partition (also the configuration's `direction`).
+    pub enum Direction: u8 {
+        /// The partition receives (ARINC 653 DESTINATION port).
+        In = 1 => "in",
+        /// The partition sends (ARINC 653 SOURCE port).
+        Out = 2 => "out",
+    }
+}
+
+codes::code_enum! {
+    /// ARINC 653 `VALIDITY_TYPE` of a sampling message: whether it is younger than the
+    /// destination port's refresh period.
+    pub enum Validity: u8 {
+        Invalid = 0 => "INVALID",
+        Valid = 1 => "VALID",
+    }
+}
+
+/// Why a request or reply could not be decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DecodeError {
+    /// The label names no request.
+    UnknownLabel(u32),
+    /// The label of a reply is no ARINC return code.
+    UnknownReturnCode(u32),
+    /// SET_PARTITION_MODE with a mode code ARINC does not define.
+    UnknownMode(u64),
+    /// REPORT_ERROR with an error code ARINC does not define.
+    UnknownError(u64),
+    /// A port kind or direction that no port can have.
+    UnknownPortKind(u64),
+    UnknownDirection(u64),
+    /// A reply word holds a value its field cannot (a mode, condition or validity code).
+    BadReplyWord(u64),
+}
+
+impl DecodeError {
+    /// The return code syssw answers an undecodable request with: a port request with a
+    /// kind or direction no configured port can have asks for what the configuration does
+    /// not provide (INVALID_CONFIG); anything else is a wrong parameter (INVALID_PARAM).
+    pub const fn return_code(self) -> ReturnCode {
+        match self {
+            Self::UnknownPortKind(_) | Self::UnknownDirection(_) => ReturnCode::InvalidConfig,
+            _ => ReturnCode::InvalidParam,
+        }
+    }
+}
+
+/// A port id as requests carry it (the port's global index in the configuration).
+pub type PortId = u64;
+
+/// A request, borrowing its data bytes (names, messages, texts) from the IPC buffer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Request<'a> {
+    PartitionStatus,
+    SetPartitionMode {
+        mode: OperatingMode,
+    },
+    CreatePort {
+        kind: PortKind,
+        direction: Direction,
+        max_message_size: u64,
+        /// Refresh period in ns (sampling; a source's is ignored) or depth (queuing).
+        refresh_or_depth: u64,
+        name: &'a [u8],
+    },
+    PortId {
+        kind: PortKind,
+        name: &'a [u8],
+    },
+    WriteSampling {
+        port: PortId,
+        message: &'a [u8],
+    },
+    ReadSampling {
+        port: PortId,
+    },
+    SamplingStatus {
+        port: PortId,
+    },
+    SendQueuing {
+        port: PortId,
+        timeout: u64,
+        message: &'a [u8],
+    },
+    ReceiveQueuing {
+        port: PortId,
+        timeout: u64,
+    },
+    QueuingStatus {
+        port: PortId,
+    },
+    ClearQueuing {
+        port: PortId,
+    },
+    ReportError {
+        error: ErrorCode,
+        detail: &'a [u8],
+    },
+    ApplicationMessage {
+        text: &'a [u8],
+    },
+}
+
+/// A request or reply as it travels: label, three words and the data bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Wire<'a> {
+    pub label: u32,
+    pub words: [u64; 3],
+    pub data: &'a [u8],
+}
+
+impl<'a> Request<'a> {
+    /// The request's label.
+    pub const fn label(&self) -> Label {
+        match self {
+            Self::PartitionStatus => Label::PartitionStatus,
+            Self::SetPartitionMode { .. } => Label::SetPartitionMode,
+            Self::CreatePort { .. } => Label::CreatePort,
+            Self::PortId { .. } => Label::PortId,
+            Self::WriteSampling { .. } => Label::WriteSampling,
+            Self::ReadSampling { .. } => Label::ReadSampling,
+            Self::SamplingStatus { .. } => Label::SamplingStatus,
+            Self::SendQueuing { .. } => Label::SendQueuing,
+            Self::ReceiveQueuing { .. } => Label::ReceiveQueuing,
+            Self::QueuingStatus { .. } => Label::QueuingStatus,
+            Self::ClearQueuing { .. } => Label::ClearQueuing,
+            Self::ReportError { .. } => Label::ReportError,
+            Self::ApplicationMessage { .. } => Label::ApplicationMessage,
+        }
+    }
+
+    /// The port a port request names (`None` for the others).
+    pub const fn port(&self) -> Option<PortId> {
+        match *self {
+            Self::WriteSampling { port, .. }
+            | Self::ReadSampling { port }
+            | Self::SamplingStatus { port }
+            | Self::SendQueuing { port, .. }
+            | Self::ReceiveQueuing { port, .. }
+            | Self::QueuingStatus { port }
+            | Self::ClearQueuing { port } => Some(port),
+            _ => None,
+        }
+    }
+
+    /// The request as label, words and data.
+    pub fn encode(&self) -> Wire<'a> {
+        let (words, data): ([u64; 3], &'a [u8]) = match *self {
+            Self::PartitionStatus => ([0; 3], &[]),
+            Self::SetPartitionMode { mode } => ([u64::from(mode.code()), 0, 0], &[]),
+            Self::CreatePort {
+                kind,
+                direction,
+                max_message_size,
+                refresh_or_depth,
+                name,
+            } => (
+                [
+                    u64::from(kind.code()) | u64::from(direction.code()) << 8,
+                    max_message_size,
+                    refresh_or_depth,
+                ],
+                name,
+            ),
+            Self::PortId { kind, name } => ([u64::from(kind.code()), 0, 0], name),
+            Self::WriteSampling { port, message } => ([port, 0, 0], message),
+            Self::ReadSampling { port }
+            | Self::SamplingStatus { port }
+            | Self::QueuingStatus { port }
+            | Self::ClearQueuing { port } => ([port, 0, 0], &[]),
+            Self::SendQueuing {
+                port,
+                timeout,
+                message,
+            } => ([port, timeout, 0], message),
+            Self::ReceiveQueuing { port, timeout } => ([port, timeout, 0], &[]),
+            Self::ReportError { error, detail } => ([u64::from(error.code()), 0, 0], detail),
+            Self::ApplicationMessage { text } => ([0; 3], text),
+        };
+        Wire {
+            label: self.label().code(),
+            words,
+            data,
+        }
+    }
+
+    /// The request a label, its words and data carry.
+    pub fn decode(wire: Wire<'a>) -> Result<Self, DecodeError> {
+        let [w0, w1, w2] = wire.words;
+        let label = Label::from_code(wire.label).ok_or(DecodeError::UnknownLabel(wire.label))?;
+        let kind = |word: u64| PortKind::from_u64(word).ok_or(DecodeError::UnknownPortKind(word));
+        Ok(match label {
+            Label::PartitionStatus => Self::PartitionStatus,
+            Label::SetPartitionMode => Self::SetPartitionMode {
+                mode: OperatingMode::from_u64(w0).ok_or(DecodeError::UnknownMode(w0))?,
+            },
+            Label::CreatePort => Self::CreatePort {
+                kind: kind(w0 & 0xff)?,
+                direction: Direction::from_u64(w0 >> 8 & 0xff)
+                    .ok_or(DecodeError::UnknownDirection(w0 >> 8 & 0xff))?,
+                max_message_size: w1,
+                refresh_or_depth: w2,
+                name: wire.data,
+            },
+            Label::PortId => Self::PortId {
+                kind: kind(w0)?,
+                name: wire.data,
+            },
+            Label::WriteSampling => Self::WriteSampling {
+                port: w0,
+                message: wire.data,
+            },
+            Label::ReadSampling => Self::ReadSampling { port: w0 },
+            Label::SamplingStatus => Self::SamplingStatus { port: w0 },
+            Label::SendQueuing => Self::SendQueuing {
+                port: w0,
+                timeout: w1,
+                message: wire.data,
+            },
+            Label::ReceiveQueuing => Self::ReceiveQueuing {
+                port: w0,
+                timeout: w1,
+            },
+            Label::QueuingStatus => Self::QueuingStatus { port: w0 },
+            Label::ClearQueuing => Self::ClearQueuing { port: w0 },
+            Label::ReportError => Self::ReportError {
+                error: ErrorCode::from_u64(w0).ok_or(DecodeError::UnknownError(w0))?,
+                detail: wire.data,
+            },
+            Label::ApplicationMessage => Self::ApplicationMessage { text: wire.data },
+        })
+    }
+}
+
+/// A reply's label as a result: `Ok` for NO_ERROR, else the ARINC code; a label outside
+/// the ARINC range is a decode error (a protocol fault of the server).
+pub fn reply_result(label: u32) -> Result<Result<(), ReturnCode>, DecodeError> {
+    match ReturnCode::from_code(label) {
+        Some(ReturnCode::NoError) => Ok(Ok(())),
+        Some(code) => Ok(Err(code)),
+        None => Err(DecodeError::UnknownReturnCode(label)),
+    }
+}
+
+/// The reply words of the requests that answer with words; each has one encoder and one
+/// decoder. Replies without words (and their data, which stays in the IPC buffer) need none.
+pub trait ReplyWords: Sized {
+    fn to_words(&self) -> [u64; 3];
+    fn from_words(words: [u64; 3]) -> Result<Self, DecodeError>;
+}
+
+fn byte_code<T>(word: u64, decode: impl FnOnce(u64) -> Option<T>) -> Result<T, DecodeError> {
+    decode(word).ok_or(DecodeError::BadReplyWord(word))
+}
+
+/// Reply to PARTITION_STATUS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PartitionStatus {
+    pub mode: OperatingMode,
+    pub start_condition: StartCondition,
+    /// The partition's index in the configuration.
+    pub index: u64,
+    pub period_ns: u64,
+    pub duration_ns: u64,
+}
+
+impl ReplyWords for PartitionStatus {
+    fn to_words(&self) -> [u64; 3] {
+        [
+            u64::from(self.mode.code())
+                | u64::from(self.start_condition.code()) << 8
+                | self.index << 16,
+            self.period_ns,
+            self.duration_ns,
+        ]
+    }
+
+    fn from_words([w0, period_ns, duration_ns]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self {
+            mode: byte_code(w0 & 0xff, OperatingMode::from_u64)?,
+            start_condition: byte_code(w0 >> 8 & 0xff, StartCondition::from_u64)?,
+            index: w0 >> 16,
+            period_ns,
+            duration_ns,
+        })
+    }
+}
+
+/// Reply to CREATE_PORT and PORT_ID.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PortIdReply {
+    pub port: PortId,
+}
+
+impl ReplyWords for PortIdReply {
+    fn to_words(&self) -> [u64; 3] {
+        [self.port, 0, 0]
+    }
+
+    fn from_words([port, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self { port })
+    }
+}
+
+/// Reply to READ_SAMPLING (the message is the reply's data).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SamplingMessage {
+    pub len: u64,
+    pub validity: Validity,
+}
+
+impl ReplyWords for SamplingMessage {
+    fn to_words(&self) -> [u64; 3] {
+        [self.len, u64::from(self.validity.code()), 0]
+    }
+
+    fn from_words([len, validity, _]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self {
+            len,
+            validity: byte_code(validity, Validity::from_u64)?,
+        })
+    }
+}
+
+/// Reply to SAMPLING_STATUS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SamplingStatus {
+    pub max_message_size: u32,
+    pub direction: Direction,
+    pub refresh_ns: u64,
+    pub last_validity: Validity,
+}
+
+impl ReplyWords for SamplingStatus {
+    fn to_words(&self) -> [u64; 3] {
+        [
+            u64::from(self.max_message_size) | u64::from(self.direction.code()) << 32,
+            self.refresh_ns,
+            u64::from(self.last_validity.code()),
+        ]
+    }
+
+    fn from_words([size_direction, refresh_ns, validity]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self {
+            max_message_size: size_direction as u32,
+            direction: byte_code(size_direction >> 32, Direction::from_u64)?,
+            refresh_ns,
+            last_validity: byte_code(validity, Validity::from_u64)?,
+        })
+    }
+}
+
+/// Reply to RECEIVE_QUEUING (the message is the reply's data; length 0 on a time-out).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QueuingMessage {
+    pub len: u64,
+}
+
+impl ReplyWords for QueuingMessage {
+    fn to_words(&self) -> [u64; 3] {
+        [self.len, 0, 0]
+    }
+
+    fn from_words([len, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self { len })
+    }
+}
+
+/// Reply to QUEUING_STATUS.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QueuingStatus {
+    pub nb_message: u32,
+    pub max_nb_message: u32,
+    pub max_message_size: u32,
+    pub direction: Direction,
+    pub waiting_processes: u64,
+}
+
+impl ReplyWords for QueuingStatus {
+    fn to_words(&self) -> [u64; 3] {
+        [
+            u64::from(self.nb_message) | u64::from(self.max_nb_message) << 32,
+            u64::from(self.max_message_size) | u64::from(self.direction.code()) << 32,
+            self.waiting_processes,
+        ]
+    }
+
+    fn from_words([messages, size_direction, waiting]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self {
+            nb_message: messages as u32,
+            max_nb_message: (messages >> 32) as u32,
+            max_message_size: size_direction as u32,
+            direction: byte_code(size_direction >> 32, Direction::from_u64)?,
+            waiting_processes: waiting,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests;
