@@ -56,7 +56,7 @@ fn drop_lower_half() {
     for slot in 0..256 {
         // SAFETY: `pml4` is the live top-level table (through the direct map); clearing
         // lower-half slots only unmaps the trampoline, which is no longer executing.
-        unsafe { pml4.add(slot).write(0) };
+        unsafe { pml4.wrapping_add(slot).write(0) };
     }
     x86_64::instructions::tlb::flush_all();
 }

@@ -40,8 +40,9 @@ impl BootHeap {
     pub fn init(&self) {
         let mut heap = self.heap.lock();
         if heap.size() == 0 {
+            let storage = core::ptr::addr_of_mut!(STORAGE) as *mut u8;
             // SAFETY: STORAGE is used by nothing else; this runs once (size() == 0 guard).
-            unsafe { heap.init(core::ptr::addr_of_mut!(STORAGE) as *mut u8, BOOT_HEAP_SIZE) };
+            unsafe { heap.init(storage, BOOT_HEAP_SIZE) };
         }
     }
 

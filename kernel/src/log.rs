@@ -13,6 +13,7 @@ pub fn init() {
 }
 
 /// Lets a fatal path (panic, exception) print even if it interrupted a log write.
+#[allow(unsafe_code)] // breaks the lock of an interrupted writer
 pub fn force_unlock() {
     if SERIAL.is_locked() {
         // SAFETY: only called on the way to halting the machine; the interrupted writer

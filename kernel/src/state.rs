@@ -19,6 +19,7 @@ use abi::syscall::{
 };
 
 /// Byte `index` of an I/O bitmap frame.
+#[allow(unsafe_code)] // the bitmap is a raw frame
 fn io_byte(frame: u64, index: usize) -> u8 {
     // SAFETY: `frame` is a bitmap frame owned by a task; index < 4096 by construction.
     unsafe { *((crate::mem::phys_to_virt(frame) + index as u64) as *const u8) }
@@ -623,6 +624,7 @@ impl Kernel {
     }
 
     /// Grants ports `first..first + count` of `caller` to the descendant `target`.
+    #[allow(unsafe_code)] // the bitmap is a raw frame
     pub fn io_grant(
         &mut self,
         caller: usize,

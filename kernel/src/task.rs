@@ -69,6 +69,7 @@ impl From<MapError> for LoadError {
 
 /// Loads the `PT_LOAD` segments of `elf` (checked by `abi::elf`) into fresh frames mapped
 /// in `space` with their rights; returns the entry point.
+#[allow(unsafe_code)] // fills fresh frames through the direct map
 pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> {
     let (entry, segments) =
         abi::elf::load_segments::<16>(elf, USER_MIN..USER_END).map_err(LoadError::Elf)?;
@@ -109,6 +110,7 @@ pub fn load_elf(elf: &[u8], space: &mut AddressSpace) -> Result<u64, LoadError> 
 /// image (`image_phys`, `image_len` bytes) read-only at `ROOT_SYSTEM_IMAGE_BASE`, the
 /// [`RootInfo`] page listing `user_memory`, a zeroed stack, and its first thread, ready.
 /// The root partition's quota is all kernel memory left afterwards.
+#[allow(unsafe_code)] // writes the RootInfo page through the direct map
 pub fn create_root(
     k: &mut crate::state::Kernel,
     syssw: &[u8],

@@ -22,6 +22,7 @@ pub fn on_idle() {
     }
 }
 
+#[allow(unsafe_code)] // the page-fault hook reads an unmapped address on purpose
 pub fn run(image: &SystemImage, apic_timer_hz: u64) {
     let Some(entry) = image.find("test/hook") else {
         return;

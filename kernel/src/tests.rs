@@ -810,6 +810,7 @@ fn an_early_timer_interrupt_rearms_the_timer() {
 }
 
 /// The bytes of a slice of plain-old-data window specs, as user space passes them.
+#[allow(unsafe_code)] // a view of plain-old-data structs as bytes
 fn window_bytes(windows: &[abi::syscall::WindowSpec]) -> &[u8] {
     // SAFETY: WindowSpec is repr(C) of three u64 (no padding); the slice is alive.
     unsafe { std::slice::from_raw_parts(windows.as_ptr().cast(), std::mem::size_of_val(windows)) }

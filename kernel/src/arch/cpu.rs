@@ -40,7 +40,8 @@ pub fn enable_sse_for_user() {
         Cr0::update(|f| {
             f.remove(Cr0Flags::EMULATE_COPROCESSOR);
             f.insert(Cr0Flags::MONITOR_COPROCESSOR);
-        });
-        Cr4::update(|f| f.insert(Cr4Flags::OSFXSR | Cr4Flags::OSXMMEXCPT_ENABLE));
-    }
+        })
+    };
+    // SAFETY: as for CR0: FXSAVE/SSE enablement and #XM delivery only.
+    unsafe { Cr4::update(|f| f.insert(Cr4Flags::OSFXSR | Cr4Flags::OSXMMEXCPT_ENABLE)) };
 }

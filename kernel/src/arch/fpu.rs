@@ -21,10 +21,9 @@ pub fn restore(area: &FpuState) {
 
 /// Loads a thread's FS and GS bases (canonical user addresses, checked by the callers).
 pub fn set_bases(fs: u64, gs: u64) {
-    // SAFETY: writing the base MSRs only changes what user-mode FS/GS accesses address;
-    // the kernel uses neither segment.
-    unsafe {
-        Msr::new(IA32_FS_BASE).write(fs);
-        Msr::new(IA32_GS_BASE).write(gs);
-    }
+    // SAFETY: writing the base MSR only changes what user-mode FS accesses address; the
+    // kernel uses neither segment.
+    unsafe { Msr::new(IA32_FS_BASE).write(fs) };
+    // SAFETY: likewise for GS.
+    unsafe { Msr::new(IA32_GS_BASE).write(gs) };
 }

@@ -75,17 +75,16 @@ fn init_tss() {
 pub fn load_io_bitmap(bitmap: Option<[&[u8]; 2]>) {
     let block = tss_block();
     // SAFETY: the CPU reads the TSS only on privilege changes and port accesses from ring 3,
-    // never while the kernel (interrupts off) updates it; the writes stay inside the block.
-    unsafe {
-        match bitmap {
-            Some([low, high]) => {
-                let iomap = &mut (*block).iomap;
-                iomap[..IOMAP_BYTES / 2].copy_from_slice(low);
-                iomap[IOMAP_BYTES / 2..IOMAP_BYTES].copy_from_slice(high);
-                (*block).tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16;
-            }
-            None => (*block).tss.iomap_base = IOMAP_DISABLED,
+    // never while the kernel (interrupts off) updates it; no other reference to the block
+    // lives while this one does.
+    let block = unsafe { &mut *block };
+    match bitmap {
+        Some([low, high]) => {
+            block.iomap[..IOMAP_BYTES / 2].copy_from_slice(low);
+            block.iomap[IOMAP_BYTES / 2..IOMAP_BYTES].copy_from_slice(high);
+            block.tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16;
         }
+        None => block.tss.iomap_base = IOMAP_DISABLED,
     }
 }
 
@@ -94,7 +93,8 @@ static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
     let block = tss_block();
     // SAFETY: the block is a static that lives forever; the descriptor only records its
     // address and the limit covering TSS and bitmap.
-    let (tss, iomap) = unsafe { (&(*block).tss, &(*block).iomap) };
+    let block = unsafe { &*block };
+    let (tss, iomap) = (&block.tss, &block.iomap);
     let mut gdt = GlobalDescriptorTable::new();
     let kernel_code = gdt.append(Descriptor::kernel_code_segment());
     let kernel_data = gdt.append(Descriptor::kernel_data_segment());
@@ -123,14 +123,17 @@ static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
 pub fn init() {
     GDT.0.load();
     let s = &GDT.1;
-    // SAFETY: the selectors index descriptors of the GDT just loaded, with the right types.
-    unsafe {
-        CS::set_reg(s.kernel_code);
-        SS::set_reg(s.kernel_data);
-        DS::set_reg(SegmentSelector(0));
-        ES::set_reg(SegmentSelector(0));
-        load_tss(s.tss);
-    }
+    // The selectors index descriptors of the GDT just loaded, with the right types:
+    // SAFETY: kernel code descriptor.
+    unsafe { CS::set_reg(s.kernel_code) };
+    // SAFETY: kernel data descriptor.
+    unsafe { SS::set_reg(s.kernel_data) };
+    // SAFETY: the null selector is valid for DS/ES in 64-bit mode.
+    unsafe { DS::set_reg(SegmentSelector(0)) };
+    // SAFETY: as for DS.
+    unsafe { ES::set_reg(SegmentSelector(0)) };
+    // SAFETY: the TSS descriptor of this GDT, loaded once.
+    unsafe { load_tss(s.tss) };
 }
 
 pub fn selectors() -> &'static Selectors {

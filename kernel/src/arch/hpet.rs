@@ -33,13 +33,11 @@ impl Hpet {
     }
 
     fn register(&self, offset: usize) -> VolatilePtr<'_, u64> {
+        // SAFETY: the direct-map address of a mapped register block is never 0.
+        let register = unsafe { NonNull::new_unchecked((self.base as usize + offset) as *mut u64) };
         // SAFETY: `base` maps the HPET register block (constructor contract); the offsets are
         // 64-bit registers of its general block.
-        unsafe {
-            VolatilePtr::new(NonNull::new_unchecked(
-                (self.base as usize + offset) as *mut u64,
-            ))
-        }
+        unsafe { VolatilePtr::new(register) }
     }
 
     pub fn frequency_hz(&self) -> u64 {

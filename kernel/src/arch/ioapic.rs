@@ -78,13 +78,11 @@ impl IoApic {
     }
 
     fn register(&self, offset: usize) -> VolatilePtr<'_, u32> {
+        // SAFETY: the direct-map address of a mapped register block is never 0.
+        let register = unsafe { NonNull::new_unchecked((self.base as usize + offset) as *mut u32) };
         // SAFETY: `base` maps the IOAPIC's register page (constructor contract); offsets are
         // the two architectural 32-bit registers.
-        unsafe {
-            VolatilePtr::new(NonNull::new_unchecked(
-                (self.base as usize + offset) as *mut u32,
-            ))
-        }
+        unsafe { VolatilePtr::new(register) }
     }
 
     fn read(&self, index: u32) -> u32 {

@@ -35,9 +35,11 @@ static BASE: AtomicU64 = AtomicU64::new(0);
 fn register(offset: usize) -> VolatilePtr<'static, u32> {
     let base = BASE.load(Ordering::Relaxed);
     assert!(base != 0, "local APIC used before init");
+    // SAFETY: the direct-map address of a mapped register block is never 0.
+    let register = unsafe { NonNull::new_unchecked((base as usize + offset) as *mut u32) };
     // SAFETY: `base` is the direct-map address of the APIC register page found via ACPI;
     // every offset used here is a 16-byte-aligned 32-bit register inside that page.
-    unsafe { VolatilePtr::new(NonNull::new_unchecked((base as usize + offset) as *mut u32)) }
+    unsafe { VolatilePtr::new(register) }
 }
 
 fn read(offset: usize) -> u32 {
@@ -53,8 +55,10 @@ pub fn init(phys: u64) -> (u32, u32) {
     // IA32_APIC_BASE bit 11: global enable (firmware normally leaves it on).
     const IA32_APIC_BASE: u32 = 0x1b;
     let mut msr = x86_64::registers::model_specific::Msr::new(IA32_APIC_BASE);
+    // SAFETY: reading the APIC base MSR has no side effects.
+    let base = unsafe { msr.read() };
     // SAFETY: setting the global-enable bit of an APIC that exists (MADT listed it).
-    unsafe { msr.write(msr.read() | (1 << 11)) };
+    unsafe { msr.write(base | (1 << 11)) };
     BASE.store(phys_to_virt(phys), Ordering::Relaxed);
     write(TASK_PRIORITY, 0);
     write(LVT_TIMER, LVT_MASKED);

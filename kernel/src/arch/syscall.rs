@@ -13,14 +13,16 @@ pub fn init() {
     // SYSRET loads CS = STAR[63:48] + 16 and SS = STAR[63:48] + 8 (user code follows user data).
     let sysret_base = selectors.user_data.0 as u64 - 8;
     let star = (sysret_base << 48) | ((selectors.kernel_code.0 as u64) << 32);
-    // SAFETY: the selectors match the GDT layout SYSCALL/SYSRET expect (gdt.rs), and LSTAR
-    // points to the entry stub; EFER.SCE only enables the instruction.
+    // SAFETY: the selectors match the GDT layout SYSCALL/SYSRET expect (gdt.rs).
+    unsafe { Msr::new(IA32_STAR).write(star) };
+    // SAFETY: LSTAR points to the entry stub.
+    unsafe { Msr::new(IA32_LSTAR).write(super::entry::syscall_entry as *const () as u64) };
+    // SAFETY: the flags cleared on entry (interrupts off, DF clear, ...).
+    unsafe { Msr::new(IA32_FMASK).write(ENTRY_RFLAGS_MASK) };
+    // SAFETY: EFER.SCE only enables the instruction, whose MSRs are set above.
     unsafe {
-        Msr::new(IA32_STAR).write(star);
-        Msr::new(IA32_LSTAR).write(super::entry::syscall_entry as *const () as u64);
-        Msr::new(IA32_FMASK).write(ENTRY_RFLAGS_MASK);
         x86_64::registers::model_specific::Efer::update(|f| {
             f.insert(x86_64::registers::model_specific::EferFlags::SYSTEM_CALL_EXTENSIONS)
-        });
-    }
+        })
+    };
 }
