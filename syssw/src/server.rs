@@ -63,7 +63,7 @@ type Buffer = [u8; MAX_MESSAGE_SIZE as usize];
 fn answer(ipc: IpcBufferRef, to: ThreadId, code: ReturnCode, words: [u64; 3], data: &[u8]) {
     ipc.write_data(0, data);
     let m = Message {
-        tag: MessageTag::new(code.code() as u32, data.len(), 0),
+        tag: MessageTag::new(code.code(), data.len(), 0),
         words,
     };
     let _ = sys::reply(to, &m);

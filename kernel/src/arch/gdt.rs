@@ -91,10 +91,6 @@ pub fn load_io_bitmap(bitmap: Option<[&[u8]; 2]>) {
 static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
     init_tss();
     let block = tss_block();
-    // SAFETY: the block is a static that lives forever; the descriptor only records its
-    // address and the limit covering TSS and bitmap.
-    let block = unsafe { &*block };
-    let (tss, iomap) = (&block.tss, &block.iomap);
     let mut gdt = GlobalDescriptorTable::new();
     let kernel_code = gdt.append(Descriptor::kernel_code_segment());
     let kernel_data = gdt.append(Descriptor::kernel_data_segment());
@@ -102,10 +98,15 @@ static GDT: Lazy<(GlobalDescriptorTable, Selectors)> = Lazy::new(|| {
     let user_code = gdt.append(Descriptor::user_code_segment());
     // The descriptor checks that the bitmap follows the TSS; iomap_base is set to it for
     // the check and back to "disabled" right after (no task owns ports at boot).
-    // SAFETY: as above; nothing runs in ring 3 yet.
+    // SAFETY: the block is a static; nothing runs in ring 3 yet and no reference into the
+    // block exists.
     unsafe { (*block).tss.iomap_base = core::mem::size_of::<TaskStateSegment>() as u16 };
+    // SAFETY: the block is a static that lives forever; the descriptor only records its
+    // address and the limit covering TSS and bitmap.
+    let block = unsafe { &*block };
     let tss = gdt.append(
-        Descriptor::tss_segment_with_iomap(tss, iomap).expect("bitmap directly follows the TSS"),
+        Descriptor::tss_segment_with_iomap(&block.tss, &block.iomap)
+            .expect("bitmap directly follows the TSS"),
     );
     load_io_bitmap(None);
     (
