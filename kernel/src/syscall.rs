@@ -43,7 +43,7 @@ pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
         return crate::fault::deliver_or_report(k, t, fault);
     }
     let raw = k.threads[t].context.rax;
-    let result = match Call::from_raw(raw) {
+    let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
         Some(call) => handle(k, t, call, clock),
     };
@@ -417,7 +417,7 @@ fn set_attribute(
     attribute: u64,
     value: u64,
 ) -> Result<(), Error> {
-    match ThreadAttribute::from_raw(attribute).ok_or(Error::InvalidArgument)? {
+    match ThreadAttribute::from_code(attribute).ok_or(Error::InvalidArgument)? {
         ThreadAttribute::Priority => {
             let priority = u8::try_from(value).map_err(|_| Error::McpExceeded)?;
             k.set_priority(target, priority)

@@ -49,209 +49,209 @@ pub const TASK_NAME_MAX: u64 = 15;
 /// `timeout` value meaning "wait forever"; `0` means "do not wait" (poll).
 pub const TIMEOUT_INFINITE: u64 = u64::MAX;
 
-/// System-call numbers.
-#[repr(u64)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Call {
-    /// `debug_write(ptr, len)`: writes `len` (<= [`DEBUG_WRITE_MAX`]) bytes of UTF-8 text
-    /// as one line of the kernel log, prefixed with the caller's task name.
-    /// Ability: `DEBUG_LOG`. Errors: `BadAddress` (buffer not readable user memory),
-    /// `InvalidArgument` (too long).
-    DebugWrite = 1,
-    /// `clock() -> rdi = ns, rsi = TSC frequency (Hz), rdx = TSC at boot`: nanoseconds
-    /// since boot (monotonic); the other two let a program convert `rdtsc` readings to the
-    /// same time base (ns = (tsc - boot) * 10^9 / Hz) for cycle-exact measurements.
-    /// Ability: none.
-    Clock = 2,
-    /// `thread_exit()`: ends the calling thread (as `thread_kill` of itself); does not
-    /// return. Ability: none.
-    ThreadExit = 3,
-    /// `system_halt(outcome)`: stops the machine; `outcome` 0 = success, 1 = failure (under
-    /// QEMU: exit 33 / 35). Ability: `SYSTEM_HALT`. Errors: `InvalidArgument`.
-    SystemHalt = 4,
-    /// `yield()`: moves the caller behind the other ready threads of its priority.
-    /// Ability: none.
-    Yield = 5,
-    /// `sleep_until(time)`: blocks until `clock()` >= `time` (ns since boot); returns at
-    /// once for a past time. Ability: none.
-    SleepUntil = 6,
+codes::code_enum! {
+    /// System-call numbers.
+    pub enum Call: u64 {
+        /// `debug_write(ptr, len)`: writes `len` (<= [`DEBUG_WRITE_MAX`]) bytes of UTF-8 text
+        /// as one line of the kernel log, prefixed with the caller's task name.
+        /// Ability: `DEBUG_LOG`. Errors: `BadAddress` (buffer not readable user memory),
+        /// `InvalidArgument` (too long).
+        DebugWrite = 1 => "debug_write",
+        /// `clock() -> rdi = ns, rsi = TSC frequency (Hz), rdx = TSC at boot`: nanoseconds
+        /// since boot (monotonic); the other two let a program convert `rdtsc` readings to the
+        /// same time base (ns = (tsc - boot) * 10^9 / Hz) for cycle-exact measurements.
+        /// Ability: none.
+        Clock = 2 => "clock",
+        /// `thread_exit()`: ends the calling thread (as `thread_kill` of itself); does not
+        /// return. Ability: none.
+        ThreadExit = 3 => "thread_exit",
+        /// `system_halt(outcome)`: stops the machine; `outcome` 0 = success, 1 = failure (under
+        /// QEMU: exit 33 / 35). Ability: `SYSTEM_HALT`. Errors: `InvalidArgument`.
+        SystemHalt = 4 => "system_halt",
+        /// `yield()`: moves the caller behind the other ready threads of its priority.
+        /// Ability: none.
+        Yield = 5 => "yield",
+        /// `sleep_until(time)`: blocks until `clock()` >= `time` (ns since boot); returns at
+        /// once for a past time. Ability: none.
+        SleepUntil = 6 => "sleep_until",
 
-    /// `task_create(abilities, mcp, rp, name_ptr, name_len) -> rdi = task`: a new child
-    /// task of the caller with an empty address space and no threads. `rp` = resource
-    /// partition it belongs to and is charged to (0 = the caller's; another one needs
-    /// `PARTITION_CONTROL` and must have been created by the caller's task). Costs one task
-    /// and one page (its top-level page table) of that partition's quota.
-    /// Ability: `CREATE_TASK`. Errors: `AbilityDenied` (`abilities` not a subset of the
-    /// caller's), `McpExceeded` (`mcp` above the caller's), `NoSuchObject` (`rp`),
-    /// `NotPermitted` (`rp` not the caller's to use), `QuotaExceeded`, `BadAddress`,
-    /// `InvalidArgument` (name too long or not UTF-8, unknown ability bits).
-    TaskCreate = 10,
-    /// `task_kill(task)`: destroys a descendant task, its threads and all its descendants;
-    /// their kernel memory returns to their resource partitions. Threads waiting on them
-    /// get `PeerGone`. Ability: `CREATE_TASK`. Errors: `NoSuchObject`, `NotPermitted` (not
-    /// a strict descendant).
-    TaskKill = 11,
-    /// `task_allow_send(from, to)`: lets threads of task `from` send IPC and notifications
-    /// to threads of task `to` (0 = the caller's task, for either). Both must be the
-    /// caller's task or its descendants. By default a task may send to itself, its parent
-    /// and its children only. Ability: `CREATE_TASK`. Errors: `NoSuchObject`,
-    /// `NotPermitted`.
-    TaskAllowSend = 12,
+        /// `task_create(abilities, mcp, rp, name_ptr, name_len) -> rdi = task`: a new child
+        /// task of the caller with an empty address space and no threads. `rp` = resource
+        /// partition it belongs to and is charged to (0 = the caller's; another one needs
+        /// `PARTITION_CONTROL` and must have been created by the caller's task). Costs one task
+        /// and one page (its top-level page table) of that partition's quota.
+        /// Ability: `CREATE_TASK`. Errors: `AbilityDenied` (`abilities` not a subset of the
+        /// caller's), `McpExceeded` (`mcp` above the caller's), `NoSuchObject` (`rp`),
+        /// `NotPermitted` (`rp` not the caller's to use), `QuotaExceeded`, `BadAddress`,
+        /// `InvalidArgument` (name too long or not UTF-8, unknown ability bits).
+        TaskCreate = 10 => "task_create",
+        /// `task_kill(task)`: destroys a descendant task, its threads and all its descendants;
+        /// their kernel memory returns to their resource partitions. Threads waiting on them
+        /// get `PeerGone`. Ability: `CREATE_TASK`. Errors: `NoSuchObject`, `NotPermitted` (not
+        /// a strict descendant).
+        TaskKill = 11 => "task_kill",
+        /// `task_allow_send(from, to)`: lets threads of task `from` send IPC and notifications
+        /// to threads of task `to` (0 = the caller's task, for either). Both must be the
+        /// caller's task or its descendants. By default a task may send to itself, its parent
+        /// and its children only. Ability: `CREATE_TASK`. Errors: `NoSuchObject`,
+        /// `NotPermitted`.
+        TaskAllowSend = 12 => "task_allow_send",
 
-    /// `thread_create(task, entry, stack, priority, arg) -> rdi = thread`: a new thread of
-    /// `task` (0 = own task; else a descendant), inactive until `thread_start`; it will
-    /// start at `entry` with `rsp` = `stack`, `rdi` = `arg`, in the creator's time
-    /// partition, without an exception handler. Costs one thread of the quota of the
-    /// task's resource partition. Ability: `CREATE_THREAD`. Errors: `McpExceeded`
-    /// (priority above the task's MCP), `NoSuchObject`, `NotPermitted`, `QuotaExceeded`,
-    /// `InvalidArgument` (entry or stack outside user space).
-    ThreadCreate = 20,
-    /// `thread_start(thread)`: makes an inactive thread ready. Ability: `CREATE_THREAD`.
-    /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (already started).
-    ThreadStart = 21,
-    /// `thread_suspend(thread)`: the thread stops being scheduled (an IPC it waits for
-    /// still completes). Ability: none beyond control rights. Errors: `NoSuchObject`,
-    /// `NotPermitted`.
-    ThreadSuspend = 22,
-    /// `thread_resume(thread)`: undoes `thread_suspend`. Errors as `thread_suspend`.
-    ThreadResume = 23,
-    /// `thread_kill(thread)`: destroys a thread; its kernel memory returns to its resource
-    /// partition. Killing oneself is `thread_exit`. Errors: `NoSuchObject`, `NotPermitted`.
-    ThreadKill = 24,
-    /// `thread_set(thread, attribute, value)`: sets one [`ThreadAttribute`] of a thread of
-    /// the caller's task or of a descendant (0 = the calling thread).
-    /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (unknown attribute, value
-    /// out of range), and per attribute as documented there.
-    ThreadSet = 25,
-    /// `thread_self() -> rdi = thread, rsi = task`. Ability: none.
-    ThreadSelf = 26,
+        /// `thread_create(task, entry, stack, priority, arg) -> rdi = thread`: a new thread of
+        /// `task` (0 = own task; else a descendant), inactive until `thread_start`; it will
+        /// start at `entry` with `rsp` = `stack`, `rdi` = `arg`, in the creator's time
+        /// partition, without an exception handler. Costs one thread of the quota of the
+        /// task's resource partition. Ability: `CREATE_THREAD`. Errors: `McpExceeded`
+        /// (priority above the task's MCP), `NoSuchObject`, `NotPermitted`, `QuotaExceeded`,
+        /// `InvalidArgument` (entry or stack outside user space).
+        ThreadCreate = 20 => "thread_create",
+        /// `thread_start(thread)`: makes an inactive thread ready. Ability: `CREATE_THREAD`.
+        /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (already started).
+        ThreadStart = 21 => "thread_start",
+        /// `thread_suspend(thread)`: the thread stops being scheduled (an IPC it waits for
+        /// still completes). Ability: none beyond control rights. Errors: `NoSuchObject`,
+        /// `NotPermitted`.
+        ThreadSuspend = 22 => "thread_suspend",
+        /// `thread_resume(thread)`: undoes `thread_suspend`. Errors as `thread_suspend`.
+        ThreadResume = 23 => "thread_resume",
+        /// `thread_kill(thread)`: destroys a thread; its kernel memory returns to its resource
+        /// partition. Killing oneself is `thread_exit`. Errors: `NoSuchObject`, `NotPermitted`.
+        ThreadKill = 24 => "thread_kill",
+        /// `thread_set(thread, attribute, value)`: sets one [`ThreadAttribute`] of a thread of
+        /// the caller's task or of a descendant (0 = the calling thread).
+        /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (unknown attribute, value
+        /// out of range), and per attribute as documented there.
+        ThreadSet = 25 => "thread_set",
+        /// `thread_self() -> rdi = thread, rsi = task`. Ability: none.
+        ThreadSelf = 26 => "thread_self",
 
-    /// `map(task, source, destination, pages, rights)`: maps `pages` pages starting at the
-    /// caller's page `source` into `task` (0 = own; else a descendant) at `destination`,
-    /// with `rights` ([`PageRights`]) that must not exceed the source pages' rights. Page
-    /// tables are charged to `task`'s resource partition. All-or-nothing. Ability: `MAP`.
-    /// Errors: `InvalidArgument` (unaligned, zero or more than [`MAP_MAX_PAGES`] pages,
-    /// destination outside user space), `BadAddress` (a source page unmapped or with fewer
-    /// rights), `AlreadyMapped`, `QuotaExceeded`, `NoSuchObject`, `NotPermitted`.
-    Map = 30,
-    /// `map_physical(task, physical, destination, pages, rights)`: like `map`, with
-    /// physical frames as the source; they must lie in memory the kernel handed to the root
-    /// task ([`RootInfo`](crate::root::RootInfo)). Ability: `PHYSICAL_MEMORY`. Errors as
-    /// `map`, with `BadAddress` for frames outside the handed-out memory.
-    MapPhysical = 31,
-    /// `unmap(task, address, pages)`: removes the mappings of `pages` pages (unmapped ones
-    /// are skipped). Ability: `MAP`. Errors: `InvalidArgument`, `NoSuchObject`,
-    /// `NotPermitted`.
-    Unmap = 32,
-    /// `protect(task, address, pages, rights)`: reduces the rights of mapped pages to
-    /// `rights` (rights are never added: map again for that). Ability: `MAP`.
-    /// Errors: `InvalidArgument`, `BadAddress` (a page unmapped), `NoSuchObject`,
-    /// `NotPermitted`.
-    Protect = 33,
+        /// `map(task, source, destination, pages, rights)`: maps `pages` pages starting at the
+        /// caller's page `source` into `task` (0 = own; else a descendant) at `destination`,
+        /// with `rights` ([`PageRights`]) that must not exceed the source pages' rights. Page
+        /// tables are charged to `task`'s resource partition. All-or-nothing. Ability: `MAP`.
+        /// Errors: `InvalidArgument` (unaligned, zero or more than [`MAP_MAX_PAGES`] pages,
+        /// destination outside user space), `BadAddress` (a source page unmapped or with fewer
+        /// rights), `AlreadyMapped`, `QuotaExceeded`, `NoSuchObject`, `NotPermitted`.
+        Map = 30 => "map",
+        /// `map_physical(task, physical, destination, pages, rights)`: like `map`, with
+        /// physical frames as the source; they must lie in memory the kernel handed to the root
+        /// task ([`RootInfo`](crate::root::RootInfo)). Ability: `PHYSICAL_MEMORY`. Errors as
+        /// `map`, with `BadAddress` for frames outside the handed-out memory.
+        MapPhysical = 31 => "map_physical",
+        /// `unmap(task, address, pages)`: removes the mappings of `pages` pages (unmapped ones
+        /// are skipped). Ability: `MAP`. Errors: `InvalidArgument`, `NoSuchObject`,
+        /// `NotPermitted`.
+        Unmap = 32 => "unmap",
+        /// `protect(task, address, pages, rights)`: reduces the rights of mapped pages to
+        /// `rights` (rights are never added: map again for that). Ability: `MAP`.
+        /// Errors: `InvalidArgument`, `BadAddress` (a page unmapped), `NoSuchObject`,
+        /// `NotPermitted`.
+        Protect = 33 => "protect",
 
-    /// `send(thread, timeout, tag, w0, w1, w2)`: waits until `thread` receives the message
-    /// ([`ipc`](crate::ipc)): tag + three words in registers, `tag.len()` bytes and
-    /// `tag.items()` map items from the caller's IPC buffer. Senders queue by priority
-    /// (FIFO within one). Ability: none; the caller's task needs the right to send to the
-    /// receiver's task. Errors: `NoSuchObject`, `NotPermitted` (no communication right),
-    /// `TimedOut`, `PeerGone` (receiver killed), `BadAddress` (own IPC buffer), and for
-    /// map items `InvalidArgument`/`BadAddress`/`AlreadyMapped`/`QuotaExceeded`.
-    Send = 40,
-    /// `receive(from, timeout) -> rdi = sender, rsi = sender's task, rdx = tag, r10/r8/r9 =
-    /// words`: waits for a
-    /// message from `from` (0 = anyone). The data and received map items are in the IPC
-    /// buffer. If the sender used `call`, the receiver must answer with `reply` or
-    /// `reply_wait`. Errors: `TimedOut`, `NoSuchObject` (`from`), `PeerGone`, `BadAddress`
-    /// (no writable IPC buffer).
-    Receive = 41,
-    /// `call(thread, timeout, tag, w0, w1, w2) -> as receive`: `send`, then waits for the
-    /// reply of that thread, atomically; `timeout` bounds both phases together.
-    /// Errors: those of `send` and `receive`.
-    Call = 42,
-    /// `reply_wait(caller, timeout, tag, w0, w1, w2) -> as receive`: replies to `caller`
-    /// (0 = reply to no one) then receives from anyone. Errors: `NotWaiting` (the caller is
-    /// not waiting for a reply from this thread; nothing is received then) and those of
-    /// `receive`.
-    ReplyWait = 43,
-    /// `reply(caller, _, tag, w0, w1, w2)`: replies without waiting. Errors: `NotWaiting`.
-    Reply = 44,
+        /// `send(thread, timeout, tag, w0, w1, w2)`: waits until `thread` receives the message
+        /// ([`ipc`](crate::ipc)): tag + three words in registers, `tag.len()` bytes and
+        /// `tag.items()` map items from the caller's IPC buffer. Senders queue by priority
+        /// (FIFO within one). Ability: none; the caller's task needs the right to send to the
+        /// receiver's task. Errors: `NoSuchObject`, `NotPermitted` (no communication right),
+        /// `TimedOut`, `PeerGone` (receiver killed), `BadAddress` (own IPC buffer), and for
+        /// map items `InvalidArgument`/`BadAddress`/`AlreadyMapped`/`QuotaExceeded`.
+        Send = 40 => "send",
+        /// `receive(from, timeout) -> rdi = sender, rsi = sender's task, rdx = tag, r10/r8/r9 =
+        /// words`: waits for a
+        /// message from `from` (0 = anyone). The data and received map items are in the IPC
+        /// buffer. If the sender used `call`, the receiver must answer with `reply` or
+        /// `reply_wait`. Errors: `TimedOut`, `NoSuchObject` (`from`), `PeerGone`, `BadAddress`
+        /// (no writable IPC buffer).
+        Receive = 41 => "receive",
+        /// `call(thread, timeout, tag, w0, w1, w2) -> as receive`: `send`, then waits for the
+        /// reply of that thread, atomically; `timeout` bounds both phases together.
+        /// Errors: those of `send` and `receive`.
+        Call = 42 => "call",
+        /// `reply_wait(caller, timeout, tag, w0, w1, w2) -> as receive`: replies to `caller`
+        /// (0 = reply to no one) then receives from anyone. Errors: `NotWaiting` (the caller is
+        /// not waiting for a reply from this thread; nothing is received then) and those of
+        /// `receive`.
+        ReplyWait = 43 => "reply_wait",
+        /// `reply(caller, _, tag, w0, w1, w2)`: replies without waiting. Errors: `NotWaiting`.
+        Reply = 44 => "reply",
 
-    /// `notify_signal(thread, bits)`: sets notification bits of `thread`, waking it if it
-    /// waits for any of them. Needs the right to send to the thread's task. Errors:
-    /// `NoSuchObject`, `NotPermitted`.
-    NotifySignal = 50,
-    /// `notify_wait(mask, timeout) -> rdi = bits`: waits until one of `mask`'s bits is set
-    /// (mask 0: just sleep for `timeout`), returns and clears the set bits of `mask`.
-    /// Errors: `TimedOut`.
-    NotifyWait = 51,
+        /// `notify_signal(thread, bits)`: sets notification bits of `thread`, waking it if it
+        /// waits for any of them. Needs the right to send to the thread's task. Errors:
+        /// `NoSuchObject`, `NotPermitted`.
+        NotifySignal = 50 => "notify_signal",
+        /// `notify_wait(mask, timeout) -> rdi = bits`: waits until one of `mask`'s bits is set
+        /// (mask 0: just sleep for `timeout`), returns and clears the set bits of `mask`.
+        /// Errors: `TimedOut`.
+        NotifyWait = 51 => "notify_wait",
 
-    /// `rp_create(tasks, threads, pages) -> rdi = rp`: a new resource partition with the
-    /// given quota, carved out of the caller's partition's free quota. Ability:
-    /// `PARTITION_CONTROL`. Errors: `QuotaExceeded`, `OutOfResources` (all partition slots
-    /// used).
-    RpCreate = 60,
-    /// `rp_info(rp) -> rdi = pages used, rsi = pages quota, rdx = threads used | threads
-    /// quota << 16 | tasks used << 32 | tasks quota << 48` (0 = the caller's partition).
-    /// Errors: `NoSuchObject`.
-    RpInfo = 61,
-    /// `set_health_monitor(thread)`: a thread of the root task that receives
-    /// [`LABEL_FAULT_REPORT`](crate::ipc::LABEL_FAULT_REPORT) messages for faults of threads
-    /// without an exception handler. Ability: `PARTITION_CONTROL`, caller in the root task.
-    /// Errors: `NoSuchObject`, `NotPermitted` (not a root-task thread).
-    SetHealthMonitor = 62,
+        /// `rp_create(tasks, threads, pages) -> rdi = rp`: a new resource partition with the
+        /// given quota, carved out of the caller's partition's free quota. Ability:
+        /// `PARTITION_CONTROL`. Errors: `QuotaExceeded`, `OutOfResources` (all partition slots
+        /// used).
+        RpCreate = 60 => "rp_create",
+        /// `rp_info(rp) -> rdi = pages used, rsi = pages quota, rdx = threads used | threads
+        /// quota << 16 | tasks used << 32 | tasks quota << 48` (0 = the caller's partition).
+        /// Errors: `NoSuchObject`.
+        RpInfo = 61 => "rp_info",
+        /// `set_health_monitor(thread)`: a thread of the root task that receives
+        /// [`LABEL_FAULT_REPORT`](crate::ipc::LABEL_FAULT_REPORT) messages for faults of threads
+        /// without an exception handler. Ability: `PARTITION_CONTROL`, caller in the root task.
+        /// Errors: `NoSuchObject`, `NotPermitted` (not a root-task thread).
+        SetHealthMonitor = 62 => "set_health_monitor",
 
-    /// `schedule_set(slot, major_frame, windows, count)`: stores time schedule `slot`
-    /// (< [`MAX_SCHEDULES`]): a major frame in ns and `count` (<= [`MAX_WINDOWS`])
-    /// [`WindowSpec`]s at user address `windows`, sorted by offset, disjoint, inside the
-    /// frame, each for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
-    /// no windows). The running or pending schedule cannot be replaced. Ability:
-    /// `SCHEDULING`. Errors: `InvalidArgument` (slot, frame, windows), `BadAddress`,
-    /// `NotPermitted` (slot in use).
-    ScheduleSet = 70,
-    /// `schedule_switch(slot)`: runs schedule `slot`; the first schedule starts at once,
-    /// later switches take effect at the next major-frame boundary. Ability: `SCHEDULING`.
-    /// Errors: `InvalidArgument` (empty slot).
-    ScheduleSwitch = 71,
-    /// `partition_info(tp) -> rdi = active time partition (0 in a gap or without a
-    /// schedule), rsi = start of tp's current or next window (ns since boot; u64::MAX if it
-    /// has none), rdx = that window's length (ns), r10 = CPU time threads of tp used (ns),
-    /// r8 = time the CPU was idle (ns), r9 = major frames started`. Ability: none. Errors:
-    /// `InvalidArgument` (tp out of range).
-    PartitionInfo = 72,
+        /// `schedule_set(slot, major_frame, windows, count)`: stores time schedule `slot`
+        /// (< [`MAX_SCHEDULES`]): a major frame in ns and `count` (<= [`MAX_WINDOWS`])
+        /// [`WindowSpec`]s at user address `windows`, sorted by offset, disjoint, inside the
+        /// frame, each for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
+        /// no windows). The running or pending schedule cannot be replaced. Ability:
+        /// `SCHEDULING`. Errors: `InvalidArgument` (slot, frame, windows), `BadAddress`,
+        /// `NotPermitted` (slot in use).
+        ScheduleSet = 70 => "schedule_set",
+        /// `schedule_switch(slot)`: runs schedule `slot`; the first schedule starts at once,
+        /// later switches take effect at the next major-frame boundary. Ability: `SCHEDULING`.
+        /// Errors: `InvalidArgument` (empty slot).
+        ScheduleSwitch = 71 => "schedule_switch",
+        /// `partition_info(tp) -> rdi = active time partition (0 in a gap or without a
+        /// schedule), rsi = start of tp's current or next window (ns since boot; u64::MAX if it
+        /// has none), rdx = that window's length (ns), r10 = CPU time threads of tp used (ns),
+        /// r8 = time the CPU was idle (ns), r9 = major frames started`. Ability: none. Errors:
+        /// `InvalidArgument` (tp out of range).
+        PartitionInfo = 72 => "partition_info",
 
-    /// `io_grant(task, first_port, count)`: lets a descendant task use I/O ports
-    /// `first_port..first_port + count` from ring 3 (enforced by the TSS I/O permission
-    /// bitmap; any other port access raises #GP, delivered like every fault). The caller
-    /// must hold the ports itself (the root task holds all except the kernel's:
-    /// [`KERNEL_PORTS`]). The first grant to a task costs 2 pages of its partition's quota.
-    /// Ability: `IO_PORTS`. Errors: `InvalidArgument` (empty range or beyond 0xffff),
-    /// `NotPermitted` (not a strict descendant, or ports the caller does not hold),
-    /// `QuotaExceeded`, `NoSuchObject`.
-    IoGrant = 80,
-    /// `irq_grant(task, line)`: lets a descendant task attach interrupt line `line`
-    /// (an IOAPIC input, < [`IRQ_LINES`]). The caller must hold the line itself (the root
-    /// task holds all except [`KERNEL_IRQS`]). Ability: `IRQ`. Errors: `InvalidArgument`
-    /// (line out of range), `NotPermitted` (not a strict descendant, or a line the caller
-    /// does not hold), `NoSuchObject`.
-    IrqGrant = 81,
-    /// `irq_attach(line, bit)`: the calling thread receives interrupt line `line`: when it
-    /// fires, the kernel masks it and sets notification bit `bit` (< 64) of the thread (so
-    /// `irq_wait` or `notify_wait` sees it). The line is unmasked at once. Attaching a line
-    /// the caller already has just changes the bit. A line is detached when its thread
-    /// dies. Ability: `IRQ`. Errors: `InvalidArgument` (line or bit out of range),
-    /// `NotPermitted` (the task does not hold the line, or another thread has it attached).
-    IrqAttach = 82,
-    /// `irq_wait(line, timeout)`: waits until the attached `line` has fired since the
-    /// last wait (and clears that). An interrupt that arrives while the thread's time
-    /// partition is not eligible is latched and seen when it runs again. The line stays
-    /// masked until `irq_ack`. Errors: `NotPermitted` (line not attached to the caller),
-    /// `InvalidArgument`, `TimedOut`.
-    IrqWait = 83,
-    /// `irq_ack(line)`: unmasks the attached `line` after its device was served.
-    /// Errors: `NotPermitted` (not attached to the caller), `InvalidArgument`.
-    IrqAck = 84,
-    /// `irq_detach(line)`: masks the line and releases it. Errors: as `irq_ack`.
-    IrqDetach = 85,
+        /// `io_grant(task, first_port, count)`: lets a descendant task use I/O ports
+        /// `first_port..first_port + count` from ring 3 (enforced by the TSS I/O permission
+        /// bitmap; any other port access raises #GP, delivered like every fault). The caller
+        /// must hold the ports itself (the root task holds all except the kernel's:
+        /// [`KERNEL_PORTS`]). The first grant to a task costs 2 pages of its partition's quota.
+        /// Ability: `IO_PORTS`. Errors: `InvalidArgument` (empty range or beyond 0xffff),
+        /// `NotPermitted` (not a strict descendant, or ports the caller does not hold),
+        /// `QuotaExceeded`, `NoSuchObject`.
+        IoGrant = 80 => "io_grant",
+        /// `irq_grant(task, line)`: lets a descendant task attach interrupt line `line`
+        /// (an IOAPIC input, < [`IRQ_LINES`]). The caller must hold the line itself (the root
+        /// task holds all except [`KERNEL_IRQS`]). Ability: `IRQ`. Errors: `InvalidArgument`
+        /// (line out of range), `NotPermitted` (not a strict descendant, or a line the caller
+        /// does not hold), `NoSuchObject`.
+        IrqGrant = 81 => "irq_grant",
+        /// `irq_attach(line, bit)`: the calling thread receives interrupt line `line`: when it
+        /// fires, the kernel masks it and sets notification bit `bit` (< 64) of the thread (so
+        /// `irq_wait` or `notify_wait` sees it). The line is unmasked at once. Attaching a line
+        /// the caller already has just changes the bit. A line is detached when its thread
+        /// dies. Ability: `IRQ`. Errors: `InvalidArgument` (line or bit out of range),
+        /// `NotPermitted` (the task does not hold the line, or another thread has it attached).
+        IrqAttach = 82 => "irq_attach",
+        /// `irq_wait(line, timeout)`: waits until the attached `line` has fired since the
+        /// last wait (and clears that). An interrupt that arrives while the thread's time
+        /// partition is not eligible is latched and seen when it runs again. The line stays
+        /// masked until `irq_ack`. Errors: `NotPermitted` (line not attached to the caller),
+        /// `InvalidArgument`, `TimedOut`.
+        IrqWait = 83 => "irq_wait",
+        /// `irq_ack(line)`: unmasks the attached `line` after its device was served.
+        /// Errors: `NotPermitted` (not attached to the caller), `InvalidArgument`.
+        IrqAck = 84 => "irq_ack",
+        /// `irq_detach(line)`: masks the line and releases it. Errors: as `irq_ack`.
+        IrqDetach = 85 => "irq_detach",
+    }
 }
 
 /// Interrupt lines (IOAPIC inputs 0..24; line `n` uses vector `0x40 + n`).
@@ -286,143 +286,58 @@ pub struct WindowSpec {
     pub partition: u64,
 }
 
-impl Call {
-    pub fn from_raw(raw: u64) -> Option<Self> {
-        use self::Call as C;
-        Some(match raw {
-            1 => C::DebugWrite,
-            2 => C::Clock,
-            3 => C::ThreadExit,
-            4 => C::SystemHalt,
-            5 => C::Yield,
-            6 => C::SleepUntil,
-            10 => C::TaskCreate,
-            11 => C::TaskKill,
-            12 => C::TaskAllowSend,
-            20 => C::ThreadCreate,
-            21 => C::ThreadStart,
-            22 => C::ThreadSuspend,
-            23 => C::ThreadResume,
-            24 => C::ThreadKill,
-            25 => C::ThreadSet,
-            26 => C::ThreadSelf,
-            30 => C::Map,
-            31 => C::MapPhysical,
-            32 => C::Unmap,
-            33 => C::Protect,
-            40 => C::Send,
-            41 => C::Receive,
-            42 => C::Call,
-            43 => C::ReplyWait,
-            44 => C::Reply,
-            50 => C::NotifySignal,
-            51 => C::NotifyWait,
-            60 => C::RpCreate,
-            61 => C::RpInfo,
-            62 => C::SetHealthMonitor,
-            70 => C::ScheduleSet,
-            71 => C::ScheduleSwitch,
-            72 => C::PartitionInfo,
-            80 => C::IoGrant,
-            81 => C::IrqGrant,
-            82 => C::IrqAttach,
-            83 => C::IrqWait,
-            84 => C::IrqAck,
-            85 => C::IrqDetach,
-            _ => return None,
-        })
+codes::code_enum! {
+    /// Attributes `thread_set` can change.
+    pub enum ThreadAttribute: u64 {
+        /// Scheduling priority, at most the thread's task's MCP (else `McpExceeded`).
+        Priority = 1 => "priority",
+        /// The thread that receives this thread's exception messages (0 = none). Must belong
+        /// to the same task or to an ancestor task.
+        ExceptionHandler = 2 => "exception_handler",
+        /// User address of the thread's [`IpcBuffer`](crate::ipc::IpcBuffer) (8-byte aligned,
+        /// 0 = none); checked to be mapped writable when set and whenever IPC uses it.
+        IpcBuffer = 3 => "ipc_buffer",
+        /// FS base (a canonical user address), e.g. for a guest's `arch_prctl(ARCH_SET_FS)`.
+        FsBase = 4 => "fs_base",
+        /// GS base (a canonical user address).
+        GsBase = 5 => "gs_base",
+        /// Time partition (0 = background). Needs `SCHEDULING`.
+        TimePartition = 6 => "time_partition",
     }
 }
 
-/// Attributes `thread_set` can change.
-#[repr(u64)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum ThreadAttribute {
-    /// Scheduling priority, at most the thread's task's MCP (else `McpExceeded`).
-    Priority = 1,
-    /// The thread that receives this thread's exception messages (0 = none). Must belong
-    /// to the same task or to an ancestor task.
-    ExceptionHandler = 2,
-    /// User address of the thread's [`IpcBuffer`](crate::ipc::IpcBuffer) (8-byte aligned,
-    /// 0 = none); checked to be mapped writable when set and whenever IPC uses it.
-    IpcBuffer = 3,
-    /// FS base (a canonical user address), e.g. for a guest's `arch_prctl(ARCH_SET_FS)`.
-    FsBase = 4,
-    /// GS base (a canonical user address).
-    GsBase = 5,
-    /// Time partition (0 = background). Needs `SCHEDULING`.
-    TimePartition = 6,
-}
-
-impl ThreadAttribute {
-    pub fn from_raw(raw: u64) -> Option<Self> {
-        Some(match raw {
-            1 => Self::Priority,
-            2 => Self::ExceptionHandler,
-            3 => Self::IpcBuffer,
-            4 => Self::FsBase,
-            5 => Self::GsBase,
-            6 => Self::TimePartition,
-            _ => return None,
-        })
-    }
-}
-
-/// Error codes returned in `rax`.
-#[repr(u64)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Error {
-    Ok = 0,
-    /// The call number does not exist.
-    InvalidCall = 1,
-    /// The caller's task lacks the ability the call needs (or asked to give more abilities
-    /// than it has).
-    AbilityDenied = 2,
-    /// An argument is out of range.
-    InvalidArgument = 3,
-    /// A buffer or page is not (entirely) mapped user memory with the rights the call needs.
-    BadAddress = 4,
-    /// No thread, task or resource partition has this identifier (any more).
-    NoSuchObject = 5,
-    /// The object exists but is not the caller's to use (control or communication right).
-    NotPermitted = 6,
-    /// A priority above the maximum controlled priority.
-    McpExceeded = 7,
-    /// The resource partition's kernel-memory quota is used up.
-    QuotaExceeded = 8,
-    /// A destination page is already mapped.
-    AlreadyMapped = 9,
-    /// The timeout expired (immediately, for a zero timeout) before the operation could
-    /// happen.
-    TimedOut = 10,
-    /// The peer was killed while the caller waited for it.
-    PeerGone = 11,
-    /// A reply to a thread that is not waiting for one from the caller.
-    NotWaiting = 12,
-    /// A fixed kernel table (e.g. resource-partition slots) is full.
-    OutOfResources = 13,
-}
-
-impl Error {
-    pub fn from_raw(raw: u64) -> Option<Self> {
-        use Error::*;
-        Some(match raw {
-            0 => Ok,
-            1 => InvalidCall,
-            2 => AbilityDenied,
-            3 => InvalidArgument,
-            4 => BadAddress,
-            5 => NoSuchObject,
-            6 => NotPermitted,
-            7 => McpExceeded,
-            8 => QuotaExceeded,
-            9 => AlreadyMapped,
-            10 => TimedOut,
-            11 => PeerGone,
-            12 => NotWaiting,
-            13 => OutOfResources,
-            _ => return None,
-        })
+codes::code_enum! {
+    /// Error codes returned in `rax`.
+    pub enum Error: u64 {
+        Ok = 0 => "Ok",
+        /// The call number does not exist.
+        InvalidCall = 1 => "InvalidCall",
+        /// The caller's task lacks the ability the call needs (or asked to give more abilities
+        /// than it has).
+        AbilityDenied = 2 => "AbilityDenied",
+        /// An argument is out of range.
+        InvalidArgument = 3 => "InvalidArgument",
+        /// A buffer or page is not (entirely) mapped user memory with the rights the call needs.
+        BadAddress = 4 => "BadAddress",
+        /// No thread, task or resource partition has this identifier (any more).
+        NoSuchObject = 5 => "NoSuchObject",
+        /// The object exists but is not the caller's to use (control or communication right).
+        NotPermitted = 6 => "NotPermitted",
+        /// A priority above the maximum controlled priority.
+        McpExceeded = 7 => "McpExceeded",
+        /// The resource partition's kernel-memory quota is used up.
+        QuotaExceeded = 8 => "QuotaExceeded",
+        /// A destination page is already mapped.
+        AlreadyMapped = 9 => "AlreadyMapped",
+        /// The timeout expired (immediately, for a zero timeout) before the operation could
+        /// happen.
+        TimedOut = 10 => "TimedOut",
+        /// The peer was killed while the caller waited for it.
+        PeerGone = 11 => "PeerGone",
+        /// A reply to a thread that is not waiting for one from the caller.
+        NotWaiting = 12 => "NotWaiting",
+        /// A fixed kernel table (e.g. resource-partition slots) is full.
+        OutOfResources = 13 => "OutOfResources",
     }
 }
 

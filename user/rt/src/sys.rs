@@ -51,7 +51,7 @@ pub fn raw(call: u64, a0: u64, a1: u64, a2: u64, a3: u64) -> (u64, u64, u64, u64
 
 /// `rax` as a result.
 pub fn status(rax: u64) -> Result<(), Error> {
-    match Error::from_raw(rax) {
+    match Error::from_code(rax) {
         Some(Error::Ok) => Ok(()),
         Some(e) => Err(e),
         None => Err(Error::InvalidCall),

@@ -226,7 +226,7 @@ pub fn format_value(var: &MonitorVar, data: &[u8]) -> String {
         }
         ValueKind::Exception => {
             let v = read_cell(&var.kind, data, var.addr);
-            match Trap::from_code(v) {
+            match Trap::from_u64(v) {
                 Some(t) => t.name().to_string(),
                 None => v.to_string(),
             }

@@ -123,72 +123,47 @@ impl core::fmt::Display for ImageError {
     }
 }
 
-/// Monitor type of a variable-map entry.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum VarType {
-    /// BOOL (1 byte, 0/1).
-    Bool = 0,
-    /// SINT.
-    SInt = 1,
-    /// INT.
-    Int = 2,
-    /// DINT.
-    DInt = 3,
-    /// LINT.
-    LInt = 4,
-    /// USINT.
-    USInt = 5,
-    /// UINT.
-    UInt = 6,
-    /// UDINT.
-    UDInt = 7,
-    /// ULINT.
-    ULInt = 8,
-    /// REAL.
-    Real = 9,
-    /// LREAL.
-    LReal = 10,
-    /// TIME (i64 nanoseconds).
-    Time = 11,
-    /// STRING (header + bytes, see [`crate::isa::Builtin`]).
-    String = 12,
-    /// BYTE.
-    Byte = 13,
-    /// WORD.
-    Word = 14,
-    /// DWORD.
-    DWord = 15,
-    /// LWORD.
-    LWord = 16,
+codes::code_enum! {
+    /// Monitor type of a variable-map entry.
+    pub enum VarType: u8 {
+        /// BOOL (1 byte, 0/1).
+        Bool = 0 => "BOOL",
+        /// SINT.
+        SInt = 1 => "SINT",
+        /// INT.
+        Int = 2 => "INT",
+        /// DINT.
+        DInt = 3 => "DINT",
+        /// LINT.
+        LInt = 4 => "LINT",
+        /// USINT.
+        USInt = 5 => "USINT",
+        /// UINT.
+        UInt = 6 => "UINT",
+        /// UDINT.
+        UDInt = 7 => "UDINT",
+        /// ULINT.
+        ULInt = 8 => "ULINT",
+        /// REAL.
+        Real = 9 => "REAL",
+        /// LREAL.
+        LReal = 10 => "LREAL",
+        /// TIME (i64 nanoseconds).
+        Time = 11 => "TIME",
+        /// STRING (header + bytes, see [`crate::isa::Builtin`]).
+        String = 12 => "STRING",
+        /// BYTE.
+        Byte = 13 => "BYTE",
+        /// WORD.
+        Word = 14 => "WORD",
+        /// DWORD.
+        DWord = 15 => "DWORD",
+        /// LWORD.
+        LWord = 16 => "LWORD",
+    }
 }
 
 impl VarType {
-    /// Decodes a type byte.
-    pub const fn from_u8(byte: u8) -> Option<VarType> {
-        use VarType::*;
-        Some(match byte {
-            0 => Bool,
-            1 => SInt,
-            2 => Int,
-            3 => DInt,
-            4 => LInt,
-            5 => USInt,
-            6 => UInt,
-            7 => UDInt,
-            8 => ULInt,
-            9 => Real,
-            10 => LReal,
-            11 => Time,
-            12 => String,
-            13 => Byte,
-            14 => Word,
-            15 => DWord,
-            16 => LWord,
-            _ => return None,
-        })
-    }
-
     /// The storage type of a scalar (`None` for STRING).
     pub const fn mem_type(self) -> Option<crate::isa::MemType> {
         use crate::isa::MemType as M;

@@ -424,57 +424,34 @@ pub fn compare(cmp: Opcode, a: u64, b: u64) -> bool {
     }
 }
 
-/// Typed data-memory access width and extension rule for loads/stores and float->int targets.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum MemType {
-    /// 8-bit signed (SINT).
-    I8 = 0,
-    /// 16-bit signed (INT).
-    I16 = 1,
-    /// 32-bit signed (DINT).
-    I32 = 2,
-    /// 64-bit signed (LINT, TIME).
-    I64 = 3,
-    /// 8-bit unsigned (USINT, BYTE, BOOL).
-    U8 = 4,
-    /// 16-bit unsigned (UINT, WORD).
-    U16 = 5,
-    /// 32-bit unsigned (UDINT, DWORD).
-    U32 = 6,
-    /// 64-bit unsigned (ULINT, LWORD).
-    U64 = 7,
-    /// REAL (f32 bits, zero-extended into the cell).
-    F32 = 8,
-    /// LREAL (f64 bits).
-    F64 = 9,
+codes::code_enum! {
+    /// Typed data-memory access width and extension rule for loads/stores and float->int targets.
+    pub enum MemType: u8 {
+        /// 8-bit signed (SINT).
+        I8 = 0 => "I8",
+        /// 16-bit signed (INT).
+        I16 = 1 => "I16",
+        /// 32-bit signed (DINT).
+        I32 = 2 => "I32",
+        /// 64-bit signed (LINT, TIME).
+        I64 = 3 => "I64",
+        /// 8-bit unsigned (USINT, BYTE, BOOL).
+        U8 = 4 => "U8",
+        /// 16-bit unsigned (UINT, WORD).
+        U16 = 5 => "U16",
+        /// 32-bit unsigned (UDINT, DWORD).
+        U32 = 6 => "U32",
+        /// 64-bit unsigned (ULINT, LWORD).
+        U64 = 7 => "U64",
+        /// REAL (f32 bits, zero-extended into the cell).
+        F32 = 8 => "F32",
+        /// LREAL (f64 bits).
+        F64 = 9 => "F64",
+    }
 }
 
 impl MemType {
     /// Every type, in numeric order.
-    pub const ALL: [MemType; 10] = [
-        MemType::I8,
-        MemType::I16,
-        MemType::I32,
-        MemType::I64,
-        MemType::U8,
-        MemType::U16,
-        MemType::U32,
-        MemType::U64,
-        MemType::F32,
-        MemType::F64,
-    ];
-
-    /// Decodes a type byte.
-    #[inline(always)]
-    pub const fn from_u8(byte: u8) -> Option<MemType> {
-        if (byte as usize) < Self::ALL.len() {
-            Some(Self::ALL[byte as usize])
-        } else {
-            None
-        }
-    }
-
     /// Width in bytes.
     #[inline(always)]
     pub const fn width(self) -> usize {
@@ -483,22 +460,6 @@ impl MemType {
             MemType::I16 | MemType::U16 => 2,
             MemType::I32 | MemType::U32 | MemType::F32 => 4,
             MemType::I64 | MemType::U64 | MemType::F64 => 8,
-        }
-    }
-
-    /// Assembler name, e.g. `"I32"`.
-    pub const fn name(self) -> &'static str {
-        match self {
-            MemType::I8 => "I8",
-            MemType::I16 => "I16",
-            MemType::I32 => "I32",
-            MemType::I64 => "I64",
-            MemType::U8 => "U8",
-            MemType::U16 => "U16",
-            MemType::U32 => "U32",
-            MemType::U64 => "U64",
-            MemType::F32 => "F32",
-            MemType::F64 => "F64",
         }
     }
 
@@ -537,103 +498,46 @@ impl MemType {
     }
 }
 
-/// Rounding rule of float->integer conversions.
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum RoundMode {
-    /// Toward zero (IEC `TRUNC`).
-    Truncate = 0,
-    /// To nearest, ties away from zero (IEC `REAL_TO_INT`: 2.5 -> 3, -2.5 -> -3).
-    NearestTiesAway = 1,
-}
-
-impl RoundMode {
-    /// Decodes a rounding-mode byte.
-    pub const fn from_u8(byte: u8) -> Option<RoundMode> {
-        match byte {
-            0 => Some(RoundMode::Truncate),
-            1 => Some(RoundMode::NearestTiesAway),
-            _ => None,
-        }
+codes::code_enum! {
+    /// Rounding rule of float->integer conversions.
+    pub enum RoundMode: u8 {
+        /// Toward zero (IEC `TRUNC`).
+        Truncate = 0 => "truncate",
+        /// To nearest, ties away from zero (IEC `REAL_TO_INT`: 2.5 -> 3, -2.5 -> -3).
+        NearestTiesAway = 1 => "nearest_ties_away",
     }
 }
 
-/// A run-time error detected by the VM. Codes are stable (they are the values an
-/// `e : __EXCEPTION` variable receives); 0 means "no exception".
-#[repr(u8)]
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Trap {
-    /// Integer (or float) division or modulo by zero.
-    DivisionByZero = 1,
-    /// CHK_INDEX failed: array index outside its declared bounds.
-    IndexOutOfBounds = 2,
-    /// CHK_RANGE_* failed: value outside a subrange type.
-    SubrangeViolation = 3,
-    /// The cycle's instruction budget is exhausted. Not catchable: it always ends the cycle.
-    Watchdog = 4,
-    /// CALL would exceed the call-frame capacity.
-    CallDepth = 5,
-    /// The operand stack (or try-frame store) is full.
-    StackOverflow = 6,
-    /// Math domain error: SQRT of a negative, LN/LOG of <= 0, ASIN/ACOS outside [-1, 1],
-    /// EXPT of 0 to a negative or of a negative to a non-integer power, float->integer
-    /// conversion of NaN/infinity/out-of-range, STRING_TO_* of a malformed string.
-    NumericError = 7,
-    /// A dynamic data address (indirect access, CALL frame, string operand) is outside data memory.
-    InvalidAddress = 8,
+codes::code_enum! {
+    /// A run-time error detected by the VM. Codes are stable (they are the values an
+    /// `e : __EXCEPTION` variable receives); 0 means "no exception".
+    pub enum Trap: u8 {
+        /// Integer (or float) division or modulo by zero.
+        DivisionByZero = 1 => "DIVISION_BY_ZERO",
+        /// CHK_INDEX failed: array index outside its declared bounds.
+        IndexOutOfBounds = 2 => "INDEX_OUT_OF_BOUNDS",
+        /// CHK_RANGE_* failed: value outside a subrange type.
+        SubrangeViolation = 3 => "SUBRANGE_VIOLATION",
+        /// The cycle's instruction budget is exhausted. Not catchable: it always ends the cycle.
+        Watchdog = 4 => "WATCHDOG",
+        /// CALL would exceed the call-frame capacity.
+        CallDepth = 5 => "CALL_DEPTH",
+        /// The operand stack (or try-frame store) is full.
+        StackOverflow = 6 => "STACK_OVERFLOW",
+        /// Math domain error: SQRT of a negative, LN/LOG of <= 0, ASIN/ACOS outside [-1, 1],
+        /// EXPT of 0 to a negative or of a negative to a non-integer power, float->integer
+        /// conversion of NaN/infinity/out-of-range, STRING_TO_* of a malformed string.
+        NumericError = 7 => "NUMERIC_ERROR",
+        /// A dynamic data address (indirect access, CALL frame, string operand) is outside data memory.
+        InvalidAddress = 8 => "INVALID_ADDRESS",
+    }
 }
 
 impl Trap {
-    /// Every trap, by code.
-    pub const ALL: [Trap; 8] = [
-        Trap::DivisionByZero,
-        Trap::IndexOutOfBounds,
-        Trap::SubrangeViolation,
-        Trap::Watchdog,
-        Trap::CallDepth,
-        Trap::StackOverflow,
-        Trap::NumericError,
-        Trap::InvalidAddress,
-    ];
-
-    /// The stable numeric code.
-    pub const fn code(self) -> u8 {
-        self as u8
-    }
-
-    /// Decodes a trap code (`None` for 0 and unknown codes).
-    pub const fn from_code(code: u64) -> Option<Trap> {
-        if code >= 1 && code <= Self::ALL.len() as u64 {
-            Some(Self::ALL[code as usize - 1])
-        } else {
-            None
-        }
-    }
-
-    /// The IEC-style name, e.g. `"DIVISION_BY_ZERO"`.
-    pub const fn name(self) -> &'static str {
-        match self {
-            Trap::DivisionByZero => "DIVISION_BY_ZERO",
-            Trap::IndexOutOfBounds => "INDEX_OUT_OF_BOUNDS",
-            Trap::SubrangeViolation => "SUBRANGE_VIOLATION",
-            Trap::Watchdog => "WATCHDOG",
-            Trap::CallDepth => "CALL_DEPTH",
-            Trap::StackOverflow => "STACK_OVERFLOW",
-            Trap::NumericError => "NUMERIC_ERROR",
-            Trap::InvalidAddress => "INVALID_ADDRESS",
-        }
-    }
-
     /// Whether a try frame can catch this trap (everything but WATCHDOG, which must
     /// terminate the cycle so that an endless loop inside `__TRY` cannot hang the task).
     pub const fn is_catchable(self) -> bool {
         !matches!(self, Trap::Watchdog)
-    }
-}
-
-impl core::fmt::Display for Trap {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        f.write_str(self.name())
     }
 }
 
@@ -866,7 +770,7 @@ impl core::fmt::Display for Instruction<'_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let imm = self.immediates;
         f.write_str(self.op.mnemonic())?;
-        let ty = |b: u8| MemType::from_u8(b).map_or("?", |t| t.name());
+        let ty = |b: u8| MemType::from_code(b).map_or("?", |t| t.name());
         match self.op.operands() {
             Operands::None => Ok(()),
             Operands::I32 => write!(f, " {}", read_u32(imm, 0) as i32),
@@ -882,7 +786,7 @@ impl core::fmt::Display for Instruction<'_> {
             Operands::TypeAddr => write!(f, " {} {}", ty(imm[0]), read_u32(imm, 1)),
             Operands::Width => write!(f, " {}", imm[0]),
             Operands::TypeMode => {
-                let mode = match RoundMode::from_u8(imm[1]) {
+                let mode = match RoundMode::from_code(imm[1]) {
                     Some(RoundMode::Truncate) => "TRUNC",
                     Some(RoundMode::NearestTiesAway) => "ROUND",
                     None => "?",
@@ -896,7 +800,7 @@ impl core::fmt::Display for Instruction<'_> {
                 read_u64(imm, 0) as i64,
                 read_u64(imm, 8) as i64
             ),
-            Operands::TrapCode => match Trap::from_code(imm[0] as u64) {
+            Operands::TrapCode => match Trap::from_u64(imm[0] as u64) {
                 Some(t) => write!(f, " {}", t.name()),
                 None => write!(f, " #{}", imm[0]),
             },

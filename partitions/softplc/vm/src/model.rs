@@ -285,7 +285,7 @@ impl<'a> Model<'a> {
             }
             Opcode::LdAbs => {
                 let v = self.read(
-                    MemType::from_u8(code[i]).unwrap(),
+                    MemType::from_code(code[i]).unwrap(),
                     imm_u32(code, i + 1) as u64,
                 )?;
                 push(&mut s, v)?;
@@ -293,26 +293,26 @@ impl<'a> Model<'a> {
             Opcode::StAbs => {
                 let v = pop(&mut s);
                 self.write(
-                    MemType::from_u8(code[i]).unwrap(),
+                    MemType::from_code(code[i]).unwrap(),
                     imm_u32(code, i + 1) as u64,
                     v,
                 )?;
             }
             Opcode::LdRel => {
                 let a = self.base as u64 + imm_u32(code, i + 1) as u64;
-                let v = self.read(MemType::from_u8(code[i]).unwrap(), a)?;
+                let v = self.read(MemType::from_code(code[i]).unwrap(), a)?;
                 push(&mut s, v)?;
             }
             Opcode::StRel => {
                 let v = pop(&mut s);
                 let a = self.base as u64 + imm_u32(code, i + 1) as u64;
-                self.write(MemType::from_u8(code[i]).unwrap(), a, v)?;
+                self.write(MemType::from_code(code[i]).unwrap(), a, v)?;
             }
             Opcode::LdInd => {
                 let a = pop(&mut s)
                     .checked_add(imm_u32(code, i + 1) as u64)
                     .ok_or(Trap::InvalidAddress)?;
-                let v = self.read(MemType::from_u8(code[i]).unwrap(), a)?;
+                let v = self.read(MemType::from_code(code[i]).unwrap(), a)?;
                 push(&mut s, v)?;
             }
             Opcode::StInd => {
@@ -320,7 +320,7 @@ impl<'a> Model<'a> {
                 let a = pop(&mut s)
                     .checked_add(imm_u32(code, i + 1) as u64)
                     .ok_or(Trap::InvalidAddress)?;
-                self.write(MemType::from_u8(code[i]).unwrap(), a, v)?;
+                self.write(MemType::from_code(code[i]).unwrap(), a, v)?;
             }
             Opcode::LeaRel => push(&mut s, self.base as u64 + imm_u32(code, i) as u64)?,
             Opcode::Copy => {
@@ -577,8 +577,8 @@ impl<'a> Model<'a> {
                 } else {
                     r64(a)
                 };
-                let ty = MemType::from_u8(code[i]).unwrap();
-                let mode = RoundMode::from_u8(code[i + 1]).unwrap();
+                let ty = MemType::from_code(code[i]).unwrap();
+                let mode = RoundMode::from_code(code[i + 1]).unwrap();
                 s.push(model_float_to_int(x, ty, mode)?);
             }
             Opcode::Jmp => next = imm_u32(code, i),
@@ -678,11 +678,11 @@ impl<'a> Model<'a> {
             Opcode::TryEnd => {
                 self.tries.pop();
             }
-            Opcode::Throw => return Err(Trap::from_code(code[i] as u64).unwrap()),
+            Opcode::Throw => return Err(Trap::from_u64(code[i] as u64).unwrap()),
             Opcode::Rethrow => {
                 let c = pop(&mut s);
                 if c != 0 {
-                    let trap = Trap::from_code(c)
+                    let trap = Trap::from_u64(c)
                         .filter(|t| *t != Trap::Watchdog)
                         .unwrap_or(Trap::NumericError);
                     return Err(trap);

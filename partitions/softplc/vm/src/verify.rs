@@ -354,7 +354,7 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
         let imm = pc + 1;
         match op.operands() {
             Operands::TypeAddr => {
-                let ty = MemType::from_u8(code[imm]).ok_or(VerifyError {
+                let ty = MemType::from_code(code[imm]).ok_or(VerifyError {
                     site,
                     reason: Reason::BadType(code[imm]),
                 })?;
@@ -383,11 +383,11 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                 }
             }
             Operands::TypeMode => {
-                match MemType::from_u8(code[imm]) {
+                match MemType::from_code(code[imm]) {
                     Some(ty) if ty.is_integer() => {}
                     _ => return err(site, Reason::BadType(code[imm])),
                 }
-                if RoundMode::from_u8(code[imm + 1]).is_none() {
+                if RoundMode::from_code(code[imm + 1]).is_none() {
                     return err(site, Reason::BadRoundMode(code[imm + 1]));
                 }
             }
@@ -395,7 +395,7 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                 Some(cmp) if cmp.is_comparison() => {}
                 _ => return err(site, Reason::BadComparison(code[imm])),
             },
-            Operands::TrapCode => match Trap::from_code(code[imm] as u64) {
+            Operands::TrapCode => match Trap::from_u64(code[imm] as u64) {
                 Some(trap) if trap.is_catchable() => {}
                 _ => return err(site, Reason::BadTrapCode(code[imm])),
             },
@@ -492,7 +492,7 @@ fn step(
     // Frame-relative operands must lie inside this POU's frame.
     match op {
         Opcode::LdRel | Opcode::StRel => {
-            let ty = MemType::from_u8(code[imm]).expect("swept");
+            let ty = MemType::from_code(code[imm]).expect("swept");
             let offset = read_u32(code, imm + 1) as u64;
             if offset + ty.width() as u64 > pou.frame_size as u64 {
                 return err(
@@ -669,7 +669,7 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         if image.name_at(off, len).is_none() {
             return err(site, Reason::BadName);
         }
-        let ty = VarType::from_u8(var.ty).ok_or(VerifyError {
+        let ty = VarType::from_code(var.ty).ok_or(VerifyError {
             site,
             reason: Reason::BadVarType(var.ty),
         })?;

@@ -461,7 +461,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 self.push(a)?;
             }
             LdAbs | LdRel | StAbs | StRel => {
-                let ty = MemType::from_u8(code[imm]).expect("verified");
+                let ty = MemType::from_code(code[imm]).expect("verified");
                 let mut address = read_u32(code, imm + 1) as u64;
                 if matches!(op, LdRel | StRel) {
                     address += self.base as u64;
@@ -475,7 +475,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
             }
             LdInd => {
-                let ty = MemType::from_u8(code[imm]).expect("verified");
+                let ty = MemType::from_code(code[imm]).expect("verified");
                 let address = self
                     .pop()
                     .checked_add(read_u32(code, imm + 1) as u64)
@@ -484,7 +484,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 self.push(v)?;
             }
             StInd => {
-                let ty = MemType::from_u8(code[imm]).expect("verified");
+                let ty = MemType::from_code(code[imm]).expect("verified");
                 let (address, v) = self.pop2();
                 let address = address
                     .checked_add(read_u32(code, imm + 1) as u64)
@@ -644,8 +644,8 @@ impl<'a, 'm> Machine<'a, 'm> {
                 self.push(r)?;
             }
             F32ToInt | F64ToInt => {
-                let target = MemType::from_u8(code[imm]).expect("verified");
-                let mode = RoundMode::from_u8(code[imm + 1]).expect("verified");
+                let target = MemType::from_code(code[imm]).expect("verified");
+                let mode = RoundMode::from_code(code[imm + 1]).expect("verified");
                 let a = self.pop();
                 let x = if op == F32ToInt {
                     f32_of(a) as f64
@@ -769,11 +769,11 @@ impl<'a, 'm> Machine<'a, 'm> {
                 self.try_depth += 1;
             }
             TryEnd => self.try_depth = self.try_depth.saturating_sub(1),
-            Throw => return Err(Trap::from_code(code[imm] as u64).expect("verified")),
+            Throw => return Err(Trap::from_u64(code[imm] as u64).expect("verified")),
             Rethrow => {
                 let c = self.pop();
                 if c != 0 {
-                    return Err(match Trap::from_code(c) {
+                    return Err(match Trap::from_u64(c) {
                         Some(trap) if trap.is_catchable() => trap,
                         _ => Trap::NumericError,
                     });
@@ -794,7 +794,7 @@ impl<'a, 'm> Machine<'a, 'm> {
 
     /// Reads a variable-map entry (verified to lie inside data memory).
     pub fn read_entry(&self, var: &Var<'_>) -> Value<'_> {
-        let ty = VarType::from_u8(var.ty).expect("verified");
+        let ty = VarType::from_code(var.ty).expect("verified");
         let at = var.addr as usize;
         let Some(mem) = ty.mem_type() else {
             let bytes = &self.data[at..at + var.size as usize];
@@ -823,7 +823,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         if var.flags & VAR_FLAG_CONSTANT != 0 {
             return Err(VarError::Constant);
         }
-        let ty = VarType::from_u8(var.ty).expect("verified");
+        let ty = VarType::from_code(var.ty).expect("verified");
         let at = var.addr as usize;
         if ty.mem_type().is_none() {
             let Value::String(text) = value else {
@@ -848,7 +848,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         if var.flags & VAR_FLAG_CONSTANT != 0 {
             return Err(VarError::Constant);
         }
-        let ty = VarType::from_u8(var.ty).expect("verified");
+        let ty = VarType::from_code(var.ty).expect("verified");
         if ty.mem_type().is_none() {
             return Err(VarError::NotForceable);
         }

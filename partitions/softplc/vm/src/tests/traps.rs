@@ -427,8 +427,8 @@ fn trap_names_and_codes_are_stable() {
     ];
     for (trap, (code, name)) in Trap::ALL.iter().zip(expected) {
         assert_eq!((trap.code(), trap.name()), (code, name));
-        assert_eq!(Trap::from_code(code as u64), Some(*trap));
+        assert_eq!(Trap::from_u64(code as u64), Some(*trap));
     }
-    assert_eq!(Trap::from_code(0), None);
-    assert_eq!(Trap::from_code(9), None);
+    assert_eq!(Trap::from_u64(0), None);
+    assert_eq!(Trap::from_u64(9), None);
 }
