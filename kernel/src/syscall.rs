@@ -1,6 +1,8 @@
-//! System-call dispatch: argument decoding, ability and right checks, then the object
-//! operations in [`state`](crate::state) and [`ipc`](crate::ipc). The ABI (numbers,
-//! registers, errors) is documented once, in `abi::syscall`.
+//! System-call dispatch: one handler per call (all of one signature, [`Handler`]), which
+//! decodes its arguments (`abi::args`, the one definition of each call's registers), checks
+//! abilities, rights and ranges, then calls the object operations in
+//! [`state`](crate::state) and [`ipc`](crate::ipc) and says what happens next ([`Next`]).
+//! The ABI (numbers, registers, errors) is documented once, in `abi::syscall`.
 
 use crate::ipc::deadline;
 use crate::kprintln;
@@ -8,6 +10,7 @@ use crate::rp::Amount;
 use crate::state::{Kernel, Source};
 use crate::thread::{Fault, State};
 use crate::timepart::{Schedule, Window};
+use abi::args::{self, ArgRegs};
 use abi::ipc::{IPC_BUFFER_SIZE, LABEL_SYSCALL, MessageTag, VECTOR_SYSCALL};
 use abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_SCHEDULES, MAX_WINDOWS, PageRights, TASK_NAME_MAX,
@@ -23,10 +26,80 @@ pub enum Outcome {
     Halt { success: bool },
 }
 
-/// The six argument registers of thread `t`.
-fn args(k: &Kernel, t: usize) -> [u64; 6] {
+/// What happens after a system call's handler returned `Ok`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Next {
+    /// The call is complete: the caller gets `rax` = Ok (its results are already in its
+    /// registers).
+    Return,
+    /// `rax` is not the dispatcher's to set: the caller blocked (the call sets it when it
+    /// ends), is gone, or the IPC path already set it.
+    Pending,
+    /// Stop the machine.
+    Halt { success: bool },
+}
+
+/// Every system call's handler has this signature: the kernel, the calling thread, its
+/// argument registers and the clock (ns since boot; read only by calls that need it, it
+/// costs a division). An `Err` is the caller's `rax`.
+type Handler = fn(&mut Kernel, usize, &ArgRegs, fn() -> u64) -> Result<Next, Error>;
+
+/// The handler of each call.
+fn handler(call: Call) -> Handler {
+    match call {
+        Call::DebugWrite => debug_write,
+        Call::Clock => clock,
+        Call::ThreadExit => thread_exit,
+        Call::SystemHalt => system_halt,
+        Call::Yield => yield_now,
+        Call::SleepUntil => sleep_until,
+        Call::TaskCreate => task_create,
+        Call::TaskKill => task_kill,
+        Call::TaskAllowSend => task_allow_send,
+        Call::ThreadCreate => thread_create,
+        Call::ThreadStart => thread_start,
+        Call::ThreadSuspend => thread_suspend,
+        Call::ThreadResume => thread_resume,
+        Call::ThreadKill => thread_kill,
+        Call::ThreadSet => thread_set,
+        Call::ThreadSelf => thread_self,
+        Call::Map => map,
+        Call::MapPhysical => map_physical,
+        Call::Unmap => unmap,
+        Call::Protect => protect,
+        Call::Send => send,
+        Call::Receive => receive,
+        Call::Call => ipc_call,
+        Call::ReplyWait => reply_wait,
+        Call::Reply => reply,
+        Call::NotifySignal => notify_signal,
+        Call::NotifyWait => notify_wait,
+        Call::RpCreate => rp_create,
+        Call::RpInfo => rp_info,
+        Call::SetHealthMonitor => set_health_monitor,
+        Call::ScheduleSet => schedule_set,
+        Call::ScheduleSwitch => schedule_switch,
+        Call::PartitionInfo => partition_info,
+        Call::IoGrant => io_grant,
+        Call::IrqGrant => irq_grant,
+        Call::IrqAttach => irq_attach,
+        Call::IrqWait => irq_wait,
+        Call::IrqAck => irq_ack,
+        Call::IrqDetach => irq_detach,
+    }
+}
+
+/// The argument registers of thread `t`.
+fn args(k: &Kernel, t: usize) -> ArgRegs {
     let c = &k.threads[t].context;
-    [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9]
+    ArgRegs {
+        rdi: c.rdi,
+        rsi: c.rsi,
+        rdx: c.rdx,
+        r10: c.r10,
+        r8: c.r8,
+        r9: c.r9,
+    }
 }
 
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
@@ -45,11 +118,15 @@ pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
     let raw = k.threads[t].context.rax;
     let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
-        Some(call) => handle(k, t, call, clock),
+        Some(call) => handler(call)(k, t, &args(k, t), clock),
     };
     match result {
-        Ok(Some(halt)) => halt,
-        Ok(None) => Outcome::Continue,
+        Ok(Next::Return) => {
+            k.threads[t].context.rax = Error::Ok as u64;
+            Outcome::Continue
+        }
+        Ok(Next::Pending) => Outcome::Continue,
+        Ok(Next::Halt { success }) => Outcome::Halt { success },
         Err(e) => {
             k.threads[t].context.rax = e as u64;
             Outcome::Continue
@@ -57,357 +134,498 @@ pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
     }
 }
 
-/// Sets `rax` = Ok for calls that completed (blocking calls set it when they end).
-fn done(k: &mut Kernel, t: usize) -> Result<Option<Outcome>, Error> {
+/// `rax` = Ok now, for calls that may block: the wake-up sets it again if the wait fails.
+fn ok_unless_changed(k: &mut Kernel, t: usize) {
     k.threads[t].context.rax = Error::Ok as u64;
-    Ok(None)
 }
 
 fn rights(bits: u64) -> Result<PageRights, Error> {
     PageRights::from_bits(bits).ok_or(Error::InvalidArgument)
 }
 
-fn handle(
+/// The calling thread's task.
+fn task_of(k: &Kernel, t: usize) -> usize {
+    k.threads[t].task
+}
+
+fn debug_write(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::DEBUG_LOG)?;
+    let a = args::DebugWrite::decode(regs);
+    if a.len > DEBUG_WRITE_MAX {
+        return Err(Error::InvalidArgument);
+    }
+    let mut buf = [0u8; DEBUG_WRITE_MAX as usize];
+    let text = &mut buf[..a.len as usize];
+    if !k.tasks[task].space.copy_from_user(a.ptr, text) {
+        return Err(Error::BadAddress);
+    }
+    let text = core::str::from_utf8(text).unwrap_or("<invalid UTF-8>");
+    kprintln!("[{}] {}", k.tasks[task].name(), text.trim_end_matches('\n'));
+    Ok(Next::Return)
+}
+
+fn clock(k: &mut Kernel, t: usize, _: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+    let c = &mut k.threads[t].context;
+    (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
+    Ok(Next::Return)
+}
+
+fn thread_exit(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    kprintln!(
+        "kernel: thread of task {} exited",
+        k.tasks[task_of(k, t)].name()
+    );
+    k.kill_thread(t);
+    Ok(Next::Pending)
+}
+
+fn system_halt(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.require(task_of(k, t), Abilities::SYSTEM_HALT)?;
+    let success = match args::SystemHalt::decode(regs).outcome {
+        0 => true,
+        1 => false,
+        _ => return Err(Error::InvalidArgument),
+    };
+    kprintln!(
+        "kernel: halt requested by user space ({})",
+        if success { "Success" } else { "Failure" }
+    );
+    Ok(Next::Halt { success })
+}
+
+fn yield_now(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.run.rotate(t);
+    Ok(Next::Return)
+}
+
+fn sleep_until(
     k: &mut Kernel,
     t: usize,
-    call: Call,
+    regs: &ArgRegs,
     clock: fn() -> u64,
-) -> Result<Option<Outcome>, Error> {
-    let task = k.threads[t].task;
-    let a = args(k, t);
-    match call {
-        Call::DebugWrite => {
-            k.require(task, Abilities::DEBUG_LOG)?;
-            let (ptr, len) = (a[0], a[1]);
-            if len > DEBUG_WRITE_MAX {
-                return Err(Error::InvalidArgument);
-            }
-            let mut buf = [0u8; DEBUG_WRITE_MAX as usize];
-            let text = &mut buf[..len as usize];
-            if !k.tasks[task].space.copy_from_user(ptr, text) {
-                return Err(Error::BadAddress);
-            }
-            let text = core::str::from_utf8(text).unwrap_or("<invalid UTF-8>");
-            kprintln!("[{}] {}", k.tasks[task].name(), text.trim_end_matches('\n'));
-            done(k, t)
-        }
-        Call::Clock => {
-            let c = &mut k.threads[t].context;
-            (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
-            done(k, t)
-        }
-        Call::ThreadExit => {
-            kprintln!("kernel: thread of task {} exited", k.tasks[task].name());
-            k.kill_thread(t);
-            Ok(None)
-        }
-        Call::SystemHalt => {
-            k.require(task, Abilities::SYSTEM_HALT)?;
-            let success = match a[0] {
-                0 => true,
-                1 => false,
-                _ => return Err(Error::InvalidArgument),
-            };
-            kprintln!(
-                "kernel: halt requested by user space ({})",
-                if success { "Success" } else { "Failure" }
-            );
-            Ok(Some(Outcome::Halt { success }))
-        }
-        Call::Yield => {
-            k.run.rotate(t);
-            done(k, t)
-        }
-        Call::SleepUntil => {
-            k.threads[t].context.rax = Error::Ok as u64;
-            if a[0] > clock() {
-                k.block(t, State::Sleeping, a[0]);
-            }
-            Ok(None)
-        }
+) -> Result<Next, Error> {
+    let time = args::SleepUntil::decode(regs).time;
+    ok_unless_changed(k, t);
+    if time > clock() {
+        k.block(t, State::Sleeping, time);
+    }
+    Ok(Next::Pending)
+}
 
-        Call::TaskCreate => {
-            k.require(task, Abilities::CREATE_TASK)?;
-            let abilities = Abilities::from_bits(a[0]).ok_or(Error::InvalidArgument)?;
-            let mcp = u8::try_from(a[1]).map_err(|_| Error::McpExceeded)?;
-            let rp = k.resource_partition(task, a[2])?;
-            if rp != k.tasks[task].rp {
-                k.require(task, Abilities::PARTITION_CONTROL)?;
-                if k.rps[rp].owner != task {
-                    return Err(Error::NotPermitted);
-                }
-            }
-            if a[4] > TASK_NAME_MAX {
-                return Err(Error::InvalidArgument);
-            }
-            let mut name = [0u8; TASK_NAME_MAX as usize];
-            let name = &mut name[..a[4] as usize];
-            if !k.tasks[task].space.copy_from_user(a[3], name) {
-                return Err(Error::BadAddress);
-            }
-            let name = core::str::from_utf8(name).map_err(|_| Error::InvalidArgument)?;
-            let child = k.create_task(task, abilities, mcp, rp, name)?;
-            k.threads[t].context.rdi = k.task_id(child);
-            done(k, t)
+fn task_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::CREATE_TASK)?;
+    let a = args::TaskCreate::decode(regs);
+    let abilities = Abilities::from_bits(a.abilities).ok_or(Error::InvalidArgument)?;
+    let mcp = u8::try_from(a.mcp).map_err(|_| Error::McpExceeded)?;
+    let rp = k.resource_partition(task, a.rp)?;
+    if rp != k.tasks[task].rp {
+        k.require(task, Abilities::PARTITION_CONTROL)?;
+        if k.rps[rp].owner != task {
+            return Err(Error::NotPermitted);
         }
-        Call::TaskKill => {
-            k.require(task, Abilities::CREATE_TASK)?;
-            let target = k.task(a[0])?;
-            if target == task || !k.is_within(target, task) {
-                return Err(Error::NotPermitted);
-            }
-            k.destroy_task(target);
-            done(k, t)
-        }
-        Call::TaskAllowSend => {
-            k.require(task, Abilities::CREATE_TASK)?;
-            let from = k.controlled_task(task, a[0])?;
-            let to = k.controlled_task(task, a[1])?;
-            k.tasks[from].send_to |= 1 << to;
-            done(k, t)
-        }
+    }
+    if a.name_len > TASK_NAME_MAX {
+        return Err(Error::InvalidArgument);
+    }
+    let mut name = [0u8; TASK_NAME_MAX as usize];
+    let name = &mut name[..a.name_len as usize];
+    if !k.tasks[task].space.copy_from_user(a.name_ptr, name) {
+        return Err(Error::BadAddress);
+    }
+    let name = core::str::from_utf8(name).map_err(|_| Error::InvalidArgument)?;
+    let child = k.create_task(task, abilities, mcp, rp, name)?;
+    k.threads[t].context.rdi = k.task_id(child);
+    Ok(Next::Return)
+}
 
-        Call::ThreadCreate => {
-            k.require(task, Abilities::CREATE_THREAD)?;
-            let target = k.controlled_task(task, a[0])?;
-            let priority = u8::try_from(a[3]).map_err(|_| Error::McpExceeded)?;
-            let tp = k.threads[t].time_partition;
-            let new = k.create_thread(target, a[1], a[2], priority, tp, a[4])?;
-            k.threads[t].context.rdi = k.thread_id(new);
-            done(k, t)
-        }
-        Call::ThreadStart => {
-            k.require(task, Abilities::CREATE_THREAD)?;
-            let target = k.controlled_thread(t, a[0])?;
-            if k.threads[target].state != State::Inactive {
-                return Err(Error::InvalidArgument);
-            }
-            k.set_state(target, State::Ready);
-            done(k, t)
-        }
-        Call::ThreadSuspend | Call::ThreadResume => {
-            let target = k.controlled_thread(t, a[0])?;
-            k.set_suspended(target, call == Call::ThreadSuspend);
-            done(k, t)
-        }
-        Call::ThreadKill => {
-            let target = k.controlled_thread(t, a[0])?;
-            k.kill_thread(target);
-            if target != t {
-                done(k, t)?;
-            }
-            Ok(None)
-        }
-        Call::ThreadSet => {
-            let target = k.controlled_thread(t, a[0])?;
-            set_attribute(k, task, target, a[1], a[2])?;
-            done(k, t)
-        }
-        Call::ThreadSelf => {
-            k.threads[t].context.rdi = k.thread_id(t);
-            k.threads[t].context.rsi = k.task_id(task);
-            done(k, t)
-        }
+fn task_kill(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::CREATE_TASK)?;
+    let target = k.task(args::TaskKill::decode(regs).task)?;
+    if target == task || !k.is_within(target, task) {
+        return Err(Error::NotPermitted);
+    }
+    k.destroy_task(target);
+    Ok(Next::Return)
+}
 
-        Call::Map | Call::MapPhysical => {
-            let source = if call == Call::Map {
-                k.require(task, Abilities::MAP)?;
-                Source::Virtual(a[1])
-            } else {
-                k.require(task, Abilities::PHYSICAL_MEMORY)?;
-                Source::Physical(a[1])
-            };
-            let target = k.controlled_task(task, a[0])?;
-            k.map(task, target, source, a[2], a[3], rights(a[4])?)?;
-            done(k, t)
-        }
-        Call::Unmap => {
-            k.require(task, Abilities::MAP)?;
-            let target = k.controlled_task(task, a[0])?;
-            k.unmap(target, a[1], a[2])?;
-            done(k, t)
-        }
-        Call::Protect => {
-            k.require(task, Abilities::MAP)?;
-            let target = k.controlled_task(task, a[0])?;
-            k.protect(target, a[1], a[2], rights(a[3])?)?;
-            done(k, t)
-        }
+fn task_allow_send(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    _: fn() -> u64,
+) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::CREATE_TASK)?;
+    let a = args::TaskAllowSend::decode(regs);
+    let from = k.controlled_task(task, a.from)?;
+    let to = k.controlled_task(task, a.to)?;
+    k.tasks[from].send_to |= 1 << to;
+    Ok(Next::Return)
+}
 
-        Call::Send | Call::Call => {
-            let dest = k.thread(a[0])?;
-            if !k.may_send(task, k.threads[dest].task) {
-                return Err(Error::NotPermitted);
-            }
-            if !MessageTag(a[2]).is_valid() {
-                return Err(Error::InvalidArgument);
-            }
-            k.send(
-                t,
-                dest,
-                call == Call::Call,
-                deadline(clock, a[1]),
-                a[1] == 0,
-            );
-            Ok(None)
-        }
-        Call::Receive => {
-            let from = match a[0] {
-                0 => None,
-                id => Some(k.thread(id)?),
-            };
-            k.receive(t, from, deadline(clock, a[1]), a[1] == 0);
-            Ok(None)
-        }
-        Call::ReplyWait | Call::Reply => {
-            if !MessageTag(a[2]).is_valid() {
-                return Err(Error::InvalidArgument);
-            }
-            if a[0] != 0 {
-                let caller = k.thread(a[0]).map_err(|_| Error::NotWaiting)?;
-                k.reply(t, caller)?;
-            }
-            if call == Call::ReplyWait {
-                k.receive(t, None, deadline(clock, a[1]), a[1] == 0);
-                Ok(None)
-            } else {
-                done(k, t)
-            }
-        }
+fn thread_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::CREATE_THREAD)?;
+    let a = args::ThreadCreate::decode(regs);
+    let target = k.controlled_task(task, a.task)?;
+    let priority = u8::try_from(a.priority).map_err(|_| Error::McpExceeded)?;
+    let tp = k.threads[t].time_partition;
+    let new = k.create_thread(target, a.entry, a.stack, priority, tp, a.arg)?;
+    k.threads[t].context.rdi = k.thread_id(new);
+    Ok(Next::Return)
+}
 
-        Call::NotifySignal => {
-            let target = k.thread(a[0])?;
-            if !k.may_send(task, k.threads[target].task) {
-                return Err(Error::NotPermitted);
-            }
-            k.signal(target, a[1]);
-            done(k, t)
-        }
-        Call::NotifyWait => {
-            k.wait_notify(t, a[0], deadline(clock, a[1]), a[1] == 0);
-            Ok(None)
-        }
+fn thread_start(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.require(task_of(k, t), Abilities::CREATE_THREAD)?;
+    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+    if k.threads[target].state != State::Inactive {
+        return Err(Error::InvalidArgument);
+    }
+    k.set_state(target, State::Ready);
+    Ok(Next::Return)
+}
 
-        Call::RpCreate => {
-            k.require(task, Abilities::PARTITION_CONTROL)?;
-            let rp = k.rp_create(
-                task,
-                Amount {
-                    tasks: a[0],
-                    threads: a[1],
-                    pages: a[2],
-                },
-            )?;
-            k.threads[t].context.rdi = rp as u64 + 1;
-            done(k, t)
+fn thread_suspend(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+    k.set_suspended(target, true);
+    Ok(Next::Return)
+}
+
+fn thread_resume(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+    k.set_suspended(target, false);
+    Ok(Next::Return)
+}
+
+fn thread_kill(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+    k.kill_thread(target);
+    Ok(if target == t {
+        Next::Pending
+    } else {
+        Next::Return
+    })
+}
+
+fn thread_set(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let a = args::ThreadSet::decode(regs);
+    let target = k.controlled_thread(t, a.thread)?;
+    set_attribute(k, task_of(k, t), target, a.attribute, a.value)?;
+    Ok(Next::Return)
+}
+
+fn thread_self(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.threads[t].context.rdi = k.thread_id(t);
+    k.threads[t].context.rsi = k.task_id(task_of(k, t));
+    Ok(Next::Return)
+}
+
+/// `map` and `map_physical`, which differ only in where the frames come from.
+fn map_from(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    ability: Abilities,
+    source: fn(u64) -> Source,
+) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, ability)?;
+    let a = args::Map::decode(regs);
+    let target = k.controlled_task(task, a.task)?;
+    k.map(
+        task,
+        target,
+        source(a.source),
+        a.destination,
+        a.pages,
+        rights(a.rights)?,
+    )?;
+    Ok(Next::Return)
+}
+
+fn map(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    map_from(k, t, regs, Abilities::MAP, Source::Virtual)
+}
+
+fn map_physical(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    map_from(k, t, regs, Abilities::PHYSICAL_MEMORY, Source::Physical)
+}
+
+fn unmap(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::MAP)?;
+    let a = args::Unmap::decode(regs);
+    let target = k.controlled_task(task, a.task)?;
+    k.unmap(target, a.address, a.pages)?;
+    Ok(Next::Return)
+}
+
+fn protect(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::MAP)?;
+    let a = args::Protect::decode(regs);
+    let target = k.controlled_task(task, a.task)?;
+    k.protect(target, a.address, a.pages, rights(a.rights)?)?;
+    Ok(Next::Return)
+}
+
+/// `send` and `call` (which also waits for the reply); the IPC path sets `rax`.
+fn send_message(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    clock: fn() -> u64,
+    and_wait: bool,
+) -> Result<Next, Error> {
+    let a = args::Ipc::decode(regs);
+    let dest = k.thread(a.peer)?;
+    if !k.may_send(task_of(k, t), k.threads[dest].task) {
+        return Err(Error::NotPermitted);
+    }
+    if !MessageTag(a.tag).is_valid() {
+        return Err(Error::InvalidArgument);
+    }
+    k.send(
+        t,
+        dest,
+        and_wait,
+        deadline(clock, a.timeout),
+        a.timeout == 0,
+    );
+    Ok(Next::Pending)
+}
+
+fn send(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+    send_message(k, t, regs, clock, false)
+}
+
+fn ipc_call(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+    send_message(k, t, regs, clock, true)
+}
+
+fn receive(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+    let a = args::Ipc::decode(regs);
+    let from = match a.peer {
+        0 => None,
+        id => Some(k.thread(id)?),
+    };
+    k.receive(t, from, deadline(clock, a.timeout), a.timeout == 0);
+    Ok(Next::Pending)
+}
+
+/// The reply half of `reply` and `reply_wait` (no caller to answer when the peer is 0).
+fn answer_caller(k: &mut Kernel, t: usize, a: &args::Ipc) -> Result<(), Error> {
+    if !MessageTag(a.tag).is_valid() {
+        return Err(Error::InvalidArgument);
+    }
+    if a.peer != 0 {
+        let caller = k.thread(a.peer).map_err(|_| Error::NotWaiting)?;
+        k.reply(t, caller)?;
+    }
+    Ok(())
+}
+
+fn reply_wait(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+    let a = args::Ipc::decode(regs);
+    answer_caller(k, t, &a)?;
+    k.receive(t, None, deadline(clock, a.timeout), a.timeout == 0);
+    Ok(Next::Pending)
+}
+
+fn reply(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    answer_caller(k, t, &args::Ipc::decode(regs))?;
+    Ok(Next::Return)
+}
+
+fn notify_signal(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let a = args::NotifySignal::decode(regs);
+    let target = k.thread(a.thread)?;
+    if !k.may_send(task_of(k, t), k.threads[target].task) {
+        return Err(Error::NotPermitted);
+    }
+    k.signal(target, a.bits);
+    Ok(Next::Return)
+}
+
+fn notify_wait(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    clock: fn() -> u64,
+) -> Result<Next, Error> {
+    let a = args::NotifyWait::decode(regs);
+    k.wait_notify(t, a.mask, deadline(clock, a.timeout), a.timeout == 0);
+    Ok(Next::Pending)
+}
+
+fn rp_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::PARTITION_CONTROL)?;
+    let a = args::RpCreate::decode(regs);
+    let rp = k.rp_create(
+        task,
+        Amount {
+            tasks: a.tasks,
+            threads: a.threads,
+            pages: a.pages,
+        },
+    )?;
+    k.threads[t].context.rdi = rp as u64 + 1;
+    Ok(Next::Return)
+}
+
+fn rp_info(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let rp = k.resource_partition(task_of(k, t), args::RpInfo::decode(regs).rp)?;
+    let r = k.rps[rp];
+    let c = &mut k.threads[t].context;
+    c.rdi = r.used.pages;
+    c.rsi = r.quota.pages;
+    c.rdx = (r.used.threads & 0xffff)
+        | (r.quota.threads & 0xffff) << 16
+        | (r.used.tasks & 0xffff) << 32
+        | (r.quota.tasks & 0xffff) << 48;
+    Ok(Next::Return)
+}
+
+fn set_health_monitor(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    _: fn() -> u64,
+) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::PARTITION_CONTROL)?;
+    let id = args::SetHealthMonitor::decode(regs).thread;
+    let monitor = k.thread(id)?;
+    if task != 0 || k.threads[monitor].task != 0 {
+        return Err(Error::NotPermitted);
+    }
+    k.health_monitor = id;
+    Ok(Next::Return)
+}
+
+fn schedule_set(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::SCHEDULING)?;
+    let a = args::ScheduleSet::decode(regs);
+    if a.slot >= MAX_SCHEDULES || a.count > MAX_WINDOWS {
+        return Err(Error::InvalidArgument);
+    }
+    let mut windows = [Window::default(); MAX_WINDOWS as usize];
+    for (i, w) in windows.iter_mut().take(a.count as usize).enumerate() {
+        let mut raw = [0u8; 24];
+        let at = a
+            .windows
+            .checked_add(i as u64 * 24)
+            .ok_or(Error::BadAddress)?;
+        if !k.tasks[task].space.copy_from_user(at, &mut raw) {
+            return Err(Error::BadAddress);
         }
-        Call::RpInfo => {
-            let rp = k.resource_partition(task, a[0])?;
-            let r = k.rps[rp];
-            let c = &mut k.threads[t].context;
-            c.rdi = r.used.pages;
-            c.rsi = r.quota.pages;
-            c.rdx = (r.used.threads & 0xffff)
-                | (r.quota.threads & 0xffff) << 16
-                | (r.used.tasks & 0xffff) << 32
-                | (r.quota.tasks & 0xffff) << 48;
-            done(k, t)
-        }
-        Call::ScheduleSet | Call::ScheduleSwitch | Call::PartitionInfo => {
-            time_call(k, t, call, a, clock())?;
-            done(k, t)
-        }
-        Call::IoGrant => {
-            k.require(task, Abilities::IO_PORTS)?;
-            let target = k.task(a[0])?;
-            k.io_grant(task, target, a[1], a[2])?;
-            done(k, t)
-        }
-        Call::IrqGrant => {
-            k.require(task, Abilities::IRQ)?;
-            let target = k.task(a[0])?;
-            k.irq_grant(task, target, a[1])?;
-            done(k, t)
-        }
-        Call::IrqAttach | Call::IrqWait | Call::IrqAck | Call::IrqDetach => {
-            k.require(task, Abilities::IRQ)?;
-            k.threads[t].context.rax = Error::Ok as u64;
-            match call {
-                Call::IrqAttach => k.irq_attach(t, a[0], a[1])?,
-                Call::IrqWait => k.irq_wait(t, a[0], deadline(clock, a[1]), a[1] == 0)?,
-                Call::IrqAck => k.irq_ack(t, a[0])?,
-                _ => k.irq_detach(t, a[0])?,
-            }
-            Ok(None)
-        }
-        Call::SetHealthMonitor => {
-            k.require(task, Abilities::PARTITION_CONTROL)?;
-            let monitor = k.thread(a[0])?;
-            if task != 0 || k.threads[monitor].task != 0 {
-                return Err(Error::NotPermitted);
-            }
-            k.health_monitor = a[0];
-            done(k, t)
-        }
+        let word = |n: usize| u64::from_ne_bytes(raw[n * 8..n * 8 + 8].try_into().unwrap());
+        *w = Window {
+            offset: word(0),
+            duration: word(1),
+            partition: u8::try_from(word(2)).map_err(|_| Error::InvalidArgument)?,
+        };
+    }
+    let schedule = Schedule::new(a.major_frame, &windows[..a.count as usize])
+        .map_err(|_| Error::InvalidArgument)?;
+    k.time
+        .install(a.slot as usize, schedule)
+        .map_err(|_| Error::NotPermitted)?;
+    Ok(Next::Return)
+}
+
+fn schedule_switch(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    clock: fn() -> u64,
+) -> Result<Next, Error> {
+    let now = clock();
+    k.require(task_of(k, t), Abilities::SCHEDULING)?;
+    let slot = args::ScheduleSwitch::decode(regs).slot;
+    if slot < MAX_SCHEDULES && k.time.switch_to(slot as usize, now) {
+        k.update_window(now);
+        Ok(Next::Return)
+    } else {
+        Err(Error::InvalidArgument)
     }
 }
 
-fn time_call(k: &mut Kernel, t: usize, call: Call, a: [u64; 6], now: u64) -> Result<(), Error> {
-    let task = k.threads[t].task;
-    match call {
-        Call::ScheduleSet => {
-            k.require(task, Abilities::SCHEDULING)?;
-            let (slot, major, ptr, count) = (a[0], a[1], a[2], a[3]);
-            if slot >= MAX_SCHEDULES || count > MAX_WINDOWS {
-                return Err(Error::InvalidArgument);
-            }
-            let mut windows = [Window::default(); MAX_WINDOWS as usize];
-            for (i, w) in windows.iter_mut().take(count as usize).enumerate() {
-                let mut raw = [0u8; 24];
-                let at = ptr.checked_add(i as u64 * 24).ok_or(Error::BadAddress)?;
-                if !k.tasks[task].space.copy_from_user(at, &mut raw) {
-                    return Err(Error::BadAddress);
-                }
-                let word = |n: usize| u64::from_ne_bytes(raw[n * 8..n * 8 + 8].try_into().unwrap());
-                *w = Window {
-                    offset: word(0),
-                    duration: word(1),
-                    partition: u8::try_from(word(2)).map_err(|_| Error::InvalidArgument)?,
-                };
-            }
-            let schedule = Schedule::new(major, &windows[..count as usize])
-                .map_err(|_| Error::InvalidArgument)?;
-            k.time
-                .install(slot as usize, schedule)
-                .map_err(|_| Error::NotPermitted)
-        }
-        Call::ScheduleSwitch => {
-            k.require(task, Abilities::SCHEDULING)?;
-            if a[0] < MAX_SCHEDULES && k.time.switch_to(a[0] as usize, now) {
-                k.update_window(now);
-                Ok(())
-            } else {
-                Err(Error::InvalidArgument)
-            }
-        }
-        _ => {
-            let tp = u8::try_from(a[0])
-                .ok()
-                .filter(|&p| (p as u64) < TIME_PARTITIONS)
-                .ok_or(Error::InvalidArgument)?;
-            let (start, length) = k.time.next_window(tp, now).unwrap_or((u64::MAX, 0));
-            let ns = |ticks| crate::time::ticks_to_ns(ticks, crate::time::tsc_hz());
-            let (cpu, idle, frames) = (
-                ns(k.cpu_ticks[tp as usize]),
-                ns(k.idle_ticks),
-                k.time.frames,
-            );
-            let active = k.active_partition.unwrap_or(0) as u64;
-            let c = &mut k.threads[t].context;
-            (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);
-            Ok(())
-        }
-    }
+fn partition_info(
+    k: &mut Kernel,
+    t: usize,
+    regs: &ArgRegs,
+    clock: fn() -> u64,
+) -> Result<Next, Error> {
+    let now = clock();
+    let tp = u8::try_from(args::PartitionInfo::decode(regs).partition)
+        .ok()
+        .filter(|&p| (p as u64) < TIME_PARTITIONS)
+        .ok_or(Error::InvalidArgument)?;
+    let (start, length) = k.time.next_window(tp, now).unwrap_or((u64::MAX, 0));
+    let ns = |ticks| crate::time::ticks_to_ns(ticks, crate::time::tsc_hz());
+    let (cpu, idle, frames) = (
+        ns(k.cpu_ticks[tp as usize]),
+        ns(k.idle_ticks),
+        k.time.frames,
+    );
+    let active = k.active_partition.unwrap_or(0) as u64;
+    let c = &mut k.threads[t].context;
+    (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);
+    Ok(Next::Return)
+}
+
+fn io_grant(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::IO_PORTS)?;
+    let a = args::IoGrant::decode(regs);
+    let target = k.task(a.task)?;
+    k.io_grant(task, target, a.first, a.count)?;
+    Ok(Next::Return)
+}
+
+fn irq_grant(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::IRQ)?;
+    let a = args::IrqGrant::decode(regs);
+    let target = k.task(a.task)?;
+    k.irq_grant(task, target, a.line)?;
+    Ok(Next::Return)
+}
+
+fn irq_attach(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.require(task_of(k, t), Abilities::IRQ)?;
+    let a = args::IrqAttach::decode(regs);
+    ok_unless_changed(k, t);
+    k.irq_attach(t, a.line, a.bit)?;
+    Ok(Next::Pending)
+}
+
+fn irq_wait(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+    k.require(task_of(k, t), Abilities::IRQ)?;
+    let a = args::IrqWait::decode(regs);
+    ok_unless_changed(k, t);
+    k.irq_wait(t, a.line, deadline(clock, a.timeout), a.timeout == 0)?;
+    Ok(Next::Pending)
+}
+
+fn irq_ack(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.require(task_of(k, t), Abilities::IRQ)?;
+    ok_unless_changed(k, t);
+    k.irq_ack(t, args::IrqLine::decode(regs).line)?;
+    Ok(Next::Pending)
+}
+
+fn irq_detach(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+    k.require(task_of(k, t), Abilities::IRQ)?;
+    ok_unless_changed(k, t);
+    k.irq_detach(t, args::IrqLine::decode(regs).line)?;
+    Ok(Next::Pending)
 }
 
 fn set_attribute(

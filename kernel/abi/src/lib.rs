@@ -3,7 +3,8 @@
 //! What lives here is a contract between separately built programs (loader, kernel, system
 //! software, partitions, host tools) and must stay stable: the boot-information block the
 //! loader hands the kernel ([`boot`]), the system-image archive format ([`sysimg`]) and the
-//! checksum they use ([`crc32`]), the system-call interface ([`syscall`]), the IPC and
+//! checksum they use ([`crc32`]), the system-call interface ([`syscall`], with the register of
+//! each argument in [`args`]), the IPC and
 //! exception message layout ([`ipc`]), the loadable-segment rules of ELF images ([`elf`]) and the root task's start information ([`root`]).
 //! It must never contain kernel policy or anything that needs an allocator (the `std` feature adds host-side writers only).
 #![no_std]
@@ -11,6 +12,7 @@
 #[cfg(feature = "std")]
 extern crate std;
 
+pub mod args;
 pub mod boot;
 pub mod crc32;
 pub mod elf;

@@ -1,5 +1,7 @@
-//! System-call stubs and typed wrappers (register convention in `abi::syscall`).
+//! System-call stubs and typed wrappers: call numbers and meanings in `abi::syscall`, which
+//! register carries which argument in `abi::args` (used here to encode every call).
 
+use abi::args::{self, ArgRegs};
 use abi::ipc::MessageTag;
 use abi::syscall::{Abilities, Call, Error, PageRights, TaskId, ThreadAttribute, ThreadId};
 use core::arch::asm;
@@ -58,17 +60,17 @@ pub fn status(rax: u64) -> Result<(), Error> {
     }
 }
 
-fn call(c: Call, a: [u64; 6]) -> Result<Regs, Error> {
-    let r = raw6(c as u64, a);
+fn call(c: Call, a: ArgRegs) -> Result<Regs, Error> {
+    let r = raw6(c as u64, a.to_array());
     status(r.rax).map(|()| r)
 }
 
 pub fn debug_write(text: &[u8]) -> Result<(), Error> {
-    call(
-        Call::DebugWrite,
-        [text.as_ptr() as u64, text.len() as u64, 0, 0, 0, 0],
-    )
-    .map(drop)
+    let a = args::DebugWrite {
+        ptr: text.as_ptr() as u64,
+        len: text.len() as u64,
+    };
+    call(Call::DebugWrite, a.encode()).map(drop)
 }
 
 /// Nanoseconds since boot.
@@ -83,11 +85,10 @@ pub fn thread_exit() -> ! {
 
 /// Ends the run (success or failure); returns only if the caller may not halt.
 pub fn system_halt(success: bool) -> Result<(), Error> {
-    call(
-        Call::SystemHalt,
-        [if success { 0 } else { 1 }, 0, 0, 0, 0, 0],
-    )
-    .map(drop)
+    let a = args::SystemHalt {
+        outcome: if success { 0 } else { 1 },
+    };
+    call(Call::SystemHalt, a.encode()).map(drop)
 }
 
 pub fn yield_now() {
@@ -95,31 +96,27 @@ pub fn yield_now() {
 }
 
 pub fn task_create(abilities: Abilities, mcp: u8, rp: u64, name: &str) -> Result<TaskId, Error> {
-    call(
-        Call::TaskCreate,
-        [
-            abilities.bits(),
-            mcp as u64,
-            rp,
-            name.as_ptr() as u64,
-            name.len() as u64,
-            0,
-        ],
-    )
-    .map(|r| TaskId(r.rdi))
+    let a = args::TaskCreate {
+        abilities: abilities.bits(),
+        mcp: mcp as u64,
+        rp,
+        name_ptr: name.as_ptr() as u64,
+        name_len: name.len() as u64,
+    };
+    call(Call::TaskCreate, a.encode()).map(|r| TaskId(r.rdi))
 }
 
 pub fn task_kill(task: TaskId) -> Result<(), Error> {
-    call(Call::TaskKill, [task.0, 0, 0, 0, 0, 0]).map(drop)
+    call(Call::TaskKill, args::TaskKill { task: task.0 }.encode()).map(drop)
 }
 
 /// Lets `from` send to `to` (`None` = the caller's task).
 pub fn task_allow_send(from: Option<TaskId>, to: Option<TaskId>) -> Result<(), Error> {
-    call(
-        Call::TaskAllowSend,
-        [from.map_or(0, |t| t.0), to.map_or(0, |t| t.0), 0, 0, 0, 0],
-    )
-    .map(drop)
+    let a = args::TaskAllowSend {
+        from: from.map_or(0, |t| t.0),
+        to: to.map_or(0, |t| t.0),
+    };
+    call(Call::TaskAllowSend, a.encode()).map(drop)
 }
 
 /// A new inactive thread in `task` (`None` = own task).
@@ -130,22 +127,18 @@ pub fn thread_create(
     priority: u8,
     arg: u64,
 ) -> Result<ThreadId, Error> {
-    call(
-        Call::ThreadCreate,
-        [
-            task.map_or(0, |t| t.0),
-            entry,
-            stack,
-            priority as u64,
-            arg,
-            0,
-        ],
-    )
-    .map(|r| ThreadId(r.rdi))
+    let a = args::ThreadCreate {
+        task: task.map_or(0, |t| t.0),
+        entry,
+        stack,
+        priority: priority as u64,
+        arg,
+    };
+    call(Call::ThreadCreate, a.encode()).map(|r| ThreadId(r.rdi))
 }
 
 fn on_thread(c: Call, thread: ThreadId) -> Result<(), Error> {
-    call(c, [thread.0, 0, 0, 0, 0, 0]).map(drop)
+    call(c, args::OnThread { thread: thread.0 }.encode()).map(drop)
 }
 
 pub fn thread_start(thread: ThreadId) -> Result<(), Error> {
@@ -170,11 +163,12 @@ pub fn thread_set(
     attribute: ThreadAttribute,
     value: u64,
 ) -> Result<(), Error> {
-    call(
-        Call::ThreadSet,
-        [thread.map_or(0, |t| t.0), attribute as u64, value, 0, 0, 0],
-    )
-    .map(drop)
+    let a = args::ThreadSet {
+        thread: thread.map_or(0, |t| t.0),
+        attribute: attribute as u64,
+        value,
+    };
+    call(Call::ThreadSet, a.encode()).map(drop)
 }
 
 /// The calling thread and its task.
@@ -190,18 +184,14 @@ pub fn map(
     pages: u64,
     rights: PageRights,
 ) -> Result<(), Error> {
-    call(
-        Call::Map,
-        [
-            task.map_or(0, |t| t.0),
-            source,
-            destination,
-            pages,
-            rights.bits(),
-            0,
-        ],
-    )
-    .map(drop)
+    let a = args::Map {
+        task: task.map_or(0, |t| t.0),
+        source,
+        destination,
+        pages,
+        rights: rights.bits(),
+    };
+    call(Call::Map, a.encode()).map(drop)
 }
 
 pub fn map_physical(
@@ -211,26 +201,23 @@ pub fn map_physical(
     pages: u64,
     rights: PageRights,
 ) -> Result<(), Error> {
-    call(
-        Call::MapPhysical,
-        [
-            task.map_or(0, |t| t.0),
-            physical,
-            destination,
-            pages,
-            rights.bits(),
-            0,
-        ],
-    )
-    .map(drop)
+    let a = args::Map {
+        task: task.map_or(0, |t| t.0),
+        source: physical,
+        destination,
+        pages,
+        rights: rights.bits(),
+    };
+    call(Call::MapPhysical, a.encode()).map(drop)
 }
 
 pub fn unmap(task: Option<TaskId>, address: u64, pages: u64) -> Result<(), Error> {
-    call(
-        Call::Unmap,
-        [task.map_or(0, |t| t.0), address, pages, 0, 0, 0],
-    )
-    .map(drop)
+    let a = args::Unmap {
+        task: task.map_or(0, |t| t.0),
+        address,
+        pages,
+    };
+    call(Call::Unmap, a.encode()).map(drop)
 }
 
 pub fn protect(
@@ -239,11 +226,13 @@ pub fn protect(
     pages: u64,
     rights: PageRights,
 ) -> Result<(), Error> {
-    call(
-        Call::Protect,
-        [task.map_or(0, |t| t.0), address, pages, rights.bits(), 0, 0],
-    )
-    .map(drop)
+    let a = args::Protect {
+        task: task.map_or(0, |t| t.0),
+        address,
+        pages,
+        rights: rights.bits(),
+    };
+    call(Call::Protect, a.encode()).map(drop)
 }
 
 /// A message in registers: tag and three words.
@@ -272,13 +261,15 @@ pub struct Received {
 }
 
 fn ipc(c: Call, peer: u64, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
-    call(
-        c,
-        [
-            peer, timeout_ns, m.tag.0, m.words[0], m.words[1], m.words[2],
-        ],
-    )
-    .map(|r| Received {
+    let a = args::Ipc {
+        peer,
+        timeout: timeout_ns,
+        tag: m.tag.0,
+        word0: m.words[0],
+        word1: m.words[1],
+        word2: m.words[2],
+    };
+    call(c, a.encode()).map(|r| Received {
         sender: ThreadId(r.rdi),
         sender_task: TaskId(r.rsi),
         message: Message {
@@ -319,12 +310,20 @@ pub fn reply(caller: ThreadId, m: &Message) -> Result<(), Error> {
 }
 
 pub fn notify_signal(thread: ThreadId, bits: u64) -> Result<(), Error> {
-    call(Call::NotifySignal, [thread.0, bits, 0, 0, 0, 0]).map(drop)
+    let a = args::NotifySignal {
+        thread: thread.0,
+        bits,
+    };
+    call(Call::NotifySignal, a.encode()).map(drop)
 }
 
 /// Waits for any bit of `mask`; returns (and clears) the bits of `mask` that were set.
 pub fn notify_wait(mask: u64, timeout_ns: u64) -> Result<u64, Error> {
-    call(Call::NotifyWait, [mask, timeout_ns, 0, 0, 0, 0]).map(|r| r.rdi)
+    let a = args::NotifyWait {
+        mask,
+        timeout: timeout_ns,
+    };
+    call(Call::NotifyWait, a.encode()).map(|r| r.rdi)
 }
 
 /// Sleeps for `ns` nanoseconds.
@@ -333,11 +332,12 @@ pub fn sleep(ns: u64) {
 }
 
 pub fn rp_create(tasks: u16, threads: u16, pages: u64) -> Result<u64, Error> {
-    call(
-        Call::RpCreate,
-        [tasks as u64, threads as u64, pages, 0, 0, 0],
-    )
-    .map(|r| r.rdi)
+    let a = args::RpCreate {
+        tasks: tasks as u64,
+        threads: threads as u64,
+        pages,
+    };
+    call(Call::RpCreate, a.encode()).map(|r| r.rdi)
 }
 
 /// Usage of a resource partition (0 = the caller's).
@@ -352,7 +352,7 @@ pub struct RpUsage {
 }
 
 pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
-    call(Call::RpInfo, [rp, 0, 0, 0, 0, 0]).map(|r| RpUsage {
+    call(Call::RpInfo, args::RpInfo { rp }.encode()).map(|r| RpUsage {
         pages_used: r.rdi,
         pages_quota: r.rsi,
         threads_used: r.rdx as u16,
@@ -363,12 +363,13 @@ pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
 }
 
 pub fn set_health_monitor(thread: ThreadId) -> Result<(), Error> {
-    call(Call::SetHealthMonitor, [thread.0, 0, 0, 0, 0, 0]).map(drop)
+    let a = args::SetHealthMonitor { thread: thread.0 };
+    call(Call::SetHealthMonitor, a.encode()).map(drop)
 }
 
 /// Blocks until `clock()` >= `time` (ns since boot).
 pub fn sleep_until(time: u64) {
-    let _ = call(Call::SleepUntil, [time, 0, 0, 0, 0, 0]);
+    let _ = call(Call::SleepUntil, args::SleepUntil { time }.encode());
 }
 
 /// Stores time schedule `slot`.
@@ -377,22 +378,17 @@ pub fn schedule_set(
     major_frame_ns: u64,
     windows: &[abi::syscall::WindowSpec],
 ) -> Result<(), Error> {
-    call(
-        Call::ScheduleSet,
-        [
-            slot,
-            major_frame_ns,
-            windows.as_ptr() as u64,
-            windows.len() as u64,
-            0,
-            0,
-        ],
-    )
-    .map(drop)
+    let a = args::ScheduleSet {
+        slot,
+        major_frame: major_frame_ns,
+        windows: windows.as_ptr() as u64,
+        count: windows.len() as u64,
+    };
+    call(Call::ScheduleSet, a.encode()).map(drop)
 }
 
 pub fn schedule_switch(slot: u64) -> Result<(), Error> {
-    call(Call::ScheduleSwitch, [slot, 0, 0, 0, 0, 0]).map(drop)
+    call(Call::ScheduleSwitch, args::ScheduleSwitch { slot }.encode()).map(drop)
 }
 
 /// What `partition_info` reports (see `abi::syscall::Call::PartitionInfo`).
@@ -407,7 +403,8 @@ pub struct PartitionInfo {
 }
 
 pub fn partition_info(tp: u64) -> Result<PartitionInfo, Error> {
-    call(Call::PartitionInfo, [tp, 0, 0, 0, 0, 0]).map(|r| PartitionInfo {
+    let a = args::PartitionInfo { partition: tp };
+    call(Call::PartitionInfo, a.encode()).map(|r| PartitionInfo {
         active: r.rdi,
         next_window_start: r.rsi,
         window_length: r.rdx,
@@ -419,31 +416,41 @@ pub fn partition_info(tp: u64) -> Result<PartitionInfo, Error> {
 
 /// Grants I/O ports `first..first + count` to a descendant task.
 pub fn io_grant(task: TaskId, first: u16, count: u32) -> Result<(), Error> {
-    call(Call::IoGrant, [task.0, first as u64, count as u64, 0, 0, 0]).map(drop)
+    let a = args::IoGrant {
+        task: task.0,
+        first: first as u64,
+        count: count as u64,
+    };
+    call(Call::IoGrant, a.encode()).map(drop)
 }
 
 /// Lets a descendant task attach interrupt line `line`.
 pub fn irq_grant(task: TaskId, line: u64) -> Result<(), Error> {
-    call(Call::IrqGrant, [task.0, line, 0, 0, 0, 0]).map(drop)
+    let a = args::IrqGrant { task: task.0, line };
+    call(Call::IrqGrant, a.encode()).map(drop)
 }
 
 /// Attaches interrupt line `line` to the calling thread; it fires as notification `bit`.
 pub fn irq_attach(line: u64, bit: u64) -> Result<(), Error> {
-    call(Call::IrqAttach, [line, bit, 0, 0, 0, 0]).map(drop)
+    call(Call::IrqAttach, args::IrqAttach { line, bit }.encode()).map(drop)
 }
 
 /// Waits until the attached line fired (`TimedOut` after `timeout_ns`; 0 = poll).
 pub fn irq_wait(line: u64, timeout_ns: u64) -> Result<(), Error> {
-    call(Call::IrqWait, [line, timeout_ns, 0, 0, 0, 0]).map(drop)
+    let a = args::IrqWait {
+        line,
+        timeout: timeout_ns,
+    };
+    call(Call::IrqWait, a.encode()).map(drop)
 }
 
 /// Unmasks the attached line after its device was served.
 pub fn irq_ack(line: u64) -> Result<(), Error> {
-    call(Call::IrqAck, [line, 0, 0, 0, 0, 0]).map(drop)
+    call(Call::IrqAck, args::IrqLine { line }.encode()).map(drop)
 }
 
 pub fn irq_detach(line: u64) -> Result<(), Error> {
-    call(Call::IrqDetach, [line, 0, 0, 0, 0, 0]).map(drop)
+    call(Call::IrqDetach, args::IrqLine { line }.encode()).map(drop)
 }
 
 /// The TSC time base: converts `rdtsc` readings to `clock()` nanoseconds and back.
