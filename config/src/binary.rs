@@ -123,16 +123,266 @@ use abi::syscall::Abilities;
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
 pub const VERSION: u32 = 1;
 pub const NAME_SIZE: usize = 32;
-pub const HEADER_SIZE: usize = 96;
-pub const SCHEDULE_SIZE: usize = 48;
-pub const WINDOW_SIZE: usize = 24;
-pub const SEGMENT_SIZE: usize = 40;
-pub const PARTITION_SIZE: usize = 136;
-pub const IO_RANGE_SIZE: usize = 4;
-pub const ATTACHMENT_SIZE: usize = 4;
-pub const PORT_SIZE: usize = 56;
-pub const CHANNEL_SIZE: usize = 40;
-pub const DESTINATION_SIZE: usize = 2;
+pub const HEADER_SIZE: usize = header::SIZE;
+pub const SCHEDULE_SIZE: usize = schedule::SIZE;
+pub const WINDOW_SIZE: usize = window::SIZE;
+pub const SEGMENT_SIZE: usize = segment::SIZE;
+pub const PARTITION_SIZE: usize = partition::SIZE;
+pub const IO_RANGE_SIZE: usize = io_range::SIZE;
+pub const ATTACHMENT_SIZE: usize = attachment::SIZE;
+pub const PORT_SIZE: usize = port::SIZE;
+pub const CHANNEL_SIZE: usize = channel::SIZE;
+pub const DESTINATION_SIZE: usize = destination::SIZE;
+
+/// A field of a record: its offset and width in bytes. Each record's fields are listed once,
+/// in the modules below (the table of the module documentation as code); the writer, the
+/// checks, the views and the tests all go through them, and a test checks that each
+/// record's fields tile it exactly.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Field {
+    pub at: usize,
+    pub len: usize,
+}
+
+impl Field {
+    const fn new(at: usize, len: usize) -> Self {
+        Self { at, len }
+    }
+
+    /// The field's bytes in `record` (which must be a whole record of its table).
+    pub fn bytes(self, record: &[u8]) -> &[u8] {
+        &record[self.at..self.at + self.len]
+    }
+
+    /// The field's bytes, for writing.
+    pub fn bytes_mut(self, record: &mut [u8]) -> &mut [u8] {
+        &mut record[self.at..self.at + self.len]
+    }
+
+    /// The field as a little-endian unsigned integer (fields are 1, 2, 4 or 8 bytes).
+    pub fn get(self, record: &[u8]) -> u64 {
+        let mut raw = [0u8; 8];
+        raw[..self.len].copy_from_slice(self.bytes(record));
+        u64::from_le_bytes(raw)
+    }
+
+    fn u8(self, record: &[u8]) -> u8 {
+        self.get(record) as u8
+    }
+
+    fn u16(self, record: &[u8]) -> usize {
+        self.get(record) as usize
+    }
+
+    fn u32(self, record: &[u8]) -> u32 {
+        self.get(record) as u32
+    }
+
+    /// Writes `value` little-endian into the field (host writer; `value` must fit).
+    pub fn set(self, record: &mut [u8], value: u64) {
+        debug_assert!(
+            self.len == 8 || value >> (8 * self.len) == 0,
+            "value too wide"
+        );
+        let raw = value.to_le_bytes();
+        self.bytes_mut(record).copy_from_slice(&raw[..self.len]);
+    }
+
+    /// The text of a name field, if it is well-formed.
+    fn name(self, record: &[u8]) -> Option<&str> {
+        name_field(self.bytes(record))
+    }
+
+    fn is_zero(self, record: &[u8]) -> bool {
+        zero(self.bytes(record))
+    }
+}
+
+/// Header fields.
+pub mod header {
+    use super::Field;
+    pub const MAGIC: Field = Field::new(0, 8);
+    pub const VERSION: Field = Field::new(8, 4);
+    pub const CRC: Field = Field::new(12, 4);
+    pub const TOTAL_SIZE: Field = Field::new(16, 4);
+    pub const RESERVED_A: Field = Field::new(20, 4);
+    pub const NAME: Field = Field::new(24, 32);
+    pub const MEMORY: Field = Field::new(56, 8);
+    /// Record count of table `i` (blob order), for `i` in 0..9.
+    pub const fn count(i: usize) -> Field {
+        Field::new(64 + 2 * i, 2)
+    }
+    pub const RESERVED_B: Field = Field::new(82, 6);
+    pub const HEALTH: Field = Field::new(88, 8);
+    pub const SIZE: usize = 96;
+    /// Every field, in order (the counts as one run).
+    pub const FIELDS: [Field; 10] = [
+        MAGIC,
+        VERSION,
+        CRC,
+        TOTAL_SIZE,
+        RESERVED_A,
+        NAME,
+        MEMORY,
+        Field::new(64, 18),
+        RESERVED_B,
+        HEALTH,
+    ];
+}
+
+/// Schedule record fields.
+pub mod schedule {
+    use super::Field;
+    pub const NAME: Field = Field::new(0, 32);
+    pub const MAJOR_FRAME: Field = Field::new(32, 8);
+    pub const FIRST_WINDOW: Field = Field::new(40, 2);
+    pub const WINDOW_COUNT: Field = Field::new(42, 2);
+    pub const RESERVED: Field = Field::new(44, 4);
+    pub const SIZE: usize = 48;
+    pub const FIELDS: [Field; 5] = [NAME, MAJOR_FRAME, FIRST_WINDOW, WINDOW_COUNT, RESERVED];
+}
+
+/// Window record fields.
+pub mod window {
+    use super::Field;
+    pub const OFFSET: Field = Field::new(0, 8);
+    pub const DURATION: Field = Field::new(8, 8);
+    pub const TIME_PARTITION: Field = Field::new(16, 1);
+    pub const RESERVED: Field = Field::new(17, 7);
+    pub const SIZE: usize = 24;
+    pub const FIELDS: [Field; 4] = [OFFSET, DURATION, TIME_PARTITION, RESERVED];
+}
+
+/// Shared-segment record fields.
+pub mod segment {
+    use super::Field;
+    pub const NAME: Field = Field::new(0, 32);
+    pub const BYTES: Field = Field::new(32, 8);
+    pub const SIZE: usize = 40;
+    pub const FIELDS: [Field; 2] = [NAME, BYTES];
+}
+
+/// Partition record fields.
+pub mod partition {
+    use super::Field;
+    pub const NAME: Field = Field::new(0, 32);
+    pub const IMAGE: Field = Field::new(32, 32);
+    pub const MEMORY: Field = Field::new(64, 8);
+    pub const KERNEL_MEMORY: Field = Field::new(72, 8);
+    pub const STACK: Field = Field::new(80, 8);
+    pub const ABILITIES: Field = Field::new(88, 8);
+    pub const KERNEL_THREADS: Field = Field::new(96, 4);
+    pub const KERNEL_TASKS: Field = Field::new(100, 4);
+    pub const IRQS: Field = Field::new(104, 4);
+    pub const MCP: Field = Field::new(108, 1);
+    pub const PRIORITY: Field = Field::new(109, 1);
+    pub const TIME_PARTITION: Field = Field::new(110, 1);
+    pub const RESERVED_A: Field = Field::new(111, 1);
+    pub const HEALTH: Field = Field::new(112, 8);
+    pub const FIRST_IO: Field = Field::new(120, 2);
+    pub const IO_COUNT: Field = Field::new(122, 2);
+    pub const FIRST_ATTACHMENT: Field = Field::new(124, 2);
+    pub const ATTACHMENT_COUNT: Field = Field::new(126, 2);
+    pub const FIRST_PORT: Field = Field::new(128, 2);
+    pub const PORT_COUNT: Field = Field::new(130, 2);
+    pub const RESERVED_B: Field = Field::new(132, 4);
+    pub const SIZE: usize = 136;
+    pub const FIELDS: [Field; 21] = [
+        NAME,
+        IMAGE,
+        MEMORY,
+        KERNEL_MEMORY,
+        STACK,
+        ABILITIES,
+        KERNEL_THREADS,
+        KERNEL_TASKS,
+        IRQS,
+        MCP,
+        PRIORITY,
+        TIME_PARTITION,
+        RESERVED_A,
+        HEALTH,
+        FIRST_IO,
+        IO_COUNT,
+        FIRST_ATTACHMENT,
+        ATTACHMENT_COUNT,
+        FIRST_PORT,
+        PORT_COUNT,
+        RESERVED_B,
+    ];
+}
+
+/// I/O port range record fields.
+pub mod io_range {
+    use super::Field;
+    pub const FIRST: Field = Field::new(0, 2);
+    pub const LAST: Field = Field::new(2, 2);
+    pub const SIZE: usize = 4;
+    pub const FIELDS: [Field; 2] = [FIRST, LAST];
+}
+
+/// Segment attachment record fields.
+pub mod attachment {
+    use super::Field;
+    pub const SEGMENT: Field = Field::new(0, 2);
+    pub const RIGHTS: Field = Field::new(2, 1);
+    pub const RESERVED: Field = Field::new(3, 1);
+    pub const SIZE: usize = 4;
+    pub const FIELDS: [Field; 3] = [SEGMENT, RIGHTS, RESERVED];
+}
+
+/// Port record fields.
+pub mod port {
+    use super::Field;
+    pub const NAME: Field = Field::new(0, 32);
+    pub const MESSAGE_SIZE: Field = Field::new(32, 4);
+    pub const DEPTH: Field = Field::new(36, 4);
+    pub const REFRESH: Field = Field::new(40, 8);
+    pub const CHANNEL: Field = Field::new(48, 2);
+    pub const KIND: Field = Field::new(50, 1);
+    pub const DIRECTION: Field = Field::new(51, 1);
+    pub const RESERVED: Field = Field::new(52, 4);
+    pub const SIZE: usize = 56;
+    pub const FIELDS: [Field; 8] = [
+        NAME,
+        MESSAGE_SIZE,
+        DEPTH,
+        REFRESH,
+        CHANNEL,
+        KIND,
+        DIRECTION,
+        RESERVED,
+    ];
+}
+
+/// Channel record fields.
+pub mod channel {
+    use super::Field;
+    pub const NAME: Field = Field::new(0, 32);
+    pub const SOURCE: Field = Field::new(32, 2);
+    pub const FIRST_DESTINATION: Field = Field::new(34, 2);
+    pub const DESTINATION_COUNT: Field = Field::new(36, 2);
+    pub const KIND: Field = Field::new(38, 1);
+    pub const RESERVED: Field = Field::new(39, 1);
+    pub const SIZE: usize = 40;
+    pub const FIELDS: [Field; 6] = [
+        NAME,
+        SOURCE,
+        FIRST_DESTINATION,
+        DESTINATION_COUNT,
+        KIND,
+        RESERVED,
+    ];
+}
+
+/// Channel destination record fields.
+pub mod destination {
+    use super::Field;
+    pub const PORT: Field = Field::new(0, 2);
+    pub const SIZE: usize = 2;
+    pub const FIELDS: [Field; 1] = [PORT];
+}
+
 /// Prefix of a partition image's entry name in `system.img` (`partition/<image>`).
 pub const IMAGE_ENTRY_PREFIX: &str = "partition/";
 
@@ -265,22 +515,6 @@ impl core::fmt::Display for DecodeError {
     }
 }
 
-fn u16_at(b: &[u8], at: usize) -> u16 {
-    u16::from_le_bytes([b[at], b[at + 1]])
-}
-
-fn u32_at(b: &[u8], at: usize) -> u32 {
-    let mut x = [0u8; 4];
-    x.copy_from_slice(&b[at..at + 4]);
-    u32::from_le_bytes(x)
-}
-
-fn u64_at(b: &[u8], at: usize) -> u64 {
-    let mut x = [0u8; 8];
-    x.copy_from_slice(&b[at..at + 8]);
-    u64::from_le_bytes(x)
-}
-
 /// The text of a name field, if it is well-formed.
 fn name_field(raw: &[u8]) -> Option<&str> {
     let len = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
@@ -307,14 +541,14 @@ pub fn decode(bytes: &[u8]) -> Result<SystemView<'_>, DecodeError> {
             actual: bytes.len(),
         });
     }
-    if bytes[0..8] != MAGIC {
+    if header::MAGIC.bytes(bytes) != MAGIC {
         return Err(DecodeError::BadMagic);
     }
-    let version = u32_at(bytes, 8);
+    let version = header::VERSION.u32(bytes);
     if version != VERSION {
         return Err(DecodeError::UnsupportedVersion(version));
     }
-    let total = u32_at(bytes, 16) as usize;
+    let total = header::TOTAL_SIZE.u32(bytes) as usize;
     if total < HEADER_SIZE {
         return Err(DecodeError::SizeMismatch {
             declared: total,
@@ -328,8 +562,8 @@ pub fn decode(bytes: &[u8]) -> Result<SystemView<'_>, DecodeError> {
         });
     }
     let bytes = &bytes[..total];
-    let stored = u32_at(bytes, 12);
-    let computed = crc32(&bytes[16..]);
+    let stored = header::CRC.u32(bytes);
+    let computed = crc32(&bytes[header::TOTAL_SIZE.at..]);
     if stored != computed {
         return Err(DecodeError::ChecksumMismatch { stored, computed });
     }
@@ -337,7 +571,7 @@ pub fn decode(bytes: &[u8]) -> Result<SystemView<'_>, DecodeError> {
     let mut offsets = [0usize; 9];
     let mut at = HEADER_SIZE;
     for (i, &(table, size, max)) in TABLES.iter().enumerate() {
-        let count = u16_at(bytes, 64 + 2 * i) as usize;
+        let count = header::count(i).u16(bytes);
         if count > max {
             return Err(DecodeError::TooMany { table, count, max });
         }
@@ -396,354 +630,370 @@ impl<'a> SystemView<'a> {
         self.counts[table.slot()]
     }
 
-    /// Every rule of the module documentation, in table order.
+    /// Every rule of the module documentation, one validator per table, in table order.
     fn check(&self) -> Result<(), DecodeError> {
-        use Table as T;
-        let header = &self.bytes[..HEADER_SIZE];
-        if !zero(&header[20..24]) || !zero(&header[82..88]) {
-            return Err(invalid(T::Header, 0, "reserved bytes are not zero"));
-        }
-        if name_field(&header[24..56]).is_none() {
-            return Err(invalid(T::Header, 0, "system name is empty or not UTF-8"));
-        }
-        let memory = u64_at(header, 56);
-        if memory == 0 || !memory.is_multiple_of(PAGE_SIZE) {
-            return Err(invalid(
-                T::Header,
-                0,
-                "memory is zero or not a multiple of 4 KiB",
-            ));
-        }
-        if HealthTable::from_bytes(&header[88..96]).is_none() {
-            return Err(invalid(T::Header, 0, "unknown module health action"));
-        }
+        self.check_header()?;
+        self.check_schedules()?;
+        let segment_memory = self.check_segments()?;
+        self.check_partitions(segment_memory)?;
+        self.check_io_ranges()?;
+        self.check_ports()?;
+        self.check_channels()
+    }
 
-        // Schedules and their windows.
+    fn check_header(&self) -> Result<(), DecodeError> {
+        let h = &self.bytes[..HEADER_SIZE];
+        let fail = |what| Err(invalid(Table::Header, 0, what));
+        if !header::RESERVED_A.is_zero(h) || !header::RESERVED_B.is_zero(h) {
+            return fail("reserved bytes are not zero");
+        }
+        if header::NAME.name(h).is_none() {
+            return fail("system name is empty or not UTF-8");
+        }
+        let memory = header::MEMORY.get(h);
+        if memory == 0 || !memory.is_multiple_of(PAGE_SIZE) {
+            return fail("memory is zero or not a multiple of 4 KiB");
+        }
+        if HealthTable::from_bytes(header::HEALTH.bytes(h)).is_none() {
+            return fail("unknown module health action");
+        }
+        Ok(())
+    }
+
+    /// Whether record `index` of `table` repeats the name of an earlier record.
+    fn duplicate_name(&self, table: Table, index: usize, name: Field) -> bool {
+        let own = name.bytes(self.record(table, index));
+        (0..index).any(|o| name.bytes(self.record(table, o)) == own)
+    }
+
+    fn check_schedules(&self) -> Result<(), DecodeError> {
+        use schedule as S;
+        use window as W;
+        let schedules = self.count(Table::Schedule);
         tiles(
-            (0..self.count(T::Schedule)).map(|i| {
-                let r = self.record(T::Schedule, i);
-                (u16_at(r, 40) as usize, u16_at(r, 42) as usize)
+            (0..schedules).map(|i| {
+                let r = self.record(Table::Schedule, i);
+                (S::FIRST_WINDOW.u16(r), S::WINDOW_COUNT.u16(r))
             }),
-            self.count(T::Window),
+            self.count(Table::Window),
         )
         .map_err(|i| {
             invalid(
-                T::Schedule,
-                i.min(self.count(T::Schedule)),
+                Table::Schedule,
+                i.min(schedules),
                 "window ranges do not tile the window table",
             )
         })?;
-        for s in 0..self.count(T::Schedule) {
-            let r = self.record(T::Schedule, s);
-            if name_field(&r[..32]).is_none() {
-                return Err(invalid(T::Schedule, s, "name is empty or not UTF-8"));
+        for s in 0..schedules {
+            let r = self.record(Table::Schedule, s);
+            let fail = |what| Err(invalid(Table::Schedule, s, what));
+            if S::NAME.name(r).is_none() {
+                return fail("name is empty or not UTF-8");
             }
-            if (0..s).any(|o| self.record(T::Schedule, o)[..32] == r[..32]) {
-                return Err(invalid(T::Schedule, s, "duplicate name"));
+            if self.duplicate_name(Table::Schedule, s, S::NAME) {
+                return fail("duplicate name");
             }
-            if !zero(&r[44..48]) {
-                return Err(invalid(T::Schedule, s, "reserved bytes are not zero"));
+            if !S::RESERVED.is_zero(r) {
+                return fail("reserved bytes are not zero");
             }
-            let frame = u64_at(r, 32);
+            let frame = S::MAJOR_FRAME.get(r);
             if frame == 0 {
-                return Err(invalid(T::Schedule, s, "major frame is zero"));
+                return fail("major frame is zero");
             }
-            let (first, count) = (u16_at(r, 40) as usize, u16_at(r, 42) as usize);
+            let (first, count) = (S::FIRST_WINDOW.u16(r), S::WINDOW_COUNT.u16(r));
             if count > MAX_WINDOWS {
-                return Err(invalid(T::Schedule, s, "more than 32 windows"));
+                return fail("more than 32 windows");
             }
             let mut previous_end = 0;
             for w in first..first + count {
-                let r = self.record(T::Window, w);
-                let (offset, duration, tp) = (u64_at(r, 0), u64_at(r, 8), r[16]);
-                if !zero(&r[17..24]) {
-                    return Err(invalid(T::Window, w, "reserved bytes are not zero"));
+                let r = self.record(Table::Window, w);
+                let fail = |what| Err(invalid(Table::Window, w, what));
+                let (offset, duration) = (W::OFFSET.get(r), W::DURATION.get(r));
+                let tp = W::TIME_PARTITION.u8(r);
+                if !W::RESERVED.is_zero(r) {
+                    return fail("reserved bytes are not zero");
                 }
                 if duration == 0 {
-                    return Err(invalid(T::Window, w, "duration is zero"));
+                    return fail("duration is zero");
                 }
                 if offset.checked_add(duration).is_none_or(|end| end > frame) {
-                    return Err(invalid(T::Window, w, "ends after the major frame"));
+                    return fail("ends after the major frame");
                 }
                 if offset < previous_end {
-                    return Err(invalid(
-                        T::Window,
-                        w,
-                        "overlaps the previous window or is not sorted by offset",
-                    ));
+                    return fail("overlaps the previous window or is not sorted by offset");
                 }
                 previous_end = offset + duration;
                 if tp == 0 || tp >= TIME_PARTITIONS {
-                    return Err(invalid(T::Window, w, "time partition not in 1..=15"));
+                    return fail("time partition not in 1..=15");
                 }
-                if !(0..self.count(T::Partition)).any(|p| self.record(T::Partition, p)[110] == tp) {
-                    return Err(invalid(T::Window, w, "time partition used by no partition"));
+                let used = (0..self.count(Table::Partition))
+                    .any(|p| partition::TIME_PARTITION.u8(self.record(Table::Partition, p)) == tp);
+                if !used {
+                    return fail("time partition used by no partition");
                 }
             }
         }
+        Ok(())
+    }
 
-        // Shared segments.
-        let mut user_memory: u64 = 0;
-        for g in 0..self.count(T::Segment) {
-            let r = self.record(T::Segment, g);
-            if name_field(&r[..32]).is_none() {
-                return Err(invalid(T::Segment, g, "name is empty or not UTF-8"));
+    /// Checks the shared segments and returns their total size.
+    fn check_segments(&self) -> Result<u64, DecodeError> {
+        let mut total: u64 = 0;
+        for g in 0..self.count(Table::Segment) {
+            let r = self.record(Table::Segment, g);
+            let fail = |what| invalid(Table::Segment, g, what);
+            if segment::NAME.name(r).is_none() {
+                return Err(fail("name is empty or not UTF-8"));
             }
-            if (0..g).any(|o| self.record(T::Segment, o)[..32] == r[..32]) {
-                return Err(invalid(T::Segment, g, "duplicate name"));
+            if self.duplicate_name(Table::Segment, g, segment::NAME) {
+                return Err(fail("duplicate name"));
             }
-            let size = u64_at(r, 32);
+            let size = segment::BYTES.get(r);
             if size == 0 || !size.is_multiple_of(PAGE_SIZE) {
-                return Err(invalid(
-                    T::Segment,
-                    g,
-                    "size is zero or not a multiple of 4 KiB",
-                ));
+                return Err(fail("size is zero or not a multiple of 4 KiB"));
             }
-            user_memory =
-                user_memory
-                    .checked_add(size)
-                    .ok_or(invalid(T::Segment, g, "sizes overflow"))?;
+            total = total.checked_add(size).ok_or(fail("sizes overflow"))?;
         }
+        Ok(total)
+    }
 
-        // Partitions.
-        let partitions = self.count(T::Partition);
-        let sub_range = |p: usize, at: usize| {
-            let r = self.record(T::Partition, p);
-            (u16_at(r, at) as usize, u16_at(r, at + 2) as usize)
-        };
-        for (table, at) in [(T::IoRange, 120), (T::Attachment, 124), (T::Port, 128)] {
-            tiles((0..partitions).map(|p| sub_range(p, at)), self.count(table)).map_err(|i| {
+    /// Partition `p`'s range `(first, count)` of another table.
+    fn sub_range(&self, p: usize, first: Field, count: Field) -> (usize, usize) {
+        let r = self.record(Table::Partition, p);
+        (first.u16(r), count.u16(r))
+    }
+
+    /// Checks the partitions (with their attachments and port names) and the budgets they
+    /// add up to, with the shared segments' `segment_memory`.
+    fn check_partitions(&self, segment_memory: u64) -> Result<(), DecodeError> {
+        use partition as P;
+        let partitions = self.count(Table::Partition);
+        for (table, first, count) in [
+            (Table::IoRange, P::FIRST_IO, P::IO_COUNT),
+            (Table::Attachment, P::FIRST_ATTACHMENT, P::ATTACHMENT_COUNT),
+            (Table::Port, P::FIRST_PORT, P::PORT_COUNT),
+        ] {
+            tiles(
+                (0..partitions).map(|p| self.sub_range(p, first, count)),
+                self.count(table),
+            )
+            .map_err(|i| {
                 invalid(
-                    T::Partition,
+                    Table::Partition,
                     i.min(partitions),
                     "I/O-range, attachment or port ranges do not tile their tables",
                 )
             })?;
         }
+        let mut user_memory = segment_memory;
         let (mut kernel_memory, mut threads, mut tasks) = (0u64, 0u64, 0u64);
         for p in 0..partitions {
-            let r = self.record(T::Partition, p);
-            let name = name_field(&r[..32]);
-            if name.is_none_or(|n| n.len() > PARTITION_NAME_MAX) {
-                return Err(invalid(
-                    T::Partition,
-                    p,
-                    "name is empty, not UTF-8 or longer than 15 bytes",
-                ));
+            let r = self.record(Table::Partition, p);
+            let fail = |what| invalid(Table::Partition, p, what);
+            if P::NAME.name(r).is_none_or(|n| n.len() > PARTITION_NAME_MAX) {
+                return Err(fail("name is empty, not UTF-8 or longer than 15 bytes"));
             }
-            if (0..p).any(|o| self.record(T::Partition, o)[..32] == r[..32]) {
-                return Err(invalid(T::Partition, p, "duplicate name"));
+            if self.duplicate_name(Table::Partition, p, P::NAME) {
+                return Err(fail("duplicate name"));
             }
-            if name_field(&r[32..64]).is_none() {
-                return Err(invalid(T::Partition, p, "image name is empty or not UTF-8"));
+            if P::IMAGE.name(r).is_none() {
+                return Err(fail("image name is empty or not UTF-8"));
             }
-            let (memory, kmem, stack) = (u64_at(r, 64), u64_at(r, 72), u64_at(r, 80));
+            let (memory, kmem, stack) =
+                (P::MEMORY.get(r), P::KERNEL_MEMORY.get(r), P::STACK.get(r));
             for size in [memory, kmem, stack] {
                 if size == 0 || !size.is_multiple_of(PAGE_SIZE) {
-                    return Err(invalid(
-                        T::Partition,
-                        p,
+                    return Err(fail(
                         "memory, kernel memory or stack is zero or not a multiple of 4 KiB",
                     ));
                 }
             }
             if stack > memory {
-                return Err(invalid(T::Partition, p, "stack larger than memory"));
+                return Err(fail("stack larger than memory"));
             }
-            let abilities = Abilities::from_bits(u64_at(r, 88)).ok_or(invalid(
-                T::Partition,
-                p,
-                "unknown ability bits",
-            ))?;
+            let abilities =
+                Abilities::from_bits(P::ABILITIES.get(r)).ok_or(fail("unknown ability bits"))?;
             if !PARTITION_ABILITIES.contains(abilities) {
-                return Err(invalid(T::Partition, p, "an ability reserved for syssw"));
+                return Err(fail("an ability reserved for syssw"));
             }
-            let (kthreads, ktasks) = (u32_at(r, 96), u32_at(r, 100));
+            let (kthreads, ktasks) = (P::KERNEL_THREADS.u32(r), P::KERNEL_TASKS.u32(r));
             if kthreads == 0 || ktasks == 0 {
-                return Err(invalid(
-                    T::Partition,
-                    p,
-                    "kernel thread or task quota is zero",
-                ));
+                return Err(fail("kernel thread or task quota is zero"));
             }
-            if u32_at(r, 104) & IrqMask::FORBIDDEN != 0 {
-                return Err(invalid(
-                    T::Partition,
-                    p,
-                    "IRQ line reserved by the kernel or beyond 23",
-                ));
+            if P::IRQS.u32(r) & IrqMask::FORBIDDEN != 0 {
+                return Err(fail("IRQ line reserved by the kernel or beyond 23"));
             }
-            let (mcp, priority, tp) = (r[108], r[109], r[110]);
+            let (mcp, priority) = (P::MCP.u8(r), P::PRIORITY.u8(r));
             if !(MCP_MIN..=MCP_MAX).contains(&mcp) {
-                return Err(invalid(T::Partition, p, "MCP not in 1..=199"));
+                return Err(fail("MCP not in 1..=199"));
             }
             if priority > mcp {
-                return Err(invalid(T::Partition, p, "priority above the MCP"));
+                return Err(fail("priority above the MCP"));
             }
-            if tp >= TIME_PARTITIONS {
-                return Err(invalid(T::Partition, p, "time partition above 15"));
+            if P::TIME_PARTITION.u8(r) >= TIME_PARTITIONS {
+                return Err(fail("time partition above 15"));
             }
-            if r[111] != 0 || !zero(&r[132..136]) {
-                return Err(invalid(T::Partition, p, "reserved bytes are not zero"));
+            if !P::RESERVED_A.is_zero(r) || !P::RESERVED_B.is_zero(r) {
+                return Err(fail("reserved bytes are not zero"));
             }
-            if HealthTable::from_bytes(&r[112..120]).is_none() {
-                return Err(invalid(T::Partition, p, "unknown health action"));
+            if HealthTable::from_bytes(P::HEALTH.bytes(r)).is_none() {
+                return Err(fail("unknown health action"));
             }
-            let overflow = invalid(T::Partition, p, "memory sizes overflow");
+            let overflow = fail("memory sizes overflow");
             user_memory = user_memory.checked_add(memory).ok_or(overflow)?;
             kernel_memory = kernel_memory.checked_add(kmem).ok_or(overflow)?;
             threads += u64::from(kthreads);
             tasks += u64::from(ktasks);
-            // Attachments of this partition.
-            let (first, count) = sub_range(p, 124);
-            for a in first..first + count {
-                let r = self.record(T::Attachment, a);
-                if u16_at(r, 0) as usize >= self.count(T::Segment) {
-                    return Err(invalid(T::Attachment, a, "segment index out of range"));
-                }
-                if Rights::from_code(r[2]).is_none() || r[3] != 0 {
-                    return Err(invalid(T::Attachment, a, "unknown rights"));
-                }
-                if (first..a).any(|o| self.record(T::Attachment, o)[..2] == r[..2]) {
-                    return Err(invalid(T::Attachment, a, "segment attached twice"));
-                }
-            }
+            self.check_attachments(p)?;
             // Ports of this partition: names unique within it.
-            let (first, count) = sub_range(p, 128);
+            let (first, count) = self.sub_range(p, P::FIRST_PORT, P::PORT_COUNT);
             for t in first..first + count {
-                let name = &self.record(T::Port, t)[..32];
-                if (first..t).any(|o| &self.record(T::Port, o)[..32] == name) {
-                    return Err(invalid(T::Port, t, "duplicate name in its partition"));
+                let name = port::NAME.bytes(self.record(Table::Port, t));
+                if (first..t).any(|o| port::NAME.bytes(self.record(Table::Port, o)) == name) {
+                    return Err(invalid(Table::Port, t, "duplicate name in its partition"));
                 }
             }
         }
+        let memory = header::MEMORY.get(self.bytes);
+        let fail = |what| Err(invalid(Table::Header, 0, what));
         if user_memory > user_memory_limit(memory) {
-            return Err(invalid(
-                T::Header,
-                0,
-                "partition and segment memory exceed the budget",
-            ));
+            return fail("partition and segment memory exceed the budget");
         }
         if kernel_memory > kernel_memory_limit(memory) {
-            return Err(invalid(
-                T::Header,
-                0,
-                "kernel memory quotas exceed the kernel pool",
-            ));
+            return fail("kernel memory quotas exceed the kernel pool");
         }
         if threads > u64::from(KERNEL_THREADS - SYSSW_THREADS)
             || tasks > u64::from(KERNEL_TASKS - SYSSW_TASKS)
         {
-            return Err(invalid(
-                T::Header,
-                0,
-                "kernel thread or task quotas exceed the kernel's tables",
-            ));
+            return fail("kernel thread or task quotas exceed the kernel's tables");
         }
+        Ok(())
+    }
 
-        // I/O port ranges: well-formed, not the kernel's, disjoint.
-        for i in 0..self.count(T::IoRange) {
+    /// Partition `p`'s segment attachments.
+    fn check_attachments(&self, p: usize) -> Result<(), DecodeError> {
+        use attachment as A;
+        let (first, count) =
+            self.sub_range(p, partition::FIRST_ATTACHMENT, partition::ATTACHMENT_COUNT);
+        for a in first..first + count {
+            let r = self.record(Table::Attachment, a);
+            let fail = |what| Err(invalid(Table::Attachment, a, what));
+            if A::SEGMENT.u16(r) >= self.count(Table::Segment) {
+                return fail("segment index out of range");
+            }
+            if Rights::from_code(A::RIGHTS.u8(r)).is_none() || !A::RESERVED.is_zero(r) {
+                return fail("unknown rights");
+            }
+            let segment = A::SEGMENT.bytes(r);
+            if (first..a).any(|o| A::SEGMENT.bytes(self.record(Table::Attachment, o)) == segment) {
+                return fail("segment attached twice");
+            }
+        }
+        Ok(())
+    }
+
+    /// I/O port ranges: well-formed, not the kernel's, disjoint.
+    fn check_io_ranges(&self) -> Result<(), DecodeError> {
+        for i in 0..self.count(Table::IoRange) {
             let range = self.io_range(i);
+            let fail = |what| Err(invalid(Table::IoRange, i, what));
             if range.first > range.last {
-                return Err(invalid(T::IoRange, i, "first port after last port"));
+                return fail("first port after last port");
             }
             if range.kernel_conflict().is_some() {
-                return Err(invalid(T::IoRange, i, "includes a port the kernel keeps"));
+                return fail("includes a port the kernel keeps");
             }
             if (0..i).any(|o| self.io_range(o).overlaps(range)) {
-                return Err(invalid(T::IoRange, i, "overlaps another range"));
+                return fail("overlaps another range");
             }
         }
+        Ok(())
+    }
 
-        // Ports.
-        let channels = self.count(T::Channel);
-        for t in 0..self.count(T::Port) {
-            let r = self.record(T::Port, t);
-            if name_field(&r[..32]).is_none() {
-                return Err(invalid(T::Port, t, "name is empty or not UTF-8"));
+    fn check_ports(&self) -> Result<(), DecodeError> {
+        use port as T;
+        let channels = self.count(Table::Channel);
+        for t in 0..self.count(Table::Port) {
+            let r = self.record(Table::Port, t);
+            let fail = |what| invalid(Table::Port, t, what);
+            if T::NAME.name(r).is_none() {
+                return Err(fail("name is empty or not UTF-8"));
             }
-            let (size, depth, refresh) = (u32_at(r, 32), u32_at(r, 36), u64_at(r, 40));
-            let channel = u16_at(r, 48) as usize;
-            let kind = PortKind::from_code(r[50]).ok_or(invalid(T::Port, t, "unknown kind"))?;
+            let (size, depth) = (T::MESSAGE_SIZE.u32(r), T::DEPTH.u32(r));
+            let kind = PortKind::from_code(T::KIND.u8(r)).ok_or(fail("unknown kind"))?;
             let direction =
-                Direction::from_code(r[51]).ok_or(invalid(T::Port, t, "unknown direction"))?;
-            if !zero(&r[52..56]) {
-                return Err(invalid(T::Port, t, "reserved bytes are not zero"));
+                Direction::from_code(T::DIRECTION.u8(r)).ok_or(fail("unknown direction"))?;
+            if !T::RESERVED.is_zero(r) {
+                return Err(fail("reserved bytes are not zero"));
             }
             if size == 0 || size > MAX_MESSAGE_SIZE {
-                return Err(invalid(T::Port, t, "message size not in 1..=4096"));
+                return Err(fail("message size not in 1..=4096"));
             }
             let depth_ok = match kind {
                 PortKind::Sampling => depth == 0,
                 PortKind::Queuing => (1..=MAX_QUEUE_DEPTH).contains(&depth),
             };
             if !depth_ok {
-                return Err(invalid(
-                    T::Port,
-                    t,
-                    "depth not 1..=256 (queuing) or not 0 (sampling)",
-                ));
+                return Err(fail("depth not 1..=256 (queuing) or not 0 (sampling)"));
             }
-            if refresh != 0 && (kind, direction) != (PortKind::Sampling, Direction::In) {
-                return Err(invalid(
-                    T::Port,
-                    t,
+            if T::REFRESH.get(r) != 0 && (kind, direction) != (PortKind::Sampling, Direction::In) {
+                return Err(fail(
                     "refresh period on a port that is not a sampling input",
                 ));
             }
-            if channel >= channels {
-                return Err(invalid(T::Port, t, "channel index out of range"));
+            if T::CHANNEL.u16(r) >= channels {
+                return Err(fail("channel index out of range"));
             }
         }
+        Ok(())
+    }
 
-        // Channels: every port in exactly one channel, consistent both ways.
+    /// Channels: every port in exactly one channel, consistent both ways.
+    fn check_channels(&self) -> Result<(), DecodeError> {
+        use channel as C;
+        let channels = self.count(Table::Channel);
         tiles(
             (0..channels).map(|c| {
-                let r = self.record(T::Channel, c);
-                (u16_at(r, 34) as usize, u16_at(r, 36) as usize)
+                let r = self.record(Table::Channel, c);
+                (C::FIRST_DESTINATION.u16(r), C::DESTINATION_COUNT.u16(r))
             }),
-            self.count(T::Destination),
+            self.count(Table::Destination),
         )
         .map_err(|i| {
             invalid(
-                T::Channel,
+                Table::Channel,
                 i.min(channels),
                 "destination ranges do not tile the destination table",
             )
         })?;
-        if self.count(T::Port) != channels + self.count(T::Destination) {
+        if self.count(Table::Port) != channels + self.count(Table::Destination) {
             return Err(invalid(
-                T::Header,
+                Table::Header,
                 0,
                 "ports and channel ends do not match one to one",
             ));
         }
         for c in 0..channels {
-            let r = self.record(T::Channel, c);
-            if name_field(&r[..32]).is_none() {
-                return Err(invalid(T::Channel, c, "name is empty or not UTF-8"));
+            let r = self.record(Table::Channel, c);
+            let fail = |what| invalid(Table::Channel, c, what);
+            if C::NAME.name(r).is_none() {
+                return Err(fail("name is empty or not UTF-8"));
             }
-            if (0..c).any(|o| self.record(T::Channel, o)[..32] == r[..32]) {
-                return Err(invalid(T::Channel, c, "duplicate name"));
+            if self.duplicate_name(Table::Channel, c, C::NAME) {
+                return Err(fail("duplicate name"));
             }
-            let kind = PortKind::from_code(r[38]).ok_or(invalid(T::Channel, c, "unknown kind"))?;
-            if r[39] != 0 {
-                return Err(invalid(T::Channel, c, "reserved bytes are not zero"));
+            let kind = PortKind::from_code(C::KIND.u8(r)).ok_or(fail("unknown kind"))?;
+            if !C::RESERVED.is_zero(r) {
+                return Err(fail("reserved bytes are not zero"));
             }
-            let (source, first, count) = (
-                u16_at(r, 32) as usize,
-                u16_at(r, 34) as usize,
-                u16_at(r, 36) as usize,
-            );
-            if source >= self.count(T::Port) {
-                return Err(invalid(T::Channel, c, "source port out of range"));
+            let source = C::SOURCE.u16(r);
+            let (first, count) = (C::FIRST_DESTINATION.u16(r), C::DESTINATION_COUNT.u16(r));
+            if source >= self.count(Table::Port) {
+                return Err(fail("source port out of range"));
             }
             let src = self.port(source);
             if src.direction != Direction::Out || src.kind != kind || src.channel != c {
-                return Err(invalid(
-                    T::Channel,
-                    c,
+                return Err(fail(
                     "source is not an output port of this channel's kind and channel",
                 ));
             }
@@ -752,36 +1002,25 @@ impl<'a> SystemView<'a> {
                 PortKind::Queuing => count == 1,
             };
             if !count_ok {
-                return Err(invalid(
-                    T::Channel,
-                    c,
-                    "sampling needs >= 1 destination, queuing exactly 1",
-                ));
+                return Err(fail("sampling needs >= 1 destination, queuing exactly 1"));
             }
             for d in first..first + count {
-                let port = u16_at(self.record(T::Destination, d), 0) as usize;
-                if port >= self.count(T::Port) {
-                    return Err(invalid(T::Destination, d, "port index out of range"));
+                let fail = |what| Err(invalid(Table::Destination, d, what));
+                let port = destination::PORT.u16(self.record(Table::Destination, d));
+                if port >= self.count(Table::Port) {
+                    return fail("port index out of range");
                 }
                 let dst = self.port(port);
                 if dst.direction != Direction::In || dst.kind != kind || dst.channel != c {
-                    return Err(invalid(
-                        T::Destination,
-                        d,
-                        "not an input port of this channel's kind and channel",
-                    ));
+                    return fail("not an input port of this channel's kind and channel");
                 }
                 if dst.size < src.size {
-                    return Err(invalid(
-                        T::Destination,
-                        d,
-                        "message size smaller than the source's",
-                    ));
+                    return fail("message size smaller than the source's");
                 }
-                if (first..d)
-                    .any(|o| self.record(T::Destination, o) == self.record(T::Destination, d))
-                {
-                    return Err(invalid(T::Destination, d, "port listed twice"));
+                if (first..d).any(|o| {
+                    self.record(Table::Destination, o) == self.record(Table::Destination, d)
+                }) {
+                    return fail("port listed twice");
                 }
             }
         }
@@ -794,17 +1033,17 @@ impl<'a> SystemView<'a> {
     }
 
     pub fn name(&self) -> &'a str {
-        name_field(&self.bytes[24..56]).unwrap_or("")
+        header::NAME.name(self.bytes).unwrap_or("")
     }
 
     /// RAM budget of the system (bytes).
     pub fn memory(&self) -> u64 {
-        u64_at(self.bytes, 56)
+        header::MEMORY.get(self.bytes)
     }
 
     /// The module health table.
     pub fn health(&self) -> HealthTable {
-        HealthTable::from_bytes(&self.bytes[88..96]).unwrap_or_default()
+        HealthTable::from_bytes(header::HEALTH.bytes(self.bytes)).unwrap_or_default()
     }
 
     pub fn schedule_count(&self) -> usize {
@@ -816,10 +1055,10 @@ impl<'a> SystemView<'a> {
         let r = self.record(Table::Schedule, i);
         ScheduleView {
             index: i,
-            name: name_field(&r[..32]).unwrap_or(""),
-            major_frame: u64_at(r, 32),
-            first_window: u16_at(r, 40) as usize,
-            window_count: u16_at(r, 42) as usize,
+            name: schedule::NAME.name(r).unwrap_or(""),
+            major_frame: schedule::MAJOR_FRAME.get(r),
+            first_window: schedule::FIRST_WINDOW.u16(r),
+            window_count: schedule::WINDOW_COUNT.u16(r),
             sys: *self,
         }
     }
@@ -838,8 +1077,8 @@ impl<'a> SystemView<'a> {
         let r = self.record(Table::Segment, i);
         SegmentView {
             index: i,
-            name: name_field(&r[..32]).unwrap_or(""),
-            size: u64_at(r, 32),
+            name: segment::NAME.name(r).unwrap_or(""),
+            size: segment::BYTES.get(r),
         }
     }
 
@@ -855,24 +1094,25 @@ impl<'a> SystemView<'a> {
     /// Partition `i` (panics if out of range).
     pub fn partition(&self, i: usize) -> PartitionView<'a> {
         let r = self.record(Table::Partition, i);
+        use partition as P;
         PartitionView {
             index: i,
-            name: name_field(&r[..32]).unwrap_or(""),
-            image: name_field(&r[32..64]).unwrap_or(""),
-            memory: u64_at(r, 64),
-            kernel_memory: u64_at(r, 72),
-            stack: u64_at(r, 80),
-            abilities: Abilities::from_bits_truncate(u64_at(r, 88)),
-            kernel_threads: u32_at(r, 96),
-            kernel_tasks: u32_at(r, 100),
-            irqs: IrqMask(u32_at(r, 104)),
-            mcp: r[108],
-            priority: r[109],
-            time_partition: r[110],
-            health: HealthTable::from_bytes(&r[112..120]).unwrap_or_default(),
-            io: (u16_at(r, 120) as usize, u16_at(r, 122) as usize),
-            attachments: (u16_at(r, 124) as usize, u16_at(r, 126) as usize),
-            ports: (u16_at(r, 128) as usize, u16_at(r, 130) as usize),
+            name: P::NAME.name(r).unwrap_or(""),
+            image: P::IMAGE.name(r).unwrap_or(""),
+            memory: P::MEMORY.get(r),
+            kernel_memory: P::KERNEL_MEMORY.get(r),
+            stack: P::STACK.get(r),
+            abilities: Abilities::from_bits_truncate(P::ABILITIES.get(r)),
+            kernel_threads: P::KERNEL_THREADS.u32(r),
+            kernel_tasks: P::KERNEL_TASKS.u32(r),
+            irqs: IrqMask(P::IRQS.u32(r)),
+            mcp: P::MCP.u8(r),
+            priority: P::PRIORITY.u8(r),
+            time_partition: P::TIME_PARTITION.u8(r),
+            health: HealthTable::from_bytes(P::HEALTH.bytes(r)).unwrap_or_default(),
+            io: self.sub_range(i, P::FIRST_IO, P::IO_COUNT),
+            attachments: self.sub_range(i, P::FIRST_ATTACHMENT, P::ATTACHMENT_COUNT),
+            ports: self.sub_range(i, P::FIRST_PORT, P::PORT_COUNT),
             sys: *self,
         }
     }
@@ -889,16 +1129,16 @@ impl<'a> SystemView<'a> {
     fn io_range(&self, i: usize) -> IoRange {
         let r = self.record(Table::IoRange, i);
         IoRange {
-            first: u16_at(r, 0),
-            last: u16_at(r, 2),
+            first: io_range::FIRST.get(r) as u16,
+            last: io_range::LAST.get(r) as u16,
         }
     }
 
     fn attachment(&self, i: usize) -> Attachment {
         let r = self.record(Table::Attachment, i);
         Attachment {
-            segment: u16_at(r, 0) as usize,
-            rights: Rights::from_code(r[2]).unwrap_or(Rights::Read),
+            segment: attachment::SEGMENT.u16(r),
+            rights: Rights::from_code(attachment::RIGHTS.u8(r)).unwrap_or(Rights::Read),
         }
     }
 
@@ -911,21 +1151,21 @@ impl<'a> SystemView<'a> {
         let r = self.record(Table::Port, i);
         let partition = (0..self.partition_count())
             .find(|&p| {
-                let r = self.record(Table::Partition, p);
-                let first = u16_at(r, 128) as usize;
-                (first..first + u16_at(r, 130) as usize).contains(&i)
+                let (first, count) =
+                    self.sub_range(p, partition::FIRST_PORT, partition::PORT_COUNT);
+                (first..first + count).contains(&i)
             })
             .unwrap_or(0);
         PortView {
             index: i,
             partition,
-            name: name_field(&r[..32]).unwrap_or(""),
-            size: u32_at(r, 32),
-            depth: u32_at(r, 36),
-            refresh: u64_at(r, 40),
-            channel: u16_at(r, 48) as usize,
-            kind: PortKind::from_code(r[50]).unwrap_or(PortKind::Sampling),
-            direction: Direction::from_code(r[51]).unwrap_or(Direction::In),
+            name: port::NAME.name(r).unwrap_or(""),
+            size: port::MESSAGE_SIZE.u32(r),
+            depth: port::DEPTH.u32(r),
+            refresh: port::REFRESH.get(r),
+            channel: port::CHANNEL.u16(r),
+            kind: PortKind::from_code(port::KIND.u8(r)).unwrap_or(PortKind::Sampling),
+            direction: Direction::from_code(port::DIRECTION.u8(r)).unwrap_or(Direction::In),
         }
     }
 
@@ -943,11 +1183,11 @@ impl<'a> SystemView<'a> {
         let r = self.record(Table::Channel, i);
         ChannelView {
             index: i,
-            name: name_field(&r[..32]).unwrap_or(""),
-            source: u16_at(r, 32) as usize,
-            first_destination: u16_at(r, 34) as usize,
-            destination_count: u16_at(r, 36) as usize,
-            kind: PortKind::from_code(r[38]).unwrap_or(PortKind::Sampling),
+            name: channel::NAME.name(r).unwrap_or(""),
+            source: channel::SOURCE.u16(r),
+            first_destination: channel::FIRST_DESTINATION.u16(r),
+            destination_count: channel::DESTINATION_COUNT.u16(r),
+            kind: PortKind::from_code(channel::KIND.u8(r)).unwrap_or(PortKind::Sampling),
             sys: *self,
         }
     }
@@ -981,9 +1221,9 @@ impl<'a> ScheduleView<'a> {
         assert!(i < self.window_count, "window index out of range");
         let r = self.sys.record(Table::Window, self.first_window + i);
         Window {
-            offset: u64_at(r, 0),
-            duration: u64_at(r, 8),
-            time_partition: r[16],
+            offset: window::OFFSET.get(r),
+            duration: window::DURATION.get(r),
+            time_partition: window::TIME_PARTITION.u8(r),
         }
     }
 
@@ -1101,7 +1341,7 @@ impl<'a> ChannelView<'a> {
     pub fn destinations(&self) -> impl Iterator<Item = usize> + 'a {
         let sys = self.sys;
         (self.first_destination..self.first_destination + self.destination_count)
-            .map(move |d| u16_at(sys.record(Table::Destination, d), 0) as usize)
+            .map(move |d| destination::PORT.u16(sys.record(Table::Destination, d)))
     }
 
     pub fn destination_count(&self) -> usize {
@@ -1116,16 +1356,38 @@ mod encode {
     use crate::system::System;
     use std::vec::Vec;
 
-    fn name(out: &mut Vec<u8>, text: &str) {
-        let mut field = [0u8; NAME_SIZE];
-        field[..text.len()].copy_from_slice(text.as_bytes());
-        out.extend_from_slice(&field);
-    }
+    /// A record being written: zeroed (so reserved bytes are zero), fields set by name.
+    struct Record<const N: usize>([u8; N]);
 
-    fn u16_of(value: usize) -> [u8; 2] {
-        u16::try_from(value)
-            .expect("validated counts fit 16 bits")
-            .to_le_bytes()
+    impl<const N: usize> Record<N> {
+        fn new() -> Self {
+            Self([0; N])
+        }
+
+        fn set(mut self, field: Field, value: u64) -> Self {
+            field.set(&mut self.0, value);
+            self
+        }
+
+        /// A count or index (validated systems keep them within 16 bits).
+        fn index(self, field: Field, value: usize) -> Self {
+            let value = u16::try_from(value).expect("validated counts fit 16 bits");
+            self.set(field, u64::from(value))
+        }
+
+        fn name(mut self, field: Field, text: &str) -> Self {
+            field.bytes_mut(&mut self.0)[..text.len()].copy_from_slice(text.as_bytes());
+            self
+        }
+
+        fn raw(mut self, field: Field, bytes: &[u8]) -> Self {
+            field.bytes_mut(&mut self.0).copy_from_slice(bytes);
+            self
+        }
+
+        fn write(self, out: &mut Vec<u8>) {
+            out.extend_from_slice(&self.0);
+        }
     }
 
     /// Writes the version-1 blob of a validated system (see the module documentation).
@@ -1137,14 +1399,13 @@ mod encode {
         let attachments: usize = system.partitions.iter().map(|p| p.shared.len()).sum();
         let ports: usize = system.partitions.iter().map(|p| p.ports.len()).sum();
         let destinations: usize = system.channels.iter().map(|c| c.destinations.len()).sum();
-        out.extend_from_slice(&MAGIC);
-        out.extend_from_slice(&VERSION.to_le_bytes());
-        out.extend_from_slice(&[0; 4]); // CRC, below
-        out.extend_from_slice(&[0; 4]); // total size, below
-        out.extend_from_slice(&[0; 4]);
-        name(&mut out, &system.name);
-        out.extend_from_slice(&system.memory.to_le_bytes());
-        for count in [
+        let mut head = Record::<{ header::SIZE }>::new()
+            .raw(header::MAGIC, &MAGIC)
+            .set(header::VERSION, u64::from(VERSION))
+            .name(header::NAME, &system.name)
+            .set(header::MEMORY, system.memory)
+            .raw(header::HEALTH, &system.health.to_bytes());
+        let counts = [
             system.schedules.len(),
             windows,
             system.segments.len(),
@@ -1154,91 +1415,154 @@ mod encode {
             ports,
             system.channels.len(),
             destinations,
-        ] {
-            out.extend_from_slice(&u16_of(count));
+        ];
+        for (i, count) in counts.into_iter().enumerate() {
+            head = head.index(header::count(i), count);
         }
-        out.extend_from_slice(&[0; 6]);
-        out.extend_from_slice(&system.health.to_bytes());
-        debug_assert_eq!(out.len(), HEADER_SIZE);
+        head.write(&mut out); // CRC and total size are set at the end
 
         let mut first = 0;
         for s in &system.schedules {
-            name(&mut out, &s.name);
-            out.extend_from_slice(&s.major_frame.to_le_bytes());
-            out.extend_from_slice(&u16_of(first));
-            out.extend_from_slice(&u16_of(s.windows.len()));
-            out.extend_from_slice(&[0; 4]);
+            use schedule as S;
+            Record::<{ S::SIZE }>::new()
+                .name(S::NAME, &s.name)
+                .set(S::MAJOR_FRAME, s.major_frame)
+                .index(S::FIRST_WINDOW, first)
+                .index(S::WINDOW_COUNT, s.windows.len())
+                .write(&mut out);
             first += s.windows.len();
         }
         for w in system.schedules.iter().flat_map(|s| &s.windows) {
-            out.extend_from_slice(&w.offset.to_le_bytes());
-            out.extend_from_slice(&w.duration.to_le_bytes());
-            out.push(w.time_partition);
-            out.extend_from_slice(&[0; 7]);
+            Record::<{ window::SIZE }>::new()
+                .set(window::OFFSET, w.offset)
+                .set(window::DURATION, w.duration)
+                .set(window::TIME_PARTITION, u64::from(w.time_partition))
+                .write(&mut out);
         }
         for g in &system.segments {
-            name(&mut out, &g.name);
-            out.extend_from_slice(&g.size.to_le_bytes());
+            Record::<{ segment::SIZE }>::new()
+                .name(segment::NAME, &g.name)
+                .set(segment::BYTES, g.size)
+                .write(&mut out);
         }
         let (mut io_at, mut att_at, mut port_at) = (0, 0, 0);
         for p in &system.partitions {
-            name(&mut out, &p.name);
-            name(&mut out, &p.image);
-            out.extend_from_slice(&p.memory.to_le_bytes());
-            out.extend_from_slice(&p.kernel_memory.to_le_bytes());
-            out.extend_from_slice(&p.stack.to_le_bytes());
-            out.extend_from_slice(&p.abilities.bits().to_le_bytes());
-            out.extend_from_slice(&p.kernel_threads.to_le_bytes());
-            out.extend_from_slice(&p.kernel_tasks.to_le_bytes());
-            out.extend_from_slice(&p.irqs.0.to_le_bytes());
-            out.extend_from_slice(&[p.mcp, p.priority, p.time_partition, 0]);
-            out.extend_from_slice(&p.health.to_bytes());
-            for (at, count) in [
-                (&mut io_at, p.io_ports.len()),
-                (&mut att_at, p.shared.len()),
-                (&mut port_at, p.ports.len()),
-            ] {
-                out.extend_from_slice(&u16_of(*at));
-                out.extend_from_slice(&u16_of(count));
-                *at += count;
-            }
-            out.extend_from_slice(&[0; 4]);
+            use partition as P;
+            Record::<{ P::SIZE }>::new()
+                .name(P::NAME, &p.name)
+                .name(P::IMAGE, &p.image)
+                .set(P::MEMORY, p.memory)
+                .set(P::KERNEL_MEMORY, p.kernel_memory)
+                .set(P::STACK, p.stack)
+                .set(P::ABILITIES, p.abilities.bits())
+                .set(P::KERNEL_THREADS, u64::from(p.kernel_threads))
+                .set(P::KERNEL_TASKS, u64::from(p.kernel_tasks))
+                .set(P::IRQS, u64::from(p.irqs.0))
+                .set(P::MCP, u64::from(p.mcp))
+                .set(P::PRIORITY, u64::from(p.priority))
+                .set(P::TIME_PARTITION, u64::from(p.time_partition))
+                .raw(P::HEALTH, &p.health.to_bytes())
+                .index(P::FIRST_IO, io_at)
+                .index(P::IO_COUNT, p.io_ports.len())
+                .index(P::FIRST_ATTACHMENT, att_at)
+                .index(P::ATTACHMENT_COUNT, p.shared.len())
+                .index(P::FIRST_PORT, port_at)
+                .index(P::PORT_COUNT, p.ports.len())
+                .write(&mut out);
+            io_at += p.io_ports.len();
+            att_at += p.shared.len();
+            port_at += p.ports.len();
         }
         for r in system.partitions.iter().flat_map(|p| &p.io_ports) {
-            out.extend_from_slice(&r.first.to_le_bytes());
-            out.extend_from_slice(&r.last.to_le_bytes());
+            Record::<{ io_range::SIZE }>::new()
+                .set(io_range::FIRST, u64::from(r.first))
+                .set(io_range::LAST, u64::from(r.last))
+                .write(&mut out);
         }
         for a in system.partitions.iter().flat_map(|p| &p.shared) {
-            out.extend_from_slice(&u16_of(a.segment));
-            out.extend_from_slice(&[a.rights as u8, 0]);
+            Record::<{ attachment::SIZE }>::new()
+                .index(attachment::SEGMENT, a.segment)
+                .set(attachment::RIGHTS, u64::from(a.rights.code()))
+                .write(&mut out);
         }
         for t in system.partitions.iter().flat_map(|p| &p.ports) {
-            name(&mut out, &t.name);
-            out.extend_from_slice(&t.size.to_le_bytes());
-            out.extend_from_slice(&t.depth.to_le_bytes());
-            out.extend_from_slice(&t.refresh.to_le_bytes());
-            out.extend_from_slice(&u16_of(t.channel));
-            out.extend_from_slice(&[t.kind as u8, t.direction as u8, 0, 0, 0, 0]);
+            use port as T;
+            Record::<{ T::SIZE }>::new()
+                .name(T::NAME, &t.name)
+                .set(T::MESSAGE_SIZE, u64::from(t.size))
+                .set(T::DEPTH, u64::from(t.depth))
+                .set(T::REFRESH, t.refresh)
+                .index(T::CHANNEL, t.channel)
+                .set(T::KIND, u64::from(t.kind.code()))
+                .set(T::DIRECTION, u64::from(t.direction.code()))
+                .write(&mut out);
         }
         let mut first = 0;
         for c in &system.channels {
-            name(&mut out, &c.name);
-            out.extend_from_slice(&u16_of(system.global_port(c.source)));
-            out.extend_from_slice(&u16_of(first));
-            out.extend_from_slice(&u16_of(c.destinations.len()));
-            out.extend_from_slice(&[c.kind as u8, 0]);
+            use channel as C;
+            Record::<{ C::SIZE }>::new()
+                .name(C::NAME, &c.name)
+                .index(C::SOURCE, system.global_port(c.source))
+                .index(C::FIRST_DESTINATION, first)
+                .index(C::DESTINATION_COUNT, c.destinations.len())
+                .set(C::KIND, u64::from(c.kind.code()))
+                .write(&mut out);
             first += c.destinations.len();
         }
         for &d in system.channels.iter().flat_map(|c| &c.destinations) {
-            out.extend_from_slice(&u16_of(system.global_port(d)));
+            Record::<{ destination::SIZE }>::new()
+                .index(destination::PORT, system.global_port(d))
+                .write(&mut out);
         }
         let total = u32::try_from(out.len()).expect("a configuration is far below 4 GiB");
-        out[16..20].copy_from_slice(&total.to_le_bytes());
-        let crc = crc32(&out[16..]);
-        out[12..16].copy_from_slice(&crc.to_le_bytes());
+        header::TOTAL_SIZE.set(&mut out, u64::from(total));
+        let crc = crc32(&out[header::TOTAL_SIZE.at..]);
+        header::CRC.set(&mut out, u64::from(crc));
         out
     }
 }
 
 #[cfg(feature = "host")]
 pub use encode::encode;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Each record's field table covers it exactly: in order, no gap, no overlap, up to
+    /// its size.
+    #[test]
+    fn fields_tile_their_records() {
+        let tables: [(&str, &[Field], usize); 10] = [
+            ("header", &header::FIELDS, header::SIZE),
+            ("schedule", &schedule::FIELDS, schedule::SIZE),
+            ("window", &window::FIELDS, window::SIZE),
+            ("segment", &segment::FIELDS, segment::SIZE),
+            ("partition", &partition::FIELDS, partition::SIZE),
+            ("I/O range", &io_range::FIELDS, io_range::SIZE),
+            ("attachment", &attachment::FIELDS, attachment::SIZE),
+            ("port", &port::FIELDS, port::SIZE),
+            ("channel", &channel::FIELDS, channel::SIZE),
+            ("destination", &destination::FIELDS, destination::SIZE),
+        ];
+        for (name, fields, size) in tables {
+            let mut next = 0;
+            for f in fields {
+                assert_eq!(
+                    f.at, next,
+                    "{name}: field at {} leaves a gap or overlaps",
+                    f.at
+                );
+                next = f.at + f.len;
+            }
+            assert_eq!(
+                next, size,
+                "{name}: fields end at {next}, the record is {size}"
+            );
+        }
+        for (i, (_, size, _)) in TABLES.iter().enumerate() {
+            let count = header::count(i);
+            assert!(count.at + count.len <= header::RESERVED_B.at, "{size}");
+        }
+    }
+}

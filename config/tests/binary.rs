@@ -4,7 +4,9 @@
 mod common;
 use abi::crc32::crc32;
 use common::*;
-use config::binary::{self, DecodeError, Table};
+use config::binary::{
+    self, DecodeError, Table, attachment, channel, header, io_range, partition, port, window,
+};
 use config::model::{Direction, ErrorCode, HealthAction, PortKind, Rights};
 use config::{System, decode};
 use proptest::prelude::*;
@@ -105,10 +107,11 @@ fn rich() -> System {
 
 /// Recomputes the checksum after a deliberate edit, so the test reaches the checks behind it.
 fn reseal(blob: &mut [u8]) {
-    let total = (u32::from_le_bytes(blob[16..20].try_into().unwrap()) as usize).min(blob.len());
-    if total >= 16 {
-        let crc = crc32(&blob[16..total]);
-        blob[12..16].copy_from_slice(&crc.to_le_bytes());
+    let covered = header::TOTAL_SIZE.at;
+    let total = (header::TOTAL_SIZE.get(blob) as usize).min(blob.len());
+    if total >= covered {
+        let crc = crc32(&blob[covered..total]);
+        header::CRC.set(blob, u64::from(crc));
     }
 }
 
@@ -252,7 +255,7 @@ fn resealed_damage_never_panics() {
 /// The byte offset of record `index` of a table in `blob` (tables follow the header in the
 /// documented order).
 fn record(blob: &[u8], table: Table, index: usize) -> usize {
-    let count = |i: usize| u16::from_le_bytes([blob[64 + 2 * i], blob[65 + 2 * i]]) as usize;
+    let count = |i: usize| header::count(i).get(blob) as usize;
     let sizes = [
         binary::SCHEDULE_SIZE,
         binary::WINDOW_SIZE,
@@ -306,10 +309,10 @@ fn invalid(table: Table, index: usize, what: &str) -> impl Fn(DecodeError) {
 fn header_damage() {
     let blob = binary::encode(&rich());
     let mut b = blob.clone();
-    b[0] = b'X';
+    header::MAGIC.bytes_mut(&mut b)[0] = b'X';
     assert_eq!(decode(&b).unwrap_err(), DecodeError::BadMagic);
     let mut b = blob.clone();
-    b[8] = 2;
+    header::VERSION.set(&mut b, 2);
     assert_eq!(decode(&b).unwrap_err(), DecodeError::UnsupportedVersion(2));
     let mut b = blob.clone();
     let last = b.len() - 1;
@@ -320,10 +323,10 @@ fn header_damage() {
     ));
     let e = damaged(|b| {
         let total = b.len() as u32 + 1;
-        b[16..20].copy_from_slice(&total.to_le_bytes());
+        header::TOTAL_SIZE.set(b, u64::from(total));
     });
     assert!(matches!(e, DecodeError::TooShort { .. }), "{e:?}");
-    let e = damaged(|b| b[64..66].copy_from_slice(&5u16.to_le_bytes()));
+    let e = damaged(|b| header::count(0).set(b, 5));
     assert_eq!(
         e,
         DecodeError::TooMany {
@@ -332,10 +335,10 @@ fn header_damage() {
             max: 4
         }
     );
-    let e = damaged(|b| b[68..70].copy_from_slice(&1u16.to_le_bytes()));
+    let e = damaged(|b| header::count(2).set(b, 1));
     assert!(matches!(e, DecodeError::SizeMismatch { .. }), "{e:?}");
-    invalid(Table::Header, 0, "reserved")(damaged(|b| b[84] = 1));
-    invalid(Table::Header, 0, "module health")(damaged(|b| b[88] = 9));
+    invalid(Table::Header, 0, "reserved")(damaged(|b| header::RESERVED_B.bytes_mut(b)[2] = 1));
+    invalid(Table::Header, 0, "module health")(damaged(|b| header::HEALTH.bytes_mut(b)[0] = 9));
 }
 
 #[test]
@@ -344,24 +347,24 @@ fn window_damage() {
     // Time partition 0 and 16.
     invalid(Table::Window, 0, "not in 1..=15")(damaged(|b| {
         let at = w(b, 0);
-        b[at + 16] = 0;
+        window::TIME_PARTITION.set(&mut b[at..], 0);
     }));
     invalid(Table::Window, 0, "used by no partition")(damaged(|b| {
         let at = w(b, 0);
-        b[at + 16] = 9;
+        window::TIME_PARTITION.set(&mut b[at..], 9);
     }));
     // Window 1 (3ms..3.5ms) moved to start at 1ms overlaps window 0 (0..2ms).
     invalid(Table::Window, 1, "overlaps")(damaged(|b| {
         let at = w(b, 1);
-        b[at..at + 8].copy_from_slice(&1_000_000u64.to_le_bytes());
+        window::OFFSET.set(&mut b[at..], 1_000_000);
     }));
     invalid(Table::Window, 2, "ends after the major frame")(damaged(|b| {
         let at = w(b, 2);
-        b[at + 8..at + 16].copy_from_slice(&u64::MAX.to_le_bytes());
+        window::DURATION.set(&mut b[at..], u64::MAX);
     }));
     invalid(Table::Window, 0, "duration is zero")(damaged(|b| {
         let at = w(b, 0);
-        b[at + 8..at + 16].fill(0);
+        window::DURATION.set(&mut b[at..], 0);
     }));
 }
 
@@ -370,40 +373,42 @@ fn partition_damage() {
     let p = |b: &Vec<u8>, i| record(b, Table::Partition, i);
     invalid(Table::Partition, 0, "MCP")(damaged(|b| {
         let at = p(b, 0);
-        b[at + 108] = 200;
+        partition::MCP.set(&mut b[at..], 200);
     }));
     invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
         let at = p(b, 0);
-        b[at + 109] = 151;
+        partition::PRIORITY.set(&mut b[at..], 151);
     }));
     invalid(Table::Partition, 1, "reserved for syssw")(damaged(|b| {
         let at = p(b, 1);
-        b[at + 89] |= 1; // bit 8: SYSTEM_HALT
+        partition::ABILITIES.bytes_mut(&mut b[at..])[1] |= 1; // bit 8: SYSTEM_HALT
     }));
     invalid(Table::Partition, 1, "IRQ line")(damaged(|b| {
         let at = p(b, 1);
-        b[at + 104] |= 1 << 4;
+        partition::IRQS.bytes_mut(&mut b[at..])[0] |= 1 << 4;
     }));
     invalid(Table::Partition, 0, "stack larger than memory")(damaged(|b| {
         let at = p(b, 0);
-        b[at + 80..at + 88].copy_from_slice(&(16u64 << 20).to_le_bytes());
+        partition::STACK.set(&mut b[at..], 16 << 20);
     }));
     invalid(Table::Partition, 2, "duplicate name")(damaged(|b| {
         let (from, to) = (p(b, 0), p(b, 2));
-        let name: Vec<u8> = b[from..from + 32].to_vec();
-        b[to..to + 32].copy_from_slice(&name);
+        let name: Vec<u8> = partition::NAME.bytes(&b[from..]).to_vec();
+        partition::NAME
+            .bytes_mut(&mut b[to..])
+            .copy_from_slice(&name);
     }));
     invalid(Table::Partition, 0, "not UTF-8")(damaged(|b| {
         let at = p(b, 0);
-        b[at] = 0xff;
+        partition::NAME.bytes_mut(&mut b[at..])[0] = 0xff;
     }));
     invalid(Table::Partition, 1, "do not tile")(damaged(|b| {
         let at = p(b, 1);
-        b[at + 128] += 1;
+        partition::FIRST_PORT.bytes_mut(&mut b[at..])[0] += 1;
     }));
     invalid(Table::Header, 0, "exceed the budget")(damaged(|b| {
         let at = p(b, 2);
-        b[at + 64..at + 72].copy_from_slice(&(1u64 << 30).to_le_bytes());
+        partition::MEMORY.set(&mut b[at..], 1 << 30);
     }));
 }
 
@@ -411,21 +416,21 @@ fn partition_damage() {
 fn resource_damage() {
     invalid(Table::IoRange, 1, "the kernel keeps")(damaged(|b| {
         let at = record(b, Table::IoRange, 1);
-        b[at..at + 2].copy_from_slice(&0x3f8u16.to_le_bytes());
-        b[at + 2..at + 4].copy_from_slice(&0x3f8u16.to_le_bytes());
+        io_range::FIRST.set(&mut b[at..], 0x3f8);
+        io_range::LAST.set(&mut b[at..], 0x3f8);
     }));
     invalid(Table::IoRange, 2, "overlaps")(damaged(|b| {
         let at = record(b, Table::IoRange, 2);
-        b[at..at + 2].copy_from_slice(&0x2f9u16.to_le_bytes());
-        b[at + 2..at + 4].copy_from_slice(&0x2f9u16.to_le_bytes());
+        io_range::FIRST.set(&mut b[at..], 0x2f9);
+        io_range::LAST.set(&mut b[at..], 0x2f9);
     }));
     invalid(Table::Attachment, 0, "segment index out of range")(damaged(|b| {
         let at = record(b, Table::Attachment, 0);
-        b[at] = 7;
+        attachment::SEGMENT.set(&mut b[at..], 7);
     }));
     invalid(Table::Attachment, 1, "unknown rights")(damaged(|b| {
         let at = record(b, Table::Attachment, 1);
-        b[at + 2] = 4;
+        attachment::RIGHTS.set(&mut b[at..], 4);
     }));
 }
 
@@ -434,32 +439,32 @@ fn port_and_channel_damage() {
     let t = |b: &Vec<u8>, i| record(b, Table::Port, i);
     invalid(Table::Port, 0, "channel index out of range")(damaged(|b| {
         let at = t(b, 0);
-        b[at + 48] = 99;
+        port::CHANNEL.set(&mut b[at..], 99);
     }));
     invalid(Table::Port, 1, "depth")(damaged(|b| {
         let at = t(b, 1);
-        b[at + 36..at + 40].fill(0);
+        port::DEPTH.set(&mut b[at..], 0);
     }));
     invalid(Table::Port, 0, "refresh period on a port")(damaged(|b| {
         // ctl.level becomes an output: refresh no longer allowed.
         let at = t(b, 0);
-        b[at + 51] = 2;
+        port::DIRECTION.set(&mut b[at..], 2);
     }));
     invalid(Table::Channel, 0, "source is not an output port")(damaged(|b| {
         let at = record(b, Table::Channel, 0);
-        b[at + 32] = 0; // ctl.level, an input
+        channel::SOURCE.set(&mut b[at..], 0); // ctl.level, an input
     }));
     invalid(Table::Destination, 0, "smaller than the source")(damaged(|b| {
         let at = t(b, 0);
-        b[at + 32..at + 36].copy_from_slice(&4u32.to_le_bytes());
+        port::MESSAGE_SIZE.set(&mut b[at..], 4);
     }));
     invalid(Table::Channel, 1, "queuing exactly 1")(damaged(|b| {
         // Move the guest's destination from channel 0 to channel 1.
         let c0 = record(b, Table::Channel, 0);
-        b[c0 + 36] = 1;
+        channel::DESTINATION_COUNT.set(&mut b[c0..], 1);
         let c1 = record(b, Table::Channel, 1);
-        b[c1 + 34] = 1;
-        b[c1 + 36] = 2;
+        channel::FIRST_DESTINATION.set(&mut b[c1..], 1);
+        channel::DESTINATION_COUNT.set(&mut b[c1..], 2);
     }));
 }
 
@@ -492,8 +497,9 @@ proptest! {
         let _ = decode(&bytes);
         // With a valid header and checksum the structure checks run too.
         let mut b = binary::encode(&rich());
-        let n = bytes.len().min(b.len() - 16);
-        b[16..16 + n].copy_from_slice(&bytes[..n]);
+        let covered = header::TOTAL_SIZE.at; // everything the checksum covers
+        let n = bytes.len().min(b.len() - covered);
+        b[covered..covered + n].copy_from_slice(&bytes[..n]);
         reseal(&mut b);
         assert_consistent(&b);
     }
@@ -505,7 +511,8 @@ proptest! {
         let mut b = binary::encode(&rich());
         let len = b.len();
         for (at, value) in edits {
-            let at = 16 + at.index(len - 16);
+            let covered = header::TOTAL_SIZE.at;
+            let at = covered + at.index(len - covered);
             b[at] = value;
         }
         reseal(&mut b);
