@@ -118,6 +118,7 @@
 
 use crate::model::*;
 use abi::crc32::crc32;
+pub use abi::layout::Field;
 use abi::syscall::Abilities;
 
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
@@ -133,70 +134,6 @@ pub const ATTACHMENT_SIZE: usize = attachment::SIZE;
 pub const PORT_SIZE: usize = port::SIZE;
 pub const CHANNEL_SIZE: usize = channel::SIZE;
 pub const DESTINATION_SIZE: usize = destination::SIZE;
-
-/// A field of a record: its offset and width in bytes. Each record's fields are listed once,
-/// in the modules below (the table of the module documentation as code); the writer, the
-/// checks, the views and the tests all go through them, and a test checks that each
-/// record's fields tile it exactly.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Field {
-    pub at: usize,
-    pub len: usize,
-}
-
-impl Field {
-    const fn new(at: usize, len: usize) -> Self {
-        Self { at, len }
-    }
-
-    /// The field's bytes in `record` (which must be a whole record of its table).
-    pub fn bytes(self, record: &[u8]) -> &[u8] {
-        &record[self.at..self.at + self.len]
-    }
-
-    /// The field's bytes, for writing.
-    pub fn bytes_mut(self, record: &mut [u8]) -> &mut [u8] {
-        &mut record[self.at..self.at + self.len]
-    }
-
-    /// The field as a little-endian unsigned integer (fields are 1, 2, 4 or 8 bytes).
-    pub fn get(self, record: &[u8]) -> u64 {
-        let mut raw = [0u8; 8];
-        raw[..self.len].copy_from_slice(self.bytes(record));
-        u64::from_le_bytes(raw)
-    }
-
-    fn u8(self, record: &[u8]) -> u8 {
-        self.get(record) as u8
-    }
-
-    fn u16(self, record: &[u8]) -> usize {
-        self.get(record) as usize
-    }
-
-    fn u32(self, record: &[u8]) -> u32 {
-        self.get(record) as u32
-    }
-
-    /// Writes `value` little-endian into the field (host writer; `value` must fit).
-    pub fn set(self, record: &mut [u8], value: u64) {
-        debug_assert!(
-            self.len == 8 || value >> (8 * self.len) == 0,
-            "value too wide"
-        );
-        let raw = value.to_le_bytes();
-        self.bytes_mut(record).copy_from_slice(&raw[..self.len]);
-    }
-
-    /// The text of a name field, if it is well-formed.
-    fn name(self, record: &[u8]) -> Option<&str> {
-        name_field(self.bytes(record))
-    }
-
-    fn is_zero(self, record: &[u8]) -> bool {
-        zero(self.bytes(record))
-    }
-}
 
 /// Header fields.
 pub mod header {
@@ -515,15 +452,6 @@ impl core::fmt::Display for DecodeError {
     }
 }
 
-/// The text of a name field, if it is well-formed.
-fn name_field(raw: &[u8]) -> Option<&str> {
-    let len = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
-    if len == 0 || raw[len..].iter().any(|&b| b != 0) {
-        return None;
-    }
-    core::str::from_utf8(&raw[..len]).ok()
-}
-
 /// A validated binary configuration (zero-copy view of the blob). Cheap to copy.
 #[derive(Clone, Copy, Debug)]
 pub struct SystemView<'a> {
@@ -612,10 +540,6 @@ fn tiles(ranges: impl Iterator<Item = (usize, usize)>, total: usize) -> Result<(
     } else {
         Err(usize::MAX)
     }
-}
-
-fn zero(bytes: &[u8]) -> bool {
-    bytes.iter().all(|&b| b == 0)
 }
 
 impl<'a> SystemView<'a> {
@@ -1546,19 +1470,7 @@ mod tests {
             ("destination", &destination::FIELDS, destination::SIZE),
         ];
         for (name, fields, size) in tables {
-            let mut next = 0;
-            for f in fields {
-                assert_eq!(
-                    f.at, next,
-                    "{name}: field at {} leaves a gap or overlaps",
-                    f.at
-                );
-                next = f.at + f.len;
-            }
-            assert_eq!(
-                next, size,
-                "{name}: fields end at {next}, the record is {size}"
-            );
+            assert_eq!(abi::layout::tiles(fields, size), Ok(()), "{name}");
         }
         for (i, (_, size, _)) in TABLES.iter().enumerate() {
             let count = header::count(i);

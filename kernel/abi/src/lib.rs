@@ -5,7 +5,8 @@
 //! loader hands the kernel ([`boot`]), the system-image archive format ([`sysimg`]) and the
 //! checksum they use ([`crc32`]), the system-call interface ([`syscall`], with the register of
 //! each argument in [`args`]), the IPC and
-//! exception message layout ([`ipc`]), the loadable-segment rules of ELF images ([`elf`]) and the root task's start information ([`root`]).
+//! exception message layout ([`ipc`]), the loadable-segment rules of ELF images ([`elf`]), the field tables of binary records
+//! ([`layout`]) and the root task's start information ([`root`]).
 //! It must never contain kernel policy or anything that needs an allocator (the `std` feature adds host-side writers only).
 #![no_std]
 
@@ -17,6 +18,7 @@ pub mod boot;
 pub mod crc32;
 pub mod elf;
 pub mod ipc;
+pub mod layout;
 pub mod root;
 pub mod syscall;
 pub mod sysimg;

@@ -25,12 +25,35 @@ use crate::crc32::crc32;
 
 pub const MAGIC: [u8; 8] = *b"PKSYSIMG";
 pub const VERSION: u32 = 1;
-pub const HEADER_SIZE: usize = 32;
-pub const ENTRY_SIZE: usize = 64;
-pub const NAME_SIZE: usize = 48;
+pub const HEADER_SIZE: usize = header::SIZE;
+pub const ENTRY_SIZE: usize = entry::SIZE;
+pub const NAME_SIZE: usize = entry::NAME.len;
 pub const MAX_ENTRIES: usize = 256;
 /// Alignment of every entry's data.
 pub const DATA_ALIGN: usize = 4096;
+
+/// Header fields (the table above as code: the one place that states them).
+pub mod header {
+    use crate::layout::Field;
+    pub const MAGIC: Field = Field::new(0, 8);
+    pub const VERSION: Field = Field::new(8, 4);
+    pub const ENTRY_COUNT: Field = Field::new(12, 4);
+    pub const TOTAL_SIZE: Field = Field::new(16, 8);
+    pub const CRC: Field = Field::new(24, 4);
+    pub const RESERVED: Field = Field::new(28, 4);
+    pub const SIZE: usize = 32;
+    pub const FIELDS: [Field; 6] = [MAGIC, VERSION, ENTRY_COUNT, TOTAL_SIZE, CRC, RESERVED];
+}
+
+/// Entry-table record fields.
+pub mod entry {
+    use crate::layout::Field;
+    pub const NAME: Field = Field::new(0, 48);
+    pub const OFFSET: Field = Field::new(48, 8);
+    pub const DATA_SIZE: Field = Field::new(56, 8);
+    pub const SIZE: usize = 64;
+    pub const FIELDS: [Field; 3] = [NAME, OFFSET, DATA_SIZE];
+}
 
 /// Why an image was rejected.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -96,26 +119,6 @@ pub struct SystemImage<'a> {
     count: usize,
 }
 
-fn read_u32(bytes: &[u8], at: usize) -> u32 {
-    let mut b = [0u8; 4];
-    b.copy_from_slice(&bytes[at..at + 4]);
-    u32::from_le_bytes(b)
-}
-
-fn read_u64(bytes: &[u8], at: usize) -> u64 {
-    let mut b = [0u8; 8];
-    b.copy_from_slice(&bytes[at..at + 8]);
-    u64::from_le_bytes(b)
-}
-
-fn entry_name(raw: &[u8]) -> Option<&str> {
-    let len = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
-    if len == 0 || raw[len..].iter().any(|&b| b != 0) {
-        return None;
-    }
-    core::str::from_utf8(&raw[..len]).ok()
-}
-
 impl<'a> SystemImage<'a> {
     /// Validates everything (header, checksum, every entry) so that later accesses cannot fail.
     /// `bytes` may be longer than the image (e.g. rounded up to pages).
@@ -123,19 +126,19 @@ impl<'a> SystemImage<'a> {
         if bytes.len() < HEADER_SIZE {
             return Err(SysImgError::TooShort);
         }
-        if bytes[0..8] != MAGIC {
+        if header::MAGIC.bytes(bytes) != MAGIC {
             return Err(SysImgError::BadMagic);
         }
-        let version = read_u32(bytes, 8);
+        let version = header::VERSION.u32(bytes);
         if version != VERSION {
             return Err(SysImgError::UnsupportedVersion(version));
         }
-        let count = read_u32(bytes, 12);
+        let count = header::ENTRY_COUNT.u32(bytes);
         if count as usize > MAX_ENTRIES {
             return Err(SysImgError::TooManyEntries(count));
         }
         let count = count as usize;
-        let total = read_u64(bytes, 16);
+        let total = header::TOTAL_SIZE.get(bytes);
         let table_end = HEADER_SIZE + count * ENTRY_SIZE;
         if total > bytes.len() as u64 || (total as usize) < table_end {
             return Err(SysImgError::SizeMismatch {
@@ -144,7 +147,7 @@ impl<'a> SystemImage<'a> {
             });
         }
         let bytes = &bytes[..total as usize];
-        let stored = read_u32(bytes, 24);
+        let stored = header::CRC.u32(bytes);
         let computed = crc32(&bytes[HEADER_SIZE..]);
         if stored != computed {
             return Err(SysImgError::ChecksumMismatch { stored, computed });
@@ -153,12 +156,12 @@ impl<'a> SystemImage<'a> {
         let mut previous_end = table_end;
         for i in 0..count {
             let raw = image.raw_entry(i);
-            let name = entry_name(&raw[..NAME_SIZE]).ok_or(SysImgError::BadEntryName(i))?;
-            if (0..i).any(|j| entry_name(&image.raw_entry(j)[..NAME_SIZE]) == Some(name)) {
+            let name = entry::NAME.name(raw).ok_or(SysImgError::BadEntryName(i))?;
+            if (0..i).any(|j| entry::NAME.name(image.raw_entry(j)) == Some(name)) {
                 return Err(SysImgError::DuplicateName(i));
             }
-            let offset = read_u64(raw, NAME_SIZE);
-            let size = read_u64(raw, NAME_SIZE + 8);
+            let offset = entry::OFFSET.get(raw);
+            let size = entry::DATA_SIZE.get(raw);
             let end = offset
                 .checked_add(size)
                 .ok_or(SysImgError::EntryOutOfBounds(i))?;
@@ -197,9 +200,9 @@ impl<'a> SystemImage<'a> {
     /// The `i`-th entry (panics if `i >= len()`; `parse` validated every entry).
     pub fn entry(&self, i: usize) -> Entry<'a> {
         let raw = self.raw_entry(i);
-        let name = entry_name(&raw[..NAME_SIZE]).unwrap_or("");
-        let offset = read_u64(raw, NAME_SIZE) as usize;
-        let size = read_u64(raw, NAME_SIZE + 8) as usize;
+        let name = entry::NAME.name(raw).unwrap_or("");
+        let offset = entry::OFFSET.get(raw) as usize;
+        let size = entry::DATA_SIZE.get(raw) as usize;
         Entry {
             name,
             offset,
@@ -258,23 +261,21 @@ pub mod builder {
             let mut out = vec![0u8; table_end];
             let mut offset = align(table_end);
             for (i, (name, data)) in self.entries.iter().enumerate() {
-                let at = HEADER_SIZE + i * ENTRY_SIZE;
-                out[at..at + name.len()].copy_from_slice(name.as_bytes());
-                out[at + NAME_SIZE..at + NAME_SIZE + 8]
-                    .copy_from_slice(&(offset as u64).to_le_bytes());
-                out[at + NAME_SIZE + 8..at + ENTRY_SIZE]
-                    .copy_from_slice(&(data.len() as u64).to_le_bytes());
+                let record = &mut out[HEADER_SIZE + i * ENTRY_SIZE..][..ENTRY_SIZE];
+                entry::NAME.bytes_mut(record)[..name.len()].copy_from_slice(name.as_bytes());
+                entry::OFFSET.set(record, offset as u64);
+                entry::DATA_SIZE.set(record, data.len() as u64);
                 out.resize(offset, 0);
                 out.extend_from_slice(data);
                 offset = align(out.len());
             }
-            out[0..8].copy_from_slice(&MAGIC);
-            out[8..12].copy_from_slice(&VERSION.to_le_bytes());
-            out[12..16].copy_from_slice(&(self.entries.len() as u32).to_le_bytes());
+            header::MAGIC.bytes_mut(&mut out).copy_from_slice(&MAGIC);
+            header::VERSION.set(&mut out, u64::from(VERSION));
+            header::ENTRY_COUNT.set(&mut out, self.entries.len() as u64);
             let total = out.len() as u64;
-            out[16..24].copy_from_slice(&total.to_le_bytes());
+            header::TOTAL_SIZE.set(&mut out, total);
             let crc = crc32(&out[HEADER_SIZE..]);
-            out[24..28].copy_from_slice(&crc.to_le_bytes());
+            header::CRC.set(&mut out, u64::from(crc));
             out
         }
     }
@@ -298,7 +299,7 @@ mod tests {
     /// Rewrites the checksum after a deliberate edit, so the test reaches the check behind it.
     fn reseal(bytes: &mut [u8]) {
         let crc = crc32(&bytes[HEADER_SIZE..]);
-        bytes[24..28].copy_from_slice(&crc.to_le_bytes());
+        header::CRC.set(bytes, u64::from(crc));
     }
 
     #[test]
@@ -326,10 +327,10 @@ mod tests {
             SysImgError::TooShort
         );
         let mut b = good.clone();
-        b[0] = b'X';
+        header::MAGIC.bytes_mut(&mut b)[0] = b'X';
         assert_eq!(SystemImage::parse(&b).unwrap_err(), SysImgError::BadMagic);
         let mut b = good.clone();
-        b[8] = 2;
+        header::VERSION.set(&mut b, 2);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
             SysImgError::UnsupportedVersion(2)
@@ -346,7 +347,7 @@ mod tests {
             SysImgError::SizeMismatch { .. }
         ));
         let mut b = good.clone();
-        b[12..16].copy_from_slice(&1000u32.to_le_bytes());
+        header::ENTRY_COUNT.set(&mut b, 1000);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
             SysImgError::TooManyEntries(1000)
@@ -356,11 +357,10 @@ mod tests {
     #[test]
     fn rejects_bad_entries() {
         let good = sample();
-        let entry = |i: usize| HEADER_SIZE + i * ENTRY_SIZE;
+        let at = |i: usize| HEADER_SIZE + i * ENTRY_SIZE;
         // Duplicate name.
         let mut b = good.clone();
-        b[entry(1)..entry(1) + 6].copy_from_slice(b"config");
-        b[entry(1) + 6..entry(1) + 6 + 1].copy_from_slice(b"\0");
+        entry::NAME.bytes_mut(&mut b[at(1)..])[..7].copy_from_slice(b"config\0");
         reseal(&mut b);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
@@ -368,7 +368,7 @@ mod tests {
         );
         // Empty name.
         let mut b = good.clone();
-        b[entry(0)..entry(0) + NAME_SIZE].fill(0);
+        entry::NAME.bytes_mut(&mut b[at(0)..]).fill(0);
         reseal(&mut b);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
@@ -376,7 +376,7 @@ mod tests {
         );
         // Data beyond the end.
         let mut b = good.clone();
-        b[entry(1) + NAME_SIZE + 8..entry(1) + ENTRY_SIZE].copy_from_slice(&u64::MAX.to_le_bytes());
+        entry::DATA_SIZE.set(&mut b[at(1)..], u64::MAX);
         reseal(&mut b);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
@@ -384,7 +384,7 @@ mod tests {
         );
         // Misaligned data.
         let mut b = good.clone();
-        b[entry(0) + NAME_SIZE..entry(0) + NAME_SIZE + 8].copy_from_slice(&4097u64.to_le_bytes());
+        entry::OFFSET.set(&mut b[at(0)..], 4097);
         reseal(&mut b);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
@@ -392,17 +392,19 @@ mod tests {
         );
         // Second entry starting inside the first.
         let mut b = good.clone();
-        let first = u64::from_le_bytes(
-            b[entry(0) + NAME_SIZE..entry(0) + NAME_SIZE + 8]
-                .try_into()
-                .unwrap(),
-        );
-        b[entry(1) + NAME_SIZE..entry(1) + NAME_SIZE + 8].copy_from_slice(&first.to_le_bytes());
+        let first = entry::OFFSET.get(&b[at(0)..]);
+        entry::OFFSET.set(&mut b[at(1)..], first);
         reseal(&mut b);
         assert_eq!(
             SystemImage::parse(&b).unwrap_err(),
             SysImgError::EntriesOverlap(1)
         );
+    }
+
+    #[test]
+    fn fields_tile_their_records() {
+        assert_eq!(crate::layout::tiles(&header::FIELDS, header::SIZE), Ok(()));
+        assert_eq!(crate::layout::tiles(&entry::FIELDS, entry::SIZE), Ok(()));
     }
 
     #[test]
