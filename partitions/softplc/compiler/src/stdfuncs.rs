@@ -15,6 +15,16 @@ use crate::types::*;
 /// Maximum length of the temporaries that hold string function results.
 const MAX_TEMP_STRING: u32 = 1024;
 
+/// A standard-function call being compiled: its name, arguments and the type the context
+/// expects of literal-only arguments.
+struct StdArgs<'e> {
+    name: &'e str,
+    id: &'e Ident,
+    exprs: Vec<&'e Expr>,
+    ctx: Option<Type>,
+    span: Span,
+}
+
 impl Gen<'_> {
     /// Compiles a standard function call; `None` if `name` is not a standard function.
     /// Whether `name` is a standard function handled here.
@@ -47,30 +57,56 @@ impl Gen<'_> {
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
         }
-        let exprs: Vec<&Expr> = args.iter().map(|a| &a.value).collect();
-        let arity = |g: &mut Self, n: usize| -> bool {
-            if exprs.len() != n {
-                g.error(
-                    span,
-                    format!("{} takes {} argument(s), {} given", id.text, n, exprs.len()),
-                );
-                for e in &exprs {
-                    g.infer(e);
-                }
-                false
-            } else {
-                true
-            }
+        let c = StdArgs {
+            name,
+            id,
+            exprs: args.iter().map(|a| &a.value).collect(),
+            ctx,
+            span,
         };
-        let t = match name {
+        match name {
+            "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
+            | "EXPT" | "ABS" | "TRUNC" | "__NOW" => self.std_numeric(&c),
+            "MOVE" | "SEL" | "MAX" | "MIN" | "LIMIT" | "MUX" => self.std_selection(&c),
+            "SHL" | "SHR" | "ROL" | "ROR" => self.std_bits(&c),
+            "LEN" | "LEFT" | "RIGHT" | "MID" | "DELETE" | "INSERT" | "REPLACE" | "FIND"
+            | "CONCAT" => self.std_string(&c),
+            _ => self.conversion(name, id, &c.exprs, span),
+        }
+    }
+
+    /// False (after reporting it and type-checking the arguments) unless the call has
+    /// exactly `n` arguments.
+    fn arity(&mut self, c: &StdArgs, n: usize) -> bool {
+        if c.exprs.len() == n {
+            return true;
+        }
+        self.error(
+            c.span,
+            format!(
+                "{} takes {} argument(s), {} given",
+                c.id.text,
+                n,
+                c.exprs.len()
+            ),
+        );
+        for e in &c.exprs {
+            self.infer(e);
+        }
+        false
+    }
+
+    /// Numeric functions: SQRT and the other REAL functions, EXPT, ABS, TRUNC, __NOW.
+    fn std_numeric(&mut self, c: &StdArgs) -> Option<Type> {
+        let t = match c.name {
             "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN" => {
-                if !arity(self, 1) {
+                if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(exprs[0], ctx.as_ref())?;
+                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
                 let single = rt == Elem::Real;
                 use Builtin::*;
-                let b = match (name, single) {
+                let b = match (c.name, single) {
                     ("SQRT", true) => SqrtF32,
                     ("SQRT", false) => SqrtF64,
                     ("LN", true) => LnF32,
@@ -96,12 +132,12 @@ impl Gen<'_> {
                 Type::Elem(rt)
             }
             "EXPT" => {
-                if !arity(self, 2) {
+                if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(exprs[0], ctx.as_ref())?;
-                let t1 = self.infer(exprs[1]);
-                self.value_to_any(exprs[1], &t1, &Type::Elem(rt));
+                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let t1 = self.infer(c.exprs[1]);
+                self.value_to_any(c.exprs[1], &t1, &Type::Elem(rt));
                 self.emit(|bb| {
                     bb.call_builtin(if rt == Elem::Real {
                         Builtin::ExptF32
@@ -112,10 +148,10 @@ impl Gen<'_> {
                 Type::Elem(rt)
             }
             "ABS" => {
-                if !arity(self, 1) {
+                if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let t = self.expr(exprs[0], ctx.as_ref());
+                let t = self.expr(c.exprs[0], c.ctx.as_ref());
                 match t.elem() {
                     Some(Elem::Real) => self.emit(|b| b.call_builtin(Builtin::AbsF32)),
                     Some(Elem::LReal) => self.emit(|b| b.call_builtin(Builtin::AbsF64)),
@@ -128,7 +164,7 @@ impl Gen<'_> {
                     }
                     Some(e) if e.is_integral() && !matches!(t, Type::Enum(_) | Type::Exception) => {
                     }
-                    _ => return Some(self.bad_arg(exprs[0], &t, "a number")),
+                    _ => return Some(self.bad_arg(c.exprs[0], &t, "a number")),
                 }
                 match t {
                     Type::Subrange(e, ..) => Type::Elem(e),
@@ -136,10 +172,10 @@ impl Gen<'_> {
                 }
             }
             "TRUNC" => {
-                if !arity(self, 1) {
+                if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(exprs[0], ctx.as_ref())?;
+                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
                 let op = if rt == Elem::Real {
                     Opcode::F32ToInt
                 } else {
@@ -149,28 +185,36 @@ impl Gen<'_> {
                 Type::DINT
             }
             "__NOW" => {
-                if !arity(self, 0) {
+                if !self.arity(c, 0) {
                     return Some(Type::Error);
                 }
                 self.op(Opcode::Now);
                 Type::TIME
             }
+            _ => unreachable!("std_numeric called for {}", c.name),
+        };
+        Some(t)
+    }
+
+    /// Selection: MOVE, SEL, MAX/MIN, LIMIT, MUX.
+    fn std_selection(&mut self, c: &StdArgs) -> Option<Type> {
+        let t = match c.name {
             "MOVE" => {
-                if !arity(self, 1) {
+                if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                self.expr(exprs[0], None)
+                self.expr(c.exprs[0], None)
             }
             "SEL" => {
-                if !arity(self, 3) {
+                if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
-                self.value_to(exprs[0], &Type::BOOL);
-                let t = self.common_of(&exprs[1..], ctx.as_ref());
+                self.value_to(c.exprs[0], &Type::BOOL);
+                let t = self.common_of(&c.exprs[1..], c.ctx.as_ref());
                 if t.is_error() {
                     return Some(t);
                 }
-                for e in &exprs[1..] {
+                for e in &c.exprs[1..] {
                     let et = self.infer(e);
                     self.value_to_any(e, &et, &t);
                 }
@@ -178,69 +222,69 @@ impl Gen<'_> {
                 t
             }
             "MAX" | "MIN" => {
-                if exprs.len() < 2 {
-                    self.error(span, format!("{} needs at least 2 arguments", id.text));
+                if c.exprs.len() < 2 {
+                    self.error(c.span, format!("{} needs at least 2 arguments", c.id.text));
                     return Some(Type::Error);
                 }
-                let t = self.common_of(&exprs, ctx.as_ref());
+                let t = self.common_of(&c.exprs, c.ctx.as_ref());
                 let Some(e) = t.elem() else {
                     if !t.is_error() {
                         let msg = format!(
                             "{} needs numeric, TIME or enumeration arguments, found {}",
-                            id.text,
+                            c.id.text,
                             self.tname(&t)
                         );
-                        self.error(span, msg);
+                        self.error(c.span, msg);
                     }
                     return Some(Type::Error);
                 };
                 let (ta, tb) = (self.temp_cell(), self.temp_cell());
-                let first_t = self.infer(exprs[0]);
-                self.value_to_any(exprs[0], &first_t, &t);
-                for x in &exprs[1..] {
+                let first_t = self.infer(c.exprs[0]);
+                self.value_to_any(c.exprs[0], &first_t, &t);
+                for x in &c.exprs[1..] {
                     let xt = self.infer(x);
                     self.value_to_any(x, &xt, &t);
-                    self.select_min_max(name == "MAX", e, ta, tb);
+                    self.select_min_max(c.name == "MAX", e, ta, tb);
                 }
                 t
             }
             "LIMIT" => {
-                if !arity(self, 3) {
+                if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
-                let t = self.common_of(&exprs, ctx.as_ref());
+                let t = self.common_of(&c.exprs, c.ctx.as_ref());
                 let Some(e) = t.elem() else {
                     return Some(Type::Error);
                 };
                 let (ta, tb) = (self.temp_cell(), self.temp_cell());
-                let it = self.infer(exprs[1]);
-                self.value_to_any(exprs[1], &it, &t);
-                let mt = self.infer(exprs[0]);
-                self.value_to_any(exprs[0], &mt, &t);
+                let it = self.infer(c.exprs[1]);
+                self.value_to_any(c.exprs[1], &it, &t);
+                let mt = self.infer(c.exprs[0]);
+                self.value_to_any(c.exprs[0], &mt, &t);
                 self.select_min_max(true, e, ta, tb);
-                let xt = self.infer(exprs[2]);
-                self.value_to_any(exprs[2], &xt, &t);
+                let xt = self.infer(c.exprs[2]);
+                self.value_to_any(c.exprs[2], &xt, &t);
                 self.select_min_max(false, e, ta, tb);
                 t
             }
             "MUX" => {
-                if exprs.len() < 2 {
-                    self.error(span, "MUX needs a selector and at least one input");
+                if c.exprs.len() < 2 {
+                    self.error(c.span, "MUX needs a selector and at least one input");
                     return Some(Type::Error);
                 }
-                let kt = self.expr(exprs[0], Some(&Type::DINT));
+                let kt = self.expr(c.exprs[0], Some(&Type::DINT));
                 if !kt.elem().is_some_and(|e| e.is_integral()) && !kt.is_error() {
-                    return Some(self.bad_arg(exprs[0], &kt, "an integer selector"));
+                    return Some(self.bad_arg(c.exprs[0], &kt, "an integer selector"));
                 }
-                let n = exprs.len() as i64 - 1;
+                let n = c.exprs.len() as i64 - 1;
                 let k = self.temp_cell();
                 self.emit(|b| {
                     b.chk_index(0, n - 1);
                     b.st_abs(MemType::I64, k);
                 });
-                let t = self.common_of(&exprs[1..], ctx.as_ref());
+                let t = self.common_of(&c.exprs[1..], c.ctx.as_ref());
                 let end = self.label();
-                for (i, x) in exprs[1..].iter().enumerate() {
+                for (i, x) in c.exprs[1..].iter().enumerate() {
                     let next = self.label();
                     self.emit(|b| {
                         b.ld_abs(MemType::I64, k);
@@ -260,20 +304,28 @@ impl Gen<'_> {
                 self.bind(end);
                 t
             }
+            _ => unreachable!("std_selection called for {}", c.name),
+        };
+        Some(t)
+    }
+
+    /// Bit shifts and rotations: SHL, SHR, ROL, ROR.
+    fn std_bits(&mut self, c: &StdArgs) -> Option<Type> {
+        let t = match c.name {
             "SHL" | "SHR" | "ROL" | "ROR" => {
-                if !arity(self, 2) {
+                if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let t = self.expr(exprs[0], None);
+                let t = self.expr(c.exprs[0], None);
                 let Some(e) = t
                     .elem()
                     .filter(|e| e.is_integral() && !matches!(t, Type::Enum(_) | Type::Exception))
                 else {
-                    return Some(self.bad_arg(exprs[0], &t, "a bit string or integer"));
+                    return Some(self.bad_arg(c.exprs[0], &t, "a bit string or integer"));
                 };
-                self.value_to(exprs[1], &Type::LINT);
+                self.value_to(c.exprs[1], &Type::LINT);
                 let w = (e.size() * 8) as u8;
-                match name {
+                match c.name {
                     "SHL" => self.op(Opcode::Shl),
                     "SHR" => self.op(if e.is_signed_int() {
                         Opcode::ShrS
@@ -286,25 +338,33 @@ impl Gen<'_> {
                 self.wrap(e);
                 Type::Elem(e)
             }
+            _ => unreachable!("std_bits called for {}", c.name),
+        };
+        Some(t)
+    }
+
+    /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT.
+    fn std_string(&mut self, c: &StdArgs) -> Option<Type> {
+        let t = match c.name {
             "LEN" => {
-                if !arity(self, 1) {
+                if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                self.string_arg(exprs[0]);
+                self.string_arg(c.exprs[0]);
                 self.emit(|b| b.call_builtin(Builtin::StrLen));
                 Type::INT
             }
             "LEFT" | "RIGHT" => {
-                if !arity(self, 2) {
+                if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let len = self.string_len_of(exprs[0]);
+                let len = self.string_len_of(c.exprs[0]);
                 let dst = self.temp_string(len);
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(exprs[0]);
-                self.int_arg(exprs[1]);
+                self.string_arg(c.exprs[0]);
+                self.int_arg(c.exprs[1]);
                 self.emit(|b| {
-                    b.call_builtin(if name == "LEFT" {
+                    b.call_builtin(if c.name == "LEFT" {
                         Builtin::StrLeft
                     } else {
                         Builtin::StrRight
@@ -314,17 +374,17 @@ impl Gen<'_> {
                 Type::String(len)
             }
             "MID" | "DELETE" => {
-                if !arity(self, 3) {
+                if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
-                let len = self.string_len_of(exprs[0]);
+                let len = self.string_len_of(c.exprs[0]);
                 let dst = self.temp_string(len);
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(exprs[0]);
-                self.int_arg(exprs[1]);
-                self.int_arg(exprs[2]);
+                self.string_arg(c.exprs[0]);
+                self.int_arg(c.exprs[1]);
+                self.int_arg(c.exprs[2]);
                 self.emit(|b| {
-                    b.call_builtin(if name == "MID" {
+                    b.call_builtin(if c.name == "MID" {
                         Builtin::StrMid
                     } else {
                         Builtin::StrDelete
@@ -334,16 +394,16 @@ impl Gen<'_> {
                 Type::String(len)
             }
             "INSERT" => {
-                if !arity(self, 3) {
+                if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
-                let len = (self.string_len_of(exprs[0]) + self.string_len_of(exprs[1]))
+                let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
                     .min(MAX_TEMP_STRING);
                 let dst = self.temp_string(len);
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(exprs[0]);
-                self.string_arg(exprs[1]);
-                self.int_arg(exprs[2]);
+                self.string_arg(c.exprs[0]);
+                self.string_arg(c.exprs[1]);
+                self.int_arg(c.exprs[2]);
                 self.emit(|b| {
                     b.call_builtin(Builtin::StrInsert);
                     b.push_u32(dst);
@@ -351,17 +411,17 @@ impl Gen<'_> {
                 Type::String(len)
             }
             "REPLACE" => {
-                if !arity(self, 4) {
+                if !self.arity(c, 4) {
                     return Some(Type::Error);
                 }
-                let len = (self.string_len_of(exprs[0]) + self.string_len_of(exprs[1]))
+                let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
                     .min(MAX_TEMP_STRING);
                 let dst = self.temp_string(len);
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(exprs[0]);
-                self.string_arg(exprs[1]);
-                self.int_arg(exprs[2]);
-                self.int_arg(exprs[3]);
+                self.string_arg(c.exprs[0]);
+                self.string_arg(c.exprs[1]);
+                self.int_arg(c.exprs[2]);
+                self.int_arg(c.exprs[3]);
                 self.emit(|b| {
                     b.call_builtin(Builtin::StrReplace);
                     b.push_u32(dst);
@@ -369,20 +429,21 @@ impl Gen<'_> {
                 Type::String(len)
             }
             "FIND" => {
-                if !arity(self, 2) {
+                if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                self.string_arg(exprs[0]);
-                self.string_arg(exprs[1]);
+                self.string_arg(c.exprs[0]);
+                self.string_arg(c.exprs[1]);
                 self.emit(|b| b.call_builtin(Builtin::StrFind));
                 Type::INT
             }
             "CONCAT" => {
-                if exprs.is_empty() {
-                    self.error(span, "CONCAT needs arguments");
+                if c.exprs.is_empty() {
+                    self.error(c.span, "CONCAT needs arguments");
                     return Some(Type::Error);
                 }
-                let len = exprs
+                let len = c
+                    .exprs
                     .iter()
                     .map(|e| self.string_len_of(e))
                     .sum::<u32>()
@@ -390,9 +451,9 @@ impl Gen<'_> {
                 let dst = self.temp_string(len);
                 // dst := first; then dst := CONCAT(dst, next) for the rest.
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(exprs[0]);
+                self.string_arg(c.exprs[0]);
                 self.emit(|b| b.call_builtin(Builtin::StrAssign));
-                for x in &exprs[1..] {
+                for x in &c.exprs[1..] {
                     self.emit(|b| {
                         b.push_u32(dst);
                         b.push_u32(dst);
@@ -403,7 +464,8 @@ impl Gen<'_> {
                 self.emit(|b| b.push_u32(dst));
                 Type::String(len)
             }
-            _ => return self.conversion(name, id, &exprs, span),
+
+            _ => unreachable!("std_string called for {}", c.name),
         };
         Some(t)
     }
