@@ -333,33 +333,7 @@ impl Validator<'_, '_> {
                     format!("unknown image `{image}`: no user program of that name is built"),
                 );
             }
-            let memory = self.page_size(&raw.memory, &path.key("memory"));
-            let kernel_memory = self
-                .page_size(&raw.kernel_memory, &path.key("kernel_memory"))
-                .unwrap_or(0);
-            let stack_path = path.key("stack");
-            let stack = match &raw.stack {
-                Some(s) => self.page_size(s, &stack_path),
-                None => Some(DEFAULT_STACK),
-            };
-            if let (Some(stack), Some(memory)) = (stack, memory)
-                && stack > memory
-            {
-                let (at, at_path) = match &raw.stack {
-                    Some(s) => (start(s), stack_path),
-                    None => (start(&raw.memory), path.key("memory")),
-                };
-                self.error(
-                    at,
-                    &at_path,
-                    format!(
-                        "the stack of {} does not fit in the partition's memory of {}",
-                        Size(stack),
-                        Size(memory)
-                    ),
-                );
-            }
-            let stack = stack.unwrap_or(0);
+            let (memory, kernel_memory, stack) = self.partition_memory(raw, &path);
             let kernel_threads = self.quota(
                 raw.kernel_threads.as_ref(),
                 &path.key("kernel_threads"),
@@ -375,204 +349,18 @@ impl Validator<'_, '_> {
                 "tasks",
             );
 
-            let mcp_value = *raw.max_priority.get_ref();
-            let mcp = if (i64::from(MCP_MIN)..=i64::from(MCP_MAX)).contains(&mcp_value) {
-                mcp_value as u8
-            } else {
-                self.error(
-                    start(&raw.max_priority),
-                    &path.key("max_priority"),
-                    format!(
-                        "max_priority (MCP) {mcp_value} is not in {MCP_MIN}..={MCP_MAX}: partition threads must stay below syssw's priority {SYSSW_PRIORITY}"
-                    ),
-                );
-                MCP_MAX
-            };
-            let priority = match &raw.priority {
-                Some(p) => {
-                    let value = *p.get_ref();
-                    if (0..=i64::from(mcp)).contains(&value) {
-                        value as u8
-                    } else {
-                        self.error(
-                            start(p),
-                            &path.key("priority"),
-                            format!(
-                                "priority {value} is not in 0..={mcp} (it may not exceed max_priority)"
-                            ),
-                        );
-                        0
-                    }
-                }
-                None => mcp,
-            };
+            let (mcp, priority) = self.priorities(raw, &path);
 
             let abilities = self.abilities(raw, &path);
             let time = self.time(raw, &path);
 
-            let mut io_ports = Vec::new();
-            for (i, entry) in raw.io_ports.iter().enumerate() {
-                let here = path.key("io_ports").index(i);
-                let Some(range) = self.io_range(entry, &here) else {
-                    continue;
-                };
-                if let Some(kernel) = range.kernel_conflict() {
-                    self.error(
-                        start(entry),
-                        &here,
-                        format!(
-                            "I/O ports {range} include {kernel}, which the kernel keeps for {}",
-                            kernel_port_use(kernel)
-                        ),
-                    );
-                    continue;
-                }
-                if let Some(&(other, owner, at)) =
-                    io_seen.iter().find(|(r, _, _)| r.overlaps(range))
-                {
-                    let line = self.r.line_of(at);
-                    let whose = holder(doc, owner, index);
-                    self.error(
-                        start(entry),
-                        &here,
-                        format!("I/O ports {range} overlap {other}, {whose} at line {line}"),
-                    );
-                    continue;
-                }
-                if io_seen.len() == MAX_IO_RANGES {
-                    self.error(
-                        start(entry),
-                        &here,
-                        format!("too many I/O port ranges (at most {MAX_IO_RANGES} in a system)"),
-                    );
-                    continue;
-                }
-                io_seen.push((range, index, start(entry)));
-                io_ports.push(range);
-            }
+            let io_ports = self.io_ports(doc, raw, &path, index, &mut io_seen);
 
-            let mut irqs = IrqMask::default();
-            for (i, entry) in raw.irqs.iter().enumerate() {
-                let here = path.key("irqs").index(i);
-                let line_no = *entry.get_ref();
-                if !(0..i64::from(IRQ_LINES)).contains(&line_no) {
-                    self.error(
-                        start(entry),
-                        &here,
-                        format!(
-                            "IRQ {line_no} is not an ISA interrupt line (0..={})",
-                            IRQ_LINES - 1
-                        ),
-                    );
-                    continue;
-                }
-                let line_no = line_no as u8;
-                if !irq_allowed(line_no) {
-                    self.error(
-                        start(entry),
-                        &here,
-                        format!(
-                            "IRQ {line_no} is reserved for {}",
-                            reserved_irq_use(line_no)
-                        ),
-                    );
-                    continue;
-                }
-                if let Some(&(_, owner, at)) = irq_seen.iter().find(|(l, _, _)| *l == line_no) {
-                    let line = self.r.line_of(at);
-                    let whose = holder(doc, owner, index);
-                    self.error(
-                        start(entry),
-                        &here,
-                        format!("IRQ {line_no} is {whose} at line {line}"),
-                    );
-                    continue;
-                }
-                irq_seen.push((line_no, index, start(entry)));
-                irqs.0 |= 1 << line_no;
-            }
+            let irqs = self.irqs(doc, raw, &path, index, &mut irq_seen, abilities);
 
-            if irqs.0 != 0 && !abilities.contains(Abilities::IRQ) {
-                let first = &raw.irqs[0];
-                self.error(
-                    start(first),
-                    &path.key("irqs"),
-                    "IRQ lines are listed but the partition lacks the `irq` ability it needs to attach them (add \"irq\" to `abilities`)",
-                );
-            }
+            let shared = self.attachments(raw, &path, segments, &mut attachment_total);
 
-            let mut shared = Vec::new();
-            for (segment, rights) in in_source_order(&raw.shared) {
-                let here = path.key("shared").key(segment.get_ref());
-                let found = segments
-                    .iter()
-                    .position(|(s, _)| s.name == *segment.get_ref());
-                if found.is_none() {
-                    self.error(
-                        start(segment),
-                        &here,
-                        format!(
-                            "unknown shared memory segment `{}` (define it in [[shared_memory]])",
-                            segment.get_ref()
-                        ),
-                    );
-                }
-                let r = Rights::from_name(rights.get_ref());
-                if r.is_none() {
-                    let why = if matches!(rights.get_ref().as_str(), "rwx" | "wx" | "xw") {
-                        " (writable and executable at once is never allowed)"
-                    } else {
-                        ""
-                    };
-                    self.error(
-                        start(rights),
-                        &here,
-                        format!(
-                            "rights {:?} are not \"r\", \"rw\" or \"rx\"{why}",
-                            rights.get_ref()
-                        ),
-                    );
-                }
-                if let (Some(index), Some(rights)) = (found, r) {
-                    attachment_total += 1;
-                    if attachment_total > MAX_ATTACHMENTS {
-                        self.error(
-                            start(segment),
-                            &here,
-                            format!(
-                                "too many shared memory attachments (at most {MAX_ATTACHMENTS} in a system)"
-                            ),
-                        );
-                    }
-                    shared.push(Attachment {
-                        segment: index,
-                        rights,
-                    });
-                }
-            }
-
-            let mut own_ports = Vec::new();
-            for (port_key, port) in in_source_order(&raw.ports) {
-                let here = path.key("ports").key(port_key.get_ref());
-                self.name(port_key, &here, NAME_MAX, "port");
-                if ports.len() == MAX_PORTS {
-                    self.error(
-                        start(port_key),
-                        &here,
-                        format!("too many ports (at most {MAX_PORTS} in a system)"),
-                    );
-                }
-                let (p, valid) = self.port(port, port_key, &here);
-                ports.push(PortDecl {
-                    partition: index,
-                    port: own_ports.len(),
-                    key_at: start(port_key),
-                    path: here,
-                    used_by: None,
-                    valid,
-                });
-                own_ports.push(p);
-            }
+            let own_ports = self.partition_ports(raw, &path, index, &mut ports);
 
             let health = self.health(&raw.health, &path.key("health"));
             times.push(time);
@@ -596,6 +384,286 @@ impl Validator<'_, '_> {
             });
         }
         (partitions, times, ports)
+    }
+
+    /// A partition's memory, kernel memory and stack (0 where invalid, after the error).
+    fn partition_memory(
+        &mut self,
+        raw: &schema::Partition,
+        path: &KeyPath,
+    ) -> (Option<u64>, u64, u64) {
+        let memory = self.page_size(&raw.memory, &path.key("memory"));
+        let kernel_memory = self
+            .page_size(&raw.kernel_memory, &path.key("kernel_memory"))
+            .unwrap_or(0);
+        let stack_path = path.key("stack");
+        let stack = match &raw.stack {
+            Some(s) => self.page_size(s, &stack_path),
+            None => Some(DEFAULT_STACK),
+        };
+        if let (Some(stack), Some(memory)) = (stack, memory)
+            && stack > memory
+        {
+            let (at, at_path) = match &raw.stack {
+                Some(s) => (start(s), stack_path),
+                None => (start(&raw.memory), path.key("memory")),
+            };
+            self.error(
+                at,
+                &at_path,
+                format!(
+                    "the stack of {} does not fit in the partition's memory of {}",
+                    Size(stack),
+                    Size(memory)
+                ),
+            );
+        }
+        let stack = stack.unwrap_or(0);
+        (memory, kernel_memory, stack)
+    }
+
+    /// A partition's MCP and first thread's priority.
+    fn priorities(&mut self, raw: &schema::Partition, path: &KeyPath) -> (u8, u8) {
+        let mcp_value = *raw.max_priority.get_ref();
+        let mcp = if (i64::from(MCP_MIN)..=i64::from(MCP_MAX)).contains(&mcp_value) {
+            mcp_value as u8
+        } else {
+            self.error(
+                start(&raw.max_priority),
+                &path.key("max_priority"),
+                format!(
+                    "max_priority (MCP) {mcp_value} is not in {MCP_MIN}..={MCP_MAX}: partition threads must stay below syssw's priority {SYSSW_PRIORITY}"
+                ),
+            );
+            MCP_MAX
+        };
+        let priority = match &raw.priority {
+            Some(p) => {
+                let value = *p.get_ref();
+                if (0..=i64::from(mcp)).contains(&value) {
+                    value as u8
+                } else {
+                    self.error(
+                        start(p),
+                        &path.key("priority"),
+                        format!(
+                            "priority {value} is not in 0..={mcp} (it may not exceed max_priority)"
+                        ),
+                    );
+                    0
+                }
+            }
+            None => mcp,
+        };
+        (mcp, priority)
+    }
+
+    /// A partition's I/O port ranges: not the kernel's, not another partition's (`io_seen`:
+    /// every range so far with its partition and position).
+    fn io_ports(
+        &mut self,
+        doc: &schema::Document,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        index: usize,
+        io_seen: &mut Vec<(IoRange, usize, usize)>,
+    ) -> Vec<IoRange> {
+        let mut io_ports = Vec::new();
+        for (i, entry) in raw.io_ports.iter().enumerate() {
+            let here = path.key("io_ports").index(i);
+            let Some(range) = self.io_range(entry, &here) else {
+                continue;
+            };
+            if let Some(kernel) = range.kernel_conflict() {
+                self.error(
+                    start(entry),
+                    &here,
+                    format!(
+                        "I/O ports {range} include {kernel}, which the kernel keeps for {}",
+                        kernel_port_use(kernel)
+                    ),
+                );
+                continue;
+            }
+            if let Some(&(other, owner, at)) = io_seen.iter().find(|(r, _, _)| r.overlaps(range)) {
+                let line = self.r.line_of(at);
+                let whose = holder(doc, owner, index);
+                self.error(
+                    start(entry),
+                    &here,
+                    format!("I/O ports {range} overlap {other}, {whose} at line {line}"),
+                );
+                continue;
+            }
+            if io_seen.len() == MAX_IO_RANGES {
+                self.error(
+                    start(entry),
+                    &here,
+                    format!("too many I/O port ranges (at most {MAX_IO_RANGES} in a system)"),
+                );
+                continue;
+            }
+            io_seen.push((range, index, start(entry)));
+            io_ports.push(range);
+        }
+        io_ports
+    }
+
+    /// A partition's interrupt lines: ISA lines the kernel does not keep, not another
+    /// partition's (`irq_seen`), and only with the `irq` ability.
+    fn irqs(
+        &mut self,
+        doc: &schema::Document,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        index: usize,
+        irq_seen: &mut Vec<(u8, usize, usize)>,
+        abilities: Abilities,
+    ) -> IrqMask {
+        let mut irqs = IrqMask::default();
+        for (i, entry) in raw.irqs.iter().enumerate() {
+            let here = path.key("irqs").index(i);
+            let line_no = *entry.get_ref();
+            if !(0..i64::from(IRQ_LINES)).contains(&line_no) {
+                self.error(
+                    start(entry),
+                    &here,
+                    format!(
+                        "IRQ {line_no} is not an ISA interrupt line (0..={})",
+                        IRQ_LINES - 1
+                    ),
+                );
+                continue;
+            }
+            let line_no = line_no as u8;
+            if !irq_allowed(line_no) {
+                self.error(
+                    start(entry),
+                    &here,
+                    format!(
+                        "IRQ {line_no} is reserved for {}",
+                        reserved_irq_use(line_no)
+                    ),
+                );
+                continue;
+            }
+            if let Some(&(_, owner, at)) = irq_seen.iter().find(|(l, _, _)| *l == line_no) {
+                let line = self.r.line_of(at);
+                let whose = holder(doc, owner, index);
+                self.error(
+                    start(entry),
+                    &here,
+                    format!("IRQ {line_no} is {whose} at line {line}"),
+                );
+                continue;
+            }
+            irq_seen.push((line_no, index, start(entry)));
+            irqs.0 |= 1 << line_no;
+        }
+
+        if irqs.0 != 0 && !abilities.contains(Abilities::IRQ) {
+            let first = &raw.irqs[0];
+            self.error(
+                start(first),
+                &path.key("irqs"),
+                "IRQ lines are listed but the partition lacks the `irq` ability it needs to attach them (add \"irq\" to `abilities`)",
+            );
+        }
+        irqs
+    }
+
+    /// A partition's shared-memory attachments (`attachment_total` counts the system's).
+    fn attachments(
+        &mut self,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        segments: &[(Segment, usize)],
+        attachment_total: &mut usize,
+    ) -> Vec<Attachment> {
+        let mut shared = Vec::new();
+        for (segment, rights) in in_source_order(&raw.shared) {
+            let here = path.key("shared").key(segment.get_ref());
+            let found = segments
+                .iter()
+                .position(|(s, _)| s.name == *segment.get_ref());
+            if found.is_none() {
+                self.error(
+                    start(segment),
+                    &here,
+                    format!(
+                        "unknown shared memory segment `{}` (define it in [[shared_memory]])",
+                        segment.get_ref()
+                    ),
+                );
+            }
+            let r = Rights::from_name(rights.get_ref());
+            if r.is_none() {
+                let why = if matches!(rights.get_ref().as_str(), "rwx" | "wx" | "xw") {
+                    " (writable and executable at once is never allowed)"
+                } else {
+                    ""
+                };
+                self.error(
+                    start(rights),
+                    &here,
+                    format!(
+                        "rights {:?} are not \"r\", \"rw\" or \"rx\"{why}",
+                        rights.get_ref()
+                    ),
+                );
+            }
+            if let (Some(index), Some(rights)) = (found, r) {
+                *attachment_total += 1;
+                if *attachment_total > MAX_ATTACHMENTS {
+                    self.error(
+                        start(segment),
+                        &here,
+                        format!(
+                            "too many shared memory attachments (at most {MAX_ATTACHMENTS} in a system)"
+                        ),
+                    );
+                }
+                shared.push(Attachment {
+                    segment: index,
+                    rights,
+                });
+            }
+        }
+        shared
+    }
+
+    /// A partition's ports; each is also recorded in `ports` (every port of the system) for
+    /// the channel checks.
+    fn partition_ports(
+        &mut self,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        index: usize,
+        ports: &mut Vec<PortDecl>,
+    ) -> Vec<Port> {
+        let mut own_ports = Vec::new();
+        for (port_key, port) in in_source_order(&raw.ports) {
+            let here = path.key("ports").key(port_key.get_ref());
+            self.name(port_key, &here, NAME_MAX, "port");
+            if ports.len() == MAX_PORTS {
+                self.error(
+                    start(port_key),
+                    &here,
+                    format!("too many ports (at most {MAX_PORTS} in a system)"),
+                );
+            }
+            let (p, valid) = self.port(port, port_key, &here);
+            ports.push(PortDecl {
+                partition: index,
+                port: own_ports.len(),
+                key_at: start(port_key),
+                path: here,
+                used_by: None,
+                valid,
+            });
+            own_ports.push(p);
+        }
+        own_ports
     }
 
     fn quota(
