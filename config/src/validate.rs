@@ -946,23 +946,7 @@ impl Validator<'_, '_> {
         partitions: &mut [Partition],
         times: &[Time],
     ) -> Vec<Schedule> {
-        let root = KeyPath::root();
-        let mut entries: Vec<(KeyPath, &Spanned<schema::Schedule>)> = Vec::new();
-        if let Some(single) = &doc.schedule {
-            if !doc.schedules.is_empty() {
-                self.error(
-                    start(single),
-                    &root.key("schedule"),
-                    "give either one [schedule] or a list of [[schedules]], not both",
-                );
-            }
-            entries.push((root.key("schedule"), single));
-        }
-        for (i, s) in doc.schedules.iter().enumerate() {
-            entries.push((root.key("schedules").index(i), s));
-        }
-
-        // Windows as (schedule, window, partition index, path of the window).
+        let entries = self.schedule_entries(doc);
         let mut schedules = Vec::new();
         let mut window_owners: Vec<Vec<usize>> = Vec::new();
         let mut names: Vec<(String, usize)> = Vec::new();
@@ -979,170 +963,14 @@ impl Validator<'_, '_> {
                     ),
                 );
             }
-            let name = match &raw.name {
-                Some(n) => {
-                    let name_path = path.key("name");
-                    self.name(n, &name_path, NAME_MAX, "schedule");
-                    if let Some((_, at)) = names.iter().find(|(m, _)| m == n.get_ref()) {
-                        let line = self.r.line_of(*at);
-                        self.error(
-                            start(n),
-                            &name_path,
-                            format!(
-                                "schedule `{}` is already defined at line {line}",
-                                n.get_ref()
-                            ),
-                        );
-                    }
-                    names.push((n.get_ref().clone(), start(n)));
-                    n.get_ref().clone()
-                }
-                None if i == 0 => "default".to_string(),
-                None => {
-                    self.error(
-                        start(schedule),
-                        path,
-                        "every schedule but the first needs a `name` (the first defaults to \"default\")",
-                    );
-                    String::new()
-                }
-            };
-
-            // Valid windows: (offset, duration, partition, index in the source).
-            let mut windows: Vec<(u64, u64, usize, usize)> = Vec::new();
-            for (j, window) in raw.windows.iter().enumerate() {
-                let wpath = path.key("windows").index(j);
-                let w = window.get_ref();
-                if j == MAX_WINDOWS {
-                    self.error(
-                        start(window),
-                        &wpath,
-                        format!("too many windows (at most {MAX_WINDOWS} per schedule)"),
-                    );
-                }
-                let part_path = wpath.key("partition");
-                let partition = partitions
-                    .iter()
-                    .position(|p| p.name == *w.partition.get_ref());
-                match partition {
-                    None => self.error(
-                        start(&w.partition),
-                        &part_path,
-                        format!("unknown partition `{}`", w.partition.get_ref()),
-                    ),
-                    Some(p) if times[p] == Time::Background => self.error(
-                        start(&w.partition),
-                        &part_path,
-                        format!(
-                            "partition `{}` runs in the background (time = \"background\") and cannot have windows",
-                            w.partition.get_ref()
-                        ),
-                    ),
-                    Some(p) => named[p] = true,
-                }
-                let offset = self.duration(&w.offset, &wpath.key("offset"));
-                let duration = self.duration(&w.duration, &wpath.key("duration"));
-                if duration == Some(0) {
-                    self.error(
-                        start(&w.duration),
-                        &wpath.key("duration"),
-                        "a window must last longer than 0",
-                    );
-                    continue;
-                }
-                if let (Some(p), Some(offset), Some(duration)) = (partition, offset, duration) {
-                    if offset.checked_add(duration).is_none() {
-                        self.error(
-                            start(&w.duration),
-                            &wpath.key("duration"),
-                            "window end overflows",
-                        );
-                        continue;
-                    }
-                    if !matches!(times[p], Time::Background | Time::Invalid) {
-                        windows.push((offset, duration, p, j));
-                    }
-                }
-            }
-
-            let major_frame = match &raw.major_frame {
-                Some(f) => {
-                    let fpath = path.key("major_frame");
-                    match self.duration(f, &fpath) {
-                        Some(0) => {
-                            self.error(start(f), &fpath, "the major frame must be longer than 0");
-                            None
-                        }
-                        other => other,
-                    }
-                }
-                None => {
-                    let end = windows.iter().map(|w| w.0 + w.1).max();
-                    if end.is_none() && raw.windows.is_empty() {
-                        self.error(
-                            start(schedule),
-                            path,
-                            "a schedule without windows needs a `major_frame`",
-                        );
-                    }
-                    end
-                }
-            };
-
+            let name = self.schedule_name(i, path, schedule, &mut names);
+            let mut windows = self.schedule_windows(path, raw, partitions, times, &mut named);
+            let major_frame = self.major_frame(path, schedule, &windows);
             if let Some(frame) = major_frame {
-                windows.retain(|&(offset, duration, _, j)| {
-                    let w = raw.windows[j].get_ref();
-                    let wpath = path.key("windows").index(j);
-                    if offset >= frame {
-                        self.error(
-                            start(&w.offset),
-                            &wpath.key("offset"),
-                            format!(
-                                "the window starts at {}, not inside the major frame of {}",
-                                Duration(offset),
-                                Duration(frame)
-                            ),
-                        );
-                        false
-                    } else if offset + duration > frame {
-                        self.error(
-                            start(&w.duration),
-                            &wpath.key("duration"),
-                            format!(
-                                "the window ends at {}, after the major frame of {}",
-                                Duration(offset + duration),
-                                Duration(frame)
-                            ),
-                        );
-                        false
-                    } else {
-                        true
-                    }
-                });
+                self.keep_windows_in_frame(path, raw, frame, &mut windows);
             }
             windows.sort_by_key(|w| (w.0, w.3));
-            let mut latest: Option<(u64, u64, usize)> = None;
-            for &(offset, duration, _, j) in &windows {
-                if let Some((lo, le, lj)) = latest
-                    && offset < le
-                {
-                    let w = raw.windows[j].get_ref();
-                    self.error(
-                        start(&w.offset),
-                        &path.key("windows").index(j).key("offset"),
-                        format!(
-                            "the window {}..{} overlaps window {lj} ({}..{})",
-                            Duration(offset),
-                            Duration(offset + duration),
-                            Duration(lo),
-                            Duration(le)
-                        ),
-                    );
-                }
-                if latest.is_none_or(|(_, le, _)| offset + duration > le) {
-                    latest = Some((offset, offset + duration, j));
-                }
-            }
+            self.window_overlaps(path, raw, &windows);
             window_owners.push(windows.iter().map(|w| w.2).collect());
             schedules.push(Schedule {
                 name,
@@ -1158,6 +986,259 @@ impl Validator<'_, '_> {
             });
         }
 
+        self.assign_time_partitions(doc, partitions, times, &named);
+        for (schedule, owners) in schedules.iter_mut().zip(&window_owners) {
+            for (window, &owner) in schedule.windows.iter_mut().zip(owners) {
+                window.time_partition = partitions[owner].time_partition;
+            }
+        }
+        schedules
+    }
+
+    /// The schedules of the file in order: the single `[schedule]` or the `[[schedules]]`
+    /// list (both at once is an error).
+    fn schedule_entries<'d>(
+        &mut self,
+        doc: &'d schema::Document,
+    ) -> Vec<(KeyPath, &'d Spanned<schema::Schedule>)> {
+        let root = KeyPath::root();
+        let mut entries: Vec<(KeyPath, &Spanned<schema::Schedule>)> = Vec::new();
+        if let Some(single) = &doc.schedule {
+            if !doc.schedules.is_empty() {
+                self.error(
+                    start(single),
+                    &root.key("schedule"),
+                    "give either one [schedule] or a list of [[schedules]], not both",
+                );
+            }
+            entries.push((root.key("schedule"), single));
+        }
+        for (i, s) in doc.schedules.iter().enumerate() {
+            entries.push((root.key("schedules").index(i), s));
+        }
+        entries
+    }
+
+    /// A schedule's name: unique; only the first may leave it out ("default").
+    /// `names` holds the names so far with their positions.
+    fn schedule_name(
+        &mut self,
+        i: usize,
+        path: &KeyPath,
+        schedule: &Spanned<schema::Schedule>,
+        names: &mut Vec<(String, usize)>,
+    ) -> String {
+        let raw = schedule.get_ref();
+        match &raw.name {
+            Some(n) => {
+                let name_path = path.key("name");
+                self.name(n, &name_path, NAME_MAX, "schedule");
+                if let Some((_, at)) = names.iter().find(|(m, _)| m == n.get_ref()) {
+                    let line = self.r.line_of(*at);
+                    self.error(
+                        start(n),
+                        &name_path,
+                        format!(
+                            "schedule `{}` is already defined at line {line}",
+                            n.get_ref()
+                        ),
+                    );
+                }
+                names.push((n.get_ref().clone(), start(n)));
+                n.get_ref().clone()
+            }
+            None if i == 0 => "default".to_string(),
+            None => {
+                self.error(
+                    start(schedule),
+                    path,
+                    "every schedule but the first needs a `name` (the first defaults to \"default\")",
+                );
+                String::new()
+            }
+        }
+    }
+
+    /// A schedule's valid windows as (offset, duration, partition, index in the source);
+    /// marks in `named` every partition a window names (even a window with other errors).
+    fn schedule_windows(
+        &mut self,
+        path: &KeyPath,
+        raw: &schema::Schedule,
+        partitions: &[Partition],
+        times: &[Time],
+        named: &mut [bool],
+    ) -> Vec<(u64, u64, usize, usize)> {
+        let mut windows: Vec<(u64, u64, usize, usize)> = Vec::new();
+        for (j, window) in raw.windows.iter().enumerate() {
+            let wpath = path.key("windows").index(j);
+            let w = window.get_ref();
+            if j == MAX_WINDOWS {
+                self.error(
+                    start(window),
+                    &wpath,
+                    format!("too many windows (at most {MAX_WINDOWS} per schedule)"),
+                );
+            }
+            let part_path = wpath.key("partition");
+            let partition = partitions
+                .iter()
+                .position(|p| p.name == *w.partition.get_ref());
+            match partition {
+                None => self.error(
+                    start(&w.partition),
+                    &part_path,
+                    format!("unknown partition `{}`", w.partition.get_ref()),
+                ),
+                Some(p) if times[p] == Time::Background => self.error(
+                    start(&w.partition),
+                    &part_path,
+                    format!(
+                        "partition `{}` runs in the background (time = \"background\") and cannot have windows",
+                        w.partition.get_ref()
+                    ),
+                ),
+                Some(p) => named[p] = true,
+            }
+            let offset = self.duration(&w.offset, &wpath.key("offset"));
+            let duration = self.duration(&w.duration, &wpath.key("duration"));
+            if duration == Some(0) {
+                self.error(
+                    start(&w.duration),
+                    &wpath.key("duration"),
+                    "a window must last longer than 0",
+                );
+                continue;
+            }
+            if let (Some(p), Some(offset), Some(duration)) = (partition, offset, duration) {
+                if offset.checked_add(duration).is_none() {
+                    self.error(
+                        start(&w.duration),
+                        &wpath.key("duration"),
+                        "window end overflows",
+                    );
+                    continue;
+                }
+                if !matches!(times[p], Time::Background | Time::Invalid) {
+                    windows.push((offset, duration, p, j));
+                }
+            }
+        }
+        windows
+    }
+
+    /// The major frame: as given, else the end of the last window.
+    fn major_frame(
+        &mut self,
+        path: &KeyPath,
+        schedule: &Spanned<schema::Schedule>,
+        windows: &[(u64, u64, usize, usize)],
+    ) -> Option<u64> {
+        let raw = schedule.get_ref();
+        match &raw.major_frame {
+            Some(f) => {
+                let fpath = path.key("major_frame");
+                match self.duration(f, &fpath) {
+                    Some(0) => {
+                        self.error(start(f), &fpath, "the major frame must be longer than 0");
+                        None
+                    }
+                    other => other,
+                }
+            }
+            None => {
+                let end = windows.iter().map(|w| w.0 + w.1).max();
+                if end.is_none() && raw.windows.is_empty() {
+                    self.error(
+                        start(schedule),
+                        path,
+                        "a schedule without windows needs a `major_frame`",
+                    );
+                }
+                end
+            }
+        }
+    }
+
+    /// Drops (with an error) the windows that do not lie inside the major frame.
+    fn keep_windows_in_frame(
+        &mut self,
+        path: &KeyPath,
+        raw: &schema::Schedule,
+        frame: u64,
+        windows: &mut Vec<(u64, u64, usize, usize)>,
+    ) {
+        windows.retain(|&(offset, duration, _, j)| {
+            let w = raw.windows[j].get_ref();
+            let wpath = path.key("windows").index(j);
+            if offset >= frame {
+                self.error(
+                    start(&w.offset),
+                    &wpath.key("offset"),
+                    format!(
+                        "the window starts at {}, not inside the major frame of {}",
+                        Duration(offset),
+                        Duration(frame)
+                    ),
+                );
+                false
+            } else if offset + duration > frame {
+                self.error(
+                    start(&w.duration),
+                    &wpath.key("duration"),
+                    format!(
+                        "the window ends at {}, after the major frame of {}",
+                        Duration(offset + duration),
+                        Duration(frame)
+                    ),
+                );
+                false
+            } else {
+                true
+            }
+        });
+    }
+
+    /// Reports windows (sorted by offset) that overlap an earlier one.
+    fn window_overlaps(
+        &mut self,
+        path: &KeyPath,
+        raw: &schema::Schedule,
+        windows: &[(u64, u64, usize, usize)],
+    ) {
+        let mut latest: Option<(u64, u64, usize)> = None;
+        for &(offset, duration, _, j) in windows {
+            if let Some((lo, le, lj)) = latest
+                && offset < le
+            {
+                let w = raw.windows[j].get_ref();
+                self.error(
+                    start(&w.offset),
+                    &path.key("windows").index(j).key("offset"),
+                    format!(
+                        "the window {}..{} overlaps window {lj} ({}..{})",
+                        Duration(offset),
+                        Duration(offset + duration),
+                        Duration(lo),
+                        Duration(le)
+                    ),
+                );
+            }
+            if latest.is_none_or(|(_, le, _)| offset + duration > le) {
+                latest = Some((offset, offset + duration, j));
+            }
+        }
+    }
+
+    /// Time partitions: explicit numbers first, then the lowest free ones in source order;
+    /// every explicit one must have a window.
+    fn assign_time_partitions(
+        &mut self,
+        doc: &schema::Document,
+        partitions: &mut [Partition],
+        times: &[Time],
+        named: &[bool],
+    ) {
         // Time partitions: explicit numbers first, then the lowest free ones in source order.
         let has_window = |p: usize| named[p];
         let mut used = [false; TIME_PARTITIONS as usize];
@@ -1222,12 +1303,6 @@ impl Validator<'_, '_> {
                 }
             }
         }
-        for (schedule, owners) in schedules.iter_mut().zip(&window_owners) {
-            for (window, &owner) in schedule.windows.iter_mut().zip(owners) {
-                window.time_partition = partitions[owner].time_partition;
-            }
-        }
-        schedules
     }
 
     fn channels(
