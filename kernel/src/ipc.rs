@@ -9,6 +9,7 @@
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
 use crate::state::{Kernel, MAX_THREADS, USER_RFLAGS};
+use crate::thread::NIL;
 use crate::thread::{Fault, NEVER, State};
 use abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET,
@@ -375,5 +376,55 @@ impl Kernel {
         } else {
             self.block(t, State::WaitingNotify { mask }, deadline);
         }
+    }
+}
+
+impl Kernel {
+    pub fn enqueue_sender(&mut self, receiver: usize, sender: usize) {
+        let priority = self.threads[sender].priority;
+        // Insert before the first queued sender of lower priority.
+        let mut prev = NIL;
+        let mut at = self.threads[receiver].senders;
+        while at != NIL && self.threads[at as usize].priority >= priority {
+            prev = at;
+            at = self.threads[at as usize].next_sender;
+        }
+        self.threads[sender].next_sender = at;
+        if prev == NIL {
+            self.threads[receiver].senders = sender as u16;
+        } else {
+            self.threads[prev as usize].next_sender = sender as u16;
+        }
+    }
+
+    pub fn unqueue_sender(&mut self, receiver: usize, sender: usize) {
+        let mut prev = NIL;
+        let mut at = self.threads[receiver].senders;
+        while at != NIL {
+            if at as usize == sender {
+                let next = self.threads[sender].next_sender;
+                if prev == NIL {
+                    self.threads[receiver].senders = next;
+                } else {
+                    self.threads[prev as usize].next_sender = next;
+                }
+                self.threads[sender].next_sender = NIL;
+                return;
+            }
+            prev = at;
+            at = self.threads[at as usize].next_sender;
+        }
+    }
+
+    /// The first queued sender to `receiver` (from `from` only, if given).
+    pub fn first_sender(&self, receiver: usize, from: Option<usize>) -> Option<usize> {
+        let mut at = self.threads[receiver].senders;
+        while at != NIL {
+            if from.is_none_or(|f| f == at as usize) {
+                return Some(at as usize);
+            }
+            at = self.threads[at as usize].next_sender;
+        }
+        None
     }
 }

@@ -23,6 +23,7 @@ pub mod boot;
 pub mod fault;
 #[allow(unsafe_code)] // the boot-time global allocator
 pub mod heap;
+pub mod io;
 pub mod ipc;
 pub mod irq;
 pub mod log;

@@ -5,6 +5,7 @@
 //! quotas of all partitions together never exceed what the kernel reserved at boot, and
 //! exhausting one partition can never make an allocation in another fail.
 
+use crate::state::{Kernel, MAX_RPS};
 use abi::syscall::Error;
 
 /// Amounts of the three kinds of kernel memory.
@@ -104,6 +105,30 @@ impl ResourcePartition {
         }
         self.carved = self.carved.plus(quota);
         Ok(Self::new(owner, quota))
+    }
+}
+
+impl Kernel {
+    /// The resource partition named by user-visible number `id` (slot + 1; 0 = `task`'s).
+    pub fn resource_partition(&self, task: usize, id: u64) -> Result<usize, Error> {
+        match id {
+            0 => Ok(self.tasks[task].rp),
+            n => usize::try_from(n - 1)
+                .ok()
+                .filter(|&r| r < MAX_RPS && self.rps[r].in_use)
+                .ok_or(Error::NoSuchObject),
+        }
+    }
+
+    pub fn rp_create(&mut self, caller_task: usize, quota: Amount) -> Result<usize, Error> {
+        let slot = self
+            .rps
+            .iter()
+            .position(|r| !r.in_use)
+            .ok_or(Error::OutOfResources)?;
+        let own = self.tasks[caller_task].rp;
+        self.rps[slot] = self.rps[own].carve(caller_task, quota)?;
+        Ok(slot)
     }
 }
 

@@ -42,64 +42,43 @@ pub enum Next {
 /// Every system call's handler has this signature: the kernel, the calling thread, its
 /// argument registers and the clock (ns since boot; read only by calls that need it, it
 /// costs a division). An `Err` is the caller's `rax`.
-type Handler = fn(&mut Kernel, usize, &ArgRegs, fn() -> u64) -> Result<Next, Error>;
+type Handler = fn(&mut Kernel, usize, &ArgRegs, Clock) -> Handled;
+/// The clock a handler may read (ns since boot).
+type Clock = fn() -> u64;
+/// What a handler returns.
+type Handled = Result<Next, Error>;
 
-/// The handler of each call.
-fn handler(call: Call) -> Handler {
-    match call {
-        Call::DebugWrite => debug_write,
-        Call::Clock => clock,
-        Call::ThreadExit => thread_exit,
-        Call::SystemHalt => system_halt,
-        Call::Yield => yield_now,
-        Call::SleepUntil => sleep_until,
-        Call::TaskCreate => task_create,
-        Call::TaskKill => task_kill,
-        Call::TaskAllowSend => task_allow_send,
-        Call::ThreadCreate => thread_create,
-        Call::ThreadStart => thread_start,
-        Call::ThreadSuspend => thread_suspend,
-        Call::ThreadResume => thread_resume,
-        Call::ThreadKill => thread_kill,
-        Call::ThreadSet => thread_set,
-        Call::ThreadSelf => thread_self,
-        Call::Map => map,
-        Call::MapPhysical => map_physical,
-        Call::Unmap => unmap,
-        Call::Protect => protect,
-        Call::Send => send,
-        Call::Receive => receive,
-        Call::Call => ipc_call,
-        Call::ReplyWait => reply_wait,
-        Call::Reply => reply,
-        Call::NotifySignal => notify_signal,
-        Call::NotifyWait => notify_wait,
-        Call::RpCreate => rp_create,
-        Call::RpInfo => rp_info,
-        Call::SetHealthMonitor => set_health_monitor,
-        Call::ScheduleSet => schedule_set,
-        Call::ScheduleSwitch => schedule_switch,
-        Call::PartitionInfo => partition_info,
-        Call::IoGrant => io_grant,
-        Call::IrqGrant => irq_grant,
-        Call::IrqAttach => irq_attach,
-        Call::IrqWait => irq_wait,
-        Call::IrqAck => irq_ack,
-        Call::IrqDetach => irq_detach,
-    }
+/// Defines `handler(call)`, the handler of each call, from one table.
+macro_rules! handlers {
+    ($($call:ident => $handler:ident,)*) => {
+        fn handler(call: Call) -> Handler {
+            match call {
+                $(Call::$call => $handler,)*
+            }
+        }
+    };
+}
+
+handlers! {
+    DebugWrite => debug_write, Clock => clock, ThreadExit => thread_exit,
+    SystemHalt => system_halt, Yield => yield_now, SleepUntil => sleep_until,
+    TaskCreate => task_create, TaskKill => task_kill, TaskAllowSend => task_allow_send,
+    ThreadCreate => thread_create, ThreadStart => thread_start, ThreadSuspend => thread_suspend,
+    ThreadResume => thread_resume, ThreadKill => thread_kill, ThreadSet => thread_set,
+    ThreadSelf => thread_self, Map => map, MapPhysical => map_physical, Unmap => unmap,
+    Protect => protect, Send => send, Receive => receive, Call => ipc_call,
+    ReplyWait => reply_wait, Reply => reply, NotifySignal => notify_signal,
+    NotifyWait => notify_wait, RpCreate => rp_create, RpInfo => rp_info,
+    SetHealthMonitor => set_health_monitor, ScheduleSet => schedule_set,
+    ScheduleSwitch => schedule_switch, PartitionInfo => partition_info, IoGrant => io_grant,
+    IrqGrant => irq_grant, IrqAttach => irq_attach, IrqWait => irq_wait, IrqAck => irq_ack,
+    IrqDetach => irq_detach,
 }
 
 /// The argument registers of thread `t`.
 fn args(k: &Kernel, t: usize) -> ArgRegs {
     let c = &k.threads[t].context;
-    ArgRegs {
-        rdi: c.rdi,
-        rsi: c.rsi,
-        rdx: c.rdx,
-        r10: c.r10,
-        r8: c.r8,
-        r9: c.r9,
-    }
+    ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
 }
 
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
@@ -148,10 +127,10 @@ fn task_of(k: &Kernel, t: usize) -> usize {
     k.threads[t].task
 }
 
-fn debug_write(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn debug_write(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::DEBUG_LOG)?;
-    let a = args::DebugWrite::decode(regs);
+    let a = args::DebugWrite::decode(r);
     if a.len > DEBUG_WRITE_MAX {
         return Err(Error::InvalidArgument);
     }
@@ -165,13 +144,13 @@ fn debug_write(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Resu
     Ok(Next::Return)
 }
 
-fn clock(k: &mut Kernel, t: usize, _: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+fn clock(k: &mut Kernel, t: usize, _: &ArgRegs, clock: Clock) -> Handled {
     let c = &mut k.threads[t].context;
     (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
     Ok(Next::Return)
 }
 
-fn thread_exit(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn thread_exit(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
     kprintln!(
         "kernel: thread of task {} exited",
         k.tasks[task_of(k, t)].name()
@@ -180,9 +159,9 @@ fn thread_exit(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<
     Ok(Next::Pending)
 }
 
-fn system_halt(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn system_halt(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::SYSTEM_HALT)?;
-    let success = match args::SystemHalt::decode(regs).outcome {
+    let success = match args::SystemHalt::decode(r).outcome {
         0 => true,
         1 => false,
         _ => return Err(Error::InvalidArgument),
@@ -194,18 +173,13 @@ fn system_halt(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Resu
     Ok(Next::Halt { success })
 }
 
-fn yield_now(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn yield_now(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
     k.run.rotate(t);
     Ok(Next::Return)
 }
 
-fn sleep_until(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    clock: fn() -> u64,
-) -> Result<Next, Error> {
-    let time = args::SleepUntil::decode(regs).time;
+fn sleep_until(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+    let time = args::SleepUntil::decode(r).time;
     ok_unless_changed(k, t);
     if time > clock() {
         k.block(t, State::Sleeping, time);
@@ -213,10 +187,10 @@ fn sleep_until(
     Ok(Next::Pending)
 }
 
-fn task_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn task_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
-    let a = args::TaskCreate::decode(regs);
+    let a = args::TaskCreate::decode(r);
     let abilities = Abilities::from_bits(a.abilities).ok_or(Error::InvalidArgument)?;
     let mcp = u8::try_from(a.mcp).map_err(|_| Error::McpExceeded)?;
     let rp = k.resource_partition(task, a.rp)?;
@@ -240,10 +214,10 @@ fn task_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Resu
     Ok(Next::Return)
 }
 
-fn task_kill(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn task_kill(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
-    let target = k.task(args::TaskKill::decode(regs).task)?;
+    let target = k.task(args::TaskKill::decode(r).task)?;
     if target == task || !k.is_within(target, task) {
         return Err(Error::NotPermitted);
     }
@@ -251,25 +225,20 @@ fn task_kill(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result
     Ok(Next::Return)
 }
 
-fn task_allow_send(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    _: fn() -> u64,
-) -> Result<Next, Error> {
+fn task_allow_send(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
-    let a = args::TaskAllowSend::decode(regs);
+    let a = args::TaskAllowSend::decode(r);
     let from = k.controlled_task(task, a.from)?;
     let to = k.controlled_task(task, a.to)?;
     k.tasks[from].send_to |= 1 << to;
     Ok(Next::Return)
 }
 
-fn thread_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn thread_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_THREAD)?;
-    let a = args::ThreadCreate::decode(regs);
+    let a = args::ThreadCreate::decode(r);
     let target = k.controlled_task(task, a.task)?;
     let priority = u8::try_from(a.priority).map_err(|_| Error::McpExceeded)?;
     let tp = k.threads[t].time_partition;
@@ -278,9 +247,9 @@ fn thread_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Re
     Ok(Next::Return)
 }
 
-fn thread_start(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn thread_start(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::CREATE_THREAD)?;
-    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+    let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     if k.threads[target].state != State::Inactive {
         return Err(Error::InvalidArgument);
     }
@@ -288,20 +257,20 @@ fn thread_start(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Res
     Ok(Next::Return)
 }
 
-fn thread_suspend(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+fn thread_suspend(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     k.set_suspended(target, true);
     Ok(Next::Return)
 }
 
-fn thread_resume(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+fn thread_resume(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     k.set_suspended(target, false);
     Ok(Next::Return)
 }
 
-fn thread_kill(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    let target = k.controlled_thread(t, args::OnThread::decode(regs).thread)?;
+fn thread_kill(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     k.kill_thread(target);
     Ok(if target == t {
         Next::Pending
@@ -310,14 +279,14 @@ fn thread_kill(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Resu
     })
 }
 
-fn thread_set(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    let a = args::ThreadSet::decode(regs);
+fn thread_set(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    let a = args::ThreadSet::decode(r);
     let target = k.controlled_thread(t, a.thread)?;
     set_attribute(k, task_of(k, t), target, a.attribute, a.value)?;
     Ok(Next::Return)
 }
 
-fn thread_self(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn thread_self(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
     k.threads[t].context.rdi = k.thread_id(t);
     k.threads[t].context.rsi = k.task_id(task_of(k, t));
     Ok(Next::Return)
@@ -327,18 +296,18 @@ fn thread_self(k: &mut Kernel, t: usize, _: &ArgRegs, _: fn() -> u64) -> Result<
 fn map_from(
     k: &mut Kernel,
     t: usize,
-    regs: &ArgRegs,
-    ability: Abilities,
-    source: fn(u64) -> Source,
-) -> Result<Next, Error> {
+    r: &ArgRegs,
+    need: Abilities,
+    from: fn(u64) -> Source,
+) -> Handled {
     let task = task_of(k, t);
-    k.require(task, ability)?;
-    let a = args::Map::decode(regs);
+    k.require(task, need)?;
+    let a = args::Map::decode(r);
     let target = k.controlled_task(task, a.task)?;
     k.map(
         task,
         target,
-        source(a.source),
+        from(a.source),
         a.destination,
         a.pages,
         rights(a.rights)?,
@@ -346,41 +315,35 @@ fn map_from(
     Ok(Next::Return)
 }
 
-fn map(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    map_from(k, t, regs, Abilities::MAP, Source::Virtual)
+fn map(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    map_from(k, t, r, Abilities::MAP, Source::Virtual)
 }
 
-fn map_physical(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    map_from(k, t, regs, Abilities::PHYSICAL_MEMORY, Source::Physical)
+fn map_physical(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    map_from(k, t, r, Abilities::PHYSICAL_MEMORY, Source::Physical)
 }
 
-fn unmap(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn unmap(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::MAP)?;
-    let a = args::Unmap::decode(regs);
+    let a = args::Unmap::decode(r);
     let target = k.controlled_task(task, a.task)?;
     k.unmap(target, a.address, a.pages)?;
     Ok(Next::Return)
 }
 
-fn protect(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn protect(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::MAP)?;
-    let a = args::Protect::decode(regs);
+    let a = args::Protect::decode(r);
     let target = k.controlled_task(task, a.task)?;
     k.protect(target, a.address, a.pages, rights(a.rights)?)?;
     Ok(Next::Return)
 }
 
 /// `send` and `call` (which also waits for the reply); the IPC path sets `rax`.
-fn send_message(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    clock: fn() -> u64,
-    and_wait: bool,
-) -> Result<Next, Error> {
-    let a = args::Ipc::decode(regs);
+fn send_message(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock, and_wait: bool) -> Handled {
+    let a = args::Ipc::decode(r);
     let dest = k.thread(a.peer)?;
     if !k.may_send(task_of(k, t), k.threads[dest].task) {
         return Err(Error::NotPermitted);
@@ -398,16 +361,16 @@ fn send_message(
     Ok(Next::Pending)
 }
 
-fn send(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
-    send_message(k, t, regs, clock, false)
+fn send(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+    send_message(k, t, r, clock, false)
 }
 
-fn ipc_call(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
-    send_message(k, t, regs, clock, true)
+fn ipc_call(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+    send_message(k, t, r, clock, true)
 }
 
-fn receive(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
-    let a = args::Ipc::decode(regs);
+fn receive(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+    let a = args::Ipc::decode(r);
     let from = match a.peer {
         0 => None,
         id => Some(k.thread(id)?),
@@ -428,20 +391,20 @@ fn answer_caller(k: &mut Kernel, t: usize, a: &args::Ipc) -> Result<(), Error> {
     Ok(())
 }
 
-fn reply_wait(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
-    let a = args::Ipc::decode(regs);
+fn reply_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+    let a = args::Ipc::decode(r);
     answer_caller(k, t, &a)?;
     k.receive(t, None, deadline(clock, a.timeout), a.timeout == 0);
     Ok(Next::Pending)
 }
 
-fn reply(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    answer_caller(k, t, &args::Ipc::decode(regs))?;
+fn reply(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    answer_caller(k, t, &args::Ipc::decode(r))?;
     Ok(Next::Return)
 }
 
-fn notify_signal(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    let a = args::NotifySignal::decode(regs);
+fn notify_signal(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    let a = args::NotifySignal::decode(r);
     let target = k.thread(a.thread)?;
     if !k.may_send(task_of(k, t), k.threads[target].task) {
         return Err(Error::NotPermitted);
@@ -450,21 +413,16 @@ fn notify_signal(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Re
     Ok(Next::Return)
 }
 
-fn notify_wait(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    clock: fn() -> u64,
-) -> Result<Next, Error> {
-    let a = args::NotifyWait::decode(regs);
+fn notify_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+    let a = args::NotifyWait::decode(r);
     k.wait_notify(t, a.mask, deadline(clock, a.timeout), a.timeout == 0);
     Ok(Next::Pending)
 }
 
-fn rp_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn rp_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::PARTITION_CONTROL)?;
-    let a = args::RpCreate::decode(regs);
+    let a = args::RpCreate::decode(r);
     let rp = k.rp_create(
         task,
         Amount {
@@ -477,8 +435,8 @@ fn rp_create(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result
     Ok(Next::Return)
 }
 
-fn rp_info(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
-    let rp = k.resource_partition(task_of(k, t), args::RpInfo::decode(regs).rp)?;
+fn rp_info(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+    let rp = k.resource_partition(task_of(k, t), args::RpInfo::decode(r).rp)?;
     let r = k.rps[rp];
     let c = &mut k.threads[t].context;
     c.rdi = r.used.pages;
@@ -490,15 +448,10 @@ fn rp_info(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<N
     Ok(Next::Return)
 }
 
-fn set_health_monitor(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    _: fn() -> u64,
-) -> Result<Next, Error> {
+fn set_health_monitor(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::PARTITION_CONTROL)?;
-    let id = args::SetHealthMonitor::decode(regs).thread;
+    let id = args::SetHealthMonitor::decode(r).thread;
     let monitor = k.thread(id)?;
     if task != 0 || k.threads[monitor].task != 0 {
         return Err(Error::NotPermitted);
@@ -507,10 +460,10 @@ fn set_health_monitor(
     Ok(Next::Return)
 }
 
-fn schedule_set(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn schedule_set(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::SCHEDULING)?;
-    let a = args::ScheduleSet::decode(regs);
+    let a = args::ScheduleSet::decode(r);
     if a.slot >= MAX_SCHEDULES || a.count > MAX_WINDOWS {
         return Err(Error::InvalidArgument);
     }
@@ -539,15 +492,10 @@ fn schedule_set(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Res
     Ok(Next::Return)
 }
 
-fn schedule_switch(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    clock: fn() -> u64,
-) -> Result<Next, Error> {
+fn schedule_switch(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
     let now = clock();
     k.require(task_of(k, t), Abilities::SCHEDULING)?;
-    let slot = args::ScheduleSwitch::decode(regs).slot;
+    let slot = args::ScheduleSwitch::decode(r).slot;
     if slot < MAX_SCHEDULES && k.time.switch_to(slot as usize, now) {
         k.update_window(now);
         Ok(Next::Return)
@@ -556,14 +504,9 @@ fn schedule_switch(
     }
 }
 
-fn partition_info(
-    k: &mut Kernel,
-    t: usize,
-    regs: &ArgRegs,
-    clock: fn() -> u64,
-) -> Result<Next, Error> {
+fn partition_info(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
     let now = clock();
-    let tp = u8::try_from(args::PartitionInfo::decode(regs).partition)
+    let tp = u8::try_from(args::PartitionInfo::decode(r).partition)
         .ok()
         .filter(|&p| (p as u64) < TIME_PARTITIONS)
         .ok_or(Error::InvalidArgument)?;
@@ -580,51 +523,51 @@ fn partition_info(
     Ok(Next::Return)
 }
 
-fn io_grant(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn io_grant(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::IO_PORTS)?;
-    let a = args::IoGrant::decode(regs);
+    let a = args::IoGrant::decode(r);
     let target = k.task(a.task)?;
     k.io_grant(task, target, a.first, a.count)?;
     Ok(Next::Return)
 }
 
-fn irq_grant(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn irq_grant(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::IRQ)?;
-    let a = args::IrqGrant::decode(regs);
+    let a = args::IrqGrant::decode(r);
     let target = k.task(a.task)?;
     k.irq_grant(task, target, a.line)?;
     Ok(Next::Return)
 }
 
-fn irq_attach(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn irq_attach(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
-    let a = args::IrqAttach::decode(regs);
+    let a = args::IrqAttach::decode(r);
     ok_unless_changed(k, t);
     k.irq_attach(t, a.line, a.bit)?;
     Ok(Next::Pending)
 }
 
-fn irq_wait(k: &mut Kernel, t: usize, regs: &ArgRegs, clock: fn() -> u64) -> Result<Next, Error> {
+fn irq_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
-    let a = args::IrqWait::decode(regs);
+    let a = args::IrqWait::decode(r);
     ok_unless_changed(k, t);
     k.irq_wait(t, a.line, deadline(clock, a.timeout), a.timeout == 0)?;
     Ok(Next::Pending)
 }
 
-fn irq_ack(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn irq_ack(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
     ok_unless_changed(k, t);
-    k.irq_ack(t, args::IrqLine::decode(regs).line)?;
+    k.irq_ack(t, args::IrqLine::decode(r).line)?;
     Ok(Next::Pending)
 }
 
-fn irq_detach(k: &mut Kernel, t: usize, regs: &ArgRegs, _: fn() -> u64) -> Result<Next, Error> {
+fn irq_detach(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
     ok_unless_changed(k, t);
-    k.irq_detach(t, args::IrqLine::decode(regs).line)?;
+    k.irq_detach(t, args::IrqLine::decode(r).line)?;
     Ok(Next::Pending)
 }
 

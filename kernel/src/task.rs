@@ -2,11 +2,14 @@
 
 use crate::mem::paging::{AddressSpace, MapError};
 use crate::mem::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
+use crate::rp::Amount;
+use crate::state::{Kernel, MAX_TASKS, MAX_THREADS};
 use abi::root::{PhysRegion, ROOT_INFO_MAGIC, ROOT_INFO_MAX_REGIONS, ROOT_INFO_VERSION, RootInfo};
 use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
     ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
 };
+use abi::syscall::{Error, TASK_NAME_MAX, make_id, split_id};
 
 #[derive(Clone, Copy)]
 pub struct Task {
@@ -191,4 +194,146 @@ pub fn create_root(
     k.threads[thread].context.rdx = ROOT_INFO_BASE;
     k.set_state(thread, crate::thread::State::Ready);
     Ok(entry)
+}
+
+impl Kernel {
+    pub fn task_id(&self, t: usize) -> u64 {
+        make_id(t, self.tasks[t].generation)
+    }
+
+    pub fn task(&self, id: u64) -> Result<usize, Error> {
+        let (index, generation) = split_id(id).ok_or(Error::NoSuchObject)?;
+        match self.tasks.get(index) {
+            Some(t) if t.in_use && t.generation == generation => Ok(index),
+            _ => Err(Error::NoSuchObject),
+        }
+    }
+
+    /// True if `task` is `ancestor` or one of its descendants.
+    pub fn is_within(&self, task: usize, ancestor: usize) -> bool {
+        let mut at = Some(task);
+        // The tree has at most MAX_TASKS levels.
+        for _ in 0..MAX_TASKS {
+            match at {
+                Some(t) if t == ancestor => return true,
+                Some(t) => at = self.tasks[t].parent,
+                None => return false,
+            }
+        }
+        false
+    }
+
+    /// The task named by `id` (0 = `caller`'s own), if the caller controls it.
+    pub fn controlled_task(&self, caller: usize, id: u64) -> Result<usize, Error> {
+        let task = if id == 0 { caller } else { self.task(id)? };
+        if self.is_within(task, caller) {
+            Ok(task)
+        } else {
+            Err(Error::NotPermitted)
+        }
+    }
+
+    pub fn may_send(&self, from_task: usize, to_task: usize) -> bool {
+        self.tasks[from_task].send_to & (1 << to_task) != 0
+    }
+
+    pub fn require(&self, task: usize, ability: Abilities) -> Result<(), Error> {
+        if self.tasks[task].abilities.contains(ability) {
+            Ok(())
+        } else {
+            Err(Error::AbilityDenied)
+        }
+    }
+
+    /// Creates a child task of `parent`. Checks abilities ⊆ parent's and MCP ≤ parent's.
+    pub fn create_task(
+        &mut self,
+        parent: usize,
+        abilities: Abilities,
+        mcp: u8,
+        rp: usize,
+        name: &str,
+    ) -> Result<usize, Error> {
+        let p = &self.tasks[parent];
+        if !p.abilities.contains(abilities) {
+            return Err(Error::AbilityDenied);
+        }
+        if mcp > p.mcp {
+            return Err(Error::McpExceeded);
+        }
+        if name.len() as u64 > TASK_NAME_MAX {
+            return Err(Error::InvalidArgument);
+        }
+        if !self.rps[rp].in_use {
+            return Err(Error::NoSuchObject);
+        }
+        let slot = self
+            .tasks
+            .iter()
+            .position(|t| !t.in_use)
+            .ok_or(Error::QuotaExceeded)?;
+        let cost = Amount {
+            tasks: 1,
+            threads: 0,
+            pages: 1,
+        };
+        self.rps[rp].charge(cost)?;
+        let Ok(space) = AddressSpace::new() else {
+            self.rps[rp].release(cost);
+            return Err(Error::OutOfResources);
+        };
+        let generation = self.tasks[slot].generation;
+        let mut task = Task {
+            in_use: true,
+            generation,
+            parent: Some(parent),
+            abilities,
+            mcp,
+            rp,
+            space,
+            // Itself and its parent; the parent may send to it.
+            send_to: (1 << slot) | (1 << parent),
+            pages_charged: 1,
+            ..Task::FREE
+        };
+        task.name[..name.len()].copy_from_slice(name.as_bytes());
+        task.name_len = name.len() as u8;
+        self.tasks[slot] = task;
+        self.tasks[parent].send_to |= 1 << slot;
+        Ok(slot)
+    }
+
+    /// Destroys `task` and its whole subtree: threads, address spaces, send rights.
+    pub fn destroy_task(&mut self, task: usize) {
+        // Children first (bounded: each round removes one task).
+        for _ in 0..MAX_TASKS {
+            let Some(child) = (0..MAX_TASKS)
+                .find(|&c| self.tasks[c].in_use && self.tasks[c].parent == Some(task))
+            else {
+                break;
+            };
+            self.destroy_task(child);
+        }
+        for t in 0..MAX_THREADS {
+            if !self.threads[t].is_free() && self.threads[t].task == task {
+                self.kill_thread(t);
+            }
+        }
+        let rp = self.tasks[task].rp;
+        let freed = self.tasks[task].space.destroy() + self.release_io_bitmap(task);
+        debug_assert_eq!(freed, self.tasks[task].pages_charged);
+        self.rps[rp].release(Amount {
+            tasks: 1,
+            threads: 0,
+            pages: self.tasks[task].pages_charged,
+        });
+        for other in self.tasks.iter_mut() {
+            other.send_to &= !(1 << task);
+        }
+        let generation = self.tasks[task].generation.wrapping_add(1);
+        self.tasks[task] = Task {
+            generation,
+            ..Task::FREE
+        };
+    }
 }

@@ -1,6 +1,10 @@
 //! Thread control blocks.
 
 use crate::arch::idt::TrapFrame;
+use crate::rp::Amount;
+use crate::sched::TIME_PARTITIONS;
+use crate::state::{Kernel, MAX_THREADS, USER_CS, USER_RFLAGS, USER_SS};
+use abi::syscall::{Error, USER_END, make_id, split_id};
 
 /// No thread (end of an intrusive list).
 pub const NIL: u16 = u16::MAX;
@@ -137,5 +141,224 @@ impl Thread {
     /// Runnable: ready and not suspended.
     pub fn is_runnable(&self) -> bool {
         self.state == State::Ready && !self.suspended
+    }
+}
+
+impl Kernel {
+    pub fn thread_id(&self, t: usize) -> u64 {
+        make_id(t, self.threads[t].generation)
+    }
+
+    pub fn thread(&self, id: u64) -> Result<usize, Error> {
+        let (index, generation) = split_id(id).ok_or(Error::NoSuchObject)?;
+        match self.threads.get(index) {
+            Some(t) if !t.is_free() && t.generation == generation => Ok(index),
+            _ => Err(Error::NoSuchObject),
+        }
+    }
+
+    /// The thread named by `id` (0 = `caller_thread`), if the caller's task controls it.
+    pub fn controlled_thread(&self, caller_thread: usize, id: u64) -> Result<usize, Error> {
+        let thread = if id == 0 {
+            caller_thread
+        } else {
+            self.thread(id)?
+        };
+        if self.is_within(self.threads[thread].task, self.threads[caller_thread].task) {
+            Ok(thread)
+        } else {
+            Err(Error::NotPermitted)
+        }
+    }
+
+    /// Changes a thread's state and keeps the run queues consistent with it.
+    pub fn set_state(&mut self, t: usize, state: State) {
+        self.threads[t].state = state;
+        self.requeue(t);
+    }
+
+    fn requeue(&mut self, t: usize) {
+        let th = &self.threads[t];
+        if th.is_runnable() {
+            self.run.enqueue(t, th.priority, th.time_partition);
+        } else {
+            self.run.remove(t);
+        }
+    }
+
+    /// Ends a blocking call of `t` with `result` in its `rax` and makes it ready.
+    pub fn wake(&mut self, t: usize, result: Error) {
+        let th = &mut self.threads[t];
+        th.context.rax = result as u64;
+        th.deadline = NEVER;
+        th.fault = None;
+        self.set_state(t, State::Ready);
+    }
+
+    /// Blocks `t` in `state` until `deadline` (absolute ns; [`NEVER`] for none).
+    pub fn block(&mut self, t: usize, state: State, deadline: u64) {
+        self.threads[t].deadline = deadline;
+        if deadline < self.next_deadline {
+            self.next_deadline = deadline;
+            self.timer_dirty = true;
+        }
+        self.set_state(t, state);
+    }
+
+    /// A new inactive thread of `task` that will start at `entry` with `rsp` = `stack` and
+    /// `rdi` = `arg`.
+    pub fn create_thread(
+        &mut self,
+        task: usize,
+        entry: u64,
+        stack: u64,
+        priority: u8,
+        time_partition: u8,
+        arg: u64,
+    ) -> Result<usize, Error> {
+        if priority > self.tasks[task].mcp {
+            return Err(Error::McpExceeded);
+        }
+        if entry >= USER_END || stack > USER_END || time_partition as usize >= TIME_PARTITIONS {
+            return Err(Error::InvalidArgument);
+        }
+        let slot = self
+            .threads
+            .iter()
+            .position(|t| t.is_free())
+            .ok_or(Error::QuotaExceeded)?;
+        self.rps[self.tasks[task].rp].charge(Amount::threads(1))?;
+        let generation = self.threads[slot].generation;
+        self.threads[slot] = Thread {
+            state: State::Inactive,
+            generation,
+            task,
+            priority,
+            time_partition,
+            context: crate::arch::idt::TrapFrame {
+                rip: entry,
+                rsp: stack,
+                rdi: arg,
+                cs: USER_CS,
+                ss: USER_SS,
+                rflags: USER_RFLAGS,
+                ..EMPTY_CONTEXT
+            },
+            fpu: FpuState::initial(),
+            ..Thread::FREE
+        };
+        Ok(slot)
+    }
+
+    /// Destroys a thread: whoever waits on it gets `PeerGone`, its slot is freed and its
+    /// quota returned.
+    pub fn kill_thread(&mut self, t: usize) {
+        if self.threads[t].is_free() {
+            return;
+        }
+        // Leave any queue it is in.
+        if let State::Sending { to, .. } = self.threads[t].state {
+            self.unqueue_sender(to, t);
+        }
+        self.run.remove(t);
+        self.release_irqs_of(t);
+        let id = self.thread_id(t);
+        // Everyone waiting for it: its senders, its callers, receivers waiting on it.
+        for other in 0..MAX_THREADS {
+            if other == t {
+                continue;
+            }
+            let waits_on_t = match self.threads[other].state {
+                State::Sending { to, .. } => to == t,
+                State::WaitingReply { from } => from == t,
+                _ => false,
+            };
+            if waits_on_t && self.threads[other].fault.is_some() {
+                // Its handler is gone: nobody can resolve the fault.
+                self.kill_thread(other);
+                continue;
+            }
+            match self.threads[other].state {
+                State::Sending { to, .. } if to == t => {
+                    self.unqueue_sender(t, other);
+                    self.wake(other, Error::PeerGone);
+                }
+                State::WaitingReply { from } if from == t => self.wake(other, Error::PeerGone),
+                State::Receiving { from: Some(f) } if f == t => self.wake(other, Error::PeerGone),
+                _ => {}
+            }
+        }
+        if self.health_monitor == id {
+            self.health_monitor = 0;
+        }
+        if self.current == Some(t) {
+            self.current = None;
+        }
+        let rp = self.tasks[self.threads[t].task].rp;
+        self.rps[rp].release(Amount::threads(1));
+        let generation = self.threads[t].generation.wrapping_add(1);
+        self.threads[t] = Thread {
+            generation,
+            ..Thread::FREE
+        };
+    }
+
+    pub fn set_suspended(&mut self, t: usize, suspended: bool) {
+        self.threads[t].suspended = suspended;
+        self.requeue(t);
+    }
+
+    pub fn set_priority(&mut self, t: usize, priority: u8) -> Result<(), Error> {
+        if priority > self.tasks[self.threads[t].task].mcp {
+            return Err(Error::McpExceeded);
+        }
+        self.run.remove(t);
+        self.threads[t].priority = priority;
+        self.requeue(t);
+        Ok(())
+    }
+
+    pub fn set_time_partition(&mut self, t: usize, partition: u8) -> Result<(), Error> {
+        if partition as usize >= TIME_PARTITIONS {
+            return Err(Error::InvalidArgument);
+        }
+        self.run.remove(t);
+        self.threads[t].time_partition = partition;
+        self.requeue(t);
+        Ok(())
+    }
+
+    /// Times out every blocked thread whose deadline is at or before `now` and recomputes
+    /// the next deadline. Bounded by the thread table.
+    pub fn expire_timeouts(&mut self, now: u64) {
+        let mut next = NEVER;
+        for t in 0..MAX_THREADS {
+            let deadline = self.threads[t].deadline;
+            if deadline == NEVER {
+                continue;
+            }
+            if deadline <= now {
+                self.abort_wait(t, Error::TimedOut);
+            } else {
+                next = next.min(deadline);
+            }
+        }
+        self.next_deadline = next;
+        self.timer_dirty = true;
+    }
+
+    /// Ends whatever `t` waits for with `error` (timeout or peer gone).
+    pub fn abort_wait(&mut self, t: usize, error: Error) {
+        match self.threads[t].state {
+            State::Sending { to, .. } => {
+                self.unqueue_sender(to, t);
+                self.wake(t, error);
+            }
+            State::WaitingReply { .. } | State::Receiving { .. } | State::WaitingNotify { .. } => {
+                self.wake(t, error)
+            }
+            State::Sleeping => self.wake(t, Error::Ok),
+            State::Free | State::Inactive | State::Ready => self.threads[t].deadline = NEVER,
+        }
     }
 }

@@ -10,6 +10,7 @@
 //! active and when the next boundary is. It is pure and host-tested against a model.
 
 use crate::sched::TIME_PARTITIONS;
+use crate::state::Kernel;
 
 pub const MAX_WINDOWS: usize = abi::syscall::MAX_WINDOWS as usize;
 pub const MAX_SCHEDULES: usize = abi::syscall::MAX_SCHEDULES as usize;
@@ -224,6 +225,44 @@ impl TimeTable {
             }
         }
         None
+    }
+}
+
+impl Kernel {
+    /// A timer event at `now`: time-outs and window boundaries.
+    pub fn on_timer(&mut self, now: u64) {
+        // The one-shot timer has fired: re-arm it even if it fired a little early (its
+        // count is rounded down) and nothing is due yet, or the next event would be missed.
+        self.timer_dirty = true;
+        if now >= self.next_deadline {
+            self.expire_timeouts(now);
+        }
+        if now >= self.next_boundary {
+            self.update_window(now);
+        }
+    }
+
+    /// Recomputes the active window (after a boundary or a schedule change).
+    pub fn update_window(&mut self, now: u64) {
+        let position = self.time.advance(now);
+        self.active_partition = position.partition;
+        self.next_boundary = position.next_boundary;
+        self.timer_dirty = true;
+    }
+
+    /// When the timer must fire next.
+    pub fn next_event(&self) -> u64 {
+        self.next_deadline.min(self.next_boundary)
+    }
+
+    /// Charges the time since the last call (TSC `now`) to the partition that ran, or idle.
+    pub fn account(&mut self, now: u64) {
+        let delta = now.saturating_sub(self.last_account);
+        self.last_account = now;
+        match self.running_partition {
+            Some(p) => self.cpu_ticks[p as usize] += delta,
+            None => self.idle_ticks += delta,
+        }
     }
 }
 

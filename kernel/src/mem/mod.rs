@@ -36,7 +36,12 @@ pub fn alloc_zeroed_frame() -> Option<u64> {
 }
 
 /// Returns a frame obtained from [`alloc_zeroed_frame`].
-pub fn free_frame(frame: u64) {
+///
+/// # Safety
+/// `frame` must come from [`alloc_zeroed_frame`], be freed once, and no longer be used:
+/// not mapped, not a page table, not a bitmap the TSS may load. The allocator links free
+/// frames through their first bytes, so a frame still in use would be corrupted.
+pub unsafe fn free_frame(frame: u64) {
     if let Some(frames) = crate::boot::FRAMES.get() {
         frames.lock().free(frame, &mut crate::boot::DirectMapLinks);
     }

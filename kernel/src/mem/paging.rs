@@ -27,9 +27,15 @@ pub struct AddressSpace {
     root: u64,
 }
 
-fn table(phys: u64) -> &'static mut [u64; 512] {
-    // SAFETY: `phys` is a page-table frame owned by an address space; the direct map covers
-    // it and the non-preemptible kernel never holds two references to one table at once.
+/// The page table in frame `phys`, through the direct map.
+///
+/// # Safety
+/// `phys` must be a page-table frame: the root of a live address space or the frame of a
+/// present non-leaf entry of one (or the active CR3 root), and the caller must not hold
+/// another reference into that table while it uses this one (the non-preemptible kernel
+/// walks one table at a time).
+unsafe fn table(phys: u64) -> &'static mut [u64; 512] {
+    // SAFETY: the caller's contract; the direct map covers every frame.
     unsafe { &mut *(phys_to_virt(phys) as *mut [u64; 512]) }
 }
 
@@ -71,8 +77,11 @@ impl AddressSpace {
         #[cfg(not(test))]
         {
             let (current, _) = x86_64::registers::control::Cr3::read();
-            let kernel = table(current.start_address().as_u64());
-            table(root)[256..].copy_from_slice(&kernel[256..]);
+            // SAFETY: the active root table, only read here.
+            let kernel = unsafe { table(current.start_address().as_u64()) };
+            // SAFETY: the new root, a fresh frame nobody else references.
+            let new_root = unsafe { table(root) };
+            new_root[256..].copy_from_slice(&kernel[256..]);
         }
         Ok(Self { root })
     }
@@ -89,7 +98,8 @@ impl AddressSpace {
     fn leaf(&self, virt: u64, create: bool) -> Result<Option<&'static mut u64>, MapError> {
         let mut t = self.root;
         for level in (1..4).rev() {
-            let entry = &mut table(t)[index(virt, level)];
+            // SAFETY: the root or a present non-leaf entry's frame (the walk below).
+            let entry = &mut unsafe { table(t) }[index(virt, level)];
             if *entry & PRESENT == 0 {
                 if !create {
                     return Ok(None);
@@ -99,7 +109,8 @@ impl AddressSpace {
             }
             t = *entry & ADDRESS;
         }
-        Ok(Some(&mut table(t)[index(virt, 0)]))
+        // SAFETY: the last non-leaf entry's frame.
+        Ok(Some(&mut unsafe { table(t) }[index(virt, 0)]))
     }
 
     /// Page-table frames a map of `pages` pages at `virt` would allocate.
@@ -114,7 +125,8 @@ impl AddressSpace {
                 let entry = if t == 0 {
                     0
                 } else {
-                    table(t)[index(at, level)]
+                    // SAFETY: the root or a present non-leaf entry's frame.
+                    (unsafe { table(t) })[index(at, level)]
                 };
                 if entry & PRESENT == 0 {
                     // Each missing level below this one is missing too.
@@ -178,7 +190,8 @@ impl AddressSpace {
         }
         let mut t = self.root;
         for level in (0..4).rev() {
-            let entry = table(t)[index(virt, level)];
+            // SAFETY: the root or a present non-leaf entry's frame.
+            let entry = unsafe { table(t) }[index(virt, level)];
             if entry & (PRESENT | USER) != PRESENT | USER || entry & HUGE != 0 {
                 return None;
             }
@@ -279,23 +292,27 @@ impl AddressSpace {
         fn free_level(t: u64, level: u32) -> u64 {
             let mut freed = 0;
             if level > 0 {
-                for entry in table(t).iter().copied() {
+                // SAFETY: a present non-leaf entry's frame, freed only after this walk.
+                for entry in unsafe { table(t) }.iter().copied() {
                     if entry & PRESENT != 0 {
                         freed += free_level(entry & ADDRESS, level - 1);
                     }
                 }
             }
-            free_frame(t);
+            // SAFETY: a table of this space, no longer referenced (its parent goes next).
+            unsafe { free_frame(t) };
             freed + 1
         }
         let mut freed = 0;
         for slot in 0..256 {
-            let entry = table(self.root)[slot];
+            // SAFETY: this space's root.
+            let entry = unsafe { table(self.root) }[slot];
             if entry & PRESENT != 0 {
                 freed += free_level(entry & ADDRESS, 2);
             }
         }
-        free_frame(self.root);
+        // SAFETY: the root, after every table below it; the space forgets it right away.
+        unsafe { free_frame(self.root) };
         self.root = 0;
         freed + 1
     }
@@ -386,7 +403,8 @@ mod tests {
         assert_eq!(space.translate(0x1000), None);
         assert_eq!(space.unmap(0x1000), None);
         space.destroy();
-        crate::mem::free_frame(frame);
+        // SAFETY: allocated by this test and no longer mapped.
+        unsafe { crate::mem::free_frame(frame) };
     }
 
     #[test]
