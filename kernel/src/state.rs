@@ -19,6 +19,15 @@ use crate::timepart::TimeTable;
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
 use abi::syscall::{Error, MAP_MAX_PAGES, PageRights};
 
+/// The slot an object identifier names, if that slot holds a live object (`live` gives its
+/// generation) of the identifier's generation: a stale id never names a successor.
+pub(crate) fn slot_of(id: u64, live: impl Fn(usize) -> Option<u16>) -> Result<usize, Error> {
+    let (index, generation) = abi::syscall::split_id(id).ok_or(Error::NoSuchObject)?;
+    (live(index) == Some(generation))
+        .then_some(index)
+        .ok_or(Error::NoSuchObject)
+}
+
 pub const MAX_THREADS: usize = 256;
 pub const MAX_TASKS: usize = 64;
 pub const MAX_RPS: usize = 16;

@@ -3,13 +3,13 @@
 use crate::mem::paging::{AddressSpace, MapError};
 use crate::mem::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
 use crate::rp::Amount;
-use crate::state::{Kernel, MAX_TASKS, MAX_THREADS};
+use crate::state::{Kernel, MAX_TASKS, MAX_THREADS, slot_of};
 use abi::root::{PhysRegion, ROOT_INFO_MAGIC, ROOT_INFO_MAX_REGIONS, ROOT_INFO_VERSION, RootInfo};
 use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
     ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
 };
-use abi::syscall::{Error, TASK_NAME_MAX, make_id, split_id};
+use abi::syscall::{Error, TASK_NAME_MAX, make_id};
 
 #[derive(Clone, Copy)]
 pub struct Task {
@@ -202,11 +202,9 @@ impl Kernel {
     }
 
     pub fn task(&self, id: u64) -> Result<usize, Error> {
-        let (index, generation) = split_id(id).ok_or(Error::NoSuchObject)?;
-        match self.tasks.get(index) {
-            Some(t) if t.in_use && t.generation == generation => Ok(index),
-            _ => Err(Error::NoSuchObject),
-        }
+        slot_of(id, |i| {
+            self.tasks.get(i).filter(|t| t.in_use).map(|t| t.generation)
+        })
     }
 
     /// True if `task` is `ancestor` or one of its descendants.

@@ -3,8 +3,8 @@
 use crate::arch::idt::TrapFrame;
 use crate::rp::Amount;
 use crate::sched::TIME_PARTITIONS;
-use crate::state::{Kernel, MAX_THREADS, USER_CS, USER_RFLAGS, USER_SS};
-use abi::syscall::{Error, USER_END, make_id, split_id};
+use crate::state::{Kernel, MAX_THREADS, USER_CS, USER_RFLAGS, USER_SS, slot_of};
+use abi::syscall::{Error, USER_END, make_id};
 
 /// No thread (end of an intrusive list).
 pub const NIL: u16 = u16::MAX;
@@ -150,11 +150,12 @@ impl Kernel {
     }
 
     pub fn thread(&self, id: u64) -> Result<usize, Error> {
-        let (index, generation) = split_id(id).ok_or(Error::NoSuchObject)?;
-        match self.threads.get(index) {
-            Some(t) if !t.is_free() && t.generation == generation => Ok(index),
-            _ => Err(Error::NoSuchObject),
-        }
+        slot_of(id, |i| {
+            self.threads
+                .get(i)
+                .filter(|t| !t.is_free())
+                .map(|t| t.generation)
+        })
     }
 
     /// The thread named by `id` (0 = `caller_thread`), if the caller's task controls it.

@@ -28,8 +28,8 @@ use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId}
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
 use user_rt::protocol::{
-    PartitionStatus, PortIdReply, QueuingMessage, QueuingStatus, ReplyWords, Request, ReturnCode,
-    SamplingMessage, SamplingStatus, Wire,
+    PartitionStatus, PortIdReply, QueuingMessage, ReplyWords, Request, ReturnCode, SamplingMessage,
+    Wire,
 };
 use user_rt::sys::{self, Message, Received};
 
@@ -210,15 +210,7 @@ impl<'a> Server<'a> {
             }
             Request::SamplingStatus { port } => {
                 match self.ports.sampling_status(index, port as usize) {
-                    Ok(s) => {
-                        let status = SamplingStatus {
-                            max_message_size: s.max_message_size,
-                            direction: s.direction,
-                            refresh_ns: s.refresh_period,
-                            last_validity: s.last_msg_validity,
-                        };
-                        reply(ReturnCode::NoError, status.to_words());
-                    }
+                    Ok(status) => reply(ReturnCode::NoError, status.to_words()),
                     Err(code) => reply(code, [0; 3]),
                 }
             }
@@ -257,16 +249,7 @@ impl<'a> Server<'a> {
             }
             Request::QueuingStatus { port } => {
                 match self.ports.queuing_status(index, port as usize) {
-                    Ok(s) => {
-                        let status = QueuingStatus {
-                            nb_message: s.nb_message,
-                            max_nb_message: s.max_nb_message,
-                            max_message_size: s.max_message_size,
-                            direction: s.direction,
-                            waiting_processes: s.waiting_processes as u64,
-                        };
-                        reply(ReturnCode::NoError, status.to_words());
-                    }
+                    Ok(status) => reply(ReturnCode::NoError, status.to_words()),
                     Err(code) => reply(code, [0; 3]),
                 }
             }

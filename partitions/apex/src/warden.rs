@@ -387,10 +387,10 @@ impl ApexSamplingPortP1 for Warden {
             port: id_word(sampling_port_id)?,
         })?;
         Ok(ApexSamplingPortStatus {
-            refresh_period: i64::try_from(status.refresh_ns).unwrap_or(INFINITE_TIME_VALUE),
+            refresh_period: i64::try_from(status.refresh_period).unwrap_or(INFINITE_TIME_VALUE),
             max_message_size: status.max_message_size,
             port_direction: codes::port_direction(status.direction),
-            last_msg_validity: codes::validity(status.last_validity),
+            last_msg_validity: codes::validity(status.last_msg_validity),
         })
     }
 }

@@ -98,6 +98,7 @@
 use abi::syscall::TIMEOUT_INFINITE;
 use config::binary::{ChannelView, SystemView};
 use config::model::{Direction, MAX_CHANNELS, MAX_PORTS, PortKind};
+pub use protocol::{QueuingStatus, SamplingStatus};
 use protocol::{ReturnCode, Validity};
 
 /// Most processes waiting on one queuing channel (see the module documentation).
@@ -147,31 +148,6 @@ pub struct Completion<'m> {
     /// For a receiver completed with `NoError`: the message (valid during the callback);
     /// empty otherwise.
     pub message: &'m [u8],
-}
-
-/// ARINC 653 `QUEUING_PORT_STATUS_TYPE`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct QueuingStatus {
-    /// Messages in this port (see the module documentation for the source/destination split).
-    pub nb_message: u32,
-    /// The port's configured depth.
-    pub max_nb_message: u32,
-    pub max_message_size: u32,
-    pub direction: Direction,
-    /// Processes parked on this port.
-    pub waiting_processes: u32,
-}
-
-/// ARINC 653 `SAMPLING_PORT_STATUS_TYPE`.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct SamplingStatus {
-    pub max_message_size: u32,
-    pub direction: Direction,
-    /// Refresh period in ns (0 = none, and always 0 for a source port).
-    pub refresh_period: u64,
-    /// Validity of the last message this port read (`Invalid` for a source port or before
-    /// the first read).
-    pub last_msg_validity: Validity,
 }
 
 /// Why [`Ports::new`] refused.

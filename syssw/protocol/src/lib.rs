@@ -459,30 +459,35 @@ impl ReplyWords for SamplingMessage {
     }
 }
 
-/// Reply to SAMPLING_STATUS.
+/// Reply to SAMPLING_STATUS (ARINC 653 `SAMPLING_PORT_STATUS_TYPE`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SamplingStatus {
     pub max_message_size: u32,
     pub direction: Direction,
-    pub refresh_ns: u64,
-    pub last_validity: Validity,
+    /// Refresh period in ns (0 = none, and always 0 for a source port).
+    pub refresh_period: u64,
+    /// Validity of the last message this port read (`Invalid` for a source port or before
+    /// the first read).
+    pub last_msg_validity: Validity,
 }
 
 impl ReplyWords for SamplingStatus {
     fn to_words(&self) -> [u64; 3] {
         [
             u64::from(self.max_message_size) | u64::from(self.direction.code()) << 32,
-            self.refresh_ns,
-            u64::from(self.last_validity.code()),
+            self.refresh_period,
+            u64::from(self.last_msg_validity.code()),
         ]
     }
 
-    fn from_words([size_direction, refresh_ns, validity]: [u64; 3]) -> Result<Self, DecodeError> {
+    fn from_words(
+        [size_direction, refresh_period, validity]: [u64; 3],
+    ) -> Result<Self, DecodeError> {
         Ok(Self {
             max_message_size: size_direction as u32,
             direction: byte_code(size_direction >> 32, Direction::from_u64)?,
-            refresh_ns,
-            last_validity: byte_code(validity, Validity::from_u64)?,
+            refresh_period,
+            last_msg_validity: byte_code(validity, Validity::from_u64)?,
         })
     }
 }
@@ -503,14 +508,17 @@ impl ReplyWords for QueuingMessage {
     }
 }
 
-/// Reply to QUEUING_STATUS.
+/// Reply to QUEUING_STATUS (ARINC 653 `QUEUING_PORT_STATUS_TYPE`).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct QueuingStatus {
+    /// Messages in the port.
     pub nb_message: u32,
+    /// The port's configured depth.
     pub max_nb_message: u32,
     pub max_message_size: u32,
     pub direction: Direction,
-    pub waiting_processes: u64,
+    /// Processes waiting on the port.
+    pub waiting_processes: u32,
 }
 
 impl ReplyWords for QueuingStatus {
@@ -518,7 +526,7 @@ impl ReplyWords for QueuingStatus {
         [
             u64::from(self.nb_message) | u64::from(self.max_nb_message) << 32,
             u64::from(self.max_message_size) | u64::from(self.direction.code()) << 32,
-            self.waiting_processes,
+            u64::from(self.waiting_processes),
         ]
     }
 
@@ -528,7 +536,8 @@ impl ReplyWords for QueuingStatus {
             max_nb_message: (messages >> 32) as u32,
             max_message_size: size_direction as u32,
             direction: byte_code(size_direction >> 32, Direction::from_u64)?,
-            waiting_processes: waiting,
+            waiting_processes: u32::try_from(waiting)
+                .map_err(|_| DecodeError::BadReplyWord(waiting))?,
         })
     }
 }

@@ -160,8 +160,8 @@ fn every_reply_round_trips() {
     check(SamplingStatus {
         max_message_size: 4096,
         direction: Direction::In,
-        refresh_ns: 125_000_000,
-        last_validity: Validity::Invalid,
+        refresh_period: 125_000_000,
+        last_msg_validity: Validity::Invalid,
     });
     check(QueuingMessage { len: 0 });
     check(QueuingStatus {

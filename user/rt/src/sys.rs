@@ -184,14 +184,7 @@ pub fn map(
     pages: u64,
     rights: PageRights,
 ) -> Result<(), Error> {
-    let a = args::Map {
-        task: task.map_or(0, |t| t.0),
-        source,
-        destination,
-        pages,
-        rights: rights.bits(),
-    };
-    call(Call::Map, a.encode()).map(drop)
+    map_from(Call::Map, task, source, destination, pages, rights)
 }
 
 pub fn map_physical(
@@ -201,14 +194,34 @@ pub fn map_physical(
     pages: u64,
     rights: PageRights,
 ) -> Result<(), Error> {
+    map_from(
+        Call::MapPhysical,
+        task,
+        physical,
+        destination,
+        pages,
+        rights,
+    )
+}
+
+/// `map` and `map_physical` take the same arguments; `source` is a page of the caller or a
+/// physical address.
+fn map_from(
+    call_number: Call,
+    task: Option<TaskId>,
+    source: u64,
+    destination: u64,
+    pages: u64,
+    rights: PageRights,
+) -> Result<(), Error> {
     let a = args::Map {
         task: task.map_or(0, |t| t.0),
-        source: physical,
+        source,
         destination,
         pages,
         rights: rights.bits(),
     };
-    call(Call::MapPhysical, a.encode()).map(drop)
+    call(call_number, a.encode()).map(drop)
 }
 
 pub fn unmap(task: Option<TaskId>, address: u64, pages: u64) -> Result<(), Error> {
