@@ -1,7 +1,7 @@
 //! The kernel stack. The kernel is non-preemptible and runs with interrupts off, so one
-//! stack per CPU suffices (DESIGN.md section 6): every entry from user mode (syscall,
-//! interrupt, exception) starts at its top, and the boot path that first used it never
-//! returns. No per-thread kernel stacks means no kernel memory per thread for stacks.
+//! stack per CPU suffices (docs/architecture.md, kernel model): every entry from user mode
+//! (syscall, interrupt, exception) starts at its top, and the boot path that first used it
+//! never returns. No per-thread kernel stacks means no kernel memory per thread for stacks.
 
 pub const KERNEL_STACK_SIZE: usize = 64 * 1024;
 
