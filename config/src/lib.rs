@@ -99,7 +99,7 @@
 //! the module's `[health]`; see [`model::HealthTable::resolve`] for the defaults.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
-//! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)
+//! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)
 //! are refused; no two partitions may share an I/O port or an IRQ.
 //!
 //! **Budgets.** Partition memory plus shared segments must fit in `memory` minus the kernel's

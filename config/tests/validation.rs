@@ -591,6 +591,15 @@ fn kernel_io_ports() {
         "partitions.a.io_ports[0]",
         "isa-debug-exit",
     );
+    // The exit device decodes four ports; the last one ends the run as well.
+    let src = doc(&[("# a", "io_ports = [0xf7]")]);
+    expect_one(
+        &src,
+        "0xf7",
+        0,
+        "partitions.a.io_ports[0]",
+        "isa-debug-exit",
+    );
     let src = doc(&[("# a", "io_ports = [\"0x40-0x50\"]")]);
     expect_one(
         &src,

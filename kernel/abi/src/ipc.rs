@@ -30,6 +30,10 @@ pub const IPC_MAX_ITEMS: usize = 4;
 pub const LABEL_EXCEPTION: u32 = 0xffff_0001;
 pub const LABEL_SYSCALL: u32 = 0xffff_0002;
 pub const LABEL_FAULT_REPORT: u32 = 0xffff_0003;
+/// Labels from this value up are the kernel's own (the exception and fault messages above):
+/// a message user space sends or replies with never carries one ([`MessageTag::is_valid`]),
+/// so a receiver can trust that such a message comes from the kernel.
+pub const KERNEL_LABELS: u32 = 0xffff_0000;
 /// Reply labels for exception messages.
 pub const REPLY_RESUME: u32 = 0;
 pub const REPLY_KILL: u32 = 1;
@@ -58,11 +62,13 @@ impl MessageTag {
     pub const fn items(self) -> usize {
         ((self.0 >> 48) & 0x7) as usize
     }
-    /// The tag is well-formed: no stray bits, length and item count within the limits.
+    /// The tag is one user space may send: no stray bits, length and item count within the
+    /// limits, and not a label of the kernel's ([`KERNEL_LABELS`]).
     pub const fn is_valid(self) -> bool {
         self.0 & !0x0007_1fff_ffff_ffff == 0
             && self.len() <= IPC_DATA_MAX
             && self.items() <= IPC_MAX_ITEMS
+            && self.label() < KERNEL_LABELS
     }
 }
 
@@ -266,6 +272,11 @@ mod tests {
         assert!(!MessageTag(t.0 | 1 << 63).is_valid());
         assert!(!MessageTag::new(1, 4097, 0).is_valid());
         assert!(!MessageTag::new(1, 0, 5).is_valid());
+        // No user message can pass for the kernel's exception or fault messages.
+        for label in [LABEL_EXCEPTION, LABEL_SYSCALL, LABEL_FAULT_REPORT, u32::MAX] {
+            assert!(!MessageTag::new(label, 0, 0).is_valid(), "{label:#x}");
+        }
+        assert!(MessageTag::new(KERNEL_LABELS - 1, 0, 0).is_valid());
     }
 
     #[test]

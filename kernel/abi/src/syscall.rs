@@ -260,13 +260,15 @@ pub const IRQ_LINES: u64 = 24;
 /// (COM1, the kernel log).
 pub const KERNEL_IRQS: [u64; 3] = [0, 2, 4];
 
-/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit).
+/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit). QEMU's
+/// isa-debug-exit device decodes 0xf4..=0xf7 (`iosize=0x04`): a write to any of them ends
+/// the whole run, so all four are the kernel's.
 pub const KERNEL_PORTS: [(u16, u16); 5] = [
     (0x20, 0x21),
     (0x40, 0x43),
     (0xa0, 0xa1),
     (0x3f8, 0x3ff),
-    (0xf4, 0xf4),
+    (0xf4, 0xf7),
 ];
 
 /// Number of time partitions (0 = background).
@@ -390,4 +392,29 @@ pub const fn split_id(id: u64) -> Option<(usize, u16)> {
         return None;
     }
     Some(((id & 0xffff) as usize - 1, (id >> 16) as u16))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn kernel_port(port: u16) -> bool {
+        KERNEL_PORTS
+            .iter()
+            .any(|&(lo, hi)| (lo..=hi).contains(&port))
+    }
+
+    #[test]
+    fn the_whole_exit_device_is_the_kernels() {
+        // QEMU's isa-debug-exit (iobase 0xf4, iosize 4): any of its ports ends the run.
+        assert!((0xf4..=0xf7).all(kernel_port));
+        assert!(!kernel_port(0xf3) && !kernel_port(0xf8));
+    }
+
+    #[test]
+    fn ids_round_trip_and_reject_stray_bits() {
+        assert_eq!(split_id(make_id(5, 7)), Some((5, 7)));
+        assert_eq!(split_id(0), None);
+        assert_eq!(split_id(1 << 40 | 1), None);
+    }
 }
