@@ -9,14 +9,19 @@ use crate::state::Kernel;
 use abi::syscall::Error;
 
 /// Byte `index` of an I/O bitmap frame.
+///
+/// # Safety
+/// `frame` must be a live bitmap frame of a task (allocated by `io_grant`, not yet freed)
+/// and `index` < 4096.
 #[allow(unsafe_code)] // the bitmap is a raw frame
-fn io_byte(frame: u64, index: usize) -> u8 {
-    // SAFETY: `frame` is a bitmap frame owned by a task; index < 4096 by construction.
+unsafe fn io_byte(frame: u64, index: usize) -> u8 {
+    // SAFETY: the caller's contract; the direct map covers the frame.
     unsafe { *((crate::mem::phys_to_virt(frame) + index as u64) as *const u8) }
 }
 
 impl Kernel {
     /// True if `task` may use `port` (the root: every port but the kernel's).
+    #[allow(unsafe_code)] // reads the task's bitmap frame
     pub fn holds_port(&self, task: usize, port: u16) -> bool {
         if task == 0 {
             return !abi::syscall::KERNEL_PORTS
@@ -26,7 +31,8 @@ impl Kernel {
         let frame = self.tasks[task].io_bitmap[port as usize / 32768];
         frame != 0 && {
             let bit = port as usize % 32768;
-            io_byte(frame, bit / 8) & (1 << (bit % 8)) == 0
+            // SAFETY: the task's own bitmap frame (non-zero: allocated), and bit / 8 < 4096.
+            (unsafe { io_byte(frame, bit / 8) }) & (1 << (bit % 8)) == 0
         }
     }
 
