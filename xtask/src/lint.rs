@@ -1,8 +1,8 @@
 //! `cargo xtask lint`: the lint gate CI runs before the tests. Formatting (`cargo fmt
 //! --check`) and clippy with every warning an error, on each kind of code the workspace
-//! builds: the host crates (with their tests), the kernel's and the APEX runtime's host-tested
-//! libraries, the kernel for `x86_64-unknown-none`, the loader for `x86_64-unknown-uefi`, and
-//! syssw and every user program for the user target. The lint policy itself lives once, in
+//! builds: the host crates (with their tests), the host-tested libraries of the kernel, the
+//! APEX runtime and the plant, the kernel for `x86_64-unknown-none`, the loader for
+//! `x86_64-unknown-uefi`, and syssw and every user program for the user target. The lint policy itself lives once, in
 //! `[workspace.lints]` of the root `Cargo.toml`; this only runs it everywhere.
 
 use anyhow::Result;
@@ -25,6 +25,14 @@ pub fn run() -> Result<bool> {
             "clippy",
             "-p",
             "apex",
+            "--no-default-features",
+            "--lib",
+            "--tests",
+        ],
+        vec![
+            "clippy",
+            "-p",
+            "plant",
             "--no-default-features",
             "--lib",
             "--tests",
