@@ -182,3 +182,28 @@ fn apex_health() {
         "the module halts",
     );
 }
+
+#[test]
+fn forged_fault_report() {
+    let o = boot("forged_fault_report");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the bystander's end is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "forger: forged fault reports refused: 64 calls, 64 sends",
+            "bystander: frame 30",
+        ],
+    );
+    // The health monitor heard of nothing but the bystander's planned end.
+    let health: Vec<&String> = o.lines.iter().filter(|l| l.contains("health:")).collect();
+    check(
+        &o,
+        health.len() == 1 && health[0].contains("partition=bystander error=application_error"),
+        &format!("unexpected health events: {health:?}"),
+    );
+}

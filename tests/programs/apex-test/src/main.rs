@@ -13,6 +13,9 @@
 //!   process overruns its time capacity (DEADLINE_MISSED); the victim finally raises an
 //!   error configured as `shutdown` (failure exit);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
+//! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
+//!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
+//!   stops the bystander, which counts its frames and ends the run successfully;
 //! * `valve` (scenario `plant_open_loop`): holds the plant's valve at 0.5 for
 //!   [`VALVE_FRAMES`] frames, then ends the run with an application error the configuration
 //!   maps to `shutdown_success`.
@@ -123,6 +126,8 @@ impl Partition<Warden> for Test {
             ),
             "restarter" => restarter(ctx),
             "bench-q" => bench::create(ctx),
+            "forger" => process(ctx, "forge", forge, Some(FRAME), None),
+            "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             "valve" => {
                 ctx.create_sampling_port_source(name("valve"), 8)
                     .expect("CREATE_SAMPLING_PORT valve");
@@ -145,6 +150,48 @@ fn main() {
 }
 
 apex::partition_entry!(main);
+
+// ---- forged_fault_report ----
+
+/// Tries to pass for the kernel: a fault report (the label only the kernel may send) naming
+/// every task id a partition could have, which syssw would act on if it arrived.
+extern "C" fn forge() {
+    use apex::user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag};
+    use apex::user_rt::abi::syscall::{TIMEOUT_INFINITE, ThreadId, make_id};
+    use apex::user_rt::sys::{Message, ipc_call, send};
+    let server = ThreadId(apex::runtime::start_info().server);
+    let mut refused = [0u32; 2];
+    for slot in 0..64 {
+        let m = Message {
+            tag: MessageTag::new(LABEL_FAULT_REPORT, 0, 0),
+            words: [make_id(slot, 0), 0, 0],
+        };
+        // Both ways in: a call (as a request) and a plain send.
+        refused[0] += u32::from(ipc_call(server, TIMEOUT_INFINITE, &m).is_err());
+        refused[1] += u32::from(send(server, 0, &m).is_err());
+    }
+    println!(
+        "forger: forged fault reports refused: {} calls, {} sends",
+        refused[0], refused[1]
+    );
+    loop {
+        periodic_wait();
+    }
+}
+
+extern "C" fn tick() {
+    let first = time();
+    loop {
+        let frame = frame_of(first, FRAME);
+        if frame.is_multiple_of(10) {
+            println!("bystander: frame {frame}");
+        }
+        if frame >= 30 {
+            raise(b"bystander done");
+        }
+        periodic_wait();
+    }
+}
 
 // ---- plant_open_loop ----
 
