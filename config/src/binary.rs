@@ -33,7 +33,7 @@
 //!
 //! Schedule (48 bytes) x S
 //! 0      32   name
-//! 32     8    major frame (ns, > 0)
+//! 32     8    major frame (ns, 1..=MAX_MAJOR_FRAME, one hour)
 //! 40     2    first window (index into the window table)
 //! 42     2    window count (<= 32); the schedules' window ranges tile the window table in order
 //! 44     4    reserved
@@ -621,8 +621,8 @@ impl<'a> SystemView<'a> {
                 return fail("reserved bytes are not zero");
             }
             let frame = S::MAJOR_FRAME.get(r);
-            if frame == 0 {
-                return fail("major frame is zero");
+            if frame == 0 || frame > MAX_MAJOR_FRAME {
+                return fail("major frame is zero or longer than the kernel's limit (1 h)");
             }
             let (first, count) = (S::FIRST_WINDOW.u16(r), S::WINDOW_COUNT.u16(r));
             if count > MAX_WINDOWS {

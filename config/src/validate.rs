@@ -1143,6 +1143,15 @@ impl Validator<'_, '_> {
                         self.error(start(f), &fpath, "the major frame must be longer than 0");
                         None
                     }
+                    Some(frame) if frame > MAX_MAJOR_FRAME => {
+                        let msg = format!(
+                            "the major frame of {} is longer than the kernel's limit of {}",
+                            Duration(frame),
+                            Duration(MAX_MAJOR_FRAME)
+                        );
+                        self.error(start(f), &fpath, msg);
+                        None
+                    }
                     other => other,
                 }
             }
@@ -1154,6 +1163,15 @@ impl Validator<'_, '_> {
                         path,
                         "a schedule without windows needs a `major_frame`",
                     );
+                }
+                if let Some(end) = end.filter(|&end| end > MAX_MAJOR_FRAME) {
+                    let msg = format!(
+                        "the windows end at {}, beyond the kernel's longest major frame of {}",
+                        Duration(end),
+                        Duration(MAX_MAJOR_FRAME)
+                    );
+                    self.error(start(schedule), path, msg);
+                    return None;
                 }
                 end
             }

@@ -5,7 +5,8 @@ mod common;
 use abi::crc32::crc32;
 use common::*;
 use config::binary::{
-    self, DecodeError, Table, attachment, channel, header, io_range, partition, port, window,
+    self, DecodeError, Table, attachment, channel, header, io_range, partition, port, schedule,
+    window,
 };
 use config::model::{Direction, ErrorCode, HealthAction, PortKind, Rights};
 use config::{System, decode};
@@ -339,6 +340,15 @@ fn header_damage() {
     assert!(matches!(e, DecodeError::SizeMismatch { .. }), "{e:?}");
     invalid(Table::Header, 0, "reserved")(damaged(|b| header::RESERVED_B.bytes_mut(b)[2] = 1));
     invalid(Table::Header, 0, "module health")(damaged(|b| header::HEALTH.bytes_mut(b)[0] = 9));
+}
+
+#[test]
+fn schedule_damage() {
+    // A frame the kernel would refuse (and whose boundary sums could overflow).
+    invalid(Table::Schedule, 0, "longer than the kernel's limit")(damaged(|b| {
+        let at = record(b, Table::Schedule, 0);
+        schedule::MAJOR_FRAME.set(&mut b[at..], u64::MAX);
+    }));
 }
 
 #[test]

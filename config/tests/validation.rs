@@ -1358,3 +1358,15 @@ mod fuzz {
         }
     }
 }
+
+#[test]
+fn major_frame_beyond_the_kernels_limit() {
+    let src = doc(&[("major_frame = \"10ms\"", "major_frame = \"7200s\"")]);
+    expect_one(
+        &src,
+        "\"7200s\"",
+        0,
+        "schedules[0].major_frame",
+        "the major frame of 7200s is longer than the kernel's limit of 3600s",
+    );
+}

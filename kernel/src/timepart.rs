@@ -38,7 +38,8 @@ pub struct Schedule {
 /// Why a schedule was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScheduleError {
-    /// Zero major frame, zero-length window, or too many windows.
+    /// Zero or too long a major frame (see `MAX_MAJOR_FRAME`), a zero-length window, or too
+    /// many windows.
     Empty,
     /// A window starts before the previous one ends (they must be sorted, disjoint).
     Overlap(usize),
@@ -50,7 +51,8 @@ pub enum ScheduleError {
 
 impl Schedule {
     pub fn new(major_frame: u64, windows: &[Window]) -> Result<Self, ScheduleError> {
-        if major_frame == 0 || windows.len() > MAX_WINDOWS {
+        let frame_ok = (1..=abi::syscall::MAX_MAJOR_FRAME).contains(&major_frame);
+        if !frame_ok || windows.len() > MAX_WINDOWS {
             return Err(ScheduleError::Empty);
         }
         let mut previous_end = 0;
@@ -282,6 +284,7 @@ mod tests {
     #[test]
     fn validation_names_the_bad_window() {
         assert_eq!(Schedule::new(0, &[]), Err(ScheduleError::Empty));
+        assert!(Schedule::new(abi::syscall::MAX_MAJOR_FRAME + 1, &[]).is_err());
         assert_eq!(
             Schedule::new(100, &[w(0, 50, 1), w(40, 10, 2)]),
             Err(ScheduleError::Overlap(1))

@@ -200,7 +200,8 @@ codes::code_enum! {
         SetHealthMonitor = 62 => "set_health_monitor",
 
         /// `schedule_set(slot, major_frame, windows, count)`: stores time schedule `slot`
-        /// (< [`MAX_SCHEDULES`]): a major frame in ns and `count` (<= [`MAX_WINDOWS`])
+        /// (< [`MAX_SCHEDULES`]): a major frame in ns (1..=[`MAX_MAJOR_FRAME`]) and `count`
+        /// (<= [`MAX_WINDOWS`])
         /// [`WindowSpec`]s at user address `windows`, sorted by offset, disjoint, inside the
         /// frame, each for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
         /// no windows). The running or pending schedule cannot be replaced. Ability:
@@ -276,6 +277,9 @@ pub const TIME_PARTITIONS: u64 = 16;
 /// Schedule slots and windows per schedule.
 pub const MAX_SCHEDULES: u64 = 4;
 pub const MAX_WINDOWS: u64 = 32;
+/// Longest major frame (ns): one hour. Far beyond any real schedule, and small enough that
+/// no sum of boundary times can overflow in the lifetime of a machine.
+pub const MAX_MAJOR_FRAME: u64 = 3_600_000_000_000;
 
 /// One window of a schedule, as `schedule_set` reads it from user memory.
 #[repr(C)]
