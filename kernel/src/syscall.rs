@@ -39,21 +39,20 @@ pub enum Next {
     Halt { success: bool },
 }
 
-/// Every system call's handler has this signature: the kernel, the calling thread, its
-/// argument registers and the clock (ns since boot; read only by calls that need it, it
-/// costs a division). An `Err` is the caller's `rax`.
-type Handler = fn(&mut Kernel, usize, &ArgRegs, Clock) -> Handled;
 /// The clock a handler may read (ns since boot).
 type Clock = fn() -> u64;
 /// What a handler returns.
 type Handled = Result<Next, Error>;
 
-/// Defines `handler(call)`, the handler of each call, from one table.
+/// Defines `dispatch`, which runs the handler of each call, from one table. Every handler
+/// has one signature: the kernel, the calling thread, its argument registers and the clock
+/// (read only by calls that need it: it costs a division); an `Err` is the caller's `rax`.
+/// Direct calls (not a table of function pointers) let the compiler inline them.
 macro_rules! handlers {
     ($($call:ident => $handler:ident,)*) => {
-        fn handler(call: Call) -> Handler {
+        fn dispatch(call: Call, k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
             match call {
-                $(Call::$call => $handler,)*
+                $(Call::$call => $handler(k, t, r, clock),)*
             }
         }
     };
@@ -97,7 +96,7 @@ pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
     let raw = k.threads[t].context.rax;
     let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
-        Some(call) => handler(call)(k, t, &args(k, t), clock),
+        Some(call) => dispatch(call, k, t, &args(k, t), clock),
     };
     match result {
         Ok(Next::Return) => {
