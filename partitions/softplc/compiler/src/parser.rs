@@ -1011,7 +1011,19 @@ impl Parser<'_> {
             }
         };
         let span = start.to(self.prev_span());
-        if !self.eat(&Tok::Semi) {
+        // IEC requires `;` after every statement; CODESYS also accepts a statement that ends
+        // with its own keyword (END_IF, END_CASE, END_FOR, END_WHILE, END_REPEAT, __ENDTRY)
+        // without one, and so does this parser.
+        let ends_with_keyword = matches!(
+            kind,
+            StmtKind::If { .. }
+                | StmtKind::Case { .. }
+                | StmtKind::For { .. }
+                | StmtKind::While { .. }
+                | StmtKind::Repeat { .. }
+                | StmtKind::Try { .. }
+        );
+        if !self.eat(&Tok::Semi) && !ends_with_keyword {
             return Err(self.error_here("`;`"));
         }
         Ok(Stmt { kind, span })
