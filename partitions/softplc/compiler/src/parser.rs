@@ -464,7 +464,10 @@ impl Parser<'_> {
                 } else {
                     None
                 };
-                self.expect(Tok::Semi)?;
+                // CODESYS leaves out the `;` after END_STRUCT.
+                if !self.eat(&Tok::Semi) && !matches!(ty, TypeRef::Struct { .. }) {
+                    self.expect(Tok::Semi)?;
+                }
                 Ok(TypeDecl { name, ty, init })
             })();
             match r {
@@ -486,7 +489,10 @@ impl Parser<'_> {
                 }
             }
         }
-        self.expect_kw("END_TYPE")
+        self.expect_kw("END_TYPE")?;
+        // CODESYS accepts (and some libraries write) `END_TYPE;`.
+        self.eat(&Tok::Semi);
+        Ok(())
     }
 
     fn type_ref(&mut self) -> PResult<TypeRef> {
