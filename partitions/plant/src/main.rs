@@ -1,17 +1,19 @@
-//! The plant partition: runs the tank simulation of the library part in its own time
-//! window, one periodic process released once per major frame. Each release it reads the
-//! valve command, advances the simulation by the simulated time of one major frame (1 ms
-//! steps), and publishes the level.
+//! The plant partition: runs the tank simulation of the library part ([`plant::Simulator`])
+//! in its own time window, one periodic process released once per major frame (the
+//! partition's period, from GET_PARTITION_STATUS). Each release reads the valve command,
+//! advances the simulation by the simulated time of one period (1 ms steps), publishes the
+//! level and, every 500 ms simulated, prints the status line documented in the library
+//! (it appears on the serial log as `[<partition>] plant: t=...`).
 //!
-//! Ports (the configuration's names; messages are 8-byte little-endian `f64`):
-//! `valve` (sampling input, 0.0..=1.0) and `level` (sampling output, metres). A valve
-//! message that is missing or invalid (older than the port's refresh period) keeps the last
-//! valid command for at most [`HOLD_RELEASES`] releases, then the valve closes (the safe
-//! state); every such release is counted.
+//! Ports it creates (messages are 8-byte little-endian `f64`; the configuration must give
+//! these sizes and refresh periods exactly, or the partition stops at its start):
+//! - `valve`: sampling in, size 8, refresh 100 ms: the valve command, 0.0..=1.0;
+//! - `level`: sampling out, size 8: the level in metres;
+//! - `setpoint` (optional): sampling in, size 8, refresh 100 ms: only shown in the status
+//!   line (`setpoint=-` without the port).
 //!
-//! Status line (an interface: tests and plotting tools parse it), every 500 ms simulated:
-//! `plant: t=<ms>ms level=<m.mmm> valve=<0.000> setpoint=- disturbance=<on|off> stale=<n>`.
-//! It must never panic on a bad message: a short or non-finite command is treated as closed.
+//! This file is glue only: it must never interpret a message itself (the library decides
+//! what a missing, invalid or malformed one means) and never panic on one.
 #![no_std]
 #![no_main]
 
@@ -21,21 +23,18 @@ use apex::a653rs::prelude::*;
 use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
-use plant::{DISTURBANCES, Plant, Tank, valve_command};
+use plant::{Simulator, decode, encode, steps_per_release};
 
-/// Simulated milliseconds per step.
-const STEP_MS: u64 = 1;
-/// Releases a stale valve command is held before the valve closes.
-pub const HOLD_RELEASES: u32 = 3;
-/// Simulated time between status lines.
-const STATUS_EVERY_MS: u64 = 500;
-/// Period if the partition has none (a background partition): 10 ms.
+/// Refresh period of the input ports (must match the configuration's `refresh`).
+const REFRESH: Duration = Duration::from_millis(100);
+/// Period if the partition has none (a background partition).
 const DEFAULT_PERIOD: Duration = Duration::from_millis(10);
 
 fn name(text: &str) -> Name {
     Name::from_str(text).expect("port names here are short")
 }
 
+/// The partition's period (its major frame), from GET_PARTITION_STATUS.
 fn period() -> Duration {
     let status = <Warden as ApexPartitionP4>::get_partition_status();
     match u64::try_from(status.period) {
@@ -44,50 +43,27 @@ fn period() -> Duration {
     }
 }
 
-/// The command in a valve message, if it is one.
-fn decode_valve(message: &[u8]) -> Option<f64> {
-    let bytes: [u8; 8] = message.get(..8)?.try_into().ok()?;
-    Some(f64::from_le_bytes(bytes))
-}
-
 extern "C" fn simulate() {
-    let valve_port = SamplingPortDestination::<Warden>::from_name(name("valve")).expect("valve");
-    let level_port = SamplingPortSource::<Warden>::from_name(name("level")).expect("level");
-    let steps = (period().as_millis() as u64 / STEP_MS).max(1);
-    let mut plant = Plant::new(Tank::DEFAULT, 0.0, STEP_MS, &DISTURBANCES);
-    let (mut command, mut held, mut stale) = (0.0, 0u32, 0u64);
-    let mut next_status = 0;
+    let valve = SamplingPortDestination::<Warden>::from_name(name("valve")).expect("valve");
+    let level = SamplingPortSource::<Warden>::from_name(name("level")).expect("level");
+    let setpoint = SamplingPortDestination::<Warden>::from_name(name("setpoint")).ok();
+    let steps = steps_per_release(u64::try_from(period().as_nanos()).unwrap_or(u64::MAX));
+    let mut sim = Simulator::new();
     let mut buf = [0u8; 8];
     loop {
-        match valve_port.receive(&mut buf) {
-            Ok((Validity::Valid, message)) => {
-                command = decode_valve(message).map_or(0.0, valve_command);
-                held = 0;
-            }
-            _ => {
-                stale += 1;
-                held += 1;
-                if held > HOLD_RELEASES {
-                    command = 0.0;
-                }
-            }
-        }
-        plant.run(command, steps);
-        let _ = level_port.send(&plant.level.to_le_bytes());
-        if plant.time_ms >= next_status {
-            next_status += STATUS_EVERY_MS;
-            println!(
-                "plant: t={}ms level={:.3} valve={:.3} setpoint=- disturbance={} stale={}",
-                plant.time_ms,
-                plant.level,
-                command,
-                if plant.disturbance() != 0.0 {
-                    "on"
-                } else {
-                    "off"
-                },
-                stale
-            );
+        let fresh = match valve.receive(&mut buf) {
+            Ok((Validity::Valid, message)) => decode(message),
+            _ => None,
+        };
+        // The setpoint is only shown: the latest message, however old.
+        let shown = setpoint
+            .as_ref()
+            .and_then(|port| port.receive(&mut buf).ok())
+            .and_then(|(_, message)| decode(message));
+        let status = sim.release(fresh, shown, steps);
+        let _ = level.send(&encode(sim.plant.level));
+        if let Some(status) = status {
+            println!("{status}");
         }
         if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
             println!("plant: PERIODIC_WAIT failed; stopping");
@@ -100,10 +76,13 @@ struct PlantPartition;
 
 impl Partition<Warden> for PlantPartition {
     fn cold_start(&self, ctx: &mut StartContext<Warden>) {
-        ctx.create_sampling_port_destination(name("valve"), 8, Duration::from_millis(100))
+        ctx.create_sampling_port_destination(name("valve"), 8, REFRESH)
             .expect("CREATE_SAMPLING_PORT valve");
         ctx.create_sampling_port_source(name("level"), 8)
             .expect("CREATE_SAMPLING_PORT level");
+        if let Err(e) = ctx.create_sampling_port_destination(name("setpoint"), 8, REFRESH) {
+            println!("plant: no setpoint port ({e:?}); status lines show setpoint=-");
+        }
         let attributes = ProcessAttribute {
             period: SystemTime::Normal(period()),
             time_capacity: SystemTime::Infinite,
