@@ -15,10 +15,7 @@
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
-//!   stops the bystander, which counts its frames and ends the run successfully;
-//! * `valve` (scenario `plant_open_loop`): holds the plant's valve at 0.5 for
-//!   [`VALVE_FRAMES`] frames, then ends the run with an application error the configuration
-//!   maps to `shutdown_success`.
+//!   stops the bystander, which counts its frames and ends the run successfully.
 //!
 //! Every line it prints starts with the partition's name (an interface for the scenario
 //! tests).
@@ -37,11 +34,6 @@ use core::time::Duration;
 
 /// The major frame of the apex_health system: the period of its periodic processes.
 const FRAME: Duration = Duration::from_millis(20);
-/// The major frame of the plant_open_loop system.
-const PLANT_FRAME: Duration = Duration::from_millis(10);
-/// Frames the valve driver holds its command: 15 s simulated, over 7 time constants of
-/// the plant's tank at that level.
-const VALVE_FRAMES: u32 = 1500;
 /// The major frame of the apex_ports system.
 const PORTS_FRAME: Duration = Duration::from_millis(100);
 
@@ -128,11 +120,6 @@ impl Partition<Warden> for Test {
             "bench-q" => bench::create(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
-            "valve" => {
-                ctx.create_sampling_port_source(name("valve"), 8)
-                    .expect("CREATE_SAMPLING_PORT valve");
-                process(ctx, "drive", drive, Some(PLANT_FRAME), None);
-            }
             other => println!("{other}: no role for this partition name"),
         }
     }
@@ -191,20 +178,6 @@ extern "C" fn tick() {
         }
         periodic_wait();
     }
-}
-
-// ---- plant_open_loop ----
-
-extern "C" fn drive() {
-    let valve = SamplingPortSource::<Warden>::from_name(name("valve")).expect("valve");
-    for _ in 0..VALVE_FRAMES {
-        valve
-            .send(&0.5f64.to_le_bytes())
-            .expect("WRITE_SAMPLING_MESSAGE valve");
-        periodic_wait();
-    }
-    println!("valve: held 0.5 for {VALVE_FRAMES} frames");
-    raise(b"done");
 }
 
 // ---- apex_ports ----
