@@ -6,6 +6,7 @@ use crate::arch::{cpu, gdt, hpet::Hpet, idt, ioapic::IoApic, lapic, pic, pit};
 use crate::heap::BootHeap;
 use crate::mem::frames::{FrameAllocator, FrameLinks};
 use crate::mem::{PAGE_SIZE, phys_to_virt};
+use crate::table::RpIdx;
 use crate::{kprintln, time};
 use abi::boot::{BootInfo, MemoryKind, MemoryRegion};
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
@@ -203,9 +204,9 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         .unwrap_or_else(|e| panic!("cannot create the root task from 'syssw': {e:?}"));
         kprintln!(
             "task: root task 'syssw' loaded, entry {entry:#x}; root partition quota {} pages, {} threads, {} tasks",
-            k.rps[0].quota.pages,
-            k.rps[0].quota.threads,
-            k.rps[0].quota.tasks
+            k.rps[RpIdx::ROOT].quota.pages,
+            k.rps[RpIdx::ROOT].quota.threads,
+            k.rps[RpIdx::ROOT].quota.tasks
         );
     }
 

@@ -8,11 +8,18 @@ use crate::arch::idt::exception_name;
 use crate::kprintln;
 use crate::state::Kernel;
 use crate::syscall::Outcome;
+use crate::table::{TaskIdx, ThreadIdx};
 use crate::thread::Fault;
 use abi::ipc::LABEL_EXCEPTION;
 
 /// CPU exception `vector` of user thread `t` (registers saved in its context).
-pub fn on_exception(k: &mut Kernel, t: usize, vector: u64, error_code: u64, cr2: u64) -> Outcome {
+pub fn on_exception(
+    k: &mut Kernel,
+    t: ThreadIdx,
+    vector: u64,
+    error_code: u64,
+    cr2: u64,
+) -> Outcome {
     let fault = Fault {
         label: LABEL_EXCEPTION,
         vector,
@@ -22,13 +29,13 @@ pub fn on_exception(k: &mut Kernel, t: usize, vector: u64, error_code: u64, cr2:
     deliver_or_report(k, t, fault)
 }
 
-pub fn deliver_or_report(k: &mut Kernel, t: usize, fault: Fault) -> Outcome {
+pub fn deliver_or_report(k: &mut Kernel, t: ThreadIdx, fault: Fault) -> Outcome {
     if k.raise_fault(t, fault) {
         return Outcome::Continue;
     }
     let task = k.threads[t].task;
     log_fault(k, t, &fault);
-    if task == 0 {
+    if task == TaskIdx::ROOT {
         kprintln!("kernel: the root task faulted without a handler; halting with failure");
         return Outcome::Halt { success: false };
     }
@@ -41,7 +48,7 @@ pub fn deliver_or_report(k: &mut Kernel, t: usize, fault: Fault) -> Outcome {
     Outcome::Continue
 }
 
-fn log_fault(k: &Kernel, t: usize, fault: &Fault) {
+fn log_fault(k: &Kernel, t: ThreadIdx, fault: &Fault) {
     let c = &k.threads[t].context;
     let (mnemonic, description) = if fault.vector == abi::ipc::VECTOR_SYSCALL {
         ("SYSCALL", "forwarded system call")

@@ -6,6 +6,7 @@
 use crate::mem::PAGE_SIZE;
 use crate::rp::Amount;
 use crate::state::Kernel;
+use crate::table::TaskIdx;
 use abi::syscall::Error;
 
 /// Byte `index` of an I/O bitmap frame.
@@ -22,8 +23,8 @@ unsafe fn io_byte(frame: u64, index: usize) -> u8 {
 impl Kernel {
     /// True if `task` may use `port` (the root: every port but the kernel's).
     #[allow(unsafe_code)] // reads the task's bitmap frame
-    pub fn holds_port(&self, task: usize, port: u16) -> bool {
-        if task == 0 {
+    pub fn holds_port(&self, task: TaskIdx, port: u16) -> bool {
+        if task == TaskIdx::ROOT {
             return !abi::syscall::KERNEL_PORTS
                 .iter()
                 .any(|&(lo, hi)| (lo..=hi).contains(&port));
@@ -40,8 +41,8 @@ impl Kernel {
     #[allow(unsafe_code)] // the bitmap is a raw frame
     pub fn io_grant(
         &mut self,
-        caller: usize,
-        target: usize,
+        caller: TaskIdx,
+        target: TaskIdx,
         first: u64,
         count: u64,
     ) -> Result<(), Error> {
@@ -98,7 +99,7 @@ impl Kernel {
 
     /// Frees `task`'s bitmap frames (when it dies); returns how many there were.
     #[allow(unsafe_code)] // the bitmap frames go back to the allocator
-    pub fn release_io_bitmap(&mut self, task: usize) -> u64 {
+    pub fn release_io_bitmap(&mut self, task: TaskIdx) -> u64 {
         let mut freed = 0;
         for frame in core::mem::take(&mut self.tasks[task].io_bitmap) {
             if frame != 0 {

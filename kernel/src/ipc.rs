@@ -9,7 +9,7 @@
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
 use crate::state::{Kernel, MAX_THREADS, USER_RFLAGS};
-use crate::thread::NIL;
+use crate::table::ThreadIdx;
 use crate::thread::{Fault, NEVER, State};
 use abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET,
@@ -35,7 +35,7 @@ pub fn deadline(clock: fn() -> u64, timeout: u64) -> u64 {
     }
 }
 
-fn read_struct<const N: usize>(k: &Kernel, t: usize, at: u64) -> Option<[u8; N]> {
+fn read_struct<const N: usize>(k: &Kernel, t: ThreadIdx, at: u64) -> Option<[u8; N]> {
     let mut out = [0u8; N];
     let th = &k.threads[t];
     (th.ipc_buffer != 0 && k.tasks[th.task].space.copy_from_user(at, &mut out)).then_some(out)
@@ -51,7 +51,7 @@ fn item_from(bytes: &[u8]) -> MapItem {
 
 impl Kernel {
     /// The registers of an exception message for thread `t`.
-    pub fn exception_message(&self, t: usize, fault: Fault) -> ExceptionMessage {
+    pub fn exception_message(&self, t: ThreadIdx, fault: Fault) -> ExceptionMessage {
         let th = &self.threads[t];
         let c = &th.context;
         ExceptionMessage {
@@ -86,7 +86,7 @@ impl Kernel {
     }
 
     /// Moves the message of `from` (its registers, or its fault) to `to`.
-    pub fn deliver(&mut self, from: usize, to: usize) -> Result<(), Blame> {
+    pub fn deliver(&mut self, from: ThreadIdx, to: ThreadIdx) -> Result<(), Blame> {
         let (tag, words);
         if let Some(fault) = self.threads[from].fault {
             let bytes = self.exception_message(from, fault).to_bytes();
@@ -119,7 +119,12 @@ impl Kernel {
     }
 
     /// Copies the data bytes and maps the items of a message, all checks first.
-    fn transfer_payload(&mut self, from: usize, to: usize, tag: MessageTag) -> Result<(), Blame> {
+    fn transfer_payload(
+        &mut self,
+        from: ThreadIdx,
+        to: ThreadIdx,
+        tag: MessageTag,
+    ) -> Result<(), Blame> {
         let (s, r) = (&self.threads[from], &self.threads[to]);
         let (s_space, r_space) = (self.tasks[s.task].space, self.tasks[r.task].space);
         let (s_buf, r_buf) = (s.ipc_buffer, r.ipc_buffer);
@@ -204,7 +209,7 @@ impl Kernel {
 
     /// `send`/`call` from thread `t` to `dest` (rights already checked), or an exception
     /// message if `t` has a fault pending.
-    pub fn send(&mut self, t: usize, dest: usize, call: bool, deadline: u64, poll: bool) {
+    pub fn send(&mut self, t: ThreadIdx, dest: ThreadIdx, call: bool, deadline: u64, poll: bool) {
         if let State::Receiving { from } = self.threads[dest].state
             && from.is_none_or(|f| f == t)
         {
@@ -230,7 +235,13 @@ impl Kernel {
     }
 
     /// The sender's side once its message arrived: a call now waits for the reply.
-    fn after_delivery(&mut self, sender: usize, receiver: usize, call: bool, deadline: u64) {
+    fn after_delivery(
+        &mut self,
+        sender: ThreadIdx,
+        receiver: ThreadIdx,
+        call: bool,
+        deadline: u64,
+    ) {
         if call {
             self.block(sender, State::WaitingReply { from: receiver }, deadline);
         } else {
@@ -239,7 +250,7 @@ impl Kernel {
     }
 
     /// `receive` by thread `t` (from `from` only, if given).
-    pub fn receive(&mut self, t: usize, from: Option<usize>, deadline: u64, poll: bool) {
+    pub fn receive(&mut self, t: ThreadIdx, from: Option<ThreadIdx>, deadline: u64, poll: bool) {
         // Bounded: each failed sender leaves the queue.
         for _ in 0..MAX_THREADS {
             let Some(s) = self.first_sender(t, from) else {
@@ -272,7 +283,7 @@ impl Kernel {
     }
 
     /// `reply` from thread `t` to `caller`. On success `t`'s `rax` is `Ok`.
-    pub fn reply(&mut self, t: usize, caller: usize) -> Result<(), Error> {
+    pub fn reply(&mut self, t: ThreadIdx, caller: ThreadIdx) -> Result<(), Error> {
         if self.threads[caller].state != (State::WaitingReply { from: t }) {
             return Err(Error::NotWaiting);
         }
@@ -289,7 +300,7 @@ impl Kernel {
 
     /// The handler `t` answers the exception message of `faulted`: resume (with the
     /// registers of the reply, if it carries them) or kill.
-    fn answer_fault(&mut self, t: usize, faulted: usize) -> Result<(), Error> {
+    fn answer_fault(&mut self, t: ThreadIdx, faulted: ThreadIdx) -> Result<(), Error> {
         let tag = MessageTag(self.threads[t].context.rdx);
         match tag.label() {
             REPLY_KILL => {
@@ -315,7 +326,7 @@ impl Kernel {
     }
 
     /// Loads edited registers into a thread, keeping it in user mode with IF set.
-    fn set_registers(&mut self, t: usize, r: &Registers) -> Result<(), Error> {
+    fn set_registers(&mut self, t: ThreadIdx, r: &Registers) -> Result<(), Error> {
         if r.rip >= USER_END || r.fs_base >= USER_END || r.gs_base >= USER_END {
             return Err(Error::InvalidArgument);
         }
@@ -334,7 +345,7 @@ impl Kernel {
 
     /// A fault of thread `t`: blocks it on an exception message to its handler, or to the
     /// health monitor. `false` if there is neither (the caller decides what then).
-    pub fn raise_fault(&mut self, t: usize, mut fault: Fault) -> bool {
+    pub fn raise_fault(&mut self, t: ThreadIdx, mut fault: Fault) -> bool {
         let handler = match self.thread(self.threads[t].exception_handler) {
             Ok(h) if h != t => h,
             _ => match self.thread(self.health_monitor) {
@@ -351,7 +362,7 @@ impl Kernel {
     }
 
     /// `notify_signal` (rights already checked).
-    pub fn signal(&mut self, target: usize, bits: u64) {
+    pub fn signal(&mut self, target: ThreadIdx, bits: u64) {
         let th = &mut self.threads[target];
         th.notify_bits |= bits;
         if let State::WaitingNotify { mask } = th.state
@@ -364,7 +375,7 @@ impl Kernel {
     }
 
     /// `notify_wait` by thread `t`.
-    pub fn wait_notify(&mut self, t: usize, mask: u64, deadline: u64, poll: bool) {
+    pub fn wait_notify(&mut self, t: ThreadIdx, mask: u64, deadline: u64, poll: bool) {
         let th = &mut self.threads[t];
         let got = th.notify_bits & mask;
         if got != 0 {
@@ -380,50 +391,49 @@ impl Kernel {
 }
 
 impl Kernel {
-    pub fn enqueue_sender(&mut self, receiver: usize, sender: usize) {
+    pub fn enqueue_sender(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
         let priority = self.threads[sender].priority;
         // Insert before the first queued sender of lower priority.
-        let mut prev = NIL;
+        let mut prev = None;
         let mut at = self.threads[receiver].senders;
-        while at != NIL && self.threads[at as usize].priority >= priority {
+        while let Some(a) = at
+            && self.threads[a].priority >= priority
+        {
             prev = at;
-            at = self.threads[at as usize].next_sender;
+            at = self.threads[a].next_sender;
         }
         self.threads[sender].next_sender = at;
-        if prev == NIL {
-            self.threads[receiver].senders = sender as u16;
-        } else {
-            self.threads[prev as usize].next_sender = sender as u16;
+        match prev {
+            None => self.threads[receiver].senders = Some(sender),
+            Some(p) => self.threads[p].next_sender = Some(sender),
         }
     }
 
-    pub fn unqueue_sender(&mut self, receiver: usize, sender: usize) {
-        let mut prev = NIL;
+    pub fn unqueue_sender(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
+        let mut prev = None;
         let mut at = self.threads[receiver].senders;
-        while at != NIL {
-            if at as usize == sender {
-                let next = self.threads[sender].next_sender;
-                if prev == NIL {
-                    self.threads[receiver].senders = next;
-                } else {
-                    self.threads[prev as usize].next_sender = next;
+        while let Some(a) = at {
+            if a == sender {
+                let next = self.threads[sender].next_sender.take();
+                match prev {
+                    None => self.threads[receiver].senders = next,
+                    Some(p) => self.threads[p].next_sender = next,
                 }
-                self.threads[sender].next_sender = NIL;
                 return;
             }
             prev = at;
-            at = self.threads[at as usize].next_sender;
+            at = self.threads[a].next_sender;
         }
     }
 
     /// The first queued sender to `receiver` (from `from` only, if given).
-    pub fn first_sender(&self, receiver: usize, from: Option<usize>) -> Option<usize> {
+    pub fn first_sender(&self, receiver: ThreadIdx, from: Option<ThreadIdx>) -> Option<ThreadIdx> {
         let mut at = self.threads[receiver].senders;
-        while at != NIL {
-            if from.is_none_or(|f| f == at as usize) {
-                return Some(at as usize);
+        while let Some(a) = at {
+            if from.is_none_or(|f| f == a) {
+                return Some(a);
             }
-            at = self.threads[at as usize].next_sender;
+            at = self.threads[a].next_sender;
         }
         None
     }

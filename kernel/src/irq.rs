@@ -9,7 +9,7 @@
 //! it when its window comes, which is the "latched" delivery ARINC 653 asks for.
 
 use crate::state::Kernel;
-use crate::thread::NIL;
+use crate::table::{TaskIdx, ThreadIdx};
 use abi::syscall::{Error, IRQ_LINES, KERNEL_IRQS};
 
 pub const LINES: usize = IRQ_LINES as usize;
@@ -17,7 +17,7 @@ pub const LINES: usize = IRQ_LINES as usize;
 /// The thread a line is attached to and the notification bit it sets.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Binding {
-    pub thread: u16,
+    pub thread: Option<ThreadIdx>,
     pub bit: u8,
 }
 
@@ -35,7 +35,7 @@ impl Irqs {
     pub const fn new() -> Self {
         Self {
             lines: [Binding {
-                thread: NIL,
+                thread: None,
                 bit: 0,
             }; LINES],
             unmasked: 0,
@@ -66,12 +66,12 @@ fn line_index(line: u64) -> Result<usize, Error> {
 }
 
 impl Kernel {
-    pub fn holds_irq(&self, task: usize, line: usize) -> bool {
+    pub fn holds_irq(&self, task: TaskIdx, line: usize) -> bool {
         self.tasks[task].irq_lines & (1 << line) != 0
     }
 
     /// `irq_grant` by `caller` to the descendant `target`.
-    pub fn irq_grant(&mut self, caller: usize, target: usize, line: u64) -> Result<(), Error> {
+    pub fn irq_grant(&mut self, caller: TaskIdx, target: TaskIdx, line: u64) -> Result<(), Error> {
         let line = line_index(line)?;
         if target == caller || !self.is_within(target, caller) || !self.holds_irq(caller, line) {
             return Err(Error::NotPermitted);
@@ -81,26 +81,26 @@ impl Kernel {
     }
 
     /// The line, if thread `t` has it attached.
-    fn attached(&self, t: usize, line: u64) -> Result<usize, Error> {
+    fn attached(&self, t: ThreadIdx, line: u64) -> Result<usize, Error> {
         let line = line_index(line)?;
-        if self.irqs.lines[line].thread == t as u16 {
+        if self.irqs.lines[line].thread == Some(t) {
             Ok(line)
         } else {
             Err(Error::NotPermitted)
         }
     }
 
-    pub fn irq_attach(&mut self, t: usize, line: u64, bit: u64) -> Result<(), Error> {
+    pub fn irq_attach(&mut self, t: ThreadIdx, line: u64, bit: u64) -> Result<(), Error> {
         let index = line_index(line)?;
         if bit >= 64 {
             return Err(Error::InvalidArgument);
         }
         let owner = self.irqs.lines[index].thread;
-        if !self.holds_irq(self.threads[t].task, index) || (owner != NIL && owner != t as u16) {
+        if !self.holds_irq(self.threads[t].task, index) || owner.is_some_and(|o| o != t) {
             return Err(Error::NotPermitted);
         }
         self.irqs.lines[index] = Binding {
-            thread: t as u16,
+            thread: Some(t),
             bit: bit as u8,
         };
         self.irqs.unmasked |= 1 << index;
@@ -110,7 +110,7 @@ impl Kernel {
     /// `irq_wait`: a notification wait on the line's bit.
     pub fn irq_wait(
         &mut self,
-        t: usize,
+        t: ThreadIdx,
         line: u64,
         deadline: u64,
         poll: bool,
@@ -122,27 +122,27 @@ impl Kernel {
         Ok(())
     }
 
-    pub fn irq_ack(&mut self, t: usize, line: u64) -> Result<(), Error> {
+    pub fn irq_ack(&mut self, t: ThreadIdx, line: u64) -> Result<(), Error> {
         let line = self.attached(t, line)?;
         self.irqs.unmasked |= 1 << line;
         Ok(())
     }
 
-    pub fn irq_detach(&mut self, t: usize, line: u64) -> Result<(), Error> {
+    pub fn irq_detach(&mut self, t: ThreadIdx, line: u64) -> Result<(), Error> {
         let line = self.attached(t, line)?;
         self.release_line(line);
         Ok(())
     }
 
     fn release_line(&mut self, line: usize) {
-        self.irqs.lines[line].thread = NIL;
+        self.irqs.lines[line].thread = None;
         self.irqs.unmasked &= !(1 << line);
     }
 
     /// Detaches every line of a dying thread (bounded by the number of lines).
-    pub fn release_irqs_of(&mut self, t: usize) {
+    pub fn release_irqs_of(&mut self, t: ThreadIdx) {
         for line in 0..LINES {
-            if self.irqs.lines[line].thread == t as u16 {
+            if self.irqs.lines[line].thread == Some(t) {
                 self.release_line(line);
             }
         }
@@ -155,8 +155,8 @@ impl Kernel {
         self.irqs.unmasked &= !(1 << line);
         self.irqs.applied &= !(1 << line);
         let Binding { thread, bit } = self.irqs.lines[line];
-        if thread != NIL {
-            self.signal(thread as usize, 1 << bit);
+        if let Some(thread) = thread {
+            self.signal(thread, 1 << bit);
         }
     }
 }

@@ -5,7 +5,8 @@
 //! quotas of all partitions together never exceed what the kernel reserved at boot, and
 //! exhausting one partition can never make an allocation in another fail.
 
-use crate::state::{Kernel, MAX_RPS};
+use crate::state::Kernel;
+use crate::table::{RpIdx, TaskIdx};
 use abi::syscall::Error;
 
 /// Amounts of the three kinds of kernel memory.
@@ -57,11 +58,11 @@ impl Amount {
     }
 }
 
-#[derive(Clone, Copy, Debug, Default)]
+#[derive(Clone, Copy, Debug)]
 pub struct ResourcePartition {
     pub in_use: bool,
     /// The task slot that created it (may place children in it).
-    pub owner: usize,
+    pub owner: TaskIdx,
     pub quota: Amount,
     /// Charged by objects and page tables of this partition.
     pub used: Amount,
@@ -70,7 +71,15 @@ pub struct ResourcePartition {
 }
 
 impl ResourcePartition {
-    pub fn new(owner: usize, quota: Amount) -> Self {
+    pub const FREE: Self = Self {
+        in_use: false,
+        owner: TaskIdx::ROOT,
+        quota: Amount::tasks(0),
+        used: Amount::tasks(0),
+        carved: Amount::tasks(0),
+    };
+
+    pub fn new(owner: TaskIdx, quota: Amount) -> Self {
         Self {
             in_use: true,
             owner,
@@ -99,7 +108,7 @@ impl ResourcePartition {
     }
 
     /// Moves `quota` of the free quota into a new partition owned by `owner`.
-    pub fn carve(&mut self, owner: usize, quota: Amount) -> Result<Self, Error> {
+    pub fn carve(&mut self, owner: TaskIdx, quota: Amount) -> Result<Self, Error> {
         if !quota.fits_in(self.free()) {
             return Err(Error::QuotaExceeded);
         }
@@ -110,22 +119,19 @@ impl ResourcePartition {
 
 impl Kernel {
     /// The resource partition named by user-visible number `id` (slot + 1; 0 = `task`'s).
-    pub fn resource_partition(&self, task: usize, id: u64) -> Result<usize, Error> {
+    pub fn resource_partition(&self, task: TaskIdx, id: u64) -> Result<RpIdx, Error> {
         match id {
             0 => Ok(self.tasks[task].rp),
             n => usize::try_from(n - 1)
                 .ok()
-                .filter(|&r| r < MAX_RPS && self.rps[r].in_use)
+                .and_then(|r| self.rps.slot(r))
+                .filter(|&r| self.rps[r].in_use)
                 .ok_or(Error::NoSuchObject),
         }
     }
 
-    pub fn rp_create(&mut self, caller_task: usize, quota: Amount) -> Result<usize, Error> {
-        let slot = self
-            .rps
-            .iter()
-            .position(|r| !r.in_use)
-            .ok_or(Error::OutOfResources)?;
+    pub fn rp_create(&mut self, caller_task: TaskIdx, quota: Amount) -> Result<RpIdx, Error> {
+        let slot = self.rps.find(|r| !r.in_use).ok_or(Error::OutOfResources)?;
         let own = self.tasks[caller_task].rp;
         self.rps[slot] = self.rps[own].carve(caller_task, quota)?;
         Ok(slot)
@@ -135,11 +141,12 @@ impl Kernel {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::table::Slot;
 
     #[test]
     fn charges_within_quota_only() {
         let mut rp = ResourcePartition::new(
-            0,
+            TaskIdx::ROOT,
             Amount {
                 tasks: 1,
                 threads: 2,
@@ -165,7 +172,7 @@ mod tests {
     #[test]
     fn carving_isolates_partitions() {
         let mut root = ResourcePartition::new(
-            0,
+            TaskIdx::ROOT,
             Amount {
                 tasks: 4,
                 threads: 8,
@@ -174,7 +181,7 @@ mod tests {
         );
         let mut a = root
             .carve(
-                1,
+                TaskIdx::at(1),
                 Amount {
                     tasks: 1,
                     threads: 2,
@@ -184,7 +191,7 @@ mod tests {
             .unwrap();
         let mut b = root
             .carve(
-                1,
+                TaskIdx::at(1),
                 Amount {
                     tasks: 1,
                     threads: 2,
@@ -193,7 +200,7 @@ mod tests {
             )
             .unwrap();
         assert_eq!(
-            root.carve(1, Amount::pages(81)).err(),
+            root.carve(TaskIdx::at(1), Amount::pages(81)).err(),
             Some(Error::QuotaExceeded),
             "only 80 pages left"
         );

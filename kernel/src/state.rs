@@ -13,6 +13,7 @@ use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
 use crate::rp::{Amount, ResourcePartition};
 use crate::sched::{RunQueues, TIME_PARTITIONS};
+use crate::table::{RpIdx, Slot, Table, TaskIdx, ThreadIdx};
 use crate::task::Task;
 use crate::thread::{NEVER, Thread};
 use crate::timepart::TimeTable;
@@ -21,10 +22,15 @@ use abi::syscall::{Error, MAP_MAX_PAGES, PageRights};
 
 /// The slot an object identifier names, if that slot holds a live object (`live` gives its
 /// generation) of the identifier's generation: a stale id never names a successor.
-pub(crate) fn slot_of(id: u64, live: impl Fn(usize) -> Option<u16>) -> Result<usize, Error> {
+pub(crate) fn slot_of<S: Slot, T, const N: usize>(
+    table: &Table<S, T, N>,
+    id: u64,
+    live: impl Fn(&T) -> Option<u16>,
+) -> Result<S, Error> {
     let (index, generation) = abi::syscall::split_id(id).ok_or(Error::NoSuchObject)?;
-    (live(index) == Some(generation))
-        .then_some(index)
+    let slot = table.slot(index).ok_or(Error::NoSuchObject)?;
+    (live(&table[slot]) == Some(generation))
+        .then_some(slot)
         .ok_or(Error::NoSuchObject)
 }
 
@@ -48,12 +54,12 @@ pub enum Source {
 }
 
 pub struct Kernel {
-    pub(crate) threads: [Thread; MAX_THREADS],
-    pub(crate) tasks: [Task; MAX_TASKS],
-    pub(crate) rps: [ResourcePartition; MAX_RPS],
+    pub(crate) threads: Table<ThreadIdx, Thread, MAX_THREADS>,
+    pub(crate) tasks: Table<TaskIdx, Task, MAX_TASKS>,
+    pub(crate) rps: Table<RpIdx, ResourcePartition, MAX_RPS>,
     pub(crate) run: RunQueues<MAX_THREADS>,
     /// The thread whose registers and FPU state are loaded (or were, before idling).
-    pub(crate) current: Option<usize>,
+    pub(crate) current: Option<ThreadIdx>,
     /// The active window's time partition (none until a schedule exists).
     pub(crate) active_partition: Option<u8>,
     /// Raw thread id of the root task's health monitor (0 = none).
@@ -92,15 +98,9 @@ impl Default for Kernel {
 impl Kernel {
     pub const fn new() -> Self {
         Self {
-            threads: [Thread::FREE; MAX_THREADS],
-            tasks: [Task::FREE; MAX_TASKS],
-            rps: [ResourcePartition {
-                in_use: false,
-                owner: 0,
-                quota: Amount::tasks(0),
-                used: Amount::tasks(0),
-                carved: Amount::tasks(0),
-            }; MAX_RPS],
+            threads: Table::new([Thread::FREE; MAX_THREADS]),
+            tasks: Table::new([Task::FREE; MAX_TASKS]),
+            rps: Table::new([ResourcePartition::FREE; MAX_RPS]),
             run: RunQueues::new(),
             current: None,
             active_partition: None,
@@ -122,8 +122,8 @@ impl Kernel {
     }
 
     /// The thread to run next.
-    pub fn choose(&self) -> Option<usize> {
-        self.run.choose(self.active_partition)
+    pub fn choose(&self) -> Option<ThreadIdx> {
+        self.run.choose(self.active_partition).map(ThreadIdx::at)
     }
 
     /// True if the physical range was handed to the root task at boot.
@@ -135,8 +135,8 @@ impl Kernel {
     /// everything is checked and the page tables are charged before anything changes.
     pub fn map(
         &mut self,
-        caller: usize,
-        target: usize,
+        caller: TaskIdx,
+        target: TaskIdx,
         source: Source,
         destination: u64,
         pages: u64,
@@ -187,7 +187,7 @@ impl Kernel {
     }
 
     /// Charges the page tables a map of `pages` at `at` in `task` will need.
-    pub fn charge_tables(&mut self, task: usize, at: u64, pages: u64) -> Result<(), Error> {
+    pub fn charge_tables(&mut self, task: TaskIdx, at: u64, pages: u64) -> Result<(), Error> {
         let needed = self.tasks[task].space.tables_needed(at, pages);
         if needed > crate::mem::free_frames() {
             // Cannot happen while quotas stay within the reserved pool; refuse anyway.
@@ -198,7 +198,7 @@ impl Kernel {
         Ok(())
     }
 
-    pub fn unmap(&mut self, target: usize, address: u64, pages: u64) -> Result<(), Error> {
+    pub fn unmap(&mut self, target: TaskIdx, address: u64, pages: u64) -> Result<(), Error> {
         if pages == 0 || pages > MAP_MAX_PAGES || !is_user_range(address, pages) {
             return Err(Error::InvalidArgument);
         }
@@ -210,7 +210,7 @@ impl Kernel {
 
     pub fn protect(
         &mut self,
-        target: usize,
+        target: TaskIdx,
         address: u64,
         pages: u64,
         rights: PageRights,

@@ -8,6 +8,7 @@ use crate::ipc::deadline;
 use crate::kprintln;
 use crate::rp::Amount;
 use crate::state::{Kernel, Source};
+use crate::table::{Slot, TaskIdx, ThreadIdx};
 use crate::thread::{Fault, State};
 use crate::timepart::{Schedule, Window};
 use abi::args::{self, ArgRegs};
@@ -50,7 +51,7 @@ type Handled = Result<Next, Error>;
 /// Direct calls (not a table of function pointers) let the compiler inline them.
 macro_rules! handlers {
     ($($call:ident => $handler:ident,)*) => {
-        fn dispatch(call: Call, k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+        fn dispatch(call: Call, k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
             match call {
                 $(Call::$call => $handler(k, t, r, clock),)*
             }
@@ -75,14 +76,14 @@ handlers! {
 }
 
 /// The argument registers of thread `t`.
-fn args(k: &Kernel, t: usize) -> ArgRegs {
+fn args(k: &Kernel, t: ThreadIdx) -> ArgRegs {
     let c = &k.threads[t].context;
     ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
 }
 
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
 /// ns since boot, read only by calls that need it (it costs a division).
-pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
+pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
     let task = k.threads[t].task;
     if !k.tasks[task].abilities.contains(Abilities::NATIVE_SYSCALLS) {
         let fault = Fault {
@@ -113,7 +114,7 @@ pub fn on_syscall(k: &mut Kernel, t: usize, clock: fn() -> u64) -> Outcome {
 }
 
 /// `rax` = Ok now, for calls that may block: the wake-up sets it again if the wait fails.
-fn ok_unless_changed(k: &mut Kernel, t: usize) {
+fn ok_unless_changed(k: &mut Kernel, t: ThreadIdx) {
     k.threads[t].context.rax = Error::Ok as u64;
 }
 
@@ -122,11 +123,11 @@ fn rights(bits: u64) -> Result<PageRights, Error> {
 }
 
 /// The calling thread's task.
-fn task_of(k: &Kernel, t: usize) -> usize {
+fn task_of(k: &Kernel, t: ThreadIdx) -> TaskIdx {
     k.threads[t].task
 }
 
-fn debug_write(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::DEBUG_LOG)?;
     let a = args::DebugWrite::decode(r);
@@ -143,13 +144,13 @@ fn debug_write(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn clock(k: &mut Kernel, t: usize, _: &ArgRegs, clock: Clock) -> Handled {
+fn clock(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, clock: Clock) -> Handled {
     let c = &mut k.threads[t].context;
     (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
     Ok(Next::Return)
 }
 
-fn thread_exit(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
+fn thread_exit(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, _: Clock) -> Handled {
     kprintln!(
         "kernel: thread of task {} exited",
         k.tasks[task_of(k, t)].name()
@@ -158,7 +159,7 @@ fn thread_exit(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Pending)
 }
 
-fn system_halt(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn system_halt(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::SYSTEM_HALT)?;
     let success = match args::SystemHalt::decode(r).outcome {
         0 => true,
@@ -172,12 +173,12 @@ fn system_halt(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Halt { success })
 }
 
-fn yield_now(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
-    k.run.rotate(t);
+fn yield_now(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, _: Clock) -> Handled {
+    k.run.rotate(t.position());
     Ok(Next::Return)
 }
 
-fn sleep_until(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn sleep_until(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let time = args::SleepUntil::decode(r).time;
     ok_unless_changed(k, t);
     if time > clock() {
@@ -186,7 +187,7 @@ fn sleep_until(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
     Ok(Next::Pending)
 }
 
-fn task_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
     let a = args::TaskCreate::decode(r);
@@ -213,7 +214,7 @@ fn task_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn task_kill(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn task_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
     let target = k.task(args::TaskKill::decode(r).task)?;
@@ -224,17 +225,17 @@ fn task_kill(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn task_allow_send(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn task_allow_send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
     let a = args::TaskAllowSend::decode(r);
     let from = k.controlled_task(task, a.from)?;
     let to = k.controlled_task(task, a.to)?;
-    k.tasks[from].send_to |= 1 << to;
+    k.tasks[from].send_to |= crate::task::bit(to);
     Ok(Next::Return)
 }
 
-fn thread_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn thread_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_THREAD)?;
     let a = args::ThreadCreate::decode(r);
@@ -246,7 +247,7 @@ fn thread_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn thread_start(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn thread_start(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::CREATE_THREAD)?;
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     if k.threads[target].state != State::Inactive {
@@ -256,19 +257,19 @@ fn thread_start(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn thread_suspend(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn thread_suspend(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     k.set_suspended(target, true);
     Ok(Next::Return)
 }
 
-fn thread_resume(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn thread_resume(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     k.set_suspended(target, false);
     Ok(Next::Return)
 }
 
-fn thread_kill(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn thread_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
     k.kill_thread(target);
     Ok(if target == t {
@@ -278,14 +279,14 @@ fn thread_kill(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     })
 }
 
-fn thread_set(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn thread_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let a = args::ThreadSet::decode(r);
     let target = k.controlled_thread(t, a.thread)?;
     set_attribute(k, task_of(k, t), target, a.attribute, a.value)?;
     Ok(Next::Return)
 }
 
-fn thread_self(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
+fn thread_self(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, _: Clock) -> Handled {
     k.threads[t].context.rdi = k.thread_id(t);
     k.threads[t].context.rsi = k.task_id(task_of(k, t));
     Ok(Next::Return)
@@ -294,7 +295,7 @@ fn thread_self(k: &mut Kernel, t: usize, _: &ArgRegs, _: Clock) -> Handled {
 /// `map` and `map_physical`, which differ only in where the frames come from.
 fn map_from(
     k: &mut Kernel,
-    t: usize,
+    t: ThreadIdx,
     r: &ArgRegs,
     need: Abilities,
     from: fn(u64) -> Source,
@@ -314,15 +315,15 @@ fn map_from(
     Ok(Next::Return)
 }
 
-fn map(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn map(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     map_from(k, t, r, Abilities::MAP, Source::Virtual)
 }
 
-fn map_physical(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn map_physical(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     map_from(k, t, r, Abilities::PHYSICAL_MEMORY, Source::Physical)
 }
 
-fn unmap(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn unmap(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::MAP)?;
     let a = args::Unmap::decode(r);
@@ -331,7 +332,7 @@ fn unmap(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn protect(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn protect(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::MAP)?;
     let a = args::Protect::decode(r);
@@ -341,7 +342,13 @@ fn protect(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
 }
 
 /// `send` and `call` (which also waits for the reply); the IPC path sets `rax`.
-fn send_message(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock, and_wait: bool) -> Handled {
+fn send_message(
+    k: &mut Kernel,
+    t: ThreadIdx,
+    r: &ArgRegs,
+    clock: Clock,
+    and_wait: bool,
+) -> Handled {
     let a = args::Ipc::decode(r);
     let dest = k.thread(a.peer)?;
     if !k.may_send(task_of(k, t), k.threads[dest].task) {
@@ -360,15 +367,15 @@ fn send_message(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock, and_wait: b
     Ok(Next::Pending)
 }
 
-fn send(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     send_message(k, t, r, clock, false)
 }
 
-fn ipc_call(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn ipc_call(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     send_message(k, t, r, clock, true)
 }
 
-fn receive(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn receive(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let a = args::Ipc::decode(r);
     let from = match a.peer {
         0 => None,
@@ -379,7 +386,7 @@ fn receive(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
 }
 
 /// The reply half of `reply` and `reply_wait` (no caller to answer when the peer is 0).
-fn answer_caller(k: &mut Kernel, t: usize, a: &args::Ipc) -> Result<(), Error> {
+fn answer_caller(k: &mut Kernel, t: ThreadIdx, a: &args::Ipc) -> Result<(), Error> {
     if !MessageTag(a.tag).is_valid() {
         return Err(Error::InvalidArgument);
     }
@@ -390,19 +397,19 @@ fn answer_caller(k: &mut Kernel, t: usize, a: &args::Ipc) -> Result<(), Error> {
     Ok(())
 }
 
-fn reply_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn reply_wait(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let a = args::Ipc::decode(r);
     answer_caller(k, t, &a)?;
     k.receive(t, None, deadline(clock, a.timeout), a.timeout == 0);
     Ok(Next::Pending)
 }
 
-fn reply(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn reply(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     answer_caller(k, t, &args::Ipc::decode(r))?;
     Ok(Next::Return)
 }
 
-fn notify_signal(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn notify_signal(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let a = args::NotifySignal::decode(r);
     let target = k.thread(a.thread)?;
     if !k.may_send(task_of(k, t), k.threads[target].task) {
@@ -412,13 +419,13 @@ fn notify_signal(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn notify_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn notify_wait(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let a = args::NotifyWait::decode(r);
     k.wait_notify(t, a.mask, deadline(clock, a.timeout), a.timeout == 0);
     Ok(Next::Pending)
 }
 
-fn rp_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn rp_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::PARTITION_CONTROL)?;
     let a = args::RpCreate::decode(r);
@@ -430,11 +437,11 @@ fn rp_create(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
             pages: a.pages,
         },
     )?;
-    k.threads[t].context.rdi = rp as u64 + 1;
+    k.threads[t].context.rdi = rp.position() as u64 + 1;
     Ok(Next::Return)
 }
 
-fn rp_info(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn rp_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let rp = k.resource_partition(task_of(k, t), args::RpInfo::decode(r).rp)?;
     let r = k.rps[rp];
     let c = &mut k.threads[t].context;
@@ -447,19 +454,19 @@ fn rp_info(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn set_health_monitor(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn set_health_monitor(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::PARTITION_CONTROL)?;
     let id = args::SetHealthMonitor::decode(r).thread;
     let monitor = k.thread(id)?;
-    if task != 0 || k.threads[monitor].task != 0 {
+    if task != TaskIdx::ROOT || k.threads[monitor].task != TaskIdx::ROOT {
         return Err(Error::NotPermitted);
     }
     k.health_monitor = id;
     Ok(Next::Return)
 }
 
-fn schedule_set(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn schedule_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::SCHEDULING)?;
     let a = args::ScheduleSet::decode(r);
@@ -491,7 +498,7 @@ fn schedule_set(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn schedule_switch(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn schedule_switch(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let now = clock();
     k.require(task_of(k, t), Abilities::SCHEDULING)?;
     let slot = args::ScheduleSwitch::decode(r).slot;
@@ -503,7 +510,7 @@ fn schedule_switch(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handl
     }
 }
 
-fn partition_info(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn partition_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let now = clock();
     let tp = u8::try_from(args::PartitionInfo::decode(r).partition)
         .ok()
@@ -522,7 +529,7 @@ fn partition_info(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handle
     Ok(Next::Return)
 }
 
-fn io_grant(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn io_grant(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::IO_PORTS)?;
     let a = args::IoGrant::decode(r);
@@ -531,7 +538,7 @@ fn io_grant(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn irq_grant(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn irq_grant(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::IRQ)?;
     let a = args::IrqGrant::decode(r);
@@ -540,7 +547,7 @@ fn irq_grant(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn irq_attach(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn irq_attach(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
     let a = args::IrqAttach::decode(r);
     ok_unless_changed(k, t);
@@ -548,7 +555,7 @@ fn irq_attach(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Pending)
 }
 
-fn irq_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
+fn irq_wait(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
     let a = args::IrqWait::decode(r);
     ok_unless_changed(k, t);
@@ -556,14 +563,14 @@ fn irq_wait(k: &mut Kernel, t: usize, r: &ArgRegs, clock: Clock) -> Handled {
     Ok(Next::Pending)
 }
 
-fn irq_ack(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn irq_ack(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
     ok_unless_changed(k, t);
     k.irq_ack(t, args::IrqLine::decode(r).line)?;
     Ok(Next::Pending)
 }
 
-fn irq_detach(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
+fn irq_detach(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::IRQ)?;
     ok_unless_changed(k, t);
     k.irq_detach(t, args::IrqLine::decode(r).line)?;
@@ -572,8 +579,8 @@ fn irq_detach(k: &mut Kernel, t: usize, r: &ArgRegs, _: Clock) -> Handled {
 
 fn set_attribute(
     k: &mut Kernel,
-    caller_task: usize,
-    target: usize,
+    caller_task: TaskIdx,
+    target: ThreadIdx,
     attribute: u64,
     value: u64,
 ) -> Result<(), Error> {

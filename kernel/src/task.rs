@@ -3,7 +3,13 @@
 use crate::mem::paging::{AddressSpace, MapError};
 use crate::mem::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
 use crate::rp::Amount;
-use crate::state::{Kernel, MAX_TASKS, MAX_THREADS, slot_of};
+use crate::state::{Kernel, MAX_TASKS, slot_of};
+use crate::table::{RpIdx, Slot, TaskIdx, ThreadIdx};
+
+/// `task`'s bit in the `send_to` masks.
+pub(crate) fn bit(task: TaskIdx) -> u64 {
+    1 << task.position()
+}
 use abi::root::{PhysRegion, ROOT_INFO_MAGIC, ROOT_INFO_MAX_REGIONS, ROOT_INFO_VERSION, RootInfo};
 use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
@@ -17,11 +23,11 @@ pub struct Task {
     pub generation: u16,
     pub name: [u8; 16],
     pub name_len: u8,
-    pub parent: Option<usize>,
+    pub parent: Option<TaskIdx>,
     pub abilities: Abilities,
     pub mcp: u8,
     /// Resource partition slot it belongs to and is charged to.
-    pub rp: usize,
+    pub rp: RpIdx,
     pub space: AddressSpace,
     /// Bit i set: threads of this task may send to threads of task slot i.
     pub send_to: u64,
@@ -43,7 +49,7 @@ impl Task {
         parent: None,
         abilities: Abilities::empty(),
         mcp: 0,
-        rp: 0,
+        rp: RpIdx::ROOT,
         space: AddressSpace::NONE,
         send_to: 0,
         pages_charged: 0,
@@ -158,20 +164,22 @@ pub fn create_root(
 
     k.user_memory_count = info.region_count as usize;
     k.user_memory = info.regions;
-    k.rps[0] = ResourcePartition::new(
-        0,
+    k.rps[RpIdx::ROOT] = ResourcePartition::new(
+        TaskIdx::ROOT,
         Amount {
             tasks: MAX_TASKS as u64,
             threads: MAX_THREADS as u64,
             pages: info.kernel_pages,
         },
     );
-    k.rps[0].charge(Amount::tasks(1)).expect("fresh quota");
+    k.rps[RpIdx::ROOT]
+        .charge(Amount::tasks(1))
+        .expect("fresh quota");
     let mut task = Task {
         in_use: true,
         abilities: Abilities::all(),
         mcp: MAX_PRIORITY,
-        rp: 0,
+        rp: RpIdx::ROOT,
         space,
         send_to: 1,
         irq_lines: crate::irq::root_lines(),
@@ -179,10 +187,10 @@ pub fn create_root(
     };
     task.name[..5].copy_from_slice(b"syssw");
     task.name_len = 5;
-    k.tasks[0] = task;
+    k.tasks[TaskIdx::ROOT] = task;
     let thread = k
         .create_thread(
-            0,
+            TaskIdx::ROOT,
             entry,
             ROOT_STACK_TOP - 8,
             ROOT_PRIORITY,
@@ -197,18 +205,16 @@ pub fn create_root(
 }
 
 impl Kernel {
-    pub fn task_id(&self, t: usize) -> u64 {
-        make_id(t, self.tasks[t].generation)
+    pub fn task_id(&self, t: TaskIdx) -> u64 {
+        make_id(t.position(), self.tasks[t].generation)
     }
 
-    pub fn task(&self, id: u64) -> Result<usize, Error> {
-        slot_of(id, |i| {
-            self.tasks.get(i).filter(|t| t.in_use).map(|t| t.generation)
-        })
+    pub fn task(&self, id: u64) -> Result<TaskIdx, Error> {
+        slot_of(&self.tasks, id, |t| t.in_use.then_some(t.generation))
     }
 
     /// True if `task` is `ancestor` or one of its descendants.
-    pub fn is_within(&self, task: usize, ancestor: usize) -> bool {
+    pub fn is_within(&self, task: TaskIdx, ancestor: TaskIdx) -> bool {
         let mut at = Some(task);
         // The tree has at most MAX_TASKS levels.
         for _ in 0..MAX_TASKS {
@@ -222,7 +228,7 @@ impl Kernel {
     }
 
     /// The task named by `id` (0 = `caller`'s own), if the caller controls it.
-    pub fn controlled_task(&self, caller: usize, id: u64) -> Result<usize, Error> {
+    pub fn controlled_task(&self, caller: TaskIdx, id: u64) -> Result<TaskIdx, Error> {
         let task = if id == 0 { caller } else { self.task(id)? };
         if self.is_within(task, caller) {
             Ok(task)
@@ -231,11 +237,11 @@ impl Kernel {
         }
     }
 
-    pub fn may_send(&self, from_task: usize, to_task: usize) -> bool {
-        self.tasks[from_task].send_to & (1 << to_task) != 0
+    pub fn may_send(&self, from_task: TaskIdx, to_task: TaskIdx) -> bool {
+        self.tasks[from_task].send_to & bit(to_task) != 0
     }
 
-    pub fn require(&self, task: usize, ability: Abilities) -> Result<(), Error> {
+    pub fn require(&self, task: TaskIdx, ability: Abilities) -> Result<(), Error> {
         if self.tasks[task].abilities.contains(ability) {
             Ok(())
         } else {
@@ -246,12 +252,12 @@ impl Kernel {
     /// Creates a child task of `parent`. Checks abilities ⊆ parent's and MCP ≤ parent's.
     pub fn create_task(
         &mut self,
-        parent: usize,
+        parent: TaskIdx,
         abilities: Abilities,
         mcp: u8,
-        rp: usize,
+        rp: RpIdx,
         name: &str,
-    ) -> Result<usize, Error> {
+    ) -> Result<TaskIdx, Error> {
         let p = &self.tasks[parent];
         if !p.abilities.contains(abilities) {
             return Err(Error::AbilityDenied);
@@ -265,11 +271,7 @@ impl Kernel {
         if !self.rps[rp].in_use {
             return Err(Error::NoSuchObject);
         }
-        let slot = self
-            .tasks
-            .iter()
-            .position(|t| !t.in_use)
-            .ok_or(Error::QuotaExceeded)?;
+        let slot = self.tasks.find(|t| !t.in_use).ok_or(Error::QuotaExceeded)?;
         let cost = Amount {
             tasks: 1,
             threads: 0,
@@ -290,29 +292,27 @@ impl Kernel {
             rp,
             space,
             // Itself and its parent; the parent may send to it.
-            send_to: (1 << slot) | (1 << parent),
+            send_to: bit(slot) | bit(parent),
             pages_charged: 1,
             ..Task::FREE
         };
         task.name[..name.len()].copy_from_slice(name.as_bytes());
         task.name_len = name.len() as u8;
         self.tasks[slot] = task;
-        self.tasks[parent].send_to |= 1 << slot;
+        self.tasks[parent].send_to |= bit(slot);
         Ok(slot)
     }
 
     /// Destroys `task` and its whole subtree: threads, address spaces, send rights.
-    pub fn destroy_task(&mut self, task: usize) {
+    pub fn destroy_task(&mut self, task: TaskIdx) {
         // Children first (bounded: each round removes one task).
         for _ in 0..MAX_TASKS {
-            let Some(child) = (0..MAX_TASKS)
-                .find(|&c| self.tasks[c].in_use && self.tasks[c].parent == Some(task))
-            else {
+            let Some(child) = self.tasks.find(|c| c.in_use && c.parent == Some(task)) else {
                 break;
             };
             self.destroy_task(child);
         }
-        for t in 0..MAX_THREADS {
+        for t in ThreadIdx::all() {
             if !self.threads[t].is_free() && self.threads[t].task == task {
                 self.kill_thread(t);
             }
@@ -325,8 +325,8 @@ impl Kernel {
             threads: 0,
             pages: self.tasks[task].pages_charged,
         });
-        for other in self.tasks.iter_mut() {
-            other.send_to &= !(1 << task);
+        for (_, other) in self.tasks.iter_mut() {
+            other.send_to &= !bit(task);
         }
         let generation = self.tasks[task].generation.wrapping_add(1);
         self.tasks[task] = Task {

@@ -3,7 +3,8 @@
 use crate::arch::idt::TrapFrame;
 use crate::rp::Amount;
 use crate::sched::TIME_PARTITIONS;
-use crate::state::{Kernel, MAX_THREADS, USER_CS, USER_RFLAGS, USER_SS, slot_of};
+use crate::state::{Kernel, USER_CS, USER_RFLAGS, USER_SS, slot_of};
+use crate::table::{Slot, TaskIdx, ThreadIdx};
 use abi::syscall::{Error, USER_END, make_id};
 
 /// No thread (end of an intrusive list).
@@ -20,14 +21,14 @@ pub enum State {
     Ready,
     /// Queued on `to`'s send queue; a `call` (or an exception) then waits for the reply.
     Sending {
-        to: usize,
+        to: ThreadIdx,
         call: bool,
     },
     WaitingReply {
-        from: usize,
+        from: ThreadIdx,
     },
     Receiving {
-        from: Option<usize>,
+        from: Option<ThreadIdx>,
     },
     WaitingNotify {
         mask: u64,
@@ -66,7 +67,7 @@ impl FpuState {
 pub struct Thread {
     pub state: State,
     pub generation: u16,
-    pub task: usize,
+    pub task: TaskIdx,
     pub priority: u8,
     pub time_partition: u8,
     pub suspended: bool,
@@ -82,9 +83,9 @@ pub struct Thread {
     pub deadline: u64,
     pub fault: Option<Fault>,
     /// Head of the queue of threads waiting to send to this one (by priority, then FIFO).
-    pub senders: u16,
+    pub senders: Option<ThreadIdx>,
     /// Link in the send queue this thread waits in.
-    pub next_sender: u16,
+    pub next_sender: Option<ThreadIdx>,
     pub notify_bits: u64,
 }
 
@@ -117,7 +118,7 @@ impl Thread {
     pub const FREE: Self = Self {
         state: State::Free,
         generation: 0,
-        task: 0,
+        task: TaskIdx::ROOT,
         priority: 0,
         time_partition: 0,
         suspended: false,
@@ -129,8 +130,8 @@ impl Thread {
         ipc_buffer: 0,
         deadline: NEVER,
         fault: None,
-        senders: NIL,
-        next_sender: NIL,
+        senders: None,
+        next_sender: None,
         notify_bits: 0,
     };
 
@@ -145,21 +146,18 @@ impl Thread {
 }
 
 impl Kernel {
-    pub fn thread_id(&self, t: usize) -> u64 {
-        make_id(t, self.threads[t].generation)
+    pub fn thread_id(&self, t: ThreadIdx) -> u64 {
+        make_id(t.position(), self.threads[t].generation)
     }
 
-    pub fn thread(&self, id: u64) -> Result<usize, Error> {
-        slot_of(id, |i| {
-            self.threads
-                .get(i)
-                .filter(|t| !t.is_free())
-                .map(|t| t.generation)
+    pub fn thread(&self, id: u64) -> Result<ThreadIdx, Error> {
+        slot_of(&self.threads, id, |t| {
+            (!t.is_free()).then_some(t.generation)
         })
     }
 
     /// The thread named by `id` (0 = `caller_thread`), if the caller's task controls it.
-    pub fn controlled_thread(&self, caller_thread: usize, id: u64) -> Result<usize, Error> {
+    pub fn controlled_thread(&self, caller_thread: ThreadIdx, id: u64) -> Result<ThreadIdx, Error> {
         let thread = if id == 0 {
             caller_thread
         } else {
@@ -173,22 +171,23 @@ impl Kernel {
     }
 
     /// Changes a thread's state and keeps the run queues consistent with it.
-    pub fn set_state(&mut self, t: usize, state: State) {
+    pub fn set_state(&mut self, t: ThreadIdx, state: State) {
         self.threads[t].state = state;
         self.requeue(t);
     }
 
-    fn requeue(&mut self, t: usize) {
+    fn requeue(&mut self, t: ThreadIdx) {
         let th = &self.threads[t];
         if th.is_runnable() {
-            self.run.enqueue(t, th.priority, th.time_partition);
+            self.run
+                .enqueue(t.position(), th.priority, th.time_partition);
         } else {
-            self.run.remove(t);
+            self.run.remove(t.position());
         }
     }
 
     /// Ends a blocking call of `t` with `result` in its `rax` and makes it ready.
-    pub fn wake(&mut self, t: usize, result: Error) {
+    pub fn wake(&mut self, t: ThreadIdx, result: Error) {
         let th = &mut self.threads[t];
         th.context.rax = result as u64;
         th.deadline = NEVER;
@@ -197,7 +196,7 @@ impl Kernel {
     }
 
     /// Blocks `t` in `state` until `deadline` (absolute ns; [`NEVER`] for none).
-    pub fn block(&mut self, t: usize, state: State, deadline: u64) {
+    pub fn block(&mut self, t: ThreadIdx, state: State, deadline: u64) {
         self.threads[t].deadline = deadline;
         if deadline < self.next_deadline {
             self.next_deadline = deadline;
@@ -210,13 +209,13 @@ impl Kernel {
     /// `rdi` = `arg`.
     pub fn create_thread(
         &mut self,
-        task: usize,
+        task: TaskIdx,
         entry: u64,
         stack: u64,
         priority: u8,
         time_partition: u8,
         arg: u64,
-    ) -> Result<usize, Error> {
+    ) -> Result<ThreadIdx, Error> {
         if priority > self.tasks[task].mcp {
             return Err(Error::McpExceeded);
         }
@@ -225,8 +224,7 @@ impl Kernel {
         }
         let slot = self
             .threads
-            .iter()
-            .position(|t| t.is_free())
+            .find(|t| t.is_free())
             .ok_or(Error::QuotaExceeded)?;
         self.rps[self.tasks[task].rp].charge(Amount::threads(1))?;
         let generation = self.threads[slot].generation;
@@ -253,7 +251,7 @@ impl Kernel {
 
     /// Destroys a thread: whoever waits on it gets `PeerGone`, its slot is freed and its
     /// quota returned.
-    pub fn kill_thread(&mut self, t: usize) {
+    pub fn kill_thread(&mut self, t: ThreadIdx) {
         if self.threads[t].is_free() {
             return;
         }
@@ -261,11 +259,11 @@ impl Kernel {
         if let State::Sending { to, .. } = self.threads[t].state {
             self.unqueue_sender(to, t);
         }
-        self.run.remove(t);
+        self.run.remove(t.position());
         self.release_irqs_of(t);
         let id = self.thread_id(t);
         // Everyone waiting for it: its senders, its callers, receivers waiting on it.
-        for other in 0..MAX_THREADS {
+        for other in ThreadIdx::all() {
             if other == t {
                 continue;
             }
@@ -304,26 +302,26 @@ impl Kernel {
         };
     }
 
-    pub fn set_suspended(&mut self, t: usize, suspended: bool) {
+    pub fn set_suspended(&mut self, t: ThreadIdx, suspended: bool) {
         self.threads[t].suspended = suspended;
         self.requeue(t);
     }
 
-    pub fn set_priority(&mut self, t: usize, priority: u8) -> Result<(), Error> {
+    pub fn set_priority(&mut self, t: ThreadIdx, priority: u8) -> Result<(), Error> {
         if priority > self.tasks[self.threads[t].task].mcp {
             return Err(Error::McpExceeded);
         }
-        self.run.remove(t);
+        self.run.remove(t.position());
         self.threads[t].priority = priority;
         self.requeue(t);
         Ok(())
     }
 
-    pub fn set_time_partition(&mut self, t: usize, partition: u8) -> Result<(), Error> {
+    pub fn set_time_partition(&mut self, t: ThreadIdx, partition: u8) -> Result<(), Error> {
         if partition as usize >= TIME_PARTITIONS {
             return Err(Error::InvalidArgument);
         }
-        self.run.remove(t);
+        self.run.remove(t.position());
         self.threads[t].time_partition = partition;
         self.requeue(t);
         Ok(())
@@ -333,7 +331,7 @@ impl Kernel {
     /// the next deadline. Bounded by the thread table.
     pub fn expire_timeouts(&mut self, now: u64) {
         let mut next = NEVER;
-        for t in 0..MAX_THREADS {
+        for t in ThreadIdx::all() {
             let deadline = self.threads[t].deadline;
             if deadline == NEVER {
                 continue;
@@ -349,7 +347,7 @@ impl Kernel {
     }
 
     /// Ends whatever `t` waits for with `error` (timeout or peer gone).
-    pub fn abort_wait(&mut self, t: usize, error: Error) {
+    pub fn abort_wait(&mut self, t: ThreadIdx, error: Error) {
         match self.threads[t].state {
             State::Sending { to, .. } => {
                 self.unqueue_sender(to, t);

@@ -15,6 +15,7 @@ use super::idt::TrapFrame;
 use super::stack::{KERNEL_STACK, KERNEL_STACK_SIZE};
 use crate::state::Kernel;
 use crate::syscall::Outcome;
+use crate::table::{TaskIdx, ThreadIdx};
 use crate::{fault, qemu, time};
 use core::arch::naked_asm;
 use core::sync::atomic::{AtomicBool, Ordering};
@@ -186,7 +187,7 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
     }
 }
 
-fn switch_to(k: &mut Kernel, next: usize) {
+fn switch_to(k: &mut Kernel, next: ThreadIdx) {
     if k.current != Some(next) || k.reload_bases {
         if k.current != Some(next) {
             if let Some(previous) = k.current {
@@ -208,7 +209,7 @@ fn switch_to(k: &mut Kernel, next: usize) {
 }
 
 /// Puts `task`'s I/O bitmap into the TSS, copying 8 KiB only if another task's is there.
-fn load_io_permissions(k: &mut Kernel, task: usize) {
+fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
     let id = k.task_id(task);
     if k.io_loaded == id {
         return;

@@ -6,6 +6,7 @@ use crate::mem::{PAGE_SIZE, test_arena};
 use crate::rp::{Amount, ResourcePartition};
 use crate::state::{Kernel, Source};
 use crate::syscall::{Outcome, on_syscall};
+use crate::table::{RpIdx, Slot, TaskIdx, ThreadIdx};
 use crate::task::Task;
 use crate::thread::{Fault, State};
 use abi::ipc::*;
@@ -19,20 +20,21 @@ struct Fixture {
 }
 
 const BUFFER_AT: u64 = 0x10_0000;
+const ROOT: TaskIdx = TaskIdx::ROOT;
 
 impl Fixture {
     fn new() -> Self {
         let arena = test_arena::init();
         let mut k = Box::new(Kernel::new());
-        k.rps[0] = ResourcePartition::new(
-            0,
+        k.rps[RpIdx::ROOT] = ResourcePartition::new(
+            ROOT,
             Amount {
                 tasks: 64,
                 threads: 256,
                 pages: 1000,
             },
         );
-        k.rps[0].charge(Amount::tasks(1)).unwrap();
+        k.rps[RpIdx::ROOT].charge(Amount::tasks(1)).unwrap();
         let mut root = Task {
             in_use: true,
             abilities: Abilities::all(),
@@ -44,7 +46,7 @@ impl Fixture {
         };
         root.name[..4].copy_from_slice(b"root");
         root.name_len = 4;
-        k.tasks[0] = root;
+        k.tasks[ROOT] = root;
         k.user_memory[0] = PhysRegion {
             start: test_arena::USER_BASE,
             pages: test_arena::FRAMES / 2,
@@ -58,13 +60,13 @@ impl Fixture {
     }
 
     /// A started thread of `task` with an IPC buffer (2 pages at BUFFER_AT + 16 KiB * n).
-    fn thread(&mut self, task: usize, priority: u8) -> usize {
+    fn thread(&mut self, task: TaskIdx, priority: u8) -> ThreadIdx {
         let t = self
             .k
             .create_thread(task, 0x1000, 0x2000, priority, 0, 0)
             .unwrap();
         self.k.set_state(t, State::Ready);
-        let at = BUFFER_AT + t as u64 * 0x4000;
+        let at = BUFFER_AT + t.position() as u64 * 0x4000;
         if self.k.tasks[task].space.translate(at).is_none() {
             self.give(task, at, 2, PageRights::WRITE);
         }
@@ -73,22 +75,22 @@ impl Fixture {
     }
 
     /// Maps `pages` fresh user frames into `task` at `at`.
-    fn give(&mut self, task: usize, at: u64, pages: u64, rights: PageRights) {
+    fn give(&mut self, task: TaskIdx, at: u64, pages: u64, rights: PageRights) {
         let frame = self.next_user_frame;
         self.next_user_frame += pages * PAGE_SIZE;
         self.k
-            .map(0, task, Source::Physical(frame), at, pages, rights)
+            .map(ROOT, task, Source::Physical(frame), at, pages, rights)
             .unwrap();
     }
 
-    fn task(&mut self, parent: usize, abilities: Abilities, mcp: u8) -> usize {
+    fn task(&mut self, parent: TaskIdx, abilities: Abilities, mcp: u8) -> TaskIdx {
         self.k
             .create_task(parent, abilities, mcp, self.k.tasks[parent].rp, "t")
             .unwrap()
     }
 
     /// Thread `t` makes system call `call`; returns `rax` (meaningful unless it blocked).
-    fn sys(&mut self, t: usize, call: Call, a: [u64; 6]) -> u64 {
+    fn sys(&mut self, t: ThreadIdx, call: Call, a: [u64; 6]) -> u64 {
         let c = &mut self.k.threads[t].context;
         c.rax = call as u64;
         [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
@@ -96,16 +98,16 @@ impl Fixture {
         self.k.threads[t].context.rax
     }
 
-    fn id(&self, t: usize) -> u64 {
+    fn id(&self, t: ThreadIdx) -> u64 {
         self.k.thread_id(t)
     }
 
-    fn write(&self, t: usize, at: u64, data: &[u8]) {
+    fn write(&self, t: ThreadIdx, at: u64, data: &[u8]) {
         let task = self.k.threads[t].task;
         assert!(self.k.tasks[task].space.copy_to_user(at, data));
     }
 
-    fn read(&self, t: usize, at: u64, len: usize) -> Vec<u8> {
+    fn read(&self, t: ThreadIdx, at: u64, len: usize) -> Vec<u8> {
         let task = self.k.threads[t].task;
         let mut out = vec![0; len];
         assert!(self.k.tasks[task].space.copy_from_user(at, &mut out));
@@ -122,8 +124,8 @@ fn err(e: Error) -> u64 {
 #[test]
 fn abilities_and_mcp_bound_children() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
-    let weak = f.task(0, Abilities::DEBUG_LOG | Abilities::NATIVE_SYSCALLS, 100);
+    let root = f.thread(ROOT, 200);
+    let weak = f.task(ROOT, Abilities::DEBUG_LOG | Abilities::NATIVE_SYSCALLS, 100);
     let w = f.thread(weak, 50);
     // More abilities than the parent has.
     let bits = (Abilities::DEBUG_LOG | Abilities::MAP).bits();
@@ -169,7 +171,7 @@ fn abilities_and_mcp_bound_children() {
 }
 
 /// Writes a one-byte task name into the root's buffer; returns its address.
-fn root_name(f: &mut Fixture, root: usize) -> u64 {
+fn root_name(f: &mut Fixture, root: ThreadIdx) -> u64 {
     let at = f.k.threads[root].ipc_buffer;
     f.write(root, at, b"c");
     at
@@ -178,7 +180,7 @@ fn root_name(f: &mut Fixture, root: usize) -> u64 {
 #[test]
 fn thread_lifecycle_and_stale_ids() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
+    let root = f.thread(ROOT, 200);
     assert_eq!(
         f.sys(root, Call::ThreadCreate, [0, 0x1000, 0x2000, 10, 7, 0]),
         OK
@@ -192,14 +194,14 @@ fn thread_lifecycle_and_stale_ids() {
         f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]),
         err(Error::InvalidArgument)
     );
-    assert!(f.k.run.is_queued(t));
+    assert!(f.k.run.is_queued(t.position()));
     assert_eq!(f.sys(root, Call::ThreadSuspend, [id, 0, 0, 0, 0, 0]), OK);
-    assert!(!f.k.run.is_queued(t));
+    assert!(!f.k.run.is_queued(t.position()));
     assert_eq!(f.sys(root, Call::ThreadResume, [id, 0, 0, 0, 0, 0]), OK);
-    assert!(f.k.run.is_queued(t));
-    let used = f.k.rps[0].used.threads;
+    assert!(f.k.run.is_queued(t.position()));
+    let used = f.k.rps[RpIdx::ROOT].used.threads;
     assert_eq!(f.sys(root, Call::ThreadKill, [id, 0, 0, 0, 0, 0]), OK);
-    assert_eq!(f.k.rps[0].used.threads, used - 1);
+    assert_eq!(f.k.rps[RpIdx::ROOT].used.threads, used - 1);
     assert_eq!(
         f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]),
         err(Error::NoSuchObject)
@@ -213,7 +215,7 @@ fn thread_lifecycle_and_stale_ids() {
 #[test]
 fn exhausting_one_partition_leaves_the_other_working() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
+    let root = f.thread(ROOT, 200);
     let quota = |threads, pages| [2, threads, pages, 0, 0, 0];
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
     let a = f.k.threads[root].context.rdi;
@@ -261,19 +263,19 @@ fn exhausting_one_partition_leaves_the_other_working() {
     assert!(f.k.tasks[itb].space.translate(0x1000).is_some());
     // Killing A returns everything.
     assert_eq!(f.sys(root, Call::TaskKill, [ta, 0, 0, 0, 0, 0]), OK);
-    let rp_a = a as usize - 1;
+    let rp_a = f.k.rps.slot(a as usize - 1).unwrap();
     assert_eq!(f.k.rps[rp_a].used, Amount::default());
 }
 
 #[test]
 fn map_protect_unmap_rules() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
-    let child = f.task(0, Abilities::all(), 100);
+    let root = f.thread(ROOT, 200);
+    let child = f.task(ROOT, Abilities::all(), 100);
     let cid = f.k.task_id(child);
     let ro = PageRights::empty().bits();
     let rw = PageRights::WRITE.bits();
-    f.give(0, 0x50_0000, 2, PageRights::empty());
+    f.give(ROOT, 0x50_0000, 2, PageRights::empty());
     // More rights than the source has.
     assert_eq!(
         f.sys(root, Call::Map, [cid, 0x50_0000, 0x60_0000, 2, rw, 0]),
@@ -314,7 +316,7 @@ fn map_protect_unmap_rules() {
         err(Error::BadAddress)
     );
     // Protect only removes rights.
-    f.give(0, 0x51_0000, 1, PageRights::WRITE);
+    f.give(ROOT, 0x51_0000, 1, PageRights::WRITE);
     assert_eq!(
         f.sys(
             root,
@@ -332,13 +334,13 @@ fn map_protect_unmap_rules() {
     );
     assert_eq!(f.sys(root, Call::Protect, [0, 0x51_0000, 1, ro, 0, 0]), OK);
     assert_eq!(
-        f.k.tasks[0].space.translate(0x51_0000).unwrap().1,
+        f.k.tasks[ROOT].space.translate(0x51_0000).unwrap().1,
         PageRights::empty()
     );
     assert_eq!(f.sys(root, Call::Unmap, [cid, 0x60_0000, 2, 0, 0, 0]), OK);
     assert_eq!(f.k.tasks[child].space.translate(0x60_0000), None);
     // No MAP ability, no map.
-    let weak = f.task(0, Abilities::NATIVE_SYSCALLS, 10);
+    let weak = f.task(ROOT, Abilities::NATIVE_SYSCALLS, 10);
     let w = f.thread(weak, 5);
     assert_eq!(
         f.sys(w, Call::Unmap, [0, 0x60_0000, 1, 0, 0, 0]),
@@ -349,8 +351,8 @@ fn map_protect_unmap_rules() {
 #[test]
 fn call_reply_with_data_and_words() {
     let mut f = Fixture::new();
-    let client = f.thread(0, 100);
-    let server_task = f.task(0, Abilities::all(), 200);
+    let client = f.thread(ROOT, 100);
+    let server_task = f.task(ROOT, Abilities::all(), 200);
     let server = f.thread(server_task, 150);
     // The server waits first.
     f.sys(server, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
@@ -404,9 +406,12 @@ fn call_reply_with_data_and_words() {
 #[test]
 fn senders_queue_by_priority_then_fifo() {
     let mut f = Fixture::new();
-    let receiver = f.thread(0, 10);
+    let receiver = f.thread(ROOT, 10);
     let rid = f.id(receiver);
-    let senders: Vec<usize> = [30, 50, 30, 40].iter().map(|&p| f.thread(0, p)).collect();
+    let senders: Vec<ThreadIdx> = [30, 50, 30, 40]
+        .iter()
+        .map(|&p| f.thread(ROOT, p))
+        .collect();
     for (i, &s) in senders.iter().enumerate() {
         f.sys(s, Call::Send, [rid, TIMEOUT_INFINITE, 0, i as u64, 0, 0]);
         assert!(matches!(f.k.threads[s].state, State::Sending { .. }));
@@ -434,8 +439,8 @@ fn senders_queue_by_priority_then_fifo() {
 #[test]
 fn timeouts_expire_at_their_deadline() {
     let mut f = Fixture::new();
-    let a = f.thread(0, 10);
-    let b = f.thread(0, 10);
+    let a = f.thread(ROOT, 10);
+    let b = f.thread(ROOT, 10);
     f.sys(a, Call::Receive, [0, 1000, 0, 0, 0, 0]);
     let bid = f.id(b);
     f.sys(b, Call::NotifyWait, [1, 500, 0, 0, 0, 0]);
@@ -460,9 +465,9 @@ fn timeouts_expire_at_their_deadline() {
 #[test]
 fn communication_rights_restrict_senders() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
-    let x = f.task(0, Abilities::all(), 100);
-    let y = f.task(0, Abilities::all(), 100);
+    let root = f.thread(ROOT, 200);
+    let x = f.task(ROOT, Abilities::all(), 100);
+    let y = f.task(ROOT, Abilities::all(), 100);
     let tx = f.thread(x, 50);
     let ty = f.thread(y, 50);
     let yid = f.id(ty);
@@ -497,17 +502,17 @@ fn communication_rights_restrict_senders() {
 #[test]
 fn map_and_grant_items() {
     let mut f = Fixture::new();
-    let sender = f.thread(0, 10);
-    let rtask = f.task(0, Abilities::all(), 100);
+    let sender = f.thread(ROOT, 10);
+    let rtask = f.task(ROOT, Abilities::all(), 100);
     let receiver = f.thread(rtask, 10);
-    f.give(0, 0x70_0000, 2, PageRights::WRITE);
+    f.give(ROOT, 0x70_0000, 2, PageRights::WRITE);
     f.write(sender, 0x70_0000, b"shared");
     // Window in the receiver's buffer; items in the sender's.
-    let window = BUFFER_AT + receiver as u64 * 0x4000 + IPC_WINDOW_OFFSET as u64;
+    let window = BUFFER_AT + receiver.position() as u64 * 0x4000 + IPC_WINDOW_OFFSET as u64;
     let mut w = 0x90_0000u64.to_ne_bytes().to_vec();
     w.extend(4u64.to_ne_bytes());
     f.write(receiver, window, &w);
-    let items = BUFFER_AT + sender as u64 * 0x4000 + IPC_ITEMS_OFFSET as u64;
+    let items = BUFFER_AT + sender.position() as u64 * 0x4000 + IPC_ITEMS_OFFSET as u64;
     let mut it = 0x70_0000u64.to_ne_bytes().to_vec();
     it.extend(1u32.to_ne_bytes());
     it.extend((PageRights::WRITE.bits() as u32).to_ne_bytes());
@@ -527,11 +532,11 @@ fn map_and_grant_items() {
     );
     assert_eq!(f.read(receiver, 0x90_0000, 6), b"shared");
     assert!(
-        f.k.tasks[0].space.translate(0x70_0000).is_some(),
+        f.k.tasks[ROOT].space.translate(0x70_0000).is_some(),
         "mapped: sender keeps it"
     );
     assert!(
-        f.k.tasks[0].space.translate(0x70_1000).is_none(),
+        f.k.tasks[ROOT].space.translate(0x70_1000).is_none(),
         "granted: sender lost it"
     );
     assert_eq!(
@@ -554,8 +559,8 @@ fn map_and_grant_items() {
 #[test]
 fn exception_round_trip_with_edited_registers() {
     let mut f = Fixture::new();
-    let handler = f.thread(0, 200);
-    let child = f.task(0, Abilities::all(), 100);
+    let handler = f.thread(ROOT, 200);
+    let child = f.task(ROOT, Abilities::all(), 100);
     let t = f.thread(child, 50);
     f.k.threads[t].exception_handler = f.id(handler);
     f.k.threads[t].context.rip = 0x40_1000;
@@ -572,7 +577,7 @@ fn exception_round_trip_with_edited_registers() {
     assert_eq!(MessageTag(c.rdx).label(), LABEL_EXCEPTION);
     let bytes = f.read(
         handler,
-        BUFFER_AT + handler as u64 * 0x4000,
+        BUFFER_AT + handler.position() as u64 * 0x4000,
         EXCEPTION_MESSAGE_SIZE,
     );
     let mut m = ExceptionMessage::from_bytes(&bytes).unwrap();
@@ -583,7 +588,11 @@ fn exception_round_trip_with_edited_registers() {
     m.registers.rip += 2;
     m.registers.rax = 0x1234;
     m.registers.rflags = u64::MAX; // IOPL and friends must not get through
-    f.write(handler, BUFFER_AT + handler as u64 * 0x4000, &m.to_bytes());
+    f.write(
+        handler,
+        BUFFER_AT + handler.position() as u64 * 0x4000,
+        &m.to_bytes(),
+    );
     let tid = f.id(t);
     let tag = MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0).0;
     assert_eq!(f.sys(handler, Call::Reply, [tid, 0, tag, 0, 0, 0]), OK);
@@ -602,8 +611,8 @@ fn exception_round_trip_with_edited_registers() {
 #[test]
 fn syscalls_of_non_native_tasks_go_to_the_handler() {
     let mut f = Fixture::new();
-    let handler = f.thread(0, 200);
-    let guest = f.task(0, Abilities::DEBUG_LOG, 100);
+    let handler = f.thread(ROOT, 200);
+    let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
     let t = f.thread(guest, 50);
     f.k.threads[t].exception_handler = f.id(handler);
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
@@ -617,8 +626,8 @@ fn syscalls_of_non_native_tasks_go_to_the_handler() {
 #[test]
 fn faults_without_handler_go_to_the_health_monitor_or_kill() {
     let mut f = Fixture::new();
-    let monitor = f.thread(0, 200);
-    let child = f.task(0, Abilities::all(), 100);
+    let monitor = f.thread(ROOT, 200);
+    let child = f.task(ROOT, Abilities::all(), 100);
     let t = f.thread(child, 50);
     let fault = Fault {
         label: LABEL_EXCEPTION,
@@ -648,9 +657,9 @@ fn faults_without_handler_go_to_the_health_monitor_or_kill() {
 #[test]
 fn killing_a_server_releases_its_clients() {
     let mut f = Fixture::new();
-    let server = f.thread(0, 10);
-    let queued = f.thread(0, 20);
-    let waiting = f.thread(0, 20);
+    let server = f.thread(ROOT, 10);
+    let queued = f.thread(ROOT, 20);
+    let waiting = f.thread(ROOT, 20);
     let sid = f.id(server);
     f.sys(server, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     f.sys(waiting, Call::Call, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
@@ -668,9 +677,9 @@ fn killing_a_server_releases_its_clients() {
 #[test]
 fn io_ports_are_granted_down_the_tree_only() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
-    let before = f.k.rps[0].used.pages;
-    let child = f.task(0, Abilities::all(), 100);
+    let root = f.thread(ROOT, 200);
+    let before = f.k.rps[RpIdx::ROOT].used.pages;
+    let child = f.task(ROOT, Abilities::all(), 100);
     let grandchild = f.task(child, Abilities::all(), 100);
     let c = f.thread(child, 50);
     let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
@@ -683,9 +692,9 @@ fn io_ports_are_granted_down_the_tree_only() {
         f.sys(root, Call::IoGrant, [cid, 0xfff0, 0x20, 0, 0, 0]),
         err(Error::InvalidArgument)
     );
-    let pages = f.k.rps[0].used.pages;
+    let pages = f.k.rps[RpIdx::ROOT].used.pages;
     assert_eq!(f.sys(root, Call::IoGrant, [cid, 0x2f8, 8, 0, 0, 0]), OK);
-    assert_eq!(f.k.rps[0].used.pages, pages + 2, "bitmap charged");
+    assert_eq!(f.k.rps[RpIdx::ROOT].used.pages, pages + 2, "bitmap charged");
     assert!(f.k.holds_port(child, 0x2f8) && f.k.holds_port(child, 0x2ff));
     assert!(!f.k.holds_port(child, 0x300) && !f.k.holds_port(child, 0x2f7));
     assert_eq!(
@@ -695,21 +704,25 @@ fn io_ports_are_granted_down_the_tree_only() {
     );
     assert_eq!(f.sys(c, Call::IoGrant, [gid, 0x2fc, 4, 0, 0, 0]), OK);
     assert!(f.k.holds_port(grandchild, 0x2fc) && !f.k.holds_port(grandchild, 0x2f8));
-    let rt = f.k.task_id(0);
+    let rt = f.k.task_id(ROOT);
     assert_eq!(
         f.sys(c, Call::IoGrant, [rt, 0x2f8, 1, 0, 0, 0]),
         err(Error::NotPermitted),
         "not upwards"
     );
     f.k.destroy_task(child);
-    assert_eq!(f.k.rps[0].used.pages, before, "bitmaps and tables returned");
+    assert_eq!(
+        f.k.rps[RpIdx::ROOT].used.pages,
+        before,
+        "bitmaps and tables returned"
+    );
 }
 
 #[test]
 fn irq_lines_are_granted_attached_masked_until_acknowledged() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
-    let child = f.task(0, Abilities::all(), 100);
+    let root = f.thread(ROOT, 200);
+    let child = f.task(ROOT, Abilities::all(), 100);
     let cid = f.k.task_id(child);
     let c = f.thread(child, 50);
     let c2 = f.thread(child, 50);
@@ -764,7 +777,7 @@ fn irq_lines_are_granted_attached_masked_until_acknowledged() {
     assert_eq!(f.k.irqs.unmasked, 1 << 3);
 
     // Without the IRQ ability nothing works.
-    let plain = f.task(0, Abilities::NATIVE_SYSCALLS, 100);
+    let plain = f.task(ROOT, Abilities::NATIVE_SYSCALLS, 100);
     let p = f.thread(plain, 50);
     assert_eq!(
         f.sys(p, Call::IrqAttach, [3, 1, 0, 0, 0, 0]),
@@ -781,14 +794,14 @@ fn irq_lines_are_granted_attached_masked_until_acknowledged() {
     );
     f.k.kill_thread(c2);
     assert_eq!(f.k.irqs.unmasked, 0);
-    assert_eq!(f.k.irqs.lines[3].thread, crate::thread::NIL);
+    assert_eq!(f.k.irqs.lines[3].thread, None);
     f.k.irq_fired(3); // nobody attached: ignored
 }
 
 #[test]
 fn an_early_timer_interrupt_rearms_the_timer() {
     let mut f = Fixture::new();
-    let root = f.thread(0, 200);
+    let root = f.thread(ROOT, 200);
     let windows = [abi::syscall::WindowSpec {
         offset: 0,
         duration: 1_000_000,
@@ -828,7 +841,7 @@ proptest::proptest! {
         steps in proptest::collection::vec(1u64..7, 1..60),
     ) {
         let mut f = Fixture::new();
-        let root = f.thread(0, 255);
+        let root = f.thread(ROOT, 255);
         // Windows in ms: a gap, then a window of the given length for the given partition.
         let mut windows = Vec::new();
         let mut at = 0;
@@ -844,8 +857,8 @@ proptest::proptest! {
         proptest::prop_assert_eq!(f.sys(root, Call::ScheduleSwitch, [0, 0, 0, 0, 0, 0]), OK);
         // The root leaves the stage; the generated threads are ready in creation order.
         f.k.set_state(root, State::Sleeping);
-        let task = f.task(0, Abilities::all(), 255);
-        let made: Vec<(usize, u8, u8)> = threads
+        let task = f.task(ROOT, Abilities::all(), 255);
+        let made: Vec<(ThreadIdx, u8, u8)> = threads
             .iter()
             .map(|&(tp, priority)| {
                 let priority = 10 + priority * 10;
@@ -864,7 +877,7 @@ proptest::proptest! {
                 .iter()
                 .find(|w| (w.offset..w.offset + w.duration).contains(&phase))
                 .map(|w| w.partition as u8);
-            let eligible = |&&(_, tp, _): &&(usize, u8, u8)| tp == 0 || Some(tp) == active;
+            let eligible = |&&(_, tp, _): &&(ThreadIdx, u8, u8)| tp == 0 || Some(tp) == active;
             let best = made.iter().filter(eligible).map(|&(_, _, p)| p).max();
             let expected = best.and_then(|p| {
                 let at_best = |tp: u8| made.iter().find(|&&(_, t, q)| q == p && t == tp).map(|&(t, ..)| t);
