@@ -2,14 +2,16 @@
 //! --check`) and clippy with every warning an error, on each kind of code the workspace
 //! builds: the host crates (with their tests), the host-tested libraries of the kernel, the
 //! APEX runtime and the plant, the kernel for `x86_64-unknown-none`, the loader for
-//! `x86_64-unknown-uefi`, and syssw and every user program for the user target. The lint policy itself lives once, in
-//! `[workspace.lints]` of the root `Cargo.toml`; this only runs it everywhere.
+//! `x86_64-unknown-uefi`, and syssw and every user program for the user target. The lint
+//! policy itself lives once, in `[workspace.lints]` of the root `Cargo.toml`; this only runs
+//! it everywhere.
 
 use anyhow::Result;
 
 /// Runs every check (all of them, even after a failure, so one run shows everything) and
 /// returns whether all passed.
 pub fn run() -> Result<bool> {
+    crate::tools::ensure_rust_targets()?;
     let mut user: Vec<String> = vec!["syssw".into()];
     user.extend(crate::check_config::known_images()?);
     let user_args: Vec<&str> = user.iter().flat_map(|p| ["-p", p.as_str()]).collect();

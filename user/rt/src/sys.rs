@@ -6,49 +6,39 @@ use abi::ipc::MessageTag;
 use abi::syscall::{Abilities, Call, Error, PageRights, TaskId, ThreadAttribute, ThreadId};
 use core::arch::asm;
 
-/// Registers after a call: `rax` and the six argument/result registers.
-#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Regs {
-    pub rax: u64,
-    pub rdi: u64,
-    pub rsi: u64,
-    pub rdx: u64,
-    pub r10: u64,
-    pub r8: u64,
-    pub r9: u64,
-}
-
-/// Raw call with all six argument registers.
+/// Raw call with all six argument registers: returns `rax` (the status) and the argument
+/// registers as the kernel left them (a call's results).
 #[inline(always)]
 #[allow(unsafe_code)] // the `syscall` instruction
-pub fn raw6(call: u64, a: [u64; 6]) -> Regs {
-    let mut r = Regs::default();
+pub fn raw6(call: u64, a: [u64; 6]) -> (u64, ArgRegs) {
+    let [mut rdi, mut rsi, mut rdx, mut r10, mut r8, mut r9] = a;
+    let rax;
     // SAFETY: `syscall` transfers to the kernel, which changes only rax and the six
     // argument registers (declared in/out), rcx and r11 (clobbered, declared), and touches
     // no memory of ours except through pointers we passed for that purpose.
     unsafe {
         asm!(
             "syscall",
-            inlateout("rax") call => r.rax,
-            inlateout("rdi") a[0] => r.rdi,
-            inlateout("rsi") a[1] => r.rsi,
-            inlateout("rdx") a[2] => r.rdx,
-            inlateout("r10") a[3] => r.r10,
-            inlateout("r8") a[4] => r.r8,
-            inlateout("r9") a[5] => r.r9,
+            inlateout("rax") call => rax,
+            inlateout("rdi") rdi,
+            inlateout("rsi") rsi,
+            inlateout("rdx") rdx,
+            inlateout("r10") r10,
+            inlateout("r8") r8,
+            inlateout("r9") r9,
             lateout("rcx") _,
             lateout("r11") _,
             options(nostack),
         );
     }
-    r
+    (rax, ArgRegs::from_array([rdi, rsi, rdx, r10, r8, r9]))
 }
 
 /// Raw call: returns (`rax`, `rdi`, `rsi`, `rdx`) after the call.
 #[inline(always)]
 pub fn raw(call: u64, a0: u64, a1: u64, a2: u64, a3: u64) -> (u64, u64, u64, u64) {
-    let r = raw6(call, [a0, a1, a2, a3, 0, 0]);
-    (r.rax, r.rdi, r.rsi, r.rdx)
+    let (rax, r) = raw6(call, [a0, a1, a2, a3, 0, 0]);
+    (rax, r.rdi, r.rsi, r.rdx)
 }
 
 /// `rax` as a result.
@@ -60,9 +50,9 @@ pub fn status(rax: u64) -> Result<(), Error> {
     }
 }
 
-fn call(c: Call, a: ArgRegs) -> Result<Regs, Error> {
-    let r = raw6(c as u64, a.to_array());
-    status(r.rax).map(|()| r)
+fn call(c: Call, a: ArgRegs) -> Result<ArgRegs, Error> {
+    let (rax, r) = raw6(c as u64, a.to_array());
+    status(rax).map(|()| r)
 }
 
 pub fn debug_write(text: &[u8]) -> Result<(), Error> {
@@ -173,7 +163,7 @@ pub fn thread_set(
 
 /// The calling thread and its task.
 pub fn thread_self() -> (ThreadId, TaskId) {
-    let r = raw6(Call::ThreadSelf as u64, [0; 6]);
+    let (_, r) = raw6(Call::ThreadSelf as u64, [0; 6]);
     (ThreadId(r.rdi), TaskId(r.rsi))
 }
 
@@ -475,7 +465,7 @@ pub struct TscBase {
 
 impl TscBase {
     pub fn get() -> Self {
-        let r = raw6(Call::Clock as u64, [0; 6]);
+        let (_, r) = raw6(Call::Clock as u64, [0; 6]);
         Self {
             hz: r.rsi,
             at_boot: r.rdx,

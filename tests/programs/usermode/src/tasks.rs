@@ -41,19 +41,19 @@ fn argument_errors(lab: &Lab) {
         Error::InvalidArgument,
     );
     let name = "x";
-    let r = sys::raw6(
+    let (rax, _) = sys::raw6(
         Call::TaskCreate as u64,
         [1 << 40, 10, 0, name.as_ptr() as u64, 1, 0],
     );
     expect_err(
         "task_create with unknown ability bits is InvalidArgument",
-        status(r.rax),
+        status(rax),
         Error::InvalidArgument,
     );
-    let r = sys::raw6(Call::TaskCreate as u64, [BASIC.bits(), 10, 0, 0x10, 4, 0]);
+    let (rax, _) = sys::raw6(Call::TaskCreate as u64, [BASIC.bits(), 10, 0, 0x10, 4, 0]);
     expect_err(
         "task_create with an unmapped name is BadAddress",
-        status(r.rax),
+        status(rax),
         Error::BadAddress,
     );
     expect_err(
@@ -111,10 +111,10 @@ fn argument_errors(lab: &Lab) {
         sys::thread_set(Some(bogus), ThreadAttribute::Priority, LOW as u64),
         Error::NoSuchObject,
     );
-    let r = sys::raw6(Call::ThreadSet as u64, [0, 99, 0, 0, 0, 0]);
+    let (rax, _) = sys::raw6(Call::ThreadSet as u64, [0, 99, 0, 0, 0, 0]);
     expect_err(
         "thread_set of an unknown attribute is InvalidArgument",
-        status(r.rax),
+        status(rax),
         Error::InvalidArgument,
     );
     let (me, task) = sys::thread_self();
