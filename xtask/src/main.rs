@@ -42,7 +42,13 @@ enum Cmd {
     },
     /// Run the benchmarks (kernel under QEMU, soft-PLC VM on the host); writes
     /// target/bench/report.json.
-    Bench,
+    Bench {
+        /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
+        /// counts then follow the instructions executed, not the host's load, so two
+        /// builds can be compared exactly (the figures are not real-time costs).
+        #[arg(long)]
+        deterministic_time: bool,
+    },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
         filter: Option<String>,
@@ -79,7 +85,7 @@ fn main() -> ExitCode {
             timeout,
             release,
         } => run(config, timeout, release),
-        Cmd::Bench => bench(),
+        Cmd::Bench { deterministic_time } => bench(deterministic_time),
         Cmd::Test {
             filter,
             scenarios_only,
@@ -236,7 +242,7 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     cargo_test(&args)
 }
 
-fn bench() -> Result<bool> {
+fn bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let mut kernel_bench = system.clone();
@@ -263,7 +269,7 @@ fn bench() -> Result<bool> {
                 timeout: Some(Duration::from_secs(300)),
                 echo: false,
                 work_dir: dir.join(name).join("state"),
-                deterministic_time: false,
+                deterministic_time,
             },
         )?;
         if !outcome.succeeded() {
