@@ -322,6 +322,9 @@ pub mod destination {
 
 /// Prefix of a partition image's entry name in `system.img` (`partition/<image>`).
 pub const IMAGE_ENTRY_PREFIX: &str = "partition/";
+/// A partition's data entry in system.img is this prefix and its name (e.g. `data/plc`, a
+/// soft-PLC's program package); syssw maps it read-only at `user_rt::partition::DATA_BASE`.
+pub const DATA_ENTRY_PREFIX: &str = "data/";
 
 /// The tables of the blob, in their order.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1224,6 +1227,11 @@ impl<'a> PartitionView<'a> {
     /// True if `entry` (a system.img entry name) is this partition's image.
     pub fn is_image_entry(&self, entry: &str) -> bool {
         entry.strip_prefix(IMAGE_ENTRY_PREFIX) == Some(self.image)
+    }
+
+    /// True if system.img entry `entry` is this partition's data ([`DATA_ENTRY_PREFIX`]).
+    pub fn is_data_entry(&self, entry: &str) -> bool {
+        entry.strip_prefix(DATA_ENTRY_PREFIX) == Some(self.name)
     }
 }
 

@@ -145,6 +145,16 @@ pub struct Reporter<'s> {
 }
 
 impl<'s> Reporter<'s> {
+    /// The file name messages carry.
+    pub fn file(&self) -> &str {
+        &self.file
+    }
+
+    /// Line and column of a source offset.
+    pub fn line_col(&self, offset: usize) -> (usize, usize) {
+        line_column(self.source, offset)
+    }
+
     pub fn new(file: &str, source: &'s str) -> Self {
         Reporter {
             file: file.to_string(),

@@ -80,6 +80,32 @@ pub struct Partition {
     pub ports: Named<Port>,
     #[serde(default)]
     pub health: Named<String>,
+    pub plc: Option<Spanned<Plc>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Plc {
+    pub program: Vec<Spanned<String>>,
+    #[serde(default)]
+    pub inputs: Named<PlcInput>,
+    #[serde(default)]
+    pub outputs: Named<PlcOutput>,
+    #[serde(default)]
+    pub watch: Vec<Spanned<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcInput {
+    pub at: Spanned<String>,
+    pub valid: Option<Spanned<String>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcOutput {
+    pub at: Spanned<String>,
 }
 
 #[derive(Debug, Deserialize)]

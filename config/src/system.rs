@@ -57,6 +57,33 @@ pub struct Partition {
     pub shared: Vec<Attachment>,
     pub ports: Vec<Port>,
     pub health: HealthTable,
+    /// Its PLC program and process-image mapping (`plc.*`), if it runs the soft-PLC.
+    pub plc: Option<Plc>,
+}
+
+/// A soft-PLC partition's program and how its ports meet its process image.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Plc {
+    /// ST source files, resolved against the description's directory, in the given order.
+    pub program: Vec<String>,
+    /// Input ports: their message lands in `%I`.
+    pub inputs: Vec<PlcLink>,
+    /// Output ports: their message is taken from `%Q`.
+    pub outputs: Vec<PlcLink>,
+    /// Variables the runtime logs with its statistics (checked against the program when
+    /// it is compiled).
+    pub watch: Vec<String>,
+}
+
+/// One port of a PLC partition in its process image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlcLink {
+    /// Index into the partition's `ports`.
+    pub port: usize,
+    /// First byte in the area (`%I` for inputs, `%Q` for outputs).
+    pub at: u32,
+    /// Inputs: the `%IX` bit set while the message is fresh, as (byte, bit).
+    pub valid: Option<(u32, u8)>,
 }
 
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -152,6 +179,9 @@ impl System {
                         })
                         .collect(),
                     health: p.health,
+                    // The binary form does not carry it: it travels in the partition's
+                    // data entry (the PLC package) instead.
+                    plc: None,
                 })
                 .collect(),
             segments: view

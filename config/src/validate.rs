@@ -363,6 +363,10 @@ impl Validator<'_, '_> {
             let own_ports = self.partition_ports(raw, &path, index, &mut ports);
 
             let health = self.health(&raw.health, &path.key("health"));
+            let plc = raw
+                .plc
+                .as_ref()
+                .and_then(|plc| self.plc(plc, &path.key("plc"), &own_ports));
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -381,9 +385,225 @@ impl Validator<'_, '_> {
                 shared,
                 ports: own_ports,
                 health,
+                plc,
             });
         }
         (partitions, times, ports)
+    }
+
+    /// A soft-PLC partition's program files and port mapping (see the crate documentation).
+    fn plc(&mut self, plc: &Spanned<schema::Plc>, path: &KeyPath, ports: &[Port]) -> Option<Plc> {
+        use plc_vm::located::{Area, Location, MAX_AREA, Width};
+        let raw = plc.get_ref();
+        let before = self.r.diagnostics.len();
+        let program_path = path.key("program");
+        if raw.program.is_empty() {
+            self.error(
+                start(plc),
+                &program_path,
+                "a PLC partition needs at least one ST source file in `program`",
+            );
+        }
+        let base = std::path::Path::new(self.r.file())
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .to_path_buf();
+        let mut program = Vec::new();
+        for file in &raw.program {
+            let resolved = base.join(file.get_ref());
+            if !resolved.is_file() {
+                self.error(
+                    start(file),
+                    &program_path,
+                    format!(
+                        "no such file `{}` (program paths are relative to this description's directory: {})",
+                        file.get_ref(),
+                        resolved.display()
+                    ),
+                );
+            }
+            program.push(resolved.to_string_lossy().into_owned());
+        }
+        // Parses an address of `area`; a bit when `bit`, else a byte/word/... start.
+        let address =
+            |v: &mut Self, text: &Spanned<String>, at_path: &KeyPath, area: Area, bit: bool| {
+                let parsed = text
+                    .get_ref()
+                    .strip_prefix('%')
+                    .ok_or_else(|| "a direct address starts with `%`".to_string())
+                    .and_then(|t| Location::parse(t).map_err(|e| e.to_string()));
+                match parsed {
+                    Ok(l) if l.area == area && (l.width == Width::Bit) == bit => Some(l),
+                    Ok(_) => {
+                        let want = match (area, bit) {
+                            (Area::Input, true) => "an input bit such as `%IX8.0`",
+                            (Area::Input, false) => {
+                                "an input byte address such as `%IB0` (or %IW/%ID/%IL)"
+                            }
+                            (_, _) => "an output byte address such as `%QB0` (or %QW/%QD/%QL)",
+                        };
+                        v.error(
+                            start(text),
+                            at_path,
+                            format!("`{}` is not {want}", text.get_ref()),
+                        );
+                        None
+                    }
+                    Err(e) => {
+                        v.error(
+                            start(text),
+                            at_path,
+                            format!("invalid direct address `{}`: {e}", text.get_ref()),
+                        );
+                        None
+                    }
+                }
+            };
+        // (first byte, end, key offset) of every mapped range per area, for overlaps.
+        let mut used: [Vec<(u32, u32, usize)>; 2] = [Vec::new(), Vec::new()];
+        let mut inputs = Vec::new();
+        let mut outputs = Vec::new();
+        let mut mapped = vec![false; ports.len()];
+        let links = raw
+            .inputs
+            .iter()
+            .map(|(k, v)| (k, Some(v.get_ref()), None, Direction::In))
+            .chain(
+                raw.outputs
+                    .iter()
+                    .map(|(k, v)| (k, None, Some(v.get_ref()), Direction::Out)),
+            );
+        for (key, input, output, direction) in links {
+            let table = if direction == Direction::In {
+                "inputs"
+            } else {
+                "outputs"
+            };
+            let link_path = path.key(table).key(key.get_ref());
+            let Some(port) = ports.iter().position(|p| &p.name == key.get_ref()) else {
+                self.error(
+                    start(key),
+                    &link_path,
+                    format!("no port `{}` in this partition's `ports`", key.get_ref()),
+                );
+                continue;
+            };
+            let p = &ports[port];
+            if p.direction != direction {
+                self.error(
+                    start(key),
+                    &link_path,
+                    format!(
+                        "port `{}` is an `{}` port: map it under `plc.{}`",
+                        p.name,
+                        p.direction.name(),
+                        if p.direction == Direction::In {
+                            "inputs"
+                        } else {
+                            "outputs"
+                        }
+                    ),
+                );
+                continue;
+            }
+            mapped[port] = true;
+            let (at, area) = match (input, output) {
+                (Some(i), _) => (&i.at, Area::Input),
+                (_, Some(o)) => (&o.at, Area::Output),
+                _ => continue,
+            };
+            let at_path = link_path.key("at");
+            let Some(location) = address(self, at, &at_path, area, false) else {
+                continue;
+            };
+            let end = location.byte + p.size;
+            if end > MAX_AREA {
+                self.error(
+                    start(at),
+                    &at_path,
+                    format!(
+                        "the {}-byte message from {} reaches beyond the {MAX_AREA}-byte area",
+                        p.size,
+                        at.get_ref()
+                    ),
+                );
+                continue;
+            }
+            let ranges = &mut used[(area == Area::Output) as usize];
+            if let Some(&(_, _, other)) = ranges
+                .iter()
+                .find(|(lo, hi, _)| location.byte < *hi && *lo < end)
+            {
+                let (line, _) = self.r.line_col(other);
+                self.error(
+                    start(at),
+                    &at_path,
+                    format!(
+                        "bytes {}..{end} overlap the mapping at line {line}",
+                        location.byte
+                    ),
+                );
+            }
+            ranges.push((location.byte, end, start(at)));
+            let mut valid = None;
+            if let Some(i) = input {
+                match (&i.valid, p.kind) {
+                    (Some(bit), _) => {
+                        valid = address(self, bit, &link_path.key("valid"), Area::Input, true).map(|l| (l.byte, l.bit));
+                    }
+                    (None, PortKind::Sampling) => self.error(
+                        start(key),
+                        &link_path,
+                        "a sampling input needs `valid`: the %IX bit the runtime sets while the message is fresh (so a stale value is never taken for a fresh one)",
+                    ),
+                    (None, PortKind::Queuing) => {}
+                }
+            }
+            let link = PlcLink {
+                port,
+                at: location.byte,
+                valid,
+            };
+            if direction == Direction::In {
+                inputs.push(link)
+            } else {
+                outputs.push(link)
+            }
+        }
+        // Validity bits must not fall into a message's bytes.
+        for link in &inputs {
+            if let Some((byte, _)) = link.valid
+                && used[0].iter().any(|(lo, hi, _)| (*lo..*hi).contains(&byte))
+            {
+                let key = raw
+                    .inputs
+                    .keys()
+                    .find(|k| k.get_ref() == &ports[link.port].name);
+                let at = key.map_or(start(plc), start);
+                self.error(
+                    at,
+                    &path.key("inputs"),
+                    format!(
+                        "the validity bit of `{}` lies inside a mapped message (byte {byte})",
+                        ports[link.port].name
+                    ),
+                );
+            }
+        }
+        for (port, _) in mapped.iter().enumerate().filter(|(_, m)| !**m) {
+            self.error(
+                start(plc),
+                path,
+                format!("port `{}` is not in the process image: map it under `plc.inputs` or `plc.outputs`", ports[port].name),
+            );
+        }
+        let watch = raw.watch.iter().map(|w| w.get_ref().clone()).collect();
+        (self.r.diagnostics.len() == before).then_some(Plc {
+            program,
+            inputs,
+            outputs,
+            watch,
+        })
     }
 
     /// A partition's memory, kernel memory and stack (0 where invalid, after the error).

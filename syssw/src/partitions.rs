@@ -1,9 +1,10 @@
 //! Creating a partition from its configuration, in two steps so that restarts reuse what
 //! was allocated at start-up: [`place`] (once) allocates its memory, loads its image and
 //! creates its resource partition (kernel-memory quota); [`instantiate`] (at start and at
-//! every restart) creates the task (abilities, MCP), maps the segments with their rights
-//! and a stack holding the start record, grants I/O ports and interrupts, maps the
-//! shared-memory segments and creates the first thread (inactive until started).
+//! every restart) creates the task (abilities, MCP), maps the segments with their rights,
+//! its data entry read-only at `DATA_BASE` and a stack holding the start record, grants
+//! I/O ports and interrupts, maps the shared-memory segments and creates the first thread
+//! (inactive until started).
 
 use config::binary::{PartitionView, SystemView};
 use root_task::spawn::{SpawnError, Spawner, map_physical_chunked};
@@ -11,7 +12,7 @@ use user_rt::abi::elf::{LoadSegment as Segment, load_segments};
 use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
-use user_rt::partition::{SHARED_BASE, StartInfo};
+use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
 use user_rt::sys;
 
 const PAGE: u64 = 4096;
@@ -59,7 +60,10 @@ pub struct Placement {
     /// Physical base of each loaded segment's frames (in `load_segments` order).
     segments: [u64; MAX_SEGMENTS],
     stack: u64,
-    /// Bytes of its memory in use (segments + stack).
+    /// Its data entry's frames and length in bytes (length 0: none). Mapped read-only, so
+    /// never reloaded.
+    data: (u64, u64),
+    /// Bytes of its memory in use (segments + data + stack).
     pub used: u64,
     /// The unmapped page below the stack: a fault there is a stack overflow.
     pub stack_guard: core::ops::Range<u64>,
@@ -131,12 +135,14 @@ pub fn place(
     spawner: &mut Spawner,
     p: &PartitionView,
     elf: &'static [u8],
+    data: &'static [u8],
 ) -> Result<Placement, LoadError> {
     let (entry, segments) =
-        load_segments::<MAX_SEGMENTS>(elf, USER_MIN..SHARED_BASE).map_err(LoadError::Image)?;
+        load_segments::<MAX_SEGMENTS>(elf, USER_MIN..DATA_BASE).map_err(LoadError::Image)?;
     let image_pages: u64 = segments.iter().flatten().map(|s| segment_pages(s).1).sum();
     let stack_pages = p.stack / PAGE;
-    let needed = (image_pages + stack_pages) * PAGE;
+    let data_pages = (data.len() as u64).div_ceil(PAGE);
+    let needed = (image_pages + data_pages + stack_pages) * PAGE;
     if needed > p.memory {
         return Err(LoadError::TooBig {
             needed,
@@ -157,12 +163,24 @@ pub fn place(
     }
     let stack = spawner.frames(stack_pages).map_err(LoadError::Spawn)?;
     let stack_base = STACK_TOP - stack_pages * PAGE;
+    let data_frames = if data.is_empty() {
+        0
+    } else {
+        spawner
+            .filled_frames(data_pages, |chunk, offset| {
+                let from = (offset as usize).min(data.len());
+                let to = (from + chunk.len()).min(data.len());
+                chunk[..to - from].copy_from_slice(&data[from..to]);
+            })
+            .map_err(LoadError::Spawn)?
+    };
     Ok(Placement {
         rp,
         entry,
         image: segments,
         segments: frames,
         stack,
+        data: (data_frames, data.len() as u64),
         used: needed,
         stack_guard: stack_base - PAGE..stack_base,
     })
@@ -212,6 +230,7 @@ pub fn instantiate(
         p.mcp,
         p.priority,
         p.name,
+        placed.data.1,
     );
     let record = info.to_bytes();
     let record_len = record.len() as u64;
@@ -233,6 +252,18 @@ pub fn instantiate(
         PageRights::WRITE,
     )
     .map_err(LoadError::Spawn)?;
+
+    let (data_frames, data_len) = placed.data;
+    if data_len > 0 {
+        map_physical_chunked(
+            Some(task),
+            data_frames,
+            DATA_BASE,
+            data_len.div_ceil(PAGE),
+            PageRights::empty(),
+        )
+        .map_err(LoadError::Spawn)?;
+    }
 
     for range in p.io_ports() {
         kernel("io_grant", sys::io_grant(task, range.first, range.count()))?;

@@ -56,12 +56,19 @@ fn resolve(file: &Path) -> PathBuf {
 /// Validates `path` and returns its binary configuration; the error lists every diagnostic.
 /// (For the image builder.)
 pub fn compile(path: &Path) -> Result<Vec<u8>> {
+    load(path).map(|system| config::binary::encode(&system))
+}
+
+/// Validates `path` and returns the system it describes; the error lists every diagnostic.
+pub fn load(path: &Path) -> Result<config::System> {
     let images = known_images()?;
-    let source = std::fs::read_to_string(resolve(path))
+    let resolved = resolve(path);
+    let source = std::fs::read_to_string(&resolved)
         .with_context(|| format!("cannot read {}", path.display()))?;
-    let name = path.display().to_string();
-    match config::compile(&name, &source, &|image| images.iter().any(|i| i == image)) {
-        Ok(blob) => Ok(blob),
+    // The name is also the base of relative paths in the file (PLC programs).
+    let name = resolved.display().to_string();
+    match config::load(&name, &source, &|image| images.iter().any(|i| i == image)) {
+        Ok(system) => Ok(system),
         Err(diagnostics) => {
             let lines: Vec<String> = diagnostics.iter().map(|d| d.to_string()).collect();
             bail!("configuration {name} is invalid:\n{}", lines.join("\n"))
@@ -78,9 +85,10 @@ pub fn run(file: &Path, any_image: bool) -> Result<bool> {
     } else {
         known_images()?
     };
-    let source = std::fs::read_to_string(resolve(file))
+    let resolved = resolve(file);
+    let source = std::fs::read_to_string(&resolved)
         .with_context(|| format!("cannot read {}", file.display()))?;
-    let name = file.display().to_string();
+    let name = resolved.display().to_string();
     let known = |image: &str| any_image || images.iter().any(|i| i == image);
     match config::load(&name, &source, &known) {
         Ok(system) => {

@@ -58,7 +58,8 @@ pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Result<
         path: artifacts.syssw.clone(),
     }];
     if let Some(config) = config {
-        let blob = crate::check_config::compile(config)?;
+        let described = crate::check_config::load(config)?;
+        let blob = config::binary::encode(&described);
         let system = config::decode(&blob).map_err(|e| anyhow!("{e}"))?;
         let mut images: Vec<String> = system.partitions().map(|p| p.image.to_string()).collect();
         images.sort();
@@ -68,6 +69,12 @@ pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Result<
             entries.push(ImageEntry::File {
                 name: format!("partition/{image}"),
                 path,
+            });
+        }
+        for (partition, package) in crate::plc::packages(&described)? {
+            entries.push(ImageEntry::Bytes {
+                name: format!("{}{partition}", config::binary::DATA_ENTRY_PREFIX),
+                data: package,
             });
         }
         entries.push(ImageEntry::Bytes {

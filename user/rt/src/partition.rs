@@ -11,6 +11,10 @@
 /// address in every partition that has the segment).
 pub const SHARED_BASE: u64 = 0x0000_6000_0000_0000;
 
+/// Where syssw maps a partition's data entry (`data/<partition>` in system.img, e.g. a
+/// soft-PLC's program package), read-only, for the partition's whole life.
+pub const DATA_BASE: u64 = 0x0000_5000_0000_0000;
+
 /// `StartInfo::magic`.
 pub const START_MAGIC: u64 = u64::from_le_bytes(*b"WRDNPART");
 
@@ -35,6 +39,8 @@ pub struct StartInfo {
     /// Length of `name` in bytes (the partition's name, UTF-8).
     pub name_len: u64,
     pub name: [u8; 32],
+    /// Bytes of its data entry mapped at [`DATA_BASE`] (0: none).
+    pub data_len: u64,
 }
 
 impl StartInfo {
@@ -47,6 +53,7 @@ impl StartInfo {
         mcp: u8,
         priority: u8,
         name: &str,
+        data_len: u64,
     ) -> Self {
         let n = name.len().min(32);
         let mut bytes = [0u8; 32];
@@ -61,10 +68,12 @@ impl StartInfo {
             priority: priority as u64,
             name_len: n as u64,
             name: bytes,
+            data_len,
         }
     }
 
-    /// The record as it lies in memory (`repr(C)`: eight u64, then the name; no padding).
+    /// The record as it lies in memory (`repr(C)`: eight u64, the name, one u64; no
+    /// padding).
     pub fn to_bytes(&self) -> [u8; core::mem::size_of::<StartInfo>()] {
         let mut out = [0u8; core::mem::size_of::<StartInfo>()];
         let words = [
@@ -80,7 +89,8 @@ impl StartInfo {
         for (chunk, word) in out.chunks_exact_mut(8).zip(words) {
             chunk.copy_from_slice(&word.to_le_bytes());
         }
-        out[64..].copy_from_slice(&self.name);
+        out[64..96].copy_from_slice(&self.name);
+        out[96..].copy_from_slice(&self.data_len.to_le_bytes());
         out
     }
 
@@ -93,6 +103,18 @@ impl StartInfo {
         // SAFETY: the caller guarantees the address came from syssw's start convention.
         let info = unsafe { &*(address as *const StartInfo) };
         (info.magic == START_MAGIC && info.name_len <= 32).then_some(info)
+    }
+
+    /// The partition's data entry (empty without one).
+    #[allow(unsafe_code)] // memory syssw mapped for this partition
+    pub fn data(&self) -> &'static [u8] {
+        if self.data_len == 0 {
+            return &[];
+        }
+        // SAFETY: a record from `from_start` is syssw's, which maps `data_len` bytes at
+        // DATA_BASE read-only before the partition starts and never unmaps or changes them
+        // while the partition's task lives.
+        unsafe { core::slice::from_raw_parts(DATA_BASE as *const u8, self.data_len as usize) }
     }
 
     pub fn name(&self) -> &str {

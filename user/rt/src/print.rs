@@ -21,6 +21,18 @@ impl LineBuffer {
     pub fn as_bytes(&self) -> &[u8] {
         &self.buf[..self.len]
     }
+
+    pub fn as_str(&self) -> &str {
+        // Only whole characters are ever written (see `write_str`).
+        core::str::from_utf8(self.as_bytes()).unwrap_or("")
+    }
+
+    /// `args` formatted into a new buffer (cut at its size).
+    pub fn format(args: core::fmt::Arguments) -> Self {
+        let mut line = Self::default();
+        let _ = core::fmt::Write::write_fmt(&mut line, args);
+        line
+    }
 }
 
 impl core::fmt::Write for LineBuffer {
@@ -38,9 +50,7 @@ impl core::fmt::Write for LineBuffer {
 }
 
 pub fn print_line(args: core::fmt::Arguments) {
-    let mut line = LineBuffer::default();
-    let _ = core::fmt::Write::write_fmt(&mut line, args);
-    let _ = crate::sys::debug_write(line.as_bytes());
+    let _ = crate::sys::debug_write(LineBuffer::format(args).as_bytes());
 }
 
 #[macro_export]

@@ -61,6 +61,8 @@ pub struct VarBlock {
 #[derive(Debug, Clone)]
 pub struct VarDecl {
     pub names: Vec<Ident>,
+    /// `AT %IX0.1`: the address text after `%` and its span.
+    pub at: Option<(String, Span)>,
     pub ty: TypeRef,
     pub init: Option<Init>,
     pub span: Span,

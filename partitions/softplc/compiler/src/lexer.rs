@@ -18,6 +18,9 @@ pub enum Tok {
     Str(String),
     /// `TYPE#` prefix of a typed literal such as `INT#5` or `Color#Red`.
     TypePrefix(String, String),
+    /// Directly represented variable `%IX0.1`, `%QW4`, ...: the text after `%`, upper-cased
+    /// (the parser checks its form).
+    Direct(String),
     Assign,   // :=
     Arrow,    // =>
     Colon,    // :
@@ -122,6 +125,14 @@ impl Lexer<'_> {
                     }
                 }
                 b'\'' => self.string(),
+                b'%' => {
+                    self.pos += 1;
+                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' {
+                        self.pos += 1;
+                    }
+                    let text = self.text[start + 1..self.pos].to_ascii_uppercase();
+                    self.push(Tok::Direct(text), start);
+                }
                 b'0'..=b'9' => self.number(),
                 c if c == b'_' || c.is_ascii_alphabetic() => self.ident(),
                 _ => self.punct(),

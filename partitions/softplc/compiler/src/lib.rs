@@ -187,6 +187,9 @@ pub fn compile(
             );
         }
     }
+    for located in located_vars(&prog) {
+        b.add_located(&located);
+    }
     let image = match b.build() {
         Ok(i) => i,
         Err(e) => {
@@ -214,6 +217,24 @@ pub fn compile(
         },
         sources,
     ))
+}
+
+/// The located variables in declaration order: globals, then each program instance's.
+fn located_vars(prog: &sema::Program) -> Vec<plc_vm::located::Located> {
+    let globals = prog.globals.iter().map(|g| (g, 0));
+    let instances = prog
+        .instances
+        .iter()
+        .flat_map(|i| prog.pous[i.pou].vars.iter().map(move |v| (v, i.addr)));
+    globals
+        .chain(instances)
+        .filter_map(|(v, base)| {
+            Some(plc_vm::located::Located {
+                location: v.location?,
+                address: base + v.offset,
+            })
+        })
+        .collect()
 }
 
 /// Parses and verifies an image, returning the verifier's reason on failure.

@@ -127,6 +127,7 @@ fn describe(t: &Tok) -> String {
         Tok::Time(_) => "duration literal".into(),
         Tok::Str(_) => "string literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
+        Tok::Direct(text) => format!("`%{text}`"),
         Tok::Eof => "end of file".into(),
         other => format!("`{}`", punct_text(other)),
     }
@@ -433,9 +434,18 @@ impl Parser<'_> {
         while self.eat(&Tok::Comma) {
             names.push(self.ident()?);
         }
-        if self.is_kw("AT") {
-            return Err(self.error_here("`:` (located variables `AT %...` are not supported)"));
-        }
+        let at = if self.eat_kw("AT") {
+            match self.tok().clone() {
+                Tok::Direct(text) => {
+                    let span = self.span();
+                    self.bump();
+                    Some((text, span))
+                }
+                _ => return Err(self.error_here("a direct address such as `%IX0.0` or `%QW2`")),
+            }
+        } else {
+            None
+        };
         self.expect(Tok::Colon)?;
         let ty = self.type_ref()?;
         let init = if self.eat(&Tok::Assign) {
@@ -446,6 +456,7 @@ impl Parser<'_> {
         self.expect(Tok::Semi)?;
         Ok(VarDecl {
             names,
+            at,
             ty,
             init,
             span: start.to(self.prev_span()),

@@ -14,6 +14,7 @@ use std::rc::Rc;
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, Span};
 use crate::types::*;
+use plc_vm::located::Location;
 
 #[derive(Debug, Clone)]
 pub struct StructDef {
@@ -44,6 +45,8 @@ pub struct VarDef {
     pub kind: VarKind,
     pub constant: bool,
     pub init: Option<Init>,
+    /// Its direct address (`AT %IX0.1`), for PROGRAM variables and globals.
+    pub location: Option<Location>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -533,6 +536,7 @@ impl Sema<'_> {
                             kind: VarKind::Local,
                             constant: false,
                             init: self.init_of(&m.ty, &m.init),
+                            location: self.location(m, &mty, false),
                         });
                         off = off.saturating_add(sz);
                         align = align.max(al);
@@ -725,6 +729,7 @@ impl Sema<'_> {
                 kind: VarKind::Output,
                 constant: false,
                 init: None,
+                location: None,
             });
         }
         for block in &ast.var_blocks {
@@ -760,6 +765,8 @@ impl Sema<'_> {
                     self.diags
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
+                let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
+                let location = self.location(d, &ty, may_locate);
                 for n in &d.names {
                     if vars.iter().any(|v| v.name == n.name) {
                         self.diags
@@ -775,6 +782,7 @@ impl Sema<'_> {
                         kind: block.kind,
                         constant: block.constant,
                         init: self.init_of(&d.ty, &d.init),
+                        location,
                     });
                 }
             }
@@ -829,6 +837,7 @@ impl Sema<'_> {
                     self.diags
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
+                let location = self.location(d, &ty, true);
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
                         self.diags
@@ -846,10 +855,60 @@ impl Sema<'_> {
                         kind: VarKind::Global,
                         constant: block.constant,
                         init: self.init_of(&d.ty, &d.init),
+                        location,
                     });
                 }
             }
         }
+    }
+
+    /// The checked direct address of a declaration (`AT %...`), if it has one: only in
+    /// `allowed` places (a PROGRAM's VAR, VAR_GLOBAL), for one variable of an elementary type
+    /// of the address's size.
+    fn location(&mut self, d: &VarDecl, ty: &Type, allowed: bool) -> Option<Location> {
+        let (text, span) = d.at.as_ref()?;
+        if !allowed {
+            self.diags.error(
+                *span,
+                "located variables (`AT %...`) are allowed only in a PROGRAM's VAR block and in VAR_GLOBAL",
+            );
+            return None;
+        }
+        if d.names.len() > 1 {
+            self.diags
+                .error(*span, "a direct address locates exactly one variable");
+            return None;
+        }
+        let location = match Location::parse(text) {
+            Ok(l) => l,
+            Err(e) => {
+                self.diags
+                    .error(*span, format!("invalid direct address `%{text}`: {e}"));
+                return None;
+            }
+        };
+        let var_type = match ty {
+            Type::Elem(e) => crate::monitor::ValueKind::Elem(*e).var_type(),
+            _ => None,
+        };
+        if !var_type.is_some_and(|t| location.width.fits(t)) {
+            if !ty.is_error() {
+                use plc_vm::located::Width;
+                let (size, expected) = match location.width {
+                    Width::Bit => ("a bit", "BOOL"),
+                    Width::Byte => ("a byte", "BYTE, SINT or USINT"),
+                    Width::Word => ("a word (2 bytes)", "WORD, INT or UINT"),
+                    Width::DWord => ("a double word (4 bytes)", "DWORD, DINT, UDINT or REAL"),
+                    Width::LWord => ("a long word (8 bytes)", "LWORD, LINT, ULINT, LREAL or TIME"),
+                };
+                self.diags.error(
+                    d.ty.span(),
+                    format!("`%{text}` is {size}: its variable must be {expected}"),
+                );
+            }
+            return None;
+        }
+        Some(location)
     }
 
     fn task_time(&mut self, e: &Expr) -> Option<i64> {

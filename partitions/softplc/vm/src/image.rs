@@ -1,16 +1,17 @@
-//! The bytecode image format (version 1), its zero-copy parser and (feature `alloc`) a builder.
+//! The bytecode image format (version 2), its zero-copy parser and (feature `alloc`) a builder.
 //!
 //! All integers are little-endian. Layout:
 //!
 //! ```text
 //! offset size  field
 //! 0      4     magic "PLCB"
-//! 4      2     version (= 1)
-//! 6      2     header length (= 88)
+//! 4      2     version (= 2; version 1 had no LOCATED section)
+//! 6      2     header length (= 96)
 //! 8      4     data_size: bytes of data memory the program needs
 //! 12     4     reserved (0)
-//! 16     72    section table: 9 x (offset u32, length u32), offsets from the image start,
-//!              in this order: CODE, CONSTS, INIT, POUS, TASKS, VARS, SRCLOCS, FILES, NAMES
+//! 16     80    section table: 10 x (offset u32, length u32), offsets from the image start,
+//!              in this order: CODE, CONSTS, INIT, POUS, TASKS, VARS, SRCLOCS, FILES, NAMES,
+//!              LOCATED
 //! ```
 //!
 //! Sections:
@@ -28,6 +29,10 @@
 //!   sorted by code offset; an entry covers code up to the next entry's offset.
 //! * `FILES`: 8-byte records `name_off u32, name_len u16, reserved u16`.
 //! * `NAMES`: UTF-8 string blob referenced by the `name_off/name_len` fields.
+//! * `LOCATED`: 12-byte records `address u32` (the variable's data memory), `byte u32` (its
+//!   first byte in the area), `area u8`, `width u8` ([`crate::located::Area`],
+//!   [`crate::located::Width`]), `bit u8`, reserved u8 — the located variables, in declaration
+//!   order (see [`crate::located`] for the copy semantics).
 //!
 //! [`Image::parse`] checks only the structure (sizes, section bounds, record multiples); the
 //! semantic checks are the verifier's job ([`mod@crate::verify`]).
@@ -37,9 +42,9 @@ use crate::isa::{read_u16, read_u32, read_u64};
 /// Image magic.
 pub const MAGIC: [u8; 4] = *b"PLCB";
 /// Format version this crate reads and writes.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Number of sections in the section table.
-pub const SECTION_COUNT: usize = 9;
+pub const SECTION_COUNT: usize = 10;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 16 + SECTION_COUNT * 8;
 /// POU record size.
@@ -52,6 +57,8 @@ pub const VAR_RECORD: usize = 16;
 pub const SRCLOC_RECORD: usize = 16;
 /// File record size.
 pub const FILE_RECORD: usize = 8;
+/// Located-variable record size.
+pub const LOCATED_RECORD: usize = 12;
 /// Watchdog budget (instructions per cycle) used when a task record says 0.
 pub const DEFAULT_WATCHDOG_BUDGET: u32 = 1_000_000;
 /// Variable flag: RETAIN.
@@ -81,6 +88,8 @@ pub enum Section {
     Files = 7,
     /// Name blob.
     Names = 8,
+    /// Located variables.
+    Located = 9,
 }
 
 /// Why [`Image::parse`] rejected the bytes.
@@ -302,6 +311,7 @@ impl<'a> Image<'a> {
             Section::SrcLocs,
             Section::Files,
             Section::Names,
+            Section::Located,
         ];
         let mut sections: [&'a [u8]; SECTION_COUNT] = [&[]; SECTION_COUNT];
         for (i, kind) in KINDS.iter().enumerate() {
@@ -320,6 +330,7 @@ impl<'a> Image<'a> {
                 Section::Vars => VAR_RECORD,
                 Section::SrcLocs => SRCLOC_RECORD,
                 Section::Files => FILE_RECORD,
+                Section::Located => LOCATED_RECORD,
                 _ => 1,
             };
             if section.len() % record != 0 {
@@ -444,6 +455,32 @@ impl<'a> Image<'a> {
             addr: read_u32(r, 8),
             size: read_u32(r, 12),
         })
+    }
+
+    /// Number of located variables.
+    pub fn located_count(&self) -> usize {
+        self.section(Section::Located).len() / LOCATED_RECORD
+    }
+
+    /// Located variable `index`; `None` if out of range or its area/width code is unknown
+    /// (the verifier refuses such an image).
+    pub fn located(&self, index: usize) -> Option<crate::located::Located> {
+        use crate::located::{Area, Located, Location, Width};
+        let r = self.record(Section::Located, LOCATED_RECORD, index)?;
+        Some(Located {
+            address: read_u32(r, 0),
+            location: Location {
+                byte: read_u32(r, 4),
+                area: Area::from_code(r[8])?,
+                width: Width::from_code(r[9])?,
+                bit: r[10],
+            },
+        })
+    }
+
+    /// Every located variable, in declaration order.
+    pub fn located_vars(&self) -> impl Iterator<Item = crate::located::Located> + '_ {
+        (0..self.located_count()).filter_map(|i| self.located(i))
     }
 
     /// Looks a variable up by exact name (linear scan; monitors are not hot paths).
@@ -580,6 +617,7 @@ mod builder {
         srclocs: Vec<u8>,
         files: Vec<u8>,
         names: Vec<u8>,
+        located: Vec<u8>,
         labels: Vec<Option<u32>>,
         fixups: Vec<(usize, Label)>,
         /// Start offsets of the emitted instructions (for the peephole fusion).
@@ -851,6 +889,17 @@ mod builder {
             r.push(flags);
             r.extend_from_slice(&addr.to_le_bytes());
             r.extend_from_slice(&size.to_le_bytes());
+        }
+
+        /// Adds a located variable (see [`crate::located`]).
+        pub fn add_located(&mut self, v: &crate::located::Located) {
+            let r = &mut self.located;
+            r.extend_from_slice(&v.address.to_le_bytes());
+            r.extend_from_slice(&v.location.byte.to_le_bytes());
+            r.push(v.location.area.code());
+            r.push(v.location.width.code());
+            r.push(v.location.bit);
+            r.push(0);
         }
 
         /// Adds a source file name and returns its index.
@@ -1176,6 +1225,7 @@ mod builder {
                 &self.srclocs,
                 &self.files,
                 &names,
+                &self.located,
             ];
             let total: usize = HEADER_LEN + sections.iter().map(|s| s.len()).sum::<usize>();
             if total > u32::MAX as usize {

@@ -57,6 +57,8 @@ pub enum Site {
     SrcLoc(usize),
     /// A file record.
     File(usize),
+    /// A located-variable record.
+    Located(usize),
     /// The image as a whole.
     Image,
 }
@@ -164,6 +166,11 @@ pub enum Reason {
     VarOutsideData,
     /// Variable size does not fit its type.
     VarSizeMismatch,
+    /// Located variable: unknown area or width code, a bit number on a non-bit or above 7,
+    /// or an address beyond the area.
+    BadLocation,
+    /// Located variable outside data memory.
+    LocatedOutsideData,
     /// Source-location table not sorted by code offset.
     SrcLocUnsorted,
     /// Source location beyond the code or naming an unknown file.
@@ -192,6 +199,7 @@ impl core::fmt::Display for Site {
             Site::Var(i) => write!(f, "in variable map entry {i}"),
             Site::SrcLoc(i) => write!(f, "in source-location entry {i}"),
             Site::File(i) => write!(f, "in file table entry {i}"),
+            Site::Located(i) => write!(f, "in located-variable entry {i}"),
             Site::Image => write!(f, "in image"),
         }
     }
@@ -276,6 +284,8 @@ impl core::fmt::Display for Reason {
             Reason::BadVarType(t) => write!(f, "unknown variable type {t}"),
             Reason::VarOutsideData => write!(f, "variable outside data memory"),
             Reason::VarSizeMismatch => write!(f, "variable size does not match its type"),
+            Reason::BadLocation => write!(f, "invalid located-variable address"),
+            Reason::LocatedOutsideData => write!(f, "located variable outside data memory"),
             Reason::SrcLocUnsorted => write!(f, "source locations not sorted by code offset"),
             Reason::SrcLocInvalid => {
                 write!(f, "source location beyond the code or with unknown file")
@@ -682,6 +692,21 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         };
         if !size_ok {
             return err(site, Reason::VarSizeMismatch);
+        }
+    }
+    for index in 0..image.located_count() {
+        use crate::located::{MAX_AREA, Width};
+        let site = Site::Located(index);
+        let Some(v) = image.located(index) else {
+            return err(site, Reason::BadLocation);
+        };
+        let l = v.location;
+        let bit_ok = l.bit == 0 || (l.width == Width::Bit && l.bit <= 7);
+        if !bit_ok || l.byte.saturating_add(l.width.bytes()) > MAX_AREA {
+            return err(site, Reason::BadLocation);
+        }
+        if v.address as u64 + l.width.bytes() as u64 > data_size {
+            return err(site, Reason::LocatedOutsideData);
         }
     }
     for index in 0..image.file_count() {

@@ -118,6 +118,26 @@ pub enum Value<'s> {
     String(&'s [u8]),
 }
 
+impl core::fmt::Display for Value<'_> {
+    /// IEC literal style: `TRUE`, `-3`, `0.5`, `T#20ms`, `'text'`.
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match *self {
+            Value::Bool(b) => f.write_str(if b { "TRUE" } else { "FALSE" }),
+            Value::Int(v) => write!(f, "{v}"),
+            Value::UInt(v) => write!(f, "{v}"),
+            Value::Real(v) => write!(f, "{v}"),
+            Value::LReal(v) => write!(f, "{v}"),
+            Value::Time(ns) if ns % 1_000_000 == 0 => write!(f, "T#{}ms", ns / 1_000_000),
+            Value::Time(ns) if ns % 1_000 == 0 => write!(f, "T#{}us", ns / 1_000),
+            Value::Time(ns) => write!(f, "T#{ns}ns"),
+            Value::String(bytes) => match core::str::from_utf8(bytes) {
+                Ok(text) => write!(f, "'{text}'"),
+                Err(_) => write!(f, "'<{} bytes>'", bytes.len()),
+            },
+        }
+    }
+}
+
 /// Why a monitor access failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum VarError {

@@ -473,10 +473,10 @@ fn parser_structural_errors() {
     bad[0] = b'X';
     assert_eq!(Image::parse(&bad).unwrap_err(), ImageError::BadMagic);
     let mut bad = good.clone();
-    bad[4] = 2;
+    bad[4] = 1;
     assert_eq!(
         Image::parse(&bad).unwrap_err(),
-        ImageError::UnsupportedVersion(2)
+        ImageError::UnsupportedVersion(1)
     );
     let mut bad = good.clone();
     bad[6] = 1;
@@ -563,5 +563,68 @@ fn disassembly() {
     assert_eq!(
         text,
         "   0 PUSH_I32 -3\n   5 ST_REL I16 4\n  11 PUSH_I64 4611686018427387904\n  20 CALL_BUILTIN SQRT_LREAL\n  23 DROP\n  24 THROW NUMERIC_ERROR\n  26 JMP @0\n"
+    );
+}
+
+#[test]
+fn located_records() {
+    use crate::located::{Area, Located, Location, Width};
+    let image_with = |v: Located| {
+        let mut b = ImageBuilder::new();
+        b.reserve_data(DATA);
+        let main = b.declare_pou("Main", 0, 0, MAIN_FRAME);
+        b.add_task(&TaskDef {
+            name: "T".into(),
+            kind: TaskKind::Cyclic,
+            priority: 0,
+            pou: main,
+            instance_base: MAIN_BASE,
+            interval_ns: 10_000_000,
+            watchdog_budget: 10,
+        });
+        b.begin_pou(main);
+        b.ret();
+        b.end_pou(main);
+        b.add_located(&v);
+        b.build().expect("build")
+    };
+    let good = Located {
+        location: Location::parse("QW3").unwrap(),
+        address: DATA - 2,
+    };
+    let bytes = image_with(good);
+    assert_eq!(verdict(&bytes), Ok(()));
+    let image = Image::parse(&bytes).unwrap();
+    assert_eq!(image.located_vars().collect::<alloc::vec::Vec<_>>(), [good]);
+    let located = |location: Location, address: u32, reason: Reason| {
+        assert_eq!(
+            verdict(&image_with(Located { location, address })),
+            Err(VerifyError {
+                site: Site::Located(0),
+                reason
+            })
+        );
+    };
+    let word = good.location;
+    located(word, DATA - 1, Reason::LocatedOutsideData);
+    located(Location { bit: 1, ..word }, 0, Reason::BadLocation);
+    let bit = Location {
+        area: Area::Input,
+        width: Width::Bit,
+        byte: 0,
+        bit: 8,
+    };
+    located(bit, 0, Reason::BadLocation);
+    located(Location { byte: 4095, ..word }, 0, Reason::BadLocation);
+    // An unknown area code: the record cannot be read, the verifier refuses it.
+    let mut bytes = image_with(good);
+    let located_section = crate::isa::read_u32(&bytes, 16 + 9 * 8) as usize;
+    bytes[located_section + 8] = 7;
+    assert_eq!(
+        verdict(&bytes),
+        Err(VerifyError {
+            site: Site::Located(0),
+            reason: Reason::BadLocation
+        })
     );
 }

@@ -1,0 +1,20 @@
+//! The soft-PLC runtime: runs a verified IEC 61131-3 program (plc-vm bytecode) in a
+//! partition, its scan cycle released at the partition's window start, its process image
+//! (`%I`, `%Q`, `%M`) connected to ARINC 653 ports.
+//!
+//! This library is the runtime's whole behaviour and is tested on the host: the package
+//! format the build writes ([`package`]) and one scan cycle ([`scan`]: inputs, due tasks,
+//! statistics, faults and safe outputs, outputs). The partition program (`main.rs`) only
+//! re-verifies the program, creates the ports and the scan process and moves bytes between
+//! them and this library. It must never trust the package: every structure is checked and
+//! the bytecode re-verified before anything runs.
+#![cfg_attr(not(test), no_std)]
+
+#[cfg(any(feature = "alloc", test))]
+extern crate alloc;
+
+pub mod package;
+pub mod scan;
+
+#[cfg(test)]
+mod tests;

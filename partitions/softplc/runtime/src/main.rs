@@ -1,0 +1,357 @@
+//! The soft-PLC partition program: reads its package (the partition's data entry, see
+//! `softplc::package`), re-verifies the bytecode, creates the package's ports and one
+//! periodic scan process released once per partition period (the major frame, so at its
+//! window start), and runs [`softplc::scan::Runtime::scan`] at every release.
+//!
+//! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
+//! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
+//! - `plc: task <name> interval=<ms>ms every=<n> priority=<p>` per task, at start;
+//! - `plc: t=<ms>ms task=<name> cycles=<n> exec_us=<last>/<min>/<mean>/<max>
+//!   jitter_us=<last>/<max> overruns=<n> faults=<n>` per task every [`STATS_EVERY_MS`];
+//! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
+//!   as IEC literals);
+//! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault
+//!   (also raised to the health monitor as an application error with the same text);
+//! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
+//!   partition reports it and creates no process: it idles).
+//!
+//! Glue only: what a message, a package or the program means is decided in the library.
+#![no_std]
+#![no_main]
+
+extern crate alloc;
+
+use alloc::vec::Vec;
+use apex::Warden;
+use apex::a653rs::bindings::ApexPartitionP4;
+use apex::a653rs::prelude::*;
+use apex::user_rt::print::LineBuffer;
+use apex::user_rt::println;
+use core::fmt::Write;
+use core::str::FromStr;
+use core::time::Duration;
+use plc_vm::image::Image;
+use plc_vm::verify::VerifiedImage;
+use plc_vm::vm::{CallFrame, Fault, Machine, Memory, TryFrame};
+use protocol::{Direction, PortKind};
+use softplc::package::{Package, PortMap};
+use softplc::scan::{Areas, PortIo, Runtime, Schedule};
+
+/// Data memory the program may use.
+const MAX_DATA: usize = 256 * 1024;
+/// Verifier scratch (two cells per code byte: programs up to 64 KiB of code).
+const MAX_SCRATCH: usize = 128 * 1024;
+/// Partition time between statistics lines.
+const STATS_EVERY_MS: u64 = 1_000;
+/// Period if the partition has none (a background partition).
+const DEFAULT_PERIOD: Duration = Duration::from_millis(10);
+
+/// Formats into a [`LineBuffer`] (no heap: the target's `alloc::format!` would unwind).
+macro_rules! text {
+    ($($arg:tt)*) => { LineBuffer::format(format_args!($($arg)*)) };
+}
+
+static DATA: spin::Mutex<[u8; MAX_DATA]> = spin::Mutex::new([0; MAX_DATA]);
+static SCRATCH: spin::Mutex<[u32; MAX_SCRATCH]> = spin::Mutex::new([0; MAX_SCRATCH]);
+static AREAS: spin::Mutex<Areas> = spin::Mutex::new(Areas::new());
+
+fn name(text: &str) -> Option<Name> {
+    Name::from_str(text).ok()
+}
+
+fn period() -> Duration {
+    let status = <Warden as ApexPartitionP4>::get_partition_status();
+    match u64::try_from(status.period) {
+        Ok(ns) if ns > 0 => Duration::from_nanos(ns),
+        _ => DEFAULT_PERIOD,
+    }
+}
+
+fn now_ns() -> u64 {
+    apex::user_rt::sys::clock()
+}
+
+/// Reports `text` to the health monitor and the log.
+fn report(text: &str) {
+    println!("plc: {text}");
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
+}
+
+/// The checked package, verified program and schedule, or why the program is refused.
+fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), LineBuffer> {
+    let info = apex::runtime::start_info();
+    let package = Package::parse(info.data()).map_err(|e| text!("package: {e}"))?;
+    let image = Image::parse(package.program()).map_err(|e| text!("bytecode image: {e}"))?;
+    let code = image.code().len();
+    let mut scratch = SCRATCH.lock();
+    let scratch = scratch
+        .get_mut(..2 * code)
+        .ok_or_else(|| text!("code of {code} bytes exceeds {} bytes", MAX_SCRATCH / 2))?;
+    let verified = plc_vm::verify::verify_with_scratch(&image, scratch)
+        .map_err(|e| text!("bytecode rejected by the verifier: {e}"))?;
+    if image.data_size() as usize > MAX_DATA {
+        return Err(text!(
+            "data memory of {} bytes exceeds {MAX_DATA}",
+            image.data_size()
+        ));
+    }
+    let period = period().as_nanos() as u64;
+    let schedule = Schedule::new(&image, period).map_err(|e| text!("tasks: {e:?}"))?;
+    Ok((package, verified, schedule))
+}
+
+enum Port {
+    SamplingIn(SamplingPortDestination<Warden>),
+    SamplingOut(SamplingPortSource<Warden>),
+    QueuingIn(QueuingPortReceiver<Warden>),
+    QueuingOut(QueuingPortSender<Warden>),
+}
+
+/// The package's ports, by package index (created at cold start).
+struct ApexPorts(Vec<Option<Port>>);
+
+impl ApexPorts {
+    fn open(package: &Package) -> Self {
+        let ports = package
+            .ports()
+            .map(|p| {
+                let n = name(p.name)?;
+                Some(match (p.kind, p.direction) {
+                    (PortKind::Sampling, Direction::In) => {
+                        Port::SamplingIn(SamplingPortDestination::from_name(n).ok()?)
+                    }
+                    (PortKind::Sampling, Direction::Out) => {
+                        Port::SamplingOut(SamplingPortSource::from_name(n).ok()?)
+                    }
+                    (PortKind::Queuing, Direction::In) => {
+                        Port::QueuingIn(QueuingPortReceiver::from_name(n).ok()?)
+                    }
+                    (PortKind::Queuing, Direction::Out) => {
+                        Port::QueuingOut(QueuingPortSender::from_name(n).ok()?)
+                    }
+                })
+            })
+            .collect();
+        Self(ports)
+    }
+}
+
+impl PortIo for ApexPorts {
+    fn receive(&mut self, port: usize, buf: &mut [u8]) -> Option<(usize, bool)> {
+        match self.0.get(port)?.as_ref()? {
+            Port::SamplingIn(p) => p
+                .receive(buf)
+                .ok()
+                .map(|(validity, m)| (m.len(), validity == Validity::Valid)),
+            Port::QueuingIn(p) => p
+                .receive(buf, SystemTime::Normal(Duration::ZERO))
+                .ok()
+                .map(|(m, _)| (m.len(), true)),
+            _ => None,
+        }
+    }
+
+    fn send(&mut self, port: usize, message: &[u8]) {
+        match self.0.get(port).and_then(|p| p.as_ref()) {
+            Some(Port::SamplingOut(p)) => {
+                let _ = p.send(message);
+            }
+            Some(Port::QueuingOut(p)) => {
+                let _ = p.send(message, SystemTime::Normal(Duration::ZERO));
+            }
+            _ => {}
+        }
+    }
+}
+
+fn fault_text(image: &Image, task: usize, fault: &Fault) -> LineBuffer {
+    let mut text = LineBuffer::default();
+    let task_name = image.task(task).map_or("?", |t| t.name);
+    let _ = write!(text, "task {task_name} stopped: {}", fault.trap.name());
+    if let Some(l) = fault.location {
+        let file = image.file_name(l.file).unwrap_or("?");
+        let _ = write!(text, " at {file}:{}:{}", l.line, l.column);
+    }
+    let _ = write!(text, "; outputs safe");
+    text
+}
+
+extern "C" fn scan() {
+    // Cold start checked all of it; a failure here cannot happen, and idles if it does.
+    let Ok((package, verified, schedule)) = load() else {
+        return;
+    };
+    let image = *verified.image();
+    let period = period().as_nanos() as u64;
+    let mut data = DATA.lock();
+    let (mut stack, mut calls, mut tries) =
+        ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+    let size = image.data_size() as usize;
+    let Ok(mut machine) = Machine::new(
+        verified,
+        Memory {
+            data: &mut data[..size],
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    ) else {
+        report("refusing the program: not enough VM memory");
+        return;
+    };
+    let mut io = ApexPorts::open(&package);
+    let mut areas = AREAS.lock();
+    let mut rt = Runtime::new(schedule, period);
+    let tp = apex::runtime::start_info().time_partition;
+    let started = now_ns();
+    let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
+    loop {
+        // The start of the window this release runs in (its release time).
+        let window = apex::user_rt::sys::partition_info(tp)
+            .map(|i| i.next_window_start)
+            .unwrap_or(0);
+        let release = if window == u64::MAX || window > now_ns() {
+            now_ns()
+        } else {
+            window
+        };
+        rt.scan(
+            &mut machine,
+            &image,
+            &package,
+            &mut io,
+            &mut areas,
+            now_ns,
+            release,
+            |task, fault| report(fault_text(&image, task, fault).as_str()),
+        );
+        let now = now_ns();
+        if now >= next_stats {
+            next_stats += STATS_EVERY_MS * 1_000_000;
+            for &task in &rt.schedule.order[..rt.schedule.count] {
+                let s = &rt.stats[task];
+                println!(
+                    "plc: t={}ms task={} cycles={} exec_us={}/{}/{}/{} jitter_us={}/{} overruns={} faults={}",
+                    (now - started) / 1_000_000,
+                    image.task(task).map_or("?", |t| t.name),
+                    s.count,
+                    s.last / 1000,
+                    s.min / 1000,
+                    s.mean() / 1000,
+                    s.max / 1000,
+                    s.last_jitter / 1000,
+                    s.max_jitter / 1000,
+                    s.overruns,
+                    s.faults
+                );
+            }
+            let mut line = text!("plc: t={}ms watch", (now - started) / 1_000_000);
+            for name in package.watch() {
+                match machine.read_var(name) {
+                    Ok(value) => {
+                        let _ = write!(line, " {name}={value}");
+                    }
+                    Err(_) => {
+                        let _ = write!(line, " {name}=?");
+                    }
+                }
+            }
+            if package.watch().next().is_some() {
+                println!("{}", line.as_str());
+            }
+        }
+        if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
+            println!("plc: PERIODIC_WAIT failed; stopping");
+            return;
+        }
+    }
+}
+
+fn create_port(ctx: &mut StartContext<Warden>, p: &PortMap) -> Result<(), Error> {
+    let n = name(p.name).ok_or(Error::InvalidParam)?;
+    let refresh = Duration::from_nanos(p.refresh_ns);
+    match (p.kind, p.direction) {
+        (PortKind::Sampling, Direction::In) => ctx
+            .create_sampling_port_destination(n, p.size, refresh)
+            .map(drop),
+        (PortKind::Sampling, Direction::Out) => {
+            ctx.create_sampling_port_source(n, p.size).map(drop)
+        }
+        (PortKind::Queuing, Direction::In) => ctx
+            .create_queuing_port_receiver(n, p.size, p.depth, QueuingDiscipline::Fifo)
+            .map(drop),
+        (PortKind::Queuing, Direction::Out) => ctx
+            .create_queuing_port_sender(n, p.size, p.depth, QueuingDiscipline::Fifo)
+            .map(drop),
+    }
+}
+
+struct PlcPartition;
+
+impl Partition<Warden> for PlcPartition {
+    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+        let (package, verified, schedule) = match load() {
+            Ok(loaded) => loaded,
+            Err(reason) => {
+                report(text!("refusing the program: {}", reason.as_str()).as_str());
+                return;
+            }
+        };
+        let image = verified.image();
+        println!(
+            "plc: program verified: {} bytes, {} task(s), {} located variable(s), {} port(s)",
+            package.program().len(),
+            schedule.count,
+            image.located_count(),
+            package.port_count()
+        );
+        let period_ns = period().as_nanos() as u64;
+        for &task in &schedule.order[..schedule.count] {
+            if let Some(t) = image.task(task) {
+                println!(
+                    "plc: task {} interval={}ms every={} priority={}",
+                    t.name,
+                    schedule.every[task] * period_ns / 1_000_000,
+                    schedule.every[task],
+                    t.priority
+                );
+            }
+        }
+        for p in package.ports() {
+            if let Err(e) = create_port(ctx, &p) {
+                report(text!("refusing the program: port {}: {e:?}", p.name).as_str());
+                return;
+            }
+        }
+        let Some(process_name) = name("scan") else {
+            return;
+        };
+        let attributes = ProcessAttribute {
+            period: SystemTime::Normal(period()),
+            time_capacity: SystemTime::Infinite,
+            entry_point: scan,
+            stack_size: 16 * 1024,
+            base_priority: 10,
+            deadline: Deadline::Soft,
+            name: process_name,
+        };
+        match ctx.create_process(attributes) {
+            Ok(process) => {
+                if let Err(e) = process.start() {
+                    report(text!("START scan failed: {e:?}").as_str());
+                }
+            }
+            Err(e) => report(text!("CREATE_PROCESS scan failed: {e:?}").as_str()),
+        }
+    }
+
+    fn warm_start(&self, ctx: &mut StartContext<Warden>) {
+        self.cold_start(ctx)
+    }
+}
+
+fn main() {
+    PlcPartition.run()
+}
+
+apex::partition_entry!(main);

@@ -1,0 +1,386 @@
+//! The PLC package: what `cargo xtask` puts into `system.img` as the PLC partition's data
+//! entry (`data/<partition>`) and the runtime reads at start: the compiled program and how
+//! the partition's ports connect to its process image. An interface (the build host writes
+//! it, the partition checks it); all integers little-endian.
+//!
+//! ```text
+//! offset size
+//! 0      4    magic "WPKG"
+//! 4      2    version (= 1)
+//! 6      2    port count N (at most MAX_PORTS)
+//! 8      4    program offset (from the package start)
+//! 12     4    program length
+//! 16     4    watch list offset
+//! 20     4    watch list length
+//! 24     64*N port records:
+//!   0    32   name (UTF-8, zero padded)
+//!   32   1    kind (protocol::PortKind code: 1 sampling, 2 queuing)
+//!   33   1    direction (protocol::Direction code: 1 in, 2 out)
+//!   34   2    reserved (0)
+//!   36   4    message size in bytes (max. for queuing ports)
+//!   40   8    refresh period in ns (sampling in; 0 otherwise)
+//!   48   4    queue depth (queuing; 0 otherwise)
+//!   52   4    first byte in the process image: %I for an input, %Q for an output
+//!   56   4    validity bit's byte in %I (inputs; NO_VALID_BIT: none)
+//!   60   1    validity bit (0..=7)
+//!   61   3    reserved (0)
+//! ...         the program: a plc-vm bytecode image (re-verified by the runtime)
+//! ...         the watch list: variable names (of the image's variable map), UTF-8,
+//!             separated by `\n`, whose values the runtime logs with its statistics
+//! ```
+//!
+//! An input port's message lands in `%I` from its first byte, an output port's message is
+//! that many bytes of `%Q` from its first byte. The validity bit of an input is set before
+//! each scan cycle when the port gave a fresh message: a sampling message younger than its
+//! refresh period, or a queuing message received for this cycle. The message bytes
+//! themselves stay as last received, so a program must look at the bit (a stale level is
+//! never silently fresh).
+
+use plc_vm::located::MAX_AREA;
+use protocol::{Direction, PortKind};
+
+/// Package magic.
+pub const MAGIC: [u8; 4] = *b"WPKG";
+/// Format version.
+pub const VERSION: u16 = 1;
+/// Header bytes before the port records.
+pub const HEADER_LEN: usize = 24;
+/// Bytes of one port record.
+pub const PORT_RECORD: usize = 64;
+/// Longest port name.
+pub const NAME_LEN: usize = 32;
+/// Most ports a package maps.
+pub const MAX_PORTS: usize = 32;
+/// `valid_byte` of an input without a validity bit (and of every output).
+pub const NO_VALID_BIT: u32 = u32::MAX;
+
+/// One port and where it meets the process image.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PortMap<'a> {
+    pub name: &'a str,
+    pub kind: PortKind,
+    pub direction: Direction,
+    /// Message size in bytes (the maximum for a queuing port).
+    pub size: u32,
+    /// Refresh period of a sampling input (ns), else 0.
+    pub refresh_ns: u64,
+    /// Queue depth of a queuing port, else 0.
+    pub depth: u32,
+    /// First byte in `%I` (inputs) or `%Q` (outputs).
+    pub area_offset: u32,
+    /// The input's validity bit in `%I` as (byte, bit), if any.
+    pub valid: Option<(u32, u8)>,
+}
+
+/// Why a package was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PackageError {
+    TooShort,
+    BadMagic,
+    UnsupportedVersion(u16),
+    TooManyPorts(u16),
+    /// The program range lies outside the package.
+    ProgramOutOfBounds,
+    /// The watch list lies outside the package or is not UTF-8.
+    BadWatchList,
+    /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
+    /// on an output or above 7).
+    BadPort(usize),
+}
+
+impl core::fmt::Display for PackageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::TooShort => write!(f, "shorter than its header and port records"),
+            Self::BadMagic => write!(f, "bad magic (expected \"WPKG\")"),
+            Self::UnsupportedVersion(v) => {
+                write!(f, "unsupported version {v} (expected {VERSION})")
+            }
+            Self::TooManyPorts(n) => write!(f, "{n} ports (at most {MAX_PORTS})"),
+            Self::ProgramOutOfBounds => write!(f, "the program lies outside the package"),
+            Self::BadWatchList => {
+                write!(f, "the watch list lies outside the package or is not UTF-8")
+            }
+            Self::BadPort(n) => write!(f, "port record {n} is malformed"),
+        }
+    }
+}
+
+fn u16_at(b: &[u8], at: usize) -> u16 {
+    u16::from_le_bytes([b[at], b[at + 1]])
+}
+
+fn u32_at(b: &[u8], at: usize) -> u32 {
+    u32::from_le_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]])
+}
+
+fn u64_at(b: &[u8], at: usize) -> u64 {
+    u64::from_le_bytes(core::array::from_fn(|i| b[at + i]))
+}
+
+/// A checked package (borrowing its bytes).
+#[derive(Clone, Copy, Debug)]
+pub struct Package<'a> {
+    bytes: &'a [u8],
+    ports: usize,
+    program: &'a [u8],
+    watch: &'a str,
+}
+
+impl<'a> Package<'a> {
+    /// Checks the structure and every port record; the program is only located (the
+    /// runtime verifies it).
+    pub fn parse(bytes: &'a [u8]) -> Result<Self, PackageError> {
+        if bytes.len() < HEADER_LEN {
+            return Err(PackageError::TooShort);
+        }
+        if bytes[..4] != MAGIC {
+            return Err(PackageError::BadMagic);
+        }
+        let version = u16_at(bytes, 4);
+        if version != VERSION {
+            return Err(PackageError::UnsupportedVersion(version));
+        }
+        let count = u16_at(bytes, 6);
+        if count as usize > MAX_PORTS {
+            return Err(PackageError::TooManyPorts(count));
+        }
+        if bytes.len() < HEADER_LEN + count as usize * PORT_RECORD {
+            return Err(PackageError::TooShort);
+        }
+        let range = |at: usize| {
+            let (offset, len) = (u32_at(bytes, at) as usize, u32_at(bytes, at + 4) as usize);
+            offset
+                .checked_add(len)
+                .and_then(|end| bytes.get(offset..end))
+        };
+        let program = range(8).ok_or(PackageError::ProgramOutOfBounds)?;
+        let watch = range(16)
+            .and_then(|w| core::str::from_utf8(w).ok())
+            .ok_or(PackageError::BadWatchList)?;
+        let package = Package {
+            bytes,
+            ports: count as usize,
+            program,
+            watch,
+        };
+        for i in 0..package.ports {
+            package.decode_port(i).ok_or(PackageError::BadPort(i))?;
+        }
+        Ok(package)
+    }
+
+    /// The bytecode image.
+    pub fn program(&self) -> &'a [u8] {
+        self.program
+    }
+
+    /// The names of the variables to log.
+    pub fn watch(&self) -> impl Iterator<Item = &'a str> {
+        self.watch.split('\n').filter(|n| !n.is_empty())
+    }
+
+    pub fn port_count(&self) -> usize {
+        self.ports
+    }
+
+    /// Port record `i` (every record was checked by [`Package::parse`]).
+    pub fn port(&self, i: usize) -> Option<PortMap<'a>> {
+        (i < self.ports).then(|| self.decode_port(i)).flatten()
+    }
+
+    pub fn ports(&self) -> impl Iterator<Item = PortMap<'a>> + '_ {
+        (0..self.ports).filter_map(|i| self.port(i))
+    }
+
+    fn decode_port(&self, i: usize) -> Option<PortMap<'a>> {
+        let at = HEADER_LEN + i * PORT_RECORD;
+        let r = self.bytes.get(at..at + PORT_RECORD)?;
+        let name_len = r[..NAME_LEN]
+            .iter()
+            .position(|&b| b == 0)
+            .unwrap_or(NAME_LEN);
+        let name = core::str::from_utf8(&r[..name_len]).ok()?;
+        if name.is_empty() || r[name_len..NAME_LEN].iter().any(|&b| b != 0) {
+            return None;
+        }
+        let kind = PortKind::from_code(r[32])?;
+        let direction = Direction::from_code(r[33])?;
+        let size = u32_at(r, 36);
+        let area_offset = u32_at(r, 52);
+        let valid = match (u32_at(r, 56), r[60]) {
+            (NO_VALID_BIT, 0) => None,
+            (byte, bit) if bit <= 7 && byte < MAX_AREA && direction == Direction::In => {
+                Some((byte, bit))
+            }
+            _ => return None,
+        };
+        if size == 0 || area_offset.checked_add(size)? > MAX_AREA {
+            return None;
+        }
+        Some(PortMap {
+            name,
+            kind,
+            direction,
+            size,
+            refresh_ns: u64_at(r, 40),
+            depth: u32_at(r, 48),
+            area_offset,
+            valid,
+        })
+    }
+}
+
+/// Writes a package (for the image builder). Names longer than [`NAME_LEN`] are cut.
+#[cfg(any(feature = "alloc", test))]
+pub fn encode(ports: &[PortMap], program: &[u8], watch: &[&str]) -> alloc::vec::Vec<u8> {
+    let mut out = alloc::vec::Vec::new();
+    let program_at = HEADER_LEN + ports.len() * PORT_RECORD;
+    let watch = watch.join("\n");
+    out.extend_from_slice(&MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&(ports.len() as u16).to_le_bytes());
+    out.extend_from_slice(&(program_at as u32).to_le_bytes());
+    out.extend_from_slice(&(program.len() as u32).to_le_bytes());
+    out.extend_from_slice(&((program_at + program.len()) as u32).to_le_bytes());
+    out.extend_from_slice(&(watch.len() as u32).to_le_bytes());
+    for p in ports {
+        let mut r = [0u8; PORT_RECORD];
+        let name = &p.name.as_bytes()[..p.name.len().min(NAME_LEN)];
+        r[..name.len()].copy_from_slice(name);
+        r[32] = p.kind.code();
+        r[33] = p.direction.code();
+        r[36..40].copy_from_slice(&p.size.to_le_bytes());
+        r[40..48].copy_from_slice(&p.refresh_ns.to_le_bytes());
+        r[48..52].copy_from_slice(&p.depth.to_le_bytes());
+        r[52..56].copy_from_slice(&p.area_offset.to_le_bytes());
+        let (byte, bit) = p.valid.unwrap_or((NO_VALID_BIT, 0));
+        r[56..60].copy_from_slice(&byte.to_le_bytes());
+        r[60] = bit;
+        out.extend_from_slice(&r);
+    }
+    out.extend_from_slice(program);
+    out.extend_from_slice(watch.as_bytes());
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn level() -> PortMap<'static> {
+        PortMap {
+            name: "level",
+            kind: PortKind::Sampling,
+            direction: Direction::In,
+            size: 8,
+            refresh_ns: 100_000_000,
+            depth: 0,
+            area_offset: 0,
+            valid: Some((16, 0)),
+        }
+    }
+
+    fn valve() -> PortMap<'static> {
+        PortMap {
+            name: "valve",
+            kind: PortKind::Sampling,
+            direction: Direction::Out,
+            size: 8,
+            refresh_ns: 0,
+            depth: 0,
+            area_offset: 8,
+            valid: None,
+        }
+    }
+
+    #[test]
+    fn round_trip() {
+        let bytes = encode(&[level(), valve()], b"PLCB...", &["tank.alarm", "x"]);
+        let p = Package::parse(&bytes).unwrap();
+        assert_eq!(
+            p.ports().collect::<alloc::vec::Vec<_>>(),
+            [level(), valve()]
+        );
+        assert_eq!(p.program(), b"PLCB...");
+        assert_eq!(
+            p.watch().collect::<alloc::vec::Vec<_>>(),
+            ["tank.alarm", "x"]
+        );
+    }
+
+    #[test]
+    fn hostile_packages_are_refused_never_panic() {
+        let good = encode(&[level(), valve()], b"PLCB", &["a"]);
+        assert_eq!(
+            Package::parse(&good[..10]).unwrap_err(),
+            PackageError::TooShort
+        );
+        assert_eq!(
+            Package::parse(&good[..80]).unwrap_err(),
+            PackageError::TooShort
+        );
+        let mut bad = good.clone();
+        bad[0] = b'X';
+        assert_eq!(Package::parse(&bad).unwrap_err(), PackageError::BadMagic);
+        let mut bad = good.clone();
+        bad[4] = 9;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::UnsupportedVersion(9)
+        );
+        let mut bad = good.clone();
+        bad[6] = 200;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::TooManyPorts(200)
+        );
+        let mut bad = good.clone();
+        bad[12] = 0xff;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::ProgramOutOfBounds
+        );
+        let mut bad = good.clone();
+        bad[20] = 9;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::BadWatchList
+        );
+        let mut bad = good.clone();
+        *bad.last_mut().unwrap() = 0xff;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::BadWatchList
+        );
+        // Record fields: kind, direction, size 0, beyond the area, a bit above 7, a
+        // validity bit on an output, a name with a gap.
+        let record = HEADER_LEN + PORT_RECORD;
+        for (at, value) in [
+            (32, 9),
+            (33, 0),
+            (36, 0),
+            (55, 0xff),
+            (60, 8),
+            (56, 0),
+            (3, 0),
+        ] {
+            let mut bad = good.clone();
+            bad[record + at] = value;
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadPort(1),
+                "byte {at} = {value}"
+            );
+        }
+        // Every truncation and every single-byte change parses or is refused.
+        for n in 0..good.len() {
+            let _ = Package::parse(&good[..n]);
+            for v in [0u8, 1, 0x7f, 0xff] {
+                let mut bad = good.clone();
+                bad[n] = v;
+                let _ = Package::parse(&bad);
+            }
+        }
+    }
+}

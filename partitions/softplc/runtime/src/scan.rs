@@ -1,0 +1,275 @@
+//! The scan cycle, as pure logic over a port interface ([`PortIo`]) and a clock, so the
+//! whole behaviour is tested on the host; `main.rs` only supplies the APEX ports and time.
+//!
+//! One release of the scan process (at its window start) is one call of [`Runtime::scan`]:
+//! 1. read every input port once into `%I` (with its validity bit) and copy the `%I` and
+//!    `%M` located variables in ([`plc_vm::located::copy_in`]);
+//! 2. run each IEC task that is due at this release — a cyclic task every
+//!    `INTERVAL / period` releases ([`Schedule`]; a program without a CONFIGURATION at
+//!    every release) — in priority order (IEC: the lowest
+//!    PRIORITY number first; ties in declaration order), with the VM's instruction budget
+//!    as its watchdog;
+//! 3. copy the `%Q` and `%M` located variables out and send every output port's bytes.
+//!
+//! A task that traps (or exhausts its budget: `WATCHDOG`) is stopped: its program
+//! instance's located `%Q` variables are set to their safe value (zero/FALSE) in the same
+//! cycle, before the outputs are sent, and stay so; the other tasks go on. The caller
+//! reports the fault to the health monitor.
+//!
+//! Per task the runtime keeps [`TaskStats`]: activations, execution time (last, min, max,
+//! mean), release jitter (scan start minus the release time, i.e. the window start),
+//! overruns (an execution longer than the task's interval) and faults.
+
+use crate::package::Package;
+use plc_vm::image::Image;
+use plc_vm::located::{self, Area, MAX_AREA};
+use plc_vm::vm::{Fault, Machine};
+use protocol::Direction;
+
+/// Most IEC tasks (the verifier's limit).
+pub const MAX_TASKS: usize = plc_vm::verify::MAX_TASKS;
+
+/// The process image: input, output and marker areas.
+pub struct Areas {
+    pub input: [u8; MAX_AREA as usize],
+    pub output: [u8; MAX_AREA as usize],
+    pub memory: [u8; MAX_AREA as usize],
+}
+
+impl Areas {
+    pub const fn new() -> Self {
+        Self {
+            input: [0; MAX_AREA as usize],
+            output: [0; MAX_AREA as usize],
+            memory: [0; MAX_AREA as usize],
+        }
+    }
+}
+
+impl Default for Areas {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The partition's ports, by their index in the package.
+pub trait PortIo {
+    /// The next message of input port `port` into `buf`: its length and whether it is
+    /// fresh (a sampling message within its refresh period, or a queued message), or
+    /// `None` when there is none.
+    fn receive(&mut self, port: usize, buf: &mut [u8]) -> Option<(usize, bool)>;
+    /// Sends `message` on output port `port`.
+    fn send(&mut self, port: usize, message: &[u8]);
+}
+
+/// Reads every input port into `%I` and sets its validity bit (cleared when the port gave
+/// no fresh message; the bytes then stay as last received).
+pub fn read_inputs(package: &Package, io: &mut impl PortIo, areas: &mut Areas) {
+    for (i, port) in package.ports().enumerate() {
+        if port.direction != Direction::In {
+            continue;
+        }
+        let at = port.area_offset as usize;
+        let slot = &mut areas.input[at..at + port.size as usize];
+        let fresh = io.receive(i, slot).is_some_and(|(_, fresh)| fresh);
+        if let Some((byte, bit)) = port.valid {
+            let b = &mut areas.input[byte as usize];
+            *b = if fresh {
+                *b | 1 << bit
+            } else {
+                *b & !(1 << bit)
+            };
+        }
+    }
+}
+
+/// Sends every output port's bytes of `%Q`.
+pub fn write_outputs(package: &Package, io: &mut impl PortIo, areas: &Areas) {
+    for (i, port) in package.ports().enumerate() {
+        if port.direction == Direction::Out {
+            let at = port.area_offset as usize;
+            io.send(i, &areas.output[at..at + port.size as usize]);
+        }
+    }
+}
+
+/// Why a program cannot run in this partition.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlanError {
+    /// A cyclic task's INTERVAL is not a positive multiple of the partition's period.
+    IntervalNotMultiple { task: usize, interval_ns: u64 },
+    /// Event (SINGLE) tasks are not supported by this runtime yet.
+    EventTask { task: usize },
+    /// No cyclic task at all.
+    NoTasks,
+}
+
+/// When each task runs: every `every[i]` releases of the scan process.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Schedule {
+    pub every: [u64; MAX_TASKS],
+    /// Tasks in the order they run within a release.
+    pub order: [usize; MAX_TASKS],
+    pub count: usize,
+}
+
+impl Schedule {
+    /// The schedule of `image`'s tasks for a scan process released every `period_ns`.
+    pub fn new(image: &Image, period_ns: u64) -> Result<Self, PlanError> {
+        let count = image.task_count().min(MAX_TASKS);
+        if count == 0 {
+            return Err(PlanError::NoTasks);
+        }
+        let mut every = [0u64; MAX_TASKS];
+        let mut order = [0usize; MAX_TASKS];
+        for (i, slot) in every.iter_mut().enumerate().take(count) {
+            let Some(task) = image.task(i) else {
+                return Err(PlanError::NoTasks);
+            };
+            if task.kind != 0 {
+                return Err(PlanError::EventTask { task: i });
+            }
+            let interval = task.interval_ns;
+            if period_ns == 0 || interval % period_ns != 0 {
+                return Err(PlanError::IntervalNotMultiple {
+                    task: i,
+                    interval_ns: interval,
+                });
+            }
+            // A program without a CONFIGURATION has one task of interval 0: every release.
+            *slot = (interval / period_ns).max(1);
+            order[i] = i;
+        }
+        let priority = |i: usize| image.task(i).map_or(u8::MAX, |t| t.priority);
+        order[..count].sort_unstable_by_key(|&i| (priority(i), i));
+        Ok(Self {
+            every,
+            order,
+            count,
+        })
+    }
+
+    /// Whether task `task` runs at release number `release` (0 = the first).
+    pub fn due(&self, task: usize, release: u64) -> bool {
+        self.every[task] != 0 && release.is_multiple_of(self.every[task])
+    }
+}
+
+/// Statistics of one task (times in ns).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TaskStats {
+    pub count: u64,
+    pub last: u64,
+    pub min: u64,
+    pub max: u64,
+    pub total: u64,
+    pub last_jitter: u64,
+    pub max_jitter: u64,
+    pub overruns: u64,
+    pub faults: u64,
+}
+
+impl TaskStats {
+    fn record(&mut self, exec: u64, jitter: u64, interval: u64) {
+        self.min = if self.count == 0 {
+            exec
+        } else {
+            self.min.min(exec)
+        };
+        self.count += 1;
+        self.last = exec;
+        self.max = self.max.max(exec);
+        self.total = self.total.saturating_add(exec);
+        self.last_jitter = jitter;
+        self.max_jitter = self.max_jitter.max(jitter);
+        if exec > interval {
+            self.overruns += 1;
+        }
+    }
+
+    /// Mean execution time.
+    pub fn mean(&self) -> u64 {
+        self.total.checked_div(self.count).unwrap_or(0)
+    }
+}
+
+/// What the runtime keeps between releases.
+pub struct Runtime {
+    pub schedule: Schedule,
+    pub stats: [TaskStats; MAX_TASKS],
+    /// Stopped tasks (after a fault) and the fault.
+    pub stopped: [Option<Fault>; MAX_TASKS],
+    pub releases: u64,
+    period_ns: u64,
+}
+
+impl Runtime {
+    pub fn new(schedule: Schedule, period_ns: u64) -> Self {
+        Self {
+            schedule,
+            stats: [TaskStats::default(); MAX_TASKS],
+            stopped: [None; MAX_TASKS],
+            releases: 0,
+            period_ns,
+        }
+    }
+
+    /// One release (see the module documentation). `release_ns` is when it was due (its
+    /// window start), `clock` the partition's time in ns (also the program's `NOW`).
+    /// Calls `on_fault` for each task that faulted in this release.
+    pub fn scan(
+        &mut self,
+        machine: &mut Machine,
+        image: &Image,
+        package: &Package,
+        io: &mut impl PortIo,
+        areas: &mut Areas,
+        mut clock: impl FnMut() -> u64,
+        release_ns: u64,
+        mut on_fault: impl FnMut(usize, &Fault),
+    ) {
+        let start = clock();
+        let jitter = start.saturating_sub(release_ns);
+        read_inputs(package, io, areas);
+        let vars = || image.located_vars();
+        located::copy_in(vars(), Area::Input, &areas.input, machine.data_mut());
+        located::copy_in(vars(), Area::Memory, &areas.memory, machine.data_mut());
+        for &task in &self.schedule.order[..self.schedule.count] {
+            if self.stopped[task].is_some() || !self.schedule.due(task, self.releases) {
+                continue;
+            }
+            let t0 = clock();
+            let result = machine.run_cycle(task, t0 as i64);
+            let exec = clock().saturating_sub(t0);
+            let interval = self.schedule.every[task].saturating_mul(self.period_ns);
+            self.stats[task].record(exec, jitter, interval);
+            if let Err(fault) = result {
+                self.stats[task].faults += 1;
+                self.stopped[task] = Some(fault);
+                safe_outputs(image, task, machine.data_mut());
+                on_fault(task, &fault);
+            }
+        }
+        located::copy_out(vars(), Area::Output, machine.data(), &mut areas.output);
+        located::copy_out(vars(), Area::Memory, machine.data(), &mut areas.memory);
+        write_outputs(package, io, areas);
+        self.releases += 1;
+    }
+}
+
+/// Sets the located `%Q` variables of `task`'s program instance to zero/FALSE.
+pub fn safe_outputs(image: &Image, task: usize, data: &mut [u8]) {
+    let Some(t) = image.task(task) else {
+        return;
+    };
+    let frame = image.pou(t.pou as usize).map_or(0, |p| p.frame_size);
+    let instance = t.instance_base as u64..t.instance_base as u64 + frame as u64;
+    for v in image.located_vars() {
+        if v.location.area == Area::Output && instance.contains(&(v.address as u64)) {
+            let at = v.address as usize;
+            if let Some(bytes) = data.get_mut(at..at + v.location.width.bytes() as usize) {
+                bytes.fill(0);
+            }
+        }
+    }
+}
