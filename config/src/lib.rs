@@ -59,6 +59,10 @@
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
 //! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
 //! health.deadline_missed = "warm_restart"
+//! plc.program = ["../plc/tank.st"]   # soft-PLC partitions only: see "PLC"
+//! plc.inputs.level = { at = "%IB0", valid = "%IX8.0" }
+//! plc.outputs.valve = { at = "%QB0" }
+//! plc.watch = ["level", "tank.pid.integral"]
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -97,6 +101,23 @@
 //! `shutdown` (stop the module with the failure outcome), `shutdown_success` (stop it with
 //! the success outcome: the expected end of a test scenario). A partition's table overrides
 //! the module's `[health]`; see [`model::HealthTable::resolve`] for the defaults.
+//!
+//! **PLC.** A partition running the soft-PLC (`image = "softplc"`) names its Structured
+//! Text sources in `plc.program` (paths relative to the description's directory, compiled
+//! in that order into one program; a missing file is an error here, a compile error stops
+//! `cargo xtask` exactly as `plcc check` prints it). Every port of the partition is mapped
+//! into its process image: `plc.inputs.<port> = { at = "%IB<n>", valid = "%IX<b>.<i>" }`
+//! puts the port's message at input byte `n` (`%IW`/`%ID`/`%IL` addresses count in their
+//! own units, as in CODESYS: `%ID1` is byte 4) and, for a sampling input, sets bit `valid`
+//! before each cycle while the message is fresh (required for sampling inputs, so a stale
+//! value is never taken for a fresh one; queuing inputs may have one too);
+//! `plc.outputs.<port> = { at = "%QB<n>" }` sends the port's size of bytes of `%Q` from
+//! byte `n` after each cycle. Mapped ranges of one area must not overlap, a validity bit
+//! must not lie inside a mapped message, and everything must fit in the 4096-byte areas.
+//! `plc.watch` names variables (globals by name, program variables as `instance.var`) the
+//! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
+//! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
+//! the partition windows (checked when the program is compiled).
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -464,6 +464,8 @@ impl Validator<'_, '_> {
         let mut inputs = Vec::new();
         let mut outputs = Vec::new();
         let mut mapped = vec![false; ports.len()];
+        // (byte, source offset, port) of every validity bit.
+        let mut valid_bits: Vec<(u32, usize, usize)> = Vec::new();
         let links = raw
             .inputs
             .iter()
@@ -550,6 +552,9 @@ impl Validator<'_, '_> {
                 match (&i.valid, p.kind) {
                     (Some(bit), _) => {
                         valid = address(self, bit, &link_path.key("valid"), Area::Input, true).map(|l| (l.byte, l.bit));
+                        if let Some((byte, _)) = valid {
+                            valid_bits.push((byte, start(bit), port));
+                        }
                     }
                     (None, PortKind::Sampling) => self.error(
                         start(key),
@@ -571,22 +576,16 @@ impl Validator<'_, '_> {
             }
         }
         // Validity bits must not fall into a message's bytes.
-        for link in &inputs {
-            if let Some((byte, _)) = link.valid
-                && used[0].iter().any(|(lo, hi, _)| (*lo..*hi).contains(&byte))
-            {
-                let key = raw
-                    .inputs
-                    .keys()
-                    .find(|k| k.get_ref() == &ports[link.port].name);
-                let at = key.map_or(start(plc), start);
+        for &(byte, at, port) in &valid_bits {
+            if used[0].iter().any(|(lo, hi, _)| (*lo..*hi).contains(&byte)) {
+                let message = format!(
+                    "the validity bit of `{}` lies inside a mapped message (byte {byte})",
+                    ports[port].name
+                );
                 self.error(
                     at,
-                    &path.key("inputs"),
-                    format!(
-                        "the validity bit of `{}` lies inside a mapped message (byte {byte})",
-                        ports[link.port].name
-                    ),
+                    &path.key("inputs").key(&ports[port].name).key("valid"),
+                    message,
                 );
             }
         }

@@ -31,7 +31,7 @@ enum Cmd {
     /// Build everything and boot it under QEMU with COM1 on this terminal.
     Run {
         /// System description to put in system.img.
-        #[arg(long, default_value = "config/systems/default.toml")]
+        #[arg(long, default_value = "config/systems/plc.toml")]
         config: PathBuf,
         /// Stop after SECS; exit 0 only if the system reached "ready" and was still running
         /// without a crash.
@@ -180,12 +180,14 @@ fn cargo_test(args: &[&str]) -> Result<bool> {
 fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     tools::ensure_qemu()?;
     // Host unit tests: the host crates (the workspace's default members), plus the pure
-    // logic of the kernel, the APEX runtime and the plant (their library parts).
+    // logic of the kernel, the APEX runtime, the plant and the PLC runtime (their library
+    // parts).
     let host_ok = scenarios_only
         || (cargo_test(&[])?
             & cargo_test(&["-p", "kernel", "--lib"])?
             & cargo_test(&["-p", "apex", "--no-default-features", "--lib"])?
-            & cargo_test(&["-p", "plant", "--no-default-features", "--lib"])?);
+            & cargo_test(&["-p", "plant", "--no-default-features", "--lib"])?
+            & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
         return Ok(false);

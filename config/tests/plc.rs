@@ -1,0 +1,194 @@
+//! Validation of the soft-PLC keys (`plc.*`) of a partition.
+
+mod common;
+use common::*;
+
+const PLC: &str = r#"ports.in = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
+plc.program = ["tests/data/counter.st"]
+plc.inputs.in = { at = "%IB0", valid = "%IX8.0" }
+# b"#;
+
+fn plc(edits: &[(&str, &str)]) -> String {
+    let mut text = doc(&[("# b", PLC)]);
+    for (pattern, replacement) in edits {
+        assert!(text.contains(pattern), "test bug: {pattern:?}");
+        text = text.replacen(pattern, replacement, 1);
+    }
+    text
+}
+
+#[test]
+fn a_mapped_plc_partition_is_valid() {
+    // Partition b's only port `in` is mapped; its program file exists (relative to the
+    // description's directory: the crate root for "test.toml").
+    let system = load_ok(&plc(&[(
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    )]));
+    let b = &system.partitions[1];
+    let p = b.plc.as_ref().expect("plc keys");
+    assert_eq!(p.program, ["tests/data/counter.st"]);
+    assert_eq!(p.inputs.len(), 1);
+    assert_eq!((p.inputs[0].at, p.inputs[0].valid), (0, Some((8, 0))));
+    assert!(p.outputs.is_empty());
+}
+
+#[test]
+fn missing_program_file() {
+    let src = plc(&[
+        (
+            "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+            "",
+        ),
+        ("tests/data/counter.st", "tests/data/nope.st"),
+    ]);
+    expect_some(
+        &src,
+        "\"tests/data/nope.st\"",
+        0,
+        "partitions.b.plc.program",
+        "no such file `tests/data/nope.st`",
+    );
+}
+
+#[test]
+fn addresses_are_checked() {
+    let base = [(
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    )];
+    let src = plc(&[base[0], ("at = \"%IB0\"", "at = \"%QB0\"")]);
+    expect_some(
+        &src,
+        "\"%QB0\"",
+        0,
+        "partitions.b.plc.inputs.in.at",
+        "is not an input byte address",
+    );
+    let src = plc(&[base[0], ("at = \"%IB0\"", "at = \"IB0\"")]);
+    expect_some(
+        &src,
+        "\"IB0\"",
+        0,
+        "partitions.b.plc.inputs.in.at",
+        "starts with `%`",
+    );
+    let src = plc(&[base[0], ("at = \"%IB0\"", "at = \"%IB4092\"")]);
+    expect_some(
+        &src,
+        "\"%IB4092\"",
+        0,
+        "partitions.b.plc.inputs.in.at",
+        "beyond the 4096-byte area",
+    );
+    let src = plc(&[base[0], ("valid = \"%IX8.0\"", "valid = \"%IX8.9\"")]);
+    expect_some(
+        &src,
+        "\"%IX8.9\"",
+        0,
+        "partitions.b.plc.inputs.in.valid",
+        "a bit number is 0..=7",
+    );
+    let src = plc(&[base[0], ("valid = \"%IX8.0\"", "valid = \"%IX3.0\"")]);
+    expect_some(
+        &src,
+        "\"%IX3.0\"",
+        0,
+        "partitions.b.plc.inputs.in.valid",
+        "lies inside a mapped message",
+    );
+    let src = plc(&[base[0], (", valid = \"%IX8.0\"", "")]);
+    expect_some(
+        &src,
+        "plc.inputs.^in",
+        0,
+        "partitions.b.plc.inputs.in",
+        "a sampling input needs `valid`",
+    );
+}
+
+#[test]
+fn every_port_is_mapped_once_in_its_direction() {
+    // An unknown port under inputs (and so `in` left unmapped), an unknown one under
+    // outputs.
+    let src = plc(&[
+        (
+            "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+            "",
+        ),
+        ("plc.inputs.in =", "plc.inputs.other ="),
+    ]);
+    expect_some(
+        &src,
+        "plc.inputs.^other",
+        0,
+        "partitions.b.plc.inputs.other",
+        "no port `other`",
+    );
+    expect_some(
+        &src,
+        "plc.program",
+        0,
+        "partitions.b.plc",
+        "port `in` is not in the process image",
+    );
+    let src = plc(&[
+        (
+            "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+            "",
+        ),
+        (
+            "# b",
+            "ports.o = { kind = \"sampling\", direction = \"out\", size = 8 }\nplc.outputs.o = { at = \"%QB0\" }\nplc.outputs.p = { at = \"%QB4\" }\n# b",
+        ),
+    ]);
+    expect_some(
+        &src,
+        "plc.outputs.^p",
+        0,
+        "partitions.b.plc.outputs.p",
+        "no port `p`",
+    );
+}
+
+#[test]
+fn overlapping_outputs() {
+    let src = plc(&[
+        (
+            "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+            "",
+        ),
+        (
+            "# b",
+            "ports.x = { kind = \"sampling\", direction = \"out\", size = 8 }\nports.y = { kind = \"sampling\", direction = \"out\", size = 8 }\nplc.outputs.x = { at = \"%QB0\" }\nplc.outputs.y = { at = \"%QW2\" }\n# b",
+        ),
+    ]);
+    expect_some(
+        &src,
+        "\"%QW2\"",
+        0,
+        "partitions.b.plc.outputs.y.at",
+        "bytes 4..12 overlap the mapping at line",
+    );
+}
+
+#[test]
+fn a_plc_needs_a_program() {
+    let src = plc(&[
+        (
+            "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+            "",
+        ),
+        (
+            "plc.program = [\"tests/data/counter.st\"]",
+            "plc.program = []",
+        ),
+    ]);
+    expect_some(
+        &src,
+        "plc.program",
+        0,
+        "partitions.b.plc.program",
+        "at least one ST source file",
+    );
+}
