@@ -64,8 +64,8 @@ pub struct Partition {
 /// A soft-PLC partition's program and how its ports meet its process image.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Plc {
-    /// ST source files, resolved against the description's directory, in the given order.
-    pub program: Vec<String>,
+    /// ST source files in the given order.
+    pub program: Vec<SourceFile>,
     /// Input ports: their message lands in `%I`.
     pub inputs: Vec<PlcLink>,
     /// Output ports: their message is taken from `%Q`.
@@ -73,6 +73,15 @@ pub struct Plc {
     /// Variables the runtime logs with its statistics (checked against the program when
     /// it is compiled).
     pub watch: Vec<String>,
+}
+
+/// A PLC source file.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SourceFile {
+    /// As written in the description (what diagnostics and trap locations show).
+    pub name: String,
+    /// Resolved against the description's directory (where it is read from).
+    pub path: String,
 }
 
 /// One port of a PLC partition in its process image.

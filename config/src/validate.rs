@@ -422,7 +422,10 @@ impl Validator<'_, '_> {
                     ),
                 );
             }
-            program.push(resolved.to_string_lossy().into_owned());
+            program.push(SourceFile {
+                name: file.get_ref().clone(),
+                path: resolved.to_string_lossy().into_owned(),
+            });
         }
         // Parses an address of `area`; a bit when `bit`, else a byte/word/... start.
         let address =

@@ -119,3 +119,121 @@ fn plc_tank() {
         );
     }
 }
+
+/// `plc: t=<ms>ms watch name=value ...` lines of partition `partition`, as
+/// (t, [(name, value)]).
+fn watch_lines<'a>(lines: &'a [String], partition: &str) -> Vec<(u64, Vec<(&'a str, &'a str)>)> {
+    let prefix = format!("[{partition}] plc: t=");
+    lines
+        .iter()
+        .filter_map(|l| {
+            let rest = &l[l.find(&prefix)? + prefix.len()..];
+            let (t, rest) = rest.split_once("ms watch ")?;
+            let values = rest
+                .split_whitespace()
+                .filter_map(|w| w.split_once('='))
+                .collect();
+            Some((t.parse().ok()?, values))
+        })
+        .collect()
+}
+
+fn value(values: &[(&str, &str)], name: &str) -> Option<u64> {
+    values
+        .iter()
+        .find(|(n, _)| *n == name)
+        .and_then(|(_, v)| v.parse().ok())
+}
+
+#[test]
+fn plc_trap() {
+    let o = boot("plc_trap");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the stopwatch ends the run",
+    );
+    // Every partition reports the trap with its kind and ST source line.
+    for partition in ["ignore", "warm", "cold"] {
+        check(
+            &o,
+            o.line(&format!(
+                "[{partition}] plc: task FAST.faulty stopped: DIVISION_BY_ZERO at "
+            ))
+            .is_some_and(|l| l.contains("at plc/trap.st:15:3; outputs safe")),
+            &format!("{partition}: no trap line naming DIVISION_BY_ZERO at plc/trap.st:15:3"),
+        );
+        check(
+            &o,
+            o.line(&format!("partition={partition} error=application_error"))
+                .is_some_and(|l| l.contains("DIVISION_BY_ZERO\\x20at\\x20plc/trap.st:15:3")),
+            &format!("{partition}: the health monitor did not hear of the trap"),
+        );
+    }
+    // ignore: FAST stays stopped at cycle 150 with its output at the safe value 0, SLOW
+    // goes on; nothing restarts.
+    let ignore = watch_lines(&o.lines, "ignore");
+    check(
+        &o,
+        ignore.len() >= 20,
+        &format!("{} watch lines of `ignore`", ignore.len()),
+    );
+    let after: Vec<_> = ignore.iter().filter(|(t, _)| *t >= 2_000).collect();
+    check(
+        &o,
+        !after.is_empty()
+            && after.iter().all(|(_, v)| {
+                value(v, "faulty.cycles") == Some(150) && value(v, "faulty.out") == Some(0)
+            }),
+        "ignore: the faulty task did not stay stopped with its output at 0",
+    );
+    let beats: Vec<u64> = after
+        .iter()
+        .filter_map(|(_, v)| value(v, "steady.beats"))
+        .collect();
+    check(
+        &o,
+        beats.len() >= 10 && beats.windows(2).all(|w| w[1] > w[0]),
+        &format!("ignore: the other task did not keep cycling: {beats:?}"),
+    );
+    check(
+        &o,
+        o.line("syssw: partition ignore: NORMAL (")
+            .is_some_and(|l| l.contains("restart 0"))
+            && o.lines
+                .iter()
+                .all(|l| !(l.contains("syssw: partition ignore:") && l.contains("restart 1"))),
+        "ignore: the partition was restarted",
+    );
+    // warm_restart: the RETAIN counter goes on across lives, the plain one restarts.
+    check(
+        &o,
+        o.line("[warm] plc: warm restart: ")
+            .is_some_and(|l| l.contains("1 RETAIN variable(s) kept")),
+        "warm: no warm restart keeping the RETAIN variable",
+    );
+    let warm = watch_lines(&o.lines, "warm");
+    check(
+        &o,
+        warm.iter().any(|(_, v)| {
+            matches!((value(v, "faulty.lives"), value(v, "faulty.cycles")), (Some(l), Some(c)) if l >= c + 150)
+        }),
+        "warm: the RETAIN counter did not survive a restart",
+    );
+    // cold_restart: both counters restart.
+    check(
+        &o,
+        o.line("[cold] plc: warm restart").is_none(),
+        "cold: restarted warm",
+    );
+    let cold = watch_lines(&o.lines, "cold");
+    check(
+        &o,
+        cold.len() >= 20
+            && cold
+                .iter()
+                .all(|(_, v)| value(v, "faulty.lives") == value(v, "faulty.cycles")),
+        "cold: the RETAIN counter survived a cold restart",
+    );
+}

@@ -20,9 +20,9 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             .program
             .iter()
             .map(|file| {
-                std::fs::read_to_string(file)
-                    .map(|text| (file.clone(), text))
-                    .with_context(|| format!("partition {}: cannot read {file}", p.name))
+                std::fs::read_to_string(&file.path)
+                    .map(|text| (file.name.clone(), text))
+                    .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
             })
             .collect::<Result<Vec<_>>>()?;
         let compiled = match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {

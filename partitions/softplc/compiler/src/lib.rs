@@ -181,6 +181,10 @@ pub fn compile(
                     plc_vm::image::VAR_FLAG_CONSTANT
                 } else {
                     0
+                } | if v.retain {
+                    plc_vm::image::VAR_FLAG_RETAIN
+                } else {
+                    0
                 },
                 v.addr,
                 v.size,

@@ -67,6 +67,8 @@ pub struct MonitorVar {
     pub addr: u32,
     pub size: u32,
     pub constant: bool,
+    /// RETAIN: kept across a warm restart.
+    pub retain: bool,
 }
 
 /// Upper bound on map entries contributed by one array (huge arrays are only partly listed).
@@ -77,7 +79,14 @@ const MAX_ELEMENTS: u64 = 4096;
 pub fn variable_map(prog: &Program) -> Vec<MonitorVar> {
     let mut out = Vec::new();
     for g in &prog.globals {
-        flatten(prog, &g.text, &g.ty, g.offset, g.constant, &mut out);
+        flatten(
+            prog,
+            &g.text,
+            &g.ty,
+            g.offset,
+            (g.constant, g.retain),
+            &mut out,
+        );
     }
     for inst in &prog.instances {
         for v in &prog.pous[inst.pou].vars {
@@ -89,7 +98,7 @@ pub fn variable_map(prog: &Program) -> Vec<MonitorVar> {
                 &format!("{}.{}", inst.name, v.text),
                 &v.ty,
                 inst.addr + v.offset,
-                v.constant,
+                (v.constant, v.retain),
                 &mut out,
             );
         }
@@ -102,7 +111,8 @@ fn flatten(
     name: &str,
     ty: &Type,
     addr: u32,
-    constant: bool,
+    // CONSTANT and RETAIN, inherited by members and elements.
+    attrs: (bool, bool),
     out: &mut Vec<MonitorVar>,
 ) {
     let kind = match ty {
@@ -126,7 +136,7 @@ fn flatten(
                     &format!("{name}.{}", m.text),
                     &m.ty,
                     addr + m.offset,
-                    constant,
+                    attrs,
                     out,
                 );
             }
@@ -142,7 +152,7 @@ fn flatten(
                     &format!("{name}.{}", v.text),
                     &v.ty,
                     addr + v.offset,
-                    constant,
+                    (attrs.0 || v.constant, attrs.1 || v.retain),
                     out,
                 );
             }
@@ -167,7 +177,7 @@ fn flatten(
                     &format!("{name}[{}]", text.join(",")),
                     &a.elem,
                     addr + flat as u32 * stride,
-                    constant,
+                    attrs,
                     out,
                 );
             }
@@ -184,7 +194,8 @@ fn flatten(
         kind,
         addr,
         size,
-        constant,
+        constant: attrs.0,
+        retain: attrs.1,
     });
 }
 

@@ -47,6 +47,8 @@ pub struct VarDef {
     pub init: Option<Init>,
     /// Its direct address (`AT %IX0.1`), for PROGRAM variables and globals.
     pub location: Option<Location>,
+    /// Declared in a RETAIN block: kept across a warm restart.
+    pub retain: bool,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -537,6 +539,7 @@ impl Sema<'_> {
                             constant: false,
                             init: self.init_of(&m.ty, &m.init),
                             location: self.location(m, &mty, false),
+                            retain: false,
                         });
                         off = off.saturating_add(sz);
                         align = align.max(al);
@@ -730,6 +733,7 @@ impl Sema<'_> {
                 constant: false,
                 init: None,
                 location: None,
+                retain: false,
             });
         }
         for block in &ast.var_blocks {
@@ -783,6 +787,7 @@ impl Sema<'_> {
                         constant: block.constant,
                         init: self.init_of(&d.ty, &d.init),
                         location,
+                        retain: block.retain,
                     });
                 }
             }
@@ -856,6 +861,7 @@ impl Sema<'_> {
                         constant: block.constant,
                         init: self.init_of(&d.ty, &d.init),
                         location,
+                        retain: block.retain,
                     });
                 }
             }

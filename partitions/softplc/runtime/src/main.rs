@@ -10,8 +10,10 @@
 //!   jitter_us=<last>/<max> overruns=<n> faults=<n>` per task every [`STATS_EVERY_MS`];
 //! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
 //!   as IEC literals);
-//! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault
-//!   (also raised to the health monitor as an application error with the same text);
+//! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault,
+//!   raised to the health monitor as the application error `<name>: <TRAP> at
+//!   <file>:<line>:<col>` (files as the configuration names them);
+//! - `plc: warm restart: <n> RETAIN variable(s) kept, the rest initialised`;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
 //!
@@ -29,6 +31,7 @@ use apex::user_rt::print::LineBuffer;
 use apex::user_rt::println;
 use core::fmt::Write;
 use core::str::FromStr;
+use core::sync::atomic::{AtomicBool, Ordering};
 use core::time::Duration;
 use plc_vm::image::Image;
 use plc_vm::verify::VerifiedImage;
@@ -52,6 +55,10 @@ macro_rules! text {
 }
 
 static DATA: spin::Mutex<[u8; MAX_DATA]> = spin::Mutex::new([0; MAX_DATA]);
+/// Data memory of the previous life, for the RETAIN values of a warm restart.
+static PREVIOUS: spin::Mutex<[u8; MAX_DATA]> = spin::Mutex::new([0; MAX_DATA]);
+/// This life began with a warm start (memory kept by syssw).
+static WARM: AtomicBool = AtomicBool::new(false);
 static SCRATCH: spin::Mutex<[u32; MAX_SCRATCH]> = spin::Mutex::new([0; MAX_SCRATCH]);
 static AREAS: spin::Mutex<Areas> = spin::Mutex::new(Areas::new());
 
@@ -164,16 +171,29 @@ impl PortIo for ApexPorts {
     }
 }
 
+/// `<task>: <TRAP> at <file>:<line>:<col>` (short: the health monitor keeps 64 bytes).
 fn fault_text(image: &Image, task: usize, fault: &Fault) -> LineBuffer {
     let mut text = LineBuffer::default();
     let task_name = image.task(task).map_or("?", |t| t.name);
-    let _ = write!(text, "task {task_name} stopped: {}", fault.trap.name());
+    let _ = write!(text, "{task_name}: {}", fault.trap.name());
     if let Some(l) = fault.location {
         let file = image.file_name(l.file).unwrap_or("?");
         let _ = write!(text, " at {file}:{}:{}", l.line, l.column);
     }
-    let _ = write!(text, "; outputs safe");
     text
+}
+
+/// Logs a task's fault and reports it to the health monitor.
+fn report_fault(image: &Image, task: usize, fault: &Fault) {
+    let text = fault_text(image, task, fault);
+    let task_name = image.task(task).map_or("?", |t| t.name);
+    let what = text
+        .as_str()
+        .strip_prefix(task_name)
+        .unwrap_or("")
+        .trim_start_matches(": ");
+    println!("plc: task {task_name} stopped: {what}; outputs safe");
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
 }
 
 extern "C" fn scan() {
@@ -187,6 +207,11 @@ extern "C" fn scan() {
     let (mut stack, mut calls, mut tries) =
         ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
     let size = image.data_size() as usize;
+    let warm = WARM.load(Ordering::Acquire);
+    let mut previous = PREVIOUS.lock();
+    if warm {
+        previous[..size].copy_from_slice(&data[..size]);
+    }
     let Ok(mut machine) = Machine::new(
         verified,
         Memory {
@@ -199,6 +224,12 @@ extern "C" fn scan() {
         report("refusing the program: not enough VM memory");
         return;
     };
+    if warm {
+        let kept =
+            softplc::scan::carry_retain(&image, &previous[..size], &image, machine.data_mut());
+        println!("plc: warm restart: {kept} RETAIN variable(s) kept, the rest initialised");
+    }
+    drop(previous);
     let mut io = ApexPorts::open(&package);
     let mut areas = AREAS.lock();
     let mut rt = Runtime::new(schedule, period);
@@ -223,7 +254,7 @@ extern "C" fn scan() {
             &mut areas,
             now_ns,
             release,
-            |task, fault| report(fault_text(&image, task, fault).as_str()),
+            |task, fault| report_fault(&image, task, fault),
         );
         let now = now_ns();
         if now >= next_stats {
@@ -286,10 +317,44 @@ fn create_port(ctx: &mut StartContext<Warden>, p: &PortMap) -> Result<(), Error>
     }
 }
 
+/// After a restart the previous life's scan process may have died holding these locks.
+#[allow(unsafe_code)] // forcing spin locks open
+fn release_previous_locks() {
+    if DATA.is_locked() {
+        // SAFETY: runs on the initialisation thread of a (re)started partition before any
+        // process exists; every thread of the previous life died with its task, so no guard
+        // of this lock is alive.
+        unsafe { DATA.force_unlock() };
+    }
+    if PREVIOUS.is_locked() {
+        // SAFETY: as above.
+        unsafe { PREVIOUS.force_unlock() };
+    }
+    if AREAS.is_locked() {
+        // SAFETY: as above.
+        unsafe { AREAS.force_unlock() };
+    }
+    if SCRATCH.is_locked() {
+        // SAFETY: as above.
+        unsafe { SCRATCH.force_unlock() };
+    }
+}
+
 struct PlcPartition;
 
-impl Partition<Warden> for PlcPartition {
-    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+impl PlcPartition {
+    /// Both starts: a warm one (memory kept) carries the RETAIN variables over; a cold one
+    /// (memory reloaded by syssw) initialises everything.
+    fn start(&self, ctx: &mut StartContext<Warden>, warm: bool) {
+        release_previous_locks();
+        WARM.store(warm, Ordering::Release);
+        {
+            // In place: an `Areas` value is too big for the initialisation thread's stack.
+            let mut areas = AREAS.lock();
+            areas.input.fill(0);
+            areas.output.fill(0);
+            areas.memory.fill(0);
+        }
         let (package, verified, schedule) = match load() {
             Ok(loaded) => loaded,
             Err(reason) => {
@@ -344,9 +409,15 @@ impl Partition<Warden> for PlcPartition {
             Err(e) => report(text!("CREATE_PROCESS scan failed: {e:?}").as_str()),
         }
     }
+}
+
+impl Partition<Warden> for PlcPartition {
+    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+        self.start(ctx, false)
+    }
 
     fn warm_start(&self, ctx: &mut StartContext<Warden>) {
-        self.cold_start(ctx)
+        self.start(ctx, true)
     }
 }
 

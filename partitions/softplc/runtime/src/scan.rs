@@ -273,3 +273,37 @@ pub fn safe_outputs(image: &Image, task: usize, data: &mut [u8]) {
         }
     }
 }
+
+/// Copies every RETAIN variable of `new_image` that `old_image` also has (same name, type
+/// and size) from `old_data` into `new_data`: the values a warm restart (same image) or an
+/// online download (a changed one) keeps. Returns how many were carried.
+pub fn carry_retain(
+    old_image: &Image,
+    old_data: &[u8],
+    new_image: &Image,
+    new_data: &mut [u8],
+) -> usize {
+    use plc_vm::image::VAR_FLAG_RETAIN;
+    let mut carried = 0;
+    for i in 0..new_image.var_count() {
+        let Some(new) = new_image.var(i).filter(|v| v.flags & VAR_FLAG_RETAIN != 0) else {
+            continue;
+        };
+        let Some(old) = old_image
+            .find_var(new.name)
+            .filter(|o| o.flags & VAR_FLAG_RETAIN != 0 && o.ty == new.ty && o.size == new.size)
+        else {
+            continue;
+        };
+        let (from, to) = (old.addr as usize, new.addr as usize);
+        let len = new.size as usize;
+        if let (Some(src), Some(dst)) = (
+            old_data.get(from..from + len),
+            new_data.get_mut(to..to + len),
+        ) {
+            dst.copy_from_slice(src);
+            carried += 1;
+        }
+    }
+    carried
+}

@@ -375,3 +375,46 @@ fn the_example_controller_holds_the_plants_level() {
     assert_eq!(left_band, None, "left the band (time ms, level)");
     assert!(alarm_seen, "the disturbance raised the alarm");
 }
+
+#[test]
+fn retain_variables_are_carried_by_name_and_type() {
+    let old = compile(
+        "PROGRAM P VAR RETAIN kept : UDINT; moved : INT; gone : INT; END_VAR VAR plain : UDINT; END_VAR
+         kept := 7; moved := 8; gone := 9; plain := 10; END_PROGRAM",
+    );
+    let new = compile(
+        "PROGRAM P VAR RETAIN extra : LREAL; moved : INT; kept : UDINT; END_VAR VAR plain : UDINT; gone : INT; END_VAR
+         plain := plain; END_PROGRAM",
+    );
+    let (old_image, new_image) = (Image::parse(&old).unwrap(), Image::parse(&new).unwrap());
+    let mut old_data = vec![0u8; old_image.data_size() as usize];
+    fn var<'a>(image: &Image<'a>, name: &str) -> plc_vm::image::Var<'a> {
+        image.find_var(name).unwrap()
+    }
+    for (name, value) in [
+        ("P.kept", 7u32),
+        ("P.moved", 8),
+        ("P.gone", 9),
+        ("P.plain", 10),
+    ] {
+        let v = var(&old_image, name);
+        let bytes = value.to_le_bytes();
+        old_data[v.addr as usize..(v.addr + v.size) as usize]
+            .copy_from_slice(&bytes[..v.size as usize]);
+    }
+    let mut new_data = vec![0u8; new_image.data_size() as usize];
+    let carried = crate::scan::carry_retain(&old_image, &old_data, &new_image, &mut new_data);
+    assert_eq!(
+        carried, 2,
+        "kept and moved (gone is no longer RETAIN, plain never was)"
+    );
+    let read = |name: &str| {
+        let v = var(&new_image, name);
+        let mut b = [0u8; 4];
+        b[..v.size as usize]
+            .copy_from_slice(&new_data[v.addr as usize..(v.addr + v.size) as usize]);
+        u32::from_le_bytes(b)
+    };
+    assert_eq!((read("P.kept"), read("P.moved")), (7, 8));
+    assert_eq!((read("P.plain"), read("P.gone")), (0, 0));
+}
