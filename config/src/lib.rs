@@ -63,6 +63,7 @@
 //! plc.inputs.level = { at = "%IB0", valid = "%IX8.0" }
 //! plc.outputs.valve = { at = "%QB0" }
 //! plc.watch = ["level", "tank.pid.integral"]
+//! plc.online = { request = "cmd", response = "reply", access = "monitor" }
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -114,7 +115,11 @@
 //! `plc.outputs.<port> = { at = "%QB<n>" }` sends the port's size of bytes of `%Q` from
 //! byte `n` after each cycle. Mapped ranges of one area must not overlap, a validity bit
 //! must not lie inside a mapped message, and everything must fit in the 4096-byte areas.
-//! `plc.watch` names variables (globals by name, program variables as `instance.var`) the
+//! `plc.online` names a queuing input and a queuing output (both `size = 256`) that carry
+//! the PLC online protocol (crate `plc-online`: list, read, write, force, unforce, task
+//! statistics) instead of process-image bytes, and what their client may do: `"monitor"`
+//! (list, read, statistics) or `"force"` (also write, force and unforce); a request beyond
+//! it is answered FORBIDDEN. `plc.watch` names variables (globals by name, program variables as `instance.var`) the
 //! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
 //! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
 //! the partition windows (checked when the program is compiled).

@@ -93,6 +93,15 @@ pub struct Plc {
     pub outputs: Named<PlcOutput>,
     #[serde(default)]
     pub watch: Vec<Spanned<String>>,
+    pub online: Option<Spanned<PlcOnline>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcOnline {
+    pub request: Spanned<String>,
+    pub response: Spanned<String>,
+    pub access: Spanned<String>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -73,6 +73,15 @@ pub struct Plc {
     /// Variables the runtime logs with its statistics (checked against the program when
     /// it is compiled).
     pub watch: Vec<String>,
+    /// The online ports (indices into the partition's `ports`) and what their client may do.
+    pub online: Option<PlcOnline>,
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlcOnline {
+    pub request: usize,
+    pub response: usize,
+    pub access: plc_online::Access,
 }
 
 /// A PLC source file.

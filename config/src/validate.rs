@@ -467,6 +467,12 @@ impl Validator<'_, '_> {
         let mut inputs = Vec::new();
         let mut outputs = Vec::new();
         let mut mapped = vec![false; ports.len()];
+        let online = raw.online.as_ref().and_then(|o| {
+            let online = self.plc_online(o, &path.key("online"), ports)?;
+            mapped[online.request] = true;
+            mapped[online.response] = true;
+            Some(online)
+        });
         // (byte, source offset, port) of every validity bit.
         let mut valid_bits: Vec<(u32, usize, usize)> = Vec::new();
         let links = raw
@@ -605,6 +611,56 @@ impl Validator<'_, '_> {
             inputs,
             outputs,
             watch,
+            online,
+        })
+    }
+
+    /// `plc.online`: a queuing input for requests and a queuing output for responses, both
+    /// of the protocol's message size, and the access level.
+    fn plc_online(
+        &mut self,
+        raw: &Spanned<schema::PlcOnline>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> Option<PlcOnline> {
+        let raw = raw.get_ref();
+        let size = plc_online::MAX_MESSAGE as u32;
+        let port = |v: &mut Self, key: &str, name: &Spanned<String>, direction: Direction| {
+            let found = ports.iter().position(|p| &p.name == name.get_ref());
+            let ok = found.is_some_and(|i| {
+                let p = &ports[i];
+                p.kind == PortKind::Queuing && p.direction == direction && p.size == size
+            });
+            if !ok {
+                v.error(
+                    start(name),
+                    &path.key(key),
+                    format!(
+                        "`{}` must be a queuing `{}` port of this partition with size = {size} (one online message)",
+                        name.get_ref(),
+                        direction.name()
+                    ),
+                );
+            }
+            found.filter(|_| ok)
+        };
+        let request = port(self, "request", &raw.request, Direction::In);
+        let response = port(self, "response", &raw.response, Direction::Out);
+        let access = plc_online::Access::from_name(raw.access.get_ref());
+        if access.is_none() {
+            self.error(
+                start(&raw.access),
+                &path.key("access"),
+                format!(
+                    "unknown access {:?}: expected \"monitor\" (list, read, statistics) or \"force\" (also write, force, unforce)",
+                    raw.access.get_ref()
+                ),
+            );
+        }
+        Some(PlcOnline {
+            request: request?,
+            response: response?,
+            access: access?,
         })
     }
 

@@ -237,3 +237,69 @@ fn plc_trap() {
         "cold: the RETAIN counter survived a cold restart",
     );
 }
+
+#[test]
+fn plc_online() {
+    let o = boot("plc_online");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the client ends the run",
+    );
+    check(
+        &o,
+        o.line("client: done").is_some(),
+        "the client did not finish",
+    );
+    let has = |text: &str| o.line(text).is_some();
+    for (text, what) in [
+        ("client: LIST -> OK", "LIST"),
+        ("client: READ -> OK", "READ"),
+        ("client: FORCE -> OK", "FORCE"),
+        ("client: UNFORCE -> OK", "UNFORCE"),
+        ("client: STATS -> OK", "STATS"),
+        (
+            "client: malformed WRITE seq 77 -> MALFORMED",
+            "the malformed request's answer",
+        ),
+        ("client: valve = 0.25", "the forced value read back"),
+        ("viewer: READ -> OK", "the monitor-only client's READ"),
+        ("viewer: WRITE -> FORBIDDEN", "the refusal of a write"),
+        ("viewer: FORCE -> FORBIDDEN", "the refusal of a force"),
+    ] {
+        check(&o, has(text), &format!("{what}: no `{text}`"));
+    }
+    check(
+        &o,
+        o.line("client: list total=")
+            .is_some_and(|l| !l.contains("count=0 ")),
+        "LIST returned no variables",
+    );
+    // The forced valve reaches the plant, and the controller takes over again after it.
+    let status: Vec<Status> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("plant: t="))
+        .filter_map(|l| Status::parse(l))
+        .collect();
+    let forced = status.iter().filter(|s| s.valve == 0.25).count();
+    check(
+        &o,
+        forced >= 4,
+        &format!("{forced} plant status lines show the forced valve 0.25 (3 s forced)"),
+    );
+    let forced_at = status.iter().position(|s| s.valve == 0.25).unwrap_or(0);
+    check(
+        &o,
+        status[forced_at..].iter().any(|s| s.valve != 0.25),
+        "the valve stayed forced after UNFORCE",
+    );
+    // The scan cycle was not disturbed: one cycle per frame, no overrun, no fault.
+    let stats = o.line("client: stats ");
+    check(
+        &o,
+        stats.is_some_and(|l| l.contains("stopped=false") && l.contains("overruns=0 faults=0")),
+        &format!("statistics: {stats:?}"),
+    );
+}

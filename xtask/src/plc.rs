@@ -50,16 +50,33 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
                 );
             }
         }
-        let ports: Vec<PortMap> = plc
+        let mut ports: Vec<PortMap> = plc
             .inputs
             .iter()
             .chain(&plc.outputs)
             .map(|link| port_map(p, link))
             .collect();
+        // The online ports follow the process-image ones (no bytes of the image).
+        let online = plc.online.map(|o| {
+            let at = ports.len();
+            for port in [o.request, o.response] {
+                let link = PlcLink {
+                    port,
+                    at: 0,
+                    valid: None,
+                };
+                ports.push(port_map(p, &link));
+            }
+            package::Online {
+                request: at,
+                response: at + 1,
+                access: o.access,
+            }
+        });
         let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
         out.push((
             p.name.clone(),
-            package::encode(&ports, &compiled.image, &watch),
+            package::encode(&ports, &compiled.image, &watch, online),
         ));
     }
     Ok(out)

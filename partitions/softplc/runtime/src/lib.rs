@@ -13,6 +13,7 @@
 #[cfg(any(feature = "alloc", test))]
 extern crate alloc;
 
+pub mod online;
 pub mod package;
 pub mod scan;
 

@@ -1,7 +1,8 @@
 //! The soft-PLC partition program: reads its package (the partition's data entry, see
 //! `softplc::package`), re-verifies the bytecode, creates the package's ports and one
 //! periodic scan process released once per partition period (the major frame, so at its
-//! window start), and runs [`softplc::scan::Runtime::scan`] at every release.
+//! window start), and runs [`softplc::scan::Runtime::scan`] at every release, then answers
+//! the waiting online requests ([`softplc::online::serve_pending`]).
 //!
 //! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
 //! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
@@ -256,6 +257,7 @@ extern "C" fn scan() {
             release,
             |task, fault| report_fault(&image, task, fault),
         );
+        softplc::online::serve_pending(&package, &mut io, &mut machine, &image, &rt);
         let now = now_ns();
         if now >= next_stats {
             next_stats += STATS_EVERY_MS * 1_000_000;

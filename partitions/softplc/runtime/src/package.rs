@@ -12,7 +12,11 @@
 //! 12     4    program length
 //! 16     4    watch list offset
 //! 20     4    watch list length
-//! 24     64*N port records:
+//! 24     1    online request port (index of a queuing input; NO_ONLINE: none)
+//! 25     1    online response port (index of a queuing output)
+//! 26     1    online access (plc_online::Access code)
+//! 27     5    reserved (0)
+//! 32     64*N port records:
 //!   0    32   name (UTF-8, zero padded)
 //!   32   1    kind (protocol::PortKind code: 1 sampling, 2 queuing)
 //!   33   1    direction (protocol::Direction code: 1 in, 2 out)
@@ -29,7 +33,9 @@
 //!             separated by `\n`, whose values the runtime logs with its statistics
 //! ```
 //!
-//! An input port's message lands in `%I` from its first byte, an output port's message is
+//! The online ports carry the online protocol (`plc-online`) instead of process-image
+//! bytes (their first-byte fields are 0). An input port's message lands in `%I` from its
+//! first byte, an output port's message is
 //! that many bytes of `%Q` from its first byte. The validity bit of an input is set before
 //! each scan cycle when the port gave a fresh message: a sampling message younger than its
 //! refresh period, or a queuing message received for this cycle. The message bytes
@@ -44,7 +50,9 @@ pub const MAGIC: [u8; 4] = *b"WPKG";
 /// Format version.
 pub const VERSION: u16 = 1;
 /// Header bytes before the port records.
-pub const HEADER_LEN: usize = 24;
+pub const HEADER_LEN: usize = 32;
+/// Online port fields without online access.
+pub const NO_ONLINE: u8 = u8::MAX;
 /// Bytes of one port record.
 pub const PORT_RECORD: usize = 64;
 /// Longest port name.
@@ -83,6 +91,9 @@ pub enum PackageError {
     ProgramOutOfBounds,
     /// The watch list lies outside the package or is not UTF-8.
     BadWatchList,
+    /// The online ports are not a queuing input and a queuing output, or the access code
+    /// is unknown.
+    BadOnline,
     /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
     /// on an output or above 7).
     BadPort(usize),
@@ -101,6 +112,7 @@ impl core::fmt::Display for PackageError {
             Self::BadWatchList => {
                 write!(f, "the watch list lies outside the package or is not UTF-8")
             }
+            Self::BadOnline => write!(f, "the online ports are not a queuing input and output"),
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
         }
     }
@@ -125,6 +137,15 @@ pub struct Package<'a> {
     ports: usize,
     program: &'a [u8],
     watch: &'a str,
+    online: Option<Online>,
+}
+
+/// The online ports (package port indices) and what their client may do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Online {
+    pub request: usize,
+    pub response: usize,
+    pub access: plc_online::Access,
 }
 
 impl<'a> Package<'a> {
@@ -158,14 +179,29 @@ impl<'a> Package<'a> {
         let watch = range(16)
             .and_then(|w| core::str::from_utf8(w).ok())
             .ok_or(PackageError::BadWatchList)?;
-        let package = Package {
+        let mut package = Package {
             bytes,
             ports: count as usize,
             program,
             watch,
+            online: None,
         };
         for i in 0..package.ports {
             package.decode_port(i).ok_or(PackageError::BadPort(i))?;
+        }
+        if bytes[24] != NO_ONLINE {
+            let port = |i: u8, direction| {
+                package
+                    .port(i as usize)
+                    .filter(|p| p.kind == PortKind::Queuing && p.direction == direction)
+                    .map(|_| i as usize)
+            };
+            let online = Online {
+                request: port(bytes[24], Direction::In).ok_or(PackageError::BadOnline)?,
+                response: port(bytes[25], Direction::Out).ok_or(PackageError::BadOnline)?,
+                access: plc_online::Access::from_code(bytes[26]).ok_or(PackageError::BadOnline)?,
+            };
+            package.online = Some(online);
         }
         Ok(package)
     }
@@ -173,6 +209,17 @@ impl<'a> Package<'a> {
     /// The bytecode image.
     pub fn program(&self) -> &'a [u8] {
         self.program
+    }
+
+    /// The online ports, if the configuration gives the PLC any.
+    pub fn online(&self) -> Option<Online> {
+        self.online
+    }
+
+    /// Whether port `i` moves process-image bytes (all but the online ports).
+    pub fn is_image_port(&self, i: usize) -> bool {
+        self.online
+            .is_none_or(|o| i != o.request && i != o.response)
     }
 
     /// The names of the variables to log.
@@ -233,7 +280,12 @@ impl<'a> Package<'a> {
 
 /// Writes a package (for the image builder). Names longer than [`NAME_LEN`] are cut.
 #[cfg(any(feature = "alloc", test))]
-pub fn encode(ports: &[PortMap], program: &[u8], watch: &[&str]) -> alloc::vec::Vec<u8> {
+pub fn encode(
+    ports: &[PortMap],
+    program: &[u8],
+    watch: &[&str],
+    online: Option<Online>,
+) -> alloc::vec::Vec<u8> {
     let mut out = alloc::vec::Vec::new();
     let program_at = HEADER_LEN + ports.len() * PORT_RECORD;
     let watch = watch.join("\n");
@@ -244,6 +296,11 @@ pub fn encode(ports: &[PortMap], program: &[u8], watch: &[&str]) -> alloc::vec::
     out.extend_from_slice(&(program.len() as u32).to_le_bytes());
     out.extend_from_slice(&((program_at + program.len()) as u32).to_le_bytes());
     out.extend_from_slice(&(watch.len() as u32).to_le_bytes());
+    match online {
+        Some(o) => out.extend_from_slice(&[o.request as u8, o.response as u8, o.access.code()]),
+        None => out.extend_from_slice(&[NO_ONLINE, NO_ONLINE, 0]),
+    }
+    out.extend_from_slice(&[0; 5]);
     for p in ports {
         let mut r = [0u8; PORT_RECORD];
         let name = &p.name.as_bytes()[..p.name.len().min(NAME_LEN)];
@@ -296,7 +353,7 @@ mod tests {
 
     #[test]
     fn round_trip() {
-        let bytes = encode(&[level(), valve()], b"PLCB...", &["tank.alarm", "x"]);
+        let bytes = encode(&[level(), valve()], b"PLCB...", &["tank.alarm", "x"], None);
         let p = Package::parse(&bytes).unwrap();
         assert_eq!(
             p.ports().collect::<alloc::vec::Vec<_>>(),
@@ -311,7 +368,7 @@ mod tests {
 
     #[test]
     fn hostile_packages_are_refused_never_panic() {
-        let good = encode(&[level(), valve()], b"PLCB", &["a"]);
+        let good = encode(&[level(), valve()], b"PLCB", &["a"], None);
         assert_eq!(
             Package::parse(&good[..10]).unwrap_err(),
             PackageError::TooShort

@@ -66,7 +66,7 @@ pub trait PortIo {
 /// no fresh message; the bytes then stay as last received).
 pub fn read_inputs(package: &Package, io: &mut impl PortIo, areas: &mut Areas) {
     for (i, port) in package.ports().enumerate() {
-        if port.direction != Direction::In {
+        if port.direction != Direction::In || !package.is_image_port(i) {
             continue;
         }
         let at = port.area_offset as usize;
@@ -86,7 +86,7 @@ pub fn read_inputs(package: &Package, io: &mut impl PortIo, areas: &mut Areas) {
 /// Sends every output port's bytes of `%Q`.
 pub fn write_outputs(package: &Package, io: &mut impl PortIo, areas: &Areas) {
     for (i, port) in package.ports().enumerate() {
-        if port.direction == Direction::Out {
+        if port.direction == Direction::Out && package.is_image_port(i) {
             let at = port.area_offset as usize;
             io.send(i, &areas.output[at..at + port.size as usize]);
         }

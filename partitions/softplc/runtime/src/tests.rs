@@ -75,7 +75,7 @@ struct Plc {
 impl Plc {
     fn new(source: &str, ports: &[PortMap]) -> Self {
         let program = compile(source);
-        let bytes = package::encode(ports, &program, &[]);
+        let bytes = package::encode(ports, &program, &[], None);
         let image = Image::parse(Package::parse(&bytes).unwrap().program()).unwrap();
         let data = vec![0u8; image.data_size() as usize];
         Self { bytes, data }
@@ -417,4 +417,172 @@ fn retain_variables_are_carried_by_name_and_type() {
     };
     assert_eq!((read("P.kept"), read("P.moved")), (7, 8));
     assert_eq!((read("P.plain"), read("P.gone")), (0, 0));
+}
+
+#[test]
+fn online_requests_between_cycles() {
+    use crate::online::serve;
+    use plc_online::{
+        Access, MAX_MESSAGE, Op, Request, Status, decode_response, encode_request, read_stats,
+    };
+    use plc_vm::vm::Value;
+    let source = "
+VAR_GLOBAL out AT %QD0 : DINT; limit : INT := 5; k : INT := 3; END_VAR
+VAR_GLOBAL CONSTANT fixed : INT := 1; END_VAR
+PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
+    let ports = [PortMap {
+        size: 4,
+        ..output("out", 0)
+    }];
+    let program = compile(source);
+    let bytes = package::encode(&ports, &program, &[], None);
+    let package = Package::parse(&bytes).unwrap();
+    let image = Image::parse(package.program()).unwrap();
+    let mut data = vec![0u8; image.data_size() as usize];
+    let (mut stack, mut calls, mut tries) =
+        ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+    let mut machine = Machine::new(
+        verify(&image).unwrap(),
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    )
+    .unwrap();
+    let mut rt = Runtime::new(Schedule::new(&image, PERIOD).unwrap(), PERIOD);
+    let mut wires = Wires {
+        inputs: vec![None],
+        ..Wires::default()
+    };
+    let mut areas = Areas::new();
+    let mut cycle = |machine: &mut Machine, rt: &mut Runtime, wires: &mut Wires| {
+        rt.scan(
+            machine,
+            &image,
+            &package,
+            wires,
+            &mut areas,
+            || 0,
+            0,
+            |_, _| {},
+        );
+        i32::from_le_bytes(wires.sent.last().unwrap().1.clone().try_into().unwrap())
+    };
+    let ask = |machine: &mut Machine, rt: &Runtime, access, r: Request| {
+        let mut req = [0u8; MAX_MESSAGE];
+        let n = encode_request(&r, 42, &mut req).unwrap();
+        let mut out = [0u8; MAX_MESSAGE];
+        let len = serve(&req[..n], access, machine, &image, rt, &mut out);
+        out[..len].to_vec()
+    };
+    assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 3);
+
+    // LIST: every variable with its type, from an index.
+    let reply = ask(
+        &mut machine,
+        &rt,
+        Access::Monitor,
+        Request::List { from: 0 },
+    );
+    let (op, seq, status, mut r) = decode_response(&reply).unwrap();
+    assert_eq!((op, seq, status), (Op::List, 42, Status::Ok));
+    let total = r.u16().unwrap();
+    let count = r.u8().unwrap();
+    assert_eq!(total as u8, count);
+    let names: Vec<&str> = (0..count)
+        .map(|_| {
+            r.u8().unwrap();
+            r.short_str().unwrap()
+        })
+        .collect();
+    assert!(
+        names.contains(&"out") && names.contains(&"P.n"),
+        "{names:?}"
+    );
+
+    // READ, and a monitor-only client may not write.
+    let reply = ask(
+        &mut machine,
+        &rt,
+        Access::Monitor,
+        Request::Read { name: "P.n" },
+    );
+    let (_, _, status, mut r) = decode_response(&reply).unwrap();
+    assert_eq!((status, r.value()), (Status::Ok, Some(Value::Int(1))));
+    let write = Request::Write {
+        name: "k",
+        value: Value::Int(10),
+    };
+    let reply = ask(&mut machine, &rt, Access::Monitor, write);
+    assert_eq!(decode_response(&reply).unwrap().2, Status::Forbidden);
+    assert_eq!(
+        cycle(&mut machine, &mut rt, &mut wires),
+        6,
+        "nothing changed"
+    );
+
+    // WRITE once; FORCE holds a value the program overwrites; UNFORCE releases it.
+    let reply = ask(&mut machine, &rt, Access::Force, write);
+    assert_eq!(decode_response(&reply).unwrap().2, Status::Ok);
+    assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 30);
+    let force = Request::Force {
+        name: "out",
+        value: Value::UInt(77),
+    };
+    let reply = ask(&mut machine, &rt, Access::Force, force);
+    assert_eq!(decode_response(&reply).unwrap().2, Status::Ok);
+    assert_eq!(
+        cycle(&mut machine, &mut rt, &mut wires),
+        77,
+        "forced output"
+    );
+    assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 77, "still forced");
+    let reply = ask(
+        &mut machine,
+        &rt,
+        Access::Force,
+        Request::Unforce { name: "out" },
+    );
+    assert_eq!(decode_response(&reply).unwrap().2, Status::Ok);
+    assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 60);
+
+    // Errors: unknown name, CONSTANT, wrong type, unknown task, malformed.
+    let bad = |name, value| Request::Write { name, value };
+    for (r, want) in [
+        (bad("nope", Value::Int(1)), Status::UnknownName),
+        (bad("fixed", Value::Int(2)), Status::Constant),
+        (bad("limit", Value::LReal(2.0)), Status::TypeMismatch),
+        (Request::Stats { task: 9 }, Status::NoSuchTask),
+    ] {
+        let reply = ask(&mut machine, &rt, Access::Force, r);
+        assert_eq!(decode_response(&reply).unwrap().2, want, "{r:?}");
+    }
+    let mut out = [0u8; MAX_MESSAGE];
+    let len = serve(
+        &[3, 9, 0xff],
+        Access::Force,
+        &mut machine,
+        &image,
+        &rt,
+        &mut out,
+    );
+    assert_eq!(&out[..len], &[3, 9, Status::Malformed.code()]);
+
+    // STATS of task 0.
+    let reply = ask(
+        &mut machine,
+        &rt,
+        Access::Monitor,
+        Request::Stats { task: 0 },
+    );
+    let (_, _, status, mut r) = decode_response(&reply).unwrap();
+    assert_eq!(status, Status::Ok);
+    let stats = read_stats(&mut r).unwrap();
+    assert_eq!(
+        (stats.stopped, stats.figures[0]),
+        (false, 6),
+        "six cycles so far"
+    );
 }

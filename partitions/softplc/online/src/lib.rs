@@ -1,0 +1,435 @@
+//! The PLC online protocol: how a client (another partition, later a Linux tool in the
+//! guest) lists, reads, writes, forces and unforces the variables of a running PLC program
+//! and reads its task statistics, over a pair of queuing ports of the PLC partition (one
+//! request message in, one response message out). An interface; no_std, no allocation, and
+//! decoding never panics: a malformed or truncated message is an error value.
+//!
+//! # Messages (all integers little-endian)
+//!
+//! Request: `op u8, seq u8, payload`; the response echoes `op` and `seq`, then
+//! `status u8` ([`Status`]) and, when the status is OK, the operation's result.
+//!
+//! | op | request payload | OK result |
+//! |---|---|---|
+//! | 1 LIST | `from u16` | `total u16, count u8`, then per variable `type u8, name_len u8, name` (from index `from`, as many as fit) |
+//! | 2 READ | `name` (the rest of the message) | a [`Value`] |
+//! | 3 WRITE | a [`Value`], then `name` | none |
+//! | 4 FORCE | a [`Value`], then `name` | none |
+//! | 5 UNFORCE | `name` | none |
+//! | 6 STATS | `task u8` | `stopped u8, name_len u8, name, count, last, min, mean, max, last_jitter, max_jitter, overruns, faults` (u64 each, times in ns) |
+//!
+//! A value is `type u8` (the bytecode's `VarType` code) and 8 bytes: the integer (two's
+//! complement or unsigned), the BOOL (0/1), the REAL/LREAL bits (REAL as f32 bits in the low
+//! half) or the TIME in ns; a STRING value (READ only) is `type, len u16, bytes`.
+
+#![no_std]
+
+use plc_vm::image::VarType;
+use plc_vm::vm::Value;
+
+/// Largest message either way (a queuing port of the PLC must hold it).
+pub const MAX_MESSAGE: usize = 256;
+
+codes::code_enum! {
+    /// Operations.
+    pub enum Op: u8 {
+        List = 1 => "LIST",
+        Read = 2 => "READ",
+        Write = 3 => "WRITE",
+        Force = 4 => "FORCE",
+        Unforce = 5 => "UNFORCE",
+        Stats = 6 => "STATS",
+    }
+}
+
+codes::code_enum! {
+    /// Outcome of a request.
+    pub enum Status: u8 {
+        Ok = 0 => "OK",
+        /// The message does not decode.
+        Malformed = 1 => "MALFORMED",
+        /// No variable of that name.
+        UnknownName = 2 => "UNKNOWN_NAME",
+        /// The value's type does not fit the variable.
+        TypeMismatch = 3 => "TYPE_MISMATCH",
+        /// The variable is CONSTANT.
+        Constant = 4 => "CONSTANT",
+        /// The configuration does not allow this client to do that (`plc.online.access`).
+        Forbidden = 5 => "FORBIDDEN",
+        /// Every force slot is in use.
+        TooManyForces = 6 => "TOO_MANY_FORCES",
+        /// No task of that number.
+        NoSuchTask = 7 => "NO_SUCH_TASK",
+        /// Not supported for this variable (e.g. forcing a STRING).
+        Unsupported = 8 => "UNSUPPORTED",
+    }
+}
+
+codes::code_enum! {
+    /// What a client may do (the configuration's `plc.online.access`), each level
+    /// including the ones before it.
+    pub enum Access: u8 {
+        /// LIST, READ, STATS.
+        Monitor = 0 => "monitor",
+        /// And WRITE, FORCE, UNFORCE.
+        Force = 1 => "force",
+    }
+}
+
+impl Op {
+    /// The access level this operation needs.
+    pub fn needs(self) -> Access {
+        match self {
+            Op::List | Op::Read | Op::Stats => Access::Monitor,
+            Op::Write | Op::Force | Op::Unforce => Access::Force,
+        }
+    }
+}
+
+/// A decoded request.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Request<'a> {
+    List { from: u16 },
+    Read { name: &'a str },
+    Write { name: &'a str, value: Value<'a> },
+    Force { name: &'a str, value: Value<'a> },
+    Unforce { name: &'a str },
+    Stats { task: u8 },
+}
+
+impl Request<'_> {
+    pub fn op(&self) -> Op {
+        match self {
+            Request::List { .. } => Op::List,
+            Request::Read { .. } => Op::Read,
+            Request::Write { .. } => Op::Write,
+            Request::Force { .. } => Op::Force,
+            Request::Unforce { .. } => Op::Unforce,
+            Request::Stats { .. } => Op::Stats,
+        }
+    }
+}
+
+/// Task statistics as STATS returns them.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct TaskStats<'a> {
+    pub name: &'a str,
+    pub stopped: bool,
+    /// count, last, min, mean, max, last_jitter, max_jitter, overruns, faults.
+    pub figures: [u64; 9],
+}
+
+/// A writer into a message buffer; every `put` fails cleanly when the buffer is full.
+pub struct Writer<'b> {
+    buf: &'b mut [u8],
+    len: usize,
+}
+
+impl<'b> Writer<'b> {
+    pub fn new(buf: &'b mut [u8]) -> Self {
+        Self { buf, len: 0 }
+    }
+
+    pub fn put(&mut self, bytes: &[u8]) -> Option<()> {
+        let end = self.len.checked_add(bytes.len())?;
+        self.buf.get_mut(self.len..end)?.copy_from_slice(bytes);
+        self.len = end;
+        Some(())
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    /// Room left.
+    pub fn room(&self) -> usize {
+        self.buf.len() - self.len
+    }
+
+    pub fn value(&mut self, value: &Value) -> Option<()> {
+        let (ty, bits) = match *value {
+            Value::Bool(b) => (VarType::Bool, b as u64),
+            Value::Int(v) => (VarType::LInt, v as u64),
+            Value::UInt(v) => (VarType::ULInt, v),
+            Value::Real(v) => (VarType::Real, v.to_bits() as u64),
+            Value::LReal(v) => (VarType::LReal, v.to_bits()),
+            Value::Time(v) => (VarType::Time, v as u64),
+            Value::String(bytes) => {
+                let len = u16::try_from(bytes.len()).ok()?;
+                self.put(&[VarType::String.code()])?;
+                self.put(&len.to_le_bytes())?;
+                return self.put(bytes);
+            }
+        };
+        self.put(&[ty.code()])?;
+        self.put(&bits.to_le_bytes())
+    }
+}
+
+/// A reader over a received message.
+pub struct Reader<'a> {
+    bytes: &'a [u8],
+}
+
+impl<'a> Reader<'a> {
+    pub fn new(bytes: &'a [u8]) -> Self {
+        Self { bytes }
+    }
+
+    pub fn take(&mut self, n: usize) -> Option<&'a [u8]> {
+        let (head, rest) = self.bytes.split_at_checked(n)?;
+        self.bytes = rest;
+        Some(head)
+    }
+
+    pub fn u8(&mut self) -> Option<u8> {
+        self.take(1).map(|b| b[0])
+    }
+
+    pub fn u16(&mut self) -> Option<u16> {
+        self.take(2).map(|b| u16::from_le_bytes([b[0], b[1]]))
+    }
+
+    pub fn u64(&mut self) -> Option<u64> {
+        self.take(8)
+            .map(|b| u64::from_le_bytes(core::array::from_fn(|i| b[i])))
+    }
+
+    /// The rest as a name (non-empty UTF-8).
+    pub fn name(&mut self) -> Option<&'a str> {
+        let rest = core::mem::take(&mut self.bytes);
+        core::str::from_utf8(rest).ok().filter(|n| !n.is_empty())
+    }
+
+    /// `len u8, bytes` as UTF-8.
+    pub fn short_str(&mut self) -> Option<&'a str> {
+        let n = self.u8()? as usize;
+        core::str::from_utf8(self.take(n)?).ok()
+    }
+
+    pub fn value(&mut self) -> Option<Value<'a>> {
+        let ty = VarType::from_code(self.u8()?)?;
+        if ty == VarType::String {
+            let n = self.u16()? as usize;
+            return self.take(n).map(Value::String);
+        }
+        let bits = self.u64()?;
+        Some(match ty {
+            VarType::Bool => Value::Bool(match bits {
+                0 => false,
+                1 => true,
+                _ => return None,
+            }),
+            VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt => Value::Int(bits as i64),
+            VarType::Real => Value::Real(f32::from_bits(u32::try_from(bits).ok()?)),
+            VarType::LReal => Value::LReal(f64::from_bits(bits)),
+            VarType::Time => Value::Time(bits as i64),
+            _ => Value::UInt(bits),
+        })
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.bytes.is_empty()
+    }
+}
+
+/// Writes request `r` with sequence number `seq`; `None` if it does not fit `buf`.
+pub fn encode_request(r: &Request, seq: u8, buf: &mut [u8]) -> Option<usize> {
+    let mut w = Writer::new(buf);
+    w.put(&[r.op().code(), seq])?;
+    match r {
+        Request::List { from } => w.put(&from.to_le_bytes())?,
+        Request::Read { name } | Request::Unforce { name } => w.put(name.as_bytes())?,
+        Request::Write { name, value } | Request::Force { name, value } => {
+            w.value(value)?;
+            w.put(name.as_bytes())?
+        }
+        Request::Stats { task } => w.put(&[*task])?,
+    }
+    Some(w.len())
+}
+
+/// Decodes a request: its sequence number, and the request or why it is malformed
+/// (`Err` carries the op byte and sequence number when there were any, for the answer).
+pub fn decode_request(bytes: &[u8]) -> Result<(u8, Request<'_>), (u8, u8)> {
+    let mut r = Reader::new(bytes);
+    let (Some(op), Some(seq)) = (r.u8(), r.u8()) else {
+        return Err((bytes.first().copied().unwrap_or(0), 0));
+    };
+    let fail = (op, seq);
+    let request = match Op::from_code(op).ok_or(fail)? {
+        Op::List => {
+            let from = r.u16().ok_or(fail)?;
+            (r.is_empty())
+                .then_some(Request::List { from })
+                .ok_or(fail)?
+        }
+        Op::Read => Request::Read {
+            name: r.name().ok_or(fail)?,
+        },
+        Op::Unforce => Request::Unforce {
+            name: r.name().ok_or(fail)?,
+        },
+        Op::Write | Op::Force => {
+            let value = r.value().ok_or(fail)?;
+            let name = r.name().ok_or(fail)?;
+            if op == Op::Write.code() {
+                Request::Write { name, value }
+            } else {
+                Request::Force { name, value }
+            }
+        }
+        Op::Stats => {
+            let task = r.u8().ok_or(fail)?;
+            (r.is_empty())
+                .then_some(Request::Stats { task })
+                .ok_or(fail)?
+        }
+    };
+    Ok((seq, request))
+}
+
+/// Starts a response: `op, seq, status`; the caller appends the result when OK.
+pub fn begin_response<'b>(op: u8, seq: u8, status: Status, buf: &'b mut [u8]) -> Writer<'b> {
+    let mut w = Writer::new(buf);
+    // A response buffer always holds its three-byte head.
+    let _ = w.put(&[op, seq, status.code()]);
+    w
+}
+
+/// A response's head: op, seq, status, and a reader over its result.
+pub fn decode_response(bytes: &[u8]) -> Option<(Op, u8, Status, Reader<'_>)> {
+    let mut r = Reader::new(bytes);
+    let op = Op::from_code(r.u8()?)?;
+    let seq = r.u8()?;
+    let status = Status::from_code(r.u8()?)?;
+    Some((op, seq, status, r))
+}
+
+/// Writes a STATS result.
+pub fn put_stats(w: &mut Writer, s: &TaskStats) -> Option<()> {
+    let name = &s.name.as_bytes()[..s.name.len().min(u8::MAX as usize)];
+    w.put(&[s.stopped as u8, name.len() as u8])?;
+    w.put(name)?;
+    for f in s.figures {
+        w.put(&f.to_le_bytes())?;
+    }
+    Some(())
+}
+
+/// Reads a STATS result.
+pub fn read_stats<'a>(r: &mut Reader<'a>) -> Option<TaskStats<'a>> {
+    let stopped = r.u8()? != 0;
+    let name = r.short_str()?;
+    let mut figures = [0u64; 9];
+    for f in &mut figures {
+        *f = r.u64()?;
+    }
+    Some(TaskStats {
+        name,
+        stopped,
+        figures,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_request_round_trips() {
+        let requests = [
+            Request::List { from: 513 },
+            Request::Read {
+                name: "tank.pid.integral",
+            },
+            Request::Write {
+                name: "tank.setpoint",
+                value: Value::LReal(1.25),
+            },
+            Request::Force {
+                name: "alarm",
+                value: Value::Bool(true),
+            },
+            Request::Force {
+                name: "n",
+                value: Value::Int(-5),
+            },
+            Request::Unforce { name: "alarm" },
+            Request::Stats { task: 3 },
+        ];
+        for (seq, r) in requests.iter().enumerate() {
+            let mut buf = [0u8; MAX_MESSAGE];
+            let n = encode_request(r, seq as u8, &mut buf).unwrap();
+            assert_eq!(decode_request(&buf[..n]), Ok((seq as u8, *r)));
+        }
+    }
+
+    #[test]
+    fn responses_round_trip() {
+        let mut buf = [0u8; MAX_MESSAGE];
+        let mut w = begin_response(Op::Read.code(), 9, Status::Ok, &mut buf);
+        w.value(&Value::Real(0.5)).unwrap();
+        let n = w.len();
+        let (op, seq, status, mut r) = decode_response(&buf[..n]).unwrap();
+        assert_eq!((op, seq, status), (Op::Read, 9, Status::Ok));
+        assert_eq!(r.value(), Some(Value::Real(0.5)));
+        let stats = TaskStats {
+            name: "CYCLE.tank",
+            stopped: true,
+            figures: [1, 2, 3, 4, 5, 6, 7, 8, 9],
+        };
+        let mut w = begin_response(Op::Stats.code(), 1, Status::Ok, &mut buf);
+        put_stats(&mut w, &stats).unwrap();
+        let n = w.len();
+        let (_, _, _, mut r) = decode_response(&buf[..n]).unwrap();
+        assert_eq!(read_stats(&mut r), Some(stats));
+        let mut w = begin_response(Op::Read.code(), 2, Status::Ok, &mut buf);
+        w.value(&Value::String(b"abc")).unwrap();
+        let n = w.len();
+        let (_, _, _, mut r) = decode_response(&buf[..n]).unwrap();
+        assert_eq!(r.value(), Some(Value::String(b"abc")));
+    }
+
+    #[test]
+    fn hostile_requests_are_errors_never_panics() {
+        assert_eq!(decode_request(&[]), Err((0, 0)));
+        assert_eq!(decode_request(&[2]), Err((2, 0)));
+        assert_eq!(decode_request(&[99, 4]), Err((99, 4)));
+        assert_eq!(decode_request(&[2, 1]), Err((2, 1)), "READ without a name");
+        assert_eq!(decode_request(&[2, 1, 0xff]), Err((2, 1)), "name not UTF-8");
+        assert_eq!(decode_request(&[1, 1, 0]), Err((1, 1)), "LIST truncated");
+        assert_eq!(decode_request(&[6, 1, 0, 0]), Err((6, 1)), "STATS too long");
+        assert_eq!(
+            decode_request(&[3, 1, VarType::Bool.code(), 2, 0, 0, 0, 0, 0, 0, 0, b'x']),
+            Err((3, 1)),
+            "a BOOL of 2"
+        );
+        assert_eq!(decode_request(&[3, 1, 200, 0]), Err((3, 1)), "unknown type");
+        // Every byte pattern of short messages, and every truncation of a long one.
+        for a in 0..=255u8 {
+            for b in [0u8, 1, 2, 255] {
+                let _ = decode_request(&[a, b]);
+                let _ = decode_request(&[a, 0, b, 1, 2, 3]);
+                let _ = decode_response(&[a, 0, b]);
+            }
+        }
+        let mut buf = [0u8; MAX_MESSAGE];
+        let r = Request::Force {
+            name: "x",
+            value: Value::LReal(2.0),
+        };
+        let n = encode_request(&r, 7, &mut buf).unwrap();
+        for cut in 0..n {
+            assert!(decode_request(&buf[..cut]).is_err(), "cut at {cut}");
+        }
+        assert!(
+            encode_request(&r, 7, &mut buf[..5]).is_none(),
+            "too small a buffer"
+        );
+    }
+}

@@ -1,0 +1,207 @@
+//! A client of the PLC online protocol (scenario `plc_online`), as another partition would
+//! be: queuing ports `cmd` (requests out) and `reply` (responses in), size 256. What it
+//! asks depends on its partition name:
+//!
+//! * `client` (the tank PLC, access "force"): LIST, READ `valve`, FORCE `valve` := 0.25 for
+//!   300 frames (the plant shows it), UNFORCE, STATS of task 0, a malformed request; then it
+//!   ends the run (an application error the configuration maps to `shutdown_success`);
+//! * `viewer` (a PLC with access "monitor"): READ, then a WRITE and a FORCE, which must be
+//!   refused.
+//!
+//! Each answer is printed as `<name>: <OP> -> <STATUS> ...`. A test program: it must never
+//! be needed by anything but its scenario.
+#![no_std]
+#![no_main]
+
+use apex::Warden;
+use apex::a653rs::bindings::ApexPartitionP4;
+use apex::a653rs::prelude::*;
+use apex::user_rt::println;
+use core::str::FromStr;
+use core::time::Duration;
+use plc_online::{MAX_MESSAGE, Request, Status, decode_response, encode_request, read_stats};
+use plc_vm::vm::Value;
+
+fn name(text: &str) -> Name {
+    Name::from_str(text).expect("names here are short")
+}
+
+fn wait_frames(n: u32) {
+    for _ in 0..n {
+        <Warden as ApexTimeP4Ext>::periodic_wait().expect("PERIODIC_WAIT");
+    }
+}
+
+struct Link {
+    cmd: QueuingPortSender<Warden>,
+    reply: QueuingPortReceiver<Warden>,
+    me: &'static str,
+    seq: u8,
+}
+
+impl Link {
+    /// Sends raw bytes and waits (frame by frame, at most 100) for the answer.
+    fn exchange(&mut self, request: &[u8], answer: &mut [u8; MAX_MESSAGE]) -> Option<usize> {
+        let poll = || SystemTime::Normal(Duration::ZERO);
+        if let Err(e) = self.cmd.send(request, poll()) {
+            println!("{}: send failed: {e:?}", self.me);
+            return None;
+        }
+        for _ in 0..100 {
+            wait_frames(1);
+            if let Ok((message, _)) = self.reply.receive(answer, poll()) {
+                return Some(message.len());
+            }
+        }
+        println!("{}: no answer", self.me);
+        None
+    }
+
+    /// Sends `r` and prints the answer's head; returns its status and result bytes.
+    fn ask(&mut self, r: Request) -> Option<(Status, [u8; MAX_MESSAGE], usize)> {
+        self.seq = self.seq.wrapping_add(1);
+        let mut request = [0u8; MAX_MESSAGE];
+        let n = encode_request(&r, self.seq, &mut request)?;
+        let mut answer = [0u8; MAX_MESSAGE];
+        let len = self.exchange(&request[..n], &mut answer)?;
+        let (op, seq, status, _) = decode_response(&answer[..len])?;
+        if seq != self.seq {
+            println!("{}: answer to seq {seq}, expected {}", self.me, self.seq);
+        }
+        println!("{}: {} -> {}", self.me, op.name(), status.name());
+        Some((status, answer, len))
+    }
+}
+
+fn read(link: &mut Link, var: &str) {
+    if let Some((Status::Ok, answer, len)) = link.ask(Request::Read { name: var }) {
+        let (_, _, _, mut r) = decode_response(&answer[..len]).expect("decoded above");
+        match r.value() {
+            Some(v) => println!("{}: {var} = {v}", link.me),
+            None => println!("{}: {var}: bad value", link.me),
+        }
+    }
+}
+
+fn client(link: &mut Link) {
+    if let Some((Status::Ok, answer, len)) = link.ask(Request::List { from: 0 }) {
+        let (_, _, _, mut r) = decode_response(&answer[..len]).expect("decoded above");
+        let (total, count) = (r.u16().unwrap_or(0), r.u8().unwrap_or(0));
+        let first = r.u8().and_then(|_| r.short_str()).unwrap_or("?");
+        println!("client: list total={total} count={count} first={first}");
+    }
+    read(link, "valve");
+    let force = Request::Force {
+        name: "valve",
+        value: Value::LReal(0.25),
+    };
+    link.ask(force);
+    wait_frames(300);
+    read(link, "valve");
+    link.ask(Request::Unforce { name: "valve" });
+    wait_frames(100);
+    read(link, "valve");
+    if let Some((Status::Ok, answer, len)) = link.ask(Request::Stats { task: 0 }) {
+        let (_, _, _, mut r) = decode_response(&answer[..len]).expect("decoded above");
+        if let Some(s) = read_stats(&mut r) {
+            let [count, _, _, _, max, _, max_jitter, overruns, faults] = s.figures;
+            println!(
+                "client: stats {} stopped={} cycles={count} max_us={} max_jitter_us={} overruns={overruns} faults={faults}",
+                s.name,
+                s.stopped,
+                max / 1000,
+                max_jitter / 1000
+            );
+        }
+    }
+    let mut answer = [0u8; MAX_MESSAGE];
+    if let Some(len) = link.exchange(&[3, 77, 0xff, 0xff], &mut answer)
+        && let Some((op, seq, status, _)) = decode_response(&answer[..len])
+    {
+        println!(
+            "client: malformed {} seq {seq} -> {}",
+            op.name(),
+            status.name()
+        );
+    }
+    wait_frames(50);
+    println!("client: done");
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(b"done");
+}
+
+fn viewer(link: &mut Link) {
+    read(link, "Count.n");
+    link.ask(Request::Write {
+        name: "Count.n",
+        value: Value::UInt(0),
+    });
+    link.ask(Request::Force {
+        name: "Count.n",
+        value: Value::UInt(0),
+    });
+    read(link, "Count.n");
+    println!("viewer: done");
+}
+
+extern "C" fn run() {
+    let me = apex::runtime::start_info();
+    let me: &'static str = if me.name() == "viewer" {
+        "viewer"
+    } else {
+        "client"
+    };
+    let mut link = Link {
+        cmd: QueuingPortSender::<Warden>::from_name(name("cmd")).expect("cmd"),
+        reply: QueuingPortReceiver::<Warden>::from_name(name("reply")).expect("reply"),
+        me,
+        seq: 0,
+    };
+    // Let the PLC start its cycles.
+    wait_frames(50);
+    if me == "viewer" {
+        viewer(&mut link);
+    } else {
+        client(&mut link);
+    }
+    loop {
+        wait_frames(100);
+    }
+}
+
+struct Client;
+
+impl Partition<Warden> for Client {
+    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+        ctx.create_queuing_port_sender(name("cmd"), MAX_MESSAGE as u32, 4, QueuingDiscipline::Fifo)
+            .expect("CREATE_QUEUING_PORT cmd");
+        ctx.create_queuing_port_receiver(
+            name("reply"),
+            MAX_MESSAGE as u32,
+            4,
+            QueuingDiscipline::Fifo,
+        )
+        .expect("CREATE_QUEUING_PORT reply");
+        let period = <Warden as ApexPartitionP4>::get_partition_status().period;
+        let attributes = ProcessAttribute {
+            period: SystemTime::Normal(Duration::from_nanos(period.max(1) as u64)),
+            time_capacity: SystemTime::Infinite,
+            entry_point: run,
+            stack_size: 16 * 1024,
+            base_priority: 10,
+            deadline: Deadline::Soft,
+            name: name("run"),
+        };
+        let process = ctx.create_process(attributes).expect("CREATE_PROCESS");
+        process.start().expect("START");
+    }
+
+    fn warm_start(&self, ctx: &mut StartContext<Warden>) {
+        self.cold_start(ctx)
+    }
+}
+
+fn main() {
+    Client.run()
+}
+
+apex::partition_entry!(main);
