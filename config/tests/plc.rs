@@ -194,3 +194,64 @@ fn a_plc_needs_a_program() {
         "at least one ST source file",
     );
 }
+
+#[test]
+fn online_ports() {
+    let online = "ports.cmd = { kind = \"queuing\", direction = \"in\", size = 256, depth = 2 }
+ports.reply = { kind = \"queuing\", direction = \"out\", size = 256, depth = 2 }
+plc.online = { request = \"cmd\", response = \"reply\", access = \"monitor\" }
+# b";
+    let base = (
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    );
+    // The online ports need no process-image mapping (their channels are left out here, so
+    // only the plc diagnostics matter).
+    let src = plc(&[base, ("# b", online)]);
+    let diags = load(&src).unwrap_err();
+    assert!(
+        diags
+            .iter()
+            .all(|d| !d.key_path.starts_with("partitions.b.plc")),
+        "{diags:?}"
+    );
+    let src = plc(&[
+        base,
+        ("# b", online),
+        ("access = \"monitor\"", "access = \"all\""),
+    ]);
+    expect_some(
+        &src,
+        "\"all\"",
+        0,
+        "partitions.b.plc.online.access",
+        "unknown access \"all\"",
+    );
+    let src = plc(&[
+        base,
+        ("# b", online),
+        ("request = \"cmd\"", "request = \"reply\""),
+    ]);
+    expect_some(
+        &src,
+        "request = ^\"reply\"",
+        0,
+        "partitions.b.plc.online.request",
+        "must be a queuing `in` port of this partition with size = 256",
+    );
+    let src = plc(&[
+        base,
+        ("# b", online),
+        (
+            "direction = \"in\", size = 256",
+            "direction = \"in\", size = 64",
+        ),
+    ]);
+    expect_some(
+        &src,
+        "request = ^\"cmd\"",
+        0,
+        "partitions.b.plc.online.request",
+        "size = 256",
+    );
+}
