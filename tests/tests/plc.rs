@@ -92,8 +92,8 @@ fn plc_tank() {
     let stats = o
         .lines
         .iter()
-        .filter(|l| l.contains("plc: t=") && l.contains(" task="))
-        .last();
+        .rev()
+        .find(|l| l.contains("plc: t=") && l.contains(" task="));
     check(&o, stats.is_some(), "no PLC statistics line");
     if let Some(line) = stats {
         let field = |name: &str| {

@@ -45,6 +45,8 @@ pub struct StartInfo {
 
 impl StartInfo {
     /// A record for partition `name` (cut to 32 bytes).
+    // One argument per field of the record.
+    #[allow(clippy::too_many_arguments)]
     pub fn new(
         index: u64,
         time_partition: u64,

@@ -85,26 +85,48 @@ fn report(text: &str) {
     let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
 }
 
+/// Why the program is refused.
+enum Refusal {
+    Package(softplc::package::PackageError),
+    Image(plc_vm::image::ImageError),
+    CodeTooLarge(usize),
+    Verifier(plc_vm::verify::VerifyError),
+    DataTooLarge(u32),
+    Tasks(softplc::scan::PlanError),
+}
+
+impl core::fmt::Display for Refusal {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Refusal::Package(e) => write!(f, "package: {e}"),
+            Refusal::Image(e) => write!(f, "bytecode image: {e}"),
+            Refusal::CodeTooLarge(n) => {
+                write!(f, "code of {n} bytes exceeds {} bytes", MAX_SCRATCH / 2)
+            }
+            Refusal::Verifier(e) => write!(f, "bytecode rejected by the verifier: {e}"),
+            Refusal::DataTooLarge(n) => write!(f, "data memory of {n} bytes exceeds {MAX_DATA}"),
+            Refusal::Tasks(e) => write!(f, "tasks: {e:?}"),
+        }
+    }
+}
+
 /// The checked package, verified program and schedule, or why the program is refused.
-fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), LineBuffer> {
+fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), Refusal> {
     let info = apex::runtime::start_info();
-    let package = Package::parse(info.data()).map_err(|e| text!("package: {e}"))?;
-    let image = Image::parse(package.program()).map_err(|e| text!("bytecode image: {e}"))?;
+    let package = Package::parse(info.data()).map_err(Refusal::Package)?;
+    let image = Image::parse(package.program()).map_err(Refusal::Image)?;
     let code = image.code().len();
     let mut scratch = SCRATCH.lock();
     let scratch = scratch
         .get_mut(..2 * code)
-        .ok_or_else(|| text!("code of {code} bytes exceeds {} bytes", MAX_SCRATCH / 2))?;
-    let verified = plc_vm::verify::verify_with_scratch(&image, scratch)
-        .map_err(|e| text!("bytecode rejected by the verifier: {e}"))?;
+        .ok_or(Refusal::CodeTooLarge(code))?;
+    let verified =
+        plc_vm::verify::verify_with_scratch(&image, scratch).map_err(Refusal::Verifier)?;
     if image.data_size() as usize > MAX_DATA {
-        return Err(text!(
-            "data memory of {} bytes exceeds {MAX_DATA}",
-            image.data_size()
-        ));
+        return Err(Refusal::DataTooLarge(image.data_size()));
     }
     let period = period().as_nanos() as u64;
-    let schedule = Schedule::new(&image, period).map_err(|e| text!("tasks: {e:?}"))?;
+    let schedule = Schedule::new(&image, period).map_err(Refusal::Tasks)?;
     Ok((package, verified, schedule))
 }
 
@@ -360,7 +382,7 @@ impl PlcPartition {
         let (package, verified, schedule) = match load() {
             Ok(loaded) => loaded,
             Err(reason) => {
-                report(text!("refusing the program: {}", reason.as_str()).as_str());
+                report(text!("refusing the program: {reason}").as_str());
                 return;
             }
         };

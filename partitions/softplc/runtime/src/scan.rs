@@ -217,6 +217,8 @@ impl Runtime {
     /// One release (see the module documentation). `release_ns` is when it was due (its
     /// window start), `clock` the partition's time in ns (also the program's `NOW`).
     /// Calls `on_fault` for each task that faulted in this release.
+    // One release touches everything the cycle involves; a bundle would only rename them.
+    #[allow(clippy::too_many_arguments)]
     pub fn scan(
         &mut self,
         machine: &mut Machine,
