@@ -221,6 +221,29 @@ fn plc_trap() {
         }),
         "warm: the RETAIN counter did not survive a restart",
     );
+    // The endless loop: the watchdog stops SPIN with its output safe, BEAT goes on, and the
+    // other PLCs kept their windows (their watch lines go on to the end).
+    check(
+        &o,
+        o.line("[loop] plc: task SPIN.s stopped: WATCHDOG").is_some()
+            && o.line("partition=loop error=application_error")
+                .is_some_and(|l| l.contains("WATCHDOG")),
+        "loop: the watchdog did not stop the endless loop, or the health monitor did not hear",
+    );
+    let looping = watch_lines(&o.lines, "loop");
+    let late: Vec<_> = looping.iter().filter(|(t, _)| *t >= 5_000).collect();
+    check(
+        &o,
+        late.len() >= 10
+            && late.iter().all(|(_, v)| value(v, "s.out") == Some(0))
+            && late.windows(2).all(|w| value(&w[1].1, "b.beats") > value(&w[0].1, "b.beats")),
+        "loop: SPIN's output is not safe or BEAT stopped cycling",
+    );
+    check(
+        &o,
+        ignore.last().is_some_and(|(t, _)| *t >= 30_000),
+        "the other PLCs did not keep their windows to the end",
+    );
     // cold_restart: both counters restart.
     check(
         &o,
