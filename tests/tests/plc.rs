@@ -225,7 +225,8 @@ fn plc_trap() {
     // other PLCs kept their windows (their watch lines go on to the end).
     check(
         &o,
-        o.line("[loop] plc: task SPIN.s stopped: WATCHDOG").is_some()
+        o.line("[loop] plc: task SPIN.s stopped: WATCHDOG")
+            .is_some()
             && o.line("partition=loop error=application_error")
                 .is_some_and(|l| l.contains("WATCHDOG")),
         "loop: the watchdog did not stop the endless loop, or the health monitor did not hear",
@@ -236,7 +237,9 @@ fn plc_trap() {
         &o,
         late.len() >= 10
             && late.iter().all(|(_, v)| value(v, "s.out") == Some(0))
-            && late.windows(2).all(|w| value(&w[1].1, "b.beats") > value(&w[0].1, "b.beats")),
+            && late
+                .windows(2)
+                .all(|w| value(&w[1].1, "b.beats") > value(&w[0].1, "b.beats")),
         "loop: SPIN's output is not safe or BEAT stopped cycling",
     );
     check(
@@ -324,5 +327,80 @@ fn plc_online() {
         &o,
         stats.is_some_and(|l| l.contains("stopped=false") && l.contains("overruns=0 faults=0")),
         &format!("statistics: {stats:?}"),
+    );
+}
+
+/// The bound on the scan's release lateness asserted on virtual time (measured: a constant
+/// 108 us from the window start to the first instruction of the scan, the kernel's window
+/// switch plus the APEX runtime's release path; on virtual time nothing else varies, so
+/// crossing the bound means a longer release path, or a background thread getting ahead of
+/// the PLC).
+const JITTER_BOUND_US: u64 = 150;
+
+#[test]
+fn plc_jitter() {
+    let o = boot("plc_jitter");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the stopwatch ends the run",
+    );
+    let stats: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("plc: t=") && l.contains(" task="))
+        .collect();
+    check(
+        &o,
+        stats.len() >= 3,
+        &format!("{} statistics lines", stats.len()),
+    );
+    for line in &stats {
+        let field = |name: &str| {
+            line.split_whitespace()
+                .find_map(|w| w.strip_prefix(name))
+                .map(|v| {
+                    v.split('/')
+                        .filter_map(|x| x.parse::<u64>().ok())
+                        .collect::<Vec<_>>()
+                })
+                .unwrap_or_default()
+        };
+        let t = line
+            .split("plc: t=")
+            .nth(1)
+            .and_then(|r| r.split("ms").next())
+            .and_then(|t| t.parse::<u64>().ok())
+            .unwrap_or(0);
+        let cycles = field("cycles=").first().copied().unwrap_or(0);
+        check(
+            &o,
+            cycles + 2 >= t && cycles <= t + 2,
+            &format!("{line}: a cycle was missed (one per 1 ms frame)"),
+        );
+        let jitter = field("jitter_us=");
+        check(
+            &o,
+            jitter.len() == 2 && jitter[1] <= JITTER_BOUND_US,
+            &format!("{line}: release lateness above {JITTER_BOUND_US} us"),
+        );
+        check(
+            &o,
+            line.contains("overruns=0 faults=0"),
+            &format!("{line}: overruns or faults"),
+        );
+    }
+    // The hog got the rest of the time: more than half of every second.
+    let hog = o.line("hog: spinning at 3 s").and_then(|l| {
+        l.split("CPU time ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|ms| ms.parse::<u64>().ok())
+    });
+    check(
+        &o,
+        hog.is_some_and(|ms| ms > 1_500),
+        &format!("the background hog's CPU time at 3 s: {hog:?} ms"),
     );
 }

@@ -88,7 +88,9 @@ impl Partition<Warden> for PlantPartition {
             time_capacity: SystemTime::Infinite,
             entry_point: simulate,
             stack_size: 16 * 1024,
-            base_priority: 10,
+            // Just below the MCP (processes must stay under it): above any background partition
+            // whose MCP is lower, so nothing outside the plant's window can delay a release.
+            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
             deadline: Deadline::Soft,
             name: name("simulate"),
         };

@@ -420,7 +420,9 @@ impl PlcPartition {
             time_capacity: SystemTime::Infinite,
             entry_point: scan,
             stack_size: 16 * 1024,
-            base_priority: 10,
+            // Just below the MCP (processes must stay under it): above any background partition
+            // whose MCP is lower, so the scan starts at the window start whatever TP0 does.
+            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
             deadline: Deadline::Soft,
             name: process_name,
         };

@@ -244,6 +244,9 @@ impl Runtime {
             let result = machine.run_cycle(task, t0 as i64);
             let exec = clock().saturating_sub(t0);
             let interval = self.schedule.every[task].saturating_mul(self.period_ns);
+            // The first release follows the partition's start (NORMAL mode), not a window
+            // start: its lateness says nothing about the release path.
+            let jitter = if self.releases == 0 { 0 } else { jitter };
             self.stats[task].record(exec, jitter, interval);
             if let Err(fault) = result {
                 self.stats[task].faults += 1;

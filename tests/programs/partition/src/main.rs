@@ -7,6 +7,8 @@
 //! * `windows-*`: checks for 50 of its windows that it runs only inside them (it learns
 //!   its window from `partition_info`), reports, then executes `ud2`: an illegal request
 //!   for the health monitor;
+//! * `hog*`: spins without ever blocking (a CPU hog at its priority) and prints its CPU time
+//!   once a second;
 //! * anything else: prints a heartbeat with its CPU time once a second.
 #![no_std]
 #![no_main]
@@ -41,8 +43,27 @@ fn main(start: u64, _: u64) {
         unsafe {
             core::arch::asm!("ud2")
         };
+    } else if name.starts_with("hog") {
+        hog(name, tp);
     } else {
         heartbeat(name, tp);
+    }
+}
+
+/// Never blocks: reads the clock in a loop and reports once a second.
+fn hog(name: &str, tp: u64) -> ! {
+    let mut next = sys::clock() / 1_000_000_000 + 1;
+    loop {
+        let now = sys::clock();
+        if now >= next * 1_000_000_000 {
+            let cpu = sys::partition_info(tp).map_or(0, |i| i.cpu_ns);
+            println!(
+                "{name}: spinning at {next} s, TP{tp} CPU time {} ms",
+                cpu / 1_000_000
+            );
+            next += 1;
+        }
+        core::hint::spin_loop();
     }
 }
 

@@ -40,7 +40,8 @@ impl Partition<Warden> for Stopwatch {
             time_capacity: SystemTime::Infinite,
             entry_point: count,
             stack_size: 16 * 1024,
-            base_priority: 10,
+            // Just below the MCP: above any background hog of the scenario.
+            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
             deadline: Deadline::Soft,
             name: name("count"),
         };
