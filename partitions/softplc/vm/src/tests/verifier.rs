@@ -569,25 +569,7 @@ fn disassembly() {
 #[test]
 fn located_records() {
     use crate::located::{Area, Located, Location, Width};
-    let image_with = |v: Located| {
-        let mut b = ImageBuilder::new();
-        b.reserve_data(DATA);
-        let main = b.declare_pou("Main", 0, 0, MAIN_FRAME);
-        b.add_task(&TaskDef {
-            name: "T".into(),
-            kind: TaskKind::Cyclic,
-            priority: 0,
-            pou: main,
-            instance_base: MAIN_BASE,
-            interval_ns: 10_000_000,
-            watchdog_budget: 10,
-        });
-        b.begin_pou(main);
-        b.ret();
-        b.end_pou(main);
-        b.add_located(&v);
-        b.build().expect("build")
-    };
+    let image_with = |v: Located| program_with(10, |b, _| b.add_located(&v));
     let good = Located {
         location: Location::parse("QW3").unwrap(),
         address: DATA - 2,
