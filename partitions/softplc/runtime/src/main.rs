@@ -419,7 +419,8 @@ impl PlcPartition {
             period: SystemTime::Normal(period()),
             time_capacity: SystemTime::Infinite,
             entry_point: scan,
-            stack_size: 16 * 1024,
+            // The VM stack and call frames, the statistics and the online buffers live here.
+            stack_size: 32 * 1024,
             // Just below the MCP (processes must stay under it): above any background partition
             // whose MCP is lower, so the scan starts at the window start whatever TP0 does.
             base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
