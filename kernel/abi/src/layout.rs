@@ -3,7 +3,9 @@
 //! configuration in `config::binary`) lists its fields once as constants. Writers, checks,
 //! views and tests all go through them, so no offset is written twice.
 //!
-//! Integers are little-endian; names are fixed-size fields of UTF-8, NUL-padded.
+//! Integers are little-endian; names are fixed-size fields of UTF-8, NUL-padded. The
+//! accessors are `#[inline]`: with a field's constant width the copy becomes a plain load
+//! in the crates that use them (syssw reads configuration records on every request).
 
 /// A field of a record: its offset and width in bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -13,41 +15,49 @@ pub struct Field {
 }
 
 impl Field {
+    #[inline]
     pub const fn new(at: usize, len: usize) -> Self {
         Self { at, len }
     }
 
     /// The field's bytes in `record` (which must hold the whole field).
+    #[inline]
     pub fn bytes(self, record: &[u8]) -> &[u8] {
         &record[self.at..self.at + self.len]
     }
 
     /// The field's bytes, for writing.
+    #[inline]
     pub fn bytes_mut(self, record: &mut [u8]) -> &mut [u8] {
         &mut record[self.at..self.at + self.len]
     }
 
     /// The field as a little-endian unsigned integer (fields of 1 to 8 bytes).
+    #[inline]
     pub fn get(self, record: &[u8]) -> u64 {
         let mut raw = [0u8; 8];
         raw[..self.len].copy_from_slice(self.bytes(record));
         u64::from_le_bytes(raw)
     }
 
+    #[inline]
     pub fn u8(self, record: &[u8]) -> u8 {
         self.get(record) as u8
     }
 
     /// A 16-bit count or index.
+    #[inline]
     pub fn u16(self, record: &[u8]) -> usize {
         self.get(record) as usize
     }
 
+    #[inline]
     pub fn u32(self, record: &[u8]) -> u32 {
         self.get(record) as u32
     }
 
     /// Writes `value` little-endian into the field (`value` must fit its width).
+    #[inline]
     pub fn set(self, record: &mut [u8], value: u64) {
         debug_assert!(
             self.len == 8 || value >> (8 * self.len) == 0,
@@ -58,6 +68,7 @@ impl Field {
     }
 
     /// The text of a name field: non-empty UTF-8, only NULs after it; `None` otherwise.
+    #[inline]
     pub fn name(self, record: &[u8]) -> Option<&str> {
         let raw = self.bytes(record);
         let len = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
@@ -68,6 +79,7 @@ impl Field {
     }
 
     /// Whether every byte of the field is zero (reserved fields).
+    #[inline]
     pub fn is_zero(self, record: &[u8]) -> bool {
         self.bytes(record).iter().all(|&b| b == 0)
     }
