@@ -112,7 +112,7 @@ fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Re
         }
         let frame = schedule.major_frame;
         for task in (0..image.task_count()).filter_map(|i| image.task(i)) {
-            if task.kind == 0 && task.interval_ns != 0 && task.interval_ns % frame != 0 {
+            if task.kind == 0 && task.interval_ns % frame != 0 {
                 bail!(
                     "partition {}: task {} has INTERVAL {} us, not a multiple of the major frame of schedule {} ({} us): the scan cycle is released once per major frame",
                     p.name,
@@ -120,13 +120,6 @@ fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Re
                     task.interval_ns / 1000,
                     schedule.name,
                     frame / 1000
-                );
-            }
-            if task.kind != 0 {
-                bail!(
-                    "partition {}: task {} is an event task (SINGLE), which the PLC runtime does not run yet",
-                    p.name,
-                    task.name
                 );
             }
         }

@@ -153,7 +153,7 @@ pub fn compile(
             let Some(inst) = prog.instances.iter().find(|i| &i.name == inst_name) else {
                 continue;
             };
-            b.add_task(&plc_vm::image::TaskDef {
+            let index = b.add_task(&plc_vm::image::TaskDef {
                 name: format!("{}.{}", t.name, inst_name),
                 kind: if t.single.is_some() {
                     plc_vm::image::TaskKind::Event
@@ -166,6 +166,9 @@ pub fn compile(
                 interval_ns: t.interval_ns.max(0) as u64,
                 watchdog_budget: 0,
             });
+            if let Some(trigger) = info.single_addr {
+                b.set_task_trigger(index, trigger);
+            }
             info.image_tasks.push(image_task);
             image_task += 1;
         }

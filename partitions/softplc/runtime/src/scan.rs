@@ -6,7 +6,9 @@
 //!    `%M` located variables in ([`plc_vm::located::copy_in`]);
 //! 2. run each IEC task that is due at this release — a cyclic task every
 //!    `INTERVAL / period` releases ([`Schedule`]; a program without a CONFIGURATION at
-//!    every release) — in priority order (IEC: the lowest
+//!    every release), an event task (`SINGLE`) at the release after its trigger BOOL went
+//!    from FALSE to TRUE (sampled once per release, after the inputs are in) — in priority
+//!    order (IEC: the lowest
 //!    PRIORITY number first; ties in declaration order), with the VM's instruction budget
 //!    as its watchdog;
 //! 3. copy the `%Q` and `%M` located variables out and send every output port's bytes.
@@ -98,16 +100,18 @@ pub fn write_outputs(package: &Package, io: &mut impl PortIo, areas: &Areas) {
 pub enum PlanError {
     /// A cyclic task's INTERVAL is not a positive multiple of the partition's period.
     IntervalNotMultiple { task: usize, interval_ns: u64 },
-    /// Event (SINGLE) tasks are not supported by this runtime yet.
+    /// An event (SINGLE) task whose image names no trigger variable.
     EventTask { task: usize },
     /// No cyclic task at all.
     NoTasks,
 }
 
-/// When each task runs: every `every[i]` releases of the scan process.
+/// When each task runs: a cyclic one every `every[i]` releases of the scan process, an
+/// event one (`every[i] == 0`) on a rising edge of the BOOL at `trigger[i]`.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Schedule {
     pub every: [u64; MAX_TASKS],
+    pub trigger: [Option<u32>; MAX_TASKS],
     /// Tasks in the order they run within a release.
     pub order: [usize; MAX_TASKS],
     pub count: usize,
@@ -121,13 +125,16 @@ impl Schedule {
             return Err(PlanError::NoTasks);
         }
         let mut every = [0u64; MAX_TASKS];
+        let mut trigger = [None; MAX_TASKS];
         let mut order = [0usize; MAX_TASKS];
         for (i, slot) in every.iter_mut().enumerate().take(count) {
             let Some(task) = image.task(i) else {
                 return Err(PlanError::NoTasks);
             };
+            order[i] = i;
             if task.kind != 0 {
-                return Err(PlanError::EventTask { task: i });
+                trigger[i] = Some(task.trigger.ok_or(PlanError::EventTask { task: i })?);
+                continue;
             }
             let interval = task.interval_ns;
             if period_ns == 0 || interval % period_ns != 0 {
@@ -138,18 +145,18 @@ impl Schedule {
             }
             // A program without a CONFIGURATION has one task of interval 0: every release.
             *slot = (interval / period_ns).max(1);
-            order[i] = i;
         }
         let priority = |i: usize| image.task(i).map_or(u8::MAX, |t| t.priority);
         order[..count].sort_unstable_by_key(|&i| (priority(i), i));
         Ok(Self {
             every,
+            trigger,
             order,
             count,
         })
     }
 
-    /// Whether task `task` runs at release number `release` (0 = the first).
+    /// Whether cyclic task `task` runs at release number `release` (0 = the first).
     pub fn due(&self, task: usize, release: u64) -> bool {
         self.every[task] != 0 && release.is_multiple_of(self.every[task])
     }
@@ -201,6 +208,8 @@ pub struct Runtime {
     pub stopped: [Option<Fault>; MAX_TASKS],
     pub releases: u64,
     period_ns: u64,
+    /// Each event task's trigger as sampled at the previous release.
+    armed: [bool; MAX_TASKS],
 }
 
 impl Runtime {
@@ -211,6 +220,7 @@ impl Runtime {
             stopped: [None; MAX_TASKS],
             releases: 0,
             period_ns,
+            armed: [false; MAX_TASKS],
         }
     }
 
@@ -236,14 +246,29 @@ impl Runtime {
         let vars = || image.located_vars();
         located::copy_in(vars(), Area::Input, &areas.input, machine.data_mut());
         located::copy_in(vars(), Area::Memory, &areas.memory, machine.data_mut());
+        let mut due = [false; MAX_TASKS];
         for &task in &self.schedule.order[..self.schedule.count] {
-            if self.stopped[task].is_some() || !self.schedule.due(task, self.releases) {
+            due[task] = match self.schedule.trigger[task] {
+                Some(at) => {
+                    let set = machine.data().get(at as usize).is_some_and(|&b| b != 0);
+                    let edge = set && !self.armed[task];
+                    self.armed[task] = set;
+                    edge
+                }
+                None => self.schedule.due(task, self.releases),
+            };
+        }
+        for &task in &self.schedule.order[..self.schedule.count] {
+            if self.stopped[task].is_some() || !due[task] {
                 continue;
             }
             let t0 = clock();
             let result = machine.run_cycle(task, t0 as i64);
             let exec = clock().saturating_sub(t0);
-            let interval = self.schedule.every[task].saturating_mul(self.period_ns);
+            // An event task has no interval: it overruns when it outlasts the period.
+            let interval = self.schedule.every[task]
+                .max(1)
+                .saturating_mul(self.period_ns);
             // The first release follows the partition's start (NORMAL mode), not a window
             // start: its lateness says nothing about the release path.
             let jitter = if self.releases == 0 { 0 } else { jitter };

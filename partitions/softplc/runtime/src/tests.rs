@@ -586,3 +586,46 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         "six cycles so far"
     );
 }
+
+#[test]
+fn an_event_task_runs_on_the_rising_edge_of_its_trigger() {
+    let source = "
+VAR_GLOBAL go AT %IX0.0 : BOOL; fired AT %QD0 : UDINT; END_VAR
+PROGRAM OnGo fired := fired + 1; END_PROGRAM
+PROGRAM Idle VAR n : INT; END_VAR n := n + 1; END_PROGRAM
+CONFIGURATION C
+  TASK cyc (INTERVAL := T#10ms, PRIORITY := 2);
+  TASK ev (SINGLE := go, PRIORITY := 1);
+  PROGRAM i WITH cyc : Idle;
+  PROGRAM o WITH ev : OnGo;
+END_CONFIGURATION
+";
+    let ports = [
+        PortMap {
+            size: 1,
+            valid: None,
+            ..input("go", 0, (0, 0))
+        },
+        PortMap {
+            size: 4,
+            ..output("fired", 0)
+        },
+    ];
+    let mut plc = Plc::new(source, &ports);
+    let mut wires = Wires {
+        inputs: vec![Some((vec![0], true)), None],
+        ..Wires::default()
+    };
+    let mut areas = Areas::new();
+    let pattern = [1u8, 1, 0, 1, 0, 0];
+    let mut fired = Vec::new();
+    plc.run(7, &mut wires, &mut areas, |r, wires, _, _| {
+        let out = &wires.sent.last().unwrap().1;
+        fired.push(u32::from_le_bytes(out[..4].try_into().unwrap()));
+        if let Some(&b) = pattern.get(r as usize) {
+            wires.inputs[0] = Some((vec![b], true));
+        }
+    });
+    // Releases see go = 0, 1, 1, 0, 1, 0, 0: edges at releases 1 and 4.
+    assert_eq!(fired, [0, 1, 1, 1, 2, 2, 2]);
+}

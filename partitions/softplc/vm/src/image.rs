@@ -22,7 +22,8 @@
 //!   code_start u32, code_len u32, frame_size u32`.
 //! * `TASKS`: 32-byte records `name_off u32, name_len u16, kind u8 (0 cyclic, 1 event),
 //!   priority u8, pou u16, reserved u16, instance_base u32, watchdog_budget u32 (instructions per
-//!   cycle, 0 = [`DEFAULT_WATCHDOG_BUDGET`]), interval_ns u64, reserved u32`.
+//!   cycle, 0 = [`DEFAULT_WATCHDOG_BUDGET`]), interval_ns u64, trigger u32` (event tasks:
+//!   1 + the data address of the BOOL whose rising edge releases the task, 0 = none).
 //! * `VARS`: 16-byte records `name_off u32, name_len u16, type u8 ([`VarType`]), flags u8
 //!   ([`VAR_FLAG_RETAIN`], [`VAR_FLAG_CONSTANT`]), address u32, size u32` — the monitor map.
 //! * `SRCLOCS`: 16-byte records `code_offset u32, line u32, column u32, file u16, reserved u16`,
@@ -237,6 +238,8 @@ pub struct Task<'a> {
     pub watchdog_budget: u32,
     /// Cycle interval in nanoseconds (cyclic tasks).
     pub interval_ns: u64,
+    /// Event tasks: the data address of the BOOL whose rising edge releases the task.
+    pub trigger: Option<u32>,
 }
 
 impl Task<'_> {
@@ -437,6 +440,7 @@ impl<'a> Image<'a> {
             instance_base: read_u32(r, 12),
             watchdog_budget: read_u32(r, 16),
             interval_ns: read_u64(r, 20),
+            trigger: read_u32(r, 28).checked_sub(1),
         })
     }
 
@@ -877,6 +881,13 @@ mod builder {
             r.extend_from_slice(&task.interval_ns.to_le_bytes());
             r.extend_from_slice(&0u32.to_le_bytes());
             self.tasks.len() / TASK_RECORD - 1
+        }
+
+        /// Makes task `task` (an index from [`ImageBuilder::add_task`]) an event task released
+        /// by the rising edge of the BOOL at data address `addr`.
+        pub fn set_task_trigger(&mut self, task: usize, addr: u32) {
+            let at = task * TASK_RECORD + 28;
+            self.tasks[at..at + 4].copy_from_slice(&addr.saturating_add(1).to_le_bytes());
         }
 
         /// Adds a variable-map entry (`size` = width for scalars, 4 + max_len for STRING).

@@ -160,6 +160,8 @@ pub enum Reason {
     BadTaskKind(u8),
     /// Instance frame `[base, base + frame_size)` outside data memory.
     FrameOutsideData,
+    /// An event task's trigger variable lies outside data memory.
+    TriggerOutsideData,
     /// Unknown variable type byte.
     BadVarType(u8),
     /// Variable outside data memory.
@@ -280,6 +282,7 @@ impl core::fmt::Display for Reason {
                 write!(f, "task POU must take 0 argument and 0 result cells")
             }
             Reason::BadTaskKind(k) => write!(f, "unknown task kind {k}"),
+            Reason::TriggerOutsideData => write!(f, "event trigger outside data memory"),
             Reason::FrameOutsideData => write!(f, "instance frame outside data memory"),
             Reason::BadVarType(t) => write!(f, "unknown variable type {t}"),
             Reason::VarOutsideData => write!(f, "variable outside data memory"),
@@ -667,6 +670,9 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         }
         if task.instance_base as u64 + pou.frame_size as u64 > data_size {
             return err(site, Reason::FrameOutsideData);
+        }
+        if task.trigger.is_some_and(|t| t as u64 >= data_size) {
+            return err(site, Reason::TriggerOutsideData);
         }
     }
     debug_assert_eq!(TASK_RECORD, 32);
