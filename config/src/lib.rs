@@ -64,6 +64,7 @@
 //! plc.outputs.valve = { at = "%QB0" }
 //! plc.watch = ["level", "tank.pid.integral"]
 //! plc.online = { request = "cmd", response = "reply", access = "monitor" }
+//! plc.safe = { valve = 0.0, "tank.heater" = false }
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -119,7 +120,10 @@
 //! the PLC online protocol (crate `plc-online`: list, read, write, force, unforce, task
 //! statistics) instead of process-image bytes, and what their client may do: `"monitor"`
 //! (list, read, statistics) or `"force"` (also write, force and unforce); a request beyond
-//! it is answered FORBIDDEN. `plc.watch` names variables (globals by name, program variables as `instance.var`) the
+//! it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
+//! they take when a task faults and the outputs go safe (a number or a boolean fitting the
+//! variable's type; checked when the program is compiled); without one they go to
+//! zero/FALSE. `plc.watch` names variables (globals by name, program variables as `instance.var`) the
 //! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
 //! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
 //! the partition windows (checked when the program is compiled).

@@ -94,6 +94,17 @@ pub struct Plc {
     #[serde(default)]
     pub watch: Vec<Spanned<String>>,
     pub online: Option<Spanned<PlcOnline>>,
+    #[serde(default)]
+    pub safe: Named<PlcValue>,
+}
+
+/// A value written in the description (`plc.safe`).
+#[derive(Debug, Deserialize, Clone, Copy)]
+#[serde(untagged)]
+pub enum PlcValue {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
 }
 
 #[derive(Debug, Deserialize)]

@@ -75,6 +75,18 @@ pub struct Plc {
     pub watch: Vec<String>,
     /// The online ports (indices into the partition's `ports`) and what their client may do.
     pub online: Option<PlcOnline>,
+    /// Safe values of `%Q` variables by name (checked against the program when it is
+    /// compiled); the others go to zero/FALSE.
+    pub safe: Vec<(String, PlcValue)>,
+}
+
+/// A value written in the description.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PlcValue {
+    Bool(bool),
+    Int(i64),
+    /// A float, as its `f64` bit pattern (so systems compare exactly).
+    Float(u64),
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -606,12 +606,25 @@ impl Validator<'_, '_> {
             );
         }
         let watch = raw.watch.iter().map(|w| w.get_ref().clone()).collect();
+        let safe = raw
+            .safe
+            .iter()
+            .map(|(name, value)| {
+                let value = match *value.get_ref() {
+                    schema::PlcValue::Bool(b) => PlcValue::Bool(b),
+                    schema::PlcValue::Int(i) => PlcValue::Int(i),
+                    schema::PlcValue::Float(f) => PlcValue::Float(f.to_bits()),
+                };
+                (name.get_ref().clone(), value)
+            })
+            .collect();
         (self.r.diagnostics.len() == before).then_some(Plc {
             program,
             inputs,
             outputs,
             watch,
             online,
+            safe,
         })
     }
 

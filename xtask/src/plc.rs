@@ -6,7 +6,8 @@
 
 use anyhow::{Context, Result, bail};
 use config::System;
-use config::system::{Partition, PlcLink};
+use config::system::{Partition, PlcLink, PlcValue};
+use plc_vm::image::{Image, VarType};
 use softplc::package::{self, PortMap};
 
 /// `(partition name, package)` for every soft-PLC partition of `system`.
@@ -74,12 +75,70 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             }
         });
         let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
+        let safe = plc
+            .safe
+            .iter()
+            .map(|(name, value)| safe_value(&image, name, *value))
+            .collect::<Result<Vec<_>, String>>()
+            .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
         out.push((
             p.name.clone(),
-            package::encode(&ports, &compiled.image, &watch, online),
+            package::encode(&ports, &compiled.image, &watch, online, &safe),
         ));
     }
     Ok(out)
+}
+
+/// The safe value of `%Q` variable `name`: it must be a located output of the program and
+/// the value must fit its type (a boolean for BOOL, an integer in range for the integer and
+/// bit-string types, a number for REAL/LREAL).
+fn safe_value(image: &Image, name: &str, value: PlcValue) -> Result<package::SafeValue, String> {
+    let var = image
+        .find_var(name)
+        .ok_or_else(|| format!("`{name}` is not a variable of the program"))?;
+    let located = image
+        .located_vars()
+        .find(|l| l.address == var.addr && l.location.area == plc_vm::located::Area::Output)
+        .ok_or_else(|| format!("`{name}` is not a located output (%Q) variable"))?;
+    let width = located.location.width.bytes() as u8;
+    let ty = VarType::from_code(var.ty).ok_or_else(|| format!("`{name}` has no plain type"))?;
+    let bad = || format!("{value:?} does not fit `{name}`, a {}", ty.name());
+    let bits = match (ty, value) {
+        (VarType::Bool, PlcValue::Bool(b)) => b as u64,
+        (VarType::Real, PlcValue::Float(f)) => (f64::from_bits(f) as f32).to_bits() as u64,
+        (VarType::Real, PlcValue::Int(i)) => (i as f32).to_bits() as u64,
+        (VarType::LReal, PlcValue::Float(f)) => f,
+        (VarType::LReal, PlcValue::Int(i)) => (i as f64).to_bits(),
+        (VarType::Bool | VarType::Real | VarType::LReal | VarType::String, _) => return Err(bad()),
+        (_, PlcValue::Int(i)) => {
+            let signed = matches!(
+                ty,
+                VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt | VarType::Time
+            );
+            let bits = u32::from(width) * 8;
+            let fits = if bits == 64 {
+                signed || i >= 0
+            } else if signed {
+                (-(1i64 << (bits - 1))..(1i64 << (bits - 1))).contains(&i)
+            } else {
+                (0..(1i64 << bits)).contains(&i)
+            };
+            if !fits {
+                return Err(bad());
+            }
+            if bits == 64 {
+                i as u64
+            } else {
+                (i as u64) & ((1u64 << bits) - 1)
+            }
+        }
+        _ => return Err(bad()),
+    };
+    Ok(package::SafeValue {
+        address: var.addr,
+        width,
+        value: bits,
+    })
 }
 
 fn port_map<'a>(p: &'a Partition, link: &PlcLink) -> PortMap<'a> {
@@ -125,4 +184,44 @@ fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Re
         }
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn image_of(source: &str) -> Vec<u8> {
+        let files = [("t.st".to_string(), source.to_string())];
+        plc_compiler::compile(&files, &plc_compiler::Options::default())
+            .map(|(c, _)| c.image)
+            .unwrap_or_else(|_| panic!("does not compile"))
+    }
+
+    #[test]
+    fn safe_values_fit_their_variables() {
+        let bytes = image_of(
+            "VAR_GLOBAL v AT %QL0 : LREAL; b AT %QX8.0 : BOOL; s AT %QB9 : SINT; plain : INT; END_VAR
+             PROGRAM P plain := 1; END_PROGRAM",
+        );
+        let image = Image::parse(&bytes).unwrap();
+        let v = safe_value(&image, "v", PlcValue::Float(0.5f64.to_bits())).unwrap();
+        assert_eq!((v.width, v.value), (8, 0.5f64.to_bits()));
+        assert_eq!(
+            safe_value(&image, "b", PlcValue::Bool(true)).unwrap().value,
+            1
+        );
+        assert_eq!(
+            safe_value(&image, "s", PlcValue::Int(-1)).unwrap().value,
+            0xff
+        );
+        for (name, value, why) in [
+            ("s", PlcValue::Int(200), "does not fit"),
+            ("b", PlcValue::Int(1), "does not fit"),
+            ("plain", PlcValue::Int(0), "not a located output"),
+            ("nope", PlcValue::Int(0), "not a variable"),
+        ] {
+            let e = safe_value(&image, name, value).unwrap_err();
+            assert!(e.contains(why), "{name}: {e}");
+        }
+    }
 }

@@ -16,7 +16,9 @@
 //! 25     1    online response port (index of a queuing output)
 //! 26     1    online access (plc_online::Access code)
 //! 27     5    reserved (0)
-//! 32     64*N port records:
+//! 32     4    safe-value list offset
+//! 36     4    safe-value list length
+//! 40     64*N port records:
 //!   0    32   name (UTF-8, zero padded)
 //!   32   1    kind (protocol::PortKind code: 1 sampling, 2 queuing)
 //!   33   1    direction (protocol::Direction code: 1 in, 2 out)
@@ -31,6 +33,10 @@
 //! ...         the program: a plc-vm bytecode image (re-verified by the runtime)
 //! ...         the watch list: variable names (of the image's variable map), UTF-8,
 //!             separated by `\n`, whose values the runtime logs with its statistics
+//! ...         the safe values: 16-byte records `address u32` (a `%Q` variable's data
+//!             address), `width u8` (1, 2, 4 or 8 bytes), reserved (3 bytes, 0), `value u64`
+//!             (little-endian, the variable's bytes), used instead of zero/FALSE when a fault
+//!             sets the outputs safe
 //! ```
 //!
 //! The online ports carry the online protocol (`plc-online`) instead of process-image
@@ -50,7 +56,9 @@ pub const MAGIC: [u8; 4] = *b"WPKG";
 /// Format version.
 pub const VERSION: u16 = 1;
 /// Header bytes before the port records.
-pub const HEADER_LEN: usize = 32;
+pub const HEADER_LEN: usize = 40;
+/// Bytes of one safe-value record.
+pub const SAFE_RECORD: usize = 16;
 /// Online port fields without online access.
 pub const NO_ONLINE: u8 = u8::MAX;
 /// Bytes of one port record.
@@ -94,6 +102,9 @@ pub enum PackageError {
     /// The online ports are not a queuing input and a queuing output, or the access code
     /// is unknown.
     BadOnline,
+    /// The safe-value list lies outside the package, is ragged, or has a record with a
+    /// width other than 1, 2, 4, 8 or a value wider than it.
+    BadSafeValues,
     /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
     /// on an output or above 7).
     BadPort(usize),
@@ -113,6 +124,7 @@ impl core::fmt::Display for PackageError {
                 write!(f, "the watch list lies outside the package or is not UTF-8")
             }
             Self::BadOnline => write!(f, "the online ports are not a queuing input and output"),
+            Self::BadSafeValues => write!(f, "the safe-value list is malformed"),
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
         }
     }
@@ -138,6 +150,18 @@ pub struct Package<'a> {
     program: &'a [u8],
     watch: &'a str,
     online: Option<Online>,
+    safe: &'a [u8],
+}
+
+/// A `%Q` variable's value when the outputs go safe.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SafeValue {
+    /// Data address of the variable.
+    pub address: u32,
+    /// Its width in bytes.
+    pub width: u8,
+    /// Its bytes, little-endian.
+    pub value: u64,
 }
 
 /// The online ports (package port indices) and what their client may do.
@@ -179,12 +203,24 @@ impl<'a> Package<'a> {
         let watch = range(16)
             .and_then(|w| core::str::from_utf8(w).ok())
             .ok_or(PackageError::BadWatchList)?;
+        let safe = range(32)
+            .filter(|s| s.len() % SAFE_RECORD == 0)
+            .ok_or(PackageError::BadSafeValues)?;
+        for r in safe.chunks_exact(SAFE_RECORD) {
+            let width = r[4];
+            let value = u64_at(r, 8);
+            let fits = width == 8 || (matches!(width, 1 | 2 | 4) && value >> (8 * width) == 0);
+            if !fits || r[5..8] != [0; 3] {
+                return Err(PackageError::BadSafeValues);
+            }
+        }
         let mut package = Package {
             bytes,
             ports: count as usize,
             program,
             watch,
             online: None,
+            safe,
         };
         for i in 0..package.ports {
             package.decode_port(i).ok_or(PackageError::BadPort(i))?;
@@ -220,6 +256,15 @@ impl<'a> Package<'a> {
     pub fn is_image_port(&self, i: usize) -> bool {
         self.online
             .is_none_or(|o| i != o.request && i != o.response)
+    }
+
+    /// The configured safe values (all others are zero/FALSE).
+    pub fn safe_values(&self) -> impl Iterator<Item = SafeValue> + 'a {
+        self.safe.chunks_exact(SAFE_RECORD).map(|r| SafeValue {
+            address: u32_at(r, 0),
+            width: r[4],
+            value: u64_at(r, 8),
+        })
     }
 
     /// The names of the variables to log.
@@ -285,6 +330,7 @@ pub fn encode(
     program: &[u8],
     watch: &[&str],
     online: Option<Online>,
+    safe: &[SafeValue],
 ) -> alloc::vec::Vec<u8> {
     let mut out = alloc::vec::Vec::new();
     let program_at = HEADER_LEN + ports.len() * PORT_RECORD;
@@ -301,6 +347,9 @@ pub fn encode(
         None => out.extend_from_slice(&[NO_ONLINE, NO_ONLINE, 0]),
     }
     out.extend_from_slice(&[0; 5]);
+    let safe_at = program_at + program.len() + watch.len();
+    out.extend_from_slice(&(safe_at as u32).to_le_bytes());
+    out.extend_from_slice(&((safe.len() * SAFE_RECORD) as u32).to_le_bytes());
     for p in ports {
         let mut r = [0u8; PORT_RECORD];
         let name = &p.name.as_bytes()[..p.name.len().min(NAME_LEN)];
@@ -318,6 +367,11 @@ pub fn encode(
     }
     out.extend_from_slice(program);
     out.extend_from_slice(watch.as_bytes());
+    for s in safe {
+        out.extend_from_slice(&s.address.to_le_bytes());
+        out.extend_from_slice(&[s.width, 0, 0, 0]);
+        out.extend_from_slice(&s.value.to_le_bytes());
+    }
     out
 }
 
@@ -353,7 +407,18 @@ mod tests {
 
     #[test]
     fn round_trip() {
-        let bytes = encode(&[level(), valve()], b"PLCB...", &["tank.alarm", "x"], None);
+        let safe = SafeValue {
+            address: 16,
+            width: 8,
+            value: 0.5f64.to_bits(),
+        };
+        let bytes = encode(
+            &[level(), valve()],
+            b"PLCB...",
+            &["tank.alarm", "x"],
+            None,
+            &[safe],
+        );
         let p = Package::parse(&bytes).unwrap();
         assert_eq!(
             p.ports().collect::<alloc::vec::Vec<_>>(),
@@ -364,11 +429,22 @@ mod tests {
             p.watch().collect::<alloc::vec::Vec<_>>(),
             ["tank.alarm", "x"]
         );
+        assert_eq!(p.safe_values().collect::<alloc::vec::Vec<_>>(), [safe]);
     }
 
     #[test]
     fn hostile_packages_are_refused_never_panic() {
-        let good = encode(&[level(), valve()], b"PLCB", &["a"], None);
+        let good = encode(
+            &[level(), valve()],
+            b"PLCB",
+            &["a"],
+            None,
+            &[SafeValue {
+                address: 0,
+                width: 1,
+                value: 1,
+            }],
+        );
         assert_eq!(
             Package::parse(&good[..10]).unwrap_err(),
             PackageError::TooShort
@@ -399,16 +475,34 @@ mod tests {
             PackageError::ProgramOutOfBounds
         );
         let mut bad = good.clone();
-        bad[20] = 9;
+        bad[20] = 0xff;
         assert_eq!(
             Package::parse(&bad).unwrap_err(),
             PackageError::BadWatchList
         );
         let mut bad = good.clone();
-        *bad.last_mut().unwrap() = 0xff;
+        let watch_at = u32::from_le_bytes(bad[16..20].try_into().unwrap()) as usize;
+        bad[watch_at] = 0xff;
         assert_eq!(
             Package::parse(&bad).unwrap_err(),
             PackageError::BadWatchList
+        );
+        // Safe values: a width of 3, a value wider than its byte, reserved bytes, ragged.
+        let safe_at = u32::from_le_bytes(good[32..36].try_into().unwrap()) as usize;
+        for (at, v) in [(4, 3u8), (9, 1), (5, 1)] {
+            let mut bad = good.clone();
+            bad[safe_at + at] = v;
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadSafeValues,
+                "safe record byte {at} = {v}"
+            );
+        }
+        let mut bad = good.clone();
+        bad[36] = 15;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::BadSafeValues
         );
         // Record fields: kind, direction, size 0, beyond the area, a bit above 7, a
         // validity bit on an output, a name with a gap.

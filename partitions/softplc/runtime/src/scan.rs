@@ -14,8 +14,9 @@
 //! 3. copy the `%Q` and `%M` located variables out and send every output port's bytes.
 //!
 //! A task that traps (or exhausts its budget: `WATCHDOG`) is stopped: its program
-//! instance's located `%Q` variables are set to their safe value (zero/FALSE) in the same
-//! cycle, before the outputs are sent, and stay so; the other tasks go on. The caller
+//! instance's located `%Q` variables and the global ones are set to their safe values
+//! (configured per variable, zero/FALSE otherwise; [`safe_outputs`]) in the same cycle,
+//! before the outputs are sent; the other tasks go on. The caller
 //! reports the fault to the health monitor.
 //!
 //! Per task the runtime keeps [`TaskStats`]: activations, execution time (last, min, max,
@@ -276,7 +277,7 @@ impl Runtime {
             if let Err(fault) = result {
                 self.stats[task].faults += 1;
                 self.stopped[task] = Some(fault);
-                safe_outputs(image, task, machine.data_mut());
+                safe_outputs(image, package, task, machine.data_mut());
                 on_fault(task, &fault);
             }
         }
@@ -287,19 +288,39 @@ impl Runtime {
     }
 }
 
-/// Sets the located `%Q` variables of `task`'s program instance to zero/FALSE.
-pub fn safe_outputs(image: &Image, task: usize, data: &mut [u8]) {
+/// Sets the outputs of a faulted task safe: every located `%Q` variable of its program
+/// instance and every global one (globals may be shared with tasks that still run; those
+/// write them again in their next cycles) gets its configured safe value, zero/FALSE
+/// without one.
+pub fn safe_outputs(image: &Image, package: &Package, task: usize, data: &mut [u8]) {
     let Some(t) = image.task(task) else {
         return;
     };
-    let frame = image.pou(t.pou as usize).map_or(0, |p| p.frame_size);
-    let instance = t.instance_base as u64..t.instance_base as u64 + frame as u64;
+    let span = |t: &plc_vm::image::Task| {
+        let frame = image.pou(t.pou as usize).map_or(0, |p| p.frame_size);
+        t.instance_base as u64..t.instance_base as u64 + frame as u64
+    };
+    let own = span(&t);
+    let in_some_instance = |a: u64| {
+        (0..image.task_count())
+            .filter_map(|i| image.task(i))
+            .any(|t| span(&t).contains(&a))
+    };
     for v in image.located_vars() {
-        if v.location.area == Area::Output && instance.contains(&(v.address as u64)) {
-            let at = v.address as usize;
-            if let Some(bytes) = data.get_mut(at..at + v.location.width.bytes() as usize) {
-                bytes.fill(0);
-            }
+        let address = v.address as u64;
+        if v.location.area != Area::Output
+            || !(own.contains(&address) || !in_some_instance(address))
+        {
+            continue;
+        }
+        let width = v.location.width.bytes() as usize;
+        let value = package
+            .safe_values()
+            .find(|s| s.address == v.address)
+            .map_or(0, |s| s.value);
+        let at = v.address as usize;
+        if let Some(bytes) = data.get_mut(at..at + width) {
+            bytes.copy_from_slice(&value.to_le_bytes()[..width]);
         }
     }
 }

@@ -75,7 +75,7 @@ struct Plc {
 impl Plc {
     fn new(source: &str, ports: &[PortMap]) -> Self {
         let program = compile(source);
-        let bytes = package::encode(ports, &program, &[], None);
+        let bytes = package::encode(ports, &program, &[], None, &[]);
         let image = Image::parse(Package::parse(&bytes).unwrap().program()).unwrap();
         let data = vec![0u8; image.data_size() as usize];
         Self { bytes, data }
@@ -435,7 +435,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         ..output("out", 0)
     }];
     let program = compile(source);
-    let bytes = package::encode(&ports, &program, &[], None);
+    let bytes = package::encode(&ports, &program, &[], None, &[]);
     let package = Package::parse(&bytes).unwrap();
     let image = Image::parse(package.program()).unwrap();
     let mut data = vec![0u8; image.data_size() as usize];
@@ -628,4 +628,58 @@ END_CONFIGURATION
     });
     // Releases see go = 0, 1, 1, 0, 1, 0, 0: edges at releases 1 and 4.
     assert_eq!(fired, [0, 1, 1, 1, 2, 2, 2]);
+}
+
+#[test]
+fn a_fault_applies_the_configured_safe_values() {
+    let source = "
+VAR_GLOBAL divisor AT %IW0 : INT; valve AT %QL0 : LREAL; lamp AT %QX8.0 : BOOL; END_VAR
+PROGRAM Bad VAR n : INT; END_VAR
+valve := 0.75; lamp := FALSE;
+n := 100 / divisor;
+END_PROGRAM";
+    let program = compile(source);
+    let image = Image::parse(&program).unwrap();
+    let address = |name: &str| image.find_var(name).unwrap().addr;
+    let safe = [
+        package::SafeValue {
+            address: address("valve"),
+            width: 8,
+            value: 0.25f64.to_bits(),
+        },
+        package::SafeValue {
+            address: address("lamp"),
+            width: 1,
+            value: 1,
+        },
+    ];
+    let ports = [
+        PortMap {
+            size: 2,
+            valid: None,
+            ..input("divisor", 0, (0, 0))
+        },
+        PortMap {
+            size: 9,
+            ..output("out", 0)
+        },
+    ];
+    let bytes = package::encode(&ports, &program, &[], None, &safe);
+    let mut plc = Plc {
+        data: vec![0u8; image.data_size() as usize],
+        bytes,
+    };
+    let mut wires = Wires {
+        inputs: vec![Some((4i16.to_le_bytes().to_vec(), true)), None],
+        ..Wires::default()
+    };
+    let mut areas = Areas::new();
+    plc.run(2, &mut wires, &mut areas, |r, wires, _, _| {
+        if r == 0 {
+            wires.inputs[0] = Some((0i16.to_le_bytes().to_vec(), true));
+        }
+    });
+    let out = |r: usize| (f64_of(&wires.sent[r].1[..8]), wires.sent[r].1[8]);
+    assert_eq!(out(0), (0.75, 0));
+    assert_eq!(out(1), (0.25, 1), "the configured safe values, not zero");
 }

@@ -615,7 +615,10 @@ fn located_records() {
 fn event_trigger_inside_data() {
     let good = program_with(10, |b, _| b.set_task_trigger(0, DATA - 1));
     assert_eq!(verdict(&good), Ok(()));
-    assert_eq!(Image::parse(&good).unwrap().task(0).unwrap().trigger, Some(DATA - 1));
+    assert_eq!(
+        Image::parse(&good).unwrap().task(0).unwrap().trigger,
+        Some(DATA - 1)
+    );
     let bad = program_with(10, |b, _| b.set_task_trigger(0, DATA));
     assert_eq!(
         verdict(&bad),
