@@ -308,9 +308,8 @@ pub fn safe_outputs(image: &Image, package: &Package, task: usize, data: &mut [u
     };
     for v in image.located_vars() {
         let address = v.address as u64;
-        if v.location.area != Area::Output
-            || !(own.contains(&address) || !in_some_instance(address))
-        {
+        let global = !in_some_instance(address);
+        if v.location.area != Area::Output || !(own.contains(&address) || global) {
             continue;
         }
         let width = v.location.width.bytes() as usize;
