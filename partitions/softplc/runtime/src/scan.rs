@@ -245,6 +245,10 @@ impl Runtime {
         let jitter = start.saturating_sub(release_ns);
         read_inputs(package, io, areas);
         let vars = || image.located_vars();
+        if self.releases == 0 {
+            // The marker area starts with the markers' initial values, not zeros.
+            located::copy_out(vars(), Area::Memory, machine.data(), &mut areas.memory);
+        }
         located::copy_in(vars(), Area::Input, &areas.input, machine.data_mut());
         located::copy_in(vars(), Area::Memory, &areas.memory, machine.data_mut());
         let mut due = [false; MAX_TASKS];

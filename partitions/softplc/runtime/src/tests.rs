@@ -178,8 +178,8 @@ fn read_execute_write_through_the_process_image() {
     plc.run(1, &mut wires, &mut areas, |_, _, _, _| {});
     assert_eq!(f64_of(&wires.sent[0].1), 0.0);
     assert_eq!(wires.sent[1].1[0], 1);
-    // The marker survives in %M across cycles (copied out and in again).
-    assert_eq!(u32::from_le_bytes(areas.memory[..4].try_into().unwrap()), 2);
+    // A new runtime (a restart) starts the marker from its initial value again.
+    assert_eq!(u32::from_le_bytes(areas.memory[..4].try_into().unwrap()), 1);
 }
 
 #[test]
@@ -682,4 +682,16 @@ END_PROGRAM";
     let out = |r: usize| (f64_of(&wires.sent[r].1[..8]), wires.sent[r].1[8]);
     assert_eq!(out(0), (0.75, 0));
     assert_eq!(out(1), (0.25, 1), "the configured safe values, not zero");
+}
+
+/// Markers start from their initial values and keep their values from cycle to cycle
+/// (copied out and in again).
+#[test]
+fn markers_keep_their_initial_values() {
+    let source = "VAR_GLOBAL m AT %MW0 : UINT := 5; END_VAR PROGRAM P m := m + 1; END_PROGRAM";
+    let mut plc = Plc::new(source, &[]);
+    let mut wires = Wires::default();
+    let mut areas = Areas::new();
+    plc.run(2, &mut wires, &mut areas, |_, _, _, _| {});
+    assert_eq!(u16::from_le_bytes([areas.memory[0], areas.memory[1]]), 7);
 }
