@@ -142,6 +142,8 @@ pub struct Reporter<'s> {
     file: String,
     source: &'s str,
     pub diagnostics: Vec<Diagnostic>,
+    /// What is valid but probably not meant (the description says it is).
+    pub warnings: Vec<Diagnostic>,
 }
 
 impl<'s> Reporter<'s> {
@@ -160,19 +162,31 @@ impl<'s> Reporter<'s> {
             file: file.to_string(),
             source,
             diagnostics: Vec::new(),
+            warnings: Vec::new(),
         }
     }
 
-    /// Records a problem at byte `offset` of the source.
-    pub fn error(&mut self, offset: usize, path: &KeyPath, message: impl fmt::Display) {
+    fn at(&self, offset: usize, path: &KeyPath, message: impl fmt::Display) -> Diagnostic {
         let (line, column) = line_column(self.source, offset);
-        self.diagnostics.push(Diagnostic {
+        Diagnostic {
             file: self.file.clone(),
             line,
             column,
             key_path: path.0.clone(),
             message: message.to_string(),
-        });
+        }
+    }
+
+    /// Records a problem at byte `offset` of the source.
+    pub fn error(&mut self, offset: usize, path: &KeyPath, message: impl fmt::Display) {
+        let diagnostic = self.at(offset, path, message);
+        self.diagnostics.push(diagnostic);
+    }
+
+    /// Records a warning at byte `offset` of the source: valid, but worth a second look.
+    pub fn warning(&mut self, offset: usize, path: &KeyPath, message: impl fmt::Display) {
+        let diagnostic = self.at(offset, path, message);
+        self.warnings.push(diagnostic);
     }
 
     /// 1-based line of byte `offset` (for "defined at line N" notes).

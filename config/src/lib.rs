@@ -53,6 +53,7 @@
 //! abilities = ["debug_log"]       # optional, see "Abilities"
 //! native_syscalls = true          # optional, default true; a paravirtualized guest says false
 //! time = 1                        # optional: "background" (TP0) or a time partition 1..=15
+//! preempts_windows = false         # optional, background only: see "Time"
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
@@ -81,6 +82,12 @@
 //! fixes the number; partitions may share a number (their windows then serve all of them),
 //! and a fixed number must have a window in some schedule. `time = "background"` puts it in
 //! TP0, which runs whenever no window's partition is ready; it cannot have windows.
+//! Inside a window, the background's threads compete by priority with the window's
+//! partition, so a background partition's `max_priority` must be below the `priority` of
+//! every windowed partition (the floor the windowed partition's own threads keep to; a thread
+//! it runs below its floor may lose its window to the background). A background partition
+//! that is meant to preempt windows says `preempts_windows = true`; the tools then print a
+//! warning instead of refusing the file.
 //!
 //! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
 //! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,
@@ -164,7 +171,7 @@ pub use diagnostic::Diagnostic;
 #[cfg(feature = "host")]
 pub use system::System;
 #[cfg(feature = "host")]
-pub use validate::load;
+pub use validate::{load, load_with_warnings};
 
 /// Parses, validates and encodes a description in one step (what the image builder needs).
 #[cfg(feature = "host")]

@@ -70,6 +70,7 @@ pub struct Partition {
     pub abilities: Vec<Spanned<String>>,
     pub native_syscalls: Option<Spanned<bool>>,
     pub time: Option<Spanned<Scalar>>,
+    pub preempts_windows: Option<Spanned<bool>>,
     #[serde(default)]
     pub io_ports: Vec<Spanned<Scalar>>,
     #[serde(default)]

@@ -26,6 +26,16 @@ pub fn load(
     source: &str,
     known_images: &dyn Fn(&str) -> bool,
 ) -> Result<System, Vec<Diagnostic>> {
+    load_with_warnings(file, source, known_images).map(|(system, _)| system)
+}
+
+/// [`load`], also returning the warnings of a valid description: things it says are
+/// intended but that weaken a guarantee (e.g. `preempts_windows`), for the tools to print.
+pub fn load_with_warnings(
+    file: &str,
+    source: &str,
+    known_images: &dyn Fn(&str) -> bool,
+) -> Result<(System, Vec<Diagnostic>), Vec<Diagnostic>> {
     let (tree, syntax) = toml::de::DeTable::parse_recoverable(source);
     let mut reporter = Reporter::new(file, source);
     if !syntax.is_empty() {
@@ -51,7 +61,9 @@ pub fn load(
     };
     let system = v.system(&document);
     if v.r.diagnostics.is_empty() {
-        Ok(system)
+        let mut warnings = core::mem::take(&mut v.r.warnings);
+        warnings.sort_by_key(|d| (d.line, d.column));
+        Ok((system, warnings))
     } else {
         Err(v.r.finish())
     }
@@ -235,6 +247,7 @@ impl Validator<'_, '_> {
         let segments = self.segments(doc);
         let (mut partitions, times, mut ports) = self.partitions(doc, &segments);
         let schedules = self.schedules(doc, &mut partitions, &times);
+        self.background_priorities(doc, &partitions);
         let channels = self.channels(doc, &mut partitions, &mut ports);
         let health = self.health(&doc.health, &root.key("health"));
 
@@ -741,7 +754,7 @@ impl Validator<'_, '_> {
                             "priority {value} is not in 0..={mcp} (it may not exceed max_priority)"
                         ),
                     );
-                    0
+                    mcp
                 }
             }
             None => mcp,
@@ -1535,6 +1548,60 @@ impl Validator<'_, '_> {
             }
             if latest.is_none_or(|(_, le, _)| offset + duration > le) {
                 latest = Some((offset, offset + duration, j));
+            }
+        }
+    }
+
+    /// A background partition competes by priority with the partition whose window is
+    /// open, so it must stay below every windowed partition's `priority` (its floor) or it
+    /// can take that partition's window away; `preempts_windows = true` on the background
+    /// partition says this is intended (then it is a warning). `preempts_windows` on a
+    /// windowed partition is an error: it means nothing there.
+    fn background_priorities(&mut self, doc: &schema::Document, partitions: &[Partition]) {
+        let base = KeyPath::root().key("partitions");
+        let raw = in_source_order(&doc.partitions);
+        let floor = partitions
+            .iter()
+            .filter(|p| p.time_partition != 0)
+            .min_by_key(|p| p.priority);
+        for (p, (_, value)) in partitions.iter().zip(&raw) {
+            let raw = value.get_ref();
+            let path = base.key(&p.name);
+            let intended = raw.preempts_windows.as_ref();
+            if p.time_partition != 0 {
+                if let Some(flag) = intended {
+                    self.error(
+                        start(flag),
+                        &path.key("preempts_windows"),
+                        format!(
+                            "partition `{}` has windows; preempts_windows only applies to a background partition (time = \"background\")",
+                            p.name
+                        ),
+                    );
+                }
+                continue;
+            }
+            let Some(windowed) = floor.filter(|w| p.mcp >= w.priority) else {
+                continue;
+            };
+            let why = format!(
+                "background partition `{}` has max_priority {} >= priority {} of windowed partition `{}`: its threads can take that partition's window away",
+                p.name, p.mcp, windowed.priority, windowed.name
+            );
+            match intended {
+                Some(flag) if *flag.get_ref() => self.r.warning(
+                    start(flag),
+                    &path.key("preempts_windows"),
+                    format!("{why} (allowed by preempts_windows = true)"),
+                ),
+                _ => self.error(
+                    start(&raw.max_priority),
+                    &path.key("max_priority"),
+                    format!(
+                        "{why}; give it a max_priority below {} or say `preempts_windows = true` if that is intended",
+                        windowed.priority
+                    ),
+                ),
             }
         }
     }

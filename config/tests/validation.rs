@@ -346,6 +346,79 @@ fn no_window_and_not_background() {
 }
 
 #[test]
+fn background_above_a_windowed_partition() {
+    // b (background) at MCP 100 would outrank a (windowed, priority 100) in a's window.
+    let src = doc(&[("max_priority = 50", "max_priority = 100")]);
+    expect_one(
+        &src,
+        "max_priority = ^100\ntime",
+        0,
+        "partitions.b.max_priority",
+        "background partition `b` has max_priority 100 >= priority 100 of windowed partition `a`",
+    );
+    // The floor is the windowed partition's `priority`, not its MCP.
+    let src = doc(&[("# a", "priority = 40")]);
+    expect_one(
+        &src,
+        "max_priority = ^50",
+        0,
+        "partitions.b.max_priority",
+        "max_priority 50 >= priority 40 of windowed partition `a`",
+    );
+    load_ok(&doc(&[("# a", "priority = 51")]));
+}
+
+#[test]
+fn background_preempting_windows_on_purpose_is_a_warning() {
+    let src = doc(&[
+        ("max_priority = 50", "max_priority = 100"),
+        ("# b", "preempts_windows = true"),
+    ]);
+    let (_, warnings) = config::load_with_warnings("test.toml", &src, &any_image).unwrap();
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    let (line, column) = position(&src, "preempts_windows = ^true", 0);
+    assert_eq!((warnings[0].line, warnings[0].column), (line, column));
+    assert_eq!(warnings[0].key_path, "partitions.b.preempts_windows");
+    assert!(
+        warnings[0]
+            .message
+            .contains("allowed by preempts_windows = true")
+    );
+    // Saying false changes nothing.
+    let src = doc(&[
+        ("max_priority = 50", "max_priority = 100"),
+        ("# b", "preempts_windows = false"),
+    ]);
+    expect_one(
+        &src,
+        "max_priority = ^100\ntime",
+        0,
+        "partitions.b.max_priority",
+        "or say `preempts_windows = true`",
+    );
+    // A background partition below every floor has no warning.
+    let (_, warnings) = config::load_with_warnings(
+        "test.toml",
+        &doc(&[("# b", "preempts_windows = true")]),
+        &any_image,
+    )
+    .unwrap();
+    assert!(warnings.is_empty(), "{warnings:?}");
+}
+
+#[test]
+fn preempts_windows_on_a_windowed_partition() {
+    let src = doc(&[("# a", "preempts_windows = true")]);
+    expect_one(
+        &src,
+        "preempts_windows = ^true",
+        0,
+        "partitions.a.preempts_windows",
+        "partition `a` has windows; preempts_windows only applies to a background partition",
+    );
+}
+
+#[test]
 fn explicit_time_partition_without_window() {
     let src = doc(&[("time = \"background\"", "time = 5")]);
     expect_one(
@@ -1129,8 +1202,8 @@ fn partition_name_rules() {
 #[test]
 fn unknown_image() {
     let src = doc(&[(
-        "image = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 100\ntime",
-        "image = \"ghost\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 100\ntime",
+        "image = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 50\ntime",
+        "image = \"ghost\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 50\ntime",
     )]);
     let diags = config::load("test.toml", &src, &|name| name == "app").unwrap_err();
     assert_eq!(diags.len(), 1);

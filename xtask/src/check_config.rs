@@ -67,12 +67,22 @@ pub fn load(path: &Path) -> Result<config::System> {
         .with_context(|| format!("cannot read {}", path.display()))?;
     // The name is also the base of relative paths in the file (PLC programs).
     let name = resolved.display().to_string();
-    match config::load(&name, &source, &|image| images.iter().any(|i| i == image)) {
-        Ok(system) => Ok(system),
+    match config::load_with_warnings(&name, &source, &|image| images.iter().any(|i| i == image)) {
+        Ok((system, warnings)) => {
+            print_warnings(&warnings);
+            Ok(system)
+        }
         Err(diagnostics) => {
             let lines: Vec<String> = diagnostics.iter().map(|d| d.to_string()).collect();
             bail!("configuration {name} is invalid:\n{}", lines.join("\n"))
         }
+    }
+}
+
+/// Warnings of a valid description on stderr, `warning: file:line:col: key: reason`.
+fn print_warnings(warnings: &[config::Diagnostic]) {
+    for w in warnings {
+        eprintln!("warning: {w}");
     }
 }
 
@@ -90,8 +100,9 @@ pub fn run(file: &Path, any_image: bool) -> Result<bool> {
         .with_context(|| format!("cannot read {}", file.display()))?;
     let name = resolved.display().to_string();
     let known = |image: &str| any_image || images.iter().any(|i| i == image);
-    match config::load(&name, &source, &known) {
-        Ok(system) => {
+    match config::load_with_warnings(&name, &source, &known) {
+        Ok((system, warnings)) => {
+            print_warnings(&warnings);
             // The encoder's output must pass the decoder's own checks.
             let blob = config::binary::encode(&system);
             if let Err(e) = config::decode(&blob) {

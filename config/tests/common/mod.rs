@@ -29,7 +29,7 @@ ports.out = { kind = "sampling", direction = "out", size = 8 }
 image = "app"
 memory = "1MiB"
 kernel_memory = "64KiB"
-max_priority = 100
+max_priority = 50
 time = "background"
 ports.in = { kind = "sampling", direction = "in", size = 8 }
 # b

@@ -38,7 +38,7 @@ max_priority = 100
 image = "app"
 memory = "1MiB"
 kernel_memory = "64KiB"
-max_priority = 100
+max_priority = 50
 time = "background"
 # b
 
