@@ -1,0 +1,385 @@
+//! Attacks on the kernel for the hardening scenarios. syssw starts it as a partition; what
+//! it does depends on the partition's name:
+//!
+//! * `fuzz*`: the system-call fuzzer: [`CALLS`] calls with random call numbers and random register arguments drawn from a fixed-seed generator
+//!   (seed printed, so a failing run can be replayed), then a histogram of the returned
+//!   codes per call, `fuzz: done ...`, and sleeps for ever;
+//! * `flood-log*`: writes 512-byte kernel log lines (the longest `debug_write`) as fast as
+//!   it can, for ever;
+//! * `victim*`: logs its window starts: once per window it reads the clock and compares it
+//!   with the window's start (`partition_info`), counts the major frames it saw to find a
+//!   missed window, prints a summary every [`REPORT_EVERY`] windows, and after
+//!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) executes `ud2` (the scenario maps that illegal request to
+//!   `shutdown_success`, ending the run).
+//!
+//! A test program: it must never be needed by anything but its scenarios.
+#![no_std]
+#![no_main]
+
+use core::fmt::Write;
+use user_rt::abi::boot::KERNEL_BASE;
+use user_rt::abi::syscall::{
+    Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, USER_END, USER_MIN, make_id,
+};
+use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
+use user_rt::println;
+use user_rt::sys;
+
+user_rt::entry!(main);
+
+/// Calls of one fuzzing run (about 3 s of virtual time under QEMU).
+const CALLS: u64 = 1_000_000;
+/// The generator's seed (xorshift64*).
+const SEED: u64 = 0x5eed_f022_2026_0001;
+/// Windows the victim logs before it ends the run.
+const VICTIM_FRAMES: u64 = 1_000;
+const REPORT_EVERY: u64 = 100;
+
+const PAGE: u64 = 4096;
+/// Where the partition's stack lies (syssw maps it below this address); the fuzzer never
+/// unmaps or protects this range of its own.
+const STACK_REGION: core::ops::Range<u64> = 0x0000_7fe0_0000_0000..USER_END;
+
+fn main(start: u64, _: u64) {
+    #[allow(unsafe_code)]
+    // SAFETY: syssw starts every partition with the start record's address in rdi.
+    let Some(info) = (unsafe { StartInfo::from_start(start) }) else {
+        println!("attack: no start record from syssw");
+        return;
+    };
+    let name = info.name();
+    if name.starts_with("fuzz") {
+        fuzz(CALLS);
+        sys::sleep_until(u64::MAX);
+    } else if name.starts_with("flood-log") {
+        let line = [b'L'; DEBUG_WRITE_MAX as usize];
+        loop {
+            let _ = sys::debug_write(&line);
+        }
+    } else if name.starts_with("victim") {
+        let windows = name
+            .rsplit('-')
+            .next()
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(VICTIM_FRAMES);
+        victim(info.time_partition, windows);
+    } else {
+        println!("attack: no role for partition `{name}`");
+    }
+}
+
+/// The victim: see the crate documentation.
+fn victim(tp: u64, windows: u64) {
+    let mut last_frame = None;
+    let (mut missed, mut max_late, mut sum_late) = (0u64, 0u64, 0u64);
+    for window in 1..=windows {
+        let now = sys::clock();
+        let Ok(info) = sys::partition_info(tp) else {
+            println!("victim: partition_info failed");
+            return;
+        };
+        let late = now.saturating_sub(info.next_window_start);
+        // The first window's start includes the partition's start-up.
+        if window > 1 {
+            max_late = max_late.max(late);
+            sum_late += late;
+        }
+        if let Some(last) = last_frame
+            && info.frames != last + 1
+        {
+            missed += info.frames.saturating_sub(last + 1);
+        }
+        last_frame = Some(info.frames);
+        if window % REPORT_EVERY == 0 || window == windows {
+            println!(
+                "victim: windows={window} missed={missed} late_ns max={max_late} mean={} last={late}",
+                sum_late / (window - 1).max(1)
+            );
+        }
+        // Ready again at the end of this window: runs at the start of the next one.
+        sys::sleep_until(info.next_window_start + info.window_length);
+    }
+    println!("victim: done");
+    #[allow(unsafe_code)]
+    // SAFETY: ud2 only raises #UD (the scenario's end).
+    unsafe {
+        core::arch::asm!("ud2")
+    };
+}
+
+/// xorshift64*: small, fast and good enough to cover argument space.
+struct Rng(u64);
+
+impl Rng {
+    fn next(&mut self) -> u64 {
+        self.0 ^= self.0 >> 12;
+        self.0 ^= self.0 << 25;
+        self.0 ^= self.0 >> 27;
+        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+
+    fn below(&mut self, n: u64) -> u64 {
+        self.next() % n
+    }
+}
+
+/// Pages the fuzzer hands the kernel as valid (or formerly valid) user memory; nothing else
+/// lives in them, so whatever the calls do to them (unmap, protect, receive into them)
+/// cannot hurt the fuzzer itself, which never touches them.
+#[repr(C, align(4096))]
+struct Scratch([u8; 2 * PAGE as usize]);
+
+// Mutable so that the kernel may write into it (it sits in the writable data segment); the
+// program itself only takes its address. Text at the start, then bytes that are never
+// UTF-8, so that few `debug_write`s succeed and those print short lines.
+static mut SCRATCH: Scratch = Scratch({
+    let mut bytes = [0xff; 2 * PAGE as usize];
+    let text = b"fuzz text";
+    let mut i = 0;
+    while i < text.len() {
+        bytes[i] = text[i];
+        i += 1;
+    }
+    bytes
+});
+
+fn scratch() -> core::ops::Range<u64> {
+    let base = &raw const SCRATCH as u64;
+    base..base + 2 * PAGE
+}
+
+/// Values that sit on the edges the kernel checks: sizes, page boundaries, the ends of
+/// user space, kernel and non-canonical addresses, identifiers of own and other objects.
+struct Pool {
+    values: [u64; 96],
+    /// The fixed values come first; ids learnt from successful calls fill a ring after them.
+    fixed: usize,
+    learnt: usize,
+}
+
+impl Pool {
+    fn new(own_task: u64, own_thread: u64) -> Self {
+        let s = scratch().start;
+        let fixed = [
+            0,
+            1,
+            2,
+            3,
+            7,
+            8,
+            15,
+            16,
+            63,
+            64,
+            255,
+            256,
+            511,
+            512,
+            513,
+            4095,
+            4096,
+            4097,
+            0x10_0000,
+            1 << 32,
+            u64::from(u32::MAX),
+            i64::MAX as u64,
+            u64::MAX,
+            u64::MAX - 1,
+            USER_MIN,
+            USER_END - PAGE,
+            USER_END,
+            USER_END - 1,
+            0xffff_8000_0000_0000,
+            KERNEL_BASE,
+            KERNEL_BASE + PAGE,
+            DATA_BASE,
+            SHARED_BASE,
+            s,
+            s + 1,
+            s + 8,
+            s + PAGE - 1,
+            s + PAGE,
+            MAX_MAJOR_FRAME,
+            MAX_MAJOR_FRAME + 1,
+            own_task,
+            own_thread,
+            make_id(0, 0),
+            make_id(0, 1),
+            make_id(1, 1),
+            make_id(2, 1),
+            make_id(255, 1),
+            make_id(256, 1),
+            make_id(63, 1),
+            make_id(64, 1),
+        ];
+        let mut values = [0; 96];
+        values[..fixed.len()].copy_from_slice(&fixed);
+        Pool {
+            values,
+            fixed: fixed.len(),
+            learnt: 0,
+        }
+    }
+
+    fn pick(&self, rng: &mut Rng) -> u64 {
+        let ring = self.values.len() - self.fixed;
+        let len = self.fixed + self.learnt.min(ring);
+        self.values[rng.below(len as u64) as usize]
+    }
+
+    /// Remembers an id a call returned, so later calls can use (and misuse) it.
+    fn learn(&mut self, id: u64) {
+        let ring = self.values.len() - self.fixed;
+        self.values[self.fixed + self.learnt % ring] = id;
+        self.learnt += 1;
+    }
+}
+
+fn argument(rng: &mut Rng, pool: &Pool) -> u64 {
+    match rng.below(10) {
+        0..=5 => pool.pick(rng),
+        6..=8 => rng.next(),
+        _ => rng.below(1024),
+    }
+}
+
+/// What the fuzzer never asks for because it would end or stall the fuzzer itself, not
+/// because the kernel could not take it: its own end, killing or suspending itself,
+/// unmapping or protecting its own code, data or stack, and long blocking (timeouts are
+/// cut to at most 50 us). Returns false to skip the call.
+fn tame(call: u64, a: &mut [u64; 6], me: (u64, u64)) -> bool {
+    let (own_task, own_thread) = me;
+    let small_timeout = |t: u64| t % 50_000;
+    let own = |task: u64| task == 0 || task == own_task;
+    let touches_self = |address: u64, pages: u64| {
+        let end = address.saturating_add(pages.min(512).saturating_mul(PAGE));
+        let scratch = scratch();
+        let inside_scratch = address >= scratch.start && end <= scratch.end;
+        let image = end > USER_MIN && address < DATA_BASE && !inside_scratch;
+        let stack = end > STACK_REGION.start && address < STACK_REGION.end;
+        image || stack
+    };
+    match Call::from_code(call) {
+        Some(Call::ThreadExit) => false,
+        Some(Call::SleepUntil) => {
+            a[0] = sys::clock() + small_timeout(a[0]);
+            true
+        }
+        Some(Call::Send | Call::Receive | Call::Call | Call::ReplyWait) => {
+            a[1] = small_timeout(a[1]);
+            true
+        }
+        Some(Call::NotifyWait | Call::IrqWait) => {
+            a[1] = small_timeout(a[1]);
+            true
+        }
+        Some(Call::ThreadKill | Call::ThreadSuspend) => a[0] != 0 && a[0] != own_thread,
+        Some(Call::Unmap | Call::Protect) => !(own(a[0]) && touches_self(a[1], a[2])),
+        _ => true,
+    }
+}
+
+/// Returned codes per call: `Call::ALL` order, then one row for unknown call numbers.
+struct Histogram([[u32; 16]; Call::COUNT + 1]);
+
+impl Histogram {
+    fn row(call: u64) -> usize {
+        Call::ALL
+            .iter()
+            .position(|c| c.code() == call)
+            .unwrap_or(Call::COUNT)
+    }
+
+    fn print(&self) {
+        for (row, counts) in self.0.iter().enumerate() {
+            let name = Call::ALL.get(row).map_or("(unknown call)", |c| c.name());
+            let total: u32 = counts.iter().sum();
+            if total == 0 {
+                continue;
+            }
+            let mut line = Line::new();
+            let _ = write!(line, "fuzz: {name} n={total}");
+            for (code, &n) in counts.iter().enumerate() {
+                if n > 0 {
+                    let code_name = Error::from_code(code as u64).map_or("?", |e| e.name());
+                    let _ = write!(line, " {code_name}={n}");
+                }
+            }
+            line.emit();
+        }
+    }
+}
+
+/// One log line built piecewise (the kernel takes at most 512 bytes per line).
+struct Line {
+    bytes: [u8; 256],
+    len: usize,
+}
+
+impl Line {
+    fn new() -> Self {
+        Line {
+            bytes: [0; 256],
+            len: 0,
+        }
+    }
+
+    fn emit(&self) {
+        let _ = sys::debug_write(&self.bytes[..self.len]);
+    }
+}
+
+impl Write for Line {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let n = s.len().min(self.bytes.len() - self.len);
+        self.bytes[self.len..self.len + n].copy_from_slice(&s.as_bytes()[..n]);
+        self.len += n;
+        Ok(())
+    }
+}
+
+/// The fuzzer: see the crate documentation.
+fn fuzz(calls: u64) {
+    let (thread, task) = sys::thread_self();
+    let me = (task.0, thread.0);
+    println!(
+        "fuzz: {calls} calls, seed {SEED:#x}, scratch {:#x}",
+        scratch().start
+    );
+    let mut rng = Rng(SEED);
+    let mut pool = Pool::new(task.0, thread.0);
+    let mut histogram = Histogram([[0; 16]; Call::COUNT + 1]);
+    let (mut done, mut skipped) = (0u64, 0u64);
+    while done < calls {
+        let call = match rng.below(20) {
+            0 => rng.next(),
+            1 => rng.below(128),
+            _ => Call::ALL[rng.below(Call::COUNT as u64) as usize].code(),
+        };
+        let mut a = [0u64; 6];
+        for slot in &mut a {
+            *slot = argument(&mut rng, &pool);
+        }
+        if !tame(call, &mut a, me) {
+            skipped += 1;
+            continue;
+        }
+        let (rax, out) = sys::raw6(call, a);
+        done += 1;
+        let code = (rax as usize).min(15);
+        histogram.0[Histogram::row(call)][code] += 1;
+        if rax == 0
+            && matches!(
+                Call::from_code(call),
+                Some(Call::TaskCreate | Call::ThreadCreate | Call::RpCreate)
+            )
+        {
+            pool.learn(out.rdi);
+        }
+        if done % 20_000 == 0 {
+            println!("fuzz: {done} calls");
+        }
+    }
+    histogram.print();
+    println!("fuzz: done: {done} calls, {skipped} skipped, seed {SEED:#x}");
+}
