@@ -33,7 +33,7 @@
 //!
 //! Schedule (48 bytes) x S
 //! 0      32   name
-//! 32     8    major frame (ns, 1..=MAX_MAJOR_FRAME, one hour)
+//! 32     8    major frame (ns, MIN_WINDOW..=MAX_MAJOR_FRAME: 10 us to one hour)
 //! 40     2    first window (index into the window table)
 //! 42     2    window count (<= 32); the schedules' window ranges tile the window table in order
 //! 44     4    reserved
@@ -41,7 +41,7 @@
 //! Window (24 bytes) x W; per schedule sorted by offset, disjoint, duration > 0,
 //! offset + duration <= major frame
 //! 0      8    offset in the major frame (ns)
-//! 8      8    duration (ns)
+//! 8      8    duration (ns, at least MIN_WINDOW: 10 us)
 //! 16     1    time partition 1..=15 (one some partition uses)
 //! 17     7    reserved
 //!
@@ -624,8 +624,10 @@ impl<'a> SystemView<'a> {
                 return fail("reserved bytes are not zero");
             }
             let frame = S::MAJOR_FRAME.get(r);
-            if frame == 0 || frame > MAX_MAJOR_FRAME {
-                return fail("major frame is zero or longer than the kernel's limit (1 h)");
+            if !(MIN_WINDOW..=MAX_MAJOR_FRAME).contains(&frame) {
+                return fail(
+                    "major frame is shorter or longer than the kernel's limits (10 us, 1 h)",
+                );
             }
             let (first, count) = (S::FIRST_WINDOW.u16(r), S::WINDOW_COUNT.u16(r));
             if count > MAX_WINDOWS {
@@ -640,8 +642,8 @@ impl<'a> SystemView<'a> {
                 if !W::RESERVED.is_zero(r) {
                     return fail("reserved bytes are not zero");
                 }
-                if duration == 0 {
-                    return fail("duration is zero");
+                if duration < MIN_WINDOW {
+                    return fail("shorter than the kernel's shortest window (10 us)");
                 }
                 if offset.checked_add(duration).is_none_or(|end| end > frame) {
                     return fail("ends after the major frame");

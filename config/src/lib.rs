@@ -34,7 +34,7 @@
 //! [[schedules.windows]]           # up to 32 per schedule; inside the frame, disjoint
 //! partition = "plc"               # a partition that is not background
 //! offset = "0ms"
-//! duration = "2ms"
+//! duration = "2ms"                # windows and major frames last at least 10us
 //! # A single schedule may also be written as [schedule] + [[schedule.windows]].
 //!
 //! [[shared_memory]]               # up to 32 segments

@@ -16,6 +16,8 @@ pub const MAX_SCHEDULES: usize = syscall::MAX_SCHEDULES as usize;
 pub const MAX_WINDOWS: usize = syscall::MAX_WINDOWS as usize;
 /// Longest major frame the kernel accepts (ns).
 pub const MAX_MAJOR_FRAME: u64 = syscall::MAX_MAJOR_FRAME;
+/// Shortest window and major frame (ns; the kernel's limit, 10 us).
+pub const MIN_WINDOW: u64 = syscall::MIN_WINDOW;
 /// Number of time partitions; 0 is the background, windows use 1..TIME_PARTITIONS.
 pub const TIME_PARTITIONS: u8 = syscall::TIME_PARTITIONS as u8;
 /// Most shared-memory segments.

@@ -1406,11 +1406,15 @@ impl Validator<'_, '_> {
             }
             let offset = self.duration(&w.offset, &wpath.key("offset"));
             let duration = self.duration(&w.duration, &wpath.key("duration"));
-            if duration == Some(0) {
+            if let Some(short) = duration.filter(|&d| d < MIN_WINDOW) {
                 self.error(
                     start(&w.duration),
                     &wpath.key("duration"),
-                    "a window must last longer than 0",
+                    format!(
+                        "a window of {} is shorter than the kernel's shortest window of {} (every window boundary is a timer interrupt)",
+                        Duration(short),
+                        Duration(MIN_WINDOW)
+                    ),
                 );
                 continue;
             }
@@ -1443,8 +1447,13 @@ impl Validator<'_, '_> {
             Some(f) => {
                 let fpath = path.key("major_frame");
                 match self.duration(f, &fpath) {
-                    Some(0) => {
-                        self.error(start(f), &fpath, "the major frame must be longer than 0");
+                    Some(frame) if frame < MIN_WINDOW => {
+                        let msg = format!(
+                            "the major frame of {} is shorter than the kernel's shortest of {}",
+                            Duration(frame),
+                            Duration(MIN_WINDOW)
+                        );
+                        self.error(start(f), &fpath, msg);
                         None
                     }
                     Some(frame) if frame > MAX_MAJOR_FRAME => {

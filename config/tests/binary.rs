@@ -345,9 +345,18 @@ fn header_damage() {
 #[test]
 fn schedule_damage() {
     // A frame the kernel would refuse (and whose boundary sums could overflow).
-    invalid(Table::Schedule, 0, "longer than the kernel's limit")(damaged(|b| {
+    invalid(Table::Schedule, 0, "longer than the kernel's limits")(damaged(|b| {
         let at = record(b, Table::Schedule, 0);
         schedule::MAJOR_FRAME.set(&mut b[at..], u64::MAX);
+    }));
+    // A frame so short that window-boundary interrupts would take all the time.
+    invalid(
+        Table::Schedule,
+        0,
+        "shorter or longer than the kernel's limits",
+    )(damaged(|b| {
+        let at = record(b, Table::Schedule, 0);
+        schedule::MAJOR_FRAME.set(&mut b[at..], 16);
     }));
 }
 
@@ -372,9 +381,21 @@ fn window_damage() {
         let at = w(b, 2);
         window::DURATION.set(&mut b[at..], u64::MAX);
     }));
-    invalid(Table::Window, 0, "duration is zero")(damaged(|b| {
+    invalid(
+        Table::Window,
+        0,
+        "shorter than the kernel's shortest window",
+    )(damaged(|b| {
         let at = w(b, 0);
         window::DURATION.set(&mut b[at..], 0);
+    }));
+    invalid(
+        Table::Window,
+        0,
+        "shorter than the kernel's shortest window",
+    )(damaged(|b| {
+        let at = w(b, 0);
+        window::DURATION.set(&mut b[at..], config::model::MIN_WINDOW - 1);
     }));
 }
 

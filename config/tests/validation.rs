@@ -544,7 +544,29 @@ fn zero_length_window() {
         "\"0ms\"\n",
         1,
         "schedules[0].windows[0].duration",
-        "must last longer than 0",
+        "a window of 0ns is shorter than the kernel's shortest window of 10us",
+    );
+}
+
+#[test]
+fn windows_and_frames_shorter_than_the_kernel_allows() {
+    // A 16 ns frame made the kernel spend all its time in window-boundary interrupts.
+    let src = with_windows(&[("0ms", "9999ns")]);
+    expect_one(
+        &src,
+        "\"9999ns\"",
+        0,
+        "schedules[0].windows[0].duration",
+        "shorter than the kernel's shortest window of 10us",
+    );
+    load_ok(&with_windows(&[("0ms", "10us")]));
+    let src = doc(&[("major_frame = \"10ms\"", "major_frame = \"16ns\"")]);
+    expect_some(
+        &src,
+        "\"16ns\"",
+        0,
+        "schedules[0].major_frame",
+        "the major frame of 16ns is shorter than the kernel's shortest of 10us",
     );
 }
 

@@ -11,6 +11,7 @@
 
 use crate::sched::TIME_PARTITIONS;
 use crate::state::Kernel;
+use abi::syscall::MIN_WINDOW;
 
 pub const MAX_WINDOWS: usize = abi::syscall::MAX_WINDOWS as usize;
 pub const MAX_SCHEDULES: usize = abi::syscall::MAX_SCHEDULES as usize;
@@ -38,8 +39,8 @@ pub struct Schedule {
 /// Why a schedule was refused.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ScheduleError {
-    /// Zero or too long a major frame (see `MAX_MAJOR_FRAME`), a zero-length window, or too
-    /// many windows.
+    /// Too short or too long a major frame (`MIN_WINDOW..=MAX_MAJOR_FRAME`), a window shorter
+    /// than `MIN_WINDOW`, or too many windows.
     Empty,
     /// A window starts before the previous one ends (they must be sorted, disjoint).
     Overlap(usize),
@@ -51,13 +52,13 @@ pub enum ScheduleError {
 
 impl Schedule {
     pub fn new(major_frame: u64, windows: &[Window]) -> Result<Self, ScheduleError> {
-        let frame_ok = (1..=abi::syscall::MAX_MAJOR_FRAME).contains(&major_frame);
+        let frame_ok = (MIN_WINDOW..=abi::syscall::MAX_MAJOR_FRAME).contains(&major_frame);
         if !frame_ok || windows.len() > MAX_WINDOWS {
             return Err(ScheduleError::Empty);
         }
         let mut previous_end = 0;
         for (i, w) in windows.iter().enumerate() {
-            if w.duration == 0 {
+            if w.duration < MIN_WINDOW {
                 return Err(ScheduleError::Empty);
             }
             if w.partition == 0 || w.partition as usize >= TIME_PARTITIONS {
@@ -273,10 +274,13 @@ mod tests {
     use super::*;
     use proptest::prelude::*;
 
+    /// Test times are in microseconds (windows are at least `MIN_WINDOW`, 10 us, long).
+    const US: u64 = 1_000;
+
     fn w(offset: u64, duration: u64, partition: u8) -> Window {
         Window {
-            offset,
-            duration,
+            offset: offset * US,
+            duration: duration * US,
             partition,
         }
     }
@@ -284,20 +288,36 @@ mod tests {
     #[test]
     fn validation_names_the_bad_window() {
         assert_eq!(Schedule::new(0, &[]), Err(ScheduleError::Empty));
-        assert!(Schedule::new(abi::syscall::MAX_MAJOR_FRAME + 1, &[]).is_err());
         assert_eq!(
-            Schedule::new(100, &[w(0, 50, 1), w(40, 10, 2)]),
+            Schedule::new(MIN_WINDOW - 1, &[]),
+            Err(ScheduleError::Empty),
+            "a frame shorter than MIN_WINDOW"
+        );
+        assert!(Schedule::new(MIN_WINDOW, &[]).is_ok());
+        assert!(Schedule::new(abi::syscall::MAX_MAJOR_FRAME + 1, &[]).is_err());
+        let short = Window {
+            offset: 0,
+            duration: MIN_WINDOW - 1,
+            partition: 1,
+        };
+        assert_eq!(
+            Schedule::new(100 * US, &[short]),
+            Err(ScheduleError::Empty),
+            "a window shorter than MIN_WINDOW"
+        );
+        assert_eq!(
+            Schedule::new(100 * US, &[w(0, 50, 1), w(40, 10, 2)]),
             Err(ScheduleError::Overlap(1))
         );
         assert_eq!(
-            Schedule::new(100, &[w(90, 20, 1)]),
+            Schedule::new(100 * US, &[w(90, 20, 1)]),
             Err(ScheduleError::BeyondFrame(0))
         );
         assert_eq!(
-            Schedule::new(100, &[w(0, 10, 0)]),
+            Schedule::new(100 * US, &[w(0, 10, 0)]),
             Err(ScheduleError::BadPartition(0))
         );
-        assert!(Schedule::new(100, &[w(0, 50, 1), w(50, 50, 2)]).is_ok());
+        assert!(Schedule::new(100 * US, &[w(0, 50, 1), w(50, 50, 2)]).is_ok());
     }
 
     #[test]
@@ -305,47 +325,55 @@ mod tests {
         let mut t = TimeTable::new();
         t.install(
             0,
-            Schedule::new(100, &[w(10, 30, 1), w(60, 20, 2)]).unwrap(),
+            Schedule::new(100 * US, &[w(10, 30, 1), w(60, 20, 2)]).unwrap(),
         )
         .unwrap();
-        assert!(t.switch_to(0, 1000));
-        let p = t.advance(1000);
-        assert_eq!((p.partition, p.next_boundary), (None, 1010));
-        let p = t.advance(1010);
-        assert_eq!((p.partition, p.next_boundary), (Some(1), 1040));
-        let p = t.advance(1045);
-        assert_eq!((p.partition, p.next_boundary), (None, 1060));
-        let p = t.advance(1079);
-        assert_eq!((p.partition, p.next_boundary), (Some(2), 1080));
-        let p = t.advance(1100);
+        assert!(t.switch_to(0, 1000 * US));
+        let p = t.advance(1000 * US);
+        assert_eq!((p.partition, p.next_boundary), (None, 1010 * US));
+        let p = t.advance(1010 * US);
+        assert_eq!((p.partition, p.next_boundary), (Some(1), 1040 * US));
+        let p = t.advance(1045 * US);
+        assert_eq!((p.partition, p.next_boundary), (None, 1060 * US));
+        let p = t.advance(1079 * US);
+        assert_eq!((p.partition, p.next_boundary), (Some(2), 1080 * US));
+        let p = t.advance(1100 * US);
         assert_eq!(
             (p.partition, p.next_boundary, p.frame_start),
-            (None, 1110, 1100)
+            (None, 1110 * US, 1100 * US)
         );
-        assert_eq!(t.next_window(2, 1100), Some((1160, 20)));
-        assert_eq!(t.next_window(1, 1115), Some((1110, 30)), "active now");
-        assert_eq!(t.next_window(1, 1141), Some((1210, 30)), "next frame");
+        assert_eq!(t.next_window(2, 1100 * US), Some((1160 * US, 20 * US)));
+        assert_eq!(
+            t.next_window(1, 1115 * US),
+            Some((1110 * US, 30 * US)),
+            "active now"
+        );
+        assert_eq!(
+            t.next_window(1, 1141 * US),
+            Some((1210 * US, 30 * US)),
+            "next frame"
+        );
     }
 
     #[test]
     fn a_switch_waits_for_the_frame_boundary() {
         let mut t = TimeTable::new();
-        t.install(0, Schedule::new(100, &[w(0, 100, 1)]).unwrap())
+        t.install(0, Schedule::new(100 * US, &[w(0, 100, 1)]).unwrap())
             .unwrap();
-        t.install(1, Schedule::new(50, &[w(0, 50, 2)]).unwrap())
+        t.install(1, Schedule::new(50 * US, &[w(0, 50, 2)]).unwrap())
             .unwrap();
         t.switch_to(0, 0);
-        t.advance(30);
-        assert!(t.switch_to(1, 30));
-        assert_eq!(t.advance(99).partition, Some(1), "not mid-frame");
-        let p = t.advance(100);
+        t.advance(30 * US);
+        assert!(t.switch_to(1, 30 * US));
+        assert_eq!(t.advance(99 * US).partition, Some(1), "not mid-frame");
+        let p = t.advance(100 * US);
         assert_eq!(
             (p.partition, p.frame_start, p.next_boundary),
-            (Some(2), 100, 150)
+            (Some(2), 100 * US, 150 * US)
         );
         assert_eq!(t.switches, 1);
         assert_eq!(
-            t.install(1, Schedule::new(10, &[w(0, 1, 3)]).unwrap()),
+            t.install(1, Schedule::new(10 * US, &[w(0, 10, 3)]).unwrap()),
             Err(ScheduleError::Empty)
         );
     }
@@ -355,13 +383,13 @@ mod tests {
         /// the frame containing that time) contains it; boundaries are never skipped.
         #[test]
         fn matches_a_model(
-            raw in proptest::collection::vec((1u64..50, 1u64..50, 1u8..4), 1..6),
-            steps in proptest::collection::vec(1u64..200, 1..100),
+            raw in proptest::collection::vec((1u64..50_000, 10_000u64..60_000, 1u8..4), 1..6),
+            steps in proptest::collection::vec(1u64..200_000, 1..100),
         ) {
             let mut windows = vec![];
             let mut at = 0;
             for (gap, duration, partition) in raw {
-                windows.push(w(at + gap, duration, partition));
+                windows.push(Window { offset: at + gap, duration, partition });
                 at += gap + duration;
             }
             let major = at + 7;

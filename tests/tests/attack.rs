@@ -55,6 +55,27 @@ fn syscall_fuzz() {
     victim_kept_its_windows(&o, 1_000);
 }
 
+#[test]
+fn syscall_fuzz_root() {
+    let o = boot("syscall_fuzz_root");
+    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    check(
+        &o,
+        o.line("fatal exception").is_none(),
+        "an exception in kernel mode",
+    );
+    check(
+        &o,
+        o.line("fuzz: done: 1000000 calls").is_some(),
+        "the fuzzer did not finish its 1,000,000 calls",
+    );
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the fuzzer ends the run",
+    );
+}
+
 /// The victim logged all its windows, missed none, and each started within the bound.
 fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64) {
     let summaries: Vec<(u64, u64, u64)> = o

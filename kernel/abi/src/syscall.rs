@@ -200,10 +200,10 @@ codes::code_enum! {
         SetHealthMonitor = 62 => "set_health_monitor",
 
         /// `schedule_set(slot, major_frame, windows, count)`: stores time schedule `slot`
-        /// (< [`MAX_SCHEDULES`]): a major frame in ns (1..=[`MAX_MAJOR_FRAME`]) and `count`
+        /// (< [`MAX_SCHEDULES`]): a major frame in ns ([`MIN_WINDOW`]..=[`MAX_MAJOR_FRAME`]) and `count`
         /// (<= [`MAX_WINDOWS`])
         /// [`WindowSpec`]s at user address `windows`, sorted by offset, disjoint, inside the
-        /// frame, each for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
+        /// frame, each at least [`MIN_WINDOW`] long and for a time partition 1..[`TIME_PARTITIONS`] (0 is the background and has
         /// no windows). The running or pending schedule cannot be replaced. Ability:
         /// `SCHEDULING`. Errors: `InvalidArgument` (slot, frame, windows), `BadAddress`,
         /// `NotPermitted` (slot in use).
@@ -280,6 +280,10 @@ pub const MAX_WINDOWS: u64 = 32;
 /// Longest major frame (ns): one hour. Far beyond any real schedule, and small enough that
 /// no sum of boundary times can overflow in the lifetime of a machine.
 pub const MAX_MAJOR_FRAME: u64 = 3_600_000_000_000;
+/// Shortest window and shortest major frame (ns): 10 us. Every window boundary is a timer
+/// interrupt; with windows and frames at least this long, boundaries come at most twice per
+/// 10 us, so no schedule can keep the CPU busy switching windows (a 16 ns frame did).
+pub const MIN_WINDOW: u64 = 10_000;
 
 /// One window of a schedule, as `schedule_set` reads it from user memory.
 #[repr(C)]

@@ -1,5 +1,7 @@
-//! Attacks on the kernel for the hardening scenarios. syssw starts it as a partition; what
-//! it does depends on the partition's name:
+//! Attacks on the kernel for the hardening scenarios. Run as the root task (every ability,
+//! all memory and ports), it is the system-call fuzzer below and then ends the run with
+//! success. syssw starts it as a partition; what it does then depends on the partition's
+//! name:
 //!
 //! * `fuzz*`: the system-call fuzzer: [`CALLS`] calls with random call numbers and random register arguments drawn from a fixed-seed generator
 //!   (seed printed, so a failing run can be replayed), then a histogram of the returned
@@ -19,7 +21,8 @@
 use core::fmt::Write;
 use user_rt::abi::boot::KERNEL_BASE;
 use user_rt::abi::syscall::{
-    Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, USER_END, USER_MIN, make_id,
+    Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, ROOT_INFO_BASE, ThreadAttribute, USER_END,
+    USER_MIN, make_id,
 };
 use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
 use user_rt::println;
@@ -36,20 +39,23 @@ const VICTIM_FRAMES: u64 = 1_000;
 const REPORT_EVERY: u64 = 100;
 
 const PAGE: u64 = 4096;
-/// Where the partition's stack lies (syssw maps it below this address); the fuzzer never
-/// unmaps or protects this range of its own.
-const STACK_REGION: core::ops::Range<u64> = 0x0000_7fe0_0000_0000..USER_END;
+/// Where a root task's start-up mappings (its information page, the system image, its
+/// stack) and a partition's stack lie; the fuzzer never unmaps or protects this range of
+/// its own.
+const TOP_REGION: core::ops::Range<u64> = ROOT_INFO_BASE..USER_END;
 
 fn main(start: u64, _: u64) {
     #[allow(unsafe_code)]
     // SAFETY: syssw starts every partition with the start record's address in rdi.
     let Some(info) = (unsafe { StartInfo::from_start(start) }) else {
-        println!("attack: no start record from syssw");
+        // No start record: the kernel started it as the root task (rdi = system image).
+        fuzz(CALLS, true);
+        let _ = sys::system_halt(true);
         return;
     };
     let name = info.name();
     if name.starts_with("fuzz") {
-        fuzz(CALLS);
+        fuzz(CALLS, false);
         sys::sleep_until(u64::MAX);
     } else if name.starts_with("flood-log") {
         let line = [b'L'; DEBUG_WRITE_MAX as usize];
@@ -246,8 +252,10 @@ fn argument(rng: &mut Rng, pool: &Pool) -> u64 {
 /// What the fuzzer never asks for because it would end or stall the fuzzer itself, not
 /// because the kernel could not take it: its own end, killing or suspending itself,
 /// unmapping or protecting its own code, data or stack, and long blocking (timeouts are
-/// cut to at most 50 us). Returns false to skip the call.
-fn tame(call: u64, a: &mut [u64; 6], me: (u64, u64)) -> bool {
+/// cut to at most 50 us); as the root task also halting the machine, moving itself out of
+/// the background and creating threads in its own task (their faults would be the root
+/// task's, which halts the machine). Returns false to skip the call.
+fn tame(call: u64, a: &mut [u64; 6], me: (u64, u64), root: bool) -> bool {
     let (own_task, own_thread) = me;
     let small_timeout = |t: u64| t % 50_000;
     let own = |task: u64| task == 0 || task == own_task;
@@ -256,11 +264,17 @@ fn tame(call: u64, a: &mut [u64; 6], me: (u64, u64)) -> bool {
         let scratch = scratch();
         let inside_scratch = address >= scratch.start && end <= scratch.end;
         let image = end > USER_MIN && address < DATA_BASE && !inside_scratch;
-        let stack = end > STACK_REGION.start && address < STACK_REGION.end;
-        image || stack
+        let top = end > TOP_REGION.start && address < TOP_REGION.end;
+        image || top
     };
     match Call::from_code(call) {
         Some(Call::ThreadExit) => false,
+        Some(Call::SystemHalt) => !root,
+        Some(Call::ThreadCreate) => !(root && own(a[0])),
+        Some(Call::ThreadSet) => {
+            let itself = a[0] == 0 || a[0] == own_thread;
+            !(itself && a[1] == ThreadAttribute::TimePartition.code())
+        }
         Some(Call::SleepUntil) => {
             a[0] = sys::clock() + small_timeout(a[0]);
             true
@@ -339,11 +353,12 @@ impl Write for Line {
 }
 
 /// The fuzzer: see the crate documentation.
-fn fuzz(calls: u64) {
+fn fuzz(calls: u64, root: bool) {
     let (thread, task) = sys::thread_self();
     let me = (task.0, thread.0);
     println!(
-        "fuzz: {calls} calls, seed {SEED:#x}, scratch {:#x}",
+        "fuzz: {calls} calls as {}, seed {SEED:#x}, scratch {:#x}",
+        if root { "the root task" } else { "a partition" },
         scratch().start
     );
     let mut rng = Rng(SEED);
@@ -360,7 +375,7 @@ fn fuzz(calls: u64) {
         for slot in &mut a {
             *slot = argument(&mut rng, &pool);
         }
-        if !tame(call, &mut a, me) {
+        if !tame(call, &mut a, me, root) {
             skipped += 1;
             continue;
         }
