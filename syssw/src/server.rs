@@ -409,20 +409,16 @@ impl<'a> Server<'a> {
                 let _ = sys::system_halt(success);
             }
             ModeChange::Stop => {
-                self.stop(index);
+                self.in_windows_of(index, |server| server.stop(index));
                 self.log_mode(index);
             }
             ModeChange::Restart { warm } => {
-                self.stop(index);
-                self.log_mode(index);
                 let start = if warm { Start::Warm } else { Start::Cold };
-                // Reloading and mapping take milliseconds: do it in the partition's own
-                // windows, so a restart never takes time from another partition (requests
-                // of others wait meanwhile; they are served after the restart).
-                let tp = self.system.partition(index).time_partition;
-                let _ = sys::thread_set(None, ThreadAttribute::TimePartition, tp as u64);
-                let started = self.start(index, start);
-                let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
+                let started = self.in_windows_of(index, |server| {
+                    server.stop(index);
+                    server.log_mode(index);
+                    server.start(index, start)
+                });
                 if let Err(e) = started {
                     println!(
                         "syssw: partition {}: restart failed: {e}; it stays IDLE",
@@ -434,6 +430,18 @@ impl<'a> Server<'a> {
                 }
             }
         }
+    }
+
+    /// Runs `work` for partition `index` in that partition's own windows: tearing down a
+    /// task, reloading and mapping its memory take long kernel calls and milliseconds in
+    /// all, which must never take time from another partition's window (requests of
+    /// others wait meanwhile; they are served after it).
+    fn in_windows_of<T>(&mut self, index: usize, work: impl FnOnce(&mut Self) -> T) -> T {
+        let tp = self.system.partition(index).time_partition;
+        let _ = sys::thread_set(None, ThreadAttribute::TimePartition, tp as u64);
+        let result = work(self);
+        let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
+        result
     }
 
     /// Kills the partition's task (every thread of it) and resets its ports.

@@ -6,8 +6,10 @@ use scenarios::{boot, check};
 /// The victim's window-start lateness asserted while an attacker runs in the window just
 /// before its own, on virtual time: the quiet case is about 2 us (the timer interrupt, the
 /// window switch and the wake-up from `sleep_until`); the margin is what the issue of
-/// bounded kernel paths allows any partition to add (50 us). Measured under the fuzzer:
-/// at most 6.5 us.
+/// bounded kernel paths allows any partition to add (50 us). Measured: 6.5 us under the
+/// fuzzer, 14 us after the log flood, 37 us after a partition restarted cold without pause
+/// (syssw's teardown and reload run in that partition's windows; what remains is one long
+/// kernel call of the restart that the window boundary cannot interrupt).
 const LATENESS_BOUND_NS: u64 = 52_000;
 
 /// `victim: windows=N missed=M late_ns max=X mean=Y last=Z` → (N, M, X).
@@ -52,7 +54,7 @@ fn syscall_fuzz() {
             >= 30,
         "the histogram misses calls",
     );
-    victim_kept_its_windows(&o, 1_000);
+    victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
 }
 
 #[test]
@@ -77,7 +79,7 @@ fn syscall_fuzz_root() {
 }
 
 /// The victim logged all its windows, missed none, and each started within the bound.
-fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64) {
+fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64, bound_ns: u64) {
     let summaries: Vec<(u64, u64, u64)> = o
         .lines
         .iter()
@@ -98,15 +100,15 @@ fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64) {
         );
         check(
             o,
-            max <= LATENESS_BOUND_NS,
-            &format!("a victim window started {max} ns late (bound {LATENESS_BOUND_NS})"),
+            max <= bound_ns,
+            &format!("a victim window started {max} ns late (bound {bound_ns})"),
         );
     }
 }
 
 #[test]
-fn attack_log_flood() {
-    let o = boot("attack_log_flood");
+fn attack_floods() {
+    let o = boot("attack_floods");
     check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
     check(
         &o,
@@ -122,5 +124,68 @@ fn attack_log_flood() {
             > 1_000,
         "the attacker did not flood the log",
     );
-    victim_kept_its_windows(&o, 200);
+    // syssw answered every request for a port of another partition with an error.
+    let forged = o
+        .lines
+        .iter()
+        .rev()
+        .filter_map(|l| l.split("forge: ").nth(1))
+        .filter_map(|r| {
+            let mut words = r.split_whitespace();
+            let sent = words.next()?.parse::<u64>().ok()?;
+            let accepted = words.nth(1)?.parse::<u64>().ok()?;
+            Some((sent, accepted))
+        })
+        .next();
+    check(
+        &o,
+        forged.is_some_and(|(sent, accepted)| sent >= 10_000 && accepted == 0),
+        &format!("syssw accepted forged requests (sent, accepted) = {forged:?}"),
+    );
+    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}
+
+#[test]
+fn attack_partitions() {
+    let o = boot("attack_partitions");
+    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    let health = |partition: &str, error: &str| {
+        o.lines
+            .iter()
+            .filter(|l| {
+                l.contains("health: ")
+                    && l.contains(&format!("partition={partition} error={error} "))
+            })
+            .count()
+    };
+    // Each kernel port faulted (9 warm restarts), none was reached.
+    check(
+        &o,
+        o.line("ports: all 9 accesses faulted").is_some() && o.line("did not fault").is_none(),
+        "a kernel port was reachable",
+    );
+    check(
+        &o,
+        health("ports", "illegal_request") == 9,
+        "one illegal_request per kernel port",
+    );
+    check(
+        &o,
+        health("overflow", "stack_overflow") == 1 && o.line("overflow: returned").is_none(),
+        "the stack overflow was not caught as stack_overflow",
+    );
+    // The restart loop really looped: one restart per window of it at least.
+    let restarts = health("fault-loop", "illegal_request");
+    check(
+        &o,
+        restarts >= 900,
+        &format!("{restarts} restarts of fault-loop in 1,000 frames"),
+    );
+    victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
 }

@@ -8,6 +8,17 @@
 //!   codes per call, `fuzz: done ...`, and sleeps for ever;
 //! * `flood-log*`: writes 512-byte kernel log lines (the longest `debug_write`) as fast as
 //!   it can, for ever;
+//! * `ports*`: at each start touches the next of the kernel's I/O ports (COM1, the
+//!   PICs, the PIT, each port of QEMU's exit device 0xf4-0xf7), which it was not granted:
+//!   every access must raise #GP (the scenario warm-restarts it, so a counter in its memory
+//!   survives), then prints `ports: all <n> accesses faulted` and sleeps;
+//! * `fault-loop*`: executes `ud2` at once at every start (the scenario cold-restarts it:
+//!   a restart loop);
+//! * `overflow*`: recurses until its stack overflows into the guard page;
+//! * `forge*`: sends syssw service requests for ports it does not own (every port id
+//!   0..64, read, status, receive, clear) and unknown labels, as fast as it can, and
+//!   counts the requests syssw accepted (`forge: <n> requests, <m> accepted`) every
+//!   10,000 requests;
 //! * `victim*`: logs its window starts: once per window it reads the clock and compares it
 //!   with the window's start (`partition_info`), counts the major frames it saw to find a
 //!   missed window, prints a summary every [`REPORT_EVERY`] windows, and after
@@ -19,14 +30,18 @@
 #![no_main]
 
 use core::fmt::Write;
+use core::sync::atomic::{AtomicUsize, Ordering};
 use user_rt::abi::boot::KERNEL_BASE;
+use user_rt::abi::ipc::MessageTag;
 use user_rt::abi::syscall::{
-    Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, ROOT_INFO_BASE, ThreadAttribute, USER_END,
-    USER_MIN, make_id,
+    Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, ROOT_INFO_BASE, ThreadAttribute, ThreadId,
+    USER_END, USER_MIN, make_id,
 };
 use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
+use user_rt::port::outb;
 use user_rt::println;
-use user_rt::sys;
+use user_rt::protocol::{OperatingMode, Request, ReturnCode};
+use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
 
@@ -62,6 +77,20 @@ fn main(start: u64, _: u64) {
         loop {
             let _ = sys::debug_write(&line);
         }
+    } else if name.starts_with("ports") {
+        touch_kernel_ports(ThreadId(info.server));
+    } else if name.starts_with("fault-loop") {
+        #[allow(unsafe_code)]
+        // SAFETY: ud2 only raises #UD.
+        unsafe {
+            core::arch::asm!("ud2")
+        };
+    } else if name.starts_with("overflow") {
+        println!("overflow: recursing");
+        let depth = recurse(0);
+        println!("overflow: returned from depth {depth}");
+    } else if name.starts_with("forge") {
+        forge(ThreadId(info.server));
     } else if name.starts_with("victim") {
         let windows = name
             .rsplit('-')
@@ -71,6 +100,99 @@ fn main(start: u64, _: u64) {
         victim(info.time_partition, windows);
     } else {
         println!("attack: no role for partition `{name}`");
+    }
+}
+
+/// The kernel's I/O ports and QEMU's exit device, which no partition may be granted.
+const KERNEL_PORTS: [u16; 9] = [0x3f8, 0x3fd, 0x20, 0xa1, 0x40, 0xf4, 0xf5, 0xf6, 0xf7];
+
+/// How many of [`KERNEL_PORTS`] were touched (kept across warm restarts).
+static PORTS_TOUCHED: AtomicUsize = AtomicUsize::new(0);
+
+fn touch_kernel_ports(server: ThreadId) {
+    // NORMAL mode first: only an initialised partition can be restarted warm (ARINC 653).
+    let _ = request(
+        server,
+        Request::SetPartitionMode {
+            mode: OperatingMode::Normal,
+        },
+    );
+    let next = PORTS_TOUCHED.fetch_add(1, Ordering::Relaxed);
+    match KERNEL_PORTS.get(next) {
+        Some(&port) => {
+            println!("ports: touching port {port:#x}");
+            // A write to the exit device would end the run; to COM1 it would garble the log.
+            outb(port, 0x01);
+            println!("ports: port {port:#x} did not fault");
+        }
+        None => {
+            println!("ports: all {} accesses faulted", KERNEL_PORTS.len());
+            sys::sleep_until(u64::MAX);
+        }
+    }
+}
+
+/// Recursion with a frame the optimiser cannot drop, until the stack runs out.
+#[inline(never)]
+fn recurse(depth: u64) -> u64 {
+    let frame = core::hint::black_box([depth; 64]);
+    if depth == u64::MAX {
+        return frame[0];
+    }
+    recurse(depth + 1) + core::hint::black_box(frame[63] & 1)
+}
+
+/// The forger's IPC buffer (replies may carry data).
+#[repr(C, align(4096))]
+struct IpcPage([u8; PAGE as usize]);
+
+static mut IPC_PAGE: IpcPage = IpcPage([0; PAGE as usize]);
+
+/// Sends a request without data to syssw; returns whether it was accepted.
+fn request(server: ThreadId, request: Request) -> bool {
+    let wire = request.encode();
+    let message = Message {
+        tag: MessageTag::new(wire.label, 0, 0),
+        words: wire.words,
+    };
+    sys::ipc_call(server, 1_000_000, &message)
+        .is_ok_and(|r| r.message.tag.label() == ReturnCode::NoError.code())
+}
+
+/// The forger: see the crate documentation.
+fn forge(server: ThreadId) {
+    let _ = sys::thread_set(None, ThreadAttribute::IpcBuffer, &raw const IPC_PAGE as u64);
+    let (mut sent, mut accepted) = (0u64, 0u64);
+    let mut rng = Rng(SEED);
+    loop {
+        let port = rng.below(64);
+        let request = match rng.below(6) {
+            0 => Request::ReadSampling { port },
+            1 => Request::SamplingStatus { port },
+            2 => Request::ReceiveQueuing { port, timeout: 0 },
+            3 => Request::QueuingStatus { port },
+            4 => Request::ClearQueuing { port },
+            _ => Request::PartitionStatus,
+        };
+        let mut wire = request.encode();
+        if rng.below(8) == 0 {
+            // A label no request has.
+            wire.label = 0x7000 + rng.below(0x1000) as u32;
+        }
+        let message = Message {
+            tag: MessageTag::new(wire.label, 0, 0),
+            words: wire.words,
+        };
+        let ok = sys::ipc_call(server, 1_000_000, &message)
+            .is_ok_and(|r| r.message.tag.label() == ReturnCode::NoError.code());
+        sent += 1;
+        // PARTITION_STATUS of its own partition is the one request it may make.
+        if ok && !matches!(request, Request::PartitionStatus) {
+            accepted += 1;
+        }
+        if sent % 10_000 == 0 {
+            println!("forge: {sent} requests, {accepted} accepted");
+        }
     }
 }
 
