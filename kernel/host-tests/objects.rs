@@ -888,3 +888,140 @@ proptest::proptest! {
         }
     }
 }
+
+/// What must hold after every system call, whatever the arguments were.
+fn invariants(k: &Kernel) -> Result<(), String> {
+    for (rp, r) in k.rps.iter().filter(|(_, r)| r.in_use) {
+        let tasks: Vec<&Task> = k
+            .tasks
+            .iter()
+            .filter(|(_, t)| t.in_use && t.rp == rp)
+            .map(|(_, t)| t)
+            .collect();
+        let pages: u64 = tasks.iter().map(|t| t.pages_charged).sum();
+        let threads = k
+            .threads
+            .iter()
+            .filter(|(_, t)| !t.is_free() && k.tasks[t.task].rp == rp)
+            .count() as u64;
+        let counted = Amount {
+            tasks: tasks.len() as u64,
+            threads,
+            pages,
+        };
+        if r.used != counted {
+            return Err(format!("{rp:?}: charged {:?}, objects {counted:?}", r.used));
+        }
+        let committed = (
+            r.used.tasks + r.carved.tasks,
+            r.used.threads + r.carved.threads,
+            r.used.pages + r.carved.pages,
+        );
+        if committed.0 > r.quota.tasks
+            || committed.1 > r.quota.threads
+            || committed.2 > r.quota.pages
+        {
+            return Err(format!(
+                "{rp:?}: {committed:?} beyond its quota {:?}",
+                r.quota
+            ));
+        }
+    }
+    for (slot, t) in k.tasks.iter().filter(|(_, t)| t.in_use) {
+        if let Some(parent) = t.parent {
+            let p = &k.tasks[parent];
+            if !p.in_use {
+                return Err(format!("{slot:?}: its parent {parent:?} is gone"));
+            }
+            if !p.abilities.contains(t.abilities) || t.mcp > p.mcp {
+                return Err(format!("{slot:?}: more abilities or MCP than its parent"));
+            }
+        }
+    }
+    for (slot, t) in k.threads.iter().filter(|(_, t)| !t.is_free()) {
+        let task = &k.tasks[t.task];
+        if !task.in_use {
+            return Err(format!("{slot:?}: its task {:?} is gone", t.task));
+        }
+        if t.priority > task.mcp {
+            return Err(format!("{slot:?}: priority {} above its MCP", t.priority));
+        }
+        let runnable = t.state == State::Ready && !t.suspended;
+        if k.run.is_queued(slot.position()) != runnable {
+            return Err(format!("{slot:?}: {:?} but queued: {}", t.state, !runnable));
+        }
+    }
+    Ok(())
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(256))]
+
+    /// Random system calls with random arguments (edge values, live ids, random words) by
+    /// random runnable threads of the root task and of a child task in its own resource
+    /// partition: after each call the kernel's invariants hold (quota accounting adds up,
+    /// abilities and MCP only shrink down the tree, priorities within MCP, a thread is in a
+    /// run queue exactly when it can run).
+    #[test]
+    fn random_calls_keep_the_kernel_consistent(
+        calls in proptest::collection::vec(
+            (0usize..8, 0usize..64, proptest::collection::vec((0usize..24, proptest::prelude::any::<u64>()), 6)),
+            1..150,
+        ),
+    ) {
+        let mut f = Fixture::new();
+        f.thread(ROOT, 200);
+        let rp = f.k.rp_create(ROOT, Amount { tasks: 4, threads: 8, pages: 64 }).unwrap();
+        let child = f
+            .k
+            .create_task(ROOT, Abilities::CREATE_THREAD | Abilities::CREATE_TASK | Abilities::MAP, 100, rp, "c")
+            .unwrap();
+        f.thread(child, 90);
+        let numbers: Vec<u64> = Call::ALL.iter().map(|c| c.code()).chain([0, 7, 99, u64::MAX]).collect();
+        for (caller, call, args) in calls {
+            // Only a runnable thread makes calls; end of the sequence if none is left.
+            let runnable: Vec<ThreadIdx> = f
+                .k
+                .threads
+                .iter()
+                .filter(|(_, t)| t.state == State::Ready && !t.suspended)
+                .map(|(slot, _)| slot)
+                .collect();
+            if runnable.is_empty() {
+                break;
+            }
+            let t = runnable[caller % runnable.len()];
+            let number = numbers[call % numbers.len()];
+            if number == Call::SystemHalt.code() {
+                continue;
+            }
+            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s)).collect();
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s)));
+            let pick = |(kind, raw): (usize, u64)| -> u64 {
+                match kind {
+                    0..=7 => ids[raw as usize % ids.len()],
+                    8 => 0,
+                    9 => 1,
+                    10 => 512,
+                    11 => 513,
+                    12 => BUFFER_AT,
+                    13 => BUFFER_AT + raw % 0x10000,
+                    14 => u64::MAX,
+                    15 => 0xffff_8000_0000_0000,
+                    16 => 0x0000_8000_0000_0000,
+                    17 => raw % 300,
+                    18 => raw % 4,
+                    _ => raw,
+                }
+            };
+            let a: Vec<u64> = args.into_iter().map(pick).collect();
+            let c = &mut f.k.threads[t].context;
+            c.rax = number;
+            [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = [a[0], a[1], a[2], a[3], a[4], a[5]];
+            let _ = on_syscall(&mut f.k, t, || 0);
+            if let Err(broken) = invariants(&f.k) {
+                proptest::prop_assert!(false, "after call {} by {:?} with {:x?}: {}", number, t, a, broken);
+            }
+        }
+    }
+}
