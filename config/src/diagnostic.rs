@@ -44,6 +44,41 @@ pub fn line_column(source: &str, offset: usize) -> (usize, usize) {
     (line, before[line_start..].chars().count() + 1)
 }
 
+impl Diagnostic {
+    /// A diagnostic at the value of the key `keys` (e.g. `["partitions", "plc", "memory"]`)
+    /// of the description `source`, for checks made after validation (the boot-time budget,
+    /// which needs the built images); at the deepest of the keys that exists, or at the
+    /// start of the file.
+    pub fn at_key(file: &str, source: &str, keys: &[&str], message: impl fmt::Display) -> Self {
+        let (tree, _) = DeTable::parse_recoverable(source);
+        let mut at = 0;
+        let mut table = Some(tree.get_ref());
+        let mut path = KeyPath::root();
+        for key in keys {
+            let Some((found, value)) = table.and_then(|t| t.get_key_value(*key)) else {
+                break;
+            };
+            path = path.key(key);
+            at = found.span().start;
+            table = match value.get_ref() {
+                DeValue::Table(inner) => Some(inner),
+                _ => {
+                    at = value.span().start;
+                    None
+                }
+            };
+        }
+        let (line, column) = line_column(source, at);
+        Diagnostic {
+            file: file.to_string(),
+            line,
+            column,
+            key_path: path.0,
+            message: message.to_string(),
+        }
+    }
+}
+
 /// A dotted key path under construction (`a.b[2].c`; keys that are not bare TOML keys are
 /// quoted).
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -235,5 +270,16 @@ mod tests {
             message: "bad".into(),
         };
         assert_eq!(d.to_string(), "f.toml:3:7: system.memory: bad");
+    }
+
+    #[test]
+    fn at_key_points_at_the_value_or_the_deepest_key() {
+        let src = "[system]\nmemory = \"1MiB\"\n\n[partitions.plc]\nimage = \"softplc\"\nkernel_memory = \"64KiB\"\n";
+        let d = Diagnostic::at_key("f", src, &["partitions", "plc", "kernel_memory"], "low");
+        assert_eq!((d.line, d.column), (6, 17));
+        assert_eq!(d.key_path, "partitions.plc.kernel_memory");
+        // A key the file leaves out (a default): the deepest existing key.
+        let d = Diagnostic::at_key("f", src, &["partitions", "plc", "memory"], "low");
+        assert_eq!((d.line, d.key_path.as_str()), (4, "partitions.plc"));
     }
 }

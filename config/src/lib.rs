@@ -143,7 +143,11 @@
 //! page-table pool (1/8 of `memory`, 16..128 MiB, [`model::kernel_pool`]) minus a 32 MiB
 //! reserve for the kernel image, firmware, system image and syssw; the `kernel_memory`
 //! quotas together must fit in the pool minus 1 MiB syssw keeps; thread and task quotas must
-//! fit in the kernel's tables (256 threads, 64 tasks) after syssw's share (16, 1).
+//! fit in the kernel's tables (256 threads, 64 tasks) after syssw's share (16, 1). What a
+//! partition needs to start depends on its image, so `cargo xtask` checks it when it builds
+//! the images (`check-config` and every image build, with `syssw_core::budget`, as syssw
+//! does at boot): image + data entry + stack within `memory`, and the page tables of what
+//! syssw maps for it (plus 2 pages of I/O bitmap with `io_ports`) within `kernel_memory`.
 //!
 //! **Images.** `load` takes a predicate that says which image names exist; `cargo xtask
 //! check-config` passes the user programs the workspace builds.

@@ -81,7 +81,10 @@ fn main(image_base: u64, image_len: u64) {
         let data = image.entries().find(|e| p.is_data_entry(e.name));
         let placement = entry
             .ok_or(partitions::LoadError::NoImage)
-            .and_then(|e| partitions::place(&mut spawner, &p, e.data, data.map_or(&[], |d| d.data)))
+            .and_then(|e| {
+                let data = data.map_or(&[][..], |d| d.data);
+                partitions::place(&mut spawner, &system, &p, e.data, data)
+            })
             .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
         placed[p.index] = Some(server::Partition {
             placed: placement,

@@ -8,16 +8,16 @@
 
 use config::binary::{PartitionView, SystemView};
 use root_task::spawn::{SpawnError, Spawner, map_physical_chunked};
+use syssw_core::budget::{self, start_budget};
 use user_rt::abi::elf::{LoadSegment as Segment, load_segments};
 use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
-use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
+use user_rt::partition::StartInfo;
+use user_rt::protocol::layout::{DATA_BASE, STACK_TOP, shared_address as layout_address};
 use user_rt::sys;
 
 const PAGE: u64 = 4096;
-/// Top of a partition's stack (its start record is at the very top).
-pub const STACK_TOP: u64 = 0x0000_7ff0_0000_0000;
 
 /// Why a partition could not be created (with the partition's name, printed by the caller).
 #[derive(Debug)]
@@ -25,6 +25,7 @@ pub enum LoadError {
     NoImage,
     Image(user_rt::abi::elf::ElfError),
     TooBig { needed: u64, memory: u64 },
+    KernelMemory { needed: u64, quota: u64 },
     Spawn(SpawnError),
     Kernel(&'static str, Error),
 }
@@ -39,6 +40,12 @@ impl core::fmt::Display for LoadError {
                 "image and stack need {} KiB, more than its memory of {} KiB",
                 needed / 1024,
                 memory / 1024
+            ),
+            Self::KernelMemory { needed, quota } => write!(
+                f,
+                "its page tables need {} KiB of kernel memory, more than its quota of {} KiB",
+                needed / 1024,
+                quota / 1024
             ),
             Self::Spawn(e) => write!(f, "out of memory or addresses: {e:?}"),
             Self::Kernel(call, e) => write!(f, "{call} failed: {e:?}"),
@@ -69,7 +76,7 @@ pub struct Placement {
     pub stack_guard: core::ops::Range<u64>,
 }
 
-const MAX_SEGMENTS: usize = 16;
+const MAX_SEGMENTS: usize = budget::MAX_IMAGE_SEGMENTS;
 
 /// A running instance of a partition.
 pub struct Instance {
@@ -92,19 +99,11 @@ pub fn shared_segments(
 }
 
 fn shared_address(system: &SystemView, segment: usize) -> u64 {
-    // Each segment gets its size rounded to 1 GiB plus a guard, so addresses never move.
-    SHARED_BASE
-        + system
-            .segments()
-            .take(segment)
-            .map(|s| (s.size >> 30) + 1)
-            .sum::<u64>()
-            * (2 << 30)
+    layout_address(system.segments().take(segment).map(|s| s.size))
 }
 
 fn segment_pages(s: &Segment) -> (u64, u64) {
-    let first = s.vaddr / PAGE * PAGE;
-    (first, (s.vaddr + s.mem_size).div_ceil(PAGE) - first / PAGE)
+    budget::segment_pages(s.vaddr, s.mem_size)
 }
 
 /// Copies a segment's file bytes into its (zeroed) frames, chunk by chunk.
@@ -133,22 +132,29 @@ fn load(spawner: &mut Spawner, s: &Segment, physical: Option<u64>) -> Result<u64
 /// partition: everything a partition owns that outlives its restarts.
 pub fn place(
     spawner: &mut Spawner,
+    system: &SystemView,
     p: &PartitionView,
     elf: &'static [u8],
     data: &'static [u8],
 ) -> Result<Placement, LoadError> {
     let (entry, segments) =
         load_segments::<MAX_SEGMENTS>(elf, USER_MIN..DATA_BASE).map_err(LoadError::Image)?;
-    let image_pages: u64 = segments.iter().flatten().map(|s| segment_pages(s).1).sum();
-    let stack_pages = p.stack / PAGE;
-    let data_pages = (data.len() as u64).div_ceil(PAGE);
-    let needed = (image_pages + data_pages + stack_pages) * PAGE;
-    if needed > p.memory {
+    // The same budget `cargo xtask` checked when it built the image.
+    let budget = start_budget(system, p, elf, data.len() as u64).map_err(LoadError::Image)?;
+    if budget.memory > p.memory {
         return Err(LoadError::TooBig {
-            needed,
+            needed: budget.memory,
             memory: p.memory,
         });
     }
+    if budget.kernel_memory > p.kernel_memory {
+        return Err(LoadError::KernelMemory {
+            needed: budget.kernel_memory,
+            quota: p.kernel_memory,
+        });
+    }
+    let stack_pages = p.stack / PAGE;
+    let data_pages = (data.len() as u64).div_ceil(PAGE);
     let rp = kernel(
         "rp_create",
         sys::rp_create(
@@ -181,7 +187,7 @@ pub fn place(
         segments: frames,
         stack,
         data: (data_frames, data.len() as u64),
-        used: needed,
+        used: budget.memory,
         stack_guard: stack_base - PAGE..stack_base,
     })
 }

@@ -1,5 +1,6 @@
-//! `cargo xtask bench`: boots the kernel benchmark system and the port benchmark system
-//! (`tests/configs/bench_ports.toml`), runs the host benchmarks,
+//! `cargo xtask bench`: boots the kernel benchmark system, the port benchmark system
+//! (`tests/configs/bench_ports.toml`) and the attack systems whose victim measures its
+//! window starts on virtual time (`window_lateness_hostile*`), runs the host benchmarks,
 //! prints one line per metric and writes `target/bench/report.json`.
 //!
 //! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio> samples=<n>`.
@@ -48,6 +49,25 @@ pub fn parse_line(line: &str) -> Option<Metric> {
         && !m.unit.is_empty()
         && m.samples > 0;
     complete.then_some(m)
+}
+
+/// The metric `window_lateness_hostile_<name>` from an attack victim's last line
+/// (`victim: lateness windows=<n> min=<ns> median=<ns> max=<ns>`, tests/programs/attack).
+pub fn parse_victim_lateness(line: &str, name: &str) -> Option<Metric> {
+    let rest = &line[line.find("victim: lateness ")? + "victim: lateness ".len()..];
+    let field = |key: &str| {
+        rest.split_whitespace()
+            .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+            .and_then(|v| v.parse::<u64>().ok())
+    };
+    Some(Metric {
+        name: format!("window_lateness_hostile_{name}"),
+        median: field("median")? as f64,
+        min: field("min")? as f64,
+        max: field("max")? as f64,
+        unit: "ns".to_string(),
+        samples: field("windows")?,
+    })
 }
 
 pub fn format_line(m: &Metric) -> String {
@@ -116,6 +136,19 @@ mod tests {
             parse_line("bench plc_vm_pid_ratio median=2.5 min=2.1 max=3.75 unit=ratio samples=50")
                 .unwrap();
         assert_eq!(r.median, 2.5);
+    }
+
+    #[test]
+    fn reads_the_victims_lateness() {
+        let m = parse_victim_lateness(
+            "[   5.1] [victim-1000] victim: lateness windows=999 min=1838 median=2850 max=44559",
+            "restart_loop",
+        )
+        .unwrap();
+        assert_eq!(m.name, "window_lateness_hostile_restart_loop");
+        assert_eq!((m.min, m.median, m.max), (1838.0, 2850.0, 44559.0));
+        assert_eq!((m.unit.as_str(), m.samples), ("ns", 999));
+        assert!(parse_victim_lateness("victim: windows=100 missed=0", "x").is_none());
     }
 
     #[test]

@@ -79,6 +79,74 @@ pub fn load(path: &Path) -> Result<config::System> {
     }
 }
 
+/// Checks that every partition of the validated description `path` (decoded: `system`) can
+/// start: its image (`images`: built user programs by name), data entry (`packages`: by
+/// partition name) and stack fit in its `memory`, and its page tables in its
+/// `kernel_memory` quota — the budget syssw computes at boot (`syssw_core::budget`), so a
+/// system that builds never fails there. The error lists one diagnostic per shortfall, at
+/// the configuration key to raise.
+pub fn check_budgets(
+    path: &Path,
+    system: &config::SystemView,
+    images: &[(String, PathBuf)],
+    packages: &[(String, Vec<u8>)],
+) -> Result<()> {
+    let resolved = resolve(path);
+    let source = std::fs::read_to_string(&resolved)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    let name = resolved.display().to_string();
+    let mut problems = Vec::new();
+    for p in system.partitions() {
+        let Some((_, elf_path)) = images.iter().find(|(image, _)| image == p.image) else {
+            continue;
+        };
+        let elf = std::fs::read(elf_path)
+            .with_context(|| format!("cannot read {}", elf_path.display()))?;
+        let data_len = packages
+            .iter()
+            .find(|(partition, _)| partition == p.name)
+            .map_or(0, |(_, package)| package.len() as u64);
+        let budget = syssw_core::budget::start_budget(system, &p, &elf, data_len)
+            .map_err(|e| anyhow::anyhow!("image {} of partition {}: {e:?}", p.image, p.name))?;
+        let at = |key: &str, message: String| {
+            config::Diagnostic::at_key(&name, &source, &["partitions", p.name, key], message)
+        };
+        if budget.memory > p.memory {
+            problems.push(at(
+                "memory",
+                format!(
+                    "partition `{}` needs {} KiB to start (image `{}`, data entry {} bytes, stack {} KiB) but has {} KiB",
+                    p.name,
+                    budget.memory.div_ceil(1024),
+                    p.image,
+                    data_len,
+                    p.stack / 1024,
+                    p.memory / 1024
+                ),
+            ));
+        }
+        if budget.kernel_memory > p.kernel_memory {
+            problems.push(at(
+                "kernel_memory",
+                format!(
+                    "partition `{}` needs {} KiB of kernel memory for the page tables of what syssw maps at its start, but its quota is {} KiB",
+                    p.name,
+                    budget.kernel_memory / 1024,
+                    p.kernel_memory / 1024
+                ),
+            ));
+        }
+    }
+    if problems.is_empty() {
+        return Ok(());
+    }
+    let lines: Vec<String> = problems.iter().map(|d| d.to_string()).collect();
+    bail!(
+        "configuration {name} cannot boot: syssw would refuse it\n{}",
+        lines.join("\n")
+    )
+}
+
 /// Warnings of a valid description on stderr, `warning: file:line:col: key: reason`.
 fn print_warnings(warnings: &[config::Diagnostic]) {
     for w in warnings {
@@ -87,8 +155,10 @@ fn print_warnings(warnings: &[config::Diagnostic]) {
 }
 
 /// The command: diagnostics on stderr, one per line, then `config FILE: ok (...)` on stdout
-/// or `config FILE: N errors` on stderr. Returns whether the file is valid. With
-/// `any_image`, image names are not checked (for descriptions of programs not written yet).
+/// or `config FILE: N errors` on stderr. Returns whether the file is valid. A valid file's
+/// images are built and every partition's start budget checked ([`check_budgets`]). With
+/// `any_image`, image names and budgets are not checked (for descriptions of programs not
+/// written yet).
 pub fn run(file: &Path, any_image: bool) -> Result<bool> {
     let images = if any_image {
         Vec::new()
@@ -105,8 +175,27 @@ pub fn run(file: &Path, any_image: bool) -> Result<bool> {
             print_warnings(&warnings);
             // The encoder's output must pass the decoder's own checks.
             let blob = config::binary::encode(&system);
-            if let Err(e) = config::decode(&blob) {
-                bail!("internal error: {name} validated but its binary form is rejected: {e}");
+            let view = match config::decode(&blob) {
+                Ok(view) => view,
+                Err(e) => {
+                    bail!("internal error: {name} validated but its binary form is rejected: {e}")
+                }
+            };
+            // The budget syssw computes at boot needs the images (and PLC packages): build
+            // them as the image builder does.
+            if !any_image {
+                let mut images: Vec<String> =
+                    system.partitions.iter().map(|p| p.image.clone()).collect();
+                images.sort();
+                images.dedup();
+                let paths = crate::artifacts::build_user_programs(&images)?;
+                let built: Vec<(String, PathBuf)> = images.into_iter().zip(paths).collect();
+                let packages = crate::plc::packages(&system)?;
+                if let Err(e) = check_budgets(file, &view, &built, &packages) {
+                    eprintln!("{e:#}");
+                    eprintln!("config {name}: does not fit at boot");
+                    return Ok(false);
+                }
             }
             println!(
                 "config {name}: ok ({} partitions, {} windows, {} channels)",

@@ -65,13 +65,16 @@ pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Result<
         images.sort();
         images.dedup();
         let paths = crate::artifacts::build_user_programs(&images)?;
-        for (image, path) in images.iter().zip(paths) {
+        let packages = crate::plc::packages(&described)?;
+        let built: Vec<(String, PathBuf)> = images.iter().cloned().zip(paths).collect();
+        crate::check_config::check_budgets(config, &system, &built, &packages)?;
+        for (image, path) in built {
             entries.push(ImageEntry::File {
                 name: format!("partition/{image}"),
                 path,
             });
         }
-        for (partition, package) in crate::plc::packages(&described)? {
+        for (partition, package) in packages {
             entries.push(ImageEntry::Bytes {
                 name: format!("{}{partition}", config::binary::DATA_ENTRY_PREFIX),
                 data: package,

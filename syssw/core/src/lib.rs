@@ -1,6 +1,7 @@
 //! The pure logic of Warden's system software (syssw, the root task): ARINC 653
 //! inter-partition ports ([`ports`]), the health monitor's decisions and its event log
-//! ([`health`]) and the partitions' operating modes ([`mode`]); the codes they answer with
+//! ([`health`]), the partitions' operating modes ([`mode`]) and what a partition needs of
+//! its memory and kernel-memory quota to start ([`budget`]); the codes they answer with
 //! and the requests they serve are the service protocol's (`syssw/protocol`).
 //!
 //! syssw itself (`syssw/src`) is thin glue: it receives the partitions' requests and the
@@ -20,6 +21,7 @@
 //!   message length.
 #![cfg_attr(not(test), no_std)]
 
+pub mod budget;
 pub mod health;
 pub mod mode;
 pub mod ports;

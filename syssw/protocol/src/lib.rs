@@ -40,6 +40,8 @@
 //! `no_std`, allocation-free and free of system calls: the IPC itself is the callers' glue.
 #![no_std]
 
+pub mod layout;
+
 codes::code_enum! {
     /// A request's IPC label.
     pub enum Label: u32 {

@@ -6,14 +6,8 @@
 //! below it, minus 8 (as if called). Everything else the partition needs from syssw comes
 //! through this record.
 
-/// Where syssw maps a partition's shared-memory segments: the first configured segment
-/// here, each next one 2 GiB per started GiB of the ones before further up (the same
-/// address in every partition that has the segment).
-pub const SHARED_BASE: u64 = 0x0000_6000_0000_0000;
-
-/// Where syssw maps a partition's data entry (`data/<partition>` in system.img, e.g. a
-/// soft-PLC's program package), read-only, for the partition's whole life.
-pub const DATA_BASE: u64 = 0x0000_5000_0000_0000;
+/// The partition's address space: see [`protocol::layout`].
+pub use protocol::layout::{DATA_BASE, SHARED_BASE};
 
 /// `StartInfo::magic`.
 pub const START_MAGIC: u64 = u64::from_le_bytes(*b"WRDNPART");

@@ -196,8 +196,15 @@ fn forge(server: ThreadId) {
     }
 }
 
-/// The victim: see the crate documentation.
+/// Most windows the victim keeps the lateness of (for its final median).
+const VICTIM_MAX_WINDOWS: usize = 4_096;
+
+/// The victim: see the crate documentation. Its last line is
+/// `victim: lateness windows=<n> min=<ns> median=<ns> max=<ns>` (the first window left out:
+/// its start includes the partition's start-up), which `cargo xtask bench` reads.
 fn victim(tp: u64, windows: u64) {
+    let windows = windows.min(VICTIM_MAX_WINDOWS as u64);
+    let mut lateness = [0u32; VICTIM_MAX_WINDOWS];
     let mut last_frame = None;
     let (mut missed, mut max_late, mut sum_late) = (0u64, 0u64, 0u64);
     for window in 1..=windows {
@@ -207,10 +214,10 @@ fn victim(tp: u64, windows: u64) {
             return;
         };
         let late = now.saturating_sub(info.next_window_start);
-        // The first window's start includes the partition's start-up.
         if window > 1 {
             max_late = max_late.max(late);
             sum_late += late;
+            lateness[window as usize - 2] = late.min(u64::from(u32::MAX)) as u32;
         }
         if let Some(last) = last_frame
             && info.frames != last + 1
@@ -226,6 +233,15 @@ fn victim(tp: u64, windows: u64) {
         }
         // Ready again at the end of this window: runs at the start of the next one.
         sys::sleep_until(info.next_window_start + info.window_length);
+    }
+    let measured = &mut lateness[..windows.saturating_sub(1) as usize];
+    measured.sort_unstable();
+    if let (Some(min), Some(max)) = (measured.first(), measured.last()) {
+        println!(
+            "victim: lateness windows={} min={min} median={} max={max}",
+            measured.len(),
+            measured[measured.len() / 2]
+        );
     }
     println!("victim: done");
     #[allow(unsafe_code)]

@@ -1,0 +1,209 @@
+//! What a partition needs to start: bytes of its memory (image, data entry, stack) and bytes
+//! of its kernel-memory quota (the page tables of everything syssw maps for it, its top-level
+//! table and, with I/O ports, its I/O permission bitmap). One computation for both users:
+//! syssw refuses a partition that does not fit before it builds anything, and `cargo xtask`
+//! refuses to build a system image with such a partition, naming the configuration key, so a
+//! validated system never fails at boot for want of memory.
+//!
+//! The page-table count is exact for a fresh address space, as the kernel charges it
+//! (`kernel/src/mem/paging.rs`, `tables_needed`): one table per level per covered span, the
+//! top level charged once at `task_create`; the I/O bitmap is 2 pages (`io_grant`). What the
+//! partition maps itself later comes on top.
+
+use abi::elf::{ElfError, load_segments};
+use abi::syscall::USER_MIN;
+use config::binary::{PartitionView, SystemView};
+use protocol::layout::{DATA_BASE, STACK_TOP, shared_address};
+
+const PAGE: u64 = 4096;
+/// Loadable segments an image may have (syssw's limit).
+pub const MAX_IMAGE_SEGMENTS: usize = 16;
+/// Regions mapped at start: image segments, stack, data entry, shared segments.
+const MAX_REGIONS: usize = MAX_IMAGE_SEGMENTS + 2 + config::model::MAX_SEGMENTS;
+/// Pages of the top-level table (charged by `task_create`) and of the I/O bitmap.
+const TOP_TABLE_PAGES: u64 = 1;
+const IO_BITMAP_PAGES: u64 = 2;
+
+/// A partition's needs at start, in bytes.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StartBudget {
+    /// Of its `memory`: image pages, data-entry pages and the stack.
+    pub memory: u64,
+    /// Of its `kernel_memory` quota.
+    pub kernel_memory: u64,
+}
+
+/// The pages of an image segment: first page address and count.
+pub fn segment_pages(vaddr: u64, mem_size: u64) -> (u64, u64) {
+    let first = vaddr / PAGE * PAGE;
+    (first, (vaddr + mem_size).div_ceil(PAGE) - first / PAGE)
+}
+
+/// What partition `p` of `system` needs to start with image `elf` and a data entry of
+/// `data_len` bytes.
+pub fn start_budget(
+    system: &SystemView,
+    p: &PartitionView,
+    elf: &[u8],
+    data_len: u64,
+) -> Result<StartBudget, ElfError> {
+    let (_, segments) = load_segments::<MAX_IMAGE_SEGMENTS>(elf, USER_MIN..DATA_BASE)?;
+    let mut regions = Regions::new();
+    let mut image_pages = 0;
+    for s in segments.iter().flatten() {
+        let (first, pages) = segment_pages(s.vaddr, s.mem_size);
+        image_pages += pages;
+        regions.add(first, pages);
+    }
+    let stack_pages = p.stack / PAGE;
+    regions.add(STACK_TOP - stack_pages * PAGE, stack_pages);
+    let data_pages = data_len.div_ceil(PAGE);
+    regions.add(DATA_BASE, data_pages);
+    for a in p.shared() {
+        let address = shared_address(system.segments().take(a.segment).map(|s| s.size));
+        regions.add(address, system.segment(a.segment).size / PAGE);
+    }
+    let io = if p.io_ports().next().is_some() {
+        IO_BITMAP_PAGES
+    } else {
+        0
+    };
+    Ok(StartBudget {
+        memory: (image_pages + data_pages + stack_pages) * PAGE,
+        kernel_memory: (TOP_TABLE_PAGES + regions.page_tables() + io) * PAGE,
+    })
+}
+
+/// The page runs mapped at start (first page address, count).
+struct Regions {
+    runs: [(u64, u64); MAX_REGIONS],
+    count: usize,
+}
+
+impl Regions {
+    fn new() -> Self {
+        Regions {
+            runs: [(0, 0); MAX_REGIONS],
+            count: 0,
+        }
+    }
+
+    fn add(&mut self, first: u64, pages: u64) {
+        if pages > 0 && self.count < MAX_REGIONS {
+            self.runs[self.count] = (first, pages);
+            self.count += 1;
+        }
+    }
+
+    /// Tables below the top level that cover the runs: per level, the distinct spans the
+    /// runs touch (a table at level `l` covers `512^l` pages).
+    fn page_tables(&self) -> u64 {
+        let mut total = 0;
+        for shift in [21u32, 30, 39] {
+            let mut spans = [(0u64, 0u64); MAX_REGIONS];
+            for (slot, &(first, pages)) in spans.iter_mut().zip(&self.runs[..self.count]) {
+                let last = first + (pages - 1) * PAGE;
+                *slot = (first >> shift, last >> shift);
+            }
+            let spans = &mut spans[..self.count];
+            spans.sort_unstable();
+            // Count the indices the (sorted) spans cover, each once.
+            let mut covered_to = None;
+            for &(from, to) in spans.iter() {
+                let from = match covered_to {
+                    Some(end) if from <= end => end + 1,
+                    _ => from,
+                };
+                if from <= to {
+                    total += to - from + 1;
+                }
+                covered_to = Some(covered_to.map_or(to, |end: u64| end.max(to)));
+            }
+        }
+        total
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tables(runs: &[(u64, u64)]) -> u64 {
+        let mut r = Regions::new();
+        for &(first, pages) in runs {
+            r.add(first, pages);
+        }
+        r.page_tables()
+    }
+
+    #[test]
+    fn one_page_needs_one_table_per_level() {
+        assert_eq!(tables(&[(0x20_0000, 1)]), 3);
+    }
+
+    #[test]
+    fn runs_share_tables_they_have_in_common() {
+        // Two pages in one 2 MiB span: still one table per level.
+        assert_eq!(tables(&[(0x20_0000, 1), (0x20_1000, 1)]), 3);
+        // A run across a 2 MiB boundary needs two last-level tables.
+        assert_eq!(tables(&[(0x1f_f000, 2)]), 4);
+        // Far apart (different 512 GiB spans): nothing shared.
+        assert_eq!(tables(&[(0x20_0000, 1), (STACK_TOP - PAGE, 1)]), 6);
+        // Nested runs count once.
+        assert_eq!(tables(&[(0x20_0000, 512), (0x20_1000, 1)]), 3);
+    }
+
+    /// A minimal static ELF with one loadable segment of `mem_size` bytes at `vaddr`.
+    fn elf(vaddr: u64, mem_size: u64) -> Vec<u8> {
+        let mut e = vec![0u8; 64 + 56];
+        e[..4].copy_from_slice(b"\x7fELF");
+        e[4] = 2; // 64-bit
+        e[5] = 1; // little-endian
+        e[6] = 1; // version
+        e[16..18].copy_from_slice(&2u16.to_le_bytes()); // ET_EXEC
+        e[18..20].copy_from_slice(&62u16.to_le_bytes()); // x86_64
+        e[20..24].copy_from_slice(&1u32.to_le_bytes());
+        e[24..32].copy_from_slice(&vaddr.to_le_bytes()); // entry
+        e[32..40].copy_from_slice(&64u64.to_le_bytes()); // program headers
+        e[52..54].copy_from_slice(&64u16.to_le_bytes());
+        e[54..56].copy_from_slice(&56u16.to_le_bytes());
+        e[56..58].copy_from_slice(&1u16.to_le_bytes());
+        e[58..60].copy_from_slice(&64u16.to_le_bytes());
+        let ph = &mut e[64..];
+        ph[..4].copy_from_slice(&1u32.to_le_bytes()); // PT_LOAD
+        ph[4..8].copy_from_slice(&6u32.to_le_bytes()); // RW
+        ph[16..24].copy_from_slice(&vaddr.to_le_bytes());
+        ph[24..32].copy_from_slice(&vaddr.to_le_bytes());
+        ph[40..48].copy_from_slice(&mem_size.to_le_bytes());
+        ph[48..56].copy_from_slice(&PAGE.to_le_bytes());
+        e
+    }
+
+    #[test]
+    fn a_partitions_start_budget() {
+        let blob = crate::testsys::blob(&crate::testsys::with(&[
+            (
+                "# a",
+                "io_ports = [\"0x2f8-0x2ff\"]\nshared = { s = \"rw\" }",
+            ),
+            ("# tail", "[[shared_memory]]\nname = \"s\"\nsize = \"8KiB\""),
+        ]));
+        let system = config::decode(&blob).unwrap();
+        let a = system.partition(0);
+        // 3 image pages at 2 MiB, the default 64 KiB stack, a 5000-byte data entry, 2 shared
+        // pages at SHARED_BASE.
+        let budget = start_budget(&system, &a, &elf(0x20_0000, 3 * PAGE), 5000).unwrap();
+        assert_eq!(budget.memory, (3 + 16 + 2) * PAGE);
+        // Last-level tables: image, stack, data, shared (4, all far apart); one level up: 4;
+        // the 512 GiB spans: image (0), data (0xa0), shared (0xc0), stack (0xff): 4. Plus
+        // the top-level table and the I/O bitmap.
+        assert_eq!(budget.kernel_memory, (4 + 4 + 4 + 1 + 2) * PAGE);
+        assert!(start_budget(&system, &a, b"not an elf", 0).is_err());
+    }
+
+    #[test]
+    fn a_gigabyte_run() {
+        // 1 GiB aligned: 512 last-level tables, one of each level above.
+        assert_eq!(tables(&[(1 << 30, 512 * 512)]), 512 + 1 + 1);
+    }
+}

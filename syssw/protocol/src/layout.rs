@@ -1,0 +1,48 @@
+//! A partition's address space as syssw builds it (an interface between syssw and every
+//! partition program, and the input of the boot-time budget in `syssw-core`):
+//!
+//! | what | where | rights |
+//! |---|---|---|
+//! | the image's loadable segments | their ELF addresses, below [`DATA_BASE`] | per segment |
+//! | its data entry (`data/<partition>` in system.img), if any | [`DATA_BASE`] | read-only |
+//! | shared-memory segments it is attached to | [`shared_address`] | as configured |
+//! | the stack, the start record at its very top | below [`STACK_TOP`], one unmapped guard page under it | read-write |
+
+/// Where syssw maps a partition's shared-memory segments: the first configured segment
+/// here, each next one 2 GiB per started GiB of the ones before further up (the same
+/// address in every partition that has the segment).
+pub const SHARED_BASE: u64 = 0x0000_6000_0000_0000;
+
+/// Where syssw maps a partition's data entry (e.g. a soft-PLC's program package),
+/// read-only, for the partition's whole life; images must lie below it.
+pub const DATA_BASE: u64 = 0x0000_5000_0000_0000;
+
+/// Top of a partition's stack (its start record is at the very top).
+pub const STACK_TOP: u64 = 0x0000_7ff0_0000_0000;
+
+/// The address of a shared-memory segment whose predecessors (in configuration order)
+/// have the sizes `before` (bytes): each predecessor takes 2 GiB for every whole GiB of its
+/// size plus one, which leaves an unmapped gap behind every segment.
+pub fn shared_address(before: impl Iterator<Item = u64>) -> u64 {
+    SHARED_BASE + before.map(|size| (size >> 30) + 1).sum::<u64>() * (2 << 30)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn shared_segments_get_two_gib_per_started_gib() {
+        assert_eq!(shared_address([].into_iter()), SHARED_BASE);
+        assert_eq!(shared_address([4096].into_iter()), SHARED_BASE + (2 << 30));
+        assert_eq!(
+            shared_address([4096, 1 << 30].into_iter()),
+            SHARED_BASE + 3 * (2 << 30)
+        );
+    }
+
+    #[test]
+    fn the_regions_do_not_overlap() {
+        const { assert!(DATA_BASE < SHARED_BASE && SHARED_BASE < STACK_TOP) };
+    }
+}
