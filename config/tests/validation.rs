@@ -1465,3 +1465,57 @@ fn major_frame_beyond_the_kernels_limit() {
         "the major frame of 7200s is longer than the kernel's limit of 3600s",
     );
 }
+
+#[test]
+fn empty_description() {
+    // The one key every description needs is reported at the start of the file.
+    let diags = load("").unwrap_err();
+    assert_eq!(diags.len(), 1, "{diags:?}");
+    assert_eq!((diags[0].line, diags[0].column), (1, 1));
+    assert!(
+        diags[0].message.contains("missing field `system`"),
+        "{diags:?}"
+    );
+}
+
+#[test]
+fn binary_garbage_is_a_syntax_error() {
+    // Not UTF-8 text at all is the caller's to refuse (check-config reads a String); NULs,
+    // control bytes and random symbols in text are TOML syntax errors with positions.
+    let mut x: u64 = 0x5eed;
+    let garbage: String = (0..4096)
+        .map(|_| {
+            x ^= x << 13;
+            x ^= x >> 7;
+            x ^= x << 17;
+            char::from((x % 128) as u8)
+        })
+        .collect();
+    let diags = load(&garbage).unwrap_err();
+    assert!(!diags.is_empty());
+    assert!(
+        diags
+            .iter()
+            .all(|d| d.message.starts_with("TOML syntax") && d.line >= 1)
+    );
+}
+
+#[test]
+fn very_large_descriptions_are_refused_by_the_limits_not_by_exhaustion() {
+    // 2,000 partitions (a 200 KB file): refused as too many, naming the first one beyond
+    // the limit (and no rule loops over them in a way a user would wait for).
+    let mut src = BASE.to_string();
+    for i in 0..2_000 {
+        src.push_str(&format!(
+            "\n[partitions.p{i}]\nimage = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 10\ntime = \"background\"\n"
+        ));
+    }
+    let diags = load(&src).unwrap_err();
+    assert!(
+        diags
+            .iter()
+            .any(|d| d.key_path == "partitions.p13" && d.message.contains("too many partitions")),
+        "{:?}",
+        &diags[..diags.len().min(5)]
+    );
+}
