@@ -89,6 +89,11 @@ fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64, bound_ns: u64
     let last = summaries.last().copied();
     check(
         o,
+        o.line("victim: created a thread").is_some(),
+        "the victim could not create a thread at its end",
+    );
+    check(
+        o,
         last.is_some_and(|(logged, _, _)| logged == windows),
         &format!("the victim did not log its {windows} windows"),
     );
@@ -123,6 +128,18 @@ fn attack_floods() {
             .count()
             > 1_000,
         "the attacker did not flood the log",
+    );
+    // The hoarder got some of each object, then QuotaExceeded for each kind; the victim
+    // still created a thread (checked with its windows below).
+    let hoard = o.line("hoard: tasks=");
+    check(
+        &o,
+        hoard.is_some_and(|l| {
+            l.contains("then QuotaExceeded QuotaExceeded QuotaExceeded")
+                && !l.contains("=0 ")
+                && !l.contains("maps=0,")
+        }),
+        "the hoarder did not exhaust each kind of its quota",
     );
     // syssw answered every request for a port of another partition with an error.
     let forged = o

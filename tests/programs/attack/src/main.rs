@@ -19,10 +19,15 @@
 //!   0..64, read, status, receive, clear) and unknown labels, as fast as it can, and
 //!   counts the requests syssw accepted (`forge: <n> requests, <m> accepted`) every
 //!   10,000 requests;
+//! * `hoard*`: exhausts its resource partition's kernel-memory quota: creates child tasks,
+//!   threads and mappings of one page at ever new addresses (each in the most page tables)
+//!   until the kernel says `QuotaExceeded`, prints `hoard: tasks=<n> threads=<n> maps=<n>,
+//!   then QuotaExceeded` and sleeps;
 //! * `victim*`: logs its window starts: once per window it reads the clock and compares it
 //!   with the window's start (`partition_info`), counts the major frames it saw to find a
 //!   missed window, prints a summary every [`REPORT_EVERY`] windows, and after
-//!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) executes `ud2` (the scenario maps that illegal request to
+//!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) creates and kills a thread (its
+//!   own quota is untouched by any hoarder) and executes `ud2` (the scenario maps that illegal request to
 //!   `shutdown_success`, ending the run).
 //!
 //! A test program: it must never be needed by anything but its scenarios.
@@ -34,8 +39,8 @@ use core::sync::atomic::{AtomicUsize, Ordering};
 use user_rt::abi::boot::KERNEL_BASE;
 use user_rt::abi::ipc::MessageTag;
 use user_rt::abi::syscall::{
-    Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, ROOT_INFO_BASE, ThreadAttribute, ThreadId,
-    USER_END, USER_MIN, make_id,
+    Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, PageRights, ROOT_INFO_BASE,
+    ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
 };
 use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
@@ -91,6 +96,9 @@ fn main(start: u64, _: u64) {
         println!("overflow: returned from depth {depth}");
     } else if name.starts_with("forge") {
         forge(ThreadId(info.server));
+    } else if name.starts_with("hoard") {
+        hoard();
+        sys::sleep_until(u64::MAX);
     } else if name.starts_with("victim") {
         let windows = name
             .rsplit('-')
@@ -196,6 +204,40 @@ fn forge(server: ThreadId) {
     }
 }
 
+/// The hoarder: see the crate documentation.
+fn hoard() {
+    let mut counts = [0u64; 3];
+    let mut last = [Error::Ok; 3];
+    for (kind, (count, error)) in counts.iter_mut().zip(&mut last).enumerate() {
+        // Bounded by the quota; the bound only guards against a kernel that never refuses.
+        for i in 0..100_000u64 {
+            let result = match kind {
+                0 => sys::task_create(Abilities::empty(), 1, 0, "h").map(|_| ()),
+                1 => sys::thread_create(None, 0x1000, 0x2000, 1, 0).map(|_| ()),
+                // One page every 512 GiB: each needs three new page tables.
+                _ => sys::map(
+                    None,
+                    scratch().start,
+                    0x0000_0100_0000_0000 + i * (512 << 30),
+                    1,
+                    PageRights::empty(),
+                ),
+            };
+            match result {
+                Ok(()) => *count += 1,
+                Err(e) => {
+                    *error = e;
+                    break;
+                }
+            }
+        }
+    }
+    println!(
+        "hoard: tasks={} threads={} maps={}, then {:?} {:?} {:?}",
+        counts[0], counts[1], counts[2], last[0], last[1], last[2]
+    );
+}
+
 /// Most windows the victim keeps the lateness of (for its final median).
 const VICTIM_MAX_WINDOWS: usize = 4_096;
 
@@ -242,6 +284,14 @@ fn victim(tp: u64, windows: u64) {
             measured.len(),
             measured[measured.len() / 2]
         );
+    }
+    // Whatever a neighbour hoarded, this partition's own quota is still there.
+    match sys::thread_create(None, 0x1000, 0x2000, 1, 0) {
+        Ok(thread) => {
+            let _ = sys::thread_kill(thread);
+            println!("victim: created a thread");
+        }
+        Err(e) => println!("victim: cannot create a thread: {e:?}"),
     }
     println!("victim: done");
     #[allow(unsafe_code)]
