@@ -25,12 +25,7 @@ fn victim_summary(line: &str) -> Option<(u64, u64, u64)> {
 #[test]
 fn syscall_fuzz() {
     let o = boot("syscall_fuzz");
-    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
-    check(
-        &o,
-        o.line("fatal exception").is_none(),
-        "an exception in kernel mode",
-    );
+    kernel_held(&o);
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,
@@ -60,12 +55,7 @@ fn syscall_fuzz() {
 #[test]
 fn syscall_fuzz_root() {
     let o = boot("syscall_fuzz_root");
-    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
-    check(
-        &o,
-        o.line("fatal exception").is_none(),
-        "an exception in kernel mode",
-    );
+    kernel_held(&o);
     check(
         &o,
         o.line("fuzz: done: 1000000 calls").is_some(),
@@ -75,6 +65,16 @@ fn syscall_fuzz_root() {
         &o,
         o.succeeded(),
         "expected success exit (33): the fuzzer ends the run",
+    );
+}
+
+/// The kernel neither panicked nor took an exception in kernel mode.
+fn kernel_held(o: &xtask::qemu::Outcome) {
+    check(o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    check(
+        o,
+        o.line("fatal exception").is_none(),
+        "an exception in kernel mode",
     );
 }
 
@@ -114,7 +114,7 @@ fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64, bound_ns: u64
 #[test]
 fn attack_floods() {
     let o = boot("attack_floods");
-    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    kernel_held(&o);
     check(
         &o,
         o.succeeded(),
@@ -165,7 +165,7 @@ fn attack_floods() {
 #[test]
 fn attack_partitions() {
     let o = boot("attack_partitions");
-    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    kernel_held(&o);
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,

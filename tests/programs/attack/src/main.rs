@@ -39,8 +39,8 @@ use core::sync::atomic::{AtomicUsize, Ordering};
 use user_rt::abi::boot::KERNEL_BASE;
 use user_rt::abi::ipc::MessageTag;
 use user_rt::abi::syscall::{
-    Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_MAJOR_FRAME, PageRights, ROOT_INFO_BASE,
-    ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
+    Abilities, Call, DEBUG_WRITE_MAX, Error, MAP_MAX_PAGES, MAX_MAJOR_FRAME, PageRights,
+    ROOT_INFO_BASE, ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
 };
 use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
@@ -448,7 +448,7 @@ fn tame(call: u64, a: &mut [u64; 6], me: (u64, u64), root: bool) -> bool {
     let small_timeout = |t: u64| t % 50_000;
     let own = |task: u64| task == 0 || task == own_task;
     let touches_self = |address: u64, pages: u64| {
-        let end = address.saturating_add(pages.min(512).saturating_mul(PAGE));
+        let end = address.saturating_add(pages.min(MAP_MAX_PAGES).saturating_mul(PAGE));
         let scratch = scratch();
         let inside_scratch = address >= scratch.start && end <= scratch.end;
         let image = end > USER_MIN && address < DATA_BASE && !inside_scratch;
@@ -467,11 +467,14 @@ fn tame(call: u64, a: &mut [u64; 6], me: (u64, u64), root: bool) -> bool {
             a[0] = sys::clock() + small_timeout(a[0]);
             true
         }
-        Some(Call::Send | Call::Receive | Call::Call | Call::ReplyWait) => {
-            a[1] = small_timeout(a[1]);
-            true
-        }
-        Some(Call::NotifyWait | Call::IrqWait) => {
+        Some(
+            Call::Send
+            | Call::Receive
+            | Call::Call
+            | Call::ReplyWait
+            | Call::NotifyWait
+            | Call::IrqWait,
+        ) => {
             a[1] = small_timeout(a[1]);
             true
         }
