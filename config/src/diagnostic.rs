@@ -68,14 +68,7 @@ impl Diagnostic {
                 }
             };
         }
-        let (line, column) = line_column(source, at);
-        Diagnostic {
-            file: file.to_string(),
-            line,
-            column,
-            key_path: path.0,
-            message: message.to_string(),
-        }
+        Reporter::new(file, source).at(at, &path, message)
     }
 }
 
