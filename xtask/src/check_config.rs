@@ -79,6 +79,29 @@ pub fn load(path: &Path) -> Result<config::System> {
     }
 }
 
+/// The files of the partitions of the validated description `path` (`described`, decoded:
+/// `system`): each image the partitions name, built (by name), and each PLC package (by
+/// partition), after [`check_budgets`] found that every partition fits at boot.
+#[allow(clippy::type_complexity)]
+pub fn partition_files(
+    path: &Path,
+    described: &config::System,
+    system: &config::SystemView,
+) -> Result<(Vec<(String, PathBuf)>, Vec<(String, Vec<u8>)>)> {
+    let mut images: Vec<String> = described
+        .partitions
+        .iter()
+        .map(|p| p.image.clone())
+        .collect();
+    images.sort();
+    images.dedup();
+    let paths = crate::artifacts::build_user_programs(&images)?;
+    let built: Vec<(String, PathBuf)> = images.into_iter().zip(paths).collect();
+    let packages = crate::plc::packages(described)?;
+    check_budgets(path, system, &built, &packages)?;
+    Ok((built, packages))
+}
+
 /// Checks that every partition of the validated description `path` (decoded: `system`) can
 /// start: its image (`images`: built user programs by name), data entry (`packages`: by
 /// partition name) and stack fit in its `memory`, and its page tables in its
@@ -141,11 +164,25 @@ pub fn check_budgets(
         return Ok(());
     }
     let lines: Vec<String> = problems.iter().map(|d| d.to_string()).collect();
-    bail!(
+    Err(BudgetShortfall(format!(
         "configuration {name} cannot boot: syssw would refuse it\n{}",
         lines.join("\n")
-    )
+    ))
+    .into())
 }
+
+/// The error of [`check_budgets`]: partitions that do not fit at boot (one diagnostic a
+/// line), told apart from failures to build.
+#[derive(Debug)]
+pub struct BudgetShortfall(String);
+
+impl std::fmt::Display for BudgetShortfall {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.0)
+    }
+}
+
+impl std::error::Error for BudgetShortfall {}
 
 /// Warnings of a valid description on stderr, `warning: file:line:col: key: reason`.
 fn print_warnings(warnings: &[config::Diagnostic]) {
@@ -183,19 +220,13 @@ pub fn run(file: &Path, any_image: bool) -> Result<bool> {
             };
             // The budget syssw computes at boot needs the images (and PLC packages): build
             // them as the image builder does.
-            if !any_image {
-                let mut images: Vec<String> =
-                    system.partitions.iter().map(|p| p.image.clone()).collect();
-                images.sort();
-                images.dedup();
-                let paths = crate::artifacts::build_user_programs(&images)?;
-                let built: Vec<(String, PathBuf)> = images.into_iter().zip(paths).collect();
-                let packages = crate::plc::packages(&system)?;
-                if let Err(e) = check_budgets(file, &view, &built, &packages) {
-                    eprintln!("{e:#}");
-                    eprintln!("config {name}: does not fit at boot");
-                    return Ok(false);
-                }
+            if !any_image && let Err(e) = partition_files(file, &system, &view) {
+                let Some(shortfall) = e.downcast_ref::<BudgetShortfall>() else {
+                    return Err(e);
+                };
+                eprintln!("{shortfall}");
+                eprintln!("config {name}: does not fit at boot");
+                return Ok(false);
             }
             println!(
                 "config {name}: ok ({} partitions, {} windows, {} channels)",

@@ -61,13 +61,7 @@ pub fn standard_entries(artifacts: &Artifacts, config: Option<&Path>) -> Result<
         let described = crate::check_config::load(config)?;
         let blob = config::binary::encode(&described);
         let system = config::decode(&blob).map_err(|e| anyhow!("{e}"))?;
-        let mut images: Vec<String> = system.partitions().map(|p| p.image.to_string()).collect();
-        images.sort();
-        images.dedup();
-        let paths = crate::artifacts::build_user_programs(&images)?;
-        let packages = crate::plc::packages(&described)?;
-        let built: Vec<(String, PathBuf)> = images.iter().cloned().zip(paths).collect();
-        crate::check_config::check_budgets(config, &system, &built, &packages)?;
+        let (built, packages) = crate::check_config::partition_files(config, &described, &system)?;
         for (image, path) in built {
             entries.push(ImageEntry::File {
                 name: format!("partition/{image}"),

@@ -244,6 +244,50 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     cargo_test(&args)
 }
 
+/// Assembles the ESP of a benchmark system under `dir` (the root task of `artifacts`, with
+/// the description `config` if any), boots it with `timeout` and returns what it printed;
+/// an error unless it ended with success.
+fn boot_bench_system(
+    qemu: &tools::Qemu,
+    artifacts: &artifacts::Artifacts,
+    config: Option<&std::path::Path>,
+    dir: &std::path::Path,
+    what: &str,
+    deterministic_time: bool,
+    timeout: Duration,
+) -> Result<qemu::Outcome> {
+    let esp_dir = esp::assemble(
+        &dir.join("esp"),
+        artifacts,
+        &esp::standard_entries(artifacts, config)?,
+    )?;
+    eprintln!(
+        "xtask: booting the {what}{}",
+        if deterministic_time {
+            " (virtual time)"
+        } else {
+            ""
+        }
+    );
+    let outcome = qemu::run(
+        qemu,
+        &RunOptions {
+            esp: esp_dir,
+            timeout: Some(timeout),
+            echo: false,
+            work_dir: dir.join("state"),
+            deterministic_time,
+        },
+    )?;
+    if !outcome.succeeded() {
+        bail!(
+            "the {what} did not finish cleanly\n{}",
+            outcome.transcript()
+        );
+    }
+    Ok(outcome)
+}
+
 /// The attack systems whose victim measures its window starts (tests/configs), with the
 /// name of their metric: `window_lateness_hostile_<name>`.
 const HOSTILE_SYSTEMS: [(&str, &str); 3] = [
@@ -263,30 +307,23 @@ fn hostile_lateness(
     let mut metrics = Vec::new();
     for (config, name) in HOSTILE_SYSTEMS {
         let config_path = xtask::workspace_root().join(format!("tests/configs/{config}.toml"));
-        let esp_dir = esp::assemble(
-            &dir.join(config).join("esp"),
-            system,
-            &esp::standard_entries(system, Some(&config_path))?,
-        )?;
-        eprintln!("xtask: booting the attack system {config} (virtual time)");
-        let outcome = qemu::run(
+        let outcome = boot_bench_system(
             qemu,
-            &RunOptions {
-                esp: esp_dir,
-                timeout: Some(Duration::from_secs(900)),
-                echo: false,
-                work_dir: dir.join(config).join("state"),
-                deterministic_time: true,
-            },
+            system,
+            Some(&config_path),
+            &dir.join(config),
+            &format!("attack system {config}"),
+            true,
+            Duration::from_secs(900),
         )?;
         let metric = outcome
             .lines
             .iter()
             .find_map(|l| xtask::bench::parse_victim_lateness(l, name));
         match metric {
-            Some(m) if outcome.succeeded() => metrics.push(m),
-            _ => bail!(
-                "the attack system {config} did not finish cleanly\n{}",
+            Some(m) => metrics.push(m),
+            None => bail!(
+                "the attack system {config} printed no victim lateness\n{}",
                 outcome.transcript()
             ),
         }
@@ -318,34 +355,17 @@ fn bench(deterministic_time: bool) -> Result<bool> {
         ("kernel", &kernel_bench, None),
         ("ports", &system, Some(ports_config.as_path())),
     ] {
-        let esp_dir = esp::assemble(
-            &dir.join(name).join("esp"),
-            artifacts,
-            &esp::standard_entries(artifacts, config)?,
-        )?;
-        eprintln!("xtask: booting the {name} benchmark system");
-        let outcome = qemu::run(
+        let outcome = boot_bench_system(
             &qemu,
-            &RunOptions {
-                esp: esp_dir,
-                // Virtual time runs slower than real time under TCG: 10 s of window
-                // measurements take minutes.
-                timeout: Some(Duration::from_secs(if deterministic_time {
-                    1800
-                } else {
-                    300
-                })),
-                echo: false,
-                work_dir: dir.join(name).join("state"),
-                deterministic_time,
-            },
+            artifacts,
+            config,
+            &dir.join(name),
+            &format!("{name} benchmark system"),
+            deterministic_time,
+            // Virtual time runs slower than real time under TCG: 10 s of window
+            // measurements take minutes.
+            Duration::from_secs(if deterministic_time { 1800 } else { 300 }),
         )?;
-        if !outcome.succeeded() {
-            bail!(
-                "the {name} benchmark system did not finish cleanly\n{}",
-                outcome.transcript()
-            );
-        }
         metrics.extend(
             outcome
                 .lines
