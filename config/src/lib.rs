@@ -66,6 +66,7 @@
 //! plc.watch = ["level", "tank.pid.integral"]
 //! plc.online = { request = "cmd", response = "reply", access = "monitor" }
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
+//! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -130,7 +131,12 @@
 //! it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
 //! they take when a task faults and the outputs go safe (a number or a boolean fitting the
 //! variable's type; checked when the program is compiled); without one they go to
-//! zero/FALSE. `plc.watch` names variables (globals by name, program variables as `instance.var`) the
+//! zero/FALSE. `plc.deadline` gives IEC tasks a time deadline (CODESYS's task watchdog
+//! time), counted from the task's release (its window start), between 100 us and one hour;
+//! a task still running then is stopped with the trap DEADLINE (outputs safe, reported as
+//! DEADLINE_MISSED, like the instruction-budget WATCHDOG that watches every task). Keys are
+//! TASK names (all programs the TASK runs) or `TASK.instance`, case-insensitive, checked
+//! against the compiled program. `plc.watch` names variables (globals by name, program variables as `instance.var`) the
 //! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
 //! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
 //! the partition windows (checked when the program is compiled).

@@ -18,6 +18,9 @@ pub const MAX_WINDOWS: usize = syscall::MAX_WINDOWS as usize;
 pub const MAX_MAJOR_FRAME: u64 = syscall::MAX_MAJOR_FRAME;
 /// Shortest window and major frame (ns; the kernel's limit, 10 us).
 pub const MIN_WINDOW: u64 = syscall::MIN_WINDOW;
+/// Shortest PLC task deadline (`plc.deadline`, ns): the runtime checks the clock every
+/// thousand VM instructions, a few microseconds apart.
+pub const MIN_TASK_DEADLINE: u64 = 100_000;
 /// Number of time partitions; 0 is the background, windows use 1..TIME_PARTITIONS.
 pub const TIME_PARTITIONS: u8 = syscall::TIME_PARTITIONS as u8;
 /// Most shared-memory segments.

@@ -97,6 +97,8 @@ pub struct Plc {
     pub online: Option<Spanned<PlcOnline>>,
     #[serde(default)]
     pub safe: Named<PlcValue>,
+    #[serde(default)]
+    pub deadline: Named<Scalar>,
 }
 
 /// A value written in the description (`plc.safe`).

@@ -78,6 +78,9 @@ pub struct Plc {
     /// Safe values of `%Q` variables by name (checked against the program when it is
     /// compiled); the others go to zero/FALSE.
     pub safe: Vec<(String, PlcValue)>,
+    /// Task deadlines by IEC TASK name (ns from the task's release; checked against the
+    /// program when it is compiled); the other tasks' deadline is their interval.
+    pub deadlines: Vec<(String, u64)>,
 }
 
 /// A value written in the description.

@@ -631,6 +631,27 @@ impl Validator<'_, '_> {
                 (name.get_ref().clone(), value)
             })
             .collect();
+        let mut deadlines = Vec::new();
+        for (task, value) in &raw.deadline {
+            let here = path.key("deadline").key(task.get_ref());
+            let Some(ns) = self.duration(value, &here) else {
+                continue;
+            };
+            if !(MIN_TASK_DEADLINE..=MAX_MAJOR_FRAME).contains(&ns) {
+                self.error(
+                    start(value),
+                    &here,
+                    format!(
+                        "a task deadline must lie between {} and {} (it is {})",
+                        Duration(MIN_TASK_DEADLINE),
+                        Duration(MAX_MAJOR_FRAME),
+                        Duration(ns)
+                    ),
+                );
+                continue;
+            }
+            deadlines.push((task.get_ref().clone(), ns));
+        }
         (self.r.diagnostics.len() == before).then_some(Plc {
             program,
             inputs,
@@ -638,6 +659,7 @@ impl Validator<'_, '_> {
             watch,
             online,
             safe,
+            deadlines,
         })
     }
 

@@ -255,3 +255,50 @@ plc.online = { request = \"cmd\", response = \"reply\", access = \"monitor\" }
         "size = 256",
     );
 }
+
+#[test]
+fn task_deadlines() {
+    let base = (
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    );
+    let with = |deadline: &str| {
+        plc(&[
+            base,
+            (
+                "plc.inputs.in",
+                &format!("plc.deadline = {{ {deadline} }}\nplc.inputs.in"),
+            ),
+        ])
+    };
+    let system = load_ok(&with("fast = \"2ms\", Slow = \"150us\""));
+    let p = system.partitions[1].plc.as_ref().expect("plc keys");
+    assert_eq!(
+        p.deadlines,
+        [
+            ("Slow".to_string(), 150_000),
+            ("fast".to_string(), 2_000_000)
+        ]
+    );
+    expect_some(
+        &with("fast = \"50us\""),
+        "\"50us\"",
+        0,
+        "partitions.b.plc.deadline.fast",
+        "a task deadline must lie between 100us and 3600s (it is 50us)",
+    );
+    expect_some(
+        &with("fast = 5"),
+        "5 }",
+        0,
+        "partitions.b.plc.deadline.fast",
+        "invalid duration 5",
+    );
+    expect_some(
+        &with("fast = \"7200s\""),
+        "\"7200s\"",
+        0,
+        "partitions.b.plc.deadline.fast",
+        "a task deadline must lie between",
+    );
+}

@@ -166,7 +166,7 @@ fn plc_trap() {
         );
         check(
             &o,
-            o.line(&format!("partition={partition} error=application_error"))
+            o.line(&format!("partition={partition} error=numeric_error"))
                 .is_some_and(|l| l.contains("DIVISION_BY_ZERO\\x20at\\x20plc/trap.st:15:3")),
             &format!("{partition}: the health monitor did not hear of the trap"),
         );
@@ -221,31 +221,10 @@ fn plc_trap() {
         }),
         "warm: the RETAIN counter did not survive a restart",
     );
-    // The endless loop: the watchdog stops SPIN with its output safe, BEAT goes on, and the
-    // other PLCs kept their windows (their watch lines go on to the end).
-    check(
-        &o,
-        o.line("[loop] plc: task SPIN.s stopped: WATCHDOG")
-            .is_some()
-            && o.line("partition=loop error=application_error")
-                .is_some_and(|l| l.contains("WATCHDOG")),
-        "loop: the watchdog did not stop the endless loop, or the health monitor did not hear",
-    );
-    let looping = watch_lines(&o.lines, "loop");
-    let late: Vec<_> = looping.iter().filter(|(t, _)| *t >= 5_000).collect();
-    check(
-        &o,
-        late.len() >= 10
-            && late.iter().all(|(_, v)| value(v, "s.out") == Some(0))
-            && late
-                .windows(2)
-                .all(|w| value(&w[1].1, "b.beats") > value(&w[0].1, "b.beats")),
-        "loop: SPIN's output is not safe or BEAT stopped cycling",
-    );
     check(
         &o,
         ignore.last().is_some_and(|(t, _)| *t >= 30_000),
-        "the other PLCs did not keep their windows to the end",
+        "the PLC that ignores the trap did not keep its windows to the end",
     );
     // cold_restart: both counters restart.
     check(
@@ -402,5 +381,127 @@ fn plc_jitter() {
         &o,
         hog.is_some_and(|ms| ms > 1_500),
         &format!("the background hog's CPU time at 3 s: {hog:?} ms"),
+    );
+}
+
+#[test]
+fn plc_watchdog() {
+    let o = boot("plc_watchdog");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the stopwatch ends the run",
+    );
+    check(
+        &o,
+        o.line("[loop] plc: task HANG.h interval=10ms every=5 priority=2 deadline=3000us")
+            .is_some()
+            && o.line("[loop] plc: task SPIN.s interval=10ms every=5 priority=3 deadline=none")
+                .is_some(),
+        "the loop PLC's tasks do not show their deadlines",
+    );
+    // Each endless loop is stopped by its watchdog inside the loop's lines, and reported.
+    for (task, trap, lines) in [
+        ("HANG.h", "DEADLINE", 20..=22),
+        ("SPIN.s", "WATCHDOG", 10..=12),
+    ] {
+        let stopped = o.line(&format!(
+            "[loop] plc: task {task} stopped: {trap} at plc/watchdog.st:"
+        ));
+        let line = stopped
+            .and_then(|l| l.split("watchdog.st:").nth(1))
+            .and_then(|r| r.split(':').next())
+            .and_then(|n| n.parse::<u32>().ok());
+        check(
+            &o,
+            stopped.is_some_and(|l| l.ends_with("; outputs safe"))
+                && line.is_some_and(|n| lines.contains(&n)),
+            &format!(
+                "{task}: no `{trap} at plc/watchdog.st:<line of the loop>:..; outputs safe` line"
+            ),
+        );
+        check(
+            &o,
+            o.lines.iter().any(|l| {
+                l.contains("partition=loop error=deadline_missed")
+                    && l.contains(&format!("{task}:\\x20{trap}"))
+                    && l.contains("action=ignore")
+            }),
+            &format!("{task}: the health monitor did not hear of the {trap} as deadline_missed"),
+        );
+    }
+    // After both stops: their outputs are safe, their counters stand still, BEAT goes on.
+    let looping = watch_lines(&o.lines, "loop");
+    let late: Vec<_> = looping.iter().filter(|(t, _)| *t >= 3_000).collect();
+    check(
+        &o,
+        late.len() >= 3
+            && late.iter().all(|(_, v)| {
+                value(v, "s.out") == Some(0)
+                    && value(v, "h.out") == Some(0)
+                    && value(v, "h.n") == Some(21)
+                    && value(v, "s.n") == Some(51)
+            })
+            && late
+                .windows(2)
+                .all(|w| value(&w[1].1, "b.beats") > value(&w[0].1, "b.beats")),
+        &format!("loop: stopped tasks not safe and still, or BEAT stopped cycling: {late:?}"),
+    );
+    // The tank PLC kept its windows: one cycle per 10 ms, no overrun, no fault.
+    let stats: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("[plc] plc: t=") && l.contains(" task="))
+        .collect();
+    check(
+        &o,
+        stats.len() >= 5,
+        &format!("{} statistics lines of the tank PLC", stats.len()),
+    );
+    for line in &stats {
+        let number = |key: &str| {
+            line.split(key)
+                .nth(1)
+                .and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next())
+                .and_then(|n| n.parse::<u64>().ok())
+                .unwrap_or(0)
+        };
+        let (t, cycles) = (number("plc: t="), number("cycles="));
+        check(
+            &o,
+            cycles + 2 >= t / 10 && cycles <= t / 10 + 2 && line.contains("overruns=0 faults=0"),
+            &format!("{line}: the tank PLC missed cycles while the other PLC looped"),
+        );
+    }
+    // The plant kept its windows: a status line every 500 ms simulated, none missing, and
+    // the tank PLC's valve command never went stale after the start.
+    let status: Vec<Status> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("plant: t="))
+        .filter_map(|l| Status::parse(l))
+        .filter(|s| s.t_ms >= 500)
+        .collect();
+    check(
+        &o,
+        status.len() >= 12
+            && status
+                .iter()
+                .enumerate()
+                .all(|(i, s)| s.t_ms == 500 * (i as u64 + 1) && s.stale == status[0].stale),
+        &format!("the plant's status lines have gaps or stale valves: {status:?}"),
+    );
+    // The background hog got the time nobody else used.
+    let hog = o.line("hog: spinning at 5 s").and_then(|l| {
+        l.split("CPU time ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|ms| ms.parse::<u64>().ok())
+    });
+    check(
+        &o,
+        hog.is_some_and(|ms| ms > 1_000),
+        &format!("the background hog's CPU time at 5 s: {hog:?} ms"),
     );
 }

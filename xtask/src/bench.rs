@@ -1,7 +1,9 @@
 //! `cargo xtask bench`: boots the kernel benchmark system, the port benchmark system
-//! (`tests/configs/bench_ports.toml`) and the attack systems whose victim measures its
-//! window starts on virtual time (`window_lateness_hostile*`), runs the host benchmarks,
-//! prints one line per metric and writes `target/bench/report.json`.
+//! (`tests/configs/bench_ports.toml`), the soft-PLC benchmark system on virtual time
+//! (`tests/configs/bench_plc.toml`: `plc_release_jitter`, `plc_cycle_overhead`,
+//! `plc_online_read`) and the attack systems whose victim measures its window starts on
+//! virtual time (`window_lateness_hostile*`), runs the host benchmarks, prints one line per
+//! metric and writes `target/bench/report.json`.
 //!
 //! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio> samples=<n>`.
 
@@ -68,6 +70,37 @@ pub fn parse_victim_lateness(line: &str, name: &str) -> Option<Metric> {
         unit: "ns".to_string(),
         samples: field("windows")?,
     })
+}
+
+/// `plc_release_jitter` and `plc_cycle_overhead` (ns) from a soft-PLC statistics line
+/// (`plc: t=<ms>ms scan releases=<n> lateness_ns=<min>/<median>/<max>
+/// overhead_ns=<min>/<median>/<max>`, partitions/softplc/runtime/src/main.rs).
+pub fn parse_plc_scan(line: &str) -> Option<[Metric; 2]> {
+    let rest = &line[line.find(" scan releases=")? + " scan releases=".len()..];
+    let mut words = rest.split_whitespace();
+    let releases: u64 = words.next()?.parse().ok()?;
+    let triple = |word: Option<&str>, key: &str, name: &str| {
+        let values: Vec<f64> = word?
+            .strip_prefix(key)?
+            .split('/')
+            .map(|v| v.parse().ok())
+            .collect::<Option<_>>()?;
+        let [min, median, max] = values[..] else {
+            return None;
+        };
+        Some(Metric {
+            name: name.to_string(),
+            median,
+            min,
+            max,
+            unit: "ns".to_string(),
+            samples: releases,
+        })
+    };
+    Some([
+        triple(words.next(), "lateness_ns=", "plc_release_jitter")?,
+        triple(words.next(), "overhead_ns=", "plc_cycle_overhead")?,
+    ])
 }
 
 pub fn format_line(m: &Metric) -> String {
@@ -149,6 +182,23 @@ mod tests {
         assert_eq!((m.min, m.median, m.max), (1838.0, 2850.0, 44559.0));
         assert_eq!((m.unit.as_str(), m.samples), ("ns", 999));
         assert!(parse_victim_lateness("victim: windows=100 missed=0", "x").is_none());
+    }
+
+    #[test]
+    fn reads_the_plc_scan_statistics() {
+        let line = "[  12.000001] [plc] plc: t=12000ms scan releases=11999 lateness_ns=10900/11500/13100 overhead_ns=4000/4125/9000";
+        let [jitter, overhead] = parse_plc_scan(line).unwrap();
+        assert_eq!(
+            (jitter.name.as_str(), jitter.min, jitter.median, jitter.max),
+            ("plc_release_jitter", 10_900.0, 11_500.0, 13_100.0)
+        );
+        assert_eq!((jitter.samples, jitter.unit.as_str()), (11_999, "ns"));
+        assert_eq!(
+            (overhead.name.as_str(), overhead.median),
+            ("plc_cycle_overhead", 4_125.0)
+        );
+        assert!(parse_plc_scan("[plc] plc: t=1ms scan releases=3 lateness_ns=1/2").is_none());
+        assert!(parse_plc_scan("[plc] plc: t=1ms watch x=1").is_none());
     }
 
     #[test]

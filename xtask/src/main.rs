@@ -40,8 +40,8 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
-    /// Run the benchmarks (kernel under QEMU, soft-PLC VM on the host); writes
-    /// target/bench/report.json.
+    /// Run the benchmarks (kernel, ports, soft-PLC and attack systems under QEMU, soft-PLC
+    /// VM on the host); writes target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
         /// counts then follow the instructions executed, not the host's load, so two
@@ -341,6 +341,43 @@ fn hostile_lateness(
     Ok(metrics)
 }
 
+/// Boots the soft-PLC benchmark system (tests/configs/bench_plc.toml) on virtual time (the
+/// release lateness is the kernel's and the runtime's, not the host's) and reads the PLC's
+/// last statistics line (`plc_release_jitter`, `plc_cycle_overhead` over all its releases)
+/// and the client's `plc_online_read`.
+fn plc_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+) -> Result<Vec<xtask::bench::Metric>> {
+    let config = xtask::workspace_root().join("tests/configs/bench_plc.toml");
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir.join("plc"),
+        "soft-PLC benchmark system",
+        true,
+        Duration::from_secs(1800),
+    )?;
+    let scan = outcome
+        .lines
+        .iter()
+        .rev()
+        .find_map(|l| xtask::bench::parse_plc_scan(l));
+    let read = outcome
+        .lines
+        .iter()
+        .find_map(|l| xtask::bench::parse_line(l));
+    match (scan, read) {
+        (Some(scan), Some(read)) => Ok(scan.into_iter().chain([read]).collect()),
+        _ => bail!(
+            "the soft-PLC benchmark system printed no scan statistics or no plc_online_read\n{}",
+            outcome.transcript()
+        ),
+    }
+}
+
 fn bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
@@ -373,6 +410,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
                 .filter_map(|l| xtask::bench::parse_line(l)),
         );
     }
+    metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);

@@ -81,9 +81,28 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             .map(|(name, value)| safe_value(&image, name, *value))
             .collect::<Result<Vec<_>, String>>()
             .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
+        let deadlines = plc
+            .deadlines
+            .iter()
+            .map(|(task, ns)| {
+                let known = (0..image.task_count())
+                    .filter_map(|i| image.task(i))
+                    .any(|t| softplc::scan::names_task(task, t.name));
+                if !known {
+                    bail!(
+                        "partition {}: plc.deadline names `{task}`, which is not a TASK of its program",
+                        p.name
+                    );
+                }
+                Ok(package::TaskDeadline {
+                    task,
+                    deadline_ns: *ns,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
         out.push((
             p.name.clone(),
-            package::encode(&ports, &compiled.image, &watch, online, &safe),
+            package::encode(&ports, &compiled.image, &watch, online, &safe, &deadlines),
         ));
     }
     Ok(out)

@@ -55,6 +55,20 @@ pub fn error_code(code: ApexErrorCode) -> Option<ErrorCode> {
     ErrorCode::from_u64(code as u64)
 }
 
+/// The APEX error code of a protocol one (both ARINC-numbered).
+pub fn apex_error_code(code: ErrorCode) -> ApexErrorCode {
+    match code {
+        ErrorCode::DeadlineMissed => ApexErrorCode::DeadlineMissed,
+        ErrorCode::ApplicationError => ApexErrorCode::ApplicationError,
+        ErrorCode::NumericError => ApexErrorCode::NumericError,
+        ErrorCode::IllegalRequest => ApexErrorCode::IllegalRequest,
+        ErrorCode::StackOverflow => ApexErrorCode::StackOverflow,
+        ErrorCode::MemoryViolation => ApexErrorCode::MemoryViolation,
+        ErrorCode::HardwareFault => ApexErrorCode::HardwareFault,
+        ErrorCode::PowerFail => ApexErrorCode::PowerFail,
+    }
+}
+
 /// The bytes of an ARINC name: up to the first NUL, at most 32.
 pub fn name_bytes(name: &ApexName) -> &[u8] {
     let end = name.iter().position(|&b| b == 0).unwrap_or(name.len());
@@ -106,6 +120,9 @@ mod tests {
             error_code(ApexErrorCode::PowerFail),
             Some(ErrorCode::PowerFail)
         );
+        for code in ErrorCode::ALL {
+            assert_eq!(error_code(apex_error_code(code)), Some(code));
+        }
     }
 
     #[test]

@@ -6,13 +6,21 @@
 //!
 //! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
 //! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
-//! - `plc: task <name> interval=<ms>ms every=<n> priority=<p>` per task, at start;
+//! - `plc: task <name> interval=<ms>ms every=<n> priority=<p> deadline=<us>us|none` per
+//!   task, at start;
 //! - `plc: t=<ms>ms task=<name> cycles=<n> exec_us=<last>/<min>/<mean>/<max>
 //!   jitter_us=<last>/<max> overruns=<n> faults=<n>` per task every [`STATS_EVERY_MS`];
+//! - `plc: t=<ms>ms scan releases=<n> lateness_ns=<min>/<median>/<max>
+//!   overhead_ns=<min>/<median>/<max>` with them: over all releases so far, the scan's start
+//!   after its window start and the runtime's own work per release besides the VM's
+//!   (`softplc::histogram`: medians to 0.5 us and 125 ns; what `cargo xtask bench` reports
+//!   as `plc_release_jitter` and `plc_cycle_overhead`);
 //! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
 //!   as IEC literals);
-//! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault,
-//!   raised to the health monitor as the application error `<name>: <TRAP> at
+//! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault
+//!   (a trap, the instruction budget WATCHDOG or the time DEADLINE), raised to the health
+//!   monitor as the error `softplc::scan::health_error` names (NUMERIC_ERROR,
+//!   DEADLINE_MISSED or APPLICATION_ERROR) with the detail `<name>: <TRAP> at
 //!   <file>:<line>:<col>` (files as the configuration names them);
 //! - `plc: warm restart: <n> RETAIN variable(s) kept, the rest initialised`;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
@@ -126,7 +134,9 @@ fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), Refusa
         return Err(Refusal::DataTooLarge(image.data_size()));
     }
     let period = period().as_nanos() as u64;
-    let schedule = Schedule::new(&image, period).map_err(Refusal::Tasks)?;
+    let schedule = Schedule::new(&image, period)
+        .map_err(Refusal::Tasks)?
+        .with_deadlines(&image, &package);
     Ok((package, verified, schedule))
 }
 
@@ -216,7 +226,8 @@ fn report_fault(image: &Image, task: usize, fault: &Fault) {
         .unwrap_or("")
         .trim_start_matches(": ");
     println!("plc: task {task_name} stopped: {what}; outputs safe");
-    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
+    let error = apex::codes::apex_error_code(softplc::scan::health_error(fault.trap));
+    let _ = apex::runtime::raise(error, apex::runtime::own_slot(), text.as_bytes());
 }
 
 extern "C" fn scan() {
@@ -298,6 +309,20 @@ extern "C" fn scan() {
                     s.max_jitter / 1000,
                     s.overruns,
                     s.faults
+                );
+            }
+            let (lateness, overhead) = (rt.lateness.summary(), rt.overhead.summary());
+            if let (Some(l), Some(o)) = (lateness, overhead) {
+                println!(
+                    "plc: t={}ms scan releases={} lateness_ns={}/{}/{} overhead_ns={}/{}/{}",
+                    (now - started) / 1_000_000,
+                    rt.releases,
+                    l.0,
+                    l.1,
+                    l.2,
+                    o.0,
+                    o.1,
+                    o.2
                 );
             }
             let mut line = text!("plc: t={}ms watch", (now - started) / 1_000_000);
@@ -397,12 +422,18 @@ impl PlcPartition {
         let period_ns = period().as_nanos() as u64;
         for &task in &schedule.order[..schedule.count] {
             if let Some(t) = image.task(task) {
+                let mut deadline = LineBuffer::default();
+                let _ = match schedule.deadline[task] {
+                    softplc::scan::NO_DEADLINE => write!(deadline, "none"),
+                    ns => write!(deadline, "{}us", ns / 1_000),
+                };
                 println!(
-                    "plc: task {} interval={}ms every={} priority={}",
+                    "plc: task {} interval={}ms every={} priority={} deadline={}",
                     t.name,
                     schedule.every[task] * period_ns / 1_000_000,
                     schedule.every[task],
-                    t.priority
+                    t.priority,
+                    deadline.as_str()
                 );
             }
         }

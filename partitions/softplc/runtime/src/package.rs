@@ -6,7 +6,7 @@
 //! ```text
 //! offset size
 //! 0      4    magic "WPKG"
-//! 4      2    version (= 1)
+//! 4      2    version (= 2)
 //! 6      2    port count N (at most MAX_PORTS)
 //! 8      4    program offset (from the package start)
 //! 12     4    program length
@@ -18,7 +18,9 @@
 //! 27     5    reserved (0)
 //! 32     4    safe-value list offset
 //! 36     4    safe-value list length
-//! 40     64*N port records:
+//! 40     4    task deadline list offset
+//! 44     4    task deadline list length
+//! 48     64*N port records:
 //!   0    32   name (UTF-8, zero padded)
 //!   32   1    kind (protocol::PortKind code: 1 sampling, 2 queuing)
 //!   33   1    direction (protocol::Direction code: 1 in, 2 out)
@@ -37,6 +39,9 @@
 //!             address), `width u8` (1, 2, 4 or 8 bytes), reserved (3 bytes, 0), `value u64`
 //!             (little-endian, the variable's bytes), used instead of zero/FALSE when a fault
 //!             sets the outputs safe
+//! ...         the task deadlines: 40-byte records `task name` (32 bytes, UTF-8, zero
+//!             padded: an IEC TASK of the program), `deadline u64` (ns from the task's
+//!             release, at least 1), replacing the default (the task's interval)
 //! ```
 //!
 //! The online ports carry the online protocol (`plc-online`) instead of process-image
@@ -54,11 +59,13 @@ use protocol::{Direction, PortKind};
 /// Package magic.
 pub const MAGIC: [u8; 4] = *b"WPKG";
 /// Format version.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Header bytes before the port records.
-pub const HEADER_LEN: usize = 40;
+pub const HEADER_LEN: usize = 48;
 /// Bytes of one safe-value record.
 pub const SAFE_RECORD: usize = 16;
+/// Bytes of one task-deadline record.
+pub const DEADLINE_RECORD: usize = NAME_LEN + 8;
 /// Online port fields without online access.
 pub const NO_ONLINE: u8 = u8::MAX;
 /// Bytes of one port record.
@@ -108,6 +115,9 @@ pub enum PackageError {
     /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
     /// on an output or above 7).
     BadPort(usize),
+    /// The task-deadline list lies outside the package, is ragged, or has a record with a
+    /// malformed name or a zero deadline.
+    BadDeadlines,
 }
 
 impl core::fmt::Display for PackageError {
@@ -126,6 +136,7 @@ impl core::fmt::Display for PackageError {
             Self::BadOnline => write!(f, "the online ports are not a queuing input and output"),
             Self::BadSafeValues => write!(f, "the safe-value list is malformed"),
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
+            Self::BadDeadlines => write!(f, "the task-deadline list is malformed"),
         }
     }
 }
@@ -151,6 +162,16 @@ pub struct Package<'a> {
     watch: &'a str,
     online: Option<Online>,
     safe: &'a [u8],
+    deadlines: &'a [u8],
+}
+
+/// A configured task deadline.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TaskDeadline<'a> {
+    /// The IEC TASK's name.
+    pub task: &'a str,
+    /// Time from the task's release by which its cycle must be done (ns).
+    pub deadline_ns: u64,
 }
 
 /// A `%Q` variable's value when the outputs go safe.
@@ -214,6 +235,14 @@ impl<'a> Package<'a> {
                 return Err(PackageError::BadSafeValues);
             }
         }
+        let deadlines = range(40)
+            .filter(|d| d.len() % DEADLINE_RECORD == 0)
+            .ok_or(PackageError::BadDeadlines)?;
+        for r in deadlines.chunks_exact(DEADLINE_RECORD) {
+            if name_field(&r[..NAME_LEN]).is_none() || u64_at(r, NAME_LEN) == 0 {
+                return Err(PackageError::BadDeadlines);
+            }
+        }
         let mut package = Package {
             bytes,
             ports: count as usize,
@@ -221,6 +250,7 @@ impl<'a> Package<'a> {
             watch,
             online: None,
             safe,
+            deadlines,
         };
         for i in 0..package.ports {
             package.decode_port(i).ok_or(PackageError::BadPort(i))?;
@@ -267,6 +297,18 @@ impl<'a> Package<'a> {
         })
     }
 
+    /// The configured task deadlines (tasks without one use their interval).
+    pub fn deadlines(&self) -> impl Iterator<Item = TaskDeadline<'a>> + 'a {
+        self.deadlines
+            .chunks_exact(DEADLINE_RECORD)
+            .filter_map(|r| {
+                Some(TaskDeadline {
+                    task: name_field(&r[..NAME_LEN])?,
+                    deadline_ns: u64_at(r, NAME_LEN),
+                })
+            })
+    }
+
     /// The names of the variables to log.
     pub fn watch(&self) -> impl Iterator<Item = &'a str> {
         self.watch.split('\n').filter(|n| !n.is_empty())
@@ -288,14 +330,7 @@ impl<'a> Package<'a> {
     fn decode_port(&self, i: usize) -> Option<PortMap<'a>> {
         let at = HEADER_LEN + i * PORT_RECORD;
         let r = self.bytes.get(at..at + PORT_RECORD)?;
-        let name_len = r[..NAME_LEN]
-            .iter()
-            .position(|&b| b == 0)
-            .unwrap_or(NAME_LEN);
-        let name = core::str::from_utf8(&r[..name_len]).ok()?;
-        if name.is_empty() || r[name_len..NAME_LEN].iter().any(|&b| b != 0) {
-            return None;
-        }
+        let name = name_field(&r[..NAME_LEN])?;
         let kind = PortKind::from_code(r[32])?;
         let direction = Direction::from_code(r[33])?;
         let size = u32_at(r, 36);
@@ -323,6 +358,22 @@ impl<'a> Package<'a> {
     }
 }
 
+/// A zero-padded name field: non-empty UTF-8, nothing after the padding starts.
+fn name_field(field: &[u8]) -> Option<&str> {
+    let len = field.iter().position(|&b| b == 0).unwrap_or(field.len());
+    let name = core::str::from_utf8(&field[..len]).ok()?;
+    (!name.is_empty() && field[len..].iter().all(|&b| b == 0)).then_some(name)
+}
+
+/// `name` as a zero-padded [`NAME_LEN`]-byte field (cut to fit).
+#[cfg(any(feature = "alloc", test))]
+fn put_name(out: &mut alloc::vec::Vec<u8>, name: &str) {
+    let mut field = [0u8; NAME_LEN];
+    let name = &name.as_bytes()[..name.len().min(NAME_LEN)];
+    field[..name.len()].copy_from_slice(name);
+    out.extend_from_slice(&field);
+}
+
 /// Writes a package (for the image builder). Names longer than [`NAME_LEN`] are cut.
 #[cfg(any(feature = "alloc", test))]
 pub fn encode(
@@ -331,6 +382,7 @@ pub fn encode(
     watch: &[&str],
     online: Option<Online>,
     safe: &[SafeValue],
+    deadlines: &[TaskDeadline],
 ) -> alloc::vec::Vec<u8> {
     let mut out = alloc::vec::Vec::new();
     let program_at = HEADER_LEN + ports.len() * PORT_RECORD;
@@ -350,6 +402,9 @@ pub fn encode(
     let safe_at = program_at + program.len() + watch.len();
     out.extend_from_slice(&(safe_at as u32).to_le_bytes());
     out.extend_from_slice(&((safe.len() * SAFE_RECORD) as u32).to_le_bytes());
+    let deadlines_at = safe_at + safe.len() * SAFE_RECORD;
+    out.extend_from_slice(&(deadlines_at as u32).to_le_bytes());
+    out.extend_from_slice(&((deadlines.len() * DEADLINE_RECORD) as u32).to_le_bytes());
     for p in ports {
         let mut r = [0u8; PORT_RECORD];
         let name = &p.name.as_bytes()[..p.name.len().min(NAME_LEN)];
@@ -371,6 +426,10 @@ pub fn encode(
         out.extend_from_slice(&s.address.to_le_bytes());
         out.extend_from_slice(&[s.width, 0, 0, 0]);
         out.extend_from_slice(&s.value.to_le_bytes());
+    }
+    for d in deadlines {
+        put_name(&mut out, d.task);
+        out.extend_from_slice(&d.deadline_ns.to_le_bytes());
     }
     out
 }
@@ -412,12 +471,17 @@ mod tests {
             width: 8,
             value: 0.5f64.to_bits(),
         };
+        let deadline = TaskDeadline {
+            task: "fast",
+            deadline_ns: 5_000_000,
+        };
         let bytes = encode(
             &[level(), valve()],
             b"PLCB...",
             &["tank.alarm", "x"],
             None,
             &[safe],
+            &[deadline],
         );
         let p = Package::parse(&bytes).unwrap();
         assert_eq!(
@@ -430,6 +494,7 @@ mod tests {
             ["tank.alarm", "x"]
         );
         assert_eq!(p.safe_values().collect::<alloc::vec::Vec<_>>(), [safe]);
+        assert_eq!(p.deadlines().collect::<alloc::vec::Vec<_>>(), [deadline]);
     }
 
     #[test]
@@ -443,6 +508,10 @@ mod tests {
                 address: 0,
                 width: 1,
                 value: 1,
+            }],
+            &[TaskDeadline {
+                task: "t",
+                deadline_ns: 1,
             }],
         );
         assert_eq!(
@@ -504,6 +573,23 @@ mod tests {
             Package::parse(&bad).unwrap_err(),
             PackageError::BadSafeValues
         );
+        // Deadlines: ragged, an empty name, a gap in the name, a zero deadline.
+        let mut bad = good.clone();
+        bad[44] = 39;
+        assert_eq!(
+            Package::parse(&bad).unwrap_err(),
+            PackageError::BadDeadlines
+        );
+        let deadline_at = u32::from_le_bytes(good[40..44].try_into().unwrap()) as usize;
+        for (at, v) in [(0, 0u8), (2, b'x'), (NAME_LEN, 0)] {
+            let mut bad = good.clone();
+            bad[deadline_at + at] = v;
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadDeadlines,
+                "deadline record byte {at} = {v}"
+            );
+        }
         // Record fields: kind, direction, size 0, beyond the area, a bit above 7, a
         // validity bit on an output, a name with a gap.
         let record = HEADER_LEN + PORT_RECORD;

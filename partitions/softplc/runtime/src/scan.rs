@@ -8,26 +8,34 @@
 //!    `INTERVAL / period` releases ([`Schedule`]; a program without a CONFIGURATION at
 //!    every release), an event task (`SINGLE`) at the release after its trigger BOOL went
 //!    from FALSE to TRUE (sampled once per release, after the inputs are in) — in priority
-//!    order (IEC: the lowest
-//!    PRIORITY number first; ties in declaration order), with the VM's instruction budget
-//!    as its watchdog;
+//!    order (IEC: the lowest PRIORITY number first; ties in declaration order), under two
+//!    watchdogs: the VM's instruction budget (trap WATCHDOG) and, where the configuration
+//!    gives the task one (`plc.deadline`, as CODESYS's task watchdog time), its time
+//!    deadline (trap DEADLINE: the release time plus the deadline);
 //! 3. copy the `%Q` and `%M` located variables out and send every output port's bytes.
 //!
-//! A task that traps (or exhausts its budget: `WATCHDOG`) is stopped: its program
-//! instance's located `%Q` variables and the global ones are set to their safe values
-//! (configured per variable, zero/FALSE otherwise; [`safe_outputs`]) in the same cycle,
-//! before the outputs are sent; the other tasks go on. The caller
-//! reports the fault to the health monitor.
+//! A task that traps (or exhausts its budget: `WATCHDOG`, or passes its deadline:
+//! `DEADLINE`) is stopped: its program instance's located `%Q` variables and the global
+//! ones are set to their safe values (configured per variable, zero/FALSE otherwise;
+//! [`safe_outputs`]) in the same cycle, before the outputs are sent; the other tasks go
+//! on. The caller reports the fault to the health monitor as the ARINC error
+//! [`health_error`] names.
 //!
 //! Per task the runtime keeps [`TaskStats`]: activations, execution time (last, min, max,
 //! mean), release jitter (scan start minus the release time, i.e. the window start),
-//! overruns (an execution longer than the task's interval) and faults.
+//! overruns (an execution longer than the task's interval) and faults. Per release it keeps
+//! histograms ([`Histogram`]) of the lateness (the same scan start minus release) and of
+//! its own overhead: the scan's time besides the VM's (ports, process image, statistics).
+//! The first release, which follows the partition's start rather than a window start, is
+//! left out of the lateness figures.
 
+use crate::histogram::Histogram;
 use crate::package::Package;
 use plc_vm::image::Image;
+use plc_vm::isa::Trap;
 use plc_vm::located::{self, Area, MAX_AREA};
 use plc_vm::vm::{Fault, Machine};
-use protocol::Direction;
+use protocol::{Direction, ErrorCode};
 
 /// Most IEC tasks (the verifier's limit).
 pub const MAX_TASKS: usize = plc_vm::verify::MAX_TASKS;
@@ -96,6 +104,33 @@ pub fn write_outputs(package: &Package, io: &mut impl PortIo, areas: &Areas) {
     }
 }
 
+/// The ARINC 653 error a task's trap is reported as: arithmetic faults are
+/// NUMERIC_ERROR, the two watchdogs (instruction budget, time deadline) DEADLINE_MISSED,
+/// every other programming error APPLICATION_ERROR.
+pub fn health_error(trap: Trap) -> ErrorCode {
+    match trap {
+        Trap::DivisionByZero | Trap::NumericError => ErrorCode::NumericError,
+        Trap::Watchdog | Trap::Deadline => ErrorCode::DeadlineMissed,
+        Trap::IndexOutOfBounds
+        | Trap::SubrangeViolation
+        | Trap::CallDepth
+        | Trap::StackOverflow
+        | Trap::InvalidAddress => ErrorCode::ApplicationError,
+    }
+}
+
+/// Whether a configured task name (`plc.deadline`) names the image's task `image_task`:
+/// image tasks are `<TASK>.<program instance>` (one per program the TASK runs), and the
+/// configuration may name the TASK (all its programs) or one of them, case-insensitively as
+/// IEC identifiers are.
+pub fn names_task(configured: &str, image_task: &str) -> bool {
+    let task = image_task.split('.').next().unwrap_or(image_task);
+    configured.eq_ignore_ascii_case(image_task) || configured.eq_ignore_ascii_case(task)
+}
+
+/// [`Schedule::deadline`] of a task without a time deadline.
+pub const NO_DEADLINE: u64 = u64::MAX;
+
 /// Why a program cannot run in this partition.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum PlanError {
@@ -108,11 +143,15 @@ pub enum PlanError {
 }
 
 /// When each task runs: a cyclic one every `every[i]` releases of the scan process, an
-/// event one (`every[i] == 0`) on a rising edge of the BOOL at `trigger[i]`.
+/// event one (`every[i] == 0`) on a rising edge of the BOOL at `trigger[i]`; by when it must
+/// be done: `deadline[i]` ns after its release ([`NO_DEADLINE`]: only the instruction
+/// budget watches it).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Schedule {
     pub every: [u64; MAX_TASKS],
     pub trigger: [Option<u32>; MAX_TASKS],
+    /// Time from the release to the task's deadline (ns), [`NO_DEADLINE`] without one.
+    pub deadline: [u64; MAX_TASKS],
     /// Tasks in the order they run within a release.
     pub order: [usize; MAX_TASKS],
     pub count: usize,
@@ -152,9 +191,21 @@ impl Schedule {
         Ok(Self {
             every,
             trigger,
+            deadline: [NO_DEADLINE; MAX_TASKS],
             order,
             count,
         })
+    }
+
+    /// The schedule with the package's configured task deadlines (see [`names_task`]).
+    pub fn with_deadlines(mut self, image: &Image, package: &Package) -> Self {
+        for (i, slot) in self.deadline.iter_mut().enumerate().take(self.count) {
+            let Some(task) = image.task(i) else { continue };
+            if let Some(d) = package.deadlines().find(|d| names_task(d.task, task.name)) {
+                *slot = d.deadline_ns;
+            }
+        }
+        self
     }
 
     /// Whether cyclic task `task` runs at release number `release` (0 = the first).
@@ -208,6 +259,10 @@ pub struct Runtime {
     /// Stopped tasks (after a fault) and the fault.
     pub stopped: [Option<Fault>; MAX_TASKS],
     pub releases: u64,
+    /// Release lateness: scan start minus release time (1 us buckets).
+    pub lateness: Histogram,
+    /// The scan's own work per release besides the VM's (250 ns buckets).
+    pub overhead: Histogram,
     period_ns: u64,
     /// Each event task's trigger as sampled at the previous release.
     armed: [bool; MAX_TASKS],
@@ -220,6 +275,8 @@ impl Runtime {
             stats: [TaskStats::default(); MAX_TASKS],
             stopped: [None; MAX_TASKS],
             releases: 0,
+            lateness: Histogram::new(1_000),
+            overhead: Histogram::new(250),
             period_ns,
             armed: [false; MAX_TASKS],
         }
@@ -251,6 +308,7 @@ impl Runtime {
         }
         located::copy_in(vars(), Area::Input, &areas.input, machine.data_mut());
         located::copy_in(vars(), Area::Memory, &areas.memory, machine.data_mut());
+        let mut in_vm = 0u64;
         let mut due = [false; MAX_TASKS];
         for &task in &self.schedule.order[..self.schedule.count] {
             due[task] = match self.schedule.trigger[task] {
@@ -268,8 +326,13 @@ impl Runtime {
                 continue;
             }
             let t0 = clock();
-            let result = machine.run_cycle(task, t0 as i64);
+            // Deadlines count from the release, as ARINC process deadlines do: a task that
+            // waited behind others has less of its time left.
+            let deadline = release_ns.saturating_add(self.schedule.deadline[task]);
+            let timed = self.schedule.deadline[task] != NO_DEADLINE;
+            let result = machine.run_cycle_until(task, t0 as i64, || timed && clock() > deadline);
             let exec = clock().saturating_sub(t0);
+            in_vm += exec;
             // An event task has no interval: it overruns when it outlasts the period.
             let interval = self.schedule.every[task]
                 .max(1)
@@ -288,6 +351,11 @@ impl Runtime {
         located::copy_out(vars(), Area::Output, machine.data(), &mut areas.output);
         located::copy_out(vars(), Area::Memory, machine.data(), &mut areas.memory);
         write_outputs(package, io, areas);
+        if self.releases > 0 {
+            self.lateness.record(jitter);
+        }
+        self.overhead
+            .record(clock().saturating_sub(start).saturating_sub(in_vm));
         self.releases += 1;
     }
 }

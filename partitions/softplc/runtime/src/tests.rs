@@ -70,15 +70,29 @@ impl PortIo for Wires {
 struct Plc {
     bytes: Vec<u8>,
     data: Vec<u8>,
+    /// How far the clock advances at each reading (ns).
+    tick: u64,
 }
 
 impl Plc {
     fn new(source: &str, ports: &[PortMap]) -> Self {
+        Self::with_deadlines(source, ports, &[])
+    }
+
+    fn with_deadlines(
+        source: &str,
+        ports: &[PortMap],
+        deadlines: &[package::TaskDeadline],
+    ) -> Self {
         let program = compile(source);
-        let bytes = package::encode(ports, &program, &[], None, &[]);
+        let bytes = package::encode(ports, &program, &[], None, &[], deadlines);
         let image = Image::parse(Package::parse(&bytes).unwrap().program()).unwrap();
         let data = vec![0u8; image.data_size() as usize];
-        Self { bytes, data }
+        Self {
+            bytes,
+            data,
+            tick: 1_000,
+        }
     }
 
     fn run(
@@ -103,8 +117,12 @@ impl Plc {
             },
         )
         .unwrap();
-        let mut rt = Runtime::new(Schedule::new(&image, PERIOD).unwrap(), PERIOD);
+        let schedule = Schedule::new(&image, PERIOD)
+            .unwrap()
+            .with_deadlines(&image, &package);
+        let mut rt = Runtime::new(schedule, PERIOD);
         let mut now = 0u64;
+        let tick = self.tick;
         for r in 0..releases {
             let release = r * PERIOD;
             now = now.max(release + 3_000);
@@ -115,7 +133,7 @@ impl Plc {
                 wires,
                 areas,
                 || {
-                    now += 1_000;
+                    now += tick;
                     now
                 },
                 release,
@@ -325,6 +343,111 @@ END_CONFIGURATION
     assert!(rt.stopped[1].is_none());
 }
 
+/// An endless loop is stopped at the task's time deadline (here configured at 2 ms for the
+/// TASK, long before the instruction budget) with DEADLINE and safe outputs; a task
+/// without a configured deadline has none, and goes on.
+#[test]
+fn a_task_past_its_deadline_stops_with_safe_outputs() {
+    let source = "
+PROGRAM Spin
+VAR n : UDINT; out AT %QD0 : UDINT; END_VAR
+n := n + 1;
+out := 9;
+IF n > 2 THEN
+  WHILE TRUE DO n := n + 1; END_WHILE
+END_IF
+END_PROGRAM
+PROGRAM Beat
+VAR beat AT %QD1 : UDINT; END_VAR
+beat := beat + 1;
+END_PROGRAM
+CONFIGURATION C
+  TASK spin (INTERVAL := T#10ms, PRIORITY := 1);
+  TASK beat (INTERVAL := T#20ms, PRIORITY := 2);
+  PROGRAM s WITH spin : Spin;
+  PROGRAM b WITH beat : Beat;
+END_CONFIGURATION
+";
+    let ports = [PortMap {
+        size: 8,
+        ..output("out", 0)
+    }];
+    let deadline = package::TaskDeadline {
+        task: "SPIN",
+        deadline_ns: 2_000_000,
+    };
+    let mut plc = Plc::with_deadlines(source, &ports, &[deadline]);
+    // A clock that moves 100 us per reading: 2 ms are 20 readings, 20,000 instructions.
+    plc.tick = 100_000;
+    let mut wires = Wires {
+        inputs: vec![None],
+        ..Wires::default()
+    };
+    let mut areas = Areas::new();
+    let mut schedule = None;
+    let rt = plc.run(6, &mut wires, &mut areas, |r, _, rt, _| {
+        if r == 0 {
+            schedule = Some(rt.schedule.clone());
+        }
+    });
+    let schedule = schedule.unwrap();
+    assert_eq!(
+        schedule.deadline[..2],
+        [2_000_000, crate::scan::NO_DEADLINE]
+    );
+    let word = |r: usize, i: usize| {
+        u32::from_le_bytes(wires.sent[r].1[4 * i..4 * i + 4].try_into().unwrap())
+    };
+    assert_eq!(word(1, 0), 9);
+    assert_eq!(
+        word(2, 0),
+        0,
+        "safe value in the cycle that passed its deadline"
+    );
+    let fault = rt.stopped[0].expect("task spin stopped");
+    assert_eq!(fault.trap, Trap::Deadline);
+    assert_eq!(
+        crate::scan::health_error(fault.trap),
+        protocol::ErrorCode::DeadlineMissed
+    );
+    assert_eq!(word(5, 0), 0, "stays stopped");
+    assert_eq!(word(4, 1), 3, "the other task goes on at its interval");
+    assert!(rt.stopped[1].is_none());
+}
+
+/// Every release after the first is late by what the clock says (here 4 us: the scan starts
+/// 3 us after the release plus one clock tick); the overhead counts every release.
+#[test]
+fn release_lateness_and_overhead_are_kept_per_release() {
+    let mut plc = Plc::new(
+        "PROGRAM Main VAR n : UDINT; END_VAR n := n + 1; END_PROGRAM",
+        &[],
+    );
+    let mut areas = Areas::new();
+    let rt = plc.run(50, &mut Wires::default(), &mut areas, |_, _, _, _| {});
+    assert_eq!(rt.lateness.count(), 49);
+    assert_eq!(rt.lateness.summary(), Some((4_000, 4_000, 4_000)));
+    assert_eq!(rt.overhead.count(), 50);
+    let (min, _, max) = rt.overhead.summary().unwrap();
+    assert!(min > 0 && max < 100_000, "{min}..{max}");
+}
+
+#[test]
+fn traps_are_reported_as_the_fitting_arinc_error() {
+    use crate::scan::{health_error, names_task};
+    use protocol::ErrorCode;
+    assert_eq!(health_error(Trap::DivisionByZero), ErrorCode::NumericError);
+    assert_eq!(health_error(Trap::NumericError), ErrorCode::NumericError);
+    assert_eq!(health_error(Trap::Watchdog), ErrorCode::DeadlineMissed);
+    assert_eq!(health_error(Trap::Deadline), ErrorCode::DeadlineMissed);
+    assert_eq!(
+        health_error(Trap::IndexOutOfBounds),
+        ErrorCode::ApplicationError
+    );
+    assert!(names_task("spin", "SPIN.s") && names_task("Spin.S", "SPIN.s"));
+    assert!(!names_task("spi", "SPIN.s") && !names_task("s", "SPIN.s"));
+}
+
 /// The example controller (config/plc/tank.st) against the plant's model, release by
 /// release as the two partitions run them (10 ms major frame): the level reaches the band
 /// 1 m ± 10 % within 8 s and stays in it until the 20 s disturbance; the disturbance raises
@@ -435,7 +558,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         ..output("out", 0)
     }];
     let program = compile(source);
-    let bytes = package::encode(&ports, &program, &[], None, &[]);
+    let bytes = package::encode(&ports, &program, &[], None, &[], &[]);
     let package = Package::parse(&bytes).unwrap();
     let image = Image::parse(package.program()).unwrap();
     let mut data = vec![0u8; image.data_size() as usize];
@@ -664,10 +787,11 @@ END_PROGRAM";
             ..output("out", 0)
         },
     ];
-    let bytes = package::encode(&ports, &program, &[], None, &safe);
+    let bytes = package::encode(&ports, &program, &[], None, &safe, &[]);
     let mut plc = Plc {
         data: vec![0u8; image.data_size() as usize],
         bytes,
+        tick: 1_000,
     };
     let mut wires = Wires {
         inputs: vec![Some((4i16.to_le_bytes().to_vec(), true)), None],

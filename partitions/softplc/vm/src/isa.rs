@@ -530,14 +530,17 @@ codes::code_enum! {
         NumericError = 7 => "NUMERIC_ERROR",
         /// A dynamic data address (indirect access, CALL frame, string operand) is outside data memory.
         InvalidAddress = 8 => "INVALID_ADDRESS",
+        /// The task's time deadline passed while it ran (the runtime's clock check, see
+        /// `Machine::run_cycle_until`). Not catchable, like WATCHDOG.
+        Deadline = 9 => "DEADLINE",
     }
 }
 
 impl Trap {
-    /// Whether a try frame can catch this trap (everything but WATCHDOG, which must
-    /// terminate the cycle so that an endless loop inside `__TRY` cannot hang the task).
+    /// Whether a try frame can catch this trap (everything but WATCHDOG and DEADLINE, which
+    /// must terminate the cycle so that an endless loop inside `__TRY` cannot hang the task).
     pub const fn is_catchable(self) -> bool {
-        !matches!(self, Trap::Watchdog)
+        !matches!(self, Trap::Watchdog | Trap::Deadline)
     }
 }
 

@@ -182,7 +182,7 @@ impl<'a> Model<'a> {
 
     fn handle(&mut self, first: Trap) -> bool {
         let mut trap = first;
-        while trap != Trap::Watchdog {
+        while trap.is_catchable() {
             let Some((handler, depth, call_depth, base)) = self.tries.pop() else {
                 return false;
             };
@@ -683,7 +683,7 @@ impl<'a> Model<'a> {
                 let c = pop(&mut s);
                 if c != 0 {
                     let trap = Trap::from_u64(c)
-                        .filter(|t| *t != Trap::Watchdog)
+                        .filter(|t| t.is_catchable())
                         .unwrap_or(Trap::NumericError);
                     return Err(trap);
                 }

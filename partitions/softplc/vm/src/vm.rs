@@ -153,6 +153,10 @@ pub enum VarError {
     TooManyForces,
 }
 
+/// Instructions between two deadline checks of [`Machine::run_cycle_until`] (a few
+/// microseconds of interpretation: the check's clock read stays below 1 % of the work).
+pub const DEADLINE_CHECK_EVERY: u32 = 1024;
+
 /// How many variables can be forced at the same time.
 pub const MAX_FORCES: usize = 16;
 
@@ -292,6 +296,19 @@ impl<'a, 'm> Machine<'a, 'm> {
 
     /// Runs one cycle of `task` at time `now_ns` (TIME, nanoseconds).
     pub fn run_cycle(&mut self, task: usize, now_ns: i64) -> Result<CycleStats, Fault> {
+        self.run_cycle_until(task, now_ns, || false)
+    }
+
+    /// [`run_cycle`](Self::run_cycle) with a time deadline: every [`DEADLINE_CHECK_EVERY`]
+    /// instructions it asks `expired` (the runtime reads its clock there) and ends the cycle
+    /// with the uncatchable trap DEADLINE when it says so. The instruction budget still
+    /// applies; whichever comes first stops the task.
+    pub fn run_cycle_until(
+        &mut self,
+        task: usize,
+        now_ns: i64,
+        mut expired: impl FnMut() -> bool,
+    ) -> Result<CycleStats, Fault> {
         let Some(entry) = self.image.task(task) else {
             return Err(Fault {
                 trap: Trap::InvalidAddress,
@@ -328,6 +345,9 @@ impl<'a, 'm> Machine<'a, 'm> {
         loop {
             if stats.instructions >= budget {
                 return Err(self.fault(task, Trap::Watchdog));
+            }
+            if stats.instructions % DEADLINE_CHECK_EVERY == DEADLINE_CHECK_EVERY - 1 && expired() {
+                return Err(self.fault(task, Trap::Deadline));
             }
             stats.instructions += 1;
             // A trapping instruction has no effect: its pops are undone (pops never overwrite

@@ -6,7 +6,11 @@
 //!   300 frames (the plant shows it), UNFORCE, STATS of task 0, a malformed request; then it
 //!   ends the run (an application error the configuration maps to `shutdown_success`);
 //! * `viewer` (a PLC with access "monitor"): READ, then a WRITE and a FORCE, which must be
-//!   refused.
+//!   refused;
+//! * `bench` (`cargo xtask bench`, tests/configs/bench_plc.toml): times [`BENCH_READS`] READs
+//!   of `Count.n` from sending the request to receiving the answer (TSC cycles) and prints
+//!   `bench plc_online_read ...`, then lets the PLC run [`BENCH_FRAMES`] more frames before it
+//!   ends the run.
 //!
 //! Each answer is printed as `<name>: <OP> -> <STATUS> ...`. A test program: it must never
 //! be needed by anything but its scenario.
@@ -17,6 +21,7 @@ use apex::Warden;
 use apex::a653rs::bindings::ApexPartitionP4;
 use apex::a653rs::prelude::*;
 use apex::user_rt::println;
+use apex::user_rt::sys::rdtsc;
 use core::str::FromStr;
 use core::time::Duration;
 use plc_online::{MAX_MESSAGE, Request, Status, decode_response, encode_request, read_stats};
@@ -129,6 +134,49 @@ fn client(link: &mut Link) {
     let _ = <Warden as ApexErrorP4Ext>::raise_application_error(b"done");
 }
 
+/// READs timed by the `bench` role.
+const BENCH_READS: usize = 200;
+/// Frames the `bench` role waits after its reads: with 1 ms frames, enough for the PLC's
+/// 10,000 releases of `plc_release_jitter` to be in its last statistics line.
+const BENCH_FRAMES: u32 = 12_000;
+
+fn bench(link: &mut Link) {
+    let mut samples = [0u64; BENCH_READS];
+    let mut request = [0u8; MAX_MESSAGE];
+    let mut answer = [0u8; MAX_MESSAGE];
+    let mut taken = 0;
+    for sample in samples.iter_mut() {
+        link.seq = link.seq.wrapping_add(1);
+        let read = Request::Read { name: "Count.n" };
+        let Some(n) = encode_request(&read, link.seq, &mut request) else {
+            break;
+        };
+        let start = rdtsc();
+        let Some(len) = link.exchange(&request[..n], &mut answer) else {
+            break;
+        };
+        *sample = rdtsc().saturating_sub(start);
+        match decode_response(&answer[..len]) {
+            Some((_, seq, Status::Ok, _)) if seq == link.seq => taken += 1,
+            _ => {
+                println!("bench: bad answer to READ seq {}", link.seq);
+                break;
+            }
+        }
+    }
+    let samples = &mut samples[..taken];
+    samples.sort_unstable();
+    if let (Some(min), Some(max)) = (samples.first(), samples.last()) {
+        println!(
+            "bench plc_online_read median={} min={min} max={max} unit=cycles samples={taken}",
+            samples[taken / 2]
+        );
+    }
+    wait_frames(BENCH_FRAMES);
+    println!("bench: done");
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(b"done");
+}
+
 fn viewer(link: &mut Link) {
     read(link, "Count.n");
     link.ask(Request::Write {
@@ -145,10 +193,10 @@ fn viewer(link: &mut Link) {
 
 extern "C" fn run() {
     let me = apex::runtime::start_info();
-    let me: &'static str = if me.name() == "viewer" {
-        "viewer"
-    } else {
-        "client"
+    let me: &'static str = match me.name() {
+        "viewer" => "viewer",
+        "bench" => "bench",
+        _ => "client",
     };
     let mut link = Link {
         cmd: QueuingPortSender::<Warden>::from_name(name("cmd")).expect("cmd"),
@@ -158,10 +206,10 @@ extern "C" fn run() {
     };
     // Let the PLC start its cycles.
     wait_frames(50);
-    if me == "viewer" {
-        viewer(&mut link);
-    } else {
-        client(&mut link);
+    match me {
+        "viewer" => viewer(&mut link),
+        "bench" => bench(&mut link),
+        _ => client(&mut link),
     }
     loop {
         wait_frames(100);

@@ -630,7 +630,7 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
 #[test]
 fn vm_matches_model_on_random_programs() {
     let programs = 10_000u64;
-    let mut traps = [0usize; 9];
+    let mut traps = [0usize; 10];
     let mut completed = 0usize;
     for seed in 0..programs {
         let bytes = random_program(seed);
@@ -678,7 +678,8 @@ fn vm_matches_model_on_random_programs() {
     // The generator must actually reach the interesting behaviour.
     std::println!("completed cycles {completed}, traps by code {traps:?}");
     assert!(completed > 10_000);
-    for trap in Trap::ALL {
+    // DEADLINE comes from the runtime's clock, never from a program: the model has no time.
+    for trap in Trap::ALL.iter().filter(|t| **t != Trap::Deadline) {
         assert!(
             traps[trap.code() as usize] > 0,
             "no uncaught {trap} in {programs} programs"

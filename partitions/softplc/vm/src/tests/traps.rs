@@ -424,11 +424,76 @@ fn trap_names_and_codes_are_stable() {
         (6, "STACK_OVERFLOW"),
         (7, "NUMERIC_ERROR"),
         (8, "INVALID_ADDRESS"),
+        (9, "DEADLINE"),
     ];
     for (trap, (code, name)) in Trap::ALL.iter().zip(expected) {
         assert_eq!((trap.code(), trap.name()), (code, name));
         assert_eq!(Trap::from_u64(code as u64), Some(*trap));
     }
     assert_eq!(Trap::from_u64(0), None);
-    assert_eq!(Trap::from_u64(9), None);
+    assert_eq!(Trap::from_u64(10), None);
+}
+
+#[test]
+fn deadline_stops_an_endless_loop_inside_try_and_is_not_caught() {
+    let bytes = program_with(u32::MAX, |c, _| {
+        let handler = c.new_label();
+        c.try_begin(handler);
+        let top = c.new_label();
+        c.bind(top);
+        c.jmp(top);
+        c.bind(handler);
+        c.drop_();
+    });
+    let image = Image::parse(&bytes).unwrap();
+    let verified = verify(&image).unwrap();
+    let mut data = [0u8; DATA as usize];
+    let mut stack = [0u64; 8];
+    let mut calls = [CallFrame::EMPTY; 2];
+    let mut tries = [TryFrame::EMPTY; 1];
+    let mut vm = Machine::new(
+        verified,
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    )
+    .unwrap();
+    // The clock is asked once per DEADLINE_CHECK_EVERY instructions; it "expires" at the
+    // third question.
+    let mut asked = 0;
+    let fault = vm
+        .run_cycle_until(0, 0, || {
+            asked += 1;
+            asked == 3
+        })
+        .unwrap_err();
+    assert_eq!((fault.trap, asked), (Trap::Deadline, 3));
+    assert_eq!(vm.task_fault(0).map(|f| f.trap), Some(Trap::Deadline));
+    assert!(!Trap::Deadline.is_catchable());
+}
+
+#[test]
+fn a_cycle_shorter_than_the_check_interval_never_reads_the_clock() {
+    let bytes = program_with(100, |c, _| c.nop());
+    let image = Image::parse(&bytes).unwrap();
+    let verified = verify(&image).unwrap();
+    let mut data = [0u8; DATA as usize];
+    let mut stack = [0u64; 8];
+    let mut calls = [CallFrame::EMPTY; 2];
+    let mut tries = [TryFrame::EMPTY; 1];
+    let mut vm = Machine::new(
+        verified,
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    )
+    .unwrap();
+    let result = vm.run_cycle_until(0, 0, || panic!("asked the clock"));
+    assert!(result.is_ok());
 }

@@ -55,6 +55,8 @@ fn bad_type_width_mode_trap_operands() {
     assert_eq!(e.reason, Reason::BadRoundMode(7));
     let e = rejects(|c, _| c.emit_raw(&[Opcode::Throw as u8, crate::isa::Trap::Watchdog.code()]));
     assert_eq!(e.reason, Reason::BadTrapCode(4));
+    let e = rejects(|c, _| c.emit_raw(&[Opcode::Throw as u8, crate::isa::Trap::Deadline.code()]));
+    assert_eq!(e.reason, Reason::BadTrapCode(9));
     let e = rejects(|c, _| c.emit_raw(&[Opcode::JumpIf as u8, Opcode::Add as u8, 0, 0, 0, 0]));
     assert_eq!(e.reason, Reason::BadComparison(Opcode::Add as u8));
 }
