@@ -197,6 +197,22 @@ fn attack_partitions() {
         health("overflow", "stack_overflow") == 1 && o.line("overflow: returned").is_none(),
         "the stack overflow was not caught as stack_overflow",
     );
+    // The fault loop under `ignore`: many threads faulted and were killed, each reported,
+    // and the partition itself was never restarted.
+    let ignored = health("fault-ignore", "illegal_request");
+    check(
+        &o,
+        ignored >= 1_000
+            && o.line("fault-ignore: 500 threads faulted").is_some()
+            && o.lines
+                .iter()
+                .filter(|l| l.contains("partition=fault-ignore "))
+                .all(|l| l.contains("action=ignore"))
+            && o.lines.iter().all(|l| {
+                !(l.contains("syssw: partition fault-ignore:") && l.contains("restart 1"))
+            }),
+        &format!("{ignored} ignored faults of fault-ignore, or it was restarted"),
+    );
     // The restart loop really looped: one restart per window of it at least.
     let restarts = health("fault-loop", "illegal_request");
     check(

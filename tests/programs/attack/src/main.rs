@@ -14,6 +14,10 @@
 //!   survives), then prints `ports: all <n> accesses faulted` and sleeps;
 //! * `fault-loop*`: executes `ud2` at once at every start (the scenario cold-restarts it:
 //!   a restart loop);
+//! * `fault-ignore*`: a fault loop the partition survives: it starts one thread after
+//!   another that executes `ud2` at once (the scenario maps that illegal request to
+//!   `ignore`, so syssw kills only the faulting thread), as fast as it can, and prints
+//!   `fault-ignore: <n> threads faulted` every [`FAULTS_REPORT_EVERY`] faults;
 //! * `overflow*`: recurses until its stack overflows into the guard page;
 //! * `forge*`: sends syssw service requests for ports it does not own (every port id
 //!   0..64, read, status, receive, clear) and unknown labels, as fast as it can, and
@@ -90,6 +94,8 @@ fn main(start: u64, _: u64) {
         unsafe {
             core::arch::asm!("ud2")
         };
+    } else if name.starts_with("fault-ignore") {
+        fault_ignore(info.priority as u8);
     } else if name.starts_with("overflow") {
         println!("overflow: recursing");
         let depth = recurse(0);
@@ -108,6 +114,46 @@ fn main(start: u64, _: u64) {
         victim(info.time_partition, windows);
     } else {
         println!("attack: no role for partition `{name}`");
+    }
+}
+
+/// Faults between two reports of `fault-ignore`.
+const FAULTS_REPORT_EVERY: u64 = 500;
+
+/// The stack of the threads `fault-ignore` starts (they die at their first instruction).
+static mut FAULTY_STACK: [u64; 64] = [0; 64];
+
+extern "C" fn faulty(_: u64) -> ! {
+    #[allow(unsafe_code)]
+    // SAFETY: ud2 only raises #UD.
+    unsafe {
+        core::arch::asm!("ud2", options(noreturn))
+    }
+}
+
+fn fault_ignore(priority: u8) -> ! {
+    let stack_top = (&raw mut FAULTY_STACK) as u64 + core::mem::size_of::<[u64; 64]>() as u64;
+    let (mut faulted, mut refused) = (0u64, 0u64);
+    loop {
+        // At the partition's own priority, FIFO behind this thread: it faults when this
+        // one yields, and syssw kills it before the next is created.
+        match sys::thread_create(None, faulty as usize as u64, stack_top, priority, 0)
+            .and_then(|t| sys::thread_start(t).map(|()| t))
+        {
+            Ok(_) => {
+                faulted += 1;
+                if faulted.is_multiple_of(FAULTS_REPORT_EVERY) {
+                    println!("fault-ignore: {faulted} threads faulted ({refused} refused)");
+                }
+            }
+            Err(e) => {
+                if refused == 0 {
+                    println!("fault-ignore: thread_create or start refused: {e:?}");
+                }
+                refused += 1;
+            }
+        }
+        sys::yield_now();
     }
 }
 
