@@ -235,7 +235,9 @@ impl Partition<Warden> for Client {
             time_capacity: SystemTime::Infinite,
             entry_point: run,
             stack_size: 16 * 1024,
-            base_priority: 10,
+            // Just below the MCP: above any background partition (a background hog with
+            // a lower MCP but a higher process priority would take this window).
+            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
             deadline: Deadline::Soft,
             name: name("run"),
         };
