@@ -83,7 +83,7 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
         out.push((
             p.name.clone(),
-            package::encode(&ports, &compiled.image, &watch, online, &safe),
+            package::encode(&ports, &compiled.image, &watch, online, &safe, None),
         ));
     }
     Ok(out)

@@ -16,6 +16,7 @@ extern crate alloc;
 pub mod online;
 pub mod package;
 pub mod scan;
+pub mod shared;
 
 #[cfg(test)]
 mod tests;

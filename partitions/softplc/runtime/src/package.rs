@@ -6,7 +6,7 @@
 //! ```text
 //! offset size
 //! 0      4    magic "WPKG"
-//! 4      2    version (= 1)
+//! 4      2    version (= 2; version 1 had no shared-globals block)
 //! 6      2    port count N (at most MAX_PORTS)
 //! 8      4    program offset (from the package start)
 //! 12     4    program length
@@ -18,7 +18,9 @@
 //! 27     5    reserved (0)
 //! 32     4    safe-value list offset
 //! 36     4    safe-value list length
-//! 40     64*N port records:
+//! 40     4    shared-globals block offset
+//! 44     4    shared-globals block length (0: the program shares no globals)
+//! 48     64*N port records:
 //!   0    32   name (UTF-8, zero padded)
 //!   32   1    kind (protocol::PortKind code: 1 sampling, 2 queuing)
 //!   33   1    direction (protocol::Direction code: 1 in, 2 out)
@@ -37,6 +39,20 @@
 //!             address), `width u8` (1, 2, 4 or 8 bytes), reserved (3 bytes, 0), `value u64`
 //!             (little-endian, the variable's bytes), used instead of zero/FALSE when a fault
 //!             sets the outputs safe
+//! ...         the shared-globals block: where this project's shared globals lie in the
+//!             shared-memory segment it shares with another project (the segment layout
+//!             and its protocol are [`crate::shared`]'s):
+//!   0    8    segment address in the partition's address space (page-aligned)
+//!   8    4    segment size in bytes
+//!   12   4    own area offset in the segment (NO_AREA: this project writes nothing)
+//!   16   4    own area length (header included)
+//!   20   4    other project's area offset (NO_AREA: this project reads nothing)
+//!   24   4    other project's area length
+//!   28   2    written variable count W
+//!   30   2    read variable count R
+//!   32   12*(W+R) records, the written ones first: data address u32 (the variable in
+//!             data memory), offset u32 (from its area's start, past the area header),
+//!             size u32 (1, 2, 4 or 8 bytes)
 //! ```
 //!
 //! The online ports carry the online protocol (`plc-online`) instead of process-image
@@ -54,9 +70,15 @@ use protocol::{Direction, PortKind};
 /// Package magic.
 pub const MAGIC: [u8; 4] = *b"WPKG";
 /// Format version.
-pub const VERSION: u16 = 1;
+pub const VERSION: u16 = 2;
 /// Header bytes before the port records.
-pub const HEADER_LEN: usize = 40;
+pub const HEADER_LEN: usize = 48;
+/// Bytes of the shared-globals block before its records.
+pub const SHARED_HEADER: usize = 32;
+/// Bytes of one shared-variable record.
+pub const SHARED_VAR_RECORD: usize = 12;
+/// Area offset of a side that has no area (nothing written, or nothing read).
+pub const NO_AREA: u32 = u32::MAX;
 /// Bytes of one safe-value record.
 pub const SAFE_RECORD: usize = 16;
 /// Online port fields without online access.
@@ -108,6 +130,9 @@ pub enum PackageError {
     /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
     /// on an output or above 7).
     BadPort(usize),
+    /// The shared-globals block lies outside the package, is ragged, or its segment, areas
+    /// or variable records are inconsistent (see [`SharedLayout`]).
+    BadShared,
 }
 
 impl core::fmt::Display for PackageError {
@@ -126,6 +151,7 @@ impl core::fmt::Display for PackageError {
             Self::BadOnline => write!(f, "the online ports are not a queuing input and output"),
             Self::BadSafeValues => write!(f, "the safe-value list is malformed"),
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
+            Self::BadShared => write!(f, "the shared-globals block is malformed"),
         }
     }
 }
@@ -151,6 +177,122 @@ pub struct Package<'a> {
     watch: &'a str,
     online: Option<Online>,
     safe: &'a [u8],
+    shared: Option<SharedLayout<'a>>,
+}
+
+/// Where a project's shared globals lie in its shared-memory segment (checked by
+/// [`Package::parse`]: both areas inside the segment, 8-byte aligned and disjoint, every
+/// variable inside its area past the header, 1, 2, 4 or 8 bytes, naturally aligned, and the
+/// written ones disjoint).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SharedLayout<'a> {
+    /// The segment's address in the partition's address space.
+    pub segment_address: u64,
+    /// Its size in bytes.
+    pub segment_size: u32,
+    /// This project's area (offset, length), if it writes anything.
+    pub own: Option<(u32, u32)>,
+    /// The other project's area (offset, length), if this one reads anything.
+    pub other: Option<(u32, u32)>,
+    written: &'a [u8],
+    read: &'a [u8],
+}
+
+/// One shared variable: its bytes in data memory and in its area of the segment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SharedVar {
+    /// Data address.
+    pub address: u32,
+    /// Offset from the start of its area.
+    pub offset: u32,
+    /// Bytes (1, 2, 4 or 8).
+    pub size: u32,
+}
+
+/// The variable records of one side of a [`SharedLayout`].
+pub type SharedVars<'a> = core::iter::Map<core::slice::ChunksExact<'a, u8>, fn(&[u8]) -> SharedVar>;
+
+impl<'a> SharedLayout<'a> {
+    /// The variables this project writes into its own area.
+    pub fn written(&self) -> SharedVars<'a> {
+        self.written.chunks_exact(SHARED_VAR_RECORD).map(shared_var)
+    }
+
+    /// The variables this project reads from the other project's area.
+    pub fn read(&self) -> SharedVars<'a> {
+        self.read.chunks_exact(SHARED_VAR_RECORD).map(shared_var)
+    }
+
+    /// Checks a block (see [`SharedLayout`]).
+    fn parse(block: &'a [u8]) -> Option<SharedLayout<'a>> {
+        let header = block.get(..SHARED_HEADER)?;
+        let segment_address = u64_at(header, 0);
+        let segment_size = u32_at(header, 8);
+        let area = |at: usize| match u32_at(header, at) {
+            NO_AREA => Some(None),
+            offset => {
+                let len = u32_at(header, at + 4);
+                let fits = offset.is_multiple_of(8)
+                    && len >= crate::shared::AREA_HEADER as u32
+                    && offset
+                        .checked_add(len)
+                        .is_some_and(|end| end <= segment_size);
+                fits.then_some(Some((offset, len)))
+            }
+        };
+        let (own, other) = (area(12)?, area(20)?);
+        let (w, r) = (u16_at(header, 28) as usize, u16_at(header, 30) as usize);
+        let records = &block[SHARED_HEADER..];
+        if !segment_address.is_multiple_of(4096)
+            || segment_address == 0
+            || w + r > 2 * plc_vm::image::MAX_SHARED_VARS
+            || records.len() != (w + r) * SHARED_VAR_RECORD
+            || (w > 0 && own.is_none())
+            || (r > 0 && other.is_none())
+        {
+            return None;
+        }
+        if let (Some((a, al)), Some((b, bl))) = (own, other)
+            && a < b + bl
+            && b < a + al
+        {
+            return None;
+        }
+        let (written, read) = records.split_at(w * SHARED_VAR_RECORD);
+        let inside = |v: SharedVar, area: Option<(u32, u32)>| {
+            let (_, len) = area.unwrap_or((0, 0));
+            matches!(v.size, 1 | 2 | 4 | 8)
+                && v.offset.is_multiple_of(v.size)
+                && v.offset >= crate::shared::AREA_HEADER as u32
+                && v.offset + v.size <= len
+                && v.address.checked_add(v.size).is_some()
+        };
+        let layout = SharedLayout {
+            segment_address,
+            segment_size,
+            own,
+            other,
+            written,
+            read,
+        };
+        let mut ok =
+            layout.written().all(|v| inside(v, own)) && layout.read().all(|v| inside(v, other));
+        for (i, v) in layout.written().enumerate() {
+            ok &= layout
+                .written()
+                .take(i)
+                .all(|o| o.offset + o.size <= v.offset || v.offset + v.size <= o.offset);
+        }
+        ok.then_some(layout)
+    }
+}
+
+fn shared_var(r: &[u8]) -> SharedVar {
+    SharedVar {
+        address: u32_at(r, 0),
+        offset: u32_at(r, 4),
+        size: u32_at(r, 8),
+    }
 }
 
 /// A `%Q` variable's value when the outputs go safe.
@@ -214,6 +356,10 @@ impl<'a> Package<'a> {
                 return Err(PackageError::BadSafeValues);
             }
         }
+        let shared = match range(40).ok_or(PackageError::BadShared)? {
+            [] => None,
+            block => Some(SharedLayout::parse(block).ok_or(PackageError::BadShared)?),
+        };
         let mut package = Package {
             bytes,
             ports: count as usize,
@@ -221,6 +367,7 @@ impl<'a> Package<'a> {
             watch,
             online: None,
             safe,
+            shared,
         };
         for i in 0..package.ports {
             package.decode_port(i).ok_or(PackageError::BadPort(i))?;
@@ -245,6 +392,11 @@ impl<'a> Package<'a> {
     /// The bytecode image.
     pub fn program(&self) -> &'a [u8] {
         self.program
+    }
+
+    /// Where the shared globals lie in the shared segment, if the program shares any.
+    pub fn shared(&self) -> Option<SharedLayout<'a>> {
+        self.shared
     }
 
     /// The online ports, if the configuration gives the PLC any.
@@ -331,10 +483,12 @@ pub fn encode(
     watch: &[&str],
     online: Option<Online>,
     safe: &[SafeValue],
+    shared: Option<&SharedPlan>,
 ) -> alloc::vec::Vec<u8> {
     let mut out = alloc::vec::Vec::new();
     let program_at = HEADER_LEN + ports.len() * PORT_RECORD;
     let watch = watch.join("\n");
+    let shared = shared.map(SharedPlan::encode).unwrap_or_default();
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&(ports.len() as u16).to_le_bytes());
@@ -350,6 +504,9 @@ pub fn encode(
     let safe_at = program_at + program.len() + watch.len();
     out.extend_from_slice(&(safe_at as u32).to_le_bytes());
     out.extend_from_slice(&((safe.len() * SAFE_RECORD) as u32).to_le_bytes());
+    let shared_at = safe_at + safe.len() * SAFE_RECORD;
+    out.extend_from_slice(&(shared_at as u32).to_le_bytes());
+    out.extend_from_slice(&(shared.len() as u32).to_le_bytes());
     for p in ports {
         let mut r = [0u8; PORT_RECORD];
         let name = &p.name.as_bytes()[..p.name.len().min(NAME_LEN)];
@@ -372,7 +529,44 @@ pub fn encode(
         out.extend_from_slice(&[s.width, 0, 0, 0]);
         out.extend_from_slice(&s.value.to_le_bytes());
     }
+    out.extend_from_slice(&shared);
     out
+}
+
+/// A project's shared-globals block as the image builder plans it (see the format above).
+#[cfg(any(feature = "alloc", test))]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SharedPlan {
+    pub segment_address: u64,
+    pub segment_size: u32,
+    /// (offset, length) of this project's area.
+    pub own: Option<(u32, u32)>,
+    /// (offset, length) of the other project's area.
+    pub other: Option<(u32, u32)>,
+    pub written: alloc::vec::Vec<SharedVar>,
+    pub read: alloc::vec::Vec<SharedVar>,
+}
+
+#[cfg(any(feature = "alloc", test))]
+impl SharedPlan {
+    pub(crate) fn encode(&self) -> alloc::vec::Vec<u8> {
+        let mut out = alloc::vec::Vec::new();
+        out.extend_from_slice(&self.segment_address.to_le_bytes());
+        out.extend_from_slice(&self.segment_size.to_le_bytes());
+        for area in [self.own, self.other] {
+            let (offset, len) = area.unwrap_or((NO_AREA, 0));
+            out.extend_from_slice(&offset.to_le_bytes());
+            out.extend_from_slice(&len.to_le_bytes());
+        }
+        out.extend_from_slice(&(self.written.len() as u16).to_le_bytes());
+        out.extend_from_slice(&(self.read.len() as u16).to_le_bytes());
+        for v in self.written.iter().chain(&self.read) {
+            out.extend_from_slice(&v.address.to_le_bytes());
+            out.extend_from_slice(&v.offset.to_le_bytes());
+            out.extend_from_slice(&v.size.to_le_bytes());
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -418,6 +612,7 @@ mod tests {
             &["tank.alarm", "x"],
             None,
             &[safe],
+            Some(&shared_plan()),
         );
         let p = Package::parse(&bytes).unwrap();
         assert_eq!(
@@ -430,6 +625,117 @@ mod tests {
             ["tank.alarm", "x"]
         );
         assert_eq!(p.safe_values().collect::<alloc::vec::Vec<_>>(), [safe]);
+        let shared = p.shared().unwrap();
+        let plan = shared_plan();
+        assert_eq!(
+            (
+                shared.segment_address,
+                shared.segment_size,
+                shared.own,
+                shared.other
+            ),
+            (
+                plan.segment_address,
+                plan.segment_size,
+                plan.own,
+                plan.other
+            )
+        );
+        assert_eq!(
+            shared.written().collect::<alloc::vec::Vec<_>>(),
+            plan.written
+        );
+        assert_eq!(shared.read().collect::<alloc::vec::Vec<_>>(), plan.read);
+        let plain = encode(&[level()], b"P", &[], None, &[], None);
+        assert_eq!(Package::parse(&plain).unwrap().shared(), None);
+    }
+
+    /// Writes a DINT at offset 8 of its area at 64, reads a BOOL at offset 8 and a LREAL at
+    /// 16 of the other's area at 0.
+    fn shared_plan() -> SharedPlan {
+        SharedPlan {
+            segment_address: 0x6000_0000_0000,
+            segment_size: 4096,
+            own: Some((64, 16)),
+            other: Some((0, 24)),
+            written: alloc::vec![SharedVar {
+                address: 100,
+                offset: 8,
+                size: 4
+            }],
+            read: alloc::vec![
+                SharedVar {
+                    address: 104,
+                    offset: 8,
+                    size: 1
+                },
+                SharedVar {
+                    address: 112,
+                    offset: 16,
+                    size: 8
+                }
+            ],
+        }
+    }
+
+    #[test]
+    fn hostile_shared_blocks_are_refused() {
+        let good = encode(&[level()], b"P", &[], None, &[], Some(&shared_plan()));
+        assert!(Package::parse(&good).is_ok());
+        let block = u32::from_le_bytes(good[40..44].try_into().unwrap()) as usize;
+        let u32_field = |bytes: &mut alloc::vec::Vec<u8>, at: usize, v: u32| {
+            bytes[block + at..block + at + 4].copy_from_slice(&v.to_le_bytes())
+        };
+        let refused = |bytes: &[u8], what: &str| {
+            assert_eq!(
+                Package::parse(bytes).unwrap_err(),
+                PackageError::BadShared,
+                "{what}"
+            )
+        };
+        for (at, value, what) in [
+            (0, 0x123, "segment not page-aligned"),
+            (8, 32, "own area beyond the segment"),
+            (12, 4, "own area not 8-aligned"),
+            (16, 4, "own area shorter than its header"),
+            (12, 8, "areas overlap"),
+            (20, u32::MAX - 3, "other area offset overflows"),
+            (24, 12, "a read variable beyond its area"),
+            (32 + 4, 4, "a written variable inside the area header"),
+            (32 + 4, 10, "a written variable not naturally aligned"),
+            (32 + 8, 3, "a variable size of 3"),
+            (32 + 12 + 8, 0, "a variable size of 0"),
+        ] {
+            let mut bad = good.clone();
+            u32_field(&mut bad, at, value);
+            refused(&bad, what);
+        }
+        // Counts beyond the records, a block beyond the package, records without an area.
+        let mut bad = good.clone();
+        bad[block + 28] = 9;
+        refused(&bad, "more records than the block holds");
+        let mut bad = good.clone();
+        bad[44] = 0xff;
+        refused(&bad, "block beyond the package");
+        let mut bad = good.clone();
+        u32_field(&mut bad, 12, NO_AREA);
+        refused(&bad, "written records without an own area");
+        // Two written variables on the same bytes.
+        let mut plan = shared_plan();
+        plan.written.push(plan.written[0]);
+        refused(
+            &encode(&[level()], b"P", &[], None, &[], Some(&plan)),
+            "written overlap",
+        );
+        // Every truncation and single-byte change of the block parses or is refused.
+        for n in block..good.len() {
+            let _ = Package::parse(&good[..n]);
+            for v in [0u8, 1, 0x7f, 0xff] {
+                let mut bad = good.clone();
+                bad[n] = v;
+                let _ = Package::parse(&bad);
+            }
+        }
     }
 
     #[test]
@@ -444,6 +750,7 @@ mod tests {
                 width: 1,
                 value: 1,
             }],
+            None,
         );
         assert_eq!(
             Package::parse(&good[..10]).unwrap_err(),

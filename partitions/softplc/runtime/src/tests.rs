@@ -75,7 +75,7 @@ struct Plc {
 impl Plc {
     fn new(source: &str, ports: &[PortMap]) -> Self {
         let program = compile(source);
-        let bytes = package::encode(ports, &program, &[], None, &[]);
+        let bytes = package::encode(ports, &program, &[], None, &[], None);
         let image = Image::parse(Package::parse(&bytes).unwrap().program()).unwrap();
         let data = vec![0u8; image.data_size() as usize];
         Self { bytes, data }
@@ -435,7 +435,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         ..output("out", 0)
     }];
     let program = compile(source);
-    let bytes = package::encode(&ports, &program, &[], None, &[]);
+    let bytes = package::encode(&ports, &program, &[], None, &[], None);
     let package = Package::parse(&bytes).unwrap();
     let image = Image::parse(package.program()).unwrap();
     let mut data = vec![0u8; image.data_size() as usize];
@@ -664,7 +664,7 @@ END_PROGRAM";
             ..output("out", 0)
         },
     ];
-    let bytes = package::encode(&ports, &program, &[], None, &safe);
+    let bytes = package::encode(&ports, &program, &[], None, &safe, None);
     let mut plc = Plc {
         data: vec![0u8; image.data_size() as usize],
         bytes,
