@@ -66,6 +66,7 @@
 //! plc.watch = ["level", "tank.pid.integral"]
 //! plc.online = { request = "cmd", response = "reply", access = "monitor" }
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
+//! plc.shared = "frame"            # the segment its shared globals go through
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text

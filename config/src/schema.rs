@@ -97,6 +97,7 @@ pub struct Plc {
     pub online: Option<Spanned<PlcOnline>>,
     #[serde(default)]
     pub safe: Named<PlcValue>,
+    pub shared: Option<Spanned<String>>,
 }
 
 /// A value written in the description (`plc.safe`).

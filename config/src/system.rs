@@ -78,6 +78,9 @@ pub struct Plc {
     /// Safe values of `%Q` variables by name (checked against the program when it is
     /// compiled); the others go to zero/FALSE.
     pub safe: Vec<(String, PlcValue)>,
+    /// The shared-memory segment (index into [`System::segments`]) through which its
+    /// shared globals meet another PLC project's (`plc.shared`).
+    pub shared: Option<usize>,
 }
 
 /// A value written in the description.
