@@ -236,8 +236,8 @@ impl SharedStats {
 /// Why a package's shared layout does not fit its program.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum SharedError {
-    /// The segment is not a whole number of words, or an area is longer than
-    /// [`MAX_AREA_LEN`].
+    /// The segment is not where syssw maps shared segments or not a whole number of words,
+    /// or an area is longer than [`MAX_AREA_LEN`].
     BadSegment,
     /// A record is not one of the program's shared variables of that direction (address
     /// and size), or a shared variable has no record.
@@ -262,7 +262,17 @@ impl core::fmt::Display for SharedError {
 pub fn check(layout: &SharedLayout, image: &Image) -> Result<(), SharedError> {
     let too_long =
         |area: Option<(u32, u32)>| area.is_some_and(|(_, len)| len as usize > MAX_AREA_LEN);
-    if !layout.segment_size.is_multiple_of(4) || too_long(layout.own) || too_long(layout.other) {
+    // Where syssw maps shared segments (not the program, data entry or stack).
+    let end = layout
+        .segment_address
+        .checked_add(u64::from(layout.segment_size));
+    let placed = layout.segment_address >= protocol::layout::SHARED_BASE
+        && end.is_some_and(|end| end <= protocol::layout::STACK_TOP);
+    if !placed
+        || !layout.segment_size.is_multiple_of(4)
+        || too_long(layout.own)
+        || too_long(layout.other)
+    {
         return Err(SharedError::BadSegment);
     }
     // The image's shared variables are disjoint (the verifier checks it), so equal counts
