@@ -299,6 +299,91 @@ fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Re
 mod tests {
     use super::*;
 
+    /// Scenario plc_shared's description, with `edit` applied, written next to its ST files.
+    fn shared_system(edit: (&str, &str)) -> Result<System> {
+        let configs = crate::workspace_root().join("tests/configs");
+        let text = std::fs::read_to_string(configs.join("plc_shared.toml"))?;
+        assert!(text.contains(edit.0), "test bug: {edit:?}");
+        let text = text.replacen(edit.0, edit.1, 1);
+        // Only the name is used (program paths are relative to its directory).
+        let path = configs.join("plc_shared_edited.toml");
+        config::load(&path.to_string_lossy(), &text, &|_| true).map_err(|d| {
+            anyhow::anyhow!(
+                "{}",
+                d.iter()
+                    .map(|d| d.to_string())
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            )
+        })
+    }
+
+    #[test]
+    fn shared_globals_pair_across_the_packages_of_a_segment() {
+        let system = shared_system(("", "")).unwrap();
+        let packages = packages(&system).unwrap();
+        let layout = |name: &str| {
+            let (_, bytes) = packages.iter().find(|(n, _)| n == name).unwrap();
+            let package = package::Package::parse(bytes).unwrap();
+            let image = Image::parse(package.program()).unwrap();
+            let shared = package.shared().unwrap();
+            softplc::shared::check(&shared, &image).unwrap();
+            let names: Vec<(String, package::SharedVar)> = image
+                .shared_vars()
+                .map(|s| {
+                    let mut records = match s.direction {
+                        plc_vm::image::SharedDirection::Write => shared.written(),
+                        plc_vm::image::SharedDirection::Read => shared.read(),
+                    };
+                    let record = records.find(|v| v.address == s.var.addr).unwrap();
+                    (s.var.name.to_string(), record)
+                })
+                .collect();
+            (shared.segment_address, shared.own, shared.other, names)
+        };
+        let (writer_at, writer_own, writer_other, written) = layout("writer");
+        let (reader_at, reader_own, reader_other, read) = layout("reader");
+        // The segment's address is where syssw maps the first segment.
+        assert_eq!(
+            (writer_at, reader_at),
+            (protocol::layout::SHARED_BASE, protocol::layout::SHARED_BASE)
+        );
+        // seq u32 at 8, a i32 at 12, level f64 at 16, small u16 at 24, odd at 26, check at 28.
+        assert_eq!((writer_own, writer_other), (Some((0, 32)), None));
+        assert_eq!((reader_own, reader_other), (None, Some((0, 32))));
+        let offsets = |vars: &[(String, package::SharedVar)]| {
+            let mut v: Vec<(String, u32, u32)> = vars
+                .iter()
+                .map(|(n, r)| (n.clone(), r.offset, r.size))
+                .collect();
+            v.sort();
+            v
+        };
+        assert_eq!(offsets(&written), offsets(&read));
+        assert_eq!(
+            offsets(&written)
+                .iter()
+                .map(|(_, o, _)| *o)
+                .collect::<Vec<_>>(),
+            [12, 28, 16, 26, 8, 24]
+        );
+    }
+
+    #[test]
+    fn shared_globals_without_a_segment_are_a_build_error() {
+        let system = shared_system((
+            "plc.program = [\"plc/shared_reader.st\"]\nplc.shared = \"link\"",
+            "plc.program = [\"plc/shared_reader.st\"]",
+        ))
+        .unwrap();
+        let e = packages(&system).unwrap_err().to_string();
+        assert!(
+            e.contains("plc/shared_reader.st:6:3: partition reader's program shares `seq`")
+                && e.contains("names no segment"),
+            "{e}"
+        );
+    }
+
     fn image_of(source: &str) -> Vec<u8> {
         let files = [("t.st".to_string(), source.to_string())];
         plc_compiler::compile(&files, &plc_compiler::Options::default())
