@@ -436,8 +436,10 @@ fn plc_shared() {
         let field = |name| value(values, name);
         check(
             &o,
-            field("Reader.torn") == Some(0) && field("Reader.backwards") == Some(0),
-            &format!("t={t}ms: torn or out-of-order records taken: {values:?}"),
+            field("Reader.torn") == Some(0)
+                && field("Reader.backwards") == Some(0)
+                && field("Reader.stale") == Some(0),
+            &format!("t={t}ms: torn, out-of-order or stale records taken: {values:?}"),
         );
     }
     // The reader took a record every cycle and saw the sequence advance by one per cycle,

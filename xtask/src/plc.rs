@@ -330,15 +330,21 @@ mod tests {
             softplc::shared::check(&shared, &image).unwrap();
             let names: Vec<(String, package::SharedVar)> = image
                 .shared_vars()
+                .filter(|s| s.direction != plc_vm::image::SharedDirection::Valid)
                 .map(|s| {
                     let mut records = match s.direction {
                         plc_vm::image::SharedDirection::Write => shared.written(),
-                        plc_vm::image::SharedDirection::Read => shared.read(),
+                        _ => shared.read(),
                     };
                     let record = records.find(|v| v.address == s.var.addr).unwrap();
                     (s.var.name.to_string(), record)
                 })
                 .collect();
+            let flag = image
+                .shared_vars()
+                .find(|s| s.direction == plc_vm::image::SharedDirection::Valid)
+                .map(|s| s.var.addr);
+            assert_eq!(shared.valid_flag, flag, "{name}");
             (shared.segment_address, shared.own, shared.other, names)
         };
         let (writer_at, writer_own, writer_other, written) = layout("writer");
@@ -378,7 +384,7 @@ mod tests {
         .unwrap();
         let e = packages(&system).unwrap_err().to_string();
         assert!(
-            e.contains("plc/shared_reader.st:6:3: partition reader's program shares `seq`")
+            e.contains("plc/shared_reader.st:7:3: partition reader's program shares `seq`")
                 && e.contains("names no segment"),
             "{e}"
         );

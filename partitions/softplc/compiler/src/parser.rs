@@ -486,7 +486,7 @@ impl Parser<'_> {
             };
             self.diags.push(Diagnostic::error(
                 span,
-                format!("{what}: write `{{attribute 'shared' := 'write'}}` (this project writes it) or `{{attribute 'shared' := 'read'}}` (it reads it from the other project)"),
+                format!("{what}: write `{{attribute 'shared' := 'write'}}` (this project writes it), `{{attribute 'shared' := 'read'}}` (it reads it from the other project) or `{{attribute 'shared' := 'valid'}}` (a BOOL: the read ones are a fresh copy)"),
             ));
         }
         // Several pragmas before one declaration: the others are reported as misplaced.

@@ -913,6 +913,32 @@ impl Sema<'_> {
     ) -> Option<plc_vm::image::SharedDirection> {
         use plc_vm::image::SharedDirection;
         let a = d.shared?;
+        if a.direction == SharedDirection::Valid {
+            if !matches!(ty, Type::Elem(crate::types::Elem::Bool) | Type::Error) {
+                self.diags.error(
+                    d.ty.span(),
+                    format!(
+                        "the validity flag of the shared globals (`'valid'`) must be a BOOL, not {}",
+                        self.prog.type_name(ty)
+                    ),
+                );
+                return None;
+            }
+            let names = d.names.len()
+                + self
+                    .prog
+                    .shared
+                    .iter()
+                    .filter(|s| s.direction == SharedDirection::Valid)
+                    .count();
+            if names > 1 {
+                self.diags.error(
+                    a.span,
+                    "a program has at most one validity flag of its shared globals",
+                );
+                return None;
+            }
+        }
         let elementary = match ty {
             Type::Elem(e) => crate::monitor::ValueKind::Elem(*e)
                 .var_type()
@@ -937,10 +963,10 @@ impl Sema<'_> {
             );
             return None;
         }
-        if block.constant && a.direction == SharedDirection::Read {
+        if block.constant && a.direction != SharedDirection::Write {
             self.diags.error(
                 a.span,
-                "a CONSTANT cannot be read from another project (it would change)",
+                "a CONSTANT cannot be read from another project or be the validity flag (it would change)",
             );
             return None;
         }

@@ -50,7 +50,9 @@
 //!   24   4    other project's area length
 //!   28   2    written variable count W
 //!   30   2    read variable count R
-//!   32   12*(W+R) records, the written ones first: data address u32 (the variable in
+//!   32   4    data address of the BOOL validity flag of the read variables (NO_FLAG:
+//!             none), set before each cycle ([`crate::shared::copy_in`])
+//!   36   12*(W+R) records, the written ones first: data address u32 (the variable in
 //!             data memory), offset u32 (from its area's start, past the area header),
 //!             size u32 (1, 2, 4 or 8 bytes)
 //! ```
@@ -74,7 +76,9 @@ pub const VERSION: u16 = 2;
 /// Header bytes before the port records.
 pub const HEADER_LEN: usize = 48;
 /// Bytes of the shared-globals block before its records.
-pub const SHARED_HEADER: usize = 32;
+pub const SHARED_HEADER: usize = 36;
+/// Validity-flag address of a project without one.
+pub const NO_FLAG: u32 = u32::MAX;
 /// Bytes of one shared-variable record.
 pub const SHARED_VAR_RECORD: usize = 12;
 /// Area offset of a side that has no area (nothing written, or nothing read).
@@ -194,6 +198,9 @@ pub struct SharedLayout<'a> {
     pub own: Option<(u32, u32)>,
     /// The other project's area (offset, length), if this one reads anything.
     pub other: Option<(u32, u32)>,
+    /// Data address of the BOOL set before each cycle to whether the read variables are a
+    /// fresh copy, if the program has one.
+    pub valid_flag: Option<u32>,
     written: &'a [u8],
     read: &'a [u8],
 }
@@ -272,6 +279,7 @@ impl<'a> SharedLayout<'a> {
             segment_size,
             own,
             other,
+            valid_flag: Some(u32_at(header, 32)).filter(|&a| a != NO_FLAG),
             written,
             read,
         };
@@ -543,6 +551,8 @@ pub struct SharedPlan {
     pub own: Option<(u32, u32)>,
     /// (offset, length) of the other project's area.
     pub other: Option<(u32, u32)>,
+    /// Data address of the validity flag.
+    pub valid_flag: Option<u32>,
     pub written: alloc::vec::Vec<SharedVar>,
     pub read: alloc::vec::Vec<SharedVar>,
 }
@@ -560,6 +570,7 @@ impl SharedPlan {
         }
         out.extend_from_slice(&(self.written.len() as u16).to_le_bytes());
         out.extend_from_slice(&(self.read.len() as u16).to_le_bytes());
+        out.extend_from_slice(&self.valid_flag.unwrap_or(NO_FLAG).to_le_bytes());
         for v in self.written.iter().chain(&self.read) {
             out.extend_from_slice(&v.address.to_le_bytes());
             out.extend_from_slice(&v.offset.to_le_bytes());
@@ -658,6 +669,7 @@ mod tests {
             segment_size: 4096,
             own: Some((64, 16)),
             other: Some((0, 24)),
+            valid_flag: Some(120),
             written: alloc::vec![SharedVar {
                 address: 100,
                 offset: 8,
@@ -701,10 +713,10 @@ mod tests {
             (12, 8, "areas overlap"),
             (20, u32::MAX - 3, "other area offset overflows"),
             (24, 12, "a read variable beyond its area"),
-            (32 + 4, 4, "a written variable inside the area header"),
-            (32 + 4, 10, "a written variable not naturally aligned"),
-            (32 + 8, 3, "a variable size of 3"),
-            (32 + 12 + 8, 0, "a variable size of 0"),
+            (36 + 4, 4, "a written variable inside the area header"),
+            (36 + 4, 10, "a written variable not naturally aligned"),
+            (36 + 8, 3, "a variable size of 3"),
+            (36 + 12 + 8, 0, "a variable size of 0"),
         ] {
             let mut bad = good.clone();
             u32_field(&mut bad, at, value);

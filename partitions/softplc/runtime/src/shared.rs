@@ -168,8 +168,22 @@ pub fn copy_out(segment: &[AtomicU32], layout: &SharedLayout, data: &[u8]) {
 
 /// Copies the other project's variables from its area into `data` (pre-cycle), through
 /// `scratch` (at least the area's length), only if a consistent copy is taken within
-/// [`MAX_ATTEMPTS`].
+/// [`MAX_ATTEMPTS`], and sets the program's validity flag, if it has one, to whether it was.
 pub fn copy_in(
+    segment: &[AtomicU32],
+    layout: &SharedLayout,
+    data: &mut [u8],
+    scratch: &mut [u8],
+) -> Fetch {
+    let fetch = take(segment, layout, data, scratch);
+    if let Some(flag) = layout.valid_flag {
+        data[flag as usize] = u8::from(matches!(fetch, Fetch::Fresh(_)));
+    }
+    fetch
+}
+
+/// [`copy_in`] without the flag.
+fn take(
     segment: &[AtomicU32],
     layout: &SharedLayout,
     data: &mut [u8],
@@ -240,7 +254,8 @@ pub enum SharedError {
     /// or an area is longer than [`MAX_AREA_LEN`].
     BadSegment,
     /// A record is not one of the program's shared variables of that direction (address
-    /// and size), or a shared variable has no record.
+    /// and size), a shared variable has no record, or the validity flag is not the
+    /// program's.
     Mismatch,
 }
 
@@ -274,6 +289,13 @@ pub fn check(layout: &SharedLayout, image: &Image) -> Result<(), SharedError> {
         || too_long(layout.other)
     {
         return Err(SharedError::BadSegment);
+    }
+    let flag = image
+        .shared_vars()
+        .find(|s| s.direction == SharedDirection::Valid)
+        .map(|s| s.var.addr);
+    if flag != layout.valid_flag {
+        return Err(SharedError::Mismatch);
     }
     // The image's shared variables are disjoint (the verifier checks it), so equal counts
     // and a record for each variable make the records exactly the variables.
@@ -409,6 +431,7 @@ mod planner {
                 segment_size: size,
                 own: areas[i],
                 other: None,
+                valid_flag: None,
                 written: Vec::new(),
                 read: Vec::new(),
             };
@@ -477,6 +500,21 @@ mod planner {
                     size: s.var.size,
                 });
             }
+            if let Some(flag) = p
+                .image
+                .shared_vars()
+                .find(|s| s.direction == SharedDirection::Valid)
+            {
+                if plan.read.is_empty() {
+                    errors.push(format!(
+                        "{}: partition {} has a validity flag `{}` but reads no shared variable",
+                        at(&p.image, &flag),
+                        p.partition,
+                        flag.var.name
+                    ));
+                }
+                plan.valid_flag = Some(flag.var.addr);
+            }
             plans.push(plan);
         }
         if errors.is_empty() {
@@ -506,7 +544,7 @@ mod tests {
     }
 
     const WRITER: &str = "VAR_GLOBAL\n  {attribute 'shared' := 'write'}\n  counter : DINT;\n  {attribute 'shared' := 'write'}\n  flag : BOOL;\n  {attribute 'shared' := 'write'}\n  level : LREAL;\nEND_VAR\nPROGRAM Main\ncounter := counter + 1;\nEND_PROGRAM\n";
-    const READER: &str = "VAR_GLOBAL\n  {attribute 'shared' := 'read'}\n  level : LREAL := 7.0;\n  {attribute 'shared' := 'read'}\n  COUNTER : DINT := -1;\nEND_VAR\nPROGRAM Main\nEND_PROGRAM\n";
+    const READER: &str = "VAR_GLOBAL\n  {attribute 'shared' := 'read'}\n  level : LREAL := 7.0;\n  {attribute 'shared' := 'read'}\n  COUNTER : DINT := -1;\n  {attribute 'shared' := 'valid'}\n  fresh : BOOL := TRUE;\nEND_VAR\nPROGRAM Main\nEND_PROGRAM\n";
 
     fn plan_of(sources: &[(&str, &str, &str)], size: u32) -> Result<Vec<SharedPlan>, Vec<String>> {
         let images: Vec<Vec<u8>> = sources.iter().map(|(_, f, s)| compile(f, s)).collect();
@@ -626,6 +664,15 @@ mod tests {
             mismatch.contains("t.st:1:43: shared variable `level` is read as REAL by partition b, but partition a writes it as LREAL (w.st:7:3)"),
             "{mismatch}"
         );
+        let lonely =
+            "VAR_GLOBAL {attribute 'shared' := 'valid'} ok : BOOL; END_VAR PROGRAM P END_PROGRAM";
+        let flag = errors(&[("a", "w.st", WRITER), ("c", "f.st", lonely)], 4096);
+        assert!(
+            flag.contains(
+                "f.st:1:44: partition c has a validity flag `ok` but reads no shared variable"
+            ),
+            "{flag}"
+        );
         let small = errors(&[("a", "w.st", WRITER), ("b", "r.st", READER)], 16);
         assert!(
             small.contains(
@@ -646,12 +693,14 @@ mod tests {
         let mut wdata = data_of(&wimage);
         let mut rdata = data_of(&rimage);
         let mut scratch = [0u8; MAX_AREA_LEN];
-        // Before the first update the reader keeps its initial values.
+        // Before the first update the reader keeps its initial values, not valid ones.
+        assert_eq!(var(&rimage, &rdata, "fresh"), [1]);
         assert_eq!(
             copy_in(&seg, &rl, &mut rdata, &mut scratch),
             Fetch::NotYetWritten
         );
         assert_eq!(var(&rimage, &rdata, "level"), 7.0f64.to_le_bytes());
+        assert_eq!(var(&rimage, &rdata, "fresh"), [0]);
         set(&wimage, &mut wdata, "counter", &41i32.to_le_bytes());
         set(&wimage, &mut wdata, "level", &2.5f64.to_le_bytes());
         copy_out(&seg, &wl, &wdata);
@@ -661,6 +710,7 @@ mod tests {
         );
         assert_eq!(var(&rimage, &rdata, "COUNTER"), 41i32.to_le_bytes());
         assert_eq!(var(&rimage, &rdata, "level"), 2.5f64.to_le_bytes());
+        assert_eq!(var(&rimage, &rdata, "fresh"), [1]);
         copy_out(&seg, &wl, &wdata);
         assert_eq!(
             copy_in(&seg, &rl, &mut rdata, &mut scratch),
@@ -699,6 +749,11 @@ mod tests {
         let odd = begin_write(&seg, 0);
         write_var(&seg, 0, wl.written().next().unwrap(), &wdata);
         assert_eq!(copy_in(&seg, &rl, &mut rdata, &mut scratch), Fetch::Busy);
+        assert_eq!(
+            var(&rimage, &rdata, "fresh"),
+            [0],
+            "stale values are flagged"
+        );
         assert_eq!(
             var(&rimage, &rdata, "COUNTER"),
             1i32.to_le_bytes(),

@@ -36,12 +36,13 @@
 //!   order (see [`crate::located`] for the copy semantics).
 //! * `SHARED`: 16-byte records `var u32` (index of the variable's `VARS` record: name, type,
 //!   data address, size), `direction u8` ([`SharedDirection`]: 0 written by this program,
-//!   1 read from the other project), reserved u8, `file u16, line u32, column u32` (the
-//!   declaration, for the build's cross-project diagnostics) — the global variables shared
-//!   with another PLC project (`{attribute 'shared' := 'write' | 'read'}`), in declaration
-//!   order. The verifier checks that each names a variable once, of an elementary type
-//!   (BOOL to LREAL, TIME, the bit strings; no STRING), that no two overlap in data memory,
-//!   and that there are at most [`MAX_SHARED_VARS`].
+//!   1 read from the other project, 2 the validity flag of the read ones), reserved u8,
+//!   `file u16, line u32, column u32` (the declaration, for the build's cross-project
+//!   diagnostics) — the global variables shared with another PLC project
+//!   (`{attribute 'shared' := 'write' | 'read' | 'valid'}`), in declaration order. The
+//!   verifier checks that each names a variable once, of an elementary type (BOOL to LREAL,
+//!   TIME, the bit strings; no STRING), that no two overlap in data memory, that at most one
+//!   is the validity flag and it is a BOOL, and that there are at most [`MAX_SHARED_VARS`].
 //!
 //! [`Image::parse`] checks only the structure (sizes, section bounds, record multiples); the
 //! semantic checks are the verifier's job ([`mod@crate::verify`]).
@@ -289,6 +290,10 @@ codes::code_enum! {
         Write = 0 => "write",
         /// This program reads it from the other project (`{attribute 'shared' := 'read'}`).
         Read = 1 => "read",
+        /// A BOOL the runtime sets before each cycle: whether the read variables hold a
+        /// consistent copy of the other project's latest update, taken for this cycle
+        /// (`{attribute 'shared' := 'valid'}`).
+        Valid = 2 => "valid",
     }
 }
 

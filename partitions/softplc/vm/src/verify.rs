@@ -15,7 +15,7 @@
 //! of scratch per code byte (state + worklist); [`verify_with_scratch`]
 //! takes it from the caller (no allocation), `verify` (feature `alloc`) allocates it.
 
-use crate::image::{Image, Section, TASK_RECORD, VarType};
+use crate::image::{Image, Section, SharedDirection, TASK_RECORD, VarType};
 use crate::isa::{
     Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect,
 };
@@ -176,9 +176,11 @@ pub enum Reason {
     /// Located variable outside data memory.
     LocatedOutsideData,
     /// Shared variable: unknown direction code, unknown variable record, a type that cannot
-    /// be shared (STRING), or a declaration in an unknown file.
+    /// be shared (STRING; a validity flag other than BOOL), or a declaration in an unknown
+    /// file.
     BadShared,
-    /// Shared variable named twice or overlapping another shared variable in data memory.
+    /// Shared variable named twice, overlapping another shared variable in data memory, or a
+    /// second validity flag.
     SharedOverlap,
     /// Source-location table not sorted by code offset.
     SrcLocUnsorted,
@@ -740,7 +742,11 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         let Some(s) = image.shared(index) else {
             return err(site, Reason::BadShared);
         };
-        let shareable = VarType::from_code(s.var.ty).is_some_and(|t| t.mem_type().is_some());
+        let ty = VarType::from_code(s.var.ty);
+        let shareable = match s.direction {
+            SharedDirection::Valid => ty == Some(VarType::Bool),
+            _ => ty.is_some_and(|t| t.mem_type().is_some()),
+        };
         if !shareable || s.location.file as usize >= image.file_count() {
             return err(site, Reason::BadShared);
         }
@@ -748,7 +754,9 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         // Quadratic, but bounded by MAX_SHARED_VARS; a copy-in must never write
         // over another shared variable.
         let clash = (0..index).filter_map(|i| image.shared(i)).any(|o| {
-            o.var_index == s.var_index || (lo < o.var.addr + o.var.size && o.var.addr < hi)
+            o.var_index == s.var_index
+                || (lo < o.var.addr + o.var.size && o.var.addr < hi)
+                || (o.direction == SharedDirection::Valid && s.direction == SharedDirection::Valid)
         });
         if clash {
             return err(site, Reason::SharedOverlap);

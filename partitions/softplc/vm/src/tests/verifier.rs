@@ -638,7 +638,7 @@ fn shared_records() {
         column: 5,
     };
     // Variables: 0 = a DINT at 0, 1 = a LREAL at 8, 2 = a STRING at 16, 3 = a DINT at 2
-    // (overlapping variable 0).
+    // (overlapping variable 0), 4 and 5 = BOOLs at 40 and 41.
     let image_with = |records: &[(u32, SharedDirection, SourceLocation)]| {
         program_with(10, |b, _| {
             b.add_file("a.st");
@@ -646,6 +646,8 @@ fn shared_records() {
             b.add_var("level", VarType::LReal, 0, 8, 8);
             b.add_var("text", VarType::String, 0, 16, 12);
             b.add_var("odd", VarType::DInt, 0, 2, 4);
+            b.add_var("ok", VarType::Bool, 0, 40, 1);
+            b.add_var("ok2", VarType::Bool, 0, 41, 1);
             for &(var, direction, location) in records {
                 b.add_shared(var, direction, location);
             }
@@ -692,10 +694,21 @@ fn shared_records() {
         Reason::SharedOverlap,
     );
     refused(&[(0, w, at(1)), (3, w, at(2))], 1, Reason::SharedOverlap);
+    // A validity flag must be a BOOL, and there is at most one.
+    let v = SharedDirection::Valid;
+    assert_eq!(
+        verdict(&image_with(&[
+            (4, v, at(1)),
+            (1, SharedDirection::Read, at(2))
+        ])),
+        Ok(())
+    );
+    refused(&[(0, v, at(1))], 0, Reason::BadShared);
+    refused(&[(4, v, at(1)), (5, v, at(2))], 1, Reason::SharedOverlap);
     // An unknown direction code.
     let mut bytes = image_with(&[(0, w, at(1))]);
     let section = crate::isa::read_u32(&bytes, 16 + 10 * 8) as usize;
-    bytes[section + 4] = 2;
+    bytes[section + 4] = 3;
     assert_eq!(
         verdict(&bytes),
         Err(VerifyError {
