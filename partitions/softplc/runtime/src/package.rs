@@ -187,7 +187,9 @@ pub struct Package<'a> {
 /// Where a project's shared globals lie in its shared-memory segment (checked by
 /// [`Package::parse`]: both areas inside the segment, 8-byte aligned and disjoint, every
 /// variable inside its area past the header, 1, 2, 4 or 8 bytes, naturally aligned, and the
-/// written ones disjoint).
+/// written ones disjoint; that the data addresses and the validity flag are the program's,
+/// and the segment where syssw maps segments, is [`crate::shared::check`]'s job, with the
+/// verified program).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct SharedLayout<'a> {
     /// The segment's address in the partition's address space.

@@ -34,6 +34,11 @@
 //! sequence again, and takes the copy into data memory only if the sequence did not change.
 //! It tries [`MAX_ATTEMPTS`] times; if every attempt overlapped an update, the read
 //! variables keep their previous values and the cycle counts as *stale* ([`Fetch::Busy`]).
+//! A writer stopped in the middle of an update (its partition stopped or restarting) leaves
+//! the sequence odd: the reader keeps the previous values until the writer's next complete
+//! update. A program that declares a BOOL `{attribute 'shared' := 'valid'}` sees before each
+//! cycle whether its read variables are a fresh copy (FALSE before the other project's first
+//! update and on a stale cycle).
 //!
 //! Why a sequence lock rather than double buffering: the writer never waits and never
 //! depends on the reader (a partition must not be able to stall another), the layout has one
@@ -58,7 +63,8 @@
 //! segment are atomic, so a concurrent writer is never a data race in the language's sense.
 //! Only the owner writes its area (the configuration maps the segment writable to both, so
 //! this is the build's layout plus each runtime keeping to it), which is why the writer may
-//! update a word holding several small variables with a plain load and store.
+//! update a word holding several small variables with a relaxed load and store. (The
+//! sequence could only come back to `s1` after 2^31 updates during one copy.)
 
 use crate::package::{SharedLayout, SharedVar};
 use core::sync::atomic::{AtomicU32, Ordering, fence};
