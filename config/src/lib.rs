@@ -67,6 +67,7 @@
 //! plc.online = { request = "cmd", response = "reply", access = "monitor" }
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
+//! plc.shared = "frame"            # the segment its shared globals go through
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -139,7 +140,14 @@
 //! against the compiled program. `plc.watch` names variables (globals by name, program variables as `instance.var`) the
 //! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
 //! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
-//! the partition windows (checked when the program is compiled).
+//! the partition windows (checked when the program is compiled). `plc.shared` names the
+//! shared-memory segment through which the program's shared globals (`{attribute 'shared'
+//! := 'write' | 'read'}` in VAR_GLOBAL) meet those of one other PLC partition: the
+//! partition must map it `"rw"`, and at most two PLC partitions name one segment. When the
+//! programs are compiled the segment is laid out (each writer's area; format and protocol
+//! in the runtime's `softplc::shared`) and paired: a variable written by both, a read
+//! variable the other does not write or writes with another type, or areas beyond the
+//! segment are build errors naming the declarations as `file:line:col`.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

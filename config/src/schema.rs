@@ -99,6 +99,7 @@ pub struct Plc {
     pub safe: Named<PlcValue>,
     #[serde(default)]
     pub deadline: Named<Scalar>,
+    pub shared: Option<Spanned<String>>,
 }
 
 /// A value written in the description (`plc.safe`).

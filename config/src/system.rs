@@ -79,8 +79,11 @@ pub struct Plc {
     /// compiled); the others go to zero/FALSE.
     pub safe: Vec<(String, PlcValue)>,
     /// Task deadlines by IEC TASK name (ns from the task's release; checked against the
-    /// program when it is compiled); the other tasks' deadline is their interval.
+    /// program when it is compiled); the other tasks have none.
     pub deadlines: Vec<(String, u64)>,
+    /// The shared-memory segment (index into [`System::segments`]) through which its
+    /// shared globals meet another PLC project's (`plc.shared`).
+    pub shared: Option<usize>,
 }
 
 /// A value written in the description.

@@ -376,10 +376,15 @@ impl Validator<'_, '_> {
             let own_ports = self.partition_ports(raw, &path, index, &mut ports);
 
             let health = self.health(&raw.health, &path.key("health"));
-            let plc = raw
-                .plc
-                .as_ref()
-                .and_then(|plc| self.plc(plc, &path.key("plc"), &own_ports));
+            let plc = raw.plc.as_ref().and_then(|plc| {
+                let plc_path = path.key("plc");
+                let shared_segment =
+                    self.plc_shared(plc, &plc_path, &shared, segments, &partitions);
+                self.plc(plc, &plc_path, &own_ports).map(|p| Plc {
+                    shared: shared_segment,
+                    ..p
+                })
+            });
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -660,7 +665,66 @@ impl Validator<'_, '_> {
             online,
             safe,
             deadlines,
+            shared: None,
         })
+    }
+
+    /// `plc.shared`: a segment the partition maps read-write, named by at most two PLC
+    /// partitions (the two projects whose shared globals meet there).
+    fn plc_shared(
+        &mut self,
+        plc: &Spanned<schema::Plc>,
+        path: &KeyPath,
+        attachments: &[Attachment],
+        segments: &[(Segment, usize)],
+        earlier: &[Partition],
+    ) -> Option<usize> {
+        let name = plc.get_ref().shared.as_ref()?;
+        let here = path.key("shared");
+        let Some(index) = segments.iter().position(|(s, _)| s.name == *name.get_ref()) else {
+            self.error(
+                start(name),
+                &here,
+                format!(
+                    "unknown shared memory segment `{}` (define it in [[shared_memory]])",
+                    name.get_ref()
+                ),
+            );
+            return None;
+        };
+        let writable = attachments
+            .iter()
+            .any(|a| a.segment == index && a.rights == Rights::ReadWrite);
+        if !writable {
+            self.error(
+                start(name),
+                &here,
+                format!(
+                    "the partition must map segment `{0}` read-write to share globals through it: add `shared = {{ {0} = \"rw\" }}`",
+                    name.get_ref()
+                ),
+            );
+            return None;
+        }
+        let others: Vec<&str> = earlier
+            .iter()
+            .filter(|p| p.plc.as_ref().is_some_and(|plc| plc.shared == Some(index)))
+            .map(|p| p.name.as_str())
+            .collect();
+        if others.len() >= 2 {
+            self.error(
+                start(name),
+                &here,
+                format!(
+                    "segment `{}` already links the shared globals of {} and {}: two PLC projects share one segment",
+                    name.get_ref(),
+                    others[0],
+                    others[1]
+                ),
+            );
+            return None;
+        }
+        Some(index)
     }
 
     /// `plc.online`: a queuing input for requests and a queuing output for responses, both

@@ -302,3 +302,77 @@ fn task_deadlines() {
         "a task deadline must lie between",
     );
 }
+
+/// Partition b shares globals through segment `link` (its PLC block plus `extra`), and the
+/// description ends with `tail`.
+fn sharing(b_extra: &str, tail: &str) -> String {
+    let text = plc(&[(
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    )]);
+    let text = text.replacen("plc.program = [", &format!("{b_extra}\nplc.program = ["), 1);
+    format!("{text}\n[[shared_memory]]\nname = \"link\"\nsize = \"4KiB\"\n{tail}")
+}
+
+/// A background PLC partition `name` sharing globals through `link`.
+fn sharing_partition(name: &str) -> String {
+    format!(
+        "\n[partitions.{name}]\nimage = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 40\ntime = \"background\"\nshared = {{ link = \"rw\" }}\nplc.program = [\"tests/data/counter.st\"]\nplc.shared = \"link\"\n"
+    )
+}
+
+#[test]
+fn plc_shared_names_a_segment_the_partition_maps_read_write() {
+    let system = load_ok(&sharing(
+        "shared = { link = \"rw\" }\nplc.shared = \"link\"",
+        "",
+    ));
+    assert_eq!(system.segments[0].name, "link");
+    let p = system.partitions[1].plc.as_ref().expect("plc keys");
+    assert_eq!(p.shared, Some(0));
+    // Without the key the partition shares nothing.
+    let system = load_ok(&sharing("shared = { link = \"rw\" }", ""));
+    assert_eq!(system.partitions[1].plc.as_ref().unwrap().shared, None);
+}
+
+#[test]
+fn plc_shared_is_checked() {
+    let src = sharing("shared = { link = \"rw\" }\nplc.shared = \"lnk\"", "");
+    expect_some(
+        &src,
+        "\"lnk\"",
+        0,
+        "partitions.b.plc.shared",
+        "unknown shared memory segment `lnk`",
+    );
+    let src = sharing("plc.shared = \"link\"", "");
+    expect_some(
+        &src,
+        "\"link\"",
+        0,
+        "partitions.b.plc.shared",
+        "must map segment `link` read-write",
+    );
+    let src = sharing("shared = { link = \"r\" }\nplc.shared = \"link\"", "");
+    expect_some(
+        &src,
+        "\"link\"",
+        0,
+        "partitions.b.plc.shared",
+        "must map segment `link` read-write",
+    );
+    // Two projects per segment: the third is refused.
+    let two = sharing(
+        "shared = { link = \"rw\" }\nplc.shared = \"link\"",
+        &sharing_partition("c"),
+    );
+    load_ok(&two);
+    let three = format!("{two}{}", sharing_partition("d"));
+    expect_some(
+        &three,
+        "plc.shared = ^\"link\"",
+        2,
+        "partitions.d.plc.shared",
+        "already links the shared globals of b and c",
+    );
+}

@@ -505,3 +505,80 @@ fn plc_watchdog() {
         &format!("the background hog's CPU time at 5 s: {hog:?} ms"),
     );
 }
+
+#[test]
+fn plc_shared() {
+    let o = boot("plc_shared");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the stopwatch ends the run",
+    );
+    for (partition, written, read) in [("writer", 6, 0), ("reader", 0, 6)] {
+        let start = format!(
+            "[{partition}] plc: shared globals: {written} written, {read} read through the segment at 0x"
+        );
+        check(&o, o.line(&start).is_some(), &format!("no `{start}` line"));
+    }
+    let writer = watch_lines(&o.lines, "writer");
+    let reader = watch_lines(&o.lines, "reader");
+    check(
+        &o,
+        writer.len() >= 2 && reader.len() >= 2,
+        &format!(
+            "{} writer and {} reader watch lines (one a second)",
+            writer.len(),
+            reader.len()
+        ),
+    );
+    for (t, values) in &reader {
+        let field = |name| value(values, name);
+        check(
+            &o,
+            field("Reader.torn") == Some(0)
+                && field("Reader.backwards") == Some(0)
+                && field("Reader.stale") == Some(0),
+            &format!("t={t}ms: torn, out-of-order or stale records taken: {values:?}"),
+        );
+    }
+    // The reader took a record every cycle and saw the sequence advance by one per cycle,
+    // as fast as the writer counts (the writer runs first in each frame).
+    let (_, last_reader) = reader.last().expect("counted");
+    let (_, last_writer) = writer.last().expect("counted");
+    let records = value(last_reader, "Reader.records").unwrap_or(0);
+    let advanced = value(last_reader, "Reader.advanced").unwrap_or(0);
+    let cycles = value(last_writer, "Writer.cycles").unwrap_or(0);
+    check(
+        &o,
+        records >= 1_000 && advanced + 1 == records,
+        &format!("the reader saw {records} records, the sequence advanced by {advanced}"),
+    );
+    check(
+        &o,
+        advanced + 10 >= cycles && advanced <= cycles + 10,
+        &format!(
+            "the sequence advanced by {advanced} for the reader while the writer ran {cycles} cycles"
+        ),
+    );
+    // The copy-ins found a new update each cycle (never a stale one: the windows do not
+    // overlap, so the writer always finishes its update first).
+    let shared = o
+        .lines
+        .iter()
+        .rev()
+        .find(|l| l.contains("[reader] plc: t=") && l.contains(" shared fresh="));
+    let count = |line: &str, name: &str| {
+        line.split_whitespace()
+            .find_map(|w| w.strip_prefix(name))
+            .and_then(|v| v.parse::<u64>().ok())
+    };
+    check(
+        &o,
+        shared.is_some_and(|l| {
+            count(l, "fresh=").is_some_and(|n| n >= 1_000) && count(l, "stale=") == Some(0)
+        }),
+        &format!("the reader's shared statistics: {shared:?}"),
+    );
+}

@@ -1,8 +1,10 @@
 //! The PLC build step of `system.img`: for each partition with `plc.*` keys, compile its
 //! ST sources with the compiler library (a compile error stops the build, printed exactly
 //! as `plcc check` prints it), check its tasks against the partition's period and its watch
-//! list against the program's variables, and write its package (`softplc::package`) as the
-//! partition's data entry `data/<partition>`.
+//! list against the program's variables, pair the shared globals of the (at most two) PLC
+//! partitions of each `plc.shared` segment and lay the segment out (`softplc::shared::plan`),
+//! and write each package (`softplc::package`) as the partition's data entry
+//! `data/<partition>`.
 
 use anyhow::{Context, Result, bail};
 use config::System;
@@ -12,100 +14,208 @@ use softplc::package::{self, PortMap};
 
 /// `(partition name, package)` for every soft-PLC partition of `system`.
 pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
-    let mut out = Vec::new();
+    // Every program first: the shared globals pair across partitions.
+    let mut programs = Vec::new();
     for (index, p) in system.partitions.iter().enumerate() {
-        let Some(plc) = &p.plc else {
-            continue;
-        };
-        let sources = plc
-            .program
-            .iter()
-            .map(|file| {
-                std::fs::read_to_string(&file.path)
-                    .map(|text| (file.name.clone(), text))
-                    .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let compiled = match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
-            Ok((compiled, _)) => compiled,
-            Err((diagnostics, map)) => {
-                eprint!(
-                    "{}",
-                    plc_compiler::diagnostics::render(&map, &diagnostics, false)
-                );
-                bail!(
-                    "partition {}: its PLC program has {} error(s)",
-                    p.name,
-                    diagnostics.len()
-                );
-            }
-        };
-        check_tasks(system, index, p, &compiled.image)?;
-        let image = plc_vm::image::Image::parse(&compiled.image)
-            .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
-        for name in &plc.watch {
-            if image.find_var(name).is_none() {
-                bail!(
-                    "partition {}: plc.watch names `{name}`, which is not a variable of its program (globals by name, program variables as instance.variable)",
-                    p.name
-                );
-            }
+        if let Some(plc) = &p.plc {
+            programs.push((index, compile(system, index, p, plc)?));
         }
-        let mut ports: Vec<PortMap> = plc
-            .inputs
-            .iter()
-            .chain(&plc.outputs)
-            .map(|link| port_map(p, link))
-            .collect();
-        // The online ports follow the process-image ones (no bytes of the image).
-        let online = plc.online.map(|o| {
-            let at = ports.len();
-            for port in [o.request, o.response] {
-                let link = PlcLink {
-                    port,
-                    at: 0,
-                    valid: None,
-                };
-                ports.push(port_map(p, &link));
-            }
-            package::Online {
-                request: at,
-                response: at + 1,
-                access: o.access,
-            }
-        });
-        let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
-        let safe = plc
-            .safe
-            .iter()
-            .map(|(name, value)| safe_value(&image, name, *value))
-            .collect::<Result<Vec<_>, String>>()
-            .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
-        let deadlines = plc
-            .deadlines
-            .iter()
-            .map(|(task, ns)| {
-                let known = (0..image.task_count())
-                    .filter_map(|i| image.task(i))
-                    .any(|t| softplc::scan::names_task(task, t.name));
-                if !known {
-                    bail!(
-                        "partition {}: plc.deadline names `{task}`, which is not a TASK of its program",
-                        p.name
-                    );
-                }
-                Ok(package::TaskDeadline {
-                    task,
-                    deadline_ns: *ns,
-                })
-            })
-            .collect::<Result<Vec<_>>>()?;
+    }
+    let mut shared = shared_plans(system, &programs)?;
+    let mut out = Vec::new();
+    for (index, compiled) in &programs {
+        let p = &system.partitions[*index];
+        let plc = p.plc.as_ref().expect("a PLC partition");
         out.push((
             p.name.clone(),
-            package::encode(&ports, &compiled.image, &watch, online, &safe, &deadlines),
+            package(p, plc, compiled, shared.remove(index).as_ref())?,
         ));
     }
     Ok(out)
+}
+
+/// The shared-globals block of each partition (by index) that shares through a segment.
+fn shared_plans(
+    system: &System,
+    programs: &[(usize, plc_compiler::Compiled)],
+) -> Result<std::collections::HashMap<usize, package::SharedPlan>> {
+    let mut plans = std::collections::HashMap::new();
+    for (index, compiled) in programs {
+        let p = &system.partitions[*index];
+        let image = Image::parse(&compiled.image).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let segment = p.plc.as_ref().and_then(|plc| plc.shared);
+        if segment.is_none() && image.shared_count() > 0 {
+            let first = image.shared(0).expect("counted");
+            bail!(
+                "{}:{}:{}: partition {}'s program shares `{}` with another project, but the partition names no segment: add plc.shared = \"<segment>\" (a [[shared_memory]] segment it maps \"rw\")",
+                image.file_name(first.location.file).unwrap_or("?"),
+                first.location.line,
+                first.location.column,
+                p.name,
+                first.var.name
+            );
+        }
+    }
+    for (seg_index, segment) in system.segments.iter().enumerate() {
+        let users: Vec<&(usize, plc_compiler::Compiled)> = programs
+            .iter()
+            .filter(|(i, _)| {
+                system.partitions[*i]
+                    .plc
+                    .as_ref()
+                    .is_some_and(|plc| plc.shared == Some(seg_index))
+            })
+            .collect();
+        if users.is_empty() {
+            continue;
+        }
+        let projects = users
+            .iter()
+            .map(|(i, compiled)| {
+                Ok(softplc::shared::Project {
+                    partition: &system.partitions[*i].name,
+                    image: Image::parse(&compiled.image).map_err(|e| anyhow::anyhow!("{e}"))?,
+                })
+            })
+            .collect::<Result<Vec<_>>>()?;
+        let address =
+            protocol::layout::shared_address(system.segments[..seg_index].iter().map(|s| s.size));
+        let size = u32::try_from(segment.size).unwrap_or(u32::MAX);
+        match softplc::shared::plan(&segment.name, address, size, &projects) {
+            Ok(segment_plans) => {
+                for ((i, _), plan) in users.iter().zip(segment_plans) {
+                    if plan.own.is_some() || plan.other.is_some() {
+                        plans.insert(*i, plan);
+                    }
+                }
+            }
+            Err(errors) => {
+                for e in &errors {
+                    eprintln!("error: {e}");
+                }
+                bail!(
+                    "shared memory segment {}: {} error(s) pairing the shared globals of its PLC partitions",
+                    segment.name,
+                    errors.len()
+                );
+            }
+        }
+    }
+    Ok(plans)
+}
+
+/// Compiles a PLC partition's program and checks its tasks and watch list.
+fn compile(
+    system: &System,
+    index: usize,
+    p: &Partition,
+    plc: &config::system::Plc,
+) -> Result<plc_compiler::Compiled> {
+    let sources = plc
+        .program
+        .iter()
+        .map(|file| {
+            std::fs::read_to_string(&file.path)
+                .map(|text| (file.name.clone(), text))
+                .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    let compiled = match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
+        Ok((compiled, _)) => compiled,
+        Err((diagnostics, map)) => {
+            eprint!(
+                "{}",
+                plc_compiler::diagnostics::render(&map, &diagnostics, false)
+            );
+            bail!(
+                "partition {}: its PLC program has {} error(s)",
+                p.name,
+                diagnostics.len()
+            );
+        }
+    };
+    check_tasks(system, index, p, &compiled.image)?;
+    let image = plc_vm::image::Image::parse(&compiled.image)
+        .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
+    for name in &plc.watch {
+        if image.find_var(name).is_none() {
+            bail!(
+                "partition {}: plc.watch names `{name}`, which is not a variable of its program (globals by name, program variables as instance.variable)",
+                p.name
+            );
+        }
+    }
+    Ok(compiled)
+}
+
+/// A PLC partition's package: its ports, program, watch list, safe values and shared
+/// globals.
+fn package(
+    p: &Partition,
+    plc: &config::system::Plc,
+    compiled: &plc_compiler::Compiled,
+    shared: Option<&package::SharedPlan>,
+) -> Result<Vec<u8>> {
+    let image = plc_vm::image::Image::parse(&compiled.image)
+        .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
+    let mut ports: Vec<PortMap> = plc
+        .inputs
+        .iter()
+        .chain(&plc.outputs)
+        .map(|link| port_map(p, link))
+        .collect();
+    // The online ports follow the process-image ones (no bytes of the image).
+    let online = plc.online.map(|o| {
+        let at = ports.len();
+        for port in [o.request, o.response] {
+            let link = PlcLink {
+                port,
+                at: 0,
+                valid: None,
+            };
+            ports.push(port_map(p, &link));
+        }
+        package::Online {
+            request: at,
+            response: at + 1,
+            access: o.access,
+        }
+    });
+    let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
+    let safe = plc
+        .safe
+        .iter()
+        .map(|(name, value)| safe_value(&image, name, *value))
+        .collect::<Result<Vec<_>, String>>()
+        .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
+    let deadlines = plc
+        .deadlines
+        .iter()
+        .map(|(task, ns)| {
+            let known = (0..image.task_count())
+                .filter_map(|i| image.task(i))
+                .any(|t| softplc::scan::names_task(task, t.name));
+            if !known {
+                bail!(
+                    "partition {}: plc.deadline names `{task}`, which is not a TASK of its program",
+                    p.name
+                );
+            }
+            Ok(package::TaskDeadline {
+                task,
+                deadline_ns: *ns,
+            })
+        })
+        .collect::<Result<Vec<_>>>()?;
+    Ok(package::encode(
+        &ports,
+        &compiled.image,
+        &watch,
+        online,
+        &safe,
+        shared,
+        &deadlines,
+    ))
 }
 
 /// The safe value of `%Q` variable `name`: it must be a located output of the program and
@@ -208,6 +318,97 @@ fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Re
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Scenario plc_shared's description, with `edit` applied, written next to its ST files.
+    fn shared_system(edit: (&str, &str)) -> Result<System> {
+        let configs = crate::workspace_root().join("tests/configs");
+        let text = std::fs::read_to_string(configs.join("plc_shared.toml"))?;
+        assert!(text.contains(edit.0), "test bug: {edit:?}");
+        let text = text.replacen(edit.0, edit.1, 1);
+        // Only the name is used (program paths are relative to its directory).
+        let path = configs.join("plc_shared_edited.toml");
+        config::load(&path.to_string_lossy(), &text, &|_| true).map_err(|d| {
+            anyhow::anyhow!(
+                "{}",
+                d.iter()
+                    .map(|d| d.to_string())
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            )
+        })
+    }
+
+    #[test]
+    fn shared_globals_pair_across_the_packages_of_a_segment() {
+        let system = shared_system(("", "")).unwrap();
+        let packages = packages(&system).unwrap();
+        let layout = |name: &str| {
+            let (_, bytes) = packages.iter().find(|(n, _)| n == name).unwrap();
+            let package = package::Package::parse(bytes).unwrap();
+            let image = Image::parse(package.program()).unwrap();
+            let shared = package.shared().unwrap();
+            softplc::shared::check(&shared, &image).unwrap();
+            let names: Vec<(String, package::SharedVar)> = image
+                .shared_vars()
+                .filter(|s| s.direction != plc_vm::image::SharedDirection::Valid)
+                .map(|s| {
+                    let mut records = match s.direction {
+                        plc_vm::image::SharedDirection::Write => shared.written(),
+                        _ => shared.read(),
+                    };
+                    let record = records.find(|v| v.address == s.var.addr).unwrap();
+                    (s.var.name.to_string(), record)
+                })
+                .collect();
+            let flag = image
+                .shared_vars()
+                .find(|s| s.direction == plc_vm::image::SharedDirection::Valid)
+                .map(|s| s.var.addr);
+            assert_eq!(shared.valid_flag, flag, "{name}");
+            (shared.segment_address, shared.own, shared.other, names)
+        };
+        let (writer_at, writer_own, writer_other, written) = layout("writer");
+        let (reader_at, reader_own, reader_other, read) = layout("reader");
+        // The segment's address is where syssw maps the first segment.
+        assert_eq!(
+            (writer_at, reader_at),
+            (protocol::layout::SHARED_BASE, protocol::layout::SHARED_BASE)
+        );
+        // seq u32 at 8, a i32 at 12, level f64 at 16, small u16 at 24, odd at 26, check at 28.
+        assert_eq!((writer_own, writer_other), (Some((0, 32)), None));
+        assert_eq!((reader_own, reader_other), (None, Some((0, 32))));
+        let offsets = |vars: &[(String, package::SharedVar)]| {
+            let mut v: Vec<(String, u32, u32)> = vars
+                .iter()
+                .map(|(n, r)| (n.clone(), r.offset, r.size))
+                .collect();
+            v.sort();
+            v
+        };
+        assert_eq!(offsets(&written), offsets(&read));
+        assert_eq!(
+            offsets(&written)
+                .iter()
+                .map(|(_, o, _)| *o)
+                .collect::<Vec<_>>(),
+            [12, 28, 16, 26, 8, 24]
+        );
+    }
+
+    #[test]
+    fn shared_globals_without_a_segment_are_a_build_error() {
+        let system = shared_system((
+            "plc.program = [\"plc/shared_reader.st\"]\nplc.shared = \"link\"",
+            "plc.program = [\"plc/shared_reader.st\"]",
+        ))
+        .unwrap();
+        let e = packages(&system).unwrap_err().to_string();
+        assert!(
+            e.contains("plc/shared_reader.st:7:3: partition reader's program shares `seq`")
+                && e.contains("names no segment"),
+            "{e}"
+        );
+    }
 
     fn image_of(source: &str) -> Vec<u8> {
         let files = [("t.st".to_string(), source.to_string())];

@@ -66,6 +66,17 @@ pub struct VarDecl {
     pub ty: TypeRef,
     pub init: Option<Init>,
     pub span: Span,
+    /// `{attribute 'shared' := 'write' | 'read'}` before it: a global shared with another
+    /// PLC project.
+    pub shared: Option<SharedAttr>,
+}
+
+/// A declaration's `{attribute 'shared'}` pragma.
+#[derive(Debug, Clone, Copy)]
+pub struct SharedAttr {
+    pub direction: plc_vm::image::SharedDirection,
+    /// The pragma.
+    pub span: Span,
 }
 
 #[derive(Debug, Clone)]

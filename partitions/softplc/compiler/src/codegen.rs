@@ -66,7 +66,7 @@ pub(crate) struct Gen<'a> {
     /// Initial data memory image.
     pub init: Vec<u8>,
     /// Image file index of each source file.
-    file_ids: Vec<u16>,
+    pub file_ids: Vec<u16>,
     /// POU whose body is being compiled.
     pub cur: usize,
     loops: Vec<LoopCtx>,

@@ -21,6 +21,10 @@ pub enum Tok {
     /// Directly represented variable `%IX0.1`, `%QW4`, ...: the text after `%`, upper-cased
     /// (the parser checks its form).
     Direct(String),
+    /// The pragma `{attribute 'shared' := 'VALUE'}` with its value as written (`None` for
+    /// `{attribute 'shared'}`); the parser attaches it to the declaration after it. Every
+    /// other pragma carries no meaning for this compiler and is skipped.
+    SharedAttribute(Option<String>),
     Assign,   // :=
     Arrow,    // =>
     Colon,    // :
@@ -66,6 +70,33 @@ pub fn lex(file: u32, text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
     };
     lx.run();
     lx.out
+}
+
+/// The value of a CODESYS attribute pragma body `attribute 'shared' := 'VALUE'` (or `None`
+/// for `attribute 'shared'`); `None` outside when the body is any other pragma.
+fn shared_attribute(body: &str) -> Option<Option<String>> {
+    let rest = body.trim_start();
+    let keyword = rest.get(..9)?;
+    if !keyword.eq_ignore_ascii_case("attribute") {
+        return None;
+    }
+    let rest = rest[9..].trim_start().strip_prefix('\'')?;
+    let (name, rest) = rest.split_once('\'')?;
+    if !name.trim().eq_ignore_ascii_case("shared") {
+        return None;
+    }
+    let rest = rest.trim();
+    if rest.is_empty() {
+        return Some(None);
+    }
+    // Anything after the name other than `:= 'value'` is kept verbatim so the parser can
+    // say what is wrong with it.
+    let value = rest
+        .strip_prefix(":=")
+        .map(str::trim)
+        .and_then(|v| v.strip_prefix('\'')?.strip_suffix('\''))
+        .unwrap_or(rest);
+    Some(Some(value.to_string()))
 }
 
 struct Lexer<'a> {
@@ -114,7 +145,6 @@ impl Lexer<'_> {
                     }
                 }
                 b'{' => {
-                    // Pragmas carry no meaning for this compiler.
                     while self.pos < self.src.len() && self.peek(0) != b'}' {
                         self.pos += 1;
                     }
@@ -122,6 +152,9 @@ impl Lexer<'_> {
                         self.error(start, "unterminated pragma `{`");
                     } else {
                         self.pos += 1;
+                        if let Some(value) = shared_attribute(&self.text[start + 1..self.pos - 1]) {
+                            self.push(Tok::SharedAttribute(value), start);
+                        }
                     }
                 }
                 b'\'' => self.string(),

@@ -127,6 +127,7 @@ pub fn compile(
     let mut b = std::mem::take(&mut generator.b);
     let init = std::mem::take(&mut generator.init);
     let pou_ids = generator.pou_ids.clone();
+    let file_ids = generator.file_ids.clone();
     drop(generator);
     if !diags.is_empty() {
         let mut list = diags.list;
@@ -175,8 +176,13 @@ pub fn compile(
         tasks.push(info);
     }
     let vars = monitor::variable_map(&prog);
+    // Variable-record index of each global shared with another project.
+    let mut shared_records = vec![None; prog.shared.len()];
     for v in &vars {
         if let Some(vt) = v.kind.var_type() {
+            if let Some(i) = prog.shared.iter().position(|s| s.text == v.name) {
+                shared_records[i] = Some(b.var_count());
+            }
             b.add_var(
                 &v.name,
                 vt,
@@ -196,6 +202,20 @@ pub fn compile(
     }
     for located in located_vars(&prog) {
         b.add_located(&located);
+    }
+    for (shared, record) in prog.shared.iter().zip(shared_records) {
+        let (line, column) = sources
+            .file(shared.span.file)
+            .line_col(shared.span.start as usize);
+        let location = plc_vm::image::SourceLocation {
+            file: file_ids[shared.span.file as usize],
+            line: line as u32,
+            column: column as u32,
+        };
+        // Every shared global is an elementary variable with a record (checked by sema).
+        if let Some(record) = record {
+            b.add_shared(record, shared.direction, location);
+        }
     }
     let image = match b.build() {
         Ok(i) => i,

@@ -94,14 +94,47 @@ const STMT_END: &[&str] = &[
 ];
 
 pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
+    // Attribute pragmas are not part of the grammar: they are set aside with the index of
+    // the token they stand before, and `var_decl` takes the one before its first name.
+    let mut toks = Vec::with_capacity(tokens.len());
+    let mut attributes = Vec::new();
+    for t in tokens {
+        match t.tok {
+            Tok::SharedAttribute(value) => attributes.push(PendingAttribute {
+                before: toks.len(),
+                value,
+                span: t.span,
+                taken: false,
+            }),
+            _ => toks.push(t),
+        }
+    }
     let mut p = Parser {
-        toks: tokens,
+        toks,
         pos: 0,
         diags,
         in_case: 0,
         depth: 0,
+        attributes,
     };
-    p.unit()
+    let unit = p.unit();
+    for a in p.attributes.iter().filter(|a| !a.taken) {
+        p.diags.push(Diagnostic::error(
+            a.span,
+            "the attribute 'shared' must stand right before a variable declaration in VAR_GLOBAL",
+        ));
+    }
+    unit
+}
+
+/// An `{attribute 'shared' ...}` pragma waiting for its declaration.
+struct PendingAttribute {
+    /// Index of the token after it.
+    before: usize,
+    value: Option<String>,
+    span: Span,
+    /// A declaration took it (or reported it).
+    taken: bool,
 }
 
 struct Parser<'a> {
@@ -113,6 +146,8 @@ struct Parser<'a> {
     /// Current nesting of expressions and statements (bounded so that no input can
     /// exhaust the native stack of the compiler).
     depth: u32,
+    /// The `{attribute 'shared'}` pragmas of this file, in order.
+    attributes: Vec<PendingAttribute>,
 }
 
 /// Maximum nesting of expressions/statements.
@@ -128,6 +163,7 @@ fn describe(t: &Tok) -> String {
         Tok::Str(_) => "string literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
+        Tok::SharedAttribute(_) => "`{attribute 'shared'}`".into(),
         Tok::Eof => "end of file".into(),
         other => format!("`{}`", punct_text(other)),
     }
@@ -428,7 +464,40 @@ impl Parser<'_> {
         })
     }
 
+    /// The direction of the `{attribute 'shared'}` pragma right before the current token,
+    /// if there is one (a pragma with a bad value is reported here and ignored).
+    fn shared_attribute(&mut self) -> Option<SharedAttr> {
+        let pos = self.pos;
+        let a = self
+            .attributes
+            .iter_mut()
+            .rev()
+            .find(|a| a.before == pos && !a.taken)?;
+        a.taken = true;
+        let span = a.span;
+        let value = a.value.clone();
+        let direction = value
+            .as_deref()
+            .and_then(|v| plc_vm::image::SharedDirection::from_name(&v.to_ascii_lowercase()));
+        if direction.is_none() {
+            let what = match &value {
+                Some(v) => format!("unknown value '{v}' of the attribute 'shared'"),
+                None => "the attribute 'shared' needs a value".into(),
+            };
+            self.diags.push(Diagnostic::error(
+                span,
+                format!("{what}: write `{{attribute 'shared' := 'write'}}` (this project writes it), `{{attribute 'shared' := 'read'}}` (it reads it from the other project) or `{{attribute 'shared' := 'valid'}}` (a BOOL: the read ones are a fresh copy)"),
+            ));
+        }
+        // Several pragmas before one declaration: the others are reported as misplaced.
+        Some(SharedAttr {
+            direction: direction?,
+            span,
+        })
+    }
+
     fn var_decl(&mut self) -> PResult<VarDecl> {
+        let shared = self.shared_attribute();
         let start = self.span();
         let mut names = vec![self.ident()?];
         while self.eat(&Tok::Comma) {
@@ -460,6 +529,7 @@ impl Parser<'_> {
             ty,
             init,
             span: start.to(self.prev_span()),
+            shared,
         })
     }
 

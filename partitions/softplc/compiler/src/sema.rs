@@ -141,6 +141,19 @@ pub struct Program {
     pub data_size: u32,
     /// Set when an allocation would exceed [`MAX_DATA`] (reported as an error).
     pub data_overflow: bool,
+    /// The globals shared with another PLC project (`{attribute 'shared'}`), in declaration
+    /// order.
+    pub shared: Vec<SharedGlobal>,
+}
+
+/// A global variable shared with another PLC project.
+#[derive(Debug, Clone)]
+pub struct SharedGlobal {
+    /// Its name as declared (the variable-map name).
+    pub text: String,
+    pub direction: plc_vm::image::SharedDirection,
+    /// Its name in the declaration.
+    pub span: Span,
 }
 
 /// Upper limit of data memory for one program (the PLC partition is small).
@@ -515,6 +528,7 @@ impl Sema<'_> {
                 let mut off = 0u32;
                 let mut align = 1;
                 for m in members {
+                    self.no_shared_attribute(m, "structure members");
                     let mty = self.resolve_type(&m.ty, &[]);
                     if matches!(mty, Type::Fb(_)) {
                         self.diags.error(
@@ -754,6 +768,7 @@ impl Sema<'_> {
                 );
             }
             for d in &block.decls {
+                self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
                 let ty = self.resolve_type(&d.ty, &vars);
                 if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
                     self.diags.error(
@@ -843,11 +858,19 @@ impl Sema<'_> {
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
                 let location = self.location(d, &ty, true);
+                let shared = self.shared_global(d, block, &ty);
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
                         self.diags
                             .error(n.span, format!("global `{}` is declared twice", n.text));
                         continue;
+                    }
+                    if let Some(direction) = shared {
+                        self.prog.shared.push(SharedGlobal {
+                            text: n.text.clone(),
+                            direction,
+                            span: n.span,
+                        });
                     }
                     let (sz, al) = self.prog.size_align(&ty);
                     let addr = self.prog.alloc(sz, al);
@@ -866,6 +889,88 @@ impl Sema<'_> {
                 }
             }
         }
+    }
+
+    /// Reports an `{attribute 'shared'}` pragma on a declaration that cannot be shared.
+    fn no_shared_attribute(&mut self, d: &VarDecl, what: &str) {
+        if let Some(a) = d.shared {
+            self.diags.error(
+                a.span,
+                format!("the attribute 'shared' applies to global variables only, not to {what}"),
+            );
+        }
+    }
+
+    /// The checked direction of a global's `{attribute 'shared'}` pragma, if it has one: an
+    /// elementary type other than STRING (the other project's bytes are taken as they are,
+    /// so no type with an invariant such as a length), not located, and not a CONSTANT that
+    /// the other project would overwrite.
+    fn shared_global(
+        &mut self,
+        d: &VarDecl,
+        block: &VarBlock,
+        ty: &Type,
+    ) -> Option<plc_vm::image::SharedDirection> {
+        use plc_vm::image::SharedDirection;
+        let a = d.shared?;
+        if a.direction == SharedDirection::Valid {
+            if !matches!(ty, Type::Elem(crate::types::Elem::Bool) | Type::Error) {
+                self.diags.error(
+                    d.ty.span(),
+                    format!(
+                        "the validity flag of the shared globals (`'valid'`) must be a BOOL, not {}",
+                        self.prog.type_name(ty)
+                    ),
+                );
+                return None;
+            }
+            let names = d.names.len()
+                + self
+                    .prog
+                    .shared
+                    .iter()
+                    .filter(|s| s.direction == SharedDirection::Valid)
+                    .count();
+            if names > 1 {
+                self.diags.error(
+                    a.span,
+                    "a program has at most one validity flag of its shared globals",
+                );
+                return None;
+            }
+        }
+        let elementary = match ty {
+            Type::Elem(e) => crate::monitor::ValueKind::Elem(*e)
+                .var_type()
+                .is_some_and(|t| t.mem_type().is_some()),
+            Type::Error => return None,
+            _ => false,
+        };
+        if !elementary {
+            self.diags.error(
+                d.ty.span(),
+                format!(
+                    "a shared variable must have an elementary type (BOOL, integers, REAL, LREAL, TIME, bit strings), not {}",
+                    self.prog.type_name(ty)
+                ),
+            );
+            return None;
+        }
+        if let Some((_, span)) = &d.at {
+            self.diags.error(
+                *span,
+                "a shared variable cannot be located (`AT %...`): it lives in the shared segment, not in the process image",
+            );
+            return None;
+        }
+        if block.constant && a.direction != SharedDirection::Write {
+            self.diags.error(
+                a.span,
+                "a CONSTANT cannot be read from another project or be the validity flag (it would change)",
+            );
+            return None;
+        }
+        Some(a.direction)
     }
 
     /// The checked direct address of a declaration (`AT %...`), if it has one: only in

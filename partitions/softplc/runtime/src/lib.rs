@@ -18,6 +18,7 @@ pub mod histogram;
 pub mod online;
 pub mod package;
 pub mod scan;
+pub mod shared;
 
 #[cfg(test)]
 mod tests;

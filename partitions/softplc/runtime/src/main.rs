@@ -1,8 +1,9 @@
 //! The soft-PLC partition program: reads its package (the partition's data entry, see
 //! `softplc::package`), re-verifies the bytecode, creates the package's ports and one
 //! periodic scan process released once per partition period (the major frame, so at its
-//! window start), and runs [`softplc::scan::Runtime::scan`] at every release, then answers
-//! the waiting online requests ([`softplc::online::serve_pending`]).
+//! window start), and runs [`softplc::scan::Runtime::scan`] at every release between the
+//! copy-in and copy-out of its shared globals ([`softplc::shared`]), then answers the
+//! waiting online requests ([`softplc::online::serve_pending`]).
 //!
 //! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
 //! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
@@ -22,6 +23,12 @@
 //!   monitor as the error `softplc::scan::health_error` names (NUMERIC_ERROR,
 //!   DEADLINE_MISSED or APPLICATION_ERROR) with the detail `<name>: <TRAP> at
 //!   <file>:<line>:<col>` (files as the configuration names them);
+//! - `plc: shared globals: <w> written, <r> read through the segment at <address>` at
+//!   start, and with the statistics (a project that reads shared globals)
+//!   `plc: t=<ms>ms shared fresh=<n> unchanged=<n>
+//!   stale=<n> not_yet=<n>`: cycles that took a new update of the other project's
+//!   variables, found no new one, kept the previous values because the other project was
+//!   mid-update at every attempt, or ran before its first update ([`softplc::shared`]);
 //! - `plc: warm restart: <n> RETAIN variable(s) kept, the rest initialised`;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
@@ -40,14 +47,15 @@ use apex::user_rt::print::LineBuffer;
 use apex::user_rt::println;
 use core::fmt::Write;
 use core::str::FromStr;
-use core::sync::atomic::{AtomicBool, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use core::time::Duration;
 use plc_vm::image::Image;
 use plc_vm::verify::VerifiedImage;
 use plc_vm::vm::{CallFrame, Fault, Machine, Memory, TryFrame};
 use protocol::{Direction, PortKind};
-use softplc::package::{Package, PortMap};
+use softplc::package::{Package, PortMap, SharedLayout};
 use softplc::scan::{Areas, PortIo, Runtime, Schedule};
+use softplc::shared::SharedStats;
 
 /// Data memory the program may use.
 const MAX_DATA: usize = 256 * 1024;
@@ -101,6 +109,7 @@ enum Refusal {
     Verifier(plc_vm::verify::VerifyError),
     DataTooLarge(u32),
     Tasks(softplc::scan::PlanError),
+    Shared(softplc::shared::SharedError),
 }
 
 impl core::fmt::Display for Refusal {
@@ -114,6 +123,7 @@ impl core::fmt::Display for Refusal {
             Refusal::Verifier(e) => write!(f, "bytecode rejected by the verifier: {e}"),
             Refusal::DataTooLarge(n) => write!(f, "data memory of {n} bytes exceeds {MAX_DATA}"),
             Refusal::Tasks(e) => write!(f, "tasks: {e:?}"),
+            Refusal::Shared(e) => write!(f, "shared globals: {e}"),
         }
     }
 }
@@ -137,7 +147,28 @@ fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), Refusa
     let schedule = Schedule::new(&image, period)
         .map_err(Refusal::Tasks)?
         .with_deadlines(&image, &package);
+    if let Some(layout) = package.shared() {
+        softplc::shared::check(&layout, &image).map_err(Refusal::Shared)?;
+    }
     Ok((package, verified, schedule))
+}
+
+/// The shared-memory segment of a checked layout, as the words the copy protocol works on.
+#[allow(unsafe_code)] // memory syssw mapped for this partition (and the other project's)
+fn segment(layout: &SharedLayout) -> &'static [AtomicU32] {
+    // SAFETY: `shared::check` accepted the layout, so the address is page-aligned, in the
+    // shared-segment region and the size a whole number of words. The build computed it with
+    // `protocol::layout::shared_address` from the configuration that also makes syssw map
+    // the segment read-write at that address (`plc.shared` requires the "rw" attachment)
+    // for the partition's whole life. `AtomicU32` has the layout of `u32`, and every access
+    // through the slice is atomic, so the other partition writing its own area at the same
+    // time is no data race.
+    unsafe {
+        core::slice::from_raw_parts(
+            layout.segment_address as *const AtomicU32,
+            layout.segment_size as usize / 4,
+        )
+    }
 }
 
 enum Port {
@@ -267,6 +298,9 @@ extern "C" fn scan() {
     let mut io = ApexPorts::open(&package);
     let mut areas = AREAS.lock();
     let mut rt = Runtime::new(schedule, period);
+    let shared = package.shared().map(|layout| (layout, segment(&layout)));
+    let mut shared_stats = SharedStats::default();
+    let mut shared_scratch = [0u8; softplc::shared::MAX_AREA_LEN];
     let tp = apex::runtime::start_info().time_partition;
     let started = now_ns();
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
@@ -280,6 +314,13 @@ extern "C" fn scan() {
         } else {
             window
         };
+        if let Some((layout, words)) = &shared
+            && layout.other.is_some()
+        {
+            let fetch =
+                softplc::shared::copy_in(words, layout, machine.data_mut(), &mut shared_scratch);
+            shared_stats.record(fetch);
+        }
         rt.scan(
             &mut machine,
             &image,
@@ -290,6 +331,9 @@ extern "C" fn scan() {
             release,
             |task, fault| report_fault(&image, task, fault),
         );
+        if let Some((layout, words)) = &shared {
+            softplc::shared::copy_out(words, layout, machine.data());
+        }
         softplc::online::serve_pending(&package, &mut io, &mut machine, &image, &rt);
         let now = now_ns();
         if now >= next_stats {
@@ -323,6 +367,17 @@ extern "C" fn scan() {
                     o.0,
                     o.1,
                     o.2
+                );
+            }
+            if shared.is_some_and(|(layout, _)| layout.other.is_some()) {
+                let s = &shared_stats;
+                println!(
+                    "plc: t={}ms shared fresh={} unchanged={} stale={} not_yet={}",
+                    (now - started) / 1_000_000,
+                    s.fresh,
+                    s.unchanged,
+                    s.stale,
+                    s.not_yet
                 );
             }
             let mut line = text!("plc: t={}ms watch", (now - started) / 1_000_000);
@@ -419,6 +474,14 @@ impl PlcPartition {
             image.located_count(),
             package.port_count()
         );
+        if let Some(layout) = package.shared() {
+            println!(
+                "plc: shared globals: {} written, {} read through the segment at {:#x}",
+                layout.written().count(),
+                layout.read().count(),
+                layout.segment_address
+            );
+        }
         let period_ns = period().as_nanos() as u64;
         for &task in &schedule.order[..schedule.count] {
             if let Some(t) = image.task(task) {

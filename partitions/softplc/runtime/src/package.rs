@@ -6,7 +6,7 @@
 //! ```text
 //! offset size
 //! 0      4    magic "WPKG"
-//! 4      2    version (= 2)
+//! 4      2    version (= 2; version 1 had no shared-globals block and no task deadlines)
 //! 6      2    port count N (at most MAX_PORTS)
 //! 8      4    program offset (from the package start)
 //! 12     4    program length
@@ -18,9 +18,11 @@
 //! 27     5    reserved (0)
 //! 32     4    safe-value list offset
 //! 36     4    safe-value list length
-//! 40     4    task deadline list offset
-//! 44     4    task deadline list length
-//! 48     64*N port records:
+//! 40     4    shared-globals block offset
+//! 44     4    shared-globals block length (0: the program shares no globals)
+//! 48     4    task deadline list offset
+//! 52     4    task deadline list length
+//! 56     64*N port records:
 //!   0    32   name (UTF-8, zero padded)
 //!   32   1    kind (protocol::PortKind code: 1 sampling, 2 queuing)
 //!   33   1    direction (protocol::Direction code: 1 in, 2 out)
@@ -39,9 +41,25 @@
 //!             address), `width u8` (1, 2, 4 or 8 bytes), reserved (3 bytes, 0), `value u64`
 //!             (little-endian, the variable's bytes), used instead of zero/FALSE when a fault
 //!             sets the outputs safe
+//! ...         the shared-globals block: where this project's shared globals lie in the
+//!             shared-memory segment it shares with another project (the segment layout
+//!             and its protocol are [`crate::shared`]'s):
+//!   0    8    segment address in the partition's address space (page-aligned)
+//!   8    4    segment size in bytes
+//!   12   4    own area offset in the segment (NO_AREA: this project writes nothing)
+//!   16   4    own area length (header included)
+//!   20   4    other project's area offset (NO_AREA: this project reads nothing)
+//!   24   4    other project's area length
+//!   28   2    written variable count W
+//!   30   2    read variable count R
+//!   32   4    data address of the BOOL validity flag of the read variables (NO_FLAG:
+//!             none), set before each cycle ([`crate::shared::copy_in`])
+//!   36   12*(W+R) records, the written ones first: data address u32 (the variable in
+//!             data memory), offset u32 (from its area's start, past the area header),
+//!             size u32 (1, 2, 4 or 8 bytes)
 //! ...         the task deadlines: 40-byte records `task name` (32 bytes, UTF-8, zero
-//!             padded: an IEC TASK of the program), `deadline u64` (ns from the task's
-//!             release, at least 1), replacing the default (the task's interval)
+//!             padded: an IEC TASK of the program, or `TASK.instance`), `deadline u64` (ns
+//!             from the task's release, at least 1); tasks without one have no deadline
 //! ```
 //!
 //! The online ports carry the online protocol (`plc-online`) instead of process-image
@@ -61,11 +79,19 @@ pub const MAGIC: [u8; 4] = *b"WPKG";
 /// Format version.
 pub const VERSION: u16 = 2;
 /// Header bytes before the port records.
-pub const HEADER_LEN: usize = 48;
-/// Bytes of one safe-value record.
-pub const SAFE_RECORD: usize = 16;
+pub const HEADER_LEN: usize = 56;
 /// Bytes of one task-deadline record.
 pub const DEADLINE_RECORD: usize = NAME_LEN + 8;
+/// Bytes of the shared-globals block before its records.
+pub const SHARED_HEADER: usize = 36;
+/// Validity-flag address of a project without one.
+pub const NO_FLAG: u32 = u32::MAX;
+/// Bytes of one shared-variable record.
+pub const SHARED_VAR_RECORD: usize = 12;
+/// Area offset of a side that has no area (nothing written, or nothing read).
+pub const NO_AREA: u32 = u32::MAX;
+/// Bytes of one safe-value record.
+pub const SAFE_RECORD: usize = 16;
 /// Online port fields without online access.
 pub const NO_ONLINE: u8 = u8::MAX;
 /// Bytes of one port record.
@@ -115,6 +141,9 @@ pub enum PackageError {
     /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
     /// on an output or above 7).
     BadPort(usize),
+    /// The shared-globals block lies outside the package, is ragged, or its segment, areas
+    /// or variable records are inconsistent (see [`SharedLayout`]).
+    BadShared,
     /// The task-deadline list lies outside the package, is ragged, or has a record with a
     /// malformed name or a zero deadline.
     BadDeadlines,
@@ -136,6 +165,7 @@ impl core::fmt::Display for PackageError {
             Self::BadOnline => write!(f, "the online ports are not a queuing input and output"),
             Self::BadSafeValues => write!(f, "the safe-value list is malformed"),
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
+            Self::BadShared => write!(f, "the shared-globals block is malformed"),
             Self::BadDeadlines => write!(f, "the task-deadline list is malformed"),
         }
     }
@@ -162,16 +192,138 @@ pub struct Package<'a> {
     watch: &'a str,
     online: Option<Online>,
     safe: &'a [u8],
+    shared: Option<SharedLayout<'a>>,
     deadlines: &'a [u8],
 }
 
 /// A configured task deadline.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TaskDeadline<'a> {
-    /// The IEC TASK's name.
+    /// The IEC TASK's name (or `TASK.instance`).
     pub task: &'a str,
     /// Time from the task's release by which its cycle must be done (ns).
     pub deadline_ns: u64,
+}
+
+/// Where a project's shared globals lie in its shared-memory segment (checked by
+/// [`Package::parse`]: both areas inside the segment, 8-byte aligned and disjoint, every
+/// variable inside its area past the header, 1, 2, 4 or 8 bytes, naturally aligned, and the
+/// written ones disjoint; that the data addresses and the validity flag are the program's,
+/// and the segment where syssw maps segments, is [`crate::shared::check`]'s job, with the
+/// verified program).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SharedLayout<'a> {
+    /// The segment's address in the partition's address space.
+    pub segment_address: u64,
+    /// Its size in bytes.
+    pub segment_size: u32,
+    /// This project's area (offset, length), if it writes anything.
+    pub own: Option<(u32, u32)>,
+    /// The other project's area (offset, length), if this one reads anything.
+    pub other: Option<(u32, u32)>,
+    /// Data address of the BOOL set before each cycle to whether the read variables are a
+    /// fresh copy, if the program has one.
+    pub valid_flag: Option<u32>,
+    written: &'a [u8],
+    read: &'a [u8],
+}
+
+/// One shared variable: its bytes in data memory and in its area of the segment.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SharedVar {
+    /// Data address.
+    pub address: u32,
+    /// Offset from the start of its area.
+    pub offset: u32,
+    /// Bytes (1, 2, 4 or 8).
+    pub size: u32,
+}
+
+/// The variable records of one side of a [`SharedLayout`].
+pub type SharedVars<'a> = core::iter::Map<core::slice::ChunksExact<'a, u8>, fn(&[u8]) -> SharedVar>;
+
+impl<'a> SharedLayout<'a> {
+    /// The variables this project writes into its own area.
+    pub fn written(&self) -> SharedVars<'a> {
+        self.written.chunks_exact(SHARED_VAR_RECORD).map(shared_var)
+    }
+
+    /// The variables this project reads from the other project's area.
+    pub fn read(&self) -> SharedVars<'a> {
+        self.read.chunks_exact(SHARED_VAR_RECORD).map(shared_var)
+    }
+
+    /// Checks a block (see [`SharedLayout`]).
+    fn parse(block: &'a [u8]) -> Option<SharedLayout<'a>> {
+        let header = block.get(..SHARED_HEADER)?;
+        let segment_address = u64_at(header, 0);
+        let segment_size = u32_at(header, 8);
+        let area = |at: usize| match u32_at(header, at) {
+            NO_AREA => Some(None),
+            offset => {
+                let len = u32_at(header, at + 4);
+                let fits = offset.is_multiple_of(8)
+                    && len >= crate::shared::AREA_HEADER as u32
+                    && offset
+                        .checked_add(len)
+                        .is_some_and(|end| end <= segment_size);
+                fits.then_some(Some((offset, len)))
+            }
+        };
+        let (own, other) = (area(12)?, area(20)?);
+        let (w, r) = (u16_at(header, 28) as usize, u16_at(header, 30) as usize);
+        let records = &block[SHARED_HEADER..];
+        if !segment_address.is_multiple_of(4096)
+            || segment_address == 0
+            || w + r > 2 * plc_vm::image::MAX_SHARED_VARS
+            || records.len() != (w + r) * SHARED_VAR_RECORD
+            || (w > 0 && own.is_none())
+            || (r > 0 && other.is_none())
+        {
+            return None;
+        }
+        if let (Some((a, al)), Some((b, bl))) = (own, other)
+            && a < b + bl
+            && b < a + al
+        {
+            return None;
+        }
+        let (written, read) = records.split_at(w * SHARED_VAR_RECORD);
+        let inside = |v: SharedVar, area: Option<(u32, u32)>| {
+            let (_, len) = area.unwrap_or((0, 0));
+            matches!(v.size, 1 | 2 | 4 | 8)
+                && v.offset.is_multiple_of(v.size)
+                && v.offset >= crate::shared::AREA_HEADER as u32
+                && v.offset + v.size <= len
+                && v.address.checked_add(v.size).is_some()
+        };
+        let layout = SharedLayout {
+            segment_address,
+            segment_size,
+            own,
+            other,
+            valid_flag: Some(u32_at(header, 32)).filter(|&a| a != NO_FLAG),
+            written,
+            read,
+        };
+        let mut ok =
+            layout.written().all(|v| inside(v, own)) && layout.read().all(|v| inside(v, other));
+        for (i, v) in layout.written().enumerate() {
+            ok &= layout
+                .written()
+                .take(i)
+                .all(|o| o.offset + o.size <= v.offset || v.offset + v.size <= o.offset);
+        }
+        ok.then_some(layout)
+    }
+}
+
+fn shared_var(r: &[u8]) -> SharedVar {
+    SharedVar {
+        address: u32_at(r, 0),
+        offset: u32_at(r, 4),
+        size: u32_at(r, 8),
+    }
 }
 
 /// A `%Q` variable's value when the outputs go safe.
@@ -235,7 +387,11 @@ impl<'a> Package<'a> {
                 return Err(PackageError::BadSafeValues);
             }
         }
-        let deadlines = range(40)
+        let shared = match range(40).ok_or(PackageError::BadShared)? {
+            [] => None,
+            block => Some(SharedLayout::parse(block).ok_or(PackageError::BadShared)?),
+        };
+        let deadlines = range(48)
             .filter(|d| d.len() % DEADLINE_RECORD == 0)
             .ok_or(PackageError::BadDeadlines)?;
         for r in deadlines.chunks_exact(DEADLINE_RECORD) {
@@ -250,6 +406,7 @@ impl<'a> Package<'a> {
             watch,
             online: None,
             safe,
+            shared,
             deadlines,
         };
         for i in 0..package.ports {
@@ -277,6 +434,11 @@ impl<'a> Package<'a> {
         self.program
     }
 
+    /// Where the shared globals lie in the shared segment, if the program shares any.
+    pub fn shared(&self) -> Option<SharedLayout<'a>> {
+        self.shared
+    }
+
     /// The online ports, if the configuration gives the PLC any.
     pub fn online(&self) -> Option<Online> {
         self.online
@@ -288,16 +450,7 @@ impl<'a> Package<'a> {
             .is_none_or(|o| i != o.request && i != o.response)
     }
 
-    /// The configured safe values (all others are zero/FALSE).
-    pub fn safe_values(&self) -> impl Iterator<Item = SafeValue> + 'a {
-        self.safe.chunks_exact(SAFE_RECORD).map(|r| SafeValue {
-            address: u32_at(r, 0),
-            width: r[4],
-            value: u64_at(r, 8),
-        })
-    }
-
-    /// The configured task deadlines (tasks without one use their interval).
+    /// The configured task deadlines (tasks without one have none).
     pub fn deadlines(&self) -> impl Iterator<Item = TaskDeadline<'a>> + 'a {
         self.deadlines
             .chunks_exact(DEADLINE_RECORD)
@@ -307,6 +460,15 @@ impl<'a> Package<'a> {
                     deadline_ns: u64_at(r, NAME_LEN),
                 })
             })
+    }
+
+    /// The configured safe values (all others are zero/FALSE).
+    pub fn safe_values(&self) -> impl Iterator<Item = SafeValue> + 'a {
+        self.safe.chunks_exact(SAFE_RECORD).map(|r| SafeValue {
+            address: u32_at(r, 0),
+            width: r[4],
+            value: u64_at(r, 8),
+        })
     }
 
     /// The names of the variables to log.
@@ -382,11 +544,13 @@ pub fn encode(
     watch: &[&str],
     online: Option<Online>,
     safe: &[SafeValue],
+    shared: Option<&SharedPlan>,
     deadlines: &[TaskDeadline],
 ) -> alloc::vec::Vec<u8> {
     let mut out = alloc::vec::Vec::new();
     let program_at = HEADER_LEN + ports.len() * PORT_RECORD;
     let watch = watch.join("\n");
+    let shared = shared.map(SharedPlan::encode).unwrap_or_default();
     out.extend_from_slice(&MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
     out.extend_from_slice(&(ports.len() as u16).to_le_bytes());
@@ -402,7 +566,10 @@ pub fn encode(
     let safe_at = program_at + program.len() + watch.len();
     out.extend_from_slice(&(safe_at as u32).to_le_bytes());
     out.extend_from_slice(&((safe.len() * SAFE_RECORD) as u32).to_le_bytes());
-    let deadlines_at = safe_at + safe.len() * SAFE_RECORD;
+    let shared_at = safe_at + safe.len() * SAFE_RECORD;
+    out.extend_from_slice(&(shared_at as u32).to_le_bytes());
+    out.extend_from_slice(&(shared.len() as u32).to_le_bytes());
+    let deadlines_at = shared_at + shared.len();
     out.extend_from_slice(&(deadlines_at as u32).to_le_bytes());
     out.extend_from_slice(&((deadlines.len() * DEADLINE_RECORD) as u32).to_le_bytes());
     for p in ports {
@@ -427,11 +594,51 @@ pub fn encode(
         out.extend_from_slice(&[s.width, 0, 0, 0]);
         out.extend_from_slice(&s.value.to_le_bytes());
     }
+    out.extend_from_slice(&shared);
     for d in deadlines {
         put_name(&mut out, d.task);
         out.extend_from_slice(&d.deadline_ns.to_le_bytes());
     }
     out
+}
+
+/// A project's shared-globals block as the image builder plans it (see the format above).
+#[cfg(any(feature = "alloc", test))]
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SharedPlan {
+    pub segment_address: u64,
+    pub segment_size: u32,
+    /// (offset, length) of this project's area.
+    pub own: Option<(u32, u32)>,
+    /// (offset, length) of the other project's area.
+    pub other: Option<(u32, u32)>,
+    /// Data address of the validity flag.
+    pub valid_flag: Option<u32>,
+    pub written: alloc::vec::Vec<SharedVar>,
+    pub read: alloc::vec::Vec<SharedVar>,
+}
+
+#[cfg(any(feature = "alloc", test))]
+impl SharedPlan {
+    pub(crate) fn encode(&self) -> alloc::vec::Vec<u8> {
+        let mut out = alloc::vec::Vec::new();
+        out.extend_from_slice(&self.segment_address.to_le_bytes());
+        out.extend_from_slice(&self.segment_size.to_le_bytes());
+        for area in [self.own, self.other] {
+            let (offset, len) = area.unwrap_or((NO_AREA, 0));
+            out.extend_from_slice(&offset.to_le_bytes());
+            out.extend_from_slice(&len.to_le_bytes());
+        }
+        out.extend_from_slice(&(self.written.len() as u16).to_le_bytes());
+        out.extend_from_slice(&(self.read.len() as u16).to_le_bytes());
+        out.extend_from_slice(&self.valid_flag.unwrap_or(NO_FLAG).to_le_bytes());
+        for v in self.written.iter().chain(&self.read) {
+            out.extend_from_slice(&v.address.to_le_bytes());
+            out.extend_from_slice(&v.offset.to_le_bytes());
+            out.extend_from_slice(&v.size.to_le_bytes());
+        }
+        out
+    }
 }
 
 #[cfg(test)]
@@ -466,14 +673,14 @@ mod tests {
 
     #[test]
     fn round_trip() {
+        let deadline = TaskDeadline {
+            task: "fast",
+            deadline_ns: 5_000_000,
+        };
         let safe = SafeValue {
             address: 16,
             width: 8,
             value: 0.5f64.to_bits(),
-        };
-        let deadline = TaskDeadline {
-            task: "fast",
-            deadline_ns: 5_000_000,
         };
         let bytes = encode(
             &[level(), valve()],
@@ -481,6 +688,7 @@ mod tests {
             &["tank.alarm", "x"],
             None,
             &[safe],
+            Some(&shared_plan()),
             &[deadline],
         );
         let p = Package::parse(&bytes).unwrap();
@@ -495,6 +703,118 @@ mod tests {
         );
         assert_eq!(p.safe_values().collect::<alloc::vec::Vec<_>>(), [safe]);
         assert_eq!(p.deadlines().collect::<alloc::vec::Vec<_>>(), [deadline]);
+        let shared = p.shared().unwrap();
+        let plan = shared_plan();
+        assert_eq!(
+            (
+                shared.segment_address,
+                shared.segment_size,
+                shared.own,
+                shared.other
+            ),
+            (
+                plan.segment_address,
+                plan.segment_size,
+                plan.own,
+                plan.other
+            )
+        );
+        assert_eq!(
+            shared.written().collect::<alloc::vec::Vec<_>>(),
+            plan.written
+        );
+        assert_eq!(shared.read().collect::<alloc::vec::Vec<_>>(), plan.read);
+        let plain = encode(&[level()], b"P", &[], None, &[], None, &[]);
+        assert_eq!(Package::parse(&plain).unwrap().shared(), None);
+    }
+
+    /// Writes a DINT at offset 8 of its area at 64, reads a BOOL at offset 8 and a LREAL at
+    /// 16 of the other's area at 0.
+    fn shared_plan() -> SharedPlan {
+        SharedPlan {
+            segment_address: 0x6000_0000_0000,
+            segment_size: 4096,
+            own: Some((64, 16)),
+            other: Some((0, 24)),
+            valid_flag: Some(120),
+            written: alloc::vec![SharedVar {
+                address: 100,
+                offset: 8,
+                size: 4
+            }],
+            read: alloc::vec![
+                SharedVar {
+                    address: 104,
+                    offset: 8,
+                    size: 1
+                },
+                SharedVar {
+                    address: 112,
+                    offset: 16,
+                    size: 8
+                }
+            ],
+        }
+    }
+
+    #[test]
+    fn hostile_shared_blocks_are_refused() {
+        let good = encode(&[level()], b"P", &[], None, &[], Some(&shared_plan()), &[]);
+        assert!(Package::parse(&good).is_ok());
+        let block = u32::from_le_bytes(good[40..44].try_into().unwrap()) as usize;
+        let u32_field = |bytes: &mut alloc::vec::Vec<u8>, at: usize, v: u32| {
+            bytes[block + at..block + at + 4].copy_from_slice(&v.to_le_bytes())
+        };
+        let refused = |bytes: &[u8], what: &str| {
+            assert_eq!(
+                Package::parse(bytes).unwrap_err(),
+                PackageError::BadShared,
+                "{what}"
+            )
+        };
+        for (at, value, what) in [
+            (0, 0x123, "segment not page-aligned"),
+            (8, 32, "own area beyond the segment"),
+            (12, 4, "own area not 8-aligned"),
+            (16, 4, "own area shorter than its header"),
+            (12, 8, "areas overlap"),
+            (20, u32::MAX - 3, "other area offset overflows"),
+            (24, 12, "a read variable beyond its area"),
+            (36 + 4, 4, "a written variable inside the area header"),
+            (36 + 4, 10, "a written variable not naturally aligned"),
+            (36 + 8, 3, "a variable size of 3"),
+            (36 + 12 + 8, 0, "a variable size of 0"),
+        ] {
+            let mut bad = good.clone();
+            u32_field(&mut bad, at, value);
+            refused(&bad, what);
+        }
+        // Counts beyond the records, a block beyond the package, records without an area.
+        let mut bad = good.clone();
+        bad[block + 28] = 9;
+        refused(&bad, "more records than the block holds");
+        let mut bad = good.clone();
+        bad[44] = 0xff;
+        refused(&bad, "block beyond the package");
+        let mut bad = good.clone();
+        u32_field(&mut bad, 12, NO_AREA);
+        refused(&bad, "written records without an own area");
+        // Two written variables on the same bytes.
+        let mut plan = shared_plan();
+        plan.written.push(plan.written[0]);
+        refused(
+            &encode(&[level()], b"P", &[], None, &[], Some(&plan), &[]),
+            "written overlap",
+        );
+        // Every truncation and single-byte change of the block parses or is refused.
+        for n in block..good.len() {
+            let _ = Package::parse(&good[..n]);
+            for v in [0u8, 1, 0x7f, 0xff] {
+                let mut bad = good.clone();
+                bad[n] = v;
+                let _ = Package::parse(&bad);
+            }
+        }
     }
 
     #[test]
@@ -509,6 +829,7 @@ mod tests {
                 width: 1,
                 value: 1,
             }],
+            None,
             &[TaskDeadline {
                 task: "t",
                 deadline_ns: 1,
@@ -575,12 +896,12 @@ mod tests {
         );
         // Deadlines: ragged, an empty name, a gap in the name, a zero deadline.
         let mut bad = good.clone();
-        bad[44] = 39;
+        bad[52] = 39;
         assert_eq!(
             Package::parse(&bad).unwrap_err(),
             PackageError::BadDeadlines
         );
-        let deadline_at = u32::from_le_bytes(good[40..44].try_into().unwrap()) as usize;
+        let deadline_at = u32::from_le_bytes(good[48..52].try_into().unwrap()) as usize;
         for (at, v) in [(0, 0u8), (2, b'x'), (NAME_LEN, 0)] {
             let mut bad = good.clone();
             bad[deadline_at + at] = v;

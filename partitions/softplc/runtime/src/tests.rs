@@ -85,7 +85,7 @@ impl Plc {
         deadlines: &[package::TaskDeadline],
     ) -> Self {
         let program = compile(source);
-        let bytes = package::encode(ports, &program, &[], None, &[], deadlines);
+        let bytes = package::encode(ports, &program, &[], None, &[], None, deadlines);
         let image = Image::parse(Package::parse(&bytes).unwrap().program()).unwrap();
         let data = vec![0u8; image.data_size() as usize];
         Self {
@@ -558,7 +558,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         ..output("out", 0)
     }];
     let program = compile(source);
-    let bytes = package::encode(&ports, &program, &[], None, &[], &[]);
+    let bytes = package::encode(&ports, &program, &[], None, &[], None, &[]);
     let package = Package::parse(&bytes).unwrap();
     let image = Image::parse(package.program()).unwrap();
     let mut data = vec![0u8; image.data_size() as usize];
@@ -787,7 +787,7 @@ END_PROGRAM";
             ..output("out", 0)
         },
     ];
-    let bytes = package::encode(&ports, &program, &[], None, &safe, &[]);
+    let bytes = package::encode(&ports, &program, &[], None, &safe, None, &[]);
     let mut plc = Plc {
         data: vec![0u8; image.data_size() as usize],
         bytes,

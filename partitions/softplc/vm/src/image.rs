@@ -1,17 +1,17 @@
-//! The bytecode image format (version 2), its zero-copy parser and (feature `alloc`) a builder.
+//! The bytecode image format (version 3), its zero-copy parser and (feature `alloc`) a builder.
 //!
 //! All integers are little-endian. Layout:
 //!
 //! ```text
 //! offset size  field
 //! 0      4     magic "PLCB"
-//! 4      2     version (= 2; version 1 had no LOCATED section)
-//! 6      2     header length (= 96)
+//! 4      2     version (= 3; version 1 had no LOCATED section, version 2 no SHARED section)
+//! 6      2     header length (= 104)
 //! 8      4     data_size: bytes of data memory the program needs
 //! 12     4     reserved (0)
-//! 16     80    section table: 10 x (offset u32, length u32), offsets from the image start,
+//! 16     88    section table: 11 x (offset u32, length u32), offsets from the image start,
 //!              in this order: CODE, CONSTS, INIT, POUS, TASKS, VARS, SRCLOCS, FILES, NAMES,
-//!              LOCATED
+//!              LOCATED, SHARED
 //! ```
 //!
 //! Sections:
@@ -34,6 +34,15 @@
 //!   first byte in the area), `area u8`, `width u8` ([`crate::located::Area`],
 //!   [`crate::located::Width`]), `bit u8`, reserved u8 — the located variables, in declaration
 //!   order (see [`crate::located`] for the copy semantics).
+//! * `SHARED`: 16-byte records `var u32` (index of the variable's `VARS` record: name, type,
+//!   data address, size), `direction u8` ([`SharedDirection`]: 0 written by this program,
+//!   1 read from the other project, 2 the validity flag of the read ones), reserved u8,
+//!   `file u16, line u32, column u32` (the declaration, for the build's cross-project
+//!   diagnostics) — the global variables shared with another PLC project
+//!   (`{attribute 'shared' := 'write' | 'read' | 'valid'}`), in declaration order. The
+//!   verifier checks that each names a variable once, of an elementary type (BOOL to LREAL,
+//!   TIME, the bit strings; no STRING), that no two overlap in data memory, that at most one
+//!   is the validity flag and it is a BOOL, and that there are at most [`MAX_SHARED_VARS`].
 //!
 //! [`Image::parse`] checks only the structure (sizes, section bounds, record multiples); the
 //! semantic checks are the verifier's job ([`mod@crate::verify`]).
@@ -43,9 +52,9 @@ use crate::isa::{read_u16, read_u32, read_u64};
 /// Image magic.
 pub const MAGIC: [u8; 4] = *b"PLCB";
 /// Format version this crate reads and writes.
-pub const VERSION: u16 = 2;
+pub const VERSION: u16 = 3;
 /// Number of sections in the section table.
-pub const SECTION_COUNT: usize = 10;
+pub const SECTION_COUNT: usize = 11;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 16 + SECTION_COUNT * 8;
 /// POU record size.
@@ -60,6 +69,10 @@ pub const SRCLOC_RECORD: usize = 16;
 pub const FILE_RECORD: usize = 8;
 /// Located-variable record size.
 pub const LOCATED_RECORD: usize = 12;
+/// Shared-variable record size.
+pub const SHARED_RECORD: usize = 16;
+/// Most shared-variable records an image may have.
+pub const MAX_SHARED_VARS: usize = 256;
 /// Watchdog budget (instructions per cycle) used when a task record says 0.
 pub const DEFAULT_WATCHDOG_BUDGET: u32 = 1_000_000;
 /// Variable flag: RETAIN.
@@ -91,6 +104,8 @@ pub enum Section {
     Names = 8,
     /// Located variables.
     Located = 9,
+    /// Variables shared with another PLC project.
+    Shared = 10,
 }
 
 /// Why [`Image::parse`] rejected the bytes.
@@ -268,6 +283,34 @@ pub struct Var<'a> {
     pub size: u32,
 }
 
+codes::code_enum! {
+    /// Which side of a shared global variable a program is on.
+    pub enum SharedDirection: u8 {
+        /// This program writes it (`{attribute 'shared' := 'write'}`).
+        Write = 0 => "write",
+        /// This program reads it from the other project (`{attribute 'shared' := 'read'}`).
+        Read = 1 => "read",
+        /// A BOOL the runtime sets before each cycle: whether the read variables hold a
+        /// consistent copy of the other project's latest update, taken for this cycle
+        /// (`{attribute 'shared' := 'valid'}`).
+        Valid = 2 => "valid",
+    }
+}
+
+/// A shared-variable record: the variable (its `VARS` record), its direction and where it is
+/// declared.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shared<'a> {
+    /// Index of its `VARS` record.
+    pub var_index: usize,
+    /// Its `VARS` record (name, type, address, size).
+    pub var: Var<'a>,
+    /// Written here or read from the other project.
+    pub direction: SharedDirection,
+    /// The declaration.
+    pub location: SourceLocation,
+}
+
 /// A source location (file index into the FILES section, 1-based line and column).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub struct SourceLocation {
@@ -315,6 +358,7 @@ impl<'a> Image<'a> {
             Section::Files,
             Section::Names,
             Section::Located,
+            Section::Shared,
         ];
         let mut sections: [&'a [u8]; SECTION_COUNT] = [&[]; SECTION_COUNT];
         for (i, kind) in KINDS.iter().enumerate() {
@@ -334,6 +378,7 @@ impl<'a> Image<'a> {
                 Section::SrcLocs => SRCLOC_RECORD,
                 Section::Files => FILE_RECORD,
                 Section::Located => LOCATED_RECORD,
+                Section::Shared => SHARED_RECORD,
                 _ => 1,
             };
             if section.len() % record != 0 {
@@ -487,6 +532,33 @@ impl<'a> Image<'a> {
         (0..self.located_count()).filter_map(|i| self.located(i))
     }
 
+    /// Number of shared-variable records.
+    pub fn shared_count(&self) -> usize {
+        self.section(Section::Shared).len() / SHARED_RECORD
+    }
+
+    /// Shared-variable record `index`; `None` if out of range, its direction code is
+    /// unknown or its variable record does not exist (the verifier refuses such an image).
+    pub fn shared(&self, index: usize) -> Option<Shared<'a>> {
+        let r = self.record(Section::Shared, SHARED_RECORD, index)?;
+        let var_index = read_u32(r, 0) as usize;
+        Some(Shared {
+            var_index,
+            var: self.var(var_index)?,
+            direction: SharedDirection::from_code(r[4])?,
+            location: SourceLocation {
+                file: read_u16(r, 6),
+                line: read_u32(r, 8),
+                column: read_u32(r, 12),
+            },
+        })
+    }
+
+    /// Every shared variable, in declaration order.
+    pub fn shared_vars(&self) -> impl Iterator<Item = Shared<'a>> + '_ {
+        (0..self.shared_count()).filter_map(|i| self.shared(i))
+    }
+
     /// Looks a variable up by exact name (linear scan; monitors are not hot paths).
     pub fn find_var(&self, name: &str) -> Option<Var<'a>> {
         (0..self.var_count())
@@ -622,6 +694,7 @@ mod builder {
         files: Vec<u8>,
         names: Vec<u8>,
         located: Vec<u8>,
+        shared: Vec<u8>,
         labels: Vec<Option<u32>>,
         fixups: Vec<(usize, Label)>,
         /// Start offsets of the emitted instructions (for the peephole fusion).
@@ -911,6 +984,27 @@ mod builder {
             r.push(v.location.width.code());
             r.push(v.location.bit);
             r.push(0);
+        }
+
+        /// Adds a shared-variable record for variable record `var` (see [`Image::shared`]).
+        pub fn add_shared(
+            &mut self,
+            var: u32,
+            direction: SharedDirection,
+            location: SourceLocation,
+        ) {
+            let r = &mut self.shared;
+            r.extend_from_slice(&var.to_le_bytes());
+            r.push(direction.code());
+            r.push(0);
+            r.extend_from_slice(&location.file.to_le_bytes());
+            r.extend_from_slice(&location.line.to_le_bytes());
+            r.extend_from_slice(&location.column.to_le_bytes());
+        }
+
+        /// Number of variable records added so far (the next one's index).
+        pub fn var_count(&self) -> u32 {
+            (self.vars.len() / VAR_RECORD) as u32
         }
 
         /// Adds a source file name and returns its index.
@@ -1237,6 +1331,7 @@ mod builder {
                 &self.files,
                 &names,
                 &self.located,
+                &self.shared,
             ];
             let total: usize = HEADER_LEN + sections.iter().map(|s| s.len()).sum::<usize>();
             if total > u32::MAX as usize {

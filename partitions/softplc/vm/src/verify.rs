@@ -15,7 +15,7 @@
 //! of scratch per code byte (state + worklist); [`verify_with_scratch`]
 //! takes it from the caller (no allocation), `verify` (feature `alloc`) allocates it.
 
-use crate::image::{Image, Section, TASK_RECORD, VarType};
+use crate::image::{Image, Section, SharedDirection, TASK_RECORD, VarType};
 use crate::isa::{
     Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect,
 };
@@ -59,6 +59,8 @@ pub enum Site {
     File(usize),
     /// A located-variable record.
     Located(usize),
+    /// A shared-variable record.
+    Shared(usize),
     /// The image as a whole.
     Image,
 }
@@ -173,6 +175,13 @@ pub enum Reason {
     BadLocation,
     /// Located variable outside data memory.
     LocatedOutsideData,
+    /// Shared variable: unknown direction code, unknown variable record, a type that cannot
+    /// be shared (STRING; a validity flag other than BOOL), or a declaration in an unknown
+    /// file.
+    BadShared,
+    /// Shared variable named twice, overlapping another shared variable in data memory, or a
+    /// second validity flag.
+    SharedOverlap,
     /// Source-location table not sorted by code offset.
     SrcLocUnsorted,
     /// Source location beyond the code or naming an unknown file.
@@ -202,6 +211,7 @@ impl core::fmt::Display for Site {
             Site::SrcLoc(i) => write!(f, "in source-location entry {i}"),
             Site::File(i) => write!(f, "in file table entry {i}"),
             Site::Located(i) => write!(f, "in located-variable entry {i}"),
+            Site::Shared(i) => write!(f, "in shared-variable entry {i}"),
             Site::Image => write!(f, "in image"),
         }
     }
@@ -289,6 +299,13 @@ impl core::fmt::Display for Reason {
             Reason::VarSizeMismatch => write!(f, "variable size does not match its type"),
             Reason::BadLocation => write!(f, "invalid located-variable address"),
             Reason::LocatedOutsideData => write!(f, "located variable outside data memory"),
+            Reason::BadShared => write!(
+                f,
+                "invalid shared variable (direction, variable, type or declaration file)"
+            ),
+            Reason::SharedOverlap => {
+                write!(f, "shared variable overlaps another shared variable")
+            }
             Reason::SrcLocUnsorted => write!(f, "source locations not sorted by code offset"),
             Reason::SrcLocInvalid => {
                 write!(f, "source location beyond the code or with unknown file")
@@ -713,6 +730,36 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         }
         if v.address as u64 + l.width.bytes() as u64 > data_size {
             return err(site, Reason::LocatedOutsideData);
+        }
+    }
+    if image.shared_count() > crate::image::MAX_SHARED_VARS {
+        return err(Site::Image, Reason::BadShared);
+    }
+    for index in 0..image.shared_count() {
+        let site = Site::Shared(index);
+        // `shared` checks the direction code and the variable record, whose address and
+        // size the loop over the variable map checked above.
+        let Some(s) = image.shared(index) else {
+            return err(site, Reason::BadShared);
+        };
+        let ty = VarType::from_code(s.var.ty);
+        let shareable = match s.direction {
+            SharedDirection::Valid => ty == Some(VarType::Bool),
+            _ => ty.is_some_and(|t| t.mem_type().is_some()),
+        };
+        if !shareable || s.location.file as usize >= image.file_count() {
+            return err(site, Reason::BadShared);
+        }
+        let (lo, hi) = (s.var.addr, s.var.addr + s.var.size);
+        // Quadratic, but bounded by MAX_SHARED_VARS; a copy-in must never write
+        // over another shared variable.
+        let clash = (0..index).filter_map(|i| image.shared(i)).any(|o| {
+            o.var_index == s.var_index
+                || (lo < o.var.addr + o.var.size && o.var.addr < hi)
+                || (o.direction == SharedDirection::Valid && s.direction == SharedDirection::Valid)
+        });
+        if clash {
+            return err(site, Reason::SharedOverlap);
         }
     }
     for index in 0..image.file_count() {

@@ -142,12 +142,12 @@ proptest! {
     #[test]
     fn parse_and_verify_never_panic_on_arbitrary_bytes_behind_a_valid_header(
         tail in proptest::collection::vec(any::<u8>(), 0..300),
-        lens in proptest::collection::vec(0u32..64, 9),
+        lens in proptest::collection::vec(0u32..64, crate::image::SECTION_COUNT),
     ) {
         // A correct header with arbitrary (mostly in-bounds) sections.
         let mut bytes = Vec::new();
         bytes.extend_from_slice(b"PLCB");
-        bytes.extend_from_slice(&1u16.to_le_bytes());
+        bytes.extend_from_slice(&crate::image::VERSION.to_le_bytes());
         bytes.extend_from_slice(&(crate::image::HEADER_LEN as u16).to_le_bytes());
         bytes.extend_from_slice(&256u32.to_le_bytes());
         bytes.extend_from_slice(&0u32.to_le_bytes());

@@ -630,3 +630,103 @@ fn event_trigger_inside_data() {
         })
     );
 }
+
+#[test]
+fn shared_records() {
+    use crate::image::{SharedDirection, SourceLocation};
+    let at = |line| SourceLocation {
+        file: 0,
+        line,
+        column: 5,
+    };
+    // Variables: 0 = a DINT at 0, 1 = a LREAL at 8, 2 = a STRING at 16, 3 = a DINT at 2
+    // (overlapping variable 0), 4 and 5 = BOOLs at 40 and 41.
+    let image_with = |records: &[(u32, SharedDirection, SourceLocation)]| {
+        program_with(10, |b, _| {
+            b.add_file("a.st");
+            b.add_var("count", VarType::DInt, 0, 0, 4);
+            b.add_var("level", VarType::LReal, 0, 8, 8);
+            b.add_var("text", VarType::String, 0, 16, 12);
+            b.add_var("odd", VarType::DInt, 0, 2, 4);
+            b.add_var("ok", VarType::Bool, 0, 40, 1);
+            b.add_var("ok2", VarType::Bool, 0, 41, 1);
+            for &(var, direction, location) in records {
+                b.add_shared(var, direction, location);
+            }
+        })
+    };
+    let good = image_with(&[
+        (0, SharedDirection::Write, at(3)),
+        (1, SharedDirection::Read, at(4)),
+    ]);
+    assert_eq!(verdict(&good), Ok(()));
+    let image = Image::parse(&good).unwrap();
+    let shared: alloc::vec::Vec<_> = image.shared_vars().collect();
+    assert_eq!(shared.len(), 2);
+    assert_eq!(
+        (shared[0].var.name, shared[0].direction, shared[0].location),
+        ("count", SharedDirection::Write, at(3))
+    );
+    assert_eq!(
+        (shared[1].var.name, shared[1].var.addr, shared[1].direction),
+        ("level", 8, SharedDirection::Read)
+    );
+    let refused = |records: &[(u32, SharedDirection, SourceLocation)], index, reason| {
+        assert_eq!(
+            verdict(&image_with(records)),
+            Err(VerifyError {
+                site: Site::Shared(index),
+                reason
+            })
+        );
+    };
+    let w = SharedDirection::Write;
+    // An unknown variable record, a STRING, a declaration in an unknown file.
+    refused(&[(9, w, at(1))], 0, Reason::BadShared);
+    refused(&[(2, w, at(1))], 0, Reason::BadShared);
+    refused(
+        &[(0, w, SourceLocation { file: 3, ..at(1) })],
+        0,
+        Reason::BadShared,
+    );
+    // The same variable twice, two variables sharing bytes.
+    refused(
+        &[(0, w, at(1)), (0, SharedDirection::Read, at(2))],
+        1,
+        Reason::SharedOverlap,
+    );
+    refused(&[(0, w, at(1)), (3, w, at(2))], 1, Reason::SharedOverlap);
+    // A validity flag must be a BOOL, and there is at most one.
+    let v = SharedDirection::Valid;
+    assert_eq!(
+        verdict(&image_with(&[
+            (4, v, at(1)),
+            (1, SharedDirection::Read, at(2))
+        ])),
+        Ok(())
+    );
+    refused(&[(0, v, at(1))], 0, Reason::BadShared);
+    refused(&[(4, v, at(1)), (5, v, at(2))], 1, Reason::SharedOverlap);
+    // An unknown direction code.
+    let mut bytes = image_with(&[(0, w, at(1))]);
+    let section = crate::isa::read_u32(&bytes, 16 + 10 * 8) as usize;
+    bytes[section + 4] = 3;
+    assert_eq!(
+        verdict(&bytes),
+        Err(VerifyError {
+            site: Site::Shared(0),
+            reason: Reason::BadShared
+        })
+    );
+    // Too many records.
+    let many: alloc::vec::Vec<_> = (0..=crate::image::MAX_SHARED_VARS)
+        .map(|i| (0, w, at(i as u32)))
+        .collect();
+    assert_eq!(
+        verdict(&image_with(&many)),
+        Err(VerifyError {
+            site: Site::Image,
+            reason: Reason::BadShared
+        })
+    );
+}
