@@ -125,9 +125,10 @@
 //! must not lie inside a mapped message, and everything must fit in the 4096-byte areas.
 //! `plc.online` names a queuing input and a queuing output (both `size = 256`) that carry
 //! the PLC online protocol (crate `plc-online`: list, read, write, force, unforce, task
-//! statistics) instead of process-image bytes, and what their client may do: `"monitor"`
-//! (list, read, statistics) or `"force"` (also write, force and unforce); a request beyond
-//! it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
+//! statistics, stop/start a task, online download) instead of process-image bytes, and
+//! what their client may do: `"monitor"` (list, read, statistics), `"force"` (also write,
+//! force, unforce, stop and start a task) or `"download"` (also replace the program by
+//! online download); a request beyond it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
 //! they take when a task faults and the outputs go safe (a number or a boolean fitting the
 //! variable's type; checked when the program is compiled); without one they go to
 //! zero/FALSE. `plc.watch` names variables (globals by name, program variables as `instance.var`) the

@@ -678,7 +678,7 @@ impl Validator<'_, '_> {
                 start(&raw.access),
                 &path.key("access"),
                 format!(
-                    "unknown access {:?}: expected \"monitor\" (list, read, statistics) or \"force\" (also write, force, unforce)",
+                    "unknown access {:?}: expected \"monitor\" (list, read, statistics), \"force\" (also write, force, unforce, stop and start a task) or \"download\" (also online download)",
                     raw.access.get_ref()
                 ),
             );

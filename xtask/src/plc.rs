@@ -81,6 +81,14 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             .map(|(name, value)| safe_value(&image, name, *value))
             .collect::<Result<Vec<_>, String>>()
             .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
+        if safe.len() > softplc::scan::MAX_SAFE_VALUES {
+            bail!(
+                "partition {}: plc.safe gives {} values, at most {} are kept",
+                p.name,
+                safe.len(),
+                softplc::scan::MAX_SAFE_VALUES
+            );
+        }
         out.push((
             p.name.clone(),
             package::encode(&ports, &compiled.image, &watch, online, &safe),

@@ -3,8 +3,9 @@
 //! (`%I`, `%Q`, `%M`) connected to ARINC 653 ports.
 //!
 //! This library is the runtime's whole behaviour and is tested on the host: the package
-//! format the build writes ([`package`]) and one scan cycle ([`scan`]: inputs, due tasks,
-//! statistics, faults and safe outputs, outputs). The partition program (`main.rs`) only
+//! format the build writes ([`package`]), one scan cycle ([`scan`]: inputs, due tasks,
+//! statistics, faults and safe outputs, outputs), the online services ([`online`]) and
+//! online download ([`download`]: chunk assembly, checks, takeover by name). The partition program (`main.rs`) only
 //! re-verifies the program, creates the ports and the scan process and moves bytes between
 //! them and this library. It must never trust the package: every structure is checked and
 //! the bytecode re-verified before anything runs.
@@ -13,6 +14,7 @@
 #[cfg(any(feature = "alloc", test))]
 extern crate alloc;
 
+pub mod download;
 pub mod online;
 pub mod package;
 pub mod scan;
