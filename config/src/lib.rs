@@ -66,6 +66,7 @@
 //! plc.watch = ["level", "tank.pid.integral"]
 //! plc.online = { request = "cmd", response = "reply", access = "monitor" }
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
+//! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -135,6 +136,15 @@
 //! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
 //! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
 //! the partition windows (checked when the program is compiled).
+//!
+//! **Data entries.** `cargo xtask` can give a partition a read-only data entry
+//! (`data/<partition>` in `system.img`, which syssw maps at `DATA_BASE`; see
+//! `user/rt/src/partition.rs`): a PLC partition's is its package (from `plc.*`), and any
+//! other partition may name ST sources in `data.plc_image` (paths as for `plc.program`,
+//! compiled in that order into one program, a compile error stops the build), whose
+//! verified bytecode image — what `plcc build` writes as `.plcb` — becomes its data
+//! entry: for example the program an online-download client sends to a PLC. A partition
+//! cannot have both, and `data` has no other keys.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -2,46 +2,30 @@
 //! ST sources with the compiler library (a compile error stops the build, printed exactly
 //! as `plcc check` prints it), check its tasks against the partition's period and its watch
 //! list against the program's variables, and write its package (`softplc::package`) as the
-//! partition's data entry `data/<partition>`.
+//! partition's data entry `data/<partition>`; for each partition with `data.plc_image`,
+//! compile those sources the same way and write the bytecode image itself (what
+//! `plcc build` writes) as its data entry.
 
 use anyhow::{Context, Result, bail};
 use config::System;
-use config::system::{Partition, PlcLink, PlcValue};
+use config::system::{DataEntry, Partition, PlcLink, PlcValue, SourceFile};
 use plc_vm::image::{Image, VarType};
 use softplc::package::{self, PortMap};
 
-/// `(partition name, package)` for every soft-PLC partition of `system`.
-pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
+/// `(partition name, data entry)` for every partition that has one: a soft-PLC
+/// partition's package, or the compiled image `data.plc_image` names.
+pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     let mut out = Vec::new();
     for (index, p) in system.partitions.iter().enumerate() {
+        if let Some(DataEntry::PlcImage(files)) = &p.data {
+            out.push((p.name.clone(), compile(p, files)?));
+        }
         let Some(plc) = &p.plc else {
             continue;
         };
-        let sources = plc
-            .program
-            .iter()
-            .map(|file| {
-                std::fs::read_to_string(&file.path)
-                    .map(|text| (file.name.clone(), text))
-                    .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
-            })
-            .collect::<Result<Vec<_>>>()?;
-        let compiled = match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
-            Ok((compiled, _)) => compiled,
-            Err((diagnostics, map)) => {
-                eprint!(
-                    "{}",
-                    plc_compiler::diagnostics::render(&map, &diagnostics, false)
-                );
-                bail!(
-                    "partition {}: its PLC program has {} error(s)",
-                    p.name,
-                    diagnostics.len()
-                );
-            }
-        };
-        check_tasks(system, index, p, &compiled.image)?;
-        let image = plc_vm::image::Image::parse(&compiled.image)
+        let compiled = compile(p, &plc.program)?;
+        check_tasks(system, index, p, &compiled)?;
+        let image = plc_vm::image::Image::parse(&compiled)
             .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
         for name in &plc.watch {
             if image.find_var(name).is_none() {
@@ -91,10 +75,37 @@ pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
         }
         out.push((
             p.name.clone(),
-            package::encode(&ports, &compiled.image, &watch, online, &safe),
+            package::encode(&ports, &compiled, &watch, online, &safe),
         ));
     }
     Ok(out)
+}
+
+/// The bytecode image of ST sources `files` of partition `p` (a compile error is printed
+/// as `plcc check` prints it and stops the build).
+fn compile(p: &Partition, files: &[SourceFile]) -> Result<Vec<u8>> {
+    let sources = files
+        .iter()
+        .map(|file| {
+            std::fs::read_to_string(&file.path)
+                .map(|text| (file.name.clone(), text))
+                .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
+        Ok((compiled, _)) => Ok(compiled.image),
+        Err((diagnostics, map)) => {
+            eprint!(
+                "{}",
+                plc_compiler::diagnostics::render(&map, &diagnostics, false)
+            );
+            bail!(
+                "partition {}: its PLC program has {} error(s)",
+                p.name,
+                diagnostics.len()
+            );
+        }
+    }
 }
 
 /// The safe value of `%Q` variable `name`: it must be a located output of the program and
