@@ -443,18 +443,9 @@ pub fn read_stats<'a>(r: &mut Reader<'a>) -> Option<TaskStats<'a>> {
     })
 }
 
-/// CRC-32 (IEEE 802.3, reflected, initial and final XOR `0xffff_ffff`: zlib's `crc32`) of
-/// `bytes`, the download checksum. Bitwise, no table: it runs once per download.
-pub fn crc32(bytes: &[u8]) -> u32 {
-    let mut crc = u32::MAX;
-    for &b in bytes {
-        crc ^= u32::from(b);
-        for _ in 0..8 {
-            crc = (crc >> 1) ^ (0xedb8_8320 & (crc & 1).wrapping_neg());
-        }
-    }
-    !crc
-}
+/// The download checksum: CRC-32 (IEEE 802.3, reflected, as zlib's `crc32`), the one the
+/// system image and the binary configuration use.
+pub use abi::crc32::crc32;
 
 #[cfg(test)]
 mod tests {

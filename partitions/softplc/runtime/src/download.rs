@@ -316,3 +316,60 @@ pub fn hand_over(takeover: &Takeover, old: &Image, old_data: &[u8], new: &mut Ma
     }
     kept
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn chunks_assemble_in_order_within_the_announced_size() {
+        let image = [7u8; 10];
+        let mut buffer = [0u8; 16];
+        let mut d = Download::new();
+        assert_eq!(d.chunk(&mut buffer, 0, &image), Err(Status::NoDownload));
+        assert_eq!(d.finish(&buffer), Err(Status::NoDownload));
+        assert_eq!(d.begin(17, 0, buffer.len()), Err(Status::TooLarge));
+        assert_eq!(d.begin(0, 0, buffer.len()), Err(Status::Malformed));
+        assert!(!d.is_open());
+        d.begin(10, plc_online::crc32(&image), buffer.len())
+            .unwrap();
+        assert_eq!(d.chunk(&mut buffer, 0, &[7; 11]), Err(Status::BadOffset));
+        assert_eq!(d.chunk(&mut buffer, 4, &image[4..]), Err(Status::BadOffset));
+        assert_eq!(
+            d.chunk(&mut buffer, u32::MAX, &[1]),
+            Err(Status::BadOffset),
+            "no overflow"
+        );
+        d.chunk(&mut buffer, 0, &image[..4]).unwrap();
+        assert_eq!(d.finish(&buffer), Err(Status::Incomplete));
+        assert!(d.is_open(), "an early commit leaves the download open");
+        assert_eq!(d.chunk(&mut buffer, 8, &image[8..]), Err(Status::BadOffset));
+        d.chunk(&mut buffer, 4, &image[4..]).unwrap();
+        assert_eq!(d.chunk(&mut buffer, 10, &[1]), Err(Status::BadOffset));
+        assert_eq!(d.finish(&buffer), Ok(&image[..]));
+        assert!(!d.is_open());
+        assert_eq!(d.finish(&buffer), Err(Status::NoDownload));
+    }
+
+    #[test]
+    fn a_wrong_checksum_ends_the_download_and_begin_starts_over() {
+        let mut buffer = [0u8; 8];
+        let mut d = Download::new();
+        d.begin(4, 1234, buffer.len()).unwrap();
+        d.chunk(&mut buffer, 0, &[1, 2]).unwrap();
+        // BEGIN again: the unfinished download is dropped.
+        d.begin(4, 1234, buffer.len()).unwrap();
+        assert_eq!(d.chunk(&mut buffer, 2, &[3, 4]), Err(Status::BadOffset));
+        d.chunk(&mut buffer, 0, &[1, 2, 3, 4]).unwrap();
+        assert_eq!(d.finish(&buffer), Err(Status::ChecksumMismatch));
+        assert_eq!(d.chunk(&mut buffer, 0, &[1]), Err(Status::NoDownload));
+    }
+
+    #[test]
+    fn names_are_cut_on_a_character_boundary() {
+        let long = "ä".repeat(40);
+        let name = VarName::of(&long);
+        assert!(name.as_str().len() <= VarName::MAX);
+        assert!(long.starts_with(name.as_str()));
+    }
+}
