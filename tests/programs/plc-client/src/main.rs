@@ -143,7 +143,7 @@ fn download(link: &mut Link, what: &str, image: &[u8], crc: u32) {
         });
     }
     match (status, release) {
-        (Some(status), Some(r)) if status == Status::Ok => {
+        (Some(Status::Ok), Some(r)) => {
             println!("client: download {what}: OK, runs from release {r}")
         }
         (Some(status), _) => println!("client: download {what}: {}", status.name()),
