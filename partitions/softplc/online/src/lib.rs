@@ -42,7 +42,9 @@
 //! takes over what refers to the running program by address (configured safe values,
 //! forces, the watch list) by name. When all of that holds the answer is OK with the
 //! release from which the new program runs: it is swapped in between two scan cycles, its
-//! RETAIN variables taking the running program's values by name and type. Any refusal
+//! RETAIN variables taking the running program's values by name and type, every task
+//! running and its statistics counted anew (the rest of that batch of requests waits for
+//! the next cycle). Any refusal
 //! (its reason is logged by the PLC) leaves the running program untouched and ends the
 //! download.
 //!
