@@ -15,6 +15,9 @@
 //!   that must exist) — or the reason the new program cannot take over.
 //! - [`hand_over`]: at the swap, the new machine gets the RETAIN values of the old data
 //!   ([`carry_retain`]) and the forces.
+//! - [`Running`]: which program runs from which of the partition's two image buffers and
+//!   two data memories, so that a download never overwrites the running program or its
+//!   data, and the old ones stay intact until the handover.
 //!
 //! Nothing here touches the running program: a refused or half download leaves it as it
 //! was. The process image's port map is in `%I`/`%Q` byte offsets, which a new program's
@@ -317,9 +320,120 @@ pub fn hand_over(takeover: &Takeover, old: &Image, old_data: &[u8], new: &mut Ma
     kept
 }
 
+/// A program the partition runs: the configured one (in its package) or a downloaded one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Program {
+    Configured,
+    /// In image buffer `buffer` (0 or 1), `len` bytes.
+    Downloaded {
+        buffer: usize,
+        len: usize,
+    },
+}
+
+/// Which program runs and in which of the two data memories (0 or 1); the partition keeps
+/// it over a warm restart to carry the RETAIN values of whatever ran.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Running {
+    pub program: Program,
+    pub data: usize,
+}
+
+impl Running {
+    /// After a cold start: the configured program in data memory 0.
+    pub const COLD: Running = Running {
+        program: Program::Configured,
+        data: 0,
+    };
+
+    /// After a warm start, when `was` ran: the configured program in the other data memory
+    /// (`was`'s keeps the values to carry).
+    pub fn warm_start(was: Running) -> Running {
+        Running {
+            program: Program::Configured,
+            data: 1 - was.data.min(1),
+        }
+    }
+
+    /// The image buffer a download is assembled in while this program runs, `previous`
+    /// having run before it: never this program's, and while the configured program runs
+    /// after a downloaded one, that one's (its bytes are needed until the handover, and a
+    /// download may only begin after it).
+    pub fn staging(self, previous: Option<Running>) -> usize {
+        match (self.program, previous.map(|p| p.program)) {
+            (Program::Downloaded { buffer, .. }, _) => 1 - buffer.min(1),
+            (Program::Configured, Some(Program::Downloaded { buffer, .. })) => buffer.min(1),
+            (Program::Configured, _) => 0,
+        }
+    }
+
+    /// What runs after a download of `len` bytes committed in image buffer `staging`: that
+    /// program, in the other data memory.
+    pub fn downloaded(self, staging: usize, len: usize) -> Running {
+        Running {
+            program: Program::Downloaded {
+                buffer: staging.min(1),
+                len,
+            },
+            data: 1 - self.data.min(1),
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_download_never_touches_what_runs_or_what_is_handed_over() {
+        // Cold start, two downloads (the second into buffer 1), a warm restart, two more.
+        let mut previous = None;
+        let mut running = Running::COLD;
+        let mut seen = Vec::new();
+        for step in ["download", "download", "warm", "download", "download"] {
+            let staging = running.staging(previous);
+            if let Program::Downloaded { buffer, .. } = running.program {
+                assert_ne!(staging, buffer, "{step}: staging over the running program");
+            }
+            if let Some(Running {
+                program: Program::Downloaded { buffer, .. },
+                ..
+            }) = previous
+                && running.program == Program::Configured
+            {
+                assert_eq!(
+                    staging, buffer,
+                    "{step}: the old program's buffer stays put"
+                );
+            }
+            let next = match step {
+                "warm" => Running::warm_start(running),
+                _ => running.downloaded(staging, 100 + seen.len()),
+            };
+            assert_ne!(next.data, running.data, "{step}: data memory reused");
+            if let Program::Downloaded { buffer, .. } = next.program {
+                assert_eq!(buffer, staging, "{step}: runs where it was assembled");
+            }
+            seen.push(next);
+            previous = Some(running);
+            running = next;
+        }
+        assert_eq!(
+            seen[2],
+            Running {
+                program: Program::Configured,
+                data: 1
+            }
+        );
+        assert_eq!(
+            seen[3].program,
+            Program::Downloaded {
+                buffer: 1,
+                len: 103
+            },
+            "assembled in the buffer the warm restart left alone"
+        );
+    }
 
     #[test]
     fn chunks_assemble_in_order_within_the_announced_size() {

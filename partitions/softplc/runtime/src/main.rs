@@ -53,7 +53,7 @@ use plc_vm::image::Image;
 use plc_vm::verify::VerifiedImage;
 use plc_vm::vm::{CallFrame, Fault, Machine, Memory, TryFrame};
 use protocol::{Direction, PortKind};
-use softplc::download::{Refusal, Takeover, check_program, hand_over};
+use softplc::download::{Program, Refusal, Running, Takeover, check_program, hand_over};
 use softplc::online::Loader;
 use softplc::package::{Package, PortMap};
 use softplc::scan::{Areas, PortIo, Runtime, SafeValues, Schedule};
@@ -82,10 +82,7 @@ static DATA: spin::Mutex<[[u8; MAX_DATA]; 2]> = spin::Mutex::new([[0; MAX_DATA];
 static IMAGES: spin::Mutex<[[u8; MAX_IMAGE]; 2]> = spin::Mutex::new([[0; MAX_IMAGE]; 2]);
 /// Which program runs and in which data memory (kept over a warm restart, which carries
 /// its RETAIN values to the configured program).
-static RUNNING: spin::Mutex<Running> = spin::Mutex::new(Running {
-    program: Program::Configured,
-    data: 0,
-});
+static RUNNING: spin::Mutex<Running> = spin::Mutex::new(Running::COLD);
 /// This partition start was a warm one (memory kept by syssw).
 static WARM: AtomicBool = AtomicBool::new(false);
 static SCRATCH: spin::Mutex<[u32; MAX_SCRATCH]> = spin::Mutex::new([0; MAX_SCRATCH]);
@@ -111,24 +108,6 @@ fn now_ns() -> u64 {
 fn report(text: &str) {
     println!("plc: {text}");
     let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
-}
-
-/// A program: the configured one (in the package) or a downloaded one.
-#[derive(Clone, Copy, PartialEq, Eq)]
-enum Program {
-    Configured,
-    /// In image buffer `buffer`, `len` bytes.
-    Downloaded {
-        buffer: usize,
-        len: usize,
-    },
-}
-
-#[derive(Clone, Copy)]
-struct Running {
-    program: Program,
-    /// Index of its data memory in [`DATA`].
-    data: usize,
 }
 
 /// The checked package, verified program and schedule, or why the program is refused.
@@ -250,25 +229,13 @@ extern "C" fn scan() {
         .load(Ordering::Acquire)
         .then(|| *RUNNING.lock())
         .map(|was| (was, None::<Takeover>));
-    let mut running = Running {
-        program: Program::Configured,
-        data: previous.map_or(0, |(was, _)| 1 - was.data),
-    };
+    let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
     let started = now_ns();
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
     let mut first_release = 0u64;
     loop {
         *RUNNING.lock() = running;
-        // The staging buffer is the one the running program does not use; it still holds
-        // the previous program, if that was a downloaded one, until the handover.
-        let staging_index = match (running.program, previous) {
-            (Program::Downloaded { buffer, .. }, _) => 1 - buffer,
-            (_, Some((was, _))) => match was.program {
-                Program::Downloaded { buffer, .. } => buffer,
-                Program::Configured => 0,
-            },
-            _ => 0,
-        };
+        let staging_index = running.staging(previous.map(|(was, _)| was));
         let [image_a, image_b] = &mut *images;
         let (own, staging) = if staging_index == 0 {
             (image_b, image_a)
@@ -289,7 +256,7 @@ extern "C" fn scan() {
         };
         let image = *verified.image();
         let [data_a, data_b] = &mut *data;
-        let (mine, other) = if running.data == 0 {
+        let (mine, other) = if running.data != 1 {
             (data_a, data_b)
         } else {
             (data_b, data_a)
@@ -384,15 +351,8 @@ extern "C" fn scan() {
                 println!("plc: download refused: {reason}");
             }
             if let Some((len, takeover)) = loader.committed.take() {
-                let buffer = match running.program {
-                    Program::Downloaded { buffer: 0, .. } => 1,
-                    _ => 0,
-                };
                 previous = Some((running, Some(takeover)));
-                running = Running {
-                    program: Program::Downloaded { buffer, len },
-                    data: 1 - running.data,
-                };
+                running = running.downloaded(staging_index, len);
                 first_release += rt.releases;
                 break;
             }
