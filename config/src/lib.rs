@@ -68,6 +68,7 @@
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
 //! plc.shared = "frame"            # the segment its shared globals go through
+//! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -127,9 +128,10 @@
 //! must not lie inside a mapped message, and everything must fit in the 4096-byte areas.
 //! `plc.online` names a queuing input and a queuing output (both `size = 256`) that carry
 //! the PLC online protocol (crate `plc-online`: list, read, write, force, unforce, task
-//! statistics) instead of process-image bytes, and what their client may do: `"monitor"`
-//! (list, read, statistics) or `"force"` (also write, force and unforce); a request beyond
-//! it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
+//! statistics, stop/start a task, online download) instead of process-image bytes, and
+//! what their client may do: `"monitor"` (list, read, statistics), `"force"` (also write,
+//! force, unforce, stop and start a task) or `"download"` (also replace the program by
+//! online download); a request beyond it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
 //! they take when a task faults and the outputs go safe (a number or a boolean fitting the
 //! variable's type; checked when the program is compiled); without one they go to
 //! zero/FALSE. `plc.deadline` gives IEC tasks a time deadline (CODESYS's task watchdog
@@ -148,6 +150,15 @@
 //! in the runtime's `softplc::shared`) and paired: a variable written by both, a read
 //! variable the other does not write or writes with another type, or areas beyond the
 //! segment are build errors naming the declarations as `file:line:col`.
+//!
+//! **Data entries.** `cargo xtask` can give a partition a read-only data entry
+//! (`data/<partition>` in `system.img`, which syssw maps at `DATA_BASE`; see
+//! `user/rt/src/partition.rs`): a PLC partition's is its package (from `plc.*`), and any
+//! other partition may name ST sources in `data.plc_image` (paths as for `plc.program`,
+//! compiled in that order into one program, a compile error stops the build), whose
+//! verified bytecode image — what `plcc build` writes as `.plcb` — becomes its data
+//! entry: for example the program an online-download client sends to a PLC. A partition
+//! cannot have both, and `data` has no other keys.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -82,6 +82,13 @@ pub struct Partition {
     #[serde(default)]
     pub health: Named<String>,
     pub plc: Option<Spanned<Plc>>,
+    pub data: Option<Spanned<Data>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Data {
+    pub plc_image: Vec<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

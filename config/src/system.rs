@@ -59,6 +59,17 @@ pub struct Partition {
     pub health: HealthTable,
     /// Its PLC program and process-image mapping (`plc.*`), if it runs the soft-PLC.
     pub plc: Option<Plc>,
+    /// What `cargo xtask` puts into a partition's data entry other than a PLC package
+    /// (`data.*`).
+    pub data: Option<DataEntry>,
+}
+
+/// The contents of a (non-PLC) partition's data entry `data/<partition>`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DataEntry {
+    /// ST sources compiled, in this order, into one verified bytecode image (what
+    /// `plcc build` writes), e.g. the program an online-download client sends.
+    PlcImage(Vec<SourceFile>),
 }
 
 /// A soft-PLC partition's program and how its ports meet its process image.
@@ -218,6 +229,7 @@ impl System {
                     // The binary form does not carry it: it travels in the partition's
                     // data entry (the PLC package) instead.
                     plc: None,
+                    data: None,
                 })
                 .collect(),
             segments: view

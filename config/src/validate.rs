@@ -385,6 +385,10 @@ impl Validator<'_, '_> {
                     ..p
                 })
             });
+            let data = raw
+                .data
+                .as_ref()
+                .and_then(|d| self.data_entry(d, &path.key("data"), raw.plc.is_some()));
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -404,9 +408,67 @@ impl Validator<'_, '_> {
                 ports: own_ports,
                 health,
                 plc,
+                data,
             });
         }
         (partitions, times, ports)
+    }
+
+    /// ST source files, resolved against the description's directory (each must exist).
+    fn source_files(&mut self, files: &[Spanned<String>], at: &KeyPath) -> Vec<SourceFile> {
+        let base = std::path::Path::new(self.r.file())
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .to_path_buf();
+        let mut program = Vec::new();
+        for file in files {
+            let resolved = base.join(file.get_ref());
+            if !resolved.is_file() {
+                self.error(
+                    start(file),
+                    at,
+                    format!(
+                        "no such file `{}` (program paths are relative to this description's directory: {})",
+                        file.get_ref(),
+                        resolved.display()
+                    ),
+                );
+            }
+            program.push(SourceFile {
+                name: file.get_ref().clone(),
+                path: resolved.to_string_lossy().into_owned(),
+            });
+        }
+        program
+    }
+
+    /// `data`: what `cargo xtask` puts into the partition's data entry (see the crate
+    /// documentation); a PLC partition's data entry is its package, so it has none.
+    fn data_entry(
+        &mut self,
+        raw: &Spanned<schema::Data>,
+        path: &KeyPath,
+        is_plc: bool,
+    ) -> Option<DataEntry> {
+        let before = self.r.diagnostics.len();
+        let files_path = path.key("plc_image");
+        if is_plc {
+            self.error(
+                start(raw),
+                path,
+                "a PLC partition's data entry is its PLC package (from `plc.*`): `data` is for other partitions",
+            );
+        }
+        let files = &raw.get_ref().plc_image;
+        if files.is_empty() {
+            self.error(
+                start(raw),
+                &files_path,
+                "`plc_image` needs at least one ST source file",
+            );
+        }
+        let files = self.source_files(files, &files_path);
+        (self.r.diagnostics.len() == before).then_some(DataEntry::PlcImage(files))
     }
 
     /// A soft-PLC partition's program files and port mapping (see the crate documentation).
@@ -422,29 +484,7 @@ impl Validator<'_, '_> {
                 "a PLC partition needs at least one ST source file in `program`",
             );
         }
-        let base = std::path::Path::new(self.r.file())
-            .parent()
-            .unwrap_or(std::path::Path::new(""))
-            .to_path_buf();
-        let mut program = Vec::new();
-        for file in &raw.program {
-            let resolved = base.join(file.get_ref());
-            if !resolved.is_file() {
-                self.error(
-                    start(file),
-                    &program_path,
-                    format!(
-                        "no such file `{}` (program paths are relative to this description's directory: {})",
-                        file.get_ref(),
-                        resolved.display()
-                    ),
-                );
-            }
-            program.push(SourceFile {
-                name: file.get_ref().clone(),
-                path: resolved.to_string_lossy().into_owned(),
-            });
-        }
+        let program = self.source_files(&raw.program, &program_path);
         // Parses an address of `area`; a bit when `bit`, else a byte/word/... start.
         let address =
             |v: &mut Self, text: &Spanned<String>, at_path: &KeyPath, area: Area, bit: bool| {
@@ -764,7 +804,7 @@ impl Validator<'_, '_> {
                 start(&raw.access),
                 &path.key("access"),
                 format!(
-                    "unknown access {:?}: expected \"monitor\" (list, read, statistics) or \"force\" (also write, force, unforce)",
+                    "unknown access {:?}: expected \"monitor\" (list, read, statistics), \"force\" (also write, force, unforce, stop and start a task) or \"download\" (also online download)",
                     raw.access.get_ref()
                 ),
             );

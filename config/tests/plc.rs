@@ -215,6 +215,20 @@ plc.online = { request = \"cmd\", response = \"reply\", access = \"monitor\" }
             .all(|d| !d.key_path.starts_with("partitions.b.plc")),
         "{diags:?}"
     );
+    for level in ["force", "download"] {
+        let src = plc(&[
+            base,
+            ("# b", online),
+            ("access = \"monitor\"", &format!("access = \"{level}\"")),
+        ]);
+        let diags = load(&src).unwrap_err();
+        assert!(
+            diags
+                .iter()
+                .all(|d| !d.key_path.starts_with("partitions.b.plc")),
+            "access {level}: {diags:?}"
+        );
+    }
     let src = plc(&[
         base,
         ("# b", online),
@@ -374,5 +388,61 @@ fn plc_shared_is_checked() {
         2,
         "partitions.d.plc.shared",
         "already links the shared globals of b and c",
+    );
+}
+
+#[test]
+fn a_partition_gets_a_compiled_plc_image_as_its_data_entry() {
+    let src = doc(&[("# a", "data.plc_image = [\"tests/data/counter.st\"]")]);
+    let system = load_ok(&src);
+    let Some(config::system::DataEntry::PlcImage(files)) = &system.partitions[0].data else {
+        panic!("no data entry: {:?}", system.partitions[0].data);
+    };
+    assert_eq!(files.len(), 1);
+    assert_eq!(files[0].name, "tests/data/counter.st");
+    assert!(files[0].path.ends_with("tests/data/counter.st"));
+    assert!(system.partitions[1].data.is_none());
+}
+
+#[test]
+fn plc_image_data_entries_are_checked() {
+    let src = doc(&[("# a", "data.plc_image = [\"tests/data/nope.st\"]")]);
+    expect_one(
+        &src,
+        "\"tests/data/nope.st\"",
+        0,
+        "partitions.a.data.plc_image",
+        "no such file `tests/data/nope.st`",
+    );
+    let src = doc(&[("# a", "data.plc_image = []")]);
+    expect_one(
+        &src,
+        "data.plc_image",
+        0,
+        "partitions.a.data.plc_image",
+        "at least one ST source file",
+    );
+    let src = doc(&[("# a", "data.file = \"x.bin\"")]);
+    let diags = load(&src).unwrap_err();
+    assert!(
+        diags
+            .iter()
+            .any(|d| d.message.contains("unknown field `file`")),
+        "{diags:?}"
+    );
+    // A PLC partition's data entry is its package.
+    let src = plc(&[
+        (
+            "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+            "",
+        ),
+        ("# b", "data.plc_image = [\"tests/data/counter.st\"]"),
+    ]);
+    expect_one(
+        &src,
+        "data.plc_image",
+        0,
+        "partitions.b.data",
+        "a PLC partition's data entry is its PLC package",
     );
 }

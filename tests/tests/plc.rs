@@ -272,6 +272,44 @@ fn plc_online() {
         ("viewer: READ -> OK", "the monitor-only client's READ"),
         ("viewer: WRITE -> FORBIDDEN", "the refusal of a write"),
         ("viewer: FORCE -> FORBIDDEN", "the refusal of a force"),
+        ("viewer: STOP -> FORBIDDEN", "the refusal of a STOP"),
+        (
+            "viewer: DOWNLOAD_BEGIN -> FORBIDDEN",
+            "the refusal of a download below `download` access",
+        ),
+        ("client: STOP -> OK", "STOP"),
+        ("client: START -> OK", "START"),
+        (
+            "plc: task CYCLE.tank stopped online; outputs safe",
+            "the STOP log line",
+        ),
+        ("plc: task CYCLE.tank started online", "the START log line"),
+        ("client: WRITE -> OK", "the WRITE of the RETAIN counter"),
+        (
+            "client: download bad-checksum: CHECKSUM_MISMATCH",
+            "the refusal of a download with a wrong checksum",
+        ),
+        (
+            "client: download truncated: REFUSED",
+            "the refusal of a truncated image",
+        ),
+        (
+            "plc: download refused: bytecode image: ",
+            "the log line of the refused image",
+        ),
+        (
+            "client: READ -> UNKNOWN_NAME",
+            "the old program still running after the bad downloads",
+        ),
+        ("client: download tank_v2: OK", "the download"),
+        (
+            "client: tank.revision = 2",
+            "the new program's variable read back",
+        ),
+        (
+            "client: tank.alarm_count = 42",
+            "the RETAIN value kept over the download",
+        ),
     ] {
         check(&o, has(text), &format!("{what}: no `{text}`"));
     }
@@ -301,11 +339,56 @@ fn plc_online() {
         "the valve stayed forced after UNFORCE",
     );
     // The scan cycle was not disturbed: one cycle per frame, no overrun, no fault.
-    let stats = o.line("client: stats ");
+    let stats: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("client: stats "))
+        .collect();
     check(
         &o,
-        stats.is_some_and(|l| l.contains("stopped=false") && l.contains("overruns=0 faults=0")),
+        stats
+            .first()
+            .is_some_and(|l| l.contains("stopped=false") && l.contains("overruns=0 faults=0")),
         &format!("statistics: {stats:?}"),
+    );
+    // STOP shows in the statistics, START clears it (the task ran on).
+    let stopped = |i: usize, want: &str| stats.get(i).is_some_and(|l| l.contains(want));
+    check(
+        &o,
+        stopped(1, "stopped=true") && stopped(2, "stopped=false"),
+        &format!("statistics around STOP/START: {stats:?}"),
+    );
+    // While the task is stopped the plant sees the configured safe valve 0.1, and the
+    // controller takes over again after START.
+    let safe = status.iter().filter(|s| s.valve == 0.1).count();
+    check(
+        &o,
+        safe >= 2,
+        &format!("{safe} plant status lines show the safe valve 0.1 (2 s stopped)"),
+    );
+    let safe_at = status.iter().position(|s| s.valve == 0.1).unwrap_or(0);
+    check(
+        &o,
+        status[safe_at..].iter().any(|s| s.valve != 0.1),
+        "the valve stayed safe after START",
+    );
+    // The download is swapped in at a release and keeps the RETAIN counter.
+    let swapped = o.line("plc: download: ");
+    check(
+        &o,
+        swapped.is_some_and(|l| {
+            l.contains(" bytes verified, swapped in at release ")
+                && l.contains(", 1 RETAIN variable(s) kept")
+        }),
+        &format!("the download's log line: {swapped:?}"),
+    );
+    // The new program runs its task: the statistics after the download (fresh ones).
+    check(
+        &o,
+        stats
+            .get(3)
+            .is_some_and(|l| l.contains("stopped=false") && l.contains("faults=0")),
+        &format!("statistics after the download: {stats:?}"),
     );
 }
 

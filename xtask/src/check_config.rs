@@ -97,7 +97,7 @@ pub fn partition_files(
     images.dedup();
     let paths = crate::artifacts::build_user_programs(&images)?;
     let built: Vec<(String, PathBuf)> = images.into_iter().zip(paths).collect();
-    let packages = crate::plc::packages(described)?;
+    let packages = crate::plc::data_entries(described)?;
     check_budgets(path, system, &built, &packages)?;
     Ok((built, packages))
 }

@@ -4,25 +4,31 @@
 //! list against the program's variables, pair the shared globals of the (at most two) PLC
 //! partitions of each `plc.shared` segment and lay the segment out (`softplc::shared::plan`),
 //! and write each package (`softplc::package`) as the partition's data entry
-//! `data/<partition>`.
+//! `data/<partition>`; for each partition with `data.plc_image`, compile those sources the
+//! same way and write the bytecode image itself (what `plcc build` writes) as its data
+//! entry.
 
 use anyhow::{Context, Result, bail};
 use config::System;
-use config::system::{Partition, PlcLink, PlcValue};
+use config::system::{DataEntry, Partition, PlcLink, PlcValue, SourceFile};
 use plc_vm::image::{Image, VarType};
 use softplc::package::{self, PortMap};
 
-/// `(partition name, package)` for every soft-PLC partition of `system`.
-pub fn packages(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
+/// `(partition name, data entry)` for every partition that has one: a soft-PLC
+/// partition's package, or the compiled image `data.plc_image` names.
+pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
+    let mut out = Vec::new();
     // Every program first: the shared globals pair across partitions.
     let mut programs = Vec::new();
     for (index, p) in system.partitions.iter().enumerate() {
+        if let Some(DataEntry::PlcImage(files)) = &p.data {
+            out.push((p.name.clone(), compile_sources(p, files)?.image));
+        }
         if let Some(plc) = &p.plc {
             programs.push((index, compile(system, index, p, plc)?));
         }
     }
     let mut shared = shared_plans(system, &programs)?;
-    let mut out = Vec::new();
     for (index, compiled) in &programs {
         let p = &system.partitions[*index];
         let plc = p.plc.as_ref().expect("a PLC partition");
@@ -111,29 +117,7 @@ fn compile(
     p: &Partition,
     plc: &config::system::Plc,
 ) -> Result<plc_compiler::Compiled> {
-    let sources = plc
-        .program
-        .iter()
-        .map(|file| {
-            std::fs::read_to_string(&file.path)
-                .map(|text| (file.name.clone(), text))
-                .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
-        })
-        .collect::<Result<Vec<_>>>()?;
-    let compiled = match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
-        Ok((compiled, _)) => compiled,
-        Err((diagnostics, map)) => {
-            eprint!(
-                "{}",
-                plc_compiler::diagnostics::render(&map, &diagnostics, false)
-            );
-            bail!(
-                "partition {}: its PLC program has {} error(s)",
-                p.name,
-                diagnostics.len()
-            );
-        }
-    };
+    let compiled = compile_sources(p, &plc.program)?;
     check_tasks(system, index, p, &compiled.image)?;
     let image = plc_vm::image::Image::parse(&compiled.image)
         .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
@@ -146,6 +130,33 @@ fn compile(
         }
     }
     Ok(compiled)
+}
+
+/// The compiled ST sources `files` of partition `p` (a compile error is printed as
+/// `plcc check` prints it and stops the build).
+fn compile_sources(p: &Partition, files: &[SourceFile]) -> Result<plc_compiler::Compiled> {
+    let sources = files
+        .iter()
+        .map(|file| {
+            std::fs::read_to_string(&file.path)
+                .map(|text| (file.name.clone(), text))
+                .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
+        })
+        .collect::<Result<Vec<_>>>()?;
+    match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
+        Ok((compiled, _)) => Ok(compiled),
+        Err((diagnostics, map)) => {
+            eprint!(
+                "{}",
+                plc_compiler::diagnostics::render(&map, &diagnostics, false)
+            );
+            bail!(
+                "partition {}: its PLC program has {} error(s)",
+                p.name,
+                diagnostics.len()
+            );
+        }
+    }
 }
 
 /// A PLC partition's package: its ports, program, watch list, safe values and shared
@@ -188,6 +199,14 @@ fn package(
         .map(|(name, value)| safe_value(&image, name, *value))
         .collect::<Result<Vec<_>, String>>()
         .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
+    if safe.len() > softplc::scan::MAX_SAFE_VALUES {
+        bail!(
+            "partition {}: plc.safe gives {} values, at most {} are kept",
+            p.name,
+            safe.len(),
+            softplc::scan::MAX_SAFE_VALUES
+        );
+    }
     let deadlines = plc
         .deadlines
         .iter()
@@ -341,7 +360,7 @@ mod tests {
     #[test]
     fn shared_globals_pair_across_the_packages_of_a_segment() {
         let system = shared_system(("", "")).unwrap();
-        let packages = packages(&system).unwrap();
+        let packages = data_entries(&system).unwrap();
         let layout = |name: &str| {
             let (_, bytes) = packages.iter().find(|(n, _)| n == name).unwrap();
             let package = package::Package::parse(bytes).unwrap();
@@ -402,7 +421,7 @@ mod tests {
             "plc.program = [\"plc/shared_reader.st\"]",
         ))
         .unwrap();
-        let e = packages(&system).unwrap_err().to_string();
+        let e = data_entries(&system).unwrap_err().to_string();
         assert!(
             e.contains("plc/shared_reader.st:7:3: partition reader's program shares `seq`")
                 && e.contains("names no segment"),

@@ -17,6 +17,36 @@
 //! | 4 FORCE | a [`Value`], then `name` | none |
 //! | 5 UNFORCE | `name` | none |
 //! | 6 STATS | `task u8` | `stopped u8, name_len u8, name, count, last, min, mean, max, last_jitter, max_jitter, overruns, faults` (u64 each, times in ns) |
+//! | 7 STOP | `task u8` | none |
+//! | 8 START | `task u8` | none |
+//! | 9 DOWNLOAD_BEGIN | `size u32, crc32 u32` | `max_chunk u16` |
+//! | 10 DOWNLOAD_CHUNK | `offset u32`, then 1..=[`MAX_CHUNK`] bytes (the rest of the message) | none |
+//! | 11 DOWNLOAD_COMMIT | none | `release u64` |
+//!
+//! Which access level ([`Access`], the configuration's `plc.online.access`) each operation
+//! needs is [`Op::needs`]: LIST, READ, STATS `monitor`; WRITE, FORCE, UNFORCE, STOP, START
+//! `force`; the DOWNLOAD operations `download`. Below it the answer is FORBIDDEN.
+//!
+//! **STOP / START.** STOP takes a task out of the scan (an already stopped one stays
+//! stopped): it runs no more and its outputs go to their safe values at once, as after a
+//! fault; STATS shows it stopped. START lets it run again from the next release; it also
+//! restarts a task a trap or the watchdog stopped (as a CODESYS reset of the task: the data
+//! keeps its values, the fault is cleared).
+//!
+//! **Online download.** A new program (the bytecode image `plcc build` writes, `.plcb`)
+//! goes over in pieces: DOWNLOAD_BEGIN announces its size and CRC-32 ([`crc32`]: IEEE,
+//! reflected, as zlib) and discards any unfinished download; DOWNLOAD_CHUNKs carry its
+//! bytes in order (each at the offset where the previous ended; BAD_OFFSET otherwise);
+//! DOWNLOAD_COMMIT checks size and checksum, then makes the checks the PLC makes on its
+//! configured program at start (image, verifier, tasks against the partition period) and
+//! takes over what refers to the running program by address (configured safe values,
+//! forces, the watch list) by name. When all of that holds the answer is OK with the
+//! release from which the new program runs: it is swapped in between two scan cycles, its
+//! RETAIN variables taking the running program's values by name and type, every task
+//! running and its statistics counted anew (the rest of that batch of requests waits for
+//! the next cycle). Any refusal
+//! (its reason is logged by the PLC) leaves the running program untouched and ends the
+//! download.
 //!
 //! A value is `type u8` (the bytecode's `VarType` code) and 8 bytes: the integer (two's
 //! complement or unsigned), the BOOL (0/1), the REAL/LREAL bits (REAL as f32 bits in the low
@@ -30,6 +60,9 @@ use plc_vm::vm::Value;
 /// Largest message either way (a queuing port of the PLC must hold it).
 pub const MAX_MESSAGE: usize = 256;
 
+/// Most image bytes one DOWNLOAD_CHUNK carries (a message less its head and offset).
+pub const MAX_CHUNK: usize = MAX_MESSAGE - 2 - 4;
+
 codes::code_enum! {
     /// Operations.
     pub enum Op: u8 {
@@ -39,6 +72,11 @@ codes::code_enum! {
         Force = 4 => "FORCE",
         Unforce = 5 => "UNFORCE",
         Stats = 6 => "STATS",
+        Stop = 7 => "STOP",
+        Start = 8 => "START",
+        DownloadBegin = 9 => "DOWNLOAD_BEGIN",
+        DownloadChunk = 10 => "DOWNLOAD_CHUNK",
+        DownloadCommit = 11 => "DOWNLOAD_COMMIT",
     }
 }
 
@@ -62,6 +100,20 @@ codes::code_enum! {
         NoSuchTask = 7 => "NO_SUCH_TASK",
         /// Not supported for this variable (e.g. forcing a STRING).
         Unsupported = 8 => "UNSUPPORTED",
+        /// A download chunk not at the offset where the previous one ended, or beyond the
+        /// announced size.
+        BadOffset = 9 => "BAD_OFFSET",
+        /// The announced image is larger than the PLC's download buffer.
+        TooLarge = 10 => "TOO_LARGE",
+        /// The assembled image's CRC-32 is not the announced one.
+        ChecksumMismatch = 11 => "CHECKSUM_MISMATCH",
+        /// The new program fails the PLC's checks or cannot take over from the running one
+        /// (the PLC logs why).
+        Refused = 12 => "REFUSED",
+        /// A chunk or commit without a download in progress.
+        NoDownload = 13 => "NO_DOWNLOAD",
+        /// A commit before every announced byte arrived.
+        Incomplete = 14 => "INCOMPLETE",
     }
 }
 
@@ -71,8 +123,10 @@ codes::code_enum! {
     pub enum Access: u8 {
         /// LIST, READ, STATS.
         Monitor = 0 => "monitor",
-        /// And WRITE, FORCE, UNFORCE.
+        /// And WRITE, FORCE, UNFORCE, STOP, START.
         Force = 1 => "force",
+        /// And the DOWNLOAD operations (a new program).
+        Download = 2 => "download",
     }
 }
 
@@ -81,7 +135,8 @@ impl Op {
     pub fn needs(self) -> Access {
         match self {
             Op::List | Op::Read | Op::Stats => Access::Monitor,
-            Op::Write | Op::Force | Op::Unforce => Access::Force,
+            Op::Write | Op::Force | Op::Unforce | Op::Stop | Op::Start => Access::Force,
+            Op::DownloadBegin | Op::DownloadChunk | Op::DownloadCommit => Access::Download,
         }
     }
 }
@@ -95,6 +150,11 @@ pub enum Request<'a> {
     Force { name: &'a str, value: Value<'a> },
     Unforce { name: &'a str },
     Stats { task: u8 },
+    Stop { task: u8 },
+    Start { task: u8 },
+    DownloadBegin { size: u32, crc32: u32 },
+    DownloadChunk { offset: u32, bytes: &'a [u8] },
+    DownloadCommit,
 }
 
 impl Request<'_> {
@@ -106,6 +166,11 @@ impl Request<'_> {
             Request::Force { .. } => Op::Force,
             Request::Unforce { .. } => Op::Unforce,
             Request::Stats { .. } => Op::Stats,
+            Request::Stop { .. } => Op::Stop,
+            Request::Start { .. } => Op::Start,
+            Request::DownloadBegin { .. } => Op::DownloadBegin,
+            Request::DownloadChunk { .. } => Op::DownloadChunk,
+            Request::DownloadCommit => Op::DownloadCommit,
         }
     }
 }
@@ -194,6 +259,11 @@ impl<'a> Reader<'a> {
         self.take(2).map(|b| u16::from_le_bytes([b[0], b[1]]))
     }
 
+    pub fn u32(&mut self) -> Option<u32> {
+        self.take(4)
+            .map(|b| u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
     pub fn u64(&mut self) -> Option<u64> {
         self.take(8)
             .map(|b| u64::from_le_bytes(core::array::from_fn(|i| b[i])))
@@ -248,7 +318,21 @@ pub fn encode_request(r: &Request, seq: u8, buf: &mut [u8]) -> Option<usize> {
             w.value(value)?;
             w.put(name.as_bytes())?
         }
-        Request::Stats { task } => w.put(&[*task])?,
+        Request::Stats { task } | Request::Stop { task } | Request::Start { task } => {
+            w.put(&[*task])?
+        }
+        Request::DownloadBegin { size, crc32 } => {
+            w.put(&size.to_le_bytes())?;
+            w.put(&crc32.to_le_bytes())?
+        }
+        Request::DownloadChunk { offset, bytes } => {
+            if bytes.is_empty() || bytes.len() > MAX_CHUNK {
+                return None;
+            }
+            w.put(&offset.to_le_bytes())?;
+            w.put(bytes)?
+        }
+        Request::DownloadCommit => {}
     }
     Some(w.len())
 }
@@ -261,7 +345,8 @@ pub fn decode_request(bytes: &[u8]) -> Result<(u8, Request<'_>), (u8, u8)> {
         return Err((bytes.first().copied().unwrap_or(0), 0));
     };
     let fail = (op, seq);
-    let request = match Op::from_code(op).ok_or(fail)? {
+    let kind = Op::from_code(op).ok_or(fail)?;
+    let request = match kind {
         Op::List => {
             let from = r.u16().ok_or(fail)?;
             (r.is_empty())
@@ -277,18 +362,42 @@ pub fn decode_request(bytes: &[u8]) -> Result<(u8, Request<'_>), (u8, u8)> {
         Op::Write | Op::Force => {
             let value = r.value().ok_or(fail)?;
             let name = r.name().ok_or(fail)?;
-            if op == Op::Write.code() {
+            if kind == Op::Write {
                 Request::Write { name, value }
             } else {
                 Request::Force { name, value }
             }
         }
-        Op::Stats => {
+        Op::Stats | Op::Stop | Op::Start => {
             let task = r.u8().ok_or(fail)?;
+            if !r.is_empty() {
+                return Err(fail);
+            }
+            match kind {
+                Op::Stop => Request::Stop { task },
+                Op::Start => Request::Start { task },
+                _ => Request::Stats { task },
+            }
+        }
+        Op::DownloadBegin => {
+            let size = r.u32().ok_or(fail)?;
+            let crc32 = r.u32().ok_or(fail)?;
             (r.is_empty())
-                .then_some(Request::Stats { task })
+                .then_some(Request::DownloadBegin { size, crc32 })
                 .ok_or(fail)?
         }
+        Op::DownloadChunk => {
+            let offset = r.u32().ok_or(fail)?;
+            let bytes = core::mem::take(&mut r.bytes);
+            if bytes.is_empty() || bytes.len() > MAX_CHUNK {
+                return Err(fail);
+            }
+            Request::DownloadChunk { offset, bytes }
+        }
+        Op::DownloadCommit => r
+            .is_empty()
+            .then_some(Request::DownloadCommit)
+            .ok_or(fail)?,
     };
     Ok((seq, request))
 }
@@ -336,6 +445,10 @@ pub fn read_stats<'a>(r: &mut Reader<'a>) -> Option<TaskStats<'a>> {
     })
 }
 
+/// The download checksum: CRC-32 (IEEE 802.3, reflected, as zlib's `crc32`), the one the
+/// system image and the binary configuration use.
+pub use abi::crc32::crc32;
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -361,6 +474,21 @@ mod tests {
             },
             Request::Unforce { name: "alarm" },
             Request::Stats { task: 3 },
+            Request::Stop { task: 0 },
+            Request::Start { task: 7 },
+            Request::DownloadBegin {
+                size: 70_000,
+                crc32: 0xcbf4_3926,
+            },
+            Request::DownloadChunk {
+                offset: 512,
+                bytes: &[1, 2, 3],
+            },
+            Request::DownloadChunk {
+                offset: 0,
+                bytes: &[0xaa; MAX_CHUNK],
+            },
+            Request::DownloadCommit,
         ];
         for (seq, r) in requests.iter().enumerate() {
             let mut buf = [0u8; MAX_MESSAGE];
@@ -431,5 +559,77 @@ mod tests {
             encode_request(&r, 7, &mut buf[..5]).is_none(),
             "too small a buffer"
         );
+    }
+
+    #[test]
+    fn hostile_control_and_download_requests_are_errors() {
+        let (stop, start) = (Op::Stop.code(), Op::Start.code());
+        let (begin, chunk, commit) = (
+            Op::DownloadBegin.code(),
+            Op::DownloadChunk.code(),
+            Op::DownloadCommit.code(),
+        );
+        for (bytes, why) in [
+            (&[stop, 1][..], "STOP without a task"),
+            (&[stop, 1, 0, 0], "STOP too long"),
+            (&[start, 1], "START without a task"),
+            (&[start, 1, 0, 9], "START too long"),
+            (&[begin, 1, 0, 1, 0, 0, 1, 2, 3], "BEGIN truncated"),
+            (&[begin, 1, 0, 1, 0, 0, 1, 2, 3, 4, 5], "BEGIN too long"),
+            (&[chunk, 1, 0, 0, 0], "CHUNK offset truncated"),
+            (&[chunk, 1, 0, 0, 0, 0], "CHUNK without bytes"),
+            (&[commit, 1, 0], "COMMIT with a payload"),
+        ] {
+            assert_eq!(decode_request(bytes), Err((bytes[0], 1)), "{why}");
+        }
+        let mut long = [0u8; MAX_MESSAGE + 1];
+        long[0] = chunk;
+        assert!(decode_request(&long).is_err(), "a chunk beyond MAX_CHUNK");
+        let mut buf = [0u8; MAX_MESSAGE];
+        let too_big = Request::DownloadChunk {
+            offset: 0,
+            bytes: &[0; MAX_CHUNK + 1],
+        };
+        assert!(encode_request(&too_big, 1, &mut buf).is_none());
+        let empty = Request::DownloadChunk {
+            offset: 0,
+            bytes: &[],
+        };
+        assert!(encode_request(&empty, 1, &mut buf).is_none());
+        // Every truncation of each new request is an error, never a panic.
+        for r in [
+            Request::Stop { task: 1 },
+            Request::DownloadBegin { size: 9, crc32: 7 },
+            Request::DownloadChunk {
+                offset: 3,
+                bytes: &[1],
+            },
+        ] {
+            let n = encode_request(&r, 5, &mut buf).unwrap();
+            for cut in 0..n {
+                assert!(decode_request(&buf[..cut]).is_err(), "{r:?} cut at {cut}");
+            }
+        }
+    }
+
+    #[test]
+    fn access_levels_include_the_ones_below() {
+        assert_eq!(Op::Stop.needs(), Access::Force);
+        assert_eq!(Op::Start.needs(), Access::Force);
+        for op in [Op::DownloadBegin, Op::DownloadChunk, Op::DownloadCommit] {
+            assert_eq!(op.needs(), Access::Download);
+        }
+        assert!(Access::Monitor.code() < Access::Force.code());
+        assert!(Access::Force.code() < Access::Download.code());
+        // The old codes are an interface: unchanged.
+        assert_eq!(Op::Stats.code(), 6);
+        assert_eq!(Status::Unsupported.code(), 8);
+        assert_eq!(Access::Force.code(), 1);
+    }
+
+    #[test]
+    fn crc32_is_zlibs() {
+        assert_eq!(crc32(b""), 0);
+        assert_eq!(crc32(b"123456789"), 0xcbf4_3926);
     }
 }

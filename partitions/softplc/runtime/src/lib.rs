@@ -4,9 +4,10 @@
 //!
 //! This library is the runtime's whole behaviour and is tested on the host: the package
 //! format the build writes ([`package`]), one scan cycle ([`scan`]: inputs, due tasks,
-//! statistics, faults and safe outputs, outputs), the latency statistics ([`histogram`])
-//! and the online services ([`online`]). The partition program (`main.rs`) only
-//! re-verifies the program, creates the ports and the scan process and moves bytes between
+//! statistics, faults and safe outputs, outputs), the latency statistics ([`histogram`]),
+//! the online services ([`online`]) and online download ([`download`]: chunk assembly,
+//! checks, takeover by name) and the globals shared with another project ([`shared`]).
+//! The partition program (`main.rs`) only re-verifies the program, creates the ports and the scan process and moves bytes between
 //! them and this library. It must never trust the package: every structure is checked and
 //! the bytecode re-verified before anything runs.
 #![cfg_attr(not(test), no_std)]
@@ -14,6 +15,7 @@
 #[cfg(any(feature = "alloc", test))]
 extern crate alloc;
 
+pub mod download;
 pub mod histogram;
 pub mod online;
 pub mod package;

@@ -5,6 +5,14 @@
 //! copy-in and copy-out of its shared globals ([`softplc::shared`]), then answers the
 //! waiting online requests ([`softplc::online::serve_pending`]).
 //!
+//! Online download: the chunks are assembled in whichever of the two static image buffers
+//! the running program does not use; a committed (verified) program then runs from the
+//! next release over the other of the two static data buffers, which the running program
+//! does not use either, after [`softplc::download::hand_over`] copied its RETAIN values and
+//! forces from the old data. The swap is a new "life" of the scan loop, so every borrow of
+//! the old program ends with it. A partition restart runs the configured program again (a
+//! warm one keeps the RETAIN variables the two programs share).
+//!
 //! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
 //! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
 //! - `plc: task <name> interval=<ms>ms every=<n> priority=<p> deadline=<us>us|none` per
@@ -12,10 +20,10 @@
 //! - `plc: t=<ms>ms task=<name> cycles=<n> exec_us=<last>/<min>/<mean>/<max>
 //!   jitter_us=<last>/<max> overruns=<n> faults=<n>` per task every [`STATS_EVERY_MS`];
 //! - `plc: t=<ms>ms scan releases=<n> lateness_ns=<min>/<median>/<max>
-//!   overhead_ns=<min>/<median>/<max>` with them: over all releases so far, the scan's start
-//!   after its window start and the runtime's own work per release besides the VM's
-//!   (`softplc::histogram`: medians to 0.5 us and 125 ns; what `cargo xtask bench` reports
-//!   as `plc_release_jitter` and `plc_cycle_overhead`);
+//!   overhead_ns=<min>/<median>/<max>` with them: over all releases of the running program,
+//!   the scan's start after its window start and the runtime's own work per release besides
+//!   the VM's (`softplc::histogram`: medians to 0.5 us and 125 ns; what `cargo xtask bench`
+//!   reports as `plc_release_jitter` and `plc_cycle_overhead`);
 //! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
 //!   as IEC literals);
 //! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault
@@ -30,6 +38,13 @@
 //!   variables, found no new one, kept the previous values because the other project was
 //!   mid-update at every attempt, or ran before its first update ([`softplc::shared`]);
 //! - `plc: warm restart: <n> RETAIN variable(s) kept, the rest initialised`;
+//! - `plc: task <name> stopped online; outputs safe` and `plc: task <name> started online`
+//!   for STOP and START;
+//! - `plc: download: <n> bytes verified, swapped in at release <r>, <k> RETAIN variable(s)
+//!   kept` when a downloaded program takes over (release numbers count from the
+//!   partition's start, 0 = the first);
+//! - `plc: download refused: <reason>` when a committed download fails a check (the
+//!   running program goes on);
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
 //!
@@ -53,12 +68,18 @@ use plc_vm::image::Image;
 use plc_vm::verify::VerifiedImage;
 use plc_vm::vm::{CallFrame, Fault, Machine, Memory, TryFrame};
 use protocol::{Direction, PortKind};
+use softplc::download::{
+    Program, Refusal, Running, Takeover, check_program, fit_configuration, hand_over,
+};
+use softplc::online::Loader;
 use softplc::package::{Package, PortMap, SharedLayout};
-use softplc::scan::{Areas, PortIo, Runtime, Schedule};
+use softplc::scan::{Areas, PortIo, Runtime, SafeValues, Schedule};
 use softplc::shared::SharedStats;
 
 /// Data memory the program may use.
 const MAX_DATA: usize = 256 * 1024;
+/// Largest program an online download may bring.
+const MAX_IMAGE: usize = 64 * 1024;
 /// Verifier scratch (two cells per code byte: programs up to 64 KiB of code).
 const MAX_SCRATCH: usize = 128 * 1024;
 /// Partition time between statistics lines.
@@ -71,10 +92,16 @@ macro_rules! text {
     ($($arg:tt)*) => { LineBuffer::format(format_args!($($arg)*)) };
 }
 
-static DATA: spin::Mutex<[u8; MAX_DATA]> = spin::Mutex::new([0; MAX_DATA]);
-/// Data memory of the previous life, for the RETAIN values of a warm restart.
-static PREVIOUS: spin::Mutex<[u8; MAX_DATA]> = spin::Mutex::new([0; MAX_DATA]);
-/// This life began with a warm start (memory kept by syssw).
+/// Two data memories: the running program's and the one the next program (after a
+/// download or a warm restart) starts in, taking RETAIN values from the other.
+static DATA: spin::Mutex<[[u8; MAX_DATA]; 2]> = spin::Mutex::new([[0; MAX_DATA]; 2]);
+/// Two image buffers for downloaded programs: the running one's and the one a download
+/// is assembled in.
+static IMAGES: spin::Mutex<[[u8; MAX_IMAGE]; 2]> = spin::Mutex::new([[0; MAX_IMAGE]; 2]);
+/// Which program runs and in which data memory (kept over a warm restart, which carries
+/// its RETAIN values to the configured program).
+static RUNNING: spin::Mutex<Running> = spin::Mutex::new(Running::COLD);
+/// This partition start was a warm one (memory kept by syssw).
 static WARM: AtomicBool = AtomicBool::new(false);
 static SCRATCH: spin::Mutex<[u32; MAX_SCRATCH]> = spin::Mutex::new([0; MAX_SCRATCH]);
 static AREAS: spin::Mutex<Areas> = spin::Mutex::new(Areas::new());
@@ -101,55 +128,15 @@ fn report(text: &str) {
     let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
 }
 
-/// Why the program is refused.
-enum Refusal {
-    Package(softplc::package::PackageError),
-    Image(plc_vm::image::ImageError),
-    CodeTooLarge(usize),
-    Verifier(plc_vm::verify::VerifyError),
-    DataTooLarge(u32),
-    Tasks(softplc::scan::PlanError),
-    Shared(softplc::shared::SharedError),
-}
-
-impl core::fmt::Display for Refusal {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match self {
-            Refusal::Package(e) => write!(f, "package: {e}"),
-            Refusal::Image(e) => write!(f, "bytecode image: {e}"),
-            Refusal::CodeTooLarge(n) => {
-                write!(f, "code of {n} bytes exceeds {} bytes", MAX_SCRATCH / 2)
-            }
-            Refusal::Verifier(e) => write!(f, "bytecode rejected by the verifier: {e}"),
-            Refusal::DataTooLarge(n) => write!(f, "data memory of {n} bytes exceeds {MAX_DATA}"),
-            Refusal::Tasks(e) => write!(f, "tasks: {e:?}"),
-            Refusal::Shared(e) => write!(f, "shared globals: {e}"),
-        }
-    }
-}
-
 /// The checked package, verified program and schedule, or why the program is refused.
 fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), Refusal> {
     let info = apex::runtime::start_info();
     let package = Package::parse(info.data()).map_err(Refusal::Package)?;
-    let image = Image::parse(package.program()).map_err(Refusal::Image)?;
-    let code = image.code().len();
-    let mut scratch = SCRATCH.lock();
-    let scratch = scratch
-        .get_mut(..2 * code)
-        .ok_or(Refusal::CodeTooLarge(code))?;
-    let verified =
-        plc_vm::verify::verify_with_scratch(&image, scratch).map_err(Refusal::Verifier)?;
-    if image.data_size() as usize > MAX_DATA {
-        return Err(Refusal::DataTooLarge(image.data_size()));
-    }
     let period = period().as_nanos() as u64;
-    let schedule = Schedule::new(&image, period)
-        .map_err(Refusal::Tasks)?
-        .with_deadlines(&image, &package);
-    if let Some(layout) = package.shared() {
-        softplc::shared::check(&layout, &image).map_err(Refusal::Shared)?;
-    }
+    let mut scratch = SCRATCH.lock();
+    let (verified, schedule) =
+        check_program(package.program(), &mut scratch[..], MAX_DATA, period)?;
+    let schedule = fit_configuration(verified.image(), schedule, &package)?;
     Ok((package, verified, schedule))
 }
 
@@ -261,144 +248,233 @@ fn report_fault(image: &Image, task: usize, fault: &Fault) {
     let _ = apex::runtime::raise(error, apex::runtime::own_slot(), text.as_bytes());
 }
 
+/// The scan process: one life of the scan loop per program (see the module documentation).
 extern "C" fn scan() {
-    // Cold start checked all of it; a failure here cannot happen, and idles if it does.
-    let Ok((package, verified, schedule)) = load() else {
+    // Cold start checked the package; a failure here cannot happen, and idles if it does.
+    let Ok(package) = Package::parse(apex::runtime::start_info().data()) else {
         return;
     };
-    let image = *verified.image();
     let period = period().as_nanos() as u64;
     let mut data = DATA.lock();
+    let mut images = IMAGES.lock();
+    let mut scratch = SCRATCH.lock();
+    let mut areas = AREAS.lock();
+    let mut io = ApexPorts::open(&package);
     let (mut stack, mut calls, mut tries) =
         ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
-    let size = image.data_size() as usize;
-    let warm = WARM.load(Ordering::Acquire);
-    let mut previous = PREVIOUS.lock();
-    if warm {
-        previous[..size].copy_from_slice(&data[..size]);
-    }
-    let Ok(mut machine) = Machine::new(
-        verified,
-        Memory {
-            data: &mut data[..size],
-            stack: &mut stack,
-            calls: &mut calls,
-            tries: &mut tries,
-        },
-    ) else {
-        report("refusing the program: not enough VM memory");
-        return;
-    };
-    if warm {
-        let kept =
-            softplc::scan::carry_retain(&image, &previous[..size], &image, machine.data_mut());
-        println!("plc: warm restart: {kept} RETAIN variable(s) kept, the rest initialised");
-    }
-    drop(previous);
-    let mut io = ApexPorts::open(&package);
-    let mut areas = AREAS.lock();
-    let mut rt = Runtime::new(schedule, period);
+    // A warm start carries the RETAIN values of what ran before it to the configured program.
+    let mut previous = WARM
+        .load(Ordering::Acquire)
+        .then(|| *RUNNING.lock())
+        .map(|was| (was, None::<Takeover>));
+    let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
     let shared = package.shared().map(|layout| (layout, segment(&layout)));
     let mut shared_stats = SharedStats::default();
     let mut shared_scratch = [0u8; softplc::shared::MAX_AREA_LEN];
-    let tp = apex::runtime::start_info().time_partition;
     let started = now_ns();
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
+    let mut first_release = 0u64;
     loop {
-        // The start of the window this release runs in (its release time).
-        let window = apex::user_rt::sys::partition_info(tp)
-            .map(|i| i.next_window_start)
-            .unwrap_or(0);
-        let release = if window == u64::MAX || window > now_ns() {
-            now_ns()
+        *RUNNING.lock() = running;
+        let staging_index = running.staging(previous.map(|(was, _)| was));
+        let [image_a, image_b] = &mut *images;
+        let (own, staging) = if staging_index == 0 {
+            (image_b, image_a)
         } else {
-            window
+            (image_a, image_b)
         };
-        if let Some((layout, words)) = &shared
-            && layout.other.is_some()
-        {
-            let fetch =
-                softplc::shared::copy_in(words, layout, machine.data_mut(), &mut shared_scratch);
-            shared_stats.record(fetch);
-        }
-        rt.scan(
-            &mut machine,
-            &image,
-            &package,
-            &mut io,
-            &mut areas,
-            now_ns,
-            release,
-            |task, fault| report_fault(&image, task, fault),
+        let program: &[u8] = match running.program {
+            Program::Configured => package.program(),
+            Program::Downloaded { len, .. } => &own[..len],
+        };
+        let checked = check_program(program, &mut scratch[..], MAX_DATA, period).and_then(
+            |(verified, schedule)| {
+                let schedule = fit_configuration(verified.image(), schedule, &package)?;
+                Ok((verified, schedule))
+            },
         );
-        if let Some((layout, words)) = &shared {
-            softplc::shared::copy_out(words, layout, machine.data());
-        }
-        softplc::online::serve_pending(&package, &mut io, &mut machine, &image, &rt);
-        let now = now_ns();
-        if now >= next_stats {
-            next_stats += STATS_EVERY_MS * 1_000_000;
-            for &task in &rt.schedule.order[..rt.schedule.count] {
-                let s = &rt.stats[task];
-                println!(
-                    "plc: t={}ms task={} cycles={} exec_us={}/{}/{}/{} jitter_us={}/{} overruns={} faults={}",
-                    (now - started) / 1_000_000,
-                    image.task(task).map_or("?", |t| t.name),
-                    s.count,
-                    s.last / 1000,
-                    s.min / 1000,
-                    s.mean() / 1000,
-                    s.max / 1000,
-                    s.last_jitter / 1000,
-                    s.max_jitter / 1000,
-                    s.overruns,
-                    s.faults
-                );
+        let (verified, schedule) = match checked {
+            Ok(checked) => checked,
+            Err(reason) => {
+                report(text!("refusing the program: {reason}").as_str());
+                return;
             }
-            let (lateness, overhead) = (rt.lateness.summary(), rt.overhead.summary());
-            if let (Some(l), Some(o)) = (lateness, overhead) {
-                println!(
-                    "plc: t={}ms scan releases={} lateness_ns={}/{}/{} overhead_ns={}/{}/{}",
-                    (now - started) / 1_000_000,
-                    rt.releases,
-                    l.0,
-                    l.1,
-                    l.2,
-                    o.0,
-                    o.1,
-                    o.2
-                );
-            }
-            if shared.is_some_and(|(layout, _)| layout.other.is_some()) {
-                let s = &shared_stats;
-                println!(
-                    "plc: t={}ms shared fresh={} unchanged={} stale={} not_yet={}",
-                    (now - started) / 1_000_000,
-                    s.fresh,
-                    s.unchanged,
-                    s.stale,
-                    s.not_yet
-                );
-            }
-            let mut line = text!("plc: t={}ms watch", (now - started) / 1_000_000);
-            for name in package.watch() {
-                match machine.read_var(name) {
-                    Ok(value) => {
-                        let _ = write!(line, " {name}={value}");
-                    }
-                    Err(_) => {
-                        let _ = write!(line, " {name}=?");
-                    }
+        };
+        let image = *verified.image();
+        let [data_a, data_b] = &mut *data;
+        let (mine, other) = if running.data != 1 {
+            (data_a, data_b)
+        } else {
+            (data_b, data_a)
+        };
+        let Ok(mut machine) = Machine::new(
+            verified,
+            Memory {
+                data: &mut mine[..],
+                stack: &mut stack,
+                calls: &mut calls,
+                tries: &mut tries,
+            },
+        ) else {
+            report("refusing the program: not enough VM memory");
+            return;
+        };
+        let mut safe = SafeValues::of(&package);
+        if let Some((was, takeover)) = previous.take() {
+            let old_bytes: &[u8] = match was.program {
+                Program::Configured => package.program(),
+                Program::Downloaded { len, .. } => &staging[..len],
+            };
+            if let Ok(old) = Image::parse(old_bytes) {
+                if let Some(takeover) = takeover {
+                    let kept = hand_over(&takeover, &old, &other[..], &mut machine);
+                    safe = takeover.safe;
+                    println!(
+                        "plc: download: {} bytes verified, swapped in at release {first_release}, {kept} RETAIN variable(s) kept",
+                        program.len()
+                    );
+                } else {
+                    let kept =
+                        softplc::scan::carry_retain(&old, &other[..], &image, machine.data_mut());
+                    println!(
+                        "plc: warm restart: {kept} RETAIN variable(s) kept, the rest initialised"
+                    );
                 }
             }
-            if package.watch().next().is_some() {
-                println!("{}", line.as_str());
+            // A new program starts at a release, never in the middle of one.
+            if takeover.is_some() && <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
+                println!("plc: PERIODIC_WAIT failed; stopping");
+                return;
             }
         }
-        if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
-            println!("plc: PERIODIC_WAIT failed; stopping");
-            return;
+        let mut rt = Runtime::new(schedule, period, safe);
+        let mut loader = Loader::new(
+            &mut staging[..],
+            &mut scratch[..],
+            MAX_DATA,
+            period,
+            first_release,
+        );
+        let tp = apex::runtime::start_info().time_partition;
+        loop {
+            // The start of the window this release runs in (its release time).
+            let window = apex::user_rt::sys::partition_info(tp)
+                .map(|i| i.next_window_start)
+                .unwrap_or(0);
+            let release = if window == u64::MAX || window > now_ns() {
+                now_ns()
+            } else {
+                window
+            };
+            if let Some((layout, words)) = &shared
+                && layout.other.is_some()
+            {
+                let fetch = softplc::shared::copy_in(
+                    words,
+                    layout,
+                    machine.data_mut(),
+                    &mut shared_scratch,
+                );
+                shared_stats.record(fetch);
+            }
+            rt.scan(
+                &mut machine,
+                &image,
+                &package,
+                &mut io,
+                &mut areas,
+                now_ns,
+                release,
+                |task, fault| report_fault(&image, task, fault),
+            );
+            if let Some((layout, words)) = &shared {
+                softplc::shared::copy_out(words, layout, machine.data());
+            }
+            let stopped_before = rt.stopped.map(|s| s.is_some());
+            softplc::online::serve_pending(
+                &package,
+                &mut io,
+                &mut machine,
+                &image,
+                &mut rt,
+                &mut loader,
+            );
+            for &task in &rt.schedule.order[..rt.schedule.count] {
+                let name = image.task(task).map_or("?", |t| t.name);
+                match (stopped_before[task], rt.stopped[task].is_some()) {
+                    (false, true) => println!("plc: task {name} stopped online; outputs safe"),
+                    (true, false) => println!("plc: task {name} started online"),
+                    _ => {}
+                }
+            }
+            if let Some(reason) = loader.refusal.take() {
+                println!("plc: download refused: {reason}");
+            }
+            if let Some((len, takeover)) = loader.committed.take() {
+                previous = Some((running, Some(takeover)));
+                running = running.downloaded(staging_index, len);
+                first_release += rt.releases;
+                break;
+            }
+            let now = now_ns();
+            if now >= next_stats {
+                next_stats += STATS_EVERY_MS * 1_000_000;
+                let ms = (now - started) / 1_000_000;
+                log_stats(&rt, &image, &package, &machine, ms);
+                if shared.is_some_and(|(layout, _)| layout.other.is_some()) {
+                    let s = &shared_stats;
+                    println!(
+                        "plc: t={ms}ms shared fresh={} unchanged={} stale={} not_yet={}",
+                        s.fresh, s.unchanged, s.stale, s.not_yet
+                    );
+                }
+            }
+            if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
+                println!("plc: PERIODIC_WAIT failed; stopping");
+                return;
+            }
         }
+    }
+}
+
+/// The statistics lines and the watch line at partition time `ms`.
+fn log_stats(rt: &Runtime, image: &Image, package: &Package, machine: &Machine, ms: u64) {
+    for &task in &rt.schedule.order[..rt.schedule.count] {
+        let s = &rt.stats[task];
+        println!(
+            "plc: t={}ms task={} cycles={} exec_us={}/{}/{}/{} jitter_us={}/{} overruns={} faults={}",
+            ms,
+            image.task(task).map_or("?", |t| t.name),
+            s.count,
+            s.last / 1000,
+            s.min / 1000,
+            s.mean() / 1000,
+            s.max / 1000,
+            s.last_jitter / 1000,
+            s.max_jitter / 1000,
+            s.overruns,
+            s.faults
+        );
+    }
+    if let (Some(l), Some(o)) = (rt.lateness.summary(), rt.overhead.summary()) {
+        println!(
+            "plc: t={ms}ms scan releases={} lateness_ns={}/{}/{} overhead_ns={}/{}/{}",
+            rt.releases, l.0, l.1, l.2, o.0, o.1, o.2
+        );
+    }
+    let mut line = text!("plc: t={}ms watch", ms);
+    for name in package.watch() {
+        match machine.read_var(name) {
+            Ok(value) => {
+                let _ = write!(line, " {name}={value}");
+            }
+            Err(_) => {
+                let _ = write!(line, " {name}=?");
+            }
+        }
+    }
+    if package.watch().next().is_some() {
+        println!("{}", line.as_str());
     }
 }
 
@@ -430,9 +506,13 @@ fn release_previous_locks() {
         // of this lock is alive.
         unsafe { DATA.force_unlock() };
     }
-    if PREVIOUS.is_locked() {
+    if IMAGES.is_locked() {
         // SAFETY: as above.
-        unsafe { PREVIOUS.force_unlock() };
+        unsafe { IMAGES.force_unlock() };
+    }
+    if RUNNING.is_locked() {
+        // SAFETY: as above.
+        unsafe { RUNNING.force_unlock() };
     }
     if AREAS.is_locked() {
         // SAFETY: as above.

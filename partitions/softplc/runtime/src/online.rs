@@ -2,11 +2,15 @@
 //! running program. The scan process calls it between cycles (at most
 //! [`REQUESTS_PER_CYCLE`] requests per release), so a request always sees and changes a
 //! consistent image and a flood of requests costs each cycle a bounded amount of work.
+//! A DOWNLOAD_COMMIT that passes every check ends the batch: the caller swaps the new
+//! program in before the next release ([`Loader::committed`]).
 
+use crate::download::{Download, Refusal, Takeover, check_program, fit_configuration, take_over};
 use crate::package::Package;
 use crate::scan::{MAX_TASKS, PortIo, Runtime};
 use plc_online::{
-    Access, MAX_MESSAGE, Op, Request, Status, TaskStats, begin_response, decode_request, put_stats,
+    Access, MAX_CHUNK, MAX_MESSAGE, Op, Request, Status, TaskStats, begin_response, decode_request,
+    put_stats,
 };
 use plc_vm::image::{Image, VarType};
 use plc_vm::vm::{Machine, VarError};
@@ -24,14 +28,91 @@ fn status_of(e: VarError) -> Status {
     }
 }
 
+/// The download side of a PLC: the buffer a new program is assembled in, the verifier's
+/// scratch, the limits a program must meet, and the outcome of the last commit.
+pub struct Loader<'b> {
+    /// Where the chunks go (the image buffer the running program does not use).
+    pub buffer: &'b mut [u8],
+    /// Verifier scratch, two cells per code byte.
+    pub scratch: &'b mut [u32],
+    /// Data memory a program may use.
+    pub max_data: usize,
+    /// The scan process's period.
+    pub period_ns: u64,
+    /// The release number of the running program's first release (its releases count on
+    /// from there), to tell a client from which release a committed program runs.
+    pub first_release: u64,
+    download: Download,
+    /// A verified download waiting to be swapped in: its length in `buffer` and what it
+    /// takes over from the running program.
+    pub committed: Option<(usize, Takeover)>,
+    /// Why the last commit was refused (for the log), taken by the caller.
+    pub refusal: Option<Refusal>,
+}
+
+impl<'b> Loader<'b> {
+    pub fn new(
+        buffer: &'b mut [u8],
+        scratch: &'b mut [u32],
+        max_data: usize,
+        period_ns: u64,
+        first_release: u64,
+    ) -> Self {
+        Self {
+            buffer,
+            scratch,
+            max_data,
+            period_ns,
+            first_release,
+            download: Download::new(),
+            committed: None,
+            refusal: None,
+        }
+    }
+
+    /// DOWNLOAD_COMMIT: the assembled image checked as at start and taken over from the
+    /// running program; on success [`Loader::committed`] holds it.
+    fn commit(&mut self, package: &Package, machine: &Machine, rt: &Runtime) -> Result<(), Status> {
+        let len = self.download.finish(self.buffer)?.len();
+        let checked = check_program(
+            &self.buffer[..len],
+            self.scratch,
+            self.max_data,
+            self.period_ns,
+        )
+        .and_then(|(verified, schedule)| {
+            fit_configuration(verified.image(), schedule, package)?;
+            take_over(
+                machine.image(),
+                verified.image(),
+                &rt.safe,
+                machine.forced(),
+                package.watch(),
+            )
+        });
+        match checked {
+            Ok(takeover) => {
+                self.committed = Some((len, takeover));
+                Ok(())
+            }
+            Err(refusal) => {
+                self.refusal = Some(refusal);
+                Err(Status::Refused)
+            }
+        }
+    }
+}
+
 /// Answers the requests waiting on the package's online request port (at most
-/// [`REQUESTS_PER_CYCLE`]) on its response port; returns how many.
+/// [`REQUESTS_PER_CYCLE`], fewer when a download is committed) on its response port;
+/// returns how many.
 pub fn serve_pending(
     package: &Package,
     io: &mut impl PortIo,
     machine: &mut Machine,
     image: &Image,
-    rt: &Runtime,
+    rt: &mut Runtime,
+    loader: &mut Loader,
 ) -> usize {
     let Some(online) = package.online() else {
         return 0;
@@ -39,7 +120,7 @@ pub fn serve_pending(
     let mut served = 0;
     let mut request = [0u8; MAX_MESSAGE];
     let mut response = [0u8; MAX_MESSAGE];
-    while served < REQUESTS_PER_CYCLE {
+    while served < REQUESTS_PER_CYCLE && loader.committed.is_none() {
         let Some((len, _)) = io.receive(online.request, &mut request) else {
             break;
         };
@@ -47,9 +128,11 @@ pub fn serve_pending(
         let n = serve(
             &request[..len],
             online.access,
+            package,
             machine,
             image,
             rt,
+            loader,
             &mut response,
         );
         io.send(online.response, &response[..n]);
@@ -60,12 +143,16 @@ pub fn serve_pending(
 
 /// Answers `request` (raw bytes) for a client allowed `access`; returns the response length
 /// in `out` (at least [`MAX_MESSAGE`] bytes).
+// The request touches the whole running PLC; a bundle would only rename these.
+#[allow(clippy::too_many_arguments)]
 pub fn serve(
     request: &[u8],
     access: Access,
+    package: &Package,
     machine: &mut Machine,
     image: &Image,
-    rt: &Runtime,
+    rt: &mut Runtime,
+    loader: &mut Loader,
     out: &mut [u8; MAX_MESSAGE],
 ) -> usize {
     let (seq, request) = match decode_request(request) {
@@ -146,6 +233,44 @@ pub fn serve(
             let _ = put_stats(&mut w, &stats);
             w.len()
         }
+        Request::Stop { task } | Request::Start { task } => {
+            let known = if op == Op::Stop {
+                rt.stop_task(task as usize, machine)
+            } else {
+                rt.start_task(task as usize, machine)
+            };
+            let status = if known {
+                Status::Ok
+            } else {
+                Status::NoSuchTask
+            };
+            begin_response(op.code(), seq, status, out).len()
+        }
+        Request::DownloadBegin { size, crc32 } => {
+            match loader.download.begin(size, crc32, loader.buffer.len()) {
+                Ok(()) => {
+                    let mut w = begin_response(op.code(), seq, Status::Ok, out);
+                    let _ = w.put(&(MAX_CHUNK as u16).to_le_bytes());
+                    w.len()
+                }
+                Err(status) => begin_response(op.code(), seq, status, out).len(),
+            }
+        }
+        Request::DownloadChunk { offset, bytes } => {
+            let status = match loader.download.chunk(loader.buffer, offset, bytes) {
+                Ok(()) => Status::Ok,
+                Err(status) => status,
+            };
+            begin_response(op.code(), seq, status, out).len()
+        }
+        Request::DownloadCommit => match loader.commit(package, machine, rt) {
+            Ok(()) => {
+                let mut w = begin_response(op.code(), seq, Status::Ok, out);
+                let _ = w.put(&(loader.first_release + rt.releases).to_le_bytes());
+                w.len()
+            }
+            Err(status) => begin_response(op.code(), seq, status, out).len(),
+        },
     }
 }
 

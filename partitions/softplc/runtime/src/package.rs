@@ -40,7 +40,7 @@
 //! ...         the safe values: 16-byte records `address u32` (a `%Q` variable's data
 //!             address), `width u8` (1, 2, 4 or 8 bytes), reserved (3 bytes, 0), `value u64`
 //!             (little-endian, the variable's bytes), used instead of zero/FALSE when a fault
-//!             sets the outputs safe
+//!             sets the outputs safe (at most `scan::MAX_SAFE_VALUES` records)
 //! ...         the shared-globals block: where this project's shared globals lie in the
 //!             shared-memory segment it shares with another project (the segment layout
 //!             and its protocol are [`crate::shared`]'s):
@@ -135,7 +135,8 @@ pub enum PackageError {
     /// The online ports are not a queuing input and a queuing output, or the access code
     /// is unknown.
     BadOnline,
-    /// The safe-value list lies outside the package, is ragged, or has a record with a
+    /// The safe-value list lies outside the package, is ragged, holds more than
+    /// [`crate::scan::MAX_SAFE_VALUES`] records, or has a record with a
     /// width other than 1, 2, 4, 8 or a value wider than it.
     BadSafeValues,
     /// Port record `n` is malformed (name, codes, a range beyond the area, a validity bit
@@ -377,7 +378,9 @@ impl<'a> Package<'a> {
             .and_then(|w| core::str::from_utf8(w).ok())
             .ok_or(PackageError::BadWatchList)?;
         let safe = range(32)
-            .filter(|s| s.len() % SAFE_RECORD == 0)
+            .filter(|s| {
+                s.len() % SAFE_RECORD == 0 && s.len() / SAFE_RECORD <= crate::scan::MAX_SAFE_VALUES
+            })
             .ok_or(PackageError::BadSafeValues)?;
         for r in safe.chunks_exact(SAFE_RECORD) {
             let width = r[4];

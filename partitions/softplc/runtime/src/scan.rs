@@ -19,7 +19,9 @@
 //! ones are set to their safe values (configured per variable, zero/FALSE otherwise;
 //! [`safe_outputs`]) in the same cycle, before the outputs are sent; the other tasks go
 //! on. The caller reports the fault to the health monitor as the ARINC error
-//! [`health_error`] names.
+//! [`health_error`] names. An online STOP stops a task the same way
+//! ([`Runtime::stop_task`]); START ([`Runtime::start_task`]) lets a stopped task run again
+//! from the next release, whatever stopped it.
 //!
 //! Per task the runtime keeps [`TaskStats`]: activations, execution time (last, min, max,
 //! mean), release jitter (scan start minus the release time, i.e. the window start),
@@ -30,7 +32,7 @@
 //! left out of the lateness figures.
 
 use crate::histogram::Histogram;
-use crate::package::Package;
+use crate::package::{Package, SafeValue};
 use plc_vm::image::Image;
 use plc_vm::isa::Trap;
 use plc_vm::located::{self, Area, MAX_AREA};
@@ -252,12 +254,86 @@ impl TaskStats {
     }
 }
 
+/// Most configured safe values (`plc.safe`) a package may hold.
+pub const MAX_SAFE_VALUES: usize = 64;
+
+/// The safe values of the running program's `%Q` variables (by data address): the
+/// package's for the configured program, re-resolved by name for a downloaded one.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SafeValues {
+    values: [SafeValue; MAX_SAFE_VALUES],
+    count: usize,
+}
+
+impl SafeValues {
+    pub const fn new() -> Self {
+        Self {
+            values: [SafeValue {
+                address: 0,
+                width: 0,
+                value: 0,
+            }; MAX_SAFE_VALUES],
+            count: 0,
+        }
+    }
+
+    /// The package's safe values (a checked package holds at most [`MAX_SAFE_VALUES`]).
+    pub fn of(package: &Package) -> Self {
+        let mut out = Self::new();
+        for v in package.safe_values() {
+            out.push(v);
+        }
+        out
+    }
+
+    /// Adds one; `false` when full.
+    pub fn push(&mut self, value: SafeValue) -> bool {
+        let Some(slot) = self.values.get_mut(self.count) else {
+            return false;
+        };
+        *slot = value;
+        self.count += 1;
+        true
+    }
+
+    pub fn iter(&self) -> impl Iterator<Item = SafeValue> + '_ {
+        self.values[..self.count].iter().copied()
+    }
+}
+
+impl Default for SafeValues {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// Why a task is stopped.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stop {
+    /// It trapped or its watchdog expired.
+    Fault(Fault),
+    /// An online STOP.
+    Requested,
+}
+
+impl Stop {
+    /// The fault, if a fault stopped the task.
+    pub fn fault(self) -> Option<Fault> {
+        match self {
+            Stop::Fault(f) => Some(f),
+            Stop::Requested => None,
+        }
+    }
+}
+
 /// What the runtime keeps between releases.
 pub struct Runtime {
     pub schedule: Schedule,
     pub stats: [TaskStats; MAX_TASKS],
-    /// Stopped tasks (after a fault) and the fault.
-    pub stopped: [Option<Fault>; MAX_TASKS],
+    /// Stopped tasks and why.
+    pub stopped: [Option<Stop>; MAX_TASKS],
+    /// The running program's safe values.
+    pub safe: SafeValues,
     pub releases: u64,
     /// Release lateness: scan start minus release time (1 us buckets).
     pub lateness: Histogram,
@@ -269,11 +345,12 @@ pub struct Runtime {
 }
 
 impl Runtime {
-    pub fn new(schedule: Schedule, period_ns: u64) -> Self {
+    pub fn new(schedule: Schedule, period_ns: u64, safe: SafeValues) -> Self {
         Self {
             schedule,
             stats: [TaskStats::default(); MAX_TASKS],
             stopped: [None; MAX_TASKS],
+            safe,
             releases: 0,
             lateness: Histogram::new(1_000),
             overhead: Histogram::new(250),
@@ -343,8 +420,8 @@ impl Runtime {
             self.stats[task].record(exec, jitter, interval);
             if let Err(fault) = result {
                 self.stats[task].faults += 1;
-                self.stopped[task] = Some(fault);
-                safe_outputs(image, package, task, machine.data_mut());
+                self.stopped[task] = Some(Stop::Fault(fault));
+                safe_outputs(image, &self.safe, task, machine.data_mut());
                 on_fault(task, &fault);
             }
         }
@@ -358,13 +435,40 @@ impl Runtime {
             .record(clock().saturating_sub(start).saturating_sub(in_vm));
         self.releases += 1;
     }
+
+    /// Online STOP: `task` runs no more and its outputs go to their safe values now (the
+    /// process image takes them at the end of the next release, as after a fault). `false`
+    /// when there is no such task. Stopping a stopped task keeps why it stopped.
+    pub fn stop_task(&mut self, task: usize, machine: &mut Machine) -> bool {
+        if task >= self.schedule.count {
+            return false;
+        }
+        if self.stopped[task].is_none() {
+            self.stopped[task] = Some(Stop::Requested);
+        }
+        let image = *machine.image();
+        safe_outputs(&image, &self.safe, task, machine.data_mut());
+        true
+    }
+
+    /// Online START: a stopped task (by STOP, a trap or its watchdog) runs again from the
+    /// next release that is due for it; its data keeps its values (a CODESYS task reset).
+    /// `false` when there is no such task.
+    pub fn start_task(&mut self, task: usize, machine: &mut Machine) -> bool {
+        if task >= self.schedule.count {
+            return false;
+        }
+        self.stopped[task] = None;
+        machine.reset_task(task);
+        true
+    }
 }
 
 /// Sets the outputs of a faulted task safe: every located `%Q` variable of its program
 /// instance and every global one (globals may be shared with tasks that still run; those
 /// write them again in their next cycles) gets its configured safe value, zero/FALSE
 /// without one.
-pub fn safe_outputs(image: &Image, package: &Package, task: usize, data: &mut [u8]) {
+pub fn safe_outputs(image: &Image, safe: &SafeValues, task: usize, data: &mut [u8]) {
     let Some(t) = image.task(task) else {
         return;
     };
@@ -385,8 +489,8 @@ pub fn safe_outputs(image: &Image, package: &Package, task: usize, data: &mut [u
             continue;
         }
         let width = v.location.width.bytes() as usize;
-        let value = package
-            .safe_values()
+        let value = safe
+            .iter()
             .find(|s| s.address == v.address)
             .map_or(0, |s| s.value);
         let at = v.address as usize;

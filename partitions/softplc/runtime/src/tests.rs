@@ -1,7 +1,7 @@
 //! Host tests of the scan cycle with programs compiled by the real compiler.
 
 use crate::package::{self, Package, PortMap};
-use crate::scan::{Areas, PlanError, PortIo, Runtime, Schedule};
+use crate::scan::{Areas, PlanError, PortIo, Runtime, SafeValues, Schedule, Stop};
 use plc_vm::image::Image;
 use plc_vm::isa::Trap;
 use plc_vm::verify::verify;
@@ -120,7 +120,7 @@ impl Plc {
         let schedule = Schedule::new(&image, PERIOD)
             .unwrap()
             .with_deadlines(&image, &package);
-        let mut rt = Runtime::new(schedule, PERIOD);
+        let mut rt = Runtime::new(schedule, PERIOD, SafeValues::of(&package));
         let mut now = 0u64;
         let tick = self.tick;
         for r in 0..releases {
@@ -336,7 +336,7 @@ END_CONFIGURATION
     assert_eq!((out(0), beat(0)), (3.0, 1));
     assert_eq!(out(1), 0.0, "safe value in the very cycle of the trap");
     assert_eq!(beat(1), 2, "the other task went on");
-    let fault = rt.stopped[0].expect("task a stopped");
+    let fault = rt.stopped[0].and_then(Stop::fault).expect("task a stopped");
     assert_eq!(fault.trap, Trap::DivisionByZero);
     assert_eq!(fault.location.map(|l| l.line), Some(5));
     assert_eq!(rt.stats[0].faults, 1);
@@ -404,7 +404,9 @@ END_CONFIGURATION
         0,
         "safe value in the cycle that passed its deadline"
     );
-    let fault = rt.stopped[0].expect("task spin stopped");
+    let fault = rt.stopped[0]
+        .and_then(|s| s.fault())
+        .expect("task spin stopped");
     assert_eq!(fault.trap, Trap::Deadline);
     assert_eq!(
         crate::scan::health_error(fault.trap),
@@ -544,7 +546,7 @@ fn retain_variables_are_carried_by_name_and_type() {
 
 #[test]
 fn online_requests_between_cycles() {
-    use crate::online::serve;
+    use crate::online::{Loader, serve};
     use plc_online::{
         Access, MAX_MESSAGE, Op, Request, Status, decode_response, encode_request, read_stats,
     };
@@ -574,7 +576,11 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         },
     )
     .unwrap();
-    let mut rt = Runtime::new(Schedule::new(&image, PERIOD).unwrap(), PERIOD);
+    let mut rt = Runtime::new(
+        Schedule::new(&image, PERIOD).unwrap(),
+        PERIOD,
+        SafeValues::of(&package),
+    );
     let mut wires = Wires {
         inputs: vec![None],
         ..Wires::default()
@@ -593,11 +599,22 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         );
         i32::from_le_bytes(wires.sent.last().unwrap().1.clone().try_into().unwrap())
     };
-    let ask = |machine: &mut Machine, rt: &Runtime, access, r: Request| {
+    let (mut buffer, mut scratch) = (vec![0u8; 4096], vec![0u32; 8192]);
+    let mut loader = Loader::new(&mut buffer, &mut scratch, 4096, PERIOD, 0);
+    let mut ask = |machine: &mut Machine, rt: &mut Runtime, access, r: Request| {
         let mut req = [0u8; MAX_MESSAGE];
         let n = encode_request(&r, 42, &mut req).unwrap();
         let mut out = [0u8; MAX_MESSAGE];
-        let len = serve(&req[..n], access, machine, &image, rt, &mut out);
+        let len = serve(
+            &req[..n],
+            access,
+            &package,
+            machine,
+            &image,
+            rt,
+            &mut loader,
+            &mut out,
+        );
         out[..len].to_vec()
     };
     assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 3);
@@ -605,7 +622,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
     // LIST: every variable with its type, from an index.
     let reply = ask(
         &mut machine,
-        &rt,
+        &mut rt,
         Access::Monitor,
         Request::List { from: 0 },
     );
@@ -628,7 +645,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
     // READ, and a monitor-only client may not write.
     let reply = ask(
         &mut machine,
-        &rt,
+        &mut rt,
         Access::Monitor,
         Request::Read { name: "P.n" },
     );
@@ -638,7 +655,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         name: "k",
         value: Value::Int(10),
     };
-    let reply = ask(&mut machine, &rt, Access::Monitor, write);
+    let reply = ask(&mut machine, &mut rt, Access::Monitor, write);
     assert_eq!(decode_response(&reply).unwrap().2, Status::Forbidden);
     assert_eq!(
         cycle(&mut machine, &mut rt, &mut wires),
@@ -647,14 +664,14 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
     );
 
     // WRITE once; FORCE holds a value the program overwrites; UNFORCE releases it.
-    let reply = ask(&mut machine, &rt, Access::Force, write);
+    let reply = ask(&mut machine, &mut rt, Access::Force, write);
     assert_eq!(decode_response(&reply).unwrap().2, Status::Ok);
     assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 30);
     let force = Request::Force {
         name: "out",
         value: Value::UInt(77),
     };
-    let reply = ask(&mut machine, &rt, Access::Force, force);
+    let reply = ask(&mut machine, &mut rt, Access::Force, force);
     assert_eq!(decode_response(&reply).unwrap().2, Status::Ok);
     assert_eq!(
         cycle(&mut machine, &mut rt, &mut wires),
@@ -664,7 +681,7 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
     assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 77, "still forced");
     let reply = ask(
         &mut machine,
-        &rt,
+        &mut rt,
         Access::Force,
         Request::Unforce { name: "out" },
     );
@@ -679,24 +696,21 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         (bad("limit", Value::LReal(2.0)), Status::TypeMismatch),
         (Request::Stats { task: 9 }, Status::NoSuchTask),
     ] {
-        let reply = ask(&mut machine, &rt, Access::Force, r);
+        let reply = ask(&mut machine, &mut rt, Access::Force, r);
         assert_eq!(decode_response(&reply).unwrap().2, want, "{r:?}");
     }
-    let mut out = [0u8; MAX_MESSAGE];
-    let len = serve(
-        &[3, 9, 0xff],
-        Access::Force,
+    let reply = ask(
         &mut machine,
-        &image,
-        &rt,
-        &mut out,
+        &mut rt,
+        Access::Force,
+        Request::Read { name: "" },
     );
-    assert_eq!(&out[..len], &[3, 9, Status::Malformed.code()]);
+    assert_eq!(&reply, &[Op::Read.code(), 42, Status::Malformed.code()]);
 
     // STATS of task 0.
     let reply = ask(
         &mut machine,
-        &rt,
+        &mut rt,
         Access::Monitor,
         Request::Stats { task: 0 },
     );
@@ -818,4 +832,557 @@ fn markers_keep_their_initial_values() {
     let mut areas = Areas::new();
     plc.run(2, &mut wires, &mut areas, |_, _, _, _| {});
     assert_eq!(u16::from_le_bytes([areas.memory[0], areas.memory[1]]), 7);
+}
+
+/// A PLC with online access driven like the partition does: scans, requests between them,
+/// and the swap of a committed download (a new machine over other data memory, handed the
+/// old one's RETAIN values and forces).
+mod online_control {
+    use super::*;
+    use crate::download::hand_over;
+    use crate::online::{Loader, serve};
+    use plc_online::{Access, MAX_CHUNK, MAX_MESSAGE, Request, Status, crc32, decode_response};
+    use plc_online::{encode_request, read_stats};
+    use plc_vm::vm::Value;
+
+    const OLD: &str = "
+VAR_GLOBAL out AT %QD0 : DINT; END_VAR
+VAR_GLOBAL RETAIN total : DINT; END_VAR
+PROGRAM P VAR n : DINT; END_VAR n := n + 1; total := total + 1; out := n * 3; END_PROGRAM";
+    /// Moves every variable (a new one first), keeps `total` RETAIN, changes the gain.
+    const NEW: &str = "
+VAR_GLOBAL version : LREAL := 2.5; out AT %QD0 : DINT; END_VAR
+VAR_GLOBAL RETAIN total : DINT; END_VAR
+PROGRAM P VAR n : DINT; END_VAR n := n + 1; total := total + 10; out := n * 5; END_PROGRAM";
+
+    fn out_port() -> PortMap<'static> {
+        PortMap {
+            size: 4,
+            ..output("out", 0)
+        }
+    }
+
+    /// `(package bytes, program)` of OLD with a safe value of 99 for `out`.
+    fn old_package() -> Vec<u8> {
+        let program = compile(OLD);
+        let image = Image::parse(&program).unwrap();
+        let safe = package::SafeValue {
+            address: image.find_var("out").unwrap().addr,
+            width: 4,
+            value: 99,
+        };
+        package::encode(
+            &[out_port()],
+            &program,
+            &["total"],
+            None,
+            &[safe],
+            None,
+            &[],
+        )
+    }
+
+    fn ask(
+        r: Request,
+        access: Access,
+        package: &Package,
+        machine: &mut Machine,
+        rt: &mut Runtime,
+        loader: &mut Loader,
+    ) -> (Status, Vec<u8>) {
+        let mut req = [0u8; MAX_MESSAGE];
+        let n = encode_request(&r, 1, &mut req).unwrap();
+        let mut out = [0u8; MAX_MESSAGE];
+        let image = *machine.image();
+        let len = serve(
+            &req[..n],
+            access,
+            package,
+            machine,
+            &image,
+            rt,
+            loader,
+            &mut out,
+        );
+        let (_, _, status, rest) = decode_response(&out[..len]).unwrap();
+        let _ = rest;
+        (status, out[3..len].to_vec())
+    }
+
+    /// Sends `image` as BEGIN (with `crc`), chunks, COMMIT; the statuses of BEGIN and
+    /// COMMIT.
+    fn download(
+        image: &[u8],
+        crc: u32,
+        package: &Package,
+        machine: &mut Machine,
+        rt: &mut Runtime,
+        loader: &mut Loader,
+    ) -> (Status, Status) {
+        let begin = Request::DownloadBegin {
+            size: image.len() as u32,
+            crc32: crc,
+        };
+        let (status, _) = ask(begin, Access::Download, package, machine, rt, loader);
+        if status != Status::Ok {
+            return (status, Status::NoDownload);
+        }
+        for (i, bytes) in image.chunks(MAX_CHUNK).enumerate() {
+            let chunk = Request::DownloadChunk {
+                offset: (i * MAX_CHUNK) as u32,
+                bytes,
+            };
+            let (status, _) = ask(chunk, Access::Download, package, machine, rt, loader);
+            assert_eq!(status, Status::Ok, "chunk {i}");
+        }
+        let commit = Request::DownloadCommit;
+        let (status, _) = ask(commit, Access::Download, package, machine, rt, loader);
+        (Status::Ok, status)
+    }
+
+    fn out_of(wires: &Wires) -> i32 {
+        i32::from_le_bytes(wires.sent.last().unwrap().1.clone().try_into().unwrap())
+    }
+
+    #[test]
+    fn stop_sets_the_outputs_safe_and_start_resumes_the_task() {
+        let bytes = old_package();
+        let package = Package::parse(&bytes).unwrap();
+        let image = Image::parse(package.program()).unwrap();
+        let mut data = vec![0u8; image.data_size() as usize];
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+        let memory = Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        };
+        let mut machine = Machine::new(verify(&image).unwrap(), memory).unwrap();
+        let schedule = Schedule::new(&image, PERIOD).unwrap();
+        let mut rt = Runtime::new(schedule, PERIOD, SafeValues::of(&package));
+        let (mut buffer, mut scratch) = (vec![0u8; 4096], vec![0u32; 8192]);
+        let mut loader = Loader::new(&mut buffer, &mut scratch, 4096, PERIOD, 0);
+        let mut wires = Wires::default();
+        let mut areas = Areas::new();
+        let mut cycle = |machine: &mut Machine, rt: &mut Runtime, wires: &mut Wires| {
+            let image = *machine.image();
+            rt.scan(
+                machine,
+                &image,
+                &package,
+                wires,
+                &mut areas,
+                || 0,
+                0,
+                |_, _| {},
+            );
+            out_of(wires)
+        };
+        assert_eq!(cycle(&mut machine, &mut rt, &mut wires), 3);
+        let stats = |machine: &mut Machine, rt: &mut Runtime, loader: &mut Loader| {
+            let r = Request::Stats { task: 0 };
+            let (_, result) = ask(r, Access::Monitor, &package, machine, rt, loader);
+            let mut reader = plc_online::Reader::new(&result);
+            let s = read_stats(&mut reader).unwrap();
+            (s.stopped, s.figures[0])
+        };
+        // A monitor-only client may not stop a task; an unknown task is NO_SUCH_TASK.
+        let stop = Request::Stop { task: 0 };
+        let (status, _) = ask(
+            stop,
+            Access::Monitor,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(status, Status::Forbidden);
+        let (status, _) = ask(
+            Request::Stop { task: 3 },
+            Access::Force,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(status, Status::NoSuchTask);
+        let (status, _) = ask(
+            stop,
+            Access::Force,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(status, Status::Ok);
+        assert_eq!(stats(&mut machine, &mut rt, &mut loader), (true, 1));
+        assert_eq!(
+            cycle(&mut machine, &mut rt, &mut wires),
+            99,
+            "the configured safe value"
+        );
+        assert_eq!(
+            cycle(&mut machine, &mut rt, &mut wires),
+            99,
+            "still stopped"
+        );
+        assert_eq!(stats(&mut machine, &mut rt, &mut loader), (true, 1));
+        let start = Request::Start { task: 0 };
+        let (status, _) = ask(
+            start,
+            Access::Force,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(status, Status::Ok);
+        assert_eq!(
+            cycle(&mut machine, &mut rt, &mut wires),
+            6,
+            "runs on from its own data"
+        );
+        assert_eq!(stats(&mut machine, &mut rt, &mut loader), (false, 2));
+    }
+
+    #[test]
+    fn start_clears_a_trapped_task() {
+        let source = "VAR_GLOBAL d AT %IW0 : INT; o AT %QW0 : INT; END_VAR
+PROGRAM P o := 10 / d; END_PROGRAM";
+        let ports = [
+            PortMap {
+                size: 2,
+                valid: None,
+                ..input("d", 0, (0, 0))
+            },
+            PortMap {
+                size: 2,
+                ..output("o", 0)
+            },
+        ];
+        let program = compile(source);
+        let bytes = package::encode(&ports, &program, &[], None, &[], None, &[]);
+        let package = Package::parse(&bytes).unwrap();
+        let image = Image::parse(package.program()).unwrap();
+        let mut data = vec![0u8; image.data_size() as usize];
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+        let memory = Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        };
+        let mut machine = Machine::new(verify(&image).unwrap(), memory).unwrap();
+        let mut rt = Runtime::new(
+            Schedule::new(&image, PERIOD).unwrap(),
+            PERIOD,
+            SafeValues::new(),
+        );
+        let mut wires = Wires {
+            inputs: vec![Some((0i16.to_le_bytes().to_vec(), true)), None],
+            ..Wires::default()
+        };
+        let mut areas = Areas::new();
+        let mut scan = |machine: &mut Machine, rt: &mut Runtime, wires: &mut Wires| {
+            rt.scan(
+                machine,
+                &image,
+                &package,
+                wires,
+                &mut areas,
+                || 0,
+                0,
+                |_, _| {},
+            );
+            i16::from_le_bytes(wires.sent.last().unwrap().1.clone().try_into().unwrap())
+        };
+        assert_eq!(scan(&mut machine, &mut rt, &mut wires), 0, "trapped");
+        assert!(rt.stopped[0].and_then(Stop::fault).is_some());
+        wires.inputs[0] = Some((2i16.to_le_bytes().to_vec(), true));
+        assert_eq!(scan(&mut machine, &mut rt, &mut wires), 0, "stays stopped");
+        assert!(rt.start_task(0, &mut machine));
+        assert_eq!(scan(&mut machine, &mut rt, &mut wires), 5, "runs again");
+    }
+
+    #[test]
+    fn a_download_swaps_in_keeping_retain_forces_and_safe_values() {
+        let bytes = old_package();
+        let package = Package::parse(&bytes).unwrap();
+        let image = Image::parse(package.program()).unwrap();
+        let new_program = compile(NEW);
+        let mut data = vec![0u8; image.data_size() as usize];
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+        let memory = Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        };
+        let mut machine = Machine::new(verify(&image).unwrap(), memory).unwrap();
+        let mut rt = Runtime::new(
+            Schedule::new(&image, PERIOD).unwrap(),
+            PERIOD,
+            SafeValues::of(&package),
+        );
+        let (mut buffer, mut scratch) = (vec![0u8; 8192], vec![0u32; 16384]);
+        let mut loader = Loader::new(&mut buffer, &mut scratch, 4096, PERIOD, 100);
+        let mut wires = Wires::default();
+        let mut areas = Areas::new();
+        for _ in 0..3 {
+            rt.scan(
+                &mut machine,
+                &image,
+                &package,
+                &mut wires,
+                &mut areas,
+                || 0,
+                0,
+                |_, _| {},
+            );
+        }
+        assert_eq!(machine.read_var("total"), Ok(Value::Int(3)));
+
+        // Below `download` access: FORBIDDEN, nothing started.
+        let begin = Request::DownloadBegin { size: 4, crc32: 0 };
+        let (status, _) = ask(
+            begin,
+            Access::Force,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(status, Status::Forbidden);
+
+        // Bad downloads: each refused, the running program untouched.
+        let crc = crc32(&new_program);
+        let (_, commit) = download(
+            &new_program,
+            crc ^ 1,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(commit, Status::ChecksumMismatch);
+        let (begin, _) = download(&[0; 9000], 0, &package, &mut machine, &mut rt, &mut loader);
+        assert_eq!(begin, Status::TooLarge);
+        let mut bad = new_program.clone();
+        bad[8..16].fill(0xff);
+        let (_, commit) = download(
+            &bad,
+            crc32(&bad),
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(commit, Status::Refused);
+        assert!(loader.refusal.take().is_some());
+        let (_, commit) = download(
+            &new_program[..100],
+            crc32(&new_program[..100]),
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(commit, Status::Refused, "a truncated image");
+        // Out of order, before a BEGIN, an incomplete commit.
+        let mut send = |r| {
+            ask(
+                r,
+                Access::Download,
+                &package,
+                &mut machine,
+                &mut rt,
+                &mut loader,
+            )
+            .0
+        };
+        assert_eq!(send(Request::DownloadCommit), Status::NoDownload);
+        let begin = Request::DownloadBegin {
+            size: new_program.len() as u32,
+            crc32: crc,
+        };
+        assert_eq!(send(begin), Status::Ok);
+        let chunk = |offset: usize| Request::DownloadChunk {
+            offset: offset as u32,
+            bytes: &new_program[offset..offset + 8],
+        };
+        assert_eq!(send(chunk(8)), Status::BadOffset);
+        assert_eq!(send(chunk(0)), Status::Ok);
+        assert_eq!(send(chunk(0)), Status::BadOffset, "a repeated chunk");
+        assert_eq!(send(Request::DownloadCommit), Status::Incomplete);
+        assert!(loader.committed.is_none());
+        rt.scan(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            || 0,
+            0,
+            |_, _| {},
+        );
+        assert_eq!(out_of(&wires), 12, "the old program still runs");
+
+        // A force of `out` and the good download.
+        let force = Request::Force {
+            name: "out",
+            value: Value::Int(-7),
+        };
+        let (status, _) = ask(
+            force,
+            Access::Force,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(status, Status::Ok);
+        let (_, commit) = download(
+            &new_program,
+            crc,
+            &package,
+            &mut machine,
+            &mut rt,
+            &mut loader,
+        );
+        assert_eq!(commit, Status::Ok);
+        let (len, takeover) = loader.committed.take().unwrap();
+        assert_eq!(&loader.buffer[..len], &new_program[..]);
+
+        // The swap, as the partition makes it between two releases.
+        let old_data = machine.data().to_vec();
+        let new_image = Image::parse(&new_program).unwrap();
+        let mut new_data = vec![0u8; new_image.data_size() as usize];
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+        let memory = Memory {
+            data: &mut new_data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        };
+        let mut machine = Machine::new(verify(&new_image).unwrap(), memory).unwrap();
+        assert_eq!(hand_over(&takeover, &image, &old_data, &mut machine), 1);
+        assert_eq!(machine.read_var("total"), Ok(Value::Int(4)), "RETAIN kept");
+        let mut rt = Runtime::new(
+            Schedule::new(&new_image, PERIOD).unwrap(),
+            PERIOD,
+            takeover.safe,
+        );
+        rt.scan(
+            &mut machine,
+            &new_image,
+            &package,
+            &mut wires,
+            &mut areas,
+            || 0,
+            0,
+            |_, _| {},
+        );
+        assert_eq!(out_of(&wires), -7, "the force followed `out`");
+        assert_eq!(machine.read_var("total"), Ok(Value::Int(14)), "new code");
+        assert_eq!(machine.read_var("version"), Ok(Value::LReal(2.5)));
+        machine.unforce_var("out").unwrap();
+        rt.scan(
+            &mut machine,
+            &new_image,
+            &package,
+            &mut wires,
+            &mut areas,
+            || 0,
+            0,
+            |_, _| {},
+        );
+        assert_eq!(out_of(&wires), 10, "the new gain");
+        // The safe value moved with `out` to its new address.
+        assert!(rt.stop_task(0, &mut machine));
+        rt.scan(
+            &mut machine,
+            &new_image,
+            &package,
+            &mut wires,
+            &mut areas,
+            || 0,
+            0,
+            |_, _| {},
+        );
+        assert_eq!(out_of(&wires), 99);
+    }
+
+    #[test]
+    fn a_download_that_cannot_take_over_is_refused() {
+        let bytes = old_package();
+        let package = Package::parse(&bytes).unwrap();
+        let image = Image::parse(package.program()).unwrap();
+        let safe = SafeValues::of(&package);
+        let check = |source: &str, forced: &[(u32, &[u8])]| {
+            let program = compile(source);
+            let new = Image::parse(&program).unwrap();
+            crate::download::take_over(&image, &new, &safe, forced.iter().copied(), package.watch())
+                .map(|_| ())
+                .map_err(|e| e.to_string())
+        };
+        assert_eq!(check(NEW, &[]), Ok(()));
+        // `out` no longer an output: its safe value has nowhere to go.
+        let e = check(
+            "VAR_GLOBAL out : DINT; END_VAR VAR_GLOBAL RETAIN total : DINT; END_VAR
+             PROGRAM P out := 1; END_PROGRAM",
+            &[],
+        )
+        .unwrap_err();
+        assert!(e.contains("`out` has a configured safe value"), "{e}");
+        // `total` (watched) gone.
+        let e = check(
+            "VAR_GLOBAL out AT %QD0 : DINT; END_VAR PROGRAM P out := 1; END_PROGRAM",
+            &[],
+        )
+        .unwrap_err();
+        assert!(e.contains("`total` is on the watch list"), "{e}");
+        // A forced `P.n` whose type changed.
+        let n = image.find_var("P.n").unwrap().addr;
+        let e = check(
+            "VAR_GLOBAL out AT %QD0 : DINT; END_VAR VAR_GLOBAL RETAIN total : DINT; END_VAR
+             PROGRAM P VAR n : INT; END_VAR n := 1; END_PROGRAM",
+            &[(n, &[1, 0, 0, 0])],
+        )
+        .unwrap_err();
+        assert!(e.contains("`P.n` is forced"), "{e}");
+    }
+
+    #[test]
+    fn the_checks_at_start_refuse_what_does_not_fit() {
+        use crate::download::{Refusal, check_program};
+        let program = compile(OLD);
+        let mut scratch = vec![0u32; 2 * program.len()];
+        assert!(check_program(&program, &mut scratch, 4096, PERIOD).is_ok());
+        assert!(matches!(
+            check_program(&program, &mut scratch[..2], 4096, PERIOD),
+            Err(Refusal::CodeTooLarge(..))
+        ));
+        assert!(matches!(
+            check_program(&program, &mut scratch, 1, PERIOD),
+            Err(Refusal::DataTooLarge(..))
+        ));
+        assert!(matches!(
+            check_program(&program[..40], &mut scratch, 4096, PERIOD),
+            Err(Refusal::Image(..))
+        ));
+        let slow = compile(
+            "PROGRAM P END_PROGRAM CONFIGURATION C RESOURCE R ON PLC
+             TASK t (INTERVAL := T#15ms, PRIORITY := 1); PROGRAM p WITH t : P;
+             END_RESOURCE END_CONFIGURATION",
+        );
+        let mut scratch = vec![0u32; 2 * slow.len()];
+        assert!(matches!(
+            check_program(&slow, &mut scratch, 4096, PERIOD),
+            Err(Refusal::Tasks(PlanError::IntervalNotMultiple { .. }))
+        ));
+    }
 }

@@ -921,6 +921,40 @@ impl<'a, 'm> Machine<'a, 'm> {
         Ok(())
     }
 
+    /// The forced variables: each one's data address and forced bytes (little-endian).
+    pub fn forced(&self) -> impl Iterator<Item = (u32, &[u8])> + '_ {
+        self.forces
+            .iter()
+            .flatten()
+            .map(|f| (f.addr, &f.bytes[..f.len as usize]))
+    }
+
+    /// Forces scalar variable `name` to `bytes`, its raw little-endian value as
+    /// [`Machine::forced`] gives it (so a force can follow a variable into another program
+    /// by name); the width must be the variable's.
+    pub fn force_bytes(&mut self, name: &str, bytes: &[u8]) -> Result<(), VarError> {
+        let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
+        let ty = VarType::from_code(var.ty).ok_or(VarError::TypeMismatch)?;
+        let mem = ty.mem_type().ok_or(VarError::NotForceable)?;
+        if var.flags & VAR_FLAG_CONSTANT != 0 {
+            return Err(VarError::Constant);
+        }
+        if bytes.len() != mem.width() {
+            return Err(VarError::TypeMismatch);
+        }
+        let mut cell = [0u8; 8];
+        cell[..bytes.len()].copy_from_slice(bytes);
+        let value = u64::from_le_bytes(cell);
+        let value = match ty {
+            VarType::Bool => Value::Bool(value != 0),
+            VarType::Real => Value::Real(f32::from_bits(value as u32)),
+            VarType::LReal => Value::LReal(f64::from_bits(value)),
+            VarType::Time => Value::Time(value as i64),
+            _ => Value::UInt(value),
+        };
+        self.force_var(name, value)
+    }
+
     /// Ends all forcing.
     pub fn clear_forces(&mut self) {
         self.forces = [None; MAX_FORCES];

@@ -2,11 +2,16 @@
 //! be: queuing ports `cmd` (requests out) and `reply` (responses in), size 256. What it
 //! asks depends on its partition name:
 //!
-//! * `client` (the tank PLC, access "force"): LIST, READ `valve`, FORCE `valve` := 0.25 for
-//!   300 frames (the plant shows it), UNFORCE, STATS of task 0, a malformed request; then it
-//!   ends the run (an application error the configuration maps to `shutdown_success`);
-//! * `viewer` (a PLC with access "monitor"): READ, then a WRITE and a FORCE, which must be
-//!   refused;
+//! * `client` (the tank PLC, access "download"): LIST, READ `valve`, FORCE `valve` := 0.25
+//!   for 300 frames (the plant shows it), UNFORCE, STATS of task 0, a malformed request;
+//!   STOP task 0 for 200 frames (the plant sees the safe valve) and START it (STATS each
+//!   time); WRITE the RETAIN `tank.alarm_count` := 42; two bad downloads (a wrong CRC-32, a
+//!   truncated image) and READ `tank.revision` (still unknown); then the download of its
+//!   data entry (the image of tests/configs/plc/tank_v2.st, `data.plc_image`) and READ
+//!   `tank.revision` and `tank.alarm_count` from the new program; then it ends the run (an
+//!   application error the configuration maps to `shutdown_success`);
+//! * `viewer` (a PLC with access "monitor"): READ, then a WRITE, a FORCE, a STOP and a
+//!   DOWNLOAD_BEGIN, which must be refused;
 //! * `bench` (`cargo xtask bench`, tests/configs/bench_plc.toml): times [`BENCH_READS`] READs
 //!   of `Count.n` from sending the request to receiving the answer (TSC cycles) and prints
 //!   `bench plc_online_read ...`, then lets the PLC run [`BENCH_FRAMES`] more frames before it
@@ -24,7 +29,9 @@ use apex::user_rt::println;
 use apex::user_rt::sys::rdtsc;
 use core::str::FromStr;
 use core::time::Duration;
-use plc_online::{MAX_MESSAGE, Request, Status, decode_response, encode_request, read_stats};
+use plc_online::{
+    MAX_CHUNK, MAX_MESSAGE, Request, Status, crc32, decode_response, encode_request, read_stats,
+};
 use plc_vm::vm::Value;
 
 fn name(text: &str) -> Name {
@@ -64,16 +71,23 @@ impl Link {
 
     /// Sends `r` and prints the answer's head; returns its status and result bytes.
     fn ask(&mut self, r: Request) -> Option<(Status, [u8; MAX_MESSAGE], usize)> {
+        let answer = self.ask_quietly(r)?;
+        let (op, _, status, _) = decode_response(&answer.1[..answer.2])?;
+        println!("{}: {} -> {}", self.me, op.name(), status.name());
+        Some(answer)
+    }
+
+    /// [`Link::ask`] without printing.
+    fn ask_quietly(&mut self, r: Request) -> Option<(Status, [u8; MAX_MESSAGE], usize)> {
         self.seq = self.seq.wrapping_add(1);
         let mut request = [0u8; MAX_MESSAGE];
         let n = encode_request(&r, self.seq, &mut request)?;
         let mut answer = [0u8; MAX_MESSAGE];
         let len = self.exchange(&request[..n], &mut answer)?;
-        let (op, seq, status, _) = decode_response(&answer[..len])?;
+        let (_, seq, status, _) = decode_response(&answer[..len])?;
         if seq != self.seq {
             println!("{}: answer to seq {seq}, expected {}", self.me, self.seq);
         }
-        println!("{}: {} -> {}", self.me, op.name(), status.name());
         Some((status, answer, len))
     }
 }
@@ -85,6 +99,60 @@ fn read(link: &mut Link, var: &str) {
             Some(v) => println!("{}: {var} = {v}", link.me),
             None => println!("{}: {var}: bad value", link.me),
         }
+    }
+}
+
+/// STATS of task 0, printed as `<me>: stats <name> stopped=<bool> cycles=<n> ...`.
+fn stats(link: &mut Link) {
+    if let Some((Status::Ok, answer, len)) = link.ask(Request::Stats { task: 0 }) {
+        let (_, _, _, mut r) = decode_response(&answer[..len]).expect("decoded above");
+        if let Some(s) = read_stats(&mut r) {
+            let [count, _, _, _, max, _, max_jitter, overruns, faults] = s.figures;
+            println!(
+                "{}: stats {} stopped={} cycles={count} max_us={} max_jitter_us={} overruns={overruns} faults={faults}",
+                link.me,
+                s.name,
+                s.stopped,
+                max / 1000,
+                max_jitter / 1000
+            );
+        }
+    }
+}
+
+/// Downloads `image` announcing `crc`: BEGIN, the chunks, COMMIT; prints
+/// `client: download <what>: <STATUS>` with the status of the first step that was not OK
+/// (or COMMIT's) and, after an OK commit, the release from which the program runs.
+fn download(link: &mut Link, what: &str, image: &[u8], crc: u32) {
+    let begin = Request::DownloadBegin {
+        size: image.len() as u32,
+        crc32: crc,
+    };
+    let mut status = link.ask_quietly(begin).map(|a| a.0);
+    for (i, bytes) in image.chunks(MAX_CHUNK).enumerate() {
+        if status != Some(Status::Ok) {
+            break;
+        }
+        let offset = (i * MAX_CHUNK) as u32;
+        status = link
+            .ask_quietly(Request::DownloadChunk { offset, bytes })
+            .map(|a| a.0);
+    }
+    let mut release = None;
+    if status == Some(Status::Ok) {
+        let answer = link.ask_quietly(Request::DownloadCommit);
+        status = answer.map(|a| a.0);
+        release = answer.and_then(|(_, a, len)| {
+            let (_, _, _, mut r) = decode_response(&a[..len])?;
+            r.u64()
+        });
+    }
+    match (status, release) {
+        (Some(Status::Ok), Some(r)) => {
+            println!("client: download {what}: OK, runs from release {r}")
+        }
+        (Some(status), _) => println!("client: download {what}: {}", status.name()),
+        (None, _) => println!("client: download {what}: no answer"),
     }
 }
 
@@ -106,19 +174,7 @@ fn client(link: &mut Link) {
     link.ask(Request::Unforce { name: "valve" });
     wait_frames(100);
     read(link, "valve");
-    if let Some((Status::Ok, answer, len)) = link.ask(Request::Stats { task: 0 }) {
-        let (_, _, _, mut r) = decode_response(&answer[..len]).expect("decoded above");
-        if let Some(s) = read_stats(&mut r) {
-            let [count, _, _, _, max, _, max_jitter, overruns, faults] = s.figures;
-            println!(
-                "client: stats {} stopped={} cycles={count} max_us={} max_jitter_us={} overruns={overruns} faults={faults}",
-                s.name,
-                s.stopped,
-                max / 1000,
-                max_jitter / 1000
-            );
-        }
-    }
+    stats(link);
     let mut answer = [0u8; MAX_MESSAGE];
     if let Some(len) = link.exchange(&[3, 77, 0xff, 0xff], &mut answer)
         && let Some((op, seq, status, _)) = decode_response(&answer[..len])
@@ -129,6 +185,29 @@ fn client(link: &mut Link) {
             status.name()
         );
     }
+    // Stop and start the tank task: the plant sees the safe valve meanwhile.
+    link.ask(Request::Stop { task: 0 });
+    stats(link);
+    wait_frames(200);
+    link.ask(Request::Start { task: 0 });
+    wait_frames(2);
+    stats(link);
+    // Online download: a RETAIN value to keep, two bad downloads, then the good one.
+    link.ask(Request::Write {
+        name: "tank.alarm_count",
+        value: Value::UInt(42),
+    });
+    let image = apex::runtime::start_info().data();
+    let crc = crc32(image);
+    download(link, "bad-checksum", image, crc ^ 0x5a5a);
+    let cut = &image[..image.len() / 2];
+    download(link, "truncated", cut, crc32(cut));
+    read(link, "tank.revision");
+    download(link, "tank_v2", image, crc);
+    wait_frames(5);
+    read(link, "tank.revision");
+    read(link, "tank.alarm_count");
+    stats(link);
     wait_frames(50);
     println!("client: done");
     let _ = <Warden as ApexErrorP4Ext>::raise_application_error(b"done");
@@ -188,6 +267,8 @@ fn viewer(link: &mut Link) {
         value: Value::UInt(0),
     });
     read(link, "Count.n");
+    link.ask(Request::Stop { task: 0 });
+    link.ask(Request::DownloadBegin { size: 16, crc32: 0 });
     println!("viewer: done");
 }
 
