@@ -338,6 +338,18 @@ fn plc_online() {
         status[forced_at..].iter().any(|s| s.valve != 0.25),
         "the valve stayed forced after UNFORCE",
     );
+    // The force shows in the statistics while it lasts.
+    let forced: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("[plc] plc: t=") && l.contains(" scan releases="))
+        .collect();
+    check(
+        &o,
+        forced.iter().any(|l| l.ends_with(" forced=1"))
+            && forced.last().is_some_and(|l| l.ends_with(" forced=0")),
+        "the statistics do not show the forced variable while it is forced",
+    );
     // The scan cycle was not disturbed: one cycle per frame, no overrun, no fault.
     let stats: Vec<&String> = o
         .lines
@@ -478,11 +490,14 @@ fn plc_watchdog() {
     );
     check(
         &o,
-        o.line("[loop] plc: task HANG.h interval=10ms every=5 priority=2 deadline=3000us")
+        o.line("[loop] plc: task BEAT.b interval=10ms every=5 priority=1 deadline=none process_priority=99")
             .is_some()
-            && o.line("[loop] plc: task SPIN.s interval=10ms every=5 priority=3 deadline=none")
-                .is_some(),
-        "the loop PLC's tasks do not show their deadlines",
+            && o.line("[loop] plc: task HANG.h interval=10ms every=5 priority=2 deadline=3000us process_priority=98")
+                .is_some()
+            && o.line("[loop] plc: task SPIN.s interval=10ms every=5 priority=3 deadline=none process_priority=97")
+                .is_some()
+            && o.line("[loop] plc: control process_priority=96").is_some(),
+        "the loop PLC's tasks do not show their deadlines and their processes' priorities",
     );
     // Each endless loop is stopped by its watchdog inside the loop's lines, and reported.
     for (task, trap, lines) in [

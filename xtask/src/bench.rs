@@ -74,7 +74,7 @@ pub fn parse_victim_lateness(line: &str, name: &str) -> Option<Metric> {
 
 /// `plc_release_jitter` and `plc_cycle_overhead` (ns) from a soft-PLC statistics line
 /// (`plc: t=<ms>ms scan releases=<n> lateness_ns=<min>/<median>/<max>
-/// overhead_ns=<min>/<median>/<max>`, partitions/softplc/runtime/src/main.rs).
+/// overhead_ns=<min>/<median>/<max> ...`, partitions/softplc/runtime/src/main.rs).
 pub fn parse_plc_scan(line: &str) -> Option<[Metric; 2]> {
     let rest = &line[line.find(" scan releases=")? + " scan releases=".len()..];
     let mut words = rest.split_whitespace();
@@ -186,7 +186,7 @@ mod tests {
 
     #[test]
     fn reads_the_plc_scan_statistics() {
-        let line = "[  12.000001] [plc] plc: t=12000ms scan releases=11999 lateness_ns=10900/11500/13100 overhead_ns=4000/4125/9000";
+        let line = "[  12.000001] [plc] plc: t=12000ms scan releases=11999 lateness_ns=10900/11500/13100 overhead_ns=4000/4125/9000 forced=0";
         let [jitter, overhead] = parse_plc_scan(line).unwrap();
         assert_eq!(
             (jitter.name.as_str(), jitter.min, jitter.median, jitter.max),

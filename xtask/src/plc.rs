@@ -304,8 +304,8 @@ fn port_map<'a>(p: &'a Partition, link: &PlcLink) -> PortMap<'a> {
 }
 
 /// Every cyclic task's INTERVAL must be a multiple of the partition's period (the major
-/// frame of each schedule that gives it windows): the scan process is released once per
-/// period at its window start.
+/// frame of each schedule that gives it windows): the task processes are released at
+/// window starts.
 fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Result<()> {
     let image = plc_vm::image::Image::parse(image)
         .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;

@@ -11,8 +11,9 @@
 //!   names one of its tasks, and its shared globals are the ones the build laid out.
 //! - [`Download`]: assembles the chunks in a buffer the partition owns (in order, within
 //!   the announced size) and checks size and CRC-32 at the commit.
-//! - [`take_over`]: what refers to the running program by data address, re-resolved by
-//!   name for the new one — the safe values (a `%Q` variable of the same name, type and
+//! - [`take_over`]: the new program must have the running one's tasks (name, kind, interval,
+//!   priority: each is an APEX process created at the partition's start); what refers to
+//!   the running program by data address, re-resolved by name for the new one — the safe values (a `%Q` variable of the same name, type and
 //!   width), the forces (a variable of the same name and type) and the watch list (names
 //!   that must exist) — or the reason the new program cannot take over.
 //! - [`hand_over`]: at the swap, the new machine gets the RETAIN values of the old data
@@ -80,6 +81,9 @@ pub enum Refusal {
     Forced(VarName),
     /// A watch-list name is not a variable of the new program.
     Watch(VarName),
+    /// A downloaded program's task differs from the running program's (each task is an
+    /// APEX process created at the partition's start).
+    TaskChanged(VarName),
     /// A configured task deadline (`plc.deadline`) names no task of the program.
     Deadline(VarName),
     /// The shared globals the build laid out (`plc.shared`) are not the program's.
@@ -94,7 +98,12 @@ impl core::fmt::Display for Refusal {
             Refusal::CodeTooLarge(n, max) => write!(f, "code of {n} bytes exceeds {max} bytes"),
             Refusal::Verifier(e) => write!(f, "bytecode rejected by the verifier: {e}"),
             Refusal::DataTooLarge(n, max) => write!(f, "data memory of {n} bytes exceeds {max}"),
-            Refusal::Tasks(e) => write!(f, "tasks: {e:?}"),
+            Refusal::Tasks(e) => write!(f, "tasks: {e}"),
+            Refusal::TaskChanged(n) => write!(
+                f,
+                "task `{}` is not the same in the new program (name, kind, interval and priority must stay: the partition runs one process per task; change tasks with the configuration)",
+                n.as_str()
+            ),
             Refusal::SafeValue(n) => write!(
                 f,
                 "`{}` has a configured safe value but is no located %Q variable of the same type in the new program",
@@ -122,7 +131,7 @@ impl core::fmt::Display for Refusal {
 
 /// The checks a program passes before it runs (see the module documentation), with the
 /// verifier's `scratch` (two cells per code byte), `max_data` bytes of data memory and a
-/// scan process released every `period_ns`.
+/// partition released every `period_ns`.
 pub fn check_program<'a>(
     bytes: &'a [u8],
     scratch: &mut [u32],
@@ -288,6 +297,19 @@ pub fn take_over<'f, 'w>(
     forced: impl Iterator<Item = (u32, &'f [u8])>,
     mut watch: impl Iterator<Item = &'w str>,
 ) -> Result<Takeover, Refusal> {
+    for i in 0..old.task_count().max(new.task_count()) {
+        let same = match (old.task(i), new.task(i)) {
+            (Some(a), Some(b)) => {
+                (a.name, a.kind, a.priority, a.interval_ns)
+                    == (b.name, b.kind, b.priority, b.interval_ns)
+            }
+            _ => false,
+        };
+        if !same {
+            let name = old.task(i).or(new.task(i)).map_or("?", |t| t.name);
+            return Err(Refusal::TaskChanged(VarName::of(name)));
+        }
+    }
     let mut takeover = Takeover {
         safe: SafeValues::new(),
         forces: [None; MAX_FORCES],

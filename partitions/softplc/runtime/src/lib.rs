@@ -7,8 +7,9 @@
 //! statistics, faults and safe outputs, outputs), the latency statistics ([`histogram`]),
 //! the online services ([`online`]) and online download ([`download`]: chunk assembly,
 //! checks, takeover by name) and the globals shared with another project ([`shared`]).
-//! The partition program (`main.rs`) only re-verifies the program, creates the ports and the scan process and moves bytes between
-//! them and this library. It must never trust the package: every structure is checked and
+//! The partition program (`main.rs`) only re-verifies the program, creates the ports and
+//! the processes (one per IEC task and a control process) and moves bytes between them and
+//! this library. It must never trust the package: every structure is checked and
 //! the bytecode re-verified before anything runs.
 #![cfg_attr(not(test), no_std)]
 

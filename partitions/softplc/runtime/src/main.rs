@@ -1,29 +1,45 @@
 //! The soft-PLC partition program: reads its package (the partition's data entry, see
-//! `softplc::package`), re-verifies the bytecode, creates the package's ports and one
-//! periodic scan process released once per partition period (the major frame, so at its
-//! window start), and runs [`softplc::scan::Runtime::scan`] at every release between the
-//! copy-in and copy-out of its shared globals ([`softplc::shared`]), then answers the
-//! waiting online requests ([`softplc::online::serve_pending`]).
+//! `softplc::package`), re-verifies the bytecode, creates the package's ports and the
+//! partition's APEX processes, all released at window starts:
+//! - one per IEC task ([`task_process`]), periodic with the task's INTERVAL (an event task:
+//!   the partition's period, looking at its trigger), its priority by the task's IEC
+//!   priority (`softplc::scan::Schedule::process_priorities`): at each release the first
+//!   process to run begins it (inputs in, the other project's shared globals in), then the
+//!   process runs one cycle of its task ([`softplc::scan::Runtime::run_task`]);
+//! - the control process ([`control`]), below all of them, once per partition period:
+//!   ends the release (shared globals out, outputs out), answers the waiting online
+//!   requests ([`softplc::online::serve_pending`]), swaps in a downloaded program, logs the
+//!   statistics.
+//!
+//! What they share (the program, its machine and runtime state, the ports and the process
+//! image: a [`Life`]) lives in the control process's frame and is reached under one lock
+//! ([`with_life`]); a process that finds it taken sleeps and looks again, so a task cycle
+//! is never preempted by another task's: a higher-priority task released while a
+//! lower-priority cycle outlasts its window starts when that cycle ends (its deadline or
+//! instruction budget bounds it).
 //!
 //! Online download: the chunks are assembled in whichever of the two static image buffers
 //! the running program does not use; a committed (verified) program then runs from the
 //! next release over the other of the two static data buffers, which the running program
 //! does not use either, after [`softplc::download::hand_over`] copied its RETAIN values and
-//! forces from the old data. The swap is a new "life" of the scan loop, so every borrow of
-//! the old program ends with it. A partition restart runs the configured program again (a
+//! forces from the old data. The swap is a new [`Life`] of the control process, so every
+//! borrow of the old program ends with it; a downloaded program must keep the running
+//! one's tasks (their processes were created at the start). A partition restart runs the configured program again (a
 //! warm one keeps the RETAIN variables the two programs share).
 //!
 //! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
 //! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
-//! - `plc: task <name> interval=<ms>ms every=<n> priority=<p> deadline=<us>us|none` per
-//!   task, at start;
+//! - `plc: task <name> interval=<ms>ms every=<n> priority=<p> deadline=<us>us|none
+//!   process_priority=<n>` per task, at start (`priority` is the IEC one), then
+//!   `plc: control process_priority=<n>`;
 //! - `plc: t=<ms>ms task=<name> cycles=<n> exec_us=<last>/<min>/<mean>/<max>
 //!   jitter_us=<last>/<max> overruns=<n> faults=<n>` per task every [`STATS_EVERY_MS`];
 //! - `plc: t=<ms>ms scan releases=<n> lateness_ns=<min>/<median>/<max>
-//!   overhead_ns=<min>/<median>/<max>` with them: over all releases of the running program,
-//!   the scan's start after its window start and the runtime's own work per release besides
-//!   the VM's (`softplc::histogram`: medians to 0.5 us and 125 ns; what `cargo xtask bench`
-//!   reports as `plc_release_jitter` and `plc_cycle_overhead`);
+//!   overhead_ns=<min>/<median>/<max> forced=<n>` with them: over all releases of the
+//!   running program, the first start at a release after its window start and the
+//!   runtime's own work per release besides the VM's (`softplc::histogram`: medians to
+//!   0.5 us and 125 ns; what `cargo xtask bench` reports as `plc_release_jitter` and
+//!   `plc_cycle_overhead`), and how many variables are forced now;
 //! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
 //!   as IEC literals);
 //! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault
@@ -105,6 +121,22 @@ static RUNNING: spin::Mutex<Running> = spin::Mutex::new(Running::COLD);
 static WARM: AtomicBool = AtomicBool::new(false);
 static SCRATCH: spin::Mutex<[u32; MAX_SCRATCH]> = spin::Mutex::new([0; MAX_SCRATCH]);
 static AREAS: spin::Mutex<Areas> = spin::Mutex::new(Areas::new());
+/// The running program's runtime state and the VM's stack, call and try frames and the
+/// shared-globals scratch: kept out of the control process's 32 KiB stack.
+static RUNTIME: spin::Mutex<Option<Runtime>> = spin::Mutex::new(None);
+static WORKSPACE: spin::Mutex<Workspace> = spin::Mutex::new(Workspace {
+    stack: [0; 256],
+    calls: [CallFrame::EMPTY; 32],
+    tries: [TryFrame::EMPTY; 16],
+    shared_scratch: [0; softplc::shared::MAX_AREA_LEN],
+});
+
+struct Workspace {
+    stack: [u64; 256],
+    calls: [CallFrame; 32],
+    tries: [TryFrame; 16],
+    shared_scratch: [u8; softplc::shared::MAX_AREA_LEN],
+}
 
 fn name(text: &str) -> Option<Name> {
     Name::from_str(text).ok()
@@ -248,8 +280,188 @@ fn report_fault(image: &Image, task: usize, fault: &Fault) {
     let _ = apex::runtime::raise(error, apex::runtime::own_slot(), text.as_bytes());
 }
 
-/// The scan process: one life of the scan loop per program (see the module documentation).
-extern "C" fn scan() {
+/// How long a process sleeps before it looks at the PLC again while another process holds
+/// it or no program is published (see [`with_life`]).
+const LOCK_POLL_NS: u64 = 20_000;
+
+/// What the partition's processes share while one program runs. The control process owns
+/// it in its own frame and publishes it through [`LIFE`]; every access, its own included,
+/// goes through [`with_life`].
+struct Life<'l> {
+    package: Package<'l>,
+    image: Image<'l>,
+    machine: Machine<'l, 'l>,
+    rt: &'l mut Runtime,
+    io: &'l mut ApexPorts,
+    areas: &'l mut Areas,
+    shared: Option<(SharedLayout<'l>, &'static [AtomicU32])>,
+    shared_stats: &'l mut SharedStats,
+    shared_scratch: &'l mut [u8; softplc::shared::MAX_AREA_LEN],
+}
+
+impl Life<'_> {
+    /// The release this process runs at (its window start), begun if no process of the
+    /// partition began it yet: inputs in, the other project's shared globals in.
+    fn begin(&mut self) -> u64 {
+        let release = current_release();
+        let began = self.rt.begin_release(
+            &mut self.machine,
+            &self.image,
+            &self.package,
+            &mut *self.io,
+            &mut *self.areas,
+            now_ns,
+            release,
+        );
+        if began
+            && let Some((layout, words)) = &self.shared
+            && layout.other.is_some()
+        {
+            let fetch = softplc::shared::copy_in(
+                words,
+                layout,
+                self.machine.data_mut(),
+                self.shared_scratch,
+            );
+            self.shared_stats.record(fetch);
+        }
+        release
+    }
+
+    /// The end of the release, after every task released at it: shared globals out,
+    /// outputs out.
+    fn end(&mut self) {
+        if let Some((layout, words)) = &self.shared {
+            softplc::shared::copy_out(words, layout, self.machine.data());
+        }
+        self.rt.end_release(
+            &mut self.machine,
+            &self.image,
+            &self.package,
+            &mut *self.io,
+            &mut *self.areas,
+            now_ns,
+        );
+    }
+}
+
+/// The published [`Life`], if any (a pointer into the control process's frame).
+struct LifeSlot(Option<core::ptr::NonNull<()>>);
+
+// SAFETY: the pointer is only dereferenced under `LIFE`'s lock ([`with_life`]); the
+// partition's processes run on one CPU of one address space.
+#[allow(unsafe_code)]
+unsafe impl Send for LifeSlot {}
+
+static LIFE: spin::Mutex<LifeSlot> = spin::Mutex::new(LifeSlot(None));
+
+/// `LIFE`'s lock. A process that finds it held sleeps [`LOCK_POLL_NS`] and looks again,
+/// so a lower-priority holder (a task cycle that outlasted its window) can finish: task
+/// cycles do not preempt each other.
+fn lock_life() -> spin::MutexGuard<'static, LifeSlot> {
+    loop {
+        if let Some(slot) = LIFE.try_lock() {
+            return slot;
+        }
+        apex::user_rt::sys::sleep_until(now_ns() + LOCK_POLL_NS);
+    }
+}
+
+/// Runs `f` on the published life, waiting (see [`lock_life`]) while there is none: at
+/// the partition's start and while a downloaded program is swapped in.
+#[allow(unsafe_code)]
+fn with_life<R>(f: impl FnOnce(&mut Life<'_>) -> R) -> R {
+    loop {
+        let slot = lock_life();
+        if let Some(life) = slot.0 {
+            // SAFETY: the control process publishes a pointer to the `Life` in its own frame
+            // ([`Published`]) and withdraws it, under this lock, before that value changes or
+            // goes away; while it is published nobody touches it but through this function,
+            // under this lock, so this is the only reference to it while `slot` is held.
+            let life = unsafe { &mut *life.as_ptr().cast::<Life<'_>>() };
+            return f(life);
+        }
+        drop(slot);
+        apex::user_rt::sys::sleep_until(now_ns() + LOCK_POLL_NS);
+    }
+}
+
+/// A published life: withdrawn when dropped.
+struct Published;
+
+impl Published {
+    fn new(life: &mut Life<'_>) -> Self {
+        lock_life().0 = Some(core::ptr::NonNull::from(life).cast());
+        Published
+    }
+}
+
+impl Drop for Published {
+    fn drop(&mut self) {
+        lock_life().0 = None;
+    }
+}
+
+/// The start of the window the calling process runs in (its release time); now if the
+/// partition has no window (background).
+fn current_release() -> u64 {
+    let tp = apex::runtime::start_info().time_partition;
+    let window = apex::user_rt::sys::partition_info(tp)
+        .map(|i| i.next_window_start)
+        .unwrap_or(0);
+    let now = now_ns();
+    if window == u64::MAX || window > now {
+        now
+    } else {
+        window
+    }
+}
+
+/// The process id of each task's process (`task + 1` in the slot of the id; 0: none),
+/// recorded when the partition starts.
+static TASK_PROCESSES: [core::sync::atomic::AtomicI64; softplc::scan::MAX_TASK_PROCESSES] =
+    [const { core::sync::atomic::AtomicI64::new(-1) }; softplc::scan::MAX_TASK_PROCESSES];
+
+/// The task the calling process runs.
+fn own_task() -> Option<usize> {
+    let me = <Warden as apex::a653rs::bindings::ApexProcessP1>::get_my_id().ok()?;
+    TASK_PROCESSES
+        .iter()
+        .position(|id| id.load(Ordering::Acquire) == me)
+}
+
+/// An IEC task's process: at every release (its INTERVAL, or the partition's period for an
+/// event task) one cycle of its task.
+extern "C" fn task_process() {
+    let Some(task) = own_task() else {
+        println!("plc: a task process without a task; stopping");
+        return;
+    };
+    loop {
+        with_life(|life| {
+            let release = life.begin();
+            let image = life.image;
+            life.rt.run_task(
+                task,
+                &mut life.machine,
+                &image,
+                now_ns,
+                release,
+                |task, fault| report_fault(&image, task, fault),
+            );
+        });
+        if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
+            println!("plc: PERIODIC_WAIT failed; stopping");
+            return;
+        }
+    }
+}
+
+/// The control process, below every task process, once per partition period: ends the
+/// release (outputs out), answers online requests, swaps in a downloaded program, logs
+/// the statistics. It owns each program's [`Life`] (one per program, see the module
+/// documentation).
+extern "C" fn control() {
     // Cold start checked the package; a failure here cannot happen, and idles if it does.
     let Ok(package) = Package::parse(apex::runtime::start_info().data()) else {
         return;
@@ -260,8 +472,14 @@ extern "C" fn scan() {
     let mut scratch = SCRATCH.lock();
     let mut areas = AREAS.lock();
     let mut io = ApexPorts::open(&package);
-    let (mut stack, mut calls, mut tries) =
-        ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+    let mut runtime = RUNTIME.lock();
+    let mut workspace = WORKSPACE.lock();
+    let Workspace {
+        stack,
+        calls,
+        tries,
+        shared_scratch,
+    } = &mut *workspace;
     // A warm start carries the RETAIN values of what ran before it to the configured program.
     let mut previous = WARM
         .load(Ordering::Acquire)
@@ -270,7 +488,6 @@ extern "C" fn scan() {
     let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
     let shared = package.shared().map(|layout| (layout, segment(&layout)));
     let mut shared_stats = SharedStats::default();
-    let mut shared_scratch = [0u8; softplc::shared::MAX_AREA_LEN];
     let started = now_ns();
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
     let mut first_release = 0u64;
@@ -311,15 +528,16 @@ extern "C" fn scan() {
             verified,
             Memory {
                 data: &mut mine[..],
-                stack: &mut stack,
-                calls: &mut calls,
-                tries: &mut tries,
+                stack: &mut stack[..],
+                calls: &mut calls[..],
+                tries: &mut tries[..],
             },
         ) else {
             report("refusing the program: not enough VM memory");
             return;
         };
         let mut safe = SafeValues::of(&package);
+        let mut swapped = false;
         if let Some((was, takeover)) = previous.take() {
             let old_bytes: &[u8] = match was.program {
                 Program::Configured => package.program(),
@@ -329,6 +547,7 @@ extern "C" fn scan() {
                 if let Some(takeover) = takeover {
                     let kept = hand_over(&takeover, &old, &other[..], &mut machine);
                     safe = takeover.safe;
+                    swapped = true;
                     println!(
                         "plc: download: {} bytes verified, swapped in at release {first_release}, {kept} RETAIN variable(s) kept",
                         program.len()
@@ -341,13 +560,7 @@ extern "C" fn scan() {
                     );
                 }
             }
-            // A new program starts at a release, never in the middle of one.
-            if takeover.is_some() && <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
-                println!("plc: PERIODIC_WAIT failed; stopping");
-                return;
-            }
         }
-        let mut rt = Runtime::new(schedule, period, safe);
         let mut loader = Loader::new(
             &mut staging[..],
             &mut scratch[..],
@@ -355,85 +568,81 @@ extern "C" fn scan() {
             period,
             first_release,
         );
-        let tp = apex::runtime::start_info().time_partition;
+        let mut life = Life {
+            package,
+            image,
+            machine,
+            rt: runtime.insert(Runtime::new(schedule, period, safe)),
+            io: &mut io,
+            areas: &mut areas,
+            shared,
+            shared_stats: &mut shared_stats,
+            shared_scratch,
+        };
+        let published = Published::new(&mut life);
+        // A new program starts at a release, never in the middle of one.
+        if swapped && <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
+            println!("plc: PERIODIC_WAIT failed; stopping");
+            return;
+        }
         loop {
-            // The start of the window this release runs in (its release time).
-            let window = apex::user_rt::sys::partition_info(tp)
-                .map(|i| i.next_window_start)
-                .unwrap_or(0);
-            let release = if window == u64::MAX || window > now_ns() {
-                now_ns()
-            } else {
-                window
-            };
-            if let Some((layout, words)) = &shared
-                && layout.other.is_some()
-            {
-                let fetch = softplc::shared::copy_in(
-                    words,
-                    layout,
-                    machine.data_mut(),
-                    &mut shared_scratch,
+            let committed = with_life(|life| {
+                life.begin();
+                life.end();
+                let stopped_before = life.rt.stopped.map(|s| s.is_some());
+                softplc::online::serve_pending(
+                    &life.package,
+                    &mut *life.io,
+                    &mut life.machine,
+                    &life.image,
+                    life.rt,
+                    &mut loader,
                 );
-                shared_stats.record(fetch);
-            }
-            rt.scan(
-                &mut machine,
-                &image,
-                &package,
-                &mut io,
-                &mut areas,
-                now_ns,
-                release,
-                |task, fault| report_fault(&image, task, fault),
-            );
-            if let Some((layout, words)) = &shared {
-                softplc::shared::copy_out(words, layout, machine.data());
-            }
-            let stopped_before = rt.stopped.map(|s| s.is_some());
-            softplc::online::serve_pending(
-                &package,
-                &mut io,
-                &mut machine,
-                &image,
-                &mut rt,
-                &mut loader,
-            );
-            for &task in &rt.schedule.order[..rt.schedule.count] {
-                let name = image.task(task).map_or("?", |t| t.name);
-                match (stopped_before[task], rt.stopped[task].is_some()) {
-                    (false, true) => println!("plc: task {name} stopped online; outputs safe"),
-                    (true, false) => println!("plc: task {name} started online"),
-                    _ => {}
+                for &task in &life.rt.schedule.order[..life.rt.schedule.count] {
+                    let name = life.image.task(task).map_or("?", |t| t.name);
+                    match (stopped_before[task], life.rt.stopped[task].is_some()) {
+                        (false, true) => println!("plc: task {name} stopped online; outputs safe"),
+                        (true, false) => println!("plc: task {name} started online"),
+                        _ => {}
+                    }
                 }
-            }
-            if let Some(reason) = loader.refusal.take() {
-                println!("plc: download refused: {reason}");
-            }
-            if let Some((len, takeover)) = loader.committed.take() {
+                if let Some(reason) = loader.refusal.take() {
+                    println!("plc: download refused: {reason}");
+                }
+                let now = now_ns();
+                if now >= next_stats {
+                    next_stats += STATS_EVERY_MS * 1_000_000;
+                    let ms = (now - started) / 1_000_000;
+                    log_stats(life.rt, &life.image, &life.package, &life.machine, ms);
+                    if life
+                        .shared
+                        .is_some_and(|(layout, _)| layout.other.is_some())
+                    {
+                        let s = &life.shared_stats;
+                        println!(
+                            "plc: t={ms}ms shared fresh={} unchanged={} stale={} not_yet={}",
+                            s.fresh, s.unchanged, s.stale, s.not_yet
+                        );
+                    }
+                }
+                loader
+                    .committed
+                    .take()
+                    .map(|commit| (commit, life.rt.releases))
+            });
+            if let Some(((len, takeover), releases)) = committed {
                 previous = Some((running, Some(takeover)));
                 running = running.downloaded(staging_index, len);
-                first_release += rt.releases;
+                first_release += releases;
                 break;
-            }
-            let now = now_ns();
-            if now >= next_stats {
-                next_stats += STATS_EVERY_MS * 1_000_000;
-                let ms = (now - started) / 1_000_000;
-                log_stats(&rt, &image, &package, &machine, ms);
-                if shared.is_some_and(|(layout, _)| layout.other.is_some()) {
-                    let s = &shared_stats;
-                    println!(
-                        "plc: t={ms}ms shared fresh={} unchanged={} stale={} not_yet={}",
-                        s.fresh, s.unchanged, s.stale, s.not_yet
-                    );
-                }
             }
             if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
                 println!("plc: PERIODIC_WAIT failed; stopping");
                 return;
             }
         }
+        // Withdrawn before the life's values go: the task processes wait for the next one.
+        drop(published);
     }
 }
 
@@ -458,8 +667,15 @@ fn log_stats(rt: &Runtime, image: &Image, package: &Package, machine: &Machine, 
     }
     if let (Some(l), Some(o)) = (rt.lateness.summary(), rt.overhead.summary()) {
         println!(
-            "plc: t={ms}ms scan releases={} lateness_ns={}/{}/{} overhead_ns={}/{}/{}",
-            rt.releases, l.0, l.1, l.2, o.0, o.1, o.2
+            "plc: t={ms}ms scan releases={} lateness_ns={}/{}/{} overhead_ns={}/{}/{} forced={}",
+            rt.releases,
+            l.0,
+            l.1,
+            l.2,
+            o.0,
+            o.1,
+            o.2,
+            machine.forced().count()
         );
     }
     let mut line = text!("plc: t={}ms watch", ms);
@@ -497,7 +713,7 @@ fn create_port(ctx: &mut StartContext<Warden>, p: &PortMap) -> Result<(), Error>
     }
 }
 
-/// After a restart the previous life's scan process may have died holding these locks.
+/// After a restart the previous life's processes may have died holding these locks.
 #[allow(unsafe_code)] // forcing spin locks open
 fn release_previous_locks() {
     if DATA.is_locked() {
@@ -522,6 +738,20 @@ fn release_previous_locks() {
         // SAFETY: as above.
         unsafe { SCRATCH.force_unlock() };
     }
+    if RUNTIME.is_locked() {
+        // SAFETY: as above.
+        unsafe { RUNTIME.force_unlock() };
+    }
+    if WORKSPACE.is_locked() {
+        // SAFETY: as above.
+        unsafe { WORKSPACE.force_unlock() };
+    }
+    if LIFE.is_locked() {
+        // SAFETY: as above.
+        unsafe { LIFE.force_unlock() };
+    }
+    // The previous life's control process is gone with its frame.
+    LIFE.lock().0 = None;
 }
 
 struct PlcPartition;
@@ -563,6 +793,10 @@ impl PlcPartition {
             );
         }
         let period_ns = period().as_nanos() as u64;
+        // The processes' priorities start just below the MCP (processes must stay under
+        // it): above any background partition whose MCP is lower, so the tasks start at the
+        // window start whatever TP0 does.
+        let (priorities, control_priority) = schedule.process_priorities(apex::runtime::mcp());
         for &task in &schedule.order[..schedule.count] {
             if let Some(t) = image.task(task) {
                 let mut deadline = LineBuffer::default();
@@ -571,43 +805,68 @@ impl PlcPartition {
                     ns => write!(deadline, "{}us", ns / 1_000),
                 };
                 println!(
-                    "plc: task {} interval={}ms every={} priority={} deadline={}",
+                    "plc: task {} interval={}ms every={} priority={} deadline={} process_priority={}",
                     t.name,
                     schedule.every[task] * period_ns / 1_000_000,
                     schedule.every[task],
                     t.priority,
-                    deadline.as_str()
+                    deadline.as_str(),
+                    priorities[task]
                 );
             }
         }
+        println!("plc: control process_priority={control_priority}");
         for p in package.ports() {
             if let Err(e) = create_port(ctx, &p) {
                 report(text!("refusing the program: port {}: {e:?}", p.name).as_str());
                 return;
             }
         }
-        let Some(process_name) = name("scan") else {
-            return;
-        };
-        let attributes = ProcessAttribute {
-            period: SystemTime::Normal(period()),
-            time_capacity: SystemTime::Infinite,
-            entry_point: scan,
-            // The VM stack and call frames, the statistics and the online buffers live here.
-            stack_size: 32 * 1024,
-            // Just below the MCP (processes must stay under it): above any background partition
-            // whose MCP is lower, so the scan starts at the window start whatever TP0 does.
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: process_name,
-        };
-        match ctx.create_process(attributes) {
-            Ok(process) => {
-                if let Err(e) = process.start() {
-                    report(text!("START scan failed: {e:?}").as_str());
-                }
+        for id in &TASK_PROCESSES {
+            id.store(-1, Ordering::Release);
+        }
+        for &task in &schedule.order[..schedule.count] {
+            let task_name = image.task(task).map_or("?", |t| t.name);
+            let period = Duration::from_nanos(schedule.process_period(task, period_ns));
+            let Some(id) = spawn(ctx, task_name, task_process, period, priorities[task]) else {
+                return;
+            };
+            TASK_PROCESSES[task].store(id, Ordering::Release);
+        }
+        // The VM's stack and call frames, the online buffers and the life live in its stack.
+        spawn(ctx, "control", control, period(), control_priority);
+    }
+}
+
+/// Creates and starts a periodic process (32 KiB of stack, soft deadline); its id, or
+/// `None` after reporting why not.
+fn spawn(
+    ctx: &mut StartContext<Warden>,
+    process_name: &str,
+    entry_point: extern "C" fn(),
+    period: Duration,
+    priority: u8,
+) -> Option<ProcessId> {
+    let attributes = ProcessAttribute {
+        period: SystemTime::Normal(period),
+        time_capacity: SystemTime::Infinite,
+        entry_point,
+        stack_size: 32 * 1024,
+        base_priority: i32::from(priority),
+        deadline: Deadline::Soft,
+        name: name(process_name)?,
+    };
+    match ctx.create_process(attributes) {
+        Ok(process) => match process.start() {
+            Ok(()) => Some(process.id()),
+            Err(e) => {
+                report(text!("START {process_name} failed: {e:?}").as_str());
+                None
             }
-            Err(e) => report(text!("CREATE_PROCESS scan failed: {e:?}").as_str()),
+        },
+        Err(e) => {
+            report(text!("CREATE_PROCESS {process_name} failed: {e:?}").as_str());
+            None
         }
     }
 }

@@ -1,5 +1,5 @@
 //! The PLC side of the online protocol (`plc-online`): answers one request against the
-//! running program. The scan process calls it between cycles (at most
+//! running program. The control process calls it after the tasks of a release (at most
 //! [`REQUESTS_PER_CYCLE`] requests per release), so a request always sees and changes a
 //! consistent image and a flood of requests costs each cycle a bounded amount of work.
 //! A DOWNLOAD_COMMIT that passes every check ends the batch: the caller swaps the new
@@ -15,7 +15,7 @@ use plc_online::{
 use plc_vm::image::{Image, VarType};
 use plc_vm::vm::{Machine, VarError};
 
-/// Requests served per release of the scan process.
+/// Requests served per release of the control process.
 pub const REQUESTS_PER_CYCLE: usize = 4;
 
 fn status_of(e: VarError) -> Status {
@@ -37,7 +37,7 @@ pub struct Loader<'b> {
     pub scratch: &'b mut [u32],
     /// Data memory a program may use.
     pub max_data: usize,
-    /// The scan process's period.
+    /// The partition's period.
     pub period_ns: u64,
     /// The release number of the running program's first release (its releases count on
     /// from there), to tell a client from which release a committed program runs.

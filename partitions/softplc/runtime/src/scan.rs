@@ -1,18 +1,25 @@
 //! The scan cycle, as pure logic over a port interface ([`PortIo`]) and a clock, so the
-//! whole behaviour is tested on the host; `main.rs` only supplies the APEX ports and time.
+//! whole behaviour is tested on the host; `main.rs` only supplies the APEX ports, time and
+//! processes.
 //!
-//! One release of the scan process (at its window start) is one call of [`Runtime::scan`]:
-//! 1. read every input port once into `%I` (with its validity bit) and copy the `%I` and
-//!    `%M` located variables in ([`plc_vm::located::copy_in`]);
-//! 2. run each IEC task that is due at this release — a cyclic task every
-//!    `INTERVAL / period` releases ([`Schedule`]; a program without a CONFIGURATION at
-//!    every release), an event task (`SINGLE`) at the release after its trigger BOOL went
-//!    from FALSE to TRUE (sampled once per release, after the inputs are in) — in priority
-//!    order (IEC: the lowest PRIORITY number first; ties in declaration order), under two
-//!    watchdogs: the VM's instruction budget (trap WATCHDOG) and, where the configuration
-//!    gives the task one (`plc.deadline`, as CODESYS's task watchdog time), its time
-//!    deadline (trap DEADLINE: the release time plus the deadline);
-//! 3. copy the `%Q` and `%M` located variables out and send every output port's bytes.
+//! Every IEC task runs in an APEX process of its own, released at window starts every
+//! `INTERVAL / period` partition periods ([`Schedule`]; a program without a CONFIGURATION
+//! every period; an event task, `SINGLE`, every period, running only after its trigger
+//! rose), with a process priority by its IEC priority ([`Schedule::process_priorities`]).
+//! One release (a window start) is:
+//! 1. [`Runtime::begin_release`], by whichever process runs first at it: read every input
+//!    port once into `%I` (with its validity bit), copy the `%I` and `%M` located variables
+//!    in ([`plc_vm::located::copy_in`]) and sample the event tasks' triggers;
+//! 2. [`Runtime::run_task`], by each task's process released at it, in priority order
+//!    (IEC: the lowest PRIORITY number first; ties in declaration order): one cycle under
+//!    two watchdogs, the VM's instruction budget (trap WATCHDOG) and, where the
+//!    configuration gives the task one (`plc.deadline`, as CODESYS's task watchdog time),
+//!    its time deadline (trap DEADLINE: the release time plus the deadline);
+//! 3. [`Runtime::end_release`], by the control process after them: copy the `%Q` and `%M`
+//!    located variables out and send every output port's bytes.
+//!
+//! [`Runtime::scan`] is all three for every due task, as the processes do them when they
+//! are released together.
 //!
 //! A task that traps (or exhausts its budget: `WATCHDOG`, or passes its deadline:
 //! `DEADLINE`) is stopped: its program instance's located `%Q` variables and the global
@@ -24,12 +31,12 @@
 //! from the next release, whatever stopped it.
 //!
 //! Per task the runtime keeps [`TaskStats`]: activations, execution time (last, min, max,
-//! mean), release jitter (scan start minus the release time, i.e. the window start),
+//! mean), release jitter (the cycle's start minus the release time, i.e. the window start),
 //! overruns (an execution longer than the task's interval) and faults. Per release it keeps
-//! histograms ([`Histogram`]) of the lateness (the same scan start minus release) and of
-//! its own overhead: the scan's time besides the VM's (ports, process image, statistics).
-//! The first release, which follows the partition's start rather than a window start, is
-//! left out of the lateness figures.
+//! histograms ([`Histogram`]) of the lateness (the release's first start minus the release
+//! time) and of its own work: the time in steps 1-3 besides the VM's (ports, process
+//! image, statistics). The first release, which follows the partition's start rather than
+//! a window start, is left out of the lateness figures.
 
 use crate::histogram::Histogram;
 use crate::package::{Package, SafeValue};
@@ -142,9 +149,34 @@ pub enum PlanError {
     EventTask { task: usize },
     /// No cyclic task at all.
     NoTasks,
+    /// More tasks than the partition has processes for.
+    TooManyTasks { count: usize },
 }
 
-/// When each task runs: a cyclic one every `every[i]` releases of the scan process, an
+impl core::fmt::Display for PlanError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            PlanError::IntervalNotMultiple { task, interval_ns } => write!(
+                f,
+                "task {task}'s INTERVAL of {interval_ns} ns is not a positive multiple of the partition's period"
+            ),
+            PlanError::EventTask { task } => {
+                write!(f, "event task {task} names no trigger variable")
+            }
+            PlanError::NoTasks => write!(f, "the program has no task"),
+            PlanError::TooManyTasks { count } => write!(
+                f,
+                "{count} tasks, but a PLC partition runs at most {MAX_TASK_PROCESSES} (one APEX process each)"
+            ),
+        }
+    }
+}
+
+/// Most IEC tasks a PLC partition runs: one APEX process each, beside the control process
+/// (`apex::table::MAX_PROCESSES` in all).
+pub const MAX_TASK_PROCESSES: usize = 15;
+
+/// When each task runs: a cyclic one every `every[i]` releases of the partition (its process's period), an
 /// event one (`every[i] == 0`) on a rising edge of the BOOL at `trigger[i]`; by when it must
 /// be done: `deadline[i]` ns after its release ([`NO_DEADLINE`]: only the instruction
 /// budget watches it).
@@ -160,11 +192,16 @@ pub struct Schedule {
 }
 
 impl Schedule {
-    /// The schedule of `image`'s tasks for a scan process released every `period_ns`.
+    /// The schedule of `image`'s tasks for a partition released every `period_ns`.
     pub fn new(image: &Image, period_ns: u64) -> Result<Self, PlanError> {
         let count = image.task_count().min(MAX_TASKS);
         if count == 0 {
             return Err(PlanError::NoTasks);
+        }
+        if image.task_count() > MAX_TASK_PROCESSES {
+            return Err(PlanError::TooManyTasks {
+                count: image.task_count(),
+            });
         }
         let mut every = [0u64; MAX_TASKS];
         let mut trigger = [None; MAX_TASKS];
@@ -197,6 +234,30 @@ impl Schedule {
             order,
             count,
         })
+    }
+
+    /// The APEX process priorities of the partition's processes, for a partition whose MCP
+    /// is `mcp`: each task's by its place in [`Schedule::order`] (IEC priority, then
+    /// declaration order), from just below the MCP down, one step per task, so that tasks
+    /// released together run in that order; and the control process's, below all of them.
+    /// None goes below 2 (the control process below 1).
+    pub fn process_priorities(&self, mcp: u8) -> ([u8; MAX_TASKS], u8) {
+        let top = mcp.saturating_sub(1).max(2);
+        let mut priority = [0u8; MAX_TASKS];
+        let mut lowest = top;
+        for (rank, &task) in self.order[..self.count].iter().enumerate() {
+            let p = top.saturating_sub(rank.min(u8::MAX as usize) as u8).max(2);
+            priority[task] = p;
+            lowest = lowest.min(p);
+        }
+        (priority, lowest.saturating_sub(1).max(1))
+    }
+
+    /// The period of task `task`'s process: its INTERVAL (a multiple of the partition's
+    /// period), or the partition's period for an event task (it looks at its trigger at
+    /// every release).
+    pub fn process_period(&self, task: usize, period_ns: u64) -> u64 {
+        self.every[task].max(1).saturating_mul(period_ns)
     }
 
     /// The schedule with the package's configured task deadlines (see [`names_task`]).
@@ -334,14 +395,22 @@ pub struct Runtime {
     pub stopped: [Option<Stop>; MAX_TASKS],
     /// The running program's safe values.
     pub safe: SafeValues,
+    /// Release instants begun ([`Runtime::begin_release`]).
     pub releases: u64,
-    /// Release lateness: scan start minus release time (1 us buckets).
+    /// Release lateness: the first start at an instant minus its release time (1 us
+    /// buckets).
     pub lateness: Histogram,
-    /// The scan's own work per release besides the VM's (250 ns buckets).
+    /// The runtime's own work per release instant besides the VM's (250 ns buckets).
     pub overhead: Histogram,
     period_ns: u64,
     /// Each event task's trigger as sampled at the previous release.
     armed: [bool; MAX_TASKS],
+    /// Event tasks whose trigger rose at the current release, until they ran.
+    triggered: [bool; MAX_TASKS],
+    /// The current release instant.
+    instant: Option<u64>,
+    /// The runtime's own work at the current instant so far (ns).
+    own_work: u64,
 }
 
 impl Runtime {
@@ -356,12 +425,17 @@ impl Runtime {
             overhead: Histogram::new(250),
             period_ns,
             armed: [false; MAX_TASKS],
+            triggered: [false; MAX_TASKS],
+            instant: None,
+            own_work: 0,
         }
     }
 
-    /// One release (see the module documentation). `release_ns` is when it was due (its
-    /// window start), `clock` the partition's time in ns (also the program's `NOW`).
-    /// Calls `on_fault` for each task that faulted in this release.
+    /// One release of every due task in priority order, as the task processes run it when
+    /// they are released together: [`begin_release`](Self::begin_release), each due task's
+    /// [`run_task`](Self::run_task), [`end_release`](Self::end_release). `release_ns` is
+    /// when it was due (its window start), `clock` the partition's time in ns (also the
+    /// program's `NOW`). Calls `on_fault` for each task that faulted in this release.
     // One release touches everything the cycle involves; a bundle would only rename them.
     #[allow(clippy::too_many_arguments)]
     pub fn scan(
@@ -375,8 +449,44 @@ impl Runtime {
         release_ns: u64,
         mut on_fault: impl FnMut(usize, &Fault),
     ) {
+        // Always a new instant, even at the same release time.
+        self.instant = None;
+        self.begin_release(machine, image, package, io, areas, &mut clock, release_ns);
+        let instant = self.releases - 1;
+        for i in 0..self.schedule.count {
+            let task = self.schedule.order[i];
+            if self.schedule.trigger[task].is_some() || self.schedule.due(task, instant) {
+                self.run_task(task, machine, image, &mut clock, release_ns, &mut on_fault);
+            }
+        }
+        self.end_release(machine, image, package, io, areas, &mut clock);
+    }
+
+    /// The start of the release instant `release_ns` (a window start), by whichever process
+    /// of the partition runs first at it; nothing when it has begun already: every input
+    /// port's message into `%I` with its validity bit, the `%I` and `%M` variables into the
+    /// program's data, the event tasks' triggers sampled (after the inputs are in), the
+    /// lateness recorded. True when it began the instant.
+    #[allow(clippy::too_many_arguments)]
+    pub fn begin_release(
+        &mut self,
+        machine: &mut Machine,
+        image: &Image,
+        package: &Package,
+        io: &mut impl PortIo,
+        areas: &mut Areas,
+        mut clock: impl FnMut() -> u64,
+        release_ns: u64,
+    ) -> bool {
+        if self.instant == Some(release_ns) {
+            return false;
+        }
         let start = clock();
-        let jitter = start.saturating_sub(release_ns);
+        // The first release follows the partition's start (NORMAL mode), not a window
+        // start: its lateness says nothing about the release path.
+        if self.releases > 0 {
+            self.lateness.record(start.saturating_sub(release_ns));
+        }
         read_inputs(package, io, areas);
         let vars = || image.located_vars();
         if self.releases == 0 {
@@ -385,55 +495,87 @@ impl Runtime {
         }
         located::copy_in(vars(), Area::Input, &areas.input, machine.data_mut());
         located::copy_in(vars(), Area::Memory, &areas.memory, machine.data_mut());
-        let mut in_vm = 0u64;
-        let mut due = [false; MAX_TASKS];
         for &task in &self.schedule.order[..self.schedule.count] {
-            due[task] = match self.schedule.trigger[task] {
-                Some(at) => {
-                    let set = machine.data().get(at as usize).is_some_and(|&b| b != 0);
-                    let edge = set && !self.armed[task];
-                    self.armed[task] = set;
-                    edge
-                }
-                None => self.schedule.due(task, self.releases),
-            };
-        }
-        for &task in &self.schedule.order[..self.schedule.count] {
-            if self.stopped[task].is_some() || !due[task] {
-                continue;
-            }
-            let t0 = clock();
-            // Deadlines count from the release, as ARINC process deadlines do: a task that
-            // waited behind others has less of its time left.
-            let deadline = release_ns.saturating_add(self.schedule.deadline[task]);
-            let timed = self.schedule.deadline[task] != NO_DEADLINE;
-            let result = machine.run_cycle_until(task, t0 as i64, || timed && clock() > deadline);
-            let exec = clock().saturating_sub(t0);
-            in_vm += exec;
-            // An event task has no interval: it overruns when it outlasts the period.
-            let interval = self.schedule.every[task]
-                .max(1)
-                .saturating_mul(self.period_ns);
-            // The first release follows the partition's start (NORMAL mode), not a window
-            // start: its lateness says nothing about the release path.
-            let jitter = if self.releases == 0 { 0 } else { jitter };
-            self.stats[task].record(exec, jitter, interval);
-            if let Err(fault) = result {
-                self.stats[task].faults += 1;
-                self.stopped[task] = Some(Stop::Fault(fault));
-                safe_outputs(image, &self.safe, task, machine.data_mut());
-                on_fault(task, &fault);
+            if let Some(at) = self.schedule.trigger[task] {
+                let set = machine.data().get(at as usize).is_some_and(|&b| b != 0);
+                self.triggered[task] |= set && !self.armed[task];
+                self.armed[task] = set;
             }
         }
+        self.instant = Some(release_ns);
+        self.releases += 1;
+        self.own_work = clock().saturating_sub(start);
+        true
+    }
+
+    /// One cycle of `task`, released at `release_ns` (a cyclic task is due whenever its
+    /// process is released; an event task only when its trigger rose since it last ran):
+    /// run under its watchdogs, its statistics kept; a task that faults is stopped, its
+    /// outputs set safe at once and `on_fault` called. Nothing for a stopped task.
+    pub fn run_task(
+        &mut self,
+        task: usize,
+        machine: &mut Machine,
+        image: &Image,
+        mut clock: impl FnMut() -> u64,
+        release_ns: u64,
+        mut on_fault: impl FnMut(usize, &Fault),
+    ) {
+        if task >= self.schedule.count || self.stopped[task].is_some() {
+            return;
+        }
+        if self.schedule.trigger[task].is_some() && !core::mem::take(&mut self.triggered[task]) {
+            return;
+        }
+        let t0 = clock();
+        // Deadlines count from the release, as ARINC process deadlines do: a task that
+        // waited behind others has less of its time left.
+        let deadline = release_ns.saturating_add(self.schedule.deadline[task]);
+        let timed = self.schedule.deadline[task] != NO_DEADLINE;
+        let result = machine.run_cycle_until(task, t0 as i64, || timed && clock() > deadline);
+        let t1 = clock();
+        let exec = t1.saturating_sub(t0);
+        // An event task has no interval: it overruns when it outlasts the period.
+        let interval = self.schedule.every[task]
+            .max(1)
+            .saturating_mul(self.period_ns);
+        let jitter = if self.releases > 1 {
+            t0.saturating_sub(release_ns)
+        } else {
+            0
+        };
+        self.stats[task].record(exec, jitter, interval);
+        if let Err(fault) = result {
+            self.stats[task].faults += 1;
+            self.stopped[task] = Some(Stop::Fault(fault));
+            safe_outputs(image, &self.safe, task, machine.data_mut());
+            on_fault(task, &fault);
+        }
+        self.own_work += clock().saturating_sub(t1);
+    }
+
+    /// The end of the current release instant, by the lowest-priority process after every
+    /// task released at it: the `%Q` and `%M` variables out and every output port's bytes
+    /// sent; the runtime's own work at this instant recorded.
+    pub fn end_release(
+        &mut self,
+        machine: &mut Machine,
+        image: &Image,
+        package: &Package,
+        io: &mut impl PortIo,
+        areas: &mut Areas,
+        mut clock: impl FnMut() -> u64,
+    ) {
+        let start = clock();
+        let vars = || image.located_vars();
         located::copy_out(vars(), Area::Output, machine.data(), &mut areas.output);
         located::copy_out(vars(), Area::Memory, machine.data(), &mut areas.memory);
         write_outputs(package, io, areas);
-        if self.releases > 0 {
-            self.lateness.record(jitter);
+        if self.instant.is_some() {
+            let own = self.own_work + clock().saturating_sub(start);
+            self.overhead.record(own);
+            self.own_work = 0;
         }
-        self.overhead
-            .record(clock().saturating_sub(start).saturating_sub(in_vm));
-        self.releases += 1;
     }
 
     /// Online STOP: `task` runs no more and its outputs go to their safe values now (the

@@ -260,12 +260,19 @@ END_CONFIGURATION
     assert_eq!(rt.stats[0].count + rt.stats[1].count, 8);
     for s in &rt.stats[..2] {
         assert_eq!(s.last, 1_000, "each cycle reads the clock twice");
-        assert_eq!(
-            s.max_jitter, 4_000,
-            "first clock read 4 us after the release"
-        );
         assert_eq!(s.overruns, 0);
     }
+    // A task's jitter is its start after the release (the clock moves 1 us per reading and
+    // starts 3 us late): slow, first, starts after the release's input work (two readings);
+    // fast, behind slow, after slow's three readings too.
+    let by_name = |name: &str| {
+        let image = Image::parse(Package::parse(&plc.bytes).unwrap().program()).unwrap();
+        (0..2)
+            .find(|&i| image.task(i).unwrap().name.starts_with(name))
+            .unwrap()
+    };
+    assert_eq!(rt.stats[by_name("SLOW")].max_jitter, 6_000);
+    assert_eq!(rt.stats[by_name("FAST")].max_jitter, 9_000);
 }
 
 #[test]
@@ -1354,6 +1361,17 @@ PROGRAM P o := 10 / d; END_PROGRAM";
         )
         .unwrap_err();
         assert!(e.contains("`P.n` is forced"), "{e}");
+        // Tasks are processes created at the start: a changed task (here an interval) or
+        // a task more is refused.
+        let e = check(
+            "VAR_GLOBAL out AT %QD0 : DINT; END_VAR VAR_GLOBAL RETAIN total : DINT; END_VAR
+             PROGRAM P VAR n : DINT; END_VAR n := 1; END_PROGRAM
+             CONFIGURATION C TASK t (INTERVAL := T#20ms, PRIORITY := 1); PROGRAM p WITH t : P;
+             END_CONFIGURATION",
+            &[],
+        )
+        .unwrap_err();
+        assert!(e.contains("is not the same in the new program"), "{e}");
     }
 
     #[test]
@@ -1385,4 +1403,138 @@ PROGRAM P o := 10 / d; END_PROGRAM";
             Err(Refusal::Tasks(PlanError::IntervalNotMultiple { .. }))
         ));
     }
+}
+
+/// Each task's process releases only its own task: the first process at a release begins it
+/// (inputs in) and nobody else does; a cyclic task runs whenever its process calls it, an
+/// event task only after its trigger rose; the control process ends the release (outputs
+/// out).
+#[test]
+fn task_processes_share_one_release() {
+    let source = "
+VAR_GLOBAL go AT %IX0.0 : BOOL; fired AT %QD0 : UDINT; beats AT %QD1 : UDINT; END_VAR
+PROGRAM OnGo fired := fired + 1; END_PROGRAM
+PROGRAM Beat beats := beats + 1; END_PROGRAM
+CONFIGURATION C
+  TASK cyc (INTERVAL := T#10ms, PRIORITY := 2);
+  TASK ev (SINGLE := go, PRIORITY := 1);
+  PROGRAM b WITH cyc : Beat;
+  PROGRAM o WITH ev : OnGo;
+END_CONFIGURATION
+";
+    let ports = [
+        PortMap {
+            size: 1,
+            valid: None,
+            ..input("go", 0, (0, 0))
+        },
+        PortMap {
+            size: 8,
+            ..output("out", 0)
+        },
+    ];
+    let plc = Plc::new(source, &ports);
+    let package = Package::parse(&plc.bytes).unwrap();
+    let image = Image::parse(package.program()).unwrap();
+    let mut data = vec![0u8; image.data_size() as usize];
+    let (mut stack, mut calls, mut tries) =
+        ([0u64; 64], [CallFrame::EMPTY; 8], [TryFrame::EMPTY; 4]);
+    let mut machine = Machine::new(
+        verify(&image).unwrap(),
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    )
+    .unwrap();
+    let schedule = Schedule::new(&image, PERIOD).unwrap();
+    let (beat, ev) = (schedule.order[1], schedule.order[0]);
+    assert_eq!(
+        schedule.process_priorities(100),
+        (
+            {
+                let mut p = [0u8; crate::scan::MAX_TASKS];
+                p[ev] = 99;
+                p[beat] = 98;
+                p
+            },
+            97
+        )
+    );
+    assert_eq!(schedule.process_period(beat, PERIOD), PERIOD);
+    let mut rt = Runtime::new(schedule, PERIOD, SafeValues::new());
+    let mut wires = Wires {
+        inputs: vec![Some((vec![1], true)), None],
+        ..Wires::default()
+    };
+    let mut areas = Areas::new();
+    let (mut now, mut out) = (0u64, Vec::new());
+    for release in [0, PERIOD, 2 * PERIOD] {
+        let mut clock = || {
+            now += 1_000;
+            release + now % PERIOD
+        };
+        // The event task's process comes first (higher priority), then the cyclic one's:
+        // only the first begins the release.
+        assert!(rt.begin_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+            release
+        ));
+        rt.run_task(ev, &mut machine, &image, &mut clock, release, |_, _| {});
+        assert!(!rt.begin_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+            release
+        ));
+        rt.run_task(beat, &mut machine, &image, &mut clock, release, |_, _| {});
+        rt.end_release(
+            &mut machine,
+            &image,
+            &package,
+            &mut wires,
+            &mut areas,
+            &mut clock,
+        );
+        let sent = &wires.sent.last().unwrap().1;
+        out.push((
+            u32::from_le_bytes(sent[..4].try_into().unwrap()),
+            u32::from_le_bytes(sent[4..8].try_into().unwrap()),
+        ));
+    }
+    // `go` is TRUE from the first release on: one rising edge, one event cycle.
+    assert_eq!(out, [(1, 1), (1, 2), (1, 3)]);
+    assert_eq!(rt.releases, 3);
+    assert_eq!(rt.overhead.count(), 3);
+    assert_eq!(rt.lateness.count(), 2);
+}
+
+#[test]
+fn a_partition_runs_at_most_fifteen_tasks() {
+    let mut source = String::new();
+    for i in 0..16 {
+        source.push_str(&format!("PROGRAM P{i} END_PROGRAM\n"));
+    }
+    source.push_str("CONFIGURATION C\n");
+    for i in 0..16 {
+        source.push_str(&format!(
+            "TASK t{i} (INTERVAL := T#10ms, PRIORITY := 1); PROGRAM p{i} WITH t{i} : P{i};\n"
+        ));
+    }
+    source.push_str("END_CONFIGURATION\n");
+    let program = compile(&source);
+    let image = Image::parse(&program).unwrap();
+    let e = Schedule::new(&image, PERIOD).unwrap_err();
+    assert_eq!(e, PlanError::TooManyTasks { count: 16 });
+    assert!(e.to_string().contains("at most 15"), "{e}");
 }
