@@ -138,6 +138,16 @@ fn watch_lines<'a>(lines: &'a [String], partition: &str) -> Vec<(u64, Vec<(&'a s
         .collect()
 }
 
+/// The background hog's CPU time (ms) at `secs` seconds, as `hog*` partitions print it.
+fn hog_cpu_ms(o: &xtask::qemu::Outcome, secs: u64) -> Option<u64> {
+    o.line(&format!("hog: spinning at {secs} s")).and_then(|l| {
+        l.split("CPU time ")
+            .nth(1)
+            .and_then(|r| r.split(' ').next())
+            .and_then(|ms| ms.parse::<u64>().ok())
+    })
+}
+
 fn value(values: &[(&str, &str)], name: &str) -> Option<u64> {
     values
         .iter()
@@ -466,12 +476,7 @@ fn plc_jitter() {
         );
     }
     // The hog got the rest of the time: more than half of every second.
-    let hog = o.line("hog: spinning at 3 s").and_then(|l| {
-        l.split("CPU time ")
-            .nth(1)
-            .and_then(|r| r.split(' ').next())
-            .and_then(|ms| ms.parse::<u64>().ok())
-    });
+    let hog = hog_cpu_ms(&o, 3);
     check(
         &o,
         hog.is_some_and(|ms| ms > 1_500),
@@ -591,12 +596,7 @@ fn plc_watchdog() {
         &format!("the plant's status lines have gaps or stale valves: {status:?}"),
     );
     // The background hog got the time nobody else used.
-    let hog = o.line("hog: spinning at 5 s").and_then(|l| {
-        l.split("CPU time ")
-            .nth(1)
-            .and_then(|r| r.split(' ').next())
-            .and_then(|ms| ms.parse::<u64>().ok())
-    });
+    let hog = hog_cpu_ms(&o, 5);
     check(
         &o,
         hog.is_some_and(|ms| ms > 1_000),

@@ -714,42 +714,25 @@ fn create_port(ctx: &mut StartContext<Warden>, p: &PortMap) -> Result<(), Error>
 }
 
 /// After a restart the previous life's processes may have died holding these locks.
-#[allow(unsafe_code)] // forcing spin locks open
 fn release_previous_locks() {
-    if DATA.is_locked() {
-        // SAFETY: runs on the initialisation thread of a (re)started partition before any
-        // process exists; every thread of the previous life died with its task, so no guard
-        // of this lock is alive.
-        unsafe { DATA.force_unlock() };
+    /// Opens `lock` if a dead thread left it locked.
+    #[allow(unsafe_code)] // forcing a spin lock open
+    fn force_open<T>(lock: &spin::Mutex<T>) {
+        if lock.is_locked() {
+            // SAFETY: runs on the initialisation thread of a (re)started partition before
+            // any process exists; every thread of the previous life died with its task, so
+            // no guard of this lock is alive.
+            unsafe { lock.force_unlock() };
+        }
     }
-    if IMAGES.is_locked() {
-        // SAFETY: as above.
-        unsafe { IMAGES.force_unlock() };
-    }
-    if RUNNING.is_locked() {
-        // SAFETY: as above.
-        unsafe { RUNNING.force_unlock() };
-    }
-    if AREAS.is_locked() {
-        // SAFETY: as above.
-        unsafe { AREAS.force_unlock() };
-    }
-    if SCRATCH.is_locked() {
-        // SAFETY: as above.
-        unsafe { SCRATCH.force_unlock() };
-    }
-    if RUNTIME.is_locked() {
-        // SAFETY: as above.
-        unsafe { RUNTIME.force_unlock() };
-    }
-    if WORKSPACE.is_locked() {
-        // SAFETY: as above.
-        unsafe { WORKSPACE.force_unlock() };
-    }
-    if LIFE.is_locked() {
-        // SAFETY: as above.
-        unsafe { LIFE.force_unlock() };
-    }
+    force_open(&DATA);
+    force_open(&IMAGES);
+    force_open(&RUNNING);
+    force_open(&AREAS);
+    force_open(&SCRATCH);
+    force_open(&RUNTIME);
+    force_open(&WORKSPACE);
+    force_open(&LIFE);
     // The previous life's control process is gone with its frame.
     LIFE.lock().0 = None;
 }

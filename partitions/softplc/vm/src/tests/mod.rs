@@ -57,6 +57,43 @@ pub struct Outcome {
     pub stack: Vec<u64>,
 }
 
+/// Memory for one machine of [`STACK`] cells, [`CALLS`] call and [`TRIES`] try frames.
+pub struct VmMemory {
+    data: Vec<u8>,
+    stack: [u64; STACK],
+    calls: [CallFrame; CALLS],
+    tries: [TryFrame; TRIES],
+}
+
+impl VmMemory {
+    /// Memory for `bytes`' image (its data size).
+    pub fn for_image(bytes: &[u8]) -> Self {
+        let image = Image::parse(bytes).expect("parse");
+        Self {
+            data: vec![0u8; image.data_size() as usize],
+            stack: [0; STACK],
+            calls: [CallFrame::EMPTY; CALLS],
+            tries: [TryFrame::EMPTY; TRIES],
+        }
+    }
+
+    /// A machine running the verified `bytes` in this memory.
+    pub fn machine<'a>(&'a mut self, bytes: &'a [u8]) -> Machine<'a, 'a> {
+        let image = Image::parse(bytes).expect("parse");
+        let verified = verify(&image).unwrap_or_else(|e| panic!("verify: {e}"));
+        Machine::new(
+            verified,
+            Memory {
+                data: &mut self.data,
+                stack: &mut self.stack,
+                calls: &mut self.calls,
+                tries: &mut self.tries,
+            },
+        )
+        .expect("machine")
+    }
+}
+
 /// Runs `cycles` cycles of task 0 on the VM and the model, asserting identical state after
 /// every cycle; returns the last cycle's outcome.
 pub fn run_both(bytes: &[u8], cycles: usize) -> Outcome {

@@ -445,22 +445,8 @@ fn deadline_stops_an_endless_loop_inside_try_and_is_not_caught() {
         c.bind(handler);
         c.drop_();
     });
-    let image = Image::parse(&bytes).unwrap();
-    let verified = verify(&image).unwrap();
-    let mut data = [0u8; DATA as usize];
-    let mut stack = [0u64; 8];
-    let mut calls = [CallFrame::EMPTY; 2];
-    let mut tries = [TryFrame::EMPTY; 1];
-    let mut vm = Machine::new(
-        verified,
-        Memory {
-            data: &mut data,
-            stack: &mut stack,
-            calls: &mut calls,
-            tries: &mut tries,
-        },
-    )
-    .unwrap();
+    let mut memory = VmMemory::for_image(&bytes);
+    let mut vm = memory.machine(&bytes);
     // The clock is asked once per DEADLINE_CHECK_EVERY instructions; it "expires" at the
     // third question.
     let mut asked = 0;
@@ -478,22 +464,10 @@ fn deadline_stops_an_endless_loop_inside_try_and_is_not_caught() {
 #[test]
 fn a_cycle_shorter_than_the_check_interval_never_reads_the_clock() {
     let bytes = program_with(100, |c, _| c.nop());
-    let image = Image::parse(&bytes).unwrap();
-    let verified = verify(&image).unwrap();
-    let mut data = [0u8; DATA as usize];
-    let mut stack = [0u64; 8];
-    let mut calls = [CallFrame::EMPTY; 2];
-    let mut tries = [TryFrame::EMPTY; 1];
-    let mut vm = Machine::new(
-        verified,
-        Memory {
-            data: &mut data,
-            stack: &mut stack,
-            calls: &mut calls,
-            tries: &mut tries,
-        },
-    )
-    .unwrap();
-    let result = vm.run_cycle_until(0, 0, || panic!("asked the clock"));
-    assert!(result.is_ok());
+    let mut memory = VmMemory::for_image(&bytes);
+    let mut vm = memory.machine(&bytes);
+    assert!(
+        vm.run_cycle_until(0, 0, || panic!("asked the clock"))
+            .is_ok()
+    );
 }
