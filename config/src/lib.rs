@@ -67,6 +67,8 @@
 //! plc.online = { request = "cmd", response = "reply", access = "monitor" }
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
+//! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
+//! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -140,6 +142,21 @@
 //! runtime logs once a second; names are checked against the compiled program. Cyclic tasks
 //! must have an INTERVAL that is a multiple of the major frame of every schedule that gives
 //! the partition windows (checked when the program is compiled).
+//!
+//! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
+//! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,
+//! whose first string is the absolute path of a static executable in the initramfs (such
+//! as `/bin/busybox`); `guest.env` its environment (`NAME=value` strings; default
+//! `PATH=/bin`, `HOME=/`, `TERM=dumb`); together at most 64 strings and 8192 bytes, no NUL
+//! bytes. `cargo xtask` builds the partition's initramfs (a cpio "newc" archive: Debian's
+//! `busybox-static` as `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`,
+//! `/etc/passwd`, `/etc/group`, an `/init` script, and these keys in `/etc/guest/init` and
+//! `/etc/guest/env`) as its data entry. The guest runs its processes as child tasks backed
+//! by its memory pool (the part of `memory` its image, initramfs and stack leave free, see
+//! `protocol::layout::POOL_BASE`), so it needs the abilities `create_task`,
+//! `create_thread` and `map`, and its `kernel_tasks`, `kernel_threads` and
+//! `kernel_memory` pay for its processes' tasks, threads and page tables. A partition has
+//! either `plc` or `guest` keys, not both.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

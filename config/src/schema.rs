@@ -82,6 +82,14 @@ pub struct Partition {
     #[serde(default)]
     pub health: Named<String>,
     pub plc: Option<Spanned<Plc>>,
+    pub guest: Option<Spanned<Guest>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Guest {
+    pub init: Vec<Spanned<String>>,
+    pub env: Option<Vec<Spanned<String>>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -59,7 +59,24 @@ pub struct Partition {
     pub health: HealthTable,
     /// Its PLC program and process-image mapping (`plc.*`), if it runs the soft-PLC.
     pub plc: Option<Plc>,
+    /// Its first Linux process (`guest.*`), if it runs the paravirtualized guest.
+    pub guest: Option<Guest>,
 }
+
+/// What a guest partition starts: `argv` and the environment of its first process
+/// (written into its initramfs by `cargo xtask`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Guest {
+    pub init: Vec<String>,
+    pub env: Vec<String>,
+}
+
+/// The environment of a guest's first process without `guest.env`.
+pub const GUEST_DEFAULT_ENV: &[&str] = &["PATH=/bin", "HOME=/", "TERM=dumb"];
+/// Most strings `guest.init` and `guest.env` may have together, and most bytes (the
+/// guest's room for them on the process's initial stack, with its auxiliary vector).
+pub const GUEST_MAX_STRINGS: usize = 64;
+pub const GUEST_MAX_BYTES: usize = 8192;
 
 /// A soft-PLC partition's program and how its ports meet its process image.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -212,9 +229,10 @@ impl System {
                         })
                         .collect(),
                     health: p.health,
-                    // The binary form does not carry it: it travels in the partition's
-                    // data entry (the PLC package) instead.
+                    // The binary form carries neither: they travel in the partition's data
+                    // entry (the PLC package, the guest's initramfs) instead.
                     plc: None,
+                    guest: None,
                 })
                 .collect(),
             segments: view

@@ -380,6 +380,10 @@ impl Validator<'_, '_> {
                 .plc
                 .as_ref()
                 .and_then(|plc| self.plc(plc, &path.key("plc"), &own_ports));
+            let guest = raw
+                .guest
+                .as_ref()
+                .and_then(|guest| self.guest(raw, guest, &path.key("guest"), abilities));
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -399,9 +403,88 @@ impl Validator<'_, '_> {
                 ports: own_ports,
                 health,
                 plc,
+                guest,
             });
         }
         (partitions, times, ports)
+    }
+
+    /// A guest partition's first process (see the crate documentation).
+    fn guest(
+        &mut self,
+        raw: &schema::Partition,
+        guest: &Spanned<schema::Guest>,
+        path: &KeyPath,
+        abilities: Abilities,
+    ) -> Option<Guest> {
+        let before = self.r.diagnostics.len();
+        let g = guest.get_ref();
+        let init_path = path.key("init");
+        if raw.plc.is_some() {
+            self.error(
+                start(guest),
+                path,
+                "a partition runs either the soft-PLC (`plc`) or the guest (`guest`), not both",
+            );
+        }
+        let needed = Abilities::CREATE_TASK | Abilities::CREATE_THREAD | Abilities::MAP;
+        if !abilities.contains(needed) {
+            self.error(
+                start(guest),
+                path,
+                "a guest partition needs the abilities `create_task`, `create_thread` and `map` (its processes are child tasks backed by its memory pool)",
+            );
+        }
+        match g.init.first() {
+            None => self.error(
+                start(guest),
+                &init_path,
+                "`init` needs at least the program to run, e.g. [\"/bin/busybox\", \"echo\", \"hello\"]",
+            ),
+            Some(program) if !program.get_ref().starts_with('/') => self.error(
+                start(program),
+                &init_path.index(0),
+                format!(
+                    "`{}` is not an absolute path in the initramfs (such as `/bin/busybox`)",
+                    program.get_ref()
+                ),
+            ),
+            Some(_) => {}
+        }
+        let env: Vec<Spanned<String>> = g.env.clone().unwrap_or_default();
+        let mut bytes = 0;
+        for (key, list) in [("init", &g.init), ("env", &env)] {
+            for (i, s) in list.iter().enumerate() {
+                bytes += s.get_ref().len() + 1;
+                if s.get_ref().contains('\0') {
+                    self.error(start(s), &path.key(key).index(i), "contains a NUL byte");
+                }
+                if key == "env" && !s.get_ref().contains('=') {
+                    self.error(
+                        start(s),
+                        &path.key(key).index(i),
+                        format!("`{}` is not NAME=value", s.get_ref()),
+                    );
+                }
+            }
+        }
+        let strings = g.init.len() + env.len();
+        if strings > GUEST_MAX_STRINGS || bytes > GUEST_MAX_BYTES {
+            self.error(
+                start(guest),
+                path,
+                format!(
+                    "`init` and `env` have {strings} strings of {bytes} bytes; at most {GUEST_MAX_STRINGS} strings and {GUEST_MAX_BYTES} bytes"
+                ),
+            );
+        }
+        (self.r.diagnostics.len() == before).then(|| Guest {
+            init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
+            env: match &g.env {
+                Some(env) => env.iter().map(|s| s.get_ref().clone()).collect(),
+                None => GUEST_DEFAULT_ENV.iter().map(|s| s.to_string()).collect(),
+            },
+        })
     }
 
     /// A soft-PLC partition's program files and port mapping (see the crate documentation).
