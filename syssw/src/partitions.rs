@@ -3,7 +3,8 @@
 //! creates its resource partition (kernel-memory quota); [`instantiate`] (at start and at
 //! every restart) creates the task (abilities, MCP), maps the segments with their rights,
 //! its data entry read-only at `DATA_BASE`, its memory pool (partitions with the `map`
-//! ability: the rest of its `memory`) read-write at `POOL_BASE`, a stack holding the start
+//! ability: the rest of its `memory`) read-write at `POOL_BASE` and read-execute at
+//! `POOL_EXEC_BASE`, a stack holding the start
 //! record, grants
 //! I/O ports and interrupts, maps the shared-memory segments and creates the first thread
 //! (inactive until started).
@@ -17,7 +18,7 @@ use user_rt::abi::syscall::{
 };
 use user_rt::partition::StartInfo;
 use user_rt::protocol::layout::{
-    DATA_BASE, POOL_BASE, STACK_TOP, shared_address as layout_address,
+    DATA_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address as layout_address,
 };
 use user_rt::sys;
 
@@ -297,6 +298,14 @@ pub fn instantiate(
         }
         map_physical_chunked(Some(task), pool_frames, POOL_BASE, pages, PageRights::WRITE)
             .map_err(LoadError::Spawn)?;
+        map_physical_chunked(
+            Some(task),
+            pool_frames,
+            POOL_EXEC_BASE,
+            pages,
+            PageRights::EXECUTE,
+        )
+        .map_err(LoadError::Spawn)?;
     }
 
     for range in p.io_ports() {

@@ -7,7 +7,8 @@
 //!
 //! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
 //! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
-//! address-space bookkeeping ([`memory`]) and page pool ([`pool`]), the process state
+//! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
+//! which process page ([`backing`]), the process state
 //! ([`process`]) and the system calls ([`syscall`]); the partition program (`main.rs`) only
 //! moves messages, maps pages and writes the log.
 //!
@@ -23,6 +24,7 @@
 //!   ENOSYS`, once per call number and process.
 #![cfg_attr(not(test), no_std)]
 
+pub mod backing;
 pub mod console;
 pub mod cpio;
 pub mod elf;

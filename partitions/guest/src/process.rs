@@ -85,6 +85,17 @@ impl<'a> Process<'a> {
         }
     }
 
+    /// Sets the name (`prctl(PR_SET_NAME)`; cut to [`NAME_LEN`] bytes).
+    pub fn set_name(&mut self, name: &str) {
+        let mut len = name.len().min(NAME_LEN);
+        while !name.is_char_boundary(len) {
+            len -= 1;
+        }
+        self.name = [0; NAME_LEN];
+        self.name[..len].copy_from_slice(&name.as_bytes()[..len]);
+        self.name_len = len;
+    }
+
     pub fn name(&self) -> &str {
         core::str::from_utf8(&self.name[..self.name_len]).unwrap_or("?")
     }

@@ -11,6 +11,7 @@
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
+//! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
 //! `getgid`, `getegid`), `exit`, `exit_group`. `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
@@ -344,6 +345,7 @@ fn call<'a>(
             p.umask = a[0] as u32 & 0o777;
             Ok(old as u64)
         }
+        nr::prctl => prctl(p, host, a[0], a[1]),
         nr::sched_yield => Ok(0),
         nr::getpid | nr::gettid | nr::getpgrp => Ok(p.pid as u64),
         nr::getppid => Ok(p.ppid as u64),
@@ -842,6 +844,41 @@ fn arch_prctl(
             Ok(0)
         }
         _ => Err(Errno::EINVAL),
+    }
+}
+
+fn prctl(p: &mut Process, host: &mut impl Host, option: u64, arg: u64) -> SysResult<u64> {
+    const PR_SET_NAME: u64 = 15;
+    const PR_GET_NAME: u64 = 16;
+    match option {
+        PR_SET_NAME => {
+            let mut buf = [0u8; 16];
+            let name = match read_cstr(p, host, arg, &mut buf) {
+                Ok(name) => name,
+                // Longer names are cut (Linux copies 16 bytes and ends them with a NUL).
+                Err(Errno::ENAMETOOLONG) => &buf[..crate::process::NAME_LEN],
+                Err(e) => return Err(e),
+            };
+            let name = core::str::from_utf8(name).unwrap_or("?");
+            p.set_name(name);
+            Ok(0)
+        }
+        PR_GET_NAME => {
+            let mut buf = [0u8; 16];
+            buf[..p.name().len()].copy_from_slice(p.name().as_bytes());
+            write_user(p, host, arg, &buf)?;
+            Ok(0)
+        }
+        _ => {
+            if p.first_unsupported(nr::prctl) {
+                host.log(format_args!(
+                    "guest: process {} ({}): unsupported prctl option {option}, returning EINVAL",
+                    p.pid,
+                    p.name()
+                ));
+            }
+            Err(Errno::EINVAL)
+        }
     }
 }
 

@@ -418,6 +418,17 @@ fn identity_time_and_signals() {
     );
     assert_eq!(w.word(SCRATCH + 8), 0);
     assert_eq!(w.p.sigmask, 1 << 1, "SIGKILL cannot be blocked");
+    // prctl(PR_SET_NAME) renames the process, PR_GET_NAME reads it back.
+    let name = w.path("a-very-long-process-name");
+    assert_eq!(w.call(nr::prctl, [15, name, 0, 0, 0, 0]), 0);
+    assert_eq!(w.p.name(), "a-very-long-pro");
+    assert_eq!(w.call(nr::prctl, [16, SCRATCH, 0, 0, 0, 0]), 0);
+    assert_eq!(w.get(SCRATCH, 16), b"a-very-long-pro\0");
+    assert_eq!(w.call(nr::prctl, [38, 1, 0, 0, 0, 0]), err(Errno::EINVAL));
+    assert_eq!(
+        w.host.log,
+        ["guest: process 1 (a-very-long-pro): unsupported prctl option 38, returning EINVAL"]
+    );
 }
 
 #[test]

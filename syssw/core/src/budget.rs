@@ -14,7 +14,7 @@
 use abi::elf::{ElfError, load_segments};
 use abi::syscall::{Abilities, USER_MIN};
 use config::binary::{PartitionView, SystemView};
-use protocol::layout::{DATA_BASE, POOL_BASE, STACK_TOP, shared_address};
+use protocol::layout::{DATA_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address};
 
 const PAGE: u64 = 4096;
 /// Loadable segments an image may have (syssw's limit).
@@ -74,6 +74,7 @@ pub fn start_budget(
         0
     };
     regions.add(POOL_BASE, pool_pages);
+    regions.add(POOL_EXEC_BASE, pool_pages);
     let io = if p.io_ports().next().is_some() {
         IO_BITMAP_PAGES
     } else {
@@ -222,10 +223,10 @@ mod tests {
         let without = start_budget(&system, &a, &elf(0x20_0000, 3 * PAGE), 0).unwrap();
         assert_eq!(without.memory, (3 + 16) * PAGE);
         assert_eq!(without.pool, a.memory - without.memory);
-        // The pool's page tables: its own 512 GiB span (0xb0), so one table per level for
-        // each 2 MiB / 1 GiB / 512 GiB it covers.
+        // The pool's page tables, for each of its two mappings (in their own 512 GiB
+        // spans, 0xb0 and 0xb8): one table per level for each 2 MiB / 1 GiB / 512 GiB.
         let pool_pages = without.pool / PAGE;
-        let tables = pool_pages.div_ceil(512) + pool_pages.div_ceil(512 * 512) + 1;
+        let tables = 2 * (pool_pages.div_ceil(512) + pool_pages.div_ceil(512 * 512) + 1);
         let mut no_pool = Regions::new();
         no_pool.add(0x20_0000, 3);
         no_pool.add(STACK_TOP - 16 * PAGE, 16);

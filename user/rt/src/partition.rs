@@ -7,7 +7,7 @@
 //! through this record.
 
 /// The partition's address space: see [`protocol::layout`].
-pub use protocol::layout::{DATA_BASE, POOL_BASE, SHARED_BASE};
+pub use protocol::layout::{DATA_BASE, POOL_BASE, POOL_EXEC_BASE, SHARED_BASE};
 
 /// `StartInfo::magic`.
 pub const START_MAGIC: u64 = u64::from_le_bytes(*b"WRDNPART");
@@ -35,8 +35,8 @@ pub struct StartInfo {
     pub name: [u8; 32],
     /// Bytes of its data entry mapped at [`DATA_BASE`] (0: none).
     pub data_len: u64,
-    /// Bytes of its memory pool mapped read-write at [`POOL_BASE`] (0: none; only a
-    /// partition with the `map` ability has one).
+    /// Bytes of its memory pool mapped read-write at [`POOL_BASE`] and read-execute at
+    /// [`POOL_EXEC_BASE`] (0: none; only a partition with the `map` ability has one).
     pub pool_len: u64,
 }
 
@@ -117,24 +117,6 @@ impl StartInfo {
         // DATA_BASE read-only before the partition starts and never unmaps or changes them
         // while the partition's task lives.
         unsafe { core::slice::from_raw_parts(DATA_BASE as *const u8, self.data_len as usize) }
-    }
-
-    /// The partition's memory pool (empty without one): its own pages, to map into its
-    /// child tasks.
-    ///
-    /// # Safety
-    /// The caller takes the one reference to this memory for the partition's life (call
-    /// it once): syssw maps the pool for the partition alone and never touches it while
-    /// the task lives.
-    #[allow(unsafe_code)] // memory syssw mapped for this partition
-    pub unsafe fn pool(&self) -> &'static mut [u8] {
-        if self.pool_len == 0 {
-            return &mut [];
-        }
-        // SAFETY: syssw maps `pool_len` bytes at POOL_BASE read-write before the partition
-        // starts and never unmaps them while the task lives; the caller guarantees this is
-        // the only reference.
-        unsafe { core::slice::from_raw_parts_mut(POOL_BASE as *mut u8, self.pool_len as usize) }
     }
 
     pub fn name(&self) -> &str {

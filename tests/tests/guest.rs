@@ -1,0 +1,79 @@
+//! The paravirtualized guest (`partitions/guest`) running Debian's static busybox
+//! (configuration `tests/configs/guest_hello.toml`): partition `echo` runs
+//! `/bin/busybox echo hello`, partition `shell` runs `/bin/sh -c 'echo hello; echo world'`.
+
+use scenarios::{boot, check};
+
+/// The text of the guest log lines of partition `partition` that contain `needle`, without
+/// the kernel's time stamp and the partition prefix (in log order).
+fn guest_lines(o: &xtask::qemu::Outcome, partition: &str, needle: &str) -> Vec<String> {
+    let prefix = format!("[{partition}] ");
+    o.lines
+        .iter()
+        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text.to_string()))
+        .filter(|text| text.contains(needle))
+        .collect()
+}
+
+#[test]
+fn guest_hello() {
+    let o = boot("guest_hello");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the shell guest's init ends the run",
+    );
+    for (partition, command, output) in [
+        ("echo", "/bin/busybox echo hello", &["hello"][..]),
+        (
+            "shell",
+            "/bin/sh -c echo hello; echo world",
+            &["hello", "world"][..],
+        ),
+    ] {
+        let started = guest_lines(&o, partition, "started: ");
+        check(
+            &o,
+            started == [format!("guest: process 1 (busybox) started: {command}")],
+            &format!("{partition}: start line {started:?}"),
+        );
+        let printed = guest_lines(&o, partition, "guest: process 1 std");
+        let expected: Vec<String> = output
+            .iter()
+            .map(|line| format!("guest: process 1 stdout: {line}"))
+            .collect();
+        check(
+            &o,
+            printed == expected,
+            &format!("{partition}: printed {printed:?}, expected {expected:?}"),
+        );
+        let exits = guest_lines(&o, partition, "guest: process 1 exited");
+        check(
+            &o,
+            exits == ["guest: process 1 exited with status 0"],
+            &format!("{partition}: exit lines {exits:?}"),
+        );
+        let unsupported = guest_lines(&o, partition, "unsupported system call");
+        check(
+            &o,
+            unsupported.is_empty(),
+            &format!("{partition}: busybox needed calls the guest lacks: {unsupported:?}"),
+        );
+        check(
+            &o,
+            guest_lines(&o, partition, "killed by signal").is_empty(),
+            &format!("{partition}: a process was killed"),
+        );
+    }
+    // Each guest reported its init's end to the health monitor.
+    for partition in ["echo", "shell"] {
+        check(
+            &o,
+            o.lines
+                .iter()
+                .any(|l| l.contains(&format!("partition={partition} error=application_error"))),
+            &format!("no health report of {partition}'s init ending"),
+        );
+    }
+}
