@@ -1,6 +1,8 @@
 //! The paravirtualized guest (`partitions/guest`) running Debian's static busybox
 //! (configuration `tests/configs/guest_hello.toml`): partition `echo` runs
-//! `/bin/busybox echo hello`, partition `shell` runs `/bin/sh -c 'echo hello; echo world'`.
+//! `/bin/busybox echo hello`, partition `cat` runs `/bin/cat /etc/passwd` (the initramfs's
+//! file, written by `cargo xtask`), partition `shell` runs
+//! `/bin/sh -c 'echo hello; echo world'`.
 
 use scenarios::{boot, check};
 
@@ -26,6 +28,11 @@ fn guest_hello() {
     );
     for (partition, command, output) in [
         ("echo", "/bin/busybox echo hello", &["hello"][..]),
+        (
+            "cat",
+            "/bin/cat /etc/passwd",
+            &["root:x:0:0:root:/root:/bin/sh"][..],
+        ),
         (
             "shell",
             "/bin/sh -c echo hello; echo world",
@@ -67,7 +74,7 @@ fn guest_hello() {
         );
     }
     // Each guest reported its init's end to the health monitor.
-    for partition in ["echo", "shell"] {
+    for partition in ["echo", "cat", "shell"] {
         check(
             &o,
             o.lines

@@ -6,6 +6,7 @@
 //! partition program implements with kernel calls and the tests with a model.
 //!
 //! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`,
+//! `sendfile` (from an initramfs file to the console),
 //! `open`, `openat`, `close`, `lseek`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
@@ -201,6 +202,7 @@ fn call<'a>(
     match number {
         nr::read => read(p, host, a[0], a[1], a[2]),
         nr::write => write(p, host, a[0], a[1], a[2]),
+        nr::sendfile => sendfile(p, host, a[0], a[1], a[2], a[3]),
         nr::readv | nr::writev => vectored(p, host, number == nr::writev, a[0], a[1], a[2]),
         nr::open => openat(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1]),
         nr::openat => openat(p, fs, host, a[0], a[1], a[2]),
@@ -401,6 +403,45 @@ fn write(p: &mut Process, host: &mut impl Host, fd: u64, buf: u64, count: u64) -
         done += n;
     }
     Ok(total as u64)
+}
+
+fn sendfile(
+    p: &mut Process,
+    host: &mut impl Host,
+    out_fd: u64,
+    in_fd: u64,
+    offset_ptr: u64,
+    count: u64,
+) -> SysResult<u64> {
+    let stream = match p.file(out_fd).ok_or(Errno::EBADF)? {
+        File::Console(stream) => stream,
+        File::Initramfs { .. } => return Err(Errno::EBADF), // opened read-only
+    };
+    let File::Initramfs { entry, offset } = p.file(in_fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::EINVAL); // no console input to copy
+    };
+    if entry.is_dir() {
+        return Err(Errno::EINVAL);
+    }
+    let from = if offset_ptr != 0 {
+        read_u64(p, host, offset_ptr)?
+    } else {
+        offset
+    };
+    let start = from.min(entry.data.len() as u64) as usize;
+    let n = (count as usize)
+        .min(entry.data.len() - start)
+        .min(MAX_TRANSFER);
+    if offset_ptr != 0 {
+        write_user(p, host, offset_ptr, &(from + n as u64).to_le_bytes())?;
+    } else {
+        p.files[in_fd as usize] = Some(File::Initramfs {
+            entry,
+            offset: from + n as u64,
+        });
+    }
+    host.console_write(p.pid, stream, &entry.data[start..start + n]);
+    Ok(n as u64)
 }
 
 fn vectored(

@@ -518,6 +518,31 @@ fn files_of_the_initramfs() {
         w.call(nr::write, [fd, SCRATCH, 1, 0, 0, 0]),
         err(Errno::EBADF)
     );
+    // sendfile to the console: from the file offset (advancing it), or from *offset.
+    assert_eq!(w.call(nr::lseek, [fd, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::sendfile, [1, fd, 0, 5, 0, 0]), 5);
+    assert_eq!(w.call(nr::lseek, [fd, 0, 1, 0, 0, 0]), 5);
+    w.put(SCRATCH, &2u64.to_le_bytes());
+    assert_eq!(w.call(nr::sendfile, [1, fd, SCRATCH, 100, 0, 0]), 28);
+    assert_eq!(w.word(SCRATCH), 30);
+    assert_eq!(w.call(nr::sendfile, [1, fd, 0, 100, 0, 0]), 25);
+    assert_eq!(
+        w.call(nr::sendfile, [1, fd, 0, 100, 0, 0]),
+        0,
+        "end of file"
+    );
+    assert_eq!(
+        w.call(nr::sendfile, [fd, 1, 0, 100, 0, 0]),
+        err(Errno::EBADF)
+    );
+    assert_eq!(
+        w.call(nr::sendfile, [1, 0, 0, 100, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.host.stdout(),
+        "root:ot:x:0:0:root:/root:/bin/sh\nx:0:0:root:/root:/bin/sh\n"
+    );
     assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
     assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), err(Errno::EBADF));
     // Read-only file system; missing files; directories.
