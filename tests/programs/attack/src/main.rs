@@ -137,7 +137,7 @@ fn fault_ignore(priority: u8) -> ! {
     loop {
         // At the partition's own priority, FIFO behind this thread: it faults when this
         // one yields, and syssw kills it before the next is created.
-        match sys::thread_create(None, faulty as usize as u64, stack_top, priority, 0)
+        match sys::thread_create(None, faulty as *const () as u64, stack_top, priority, 0)
             .and_then(|t| sys::thread_start(t).map(|()| t))
         {
             Ok(_) => {
