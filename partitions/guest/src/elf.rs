@@ -243,8 +243,10 @@ impl LoadPlan {
         &self.segments[..self.count]
     }
 
-    /// The page runs to map, in ascending order, disjoint: each segment's pages, a page
-    /// shared by two segments once with both segments' rights.
+    /// The page runs to map, in ascending order, disjoint: each segment's pages; a page
+    /// shared by two segments once, with the later segment's rights (as on Linux, whose
+    /// mapping of the later segment replaces the earlier one's there) and both segments'
+    /// bytes.
     pub fn page_runs(&self) -> ([PageRun; MAX_SEGMENTS * 2], usize) {
         let mut runs = [PageRun::default(); MAX_SEGMENTS * 2];
         let mut n = 0;
@@ -254,12 +256,12 @@ impl LoadPlan {
                 let last = &mut runs[n - 1];
                 let last_end = last.start + last.pages * PAGE;
                 if last_end > start {
-                    // The shared page: split it off the previous run with both rights.
+                    // The shared page: split it off the previous run.
                     last.pages -= 1;
                     let shared = PageRun {
                         start,
                         pages: 1,
-                        rights: last.rights | s.rights,
+                        rights: s.rights,
                     };
                     if last.pages == 0 {
                         n -= 1;
@@ -434,7 +436,7 @@ pub(crate) mod tests {
     }
 
     #[test]
-    fn a_page_shared_by_two_segments_gets_both_rights() {
+    fn a_page_shared_by_two_segments_gets_the_later_ones_rights() {
         let e = elf(
             ET_EXEC,
             0x40_0100,
@@ -462,7 +464,13 @@ pub(crate) mod tests {
             ],
             0x2000,
         );
+        let mut e = e;
+        e[0x1700] = 0xc3;
+        e[0x1800..0x1808].copy_from_slice(b"DATADATA");
         let p = LoadPlan::new(&e).unwrap();
+        let mut page = [0u8; 4096];
+        p.fill(&e, 0x40_1000, &mut page);
+        assert_eq!((page[0x700], &page[0x800..0x808]), (0xc3, &b"DATADATA"[..]));
         let (runs, n) = p.page_runs();
         assert_eq!(
             &runs[..n],
@@ -475,7 +483,7 @@ pub(crate) mod tests {
                 PageRun {
                     start: 0x40_1000,
                     pages: 1,
-                    rights: Rights::all()
+                    rights: Rights::READ | Rights::WRITE
                 },
                 PageRun {
                     start: 0x40_2000,

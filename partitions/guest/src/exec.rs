@@ -29,8 +29,9 @@ pub enum ExecError {
     /// Too many areas, or an area outside user space.
     Layout(AreaError),
     Stack(StackError),
-    /// The guest is out of memory for its pages.
-    OutOfMemory,
+    /// Its memory cannot be mapped: `ENOMEM` (the guest is out of memory), `EACCES` (a
+    /// segment both writable and executable, which the guest never maps).
+    Memory(Errno),
     NoArguments,
 }
 
@@ -43,7 +44,10 @@ impl core::fmt::Display for ExecError {
             Self::Elf(e) => write!(f, "{e}"),
             Self::Layout(e) => write!(f, "its memory layout does not fit: {e:?}"),
             Self::Stack(e) => write!(f, "its arguments do not fit the stack: {e:?}"),
-            Self::OutOfMemory => write!(f, "the guest is out of memory"),
+            Self::Memory(Errno::EACCES) => {
+                write!(f, "a segment is writable and executable (never mapped)")
+            }
+            Self::Memory(_) => write!(f, "the guest is out of memory"),
             Self::NoArguments => write!(f, "no program given"),
         }
     }
@@ -87,19 +91,18 @@ pub fn load<'a>(
     let mut page = [0u8; PAGE as usize];
     for run in &runs[..n] {
         host.map_zeroed(run.start, run.pages, run.rights)
-            .map_err(|_| ExecError::OutOfMemory)?;
+            .map_err(ExecError::Memory)?;
         for i in 0..run.pages {
             let at = run.start + i * PAGE;
             plan.fill(elf, at, &mut page);
             if page.iter().any(|&b| b != 0) {
-                host.write_user(at, &page)
-                    .map_err(|_| ExecError::OutOfMemory)?;
+                host.write_user(at, &page).map_err(ExecError::Memory)?;
             }
         }
     }
     let stack = process.add_stack().map_err(ExecError::Layout)?;
     host.map_zeroed(stack.start, (stack.end - stack.start) / PAGE, stack.rights)
-        .map_err(|_| ExecError::OutOfMemory)?;
+        .map_err(ExecError::Memory)?;
     let mut aux = AuxInfo {
         phdr: plan.phdr,
         phnum: plan.phnum,
@@ -113,7 +116,7 @@ pub fn load<'a>(
     let built =
         stack::build(&mut top, STACK_TOP, argv, envp, path, &aux).map_err(ExecError::Stack)?;
     host.write_user(STACK_TOP - built.used as u64, &top[ARG_MAX - built.used..])
-        .map_err(|_| ExecError::OutOfMemory)?;
+        .map_err(ExecError::Memory)?;
     Ok(Loaded {
         process,
         entry: plan.entry,

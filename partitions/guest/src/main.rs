@@ -400,8 +400,8 @@ impl Host for GuestHost<'_> {
     }
 
     fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
-        if rights.contains(Rights::WRITE | Rights::EXECUTE) {
-            // No page is writable and executable at once (the pool's two aliases).
+        if rights.writable_and_executable() {
+            // The pool's two aliases are read-write and read-execute: no source for it.
             return Err(Errno::EACCES);
         }
         let result = self.back(start, pages, rights);
@@ -422,7 +422,7 @@ impl Host for GuestHost<'_> {
     }
 
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
-        if rights.contains(Rights::WRITE | Rights::EXECUTE) {
+        if rights.writable_and_executable() {
             return Err(Errno::EACCES);
         }
         for i in 0..pages {

@@ -64,6 +64,11 @@ impl Rights {
     pub const fn bits(self) -> u8 {
         self.0
     }
+    /// Writable and executable at once: the guest never maps such a page (W^X), so
+    /// `mmap` and `mprotect` asking for it fail with `EACCES`.
+    pub const fn writable_and_executable(self) -> bool {
+        self.contains(Self::WRITE) && self.contains(Self::EXECUTE)
+    }
     /// Whether pages with these rights can be mapped (every mapped page is readable on
     /// x86-64; `PROT_NONE` areas stay unmapped).
     pub const fn accessible(self) -> bool {

@@ -16,6 +16,8 @@
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
 //! `getgid`, `getegid`), `exit`, `exit_group`. `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
+//! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
+//! both fail with `EACCES`.
 //! A CPU exception (page fault outside the process's memory, invalid opcode, ...) kills the
 //! process with the matching signal: no signal handler is delivered yet.
 
@@ -45,7 +47,8 @@ pub trait Host {
     /// Copies `data` into the process's memory at `address` (checked writable areas).
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno>;
     /// Backs `pages` pages at `start` with zeroed memory and maps them with `rights`
-    /// (`ENOMEM` when the guest is out of memory; then nothing is mapped).
+    /// (`ENOMEM` when the guest is out of memory, `EACCES` for rights it never grants, such
+    /// as writable and executable at once; then nothing is mapped).
     fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
     /// Unmaps `pages` pages at `start` and frees their memory (pages never backed are
     /// skipped).
@@ -754,6 +757,9 @@ fn mmap(
     flags: u64,
 ) -> SysResult<u64> {
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
     if len == 0 || flags & (linux::MAP_SHARED | linux::MAP_PRIVATE) == 0 {
         return Err(Errno::EINVAL);
     }
@@ -796,9 +802,11 @@ fn mmap(
             kind: Kind::Anonymous,
         })
         .map_err(area_error)?;
-    if rights.accessible() && host.map_zeroed(start, len / PAGE, rights).is_err() {
+    if rights.accessible()
+        && let Err(e) = host.map_zeroed(start, len / PAGE, rights)
+    {
         let _ = p.areas.remove(start, start + len, |_| ());
-        return Err(Errno::ENOMEM);
+        return Err(e);
     }
     Ok(start)
 }
@@ -835,6 +843,9 @@ fn mprotect(
     prot: u64,
 ) -> SysResult<u64> {
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
     if !start.is_multiple_of(PAGE) {
         return Err(Errno::EINVAL);
     }

@@ -268,7 +268,7 @@ fn what_cannot_start_says_why() {
     let mut tiny = Model::new(3);
     assert_eq!(
         load(&[b"/bin/busybox"], &mut tiny),
-        Err(ExecError::OutOfMemory)
+        Err(ExecError::Memory(Errno::ENOMEM))
     );
 }
 
@@ -471,6 +471,15 @@ fn anonymous_memory() {
     assert_eq!(w.host.budget, before);
     assert_eq!(w.call(nr::mprotect, [r, PAGE, 3, 0, 0, 0]), 0);
     assert_eq!(w.host.budget, before - 1);
+    // Never writable and executable at once.
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 7, 0x22, u64::MAX, 0]),
+        err(Errno::EACCES)
+    );
+    assert_eq!(
+        w.call(nr::mprotect, [r, PAGE, 6, 0, 0, 0]),
+        err(Errno::EACCES)
+    );
     // File mappings, bad flags and exhaustion.
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 1, 0x02, 3, 0]),
