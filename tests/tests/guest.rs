@@ -1,7 +1,7 @@
 //! The paravirtualized guest (`partitions/guest`) running Debian's static busybox
 //! (configuration `tests/configs/guest_hello.toml`): partition `echo` runs
 //! `/bin/busybox echo hello`, partition `cat` runs `/bin/cat /etc/passwd` (the initramfs's
-//! file, written by `cargo xtask`), partition `shell` runs
+//! file, written by `cargo xtask`), partition `ls` runs `/bin/ls /`, partition `shell` runs
 //! `/bin/sh -c 'echo hello; echo world'`.
 
 use scenarios::{boot, check};
@@ -32,6 +32,12 @@ fn guest_hello() {
             "cat",
             "/bin/cat /etc/passwd",
             &["root:x:0:0:root:/root:/bin/sh"][..],
+        ),
+        // The initramfs's root (xtask/src/guest.rs), one name a line: stdout is no terminal.
+        (
+            "ls",
+            "/bin/ls /",
+            &["bin", "dev", "etc", "init", "proc", "root", "tmp"][..],
         ),
         (
             "shell",
@@ -74,7 +80,7 @@ fn guest_hello() {
         );
     }
     // Each guest reported its init's end to the health monitor.
-    for partition in ["echo", "cat", "shell"] {
+    for partition in ["echo", "cat", "ls", "shell"] {
         check(
             &o,
             o.lines

@@ -65,7 +65,14 @@ pub struct Entry<'a> {
     pub data: &'a [u8],
 }
 
-impl Entry<'_> {
+impl<'a> Entry<'a> {
+    /// The normalised path without the leading `/`: `""` for the root (stored as `.`), no
+    /// trailing `/`.
+    pub fn path(&self) -> &'a str {
+        let name = self.name.trim_end_matches('/');
+        if name == "." { "" } else { name }
+    }
+
     pub fn file_type(&self) -> u32 {
         self.mode & S_IFMT
     }
@@ -204,13 +211,24 @@ impl<'a> Archive<'a> {
     /// The entry named by the absolute or relative `path` exactly (no `..`, no symbolic
     /// links followed: that is [`crate::vfs`]'s job). `/` is the root directory.
     pub fn get(&self, path: &str) -> Option<Entry<'a>> {
-        let name = path.trim_start_matches('/');
-        let name = name.trim_end_matches('/');
-        self.entries().find(|e| {
-            let e_name = e.name.trim_end_matches('/');
-            e_name == name || (name.is_empty() && e_name == ".")
-        })
+        let path = path.trim_start_matches('/').trim_end_matches('/');
+        self.entries().find(|e| e.path() == path)
     }
+
+    /// The entries directly inside the directory whose [`Entry::path`] is `dir` (`""` is
+    /// the root), in archive order.
+    pub fn children<'d>(&self, dir: &'d str) -> impl Iterator<Item = Entry<'a>> + 'd
+    where
+        'a: 'd,
+    {
+        self.entries()
+            .filter(move |e| !e.path().is_empty() && parent(e.path()) == dir)
+    }
+}
+
+/// The directory part of a normalised path (`"bin/sh"` -> `"bin"`, `"etc"` -> `""`).
+pub fn parent(path: &str) -> &str {
+    path.rfind('/').map_or("", |at| &path[..at])
 }
 
 /// The entries of a checked archive, in order.
@@ -280,6 +298,18 @@ pub(crate) mod tests {
         assert_eq!((bb.data, bb.mode & 0o777), (&b"\x7fELF..."[..], 0o755));
         assert!(a.get("/bin").unwrap().is_dir());
         assert!(a.get("/nothing").is_none());
+        let children: Vec<&str> = a.children("bin").map(|e| e.name).collect();
+        assert_eq!(children, ["bin/busybox", "bin/sh"]);
+        let top: Vec<&str> = a.children("").map(|e| e.name).collect();
+        assert_eq!(
+            top,
+            ["bin"],
+            "etc/passwd has no etc entry: not a child of the root"
+        );
+        assert_eq!(
+            (parent("bin/sh"), parent("etc"), parent("")),
+            ("bin", "", "")
+        );
     }
 
     #[test]

@@ -7,7 +7,7 @@
 //!
 //! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`,
 //! `sendfile` (from an initramfs file to the console),
-//! `open`, `openat`, `close`, `lseek`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
+//! `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
@@ -217,6 +217,7 @@ fn call<'a>(
             slot.take().map(|_| 0).ok_or(Errno::EBADF)
         }
         nr::lseek => lseek(p, a[0], a[1] as i64, a[2]),
+        nr::getdents64 => getdents64(p, fs, host, a[0], a[1], a[2]),
         nr::stat | nr::lstat => {
             let follow = number == nr::stat;
             let entry = lookup_at(p, fs, host, linux::AT_FDCWD as u64, a[0], follow)?;
@@ -498,6 +499,84 @@ fn lseek(p: &mut Process, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
         offset: new as u64,
     });
     Ok(new as u64)
+}
+
+/// Linux's `getdents64`: the directory's entries from its offset (`.`, `..`, then its
+/// children in archive order; the offset counts entries) as `struct linux_dirent64`
+/// records, as many as fit in `count` bytes.
+fn getdents64<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+) -> SysResult<u64> {
+    const DT_CHR: u8 = 2;
+    const DT_DIR: u8 = 4;
+    const DT_REG: u8 = 8;
+    const DT_LNK: u8 = 10;
+    const HEADER: usize = 19; // d_ino, d_off, d_reclen, d_type
+    let File::Initramfs { entry, offset } = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::ENOTDIR);
+    };
+    if !entry.is_dir() {
+        return Err(Errno::ENOTDIR);
+    }
+    let dir = entry.path();
+    let mut written = 0usize;
+    let mut index = offset;
+    let mut record = [0u8; HEADER + 256];
+    loop {
+        let (ino, kind, name) = match index {
+            0 => (entry.ino, DT_DIR, "."),
+            1 => {
+                let up = fs
+                    .get(crate::cpio::parent(dir))
+                    .map_or(entry.ino, |e| e.ino);
+                (up, DT_DIR, "..")
+            }
+            i => match fs.children(dir).nth(i as usize - 2) {
+                None => break,
+                Some(child) => {
+                    let kind = match child.file_type() {
+                        crate::cpio::S_IFDIR => DT_DIR,
+                        crate::cpio::S_IFLNK => DT_LNK,
+                        S_IFCHR => DT_CHR,
+                        _ => DT_REG,
+                    };
+                    let path = child.path();
+                    (
+                        child.ino,
+                        kind,
+                        &path[path.rfind('/').map_or(0, |at| at + 1)..],
+                    )
+                }
+            },
+        };
+        let name = &name.as_bytes()[..name.len().min(255)];
+        let length = (HEADER + name.len() + 1).next_multiple_of(8);
+        if written + length > count as usize {
+            if written == 0 {
+                return Err(Errno::EINVAL); // the buffer cannot hold one record
+            }
+            break;
+        }
+        record[..length].fill(0);
+        record[..8].copy_from_slice(&(ino as u64).to_le_bytes());
+        record[8..16].copy_from_slice(&(index + 1).to_le_bytes());
+        record[16..18].copy_from_slice(&(length as u16).to_le_bytes());
+        record[18] = kind;
+        record[HEADER..HEADER + name.len()].copy_from_slice(name);
+        write_user(p, host, buf + written as u64, &record[..length])?;
+        written += length;
+        index += 1;
+    }
+    p.files[fd as usize] = Some(File::Initramfs {
+        entry,
+        offset: index,
+    });
+    Ok(written as u64)
 }
 
 /// Looks a path of the process up, relative to `dirfd` (only `AT_FDCWD`, `/`, is

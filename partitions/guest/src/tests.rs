@@ -574,6 +574,47 @@ fn files_of_the_initramfs() {
         w.call(nr::read, [fd, SCRATCH, 1, 0, 0, 0]),
         err(Errno::EISDIR)
     );
+    // getdents64 lists ".", "..", then the directory's entries; small buffers continue.
+    let bin = w.path("/bin");
+    let fd = w.call(nr::open, [bin, 0o200000, 0, 0, 0, 0]);
+    let n = w.call(nr::getdents64, [fd, SCRATCH, 4096, 0, 0, 0]);
+    let names = dirents(&w.get(SCRATCH, n as usize));
+    assert_eq!(
+        names,
+        [(".", 4), ("..", 4), ("busybox", 8), ("sh", 10), ("data", 8)]
+    );
+    assert_eq!(
+        w.call(nr::getdents64, [fd, SCRATCH, 4096, 0, 0, 0]),
+        0,
+        "at the end"
+    );
+    assert_eq!(w.call(nr::lseek, [fd, 0, 0, 0, 0, 0]), 0);
+    let n = w.call(nr::getdents64, [fd, SCRATCH, 60, 0, 0, 0]);
+    assert_eq!(dirents(&w.get(SCRATCH, n as usize)), [(".", 4), ("..", 4)]);
+    assert_eq!(
+        w.call(nr::getdents64, [fd, SCRATCH, 10, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    let n = w.call(nr::getdents64, [fd, SCRATCH, 4096, 0, 0, 0]);
+    assert_eq!(dirents(&w.get(SCRATCH, n as usize)).len(), 3);
+    let passwd = w.path("/etc/passwd");
+    let file = w.call(nr::open, [passwd, 0, 0, 0, 0, 0]);
+    assert_eq!(
+        w.call(nr::getdents64, [file, SCRATCH, 4096, 0, 0, 0]),
+        err(Errno::ENOTDIR)
+    );
+    assert_eq!(
+        w.call(nr::getdents64, [1, SCRATCH, 4096, 0, 0, 0]),
+        err(Errno::ENOTDIR)
+    );
+    let root = w.path("/");
+    let fd = w.call(nr::open, [root, 0o200000, 0, 0, 0, 0]);
+    let n = w.call(nr::getdents64, [fd, SCRATCH, 4096, 0, 0, 0]);
+    let names: Vec<&str> = dirents(&w.get(SCRATCH, n as usize))
+        .iter()
+        .map(|d| d.0)
+        .collect();
+    assert_eq!(names, [".", "..", "bin", "etc"]);
     // stat follows links, lstat does not; newfstatat with AT_EMPTY_PATH is fstat.
     let sh = w.path("/bin/sh");
     assert_eq!(w.call(nr::stat, [sh, SCRATCH, 0, 0, 0, 0]), 0);
@@ -615,6 +656,24 @@ fn files_of_the_initramfs() {
         last = w.call(nr::open, [passwd, 0, 0, 0, 0, 0]);
     }
     assert_eq!(last, err(Errno::EMFILE));
+}
+
+/// The (name, type) of each `linux_dirent64` record in `bytes`.
+fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
+    let mut out = Vec::new();
+    let mut at = 0;
+    while at < bytes.len() {
+        let length = u16::from_le_bytes([bytes[at + 16], bytes[at + 17]]) as usize;
+        assert_eq!(length % 8, 0);
+        let name = &bytes[at + 19..at + length];
+        let name = &name[..name.iter().position(|&b| b == 0).unwrap()];
+        out.push((
+            &*String::from_utf8(name.to_vec()).unwrap().leak(),
+            bytes[at + 18],
+        ));
+        at += length;
+    }
+    out
 }
 
 #[test]
