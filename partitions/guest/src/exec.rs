@@ -32,13 +32,14 @@ pub enum ExecError {
     /// Its memory cannot be mapped: `ENOMEM` (the guest is out of memory), `EACCES` (a
     /// segment both writable and executable, which the guest never maps).
     Memory(Errno),
+    /// `guest.init` is empty (or its initramfs lacks `/etc/guest/init`).
     NoArguments,
 }
 
 impl core::fmt::Display for ExecError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
-            Self::Lookup(e) => write!(f, "cannot look it up (errno {})", e.0),
+            Self::Lookup(e) => write!(f, "{} (errno {})", e.describe(), e.0),
             Self::NotAFile => write!(f, "not a regular file"),
             Self::NotExecutable => write!(f, "no execute permission"),
             Self::Elf(e) => write!(f, "{e}"),
@@ -48,7 +49,7 @@ impl core::fmt::Display for ExecError {
                 write!(f, "a segment is writable and executable (never mapped)")
             }
             Self::Memory(_) => write!(f, "the guest is out of memory"),
-            Self::NoArguments => write!(f, "no program given"),
+            Self::NoArguments => write!(f, "no program given (guest.init)"),
         }
     }
 }

@@ -27,6 +27,20 @@ impl Errno {
     pub const ENOSYS: Self = Self(38);
     pub const ELOOP: Self = Self(40);
 
+    /// Its symbolic name and meaning, for messages.
+    pub const fn describe(self) -> &'static str {
+        match self.0 {
+            1 => "EPERM (operation not permitted)",
+            2 => "ENOENT (no such file or directory)",
+            12 => "ENOMEM (out of memory)",
+            13 => "EACCES (permission denied)",
+            20 => "ENOTDIR (a path component is not a directory)",
+            36 => "ENAMETOOLONG (file name too long)",
+            40 => "ELOOP (too many levels of symbolic links)",
+            _ => "error",
+        }
+    }
+
     /// The value in `rax`.
     pub const fn result(self) -> u64 {
         (-(self.0 as i64)) as u64

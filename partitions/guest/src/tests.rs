@@ -265,6 +265,10 @@ fn what_cannot_start_says_why() {
         Err(ExecError::NotExecutable)
     );
     assert_eq!(load(&[], &mut host), Err(ExecError::NoArguments));
+    assert_eq!(
+        ExecError::Lookup(Errno::ENOENT).to_string(),
+        "ENOENT (no such file or directory) (errno 2)"
+    );
     let mut tiny = Model::new(3);
     assert_eq!(
         load(&[b"/bin/busybox"], &mut tiny),

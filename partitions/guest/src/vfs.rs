@@ -86,9 +86,10 @@ fn resolve<'a>(
     } else {
         *base
     };
-    let parts: &mut dyn Iterator<Item = &[u8]> =
-        &mut path.split(|&b| b == b'/').filter(|p| !p.is_empty());
-    let mut parts = parts.peekable();
+    let mut parts = path
+        .split(|&b| b == b'/')
+        .filter(|p| !p.is_empty())
+        .peekable();
     let mut entry = fs.get("/").ok_or(Errno::ENOENT)?;
     let trailing_slash = path.last() == Some(&b'/');
     while let Some(part) = parts.next() {
