@@ -69,6 +69,7 @@
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
+//! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -148,10 +149,15 @@
 //! whose first string is the absolute path of a static executable in the initramfs (such
 //! as `/bin/busybox`); `guest.env` its environment (`NAME=value` strings; default
 //! `PATH=/bin`, `HOME=/`, `TERM=dumb`); together at most 64 strings and 8192 bytes, no NUL
-//! bytes. `cargo xtask` builds the partition's initramfs (a cpio "newc" archive: Debian's
-//! `busybox-static` as `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`,
-//! `/etc/passwd`, `/etc/group`, an `/init` script, and these keys in `/etc/guest/init` and
-//! `/etc/guest/env`) as its data entry. The guest runs its processes as child tasks backed
+//! bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
+//! initramfs (missing directories are created), each value a file on the host, relative to
+//! the description's directory (its permission bits are kept, owner root); they may replace
+//! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
+//! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `cargo xtask` builds the
+//! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as
+//! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `/etc/passwd`,
+//! `/etc/group`, an `/init` script, these keys in `/etc/guest/init` and `/etc/guest/env`,
+//! and the files) as its data entry. The guest runs its processes as child tasks backed
 //! by its memory pool (the part of `memory` its image, initramfs and stack leave free, see
 //! `protocol::layout::POOL_BASE`), so it needs the abilities `create_task`,
 //! `create_thread` and `map`, and its `kernel_tasks`, `kernel_threads` and

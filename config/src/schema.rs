@@ -90,6 +90,8 @@ pub struct Partition {
 pub struct Guest {
     pub init: Vec<Spanned<String>>,
     pub env: Option<Vec<Spanned<String>>>,
+    #[serde(default)]
+    pub files: Named<String>,
 }
 
 #[derive(Debug, Deserialize)]

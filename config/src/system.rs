@@ -63,13 +63,28 @@ pub struct Partition {
     pub guest: Option<Guest>,
 }
 
-/// What a guest partition starts: `argv` and the environment of its first process
-/// (written into its initramfs by `cargo xtask`).
+/// What a guest partition starts: `argv` and the environment of its first process, and the
+/// files it adds to its initramfs (all written into the initramfs by `cargo xtask`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Guest {
     pub init: Vec<String>,
     pub env: Vec<String>,
+    /// (absolute path in the initramfs, host file), sorted by path.
+    pub files: Vec<(String, SourceFile)>,
 }
+
+/// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
+/// (busybox, its applet links, the guest's command line, `/init`).
+pub const GUEST_RESERVED_PATHS: &[&str] = &[
+    "/bin/busybox",
+    "/bin/sh",
+    "/bin/echo",
+    "/bin/cat",
+    "/bin/ls",
+    "/etc/guest/init",
+    "/etc/guest/env",
+    "/init",
+];
 
 /// The environment of a guest's first process without `guest.env`.
 pub const GUEST_DEFAULT_ENV: &[&str] = &["PATH=/bin", "HOME=/", "TERM=dumb"];

@@ -478,7 +478,60 @@ impl Validator<'_, '_> {
                 ),
             );
         }
+        let base = std::path::Path::new(self.r.file())
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .to_path_buf();
+        let mut files = Vec::new();
+        for (target, source) in &g.files {
+            let at = path.key("files").key(target.get_ref());
+            let t = target.get_ref();
+            let normal = t.starts_with('/')
+                && !t.ends_with('/')
+                && t[1..]
+                    .split('/')
+                    .all(|part| !part.is_empty() && part != "." && part != "..")
+                && !t.contains('\0');
+            if !normal {
+                self.error(
+                    start(target),
+                    &at,
+                    format!(
+                        "`{t}` is not a normalised absolute path of a file (such as `/etc/motd`)"
+                    ),
+                );
+            } else if GUEST_RESERVED_PATHS.contains(&t.as_str()) {
+                self.error(
+                    start(target),
+                    &at,
+                    format!(
+                        "`{t}` is written by the image builder and cannot be replaced (reserved: {})",
+                        GUEST_RESERVED_PATHS.join(", ")
+                    ),
+                );
+            }
+            let resolved = base.join(source.get_ref());
+            if !resolved.is_file() {
+                self.error(
+                    start(source),
+                    &at,
+                    format!(
+                        "no such file `{}` (paths are relative to this description's directory: {})",
+                        source.get_ref(),
+                        resolved.display()
+                    ),
+                );
+            }
+            files.push((
+                t.clone(),
+                SourceFile {
+                    name: source.get_ref().clone(),
+                    path: resolved.to_string_lossy().into_owned(),
+                },
+            ));
+        }
         (self.r.diagnostics.len() == before).then(|| Guest {
+            files,
             init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
             env: match &g.env {
                 Some(env) => env.iter().map(|s| s.get_ref().clone()).collect(),

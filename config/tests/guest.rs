@@ -115,3 +115,48 @@ fn unknown_guest_keys_are_errors() {
         "{errors:?}"
     );
 }
+
+#[test]
+fn files_are_added_from_the_host() {
+    let system = load_ok(&guest(
+        "guest.init = [\"/bin/cat\", \"/etc/motd\"]\nguest.files = { \"/etc/motd\" = \"tests/data/motd.txt\", \"/etc/passwd\" = \"tests/data/motd.txt\" }",
+    ));
+    let g = system.partitions[1].guest.as_ref().unwrap();
+    let targets: Vec<&str> = g.files.iter().map(|(t, _)| t.as_str()).collect();
+    assert_eq!(targets, ["/etc/motd", "/etc/passwd"]);
+    assert_eq!(g.files[0].1.name, "tests/data/motd.txt");
+    assert!(g.files[0].1.path.ends_with("tests/data/motd.txt"));
+}
+
+#[test]
+fn files_need_a_host_file_and_a_free_absolute_path() {
+    let with = |files: &str| {
+        guest(&format!(
+            "guest.init = [\"/bin/sh\"]\nguest.files = {{ {files} }}"
+        ))
+    };
+    expect_some(
+        &with("\"/etc/motd\" = \"tests/data/nope.txt\""),
+        "\"tests/data/nope.txt\"",
+        0,
+        "partitions.b.guest.files.\"/etc/motd\"",
+        "no such file `tests/data/nope.txt`",
+    );
+    for bad in ["etc/motd", "/etc/../motd", "/etc/", "/etc//motd", "/./motd"] {
+        let src = with(&format!("\"{bad}\" = \"tests/data/motd.txt\""));
+        let errors = load(&src).unwrap_err();
+        assert!(
+            errors
+                .iter()
+                .any(|d| d.to_string().contains("is not a normalised absolute path")),
+            "{bad}: {errors:?}"
+        );
+    }
+    let errors = load(&with("\"/bin/busybox\" = \"tests/data/motd.txt\"")).unwrap_err();
+    assert!(
+        errors.iter().any(|d| d
+            .to_string()
+            .contains("`/bin/busybox` is written by the image builder")),
+        "{errors:?}"
+    );
+}

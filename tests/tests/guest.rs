@@ -1,7 +1,8 @@
 //! The paravirtualized guest (`partitions/guest`) running Debian's static busybox
 //! (configuration `tests/configs/guest_hello.toml`): partition `echo` runs
-//! `/bin/busybox echo hello`, partition `cat` runs `/bin/cat /etc/passwd` (the initramfs's
-//! file, written by `cargo xtask`), partition `ls` runs `/bin/ls /`, partition `shell` runs
+//! `/bin/busybox echo hello`, partition `cat` runs `/bin/cat /etc/passwd /etc/motd` (the
+//! first written by `cargo xtask`, the second `tests/configs/guest/motd.txt` added with
+//! `guest.files`), partition `ls` runs `/bin/ls /`, partition `shell` runs
 //! `/bin/sh -c 'echo hello; echo world'`.
 
 use scenarios::{boot, check};
@@ -30,8 +31,11 @@ fn guest_hello() {
         ("echo", "/bin/busybox echo hello", &["hello"][..]),
         (
             "cat",
-            "/bin/cat /etc/passwd",
-            &["root:x:0:0:root:/root:/bin/sh"][..],
+            "/bin/cat /etc/passwd /etc/motd",
+            &[
+                "root:x:0:0:root:/root:/bin/sh",
+                "Welcome to the Warden guest.",
+            ][..],
         ),
         // The initramfs's root (xtask/src/guest.rs), one name a line: stdout is no terminal.
         (

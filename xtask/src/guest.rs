@@ -10,6 +10,7 @@
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
 //! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
+//! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
 //!
 //! Every entry belongs to root, has mtime 0 and a fixed inode number, so the archive only
 //! changes when busybox or the keys do.
@@ -62,6 +63,19 @@ fn check_static(path: &Path, elf: &[u8]) -> Result<()> {
     Ok(())
 }
 
+/// The permission bits of a host file (0644 where the platform has none).
+fn file_mode(path: &Path) -> u32 {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if let Ok(meta) = std::fs::metadata(path) {
+            return meta.permissions().mode() & 0o7777;
+        }
+    }
+    let _ = path;
+    0o644
+}
+
 /// Each string followed by a NUL.
 fn nul_terminated(strings: &[String]) -> Vec<u8> {
     strings.iter().flat_map(|s| s.bytes().chain([0])).collect()
@@ -110,6 +124,28 @@ pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
         dir("root"),
         dir("tmp"),
     ]);
+    for (target, source) in &guest.files {
+        let data = std::fs::read(&source.path)
+            .with_context(|| format!("guest.files: cannot read {}", source.path))?;
+        let mode = file_mode(Path::new(&source.path));
+        let name = target.trim_start_matches('/');
+        if let Some(existing) = entries.iter_mut().find(|e| e.0 == name) {
+            // /etc/passwd or /etc/group (the validator refuses the others).
+            *existing = (name.to_string(), S_IFREG | mode, data);
+            continue;
+        }
+        let mut dir = String::new();
+        for part in name.split('/').take(name.split('/').count() - 1) {
+            if !dir.is_empty() {
+                dir.push('/');
+            }
+            dir.push_str(part);
+            if !entries.iter().any(|e| e.0 == dir) {
+                entries.push((dir.clone(), S_IFDIR | 0o755, Vec::new()));
+            }
+        }
+        entries.push((name.to_string(), S_IFREG | mode, data));
+    }
     let inputs = entries
         .into_iter()
         .enumerate()
@@ -138,7 +174,52 @@ mod tests {
         Guest {
             init: vec!["/bin/busybox".into(), "echo".into(), "it's".into()],
             env: vec!["PATH=/bin".into()],
+            files: Vec::new(),
         }
+    }
+
+    #[test]
+    fn files_are_added_with_their_directories() {
+        let dir = std::env::temp_dir().join(format!("xtask-guest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let source = |name: &str, text: &str| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).unwrap();
+            config::system::SourceFile {
+                name: name.into(),
+                path: path.to_string_lossy().into_owned(),
+            }
+        };
+        let mut g = hello();
+        g.files = vec![
+            (
+                "/etc/passwd".into(),
+                source("passwd", "root:x:0:0::/:/bin/sh\n"),
+            ),
+            ("/opt/app/run.sh".into(), source("run.sh", "echo hi\n")),
+        ];
+        let bytes = initramfs(b"ELF", &g).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        assert_eq!(
+            fs.get("/etc/passwd").unwrap().data,
+            b"root:x:0:0::/:/bin/sh\n"
+        );
+        assert_eq!(fs.entries().filter(|e| e.path() == "etc/passwd").count(), 1);
+        assert!(fs.get("/opt").unwrap().is_dir());
+        assert!(fs.get("/opt/app").unwrap().is_dir());
+        let run = fs.get("/opt/app/run.sh").unwrap();
+        assert_eq!(run.data, b"echo hi\n");
+        assert!(run.is_file());
+        g.files = vec![(
+            "/etc/motd".into(),
+            config::system::SourceFile {
+                name: "gone".into(),
+                path: dir.join("gone").to_string_lossy().into_owned(),
+            },
+        )];
+        let err = initramfs(b"ELF", &g).unwrap_err();
+        assert!(format!("{err:#}").contains("cannot read"), "{err:#}");
+        std::fs::remove_dir_all(&dir).unwrap();
     }
 
     #[test]
