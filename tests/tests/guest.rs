@@ -2,7 +2,8 @@
 //! (configuration `tests/configs/guest_hello.toml`): partition `echo` runs
 //! `/bin/busybox echo hello`, partition `cat` runs `/bin/cat /etc/passwd /etc/motd` (the
 //! first written by `cargo xtask`, the second `tests/configs/guest/motd.txt` added with
-//! `guest.files`), partition `ls` runs `/bin/ls /`, partition `shell` runs
+//! `guest.files`), partition `ls` runs `/bin/ls /`, partition `segv` runs a shell function
+//! that calls itself until its stack overflows, partition `shell` runs
 //! `/bin/sh -c 'echo hello; echo world'`.
 
 use scenarios::{boot, check};
@@ -83,6 +84,34 @@ fn guest_hello() {
             &format!("{partition}: a process was killed"),
         );
     }
+    // The overflowing stack: the page fault just below the process's stack kills it with
+    // SIGSEGV (memory::STACK_TOP - STACK_SIZE = 0x7fff_ffec_0000), nothing else.
+    let started = guest_lines(&o, "segv", "started: ");
+    check(
+        &o,
+        started == ["guest: process 1 (busybox) started: /bin/sh -c f() { f; }; f"],
+        &format!("segv: start line {started:?}"),
+    );
+    let killed = guest_lines(&o, "segv", "guest: process 1 (busybox) killed by signal");
+    check(
+        &o,
+        killed.len() == 1
+            && killed[0].starts_with(
+                "guest: process 1 (busybox) killed by signal 11 (SIGSEGV): vector 14 error 0x6 address 0x7fffffebf",
+            ),
+        &format!("segv: {killed:?}"),
+    );
+    check(
+        &o,
+        guest_lines(&o, "segv", "guest: process 1 exited").is_empty(),
+        "segv: a killed process has no exit status line",
+    );
+    check(
+        &o,
+        o.line("partition=segv error=application_error detail=\"init\\x20killed\\x20by\\x20signal\\x2011\"")
+            .is_some(),
+        "segv: no health report of its init's death",
+    );
     // Each guest reported its init's end to the health monitor.
     for partition in ["echo", "cat", "ls", "shell"] {
         check(
