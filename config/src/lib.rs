@@ -69,6 +69,9 @@
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
 //! plc.shared = "frame"            # the segment its shared globals go through
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
+//! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
+//! guest.env = ["PATH=/bin", "HOME=/"]              # optional
+//! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -159,6 +162,26 @@
 //! verified bytecode image — what `plcc build` writes as `.plcb` — becomes its data
 //! entry: for example the program an online-download client sends to a PLC. A partition
 //! cannot have both, and `data` has no other keys.
+//!
+//! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
+//! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,
+//! whose first string is the absolute path of a static executable in the initramfs (such
+//! as `/bin/busybox`); `guest.env` its environment (`NAME=value` strings; default
+//! `PATH=/bin`, `HOME=/`, `TERM=dumb`); together at most 64 strings and 8192 bytes, no NUL
+//! bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
+//! initramfs (missing directories are created), each value a file on the host, relative to
+//! the description's directory (its permission bits are kept, owner root); they may replace
+//! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
+//! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `cargo xtask` builds the
+//! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as
+//! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `/etc/passwd`,
+//! `/etc/group`, an `/init` script, these keys in `/etc/guest/init` and `/etc/guest/env`,
+//! and the files) as its data entry. The guest runs its processes as child tasks backed
+//! by its memory pool (the part of `memory` its image, initramfs and stack leave free, see
+//! `protocol::layout::POOL_BASE`), so it needs the abilities `create_task`,
+//! `create_thread` and `map`, and its `kernel_tasks`, `kernel_threads` and
+//! `kernel_memory` pay for its processes' tasks, threads and page tables. A partition has
+//! either `plc` or `guest` keys, not both.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -83,6 +83,16 @@ pub struct Partition {
     pub health: Named<String>,
     pub plc: Option<Spanned<Plc>>,
     pub data: Option<Spanned<Data>>,
+    pub guest: Option<Spanned<Guest>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Guest {
+    pub init: Vec<Spanned<String>>,
+    pub env: Option<Vec<Spanned<String>>>,
+    #[serde(default)]
+    pub files: Named<String>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -62,7 +62,39 @@ pub struct Partition {
     /// What `cargo xtask` puts into a partition's data entry other than a PLC package
     /// (`data.*`).
     pub data: Option<DataEntry>,
+    /// Its first Linux process (`guest.*`), if it runs the paravirtualized guest.
+    pub guest: Option<Guest>,
 }
+
+/// What a guest partition starts: `argv` and the environment of its first process, and the
+/// files it adds to its initramfs (all written into the initramfs by `cargo xtask`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Guest {
+    pub init: Vec<String>,
+    pub env: Vec<String>,
+    /// (absolute path in the initramfs, host file), sorted by path.
+    pub files: Vec<(String, SourceFile)>,
+}
+
+/// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
+/// (busybox, its applet links, the guest's command line, `/init`).
+pub const GUEST_RESERVED_PATHS: &[&str] = &[
+    "/bin/busybox",
+    "/bin/sh",
+    "/bin/echo",
+    "/bin/cat",
+    "/bin/ls",
+    "/etc/guest/init",
+    "/etc/guest/env",
+    "/init",
+];
+
+/// The environment of a guest's first process without `guest.env`.
+pub const GUEST_DEFAULT_ENV: &[&str] = &["PATH=/bin", "HOME=/", "TERM=dumb"];
+/// Most strings `guest.init` and `guest.env` may have together, and most bytes (the
+/// guest's room for them on the process's initial stack, with its auxiliary vector).
+pub const GUEST_MAX_STRINGS: usize = 64;
+pub const GUEST_MAX_BYTES: usize = 8192;
 
 /// The contents of a (non-PLC) partition's data entry `data/<partition>`.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -226,10 +258,12 @@ impl System {
                         })
                         .collect(),
                     health: p.health,
-                    // The binary form does not carry it: it travels in the partition's
-                    // data entry (the PLC package) instead.
+                    // The binary form carries none of these: they travel in the
+                    // partition's data entry (the PLC package, the compiled image, the
+                    // guest's initramfs) instead.
                     plc: None,
                     data: None,
+                    guest: None,
                 })
                 .collect(),
             segments: view

@@ -389,6 +389,17 @@ impl Validator<'_, '_> {
                 .data
                 .as_ref()
                 .and_then(|d| self.data_entry(d, &path.key("data"), raw.plc.is_some()));
+            let guest = raw
+                .guest
+                .as_ref()
+                .and_then(|guest| self.guest(raw, guest, &path.key("guest"), abilities));
+            if let (Some(_), Some(data)) = (&raw.guest, &raw.data) {
+                self.error(
+                    start(data),
+                    &path.key("data"),
+                    "a guest partition's data entry is its initramfs (from `guest.*`): `data` is for other partitions",
+                );
+            }
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -409,9 +420,141 @@ impl Validator<'_, '_> {
                 health,
                 plc,
                 data,
+                guest,
             });
         }
         (partitions, times, ports)
+    }
+
+    /// A guest partition's first process (see the crate documentation).
+    fn guest(
+        &mut self,
+        raw: &schema::Partition,
+        guest: &Spanned<schema::Guest>,
+        path: &KeyPath,
+        abilities: Abilities,
+    ) -> Option<Guest> {
+        let before = self.r.diagnostics.len();
+        let g = guest.get_ref();
+        let init_path = path.key("init");
+        if raw.plc.is_some() {
+            self.error(
+                start(guest),
+                path,
+                "a partition runs either the soft-PLC (`plc`) or the guest (`guest`), not both",
+            );
+        }
+        let needed = Abilities::CREATE_TASK | Abilities::CREATE_THREAD | Abilities::MAP;
+        if !abilities.contains(needed) {
+            self.error(
+                start(guest),
+                path,
+                "a guest partition needs the abilities `create_task`, `create_thread` and `map` (its processes are child tasks backed by its memory pool)",
+            );
+        }
+        match g.init.first() {
+            None => self.error(
+                start(guest),
+                &init_path,
+                "`init` needs at least the program to run, e.g. [\"/bin/busybox\", \"echo\", \"hello\"]",
+            ),
+            Some(program) if !program.get_ref().starts_with('/') => self.error(
+                start(program),
+                &init_path.index(0),
+                format!(
+                    "`{}` is not an absolute path in the initramfs (such as `/bin/busybox`)",
+                    program.get_ref()
+                ),
+            ),
+            Some(_) => {}
+        }
+        let env: Vec<Spanned<String>> = g.env.clone().unwrap_or_default();
+        let mut bytes = 0;
+        for (key, list) in [("init", &g.init), ("env", &env)] {
+            for (i, s) in list.iter().enumerate() {
+                bytes += s.get_ref().len() + 1;
+                if s.get_ref().contains('\0') {
+                    self.error(start(s), &path.key(key).index(i), "contains a NUL byte");
+                }
+                if key == "env" && !s.get_ref().contains('=') {
+                    self.error(
+                        start(s),
+                        &path.key(key).index(i),
+                        format!("`{}` is not NAME=value", s.get_ref()),
+                    );
+                }
+            }
+        }
+        let strings = g.init.len() + env.len();
+        if strings > GUEST_MAX_STRINGS || bytes > GUEST_MAX_BYTES {
+            self.error(
+                start(guest),
+                path,
+                format!(
+                    "`init` and `env` have {strings} strings of {bytes} bytes; at most {GUEST_MAX_STRINGS} strings and {GUEST_MAX_BYTES} bytes"
+                ),
+            );
+        }
+        let base = std::path::Path::new(self.r.file())
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .to_path_buf();
+        let mut files = Vec::new();
+        for (target, source) in &g.files {
+            let at = path.key("files").key(target.get_ref());
+            let t = target.get_ref();
+            let normal = t.starts_with('/')
+                && !t.ends_with('/')
+                && t[1..]
+                    .split('/')
+                    .all(|part| !part.is_empty() && part != "." && part != "..")
+                && !t.contains('\0');
+            if !normal {
+                self.error(
+                    start(target),
+                    &at,
+                    format!(
+                        "`{t}` is not a normalised absolute path of a file (such as `/etc/motd`)"
+                    ),
+                );
+            } else if GUEST_RESERVED_PATHS.contains(&t.as_str()) {
+                self.error(
+                    start(target),
+                    &at,
+                    format!(
+                        "`{t}` is written by the image builder and cannot be replaced (reserved: {})",
+                        GUEST_RESERVED_PATHS.join(", ")
+                    ),
+                );
+            }
+            let resolved = base.join(source.get_ref());
+            if !resolved.is_file() {
+                self.error(
+                    start(source),
+                    &at,
+                    format!(
+                        "no such file `{}` (paths are relative to this description's directory: {})",
+                        source.get_ref(),
+                        resolved.display()
+                    ),
+                );
+            }
+            files.push((
+                t.clone(),
+                SourceFile {
+                    name: source.get_ref().clone(),
+                    path: resolved.to_string_lossy().into_owned(),
+                },
+            ));
+        }
+        (self.r.diagnostics.len() == before).then(|| Guest {
+            files,
+            init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
+            env: match &g.env {
+                Some(env) => env.iter().map(|s| s.get_ref().clone()).collect(),
+                None => GUEST_DEFAULT_ENV.iter().map(|s| s.to_string()).collect(),
+            },
+        })
     }
 
     /// ST source files, resolved against the description's directory (each must exist).

@@ -2,7 +2,10 @@
 //! was allocated at start-up: [`place`] (once) allocates its memory, loads its image and
 //! creates its resource partition (kernel-memory quota); [`instantiate`] (at start and at
 //! every restart) creates the task (abilities, MCP), maps the segments with their rights,
-//! its data entry read-only at `DATA_BASE` and a stack holding the start record, grants
+//! its data entry read-only at `DATA_BASE`, its memory pool (partitions with the `map`
+//! ability: the rest of its `memory`) read-write at `POOL_BASE` and read-execute at
+//! `POOL_EXEC_BASE`, a stack holding the start
+//! record, grants
 //! I/O ports and interrupts, maps the shared-memory segments and creates the first thread
 //! (inactive until started).
 
@@ -14,7 +17,9 @@ use user_rt::abi::syscall::{
     Error, PageRights, TaskId, ThreadAttribute, ThreadId, USER_END, USER_MIN,
 };
 use user_rt::partition::StartInfo;
-use user_rt::protocol::layout::{DATA_BASE, STACK_TOP, shared_address as layout_address};
+use user_rt::protocol::layout::{
+    DATA_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address as layout_address,
+};
 use user_rt::sys;
 
 const PAGE: u64 = 4096;
@@ -70,6 +75,8 @@ pub struct Placement {
     /// Its data entry's frames and length in bytes (length 0: none). Mapped read-only, so
     /// never reloaded.
     data: (u64, u64),
+    /// Its memory pool's frames and length in bytes (length 0: none).
+    pool: (u64, u64),
     /// Bytes of its memory in use (segments + data + stack).
     pub used: u64,
     /// The unmapped page below the stack: a fault there is a stack overflow.
@@ -180,6 +187,13 @@ pub fn place(
             })
             .map_err(LoadError::Spawn)?
     };
+    let pool_frames = if budget.pool == 0 {
+        0
+    } else {
+        spawner
+            .frames(budget.pool / PAGE)
+            .map_err(LoadError::Spawn)?
+    };
     Ok(Placement {
         rp,
         entry,
@@ -187,6 +201,7 @@ pub fn place(
         segments: frames,
         stack,
         data: (data_frames, data.len() as u64),
+        pool: (pool_frames, budget.pool),
         used: budget.memory,
         stack_guard: stack_base - PAGE..stack_base,
     })
@@ -237,6 +252,7 @@ pub fn instantiate(
         p.priority,
         p.name,
         placed.data.1,
+        placed.pool.1,
     );
     let record = info.to_bytes();
     let record_len = record.len() as u64;
@@ -267,6 +283,27 @@ pub fn instantiate(
             DATA_BASE,
             data_len.div_ceil(PAGE),
             PageRights::empty(),
+        )
+        .map_err(LoadError::Spawn)?;
+    }
+
+    let (pool_frames, pool_len) = placed.pool;
+    if pool_len > 0 {
+        let pages = pool_len / PAGE;
+        // Zeroed at boot by `frames`; a cold restart must not see the last instance's data.
+        if start == Start::Cold {
+            spawner
+                .refill_frames(pool_frames, pages, |_, _| ())
+                .map_err(LoadError::Spawn)?;
+        }
+        map_physical_chunked(Some(task), pool_frames, POOL_BASE, pages, PageRights::WRITE)
+            .map_err(LoadError::Spawn)?;
+        map_physical_chunked(
+            Some(task),
+            pool_frames,
+            POOL_EXEC_BASE,
+            pages,
+            PageRights::EXECUTE,
         )
         .map_err(LoadError::Spawn)?;
     }

@@ -80,8 +80,9 @@ pub fn load(path: &Path) -> Result<config::System> {
 }
 
 /// The files of the partitions of the validated description `path` (`described`, decoded:
-/// `system`): each image the partitions name, built (by name), and each PLC package (by
-/// partition), after [`check_budgets`] found that every partition fits at boot.
+/// `system`): each image the partitions name, built (by name), and each data entry (by
+/// partition: PLC packages, guest initramfs images), after [`check_budgets`] found that
+/// every partition fits at boot.
 #[allow(clippy::type_complexity)]
 pub fn partition_files(
     path: &Path,
@@ -97,7 +98,8 @@ pub fn partition_files(
     images.dedup();
     let paths = crate::artifacts::build_user_programs(&images)?;
     let built: Vec<(String, PathBuf)> = images.into_iter().zip(paths).collect();
-    let packages = crate::plc::data_entries(described)?;
+    let mut packages = crate::plc::data_entries(described)?;
+    packages.extend(crate::guest::initramfs_images(described)?);
     check_budgets(path, system, &built, &packages)?;
     Ok((built, packages))
 }

@@ -10,6 +10,7 @@ pub mod artifacts;
 pub mod bench;
 pub mod check_config;
 pub mod esp;
+pub mod guest;
 pub mod lint;
 pub mod plc;
 pub mod qemu;

@@ -1,7 +1,7 @@
 //! `cargo xtask lint`: the lint gate CI runs before the tests. Formatting (`cargo fmt
 //! --check`) and clippy with every warning an error, on each kind of code the workspace
 //! builds: the host crates (with their tests), the host-tested libraries of the kernel, the
-//! APEX runtime, the plant and the PLC runtime, the kernel for `x86_64-unknown-none`, the loader for
+//! APEX runtime, the plant, the PLC runtime and the guest, the kernel for `x86_64-unknown-none`, the loader for
 //! `x86_64-unknown-uefi`, and syssw and every user program for the user target. The lint
 //! policy itself lives once, in `[workspace.lints]` of the root `Cargo.toml`; this only runs
 //! it everywhere.
@@ -43,6 +43,14 @@ pub fn run() -> Result<bool> {
             "clippy",
             "-p",
             "softplc",
+            "--no-default-features",
+            "--lib",
+            "--tests",
+        ],
+        vec![
+            "clippy",
+            "-p",
+            "guest",
             "--no-default-features",
             "--lib",
             "--tests",

@@ -180,14 +180,15 @@ fn cargo_test(args: &[&str]) -> Result<bool> {
 fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     tools::ensure_qemu()?;
     // Host unit tests: the host crates (the workspace's default members), plus the pure
-    // logic of the kernel, the APEX runtime, the plant and the PLC runtime (their library
-    // parts).
+    // logic of the kernel, the APEX runtime, the plant, the PLC runtime and the guest (their
+    // library parts).
     let host_ok = scenarios_only
         || (cargo_test(&[])?
             & cargo_test(&["-p", "kernel", "--lib"])?
             & cargo_test(&["-p", "apex", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "plant", "--no-default-features", "--lib"])?
-            & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?);
+            & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?
+            & cargo_test(&["-p", "guest", "--no-default-features", "--lib"])?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
         return Ok(false);

@@ -1,4 +1,5 @@
-//! Finds (or installs) what running the system needs: QEMU, OVMF, the Rust targets.
+//! Finds (or installs) what running the system needs: QEMU, OVMF, the Rust targets, and
+//! for guest partitions Debian's static busybox.
 //! When something is missing it is installed when that is possible without asking
 //! (root with apt-get); otherwise the error says the exact command to run.
 
@@ -7,6 +8,10 @@ use std::path::{Path, PathBuf};
 use std::process::Command;
 
 pub const APT_PACKAGES: &[&str] = &["qemu-system-x86", "ovmf"];
+/// The package of the static busybox a guest's initramfs holds.
+pub const BUSYBOX_PACKAGE: &str = "busybox-static";
+/// Where Debian's `busybox-static` installs it.
+const BUSYBOX_PATHS: &[&str] = &["/bin/busybox", "/usr/bin/busybox"];
 pub const RUST_TARGETS: &[&str] = &["x86_64-unknown-uefi", "x86_64-unknown-none"];
 
 /// Paths of QEMU and the OVMF firmware pair.
@@ -59,14 +64,16 @@ fn is_root() -> bool {
         .unwrap_or(false)
 }
 
-fn install_packages() -> Result<()> {
-    let install = format!("apt-get install -y {}", APT_PACKAGES.join(" "));
+/// Installs `packages` with apt-get when running as root; otherwise (or if that fails) the
+/// error says the exact command (`what` names what is missing).
+fn install_packages(packages: &[&str], what: &str) -> Result<()> {
+    let install = format!("apt-get install -y {}", packages.join(" "));
     if !is_root() || find_in_path("apt-get").is_none() {
         bail!(
-            "QEMU and/or OVMF are missing. Install them with:\n    sudo apt-get update && sudo {install}\n(or your distribution's qemu-system-x86_64 and OVMF packages)"
+            "{what} missing. Install with:\n    sudo apt-get update && sudo {install}\n(or your distribution's equivalent)"
         );
     }
-    eprintln!("xtask: QEMU/OVMF missing; running apt-get update && {install}");
+    eprintln!("xtask: {what} missing; running apt-get update && {install}");
     let ok = Command::new("apt-get")
         .args(["update", "-qq"])
         .status()
@@ -74,20 +81,40 @@ fn install_packages() -> Result<()> {
         .unwrap_or(false)
         && Command::new("apt-get")
             .args(["install", "-y", "-qq"])
-            .args(APT_PACKAGES)
+            .args(packages)
             .env("DEBIAN_FRONTEND", "noninteractive")
             .status()
             .map(|s| s.success())
             .unwrap_or(false);
     if !ok {
-        bail!("installing QEMU/OVMF failed; run `apt-get update && {install}` yourself");
+        bail!("installing {what} failed; run `apt-get update && {install}` yourself");
     }
     Ok(())
 }
 
+/// The static busybox for guest initramfs images (installing `busybox-static` first if
+/// it is missing, as for QEMU).
+pub fn ensure_busybox() -> Result<PathBuf> {
+    let find = || {
+        BUSYBOX_PATHS
+            .iter()
+            .map(Path::new)
+            .find(|p| p.is_file())
+            .map(Path::to_path_buf)
+    };
+    if let Some(path) = find() {
+        return Ok(path);
+    }
+    install_packages(
+        &[BUSYBOX_PACKAGE],
+        "busybox (Debian package busybox-static)",
+    )?;
+    find().context("busybox still not found in /bin or /usr/bin")
+}
+
 pub fn ensure_qemu() -> Result<Qemu> {
     if find_in_path("qemu-system-x86_64").is_none() || find_ovmf().is_none() {
-        install_packages()?;
+        install_packages(APT_PACKAGES, "QEMU and/or OVMF are")?;
     }
     let binary =
         find_in_path("qemu-system-x86_64").context("qemu-system-x86_64 still not found in PATH")?;

@@ -1,6 +1,7 @@
 //! What a partition needs to start: bytes of its memory (image, data entry, stack) and bytes
 //! of its kernel-memory quota (the page tables of everything syssw maps for it, its top-level
-//! table and, with I/O ports, its I/O permission bitmap). One computation for both users:
+//! table and, with I/O ports, its I/O permission bitmap), and the memory pool a partition
+//! with the `map` ability gets (the rest of its `memory`, `protocol::layout::POOL_BASE`). One computation for both users:
 //! syssw refuses a partition that does not fit before it builds anything, and `cargo xtask`
 //! refuses to build a system image with such a partition, naming the configuration key, so a
 //! validated system never fails at boot for want of memory.
@@ -11,9 +12,9 @@
 //! partition maps itself later comes on top.
 
 use abi::elf::{ElfError, load_segments};
-use abi::syscall::USER_MIN;
+use abi::syscall::{Abilities, USER_MIN};
 use config::binary::{PartitionView, SystemView};
-use protocol::layout::{DATA_BASE, STACK_TOP, shared_address};
+use protocol::layout::{DATA_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address};
 
 const PAGE: u64 = 4096;
 /// Loadable segments an image may have (syssw's limit).
@@ -29,8 +30,11 @@ const IO_BITMAP_PAGES: u64 = 2;
 pub struct StartBudget {
     /// Of its `memory`: image pages, data-entry pages and the stack.
     pub memory: u64,
-    /// Of its `kernel_memory` quota.
+    /// Of its `kernel_memory` quota (including the page tables of the pool).
     pub kernel_memory: u64,
+    /// Its memory pool: what `memory` leaves after `memory` above, for a partition with
+    /// the `map` ability (0 otherwise, or when nothing is left).
+    pub pool: u64,
 }
 
 /// The pages of an image segment: first page address and count.
@@ -63,14 +67,23 @@ pub fn start_budget(
         let address = shared_address(system.segments().take(a.segment).map(|s| s.size));
         regions.add(address, system.segment(a.segment).size / PAGE);
     }
+    let used = image_pages + data_pages + stack_pages;
+    let pool_pages = if p.abilities.contains(Abilities::MAP) {
+        (p.memory / PAGE).saturating_sub(used)
+    } else {
+        0
+    };
+    regions.add(POOL_BASE, pool_pages);
+    regions.add(POOL_EXEC_BASE, pool_pages);
     let io = if p.io_ports().next().is_some() {
         IO_BITMAP_PAGES
     } else {
         0
     };
     Ok(StartBudget {
-        memory: (image_pages + data_pages + stack_pages) * PAGE,
+        memory: used * PAGE,
         kernel_memory: (TOP_TABLE_PAGES + regions.page_tables() + io) * PAGE,
+        pool: pool_pages * PAGE,
     })
 }
 
@@ -198,7 +211,29 @@ mod tests {
         // the 512 GiB spans: image (0), data (0xa0), shared (0xc0), stack (0xff): 4. Plus
         // the top-level table and the I/O bitmap.
         assert_eq!(budget.kernel_memory, (4 + 4 + 4 + 1 + 2) * PAGE);
+        assert_eq!(budget.pool, 0, "no `map` ability, no pool");
         assert!(start_budget(&system, &a, b"not an elf", 0).is_err());
+    }
+
+    #[test]
+    fn a_partition_with_map_gets_the_rest_of_its_memory_as_pool() {
+        let blob = crate::testsys::blob(&crate::testsys::with(&[("# a", "abilities = [\"map\"]")]));
+        let system = config::decode(&blob).unwrap();
+        let a = system.partition(0);
+        let without = start_budget(&system, &a, &elf(0x20_0000, 3 * PAGE), 0).unwrap();
+        assert_eq!(without.memory, (3 + 16) * PAGE);
+        assert_eq!(without.pool, a.memory - without.memory);
+        // The pool's page tables, for each of its two mappings (in their own 512 GiB
+        // spans, 0xb0 and 0xb8): one table per level for each 2 MiB / 1 GiB / 512 GiB.
+        let pool_pages = without.pool / PAGE;
+        let tables = 2 * (pool_pages.div_ceil(512) + pool_pages.div_ceil(512 * 512) + 1);
+        let mut no_pool = Regions::new();
+        no_pool.add(0x20_0000, 3);
+        no_pool.add(STACK_TOP - 16 * PAGE, 16);
+        assert_eq!(
+            without.kernel_memory,
+            (TOP_TABLE_PAGES + no_pool.page_tables() + tables) * PAGE
+        );
     }
 
     #[test]

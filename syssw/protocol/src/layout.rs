@@ -5,6 +5,8 @@
 //! |---|---|---|
 //! | the image's loadable segments | their ELF addresses, below [`DATA_BASE`] | per segment |
 //! | its data entry (`data/<partition>` in system.img), if any | [`DATA_BASE`] | read-only |
+//! | its memory pool: the rest of its `memory`, for a partition with the `map` ability | [`POOL_BASE`] | read-write |
+//! | the same frames again | [`POOL_EXEC_BASE`] | read-execute |
 //! | shared-memory segments it is attached to | [`shared_address`] | as configured |
 //! | the stack, the start record at its very top | below [`STACK_TOP`], one unmapped guard page under it | read-write |
 
@@ -16,6 +18,19 @@ pub const SHARED_BASE: u64 = 0x0000_6000_0000_0000;
 /// Where syssw maps a partition's data entry (e.g. a soft-PLC's program package),
 /// read-only, for the partition's whole life; images must lie below it.
 pub const DATA_BASE: u64 = 0x0000_5000_0000_0000;
+
+/// Where syssw maps a partition's memory pool: for a partition with the `map` ability, the
+/// part of its configured `memory` its image, data entry and stack leave free, zeroed at
+/// every start but a warm restart, read-write. The partition maps these pages into its own
+/// child tasks (a paravirtualized guest backs its processes' memory with them); they are
+/// its own memory, so nothing of another partition is reachable through them.
+pub const POOL_BASE: u64 = 0x0000_5800_0000_0000;
+
+/// Where syssw maps the pool's frames a second time, read-execute: the source of the
+/// executable pages the partition maps into its child tasks (no page is ever writable and
+/// executable in one mapping). Page `i` of the pool is at `POOL_BASE + i * 4096` and
+/// `POOL_EXEC_BASE + i * 4096`.
+pub const POOL_EXEC_BASE: u64 = 0x0000_5c00_0000_0000;
 
 /// Top of a partition's stack (its start record is at the very top).
 pub const STACK_TOP: u64 = 0x0000_7ff0_0000_0000;
@@ -43,6 +58,13 @@ mod tests {
 
     #[test]
     fn the_regions_do_not_overlap() {
-        const { assert!(DATA_BASE < SHARED_BASE && SHARED_BASE < STACK_TOP) };
+        const {
+            assert!(
+                DATA_BASE < POOL_BASE
+                    && POOL_BASE < POOL_EXEC_BASE
+                    && POOL_EXEC_BASE < SHARED_BASE
+                    && SHARED_BASE < STACK_TOP
+            )
+        };
     }
 }

@@ -7,7 +7,7 @@
 //! through this record.
 
 /// The partition's address space: see [`protocol::layout`].
-pub use protocol::layout::{DATA_BASE, SHARED_BASE};
+pub use protocol::layout::{DATA_BASE, POOL_BASE, POOL_EXEC_BASE, SHARED_BASE};
 
 /// `StartInfo::magic`.
 pub const START_MAGIC: u64 = u64::from_le_bytes(*b"WRDNPART");
@@ -35,6 +35,9 @@ pub struct StartInfo {
     pub name: [u8; 32],
     /// Bytes of its data entry mapped at [`DATA_BASE`] (0: none).
     pub data_len: u64,
+    /// Bytes of its memory pool mapped read-write at [`POOL_BASE`] and read-execute at
+    /// [`POOL_EXEC_BASE`] (0: none; only a partition with the `map` ability has one).
+    pub pool_len: u64,
 }
 
 impl StartInfo {
@@ -50,6 +53,7 @@ impl StartInfo {
         priority: u8,
         name: &str,
         data_len: u64,
+        pool_len: u64,
     ) -> Self {
         let n = name.len().min(32);
         let mut bytes = [0u8; 32];
@@ -65,10 +69,11 @@ impl StartInfo {
             name_len: n as u64,
             name: bytes,
             data_len,
+            pool_len,
         }
     }
 
-    /// The record as it lies in memory (`repr(C)`: eight u64, the name, one u64; no
+    /// The record as it lies in memory (`repr(C)`: eight u64, the name, two u64; no
     /// padding).
     pub fn to_bytes(&self) -> [u8; core::mem::size_of::<StartInfo>()] {
         let mut out = [0u8; core::mem::size_of::<StartInfo>()];
@@ -86,7 +91,8 @@ impl StartInfo {
             chunk.copy_from_slice(&word.to_le_bytes());
         }
         out[64..96].copy_from_slice(&self.name);
-        out[96..].copy_from_slice(&self.data_len.to_le_bytes());
+        out[96..104].copy_from_slice(&self.data_len.to_le_bytes());
+        out[104..].copy_from_slice(&self.pool_len.to_le_bytes());
         out
     }
 

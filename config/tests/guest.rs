@@ -1,0 +1,173 @@
+//! Validation of the guest keys (`guest.*`) of a partition.
+
+mod common;
+use common::*;
+
+/// Partition `b` as a guest with these extra lines.
+fn guest(lines: &str) -> String {
+    doc(&[(
+        "time = \"background\"",
+        &format!(
+            "time = \"background\"\nabilities = [\"create_task\", \"create_thread\", \"map\"]\n{lines}"
+        ),
+    )])
+}
+
+#[test]
+fn a_guest_partition_is_valid() {
+    let system = load_ok(&guest(
+        "guest.init = [\"/bin/busybox\", \"sh\", \"-c\", \"echo hello; echo world\"]",
+    ));
+    let g = system.partitions[1].guest.as_ref().expect("guest keys");
+    assert_eq!(
+        g.init,
+        ["/bin/busybox", "sh", "-c", "echo hello; echo world"]
+    );
+    assert_eq!(g.env, config::system::GUEST_DEFAULT_ENV);
+    let system = load_ok(&guest(
+        "guest.init = [\"/bin/sh\"]\nguest.env = [\"PATH=/bin\", \"A=\"]",
+    ));
+    let g = system.partitions[1].guest.as_ref().unwrap();
+    assert_eq!(g.env, ["PATH=/bin", "A="]);
+    assert!(system.partitions[0].guest.is_none());
+}
+
+#[test]
+fn init_must_name_an_absolute_program() {
+    expect_some(
+        &guest("guest.init = []"),
+        "guest.init = []",
+        0,
+        "partitions.b.guest.init",
+        "needs at least the program to run",
+    );
+    expect_some(
+        &guest("guest.init = [\"busybox\", \"echo\"]"),
+        "\"busybox\"",
+        0,
+        "partitions.b.guest.init[0]",
+        "`busybox` is not an absolute path",
+    );
+}
+
+#[test]
+fn env_entries_are_name_value_pairs() {
+    expect_some(
+        &guest("guest.init = [\"/bin/sh\"]\nguest.env = [\"PATH=/bin\", \"oops\"]"),
+        "\"oops\"",
+        0,
+        "partitions.b.guest.env[1]",
+        "`oops` is not NAME=value",
+    );
+}
+
+#[test]
+fn strings_are_limited() {
+    let many = vec!["\"x\""; 70].join(", ");
+    let src = guest(&format!("guest.init = [\"/bin/sh\", {many}]"));
+    let errors = load(&src).unwrap_err();
+    assert!(
+        errors
+            .iter()
+            .any(|d| d.to_string().contains("at most 64 strings")),
+        "{errors:?}"
+    );
+    let long = "y".repeat(9000);
+    let errors = load(&guest(&format!("guest.init = [\"/bin/sh\", \"{long}\"]"))).unwrap_err();
+    assert!(
+        errors.iter().any(|d| d.to_string().contains("8192 bytes")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn a_guest_needs_its_abilities_and_no_plc() {
+    let src = doc(&[(
+        "time = \"background\"",
+        "time = \"background\"\nabilities = [\"create_task\"]\nguest.init = [\"/bin/sh\"]",
+    )]);
+    let errors = load(&src).unwrap_err();
+    assert!(
+        errors.iter().any(|d| {
+            let t = d.to_string();
+            t.contains("partitions.b.guest")
+                && t.contains("`create_task`, `create_thread` and `map`")
+        }),
+        "{errors:?}"
+    );
+    let src = guest(
+        "guest.init = [\"/bin/sh\"]\nplc.program = [\"tests/data/counter.st\"]\nplc.inputs.in = { at = \"%IB0\", valid = \"%IX8.0\" }",
+    );
+    let errors = load(&src).unwrap_err();
+    assert!(
+        errors
+            .iter()
+            .any(|d| d.to_string().contains("either the soft-PLC")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn unknown_guest_keys_are_errors() {
+    let errors = load(&guest("guest.init = [\"/bin/sh\"]\nguest.files = []")).unwrap_err();
+    assert!(
+        errors.iter().any(|d| d.to_string().contains("files")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn files_are_added_from_the_host() {
+    let system = load_ok(&guest(
+        "guest.init = [\"/bin/cat\", \"/etc/motd\"]\nguest.files = { \"/etc/motd\" = \"tests/data/motd.txt\", \"/etc/passwd\" = \"tests/data/motd.txt\" }",
+    ));
+    let g = system.partitions[1].guest.as_ref().unwrap();
+    let targets: Vec<&str> = g.files.iter().map(|(t, _)| t.as_str()).collect();
+    assert_eq!(targets, ["/etc/motd", "/etc/passwd"]);
+    assert_eq!(g.files[0].1.name, "tests/data/motd.txt");
+    assert!(g.files[0].1.path.ends_with("tests/data/motd.txt"));
+}
+
+#[test]
+fn files_need_a_host_file_and_a_free_absolute_path() {
+    let with = |files: &str| {
+        guest(&format!(
+            "guest.init = [\"/bin/sh\"]\nguest.files = {{ {files} }}"
+        ))
+    };
+    expect_some(
+        &with("\"/etc/motd\" = \"tests/data/nope.txt\""),
+        "\"tests/data/nope.txt\"",
+        0,
+        "partitions.b.guest.files.\"/etc/motd\"",
+        "no such file `tests/data/nope.txt`",
+    );
+    for bad in ["etc/motd", "/etc/../motd", "/etc/", "/etc//motd", "/./motd"] {
+        let src = with(&format!("\"{bad}\" = \"tests/data/motd.txt\""));
+        let errors = load(&src).unwrap_err();
+        assert!(
+            errors
+                .iter()
+                .any(|d| d.to_string().contains("is not a normalised absolute path")),
+            "{bad}: {errors:?}"
+        );
+    }
+    let errors = load(&with("\"/bin/busybox\" = \"tests/data/motd.txt\"")).unwrap_err();
+    assert!(
+        errors.iter().any(|d| d
+            .to_string()
+            .contains("`/bin/busybox` is written by the image builder")),
+        "{errors:?}"
+    );
+}
+
+#[test]
+fn a_guest_has_no_other_data_entry() {
+    expect_some(
+        &guest("guest.init = [\"/bin/sh\"]\ndata.plc_image = [\"tests/data/counter.st\"]"),
+        "data.plc_image",
+        0,
+        "partitions.b.data",
+        "a guest partition's data entry is its initramfs",
+    );
+}

@@ -1,0 +1,132 @@
+//! Which page of the guest's pool backs which page of a process: a table sorted by the
+//! process's page address, stored in memory the caller provides (16 bytes an entry: the
+//! page address and the pool page index, little-endian), so its capacity follows the pool's
+//! size rather than a constant.
+
+/// Bytes of one entry.
+pub const ENTRY: usize = 16;
+
+/// The table is full.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Full;
+
+pub struct Backing<'b> {
+    bytes: &'b mut [u8],
+    len: usize,
+}
+
+impl<'b> Backing<'b> {
+    /// An empty table in `bytes` (room for `bytes.len() / 16` entries).
+    pub fn new(bytes: &'b mut [u8]) -> Self {
+        Self { bytes, len: 0 }
+    }
+
+    pub fn capacity(&self) -> usize {
+        self.bytes.len() / ENTRY
+    }
+
+    pub fn len(&self) -> usize {
+        self.len
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len == 0
+    }
+
+    fn entry(&self, i: usize) -> (u64, usize) {
+        let e = &self.bytes[i * ENTRY..(i + 1) * ENTRY];
+        let page = u64::from_le_bytes(e[..8].try_into().unwrap_or_default());
+        let index = u64::from_le_bytes(e[8..].try_into().unwrap_or_default());
+        (page, index as usize)
+    }
+
+    fn set(&mut self, i: usize, page: u64, index: usize) {
+        let e = &mut self.bytes[i * ENTRY..(i + 1) * ENTRY];
+        e[..8].copy_from_slice(&page.to_le_bytes());
+        e[8..].copy_from_slice(&(index as u64).to_le_bytes());
+    }
+
+    /// Position of `page`, or where it would go.
+    fn search(&self, page: u64) -> Result<usize, usize> {
+        let (mut lo, mut hi) = (0, self.len);
+        while lo < hi {
+            let mid = (lo + hi) / 2;
+            match self.entry(mid).0.cmp(&page) {
+                core::cmp::Ordering::Equal => return Ok(mid),
+                core::cmp::Ordering::Less => lo = mid + 1,
+                core::cmp::Ordering::Greater => hi = mid,
+            }
+        }
+        Err(lo)
+    }
+
+    /// The pool page backing the process page at `page` (page-aligned).
+    pub fn get(&self, page: u64) -> Option<usize> {
+        self.search(page).ok().map(|i| self.entry(i).1)
+    }
+
+    /// Records that pool page `index` backs `page` (replacing an older entry for it).
+    pub fn insert(&mut self, page: u64, index: usize) -> Result<(), Full> {
+        match self.search(page) {
+            Ok(i) => self.set(i, page, index),
+            Err(i) => {
+                if self.len == self.capacity() {
+                    return Err(Full);
+                }
+                self.bytes
+                    .copy_within(i * ENTRY..self.len * ENTRY, (i + 1) * ENTRY);
+                self.set(i, page, index);
+                self.len += 1;
+            }
+        }
+        Ok(())
+    }
+
+    /// Forgets `page`; returns the pool page that backed it.
+    pub fn remove(&mut self, page: u64) -> Option<usize> {
+        let i = self.search(page).ok()?;
+        let index = self.entry(i).1;
+        self.bytes
+            .copy_within((i + 1) * ENTRY..self.len * ENTRY, i * ENTRY);
+        self.len -= 1;
+        Some(index)
+    }
+
+    /// Empties the table, handing each pool page to `free`.
+    pub fn drain(&mut self, mut free: impl FnMut(usize)) {
+        for i in 0..self.len {
+            free(self.entry(i).1);
+        }
+        self.len = 0;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn keeps_pages_sorted_and_bounded() {
+        let mut bytes = [0u8; 4 * ENTRY];
+        let mut b = Backing::new(&mut bytes);
+        assert_eq!(b.capacity(), 4);
+        b.insert(0x3000, 7).unwrap();
+        b.insert(0x1000, 5).unwrap();
+        b.insert(0x2000, 6).unwrap();
+        b.insert(0x2000, 9).unwrap(); // replaced
+        assert_eq!(
+            (b.get(0x1000), b.get(0x2000), b.get(0x3000)),
+            (Some(5), Some(9), Some(7))
+        );
+        assert_eq!(b.get(0x4000), None);
+        b.insert(0x4000, 1).unwrap();
+        assert_eq!(b.insert(0x5000, 2), Err(Full));
+        assert_eq!(b.remove(0x2000), Some(9));
+        assert_eq!(b.remove(0x2000), None);
+        assert_eq!(b.len(), 3);
+        let mut freed = Vec::new();
+        b.drain(|i| freed.push(i));
+        assert_eq!(freed, [5, 7, 1]);
+        assert!(b.is_empty());
+    }
+}

@@ -1,0 +1,126 @@
+//! Starting a program in a new process: look the executable up in the initramfs, plan its
+//! layout ([`crate::elf`]), back and fill its segments, map the stack and lay out `argv`,
+//! `envp` and the auxiliary vector on it ([`crate::stack`]). What it returns is everything
+//! the partition program needs to create the process's thread: entry and stack pointer.
+
+use crate::cpio::Archive;
+use crate::elf::{ElfError, LoadPlan};
+use crate::linux::Errno;
+use crate::memory::{AreaError, PAGE, STACK_TOP};
+use crate::process::Process;
+use crate::stack::{self, AuxInfo, StackError};
+use crate::syscall::Host;
+use crate::vfs;
+
+/// Bytes at the top of the stack the initial stack may take (arguments, environment,
+/// auxiliary vector).
+pub const ARG_MAX: usize = 16 * 1024;
+
+/// Why a program cannot start.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ExecError {
+    /// Looking the executable up failed (`ENOENT`, `ENOTDIR`, `ELOOP` ...).
+    Lookup(Errno),
+    /// It is not a regular file.
+    NotAFile,
+    /// No execute permission bit.
+    NotExecutable,
+    Elf(ElfError),
+    /// Too many areas, or an area outside user space.
+    Layout(AreaError),
+    Stack(StackError),
+    /// Its memory cannot be mapped: `ENOMEM` (the guest is out of memory), `EACCES` (a
+    /// segment both writable and executable, which the guest never maps).
+    Memory(Errno),
+    /// `guest.init` is empty (or its initramfs lacks `/etc/guest/init`).
+    NoArguments,
+}
+
+impl core::fmt::Display for ExecError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Lookup(e) => write!(f, "{} (errno {})", e.describe(), e.0),
+            Self::NotAFile => write!(f, "not a regular file"),
+            Self::NotExecutable => write!(f, "no execute permission"),
+            Self::Elf(e) => write!(f, "{e}"),
+            Self::Layout(e) => write!(f, "its memory layout does not fit: {e:?}"),
+            Self::Stack(e) => write!(f, "its arguments do not fit the stack: {e:?}"),
+            Self::Memory(Errno::EACCES) => {
+                write!(f, "a segment is writable and executable (never mapped)")
+            }
+            Self::Memory(_) => write!(f, "the guest is out of memory"),
+            Self::NoArguments => write!(f, "no program given (guest.init)"),
+        }
+    }
+}
+
+/// A loaded program, ready to run: the thread starts at `entry` with `rsp = sp`.
+#[derive(Debug)]
+pub struct Loaded<'a> {
+    pub process: Process<'a>,
+    pub entry: u64,
+    pub sp: u64,
+}
+
+/// Loads `argv[0]` from `fs` as process `pid` (parent `ppid`) with `argv` and `envp`,
+/// mapping its memory through `host`. `hwcap` is what the CPU offers (`AT_HWCAP`). On an
+/// error, pages already mapped are the caller's to release (with the task).
+pub fn load<'a>(
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    pid: u32,
+    ppid: u32,
+    argv: &[&[u8]],
+    envp: &[&[u8]],
+    hwcap: u64,
+) -> Result<Loaded<'a>, ExecError> {
+    let path = *argv.first().ok_or(ExecError::NoArguments)?;
+    let (entry, exe) = vfs::lookup(fs, path, true).map_err(ExecError::Lookup)?;
+    if !entry.is_file() {
+        return Err(ExecError::NotAFile);
+    }
+    if entry.mode & 0o111 == 0 {
+        return Err(ExecError::NotExecutable);
+    }
+    let elf = entry.data;
+    let plan = LoadPlan::new(elf).map_err(ExecError::Elf)?;
+    let mut process = Process::new(pid, ppid, exe);
+    let (runs, n) = plan.page_runs();
+    process
+        .set_image(&runs[..n], plan.brk_start)
+        .map_err(ExecError::Layout)?;
+    let mut page = [0u8; PAGE as usize];
+    for run in &runs[..n] {
+        host.map_zeroed(run.start, run.pages, run.rights)
+            .map_err(ExecError::Memory)?;
+        for i in 0..run.pages {
+            let at = run.start + i * PAGE;
+            plan.fill(elf, at, &mut page);
+            if page.iter().any(|&b| b != 0) {
+                host.write_user(at, &page).map_err(ExecError::Memory)?;
+            }
+        }
+    }
+    let stack = process.add_stack().map_err(ExecError::Layout)?;
+    host.map_zeroed(stack.start, (stack.end - stack.start) / PAGE, stack.rights)
+        .map_err(ExecError::Memory)?;
+    let mut aux = AuxInfo {
+        phdr: plan.phdr,
+        phnum: plan.phnum,
+        phent: plan.phent,
+        entry: plan.entry,
+        hwcap,
+        ..AuxInfo::default()
+    };
+    host.random(&mut aux.random);
+    let mut top = [0u8; ARG_MAX];
+    let built =
+        stack::build(&mut top, STACK_TOP, argv, envp, path, &aux).map_err(ExecError::Stack)?;
+    host.write_user(STACK_TOP - built.used as u64, &top[ARG_MAX - built.used..])
+        .map_err(ExecError::Memory)?;
+    Ok(Loaded {
+        process,
+        entry: plan.entry,
+        sp: built.sp,
+    })
+}

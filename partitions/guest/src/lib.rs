@@ -1,0 +1,61 @@
+//! The paravirtualized guest: a Linux-ABI personality that runs unmodified static Linux
+//! executables (Debian's `busybox-static`) as tasks of the microkernel. Each Linux process
+//! is a child task of the guest partition created without `native_syscalls`, its thread
+//! has the guest as exception handler, so its `syscall`s and faults reach the guest as
+//! exception messages with the full register context; the guest serves them and replies
+//! with the edited registers.
+//!
+//! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
+//! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
+//! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
+//! which process page ([`backing`]), the process state
+//! ([`process`]) and the system calls ([`syscall`]); the partition program (`main.rs`) only
+//! moves messages, maps pages and writes the log.
+//!
+//! # Log lines (COM1, each prefixed `[<partition>] ` by the kernel)
+//!
+//! - `guest: process <pid> (<name>) started: <argv>` when a process starts, or
+//!   `guest: cannot start <path>: <why>`;
+//! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]);
+//! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
+//! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
+//!   when a fault kills it;
+//! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
+//!   ENOSYS`, once per call number and process.
+#![cfg_attr(not(test), no_std)]
+
+pub mod backing;
+pub mod console;
+pub mod cpio;
+pub mod elf;
+pub mod exec;
+pub mod linux;
+pub mod memory;
+pub mod pool;
+pub mod process;
+pub mod stack;
+pub mod syscall;
+pub mod vfs;
+
+/// Where the guest's command line is in the initramfs: `argv` of the first process, each
+/// argument NUL-terminated (written by `cargo xtask` from the partition's `guest.init`).
+pub const INIT_ARGS_PATH: &str = "/etc/guest/init";
+/// Its environment, in the same form (from `guest.env`).
+pub const INIT_ENV_PATH: &str = "/etc/guest/env";
+
+/// The NUL-terminated strings of `bytes` (a trailing piece without NUL counts too; empty
+/// strings are kept), at most `out.len()`; returns how many.
+pub fn split_nul<'a>(bytes: &'a [u8], out: &mut [&'a [u8]]) -> usize {
+    let mut n = 0;
+    for s in bytes.split_inclusive(|&b| b == 0) {
+        if n == out.len() {
+            break;
+        }
+        out[n] = s.strip_suffix(&[0]).unwrap_or(s);
+        n += 1;
+    }
+    n
+}
+
+#[cfg(test)]
+mod tests;

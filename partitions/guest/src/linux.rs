@@ -1,0 +1,212 @@
+//! The Linux x86-64 ABI constants the guest implements: system-call numbers (with their
+//! names, for the log), error numbers, and the flag values of the calls it serves.
+
+/// A Linux error number; a system call returns `-errno` in `rax`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Errno(pub u16);
+
+impl Errno {
+    pub const EPERM: Self = Self(1);
+    pub const ENOENT: Self = Self(2);
+    pub const ESRCH: Self = Self(3);
+    pub const EBADF: Self = Self(9);
+    pub const ENOMEM: Self = Self(12);
+    pub const EACCES: Self = Self(13);
+    pub const EFAULT: Self = Self(14);
+    pub const EEXIST: Self = Self(17);
+    pub const ENODEV: Self = Self(19);
+    pub const ENOTDIR: Self = Self(20);
+    pub const EISDIR: Self = Self(21);
+    pub const EINVAL: Self = Self(22);
+    pub const EMFILE: Self = Self(24);
+    pub const ENOTTY: Self = Self(25);
+    pub const ESPIPE: Self = Self(29);
+    pub const EROFS: Self = Self(30);
+    pub const ERANGE: Self = Self(34);
+    pub const ENAMETOOLONG: Self = Self(36);
+    pub const ENOSYS: Self = Self(38);
+    pub const ELOOP: Self = Self(40);
+
+    /// Its symbolic name and meaning, for messages.
+    pub const fn describe(self) -> &'static str {
+        match self.0 {
+            1 => "EPERM (operation not permitted)",
+            2 => "ENOENT (no such file or directory)",
+            12 => "ENOMEM (out of memory)",
+            13 => "EACCES (permission denied)",
+            20 => "ENOTDIR (a path component is not a directory)",
+            36 => "ENAMETOOLONG (file name too long)",
+            40 => "ELOOP (too many levels of symbolic links)",
+            _ => "error",
+        }
+    }
+
+    /// The value in `rax`.
+    pub const fn result(self) -> u64 {
+        (-(self.0 as i64)) as u64
+    }
+}
+
+macro_rules! syscalls {
+    ($($name:ident = $number:literal,)*) => {
+        /// System-call numbers (x86-64), named as in Linux's `unistd_64.h`.
+        #[allow(non_upper_case_globals)]
+        pub mod nr {
+            $(pub const $name: u64 = $number;)*
+        }
+        /// The name of system call `number` (`None` for numbers this table lacks).
+        pub fn syscall_name(number: u64) -> Option<&'static str> {
+            match number {
+                $($number => Some(stringify!($name)),)*
+                _ => None,
+            }
+        }
+    };
+}
+
+syscalls! {
+    read = 0,
+    write = 1,
+    open = 2,
+    close = 3,
+    stat = 4,
+    fstat = 5,
+    lstat = 6,
+    poll = 7,
+    lseek = 8,
+    mmap = 9,
+    mprotect = 10,
+    munmap = 11,
+    brk = 12,
+    rt_sigaction = 13,
+    rt_sigprocmask = 14,
+    rt_sigreturn = 15,
+    ioctl = 16,
+    pread64 = 17,
+    readv = 19,
+    writev = 20,
+    access = 21,
+    pipe = 22,
+    sched_yield = 24,
+    madvise = 28,
+    dup = 32,
+    dup2 = 33,
+    nanosleep = 35,
+    getpid = 39,
+    sendfile = 40,
+    clone = 56,
+    fork = 57,
+    vfork = 58,
+    execve = 59,
+    exit = 60,
+    wait4 = 61,
+    kill = 62,
+    uname = 63,
+    fcntl = 72,
+    getcwd = 79,
+    chdir = 80,
+    readlink = 89,
+    umask = 95,
+    gettimeofday = 96,
+    getrlimit = 97,
+    sysinfo = 99,
+    getuid = 102,
+    getgid = 104,
+    setuid = 105,
+    setgid = 106,
+    geteuid = 107,
+    getegid = 108,
+    setpgid = 109,
+    getppid = 110,
+    getpgrp = 111,
+    setsid = 112,
+    sigaltstack = 131,
+    prctl = 157,
+    arch_prctl = 158,
+    gettid = 186,
+    time = 201,
+    futex = 202,
+    getdents64 = 217,
+    set_tid_address = 218,
+    clock_gettime = 228,
+    clock_getres = 229,
+    clock_nanosleep = 230,
+    exit_group = 231,
+    tgkill = 234,
+    openat = 257,
+    newfstatat = 262,
+    readlinkat = 267,
+    faccessat = 269,
+    set_robust_list = 273,
+    pipe2 = 293,
+    prlimit64 = 302,
+    getrandom = 318,
+    statx = 332,
+    rseq = 334,
+    faccessat2 = 439,
+}
+
+/// `AT_FDCWD`: paths relative to the working directory.
+pub const AT_FDCWD: i64 = -100;
+pub const AT_SYMLINK_NOFOLLOW: u64 = 0x100;
+pub const AT_EMPTY_PATH: u64 = 0x1000;
+
+pub const O_ACCMODE: u64 = 3;
+pub const O_WRONLY: u64 = 1;
+pub const O_RDWR: u64 = 2;
+pub const O_CREAT: u64 = 0o100;
+pub const O_TRUNC: u64 = 0o1000;
+pub const O_DIRECTORY: u64 = 0o200000;
+
+pub const MAP_SHARED: u64 = 0x01;
+pub const MAP_PRIVATE: u64 = 0x02;
+pub const MAP_FIXED: u64 = 0x10;
+pub const MAP_ANONYMOUS: u64 = 0x20;
+pub const MAP_FIXED_NOREPLACE: u64 = 0x10_0000;
+
+pub const ARCH_SET_GS: u64 = 0x1001;
+pub const ARCH_SET_FS: u64 = 0x1002;
+pub const ARCH_GET_FS: u64 = 0x1003;
+pub const ARCH_GET_GS: u64 = 0x1004;
+
+pub const TCGETS: u64 = 0x5401;
+
+pub const SIGKILL: u64 = 9;
+pub const SIGSTOP: u64 = 19;
+/// Signals a fault kills a process with (no handlers are delivered yet).
+pub const SIGILL: u32 = 4;
+pub const SIGTRAP: u32 = 5;
+pub const SIGBUS: u32 = 7;
+pub const SIGFPE: u32 = 8;
+pub const SIGSEGV: u32 = 11;
+
+/// The name of a fatal signal, for the log.
+pub fn signal_name(signal: u32) -> &'static str {
+    match signal {
+        SIGILL => "SIGILL",
+        SIGTRAP => "SIGTRAP",
+        SIGBUS => "SIGBUS",
+        SIGFPE => "SIGFPE",
+        SIGSEGV => "SIGSEGV",
+        _ => "?",
+    }
+}
+
+pub const CLOCK_REALTIME: u64 = 0;
+pub const CLOCK_MONOTONIC: u64 = 1;
+
+pub const RLIMIT_STACK: u64 = 3;
+pub const RLIMIT_NOFILE: u64 = 7;
+pub const RLIM_INFINITY: u64 = u64::MAX;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_and_errors() {
+        assert_eq!(syscall_name(nr::exit_group), Some("exit_group"));
+        assert_eq!(syscall_name(1000), None);
+        assert_eq!(Errno::ENOSYS.result(), (-38i64) as u64);
+    }
+}

@@ -1,0 +1,477 @@
+//! The guest partition program: reads its initramfs (its data entry), starts the first
+//! Linux process (`/etc/guest/init`, from `guest.init`) in a child task without
+//! `native_syscalls` whose thread has this thread as exception handler, and serves the
+//! process's system calls and faults with the library ([`guest::syscall::handle`]) until it
+//! ends. Then it reports `init exited with status <n>` (or `killed by signal <n>`) to the
+//! health monitor as an application error, as Linux panics when init ends: the
+//! configuration's health table decides (restart the guest, or end a test run).
+//!
+//! Its memory pool (syssw maps it at `POOL_BASE`, read-write, and at `POOL_EXEC_BASE`,
+//! read-execute) is cut into: its own IPC buffer, the backing table, and the frames that
+//! back the processes' pages. This file is glue only: every decision about a Linux call is
+//! the library's.
+#![no_std]
+#![no_main]
+
+use guest::backing::{Backing, ENTRY};
+use guest::console::{LineBuffer, stream_name};
+use guest::cpio::Archive;
+use guest::linux::Errno;
+use guest::memory::{PAGE, Rights};
+use guest::pool::PagePool;
+use guest::process::Stream;
+use guest::syscall::{Host, Outcome, handle};
+use user_rt::abi::ipc::{
+    EXCEPTION_MESSAGE_SIZE, IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL, MessageTag,
+    REPLY_RESUME,
+};
+use user_rt::abi::syscall::{
+    Abilities, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId,
+};
+use user_rt::ipc_buffer::IpcBufferRef;
+use user_rt::partition::{POOL_BASE, POOL_EXEC_BASE, StartInfo};
+use user_rt::println;
+use user_rt::protocol::{ErrorCode, Request};
+use user_rt::sys::{self, Message};
+
+user_rt::entry!(main);
+
+/// Pages of the pool the IPC buffer takes (at its start).
+const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
+/// The pid of the first process.
+const INIT_PID: u32 = 1;
+
+fn main(start: u64, _: u64) {
+    #[allow(unsafe_code)]
+    // SAFETY: syssw starts every partition with the start record's address in rdi.
+    let Some(info) = (unsafe { StartInfo::from_start(start) }) else {
+        println!("guest: no start record from syssw");
+        return;
+    };
+    user_rt::service::set_server(ThreadId(info.server));
+    let pool_pages = info.pool_len / PAGE;
+    // The backing table: one entry per frame it can hand out.
+    let table_pages = (pool_pages * ENTRY as u64).div_ceil(PAGE + ENTRY as u64);
+    if pool_pages < IPC_PAGES + table_pages + 1 {
+        println!(
+            "guest: no memory pool ({} KiB): give the partition the `map` ability and more `memory`",
+            info.pool_len / 1024
+        );
+        return;
+    }
+    #[allow(unsafe_code)]
+    // SAFETY: syssw mapped the pool read-write at POOL_BASE for this partition alone; its
+    // first IPC_PAGES pages are used only through this IpcBufferRef.
+    let ipc = unsafe { IpcBufferRef::new(POOL_BASE) };
+    let (me, _) = sys::thread_self();
+    if let Err(e) = sys::thread_set(None, ThreadAttribute::IpcBuffer, ipc.address()) {
+        println!("guest: cannot register its IPC buffer: {e:?}");
+        return;
+    }
+    let table_base = POOL_BASE + IPC_PAGES * PAGE;
+    let frames_page = IPC_PAGES + table_pages;
+    let frame_count = pool_pages - frames_page;
+    #[allow(unsafe_code)]
+    // SAFETY: the rest of the pool after the IPC buffer, mapped read-write for this
+    // partition alone and never unmapped while it runs; this is the only reference to it
+    // (the read-execute alias is only ever a `map` source).
+    let rest = unsafe {
+        core::slice::from_raw_parts_mut(
+            table_base as *mut u8,
+            ((table_pages + frame_count) * PAGE) as usize,
+        )
+    };
+    let (table, frames) = rest.split_at_mut((table_pages * PAGE) as usize);
+
+    let fs = match Archive::new(info.data()) {
+        Ok(fs) => fs,
+        Err(e) => {
+            println!("guest: its initramfs (data entry) is unreadable: {e}");
+            return;
+        }
+    };
+    let mut args = [&b""[..]; guest::stack::MAX_STRINGS];
+    let mut env = [&b""[..]; guest::stack::MAX_STRINGS];
+    let argc = fs
+        .get(guest::INIT_ARGS_PATH)
+        .map_or(0, |e| guest::split_nul(e.data, &mut args));
+    let envc = fs
+        .get(guest::INIT_ENV_PATH)
+        .map_or(0, |e| guest::split_nul(e.data, &mut env));
+
+    let mcp = (info.priority as u8).saturating_sub(1).max(1);
+    let task = match sys::task_create(Abilities::empty(), mcp, 0, "init") {
+        Ok(t) => t,
+        Err(e) => {
+            println!("guest: task_create failed: {e:?}");
+            return;
+        }
+    };
+    let mut host = GuestHost {
+        task,
+        frames,
+        first_frame: frames_page,
+        pool: PagePool::new(frame_count as usize),
+        backing: Backing::new(table),
+        out: [LineBuffer::new(), LineBuffer::new()],
+        started: sys::clock(),
+        seed: sys::rdtsc() | 1,
+    };
+    let argv = &args[..argc];
+    let loaded = match guest::exec::load(&fs, &mut host, INIT_PID, 0, argv, &env[..envc], hwcap()) {
+        Ok(l) => l,
+        Err(e) => {
+            let path = argv
+                .first()
+                .map_or("", |p| core::str::from_utf8(p).unwrap_or("?"));
+            println!("guest: cannot start {path}: {e}");
+            end(&mut host, ipc, Outcome::Exit(127));
+            return;
+        }
+    };
+    let mut process = loaded.process;
+    println!(
+        "guest: process {} ({}) started: {}",
+        process.pid,
+        process.name(),
+        Joined(argv)
+    );
+    let thread = match start_thread(task, loaded.entry, loaded.sp, mcp, me) {
+        Ok(t) => t,
+        Err(e) => {
+            println!("guest: cannot start the process's thread: {e:?}");
+            end(&mut host, ipc, Outcome::Killed(guest::linux::SIGSEGV));
+            return;
+        }
+    };
+
+    let mut next = sys::receive(Some(thread), TIMEOUT_INFINITE);
+    let outcome = loop {
+        let received = match next {
+            Ok(r) => r,
+            Err(e) => {
+                println!("guest: receive failed: {e:?}");
+                break Outcome::Killed(guest::linux::SIGSEGV);
+            }
+        };
+        let tag = received.message.tag;
+        let from_kernel = matches!(tag.label(), LABEL_SYSCALL | LABEL_EXCEPTION)
+            && tag.len() == EXCEPTION_MESSAGE_SIZE;
+        if received.sender != thread || !from_kernel {
+            next = sys::receive(Some(thread), TIMEOUT_INFINITE);
+            continue;
+        }
+        let mut m = ipc.exception();
+        match handle(&mut process, &fs, &mut host, &mut m) {
+            Outcome::Resume => {
+                ipc.set_exception(&m);
+                let resume = Message {
+                    tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
+                    words: [0; 3],
+                };
+                next = sys::reply_wait(Some(thread), TIMEOUT_INFINITE, &resume);
+            }
+            ended => break ended,
+        }
+    };
+    end(&mut host, ipc, outcome);
+}
+
+/// Creates the process's thread (the guest as its exception handler; it runs in the guest's
+/// time partition, as every thread in its creator's) and starts it.
+fn start_thread(
+    task: TaskId,
+    entry: u64,
+    sp: u64,
+    priority: u8,
+    handler: ThreadId,
+) -> Result<ThreadId, user_rt::abi::syscall::Error> {
+    let thread = sys::thread_create(Some(task), entry, sp, priority, 0)?;
+    sys::thread_set(Some(thread), ThreadAttribute::ExceptionHandler, handler.0)?;
+    sys::thread_start(thread)?;
+    Ok(thread)
+}
+
+/// Ends the process (its task, its memory, its pending output) and reports the end of init
+/// to the health monitor.
+fn end(host: &mut GuestHost, ipc: IpcBufferRef, outcome: Outcome) {
+    let _ = sys::task_kill(host.task);
+    for (i, stream) in [Stream::Stdout, Stream::Stderr].into_iter().enumerate() {
+        host.out[i].flush(|line| {
+            println!(
+                "guest: process {INIT_PID} {}: {}",
+                stream_name(stream),
+                Lossy(line)
+            )
+        });
+    }
+    let pool = &mut host.pool;
+    host.backing.drain(|index| pool.free(index));
+    let mut detail = [0u8; 64];
+    let text = match outcome {
+        Outcome::Killed(signal) => {
+            format(&mut detail, format_args!("init killed by signal {signal}"))
+        }
+        Outcome::Exit(status) => format(
+            &mut detail,
+            format_args!("init exited with status {status}"),
+        ),
+        Outcome::Resume => "",
+    };
+    println!("guest: {text}");
+    if let Some(server) = user_rt::service::server() {
+        let request = Request::ReportError {
+            error: ErrorCode::ApplicationError,
+            detail: text.as_bytes(),
+        };
+        let _ = user_rt::service::request(server, ipc, &request);
+    }
+}
+
+/// Formats into `buf` (cut at its end).
+fn format<'b>(buf: &'b mut [u8], args: core::fmt::Arguments) -> &'b str {
+    struct Cursor<'c> {
+        buf: &'c mut [u8],
+        len: usize,
+    }
+    impl core::fmt::Write for Cursor<'_> {
+        fn write_str(&mut self, s: &str) -> core::fmt::Result {
+            let n = s.len().min(self.buf.len() - self.len);
+            self.buf[self.len..self.len + n].copy_from_slice(&s.as_bytes()[..n]);
+            self.len += n;
+            Ok(())
+        }
+    }
+    let mut c = Cursor { buf, len: 0 };
+    let _ = core::fmt::write(&mut c, args);
+    let len = c.len;
+    core::str::from_utf8(&buf[..len]).unwrap_or("")
+}
+
+/// CPUID leaf 1's EDX: what Linux passes as `AT_HWCAP` on x86-64.
+fn hwcap() -> u64 {
+    core::arch::x86_64::__cpuid(1).edx as u64
+}
+
+/// Bytes shown as text, invalid UTF-8 as `\x..` escapes.
+struct Lossy<'a>(&'a [u8]);
+
+impl core::fmt::Display for Lossy<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        for chunk in self.0.utf8_chunks() {
+            f.write_str(chunk.valid())?;
+            for b in chunk.invalid() {
+                write!(f, "\\x{b:02x}")?;
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Arguments separated by spaces.
+struct Joined<'a>(&'a [&'a [u8]]);
+
+impl core::fmt::Display for Joined<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        for (i, a) in self.0.iter().enumerate() {
+            if i > 0 {
+                f.write_str(" ")?;
+            }
+            write!(f, "{}", Lossy(a))?;
+        }
+        Ok(())
+    }
+}
+
+/// The kernel side of the library's [`Host`]: the process's task, the guest's frames and
+/// which of them back which process page.
+struct GuestHost<'p> {
+    task: TaskId,
+    /// The frames (pool pages from `first_frame` on), read-write.
+    frames: &'p mut [u8],
+    first_frame: u64,
+    pool: PagePool,
+    backing: Backing<'p>,
+    out: [LineBuffer; 2],
+    started: u64,
+    seed: u64,
+}
+
+impl GuestHost<'_> {
+    fn frame(&mut self, index: usize) -> &mut [u8] {
+        let at = index * PAGE as usize;
+        &mut self.frames[at..at + PAGE as usize]
+    }
+
+    /// Maps frames `index..index + pages` at `start` in the process with `rights`.
+    fn map_frames(
+        &self,
+        index: usize,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+    ) -> Result<(), Errno> {
+        let (base, kernel_rights) = if rights.contains(Rights::EXECUTE) {
+            (POOL_EXEC_BASE, PageRights::EXECUTE)
+        } else if rights.contains(Rights::WRITE) {
+            (POOL_BASE, PageRights::WRITE)
+        } else {
+            (POOL_BASE, PageRights::empty())
+        };
+        let mut done = 0;
+        while done < pages {
+            let n = (pages - done).min(MAP_MAX_PAGES);
+            let source = base + (self.first_frame + index as u64 + done) * PAGE;
+            sys::map(
+                Some(self.task),
+                source,
+                start + done * PAGE,
+                n,
+                kernel_rights,
+            )
+            .map_err(|_| Errno::ENOMEM)?;
+            done += n;
+        }
+        Ok(())
+    }
+
+    /// Backs and maps one run of pages with fresh frames (one contiguous run if the pool has
+    /// one, else page by page).
+    fn back(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+        if let Some(index) = self.pool.alloc(pages as usize) {
+            for i in 0..pages as usize {
+                self.frame(index + i).fill(0);
+            }
+            for i in 0..pages {
+                if self
+                    .backing
+                    .insert(start + i * PAGE, index + i as usize)
+                    .is_err()
+                {
+                    return Err(Errno::ENOMEM);
+                }
+            }
+            return self.map_frames(index, start, pages, rights);
+        }
+        for i in 0..pages {
+            let index = self.pool.alloc(1).ok_or(Errno::ENOMEM)?;
+            self.frame(index).fill(0);
+            let page = start + i * PAGE;
+            if self.backing.insert(page, index).is_err() {
+                self.pool.free(index);
+                return Err(Errno::ENOMEM);
+            }
+            self.map_frames(index, page, 1, rights)?;
+        }
+        Ok(())
+    }
+
+    /// The frame bytes behind process address `address` and how many of them lie in its
+    /// page.
+    fn locate(&self, address: u64) -> Option<(usize, usize)> {
+        let page = address & !(PAGE - 1);
+        let index = self.backing.get(page)?;
+        let offset = (address - page) as usize;
+        Some((index * PAGE as usize + offset, PAGE as usize - offset))
+    }
+}
+
+impl Host for GuestHost<'_> {
+    fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno> {
+        let mut done = 0;
+        while done < buf.len() {
+            let (at, room) = self.locate(address + done as u64).ok_or(Errno::EFAULT)?;
+            let n = room.min(buf.len() - done);
+            buf[done..done + n].copy_from_slice(&self.frames[at..at + n]);
+            done += n;
+        }
+        Ok(())
+    }
+
+    fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno> {
+        let mut done = 0;
+        while done < data.len() {
+            let (at, room) = self.locate(address + done as u64).ok_or(Errno::EFAULT)?;
+            let n = room.min(data.len() - done);
+            self.frames[at..at + n].copy_from_slice(&data[done..done + n]);
+            done += n;
+        }
+        Ok(())
+    }
+
+    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+        if rights.writable_and_executable() {
+            // The pool's two aliases are read-write and read-execute: no source for it.
+            return Err(Errno::EACCES);
+        }
+        let result = self.back(start, pages, rights);
+        if result.is_err() {
+            self.unmap(start, pages);
+        }
+        result
+    }
+
+    fn unmap(&mut self, start: u64, pages: u64) {
+        for i in 0..pages {
+            let page = start + i * PAGE;
+            if let Some(index) = self.backing.remove(page) {
+                let _ = sys::unmap(Some(self.task), page, 1);
+                self.pool.free(index);
+            }
+        }
+    }
+
+    fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+        if rights.writable_and_executable() {
+            return Err(Errno::EACCES);
+        }
+        for i in 0..pages {
+            let page = start + i * PAGE;
+            match self.backing.get(page) {
+                Some(index) => {
+                    let _ = sys::unmap(Some(self.task), page, 1);
+                    if rights.accessible() {
+                        self.map_frames(index, page, 1, rights)?;
+                    }
+                }
+                None if rights.accessible() => self.back(page, 1, rights)?,
+                None => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]) {
+        let buffer = match stream {
+            Stream::Stdout => &mut self.out[0],
+            Stream::Stderr => &mut self.out[1],
+        };
+        buffer.write(bytes, |line| {
+            println!(
+                "guest: process {pid} {}: {}",
+                stream_name(stream),
+                Lossy(line)
+            )
+        });
+    }
+
+    fn now_ns(&mut self) -> u64 {
+        sys::clock().saturating_sub(self.started)
+    }
+
+    /// Not cryptographically strong yet: xorshift64* seeded from the time-stamp counter.
+    fn random(&mut self, buf: &mut [u8]) {
+        for chunk in buf.chunks_mut(8) {
+            self.seed ^= sys::rdtsc();
+            self.seed ^= self.seed >> 12;
+            self.seed ^= self.seed << 25;
+            self.seed ^= self.seed >> 27;
+            let word = self.seed.wrapping_mul(0x2545_f491_4f6c_dd1d).to_le_bytes();
+            chunk.copy_from_slice(&word[..chunk.len()]);
+        }
+    }
+
+    fn log(&mut self, line: core::fmt::Arguments) {
+        println!("{line}");
+    }
+}

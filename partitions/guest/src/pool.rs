@@ -1,0 +1,100 @@
+//! The guest's page pool: the free memory of its partition (syssw maps it at
+//! `POOL_BASE`, see `user_rt::partition`) handed out page by page to back its processes'
+//! memory. A bitmap over the pool's pages; runs of contiguous pages are handed out first
+//! fit, so a segment can be mapped into a process with one `map` call.
+
+/// Most pages a pool manages (256 MiB).
+pub const MAX_POOL_PAGES: usize = 65536;
+
+/// Free/used state of up to [`MAX_POOL_PAGES`] pages, by index.
+pub struct PagePool {
+    used: [u64; MAX_POOL_PAGES / 64],
+    pages: usize,
+    free: usize,
+}
+
+impl PagePool {
+    /// A pool of `pages` free pages (at most [`MAX_POOL_PAGES`]; more are ignored).
+    pub const fn new(pages: usize) -> Self {
+        let pages = if pages > MAX_POOL_PAGES {
+            MAX_POOL_PAGES
+        } else {
+            pages
+        };
+        Self {
+            used: [0; MAX_POOL_PAGES / 64],
+            pages,
+            free: pages,
+        }
+    }
+
+    pub fn free_pages(&self) -> usize {
+        self.free
+    }
+
+    pub fn is_used(&self, page: usize) -> bool {
+        page < self.pages && self.used[page / 64] & (1 << (page % 64)) != 0
+    }
+
+    fn set(&mut self, page: usize, used: bool) {
+        if used {
+            self.used[page / 64] |= 1 << (page % 64);
+        } else {
+            self.used[page / 64] &= !(1 << (page % 64));
+        }
+    }
+
+    /// The first run of `count` free pages, marked used; `None` if there is none.
+    pub fn alloc(&mut self, count: usize) -> Option<usize> {
+        if count == 0 || count > self.free {
+            return None;
+        }
+        let mut start = 0;
+        while start + count <= self.pages {
+            match (start..start + count).rev().find(|&p| self.is_used(p)) {
+                Some(used) => start = used + 1,
+                None => {
+                    for p in start..start + count {
+                        self.set(p, true);
+                    }
+                    self.free -= count;
+                    return Some(start);
+                }
+            }
+        }
+        None
+    }
+
+    /// Frees page `page` (a page not in use is left as it is).
+    pub fn free(&mut self, page: usize) {
+        if self.is_used(page) {
+            self.set(page, false);
+            self.free += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hands_out_runs_first_fit_and_takes_them_back() {
+        let mut p = PagePool::new(10);
+        assert_eq!(p.alloc(3), Some(0));
+        assert_eq!(p.alloc(3), Some(3));
+        p.free(1);
+        assert_eq!(p.alloc(2), Some(6));
+        assert_eq!(p.alloc(1), Some(1));
+        assert_eq!(p.free_pages(), 2);
+        assert_eq!(p.alloc(3), None);
+        assert_eq!(p.alloc(2), Some(8));
+        assert_eq!(p.alloc(1), None);
+        p.free(100);
+        p.free(0);
+        p.free(0);
+        assert_eq!(p.free_pages(), 1);
+        assert_eq!(p.alloc(0), None);
+        assert_eq!(PagePool::new(usize::MAX).free_pages(), MAX_POOL_PAGES);
+    }
+}

@@ -1,0 +1,152 @@
+//! The state the guest keeps for one Linux process: identity, address-space areas and
+//! heap, open files, signal dispositions, and what the C library registered
+//! (`set_tid_address`, `set_robust_list`). The system calls change it
+//! ([`crate::syscall::handle`]); the partition program owns one per process.
+
+use crate::cpio::Entry;
+use crate::memory::{Area, AreaError, Areas, Kind, STACK_SIZE, STACK_TOP};
+use crate::vfs::PathBuf;
+
+/// Most open files of a process (`RLIMIT_NOFILE`).
+pub const MAX_FILES: usize = 64;
+/// Longest process name (Linux's `TASK_COMM_LEN` without the NUL).
+pub const NAME_LEN: usize = 15;
+
+/// Which console stream a terminal descriptor writes to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stream {
+    Stdout,
+    Stderr,
+}
+
+/// An open file description.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum File<'a> {
+    /// The console (standard input reads end of file, output goes to the log).
+    Console(Stream),
+    /// A file or directory of the initramfs, read-only, with its offset.
+    Initramfs { entry: Entry<'a>, offset: u64 },
+}
+
+/// One Linux process.
+#[derive(Clone, Debug)]
+pub struct Process<'a> {
+    pub pid: u32,
+    pub ppid: u32,
+    name: [u8; NAME_LEN],
+    name_len: usize,
+    /// The executable's normalised path (`/proc/self/exe`).
+    pub exe: PathBuf,
+    pub areas: Areas,
+    /// Start of the heap (after the executable) and the current program break.
+    pub brk_start: u64,
+    pub brk: u64,
+    pub files: [Option<File<'a>>; MAX_FILES],
+    /// `struct sigaction` as the kernel ABI has it (handler, flags, restorer, mask) per
+    /// signal 1..=64 (recorded; no handler is delivered yet).
+    pub sigactions: [[u64; 4]; 64],
+    pub sigmask: u64,
+    pub umask: u32,
+    pub clear_child_tid: u64,
+    pub robust_list: u64,
+    /// System-call numbers already logged as unsupported (0..511; 511 stands for every
+    /// number from 511 up).
+    unsupported_logged: [u64; 8],
+}
+
+impl<'a> Process<'a> {
+    /// A process `pid` running executable `exe` (its name is the last path component),
+    /// with the console on descriptors 0, 1 and 2 and no memory yet.
+    pub fn new(pid: u32, ppid: u32, exe: PathBuf) -> Self {
+        let base = exe.as_str().rsplit('/').next().unwrap_or("").as_bytes();
+        let name_len = base.len().min(NAME_LEN);
+        let mut name = [0u8; NAME_LEN];
+        name[..name_len].copy_from_slice(&base[..name_len]);
+        let mut files = [None; MAX_FILES];
+        files[0] = Some(File::Console(Stream::Stdout));
+        files[1] = Some(File::Console(Stream::Stdout));
+        files[2] = Some(File::Console(Stream::Stderr));
+        Self {
+            pid,
+            ppid,
+            name,
+            name_len,
+            exe,
+            areas: Areas::new(),
+            brk_start: 0,
+            brk: 0,
+            files,
+            sigactions: [[0; 4]; 64],
+            sigmask: 0,
+            umask: 0o022,
+            clear_child_tid: 0,
+            robust_list: 0,
+            unsupported_logged: [0; 8],
+        }
+    }
+
+    /// Sets the name (`prctl(PR_SET_NAME)`; cut to [`NAME_LEN`] bytes).
+    pub fn set_name(&mut self, name: &str) {
+        let mut len = name.len().min(NAME_LEN);
+        while !name.is_char_boundary(len) {
+            len -= 1;
+        }
+        self.name = [0; NAME_LEN];
+        self.name[..len].copy_from_slice(&name.as_bytes()[..len]);
+        self.name_len = len;
+    }
+
+    pub fn name(&self) -> &str {
+        core::str::from_utf8(&self.name[..self.name_len]).unwrap_or("?")
+    }
+
+    /// Records the executable's areas (one per page run) and where the heap starts.
+    pub fn set_image(
+        &mut self,
+        runs: &[crate::elf::PageRun],
+        brk_start: u64,
+    ) -> Result<(), AreaError> {
+        for r in runs {
+            self.areas.insert(Area {
+                start: r.start,
+                end: r.start + r.pages * crate::memory::PAGE,
+                rights: r.rights,
+                kind: Kind::Image,
+            })?;
+        }
+        self.brk_start = brk_start;
+        self.brk = brk_start;
+        Ok(())
+    }
+
+    /// The stack's area (`STACK_TOP - STACK_SIZE .. STACK_TOP`), recorded.
+    pub fn add_stack(&mut self) -> Result<Area, AreaError> {
+        let area = Area {
+            start: STACK_TOP - STACK_SIZE,
+            end: STACK_TOP,
+            rights: crate::memory::Rights::READ | crate::memory::Rights::WRITE,
+            kind: Kind::Stack,
+        };
+        self.areas.insert(area)?;
+        Ok(area)
+    }
+
+    /// The lowest free descriptor.
+    pub fn free_fd(&self) -> Option<usize> {
+        self.files.iter().position(Option::is_none)
+    }
+
+    pub fn file(&self, fd: u64) -> Option<File<'a>> {
+        self.files.get(usize::try_from(fd).ok()?).copied().flatten()
+    }
+
+    /// Whether an unsupported call `number` is seen for the first time (then it is logged).
+    pub fn first_unsupported(&mut self, number: u64) -> bool {
+        let number = number.min(511);
+        let word = &mut self.unsupported_logged[(number / 64) as usize];
+        let bit = 1 << (number % 64);
+        let first = *word & bit == 0;
+        *word |= bit;
+        first
+    }
+}

@@ -1,0 +1,1101 @@
+//! The Linux system calls and faults of a process, as a pure function: [`handle`] takes the
+//! exception message the kernel sent for one of the process's threads (its registers) and
+//! either edits the registers (the call's result in `rax`) for the reply that resumes the
+//! thread, or says the process ends. What needs the real system (process memory, mapping
+//! pages, the console, the clock, random bytes, the log) goes through [`Host`], which the
+//! partition program implements with kernel calls and the tests with a model.
+//!
+//! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`,
+//! `sendfile` (from an initramfs file to the console),
+//! `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
+//! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
+//! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
+//! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
+//! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
+//! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
+//! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
+//! `getgid`, `getegid`), `exit`, `exit_group`. `rseq` answers `ENOSYS` (as on kernels
+//! without it); any other call answers `ENOSYS` and is logged once per number and process.
+//! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
+//! both fail with `EACCES`.
+//! A CPU exception (page fault outside the process's memory, invalid opcode, ...) kills the
+//! process with the matching signal: no signal handler is delivered yet.
+
+use crate::cpio::{Archive, Entry, S_IFCHR, S_IFMT};
+use crate::linux::{self, Errno, nr};
+use crate::memory::{Area, AreaError, Kind, PAGE, Rights, USER_TOP, page_up};
+use crate::process::{File, Process, Stream};
+use crate::vfs;
+use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
+
+/// Lowest address `mmap` places mappings at without a hint.
+pub const MMAP_BOTTOM: u64 = 1 << 36;
+/// Largest heap (`brk` beyond this fails).
+pub const MAX_HEAP: u64 = 1 << 30;
+/// Most bytes one `write`/`read`/`getrandom` moves (a short count, as Linux may return).
+const MAX_TRANSFER: usize = 1 << 20;
+/// Most `iovec`s of one `readv`/`writev` (Linux's `IOV_MAX`).
+const IOV_MAX: u64 = 1024;
+/// The device numbers of the console (`/dev/console`, 5:1).
+const CONSOLE_RDEV: u64 = 5 << 8 | 1;
+
+/// What the guest's environment provides to the system calls.
+pub trait Host {
+    /// Copies the process's memory at `address` into `buf` (the caller checked that the
+    /// range lies in readable areas).
+    fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno>;
+    /// Copies `data` into the process's memory at `address` (checked writable areas).
+    fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno>;
+    /// Backs `pages` pages at `start` with zeroed memory and maps them with `rights`
+    /// (`ENOMEM` when the guest is out of memory, `EACCES` for rights it never grants, such
+    /// as writable and executable at once; then nothing is mapped).
+    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
+    /// Unmaps `pages` pages at `start` and frees their memory (pages never backed are
+    /// skipped).
+    fn unmap(&mut self, start: u64, pages: u64);
+    /// Gives the pages at `start` the `rights` (none: unmapped, contents kept); pages not
+    /// backed yet are backed with zeroed memory.
+    fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
+    /// Output of process `pid` on the console.
+    fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]);
+    /// Nanoseconds since the guest started.
+    fn now_ns(&mut self) -> u64;
+    fn random(&mut self, buf: &mut [u8]);
+    fn log(&mut self, line: core::fmt::Arguments);
+}
+
+/// How the process goes on after [`handle`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Outcome {
+    /// Resume the thread with the (edited) registers of the message.
+    Resume,
+    /// The process exited with this status (`exit_group`).
+    Exit(u8),
+    /// The process was killed by this signal.
+    Killed(u32),
+}
+
+/// Serves one exception message of process `p`, whose files live in `fs`.
+pub fn handle<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    m: &mut ExceptionMessage,
+) -> Outcome {
+    if m.vector != VECTOR_SYSCALL {
+        return fault(p, host, m);
+    }
+    let r = &mut m.registers;
+    let number = r.rax;
+    let args = [r.rdi, r.rsi, r.rdx, r.r10, r.r8, r.r9];
+    let result = match number {
+        nr::exit | nr::exit_group => {
+            let status = args[0] as u8;
+            host.log(format_args!(
+                "guest: process {} exited with status {status}",
+                p.pid
+            ));
+            return Outcome::Exit(status);
+        }
+        _ => call(p, fs, host, number, args, r),
+    };
+    r.rax = match result {
+        Ok(value) => value,
+        Err(e) => e.result(),
+    };
+    // What the `syscall` instruction leaves in them on Linux.
+    r.rcx = r.rip;
+    r.r11 = r.rflags;
+    Outcome::Resume
+}
+
+/// The signal a CPU exception kills with (Linux's mapping).
+fn fault_signal(vector: u64) -> u32 {
+    match vector {
+        0 | 16 | 19 => linux::SIGFPE,
+        1 | 3 => linux::SIGTRAP,
+        6 => linux::SIGILL,
+        17 => linux::SIGBUS,
+        _ => linux::SIGSEGV,
+    }
+}
+
+fn fault(p: &Process, host: &mut impl Host, m: &ExceptionMessage) -> Outcome {
+    let signal = fault_signal(m.vector);
+    host.log(format_args!(
+        "guest: process {} ({}) killed by signal {signal} ({}): vector {} error {:#x} address {:#x} rip {:#x}",
+        p.pid,
+        p.name(),
+        linux::signal_name(signal),
+        m.vector,
+        m.error_code,
+        m.fault_address,
+        m.registers.rip
+    ));
+    Outcome::Killed(signal)
+}
+
+type SysResult<T> = Result<T, Errno>;
+
+/// Whether `address..address + len` lies in areas with `rights`.
+fn check_user(p: &Process, address: u64, len: usize, rights: Rights) -> SysResult<()> {
+    if len == 0 {
+        return Ok(());
+    }
+    let end = address.checked_add(len as u64).ok_or(Errno::EFAULT)?;
+    if end > USER_TOP {
+        return Err(Errno::EFAULT);
+    }
+    let mut at = address;
+    while at < end {
+        let a = p.areas.find(at).ok_or(Errno::EFAULT)?;
+        if !a.rights.contains(rights) || !a.rights.accessible() {
+            return Err(Errno::EFAULT);
+        }
+        at = a.end;
+    }
+    Ok(())
+}
+
+fn read_user(p: &Process, host: &mut impl Host, address: u64, buf: &mut [u8]) -> SysResult<()> {
+    check_user(p, address, buf.len(), Rights::READ)?;
+    host.read_user(address, buf)
+}
+
+fn write_user(p: &Process, host: &mut impl Host, address: u64, data: &[u8]) -> SysResult<()> {
+    check_user(p, address, data.len(), Rights::WRITE)?;
+    host.write_user(address, data)
+}
+
+fn read_u64(p: &Process, host: &mut impl Host, address: u64) -> SysResult<u64> {
+    let mut b = [0u8; 8];
+    read_user(p, host, address, &mut b)?;
+    Ok(u64::from_le_bytes(b))
+}
+
+/// A NUL-terminated string of the process (at most `buf.len() - 1` bytes).
+fn read_cstr<'b>(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    buf: &'b mut [u8],
+) -> SysResult<&'b [u8]> {
+    let mut len = 0;
+    while len < buf.len() {
+        // Up to the end of the page, so no unmapped byte after the NUL is touched.
+        let at = address.checked_add(len as u64).ok_or(Errno::EFAULT)?;
+        let chunk = ((PAGE - at % PAGE) as usize).min(buf.len() - len);
+        read_user(p, host, at, &mut buf[len..len + chunk])?;
+        if let Some(nul) = buf[len..len + chunk].iter().position(|&b| b == 0) {
+            return Ok(&buf[..len + nul]);
+        }
+        len += chunk;
+    }
+    Err(Errno::ENAMETOOLONG)
+}
+
+fn call<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    number: u64,
+    a: [u64; 6],
+    regs: &mut Registers,
+) -> SysResult<u64> {
+    match number {
+        nr::read => read(p, host, a[0], a[1], a[2]),
+        nr::write => write(p, host, a[0], a[1], a[2]),
+        nr::sendfile => sendfile(p, host, a[0], a[1], a[2], a[3]),
+        nr::readv | nr::writev => vectored(p, host, number == nr::writev, a[0], a[1], a[2]),
+        nr::open => openat(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1]),
+        nr::openat => openat(p, fs, host, a[0], a[1], a[2]),
+        nr::close => {
+            let slot = p
+                .files
+                .get_mut(usize::try_from(a[0]).map_err(|_| Errno::EBADF)?)
+                .ok_or(Errno::EBADF)?;
+            slot.take().map(|_| 0).ok_or(Errno::EBADF)
+        }
+        nr::lseek => lseek(p, a[0], a[1] as i64, a[2]),
+        nr::getdents64 => getdents64(p, fs, host, a[0], a[1], a[2]),
+        nr::stat | nr::lstat => {
+            let follow = number == nr::stat;
+            let entry = lookup_at(p, fs, host, linux::AT_FDCWD as u64, a[0], follow)?;
+            write_stat(p, host, a[1], &stat_of(Some(&entry)))
+        }
+        nr::fstat => {
+            let st = stat_of_fd(p, a[0])?;
+            write_stat(p, host, a[1], &st)
+        }
+        nr::newfstatat => {
+            let (dirfd, path, buf, flags) = (a[0], a[1], a[2], a[3]);
+            if flags & linux::AT_EMPTY_PATH != 0 {
+                let mut b = [0u8; 1];
+                if read_cstr(p, host, path, &mut b).is_ok_and(|s| s.is_empty()) {
+                    let st = stat_of_fd(p, dirfd)?;
+                    return write_stat(p, host, buf, &st);
+                }
+            }
+            let follow = flags & linux::AT_SYMLINK_NOFOLLOW == 0;
+            let entry = lookup_at(p, fs, host, dirfd, path, follow)?;
+            write_stat(p, host, buf, &stat_of(Some(&entry)))
+        }
+        nr::access => access(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1]),
+        nr::faccessat | nr::faccessat2 => access(p, fs, host, a[0], a[1], a[2]),
+        nr::readlink => readlink(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1], a[2]),
+        nr::readlinkat => readlink(p, fs, host, a[0], a[1], a[2], a[3]),
+        nr::getcwd => {
+            if a[1] < 2 {
+                return Err(Errno::ERANGE);
+            }
+            write_user(p, host, a[0], b"/\0")?;
+            Ok(2)
+        }
+        nr::ioctl => {
+            // No terminal yet: the console is not a tty (TCGETS and the rest: ENOTTY).
+            p.file(a[0]).ok_or(Errno::EBADF)?;
+            Err(Errno::ENOTTY)
+        }
+        nr::fcntl => fcntl(p, a[0], a[1]),
+        nr::brk => Ok(brk(p, host, a[0])),
+        nr::mmap => mmap(p, host, a[0], a[1], a[2], a[3]),
+        nr::munmap => munmap(p, host, a[0], a[1]),
+        nr::mprotect => mprotect(p, host, a[0], a[1], a[2]),
+        nr::madvise => Ok(0),
+        nr::arch_prctl => arch_prctl(p, host, regs, a[0], a[1]),
+        nr::set_tid_address => {
+            p.clear_child_tid = a[0];
+            Ok(p.pid as u64)
+        }
+        nr::set_robust_list => {
+            // Its one valid length: sizeof(struct robust_list_head).
+            if a[1] != 24 {
+                return Err(Errno::EINVAL);
+            }
+            p.robust_list = a[0];
+            Ok(0)
+        }
+        nr::rseq => Err(Errno::ENOSYS),
+        nr::rt_sigaction => sigaction(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigprocmask => sigprocmask(p, host, a[0], a[1], a[2], a[3]),
+        nr::prlimit64 => {
+            if a[0] != 0 && a[0] != p.pid as u64 {
+                return Err(Errno::ESRCH);
+            }
+            if a[2] != 0 {
+                return Err(Errno::EPERM); // the limits are fixed
+            }
+            rlimit(p, host, a[1], a[3])
+        }
+        nr::getrlimit => rlimit(p, host, a[0], a[1]),
+        nr::getrandom => {
+            if a[2] & !7 != 0 {
+                return Err(Errno::EINVAL);
+            }
+            let mut bytes = [0u8; 256];
+            let n = (a[1] as usize).min(bytes.len());
+            host.random(&mut bytes[..n]);
+            write_user(p, host, a[0], &bytes[..n])?;
+            Ok(n as u64)
+        }
+        nr::clock_gettime => {
+            // CLOCK_REALTIME .. CLOCK_BOOTTIME; there is no real-time clock yet, so the
+            // wall clock starts at the epoch when the guest starts.
+            if a[0] > 7 {
+                return Err(Errno::EINVAL);
+            }
+            let ns = host.now_ns();
+            let mut ts = [0u8; 16];
+            ts[..8].copy_from_slice(&(ns / 1_000_000_000).to_le_bytes());
+            ts[8..].copy_from_slice(&(ns % 1_000_000_000).to_le_bytes());
+            write_user(p, host, a[1], &ts)?;
+            Ok(0)
+        }
+        nr::gettimeofday => {
+            let ns = host.now_ns();
+            if a[0] != 0 {
+                let mut tv = [0u8; 16];
+                tv[..8].copy_from_slice(&(ns / 1_000_000_000).to_le_bytes());
+                tv[8..].copy_from_slice(&(ns % 1_000_000_000 / 1000).to_le_bytes());
+                write_user(p, host, a[0], &tv)?;
+            }
+            Ok(0)
+        }
+        nr::time => {
+            let seconds = host.now_ns() / 1_000_000_000;
+            if a[0] != 0 {
+                write_user(p, host, a[0], &seconds.to_le_bytes())?;
+            }
+            Ok(seconds)
+        }
+        nr::uname => {
+            let mut u = [0u8; 6 * 65];
+            for (i, field) in [
+                &b"Linux"[..],
+                b"warden",
+                b"6.1.0-warden",
+                b"#1 Warden paravirtualized guest",
+                b"x86_64",
+                b"(none)",
+            ]
+            .iter()
+            .enumerate()
+            {
+                u[i * 65..i * 65 + field.len()].copy_from_slice(field);
+            }
+            write_user(p, host, a[0], &u)?;
+            Ok(0)
+        }
+        nr::umask => {
+            let old = p.umask;
+            p.umask = a[0] as u32 & 0o777;
+            Ok(old as u64)
+        }
+        nr::prctl => prctl(p, host, a[0], a[1]),
+        nr::sched_yield => Ok(0),
+        nr::getpid | nr::gettid | nr::getpgrp => Ok(p.pid as u64),
+        nr::getppid => Ok(p.ppid as u64),
+        nr::getuid | nr::geteuid | nr::getgid | nr::getegid => Ok(0),
+        _ => {
+            if p.first_unsupported(number) {
+                host.log(format_args!(
+                    "guest: process {} ({}): unsupported system call {number} ({}), returning ENOSYS",
+                    p.pid,
+                    p.name(),
+                    linux::syscall_name(number).unwrap_or("unknown")
+                ));
+            }
+            Err(Errno::ENOSYS)
+        }
+    }
+}
+
+fn read(p: &mut Process, host: &mut impl Host, fd: u64, buf: u64, count: u64) -> SysResult<u64> {
+    match p.file(fd).ok_or(Errno::EBADF)? {
+        File::Console(_) => Ok(0), // no console input yet: end of file
+        File::Initramfs { entry, offset } => {
+            if entry.is_dir() {
+                return Err(Errno::EISDIR);
+            }
+            let start = (offset as usize).min(entry.data.len());
+            let n = (count as usize)
+                .min(entry.data.len() - start)
+                .min(MAX_TRANSFER);
+            write_user(p, host, buf, &entry.data[start..start + n])?;
+            p.files[fd as usize] = Some(File::Initramfs {
+                entry,
+                offset: offset + n as u64,
+            });
+            Ok(n as u64)
+        }
+    }
+}
+
+fn write(p: &mut Process, host: &mut impl Host, fd: u64, buf: u64, count: u64) -> SysResult<u64> {
+    let stream = match p.file(fd).ok_or(Errno::EBADF)? {
+        File::Console(stream) => stream,
+        File::Initramfs { .. } => return Err(Errno::EBADF), // opened read-only
+    };
+    let total = (count as usize).min(MAX_TRANSFER);
+    check_user(p, buf, total, Rights::READ)?;
+    let mut chunk = [0u8; 512];
+    let mut done = 0;
+    while done < total {
+        let n = (total - done).min(chunk.len());
+        host.read_user(buf + done as u64, &mut chunk[..n])?;
+        host.console_write(p.pid, stream, &chunk[..n]);
+        done += n;
+    }
+    Ok(total as u64)
+}
+
+fn sendfile(
+    p: &mut Process,
+    host: &mut impl Host,
+    out_fd: u64,
+    in_fd: u64,
+    offset_ptr: u64,
+    count: u64,
+) -> SysResult<u64> {
+    let stream = match p.file(out_fd).ok_or(Errno::EBADF)? {
+        File::Console(stream) => stream,
+        File::Initramfs { .. } => return Err(Errno::EBADF), // opened read-only
+    };
+    let File::Initramfs { entry, offset } = p.file(in_fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::EINVAL); // no console input to copy
+    };
+    if entry.is_dir() {
+        return Err(Errno::EINVAL);
+    }
+    let from = if offset_ptr != 0 {
+        read_u64(p, host, offset_ptr)?
+    } else {
+        offset
+    };
+    let start = from.min(entry.data.len() as u64) as usize;
+    let n = (count as usize)
+        .min(entry.data.len() - start)
+        .min(MAX_TRANSFER);
+    if offset_ptr != 0 {
+        write_user(p, host, offset_ptr, &(from + n as u64).to_le_bytes())?;
+    } else {
+        p.files[in_fd as usize] = Some(File::Initramfs {
+            entry,
+            offset: from + n as u64,
+        });
+    }
+    host.console_write(p.pid, stream, &entry.data[start..start + n]);
+    Ok(n as u64)
+}
+
+fn vectored(
+    p: &mut Process,
+    host: &mut impl Host,
+    is_write: bool,
+    fd: u64,
+    iov: u64,
+    count: u64,
+) -> SysResult<u64> {
+    if count > IOV_MAX {
+        return Err(Errno::EINVAL);
+    }
+    p.file(fd).ok_or(Errno::EBADF)?;
+    let mut total = 0u64;
+    for i in 0..count {
+        let base = read_u64(p, host, iov + i * 16)?;
+        let len = read_u64(p, host, iov + i * 16 + 8)?;
+        if len == 0 {
+            continue;
+        }
+        let n = if is_write {
+            write(p, host, fd, base, len)?
+        } else {
+            read(p, host, fd, base, len)?
+        };
+        total += n;
+        if n < len {
+            break;
+        }
+    }
+    Ok(total)
+}
+
+fn lseek(p: &mut Process, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
+    let File::Initramfs { entry, offset: at } = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::ESPIPE);
+    };
+    let base = match whence {
+        0 => 0,
+        1 => at as i64,
+        2 => entry.data.len() as i64,
+        _ => return Err(Errno::EINVAL),
+    };
+    let new = base
+        .checked_add(offset)
+        .filter(|&n| n >= 0)
+        .ok_or(Errno::EINVAL)?;
+    p.files[fd as usize] = Some(File::Initramfs {
+        entry,
+        offset: new as u64,
+    });
+    Ok(new as u64)
+}
+
+/// Linux's `getdents64`: the directory's entries from its offset (`.`, `..`, then its
+/// children in archive order; the offset counts entries) as `struct linux_dirent64`
+/// records, as many as fit in `count` bytes.
+fn getdents64<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+) -> SysResult<u64> {
+    const DT_CHR: u8 = 2;
+    const DT_DIR: u8 = 4;
+    const DT_REG: u8 = 8;
+    const DT_LNK: u8 = 10;
+    const HEADER: usize = 19; // d_ino, d_off, d_reclen, d_type
+    let File::Initramfs { entry, offset } = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::ENOTDIR);
+    };
+    if !entry.is_dir() {
+        return Err(Errno::ENOTDIR);
+    }
+    let dir = entry.path();
+    let mut written = 0usize;
+    let mut index = offset;
+    let mut record = [0u8; HEADER + 256];
+    loop {
+        let (ino, kind, name) = match index {
+            0 => (entry.ino, DT_DIR, "."),
+            1 => {
+                let up = fs
+                    .get(crate::cpio::parent(dir))
+                    .map_or(entry.ino, |e| e.ino);
+                (up, DT_DIR, "..")
+            }
+            i => match fs.children(dir).nth(i as usize - 2) {
+                None => break,
+                Some(child) => {
+                    let kind = match child.file_type() {
+                        crate::cpio::S_IFDIR => DT_DIR,
+                        crate::cpio::S_IFLNK => DT_LNK,
+                        S_IFCHR => DT_CHR,
+                        _ => DT_REG,
+                    };
+                    let path = child.path();
+                    (
+                        child.ino,
+                        kind,
+                        &path[path.rfind('/').map_or(0, |at| at + 1)..],
+                    )
+                }
+            },
+        };
+        let name = &name.as_bytes()[..name.len().min(255)];
+        let length = (HEADER + name.len() + 1).next_multiple_of(8);
+        if written + length > count as usize {
+            if written == 0 {
+                return Err(Errno::EINVAL); // the buffer cannot hold one record
+            }
+            break;
+        }
+        record[..length].fill(0);
+        record[..8].copy_from_slice(&(ino as u64).to_le_bytes());
+        record[8..16].copy_from_slice(&(index + 1).to_le_bytes());
+        record[16..18].copy_from_slice(&(length as u16).to_le_bytes());
+        record[18] = kind;
+        record[HEADER..HEADER + name.len()].copy_from_slice(name);
+        write_user(p, host, buf + written as u64, &record[..length])?;
+        written += length;
+        index += 1;
+    }
+    p.files[fd as usize] = Some(File::Initramfs {
+        entry,
+        offset: index,
+    });
+    Ok(written as u64)
+}
+
+/// Looks a path of the process up, relative to `dirfd` (only `AT_FDCWD`, `/`, is
+/// supported as a base for relative paths).
+fn lookup_at<'a>(
+    p: &Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    follow: bool,
+) -> SysResult<Entry<'a>> {
+    let mut buf = [0u8; 256];
+    let path = read_cstr(p, host, path, &mut buf)?;
+    if path.first() != Some(&b'/') && dirfd as i64 != linux::AT_FDCWD {
+        // Directory descriptors as a base: not yet.
+        return Err(if p.file(dirfd).is_some() {
+            Errno::ENOTDIR
+        } else {
+            Errno::EBADF
+        });
+    }
+    vfs::lookup(fs, path, follow).map(|(entry, _)| entry)
+}
+
+fn openat<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const O_NOFOLLOW: u64 = 0o400000;
+    let found = lookup_at(p, fs, host, dirfd, path, flags & O_NOFOLLOW == 0);
+    if flags & linux::O_ACCMODE != 0 || flags & (linux::O_CREAT | linux::O_TRUNC) != 0 {
+        // The initramfs is read-only.
+        return Err(match found {
+            Err(Errno::ENOENT) if flags & linux::O_CREAT == 0 => Errno::ENOENT,
+            Err(e) if e != Errno::ENOENT => e,
+            _ => Errno::EROFS,
+        });
+    }
+    let entry = found?;
+    if flags & linux::O_DIRECTORY != 0 && !entry.is_dir() {
+        return Err(Errno::ENOTDIR);
+    }
+    if entry.is_symlink() {
+        return Err(Errno::ELOOP); // O_NOFOLLOW on a link
+    }
+    let fd = p.free_fd().ok_or(Errno::EMFILE)?;
+    p.files[fd] = Some(File::Initramfs { entry, offset: 0 });
+    Ok(fd as u64)
+}
+
+fn access<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    mode: u64,
+) -> SysResult<u64> {
+    const W_OK: u64 = 2;
+    const X_OK: u64 = 1;
+    if mode & !7 != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let entry = lookup_at(p, fs, host, dirfd, path, true)?;
+    if mode & W_OK != 0 {
+        return Err(Errno::EROFS);
+    }
+    // Root may execute anything with an execute bit set for someone.
+    if mode & X_OK != 0 && entry.mode & 0o111 == 0 {
+        return Err(Errno::EACCES);
+    }
+    Ok(0)
+}
+
+#[allow(clippy::too_many_arguments)] // the system call's arguments
+fn readlink<'a>(
+    p: &mut Process<'a>,
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    buf: u64,
+    size: u64,
+) -> SysResult<u64> {
+    if size as i64 <= 0 {
+        return Err(Errno::EINVAL);
+    }
+    let mut name = [0u8; 256];
+    let text = read_cstr(p, host, path, &mut name)?;
+    let mut exe = [0u8; 257];
+    let target: &[u8] = if text == b"/proc/self/exe" {
+        let path = p.exe.as_str().as_bytes();
+        exe[0] = b'/';
+        exe[1..1 + path.len()].copy_from_slice(path);
+        &exe[..1 + path.len()]
+    } else {
+        let entry = lookup_at(p, fs, host, dirfd, path, false)?;
+        if !entry.is_symlink() {
+            return Err(Errno::EINVAL);
+        }
+        entry.data
+    };
+    let n = target.len().min(size as usize);
+    write_user(p, host, buf, &target[..n])?;
+    Ok(n as u64)
+}
+
+fn fcntl(p: &mut Process, fd: u64, cmd: u64) -> SysResult<u64> {
+    const F_GETFD: u64 = 1;
+    const F_SETFD: u64 = 2;
+    const F_GETFL: u64 = 3;
+    const F_SETFL: u64 = 4;
+    let file = p.file(fd).ok_or(Errno::EBADF)?;
+    match cmd {
+        F_GETFD | F_SETFD | F_SETFL => Ok(0),
+        F_GETFL => Ok(match file {
+            File::Console(_) => linux::O_RDWR,
+            File::Initramfs { .. } => 0,
+        }),
+        _ => Err(Errno::EINVAL),
+    }
+}
+
+/// Linux's `struct stat` (x86-64) fields the guest fills.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stat {
+    pub ino: u64,
+    pub nlink: u64,
+    pub mode: u32,
+    pub uid: u32,
+    pub gid: u32,
+    pub rdev: u64,
+    pub size: u64,
+    pub mtime: u64,
+}
+
+impl Stat {
+    /// The 144-byte `struct stat`.
+    pub fn to_bytes(&self) -> [u8; 144] {
+        let mut b = [0u8; 144];
+        b[0..8].copy_from_slice(&1u64.to_le_bytes()); // st_dev: the initramfs
+        b[8..16].copy_from_slice(&self.ino.to_le_bytes());
+        b[16..24].copy_from_slice(&self.nlink.to_le_bytes());
+        b[24..28].copy_from_slice(&self.mode.to_le_bytes());
+        b[28..32].copy_from_slice(&self.uid.to_le_bytes());
+        b[32..36].copy_from_slice(&self.gid.to_le_bytes());
+        b[40..48].copy_from_slice(&self.rdev.to_le_bytes());
+        b[48..56].copy_from_slice(&self.size.to_le_bytes());
+        b[56..64].copy_from_slice(&4096u64.to_le_bytes()); // st_blksize
+        b[64..72].copy_from_slice(&self.size.div_ceil(512).to_le_bytes()); // st_blocks
+        for at in [72, 88, 104] {
+            b[at..at + 8].copy_from_slice(&self.mtime.to_le_bytes());
+        }
+        b
+    }
+}
+
+/// The status of an initramfs entry, or of the console (`None`).
+fn stat_of(entry: Option<&Entry>) -> Stat {
+    match entry {
+        Some(e) => Stat {
+            ino: e.ino as u64,
+            nlink: e.nlink.max(1) as u64,
+            mode: e.mode,
+            uid: e.uid,
+            gid: e.gid,
+            rdev: 0,
+            size: e.data.len() as u64,
+            mtime: e.mtime as u64,
+        },
+        None => Stat {
+            ino: 1,
+            nlink: 1,
+            mode: S_IFCHR | 0o620,
+            rdev: CONSOLE_RDEV,
+            ..Stat::default()
+        },
+    }
+}
+
+fn stat_of_fd(p: &Process, fd: u64) -> SysResult<Stat> {
+    Ok(match p.file(fd).ok_or(Errno::EBADF)? {
+        File::Console(_) => stat_of(None),
+        File::Initramfs { entry, .. } => stat_of(Some(&entry)),
+    })
+}
+
+fn write_stat(p: &Process, host: &mut impl Host, buf: u64, st: &Stat) -> SysResult<u64> {
+    debug_assert!(st.mode & S_IFMT != 0 || st.mode == 0);
+    write_user(p, host, buf, &st.to_bytes())?;
+    Ok(0)
+}
+
+/// Linux's `brk`: returns the new break, or the old one if it cannot move there.
+fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 {
+    if requested < p.brk_start || requested - p.brk_start > MAX_HEAP {
+        return p.brk;
+    }
+    let (old_end, new_end) = (page_up(p.brk), page_up(requested));
+    if new_end > old_end {
+        let grown = if old_end == p.brk_start {
+            p.areas.insert(Area {
+                start: p.brk_start,
+                end: new_end,
+                rights: Rights::READ | Rights::WRITE,
+                kind: Kind::Heap,
+            })
+        } else {
+            p.areas.resize(old_end, new_end)
+        };
+        if grown.is_err() {
+            return p.brk;
+        }
+        let pages = (new_end - old_end) / PAGE;
+        if host
+            .map_zeroed(old_end, pages, Rights::READ | Rights::WRITE)
+            .is_err()
+        {
+            let _ = if old_end == p.brk_start {
+                p.areas.remove(p.brk_start, new_end, |_| ())
+            } else {
+                p.areas.resize(new_end, old_end)
+            };
+            return p.brk;
+        }
+    } else if new_end < old_end {
+        host.unmap(new_end, (old_end - new_end) / PAGE);
+        let _ = if new_end == p.brk_start {
+            p.areas.remove(p.brk_start, old_end, |_| ())
+        } else {
+            p.areas.resize(old_end, new_end)
+        };
+    }
+    p.brk = requested;
+    requested
+}
+
+fn area_error(e: AreaError) -> Errno {
+    match e {
+        AreaError::Invalid => Errno::EINVAL,
+        AreaError::Overlaps => Errno::EEXIST,
+        AreaError::TooMany => Errno::ENOMEM,
+    }
+}
+
+fn mmap(
+    p: &mut Process,
+    host: &mut impl Host,
+    hint: u64,
+    len: u64,
+    prot: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
+    if len == 0 || flags & (linux::MAP_SHARED | linux::MAP_PRIVATE) == 0 {
+        return Err(Errno::EINVAL);
+    }
+    if flags & linux::MAP_ANONYMOUS == 0 {
+        return Err(Errno::ENODEV); // file mappings: not yet
+    }
+    let len = len.checked_add(PAGE - 1).ok_or(Errno::ENOMEM)? & !(PAGE - 1);
+    let fixed = flags & (linux::MAP_FIXED | linux::MAP_FIXED_NOREPLACE) != 0;
+    let start = if fixed {
+        let end = hint.checked_add(len).ok_or(Errno::ENOMEM)?;
+        if !hint.is_multiple_of(PAGE) || hint == 0 || end > USER_TOP {
+            return Err(Errno::EINVAL);
+        }
+        if p.areas.overlaps(hint, end) {
+            if flags & linux::MAP_FIXED_NOREPLACE != 0 {
+                return Err(Errno::EEXIST);
+            }
+            munmap(p, host, hint, len)?;
+        }
+        hint
+    } else {
+        let hinted = hint.is_multiple_of(PAGE)
+            && hint >= MMAP_BOTTOM
+            && hint
+                .checked_add(len)
+                .is_some_and(|end| end <= crate::memory::MMAP_TOP && !p.areas.overlaps(hint, end));
+        if hinted {
+            hint
+        } else {
+            p.areas
+                .free_below(crate::memory::MMAP_TOP, MMAP_BOTTOM, len)
+                .ok_or(Errno::ENOMEM)?
+        }
+    };
+    p.areas
+        .insert(Area {
+            start,
+            end: start + len,
+            rights,
+            kind: Kind::Anonymous,
+        })
+        .map_err(area_error)?;
+    if rights.accessible()
+        && let Err(e) = host.map_zeroed(start, len / PAGE, rights)
+    {
+        let _ = p.areas.remove(start, start + len, |_| ());
+        return Err(e);
+    }
+    Ok(start)
+}
+
+fn munmap(p: &mut Process, host: &mut impl Host, start: u64, len: u64) -> SysResult<u64> {
+    if !start.is_multiple_of(PAGE) || len == 0 {
+        return Err(Errno::EINVAL);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::EINVAL)?;
+    let mut parts = [(0u64, 0u64); crate::memory::MAX_AREAS + 2];
+    let mut n = 0;
+    p.areas
+        .remove(start, end, |a| {
+            if n < parts.len() {
+                parts[n] = (a.start, a.end);
+                n += 1;
+            }
+        })
+        .map_err(area_error)?;
+    for &(s, e) in &parts[..n] {
+        host.unmap(s, (e - s) / PAGE);
+    }
+    Ok(0)
+}
+
+fn mprotect(
+    p: &mut Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+    prot: u64,
+) -> SysResult<u64> {
+    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
+    if !start.is_multiple_of(PAGE) {
+        return Err(Errno::EINVAL);
+    }
+    if len == 0 {
+        return Ok(0);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::ENOMEM)?;
+    if !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    host.protect(start, (end - start) / PAGE, rights)?;
+    p.areas
+        .protect(start, end, rights, |_| ())
+        .map_err(area_error)?;
+    Ok(0)
+}
+
+fn arch_prctl(
+    p: &Process,
+    host: &mut impl Host,
+    regs: &mut Registers,
+    code: u64,
+    address: u64,
+) -> SysResult<u64> {
+    match code {
+        linux::ARCH_SET_FS | linux::ARCH_SET_GS => {
+            if address >= abi::syscall::USER_END {
+                return Err(Errno::EPERM);
+            }
+            // The reply that resumes the thread sets its FS/GS base.
+            if code == linux::ARCH_SET_FS {
+                regs.fs_base = address;
+            } else {
+                regs.gs_base = address;
+            }
+            Ok(0)
+        }
+        linux::ARCH_GET_FS | linux::ARCH_GET_GS => {
+            let base = if code == linux::ARCH_GET_FS {
+                regs.fs_base
+            } else {
+                regs.gs_base
+            };
+            write_user(p, host, address, &base.to_le_bytes())?;
+            Ok(0)
+        }
+        _ => Err(Errno::EINVAL),
+    }
+}
+
+fn prctl(p: &mut Process, host: &mut impl Host, option: u64, arg: u64) -> SysResult<u64> {
+    const PR_SET_NAME: u64 = 15;
+    const PR_GET_NAME: u64 = 16;
+    match option {
+        PR_SET_NAME => {
+            let mut buf = [0u8; 16];
+            let name = match read_cstr(p, host, arg, &mut buf) {
+                Ok(name) => name,
+                // Longer names are cut (Linux copies 16 bytes and ends them with a NUL).
+                Err(Errno::ENAMETOOLONG) => &buf[..crate::process::NAME_LEN],
+                Err(e) => return Err(e),
+            };
+            let name = core::str::from_utf8(name).unwrap_or("?");
+            p.set_name(name);
+            Ok(0)
+        }
+        PR_GET_NAME => {
+            let mut buf = [0u8; 16];
+            buf[..p.name().len()].copy_from_slice(p.name().as_bytes());
+            write_user(p, host, arg, &buf)?;
+            Ok(0)
+        }
+        _ => {
+            if p.first_unsupported(nr::prctl) {
+                host.log(format_args!(
+                    "guest: process {} ({}): unsupported prctl option {option}, returning EINVAL",
+                    p.pid,
+                    p.name()
+                ));
+            }
+            Err(Errno::EINVAL)
+        }
+    }
+}
+
+fn sigaction(
+    p: &mut Process,
+    host: &mut impl Host,
+    signal: u64,
+    act: u64,
+    old: u64,
+    size: u64,
+) -> SysResult<u64> {
+    if size != 8 || signal == 0 || signal > 64 {
+        return Err(Errno::EINVAL);
+    }
+    if act != 0 && (signal == linux::SIGKILL || signal == linux::SIGSTOP) {
+        return Err(Errno::EINVAL);
+    }
+    let index = signal as usize - 1;
+    let mut new = [0u64; 4];
+    if act != 0 {
+        for (i, word) in new.iter_mut().enumerate() {
+            *word = read_u64(p, host, act + 8 * i as u64)?;
+        }
+    }
+    if old != 0 {
+        let mut bytes = [0u8; 32];
+        for (chunk, word) in bytes.chunks_exact_mut(8).zip(p.sigactions[index]) {
+            chunk.copy_from_slice(&word.to_le_bytes());
+        }
+        write_user(p, host, old, &bytes)?;
+    }
+    if act != 0 {
+        p.sigactions[index] = new;
+    }
+    Ok(0)
+}
+
+fn sigprocmask(
+    p: &mut Process,
+    host: &mut impl Host,
+    how: u64,
+    set: u64,
+    old: u64,
+    size: u64,
+) -> SysResult<u64> {
+    const UNBLOCKABLE: u64 = 1 << (linux::SIGKILL - 1) | 1 << (linux::SIGSTOP - 1);
+    if size != 8 {
+        return Err(Errno::EINVAL);
+    }
+    let new = if set != 0 {
+        let bits = read_u64(p, host, set)?;
+        Some(match how {
+            0 => p.sigmask | bits,
+            1 => p.sigmask & !bits,
+            2 => bits,
+            _ => return Err(Errno::EINVAL),
+        })
+    } else {
+        None
+    };
+    if old != 0 {
+        write_user(p, host, old, &p.sigmask.to_le_bytes())?;
+    }
+    if let Some(mask) = new {
+        p.sigmask = mask & !UNBLOCKABLE;
+    }
+    Ok(0)
+}
+
+fn rlimit(p: &Process, host: &mut impl Host, resource: u64, old: u64) -> SysResult<u64> {
+    if resource >= 16 {
+        return Err(Errno::EINVAL);
+    }
+    let (cur, max) = match resource {
+        linux::RLIMIT_STACK => (crate::memory::STACK_SIZE, crate::memory::STACK_SIZE),
+        linux::RLIMIT_NOFILE => (
+            crate::process::MAX_FILES as u64,
+            crate::process::MAX_FILES as u64,
+        ),
+        _ => (linux::RLIM_INFINITY, linux::RLIM_INFINITY),
+    };
+    if old != 0 {
+        let mut b = [0u8; 16];
+        b[..8].copy_from_slice(&cur.to_le_bytes());
+        b[8..].copy_from_slice(&max.to_le_bytes());
+        write_user(p, host, old, &b)?;
+    }
+    Ok(0)
+}

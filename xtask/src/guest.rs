@@ -1,0 +1,263 @@
+//! The guest build step of `system.img`: for each partition with `guest.*` keys, its
+//! initramfs, a cpio "newc" archive (written with the `cpio` crate) that becomes the
+//! partition's data entry `data/<partition>`. It holds:
+//!
+//! | path | what |
+//! |---|---|
+//! | `/bin/busybox` | Debian's `busybox-static` (installed by [`crate::tools::ensure_busybox`]) |
+//! | `/bin/{sh,echo,cat,ls}` | symbolic links to `busybox` (its applets) |
+//! | `/etc/passwd`, `/etc/group` | root (0) only |
+//! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
+//! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
+//! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
+//! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
+//!
+//! Every entry belongs to root, has mtime 0 and a fixed inode number, so the archive only
+//! changes when busybox or the keys do.
+
+use anyhow::{Context, Result, bail};
+use config::System;
+use config::system::Guest;
+use std::io::Cursor;
+use std::path::Path;
+
+/// The applets linked to busybox in `/bin`.
+pub const APPLETS: &[&str] = &["sh", "echo", "cat", "ls"];
+
+const S_IFREG: u32 = 0o100000;
+const S_IFDIR: u32 = 0o040000;
+const S_IFLNK: u32 = 0o120000;
+
+/// `(partition name, initramfs)` for every guest partition of `system`.
+pub fn initramfs_images(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
+    let mut out = Vec::new();
+    let mut busybox = None;
+    for p in &system.partitions {
+        let Some(guest) = &p.guest else {
+            continue;
+        };
+        if busybox.is_none() {
+            let path = crate::tools::ensure_busybox()?;
+            let bytes =
+                std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+            check_static(&path, &bytes)?;
+            busybox = Some(bytes);
+        }
+        let archive = initramfs(busybox.as_deref().unwrap_or_default(), guest)
+            .with_context(|| format!("partition {}: cannot write its initramfs", p.name))?;
+        out.push((p.name.clone(), archive));
+    }
+    Ok(out)
+}
+
+/// Refuses a busybox the guest cannot run (Debian's dynamically linked `busybox` package
+/// installs the same path as `busybox-static`).
+fn check_static(path: &Path, elf: &[u8]) -> Result<()> {
+    if let Err(e) = guest::elf::LoadPlan::new(elf) {
+        bail!(
+            "{} cannot run in the guest: {e}. Install the static one: apt-get install -y {}",
+            path.display(),
+            crate::tools::BUSYBOX_PACKAGE
+        );
+    }
+    Ok(())
+}
+
+/// The permission bits of a host file (0644 where the platform has none).
+fn file_mode(path: &Path) -> u32 {
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::PermissionsExt;
+        if let Ok(meta) = std::fs::metadata(path) {
+            return meta.permissions().mode() & 0o7777;
+        }
+    }
+    let _ = path;
+    0o644
+}
+
+/// Each string followed by a NUL.
+fn nul_terminated(strings: &[String]) -> Vec<u8> {
+    strings.iter().flat_map(|s| s.bytes().chain([0])).collect()
+}
+
+/// `s` quoted for the shell.
+fn quote(s: &str) -> String {
+    format!("'{}'", s.replace('\'', "'\\''"))
+}
+
+/// The initramfs of a guest whose first process is `guest`, with `busybox` as `/bin/busybox`.
+pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
+    let dir = |name: &str| (name.to_string(), S_IFDIR | 0o755, Vec::new());
+    let file = |name: &str, mode: u32, data: Vec<u8>| (name.to_string(), S_IFREG | mode, data);
+    let mut entries = vec![
+        dir("."),
+        dir("bin"),
+        file("bin/busybox", 0o755, busybox.to_vec()),
+    ];
+    for applet in APPLETS {
+        entries.push((
+            format!("bin/{applet}"),
+            S_IFLNK | 0o777,
+            b"busybox".to_vec(),
+        ));
+    }
+    let command: Vec<String> = guest.init.iter().map(|s| quote(s)).collect();
+    entries.extend([
+        dir("dev"),
+        dir("etc"),
+        file(
+            "etc/passwd",
+            0o644,
+            b"root:x:0:0:root:/root:/bin/sh\n".to_vec(),
+        ),
+        file("etc/group", 0o644, b"root:x:0:\n".to_vec()),
+        dir("etc/guest"),
+        file("etc/guest/init", 0o644, nul_terminated(&guest.init)),
+        file("etc/guest/env", 0o644, nul_terminated(&guest.env)),
+        file(
+            "init",
+            0o755,
+            format!("#!/bin/sh\nexec {}\n", command.join(" ")).into_bytes(),
+        ),
+        dir("proc"),
+        dir("root"),
+        dir("tmp"),
+    ]);
+    for (target, source) in &guest.files {
+        let data = std::fs::read(&source.path)
+            .with_context(|| format!("guest.files: cannot read {}", source.path))?;
+        let mode = file_mode(Path::new(&source.path));
+        let name = target.trim_start_matches('/');
+        if let Some(existing) = entries.iter_mut().find(|e| e.0 == name) {
+            // /etc/passwd or /etc/group (the validator refuses the others).
+            *existing = (name.to_string(), S_IFREG | mode, data);
+            continue;
+        }
+        let mut dir = String::new();
+        for part in name.split('/').take(name.split('/').count() - 1) {
+            if !dir.is_empty() {
+                dir.push('/');
+            }
+            dir.push_str(part);
+            if !entries.iter().any(|e| e.0 == dir) {
+                entries.push((dir.clone(), S_IFDIR | 0o755, Vec::new()));
+            }
+        }
+        entries.push((name.to_string(), S_IFREG | mode, data));
+    }
+    let inputs = entries
+        .into_iter()
+        .enumerate()
+        .map(|(i, (name, mode, data))| {
+            (
+                cpio::newc::Builder::new(&name)
+                    .ino(i as u32 + 1)
+                    .mode(mode)
+                    .uid(0)
+                    .gid(0)
+                    .nlink(if mode & S_IFDIR != 0 { 2 } else { 1 })
+                    .mtime(0),
+                Cursor::new(data),
+            )
+        });
+    let out = cpio::write_cpio(inputs, Cursor::new(Vec::new()))?;
+    Ok(out.into_inner())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use guest::cpio::Archive;
+
+    fn hello() -> Guest {
+        Guest {
+            init: vec!["/bin/busybox".into(), "echo".into(), "it's".into()],
+            env: vec!["PATH=/bin".into()],
+            files: Vec::new(),
+        }
+    }
+
+    #[test]
+    fn files_are_added_with_their_directories() {
+        let dir = std::env::temp_dir().join(format!("xtask-guest-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let source = |name: &str, text: &str| {
+            let path = dir.join(name);
+            std::fs::write(&path, text).unwrap();
+            config::system::SourceFile {
+                name: name.into(),
+                path: path.to_string_lossy().into_owned(),
+            }
+        };
+        let mut g = hello();
+        g.files = vec![
+            (
+                "/etc/passwd".into(),
+                source("passwd", "root:x:0:0::/:/bin/sh\n"),
+            ),
+            ("/opt/app/run.sh".into(), source("run.sh", "echo hi\n")),
+        ];
+        let bytes = initramfs(b"ELF", &g).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        assert_eq!(
+            fs.get("/etc/passwd").unwrap().data,
+            b"root:x:0:0::/:/bin/sh\n"
+        );
+        assert_eq!(fs.entries().filter(|e| e.path() == "etc/passwd").count(), 1);
+        assert!(fs.get("/opt").unwrap().is_dir());
+        assert!(fs.get("/opt/app").unwrap().is_dir());
+        let run = fs.get("/opt/app/run.sh").unwrap();
+        assert_eq!(run.data, b"echo hi\n");
+        assert!(run.is_file());
+        g.files = vec![(
+            "/etc/motd".into(),
+            config::system::SourceFile {
+                name: "gone".into(),
+                path: dir.join("gone").to_string_lossy().into_owned(),
+            },
+        )];
+        let err = initramfs(b"ELF", &g).unwrap_err();
+        assert!(format!("{err:#}").contains("cannot read"), "{err:#}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn the_guest_reads_the_initramfs_it_gets() {
+        let bytes = initramfs(b"\x7fELF-busybox", &hello()).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        let (bb, _) = guest::vfs::lookup(&fs, b"/bin/sh", true).unwrap();
+        assert_eq!(bb.data, b"\x7fELF-busybox");
+        assert_eq!(bb.mode, S_IFREG | 0o755);
+        for applet in APPLETS {
+            let (e, path) =
+                guest::vfs::lookup(&fs, format!("/bin/{applet}").as_bytes(), true).unwrap();
+            assert_eq!(path.as_str(), "bin/busybox", "{applet}");
+            assert!(e.is_file());
+        }
+        let args = fs.get(guest::INIT_ARGS_PATH).unwrap();
+        assert_eq!(args.data, b"/bin/busybox\0echo\0it's\0");
+        assert_eq!(fs.get(guest::INIT_ENV_PATH).unwrap().data, b"PATH=/bin\0");
+        assert_eq!(
+            fs.get("/init").unwrap().data,
+            b"#!/bin/sh\nexec '/bin/busybox' 'echo' 'it'\\''s'\n"
+        );
+        assert!(
+            fs.get("/etc/passwd")
+                .unwrap()
+                .data
+                .starts_with(b"root:x:0:0:")
+        );
+        assert!(fs.get("/etc/group").unwrap().is_file());
+        assert!(fs.get("/tmp").unwrap().is_dir());
+        // Deterministic.
+        assert_eq!(bytes, initramfs(b"\x7fELF-busybox", &hello()).unwrap());
+    }
+
+    #[test]
+    fn a_dynamic_busybox_is_refused_with_the_fix() {
+        let err = check_static(Path::new("/bin/busybox"), b"#!/bin/sh\n").unwrap_err();
+        let text = err.to_string();
+        assert!(text.contains("apt-get install -y busybox-static"), "{text}");
+    }
+}
