@@ -1,42 +1,84 @@
 //! A fixed-size latency histogram: what the runtime keeps of every release's lateness and
-//! of its own work per cycle, so that it can report min/median/max over any number of
-//! cycles (a bench wants 10,000 and more) in constant memory and constant time per sample.
+//! of its own work per release, so that it can report min/median/max over any number of
+//! releases (a bench wants 10,000 and more) in constant memory and constant time per sample,
+//! whether a figure is 10 us on virtual time or 10 ms under a loaded emulator.
 //!
-//! Samples fall into [`BUCKETS`] buckets of `width` ns; larger ones into an overflow count.
-//! Min and max are exact; the median is the midpoint of the bucket that holds it (so it is
-//! exact to `width / 2`), clamped to [min, max] — and the max when the median overflows.
+//! Buckets are log-linear: values below 64 ns have a bucket each; above, every power of two
+//! is split into 32 buckets, so a bucket is at most 1/32 of its values wide. Min and max
+//! are exact; the median is the midpoint of the bucket that holds it (within 1/64 of the
+//! true value), clamped to [min, max]. Values from 2^([`MAX_EXPONENT`] + 1) ns (about 37
+//! minutes) share the last bucket.
 
+/// Significant bits a bucket keeps below a value's top bit.
+const SUB_BITS: u32 = 5;
+const SUB: usize = 1 << SUB_BITS;
+/// Values below this have a bucket each.
+const LINEAR: u64 = 2 * SUB as u64;
+/// Highest top-bit position with buckets of its own.
+pub const MAX_EXPONENT: u32 = 40;
 /// Buckets per histogram.
-pub const BUCKETS: usize = 256;
+pub const BUCKETS: usize = LINEAR as usize + (MAX_EXPONENT as usize - SUB_BITS as usize) * SUB;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Histogram {
-    width: u64,
     counts: [u32; BUCKETS],
-    overflow: u64,
     count: u64,
     min: u64,
     max: u64,
 }
 
+impl Default for Histogram {
+    fn default() -> Self {
+        Self::new()
+    }
+}
+
+/// The bucket of `ns`.
+fn bucket(ns: u64) -> usize {
+    if ns < LINEAR {
+        return ns as usize;
+    }
+    let top = 63 - ns.leading_zeros();
+    if top > MAX_EXPONENT {
+        return BUCKETS - 1;
+    }
+    let shift = top - SUB_BITS;
+    let mantissa = (ns >> shift) as usize & (SUB - 1);
+    LINEAR as usize + (top - SUB_BITS - 1) as usize * SUB + mantissa
+}
+
+/// The middle of bucket `index`.
+fn midpoint(index: usize) -> u64 {
+    if index < LINEAR as usize {
+        return index as u64;
+    }
+    let above = index - LINEAR as usize;
+    let shift = (above / SUB) as u32 + 1;
+    let low = ((SUB + above % SUB) as u64) << shift;
+    low + (1u64 << shift) / 2
+}
+
 impl Histogram {
-    /// An empty histogram with buckets `width` ns wide (at least 1).
-    pub const fn new(width: u64) -> Self {
+    pub const fn new() -> Self {
         Self {
-            width: if width == 0 { 1 } else { width },
             counts: [0; BUCKETS],
-            overflow: 0,
             count: 0,
             min: u64::MAX,
             max: 0,
         }
     }
 
+    /// Empty again (in place).
+    pub fn clear(&mut self) {
+        self.counts.fill(0);
+        self.count = 0;
+        self.min = u64::MAX;
+        self.max = 0;
+    }
+
     pub fn record(&mut self, ns: u64) {
-        match self.counts.get_mut((ns / self.width) as usize) {
-            Some(c) => *c = c.saturating_add(1),
-            None => self.overflow += 1,
-        }
+        let slot = &mut self.counts[bucket(ns)];
+        *slot = slot.saturating_add(1);
         self.count += 1;
         self.min = self.min.min(ns);
         self.max = self.max.max(ns);
@@ -58,9 +100,7 @@ impl Histogram {
         for (i, &c) in self.counts.iter().enumerate() {
             seen += u64::from(c);
             if seen >= rank {
-                median = (i as u64)
-                    .saturating_mul(self.width)
-                    .saturating_add(self.width / 2);
+                median = midpoint(i);
                 break;
             }
         }
@@ -74,29 +114,52 @@ mod tests {
 
     #[test]
     fn summary_of_samples() {
-        let mut h = Histogram::new(1_000);
+        let mut h = Histogram::new();
         assert_eq!(h.summary(), None);
         for ns in [12_300, 11_100, 11_900, 40_000, 11_500] {
             h.record(ns);
         }
-        // Sorted: 11.1, 11.5, 11.9, 12.3, 40 us: the median 11.9 us lies in bucket 11.
-        assert_eq!(h.summary(), Some((11_100, 11_500, 40_000)));
-        assert_eq!(h.count(), 5);
+        // Sorted: 11.1, 11.5, 11.9, 12.3, 40 us: the median 11.9 us, in a bucket of 256 ns.
+        let (min, median, max) = h.summary().unwrap();
+        assert_eq!((min, max, h.count()), (11_100, 40_000, 5));
+        assert!(median.abs_diff(11_900) <= 11_900 / 64, "{median}");
     }
 
     #[test]
-    fn the_median_stays_within_min_and_max_and_overflow_counts() {
-        let mut h = Histogram::new(1_000);
+    fn buckets_hold_their_values_within_one_sixty_fourth() {
+        let mut previous = 0;
+        for ns in (0..200_000u64).chain([1 << 20, 7_935_329, 1 << 39, u64::MAX / 3]) {
+            let b = bucket(ns);
+            assert!(
+                b >= previous || ns >= 200_000,
+                "buckets grow with the value"
+            );
+            previous = b;
+            if ns < 1 << (MAX_EXPONENT + 1) {
+                let mid = midpoint(b);
+                assert!(mid.abs_diff(ns) <= ns / 32 + 1, "{ns}: bucket {b} at {mid}");
+            } else {
+                assert_eq!(b, BUCKETS - 1);
+            }
+        }
+    }
+
+    #[test]
+    fn the_median_stays_within_min_and_max() {
+        let mut h = Histogram::new();
         h.record(5);
         assert_eq!(h.summary(), Some((5, 5, 5)));
-        let mut h = Histogram::new(10);
+        let mut h = Histogram::new();
         for _ in 0..3 {
-            h.record(1_000_000);
+            h.record(7_935_329);
         }
         h.record(3);
-        assert_eq!(h.summary(), Some((3, 1_000_000, 1_000_000)));
-        let mut h = Histogram::new(0);
+        let (_, median, max) = h.summary().unwrap();
+        assert!(median.abs_diff(7_935_329) <= 7_935_329 / 64 && max == 7_935_329);
+        let mut h = Histogram::new();
         h.record(u64::MAX);
         assert_eq!(h.summary(), Some((u64::MAX, u64::MAX, u64::MAX)));
+        h.clear();
+        assert_eq!((h.summary(), h), (None, Histogram::new()));
     }
 }

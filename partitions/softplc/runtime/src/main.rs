@@ -37,8 +37,8 @@
 //! - `plc: t=<ms>ms scan releases=<n> lateness_ns=<min>/<median>/<max>
 //!   overhead_ns=<min>/<median>/<max> forced=<n>` with them: over all releases of the
 //!   running program, the first start at a release after its window start and the
-//!   runtime's own work per release besides the VM's (`softplc::histogram`: medians to
-//!   0.5 us and 125 ns; what `cargo xtask bench` reports as `plc_release_jitter` and
+//!   runtime's own work per release besides the VM's (`softplc::histogram`: medians within
+//!   1/64; what `cargo xtask bench` reports as `plc_release_jitter` and
 //!   `plc_cycle_overhead`), and how many variables are forced now;
 //! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
 //!   as IEC literals);
@@ -123,7 +123,7 @@ static SCRATCH: spin::Mutex<[u32; MAX_SCRATCH]> = spin::Mutex::new([0; MAX_SCRAT
 static AREAS: spin::Mutex<Areas> = spin::Mutex::new(Areas::new());
 /// The running program's runtime state and the VM's stack, call and try frames and the
 /// shared-globals scratch: kept out of the control process's 32 KiB stack.
-static RUNTIME: spin::Mutex<Option<Runtime>> = spin::Mutex::new(None);
+static RUNTIME: spin::Mutex<Runtime> = spin::Mutex::new(Runtime::idle());
 static WORKSPACE: spin::Mutex<Workspace> = spin::Mutex::new(Workspace {
     stack: [0; 256],
     calls: [CallFrame::EMPTY; 32],
@@ -572,7 +572,10 @@ extern "C" fn control() {
             package,
             image,
             machine,
-            rt: runtime.insert(Runtime::new(schedule, period, safe)),
+            rt: {
+                runtime.restart(schedule, period, safe);
+                &mut runtime
+            },
             io: &mut io,
             areas: &mut areas,
             shared,

@@ -292,6 +292,19 @@ pub struct TaskStats {
 }
 
 impl TaskStats {
+    /// No activation yet.
+    pub const ZERO: TaskStats = TaskStats {
+        count: 0,
+        last: 0,
+        min: 0,
+        max: 0,
+        total: 0,
+        last_jitter: 0,
+        max_jitter: 0,
+        overruns: 0,
+        faults: 0,
+    };
+
     fn record(&mut self, exec: u64, jitter: u64, interval: u64) {
         self.min = if self.count == 0 {
             exec
@@ -397,10 +410,9 @@ pub struct Runtime {
     pub safe: SafeValues,
     /// Release instants begun ([`Runtime::begin_release`]).
     pub releases: u64,
-    /// Release lateness: the first start at an instant minus its release time (1 us
-    /// buckets).
+    /// Release lateness: the first start at an instant minus its release time.
     pub lateness: Histogram,
-    /// The runtime's own work per release instant besides the VM's (250 ns buckets).
+    /// The runtime's own work per release instant besides the VM's.
     pub overhead: Histogram,
     period_ns: u64,
     /// Each event task's trigger as sampled at the previous release.
@@ -415,20 +427,50 @@ pub struct Runtime {
 
 impl Runtime {
     pub fn new(schedule: Schedule, period_ns: u64, safe: SafeValues) -> Self {
+        let mut rt = Self::idle();
+        rt.restart(schedule, period_ns, safe);
+        rt
+    }
+
+    /// A runtime with no task (a static's initial value).
+    pub const fn idle() -> Self {
         Self {
-            schedule,
-            stats: [TaskStats::default(); MAX_TASKS],
+            schedule: Schedule {
+                every: [0; MAX_TASKS],
+                trigger: [None; MAX_TASKS],
+                deadline: [NO_DEADLINE; MAX_TASKS],
+                order: [0; MAX_TASKS],
+                count: 0,
+            },
+            stats: [TaskStats::ZERO; MAX_TASKS],
             stopped: [None; MAX_TASKS],
-            safe,
+            safe: SafeValues::new(),
             releases: 0,
-            lateness: Histogram::new(1_000),
-            overhead: Histogram::new(250),
-            period_ns,
+            lateness: Histogram::new(),
+            overhead: Histogram::new(),
+            period_ns: 0,
             armed: [false; MAX_TASKS],
             triggered: [false; MAX_TASKS],
             instant: None,
             own_work: 0,
         }
+    }
+
+    /// Starts over with a program's schedule and safe values, in place (a runtime is large
+    /// for a partition's process stacks).
+    pub fn restart(&mut self, schedule: Schedule, period_ns: u64, safe: SafeValues) {
+        self.schedule = schedule;
+        self.stats.fill(TaskStats::ZERO);
+        self.stopped.fill(None);
+        self.safe = safe;
+        self.releases = 0;
+        self.lateness.clear();
+        self.overhead.clear();
+        self.period_ns = period_ns;
+        self.armed.fill(false);
+        self.triggered.fill(false);
+        self.instant = None;
+        self.own_work = 0;
     }
 
     /// One release of every due task in priority order, as the task processes run it when
