@@ -175,13 +175,14 @@ fn load() -> Result<(Package<'static>, VerifiedImage<'static>, Schedule), Refusa
 /// The shared-memory segment of a checked layout, as the words the copy protocol works on.
 #[allow(unsafe_code)] // memory syssw mapped for this partition (and the other project's)
 fn segment(layout: &SharedLayout) -> &'static [AtomicU32] {
-    // SAFETY: `shared::check` accepted the layout, so the address is page-aligned, in the
+    // `shared::check` accepted the layout, so the address is page-aligned, in the
     // shared-segment region and the size a whole number of words. The build computed it with
     // `protocol::layout::shared_address` from the configuration that also makes syssw map
     // the segment read-write at that address (`plc.shared` requires the "rw" attachment)
     // for the partition's whole life. `AtomicU32` has the layout of `u32`, and every access
     // through the slice is atomic, so the other partition writing its own area at the same
     // time is no data race.
+    // SAFETY: mapped, aligned words for the partition's life, only accessed atomically.
     unsafe {
         core::slice::from_raw_parts(
             layout.segment_address as *const AtomicU32,
@@ -374,10 +375,10 @@ fn with_life<R>(f: impl FnOnce(&mut Life<'_>) -> R) -> R {
     loop {
         let slot = lock_life();
         if let Some(life) = slot.0 {
-            // SAFETY: the control process publishes a pointer to the `Life` in its own frame
+            // The control process publishes a pointer to the `Life` in its own frame
             // ([`Published`]) and withdraws it, under this lock, before that value changes or
-            // goes away; while it is published nobody touches it but through this function,
-            // under this lock, so this is the only reference to it while `slot` is held.
+            // goes away; while it is published nobody touches it but through this function.
+            // SAFETY: a live `Life`, and under the lock this is the only reference to it.
             let life = unsafe { &mut *life.as_ptr().cast::<Life<'_>>() };
             return f(life);
         }
