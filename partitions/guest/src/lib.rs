@@ -31,10 +31,12 @@ pub mod elf;
 pub mod exec;
 pub mod linux;
 pub mod memory;
+pub mod pipe;
 pub mod pool;
 pub mod process;
 pub mod stack;
 pub mod syscall;
+pub mod system;
 pub mod vfs;
 
 /// Where the guest's command line is in the initramfs: `argv` of the first process, each

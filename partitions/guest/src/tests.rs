@@ -129,6 +129,7 @@ fn initramfs() -> Vec<u8> {
 struct World<'a> {
     fs: Archive<'a>,
     p: Process<'a>,
+    pipes: crate::pipe::Pipes,
     host: Model,
     fs_base: u64,
 }
@@ -152,6 +153,7 @@ impl<'a> World<'a> {
         let mut w = World {
             fs,
             p: loaded.process,
+            pipes: crate::pipe::Pipes::new(),
             host,
             fs_base: 0,
         };
@@ -175,7 +177,13 @@ impl<'a> World<'a> {
 
     fn run(&mut self, number: u64, a: [u64; 6]) -> (Outcome, ExceptionMessage) {
         let mut m = Self::message(number, a, self.fs_base);
-        let outcome = handle(&mut self.p, &self.fs, &mut self.host, &mut m);
+        let outcome = handle(
+            &mut self.p,
+            &mut self.pipes,
+            &self.fs,
+            &mut self.host,
+            &mut m,
+        );
         self.fs_base = m.registers.fs_base;
         (outcome, m)
     }
@@ -684,14 +692,14 @@ fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
 fn unsupported_calls_and_faults() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::clone, [0; 6]), err(Errno::ENOSYS));
-    assert_eq!(w.call(nr::clone, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::kill, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::kill, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(5000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(6000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 56 (clone), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 62 (kill), returning ENOSYS",
             "guest: process 1 (busybox): unsupported system call 5000 (unknown), returning ENOSYS",
         ]
     );
@@ -702,7 +710,7 @@ fn unsupported_calls_and_faults() {
         ..Default::default()
     };
     m.registers.rip = 0x40_1010;
-    let outcome = handle(&mut w.p, &w.fs, &mut w.host, &mut m);
+    let outcome = handle(&mut w.p, &mut w.pipes, &w.fs, &mut w.host, &mut m);
     assert_eq!(outcome, Outcome::Killed(11));
     assert_eq!(
         w.host.log.last().unwrap(),
@@ -710,7 +718,7 @@ fn unsupported_calls_and_faults() {
     );
     m.vector = 6;
     assert_eq!(
-        handle(&mut w.p, &w.fs, &mut w.host, &mut m),
+        handle(&mut w.p, &mut w.pipes, &w.fs, &mut w.host, &mut m),
         Outcome::Killed(4)
     );
 }
