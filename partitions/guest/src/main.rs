@@ -1,14 +1,18 @@
 //! The guest partition program: reads its initramfs (its data entry), starts the first
 //! Linux process (`/etc/guest/init`, from `guest.init`) in a child task without
 //! `native_syscalls` whose thread has this thread as exception handler, and serves the
-//! process's system calls and faults with the library ([`guest::syscall::handle`]) until it
-//! ends. Then it reports `init exited with status <n>` (or `killed by signal <n>`) to the
+//! system calls and faults of it and of the processes it forks (each a task of its own)
+//! with the library's process table ([`guest::system::System`]): it receives the exception
+//! message of any process's thread and replies when the library says so, perhaps much
+//! later (a call that waits). When init ends, the other processes end too, and it reports `init exited with status <n>` (or `killed by signal <n>`) to the
 //! health monitor as an application error, as Linux panics when init ends: the
 //! configuration's health table decides (restart the guest, or end a test run).
 //!
 //! Its memory pool (syssw maps it at `POOL_BASE`, read-write, and at `POOL_EXEC_BASE`,
 //! read-execute) is cut into: its own IPC buffer, the backing table, and the frames that
-//! back the processes' pages. This file is glue only: every decision about a Linux call is
+//! back the processes' pages (the backing table's key is the pid above the page address).
+//! Its stack holds the process table: give a guest partition `stack = "1MiB"`. This file
+//! is glue only: every decision about a Linux call is
 //! the library's.
 #![no_std]
 #![no_main]

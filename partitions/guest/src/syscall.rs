@@ -5,16 +5,20 @@
 //! pages, the console, the clock, random bytes, the log) goes through [`Host`], which the
 //! partition program implements with kernel calls and the tests with a model.
 //!
-//! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`,
-//! `sendfile` (from an initramfs file to the console),
-//! `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
+//! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`
+//! (the console, initramfs files, pipes), `sendfile` (from an initramfs file to the
+//! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
+//! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
-//! `getgid`, `getegid`), `exit`, `exit_group`. `rseq` answers `ENOSYS` (as on kernels
+//! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve` and
+//! `wait4` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
+//! `F_DUPFD_CLOEXEC`, `F_GETFD`, `F_SETFD` (close-on-exec), `F_GETFL` and `F_SETFL`
+//! (accepted, no status flag acts yet: `O_NONBLOCK` pipes still wait). `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.

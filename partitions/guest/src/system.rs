@@ -409,14 +409,17 @@ impl<'a> System<'a> {
         copied.push(p, k, path)?;
         let mut lists = [0usize; 2];
         for (list, base) in [argv, envp].into_iter().enumerate() {
+            // A null list is an empty one (as Linux allows).
             let mut n = 0;
-            while base != 0 {
-                let at = syscall::read_u64(p, k, base + 8 * n)?;
-                if at == 0 {
-                    break;
-                }
+            let mut at = if base == 0 {
+                0
+            } else {
+                syscall::read_u64(p, k, base)?
+            };
+            while at != 0 {
                 copied.push(p, k, at)?;
                 n += 1;
+                at = syscall::read_u64(p, k, base + 8 * n)?;
             }
             lists[list] = n as usize;
         }
