@@ -397,30 +397,56 @@ impl GuestHost<'_> {
     }
 
     /// Copies the current process's backed pages into process `child` (whose task
-    /// exists); returns how many.
+    /// exists); returns how many. Each run of backed pages in one area goes into one run of
+    /// frames where the pool has one, mapped with one call.
     fn copy_pages(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno> {
         let parent = self.current;
+        let size = PAGE as usize;
         let mut copied = 0;
         let mut at = key(parent, 0);
-        while let Some((k, from)) = self.backing.first_from(at)
+        while let Some((k, _)) = self.backing.first_from(at)
             && k < key(parent + 1, 0)
         {
-            at = k + PAGE;
-            let page = k - key(parent, 0);
-            let to = self.pool.alloc(1).ok_or(Errno::ENOMEM)?;
-            let size = PAGE as usize;
-            self.frames
-                .copy_within(from * size..(from + 1) * size, to * size);
-            if self.backing.insert(key(child, page), to).is_err() {
-                self.pool.free(to);
-                return Err(Errno::ENOMEM);
+            let start = k - key(parent, 0);
+            let area = areas.find(start);
+            let area_end = area.map_or(start + PAGE, |a| a.end);
+            let mut pages = 1;
+            while start + pages * PAGE < area_end && self.backing.get(k + pages * PAGE).is_some() {
+                pages += 1;
             }
-            if let Some(area) = areas.find(page)
+            let run = match self.pool.alloc(pages as usize) {
+                Some(run) => run,
+                None => {
+                    pages = 1;
+                    self.pool.alloc(1).ok_or(Errno::ENOMEM)?
+                }
+            };
+            for i in 0..pages {
+                let to = run + i as usize;
+                let Some(from) = self.backing.get(k + i * PAGE) else {
+                    self.pool.free(to);
+                    continue;
+                };
+                self.frames
+                    .copy_within(from * size..(from + 1) * size, to * size);
+                if self
+                    .backing
+                    .insert(key(child, start + i * PAGE), to)
+                    .is_err()
+                {
+                    for j in i..pages {
+                        self.pool.free(run + j as usize);
+                    }
+                    return Err(Errno::ENOMEM);
+                }
+            }
+            if let Some(area) = area
                 && area.rights.accessible()
             {
-                self.map_frames(child, to, page, 1, area.rights)?;
+                self.map_frames(child, run, start, pages, area.rights)?;
             }
-            copied += 1;
+            copied += pages;
+            at = k + pages * PAGE;
         }
         Ok(copied)
     }
