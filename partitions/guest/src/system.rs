@@ -15,8 +15,9 @@
 //! partition program copies them; [`Tasks::fork`]) and a thread started at address 0:
 //! its first exception message (the fetch fault) is answered with the parent's registers
 //! and `rax = 0`, the child's half of the `fork`. `vfork` and `clone(CLONE_VM |
-//! CLONE_VFORK)` are served the same way (a copy, not shared memory: the parent goes on at
-//! once; a child that only `execve`s or `_exit`s cannot tell).
+//! CLONE_VFORK)` are served the same way (a copy, not shared memory; a child that only
+//! `execve`s or `_exit`s cannot tell), and the parent waits, as on Linux, until the child
+//! executes or ends ([`State::Vforked`]).
 //!
 //! **Limits.** At most [`MAX_PROCESSES`] processes, zombies included, and at most as many
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
@@ -74,6 +75,9 @@ pub enum State {
     Starting(Registers),
     /// Its call waits: this message is served again when something happened.
     Blocked(ExceptionMessage),
+    /// It vforked `child` and waits until the child executes or ends; then `reply` (the
+    /// child's pid in `rax`) resumes it.
+    Vforked { child: u32, reply: ExceptionMessage },
     /// It ended and its parent has not reaped it: its wait status.
     Zombie(u32),
 }
@@ -155,7 +159,7 @@ impl<'a> System<'a> {
             }
             State::Running => self.run(i, fs, k, m),
             // A blocked or ended process has no thread that could send.
-            State::Blocked(_) | State::Zombie(_) => None,
+            State::Blocked(_) | State::Vforked { .. } | State::Zombie(_) => None,
         };
         ended.or_else(|| self.wake(fs, k))
     }
@@ -219,13 +223,12 @@ impl<'a> System<'a> {
             Outcome::Process => {
                 let r = &mut m.registers;
                 let args = [r.rdi, r.rsi, r.rdx, r.r10, r.r8];
+                let (flags, vfork_flags) = (args[0], CLONE_VM | CLONE_VFORK | linux::SIGCHLD);
+                let vfork = r.rax == nr::vfork || (r.rax == nr::clone && flags & CLONE_VFORK != 0);
                 let result = match r.rax {
-                    nr::clone => self.fork(i, k, args[0], args[1], args[2], args[3], r),
+                    nr::clone => self.fork(i, k, flags, args[1], args[2], args[3], r),
                     nr::fork => self.fork(i, k, linux::SIGCHLD, 0, 0, 0, r),
-                    nr::vfork => {
-                        let flags = CLONE_VM | CLONE_VFORK | linux::SIGCHLD;
-                        self.fork(i, k, flags, 0, 0, 0, r)
-                    }
+                    nr::vfork => self.fork(i, k, vfork_flags, 0, 0, 0, r),
                     nr::wait4 => match self.wait(i, k, args[0] as i32, args[1], args[2], args[3]) {
                         Err(Errno(0)) => {
                             if let Some(slot) = self.slots[i].as_mut() {
@@ -244,6 +247,7 @@ impl<'a> System<'a> {
                                 ..Registers::default()
                             };
                             k.resume(pid, &m);
+                            self.release_vfork_parent(pid, k);
                             return None;
                         }
                         // The old image is gone and the new one did not load.
@@ -255,8 +259,31 @@ impl<'a> System<'a> {
                 r.rax = result.unwrap_or_else(|e| e.result());
                 r.rcx = r.rip;
                 r.r11 = r.rflags;
-                k.resume(pid, &m);
+                match result {
+                    // The vfork parent waits until its child executes or ends.
+                    Ok(child) if vfork => {
+                        if let Some(slot) = self.slots[i].as_mut() {
+                            slot.state = State::Vforked {
+                                child: child as u32,
+                                reply: m,
+                            };
+                        }
+                    }
+                    _ => k.resume(pid, &m),
+                }
                 None
+            }
+        }
+    }
+
+    /// The parent that vforked `child` goes on (the child executed or ended).
+    fn release_vfork_parent(&mut self, child: u32, k: &mut impl Tasks) {
+        for slot in self.slots.iter_mut().flatten() {
+            if let State::Vforked { child: c, reply } = slot.state
+                && c == child
+            {
+                slot.state = State::Running;
+                k.resume(slot.process.pid, &reply);
             }
         }
     }
@@ -514,6 +541,8 @@ impl<'a> System<'a> {
         let pid = slot.process.pid;
         close_files(&mut slot.process, &mut self.pipes, false);
         k.release(pid);
+        self.release_vfork_parent(pid, k);
+        let slot = self.slots[i].as_mut()?;
         slot.state = State::Zombie(word);
         let parent = slot.process.ppid;
         for s in self.slots.iter_mut().flatten() {

@@ -945,26 +945,35 @@ fn fork_copies_the_process_and_wait_reaps_it() {
         g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]),
         Some(err(Errno::ECHILD))
     );
-    // vfork and clone(CLONE_VM | CLONE_VFORK) fork too; clone for threads does not.
-    assert_eq!(g.call(1, nr::vfork, [0; 6]), Some(3));
-    assert_eq!(g.call(1, nr::clone, [0x4111, 0, 0, 0, 0, 0]), Some(4));
+    // vfork: a fork whose parent waits until the child ends or executes.
+    assert_eq!(g.call(1, nr::vfork, [0; 6]), None);
+    assert!(matches!(
+        g.system.state(1),
+        Some(State::Vforked { child: 3, .. })
+    ));
+    let fault = ExceptionMessage::default();
+    assert_eq!(g.serve(3, fault), [(3, 0)]);
+    assert_eq!(g.serve(3, World::message(nr::exit, [0; 6], 0)), [(1, 3)]);
+    assert_eq!(g.system.state(3), Some(State::Zombie(0)), "not reaped yet");
+    // clone(CLONE_VM | CLONE_VFORK): the same; the child's execve lets the parent go on.
+    assert_eq!(g.call(1, nr::clone, [0x4111, 0, 0, 0, 0, 0]), None);
+    assert_eq!(g.serve(4, fault), [(4, 0)]);
+    g.put(4, SCRATCH + 0xe00, b"/bin/sh\0");
+    let argv = put_strings(&mut g, 4, SCRATCH + 0x400, &["sh"]);
+    let execve = World::message(nr::execve, [SCRATCH + 0xe00, argv, 0, 0, 0, 0], 0);
+    assert_eq!(g.serve(4, execve), [(4, 0), (1, 4)]);
+    // Threads: not yet.
     assert_eq!(
         g.call(1, nr::clone, [0x50f00, 0, 0, 0, 0, 0]),
         Some(err(Errno::EINVAL))
     );
-    // A child's exit before anyone waits leaves a zombie, reaped by pid.
-    let fault = ExceptionMessage::default();
-    for pid in [3, 4] {
-        let _ = g.serve(pid, fault);
-    }
-    let _ = g.serve(4, World::message(nr::exit, [0, 0, 0, 0, 0, 0], 0));
-    assert_eq!(g.system.state(4), Some(State::Zombie(0)));
-    assert_eq!(g.call(1, nr::wait4, [4, status, WNOHANG, 0, 0, 0]), Some(4));
+    // A child's exit before anyone waits left a zombie, reaped by pid.
+    assert_eq!(g.call(1, nr::wait4, [3, status, WNOHANG, 0, 0, 0]), Some(3));
     assert_eq!(
-        g.call(1, nr::wait4, [4, status, WNOHANG, 0, 0, 0]),
+        g.call(1, nr::wait4, [3, status, WNOHANG, 0, 0, 0]),
         Some(err(Errno::ECHILD))
     );
-    assert_eq!(g.pids(), [1, 3]);
+    assert_eq!(g.pids(), [1, 4]);
 }
 
 #[test]
@@ -1080,18 +1089,18 @@ fn pipes_block_readers_until_data_or_end_of_file_and_kill_writers_without_reader
 }
 
 /// Puts `strings` as a NULL-terminated pointer array with its strings at `at`.
-fn put_strings(g: &mut Guest, at: u64, strings: &[&str]) -> u64 {
+fn put_strings(g: &mut Guest, pid: u32, at: u64, strings: &[&str]) -> u64 {
     let mut text = at + 0x100;
     let mut pointers = Vec::new();
     for s in strings {
         let mut b = s.as_bytes().to_vec();
         b.push(0);
-        g.put(1, text, &b);
+        g.put(pid, text, &b);
         pointers.extend_from_slice(&text.to_le_bytes());
         text += b.len() as u64;
     }
     pointers.extend_from_slice(&0u64.to_le_bytes());
-    g.put(1, at, &pointers);
+    g.put(pid, at, &pointers);
     at
 }
 
@@ -1106,8 +1115,8 @@ fn execve_replaces_the_image_keeps_the_files_and_closes_close_on_exec() {
         Some(3)
     );
     assert_eq!(g.call(1, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
-    let argv = put_strings(&mut g, SCRATCH + 0x400, &["sh", "-c", "x"]);
-    let envp = put_strings(&mut g, SCRATCH + 0x800, &["A=1"]);
+    let argv = put_strings(&mut g, 1, SCRATCH + 0x400, &["sh", "-c", "x"]);
+    let envp = put_strings(&mut g, 1, SCRATCH + 0x800, &["A=1"]);
     g.put(1, SCRATCH + 0xe00, b"/nothing\0");
     assert_eq!(
         g.call(1, nr::execve, [SCRATCH + 0xe00, argv, envp, 0, 0, 0]),
@@ -1152,7 +1161,7 @@ fn execve_replaces_the_image_keeps_the_files_and_closes_close_on_exec() {
         Some(SCRATCH)
     );
     g.put(1, SCRATCH + 0xe00, b"/etc/script\0");
-    let argv = put_strings(&mut g, SCRATCH + 0x400, &["script", "arg"]);
+    let argv = put_strings(&mut g, 1, SCRATCH + 0x400, &["script", "arg"]);
     let _ = g.serve(
         1,
         World::message(nr::execve, [SCRATCH + 0xe00, argv, 0, 0, 0, 0], 0),
