@@ -446,7 +446,8 @@ impl<'a> System<'a> {
             while at != 0 {
                 copied.push(p, k, at)?;
                 n += 1;
-                at = syscall::read_u64(p, k, base + 8 * n)?;
+                let next = base.checked_add(8 * n).ok_or(Errno::EFAULT)?;
+                at = syscall::read_u64(p, k, next)?;
             }
             lists[list] = n as usize;
         }

@@ -1171,3 +1171,114 @@ fn execve_replaces_the_image_keeps_the_files_and_closes_close_on_exec() {
         "guest: process 1 (busybox) started: /bin/sh -e /etc/script arg"
     );
 }
+
+/// Random calls of random processes (forks, waits, pipes, execs among them) with edge
+/// arguments never panic, and the table stays consistent: every parent is in it, pipe ends
+/// are counted right (all pipes close with the processes).
+#[test]
+fn random_process_calls_never_panic() {
+    let bytes = initramfs();
+    for round in 0..100 {
+        random_process_calls(&bytes, 0x9e37_79b9_7f4a_7c15 ^ round);
+    }
+}
+
+fn random_process_calls(bytes: &[u8], mut seed: u64) {
+    let mut g = Guest::new(bytes);
+    let argv = put_strings(&mut g, 1, SCRATCH + 0x400, &["sh"]);
+    g.put(1, SCRATCH + 0xe00, b"/bin/sh\0");
+    let calls = [
+        nr::fork,
+        nr::vfork,
+        nr::clone,
+        nr::wait4,
+        nr::pipe2,
+        nr::pipe,
+        nr::dup,
+        nr::dup2,
+        nr::dup3,
+        nr::close,
+        nr::read,
+        nr::write,
+        nr::fcntl,
+        nr::execve,
+        nr::exit,
+        nr::getpid,
+    ];
+    let edges = [
+        0,
+        1,
+        3,
+        4,
+        5,
+        63,
+        64,
+        u64::MAX,
+        SCRATCH,
+        SCRATCH + 0xe00,
+        argv,
+        0x4111,
+        0x11,
+        1030,
+        u64::MAX - 7,
+    ];
+    let mut next = || {
+        seed ^= seed << 13;
+        seed ^= seed >> 7;
+        seed ^= seed << 17;
+        seed
+    };
+    for _ in 0..2_000 {
+        let pids: Vec<u32> = g
+            .pids()
+            .into_iter()
+            .filter(|&p| matches!(g.system.state(p), Some(State::Running | State::Starting(_))))
+            .collect();
+        if pids.is_empty() {
+            break; // they all wait on each other, as processes can
+        }
+        let pid = pids[(next() % pids.len() as u64) as usize];
+        let m = match g.system.state(pid) {
+            Some(State::Starting(_)) => ExceptionMessage::default(),
+            Some(State::Running) => {
+                let number = calls[(next() % calls.len() as u64) as usize];
+                // init's end would end the guest: it does not exit.
+                if pid == 1 && number == nr::exit {
+                    continue;
+                }
+                let mut a = [0u64; 6];
+                for x in &mut a {
+                    *x = edges[(next() % edges.len() as u64) as usize];
+                }
+                World::message(number, a, 0)
+            }
+            _ => continue,
+        };
+        g.host.resumed.clear();
+        if g.system.serve(pid, &g.fs, &mut g.host, m).is_some() {
+            return; // init died (SIGPIPE, a failed execve): the guest ends
+        }
+        for p in g.pids() {
+            let ppid = g.system.process(p).unwrap().ppid;
+            assert!(p == 1 || g.pids().contains(&ppid), "{p}'s parent {ppid}");
+        }
+    }
+    let mut end = g.host.released.len();
+    for pid in g.pids().into_iter().skip(1) {
+        if g.system.state(pid) == Some(State::Running) {
+            let _ = g.serve(pid, World::message(nr::exit, [0; 6], 0));
+            end += 1;
+        }
+    }
+    assert!(g.host.released.len() >= end);
+    for fd in 0..64 {
+        let _ = g.call(1, nr::close, [fd, 0, 0, 0, 0, 0]);
+    }
+    let blocked_or_starting = g
+        .pids()
+        .into_iter()
+        .any(|p| !matches!(g.system.state(p), Some(State::Running | State::Zombie(_))));
+    if !blocked_or_starting {
+        assert_eq!(g.system.pipes.open_count(), 0, "every pipe end was closed");
+    }
+}
