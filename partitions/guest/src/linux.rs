@@ -186,6 +186,8 @@ pub const SIGBUS: u32 = 7;
 pub const SIGFPE: u32 = 8;
 pub const SIGSEGV: u32 = 11;
 pub const SIGPIPE: u32 = 13;
+/// `SIG_IGN` as a `sigaction` handler.
+pub const SIG_IGN: u64 = 1;
 pub const SIGCHLD: u64 = 17;
 
 /// The name of a fatal signal, for the log.

@@ -90,8 +90,6 @@ pub enum Outcome {
 /// without readers.
 const WOULD_BLOCK: Errno = Errno(0xfff0);
 const BROKEN_PIPE: Errno = Errno(0xfff1);
-/// `SIG_IGN` as a `sigaction` handler.
-const SIG_IGN: u64 = 1;
 /// `O_CLOEXEC` (`open`, `pipe2`, `dup3`).
 pub const O_CLOEXEC: u64 = 0o2000000;
 
@@ -126,7 +124,7 @@ pub fn handle<'a>(
         Ok(value) => value,
         Err(WOULD_BLOCK) => return Outcome::Block,
         Err(BROKEN_PIPE) => {
-            if p.sigactions[linux::SIGPIPE as usize - 1][0] != SIG_IGN {
+            if p.sigactions[linux::SIGPIPE as usize - 1][0] != linux::SIG_IGN {
                 host.log(format_args!(
                     "guest: process {} ({}) killed by signal {} (SIGPIPE): wrote to a pipe without readers",
                     p.pid,

@@ -19,6 +19,9 @@
 //! `execve`s or `_exit`s cannot tell), and the parent waits, as on Linux, until the child
 //! executes or ends ([`State::Vforked`]).
 //!
+//! A parent that ignores `SIGCHLD` (or set `SA_NOCLDWAIT`) leaves no zombies: its
+//! children are reaped when they end, and its `wait4` waits until none is left (`ECHILD`).
+//!
 //! **Limits.** At most [`MAX_PROCESSES`] processes, zombies included, and at most as many
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
 //! beyond either, `fork` fails with `EAGAIN`.
@@ -511,8 +514,8 @@ impl<'a> System<'a> {
                 new.umask = old.umask;
                 // Handlers are gone with the image; ignored signals stay ignored.
                 for (n, action) in new.sigactions.iter_mut().enumerate() {
-                    if old.sigactions[n][0] == 1 {
-                        *action = [1, 0, 0, 0];
+                    if old.sigactions[n][0] == linux::SIG_IGN {
+                        *action = [linux::SIG_IGN, 0, 0, 0];
                     }
                 }
                 k.log(format_args!(
@@ -558,8 +561,15 @@ impl<'a> System<'a> {
                 Outcome::Exit((word >> 8) as u8)
             });
         }
-        if self.index(parent).is_none() {
-            self.slots[i] = None; // nobody waits for it
+        // Nobody waits for it without a parent, or with one that ignores SIGCHLD or set
+        // SA_NOCLDWAIT (Linux reaps such children at once).
+        const SA_NOCLDWAIT: u64 = 2;
+        let reaped = self.process(parent).is_none_or(|p| {
+            let [handler, flags, ..] = p.sigactions[linux::SIGCHLD as usize - 1];
+            handler == linux::SIG_IGN || flags & SA_NOCLDWAIT != 0
+        });
+        if reaped {
+            self.slots[i] = None;
         }
         None
     }

@@ -974,6 +974,18 @@ fn fork_copies_the_process_and_wait_reaps_it() {
         Some(err(Errno::ECHILD))
     );
     assert_eq!(g.pids(), [1, 4]);
+    // A parent that ignores SIGCHLD has no zombies: wait4 waits until no child is left.
+    g.put(1, SCRATCH + 0x600, &[1, 0, 0, 0, 0, 0, 0, 0]);
+    assert_eq!(
+        g.call(1, nr::rt_sigaction, [17, SCRATCH + 0x600, 0, 8, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.call(1, nr::wait4, [u64::MAX, 0, 0, 0, 0, 0]), None);
+    assert_eq!(
+        g.serve(4, World::message(nr::exit, [0; 6], 0)),
+        [(1, err(Errno::ECHILD))]
+    );
+    assert_eq!(g.pids(), [1]);
 }
 
 #[test]
