@@ -183,8 +183,8 @@
 //! `kernel_memory` pay for its processes' tasks, threads and page tables (one task and one
 //! thread a process, at most 16 processes: `kernel_tasks = 17` with its own; fewer tasks
 //! limit its processes, `fork` then fails with EAGAIN); its process table lives on its
-//! stack, so it wants `stack = "1MiB"`. A partition has either `plc` or `guest` keys, not
-//! both.
+//! stack, so it needs a `stack` of at least 1 MiB (a smaller one is an error). A partition
+//! has either `plc` or `guest` keys, not both.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -11,9 +11,8 @@
 //! Its memory pool (syssw maps it at `POOL_BASE`, read-write, and at `POOL_EXEC_BASE`,
 //! read-execute) is cut into: its own IPC buffer, the backing table, and the frames that
 //! back the processes' pages (the backing table's key is the pid above the page address).
-//! Its stack holds the process table: give a guest partition `stack = "1MiB"`. This file
-//! is glue only: every decision about a Linux call is
-//! the library's.
+//! Its stack holds the process table (the configuration gives a guest at least 1 MiB).
+//! This file is glue only: every decision about a Linux call is the library's.
 #![no_std]
 #![no_main]
 
