@@ -26,8 +26,13 @@ pub enum File<'a> {
     Console(Stream),
     /// A file or directory of the initramfs, read-only, with its offset.
     Initramfs { entry: Entry<'a>, offset: u64 },
-    /// One end of pipe `pipe` ([`crate::pipe::Pipes`]).
-    Pipe { pipe: usize, write: bool },
+    /// One end of pipe `pipe` ([`crate::pipe::Pipes`]); `nonblock`: `O_NONBLOCK` (calls
+    /// that would wait fail with `EAGAIN`).
+    Pipe {
+        pipe: usize,
+        write: bool,
+        nonblock: bool,
+    },
 }
 
 /// One Linux process.

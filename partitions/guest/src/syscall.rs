@@ -18,7 +18,7 @@
 //! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve` and
 //! `wait4` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
 //! `F_DUPFD_CLOEXEC`, `F_GETFD`, `F_SETFD` (close-on-exec), `F_GETFL` and `F_SETFL`
-//! (accepted, no status flag acts yet: `O_NONBLOCK` pipes still wait). `rseq` answers `ENOSYS` (as on kernels
+//! (`O_NONBLOCK` of a pipe descriptor: `EAGAIN` instead of waiting). `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
@@ -441,7 +441,7 @@ fn call<'a>(
 
 /// Closes descriptor `fd` if open (a pipe end counts one descriptor less).
 fn close(p: &mut Process, pipes: &mut Pipes, fd: usize) {
-    if let Some(File::Pipe { pipe, write }) = p.files.get_mut(fd).and_then(Option::take) {
+    if let Some(File::Pipe { pipe, write, .. }) = p.files.get_mut(fd).and_then(Option::take) {
         pipes.close_end(pipe, write);
     }
     if fd < MAX_FILES {
@@ -461,7 +461,7 @@ pub fn close_files(p: &mut Process, pipes: &mut Pipes, only_cloexec: bool) {
 /// Another descriptor of every pipe end `p` has open (a forked child's copies).
 pub fn share_files(p: &Process, pipes: &mut Pipes) {
     for file in p.files.iter().flatten() {
-        if let File::Pipe { pipe, write } = *file {
+        if let File::Pipe { pipe, write, .. } = *file {
             pipes.add_end(pipe, write);
         }
     }
@@ -469,7 +469,7 @@ pub fn share_files(p: &Process, pipes: &mut Pipes) {
 
 /// Puts a copy of `file` at the free descriptor `fd`.
 fn duplicate<'a>(p: &mut Process<'a>, pipes: &mut Pipes, file: File<'a>, fd: usize, cloexec: bool) {
-    if let File::Pipe { pipe, write } = file {
+    if let File::Pipe { pipe, write, .. } = file {
         pipes.add_end(pipe, write);
     }
     p.install(fd, file, cloexec);
@@ -482,8 +482,7 @@ fn pipe(
     fds: u64,
     flags: u64,
 ) -> SysResult<u64> {
-    const O_NONBLOCK: u64 = 0o4000;
-    if flags & !(O_CLOEXEC | O_NONBLOCK) != 0 {
+    if flags & !(O_CLOEXEC | linux::O_NONBLOCK) != 0 {
         return Err(Errno::EINVAL);
     }
     check_user(p, fds, 8, Rights::WRITE)?;
@@ -492,22 +491,14 @@ fn pipe(
     // Linux's limit on a user's pipe buffers: ENFILE.
     let index = pipes.open().ok_or(Errno(23))?;
     let cloexec = flags & O_CLOEXEC != 0;
-    p.install(
-        read_fd,
-        File::Pipe {
+    for (fd, write) in [(read_fd, false), (write_fd, true)] {
+        let end = File::Pipe {
             pipe: index,
-            write: false,
-        },
-        cloexec,
-    );
-    p.install(
-        write_fd,
-        File::Pipe {
-            pipe: index,
-            write: true,
-        },
-        cloexec,
-    );
+            write,
+            nonblock: flags & linux::O_NONBLOCK != 0,
+        };
+        p.install(fd, end, cloexec);
+    }
     let mut pair = [0u8; 8];
     pair[..4].copy_from_slice(&(read_fd as u32).to_le_bytes());
     pair[4..].copy_from_slice(&(write_fd as u32).to_le_bytes());
@@ -526,7 +517,7 @@ fn read(
     match p.file(fd).ok_or(Errno::EBADF)? {
         File::Console(_) => Ok(0), // no console input yet: end of file
         File::Pipe { write: true, .. } => Err(Errno::EBADF),
-        File::Pipe { pipe, .. } => {
+        File::Pipe { pipe, nonblock, .. } => {
             let n = (count as usize).min(PIPE_SIZE);
             check_user(p, buf, n, Rights::WRITE)?;
             let mut bytes = [0u8; PIPE_SIZE];
@@ -535,6 +526,7 @@ fn read(
                     host.write_user(buf, &bytes[..n])?;
                     Ok(n as u64)
                 }
+                Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
                 Transfer::WouldBlock => Err(WOULD_BLOCK),
                 Transfer::Broken => Err(Errno::EBADF),
             }
@@ -568,12 +560,13 @@ fn write(
     let stream = match p.file(fd).ok_or(Errno::EBADF)? {
         File::Console(stream) => stream,
         File::Initramfs { .. } | File::Pipe { write: false, .. } => return Err(Errno::EBADF),
-        File::Pipe { pipe, .. } => {
+        File::Pipe { pipe, nonblock, .. } => {
             let n = (count as usize).min(PIPE_SIZE);
             let mut bytes = [0u8; PIPE_SIZE];
             read_user(p, host, buf, &mut bytes[..n])?;
             return match pipes.write(pipe, &bytes[..n]) {
                 Transfer::Done(n) => Ok(n as u64),
+                Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
                 Transfer::WouldBlock => Err(WOULD_BLOCK),
                 Transfer::Broken => Err(BROKEN_PIPE),
             };
@@ -908,12 +901,29 @@ fn fcntl(p: &mut Process, pipes: &mut Pipes, fd: u64, cmd: u64, arg: u64) -> Sys
             p.set_cloexec(fd, arg & FD_CLOEXEC != 0);
             Ok(0)
         }
-        // No status flag changes anything yet (O_NONBLOCK, O_APPEND).
-        F_SETFL => Ok(0),
+        // O_NONBLOCK of a pipe end (this descriptor's: Linux shares it with the
+        // descriptors dup'ed from it); other flags change nothing (O_APPEND: no writable
+        // files).
+        F_SETFL => {
+            if let File::Pipe { pipe, write, .. } = file {
+                let nonblock = arg & linux::O_NONBLOCK != 0;
+                p.files[fd] = Some(File::Pipe {
+                    pipe,
+                    write,
+                    nonblock,
+                });
+            }
+            Ok(0)
+        }
         F_GETFL => Ok(match file {
             File::Console(_) => linux::O_RDWR,
-            File::Initramfs { .. } | File::Pipe { write: false, .. } => 0,
-            File::Pipe { write: true, .. } => linux::O_WRONLY,
+            File::Initramfs { .. } => 0,
+            File::Pipe {
+                write, nonblock, ..
+            } => {
+                let access = if write { linux::O_WRONLY } else { 0 };
+                access | if nonblock { linux::O_NONBLOCK } else { 0 }
+            }
         }),
         _ => Err(Errno::EINVAL),
     }

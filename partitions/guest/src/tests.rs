@@ -1098,6 +1098,21 @@ fn pipes_block_readers_until_data_or_end_of_file_and_kill_writers_without_reader
     );
     assert_eq!(g.call(1, nr::close, [r, 0, 0, 0, 0, 0]), Some(0));
     assert_eq!(g.system.pipes.open_count(), 0);
+    // O_NONBLOCK: EAGAIN instead of waiting, until F_SETFL clears it.
+    let o_nonblock = 0o4000;
+    assert_eq!(
+        g.call(1, nr::pipe2, [SCRATCH, o_nonblock, 0, 0, 0, 0]),
+        Some(0)
+    );
+    let r = g.word(1, SCRATCH) as u64;
+    assert_eq!(g.call(1, nr::fcntl, [r, 3, 0, 0, 0, 0]), Some(o_nonblock));
+    assert_eq!(
+        g.call(1, nr::read, [r, buf, 1, 0, 0, 0]),
+        Some(err(Errno::EAGAIN))
+    );
+    assert_eq!(g.call(1, nr::fcntl, [r, 4, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::fcntl, [r, 3, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::read, [r, buf, 1, 0, 0, 0]), None, "waits");
 }
 
 /// Puts `strings` as a NULL-terminated pointer array with its strings at `at`.
