@@ -8,6 +8,7 @@ pub struct Errno(pub u16);
 impl Errno {
     pub const EPERM: Self = Self(1);
     pub const ENOENT: Self = Self(2);
+    pub const E2BIG: Self = Self(7);
     pub const ENOEXEC: Self = Self(8);
     pub const ESRCH: Self = Self(3);
     pub const EBADF: Self = Self(9);
@@ -21,6 +22,7 @@ impl Errno {
     pub const ENOTDIR: Self = Self(20);
     pub const EISDIR: Self = Self(21);
     pub const EINVAL: Self = Self(22);
+    pub const ENFILE: Self = Self(23);
     pub const EMFILE: Self = Self(24);
     pub const ENOTTY: Self = Self(25);
     pub const ESPIPE: Self = Self(29);

@@ -488,8 +488,7 @@ fn pipe(
     check_user(p, fds, 8, Rights::WRITE)?;
     let read_fd = p.free_fd().ok_or(Errno::EMFILE)?;
     let write_fd = p.free_fd_from(read_fd + 1).ok_or(Errno::EMFILE)?;
-    // Linux's limit on a user's pipe buffers: ENFILE.
-    let index = pipes.open().ok_or(Errno(23))?;
+    let index = pipes.open().ok_or(Errno::ENFILE)?;
     let cloexec = flags & O_CLOEXEC != 0;
     for (fd, write) in [(read_fd, false), (write_fd, true)] {
         let end = File::Pipe {

@@ -7,7 +7,7 @@
 //! reply at any later time. A call that has to wait (`wait4` for a running child, `read`
 //! from an empty pipe, `write` to a full one) changes nothing and leaves the process
 //! [`State::Blocked`] with its message kept; after every message the guest serves, it
-//! serves the kept messages again, in pid order, until none makes progress, and replies
+//! serves the kept messages again, in table order, until none makes progress, and replies
 //! to each call that completes. So a waiting process never stops the guest from serving
 //! the others, and the order of events decides nothing but who runs first.
 //!
@@ -233,13 +233,13 @@ impl<'a> System<'a> {
                     nr::fork => self.fork(i, k, linux::SIGCHLD, 0, 0, 0, r),
                     nr::vfork => self.fork(i, k, vfork_flags, 0, 0, 0, r),
                     nr::wait4 => match self.wait(i, k, args[0] as i32, args[1], args[2], args[3]) {
-                        Err(Errno(0)) => {
+                        Ok(None) => {
                             if let Some(slot) = self.slots[i].as_mut() {
                                 slot.state = State::Blocked(kept);
                             }
                             return None;
                         }
-                        result => result,
+                        result => result.map(|pid| pid.unwrap_or(0)),
                     },
                     _ => match self.execve(i, fs, k, args[0], args[1], args[2]) {
                         Ok(Some((entry, sp))) => {
@@ -368,7 +368,8 @@ impl<'a> System<'a> {
         Ok(pid as u64)
     }
 
-    /// `wait4`: `Err(Errno(0))` when the caller has to wait.
+    /// `wait4`: the reaped child's pid (0: none yet, `WNOHANG`), `None` when the caller
+    /// has to wait.
     fn wait(
         &mut self,
         i: usize,
@@ -377,7 +378,7 @@ impl<'a> System<'a> {
         status: u64,
         options: u64,
         rusage: u64,
-    ) -> SysResult<u64> {
+    ) -> SysResult<Option<u64>> {
         let caller = self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process.pid;
         // No process groups yet: 0 and -pgid wait for any child, as -1 does.
         let matches =
@@ -390,11 +391,7 @@ impl<'a> System<'a> {
                 .is_some_and(|s| matches(s) && matches!(s.state, State::Zombie(_)))
         });
         let Some(z) = zombie else {
-            return if options & WNOHANG != 0 {
-                Ok(0)
-            } else {
-                Err(Errno(0))
-            };
+            return Ok((options & WNOHANG != 0).then_some(0));
         };
         let Some(Slot {
             process: child,
@@ -412,7 +409,7 @@ impl<'a> System<'a> {
             syscall::write_user(p, k, rusage, &[0; RUSAGE_SIZE])?;
         }
         self.slots[z] = None;
-        Ok(pid as u64)
+        Ok(Some(pid as u64))
     }
 
     /// `execve`: `Ok(Some((entry, stack pointer)))` with the new image loaded, `Ok(None)`
@@ -483,7 +480,7 @@ impl<'a> System<'a> {
             n += 1;
             for &a in args.iter().skip(1) {
                 if n == script.len() {
-                    return Err(E2BIG);
+                    return Err(Errno::E2BIG);
                 }
                 script[n] = a;
                 n += 1;
@@ -495,7 +492,7 @@ impl<'a> System<'a> {
         let (entry, _) = exec::find(fs, file).map_err(exec_errno)?;
         crate::elf::LoadPlan::new(entry.data).map_err(|_| Errno::ENOEXEC)?;
         if argv.len() + env.len() > MAX_STRINGS {
-            return Err(E2BIG);
+            return Err(Errno::E2BIG);
         }
 
         // No return from here: the old image goes.
@@ -596,16 +593,18 @@ struct Strings {
     count: usize,
 }
 
-/// `E2BIG`: the arguments do not fit.
-const E2BIG: Errno = Errno(7);
-
 impl Strings {
     fn push(&mut self, p: &Process, k: &mut impl Host, address: u64) -> SysResult<()> {
         if self.count == self.spans.len() {
-            return Err(E2BIG);
+            return Err(Errno::E2BIG);
         }
-        let s = syscall::read_cstr(p, k, address, &mut self.bytes[self.used..])
-            .map_err(|e| if e == Errno::ENAMETOOLONG { E2BIG } else { e })?;
+        let s = syscall::read_cstr(p, k, address, &mut self.bytes[self.used..]).map_err(|e| {
+            if e == Errno::ENAMETOOLONG {
+                Errno::E2BIG
+            } else {
+                e
+            }
+        })?;
         let len = s.len();
         self.spans[self.count] = (self.used, len);
         self.used += len + 1;
