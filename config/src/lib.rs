@@ -174,14 +174,17 @@
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
 //! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as
-//! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `/etc/passwd`,
-//! `/etc/group`, an `/init` script, these keys in `/etc/guest/init` and `/etc/guest/env`,
-//! and the files) as its data entry. The guest runs its processes as child tasks backed
-//! by its memory pool (the part of `memory` its image, initramfs and stack leave free, see
-//! `protocol::layout::POOL_BASE`), so it needs the abilities `create_task`,
-//! `create_thread` and `map`, and its `kernel_tasks`, `kernel_threads` and
-//! `kernel_memory` pay for its processes' tasks, threads and page tables. A partition has
-//! either `plc` or `guest` keys, not both.
+//! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `wc`, `true`,
+//! `/etc/passwd`, `/etc/group`, an `/init` script, these keys in `/etc/guest/init` and
+//! `/etc/guest/env`, and the files) as its data entry. The guest runs its processes as
+//! child tasks backed by its memory pool (the part of `memory` its image, initramfs and
+//! stack leave free, see `protocol::layout::POOL_BASE`), so it needs the abilities
+//! `create_task`, `create_thread` and `map`, and its `kernel_tasks`, `kernel_threads` and
+//! `kernel_memory` pay for its processes' tasks, threads and page tables (one task and one
+//! thread a process, at most 16 processes: `kernel_tasks = 17` with its own; fewer tasks
+//! limit its processes, `fork` then fails with EAGAIN); its process table lives on its
+//! stack, so it needs a `stack` of at least 1 MiB (a smaller one is an error). A partition
+//! has either `plc` or `guest` keys, not both.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

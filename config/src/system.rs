@@ -84,10 +84,15 @@ pub const GUEST_RESERVED_PATHS: &[&str] = &[
     "/bin/echo",
     "/bin/cat",
     "/bin/ls",
+    "/bin/wc",
+    "/bin/true",
     "/etc/guest/init",
     "/etc/guest/env",
     "/init",
 ];
+
+/// The smallest `stack` of a guest partition: the guest keeps its process table there.
+pub const GUEST_MIN_STACK: u64 = 1 << 20;
 
 /// The environment of a guest's first process without `guest.env`.
 pub const GUEST_DEFAULT_ENV: &[&str] = &["PATH=/bin", "HOME=/", "TERM=dumb"];

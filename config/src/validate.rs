@@ -389,10 +389,10 @@ impl Validator<'_, '_> {
                 .data
                 .as_ref()
                 .and_then(|d| self.data_entry(d, &path.key("data"), raw.plc.is_some()));
-            let guest = raw
-                .guest
-                .as_ref()
-                .and_then(|guest| self.guest(raw, guest, &path.key("guest"), abilities));
+            let guest = raw.guest.as_ref().and_then(|guest| {
+                let stack = (stack, &path.key("stack"));
+                self.guest(raw, guest, &path.key("guest"), abilities, stack)
+            });
             if let (Some(_), Some(data)) = (&raw.guest, &raw.data) {
                 self.error(
                     start(data),
@@ -433,9 +433,25 @@ impl Validator<'_, '_> {
         guest: &Spanned<schema::Guest>,
         path: &KeyPath,
         abilities: Abilities,
+        (stack, stack_path): (u64, &KeyPath),
     ) -> Option<Guest> {
         let before = self.r.diagnostics.len();
         let g = guest.get_ref();
+        if stack != 0 && stack < GUEST_MIN_STACK {
+            let (at, at_path) = match &raw.stack {
+                Some(s) => (start(s), stack_path.clone()),
+                None => (start(guest), path.clone()),
+            };
+            self.error(
+                at,
+                &at_path,
+                format!(
+                    "a guest partition needs a `stack` of at least {} (its process table lives there), not {}",
+                    Size(GUEST_MIN_STACK),
+                    Size(stack)
+                ),
+            );
+        }
         let init_path = path.key("init");
         if raw.plc.is_some() {
             self.error(

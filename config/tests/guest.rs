@@ -8,7 +8,7 @@ fn guest(lines: &str) -> String {
     doc(&[(
         "time = \"background\"",
         &format!(
-            "time = \"background\"\nabilities = [\"create_task\", \"create_thread\", \"map\"]\n{lines}"
+            "time = \"background\"\nstack = \"1MiB\"\nabilities = [\"create_task\", \"create_thread\", \"map\"]\n{lines}"
         ),
     )])
 }
@@ -170,4 +170,19 @@ fn a_guest_has_no_other_data_entry() {
         "partitions.b.data",
         "a guest partition's data entry is its initramfs",
     );
+}
+
+#[test]
+fn a_guest_needs_a_stack_for_its_process_table() {
+    let src = guest("guest.init = [\"/bin/sh\"]").replace("stack = \"1MiB\"", "stack = \"256KiB\"");
+    expect_some(
+        &src,
+        "\"256KiB\"",
+        0,
+        "partitions.b.stack",
+        "a guest partition needs a `stack` of at least 1MiB (its process table lives there), not 256KiB",
+    );
+    // Without `stack`: the default 64 KiB, reported at the guest keys.
+    let src = guest("guest.init = [\"/bin/sh\"]").replace("stack = \"1MiB\"\n", "");
+    expect_some(&src, "guest.init", 0, "partitions.b.guest", "not 64KiB");
 }

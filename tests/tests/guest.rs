@@ -4,7 +4,8 @@
 //! first written by `cargo xtask`, the second `tests/configs/guest/motd.txt` added with
 //! `guest.files`), partition `ls` runs `/bin/ls /`, partition `segv` runs a shell function
 //! that calls itself until its stack overflows, partition `shell` runs
-//! `/bin/sh -c 'echo hello; echo world'`.
+//! `/bin/sh -c 'echo hello; echo world'`, partition `pipes` runs shell pipelines, a
+//! subshell's exit status and a loop of 50 processes.
 
 use scenarios::{boot, check};
 
@@ -84,6 +85,54 @@ fn guest_hello() {
             &format!("{partition}: a process was killed"),
         );
     }
+    // Processes and pipes: each line comes out of the pipeline's last process, in order;
+    // the subshell's exit status reaches `$?`; the loop ran 50 processes, each forked and
+    // executing /bin/true; no process is left (every one was reaped).
+    let printed: Vec<String> = guest_lines(&o, "pipes", " stdout: ")
+        .iter()
+        .map(|l| {
+            l.split_once(" stdout: ")
+                .map(|(_, t)| t.to_string())
+                .unwrap_or_default()
+        })
+        .collect();
+    check(
+        &o,
+        printed == ["one", "two", "7", "status 3", "ran 50"],
+        &format!("pipes: printed {printed:?}"),
+    );
+    let trues = guest_lines(&o, "pipes", "(busybox) started: /bin/true");
+    check(
+        &o,
+        trues.len() == 50,
+        &format!("pipes: {} /bin/true processes", trues.len()),
+    );
+    let forks = guest_lines(&o, "pipes", " forked from 1: ");
+    check(
+        &o,
+        forks.len() >= 50 + 5,
+        &format!("pipes: {} forks", forks.len()),
+    );
+    let subshell = guest_lines(&o, "pipes", "exited with status 3");
+    check(
+        &o,
+        subshell.len() == 1 && !subshell[0].starts_with("guest: process 1 "),
+        &format!("pipes: the subshell's exit {subshell:?}"),
+    );
+    for (needle, expected) in [
+        (
+            "guest: init ended with",
+            "guest: init ended with 0 other processes left",
+        ),
+        ("guest: init exited", "guest: init exited with status 0"),
+    ] {
+        let lines = guest_lines(&o, "pipes", needle);
+        check(&o, lines == [expected], &format!("pipes: {lines:?}"));
+    }
+    for needle in ["unsupported system call", "killed by signal", "cannot"] {
+        let lines = guest_lines(&o, "pipes", needle);
+        check(&o, lines.is_empty(), &format!("pipes: {lines:?}"));
+    }
     // The overflowing stack: the page fault just below the process's stack kills it with
     // SIGSEGV (memory::STACK_TOP - STACK_SIZE = 0x7fff_ffec_0000), nothing else.
     let started = guest_lines(&o, "segv", "started: ");
@@ -113,7 +162,7 @@ fn guest_hello() {
         "segv: no health report of its init's death",
     );
     // Each guest reported its init's end to the health monitor.
-    for partition in ["echo", "cat", "ls", "shell"] {
+    for partition in ["echo", "cat", "pipes", "ls", "shell"] {
         check(
             &o,
             o.lines

@@ -5,7 +5,7 @@
 //! | path | what |
 //! |---|---|
 //! | `/bin/busybox` | Debian's `busybox-static` (installed by [`crate::tools::ensure_busybox`]) |
-//! | `/bin/{sh,echo,cat,ls}` | symbolic links to `busybox` (its applets) |
+//! | `/bin/{sh,echo,cat,ls,wc,true}` | symbolic links to `busybox` (its applets) |
 //! | `/etc/passwd`, `/etc/group` | root (0) only |
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
@@ -22,7 +22,7 @@ use std::io::Cursor;
 use std::path::Path;
 
 /// The applets linked to busybox in `/bin`.
-pub const APPLETS: &[&str] = &["sh", "echo", "cat", "ls"];
+pub const APPLETS: &[&str] = &["sh", "echo", "cat", "ls", "wc", "true"];
 
 const S_IFREG: u32 = 0o100000;
 const S_IFDIR: u32 = 0o040000;

@@ -65,6 +65,12 @@ impl<'b> Backing<'b> {
         self.search(page).ok().map(|i| self.entry(i).1)
     }
 
+    /// The first entry at or after `page`: its page and pool page.
+    pub fn first_from(&self, page: u64) -> Option<(u64, usize)> {
+        let i = self.search(page).unwrap_or_else(|i| i);
+        (i < self.len).then(|| self.entry(i))
+    }
+
     /// Records that pool page `index` backs `page` (replacing an older entry for it).
     pub fn insert(&mut self, page: u64, index: usize) -> Result<(), Full> {
         match self.search(page) {
@@ -119,6 +125,9 @@ mod tests {
             (Some(5), Some(9), Some(7))
         );
         assert_eq!(b.get(0x4000), None);
+        assert_eq!(b.first_from(0x1800), Some((0x2000, 9)));
+        assert_eq!(b.first_from(0x3000), Some((0x3000, 7)));
+        assert_eq!(b.first_from(0x3001), None);
         b.insert(0x4000, 1).unwrap();
         assert_eq!(b.insert(0x5000, 2), Err(Full));
         assert_eq!(b.remove(0x2000), Some(9));

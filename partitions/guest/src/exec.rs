@@ -75,6 +75,15 @@ pub fn load<'a>(
     hwcap: u64,
 ) -> Result<Loaded<'a>, ExecError> {
     let path = *argv.first().ok_or(ExecError::NoArguments)?;
+    load_file(fs, host, (pid, ppid), path, argv, envp, hwcap)
+}
+
+/// The executable at `path` and its load plan, checked (what `execve` checks before it
+/// drops the old image).
+pub fn find<'a>(
+    fs: &Archive<'a>,
+    path: &[u8],
+) -> Result<(crate::cpio::Entry<'a>, vfs::PathBuf), ExecError> {
     let (entry, exe) = vfs::lookup(fs, path, true).map_err(ExecError::Lookup)?;
     if !entry.is_file() {
         return Err(ExecError::NotAFile);
@@ -82,6 +91,21 @@ pub fn load<'a>(
     if entry.mode & 0o111 == 0 {
         return Err(ExecError::NotExecutable);
     }
+    Ok((entry, exe))
+}
+
+/// [`load`] with the executable's `path` apart from `argv` (`execve`); `ids` are the
+/// process's pid and parent pid.
+pub fn load_file<'a>(
+    fs: &Archive<'a>,
+    host: &mut impl Host,
+    (pid, ppid): (u32, u32),
+    path: &[u8],
+    argv: &[&[u8]],
+    envp: &[&[u8]],
+    hwcap: u64,
+) -> Result<Loaded<'a>, ExecError> {
+    let (entry, exe) = find(fs, path)?;
     let elf = entry.data;
     let plan = LoadPlan::new(elf).map_err(ExecError::Elf)?;
     let mut process = Process::new(pid, ppid, exe);

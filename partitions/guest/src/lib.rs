@@ -8,20 +8,28 @@
 //! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
 //! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
 //! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
-//! which process page ([`backing`]), the process state
-//! ([`process`]) and the system calls ([`syscall`]); the partition program (`main.rs`) only
-//! moves messages, maps pages and writes the log.
+//! which process page ([`backing`]), the process state ([`process`]), the system calls of
+//! one process ([`syscall`]), the pipes ([`pipe`]) and the process table with fork, exec,
+//! wait and the deferred replies of waiting calls ([`system`]); the partition program
+//! (`main.rs`) only moves messages, creates tasks, maps pages and writes the log.
 //!
 //! # Log lines (COM1, each prefixed `[<partition>] ` by the kernel)
 //!
-//! - `guest: process <pid> (<name>) started: <argv>` when a process starts, or
-//!   `guest: cannot start <path>: <why>`;
+//! - `guest: process <pid> (<name>) started: <argv>` when a process starts (the first one,
+//!   or one that `execve`s), or `guest: cannot start <path>: <why>` (the first),
+//!   `guest: process <pid> cannot execute <path>: <why>` (an `execve` that failed after the
+//!   old image was dropped: the process dies with SIGSEGV);
+//! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages copied in <t> us`;
 //! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]);
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
-//!   when a fault kills it;
+//!   when a fault kills it, `... killed by signal 13 (SIGPIPE): wrote to a pipe without
+//!   readers`;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
-//!   ENOSYS`, once per call number and process.
+//!   ENOSYS`, once per call number and process;
+//! - `guest: init ended with <n> other processes left` (zombies included), then
+//!   `guest: init exited with status <n>` or `guest: init killed by signal <n>` (also the
+//!   detail of the health report).
 #![cfg_attr(not(test), no_std)]
 
 pub mod backing;
@@ -31,10 +39,12 @@ pub mod elf;
 pub mod exec;
 pub mod linux;
 pub mod memory;
+pub mod pipe;
 pub mod pool;
 pub mod process;
 pub mod stack;
 pub mod syscall;
+pub mod system;
 pub mod vfs;
 
 /// Where the guest's command line is in the initramfs: `argv` of the first process, each

@@ -8,8 +8,12 @@ pub struct Errno(pub u16);
 impl Errno {
     pub const EPERM: Self = Self(1);
     pub const ENOENT: Self = Self(2);
+    pub const E2BIG: Self = Self(7);
+    pub const ENOEXEC: Self = Self(8);
     pub const ESRCH: Self = Self(3);
     pub const EBADF: Self = Self(9);
+    pub const ECHILD: Self = Self(10);
+    pub const EAGAIN: Self = Self(11);
     pub const ENOMEM: Self = Self(12);
     pub const EACCES: Self = Self(13);
     pub const EFAULT: Self = Self(14);
@@ -18,10 +22,12 @@ impl Errno {
     pub const ENOTDIR: Self = Self(20);
     pub const EISDIR: Self = Self(21);
     pub const EINVAL: Self = Self(22);
+    pub const ENFILE: Self = Self(23);
     pub const EMFILE: Self = Self(24);
     pub const ENOTTY: Self = Self(25);
     pub const ESPIPE: Self = Self(29);
     pub const EROFS: Self = Self(30);
+    pub const EPIPE: Self = Self(32);
     pub const ERANGE: Self = Self(34);
     pub const ENAMETOOLONG: Self = Self(36);
     pub const ENOSYS: Self = Self(38);
@@ -32,6 +38,7 @@ impl Errno {
         match self.0 {
             1 => "EPERM (operation not permitted)",
             2 => "ENOENT (no such file or directory)",
+            8 => "ENOEXEC (not an executable format)",
             12 => "ENOMEM (out of memory)",
             13 => "EACCES (permission denied)",
             20 => "ENOTDIR (a path component is not a directory)",
@@ -138,6 +145,7 @@ syscalls! {
     readlinkat = 267,
     faccessat = 269,
     set_robust_list = 273,
+    dup3 = 292,
     pipe2 = 293,
     prlimit64 = 302,
     getrandom = 318,
@@ -155,6 +163,7 @@ pub const O_ACCMODE: u64 = 3;
 pub const O_WRONLY: u64 = 1;
 pub const O_RDWR: u64 = 2;
 pub const O_CREAT: u64 = 0o100;
+pub const O_NONBLOCK: u64 = 0o4000;
 pub const O_TRUNC: u64 = 0o1000;
 pub const O_DIRECTORY: u64 = 0o200000;
 
@@ -179,6 +188,10 @@ pub const SIGTRAP: u32 = 5;
 pub const SIGBUS: u32 = 7;
 pub const SIGFPE: u32 = 8;
 pub const SIGSEGV: u32 = 11;
+pub const SIGPIPE: u32 = 13;
+/// `SIG_IGN` as a `sigaction` handler.
+pub const SIG_IGN: u64 = 1;
+pub const SIGCHLD: u64 = 17;
 
 /// The name of a fatal signal, for the log.
 pub fn signal_name(signal: u32) -> &'static str {
@@ -188,6 +201,7 @@ pub fn signal_name(signal: u32) -> &'static str {
         SIGBUS => "SIGBUS",
         SIGFPE => "SIGFPE",
         SIGSEGV => "SIGSEGV",
+        SIGPIPE => "SIGPIPE",
         _ => "?",
     }
 }

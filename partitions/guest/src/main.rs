@@ -1,15 +1,18 @@
 //! The guest partition program: reads its initramfs (its data entry), starts the first
 //! Linux process (`/etc/guest/init`, from `guest.init`) in a child task without
 //! `native_syscalls` whose thread has this thread as exception handler, and serves the
-//! process's system calls and faults with the library ([`guest::syscall::handle`]) until it
-//! ends. Then it reports `init exited with status <n>` (or `killed by signal <n>`) to the
+//! system calls and faults of it and of the processes it forks (each a task of its own)
+//! with the library's process table ([`guest::system::System`]): it receives the exception
+//! message of any process's thread and replies when the library says so, perhaps much
+//! later (a call that waits). When init ends, the other processes end too, and it reports `init exited with status <n>` (or `killed by signal <n>`) to the
 //! health monitor as an application error, as Linux panics when init ends: the
 //! configuration's health table decides (restart the guest, or end a test run).
 //!
 //! Its memory pool (syssw maps it at `POOL_BASE`, read-write, and at `POOL_EXEC_BASE`,
 //! read-execute) is cut into: its own IPC buffer, the backing table, and the frames that
-//! back the processes' pages. This file is glue only: every decision about a Linux call is
-//! the library's.
+//! back the processes' pages (the backing table's key is the pid above the page address).
+//! Its stack holds the process table (the configuration gives a guest at least 1 MiB).
+//! This file is glue only: every decision about a Linux call is the library's.
 #![no_std]
 #![no_main]
 
@@ -17,13 +20,15 @@ use guest::backing::{Backing, ENTRY};
 use guest::console::{LineBuffer, stream_name};
 use guest::cpio::Archive;
 use guest::linux::Errno;
+use guest::memory::Areas;
 use guest::memory::{PAGE, Rights};
 use guest::pool::PagePool;
 use guest::process::Stream;
-use guest::syscall::{Host, Outcome, handle};
+use guest::syscall::{Host, Outcome};
+use guest::system::{INIT_PID, Joined, MAX_PROCESSES, System, Tasks};
 use user_rt::abi::ipc::{
-    EXCEPTION_MESSAGE_SIZE, IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL, MessageTag,
-    REPLY_RESUME,
+    EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL,
+    MessageTag, REPLY_RESUME,
 };
 use user_rt::abi::syscall::{
     Abilities, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId,
@@ -38,8 +43,6 @@ user_rt::entry!(main);
 
 /// Pages of the pool the IPC buffer takes (at its start).
 const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
-/// The pid of the first process.
-const INIT_PID: u32 = 1;
 
 fn main(start: u64, _: u64) {
     #[allow(unsafe_code)]
@@ -100,6 +103,19 @@ fn main(start: u64, _: u64) {
         .map_or(0, |e| guest::split_nul(e.data, &mut env));
 
     let mcp = (info.priority as u8).saturating_sub(1).max(1);
+    let mut host = GuestHost {
+        frames,
+        first_frame: frames_page,
+        pool: PagePool::new(frame_count as usize),
+        backing: Backing::new(table),
+        current: INIT_PID,
+        tasks: [const { None }; MAX_PROCESSES],
+        mcp,
+        handler: me,
+        ipc,
+        started: sys::clock(),
+        seed: sys::rdtsc() | 1,
+    };
     let task = match sys::task_create(Abilities::empty(), mcp, 0, "init") {
         Ok(t) => t,
         Err(e) => {
@@ -107,16 +123,7 @@ fn main(start: u64, _: u64) {
             return;
         }
     };
-    let mut host = GuestHost {
-        task,
-        frames,
-        first_frame: frames_page,
-        pool: PagePool::new(frame_count as usize),
-        backing: Backing::new(table),
-        out: [LineBuffer::new(), LineBuffer::new()],
-        started: sys::clock(),
-        seed: sys::rdtsc() | 1,
-    };
+    host.tasks[0] = Some(Task::new(INIT_PID, task));
     let argv = &args[..argc];
     let loaded = match guest::exec::load(&fs, &mut host, INIT_PID, 0, argv, &env[..envc], hwcap()) {
         Ok(l) => l,
@@ -125,29 +132,34 @@ fn main(start: u64, _: u64) {
                 .first()
                 .map_or("", |p| core::str::from_utf8(p).unwrap_or("?"));
             println!("guest: cannot start {path}: {e}");
-            end(&mut host, ipc, Outcome::Exit(127));
+            host.release(INIT_PID);
+            report(ipc, Outcome::Exit(127));
             return;
         }
     };
-    let mut process = loaded.process;
     println!(
         "guest: process {} ({}) started: {}",
-        process.pid,
-        process.name(),
+        loaded.process.pid,
+        loaded.process.name(),
         Joined(argv)
     );
-    let thread = match start_thread(task, loaded.entry, loaded.sp, mcp, me) {
-        Ok(t) => t,
+    match start_thread(task, loaded.entry, loaded.sp, mcp, me) {
+        Ok(thread) => {
+            if let Some(t) = host.tasks[0].as_mut() {
+                t.thread = thread;
+            }
+        }
         Err(e) => {
             println!("guest: cannot start the process's thread: {e:?}");
-            end(&mut host, ipc, Outcome::Killed(guest::linux::SIGSEGV));
+            host.release(INIT_PID);
+            report(ipc, Outcome::Killed(guest::linux::SIGSEGV));
             return;
         }
-    };
+    }
 
-    let mut next = sys::receive(Some(thread), TIMEOUT_INFINITE);
+    let mut system = System::new(loaded.process, hwcap());
     let outcome = loop {
-        let received = match next {
+        let received = match sys::receive(None, TIMEOUT_INFINITE) {
             Ok(r) => r,
             Err(e) => {
                 println!("guest: receive failed: {e:?}");
@@ -157,24 +169,17 @@ fn main(start: u64, _: u64) {
         let tag = received.message.tag;
         let from_kernel = matches!(tag.label(), LABEL_SYSCALL | LABEL_EXCEPTION)
             && tag.len() == EXCEPTION_MESSAGE_SIZE;
-        if received.sender != thread || !from_kernel {
-            next = sys::receive(Some(thread), TIMEOUT_INFINITE);
+        let Some(pid) = host.pid_of(received.sender).filter(|_| from_kernel) else {
             continue;
-        }
-        let mut m = ipc.exception();
-        match handle(&mut process, &fs, &mut host, &mut m) {
-            Outcome::Resume => {
-                ipc.set_exception(&m);
-                let resume = Message {
-                    tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
-                    words: [0; 3],
-                };
-                next = sys::reply_wait(Some(thread), TIMEOUT_INFINITE, &resume);
-            }
-            ended => break ended,
+        };
+        if let Some(ended) = system.serve(pid, &fs, &mut host, ipc.exception()) {
+            break ended;
         }
     };
-    end(&mut host, ipc, outcome);
+    let left = system.pids().filter(|&pid| pid != INIT_PID).count();
+    println!("guest: init ended with {left} other processes left");
+    system.release_all(&mut host);
+    report(ipc, outcome);
 }
 
 /// Creates the process's thread (the guest as its exception handler; it runs in the guest's
@@ -192,21 +197,8 @@ fn start_thread(
     Ok(thread)
 }
 
-/// Ends the process (its task, its memory, its pending output) and reports the end of init
-/// to the health monitor.
-fn end(host: &mut GuestHost, ipc: IpcBufferRef, outcome: Outcome) {
-    let _ = sys::task_kill(host.task);
-    for (i, stream) in [Stream::Stdout, Stream::Stderr].into_iter().enumerate() {
-        host.out[i].flush(|line| {
-            println!(
-                "guest: process {INIT_PID} {}: {}",
-                stream_name(stream),
-                Lossy(line)
-            )
-        });
-    }
-    let pool = &mut host.pool;
-    host.backing.drain(|index| pool.free(index));
+/// Reports the end of init to the health monitor.
+fn report(ipc: IpcBufferRef, outcome: Outcome) {
     let mut detail = [0u8; 64];
     let text = match outcome {
         Outcome::Killed(signal) => {
@@ -216,7 +208,7 @@ fn end(host: &mut GuestHost, ipc: IpcBufferRef, outcome: Outcome) {
             &mut detail,
             format_args!("init exited with status {status}"),
         ),
-        Outcome::Resume => "",
+        _ => "",
     };
     println!("guest: {text}");
     if let Some(server) = user_rt::service::server() {
@@ -268,49 +260,79 @@ impl core::fmt::Display for Lossy<'_> {
     }
 }
 
-/// Arguments separated by spaces.
-struct Joined<'a>(&'a [&'a [u8]]);
+/// A process's kernel objects and its console lines in progress.
+struct Task {
+    pid: u32,
+    task: TaskId,
+    thread: ThreadId,
+    out: [LineBuffer; 2],
+}
 
-impl core::fmt::Display for Joined<'_> {
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        for (i, a) in self.0.iter().enumerate() {
-            if i > 0 {
-                f.write_str(" ")?;
-            }
-            write!(f, "{}", Lossy(a))?;
+impl Task {
+    fn new(pid: u32, task: TaskId) -> Self {
+        Self {
+            pid,
+            task,
+            thread: ThreadId(0),
+            out: [LineBuffer::new(), LineBuffer::new()],
         }
-        Ok(())
     }
 }
 
-/// The kernel side of the library's [`Host`]: the process's task, the guest's frames and
-/// which of them back which process page.
+/// The backing table's key of page `page` of process `pid` (user addresses are below
+/// 2^47: the pid takes the bits above).
+fn key(pid: u32, page: u64) -> u64 {
+    (pid as u64) << 48 | page
+}
+
+/// The kernel side of the library's [`Host`] and [`Tasks`]: the processes' tasks, the
+/// guest's frames and which of them back which process page.
 struct GuestHost<'p> {
-    task: TaskId,
     /// The frames (pool pages from `first_frame` on), read-write.
     frames: &'p mut [u8],
     first_frame: u64,
     pool: PagePool,
     backing: Backing<'p>,
-    out: [LineBuffer; 2],
+    /// The process the memory calls act on.
+    current: u32,
+    tasks: [Option<Task>; MAX_PROCESSES],
+    /// Priority of the processes' threads.
+    mcp: u8,
+    /// This thread: the exception handler of the processes' threads.
+    handler: ThreadId,
+    ipc: IpcBufferRef,
     started: u64,
     seed: u64,
 }
 
 impl GuestHost<'_> {
+    fn task(&self, pid: u32) -> Option<&Task> {
+        self.tasks.iter().flatten().find(|t| t.pid == pid)
+    }
+
+    fn pid_of(&self, thread: ThreadId) -> Option<u32> {
+        self.tasks
+            .iter()
+            .flatten()
+            .find(|t| t.thread == thread)
+            .map(|t| t.pid)
+    }
+
     fn frame(&mut self, index: usize) -> &mut [u8] {
         let at = index * PAGE as usize;
         &mut self.frames[at..at + PAGE as usize]
     }
 
-    /// Maps frames `index..index + pages` at `start` in the process with `rights`.
+    /// Maps frames `index..index + pages` at `start` in process `pid` with `rights`.
     fn map_frames(
         &self,
+        pid: u32,
         index: usize,
         start: u64,
         pages: u64,
         rights: Rights,
     ) -> Result<(), Errno> {
+        let task = self.task(pid).ok_or(Errno::ENOMEM)?.task;
         let (base, kernel_rights) = if rights.contains(Rights::EXECUTE) {
             (POOL_EXEC_BASE, PageRights::EXECUTE)
         } else if rights.contains(Rights::WRITE) {
@@ -322,14 +344,8 @@ impl GuestHost<'_> {
         while done < pages {
             let n = (pages - done).min(MAP_MAX_PAGES);
             let source = base + (self.first_frame + index as u64 + done) * PAGE;
-            sys::map(
-                Some(self.task),
-                source,
-                start + done * PAGE,
-                n,
-                kernel_rights,
-            )
-            .map_err(|_| Errno::ENOMEM)?;
+            sys::map(Some(task), source, start + done * PAGE, n, kernel_rights)
+                .map_err(|_| Errno::ENOMEM)?;
             done += n;
         }
         Ok(())
@@ -338,6 +354,7 @@ impl GuestHost<'_> {
     /// Backs and maps one run of pages with fresh frames (one contiguous run if the pool has
     /// one, else page by page).
     fn back(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+        let pid = self.current;
         if let Some(index) = self.pool.alloc(pages as usize) {
             for i in 0..pages as usize {
                 self.frame(index + i).fill(0);
@@ -345,34 +362,92 @@ impl GuestHost<'_> {
             for i in 0..pages {
                 if self
                     .backing
-                    .insert(start + i * PAGE, index + i as usize)
+                    .insert(key(pid, start + i * PAGE), index + i as usize)
                     .is_err()
                 {
+                    for j in i..pages {
+                        self.pool.free(index + j as usize);
+                    }
                     return Err(Errno::ENOMEM);
                 }
             }
-            return self.map_frames(index, start, pages, rights);
+            return self.map_frames(pid, index, start, pages, rights);
         }
         for i in 0..pages {
             let index = self.pool.alloc(1).ok_or(Errno::ENOMEM)?;
             self.frame(index).fill(0);
             let page = start + i * PAGE;
-            if self.backing.insert(page, index).is_err() {
+            if self.backing.insert(key(pid, page), index).is_err() {
                 self.pool.free(index);
                 return Err(Errno::ENOMEM);
             }
-            self.map_frames(index, page, 1, rights)?;
+            self.map_frames(pid, index, page, 1, rights)?;
         }
         Ok(())
     }
 
-    /// The frame bytes behind process address `address` and how many of them lie in its
-    /// page.
+    /// The frame bytes behind address `address` of the current process and how many of
+    /// them lie in its page.
     fn locate(&self, address: u64) -> Option<(usize, usize)> {
         let page = address & !(PAGE - 1);
-        let index = self.backing.get(page)?;
+        let index = self.backing.get(key(self.current, page))?;
         let offset = (address - page) as usize;
         Some((index * PAGE as usize + offset, PAGE as usize - offset))
+    }
+
+    /// Copies the current process's backed pages into process `child` (whose task
+    /// exists); returns how many. Each run of backed pages in one area goes into one run of
+    /// frames where the pool has one, mapped with one call.
+    fn copy_pages(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno> {
+        let parent = self.current;
+        let size = PAGE as usize;
+        let mut copied = 0;
+        let mut at = key(parent, 0);
+        while let Some((k, _)) = self.backing.first_from(at)
+            && k < key(parent + 1, 0)
+        {
+            let start = k - key(parent, 0);
+            let area = areas.find(start);
+            let area_end = area.map_or(start + PAGE, |a| a.end);
+            let mut pages = 1;
+            while start + pages * PAGE < area_end && self.backing.get(k + pages * PAGE).is_some() {
+                pages += 1;
+            }
+            let run = match self.pool.alloc(pages as usize) {
+                Some(run) => run,
+                None => {
+                    pages = 1;
+                    self.pool.alloc(1).ok_or(Errno::ENOMEM)?
+                }
+            };
+            for i in 0..pages {
+                let to = run + i as usize;
+                let Some(from) = self.backing.get(k + i * PAGE) else {
+                    self.pool.free(to);
+                    continue;
+                };
+                self.frames
+                    .copy_within(from * size..(from + 1) * size, to * size);
+                if self
+                    .backing
+                    .insert(key(child, start + i * PAGE), to)
+                    .is_err()
+                {
+                    for j in i..pages {
+                        self.pool.free(run + j as usize);
+                    }
+                    return Err(Errno::ENOMEM);
+                }
+            }
+            if let Some(area) = area
+                && area.rights.accessible()
+            {
+                self.map_frames(child, run, start, pages, area.rights)?;
+            }
+            copied += pages;
+            at = k + pages * PAGE;
+        }
+        Ok(copied)
     }
 }
 
@@ -412,10 +487,13 @@ impl Host for GuestHost<'_> {
     }
 
     fn unmap(&mut self, start: u64, pages: u64) {
+        let Some(task) = self.task(self.current).map(|t| t.task) else {
+            return;
+        };
         for i in 0..pages {
             let page = start + i * PAGE;
-            if let Some(index) = self.backing.remove(page) {
-                let _ = sys::unmap(Some(self.task), page, 1);
+            if let Some(index) = self.backing.remove(key(self.current, page)) {
+                let _ = sys::unmap(Some(task), page, 1);
                 self.pool.free(index);
             }
         }
@@ -425,13 +503,15 @@ impl Host for GuestHost<'_> {
         if rights.writable_and_executable() {
             return Err(Errno::EACCES);
         }
+        let pid = self.current;
+        let task = self.task(pid).ok_or(Errno::ENOMEM)?.task;
         for i in 0..pages {
             let page = start + i * PAGE;
-            match self.backing.get(page) {
+            match self.backing.get(key(pid, page)) {
                 Some(index) => {
-                    let _ = sys::unmap(Some(self.task), page, 1);
+                    let _ = sys::unmap(Some(task), page, 1);
                     if rights.accessible() {
-                        self.map_frames(index, page, 1, rights)?;
+                        self.map_frames(pid, index, page, 1, rights)?;
                     }
                 }
                 None if rights.accessible() => self.back(page, 1, rights)?,
@@ -442,9 +522,12 @@ impl Host for GuestHost<'_> {
     }
 
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]) {
+        let Some(task) = self.tasks.iter_mut().flatten().find(|t| t.pid == pid) else {
+            return;
+        };
         let buffer = match stream {
-            Stream::Stdout => &mut self.out[0],
-            Stream::Stderr => &mut self.out[1],
+            Stream::Stdout => &mut task.out[0],
+            Stream::Stderr => &mut task.out[1],
         };
         buffer.write(bytes, |line| {
             println!(
@@ -473,5 +556,85 @@ impl Host for GuestHost<'_> {
 
     fn log(&mut self, line: core::fmt::Arguments) {
         println!("{line}");
+    }
+}
+
+impl Tasks for GuestHost<'_> {
+    fn select(&mut self, pid: u32) {
+        self.current = pid;
+    }
+
+    fn fork(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno> {
+        let slot = self
+            .tasks
+            .iter()
+            .position(Option::is_none)
+            .ok_or(Errno::EAGAIN)?;
+        let task = sys::task_create(Abilities::empty(), self.mcp, 0, "process")
+            .map_err(|_| Errno::EAGAIN)?;
+        self.tasks[slot] = Some(Task::new(child, task));
+        let copied = self.copy_pages(child, areas);
+        // The thread starts at address 0: its fetch fault asks the guest for the registers.
+        let thread = copied.and_then(|_| {
+            start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)
+        });
+        match thread {
+            Ok(thread) => {
+                if let Some(t) = self.tasks[slot].as_mut() {
+                    t.thread = thread;
+                }
+                copied
+            }
+            Err(e) => {
+                self.release(child);
+                Err(e)
+            }
+        }
+    }
+
+    fn release(&mut self, pid: u32) {
+        let Some(slot) = self
+            .tasks
+            .iter()
+            .position(|t| t.as_ref().is_some_and(|t| t.pid == pid))
+        else {
+            return;
+        };
+        let Some(mut task) = self.tasks[slot].take() else {
+            return;
+        };
+        let _ = sys::task_kill(task.task);
+        for (i, stream) in [Stream::Stdout, Stream::Stderr].into_iter().enumerate() {
+            task.out[i].flush(|line| {
+                println!(
+                    "guest: process {pid} {}: {}",
+                    stream_name(stream),
+                    Lossy(line)
+                )
+            });
+        }
+        // The task's mappings went with it: only the frames are left to free.
+        let mut at = key(pid, 0);
+        while let Some((k, index)) = self.backing.first_from(at)
+            && k < key(pid + 1, 0)
+        {
+            self.backing.remove(k);
+            self.pool.free(index);
+            at = k;
+        }
+    }
+
+    fn resume(&mut self, pid: u32, m: &ExceptionMessage) {
+        let Some(thread) = self.task(pid).map(|t| t.thread) else {
+            return;
+        };
+        self.ipc.set_exception(m);
+        let resume = Message {
+            tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
+            words: [0; 3],
+        };
+        if let Err(e) = sys::reply(thread, &resume) {
+            println!("guest: cannot resume process {pid}: {e:?}");
+        }
     }
 }

@@ -44,15 +44,30 @@ impl PagePool {
         }
     }
 
+    /// The first free page from `page` on (a word of 64 used pages at a time).
+    fn first_free_from(&self, page: usize) -> Option<usize> {
+        let mut p = page;
+        while p < self.pages {
+            // The pages below `p` in its word count as used.
+            let word = self.used[p / 64] | ((1u64 << (p % 64)) - 1);
+            if word != u64::MAX {
+                let free = p / 64 * 64 + word.trailing_ones() as usize;
+                return (free < self.pages).then_some(free);
+            }
+            p = (p / 64 + 1) * 64;
+        }
+        None
+    }
+
     /// The first run of `count` free pages, marked used; `None` if there is none.
     pub fn alloc(&mut self, count: usize) -> Option<usize> {
         if count == 0 || count > self.free {
             return None;
         }
-        let mut start = 0;
+        let mut start = self.first_free_from(0)?;
         while start + count <= self.pages {
             match (start..start + count).rev().find(|&p| self.is_used(p)) {
-                Some(used) => start = used + 1,
+                Some(used) => start = self.first_free_from(used + 1)?,
                 None => {
                     for p in start..start + count {
                         self.set(p, true);
@@ -96,5 +111,24 @@ mod tests {
         assert_eq!(p.free_pages(), 1);
         assert_eq!(p.alloc(0), None);
         assert_eq!(PagePool::new(usize::MAX).free_pages(), MAX_POOL_PAGES);
+    }
+
+    #[test]
+    fn finds_free_pages_past_full_words_and_holes() {
+        let mut p = PagePool::new(200);
+        assert_eq!(p.alloc(130), Some(0));
+        p.free(5);
+        p.free(70);
+        p.free(71);
+        assert_eq!(p.alloc(3), Some(130), "no hole of three");
+        assert_eq!(p.alloc(2), Some(70));
+        assert_eq!(p.alloc(1), Some(5));
+        assert_eq!(p.free_pages(), 67);
+        assert_eq!(p.alloc(68), None);
+        p.free(7);
+        assert_eq!(p.alloc(2), Some(133), "past the single hole at 7");
+        assert_eq!(p.alloc(1), Some(7));
+        assert_eq!(p.alloc(65), Some(135));
+        assert_eq!(p.alloc(1), None);
     }
 }

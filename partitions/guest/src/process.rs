@@ -26,6 +26,13 @@ pub enum File<'a> {
     Console(Stream),
     /// A file or directory of the initramfs, read-only, with its offset.
     Initramfs { entry: Entry<'a>, offset: u64 },
+    /// One end of pipe `pipe` ([`crate::pipe::Pipes`]); `nonblock`: `O_NONBLOCK` (calls
+    /// that would wait fail with `EAGAIN`).
+    Pipe {
+        pipe: usize,
+        write: bool,
+        nonblock: bool,
+    },
 }
 
 /// One Linux process.
@@ -42,6 +49,8 @@ pub struct Process<'a> {
     pub brk_start: u64,
     pub brk: u64,
     pub files: [Option<File<'a>>; MAX_FILES],
+    /// Close-on-exec, one bit per descriptor.
+    pub cloexec: u64,
     /// `struct sigaction` as the kernel ABI has it (handler, flags, restorer, mask) per
     /// signal 1..=64 (recorded; no handler is delivered yet).
     pub sigactions: [[u64; 4]; 64],
@@ -76,6 +85,7 @@ impl<'a> Process<'a> {
             brk_start: 0,
             brk: 0,
             files,
+            cloexec: 0,
             sigactions: [[0; 4]; 64],
             sigmask: 0,
             umask: 0o022,
@@ -133,7 +143,31 @@ impl<'a> Process<'a> {
 
     /// The lowest free descriptor.
     pub fn free_fd(&self) -> Option<usize> {
-        self.files.iter().position(Option::is_none)
+        self.free_fd_from(0)
+    }
+
+    /// The lowest free descriptor from `low` on.
+    pub fn free_fd_from(&self, low: usize) -> Option<usize> {
+        (low..MAX_FILES).find(|&fd| self.files[fd].is_none())
+    }
+
+    /// Puts `file` at descriptor `fd` (free or closed by the caller before), with its
+    /// close-on-exec flag.
+    pub fn install(&mut self, fd: usize, file: File<'a>, cloexec: bool) {
+        self.files[fd] = Some(file);
+        self.set_cloexec(fd, cloexec);
+    }
+
+    pub fn set_cloexec(&mut self, fd: usize, on: bool) {
+        if on {
+            self.cloexec |= 1 << fd;
+        } else {
+            self.cloexec &= !(1 << fd);
+        }
+    }
+
+    pub fn is_cloexec(&self, fd: usize) -> bool {
+        self.cloexec & (1 << fd) != 0
     }
 
     pub fn file(&self, fd: u64) -> Option<File<'a>> {

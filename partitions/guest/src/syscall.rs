@@ -5,16 +5,20 @@
 //! pages, the console, the clock, random bytes, the log) goes through [`Host`], which the
 //! partition program implements with kernel calls and the tests with a model.
 //!
-//! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`,
-//! `sendfile` (from an initramfs file to the console),
-//! `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
+//! Served (x86-64 numbers in [`crate::linux::nr`]): `read`, `write`, `readv`, `writev`
+//! (the console, initramfs files, pipes), `sendfile` (from an initramfs file to the
+//! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
+//! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
-//! `getgid`, `getegid`), `exit`, `exit_group`. `rseq` answers `ENOSYS` (as on kernels
+//! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve` and
+//! `wait4` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
+//! `F_DUPFD_CLOEXEC`, `F_GETFD`, `F_SETFD` (close-on-exec), `F_GETFL` and `F_SETFL`
+//! (`O_NONBLOCK` of a pipe descriptor: `EAGAIN` instead of waiting). `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
@@ -24,7 +28,8 @@
 use crate::cpio::{Archive, Entry, S_IFCHR, S_IFMT};
 use crate::linux::{self, Errno, nr};
 use crate::memory::{Area, AreaError, Kind, PAGE, Rights, USER_TOP, page_up};
-use crate::process::{File, Process, Stream};
+use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
+use crate::process::{File, MAX_FILES, Process, Stream};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
 
@@ -73,11 +78,26 @@ pub enum Outcome {
     Exit(u8),
     /// The process was killed by this signal.
     Killed(u32),
+    /// The call waits for another process (an empty or full pipe): nothing changed; serve
+    /// the same message again when something happened, and only then reply.
+    Block,
+    /// The call is one of the process table's ([`crate::system`]): `clone`, `fork`,
+    /// `vfork`, `execve`, `wait4`.
+    Process,
 }
 
-/// Serves one exception message of process `p`, whose files live in `fs`.
+/// Internal results that are no error number: the call would block, or wrote to a pipe
+/// without readers.
+const WOULD_BLOCK: Errno = Errno(0xfff0);
+const BROKEN_PIPE: Errno = Errno(0xfff1);
+/// `O_CLOEXEC` (`open`, `pipe2`, `dup3`).
+pub const O_CLOEXEC: u64 = 0o2000000;
+
+/// Serves one exception message of process `p`, whose files live in `fs` and whose pipes
+/// are in `pipes`.
 pub fn handle<'a>(
     p: &mut Process<'a>,
+    pipes: &mut Pipes,
     fs: &Archive<'a>,
     host: &mut impl Host,
     m: &mut ExceptionMessage,
@@ -97,10 +117,24 @@ pub fn handle<'a>(
             ));
             return Outcome::Exit(status);
         }
-        _ => call(p, fs, host, number, args, r),
+        nr::clone | nr::fork | nr::vfork | nr::execve | nr::wait4 => return Outcome::Process,
+        _ => call(p, pipes, fs, host, number, args, r),
     };
     r.rax = match result {
         Ok(value) => value,
+        Err(WOULD_BLOCK) => return Outcome::Block,
+        Err(BROKEN_PIPE) => {
+            if p.sigactions[linux::SIGPIPE as usize - 1][0] != linux::SIG_IGN {
+                host.log(format_args!(
+                    "guest: process {} ({}) killed by signal {} (SIGPIPE): wrote to a pipe without readers",
+                    p.pid,
+                    p.name(),
+                    linux::SIGPIPE
+                ));
+                return Outcome::Killed(linux::SIGPIPE);
+            }
+            Errno::EPIPE.result()
+        }
         Err(e) => e.result(),
     };
     // What the `syscall` instruction leaves in them on Linux.
@@ -135,10 +169,10 @@ fn fault(p: &Process, host: &mut impl Host, m: &ExceptionMessage) -> Outcome {
     Outcome::Killed(signal)
 }
 
-type SysResult<T> = Result<T, Errno>;
+pub(crate) type SysResult<T> = Result<T, Errno>;
 
 /// Whether `address..address + len` lies in areas with `rights`.
-fn check_user(p: &Process, address: u64, len: usize, rights: Rights) -> SysResult<()> {
+pub(crate) fn check_user(p: &Process, address: u64, len: usize, rights: Rights) -> SysResult<()> {
     if len == 0 {
         return Ok(());
     }
@@ -157,24 +191,34 @@ fn check_user(p: &Process, address: u64, len: usize, rights: Rights) -> SysResul
     Ok(())
 }
 
-fn read_user(p: &Process, host: &mut impl Host, address: u64, buf: &mut [u8]) -> SysResult<()> {
+pub(crate) fn read_user(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    buf: &mut [u8],
+) -> SysResult<()> {
     check_user(p, address, buf.len(), Rights::READ)?;
     host.read_user(address, buf)
 }
 
-fn write_user(p: &Process, host: &mut impl Host, address: u64, data: &[u8]) -> SysResult<()> {
+pub(crate) fn write_user(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    data: &[u8],
+) -> SysResult<()> {
     check_user(p, address, data.len(), Rights::WRITE)?;
     host.write_user(address, data)
 }
 
-fn read_u64(p: &Process, host: &mut impl Host, address: u64) -> SysResult<u64> {
+pub(crate) fn read_u64(p: &Process, host: &mut impl Host, address: u64) -> SysResult<u64> {
     let mut b = [0u8; 8];
     read_user(p, host, address, &mut b)?;
     Ok(u64::from_le_bytes(b))
 }
 
 /// A NUL-terminated string of the process (at most `buf.len() - 1` bytes).
-fn read_cstr<'b>(
+pub(crate) fn read_cstr<'b>(
     p: &Process,
     host: &mut impl Host,
     address: u64,
@@ -194,8 +238,10 @@ fn read_cstr<'b>(
     Err(Errno::ENAMETOOLONG)
 }
 
+#[allow(clippy::too_many_arguments)] // the call, its arguments and what it acts on
 fn call<'a>(
     p: &mut Process<'a>,
+    pipes: &mut Pipes,
     fs: &Archive<'a>,
     host: &mut impl Host,
     number: u64,
@@ -203,19 +249,42 @@ fn call<'a>(
     regs: &mut Registers,
 ) -> SysResult<u64> {
     match number {
-        nr::read => read(p, host, a[0], a[1], a[2]),
-        nr::write => write(p, host, a[0], a[1], a[2]),
+        nr::read => read(p, pipes, host, a[0], a[1], a[2]),
+        nr::write => write(p, pipes, host, a[0], a[1], a[2]),
         nr::sendfile => sendfile(p, host, a[0], a[1], a[2], a[3]),
-        nr::readv | nr::writev => vectored(p, host, number == nr::writev, a[0], a[1], a[2]),
+        nr::readv | nr::writev => vectored(p, pipes, host, number == nr::writev, a[0], a[1], a[2]),
         nr::open => openat(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1]),
         nr::openat => openat(p, fs, host, a[0], a[1], a[2]),
         nr::close => {
-            let slot = p
-                .files
-                .get_mut(usize::try_from(a[0]).map_err(|_| Errno::EBADF)?)
-                .ok_or(Errno::EBADF)?;
-            slot.take().map(|_| 0).ok_or(Errno::EBADF)
+            let fd = usize::try_from(a[0]).map_err(|_| Errno::EBADF)?;
+            p.file(a[0]).ok_or(Errno::EBADF)?;
+            close(p, pipes, fd);
+            Ok(0)
         }
+        nr::dup => {
+            let file = p.file(a[0]).ok_or(Errno::EBADF)?;
+            let fd = p.free_fd().ok_or(Errno::EMFILE)?;
+            duplicate(p, pipes, file, fd, false);
+            Ok(fd as u64)
+        }
+        nr::dup2 | nr::dup3 => {
+            let flags = if number == nr::dup3 { a[2] } else { 0 };
+            if flags & !O_CLOEXEC != 0 || (number == nr::dup3 && a[0] == a[1]) {
+                return Err(Errno::EINVAL);
+            }
+            let file = p.file(a[0]).ok_or(Errno::EBADF)?;
+            let fd = usize::try_from(a[1])
+                .ok()
+                .filter(|&fd| fd < MAX_FILES)
+                .ok_or(Errno::EBADF)?;
+            if a[0] != a[1] {
+                close(p, pipes, fd);
+                duplicate(p, pipes, file, fd, flags & O_CLOEXEC != 0);
+            }
+            Ok(fd as u64)
+        }
+        nr::pipe => pipe(p, pipes, host, a[0], 0),
+        nr::pipe2 => pipe(p, pipes, host, a[0], a[1]),
         nr::lseek => lseek(p, a[0], a[1] as i64, a[2]),
         nr::getdents64 => getdents64(p, fs, host, a[0], a[1], a[2]),
         nr::stat | nr::lstat => {
@@ -256,7 +325,7 @@ fn call<'a>(
             p.file(a[0]).ok_or(Errno::EBADF)?;
             Err(Errno::ENOTTY)
         }
-        nr::fcntl => fcntl(p, a[0], a[1]),
+        nr::fcntl => fcntl(p, pipes, a[0], a[1], a[2]),
         nr::brk => Ok(brk(p, host, a[0])),
         nr::mmap => mmap(p, host, a[0], a[1], a[2], a[3]),
         nr::munmap => munmap(p, host, a[0], a[1]),
@@ -370,9 +439,97 @@ fn call<'a>(
     }
 }
 
-fn read(p: &mut Process, host: &mut impl Host, fd: u64, buf: u64, count: u64) -> SysResult<u64> {
+/// Closes descriptor `fd` if open (a pipe end counts one descriptor less).
+fn close(p: &mut Process, pipes: &mut Pipes, fd: usize) {
+    if let Some(File::Pipe { pipe, write, .. }) = p.files.get_mut(fd).and_then(Option::take) {
+        pipes.close_end(pipe, write);
+    }
+    if fd < MAX_FILES {
+        p.set_cloexec(fd, false);
+    }
+}
+
+/// Closes every descriptor of `p` (it ends), or only the close-on-exec ones (`execve`).
+pub fn close_files(p: &mut Process, pipes: &mut Pipes, only_cloexec: bool) {
+    for fd in 0..MAX_FILES {
+        if !only_cloexec || p.is_cloexec(fd) {
+            close(p, pipes, fd);
+        }
+    }
+}
+
+/// Another descriptor of every pipe end `p` has open (a forked child's copies).
+pub fn share_files(p: &Process, pipes: &mut Pipes) {
+    for file in p.files.iter().flatten() {
+        if let File::Pipe { pipe, write, .. } = *file {
+            pipes.add_end(pipe, write);
+        }
+    }
+}
+
+/// Puts a copy of `file` at the free descriptor `fd`.
+fn duplicate<'a>(p: &mut Process<'a>, pipes: &mut Pipes, file: File<'a>, fd: usize, cloexec: bool) {
+    if let File::Pipe { pipe, write, .. } = file {
+        pipes.add_end(pipe, write);
+    }
+    p.install(fd, file, cloexec);
+}
+
+fn pipe(
+    p: &mut Process,
+    pipes: &mut Pipes,
+    host: &mut impl Host,
+    fds: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    if flags & !(O_CLOEXEC | linux::O_NONBLOCK) != 0 {
+        return Err(Errno::EINVAL);
+    }
+    check_user(p, fds, 8, Rights::WRITE)?;
+    let read_fd = p.free_fd().ok_or(Errno::EMFILE)?;
+    let write_fd = p.free_fd_from(read_fd + 1).ok_or(Errno::EMFILE)?;
+    let index = pipes.open().ok_or(Errno::ENFILE)?;
+    let cloexec = flags & O_CLOEXEC != 0;
+    for (fd, write) in [(read_fd, false), (write_fd, true)] {
+        let end = File::Pipe {
+            pipe: index,
+            write,
+            nonblock: flags & linux::O_NONBLOCK != 0,
+        };
+        p.install(fd, end, cloexec);
+    }
+    let mut pair = [0u8; 8];
+    pair[..4].copy_from_slice(&(read_fd as u32).to_le_bytes());
+    pair[4..].copy_from_slice(&(write_fd as u32).to_le_bytes());
+    host.write_user(fds, &pair)?;
+    Ok(0)
+}
+
+fn read(
+    p: &mut Process,
+    pipes: &mut Pipes,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+) -> SysResult<u64> {
     match p.file(fd).ok_or(Errno::EBADF)? {
         File::Console(_) => Ok(0), // no console input yet: end of file
+        File::Pipe { write: true, .. } => Err(Errno::EBADF),
+        File::Pipe { pipe, nonblock, .. } => {
+            let n = (count as usize).min(PIPE_SIZE);
+            check_user(p, buf, n, Rights::WRITE)?;
+            let mut bytes = [0u8; PIPE_SIZE];
+            match pipes.read(pipe, &mut bytes[..n]) {
+                Transfer::Done(n) => {
+                    host.write_user(buf, &bytes[..n])?;
+                    Ok(n as u64)
+                }
+                Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
+                Transfer::WouldBlock => Err(WOULD_BLOCK),
+                Transfer::Broken => Err(Errno::EBADF),
+            }
+        }
         File::Initramfs { entry, offset } => {
             if entry.is_dir() {
                 return Err(Errno::EISDIR);
@@ -391,10 +548,28 @@ fn read(p: &mut Process, host: &mut impl Host, fd: u64, buf: u64, count: u64) ->
     }
 }
 
-fn write(p: &mut Process, host: &mut impl Host, fd: u64, buf: u64, count: u64) -> SysResult<u64> {
+fn write(
+    p: &mut Process,
+    pipes: &mut Pipes,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+) -> SysResult<u64> {
     let stream = match p.file(fd).ok_or(Errno::EBADF)? {
         File::Console(stream) => stream,
-        File::Initramfs { .. } => return Err(Errno::EBADF), // opened read-only
+        File::Initramfs { .. } | File::Pipe { write: false, .. } => return Err(Errno::EBADF),
+        File::Pipe { pipe, nonblock, .. } => {
+            let n = (count as usize).min(PIPE_SIZE);
+            let mut bytes = [0u8; PIPE_SIZE];
+            read_user(p, host, buf, &mut bytes[..n])?;
+            return match pipes.write(pipe, &bytes[..n]) {
+                Transfer::Done(n) => Ok(n as u64),
+                Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
+                Transfer::WouldBlock => Err(WOULD_BLOCK),
+                Transfer::Broken => Err(BROKEN_PIPE),
+            };
+        }
     };
     let total = (count as usize).min(MAX_TRANSFER);
     check_user(p, buf, total, Rights::READ)?;
@@ -420,6 +595,7 @@ fn sendfile(
     let stream = match p.file(out_fd).ok_or(Errno::EBADF)? {
         File::Console(stream) => stream,
         File::Initramfs { .. } => return Err(Errno::EBADF), // opened read-only
+        File::Pipe { .. } => return Err(Errno::EINVAL),     // the caller falls back to write
     };
     let File::Initramfs { entry, offset } = p.file(in_fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::EINVAL); // no console input to copy
@@ -450,6 +626,7 @@ fn sendfile(
 
 fn vectored(
     p: &mut Process,
+    pipes: &mut Pipes,
     host: &mut impl Host,
     is_write: bool,
     fd: u64,
@@ -467,10 +644,15 @@ fn vectored(
         if len == 0 {
             continue;
         }
-        let n = if is_write {
-            write(p, host, fd, base, len)?
+        let n = match if is_write {
+            write(p, pipes, host, fd, base, len)
         } else {
-            read(p, host, fd, base, len)?
+            read(p, pipes, host, fd, base, len)
+        } {
+            Ok(n) => n,
+            // What moved already counts; the rest waits for the next call.
+            Err(WOULD_BLOCK | BROKEN_PIPE) if total > 0 => break,
+            Err(e) => return Err(e),
         };
         total += n;
         if n < len {
@@ -628,7 +810,11 @@ fn openat<'a>(
         return Err(Errno::ELOOP); // O_NOFOLLOW on a link
     }
     let fd = p.free_fd().ok_or(Errno::EMFILE)?;
-    p.files[fd] = Some(File::Initramfs { entry, offset: 0 });
+    p.install(
+        fd,
+        File::Initramfs { entry, offset: 0 },
+        flags & O_CLOEXEC != 0,
+    );
     Ok(fd as u64)
 }
 
@@ -689,17 +875,54 @@ fn readlink<'a>(
     Ok(n as u64)
 }
 
-fn fcntl(p: &mut Process, fd: u64, cmd: u64) -> SysResult<u64> {
+fn fcntl(p: &mut Process, pipes: &mut Pipes, fd: u64, cmd: u64, arg: u64) -> SysResult<u64> {
+    const F_DUPFD: u64 = 0;
     const F_GETFD: u64 = 1;
     const F_SETFD: u64 = 2;
     const F_GETFL: u64 = 3;
     const F_SETFL: u64 = 4;
+    const F_DUPFD_CLOEXEC: u64 = 1030;
+    const FD_CLOEXEC: u64 = 1;
     let file = p.file(fd).ok_or(Errno::EBADF)?;
+    let fd = fd as usize;
     match cmd {
-        F_GETFD | F_SETFD | F_SETFL => Ok(0),
+        F_DUPFD | F_DUPFD_CLOEXEC => {
+            let low = usize::try_from(arg)
+                .ok()
+                .filter(|&low| low < MAX_FILES)
+                .ok_or(Errno::EINVAL)?;
+            let new = p.free_fd_from(low).ok_or(Errno::EMFILE)?;
+            duplicate(p, pipes, file, new, cmd == F_DUPFD_CLOEXEC);
+            Ok(new as u64)
+        }
+        F_GETFD => Ok(if p.is_cloexec(fd) { FD_CLOEXEC } else { 0 }),
+        F_SETFD => {
+            p.set_cloexec(fd, arg & FD_CLOEXEC != 0);
+            Ok(0)
+        }
+        // O_NONBLOCK of a pipe end (this descriptor's: Linux shares it with the
+        // descriptors dup'ed from it); other flags change nothing (O_APPEND: no writable
+        // files).
+        F_SETFL => {
+            if let File::Pipe { pipe, write, .. } = file {
+                let nonblock = arg & linux::O_NONBLOCK != 0;
+                p.files[fd] = Some(File::Pipe {
+                    pipe,
+                    write,
+                    nonblock,
+                });
+            }
+            Ok(0)
+        }
         F_GETFL => Ok(match file {
             File::Console(_) => linux::O_RDWR,
             File::Initramfs { .. } => 0,
+            File::Pipe {
+                write, nonblock, ..
+            } => {
+                let access = if write { linux::O_WRONLY } else { 0 };
+                access | if nonblock { linux::O_NONBLOCK } else { 0 }
+            }
         }),
         _ => Err(Errno::EINVAL),
     }
@@ -763,9 +986,16 @@ fn stat_of(entry: Option<&Entry>) -> Stat {
 }
 
 fn stat_of_fd(p: &Process, fd: u64) -> SysResult<Stat> {
+    const S_IFIFO: u32 = 0o010000;
     Ok(match p.file(fd).ok_or(Errno::EBADF)? {
         File::Console(_) => stat_of(None),
         File::Initramfs { entry, .. } => stat_of(Some(&entry)),
+        File::Pipe { pipe, .. } => Stat {
+            ino: 0x1_0000 + pipe as u64,
+            nlink: 1,
+            mode: S_IFIFO | 0o600,
+            ..Stat::default()
+        },
     })
 }
 
