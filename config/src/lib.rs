@@ -211,6 +211,8 @@ pub mod units;
 #[cfg(feature = "host")]
 pub mod diagnostic;
 #[cfg(feature = "host")]
+pub mod generate;
+#[cfg(feature = "host")]
 mod schema;
 #[cfg(feature = "host")]
 pub mod system;
