@@ -10,8 +10,9 @@
 //! floor, or with `preempts_windows`); 1 to 4 schedules whose windows lie in disjoint slots
 //! of a major frame between 10 us (`MIN_WINDOW`) and 1 h (`MAX_MAJOR_FRAME`); shared-memory
 //! segments, sampling and queuing channels, module and partition health tables, I/O port
-//! ranges and IRQ lines outside the kernel's. Every partition runs `image` and has
-//! `debug_log`, so the heartbeat program `test-partition` can boot any of them.
+//! ranges and IRQ lines outside the kernel's. Every partition runs `image`, has
+//! `debug_log` and is named `p<index>`, so the heartbeat program `test-partition` (whose
+//! role follows the name) can boot any of them.
 //!
 //! The generator aims at valid text only; a description [`crate::load`] refuses is a bug in
 //! one or the other, which the property tests count (`config/tests/generated.rs`).
