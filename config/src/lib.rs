@@ -7,7 +7,8 @@
 //!   what syssw links (`default-features = false`).
 //! - feature `host` (default): [`load`] parses and validates a TOML description into a
 //!   [`System`], reporting every problem as a [`Diagnostic`] (`file:line:col: key.path:
-//!   reason`); [`binary::encode`] turns a `System` into the blob.
+//!   reason`); [`binary::encode`] turns a `System` into the blob; [`generate`] makes random
+//!   valid descriptions from a seed (the boot property's tests).
 //!
 //! This crate must never let an inconsistent configuration through: whatever [`load`]
 //! accepts encodes to a blob [`binary::decode`] accepts, and the decoder re-checks every rule
@@ -213,6 +214,8 @@ pub mod units;
 
 #[cfg(feature = "host")]
 pub mod diagnostic;
+#[cfg(feature = "host")]
+pub mod generate;
 #[cfg(feature = "host")]
 mod schema;
 #[cfg(feature = "host")]

@@ -12,14 +12,19 @@ use scenarios::{boot, check};
 /// kernel call of the restart that the window boundary cannot interrupt).
 const LATENESS_BOUND_NS: u64 = 52_000;
 
-/// `victim: windows=N missed=M late_ns max=X mean=Y last=Z` → (N, M, X).
-fn victim_summary(line: &str) -> Option<(u64, u64, u64)> {
+/// `victim: windows=N missed=M drift=D late_ns max=X mean=Y last=Z` → (N, M, D, X).
+fn victim_summary(line: &str) -> Option<(u64, u64, u64, u64)> {
     let field = |name: &str| {
         line.split_whitespace()
             .find_map(|w| w.strip_prefix(name))
             .and_then(|v| v.parse::<u64>().ok())
     };
-    Some((field("windows=")?, field("missed=")?, field("max=")?))
+    Some((
+        field("windows=")?,
+        field("missed=")?,
+        field("drift=")?,
+        field("max=")?,
+    ))
 }
 
 #[test]
@@ -78,9 +83,11 @@ fn kernel_held(o: &xtask::qemu::Outcome) {
     );
 }
 
-/// The victim logged all its windows, missed none, and each started within the bound.
+/// The victim logged all its windows, missed none, each started within the bound, and the
+/// kernel reported each window's start exactly on the ideal sequence (first start plus
+/// whole major frames: no drift).
 fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64, bound_ns: u64) {
-    let summaries: Vec<(u64, u64, u64)> = o
+    let summaries: Vec<(u64, u64, u64, u64)> = o
         .lines
         .iter()
         .filter(|l| l.contains("victim: windows="))
@@ -94,14 +101,19 @@ fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64, bound_ns: u64
     );
     check(
         o,
-        last.is_some_and(|(logged, _, _)| logged == windows),
+        last.is_some_and(|(logged, _, _, _)| logged == windows),
         &format!("the victim did not log its {windows} windows"),
     );
-    for (windows, missed, max) in summaries {
+    for (windows, missed, drift, max) in summaries {
         check(
             o,
             missed == 0,
             &format!("the victim missed {missed} windows of {windows}"),
+        );
+        check(
+            o,
+            drift == 0,
+            &format!("{drift} of {windows} window starts off the ideal sequence"),
         );
         check(
             o,

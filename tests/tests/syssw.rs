@@ -59,3 +59,52 @@ fn syssw_partitions() {
         "the #UD of windows-b must be handled as illegal_request with action shutdown_success",
     );
 }
+
+/// Boot property: a description `check-config` accepts boots. `tests/configs/generated_<seed>.toml`
+/// is `config::generate`'s description for the seed (checked by `cargo test -p warden-config`),
+/// every partition the heartbeat program: syssw starts them all, each reports it started and
+/// then a heartbeat, and the kernel neither panics nor faults in kernel mode.
+fn generated_boot(seed: u64) {
+    let name = format!("generated_boot_{seed}");
+    let text = std::fs::read_to_string(
+        xtask::workspace_root().join(format!("tests/configs/generated_{seed}.toml")),
+    )
+    .unwrap();
+    let partitions = text.matches("\n[partitions.").count();
+    let o = boot(&name);
+    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    check(
+        &o,
+        o.line("fatal exception").is_none(),
+        "an exception in kernel mode",
+    );
+    let started = format!("syssw: {partitions} partitions started");
+    check(
+        &o,
+        o.line(&started).is_some(),
+        &format!("missing {started:?}"),
+    );
+    for i in 0..partitions {
+        for line in [
+            format!("p{i}: started as partition {i} in TP"),
+            format!("p{i}: alive at "),
+        ] {
+            check(&o, o.line(&line).is_some(), &format!("missing {line:?}"));
+        }
+    }
+}
+
+#[test]
+fn generated_boot_1() {
+    generated_boot(1);
+}
+
+#[test]
+fn generated_boot_2() {
+    generated_boot(2);
+}
+
+#[test]
+fn generated_boot_3() {
+    generated_boot(3);
+}

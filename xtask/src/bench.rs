@@ -2,10 +2,12 @@
 //! (`tests/configs/bench_ports.toml`), the soft-PLC benchmark system on virtual time
 //! (`tests/configs/bench_plc.toml`: `plc_release_jitter`, `plc_cycle_overhead`,
 //! `plc_online_read`) and the attack systems whose victim measures its window starts on
-//! virtual time (`window_lateness_hostile*`), runs the host benchmarks, prints one line per
+//! virtual time (`window_lateness_hostile*`) and the soak system on virtual time
+//! (`tests/configs/soak.toml`: `soak_window_lateness`, `soak_missed_windows`,
+//! `soak_window_drift`; alone with `--soak`), runs the host benchmarks, prints one line per
 //! metric and writes `target/bench/report.json`.
 //!
-//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio> samples=<n>`.
+//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio|count> samples=<n>`.
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;
@@ -53,23 +55,52 @@ pub fn parse_line(line: &str) -> Option<Metric> {
     complete.then_some(m)
 }
 
-/// The metric `window_lateness_hostile_<name>` from an attack victim's last line
-/// (`victim: lateness windows=<n> min=<ns> median=<ns> max=<ns>`, tests/programs/attack).
+/// The window-start lateness (ns) from an attack victim's last line (`victim: lateness
+/// windows=<n> min=<ns> median=<ns> max=<ns> missed=<n> drift=<n>`, tests/programs/attack)
+/// as metric `name`.
 pub fn parse_victim_lateness(line: &str, name: &str) -> Option<Metric> {
-    let rest = &line[line.find("victim: lateness ")? + "victim: lateness ".len()..];
-    let field = |key: &str| {
-        rest.split_whitespace()
-            .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
-            .and_then(|v| v.parse::<u64>().ok())
-    };
+    let field = |key| victim_field(line, key);
     Some(Metric {
-        name: format!("window_lateness_hostile_{name}"),
+        name: name.to_string(),
         median: field("median")? as f64,
         min: field("min")? as f64,
         max: field("max")? as f64,
         unit: "ns".to_string(),
         samples: field("windows")?,
     })
+}
+
+/// The soak's metrics from its victim's last line: `soak_window_lateness` (ns), and as
+/// counts over all its windows `soak_missed_windows` (windows the victim did not run in)
+/// and `soak_window_drift` (window starts the kernel reported off the ideal sequence, the
+/// first start plus whole major frames).
+pub fn parse_soak(line: &str) -> Option<[Metric; 3]> {
+    let lateness = parse_victim_lateness(line, "soak_window_lateness")?;
+    let windows = lateness.samples;
+    let count = |name: &str, key| {
+        let n = victim_field(line, key)? as f64;
+        Some(Metric {
+            name: name.to_string(),
+            median: n,
+            min: n,
+            max: n,
+            unit: "count".to_string(),
+            samples: windows,
+        })
+    };
+    Some([
+        count("soak_missed_windows", "missed")?,
+        count("soak_window_drift", "drift")?,
+        lateness,
+    ])
+}
+
+/// Field `key` of a victim's `victim: lateness ...` line.
+fn victim_field(line: &str, key: &str) -> Option<u64> {
+    let rest = &line[line.find("victim: lateness ")? + "victim: lateness ".len()..];
+    rest.split_whitespace()
+        .find_map(|w| w.strip_prefix(key)?.strip_prefix('='))
+        .and_then(|v| v.parse().ok())
 }
 
 /// `plc_release_jitter` and `plc_cycle_overhead` (ns) from a soft-PLC statistics line
@@ -141,9 +172,14 @@ pub fn host_metrics() -> Result<Vec<Metric>> {
 }
 
 pub fn write_report(metrics: &[Metric]) -> Result<std::path::PathBuf> {
+    write_report_as(metrics, "report.json")
+}
+
+/// Writes `metrics` to `target/bench/<file>`.
+pub fn write_report_as(metrics: &[Metric], file: &str) -> Result<std::path::PathBuf> {
     let dir = crate::target_dir().join("bench");
     std::fs::create_dir_all(&dir)?;
-    let path = dir.join("report.json");
+    let path = dir.join(file);
     std::fs::write(&path, serde_json::to_string_pretty(metrics)?)?;
     Ok(path)
 }
@@ -175,13 +211,32 @@ mod tests {
     fn reads_the_victims_lateness() {
         let m = parse_victim_lateness(
             "[   5.1] [victim-1000] victim: lateness windows=999 min=1838 median=2850 max=44559",
-            "restart_loop",
+            "window_lateness_hostile_restart_loop",
         )
         .unwrap();
         assert_eq!(m.name, "window_lateness_hostile_restart_loop");
         assert_eq!((m.min, m.median, m.max), (1838.0, 2850.0, 44559.0));
         assert_eq!((m.unit.as_str(), m.samples), ("ns", 999));
         assert!(parse_victim_lateness("victim: windows=100 missed=0", "x").is_none());
+    }
+
+    #[test]
+    fn reads_the_soak() {
+        let line = "[  60.2] [victim-100000] victim: lateness windows=99999 min=1838 median=2850 max=9559 missed=2 drift=0";
+        let [missed, drift, lateness] = parse_soak(line).unwrap();
+        assert_eq!(
+            (missed.name.as_str(), missed.max),
+            ("soak_missed_windows", 2.0)
+        );
+        assert_eq!((drift.name.as_str(), drift.max), ("soak_window_drift", 0.0));
+        assert_eq!(missed.unit, "count");
+        assert_eq!(lateness.name, "soak_window_lateness");
+        assert_eq!(
+            (lateness.median, lateness.max, lateness.samples),
+            (2850.0, 9559.0, 99999)
+        );
+        // A line without the counts (an older victim) is no soak result.
+        assert!(parse_soak("victim: lateness windows=9 min=1 median=2 max=3").is_none());
     }
 
     #[test]

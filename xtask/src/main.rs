@@ -40,14 +40,23 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
-    /// Run the benchmarks (kernel, ports, soft-PLC and attack systems under QEMU, soft-PLC
-    /// VM on the host); writes target/bench/report.json.
+    /// Run the benchmarks (kernel, ports, soft-PLC, attack and soak systems under QEMU,
+    /// soft-PLC VM on the host); writes target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
         /// counts then follow the instructions executed, not the host's load, so two
         /// builds can be compared exactly (the figures are not real-time costs).
         #[arg(long)]
         deterministic_time: bool,
+        /// Run only the soak (tests/configs/soak.toml, virtual time; also part of the full
+        /// bench): every partition busy for FRAMES major frames of 50 us; reports
+        /// `soak_window_lateness`, `soak_missed_windows` and `soak_window_drift` and writes
+        /// target/bench/soak.json.
+        #[arg(long)]
+        soak: bool,
+        /// Major frames of the soak.
+        #[arg(long, value_name = "FRAMES", default_value_t = SOAK_FRAMES, requires = "soak")]
+        frames: u64,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -85,7 +94,12 @@ fn main() -> ExitCode {
             timeout,
             release,
         } => run(config, timeout, release),
-        Cmd::Bench { deterministic_time } => bench(deterministic_time),
+        Cmd::Bench {
+            soak: true, frames, ..
+        } => soak(frames),
+        Cmd::Bench {
+            deterministic_time, ..
+        } => bench(deterministic_time),
         Cmd::Test {
             filter,
             scenarios_only,
@@ -317,10 +331,9 @@ fn hostile_lateness(
             true,
             Duration::from_secs(900),
         )?;
-        let metric = outcome
-            .lines
-            .iter()
-            .find_map(|l| xtask::bench::parse_victim_lateness(l, name));
+        let metric = outcome.lines.iter().find_map(|l| {
+            xtask::bench::parse_victim_lateness(l, &format!("window_lateness_hostile_{name}"))
+        });
         match metric {
             Some(m) => metrics.push(m),
             None => bail!(
@@ -379,6 +392,74 @@ fn plc_metrics(
     }
 }
 
+/// Major frames of `cargo xtask bench --soak` by default.
+const SOAK_FRAMES: u64 = 1_000_000;
+
+/// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
+fn soak(frames: u64) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = soak_metrics(&qemu, &system, &xtask::target_dir().join("bench"), frames)?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "soak.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
+/// Boots the soak system (tests/configs/soak.toml, its victim renamed to log `frames`
+/// windows, one per major frame) on virtual time and reads its victim's last line:
+/// `soak_missed_windows`, `soak_window_drift`, `soak_window_lateness`.
+fn soak_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+    frames: u64,
+) -> Result<Vec<xtask::bench::Metric>> {
+    if !(2..=99_999_999_999).contains(&frames) {
+        bail!(
+            "--frames {frames}: the soak needs 2 to 99999999999 frames (the victim's name holds the count)"
+        );
+    }
+    let dir = dir.join("soak");
+    std::fs::create_dir_all(&dir)?;
+    let text = std::fs::read_to_string(xtask::workspace_root().join("tests/configs/soak.toml"))?;
+    let victim = format!("victim-{SOAK_FRAMES}");
+    if !text.contains(&victim) {
+        bail!("tests/configs/soak.toml has no partition {victim}");
+    }
+    let config = dir.join("soak.toml");
+    std::fs::write(&config, text.replace(&victim, &format!("victim-{frames}")))?;
+    let started = std::time::Instant::now();
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir,
+        &format!("soak system ({frames} major frames)"),
+        true,
+        // Measured: 10^6 frames take about 150 s of host time under TCG.
+        Duration::from_secs(600 + frames / 1_000),
+    )?;
+    eprintln!(
+        "xtask: the soak of {frames} major frames took {:.0} s of host time",
+        started.elapsed().as_secs_f64()
+    );
+    match outcome
+        .lines
+        .iter()
+        .rev()
+        .find_map(|l| xtask::bench::parse_soak(l))
+    {
+        Some(metrics) => Ok(metrics.into()),
+        None => bail!(
+            "the soak system printed no victim summary\n{}",
+            outcome.transcript()
+        ),
+    }
+}
+
 fn bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
@@ -413,6 +494,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     }
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
+    metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {

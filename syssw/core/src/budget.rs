@@ -140,6 +140,7 @@ impl Regions {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::testsys::elf;
 
     fn tables(runs: &[(u64, u64)]) -> u64 {
         let mut r = Regions::new();
@@ -164,32 +165,6 @@ mod tests {
         assert_eq!(tables(&[(0x20_0000, 1), (STACK_TOP - PAGE, 1)]), 6);
         // Nested runs count once.
         assert_eq!(tables(&[(0x20_0000, 512), (0x20_1000, 1)]), 3);
-    }
-
-    /// A minimal static ELF with one loadable segment of `mem_size` bytes at `vaddr`.
-    fn elf(vaddr: u64, mem_size: u64) -> Vec<u8> {
-        let mut e = vec![0u8; 64 + 56];
-        e[..4].copy_from_slice(b"\x7fELF");
-        e[4] = 2; // 64-bit
-        e[5] = 1; // little-endian
-        e[6] = 1; // version
-        e[16..18].copy_from_slice(&2u16.to_le_bytes()); // ET_EXEC
-        e[18..20].copy_from_slice(&62u16.to_le_bytes()); // x86_64
-        e[20..24].copy_from_slice(&1u32.to_le_bytes());
-        e[24..32].copy_from_slice(&vaddr.to_le_bytes()); // entry
-        e[32..40].copy_from_slice(&64u64.to_le_bytes()); // program headers
-        e[52..54].copy_from_slice(&64u16.to_le_bytes());
-        e[54..56].copy_from_slice(&56u16.to_le_bytes());
-        e[56..58].copy_from_slice(&1u16.to_le_bytes());
-        e[58..60].copy_from_slice(&64u16.to_le_bytes());
-        let ph = &mut e[64..];
-        ph[..4].copy_from_slice(&1u32.to_le_bytes()); // PT_LOAD
-        ph[4..8].copy_from_slice(&6u32.to_le_bytes()); // RW
-        ph[16..24].copy_from_slice(&vaddr.to_le_bytes());
-        ph[24..32].copy_from_slice(&vaddr.to_le_bytes());
-        ph[40..48].copy_from_slice(&mem_size.to_le_bytes());
-        ph[48..56].copy_from_slice(&PAGE.to_le_bytes());
-        e
     }
 
     #[test]

@@ -27,6 +27,8 @@ pub mod mode;
 pub mod ports;
 
 #[cfg(test)]
+mod generated_systems;
+#[cfg(test)]
 mod testsys;
 
 pub use protocol::ReturnCode;

@@ -17,7 +17,7 @@
 extern crate alloc;
 
 pub mod download;
-pub mod histogram;
+pub use histogram;
 pub mod online;
 pub mod package;
 pub mod scan;

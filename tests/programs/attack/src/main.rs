@@ -29,7 +29,9 @@
 //!   then QuotaExceeded` and sleeps;
 //! * `victim*`: logs its window starts: once per window it reads the clock and compares it
 //!   with the window's start (`partition_info`), counts the major frames it saw to find a
-//!   missed window, prints a summary every [`REPORT_EVERY`] windows, and after
+//!   missed window and whether the start is the ideal one (the first start plus whole major
+//!   frames: `drift`), keeps the lateness in a constant-size histogram (a soak logs 10^6
+//!   windows), prints a summary every [`REPORT_EVERY`] windows, and after
 //!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) creates and kills a thread (its
 //!   own quota is untouched by any hoarder) and executes `ud2` (the scenario maps that illegal request to
 //!   `shutdown_success`, ending the run).
@@ -284,17 +286,20 @@ fn hoard() {
     );
 }
 
-/// Most windows the victim keeps the lateness of (for its final median).
-const VICTIM_MAX_WINDOWS: usize = 4_096;
-
-/// The victim: see the crate documentation. Its last line is
-/// `victim: lateness windows=<n> min=<ns> median=<ns> max=<ns>` (the first window left out:
-/// its start includes the partition's start-up), which `cargo xtask bench` reads.
+/// The victim: see the crate documentation. It reports every [`REPORT_EVERY`] windows, or
+/// 100 times in all for a long run (a line takes longer than a short window). Its last line
+/// is `victim: lateness windows=<n> min=<ns> median=<ns> max=<ns> missed=<n> drift=<n>`
+/// (the first window left out: its start includes the partition's start-up; the median
+/// within 1/64, `histogram`), which `cargo xtask bench` reads. `drift` counts the window
+/// starts the kernel reported off the ideal sequence: the first start plus whole major
+/// frames (the frame learnt from the first two windows, one window per frame).
 fn victim(tp: u64, windows: u64) {
-    let windows = windows.min(VICTIM_MAX_WINDOWS as u64);
-    let mut lateness = [0u32; VICTIM_MAX_WINDOWS];
+    let report_every = REPORT_EVERY.max(windows / 100);
+    let mut lateness = histogram::Histogram::new();
+    let mut first: Option<(u64, u64)> = None;
+    let mut major_frame = None;
     let mut last_frame = None;
-    let (mut missed, mut max_late, mut sum_late) = (0u64, 0u64, 0u64);
+    let (mut missed, mut drift, mut max_late, mut sum_late) = (0u64, 0u64, 0u64, 0u64);
     for window in 1..=windows {
         let now = sys::clock();
         let Ok(info) = sys::partition_info(tp) else {
@@ -305,7 +310,7 @@ fn victim(tp: u64, windows: u64) {
         if window > 1 {
             max_late = max_late.max(late);
             sum_late += late;
-            lateness[window as usize - 2] = late.min(u64::from(u32::MAX)) as u32;
+            lateness.record(late);
         }
         if let Some(last) = last_frame
             && info.frames != last + 1
@@ -313,22 +318,32 @@ fn victim(tp: u64, windows: u64) {
             missed += info.frames.saturating_sub(last + 1);
         }
         last_frame = Some(info.frames);
-        if window % REPORT_EVERY == 0 || window == windows {
+        match (first, major_frame) {
+            (None, _) => first = Some((info.next_window_start, info.frames)),
+            (Some((start, frame)), None) => {
+                let frames = info.frames.saturating_sub(frame).max(1);
+                major_frame = Some(info.next_window_start.saturating_sub(start) / frames);
+            }
+            (Some((start, frame)), Some(major)) => {
+                let ideal = start + info.frames.saturating_sub(frame) * major;
+                if info.next_window_start != ideal {
+                    drift += 1;
+                }
+            }
+        }
+        if window % report_every == 0 || window == windows {
             println!(
-                "victim: windows={window} missed={missed} late_ns max={max_late} mean={} last={late}",
+                "victim: windows={window} missed={missed} drift={drift} late_ns max={max_late} mean={} last={late}",
                 sum_late / (window - 1).max(1)
             );
         }
         // Ready again at the end of this window: runs at the start of the next one.
         sys::sleep_until(info.next_window_start + info.window_length);
     }
-    let measured = &mut lateness[..windows.saturating_sub(1) as usize];
-    measured.sort_unstable();
-    if let (Some(min), Some(max)) = (measured.first(), measured.last()) {
+    if let Some((min, median, max)) = lateness.summary() {
         println!(
-            "victim: lateness windows={} min={min} median={} max={max}",
-            measured.len(),
-            measured[measured.len() / 2]
+            "victim: lateness windows={} min={min} median={median} max={max} missed={missed} drift={drift}",
+            lateness.count()
         );
     }
     // Whatever a neighbour hoarded, this partition's own quota is still there.

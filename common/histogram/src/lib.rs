@@ -1,6 +1,7 @@
-//! A fixed-size latency histogram: what the runtime keeps of every release's lateness and
-//! of its own work per release, so that it can report min/median/max over any number of
-//! releases (a bench wants 10,000 and more) in constant memory and constant time per sample,
+//! A fixed-size latency histogram: what the soft-PLC runtime keeps of every release's
+//! lateness and of its own work per release, and the soak victim of every window start's
+//! lateness, so that they can report min/median/max over any number of samples (a bench
+//! wants 10,000 and more, the soak 10^6) in constant memory and constant time per sample,
 //! whether a figure is 10 us on virtual time or 10 ms under a loaded emulator.
 //!
 //! Buckets are log-linear: values below 64 ns have a bucket each; above, every power of two
@@ -8,6 +9,7 @@
 //! are exact; the median is the midpoint of the bucket that holds it (within 1/64 of the
 //! true value), clamped to [min, max]. Values from 2^([`MAX_EXPONENT`] + 1) ns (about 37
 //! minutes) share the last bucket.
+#![cfg_attr(not(test), no_std)]
 
 /// Significant bits a bucket keeps below a value's top bit.
 const SUB_BITS: u32 = 5;
