@@ -211,10 +211,7 @@ fn package(
         .deadlines
         .iter()
         .map(|(task, ns)| {
-            let known = (0..image.task_count())
-                .filter_map(|i| image.task(i))
-                .any(|t| softplc::scan::names_task(task, t.name));
-            if !known {
+            if !softplc::scan::has_task(&image, task) {
                 bail!(
                     "partition {}: plc.deadline names `{task}`, which is not a TASK of its program",
                     p.name

@@ -27,7 +27,7 @@
 //! located variables address directly, so it needs no re-resolution.
 
 use crate::package::{Package, PackageError, SafeValue};
-use crate::scan::{PlanError, SafeValues, Schedule, carry_retain, names_task};
+use crate::scan::{PlanError, SafeValues, Schedule, carry_retain, has_task};
 use crate::shared::SharedError;
 use plc_online::Status;
 use plc_vm::image::{Image, ImageError, Var, VarType};
@@ -160,13 +160,8 @@ pub fn fit_configuration(
     schedule: Schedule,
     package: &Package,
 ) -> Result<Schedule, Refusal> {
-    for d in package.deadlines() {
-        let known = (0..image.task_count())
-            .filter_map(|i| image.task(i))
-            .any(|t| names_task(d.task, t.name));
-        if !known {
-            return Err(Refusal::Deadline(VarName::of(d.task)));
-        }
+    if let Some(d) = package.deadlines().find(|d| !has_task(image, d.task)) {
+        return Err(Refusal::Deadline(VarName::of(d.task)));
     }
     if let Some(layout) = package.shared() {
         crate::shared::check(&layout, image).map_err(Refusal::Shared)?;

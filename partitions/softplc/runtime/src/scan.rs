@@ -137,6 +137,13 @@ pub fn names_task(configured: &str, image_task: &str) -> bool {
     configured.eq_ignore_ascii_case(image_task) || configured.eq_ignore_ascii_case(task)
 }
 
+/// Whether a configured task name names some task of `image` (see [`names_task`]).
+pub fn has_task(image: &Image, configured: &str) -> bool {
+    (0..image.task_count())
+        .filter_map(|i| image.task(i))
+        .any(|t| names_task(configured, t.name))
+}
+
 /// [`Schedule::deadline`] of a task without a time deadline.
 pub const NO_DEADLINE: u64 = u64::MAX;
 
