@@ -45,6 +45,7 @@ pub mod process;
 pub mod stack;
 pub mod syscall;
 pub mod system;
+pub mod tty;
 pub mod vfs;
 
 /// Where the guest's command line is in the initramfs: `argv` of the first process, each
