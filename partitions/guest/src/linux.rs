@@ -180,6 +180,10 @@ pub const ARCH_GET_GS: u64 = 0x1004;
 
 pub const TCGETS: u64 = 0x5401;
 
+/// Signals the terminal's control characters send ([`crate::tty`]).
+pub const SIGINT: u32 = 2;
+pub const SIGQUIT: u32 = 3;
+pub const SIGTSTP: u32 = 20;
 pub const SIGKILL: u64 = 9;
 pub const SIGSTOP: u64 = 19;
 /// Signals a fault kills a process with (no handlers are delivered yet).
@@ -189,13 +193,17 @@ pub const SIGBUS: u32 = 7;
 pub const SIGFPE: u32 = 8;
 pub const SIGSEGV: u32 = 11;
 pub const SIGPIPE: u32 = 13;
-/// `SIG_IGN` as a `sigaction` handler.
+/// `SIG_DFL` and `SIG_IGN` as a `sigaction` handler.
+pub const SIG_DFL: u64 = 0;
 pub const SIG_IGN: u64 = 1;
 pub const SIGCHLD: u64 = 17;
 
-/// The name of a fatal signal, for the log.
+/// The name of a signal that ends a process, for the log.
 pub fn signal_name(signal: u32) -> &'static str {
     match signal {
+        SIGINT => "SIGINT",
+        SIGQUIT => "SIGQUIT",
+        SIGTSTP => "SIGTSTP",
         SIGILL => "SIGILL",
         SIGTRAP => "SIGTRAP",
         SIGBUS => "SIGBUS",

@@ -173,6 +173,39 @@ impl<'a> System<'a> {
         self.wake(fs, k)
     }
 
+    /// A signal the terminal's control characters send to process group `group`
+    /// ([`crate::tty::Signal`]). No signal handler is delivered yet and `getpgrp` is a
+    /// process's pid, so the group is its leader alone, and only a default action that
+    /// ends a process is taken: the leader dies by the signal unless it ignores it or set a
+    /// handler, or is init (as Linux spares init signals without handlers); `SIGTSTP`
+    /// (stop) does nothing. The caller then serves the blocked calls again (a parent
+    /// waiting for the killed process).
+    pub fn terminal_signal(&mut self, signal: u32, group: u32, k: &mut impl Tasks) {
+        let Some(i) = self.index(group) else {
+            return;
+        };
+        let Some(slot) = self.slots[i].as_ref() else {
+            return;
+        };
+        let action = (signal as usize)
+            .checked_sub(1)
+            .and_then(|n| slot.process.sigactions.get(n));
+        let default = action.is_some_and(|a| a[0] == linux::SIG_DFL);
+        if signal == linux::SIGTSTP
+            || group == INIT_PID
+            || !default
+            || matches!(slot.state, State::Zombie(_))
+        {
+            return;
+        }
+        k.log(format_args!(
+            "guest: process {group} ({}) killed by signal {signal} ({}): from the console",
+            slot.process.name(),
+            linux::signal_name(signal)
+        ));
+        self.end(i, signal, k);
+    }
+
     /// Serves the kept messages of blocked processes until none completes.
     fn wake(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
         loop {

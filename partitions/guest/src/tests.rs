@@ -1446,3 +1446,47 @@ fn a_reader_of_the_console_waits_without_stopping_the_others() {
     assert_eq!(g.get(child, SCRATCH, 3), b"ls\n");
     assert_eq!(g.system.state(child), Some(State::Running));
 }
+
+#[test]
+fn console_signals_kill_the_foreground_leader_by_default() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    let other = g.fork(1);
+    // `other` ignores SIGINT (rt_sigaction with SIG_IGN).
+    g.put(other, SCRATCH, &[1, 0, 0, 0, 0, 0, 0, 0]);
+    g.put(other, SCRATCH + 8, &[0; 24]);
+    assert_eq!(
+        g.call(other, nr::rt_sigaction, [2, SCRATCH, 0, 8, 0, 0]),
+        Some(0)
+    );
+    // init waits for `child`.
+    assert_eq!(g.call(1, nr::wait4, [child as u64, 0, 0, 0, 0, 0]), None);
+    for (signal, group) in [
+        (crate::linux::SIGINT, other),
+        (crate::linux::SIGINT, 1),
+        (crate::linux::SIGTSTP, child),
+        (crate::linux::SIGINT, 99),
+    ] {
+        g.system.terminal_signal(signal, group, &mut g.host);
+    }
+    assert!(g.host.released.is_empty(), "ignored, init, stop, nobody");
+    g.system
+        .terminal_signal(crate::linux::SIGQUIT, child, &mut g.host);
+    assert_eq!(g.host.released, [child]);
+    assert!(
+        g.host
+            .log
+            .iter()
+            .any(|l| l.ends_with("killed by signal 3 (SIGQUIT): from the console"))
+    );
+    g.host.resumed.clear();
+    assert_eq!(g.system.retry_blocked(&g.fs, &mut g.host), None);
+    let replies: Vec<(u32, u64)> = g
+        .host
+        .resumed
+        .iter()
+        .map(|(p, m)| (*p, m.registers.rax))
+        .collect();
+    assert_eq!(replies, [(1, child as u64)], "init's wait4 returns");
+}

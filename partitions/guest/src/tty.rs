@@ -27,7 +27,7 @@
 //! This module is pure: it never touches the device or a process; it returns what to
 //! echo through the caller's output function and the signals as values.
 
-use crate::linux::Errno;
+use crate::linux::{Errno, SIGINT, SIGQUIT, SIGTSTP};
 
 /// Bytes the input queue holds (Linux's `N_TTY_BUF_SIZE`); a canonical line is at most
 /// one less.
@@ -104,11 +104,6 @@ pub const NOFLSH: u32 = 0x80;
 pub const ECHOCTL: u32 = 0x200;
 pub const ECHOKE: u32 = 0x800;
 pub const IEXTEN: u32 = 0x8000;
-
-/// The signals the control characters send.
-pub const SIGINT: u32 = 2;
-pub const SIGQUIT: u32 = 3;
-pub const SIGTSTP: u32 = 20;
 
 /// A marker in the input queue: a `VEOF` that ended a line (never handed to a reader).
 const EOF_MARK: u16 = 0x100;
