@@ -53,6 +53,9 @@ pub mod vfs;
 pub const INIT_ARGS_PATH: &str = "/etc/guest/init";
 /// Its environment, in the same form (from `guest.env`).
 pub const INIT_ENV_PATH: &str = "/etc/guest/env";
+/// The console's device, `com2` (from `guest.console`); without the file the console is
+/// the log.
+pub const CONSOLE_PATH: &str = "/etc/guest/console";
 
 /// The NUL-terminated strings of `bytes` (a trailing piece without NUL counts too; empty
 /// strings are kept), at most `out.len()`; returns how many.
