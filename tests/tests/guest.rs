@@ -172,3 +172,41 @@ fn guest_hello() {
         );
     }
 }
+
+/// Scenario guest_console (`tests/configs/guest_console.toml`): the console of guest
+/// `linux` is a terminal on COM2 running an interactive `/bin/sh`; the scenario types
+/// commands into it.
+#[test]
+fn guest_console() {
+    let o = boot("guest_console");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the shell's end ends the run",
+    );
+    let lines = o.console_lines();
+    let has = |text: &str| lines.iter().any(|l| *l == text);
+    // The shell's line editor erased two characters of "typo" before "pe".
+    for expected in ["hello from the console", "type"] {
+        check(&o, has(expected), &format!("console: no line {expected:?}"));
+    }
+    // `cat` read through the canonical line discipline: the terminal echoed what was
+    // typed, erase included, then cat wrote the edited line.
+    check(
+        &o,
+        o.console.contains("one tw\x08 \x08o\r\none to\r\n"),
+        "console: cat's echoed and edited line",
+    );
+    check(&o, !has("typo"), "console: the erased characters stayed");
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: init exited with status 0").len() == 1,
+        "the shell ended at the Ctrl-D",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: process 1 stdout").is_empty(),
+        "the console's output went to COM2, not the log",
+    );
+}

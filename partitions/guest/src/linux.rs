@@ -143,6 +143,7 @@ syscalls! {
     openat = 257,
     newfstatat = 262,
     readlinkat = 267,
+    ppoll = 271,
     faccessat = 269,
     set_robust_list = 273,
     dup3 = 292,

@@ -75,6 +75,19 @@ impl Pipes {
             .map_or(0, |p| p.len)
     }
 
+    /// Whether a `read` (`write: false`) or a `write` of one byte on pipe `index` would
+    /// return now (data or end of file; room or no readers): for `poll`.
+    pub fn ready(&self, index: usize, write: bool) -> bool {
+        let Some(Some(p)) = self.pipes.get(index) else {
+            return true;
+        };
+        if write {
+            p.readers == 0 || p.len < PIPE_SIZE
+        } else {
+            p.writers == 0 || p.len > 0
+        }
+    }
+
     /// One more descriptor for an end (`dup`, `fork`).
     pub fn add_end(&mut self, index: usize, write: bool) {
         if let Some(Some(p)) = self.pipes.get_mut(index) {

@@ -9,7 +9,7 @@
 //! (the console, initramfs files, pipes), `sendfile` (from an initramfs file to the
 //! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
 //! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
-//! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
+//! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `poll`, `ppoll`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
@@ -323,6 +323,26 @@ fn call<'a>(
         nr::faccessat | nr::faccessat2 => access(p, fs, host, a[0], a[1], a[2]),
         nr::readlink => readlink(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1], a[2]),
         nr::readlinkat => readlink(p, fs, host, a[0], a[1], a[2], a[3]),
+        nr::poll => {
+            let timeout = a[2] as i32;
+            poll(
+                p,
+                pipes,
+                host,
+                a[0],
+                a[1],
+                (timeout >= 0).then_some(timeout as u64),
+            )
+        }
+        nr::ppoll => {
+            let timeout = if a[2] == 0 {
+                None
+            } else {
+                let (s, ns) = (read_u64(p, host, a[2])?, read_u64(p, host, a[2] + 8)?);
+                Some(s | ns)
+            };
+            poll(p, pipes, host, a[0], a[1], timeout)
+        }
         nr::getcwd => {
             if a[1] < 2 {
                 return Err(Errno::ERANGE);
@@ -601,6 +621,75 @@ fn write(
         done += n;
     }
     Ok(total as u64)
+}
+
+/// `poll` and `ppoll`: which descriptors of the `count` `struct pollfd`s at `fds` are
+/// ready (`POLLIN`/`POLLOUT` as asked, `POLLHUP` for a pipe without writers, `POLLNVAL`
+/// for a closed descriptor). When none is, a call without a timeout (`None`) waits, as a
+/// blocked call, until one is; with a timeout it returns 0 at once (no timer wakes a
+/// waiting call yet, so a timeout ends early rather than never). The signal mask of
+/// `ppoll` is not applied (no handler is delivered yet).
+fn poll(
+    p: &Process,
+    pipes: &Pipes,
+    host: &mut impl Host,
+    fds: u64,
+    count: u64,
+    timeout: Option<u64>,
+) -> SysResult<u64> {
+    const POLLIN: u16 = 0x1;
+    const POLLOUT: u16 = 0x4;
+    const POLLHUP: u16 = 0x10;
+    const POLLNVAL: u16 = 0x20;
+    if count > MAX_FILES as u64 {
+        return Err(Errno::EINVAL);
+    }
+    let mut table = [0u8; 8 * MAX_FILES];
+    let table = &mut table[..8 * count as usize];
+    read_user(p, host, fds, table)?;
+    let mut ready = 0;
+    for entry in table.chunks_exact_mut(8) {
+        let fd = i32::from_le_bytes([entry[0], entry[1], entry[2], entry[3]]);
+        let events = u16::from_le_bytes([entry[4], entry[5]]);
+        if fd < 0 {
+            entry[6..].fill(0); // ignored
+            continue;
+        }
+        let (readable, writable, hangup) = match p.file(fd as u64) {
+            None => {
+                entry[6..].copy_from_slice(&POLLNVAL.to_le_bytes());
+                ready += 1;
+                continue;
+            }
+            Some(File::Console(_)) => (host.tty().is_none_or(|t| t.readable()), true, false),
+            Some(File::Pipe { pipe, write, .. }) => {
+                let ready = pipes.ready(pipe, write);
+                (
+                    !write && ready,
+                    write && ready,
+                    !write && ready && pipes.buffered(pipe) == 0,
+                )
+            }
+            Some(File::Initramfs { .. }) => (true, true, false),
+        };
+        let mut revents = 0;
+        if readable && events & POLLIN != 0 {
+            revents |= POLLIN;
+        }
+        if writable && events & POLLOUT != 0 {
+            revents |= POLLOUT;
+        }
+        if hangup {
+            revents |= POLLHUP;
+        }
+        entry[6..].copy_from_slice(&revents.to_le_bytes());
+        ready += u64::from(revents != 0);
+    }
+    if ready == 0 && timeout.is_none() {
+        return Err(WOULD_BLOCK);
+    }
+    write_user(p, host, fds, table)?;
+    Ok(ready)
 }
 
 /// The terminal ioctls on a console descriptor ([`crate::tty`]): `ENOTTY` without a

@@ -1490,3 +1490,69 @@ fn console_signals_kill_the_foreground_leader_by_default() {
         .collect();
     assert_eq!(replies, [(1, child as u64)], "init's wait4 returns");
 }
+
+#[test]
+fn poll_waits_for_the_console() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    w.host.tty = Some(Tty::new(1));
+    let pollfd = |fd: i32, events: u16| {
+        let mut b = fd.to_le_bytes().to_vec();
+        b.extend_from_slice(&events.to_le_bytes());
+        b.extend_from_slice(&[0xff, 0xff]);
+        b
+    };
+    // The console: nothing to read yet, writable.
+    let table = [pollfd(0, 1), pollfd(-1, 1), pollfd(40, 1)].concat();
+    w.put(SCRATCH, &table);
+    assert_eq!(
+        w.call(nr::poll, [SCRATCH, 3, 0, 0, 0, 0]),
+        1,
+        "only the closed one"
+    );
+    assert_eq!(w.get(SCRATCH + 6, 2), [0, 0]);
+    assert_eq!(
+        w.get(SCRATCH + 14, 2),
+        [0, 0],
+        "a negative descriptor is skipped"
+    );
+    assert_eq!(w.get(SCRATCH + 22, 2), [0x20, 0], "POLLNVAL");
+    w.put(SCRATCH, &[pollfd(0, 1), pollfd(1, 4)].concat());
+    assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH + 14, 2), [4, 0], "POLLOUT");
+    // Without a timeout it waits until a line came; a timeout ends at once.
+    w.put(SCRATCH, &pollfd(0, 1));
+    let (outcome, _) = w.run(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]);
+    assert_eq!(outcome, Outcome::Block);
+    let (outcome, _) = w.run(nr::ppoll, [SCRATCH, 1, 0, 0, 8, 0]);
+    assert_eq!(outcome, Outcome::Block);
+    w.put(SCRATCH + 64, &[0; 16]);
+    assert_eq!(w.call(nr::ppoll, [SCRATCH, 1, SCRATCH + 64, 0, 8, 0]), 0);
+    assert_eq!(w.call(nr::poll, [SCRATCH, 1, 50, 0, 0, 0]), 0);
+    type_in(&mut w.host, b"x\r");
+    assert_eq!(w.call(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH + 6, 2), [1, 0], "POLLIN");
+    // A pipe: the write end is ready, the read end once there is data or no writer.
+    w.put(SCRATCH + 128, &[0; 8]);
+    assert_eq!(w.call(nr::pipe, [SCRATCH + 128, 0, 0, 0, 0, 0]), 0);
+    let (r, wr) = (
+        w.get(SCRATCH + 128, 1)[0] as i32,
+        w.get(SCRATCH + 132, 1)[0] as i32,
+    );
+    w.put(SCRATCH, &[pollfd(r, 1), pollfd(wr, 4)].concat());
+    assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH + 6, 2), [0, 0]);
+    assert_eq!(w.call(nr::close, [wr as u64, 0, 0, 0, 0, 0]), 0);
+    w.put(SCRATCH, &pollfd(r, 1));
+    assert_eq!(w.call(nr::poll, [SCRATCH, 1, 0, 0, 0, 0]), 1);
+    assert_eq!(
+        w.get(SCRATCH + 6, 2),
+        [0x11, 0],
+        "POLLIN | POLLHUP: end of file"
+    );
+    assert_eq!(
+        w.call(nr::poll, [SCRATCH, 65, 0, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(w.call(nr::poll, [8, 1, 0, 0, 0, 0]), err(Errno::EFAULT));
+}
