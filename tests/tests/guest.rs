@@ -175,7 +175,8 @@ fn guest_hello() {
 
 /// Scenario guest_console (`tests/configs/guest_console.toml`): the console of guest
 /// `linux` is a terminal on COM2 running an interactive `/bin/sh`; the scenario types
-/// commands into it.
+/// commands into it: two `echo`s (one with erased characters), `cat` with a line and a
+/// Ctrl-D, `cat` with a Ctrl-C, a Ctrl-D at the prompt.
 #[test]
 fn guest_console() {
     let o = boot("guest_console");
@@ -199,9 +200,18 @@ fn guest_console() {
         "console: cat's echoed and edited line",
     );
     check(&o, !has("typo"), "console: the erased characters stayed");
+    // The Ctrl-C: the shell had made the second `cat` the foreground process group.
     check(
         &o,
-        guest_lines(&o, "linux", "guest: init exited with status 0").len() == 1,
+        guest_lines(&o, "linux", "killed by signal 2 (SIGINT): from the console")
+            == ["guest: process 3 (busybox) killed by signal 2 (SIGINT): from the console"],
+        "the Ctrl-C killed the second cat",
+    );
+    check(&o, o.console.contains("^C"), "console: the echoed ^C");
+    // At the Ctrl-D the shell exits with the last command's status: 128 + SIGINT.
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: init exited with status 130").len() == 1,
         "the shell ended at the Ctrl-D",
     );
     check(
