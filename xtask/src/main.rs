@@ -179,6 +179,8 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     let verdict = match &outcome.ending {
         Ending::Exited(qemu::EXIT_SUCCESS) => Ok("the system exited with success"),
         Ending::Exited(qemu::EXIT_FAILURE) => Err("the system exited with failure".to_string()),
+        // Ctrl-A X on the guest's console.
+        Ending::Exited(0) if console.is_some() => Ok("QEMU was quit"),
         Ending::TimedOut if crashed => Err("the system crashed".to_string()),
         Ending::TimedOut if !ready => Err(format!(
             "the system did not reach '{READY_MARKER}' (hung at boot)"

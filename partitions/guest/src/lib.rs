@@ -10,8 +10,21 @@
 //! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
 //! which process page ([`backing`]), the process state ([`process`]), the system calls of
 //! one process ([`syscall`]), the pipes ([`pipe`]) and the process table with fork, exec,
-//! wait and the deferred replies of waiting calls ([`system`]); the partition program
-//! (`main.rs`) only moves messages, creates tasks, maps pages and writes the log.
+//! wait and the deferred replies of waiting calls ([`system`]), and the console's terminal
+//! line discipline ([`tty`]); the partition program (`main.rs`) only moves messages,
+//! creates tasks, maps pages, drives COM2 (`com2.rs`) and writes the log.
+//!
+//! # The console
+//!
+//! Every process starts with the console on descriptors 0, 1 and 2 (a
+//! [`process::File::Console`]; a device node such as `/dev/tty` opens the same file). With
+//! `guest.console = "com2"` in the configuration ([`CONSOLE_PATH`] in the initramfs) it is
+//! a terminal: COM2's input goes through the line discipline ([`tty::Tty`]: echo, line
+//! editing, the control characters' signals for the foreground process group, handled by
+//! [`system::System::terminal_signal`]), a `read` waits for it as a deferred reply, output
+//! goes through the terminal to COM2, and the terminal ioctls and `poll` answer. Without it
+//! the console is the log: output lines are logged ([`console`]), reading gives end of
+//! file, and the terminal ioctls answer `ENOTTY`.
 //!
 //! # Log lines (COM1, each prefixed `[<partition>] ` by the kernel)
 //!
@@ -20,11 +33,15 @@
 //!   `guest: process <pid> cannot execute <path>: <why>` (an `execve` that failed after the
 //!   old image was dropped: the process dies with SIGSEGV);
 //! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages copied in <t> us`;
-//! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]);
+//! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]),
+//!   when the console is the log;
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
 //!   when a fault kills it, `... killed by signal 13 (SIGPIPE): wrote to a pipe without
-//!   readers`;
+//!   readers`, `... killed by signal <2|3> (<SIGINT|SIGQUIT>): from the console` (a control
+//!   character typed on the terminal);
+//! - `guest: console: cannot start the COM2 reader: <error>` or `guest: console: cannot
+//!   attach interrupt line 3: <error>` (the console then has no input);
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS`, once per call number and process;
 //! - `guest: init ended with <n> other processes left` (zombies included), then
