@@ -17,7 +17,7 @@
 //! # The console
 //!
 //! Every process starts with the console on descriptors 0, 1 and 2 (a
-//! [`process::File::Console`]; a device node such as `/dev/tty` opens the same file). With
+//! [`process::File::Console`], the file a device node such as `/dev/tty` is to open). With
 //! `guest.console = "com2"` in the configuration ([`CONSOLE_PATH`] in the initramfs) it is
 //! a terminal: COM2's input goes through the line discipline ([`tty::Tty`]: echo, line
 //! editing, the control characters' signals for the foreground process group, handled by
