@@ -42,6 +42,8 @@ pub mod memory;
 pub mod pipe;
 pub mod pool;
 pub mod process;
+pub mod sigcalls;
+pub mod signal;
 pub mod stack;
 pub mod syscall;
 pub mod system;

@@ -30,6 +30,8 @@ use crate::linux::{self, Errno, nr};
 use crate::memory::{Area, AreaError, Kind, PAGE, Rights, USER_TOP, page_up};
 use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
 use crate::process::{File, MAX_FILES, Process, Stream};
+use crate::sigcalls;
+use crate::signal::{self, Info, SIGSEGV};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
 
@@ -65,6 +67,10 @@ pub trait Host {
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]);
     /// Nanoseconds since the guest started.
     fn now_ns(&mut self) -> u64;
+    /// Copies the FPU/SSE state (FXSAVE image) of the process's thread into `image`.
+    fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno>;
+    /// Loads the FPU/SSE state of the process's thread from `image`.
+    fn set_fpu(&mut self, image: &[u8; 512]) -> Result<(), Errno>;
     fn random(&mut self, buf: &mut [u8]);
     fn log(&mut self, line: core::fmt::Arguments);
 }
@@ -82,13 +88,17 @@ pub enum Outcome {
     /// the same message again when something happened, and only then reply.
     Block,
     /// The call is one of the process table's ([`crate::system`]): `clone`, `fork`,
-    /// `vfork`, `execve`, `wait4`.
+    /// `vfork`, `execve`, `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, the process-group
+    /// and session calls.
     Process,
+    /// A fault raised this signal and the process has a handler for it: the process table
+    /// delivers it (the registers are those of the faulting instruction).
+    Signal(Info),
 }
 
 /// Internal results that are no error number: the call would block, or wrote to a pipe
 /// without readers.
-const WOULD_BLOCK: Errno = Errno(0xfff0);
+pub(crate) const WOULD_BLOCK: Errno = Errno(0xfff0);
 const BROKEN_PIPE: Errno = Errno(0xfff1);
 /// `O_CLOEXEC` (`open`, `pipe2`, `dup3`).
 pub const O_CLOEXEC: u64 = 0o2000000;
@@ -117,22 +127,40 @@ pub fn handle<'a>(
             ));
             return Outcome::Exit(status);
         }
-        nr::clone | nr::fork | nr::vfork | nr::execve | nr::wait4 => return Outcome::Process,
+        nr::clone
+        | nr::fork
+        | nr::vfork
+        | nr::execve
+        | nr::wait4
+        | nr::waitid
+        | nr::kill
+        | nr::tkill
+        | nr::tgkill
+        | nr::setpgid
+        | nr::getpgid
+        | nr::setsid
+        | nr::getsid => return Outcome::Process,
+        nr::rt_sigreturn => {
+            return match sigcalls::sigreturn(p, host, m) {
+                Some(()) => Outcome::Resume,
+                None => {
+                    host.log(format_args!(
+                        "guest: process {} ({}) killed by signal {SIGSEGV} (SIGSEGV): rt_sigreturn without a readable signal frame",
+                        p.pid,
+                        p.name()
+                    ));
+                    Outcome::Killed(SIGSEGV)
+                }
+            };
+        }
         _ => call(p, pipes, fs, host, number, args, r),
     };
     r.rax = match result {
         Ok(value) => value,
         Err(WOULD_BLOCK) => return Outcome::Block,
         Err(BROKEN_PIPE) => {
-            if p.sigactions[linux::SIGPIPE as usize - 1][0] != linux::SIG_IGN {
-                host.log(format_args!(
-                    "guest: process {} ({}) killed by signal {} (SIGPIPE): wrote to a pipe without readers",
-                    p.pid,
-                    p.name(),
-                    linux::SIGPIPE
-                ));
-                return Outcome::Killed(linux::SIGPIPE);
-            }
+            // Delivered (by default: the end of the process) before the call returns.
+            p.raise(Info::kernel(signal::SIGPIPE));
             Errno::EPIPE.result()
         }
         Err(e) => e.result(),
@@ -143,30 +171,36 @@ pub fn handle<'a>(
     Outcome::Resume
 }
 
-/// The signal a CPU exception kills with (Linux's mapping).
-fn fault_signal(vector: u64) -> u32 {
-    match vector {
-        0 | 16 | 19 => linux::SIGFPE,
-        1 | 3 => linux::SIGTRAP,
-        6 => linux::SIGILL,
-        17 => linux::SIGBUS,
-        _ => linux::SIGSEGV,
-    }
-}
-
+/// A CPU exception of the process: the signal it raises goes to the process's handler
+/// when it has one that the mask does not block ([`Outcome::Signal`]); else the process
+/// dies with it (Linux forces the default action of a blocked or ignored fault signal).
 fn fault(p: &Process, host: &mut impl Host, m: &ExceptionMessage) -> Outcome {
-    let signal = fault_signal(m.vector);
+    let (sig, code) = signal::fault_signal(m.vector, m.error_code);
+    let caught = p.action(sig).handler > signal::SIG_IGN && p.sigmask & signal::bit(sig) == 0;
+    if caught {
+        return Outcome::Signal(Info {
+            signal: sig,
+            code,
+            pid: 0,
+            status: 0,
+            address: if m.vector == 14 {
+                m.fault_address
+            } else {
+                m.registers.rip
+            },
+        });
+    }
     host.log(format_args!(
-        "guest: process {} ({}) killed by signal {signal} ({}): vector {} error {:#x} address {:#x} rip {:#x}",
+        "guest: process {} ({}) killed by signal {sig} ({}): vector {} error {:#x} address {:#x} rip {:#x}",
         p.pid,
         p.name(),
-        linux::signal_name(signal),
+        signal::name(sig),
         m.vector,
         m.error_code,
         m.fault_address,
         m.registers.rip
     ));
-    Outcome::Killed(signal)
+    Outcome::Killed(sig)
 }
 
 pub(crate) type SysResult<T> = Result<T, Errno>;
@@ -345,8 +379,17 @@ fn call<'a>(
             Ok(0)
         }
         nr::rseq => Err(Errno::ENOSYS),
-        nr::rt_sigaction => sigaction(p, host, a[0], a[1], a[2], a[3]),
-        nr::rt_sigprocmask => sigprocmask(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigaction => sigcalls::sigaction(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigprocmask => sigcalls::sigprocmask(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigpending => sigcalls::sigpending(p, host, a[0], a[1]),
+        nr::sigaltstack => sigcalls::sigaltstack(p, host, regs.rsp, a[0], a[1]),
+        nr::rt_sigsuspend => sigcalls::sigsuspend(p, host, a[0], a[1]),
+        nr::pause => Err(WOULD_BLOCK),
+        nr::nanosleep => sigcalls::sleep(p, host, linux::CLOCK_MONOTONIC, 0, a[0]),
+        nr::clock_nanosleep => sigcalls::sleep(p, host, a[0], a[1], a[2]),
+        nr::alarm => Ok(sigcalls::alarm(p, host, a[0])),
+        nr::getitimer => sigcalls::getitimer(p, host, a[0], a[1]),
+        nr::setitimer => sigcalls::setitimer(p, host, a[0], a[1], a[2]),
         nr::prlimit64 => {
             if a[0] != 0 && a[0] != p.pid as u64 {
                 return Err(Errno::ESRCH);
@@ -422,7 +465,8 @@ fn call<'a>(
         }
         nr::prctl => prctl(p, host, a[0], a[1]),
         nr::sched_yield => Ok(0),
-        nr::getpid | nr::gettid | nr::getpgrp => Ok(p.pid as u64),
+        nr::getpid | nr::gettid => Ok(p.pid as u64),
+        nr::getpgrp => Ok(p.pgid as u64),
         nr::getppid => Ok(p.ppid as u64),
         nr::getuid | nr::geteuid | nr::getgid | nr::getegid => Ok(0),
         _ => {
@@ -1241,72 +1285,6 @@ fn prctl(p: &mut Process, host: &mut impl Host, option: u64, arg: u64) -> SysRes
             Err(Errno::EINVAL)
         }
     }
-}
-
-fn sigaction(
-    p: &mut Process,
-    host: &mut impl Host,
-    signal: u64,
-    act: u64,
-    old: u64,
-    size: u64,
-) -> SysResult<u64> {
-    if size != 8 || signal == 0 || signal > 64 {
-        return Err(Errno::EINVAL);
-    }
-    if act != 0 && (signal == linux::SIGKILL || signal == linux::SIGSTOP) {
-        return Err(Errno::EINVAL);
-    }
-    let index = signal as usize - 1;
-    let mut new = [0u64; 4];
-    if act != 0 {
-        for (i, word) in new.iter_mut().enumerate() {
-            *word = read_u64(p, host, act + 8 * i as u64)?;
-        }
-    }
-    if old != 0 {
-        let mut bytes = [0u8; 32];
-        for (chunk, word) in bytes.chunks_exact_mut(8).zip(p.sigactions[index]) {
-            chunk.copy_from_slice(&word.to_le_bytes());
-        }
-        write_user(p, host, old, &bytes)?;
-    }
-    if act != 0 {
-        p.sigactions[index] = new;
-    }
-    Ok(0)
-}
-
-fn sigprocmask(
-    p: &mut Process,
-    host: &mut impl Host,
-    how: u64,
-    set: u64,
-    old: u64,
-    size: u64,
-) -> SysResult<u64> {
-    const UNBLOCKABLE: u64 = 1 << (linux::SIGKILL - 1) | 1 << (linux::SIGSTOP - 1);
-    if size != 8 {
-        return Err(Errno::EINVAL);
-    }
-    let new = if set != 0 {
-        let bits = read_u64(p, host, set)?;
-        Some(match how {
-            0 => p.sigmask | bits,
-            1 => p.sigmask & !bits,
-            2 => bits,
-            _ => return Err(Errno::EINVAL),
-        })
-    } else {
-        None
-    };
-    if old != 0 {
-        write_user(p, host, old, &p.sigmask.to_le_bytes())?;
-    }
-    if let Some(mask) = new {
-        p.sigmask = mask & !UNBLOCKABLE;
-    }
-    Ok(0)
 }
 
 fn rlimit(p: &Process, host: &mut impl Host, resource: u64, old: u64) -> SysResult<u64> {
