@@ -9,8 +9,10 @@
 //! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
 //! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
 //! which process page ([`backing`]), the process state ([`process`]), the system calls of
-//! one process ([`syscall`]), the pipes ([`pipe`]) and the process table with fork, exec,
-//! wait and the deferred replies of waiting calls ([`system`]); the partition program
+//! one process ([`syscall`]; its signal and timer calls in [`sigcalls`]), the signals'
+//! numbers, actions and frame ([`signal`]), the pipes ([`pipe`]) and the process table
+//! with fork, exec, wait, signal delivery, process groups, timers and the deferred replies
+//! of waiting calls ([`system`]); the partition program
 //! (`main.rs`) only moves messages, creates tasks, maps pages and writes the log.
 //!
 //! # Log lines (COM1, each prefixed `[<partition>] ` by the kernel)
@@ -23,8 +25,10 @@
 //! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]);
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
-//!   when a fault kills it, `... killed by signal 13 (SIGPIPE): wrote to a pipe without
-//!   readers`;
+//!   when a fault kills it, `guest: process <pid> (<name>) killed by signal <n> (<NAME>)`
+//!   when a signal it does not catch ends it (`kill`, `SIGPIPE`, an alarm), with
+//!   `: no room for the frame ...` or `: rt_sigreturn without a readable signal frame`
+//!   when a handler's frame could not be written or read back;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS`, once per call number and process;
 //! - `guest: init ended with <n> other processes left` (zombies included), then

@@ -11,19 +11,23 @@
 //! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
-//! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
+//! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
+//! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
+//! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
-//! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve` and
-//! `wait4` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
+//! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve`,
+//! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `setpgid`, `getpgid`, `setsid` and
+//! `getsid` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
 //! `F_DUPFD_CLOEXEC`, `F_GETFD`, `F_SETFD` (close-on-exec), `F_GETFL` and `F_SETFL`
 //! (`O_NONBLOCK` of a pipe descriptor: `EAGAIN` instead of waiting). `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
-//! A CPU exception (page fault outside the process's memory, invalid opcode, ...) kills the
-//! process with the matching signal: no signal handler is delivered yet.
+//! A CPU exception (page fault outside the process's memory, invalid opcode, ...) raises the
+//! matching signal: its handler runs if the process has one that is not blocked, else the
+//! process dies of it.
 
 use crate::cpio::{Archive, Entry, S_IFCHR, S_IFMT};
 use crate::linux::{self, Errno, nr};
