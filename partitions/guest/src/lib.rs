@@ -44,6 +44,7 @@ pub mod exec;
 pub mod linux;
 pub mod memory;
 pub mod pipe;
+pub mod poll;
 pub mod pool;
 pub mod process;
 pub mod sigcalls;

@@ -75,6 +75,29 @@ impl Pipes {
             .map_or(0, |p| p.len)
     }
 
+    /// The `poll` events of pipe `index`'s read or write end: readable when it buffers
+    /// bytes, hung up when the other end is gone, writable while it has room.
+    pub fn poll(&self, index: usize, write: bool) -> u16 {
+        use crate::poll::{POLLERR, POLLHUP, POLLIN, POLLOUT};
+        let Some(Some(p)) = self.pipes.get(index) else {
+            return POLLERR;
+        };
+        match write {
+            false => {
+                let data = if p.len > 0 { POLLIN } else { 0 };
+                data | if p.writers == 0 { POLLHUP } else { 0 }
+            }
+            true if p.readers == 0 => POLLERR,
+            true => {
+                if p.len < PIPE_SIZE {
+                    POLLOUT
+                } else {
+                    0
+                }
+            }
+        }
+    }
+
     /// One more descriptor for an end (`dup`, `fork`).
     pub fn add_end(&mut self, index: usize, write: bool) {
         if let Some(Some(p)) = self.pipes.get_mut(index) {

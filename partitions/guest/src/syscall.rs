@@ -13,7 +13,8 @@
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
 //! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
-//! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), `prlimit64`, `getrlimit`,
+//! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), the
+//! waits of [`crate::poll`] (`poll`, `ppoll`, `select`, `pselect6`), `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
@@ -33,6 +34,7 @@ use crate::cpio::{Archive, Entry, S_IFCHR, S_IFMT};
 use crate::linux::{self, Errno, nr};
 use crate::memory::{Area, AreaError, Kind, PAGE, Rights, USER_TOP, page_up};
 use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
+use crate::poll;
 use crate::process::{File, MAX_FILES, Process, Stream};
 use crate::sigcalls;
 use crate::signal::{self, Info, SIGSEGV};
@@ -392,6 +394,16 @@ fn call<'a>(
         nr::nanosleep => sigcalls::sleep(p, host, linux::CLOCK_MONOTONIC, 0, a[0]),
         nr::clock_nanosleep => sigcalls::sleep(p, host, a[0], a[1], a[2]),
         nr::alarm => Ok(sigcalls::alarm(p, host, a[0])),
+        nr::poll => {
+            let timeout = poll::poll_timeout(a[2]);
+            poll::poll(p, pipes, host, a[0], a[1], timeout, 0, 0)
+        }
+        nr::ppoll => {
+            let timeout = poll::ppoll_timeout(p, host, a[2])?;
+            poll::poll(p, pipes, host, a[0], a[1], timeout, a[3], a[4])
+        }
+        nr::select => poll::select(p, pipes, host, a, false),
+        nr::pselect6 => poll::select(p, pipes, host, a, true),
         nr::getitimer => sigcalls::getitimer(p, host, a[0], a[1]),
         nr::setitimer => sigcalls::setitimer(p, host, a[0], a[1], a[2]),
         nr::prlimit64 => {

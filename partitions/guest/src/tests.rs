@@ -1649,3 +1649,79 @@ fn a_fault_goes_to_its_handler_with_the_address() {
     let _ = g.system.serve(child, &g.fs, &mut g.host, m);
     assert_eq!(g.system.state(child), Some(State::Zombie(SIGSEGV)));
 }
+
+#[test]
+fn poll_and_select_wait_for_a_pipe_or_their_timeout() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    assert_eq!(g.call(1, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    let (r, w) = (g.word(1, SCRATCH) as u64, g.word(1, SCRATCH + 4));
+    let child = g.fork(1);
+    // pollfd {r, POLLIN}, {w, POLLOUT}: the write end is ready at once.
+    let table = |g: &mut Guest, pid: u32| {
+        let mut t = Vec::new();
+        t.extend_from_slice(&(r as i32).to_le_bytes());
+        t.extend_from_slice(&1u16.to_le_bytes());
+        t.extend_from_slice(&0u16.to_le_bytes());
+        t.extend_from_slice(&(w as i32).to_le_bytes());
+        t.extend_from_slice(&4u16.to_le_bytes());
+        t.extend_from_slice(&0u16.to_le_bytes());
+        g.put(pid, SCRATCH + 0x400, &t);
+    };
+    table(&mut g, child);
+    assert_eq!(
+        g.call(child, nr::poll, [SCRATCH + 0x400, 2, 0, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(g.get(child, SCRATCH + 0x406, 2), 0u16.to_le_bytes());
+    assert_eq!(g.get(child, SCRATCH + 0x40e, 2), 4u16.to_le_bytes());
+    // Only the read end, forever: waits until the parent writes.
+    assert_eq!(
+        g.call(child, nr::poll, [SCRATCH + 0x400, 1, u64::MAX, 0, 0, 0]),
+        None
+    );
+    g.put(1, SCRATCH + 0x300, b"x");
+    let replies = g.serve(
+        1,
+        World::message(nr::write, [w as u64, SCRATCH + 0x300, 1, 0, 0, 0], 0),
+    );
+    assert_eq!(replies, [(1, 1), (child, 1)]);
+    assert_eq!(g.get(child, SCRATCH + 0x406, 2), 1u16.to_le_bytes());
+    // select on the read end: readable; after reading it, a timeout ends it with 0.
+    g.put(child, SCRATCH + 0x500, &(1u64 << r).to_le_bytes());
+    assert_eq!(
+        g.call(child, nr::select, [r + 1, SCRATCH + 0x500, 0, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(
+        g.call(child, nr::read, [r, SCRATCH + 0x600, 1, 0, 0, 0]),
+        Some(1)
+    );
+    // (10 s: the model's clock advances 1.5 s per reading.)
+    g.put(
+        child,
+        SCRATCH + 0x510,
+        &[10, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert_eq!(
+        g.call(
+            child,
+            nr::select,
+            [r + 1, SCRATCH + 0x500, 0, 0, SCRATCH + 0x510, 0]
+        ),
+        None
+    );
+    g.host.resumed.clear();
+    for _ in 0..10 {
+        assert_eq!(g.system.tick(&g.fs, &mut g.host), None);
+    }
+    assert_eq!(g.host.resumed.len(), 1);
+    assert_eq!(g.host.resumed[0].1.registers.rax, 0);
+    assert_eq!(g.get(child, SCRATCH + 0x500, 8), 0u64.to_le_bytes());
+    // A closed descriptor: POLLNVAL for poll, EBADF for select.
+    g.put(child, SCRATCH + 0x500, &(1u64 << 20).to_le_bytes());
+    assert_eq!(
+        g.call(child, nr::select, [21, SCRATCH + 0x500, 0, 0, 0, 0]),
+        Some(err(Errno::EBADF))
+    );
+}
