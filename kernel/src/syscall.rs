@@ -65,7 +65,7 @@ handlers! {
     TaskCreate => task_create, TaskKill => task_kill, TaskAllowSend => task_allow_send,
     ThreadCreate => thread_create, ThreadStart => thread_start, ThreadSuspend => thread_suspend,
     ThreadResume => thread_resume, ThreadKill => thread_kill, ThreadSet => thread_set,
-    ThreadSelf => thread_self, Map => map, MapPhysical => map_physical, Unmap => unmap,
+    ThreadSelf => thread_self, ThreadFpu => thread_fpu, Map => map, MapPhysical => map_physical, Unmap => unmap,
     Protect => protect, Send => send, Receive => receive, Call => ipc_call,
     ReplyWait => reply_wait, Reply => reply, NotifySignal => notify_signal,
     NotifyWait => notify_wait, RpCreate => rp_create, RpInfo => rp_info,
@@ -283,6 +283,30 @@ fn thread_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let a = args::ThreadSet::decode(r);
     let target = k.controlled_thread(t, a.thread)?;
     set_attribute(k, task_of(k, t), target, a.attribute, a.value)?;
+    Ok(Next::Return)
+}
+
+fn thread_fpu(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    let a = args::ThreadFpu::decode(r);
+    let target = k.controlled_thread(t, a.thread)?;
+    // The caller runs, so the target's image is the one saved when it was switched out.
+    if target == t || a.write > 1 {
+        return Err(Error::InvalidArgument);
+    }
+    let space = &k.tasks[task_of(k, t)].space;
+    if a.write == 0 {
+        let image = k.threads[target].fpu.0;
+        return if space.copy_to_user(a.buffer, &image) {
+            Ok(Next::Return)
+        } else {
+            Err(Error::BadAddress)
+        };
+    }
+    let mut image = [0u8; 512];
+    if !space.copy_from_user(a.buffer, &mut image) {
+        return Err(Error::BadAddress);
+    }
+    k.threads[target].fpu = k.threads[target].fpu.sanitized(image);
     Ok(Next::Return)
 }
 

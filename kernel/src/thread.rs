@@ -61,6 +61,21 @@ impl FpuState {
         image[25] = 0x1f;
         Self(image)
     }
+
+    /// `image` with the MXCSR bits FXRSTOR refuses (#GP) cleared, so any 512 bytes from
+    /// user space can be loaded: the processor's MXCSR_MASK as FXSAVE recorded it in this
+    /// state, or 0xffbf (the architectural default) where it is 0.
+    pub fn sanitized(&self, mut image: [u8; 512]) -> Self {
+        let word = |b: &[u8]| u32::from_le_bytes([b[0], b[1], b[2], b[3]]);
+        let mask = match word(&self.0[28..32]) {
+            0 => 0xffbf,
+            m => m,
+        };
+        let mxcsr = word(&image[24..28]) & mask;
+        image[24..28].copy_from_slice(&mxcsr.to_le_bytes());
+        image[28..32].copy_from_slice(&self.0[28..32]);
+        Self(image)
+    }
 }
 
 #[derive(Clone, Copy)]
@@ -359,5 +374,25 @@ impl Kernel {
             State::Sleeping => self.wake(t, Error::Ok),
             State::Free | State::Inactive | State::Ready => self.threads[t].deadline = NEVER,
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::FpuState;
+
+    #[test]
+    fn a_sanitized_fpu_image_keeps_writable_mxcsr_bits_only() {
+        let mut current = FpuState::initial();
+        let mut image = [0xffu8; 512];
+        assert_eq!(
+            &current.sanitized(image).0[24..32],
+            &[0xbf, 0xff, 0, 0, 0, 0, 0, 0]
+        );
+        current.0[28..32].copy_from_slice(&0xffffu32.to_le_bytes());
+        image[24..28].copy_from_slice(&0x1f80u32.to_le_bytes());
+        let loaded = current.sanitized(image);
+        assert_eq!(&loaded.0[24..32], &[0x80, 0x1f, 0, 0, 0xff, 0xff, 0, 0]);
+        assert_eq!(loaded.0[0..24], image[0..24]);
     }
 }

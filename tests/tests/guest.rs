@@ -173,6 +173,95 @@ fn guest_hello() {
     }
 }
 
+/// What the processes of `partition` wrote to standard output, line by line in log order.
+fn stdout_lines(o: &xtask::qemu::Outcome, partition: &str) -> Vec<String> {
+    guest_lines(o, partition, " stdout: ")
+        .iter()
+        .filter_map(|l| l.split_once(" stdout: ").map(|(_, t)| t.to_string()))
+        .collect()
+}
+
+/// Checks what every guest scenario script must show: success, no panic, no call the guest
+/// lacks, init exited with status 0 leaving no process.
+fn script_ran(o: &xtask::qemu::Outcome, partition: &str) {
+    check(o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        o,
+        o.succeeded(),
+        "expected success exit (33): the script's end ends the run",
+    );
+    let unsupported = guest_lines(o, partition, "unsupported system call");
+    check(
+        o,
+        unsupported.is_empty(),
+        &format!("calls the guest lacks: {unsupported:?}"),
+    );
+    for (needle, expected) in [
+        (
+            "guest: init ended with",
+            "guest: init ended with 0 other processes left",
+        ),
+        ("guest: init exited", "guest: init exited with status 0"),
+    ] {
+        let lines = guest_lines(o, partition, needle);
+        check(o, lines == [expected], &format!("{partition}: {lines:?}"));
+    }
+}
+
+#[test]
+fn guest_signals() {
+    let o = boot("guest_signals");
+    script_ran(&o, "signals");
+    let printed = stdout_lines(&o, "signals");
+    let expected = [
+        "caught USR1",
+        "after trap",
+        "slept",
+        "self-kill status 143",
+        "child caught INT",
+        "child goes on",
+        "sleep killed status 143",
+        "stopped then killed status 137",
+        "y",
+        "y",
+        "pipeline status 0",
+        "alarm rang",
+        "after alarm",
+        "done",
+    ];
+    check(&o, printed == expected, &format!("printed {printed:?}"));
+    for (signal, count) in [("15 (SIGTERM)", 2), ("9 (SIGKILL)", 1), ("13 (SIGPIPE)", 1)] {
+        let killed = guest_lines(&o, "signals", &format!("killed by signal {signal}"));
+        check(&o, killed.len() == count, &format!("{signal}: {killed:?}"));
+    }
+}
+
+#[test]
+fn guest_processes() {
+    let o = boot("guest_processes");
+    script_ran(&o, "processes");
+    let printed = stdout_lines(&o, "processes");
+    let expected = [
+        "ran 200 processes",
+        "ten in parallel reaped",
+        "orphan started",
+        "its parent is gone",
+        "done",
+    ];
+    check(&o, printed == expected, &format!("printed {printed:?}"));
+    let trues = guest_lines(&o, "processes", "(busybox) started: /bin/true");
+    check(
+        &o,
+        trues.len() == 201,
+        &format!("{} /bin/true processes", trues.len()),
+    );
+    check(
+        &o,
+        guest_lines(&o, "processes", "killed by signal").is_empty(),
+        "a process was killed",
+    );
+}
+
 /// Scenario guest_console (`tests/configs/guest_console.toml`): the console of guest
 /// `linux` is a terminal on COM2 running an interactive `/bin/sh`; the scenario types
 /// commands into it: two `echo`s (one with erased characters), `cat` with a line and a

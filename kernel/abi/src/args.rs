@@ -86,6 +86,8 @@ call_args! {
     OnThread { thread: rdi }
     /// `thread_set`.
     ThreadSet { thread: rdi, attribute: rsi, value: rdx }
+    /// `thread_fpu`.
+    ThreadFpu { thread: rdi, buffer: rsi, write: rdx }
     /// `map` (`source` = a page of the caller) and `map_physical` (`source` = a physical
     /// address).
     Map { task: rdi, source: rsi, destination: rdx, pages: r10, rights: r8 }
@@ -173,6 +175,7 @@ mod tests {
         check(ThreadCreate::decode, ThreadCreate::encode);
         check(OnThread::decode, OnThread::encode);
         check(ThreadSet::decode, ThreadSet::encode);
+        check(ThreadFpu::decode, ThreadFpu::encode);
         check(Map::decode, Map::encode);
         check(Unmap::decode, Unmap::encode);
         check(Protect::decode, Protect::encode);

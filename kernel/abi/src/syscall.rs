@@ -124,6 +124,15 @@ codes::code_enum! {
         ThreadSet = 25 => "thread_set",
         /// `thread_self() -> rdi = thread, rsi = task`. Ability: none.
         ThreadSelf = 26 => "thread_self",
+        /// `thread_fpu(thread, buffer, write)`: copies the FPU/SSE state (the 512-byte
+        /// FXSAVE image) of another thread of the caller's task or of a descendant to the
+        /// caller's `buffer` (`write` = 0), or loads it from there (`write` = 1; reserved
+        /// MXCSR bits are cleared, so no image can make the kernel fault). For a guest that
+        /// saves and restores a process's FPU state around a signal handler. Ability: none
+        /// beyond control rights. Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument`
+        /// (the calling thread itself, `write` > 1), `BadAddress` (`buffer` not 512 bytes of
+        /// readable, or for `write` = 0 writable, user memory).
+        ThreadFpu = 27 => "thread_fpu",
 
         /// `map(task, source, destination, pages, rights)`: maps `pages` pages starting at the
         /// caller's page `source` into `task` (0 = own; else a descendant) at `destination`,

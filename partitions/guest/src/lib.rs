@@ -9,10 +9,12 @@
 //! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
 //! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
 //! which process page ([`backing`]), the process state ([`process`]), the system calls of
-//! one process ([`syscall`]), the pipes ([`pipe`]) and the process table with fork, exec,
-//! wait and the deferred replies of waiting calls ([`system`]), and the console's terminal
-//! line discipline ([`tty`]); the partition program (`main.rs`) only moves messages,
-//! creates tasks, maps pages, drives COM2 (`com2.rs`) and writes the log.
+//! one process ([`syscall`]; its signal and timer calls in [`sigcalls`]), the signals'
+//! numbers, actions and frame ([`signal`]), the pipes ([`pipe`]), the process table
+//! with fork, exec, wait, signal delivery, process groups, timers and the deferred replies
+//! of waiting calls ([`system`]), and the console's terminal line discipline ([`tty`]);
+//! the partition program (`main.rs`) only moves messages, creates tasks, maps pages,
+//! drives COM2 (`com2.rs`) and writes the log.
 //!
 //! # The console
 //!
@@ -20,8 +22,8 @@
 //! [`process::File::Console`], the file a device node such as `/dev/tty` is to open). With
 //! `guest.console = "com2"` in the configuration ([`CONSOLE_PATH`] in the initramfs) it is
 //! a terminal: COM2's input goes through the line discipline ([`tty::Tty`]: echo, line
-//! editing, the control characters' signals for the foreground process group, handled by
-//! [`system::System::terminal_signal`]), a `read` waits for it as a deferred reply, output
+//! editing, the control characters' signals for the foreground process group, sent with
+//! [`system::System::signal_group`]), a `read` waits for it as a deferred reply, output
 //! goes through the terminal to COM2, and the terminal ioctls and `poll` answer. Without it
 //! the console is the log: output lines are logged ([`console`]), reading gives end of
 //! file, and the terminal ioctls answer `ENOTTY`.
@@ -37,9 +39,10 @@
 //!   when the console is the log;
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
-//!   when a fault kills it, `... killed by signal 13 (SIGPIPE): wrote to a pipe without
-//!   readers`, `... killed by signal <2|3> (<SIGINT|SIGQUIT>): from the console` (a control
-//!   character typed on the terminal);
+//!   when a fault kills it, `guest: process <pid> (<name>) killed by signal <n> (<NAME>)`
+//!   when a signal it does not catch ends it (`kill`, `SIGPIPE`, an alarm), with
+//!   `: no room for the frame ...` or `: rt_sigreturn without a readable signal frame`
+//!   when a handler's frame could not be written or read back;
 //! - `guest: console: cannot start the COM2 reader: <error>` or `guest: console: cannot
 //!   attach interrupt line 3: <error>` (the console then has no input);
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
@@ -57,8 +60,11 @@ pub mod exec;
 pub mod linux;
 pub mod memory;
 pub mod pipe;
+pub mod poll;
 pub mod pool;
 pub mod process;
+pub mod sigcalls;
+pub mod signal;
 pub mod stack;
 pub mod syscall;
 pub mod system;

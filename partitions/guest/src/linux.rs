@@ -8,6 +8,7 @@ pub struct Errno(pub u16);
 impl Errno {
     pub const EPERM: Self = Self(1);
     pub const ENOENT: Self = Self(2);
+    pub const EINTR: Self = Self(4);
     pub const E2BIG: Self = Self(7);
     pub const ENOEXEC: Self = Self(8);
     pub const ESRCH: Self = Self(3);
@@ -94,11 +95,16 @@ syscalls! {
     writev = 20,
     access = 21,
     pipe = 22,
+    select = 23,
     sched_yield = 24,
     madvise = 28,
     dup = 32,
     dup2 = 33,
+    pause = 34,
     nanosleep = 35,
+    getitimer = 36,
+    alarm = 37,
+    setitimer = 38,
     getpid = 39,
     sendfile = 40,
     clone = 56,
@@ -127,10 +133,16 @@ syscalls! {
     getppid = 110,
     getpgrp = 111,
     setsid = 112,
+    getpgid = 121,
+    getsid = 124,
+    rt_sigpending = 127,
+    rt_sigtimedwait = 128,
+    rt_sigsuspend = 130,
     sigaltstack = 131,
     prctl = 157,
     arch_prctl = 158,
     gettid = 186,
+    tkill = 200,
     time = 201,
     futex = 202,
     getdents64 = 217,
@@ -140,11 +152,13 @@ syscalls! {
     clock_nanosleep = 230,
     exit_group = 231,
     tgkill = 234,
+    waitid = 247,
     openat = 257,
     newfstatat = 262,
     readlinkat = 267,
-    ppoll = 271,
     faccessat = 269,
+    pselect6 = 270,
+    ppoll = 271,
     set_robust_list = 273,
     dup3 = 292,
     pipe2 = 293,
@@ -180,40 +194,6 @@ pub const ARCH_GET_FS: u64 = 0x1003;
 pub const ARCH_GET_GS: u64 = 0x1004;
 
 pub const TCGETS: u64 = 0x5401;
-
-/// Signals the terminal's control characters send ([`crate::tty`]).
-pub const SIGINT: u32 = 2;
-pub const SIGQUIT: u32 = 3;
-pub const SIGTSTP: u32 = 20;
-pub const SIGKILL: u64 = 9;
-pub const SIGSTOP: u64 = 19;
-/// Signals a fault kills a process with (no handlers are delivered yet).
-pub const SIGILL: u32 = 4;
-pub const SIGTRAP: u32 = 5;
-pub const SIGBUS: u32 = 7;
-pub const SIGFPE: u32 = 8;
-pub const SIGSEGV: u32 = 11;
-pub const SIGPIPE: u32 = 13;
-/// `SIG_DFL` and `SIG_IGN` as a `sigaction` handler.
-pub const SIG_DFL: u64 = 0;
-pub const SIG_IGN: u64 = 1;
-pub const SIGCHLD: u64 = 17;
-
-/// The name of a signal that ends a process, for the log.
-pub fn signal_name(signal: u32) -> &'static str {
-    match signal {
-        SIGINT => "SIGINT",
-        SIGQUIT => "SIGQUIT",
-        SIGTSTP => "SIGTSTP",
-        SIGILL => "SIGILL",
-        SIGTRAP => "SIGTRAP",
-        SIGBUS => "SIGBUS",
-        SIGFPE => "SIGFPE",
-        SIGSEGV => "SIGSEGV",
-        SIGPIPE => "SIGPIPE",
-        _ => "?",
-    }
-}
 
 pub const CLOCK_REALTIME: u64 = 0;
 pub const CLOCK_MONOTONIC: u64 = 1;

@@ -174,18 +174,37 @@ fn main(start: u64, _: u64) {
         Err(e) => {
             println!("guest: cannot start the process's thread: {e:?}");
             host.release(INIT_PID);
-            report(ipc, Outcome::Killed(guest::linux::SIGSEGV));
+            report(ipc, Outcome::Killed(guest::signal::SIGSEGV));
             return;
         }
     }
 
     let mut system = System::new(loaded.process, hwcap());
     let outcome = loop {
-        let received = match sys::receive(None, TIMEOUT_INFINITE) {
+        // Wait for a message, or until the next sleep or alarm is due (a due one first:
+        // a busy guest must not starve its timers).
+        let now = host.now_ns();
+        let timeout = match system.next_timer() {
+            Some(at) if at <= now => {
+                if let Some(ended) = system.tick(&fs, &mut host) {
+                    break ended;
+                }
+                continue;
+            }
+            Some(at) => at - now,
+            None => TIMEOUT_INFINITE,
+        };
+        let received = match sys::receive(None, timeout) {
             Ok(r) => r,
+            Err(user_rt::abi::syscall::Error::TimedOut) => {
+                if let Some(ended) = system.tick(&fs, &mut host) {
+                    break ended;
+                }
+                continue;
+            }
             Err(e) => {
                 println!("guest: receive failed: {e:?}");
-                break Outcome::Killed(guest::linux::SIGSEGV);
+                break Outcome::Killed(guest::signal::SIGSEGV);
             }
         };
         let tag = received.message.tag;
@@ -221,8 +240,10 @@ fn console_input<'a>(
     let (bytes, n) = com2::decode(m);
     for &b in &bytes[..n] {
         let signal = host.tty.as_mut()?.input(b, &mut com2::put);
-        if let Some(s) = signal {
-            system.terminal_signal(s.signal, s.group, host);
+        if let Some(s) = signal
+            && let Some(ended) = system.signal_group(s.group, s.signal, host)
+        {
+            return Some(ended);
         }
     }
     system.retry_blocked(fs, host)
@@ -597,6 +618,17 @@ impl Host for GuestHost<'_> {
         sys::clock().saturating_sub(self.started)
     }
 
+    fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno> {
+        let thread = self.task(self.current).ok_or(Errno::ESRCH)?.thread;
+        sys::thread_fpu(thread, image, false).map_err(|_| Errno::EFAULT)
+    }
+
+    fn set_fpu(&mut self, image: &[u8; 512]) -> Result<(), Errno> {
+        let thread = self.task(self.current).ok_or(Errno::ESRCH)?.thread;
+        let mut copy = *image;
+        sys::thread_fpu(thread, &mut copy, true).map_err(|_| Errno::EFAULT)
+    }
+
     /// Not cryptographically strong yet: xorshift64* seeded from the time-stamp counter.
     fn random(&mut self, buf: &mut [u8]) {
         for chunk in buf.chunks_mut(8) {
@@ -677,6 +709,17 @@ impl Tasks for GuestHost<'_> {
             self.pool.free(index);
             at = k;
         }
+    }
+
+    fn suspend(&mut self, pid: u32, stop: bool) {
+        let Some(thread) = self.task(pid).map(|t| t.thread) else {
+            return;
+        };
+        let _ = if stop {
+            sys::thread_suspend(thread)
+        } else {
+            sys::thread_resume(thread)
+        };
     }
 
     fn resume(&mut self, pid: u32, m: &ExceptionMessage) {

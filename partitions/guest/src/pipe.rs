@@ -75,16 +75,26 @@ impl Pipes {
             .map_or(0, |p| p.len)
     }
 
-    /// Whether a `read` (`write: false`) or a `write` of one byte on pipe `index` would
-    /// return now (data or end of file; room or no readers): for `poll`.
-    pub fn ready(&self, index: usize, write: bool) -> bool {
+    /// The `poll` events of pipe `index`'s read or write end: readable when it buffers
+    /// bytes, hung up when the other end is gone, writable while it has room.
+    pub fn poll(&self, index: usize, write: bool) -> u16 {
+        use crate::poll::{POLLERR, POLLHUP, POLLIN, POLLOUT};
         let Some(Some(p)) = self.pipes.get(index) else {
-            return true;
+            return POLLERR;
         };
-        if write {
-            p.readers == 0 || p.len < PIPE_SIZE
-        } else {
-            p.writers == 0 || p.len > 0
+        match write {
+            false => {
+                let data = if p.len > 0 { POLLIN } else { 0 };
+                data | if p.writers == 0 { POLLHUP } else { 0 }
+            }
+            true if p.readers == 0 => POLLERR,
+            true => {
+                if p.len < PIPE_SIZE {
+                    POLLOUT
+                } else {
+                    0
+                }
+            }
         }
     }
 

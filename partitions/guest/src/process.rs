@@ -5,6 +5,7 @@
 
 use crate::cpio::Entry;
 use crate::memory::{Area, AreaError, Areas, Kind, STACK_SIZE, STACK_TOP};
+use crate::signal::{Action, AltStack, Info};
 use crate::vfs::PathBuf;
 
 /// Most open files of a process (`RLIMIT_NOFILE`).
@@ -51,10 +52,27 @@ pub struct Process<'a> {
     pub files: [Option<File<'a>>; MAX_FILES],
     /// Close-on-exec, one bit per descriptor.
     pub cloexec: u64,
-    /// `struct sigaction` as the kernel ABI has it (handler, flags, restorer, mask) per
-    /// signal 1..=64 (recorded; no handler is delivered yet).
-    pub sigactions: [[u64; 4]; 64],
+    /// Process group and session.
+    pub pgid: u32,
+    pub sid: u32,
+    /// Whether it executed a program since it was forked (`setpgid` on it then fails).
+    pub executed: bool,
+    /// The disposition of each signal 1..=64 (index `signal - 1`).
+    pub sigactions: [Action; 64],
     pub sigmask: u64,
+    /// Signals sent and not delivered yet, with what their `siginfo` says (the first of
+    /// each kind: standard signals do not queue).
+    pub pending: u64,
+    pub pending_info: [Info; 64],
+    /// The mask to restore after a handler when a call (`rt_sigsuspend`) replaced it only
+    /// while it waited.
+    pub saved_mask: Option<u64>,
+    pub alt_stack: AltStack,
+    /// When a `nanosleep` (or a waiting call with a timeout) ends, in the guest's clock.
+    pub wake_at: Option<u64>,
+    /// When `alarm`/`setitimer(ITIMER_REAL)` raises SIGALRM, and its reload interval.
+    pub alarm_at: Option<u64>,
+    pub alarm_interval: u64,
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
@@ -86,8 +104,18 @@ impl<'a> Process<'a> {
             brk: 0,
             files,
             cloexec: 0,
-            sigactions: [[0; 4]; 64],
+            pgid: pid,
+            sid: pid,
+            executed: false,
+            sigactions: [Action::DEFAULT; 64],
             sigmask: 0,
+            pending: 0,
+            pending_info: [Info::default(); 64],
+            saved_mask: None,
+            alt_stack: AltStack::NONE,
+            wake_at: None,
+            alarm_at: None,
+            alarm_interval: 0,
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,
@@ -172,6 +200,37 @@ impl<'a> Process<'a> {
 
     pub fn file(&self, fd: u64) -> Option<File<'a>> {
         self.files.get(usize::try_from(fd).ok()?).copied().flatten()
+    }
+
+    pub fn action(&self, signal: u32) -> Action {
+        self.sigactions[signal as usize - 1]
+    }
+
+    /// Makes `info.signal` pending (a standard signal already pending stays as it is).
+    pub fn raise(&mut self, info: Info) {
+        let bit = crate::signal::bit(info.signal);
+        if self.pending & bit == 0 {
+            self.pending |= bit;
+            self.pending_info[info.signal as usize - 1] = info;
+        }
+    }
+
+    /// The pending signals its mask does not block.
+    pub fn deliverable(&self) -> u64 {
+        self.pending & !(self.sigmask & !crate::signal::UNBLOCKABLE)
+    }
+
+    /// Takes the lowest deliverable signal off the pending set (SIGKILL and SIGSTOP first).
+    pub fn take_signal(&mut self) -> Option<Info> {
+        let ready = self.deliverable();
+        let first = ready & crate::signal::UNBLOCKABLE;
+        let bits = if first != 0 { first } else { ready };
+        if bits == 0 {
+            return None;
+        }
+        let signal = bits.trailing_zeros() + 1;
+        self.pending &= !crate::signal::bit(signal);
+        Some(self.pending_info[signal as usize - 1])
     }
 
     /// Whether an unsupported call `number` is seen for the first time (then it is logged).

@@ -9,14 +9,18 @@
 //! (the console, initramfs files, pipes), `sendfile` (from an initramfs file to the
 //! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
 //! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
-//! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `poll`, `ppoll`, `fcntl`, `brk`,
+//! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
 //! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
-//! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
+//! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
+//! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
+//! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), the
+//! waits of [`crate::poll`] (`poll`, `ppoll`, `select`, `pselect6`), `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
-//! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve` and
-//! `wait4` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
+//! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve`,
+//! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `setpgid`, `getpgid`, `setsid` and
+//! `getsid` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
 //! `F_DUPFD_CLOEXEC`, `F_GETFD`, `F_SETFD` (close-on-exec), `F_GETFL` and `F_SETFL`
 //! (`O_NONBLOCK` of a pipe descriptor: `EAGAIN` instead of waiting). On the console, `read`
 //! takes the terminal's input (waiting for it) and `ioctl` serves the terminal requests
@@ -25,14 +29,18 @@
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
-//! A CPU exception (page fault outside the process's memory, invalid opcode, ...) kills the
-//! process with the matching signal: no signal handler is delivered yet.
+//! A CPU exception (page fault outside the process's memory, invalid opcode, ...) raises the
+//! matching signal: its handler runs if the process has one that is not blocked, else the
+//! process dies of it.
 
 use crate::cpio::{Archive, Entry, S_IFCHR, S_IFMT};
 use crate::linux::{self, Errno, nr};
 use crate::memory::{Area, AreaError, Kind, PAGE, Rights, USER_TOP, page_up};
 use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
+use crate::poll;
 use crate::process::{File, MAX_FILES, Process, Stream};
+use crate::sigcalls;
+use crate::signal::{self, Info, SIGSEGV};
 use crate::tty::{self, Termios, Tty, Winsize};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
@@ -75,6 +83,10 @@ pub trait Host {
     }
     /// Nanoseconds since the guest started.
     fn now_ns(&mut self) -> u64;
+    /// Copies the FPU/SSE state (FXSAVE image) of the process's thread into `image`.
+    fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno>;
+    /// Loads the FPU/SSE state of the process's thread from `image`.
+    fn set_fpu(&mut self, image: &[u8; 512]) -> Result<(), Errno>;
     fn random(&mut self, buf: &mut [u8]);
     fn log(&mut self, line: core::fmt::Arguments);
 }
@@ -92,13 +104,17 @@ pub enum Outcome {
     /// the same message again when something happened, and only then reply.
     Block,
     /// The call is one of the process table's ([`crate::system`]): `clone`, `fork`,
-    /// `vfork`, `execve`, `wait4`.
+    /// `vfork`, `execve`, `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, the process-group
+    /// and session calls.
     Process,
+    /// A fault raised this signal and the process has a handler for it: the process table
+    /// delivers it (the registers are those of the faulting instruction).
+    Signal(Info),
 }
 
 /// Internal results that are no error number: the call would block, or wrote to a pipe
 /// without readers.
-const WOULD_BLOCK: Errno = Errno(0xfff0);
+pub(crate) const WOULD_BLOCK: Errno = Errno(0xfff0);
 const BROKEN_PIPE: Errno = Errno(0xfff1);
 /// `O_CLOEXEC` (`open`, `pipe2`, `dup3`).
 pub const O_CLOEXEC: u64 = 0o2000000;
@@ -127,22 +143,40 @@ pub fn handle<'a>(
             ));
             return Outcome::Exit(status);
         }
-        nr::clone | nr::fork | nr::vfork | nr::execve | nr::wait4 => return Outcome::Process,
+        nr::clone
+        | nr::fork
+        | nr::vfork
+        | nr::execve
+        | nr::wait4
+        | nr::waitid
+        | nr::kill
+        | nr::tkill
+        | nr::tgkill
+        | nr::setpgid
+        | nr::getpgid
+        | nr::setsid
+        | nr::getsid => return Outcome::Process,
+        nr::rt_sigreturn => {
+            return match sigcalls::sigreturn(p, host, m) {
+                Some(()) => Outcome::Resume,
+                None => {
+                    host.log(format_args!(
+                        "guest: process {} ({}) killed by signal {SIGSEGV} (SIGSEGV): rt_sigreturn without a readable signal frame",
+                        p.pid,
+                        p.name()
+                    ));
+                    Outcome::Killed(SIGSEGV)
+                }
+            };
+        }
         _ => call(p, pipes, fs, host, number, args, r),
     };
     r.rax = match result {
         Ok(value) => value,
         Err(WOULD_BLOCK) => return Outcome::Block,
         Err(BROKEN_PIPE) => {
-            if p.sigactions[linux::SIGPIPE as usize - 1][0] != linux::SIG_IGN {
-                host.log(format_args!(
-                    "guest: process {} ({}) killed by signal {} (SIGPIPE): wrote to a pipe without readers",
-                    p.pid,
-                    p.name(),
-                    linux::SIGPIPE
-                ));
-                return Outcome::Killed(linux::SIGPIPE);
-            }
+            // Delivered (by default: the end of the process) before the call returns.
+            p.raise(Info::kernel(signal::SIGPIPE));
             Errno::EPIPE.result()
         }
         Err(e) => e.result(),
@@ -153,30 +187,36 @@ pub fn handle<'a>(
     Outcome::Resume
 }
 
-/// The signal a CPU exception kills with (Linux's mapping).
-fn fault_signal(vector: u64) -> u32 {
-    match vector {
-        0 | 16 | 19 => linux::SIGFPE,
-        1 | 3 => linux::SIGTRAP,
-        6 => linux::SIGILL,
-        17 => linux::SIGBUS,
-        _ => linux::SIGSEGV,
-    }
-}
-
+/// A CPU exception of the process: the signal it raises goes to the process's handler
+/// when it has one that the mask does not block ([`Outcome::Signal`]); else the process
+/// dies with it (Linux forces the default action of a blocked or ignored fault signal).
 fn fault(p: &Process, host: &mut impl Host, m: &ExceptionMessage) -> Outcome {
-    let signal = fault_signal(m.vector);
+    let (sig, code) = signal::fault_signal(m.vector, m.error_code);
+    let caught = p.action(sig).handler > signal::SIG_IGN && p.sigmask & signal::bit(sig) == 0;
+    if caught {
+        return Outcome::Signal(Info {
+            signal: sig,
+            code,
+            pid: 0,
+            status: 0,
+            address: if m.vector == 14 {
+                m.fault_address
+            } else {
+                m.registers.rip
+            },
+        });
+    }
     host.log(format_args!(
-        "guest: process {} ({}) killed by signal {signal} ({}): vector {} error {:#x} address {:#x} rip {:#x}",
+        "guest: process {} ({}) killed by signal {sig} ({}): vector {} error {:#x} address {:#x} rip {:#x}",
         p.pid,
         p.name(),
-        linux::signal_name(signal),
+        signal::name(sig),
         m.vector,
         m.error_code,
         m.fault_address,
         m.registers.rip
     ));
-    Outcome::Killed(signal)
+    Outcome::Killed(sig)
 }
 
 pub(crate) type SysResult<T> = Result<T, Errno>;
@@ -323,26 +363,6 @@ fn call<'a>(
         nr::faccessat | nr::faccessat2 => access(p, fs, host, a[0], a[1], a[2]),
         nr::readlink => readlink(p, fs, host, linux::AT_FDCWD as u64, a[0], a[1], a[2]),
         nr::readlinkat => readlink(p, fs, host, a[0], a[1], a[2], a[3]),
-        nr::poll => {
-            let timeout = a[2] as i32;
-            poll(
-                p,
-                pipes,
-                host,
-                a[0],
-                a[1],
-                (timeout >= 0).then_some(timeout as u64),
-            )
-        }
-        nr::ppoll => {
-            let timeout = if a[2] == 0 {
-                None
-            } else {
-                let (s, ns) = (read_u64(p, host, a[2])?, read_u64(p, host, a[2] + 8)?);
-                Some(s | ns)
-            };
-            poll(p, pipes, host, a[0], a[1], timeout)
-        }
         nr::getcwd => {
             if a[1] < 2 {
                 return Err(Errno::ERANGE);
@@ -374,8 +394,27 @@ fn call<'a>(
             Ok(0)
         }
         nr::rseq => Err(Errno::ENOSYS),
-        nr::rt_sigaction => sigaction(p, host, a[0], a[1], a[2], a[3]),
-        nr::rt_sigprocmask => sigprocmask(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigaction => sigcalls::sigaction(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigprocmask => sigcalls::sigprocmask(p, host, a[0], a[1], a[2], a[3]),
+        nr::rt_sigpending => sigcalls::sigpending(p, host, a[0], a[1]),
+        nr::sigaltstack => sigcalls::sigaltstack(p, host, regs.rsp, a[0], a[1]),
+        nr::rt_sigsuspend => sigcalls::sigsuspend(p, host, a[0], a[1]),
+        nr::pause => Err(WOULD_BLOCK),
+        nr::nanosleep => sigcalls::sleep(p, host, linux::CLOCK_MONOTONIC, 0, a[0]),
+        nr::clock_nanosleep => sigcalls::sleep(p, host, a[0], a[1], a[2]),
+        nr::alarm => Ok(sigcalls::alarm(p, host, a[0])),
+        nr::poll => {
+            let timeout = poll::poll_timeout(a[2]);
+            poll::poll(p, pipes, host, a[0], a[1], timeout, 0, 0)
+        }
+        nr::ppoll => {
+            let timeout = poll::ppoll_timeout(p, host, a[2])?;
+            poll::poll(p, pipes, host, a[0], a[1], timeout, a[3], a[4])
+        }
+        nr::select => poll::select(p, pipes, host, a, false),
+        nr::pselect6 => poll::select(p, pipes, host, a, true),
+        nr::getitimer => sigcalls::getitimer(p, host, a[0], a[1]),
+        nr::setitimer => sigcalls::setitimer(p, host, a[0], a[1], a[2]),
         nr::prlimit64 => {
             if a[0] != 0 && a[0] != p.pid as u64 {
                 return Err(Errno::ESRCH);
@@ -451,7 +490,8 @@ fn call<'a>(
         }
         nr::prctl => prctl(p, host, a[0], a[1]),
         nr::sched_yield => Ok(0),
-        nr::getpid | nr::gettid | nr::getpgrp => Ok(p.pid as u64),
+        nr::getpid | nr::gettid => Ok(p.pid as u64),
+        nr::getpgrp => Ok(p.pgid as u64),
         nr::getppid => Ok(p.ppid as u64),
         nr::getuid | nr::geteuid | nr::getgid | nr::getegid => Ok(0),
         _ => {
@@ -621,75 +661,6 @@ fn write(
         done += n;
     }
     Ok(total as u64)
-}
-
-/// `poll` and `ppoll`: which descriptors of the `count` `struct pollfd`s at `fds` are
-/// ready (`POLLIN`/`POLLOUT` as asked, `POLLHUP` for a pipe without writers, `POLLNVAL`
-/// for a closed descriptor). When none is, a call without a timeout (`None`) waits, as a
-/// blocked call, until one is; with a timeout it returns 0 at once (no timer wakes a
-/// waiting call yet, so a timeout ends early rather than never). The signal mask of
-/// `ppoll` is not applied (no handler is delivered yet).
-fn poll(
-    p: &Process,
-    pipes: &Pipes,
-    host: &mut impl Host,
-    fds: u64,
-    count: u64,
-    timeout: Option<u64>,
-) -> SysResult<u64> {
-    const POLLIN: u16 = 0x1;
-    const POLLOUT: u16 = 0x4;
-    const POLLHUP: u16 = 0x10;
-    const POLLNVAL: u16 = 0x20;
-    if count > MAX_FILES as u64 {
-        return Err(Errno::EINVAL);
-    }
-    let mut table = [0u8; 8 * MAX_FILES];
-    let table = &mut table[..8 * count as usize];
-    read_user(p, host, fds, table)?;
-    let mut ready = 0;
-    for entry in table.chunks_exact_mut(8) {
-        let fd = i32::from_le_bytes([entry[0], entry[1], entry[2], entry[3]]);
-        let events = u16::from_le_bytes([entry[4], entry[5]]);
-        if fd < 0 {
-            entry[6..].fill(0); // ignored
-            continue;
-        }
-        let (readable, writable, hangup) = match p.file(fd as u64) {
-            None => {
-                entry[6..].copy_from_slice(&POLLNVAL.to_le_bytes());
-                ready += 1;
-                continue;
-            }
-            Some(File::Console(_)) => (host.tty().is_none_or(|t| t.readable()), true, false),
-            Some(File::Pipe { pipe, write, .. }) => {
-                let ready = pipes.ready(pipe, write);
-                (
-                    !write && ready,
-                    write && ready,
-                    !write && ready && pipes.buffered(pipe) == 0,
-                )
-            }
-            Some(File::Initramfs { .. }) => (true, true, false),
-        };
-        let mut revents = 0;
-        if readable && events & POLLIN != 0 {
-            revents |= POLLIN;
-        }
-        if writable && events & POLLOUT != 0 {
-            revents |= POLLOUT;
-        }
-        if hangup {
-            revents |= POLLHUP;
-        }
-        entry[6..].copy_from_slice(&revents.to_le_bytes());
-        ready += u64::from(revents != 0);
-    }
-    if ready == 0 && timeout.is_none() {
-        return Err(WOULD_BLOCK);
-    }
-    write_user(p, host, fds, table)?;
-    Ok(ready)
 }
 
 /// The terminal ioctls on a console descriptor ([`crate::tty`]): `ENOTTY` without a
@@ -1403,72 +1374,6 @@ fn prctl(p: &mut Process, host: &mut impl Host, option: u64, arg: u64) -> SysRes
             Err(Errno::EINVAL)
         }
     }
-}
-
-fn sigaction(
-    p: &mut Process,
-    host: &mut impl Host,
-    signal: u64,
-    act: u64,
-    old: u64,
-    size: u64,
-) -> SysResult<u64> {
-    if size != 8 || signal == 0 || signal > 64 {
-        return Err(Errno::EINVAL);
-    }
-    if act != 0 && (signal == linux::SIGKILL || signal == linux::SIGSTOP) {
-        return Err(Errno::EINVAL);
-    }
-    let index = signal as usize - 1;
-    let mut new = [0u64; 4];
-    if act != 0 {
-        for (i, word) in new.iter_mut().enumerate() {
-            *word = read_u64(p, host, act + 8 * i as u64)?;
-        }
-    }
-    if old != 0 {
-        let mut bytes = [0u8; 32];
-        for (chunk, word) in bytes.chunks_exact_mut(8).zip(p.sigactions[index]) {
-            chunk.copy_from_slice(&word.to_le_bytes());
-        }
-        write_user(p, host, old, &bytes)?;
-    }
-    if act != 0 {
-        p.sigactions[index] = new;
-    }
-    Ok(0)
-}
-
-fn sigprocmask(
-    p: &mut Process,
-    host: &mut impl Host,
-    how: u64,
-    set: u64,
-    old: u64,
-    size: u64,
-) -> SysResult<u64> {
-    const UNBLOCKABLE: u64 = 1 << (linux::SIGKILL - 1) | 1 << (linux::SIGSTOP - 1);
-    if size != 8 {
-        return Err(Errno::EINVAL);
-    }
-    let new = if set != 0 {
-        let bits = read_u64(p, host, set)?;
-        Some(match how {
-            0 => p.sigmask | bits,
-            1 => p.sigmask & !bits,
-            2 => bits,
-            _ => return Err(Errno::EINVAL),
-        })
-    } else {
-        None
-    };
-    if old != 0 {
-        write_user(p, host, old, &p.sigmask.to_le_bytes())?;
-    }
-    if let Some(mask) = new {
-        p.sigmask = mask & !UNBLOCKABLE;
-    }
-    Ok(0)
 }
 
 fn rlimit(p: &Process, host: &mut impl Host, resource: u64, old: u64) -> SysResult<u64> {

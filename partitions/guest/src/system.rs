@@ -28,10 +28,12 @@
 
 use crate::cpio::Archive;
 use crate::exec::{self, ARG_MAX, ExecError};
-use crate::linux::{self, Errno, nr};
+use crate::linux::{Errno, nr};
 use crate::memory::{Areas, PAGE};
 use crate::pipe::Pipes;
 use crate::process::Process;
+use crate::sigcalls;
+use crate::signal::{self, Action, Default, Info, SIGCHLD, SIGSEGV};
 use crate::stack::MAX_STRINGS;
 use crate::syscall::{self, Host, Outcome, SysResult, close_files, share_files};
 use abi::ipc::{ExceptionMessage, Registers};
@@ -47,6 +49,12 @@ const CLONE_PARENT_SETTID: u64 = 0x10_0000;
 const CLONE_CHILD_CLEARTID: u64 = 0x20_0000;
 const CLONE_CHILD_SETTID: u64 = 0x100_0000;
 const WNOHANG: u64 = 1;
+const WUNTRACED: u64 = 2;
+const WEXITED: u64 = 4;
+const WCONTINUED: u64 = 8;
+const WNOWAIT: u64 = 0x0100_0000;
+/// `__WNOTHREAD`, `__WALL`, `__WCLONE`: accepted, meaningless with one thread per process.
+const WTHREAD_FLAGS: u64 = 0xe000_0000;
 /// Bytes of `struct rusage` (`wait4` fills it with zeros: no accounting yet).
 const RUSAGE_SIZE: usize = 144;
 
@@ -66,6 +74,8 @@ pub trait Tasks: Host {
     /// Replies to the waiting exception message of `pid`'s thread: it resumes with the
     /// registers of `m`.
     fn resume(&mut self, pid: u32, m: &ExceptionMessage);
+    /// Suspends (`stop`) or resumes `pid`'s thread (`SIGSTOP`, `SIGCONT`).
+    fn suspend(&mut self, pid: u32, stop: bool);
 }
 
 /// Where a process is.
@@ -89,6 +99,80 @@ pub enum State {
 struct Slot<'a> {
     process: Process<'a>,
     state: State,
+    /// Stopped by a signal: its thread is suspended.
+    stopped: bool,
+    /// A stop (`0x7f | signal << 8`) or continue (`0xffff`) its parent has not waited for.
+    report: Option<u32>,
+}
+
+/// Which children a wait is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Which {
+    Any,
+    Pid(u32),
+    /// A process group (0: the caller's).
+    Group(u32),
+}
+
+/// A `wait4` or `waitid` request.
+#[derive(Clone, Copy, Debug)]
+struct Wait {
+    which: Which,
+    options: u64,
+    /// `waitid`: report a `siginfo`, not a status word.
+    siginfo: bool,
+}
+
+impl Wait {
+    fn wait4(pid: i32, options: u64) -> Self {
+        let which = match pid {
+            -1 => Which::Any,
+            0 => Which::Group(0),
+            p if p < 0 => Which::Group(p.unsigned_abs()),
+            p => Which::Pid(p as u32),
+        };
+        Self {
+            which,
+            options: (options & !WTHREAD_FLAGS) | WEXITED,
+            siginfo: false,
+        }
+    }
+
+    fn waitid(idtype: u64, id: u64, options: u64) -> SysResult<Self> {
+        let which = match idtype {
+            0 => Which::Any,
+            1 => Which::Pid(u32::try_from(id).map_err(|_| Errno::EINVAL)?),
+            2 => Which::Group(u32::try_from(id).map_err(|_| Errno::EINVAL)?),
+            _ => return Err(Errno::EINVAL),
+        };
+        let options = options & !WTHREAD_FLAGS;
+        let known = WNOHANG | WUNTRACED | WEXITED | WCONTINUED | WNOWAIT;
+        if options & !known != 0 || options & (WUNTRACED | WEXITED | WCONTINUED) == 0 {
+            return Err(Errno::EINVAL);
+        }
+        Ok(Self {
+            which,
+            options,
+            siginfo: true,
+        })
+    }
+}
+
+/// The `siginfo` `waitid` reports for child `pid` with wait status `word`.
+fn child_info(pid: u32, word: u32) -> Info {
+    let (code, status) = match word {
+        0xffff => (signal::CLD_CONTINUED, signal::SIGCONT as i32),
+        w if w & 0xff == 0x7f => (signal::CLD_STOPPED, (w >> 8 & 0xff) as i32),
+        w if w & 0x7f != 0 => (signal::CLD_KILLED, (w & 0x7f) as i32),
+        w => (signal::CLD_EXITED, (w >> 8 & 0xff) as i32),
+    };
+    Info {
+        signal: signal::SIGCHLD,
+        code,
+        pid,
+        status,
+        address: 0,
+    }
 }
 
 /// The wait status of a process that exited with `code`.
@@ -101,6 +185,8 @@ pub struct System<'a> {
     slots: [Option<Slot<'a>>; MAX_PROCESSES],
     pub pipes: Pipes,
     next_pid: u32,
+    /// How init ended, when a call of another process ended it.
+    ended: Option<Outcome>,
     /// `AT_HWCAP` for the programs `execve` starts.
     hwcap: u64,
 }
@@ -113,11 +199,14 @@ impl<'a> System<'a> {
         slots[0] = Some(Slot {
             process: init,
             state: State::Running,
+            stopped: false,
+            report: None,
         });
         Self {
             slots,
             pipes: Pipes::new(),
             next_pid,
+            ended: None,
             hwcap,
         }
     }
@@ -157,8 +246,7 @@ impl<'a> System<'a> {
             State::Starting(registers) => {
                 slot.state = State::Running;
                 m.registers = registers;
-                k.resume(pid, &m);
-                None
+                self.resume(i, k, m, None)
             }
             State::Running => self.run(i, fs, k, m),
             // A blocked or ended process has no thread that could send.
@@ -173,46 +261,47 @@ impl<'a> System<'a> {
         self.wake(fs, k)
     }
 
-    /// A signal the terminal's control characters send to process group `group`
-    /// ([`crate::tty::Signal`]). No signal handler is delivered yet and `getpgrp` is a
-    /// process's pid, so the group is its leader alone, and only a default action that
-    /// ends a process is taken: the leader dies by the signal unless it ignores it or set a
-    /// handler, or is init (as Linux spares init signals without handlers); `SIGTSTP`
-    /// (stop) does nothing. The caller then serves the blocked calls again (a parent
-    /// waiting for the killed process).
-    pub fn terminal_signal(&mut self, signal: u32, group: u32, k: &mut impl Tasks) {
-        let Some(i) = self.index(group) else {
-            return;
-        };
-        let Some(slot) = self.slots[i].as_ref() else {
-            return;
-        };
-        let action = (signal as usize)
-            .checked_sub(1)
-            .and_then(|n| slot.process.sigactions.get(n));
-        let default = action.is_some_and(|a| a[0] == linux::SIG_DFL);
-        if signal == linux::SIGTSTP
-            || group == INIT_PID
-            || !default
-            || matches!(slot.state, State::Zombie(_))
-        {
-            return;
-        }
-        k.log(format_args!(
-            "guest: process {group} ({}) killed by signal {signal} ({}): from the console",
-            slot.process.name(),
-            linux::signal_name(signal)
-        ));
-        self.end(i, signal, k);
+    /// The time the next sleeping call or alarm is due (the guest's clock), if any.
+    pub fn next_timer(&self) -> Option<u64> {
+        self.slots
+            .iter()
+            .flatten()
+            .filter(|s| !matches!(s.state, State::Zombie(_)))
+            .flat_map(|s| {
+                let sleeping = matches!(s.state, State::Blocked(_)).then_some(s.process.wake_at);
+                [sleeping.flatten(), s.process.alarm_at]
+            })
+            .flatten()
+            .min()
     }
 
-    /// Serves the kept messages of blocked processes until none completes.
+    /// Raises the alarms that are due and completes the sleeps that ended (called when the
+    /// time [`System::next_timer`] named has come).
+    pub fn tick(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
+        let now = k.now_ns();
+        for j in 0..MAX_PROCESSES {
+            let due = match self.slots[j].as_mut() {
+                Some(s) if !matches!(s.state, State::Zombie(_)) => {
+                    sigcalls::alarm_due(&mut s.process, now)
+                }
+                _ => false,
+            };
+            if due && let Some(ended) = self.send(j, None, Info::kernel(sigcalls::ALARM), k) {
+                return Some(ended);
+            }
+        }
+        self.wake(fs, k)
+    }
+
+    /// Serves the kept messages of blocked processes until none completes; a blocked
+    /// process with a signal to act on is interrupted instead.
     fn wake(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
         loop {
             let mut progress = false;
             for i in 0..MAX_PROCESSES {
                 let Some(Slot {
                     state: State::Blocked(m),
+                    stopped: false,
                     ..
                 }) = self.slots[i]
                 else {
@@ -221,7 +310,15 @@ impl<'a> System<'a> {
                 if let Some(slot) = self.slots[i].as_mut() {
                     slot.state = State::Running;
                 }
-                let ended = self.run(i, fs, k, m);
+                let ended = match self.interrupting(i) {
+                    Some(restart) => {
+                        let p = &mut self.slots[i].as_mut()?.process;
+                        k.select(p.pid);
+                        let m = sigcalls::interrupted(p, k, m, restart);
+                        self.resume(i, k, m, None)
+                    }
+                    None => self.run(i, fs, k, m),
+                };
                 if ended.is_some() {
                     return ended;
                 }
@@ -239,6 +336,358 @@ impl<'a> System<'a> {
         }
     }
 
+    /// Whether the blocked process in slot `i` has a signal that interrupts its call, and
+    /// then whether the call restarts after it (a handler with `SA_RESTART`, or a stop).
+    /// Deliverable signals it ignores are dropped on the way.
+    fn interrupting(&mut self, i: usize) -> Option<bool> {
+        let p = &mut self.slots[i].as_mut()?.process;
+        loop {
+            let ready = p.deliverable();
+            if ready == 0 {
+                return None;
+            }
+            let first = ready & signal::UNBLOCKABLE;
+            let sig = (if first != 0 { first } else { ready }).trailing_zeros() + 1;
+            let action = p.action(sig);
+            if sig != signal::SIGKILL && sig != signal::SIGSTOP && action.ignores(sig) {
+                p.pending &= !signal::bit(sig);
+                continue;
+            }
+            let handled = sig != signal::SIGKILL && action.handler > signal::SIG_IGN;
+            let stops = !handled && signal::bit(sig) & signal::STOP_SIGNALS != 0;
+            return Some(stops || handled && action.flags & signal::SA_RESTART != 0);
+        }
+    }
+
+    /// Resumes the process in slot `i` with message `m` (a completed call, or the fault
+    /// `trap` with its vector, error code and address), delivering its pending signals
+    /// first: an ignored one is dropped, a fatal one ends it, a stop signal stops it, and
+    /// a caught one runs its handler (one per resumption: the next goes when the handler
+    /// returns with `rt_sigreturn`, a system call).
+    fn resume(
+        &mut self,
+        i: usize,
+        k: &mut impl Tasks,
+        mut m: ExceptionMessage,
+        trap: Option<(u64, u64, u64)>,
+    ) -> Option<Outcome> {
+        loop {
+            let slot = self.slots[i].as_mut()?;
+            let p = &mut slot.process;
+            let pid = p.pid;
+            let Some(info) = p.take_signal() else {
+                k.resume(pid, &m);
+                return None;
+            };
+            let sig = info.signal;
+            let action = p.action(sig);
+            let caught = sig != signal::SIGKILL && sig != signal::SIGSTOP;
+            if caught && action.handler == signal::SIG_IGN {
+                continue;
+            }
+            if !caught || action.handler == signal::SIG_DFL {
+                match signal::default_action(sig) {
+                    Default::Ignore | Default::Continue => continue,
+                    Default::Stop => {
+                        self.stop(i, sig, k);
+                        continue;
+                    }
+                    Default::Terminate | Default::Core => {
+                        k.log(format_args!(
+                            "guest: process {pid} ({}) killed by signal {sig} ({})",
+                            p.name(),
+                            signal::name(sig)
+                        ));
+                        return self.end(i, sig, k);
+                    }
+                }
+            }
+            let (vector, error, cr2) = trap.unwrap_or_default();
+            let at = signal::Interrupted {
+                registers: m.registers,
+                mask: p.saved_mask.take().unwrap_or(p.sigmask),
+                trap: vector,
+                error,
+                cr2,
+            };
+            k.select(pid);
+            let mut image = [0u8; signal::FPU_SIZE];
+            let written = signal::frame(&action, &info, &at, &p.alt_stack).filter(|f| {
+                k.fpu(&mut image).is_ok()
+                    && syscall::write_user(p, k, f.fpu, &image).is_ok()
+                    && syscall::write_user(p, k, f.frame, &f.bytes).is_ok()
+            });
+            let Some(frame) = written else {
+                k.log(format_args!(
+                    "guest: process {pid} ({}) killed by signal {SIGSEGV} (SIGSEGV): no room for the frame of signal {sig} ({}) at rsp {:#x}",
+                    p.name(),
+                    signal::name(sig),
+                    m.registers.rsp
+                ));
+                return self.end(i, SIGSEGV, k);
+            };
+            p.sigmask |= action.mask;
+            if action.flags & signal::SA_NODEFER == 0 {
+                p.sigmask |= signal::bit(sig);
+            }
+            p.sigmask &= !signal::UNBLOCKABLE;
+            if action.flags & signal::SA_RESETHAND != 0 {
+                p.sigactions[sig as usize - 1] = Action::DEFAULT;
+            }
+            m.registers = frame.registers;
+            k.resume(pid, &m);
+            return None;
+        }
+    }
+
+    /// Stops the process in slot `i` (signal `sig`): its thread is suspended (a reply it
+    /// waits for still arrives, and it runs on after `SIGCONT`), its parent is told.
+    fn stop(&mut self, i: usize, sig: u32, k: &mut impl Tasks) {
+        let Some(slot) = self.slots[i].as_mut() else {
+            return;
+        };
+        if slot.stopped {
+            return;
+        }
+        slot.stopped = true;
+        slot.report = Some(0x7f | sig << 8);
+        let (pid, parent) = (slot.process.pid, slot.process.ppid);
+        k.suspend(pid, true);
+        self.notify_parent(parent, pid, signal::CLD_STOPPED, sig as i32);
+    }
+
+    /// Continues a stopped process in slot `i`.
+    fn cont(&mut self, i: usize, k: &mut impl Tasks) {
+        let Some(slot) = self.slots[i].as_mut() else {
+            return;
+        };
+        if !slot.stopped {
+            return;
+        }
+        slot.stopped = false;
+        slot.report = Some(0xffff);
+        let (pid, parent) = (slot.process.pid, slot.process.ppid);
+        k.suspend(pid, false);
+        self.notify_parent(parent, pid, signal::CLD_CONTINUED, signal::SIGCONT as i32);
+    }
+
+    /// `SIGCHLD` for `parent` about child `child` (unless the parent ignores it, or asked
+    /// with `SA_NOCLDSTOP` not to hear of stops and continues).
+    fn notify_parent(&mut self, parent: u32, child: u32, code: i32, status: i32) {
+        let Some(j) = self.index(parent) else {
+            return;
+        };
+        let Some(slot) = self.slots[j].as_mut() else {
+            return;
+        };
+        let p = &mut slot.process;
+        let stop_event = code == signal::CLD_STOPPED || code == signal::CLD_CONTINUED;
+        if stop_event && p.action(signal::SIGCHLD).flags & signal::SA_NOCLDSTOP != 0 {
+            return;
+        }
+        let info = Info {
+            signal: signal::SIGCHLD,
+            code,
+            pid: child,
+            status,
+            address: 0,
+        };
+        Self::post(p, info);
+    }
+
+    /// Makes `info.signal` pending for `p` unless it would do nothing (then Linux discards
+    /// it at once, if it is not blocked); `SIGCONT` and the stop signals cancel each other.
+    fn post(p: &mut Process<'a>, info: Info) -> bool {
+        let sig = info.signal;
+        if sig == signal::SIGCONT || sig == signal::SIGKILL {
+            p.pending &= !signal::STOP_SIGNALS;
+        } else if signal::bit(sig) & signal::STOP_SIGNALS != 0 {
+            p.pending &= !signal::bit(signal::SIGCONT);
+        }
+        // Init gets only the signals it has a handler for (Linux protects it so).
+        if p.pid == INIT_PID && p.action(sig).handler == signal::SIG_DFL {
+            return false;
+        }
+        let blocked = p.sigmask & signal::bit(sig) & !signal::UNBLOCKABLE != 0;
+        if !blocked
+            && sig != signal::SIGKILL
+            && sig != signal::SIGSTOP
+            && p.action(sig).ignores(sig)
+        {
+            return false;
+        }
+        p.raise(info);
+        true
+    }
+
+    /// Sends `info` to the process in slot `j`, on behalf of the process in slot `sender`
+    /// (whose call is being served: it sees its own signals when the call returns). A
+    /// process running user code sees a caught signal at its next system call or fault;
+    /// one the signal ends, stops or continues is ended, stopped or continued at once.
+    fn send(
+        &mut self,
+        j: usize,
+        sender: Option<usize>,
+        info: Info,
+        k: &mut impl Tasks,
+    ) -> Option<Outcome> {
+        let sig = info.signal;
+        let slot = self.slots[j].as_mut()?;
+        if matches!(slot.state, State::Zombie(_)) {
+            return None;
+        }
+        if sig == signal::SIGCONT || sig == signal::SIGKILL {
+            self.cont(j, k);
+        }
+        let slot = self.slots[j].as_mut()?;
+        if !Self::post(&mut slot.process, info) || sender == Some(j) {
+            return None;
+        }
+        let p = &slot.process;
+        let acts_now = matches!(
+            slot.state,
+            State::Running | State::Starting(_) | State::Vforked { .. }
+        ) && p.deliverable() & signal::bit(sig) != 0
+            && (sig == signal::SIGKILL
+                || sig == signal::SIGSTOP
+                || p.action(sig).handler == signal::SIG_DFL);
+        let vforked = matches!(slot.state, State::Vforked { .. });
+        if !acts_now || (vforked && sig != signal::SIGKILL) {
+            return None; // blocked calls are interrupted by `wake`
+        }
+        match signal::default_action(sig) {
+            Default::Terminate | Default::Core => {
+                let slot = self.slots[j].as_mut()?;
+                slot.process.pending &= !signal::bit(sig);
+                k.log(format_args!(
+                    "guest: process {} ({}) killed by signal {sig} ({})",
+                    slot.process.pid,
+                    slot.process.name(),
+                    signal::name(sig)
+                ));
+                self.end(j, sig, k)
+            }
+            Default::Stop => {
+                if let Some(slot) = self.slots[j].as_mut() {
+                    slot.process.pending &= !signal::bit(sig);
+                }
+                self.stop(j, sig, k);
+                None
+            }
+            Default::Ignore | Default::Continue => None,
+        }
+    }
+
+    /// Sends signal `sig` (from process `from`, 0 for the guest) to every process of group
+    /// `pgid` (the terminal's `SIGINT`, `SIGQUIT`, `SIGTSTP`, a `kill` of a group); `false`
+    /// when the group has no process.
+    pub fn signal_group(&mut self, pgid: u32, sig: u32, k: &mut impl Tasks) -> Option<Outcome> {
+        for j in 0..MAX_PROCESSES {
+            let member = self.slots[j]
+                .as_ref()
+                .is_some_and(|s| s.process.pgid == pgid && !matches!(s.state, State::Zombie(_)));
+            if member && let Some(ended) = self.send(j, None, Info::kernel(sig), k) {
+                return Some(ended);
+            }
+        }
+        None
+    }
+
+    /// `kill(pid, sig)` by the process in slot `i` (`tkill`/`tgkill`: one process, as every
+    /// process has one thread).
+    fn kill(&mut self, i: usize, k: &mut impl Tasks, target: i64, sig: u64) -> SysResult<u64> {
+        if sig > signal::NSIG as u64 {
+            return Err(Errno::EINVAL);
+        }
+        let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
+        let (me, my_group) = (caller.pid, caller.pgid);
+        let hits = |s: &Slot| match target {
+            -1 => s.process.pid != INIT_PID && s.process.pid != me,
+            0 => s.process.pgid == my_group,
+            t if t < 0 => t.checked_neg() == Some(s.process.pgid as i64),
+            t => t == s.process.pid as i64,
+        };
+        let targets: [bool; MAX_PROCESSES] =
+            core::array::from_fn(|j| self.slots[j].as_ref().is_some_and(hits));
+        if !targets.contains(&true) {
+            return Err(Errno::ESRCH);
+        }
+        if sig == 0 {
+            return Ok(0);
+        }
+        for (j, _) in targets.iter().enumerate().filter(|(_, t)| **t) {
+            // The caller's own end, if it killed itself, comes when its call returns.
+            if let Some(ended) = self.send(j, Some(i), Info::user(sig as u32, me), k) {
+                self.ended = Some(ended);
+            }
+        }
+        Ok(0)
+    }
+
+    /// `setpgid(pid, pgid)`.
+    fn setpgid(&mut self, i: usize, pid: u64, pgid: u64) -> SysResult<u64> {
+        let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
+        let (me, my_sid) = (caller.pid, caller.sid);
+        let pid = if pid == 0 {
+            me
+        } else {
+            u32::try_from(pid).map_err(|_| Errno::ESRCH)?
+        };
+        let pgid = if pgid == 0 {
+            pid
+        } else {
+            u32::try_from(pgid).map_err(|_| Errno::EINVAL)?
+        };
+        if pgid > i32::MAX as u32 {
+            return Err(Errno::EINVAL);
+        }
+        let j = self.index(pid).ok_or(Errno::ESRCH)?;
+        let target = &self.slots[j].as_ref().ok_or(Errno::ESRCH)?.process;
+        if pid != me && target.ppid != me {
+            return Err(Errno::ESRCH);
+        }
+        if pid != me && target.executed {
+            return Err(Errno::EACCES);
+        }
+        if target.sid != my_sid || target.sid == target.pid {
+            return Err(Errno::EPERM);
+        }
+        let group_exists = self
+            .slots
+            .iter()
+            .flatten()
+            .any(|s| s.process.pgid == pgid && s.process.sid == my_sid);
+        if pgid != pid && !group_exists {
+            return Err(Errno::EPERM);
+        }
+        self.slots[j].as_mut().ok_or(Errno::ESRCH)?.process.pgid = pgid;
+        Ok(0)
+    }
+
+    /// `getpgid(pid)` / `getsid(pid)` (`pid` 0: the caller).
+    fn group_of(&self, i: usize, pid: u64, session: bool) -> SysResult<u64> {
+        let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
+        let pid = if pid == 0 {
+            caller.pid
+        } else {
+            u32::try_from(pid).map_err(|_| Errno::ESRCH)?
+        };
+        let p = self.process(pid).ok_or(Errno::ESRCH)?;
+        Ok(if session { p.sid } else { p.pgid } as u64)
+    }
+
+    /// `setsid()`: a new session and group led by the caller (`EPERM` for a group leader).
+    fn setsid(&mut self, i: usize) -> SysResult<u64> {
+        let me = self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process.pid;
+        if self.slots.iter().flatten().any(|s| s.process.pgid == me) {
+            return Err(Errno::EPERM);
+        }
+        let p = &mut self.slots[i].as_mut().ok_or(Errno::ESRCH)?.process;
+        p.sid = me;
+        p.pgid = me;
+        Ok(me as u64)
+    }
+
     /// Serves message `m` of the running process in slot `i`.
     fn run(
         &mut self,
@@ -252,34 +701,60 @@ impl<'a> System<'a> {
         k.select(pid);
         let kept = m;
         match syscall::handle(&mut slot.process, &mut self.pipes, fs, k, &mut m) {
-            Outcome::Resume => {
-                k.resume(pid, &m);
-                None
-            }
+            Outcome::Resume => self.resume(i, k, m, None),
             Outcome::Block => {
                 slot.state = State::Blocked(kept);
                 None
             }
             Outcome::Exit(code) => self.end(i, exit_status(code), k),
             Outcome::Killed(signal) => self.end(i, signal, k),
+            Outcome::Signal(info) => {
+                slot.process.raise(info);
+                let trap = (m.vector, m.error_code, m.fault_address);
+                self.resume(i, k, m, Some(trap))
+            }
             Outcome::Process => {
                 let r = &mut m.registers;
                 let args = [r.rdi, r.rsi, r.rdx, r.r10, r.r8];
-                let (flags, vfork_flags) = (args[0], CLONE_VM | CLONE_VFORK | linux::SIGCHLD);
+                let (flags, vfork_flags) = (args[0], CLONE_VM | CLONE_VFORK | SIGCHLD as u64);
                 let vfork = r.rax == nr::vfork || (r.rax == nr::clone && flags & CLONE_VFORK != 0);
                 let result = match r.rax {
                     nr::clone => self.fork(i, k, flags, args[1], args[2], args[3], r),
-                    nr::fork => self.fork(i, k, linux::SIGCHLD, 0, 0, 0, r),
+                    nr::fork => self.fork(i, k, SIGCHLD as u64, 0, 0, 0, r),
                     nr::vfork => self.fork(i, k, vfork_flags, 0, 0, 0, r),
-                    nr::wait4 => match self.wait(i, k, args[0] as i32, args[1], args[2], args[3]) {
-                        Ok(None) => {
-                            if let Some(slot) = self.slots[i].as_mut() {
-                                slot.state = State::Blocked(kept);
-                            }
-                            return None;
-                        }
-                        result => result.map(|pid| pid.unwrap_or(0)),
+                    nr::kill => self.kill(i, k, args[0] as i32 as i64, args[1]),
+                    nr::tkill => match args[0] as i32 {
+                        t if t <= 0 => Err(Errno::EINVAL),
+                        t => self.kill(i, k, t as i64, args[1]),
                     },
+                    nr::tgkill => match (args[0] as i32, args[1] as i32) {
+                        (g, t) if g <= 0 || t <= 0 => Err(Errno::EINVAL),
+                        (g, t) if g != t => Err(Errno::ESRCH),
+                        (_, t) => self.kill(i, k, t as i64, args[2]),
+                    },
+                    nr::setpgid => self.setpgid(i, args[0], args[1]),
+                    nr::getpgid => self.group_of(i, args[0], false),
+                    nr::getsid => self.group_of(i, args[0], true),
+                    nr::setsid => self.setsid(i),
+                    nr::wait4 | nr::waitid => {
+                        let waited = if r.rax == nr::wait4 {
+                            self.wait(i, k, Wait::wait4(args[0] as i32, args[2]), args[1], args[3])
+                        } else {
+                            Wait::waitid(args[0], args[1], args[3])
+                                .and_then(|w| self.wait(i, k, w, args[2], 0))
+                        };
+                        match waited {
+                            Ok(None) => {
+                                if let Some(slot) = self.slots[i].as_mut() {
+                                    slot.state = State::Blocked(kept);
+                                }
+                                return None;
+                            }
+                            // waitid returns 0 and reports the pid in the siginfo.
+                            result if r.rax == nr::waitid => result.map(|_| 0),
+                            result => result.map(|pid| pid.unwrap_or(0)),
+                        }
+                    }
                     _ => match self.execve(i, fs, k, args[0], args[1], args[2]) {
                         Ok(Some((entry, sp))) => {
                             m.registers = Registers {
@@ -288,15 +763,17 @@ impl<'a> System<'a> {
                                 rflags: m.registers.rflags,
                                 ..Registers::default()
                             };
-                            k.resume(pid, &m);
-                            self.release_vfork_parent(pid, k);
-                            return None;
+                            let ended = self.resume(i, k, m, None);
+                            return ended.or_else(|| self.release_vfork_parent(pid, k));
                         }
                         // The old image is gone and the new one did not load.
-                        Ok(None) => return self.end(i, linux::SIGSEGV, k),
+                        Ok(None) => return self.end(i, SIGSEGV, k),
                         Err(e) => Err(e),
                     },
                 };
+                if let Some(ended) = self.ended.take() {
+                    return Some(ended);
+                }
                 let r = &mut m.registers;
                 r.rax = result.unwrap_or_else(|e| e.result());
                 r.rcx = r.rip;
@@ -310,24 +787,30 @@ impl<'a> System<'a> {
                                 reply: m,
                             };
                         }
+                        None
                     }
-                    _ => k.resume(pid, &m),
+                    // Killed itself (or its group): the signal acts before the call returns.
+                    _ if self.slots[i].is_none() => None,
+                    _ => self.resume(i, k, m, None),
                 }
-                None
             }
         }
     }
 
     /// The parent that vforked `child` goes on (the child executed or ended).
-    fn release_vfork_parent(&mut self, child: u32, k: &mut impl Tasks) {
-        for slot in self.slots.iter_mut().flatten() {
-            if let State::Vforked { child: c, reply } = slot.state
+    fn release_vfork_parent(&mut self, child: u32, k: &mut impl Tasks) -> Option<Outcome> {
+        for i in 0..MAX_PROCESSES {
+            if let Some(slot) = self.slots[i].as_mut()
+                && let State::Vforked { child: c, reply } = slot.state
                 && c == child
             {
                 slot.state = State::Running;
-                k.resume(slot.process.pid, &reply);
+                if let Some(ended) = self.resume(i, k, reply, None) {
+                    return Some(ended);
+                }
             }
         }
+        None
     }
 
     /// `clone` with fork semantics: a new process with a copy of the caller's memory,
@@ -350,7 +833,7 @@ impl<'a> System<'a> {
             | CLONE_CHILD_SETTID
             | 0xff;
         let signal = flags & 0xff;
-        if flags & !KNOWN != 0 || (signal != linux::SIGCHLD && signal != 0) {
+        if flags & !KNOWN != 0 || (signal != SIGCHLD as u64 && signal != 0) {
             return Err(Errno::EINVAL); // threads, namespaces, other exit signals
         }
         if flags & CLONE_VM != 0 && flags & CLONE_VFORK == 0 {
@@ -369,6 +852,13 @@ impl<'a> System<'a> {
         let mut child = parent.clone();
         child.pid = pid;
         child.ppid = parent.pid;
+        // Linux: no pending signals, alarms or sleeps are inherited.
+        child.pending = 0;
+        child.alarm_at = None;
+        child.alarm_interval = 0;
+        child.wake_at = None;
+        child.saved_mask = None;
+        child.executed = false;
         child.clear_child_tid = if flags & CLONE_CHILD_CLEARTID != 0 {
             child_tid
         } else {
@@ -402,52 +892,75 @@ impl<'a> System<'a> {
         self.slots[free] = Some(Slot {
             process: child,
             state: State::Starting(child_registers),
+            stopped: false,
+            report: None,
         });
         self.next_pid = pid.checked_add(1).unwrap_or(INIT_PID + 1);
         Ok(pid as u64)
     }
 
-    /// `wait4`: the reaped child's pid (0: none yet, `WNOHANG`), `None` when the caller
-    /// has to wait.
+    /// `wait4`/`waitid` of the process in slot `i`: the pid of the child it reports (0:
+    /// none yet, `WNOHANG`), `None` when the caller has to wait. `status` receives the
+    /// wait status (`wait4`) or the `siginfo` (`waitid`); `rusage` zeros.
     fn wait(
         &mut self,
         i: usize,
         k: &mut impl Tasks,
-        which: i32,
+        w: Wait,
         status: u64,
-        options: u64,
         rusage: u64,
     ) -> SysResult<Option<u64>> {
-        let caller = self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process.pid;
-        // No process groups yet: 0 and -pgid wait for any child, as -1 does.
-        let matches =
-            |s: &Slot| s.process.ppid == caller && (which <= 0 || s.process.pid == which as u32);
+        let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
+        let (me, my_group) = (caller.pid, caller.pgid);
+        let matches = |s: &Slot| {
+            s.process.ppid == me
+                && match w.which {
+                    Which::Any => true,
+                    Which::Pid(pid) => s.process.pid == pid,
+                    Which::Group(0) => s.process.pgid == my_group,
+                    Which::Group(g) => s.process.pgid == g,
+                }
+        };
         if !self.slots.iter().flatten().any(matches) {
             return Err(Errno::ECHILD);
         }
-        let zombie = self.slots.iter().position(|s| {
-            s.as_ref()
-                .is_some_and(|s| matches(s) && matches!(s.state, State::Zombie(_)))
+        // An ended child first, then a stop or continue to report.
+        let event = |s: &Slot| match s.state {
+            State::Zombie(word) if w.options & WEXITED != 0 => Some((word, true)),
+            _ => match s.report {
+                Some(word) if word == 0xffff && w.options & WCONTINUED != 0 => Some((word, false)),
+                Some(word) if word != 0xffff && s.stopped && w.options & WUNTRACED != 0 => {
+                    Some((word, false))
+                }
+                _ => None,
+            },
+        };
+        let found = (0..MAX_PROCESSES).find_map(|z| {
+            let s = self.slots[z].as_ref()?;
+            matches(s).then(|| event(s)).flatten().map(|e| (z, e))
         });
-        let Some(z) = zombie else {
-            return Ok((options & WNOHANG != 0).then_some(0));
+        let Some((z, (word, ended))) = found else {
+            return Ok((w.options & WNOHANG != 0).then_some(0));
         };
-        let Some(Slot {
-            process: child,
-            state: State::Zombie(word),
-        }) = &self.slots[z]
-        else {
-            return Err(Errno::ECHILD);
-        };
-        let (pid, word) = (child.pid, *word);
+        let pid = self.slots[z].as_ref().ok_or(Errno::ECHILD)?.process.pid;
         let p = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
         if status != 0 {
-            syscall::write_user(p, k, status, &word.to_le_bytes())?;
+            if w.siginfo {
+                syscall::write_user(p, k, status, &child_info(pid, word).to_bytes())?;
+            } else {
+                syscall::write_user(p, k, status, &word.to_le_bytes())?;
+            }
         }
         if rusage != 0 {
             syscall::write_user(p, k, rusage, &[0; RUSAGE_SIZE])?;
         }
-        self.slots[z] = None;
+        if w.options & WNOWAIT == 0 {
+            if ended {
+                self.slots[z] = None;
+            } else if let Some(s) = self.slots[z].as_mut() {
+                s.report = None;
+            }
+        }
         Ok(Some(pid as u64))
     }
 
@@ -547,11 +1060,15 @@ impl<'a> System<'a> {
                 new.files = old.files;
                 new.cloexec = 0;
                 new.sigmask = old.sigmask;
+                new.pending = old.pending;
+                new.pending_info = old.pending_info;
                 new.umask = old.umask;
+                (new.pgid, new.sid, new.executed) = (old.pgid, old.sid, true);
+                (new.alarm_at, new.alarm_interval) = (old.alarm_at, old.alarm_interval);
                 // Handlers are gone with the image; ignored signals stay ignored.
                 for (n, action) in new.sigactions.iter_mut().enumerate() {
-                    if old.sigactions[n][0] == linux::SIG_IGN {
-                        *action = [linux::SIG_IGN, 0, 0, 0];
+                    if old.sigactions[n].handler == signal::SIG_IGN {
+                        *action = Action::IGNORE;
                     }
                 }
                 k.log(format_args!(
@@ -581,9 +1098,16 @@ impl<'a> System<'a> {
         let pid = slot.process.pid;
         close_files(&mut slot.process, &mut self.pipes, false);
         k.release(pid);
-        self.release_vfork_parent(pid, k);
         let slot = self.slots[i].as_mut()?;
         slot.state = State::Zombie(word);
+        slot.stopped = false;
+        slot.report = None;
+        if pid != INIT_PID
+            && let Some(ended) = self.release_vfork_parent(pid, k)
+        {
+            return Some(ended);
+        }
+        let slot = self.slots[i].as_mut()?;
         let parent = slot.process.ppid;
         for s in self.slots.iter_mut().flatten() {
             if s.process.ppid == pid {
@@ -599,13 +1123,15 @@ impl<'a> System<'a> {
         }
         // Nobody waits for it without a parent, or with one that ignores SIGCHLD or set
         // SA_NOCLDWAIT (Linux reaps such children at once).
-        const SA_NOCLDWAIT: u64 = 2;
         let reaped = self.process(parent).is_none_or(|p| {
-            let [handler, flags, ..] = p.sigactions[linux::SIGCHLD as usize - 1];
-            handler == linux::SIG_IGN || flags & SA_NOCLDWAIT != 0
+            let action = p.action(SIGCHLD);
+            action.handler == signal::SIG_IGN || action.flags & signal::SA_NOCLDWAIT != 0
         });
         if reaped {
             self.slots[i] = None;
+        } else {
+            let info = child_info(pid, word);
+            self.notify_parent(parent, pid, info.code, info.status);
         }
         None
     }

@@ -32,6 +32,9 @@ struct Model {
     tty: Option<Tty>,
     log: Vec<String>,
     now: u64,
+    /// FPU images by pid, and the processes suspended (stopped).
+    fpu: HashMap<u32, [u8; 512]>,
+    suspended: Vec<u32>,
 }
 
 impl Model {
@@ -112,6 +115,14 @@ impl Host for Model {
     fn now_ns(&mut self) -> u64 {
         self.now += 1_500_000_000;
         self.now
+    }
+    fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno> {
+        *image = self.fpu.get(&self.current).copied().unwrap_or([0x11; 512]);
+        Ok(())
+    }
+    fn set_fpu(&mut self, image: &[u8; 512]) -> Result<(), Errno> {
+        self.fpu.insert(self.current, *image);
+        Ok(())
     }
     fn random(&mut self, buf: &mut [u8]) {
         buf.fill(0x5a);
@@ -707,14 +718,14 @@ fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
 fn unsupported_calls_and_faults() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::kill, [0; 6]), err(Errno::ENOSYS));
-    assert_eq!(w.call(nr::kill, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::futex, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::futex, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(5000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(6000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 62 (kill), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 202 (futex), returning ENOSYS",
             "guest: process 1 (busybox): unsupported system call 5000 (unknown), returning ENOSYS",
         ]
     );
@@ -827,6 +838,12 @@ impl Tasks for Model {
     }
     fn resume(&mut self, pid: u32, m: &ExceptionMessage) {
         self.resumed.push((pid, *m));
+    }
+    fn suspend(&mut self, pid: u32, stop: bool) {
+        self.suspended.retain(|&p| p != pid);
+        if stop {
+            self.suspended.push(pid);
+        }
     }
 }
 
@@ -1316,6 +1333,405 @@ fn random_process_calls(bytes: &[u8], mut seed: u64) {
     }
 }
 
+/// A system call of `pid` whose stack pointer is the top of the scratch page (room for a
+/// signal frame).
+fn on_stack(number: u64, a: [u64; 6]) -> ExceptionMessage {
+    let mut m = World::message(number, a, 0);
+    m.registers.rsp = SCRATCH + PAGE;
+    m
+}
+
+const HANDLER: u64 = 0x40_2000;
+const RESTORER: u64 = 0x40_3000;
+
+/// Installs a handler for `signal` in `pid` with `flags` (`SA_RESTORER` added).
+fn catch(g: &mut Guest, pid: u32, signal: u32, flags: u64) {
+    let action = crate::signal::Action {
+        handler: HANDLER,
+        flags: flags | crate::signal::SA_RESTORER,
+        restorer: RESTORER,
+        mask: 0,
+    };
+    g.put(pid, SCRATCH + 0x100, &action.to_bytes());
+    assert_eq!(
+        g.call(
+            pid,
+            nr::rt_sigaction,
+            [signal as u64, SCRATCH + 0x100, 0, 8, 0, 0]
+        ),
+        Some(0)
+    );
+}
+
+/// The handler's `rt_sigreturn` (its `ret` popped the restorer address): the registers the
+/// process resumes with.
+fn sigreturn(g: &mut Guest, pid: u32, frame: u64) -> ExceptionMessage {
+    let mut m = World::message(nr::rt_sigreturn, [0; 6], 0);
+    m.registers.rsp = frame + 8;
+    g.host.resumed.clear();
+    assert_eq!(g.system.serve(pid, &g.fs, &mut g.host, m), None);
+    let (p, m) = g.host.resumed[0];
+    assert_eq!(p, pid);
+    m
+}
+
+#[test]
+fn a_caught_signal_runs_its_handler_on_a_frame_and_returns() {
+    use crate::signal::{SA_SIGINFO, SIGUSR1};
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    catch(&mut g, child, SIGUSR1, SA_SIGINFO);
+    // The child runs user code: the signal waits for its next system call.
+    assert_eq!(
+        g.call(1, nr::kill, [child as u64, SIGUSR1 as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    g.host.fpu.insert(child, [0x22; 512]);
+    g.host.resumed.clear();
+    let _ = g
+        .system
+        .serve(child, &g.fs, &mut g.host, on_stack(nr::getpid, [0; 6]));
+    let (pid, m) = g.host.resumed[0];
+    let r = m.registers;
+    assert_eq!((pid, r.rip, r.rdi), (child, HANDLER, SIGUSR1 as u64));
+    assert_eq!((r.rsp + 8) % 16, 0);
+    assert!(r.rsp < SCRATCH + PAGE - 128 - 512);
+    assert_eq!(g.get(child, r.rsp, 8), RESTORER.to_le_bytes());
+    // siginfo: the signal and the sender.
+    assert_eq!(g.word(child, r.rsi), SIGUSR1);
+    assert_eq!(g.word(child, r.rsi + 16), 1);
+    // The handler changes its FPU state; rt_sigreturn brings the saved one back, with the
+    // registers of the interrupted call (its result in rax) and the mask.
+    g.host.fpu.insert(child, [0x33; 512]);
+    let back = sigreturn(&mut g, child, r.rsp);
+    assert_eq!(back.registers.rax, child as u64);
+    assert_eq!(back.registers.rip, 0x40_1019);
+    assert_eq!(back.registers.rsp, SCRATCH + PAGE);
+    assert_eq!(g.host.fpu[&child], [0x22; 512]);
+    assert_eq!(g.system.process(child).unwrap().sigmask, 0);
+}
+
+#[test]
+fn default_actions_end_stop_and_continue_processes() {
+    use crate::signal::{SIGCONT, SIGSTOP, SIGTERM, SIGWINCH};
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    // Ignored by default: nothing happens.
+    assert_eq!(
+        g.call(1, nr::kill, [child as u64, SIGWINCH as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.system.state(child), Some(State::Running));
+    // Stop: its thread is suspended; the parent sees it with WUNTRACED, once.
+    assert_eq!(
+        g.call(1, nr::kill, [child as u64, SIGSTOP as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.host.suspended, [child]);
+    let wuntraced = 2;
+    assert_eq!(
+        g.call(
+            1,
+            nr::wait4,
+            [child as u64, SCRATCH, wuntraced | WNOHANG, 0, 0, 0]
+        ),
+        Some(child as u64)
+    );
+    assert_eq!(g.word(1, SCRATCH), 0x7f | SIGSTOP << 8);
+    assert_eq!(
+        g.call(
+            1,
+            nr::wait4,
+            [child as u64, SCRATCH, wuntraced | WNOHANG, 0, 0, 0]
+        ),
+        Some(0)
+    );
+    // Continue: resumed, reported with WCONTINUED.
+    assert_eq!(
+        g.call(1, nr::kill, [child as u64, SIGCONT as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert!(g.host.suspended.is_empty());
+    assert_eq!(
+        g.call(1, nr::wait4, [child as u64, SCRATCH, 8 | WNOHANG, 0, 0, 0]),
+        Some(child as u64)
+    );
+    assert_eq!(g.word(1, SCRATCH), 0xffff);
+    // Terminate: the running child ends at once; its status is the signal.
+    assert_eq!(
+        g.call(1, nr::kill, [child as u64, SIGTERM as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert!(g.host.released.contains(&child));
+    assert!(
+        g.host
+            .log
+            .last()
+            .unwrap()
+            .contains("killed by signal 15 (SIGTERM)")
+    );
+    assert_eq!(
+        g.call(1, nr::wait4, [u64::MAX, SCRATCH, 0, 0, 0, 0]),
+        Some(child as u64)
+    );
+    assert_eq!(g.word(1, SCRATCH), SIGTERM);
+    // Init is protected from signals it does not catch; unknown targets are ESRCH.
+    assert_eq!(
+        g.call(1, nr::kill, [1, SIGTERM as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.system.state(1), Some(State::Running));
+    assert_eq!(
+        g.call(1, nr::kill, [99, 0, 0, 0, 0, 0]),
+        Some(err(Errno::ESRCH))
+    );
+    assert_eq!(
+        g.call(1, nr::kill, [1, 65, 0, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
+    );
+}
+
+#[test]
+fn signals_interrupt_waiting_calls_or_restart_them() {
+    use crate::signal::{SA_RESTART, SIGUSR1, SIGUSR2};
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    assert_eq!(g.call(1, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    let r = g.word(1, SCRATCH) as u64;
+    let child = g.fork(1);
+    catch(&mut g, child, SIGUSR1, 0);
+    catch(&mut g, child, SIGUSR2, SA_RESTART);
+    // A read from the empty pipe waits; SIGUSR1 (no SA_RESTART) ends it with EINTR after
+    // the handler.
+    let read = on_stack(nr::read, [r, SCRATCH + 0x200, 10, 0, 0, 0]);
+    assert!(g.serve(child, read).is_empty());
+    let replies = g.serve(
+        1,
+        World::message(nr::kill, [child as u64, SIGUSR1 as u64, 0, 0, 0, 0], 0),
+    );
+    assert_eq!(replies[0], (1, 0));
+    let (_, m) = g.host.resumed[1];
+    assert_eq!(m.registers.rip, HANDLER);
+    let back = sigreturn(&mut g, child, m.registers.rsp);
+    assert_eq!(back.registers.rax, err(Errno::EINTR));
+    // With SA_RESTART the thread goes back to its `syscall` instruction.
+    assert!(g.serve(child, read).is_empty());
+    g.serve(
+        1,
+        World::message(nr::kill, [child as u64, SIGUSR2 as u64, 0, 0, 0, 0], 0),
+    );
+    let (_, m) = g.host.resumed[1];
+    let back = sigreturn(&mut g, child, m.registers.rsp);
+    assert_eq!(
+        (back.registers.rax, back.registers.rip),
+        (nr::read, 0x40_1017)
+    );
+    // A signal that ends the process ends a waiting one too.
+    assert!(g.serve(child, read).is_empty());
+    g.serve(
+        1,
+        World::message(nr::kill, [child as u64, 9, 0, 0, 0, 0], 0),
+    );
+    assert_eq!(g.system.state(child), Some(State::Zombie(9)));
+}
+
+#[test]
+fn sleeps_end_when_their_time_comes_or_with_eintr() {
+    use crate::signal::SIGALRM;
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    // 2 s: the model's clock advances 1.5 s per reading.
+    g.put(
+        child,
+        SCRATCH,
+        &[2, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert!(
+        g.serve(child, on_stack(nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]))
+            .is_empty()
+    );
+    let due = g.system.next_timer().unwrap();
+    assert!(due > 0);
+    g.host.resumed.clear();
+    assert_eq!(g.system.tick(&g.fs, &mut g.host), None);
+    assert_eq!(g.host.resumed.len(), 1, "slept long enough");
+    assert_eq!(g.host.resumed[0].1.registers.rax, 0);
+    // An alarm interrupts a sleep: SIGALRM ends the process by default.
+    assert_eq!(g.call(child, nr::alarm, [1, 0, 0, 0, 0, 0]), Some(0));
+    g.put(
+        child,
+        SCRATCH,
+        &[100, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert!(
+        g.serve(child, on_stack(nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]))
+            .is_empty()
+    );
+    assert_eq!(g.system.tick(&g.fs, &mut g.host), None);
+    assert_eq!(g.system.state(child), Some(State::Zombie(SIGALRM)));
+    // Bad times are EINVAL.
+    g.put(
+        1,
+        SCRATCH,
+        &[0, 0, 0, 0, 0, 0, 0, 0, 0, 0xca, 0x9a, 0x3b, 0, 0, 0, 0],
+    );
+    assert_eq!(
+        g.call(1, nr::nanosleep, [SCRATCH, 0, 0, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
+    );
+}
+
+#[test]
+fn process_groups_sessions_and_group_signals() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let a = g.fork(1);
+    let b = g.fork(1);
+    assert_eq!(g.call(a, nr::getpgrp, [0; 6]), Some(1));
+    // A new group led by a; b joins it (its parent moves it).
+    assert_eq!(g.call(a, nr::setpgid, [0, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(
+        g.call(1, nr::setpgid, [b as u64, a as u64, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.call(b, nr::getpgid, [0; 6]), Some(a as u64));
+    assert_eq!(
+        g.call(1, nr::setpgid, [b as u64, 77, 0, 0, 0, 0]),
+        Some(err(Errno::EPERM))
+    );
+    assert_eq!(
+        g.call(a, nr::setpgid, [1, 0, 0, 0, 0, 0]),
+        Some(err(Errno::ESRCH))
+    );
+    // A group leader cannot start a session; b can.
+    assert_eq!(g.call(a, nr::setsid, [0; 6]), Some(err(Errno::EPERM)));
+    assert_eq!(g.call(b, nr::setsid, [0; 6]), Some(b as u64));
+    assert_eq!(
+        g.call(1, nr::getsid, [b as u64, 0, 0, 0, 0, 0]),
+        Some(b as u64)
+    );
+    assert_eq!(
+        g.call(1, nr::setpgid, [b as u64, 0, 0, 0, 0, 0]),
+        Some(err(Errno::EPERM))
+    );
+    // kill(-pgid) reaches the group.
+    assert_eq!(
+        g.call(1, nr::kill, [(-(a as i64)) as u64, 15, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.system.state(a), Some(State::Zombie(15)));
+    assert_eq!(g.system.state(b), Some(State::Running));
+    // waitid reports the child as a siginfo.
+    assert_eq!(
+        g.call(1, nr::waitid, [1, a as u64, SCRATCH, 4, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.word(1, SCRATCH), crate::signal::SIGCHLD);
+    assert_eq!(g.word(1, SCRATCH + 8), crate::signal::CLD_KILLED as u32);
+    assert_eq!(g.word(1, SCRATCH + 16), a);
+    assert_eq!(g.word(1, SCRATCH + 24), 15);
+}
+
+#[test]
+fn a_fault_goes_to_its_handler_with_the_address() {
+    use crate::signal::{SA_SIGINFO, SIGSEGV};
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    catch(&mut g, child, SIGSEGV, SA_SIGINFO);
+    let mut m = on_stack(0, [0; 6]);
+    (m.vector, m.error_code, m.fault_address) = (14, 6, 0xdead_0000);
+    g.host.resumed.clear();
+    let _ = g.system.serve(child, &g.fs, &mut g.host, m);
+    let (_, r) = g.host.resumed[0];
+    assert_eq!(r.registers.rip, HANDLER);
+    let info = r.registers.rsi;
+    assert_eq!(g.word(child, info + 8), crate::signal::SEGV_MAPERR as u32);
+    assert_eq!(g.get(child, info + 16, 8), 0xdead_0000u64.to_le_bytes());
+    // While the handler runs SIGSEGV is blocked: a second fault kills.
+    let _ = g.system.serve(child, &g.fs, &mut g.host, m);
+    assert_eq!(g.system.state(child), Some(State::Zombie(SIGSEGV)));
+}
+
+#[test]
+fn poll_and_select_wait_for_a_pipe_or_their_timeout() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    assert_eq!(g.call(1, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    let (r, w) = (g.word(1, SCRATCH) as u64, g.word(1, SCRATCH + 4));
+    let child = g.fork(1);
+    // pollfd {r, POLLIN}, {w, POLLOUT}: the write end is ready at once.
+    let table = |g: &mut Guest, pid: u32| {
+        let mut t = Vec::new();
+        t.extend_from_slice(&(r as i32).to_le_bytes());
+        t.extend_from_slice(&1u16.to_le_bytes());
+        t.extend_from_slice(&0u16.to_le_bytes());
+        t.extend_from_slice(&(w as i32).to_le_bytes());
+        t.extend_from_slice(&4u16.to_le_bytes());
+        t.extend_from_slice(&0u16.to_le_bytes());
+        g.put(pid, SCRATCH + 0x400, &t);
+    };
+    table(&mut g, child);
+    assert_eq!(
+        g.call(child, nr::poll, [SCRATCH + 0x400, 2, 0, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(g.get(child, SCRATCH + 0x406, 2), 0u16.to_le_bytes());
+    assert_eq!(g.get(child, SCRATCH + 0x40e, 2), 4u16.to_le_bytes());
+    // Only the read end, forever: waits until the parent writes.
+    assert_eq!(
+        g.call(child, nr::poll, [SCRATCH + 0x400, 1, u64::MAX, 0, 0, 0]),
+        None
+    );
+    g.put(1, SCRATCH + 0x300, b"x");
+    let replies = g.serve(
+        1,
+        World::message(nr::write, [w as u64, SCRATCH + 0x300, 1, 0, 0, 0], 0),
+    );
+    assert_eq!(replies, [(1, 1), (child, 1)]);
+    assert_eq!(g.get(child, SCRATCH + 0x406, 2), 1u16.to_le_bytes());
+    // select on the read end: readable; after reading it, a timeout ends it with 0.
+    g.put(child, SCRATCH + 0x500, &(1u64 << r).to_le_bytes());
+    assert_eq!(
+        g.call(child, nr::select, [r + 1, SCRATCH + 0x500, 0, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(
+        g.call(child, nr::read, [r, SCRATCH + 0x600, 1, 0, 0, 0]),
+        Some(1)
+    );
+    // (10 s: the model's clock advances 1.5 s per reading.)
+    g.put(
+        child,
+        SCRATCH + 0x510,
+        &[10, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert_eq!(
+        g.call(
+            child,
+            nr::select,
+            [r + 1, SCRATCH + 0x500, 0, 0, SCRATCH + 0x510, 0]
+        ),
+        None
+    );
+    g.host.resumed.clear();
+    for _ in 0..10 {
+        assert_eq!(g.system.tick(&g.fs, &mut g.host), None);
+    }
+    assert_eq!(g.host.resumed.len(), 1);
+    assert_eq!(g.host.resumed[0].1.registers.rax, 0);
+    assert_eq!(g.get(child, SCRATCH + 0x500, 8), 0u64.to_le_bytes());
+    // A closed descriptor: POLLNVAL for poll, EBADF for select.
+    g.put(child, SCRATCH + 0x500, &(1u64 << 20).to_le_bytes());
+    assert_eq!(
+        g.call(child, nr::select, [21, SCRATCH + 0x500, 0, 0, 0, 0]),
+        Some(err(Errno::EBADF))
+    );
+}
+
 /// Types `bytes` on the console of `host` (its echo is dropped).
 fn type_in(host: &mut Model, bytes: &[u8]) {
     let tty = host.tty.as_mut().unwrap();
@@ -1448,111 +1864,34 @@ fn a_reader_of_the_console_waits_without_stopping_the_others() {
 }
 
 #[test]
-fn console_signals_kill_the_foreground_leader_by_default() {
-    let bytes = initramfs();
-    let mut g = Guest::new(&bytes);
-    let child = g.fork(1);
-    let other = g.fork(1);
-    // `other` ignores SIGINT (rt_sigaction with SIG_IGN).
-    g.put(other, SCRATCH, &[1, 0, 0, 0, 0, 0, 0, 0]);
-    g.put(other, SCRATCH + 8, &[0; 24]);
-    assert_eq!(
-        g.call(other, nr::rt_sigaction, [2, SCRATCH, 0, 8, 0, 0]),
-        Some(0)
-    );
-    // init waits for `child`.
-    assert_eq!(g.call(1, nr::wait4, [child as u64, 0, 0, 0, 0, 0]), None);
-    for (signal, group) in [
-        (crate::linux::SIGINT, other),
-        (crate::linux::SIGINT, 1),
-        (crate::linux::SIGTSTP, child),
-        (crate::linux::SIGINT, 99),
-    ] {
-        g.system.terminal_signal(signal, group, &mut g.host);
-    }
-    assert!(g.host.released.is_empty(), "ignored, init, stop, nobody");
-    g.system
-        .terminal_signal(crate::linux::SIGQUIT, child, &mut g.host);
-    assert_eq!(g.host.released, [child]);
-    assert!(
-        g.host
-            .log
-            .iter()
-            .any(|l| l.ends_with("killed by signal 3 (SIGQUIT): from the console"))
-    );
-    g.host.resumed.clear();
-    assert_eq!(g.system.retry_blocked(&g.fs, &mut g.host), None);
-    let replies: Vec<(u32, u64)> = g
-        .host
-        .resumed
-        .iter()
-        .map(|(p, m)| (*p, m.registers.rax))
-        .collect();
-    assert_eq!(replies, [(1, child as u64)], "init's wait4 returns");
-}
-
-#[test]
-fn poll_waits_for_the_console() {
+fn poll_waits_for_the_console_terminal() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    w.host.tty = Some(Tty::new(1));
     let pollfd = |fd: i32, events: u16| {
         let mut b = fd.to_le_bytes().to_vec();
         b.extend_from_slice(&events.to_le_bytes());
         b.extend_from_slice(&[0xff, 0xff]);
         b
     };
-    // The console: nothing to read yet, writable.
-    let table = [pollfd(0, 1), pollfd(-1, 1), pollfd(40, 1)].concat();
-    w.put(SCRATCH, &table);
-    assert_eq!(
-        w.call(nr::poll, [SCRATCH, 3, 0, 0, 0, 0]),
-        1,
-        "only the closed one"
-    );
-    assert_eq!(w.get(SCRATCH + 6, 2), [0, 0]);
-    assert_eq!(
-        w.get(SCRATCH + 14, 2),
-        [0, 0],
-        "a negative descriptor is skipped"
-    );
-    assert_eq!(w.get(SCRATCH + 22, 2), [0x20, 0], "POLLNVAL");
+    // Without a terminal the console reads end of file: always readable.
     w.put(SCRATCH, &[pollfd(0, 1), pollfd(1, 4)].concat());
+    assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 2);
+    // With one: readable once a line came; always writable.
+    w.host.tty = Some(Tty::new(1));
     assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH + 6, 2), [0, 0]);
     assert_eq!(w.get(SCRATCH + 14, 2), [4, 0], "POLLOUT");
-    // Without a timeout it waits until a line came; a timeout ends at once.
     w.put(SCRATCH, &pollfd(0, 1));
     let (outcome, _) = w.run(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]);
-    assert_eq!(outcome, Outcome::Block);
-    let (outcome, _) = w.run(nr::ppoll, [SCRATCH, 1, 0, 0, 8, 0]);
-    assert_eq!(outcome, Outcome::Block);
-    w.put(SCRATCH + 64, &[0; 16]);
-    assert_eq!(w.call(nr::ppoll, [SCRATCH, 1, SCRATCH + 64, 0, 8, 0]), 0);
-    assert_eq!(w.call(nr::poll, [SCRATCH, 1, 50, 0, 0, 0]), 0);
-    type_in(&mut w.host, b"x\r");
+    assert_eq!(outcome, Outcome::Block, "no timeout: it waits");
+    type_in(&mut w.host, b"x");
+    let (outcome, _) = w.run(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]);
+    assert_eq!(
+        outcome,
+        Outcome::Block,
+        "a line in progress is not input yet"
+    );
+    type_in(&mut w.host, b"\r");
     assert_eq!(w.call(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]), 1);
     assert_eq!(w.get(SCRATCH + 6, 2), [1, 0], "POLLIN");
-    // A pipe: the write end is ready, the read end once there is data or no writer.
-    w.put(SCRATCH + 128, &[0; 8]);
-    assert_eq!(w.call(nr::pipe, [SCRATCH + 128, 0, 0, 0, 0, 0]), 0);
-    let (r, wr) = (
-        w.get(SCRATCH + 128, 1)[0] as i32,
-        w.get(SCRATCH + 132, 1)[0] as i32,
-    );
-    w.put(SCRATCH, &[pollfd(r, 1), pollfd(wr, 4)].concat());
-    assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 1);
-    assert_eq!(w.get(SCRATCH + 6, 2), [0, 0]);
-    assert_eq!(w.call(nr::close, [wr as u64, 0, 0, 0, 0, 0]), 0);
-    w.put(SCRATCH, &pollfd(r, 1));
-    assert_eq!(w.call(nr::poll, [SCRATCH, 1, 0, 0, 0, 0]), 1);
-    assert_eq!(
-        w.get(SCRATCH + 6, 2),
-        [0x11, 0],
-        "POLLIN | POLLHUP: end of file"
-    );
-    assert_eq!(
-        w.call(nr::poll, [SCRATCH, 65, 0, 0, 0, 0]),
-        err(Errno::EINVAL)
-    );
-    assert_eq!(w.call(nr::poll, [8, 1, 0, 0, 0, 0]), err(Errno::EFAULT));
 }

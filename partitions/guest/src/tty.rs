@@ -27,7 +27,8 @@
 //! This module is pure: it never touches the device or a process; it returns what to
 //! echo through the caller's output function and the signals as values.
 
-use crate::linux::{Errno, SIGINT, SIGQUIT, SIGTSTP};
+use crate::linux::Errno;
+use crate::signal::{SIGINT, SIGQUIT, SIGTSTP};
 
 /// Bytes the input queue holds (Linux's `N_TTY_BUF_SIZE`); a canonical line is at most
 /// one less.

@@ -161,6 +161,17 @@ pub fn thread_set(
     call(Call::ThreadSet, a.encode()).map(drop)
 }
 
+/// Copies the FPU/SSE state (FXSAVE image) of another thread (of a descendant task) into
+/// `image` (`write` = false) or loads it from there (`write` = true).
+pub fn thread_fpu(thread: ThreadId, image: &mut [u8; 512], write: bool) -> Result<(), Error> {
+    let a = args::ThreadFpu {
+        thread: thread.0,
+        buffer: image.as_mut_ptr() as u64,
+        write: write as u64,
+    };
+    call(Call::ThreadFpu, a.encode()).map(drop)
+}
+
 /// The calling thread and its task.
 pub fn thread_self() -> (ThreadId, TaskId) {
     let (_, r) = raw6(Call::ThreadSelf as u64, [0; 6]);

@@ -1,0 +1,234 @@
+//! Waiting for descriptors: `poll`, `ppoll`, `select` and `pselect6`. Each file kind says
+//! which events it has now ([`events`]); a call with nothing ready waits (its message is
+//! served again whenever something happened, see [`crate::system`]) until a descriptor is
+//! ready, its timeout passed (the process's `wake_at`), or a signal interrupts it.
+//! `ppoll` and `pselect6` wait with the signal mask they were given and restore the
+//! caller's afterwards.
+
+use crate::linux::Errno;
+use crate::pipe::Pipes;
+use crate::process::{File, MAX_FILES, Process};
+use crate::signal::UNBLOCKABLE;
+use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
+
+pub const POLLIN: u16 = 0x1;
+pub const POLLPRI: u16 = 0x2;
+pub const POLLOUT: u16 = 0x4;
+pub const POLLERR: u16 = 0x8;
+pub const POLLHUP: u16 = 0x10;
+pub const POLLNVAL: u16 = 0x20;
+pub const POLLRDNORM: u16 = 0x40;
+pub const POLLWRNORM: u16 = 0x100;
+
+/// Most descriptors one `poll` watches (the process's descriptor limit).
+const MAX_POLL: u64 = MAX_FILES as u64;
+
+/// The events descriptor `fd` of `p` has now (`POLLNVAL` for a closed one), the console's
+/// being `console` ([`console_events`]). `POLLERR` and `POLLHUP` are reported whether
+/// asked for or not.
+pub fn events(p: &Process, pipes: &Pipes, console: u16, fd: u64) -> u16 {
+    let ready = match p.file(fd) {
+        None => return POLLNVAL,
+        Some(File::Pipe { pipe, write, .. }) => pipes.poll(pipe, write),
+        Some(File::Console(_)) => console,
+        // Regular files never wait.
+        Some(_) => POLLIN | POLLOUT,
+    };
+    let normal = if ready & POLLIN != 0 { POLLRDNORM } else { 0 }
+        | if ready & POLLOUT != 0 { POLLWRNORM } else { 0 };
+    ready | normal
+}
+
+/// The console's events: its terminal's input readiness ([`crate::tty::Tty::readable`]),
+/// or, without a terminal, always readable (end of file); always writable.
+pub fn console_events(host: &mut impl Host) -> u16 {
+    let readable = host.tty().is_none_or(|t| t.readable());
+    (if readable { POLLIN } else { 0 }) | POLLOUT
+}
+
+/// The deadline of a wait: `None` (forever), `Some(0)` (do not wait), or when it ends on
+/// the guest's clock. Set on the first serve of the call, kept in `p.wake_at` after.
+fn deadline(p: &mut Process, host: &mut impl Host, timeout_ns: Option<u64>) -> Option<u64> {
+    match timeout_ns {
+        None => None,
+        Some(0) => Some(0),
+        Some(ns) => Some(
+            *p.wake_at
+                .get_or_insert_with(|| host.now_ns().saturating_add(ns)),
+        ),
+    }
+}
+
+/// Whether the wait is over without anything ready: its deadline passed.
+fn timed_out(host: &mut impl Host, deadline: Option<u64>) -> bool {
+    match deadline {
+        None => false,
+        Some(0) => true,
+        Some(at) => host.now_ns() >= at,
+    }
+}
+
+/// Ends a wait: the process's timer and temporary mask go.
+fn finish(p: &mut Process) {
+    p.wake_at = None;
+    if let Some(mask) = p.saved_mask.take() {
+        p.sigmask = mask;
+    }
+}
+
+/// Installs the mask `ppoll`/`pselect6` wait with (once: the call is served again while it
+/// waits).
+fn wait_mask(p: &mut Process, host: &mut impl Host, set: u64, size: u64) -> SysResult<()> {
+    if set == 0 || p.saved_mask.is_some() {
+        return Ok(());
+    }
+    if size != 8 {
+        return Err(Errno::EINVAL);
+    }
+    let mut b = [0u8; 8];
+    read_user(p, host, set, &mut b)?;
+    p.saved_mask = Some(p.sigmask);
+    p.sigmask = u64::from_le_bytes(b) & !UNBLOCKABLE;
+    Ok(())
+}
+
+/// A `struct timespec` (`ppoll`, `pselect6`) in ns; `None` for a null pointer.
+fn read_timeout(p: &Process, host: &mut impl Host, at: u64, micro: bool) -> SysResult<Option<u64>> {
+    if at == 0 {
+        return Ok(None);
+    }
+    let mut b = [0u8; 16];
+    read_user(p, host, at, &mut b)?;
+    let sec = i64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
+    let frac = i64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
+    let (limit, unit) = if micro {
+        (1_000_000, 1000)
+    } else {
+        (1_000_000_000, 1)
+    };
+    if sec < 0 || !(0..limit).contains(&frac) {
+        return Err(Errno::EINVAL);
+    }
+    Ok(Some(
+        (sec as u64)
+            .saturating_mul(1_000_000_000)
+            .saturating_add(frac as u64 * unit),
+    ))
+}
+
+/// `poll(fds, nfds, timeout_ms)` and `ppoll(fds, nfds, timeout, sigmask, size)`.
+#[allow(clippy::too_many_arguments)] // the calls' arguments
+pub fn poll(
+    p: &mut Process,
+    pipes: &Pipes,
+    host: &mut impl Host,
+    fds: u64,
+    nfds: u64,
+    timeout_ns: Option<u64>,
+    mask: u64,
+    mask_size: u64,
+) -> SysResult<u64> {
+    if nfds > MAX_POLL {
+        return Err(Errno::EINVAL);
+    }
+    let mut table = [0u8; MAX_POLL as usize * 8];
+    let table = &mut table[..nfds as usize * 8];
+    read_user(p, host, fds, table)?;
+    wait_mask(p, host, mask, mask_size)?;
+    let console = console_events(host);
+    let mut ready = 0;
+    for entry in table.chunks_exact_mut(8) {
+        let fd = i32::from_le_bytes(entry[..4].try_into().unwrap_or([0; 4]));
+        let asked = u16::from_le_bytes([entry[4], entry[5]]);
+        let got = if fd < 0 {
+            0
+        } else {
+            events(p, pipes, console, fd as u64) & (asked | POLLERR | POLLHUP | POLLNVAL)
+        };
+        entry[6..8].copy_from_slice(&got.to_le_bytes());
+        ready += u64::from(got != 0);
+    }
+    let deadline = deadline(p, host, timeout_ns);
+    if ready == 0 && !timed_out(host, deadline) {
+        return Err(WOULD_BLOCK);
+    }
+    finish(p);
+    write_user(p, host, fds, table)?;
+    Ok(ready)
+}
+
+/// `poll`'s timeout in ms (negative: forever) as ns.
+pub fn poll_timeout(ms: u64) -> Option<u64> {
+    let ms = ms as i32;
+    (ms >= 0).then(|| ms as u64 * 1_000_000)
+}
+
+/// `ppoll`'s timeout.
+pub fn ppoll_timeout(p: &Process, host: &mut impl Host, at: u64) -> SysResult<Option<u64>> {
+    read_timeout(p, host, at, false)
+}
+
+/// `select(nfds, readfds, writefds, exceptfds, timeval)` and `pselect6(..., timespec,
+/// {sigmask, size})`.
+pub fn select(
+    p: &mut Process,
+    pipes: &Pipes,
+    host: &mut impl Host,
+    a: [u64; 6],
+    pselect: bool,
+) -> SysResult<u64> {
+    let [nfds, sets @ .., timeout] = [a[0], a[1], a[2], a[3], a[4]];
+    if nfds > MAX_FILES as u64 {
+        return Err(Errno::EINVAL);
+    }
+    let timeout_ns = read_timeout(p, host, timeout, !pselect)?;
+    if pselect && a[5] != 0 {
+        let mut b = [0u8; 16];
+        read_user(p, host, a[5], &mut b)?;
+        let set = u64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
+        let size = u64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
+        wait_mask(p, host, set, size)?;
+    }
+    let bytes = (nfds as usize).div_ceil(64) * 8;
+    let mut asked = [0u64; 3];
+    for (set, &at) in asked.iter_mut().zip(&sets) {
+        if at != 0 {
+            let mut b = [0u8; 8];
+            read_user(p, host, at, &mut b[..bytes])?;
+            *set = u64::from_le_bytes(b);
+        }
+    }
+    let console = console_events(host);
+    let mut got = [0u64; 3];
+    for fd in 0..nfds {
+        let bit = 1 << fd;
+        if (asked[0] | asked[1] | asked[2]) & bit == 0 {
+            continue;
+        }
+        let ev = events(p, pipes, console, fd);
+        if ev & POLLNVAL != 0 {
+            return Err(Errno::EBADF);
+        }
+        if ev & (POLLIN | POLLHUP | POLLERR) != 0 {
+            got[0] |= asked[0] & bit;
+        }
+        if ev & (POLLOUT | POLLERR) != 0 {
+            got[1] |= asked[1] & bit;
+        }
+        if ev & POLLPRI != 0 {
+            got[2] |= asked[2] & bit;
+        }
+    }
+    let ready: u32 = got.iter().map(|s| s.count_ones()).sum();
+    let deadline = deadline(p, host, timeout_ns);
+    if ready == 0 && !timed_out(host, deadline) {
+        return Err(WOULD_BLOCK);
+    }
+    finish(p);
+    for (set, &at) in got.iter().zip(&sets) {
+        if at != 0 {
+            write_user(p, host, at, &set.to_le_bytes()[..bytes])?;
+        }
+    }
+    Ok(ready as u64)
+}

@@ -1,0 +1,13 @@
+# Scenario guest_processes: 200 short processes one after the other, ten at once, and an
+# orphan that init (this shell) inherits and reaps.
+i=0
+while [ $i -lt 200 ]; do /bin/true; i=$((i+1)); done
+echo "ran $i processes"
+for n in 1 2 3 4 5 6 7 8 9 10; do /bin/busybox sleep 0.05 & done
+wait
+echo "ten in parallel reaped"
+/bin/busybox sh -c '/bin/busybox sleep 0.1 & echo orphan started'
+echo "its parent is gone"
+/bin/busybox sleep 0.3
+/bin/true
+echo done
