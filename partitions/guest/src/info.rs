@@ -51,14 +51,15 @@ pub fn call(
         nr::setgroups if a[0] > 65536 => Err(Errno::EINVAL),
         nr::setgroups => Ok(0),
         nr::getrusage => match a[0] as i32 {
-            0 | -1 | 1 => write_user(p, host, a[1], &[0; 144]).map(|()| 0),
+            // RUSAGE_SELF, RUSAGE_CHILDREN, RUSAGE_THREAD
+            -1..=1 => write_user(p, host, a[1], &[0; 144]).map(|()| 0),
             _ => Err(Errno::EINVAL),
         },
         nr::times => {
-            if a[0] != 0 {
-                if let Err(e) = write_user(p, host, a[0], &[0; 32]) {
-                    return Some(Err(e));
-                }
+            if a[0] != 0
+                && let Err(e) = write_user(p, host, a[0], &[0; 32])
+            {
+                return Some(Err(e));
             }
             Ok(host.now_ns() / (1_000_000_000 / TICKS_PER_S))
         }
