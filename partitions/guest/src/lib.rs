@@ -57,6 +57,7 @@ pub mod console;
 pub mod cpio;
 pub mod elf;
 pub mod exec;
+pub mod info;
 pub mod linux;
 pub mod memory;
 pub mod pipe;

@@ -32,6 +32,7 @@ impl Errno {
     pub const ERANGE: Self = Self(34);
     pub const ENAMETOOLONG: Self = Self(36);
     pub const ENOSYS: Self = Self(38);
+    pub const ETIMEDOUT: Self = Self(110);
     pub const ELOOP: Self = Self(40);
 
     /// Its symbolic name and meaning, for messages.
@@ -122,7 +123,9 @@ syscalls! {
     umask = 95,
     gettimeofday = 96,
     getrlimit = 97,
+    getrusage = 98,
     sysinfo = 99,
+    times = 100,
     getuid = 102,
     getgid = 104,
     setuid = 105,
@@ -133,18 +136,31 @@ syscalls! {
     getppid = 110,
     getpgrp = 111,
     setsid = 112,
+    setreuid = 113,
+    setregid = 114,
+    getgroups = 115,
+    setgroups = 116,
+    setresuid = 117,
+    getresuid = 118,
+    setresgid = 119,
+    getresgid = 120,
     getpgid = 121,
     getsid = 124,
     rt_sigpending = 127,
     rt_sigtimedwait = 128,
     rt_sigsuspend = 130,
     sigaltstack = 131,
+    getpriority = 140,
+    setpriority = 141,
     prctl = 157,
     arch_prctl = 158,
+    mount = 165,
     gettid = 186,
     tkill = 200,
     time = 201,
     futex = 202,
+    sched_setaffinity = 203,
+    sched_getaffinity = 204,
     getdents64 = 217,
     set_tid_address = 218,
     clock_gettime = 228,

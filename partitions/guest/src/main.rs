@@ -618,6 +618,11 @@ impl Host for GuestHost<'_> {
         sys::clock().saturating_sub(self.started)
     }
 
+    fn memory(&mut self) -> (u64, u64) {
+        let frames = self.frames.len() as u64 / PAGE;
+        (frames * PAGE, self.pool.free_pages() as u64 * PAGE)
+    }
+
     fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno> {
         let thread = self.task(self.current).ok_or(Errno::ESRCH)?.thread;
         sys::thread_fpu(thread, image, false).map_err(|_| Errno::EFAULT)

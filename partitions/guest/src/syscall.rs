@@ -17,7 +17,9 @@
 //! waits of [`crate::poll`] (`poll`, `ppoll`, `select`, `pselect6`), `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
-//! the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
+//! the identity and resource calls of [`crate::info`] (the uid/gid calls, `getrusage`,
+//! `times`, `sched_getaffinity`, `sched_setaffinity`, `getpriority`, `setpriority`,
+//! `futex`), `sysinfo` (the process table's), the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
 //! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve`,
 //! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `setpgid`, `getpgid`, `setsid` and
 //! `getsid` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
@@ -83,6 +85,8 @@ pub trait Host {
     }
     /// Nanoseconds since the guest started.
     fn now_ns(&mut self) -> u64;
+    /// The guest's memory for its processes: total and free bytes.
+    fn memory(&mut self) -> (u64, u64);
     /// Copies the FPU/SSE state (FXSAVE image) of the process's thread into `image`.
     fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno>;
     /// Loads the FPU/SSE state of the process's thread from `image`.
@@ -155,7 +159,8 @@ pub fn handle<'a>(
         | nr::setpgid
         | nr::getpgid
         | nr::setsid
-        | nr::getsid => return Outcome::Process,
+        | nr::getsid
+        | nr::sysinfo => return Outcome::Process,
         nr::rt_sigreturn => {
             return match sigcalls::sigreturn(p, host, m) {
                 Some(()) => Outcome::Resume,
@@ -169,7 +174,10 @@ pub fn handle<'a>(
                 }
             };
         }
-        _ => call(p, pipes, fs, host, number, args, r),
+        _ => match crate::info::call(p, host, number, args) {
+            Some(result) => result,
+            None => call(p, pipes, fs, host, number, args, r),
+        },
     };
     r.rax = match result {
         Ok(value) => value,

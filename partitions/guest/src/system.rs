@@ -736,6 +736,13 @@ impl<'a> System<'a> {
                     nr::getpgid => self.group_of(i, args[0], false),
                     nr::getsid => self.group_of(i, args[0], true),
                     nr::setsid => self.setsid(i),
+                    nr::sysinfo => {
+                        let (total, free) = k.memory();
+                        let count = self.pids().count() as u16;
+                        let record = crate::info::sysinfo_record(k.now_ns(), total, free, count);
+                        let p = &self.slots[i].as_ref()?.process;
+                        syscall::write_user(p, k, args[0], &record).map(|()| 0)
+                    }
                     nr::wait4 | nr::waitid => {
                         let waited = if r.rax == nr::wait4 {
                             self.wait(i, k, Wait::wait4(args[0] as i32, args[2]), args[1], args[3])

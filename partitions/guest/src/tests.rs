@@ -116,6 +116,9 @@ impl Host for Model {
         self.now += 1_500_000_000;
         self.now
     }
+    fn memory(&mut self) -> (u64, u64) {
+        (100_000 * PAGE, self.budget * PAGE)
+    }
     fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno> {
         *image = self.fpu.get(&self.current).copied().unwrap_or([0x11; 512]);
         Ok(())
@@ -718,14 +721,14 @@ fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
 fn unsupported_calls_and_faults() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::futex, [0; 6]), err(Errno::ENOSYS));
-    assert_eq!(w.call(nr::futex, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::mount, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::mount, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(5000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(6000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 202 (futex), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 165 (mount), returning ENOSYS",
             "guest: process 1 (busybox): unsupported system call 5000 (unknown), returning ENOSYS",
         ]
     );
@@ -1730,6 +1733,60 @@ fn poll_and_select_wait_for_a_pipe_or_their_timeout() {
         g.call(child, nr::select, [21, SCRATCH + 0x500, 0, 0, 0, 0]),
         Some(err(Errno::EBADF))
     );
+}
+
+#[test]
+fn identity_resources_and_futex_of_a_single_threaded_root_process() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    assert_eq!(g.call(1, nr::setuid, [0; 6]), Some(0));
+    assert_eq!(
+        g.call(1, nr::setuid, [1000, 0, 0, 0, 0, 0]),
+        Some(err(Errno::EPERM))
+    );
+    assert_eq!(
+        g.call(1, nr::setresgid, [u64::MAX, 0, u64::MAX, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.call(1, nr::getgroups, [0; 6]), Some(0));
+    assert_eq!(
+        g.call(1, nr::sched_getaffinity, [0, 128, SCRATCH, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(g.get(1, SCRATCH, 8), 1u64.to_le_bytes());
+    assert_eq!(
+        g.call(1, nr::getrusage, [5, SCRATCH, 0, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
+    );
+    assert_eq!(g.call(1, nr::sysinfo, [SCRATCH, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.get(1, SCRATCH + 80, 2), 1u16.to_le_bytes(), "one process");
+    assert_eq!(g.get(1, SCRATCH + 32, 8), (100_000 * PAGE).to_le_bytes());
+    // A futex wait on a changed word is EAGAIN; on the same word it waits (nobody else can
+    // wake it) until its timeout.
+    g.put(1, SCRATCH, &7u32.to_le_bytes());
+    assert_eq!(
+        g.call(1, nr::futex, [SCRATCH, 128, 8, 0, 0, 0]),
+        Some(err(Errno::EAGAIN))
+    );
+    assert_eq!(
+        g.call(1, nr::futex, [SCRATCH, 129, 1, 0, 0, 0]),
+        Some(0),
+        "wake"
+    );
+    g.put(
+        1,
+        SCRATCH + 16,
+        &[10, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert_eq!(
+        g.call(1, nr::futex, [SCRATCH, 128, 7, SCRATCH + 16, 0, 0]),
+        None
+    );
+    g.host.resumed.clear();
+    for _ in 0..10 {
+        assert_eq!(g.system.tick(&g.fs, &mut g.host), None);
+    }
+    assert_eq!(g.host.resumed[0].1.registers.rax, err(Errno::ETIMEDOUT));
 }
 
 /// Types `bytes` on the console of `host` (its echo is dropped).
