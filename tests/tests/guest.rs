@@ -276,7 +276,7 @@ fn guest_console() {
         "expected success exit (33): the shell's end ends the run",
     );
     let lines = o.console_lines();
-    let has = |text: &str| lines.iter().any(|l| *l == text);
+    let has = |text: &str| lines.contains(&text);
     // The shell's line editor erased two characters of "typo" before "pe".
     for expected in ["hello from the console", "type"] {
         check(&o, has(expected), &format!("console: no line {expected:?}"));
