@@ -288,7 +288,11 @@ fn guest_console() {
         o.console.contains("one tw\x08 \x08o\r\none to\r\n"),
         "console: cat's echoed and edited line",
     );
-    check(&o, !has("typo"), "console: the erased characters stayed");
+    check(
+        &o,
+        !has("typo"),
+        "console: the erased characters reached the shell",
+    );
     // The Ctrl-C: the shell had made the second `cat` the foreground process group.
     check(
         &o,
