@@ -265,7 +265,8 @@ fn guest_processes() {
 /// Scenario guest_console (`tests/configs/guest_console.toml`): the console of guest
 /// `linux` is a terminal on COM2 running an interactive `/bin/sh`; the scenario types
 /// commands into it: two `echo`s (one with erased characters), `cat` with a line and a
-/// Ctrl-D, `cat` with a Ctrl-C, a Ctrl-D at the prompt.
+/// Ctrl-D, `cat` with a Ctrl-C, `cat` with a Ctrl-Z then `fg`, a line and a Ctrl-D, a
+/// Ctrl-D at the prompt.
 #[test]
 fn guest_console() {
     let o = boot("guest_console");
@@ -301,10 +302,27 @@ fn guest_console() {
         "the Ctrl-C killed the second cat",
     );
     check(&o, o.console.contains("^C"), "console: the echoed ^C");
-    // At the Ctrl-D the shell exits with the last command's status: 128 + SIGINT.
+    // The Ctrl-Z stopped the third `cat` (SIGTSTP), `fg` made it the foreground again and
+    // continued it: it read a line and ended at its Ctrl-D.
     check(
         &o,
-        guest_lines(&o, "linux", "guest: init exited with status 130").len() == 1,
+        o.console
+            .contains("^Z[1]+  Stopped                    cat\r\n"),
+        "console: the shell's job report of the stopped cat",
+    );
+    check(
+        &o,
+        o.console.contains("back\r\nback\r\n"),
+        "console: the continued cat's echoed and copied line",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: process 4 exited with status 0").len() == 1,
+        "the continued cat ended",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: init exited with status 0").len() == 1,
         "the shell ended at the Ctrl-D",
     );
     check(
