@@ -287,15 +287,14 @@ fn type_console(
 /// Follows COM1's log file (`Com2::Terminal`), a line at a time, until `done`.
 fn follow(path: PathBuf, tx: mpsc::Sender<String>, done: Arc<Mutex<bool>>) {
     std::thread::spawn(move || {
-        let mut at = 0;
+        let Ok(mut file) = std::fs::File::open(&path) else {
+            return;
+        };
         let mut pending = Vec::new();
         loop {
             let finished = *done.lock().unwrap_or_else(|e| e.into_inner());
-            if let Ok(bytes) = std::fs::read(&path)
-                && bytes.len() > at
-            {
-                pending.extend_from_slice(&bytes[at..]);
-                at = bytes.len();
+            // Reads on from where the last read ended.
+            if std::io::Read::read_to_end(&mut file, &mut pending).is_ok() {
                 while let Some(end) = pending.iter().position(|&b| b == b'\n') {
                     let line: Vec<u8> = pending.drain(..=end).collect();
                     let text = String::from_utf8_lossy(&line)

@@ -21,6 +21,7 @@ const FCR: u16 = BASE + 2;
 const LCR: u16 = BASE + 3;
 const MCR: u16 = BASE + 4;
 const LSR: u16 = BASE + 5;
+const SCRATCH: u16 = BASE + 7;
 /// `LSR`: a received byte waits; the transmit holding register is empty.
 const LSR_DATA_READY: u8 = 0x01;
 const LSR_THR_EMPTY: u8 = 0x20;
@@ -43,8 +44,13 @@ struct Stack([u8; STACK_SIZE]);
 static mut READER_STACK: Stack = Stack([0; STACK_SIZE]);
 
 /// Sets the UART up: 8N1, FIFO on with a trigger level of one byte, the interrupt on
-/// received data.
-pub fn init() {
+/// received data. `false` when there is no UART (its scratch register does not keep a
+/// byte: absent ports read 0xff, which would look like endless input).
+pub fn init() -> bool {
+    outb(SCRATCH, 0x5a);
+    if inb(SCRATCH) != 0x5a {
+        return false;
+    }
     outb(IER, 0);
     outb(LCR, 0x80); // divisor latch: 115200 baud
     outb(DATA, 1);
@@ -53,6 +59,7 @@ pub fn init() {
     outb(FCR, 0x07);
     outb(MCR, 0x0b); // DTR, RTS, OUT2 (the PC's interrupt gate)
     outb(IER, 0x01);
+    true
 }
 
 /// Writes one byte (dropped when the device does not take it).

@@ -44,7 +44,8 @@
 //!   `: no room for the frame ...` or `: rt_sigreturn without a readable signal frame`
 //!   when a handler's frame could not be written or read back;
 //! - `guest: console: cannot start the COM2 reader: <error>` or `guest: console: cannot
-//!   attach interrupt line 3: <error>` (the console then has no input);
+//!   attach interrupt line 3: <error>` (the console then has no input), `guest: console:
+//!   no UART at COM2's ports, the console is the log`;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS`, once per call number and process;
 //! - `guest: init ended with <n> other processes left` (zombies included), then

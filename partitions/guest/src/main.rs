@@ -128,8 +128,9 @@ fn main(start: u64, _: u64) {
         .get(guest::CONSOLE_PATH)
         .is_some_and(|e| e.data.trim_ascii() == b"com2");
     let mut reader = None;
-    if wants_terminal {
-        com2::init();
+    if wants_terminal && !com2::init() {
+        println!("guest: console: no UART at COM2's ports, the console is the log");
+    } else if wants_terminal {
         match com2::start_reader(me, info.priority as u8) {
             Ok(thread) => {
                 reader = Some(thread);
