@@ -265,8 +265,8 @@ fn guest_processes() {
 /// Scenario guest_console (`tests/configs/guest_console.toml`): the console of guest
 /// `linux` is a terminal on COM2 running an interactive `/bin/sh`; the scenario types
 /// commands into it: two `echo`s (one with erased characters), `cat` with a line and a
-/// Ctrl-D, `cat` with a Ctrl-C, `cat` with a Ctrl-Z then `fg`, a line and a Ctrl-D, a
-/// Ctrl-D at the prompt.
+/// Ctrl-D, `cat` with a Ctrl-C, `cat` with a Ctrl-Z then `fg`, a line and a Ctrl-D, `cat &`
+/// then `fg`, a line and a Ctrl-D, a Ctrl-D at the prompt.
 #[test]
 fn guest_console() {
     let o = boot("guest_console");
@@ -319,6 +319,25 @@ fn guest_console() {
         &o,
         guest_lines(&o, "linux", "guest: process 4 exited with status 0").len() == 1,
         "the continued cat ended",
+    );
+    // `cat &` read the terminal in the background: SIGTTIN stopped it (the shell's job
+    // report at a later prompt) until `fg` brought it to the foreground.
+    check(
+        &o,
+        o.console
+            .contains("[1]+  Stopped (tty input)        cat\r\n"),
+        "console: the background cat stopped by SIGTTIN",
+    );
+    check(
+        &o,
+        o.console
+            .contains("from the background\r\nfrom the background\r\n"),
+        "console: the foreground cat's echoed and copied line",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: process 5 exited with status 0").len() == 1,
+        "the background cat ended",
     );
     check(
         &o,

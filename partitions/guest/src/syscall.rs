@@ -597,6 +597,17 @@ fn read(
             let Some(tty) = host.tty() else {
                 return Ok(0); // no terminal: end of file
             };
+            if tty.session() == p.sid && tty.foreground() != p.pgid {
+                // A background job reading its terminal: SIGTTIN stops it, and the read
+                // starts again when it is continued (in the foreground); EIO when it
+                // would not stop.
+                let ttin = signal::SIGTTIN;
+                if p.action(ttin).ignores(ttin) || p.sigmask & signal::bit(ttin) != 0 {
+                    return Err(Errno::EIO);
+                }
+                p.raise(Info::kernel(ttin));
+                return Err(WOULD_BLOCK);
+            }
             let mut bytes = [0u8; tty::INPUT_MAX];
             let n = tty.read(&mut bytes[..n]).ok_or(WOULD_BLOCK)?;
             host.write_user(buf, &bytes[..n])?;
@@ -718,8 +729,14 @@ fn tty_ioctl(p: &Process, host: &mut impl Host, request: u64, arg: u64) -> SysRe
             1 => {} // TCOFLUSH: output never waits, nothing to discard
             _ => return Err(Errno::EINVAL),
         },
-        // One console is every process's controlling terminal; output is never stopped.
-        TIOCSCTTY | TCXONC => {}
+        // A session leader makes the console its controlling terminal (every process has
+        // it as init's session's); output is never stopped.
+        TIOCSCTTY => {
+            if p.sid == p.pid {
+                tty.set_session(p.sid, p.pgid);
+            }
+        }
+        TCXONC => {}
         _ => return Err(Errno::ENOTTY),
     }
     Ok(0)

@@ -1952,3 +1952,52 @@ fn poll_waits_for_the_console_terminal() {
     assert_eq!(w.call(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]), 1);
     assert_eq!(w.get(SCRATCH + 6, 2), [1, 0], "POLLIN");
 }
+
+#[test]
+fn a_background_reader_of_the_terminal_is_stopped_until_it_is_in_the_foreground() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    g.host.tty = Some(Tty::new(1));
+    let child = g.fork(1);
+    // The child in a process group of its own, not the terminal's foreground one.
+    assert_eq!(g.call(child, nr::setpgid, [0, 0, 0, 0, 0, 0]), Some(0));
+    type_in(&mut g.host, b"typed\r");
+    // Its read stops it (its thread is suspended) and is set to run again (rip back at
+    // the `syscall` instruction, rax the call's number).
+    g.host.resumed.clear();
+    let _ = g.system.serve(
+        child,
+        &g.fs,
+        &mut g.host,
+        World::message(nr::read, [0, SCRATCH, 100, 0, 0, 0], 0),
+    );
+    assert_eq!(g.host.suspended, [child], "SIGTTIN stopped it");
+    let (pid, m) = g.host.resumed[0];
+    assert_eq!(
+        (pid, m.registers.rax, m.registers.rip),
+        (child, nr::read, 0x40_1019 - 2)
+    );
+    // In the foreground and continued, the read again takes the line.
+    g.host
+        .tty
+        .as_mut()
+        .unwrap()
+        .set_foreground(child as i32)
+        .unwrap();
+    assert_eq!(g.call(1, nr::kill, [child as u64, 18, 0, 0, 0, 0]), Some(0));
+    assert!(g.host.suspended.is_empty());
+    assert_eq!(g.call(child, nr::read, [0, SCRATCH, 100, 0, 0, 0]), Some(6));
+    assert_eq!(g.get(child, SCRATCH, 6), b"typed\n");
+    // One that ignores SIGTTIN reads EIO.
+    g.host.tty.as_mut().unwrap().set_foreground(1).unwrap();
+    g.put(child, SCRATCH, &[1, 0, 0, 0, 0, 0, 0, 0]);
+    g.put(child, SCRATCH + 8, &[0; 24]);
+    assert_eq!(
+        g.call(child, nr::rt_sigaction, [21, SCRATCH, 0, 8, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(
+        g.call(child, nr::read, [0, SCRATCH, 100, 0, 0, 0]),
+        Some(err(Errno::EIO))
+    );
+}

@@ -20,9 +20,11 @@
 //! - **Output** ([`Tty::write`]): with `OPOST`, `ONLCR` turns `\n` into `\r\n` and
 //!   `OCRNL` `\r` into `\n`. Output never waits (the device takes every byte).
 //!
-//! Not kept: flow control (`IXON`/`IXOFF`: `VSTART`/`VSTOP` are data), parity and speed
-//! (`c_cflag` is stored and reported only), `SIGTTIN`/`SIGTTOU` for background groups,
-//! `SIGWINCH`. Tabs are erased as one column.
+//! It also knows the session it is the controlling terminal of ([`Tty::session`]): a
+//! process of that session outside the foreground group that reads it gets `SIGTTIN`
+//! (`crate::syscall`'s `read`). Not kept: flow control (`IXON`/`IXOFF`: `VSTART`/`VSTOP`
+//! are data), parity and speed (`c_cflag` is stored and reported only), `SIGTTOU`
+//! (`TOSTOP`), `SIGWINCH`. Tabs are erased as one column.
 //!
 //! This module is pure: it never touches the device or a process; it returns what to
 //! echo through the caller's output function and the signals as values.
@@ -223,6 +225,9 @@ pub struct Tty {
     winsize: Winsize,
     /// The foreground process group (who gets the control characters' signals).
     foreground: u32,
+    /// The session whose controlling terminal it is (its background groups get `SIGTTIN`
+    /// when they read).
+    session: u32,
     /// The input: bytes and [`EOF_MARK`]s; `queue[..ready]` can be read, the rest is the
     /// canonical line being edited.
     queue: [u16; INPUT_MAX],
@@ -233,8 +238,9 @@ pub struct Tty {
 }
 
 impl Tty {
-    /// A terminal with Linux's defaults whose foreground group is `foreground` (the
-    /// guest's first process: the console is its controlling terminal), 24 by 80.
+    /// A terminal with Linux's defaults whose foreground group and session are
+    /// `foreground` (the guest's first process: the console is its controlling terminal),
+    /// 24 by 80.
     pub fn new(foreground: u32) -> Self {
         Self {
             termios: Termios::default(),
@@ -244,6 +250,7 @@ impl Tty {
                 ..Winsize::default()
             },
             foreground,
+            session: foreground,
             queue: [0; INPUT_MAX],
             len: 0,
             ready: 0,
@@ -283,6 +290,17 @@ impl Tty {
 
     pub fn foreground(&self) -> u32 {
         self.foreground
+    }
+
+    pub fn session(&self) -> u32 {
+        self.session
+    }
+
+    /// `TIOCSCTTY` of session leader `session`, in process group `group`: the terminal
+    /// becomes its controlling terminal, with `group` in the foreground.
+    pub fn set_session(&mut self, session: u32, group: u32) {
+        self.session = session;
+        self.foreground = group;
     }
 
     /// `TIOCSPGRP`: a group id must be positive (`EINVAL`).
