@@ -609,6 +609,45 @@ fn exception_round_trip_with_edited_registers() {
 }
 
 #[test]
+fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
+    let mut f = Fixture::new();
+    let handler = f.thread(ROOT, 200);
+    let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
+    let t = f.thread(guest, 50);
+    let tid = f.id(t);
+    f.k.threads[t].context.rip = 0x40_2000;
+    // Without a handler there is nobody to tell.
+    let interrupt = |f: &mut Fixture| f.sys(handler, Call::ThreadInterrupt, [tid, 0, 0, 0, 0, 0]);
+    assert_eq!(interrupt(&mut f), err(Error::InvalidArgument));
+    f.k.threads[t].exception_handler = f.id(handler);
+    assert_eq!(f.k.threads[t].state, State::Ready);
+    assert_eq!(interrupt(&mut f), OK);
+    assert_eq!(f.k.threads[handler].context.rdi, 1);
+    assert_eq!(
+        f.k.threads[t].state,
+        State::Sending {
+            to: handler,
+            call: true
+        }
+    );
+    f.sys(handler, Call::Receive, [0, 0, 0, 0, 0, 0]);
+    let bytes = f.read(
+        handler,
+        BUFFER_AT + handler.position() as u64 * 0x4000,
+        EXCEPTION_MESSAGE_SIZE,
+    );
+    let m = ExceptionMessage::from_bytes(&bytes).unwrap();
+    assert_eq!((m.vector, m.registers.rip), (VECTOR_INTERRUPT, 0x40_2000));
+    // Now it waits for the reply (in the kernel): left alone.
+    assert_eq!(interrupt(&mut f), OK);
+    assert_eq!(f.k.threads[handler].context.rdi, 0);
+    assert_eq!(
+        f.sys(handler, Call::ThreadInterrupt, [0, 0, 0, 0, 0, 0]),
+        err(Error::InvalidArgument)
+    );
+}
+
+#[test]
 fn syscalls_of_non_native_tasks_go_to_the_handler() {
     let mut f = Fixture::new();
     let handler = f.thread(ROOT, 200);

@@ -12,7 +12,9 @@ use crate::table::{Slot, TaskIdx, ThreadIdx};
 use crate::thread::{Fault, State};
 use crate::timepart::{Schedule, Window};
 use abi::args::{self, ArgRegs};
-use abi::ipc::{IPC_BUFFER_SIZE, LABEL_SYSCALL, MessageTag, VECTOR_SYSCALL};
+use abi::ipc::{
+    IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL, MessageTag, VECTOR_INTERRUPT, VECTOR_SYSCALL,
+};
 use abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_SCHEDULES, MAX_WINDOWS, PageRights, TASK_NAME_MAX,
     TIME_PARTITIONS, ThreadAttribute, USER_END,
@@ -65,7 +67,8 @@ handlers! {
     TaskCreate => task_create, TaskKill => task_kill, TaskAllowSend => task_allow_send,
     ThreadCreate => thread_create, ThreadStart => thread_start, ThreadSuspend => thread_suspend,
     ThreadResume => thread_resume, ThreadKill => thread_kill, ThreadSet => thread_set,
-    ThreadSelf => thread_self, ThreadFpu => thread_fpu, Map => map, MapPhysical => map_physical, Unmap => unmap,
+    ThreadSelf => thread_self, ThreadFpu => thread_fpu,
+    ThreadInterrupt => thread_interrupt, Map => map, MapPhysical => map_physical, Unmap => unmap,
     Protect => protect, Send => send, Receive => receive, Call => ipc_call,
     ReplyWait => reply_wait, Reply => reply, NotifySignal => notify_signal,
     NotifyWait => notify_wait, RpCreate => rp_create, RpInfo => rp_info,
@@ -307,6 +310,27 @@ fn thread_fpu(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
         return Err(Error::BadAddress);
     }
     k.threads[target].fpu = k.threads[target].fpu.sanitized(image);
+    Ok(Next::Return)
+}
+
+fn thread_interrupt(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
+    let handler = k.thread(k.threads[target].exception_handler);
+    if target == t || handler.is_err() {
+        return Err(Error::InvalidArgument);
+    }
+    // One CPU: the caller runs, so a ready target is preempted in user mode.
+    let interrupted = k.threads[target].state == State::Ready;
+    if interrupted {
+        let fault = Fault {
+            label: LABEL_EXCEPTION,
+            vector: VECTOR_INTERRUPT,
+            error_code: 0,
+            address: 0,
+        };
+        k.raise_fault(target, fault);
+    }
+    k.threads[t].context.rdi = interrupted as u64;
     Ok(Next::Return)
 }
 

@@ -227,6 +227,8 @@ fn guest_signals() {
         "pipeline status 0",
         "alarm rang",
         "after alarm",
+        "busy loop interrupted",
+        "busy status 3",
         "done",
     ];
     check(&o, printed == expected, &format!("printed {printed:?}"));

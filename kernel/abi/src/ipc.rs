@@ -40,6 +40,9 @@ pub const REPLY_KILL: u32 = 1;
 
 /// Pseudo-vector of a forwarded `syscall` in an [`ExceptionMessage`].
 pub const VECTOR_SYSCALL: u64 = 0x100;
+/// Pseudo-vector of a thread stopped by `thread_interrupt` where it was running (its
+/// registers are those of the next instruction it would have executed).
+pub const VECTOR_INTERRUPT: u64 = 0x101;
 
 /// Message descriptor: label (bits 0..32), data length in bytes (bits 32..45), map-item
 /// count (bits 48..51).
@@ -162,7 +165,7 @@ pub struct Registers {
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ExceptionMessage {
-    /// CPU exception vector (0..32) or [`VECTOR_SYSCALL`].
+    /// CPU exception vector (0..32), [`VECTOR_SYSCALL`] or [`VECTOR_INTERRUPT`].
     pub vector: u64,
     pub error_code: u64,
     /// CR2 for a page fault, else 0.

@@ -133,6 +133,15 @@ codes::code_enum! {
         /// (the calling thread itself, `write` > 1), `BadAddress` (`buffer` not 512 bytes of
         /// readable, or for `write` = 0 writable, user memory).
         ThreadFpu = 27 => "thread_fpu",
+        /// `thread_interrupt(thread) -> rdi = interrupted`: a thread of a descendant task
+        /// that is running user code (ready) stops and sends its exception handler an
+        /// exception message with vector [`VECTOR_INTERRUPT`](crate::ipc::VECTOR_INTERRUPT),
+        /// as if it faulted at its next instruction: for a guest that delivers a signal to
+        /// a process busy in user code. A thread in the kernel (waiting in IPC, sleeping,
+        /// inactive) is left alone (`rdi` = 0): it reports when its call returns. Ability:
+        /// none beyond control rights. Errors: `NoSuchObject`, `NotPermitted`,
+        /// `InvalidArgument` (the calling thread, or a thread without exception handler).
+        ThreadInterrupt = 28 => "thread_interrupt",
 
         /// `map(task, source, destination, pages, rights)`: maps `pages` pages starting at the
         /// caller's page `source` into `task` (0 = own; else a descendant) at `destination`,

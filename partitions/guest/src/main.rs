@@ -717,6 +717,12 @@ impl Tasks for GuestHost<'_> {
         }
     }
 
+    fn interrupt(&mut self, pid: u32) {
+        if let Some(thread) = self.task(pid).map(|t| t.thread) {
+            let _ = sys::thread_interrupt(thread);
+        }
+    }
+
     fn suspend(&mut self, pid: u32, stop: bool) {
         let Some(thread) = self.task(pid).map(|t| t.thread) else {
             return;

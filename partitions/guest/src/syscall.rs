@@ -45,7 +45,7 @@ use crate::sigcalls;
 use crate::signal::{self, Info, SIGSEGV};
 use crate::tty::{self, Termios, Tty, Winsize};
 use crate::vfs;
-use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
+use abi::ipc::{ExceptionMessage, Registers, VECTOR_INTERRUPT, VECTOR_SYSCALL};
 
 /// Lowest address `mmap` places mappings at without a hint.
 pub const MMAP_BOTTOM: u64 = 1 << 36;
@@ -132,6 +132,10 @@ pub fn handle<'a>(
     host: &mut impl Host,
     m: &mut ExceptionMessage,
 ) -> Outcome {
+    if m.vector == VECTOR_INTERRUPT {
+        // Stopped in user code to take a signal ([`crate::system`]): it goes on as it was.
+        return Outcome::Resume;
+    }
     if m.vector != VECTOR_SYSCALL {
         return fault(p, host, m);
     }

@@ -76,6 +76,10 @@ pub trait Tasks: Host {
     fn resume(&mut self, pid: u32, m: &ExceptionMessage);
     /// Suspends (`stop`) or resumes `pid`'s thread (`SIGSTOP`, `SIGCONT`).
     fn suspend(&mut self, pid: u32, stop: bool);
+    /// Makes `pid`'s thread, if it is running user code, send an exception message now
+    /// (vector `VECTOR_INTERRUPT`), so a caught signal is delivered without waiting for
+    /// its next system call.
+    fn interrupt(&mut self, pid: u32);
 }
 
 /// Where a process is.
@@ -522,8 +526,8 @@ impl<'a> System<'a> {
 
     /// Sends `info` to the process in slot `j`, on behalf of the process in slot `sender`
     /// (whose call is being served: it sees its own signals when the call returns). A
-    /// process running user code sees a caught signal at its next system call or fault;
-    /// one the signal ends, stops or continues is ended, stopped or continued at once.
+    /// process running user code is interrupted to run a caught signal's handler; one the
+    /// signal ends, stops or continues is ended, stopped or continued at once.
     fn send(
         &mut self,
         j: usize,
@@ -552,6 +556,11 @@ impl<'a> System<'a> {
                 || sig == signal::SIGSTOP
                 || p.action(sig).handler == signal::SIG_DFL);
         let vforked = matches!(slot.state, State::Vforked { .. });
+        let caught = p.deliverable() & signal::bit(sig) != 0 && !acts_now;
+        if caught && matches!(slot.state, State::Running) {
+            // Its handler runs at once, not at the next system call.
+            k.interrupt(p.pid);
+        }
         if !acts_now || (vforked && sig != signal::SIGKILL) {
             return None; // blocked calls are interrupted by `wake`
         }

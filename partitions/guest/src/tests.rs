@@ -35,6 +35,7 @@ struct Model {
     /// FPU images by pid, and the processes suspended (stopped).
     fpu: HashMap<u32, [u8; 512]>,
     suspended: Vec<u32>,
+    interrupted: Vec<u32>,
 }
 
 impl Model {
@@ -841,6 +842,9 @@ impl Tasks for Model {
     }
     fn resume(&mut self, pid: u32, m: &ExceptionMessage) {
         self.resumed.push((pid, *m));
+    }
+    fn interrupt(&mut self, pid: u32) {
+        self.interrupted.push(pid);
     }
     fn suspend(&mut self, pid: u32, stop: bool) {
         self.suspended.retain(|&p| p != pid);

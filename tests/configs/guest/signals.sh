@@ -23,4 +23,10 @@ echo "stopped then killed status $?"
 /bin/busybox yes | /bin/busybox head -n 2
 echo "pipeline status $?"
 /bin/busybox sh -c 'trap "echo alarm rang" ALRM; /bin/busybox sleep 0.05; kill -ALRM $$; echo after alarm'
+/bin/busybox sh -c 'trap "echo busy loop interrupted; exit 3" USR1; while :; do :; done' &
+pid=$!
+/bin/busybox sleep 0.1
+kill -USR1 $pid
+wait $pid
+echo "busy status $?"
 echo done

@@ -172,6 +172,13 @@ pub fn thread_fpu(thread: ThreadId, image: &mut [u8; 512], write: bool) -> Resul
     call(Call::ThreadFpu, a.encode()).map(drop)
 }
 
+/// Makes `thread` (of a descendant task), if it is running user code, report to its
+/// exception handler now; whether it did.
+pub fn thread_interrupt(thread: ThreadId) -> Result<bool, Error> {
+    let a = args::OnThread { thread: thread.0 };
+    call(Call::ThreadInterrupt, a.encode()).map(|r| r.rdi != 0)
+}
+
 /// The calling thread and its task.
 pub fn thread_self() -> (ThreadId, TaskId) {
     let (_, r) = raw6(Call::ThreadSelf as u64, [0; 6]);
