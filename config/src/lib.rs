@@ -73,6 +73,7 @@
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
+//! guest.console = "com2"                           # optional: a terminal on COM2
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -185,7 +186,13 @@
 //! thread a process, at most 16 processes: `kernel_tasks = 17` with its own; fewer tasks
 //! limit its processes, `fork` then fails with EAGAIN); its process table lives on its
 //! stack, so it needs a `stack` of at least 1 MiB (a smaller one is an error). A partition
-//! has either `plc` or `guest` keys, not both.
+//! has either `plc` or `guest` keys, not both. `guest.console = "com2"` makes the
+//! processes' console a terminal on COM2 (`/etc/guest/console` in the initramfs; the line
+//! discipline is `partitions/guest/src/tty.rs`): the partition then needs
+//! `io_ports = ["0x2f8-0x2ff"]`, `irqs = [3]`, the ability `irq` and one more kernel
+//! thread (the console's reader); `cargo xtask run` connects COM2 to the terminal and
+//! scenarios feed it from `console_input`. Without it, the processes' output lines go to
+//! the log and reading the console gives end of file.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -93,6 +93,7 @@ pub struct Guest {
     pub env: Option<Vec<Spanned<String>>>,
     #[serde(default)]
     pub files: Named<String>,
+    pub console: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -74,7 +74,17 @@ pub struct Guest {
     pub env: Vec<String>,
     /// (absolute path in the initramfs, host file), sorted by path.
     pub files: Vec<(String, SourceFile)>,
+    /// The processes' console is a terminal on COM2 (`guest.console = "com2"`); otherwise
+    /// their output goes to the log.
+    pub console_com2: bool,
 }
+
+/// COM2's ports and interrupt line, which `guest.console = "com2"` needs.
+pub const COM2_PORTS: crate::model::IoRange = crate::model::IoRange {
+    first: 0x2f8,
+    last: 0x2ff,
+};
+pub const COM2_IRQ: u8 = 3;
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
 /// (busybox, its applet links, the guest's command line, `/init`).
@@ -88,6 +98,7 @@ pub const GUEST_RESERVED_PATHS: &[&str] = &[
     "/bin/true",
     "/etc/guest/init",
     "/etc/guest/env",
+    "/etc/guest/console",
     "/init",
 ];
 

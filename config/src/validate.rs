@@ -391,7 +391,8 @@ impl Validator<'_, '_> {
                 .and_then(|d| self.data_entry(d, &path.key("data"), raw.plc.is_some()));
             let guest = raw.guest.as_ref().and_then(|guest| {
                 let stack = (stack, &path.key("stack"));
-                self.guest(raw, guest, &path.key("guest"), abilities, stack)
+                let device = (io_ports.as_slice(), irqs);
+                self.guest(raw, guest, &path.key("guest"), abilities, stack, device)
             });
             if let (Some(_), Some(data)) = (&raw.guest, &raw.data) {
                 self.error(
@@ -434,6 +435,7 @@ impl Validator<'_, '_> {
         path: &KeyPath,
         abilities: Abilities,
         (stack, stack_path): (u64, &KeyPath),
+        (io_ports, irqs): (&[IoRange], IrqMask),
     ) -> Option<Guest> {
         let before = self.r.diagnostics.len();
         let g = guest.get_ref();
@@ -563,7 +565,33 @@ impl Validator<'_, '_> {
                 },
             ));
         }
+        let console_com2 = g.console.as_ref().is_some_and(|console| {
+            let at = path.key("console");
+            if console.get_ref() != "com2" {
+                self.error(
+                    start(console),
+                    &at,
+                    format!(
+                        "`{}` is no console device (the only one is \"com2\")",
+                        console.get_ref()
+                    ),
+                );
+                return false;
+            }
+            let has_ports = io_ports
+                .iter()
+                .any(|r| r.first <= COM2_PORTS.first && COM2_PORTS.last <= r.last);
+            if !has_ports || !irqs.contains(COM2_IRQ) {
+                self.error(
+                    start(console),
+                    &at,
+                    "a console on COM2 needs its ports and interrupt: io_ports = [\"0x2f8-0x2ff\"] and irqs = [3] (with the ability `irq`)",
+                );
+            }
+            true
+        });
         (self.r.diagnostics.len() == before).then(|| Guest {
+            console_com2,
             files,
             init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
             env: match &g.env {

@@ -186,3 +186,39 @@ fn a_guest_needs_a_stack_for_its_process_table() {
     let src = guest("guest.init = [\"/bin/sh\"]").replace("stack = \"1MiB\"\n", "");
     expect_some(&src, "guest.init", 0, "partitions.b.guest", "not 64KiB");
 }
+
+#[test]
+fn a_console_on_com2_needs_its_ports_and_interrupt() {
+    let with = |device: &str| {
+        doc(&[(
+            "time = \"background\"",
+            &format!(
+                "time = \"background\"\nstack = \"1MiB\"\nabilities = [\"create_task\", \"create_thread\", \"map\", \"irq\"]\n{device}\nguest.init = [\"/bin/sh\"]\nguest.console = \"com2\""
+            ),
+        )])
+    };
+    let system = load_ok(&with("io_ports = [\"0x2f8-0x2ff\"]\nirqs = [3]"));
+    assert!(system.partitions[1].guest.as_ref().unwrap().console_com2);
+    let system = load_ok(&guest("guest.init = [\"/bin/sh\"]"));
+    assert!(!system.partitions[1].guest.as_ref().unwrap().console_com2);
+    for device in [
+        "io_ports = [\"0x2f8-0x2ff\"]",
+        "irqs = [3]",
+        "io_ports = [\"0x2f8-0x2fb\"]\nirqs = [3]",
+    ] {
+        expect_some(
+            &with(device),
+            "\"com2\"",
+            0,
+            "partitions.b.guest.console",
+            "needs its ports and interrupt",
+        );
+    }
+    expect_some(
+        &guest("guest.init = [\"/bin/sh\"]\nguest.console = \"com1\""),
+        "\"com1\"",
+        0,
+        "partitions.b.guest.console",
+        "`com1` is no console device",
+    );
+}

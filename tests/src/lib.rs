@@ -25,6 +25,14 @@ pub fn boot(name: &str) -> Outcome {
             echo: false,
             work_dir: dir.join("state"),
             deterministic_time: s.manifest.deterministic_time,
+            com2: if s.manifest.console_input.is_empty() {
+                qemu::Com2::Unconnected
+            } else {
+                qemu::Com2::Scripted {
+                    start: s.manifest.console_start.clone(),
+                    input: s.manifest.console_input.clone(),
+                }
+            },
         },
     )
     .unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"))

@@ -263,3 +263,92 @@ fn guest_processes() {
         "a process was killed",
     );
 }
+
+/// Scenario guest_console (`tests/configs/guest_console.toml`): the console of guest
+/// `linux` is a terminal on COM2 running an interactive `/bin/sh`; the scenario types
+/// commands into it: two `echo`s (one with erased characters), `cat` with a line and a
+/// Ctrl-D, `cat` with a Ctrl-C, `cat` with a Ctrl-Z then `fg`, a line and a Ctrl-D, `cat &`
+/// then `fg`, a line and a Ctrl-D, a Ctrl-D at the prompt.
+#[test]
+fn guest_console() {
+    let o = boot("guest_console");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the shell's end ends the run",
+    );
+    let lines = o.console_lines();
+    let has = |text: &str| lines.contains(&text);
+    // The shell's line editor erased two characters of "typo" before "pe".
+    for expected in ["hello from the console", "type"] {
+        check(&o, has(expected), &format!("console: no line {expected:?}"));
+    }
+    // `cat` read through the canonical line discipline: the terminal echoed what was
+    // typed, erase included, then cat wrote the edited line.
+    check(
+        &o,
+        o.console.contains("one tw\x08 \x08o\r\none to\r\n"),
+        "console: cat's echoed and edited line",
+    );
+    check(
+        &o,
+        !has("typo"),
+        "console: the erased characters reached the shell",
+    );
+    // The Ctrl-C: the shell had made the second `cat` the foreground process group.
+    check(
+        &o,
+        guest_lines(&o, "linux", "killed by signal")
+            == ["guest: process 3 (busybox) killed by signal 2 (SIGINT)"],
+        "the Ctrl-C killed the second cat",
+    );
+    check(&o, o.console.contains("^C"), "console: the echoed ^C");
+    // The Ctrl-Z stopped the third `cat` (SIGTSTP), `fg` made it the foreground again and
+    // continued it: it read a line and ended at its Ctrl-D.
+    check(
+        &o,
+        o.console
+            .contains("^Z[1]+  Stopped                    cat\r\n"),
+        "console: the shell's job report of the stopped cat",
+    );
+    check(
+        &o,
+        o.console.contains("back\r\nback\r\n"),
+        "console: the continued cat's echoed and copied line",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: process 4 exited with status 0").len() == 1,
+        "the continued cat ended",
+    );
+    // `cat &` read the terminal in the background: SIGTTIN stopped it (the shell's job
+    // report at a later prompt) until `fg` brought it to the foreground.
+    check(
+        &o,
+        o.console
+            .contains("[1]+  Stopped (tty input)        cat\r\n"),
+        "console: the background cat stopped by SIGTTIN",
+    );
+    check(
+        &o,
+        o.console
+            .contains("from the background\r\nfrom the background\r\n"),
+        "console: the foreground cat's echoed and copied line",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: process 5 exited with status 0").len() == 1,
+        "the background cat ended",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: init exited with status 0").len() == 1,
+        "the shell ended at the Ctrl-D",
+    );
+    check(
+        &o,
+        guest_lines(&o, "linux", "guest: process 1 stdout").is_empty(),
+        "the console's output went to COM2, not the log",
+    );
+}

@@ -8,6 +8,7 @@
 //! | `/bin/{sh,echo,cat,ls,wc,true}` | symbolic links to `busybox` (its applets) |
 //! | `/etc/passwd`, `/etc/group` | root (0) only |
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
+//! | `/etc/guest/console` | `com2` with `guest.console = "com2"` (`guest::CONSOLE_PATH`): the console is a terminal on COM2 |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
 //! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
 //! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
@@ -115,6 +116,11 @@ pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
         dir("etc/guest"),
         file("etc/guest/init", 0o644, nul_terminated(&guest.init)),
         file("etc/guest/env", 0o644, nul_terminated(&guest.env)),
+    ]);
+    if guest.console_com2 {
+        entries.push(file("etc/guest/console", 0o644, b"com2\n".to_vec()));
+    }
+    entries.extend([
         file(
             "init",
             0o755,
@@ -175,6 +181,7 @@ mod tests {
             init: vec!["/bin/busybox".into(), "echo".into(), "it's".into()],
             env: vec!["PATH=/bin".into()],
             files: Vec::new(),
+            console_com2: false,
         }
     }
 
@@ -250,6 +257,15 @@ mod tests {
         );
         assert!(fs.get("/etc/group").unwrap().is_file());
         assert!(fs.get("/tmp").unwrap().is_dir());
+        assert!(
+            fs.get(guest::CONSOLE_PATH).is_none(),
+            "the console is the log"
+        );
+        let mut g = hello();
+        g.console_com2 = true;
+        let with_console = initramfs(b"\x7fELF-busybox", &g).unwrap();
+        let console = Archive::new(&with_console).unwrap();
+        assert_eq!(console.get(guest::CONSOLE_PATH).unwrap().data, b"com2\n");
         // Deterministic.
         assert_eq!(bytes, initramfs(b"\x7fELF-busybox", &hello()).unwrap());
     }

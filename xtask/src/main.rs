@@ -129,6 +129,13 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     }
     let artifacts = artifacts::build(release, KernelVariant::Production)?;
     let esp_dir = xtask::target_dir().join("esp").join("run");
+    let work_dir = xtask::target_dir().join("esp").join("run-state");
+    // A guest with a console on COM2 gets this terminal; the kernel log then goes to a file.
+    let console = xtask::check_config::load(&config)?
+        .partitions
+        .iter()
+        .find(|p| p.guest.as_ref().is_some_and(|g| g.console_com2))
+        .map(|p| p.name.clone());
     esp::assemble(
         &esp_dir,
         &artifacts,
@@ -137,19 +144,31 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     eprintln!(
         "xtask: booting {} under QEMU{}",
         esp_dir.display(),
-        match timeout {
-            Some(t) => format!(" for {t} s"),
-            None => " (stop with Ctrl-C)".into(),
+        match (timeout, &console) {
+            (Some(t), _) => format!(" for {t} s"),
+            (None, None) => " (stop with Ctrl-C)".into(),
+            (None, Some(_)) => " (stop with Ctrl-A X)".into(),
         }
     );
+    if let Some(partition) = &console {
+        eprintln!(
+            "xtask: this terminal is the console of guest `{partition}` (COM2; Ctrl-A X quits QEMU, Ctrl-A C its monitor); the kernel log (COM1) goes to {}",
+            work_dir.join("com1.log").display()
+        );
+    }
     let outcome = qemu::run(
         &qemu,
         &RunOptions {
             esp: esp_dir.clone(),
             timeout: timeout.map(Duration::from_secs),
             echo: true,
-            work_dir: xtask::target_dir().join("esp").join("run-state"),
+            work_dir,
             deterministic_time: false,
+            com2: if console.is_some() {
+                qemu::Com2::Terminal
+            } else {
+                qemu::Com2::Unconnected
+            },
         },
     )?;
     let crashed = outcome
@@ -160,6 +179,8 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     let verdict = match &outcome.ending {
         Ending::Exited(qemu::EXIT_SUCCESS) => Ok("the system exited with success"),
         Ending::Exited(qemu::EXIT_FAILURE) => Err("the system exited with failure".to_string()),
+        // Ctrl-A X on the guest's console.
+        Ending::Exited(0) if console.is_some() => Ok("QEMU was quit"),
         Ending::TimedOut if crashed => Err("the system crashed".to_string()),
         Ending::TimedOut if !ready => Err(format!(
             "the system did not reach '{READY_MARKER}' (hung at boot)"
@@ -292,6 +313,7 @@ fn boot_bench_system(
             echo: false,
             work_dir: dir.join("state"),
             deterministic_time,
+            com2: qemu::Com2::Unconnected,
         },
     )?;
     if !outcome.succeeded() {

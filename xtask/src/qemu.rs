@@ -1,4 +1,6 @@
-//! Boots an ESP folder under QEMU (TCG) and captures the serial log (COM1).
+//! Boots an ESP folder under QEMU (TCG) and captures the serial log (COM1), with COM2 (the
+//! guest's console) unconnected, fed from a script ([`Com2::Scripted`]: scenarios) or on
+//! this terminal ([`Com2::Terminal`]: `cargo xtask run`).
 //!
 //! Exit convention (kernel `qemu::exit`): 0x10 written to isa-debug-exit at port 0xf4 makes
 //! QEMU exit with 33 (success), 0x11 with 35 (failure). Anything else, or a timeout, is a
@@ -9,7 +11,7 @@ use anyhow::{Context, Result};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::sync::mpsc;
+use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
 pub const EXIT_SUCCESS: i32 = 33;
@@ -31,7 +33,29 @@ pub struct RunOptions {
     /// instructions executed, so host scheduling stalls cannot make a timer late. For
     /// scenarios that assert a timing property of the kernel rather than measure QEMU.
     pub deterministic_time: bool,
+    pub com2: Com2,
 }
+
+/// Where COM2 goes.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub enum Com2 {
+    /// Nowhere (a device user threads can drive: interrupt tests put it in loopback mode).
+    #[default]
+    Unconnected,
+    /// Typed from a script: once the output shows `start` (the firmware and the loader
+    /// write to COM2 too), each piece is sent when the output has been quiet for [`QUIET`]
+    /// after it grew (a prompt came), as a person would type; the output is
+    /// [`Outcome::console`]. Through a pair of FIFOs `work_dir/com2.{in,out}`.
+    Scripted { start: String, input: Vec<String> },
+    /// This terminal, raw, multiplexed with QEMU's monitor (Ctrl-A X quits, Ctrl-A C
+    /// switches to the monitor); COM1 then goes to `work_dir/com1.log`, not echoed.
+    Terminal,
+}
+
+/// How long the console output must stay unchanged before a scripted piece is typed.
+pub const QUIET: Duration = Duration::from_millis(500);
+/// Longest wait for output before a scripted piece is typed anyway.
+const PROMPT_WAIT: Duration = Duration::from_secs(60);
 
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum Ending {
@@ -50,6 +74,9 @@ pub struct Outcome {
     pub ending: Ending,
     /// Serial lines (COM1), without line terminators.
     pub lines: Vec<String>,
+    /// What came out of COM2 ([`Com2::Scripted`]), as it came (`\r\n` line ends from the
+    /// guest's terminal, escape sequences).
+    pub console: String,
     pub stderr: String,
     pub elapsed: Duration,
 }
@@ -70,16 +97,32 @@ impl Outcome {
     /// The serial log followed by QEMU's stderr, for failure messages.
     pub fn transcript(&self) -> String {
         format!(
-            "--- ending: {:?} after {:.1} s\n--- serial:\n{}\n--- qemu stderr:\n{}",
+            "--- ending: {:?} after {:.1} s\n--- serial:\n{}\n--- console (COM2):\n{}\n--- qemu stderr:\n{}",
             self.ending,
             self.elapsed.as_secs_f64(),
             self.lines.join("\n"),
+            self.console,
             self.stderr
         )
     }
+
+    /// The console's output as lines, without the terminal's carriage returns.
+    pub fn console_lines(&self) -> Vec<&str> {
+        self.console
+            .split('\n')
+            .map(|l| l.trim_end_matches('\r'))
+            .collect()
+    }
 }
 
-pub fn command(qemu: &Qemu, esp: &Path, vars: &Path, deterministic_time: bool) -> Command {
+pub fn command(
+    qemu: &Qemu,
+    esp: &Path,
+    vars: &Path,
+    deterministic_time: bool,
+    com2: &Com2,
+    work_dir: &Path,
+) -> Command {
     let mut cmd = Command::new(&qemu.binary);
     cmd.args([
         "-nodefaults",
@@ -102,16 +145,34 @@ pub fn command(qemu: &Qemu, esp: &Path, vars: &Path, deterministic_time: bool) -
         .arg(format!("if=pflash,format=raw,file={}", vars.display()));
     cmd.arg("-drive")
         .arg(format!("format=raw,file=fat:rw:{}", esp.display()));
-    cmd.args([
-        "-serial",
-        "stdio",
-        // COM2 (0x2f8, IRQ 3) exists but goes nowhere: a device user threads can drive
-        // (interrupt tests put it in loopback mode; the guest's console later).
-        "-serial",
-        "null",
-        "-device",
-        "isa-debug-exit,iobase=0xf4,iosize=0x04",
-    ]);
+    // COM1 (the kernel log), then COM2 (0x2f8, IRQ 3).
+    match com2 {
+        Com2::Unconnected => {
+            cmd.args(["-serial", "stdio", "-serial", "null"]);
+        }
+        Com2::Scripted { .. } => {
+            cmd.args(["-serial", "stdio", "-chardev"]);
+            cmd.arg(format!(
+                "pipe,id=com2,path={}",
+                work_dir.join("com2").display()
+            ));
+            cmd.args(["-serial", "chardev:com2"]);
+        }
+        Com2::Terminal => {
+            cmd.arg("-serial")
+                .arg(format!("file:{}", work_dir.join("com1.log").display()));
+            // Ctrl-C goes to the guest (signal=off); Ctrl-A X quits QEMU.
+            cmd.args([
+                "-chardev",
+                "stdio,id=com2,mux=on,signal=off",
+                "-serial",
+                "chardev:com2",
+                "-mon",
+                "chardev=com2,mode=readline",
+            ]);
+        }
+    }
+    cmd.args(["-device", "isa-debug-exit,iobase=0xf4,iosize=0x04"]);
     if deterministic_time {
         // 2 ns of virtual time per instruction (a 500 MHz guest); no sleeping when idle,
         // so idle time passes at once instead of in host time.
@@ -121,8 +182,135 @@ pub fn command(qemu: &Qemu, esp: &Path, vars: &Path, deterministic_time: bool) -
 }
 
 fn stop(child: &mut Child) {
+    // SIGTERM first: QEMU then restores the terminal it put in raw mode.
+    let terminated = Command::new("kill")
+        .args(["-TERM", &child.id().to_string()])
+        .status()
+        .is_ok_and(|s| s.success());
+    if terminated {
+        let until = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < until {
+            if child.try_wait().ok().flatten().is_some() {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(50));
+        }
+    }
     let _ = child.kill();
     let _ = child.wait();
+}
+
+/// COM2's output so far and when it last grew.
+#[derive(Default)]
+struct ConsoleOutput {
+    bytes: Vec<u8>,
+    changed: Option<Instant>,
+}
+
+/// Makes the FIFOs of a scripted COM2 (`base.in`, `base.out`).
+fn make_fifos(base: &Path) -> Result<()> {
+    for end in ["in", "out"] {
+        let path = base.with_extension(end);
+        let _ = std::fs::remove_file(&path);
+        let ok = Command::new("mkfifo")
+            .arg(&path)
+            .status()
+            .is_ok_and(|s| s.success());
+        if !ok {
+            anyhow::bail!("cannot create the FIFO {}", path.display());
+        }
+    }
+    Ok(())
+}
+
+/// Reads COM2's output (`base.out`) until QEMU closes it.
+fn read_console(base: PathBuf, output: Arc<Mutex<ConsoleOutput>>) -> std::thread::JoinHandle<()> {
+    std::thread::spawn(move || {
+        let Ok(mut fifo) = std::fs::File::open(base.with_extension("out")) else {
+            return;
+        };
+        let mut buf = [0u8; 4096];
+        while let Ok(n) = std::io::Read::read(&mut fifo, &mut buf) {
+            if n == 0 {
+                break;
+            }
+            let mut o = output.lock().unwrap_or_else(|e| e.into_inner());
+            o.bytes.extend_from_slice(&buf[..n]);
+            o.changed = Some(Instant::now());
+        }
+    })
+}
+
+/// Types `script` into COM2 (`base.in`) once the output shows `start`, each piece once the
+/// output grew and went quiet.
+fn type_console(
+    base: PathBuf,
+    start: String,
+    script: Vec<String>,
+    output: Arc<Mutex<ConsoleOutput>>,
+) {
+    std::thread::spawn(move || {
+        let Ok(mut fifo) = std::fs::OpenOptions::new()
+            .write(true)
+            .open(base.with_extension("in"))
+        else {
+            return;
+        };
+        let mut seen = 0;
+        let asked = Instant::now();
+        while asked.elapsed() < PROMPT_WAIT {
+            std::thread::sleep(Duration::from_millis(50));
+            let o = output.lock().unwrap_or_else(|e| e.into_inner());
+            if let Some(at) = String::from_utf8_lossy(&o.bytes).find(&start) {
+                seen = at;
+                break;
+            }
+        }
+        for piece in script {
+            let asked = Instant::now();
+            loop {
+                std::thread::sleep(Duration::from_millis(50));
+                let o = output.lock().unwrap_or_else(|e| e.into_inner());
+                let quiet = o.changed.is_some_and(|t| t.elapsed() >= QUIET);
+                if (o.bytes.len() > seen && quiet) || asked.elapsed() >= PROMPT_WAIT {
+                    seen = o.bytes.len();
+                    break;
+                }
+            }
+            if std::io::Write::write_all(&mut fifo, piece.as_bytes()).is_err() {
+                return;
+            }
+        }
+    });
+}
+
+/// Follows COM1's log file (`Com2::Terminal`), a line at a time, until `done`.
+fn follow(path: PathBuf, tx: mpsc::Sender<String>, done: Arc<Mutex<bool>>) {
+    std::thread::spawn(move || {
+        let Ok(mut file) = std::fs::File::open(&path) else {
+            return;
+        };
+        let mut pending = Vec::new();
+        loop {
+            let finished = *done.lock().unwrap_or_else(|e| e.into_inner());
+            // Reads on from where the last read ended.
+            if std::io::Read::read_to_end(&mut file, &mut pending).is_ok() {
+                while let Some(end) = pending.iter().position(|&b| b == b'\n') {
+                    let line: Vec<u8> = pending.drain(..=end).collect();
+                    let text = String::from_utf8_lossy(&line)
+                        .trim_end_matches(['\n', '\r'])
+                        .to_string();
+                    if tx.send(text).is_err() {
+                        return;
+                    }
+                }
+            }
+            if finished {
+                return;
+            }
+            std::thread::sleep(Duration::from_millis(100));
+        }
+    });
 }
 
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
@@ -130,16 +318,132 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
     let vars = options.work_dir.join("OVMF_VARS.fd");
     std::fs::copy(&qemu.ovmf_vars, &vars)
         .with_context(|| format!("cannot copy {}", qemu.ovmf_vars.display()))?;
-    let mut child = command(qemu, &options.esp, &vars, options.deterministic_time)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
+    let terminal = options.com2 == Com2::Terminal;
+    let com2_base = options.work_dir.join("com2");
+    let com1_log = options.work_dir.join("com1.log");
+    if let Com2::Scripted { .. } = options.com2 {
+        make_fifos(&com2_base)?;
+    }
+    if terminal {
+        std::fs::write(&com1_log, "")?;
+    }
+    let mut cmd = command(
+        qemu,
+        &options.esp,
+        &vars,
+        options.deterministic_time,
+        &options.com2,
+        &options.work_dir,
+    );
+    if terminal {
+        cmd.stdin(Stdio::inherit()).stdout(Stdio::inherit());
+    } else {
+        cmd.stdin(Stdio::null()).stdout(Stdio::piped());
+    }
+    let mut child = cmd
         .stderr(Stdio::piped())
         .spawn()
         .with_context(|| format!("cannot start {}", qemu.binary.display()))?;
     let started = Instant::now();
 
+    let console = Arc::new(Mutex::new(ConsoleOutput::default()));
+    let console_reader = match &options.com2 {
+        Com2::Scripted { start, input } => {
+            let reader = read_console(com2_base.clone(), console.clone());
+            let script = (start.clone(), input.clone());
+            type_console(com2_base.clone(), script.0, script.1, console.clone());
+            Some(reader)
+        }
+        _ => None,
+    };
     let (tx, rx) = mpsc::channel();
-    let stdout = child.stdout.take().expect("piped stdout");
+    let followed = Arc::new(Mutex::new(false));
+    if terminal {
+        follow(com1_log.clone(), tx, followed.clone());
+    } else {
+        let stdout = child.stdout.take().expect("piped stdout");
+        spawn_line_reader(stdout, tx);
+    }
+    let stderr = child.stderr.take().expect("piped stderr");
+    let stderr_reader = std::thread::spawn(move || {
+        let mut text = String::new();
+        let _ = std::io::Read::read_to_string(&mut BufReader::new(stderr), &mut text);
+        text
+    });
+
+    let mut lines = Vec::new();
+    let deadline = options.timeout.map(|t| started + t);
+    let ending = loop {
+        let wait = deadline
+            .map(|d| d.saturating_duration_since(Instant::now()))
+            .unwrap_or(Duration::from_secs(3600))
+            .min(Duration::from_millis(200));
+        match rx.recv_timeout(wait) {
+            Ok(line) => {
+                if options.echo && !terminal {
+                    println!("{line}");
+                }
+                let fatal = FATAL_MARKERS.iter().any(|m| line.contains(m));
+                lines.push(line.clone());
+                if fatal {
+                    stop(&mut child);
+                    break Ending::Aborted(line);
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Timeout) => {
+                if deadline.is_some_and(|d| Instant::now() >= d) {
+                    stop(&mut child);
+                    break Ending::TimedOut;
+                }
+                if terminal && let Some(status) = child.try_wait()? {
+                    break status.code().map_or(Ending::Killed, Ending::Exited);
+                }
+            }
+            Err(mpsc::RecvTimeoutError::Disconnected) => {
+                let status = child.wait()?;
+                break status.code().map_or(Ending::Killed, Ending::Exited);
+            }
+        }
+    };
+    if terminal {
+        // The log's last lines.
+        *followed.lock().unwrap_or_else(|e| e.into_inner()) = true;
+        while let Ok(line) = rx.recv_timeout(Duration::from_secs(1)) {
+            lines.push(line);
+        }
+    }
+    let stderr = stderr_reader.join().unwrap_or_default();
+    let console = match console_reader {
+        Some(reader) => {
+            // Opening the ends QEMU never opened (it failed to start) unblocks the threads.
+            for end in ["in", "out"] {
+                let _ = std::fs::OpenOptions::new()
+                    .read(true)
+                    .write(true)
+                    .open(com2_base.with_extension(end));
+            }
+            let _ = reader.join();
+            let o = console.lock().unwrap_or_else(|e| e.into_inner());
+            String::from_utf8_lossy(&o.bytes).into_owned()
+        }
+        None => String::new(),
+    };
+    // Kept for reading after a passing run too (scenario logs hold measurements).
+    let _ = std::fs::write(options.work_dir.join("serial.log"), lines.join("\n") + "\n");
+    if !console.is_empty() {
+        let _ = std::fs::write(options.work_dir.join("console.log"), &console);
+    }
+    Ok(Outcome {
+        ending,
+        lines,
+        console,
+        stderr,
+        elapsed: started.elapsed(),
+    })
+}
+
+/// Sends COM1's lines (QEMU's stdout) to `tx`.
+fn spawn_line_reader(stdout: std::process::ChildStdout, tx: mpsc::Sender<String>) {
     std::thread::spawn(move || {
         let mut reader = BufReader::new(stdout);
         let mut buf = Vec::new();
@@ -158,50 +462,4 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
             buf.clear();
         }
     });
-    let stderr = child.stderr.take().expect("piped stderr");
-    let stderr_reader = std::thread::spawn(move || {
-        let mut text = String::new();
-        let _ = std::io::Read::read_to_string(&mut BufReader::new(stderr), &mut text);
-        text
-    });
-
-    let mut lines = Vec::new();
-    let deadline = options.timeout.map(|t| started + t);
-    let ending = loop {
-        let wait = deadline
-            .map(|d| d.saturating_duration_since(Instant::now()))
-            .unwrap_or(Duration::from_secs(3600));
-        match rx.recv_timeout(wait) {
-            Ok(line) => {
-                if options.echo {
-                    println!("{line}");
-                }
-                let fatal = FATAL_MARKERS.iter().any(|m| line.contains(m));
-                lines.push(line.clone());
-                if fatal {
-                    stop(&mut child);
-                    break Ending::Aborted(line);
-                }
-            }
-            Err(mpsc::RecvTimeoutError::Timeout) => {
-                if deadline.is_some_and(|d| Instant::now() >= d) {
-                    stop(&mut child);
-                    break Ending::TimedOut;
-                }
-            }
-            Err(mpsc::RecvTimeoutError::Disconnected) => {
-                let status = child.wait()?;
-                break status.code().map_or(Ending::Killed, Ending::Exited);
-            }
-        }
-    };
-    let stderr = stderr_reader.join().unwrap_or_default();
-    // Kept for reading after a passing run too (scenario logs hold measurements).
-    let _ = std::fs::write(options.work_dir.join("serial.log"), lines.join("\n") + "\n");
-    Ok(Outcome {
-        ending,
-        lines,
-        stderr,
-        elapsed: started.elapsed(),
-    })
 }

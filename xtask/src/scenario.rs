@@ -13,6 +13,14 @@
 //! corrupt_system_image = true   # optional: flip a byte of system.img after building it
 //! deterministic_time = true     # optional: QEMU on virtual time (-icount), for scenarios
 //!                               # that assert kernel timing, not measure QEMU's
+//! console_input = ["echo hi\r", "\u0004"]   # optional: typed into COM2 (a guest's
+//!                               # console) once its output shows `console_start`, each
+//!                               # piece once the output grew and then stayed quiet for
+//!                               # `qemu::QUIET` (a prompt came); the test reads COM2's
+//!                               # output as `Outcome::console`
+//! console_start = "built-in shell"   # with console_input: typing starts once the
+//!                               # output shows this (the firmware and the loader write
+//!                               # to COM2 first); default "": at the first quiet output
 //! ```
 
 use anyhow::{Context, Result};
@@ -39,6 +47,10 @@ pub struct Manifest {
     pub corrupt_system_image: bool,
     #[serde(default)]
     pub deterministic_time: bool,
+    #[serde(default)]
+    pub console_input: Vec<String>,
+    #[serde(default)]
+    pub console_start: String,
 }
 
 impl Manifest {

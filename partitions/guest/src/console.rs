@@ -1,5 +1,5 @@
-//! The console of the guest's processes, until it has a terminal of its own: their output
-//! is cut into lines, and each line is logged as
+//! The console of the guest's processes when it has no terminal (no `guest.console`; the
+//! terminal is [`crate::tty`]): their output is cut into lines, and each line is logged as
 //! `guest: process <pid> <stdout|stderr>: <text>` (the kernel log then prefixes it with
 //! the partition's name). A line longer than [`LINE_MAX`] bytes is cut there; what is left
 //! without a newline when the process ends is logged with [`LineBuffer::flush`].

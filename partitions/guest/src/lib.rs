@@ -10,10 +10,23 @@
 //! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
 //! which process page ([`backing`]), the process state ([`process`]), the system calls of
 //! one process ([`syscall`]; its signal and timer calls in [`sigcalls`]), the signals'
-//! numbers, actions and frame ([`signal`]), the pipes ([`pipe`]) and the process table
+//! numbers, actions and frame ([`signal`]), the pipes ([`pipe`]), the process table
 //! with fork, exec, wait, signal delivery, process groups, timers and the deferred replies
-//! of waiting calls ([`system`]); the partition program
-//! (`main.rs`) only moves messages, creates tasks, maps pages and writes the log.
+//! of waiting calls ([`system`]), and the console's terminal line discipline ([`tty`]);
+//! the partition program (`main.rs`) only moves messages, creates tasks, maps pages,
+//! drives COM2 (`com2.rs`) and writes the log.
+//!
+//! # The console
+//!
+//! Every process starts with the console on descriptors 0, 1 and 2 (a
+//! [`process::File::Console`], the file a device node such as `/dev/tty` is to open). With
+//! `guest.console = "com2"` in the configuration ([`CONSOLE_PATH`] in the initramfs) it is
+//! a terminal: COM2's input goes through the line discipline ([`tty::Tty`]: echo, line
+//! editing, the control characters' signals for the foreground process group, sent with
+//! [`system::System::signal_group`]), a `read` waits for it as a deferred reply, output
+//! goes through the terminal to COM2, and the terminal ioctls and `poll` answer. Without it
+//! the console is the log: output lines are logged ([`console`]), reading gives end of
+//! file, and the terminal ioctls answer `ENOTTY`.
 //!
 //! # Log lines (COM1, each prefixed `[<partition>] ` by the kernel)
 //!
@@ -22,13 +35,17 @@
 //!   `guest: process <pid> cannot execute <path>: <why>` (an `execve` that failed after the
 //!   old image was dropped: the process dies with SIGSEGV);
 //! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages copied in <t> us`;
-//! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]);
+//! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]),
+//!   when the console is the log;
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
 //!   when a fault kills it, `guest: process <pid> (<name>) killed by signal <n> (<NAME>)`
 //!   when a signal it does not catch ends it (`kill`, `SIGPIPE`, an alarm), with
 //!   `: no room for the frame ...` or `: rt_sigreturn without a readable signal frame`
 //!   when a handler's frame could not be written or read back;
+//! - `guest: console: cannot start the COM2 reader: <error>` or `guest: console: cannot
+//!   attach interrupt line 3: <error>` (the console then has no input), `guest: console:
+//!   no UART at COM2's ports, the console is the log`;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS`, once per call number and process;
 //! - `guest: init ended with <n> other processes left` (zombies included), then
@@ -53,6 +70,7 @@ pub mod signal;
 pub mod stack;
 pub mod syscall;
 pub mod system;
+pub mod tty;
 pub mod vfs;
 
 /// Where the guest's command line is in the initramfs: `argv` of the first process, each
@@ -60,6 +78,9 @@ pub mod vfs;
 pub const INIT_ARGS_PATH: &str = "/etc/guest/init";
 /// Its environment, in the same form (from `guest.env`).
 pub const INIT_ENV_PATH: &str = "/etc/guest/env";
+/// The console's device, `com2` (from `guest.console`); without the file the console is
+/// the log.
+pub const CONSOLE_PATH: &str = "/etc/guest/console";
 
 /// The NUL-terminated strings of `bytes` (a trailing piece without NUL counts too; empty
 /// strings are kept), at most `out.len()`; returns how many.

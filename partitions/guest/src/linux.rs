@@ -9,6 +9,7 @@ impl Errno {
     pub const EPERM: Self = Self(1);
     pub const ENOENT: Self = Self(2);
     pub const EINTR: Self = Self(4);
+    pub const EIO: Self = Self(5);
     pub const E2BIG: Self = Self(7);
     pub const ENOEXEC: Self = Self(8);
     pub const ESRCH: Self = Self(3);

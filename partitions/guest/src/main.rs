@@ -13,8 +13,14 @@
 //! back the processes' pages (the backing table's key is the pid above the page address).
 //! Its stack holds the process table (the configuration gives a guest at least 1 MiB).
 //! This file is glue only: every decision about a Linux call is the library's.
+//!
+//! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
+//! processes' console is a terminal ([`guest::tty`]) on COM2 ([`com2`]); without it, their
+//! output lines go to the log and reading the console gives end of file.
 #![no_std]
 #![no_main]
+
+mod com2;
 
 use guest::backing::{Backing, ENTRY};
 use guest::console::{LineBuffer, stream_name};
@@ -26,6 +32,7 @@ use guest::pool::PagePool;
 use guest::process::Stream;
 use guest::syscall::{Host, Outcome};
 use guest::system::{INIT_PID, Joined, MAX_PROCESSES, System, Tasks};
+use guest::tty::Tty;
 use user_rt::abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL,
     MessageTag, REPLY_RESUME,
@@ -115,7 +122,23 @@ fn main(start: u64, _: u64) {
         ipc,
         started: sys::clock(),
         seed: sys::rdtsc() | 1,
+        tty: None,
     };
+    let wants_terminal = fs
+        .get(guest::CONSOLE_PATH)
+        .is_some_and(|e| e.data.trim_ascii() == b"com2");
+    let mut reader = None;
+    if wants_terminal && !com2::init() {
+        println!("guest: console: no UART at COM2's ports, the console is the log");
+    } else if wants_terminal {
+        match com2::start_reader(me, info.priority as u8) {
+            Ok(thread) => {
+                reader = Some(thread);
+                host.tty = Some(Tty::new(INIT_PID));
+            }
+            Err(e) => println!("guest: console: cannot start the COM2 reader: {e:?}"),
+        }
+    }
     let task = match sys::task_create(Abilities::empty(), mcp, 0, "init") {
         Ok(t) => t,
         Err(e) => {
@@ -186,6 +209,12 @@ fn main(start: u64, _: u64) {
             }
         };
         let tag = received.message.tag;
+        if reader == Some(received.sender) && tag.label() == com2::LABEL_INPUT {
+            if let Some(ended) = console_input(&mut system, &fs, &mut host, &received.message) {
+                break ended;
+            }
+            continue;
+        }
         let from_kernel = matches!(tag.label(), LABEL_SYSCALL | LABEL_EXCEPTION)
             && tag.len() == EXCEPTION_MESSAGE_SIZE;
         let Some(pid) = host.pid_of(received.sender).filter(|_| from_kernel) else {
@@ -199,6 +228,26 @@ fn main(start: u64, _: u64) {
     println!("guest: init ended with {left} other processes left");
     system.release_all(&mut host);
     report(ipc, outcome);
+}
+
+/// Input from the console: through the line discipline (echo to COM2, signals of the
+/// control characters), then the calls waiting for it are served again.
+fn console_input<'a>(
+    system: &mut System<'a>,
+    fs: &Archive<'a>,
+    host: &mut GuestHost,
+    m: &Message,
+) -> Option<Outcome> {
+    let (bytes, n) = com2::decode(m);
+    for &b in &bytes[..n] {
+        let signal = host.tty.as_mut()?.input(b, &mut com2::put);
+        if let Some(s) = signal
+            && let Some(ended) = system.signal_group(s.group, s.signal, host)
+        {
+            return Some(ended);
+        }
+    }
+    system.retry_blocked(fs, host)
 }
 
 /// Creates the process's thread (the guest as its exception handler; it runs in the guest's
@@ -322,6 +371,8 @@ struct GuestHost<'p> {
     ipc: IpcBufferRef,
     started: u64,
     seed: u64,
+    /// The console's terminal (COM2), if the guest has one.
+    tty: Option<Tty>,
 }
 
 impl GuestHost<'_> {
@@ -541,6 +592,9 @@ impl Host for GuestHost<'_> {
     }
 
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]) {
+        if let Some(tty) = self.tty.as_mut() {
+            return tty.write(bytes, &mut com2::put);
+        }
         let Some(task) = self.tasks.iter_mut().flatten().find(|t| t.pid == pid) else {
             return;
         };
@@ -555,6 +609,10 @@ impl Host for GuestHost<'_> {
                 Lossy(line)
             )
         });
+    }
+
+    fn tty(&mut self) -> Option<&mut Tty> {
+        self.tty.as_mut()
     }
 
     fn now_ns(&mut self) -> u64 {

@@ -23,18 +23,27 @@ pub const POLLWRNORM: u16 = 0x100;
 /// Most descriptors one `poll` watches (the process's descriptor limit).
 const MAX_POLL: u64 = MAX_FILES as u64;
 
-/// The events descriptor `fd` of `p` has now (`POLLNVAL` for a closed one). `POLLERR` and
-/// `POLLHUP` are reported whether asked for or not.
-pub fn events(p: &Process, pipes: &Pipes, fd: u64) -> u16 {
+/// The events descriptor `fd` of `p` has now (`POLLNVAL` for a closed one), the console's
+/// being `console` ([`console_events`]). `POLLERR` and `POLLHUP` are reported whether
+/// asked for or not.
+pub fn events(p: &Process, pipes: &Pipes, console: u16, fd: u64) -> u16 {
     let ready = match p.file(fd) {
         None => return POLLNVAL,
         Some(File::Pipe { pipe, write, .. }) => pipes.poll(pipe, write),
-        // The console (its input reads end of file) and regular files never wait.
+        Some(File::Console(_)) => console,
+        // Regular files never wait.
         Some(_) => POLLIN | POLLOUT,
     };
     let normal = if ready & POLLIN != 0 { POLLRDNORM } else { 0 }
         | if ready & POLLOUT != 0 { POLLWRNORM } else { 0 };
     ready | normal
+}
+
+/// The console's events: its terminal's input readiness ([`crate::tty::Tty::readable`]),
+/// or, without a terminal, always readable (end of file); always writable.
+pub fn console_events(host: &mut impl Host) -> u16 {
+    let readable = host.tty().is_none_or(|t| t.readable());
+    (if readable { POLLIN } else { 0 }) | POLLOUT
 }
 
 /// The deadline of a wait: `None` (forever), `Some(0)` (do not wait), or when it ends on
@@ -126,6 +135,7 @@ pub fn poll(
     let table = &mut table[..nfds as usize * 8];
     read_user(p, host, fds, table)?;
     wait_mask(p, host, mask, mask_size)?;
+    let console = console_events(host);
     let mut ready = 0;
     for entry in table.chunks_exact_mut(8) {
         let fd = i32::from_le_bytes(entry[..4].try_into().unwrap_or([0; 4]));
@@ -133,7 +143,7 @@ pub fn poll(
         let got = if fd < 0 {
             0
         } else {
-            events(p, pipes, fd as u64) & (asked | POLLERR | POLLHUP | POLLNVAL)
+            events(p, pipes, console, fd as u64) & (asked | POLLERR | POLLHUP | POLLNVAL)
         };
         entry[6..8].copy_from_slice(&got.to_le_bytes());
         ready += u64::from(got != 0);
@@ -188,13 +198,14 @@ pub fn select(
             *set = u64::from_le_bytes(b);
         }
     }
+    let console = console_events(host);
     let mut got = [0u64; 3];
     for fd in 0..nfds {
         let bit = 1 << fd;
         if (asked[0] | asked[1] | asked[2]) & bit == 0 {
             continue;
         }
-        let ev = events(p, pipes, fd);
+        let ev = events(p, pipes, console, fd);
         if ev & POLLNVAL != 0 {
             return Err(Errno::EBADF);
         }

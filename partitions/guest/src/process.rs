@@ -23,7 +23,9 @@ pub enum Stream {
 /// An open file description.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum File<'a> {
-    /// The console (standard input reads end of file, output goes to the log).
+    /// The console: the terminal on COM2 ([`crate::tty`]) or, without one, the log
+    /// (reading gives end of file; the stream names the log line). `/dev/console` and
+    /// `/dev/tty` open it as `Console(Stream::Stdout)`.
     Console(Stream),
     /// A file or directory of the initramfs, read-only, with its offset.
     Initramfs { entry: Entry<'a>, offset: u64 },

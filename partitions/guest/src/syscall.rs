@@ -24,7 +24,10 @@
 //! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `setpgid`, `getpgid`, `setsid` and
 //! `getsid` are the process table's ([`crate::system`]). `fcntl` serves `F_DUPFD`,
 //! `F_DUPFD_CLOEXEC`, `F_GETFD`, `F_SETFD` (close-on-exec), `F_GETFL` and `F_SETFL`
-//! (`O_NONBLOCK` of a pipe descriptor: `EAGAIN` instead of waiting). `rseq` answers `ENOSYS` (as on kernels
+//! (`O_NONBLOCK` of a pipe descriptor: `EAGAIN` instead of waiting). On the console, `read`
+//! takes the terminal's input (waiting for it) and `ioctl` serves the terminal requests
+//! of [`crate::tty::ioctl`] when the guest has a terminal ([`Host::tty`]); without one,
+//! reading gives end of file and every `ioctl` `ENOTTY`, as on any other file. `rseq` answers `ENOSYS` (as on kernels
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
@@ -40,6 +43,7 @@ use crate::poll;
 use crate::process::{File, MAX_FILES, Process, Stream};
 use crate::sigcalls;
 use crate::signal::{self, Info, SIGSEGV};
+use crate::tty::{self, Termios, Tty, Winsize};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_INTERRUPT, VECTOR_SYSCALL};
 
@@ -73,6 +77,12 @@ pub trait Host {
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
     /// Output of process `pid` on the console.
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]);
+    /// The console's terminal, when the guest has one (COM2): then the console reads its
+    /// input and answers the terminal ioctls. Without one, reading the console gives end
+    /// of file and the terminal ioctls `ENOTTY`.
+    fn tty(&mut self) -> Option<&mut Tty> {
+        None
+    }
     /// Nanoseconds since the guest started.
     fn now_ns(&mut self) -> u64;
     /// The guest's memory for its processes: total and free bytes.
@@ -372,11 +382,10 @@ fn call<'a>(
             write_user(p, host, a[0], b"/\0")?;
             Ok(2)
         }
-        nr::ioctl => {
-            // No terminal yet: the console is not a tty (TCGETS and the rest: ENOTTY).
-            p.file(a[0]).ok_or(Errno::EBADF)?;
-            Err(Errno::ENOTTY)
-        }
+        nr::ioctl => match p.file(a[0]).ok_or(Errno::EBADF)? {
+            File::Console(_) => tty_ioctl(p, host, a[1], a[2]),
+            _ => Err(Errno::ENOTTY),
+        },
         nr::fcntl => fcntl(p, pipes, a[0], a[1], a[2]),
         nr::brk => Ok(brk(p, host, a[0])),
         nr::mmap => mmap(p, host, a[0], a[1], a[2], a[3]),
@@ -586,7 +595,28 @@ fn read(
     count: u64,
 ) -> SysResult<u64> {
     match p.file(fd).ok_or(Errno::EBADF)? {
-        File::Console(_) => Ok(0), // no console input yet: end of file
+        File::Console(_) => {
+            let n = (count as usize).min(tty::INPUT_MAX);
+            check_user(p, buf, n, Rights::WRITE)?;
+            let Some(tty) = host.tty() else {
+                return Ok(0); // no terminal: end of file
+            };
+            if tty.session() == p.sid && tty.foreground() != p.pgid {
+                // A background job reading its terminal: SIGTTIN stops it, and the read
+                // starts again when it is continued (in the foreground); EIO when it
+                // would not stop.
+                let ttin = signal::SIGTTIN;
+                if p.action(ttin).ignores(ttin) || p.sigmask & signal::bit(ttin) != 0 {
+                    return Err(Errno::EIO);
+                }
+                p.raise(Info::kernel(ttin));
+                return Err(WOULD_BLOCK);
+            }
+            let mut bytes = [0u8; tty::INPUT_MAX];
+            let n = tty.read(&mut bytes[..n]).ok_or(WOULD_BLOCK)?;
+            host.write_user(buf, &bytes[..n])?;
+            Ok(n as u64)
+        }
         File::Pipe { write: true, .. } => Err(Errno::EBADF),
         File::Pipe { pipe, nonblock, .. } => {
             let n = (count as usize).min(PIPE_SIZE);
@@ -654,6 +684,66 @@ fn write(
         done += n;
     }
     Ok(total as u64)
+}
+
+/// The terminal ioctls on a console descriptor ([`crate::tty`]): `ENOTTY` without a
+/// terminal or for any other request.
+fn tty_ioctl(p: &Process, host: &mut impl Host, request: u64, arg: u64) -> SysResult<u64> {
+    use tty::ioctl::*;
+    let tty = host.tty().ok_or(Errno::ENOTTY)?;
+    match request {
+        TCGETS => {
+            let bytes = tty.termios().to_bytes();
+            write_user(p, host, arg, &bytes)?;
+        }
+        TCSETS | TCSETSW | TCSETSF => {
+            let mut bytes = [0u8; tty::TERMIOS_SIZE];
+            read_user(p, host, arg, &mut bytes)?;
+            let termios = Termios::from_bytes(&bytes);
+            host.tty()
+                .ok_or(Errno::ENOTTY)?
+                .set_termios(termios, request == TCSETSF);
+        }
+        TIOCGWINSZ => {
+            let bytes = tty.winsize().to_bytes();
+            write_user(p, host, arg, &bytes)?;
+        }
+        TIOCSWINSZ => {
+            let mut bytes = [0u8; tty::WINSIZE_SIZE];
+            read_user(p, host, arg, &mut bytes)?;
+            let size = Winsize::from_bytes(&bytes);
+            host.tty().ok_or(Errno::ENOTTY)?.set_winsize(size);
+        }
+        TIOCGPGRP => {
+            let group = tty.foreground();
+            write_user(p, host, arg, &group.to_le_bytes())?;
+        }
+        TIOCSPGRP => {
+            let mut bytes = [0u8; 4];
+            read_user(p, host, arg, &mut bytes)?;
+            let group = i32::from_le_bytes(bytes);
+            host.tty().ok_or(Errno::ENOTTY)?.set_foreground(group)?;
+        }
+        FIONREAD => {
+            let n = tty.available() as u32;
+            write_user(p, host, arg, &n.to_le_bytes())?;
+        }
+        TCFLSH => match arg {
+            TCIFLUSH | TCIOFLUSH => tty.flush_input(),
+            1 => {} // TCOFLUSH: output never waits, nothing to discard
+            _ => return Err(Errno::EINVAL),
+        },
+        // A session leader makes the console its controlling terminal (every process has
+        // it as init's session's); output is never stopped.
+        TIOCSCTTY => {
+            if p.sid == p.pid {
+                tty.set_session(p.sid, p.pgid);
+            }
+        }
+        TCXONC => {}
+        _ => return Err(Errno::ENOTTY),
+    }
+    Ok(0)
 }
 
 fn sendfile(

@@ -6,8 +6,8 @@
 //! thread sent as a `call`: the thread waits until the guest replies, and the guest may
 //! reply at any later time. A call that has to wait (`wait4` for a running child, `read`
 //! from an empty pipe, `write` to a full one) changes nothing and leaves the process
-//! [`State::Blocked`] with its message kept; after every message the guest serves, it
-//! serves the kept messages again, in table order, until none makes progress, and replies
+//! [`State::Blocked`] with its message kept; after every message the guest serves (and
+//! when console input arrives: [`System::retry_blocked`]), it serves the kept messages again, in table order, until none makes progress, and replies
 //! to each call that completes. So a waiting process never stops the guest from serving
 //! the others, and the order of events decides nothing but who runs first.
 //!
@@ -257,6 +257,12 @@ impl<'a> System<'a> {
             State::Blocked(_) | State::Vforked { .. } | State::Zombie(_) => None,
         };
         ended.or_else(|| self.wake(fs, k))
+    }
+
+    /// Serves the kept messages of blocked processes again, after something outside the
+    /// processes happened (console input arrived). Returns how init ended when it did.
+    pub fn retry_blocked(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
+        self.wake(fs, k)
     }
 
     /// The time the next sleeping call or alarm is due (the guest's clock), if any.

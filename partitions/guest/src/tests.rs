@@ -10,6 +10,7 @@ use crate::memory::{PAGE, Rights, STACK_TOP};
 use crate::process::{Process, Stream};
 use crate::syscall::{Host, Outcome, handle};
 use crate::system::{MAX_PROCESSES, State, System, Tasks};
+use crate::tty::{self, Tty};
 use abi::ipc::{ExceptionMessage, VECTOR_SYSCALL};
 use std::collections::HashMap;
 
@@ -27,6 +28,8 @@ struct Model {
     /// Pages the guest may still back.
     budget: u64,
     console: Vec<(u32, Stream, Vec<u8>)>,
+    /// The console's terminal, if the guest has one.
+    tty: Option<Tty>,
     log: Vec<String>,
     now: u64,
     /// FPU images by pid, and the processes suspended (stopped).
@@ -106,6 +109,9 @@ impl Host for Model {
     }
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]) {
         self.console.push((pid, stream, bytes.to_vec()));
+    }
+    fn tty(&mut self) -> Option<&mut Tty> {
+        self.tty.as_mut()
     }
     fn now_ns(&mut self) -> u64 {
         self.now += 1_500_000_000;
@@ -380,7 +386,7 @@ fn a_c_library_start_and_hello() {
     // getrandom
     assert_eq!(w.call(nr::getrandom, [SCRATCH, 8, 0, 0, 0, 0]), 8);
     assert_eq!(w.word(SCRATCH), 0x5a5a_5a5a_5a5a_5a5a);
-    // The console: not a terminal yet.
+    // The console of a guest without a terminal (no COM2) is no terminal.
     assert_eq!(
         w.call(nr::ioctl, [1, 0x5401, SCRATCH, 0, 0, 0]),
         err(Errno::ENOTTY)
@@ -1785,4 +1791,217 @@ fn identity_resources_and_futex_of_a_single_threaded_root_process() {
         assert_eq!(g.system.tick(&g.fs, &mut g.host), None);
     }
     assert_eq!(g.host.resumed[0].1.registers.rax, err(Errno::ETIMEDOUT));
+}
+
+/// Types `bytes` on the console of `host` (its echo is dropped).
+fn type_in(host: &mut Model, bytes: &[u8]) {
+    let tty = host.tty.as_mut().unwrap();
+    for &b in bytes {
+        tty.input(b, &mut |_| {});
+    }
+}
+
+#[test]
+fn the_console_terminal_answers_its_ioctls() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    assert_eq!(
+        w.call(nr::read, [0, SCRATCH, 10, 0, 0, 0]),
+        0,
+        "without a terminal: end of file"
+    );
+    w.host.tty = Some(Tty::new(1));
+    // isatty: TCGETS gives Linux's defaults.
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TCGETS, SCRATCH, 0, 0, 0]),
+        0
+    );
+    let termios = tty::Termios::from_bytes(&w.get(SCRATCH, 36).try_into().unwrap());
+    assert_eq!(termios, tty::Termios::default());
+    // Raw mode, as a line editor sets it.
+    let mut raw = termios;
+    raw.lflag &= !(tty::ICANON | tty::ECHO);
+    w.put(SCRATCH, &raw.to_bytes());
+    assert_eq!(
+        w.call(nr::ioctl, [2, tty::ioctl::TCSETSW, SCRATCH, 0, 0, 0]),
+        0
+    );
+    assert_eq!(w.host.tty.as_ref().unwrap().termios(), raw);
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TIOCGWINSZ, SCRATCH, 0, 0, 0]),
+        0
+    );
+    assert_eq!(w.get(SCRATCH, 4), [24, 0, 80, 0]);
+    w.put(SCRATCH, &[50, 0, 132, 0, 0, 0, 0, 0]);
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TIOCSWINSZ, SCRATCH, 0, 0, 0]),
+        0
+    );
+    assert_eq!(w.host.tty.as_ref().unwrap().winsize().cols, 132);
+    // The foreground process group.
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TIOCGPGRP, SCRATCH, 0, 0, 0]),
+        0
+    );
+    assert_eq!(w.get(SCRATCH, 4), 1u32.to_le_bytes());
+    w.put(SCRATCH, &5u32.to_le_bytes());
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TIOCSPGRP, SCRATCH, 0, 0, 0]),
+        0
+    );
+    assert_eq!(w.host.tty.as_ref().unwrap().foreground(), 5);
+    w.put(SCRATCH, &(-1i32).to_le_bytes());
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TIOCSPGRP, SCRATCH, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(w.call(nr::ioctl, [0, tty::ioctl::TIOCSCTTY, 0, 0, 0, 0]), 0);
+    // Bad requests and addresses.
+    assert_eq!(
+        w.call(nr::ioctl, [0, 0x1234, SCRATCH, 0, 0, 0]),
+        err(Errno::ENOTTY)
+    );
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TCGETS, 8, 0, 0, 0]),
+        err(Errno::EFAULT)
+    );
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::TCFLSH, 7, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    // Reading: waits while there is nothing, then takes the input.
+    let (outcome, _) = w.run(nr::read, [0, SCRATCH, 10, 0, 0, 0]);
+    assert_eq!(outcome, Outcome::Block);
+    type_in(&mut w.host, b"ab");
+    assert_eq!(
+        w.call(nr::ioctl, [0, tty::ioctl::FIONREAD, SCRATCH + 64, 0, 0, 0]),
+        0
+    );
+    assert_eq!(w.get(SCRATCH + 64, 4), 2u32.to_le_bytes());
+    assert_eq!(w.call(nr::read, [0, SCRATCH, 1, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH, 1), b"a");
+    assert_eq!(w.call(nr::read, [0, 8, 10, 0, 0, 0]), err(Errno::EFAULT));
+    assert_eq!(
+        w.call(nr::read, [0, SCRATCH, 10, 0, 0, 0]),
+        1,
+        "nothing lost"
+    );
+    // A pipe is no terminal.
+    w.put(SCRATCH, &[0; 8]);
+    assert_eq!(w.call(nr::pipe, [SCRATCH, 0, 0, 0, 0, 0]), 0);
+    let fd = w.get(SCRATCH, 4)[0] as u64;
+    assert_eq!(
+        w.call(nr::ioctl, [fd, tty::ioctl::TCGETS, SCRATCH, 0, 0, 0]),
+        err(Errno::ENOTTY)
+    );
+}
+
+#[test]
+fn a_reader_of_the_console_waits_without_stopping_the_others() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    g.host.tty = Some(Tty::new(1));
+    let child = g.fork(1);
+    assert_eq!(g.call(child, nr::read, [0, SCRATCH, 100, 0, 0, 0]), None);
+    assert!(matches!(g.system.state(child), Some(State::Blocked(_))));
+    // The others go on meanwhile.
+    assert_eq!(g.call(1, nr::getpid, [0; 6]), Some(1));
+    // A line without its end wakes nobody; the end of the line does.
+    type_in(&mut g.host, b"ls\x7fs");
+    g.host.resumed.clear();
+    assert_eq!(g.system.retry_blocked(&g.fs, &mut g.host), None);
+    assert!(g.host.resumed.is_empty());
+    type_in(&mut g.host, b"\r");
+    assert_eq!(g.system.retry_blocked(&g.fs, &mut g.host), None);
+    let replies: Vec<(u32, u64)> = g
+        .host
+        .resumed
+        .iter()
+        .map(|(p, m)| (*p, m.registers.rax))
+        .collect();
+    assert_eq!(replies, [(child, 3)]);
+    assert_eq!(g.get(child, SCRATCH, 3), b"ls\n");
+    assert_eq!(g.system.state(child), Some(State::Running));
+}
+
+#[test]
+fn poll_waits_for_the_console_terminal() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let pollfd = |fd: i32, events: u16| {
+        let mut b = fd.to_le_bytes().to_vec();
+        b.extend_from_slice(&events.to_le_bytes());
+        b.extend_from_slice(&[0xff, 0xff]);
+        b
+    };
+    // Without a terminal the console reads end of file: always readable.
+    w.put(SCRATCH, &[pollfd(0, 1), pollfd(1, 4)].concat());
+    assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 2);
+    // With one: readable once a line came; always writable.
+    w.host.tty = Some(Tty::new(1));
+    assert_eq!(w.call(nr::poll, [SCRATCH, 2, 0, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH + 6, 2), [0, 0]);
+    assert_eq!(w.get(SCRATCH + 14, 2), [4, 0], "POLLOUT");
+    w.put(SCRATCH, &pollfd(0, 1));
+    let (outcome, _) = w.run(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]);
+    assert_eq!(outcome, Outcome::Block, "no timeout: it waits");
+    type_in(&mut w.host, b"x");
+    let (outcome, _) = w.run(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]);
+    assert_eq!(
+        outcome,
+        Outcome::Block,
+        "a line in progress is not input yet"
+    );
+    type_in(&mut w.host, b"\r");
+    assert_eq!(w.call(nr::poll, [SCRATCH, 1, -1i64 as u64, 0, 0, 0]), 1);
+    assert_eq!(w.get(SCRATCH + 6, 2), [1, 0], "POLLIN");
+}
+
+#[test]
+fn a_background_reader_of_the_terminal_is_stopped_until_it_is_in_the_foreground() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    g.host.tty = Some(Tty::new(1));
+    let child = g.fork(1);
+    // The child in a process group of its own, not the terminal's foreground one.
+    assert_eq!(g.call(child, nr::setpgid, [0, 0, 0, 0, 0, 0]), Some(0));
+    type_in(&mut g.host, b"typed\r");
+    // Its read stops it (its thread is suspended) and is set to run again (rip back at
+    // the `syscall` instruction, rax the call's number).
+    g.host.resumed.clear();
+    let _ = g.system.serve(
+        child,
+        &g.fs,
+        &mut g.host,
+        World::message(nr::read, [0, SCRATCH, 100, 0, 0, 0], 0),
+    );
+    assert_eq!(g.host.suspended, [child], "SIGTTIN stopped it");
+    let (pid, m) = g.host.resumed[0];
+    assert_eq!(
+        (pid, m.registers.rax, m.registers.rip),
+        (child, nr::read, 0x40_1019 - 2)
+    );
+    // In the foreground and continued, the read again takes the line.
+    g.host
+        .tty
+        .as_mut()
+        .unwrap()
+        .set_foreground(child as i32)
+        .unwrap();
+    assert_eq!(g.call(1, nr::kill, [child as u64, 18, 0, 0, 0, 0]), Some(0));
+    assert!(g.host.suspended.is_empty());
+    assert_eq!(g.call(child, nr::read, [0, SCRATCH, 100, 0, 0, 0]), Some(6));
+    assert_eq!(g.get(child, SCRATCH, 6), b"typed\n");
+    // One that ignores SIGTTIN reads EIO.
+    g.host.tty.as_mut().unwrap().set_foreground(1).unwrap();
+    g.put(child, SCRATCH, &[1, 0, 0, 0, 0, 0, 0, 0]);
+    g.put(child, SCRATCH + 8, &[0; 24]);
+    assert_eq!(
+        g.call(child, nr::rt_sigaction, [21, SCRATCH, 0, 8, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(
+        g.call(child, nr::read, [0, SCRATCH, 100, 0, 0, 0]),
+        Some(err(Errno::EIO))
+    );
 }
