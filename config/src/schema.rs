@@ -93,6 +93,8 @@ pub struct Guest {
     pub env: Option<Vec<Spanned<String>>>,
     #[serde(default)]
     pub files: Named<String>,
+    #[serde(default)]
+    pub programs: Vec<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

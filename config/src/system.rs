@@ -74,7 +74,14 @@ pub struct Guest {
     pub env: Vec<String>,
     /// (absolute path in the initramfs, host file), sorted by path.
     pub files: Vec<(String, SourceFile)>,
+    /// Linux programs `cargo xtask` builds (one of [`GUEST_PROGRAMS`]) and adds as
+    /// `/bin/<name>`, in the order given.
+    pub programs: Vec<String>,
 }
+
+/// The Linux programs `guest.programs` may name: static executables `cargo xtask` builds
+/// from `tests/linux` with `gcc -static` (`xtask/src/linux.rs`).
+pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench"];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
 /// (busybox, its applet links, the guest's command line, `/init`).
