@@ -27,7 +27,7 @@ extern const char *self_path;
 void say(const char *fmt, ...) __attribute__((format(printf, 1, 2)));
 /* `ok name` when cond holds, else `FAIL name: <detail>` (the detail formatted). */
 void check(const char *name, int cond, const char *fmt, ...) __attribute__((format(printf, 3, 4)));
-/* Expects the integer `got` to equal `expected`. */
+/* Expects the integer `got` to equal `expected` (a -1 is shown with errno's name). */
 void check_eq(const char *name, long expected, long got);
 /* Expects a call to have failed with -1 and errno `expected` (errno as the call left it). */
 void check_errno(const char *name, long ret, int expected);

@@ -66,7 +66,11 @@ const char *errno_name(int e)
 
 void check_eq(const char *name, long expected, long got)
 {
-	check(name, expected == got, "expected %ld got %ld", expected, got);
+	int e = errno;
+	if (got == -1 && expected != -1)
+		check(name, 0, "expected %ld got -1 (%s)", expected, errno_name(e));
+	else
+		check(name, expected == got, "expected %ld got %ld", expected, got);
 }
 
 void check_errno(const char *name, long ret, int expected)

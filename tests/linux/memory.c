@@ -37,6 +37,16 @@ static void read_byte(volatile char *p)
 		_exit(3);
 }
 
+/* Expects mmap's answer `ret` to be MAP_FAILED with errno `expected`. */
+static void check_map_errno(const char *name, void *ret, int expected)
+{
+	int e = errno;
+	if (ret != MAP_FAILED)
+		check(name, 0, "expected %s got a mapping", errno_name(expected));
+	else
+		check(name, e == expected, "expected %s got %s", errno_name(expected), errno_name(e));
+}
+
 static int all_zero(const char *p, long len)
 {
 	for (long i = 0; i < len; i++)
@@ -75,25 +85,15 @@ void area_memory(void)
 	a[4 * PAGE - 1] = 'y';
 	check("anonymous mapping is writable", a[0] == 'x' && a[4 * PAGE - 1] == 'y',
 	      "expected the bytes written");
-	errno = 0;
-	check("mmap of length 0 EINVAL",
-	      mmap(NULL, 0, PROT_READ, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0) == MAP_FAILED &&
-		      errno == EINVAL,
-	      "expected EINVAL got %s", errno_name(errno));
-	errno = 0;
-	check("mmap without MAP_PRIVATE or MAP_SHARED EINVAL",
-	      mmap(NULL, PAGE, PROT_READ, MAP_ANONYMOUS, -1, 0) == MAP_FAILED && errno == EINVAL,
-	      "expected EINVAL got %s", errno_name(errno));
-	errno = 0;
-	check("mmap of a bad descriptor EBADF",
-	      mmap(NULL, PAGE, PROT_READ, MAP_PRIVATE, 999, 0) == MAP_FAILED && errno == EBADF,
-	      "expected EBADF got %s", errno_name(errno));
-	errno = 0;
-	check("mmap MAP_FIXED at an unaligned address EINVAL",
-	      mmap(a + 1, PAGE, PROT_READ, MAP_PRIVATE | MAP_ANONYMOUS | MAP_FIXED, -1, 0) ==
-			      MAP_FAILED &&
-		      errno == EINVAL,
-	      "expected EINVAL got %s", errno_name(errno));
+	check_map_errno("mmap of length 0 EINVAL",
+			mmap(NULL, 0, PROT_READ, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0), EINVAL);
+	check_map_errno("mmap without MAP_PRIVATE or MAP_SHARED EINVAL",
+			mmap(NULL, PAGE, PROT_READ, MAP_ANONYMOUS, -1, 0), EINVAL);
+	check_map_errno("mmap of a bad descriptor EBADF",
+			mmap(NULL, PAGE, PROT_READ, MAP_PRIVATE, 999, 0), EBADF);
+	check_map_errno("mmap MAP_FIXED at an unaligned address EINVAL",
+			mmap(a + 1, PAGE, PROT_READ, MAP_PRIVATE | MAP_ANONYMOUS | MAP_FIXED, -1, 0),
+			EINVAL);
 
 	/* MAP_FIXED replaces what is there; the hole munmap leaves can be filled again. */
 	check_eq("munmap of the second page", 0, munmap(a + PAGE, PAGE));
@@ -171,10 +171,8 @@ void area_memory(void)
 	} else {
 		check("file mapping at an offset", 0, "expected success got %s", errno_name(errno));
 	}
-	errno = 0;
-	check("file mapping at an unaligned offset EINVAL",
-	      mmap(NULL, PAGE, PROT_READ, MAP_PRIVATE, fd, 1) == MAP_FAILED && errno == EINVAL,
-	      "expected EINVAL got %s", errno_name(errno));
+	check_map_errno("file mapping at an unaligned offset EINVAL",
+			mmap(NULL, PAGE, PROT_READ, MAP_PRIVATE, fd, 1), EINVAL);
 	close(fd);
 
 	/* A large mapping costs only what is touched (demand paging). */

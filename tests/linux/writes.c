@@ -52,8 +52,8 @@ void area_writes(void)
 	char buf[64];
 	struct stat st;
 	snprintf(dir, sizeof dir, "/tmp/linux-tests-XXXXXX");
-	check("mkdtemp under /tmp", mkdtemp(dir) != NULL, "expected success got %s",
-	      errno_name(errno));
+	char *made = mkdtemp(dir);
+	check("mkdtemp under /tmp", made != NULL, "expected success got %s", errno_name(errno));
 	mode_t old_mask = umask(022);
 
 	int fd = open(at("a"), O_RDWR | O_CREAT | O_EXCL, 0666);

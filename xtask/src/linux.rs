@@ -136,7 +136,7 @@ pub fn differences(expected: &[String], got: &[String]) -> Vec<String> {
         }
     }
     if out.is_empty() && expected != got {
-        out.push("(the same lines in another order)".to_string());
+        out.push("(the same lines, in another order or number)".to_string());
     }
     out
 }
