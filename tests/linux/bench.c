@@ -216,10 +216,10 @@ static long run_drained(char *const argv[], void (*feed)(int fd))
 		total += n;
 	close(out[0]);
 	int status = wait_child(pid);
-	if (feeder > 0)
-		wait_child(feeder);
-	if (pid < 0 || status != 0) {
-		printf("bench-error %s ended with status 0x%x\n", argv[0], status);
+	int fed = feeder > 0 ? wait_child(feeder) : 0;
+	if (pid < 0 || status != 0 || feeder < 0 || fed != 0) {
+		printf("bench-error %s ended with status 0x%x, its feeder with 0x%x\n", argv[0],
+		       status, fed);
 		broken = 1;
 		return -1;
 	}
@@ -249,6 +249,18 @@ static int shell_round(long n)
 
 #define GZIP_BYTES (4L << 20)
 
+/* Writes all of `data` (a pipe may take it in parts); exits 1 if it cannot. */
+static void write_all(int fd, const char *data, size_t len)
+{
+	while (len > 0) {
+		ssize_t n = write(fd, data, len);
+		if (n <= 0)
+			_exit(1);
+		data += n;
+		len -= n;
+	}
+}
+
 /* 4 MiB of text that compresses like prose: words from a small list, picked by a fixed
  * xorshift sequence. */
 static void gzip_input(int fd)
@@ -267,15 +279,13 @@ static void gzip_input(int fd)
 		const char *w = words[x % (sizeof words / sizeof words[0])];
 		size_t len = strlen(w);
 		if (used + len > sizeof buf || sent + (long)(used + len) > GZIP_BYTES) {
-			if (write(fd, buf, used) != (ssize_t)used)
-				_exit(1);
+			write_all(fd, buf, used);
 			sent += used;
 			used = 0;
 			if (sent + (long)len > GZIP_BYTES) {
 				long rest = GZIP_BYTES - sent;
 				memset(buf, '.', rest);
-				if (write(fd, buf, rest) != rest)
-					_exit(1);
+				write_all(fd, buf, rest);
 				break;
 			}
 		}
@@ -289,7 +299,14 @@ static int gzip_round(long n)
 {
 	(void)n;
 	char *argv[] = { "/bin/busybox", "gzip", "-c", NULL };
-	return run_drained(argv, gzip_input) <= 0 ? -1 : 0;
+	long compressed = run_drained(argv, gzip_input);
+	if (compressed >= 0 && compressed < 64 * 1024) {
+		/* 4 MiB of these words compress to a few hundred KiB, never this little. */
+		printf("bench-error gzip wrote only %ld bytes\n", compressed);
+		broken = 1;
+		return -1;
+	}
+	return compressed < 0 ? -1 : 0;
 }
 
 static const struct {

@@ -1,6 +1,7 @@
 /* Area `memory`: brk, anonymous mmap (plain, fixed, hinted, large and untouched), private
- * file mappings, munmap and mprotect with their errors, and the SIGSEGV a child gets for
- * touching memory it has not (or no longer, or not writable). */
+ * file mappings, munmap and mprotect with their errors, the SIGSEGV a child gets for
+ * touching memory it has not (or no longer, or not writable), and vfork's child borrowing
+ * its parent's memory. */
 #include "check.h"
 
 #include <fcntl.h>
@@ -174,6 +175,17 @@ void area_memory(void)
 	check_map_errno("file mapping at an unaligned offset EINVAL",
 			mmap(NULL, PAGE, PROT_READ, MAP_PRIVATE, fd, 1), EINVAL);
 	close(fd);
+
+	/* A vfork child runs in its parent's memory until it exits or executes. */
+	static volatile int shared;
+	shared = 0;
+	int pid = vfork();
+	if (pid == 0) {
+		shared = 7;
+		_exit(0);
+	}
+	wait_for(pid);
+	check_eq("vfork child's write seen by the parent", 7, shared);
 
 	/* A large mapping costs only what is touched (demand paging). */
 	long big = 256L << 20;

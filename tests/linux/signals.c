@@ -128,11 +128,19 @@ void area_signals(void)
 	check_errno("kill of a missing process ESRCH", kill(0x3ffffff0, 0), ESRCH);
 	check_errno("kill with a bad signal EINVAL", kill(getpid(), 65), EINVAL);
 
+	/* A child killed by SIGKILL has status word 9. */
+	int pid = fork();
+	if (pid == 0) {
+		kill(getpid(), SIGKILL);
+		_exit(1);
+	}
+	check_eq("status word of a child killed by SIGKILL", SIGKILL, wait_for(pid));
+
 	/* Default actions, seen in the wait status. The child waits in a read the parent ends
 	 * (end of file) after the signal, so that it ends even where kill failed. */
 	int gate[2];
 	pipe(gate);
-	int pid = fork();
+	pid = fork();
 	if (pid == 0) {
 		char c;
 		close(gate[1]);
