@@ -74,6 +74,7 @@
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
 //! guest.console = "com2"                           # optional: a terminal on COM2
+//! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -174,7 +175,11 @@
 //! initramfs (missing directories are created), each value a file on the host, relative to
 //! the description's directory (its permission bits are kept, owner root); they may replace
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
-//! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `cargo xtask` builds the
+//! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `guest.programs` names
+//! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`
+//! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, and `linux-bench`,
+//! the guest benchmark) and adds as `/bin/<name>` (not also a `guest.files` path, each
+//! once). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as
 //! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `wc`, `true`,
 //! `/etc/passwd`, `/etc/group`, an `/init` script, these keys in `/etc/guest/init` and

@@ -94,6 +94,8 @@ pub struct Guest {
     #[serde(default)]
     pub files: Named<String>,
     pub console: Option<Spanned<String>>,
+    #[serde(default)]
+    pub programs: Vec<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

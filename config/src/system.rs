@@ -77,6 +77,9 @@ pub struct Guest {
     /// The processes' console is a terminal on COM2 (`guest.console = "com2"`); otherwise
     /// their output goes to the log.
     pub console_com2: bool,
+    /// Linux programs `cargo xtask` builds (one of [`GUEST_PROGRAMS`]) and adds as
+    /// `/bin/<name>`, in the order given.
+    pub programs: Vec<String>,
 }
 
 /// COM2's ports and interrupt line, which `guest.console = "com2"` needs.
@@ -85,6 +88,10 @@ pub const COM2_PORTS: crate::model::IoRange = crate::model::IoRange {
     last: 0x2ff,
 };
 pub const COM2_IRQ: u8 = 3;
+
+/// The Linux programs `guest.programs` may name: static executables `cargo xtask` builds
+/// from `tests/linux` with `gcc -static` (`xtask/src/linux.rs`).
+pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench"];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
 /// (busybox, its applet links, the guest's command line, `/init`).

@@ -590,8 +590,33 @@ impl Validator<'_, '_> {
             }
             true
         });
+        let mut programs: Vec<String> = Vec::new();
+        for (i, program) in g.programs.iter().enumerate() {
+            let name = program.get_ref();
+            let at = path.key("programs").index(i);
+            if !GUEST_PROGRAMS.contains(&name.as_str()) {
+                self.error(
+                    start(program),
+                    &at,
+                    format!(
+                        "`{name}` is no program cargo xtask builds (known: {})",
+                        GUEST_PROGRAMS.join(", ")
+                    ),
+                );
+            } else if programs.contains(name) {
+                self.error(start(program), &at, format!("`{name}` is listed twice"));
+            } else if files.iter().any(|(t, _)| *t == format!("/bin/{name}")) {
+                self.error(
+                    start(program),
+                    &at,
+                    format!("`/bin/{name}` is also a `guest.files` path"),
+                );
+            }
+            programs.push(name.clone());
+        }
         (self.r.diagnostics.len() == before).then(|| Guest {
             console_com2,
+            programs,
             files,
             init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
             env: match &g.env {

@@ -222,3 +222,45 @@ fn a_console_on_com2_needs_its_ports_and_interrupt() {
         "`com1` is no console device",
     );
 }
+
+#[test]
+fn programs_are_known_once_and_not_also_files() {
+    let system = load_ok(&guest(
+        "guest.init = [\"/bin/linux-tests\"]\nguest.programs = [\"linux-tests\", \"linux-bench\"]",
+    ));
+    let g = system.partitions[1].guest.as_ref().unwrap();
+    assert_eq!(g.programs, ["linux-tests", "linux-bench"]);
+    let none = load_ok(&guest("guest.init = [\"/bin/sh\"]"));
+    assert!(
+        none.partitions[1]
+            .guest
+            .as_ref()
+            .unwrap()
+            .programs
+            .is_empty()
+    );
+    expect_some(
+        &guest("guest.init = [\"/bin/sh\"]\nguest.programs = [\"gcc\"]"),
+        "\"gcc\"",
+        0,
+        "partitions.b.guest.programs[0]",
+        "`gcc` is no program cargo xtask builds (known: linux-tests, linux-bench)",
+    );
+    expect_some(
+        &guest("guest.init = [\"/bin/sh\"]\nguest.programs = [\"linux-tests\", \"linux-tests\"]"),
+        "\"linux-tests\"",
+        1,
+        "partitions.b.guest.programs[1]",
+        "`linux-tests` is listed twice",
+    );
+    let errors = load(&guest(
+        "guest.init = [\"/bin/sh\"]\nguest.programs = [\"linux-tests\"]\nguest.files = { \"/bin/linux-tests\" = \"tests/data/motd.txt\" }",
+    ))
+    .unwrap_err();
+    assert!(
+        errors.iter().any(|d| d
+            .to_string()
+            .contains("`/bin/linux-tests` is also a `guest.files` path")),
+        "{errors:?}"
+    );
+}

@@ -12,6 +12,7 @@
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
 //! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
 //! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
+//! | `/bin/<name>` of each `guest.programs` name | the Linux program built from `tests/linux` ([`crate::linux`]) |
 //!
 //! Every entry belongs to root, has mtime 0 and a fixed inode number, so the archive only
 //! changes when busybox or the keys do.
@@ -130,6 +131,12 @@ pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
         dir("root"),
         dir("tmp"),
     ]);
+    for name in &guest.programs {
+        let path = crate::linux::build(name)?;
+        let data =
+            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+        entries.push((format!("bin/{name}"), S_IFREG | 0o755, data));
+    }
     for (target, source) in &guest.files {
         let data = std::fs::read(&source.path)
             .with_context(|| format!("guest.files: cannot read {}", source.path))?;
@@ -182,6 +189,7 @@ mod tests {
             env: vec!["PATH=/bin".into()],
             files: Vec::new(),
             console_com2: false,
+            programs: Vec::new(),
         }
     }
 
@@ -227,6 +235,18 @@ mod tests {
         let err = initramfs(b"ELF", &g).unwrap_err();
         assert!(format!("{err:#}").contains("cannot read"), "{err:#}");
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn programs_are_built_into_bin() {
+        let mut g = hello();
+        g.programs = vec!["linux-tests".into()];
+        let bytes = initramfs(b"ELF", &g).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        let program = fs.get("/bin/linux-tests").unwrap();
+        assert!(program.data.starts_with(b"\x7fELF"));
+        assert_eq!(program.mode, S_IFREG | 0o755);
+        guest::elf::LoadPlan::new(program.data).unwrap();
     }
 
     #[test]

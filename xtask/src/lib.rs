@@ -3,8 +3,8 @@
 //! The library part is shared with the QEMU scenario tests (`tests/`): building the
 //! bare-metal artifacts ([`artifacts`]), assembling an ESP folder with `system.img`
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
-//! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), and the
-//! lint gate ([`lint`]).
+//! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
+//! lint gate ([`lint`]), and the Linux-side test programs ([`linux`]).
 
 pub mod artifacts;
 pub mod bench;
@@ -12,6 +12,7 @@ pub mod check_config;
 pub mod esp;
 pub mod guest;
 pub mod lint;
+pub mod linux;
 pub mod plc;
 pub mod qemu;
 pub mod scenario;

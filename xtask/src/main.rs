@@ -2,7 +2,7 @@
 //!
 //! Exit codes: 0 success; 1 failure (build error, failed test, crashed or hung system).
 
-use anyhow::{Result, bail};
+use anyhow::{Context, Result, bail};
 use clap::{Parser, Subcommand};
 use std::path::PathBuf;
 use std::process::ExitCode;
@@ -57,6 +57,11 @@ enum Cmd {
         /// Major frames of the soak.
         #[arg(long, value_name = "FRAMES", default_value_t = SOAK_FRAMES, requires = "soak")]
         frames: u64,
+        /// Run only the guest benchmark (tests/configs/bench_guest.toml: linux-bench in a
+        /// guest partition, and on the host as `host_*` for comparison; also part of the
+        /// full bench); writes target/bench/guest.json.
+        #[arg(long, conflicts_with = "soak")]
+        guest: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -97,6 +102,7 @@ fn main() -> ExitCode {
         Cmd::Bench {
             soak: true, frames, ..
         } => soak(frames),
+        Cmd::Bench { guest: true, .. } => guest_bench(),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -216,14 +222,15 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     tools::ensure_qemu()?;
     // Host unit tests: the host crates (the workspace's default members), plus the pure
     // logic of the kernel, the APEX runtime, the plant, the PLC runtime and the guest (their
-    // library parts).
+    // library parts), and the Linux-side checks (tests/linux) on the host Linux.
     let host_ok = scenarios_only
         || (cargo_test(&[])?
             & cargo_test(&["-p", "kernel", "--lib"])?
             & cargo_test(&["-p", "apex", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "plant", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?
-            & cargo_test(&["-p", "guest", "--no-default-features", "--lib"])?);
+            & cargo_test(&["-p", "guest", "--no-default-features", "--lib"])?
+            & xtask::linux::host_check()?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
         return Ok(false);
@@ -414,6 +421,88 @@ fn plc_metrics(
     }
 }
 
+/// `cargo xtask bench --guest`: only the guest benchmark; writes `target/bench/guest.json`.
+fn guest_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = guest_metrics(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "guest.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
+/// The guest benchmark: `linux-bench` (tests/linux/bench.c) on the host Linux (`host_*`,
+/// the same loops, for comparison), then in the guest partition of
+/// tests/configs/bench_guest.toml (`guest_*`, on real time: the cycles are what the
+/// guest's calls cost under QEMU).
+fn guest_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+) -> Result<Vec<xtask::bench::Metric>> {
+    let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
+    let described = xtask::check_config::load(&config)?;
+    let args: Vec<String> = described
+        .partitions
+        .iter()
+        .find_map(|p| p.guest.as_ref())
+        .map(|g| g.init.iter().skip(1).cloned().collect())
+        .unwrap_or_default();
+    let program = xtask::linux::build("linux-bench")?;
+    eprintln!("xtask: running linux-bench on the host");
+    let out = std::process::Command::new(&program)
+        .args(&args)
+        .args(["--prefix", "host_"])
+        .current_dir("/")
+        .output()
+        .with_context(|| format!("cannot run {}", program.display()))?;
+    let host_text = String::from_utf8_lossy(&out.stdout);
+    if !out.status.success() {
+        bail!(
+            "linux-bench failed on the host ({}):\n{host_text}",
+            out.status
+        );
+    }
+    let mut metrics: Vec<_> = host_text
+        .lines()
+        .filter_map(xtask::bench::parse_line)
+        .collect();
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir.join("guest"),
+        "guest benchmark system",
+        false,
+        Duration::from_secs(3600),
+    )?;
+    let errors: Vec<&String> = outcome
+        .lines
+        .iter()
+        .filter(|l| l.contains("bench-error") || l.contains("killed by signal"))
+        .collect();
+    let guest: Vec<_> = outcome
+        .lines
+        .iter()
+        .filter_map(|l| xtask::bench::parse_line(l))
+        .filter(|m| m.name.starts_with("guest_"))
+        .collect();
+    if !errors.is_empty() || guest.is_empty() {
+        bail!(
+            "the guest benchmark failed: {errors:?}\n{}",
+            outcome.transcript()
+        );
+    }
+    for note in outcome.lines.iter().filter(|l| l.contains("stdout: note ")) {
+        eprintln!("xtask: {note}");
+    }
+    metrics.extend(guest);
+    Ok(metrics)
+}
+
 /// Major frames of `cargo xtask bench --soak` by default.
 const SOAK_FRAMES: u64 = 1_000_000;
 
@@ -517,6 +606,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
+    metrics.extend(guest_metrics(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {

@@ -1,0 +1,394 @@
+/* linux-bench: the guest benchmark, in TSC cycles, after the method of Table 1 of the
+ * P4Linux paper ("The performance of µ-kernel-based systems"): each metric is a loop of
+ * `--loops` calls (default 1000) timed with rdtsc, divided by the number of calls, repeated
+ * `--rounds` times (default 5); the line gives the median, minimum and maximum over the
+ * rounds:
+ *
+ *     bench <prefix><metric> median=<n> min=<n> max=<n> unit=cycles samples=<rounds>
+ *
+ * (the line format of `cargo xtask bench`; prefix `guest_` unless `--prefix` says
+ * otherwise, e.g. `host_` for the same program on the host). Metrics:
+ *
+ *   getpid            one getpid system call
+ *   fork_exit         fork, the child _exits, the parent waits for it
+ *   vfork_exit        the same with vfork
+ *   fork_execve       fork, the child executes this program (`--exit 0`), the parent waits
+ *   vfork_execve      the same with vfork
+ *   pipe_roundtrip    one byte to a child process and back through two pipes
+ *   shell_echo_cat    (per run, not per call) `sh -c` running 200 times
+ *                     `echo $i | cat > /dev/null` (cat's output goes into a pipe this
+ *                     program drains when there is no /dev/null; a `note` line says so)
+ *   gzip_4mib         (per run) `busybox gzip -c` of 4 MiB of text fed through a pipe, its
+ *                     output drained through another
+ *
+ *     linux-bench [--loops N] [--fork-loops N] [--rounds N] [--prefix P] [METRIC...]
+ *
+ * `--fork-loops` sets the loop length of the four process metrics on their own (they cost
+ * milliseconds per call where fork copies the address space). Must be started with an
+ * absolute path (it executes itself). Exits 1 when a metric could not be measured. */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/syscall.h>
+#include <sys/wait.h>
+#include <unistd.h>
+#include <x86intrin.h>
+
+#define MAX_ROUNDS 64
+
+static const char *self;
+static const char *prefix = "guest_";
+static long loops = 1000, fork_loops = 1000;
+static int rounds = 5;
+static int broken;
+
+static unsigned long long now(void)
+{
+	_mm_lfence();
+	return __rdtsc();
+}
+
+static void fail(const char *what)
+{
+	printf("bench-error %s: %s\n", what, strerror(errno));
+	fflush(stdout);
+	broken = 1;
+}
+
+static int wait_child(int pid)
+{
+	int status;
+	while (waitpid(pid, &status, 0) == -1)
+		if (errno != EINTR)
+			return -1;
+	return status;
+}
+
+static int by_value(const void *a, const void *b)
+{
+	unsigned long long x = *(const unsigned long long *)a, y = *(const unsigned long long *)b;
+	return x < y ? -1 : x > y;
+}
+
+/* Prints the line of `name` from the per-call cycles of each round. */
+static void report(const char *name, unsigned long long *values, int n)
+{
+	qsort(values, n, sizeof values[0], by_value);
+	unsigned long long median = n % 2 ? values[n / 2] : (values[n / 2 - 1] + values[n / 2]) / 2;
+	printf("bench %s%s median=%llu min=%llu max=%llu unit=cycles samples=%d\n", prefix, name,
+	       median, values[0], values[n - 1], n);
+	fflush(stdout);
+}
+
+static int getpid_round(long n)
+{
+	for (long i = 0; i < n; i++)
+		syscall(SYS_getpid);
+	return 0;
+}
+
+static int fork_round(long n, int use_vfork, int exec)
+{
+	char *args[] = { (char *)self, "--exit", "0", NULL };
+	char *env[] = { NULL };
+	for (long i = 0; i < n; i++) {
+		int pid = use_vfork ? vfork() : fork();
+		if (pid == 0) {
+			if (exec)
+				execve(self, args, env);
+			_exit(exec ? 99 : 0);
+		}
+		if (pid < 0) {
+			fail(use_vfork ? "vfork" : "fork");
+			return -1;
+		}
+		int status = wait_child(pid);
+		if (status != 0) {
+			printf("bench-error child status 0x%x\n", status);
+			broken = 1;
+			return -1;
+		}
+	}
+	return 0;
+}
+static int fork_exit_round(long n)
+{
+	return fork_round(n, 0, 0);
+}
+static int vfork_exit_round(long n)
+{
+	return fork_round(n, 1, 0);
+}
+static int fork_execve_round(long n)
+{
+	return fork_round(n, 0, 1);
+}
+static int vfork_execve_round(long n)
+{
+	return fork_round(n, 1, 1);
+}
+
+/* The echo child of the round trips lives over all rounds. */
+static int to_child[2] = { -1, -1 }, from_child[2] = { -1, -1 };
+static int echo_pid;
+
+static int pipe_roundtrip_round(long n)
+{
+	if (echo_pid == 0) {
+		if (pipe(to_child) || pipe(from_child)) {
+			fail("pipe");
+			return -1;
+		}
+		echo_pid = fork();
+		if (echo_pid == 0) {
+			char c;
+			close(to_child[1]);
+			close(from_child[0]);
+			while (read(to_child[0], &c, 1) == 1)
+				if (write(from_child[1], &c, 1) != 1)
+					_exit(1);
+			_exit(0);
+		}
+		close(to_child[0]);
+		close(from_child[1]);
+	}
+	char c = 'x';
+	for (long i = 0; i < n; i++)
+		if (write(to_child[1], &c, 1) != 1 || read(from_child[0], &c, 1) != 1) {
+			fail("pipe round trip");
+			return -1;
+		}
+	return 0;
+}
+
+static void end_echo_child(void)
+{
+	if (echo_pid > 0) {
+		close(to_child[1]);
+		close(from_child[0]);
+		wait_child(echo_pid);
+		echo_pid = 0;
+	}
+}
+
+/* Runs `argv` with its stdin from `feed` (or nothing) and its stdout into a pipe this
+ * process drains; returns the number of bytes it printed, -1 on failure. `feed` runs in a
+ * child of its own writing into the program's stdin. */
+static long run_drained(char *const argv[], void (*feed)(int fd))
+{
+	int out[2], in[2] = { -1, -1 };
+	if (pipe(out) || (feed && pipe(in))) {
+		fail("pipe");
+		return -1;
+	}
+	int pid = fork();
+	if (pid == 0) {
+		dup2(out[1], 1);
+		close(out[0]);
+		close(out[1]);
+		if (feed) {
+			dup2(in[0], 0);
+			close(in[0]);
+			close(in[1]);
+		}
+		char *env[] = { "PATH=/bin:/usr/bin", NULL };
+		execve(argv[0], argv, env);
+		_exit(127);
+	}
+	close(out[1]);
+	int feeder = 0;
+	if (feed) {
+		close(in[0]);
+		feeder = fork();
+		if (feeder == 0) {
+			close(out[0]);
+			feed(in[1]);
+			_exit(0);
+		}
+		close(in[1]);
+	}
+	char buf[4096];
+	long total = 0, n;
+	while ((n = read(out[0], buf, sizeof buf)) > 0)
+		total += n;
+	close(out[0]);
+	int status = wait_child(pid);
+	int fed = feeder > 0 ? wait_child(feeder) : 0;
+	if (pid < 0 || status != 0 || feeder < 0 || fed != 0) {
+		printf("bench-error %s ended with status 0x%x, its feeder with 0x%x\n", argv[0],
+		       status, fed);
+		broken = 1;
+		return -1;
+	}
+	return total;
+}
+
+static int have_dev_null(void)
+{
+	int fd = open("/dev/null", O_WRONLY);
+	if (fd < 0)
+		return 0;
+	int ok = write(fd, "x", 1) == 1;
+	close(fd);
+	return ok;
+}
+
+static int shell_round(long n)
+{
+	(void)n;
+	char *with_null[] = { "/bin/sh", "-c",
+			      "i=0; while [ $i -lt 200 ]; do echo $i | cat > /dev/null; i=$((i+1)); done",
+			      NULL };
+	char *drained[] = { "/bin/sh", "-c",
+			    "i=0; while [ $i -lt 200 ]; do echo $i | cat; i=$((i+1)); done", NULL };
+	return run_drained(have_dev_null() ? with_null : drained, NULL) < 0 ? -1 : 0;
+}
+
+#define GZIP_BYTES (4L << 20)
+
+/* Writes all of `data` (a pipe may take it in parts); exits 1 if it cannot. */
+static void write_all(int fd, const char *data, size_t len)
+{
+	while (len > 0) {
+		ssize_t n = write(fd, data, len);
+		if (n <= 0)
+			_exit(1);
+		data += n;
+		len -= n;
+	}
+}
+
+/* 4 MiB of text that compresses like prose: words from a small list, picked by a fixed
+ * xorshift sequence. */
+static void gzip_input(int fd)
+{
+	static const char *words[] = { "the ", "guest ", "partition ", "runs ", "a ", "static ",
+				       "Linux ", "binary ", "as ", "microkernel ", "task, ",
+				       "served ", "by ", "its ", "personality.\n" };
+	static char buf[65536];
+	unsigned long x = 88172645463325252UL;
+	long sent = 0;
+	size_t used = 0;
+	while (sent < GZIP_BYTES) {
+		x ^= x << 13;
+		x ^= x >> 7;
+		x ^= x << 17;
+		const char *w = words[x % (sizeof words / sizeof words[0])];
+		size_t len = strlen(w);
+		if (used + len > sizeof buf || sent + (long)(used + len) > GZIP_BYTES) {
+			write_all(fd, buf, used);
+			sent += used;
+			used = 0;
+			if (sent + (long)len > GZIP_BYTES) {
+				long rest = GZIP_BYTES - sent;
+				memset(buf, '.', rest);
+				write_all(fd, buf, rest);
+				break;
+			}
+		}
+		memcpy(buf + used, w, len);
+		used += len;
+	}
+	close(fd);
+}
+
+static int gzip_round(long n)
+{
+	(void)n;
+	char *argv[] = { "/bin/busybox", "gzip", "-c", NULL };
+	long compressed = run_drained(argv, gzip_input);
+	if (compressed >= 0 && compressed < 64 * 1024) {
+		/* 4 MiB of these words compress to a few hundred KiB, never this little. */
+		printf("bench-error gzip wrote only %ld bytes\n", compressed);
+		broken = 1;
+		return -1;
+	}
+	return compressed < 0 ? -1 : 0;
+}
+
+static const struct {
+	const char *name;
+	int (*round)(long n);
+	int process; /* loops of --fork-loops */
+	int per_run; /* one run per round, not per call */
+} metrics[] = {
+	{ "getpid", getpid_round, 0, 0 },
+	{ "fork_exit", fork_exit_round, 1, 0 },
+	{ "vfork_exit", vfork_exit_round, 1, 0 },
+	{ "fork_execve", fork_execve_round, 1, 0 },
+	{ "vfork_execve", vfork_execve_round, 1, 0 },
+	{ "pipe_roundtrip", pipe_roundtrip_round, 0, 0 },
+	{ "shell_echo_cat", shell_round, 0, 1 },
+	{ "gzip_4mib", gzip_round, 0, 1 },
+};
+#define METRICS (sizeof metrics / sizeof metrics[0])
+
+static void measure(size_t m)
+{
+	unsigned long long values[MAX_ROUNDS];
+	long n = metrics[m].per_run ? 1 : metrics[m].process ? fork_loops : loops;
+	if (metrics[m].per_run && strcmp(metrics[m].name, "shell_echo_cat") == 0 &&
+	    !have_dev_null()) {
+		printf("note %s%s: no /dev/null, cat writes into a pipe\n", prefix, metrics[m].name);
+		fflush(stdout);
+	}
+	/* A short warm-up round for the per-call metrics (page faults, the echo child). */
+	if (!metrics[m].per_run && metrics[m].round(n < 10 ? n : 10) < 0)
+		return;
+	for (int r = 0; r < rounds; r++) {
+		unsigned long long start = now();
+		if (metrics[m].round(n) < 0)
+			return;
+		values[r] = (now() - start) / n;
+	}
+	end_echo_child();
+	report(metrics[m].name, values, rounds);
+}
+
+static long number(const char *s, long max)
+{
+	char *end;
+	long v = strtol(s, &end, 10);
+	if (*end || v < 1 || v > max) {
+		fprintf(stderr, "linux-bench: %s: expected 1..%ld\n", s, max);
+		exit(2);
+	}
+	return v;
+}
+
+int main(int argc, char **argv)
+{
+	self = argv[0];
+	if (argc == 3 && strcmp(argv[1], "--exit") == 0)
+		return atoi(argv[2]);
+	int chosen = 0;
+	int selected[METRICS] = { 0 };
+	for (int i = 1; i < argc; i++) {
+		if (strcmp(argv[i], "--loops") == 0 && i + 1 < argc)
+			loops = number(argv[++i], 1000000);
+		else if (strcmp(argv[i], "--fork-loops") == 0 && i + 1 < argc)
+			fork_loops = number(argv[++i], 1000000);
+		else if (strcmp(argv[i], "--rounds") == 0 && i + 1 < argc)
+			rounds = number(argv[++i], MAX_ROUNDS);
+		else if (strcmp(argv[i], "--prefix") == 0 && i + 1 < argc)
+			prefix = argv[++i];
+		else {
+			size_t m = 0;
+			while (m < METRICS && strcmp(metrics[m].name, argv[i]) != 0)
+				m++;
+			if (m == METRICS) {
+				fprintf(stderr, "linux-bench: unknown metric or option %s\n", argv[i]);
+				return 2;
+			}
+			selected[m] = 1;
+			chosen = 1;
+		}
+	}
+	for (size_t m = 0; m < METRICS; m++)
+		if (!chosen || selected[m])
+			measure(m);
+	return broken;
+}

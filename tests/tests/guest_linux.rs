@@ -1,0 +1,64 @@
+//! The Linux-side checks (`tests/linux`, program `linux-tests`) in the paravirtualized guest
+//! (configuration `tests/configs/guest_linux.toml`): each guest partition there runs
+//! `/bin/linux-tests AREA...`, and its output must be exactly the areas' expected files
+//! `tests/linux/expected/<area>.out` — the lines the same program prints on the host Linux
+//! (`cargo xtask test` checks that on the host first). The areas the configuration runs
+//! are those the guest passes; the others are listed there with what they wait for.
+
+use scenarios::{boot, check};
+
+const CONFIG: &str = "tests/configs/guest_linux.toml";
+
+/// The text the processes of guest partition `partition` printed on stdout, a line each.
+fn printed(o: &xtask::qemu::Outcome, partition: &str) -> Vec<String> {
+    let prefix = format!("[{partition}] guest: process ");
+    o.lines
+        .iter()
+        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text))
+        .filter_map(|text| text.split_once(" stdout: ").map(|(_, t)| t.to_string()))
+        .collect()
+}
+
+#[test]
+fn guest_linux() {
+    let system = xtask::check_config::load(&xtask::workspace_root().join(CONFIG))
+        .unwrap_or_else(|e| panic!("{e:#}"));
+    let runs: Vec<(String, Vec<String>)> = system
+        .partitions
+        .iter()
+        .filter_map(|p| {
+            let init = &p.guest.as_ref()?.init;
+            (init.first()? == "/bin/linux-tests").then(|| (p.name.clone(), init[1..].to_vec()))
+        })
+        .collect();
+    assert!(!runs.is_empty(), "{CONFIG} runs no linux-tests");
+    let o = boot("guest_linux");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the last guest's init ends the run",
+    );
+    for (partition, areas) in &runs {
+        let mut expected = Vec::new();
+        for area in areas {
+            expected.extend(xtask::linux::expected(area).unwrap_or_else(|e| panic!("{e:#}")));
+        }
+        let got = printed(&o, partition);
+        let diff = xtask::linux::differences(&expected, &got);
+        check(
+            &o,
+            diff.is_empty(),
+            &format!(
+                "{partition} ({areas:?}) printed other lines:\n{}",
+                diff.join("\n")
+            ),
+        );
+        check(
+            &o,
+            o.line(&format!("[{partition}] guest: init exited with status 0"))
+                .is_some(),
+            &format!("{partition}: linux-tests did not exit with status 0"),
+        );
+    }
+}

@@ -1,0 +1,231 @@
+//! The Linux-side programs of `tests/linux`: static C programs built with `gcc -static`
+//! (glibc), the same executables run on the host Linux and in the guest.
+//!
+//! - `linux-tests` (every `tests/linux/*.c` but `bench.c`): the system-call checks, one
+//!   area a source file; `tests/linux/expected/<area>.out` is each area's expected output.
+//!   [`host_check`] runs every area on the host and compares (part of `cargo xtask test`):
+//!   the host run proves the checks themselves right, the scenario `guest_linux` runs the
+//!   areas the guest passes and expects the same lines.
+//! - `linux-bench` (`tests/linux/bench.c`): the guest benchmark of `cargo xtask bench`.
+//!
+//! They are built into `target/linux/<name>` (only when a source is newer) and reach a
+//! guest's initramfs as `/bin/<name>` through the partition key `guest.programs`
+//! ([`config::system::GUEST_PROGRAMS`]). This module never installs a compiler: a missing
+//! gcc or static C library is an error that says the apt command.
+
+use anyhow::{Context, Result, bail};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+
+/// The Debian packages of `gcc -static` with glibc.
+pub const GCC_PACKAGES: &str = "gcc libc6-dev";
+/// How every program is compiled.
+const CFLAGS: &[&str] = &["-static", "-O2", "-Wall", "-Werror"];
+
+/// `tests/linux`.
+pub fn source_dir() -> PathBuf {
+    crate::workspace_root().join("tests/linux")
+}
+
+/// Where program `name` is built.
+pub fn output_path(name: &str) -> PathBuf {
+    crate::target_dir().join("linux").join(name)
+}
+
+/// The C sources of program `name` (one of [`config::system::GUEST_PROGRAMS`]).
+pub fn sources(name: &str) -> Result<Vec<PathBuf>> {
+    let mut c_files: Vec<PathBuf> = std::fs::read_dir(source_dir())
+        .with_context(|| format!("cannot list {}", source_dir().display()))?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "c"))
+        .collect();
+    c_files.sort();
+    let is_bench = |p: &PathBuf| p.file_name().is_some_and(|n| n == "bench.c");
+    Ok(match name {
+        "linux-tests" => c_files.into_iter().filter(|p| !is_bench(p)).collect(),
+        "linux-bench" => c_files.into_iter().filter(is_bench).collect(),
+        _ => bail!("no Linux program {name}"),
+    })
+}
+
+fn modified(path: &Path) -> Option<std::time::SystemTime> {
+    std::fs::metadata(path).and_then(|m| m.modified()).ok()
+}
+
+/// Builds program `name` unless it is newer than its sources and headers; returns its path.
+pub fn build(name: &str) -> Result<PathBuf> {
+    let sources = sources(name)?;
+    let out = output_path(name);
+    let headers: Vec<PathBuf> = std::fs::read_dir(source_dir())?
+        .filter_map(|e| e.ok().map(|e| e.path()))
+        .filter(|p| p.extension().is_some_and(|e| e == "h"))
+        .collect();
+    let built = modified(&out);
+    if built.is_some()
+        && sources
+            .iter()
+            .chain(&headers)
+            .all(|s| modified(s).is_some_and(|m| Some(m) <= built))
+    {
+        return Ok(out);
+    }
+    let missing = || {
+        format!(
+            "building the Linux test programs needs gcc and the static C library. Install with:\n    sudo apt-get install -y {GCC_PACKAGES}"
+        )
+    };
+    std::fs::create_dir_all(out.parent().unwrap_or(Path::new(".")))?;
+    let output = Command::new("gcc")
+        .args(CFLAGS)
+        .arg("-o")
+        .arg(&out)
+        .args(&sources)
+        .output();
+    let output = match output {
+        Ok(o) => o,
+        Err(e) if e.kind() == std::io::ErrorKind::NotFound => bail!("{}", missing()),
+        Err(e) => return Err(e).context("cannot run gcc"),
+    };
+    if !output.status.success() {
+        let text = String::from_utf8_lossy(&output.stderr);
+        if text.contains("cannot find -lc") {
+            bail!("{}\n{text}", missing());
+        }
+        bail!("gcc could not build {name}:\n{text}");
+    }
+    Ok(out)
+}
+
+/// The areas of `linux-tests`, from the expected-output files, sorted.
+pub fn areas() -> Result<Vec<String>> {
+    let dir = source_dir().join("expected");
+    let mut areas: Vec<String> = std::fs::read_dir(&dir)
+        .with_context(|| format!("cannot list {}", dir.display()))?
+        .filter_map(|e| e.ok())
+        .filter_map(|e| {
+            e.file_name()
+                .to_str()?
+                .strip_suffix(".out")
+                .map(str::to_string)
+        })
+        .collect();
+    areas.sort();
+    Ok(areas)
+}
+
+/// The expected output of `area`, one string a line.
+pub fn expected(area: &str) -> Result<Vec<String>> {
+    let path = source_dir().join("expected").join(format!("{area}.out"));
+    let text = std::fs::read_to_string(&path)
+        .with_context(|| format!("cannot read {}", path.display()))?;
+    Ok(text.lines().map(str::to_string).collect())
+}
+
+/// What differs between the `expected` and the `got` lines of an area (empty when equal):
+/// each line as `-expected` or `+got`, in order of the expected lines.
+pub fn differences(expected: &[String], got: &[String]) -> Vec<String> {
+    let mut out = Vec::new();
+    for line in expected {
+        if !got.contains(line) {
+            out.push(format!("-{line}"));
+        }
+    }
+    for line in got {
+        if !expected.contains(line) {
+            out.push(format!("+{line}"));
+        }
+    }
+    if out.is_empty() && expected != got {
+        out.push("(the same lines, in another order or number)".to_string());
+    }
+    out
+}
+
+/// Builds `linux-tests`, runs each area on the host (from `/`) and compares its output with
+/// the expected file; prints what differs. `Ok(false)` when an area differs or fails.
+pub fn host_check() -> Result<bool> {
+    let program = build("linux-tests")?;
+    let mut ok = true;
+    for area in areas()? {
+        let out = Command::new(&program)
+            .arg(&area)
+            .current_dir("/")
+            .output()
+            .with_context(|| format!("cannot run {}", program.display()))?;
+        let got: Vec<String> = String::from_utf8_lossy(&out.stdout)
+            .lines()
+            .map(str::to_string)
+            .collect();
+        let diff = differences(&expected(&area)?, &got);
+        if diff.is_empty() && out.status.success() {
+            eprintln!(
+                "xtask: linux-tests {area} on the host: {} lines as expected",
+                got.len()
+            );
+        } else {
+            ok = false;
+            eprintln!(
+                "xtask: FAILED: linux-tests {area} on the host ({}) differs from tests/linux/expected/{area}.out:\n{}",
+                out.status,
+                diff.join("\n")
+            );
+        }
+    }
+    Ok(ok)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn every_guest_program_has_sources() {
+        for name in config::system::GUEST_PROGRAMS {
+            assert!(!sources(name).unwrap().is_empty(), "{name}");
+        }
+        assert!(sources("other").is_err());
+        let tests = sources("linux-tests").unwrap();
+        assert!(tests.iter().any(|p| p.ends_with("main.c")));
+        assert!(!tests.iter().any(|p| p.ends_with("bench.c")));
+    }
+
+    #[test]
+    fn every_area_has_its_source_and_a_final_line() {
+        for area in areas().unwrap() {
+            assert!(source_dir().join(format!("{area}.c")).is_file(), "{area}");
+            let lines = expected(&area).unwrap();
+            assert_eq!(
+                lines.last().map(String::as_str),
+                Some(format!("area {area}: all checks passed").as_str())
+            );
+            assert!(
+                lines[..lines.len() - 1]
+                    .iter()
+                    .all(|l| l.starts_with("ok "))
+            );
+        }
+    }
+
+    #[test]
+    fn differences_name_missing_and_extra_lines() {
+        let lines = |s: &[&str]| s.iter().map(|l| l.to_string()).collect::<Vec<_>>();
+        let want = lines(&["ok a", "ok b", "area x: all checks passed"]);
+        assert!(differences(&want, &want).is_empty());
+        let got = lines(&[
+            "ok a",
+            "FAIL b: expected 1 got 2",
+            "area x: 1 checks failed",
+        ]);
+        assert_eq!(
+            differences(&want, &got),
+            [
+                "-ok b",
+                "-area x: all checks passed",
+                "+FAIL b: expected 1 got 2",
+                "+area x: 1 checks failed"
+            ]
+        );
+        let swapped = lines(&["ok b", "ok a", "area x: all checks passed"]);
+        assert_eq!(differences(&want, &swapped).len(), 1);
+    }
+}
