@@ -125,9 +125,8 @@ pub fn load_file<'a>(
             }
         }
     }
-    let stack = process.add_stack().map_err(ExecError::Layout)?;
-    host.map_zeroed(stack.start, (stack.end - stack.start) / PAGE, stack.rights)
-        .map_err(ExecError::Memory)?;
+    // The stack's pages are backed when touched: the strings below fill its top ones.
+    process.add_stack().map_err(ExecError::Layout)?;
     let mut aux = AuxInfo {
         phdr: plan.phdr,
         phnum: plan.phnum,

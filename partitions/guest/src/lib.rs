@@ -7,8 +7,9 @@
 //!
 //! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
 //! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
-//! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
-//! which process page ([`backing`]), the process state ([`process`]), the system calls of
+//! address-space bookkeeping and fault decisions ([`memory`]), page pool ([`pool`]), which
+//! pool page backs which process page ([`backing`]) and the demand paging and
+//! copy-on-write sharing of those pages ([`frames`]), the process state ([`process`]), the system calls of
 //! one process ([`syscall`]), the pipes ([`pipe`]) and the process table with fork, exec,
 //! wait and the deferred replies of waiting calls ([`system`]); the partition program
 //! (`main.rs`) only moves messages, creates tasks, maps pages and writes the log.
@@ -19,11 +20,13 @@
 //!   or one that `execve`s), or `guest: cannot start <path>: <why>` (the first),
 //!   `guest: process <pid> cannot execute <path>: <why>` (an `execve` that failed after the
 //!   old image was dropped: the process dies with SIGSEGV);
-//! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages copied in <t> us`;
+//! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages shared in <t> us` (the
+//!   pages the child shares copy-on-write, and how long the `fork` took);
 //! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]);
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
-//!   when a fault kills it, `... killed by signal 13 (SIGPIPE): wrote to a pipe without
+//!   when a fault kills it (`SIGBUS` when the guest is out of memory for a page it
+//!   touches), `... killed by signal 13 (SIGPIPE): wrote to a pipe without
 //!   readers`;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS`, once per call number and process;
@@ -37,6 +40,7 @@ pub mod console;
 pub mod cpio;
 pub mod elf;
 pub mod exec;
+pub mod frames;
 pub mod linux;
 pub mod memory;
 pub mod pipe;

@@ -11,11 +11,11 @@
 //! to each call that completes. So a waiting process never stops the guest from serving
 //! the others, and the order of events decides nothing but who runs first.
 //!
-//! **Fork.** The child is a new task with an eager copy of the parent's pages (the
-//! partition program copies them; [`Tasks::fork`]) and a thread started at address 0:
+//! **Fork.** The child is a new task sharing the parent's pages copy-on-write (the
+//! partition program maps them; [`Tasks::fork`]) and a thread started at address 0:
 //! its first exception message (the fetch fault) is answered with the parent's registers
 //! and `rax = 0`, the child's half of the `fork`. `vfork` and `clone(CLONE_VM |
-//! CLONE_VFORK)` are served the same way (a copy, not shared memory; a child that only
+//! CLONE_VFORK)` are served the same way (copy-on-write, not shared memory; a child that only
 //! `execve`s or `_exit`s cannot tell), and the parent waits, as on Linux, until the child
 //! executes or ends ([`State::Vforked`]).
 //!
@@ -55,11 +55,12 @@ const RUSAGE_SIZE: usize = 144;
 pub trait Tasks: Host {
     /// Makes `pid` the process the memory calls of [`Host`] act on.
     fn select(&mut self, pid: u32);
-    /// Creates process `child`: a task with a copy of the selected process's memory (the
-    /// pages of `areas`, with their rights) and a thread that starts at address 0 with this
-    /// guest as its exception handler. Returns how many pages it copied; `EAGAIN` when no
-    /// task or thread can be created, `ENOMEM` when the pool is out of pages (then nothing
-    /// of the child is left).
+    /// Creates process `child`: a task with the selected process's memory, shared
+    /// copy-on-write (each page it has backed, with the rights of its area in `areas`,
+    /// read-only in both until one of them writes it: [`crate::frames`]) and a thread that
+    /// starts at address 0 with this guest as its exception handler. Returns how many pages
+    /// it shares; `EAGAIN` when no task or thread can be created, `ENOMEM` when the guest
+    /// is out of memory for its bookkeeping (then nothing of the child is left).
     fn fork(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno>;
     /// Ends process `pid`: its task, its memory and its pending console output.
     fn release(&mut self, pid: u32);
@@ -340,7 +341,7 @@ impl<'a> System<'a> {
         let took = k.now_ns().saturating_sub(started);
         share_files(&child, &mut self.pipes);
         k.log(format_args!(
-            "guest: process {pid} ({}) forked from {}: {pages} pages copied in {} us",
+            "guest: process {pid} ({}) forked from {}: {pages} pages shared in {} us",
             child.name(),
             parent.pid,
             took / 1000

@@ -6,14 +6,15 @@ use crate::cpio::{Archive, S_IFDIR, S_IFLNK, S_IFREG};
 use crate::elf::tests::static_exe;
 use crate::exec::{self, ExecError};
 use crate::linux::{Errno, nr};
-use crate::memory::{PAGE, Rights, STACK_TOP};
+use crate::memory::{PAGE, PF_PRESENT, PF_USER, PF_WRITE, Rights, STACK_TOP};
 use crate::process::{Process, Stream};
 use crate::syscall::{Host, Outcome, handle};
 use crate::system::{MAX_PROCESSES, State, System, Tasks};
 use abi::ipc::{ExceptionMessage, VECTOR_SYSCALL};
 use std::collections::HashMap;
 
-/// Process memory as the kernel would have it: backed pages with their rights.
+/// Process memory as the kernel would have it: backed pages with the rights they are
+/// mapped with (none: backed, not mapped).
 #[derive(Default)]
 struct Model {
     /// The pages of the selected process ([`Tasks::select`]).
@@ -47,6 +48,15 @@ impl Model {
             .collect();
         String::from_utf8(bytes).unwrap()
     }
+    /// Backs `page` with a zeroed page mapped with `rights` (none: not mapped).
+    fn back(&mut self, page: u64, rights: Rights) -> Result<(), Errno> {
+        if self.budget == 0 {
+            return Err(Errno::ENOMEM);
+        }
+        self.budget -= 1;
+        self.pages.insert(page, (vec![0; PAGE as usize], rights));
+        Ok(())
+    }
     fn byte(&self, address: u64) -> Option<u8> {
         let (page, _) = self.pages.get(&(address & !(PAGE - 1)))?;
         Some(page[(address % PAGE) as usize])
@@ -56,17 +66,19 @@ impl Model {
 impl Host for Model {
     fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno> {
         for (i, b) in buf.iter_mut().enumerate() {
-            *b = self.byte(address + i as u64).ok_or(Errno::EFAULT)?;
+            *b = self.byte(address + i as u64).unwrap_or(0);
         }
         Ok(())
     }
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno> {
         for (i, b) in data.iter().enumerate() {
             let a = address + i as u64;
-            let (page, _) = self
-                .pages
-                .get_mut(&(a & !(PAGE - 1)))
-                .ok_or(Errno::EFAULT)?;
+            let at = a & !(PAGE - 1);
+            if !self.pages.contains_key(&at) {
+                // Backed, not mapped until it faults.
+                self.back(at, Rights::NONE)?;
+            }
+            let (page, _) = self.pages.get_mut(&at).ok_or(Errno::EFAULT)?;
             page[(a % PAGE) as usize] = *b;
         }
         Ok(())
@@ -78,9 +90,8 @@ impl Host for Model {
         for i in 0..pages {
             let at = start + i * PAGE;
             assert!(!self.pages.contains_key(&at), "page {at:#x} mapped twice");
-            self.pages.insert(at, (vec![0; PAGE as usize], rights));
+            self.back(at, rights)?;
         }
-        self.budget -= pages;
         Ok(())
     }
     fn unmap(&mut self, start: u64, pages: u64) {
@@ -90,13 +101,21 @@ impl Host for Model {
             }
         }
     }
-    fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+    fn protect(&mut self, start: u64, pages: u64, _: Rights) -> Result<(), Errno> {
+        // Unmapped until the next fault.
         for i in 0..pages {
-            let at = start + i * PAGE;
-            match self.pages.get_mut(&at) {
-                Some(p) => p.1 = rights,
-                None => self.map_zeroed(at, 1, rights)?,
+            if let Some(p) = self.pages.get_mut(&(start + i * PAGE)) {
+                p.1 = Rights::NONE;
             }
+        }
+        Ok(())
+    }
+    fn fault_in(&mut self, page: u64, rights: Rights, _: bool) -> Result<(), Errno> {
+        if !self.pages.contains_key(&page) {
+            self.back(page, rights)?;
+        }
+        if let Some(p) = self.pages.get_mut(&page) {
+            p.1 = rights;
         }
         Ok(())
     }
@@ -182,6 +201,17 @@ impl<'a> World<'a> {
         r.rip = 0x40_1019;
         r.fs_base = fs_base;
         m
+    }
+
+    /// A page fault of the process at `address` with `error` (the CPU's error code).
+    fn fault(&mut self, error: u64, address: u64) -> Outcome {
+        let mut m = ExceptionMessage {
+            vector: crate::memory::VECTOR_PAGE_FAULT,
+            error_code: error,
+            fault_address: address,
+            ..Default::default()
+        };
+        handle(&mut self.p, &mut self.pipes, &self.fs, &mut self.host, &mut m)
     }
 
     fn run(&mut self, number: u64, a: [u64; 6]) -> (Outcome, ExceptionMessage) {
@@ -456,18 +486,33 @@ fn identity_time_and_signals() {
 fn anonymous_memory() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
+    let before = w.host.budget;
     let a = w.call(nr::mmap, [0, 3 * PAGE, 3, 0x22, u64::MAX, 0]);
     assert!(a >= crate::syscall::MMAP_BOTTOM && a.is_multiple_of(PAGE));
+    assert_eq!(w.host.budget, before, "nothing backed before it is touched");
+    // The first touch faults the page in with its area's rights.
+    assert_eq!(w.fault(PF_USER | PF_WRITE, a + 2 * PAGE + 5), Outcome::Resume);
+    assert_eq!(w.host.pages[&(a + 2 * PAGE)].1, Rights::READ | Rights::WRITE);
     w.put(a + 2 * PAGE, b"x");
     let b = w.call(nr::mmap, [0, 10, 3, 0x22, u64::MAX, 0]);
     assert_eq!(b + PAGE, a, "top-down, adjacent");
-    // mprotect read-only, then writes through the kernel fail with EFAULT.
+    // A hint that is free is taken.
+    let hint = crate::syscall::MMAP_BOTTOM + 0x10_0000;
+    assert_eq!(w.call(nr::mmap, [hint, PAGE, 3, 0x22, u64::MAX, 0]), hint);
+    assert_ne!(w.call(nr::mmap, [hint, PAGE, 3, 0x22, u64::MAX, 0]), hint);
+    // mprotect read-only: writes through the kernel fail with EFAULT, a write of the
+    // process is SIGSEGV, a read faults the page in read-only.
     assert_eq!(w.call(nr::mprotect, [a, PAGE, 1, 0, 0, 0]), 0);
-    assert_eq!(w.host.pages[&a].1, Rights::READ);
     assert_eq!(
         w.call(nr::getrandom, [a, 8, 0, 0, 0, 0]),
         err(Errno::EFAULT)
     );
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, a),
+        Outcome::Killed(crate::linux::SIGSEGV)
+    );
+    assert_eq!(w.fault(PF_USER, a), Outcome::Resume);
+    assert_eq!(w.host.pages[&a].1, Rights::READ);
     assert_eq!(
         w.call(nr::mprotect, [a + 1, PAGE, 1, 0, 0, 0]),
         err(Errno::EINVAL)
@@ -476,21 +521,31 @@ fn anonymous_memory() {
         w.call(nr::mprotect, [0x1000, PAGE, 1, 0, 0, 0]),
         err(Errno::ENOMEM)
     );
-    // munmap the middle page.
+    // munmap the middle page: a fault there is SIGSEGV.
     assert_eq!(w.call(nr::munmap, [a + PAGE, PAGE, 0, 0, 0, 0]), 0);
     assert!(w.host.byte(a + PAGE).is_none());
     assert_eq!(w.host.byte(a + 2 * PAGE), Some(b'x'));
+    assert_eq!(
+        w.fault(PF_USER, a + PAGE),
+        Outcome::Killed(crate::linux::SIGSEGV)
+    );
     // MAP_FIXED over existing pages replaces them; MAP_FIXED_NOREPLACE refuses.
     assert_eq!(w.call(nr::mmap, [a, 2 * PAGE, 3, 0x32, u64::MAX, 0]), a);
+    assert!(w.host.byte(a).is_none(), "the old page went");
     assert_eq!(
         w.call(nr::mmap, [a, PAGE, 3, 0x10_0022, u64::MAX, 0]),
         err(Errno::EEXIST)
     );
-    // PROT_NONE reserves without backing; mprotect later backs it.
+    // PROT_NONE reserves: any access is SIGSEGV until mprotect allows it.
     let before = w.host.budget;
     let r = w.call(nr::mmap, [0, 4 * PAGE, 0, 0x22, u64::MAX, 0]);
-    assert_eq!(w.host.budget, before);
+    assert_eq!(
+        w.fault(PF_USER, r),
+        Outcome::Killed(crate::linux::SIGSEGV)
+    );
     assert_eq!(w.call(nr::mprotect, [r, PAGE, 3, 0, 0, 0]), 0);
+    assert_eq!(w.host.budget, before);
+    assert_eq!(w.fault(PF_USER | PF_WRITE, r), Outcome::Resume);
     assert_eq!(w.host.budget, before - 1);
     // Never writable and executable at once.
     assert_eq!(
@@ -501,10 +556,15 @@ fn anonymous_memory() {
         w.call(nr::mprotect, [r, PAGE, 6, 0, 0, 0]),
         err(Errno::EACCES)
     );
-    // File mappings, bad flags and exhaustion.
+    // Bad flags and exhaustion.
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 1, 0x02, 3, 0]),
-        err(Errno::ENODEV)
+        err(Errno::EBADF)
+    );
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 1, 0x02, 1, 0]),
+        err(Errno::ENODEV),
+        "the console cannot be mapped"
     );
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 1, 0x20, u64::MAX, 0]),
@@ -522,11 +582,70 @@ fn anonymous_memory() {
         w.call(nr::mmap, [0, u64::MAX, 3, 0x22, u64::MAX, 0]),
         err(Errno::ENOMEM)
     );
+    // The guest out of memory for a page a process touches: SIGBUS, for it alone.
+    let big = w.call(nr::mmap, [0, 2000 * PAGE, 3, 0x22, u64::MAX, 0]);
+    w.host.budget = 0;
     assert_eq!(
-        w.call(nr::mmap, [0, 2000 * PAGE, 3, 0x22, u64::MAX, 0]),
-        err(Errno::ENOMEM)
+        w.fault(PF_USER | PF_WRITE, big),
+        Outcome::Killed(crate::linux::SIGBUS)
     );
-    assert_eq!(w.host.budget, before - 1, "a failed mmap backs nothing");
+}
+
+#[test]
+fn file_mappings_copy_the_file_in() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let path = w.path("/etc/passwd");
+    let fd = w.call(nr::openat, [(-100i64) as u64, path, 0, 0, 0, 0]);
+    let at = w.call(nr::mmap, [0, 2 * PAGE, 1, 0x02, fd, 0]);
+    assert!(at.is_multiple_of(PAGE) && at >= crate::syscall::MMAP_BOTTOM);
+    assert_eq!(w.host.byte(at), Some(b'r'));
+    assert_eq!(w.host.byte(at + 30), Some(0), "zeros after the end of the file");
+    assert!(w.host.byte(at + PAGE).is_none(), "pages past it are not backed");
+    assert_eq!(w.fault(PF_USER, at + 4), Outcome::Resume);
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, at),
+        Outcome::Killed(crate::linux::SIGSEGV)
+    );
+    // Fixed, at an offset, private and writable.
+    let fixed = crate::syscall::MMAP_BOTTOM;
+    assert_eq!(w.call(nr::mmap, [fixed, PAGE, 3, 0x12, fd, 0]), fixed);
+    assert_eq!(
+        w.call(nr::mmap, [fixed, PAGE, 3, 0x02, fd, 1]),
+        err(Errno::EINVAL),
+        "unaligned offset"
+    );
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 3, 0x01, fd, 0]),
+        err(Errno::EACCES),
+        "shared and writable"
+    );
+    let root = w.path("/");
+    let dir = w.call(nr::openat, [(-100i64) as u64, root, 0o200000, 0, 0, 0]);
+    assert_eq!(w.call(nr::mmap, [0, PAGE, 1, 0x02, dir, 0]), err(Errno::ENODEV));
+}
+
+#[test]
+fn the_stack_is_paged_in_on_demand_and_guarded_below() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let low = STACK_TOP - crate::memory::STACK_SIZE;
+    assert!(w.host.byte(low).is_none(), "its low pages are not backed");
+    assert_eq!(w.fault(PF_USER | PF_WRITE, low + 8), Outcome::Resume);
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, low - 8),
+        Outcome::Killed(crate::linux::SIGSEGV)
+    );
+    assert!(w.host.log.last().unwrap().contains("killed by signal 11 (SIGSEGV)"));
+    // Kernel addresses, other exceptions.
+    assert_eq!(
+        w.fault(PF_USER | PF_PRESENT, 0xffff_8000_0000_0000),
+        Outcome::Killed(crate::linux::SIGSEGV)
+    );
+    let mut m = World::message(0, [0; 6], 0);
+    m.vector = 0;
+    let outcome = handle(&mut w.p, &mut w.pipes, &w.fs, &mut w.host, &mut m);
+    assert_eq!(outcome, Outcome::Killed(crate::linux::SIGFPE));
 }
 
 #[test]

@@ -1,0 +1,203 @@
+//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mprotect`. They change the
+//! process's areas ([`crate::memory::Areas`]); no page is backed here (the first access
+//! faults it in, [`Host::fault_in`]) except the contents of a file mapping, which are
+//! copied in when it is made. They never map a page writable and executable (W^X).
+
+use super::{Host, MAX_HEAP, MMAP_BOTTOM, SysResult};
+use crate::linux::{self, Errno};
+use crate::memory::{Area, AreaError, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_up};
+use crate::process::{File, Process};
+
+/// Linux's `brk`: returns the new break, or the old one if it cannot move there. The heap's
+/// pages are backed when first touched.
+pub(super) fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 {
+    if requested < p.brk_start || requested - p.brk_start > MAX_HEAP {
+        return p.brk;
+    }
+    let (old_end, new_end) = (page_up(p.brk), page_up(requested));
+    if new_end > old_end {
+        let grown = if old_end == p.brk_start {
+            p.areas.insert(Area {
+                start: p.brk_start,
+                end: new_end,
+                rights: Rights::READ | Rights::WRITE,
+                kind: Kind::Heap,
+            })
+        } else {
+            p.areas.resize(old_end, new_end)
+        };
+        if grown.is_err() {
+            return p.brk;
+        }
+    } else if new_end < old_end {
+        host.unmap(new_end, (old_end - new_end) / PAGE);
+        let _ = if new_end == p.brk_start {
+            p.areas.remove(p.brk_start, old_end, |_| ())
+        } else {
+            p.areas.resize(old_end, new_end)
+        };
+    }
+    p.brk = requested;
+    requested
+}
+
+pub(super) fn area_error(e: AreaError) -> Errno {
+    match e {
+        AreaError::Invalid => Errno::EINVAL,
+        AreaError::Overlaps => Errno::EEXIST,
+        AreaError::TooMany => Errno::ENOMEM,
+    }
+}
+
+/// The bytes of file `file` from `offset` on (as many as fit `buf`; fewer at its end):
+/// what a file mapping copies in. `ENODEV` for files that cannot be mapped.
+fn read_file_at(file: &File, offset: u64, buf: &mut [u8]) -> SysResult<usize> {
+    match file {
+        File::Initramfs { entry, .. } if entry.is_file() => {
+            let start = usize::try_from(offset)
+                .unwrap_or(usize::MAX)
+                .min(entry.data.len());
+            let n = buf.len().min(entry.data.len() - start);
+            buf[..n].copy_from_slice(&entry.data[start..start + n]);
+            Ok(n)
+        }
+        _ => Err(Errno::ENODEV),
+    }
+}
+
+/// Linux's `mmap`: anonymous or file-backed (private; shared read-only, as nothing can
+/// write the files) mappings at a free place (below [`MMAP_TOP`], the hint if it is free),
+/// or at a fixed address (`MAP_FIXED` replaces what was there, `MAP_FIXED_NOREPLACE`
+/// fails with `EEXIST`).
+pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+    let [hint, len, prot, flags, fd, offset] = a;
+    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
+    if len == 0 || flags & (linux::MAP_SHARED | linux::MAP_PRIVATE) == 0 {
+        return Err(Errno::EINVAL);
+    }
+    let file = if flags & linux::MAP_ANONYMOUS == 0 {
+        let file = p.file(fd).ok_or(Errno::EBADF)?;
+        if !offset.is_multiple_of(PAGE) {
+            return Err(Errno::EINVAL);
+        }
+        read_file_at(&file, 0, &mut [])?;
+        if flags & linux::MAP_SHARED != 0 && rights.contains(Rights::WRITE) {
+            return Err(Errno::EACCES); // no file is open for writing
+        }
+        Some(file)
+    } else {
+        None
+    };
+    let len = len.checked_add(PAGE - 1).ok_or(Errno::ENOMEM)? & !(PAGE - 1);
+    let fixed = flags & (linux::MAP_FIXED | linux::MAP_FIXED_NOREPLACE) != 0;
+    let start = if fixed {
+        let end = hint.checked_add(len).ok_or(Errno::ENOMEM)?;
+        if !hint.is_multiple_of(PAGE) || hint == 0 || end > USER_TOP {
+            return Err(Errno::EINVAL);
+        }
+        if p.areas.overlaps(hint, end) {
+            if flags & linux::MAP_FIXED_NOREPLACE != 0 {
+                return Err(Errno::EEXIST);
+            }
+            munmap(p, host, hint, len)?;
+        }
+        hint
+    } else {
+        let hinted = hint.is_multiple_of(PAGE)
+            && hint >= MMAP_BOTTOM
+            && hint
+                .checked_add(len)
+                .is_some_and(|end| end <= MMAP_TOP && !p.areas.overlaps(hint, end));
+        if hinted {
+            hint
+        } else {
+            p.areas
+                .free_below(MMAP_TOP, MMAP_BOTTOM, len)
+                .ok_or(Errno::ENOMEM)?
+        }
+    };
+    p.areas
+        .insert(Area {
+            start,
+            end: start + len,
+            rights,
+            kind: Kind::Anonymous,
+        })
+        .map_err(area_error)?;
+    if let Some(file) = file {
+        // The file's pages are copied in now; those past its end stay zero.
+        let mut page = [0u8; PAGE as usize];
+        for at in (start..start + len).step_by(PAGE as usize) {
+            let n = read_file_at(&file, offset.saturating_add(at - start), &mut page)?;
+            if n == 0 {
+                break;
+            }
+            page[n..].fill(0);
+            if let Err(e) = host.write_user(at, &page) {
+                let _ = munmap(p, host, start, len);
+                return Err(e);
+            }
+        }
+    }
+    Ok(start)
+}
+
+/// Linux's `munmap` (parts of areas too; pages not mapped are fine).
+pub(super) fn munmap(p: &mut Process, host: &mut impl Host, start: u64, len: u64) -> SysResult<u64> {
+    if !start.is_multiple_of(PAGE) || len == 0 {
+        return Err(Errno::EINVAL);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::EINVAL)?;
+    let mut parts = [(0u64, 0u64); crate::memory::MAX_AREAS + 2];
+    let mut n = 0;
+    p.areas
+        .remove(start, end, |a| {
+            if n < parts.len() {
+                parts[n] = (a.start, a.end);
+                n += 1;
+            }
+        })
+        .map_err(area_error)?;
+    for &(s, e) in &parts[..n] {
+        host.unmap(s, (e - s) / PAGE);
+    }
+    Ok(0)
+}
+
+/// Linux's `mprotect` (every page of the range must be in some area: else `ENOMEM`).
+pub(super) fn mprotect(
+    p: &mut Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+    prot: u64,
+) -> SysResult<u64> {
+    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
+    if !start.is_multiple_of(PAGE) {
+        return Err(Errno::EINVAL);
+    }
+    if len == 0 {
+        return Ok(0);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::ENOMEM)?;
+    if !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    p.areas
+        .protect(start, end, rights, |_| ())
+        .map_err(area_error)?;
+    host.protect(start, (end - start) / PAGE, rights)?;
+    Ok(0)
+}
