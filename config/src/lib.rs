@@ -171,7 +171,9 @@
 //! `PATH=/bin`, `HOME=/`, `TERM=dumb`); together at most 64 strings and 8192 bytes, no NUL
 //! bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
 //! initramfs (missing directories are created), each value a file on the host, relative to
-//! the description's directory (its permission bits are kept, owner root); they may replace
+//! the description's directory (its permission bits are kept, owner root; a C source, a
+//! name ending in `.c`, is compiled with the host's `gcc -static` and the program added
+//! instead, mode 0755); they may replace
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
 //! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as

@@ -10,7 +10,7 @@
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
 //! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
-//! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
+//! | each `guest.files` path | the host file, with its permission bits (missing directories are added); a `.c` source compiled with `gcc -static` ([`crate::guest_programs`]) |
 //!
 //! Every entry belongs to root, has mtime 0 and a fixed inode number, so the archive only
 //! changes when busybox or the keys do.
@@ -125,9 +125,8 @@ pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
         dir("tmp"),
     ]);
     for (target, source) in &guest.files {
-        let data = std::fs::read(&source.path)
-            .with_context(|| format!("guest.files: cannot read {}", source.path))?;
-        let mode = file_mode(Path::new(&source.path));
+        let (data, mode) = crate::guest_programs::contents(Path::new(&source.path))?;
+        let mode = mode.unwrap_or_else(|| file_mode(Path::new(&source.path)));
         let name = target.trim_start_matches('/');
         if let Some(existing) = entries.iter_mut().find(|e| e.0 == name) {
             // /etc/passwd or /etc/group (the validator refuses the others).

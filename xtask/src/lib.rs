@@ -11,6 +11,7 @@ pub mod bench;
 pub mod check_config;
 pub mod esp;
 pub mod guest;
+pub mod guest_programs;
 pub mod lint;
 pub mod plc;
 pub mod qemu;

@@ -119,7 +119,11 @@ impl<'p> Frames<'p> {
             for i in 0..pages {
                 let frame = run + i as usize;
                 self.frame(frame).fill(0);
-                if self.backing.insert(key(pid, start + i * PAGE), frame).is_err() {
+                if self
+                    .backing
+                    .insert(key(pid, start + i * PAGE), frame)
+                    .is_err()
+                {
                     for j in i..pages {
                         self.pool.free(run + j as usize);
                     }
@@ -482,7 +486,10 @@ mod tests {
         f.release(&mut t, 1, 0x9000, 1);
         assert_eq!(f.share(&mut t, 1, 2, none_at_2), Ok(2));
         assert!(t.mapped.contains_key(&(2, 0x1000)));
-        assert!(!t.mapped.contains_key(&(2, 0x2000)), "PROT_NONE stays unmapped");
+        assert!(
+            !t.mapped.contains_key(&(2, 0x2000)),
+            "PROT_NONE stays unmapped"
+        );
     }
 
     #[test]

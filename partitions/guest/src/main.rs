@@ -20,8 +20,8 @@
 use guest::backing::ENTRY;
 use guest::console::{LineBuffer, stream_name};
 use guest::cpio::Archive;
-use guest::linux::Errno;
 use guest::frames::{Frames, Mapper};
+use guest::linux::Errno;
 use guest::memory::Areas;
 use guest::memory::{PAGE, Rights};
 use guest::process::Stream;
@@ -290,7 +290,11 @@ struct Spaces<'t> {
 
 impl Spaces<'_> {
     fn task(&self, pid: u32) -> Option<TaskId> {
-        self.tasks.iter().flatten().find(|t| t.pid == pid).map(|t| t.task)
+        self.tasks
+            .iter()
+            .flatten()
+            .find(|t| t.pid == pid)
+            .map(|t| t.task)
     }
 }
 
@@ -370,7 +374,7 @@ struct GuestHost<'p> {
     seed: u64,
 }
 
-impl GuestHost<'_> {
+impl<'p> GuestHost<'p> {
     fn task(&self, pid: u32) -> Option<&Task> {
         self.tasks.iter().flatten().find(|t| t.pid == pid)
     }
@@ -384,7 +388,7 @@ impl GuestHost<'_> {
     }
 
     /// The frames and the kernel calls that map them.
-    fn memory(&mut self) -> (&mut Frames<'_>, Spaces<'_>, u32) {
+    fn memory(&mut self) -> (&mut Frames<'p>, Spaces<'_>, u32) {
         let spaces = Spaces {
             tasks: &self.tasks,
             first_frame: self.first_frame,

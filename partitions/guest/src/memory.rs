@@ -451,12 +451,21 @@ mod tests {
             Fault::Resolve { write: true, .. }
         ));
         // Outside every area: the guard page below the stack, null, kernel addresses.
-        assert_eq!(pf(user | PF_WRITE, STACK_TOP - STACK_SIZE - 8), segv(SEGV_MAPERR));
+        assert_eq!(
+            pf(user | PF_WRITE, STACK_TOP - STACK_SIZE - 8),
+            segv(SEGV_MAPERR)
+        );
         assert_eq!(pf(user, 0), segv(SEGV_MAPERR));
-        assert_eq!(pf(user | PF_PRESENT, 0xffff_8000_0000_0000), segv(SEGV_MAPERR));
+        assert_eq!(
+            pf(user | PF_PRESENT, 0xffff_8000_0000_0000),
+            segv(SEGV_MAPERR)
+        );
         assert_eq!(pf(user, USER_TOP), segv(SEGV_MAPERR));
         // Rights: writes to read-only pages, fetches from data, PROT_NONE.
-        assert_eq!(pf(user | PF_PRESENT | PF_WRITE, 0x40_0000), segv(SEGV_ACCERR));
+        assert_eq!(
+            pf(user | PF_PRESENT | PF_WRITE, 0x40_0000),
+            segv(SEGV_ACCERR)
+        );
         assert_eq!(pf(user | PF_WRITE, 0x60_0000), segv(SEGV_ACCERR));
         assert_eq!(pf(user | PF_FETCH, 0x60_0000), segv(SEGV_ACCERR));
         assert_eq!(pf(user, 0x70_0000), segv(SEGV_ACCERR));

@@ -211,7 +211,13 @@ impl<'a> World<'a> {
             fault_address: address,
             ..Default::default()
         };
-        handle(&mut self.p, &mut self.pipes, &self.fs, &mut self.host, &mut m)
+        handle(
+            &mut self.p,
+            &mut self.pipes,
+            &self.fs,
+            &mut self.host,
+            &mut m,
+        )
     }
 
     fn run(&mut self, number: u64, a: [u64; 6]) -> (Outcome, ExceptionMessage) {
@@ -491,8 +497,14 @@ fn anonymous_memory() {
     assert!(a >= crate::syscall::MMAP_BOTTOM && a.is_multiple_of(PAGE));
     assert_eq!(w.host.budget, before, "nothing backed before it is touched");
     // The first touch faults the page in with its area's rights.
-    assert_eq!(w.fault(PF_USER | PF_WRITE, a + 2 * PAGE + 5), Outcome::Resume);
-    assert_eq!(w.host.pages[&(a + 2 * PAGE)].1, Rights::READ | Rights::WRITE);
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, a + 2 * PAGE + 5),
+        Outcome::Resume
+    );
+    assert_eq!(
+        w.host.pages[&(a + 2 * PAGE)].1,
+        Rights::READ | Rights::WRITE
+    );
     w.put(a + 2 * PAGE, b"x");
     let b = w.call(nr::mmap, [0, 10, 3, 0x22, u64::MAX, 0]);
     assert_eq!(b + PAGE, a, "top-down, adjacent");
@@ -539,10 +551,7 @@ fn anonymous_memory() {
     // PROT_NONE reserves: any access is SIGSEGV until mprotect allows it.
     let before = w.host.budget;
     let r = w.call(nr::mmap, [0, 4 * PAGE, 0, 0x22, u64::MAX, 0]);
-    assert_eq!(
-        w.fault(PF_USER, r),
-        Outcome::Killed(crate::linux::SIGSEGV)
-    );
+    assert_eq!(w.fault(PF_USER, r), Outcome::Killed(crate::linux::SIGSEGV));
     assert_eq!(w.call(nr::mprotect, [r, PAGE, 3, 0, 0, 0]), 0);
     assert_eq!(w.host.budget, before);
     assert_eq!(w.fault(PF_USER | PF_WRITE, r), Outcome::Resume);
@@ -600,8 +609,15 @@ fn file_mappings_copy_the_file_in() {
     let at = w.call(nr::mmap, [0, 2 * PAGE, 1, 0x02, fd, 0]);
     assert!(at.is_multiple_of(PAGE) && at >= crate::syscall::MMAP_BOTTOM);
     assert_eq!(w.host.byte(at), Some(b'r'));
-    assert_eq!(w.host.byte(at + 30), Some(0), "zeros after the end of the file");
-    assert!(w.host.byte(at + PAGE).is_none(), "pages past it are not backed");
+    assert_eq!(
+        w.host.byte(at + 30),
+        Some(0),
+        "zeros after the end of the file"
+    );
+    assert!(
+        w.host.byte(at + PAGE).is_none(),
+        "pages past it are not backed"
+    );
     assert_eq!(w.fault(PF_USER, at + 4), Outcome::Resume);
     assert_eq!(
         w.fault(PF_USER | PF_WRITE, at),
@@ -622,7 +638,10 @@ fn file_mappings_copy_the_file_in() {
     );
     let root = w.path("/");
     let dir = w.call(nr::openat, [(-100i64) as u64, root, 0o200000, 0, 0, 0]);
-    assert_eq!(w.call(nr::mmap, [0, PAGE, 1, 0x02, dir, 0]), err(Errno::ENODEV));
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 1, 0x02, dir, 0]),
+        err(Errno::ENODEV)
+    );
 }
 
 #[test]
@@ -636,7 +655,13 @@ fn the_stack_is_paged_in_on_demand_and_guarded_below() {
         w.fault(PF_USER | PF_WRITE, low - 8),
         Outcome::Killed(crate::linux::SIGSEGV)
     );
-    assert!(w.host.log.last().unwrap().contains("killed by signal 11 (SIGSEGV)"));
+    assert!(
+        w.host
+            .log
+            .last()
+            .unwrap()
+            .contains("killed by signal 11 (SIGSEGV)")
+    );
     // Kernel addresses, other exceptions.
     assert_eq!(
         w.fault(PF_USER | PF_PRESENT, 0xffff_8000_0000_0000),

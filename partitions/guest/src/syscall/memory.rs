@@ -146,7 +146,12 @@ pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysRes
 }
 
 /// Linux's `munmap` (parts of areas too; pages not mapped are fine).
-pub(super) fn munmap(p: &mut Process, host: &mut impl Host, start: u64, len: u64) -> SysResult<u64> {
+pub(super) fn munmap(
+    p: &mut Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+) -> SysResult<u64> {
     if !start.is_multiple_of(PAGE) || len == 0 {
         return Err(Errno::EINVAL);
     }
