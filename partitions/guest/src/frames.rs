@@ -169,6 +169,21 @@ impl<'p> Frames<'p> {
         m.map(pid, frame, page, 1, rights)
     }
 
+    /// Backs `page` of `pid` with a frame `fill` fills (zeroed before), unmapped, unless a
+    /// frame backs it already.
+    pub fn fill_in(
+        &mut self,
+        pid: u32,
+        page: u64,
+        fill: impl FnOnce(&mut [u8]),
+    ) -> Result<(), Errno> {
+        if self.backing.get(key(pid, page)).is_none() {
+            let frame = self.back_page(pid, page)?;
+            fill(self.frame(frame));
+        }
+        Ok(())
+    }
+
     /// Copies the memory of `pid` at `address` into `buf`; pages not backed read as zeros.
     pub fn read(&self, pid: u32, address: u64, buf: &mut [u8]) {
         let mut done = 0;
@@ -490,6 +505,21 @@ mod tests {
             !t.mapped.contains_key(&(2, 0x2000)),
             "PROT_NONE stays unmapped"
         );
+    }
+
+    #[test]
+    fn fill_in_backs_a_page_once() {
+        let (mut mem, mut table) = setup(2);
+        let mut f = Frames::new(&mut mem, &mut table);
+        let mut t = Tables::default();
+        f.fill_in(1, 0x1000, |b| b[..2].copy_from_slice(b"hi"))
+            .unwrap();
+        f.fill_in(1, 0x1000, |_| panic!("filled twice")).unwrap();
+        assert!(t.mapped.is_empty());
+        assert_eq!((byte(&f, 1, 0x1001), byte(&f, 1, 0x1002)), (b'i', 0));
+        f.fault_in(&mut t, 1, 0x1000, Rights::READ, false).unwrap();
+        assert_eq!(byte(&f, 1, 0x1000), b'h');
+        assert_eq!(f.free_frames(), 1);
     }
 
     #[test]

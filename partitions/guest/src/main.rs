@@ -435,6 +435,10 @@ impl Host for GuestHost<'_> {
         Ok(())
     }
 
+    fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
+        self.frames.fill_in(self.current, page, fill)
+    }
+
     fn fault_in(&mut self, page: u64, rights: Rights, write: bool) -> Result<(), Errno> {
         let (frames, mut spaces, pid) = self.memory();
         frames.fault_in(&mut spaces, pid, page, rights, write)

@@ -34,7 +34,7 @@ use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
 use crate::process::{File, MAX_FILES, Process, Stream};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
-use memory::{brk, mmap, mprotect, munmap};
+use memory::{brk, fill_file_pages, mmap, mprotect, munmap};
 
 mod memory;
 
@@ -69,6 +69,10 @@ pub trait Host {
     /// The pages at `start` get new rights (their areas changed): the contents stay, the
     /// next access maps them as the areas then allow ([`Host::fault_in`]).
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
+    /// Backs `page` with the bytes `fill` writes into a zeroed page, unless something backs
+    /// it already (a file mapping's page, before its first use; `ENOMEM` when the guest is
+    /// out of memory).
+    fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno>;
     /// Makes `page` accessible with `rights` after a page fault its area allows (`write`:
     /// the access writes): backs it with zeroed memory the first time, copies it if it is
     /// shared and written, and maps it (`ENOMEM` when the guest is out of memory).
@@ -165,7 +169,9 @@ fn fault(p: &Process, host: &mut impl Host, m: &ExceptionMessage) -> Outcome {
             page,
             rights,
             write,
-        } => match host.fault_in(page, rights, write) {
+        } => match fill_file_pages(p, host, page, PAGE)
+            .and_then(|()| host.fault_in(page, rights, write))
+        {
             Ok(()) => return Outcome::Resume,
             Err(_) => linux::SIGBUS,
         },
@@ -206,13 +212,26 @@ pub(crate) fn check_user(p: &Process, address: u64, len: usize, rights: Rights) 
     Ok(())
 }
 
+/// [`check_user`], then the pages of file mappings in the range are filled from their
+/// files if they were never touched (before the guest reads or writes them for a call).
+pub(crate) fn prepare_user(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    len: usize,
+    rights: Rights,
+) -> SysResult<()> {
+    check_user(p, address, len, rights)?;
+    fill_file_pages(p, host, address, len as u64)
+}
+
 pub(crate) fn read_user(
     p: &Process,
     host: &mut impl Host,
     address: u64,
     buf: &mut [u8],
 ) -> SysResult<()> {
-    check_user(p, address, buf.len(), Rights::READ)?;
+    prepare_user(p, host, address, buf.len(), Rights::READ)?;
     host.read_user(address, buf)
 }
 
@@ -222,7 +241,7 @@ pub(crate) fn write_user(
     address: u64,
     data: &[u8],
 ) -> SysResult<()> {
-    check_user(p, address, data.len(), Rights::WRITE)?;
+    prepare_user(p, host, address, data.len(), Rights::WRITE)?;
     host.write_user(address, data)
 }
 
@@ -500,7 +519,7 @@ fn pipe(
     if flags & !(O_CLOEXEC | linux::O_NONBLOCK) != 0 {
         return Err(Errno::EINVAL);
     }
-    check_user(p, fds, 8, Rights::WRITE)?;
+    prepare_user(p, host, fds, 8, Rights::WRITE)?;
     let read_fd = p.free_fd().ok_or(Errno::EMFILE)?;
     let write_fd = p.free_fd_from(read_fd + 1).ok_or(Errno::EMFILE)?;
     let index = pipes.open().ok_or(Errno::ENFILE)?;
@@ -533,7 +552,7 @@ fn read(
         File::Pipe { write: true, .. } => Err(Errno::EBADF),
         File::Pipe { pipe, nonblock, .. } => {
             let n = (count as usize).min(PIPE_SIZE);
-            check_user(p, buf, n, Rights::WRITE)?;
+            prepare_user(p, host, buf, n, Rights::WRITE)?;
             let mut bytes = [0u8; PIPE_SIZE];
             match pipes.read(pipe, &mut bytes[..n]) {
                 Transfer::Done(n) => {
@@ -587,7 +606,7 @@ fn write(
         }
     };
     let total = (count as usize).min(MAX_TRANSFER);
-    check_user(p, buf, total, Rights::READ)?;
+    prepare_user(p, host, buf, total, Rights::READ)?;
     let mut chunk = [0u8; 512];
     let mut done = 0;
     while done < total {

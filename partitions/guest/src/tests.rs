@@ -110,6 +110,15 @@ impl Host for Model {
         }
         Ok(())
     }
+    fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
+        if !self.pages.contains_key(&page) {
+            self.back(page, Rights::NONE)?;
+            if let Some(p) = self.pages.get_mut(&page) {
+                fill(&mut p.0);
+            }
+        }
+        Ok(())
+    }
     fn fault_in(&mut self, page: u64, rights: Rights, _: bool) -> Result<(), Errno> {
         if !self.pages.contains_key(&page) {
             self.back(page, rights)?;
@@ -601,13 +610,19 @@ fn anonymous_memory() {
 }
 
 #[test]
-fn file_mappings_copy_the_file_in() {
+fn file_mappings_are_filled_from_the_file_when_touched() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
     let path = w.path("/etc/passwd");
     let fd = w.call(nr::openat, [(-100i64) as u64, path, 0, 0, 0, 0]);
     let at = w.call(nr::mmap, [0, 2 * PAGE, 1, 0x02, fd, 0]);
     assert!(at.is_multiple_of(PAGE) && at >= crate::syscall::MMAP_BOTTOM);
+    assert!(
+        w.host.byte(at).is_none(),
+        "nothing backed before the first touch"
+    );
+    assert_eq!(w.fault(PF_USER, at + 4), Outcome::Resume);
+    assert_eq!(w.host.pages[&at].1, Rights::READ);
     assert_eq!(w.host.byte(at), Some(b'r'));
     assert_eq!(
         w.host.byte(at + 30),
@@ -616,16 +631,33 @@ fn file_mappings_copy_the_file_in() {
     );
     assert!(
         w.host.byte(at + PAGE).is_none(),
-        "pages past it are not backed"
+        "the next page is not backed"
     );
-    assert_eq!(w.fault(PF_USER, at + 4), Outcome::Resume);
     assert_eq!(
         w.fault(PF_USER | PF_WRITE, at),
         Outcome::Killed(crate::linux::SIGSEGV)
     );
-    // Fixed, at an offset, private and writable.
+    // A private writable mapping at a fixed address, never touched: a `write` of it to
+    // the console reads the file's bytes (the guest fills it before it reads).
     let fixed = crate::syscall::MMAP_BOTTOM;
     assert_eq!(w.call(nr::mmap, [fixed, PAGE, 3, 0x12, fd, 0]), fixed);
+    assert_eq!(w.call(nr::write, [1, fixed, 5, 0, 0, 0]), 5);
+    assert!(w.host.stdout().ends_with("root:"));
+    // Written by the guest (a `read` into it): the rest of the page keeps the file.
+    assert_eq!(w.call(nr::munmap, [fixed, PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::mmap, [fixed, PAGE, 3, 0x12, fd, 0]), fixed);
+    assert_eq!(w.call(nr::lseek, [fd, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::read, [fd, fixed + 1, 1, 0, 0, 0]), 1);
+    assert_eq!(w.get(fixed, 5), b"rrot:");
+    // munmap of the middle of a file mapping: the rest keeps its offsets.
+    let three = w.call(nr::mmap, [0, 3 * PAGE, 1, 0x02, fd, 0]);
+    assert_eq!(w.call(nr::munmap, [three, PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.fault(PF_USER, three + PAGE), Outcome::Resume);
+    assert_eq!(
+        w.host.byte(three + PAGE),
+        Some(0),
+        "past the end of the file"
+    );
     assert_eq!(
         w.call(nr::mmap, [fixed, PAGE, 3, 0x02, fd, 1]),
         err(Errno::EINVAL),
@@ -642,6 +674,24 @@ fn file_mappings_copy_the_file_in() {
         w.call(nr::mmap, [0, PAGE, 1, 0x02, dir, 0]),
         err(Errno::ENODEV)
     );
+    // Closing the descriptor keeps the mapping's file; a slot no mapping names is taken
+    // again, and there are only so many.
+    assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::write, [1, at, 4, 0, 0, 0]), 4);
+    let path = w.path("/etc/passwd");
+    let fd = w.call(nr::openat, [(-100i64) as u64, path, 0, 0, 0, 0]);
+    let mut maps = Vec::new();
+    loop {
+        let m = w.call(nr::mmap, [0, PAGE, 1, 0x02, fd, 0]);
+        if m == err(Errno::ENOMEM) {
+            break;
+        }
+        maps.push(m);
+        assert!(maps.len() <= crate::process::MAX_MAPPED_FILES, "{m:#x}");
+    }
+    assert_eq!(maps.len(), crate::process::MAX_MAPPED_FILES - 3);
+    assert_eq!(w.call(nr::munmap, [maps[0], PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::mmap, [0, PAGE, 1, 0x02, fd, 0]), maps[0]);
 }
 
 #[test]

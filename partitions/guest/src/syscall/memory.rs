@@ -1,11 +1,14 @@
-//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mprotect`. They change the
-//! process's areas ([`crate::memory::Areas`]); no page is backed here (the first access
-//! faults it in, [`Host::fault_in`]) except the contents of a file mapping, which are
-//! copied in when it is made. They never map a page writable and executable (W^X).
+//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mprotect`, and the filling of
+//! file mappings' pages. The calls change the process's areas ([`crate::memory::Areas`]);
+//! no page is backed here: the first access faults it in ([`Host::fault_in`]), a file
+//! mapping's page filled from its file first ([`fill_file_pages`], also before the guest
+//! reads or writes one for a call). They never map a page writable and executable (W^X).
 
 use super::{Host, MAX_HEAP, MMAP_BOTTOM, SysResult};
 use crate::linux::{self, Errno};
-use crate::memory::{Area, AreaError, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_up};
+use crate::memory::{
+    Area, AreaError, FileSource, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_down, page_up,
+};
 use crate::process::{File, Process};
 
 /// Linux's `brk`: returns the new break, or the old one if it cannot move there. The heap's
@@ -22,6 +25,7 @@ pub(super) fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 
                 end: new_end,
                 rights: Rights::READ | Rights::WRITE,
                 kind: Kind::Heap,
+                file: None,
             })
         } else {
             p.areas.resize(old_end, new_end)
@@ -50,7 +54,9 @@ pub(super) fn area_error(e: AreaError) -> Errno {
 }
 
 /// The bytes of file `file` from `offset` on (as many as fit `buf`; fewer at its end):
-/// what a file mapping copies in. `ENODEV` for files that cannot be mapped.
+/// what a file mapping's pages are filled with. `ENODEV` for files that cannot be mapped.
+/// (Past the end of the file a mapping reads zeros; Linux would raise SIGBUS for whole
+/// pages past it.)
 fn read_file_at(file: &File, offset: u64, buf: &mut [u8]) -> SysResult<usize> {
     match file {
         File::Initramfs { entry, .. } if entry.is_file() => {
@@ -63,6 +69,57 @@ fn read_file_at(file: &File, offset: u64, buf: &mut [u8]) -> SysResult<usize> {
         }
         _ => Err(Errno::ENODEV),
     }
+}
+
+/// Fills the pages of file mappings in `address..address + len` that nothing backs yet
+/// with their files' bytes (pages of other areas, or outside any, are left alone).
+pub(crate) fn fill_file_pages(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    len: u64,
+) -> SysResult<()> {
+    if len == 0 || p.areas.iter().all(|a| a.file.is_none()) {
+        return Ok(());
+    }
+    let end = address.saturating_add(len);
+    let mut page = page_down(address);
+    while page < end {
+        let source = p.areas.find(page).and_then(|a| a.file_at(page));
+        if let Some(FileSource { slot, offset }) = source
+            && let Some(Some(file)) = p.mapped_files.get(slot as usize)
+        {
+            host.fill_in(page, &mut |bytes| {
+                let _ = read_file_at(file, offset, bytes);
+            })?;
+        }
+        page = match page.checked_add(PAGE) {
+            Some(next) => next,
+            None => break,
+        };
+    }
+    Ok(())
+}
+
+/// A free slot for `file` in the process's mapped files (a slot no area names any more is
+/// free; `ENOMEM` when every one is named).
+fn mapped_file_slot<'a>(p: &mut Process<'a>, file: File<'a>) -> SysResult<u8> {
+    for (slot, mapped) in p.mapped_files.iter_mut().enumerate() {
+        let named = p
+            .areas
+            .iter()
+            .any(|a| a.file.is_some_and(|f| f.slot as usize == slot));
+        if !named {
+            *mapped = None;
+        }
+    }
+    let slot = p
+        .mapped_files
+        .iter()
+        .position(Option::is_none)
+        .ok_or(Errno::ENOMEM)?;
+    p.mapped_files[slot] = Some(file);
+    Ok(slot as u8)
 }
 
 /// Linux's `mmap`: anonymous or file-backed (private; shared read-only, as nothing can
@@ -87,6 +144,7 @@ pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysRes
         if flags & linux::MAP_SHARED != 0 && rights.contains(Rights::WRITE) {
             return Err(Errno::EACCES); // no file is open for writing
         }
+        // Files are not writable (yet): a shared mapping cannot tell it is a copy.
         Some(file)
     } else {
         None
@@ -119,29 +177,22 @@ pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysRes
                 .ok_or(Errno::ENOMEM)?
         }
     };
+    let file = match file {
+        Some(file) => Some(FileSource {
+            slot: mapped_file_slot(p, file)?,
+            offset,
+        }),
+        None => None,
+    };
     p.areas
         .insert(Area {
             start,
             end: start + len,
             rights,
             kind: Kind::Anonymous,
+            file,
         })
         .map_err(area_error)?;
-    if let Some(file) = file {
-        // The file's pages are copied in now; those past its end stay zero.
-        let mut page = [0u8; PAGE as usize];
-        for at in (start..start + len).step_by(PAGE as usize) {
-            let n = read_file_at(&file, offset.saturating_add(at - start), &mut page)?;
-            if n == 0 {
-                break;
-            }
-            page[n..].fill(0);
-            if let Err(e) = host.write_user(at, &page) {
-                let _ = munmap(p, host, start, len);
-                return Err(e);
-            }
-        }
-    }
     Ok(start)
 }
 
