@@ -104,9 +104,10 @@ impl<'p> Frames<'p> {
         Ok(copy)
     }
 
-    /// Backs `pages` pages at `start` of `pid` with zeroed frames and maps them with
-    /// `rights` (one contiguous run of frames if the pool has one, else page by page). On
-    /// an error the pages backed so far stay: the caller releases them ([`Frames::release`]).
+    /// Backs `pages` pages at `start` of `pid` with frames `fill(address, frame)` writes in
+    /// full (their old contents are undefined) and maps them with `rights` (one contiguous
+    /// run of frames if the pool has one, else page by page). On an error the pages backed
+    /// so far stay: the caller releases them ([`Frames::release`]).
     pub fn back(
         &mut self,
         m: &mut impl Mapper,
@@ -114,16 +115,14 @@ impl<'p> Frames<'p> {
         start: u64,
         pages: u64,
         rights: Rights,
+        mut fill: impl FnMut(u64, &mut [u8]),
     ) -> Result<(), Errno> {
         if let Some(run) = self.pool.alloc(pages as usize) {
             for i in 0..pages {
                 let frame = run + i as usize;
-                self.frame(frame).fill(0);
-                if self
-                    .backing
-                    .insert(key(pid, start + i * PAGE), frame)
-                    .is_err()
-                {
+                let page = start + i * PAGE;
+                fill(page, self.frame(frame));
+                if self.backing.insert(key(pid, page), frame).is_err() {
                     for j in i..pages {
                         self.pool.free(run + j as usize);
                     }
@@ -135,6 +134,7 @@ impl<'p> Frames<'p> {
         for i in 0..pages {
             let page = start + i * PAGE;
             let frame = self.back_page(pid, page)?;
+            fill(page, self.frame(frame));
             m.map(pid, frame, page, 1, rights)?;
         }
         Ok(())
@@ -435,7 +435,11 @@ mod tests {
         let mut f = Frames::new(&mut mem, &mut table);
         let mut t = Tables::default();
         // Parent 1: a read-execute image (3 pages, one run), two written heap pages.
-        f.back(&mut t, 1, 0x40_0000, 3, RX).unwrap();
+        f.back(&mut t, 1, 0x40_0000, 3, RX, |at, page| {
+            page.fill((at >> 12) as u8)
+        })
+        .unwrap();
+        assert_eq!(byte(&f, 1, 0x40_2fff), 0x02, "filled");
         f.fault_in(&mut t, 1, 0x80_0000, RW, true).unwrap();
         f.fault_in(&mut t, 1, 0x80_1000, RW, true).unwrap();
         f.write(&mut t, 1, 0x80_0000, b"parent").unwrap();

@@ -408,13 +408,19 @@ impl Host for GuestHost<'_> {
         frames.write(&mut spaces, pid, address, data)
     }
 
-    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+    fn map_filled(
+        &mut self,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        fill: &mut dyn FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno> {
         if rights.writable_and_executable() {
             // The pool's two aliases are read-write and read-execute: no source for it.
             return Err(Errno::EACCES);
         }
         let (frames, mut spaces, pid) = self.memory();
-        let result = frames.back(&mut spaces, pid, start, pages, rights);
+        let result = frames.back(&mut spaces, pid, start, pages, rights, fill);
         if result.is_err() {
             frames.release(&mut spaces, pid, start, pages);
         }

@@ -59,10 +59,17 @@ pub trait Host {
     /// shared with another process (after `fork`) copied first (`ENOMEM` when the guest is
     /// out of memory).
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno>;
-    /// Backs `pages` pages at `start` with zeroed memory and maps them with `rights` at
-    /// once (a program's image, filled right after; `ENOMEM` when the guest is out of
-    /// memory, `EACCES` for rights it never grants, such as writable and executable at once).
-    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
+    /// Backs `pages` pages at `start` with memory `fill(address, page)` writes in full (the
+    /// page's previous contents are undefined) and maps them with `rights` at once (a
+    /// program's image; `ENOMEM` when the guest is out of memory, `EACCES` for rights it
+    /// never grants, such as writable and executable at once; then nothing is mapped).
+    fn map_filled(
+        &mut self,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        fill: &mut dyn FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno>;
     /// Unmaps `pages` pages at `start` and drops the process's memory there (pages never
     /// backed are skipped).
     fn unmap(&mut self, start: u64, pages: u64);

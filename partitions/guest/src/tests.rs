@@ -83,7 +83,13 @@ impl Host for Model {
         }
         Ok(())
     }
-    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+    fn map_filled(
+        &mut self,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        fill: &mut dyn FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno> {
         if pages > self.budget {
             return Err(Errno::ENOMEM);
         }
@@ -91,6 +97,10 @@ impl Host for Model {
             let at = start + i * PAGE;
             assert!(!self.pages.contains_key(&at), "page {at:#x} mapped twice");
             self.back(at, rights)?;
+            if let Some(p) = self.pages.get_mut(&at) {
+                p.0.fill(0xcc); // what a recycled frame may hold
+                fill(at, &mut p.0);
+            }
         }
         Ok(())
     }
