@@ -41,9 +41,9 @@ pub trait Mapper {
 }
 
 /// The backing table's key of page `page` of process `pid` (user addresses are below
-/// 2^47: the pid takes the bits above).
+/// 2^47: the pid takes the 16 bits above; pids stay below [`crate::system::PID_MAX`]).
 const fn key(pid: u32, page: u64) -> u64 {
-    (pid as u64) << 48 | page
+    ((pid & 0xffff) as u64) << 48 | page
 }
 
 const SIZE: usize = PAGE as usize;

@@ -40,6 +40,18 @@ use abi::ipc::{ExceptionMessage, Registers};
 pub const MAX_PROCESSES: usize = 16;
 /// The pid of the first process; orphans become its children.
 pub const INIT_PID: u32 = 1;
+/// Pids are below this (Linux's default `pid_max`); then they start again above init's.
+/// The guest's frame bookkeeping keys pages by pid in 16 bits ([`crate::frames`]).
+pub const PID_MAX: u32 = 32768;
+
+/// The pid after `pid`.
+fn next_pid(pid: u32) -> u32 {
+    if pid + 1 >= PID_MAX {
+        INIT_PID + 1
+    } else {
+        pid + 1
+    }
+}
 
 const CLONE_VM: u64 = 0x100;
 const CLONE_VFORK: u64 = 0x4000;
@@ -325,7 +337,7 @@ impl<'a> System<'a> {
             .ok_or(Errno::EAGAIN)?;
         let mut pid = self.next_pid;
         while self.index(pid).is_some() || pid == 0 {
-            pid = pid.checked_add(1).unwrap_or(INIT_PID + 1);
+            pid = next_pid(pid);
         }
         let parent = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
         let mut child = parent.clone();
@@ -365,7 +377,7 @@ impl<'a> System<'a> {
             process: child,
             state: State::Starting(child_registers),
         });
-        self.next_pid = pid.checked_add(1).unwrap_or(INIT_PID + 1);
+        self.next_pid = next_pid(pid);
         Ok(pid as u64)
     }
 
@@ -641,5 +653,17 @@ impl core::fmt::Display for Joined<'_> {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pids_wrap_below_pid_max() {
+        assert_eq!(next_pid(2), 3);
+        assert_eq!(next_pid(PID_MAX - 2), PID_MAX - 1);
+        assert_eq!(next_pid(PID_MAX - 1), INIT_PID + 1);
     }
 }
