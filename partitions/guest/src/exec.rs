@@ -113,11 +113,16 @@ pub fn load_file<'a>(
     process
         .set_image(&runs[..n], plan.brk_start)
         .map_err(ExecError::Layout)?;
-    // Each page is written once, straight into the frame that backs it.
+    // Each page is written once, straight into the frame that backs it (the initramfs is
+    // read-only: an inode's contents never change).
     for run in &runs[..n] {
-        host.map_filled(run.start, run.pages, run.rights, &mut |at, page| {
-            plan.fill(elf, at, page)
-        })
+        host.map_image(
+            run.start,
+            run.pages,
+            run.rights,
+            entry.ino,
+            &mut |at, page| plan.fill(elf, at, page),
+        )
         .map_err(ExecError::Memory)?;
     }
     // The stack's pages are backed when touched: the strings below fill its top ones.

@@ -13,6 +13,11 @@
 //!   ([`Frames::write`]) copy a shared frame first, so no write ever reaches a frame that
 //!   another process still sees.
 //!
+//! - **Image cache.** The pages of a program's image ([`Frames::back_image`]) are kept
+//!   after their first load, keyed by the image and address, and every process that runs
+//!   the program shares them copy-on-write: a later `execve` of it copies nothing. Pages
+//!   only the cache holds are given back when the pool runs out.
+//!
 //! It never decides whether an access is allowed: the caller checked the process's areas
 //! ([`crate::memory`]) and passes the rights the page gets.
 
@@ -46,6 +51,17 @@ const fn key(pid: u32, page: u64) -> u64 {
     ((pid & 0xffff) as u64) << 48 | page
 }
 
+/// The pid the image cache's pages are kept under: none of a process (init is 1), and
+/// first in the table, so inserting a process's pages never moves the cache's entries.
+const CACHE: u32 = 0;
+/// Image ids the cache takes (below this).
+pub const MAX_IMAGE_ID: u32 = 1 << 13;
+
+/// The backing table's key of the cached page at `page` of image `image`.
+const fn cache_key(image: u32, page: u64) -> u64 {
+    key(CACHE, (image as u64) << 35 | page >> 12)
+}
+
 const SIZE: usize = PAGE as usize;
 
 /// The frames, their pool and their backing table.
@@ -77,13 +93,38 @@ impl<'p> Frames<'p> {
         Some((frame, self.pool.references(frame)))
     }
 
+    /// A run of `count` free frames (one reference each); when the pool has none, the
+    /// image cache first gives back the pages no process uses.
+    fn alloc(&mut self, count: usize) -> Option<usize> {
+        self.pool.alloc(count).or_else(|| {
+            self.evict_cache();
+            self.pool.alloc(count)
+        })
+    }
+
+    /// Frees the image cache's pages that no process shares.
+    fn evict_cache(&mut self) {
+        let mut at = key(CACHE, 0);
+        while let Some((k, frame)) = self.backing.first_from(at)
+            && k < key(CACHE + 1, 0)
+        {
+            if self.pool.references(frame) == 1 {
+                self.backing.remove(k);
+                self.pool.free(frame);
+                at = k;
+            } else {
+                at = k + 1;
+            }
+        }
+    }
+
     fn frame(&mut self, frame: usize) -> &mut [u8] {
         &mut self.memory[frame * SIZE..(frame + 1) * SIZE]
     }
 
     /// A zeroed frame that backs `page` of `pid` (unmapped).
     fn back_page(&mut self, pid: u32, page: u64) -> Result<usize, Errno> {
-        let frame = self.pool.alloc(1).ok_or(Errno::ENOMEM)?;
+        let frame = self.alloc(1).ok_or(Errno::ENOMEM)?;
         self.frame(frame).fill(0);
         if self.backing.insert(key(pid, page), frame).is_err() {
             self.pool.free(frame);
@@ -95,7 +136,7 @@ impl<'p> Frames<'p> {
     /// A frame of its own for `page` of `pid`, a copy of the shared `frame` (whose
     /// reference it drops).
     fn copy_page(&mut self, pid: u32, page: u64, frame: usize) -> Result<usize, Errno> {
-        let copy = self.pool.alloc(1).ok_or(Errno::ENOMEM)?;
+        let copy = self.alloc(1).ok_or(Errno::ENOMEM)?;
         self.memory
             .copy_within(frame * SIZE..(frame + 1) * SIZE, copy * SIZE);
         // Replacing the entry cannot fail: it exists.
@@ -117,7 +158,7 @@ impl<'p> Frames<'p> {
         rights: Rights,
         mut fill: impl FnMut(u64, &mut [u8]),
     ) -> Result<(), Errno> {
-        if let Some(run) = self.pool.alloc(pages as usize) {
+        if let Some(run) = self.alloc(pages as usize) {
             for i in 0..pages {
                 let frame = run + i as usize;
                 let page = start + i * PAGE;
@@ -138,6 +179,81 @@ impl<'p> Frames<'p> {
             m.map(pid, frame, page, 1, rights)?;
         }
         Ok(())
+    }
+
+    /// [`Frames::back`] for the pages of a program's image `image` (an id below
+    /// [`MAX_IMAGE_ID`] that names what `fill` writes: the same id and address always give
+    /// the same bytes): the pages come from the image cache, filled on their first use,
+    /// and are shared with it copy-on-write (mapped without WRITE; a write copies). Other
+    /// ids are not cached.
+    #[allow(clippy::too_many_arguments)] // `back`'s, and the image
+    pub fn back_image(
+        &mut self,
+        m: &mut impl Mapper,
+        pid: u32,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        image: u32,
+        mut fill: impl FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno> {
+        if image >= MAX_IMAGE_ID {
+            return self.back(m, pid, start, pages, rights, fill);
+        }
+        let rights = rights.without(Rights::WRITE);
+        let cached = |f: &Self, i: u64| f.backing.get(cache_key(image, start + i * PAGE));
+        // The run being collected for one `map`: first page, first frame, pages.
+        let mut run: Option<(u64, usize, u64)> = None;
+        for i in 0..pages {
+            let page = start + i * PAGE;
+            let frame = match cached(self, i) {
+                Some(frame) => frame,
+                None => {
+                    // Fill the missing pages from here on, as one run if the pool has one.
+                    let missing = (i..pages)
+                        .take_while(|&j| cached(self, j).is_none())
+                        .count();
+                    let (first, n) = match self.alloc(missing) {
+                        Some(first) => (first, missing),
+                        None => (self.alloc(1).ok_or(Errno::ENOMEM)?, 1),
+                    };
+                    for j in 0..n {
+                        let at = page + j as u64 * PAGE;
+                        fill(at, self.frame(first + j));
+                        if self
+                            .backing
+                            .insert(cache_key(image, at), first + j)
+                            .is_err()
+                        {
+                            for k in j..n {
+                                self.pool.free(first + k);
+                            }
+                            return Err(Errno::ENOMEM);
+                        }
+                    }
+                    first
+                }
+            };
+            if !self.pool.share(frame) {
+                return Err(Errno::EAGAIN);
+            }
+            if self.backing.insert(key(pid, page), frame).is_err() {
+                self.pool.free(frame);
+                return Err(Errno::ENOMEM);
+            }
+            run = match run {
+                Some((s, f, n)) if f + n as usize == frame => Some((s, f, n + 1)),
+                Some((s, f, n)) => {
+                    m.map(pid, f, s, n, rights)?;
+                    Some((page, frame, 1))
+                }
+                None => Some((page, frame, 1)),
+            };
+        }
+        match run {
+            Some((s, f, n)) => m.map(pid, f, s, n, rights),
+            None => Ok(()),
+        }
     }
 
     /// Makes `page` of `pid` accessible with `rights` after a page fault (`write`: the
@@ -509,6 +625,49 @@ mod tests {
             !t.mapped.contains_key(&(2, 0x2000)),
             "PROT_NONE stays unmapped"
         );
+    }
+
+    #[test]
+    fn images_are_loaded_once_and_shared_copy_on_write() {
+        let (mut mem, mut table) = setup(8);
+        let mut f = Frames::new(&mut mem, &mut table);
+        let mut t = Tables::default();
+        let fills = std::cell::Cell::new(0);
+        let fill = |at: u64, page: &mut [u8]| {
+            fills.set(fills.get() + 1);
+            page.fill((at >> 12) as u8);
+        };
+        f.back_image(&mut t, 1, 0x40_0000, 3, RW, 7, &fill).unwrap();
+        f.back_image(&mut t, 2, 0x40_0000, 3, RW, 7, &fill).unwrap();
+        assert_eq!(fills.get(), 3, "filled once");
+        assert_eq!(f.free_frames(), 5);
+        assert_eq!(t.calls, 2, "one map per process");
+        assert_eq!(t.mapped[&(2, 0x40_1000)].1, Rights::READ);
+        assert_eq!(f.frame_of(1, 0x40_1000).unwrap().1, 3);
+        // A write copies; the cache keeps the loaded bytes for the next process.
+        f.fault_in(&mut t, 1, 0x40_1000, RW, true).unwrap();
+        f.write(&mut t, 1, 0x40_1000, b"w").unwrap();
+        f.release_all(2);
+        f.back_image(&mut t, 3, 0x40_0000, 3, RW, 7, &fill).unwrap();
+        assert_eq!(
+            (fills.get(), byte(&f, 3, 0x40_1000), byte(&f, 1, 0x40_1000)),
+            (3, 1, b'w')
+        );
+        // Out of frames: the pages only the cache holds are given back.
+        f.release_all(1);
+        f.release_all(3);
+        assert_eq!(f.free_frames(), 5);
+        for page in 0..8 {
+            f.fault_in(&mut t, 4, 0x1000 * (page + 1), RW, true)
+                .unwrap();
+        }
+        assert_eq!(f.free_frames(), 0);
+        assert!(f.fault_in(&mut t, 4, 0x10_0000, RW, true).is_err());
+        // Images with ids the cache does not take are loaded as they are.
+        f.release_all(4);
+        f.back_image(&mut t, 5, 0x40_0000, 1, RW, MAX_IMAGE_ID, &fill)
+            .unwrap();
+        assert_eq!((fills.get(), f.frame_of(5, 0x40_0000).unwrap().1), (4, 1));
     }
 
     #[test]

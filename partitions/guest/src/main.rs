@@ -408,11 +408,12 @@ impl Host for GuestHost<'_> {
         frames.write(&mut spaces, pid, address, data)
     }
 
-    fn map_filled(
+    fn map_image(
         &mut self,
         start: u64,
         pages: u64,
         rights: Rights,
+        image: u32,
         fill: &mut dyn FnMut(u64, &mut [u8]),
     ) -> Result<(), Errno> {
         if rights.writable_and_executable() {
@@ -420,7 +421,7 @@ impl Host for GuestHost<'_> {
             return Err(Errno::EACCES);
         }
         let (frames, mut spaces, pid) = self.memory();
-        let result = frames.back(&mut spaces, pid, start, pages, rights, fill);
+        let result = frames.back_image(&mut spaces, pid, start, pages, rights, image, fill);
         if result.is_err() {
             frames.release(&mut spaces, pid, start, pages);
         }

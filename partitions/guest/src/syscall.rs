@@ -59,15 +59,19 @@ pub trait Host {
     /// shared with another process (after `fork`) copied first (`ENOMEM` when the guest is
     /// out of memory).
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno>;
-    /// Backs `pages` pages at `start` with memory `fill(address, page)` writes in full (the
-    /// page's previous contents are undefined) and maps them with `rights` at once (a
-    /// program's image; `ENOMEM` when the guest is out of memory, `EACCES` for rights it
-    /// never grants, such as writable and executable at once; then nothing is mapped).
-    fn map_filled(
+    /// Backs `pages` pages at `start` of program image `image` with memory `fill(address,
+    /// page)` writes in full (the page's previous contents are undefined) and maps them
+    /// with `rights` at once (`ENOMEM` when the guest is out of memory, `EACCES` for rights
+    /// it never grants, such as writable and executable at once). `image` names the
+    /// contents: the same image and address always give the same bytes (an initramfs
+    /// file's inode), so the host may keep the pages and share them copy-on-write with
+    /// every process that runs the image ([`crate::frames`]).
+    fn map_image(
         &mut self,
         start: u64,
         pages: u64,
         rights: Rights,
+        image: u32,
         fill: &mut dyn FnMut(u64, &mut [u8]),
     ) -> Result<(), Errno>;
     /// Unmaps `pages` pages at `start` and drops the process's memory there (pages never

@@ -83,11 +83,12 @@ impl Host for Model {
         }
         Ok(())
     }
-    fn map_filled(
+    fn map_image(
         &mut self,
         start: u64,
         pages: u64,
         rights: Rights,
+        _: u32,
         fill: &mut dyn FnMut(u64, &mut [u8]),
     ) -> Result<(), Errno> {
         if pages > self.budget {
