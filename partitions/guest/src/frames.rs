@@ -4,15 +4,15 @@
 //! `protect` and the tests with a model).
 //!
 //! - **Demand paging.** A page is backed when it is first touched: the page fault (or the
-//!   guest writing into it for a system call) gives it a zeroed frame. Only a program's
-//!   image is backed and mapped at once ([`Frames::back`]), as it is filled right after.
+//!   guest writing into it for a system call) gives it a zeroed frame, or one filled by
+//!   the caller ([`Frames::fill_in`], a file mapping's page). Only a program's image is
+//!   backed and mapped at once ([`Frames::back_image`]).
 //! - **Copy-on-write.** `fork` ([`Frames::share`]) gives the child the parent's frames, one
 //!   more reference each, mapped read-only in both; the first write of either faults and
 //!   gets a copy of its own ([`Frames::fault_in`]), or the frame itself made writable
 //!   when the other side already let go of it. The guest's own writes into a process
 //!   ([`Frames::write`]) copy a shared frame first, so no write ever reaches a frame that
 //!   another process still sees.
-//!
 //! - **Image cache.** The pages of a program's image ([`Frames::back_image`]) are kept
 //!   after their first load, keyed by the image and address, and every process that runs
 //!   the program shares them copy-on-write: a later `execve` of it copies nothing. Pages
