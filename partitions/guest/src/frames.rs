@@ -51,6 +51,9 @@ const fn key(pid: u32, page: u64) -> u64 {
     ((pid & 0xffff) as u64) << 48 | page
 }
 
+/// Above every user address, below the next pid's keys.
+const ADDRESS_END: u64 = 1 << 47;
+
 /// The pid the image cache's pages are kept under: none of a process (init is 1), and
 /// first in the table, so inserting a process's pages never moves the cache's entries.
 const CACHE: u32 = 0;
@@ -369,35 +372,33 @@ impl<'p> Frames<'p> {
     /// Unmaps the pages of `pid` in `start..start + pages` and drops its references to
     /// their frames (`munmap`).
     pub fn release(&mut self, m: &mut impl Mapper, pid: u32, start: u64, pages: u64) {
-        let end = start.saturating_add(pages.saturating_mul(PAGE));
+        let end = start
+            .saturating_add(pages.saturating_mul(PAGE))
+            .min(ADDRESS_END);
         self.backed_runs(pid, start, end, |first, n| m.unmap(pid, first, n));
-        let mut at = key(pid, start);
-        while let Some((k, frame)) = self.backing.first_from(at)
-            && k < key(pid, end)
-        {
-            self.backing.remove(k);
-            self.pool.free(frame);
-            at = k;
-        }
+        let pool = &mut self.pool;
+        self.backing
+            .remove_range(key(pid, start), key(pid, end), |_, frame| {
+                pool.free(frame);
+            });
     }
 
     /// Unmaps the pages of `pid` in `start..start + pages` but keeps their contents: the
     /// next access faults them in again, with the rights the areas have then (`mprotect`).
     pub fn unmap(&mut self, m: &mut impl Mapper, pid: u32, start: u64, pages: u64) {
-        let end = start.saturating_add(pages.saturating_mul(PAGE));
+        let end = start
+            .saturating_add(pages.saturating_mul(PAGE))
+            .min(ADDRESS_END);
         self.backed_runs(pid, start, end, |first, n| m.unmap(pid, first, n));
     }
 
     /// Drops every reference of `pid` (its task and mappings are gone).
     pub fn release_all(&mut self, pid: u32) {
-        let mut at = key(pid, 0);
-        while let Some((k, frame)) = self.backing.first_from(at)
-            && k < key(pid + 1, 0)
-        {
-            self.backing.remove(k);
-            self.pool.free(frame);
-            at = k;
-        }
+        let pool = &mut self.pool;
+        self.backing
+            .remove_range(key(pid, 0), key(pid + 1, 0), |_, frame| {
+                pool.free(frame);
+            });
     }
 
     /// `fork`: `child` (a new task, nothing mapped) gets every page `parent` has backed,
@@ -697,5 +698,14 @@ mod tests {
         f.fault_in(&mut t, 1, 0x1000, Rights::READ, false).unwrap();
         assert_eq!(t.mapped[&(1, 0x1000)].1, Rights::READ);
         assert_eq!(byte(&f, 1, 0x1000), b'k');
+        // Ranges to the end of the address space stay within the process.
+        for pid in [2, 3] {
+            f.fault_in(&mut t, pid, 0x1000, RW, true).unwrap();
+        }
+        f.release(&mut t, 2, 0, u64::MAX);
+        f.unmap(&mut t, 2, 0, u64::MAX);
+        assert!(f.frame_of(2, 0x1000).is_none());
+        assert!(f.frame_of(1, 0x1000).is_some() && f.frame_of(3, 0x1000).is_some());
+        assert!(t.mapped.contains_key(&(3, 0x1000)));
     }
 }
