@@ -10,7 +10,8 @@
 //! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
 //! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
-//! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
+//! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mprotect`, `madvise`
+//! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
@@ -34,7 +35,7 @@ use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
 use crate::process::{File, MAX_FILES, Process, Stream};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
-use memory::{brk, fill_file_pages, mmap, mprotect, munmap};
+use memory::{brk, fill_file_pages, madvise, mmap, mprotect, munmap};
 
 mod memory;
 
@@ -375,7 +376,7 @@ fn call<'a>(
         nr::mmap => mmap(p, host, a),
         nr::munmap => munmap(p, host, a[0], a[1]),
         nr::mprotect => mprotect(p, host, a[0], a[1], a[2]),
-        nr::madvise => Ok(0),
+        nr::madvise => madvise(p, host, a[0], a[1], a[2]),
         nr::arch_prctl => arch_prctl(p, host, regs, a[0], a[1]),
         nr::set_tid_address => {
             p.clear_child_tid = a[0];

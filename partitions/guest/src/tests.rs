@@ -576,6 +576,20 @@ fn anonymous_memory() {
     assert_eq!(w.host.budget, before);
     assert_eq!(w.fault(PF_USER | PF_WRITE, r), Outcome::Resume);
     assert_eq!(w.host.budget, before - 1);
+    // MADV_DONTNEED drops pages: the next touch reads zeros.
+    w.put(r, b"dirty");
+    assert_eq!(w.call(nr::madvise, [r, PAGE, 4, 0, 0, 0]), 0);
+    assert!(w.host.byte(r).is_none());
+    assert_eq!(w.get(r, 5), [0; 5]);
+    assert_eq!(w.call(nr::madvise, [r, PAGE, 0, 0, 0, 0]), 0, "MADV_NORMAL");
+    assert_eq!(
+        w.call(nr::madvise, [r + 1, PAGE, 4, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::madvise, [0x1000, PAGE, 4, 0, 0, 0]),
+        err(Errno::ENOMEM)
+    );
     // Never writable and executable at once.
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 7, 0x22, u64::MAX, 0]),

@@ -1,8 +1,8 @@
 /* A Linux test program for the guest's memory and fault handling (built by `cargo xtask`
  * with `gcc -static`, see xtask/src/guest_programs.rs). `probe <what>` does one thing that
  * must kill it with a signal (it prints "<what>: not contained" and exits 1 if it lives
- * on); `probe memory` checks demand paging, copy-on-write fork, mprotect, munmap and
- * mmap and prints "memory: <check> ok" for each (exit 0 when all passed). */
+ * on); `probe memory` checks demand paging, copy-on-write fork, mprotect, munmap,
+ * madvise and mmap and prints "memory: <check> ok" for each (exit 0 when all passed). */
 #define _GNU_SOURCE
 #include <fcntl.h>
 #include <signal.h>
@@ -56,6 +56,8 @@ static int memory(void) {
     big[0] = 'a';
     big[len - 1] = 'z';
     check(big[0] == 'a' && big[len - 1] == 'z' && big[len / 2] == 0, "touched pages");
+    check(madvise(big + len - 4096, 4096, MADV_DONTNEED) == 0 && big[len - 1] == 0,
+          "MADV_DONTNEED gives zeros");
 
     /* The heap: malloc of small and large blocks. */
     char *heap = malloc(1 << 20);

@@ -1,4 +1,4 @@
-//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mprotect`, and the filling of
+//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mprotect`, `madvise`, and the filling of
 //! file mappings' pages. The calls change the process's areas ([`crate::memory::Areas`]);
 //! no page is backed here: the first access faults it in ([`Host::fault_in`]), a file
 //! mapping's page filled from its file first ([`fill_file_pages`], also before the guest
@@ -255,5 +255,35 @@ pub(super) fn mprotect(
         .protect(start, end, rights, |_| ())
         .map_err(area_error)?;
     host.protect(start, (end - start) / PAGE, rights)?;
+    Ok(0)
+}
+
+/// Linux's `madvise`: `MADV_DONTNEED` drops the pages of the range (the next touch gives
+/// zeros, or a file mapping's bytes again); other advice changes nothing. `ENOMEM` when a
+/// page of the range is in no area.
+pub(super) fn madvise(
+    p: &Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+    advice: u64,
+) -> SysResult<u64> {
+    const MADV_DONTNEED: u64 = 4;
+    if !start.is_multiple_of(PAGE) {
+        return Err(Errno::EINVAL);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::EINVAL)?;
+    if len == 0 {
+        return Ok(0);
+    }
+    if !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    if advice == MADV_DONTNEED {
+        host.unmap(start, (end - start) / PAGE);
+    }
     Ok(0)
 }
