@@ -54,9 +54,10 @@ fn main(start: u64, _: u64) {
     };
     user_rt::service::set_server(ThreadId(info.server));
     let pool_pages = info.pool_len / PAGE;
-    // The backing table: two entries per frame it can hand out (after a `fork`, a frame
-    // backs a page of each process that shares it).
-    const ENTRIES_PER_FRAME: u64 = 2;
+    // The backing table: four entries per frame it can hand out (1.5% of the pool): a
+    // shared frame backs a page of each process that shares it (after a `fork`, or a
+    // program's image for every process running it), and the image cache's entry.
+    const ENTRIES_PER_FRAME: u64 = 4;
     let entry_bytes = ENTRIES_PER_FRAME * ENTRY as u64;
     let table_pages = (pool_pages * entry_bytes).div_ceil(PAGE + entry_bytes);
     if pool_pages < IPC_PAGES + table_pages + 1 {
