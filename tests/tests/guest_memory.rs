@@ -99,6 +99,8 @@ fn guest_faults() {
         "memory: a write to it is SIGSEGV ok",
         "memory: a read there is SIGSEGV ok",
         "memory: MAP_FIXED_NOREPLACE refused (EEXIST) ok",
+        "memory: MADV_DONTNEED gives zeros ok",
+        "memory: mremap kept the contents ok",
         "memory: mmap of /etc/passwd ok",
         "memory: all checks passed",
         "memory: status 0",

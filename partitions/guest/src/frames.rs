@@ -392,6 +392,26 @@ impl<'p> Frames<'p> {
         self.backed_runs(pid, start, end, |first, n| m.unmap(pid, first, n));
     }
 
+    /// Moves the backed pages of `pid` in `from..from + pages` to `to..` (a range nothing
+    /// backs): their frames go along, the old mappings go (the next access maps the new
+    /// addresses).
+    pub fn move_pages(&mut self, m: &mut impl Mapper, pid: u32, from: u64, to: u64, pages: u64) {
+        let end = from
+            .saturating_add(pages.saturating_mul(PAGE))
+            .min(ADDRESS_END);
+        self.backed_runs(pid, from, end, |first, n| m.unmap(pid, first, n));
+        let mut at = key(pid, from);
+        while let Some((k, frame)) = self.backing.first_from(at)
+            && k < key(pid, end)
+        {
+            self.backing.remove(k);
+            let page = k - key(pid, from);
+            // Cannot be full: an entry was just removed.
+            let _ = self.backing.insert(key(pid, to + page), frame);
+            at = k;
+        }
+    }
+
     /// Drops every reference of `pid` (its task and mappings are gone).
     pub fn release_all(&mut self, pid: u32) {
         let pool = &mut self.pool;
@@ -669,6 +689,21 @@ mod tests {
         f.back_image(&mut t, 5, 0x40_0000, 1, RW, MAX_IMAGE_ID, &fill)
             .unwrap();
         assert_eq!((fills.get(), f.frame_of(5, 0x40_0000).unwrap().1), (4, 1));
+    }
+
+    #[test]
+    fn moved_pages_keep_their_frames() {
+        let (mut mem, mut table) = setup(4);
+        let mut f = Frames::new(&mut mem, &mut table);
+        let mut t = Tables::default();
+        f.fault_in(&mut t, 1, 0x1000, RW, true).unwrap();
+        f.write(&mut t, 1, 0x3000, b"z").unwrap();
+        let frame = f.frame_of(1, 0x1000).unwrap().0;
+        f.move_pages(&mut t, 1, 0x1000, 0x9000, 3);
+        assert!(t.mapped.is_empty() && f.frame_of(1, 0x1000).is_none());
+        assert_eq!(f.frame_of(1, 0x9000).unwrap().0, frame);
+        assert_eq!(byte(&f, 1, 0xb000), b'z');
+        assert_eq!(f.free_frames(), 2);
     }
 
     #[test]

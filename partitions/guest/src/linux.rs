@@ -95,6 +95,7 @@ syscalls! {
     access = 21,
     pipe = 22,
     sched_yield = 24,
+    mremap = 25,
     madvise = 28,
     dup = 32,
     dup2 = 33,

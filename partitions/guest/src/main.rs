@@ -443,6 +443,11 @@ impl Host for GuestHost<'_> {
         Ok(())
     }
 
+    fn move_pages(&mut self, from: u64, to: u64, pages: u64) {
+        let (frames, mut spaces, pid) = self.memory();
+        frames.move_pages(&mut spaces, pid, from, to, pages);
+    }
+
     fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
         self.frames.fill_in(self.current, page, fill)
     }

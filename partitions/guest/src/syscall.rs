@@ -10,7 +10,8 @@
 //! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
 //! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
-//! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mprotect`, `madvise`
+//! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mremap` (in place, or moved
+//! with `MREMAP_MAYMOVE`), `mprotect`, `madvise`
 //! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, `rt_sigaction`, `rt_sigprocmask`, `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
@@ -35,7 +36,7 @@ use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
 use crate::process::{File, MAX_FILES, Process, Stream};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_SYSCALL};
-use memory::{brk, fill_file_pages, madvise, mmap, mprotect, munmap};
+use memory::{brk, fill_file_pages, madvise, mmap, mprotect, mremap, munmap};
 
 mod memory;
 
@@ -81,6 +82,9 @@ pub trait Host {
     /// The pages at `start` get new rights (their areas changed): the contents stay, the
     /// next access maps them as the areas then allow ([`Host::fault_in`]).
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
+    /// Moves the `pages` pages at `from` to `to` (a free range): their contents go along,
+    /// the old addresses are left unmapped (`mremap`).
+    fn move_pages(&mut self, from: u64, to: u64, pages: u64);
     /// Backs `page` with the bytes `fill` writes into a zeroed page, unless something backs
     /// it already (a file mapping's page, before its first use; `ENOMEM` when the guest is
     /// out of memory).
@@ -377,6 +381,7 @@ fn call<'a>(
         nr::munmap => munmap(p, host, a[0], a[1]),
         nr::mprotect => mprotect(p, host, a[0], a[1], a[2]),
         nr::madvise => madvise(p, host, a[0], a[1], a[2]),
+        nr::mremap => mremap(p, host, a[0], a[1], a[2], a[3]),
         nr::arch_prctl => arch_prctl(p, host, regs, a[0], a[1]),
         nr::set_tid_address => {
             p.clear_child_tid = a[0];

@@ -121,6 +121,13 @@ impl Host for Model {
         }
         Ok(())
     }
+    fn move_pages(&mut self, from: u64, to: u64, pages: u64) {
+        for i in 0..pages {
+            if let Some((bytes, _)) = self.pages.remove(&(from + i * PAGE)) {
+                self.pages.insert(to + i * PAGE, (bytes, Rights::NONE));
+            }
+        }
+    }
     fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
         if !self.pages.contains_key(&page) {
             self.back(page, Rights::NONE)?;
@@ -576,6 +583,38 @@ fn anonymous_memory() {
     assert_eq!(w.host.budget, before);
     assert_eq!(w.fault(PF_USER | PF_WRITE, r), Outcome::Resume);
     assert_eq!(w.host.budget, before - 1);
+    // mremap: shrink in place, grow in place, move with MREMAP_MAYMOVE.
+    let m = w.call(nr::mmap, [0, 2 * PAGE, 3, 0x22, u64::MAX, 0]);
+    w.put(m, b"moved");
+    assert_eq!(w.call(nr::mremap, [m, 2 * PAGE, PAGE, 0, 0, 0]), m);
+    assert!(w.p.areas.find(m + PAGE).is_none(), "shrunk");
+    assert_eq!(
+        w.call(nr::mremap, [m, PAGE, 2 * PAGE, 0, 0, 0]),
+        m,
+        "in place"
+    );
+    assert_eq!(
+        w.call(nr::mremap, [m, 2 * PAGE, 64 * PAGE, 0, 0, 0]),
+        err(Errno::ENOMEM),
+        "an area above it, and no MREMAP_MAYMOVE"
+    );
+    let moved = w.call(nr::mremap, [m, 2 * PAGE, 64 * PAGE, 1, 0, 0]);
+    assert_ne!(moved, m);
+    assert_eq!(w.get(moved, 5), b"moved");
+    assert!(w.p.areas.find(m).is_none());
+    assert_eq!(w.p.areas.find(moved).unwrap().end, moved + 64 * PAGE);
+    assert_eq!(
+        w.call(nr::mremap, [moved + 1, PAGE, PAGE, 1, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::mremap, [moved, PAGE, PAGE, 2, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::mremap, [m, PAGE, PAGE, 1, 0, 0]),
+        err(Errno::EFAULT)
+    );
     // MADV_DONTNEED drops pages: the next touch reads zeros.
     w.put(r, b"dirty");
     assert_eq!(w.call(nr::madvise, [r, PAGE, 4, 0, 0, 0]), 0);

@@ -2,7 +2,7 @@
  * with `gcc -static`, see xtask/src/guest_programs.rs). `probe <what>` does one thing that
  * must kill it with a signal (it prints "<what>: not contained" and exits 1 if it lives
  * on); `probe memory` checks demand paging, copy-on-write fork, mprotect, munmap,
- * madvise and mmap and prints "memory: <check> ok" for each (exit 0 when all passed). */
+ * madvise, mremap and mmap and prints "memory: <check> ok" for each (exit 0 when all passed). */
 #define _GNU_SOURCE
 #include <fcntl.h>
 #include <signal.h>
@@ -113,6 +113,13 @@ static int memory(void) {
     check(fixed == area && area[0] == 0, "MAP_FIXED replaced a page");
     char *no = mmap(area, 4096, PROT_READ, MAP_PRIVATE | MAP_ANONYMOUS | MAP_FIXED_NOREPLACE, -1, 0);
     check(no == MAP_FAILED, "MAP_FIXED_NOREPLACE refused (EEXIST)");
+
+    /* mremap: grown (moved if it must be), contents kept. */
+    char *small = mmap(NULL, 4096, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS, -1, 0);
+    strcpy(small, "kept");
+    char *grown = mremap(small, 4096, 1 << 20, MREMAP_MAYMOVE);
+    check(grown != MAP_FAILED && strcmp(grown, "kept") == 0 && grown[(1 << 20) - 1] == 0,
+          "mremap kept the contents");
 
     /* A file mapping. */
     int fd = open("/etc/passwd", O_RDONLY);

@@ -1,4 +1,4 @@
-//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mprotect`, `madvise`, and the filling of
+//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mremap`, `mprotect`, `madvise`, and the filling of
 //! file mappings' pages. The calls change the process's areas ([`crate::memory::Areas`]);
 //! no page is backed here: the first access faults it in ([`Host::fault_in`]), a file
 //! mapping's page filled from its file first ([`fill_file_pages`], also before the guest
@@ -286,4 +286,66 @@ pub(super) fn madvise(
         host.unmap(start, (end - start) / PAGE);
     }
     Ok(0)
+}
+
+/// Linux's `mremap` of `old_len` bytes at `old` (within one area) to `new_len`: shrinks in
+/// place, grows in place when the pages after the area are free, else moves the pages to a
+/// free place with `MREMAP_MAYMOVE` (`ENOMEM` without). `MREMAP_FIXED` and
+/// `MREMAP_DONTUNMAP` are not served (`EINVAL`).
+pub(super) fn mremap(
+    p: &mut Process,
+    host: &mut impl Host,
+    old: u64,
+    old_len: u64,
+    new_len: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const MREMAP_MAYMOVE: u64 = 1;
+    if !old.is_multiple_of(PAGE) || new_len == 0 || flags & !MREMAP_MAYMOVE != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let (old_len, new_len) = (page_up(old_len), page_up(new_len));
+    let old_end = old.checked_add(old_len).ok_or(Errno::EFAULT)?;
+    let area = *p
+        .areas
+        .find(old)
+        .filter(|a| old_end <= a.end && old_len > 0)
+        .ok_or(Errno::EFAULT)?;
+    let new_end = old.checked_add(new_len).ok_or(Errno::ENOMEM)?;
+    if new_len <= old_len {
+        if new_len < old_len {
+            munmap(p, host, new_end, old_len - new_len)?;
+        }
+        return Ok(old);
+    }
+    if old_end == area.end
+        && area.kind != Kind::Heap
+        && new_end <= USER_TOP
+        && !p.areas.overlaps(old_end, new_end)
+        && p.areas.resize(old_end, new_end).is_ok()
+    {
+        return Ok(old);
+    }
+    if flags & MREMAP_MAYMOVE == 0 {
+        return Err(Errno::ENOMEM);
+    }
+    let to = p
+        .areas
+        .free_below(MMAP_TOP, MMAP_BOTTOM, new_len)
+        .ok_or(Errno::ENOMEM)?;
+    p.areas
+        .insert(Area {
+            start: to,
+            end: to + new_len,
+            kind: Kind::Anonymous,
+            file: area.file_at(old),
+            ..area
+        })
+        .map_err(area_error)?;
+    if let Err(e) = p.areas.remove(old, old_end, |_| ()) {
+        let _ = p.areas.remove(to, to + new_len, |_| ());
+        return Err(area_error(e));
+    }
+    host.move_pages(old, to, old_len / PAGE);
+    Ok(to)
 }
