@@ -177,8 +177,9 @@
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
 //! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `guest.programs` names
 //! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`
-//! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, and `linux-bench`,
-//! the guest benchmark) and adds as `/bin/<name>` (not also a `guest.files` path, each
+//! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, `linux-bench`, the
+//! guest benchmark, and `linux-probe`, the faults and forbidden accesses of the memory and
+//! isolation scenarios) and adds as `/bin/<name>` (not also a `guest.files` path, each
 //! once). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as
 //! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `wc`, `true`,

@@ -91,7 +91,7 @@ pub const COM2_IRQ: u8 = 3;
 
 /// The Linux programs `guest.programs` may name: static executables `cargo xtask` builds
 /// from `tests/linux` with `gcc -static` (`xtask/src/linux.rs`).
-pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench"];
+pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench", "linux-probe"];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
 /// (busybox, its applet links, the guest's command line, `/init`).

@@ -7,6 +7,8 @@
 //!   the host run proves the checks themselves right, the scenario `guest_linux` runs the
 //!   areas the guest passes and expects the same lines.
 //! - `linux-bench` (`tests/linux/bench.c`): the guest benchmark of `cargo xtask bench`.
+//! - `linux-probe` (`tests/linux/probe.c`): the faults and forbidden accesses of the
+//!   scenarios `guest_faults` and `guest_isolation` (one per argument).
 //!
 //! They are built into `target/linux/<name>` (only when a source is newer) and reach a
 //! guest's initramfs as `/bin/<name>` through the partition key `guest.programs`
@@ -19,6 +21,8 @@ use std::process::Command;
 
 /// The Debian packages of `gcc -static` with glibc.
 pub const GCC_PACKAGES: &str = "gcc libc6-dev";
+/// The programs built from one source file each; `linux-tests` is every other source.
+const SINGLE_FILE: &[(&str, &str)] = &[("linux-bench", "bench.c"), ("linux-probe", "probe.c")];
 /// How every program is compiled.
 const CFLAGS: &[&str] = &["-static", "-O2", "-Wall", "-Werror"];
 
@@ -40,12 +44,18 @@ pub fn sources(name: &str) -> Result<Vec<PathBuf>> {
         .filter(|p| p.extension().is_some_and(|e| e == "c"))
         .collect();
     c_files.sort();
-    let is_bench = |p: &PathBuf| p.file_name().is_some_and(|n| n == "bench.c");
-    Ok(match name {
-        "linux-tests" => c_files.into_iter().filter(|p| !is_bench(p)).collect(),
-        "linux-bench" => c_files.into_iter().filter(is_bench).collect(),
-        _ => bail!("no Linux program {name}"),
-    })
+    let own_file = |p: &PathBuf| {
+        SINGLE_FILE
+            .iter()
+            .any(|(_, file)| p.file_name().is_some_and(|n| n == *file))
+    };
+    if name == "linux-tests" {
+        return Ok(c_files.into_iter().filter(|p| !own_file(p)).collect());
+    }
+    match SINGLE_FILE.iter().find(|(program, _)| *program == name) {
+        Some((_, file)) => Ok(vec![source_dir().join(file)]),
+        None => bail!("no Linux program {name}"),
+    }
 }
 
 fn modified(path: &Path) -> Option<std::time::SystemTime> {

@@ -98,6 +98,20 @@ impl<'b> Backing<'b> {
         Some(index)
     }
 
+    /// Forgets every page in `from..to`, handing each page and pool page to `removed` (the
+    /// entries after them move once).
+    pub fn remove_range(&mut self, from: u64, to: u64, mut removed: impl FnMut(u64, usize)) {
+        let start = self.search(from).unwrap_or_else(|i| i);
+        let end = self.search(to).unwrap_or_else(|i| i).max(start);
+        for i in start..end {
+            let (page, index) = self.entry(i);
+            removed(page, index);
+        }
+        self.bytes
+            .copy_within(end * ENTRY..self.len * ENTRY, start * ENTRY);
+        self.len -= end - start;
+    }
+
     /// Empties the table, handing each pool page to `free`.
     pub fn drain(&mut self, mut free: impl FnMut(usize)) {
         for i in 0..self.len {
@@ -133,6 +147,16 @@ mod tests {
         assert_eq!(b.remove(0x2000), Some(9));
         assert_eq!(b.remove(0x2000), None);
         assert_eq!(b.len(), 3);
+        b.insert(0x2000, 9).unwrap();
+        let mut gone = Vec::new();
+        b.remove_range(0x1800, 0x4000, |page, i| gone.push((page, i)));
+        assert_eq!(gone, [(0x2000, 9), (0x3000, 7)]);
+        assert_eq!(
+            (b.len(), b.get(0x1000), b.get(0x4000)),
+            (2, Some(5), Some(1))
+        );
+        b.remove_range(0x5000, 0x1000, |_, _| panic!("an empty range"));
+        b.insert(0x3000, 7).unwrap();
         let mut freed = Vec::new();
         b.drain(|i| freed.push(i));
         assert_eq!(freed, [5, 7, 1]);

@@ -6,7 +6,7 @@
 use crate::cpio::Archive;
 use crate::elf::{ElfError, LoadPlan};
 use crate::linux::Errno;
-use crate::memory::{AreaError, PAGE, STACK_TOP};
+use crate::memory::{AreaError, STACK_TOP};
 use crate::process::Process;
 use crate::stack::{self, AuxInfo, StackError};
 use crate::syscall::Host;
@@ -113,21 +113,20 @@ pub fn load_file<'a>(
     process
         .set_image(&runs[..n], plan.brk_start)
         .map_err(ExecError::Layout)?;
-    let mut page = [0u8; PAGE as usize];
+    // Each page is written once, straight into the frame that backs it (the initramfs is
+    // read-only: an inode's contents never change).
     for run in &runs[..n] {
-        host.map_zeroed(run.start, run.pages, run.rights)
-            .map_err(ExecError::Memory)?;
-        for i in 0..run.pages {
-            let at = run.start + i * PAGE;
-            plan.fill(elf, at, &mut page);
-            if page.iter().any(|&b| b != 0) {
-                host.write_user(at, &page).map_err(ExecError::Memory)?;
-            }
-        }
-    }
-    let stack = process.add_stack().map_err(ExecError::Layout)?;
-    host.map_zeroed(stack.start, (stack.end - stack.start) / PAGE, stack.rights)
+        host.map_image(
+            run.start,
+            run.pages,
+            run.rights,
+            entry.ino,
+            &mut |at, page| plan.fill(elf, at, page),
+        )
         .map_err(ExecError::Memory)?;
+    }
+    // The stack's pages are backed when touched: the strings below fill its top ones.
+    process.add_stack().map_err(ExecError::Layout)?;
     let mut aux = AuxInfo {
         phdr: plan.phdr,
         phnum: plan.phnum,

@@ -7,14 +7,15 @@
 //!
 //! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
 //! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
-//! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
-//! which process page ([`backing`]), the process state ([`process`]), the system calls of
-//! one process ([`syscall`]; its signal and timer calls in [`sigcalls`]), the signals'
-//! numbers, actions and frame ([`signal`]), the pipes ([`pipe`]), the process table
-//! with fork, exec, wait, signal delivery, process groups, timers and the deferred replies
-//! of waiting calls ([`system`]), and the console's terminal line discipline ([`tty`]);
-//! the partition program (`main.rs`) only moves messages, creates tasks, maps pages,
-//! drives COM2 (`com2.rs`) and writes the log.
+//! address-space bookkeeping and fault decisions ([`memory`]), page pool ([`pool`]), which
+//! pool page backs which process page ([`backing`]) and the demand paging and
+//! copy-on-write sharing of those pages ([`frames`]), the process state ([`process`]), the
+//! system calls of one process ([`syscall`]; its signal and timer calls in [`sigcalls`]),
+//! the signals' numbers, actions and frame ([`signal`]), the pipes ([`pipe`]), the process
+//! table with fork, exec, wait, signal delivery, process groups, timers and the deferred
+//! replies of waiting calls ([`system`]), and the console's terminal line discipline
+//! ([`tty`]); the partition program (`main.rs`) only moves messages, creates tasks, maps
+//! pages, drives COM2 (`com2.rs`) and writes the log.
 //!
 //! # The console
 //!
@@ -34,12 +35,14 @@
 //!   or one that `execve`s), or `guest: cannot start <path>: <why>` (the first),
 //!   `guest: process <pid> cannot execute <path>: <why>` (an `execve` that failed after the
 //!   old image was dropped: the process dies with SIGSEGV);
-//! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages copied in <t> us`;
+//! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages shared in <t> us` (the
+//!   pages the child shares copy-on-write, and how long the `fork` took);
 //! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]),
 //!   when the console is the log;
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);
 //! - `guest: process <pid> (<name>) killed by signal <n> (<NAME>): vector ... rip ...`
-//!   when a fault kills it, `guest: process <pid> (<name>) killed by signal <n> (<NAME>)`
+//!   when a fault kills it (`SIGBUS` when the guest is out of memory for a page it
+//!   touches), `guest: process <pid> (<name>) killed by signal <n> (<NAME>)`
 //!   when a signal it does not catch ends it (`kill`, `SIGPIPE`, an alarm), with
 //!   `: no room for the frame ...` or `: rt_sigreturn without a readable signal frame`
 //!   when a handler's frame could not be written or read back;
@@ -58,6 +61,7 @@ pub mod console;
 pub mod cpio;
 pub mod elf;
 pub mod exec;
+pub mod frames;
 pub mod info;
 pub mod linux;
 pub mod memory;

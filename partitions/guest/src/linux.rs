@@ -99,6 +99,7 @@ syscalls! {
     pipe = 22,
     select = 23,
     sched_yield = 24,
+    mremap = 25,
     madvise = 28,
     dup = 32,
     dup2 = 33,

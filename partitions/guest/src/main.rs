@@ -10,7 +10,8 @@
 //!
 //! Its memory pool (syssw maps it at `POOL_BASE`, read-write, and at `POOL_EXEC_BASE`,
 //! read-execute) is cut into: its own IPC buffer, the backing table, and the frames that
-//! back the processes' pages (the backing table's key is the pid above the page address).
+//! back the processes' pages ([`guest::frames`]; a frame is mapped into a process from
+//! the read-execute alias for executable pages, else from the read-write one).
 //! Its stack holds the process table (the configuration gives a guest at least 1 MiB).
 //! This file is glue only: every decision about a Linux call is the library's.
 //!
@@ -22,13 +23,13 @@
 
 mod com2;
 
-use guest::backing::{Backing, ENTRY};
+use guest::backing::ENTRY;
 use guest::console::{LineBuffer, stream_name};
 use guest::cpio::Archive;
+use guest::frames::{Frames, Mapper};
 use guest::linux::Errno;
 use guest::memory::Areas;
 use guest::memory::{PAGE, Rights};
-use guest::pool::PagePool;
 use guest::process::Stream;
 use guest::syscall::{Host, Outcome};
 use guest::system::{INIT_PID, Joined, MAX_PROCESSES, System, Tasks};
@@ -60,8 +61,12 @@ fn main(start: u64, _: u64) {
     };
     user_rt::service::set_server(ThreadId(info.server));
     let pool_pages = info.pool_len / PAGE;
-    // The backing table: one entry per frame it can hand out.
-    let table_pages = (pool_pages * ENTRY as u64).div_ceil(PAGE + ENTRY as u64);
+    // The backing table: four entries per frame it can hand out (1.5% of the pool): a
+    // shared frame backs a page of each process that shares it (after a `fork`, or a
+    // program's image for every process running it), and the image cache's entry.
+    const ENTRIES_PER_FRAME: u64 = 4;
+    let entry_bytes = ENTRIES_PER_FRAME * ENTRY as u64;
+    let table_pages = (pool_pages * entry_bytes).div_ceil(PAGE + entry_bytes);
     if pool_pages < IPC_PAGES + table_pages + 1 {
         println!(
             "guest: no memory pool ({} KiB): give the partition the `map` ability and more `memory`",
@@ -111,10 +116,8 @@ fn main(start: u64, _: u64) {
 
     let mcp = (info.priority as u8).saturating_sub(1).max(1);
     let mut host = GuestHost {
-        frames,
+        frames: Frames::new(frames, table),
         first_frame: frames_page,
-        pool: PagePool::new(frame_count as usize),
-        backing: Backing::new(table),
         current: INIT_PID,
         tasks: [const { None }; MAX_PROCESSES],
         mcp,
@@ -347,20 +350,87 @@ impl Task {
     }
 }
 
-/// The backing table's key of page `page` of process `pid` (user addresses are below
-/// 2^47: the pid takes the bits above).
-fn key(pid: u32, page: u64) -> u64 {
-    (pid as u64) << 48 | page
+/// The kernel side of [`Mapper`]: `map`, `unmap` and `protect` on the processes' tasks.
+struct Spaces<'t> {
+    tasks: &'t [Option<Task>],
+    /// The pool page of frame 0.
+    first_frame: u64,
+}
+
+impl Spaces<'_> {
+    fn task(&self, pid: u32) -> Option<TaskId> {
+        self.tasks
+            .iter()
+            .flatten()
+            .find(|t| t.pid == pid)
+            .map(|t| t.task)
+    }
+}
+
+/// Calls `call(start, pages)` for `start..start + pages` in pieces the kernel takes.
+fn in_pieces(start: u64, pages: u64, mut call: impl FnMut(u64, u64)) {
+    let mut done = 0;
+    while done < pages {
+        let n = (pages - done).min(MAP_MAX_PAGES);
+        call(start + done * PAGE, n);
+        done += n;
+    }
+}
+
+impl Mapper for Spaces<'_> {
+    fn map(
+        &mut self,
+        pid: u32,
+        frame: usize,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+    ) -> Result<(), Errno> {
+        let task = self.task(pid).ok_or(Errno::ENOMEM)?;
+        let (base, kernel_rights) = if rights.contains(Rights::EXECUTE) {
+            (POOL_EXEC_BASE, PageRights::EXECUTE)
+        } else if rights.contains(Rights::WRITE) {
+            (POOL_BASE, PageRights::WRITE)
+        } else {
+            (POOL_BASE, PageRights::empty())
+        };
+        let source = base + (self.first_frame + frame as u64) * PAGE;
+        let mut result = Ok(());
+        in_pieces(start, pages, |at, n| {
+            if result.is_ok() {
+                result = sys::map(Some(task), source + (at - start), at, n, kernel_rights)
+                    .map_err(|_| Errno::ENOMEM);
+            }
+        });
+        result
+    }
+
+    fn unmap(&mut self, pid: u32, start: u64, pages: u64) {
+        if let Some(task) = self.task(pid) {
+            in_pieces(start, pages, |at, n| {
+                let _ = sys::unmap(Some(task), at, n);
+            });
+        }
+    }
+
+    fn write_protect(&mut self, pid: u32, start: u64, pages: u64) {
+        if let Some(task) = self.task(pid) {
+            in_pieces(start, pages, |at, n| {
+                // Pages backed but not mapped make `protect` fail: unmapping does as well.
+                if sys::protect(Some(task), at, n, PageRights::empty()).is_err() {
+                    let _ = sys::unmap(Some(task), at, n);
+                }
+            });
+        }
+    }
 }
 
 /// The kernel side of the library's [`Host`] and [`Tasks`]: the processes' tasks, the
 /// guest's frames and which of them back which process page.
 struct GuestHost<'p> {
-    /// The frames (pool pages from `first_frame` on), read-write.
-    frames: &'p mut [u8],
+    frames: Frames<'p>,
+    /// The pool page of frame 0.
     first_frame: u64,
-    pool: PagePool,
-    backing: Backing<'p>,
     /// The process the memory calls act on.
     current: u32,
     tasks: [Option<Task>; MAX_PROCESSES],
@@ -375,7 +445,7 @@ struct GuestHost<'p> {
     tty: Option<Tty>,
 }
 
-impl GuestHost<'_> {
+impl<'p> GuestHost<'p> {
     fn task(&self, pid: u32) -> Option<&Task> {
         self.tasks.iter().flatten().find(|t| t.pid == pid)
     }
@@ -388,207 +458,73 @@ impl GuestHost<'_> {
             .map(|t| t.pid)
     }
 
-    fn frame(&mut self, index: usize) -> &mut [u8] {
-        let at = index * PAGE as usize;
-        &mut self.frames[at..at + PAGE as usize]
-    }
-
-    /// Maps frames `index..index + pages` at `start` in process `pid` with `rights`.
-    fn map_frames(
-        &self,
-        pid: u32,
-        index: usize,
-        start: u64,
-        pages: u64,
-        rights: Rights,
-    ) -> Result<(), Errno> {
-        let task = self.task(pid).ok_or(Errno::ENOMEM)?.task;
-        let (base, kernel_rights) = if rights.contains(Rights::EXECUTE) {
-            (POOL_EXEC_BASE, PageRights::EXECUTE)
-        } else if rights.contains(Rights::WRITE) {
-            (POOL_BASE, PageRights::WRITE)
-        } else {
-            (POOL_BASE, PageRights::empty())
+    /// The frames and the kernel calls that map them.
+    fn memory(&mut self) -> (&mut Frames<'p>, Spaces<'_>, u32) {
+        let spaces = Spaces {
+            tasks: &self.tasks,
+            first_frame: self.first_frame,
         };
-        let mut done = 0;
-        while done < pages {
-            let n = (pages - done).min(MAP_MAX_PAGES);
-            let source = base + (self.first_frame + index as u64 + done) * PAGE;
-            sys::map(Some(task), source, start + done * PAGE, n, kernel_rights)
-                .map_err(|_| Errno::ENOMEM)?;
-            done += n;
-        }
-        Ok(())
-    }
-
-    /// Backs and maps one run of pages with fresh frames (one contiguous run if the pool has
-    /// one, else page by page).
-    fn back(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
-        let pid = self.current;
-        if let Some(index) = self.pool.alloc(pages as usize) {
-            for i in 0..pages as usize {
-                self.frame(index + i).fill(0);
-            }
-            for i in 0..pages {
-                if self
-                    .backing
-                    .insert(key(pid, start + i * PAGE), index + i as usize)
-                    .is_err()
-                {
-                    for j in i..pages {
-                        self.pool.free(index + j as usize);
-                    }
-                    return Err(Errno::ENOMEM);
-                }
-            }
-            return self.map_frames(pid, index, start, pages, rights);
-        }
-        for i in 0..pages {
-            let index = self.pool.alloc(1).ok_or(Errno::ENOMEM)?;
-            self.frame(index).fill(0);
-            let page = start + i * PAGE;
-            if self.backing.insert(key(pid, page), index).is_err() {
-                self.pool.free(index);
-                return Err(Errno::ENOMEM);
-            }
-            self.map_frames(pid, index, page, 1, rights)?;
-        }
-        Ok(())
-    }
-
-    /// The frame bytes behind address `address` of the current process and how many of
-    /// them lie in its page.
-    fn locate(&self, address: u64) -> Option<(usize, usize)> {
-        let page = address & !(PAGE - 1);
-        let index = self.backing.get(key(self.current, page))?;
-        let offset = (address - page) as usize;
-        Some((index * PAGE as usize + offset, PAGE as usize - offset))
-    }
-
-    /// Copies the current process's backed pages into process `child` (whose task
-    /// exists); returns how many. Each run of backed pages in one area goes into one run of
-    /// frames where the pool has one, mapped with one call.
-    fn copy_pages(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno> {
-        let parent = self.current;
-        let size = PAGE as usize;
-        let mut copied = 0;
-        let mut at = key(parent, 0);
-        while let Some((k, _)) = self.backing.first_from(at)
-            && k < key(parent + 1, 0)
-        {
-            let start = k - key(parent, 0);
-            let area = areas.find(start);
-            let area_end = area.map_or(start + PAGE, |a| a.end);
-            let mut pages = 1;
-            while start + pages * PAGE < area_end && self.backing.get(k + pages * PAGE).is_some() {
-                pages += 1;
-            }
-            let run = match self.pool.alloc(pages as usize) {
-                Some(run) => run,
-                None => {
-                    pages = 1;
-                    self.pool.alloc(1).ok_or(Errno::ENOMEM)?
-                }
-            };
-            for i in 0..pages {
-                let to = run + i as usize;
-                let Some(from) = self.backing.get(k + i * PAGE) else {
-                    self.pool.free(to);
-                    continue;
-                };
-                self.frames
-                    .copy_within(from * size..(from + 1) * size, to * size);
-                if self
-                    .backing
-                    .insert(key(child, start + i * PAGE), to)
-                    .is_err()
-                {
-                    for j in i..pages {
-                        self.pool.free(run + j as usize);
-                    }
-                    return Err(Errno::ENOMEM);
-                }
-            }
-            if let Some(area) = area
-                && area.rights.accessible()
-            {
-                self.map_frames(child, run, start, pages, area.rights)?;
-            }
-            copied += pages;
-            at = k + pages * PAGE;
-        }
-        Ok(copied)
+        (&mut self.frames, spaces, self.current)
     }
 }
 
 impl Host for GuestHost<'_> {
     fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno> {
-        let mut done = 0;
-        while done < buf.len() {
-            let (at, room) = self.locate(address + done as u64).ok_or(Errno::EFAULT)?;
-            let n = room.min(buf.len() - done);
-            buf[done..done + n].copy_from_slice(&self.frames[at..at + n]);
-            done += n;
-        }
+        self.frames.read(self.current, address, buf);
         Ok(())
     }
 
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno> {
-        let mut done = 0;
-        while done < data.len() {
-            let (at, room) = self.locate(address + done as u64).ok_or(Errno::EFAULT)?;
-            let n = room.min(data.len() - done);
-            self.frames[at..at + n].copy_from_slice(&data[done..done + n]);
-            done += n;
-        }
-        Ok(())
+        let (frames, mut spaces, pid) = self.memory();
+        frames.write(&mut spaces, pid, address, data)
     }
 
-    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+    fn map_image(
+        &mut self,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        image: u32,
+        fill: &mut dyn FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno> {
         if rights.writable_and_executable() {
             // The pool's two aliases are read-write and read-execute: no source for it.
             return Err(Errno::EACCES);
         }
-        let result = self.back(start, pages, rights);
+        let (frames, mut spaces, pid) = self.memory();
+        let result = frames.back_image(&mut spaces, pid, start, pages, rights, image, fill);
         if result.is_err() {
-            self.unmap(start, pages);
+            frames.release(&mut spaces, pid, start, pages);
         }
         result
     }
 
     fn unmap(&mut self, start: u64, pages: u64) {
-        let Some(task) = self.task(self.current).map(|t| t.task) else {
-            return;
-        };
-        for i in 0..pages {
-            let page = start + i * PAGE;
-            if let Some(index) = self.backing.remove(key(self.current, page)) {
-                let _ = sys::unmap(Some(task), page, 1);
-                self.pool.free(index);
-            }
-        }
+        let (frames, mut spaces, pid) = self.memory();
+        frames.release(&mut spaces, pid, start, pages);
     }
 
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
         if rights.writable_and_executable() {
             return Err(Errno::EACCES);
         }
-        let pid = self.current;
-        let task = self.task(pid).ok_or(Errno::ENOMEM)?.task;
-        for i in 0..pages {
-            let page = start + i * PAGE;
-            match self.backing.get(key(pid, page)) {
-                Some(index) => {
-                    let _ = sys::unmap(Some(task), page, 1);
-                    if rights.accessible() {
-                        self.map_frames(pid, index, page, 1, rights)?;
-                    }
-                }
-                None if rights.accessible() => self.back(page, 1, rights)?,
-                None => {}
-            }
-        }
+        let (frames, mut spaces, pid) = self.memory();
+        frames.unmap(&mut spaces, pid, start, pages);
         Ok(())
+    }
+
+    fn move_pages(&mut self, from: u64, to: u64, pages: u64) {
+        let (frames, mut spaces, pid) = self.memory();
+        frames.move_pages(&mut spaces, pid, from, to, pages);
+    }
+
+    fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
+        self.frames.fill_in(self.current, page, fill)
+    }
+
+    fn fault_in(&mut self, page: u64, rights: Rights, write: bool) -> Result<(), Errno> {
+        let (frames, mut spaces, pid) = self.memory();
+        frames.fault_in(&mut spaces, pid, page, rights, write)
     }
 
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]) {
@@ -666,7 +602,9 @@ impl Tasks for GuestHost<'_> {
         let task = sys::task_create(Abilities::empty(), self.mcp, 0, "process")
             .map_err(|_| Errno::EAGAIN)?;
         self.tasks[slot] = Some(Task::new(child, task));
-        let copied = self.copy_pages(child, areas);
+        let (frames, mut spaces, parent) = self.memory();
+        let rights = |page| areas.find(page).map(|a| a.rights);
+        let copied = frames.share(&mut spaces, parent, child, rights);
         // The thread starts at address 0: its fetch fault asks the guest for the registers.
         let thread = copied.and_then(|_| {
             start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)
@@ -706,15 +644,8 @@ impl Tasks for GuestHost<'_> {
                 )
             });
         }
-        // The task's mappings went with it: only the frames are left to free.
-        let mut at = key(pid, 0);
-        while let Some((k, index)) = self.backing.first_from(at)
-            && k < key(pid + 1, 0)
-        {
-            self.backing.remove(k);
-            self.pool.free(index);
-            at = k;
-        }
+        // The task's mappings went with it: only its references to frames are left.
+        self.frames.release_all(pid);
     }
 
     fn interrupt(&mut self, pid: u32) {

@@ -10,6 +10,15 @@
 //! | the executable's segments, then the heap (`brk`) | link addresses (static PIE: [`crate::elf::PIE_BASE`]) |
 //! | anonymous `mmap`s | top-down below [`MMAP_TOP`] |
 //! | the stack, [`STACK_SIZE`] bytes | below [`STACK_TOP`] |
+//!
+//! Pages are backed when first touched ([`crate::frames`]): a CPU exception of a process
+//! is judged by [`classify_fault`], a pure function of the areas and what the kernel
+//! reported, which says either which page to fault in with which rights, or which signal
+//! (and `si_code`) the process gets.
+
+use crate::signal::{
+    self, BUS_ADRALN, FPE_INTDIV, ILL_ILLOPN, SEGV_ACCERR, SEGV_MAPERR, SI_KERNEL, TRAP_BRKPT,
+};
 
 /// Page size.
 pub const PAGE: u64 = 4096;
@@ -61,6 +70,14 @@ impl Rights {
     pub const fn contains(self, other: Self) -> bool {
         self.0 & other.0 == other.0
     }
+    /// These rights and `other`'s.
+    pub const fn with(self, other: Self) -> Self {
+        Self(self.0 | other.0)
+    }
+    /// These rights without `other`'s.
+    pub const fn without(self, other: Self) -> Self {
+        Self(self.0 & !other.0)
+    }
     pub const fn bits(self) -> u8 {
         self.0
     }
@@ -99,6 +116,14 @@ pub enum Kind {
     Anonymous,
 }
 
+/// Where the pages of a file mapping come from: mapped file `slot` of the process
+/// ([`crate::process::Process::mapped_files`]), from byte `offset` for the area's first page.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FileSource {
+    pub slot: u8,
+    pub offset: u64,
+}
+
 /// A mapped area: pages `start..end`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Area {
@@ -106,6 +131,19 @@ pub struct Area {
     pub end: u64,
     pub rights: Rights,
     pub kind: Kind,
+    /// A file mapping's file (its pages are filled from it when first touched); `None`:
+    /// zeroed pages.
+    pub file: Option<FileSource>,
+}
+
+impl Area {
+    /// The file and offset the page at `page` of this area is filled from.
+    pub fn file_at(&self, page: u64) -> Option<FileSource> {
+        self.file.map(|f| FileSource {
+            slot: f.slot,
+            offset: f.offset.saturating_add(page - self.start),
+        })
+    }
 }
 
 /// Why an area cannot be added.
@@ -140,6 +178,7 @@ impl Areas {
                 end: 0,
                 rights: Rights::NONE,
                 kind: Kind::Image,
+                file: None,
             }; MAX_AREAS],
             count: 0,
         }
@@ -202,6 +241,7 @@ impl Areas {
             let inside = self.iter().position(|a| a.start < x && x < a.end);
             if let Some(i) = inside {
                 let mut upper = self.areas[i];
+                upper.file = upper.file_at(x);
                 upper.start = x;
                 self.areas[i].end = x;
                 self.areas.copy_within(i + 1..self.count, i + 2);
@@ -314,9 +354,148 @@ impl Areas {
     }
 }
 
+/// Bits of the page-fault error code (as the CPU pushes it; the kernel passes it on in
+/// the exception message).
+pub const PF_PRESENT: u64 = 1;
+pub const PF_WRITE: u64 = 2;
+pub const PF_USER: u64 = 4;
+pub const PF_RESERVED: u64 = 8;
+pub const PF_FETCH: u64 = 16;
+/// The page-fault vector.
+pub const VECTOR_PAGE_FAULT: u64 = 14;
+
+/// What a CPU exception of a process comes to.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// A page fault the process's areas allow: back (or copy) `page` and map it with
+    /// `rights`, then resume the process at the same instruction.
+    Resolve {
+        page: u64,
+        rights: Rights,
+        write: bool,
+    },
+    /// The process gets `signal` with `si_code` `code` (the fault address is what the
+    /// kernel reported).
+    Signal { signal: u32, code: i32 },
+}
+
+/// The decision for CPU exception `vector` (with `error_code` and, for a page fault,
+/// `address`) of a process with `areas`: Linux's mapping of exceptions to signals, and
+/// for a page fault, whether the access is one the areas allow (then the page is backed on
+/// demand, or a shared page copied). An access outside every area (kernel addresses, the
+/// guard page below the stack, a stray pointer) is `SIGSEGV`/`SEGV_MAPERR`; one the
+/// area's rights forbid (a write to a read-only page, a fetch from a non-executable one,
+/// any access to `PROT_NONE`) `SIGSEGV`/`SEGV_ACCERR`.
+pub fn classify_fault(areas: &Areas, vector: u64, error_code: u64, address: u64) -> Fault {
+    let raise = |signal, code| Fault::Signal { signal, code };
+    match vector {
+        0 => raise(signal::SIGFPE, FPE_INTDIV),
+        16 | 19 => raise(signal::SIGFPE, 0),
+        1 | 3 => raise(signal::SIGTRAP, TRAP_BRKPT),
+        6 => raise(signal::SIGILL, ILL_ILLOPN),
+        17 => raise(signal::SIGBUS, BUS_ADRALN),
+        VECTOR_PAGE_FAULT => {
+            let Some(area) = areas.find(address).filter(|_| address < USER_TOP) else {
+                return raise(signal::SIGSEGV, SEGV_MAPERR);
+            };
+            let write = error_code & PF_WRITE != 0;
+            let fetch = error_code & PF_FETCH != 0;
+            let allowed = area.rights.accessible()
+                && error_code & PF_RESERVED == 0
+                && (!write || area.rights.contains(Rights::WRITE))
+                && (!fetch || area.rights.contains(Rights::EXECUTE));
+            if allowed {
+                Fault::Resolve {
+                    page: page_down(address),
+                    rights: area.rights,
+                    write,
+                }
+            } else {
+                raise(signal::SIGSEGV, SEGV_ACCERR)
+            }
+        }
+        // A general-protection fault (a privileged instruction, an I/O port the process
+        // has no access to, a non-canonical address) and the rest.
+        _ => raise(signal::SIGSEGV, SI_KERNEL),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn faults_resolve_inside_areas_with_their_rights_only() {
+        let mut a = Areas::new();
+        let rw = Rights::READ | Rights::WRITE;
+        let rx = Rights::READ | Rights::EXECUTE;
+        a.insert(area(0x40_0000, 0x40_2000, rx)).unwrap();
+        a.insert(area(0x60_0000, 0x60_1000, Rights::READ)).unwrap();
+        a.insert(area(0x70_0000, 0x70_1000, Rights::NONE)).unwrap();
+        a.insert(Area {
+            kind: Kind::Stack,
+            ..area(STACK_TOP - STACK_SIZE, STACK_TOP, rw)
+        })
+        .unwrap();
+        let pf = |error, address| classify_fault(&a, VECTOR_PAGE_FAULT, error, address);
+        let user = PF_USER;
+        let segv = |code| Fault::Signal {
+            signal: signal::SIGSEGV,
+            code,
+        };
+        // Demand paging: the stack's pages, the image's code.
+        assert_eq!(
+            pf(user | PF_WRITE, STACK_TOP - 8),
+            Fault::Resolve {
+                page: STACK_TOP - PAGE,
+                rights: rw,
+                write: true
+            }
+        );
+        assert_eq!(
+            pf(user | PF_FETCH, 0x40_1234),
+            Fault::Resolve {
+                page: 0x40_1000,
+                rights: rx,
+                write: false
+            }
+        );
+        // Copy-on-write: a write to a present page of a writable area.
+        assert!(matches!(
+            pf(user | PF_PRESENT | PF_WRITE, STACK_TOP - 8),
+            Fault::Resolve { write: true, .. }
+        ));
+        // Outside every area: the guard page below the stack, null, kernel addresses.
+        assert_eq!(
+            pf(user | PF_WRITE, STACK_TOP - STACK_SIZE - 8),
+            segv(SEGV_MAPERR)
+        );
+        assert_eq!(pf(user, 0), segv(SEGV_MAPERR));
+        assert_eq!(
+            pf(user | PF_PRESENT, 0xffff_8000_0000_0000),
+            segv(SEGV_MAPERR)
+        );
+        assert_eq!(pf(user, USER_TOP), segv(SEGV_MAPERR));
+        // Rights: writes to read-only pages, fetches from data, PROT_NONE.
+        assert_eq!(
+            pf(user | PF_PRESENT | PF_WRITE, 0x40_0000),
+            segv(SEGV_ACCERR)
+        );
+        assert_eq!(pf(user | PF_WRITE, 0x60_0000), segv(SEGV_ACCERR));
+        assert_eq!(pf(user | PF_FETCH, 0x60_0000), segv(SEGV_ACCERR));
+        assert_eq!(pf(user, 0x70_0000), segv(SEGV_ACCERR));
+        assert_eq!(pf(user | PF_RESERVED, 0x60_0000), segv(SEGV_ACCERR));
+        // Other exceptions: Linux's signals.
+        let signal_of = |vector| match classify_fault(&a, vector, 0, 0) {
+            Fault::Signal { signal, .. } => signal,
+            Fault::Resolve { .. } => 0,
+        };
+        assert_eq!(signal_of(0), signal::SIGFPE);
+        assert_eq!(signal_of(6), signal::SIGILL);
+        assert_eq!(signal_of(13), signal::SIGSEGV);
+        assert_eq!(signal_of(3), signal::SIGTRAP);
+        assert_eq!(signal_of(17), signal::SIGBUS);
+    }
 
     fn area(start: u64, end: u64, rights: Rights) -> Area {
         Area {
@@ -324,6 +503,7 @@ mod tests {
             end,
             rights,
             kind: Kind::Anonymous,
+            file: None,
         }
     }
 
@@ -375,6 +555,37 @@ mod tests {
             .unwrap();
         assert_eq!(gone, [(0x2000, 0x3000), (0x5000, 0x6000)]);
         assert_eq!(ranges(&a), [(0x1000, 0x2000, 3), (0x6000, 0x9000, 3)]);
+    }
+
+    #[test]
+    fn a_split_file_mapping_keeps_each_page_at_its_offset() {
+        let mut a = Areas::new();
+        a.insert(Area {
+            file: Some(FileSource {
+                slot: 2,
+                offset: 0x10000,
+            }),
+            ..area(0x1000, 0x5000, Rights::READ)
+        })
+        .unwrap();
+        a.protect(0x2000, 0x3000, Rights::NONE, |_| ()).unwrap();
+        a.remove(0x3000, 0x4000, |_| ()).unwrap();
+        let offsets: Vec<_> = a
+            .iter()
+            .map(|r| (r.start, r.file.map(|f| (f.slot, f.offset))))
+            .collect();
+        assert_eq!(
+            offsets,
+            [
+                (0x1000, Some((2, 0x10000))),
+                (0x2000, Some((2, 0x11000))),
+                (0x4000, Some((2, 0x13000))),
+            ]
+        );
+        assert_eq!(
+            a.find(0x4800).unwrap().file_at(0x4000).unwrap().offset,
+            0x13000
+        );
     }
 
     #[test]

@@ -1,14 +1,20 @@
 //! The guest's page pool: the free memory of its partition (syssw maps it at
 //! `POOL_BASE`, see `user_rt::partition`) handed out page by page to back its processes'
 //! memory. A bitmap over the pool's pages; runs of contiguous pages are handed out first
-//! fit, so a segment can be mapped into a process with one `map` call.
+//! fit, so a segment can be mapped into a process with one `map` call. Each page in use
+//! counts its references: a page a `fork` shares between parent and child (copy-on-write)
+//! has one per process, and is free again when the last one goes.
 
 /// Most pages a pool manages (256 MiB).
 pub const MAX_POOL_PAGES: usize = 65536;
 
-/// Free/used state of up to [`MAX_POOL_PAGES`] pages, by index.
+/// Most references one page can have (more processes than a guest ever has).
+pub const MAX_REFERENCES: u8 = u8::MAX;
+
+/// Free/used state and reference counts of up to [`MAX_POOL_PAGES`] pages, by index.
 pub struct PagePool {
     used: [u64; MAX_POOL_PAGES / 64],
+    references: [u8; MAX_POOL_PAGES],
     pages: usize,
     free: usize,
 }
@@ -23,6 +29,7 @@ impl PagePool {
         };
         Self {
             used: [0; MAX_POOL_PAGES / 64],
+            references: [0; MAX_POOL_PAGES],
             pages,
             free: pages,
         }
@@ -59,7 +66,8 @@ impl PagePool {
         None
     }
 
-    /// The first run of `count` free pages, marked used; `None` if there is none.
+    /// The first run of `count` free pages, marked used with one reference each; `None`
+    /// if there is none.
     pub fn alloc(&mut self, count: usize) -> Option<usize> {
         if count == 0 || count > self.free {
             return None;
@@ -71,6 +79,7 @@ impl PagePool {
                 None => {
                     for p in start..start + count {
                         self.set(p, true);
+                        self.references[p] = 1;
                     }
                     self.free -= count;
                     return Some(start);
@@ -80,12 +89,38 @@ impl PagePool {
         None
     }
 
-    /// Frees page `page` (a page not in use is left as it is).
-    pub fn free(&mut self, page: usize) {
+    /// How many references page `page` has (0: free).
+    pub fn references(&self, page: usize) -> u8 {
         if self.is_used(page) {
-            self.set(page, false);
-            self.free += 1;
+            self.references[page]
+        } else {
+            0
         }
+    }
+
+    /// Adds a reference to page `page` (in use); false if it is free or has
+    /// [`MAX_REFERENCES`] already (then nothing changed).
+    pub fn share(&mut self, page: usize) -> bool {
+        if !self.is_used(page) || self.references[page] == MAX_REFERENCES {
+            return false;
+        }
+        self.references[page] += 1;
+        true
+    }
+
+    /// Drops a reference to page `page`; the last one frees it (returns whether it did).
+    /// A page not in use is left as it is.
+    pub fn free(&mut self, page: usize) -> bool {
+        if !self.is_used(page) {
+            return false;
+        }
+        self.references[page] = self.references[page].saturating_sub(1);
+        if self.references[page] > 0 {
+            return false;
+        }
+        self.set(page, false);
+        self.free += 1;
+        true
     }
 }
 
@@ -111,6 +146,29 @@ mod tests {
         assert_eq!(p.free_pages(), 1);
         assert_eq!(p.alloc(0), None);
         assert_eq!(PagePool::new(usize::MAX).free_pages(), MAX_POOL_PAGES);
+    }
+
+    #[test]
+    fn a_shared_page_is_free_after_its_last_reference() {
+        let mut p = PagePool::new(4);
+        let a = p.alloc(1).unwrap();
+        assert_eq!(p.references(a), 1);
+        assert!(p.share(a));
+        assert!(p.share(a));
+        assert_eq!(p.references(a), 3);
+        assert!(!p.free(a));
+        assert!(!p.free(a));
+        assert_eq!(p.free_pages(), 3);
+        assert!(p.free(a));
+        assert_eq!((p.references(a), p.free_pages()), (0, 4));
+        assert!(!p.share(a), "a free page cannot be shared");
+        assert!(!p.free(a));
+        let b = p.alloc(1).unwrap();
+        for _ in 1..MAX_REFERENCES {
+            assert!(p.share(b));
+        }
+        assert!(!p.share(b), "the count never wraps");
+        assert_eq!(p.references(b), MAX_REFERENCES);
     }
 
     #[test]

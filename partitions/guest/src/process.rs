@@ -10,6 +10,8 @@ use crate::vfs::PathBuf;
 
 /// Most open files of a process (`RLIMIT_NOFILE`).
 pub const MAX_FILES: usize = 64;
+/// Most files a process has mappings of at once.
+pub const MAX_MAPPED_FILES: usize = 16;
 /// Longest process name (Linux's `TASK_COMM_LEN` without the NUL).
 pub const NAME_LEN: usize = 15;
 
@@ -48,6 +50,9 @@ pub struct Process<'a> {
     /// The executable's normalised path (`/proc/self/exe`).
     pub exe: PathBuf,
     pub areas: Areas,
+    /// The files of its file mappings (an area's [`crate::memory::FileSource`] names its
+    /// slot); a slot no area names is free.
+    pub mapped_files: [Option<File<'a>>; MAX_MAPPED_FILES],
     /// Start of the heap (after the executable) and the current program break.
     pub brk_start: u64,
     pub brk: u64,
@@ -102,6 +107,7 @@ impl<'a> Process<'a> {
             name_len,
             exe,
             areas: Areas::new(),
+            mapped_files: [None; MAX_MAPPED_FILES],
             brk_start: 0,
             brk: 0,
             files,
@@ -152,6 +158,7 @@ impl<'a> Process<'a> {
                 end: r.start + r.pages * crate::memory::PAGE,
                 rights: r.rights,
                 kind: Kind::Image,
+                file: None,
             })?;
         }
         self.brk_start = brk_start;
@@ -166,6 +173,7 @@ impl<'a> Process<'a> {
             end: STACK_TOP,
             rights: crate::memory::Rights::READ | crate::memory::Rights::WRITE,
             kind: Kind::Stack,
+            file: None,
         };
         self.areas.insert(area)?;
         Ok(area)

@@ -67,6 +67,10 @@ pub const SEGV_MAPERR: i32 = 1;
 pub const SEGV_ACCERR: i32 = 2;
 pub const ILL_ILLOPN: i32 = 2;
 pub const FPE_INTDIV: i32 = 1;
+pub const TRAP_BRKPT: i32 = 1;
+pub const BUS_ADRALN: i32 = 1;
+/// A page the guest could not back (out of memory).
+pub const BUS_ADRERR: i32 = 2;
 
 /// `sigaltstack`'s `ss_flags`.
 pub const SS_ONSTACK: u32 = 1;
@@ -440,22 +444,6 @@ pub fn restore(b: &[u8; FRAME_SIZE], current: &Registers) -> Restored {
     }
 }
 
-/// The signal a CPU exception raises (Linux's mapping) and its `si_code`.
-pub const fn fault_signal(vector: u64, error_code: u64) -> (u32, i32) {
-    match vector {
-        0 => (SIGFPE, FPE_INTDIV),
-        16 | 19 => (SIGFPE, 0),
-        1 | 3 => (SIGTRAP, SI_KERNEL),
-        6 => (SIGILL, ILL_ILLOPN),
-        17 => (SIGBUS, SI_KERNEL),
-        // A page fault on a present page is an access error, on a missing one a mapping
-        // error; a general protection fault carries no address.
-        14 if error_code & 1 != 0 => (SIGSEGV, SEGV_ACCERR),
-        14 => (SIGSEGV, SEGV_MAPERR),
-        _ => (SIGSEGV, SI_KERNEL),
-    }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -595,8 +583,5 @@ mod tests {
         assert!(!Action::DEFAULT.ignores(SIGINT));
         assert!(Action::IGNORE.ignores(SIGINT));
         assert_eq!(name(SIGPIPE), "SIGPIPE");
-        assert_eq!(fault_signal(14, 4), (SIGSEGV, SEGV_MAPERR));
-        assert_eq!(fault_signal(14, 5), (SIGSEGV, SEGV_ACCERR));
-        assert_eq!(fault_signal(0, 0), (SIGFPE, FPE_INTDIV));
     }
 }

@@ -10,7 +10,9 @@
 //! console; to a pipe `EINVAL`, so callers fall back to `write`), `pipe`, `pipe2`, `dup`,
 //! `dup2`, `dup3`, `open`, `openat`, `close`, `lseek`, `getdents64`, `stat`, `lstat`, `fstat`, `newfstatat`, `access`,
 //! `faccessat`, `faccessat2`, `readlink`, `readlinkat`, `getcwd`, `ioctl`, `fcntl`, `brk`,
-//! `mmap` (anonymous), `munmap`, `mprotect`, `madvise`, `arch_prctl`, `set_tid_address`,
+//! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mremap` (in place, or moved
+//! with `MREMAP_MAYMOVE`), `mprotect`, `madvise`
+//! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
 //! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
 //! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), the
@@ -31,13 +33,15 @@
 //! without it); any other call answers `ENOSYS` and is logged once per number and process.
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
-//! A CPU exception (page fault outside the process's memory, invalid opcode, ...) raises the
-//! matching signal: its handler runs if the process has one that is not blocked, else the
-//! process dies of it.
+//! A page fault inside the process's areas backs (or copies) the page and resumes it; any
+//! other CPU exception (a page fault outside its memory or against its rights, an invalid
+//! opcode, a division by zero, a general-protection fault) raises the matching signal
+//! ([`crate::memory::classify_fault`]): its handler runs if the process has one that is not
+//! blocked, else the process dies of it.
 
 use crate::cpio::{Archive, Entry, S_IFCHR, S_IFMT};
 use crate::linux::{self, Errno, nr};
-use crate::memory::{Area, AreaError, Kind, PAGE, Rights, USER_TOP, page_up};
+use crate::memory::{Fault, PAGE, Rights, USER_TOP, classify_fault};
 use crate::pipe::{PIPE_SIZE, Pipes, Transfer};
 use crate::poll;
 use crate::process::{File, MAX_FILES, Process, Stream};
@@ -46,6 +50,9 @@ use crate::signal::{self, Info, SIGSEGV};
 use crate::tty::{self, Termios, Tty, Winsize};
 use crate::vfs;
 use abi::ipc::{ExceptionMessage, Registers, VECTOR_INTERRUPT, VECTOR_SYSCALL};
+use memory::{brk, fill_file_pages, madvise, mmap, mprotect, mremap, munmap};
+
+mod memory;
 
 /// Lowest address `mmap` places mappings at without a hint.
 pub const MMAP_BOTTOM: u64 = 1 << 36;
@@ -61,20 +68,45 @@ const CONSOLE_RDEV: u64 = 5 << 8 | 1;
 /// What the guest's environment provides to the system calls.
 pub trait Host {
     /// Copies the process's memory at `address` into `buf` (the caller checked that the
-    /// range lies in readable areas).
+    /// range lies in readable areas; pages not backed yet read as zeros).
     fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno>;
-    /// Copies `data` into the process's memory at `address` (checked writable areas).
+    /// Copies `data` into the process's memory at `address` (the caller checked writable
+    /// areas, or it is a program being loaded): a page not backed yet is backed, a page
+    /// shared with another process (after `fork`) copied first (`ENOMEM` when the guest is
+    /// out of memory).
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno>;
-    /// Backs `pages` pages at `start` with zeroed memory and maps them with `rights`
-    /// (`ENOMEM` when the guest is out of memory, `EACCES` for rights it never grants, such
-    /// as writable and executable at once; then nothing is mapped).
-    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
-    /// Unmaps `pages` pages at `start` and frees their memory (pages never backed are
-    /// skipped).
+    /// Backs `pages` pages at `start` of program image `image` with memory `fill(address,
+    /// page)` writes in full (the page's previous contents are undefined) and maps them
+    /// with `rights` at once (`ENOMEM` when the guest is out of memory, `EACCES` for rights
+    /// it never grants, such as writable and executable at once). `image` names the
+    /// contents: the same image and address always give the same bytes (an initramfs
+    /// file's inode), so the host may keep the pages and share them copy-on-write with
+    /// every process that runs the image ([`crate::frames`]).
+    fn map_image(
+        &mut self,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        image: u32,
+        fill: &mut dyn FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno>;
+    /// Unmaps `pages` pages at `start` and drops the process's memory there (pages never
+    /// backed are skipped).
     fn unmap(&mut self, start: u64, pages: u64);
-    /// Gives the pages at `start` the `rights` (none: unmapped, contents kept); pages not
-    /// backed yet are backed with zeroed memory.
+    /// The pages at `start` get new rights (their areas changed): the contents stay, the
+    /// next access maps them as the areas then allow ([`Host::fault_in`]).
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno>;
+    /// Moves the `pages` pages at `from` to `to` (a free range): their contents go along,
+    /// the old addresses are left unmapped (`mremap`).
+    fn move_pages(&mut self, from: u64, to: u64, pages: u64);
+    /// Backs `page` with the bytes `fill` writes into a zeroed page, unless something backs
+    /// it already (a file mapping's page, before its first use; `ENOMEM` when the guest is
+    /// out of memory).
+    fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno>;
+    /// Makes `page` accessible with `rights` after a page fault its area allows (`write`:
+    /// the access writes): backs it with zeroed memory the first time, copies it if it is
+    /// shared and written, and maps it (`ENOMEM` when the guest is out of memory).
+    fn fault_in(&mut self, page: u64, rights: Rights, write: bool) -> Result<(), Errno>;
     /// Output of process `pid` on the console.
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]);
     /// The console's terminal, when the guest has one (COM2): then the console reads its
@@ -199,11 +231,26 @@ pub fn handle<'a>(
     Outcome::Resume
 }
 
-/// A CPU exception of the process: the signal it raises goes to the process's handler
-/// when it has one that the mask does not block ([`Outcome::Signal`]); else the process
-/// dies with it (Linux forces the default action of a blocked or ignored fault signal).
+/// A CPU exception of process `p`: a page fault its areas allow is resolved (the page
+/// backed or copied, [`crate::memory::classify_fault`]) and the process resumes; any other
+/// raises the matching signal (`SIGBUS` when the guest is out of memory for the page, as
+/// Linux when a fault cannot get one), which goes to the process's handler when it has one
+/// that the mask does not block ([`Outcome::Signal`]); else the process dies with it (Linux
+/// forces the default action of a blocked or ignored fault signal).
 fn fault(p: &Process, host: &mut impl Host, m: &ExceptionMessage) -> Outcome {
-    let (sig, code) = signal::fault_signal(m.vector, m.error_code);
+    let (sig, code) = match classify_fault(&p.areas, m.vector, m.error_code, m.fault_address) {
+        Fault::Resolve {
+            page,
+            rights,
+            write,
+        } => match fill_file_pages(p, host, page, PAGE)
+            .and_then(|()| host.fault_in(page, rights, write))
+        {
+            Ok(()) => return Outcome::Resume,
+            Err(_) => (signal::SIGBUS, signal::BUS_ADRERR),
+        },
+        Fault::Signal { signal, code } => (signal, code),
+    };
     let caught = p.action(sig).handler > signal::SIG_IGN && p.sigmask & signal::bit(sig) == 0;
     if caught {
         return Outcome::Signal(Info {
@@ -253,13 +300,26 @@ pub(crate) fn check_user(p: &Process, address: u64, len: usize, rights: Rights) 
     Ok(())
 }
 
+/// [`check_user`], then the pages of file mappings in the range are filled from their
+/// files if they were never touched (before the guest reads or writes them for a call).
+pub(crate) fn prepare_user(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    len: usize,
+    rights: Rights,
+) -> SysResult<()> {
+    check_user(p, address, len, rights)?;
+    fill_file_pages(p, host, address, len as u64)
+}
+
 pub(crate) fn read_user(
     p: &Process,
     host: &mut impl Host,
     address: u64,
     buf: &mut [u8],
 ) -> SysResult<()> {
-    check_user(p, address, buf.len(), Rights::READ)?;
+    prepare_user(p, host, address, buf.len(), Rights::READ)?;
     host.read_user(address, buf)
 }
 
@@ -269,7 +329,7 @@ pub(crate) fn write_user(
     address: u64,
     data: &[u8],
 ) -> SysResult<()> {
-    check_user(p, address, data.len(), Rights::WRITE)?;
+    prepare_user(p, host, address, data.len(), Rights::WRITE)?;
     host.write_user(address, data)
 }
 
@@ -388,10 +448,11 @@ fn call<'a>(
         },
         nr::fcntl => fcntl(p, pipes, a[0], a[1], a[2]),
         nr::brk => Ok(brk(p, host, a[0])),
-        nr::mmap => mmap(p, host, a[0], a[1], a[2], a[3]),
+        nr::mmap => mmap(p, host, a),
         nr::munmap => munmap(p, host, a[0], a[1]),
         nr::mprotect => mprotect(p, host, a[0], a[1], a[2]),
-        nr::madvise => Ok(0),
+        nr::madvise => madvise(p, host, a[0], a[1], a[2]),
+        nr::mremap => mremap(p, host, a[0], a[1], a[2], a[3]),
         nr::arch_prctl => arch_prctl(p, host, regs, a[0], a[1]),
         nr::set_tid_address => {
             p.clear_child_tid = a[0];
@@ -566,7 +627,7 @@ fn pipe(
     if flags & !(O_CLOEXEC | linux::O_NONBLOCK) != 0 {
         return Err(Errno::EINVAL);
     }
-    check_user(p, fds, 8, Rights::WRITE)?;
+    prepare_user(p, host, fds, 8, Rights::WRITE)?;
     let read_fd = p.free_fd().ok_or(Errno::EMFILE)?;
     let write_fd = p.free_fd_from(read_fd + 1).ok_or(Errno::EMFILE)?;
     let index = pipes.open().ok_or(Errno::ENFILE)?;
@@ -620,7 +681,7 @@ fn read(
         File::Pipe { write: true, .. } => Err(Errno::EBADF),
         File::Pipe { pipe, nonblock, .. } => {
             let n = (count as usize).min(PIPE_SIZE);
-            check_user(p, buf, n, Rights::WRITE)?;
+            prepare_user(p, host, buf, n, Rights::WRITE)?;
             let mut bytes = [0u8; PIPE_SIZE];
             match pipes.read(pipe, &mut bytes[..n]) {
                 Transfer::Done(n) => {
@@ -674,7 +735,7 @@ fn write(
         }
     };
     let total = (count as usize).min(MAX_TRANSFER);
-    check_user(p, buf, total, Rights::READ)?;
+    prepare_user(p, host, buf, total, Rights::READ)?;
     let mut chunk = [0u8; 512];
     let mut done = 0;
     while done < total {
@@ -1164,176 +1225,6 @@ fn stat_of_fd(p: &Process, fd: u64) -> SysResult<Stat> {
 fn write_stat(p: &Process, host: &mut impl Host, buf: u64, st: &Stat) -> SysResult<u64> {
     debug_assert!(st.mode & S_IFMT != 0 || st.mode == 0);
     write_user(p, host, buf, &st.to_bytes())?;
-    Ok(0)
-}
-
-/// Linux's `brk`: returns the new break, or the old one if it cannot move there.
-fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 {
-    if requested < p.brk_start || requested - p.brk_start > MAX_HEAP {
-        return p.brk;
-    }
-    let (old_end, new_end) = (page_up(p.brk), page_up(requested));
-    if new_end > old_end {
-        let grown = if old_end == p.brk_start {
-            p.areas.insert(Area {
-                start: p.brk_start,
-                end: new_end,
-                rights: Rights::READ | Rights::WRITE,
-                kind: Kind::Heap,
-            })
-        } else {
-            p.areas.resize(old_end, new_end)
-        };
-        if grown.is_err() {
-            return p.brk;
-        }
-        let pages = (new_end - old_end) / PAGE;
-        if host
-            .map_zeroed(old_end, pages, Rights::READ | Rights::WRITE)
-            .is_err()
-        {
-            let _ = if old_end == p.brk_start {
-                p.areas.remove(p.brk_start, new_end, |_| ())
-            } else {
-                p.areas.resize(new_end, old_end)
-            };
-            return p.brk;
-        }
-    } else if new_end < old_end {
-        host.unmap(new_end, (old_end - new_end) / PAGE);
-        let _ = if new_end == p.brk_start {
-            p.areas.remove(p.brk_start, old_end, |_| ())
-        } else {
-            p.areas.resize(old_end, new_end)
-        };
-    }
-    p.brk = requested;
-    requested
-}
-
-fn area_error(e: AreaError) -> Errno {
-    match e {
-        AreaError::Invalid => Errno::EINVAL,
-        AreaError::Overlaps => Errno::EEXIST,
-        AreaError::TooMany => Errno::ENOMEM,
-    }
-}
-
-fn mmap(
-    p: &mut Process,
-    host: &mut impl Host,
-    hint: u64,
-    len: u64,
-    prot: u64,
-    flags: u64,
-) -> SysResult<u64> {
-    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
-    if rights.writable_and_executable() {
-        return Err(Errno::EACCES);
-    }
-    if len == 0 || flags & (linux::MAP_SHARED | linux::MAP_PRIVATE) == 0 {
-        return Err(Errno::EINVAL);
-    }
-    if flags & linux::MAP_ANONYMOUS == 0 {
-        return Err(Errno::ENODEV); // file mappings: not yet
-    }
-    let len = len.checked_add(PAGE - 1).ok_or(Errno::ENOMEM)? & !(PAGE - 1);
-    let fixed = flags & (linux::MAP_FIXED | linux::MAP_FIXED_NOREPLACE) != 0;
-    let start = if fixed {
-        let end = hint.checked_add(len).ok_or(Errno::ENOMEM)?;
-        if !hint.is_multiple_of(PAGE) || hint == 0 || end > USER_TOP {
-            return Err(Errno::EINVAL);
-        }
-        if p.areas.overlaps(hint, end) {
-            if flags & linux::MAP_FIXED_NOREPLACE != 0 {
-                return Err(Errno::EEXIST);
-            }
-            munmap(p, host, hint, len)?;
-        }
-        hint
-    } else {
-        let hinted = hint.is_multiple_of(PAGE)
-            && hint >= MMAP_BOTTOM
-            && hint
-                .checked_add(len)
-                .is_some_and(|end| end <= crate::memory::MMAP_TOP && !p.areas.overlaps(hint, end));
-        if hinted {
-            hint
-        } else {
-            p.areas
-                .free_below(crate::memory::MMAP_TOP, MMAP_BOTTOM, len)
-                .ok_or(Errno::ENOMEM)?
-        }
-    };
-    p.areas
-        .insert(Area {
-            start,
-            end: start + len,
-            rights,
-            kind: Kind::Anonymous,
-        })
-        .map_err(area_error)?;
-    if rights.accessible()
-        && let Err(e) = host.map_zeroed(start, len / PAGE, rights)
-    {
-        let _ = p.areas.remove(start, start + len, |_| ());
-        return Err(e);
-    }
-    Ok(start)
-}
-
-fn munmap(p: &mut Process, host: &mut impl Host, start: u64, len: u64) -> SysResult<u64> {
-    if !start.is_multiple_of(PAGE) || len == 0 {
-        return Err(Errno::EINVAL);
-    }
-    let end = start
-        .checked_add(page_up(len))
-        .filter(|&e| e <= USER_TOP)
-        .ok_or(Errno::EINVAL)?;
-    let mut parts = [(0u64, 0u64); crate::memory::MAX_AREAS + 2];
-    let mut n = 0;
-    p.areas
-        .remove(start, end, |a| {
-            if n < parts.len() {
-                parts[n] = (a.start, a.end);
-                n += 1;
-            }
-        })
-        .map_err(area_error)?;
-    for &(s, e) in &parts[..n] {
-        host.unmap(s, (e - s) / PAGE);
-    }
-    Ok(0)
-}
-
-fn mprotect(
-    p: &mut Process,
-    host: &mut impl Host,
-    start: u64,
-    len: u64,
-    prot: u64,
-) -> SysResult<u64> {
-    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
-    if rights.writable_and_executable() {
-        return Err(Errno::EACCES);
-    }
-    if !start.is_multiple_of(PAGE) {
-        return Err(Errno::EINVAL);
-    }
-    if len == 0 {
-        return Ok(0);
-    }
-    let end = start
-        .checked_add(page_up(len))
-        .filter(|&e| e <= USER_TOP)
-        .ok_or(Errno::ENOMEM)?;
-    if !p.areas.covers(start, end) {
-        return Err(Errno::ENOMEM);
-    }
-    host.protect(start, (end - start) / PAGE, rights)?;
-    p.areas
-        .protect(start, end, rights, |_| ())
-        .map_err(area_error)?;
     Ok(0)
 }
 

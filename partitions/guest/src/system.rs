@@ -11,11 +11,11 @@
 //! to each call that completes. So a waiting process never stops the guest from serving
 //! the others, and the order of events decides nothing but who runs first.
 //!
-//! **Fork.** The child is a new task with an eager copy of the parent's pages (the
-//! partition program copies them; [`Tasks::fork`]) and a thread started at address 0:
+//! **Fork.** The child is a new task sharing the parent's pages copy-on-write (the
+//! partition program maps them; [`Tasks::fork`]) and a thread started at address 0:
 //! its first exception message (the fetch fault) is answered with the parent's registers
 //! and `rax = 0`, the child's half of the `fork`. `vfork` and `clone(CLONE_VM |
-//! CLONE_VFORK)` are served the same way (a copy, not shared memory; a child that only
+//! CLONE_VFORK)` are served the same way (copy-on-write, not shared memory; a child that only
 //! `execve`s or `_exit`s cannot tell), and the parent waits, as on Linux, until the child
 //! executes or ends ([`State::Vforked`]).
 //!
@@ -42,6 +42,18 @@ use abi::ipc::{ExceptionMessage, Registers};
 pub const MAX_PROCESSES: usize = 16;
 /// The pid of the first process; orphans become its children.
 pub const INIT_PID: u32 = 1;
+/// Pids are below this (Linux's default `pid_max`); then they start again above init's.
+/// The guest's frame bookkeeping keys pages by pid in 16 bits ([`crate::frames`]).
+pub const PID_MAX: u32 = 32768;
+
+/// The pid after `pid`.
+fn next_pid(pid: u32) -> u32 {
+    if pid + 1 >= PID_MAX {
+        INIT_PID + 1
+    } else {
+        pid + 1
+    }
+}
 
 const CLONE_VM: u64 = 0x100;
 const CLONE_VFORK: u64 = 0x4000;
@@ -63,11 +75,12 @@ const RUSAGE_SIZE: usize = 144;
 pub trait Tasks: Host {
     /// Makes `pid` the process the memory calls of [`Host`] act on.
     fn select(&mut self, pid: u32);
-    /// Creates process `child`: a task with a copy of the selected process's memory (the
-    /// pages of `areas`, with their rights) and a thread that starts at address 0 with this
-    /// guest as its exception handler. Returns how many pages it copied; `EAGAIN` when no
-    /// task or thread can be created, `ENOMEM` when the pool is out of pages (then nothing
-    /// of the child is left).
+    /// Creates process `child`: a task with the selected process's memory, shared
+    /// copy-on-write (each page it has backed, with the rights of its area in `areas`,
+    /// read-only in both until one of them writes it: [`crate::frames`]) and a thread that
+    /// starts at address 0 with this guest as its exception handler. Returns how many pages
+    /// it shares; `EAGAIN` when no task or thread can be created, `ENOMEM` when the guest
+    /// is out of memory for its bookkeeping (then nothing of the child is left).
     fn fork(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno>;
     /// Ends process `pid`: its task, its memory and its pending console output.
     fn release(&mut self, pid: u32);
@@ -862,7 +875,7 @@ impl<'a> System<'a> {
             .ok_or(Errno::EAGAIN)?;
         let mut pid = self.next_pid;
         while self.index(pid).is_some() || pid == 0 {
-            pid = pid.checked_add(1).unwrap_or(INIT_PID + 1);
+            pid = next_pid(pid);
         }
         let parent = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
         let mut child = parent.clone();
@@ -885,7 +898,7 @@ impl<'a> System<'a> {
         let took = k.now_ns().saturating_sub(started);
         share_files(&child, &mut self.pipes);
         k.log(format_args!(
-            "guest: process {pid} ({}) forked from {}: {pages} pages copied in {} us",
+            "guest: process {pid} ({}) forked from {}: {pages} pages shared in {} us",
             child.name(),
             parent.pid,
             took / 1000
@@ -911,7 +924,7 @@ impl<'a> System<'a> {
             stopped: false,
             report: None,
         });
-        self.next_pid = pid.checked_add(1).unwrap_or(INIT_PID + 1);
+        self.next_pid = next_pid(pid);
         Ok(pid as u64)
     }
 
@@ -1221,5 +1234,17 @@ impl core::fmt::Display for Joined<'_> {
             }
         }
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pids_wrap_below_pid_max() {
+        assert_eq!(next_pid(2), 3);
+        assert_eq!(next_pid(PID_MAX - 2), PID_MAX - 1);
+        assert_eq!(next_pid(PID_MAX - 1), INIT_PID + 1);
     }
 }

@@ -6,7 +6,7 @@ use crate::cpio::{Archive, S_IFDIR, S_IFLNK, S_IFREG};
 use crate::elf::tests::static_exe;
 use crate::exec::{self, ExecError};
 use crate::linux::{Errno, nr};
-use crate::memory::{PAGE, Rights, STACK_TOP};
+use crate::memory::{PAGE, PF_PRESENT, PF_USER, PF_WRITE, Rights, STACK_TOP};
 use crate::process::{Process, Stream};
 use crate::syscall::{Host, Outcome, handle};
 use crate::system::{MAX_PROCESSES, State, System, Tasks};
@@ -14,7 +14,8 @@ use crate::tty::{self, Tty};
 use abi::ipc::{ExceptionMessage, VECTOR_SYSCALL};
 use std::collections::HashMap;
 
-/// Process memory as the kernel would have it: backed pages with their rights.
+/// Process memory as the kernel would have it: backed pages with the rights they are
+/// mapped with (none: backed, not mapped).
 #[derive(Default)]
 struct Model {
     /// The pages of the selected process ([`Tasks::select`]).
@@ -54,6 +55,15 @@ impl Model {
             .collect();
         String::from_utf8(bytes).unwrap()
     }
+    /// Backs `page` with a zeroed page mapped with `rights` (none: not mapped).
+    fn back(&mut self, page: u64, rights: Rights) -> Result<(), Errno> {
+        if self.budget == 0 {
+            return Err(Errno::ENOMEM);
+        }
+        self.budget -= 1;
+        self.pages.insert(page, (vec![0; PAGE as usize], rights));
+        Ok(())
+    }
     fn byte(&self, address: u64) -> Option<u8> {
         let (page, _) = self.pages.get(&(address & !(PAGE - 1)))?;
         Some(page[(address % PAGE) as usize])
@@ -63,31 +73,43 @@ impl Model {
 impl Host for Model {
     fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno> {
         for (i, b) in buf.iter_mut().enumerate() {
-            *b = self.byte(address + i as u64).ok_or(Errno::EFAULT)?;
+            *b = self.byte(address + i as u64).unwrap_or(0);
         }
         Ok(())
     }
     fn write_user(&mut self, address: u64, data: &[u8]) -> Result<(), Errno> {
         for (i, b) in data.iter().enumerate() {
             let a = address + i as u64;
-            let (page, _) = self
-                .pages
-                .get_mut(&(a & !(PAGE - 1)))
-                .ok_or(Errno::EFAULT)?;
+            let at = a & !(PAGE - 1);
+            if !self.pages.contains_key(&at) {
+                // Backed, not mapped until it faults.
+                self.back(at, Rights::NONE)?;
+            }
+            let (page, _) = self.pages.get_mut(&at).ok_or(Errno::EFAULT)?;
             page[(a % PAGE) as usize] = *b;
         }
         Ok(())
     }
-    fn map_zeroed(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+    fn map_image(
+        &mut self,
+        start: u64,
+        pages: u64,
+        rights: Rights,
+        _: u32,
+        fill: &mut dyn FnMut(u64, &mut [u8]),
+    ) -> Result<(), Errno> {
         if pages > self.budget {
             return Err(Errno::ENOMEM);
         }
         for i in 0..pages {
             let at = start + i * PAGE;
             assert!(!self.pages.contains_key(&at), "page {at:#x} mapped twice");
-            self.pages.insert(at, (vec![0; PAGE as usize], rights));
+            self.back(at, rights)?;
+            if let Some(p) = self.pages.get_mut(&at) {
+                p.0.fill(0xcc); // what a recycled frame may hold
+                fill(at, &mut p.0);
+            }
         }
-        self.budget -= pages;
         Ok(())
     }
     fn unmap(&mut self, start: u64, pages: u64) {
@@ -97,13 +119,37 @@ impl Host for Model {
             }
         }
     }
-    fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
+    fn protect(&mut self, start: u64, pages: u64, _: Rights) -> Result<(), Errno> {
+        // Unmapped until the next fault.
         for i in 0..pages {
-            let at = start + i * PAGE;
-            match self.pages.get_mut(&at) {
-                Some(p) => p.1 = rights,
-                None => self.map_zeroed(at, 1, rights)?,
+            if let Some(p) = self.pages.get_mut(&(start + i * PAGE)) {
+                p.1 = Rights::NONE;
             }
+        }
+        Ok(())
+    }
+    fn move_pages(&mut self, from: u64, to: u64, pages: u64) {
+        for i in 0..pages {
+            if let Some((bytes, _)) = self.pages.remove(&(from + i * PAGE)) {
+                self.pages.insert(to + i * PAGE, (bytes, Rights::NONE));
+            }
+        }
+    }
+    fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
+        if !self.pages.contains_key(&page) {
+            self.back(page, Rights::NONE)?;
+            if let Some(p) = self.pages.get_mut(&page) {
+                fill(&mut p.0);
+            }
+        }
+        Ok(())
+    }
+    fn fault_in(&mut self, page: u64, rights: Rights, _: bool) -> Result<(), Errno> {
+        if !self.pages.contains_key(&page) {
+            self.back(page, rights)?;
+        }
+        if let Some(p) = self.pages.get_mut(&page) {
+            p.1 = rights;
         }
         Ok(())
     }
@@ -203,6 +249,23 @@ impl<'a> World<'a> {
         r.rip = 0x40_1019;
         r.fs_base = fs_base;
         m
+    }
+
+    /// A page fault of the process at `address` with `error` (the CPU's error code).
+    fn fault(&mut self, error: u64, address: u64) -> Outcome {
+        let mut m = ExceptionMessage {
+            vector: crate::memory::VECTOR_PAGE_FAULT,
+            error_code: error,
+            fault_address: address,
+            ..Default::default()
+        };
+        handle(
+            &mut self.p,
+            &mut self.pipes,
+            &self.fs,
+            &mut self.host,
+            &mut m,
+        )
     }
 
     fn run(&mut self, number: u64, a: [u64; 6]) -> (Outcome, ExceptionMessage) {
@@ -477,18 +540,39 @@ fn identity_time_and_signals() {
 fn anonymous_memory() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
+    let before = w.host.budget;
     let a = w.call(nr::mmap, [0, 3 * PAGE, 3, 0x22, u64::MAX, 0]);
     assert!(a >= crate::syscall::MMAP_BOTTOM && a.is_multiple_of(PAGE));
+    assert_eq!(w.host.budget, before, "nothing backed before it is touched");
+    // The first touch faults the page in with its area's rights.
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, a + 2 * PAGE + 5),
+        Outcome::Resume
+    );
+    assert_eq!(
+        w.host.pages[&(a + 2 * PAGE)].1,
+        Rights::READ | Rights::WRITE
+    );
     w.put(a + 2 * PAGE, b"x");
     let b = w.call(nr::mmap, [0, 10, 3, 0x22, u64::MAX, 0]);
     assert_eq!(b + PAGE, a, "top-down, adjacent");
-    // mprotect read-only, then writes through the kernel fail with EFAULT.
+    // A hint that is free is taken.
+    let hint = crate::syscall::MMAP_BOTTOM + 0x10_0000;
+    assert_eq!(w.call(nr::mmap, [hint, PAGE, 3, 0x22, u64::MAX, 0]), hint);
+    assert_ne!(w.call(nr::mmap, [hint, PAGE, 3, 0x22, u64::MAX, 0]), hint);
+    // mprotect read-only: writes through the kernel fail with EFAULT, a write of the
+    // process is SIGSEGV, a read faults the page in read-only.
     assert_eq!(w.call(nr::mprotect, [a, PAGE, 1, 0, 0, 0]), 0);
-    assert_eq!(w.host.pages[&a].1, Rights::READ);
     assert_eq!(
         w.call(nr::getrandom, [a, 8, 0, 0, 0, 0]),
         err(Errno::EFAULT)
     );
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, a),
+        Outcome::Killed(crate::signal::SIGSEGV)
+    );
+    assert_eq!(w.fault(PF_USER, a), Outcome::Resume);
+    assert_eq!(w.host.pages[&a].1, Rights::READ);
     assert_eq!(
         w.call(nr::mprotect, [a + 1, PAGE, 1, 0, 0, 0]),
         err(Errno::EINVAL)
@@ -497,22 +581,75 @@ fn anonymous_memory() {
         w.call(nr::mprotect, [0x1000, PAGE, 1, 0, 0, 0]),
         err(Errno::ENOMEM)
     );
-    // munmap the middle page.
+    // munmap the middle page: a fault there is SIGSEGV.
     assert_eq!(w.call(nr::munmap, [a + PAGE, PAGE, 0, 0, 0, 0]), 0);
     assert!(w.host.byte(a + PAGE).is_none());
     assert_eq!(w.host.byte(a + 2 * PAGE), Some(b'x'));
+    assert_eq!(
+        w.fault(PF_USER, a + PAGE),
+        Outcome::Killed(crate::signal::SIGSEGV)
+    );
     // MAP_FIXED over existing pages replaces them; MAP_FIXED_NOREPLACE refuses.
     assert_eq!(w.call(nr::mmap, [a, 2 * PAGE, 3, 0x32, u64::MAX, 0]), a);
+    assert!(w.host.byte(a).is_none(), "the old page went");
     assert_eq!(
         w.call(nr::mmap, [a, PAGE, 3, 0x10_0022, u64::MAX, 0]),
         err(Errno::EEXIST)
     );
-    // PROT_NONE reserves without backing; mprotect later backs it.
+    // PROT_NONE reserves: any access is SIGSEGV until mprotect allows it.
     let before = w.host.budget;
     let r = w.call(nr::mmap, [0, 4 * PAGE, 0, 0x22, u64::MAX, 0]);
-    assert_eq!(w.host.budget, before);
+    assert_eq!(w.fault(PF_USER, r), Outcome::Killed(crate::signal::SIGSEGV));
     assert_eq!(w.call(nr::mprotect, [r, PAGE, 3, 0, 0, 0]), 0);
+    assert_eq!(w.host.budget, before);
+    assert_eq!(w.fault(PF_USER | PF_WRITE, r), Outcome::Resume);
     assert_eq!(w.host.budget, before - 1);
+    // mremap: shrink in place, grow in place, move with MREMAP_MAYMOVE.
+    let m = w.call(nr::mmap, [0, 2 * PAGE, 3, 0x22, u64::MAX, 0]);
+    w.put(m, b"moved");
+    assert_eq!(w.call(nr::mremap, [m, 2 * PAGE, PAGE, 0, 0, 0]), m);
+    assert!(w.p.areas.find(m + PAGE).is_none(), "shrunk");
+    assert_eq!(
+        w.call(nr::mremap, [m, PAGE, 2 * PAGE, 0, 0, 0]),
+        m,
+        "in place"
+    );
+    assert_eq!(
+        w.call(nr::mremap, [m, 2 * PAGE, 64 * PAGE, 0, 0, 0]),
+        err(Errno::ENOMEM),
+        "an area above it, and no MREMAP_MAYMOVE"
+    );
+    let moved = w.call(nr::mremap, [m, 2 * PAGE, 64 * PAGE, 1, 0, 0]);
+    assert_ne!(moved, m);
+    assert_eq!(w.get(moved, 5), b"moved");
+    assert!(w.p.areas.find(m).is_none());
+    assert_eq!(w.p.areas.find(moved).unwrap().end, moved + 64 * PAGE);
+    assert_eq!(
+        w.call(nr::mremap, [moved + 1, PAGE, PAGE, 1, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::mremap, [moved, PAGE, PAGE, 2, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::mremap, [m, PAGE, PAGE, 1, 0, 0]),
+        err(Errno::EFAULT)
+    );
+    // MADV_DONTNEED drops pages: the next touch reads zeros.
+    w.put(r, b"dirty");
+    assert_eq!(w.call(nr::madvise, [r, PAGE, 4, 0, 0, 0]), 0);
+    assert!(w.host.byte(r).is_none());
+    assert_eq!(w.get(r, 5), [0; 5]);
+    assert_eq!(w.call(nr::madvise, [r, PAGE, 0, 0, 0, 0]), 0, "MADV_NORMAL");
+    assert_eq!(
+        w.call(nr::madvise, [r + 1, PAGE, 4, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::madvise, [0x1000, PAGE, 4, 0, 0, 0]),
+        err(Errno::ENOMEM)
+    );
     // Never writable and executable at once.
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 7, 0x22, u64::MAX, 0]),
@@ -522,10 +659,15 @@ fn anonymous_memory() {
         w.call(nr::mprotect, [r, PAGE, 6, 0, 0, 0]),
         err(Errno::EACCES)
     );
-    // File mappings, bad flags and exhaustion.
+    // Bad flags and exhaustion.
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 1, 0x02, 3, 0]),
-        err(Errno::ENODEV)
+        err(Errno::EBADF)
+    );
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 1, 0x02, 1, 0]),
+        err(Errno::ENODEV),
+        "the console cannot be mapped"
     );
     assert_eq!(
         w.call(nr::mmap, [0, PAGE, 1, 0x20, u64::MAX, 0]),
@@ -543,11 +685,127 @@ fn anonymous_memory() {
         w.call(nr::mmap, [0, u64::MAX, 3, 0x22, u64::MAX, 0]),
         err(Errno::ENOMEM)
     );
+    // The guest out of memory for a page a process touches: SIGBUS, for it alone.
+    let big = w.call(nr::mmap, [0, 2000 * PAGE, 3, 0x22, u64::MAX, 0]);
+    w.host.budget = 0;
     assert_eq!(
-        w.call(nr::mmap, [0, 2000 * PAGE, 3, 0x22, u64::MAX, 0]),
-        err(Errno::ENOMEM)
+        w.fault(PF_USER | PF_WRITE, big),
+        Outcome::Killed(crate::signal::SIGBUS)
     );
-    assert_eq!(w.host.budget, before - 1, "a failed mmap backs nothing");
+}
+
+#[test]
+fn file_mappings_are_filled_from_the_file_when_touched() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let path = w.path("/etc/passwd");
+    let fd = w.call(nr::openat, [(-100i64) as u64, path, 0, 0, 0, 0]);
+    let at = w.call(nr::mmap, [0, 2 * PAGE, 1, 0x02, fd, 0]);
+    assert!(at.is_multiple_of(PAGE) && at >= crate::syscall::MMAP_BOTTOM);
+    assert!(
+        w.host.byte(at).is_none(),
+        "nothing backed before the first touch"
+    );
+    assert_eq!(w.fault(PF_USER, at + 4), Outcome::Resume);
+    assert_eq!(w.host.pages[&at].1, Rights::READ);
+    assert_eq!(w.host.byte(at), Some(b'r'));
+    assert_eq!(
+        w.host.byte(at + 30),
+        Some(0),
+        "zeros after the end of the file"
+    );
+    assert!(
+        w.host.byte(at + PAGE).is_none(),
+        "the next page is not backed"
+    );
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, at),
+        Outcome::Killed(crate::signal::SIGSEGV)
+    );
+    // A private writable mapping at a fixed address, never touched: a `write` of it to
+    // the console reads the file's bytes (the guest fills it before it reads).
+    let fixed = crate::syscall::MMAP_BOTTOM;
+    assert_eq!(w.call(nr::mmap, [fixed, PAGE, 3, 0x12, fd, 0]), fixed);
+    assert_eq!(w.call(nr::write, [1, fixed, 5, 0, 0, 0]), 5);
+    assert!(w.host.stdout().ends_with("root:"));
+    // Written by the guest (a `read` into it): the rest of the page keeps the file.
+    assert_eq!(w.call(nr::munmap, [fixed, PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::mmap, [fixed, PAGE, 3, 0x12, fd, 0]), fixed);
+    assert_eq!(w.call(nr::lseek, [fd, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::read, [fd, fixed + 1, 1, 0, 0, 0]), 1);
+    assert_eq!(w.get(fixed, 5), b"rrot:");
+    // munmap of the middle of a file mapping: the rest keeps its offsets.
+    let three = w.call(nr::mmap, [0, 3 * PAGE, 1, 0x02, fd, 0]);
+    assert_eq!(w.call(nr::munmap, [three, PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.fault(PF_USER, three + PAGE), Outcome::Resume);
+    assert_eq!(
+        w.host.byte(three + PAGE),
+        Some(0),
+        "past the end of the file"
+    );
+    assert_eq!(
+        w.call(nr::mmap, [fixed, PAGE, 3, 0x02, fd, 1]),
+        err(Errno::EINVAL),
+        "unaligned offset"
+    );
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 3, 0x01, fd, 0]),
+        err(Errno::EACCES),
+        "shared and writable"
+    );
+    let root = w.path("/");
+    let dir = w.call(nr::openat, [(-100i64) as u64, root, 0o200000, 0, 0, 0]);
+    assert_eq!(
+        w.call(nr::mmap, [0, PAGE, 1, 0x02, dir, 0]),
+        err(Errno::ENODEV)
+    );
+    // Closing the descriptor keeps the mapping's file; a slot no mapping names is taken
+    // again, and there are only so many.
+    assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::write, [1, at, 4, 0, 0, 0]), 4);
+    let path = w.path("/etc/passwd");
+    let fd = w.call(nr::openat, [(-100i64) as u64, path, 0, 0, 0, 0]);
+    let mut maps = Vec::new();
+    loop {
+        let m = w.call(nr::mmap, [0, PAGE, 1, 0x02, fd, 0]);
+        if m == err(Errno::ENOMEM) {
+            break;
+        }
+        maps.push(m);
+        assert!(maps.len() <= crate::process::MAX_MAPPED_FILES, "{m:#x}");
+    }
+    assert_eq!(maps.len(), crate::process::MAX_MAPPED_FILES - 3);
+    assert_eq!(w.call(nr::munmap, [maps[0], PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::mmap, [0, PAGE, 1, 0x02, fd, 0]), maps[0]);
+}
+
+#[test]
+fn the_stack_is_paged_in_on_demand_and_guarded_below() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let low = STACK_TOP - crate::memory::STACK_SIZE;
+    assert!(w.host.byte(low).is_none(), "its low pages are not backed");
+    assert_eq!(w.fault(PF_USER | PF_WRITE, low + 8), Outcome::Resume);
+    assert_eq!(
+        w.fault(PF_USER | PF_WRITE, low - 8),
+        Outcome::Killed(crate::signal::SIGSEGV)
+    );
+    assert!(
+        w.host
+            .log
+            .last()
+            .unwrap()
+            .contains("killed by signal 11 (SIGSEGV)")
+    );
+    // Kernel addresses, other exceptions.
+    assert_eq!(
+        w.fault(PF_USER | PF_PRESENT, 0xffff_8000_0000_0000),
+        Outcome::Killed(crate::signal::SIGSEGV)
+    );
+    let mut m = World::message(0, [0; 6], 0);
+    m.vector = 0;
+    let outcome = handle(&mut w.p, &mut w.pipes, &w.fs, &mut w.host, &mut m);
+    assert_eq!(outcome, Outcome::Killed(crate::signal::SIGFPE));
 }
 
 #[test]

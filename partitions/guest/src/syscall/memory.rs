@@ -1,0 +1,351 @@
+//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mremap`, `mprotect`, `madvise`, and the filling of
+//! file mappings' pages. The calls change the process's areas ([`crate::memory::Areas`]);
+//! no page is backed here: the first access faults it in ([`Host::fault_in`]), a file
+//! mapping's page filled from its file first ([`fill_file_pages`], also before the guest
+//! reads or writes one for a call). They never map a page writable and executable (W^X).
+
+use super::{Host, MAX_HEAP, MMAP_BOTTOM, SysResult};
+use crate::linux::{self, Errno};
+use crate::memory::{
+    Area, AreaError, FileSource, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_down, page_up,
+};
+use crate::process::{File, Process};
+
+/// Linux's `brk`: returns the new break, or the old one if it cannot move there. The heap's
+/// pages are backed when first touched.
+pub(super) fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 {
+    if requested < p.brk_start || requested - p.brk_start > MAX_HEAP {
+        return p.brk;
+    }
+    let (old_end, new_end) = (page_up(p.brk), page_up(requested));
+    if new_end > old_end {
+        let grown = if old_end == p.brk_start {
+            p.areas.insert(Area {
+                start: p.brk_start,
+                end: new_end,
+                rights: Rights::READ | Rights::WRITE,
+                kind: Kind::Heap,
+                file: None,
+            })
+        } else {
+            p.areas.resize(old_end, new_end)
+        };
+        if grown.is_err() {
+            return p.brk;
+        }
+    } else if new_end < old_end {
+        host.unmap(new_end, (old_end - new_end) / PAGE);
+        let _ = if new_end == p.brk_start {
+            p.areas.remove(p.brk_start, old_end, |_| ())
+        } else {
+            p.areas.resize(old_end, new_end)
+        };
+    }
+    p.brk = requested;
+    requested
+}
+
+pub(super) fn area_error(e: AreaError) -> Errno {
+    match e {
+        AreaError::Invalid => Errno::EINVAL,
+        AreaError::Overlaps => Errno::EEXIST,
+        AreaError::TooMany => Errno::ENOMEM,
+    }
+}
+
+/// The bytes of file `file` from `offset` on (as many as fit `buf`; fewer at its end):
+/// what a file mapping's pages are filled with. `ENODEV` for files that cannot be mapped.
+/// (Past the end of the file a mapping reads zeros; Linux would raise SIGBUS for whole
+/// pages past it.)
+fn read_file_at(file: &File, offset: u64, buf: &mut [u8]) -> SysResult<usize> {
+    match file {
+        File::Initramfs { entry, .. } if entry.is_file() => {
+            let start = usize::try_from(offset)
+                .unwrap_or(usize::MAX)
+                .min(entry.data.len());
+            let n = buf.len().min(entry.data.len() - start);
+            buf[..n].copy_from_slice(&entry.data[start..start + n]);
+            Ok(n)
+        }
+        _ => Err(Errno::ENODEV),
+    }
+}
+
+/// Fills the pages of file mappings in `address..address + len` that nothing backs yet
+/// with their files' bytes (pages of other areas, or outside any, are left alone).
+pub(crate) fn fill_file_pages(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    len: u64,
+) -> SysResult<()> {
+    if len == 0 || p.areas.iter().all(|a| a.file.is_none()) {
+        return Ok(());
+    }
+    let end = address.saturating_add(len);
+    let mut page = page_down(address);
+    while page < end {
+        let source = p.areas.find(page).and_then(|a| a.file_at(page));
+        if let Some(FileSource { slot, offset }) = source
+            && let Some(Some(file)) = p.mapped_files.get(slot as usize)
+        {
+            host.fill_in(page, &mut |bytes| {
+                let _ = read_file_at(file, offset, bytes);
+            })?;
+        }
+        page = match page.checked_add(PAGE) {
+            Some(next) => next,
+            None => break,
+        };
+    }
+    Ok(())
+}
+
+/// A free slot for `file` in the process's mapped files (a slot no area names any more is
+/// free; `ENOMEM` when every one is named).
+fn mapped_file_slot<'a>(p: &mut Process<'a>, file: File<'a>) -> SysResult<u8> {
+    for (slot, mapped) in p.mapped_files.iter_mut().enumerate() {
+        let named = p
+            .areas
+            .iter()
+            .any(|a| a.file.is_some_and(|f| f.slot as usize == slot));
+        if !named {
+            *mapped = None;
+        }
+    }
+    let slot = p
+        .mapped_files
+        .iter()
+        .position(Option::is_none)
+        .ok_or(Errno::ENOMEM)?;
+    p.mapped_files[slot] = Some(file);
+    Ok(slot as u8)
+}
+
+/// Linux's `mmap`: anonymous or file-backed (private; shared read-only, as nothing can
+/// write the files) mappings at a free place (below [`MMAP_TOP`], the hint if it is free),
+/// or at a fixed address (`MAP_FIXED` replaces what was there, `MAP_FIXED_NOREPLACE`
+/// fails with `EEXIST`).
+pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+    let [hint, len, prot, flags, fd, offset] = a;
+    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
+    if len == 0 || flags & (linux::MAP_SHARED | linux::MAP_PRIVATE) == 0 {
+        return Err(Errno::EINVAL);
+    }
+    let file = if flags & linux::MAP_ANONYMOUS == 0 {
+        let file = p.file(fd).ok_or(Errno::EBADF)?;
+        if !offset.is_multiple_of(PAGE) {
+            return Err(Errno::EINVAL);
+        }
+        read_file_at(&file, 0, &mut [])?;
+        if flags & linux::MAP_SHARED != 0 && rights.contains(Rights::WRITE) {
+            return Err(Errno::EACCES); // no file is open for writing
+        }
+        // Files are not writable (yet): a shared mapping cannot tell it is a copy.
+        Some(file)
+    } else {
+        None
+    };
+    let len = len.checked_add(PAGE - 1).ok_or(Errno::ENOMEM)? & !(PAGE - 1);
+    let fixed = flags & (linux::MAP_FIXED | linux::MAP_FIXED_NOREPLACE) != 0;
+    let start = if fixed {
+        let end = hint.checked_add(len).ok_or(Errno::ENOMEM)?;
+        if !hint.is_multiple_of(PAGE) || hint == 0 || end > USER_TOP {
+            return Err(Errno::EINVAL);
+        }
+        if p.areas.overlaps(hint, end) {
+            if flags & linux::MAP_FIXED_NOREPLACE != 0 {
+                return Err(Errno::EEXIST);
+            }
+            munmap(p, host, hint, len)?;
+        }
+        hint
+    } else {
+        let hinted = hint.is_multiple_of(PAGE)
+            && hint >= MMAP_BOTTOM
+            && hint
+                .checked_add(len)
+                .is_some_and(|end| end <= MMAP_TOP && !p.areas.overlaps(hint, end));
+        if hinted {
+            hint
+        } else {
+            p.areas
+                .free_below(MMAP_TOP, MMAP_BOTTOM, len)
+                .ok_or(Errno::ENOMEM)?
+        }
+    };
+    let file = match file {
+        Some(file) => Some(FileSource {
+            slot: mapped_file_slot(p, file)?,
+            offset,
+        }),
+        None => None,
+    };
+    p.areas
+        .insert(Area {
+            start,
+            end: start + len,
+            rights,
+            kind: Kind::Anonymous,
+            file,
+        })
+        .map_err(area_error)?;
+    Ok(start)
+}
+
+/// Linux's `munmap` (parts of areas too; pages not mapped are fine).
+pub(super) fn munmap(
+    p: &mut Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+) -> SysResult<u64> {
+    if !start.is_multiple_of(PAGE) || len == 0 {
+        return Err(Errno::EINVAL);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::EINVAL)?;
+    let mut parts = [(0u64, 0u64); crate::memory::MAX_AREAS + 2];
+    let mut n = 0;
+    p.areas
+        .remove(start, end, |a| {
+            if n < parts.len() {
+                parts[n] = (a.start, a.end);
+                n += 1;
+            }
+        })
+        .map_err(area_error)?;
+    for &(s, e) in &parts[..n] {
+        host.unmap(s, (e - s) / PAGE);
+    }
+    Ok(0)
+}
+
+/// Linux's `mprotect` (every page of the range must be in some area: else `ENOMEM`).
+pub(super) fn mprotect(
+    p: &mut Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+    prot: u64,
+) -> SysResult<u64> {
+    let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
+    if rights.writable_and_executable() {
+        return Err(Errno::EACCES);
+    }
+    if !start.is_multiple_of(PAGE) {
+        return Err(Errno::EINVAL);
+    }
+    if len == 0 {
+        return Ok(0);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::ENOMEM)?;
+    if !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    p.areas
+        .protect(start, end, rights, |_| ())
+        .map_err(area_error)?;
+    host.protect(start, (end - start) / PAGE, rights)?;
+    Ok(0)
+}
+
+/// Linux's `madvise`: `MADV_DONTNEED` drops the pages of the range (the next touch gives
+/// zeros, or a file mapping's bytes again); other advice changes nothing. `ENOMEM` when a
+/// page of the range is in no area.
+pub(super) fn madvise(
+    p: &Process,
+    host: &mut impl Host,
+    start: u64,
+    len: u64,
+    advice: u64,
+) -> SysResult<u64> {
+    const MADV_DONTNEED: u64 = 4;
+    if !start.is_multiple_of(PAGE) {
+        return Err(Errno::EINVAL);
+    }
+    let end = start
+        .checked_add(page_up(len))
+        .filter(|&e| e <= USER_TOP)
+        .ok_or(Errno::EINVAL)?;
+    if len == 0 {
+        return Ok(0);
+    }
+    if !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    if advice == MADV_DONTNEED {
+        host.unmap(start, (end - start) / PAGE);
+    }
+    Ok(0)
+}
+
+/// Linux's `mremap` of `old_len` bytes at `old` (within one area) to `new_len`: shrinks in
+/// place, grows in place when the pages after the area are free, else moves the pages to a
+/// free place with `MREMAP_MAYMOVE` (`ENOMEM` without). `MREMAP_FIXED` and
+/// `MREMAP_DONTUNMAP` are not served (`EINVAL`).
+pub(super) fn mremap(
+    p: &mut Process,
+    host: &mut impl Host,
+    old: u64,
+    old_len: u64,
+    new_len: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const MREMAP_MAYMOVE: u64 = 1;
+    if !old.is_multiple_of(PAGE) || new_len == 0 || flags & !MREMAP_MAYMOVE != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let (old_len, new_len) = (page_up(old_len), page_up(new_len));
+    let old_end = old.checked_add(old_len).ok_or(Errno::EFAULT)?;
+    let area = *p
+        .areas
+        .find(old)
+        .filter(|a| old_end <= a.end && old_len > 0)
+        .ok_or(Errno::EFAULT)?;
+    let new_end = old.checked_add(new_len).ok_or(Errno::ENOMEM)?;
+    if new_len <= old_len {
+        if new_len < old_len {
+            munmap(p, host, new_end, old_len - new_len)?;
+        }
+        return Ok(old);
+    }
+    if old_end == area.end
+        && area.kind != Kind::Heap
+        && new_end <= USER_TOP
+        && !p.areas.overlaps(old_end, new_end)
+        && p.areas.resize(old_end, new_end).is_ok()
+    {
+        return Ok(old);
+    }
+    if flags & MREMAP_MAYMOVE == 0 {
+        return Err(Errno::ENOMEM);
+    }
+    let to = p
+        .areas
+        .free_below(MMAP_TOP, MMAP_BOTTOM, new_len)
+        .ok_or(Errno::ENOMEM)?;
+    p.areas
+        .insert(Area {
+            start: to,
+            end: to + new_len,
+            kind: Kind::Anonymous,
+            file: area.file_at(old),
+            ..area
+        })
+        .map_err(area_error)?;
+    if let Err(e) = p.areas.remove(old, old_end, |_| ()) {
+        let _ = p.areas.remove(to, to + new_len, |_| ());
+        return Err(area_error(e));
+    }
+    host.move_pages(old, to, old_len / PAGE);
+    Ok(to)
+}
