@@ -1,6 +1,6 @@
 //! The guest's memory and faults in QEMU: `guest_faults` (configuration
 //! `tests/configs/guest_faults.toml`) and `guest_isolation` (`guest_isolation.toml`), both
-//! running the static C program `tests/linux/probe.c (`linux-probe`)` as Linux processes.
+//! running the static C program `linux-probe` (`tests/linux/probe.c`) as Linux processes.
 
 use scenarios::{boot, check};
 use xtask::qemu::Outcome;
@@ -24,12 +24,12 @@ fn printed(o: &Outcome, partition: &str) -> Vec<String> {
         .collect()
 }
 
-/// Each probe (`probe <name>`, one process each) was killed by its signal in the CPU
+/// Each probe (`linux-probe <name>`, one process each) was killed by its signal in the CPU
 /// exception `vector`, and the shell saw `128 + signal`, in `partition`.
 fn killed(o: &Outcome, partition: &str, probes: &[(&str, u32, &str, u64)]) {
     let printed = printed(o, partition);
     for (probe, signal, name, vector) in probes {
-        let started = guest_lines(o, partition, &format!("started: /bin/probe {probe}"));
+        let started = guest_lines(o, partition, &format!("started: /bin/linux-probe {probe}"));
         let pid = started.first().and_then(|l| {
             l.strip_prefix("guest: process ")
                 .and_then(|rest| rest.split_once(' '))
@@ -44,7 +44,7 @@ fn killed(o: &Outcome, partition: &str, probes: &[(&str, u32, &str, u64)]) {
             o,
             partition,
             &format!(
-                "process {} (probe) killed by signal",
+                "process {} (linux-probe) killed by signal",
                 pid.unwrap_or_default()
             ),
         );

@@ -90,6 +90,11 @@ impl<'p> Frames<'p> {
         self.pool.free_pages()
     }
 
+    /// How many frames there are.
+    pub fn total_frames(&self) -> usize {
+        self.memory.len() / SIZE
+    }
+
     /// The frame backing `page` of process `pid` and its references.
     pub fn frame_of(&self, pid: u32, page: u64) -> Option<(usize, u8)> {
         let frame = self.backing.get(key(pid, page))?;

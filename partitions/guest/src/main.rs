@@ -556,8 +556,8 @@ impl Host for GuestHost<'_> {
     }
 
     fn memory(&mut self) -> (u64, u64) {
-        let frames = self.frames.len() as u64 / PAGE;
-        (frames * PAGE, self.pool.free_pages() as u64 * PAGE)
+        let total = self.frames.total_frames() as u64;
+        (total * PAGE, self.frames.free_frames() as u64 * PAGE)
     }
 
     fn fpu(&mut self, image: &mut [u8; 512]) -> Result<(), Errno> {
