@@ -32,6 +32,8 @@
 //!   detail of the health report).
 #![cfg_attr(not(test), no_std)]
 
+extern crate alloc;
+
 pub mod backing;
 pub mod console;
 pub mod cpio;

@@ -26,7 +26,6 @@
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
 //! beyond either, `fork` fails with `EAGAIN`.
 
-use crate::cpio::Archive;
 use crate::exec::{self, ARG_MAX, ExecError};
 use crate::linux::{self, Errno, nr};
 use crate::memory::{Areas, PAGE};
@@ -34,6 +33,8 @@ use crate::pipe::Pipes;
 use crate::process::Process;
 use crate::stack::MAX_STRINGS;
 use crate::syscall::{self, Host, Outcome, SysResult, close_files, share_files};
+use crate::vfs::Fs;
+use crate::vfs::proc::{ProcInfo, ProcessTable};
 use abi::ipc::{ExceptionMessage, Registers};
 
 /// Most processes of a guest (the default and the ceiling of its process limit).
@@ -86,8 +87,8 @@ pub enum State {
 }
 
 #[derive(Clone, Debug)]
-struct Slot<'a> {
-    process: Process<'a>,
+struct Slot {
+    process: Process,
     state: State,
 }
 
@@ -97,17 +98,17 @@ pub const fn exit_status(code: u8) -> u32 {
 }
 
 /// The process table of a guest.
-pub struct System<'a> {
-    slots: [Option<Slot<'a>>; MAX_PROCESSES],
+pub struct System {
+    slots: [Option<Slot>; MAX_PROCESSES],
     pub pipes: Pipes,
     next_pid: u32,
     /// `AT_HWCAP` for the programs `execve` starts.
     hwcap: u64,
 }
 
-impl<'a> System<'a> {
+impl System {
     /// A table holding `init`, already loaded and running.
-    pub fn new(init: Process<'a>, hwcap: u64) -> Self {
+    pub fn new(init: Process, hwcap: u64) -> Self {
         let mut slots = [const { None }; MAX_PROCESSES];
         let next_pid = init.pid + 1;
         slots[0] = Some(Slot {
@@ -128,7 +129,7 @@ impl<'a> System<'a> {
             .position(|s| s.as_ref().is_some_and(|s| s.process.pid == pid))
     }
 
-    pub fn process(&self, pid: u32) -> Option<&Process<'a>> {
+    pub fn process(&self, pid: u32) -> Option<&Process> {
         Some(&self.slots[self.index(pid)?].as_ref()?.process)
     }
 
@@ -147,7 +148,7 @@ impl<'a> System<'a> {
     pub fn serve(
         &mut self,
         pid: u32,
-        fs: &Archive<'a>,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         mut m: ExceptionMessage,
     ) -> Option<Outcome> {
@@ -168,7 +169,7 @@ impl<'a> System<'a> {
     }
 
     /// Serves the kept messages of blocked processes until none completes.
-    fn wake(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
+    fn wake(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         loop {
             let mut progress = false;
             for i in 0..MAX_PROCESSES {
@@ -204,15 +205,18 @@ impl<'a> System<'a> {
     fn run(
         &mut self,
         i: usize,
-        fs: &Archive<'a>,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         mut m: ExceptionMessage,
     ) -> Option<Outcome> {
-        let slot = self.slots[i].as_mut()?;
+        let (before, rest) = self.slots.split_at_mut(i);
+        let (slot, after) = rest.split_first_mut()?;
+        let slot = slot.as_mut()?;
+        let others = Others { before, after };
         let pid = slot.process.pid;
         k.select(pid);
         let kept = m;
-        match syscall::handle(&mut slot.process, &mut self.pipes, fs, k, &mut m) {
+        match syscall::handle(&mut slot.process, &mut self.pipes, fs, &others, k, &mut m) {
             Outcome::Resume => {
                 k.resume(pid, &m);
                 None
@@ -221,17 +225,17 @@ impl<'a> System<'a> {
                 slot.state = State::Blocked(kept);
                 None
             }
-            Outcome::Exit(code) => self.end(i, exit_status(code), k),
-            Outcome::Killed(signal) => self.end(i, signal, k),
+            Outcome::Exit(code) => self.end(i, exit_status(code), fs, k),
+            Outcome::Killed(signal) => self.end(i, signal, fs, k),
             Outcome::Process => {
                 let r = &mut m.registers;
                 let args = [r.rdi, r.rsi, r.rdx, r.r10, r.r8];
                 let (flags, vfork_flags) = (args[0], CLONE_VM | CLONE_VFORK | linux::SIGCHLD);
                 let vfork = r.rax == nr::vfork || (r.rax == nr::clone && flags & CLONE_VFORK != 0);
                 let result = match r.rax {
-                    nr::clone => self.fork(i, k, flags, args[1], args[2], args[3], r),
-                    nr::fork => self.fork(i, k, linux::SIGCHLD, 0, 0, 0, r),
-                    nr::vfork => self.fork(i, k, vfork_flags, 0, 0, 0, r),
+                    nr::clone => self.fork(i, fs, k, flags, [args[1], args[2], args[3]], r),
+                    nr::fork => self.fork(i, fs, k, linux::SIGCHLD, [0; 3], r),
+                    nr::vfork => self.fork(i, fs, k, vfork_flags, [0; 3], r),
                     nr::wait4 => match self.wait(i, k, args[0] as i32, args[1], args[2], args[3]) {
                         Ok(None) => {
                             if let Some(slot) = self.slots[i].as_mut() {
@@ -254,7 +258,7 @@ impl<'a> System<'a> {
                             return None;
                         }
                         // The old image is gone and the new one did not load.
-                        Ok(None) => return self.end(i, linux::SIGSEGV, k),
+                        Ok(None) => return self.end(i, linux::SIGSEGV, fs, k),
                         Err(e) => Err(e),
                     },
                 };
@@ -292,16 +296,14 @@ impl<'a> System<'a> {
     }
 
     /// `clone` with fork semantics: a new process with a copy of the caller's memory,
-    /// files and registers.
-    #[allow(clippy::too_many_arguments)] // the call's arguments
+    /// files and registers; `[stack, parent_tid, child_tid]` are `clone`'s arguments.
     fn fork(
         &mut self,
         i: usize,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         flags: u64,
-        stack: u64,
-        parent_tid: u64,
-        child_tid: u64,
+        [stack, parent_tid, child_tid]: [u64; 3],
         registers: &Registers,
     ) -> SysResult<u64> {
         const KNOWN: u64 = CLONE_VM
@@ -338,7 +340,7 @@ impl<'a> System<'a> {
         let started = k.now_ns();
         let pages = k.fork(pid, &parent.areas)?;
         let took = k.now_ns().saturating_sub(started);
-        share_files(&child, &mut self.pipes);
+        share_files(&child, &mut self.pipes, fs);
         k.log(format_args!(
             "guest: process {pid} ({}) forked from {}: {pages} pages copied in {} us",
             child.name(),
@@ -418,7 +420,7 @@ impl<'a> System<'a> {
     fn execve(
         &mut self,
         i: usize,
-        fs: &Archive<'a>,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         path: u64,
         argv: u64,
@@ -461,10 +463,20 @@ impl<'a> System<'a> {
         let mut script = [&b""[..]; MAX_STRINGS + 2];
         let mut file = path[0];
         let mut argv: &[&[u8]] = args;
-        let (entry, _) = exec::find(fs, file).map_err(exec_errno)?;
-        if let Some(line) = entry.data.strip_prefix(b"#!") {
-            // A script: its interpreter runs with the script's path after its argument.
+        let (pid, cwd) = (p.pid, p.cwd);
+        let (data, _) = exec::find(fs, pid, cwd, file).map_err(exec_errno)?;
+        // The `#!` line, copied: the file may go before the interpreter loads (as a
+        // close-on-exec descriptor closes).
+        let mut first_line = [0u8; 256];
+        let shebang = data.strip_prefix(b"#!").map(|line| {
             let line = line.split(|&b| b == b'\n').next().unwrap_or_default();
+            let n = line.len().min(first_line.len());
+            first_line[..n].copy_from_slice(&line[..n]);
+            n
+        });
+        if let Some(n) = shebang {
+            // A script: its interpreter runs with the script's path after its argument.
+            let line = &first_line[..n];
             let mut words = line
                 .split(|&b| b == b' ' || b == b'\t')
                 .filter(|w| !w.is_empty());
@@ -487,10 +499,9 @@ impl<'a> System<'a> {
             }
             file = interpreter;
             argv = &script[..n];
-            exec::find(fs, file).map_err(exec_errno)?;
         }
-        let (entry, _) = exec::find(fs, file).map_err(exec_errno)?;
-        crate::elf::LoadPlan::new(entry.data).map_err(|_| Errno::ENOEXEC)?;
+        let (data, _) = exec::find(fs, pid, cwd, file).map_err(exec_errno)?;
+        crate::elf::LoadPlan::new(data).map_err(|_| Errno::ENOEXEC)?;
         if argv.len() + env.len() > MAX_STRINGS {
             return Err(Errno::E2BIG);
         }
@@ -500,9 +511,9 @@ impl<'a> System<'a> {
         for area in old.areas.iter() {
             k.unmap(area.start, (area.end - area.start) / PAGE);
         }
-        close_files(old, &mut self.pipes, true);
+        close_files(old, &mut self.pipes, fs, true);
         let ids = (old.pid, old.ppid);
-        match exec::load_file(fs, k, ids, file, argv, env, self.hwcap) {
+        match exec::load_file(fs, k, ids, cwd, file, argv, env, self.hwcap) {
             Ok(loaded) => {
                 let mut new = loaded.process;
                 new.files = old.files;
@@ -537,10 +548,10 @@ impl<'a> System<'a> {
 
     /// Process in slot `i` ended with wait status `word`: its files close, its task and
     /// memory go, its children become init's, and it stays a zombie for its parent.
-    fn end(&mut self, i: usize, word: u32, k: &mut impl Tasks) -> Option<Outcome> {
+    fn end(&mut self, i: usize, word: u32, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         let slot = self.slots[i].as_mut()?;
         let pid = slot.process.pid;
-        close_files(&mut slot.process, &mut self.pipes, false);
+        close_files(&mut slot.process, &mut self.pipes, fs, false);
         k.release(pid);
         self.release_vfork_parent(pid, k);
         let slot = self.slots[i].as_mut()?;
@@ -572,15 +583,45 @@ impl<'a> System<'a> {
     }
 
     /// Ends every process (the guest ends).
-    pub fn release_all(&mut self, k: &mut impl Tasks) {
+    pub fn release_all(&mut self, fs: &mut Fs, k: &mut impl Tasks) {
         for slot in self.slots.iter_mut() {
             if let Some(s) = slot.take()
                 && !matches!(s.state, State::Zombie(_))
             {
                 let mut process = s.process;
-                close_files(&mut process, &mut self.pipes, false);
+                close_files(&mut process, &mut self.pipes, fs, false);
                 k.release(process.pid);
             }
+        }
+    }
+}
+
+/// The processes other than the one a call is served for, as `/proc` sees them.
+struct Others<'s> {
+    before: &'s [Option<Slot>],
+    after: &'s [Option<Slot>],
+}
+
+impl Others<'_> {
+    fn slots(&self) -> impl Iterator<Item = &Slot> {
+        self.before.iter().chain(self.after).flatten()
+    }
+}
+
+impl ProcessTable for Others<'_> {
+    fn find(&self, pid: u32) -> Option<ProcInfo<'_>> {
+        let slot = self.slots().find(|s| s.process.pid == pid)?;
+        let state = match slot.state {
+            State::Running | State::Starting(_) => b'R',
+            State::Blocked(_) | State::Vforked { .. } => b'S',
+            State::Zombie(_) => b'Z',
+        };
+        Some(ProcInfo::of(&slot.process, state))
+    }
+
+    fn each_pid(&self, f: &mut dyn FnMut(u32)) {
+        for s in self.slots() {
+            f(s.process.pid);
         }
     }
 }

@@ -10,6 +10,7 @@ use crate::memory::{PAGE, Rights, STACK_TOP};
 use crate::process::{Process, Stream};
 use crate::syscall::{Host, Outcome, handle};
 use crate::system::{MAX_PROCESSES, State, System, Tasks};
+use crate::vfs::Fs;
 use abi::ipc::{ExceptionMessage, VECTOR_SYSCALL};
 use std::collections::HashMap;
 
@@ -136,8 +137,8 @@ fn initramfs() -> Vec<u8> {
 /// A loaded process, its memory and its file system, with a scratch page at
 /// [`SCRATCH`] for call arguments.
 struct World<'a> {
-    fs: Archive<'a>,
-    p: Process<'a>,
+    fs: Fs<'a>,
+    p: Process,
     pipes: crate::pipe::Pipes,
     host: Model,
     fs_base: u64,
@@ -147,7 +148,7 @@ const SCRATCH: u64 = 0x7000_0000;
 
 impl<'a> World<'a> {
     fn new(bytes: &'a [u8]) -> Self {
-        let fs = Archive::new(bytes).unwrap();
+        let fs = Fs::new(&Archive::new(bytes).unwrap(), 1 << 20).unwrap();
         let mut host = Model::new(1000);
         let loaded = exec::load(
             &fs,
@@ -189,7 +190,8 @@ impl<'a> World<'a> {
         let outcome = handle(
             &mut self.p,
             &mut self.pipes,
-            &self.fs,
+            &mut self.fs,
+            &(),
             &mut self.host,
             &mut m,
         );
@@ -237,7 +239,7 @@ fn err(e: Errno) -> u64 {
 #[test]
 fn loads_the_program_its_stack_and_its_areas() {
     let bytes = initramfs();
-    let fs = Archive::new(&bytes).unwrap();
+    let fs = Fs::new(&Archive::new(&bytes).unwrap(), 1 << 20).unwrap();
     let mut host = Model::new(1000);
     let l = exec::load(
         &fs,
@@ -267,7 +269,7 @@ fn loads_the_program_its_stack_and_its_areas() {
 #[test]
 fn what_cannot_start_says_why() {
     let bytes = initramfs();
-    let fs = Archive::new(&bytes).unwrap();
+    let fs = Fs::new(&Archive::new(&bytes).unwrap(), 1 << 20).unwrap();
     let mut host = Model::new(1000);
     let load = |argv: &[&[u8]], host: &mut Model| {
         exec::load(&fs, host, 1, 0, argv, &[], 0).map(|l| l.entry)
@@ -575,20 +577,22 @@ fn files_of_the_initramfs() {
     );
     assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
     assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), err(Errno::EBADF));
-    // Read-only file system; missing files; directories.
-    assert_eq!(
-        w.call(nr::openat, [(-100i64) as u64, path, 1, 0, 0, 0]),
-        err(Errno::EROFS)
-    );
+    // Writable files; missing files (O_CREAT makes them); directories.
+    let fd = w.call(nr::openat, [(-100i64) as u64, path, 1, 0, 0, 0]);
+    assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
     let missing = w.path("/etc/shadow");
     assert_eq!(
         w.call(nr::open, [missing, 0, 0, 0, 0, 0]),
         err(Errno::ENOENT)
     );
+    let fd = w.call(nr::open, [missing, 0o101, 0o644, 0, 0, 0]);
+    assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
     assert_eq!(
-        w.call(nr::open, [missing, 0o101, 0o644, 0, 0, 0]),
-        err(Errno::EROFS)
+        w.call(nr::open, [missing, 0o301, 0o644, 0, 0, 0]),
+        err(Errno::EEXIST),
+        "O_EXCL"
     );
+    assert_eq!(w.call(nr::unlink, [missing, 0, 0, 0, 0, 0]), 0);
     let dir = w.path("/etc");
     let fd = w.call(nr::open, [dir, 0o200000, 0, 0, 0, 0]);
     assert_eq!(
@@ -602,7 +606,7 @@ fn files_of_the_initramfs() {
     let names = dirents(&w.get(SCRATCH, n as usize));
     assert_eq!(
         names,
-        [(".", 4), ("..", 4), ("busybox", 8), ("sh", 10), ("data", 8)]
+        [(".", 4), ("..", 4), ("busybox", 8), ("data", 8), ("sh", 10)]
     );
     assert_eq!(
         w.call(nr::getdents64, [fd, SCRATCH, 4096, 0, 0, 0]),
@@ -635,7 +639,7 @@ fn files_of_the_initramfs() {
         .iter()
         .map(|d| d.0)
         .collect();
-    assert_eq!(names, [".", "..", "bin", "etc"]);
+    assert_eq!(names, [".", "..", "bin", "dev", "etc", "proc", "tmp"]);
     // stat follows links, lstat does not; newfstatat with AT_EMPTY_PATH is fstat.
     let sh = w.path("/bin/sh");
     assert_eq!(w.call(nr::stat, [sh, SCRATCH, 0, 0, 0, 0]), 0);
@@ -654,10 +658,7 @@ fn files_of_the_initramfs() {
         err(Errno::EINVAL)
     );
     assert_eq!(w.call(nr::access, [passwd, 4, 0, 0, 0, 0]), 0);
-    assert_eq!(
-        w.call(nr::access, [passwd, 2, 0, 0, 0, 0]),
-        err(Errno::EROFS)
-    );
+    assert_eq!(w.call(nr::access, [passwd, 2, 0, 0, 0, 0]), 0);
     assert_eq!(
         w.call(nr::access, [passwd, 1, 0, 0, 0, 0]),
         err(Errno::EACCES)
@@ -719,7 +720,7 @@ fn unsupported_calls_and_faults() {
         ..Default::default()
     };
     m.registers.rip = 0x40_1010;
-    let outcome = handle(&mut w.p, &mut w.pipes, &w.fs, &mut w.host, &mut m);
+    let outcome = handle(&mut w.p, &mut w.pipes, &mut w.fs, &(), &mut w.host, &mut m);
     assert_eq!(outcome, Outcome::Killed(11));
     assert_eq!(
         w.host.log.last().unwrap(),
@@ -727,7 +728,7 @@ fn unsupported_calls_and_faults() {
     );
     m.vector = 6;
     assert_eq!(
-        handle(&mut w.p, &mut w.pipes, &w.fs, &mut w.host, &mut m),
+        handle(&mut w.p, &mut w.pipes, &mut w.fs, &(), &mut w.host, &mut m),
         Outcome::Killed(4)
     );
 }
@@ -826,8 +827,8 @@ impl Tasks for Model {
 
 /// A guest with several processes: init loaded as pid 1, with a scratch page.
 struct Guest<'a> {
-    fs: Archive<'a>,
-    system: System<'a>,
+    fs: Fs<'a>,
+    system: System,
     host: Model,
 }
 
@@ -835,7 +836,7 @@ const WNOHANG: u64 = 1;
 
 impl<'a> Guest<'a> {
     fn new(bytes: &'a [u8]) -> Self {
-        let fs = Archive::new(bytes).unwrap();
+        let fs = Fs::new(&Archive::new(bytes).unwrap(), 1 << 20).unwrap();
         let mut host = Model::new(100_000);
         host.current = 1;
         let loaded = exec::load(&fs, &mut host, 1, 0, &[b"/bin/sh"], &[], 0).unwrap();
@@ -854,7 +855,7 @@ impl<'a> Guest<'a> {
     /// Serves message `m` of `pid`: the replies it caused, by pid with `rax`.
     fn serve(&mut self, pid: u32, m: ExceptionMessage) -> Vec<(u32, u64)> {
         self.host.resumed.clear();
-        let ended = self.system.serve(pid, &self.fs, &mut self.host, m);
+        let ended = self.system.serve(pid, &mut self.fs, &mut self.host, m);
         assert_eq!(ended, None, "init ended");
         self.host
             .resumed
@@ -880,7 +881,9 @@ impl<'a> Guest<'a> {
             ..Default::default()
         };
         self.host.resumed.clear();
-        let _ = self.system.serve(child, &self.fs, &mut self.host, fault);
+        let _ = self
+            .system
+            .serve(child, &mut self.fs, &mut self.host, fault);
         let (pid, m) = self.host.resumed[0];
         assert_eq!(pid, child);
         assert_eq!((m.registers.rax, m.registers.rip), (0, 0x40_1019));
@@ -1158,7 +1161,7 @@ fn execve_replaces_the_image_keeps_the_files_and_closes_close_on_exec() {
     g.host.resumed.clear();
     let _ = g.system.serve(
         1,
-        &g.fs,
+        &mut g.fs,
         &mut g.host,
         World::message(nr::execve, [SCRATCH + 0xe00, argv, envp, 0, 0, 0], 0),
     );
@@ -1282,7 +1285,7 @@ fn random_process_calls(bytes: &[u8], mut seed: u64) {
             _ => continue,
         };
         g.host.resumed.clear();
-        if g.system.serve(pid, &g.fs, &mut g.host, m).is_some() {
+        if g.system.serve(pid, &mut g.fs, &mut g.host, m).is_some() {
             return; // init died (SIGPIPE, a failed execve): the guest ends
         }
         for p in g.pids() {
@@ -1308,4 +1311,198 @@ fn random_process_calls(bytes: &[u8], mut seed: u64) {
     if !blocked_or_starting {
         assert_eq!(g.system.pipes.open_count(), 0, "every pipe end was closed");
     }
+}
+
+impl Guest<'_> {
+    /// Puts `text` NUL-terminated at `at` of `pid`.
+    fn text(&mut self, pid: u32, at: u64, text: &str) -> u64 {
+        let mut b = text.as_bytes().to_vec();
+        b.push(0);
+        self.put(pid, at, &b);
+        at
+    }
+}
+
+const AT_FDCWD: u64 = (-100i64) as u64;
+
+#[test]
+fn open_files_share_their_offset_across_dup_and_fork() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let path = g.text(1, SCRATCH + 0x800, "/tmp/log");
+    let fd = g
+        .call(1, nr::openat, [AT_FDCWD, path, 0o2 | 0o100, 0o644, 0, 0])
+        .unwrap();
+    let copy = g.call(1, nr::dup, [fd, 0, 0, 0, 0, 0]).unwrap();
+    g.put(1, SCRATCH, b"abc");
+    assert_eq!(g.call(1, nr::write, [fd, SCRATCH, 3, 0, 0, 0]), Some(3));
+    assert_eq!(g.call(1, nr::write, [copy, SCRATCH, 2, 0, 0, 0]), Some(2));
+    let child = g.fork(1);
+    assert_eq!(
+        g.call(child, nr::write, [fd, SCRATCH + 2, 1, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(
+        g.call(1, nr::lseek, [copy, 0, 1, 0, 0, 0]),
+        Some(6),
+        "the child's write moved the parent's offset"
+    );
+    assert_eq!(g.call(child, nr::exit_group, [0; 6]), None);
+    // pread does not move it; O_APPEND writes at the end.
+    assert_eq!(
+        g.call(1, nr::pread64, [fd, SCRATCH + 0x100, 10, 1, 0, 0]),
+        Some(5)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x100, 5), b"bcabc");
+    assert_eq!(g.call(1, nr::lseek, [fd, 0, 1, 0, 0, 0]), Some(6));
+    assert_eq!(g.call(1, nr::fcntl, [fd, 4, 0o2000, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::lseek, [fd, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::write, [copy, SCRATCH, 1, 0, 0, 0]), Some(1));
+    assert_eq!(
+        g.call(1, nr::fstat, [fd, SCRATCH + 0x200, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x200 + 48, 1), [7], "st_size");
+    // Unlinked while open: still readable, gone with the last descriptor.
+    assert_eq!(g.call(1, nr::unlink, [path, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(
+        g.call(1, nr::pread64, [copy, SCRATCH + 0x100, 10, 0, 0, 0]),
+        Some(7)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x100, 7), b"abcabca");
+    let opened = g.fs.open_count();
+    g.call(1, nr::close, [fd, 0, 0, 0, 0, 0]);
+    assert_eq!(g.fs.open_count(), opened, "one descriptor left");
+    g.call(1, nr::close, [copy, 0, 0, 0, 0, 0]);
+    assert_eq!(g.fs.open_count(), opened - 1);
+}
+
+#[test]
+fn directories_names_and_the_working_directory() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let buf = SCRATCH + 0x400;
+    let call = |g: &mut Guest, n: u64, a: [u64; 6]| g.call(1, n, a).unwrap();
+    let d = g.text(1, SCRATCH + 0x800, "/tmp/d");
+    assert_eq!(call(&mut g, nr::mkdir, [d, 0o777, 0, 0, 0, 0]), 0);
+    assert_eq!(
+        call(&mut g, nr::mkdir, [d, 0o777, 0, 0, 0, 0]),
+        err(Errno::EEXIST)
+    );
+    assert_eq!(call(&mut g, nr::stat, [d, buf, 0, 0, 0, 0]), 0);
+    assert_eq!(
+        g.get(1, buf + 24, 4),
+        (S_IFDIR | 0o755).to_le_bytes(),
+        "umask 022"
+    );
+    assert_eq!(call(&mut g, nr::chdir, [d, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(call(&mut g, nr::getcwd, [buf, 100, 0, 0, 0, 0]), 7);
+    assert_eq!(g.get(1, buf, 7), b"/tmp/d\0");
+    assert_eq!(
+        call(&mut g, nr::getcwd, [buf, 5, 0, 0, 0, 0]),
+        err(Errno::ERANGE)
+    );
+    // Relative names start at the working directory.
+    let f = g.text(1, SCRATCH + 0x800, "f");
+    let fd = call(&mut g, nr::creat, [f, 0o600, 0, 0, 0, 0]);
+    g.put(1, SCRATCH, b"0123456789");
+    assert_eq!(call(&mut g, nr::write, [fd, SCRATCH, 10, 0, 0, 0]), 10);
+    assert_eq!(call(&mut g, nr::ftruncate, [fd, 4, 0, 0, 0, 0]), 0);
+    let abs = g.text(1, SCRATCH + 0x800, "/tmp/d/f");
+    assert_eq!(call(&mut g, nr::stat, [abs, buf, 0, 0, 0, 0]), 0);
+    assert_eq!(g.get(1, buf + 48, 1), [4]);
+    let target = g.text(1, SCRATCH + 0x900, "f");
+    let link = g.text(1, SCRATCH + 0x800, "../l");
+    assert_eq!(call(&mut g, nr::symlink, [target, link, 0, 0, 0, 0]), 0);
+    assert_eq!(call(&mut g, nr::readlink, [link, buf, 64, 0, 0, 0]), 1);
+    let from = g.text(1, SCRATCH + 0x800, "f");
+    let to = g.text(1, SCRATCH + 0x900, "/tmp/g");
+    assert_eq!(call(&mut g, nr::rename, [from, to, 0, 0, 0, 0]), 0);
+    let dot = g.text(1, SCRATCH + 0x800, "..");
+    let dir = call(&mut g, nr::open, [dot, 0o200000, 0, 0, 0, 0]);
+    let n = call(&mut g, nr::getdents64, [dir, buf, 4096, 0, 0, 0]);
+    let names: Vec<&str> = dirents(&g.get(1, buf, n as usize))
+        .iter()
+        .map(|d| d.0)
+        .collect();
+    assert_eq!(names, [".", "..", "d", "g", "l"]);
+    // An *at call from a directory descriptor; rmdir of a full, then empty, directory.
+    let name = g.text(1, SCRATCH + 0x800, "g");
+    assert_eq!(call(&mut g, nr::unlinkat, [dir, name, 0, 0, 0, 0]), 0);
+    let dot = g.text(1, SCRATCH + 0x800, "..");
+    assert_eq!(call(&mut g, nr::chdir, [dot, 0, 0, 0, 0, 0]), 0);
+    let d = g.text(1, SCRATCH + 0x800, "d");
+    assert_eq!(call(&mut g, nr::rmdir, [d, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(
+        call(&mut g, nr::rmdir, [d, 0, 0, 0, 0, 0]),
+        err(Errno::ENOENT)
+    );
+    // /dev/null, /dev/zero.
+    let null = g.text(1, SCRATCH + 0x800, "/dev/null");
+    let fd = call(&mut g, nr::open, [null, 2, 0, 0, 0, 0]);
+    assert_eq!(call(&mut g, nr::write, [fd, SCRATCH, 10, 0, 0, 0]), 10);
+    assert_eq!(call(&mut g, nr::read, [fd, SCRATCH, 10, 0, 0, 0]), 0);
+    let zero = g.text(1, SCRATCH + 0x800, "/dev/zero");
+    let fd = call(&mut g, nr::open, [zero, 0, 0, 0, 0, 0]);
+    assert_eq!(call(&mut g, nr::read, [fd, SCRATCH, 10, 0, 0, 0]), 10);
+    assert_eq!(g.get(1, SCRATCH, 10), [0; 10]);
+    let tty = g.text(1, SCRATCH + 0x800, "/dev/tty");
+    let fd = call(&mut g, nr::open, [tty, 1, 0, 0, 0, 0]);
+    g.put(1, SCRATCH, b"on the console\n");
+    assert_eq!(call(&mut g, nr::write, [fd, SCRATCH, 15, 0, 0, 0]), 15);
+    assert_eq!(g.host.stdout(), "on the console\n");
+}
+
+#[test]
+fn proc_files_of_the_processes() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    let path = g.text(1, SCRATCH + 0x800, &format!("/proc/{child}/stat"));
+    let fd = g.call(1, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    let n = g.call(1, nr::read, [fd, SCRATCH, 512, 0, 0, 0]).unwrap();
+    let stat = String::from_utf8(g.get(1, SCRATCH, n as usize)).unwrap();
+    assert!(
+        stat.starts_with(&format!("{child} (busybox) R 1 ")),
+        "{stat}"
+    );
+    let path = g.text(1, SCRATCH + 0x800, "/proc/self/cmdline");
+    let fd = g.call(1, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    let n = g.call(1, nr::read, [fd, SCRATCH, 512, 0, 0, 0]).unwrap();
+    assert_eq!(g.get(1, SCRATCH, n as usize), b"/bin/sh\0");
+    let exe = g.text(1, SCRATCH + 0x800, "/proc/self/exe");
+    assert_eq!(
+        g.call(1, nr::readlink, [exe, SCRATCH, 64, 0, 0, 0]),
+        Some(12)
+    );
+    assert_eq!(g.get(1, SCRATCH, 12), b"/bin/busybox");
+    let path = g.text(1, SCRATCH + 0x800, "/proc/self/cmdline");
+    assert_eq!(
+        g.call(1, nr::open, [path, 1, 0, 0, 0, 0]),
+        Some(err(Errno::EACCES)),
+        "read-only"
+    );
+    let dir = g.text(1, SCRATCH + 0x800, "/proc");
+    let fd = g.call(1, nr::open, [dir, 0o200000, 0, 0, 0, 0]).unwrap();
+    let n = g
+        .call(1, nr::getdents64, [fd, SCRATCH, 4096, 0, 0, 0])
+        .unwrap();
+    let names: Vec<&str> = dirents(&g.get(1, SCRATCH, n as usize))
+        .iter()
+        .map(|d| d.0)
+        .collect();
+    let child_name = child.to_string();
+    assert_eq!(
+        names,
+        [
+            ".",
+            "..",
+            "self",
+            "meminfo",
+            "uptime",
+            "mounts",
+            "1",
+            child_name.as_str()
+        ]
+    );
 }
