@@ -1506,3 +1506,29 @@ fn proc_files_of_the_processes() {
         ]
     );
 }
+
+#[test]
+fn a_removed_working_directory_stays_until_left() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let d = g.text(1, SCRATCH + 0x800, "/tmp/gone");
+    assert_eq!(g.call(1, nr::mkdir, [d, 0o755, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::chdir, [d, 0, 0, 0, 0, 0]), Some(0));
+    let child = g.fork(1);
+    assert_eq!(g.call(1, nr::rmdir, [d, 0, 0, 0, 0, 0]), Some(0));
+    // Not reused by a new directory while a process is in it.
+    let e = g.text(1, SCRATCH + 0x800, "/tmp/new");
+    assert_eq!(g.call(1, nr::mkdir, [e, 0o755, 0, 0, 0, 0]), Some(0));
+    let f = g.text(child, SCRATCH + 0x800, "f");
+    assert_eq!(
+        g.call(child, nr::open, [f, 0o101, 0o644, 0, 0, 0]),
+        Some(err(Errno::ENOENT)),
+        "nothing can be made in a removed directory"
+    );
+    let e = g.text(child, SCRATCH + 0x800, "/tmp/new");
+    assert_eq!(g.call(child, nr::chdir, [e, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(
+        g.call(child, nr::getcwd, [SCRATCH, 64, 0, 0, 0, 0]),
+        Some(9)
+    );
+}

@@ -65,17 +65,23 @@ pub fn close(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, fd: usize) {
     }
 }
 
-/// Closes every descriptor of `p` (it ends), or only the close-on-exec ones (`execve`).
+/// Closes every descriptor of `p` and lets its working directory go (it ends), or closes
+/// only the close-on-exec ones (`execve`).
 pub fn close_files(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, only_cloexec: bool) {
     for fd in 0..MAX_FILES {
         if !only_cloexec || p.is_cloexec(fd) {
             close(p, pipes, fs, fd);
         }
     }
+    if !only_cloexec {
+        fs.unhold(p.cwd);
+    }
 }
 
-/// Another descriptor of everything `p` has open (a forked child's copies).
+/// Another descriptor of everything `p` has open, and its working directory once more (a
+/// forked child's copies).
 pub fn share_files(p: &Process, pipes: &mut Pipes, fs: &mut Fs) {
+    fs.hold(p.cwd);
     for file in p.files.iter().flatten() {
         match *file {
             File::Pipe { pipe, write, .. } => pipes.add_end(pipe, write),
@@ -1100,7 +1106,7 @@ pub fn chdir(p: &mut Process, f: &mut Files, host: &mut impl Host, path: u64) ->
     if !f.fs.is_dir(node) {
         return Err(Errno::ENOTDIR);
     }
-    p.cwd = node;
+    set_cwd(p, f, node);
     Ok(0)
 }
 
@@ -1112,8 +1118,14 @@ pub fn fchdir(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
     if !f.fs.is_dir(node) {
         return Err(Errno::ENOTDIR);
     }
-    p.cwd = node;
+    set_cwd(p, f, node);
     Ok(0)
+}
+
+fn set_cwd(p: &mut Process, f: &mut Files, node: Node) {
+    f.fs.hold(node);
+    f.fs.unhold(p.cwd);
+    p.cwd = node;
 }
 
 pub fn getcwd(

@@ -11,9 +11,9 @@
 //! `ENOMEM` (file data grows with `try_reserve`), never an abort of the guest. The limit
 //! is below the heap's size so the tables around the data fit too.
 //!
-//! **Inodes** are numbered by their slot; one lives while a directory entry names it or an
-//! open file description refers to it (an unlinked file stays readable through open
-//! descriptors). Permission bits are kept and shown but not enforced: every process is
+//! **Inodes** are numbered by their slot; one lives while a directory entry names it, an
+//! open file description refers to it or it is a working directory (an unlinked file stays
+//! readable through open descriptors). Permission bits are kept and shown but not enforced: every process is
 //! root. Timestamps are one: `mtime`, in seconds since the guest started.
 //!
 //! **Open file descriptions** ([`Open`]) carry the offset, flags and the node; descriptors
@@ -816,6 +816,9 @@ impl<'a> Fs<'a> {
         if !self.is_dir(Node::Inode(dir)) {
             return Err(Errno::ENOTDIR);
         }
+        if self.inode(dir).is_some_and(|d| d.nlink == 0) {
+            return Err(Errno::ENOENT); // removed, still someone's working directory
+        }
         if self.entry(dir, name).is_some() {
             return Err(Errno::EEXIST);
         }
@@ -1142,6 +1145,24 @@ impl<'a> Fs<'a> {
         }
         let node = o.node;
         self.opens[id] = None;
+        if let Some(ino) = self.ino(node) {
+            if let Some(i) = self.inode_mut(ino) {
+                i.opened = i.opened.saturating_sub(1);
+            }
+            self.free_if_unused(ino);
+        }
+    }
+
+    /// `node` is in use beyond its directory entries (a working directory): it lives while
+    /// held, as while open.
+    pub fn hold(&mut self, node: Node) {
+        if let Some(i) = self.ino(node).and_then(|ino| self.inode_mut(ino)) {
+            i.opened += 1;
+        }
+    }
+
+    /// The end of a [`Fs::hold`].
+    pub fn unhold(&mut self, node: Node) {
         if let Some(ino) = self.ino(node) {
             if let Some(i) = self.inode_mut(ino) {
                 i.opened = i.opened.saturating_sub(1);
