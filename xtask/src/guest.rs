@@ -302,10 +302,14 @@ mod tests {
 
     #[test]
     fn applets_are_listed_by_the_busybox_itself() {
-        let Ok(path) = crate::tools::ensure_busybox() else {
+        let Some(path) = crate::tools::BUSYBOX_PATHS
+            .iter()
+            .map(Path::new)
+            .find(|p| p.is_file())
+        else {
             return; // no busybox on this host: the fallback list is used
         };
-        let paths = applet_paths(&path);
+        let paths = applet_paths(path);
         assert!(paths.contains(&"bin/sh".to_string()), "{paths:?}");
         assert!(!paths.contains(&"bin/busybox".to_string()));
         assert!(paths.iter().all(|p| p.contains('/')));

@@ -5,13 +5,17 @@
 //! exception messages with the full register context; the guest serves them and replies
 //! with the edited registers.
 //!
-//! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
-//! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
-//! address-space bookkeeping ([`memory`]), page pool ([`pool`]) and which pool page backs
-//! which process page ([`backing`]), the process state ([`process`]), the system calls of
-//! one process ([`syscall`]), the pipes ([`pipe`]) and the process table with fork, exec,
-//! wait and the deferred replies of waiting calls ([`system`]); the partition program
-//! (`main.rs`) only moves messages, creates tasks, maps pages and writes the log.
+//! This library is the personality itself, host-tested: the initramfs reader ([`cpio`]),
+//! the file system ([`vfs`]: the initramfs's contents, writable, in memory, with `/dev`
+//! and `/proc`, and the open file descriptions), the executable loader ([`elf`],
+//! [`exec`]) and initial stack ([`stack`]), the address-space bookkeeping ([`memory`]),
+//! page pool ([`pool`]) and which pool page backs which process page ([`backing`]), the
+//! process state ([`process`]), the system calls of one process ([`syscall`], the file
+//! calls in [`syscall::file`]), the pipes ([`pipe`]) and the process table with fork,
+//! exec, wait and the deferred replies of waiting calls ([`system`]); the partition
+//! program (`main.rs`) only moves messages, creates tasks, maps pages, writes the log and
+//! gives the library its heap (a part of the memory pool: the file system's data and
+//! tables live there, within the byte limit [`vfs::Fs::new`] gets).
 //!
 //! # Log lines (COM1, each prefixed `[<partition>] ` by the kernel)
 //!
