@@ -43,7 +43,12 @@ const EXPECTED: &[&str] = &[
     "/bin/sh",
     "/etc/busybox.sh",
     "PID COMMAND",
-    "ps listed",
+    // The process name is the executable's (Linux's would be `sh`, the name it was
+    // started by: busybox's ps shows the difference in braces).
+    "root {busybox} /bin/sh",
+    // 13 MB do not fit the file system's 8 MiB (half of the heap, a quarter of 64 MiB).
+    "dd 1",
+    "again",
     "false 1",
     "subshell 7",
     "sh 3",

@@ -1446,6 +1446,11 @@ fn directories_names_and_the_working_directory() {
     let fd = call(&mut g, nr::open, [zero, 0, 0, 0, 0, 0]);
     assert_eq!(call(&mut g, nr::read, [fd, SCRATCH, 10, 0, 0, 0]), 10);
     assert_eq!(g.get(1, SCRATCH, 10), [0; 10]);
+    assert_eq!(
+        call(&mut g, nr::read, [fd, SCRATCH, PAGE, 0, 0, 0]),
+        PAGE,
+        "a whole read, not one step"
+    );
     let tty = g.text(1, SCRATCH + 0x800, "/dev/tty");
     let fd = call(&mut g, nr::open, [tty, 1, 0, 0, 0, 0]);
     g.put(1, SCRATCH, b"on the console\n");

@@ -42,7 +42,11 @@ ls -l src | awk 'NR > 1 { print $1, $NF }'
 readlink /proc/self/exe
 head -n 1 /proc/mounts
 tr '\0' '\n' < /proc/1/cmdline
-ps | awk 'NR == 1 { print $1, $3 } $3 == "ps" { print "ps listed" }'
+ps | awk 'NR == 1 { print $1, $3 } $1 == 1 { print $2, $3, $4 }'
+dd if=/dev/zero of=big bs=65536 count=200 2>/dev/null
+echo "dd $?"
+rm big
+echo again > small && cat small
 false
 echo "false $?"
 (exit 7)

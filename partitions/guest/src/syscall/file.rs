@@ -342,17 +342,10 @@ fn write_kernel(
     }
 }
 
-/// Whether reading or writing `fd` may go on after a full step (files and the console;
-/// a pipe or device moves at most one step per call).
-fn streams(p: &Process, f: &Files, fd: u64) -> bool {
-    match p.file(fd) {
-        Some(File::Open(id)) => {
-            f.fs.description(id)
-                .is_some_and(|o| f.fs.device(o.node).is_none())
-        }
-        Some(File::Console(_)) => true,
-        _ => false,
-    }
+/// Whether reading or writing `fd` may go on after a full step (files, devices and the
+/// console; a pipe moves at most one step per call, what it holds or has room for).
+fn streams(p: &Process, fd: u64) -> bool {
+    !matches!(p.file(fd), Some(File::Pipe { .. }))
 }
 
 /// `read` (`at: None`) and `pread64`.
@@ -385,7 +378,7 @@ pub fn read(
         };
         host.write_user(buf + done as u64, &chunk[..n])?;
         done += n;
-        if n < want || done == total || !streams(p, f, fd) {
+        if n < want || done == total || !streams(p, fd) {
             break;
         }
     }
@@ -417,7 +410,7 @@ pub fn write(
             Err(e) => return Err(e),
         };
         done += n;
-        if n < want || !streams(p, f, fd) {
+        if n < want || !streams(p, fd) {
             break;
         }
     }

@@ -471,7 +471,7 @@ impl<'a> Fs<'a> {
         }
     }
 
-    /// A regular file's permission bits.
+    /// Its `st_mode`: file type and permission bits.
     pub fn mode(&self, node: Node) -> u32 {
         self.stat(node).mode
     }
