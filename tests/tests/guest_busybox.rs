@@ -46,7 +46,8 @@ const EXPECTED: &[&str] = &[
     // The process name is the executable's (Linux's would be `sh`, the name it was
     // started by: busybox's ps shows the difference in braces).
     "root {busybox} /bin/sh",
-    // 13 MB do not fit the file system's 8 MiB (half of the heap, a quarter of 64 MiB).
+    // 13 MB do not fit the file system's 8 MiB or so (half of the heap, a quarter of the
+    // pool of a 64 MiB partition).
     "dd 1",
     "again",
     "false 1",
