@@ -1537,3 +1537,91 @@ fn a_removed_working_directory_stays_until_left() {
         Some(9)
     );
 }
+
+#[test]
+fn listing_while_removing_copying_and_status() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let call = |g: &mut Guest, n: u64, a: [u64; 6]| g.call(1, n, a).unwrap();
+    for name in ["/tmp/a", "/tmp/b", "/tmp/c", "/tmp/d"] {
+        let p = g.text(1, SCRATCH + 0x800, name);
+        let fd = call(&mut g, nr::creat, [p, 0o644, 0, 0, 0, 0]);
+        call(&mut g, nr::close, [fd, 0, 0, 0, 0, 0]);
+    }
+    // Entries removed between two getdents64 calls make none of the others skipped.
+    let tmp = g.text(1, SCRATCH + 0x800, "/tmp");
+    let dir = call(&mut g, nr::open, [tmp, 0o200000, 0, 0, 0, 0]);
+    let n = call(&mut g, nr::getdents64, [dir, SCRATCH, 72, 0, 0, 0]);
+    let first: Vec<&str> = dirents(&g.get(1, SCRATCH, n as usize))
+        .iter()
+        .map(|d| d.0)
+        .collect();
+    assert_eq!(first, [".", "..", "a"]);
+    for name in ["/tmp/a", "/tmp/b"] {
+        let p = g.text(1, SCRATCH + 0x800, name);
+        assert_eq!(call(&mut g, nr::unlink, [p, 0, 0, 0, 0, 0]), 0);
+    }
+    let n = call(&mut g, nr::getdents64, [dir, SCRATCH, 4096, 0, 0, 0]);
+    let rest: Vec<&str> = dirents(&g.get(1, SCRATCH, n as usize))
+        .iter()
+        .map(|d| d.0)
+        .collect();
+    assert_eq!(rest, ["c", "d"]);
+    // sendfile from a file to a file and to a pipe.
+    let passwd = g.text(1, SCRATCH + 0x800, "/etc/passwd");
+    let from = call(&mut g, nr::open, [passwd, 0, 0, 0, 0, 0]);
+    let c = g.text(1, SCRATCH + 0x800, "/tmp/c");
+    let to = call(&mut g, nr::open, [c, 1, 0, 0, 0, 0]);
+    assert_eq!(call(&mut g, nr::sendfile, [to, from, 0, 100, 0, 0]), 30);
+    assert_eq!(call(&mut g, nr::sendfile, [to, from, 0, 100, 0, 0]), 0);
+    assert_eq!(call(&mut g, nr::pipe2, [SCRATCH, 0, 0, 0, 0, 0]), 0);
+    let ends = g.get(1, SCRATCH, 8);
+    let write_end = u32::from_le_bytes(ends[4..8].try_into().unwrap()) as u64;
+    g.put(1, SCRATCH + 0x100, &5u64.to_le_bytes());
+    assert_eq!(
+        call(
+            &mut g,
+            nr::sendfile,
+            [write_end, from, SCRATCH + 0x100, 4, 0, 0]
+        ),
+        4
+    );
+    assert_eq!(
+        u64::from_le_bytes(g.get(1, SCRATCH + 0x100, 8).try_into().unwrap()),
+        9
+    );
+    assert_eq!(
+        call(&mut g, nr::sendfile, [from, to, 0, 4, 0, 0]),
+        err(Errno::EBADF),
+        "into a read-only file"
+    );
+    // statx and statfs.
+    assert_eq!(
+        call(&mut g, nr::statx, [AT_FDCWD, c, 0, 0x7ff, SCRATCH, 0]),
+        0
+    );
+    let statx = g.get(1, SCRATCH, 256);
+    assert_eq!(
+        u16::from_le_bytes([statx[28], statx[29]]) as u32,
+        S_IFREG | 0o644
+    );
+    assert_eq!(statx[40], 30, "stx_size");
+    assert_eq!(call(&mut g, nr::statfs, [c, SCRATCH, 0, 0, 0, 0]), 0);
+    assert_eq!(g.get(1, SCRATCH, 8), 0x0102_1994u64.to_le_bytes(), "tmpfs");
+    // chmod and utimensat change what stat shows.
+    assert_eq!(call(&mut g, nr::chmod, [c, 0o600, 0, 0, 0, 0]), 0);
+    let mut times = [0u8; 32];
+    times[16..24].copy_from_slice(&1234u64.to_le_bytes());
+    g.put(1, SCRATCH + 0x200, &times);
+    assert_eq!(
+        call(
+            &mut g,
+            nr::utimensat,
+            [AT_FDCWD, c, SCRATCH + 0x200, 0, 0, 0]
+        ),
+        0
+    );
+    assert_eq!(call(&mut g, nr::stat, [c, SCRATCH, 0, 0, 0, 0]), 0);
+    assert_eq!(g.get(1, SCRATCH + 24, 4), (S_IFREG | 0o600).to_le_bytes());
+    assert_eq!(g.get(1, SCRATCH + 88, 8), 1234u64.to_le_bytes(), "st_mtime");
+}
