@@ -526,8 +526,9 @@ pub fn lseek(p: &mut Process, f: &mut Files, fd: u64, offset: i64, whence: u64) 
         .checked_add(offset)
         .filter(|&n| n >= 0)
         .ok_or(Errno::EINVAL)?;
-    if is_dir {
-        // A directory's offset counts entries: only its start can be sought.
+    if is_dir && new != o.offset as i64 {
+        // A directory's offset counts entries: only its start can be sought (and where it
+        // is, told).
         if new != 0 {
             return Err(Errno::EINVAL);
         }
