@@ -1,8 +1,9 @@
 //! `/proc`: the files busybox reads about the processes and the system, made from the
 //! process table when they are opened (a snapshot, as a single `read` of a small file on
 //! Linux is). `/proc/self` (a link to the caller's directory), `/proc/<pid>/` with `exe`
-//! (a link to the executable), `stat` (Linux's format, what `ps` parses) and `cmdline`
-//! (the arguments, each NUL-terminated), `/proc/meminfo`, `/proc/uptime` and
+//! (a link to the executable), `stat` (Linux's format, what `ps` parses), `status`
+//! (name, state, ids and size as `Name:\t...` lines) and `cmdline` (the arguments, each
+//! NUL-terminated), `/proc/meminfo`, `/proc/uptime` and
 //! `/proc/mounts`. Nothing here can be written, created or removed.
 //!
 //! The process table belongs to [`crate::system`]; the system calls see it through
@@ -34,12 +35,14 @@ pub enum Node {
 pub enum File {
     Exe,
     Stat,
+    Status,
     Cmdline,
 }
 
-const PROCESS_FILES: [(&str, File); 3] = [
+const PROCESS_FILES: [(&str, File); 4] = [
     ("exe", File::Exe),
     ("stat", File::Stat),
+    ("status", File::Status),
     ("cmdline", File::Cmdline),
 ];
 const SYSTEM_FILES: [(&str, Node); 4] = [
@@ -315,6 +318,23 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
                 let _ = w.write_str(" 0");
             }
             let _ = w.write_str("\n");
+        }
+        Node::File(pid, File::Status) => {
+            let p = procs.find(pid)?;
+            let state = match p.state {
+                b'R' => "R (running)",
+                b'S' => "S (sleeping)",
+                _ => "Z (zombie)",
+            };
+            let _ = write!(
+                w,
+                "Name:\t{}\nState:\t{state}\nTgid:\t{}\nPid:\t{}\nPPid:\t{}\nUid:\t0\t0\t0\t0\nGid:\t0\t0\t0\t0\nVmSize:\t{} kB\nThreads:\t1\n",
+                p.name,
+                p.pid,
+                p.pid,
+                p.ppid,
+                p.size / 1024
+            );
         }
         Node::File(pid, File::Cmdline) => {
             let p = procs.find(pid)?;

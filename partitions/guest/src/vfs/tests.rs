@@ -233,6 +233,11 @@ fn proc_shows_the_processes() {
         .collect();
     assert_eq!(listing, ["self", "meminfo", "uptime", "mounts", "1", "7"]);
     assert_eq!(read("/proc/7/cmdline"), "sleep\x0010\x00");
+    let status = read("/proc/7/status");
+    assert!(
+        status.starts_with("Name:\tsleep\nState:\tZ (zombie)\nTgid:\t7\nPid:\t7\nPPid:\t1\n"),
+        "{status}"
+    );
     let stat = read("/proc/7/stat");
     assert!(stat.starts_with("7 (sleep) Z 1 7 7 0 -1 "), "{stat}");
     assert_eq!(stat.split(' ').count(), 52, "{stat}");
