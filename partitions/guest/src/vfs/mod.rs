@@ -677,7 +677,7 @@ impl<'a> Fs<'a> {
         let mut tail_len = 0;
         let mut at = match node {
             Node::Proc(n) => {
-                let mut w = TailWriter {
+                let mut w = SliceWriter {
                     buf: &mut proc_tail,
                     len: 0,
                 };
@@ -1199,12 +1199,13 @@ impl<'a> Fs<'a> {
     }
 }
 
-struct TailWriter<'b> {
-    buf: &'b mut [u8; 32],
-    len: usize,
+/// Formats into a byte buffer (an error when it is full).
+pub(crate) struct SliceWriter<'b> {
+    pub buf: &'b mut [u8],
+    pub len: usize,
 }
 
-impl core::fmt::Write for TailWriter<'_> {
+impl core::fmt::Write for SliceWriter<'_> {
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
         let end = self.len + s.len();
         if end > self.buf.len() {

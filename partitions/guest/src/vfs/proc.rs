@@ -9,7 +9,7 @@
 //! The process table belongs to [`crate::system`]; the system calls see it through
 //! [`ProcessTable`], read-only, as [`Procs`]: the caller and the others.
 
-use super::Stat;
+use super::{SliceWriter, Stat};
 use crate::cpio::{S_IFDIR, S_IFLNK, S_IFREG};
 use alloc::vec::Vec;
 use core::fmt::Write;
@@ -197,7 +197,7 @@ pub fn is_link(node: Node) -> bool {
 
 /// A link's target, written into `buf` (`None`: not a link, or its process is gone).
 pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b [u8]> {
-    let mut w = Cursor { buf, len: 0 };
+    let mut w = SliceWriter { buf, len: 0 };
     match node {
         Node::SelfLink => write!(w, "{}", procs.me.pid).ok()?,
         Node::File(pid, File::Exe) => write!(w, "/{}", procs.find(pid)?.exe).ok()?,
@@ -350,23 +350,6 @@ struct VecWriter<'v>(&'v mut Vec<u8>);
 impl Write for VecWriter<'_> {
     fn write_str(&mut self, s: &str) -> core::fmt::Result {
         self.0.extend_from_slice(s.as_bytes());
-        Ok(())
-    }
-}
-
-struct Cursor<'b> {
-    buf: &'b mut [u8; 280],
-    len: usize,
-}
-
-impl Write for Cursor<'_> {
-    fn write_str(&mut self, s: &str) -> core::fmt::Result {
-        let end = self.len + s.len();
-        if end > self.buf.len() {
-            return Err(core::fmt::Error);
-        }
-        self.buf[self.len..end].copy_from_slice(s.as_bytes());
-        self.len = end;
         Ok(())
     }
 }
