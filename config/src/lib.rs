@@ -170,8 +170,8 @@
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,
 //! whose first string is the absolute path of a static executable in the initramfs (such
 //! as `/bin/busybox`); `guest.env` its environment (`NAME=value` strings; default
-//! `PATH=/bin`, `HOME=/`, `TERM=dumb`); together at most 64 strings and 8192 bytes, no NUL
-//! bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
+//! `PATH=/bin:/usr/bin:/sbin:/usr/sbin`, `HOME=/`, `TERM=dumb`); together at most 64
+//! strings and 8192 bytes, no NUL bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
 //! initramfs (missing directories are created), each value a file on the host, relative to
 //! the description's directory (its permission bits are kept, owner root); they may replace
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the

@@ -113,7 +113,8 @@ pub const GUEST_RESERVED_PATHS: &[&str] = &[
 pub const GUEST_MIN_STACK: u64 = 1 << 20;
 
 /// The environment of a guest's first process without `guest.env`.
-pub const GUEST_DEFAULT_ENV: &[&str] = &["PATH=/bin", "HOME=/", "TERM=dumb"];
+pub const GUEST_DEFAULT_ENV: &[&str] =
+    &["PATH=/bin:/usr/bin:/sbin:/usr/sbin", "HOME=/", "TERM=dumb"];
 /// Most strings `guest.init` and `guest.env` may have together, and most bytes (the
 /// guest's room for them on the process's initial stack, with its auxiliary vector).
 pub const GUEST_MAX_STRINGS: usize = 64;

@@ -43,7 +43,9 @@ fn guest_hello() {
         (
             "ls",
             "/bin/ls /",
-            &["bin", "dev", "etc", "init", "proc", "root", "tmp"][..],
+            &[
+                "bin", "dev", "etc", "init", "proc", "root", "sbin", "tmp", "usr",
+            ][..],
         ),
         (
             "shell",
@@ -98,7 +100,7 @@ fn guest_hello() {
         .collect();
     check(
         &o,
-        printed == ["one", "two", "7", "status 3", "ran 50"],
+        printed == ["one", "two", "9", "status 3", "ran 50"],
         &format!("pipes: printed {printed:?}"),
     );
     let trues = guest_lines(&o, "pipes", "(busybox) started: /bin/true");

@@ -5,7 +5,7 @@
 //! | path | what |
 //! |---|---|
 //! | `/bin/busybox` | Debian's `busybox-static` (installed by [`crate::tools::ensure_busybox`]) |
-//! | `/bin/{sh,echo,cat,ls,wc,true}` | symbolic links to `busybox` (its applets) |
+//! | `/bin/*`, `/sbin/*`, `/usr/bin/*`, `/usr/sbin/*` | symbolic links to `busybox`, one per applet, where Debian's `busybox --install` puts them (the list is `busybox --list-full` of the host's binary; [`APPLETS`] if it cannot run) |
 //! | `/etc/passwd`, `/etc/group` | root (0) only |
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
 //! | `/etc/guest/console` | `com2` with `guest.console = "com2"` (`guest::CONSOLE_PATH`): the console is a terminal on COM2 |
@@ -23,8 +23,33 @@ use config::system::Guest;
 use std::io::Cursor;
 use std::path::Path;
 
-/// The applets linked to busybox in `/bin`.
+/// The applets linked in `/bin` when the host cannot run busybox to list them.
 pub const APPLETS: &[&str] = &["sh", "echo", "cat", "ls", "wc", "true"];
+
+/// Where each applet of the busybox at `path` goes (`bin/ls`, `usr/bin/awk`): its
+/// `--list-full`, or [`APPLETS`] in `/bin` if it cannot run here.
+fn applet_paths(path: &Path) -> Vec<String> {
+    let listed = std::process::Command::new(path)
+        .arg("--list-full")
+        .output()
+        .ok()
+        .filter(|o| o.status.success())
+        .map(|o| String::from_utf8_lossy(&o.stdout).into_owned());
+    let mut paths: Vec<String> = match listed {
+        Some(text) => text
+            .lines()
+            .map(str::trim)
+            // Applets in a directory only (not `linuxrc`), and not busybox itself.
+            .filter(|l| l.contains('/') && !l.ends_with('/') && *l != "bin/busybox")
+            .filter(|l| l.split('/').all(|part| !part.is_empty() && part != ".."))
+            .map(str::to_string)
+            .collect(),
+        None => APPLETS.iter().map(|a| format!("bin/{a}")).collect(),
+    };
+    paths.sort();
+    paths.dedup();
+    paths
+}
 
 const S_IFREG: u32 = 0o100000;
 const S_IFDIR: u32 = 0o040000;
@@ -34,6 +59,7 @@ const S_IFLNK: u32 = 0o120000;
 pub fn initramfs_images(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     let mut out = Vec::new();
     let mut busybox = None;
+    let mut applets = Vec::new();
     for p in &system.partitions {
         let Some(guest) = &p.guest else {
             continue;
@@ -44,8 +70,9 @@ pub fn initramfs_images(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
                 std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
             check_static(&path, &bytes)?;
             busybox = Some(bytes);
+            applets = applet_paths(&path);
         }
-        let archive = initramfs(busybox.as_deref().unwrap_or_default(), guest)
+        let archive = initramfs(busybox.as_deref().unwrap_or_default(), &applets, guest)
             .with_context(|| format!("partition {}: cannot write its initramfs", p.name))?;
         out.push((p.name.clone(), archive));
     }
@@ -88,8 +115,9 @@ fn quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', "'\\''"))
 }
 
-/// The initramfs of a guest whose first process is `guest`, with `busybox` as `/bin/busybox`.
-pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
+/// The initramfs of a guest whose first process is `guest`, with `busybox` as
+/// `/bin/busybox` and a link to it at each of `applets` (`bin/ls`, `usr/bin/awk`).
+pub fn initramfs(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Vec<u8>> {
     let dir = |name: &str| (name.to_string(), S_IFDIR | 0o755, Vec::new());
     let file = |name: &str, mode: u32, data: Vec<u8>| (name.to_string(), S_IFREG | mode, data);
     let mut entries = vec![
@@ -97,12 +125,18 @@ pub fn initramfs(busybox: &[u8], guest: &Guest) -> Result<Vec<u8>> {
         dir("bin"),
         file("bin/busybox", 0o755, busybox.to_vec()),
     ];
-    for applet in APPLETS {
-        entries.push((
-            format!("bin/{applet}"),
-            S_IFLNK | 0o777,
-            b"busybox".to_vec(),
-        ));
+    for dir in ["sbin", "usr", "usr/bin", "usr/sbin"] {
+        if applets.iter().any(|a| a.starts_with(&format!("{dir}/"))) {
+            entries.push((dir.to_string(), S_IFDIR | 0o755, Vec::new()));
+        }
+    }
+    for applet in applets {
+        let target: &[u8] = if applet.starts_with("bin/") {
+            b"busybox"
+        } else {
+            b"/bin/busybox"
+        };
+        entries.push((applet.clone(), S_IFLNK | 0o777, target.to_vec()));
     }
     let command: Vec<String> = guest.init.iter().map(|s| quote(s)).collect();
     entries.extend([
@@ -183,6 +217,13 @@ mod tests {
     use super::*;
     use guest::cpio::Archive;
 
+    fn applets() -> Vec<String> {
+        ["bin/sh", "bin/ls", "usr/bin/awk"]
+            .iter()
+            .map(|s| s.to_string())
+            .collect()
+    }
+
     fn hello() -> Guest {
         Guest {
             init: vec!["/bin/busybox".into(), "echo".into(), "it's".into()],
@@ -213,7 +254,7 @@ mod tests {
             ),
             ("/opt/app/run.sh".into(), source("run.sh", "echo hi\n")),
         ];
-        let bytes = initramfs(b"ELF", &g).unwrap();
+        let bytes = initramfs(b"ELF", &applets(), &g).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         assert_eq!(
             fs.get("/etc/passwd").unwrap().data,
@@ -232,7 +273,7 @@ mod tests {
                 path: dir.join("gone").to_string_lossy().into_owned(),
             },
         )];
-        let err = initramfs(b"ELF", &g).unwrap_err();
+        let err = initramfs(b"ELF", &applets(), &g).unwrap_err();
         assert!(format!("{err:#}").contains("cannot read"), "{err:#}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -251,17 +292,19 @@ mod tests {
 
     #[test]
     fn the_guest_reads_the_initramfs_it_gets() {
-        let bytes = initramfs(b"\x7fELF-busybox", &hello()).unwrap();
+        let bytes = initramfs(b"\x7fELF-busybox", &applets(), &hello()).unwrap();
         let fs = Archive::new(&bytes).unwrap();
-        let (bb, _) = guest::vfs::lookup(&fs, b"/bin/sh", true).unwrap();
-        assert_eq!(bb.data, b"\x7fELF-busybox");
-        assert_eq!(bb.mode, S_IFREG | 0o755);
-        for applet in APPLETS {
-            let (e, path) =
-                guest::vfs::lookup(&fs, format!("/bin/{applet}").as_bytes(), true).unwrap();
+        let files = guest::vfs::Fs::new(&fs, 1 << 20).unwrap();
+        for applet in applets() {
+            let (data, path) =
+                guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
+                    .unwrap();
             assert_eq!(path.as_str(), "bin/busybox", "{applet}");
-            assert!(e.is_file());
+            assert_eq!(data, b"\x7fELF-busybox");
         }
+        assert_eq!(fs.get("/bin/busybox").unwrap().mode, S_IFREG | 0o755);
+        assert!(fs.get("/usr/bin").unwrap().is_dir());
+        assert!(fs.get("/sbin").is_none(), "no applet there");
         let args = fs.get(guest::INIT_ARGS_PATH).unwrap();
         assert_eq!(args.data, b"/bin/busybox\0echo\0it's\0");
         assert_eq!(fs.get(guest::INIT_ENV_PATH).unwrap().data, b"PATH=/bin\0");
@@ -287,7 +330,27 @@ mod tests {
         let console = Archive::new(&with_console).unwrap();
         assert_eq!(console.get(guest::CONSOLE_PATH).unwrap().data, b"com2\n");
         // Deterministic.
-        assert_eq!(bytes, initramfs(b"\x7fELF-busybox", &hello()).unwrap());
+        assert_eq!(
+            bytes,
+            initramfs(b"\x7fELF-busybox", &applets(), &hello()).unwrap()
+        );
+    }
+
+    #[test]
+    fn applets_are_listed_by_the_busybox_itself() {
+        let Some(path) = crate::tools::BUSYBOX_PATHS
+            .iter()
+            .map(Path::new)
+            .find(|p| p.is_file())
+        else {
+            return; // no busybox on this host: the fallback list is used
+        };
+        let paths = applet_paths(path);
+        assert!(paths.contains(&"bin/sh".to_string()), "{paths:?}");
+        assert!(!paths.contains(&"bin/busybox".to_string()));
+        assert!(paths.iter().all(|p| p.contains('/')));
+        let missing = Path::new("/nonexistent/busybox");
+        assert_eq!(applet_paths(missing).len(), APPLETS.len());
     }
 
     #[test]

@@ -11,7 +11,7 @@ pub const APT_PACKAGES: &[&str] = &["qemu-system-x86", "ovmf"];
 /// The package of the static busybox a guest's initramfs holds.
 pub const BUSYBOX_PACKAGE: &str = "busybox-static";
 /// Where Debian's `busybox-static` installs it.
-const BUSYBOX_PATHS: &[&str] = &["/bin/busybox", "/usr/bin/busybox"];
+pub const BUSYBOX_PATHS: &[&str] = &["/bin/busybox", "/usr/bin/busybox"];
 pub const RUST_TARGETS: &[&str] = &["x86_64-unknown-uefi", "x86_64-unknown-none"];
 
 /// Paths of QEMU and the OVMF firmware pair.

@@ -3,14 +3,14 @@
 //! `envp` and the auxiliary vector on it ([`crate::stack`]). What it returns is everything
 //! the partition program needs to create the process's thread: entry and stack pointer.
 
-use crate::cpio::Archive;
 use crate::elf::{ElfError, LoadPlan};
+use crate::frames::MAX_IMAGE_ID;
 use crate::linux::Errno;
 use crate::memory::{AreaError, STACK_TOP};
 use crate::process::Process;
 use crate::stack::{self, AuxInfo, StackError};
 use crate::syscall::Host;
-use crate::vfs;
+use crate::vfs::{self, Fs, Node};
 
 /// Bytes at the top of the stack the initial stack may take (arguments, environment,
 /// auxiliary vector).
@@ -56,8 +56,8 @@ impl core::fmt::Display for ExecError {
 
 /// A loaded program, ready to run: the thread starts at `entry` with `rsp = sp`.
 #[derive(Debug)]
-pub struct Loaded<'a> {
-    pub process: Process<'a>,
+pub struct Loaded {
+    pub process: Process,
     pub entry: u64,
     pub sp: u64,
 }
@@ -65,64 +65,85 @@ pub struct Loaded<'a> {
 /// Loads `argv[0]` from `fs` as process `pid` (parent `ppid`) with `argv` and `envp`,
 /// mapping its memory through `host`. `hwcap` is what the CPU offers (`AT_HWCAP`). On an
 /// error, pages already mapped are the caller's to release (with the task).
-pub fn load<'a>(
-    fs: &Archive<'a>,
+pub fn load(
+    fs: &Fs,
     host: &mut impl Host,
     pid: u32,
     ppid: u32,
     argv: &[&[u8]],
     envp: &[&[u8]],
     hwcap: u64,
-) -> Result<Loaded<'a>, ExecError> {
+) -> Result<Loaded, ExecError> {
     let path = *argv.first().ok_or(ExecError::NoArguments)?;
-    load_file(fs, host, (pid, ppid), path, argv, envp, hwcap)
+    let root = Node::Inode(vfs::ROOT);
+    load_file(fs, host, (pid, ppid), root, path, argv, envp, hwcap)
 }
 
-/// The executable at `path` and its load plan, checked (what `execve` checks before it
-/// drops the old image).
-pub fn find<'a>(
-    fs: &Archive<'a>,
-    path: &[u8],
-) -> Result<(crate::cpio::Entry<'a>, vfs::PathBuf), ExecError> {
-    let (entry, exe) = vfs::lookup(fs, path, true).map_err(ExecError::Lookup)?;
-    if !entry.is_file() {
-        return Err(ExecError::NotAFile);
-    }
-    if entry.mode & 0o111 == 0 {
+/// An executable found: its bytes, its absolute path, and the id its loaded pages may be
+/// cached under (the file's, while it still holds the initramfs's bytes; else one the
+/// cache never keeps: a file written since may change).
+pub struct Found<'f> {
+    pub bytes: &'f [u8],
+    pub exe: vfs::PathBuf,
+    pub image: u32,
+}
+
+/// The executable at `path` (relative to `cwd`), checked: a regular file with an execute
+/// bit (what `execve` checks before it drops the old image). `pid` is the caller's
+/// (`/proc/self`).
+pub fn find<'f>(fs: &'f Fs, pid: u32, cwd: Node, path: &[u8]) -> Result<Found<'f>, ExecError> {
+    let procs = vfs::proc::Procs::alone(pid);
+    let node = fs
+        .lookup(&procs, cwd, path, true)
+        .map_err(ExecError::Lookup)?;
+    let data = fs.file_bytes(node).ok_or(ExecError::NotAFile)?;
+    if fs.mode(node) & 0o111 == 0 {
         return Err(ExecError::NotExecutable);
     }
-    Ok((entry, exe))
+    let exe = fs.path_of(node).map_err(ExecError::Lookup)?;
+    let image = fs
+        .archive_ino(node)
+        .filter(|&ino| ino < MAX_IMAGE_ID)
+        .unwrap_or(MAX_IMAGE_ID);
+    Ok(Found {
+        bytes: data,
+        exe,
+        image,
+    })
 }
 
-/// [`load`] with the executable's `path` apart from `argv` (`execve`); `ids` are the
-/// process's pid and parent pid.
-pub fn load_file<'a>(
-    fs: &Archive<'a>,
+/// [`load`] with the executable's `path` (relative to `cwd`) apart from `argv`
+/// (`execve`); `ids` are the process's pid and parent pid.
+#[allow(clippy::too_many_arguments)] // what a program starts with
+pub fn load_file(
+    fs: &Fs,
     host: &mut impl Host,
     (pid, ppid): (u32, u32),
+    cwd: Node,
     path: &[u8],
     argv: &[&[u8]],
     envp: &[&[u8]],
     hwcap: u64,
-) -> Result<Loaded<'a>, ExecError> {
-    let (entry, exe) = find(fs, path)?;
-    let elf = entry.data;
+) -> Result<Loaded, ExecError> {
+    let Found {
+        bytes: elf,
+        exe,
+        image,
+    } = find(fs, pid, cwd, path)?;
     let plan = LoadPlan::new(elf).map_err(ExecError::Elf)?;
     let mut process = Process::new(pid, ppid, exe);
+    process.cwd = cwd;
+    process.set_cmdline(argv);
     let (runs, n) = plan.page_runs();
     process
         .set_image(&runs[..n], plan.brk_start)
         .map_err(ExecError::Layout)?;
-    // Each page is written once, straight into the frame that backs it (the initramfs is
-    // read-only: an inode's contents never change).
+    // Each page is written once, straight into the frame that backs it (or shared with
+    // the processes that run the same unchanged initramfs file).
     for run in &runs[..n] {
-        host.map_image(
-            run.start,
-            run.pages,
-            run.rights,
-            entry.ino,
-            &mut |at, page| plan.fill(elf, at, page),
-        )
+        host.map_image(run.start, run.pages, run.rights, image, &mut |at, page| {
+            plan.fill(elf, at, page)
+        })
         .map_err(ExecError::Memory)?;
     }
     // The stack's pages are backed when touched: the strings below fill its top ones.

@@ -5,17 +5,21 @@
 //! exception messages with the full register context; the guest serves them and replies
 //! with the edited registers.
 //!
-//! This library is the personality itself, host-tested: the initramfs reader ([`cpio`],
-//! [`vfs`]), the executable loader ([`elf`], [`exec`]) and initial stack ([`stack`]), the
-//! address-space bookkeeping and fault decisions ([`memory`]), page pool ([`pool`]), which
-//! pool page backs which process page ([`backing`]) and the demand paging and
-//! copy-on-write sharing of those pages ([`frames`]), the process state ([`process`]), the
-//! system calls of one process ([`syscall`]; its signal and timer calls in [`sigcalls`]),
-//! the signals' numbers, actions and frame ([`signal`]), the pipes ([`pipe`]), the process
-//! table with fork, exec, wait, signal delivery, process groups, timers and the deferred
-//! replies of waiting calls ([`system`]), and the console's terminal line discipline
-//! ([`tty`]); the partition program (`main.rs`) only moves messages, creates tasks, maps
-//! pages, drives COM2 (`com2.rs`) and writes the log.
+//! This library is the personality itself, host-tested: the initramfs reader ([`cpio`]),
+//! the file system ([`vfs`]: the initramfs's contents, writable, in memory, with `/dev`
+//! and `/proc`, and the open file descriptions), the executable loader ([`elf`],
+//! [`exec`]) and initial stack ([`stack`]), the address-space bookkeeping and fault
+//! decisions ([`memory`]), page pool ([`pool`]), which pool page backs which process page
+//! ([`backing`]) and the demand paging and copy-on-write sharing of those pages
+//! ([`frames`]), the process state ([`process`]), the system calls of one process
+//! ([`syscall`]; the file calls in [`syscall::file`], the signal and timer calls in
+//! [`sigcalls`]), the signals' numbers, actions and frame ([`signal`]), the pipes
+//! ([`pipe`]), the process table with fork, exec, wait, signal delivery, process groups,
+//! timers and the deferred replies of waiting calls ([`system`]), and the console's
+//! terminal line discipline ([`tty`]); the partition program (`main.rs`) only moves
+//! messages, creates tasks, maps pages, drives COM2 (`com2.rs`), writes the log and gives
+//! the library its heap (a part of the memory pool: the file system's data and tables
+//! live there, within the byte limit [`vfs::Fs::new`] gets).
 //!
 //! # The console
 //!
@@ -55,6 +59,8 @@
 //!   `guest: init exited with status <n>` or `guest: init killed by signal <n>` (also the
 //!   detail of the health report).
 #![cfg_attr(not(test), no_std)]
+
+extern crate alloc;
 
 pub mod backing;
 pub mod console;

@@ -9,10 +9,15 @@
 //! configuration's health table decides (restart the guest, or end a test run).
 //!
 //! Its memory pool (syssw maps it at `POOL_BASE`, read-write, and at `POOL_EXEC_BASE`,
-//! read-execute) is cut into: its own IPC buffer, the backing table, and the frames that
-//! back the processes' pages ([`guest::frames`]; a frame is mapped into a process from
-//! the read-execute alias for executable pages, else from the read-write one).
-//! Its stack holds the process table (the configuration gives a guest at least 1 MiB).
+//! read-execute) is cut into: its own IPC buffer, the backing table, the frames that back
+//! the processes' pages ([`guest::frames`]; a frame is mapped into a process from the
+//! read-execute alias for executable pages, else from the read-write one), and at its end
+//! the heap ([`HEAP_SHARE`] of the pool). The heap holds the file system ([`guest::vfs`]:
+//! written file data, names, the open file descriptions), whose byte limit is half the
+//! heap: the other half absorbs what reallocation (a growing file's old and new buffers),
+//! fragmentation and the tables around the data take, so a full file system answers
+//! `ENOSPC` before an allocation can fail. Its stack holds the process table (the
+//! configuration gives a guest at least 1 MiB).
 //! This file is glue only: every decision about a Linux call is the library's.
 //!
 //! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
@@ -34,6 +39,7 @@ use guest::process::Stream;
 use guest::syscall::{Host, Outcome};
 use guest::system::{INIT_PID, Joined, MAX_PROCESSES, System, Tasks};
 use guest::tty::Tty;
+use guest::vfs::Fs;
 use user_rt::abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL,
     MessageTag, REPLY_RESUME,
@@ -51,6 +57,40 @@ user_rt::entry!(main);
 
 /// Pages of the pool the IPC buffer takes (at its start).
 const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
+/// The part of the pool that is the heap (1/4: the processes' pages keep the rest; a
+/// busybox shell session needs a few MiB of frames, its files far less).
+const HEAP_SHARE: u64 = 4;
+
+/// The global allocator over the heap part of the pool (the guest has one thread: the
+/// lock is never contended).
+struct GuestHeap(spin::mutex::SpinMutex<linked_list_allocator::Heap>);
+
+#[allow(unsafe_code)]
+// SAFETY: allocation and deallocation go to the one heap under its lock; a failed
+// allocation returns null, as GlobalAlloc wants.
+unsafe impl core::alloc::GlobalAlloc for GuestHeap {
+    unsafe fn alloc(&self, layout: core::alloc::Layout) -> *mut u8 {
+        self.0
+            .lock()
+            .allocate_first_fit(layout)
+            .map_or(core::ptr::null_mut(), |p| p.as_ptr())
+    }
+
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: core::alloc::Layout) {
+        if let Some(p) = core::ptr::NonNull::new(ptr) {
+            #[allow(unsafe_code)]
+            // SAFETY: `ptr` came from `alloc` with this layout (GlobalAlloc's contract).
+            unsafe {
+                self.0.lock().deallocate(p, layout)
+            };
+        }
+    }
+}
+
+#[global_allocator]
+static HEAP: GuestHeap = GuestHeap(spin::mutex::SpinMutex::new(
+    linked_list_allocator::Heap::empty(),
+));
 
 fn main(start: u64, _: u64) {
     #[allow(unsafe_code)]
@@ -60,14 +100,15 @@ fn main(start: u64, _: u64) {
         return;
     };
     user_rt::service::set_server(ThreadId(info.server));
-    let pool_pages = info.pool_len / PAGE;
+    let heap_pages = info.pool_len / PAGE / HEAP_SHARE;
+    let pool_pages = info.pool_len / PAGE - heap_pages;
     // The backing table: four entries per frame it can hand out (1.5% of the pool): a
     // shared frame backs a page of each process that shares it (after a `fork`, or a
     // program's image for every process running it), and the image cache's entry.
     const ENTRIES_PER_FRAME: u64 = 4;
     let entry_bytes = ENTRIES_PER_FRAME * ENTRY as u64;
     let table_pages = (pool_pages * entry_bytes).div_ceil(PAGE + entry_bytes);
-    if pool_pages < IPC_PAGES + table_pages + 1 {
+    if pool_pages < IPC_PAGES + table_pages + 1 || heap_pages == 0 {
         println!(
             "guest: no memory pool ({} KiB): give the partition the `map` ability and more `memory`",
             info.pool_len / 1024
@@ -87,7 +128,7 @@ fn main(start: u64, _: u64) {
     let frames_page = IPC_PAGES + table_pages;
     let frame_count = pool_pages - frames_page;
     #[allow(unsafe_code)]
-    // SAFETY: the rest of the pool after the IPC buffer, mapped read-write for this
+    // SAFETY: the pool after the IPC buffer up to the heap, mapped read-write for this
     // partition alone and never unmapped while it runs; this is the only reference to it
     // (the read-execute alias is only ever a `map` source).
     let rest = unsafe {
@@ -97,9 +138,18 @@ fn main(start: u64, _: u64) {
         )
     };
     let (table, frames) = rest.split_at_mut((table_pages * PAGE) as usize);
+    let heap_base = POOL_BASE + pool_pages * PAGE;
+    let heap_size = (heap_pages * PAGE) as usize;
+    #[allow(unsafe_code)]
+    // SAFETY: the last heap_pages pages of the pool, mapped read-write for this partition
+    // alone, lie after `rest` and are used by nothing else; the heap is set up once,
+    // before anything allocates.
+    unsafe {
+        HEAP.0.lock().init(heap_base as *mut u8, heap_size)
+    };
 
-    let fs = match Archive::new(info.data()) {
-        Ok(fs) => fs,
+    let archive = match Archive::new(info.data()) {
+        Ok(archive) => archive,
         Err(e) => {
             println!("guest: its initramfs (data entry) is unreadable: {e}");
             return;
@@ -107,12 +157,24 @@ fn main(start: u64, _: u64) {
     };
     let mut args = [&b""[..]; guest::stack::MAX_STRINGS];
     let mut env = [&b""[..]; guest::stack::MAX_STRINGS];
-    let argc = fs
+    let argc = archive
         .get(guest::INIT_ARGS_PATH)
         .map_or(0, |e| guest::split_nul(e.data, &mut args));
-    let envc = fs
+    let envc = archive
         .get(guest::INIT_ENV_PATH)
         .map_or(0, |e| guest::split_nul(e.data, &mut env));
+    let mut fs = match Fs::new(&archive, heap_size / 2) {
+        Ok(fs) => fs,
+        Err(e) => {
+            println!(
+                "guest: its initramfs does not fit its heap of {} KiB: {}",
+                heap_size / 1024,
+                e.describe()
+            );
+            return;
+        }
+    };
+    fs.set_memory(info.pool_len);
 
     let mcp = (info.priority as u8).saturating_sub(1).max(1);
     let mut host = GuestHost {
@@ -127,7 +189,7 @@ fn main(start: u64, _: u64) {
         seed: sys::rdtsc() | 1,
         tty: None,
     };
-    let wants_terminal = fs
+    let wants_terminal = archive
         .get(guest::CONSOLE_PATH)
         .is_some_and(|e| e.data.trim_ascii() == b"com2");
     let mut reader = None;
@@ -190,7 +252,7 @@ fn main(start: u64, _: u64) {
         let now = host.now_ns();
         let timeout = match system.next_timer() {
             Some(at) if at <= now => {
-                if let Some(ended) = system.tick(&fs, &mut host) {
+                if let Some(ended) = system.tick(&mut fs, &mut host) {
                     break ended;
                 }
                 continue;
@@ -201,7 +263,7 @@ fn main(start: u64, _: u64) {
         let received = match sys::receive(None, timeout) {
             Ok(r) => r,
             Err(user_rt::abi::syscall::Error::TimedOut) => {
-                if let Some(ended) = system.tick(&fs, &mut host) {
+                if let Some(ended) = system.tick(&mut fs, &mut host) {
                     break ended;
                 }
                 continue;
@@ -213,7 +275,7 @@ fn main(start: u64, _: u64) {
         };
         let tag = received.message.tag;
         if reader == Some(received.sender) && tag.label() == com2::LABEL_INPUT {
-            if let Some(ended) = console_input(&mut system, &fs, &mut host, &received.message) {
+            if let Some(ended) = console_input(&mut system, &mut fs, &mut host, &received.message) {
                 break ended;
             }
             continue;
@@ -223,21 +285,21 @@ fn main(start: u64, _: u64) {
         let Some(pid) = host.pid_of(received.sender).filter(|_| from_kernel) else {
             continue;
         };
-        if let Some(ended) = system.serve(pid, &fs, &mut host, ipc.exception()) {
+        if let Some(ended) = system.serve(pid, &mut fs, &mut host, ipc.exception()) {
             break ended;
         }
     };
     let left = system.pids().filter(|&pid| pid != INIT_PID).count();
     println!("guest: init ended with {left} other processes left");
-    system.release_all(&mut host);
+    system.release_all(&mut fs, &mut host);
     report(ipc, outcome);
 }
 
 /// Input from the console: through the line discipline (echo to COM2, signals of the
 /// control characters), then the calls waiting for it are served again.
-fn console_input<'a>(
-    system: &mut System<'a>,
-    fs: &Archive<'a>,
+fn console_input(
+    system: &mut System,
+    fs: &mut Fs,
     host: &mut GuestHost,
     m: &Message,
 ) -> Option<Outcome> {
@@ -245,7 +307,7 @@ fn console_input<'a>(
     for &b in &bytes[..n] {
         let signal = host.tty.as_mut()?.input(b, &mut com2::put);
         if let Some(s) = signal
-            && let Some(ended) = system.signal_group(s.group, s.signal, host)
+            && let Some(ended) = system.signal_group(s.group, s.signal, fs, host)
         {
             return Some(ended);
         }

@@ -114,14 +114,8 @@ pub enum Kind {
     Heap,
     Stack,
     Anonymous,
-}
-
-/// Where the pages of a file mapping come from: mapped file `slot` of the process
-/// ([`crate::process::Process::mapped_files`]), from byte `offset` for the area's first page.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct FileSource {
-    pub slot: u8,
-    pub offset: u64,
+    /// A mapping of a file (its pages filled from the file when it was mapped).
+    File,
 }
 
 /// A mapped area: pages `start..end`.
@@ -131,19 +125,6 @@ pub struct Area {
     pub end: u64,
     pub rights: Rights,
     pub kind: Kind,
-    /// A file mapping's file (its pages are filled from it when first touched); `None`:
-    /// zeroed pages.
-    pub file: Option<FileSource>,
-}
-
-impl Area {
-    /// The file and offset the page at `page` of this area is filled from.
-    pub fn file_at(&self, page: u64) -> Option<FileSource> {
-        self.file.map(|f| FileSource {
-            slot: f.slot,
-            offset: f.offset.saturating_add(page - self.start),
-        })
-    }
 }
 
 /// Why an area cannot be added.
@@ -178,7 +159,6 @@ impl Areas {
                 end: 0,
                 rights: Rights::NONE,
                 kind: Kind::Image,
-                file: None,
             }; MAX_AREAS],
             count: 0,
         }
@@ -241,7 +221,6 @@ impl Areas {
             let inside = self.iter().position(|a| a.start < x && x < a.end);
             if let Some(i) = inside {
                 let mut upper = self.areas[i];
-                upper.file = upper.file_at(x);
                 upper.start = x;
                 self.areas[i].end = x;
                 self.areas.copy_within(i + 1..self.count, i + 2);
@@ -503,7 +482,6 @@ mod tests {
             end,
             rights,
             kind: Kind::Anonymous,
-            file: None,
         }
     }
 
@@ -555,37 +533,6 @@ mod tests {
             .unwrap();
         assert_eq!(gone, [(0x2000, 0x3000), (0x5000, 0x6000)]);
         assert_eq!(ranges(&a), [(0x1000, 0x2000, 3), (0x6000, 0x9000, 3)]);
-    }
-
-    #[test]
-    fn a_split_file_mapping_keeps_each_page_at_its_offset() {
-        let mut a = Areas::new();
-        a.insert(Area {
-            file: Some(FileSource {
-                slot: 2,
-                offset: 0x10000,
-            }),
-            ..area(0x1000, 0x5000, Rights::READ)
-        })
-        .unwrap();
-        a.protect(0x2000, 0x3000, Rights::NONE, |_| ()).unwrap();
-        a.remove(0x3000, 0x4000, |_| ()).unwrap();
-        let offsets: Vec<_> = a
-            .iter()
-            .map(|r| (r.start, r.file.map(|f| (f.slot, f.offset))))
-            .collect();
-        assert_eq!(
-            offsets,
-            [
-                (0x1000, Some((2, 0x10000))),
-                (0x2000, Some((2, 0x11000))),
-                (0x4000, Some((2, 0x13000))),
-            ]
-        );
-        assert_eq!(
-            a.find(0x4800).unwrap().file_at(0x4000).unwrap().offset,
-            0x13000
-        );
     }
 
     #[test]

@@ -3,15 +3,16 @@
 //! (`set_tid_address`, `set_robust_list`). The system calls change it
 //! ([`crate::syscall::handle`]); the partition program owns one per process.
 
-use crate::cpio::Entry;
 use crate::memory::{Area, AreaError, Areas, Kind, STACK_SIZE, STACK_TOP};
 use crate::signal::{Action, AltStack, Info};
-use crate::vfs::PathBuf;
+use crate::vfs::{self, Node, OpenId, PathBuf};
+use alloc::vec::Vec;
 
 /// Most open files of a process (`RLIMIT_NOFILE`).
 pub const MAX_FILES: usize = 64;
-/// Most files a process has mappings of at once.
-pub const MAX_MAPPED_FILES: usize = 16;
+/// Most bytes of arguments `/proc/<pid>/cmdline` shows (Linux shows them all; `ps`
+/// reads one page).
+pub const CMDLINE_MAX: usize = 4096;
 /// Longest process name (Linux's `TASK_COMM_LEN` without the NUL).
 pub const NAME_LEN: usize = 15;
 
@@ -22,15 +23,17 @@ pub enum Stream {
     Stderr,
 }
 
-/// An open file description.
+/// What a descriptor refers to.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum File<'a> {
+pub enum File {
     /// The console: the terminal on COM2 ([`crate::tty`]) or, without one, the log
     /// (reading gives end of file; the stream names the log line). `/dev/console` and
     /// `/dev/tty` open it as `Console(Stream::Stdout)`.
     Console(Stream),
-    /// A file or directory of the initramfs, read-only, with its offset.
-    Initramfs { entry: Entry<'a>, offset: u64 },
+    /// An open file description of the file system ([`crate::vfs::Fs::description`]):
+    /// a file, directory, device or `/proc` file with its offset, shared by the
+    /// descriptors `dup` and `fork` made of it.
+    Open(OpenId),
     /// One end of pipe `pipe` ([`crate::pipe::Pipes`]); `nonblock`: `O_NONBLOCK` (calls
     /// that would wait fail with `EAGAIN`).
     Pipe {
@@ -42,21 +45,23 @@ pub enum File<'a> {
 
 /// One Linux process.
 #[derive(Clone, Debug)]
-pub struct Process<'a> {
+pub struct Process {
     pub pid: u32,
     pub ppid: u32,
     name: [u8; NAME_LEN],
     name_len: usize,
     /// The executable's normalised path (`/proc/self/exe`).
     pub exe: PathBuf,
+    /// Its arguments, each NUL-terminated (`/proc/<pid>/cmdline`; at most
+    /// [`CMDLINE_MAX`] bytes).
+    pub cmdline: Vec<u8>,
+    /// The working directory.
+    pub cwd: Node,
     pub areas: Areas,
-    /// The files of its file mappings (an area's [`crate::memory::FileSource`] names its
-    /// slot); a slot no area names is free.
-    pub mapped_files: [Option<File<'a>>; MAX_MAPPED_FILES],
     /// Start of the heap (after the executable) and the current program break.
     pub brk_start: u64,
     pub brk: u64,
-    pub files: [Option<File<'a>>; MAX_FILES],
+    pub files: [Option<File>; MAX_FILES],
     /// Close-on-exec, one bit per descriptor.
     pub cloexec: u64,
     /// Process group and session.
@@ -88,7 +93,7 @@ pub struct Process<'a> {
     unsupported_logged: [u64; 8],
 }
 
-impl<'a> Process<'a> {
+impl Process {
     /// A process `pid` running executable `exe` (its name is the last path component),
     /// with the console on descriptors 0, 1 and 2 and no memory yet.
     pub fn new(pid: u32, ppid: u32, exe: PathBuf) -> Self {
@@ -106,8 +111,9 @@ impl<'a> Process<'a> {
             name,
             name_len,
             exe,
+            cmdline: Vec::new(),
+            cwd: Node::Inode(vfs::ROOT),
             areas: Areas::new(),
-            mapped_files: [None; MAX_MAPPED_FILES],
             brk_start: 0,
             brk: 0,
             files,
@@ -129,6 +135,23 @@ impl<'a> Process<'a> {
             robust_list: 0,
             unsupported_logged: [0; 8],
         }
+    }
+
+    /// Records its arguments (`/proc/<pid>/cmdline`), cut at [`CMDLINE_MAX`] bytes; with
+    /// no memory for them, none.
+    pub fn set_cmdline(&mut self, argv: &[&[u8]]) {
+        let len: usize = argv.iter().map(|a| a.len() + 1).sum();
+        let len = len.min(CMDLINE_MAX);
+        let mut cmdline = Vec::new();
+        if cmdline.try_reserve_exact(len).is_err() {
+            return;
+        }
+        for a in argv {
+            cmdline.extend_from_slice(a);
+            cmdline.push(0);
+        }
+        cmdline.truncate(len);
+        self.cmdline = cmdline;
     }
 
     /// Sets the name (`prctl(PR_SET_NAME)`; cut to [`NAME_LEN`] bytes).
@@ -158,7 +181,6 @@ impl<'a> Process<'a> {
                 end: r.start + r.pages * crate::memory::PAGE,
                 rights: r.rights,
                 kind: Kind::Image,
-                file: None,
             })?;
         }
         self.brk_start = brk_start;
@@ -173,7 +195,6 @@ impl<'a> Process<'a> {
             end: STACK_TOP,
             rights: crate::memory::Rights::READ | crate::memory::Rights::WRITE,
             kind: Kind::Stack,
-            file: None,
         };
         self.areas.insert(area)?;
         Ok(area)
@@ -191,7 +212,7 @@ impl<'a> Process<'a> {
 
     /// Puts `file` at descriptor `fd` (free or closed by the caller before), with its
     /// close-on-exec flag.
-    pub fn install(&mut self, fd: usize, file: File<'a>, cloexec: bool) {
+    pub fn install(&mut self, fd: usize, file: File, cloexec: bool) {
         self.files[fd] = Some(file);
         self.set_cloexec(fd, cloexec);
     }
@@ -208,7 +229,7 @@ impl<'a> Process<'a> {
         self.cloexec & (1 << fd) != 0
     }
 
-    pub fn file(&self, fd: u64) -> Option<File<'a>> {
+    pub fn file(&self, fd: u64) -> Option<File> {
         self.files.get(usize::try_from(fd).ok()?).copied().flatten()
     }
 

@@ -26,7 +26,6 @@
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
 //! beyond either, `fork` fails with `EAGAIN`.
 
-use crate::cpio::Archive;
 use crate::exec::{self, ARG_MAX, ExecError};
 use crate::linux::{Errno, nr};
 use crate::memory::{Areas, PAGE};
@@ -36,6 +35,8 @@ use crate::sigcalls;
 use crate::signal::{self, Action, Default, Info, SIGCHLD, SIGSEGV};
 use crate::stack::MAX_STRINGS;
 use crate::syscall::{self, Host, Outcome, SysResult, close_files, share_files};
+use crate::vfs::Fs;
+use crate::vfs::proc::{ProcInfo, ProcessTable};
 use abi::ipc::{ExceptionMessage, Registers};
 
 /// Most processes of a guest (the default and the ceiling of its process limit).
@@ -113,8 +114,8 @@ pub enum State {
 }
 
 #[derive(Clone, Debug)]
-struct Slot<'a> {
-    process: Process<'a>,
+struct Slot {
+    process: Process,
     state: State,
     /// Stopped by a signal: its thread is suspended.
     stopped: bool,
@@ -198,8 +199,8 @@ pub const fn exit_status(code: u8) -> u32 {
 }
 
 /// The process table of a guest.
-pub struct System<'a> {
-    slots: [Option<Slot<'a>>; MAX_PROCESSES],
+pub struct System {
+    slots: [Option<Slot>; MAX_PROCESSES],
     pub pipes: Pipes,
     next_pid: u32,
     /// How init ended, when a call of another process ended it.
@@ -208,9 +209,9 @@ pub struct System<'a> {
     hwcap: u64,
 }
 
-impl<'a> System<'a> {
+impl System {
     /// A table holding `init`, already loaded and running.
-    pub fn new(init: Process<'a>, hwcap: u64) -> Self {
+    pub fn new(init: Process, hwcap: u64) -> Self {
         let mut slots = [const { None }; MAX_PROCESSES];
         let next_pid = init.pid + 1;
         slots[0] = Some(Slot {
@@ -234,7 +235,7 @@ impl<'a> System<'a> {
             .position(|s| s.as_ref().is_some_and(|s| s.process.pid == pid))
     }
 
-    pub fn process(&self, pid: u32) -> Option<&Process<'a>> {
+    pub fn process(&self, pid: u32) -> Option<&Process> {
         Some(&self.slots[self.index(pid)?].as_ref()?.process)
     }
 
@@ -253,7 +254,7 @@ impl<'a> System<'a> {
     pub fn serve(
         &mut self,
         pid: u32,
-        fs: &Archive<'a>,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         mut m: ExceptionMessage,
     ) -> Option<Outcome> {
@@ -263,7 +264,7 @@ impl<'a> System<'a> {
             State::Starting(registers) => {
                 slot.state = State::Running;
                 m.registers = registers;
-                self.resume(i, k, m, None)
+                self.resume(i, fs, k, m, None)
             }
             State::Running => self.run(i, fs, k, m),
             // A blocked or ended process has no thread that could send.
@@ -274,7 +275,7 @@ impl<'a> System<'a> {
 
     /// Serves the kept messages of blocked processes again, after something outside the
     /// processes happened (console input arrived). Returns how init ended when it did.
-    pub fn retry_blocked(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
+    pub fn retry_blocked(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         self.wake(fs, k)
     }
 
@@ -294,7 +295,7 @@ impl<'a> System<'a> {
 
     /// Raises the alarms that are due and completes the sleeps that ended (called when the
     /// time [`System::next_timer`] named has come).
-    pub fn tick(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
+    pub fn tick(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         let now = k.now_ns();
         for j in 0..MAX_PROCESSES {
             let due = match self.slots[j].as_mut() {
@@ -303,7 +304,7 @@ impl<'a> System<'a> {
                 }
                 _ => false,
             };
-            if due && let Some(ended) = self.send(j, None, Info::kernel(sigcalls::ALARM), k) {
+            if due && let Some(ended) = self.send(j, None, Info::kernel(sigcalls::ALARM), fs, k) {
                 return Some(ended);
             }
         }
@@ -312,7 +313,7 @@ impl<'a> System<'a> {
 
     /// Serves the kept messages of blocked processes until none completes; a blocked
     /// process with a signal to act on is interrupted instead.
-    fn wake(&mut self, fs: &Archive<'a>, k: &mut impl Tasks) -> Option<Outcome> {
+    fn wake(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         loop {
             let mut progress = false;
             for i in 0..MAX_PROCESSES {
@@ -332,7 +333,7 @@ impl<'a> System<'a> {
                         let p = &mut self.slots[i].as_mut()?.process;
                         k.select(p.pid);
                         let m = sigcalls::interrupted(p, k, m, restart);
-                        self.resume(i, k, m, None)
+                        self.resume(i, fs, k, m, None)
                     }
                     None => self.run(i, fs, k, m),
                 };
@@ -384,6 +385,7 @@ impl<'a> System<'a> {
     fn resume(
         &mut self,
         i: usize,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         mut m: ExceptionMessage,
         trap: Option<(u64, u64, u64)>,
@@ -415,7 +417,7 @@ impl<'a> System<'a> {
                             p.name(),
                             signal::name(sig)
                         ));
-                        return self.end(i, sig, k);
+                        return self.end(i, sig, fs, k);
                     }
                 }
             }
@@ -441,7 +443,7 @@ impl<'a> System<'a> {
                     signal::name(sig),
                     m.registers.rsp
                 ));
-                return self.end(i, SIGSEGV, k);
+                return self.end(i, SIGSEGV, fs, k);
             };
             p.sigmask |= action.mask;
             if action.flags & signal::SA_NODEFER == 0 {
@@ -514,7 +516,7 @@ impl<'a> System<'a> {
 
     /// Makes `info.signal` pending for `p` unless it would do nothing (then Linux discards
     /// it at once, if it is not blocked); `SIGCONT` and the stop signals cancel each other.
-    fn post(p: &mut Process<'a>, info: Info) -> bool {
+    fn post(p: &mut Process, info: Info) -> bool {
         let sig = info.signal;
         if sig == signal::SIGCONT || sig == signal::SIGKILL {
             p.pending &= !signal::STOP_SIGNALS;
@@ -546,6 +548,7 @@ impl<'a> System<'a> {
         j: usize,
         sender: Option<usize>,
         info: Info,
+        fs: &mut Fs,
         k: &mut impl Tasks,
     ) -> Option<Outcome> {
         let sig = info.signal;
@@ -587,7 +590,7 @@ impl<'a> System<'a> {
                     slot.process.name(),
                     signal::name(sig)
                 ));
-                self.end(j, sig, k)
+                self.end(j, sig, fs, k)
             }
             Default::Stop => {
                 if let Some(slot) = self.slots[j].as_mut() {
@@ -603,12 +606,18 @@ impl<'a> System<'a> {
     /// Sends signal `sig` (from process `from`, 0 for the guest) to every process of group
     /// `pgid` (the terminal's `SIGINT`, `SIGQUIT`, `SIGTSTP`, a `kill` of a group); `false`
     /// when the group has no process.
-    pub fn signal_group(&mut self, pgid: u32, sig: u32, k: &mut impl Tasks) -> Option<Outcome> {
+    pub fn signal_group(
+        &mut self,
+        pgid: u32,
+        sig: u32,
+        fs: &mut Fs,
+        k: &mut impl Tasks,
+    ) -> Option<Outcome> {
         for j in 0..MAX_PROCESSES {
             let member = self.slots[j]
                 .as_ref()
                 .is_some_and(|s| s.process.pgid == pgid && !matches!(s.state, State::Zombie(_)));
-            if member && let Some(ended) = self.send(j, None, Info::kernel(sig), k) {
+            if member && let Some(ended) = self.send(j, None, Info::kernel(sig), fs, k) {
                 return Some(ended);
             }
         }
@@ -617,7 +626,14 @@ impl<'a> System<'a> {
 
     /// `kill(pid, sig)` by the process in slot `i` (`tkill`/`tgkill`: one process, as every
     /// process has one thread).
-    fn kill(&mut self, i: usize, k: &mut impl Tasks, target: i64, sig: u64) -> SysResult<u64> {
+    fn kill(
+        &mut self,
+        i: usize,
+        fs: &mut Fs,
+        k: &mut impl Tasks,
+        target: i64,
+        sig: u64,
+    ) -> SysResult<u64> {
         if sig > signal::NSIG as u64 {
             return Err(Errno::EINVAL);
         }
@@ -639,7 +655,7 @@ impl<'a> System<'a> {
         }
         for (j, _) in targets.iter().enumerate().filter(|(_, t)| **t) {
             // The caller's own end, if it killed itself, comes when its call returns.
-            if let Some(ended) = self.send(j, Some(i), Info::user(sig as u32, me), k) {
+            if let Some(ended) = self.send(j, Some(i), Info::user(sig as u32, me), fs, k) {
                 self.ended = Some(ended);
             }
         }
@@ -714,26 +730,29 @@ impl<'a> System<'a> {
     fn run(
         &mut self,
         i: usize,
-        fs: &Archive<'a>,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         mut m: ExceptionMessage,
     ) -> Option<Outcome> {
-        let slot = self.slots[i].as_mut()?;
+        let (before, rest) = self.slots.split_at_mut(i);
+        let (slot, after) = rest.split_first_mut()?;
+        let slot = slot.as_mut()?;
+        let others = Others { before, after };
         let pid = slot.process.pid;
         k.select(pid);
         let kept = m;
-        match syscall::handle(&mut slot.process, &mut self.pipes, fs, k, &mut m) {
-            Outcome::Resume => self.resume(i, k, m, None),
+        match syscall::handle(&mut slot.process, &mut self.pipes, fs, &others, k, &mut m) {
+            Outcome::Resume => self.resume(i, fs, k, m, None),
             Outcome::Block => {
                 slot.state = State::Blocked(kept);
                 None
             }
-            Outcome::Exit(code) => self.end(i, exit_status(code), k),
-            Outcome::Killed(signal) => self.end(i, signal, k),
+            Outcome::Exit(code) => self.end(i, exit_status(code), fs, k),
+            Outcome::Killed(signal) => self.end(i, signal, fs, k),
             Outcome::Signal(info) => {
                 slot.process.raise(info);
                 let trap = (m.vector, m.error_code, m.fault_address);
-                self.resume(i, k, m, Some(trap))
+                self.resume(i, fs, k, m, Some(trap))
             }
             Outcome::Process => {
                 let r = &mut m.registers;
@@ -741,18 +760,18 @@ impl<'a> System<'a> {
                 let (flags, vfork_flags) = (args[0], CLONE_VM | CLONE_VFORK | SIGCHLD as u64);
                 let vfork = r.rax == nr::vfork || (r.rax == nr::clone && flags & CLONE_VFORK != 0);
                 let result = match r.rax {
-                    nr::clone => self.fork(i, k, flags, args[1], args[2], args[3], r),
-                    nr::fork => self.fork(i, k, SIGCHLD as u64, 0, 0, 0, r),
-                    nr::vfork => self.fork(i, k, vfork_flags, 0, 0, 0, r),
-                    nr::kill => self.kill(i, k, args[0] as i32 as i64, args[1]),
+                    nr::clone => self.fork(i, fs, k, flags, [args[1], args[2], args[3]], r),
+                    nr::fork => self.fork(i, fs, k, SIGCHLD as u64, [0; 3], r),
+                    nr::vfork => self.fork(i, fs, k, vfork_flags, [0; 3], r),
+                    nr::kill => self.kill(i, fs, k, args[0] as i32 as i64, args[1]),
                     nr::tkill => match args[0] as i32 {
                         t if t <= 0 => Err(Errno::EINVAL),
-                        t => self.kill(i, k, t as i64, args[1]),
+                        t => self.kill(i, fs, k, t as i64, args[1]),
                     },
                     nr::tgkill => match (args[0] as i32, args[1] as i32) {
                         (g, t) if g <= 0 || t <= 0 => Err(Errno::EINVAL),
                         (g, t) if g != t => Err(Errno::ESRCH),
-                        (_, t) => self.kill(i, k, t as i64, args[2]),
+                        (_, t) => self.kill(i, fs, k, t as i64, args[2]),
                     },
                     nr::setpgid => self.setpgid(i, args[0], args[1]),
                     nr::getpgid => self.group_of(i, args[0], false),
@@ -792,11 +811,11 @@ impl<'a> System<'a> {
                                 rflags: m.registers.rflags,
                                 ..Registers::default()
                             };
-                            let ended = self.resume(i, k, m, None);
-                            return ended.or_else(|| self.release_vfork_parent(pid, k));
+                            let ended = self.resume(i, fs, k, m, None);
+                            return ended.or_else(|| self.release_vfork_parent(pid, fs, k));
                         }
                         // The old image is gone and the new one did not load.
-                        Ok(None) => return self.end(i, SIGSEGV, k),
+                        Ok(None) => return self.end(i, SIGSEGV, fs, k),
                         Err(e) => Err(e),
                     },
                 };
@@ -820,21 +839,26 @@ impl<'a> System<'a> {
                     }
                     // Killed itself (or its group): the signal acts before the call returns.
                     _ if self.slots[i].is_none() => None,
-                    _ => self.resume(i, k, m, None),
+                    _ => self.resume(i, fs, k, m, None),
                 }
             }
         }
     }
 
     /// The parent that vforked `child` goes on (the child executed or ended).
-    fn release_vfork_parent(&mut self, child: u32, k: &mut impl Tasks) -> Option<Outcome> {
+    fn release_vfork_parent(
+        &mut self,
+        child: u32,
+        fs: &mut Fs,
+        k: &mut impl Tasks,
+    ) -> Option<Outcome> {
         for i in 0..MAX_PROCESSES {
             if let Some(slot) = self.slots[i].as_mut()
                 && let State::Vforked { child: c, reply } = slot.state
                 && c == child
             {
                 slot.state = State::Running;
-                if let Some(ended) = self.resume(i, k, reply, None) {
+                if let Some(ended) = self.resume(i, fs, k, reply, None) {
                     return Some(ended);
                 }
             }
@@ -843,16 +867,14 @@ impl<'a> System<'a> {
     }
 
     /// `clone` with fork semantics: a new process with a copy of the caller's memory,
-    /// files and registers.
-    #[allow(clippy::too_many_arguments)] // the call's arguments
+    /// files and registers; `[stack, parent_tid, child_tid]` are `clone`'s arguments.
     fn fork(
         &mut self,
         i: usize,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         flags: u64,
-        stack: u64,
-        parent_tid: u64,
-        child_tid: u64,
+        [stack, parent_tid, child_tid]: [u64; 3],
         registers: &Registers,
     ) -> SysResult<u64> {
         const KNOWN: u64 = CLONE_VM
@@ -896,7 +918,7 @@ impl<'a> System<'a> {
         let started = k.now_ns();
         let pages = k.fork(pid, &parent.areas)?;
         let took = k.now_ns().saturating_sub(started);
-        share_files(&child, &mut self.pipes);
+        share_files(&child, &mut self.pipes, fs);
         k.log(format_args!(
             "guest: process {pid} ({}) forked from {}: {pages} pages shared in {} us",
             child.name(),
@@ -999,7 +1021,7 @@ impl<'a> System<'a> {
     fn execve(
         &mut self,
         i: usize,
-        fs: &Archive<'a>,
+        fs: &mut Fs,
         k: &mut impl Tasks,
         path: u64,
         argv: u64,
@@ -1042,10 +1064,20 @@ impl<'a> System<'a> {
         let mut script = [&b""[..]; MAX_STRINGS + 2];
         let mut file = path[0];
         let mut argv: &[&[u8]] = args;
-        let (entry, _) = exec::find(fs, file).map_err(exec_errno)?;
-        if let Some(line) = entry.data.strip_prefix(b"#!") {
-            // A script: its interpreter runs with the script's path after its argument.
+        let (pid, cwd) = (p.pid, p.cwd);
+        let data = exec::find(fs, pid, cwd, file).map_err(exec_errno)?.bytes;
+        // The `#!` line, copied: the file may go before the interpreter loads (as a
+        // close-on-exec descriptor closes).
+        let mut first_line = [0u8; 256];
+        let shebang = data.strip_prefix(b"#!").map(|line| {
             let line = line.split(|&b| b == b'\n').next().unwrap_or_default();
+            let n = line.len().min(first_line.len());
+            first_line[..n].copy_from_slice(&line[..n]);
+            n
+        });
+        if let Some(n) = shebang {
+            // A script: its interpreter runs with the script's path after its argument.
+            let line = &first_line[..n];
             let mut words = line
                 .split(|&b| b == b' ' || b == b'\t')
                 .filter(|w| !w.is_empty());
@@ -1068,10 +1100,9 @@ impl<'a> System<'a> {
             }
             file = interpreter;
             argv = &script[..n];
-            exec::find(fs, file).map_err(exec_errno)?;
         }
-        let (entry, _) = exec::find(fs, file).map_err(exec_errno)?;
-        crate::elf::LoadPlan::new(entry.data).map_err(|_| Errno::ENOEXEC)?;
+        let data = exec::find(fs, pid, cwd, file).map_err(exec_errno)?.bytes;
+        crate::elf::LoadPlan::new(data).map_err(|_| Errno::ENOEXEC)?;
         if argv.len() + env.len() > MAX_STRINGS {
             return Err(Errno::E2BIG);
         }
@@ -1081,9 +1112,9 @@ impl<'a> System<'a> {
         for area in old.areas.iter() {
             k.unmap(area.start, (area.end - area.start) / PAGE);
         }
-        close_files(old, &mut self.pipes, true);
+        close_files(old, &mut self.pipes, fs, true);
         let ids = (old.pid, old.ppid);
-        match exec::load_file(fs, k, ids, file, argv, env, self.hwcap) {
+        match exec::load_file(fs, k, ids, cwd, file, argv, env, self.hwcap) {
             Ok(loaded) => {
                 let mut new = loaded.process;
                 new.files = old.files;
@@ -1122,17 +1153,17 @@ impl<'a> System<'a> {
 
     /// Process in slot `i` ended with wait status `word`: its files close, its task and
     /// memory go, its children become init's, and it stays a zombie for its parent.
-    fn end(&mut self, i: usize, word: u32, k: &mut impl Tasks) -> Option<Outcome> {
+    fn end(&mut self, i: usize, word: u32, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         let slot = self.slots[i].as_mut()?;
         let pid = slot.process.pid;
-        close_files(&mut slot.process, &mut self.pipes, false);
+        close_files(&mut slot.process, &mut self.pipes, fs, false);
         k.release(pid);
         let slot = self.slots[i].as_mut()?;
         slot.state = State::Zombie(word);
         slot.stopped = false;
         slot.report = None;
         if pid != INIT_PID
-            && let Some(ended) = self.release_vfork_parent(pid, k)
+            && let Some(ended) = self.release_vfork_parent(pid, fs, k)
         {
             return Some(ended);
         }
@@ -1166,15 +1197,45 @@ impl<'a> System<'a> {
     }
 
     /// Ends every process (the guest ends).
-    pub fn release_all(&mut self, k: &mut impl Tasks) {
+    pub fn release_all(&mut self, fs: &mut Fs, k: &mut impl Tasks) {
         for slot in self.slots.iter_mut() {
             if let Some(s) = slot.take()
                 && !matches!(s.state, State::Zombie(_))
             {
                 let mut process = s.process;
-                close_files(&mut process, &mut self.pipes, false);
+                close_files(&mut process, &mut self.pipes, fs, false);
                 k.release(process.pid);
             }
+        }
+    }
+}
+
+/// The processes other than the one a call is served for, as `/proc` sees them.
+struct Others<'s> {
+    before: &'s [Option<Slot>],
+    after: &'s [Option<Slot>],
+}
+
+impl Others<'_> {
+    fn slots(&self) -> impl Iterator<Item = &Slot> {
+        self.before.iter().chain(self.after).flatten()
+    }
+}
+
+impl ProcessTable for Others<'_> {
+    fn find(&self, pid: u32) -> Option<ProcInfo<'_>> {
+        let slot = self.slots().find(|s| s.process.pid == pid)?;
+        let state = match slot.state {
+            State::Running | State::Starting(_) => b'R',
+            State::Blocked(_) | State::Vforked { .. } => b'S',
+            State::Zombie(_) => b'Z',
+        };
+        Some(ProcInfo::of(&slot.process, state))
+    }
+
+    fn each_pid(&self, f: &mut dyn FnMut(u32)) {
+        for s in self.slots() {
+            f(s.process.pid);
         }
     }
 }

@@ -1,15 +1,16 @@
-//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mremap`, `mprotect`, `madvise`, and the filling of
-//! file mappings' pages. The calls change the process's areas ([`crate::memory::Areas`]);
-//! no page is backed here: the first access faults it in ([`Host::fault_in`]), a file
-//! mapping's page filled from its file first ([`fill_file_pages`], also before the guest
-//! reads or writes one for a call). They never map a page writable and executable (W^X).
+//! The memory calls of a process: `brk`, `mmap`, `munmap`, `mremap`, `mprotect`,
+//! `madvise`. The calls change the process's areas ([`crate::memory::Areas`]); an
+//! anonymous page is backed when first touched ([`Host::fault_in`]); a file mapping's
+//! pages are filled from the file when it is mapped ([`Host::fill_in`]: POSIX leaves it open
+//! whether a private mapping sees later writes to the file; this one does not). They never
+//! map a page writable and executable (W^X).
 
 use super::{Host, MAX_HEAP, MMAP_BOTTOM, SysResult};
 use crate::linux::{self, Errno};
-use crate::memory::{
-    Area, AreaError, FileSource, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_down, page_up,
-};
+use crate::memory::{Area, AreaError, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_up};
 use crate::process::{File, Process};
+use crate::vfs::Fs;
+use crate::vfs::dev::Device;
 
 /// Linux's `brk`: returns the new break, or the old one if it cannot move there. The heap's
 /// pages are backed when first touched.
@@ -25,7 +26,6 @@ pub(super) fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 
                 end: new_end,
                 rights: Rights::READ | Rights::WRITE,
                 kind: Kind::Heap,
-                file: None,
             })
         } else {
             p.areas.resize(old_end, new_end)
@@ -53,80 +53,11 @@ pub(super) fn area_error(e: AreaError) -> Errno {
     }
 }
 
-/// The bytes of file `file` from `offset` on (as many as fit `buf`; fewer at its end):
-/// what a file mapping's pages are filled with. `ENODEV` for files that cannot be mapped.
-/// (Past the end of the file a mapping reads zeros; Linux would raise SIGBUS for whole
-/// pages past it.)
-fn read_file_at(file: &File, offset: u64, buf: &mut [u8]) -> SysResult<usize> {
-    match file {
-        File::Initramfs { entry, .. } if entry.is_file() => {
-            let start = usize::try_from(offset)
-                .unwrap_or(usize::MAX)
-                .min(entry.data.len());
-            let n = buf.len().min(entry.data.len() - start);
-            buf[..n].copy_from_slice(&entry.data[start..start + n]);
-            Ok(n)
-        }
-        _ => Err(Errno::ENODEV),
-    }
-}
-
-/// Fills the pages of file mappings in `address..address + len` that nothing backs yet
-/// with their files' bytes (pages of other areas, or outside any, are left alone).
-pub(crate) fn fill_file_pages(
-    p: &Process,
-    host: &mut impl Host,
-    address: u64,
-    len: u64,
-) -> SysResult<()> {
-    if len == 0 || p.areas.iter().all(|a| a.file.is_none()) {
-        return Ok(());
-    }
-    let end = address.saturating_add(len);
-    let mut page = page_down(address);
-    while page < end {
-        let source = p.areas.find(page).and_then(|a| a.file_at(page));
-        if let Some(FileSource { slot, offset }) = source
-            && let Some(Some(file)) = p.mapped_files.get(slot as usize)
-        {
-            host.fill_in(page, &mut |bytes| {
-                let _ = read_file_at(file, offset, bytes);
-            })?;
-        }
-        page = match page.checked_add(PAGE) {
-            Some(next) => next,
-            None => break,
-        };
-    }
-    Ok(())
-}
-
-/// A free slot for `file` in the process's mapped files (a slot no area names any more is
-/// free; `ENOMEM` when every one is named).
-fn mapped_file_slot<'a>(p: &mut Process<'a>, file: File<'a>) -> SysResult<u8> {
-    for (slot, mapped) in p.mapped_files.iter_mut().enumerate() {
-        let named = p
-            .areas
-            .iter()
-            .any(|a| a.file.is_some_and(|f| f.slot as usize == slot));
-        if !named {
-            *mapped = None;
-        }
-    }
-    let slot = p
-        .mapped_files
-        .iter()
-        .position(Option::is_none)
-        .ok_or(Errno::ENOMEM)?;
-    p.mapped_files[slot] = Some(file);
-    Ok(slot as u8)
-}
-
 /// Linux's `mmap`: anonymous or file-backed (private; shared read-only, as nothing can
 /// write the files) mappings at a free place (below [`MMAP_TOP`], the hint if it is free),
 /// or at a fixed address (`MAP_FIXED` replaces what was there, `MAP_FIXED_NOREPLACE`
 /// fails with `EEXIST`).
-pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
     let [hint, len, prot, flags, fd, offset] = a;
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
     if rights.writable_and_executable() {
@@ -135,20 +66,40 @@ pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysRes
     if len == 0 || flags & (linux::MAP_SHARED | linux::MAP_PRIVATE) == 0 {
         return Err(Errno::EINVAL);
     }
-    let file = if flags & linux::MAP_ANONYMOUS == 0 {
-        let file = p.file(fd).ok_or(Errno::EBADF)?;
+    // The bytes a file mapping starts with (`None`: zeros, also for `/dev/zero`).
+    let contents: Option<&[u8]> = if flags & linux::MAP_ANONYMOUS == 0 {
+        let Some(File::Open(id)) = p.file(fd) else {
+            return Err(if p.file(fd).is_none() {
+                Errno::EBADF
+            } else {
+                Errno::ENODEV
+            });
+        };
+        let open = fs.description(id).ok_or(Errno::EBADF)?;
         if !offset.is_multiple_of(PAGE) {
             return Err(Errno::EINVAL);
         }
-        read_file_at(&file, 0, &mut [])?;
-        if flags & linux::MAP_SHARED != 0 && rights.contains(Rights::WRITE) {
-            return Err(Errno::EACCES); // no file is open for writing
+        if open.flags & linux::O_ACCMODE == linux::O_WRONLY {
+            return Err(Errno::EACCES);
         }
-        // Files are not writable (yet): a shared mapping cannot tell it is a copy.
-        Some(file)
+        if flags & linux::MAP_SHARED != 0
+            && rights.contains(Rights::WRITE)
+            && open.flags & linux::O_ACCMODE != linux::O_RDWR
+        {
+            return Err(Errno::EACCES);
+        }
+        match fs.device(open.node) {
+            Some(Device::Zero) => None,
+            Some(_) => return Err(Errno::ENODEV),
+            None => Some(fs.file_bytes(open.node).ok_or(Errno::ENODEV)?),
+        }
     } else {
         None
     };
+    if contents.is_some() && flags & linux::MAP_SHARED != 0 && rights.contains(Rights::WRITE) {
+        // Writes through a shared mapping would have to reach the file.
+        return Err(Errno::EACCES);
+    }
     let len = len.checked_add(PAGE - 1).ok_or(Errno::ENOMEM)? & !(PAGE - 1);
     let fixed = flags & (linux::MAP_FIXED | linux::MAP_FIXED_NOREPLACE) != 0;
     let start = if fixed {
@@ -177,22 +128,39 @@ pub(super) fn mmap(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysRes
                 .ok_or(Errno::ENOMEM)?
         }
     };
-    let file = match file {
-        Some(file) => Some(FileSource {
-            slot: mapped_file_slot(p, file)?,
-            offset,
-        }),
-        None => None,
+    let kind = if contents.is_some() {
+        Kind::File
+    } else {
+        Kind::Anonymous
     };
     p.areas
         .insert(Area {
             start,
             end: start + len,
             rights,
-            kind: Kind::Anonymous,
-            file,
+            kind,
         })
         .map_err(area_error)?;
+    if let Some(bytes) = contents {
+        // The file's bytes from `offset` on, zeros after its end.
+        let from = usize::try_from(offset)
+            .unwrap_or(usize::MAX)
+            .min(bytes.len());
+        let bytes = &bytes[from..];
+        let mut page = start;
+        while page < start + len && ((page - start) as usize) < bytes.len() {
+            let at = (page - start) as usize;
+            let piece = &bytes[at..bytes.len().min(at + PAGE as usize)];
+            let filled = host.fill_in(page, &mut |frame| {
+                frame[..piece.len()].copy_from_slice(piece)
+            });
+            if let Err(e) = filled {
+                let _ = munmap(p, host, start, len);
+                return Err(e);
+            }
+            page += PAGE;
+        }
+    }
     Ok(start)
 }
 
@@ -283,7 +251,19 @@ pub(super) fn madvise(
         return Err(Errno::ENOMEM);
     }
     if advice == MADV_DONTNEED {
-        host.unmap(start, (end - start) / PAGE);
+        // Anonymous pages come back zeroed; a file mapping's pages keep their bytes (they
+        // were filled when it was mapped, and a private mapping's own changes stay).
+        let mut at = start;
+        while at < end {
+            let Some(area) = p.areas.find(at) else {
+                break;
+            };
+            let until = area.end.min(end);
+            if area.kind != Kind::File {
+                host.unmap(at, (until - at) / PAGE);
+            }
+            at = until;
+        }
     }
     Ok(0)
 }
@@ -338,7 +318,6 @@ pub(super) fn mremap(
             start: to,
             end: to + new_len,
             kind: Kind::Anonymous,
-            file: area.file_at(old),
             ..area
         })
         .map_err(area_error)?;

@@ -1,0 +1,1273 @@
+//! The file system calls of a process: descriptors (`dup*`, `pipe*`, `close`, `fcntl`),
+//! reading and writing (`read`, `write`, `readv`, `writev`, `pread64`, `pwrite64`,
+//! `sendfile`, `lseek`, `ftruncate`, `truncate`), names (`open`, `openat`, `creat`,
+//! `mkdir*`, `unlink*`, `rmdir`, `rename*`, `symlink*`, `link*`, `readlink*`), status
+//! (`stat`, `lstat`, `fstat`, `newfstatat`, `statx`, `statfs`, `fstatfs`, `access`,
+//! `faccessat*`, `getdents64`), the working directory (`chdir`, `fchdir`, `getcwd`) and
+//! attributes (`chmod`, `fchmod*`; `chown*` and `utime*` are accepted, the owner stays
+//! root). The file system itself is [`crate::vfs`]; this module copies paths and data
+//! between it and the process and never keeps state of its own.
+
+use super::{
+    BROKEN_PIPE, Host, IOV_MAX, MAX_TRANSFER, O_CLOEXEC, SysResult, WOULD_BLOCK, check_user,
+    read_cstr, read_u64, write_user,
+};
+use crate::linux::{self, Errno};
+use crate::memory::Rights;
+use crate::pipe::{Pipes, Transfer};
+use crate::process::{File, MAX_FILES, Process, Stream};
+use crate::signal::{self, Info};
+use crate::tty;
+use crate::vfs::dev::Device;
+use crate::vfs::proc::{self, ProcInfo, ProcessTable, Procs};
+use crate::vfs::{self, Fs, Ino, Node, PATH_MAX, Remove, Stat};
+
+/// What the file calls act on besides the process: the pipes, the file system and the
+/// other processes (`/proc`).
+pub struct Files<'f, 'a> {
+    pub pipes: &'f mut Pipes,
+    pub fs: &'f mut Fs<'a>,
+    pub others: &'f dyn ProcessTable,
+}
+
+/// Bytes moved through the guest per step (a pipe's size: one pipe transfer).
+const CHUNK: usize = crate::pipe::PIPE_SIZE;
+/// `S_IFIFO` (a pipe's `st_mode`).
+const S_IFIFO: u32 = 0o010000;
+/// `struct statfs`'s `f_type` of a tmpfs.
+const TMPFS_MAGIC: u64 = 0x0102_1994;
+
+/// The processes as the calls of `p` see them.
+fn procs<'s>(p: &'s Process, f: &'s Files) -> Procs<'s> {
+    Procs {
+        me: ProcInfo::of(p, b'R'),
+        others: f.others,
+        now_ns: 0,
+        memory: f.fs.memory(),
+        fs_used: f.fs.usage().0 as u64,
+    }
+}
+
+fn seconds(host: &mut impl Host) -> u64 {
+    host.now_ns() / 1_000_000_000
+}
+
+// ---- descriptors ----
+
+/// Closes descriptor `fd` if open (a pipe end or open file description counts one
+/// descriptor less).
+pub fn close(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, fd: usize) {
+    match p.files.get_mut(fd).and_then(Option::take) {
+        Some(File::Pipe { pipe, write, .. }) => pipes.close_end(pipe, write),
+        Some(File::Open(id)) => fs.release(id),
+        _ => {}
+    }
+    if fd < MAX_FILES {
+        p.set_cloexec(fd, false);
+    }
+}
+
+/// Closes every descriptor of `p` and lets its working directory go (it ends), or closes
+/// only the close-on-exec ones (`execve`).
+pub fn close_files(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, only_cloexec: bool) {
+    for fd in 0..MAX_FILES {
+        if !only_cloexec || p.is_cloexec(fd) {
+            close(p, pipes, fs, fd);
+        }
+    }
+    if !only_cloexec {
+        fs.unhold(p.cwd);
+    }
+}
+
+/// Another descriptor of everything `p` has open, and its working directory once more (a
+/// forked child's copies).
+pub fn share_files(p: &Process, pipes: &mut Pipes, fs: &mut Fs) {
+    fs.hold(p.cwd);
+    for file in p.files.iter().flatten() {
+        match *file {
+            File::Pipe { pipe, write, .. } => pipes.add_end(pipe, write),
+            File::Open(id) => fs.share(id),
+            File::Console(_) => {}
+        }
+    }
+}
+
+/// Puts a copy of `file` at the free descriptor `fd`.
+fn duplicate(p: &mut Process, f: &mut Files, file: File, fd: usize, cloexec: bool) {
+    match file {
+        File::Pipe { pipe, write, .. } => f.pipes.add_end(pipe, write),
+        File::Open(id) => f.fs.share(id),
+        File::Console(_) => {}
+    }
+    p.install(fd, file, cloexec);
+}
+
+pub fn close_fd(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
+    p.file(fd).ok_or(Errno::EBADF)?;
+    close(p, f.pipes, f.fs, fd as usize);
+    Ok(0)
+}
+
+pub fn dup(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
+    let file = p.file(fd).ok_or(Errno::EBADF)?;
+    let new = p.free_fd().ok_or(Errno::EMFILE)?;
+    duplicate(p, f, file, new, false);
+    Ok(new as u64)
+}
+
+/// `dup2` (`flags: None`) and `dup3`.
+pub fn dup3(
+    p: &mut Process,
+    f: &mut Files,
+    old: u64,
+    new: u64,
+    flags: Option<u64>,
+) -> SysResult<u64> {
+    let bits = flags.unwrap_or(0);
+    if bits & !O_CLOEXEC != 0 || (flags.is_some() && old == new) {
+        return Err(Errno::EINVAL);
+    }
+    let file = p.file(old).ok_or(Errno::EBADF)?;
+    let fd = usize::try_from(new)
+        .ok()
+        .filter(|&fd| fd < MAX_FILES)
+        .ok_or(Errno::EBADF)?;
+    if old != new {
+        close(p, f.pipes, f.fs, fd);
+        duplicate(p, f, file, fd, bits & O_CLOEXEC != 0);
+    }
+    Ok(fd as u64)
+}
+
+pub fn pipe(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fds: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    if flags & !(O_CLOEXEC | linux::O_NONBLOCK) != 0 {
+        return Err(Errno::EINVAL);
+    }
+    check_user(p, fds, 8, Rights::WRITE)?;
+    let read_fd = p.free_fd().ok_or(Errno::EMFILE)?;
+    let write_fd = p.free_fd_from(read_fd + 1).ok_or(Errno::EMFILE)?;
+    let index = f.pipes.open().ok_or(Errno::ENFILE)?;
+    let cloexec = flags & O_CLOEXEC != 0;
+    for (fd, write) in [(read_fd, false), (write_fd, true)] {
+        let end = File::Pipe {
+            pipe: index,
+            write,
+            nonblock: flags & linux::O_NONBLOCK != 0,
+        };
+        p.install(fd, end, cloexec);
+    }
+    let mut pair = [0u8; 8];
+    pair[..4].copy_from_slice(&(read_fd as u32).to_le_bytes());
+    pair[4..].copy_from_slice(&(write_fd as u32).to_le_bytes());
+    host.write_user(fds, &pair)?;
+    Ok(0)
+}
+
+pub fn fcntl(p: &mut Process, f: &mut Files, fd: u64, cmd: u64, arg: u64) -> SysResult<u64> {
+    const F_DUPFD: u64 = 0;
+    const F_GETFD: u64 = 1;
+    const F_SETFD: u64 = 2;
+    const F_GETFL: u64 = 3;
+    const F_SETFL: u64 = 4;
+    const F_DUPFD_CLOEXEC: u64 = 1030;
+    const FD_CLOEXEC: u64 = 1;
+    let file = p.file(fd).ok_or(Errno::EBADF)?;
+    let fd = fd as usize;
+    match cmd {
+        F_DUPFD | F_DUPFD_CLOEXEC => {
+            let low = usize::try_from(arg)
+                .ok()
+                .filter(|&low| low < MAX_FILES)
+                .ok_or(Errno::EINVAL)?;
+            let new = p.free_fd_from(low).ok_or(Errno::EMFILE)?;
+            duplicate(p, f, file, new, cmd == F_DUPFD_CLOEXEC);
+            Ok(new as u64)
+        }
+        F_GETFD => Ok(if p.is_cloexec(fd) { FD_CLOEXEC } else { 0 }),
+        F_SETFD => {
+            p.set_cloexec(fd, arg & FD_CLOEXEC != 0);
+            Ok(0)
+        }
+        // O_NONBLOCK of a pipe end (this descriptor's: Linux shares it with the
+        // descriptors dup'ed from it); O_APPEND and O_NONBLOCK of an open file
+        // description (shared).
+        F_SETFL => {
+            match file {
+                File::Pipe { pipe, write, .. } => {
+                    let nonblock = arg & linux::O_NONBLOCK != 0;
+                    p.files[fd] = Some(File::Pipe {
+                        pipe,
+                        write,
+                        nonblock,
+                    });
+                }
+                File::Open(id) => {
+                    const CHANGEABLE: u64 = linux::O_APPEND | linux::O_NONBLOCK;
+                    if let Some(o) = f.fs.description_mut(id) {
+                        o.flags = (o.flags & !CHANGEABLE) | (arg & CHANGEABLE);
+                    }
+                }
+                File::Console(_) => {}
+            }
+            Ok(0)
+        }
+        F_GETFL => Ok(match file {
+            File::Console(_) => linux::O_RDWR,
+            File::Open(id) => f.fs.description(id).map_or(0, |o| o.flags),
+            File::Pipe {
+                write, nonblock, ..
+            } => {
+                let access = if write { linux::O_WRONLY } else { 0 };
+                access | if nonblock { linux::O_NONBLOCK } else { 0 }
+            }
+        }),
+        _ => Err(Errno::EINVAL),
+    }
+}
+
+// ---- reading and writing ----
+
+/// Reads from `fd` into `buf` (at most one pipe's worth from a pipe), at `at` or (`None`)
+/// at the description's offset, which then moves.
+fn read_kernel(
+    p: &Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    buf: &mut [u8],
+    at: Option<u64>,
+) -> SysResult<usize> {
+    match p.file(fd).ok_or(Errno::EBADF)? {
+        File::Console(_) if at.is_some() => Err(Errno::ESPIPE),
+        File::Console(_) => Ok(0), // served by `console_read`
+        File::Pipe { write: true, .. } => Err(Errno::EBADF),
+        File::Pipe { .. } if at.is_some() => Err(Errno::ESPIPE),
+        File::Pipe { pipe, nonblock, .. } => match f.pipes.read(pipe, buf) {
+            Transfer::Done(n) => Ok(n),
+            Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
+            Transfer::WouldBlock => Err(WOULD_BLOCK),
+            Transfer::Broken => Err(Errno::EBADF),
+        },
+        File::Open(id) => {
+            let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+            if o.flags & linux::O_ACCMODE == linux::O_WRONLY {
+                return Err(Errno::EBADF);
+            }
+            let node = o.node;
+            if f.fs.is_dir(node) {
+                return Err(Errno::EISDIR);
+            }
+            match f.fs.device(node) {
+                Some(Device::Null) => return Ok(0),
+                Some(Device::Zero) => {
+                    buf.fill(0);
+                    return Ok(buf.len());
+                }
+                Some(Device::Urandom | Device::Random) => {
+                    host.random(buf);
+                    return Ok(buf.len());
+                }
+                Some(Device::Console | Device::Tty) | None => {}
+            }
+            let offset = at.unwrap_or(o.offset);
+            let bytes = match &o.snapshot {
+                Some(s) => &s[..],
+                None => f.fs.file_bytes(node).ok_or(Errno::EINVAL)?,
+            };
+            let start = offset.min(bytes.len() as u64) as usize;
+            let n = buf.len().min(bytes.len() - start);
+            buf[..n].copy_from_slice(&bytes[start..start + n]);
+            if at.is_none()
+                && let Some(o) = f.fs.description_mut(id)
+            {
+                o.offset = offset + n as u64;
+            }
+            Ok(n)
+        }
+    }
+}
+
+/// Writes `data` to `fd`, at `at` or (`None`) at the description's offset (its end with
+/// `O_APPEND`), which then moves.
+fn write_kernel(
+    p: &Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    data: &[u8],
+    at: Option<u64>,
+) -> SysResult<usize> {
+    match p.file(fd).ok_or(Errno::EBADF)? {
+        File::Console(_) if at.is_some() => Err(Errno::ESPIPE),
+        File::Console(stream) => {
+            host.console_write(p.pid, stream, data);
+            Ok(data.len())
+        }
+        File::Pipe { write: false, .. } => Err(Errno::EBADF),
+        File::Pipe { .. } if at.is_some() => Err(Errno::ESPIPE),
+        File::Pipe { pipe, nonblock, .. } => match f.pipes.write(pipe, data) {
+            Transfer::Done(n) => Ok(n),
+            Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
+            Transfer::WouldBlock => Err(WOULD_BLOCK),
+            Transfer::Broken => Err(BROKEN_PIPE),
+        },
+        File::Open(id) => {
+            let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+            if o.flags & linux::O_ACCMODE == 0 {
+                return Err(Errno::EBADF);
+            }
+            let node = o.node;
+            if f.fs.device(node).is_some() {
+                return Ok(data.len()); // null, zero, random: swallowed
+            }
+            let offset = if o.flags & linux::O_APPEND != 0 {
+                f.fs.stat(node).size
+            } else {
+                at.unwrap_or(o.offset)
+            };
+            let now = seconds(host);
+            let n = f.fs.write(node, offset, data, now)?;
+            if at.is_none()
+                && let Some(o) = f.fs.description_mut(id)
+            {
+                o.offset = offset + n as u64;
+            }
+            Ok(n)
+        }
+    }
+}
+
+/// Whether reading or writing `fd` may go on after a full step (files, devices and the
+/// console; a pipe moves at most one step per call, what it holds or has room for).
+fn streams(p: &Process, fd: u64) -> bool {
+    !matches!(p.file(fd), Some(File::Pipe { .. }))
+}
+
+/// A `read` of the console: the terminal's input ([`crate::tty`]; waits for it), or end of
+/// file when the console is the log. A background job reading its terminal gets SIGTTIN,
+/// which stops it; the read starts again when it is continued (in the foreground). EIO
+/// when that signal would not stop it.
+fn console_read(p: &mut Process, host: &mut impl Host, buf: u64, count: u64) -> SysResult<u64> {
+    let n = (count as usize).min(tty::INPUT_MAX);
+    check_user(p, buf, n, Rights::WRITE)?;
+    let Some(tty) = host.tty() else {
+        return Ok(0);
+    };
+    if tty.session() == p.sid && tty.foreground() != p.pgid {
+        let ttin = signal::SIGTTIN;
+        if p.action(ttin).ignores(ttin) || p.sigmask & signal::bit(ttin) != 0 {
+            return Err(Errno::EIO);
+        }
+        p.raise(Info::kernel(ttin));
+        return Err(WOULD_BLOCK);
+    }
+    let mut bytes = [0u8; tty::INPUT_MAX];
+    let n = tty.read(&mut bytes[..n]).ok_or(WOULD_BLOCK)?;
+    host.write_user(buf, &bytes[..n])?;
+    Ok(n as u64)
+}
+
+/// `read` (`at: None`) and `pread64`.
+pub fn read(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+    at: Option<u64>,
+) -> SysResult<u64> {
+    if at.is_none() && matches!(p.file(fd), Some(File::Console(_))) {
+        return console_read(p, host, buf, count);
+    }
+    let total = (count as usize).min(MAX_TRANSFER);
+    check_user(p, buf, total, Rights::WRITE)?;
+    let mut chunk = [0u8; CHUNK];
+    let mut done = 0;
+    loop {
+        let want = (total - done).min(CHUNK);
+        let n = match read_kernel(
+            p,
+            f,
+            host,
+            fd,
+            &mut chunk[..want],
+            at.map(|a| a + done as u64),
+        ) {
+            Ok(n) => n,
+            Err(WOULD_BLOCK | BROKEN_PIPE) if done > 0 => break,
+            Err(e) => return Err(e),
+        };
+        host.write_user(buf + done as u64, &chunk[..n])?;
+        done += n;
+        if n < want || done == total || !streams(p, fd) {
+            break;
+        }
+    }
+    Ok(done as u64)
+}
+
+/// `write` (`at: None`) and `pwrite64`.
+pub fn write(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+    at: Option<u64>,
+) -> SysResult<u64> {
+    let total = (count as usize).min(MAX_TRANSFER);
+    check_user(p, buf, total, Rights::READ)?;
+    p.file(fd).ok_or(Errno::EBADF)?;
+    let mut chunk = [0u8; CHUNK];
+    let mut done = 0;
+    while done < total {
+        let want = (total - done).min(CHUNK);
+        host.read_user(buf + done as u64, &mut chunk[..want])?;
+        let n = match write_kernel(p, f, host, fd, &chunk[..want], at.map(|a| a + done as u64)) {
+            Ok(n) => n,
+            // What moved already counts.
+            Err(_) if done > 0 => break,
+            Err(e) => return Err(e),
+        };
+        done += n;
+        if n < want || !streams(p, fd) {
+            break;
+        }
+    }
+    Ok(done as u64)
+}
+
+pub fn vectored(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    is_write: bool,
+    fd: u64,
+    iov: u64,
+    count: u64,
+) -> SysResult<u64> {
+    if count > IOV_MAX {
+        return Err(Errno::EINVAL);
+    }
+    p.file(fd).ok_or(Errno::EBADF)?;
+    let mut total = 0u64;
+    for i in 0..count {
+        let base = read_u64(p, host, iov + i * 16)?;
+        let len = read_u64(p, host, iov + i * 16 + 8)?;
+        if len == 0 {
+            continue;
+        }
+        let n = match if is_write {
+            write(p, f, host, fd, base, len, None)
+        } else {
+            read(p, f, host, fd, base, len, None)
+        } {
+            Ok(n) => n,
+            // What moved already counts; the rest waits for the next call.
+            Err(WOULD_BLOCK | BROKEN_PIPE) if total > 0 => break,
+            Err(e) => return Err(e),
+        };
+        total += n;
+        if n < len {
+            break;
+        }
+    }
+    Ok(total)
+}
+
+/// `sendfile`: from a file (or device) at its offset or at `*offset_ptr`, to any
+/// writable descriptor, one step per call (callers loop).
+pub fn sendfile(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    out_fd: u64,
+    in_fd: u64,
+    offset_ptr: u64,
+    count: u64,
+) -> SysResult<u64> {
+    let writable = match p.file(out_fd).ok_or(Errno::EBADF)? {
+        File::Console(_) | File::Pipe { write: true, .. } => true,
+        File::Pipe { .. } => false,
+        File::Open(id) => {
+            f.fs.description(id)
+                .is_some_and(|o| o.flags & linux::O_ACCMODE != 0)
+        }
+    };
+    if !writable {
+        return Err(Errno::EBADF);
+    }
+    let File::Open(id) = p.file(in_fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::EINVAL); // pipes and the console cannot be sent from
+    };
+    let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+    if f.fs.is_dir(o.node) {
+        return Err(Errno::EINVAL);
+    }
+    let from = if offset_ptr != 0 {
+        read_u64(p, host, offset_ptr)?
+    } else {
+        o.offset
+    };
+    let mut chunk = [0u8; CHUNK];
+    let want = (count as usize).min(CHUNK);
+    // Read without moving the offset: a write that waits leaves everything unchanged.
+    let n = read_kernel(p, f, host, in_fd, &mut chunk[..want], Some(from))?;
+    if n == 0 {
+        return Ok(0);
+    }
+    let written = write_kernel(p, f, host, out_fd, &chunk[..n], None)?;
+    let to = from + written as u64;
+    if offset_ptr != 0 {
+        write_user(p, host, offset_ptr, &to.to_le_bytes())?;
+    } else if let Some(o) = f.fs.description_mut(id) {
+        o.offset = to;
+    }
+    Ok(written as u64)
+}
+
+pub fn lseek(p: &mut Process, f: &mut Files, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
+    let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::ESPIPE);
+    };
+    let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+    let size = match &o.snapshot {
+        Some(s) => s.len() as u64,
+        None => f.fs.stat(o.node).size,
+    };
+    let is_dir = f.fs.is_dir(o.node);
+    let base = match whence {
+        0 => 0,
+        1 => o.offset as i64,
+        2 => size as i64,
+        _ => return Err(Errno::EINVAL),
+    };
+    let new = base
+        .checked_add(offset)
+        .filter(|&n| n >= 0)
+        .ok_or(Errno::EINVAL)?;
+    if is_dir && new != o.offset as i64 {
+        // A directory's offset counts entries: only its start can be sought (and where it
+        // is, told).
+        if new != 0 {
+            return Err(Errno::EINVAL);
+        }
+        f.fs.set_cursor(id, None)?;
+    }
+    if let Some(o) = f.fs.description_mut(id) {
+        o.offset = new as u64;
+    }
+    Ok(new as u64)
+}
+
+/// `ftruncate`.
+pub fn ftruncate(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    len: u64,
+) -> SysResult<u64> {
+    let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::EINVAL);
+    };
+    let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+    if o.flags & linux::O_ACCMODE == 0 {
+        return Err(Errno::EINVAL);
+    }
+    let node = o.node;
+    if (len as i64) < 0 {
+        return Err(Errno::EINVAL);
+    }
+    let now = seconds(host);
+    f.fs.truncate(node, len, now)?;
+    Ok(0)
+}
+
+/// `truncate`.
+pub fn truncate(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    path: u64,
+    len: u64,
+) -> SysResult<u64> {
+    let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?;
+    if (len as i64) < 0 {
+        return Err(Errno::EINVAL);
+    }
+    let now = seconds(host);
+    f.fs.truncate(node, len, now)?;
+    Ok(0)
+}
+
+// ---- names ----
+
+/// The directory relative paths of `*at` calls start from: `dirfd`'s, or the working
+/// directory (`AT_FDCWD`).
+fn base(p: &Process, f: &Files, dirfd: u64, path: &[u8]) -> SysResult<Node> {
+    if path.first() == Some(&b'/') || dirfd as u32 as i32 as i64 == linux::AT_FDCWD {
+        return Ok(p.cwd);
+    }
+    match p.file(dirfd).ok_or(Errno::EBADF)? {
+        File::Open(id) => {
+            let node = f.fs.description(id).ok_or(Errno::EBADF)?.node;
+            if f.fs.is_dir(node) {
+                Ok(node)
+            } else {
+                Err(Errno::ENOTDIR)
+            }
+        }
+        _ => Err(Errno::ENOTDIR),
+    }
+}
+
+/// The node path `path` of the process names, from `dirfd`.
+fn resolve(
+    p: &Process,
+    f: &Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    follow: bool,
+) -> SysResult<Node> {
+    let mut buf = [0u8; PATH_MAX];
+    let text = read_cstr(p, host, path, &mut buf)?;
+    let start = base(p, f, dirfd, text)?;
+    f.fs.lookup(&procs(p, f), start, text, follow)
+}
+
+/// The directory that holds the last component of `path` (from `dirfd`), and that name
+/// (in `buf`).
+fn resolve_parent<'b>(
+    p: &Process,
+    f: &Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    buf: &'b mut [u8; PATH_MAX],
+) -> SysResult<(Ino, &'b [u8])> {
+    let text = read_cstr(p, host, path, buf)?;
+    let start = base(p, f, dirfd, text)?;
+    f.fs.lookup_parent(&procs(p, f), start, text)
+}
+
+/// `openat` (and `open`, `creat`).
+pub fn openat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    flags: u64,
+    mode: u64,
+) -> SysResult<u64> {
+    const KEPT: u64 = linux::O_ACCMODE | linux::O_APPEND | linux::O_NONBLOCK;
+    let access = flags & linux::O_ACCMODE;
+    if access == linux::O_ACCMODE {
+        return Err(Errno::EINVAL);
+    }
+    let fd = p.free_fd().ok_or(Errno::EMFILE)?;
+    let mut buf = [0u8; PATH_MAX];
+    let text = read_cstr(p, host, path, &mut buf)?;
+    let start = base(p, f, dirfd, text)?;
+    let create = flags & linux::O_CREAT != 0;
+    let exclusive = create && flags & linux::O_EXCL != 0;
+    let follow = flags & linux::O_NOFOLLOW == 0 && !exclusive;
+    let found = f.fs.lookup(&procs(p, f), start, text, follow);
+    let node = match found {
+        Ok(_) if exclusive => return Err(Errno::EEXIST),
+        Ok(node) => node,
+        Err(Errno::ENOENT) if create => {
+            if text.last() == Some(&b'/') {
+                return Err(Errno::EISDIR);
+            }
+            let (dir, name) = f.fs.lookup_parent(&procs(p, f), start, text)?;
+            if f.fs.get(dir, name).is_some() {
+                // A link to a missing file: Linux creates the target; not here.
+                return Err(Errno::ENOENT);
+            }
+            let now = seconds(host);
+            let mode = mode as u32 & !p.umask & 0o7777;
+            Node::Inode(f.fs.create(dir, name, mode, now)?)
+        }
+        Err(e) => return Err(e),
+    };
+    if f.fs.is_symlink(node) {
+        return Err(Errno::ELOOP); // O_NOFOLLOW on a link
+    }
+    let is_dir = f.fs.is_dir(node);
+    if flags & linux::O_DIRECTORY != 0 && !is_dir {
+        return Err(Errno::ENOTDIR);
+    }
+    if is_dir && access != 0 {
+        return Err(Errno::EISDIR);
+    }
+    let cloexec = flags & O_CLOEXEC != 0;
+    if let Some(device) = f.fs.device(node)
+        && device.is_console()
+    {
+        p.install(fd, File::Console(Stream::Stdout), cloexec);
+        return Ok(fd as u64);
+    }
+    let snapshot = match node {
+        Node::Proc(n) => {
+            if access != 0 {
+                return Err(Errno::EACCES);
+            }
+            if proc::is_dir(n) {
+                None
+            } else {
+                let mut procs = procs(p, f);
+                procs.now_ns = host.now_ns();
+                Some(proc::contents(n, &procs).ok_or(Errno::ENOENT)?)
+            }
+        }
+        Node::Inode(_) => None,
+    };
+    if flags & linux::O_TRUNC != 0 && access != 0 && f.fs.file_bytes(node).is_some() {
+        let now = seconds(host);
+        f.fs.truncate(node, 0, now)?;
+    }
+    let id = f.fs.open(node, flags & KEPT, snapshot)?;
+    p.install(fd, File::Open(id), cloexec);
+    Ok(fd as u64)
+}
+
+pub fn mkdirat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    mode: u64,
+) -> SysResult<u64> {
+    let mut buf = [0u8; PATH_MAX];
+    let (dir, name) = match resolve_parent(p, f, host, dirfd, path, &mut buf) {
+        Err(Errno::EINVAL | Errno::EBUSY) => return Err(Errno::EEXIST), // ".", "..", "/"
+        r => r?,
+    };
+    let now = seconds(host);
+    f.fs.mkdir(dir, name, mode as u32 & !p.umask & 0o7777, now)?;
+    Ok(0)
+}
+
+/// `unlinkat` (`AT_REMOVEDIR`: `rmdir`), `unlink`, `rmdir`.
+pub fn unlinkat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    if flags & !linux::AT_REMOVEDIR != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let mut buf = [0u8; PATH_MAX];
+    let (dir, name) = resolve_parent(p, f, host, dirfd, path, &mut buf)?;
+    let what = if flags & linux::AT_REMOVEDIR != 0 {
+        Remove::Dir
+    } else {
+        Remove::File
+    };
+    let now = seconds(host);
+    f.fs.remove(dir, name, what, now)?;
+    Ok(0)
+}
+
+/// `renameat2` (`RENAME_NOREPLACE` only), `renameat`, `rename`.
+#[allow(clippy::too_many_arguments)] // the call's arguments
+pub fn renameat2(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    old_dirfd: u64,
+    old: u64,
+    new_dirfd: u64,
+    new: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const RENAME_NOREPLACE: u64 = 1;
+    if flags & !RENAME_NOREPLACE != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let mut from_buf = [0u8; PATH_MAX];
+    let mut to_buf = [0u8; PATH_MAX];
+    let (from_dir, from) = resolve_parent(p, f, host, old_dirfd, old, &mut from_buf)?;
+    let (to_dir, to) = resolve_parent(p, f, host, new_dirfd, new, &mut to_buf)?;
+    let now = seconds(host);
+    f.fs.rename(
+        from_dir,
+        from,
+        to_dir,
+        to,
+        flags & RENAME_NOREPLACE != 0,
+        now,
+    )?;
+    Ok(0)
+}
+
+pub fn symlinkat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    target: u64,
+    dirfd: u64,
+    path: u64,
+) -> SysResult<u64> {
+    let mut target_buf = [0u8; PATH_MAX];
+    let target = read_cstr(p, host, target, &mut target_buf)?;
+    let mut buf = [0u8; PATH_MAX];
+    let (dir, name) = resolve_parent(p, f, host, dirfd, path, &mut buf)?;
+    let now = seconds(host);
+    f.fs.symlink(dir, name, target, now)?;
+    Ok(0)
+}
+
+/// `linkat` (and `link`: links not followed).
+#[allow(clippy::too_many_arguments)] // the call's arguments
+pub fn linkat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    old_dirfd: u64,
+    old: u64,
+    new_dirfd: u64,
+    new: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    if flags & !linux::AT_SYMLINK_FOLLOW != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let follow = flags & linux::AT_SYMLINK_FOLLOW != 0;
+    let node = resolve(p, f, host, old_dirfd, old, follow)?;
+    let mut buf = [0u8; PATH_MAX];
+    let (dir, name) = resolve_parent(p, f, host, new_dirfd, new, &mut buf)?;
+    let now = seconds(host);
+    f.fs.link(node, dir, name, now)?;
+    Ok(0)
+}
+
+#[allow(clippy::too_many_arguments)] // the system call's arguments
+pub fn readlinkat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    buf: u64,
+    size: u64,
+) -> SysResult<u64> {
+    if size as i64 <= 0 {
+        return Err(Errno::EINVAL);
+    }
+    let node = resolve(p, f, host, dirfd, path, false)?;
+    let mut scratch = [0u8; 280];
+    let procs = procs(p, f);
+    let target = f.fs.link_target(&procs, node, &mut scratch)?;
+    let n = target.len().min(size as usize);
+    write_user(p, host, buf, &target[..n])?;
+    Ok(n as u64)
+}
+
+// ---- status ----
+
+/// The status of what descriptor `fd` refers to.
+fn stat_fd(p: &Process, f: &Files, fd: u64) -> SysResult<Stat> {
+    Ok(match p.file(fd).ok_or(Errno::EBADF)? {
+        File::Console(_) => Stat {
+            ino: 0x3000_0001,
+            nlink: 1,
+            mode: crate::cpio::S_IFCHR | 0o620,
+            rdev: Device::Console.rdev(),
+            ..Stat::default()
+        },
+        File::Open(id) => f.fs.stat(f.fs.description(id).ok_or(Errno::EBADF)?.node),
+        File::Pipe { pipe, .. } => Stat {
+            ino: 0x2000_0000 + pipe as u64,
+            nlink: 1,
+            mode: S_IFIFO | 0o600,
+            ..Stat::default()
+        },
+    })
+}
+
+/// The status for `newfstatat` and `statx`: of `path` from `dirfd`, or of `dirfd`
+/// itself with `AT_EMPTY_PATH` and an empty path.
+fn stat_at(
+    p: &Process,
+    f: &Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    flags: u64,
+) -> SysResult<Stat> {
+    if flags & linux::AT_EMPTY_PATH != 0 {
+        let mut b = [0u8; 1];
+        if read_cstr(p, host, path, &mut b).is_ok_and(|s| s.is_empty()) {
+            return stat_fd(p, f, dirfd);
+        }
+    }
+    let follow = flags & linux::AT_SYMLINK_NOFOLLOW == 0;
+    let node = resolve(p, f, host, dirfd, path, follow)?;
+    Ok(f.fs.stat(node))
+}
+
+/// `stat` and `lstat`.
+pub fn stat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    path: u64,
+    buf: u64,
+    follow: bool,
+) -> SysResult<u64> {
+    let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, follow)?;
+    let st = f.fs.stat(node);
+    write_user(p, host, buf, &st.to_bytes())?;
+    Ok(0)
+}
+
+pub fn fstat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+) -> SysResult<u64> {
+    let st = stat_fd(p, f, fd)?;
+    write_user(p, host, buf, &st.to_bytes())?;
+    Ok(0)
+}
+
+pub fn newfstatat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    buf: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    let st = stat_at(p, f, host, dirfd, path, flags)?;
+    write_user(p, host, buf, &st.to_bytes())?;
+    Ok(0)
+}
+
+pub fn statx(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    flags: u64,
+    buf: u64,
+) -> SysResult<u64> {
+    let st = stat_at(p, f, host, dirfd, path, flags)?;
+    write_user(p, host, buf, &st.to_statx())?;
+    Ok(0)
+}
+
+/// `statfs` (`fd: None`) and `fstatfs`: one tmpfs, its blocks the byte limit.
+pub fn statfs(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    path: u64,
+    fd: Option<u64>,
+    buf: u64,
+) -> SysResult<u64> {
+    match fd {
+        Some(fd) => {
+            stat_fd(p, f, fd)?;
+        }
+        None => {
+            resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?;
+        }
+    }
+    let (used, limit) = f.fs.usage();
+    let blocks = (limit / 4096) as u64;
+    let free = (limit.saturating_sub(used) / 4096) as u64;
+    let mut b = [0u8; 120];
+    for (i, v) in [
+        TMPFS_MAGIC,
+        4096,
+        blocks,
+        free,
+        free,
+        0,
+        0,
+        0,
+        vfs::NAME_MAX as u64,
+        4096,
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        b[i * 8..i * 8 + 8].copy_from_slice(&v.to_le_bytes());
+    }
+    write_user(p, host, buf, &b)?;
+    Ok(0)
+}
+
+/// `faccessat` (and `access`, `faccessat2`): every process is root, so only existence
+/// and, for `X_OK`, an execute bit of a non-directory count.
+pub fn access(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    dirfd: u64,
+    path: u64,
+    mode: u64,
+) -> SysResult<u64> {
+    const W_OK: u64 = 2;
+    const X_OK: u64 = 1;
+    if mode & !7 != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let node = resolve(p, f, host, dirfd, path, true)?;
+    if mode & W_OK != 0 && matches!(node, Node::Proc(_)) {
+        return Err(Errno::EACCES);
+    }
+    if mode & X_OK != 0 && !f.fs.is_dir(node) && f.fs.mode(node) & 0o111 == 0 {
+        return Err(Errno::EACCES);
+    }
+    Ok(0)
+}
+
+/// `getdents64`: the directory's entries from its position (`.`, `..`, then its entries
+/// in name order) as `struct linux_dirent64` records, as many as fit in `count` bytes.
+pub fn getdents64(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    count: u64,
+) -> SysResult<u64> {
+    const HEADER: usize = 19; // d_ino, d_off, d_reclen, d_type
+    let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::ENOTDIR);
+    };
+    let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+    let dir = o.node;
+    if !f.fs.is_dir(dir) {
+        return Err(Errno::ENOTDIR);
+    }
+    let mut index = o.offset;
+    let mut last = [0u8; vfs::NAME_MAX];
+    let mut last_len = None;
+    if let Some(name) = f.fs.cursor(id) {
+        last[..name.len()].copy_from_slice(name);
+        last_len = Some(name.len());
+    }
+    let listing = match dir {
+        Node::Proc(n) => proc::entries(n, &procs(p, f)),
+        Node::Inode(_) => alloc::vec::Vec::new(),
+    };
+    let mut written = 0usize;
+    let mut record = [0u8; HEADER + vfs::NAME_MAX + 1 + 8];
+    loop {
+        let (name, node): (&[u8], Node) = match (index, dir) {
+            (0, _) => (b".", dir),
+            (1, _) => (b"..", f.fs.parent(dir)),
+            (_, Node::Proc(_)) => match listing.get(index as usize - 2) {
+                Some((name, node)) => (name, Node::Proc(*node)),
+                None => break,
+            },
+            (_, Node::Inode(ino)) => match f.fs.next_entry(ino, last_len.map(|l| &last[..l])) {
+                Some(e) => e,
+                None => break,
+            },
+        };
+        let st = f.fs.stat(node);
+        // DT_* is the file type's top four bits.
+        let kind = (st.mode >> 12) as u8;
+        let length = (HEADER + name.len() + 1).next_multiple_of(8);
+        if written + length > count as usize {
+            if written == 0 {
+                return Err(Errno::EINVAL); // the buffer cannot hold one record
+            }
+            break;
+        }
+        record[..length].fill(0);
+        record[..8].copy_from_slice(&st.ino.to_le_bytes());
+        record[8..16].copy_from_slice(&(index + 1).to_le_bytes());
+        record[16..18].copy_from_slice(&(length as u16).to_le_bytes());
+        record[18] = kind;
+        record[HEADER..HEADER + name.len()].copy_from_slice(name);
+        if index >= 2 && matches!(dir, Node::Inode(_)) {
+            let n = name.len().min(last.len());
+            last[..n].copy_from_slice(&name[..n]);
+            last_len = Some(n);
+        }
+        write_user(p, host, buf + written as u64, &record[..length])?;
+        written += length;
+        index += 1;
+    }
+    f.fs.set_cursor(id, last_len.map(|l| &last[..l]))?;
+    if let Some(o) = f.fs.description_mut(id) {
+        o.offset = index;
+    }
+    Ok(written as u64)
+}
+
+// ---- the working directory and attributes ----
+
+pub fn chdir(p: &mut Process, f: &mut Files, host: &mut impl Host, path: u64) -> SysResult<u64> {
+    let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?;
+    if !f.fs.is_dir(node) {
+        return Err(Errno::ENOTDIR);
+    }
+    set_cwd(p, f, node);
+    Ok(0)
+}
+
+pub fn fchdir(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
+    let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
+        return Err(Errno::ENOTDIR);
+    };
+    let node = f.fs.description(id).ok_or(Errno::EBADF)?.node;
+    if !f.fs.is_dir(node) {
+        return Err(Errno::ENOTDIR);
+    }
+    set_cwd(p, f, node);
+    Ok(0)
+}
+
+fn set_cwd(p: &mut Process, f: &mut Files, node: Node) {
+    f.fs.hold(node);
+    f.fs.unhold(p.cwd);
+    p.cwd = node;
+}
+
+pub fn getcwd(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    buf: u64,
+    size: u64,
+) -> SysResult<u64> {
+    let path = f.fs.path_of(p.cwd)?;
+    let text = path.as_str().as_bytes();
+    let len = text.len() + 2; // the leading '/' and the NUL
+    if (size as usize) < len {
+        return Err(Errno::ERANGE);
+    }
+    let mut out = [0u8; 258];
+    out[0] = b'/';
+    out[1..1 + text.len()].copy_from_slice(text);
+    write_user(p, host, buf, &out[..len])?;
+    Ok(len as u64)
+}
+
+/// `fchmodat` (and `chmod`), or `fchmod` (`fd`).
+pub fn chmod(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    target: Target,
+    mode: u64,
+) -> SysResult<u64> {
+    let node = target.node(p, f, host)?;
+    f.fs.chmod(node, mode as u32)?;
+    Ok(0)
+}
+
+/// `chown`, `utimensat` and their relatives: the node must exist; the owner stays root.
+/// `utimensat` sets the modification time (`times` null: now).
+pub fn utimensat(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    target: Target,
+    times: u64,
+) -> SysResult<u64> {
+    const UTIME_NOW: u64 = (1 << 30) - 1;
+    const UTIME_OMIT: u64 = (1 << 30) - 2;
+    let node = target.node(p, f, host)?;
+    let mtime = if times == 0 {
+        Some(seconds(host))
+    } else {
+        let seconds_field = read_u64(p, host, times + 16)?;
+        match read_u64(p, host, times + 24)? {
+            UTIME_OMIT => None,
+            UTIME_NOW => Some(seconds(host)),
+            _ => Some(seconds_field),
+        }
+    };
+    if let Some(t) = mtime {
+        f.fs.set_mtime(node, t);
+    }
+    Ok(0)
+}
+
+/// What an attribute call names: a path from a directory, or a descriptor.
+#[derive(Clone, Copy)]
+pub enum Target {
+    Path { dirfd: u64, path: u64, follow: bool },
+    Fd(u64),
+}
+
+impl Target {
+    /// `*at` calls: a null or (with `AT_EMPTY_PATH`) empty path names `dirfd` itself.
+    pub fn at(dirfd: u64, path: u64, flags: u64) -> Self {
+        if path == 0 {
+            return Target::Fd(dirfd);
+        }
+        Target::Path {
+            dirfd,
+            path,
+            follow: flags & linux::AT_SYMLINK_NOFOLLOW == 0,
+        }
+    }
+
+    pub fn path(path: u64, follow: bool) -> Self {
+        Target::Path {
+            dirfd: linux::AT_FDCWD as u64,
+            path,
+            follow,
+        }
+    }
+
+    fn node(self, p: &Process, f: &Files, host: &mut impl Host) -> SysResult<Node> {
+        match self {
+            Target::Fd(fd) => match p.file(fd).ok_or(Errno::EBADF)? {
+                File::Open(id) => Ok(f.fs.description(id).ok_or(Errno::EBADF)?.node),
+                _ => Err(Errno::EPERM),
+            },
+            Target::Path {
+                dirfd,
+                path,
+                follow,
+            } => resolve(p, f, host, dirfd, path, follow),
+        }
+    }
+}
+
+/// `fchownat` and relatives: accepted for existing nodes (no owners but root).
+pub fn chown(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    target: Target,
+) -> SysResult<u64> {
+    target.node(p, f, host)?;
+    Ok(0)
+}
+
+/// `fsync`, `fdatasync`, `syncfs`, `fadvise64`: nothing to do for a valid descriptor.
+pub fn nothing(p: &mut Process, fd: u64) -> SysResult<u64> {
+    p.file(fd).ok_or(Errno::EBADF)?;
+    Ok(0)
+}

@@ -1,0 +1,1269 @@
+//! The guest's file system: the initramfs's contents in a writable in-memory file system
+//! (regular files, directories, symbolic links, hard links), the devices of `/dev`
+//! ([`dev`]) and `/proc` ([`proc`], made from the process table when read), and the table
+//! of open file descriptions the descriptors of every process point to.
+//!
+//! **Data.** A file of the initramfs keeps borrowing its bytes from the archive until it
+//! is first written or truncated (busybox, 2 MB, is never copied); then they are copied
+//! into memory of the guest's heap. Every byte the file system holds in the heap (file
+//! capacity, names, link targets, a fixed cost per inode) counts against its byte limit:
+//! beyond it, calls fail with `ENOSPC`, and a heap allocation of file data that fails gives
+//! `ENOMEM` (file data grows with `try_reserve`), never an abort of the guest. The limit
+//! is below the heap's size so the tables around the data fit too.
+//!
+//! **Inodes** are numbered by their slot; one lives while a directory entry names it, an
+//! open file description refers to it or it is a working directory (an unlinked file stays
+//! readable through open descriptors). Permission bits are kept and shown but not enforced: every process is
+//! root. Timestamps are one: `mtime`, in seconds since the guest started.
+//!
+//! **Open file descriptions** ([`Open`]) carry the offset, flags and the node; descriptors
+//! of one or several processes share one through `dup` and `fork` (reference counted, as
+//! Linux shares them), so the offset moves for all of them.
+//!
+//! **Paths**: absolute or relative to a directory (the working directory, or a descriptor
+//! of `*at` calls), `.` and `..`, symbolic links (at most [`MAX_LINKS`] in one lookup, as
+//! Linux's `ELOOP` limit), components up to [`NAME_MAX`] bytes. This module never reads
+//! process memory: the system calls copy the paths in ([`crate::syscall`]).
+
+pub mod dev;
+pub mod proc;
+
+use crate::cpio::{Archive, S_IFCHR, S_IFDIR, S_IFLNK, S_IFMT, S_IFREG};
+use crate::linux::Errno;
+use alloc::boxed::Box;
+use alloc::collections::BTreeMap;
+use alloc::vec::Vec;
+use dev::Device;
+use proc::Procs;
+
+/// Longest path (Linux's `PATH_MAX`).
+pub const PATH_MAX: usize = 4096;
+/// Longest name of a directory entry.
+pub const NAME_MAX: usize = 255;
+/// Most symbolic links followed in one lookup.
+pub const MAX_LINKS: usize = 8;
+/// Most open file descriptions of the guest (over all processes; `ENFILE` beyond).
+pub const MAX_OPEN: usize = 256;
+/// Longest normalised path the guest keeps for an executable (`/proc/<pid>/exe`).
+const MAX_PATH: usize = 256;
+/// What an inode costs against the byte limit beside its data: its slot and its
+/// directory entry.
+const INODE_COST: usize = 96;
+/// Most bytes a file's capacity grows by at once (doubling up to it: appending stays
+/// linear without reserving much more than is written).
+const MAX_GROWTH: usize = 1 << 20;
+/// Largest file (Linux's `EFBIG` beyond).
+pub const MAX_FILE: u64 = 1 << 32;
+
+/// An inode number of the file system (its slot).
+pub type Ino = u32;
+/// The root directory.
+pub const ROOT: Ino = 0;
+
+/// A node a path names: an inode of the file system or a node of `/proc`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Node {
+    Inode(Ino),
+    Proc(proc::Node),
+}
+
+/// A file's bytes: borrowed from the initramfs until first changed.
+#[derive(Debug)]
+enum Data<'a> {
+    Borrowed(&'a [u8]),
+    Owned(Vec<u8>),
+}
+
+impl Data<'_> {
+    fn bytes(&self) -> &[u8] {
+        match self {
+            Data::Borrowed(b) => b,
+            Data::Owned(v) => v,
+        }
+    }
+    /// Bytes of the heap it holds.
+    fn cost(&self) -> usize {
+        match self {
+            Data::Borrowed(_) => 0,
+            Data::Owned(v) => v.capacity(),
+        }
+    }
+}
+
+#[derive(Debug)]
+enum Body<'a> {
+    File(Data<'a>),
+    Dir {
+        parent: Ino,
+        entries: BTreeMap<Box<[u8]>, Ino>,
+    },
+    Symlink(Data<'a>),
+    Device(Device),
+}
+
+#[derive(Debug)]
+struct Inode<'a> {
+    /// File type and permission bits.
+    mode: u32,
+    /// Directory entries naming it.
+    nlink: u32,
+    /// Open file descriptions referring to it.
+    opened: u32,
+    mtime: u64,
+    body: Body<'a>,
+}
+
+/// Linux's `struct stat` fields the guest fills.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Stat {
+    pub ino: u64,
+    pub nlink: u64,
+    pub mode: u32,
+    pub uid: u32,
+    pub gid: u32,
+    pub rdev: u64,
+    pub size: u64,
+    pub mtime: u64,
+}
+
+impl Stat {
+    /// The 144-byte `struct stat` (x86-64).
+    pub fn to_bytes(&self) -> [u8; 144] {
+        let mut b = [0u8; 144];
+        b[0..8].copy_from_slice(&1u64.to_le_bytes()); // st_dev: the one file system
+        b[8..16].copy_from_slice(&self.ino.to_le_bytes());
+        b[16..24].copy_from_slice(&self.nlink.to_le_bytes());
+        b[24..28].copy_from_slice(&self.mode.to_le_bytes());
+        b[28..32].copy_from_slice(&self.uid.to_le_bytes());
+        b[32..36].copy_from_slice(&self.gid.to_le_bytes());
+        b[40..48].copy_from_slice(&self.rdev.to_le_bytes());
+        b[48..56].copy_from_slice(&self.size.to_le_bytes());
+        b[56..64].copy_from_slice(&4096u64.to_le_bytes()); // st_blksize
+        b[64..72].copy_from_slice(&self.size.div_ceil(512).to_le_bytes()); // st_blocks
+        for at in [72, 88, 104] {
+            b[at..at + 8].copy_from_slice(&self.mtime.to_le_bytes());
+        }
+        b
+    }
+
+    /// The 256-byte `struct statx` (every basic field valid).
+    pub fn to_statx(&self) -> [u8; 256] {
+        const STATX_BASIC_STATS: u32 = 0x7ff;
+        let mut b = [0u8; 256];
+        b[0..4].copy_from_slice(&STATX_BASIC_STATS.to_le_bytes());
+        b[4..8].copy_from_slice(&4096u32.to_le_bytes()); // stx_blksize
+        b[16..20].copy_from_slice(&(self.nlink as u32).to_le_bytes());
+        b[20..24].copy_from_slice(&self.uid.to_le_bytes());
+        b[24..28].copy_from_slice(&self.gid.to_le_bytes());
+        b[28..30].copy_from_slice(&(self.mode as u16).to_le_bytes());
+        b[32..40].copy_from_slice(&self.ino.to_le_bytes());
+        b[40..48].copy_from_slice(&self.size.to_le_bytes());
+        b[48..56].copy_from_slice(&self.size.div_ceil(512).to_le_bytes());
+        for at in [64, 80, 96, 112] {
+            // atime, btime, ctime, mtime: seconds (nanoseconds stay 0)
+            b[at..at + 8].copy_from_slice(&self.mtime.to_le_bytes());
+        }
+        b[128..132].copy_from_slice(&((self.rdev >> 8) as u32).to_le_bytes());
+        b[132..136].copy_from_slice(&((self.rdev & 0xff) as u32).to_le_bytes());
+        b[140..144].copy_from_slice(&1u32.to_le_bytes()); // stx_dev_minor
+        b
+    }
+
+    pub fn is_dir(&self) -> bool {
+        self.mode & S_IFMT == S_IFDIR
+    }
+}
+
+/// An open file description.
+#[derive(Clone, Debug)]
+pub struct Open {
+    pub node: Node,
+    pub offset: u64,
+    /// The `open` flags it keeps (access mode, `O_APPEND`, `O_NONBLOCK`).
+    pub flags: u64,
+    refs: u32,
+    /// A directory's position: the last name listed (entries removed or added meanwhile
+    /// do not make it skip others).
+    cursor: Option<Box<[u8]>>,
+    /// A `/proc` file's contents, made when it was opened.
+    pub snapshot: Option<Vec<u8>>,
+}
+
+/// An open file description's index ([`Fs::open`]).
+pub type OpenId = usize;
+
+/// The file system.
+#[derive(Debug)]
+pub struct Fs<'a> {
+    inodes: Vec<Option<Inode<'a>>>,
+    /// Free slots of `inodes`.
+    free: Vec<Ino>,
+    /// Heap bytes it holds, and the most it may.
+    used: usize,
+    limit: usize,
+    /// The directory `/proc` stands on.
+    proc_dir: Option<Ino>,
+    opens: Vec<Option<Open>>,
+    /// Bytes of the guest's memory (`/proc/meminfo`).
+    memory: u64,
+}
+
+/// What the removal of a directory entry removes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+pub enum Remove {
+    /// A non-directory (`unlink`).
+    File,
+    /// An empty directory (`rmdir`).
+    Dir,
+}
+
+impl<'a> Fs<'a> {
+    /// The file system of `archive`'s contents (their data borrowed from it), holding at
+    /// most `limit` heap bytes, with the devices in `/dev`, and `/proc`, `/tmp` and
+    /// `/dev` created if the archive lacks them.
+    pub fn new(archive: &Archive<'a>, limit: usize) -> Result<Self, Errno> {
+        let mut fs = Fs {
+            inodes: Vec::new(),
+            free: Vec::new(),
+            used: 0,
+            limit,
+            proc_dir: None,
+            opens: Vec::new(),
+            memory: 0,
+        };
+        fs.add(
+            S_IFDIR | 0o755,
+            Body::Dir {
+                parent: ROOT,
+                entries: BTreeMap::new(),
+            },
+            0,
+        )?;
+        for entry in archive.entries() {
+            let path = entry.path();
+            if path.is_empty() {
+                if let Some(Some(root)) = fs.inodes.first_mut() {
+                    root.mode = S_IFDIR | (entry.mode & 0o7777);
+                }
+                continue;
+            }
+            let (dir, name) = match path.rfind('/') {
+                Some(at) => (fs.mkdir_all(&path[..at])?, &path[at + 1..]),
+                None => (ROOT, path),
+            };
+            let name = name.as_bytes();
+            let mtime = entry.mtime as u64;
+            if fs.entry(dir, name).is_some() {
+                continue; // a directory made for an earlier entry, or a repeated name
+            }
+            let body = match entry.file_type() {
+                S_IFDIR => Body::Dir {
+                    parent: dir,
+                    entries: BTreeMap::new(),
+                },
+                S_IFLNK => Body::Symlink(Data::Borrowed(entry.data)),
+                _ => Body::File(Data::Borrowed(entry.data)),
+            };
+            let mode = match entry.file_type() {
+                S_IFDIR | S_IFLNK => entry.mode,
+                _ => S_IFREG | (entry.mode & 0o7777),
+            };
+            let ino = fs.add(mode, body, mtime)?;
+            fs.link_entry(dir, name, ino)?;
+        }
+        let dev = fs.mkdir_all("dev")?;
+        for (name, device) in Device::ALL {
+            if fs.entry(dev, name.as_bytes()).is_none() {
+                let ino = fs.add(S_IFCHR | 0o666, Body::Device(device), 0)?;
+                fs.link_entry(dev, name.as_bytes(), ino)?;
+            }
+        }
+        fs.mkdir_all("tmp")?;
+        fs.proc_dir = Some(fs.mkdir_all("proc")?);
+        Ok(fs)
+    }
+
+    /// Records the guest's memory size (what `/proc/meminfo` shows as total).
+    pub fn set_memory(&mut self, bytes: u64) {
+        self.memory = bytes;
+    }
+
+    pub fn memory(&self) -> u64 {
+        self.memory
+    }
+
+    /// Heap bytes in use, and the limit.
+    pub fn usage(&self) -> (usize, usize) {
+        (self.used, self.limit)
+    }
+
+    fn charge(&mut self, bytes: usize) -> Result<(), Errno> {
+        let total = self.used.checked_add(bytes).ok_or(Errno::ENOSPC)?;
+        if total > self.limit {
+            return Err(Errno::ENOSPC);
+        }
+        self.used = total;
+        Ok(())
+    }
+
+    fn refund(&mut self, bytes: usize) {
+        self.used = self.used.saturating_sub(bytes);
+    }
+
+    fn add(&mut self, mode: u32, body: Body<'a>, mtime: u64) -> Result<Ino, Errno> {
+        self.charge(INODE_COST)?;
+        let inode = Inode {
+            mode,
+            nlink: 0,
+            opened: 0,
+            mtime,
+            body,
+        };
+        if let Some(ino) = self.free.pop() {
+            self.inodes[ino as usize] = Some(inode);
+            return Ok(ino);
+        }
+        if self.inodes.try_reserve(1).is_err() {
+            self.refund(INODE_COST);
+            return Err(Errno::ENOMEM);
+        }
+        self.inodes.push(Some(inode));
+        Ok((self.inodes.len() - 1) as Ino)
+    }
+
+    fn inode(&self, ino: Ino) -> Option<&Inode<'a>> {
+        self.inodes.get(ino as usize)?.as_ref()
+    }
+
+    fn inode_mut(&mut self, ino: Ino) -> Option<&mut Inode<'a>> {
+        self.inodes.get_mut(ino as usize)?.as_mut()
+    }
+
+    /// Directory `dir`'s entry `name`.
+    fn entry(&self, dir: Ino, name: &[u8]) -> Option<Ino> {
+        match &self.inode(dir)?.body {
+            Body::Dir { entries, .. } => entries.get(name).copied(),
+            _ => None,
+        }
+    }
+
+    /// Adds entry `name` for `ino` to directory `dir` (which lacks it).
+    fn link_entry(&mut self, dir: Ino, name: &[u8], ino: Ino) -> Result<(), Errno> {
+        if name.len() > NAME_MAX {
+            return Err(Errno::ENAMETOOLONG);
+        }
+        self.charge(name.len())?;
+        let key: Box<[u8]> = name.into();
+        match self.inode_mut(dir).map(|d| &mut d.body) {
+            Some(Body::Dir { entries, .. }) => {
+                entries.insert(key, ino);
+            }
+            _ => {
+                self.refund(name.len());
+                return Err(Errno::ENOTDIR);
+            }
+        }
+        if let Some(i) = self.inode_mut(ino) {
+            i.nlink += 1;
+            if let Body::Dir { parent, .. } = &mut i.body {
+                *parent = dir;
+            }
+        }
+        Ok(())
+    }
+
+    /// Removes entry `name` of `dir` (one link less for its inode; freed when nothing
+    /// refers to it any more).
+    fn unlink_entry(&mut self, dir: Ino, name: &[u8]) {
+        let removed = match self.inode_mut(dir).map(|d| &mut d.body) {
+            Some(Body::Dir { entries, .. }) => entries.remove(name),
+            _ => None,
+        };
+        if let Some(ino) = removed {
+            self.refund(name.len());
+            if let Some(i) = self.inode_mut(ino) {
+                i.nlink = i.nlink.saturating_sub(1);
+            }
+            self.free_if_unused(ino);
+        }
+    }
+
+    fn free_if_unused(&mut self, ino: Ino) {
+        let unused = self
+            .inode(ino)
+            .is_some_and(|i| i.nlink == 0 && i.opened == 0);
+        if unused && ino != ROOT {
+            if let Some(inode) = self.inodes[ino as usize].take() {
+                let data = match &inode.body {
+                    Body::File(d) | Body::Symlink(d) => d.cost(),
+                    _ => 0,
+                };
+                self.refund(INODE_COST + data);
+            }
+            self.free.push(ino);
+        }
+    }
+
+    /// The directory at `path` (relative to the root, no links or `..`), made with its
+    /// parents where missing.
+    fn mkdir_all(&mut self, path: &str) -> Result<Ino, Errno> {
+        let mut dir = ROOT;
+        for part in path.split('/').filter(|p| !p.is_empty()) {
+            dir = match self.entry(dir, part.as_bytes()) {
+                Some(ino) => ino,
+                None => {
+                    let ino = self.add(
+                        S_IFDIR | 0o755,
+                        Body::Dir {
+                            parent: dir,
+                            entries: BTreeMap::new(),
+                        },
+                        0,
+                    )?;
+                    self.link_entry(dir, part.as_bytes(), ino)?;
+                    ino
+                }
+            };
+        }
+        Ok(dir)
+    }
+
+    // ---- nodes ----
+
+    pub fn is_dir(&self, node: Node) -> bool {
+        match node {
+            Node::Inode(ino) => self
+                .inode(ino)
+                .is_some_and(|i| matches!(i.body, Body::Dir { .. })),
+            Node::Proc(n) => proc::is_dir(n),
+        }
+    }
+
+    pub fn is_symlink(&self, node: Node) -> bool {
+        match node {
+            Node::Inode(ino) => self
+                .inode(ino)
+                .is_some_and(|i| matches!(i.body, Body::Symlink(_))),
+            Node::Proc(n) => proc::is_link(n),
+        }
+    }
+
+    /// The device `node` is.
+    pub fn device(&self, node: Node) -> Option<Device> {
+        match self.inode(self.ino(node)?)?.body {
+            Body::Device(d) => Some(d),
+            _ => None,
+        }
+    }
+
+    fn ino(&self, node: Node) -> Option<Ino> {
+        match node {
+            Node::Inode(ino) => Some(ino),
+            Node::Proc(_) => None,
+        }
+    }
+
+    /// The inode of a regular file that still holds the initramfs's bytes (never written
+    /// since the guest started): its contents are those of the archive's entry.
+    pub fn archive_ino(&self, node: Node) -> Option<Ino> {
+        let ino = self.ino(node)?;
+        match &self.inode(ino)?.body {
+            Body::File(Data::Borrowed(_)) => Some(ino),
+            _ => None,
+        }
+    }
+
+    /// A regular file's bytes (`None`: not a regular file of the file system).
+    pub fn file_bytes(&self, node: Node) -> Option<&[u8]> {
+        match &self.inode(self.ino(node)?)?.body {
+            Body::File(d) => Some(d.bytes()),
+            _ => None,
+        }
+    }
+
+    /// Its `st_mode`: file type and permission bits.
+    pub fn mode(&self, node: Node) -> u32 {
+        self.stat(node).mode
+    }
+
+    pub fn stat(&self, node: Node) -> Stat {
+        let ino = match node {
+            Node::Inode(ino) => ino,
+            Node::Proc(n) => return proc::stat(n),
+        };
+        let Some(i) = self.inode(ino) else {
+            return Stat::default();
+        };
+        let (size, nlink, rdev) = match &i.body {
+            Body::File(d) | Body::Symlink(d) => (d.bytes().len() as u64, i.nlink, 0),
+            Body::Dir { entries, .. } => {
+                let subdirs = entries
+                    .values()
+                    .filter(|&&c| self.is_dir(Node::Inode(c)))
+                    .count();
+                (4096, 2 + subdirs as u32, 0)
+            }
+            Body::Device(d) => (0, i.nlink, d.rdev()),
+        };
+        Stat {
+            ino: ino as u64 + 1,
+            nlink: nlink as u64,
+            mode: i.mode,
+            uid: 0,
+            gid: 0,
+            rdev,
+            size,
+            mtime: i.mtime,
+        }
+    }
+
+    fn node_of(&self, ino: Ino) -> Node {
+        if Some(ino) == self.proc_dir {
+            Node::Proc(proc::Node::Root)
+        } else {
+            Node::Inode(ino)
+        }
+    }
+
+    /// The directory above `node` (the root's is the root).
+    pub fn parent(&self, node: Node) -> Node {
+        match node {
+            Node::Inode(ino) => match self.inode(ino).map(|i| &i.body) {
+                Some(Body::Dir { parent, .. }) => self.node_of(*parent),
+                _ => Node::Inode(ROOT),
+            },
+            Node::Proc(n) => match proc::parent(n) {
+                Some(up) => Node::Proc(up),
+                None => self.parent(Node::Inode(self.proc_dir.unwrap_or(ROOT))),
+            },
+        }
+    }
+
+    // ---- lookup ----
+
+    /// Looks `path` up from directory `start`; `follow_last` follows a symbolic link in
+    /// the last component (`stat` does, `lstat` and `readlink` do not).
+    pub fn lookup(
+        &self,
+        procs: &Procs,
+        start: Node,
+        path: &[u8],
+        follow_last: bool,
+    ) -> Result<Node, Errno> {
+        if path.is_empty() {
+            return Err(Errno::ENOENT);
+        }
+        if path.len() >= PATH_MAX {
+            return Err(Errno::ENAMETOOLONG);
+        }
+        let mut links = 0;
+        self.walk(procs, start, path, follow_last, &mut links)
+    }
+
+    fn walk(
+        &self,
+        procs: &Procs,
+        base: Node,
+        path: &[u8],
+        follow_last: bool,
+        links: &mut usize,
+    ) -> Result<Node, Errno> {
+        let mut at = if path.first() == Some(&b'/') {
+            Node::Inode(ROOT)
+        } else {
+            base
+        };
+        let trailing_slash = path.last() == Some(&b'/');
+        let mut parts = path
+            .split(|&b| b == b'/')
+            .filter(|p| !p.is_empty())
+            .peekable();
+        while let Some(part) = parts.next() {
+            if !self.is_dir(at) {
+                return Err(Errno::ENOTDIR);
+            }
+            if part.len() > NAME_MAX {
+                return Err(Errno::ENAMETOOLONG);
+            }
+            let next = match part {
+                b"." => continue,
+                b".." => {
+                    at = self.parent(at);
+                    continue;
+                }
+                _ => self.child(procs, at, part).ok_or(Errno::ENOENT)?,
+            };
+            let last = parts.peek().is_none();
+            if self.is_symlink(next) && (!last || follow_last || trailing_slash) {
+                *links += 1;
+                if *links > MAX_LINKS {
+                    return Err(Errno::ELOOP);
+                }
+                let mut buf = [0u8; 280];
+                let target = self.link_target(procs, next, &mut buf)?;
+                at = self.walk(procs, at, target, true, links)?;
+            } else {
+                at = next;
+            }
+        }
+        if trailing_slash && !self.is_dir(at) {
+            return Err(Errno::ENOTDIR);
+        }
+        Ok(at)
+    }
+
+    fn child(&self, procs: &Procs, dir: Node, name: &[u8]) -> Option<Node> {
+        match dir {
+            Node::Inode(ino) => self.entry(ino, name).map(|c| self.node_of(c)),
+            Node::Proc(n) => proc::child(n, name, procs).map(Node::Proc),
+        }
+    }
+
+    /// A symbolic link's target (`EINVAL`: not a link).
+    pub fn link_target<'b>(
+        &'b self,
+        procs: &Procs,
+        node: Node,
+        buf: &'b mut [u8; 280],
+    ) -> Result<&'b [u8], Errno> {
+        match node {
+            Node::Inode(ino) => match self.inode(ino).map(|i| &i.body) {
+                Some(Body::Symlink(d)) => Ok(d.bytes()),
+                _ => Err(Errno::EINVAL),
+            },
+            Node::Proc(n) if proc::is_link(n) => proc::link(n, procs, buf).ok_or(Errno::ENOENT),
+            Node::Proc(_) => Err(Errno::EINVAL),
+        }
+    }
+
+    /// The directory that is to hold `path`'s last component, and that name (for calls
+    /// that create or remove an entry). `.` and `..` as the last name are `EINVAL`; in
+    /// `/proc` nothing can be created (`EACCES`).
+    pub fn lookup_parent<'p>(
+        &self,
+        procs: &Procs,
+        start: Node,
+        path: &'p [u8],
+    ) -> Result<(Ino, &'p [u8]), Errno> {
+        if path.len() >= PATH_MAX {
+            return Err(Errno::ENAMETOOLONG);
+        }
+        let end = path
+            .iter()
+            .rposition(|&b| b != b'/')
+            .ok_or(if path.is_empty() {
+                Errno::ENOENT
+            } else {
+                Errno::EBUSY // the root itself
+            })?;
+        let path = &path[..=end];
+        let (dir_path, name): (&[u8], &[u8]) = match path.iter().rposition(|&b| b == b'/') {
+            Some(at) => (&path[..=at], &path[at + 1..]),
+            None => (b".", path),
+        };
+        if name == b"." || name == b".." {
+            return Err(Errno::EINVAL);
+        }
+        if name.len() > NAME_MAX {
+            return Err(Errno::ENAMETOOLONG);
+        }
+        match self.lookup(procs, start, dir_path, true)? {
+            Node::Inode(ino) if self.is_dir(Node::Inode(ino)) => Ok((ino, name)),
+            Node::Inode(_) => Err(Errno::ENOTDIR),
+            Node::Proc(_) => Err(Errno::EACCES),
+        }
+    }
+
+    /// The node entry `name` of `dir` names (links not followed).
+    pub fn get(&self, dir: Ino, name: &[u8]) -> Option<Node> {
+        self.entry(dir, name).map(|c| self.node_of(c))
+    }
+
+    /// `node`'s absolute path (`ENOENT` for an unlinked node; `ENAMETOOLONG` past
+    /// [`MAX_PATH`] bytes). A file linked more than once has one of its paths.
+    pub fn path_of(&self, node: Node) -> Result<PathBuf, Errno> {
+        let mut parts: Vec<&[u8]> = Vec::new();
+        let mut proc_tail = [0u8; 32];
+        let mut tail_len = 0;
+        let mut at = match node {
+            Node::Proc(n) => {
+                let mut w = SliceWriter {
+                    buf: &mut proc_tail,
+                    len: 0,
+                };
+                match n {
+                    proc::Node::Root => {}
+                    proc::Node::Process(pid) => {
+                        let _ = core::fmt::Write::write_fmt(&mut w, format_args!("{pid}"));
+                    }
+                    _ => return Err(Errno::ENOENT), // only directories are asked for
+                }
+                tail_len = w.len;
+                self.proc_dir.ok_or(Errno::ENOENT)?
+            }
+            Node::Inode(ino) => ino,
+        };
+        let mut file_name: Option<&[u8]> = None;
+        if !self.is_dir(Node::Inode(at)) {
+            // A file has no parent of its own: the first directory that names it.
+            let (dir, name) = self
+                .inodes
+                .iter()
+                .enumerate()
+                .find_map(|(d, i)| match i.as_ref().map(|i| &i.body) {
+                    Some(Body::Dir { entries, .. }) => entries
+                        .iter()
+                        .find(|(_, c)| **c == at)
+                        .map(|(n, _)| (d as Ino, &**n)),
+                    _ => None,
+                })
+                .ok_or(Errno::ENOENT)?;
+            file_name = Some(name);
+            at = dir;
+        }
+        let mut steps = 0;
+        while at != ROOT {
+            let Some(Body::Dir { parent, .. }) = self.inode(at).map(|i| &i.body) else {
+                return Err(Errno::ENOENT);
+            };
+            let name = match &self.inode(*parent).map(|i| &i.body) {
+                Some(Body::Dir { entries, .. }) => entries
+                    .iter()
+                    .find(|(_, c)| **c == at)
+                    .map(|(n, _)| &**n)
+                    .ok_or(Errno::ENOENT)?,
+                _ => return Err(Errno::ENOENT),
+            };
+            parts.push(name);
+            at = *parent;
+            steps += 1;
+            if steps > PATH_MAX {
+                return Err(Errno::ELOOP);
+            }
+        }
+        let mut out = PathBuf::root();
+        for part in parts.iter().rev() {
+            out.push(part)?;
+        }
+        if tail_len > 0 {
+            out.push(&proc_tail[..tail_len])?;
+        }
+        if let Some(name) = file_name {
+            out.push(name)?;
+        }
+        Ok(out)
+    }
+
+    // ---- changes ----
+
+    /// Creates a regular file `name` in `dir` with permission bits `mode`.
+    pub fn create(&mut self, dir: Ino, name: &[u8], mode: u32, now: u64) -> Result<Ino, Errno> {
+        self.new_entry(
+            dir,
+            name,
+            S_IFREG | (mode & 0o7777),
+            Body::File(Data::Owned(Vec::new())),
+            now,
+        )
+    }
+
+    pub fn mkdir(&mut self, dir: Ino, name: &[u8], mode: u32, now: u64) -> Result<Ino, Errno> {
+        self.new_entry(
+            dir,
+            name,
+            S_IFDIR | (mode & 0o7777),
+            Body::Dir {
+                parent: dir,
+                entries: BTreeMap::new(),
+            },
+            now,
+        )
+    }
+
+    pub fn symlink(
+        &mut self,
+        dir: Ino,
+        name: &[u8],
+        target: &[u8],
+        now: u64,
+    ) -> Result<Ino, Errno> {
+        if target.is_empty() {
+            return Err(Errno::ENOENT);
+        }
+        if target.len() >= PATH_MAX {
+            return Err(Errno::ENAMETOOLONG);
+        }
+        self.charge(target.len())?;
+        let mut data = Vec::new();
+        if data.try_reserve_exact(target.len()).is_err() {
+            self.refund(target.len());
+            return Err(Errno::ENOMEM);
+        }
+        data.extend_from_slice(target);
+        let extra = data.capacity() - target.len();
+        self.used += extra;
+        let made = self.new_entry(
+            dir,
+            name,
+            S_IFLNK | 0o777,
+            Body::Symlink(Data::Owned(data)),
+            now,
+        );
+        if made.is_err() {
+            self.refund(target.len() + extra);
+        }
+        made
+    }
+
+    fn new_entry(
+        &mut self,
+        dir: Ino,
+        name: &[u8],
+        mode: u32,
+        body: Body<'a>,
+        now: u64,
+    ) -> Result<Ino, Errno> {
+        if !self.is_dir(Node::Inode(dir)) {
+            return Err(Errno::ENOTDIR);
+        }
+        if self.inode(dir).is_some_and(|d| d.nlink == 0) {
+            return Err(Errno::ENOENT); // removed, still someone's working directory
+        }
+        if self.entry(dir, name).is_some() {
+            return Err(Errno::EEXIST);
+        }
+        let ino = self.add(mode, body, now)?;
+        if let Err(e) = self.link_entry(dir, name, ino) {
+            self.free_if_unused(ino);
+            return Err(e);
+        }
+        self.touch(dir, now);
+        Ok(ino)
+    }
+
+    fn touch(&mut self, ino: Ino, now: u64) {
+        if let Some(i) = self.inode_mut(ino) {
+            i.mtime = now;
+        }
+    }
+
+    /// Another entry `name` in `dir` for the non-directory `node` (`link`).
+    pub fn link(&mut self, node: Node, dir: Ino, name: &[u8], now: u64) -> Result<(), Errno> {
+        let ino = self.ino(node).ok_or(Errno::EXDEV)?;
+        if self.is_dir(node) {
+            return Err(Errno::EPERM);
+        }
+        if self.entry(dir, name).is_some() {
+            return Err(Errno::EEXIST);
+        }
+        self.link_entry(dir, name, ino)?;
+        self.touch(dir, now);
+        Ok(())
+    }
+
+    /// Removes entry `name` of `dir`: a non-directory or an empty directory, as `what`
+    /// says.
+    pub fn remove(&mut self, dir: Ino, name: &[u8], what: Remove, now: u64) -> Result<(), Errno> {
+        let ino = self.entry(dir, name).ok_or(Errno::ENOENT)?;
+        let is_dir = self.is_dir(Node::Inode(ino));
+        match what {
+            Remove::File if is_dir => return Err(Errno::EISDIR),
+            Remove::Dir if !is_dir => return Err(Errno::ENOTDIR),
+            Remove::Dir => {
+                if Some(ino) == self.proc_dir {
+                    return Err(Errno::EBUSY);
+                }
+                if let Some(Body::Dir { entries, .. }) = self.inode(ino).map(|i| &i.body)
+                    && !entries.is_empty()
+                {
+                    return Err(Errno::ENOTEMPTY);
+                }
+            }
+            Remove::File => {}
+        }
+        self.unlink_entry(dir, name);
+        self.touch(dir, now);
+        Ok(())
+    }
+
+    /// Renames entry `from` of `from_dir` to `to` of `to_dir`, replacing what `to` named
+    /// (a non-directory by a non-directory, an empty directory by a directory) unless
+    /// `no_replace`.
+    pub fn rename(
+        &mut self,
+        from_dir: Ino,
+        from: &[u8],
+        to_dir: Ino,
+        to: &[u8],
+        no_replace: bool,
+        now: u64,
+    ) -> Result<(), Errno> {
+        let ino = self.entry(from_dir, from).ok_or(Errno::ENOENT)?;
+        if !self.is_dir(Node::Inode(to_dir)) {
+            return Err(Errno::ENOTDIR);
+        }
+        let moving_dir = self.is_dir(Node::Inode(ino));
+        if Some(ino) == self.proc_dir {
+            return Err(Errno::EBUSY);
+        }
+        if moving_dir {
+            // Not into itself or below it.
+            let mut at = to_dir;
+            for _ in 0..self.inodes.len() {
+                if at == ino {
+                    return Err(Errno::EINVAL);
+                }
+                if at == ROOT {
+                    break;
+                }
+                at = match self.inode(at).map(|i| &i.body) {
+                    Some(Body::Dir { parent, .. }) => *parent,
+                    _ => ROOT,
+                };
+            }
+        }
+        if let Some(old) = self.entry(to_dir, to) {
+            if old == ino {
+                return Ok(()); // the same file: nothing to do
+            }
+            if no_replace {
+                return Err(Errno::EEXIST);
+            }
+            let old_is_dir = self.is_dir(Node::Inode(old));
+            match (moving_dir, old_is_dir) {
+                (true, false) => return Err(Errno::ENOTDIR),
+                (false, true) => return Err(Errno::EISDIR),
+                (true, true) => self.remove(to_dir, to, Remove::Dir, now)?,
+                (false, false) => self.remove(to_dir, to, Remove::File, now)?,
+            }
+        }
+        // The new entry first (it may fail for the limit), then the old one goes.
+        self.link_entry(to_dir, to, ino)?;
+        if let Some(i) = self.inode_mut(ino) {
+            i.nlink += 1; // held while the old entry goes
+        }
+        self.unlink_entry(from_dir, from);
+        if let Some(i) = self.inode_mut(ino) {
+            i.nlink -= 1;
+            if let Body::Dir { parent, .. } = &mut i.body {
+                *parent = to_dir;
+            }
+        }
+        self.touch(from_dir, now);
+        self.touch(to_dir, now);
+        Ok(())
+    }
+
+    /// Sets the permission bits.
+    pub fn chmod(&mut self, node: Node, mode: u32) -> Result<(), Errno> {
+        let ino = self.ino(node).ok_or(Errno::EPERM)?;
+        let i = self.inode_mut(ino).ok_or(Errno::ENOENT)?;
+        i.mode = (i.mode & S_IFMT) | (mode & 0o7777);
+        Ok(())
+    }
+
+    pub fn set_mtime(&mut self, node: Node, mtime: u64) {
+        if let Some(ino) = self.ino(node) {
+            self.touch(ino, mtime);
+        }
+    }
+
+    /// The file's data as owned bytes (copied from the initramfs on the first change).
+    fn owned(&mut self, ino: Ino) -> Result<&mut Vec<u8>, Errno> {
+        let borrowed = match self.inode(ino).map(|i| &i.body) {
+            Some(Body::File(Data::Borrowed(b))) => Some(*b),
+            Some(Body::File(Data::Owned(_))) => None,
+            Some(Body::Dir { .. }) => return Err(Errno::EISDIR),
+            _ => return Err(Errno::EINVAL),
+        };
+        if let Some(bytes) = borrowed {
+            self.charge(bytes.len())?;
+            let mut v = Vec::new();
+            if v.try_reserve_exact(bytes.len()).is_err() {
+                self.refund(bytes.len());
+                return Err(Errno::ENOMEM);
+            }
+            v.extend_from_slice(bytes);
+            self.used += v.capacity() - bytes.len();
+            if let Some(i) = self.inode_mut(ino) {
+                i.body = Body::File(Data::Owned(v));
+            }
+        }
+        match self.inode_mut(ino).map(|i| &mut i.body) {
+            Some(Body::File(Data::Owned(v))) => Ok(v),
+            _ => Err(Errno::EINVAL),
+        }
+    }
+
+    /// Makes room for `len` bytes in file `ino` (growing its capacity, counted against the
+    /// limit).
+    fn reserve(&mut self, ino: Ino, len: usize) -> Result<(), Errno> {
+        let capacity = self.owned(ino)?.capacity();
+        if len <= capacity {
+            return Ok(());
+        }
+        let wanted = len.max(capacity + capacity.min(MAX_GROWTH)).max(64);
+        // Within the limit: the doubling if it fits, else exactly what is needed.
+        let room = self.limit.saturating_sub(self.used);
+        let target = if wanted - capacity <= room {
+            wanted
+        } else if len - capacity <= room {
+            len
+        } else {
+            return Err(Errno::ENOSPC);
+        };
+        let v = self.owned(ino)?;
+        v.try_reserve_exact(target - v.len())
+            .map_err(|_| Errno::ENOMEM)?;
+        let grown = v.capacity() - capacity;
+        self.used += grown;
+        Ok(())
+    }
+
+    /// Writes `data` at `offset` of regular file `node` (a hole before it reads zeros);
+    /// returns how many bytes.
+    pub fn write(
+        &mut self,
+        node: Node,
+        offset: u64,
+        data: &[u8],
+        now: u64,
+    ) -> Result<usize, Errno> {
+        let ino = self.ino(node).ok_or(Errno::EINVAL)?;
+        let end = offset
+            .checked_add(data.len() as u64)
+            .filter(|&e| e <= MAX_FILE)
+            .ok_or(Errno::EFBIG)?;
+        if data.is_empty() {
+            return Ok(0);
+        }
+        self.reserve(ino, end as usize)?;
+        let v = self.owned(ino)?;
+        let at = offset as usize;
+        if v.len() < at {
+            v.resize(at, 0);
+        }
+        let overlap = (v.len() - at).min(data.len());
+        v[at..at + overlap].copy_from_slice(&data[..overlap]);
+        v.extend_from_slice(&data[overlap..]);
+        self.touch(ino, now);
+        Ok(data.len())
+    }
+
+    /// Sets regular file `node`'s length (cut, or zeros added).
+    pub fn truncate(&mut self, node: Node, len: u64, now: u64) -> Result<(), Errno> {
+        let ino = self.ino(node).ok_or(Errno::EINVAL)?;
+        if len > MAX_FILE {
+            return Err(Errno::EFBIG);
+        }
+        let len = len as usize;
+        if self.file_bytes(node).is_some_and(|b| b.len() == len) {
+            return Ok(());
+        }
+        if len == 0 {
+            // Drop the data at once (`O_TRUNC`, the most common case).
+            let cost = match self.inode(ino).map(|i| &i.body) {
+                Some(Body::File(d)) => d.cost(),
+                Some(Body::Dir { .. }) => return Err(Errno::EISDIR),
+                _ => return Err(Errno::EINVAL),
+            };
+            self.refund(cost);
+            if let Some(i) = self.inode_mut(ino) {
+                i.body = Body::File(Data::Owned(Vec::new()));
+                i.mtime = now;
+            }
+            return Ok(());
+        }
+        self.reserve(ino, len)?;
+        let v = self.owned(ino)?;
+        v.resize(len, 0);
+        self.touch(ino, now);
+        Ok(())
+    }
+
+    /// Directory `dir`'s first entry after `after` (in name order; `None`: from the start).
+    pub fn next_entry(&self, dir: Ino, after: Option<&[u8]>) -> Option<(&[u8], Node)> {
+        let Some(Body::Dir { entries, .. }) = self.inode(dir).map(|i| &i.body) else {
+            return None;
+        };
+        let mut range = match after {
+            None => entries.range::<[u8], _>(..),
+            Some(name) => entries.range::<[u8], _>((
+                core::ops::Bound::Excluded(name),
+                core::ops::Bound::Unbounded,
+            )),
+        };
+        range.next().map(|(n, &c)| (&**n, self.node_of(c)))
+    }
+
+    // ---- open file descriptions ----
+
+    /// A new open file description of `node` with `flags` (its only reference).
+    pub fn open(
+        &mut self,
+        node: Node,
+        flags: u64,
+        snapshot: Option<Vec<u8>>,
+    ) -> Result<OpenId, Errno> {
+        let description = Open {
+            node,
+            offset: 0,
+            flags,
+            refs: 1,
+            cursor: None,
+            snapshot,
+        };
+        let id = match self.opens.iter().position(Option::is_none) {
+            Some(id) => id,
+            None if self.opens.len() < MAX_OPEN => {
+                self.opens.try_reserve(1).map_err(|_| Errno::ENOMEM)?;
+                self.opens.push(None);
+                self.opens.len() - 1
+            }
+            None => return Err(Errno::ENFILE),
+        };
+        self.opens[id] = Some(description);
+        if let Some(i) = self.ino(node).and_then(|ino| self.inode_mut(ino)) {
+            i.opened += 1;
+        }
+        Ok(id)
+    }
+
+    pub fn description(&self, id: OpenId) -> Option<&Open> {
+        self.opens.get(id)?.as_ref()
+    }
+
+    pub fn description_mut(&mut self, id: OpenId) -> Option<&mut Open> {
+        self.opens.get_mut(id)?.as_mut()
+    }
+
+    /// One more descriptor refers to description `id` (`dup`, `fork`).
+    pub fn share(&mut self, id: OpenId) {
+        if let Some(o) = self.description_mut(id) {
+            o.refs += 1;
+        }
+    }
+
+    /// One descriptor less refers to description `id`; the last one closes it.
+    pub fn release(&mut self, id: OpenId) {
+        let Some(o) = self.description_mut(id) else {
+            return;
+        };
+        o.refs -= 1;
+        if o.refs > 0 {
+            return;
+        }
+        let node = o.node;
+        self.opens[id] = None;
+        if let Some(ino) = self.ino(node) {
+            if let Some(i) = self.inode_mut(ino) {
+                i.opened = i.opened.saturating_sub(1);
+            }
+            self.free_if_unused(ino);
+        }
+    }
+
+    /// `node` is in use beyond its directory entries (a working directory): it lives while
+    /// held, as while open.
+    pub fn hold(&mut self, node: Node) {
+        if let Some(i) = self.ino(node).and_then(|ino| self.inode_mut(ino)) {
+            i.opened += 1;
+        }
+    }
+
+    /// The end of a [`Fs::hold`].
+    pub fn unhold(&mut self, node: Node) {
+        if let Some(ino) = self.ino(node) {
+            if let Some(i) = self.inode_mut(ino) {
+                i.opened = i.opened.saturating_sub(1);
+            }
+            self.free_if_unused(ino);
+        }
+    }
+
+    /// How many open file descriptions exist.
+    pub fn open_count(&self) -> usize {
+        self.opens.iter().flatten().count()
+    }
+
+    /// Directory description `id`'s position: the last name it listed.
+    pub fn cursor(&self, id: OpenId) -> Option<&[u8]> {
+        self.description(id)?.cursor.as_deref()
+    }
+
+    /// Sets it (`None`: from the start again; the offset restarts too).
+    pub fn set_cursor(&mut self, id: OpenId, name: Option<&[u8]>) -> Result<(), Errno> {
+        let cursor = match name {
+            Some(n) => {
+                let mut v = Vec::new();
+                v.try_reserve_exact(n.len()).map_err(|_| Errno::ENOMEM)?;
+                v.extend_from_slice(n);
+                Some(v.into_boxed_slice())
+            }
+            None => None,
+        };
+        if let Some(o) = self.description_mut(id) {
+            o.cursor = cursor;
+        }
+        Ok(())
+    }
+}
+
+/// Formats into a byte buffer (an error when it is full).
+pub(crate) struct SliceWriter<'b> {
+    pub buf: &'b mut [u8],
+    pub len: usize,
+}
+
+impl core::fmt::Write for SliceWriter<'_> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        let end = self.len + s.len();
+        if end > self.buf.len() {
+            return Err(core::fmt::Error);
+        }
+        self.buf[self.len..end].copy_from_slice(s.as_bytes());
+        self.len = end;
+        Ok(())
+    }
+}
+
+/// A normalised absolute path without the leading `/` (`"bin/sh"`; `""` is the root).
+#[derive(Clone, Copy)]
+pub struct PathBuf {
+    bytes: [u8; MAX_PATH],
+    len: usize,
+}
+
+impl core::fmt::Debug for PathBuf {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "/{}", self.as_str())
+    }
+}
+
+impl PathBuf {
+    pub const fn root() -> Self {
+        Self {
+            bytes: [0; MAX_PATH],
+            len: 0,
+        }
+    }
+    pub fn as_str(&self) -> &str {
+        core::str::from_utf8(&self.bytes[..self.len]).unwrap_or("")
+    }
+    fn push(&mut self, part: &[u8]) -> Result<(), Errno> {
+        let extra = part.len() + usize::from(self.len > 0);
+        if self.len + extra > MAX_PATH {
+            return Err(Errno::ENAMETOOLONG);
+        }
+        if self.len > 0 {
+            self.bytes[self.len] = b'/';
+            self.len += 1;
+        }
+        self.bytes[self.len..self.len + part.len()].copy_from_slice(part);
+        self.len += part.len();
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests;

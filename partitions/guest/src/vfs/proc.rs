@@ -1,0 +1,355 @@
+//! `/proc`: the files busybox reads about the processes and the system, made from the
+//! process table when they are opened (a snapshot, as a single `read` of a small file on
+//! Linux is). `/proc/self` (a link to the caller's directory), `/proc/<pid>/` with `exe`
+//! (a link to the executable), `stat` (Linux's format, what `ps` parses), `status`
+//! (name, state, ids and size as `Name:\t...` lines) and `cmdline` (the arguments, each
+//! NUL-terminated), `/proc/meminfo`, `/proc/uptime` and
+//! `/proc/mounts`. Nothing here can be written, created or removed.
+//!
+//! The process table belongs to [`crate::system`]; the system calls see it through
+//! [`ProcessTable`], read-only, as [`Procs`]: the caller and the others.
+
+use super::{SliceWriter, Stat};
+use crate::cpio::{S_IFDIR, S_IFLNK, S_IFREG};
+use alloc::vec::Vec;
+use core::fmt::Write;
+
+/// A node of `/proc`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Node {
+    /// `/proc` itself.
+    Root,
+    /// `/proc/self`.
+    SelfLink,
+    Meminfo,
+    Uptime,
+    Mounts,
+    /// `/proc/<pid>`.
+    Process(u32),
+    /// `/proc/<pid>/<file>`.
+    File(u32, File),
+}
+
+/// A file of `/proc/<pid>/`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum File {
+    Exe,
+    Stat,
+    Status,
+    Cmdline,
+}
+
+const PROCESS_FILES: [(&str, File); 4] = [
+    ("exe", File::Exe),
+    ("stat", File::Stat),
+    ("status", File::Status),
+    ("cmdline", File::Cmdline),
+];
+const SYSTEM_FILES: [(&str, Node); 4] = [
+    ("self", Node::SelfLink),
+    ("meminfo", Node::Meminfo),
+    ("uptime", Node::Uptime),
+    ("mounts", Node::Mounts),
+];
+
+/// What `/proc` shows of one process.
+#[derive(Clone, Copy, Debug)]
+pub struct ProcInfo<'s> {
+    pub pid: u32,
+    pub ppid: u32,
+    /// `R` (running or ready), `S` (waiting in a call), `Z` (a zombie).
+    pub state: u8,
+    pub name: &'s str,
+    /// Its arguments, each NUL-terminated.
+    pub cmdline: &'s [u8],
+    /// Its executable's absolute path.
+    pub exe: &'s str,
+    /// Bytes of its address space.
+    pub size: u64,
+}
+
+impl<'s> ProcInfo<'s> {
+    /// What `/proc` shows of process `p` in `state`.
+    pub fn of(p: &'s crate::process::Process, state: u8) -> Self {
+        ProcInfo {
+            pid: p.pid,
+            ppid: p.ppid,
+            state,
+            name: p.name(),
+            cmdline: &p.cmdline,
+            exe: p.exe.as_str(),
+            size: p.areas.iter().map(|a| a.end - a.start).sum(),
+        }
+    }
+}
+
+/// The process table as the system calls may read it: every process but the caller.
+pub trait ProcessTable {
+    fn find(&self, pid: u32) -> Option<ProcInfo<'_>>;
+    /// Calls `f` with each pid.
+    fn each_pid(&self, f: &mut dyn FnMut(u32));
+}
+
+/// A table without other processes.
+impl ProcessTable for () {
+    fn find(&self, _: u32) -> Option<ProcInfo<'_>> {
+        None
+    }
+    fn each_pid(&self, _: &mut dyn FnMut(u32)) {}
+}
+
+/// The processes a call sees: its caller and the others.
+pub struct Procs<'s> {
+    pub me: ProcInfo<'s>,
+    pub others: &'s dyn ProcessTable,
+    /// Nanoseconds since the guest started (`uptime`).
+    pub now_ns: u64,
+    /// Bytes of the guest's memory pool, and of it in use by the file system
+    /// (`meminfo`).
+    pub memory: u64,
+    pub fs_used: u64,
+}
+
+impl<'s> Procs<'s> {
+    /// What process `pid` sees with nothing known about itself or the others (paths
+    /// only).
+    pub fn alone(pid: u32) -> Self {
+        Procs {
+            me: ProcInfo {
+                pid,
+                ppid: 0,
+                state: b'R',
+                name: "",
+                cmdline: b"",
+                exe: "",
+                size: 0,
+            },
+            others: &(),
+            now_ns: 0,
+            memory: 0,
+            fs_used: 0,
+        }
+    }
+
+    pub fn find(&self, pid: u32) -> Option<ProcInfo<'_>> {
+        if pid == self.me.pid {
+            Some(self.me)
+        } else {
+            self.others.find(pid)
+        }
+    }
+
+    /// Every pid, ascending.
+    fn pids(&self) -> Vec<u32> {
+        let mut pids = Vec::new();
+        pids.push(self.me.pid);
+        self.others.each_pid(&mut |pid| pids.push(pid));
+        pids.sort_unstable();
+        pids.dedup();
+        pids
+    }
+}
+
+fn parse_pid(name: &[u8]) -> Option<u32> {
+    if name.is_empty() || name.len() > 9 || name[0] == b'0' {
+        return None;
+    }
+    let text = core::str::from_utf8(name).ok()?;
+    text.parse().ok()
+}
+
+/// The entry `name` in directory `dir` (`None`: no such entry; not a directory: the
+/// caller checked).
+pub fn child(dir: Node, name: &[u8], procs: &Procs) -> Option<Node> {
+    match dir {
+        Node::Root => SYSTEM_FILES
+            .iter()
+            .find(|(n, _)| n.as_bytes() == name)
+            .map(|&(_, node)| node)
+            .or_else(|| {
+                let pid = parse_pid(name)?;
+                procs.find(pid).map(|_| Node::Process(pid))
+            }),
+        Node::Process(pid) => PROCESS_FILES
+            .iter()
+            .find(|(n, _)| n.as_bytes() == name)
+            .map(|&(_, file)| Node::File(pid, file)),
+        _ => None,
+    }
+}
+
+/// The directory above `node` (`None`: `/proc` itself, whose parent is the file system's).
+pub fn parent(node: Node) -> Option<Node> {
+    match node {
+        Node::Root => None,
+        Node::File(pid, _) => Some(Node::Process(pid)),
+        _ => Some(Node::Root),
+    }
+}
+
+pub fn is_dir(node: Node) -> bool {
+    matches!(node, Node::Root | Node::Process(_))
+}
+
+pub fn is_link(node: Node) -> bool {
+    matches!(node, Node::SelfLink | Node::File(_, File::Exe))
+}
+
+/// A link's target, written into `buf` (`None`: not a link, or its process is gone).
+pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b [u8]> {
+    let mut w = SliceWriter { buf, len: 0 };
+    match node {
+        Node::SelfLink => write!(w, "{}", procs.me.pid).ok()?,
+        Node::File(pid, File::Exe) => write!(w, "/{}", procs.find(pid)?.exe).ok()?,
+        _ => return None,
+    }
+    let len = w.len;
+    Some(&buf[..len])
+}
+
+/// Its inode number (in a range of its own, apart from the file system's).
+fn ino(node: Node) -> u64 {
+    const BASE: u64 = 0x4000_0000;
+    match node {
+        Node::Root => BASE,
+        Node::SelfLink => BASE + 1,
+        Node::Meminfo => BASE + 2,
+        Node::Uptime => BASE + 3,
+        Node::Mounts => BASE + 4,
+        Node::Process(pid) => BASE + 16 * (pid as u64 + 1),
+        Node::File(pid, f) => BASE + 16 * (pid as u64 + 1) + 1 + f as u64,
+    }
+}
+
+pub fn stat(node: Node) -> Stat {
+    let mode = if is_dir(node) {
+        S_IFDIR | 0o555
+    } else if is_link(node) {
+        S_IFLNK | 0o777
+    } else {
+        S_IFREG | 0o444
+    };
+    Stat {
+        ino: ino(node),
+        nlink: if is_dir(node) { 2 } else { 1 },
+        mode,
+        ..Stat::default()
+    }
+}
+
+/// The entries of directory `dir`: name, inode number and whether each is a directory
+/// (`.` and `..` are the caller's).
+pub fn entries(dir: Node, procs: &Procs) -> Vec<(Vec<u8>, Node)> {
+    let mut out = Vec::new();
+    match dir {
+        Node::Root => {
+            for (name, node) in SYSTEM_FILES {
+                out.push((name.as_bytes().to_vec(), node));
+            }
+            for pid in procs.pids() {
+                let mut name = Vec::new();
+                let _ = write!(VecWriter(&mut name), "{pid}");
+                out.push((name, Node::Process(pid)));
+            }
+        }
+        Node::Process(pid) => {
+            for (name, file) in PROCESS_FILES {
+                out.push((name.as_bytes().to_vec(), Node::File(pid, file)));
+            }
+        }
+        _ => {}
+    }
+    out
+}
+
+pub fn inode_number(node: Node) -> u64 {
+    ino(node)
+}
+
+/// The contents of file `node` now (`None`: a directory or link, or its process is gone).
+pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
+    let mut text = Vec::new();
+    let mut w = VecWriter(&mut text);
+    match node {
+        Node::Meminfo => {
+            let total = procs.memory / 1024;
+            let mut used = procs.fs_used;
+            for pid in procs.pids() {
+                used += procs.find(pid).map_or(0, |p| p.size);
+            }
+            let free = total.saturating_sub(used / 1024);
+            let _ = write!(
+                w,
+                "MemTotal:       {total:8} kB\nMemFree:        {free:8} kB\nMemAvailable:   {free:8} kB\nBuffers:               0 kB\nCached:                0 kB\nSwapTotal:             0 kB\nSwapFree:              0 kB\n"
+            );
+        }
+        Node::Uptime => {
+            let centis = procs.now_ns / 10_000_000;
+            let _ = writeln!(
+                w,
+                "{}.{:02} {}.{:02}",
+                centis / 100,
+                centis % 100,
+                centis / 100,
+                centis % 100
+            );
+        }
+        Node::Mounts => {
+            let _ = write!(w, "rootfs / rootfs rw 0 0\nproc /proc proc rw 0 0\n");
+        }
+        Node::File(pid, File::Stat) => {
+            let p = procs.find(pid)?;
+            // pid (comm) state ppid pgrp session tty_nr tpgid flags minflt cminflt majflt
+            // cmajflt utime stime cutime cstime priority nice num_threads itrealvalue
+            // starttime vsize rss, then 28 more fields nobody here reads.
+            let _ = write!(
+                w,
+                "{} ({}) {} {} {} {} 0 -1 4194560 0 0 0 0 0 0 0 0 20 0 1 0 0 {} {}",
+                p.pid,
+                p.name,
+                p.state as char,
+                p.ppid,
+                p.pid,
+                p.pid,
+                p.size,
+                p.size / 4096
+            );
+            for _ in 0..28 {
+                let _ = w.write_str(" 0");
+            }
+            let _ = w.write_str("\n");
+        }
+        Node::File(pid, File::Status) => {
+            let p = procs.find(pid)?;
+            let state = match p.state {
+                b'R' => "R (running)",
+                b'S' => "S (sleeping)",
+                _ => "Z (zombie)",
+            };
+            let _ = write!(
+                w,
+                "Name:\t{}\nState:\t{state}\nTgid:\t{}\nPid:\t{}\nPPid:\t{}\nUid:\t0\t0\t0\t0\nGid:\t0\t0\t0\t0\nVmSize:\t{} kB\nThreads:\t1\n",
+                p.name,
+                p.pid,
+                p.pid,
+                p.ppid,
+                p.size / 1024
+            );
+        }
+        Node::File(pid, File::Cmdline) => {
+            let p = procs.find(pid)?;
+            text.extend_from_slice(p.cmdline);
+        }
+        _ => return None,
+    }
+    Some(text)
+}
+
+struct VecWriter<'v>(&'v mut Vec<u8>);
+
+impl Write for VecWriter<'_> {
+    fn write_str(&mut self, s: &str) -> core::fmt::Result {
+        self.0.extend_from_slice(s.as_bytes());
+        Ok(())
+    }
+}
