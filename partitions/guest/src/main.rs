@@ -55,6 +55,9 @@ use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
 
+/// How long a process runs before another that may run gets the CPU (Linux's default
+/// scheduler gives a few milliseconds).
+const TIME_SLICE_NS: u64 = 10_000_000;
 /// Pages of the pool the IPC buffer takes (at its start).
 const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
 /// The part of the pool that is the heap (1/4: the processes' pages keep the rest; a
@@ -246,6 +249,7 @@ fn main(start: u64, _: u64) {
     }
 
     let mut system = System::new(loaded.process, hwcap());
+    let (mut slice_end, mut sliced) = (0, 0);
     let outcome = loop {
         // Wait for a message, or until the next sleep or alarm is due (a due one first:
         // a busy guest must not starve its timers).
@@ -259,6 +263,30 @@ fn main(start: u64, _: u64) {
             }
             Some(at) => at - now,
             None => TIMEOUT_INFINITE,
+        };
+        // Time slices: the processes' threads share one priority and the kernel runs the
+        // first ready one until it blocks (a preempted one resumes first), so with two or
+        // more that may run, each slice ends by interrupting one: its exception message is
+        // answered at once, which puts it behind the others. Taking them in turn (pid
+        // order) follows the kernel's queue, so the one interrupted is the one that ran; a
+        // Linux scheduler shares a CPU among busy processes the same way.
+        let timeout = if system.runnable().nth(1).is_none() {
+            slice_end = now + TIME_SLICE_NS;
+            timeout
+        } else if now >= slice_end {
+            let next = system
+                .runnable()
+                .filter(|&pid| pid > sliced)
+                .min()
+                .or_else(|| system.runnable().min());
+            if let Some(pid) = next {
+                host.interrupt(pid);
+                sliced = pid;
+            }
+            slice_end = now + TIME_SLICE_NS;
+            timeout.min(TIME_SLICE_NS)
+        } else {
+            timeout.min(slice_end - now)
         };
         let received = match sys::receive(None, timeout) {
             Ok(r) => r,

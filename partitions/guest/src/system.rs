@@ -279,6 +279,16 @@ impl System {
         self.wake(fs, k)
     }
 
+    /// The processes that may be running user code (not waiting in a call, stopped or
+    /// ended): the ones a time slice is shared among.
+    pub fn runnable(&self) -> impl Iterator<Item = u32> + '_ {
+        self.slots
+            .iter()
+            .flatten()
+            .filter(|s| matches!(s.state, State::Running) && !s.stopped)
+            .map(|s| s.process.pid)
+    }
+
     /// The time the next sleeping call or alarm is due (the guest's clock), if any.
     pub fn next_timer(&self) -> Option<u64> {
         self.slots

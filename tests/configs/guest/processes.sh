@@ -1,5 +1,6 @@
 # Scenario guest_processes: 200 short processes one after the other, ten at once, and an
-# orphan that init (this shell) inherits and reaps.
+# orphan that init (this shell) inherits and reaps, then 20 more beside a process spinning
+# in user code (the guest shares the CPU among them in time slices).
 i=0
 while [ $i -lt 200 ]; do /bin/true; i=$((i+1)); done
 echo "ran $i processes"
@@ -10,4 +11,12 @@ echo "ten in parallel reaped"
 echo "its parent is gone"
 /bin/busybox sleep 0.3
 /bin/true
+/bin/busybox sh -c 'while :; do :; done' &
+hog=$!
+i=0
+while [ $i -lt 20 ]; do /bin/true; i=$((i+1)); done
+echo "ran $i processes beside a busy one"
+kill $hog
+wait $hog
+echo "the busy one ended with $?"
 echo done
