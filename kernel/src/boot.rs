@@ -83,6 +83,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         "boot: loader handed over {} us before entry; lower half unmapped",
         time::ticks_to_ns(entry_tsc.wrapping_sub(info.tsc_at_handoff), time::tsc_hz()) / 1000
     );
+    time::set_wall_clock(info.wall_clock_at_handoff, info.tsc_at_handoff);
 
     gdt::init();
     idt::init();

@@ -150,6 +150,7 @@ fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 fn clock(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, clock: Clock) -> Handled {
     let c = &mut k.threads[t].context;
     (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
+    c.r10 = crate::time::wall_clock_at_boot();
     Ok(Next::Return)
 }
 

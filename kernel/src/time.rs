@@ -5,6 +5,8 @@ use core::sync::atomic::{AtomicU64, Ordering};
 static TSC_AT_BOOT: AtomicU64 = AtomicU64::new(0);
 static TSC_HZ: AtomicU64 = AtomicU64::new(0);
 static TIMER_INTERRUPTS: AtomicU64 = AtomicU64::new(0);
+/// Unix time in ns at [`TSC_AT_BOOT`] (0: unknown).
+static WALL_CLOCK_AT_BOOT: AtomicU64 = AtomicU64::new(0);
 
 /// Converts a TSC tick count to nanoseconds (0 while the frequency is unknown).
 pub fn ticks_to_ns(ticks: u64, hz: u64) -> u64 {
@@ -20,6 +22,20 @@ pub fn set_boot_tsc(tsc: u64) {
 
 pub fn set_tsc_hz(hz: u64) {
     TSC_HZ.store(hz, Ordering::Relaxed);
+}
+
+/// Records the wall-clock time of boot: the firmware's clock (`at_handoff`, Unix ns, 0 if
+/// none) plus the time from the handoff to the kernel's boot TSC.
+pub fn set_wall_clock(at_handoff: u64, handoff_tsc: u64) {
+    if at_handoff == 0 {
+        return;
+    }
+    let since = ticks_to_ns(boot_tsc().saturating_sub(handoff_tsc), tsc_hz());
+    WALL_CLOCK_AT_BOOT.store(at_handoff.saturating_add(since), Ordering::Relaxed);
+}
+
+pub fn wall_clock_at_boot() -> u64 {
+    WALL_CLOCK_AT_BOOT.load(Ordering::Relaxed)
 }
 
 pub fn boot_tsc() -> u64 {

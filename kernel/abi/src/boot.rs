@@ -25,7 +25,7 @@ pub const KERNEL_BASE: u64 = 0xffff_ffff_8000_0000;
 pub const BOOT_INFO_MAGIC: u64 = u64::from_le_bytes(*b"PKBOOTIN");
 
 /// Bumped on every incompatible change of [`BootInfo`] or [`MemoryRegion`].
-pub const BOOT_INFO_VERSION: u32 = 1;
+pub const BOOT_INFO_VERSION: u32 = 2;
 
 /// A physical address range, `[start, start + len)`.
 #[repr(C)]
@@ -144,6 +144,43 @@ pub struct BootInfo {
     pub page_table_root: u64,
     /// TSC value read just before the jump, so the kernel can report loader-to-kernel time.
     pub tsc_at_handoff: u64,
+    /// The firmware's real-time clock when the loader read it, just before the handoff, as
+    /// nanoseconds since the Unix epoch (UTC; a clock without a time zone is taken as UTC);
+    /// 0 when the firmware has no clock.
+    pub wall_clock_at_handoff: u64,
+}
+
+/// Nanoseconds since 1970-01-01T00:00:00Z of a calendar date and time (UTC), or `None`
+/// for an impossible one (month 1..=12, day 1..=31, year from 1970; leap seconds are not
+/// counted, as Unix time does not).
+pub fn unix_ns(
+    (year, month, day): (u16, u8, u8),
+    (hour, minute, second): (u8, u8, u8),
+    nanosecond: u32,
+) -> Option<u64> {
+    if year < 1970 || !(1..=12).contains(&month) || !(1..=31).contains(&day) {
+        return None;
+    }
+    if hour > 23 || minute > 59 || second > 60 || nanosecond >= 1_000_000_000 {
+        return None;
+    }
+    // Days from the epoch to the date (the proleptic Gregorian calendar, years counted
+    // from March so that the leap day comes last).
+    let (y, m) = if month <= 2 {
+        (year as i64 - 1, month as i64 + 9)
+    } else {
+        (year as i64, month as i64 - 3)
+    };
+    let era = y.div_euclid(400);
+    let year_of_era = y - era * 400;
+    let day_of_year = (153 * m + 2) / 5 + day as i64 - 1;
+    let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
+    let days = era * 146_097 + day_of_era - 719_468;
+    let seconds = days * 86_400 + hour as i64 * 3600 + minute as i64 * 60 + second as i64;
+    u64::try_from(seconds)
+        .ok()?
+        .checked_mul(1_000_000_000)?
+        .checked_add(nanosecond as u64)
 }
 
 impl BootInfo {
@@ -173,7 +210,7 @@ mod tests {
     fn layout_is_stable() {
         // Loader and kernel are built separately: these sizes are part of the contract.
         assert_eq!(core::mem::size_of::<MemoryRegion>(), 24);
-        assert_eq!(core::mem::size_of::<BootInfo>(), 96);
+        assert_eq!(core::mem::size_of::<BootInfo>(), 104);
         assert_eq!(core::mem::size_of::<PhysRange>(), 16);
     }
 
@@ -181,6 +218,22 @@ mod tests {
     fn custom_uefi_types_are_in_the_os_range() {
         assert_eq!(MemoryKind::KERNEL.uefi_type(), 0x8000_0007);
         assert!(MemoryKind::BOOT_INFO.uefi_type() >= 0x8000_0000);
+    }
+
+    #[test]
+    fn calendar_dates_become_unix_time() {
+        assert_eq!(unix_ns((1970, 1, 1), (0, 0, 0), 0), Some(0));
+        assert_eq!(
+            unix_ns((2000, 3, 1), (0, 0, 1), 5),
+            Some(951_868_801_000_000_005)
+        );
+        // 2024-02-29 (a leap day) 12:34:56 UTC.
+        assert_eq!(
+            unix_ns((2024, 2, 29), (12, 34, 56), 0),
+            Some(1_709_210_096_000_000_000)
+        );
+        assert_eq!(unix_ns((2026, 13, 1), (0, 0, 0), 0), None);
+        assert_eq!(unix_ns((1969, 12, 31), (23, 59, 59), 0), None);
     }
 
     #[test]
@@ -197,6 +250,7 @@ mod tests {
             trampoline: PhysRange::default(),
             page_table_root: 0,
             tsc_at_handoff: 0,
+            wall_clock_at_handoff: 0,
         };
         assert!(good.check().is_ok());
         assert!(BootInfo { magic: 0, ..good }.check().is_err());

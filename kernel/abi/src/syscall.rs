@@ -57,9 +57,11 @@ codes::code_enum! {
         /// Ability: `DEBUG_LOG`. Errors: `BadAddress` (buffer not readable user memory),
         /// `InvalidArgument` (too long).
         DebugWrite = 1 => "debug_write",
-        /// `clock() -> rdi = ns, rsi = TSC frequency (Hz), rdx = TSC at boot`: nanoseconds
-        /// since boot (monotonic); the other two let a program convert `rdtsc` readings to the
-        /// same time base (ns = (tsc - boot) * 10^9 / Hz) for cycle-exact measurements.
+        /// `clock() -> rdi = ns, rsi = TSC frequency (Hz), rdx = TSC at boot, r10 = wall
+        /// clock at boot`: nanoseconds since boot (monotonic); rsi and rdx let a program
+        /// convert `rdtsc` readings to the same time base (ns = (tsc - boot) * 10^9 / Hz) for
+        /// cycle-exact measurements; r10 is the Unix time in ns at boot from the firmware's
+        /// real-time clock (UTC; 0 when there is none), so wall-clock time is r10 + rdi.
         /// Ability: none.
         Clock = 2 => "clock",
         /// `thread_exit()`: ends the calling thread (as `thread_kill` of itself); does not

@@ -96,6 +96,7 @@ fn load() -> Result<core::convert::Infallible, String> {
     let info_phys = allocate(MemoryKind::BOOT_INFO, info_pages)?;
     let regions_phys = info_phys + core::mem::size_of::<BootInfo>() as u64;
 
+    let wall_clock = wall_clock();
     println!("loader: exiting boot services");
     // SAFETY: no boot-services object (protocol, pool buffer) is alive past this point: the
     // file system and file buffers were dropped above, and nothing below allocates.
@@ -120,6 +121,7 @@ fn load() -> Result<core::convert::Infallible, String> {
         trampoline,
         page_table_root: tables.root(),
         tsc_at_handoff: 0,
+        wall_clock_at_handoff: wall_clock,
     };
     // SAFETY: `info_phys` is the start of our BOOT_INFO allocation, suitably aligned (page).
     unsafe {
@@ -393,4 +395,19 @@ fn halt_with(message: &str) -> ! {
     loop {
         x86_64::instructions::hlt();
     }
+}
+
+/// The firmware's real-time clock as Unix time in ns (UTC), 0 without one.
+fn wall_clock() -> u64 {
+    let Ok(t) = uefi::runtime::get_time() else {
+        return 0;
+    };
+    let local = abi::boot::unix_ns(
+        (t.year(), t.month(), t.day()),
+        (t.hour(), t.minute(), t.second()),
+        t.nanosecond(),
+    );
+    // UEFI: local time = UTC - time_zone (minutes); none given means UTC.
+    let zone_ns = t.time_zone().unwrap_or(0) as i64 * 60_000_000_000;
+    local.map_or(0, |ns| ns.saturating_add_signed(zone_ns))
 }

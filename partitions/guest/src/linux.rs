@@ -183,6 +183,7 @@ syscalls! {
     setpriority = 141,
     prctl = 157,
     arch_prctl = 158,
+    setrlimit = 160,
     sync = 162,
     mount = 165,
     gettid = 186,
@@ -262,6 +263,7 @@ pub const CLOCK_REALTIME: u64 = 0;
 pub const CLOCK_MONOTONIC: u64 = 1;
 
 pub const RLIMIT_STACK: u64 = 3;
+pub const RLIMIT_CORE: u64 = 4;
 pub const RLIMIT_NOFILE: u64 = 7;
 pub const RLIM_INFINITY: u64 = u64::MAX;
 

@@ -189,6 +189,7 @@ fn main(start: u64, _: u64) {
         handler: me,
         ipc,
         started: sys::clock(),
+        wall_clock_at_boot: sys::wall_clock_at_boot(),
         seed: sys::rdtsc() | 1,
         tty: None,
     };
@@ -426,6 +427,9 @@ struct Task {
     pid: u32,
     task: TaskId,
     thread: ThreadId,
+    /// The process whose memory (task and frames) it uses: itself, or for a vfork child
+    /// its parent's until it executes.
+    memory: u32,
     out: [LineBuffer; 2],
 }
 
@@ -435,6 +439,7 @@ impl Task {
             pid,
             task,
             thread: ThreadId(0),
+            memory: pid,
             out: [LineBuffer::new(), LineBuffer::new()],
         }
     }
@@ -448,11 +453,12 @@ struct Spaces<'t> {
 }
 
 impl Spaces<'_> {
+    /// The task of the memory of `pid`.
     fn task(&self, pid: u32) -> Option<TaskId> {
         self.tasks
             .iter()
             .flatten()
-            .find(|t| t.pid == pid)
+            .find(|t| t.pid == pid && t.memory == pid)
             .map(|t| t.task)
     }
 }
@@ -530,6 +536,8 @@ struct GuestHost<'p> {
     handler: ThreadId,
     ipc: IpcBufferRef,
     started: u64,
+    /// Unix time in ns at boot (the firmware's clock), if the machine has one.
+    wall_clock_at_boot: Option<u64>,
     seed: u64,
     /// The console's terminal (COM2), if the guest has one.
     tty: Option<Tty>,
@@ -538,6 +546,11 @@ struct GuestHost<'p> {
 impl<'p> GuestHost<'p> {
     fn task(&self, pid: u32) -> Option<&Task> {
         self.tasks.iter().flatten().find(|t| t.pid == pid)
+    }
+
+    /// The process whose memory `pid` uses (its own, or a vfork parent's).
+    fn memory_of(&self, pid: u32) -> u32 {
+        self.task(pid).map_or(pid, |t| t.memory)
     }
 
     fn pid_of(&self, thread: ThreadId) -> Option<u32> {
@@ -554,13 +567,14 @@ impl<'p> GuestHost<'p> {
             tasks: &self.tasks,
             first_frame: self.first_frame,
         };
-        (&mut self.frames, spaces, self.current)
+        let owner = self.memory_of(self.current);
+        (&mut self.frames, spaces, owner)
     }
 }
 
 impl Host for GuestHost<'_> {
     fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno> {
-        self.frames.read(self.current, address, buf);
+        self.frames.read(self.memory_of(self.current), address, buf);
         Ok(())
     }
 
@@ -609,7 +623,8 @@ impl Host for GuestHost<'_> {
     }
 
     fn fill_in(&mut self, page: u64, fill: &mut dyn FnMut(&mut [u8])) -> Result<(), Errno> {
-        self.frames.fill_in(self.current, page, fill)
+        let owner = self.memory_of(self.current);
+        self.frames.fill_in(owner, page, fill)
     }
 
     fn fault_in(&mut self, page: u64, rights: Rights, write: bool) -> Result<(), Errno> {
@@ -643,6 +658,13 @@ impl Host for GuestHost<'_> {
 
     fn now_ns(&mut self) -> u64 {
         sys::clock().saturating_sub(self.started)
+    }
+
+    fn wall_clock_ns(&mut self) -> u64 {
+        match self.wall_clock_at_boot {
+            Some(at_boot) => at_boot.saturating_add(sys::clock()),
+            None => self.now_ns(),
+        }
     }
 
     fn memory(&mut self) -> (u64, u64) {
@@ -713,6 +735,48 @@ impl Tasks for GuestHost<'_> {
         }
     }
 
+    fn borrow(&mut self, child: u32, parent: u32) -> Result<(), Errno> {
+        let slot = self
+            .tasks
+            .iter()
+            .position(Option::is_none)
+            .ok_or(Errno::EAGAIN)?;
+        let owner = self.task(parent).ok_or(Errno::ESRCH)?;
+        let (task, memory) = (owner.task, owner.memory);
+        // The thread starts at address 0: its fetch fault asks the guest for the registers.
+        let thread = start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)?;
+        self.tasks[slot] = Some(Task {
+            thread,
+            memory,
+            ..Task::new(child, task)
+        });
+        Ok(())
+    }
+
+    fn own(&mut self, pid: u32) -> Result<bool, Errno> {
+        let Some(slot) = self
+            .tasks
+            .iter()
+            .position(|t| t.as_ref().is_some_and(|t| t.pid == pid && t.memory != pid))
+        else {
+            return Ok(false);
+        };
+        let task = sys::task_create(Abilities::empty(), self.mcp, 0, "process")
+            .map_err(|_| Errno::EAGAIN)?;
+        let thread = match start_thread(task, 0, 0, self.mcp, self.handler) {
+            Ok(thread) => thread,
+            Err(_) => {
+                let _ = sys::task_kill(task);
+                return Err(Errno::EAGAIN);
+            }
+        };
+        if let Some(t) = self.tasks[slot].as_mut() {
+            let _ = sys::thread_kill(t.thread);
+            (t.task, t.thread, t.memory) = (task, thread, pid);
+        }
+        Ok(true)
+    }
+
     fn release(&mut self, pid: u32) {
         let Some(slot) = self
             .tasks
@@ -724,7 +788,12 @@ impl Tasks for GuestHost<'_> {
         let Some(mut task) = self.tasks[slot].take() else {
             return;
         };
-        let _ = sys::task_kill(task.task);
+        if task.memory != pid {
+            // A vfork child: only its thread is its own.
+            let _ = sys::thread_kill(task.thread);
+        } else {
+            let _ = sys::task_kill(task.task);
+        }
         for (i, stream) in [Stream::Stdout, Stream::Stderr].into_iter().enumerate() {
             task.out[i].flush(|line| {
                 println!(

@@ -3,6 +3,7 @@
 //! (`set_tid_address`, `set_robust_list`). The system calls change it
 //! ([`crate::syscall::handle`]); the partition program owns one per process.
 
+use crate::linux;
 use crate::memory::{Area, AreaError, Areas, Kind, STACK_SIZE, STACK_TOP};
 use crate::signal::{Action, AltStack, Info};
 use crate::vfs::{self, Node, OpenId, PathBuf};
@@ -13,6 +14,30 @@ pub const MAX_FILES: usize = 64;
 /// Most bytes of arguments `/proc/<pid>/cmdline` shows (Linux shows them all; `ps`
 /// reads one page).
 pub const CMDLINE_MAX: usize = 4096;
+/// Resource limits (`RLIMIT_*`, 0..16): soft and hard.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limit {
+    pub soft: u64,
+    pub hard: u64,
+}
+
+/// Linux's resource limits of a process (`RLIMIT_*` indices) and what the guest can give:
+/// the stack and the descriptors have fixed sizes, the rest no limit of its own.
+pub const LIMITS: usize = 16;
+
+/// The limits a process starts with.
+pub fn default_limits() -> [Limit; LIMITS] {
+    let mut limits = [Limit {
+        soft: linux::RLIM_INFINITY,
+        hard: linux::RLIM_INFINITY,
+    }; LIMITS];
+    let fixed = |n: u64| Limit { soft: n, hard: n };
+    limits[linux::RLIMIT_STACK as usize] = fixed(crate::memory::STACK_SIZE);
+    limits[linux::RLIMIT_NOFILE as usize] = fixed(MAX_FILES as u64);
+    limits[linux::RLIMIT_CORE as usize] = fixed(0);
+    limits
+}
+
 /// Longest process name (Linux's `TASK_COMM_LEN` without the NUL).
 pub const NAME_LEN: usize = 15;
 
@@ -85,6 +110,11 @@ pub struct Process {
     /// When `alarm`/`setitimer(ITIMER_REAL)` raises SIGALRM, and its reload interval.
     pub alarm_at: Option<u64>,
     pub alarm_interval: u64,
+    /// Resource limits (`prlimit64`); the descriptor limit bounds new descriptors.
+    pub limits: [Limit; LIMITS],
+    /// Bytes a blocking pipe `write` moved before it had to wait (it goes on from there
+    /// when served again, and returns the whole count, as Linux's blocking writes do).
+    pub pipe_written: u64,
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
@@ -130,6 +160,8 @@ impl Process {
             wake_at: None,
             alarm_at: None,
             alarm_interval: 0,
+            limits: default_limits(),
+            pipe_written: 0,
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,
@@ -207,7 +239,13 @@ impl Process {
 
     /// The lowest free descriptor from `low` on.
     pub fn free_fd_from(&self, low: usize) -> Option<usize> {
-        (low..MAX_FILES).find(|&fd| self.files[fd].is_none())
+        (low..self.max_fd()).find(|&fd| self.files[fd].is_none())
+    }
+
+    /// One more than the highest descriptor it may open (`RLIMIT_NOFILE`).
+    pub fn max_fd(&self) -> usize {
+        let soft = self.limits[crate::linux::RLIMIT_NOFILE as usize].soft;
+        usize::try_from(soft).unwrap_or(MAX_FILES).min(MAX_FILES)
     }
 
     /// Puts `file` at descriptor `fd` (free or closed by the caller before), with its

@@ -203,7 +203,10 @@ pub fn sleep(
         return Err(Errno::EINVAL);
     }
     let ns = read_timespec(p, host, request)?;
-    let at = if flags & TIMER_ABSTIME != 0 {
+    let at = if flags & TIMER_ABSTIME != 0 && crate::syscall::is_realtime(clock) {
+        // A wall-clock deadline, on the guest's clock.
+        ns.saturating_sub(host.wall_clock_ns().saturating_sub(now))
+    } else if flags & TIMER_ABSTIME != 0 {
         ns
     } else {
         now.saturating_add(ns)
@@ -338,6 +341,14 @@ pub fn interrupted(
     let r = &mut m.registers;
     let number = r.rax;
     let wake_at = p.wake_at.take();
+    // A write that moved some bytes before it waited returns them, restart or not.
+    let written = core::mem::take(&mut p.pipe_written);
+    if number == nr::write && written > 0 {
+        r.rax = written;
+        r.rcx = r.rip;
+        r.r11 = r.rflags;
+        return m;
+    }
     if restart && restartable(number) {
         // Back to the `syscall` instruction (2 bytes) with the call number in rax.
         r.rip = r.rip.wrapping_sub(2);

@@ -112,6 +112,9 @@ pub trait Host {
     }
     /// Nanoseconds since the guest started.
     fn now_ns(&mut self) -> u64;
+    /// Unix time in ns: the firmware's clock at boot plus the kernel's clock (without a
+    /// clock, time since the guest started, as if it started at the epoch).
+    fn wall_clock_ns(&mut self) -> u64;
     /// The guest's memory for its processes: total and free bytes.
     fn memory(&mut self) -> (u64, u64);
     /// Copies the FPU/SSE state (FXSAVE image) of the process's thread into `image`.
@@ -466,12 +469,10 @@ fn call(
             if a[0] != 0 && a[0] != p.pid as u64 {
                 return Err(Errno::ESRCH);
             }
-            if a[2] != 0 {
-                return Err(Errno::EPERM); // the limits are fixed
-            }
-            rlimit(p, host, a[1], a[3])
+            rlimit(p, host, a[1], a[2], a[3])
         }
-        nr::getrlimit => rlimit(p, host, a[0], a[1]),
+        nr::getrlimit => rlimit(p, host, a[0], 0, a[1]),
+        nr::setrlimit => rlimit(p, host, a[0], a[1], 0),
         nr::getrandom => {
             if a[2] & !7 != 0 {
                 return Err(Errno::EINVAL);
@@ -483,20 +484,36 @@ fn call(
             Ok(n as u64)
         }
         nr::clock_gettime => {
-            // CLOCK_REALTIME .. CLOCK_BOOTTIME; there is no real-time clock yet, so the
-            // wall clock starts at the epoch when the guest starts.
+            // CLOCK_REALTIME .. CLOCK_BOOTTIME: the real-time ones the wall clock, the others
+            // the guest's clock.
             if a[0] > 7 {
                 return Err(Errno::EINVAL);
             }
-            let ns = host.now_ns();
+            let ns = if is_realtime(a[0]) {
+                host.wall_clock_ns()
+            } else {
+                host.now_ns()
+            };
             let mut ts = [0u8; 16];
             ts[..8].copy_from_slice(&(ns / 1_000_000_000).to_le_bytes());
             ts[8..].copy_from_slice(&(ns % 1_000_000_000).to_le_bytes());
             write_user(p, host, a[1], &ts)?;
             Ok(0)
         }
+        nr::clock_getres => {
+            if a[0] > 7 {
+                return Err(Errno::EINVAL);
+            }
+            // The guest's clock counts nanoseconds (the kernel's, from the TSC).
+            if a[1] != 0 {
+                let mut ts = [0u8; 16];
+                ts[8..].copy_from_slice(&1u64.to_le_bytes());
+                write_user(p, host, a[1], &ts)?;
+            }
+            Ok(0)
+        }
         nr::gettimeofday => {
-            let ns = host.now_ns();
+            let ns = host.wall_clock_ns();
             if a[0] != 0 {
                 let mut tv = [0u8; 16];
                 tv[..8].copy_from_slice(&(ns / 1_000_000_000).to_le_bytes());
@@ -506,7 +523,7 @@ fn call(
             Ok(0)
         }
         nr::time => {
-            let seconds = host.now_ns() / 1_000_000_000;
+            let seconds = host.wall_clock_ns() / 1_000_000_000;
             if a[0] != 0 {
                 write_user(p, host, a[0], &seconds.to_le_bytes())?;
             }
@@ -553,6 +570,12 @@ fn call(
             Err(Errno::ENOSYS)
         }
     }
+}
+
+/// Whether clock id `clock` counts wall-clock time (`CLOCK_REALTIME`,
+/// `CLOCK_REALTIME_COARSE`).
+pub(crate) fn is_realtime(clock: u64) -> bool {
+    matches!(clock, 0 | 5)
 }
 
 /// A file offset argument (`pread64`, `pwrite64`): negative ones are `EINVAL`.
@@ -692,23 +715,44 @@ fn prctl(p: &mut Process, host: &mut impl Host, option: u64, arg: u64) -> SysRes
     }
 }
 
-fn rlimit(p: &Process, host: &mut impl Host, resource: u64, old: u64) -> SysResult<u64> {
-    if resource >= 16 {
-        return Err(Errno::EINVAL);
-    }
-    let (cur, max) = match resource {
-        linux::RLIMIT_STACK => (crate::memory::STACK_SIZE, crate::memory::STACK_SIZE),
-        linux::RLIMIT_NOFILE => (
-            crate::process::MAX_FILES as u64,
-            crate::process::MAX_FILES as u64,
-        ),
-        _ => (linux::RLIM_INFINITY, linux::RLIM_INFINITY),
+fn rlimit(
+    p: &mut Process,
+    host: &mut impl Host,
+    resource: u64,
+    new: u64,
+    old: u64,
+) -> SysResult<u64> {
+    let index = usize::try_from(resource)
+        .ok()
+        .filter(|&r| r < crate::process::LIMITS)
+        .ok_or(Errno::EINVAL)?;
+    let replacement = if new != 0 {
+        let mut b = [0u8; 16];
+        read_user(p, host, new, &mut b)?;
+        let soft = u64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
+        let hard = u64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
+        if soft > hard {
+            return Err(Errno::EINVAL);
+        }
+        // Root may raise a hard limit, but not beyond what the guest has (descriptors,
+        // the stack's fixed size).
+        let ceiling = crate::process::default_limits()[index].hard;
+        if hard > ceiling {
+            return Err(Errno::EPERM);
+        }
+        Some(crate::process::Limit { soft, hard })
+    } else {
+        None
     };
     if old != 0 {
+        let limit = p.limits[index];
         let mut b = [0u8; 16];
-        b[..8].copy_from_slice(&cur.to_le_bytes());
-        b[8..].copy_from_slice(&max.to_le_bytes());
+        b[..8].copy_from_slice(&limit.soft.to_le_bytes());
+        b[8..].copy_from_slice(&limit.hard.to_le_bytes());
         write_user(p, host, old, &b)?;
+    }
+    if let Some(limit) = replacement {
+        p.limits[index] = limit;
     }
     Ok(0)
 }

@@ -15,9 +15,9 @@
 //! partition program maps them; [`Tasks::fork`]) and a thread started at address 0:
 //! its first exception message (the fetch fault) is answered with the parent's registers
 //! and `rax = 0`, the child's half of the `fork`. `vfork` and `clone(CLONE_VM |
-//! CLONE_VFORK)` are served the same way (copy-on-write, not shared memory; a child that only
-//! `execve`s or `_exit`s cannot tell), and the parent waits, as on Linux, until the child
-//! executes or ends ([`State::Vforked`]).
+//! CLONE_VFORK)` make the child a thread in the parent's task instead ([`Tasks::borrow`]):
+//! it runs in its parent's memory, as on Linux, until it executes (then it gets a task of
+//! its own, [`Tasks::own`]) or ends; the parent waits meanwhile ([`State::Vforked`]).
 //!
 //! A parent that ignores `SIGCHLD` (or set `SA_NOCLDWAIT`) leaves no zombies: its
 //! children are reaped when they end, and its `wait4` waits until none is left (`ECHILD`).
@@ -83,7 +83,16 @@ pub trait Tasks: Host {
     /// it shares; `EAGAIN` when no task or thread can be created, `ENOMEM` when the guest
     /// is out of memory for its bookkeeping (then nothing of the child is left).
     fn fork(&mut self, child: u32, areas: &Areas) -> Result<u64, Errno>;
-    /// Ends process `pid`: its task, its memory and its pending console output.
+    /// Creates process `child` of a `vfork`: a thread in the selected process's task
+    /// (`parent`'s), starting at address 0 like a forked child's, so the child runs in its
+    /// parent's memory until it executes or ends, as Linux's vfork child does.
+    fn borrow(&mut self, child: u32, parent: u32) -> Result<(), Errno>;
+    /// Gives process `pid`, if it runs in its parent's memory (a vfork child), a task and
+    /// memory of its own and a new thread that starts at address 0 (its old thread is
+    /// gone): `Ok(true)`; `Ok(false)` for a process that has them already.
+    fn own(&mut self, pid: u32) -> Result<bool, Errno>;
+    /// Ends process `pid`: its task (a vfork child's thread), its memory and its pending
+    /// console output.
     fn release(&mut self, pid: u32);
     /// Replies to the waiting exception message of `pid`'s thread: it resumes with the
     /// registers of `m`.
@@ -814,14 +823,22 @@ impl System {
                         }
                     }
                     _ => match self.execve(i, fs, k, args[0], args[1], args[2]) {
-                        Ok(Some((entry, sp))) => {
+                        Ok(Some((entry, sp, new_thread))) => {
                             m.registers = Registers {
                                 rip: entry,
                                 rsp: sp,
                                 rflags: m.registers.rflags,
                                 ..Registers::default()
                             };
-                            let ended = self.resume(i, fs, k, m, None);
+                            let ended = if new_thread {
+                                // Its new thread reports first (a fault at address 0).
+                                if let Some(slot) = self.slots[i].as_mut() {
+                                    slot.state = State::Starting(m.registers);
+                                }
+                                None
+                            } else {
+                                self.resume(i, fs, k, m, None)
+                            };
                             return ended.or_else(|| self.release_vfork_parent(pid, fs, k));
                         }
                         // The old image is gone and the new one did not load.
@@ -926,7 +943,12 @@ impl System {
             0
         };
         let started = k.now_ns();
-        let pages = k.fork(pid, &parent.areas)?;
+        let pages = if flags & CLONE_VM != 0 {
+            k.borrow(pid, parent.pid)?;
+            0
+        } else {
+            k.fork(pid, &parent.areas)?
+        };
         let took = k.now_ns().saturating_sub(started);
         share_files(&child, &mut self.pipes, fs);
         k.log(format_args!(
@@ -1025,7 +1047,8 @@ impl System {
         Ok(Some(pid as u64))
     }
 
-    /// `execve`: `Ok(Some((entry, stack pointer)))` with the new image loaded, `Ok(None)`
+    /// `execve`: `Ok(Some((entry, stack pointer, new thread)))` with the new image loaded
+    /// (a new thread when a vfork child left its parent's memory), `Ok(None)`
     /// when the old image is gone but the new one did not load (the process dies), an
     /// error when the old image is intact.
     fn execve(
@@ -1036,7 +1059,7 @@ impl System {
         path: u64,
         argv: u64,
         envp: u64,
-    ) -> SysResult<Option<(u64, u64)>> {
+    ) -> SysResult<Option<(u64, u64, bool)>> {
         let slot = self.slots[i].as_mut().ok_or(Errno::ESRCH)?;
         let p = &slot.process;
         // The strings are copied out before the old image goes: path, argv, envp.
@@ -1117,10 +1140,15 @@ impl System {
             return Err(Errno::E2BIG);
         }
 
+        // A vfork child gets memory of its own first (the old image is its parent's).
+        k.select(pid);
+        let borrowed = k.own(pid)?;
         // No return from here: the old image goes.
         let old = &mut slot.process;
-        for area in old.areas.iter() {
-            k.unmap(area.start, (area.end - area.start) / PAGE);
+        if !borrowed {
+            for area in old.areas.iter() {
+                k.unmap(area.start, (area.end - area.start) / PAGE);
+            }
         }
         close_files(old, &mut self.pipes, fs, true);
         let ids = (old.pid, old.ppid);
@@ -1148,7 +1176,7 @@ impl System {
                     Joined(argv)
                 ));
                 slot.process = new;
-                Ok(Some((loaded.entry, loaded.sp)))
+                Ok(Some((loaded.entry, loaded.sp, borrowed)))
             }
             Err(e) => {
                 k.log(format_args!(
@@ -1166,6 +1194,17 @@ impl System {
     fn end(&mut self, i: usize, word: u32, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         let slot = self.slots[i].as_mut()?;
         let pid = slot.process.pid;
+        // A vfork child runs in this process's memory, which goes now: it goes too.
+        let borrower = match slot.state {
+            State::Vforked { child, .. } => self.index(child),
+            _ => None,
+        };
+        if let Some(j) = borrower {
+            if let Some(ended) = self.end(j, signal::SIGKILL, fs, k) {
+                return Some(ended);
+            }
+        }
+        let slot = self.slots[i].as_mut()?;
         close_files(&mut slot.process, &mut self.pipes, fs, false);
         k.release(pid);
         let slot = self.slots[i].as_mut()?;

@@ -38,6 +38,8 @@ struct Model {
     fpu: HashMap<u32, [u8; 512]>,
     suspended: Vec<u32>,
     interrupted: Vec<u32>,
+    /// vfork children and the process whose memory they use.
+    aliases: HashMap<u32, u32>,
 }
 
 impl Model {
@@ -163,6 +165,9 @@ impl Host for Model {
     fn now_ns(&mut self) -> u64 {
         self.now += 1_500_000_000;
         self.now
+    }
+    fn wall_clock_ns(&mut self) -> u64 {
+        self.now_ns()
     }
     fn memory(&mut self) -> (u64, u64) {
         (100_000 * PAGE, self.budget * PAGE)
@@ -432,10 +437,18 @@ fn a_c_library_start_and_hello() {
     // prlimit64(0, RLIMIT_STACK, NULL, &old)
     assert_eq!(w.call(nr::prlimit64, [0, 3, 0, SCRATCH, 0, 0]), 0);
     assert_eq!(w.word(SCRATCH), 256 * 1024);
+    // The same limits again are fine; a hard limit above the stack's size is not; the
+    // descriptor limit lowered bounds new descriptors.
+    assert_eq!(w.call(nr::prlimit64, [0, 3, SCRATCH, 0, 0, 0]), 0);
+    w.put(SCRATCH + 8, &(1u64 << 30).to_le_bytes());
     assert_eq!(
         w.call(nr::prlimit64, [0, 3, SCRATCH, 0, 0, 0]),
         err(Errno::EPERM)
     );
+    w.put(SCRATCH, &[4, 0, 0, 0, 0, 0, 0, 0, 4, 0, 0, 0, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::prlimit64, [0, 7, SCRATCH, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::dup, [0, 0, 0, 0, 0, 0]), 3);
+    assert_eq!(w.call(nr::dup, [0, 0, 0, 0, 0, 0]), err(Errno::EMFILE));
     assert_eq!(
         w.call(nr::prlimit64, [99, 3, 0, SCRATCH, 0, 0]),
         err(Errno::ESRCH)
@@ -1062,12 +1075,26 @@ fn split_nul_keeps_empty_arguments() {
 
 impl Tasks for Model {
     fn select(&mut self, pid: u32) {
+        // A vfork child's memory is its parent's.
+        let pid = self.aliases.get(&pid).copied().unwrap_or(pid);
         if pid != self.current {
             let pages = std::mem::take(&mut self.pages);
             self.others.insert(self.current, pages);
             self.pages = self.others.remove(&pid).unwrap_or_default();
             self.current = pid;
         }
+    }
+    fn borrow(&mut self, child: u32, parent: u32) -> Result<(), Errno> {
+        let owner = self.aliases.get(&parent).copied().unwrap_or(parent);
+        self.aliases.insert(child, owner);
+        Ok(())
+    }
+    fn own(&mut self, pid: u32) -> Result<bool, Errno> {
+        let borrowed = self.aliases.remove(&pid).is_some();
+        if borrowed {
+            self.select(pid);
+        }
+        Ok(borrowed)
     }
     fn fork(&mut self, child: u32, _: &crate::memory::Areas) -> Result<u64, Errno> {
         let n = self.pages.len() as u64;
@@ -1079,6 +1106,10 @@ impl Tasks for Model {
         Ok(n)
     }
     fn release(&mut self, pid: u32) {
+        if self.aliases.remove(&pid).is_some() {
+            self.released.push(pid);
+            return;
+        }
         let pages = if pid == self.current {
             std::mem::take(&mut self.pages)
         } else {
@@ -1232,6 +1263,9 @@ fn fork_copies_the_process_and_wait_reaps_it() {
     ));
     let fault = ExceptionMessage::default();
     assert_eq!(g.serve(3, fault), [(3, 0)]);
+    // It runs in its parent's memory: what it writes, the parent sees.
+    g.put(3, SCRATCH + 0xf00, b"shared");
+    assert_eq!(g.get(1, SCRATCH + 0xf00, 6), b"shared");
     assert_eq!(g.serve(3, World::message(nr::exit, [0; 6], 0)), [(1, 3)]);
     assert_eq!(g.system.state(3), Some(State::Zombie(0)), "not reaped yet");
     // clone(CLONE_VM | CLONE_VFORK): the same; the child's execve lets the parent go on.
@@ -1240,7 +1274,18 @@ fn fork_copies_the_process_and_wait_reaps_it() {
     g.put(4, SCRATCH + 0xe00, b"/bin/sh\0");
     let argv = put_strings(&mut g, 4, SCRATCH + 0x400, &["sh"]);
     let execve = World::message(nr::execve, [SCRATCH + 0xe00, argv, 0, 0, 0, 0], 0);
-    assert_eq!(g.serve(4, execve), [(4, 0), (1, 4)]);
+    // The child leaves its parent's memory for a task of its own, whose new thread reports
+    // first; the parent goes on at once.
+    assert_eq!(g.serve(4, execve), [(1, 4)]);
+    assert!(matches!(g.system.state(4), Some(State::Starting(_))));
+    g.host.resumed.clear();
+    let _ = g.system.serve(4, &mut g.fs, &mut g.host, fault);
+    assert_eq!(g.host.resumed[0].1.registers.rip, 0x40_1010, "its entry");
+    assert_eq!(
+        g.get(1, SCRATCH + 0xf00, 6),
+        b"shared",
+        "the parent's memory stays"
+    );
     // Threads: not yet.
     assert_eq!(
         g.call(1, nr::clone, [0x50f00, 0, 0, 0, 0, 0]),

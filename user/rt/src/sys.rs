@@ -474,6 +474,13 @@ pub fn irq_detach(line: u64) -> Result<(), Error> {
     call(Call::IrqDetach, args::IrqLine { line }.encode()).map(drop)
 }
 
+/// The Unix time in ns at boot, from the firmware's real-time clock (`None` without one):
+/// the wall-clock time is this plus [`clock`].
+pub fn wall_clock_at_boot() -> Option<u64> {
+    let (_, r) = raw6(Call::Clock as u64, [0; 6]);
+    Some(r.r10).filter(|&ns| ns != 0)
+}
+
 /// The TSC time base: converts `rdtsc` readings to `clock()` nanoseconds and back.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct TscBase {

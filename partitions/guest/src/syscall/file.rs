@@ -48,8 +48,9 @@ fn procs<'s>(p: &'s Process, f: &'s Files) -> Procs<'s> {
     }
 }
 
+/// The wall clock in seconds (file times).
 fn seconds(host: &mut impl Host) -> u64 {
-    host.now_ns() / 1_000_000_000
+    host.wall_clock_ns() / 1_000_000_000
 }
 
 // ---- descriptors ----
@@ -131,7 +132,7 @@ pub fn dup3(
     let file = p.file(old).ok_or(Errno::EBADF)?;
     let fd = usize::try_from(new)
         .ok()
-        .filter(|&fd| fd < MAX_FILES)
+        .filter(|&fd| fd < p.max_fd())
         .ok_or(Errno::EBADF)?;
     if old != new {
         close(p, f.pipes, f.fs, fd);
@@ -184,7 +185,7 @@ pub fn fcntl(p: &mut Process, f: &mut Files, fd: u64, cmd: u64, arg: u64) -> Sys
         F_DUPFD | F_DUPFD_CLOEXEC => {
             let low = usize::try_from(arg)
                 .ok()
-                .filter(|&low| low < MAX_FILES)
+                .filter(|&low| low < p.max_fd())
                 .ok_or(Errno::EINVAL)?;
             let new = p.free_fd_from(low).ok_or(Errno::EMFILE)?;
             duplicate(p, f, file, new, cmd == F_DUPFD_CLOEXEC);
@@ -426,7 +427,15 @@ pub fn write(
 ) -> SysResult<u64> {
     let total = (count as usize).min(MAX_TRANSFER);
     check_user(p, buf, total, Rights::READ)?;
-    p.file(fd).ok_or(Errno::EBADF)?;
+    let file = p.file(fd).ok_or(Errno::EBADF)?;
+    if let File::Pipe {
+        write: true,
+        nonblock: false,
+        ..
+    } = file
+    {
+        return pipe_write(p, f, host, fd, buf, total);
+    }
     let mut chunk = [0u8; CHUNK];
     let mut done = 0;
     while done < total {
@@ -443,6 +452,39 @@ pub fn write(
             break;
         }
     }
+    Ok(done as u64)
+}
+
+/// A blocking `write` to a pipe: all of it, waiting for room as often as needed (the
+/// progress is kept in the process between the serves of its waiting call); a reader that
+/// goes away meanwhile ends it with what moved (`EPIPE` and SIGPIPE when nothing did).
+fn pipe_write(
+    p: &mut Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    fd: u64,
+    buf: u64,
+    total: usize,
+) -> SysResult<u64> {
+    let mut chunk = [0u8; CHUNK];
+    let mut done = (p.pipe_written as usize).min(total);
+    while done < total {
+        let want = (total - done).min(CHUNK);
+        host.read_user(buf + done as u64, &mut chunk[..want])?;
+        match write_kernel(p, f, host, fd, &chunk[..want], None) {
+            Ok(n) => done += n,
+            Err(WOULD_BLOCK) => {
+                p.pipe_written = done as u64;
+                return Err(WOULD_BLOCK);
+            }
+            Err(_) if done > 0 => break,
+            Err(e) => {
+                p.pipe_written = 0;
+                return Err(e);
+            }
+        }
+    }
+    p.pipe_written = 0;
     Ok(done as u64)
 }
 

@@ -53,6 +53,9 @@ pub(super) fn area_error(e: AreaError) -> Errno {
     }
 }
 
+/// The lowest address a hint may name (Linux's default `vm.mmap_min_addr`).
+const MMAP_MIN_ADDR: u64 = 0x1_0000;
+
 /// Linux's `mmap`: anonymous or file-backed (private; shared read-only, as nothing can
 /// write the files) mappings at a free place (below [`MMAP_TOP`], the hint if it is free),
 /// or at a fixed address (`MAP_FIXED` replaces what was there, `MAP_FIXED_NOREPLACE`
@@ -116,10 +119,10 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
         hint
     } else {
         let hinted = hint.is_multiple_of(PAGE)
-            && hint >= MMAP_BOTTOM
+            && hint >= MMAP_MIN_ADDR
             && hint
                 .checked_add(len)
-                .is_some_and(|end| end <= MMAP_TOP && !p.areas.overlaps(hint, end));
+                .is_some_and(|end| end <= USER_TOP && !p.areas.overlaps(hint, end));
         if hinted {
             hint
         } else {
