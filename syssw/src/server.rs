@@ -386,6 +386,11 @@ impl<'a> Server<'a> {
     fn fault(&mut self, m: Received) {
         let e = self.ipc.exception();
         let Some(index) = self.partition_of(TaskId(e.task)) else {
+            if self.restarts.dying(e.task) {
+                // A thread of a partition being restarted, before the worker killed it.
+                kill_faulted(m.sender);
+                return;
+            }
             println!(
                 "health: fault report for unknown task {:#x}; thread killed",
                 e.task

@@ -156,17 +156,30 @@ fn syssw_restart_loop() {
             ),
         );
     }
-    // The restart loop ran all along: restarts between the victim's first and last rounds.
+    // Both restart loops ran all along: restarts between the victim's first and last
+    // rounds, the background partition's queued behind the big one's.
     let (first, last) = (rounds[0].0, rounds[rounds.len() - 1].0);
-    let restarts = o.lines[first..last]
-        .iter()
-        .filter(|l| l.contains("syssw: partition fault-loop: COLD_START (HM_PARTITION_RESTART"))
-        .count();
+    let restarts = |partition: &str| {
+        let line = format!("syssw: partition {partition}: COLD_START (HM_PARTITION_RESTART");
+        o.lines[first..last]
+            .iter()
+            .filter(|l| l.contains(&line))
+            .count()
+    };
+    for partition in ["fault-loop", "fault-loop-bg"] {
+        let n = restarts(partition);
+        check(
+            &o,
+            n >= 10,
+            &format!("only {n} restarts of {partition} during the victim's 300 rounds"),
+        );
+    }
     check(
         &o,
-        restarts >= 10,
-        &format!("only {restarts} restarts of fault-loop during the victim's 300 rounds"),
+        o.line("restart failed").is_none() && o.line("fault report for unknown task").is_none(),
+        "a restart failed, or a fault of a restarting partition went astray",
     );
+    let restarts = restarts("fault-loop");
     let max = rounds.iter().map(|r| r.2).max().unwrap_or(0);
     eprintln!("syssw_restart_loop: {restarts} restarts, longest wait {max} ns");
 }

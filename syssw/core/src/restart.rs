@@ -204,6 +204,12 @@ impl Restarts {
         (0..self.len).filter_map(|i| self.queue[(self.head + i) % MAX_PARTITIONS])
     }
 
+    /// `task` is the old task the running job kills (alive until the worker gets to it:
+    /// its threads' faults belong to no partition any more).
+    pub fn dying(&self, task: u64) -> bool {
+        self.running.is_some_and(|j| j.kill == Some(task))
+    }
+
     /// The worker waits and nothing is queued: a job queued now starts at once.
     pub fn worker_idle(&self) -> bool {
         self.worker_waiting && self.len == 0
@@ -303,8 +309,16 @@ mod tests {
         let mut r = Restarts::new();
         assert_eq!(r.report(Report::Ready), Ok(None));
         assert!(r.worker_idle());
-        assert!(r.push(cold(0)));
-        assert_eq!(r.dispatch(), Some(cold(0)));
+        let job = Job {
+            kill: Some(42),
+            ..cold(0)
+        };
+        assert!(r.push(job));
+        assert!(!r.dying(42), "queued, not running");
+        assert_eq!(r.dispatch(), Some(job));
+        assert!(r.dying(42) && !r.dying(43));
+        r.report(done(0)).unwrap();
+        assert!(!r.dying(42), "killed by now");
     }
 
     #[test]
