@@ -6,8 +6,9 @@
 //!
 //! Ownership: the worker owns the [`Loader`] (frame allocator, scratch window, placements)
 //! from its start on; the server thread never touches it again after start-up. It is handed
-//! over once through [`HANDOVER`]; after that the two threads share no mutable memory, only
-//! IPC messages (job and report words).
+//! over once through [`HANDOVER`]; after that the two threads share only IPC messages (job
+//! and report words) and the health records of [`HEALTH_RECORDS`], each passed from the
+//! server to the worker with its job.
 //!
 //! Where the time goes: the server moves the worker into the restarted partition's time
 //! partition before it hands over a job, so the kill of the old task and the health line
@@ -23,13 +24,14 @@
 //! `syssw: restart worker: WHAT` before a failure halt (a bug of syssw).
 
 use crate::partitions::{Loader, Start};
-use crate::server::log_mode_change;
+use crate::server::{LogLine, log_mode_change};
+use config::model::MAX_PARTITIONS;
 use root_task::spawn::{SpawnError, Thread};
+use syssw_core::health::Record;
 use syssw_core::mode::OperatingMode;
 use syssw_core::restart::{Job, Kind, Report};
 use user_rt::abi::ipc::MessageTag;
-use user_rt::abi::syscall::{DEBUG_WRITE_MAX, TIMEOUT_INFINITE, TaskId, ThreadId};
-use user_rt::ipc_buffer::IpcBufferRef;
+use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadId};
 use user_rt::println;
 use user_rt::sys::{self, Message};
 
@@ -40,13 +42,36 @@ pub const SERVER_PRIORITY: u8 = config::model::SYSSW_PRIORITY + 1;
 /// segments on it).
 const STACK_PAGES: u64 = 16;
 
-/// The loader (and the worker's IPC buffer address) on its way from the server thread to
-/// the worker. A static is the only place
+/// The loader on its way from the server thread to the worker. A static is the only place
 /// both threads can name without `unsafe` (a new thread gets one word of argument); the
 /// lock is taken exactly twice, by the server before it starts the worker and by the worker
 /// when it starts, so it never spins. Its acquire/release ordering (and the `thread_start`
 /// system call in between) makes the server's writes to the loader visible to the worker.
-static HANDOVER: spin::Mutex<Option<(Loader, u64)>> = spin::Mutex::new(None);
+static HANDOVER: spin::Mutex<Option<Loader>> = spin::Mutex::new(None);
+
+/// Per partition, the health record of the error that caused its restart, for the worker to
+/// print in the partition's window (formatting and printing it is most of what a fault
+/// report costs the server thread). The server fills a partition's slot only right before
+/// it hands that partition's job to the worker, and the worker empties it when it runs the
+/// job; the partition has no task in between, so no second record for it can come, and the
+/// two never want a slot at once. Both only `try_lock`, never spin: the server outranks the
+/// worker, so it could never wait for a lock a preempted worker holds. A failed try (a bug)
+/// costs only where the line is printed. Acquire/release of the lock (and the `reply` in
+/// between) make the record the server wrote visible to the worker.
+static HEALTH_RECORDS: [spin::Mutex<Option<Record>>; MAX_PARTITIONS] =
+    [const { spin::Mutex::new(None) }; MAX_PARTITIONS];
+
+/// Leaves `record` for the worker to print with partition `index`'s job (which the caller
+/// hands over next). False if it cannot: the caller prints it.
+pub fn hand_over_record(index: usize, record: Record) -> bool {
+    match HEALTH_RECORDS.get(index).and_then(|slot| slot.try_lock()) {
+        Some(mut slot) => {
+            *slot = Some(record);
+            true
+        }
+        None => false,
+    }
+}
 
 /// Creates the worker (inactive) with the loader's spawner and hands the loader over; start
 /// it with `thread_start`. It first asks `server` for a job at syssw's priority.
@@ -58,21 +83,16 @@ pub fn create_worker(mut loader: Loader, server: ThreadId) -> Result<Thread, Spa
         server.0,
         STACK_PAGES,
     )?;
-    *HANDOVER.lock() = Some((loader, thread.ipc_buffer));
+    *HANDOVER.lock() = Some(loader);
     Ok(thread)
 }
 
 /// The worker thread: asks the server for a job, runs it, reports it with its next call.
 extern "C" fn worker(server: u64) -> ! {
     let server = ThreadId(server);
-    let Some((mut loader, ipc_buffer)) = HANDOVER.lock().take() else {
+    let Some(mut loader) = HANDOVER.lock().take() else {
         fatal(format_args!("started without its loader"))
     };
-    #[allow(unsafe_code)]
-    // SAFETY: `Spawner::thread` mapped this thread's IPC buffer writable in syssw's task for
-    // good and registered it for this thread alone; only this thread uses it, through this.
-    let ipc = unsafe { IpcBufferRef::new(ipc_buffer) };
-    let mut line = [0u8; DEBUG_WRITE_MAX as usize];
     let mut report = Report::Ready;
     loop {
         let (label, words) = report.encode();
@@ -89,13 +109,6 @@ extern "C" fn worker(server: u64) -> ! {
         let Some(job) = Job::from_words(reply.message.words) else {
             fatal(format_args!("a reply that is no job"))
         };
-        // The health monitor's line about the error that caused this restart, if the
-        // server left it to be printed here (in the partition's window).
-        let len = reply.message.tag.len().min(line.len());
-        if len > 0 {
-            ipc.read_data(0, &mut line[..len]);
-            let _ = sys::debug_write(&line[..len]);
-        }
         report = run(&mut loader, job);
     }
 }
@@ -110,6 +123,14 @@ fn fatal(what: core::fmt::Arguments) -> ! {
 fn run(loader: &mut Loader, job: Job) -> Report {
     if let Some(task) = job.kill {
         let _ = sys::task_kill(TaskId(task));
+    }
+    // The health monitor's line about the error that caused this restart, if the server
+    // left it to be printed here.
+    let record = HEALTH_RECORDS[job.partition]
+        .try_lock()
+        .and_then(|mut slot| slot.take());
+    if let Some(record) = record {
+        println!("{}", LogLine(&loader.system, &record));
     }
     let (start, mode) = match job.kind {
         Kind::Cold => (Start::Cold, OperatingMode::ColdStart),

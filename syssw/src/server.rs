@@ -25,7 +25,7 @@ use crate::partitions::Instance;
 use config::binary::SystemView;
 use config::model::{Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind};
 use syssw_core::health::{
-    Detail, ErrorEvent, Fault, HealthMonitor, Text, classify, write_log_line,
+    Detail, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports};
@@ -33,7 +33,6 @@ use syssw_core::restart::{Job, Kind, Report, Restarts};
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
 use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
-use user_rt::print::LineBuffer;
 use user_rt::println;
 use user_rt::protocol::{
     PartitionStatus, PortIdReply, QueuingMessage, ReplyWords, Request, ReturnCode, SamplingMessage,
@@ -90,7 +89,7 @@ fn complete(ipc: IpcBufferRef, c: Completion<'_>) {
 }
 
 /// A health record as the core's formatter writes it.
-struct LogLine<'s, 'a>(&'s SystemView<'a>, &'s syssw_core::health::Record);
+pub struct LogLine<'s, 'a>(pub &'s SystemView<'a>, pub &'s Record);
 
 impl core::fmt::Display for LogLine<'_, '_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
@@ -417,19 +416,18 @@ impl<'a> Server<'a> {
             detail,
         };
         let record = self.health.report(&self.system, now, event);
-        let line = LineBuffer::format(format_args!("{}", LogLine(&self.system, &record)));
         let change = self.running(index).mode.apply_health(record.action);
         match change {
             ModeChange::None => {
-                let _ = sys::debug_write(line.as_bytes());
+                println!("{}", LogLine(&self.system, &record));
                 true
             }
             ModeChange::Restart { warm } => {
-                self.restart(index, warm, Some(&line));
+                self.restart(index, warm, Some(record));
                 false
             }
             _ => {
-                let _ = sys::debug_write(line.as_bytes());
+                println!("{}", LogLine(&self.system, &record));
                 self.carry_out(index, change);
                 false
             }
@@ -456,7 +454,7 @@ impl<'a> Server<'a> {
     /// error that caused the restart, if any) in the partition's window when it can start
     /// at once; otherwise (busy with another partition, or a background partition) this
     /// thread does both now, so that nothing of the partition runs on while it waits.
-    fn restart(&mut self, index: usize, warm: bool, health: Option<&LineBuffer>) {
+    fn restart(&mut self, index: usize, warm: bool, health: Option<Record>) {
         let old = self.forget(index);
         let at_once =
             self.system.partition(index).time_partition != 0 && self.restarts.worker_idle();
@@ -468,9 +466,10 @@ impl<'a> Server<'a> {
             }
             None => None,
         };
-        let line = health.map_or(&[][..], |l| l.as_bytes());
-        if !at_once && !line.is_empty() {
-            let _ = sys::debug_write(line);
+        if let Some(record) = health
+            && !(at_once && crate::restart::hand_over_record(index, record))
+        {
+            println!("{}", LogLine(&self.system, &record));
         }
         let mode = self.running(index).mode;
         let job = Job {
@@ -484,7 +483,7 @@ impl<'a> Server<'a> {
         // restart before the worker reports this one.
         let queued = self.restarts.push(job);
         debug_assert!(queued, "a partition without a task restarts once");
-        self.dispatch(if at_once { line } else { &[] });
+        self.dispatch();
     }
 
     /// Kills the partition's task (every thread of it) and resets its ports.
@@ -506,13 +505,12 @@ impl<'a> Server<'a> {
         instance.map(|i| i.task)
     }
 
-    /// Hands the next queued restart to the worker if it waits for one, with `log` (a line
-    /// for the worker to print first; it belongs to that job), in the restarted
+    /// Hands the next queued restart to the worker if it waits for one, in the restarted
     /// partition's time partition, so that partition's windows pay for the reload: at
     /// syssw's priority there (above every thread of the partition it may have to kill,
     /// below this thread), or for a background partition at its priority (it competes
     /// for the background as the partition itself would).
-    fn dispatch(&mut self, log: &[u8]) {
+    fn dispatch(&mut self) {
         let Some(job) = self.restarts.dispatch() else {
             return;
         };
@@ -537,9 +535,8 @@ impl<'a> Server<'a> {
             }
             self.worker_place = Some(place);
         }
-        self.ipc.write_data(0, log);
         let m = Message {
-            tag: MessageTag::new(0, log.len(), 0),
+            tag: MessageTag::new(0, 0, 0),
             words: job.to_words(),
         };
         if let Err(e) = sys::reply(self.worker, &m) {
@@ -585,7 +582,7 @@ impl<'a> Server<'a> {
             }
             Report::Failed { partition } => self.idle(partition),
         }
-        self.dispatch(&[]);
+        self.dispatch();
     }
 
     /// A restart failed: the partition stays IDLE (without a task).

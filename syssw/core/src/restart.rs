@@ -13,8 +13,8 @@
 //!
 //! Who kills the old task and prints the health monitor's line about the error that caused
 //! the restart: the worker, first thing in the partition's window, when the job starts at
-//! once ([`Restarts::worker_idle`]) and the partition has windows (the line travels as the
-//! data of the reply that hands over the job); else (the worker is busy with another
+//! once ([`Restarts::worker_idle`]) and the partition has windows (the record is left for
+//! it next to the job, `syssw/src/restart.rs`); else (the worker is busy with another
 //! partition, or a background partition restarts) the server at once, so that no thread of
 //! a partition being restarted ever runs on. So in a restart loop the server's share of a
 //! fault report is its bookkeeping and one reply: short, however large the partition, when
