@@ -13,14 +13,15 @@
 //! Where the time goes: the server moves the worker into the restarted partition's time
 //! partition before it hands over a job, so the kill of the old task and the health line
 //! (when the server left them to the worker), the reload and the mapping run in that
-//! partition's windows and never take time from another partition's window. There it runs at syssw's priority
-//! ([`config::model::SYSSW_PRIORITY`], above every partition thread, one below the server
-//! thread's [`SERVER_PRIORITY`], so the server still answers at once); a background
-//! partition's restart runs at that partition's priority (it competes as the partition
-//! itself would).
+//! partition's windows and never take time from another partition's window. There it runs
+//! at syssw's priority ([`config::model::SYSSW_PRIORITY`], above every partition thread, one
+//! below the server thread's [`SERVER_PRIORITY`], so the server still answers at once); a
+//! background partition's restart runs at that partition's priority (it competes as the
+//! partition itself would).
 //!
 //! Log lines (an interface): the health monitor's line the server handed over and the
-//! restart's mode-change line (`crate::server`) when it starts; `syssw: partition NAME: restart failed: REASON; it stays IDLE`;
+//! restart's mode-change line (`crate::server`) when it starts;
+//! `syssw: partition NAME: restart failed: REASON; it stays IDLE`;
 //! `syssw: restart worker: WHAT` before a failure halt (a bug of syssw).
 
 use crate::partitions::{Loader, Start};
@@ -55,9 +56,10 @@ static HANDOVER: spin::Mutex<Option<Loader>> = spin::Mutex::new(None);
 /// it hands that partition's job to the worker, and the worker empties it when it runs the
 /// job; the partition has no task in between, so no second record for it can come, and the
 /// two never want a slot at once. Both only `try_lock`, never spin: the server outranks the
-/// worker, so it could never wait for a lock a preempted worker holds. A failed try (a bug)
-/// costs only where the line is printed. Acquire/release of the lock (and the `reply` in
-/// between) make the record the server wrote visible to the worker.
+/// worker, so it could never wait for a lock a preempted worker holds (should its try fail,
+/// it prints the line itself); the server holds a slot only while it writes it, so the
+/// worker, which cannot run meanwhile, always gets it. Acquire/release of the lock (and the
+/// `reply` in between) make the record the server wrote visible to the worker.
 static HEALTH_RECORDS: [spin::Mutex<Option<Record>>; MAX_PARTITIONS] =
     [const { spin::Mutex::new(None) }; MAX_PARTITIONS];
 
