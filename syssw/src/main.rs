@@ -6,9 +6,11 @@
 //! loaded into zeroed memory with the segments' rights, a stack with the start record
 //! (`user_rt::partition`), I/O-port and interrupt grants, shared-memory segments and the
 //! first thread in its time partition; then it installs the schedules, starts the
-//! partitions and serves them ([`server`]: ports, modes, health monitor, restarts). It must
-//! never allocate after start-up and never trusts a partition: everything it gets from one
-//! is checked.
+//! partitions and serves them ([`server`]: ports, modes, health monitor, restarts). Two
+//! threads: the server thread answers every request and fault report at once, the restart
+//! worker ([`restart`]) rebuilds restarted partitions in their own windows. It must never
+//! allocate after start-up and never trusts a partition: everything it gets from one is
+//! checked.
 //!
 //! Log lines (an interface): `syssw: partition NAME: TP<n>|background, MCP m, priority p,
 //! memory used/total KiB, kernel memory k KiB, ports ..., irqs ...` per partition, then
@@ -19,6 +21,7 @@
 #![no_main]
 
 mod partitions;
+mod restart;
 mod server;
 
 use root_task::spawn::{AddressRange, FramePool, Spawner};
@@ -32,8 +35,6 @@ user_rt::entry!(main);
 /// syssw's own addresses for scratch mappings.
 const SPAWN_BASE: u64 = 0x0000_1000_0000_0000;
 const SPAWN_END: u64 = 0x0000_2000_0000_0000;
-/// Most shared segments (the configuration's limit is lower).
-const MAX_SEGMENTS: usize = 32;
 
 fn reject(what: core::fmt::Arguments) -> ! {
     println!("syssw: configuration rejected: {what}");
@@ -66,52 +67,53 @@ fn main(image_base: u64, image_len: u64) {
         .unwrap_or_else(|e| reject(format_args!("no IPC buffer for syssw: {e:?}")));
     let (me, _) = sys::thread_self();
 
-    let mut shared = [0u64; MAX_SEGMENTS];
-    partitions::shared_segments(&mut spawner, &system, &mut shared[..system.segment_count()])
-        .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
     // Every port buffer, sized once from the configuration: nothing is allocated later.
     let arena = spawner
         .own_memory(syssw_core::ports::arena_size(&system))
         .unwrap_or_else(|e| reject(format_args!("no memory for port buffers: {e:?}")));
     let ports = syssw_core::ports::Ports::new(&system, arena)
         .unwrap_or_else(|e| reject(format_args!("ports: {e}")));
+    let mut loader = partitions::Loader::new(spawner, system, me)
+        .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
     let mut placed = [const { None }; config::model::MAX_PARTITIONS];
     for p in system.partitions() {
         let entry = image.entries().find(|e| p.is_image_entry(e.name));
         let data = image.entries().find(|e| p.is_data_entry(e.name));
         let placement = entry
             .ok_or(partitions::LoadError::NoImage)
-            .and_then(|e| {
-                let data = data.map_or(&[][..], |d| d.data);
-                partitions::place(&mut spawner, &system, &p, e.data, data)
-            })
+            .and_then(|e| loader.place(&p, e.data, data.map_or(&[][..], |d| d.data)))
+            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+        let used = placement.used;
+        let stack_guard = placement.stack_guard.clone();
+        let mode = syssw_core::mode::PartitionMode::boot();
+        let instance = loader
+            .instantiate(
+                p.index,
+                partitions::Start::Boot,
+                mode.start_condition() as u64,
+            )
             .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
         placed[p.index] = Some(server::Partition {
-            placed: placement,
-            instance: None,
-            mode: syssw_core::mode::PartitionMode::boot(),
+            stack_guard,
+            instance: Some(instance),
+            mode,
         });
+        log_partition(&p, used);
     }
-    let mut server = server::Server {
+    // From here on the worker owns the loader (frame allocator, placements).
+    let worker = restart::create_worker(loader, me)
+        .unwrap_or_else(|e| reject(format_args!("no restart worker: {e:?}")));
+    let server = server::Server {
         system,
-        spawner,
-        shared: &shared,
         partitions: placed,
         ports,
         created: [false; config::model::MAX_PORTS],
         health: syssw_core::health::HealthMonitor::new(),
         ipc,
-        me,
+        worker: worker.id,
+        restarts: syssw_core::restart::Restarts::new(),
+        worker_place: None,
     };
-    for p in system.partitions() {
-        server
-            .start(p.index, partitions::Start::Boot)
-            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
-        let used = server.partitions[p.index]
-            .as_ref()
-            .map_or(0, |q| q.placed.used);
-        log_partition(&p, used);
-    }
     for s in system.schedules() {
         let mut windows = [user_rt::abi::syscall::WindowSpec::default(); 32];
         let n = s.window_count();
@@ -124,9 +126,19 @@ fn main(image_base: u64, image_len: u64) {
     if system.schedule_count() > 0 {
         sys::schedule_switch(0).unwrap_or_else(|e| reject(format_args!("schedule_switch: {e:?}")));
     }
-    // syssw itself stays in TP0 at its priority: it only runs to serve requests and faults.
+    // The server thread stays in TP0 above every other thread: it only runs to serve
+    // requests and faults.
     sys::set_health_monitor(me).unwrap_or_else(|e| reject(format_args!("health monitor: {e:?}")));
     let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
+    sys::thread_set(
+        None,
+        ThreadAttribute::Priority,
+        restart::SERVER_PRIORITY as u64,
+    )
+    .unwrap_or_else(|e| reject(format_args!("server priority: {e:?}")));
+    // The worker first asks for a job: it runs when this thread first waits for requests.
+    sys::thread_start(worker.id)
+        .unwrap_or_else(|e| reject(format_args!("thread_start of the restart worker: {e:?}")));
     for p in server.partitions.iter().flatten() {
         if let Some(instance) = &p.instance {
             sys::thread_start(instance.thread)

@@ -1,15 +1,18 @@
 //! Creating a partition from its configuration, in two steps so that restarts reuse what
-//! was allocated at start-up: [`place`] (once) allocates its memory, loads its image and
-//! creates its resource partition (kernel-memory quota); [`instantiate`] (at start and at
-//! every restart) creates the task (abilities, MCP), maps the segments with their rights,
-//! its data entry read-only at `DATA_BASE`, its memory pool (partitions with the `map`
-//! ability: the rest of its `memory`) read-write at `POOL_BASE` and read-execute at
-//! `POOL_EXEC_BASE`, a stack holding the start
-//! record, grants
-//! I/O ports and interrupts, maps the shared-memory segments and creates the first thread
-//! (inactive until started).
+//! was allocated at start-up: [`Loader::place`] (once) allocates its memory, loads its image
+//! and creates its resource partition (kernel-memory quota); [`Loader::instantiate`] (at
+//! start and at every restart) creates the task (abilities, MCP), maps the segments with
+//! their rights, its data entry read-only at `DATA_BASE`, its memory pool (partitions with
+//! the `map` ability: the rest of its `memory`) read-write at `POOL_BASE` and read-execute at
+//! `POOL_EXEC_BASE`, a stack holding the start record, grants I/O ports and interrupts, maps
+//! the shared-memory segments and creates the first thread (inactive until started).
+//!
+//! The [`Loader`] owns everything this needs that changes (the frame allocator and its
+//! scratch window) or that only it reads (the placements): one thread owns it at a time,
+//! syssw's main thread at start-up and the restart worker (`crate::restart`) after.
 
 use config::binary::{PartitionView, SystemView};
+use config::model::{MAX_PARTITIONS, MAX_SEGMENTS as MAX_SHARED};
 use root_task::spawn::{SpawnError, Spawner, map_physical_chunked};
 use syssw_core::budget::{self, start_budget};
 use user_rt::abi::elf::{LoadSegment as Segment, load_segments};
@@ -91,18 +94,87 @@ pub struct Instance {
     pub thread: ThreadId,
 }
 
-/// Physical frames of each shared-memory segment (allocated once, in configuration order).
-pub fn shared_segments(
-    spawner: &mut Spawner,
-    system: &SystemView,
-    out: &mut [u64],
-) -> Result<(), LoadError> {
-    for (slot, segment) in out.iter_mut().zip(system.segments()) {
-        *slot = spawner
-            .frames(segment.size / PAGE)
-            .map_err(LoadError::Spawn)?;
+/// What creating and re-creating partitions needs; see the module documentation.
+pub struct Loader {
+    pub system: SystemView<'static>,
+    spawner: Spawner,
+    placed: [Option<Placement>; MAX_PARTITIONS],
+    /// Physical frames of each shared-memory segment (allocated once, in configuration
+    /// order).
+    shared: [u64; MAX_SHARED],
+    /// syssw's server thread (named in every start record).
+    server: ThreadId,
+}
+
+impl Loader {
+    /// Takes the spawner syssw allocates everything from and allocates the shared-memory
+    /// segments.
+    pub fn new(
+        mut spawner: Spawner,
+        system: SystemView<'static>,
+        server: ThreadId,
+    ) -> Result<Self, LoadError> {
+        let mut shared = [0; MAX_SHARED];
+        for (slot, segment) in shared.iter_mut().zip(system.segments()) {
+            *slot = spawner
+                .frames(segment.size / PAGE)
+                .map_err(LoadError::Spawn)?;
+        }
+        Ok(Loader {
+            system,
+            spawner,
+            placed: [const { None }; MAX_PARTITIONS],
+            shared,
+            server,
+        })
     }
-    Ok(())
+
+    /// The spawner, for syssw's own memory and threads at start-up.
+    pub fn spawner(&mut self) -> &mut Spawner {
+        &mut self.spawner
+    }
+
+    /// [`place`]s partition `p` (once, at start-up).
+    pub fn place(
+        &mut self,
+        p: &PartitionView,
+        elf: &'static [u8],
+        data: &'static [u8],
+    ) -> Result<&Placement, LoadError> {
+        let placement = place(&mut self.spawner, &self.system, p, elf, data)?;
+        Ok(self.placed[p.index].insert(placement))
+    }
+
+    /// A new instance of placed partition `index`; see [`instantiate`]. On an error nothing
+    /// of the new instance is left.
+    pub fn instantiate(
+        &mut self,
+        index: usize,
+        start: Start,
+        condition: u64,
+    ) -> Result<Instance, LoadError> {
+        let p = self.system.partition(index);
+        let placed = self.placed[index].as_ref().ok_or(LoadError::NoImage)?;
+        let task = kernel(
+            "task_create",
+            sys::task_create(p.abilities, p.mcp, placed.rp, p.name),
+        )?;
+        let instance = instantiate(
+            &mut self.spawner,
+            &self.system,
+            &p,
+            placed,
+            &self.shared,
+            self.server,
+            task,
+            start,
+            condition,
+        );
+        if instance.is_err() {
+            let _ = sys::task_kill(task);
+        }
+        instance
+    }
 }
 
 fn shared_address(system: &SystemView, segment: usize) -> u64 {
@@ -137,7 +209,7 @@ fn load(spawner: &mut Spawner, s: &Segment, physical: Option<u64>) -> Result<u64
 
 /// Allocates a partition's memory (zeroed), loads its image and creates its resource
 /// partition: everything a partition owns that outlives its restarts.
-pub fn place(
+fn place(
     spawner: &mut Spawner,
     system: &SystemView,
     p: &PartitionView,
@@ -216,23 +288,20 @@ pub enum Start {
     Warm,
 }
 
-/// Creates a partition's task with its memory, grants and first thread (inactive), for
+/// Fills a partition's new task with its memory, grants and first thread (inactive), for
 /// the start condition `condition` (ARINC START_CONDITION, passed in the start record).
 #[allow(clippy::too_many_arguments)]
-pub fn instantiate(
+fn instantiate(
     spawner: &mut Spawner,
     system: &SystemView,
     p: &PartitionView,
     placed: &Placement,
     shared: &[u64],
     server: ThreadId,
+    task: TaskId,
     start: Start,
     condition: u64,
 ) -> Result<Instance, LoadError> {
-    let task = kernel(
-        "task_create",
-        sys::task_create(p.abilities, p.mcp, placed.rp, p.name),
-    )?;
     for (s, &frames) in placed.image.iter().flatten().zip(&placed.segments) {
         if start == Start::Cold {
             load(spawner, s, Some(frames))?;

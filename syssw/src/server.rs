@@ -3,26 +3,33 @@
 //! application messages) and the kernel's fault reports, and carries out the
 //! health monitor's decisions (stop, cold/warm restart, module shutdown).
 //!
-//! It runs in time partition 0 above every partition's MCP, so a request is served at
-//! once, inside the caller's window; a restart runs in the restarted partition's own time
-//! partition (its windows pay for the reload). Requests that wait (queuing ports) are parked in
-//! `syssw_core::ports` and answered later with a deferred `reply`; the receive time-out
-//! is the earliest waiter's deadline, so time-outs are answered on time.
+//! It runs in time partition 0 above every other thread (`crate::restart::SERVER_PRIORITY`),
+//! so a request is served at once, inside the caller's window, and it never does anything
+//! slow: a restart's quick part (forget the old task, reset its ports) is done here at once,
+//! the rest (kill the old task, print the health line, reload, zero and map the memory,
+//! create the task and its first thread) by the restart worker (`crate::restart`) in the
+//! restarted partition's own windows, while this thread goes on serving (who kills and
+//! prints when the worker cannot start at once: `syssw_core::restart`). The worker asks for jobs with a `call` answered when one is
+//! queued (`syssw_core::restart`) and reports the new instance with its next call; this
+//! thread then records it and starts its first thread. Requests that wait (queuing ports)
+//! are parked in `syssw_core::ports` and answered later with a deferred `reply`, like the
+//! worker's; the receive time-out is the earliest waiter's deadline, so time-outs are
+//! answered on time.
 //!
 //! Log lines (an interface, besides the health monitor's `health: ...` line of
 //! `syssw_core::health`): `syssw: partition NAME: MODE (START_CONDITION, restart N)` on
 //! every mode change and `message: t=<ms>.<us>ms partition=NAME text="..."` for
 //! REPORT_APPLICATION_MESSAGE.
 
-use crate::partitions::{self, Instance, Placement, Start};
+use crate::partitions::Instance;
 use config::binary::SystemView;
 use config::model::{Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind};
-use root_task::spawn::Spawner;
 use syssw_core::health::{
-    Detail, ErrorEvent, Fault, HealthMonitor, Text, classify, write_log_line,
+    Detail, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
 };
-use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode};
+use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports};
+use syssw_core::restart::{Job, Kind, Report, Restarts};
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
 use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
@@ -35,23 +42,26 @@ use user_rt::sys::{self, Message, Received};
 
 /// One configured partition at run time.
 pub struct Partition {
-    pub placed: Placement,
-    /// `None` while it is IDLE.
+    /// The unmapped page below its stack: a fault there is a stack overflow.
+    pub stack_guard: core::ops::Range<u64>,
+    /// `None` while it is IDLE or being restarted.
     pub instance: Option<Instance>,
     pub mode: PartitionMode,
 }
 
 pub struct Server<'a> {
     pub system: SystemView<'a>,
-    pub spawner: Spawner,
-    pub shared: &'a [u64],
     pub partitions: [Option<Partition>; MAX_PARTITIONS],
     pub ports: Ports<'a>,
     /// Ports their partition has created since it last (re)started.
     pub created: [bool; MAX_PORTS],
     pub health: HealthMonitor,
     pub ipc: IpcBufferRef,
-    pub me: ThreadId,
+    /// The restart worker (`crate::restart`) and the restarts queued for it.
+    pub worker: ThreadId,
+    pub restarts: Restarts,
+    /// The worker's time partition and priority since the last job (`None`: as created).
+    pub worker_place: Option<(u8, u8)>,
 }
 
 /// A request's data (name, message, text), copied out of the IPC buffer before anything
@@ -79,7 +89,7 @@ fn complete(ipc: IpcBufferRef, c: Completion<'_>) {
 }
 
 /// A health record as the core's formatter writes it.
-struct LogLine<'s, 'a>(&'s SystemView<'a>, &'s syssw_core::health::Record);
+pub struct LogLine<'s, 'a>(pub &'s SystemView<'a>, pub &'s Record);
 
 impl core::fmt::Display for LogLine<'_, '_> {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
@@ -91,14 +101,23 @@ impl<'a> Server<'a> {
     pub fn run(mut self) -> ! {
         let mut buffer: Buffer = [0; MAX_MESSAGE_SIZE as usize];
         loop {
-            let now = sys::clock();
-            let ipc = self.ipc;
-            let timeout = match self.ports.expire(now, |c| complete(ipc, c)) {
-                Some(deadline) if deadline != NEVER => deadline.saturating_sub(now).max(1),
-                _ => TIMEOUT_INFINITE,
+            // Without a waiter that can time out nothing expires (and the clock is not read:
+            // one system call less on the path of every fault report and request).
+            let timeout = match self.ports.next_deadline() {
+                None => TIMEOUT_INFINITE,
+                Some(_) => {
+                    let now = sys::clock();
+                    let ipc = self.ipc;
+                    match self.ports.expire(now, |c| complete(ipc, c)) {
+                        Some(deadline) if deadline != NEVER => deadline.saturating_sub(now).max(1),
+                        _ => TIMEOUT_INFINITE,
+                    }
+                }
             };
             if let Ok(m) = sys::receive(None, timeout) {
-                if m.message.tag.label() == LABEL_FAULT_REPORT {
+                if m.sender == self.worker {
+                    self.worker_call(m);
+                } else if m.message.tag.label() == LABEL_FAULT_REPORT {
                     self.fault(m);
                 } else {
                     self.request(m, &mut buffer);
@@ -366,6 +385,11 @@ impl<'a> Server<'a> {
     fn fault(&mut self, m: Received) {
         let e = self.ipc.exception();
         let Some(index) = self.partition_of(TaskId(e.task)) else {
+            if self.restarts.dying(e.task) {
+                // A thread of a partition being restarted, before the worker killed it.
+                kill_faulted(m.sender);
+                return;
+            }
             println!(
                 "health: fault report for unknown task {:#x}; thread killed",
                 e.task
@@ -374,7 +398,7 @@ impl<'a> Server<'a> {
             return;
         };
         let fault = Fault::from_message(&e);
-        let guard = self.running(index).placed.stack_guard.clone();
+        let guard = self.running(index).stack_guard.clone();
         let error = classify(&fault, guard);
         if self.error(index, error, Detail::Fault(fault)) {
             // "ignore": the partition goes on, but the faulting thread cannot.
@@ -392,16 +416,26 @@ impl<'a> Server<'a> {
             detail,
         };
         let record = self.health.report(&self.system, now, event);
-        println!("{}", LogLine(&self.system, &record));
         let change = self.running(index).mode.apply_health(record.action);
-        if change == ModeChange::None {
-            return true;
+        match change {
+            ModeChange::None => {
+                println!("{}", LogLine(&self.system, &record));
+                true
+            }
+            ModeChange::Restart { warm } => {
+                self.restart(index, warm, Some(record));
+                false
+            }
+            _ => {
+                println!("{}", LogLine(&self.system, &record));
+                self.carry_out(index, change);
+                false
+            }
         }
-        self.carry_out(index, change);
-        false
     }
 
-    /// Does what a mode change demands.
+    /// Does what a mode change demands. Nothing here waits for long: a restart's slow part
+    /// is queued for the worker.
     fn carry_out(&mut self, index: usize, change: ModeChange) {
         match change {
             ModeChange::None | ModeChange::Run => {}
@@ -409,89 +443,182 @@ impl<'a> Server<'a> {
                 let _ = sys::system_halt(success);
             }
             ModeChange::Stop => {
-                self.in_windows_of(index, |server| server.stop(index));
+                self.stop(index);
                 self.log_mode(index);
             }
-            ModeChange::Restart { warm } => {
-                let start = if warm { Start::Warm } else { Start::Cold };
-                let started = self.in_windows_of(index, |server| {
-                    server.stop(index);
-                    server.log_mode(index);
-                    server.start(index, start)
-                });
-                if let Err(e) = started {
-                    println!(
-                        "syssw: partition {}: restart failed: {e}; it stays IDLE",
-                        self.system.partition(index).name
-                    );
-                    self.running(index)
-                        .mode
-                        .apply_health(config::model::HealthAction::Idle);
-                }
-            }
+            ModeChange::Restart { warm } => self.restart(index, warm, None),
         }
     }
 
-    /// Runs `work` for partition `index` in that partition's own windows: tearing down a
-    /// task, reloading and mapping its memory take long kernel calls and milliseconds in
-    /// all, which must never take time from another partition's window (requests of
-    /// others wait meanwhile; they are served after it).
-    fn in_windows_of<T>(&mut self, index: usize, work: impl FnOnce(&mut Self) -> T) -> T {
-        let tp = self.system.partition(index).time_partition;
-        let _ = sys::thread_set(None, ThreadAttribute::TimePartition, tp as u64);
-        let result = work(self);
-        let _ = sys::thread_set(None, ThreadAttribute::TimePartition, 0);
-        result
+    /// Restarts partition `index`. The worker kills the old task and logs `health` (the
+    /// error that caused the restart, if any) in the partition's window when it can start
+    /// at once; otherwise (busy with another partition, or a background partition) this
+    /// thread does both now, so that nothing of the partition runs on while it waits.
+    fn restart(&mut self, index: usize, warm: bool, health: Option<Record>) {
+        let old = self.forget(index);
+        let at_once =
+            self.system.partition(index).time_partition != 0 && self.restarts.worker_idle();
+        let kill = match old {
+            Some(task) if at_once => Some(task.0),
+            Some(task) => {
+                let _ = sys::task_kill(task);
+                None
+            }
+            None => None,
+        };
+        if let Some(record) = health
+            && !(at_once && crate::restart::hand_over_record(index, record))
+        {
+            println!("{}", LogLine(&self.system, &record));
+        }
+        let mode = self.running(index).mode;
+        let job = Job {
+            partition: index,
+            kind: if warm { Kind::Warm } else { Kind::Cold },
+            condition: mode.start_condition(),
+            restarts: mode.restarts(),
+            kill,
+        };
+        // Its old task is gone for the server, so nothing of it can ask for a second
+        // restart before the worker reports this one.
+        let queued = self.restarts.push(job);
+        debug_assert!(queued, "a partition without a task restarts once");
+        self.dispatch();
     }
 
     /// Kills the partition's task (every thread of it) and resets its ports.
     fn stop(&mut self, index: usize) {
-        if let Some(instance) = self.running(index).instance.take() {
-            let _ = sys::task_kill(instance.task);
+        if let Some(task) = self.forget(index) {
+            let _ = sys::task_kill(task);
         }
+    }
+
+    /// Forgets the partition's task (its requests and faults are no longer its partition's)
+    /// and resets its ports; returns the task, still alive.
+    fn forget(&mut self, index: usize) -> Option<TaskId> {
+        let instance = self.running(index).instance.take();
         for p in self.system.ports().filter(|p| p.partition == index) {
             self.created[p.index] = false;
         }
         let ipc = self.ipc;
         self.ports.reset_partition(index, |c| complete(ipc, c));
+        instance.map(|i| i.task)
     }
 
-    /// Creates and starts a new instance of the partition (boot or restart).
-    pub fn start(&mut self, index: usize, start: Start) -> Result<(), partitions::LoadError> {
-        let p = self.system.partition(index);
-        let (me, shared, system) = (self.me, self.shared, self.system);
-        let part = self.partitions[index]
-            .as_mut()
-            .expect("every configured partition is placed at start-up");
-        let condition = part.mode.start_condition() as u64;
-        let instance = partitions::instantiate(
-            &mut self.spawner,
-            &system,
-            &p,
-            &part.placed,
-            shared,
-            me,
-            start,
-            condition,
-        )?;
-        if start != Start::Boot {
-            sys::thread_start(instance.thread)
-                .map_err(|e| partitions::LoadError::Kernel("thread_start", e))?;
+    /// Hands the next queued restart to the worker if it waits for one, in the restarted
+    /// partition's time partition, so that partition's windows pay for the reload: at
+    /// syssw's priority there (above every thread of the partition it may have to kill,
+    /// below this thread), or for a background partition at its priority (it competes
+    /// for the background as the partition itself would).
+    fn dispatch(&mut self) {
+        let Some(job) = self.restarts.dispatch() else {
+            return;
+        };
+        let p = self.system.partition(job.partition);
+        let priority = match p.time_partition {
+            0 => p.priority,
+            _ => config::model::SYSSW_PRIORITY,
+        };
+        // A partition restarting again and again finds the worker where it was (two
+        // system calls less on the path a fault report takes).
+        let place = (p.time_partition, priority);
+        if self.worker_place != Some(place) {
+            let worker = Some(self.worker);
+            let moved = sys::thread_set(
+                worker,
+                ThreadAttribute::TimePartition,
+                p.time_partition as u64,
+            )
+            .and_then(|()| sys::thread_set(worker, ThreadAttribute::Priority, priority as u64));
+            if let Err(e) = moved {
+                self.worker_failed(format_args!("cannot move it to {}: {e:?}", p.name));
+            }
+            self.worker_place = Some(place);
         }
-        part.instance = Some(instance);
-        Ok(())
+        let m = Message {
+            tag: MessageTag::new(0, 0, 0),
+            words: job.to_words(),
+        };
+        if let Err(e) = sys::reply(self.worker, &m) {
+            self.worker_failed(format_args!("cannot hand it a job: {e:?}"));
+        }
+    }
+
+    /// The worker's call: it reports the restart it finished (if any) and asks for the
+    /// next. A restarted partition's instance is recorded before its first thread starts,
+    /// so its first request finds it.
+    fn worker_call(&mut self, m: Received) {
+        let tag = m.message.tag;
+        if tag.label() == LABEL_FAULT_REPORT {
+            let e = self.ipc.exception();
+            self.worker_failed(format_args!(
+                "faulted (vector {}, rip {:#x})",
+                e.vector, e.registers.rip
+            ));
+        }
+        let Some(report) = Report::decode(tag.label(), m.message.words) else {
+            self.worker_failed(format_args!("unknown report label {}", tag.label()));
+        };
+        let index = match self.restarts.report(report) {
+            Ok(finished) => finished,
+            Err(e) => self.worker_failed(format_args!("report refused: {e:?}")),
+        };
+        match report {
+            Report::Ready => {}
+            Report::Done { task, thread, .. } => {
+                let instance = Instance {
+                    task: TaskId(task),
+                    thread: ThreadId(thread),
+                };
+                let index = index.expect("a finished job");
+                self.running(index).instance = Some(instance);
+                if let Err(e) = sys::thread_start(ThreadId(thread)) {
+                    println!(
+                        "syssw: partition {}: restart failed: thread_start failed: {e:?}; it stays IDLE",
+                        self.system.partition(index).name
+                    );
+                    self.idle(index);
+                }
+            }
+            Report::Failed { partition } => self.idle(partition),
+        }
+        self.dispatch();
+    }
+
+    /// A restart failed: the partition stays IDLE (without a task).
+    fn idle(&mut self, index: usize) {
+        self.stop(index);
+        self.running(index)
+            .mode
+            .apply_health(config::model::HealthAction::Idle);
+        self.log_mode(index);
+    }
+
+    /// The worker broke syssw's own protocol: no partition could be restarted any more.
+    fn worker_failed(&self, what: core::fmt::Arguments) -> ! {
+        println!("syssw: restart worker: {what}");
+        let _ = sys::system_halt(false);
+        sys::thread_exit()
     }
 
     fn log_mode(&mut self, index: usize) {
-        let name = self.system.partition(index).name;
         let mode = self.running(index).mode;
-        println!(
-            "syssw: partition {name}: {} ({}, restart {})",
-            mode.mode().name(),
-            mode.start_condition().name(),
-            mode.restarts()
+        log_mode_change(
+            self.system.partition(index).name,
+            mode.mode(),
+            mode.start_condition(),
+            mode.restarts(),
         );
     }
+}
+
+/// The mode-change log line (see the module documentation).
+pub fn log_mode_change(name: &str, mode: OperatingMode, condition: StartCondition, restarts: u32) {
+    println!(
+        "syssw: partition {name}: {} ({}, restart {restarts})",
+        mode.name(),
+        condition.name(),
+    );
 }
 
 fn kill_faulted(thread: ThreadId) {

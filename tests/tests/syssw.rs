@@ -108,3 +108,78 @@ fn generated_boot_2() {
 fn generated_boot_3() {
     generated_boot(3);
 }
+
+/// How long any service request of the victim may wait while another partition restarts,
+/// on virtual time: one major frame of the scenario. A request that waited behind a
+/// restart would wait until the restarted partition's next window at least (about a
+/// frame); answered at once it takes microseconds.
+const RESTART_LOOP_WAIT_BOUND_NS: u64 = 10_000_000;
+
+/// `port-victim: round=N wait_ns=W ...` → (N, W).
+fn victim_round(line: &str) -> Option<(u64, u64)> {
+    let rest = line.split("port-victim: round=").nth(1)?;
+    let mut words = rest.split_whitespace();
+    let round = words.next()?.parse().ok()?;
+    let wait = words.next()?.strip_prefix("wait_ns=")?.parse().ok()?;
+    Some((round, wait))
+}
+
+#[test]
+fn syssw_restart_loop() {
+    let o = boot("syssw_restart_loop");
+    check(&o, o.line("KERNEL PANIC").is_none(), "the kernel panicked");
+    check(&o, o.line("panic at ").is_none(), "a panic");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    check(
+        &o,
+        o.line("port-victim: done rounds=300 ")
+            .is_some_and(|l| l.ends_with(" lost=0")),
+        "the victim did not finish its 300 round trips, each message back unchanged",
+    );
+    let rounds: Vec<(usize, u64, u64)> = o
+        .lines
+        .iter()
+        .enumerate()
+        .filter_map(|(at, l)| victim_round(l).map(|(round, wait)| (at, round, wait)))
+        .collect();
+    check(&o, rounds.len() == 300, "the victim logged 300 rounds");
+    for &(_, round, wait) in &rounds {
+        check(
+            &o,
+            wait <= RESTART_LOOP_WAIT_BOUND_NS,
+            &format!(
+                "round {round}: a request waited {wait} ns (bound {RESTART_LOOP_WAIT_BOUND_NS})"
+            ),
+        );
+    }
+    // Both restart loops ran all along: restarts between the victim's first and last
+    // rounds, the background partition's queued behind the big one's.
+    let (first, last) = (rounds[0].0, rounds[rounds.len() - 1].0);
+    let restarts = |partition: &str| {
+        let line = format!("syssw: partition {partition}: COLD_START (HM_PARTITION_RESTART");
+        o.lines[first..last]
+            .iter()
+            .filter(|l| l.contains(&line))
+            .count()
+    };
+    for partition in ["fault-loop", "fault-loop-bg"] {
+        let n = restarts(partition);
+        check(
+            &o,
+            n >= 10,
+            &format!("only {n} restarts of {partition} during the victim's 300 rounds"),
+        );
+    }
+    check(
+        &o,
+        o.line("restart failed").is_none() && o.line("fault report for unknown task").is_none(),
+        "a restart failed, or a fault of a restarting partition went astray",
+    );
+    let restarts = restarts("fault-loop");
+    let max = rounds.iter().map(|r| r.2).max().unwrap_or(0);
+    eprintln!("syssw_restart_loop: {restarts} restarts, longest wait {max} ns");
+}

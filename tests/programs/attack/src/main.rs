@@ -34,7 +34,16 @@
 //!   windows), prints a summary every [`REPORT_EVERY`] windows, and after
 //!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) creates and kills a thread (its
 //!   own quota is untouched by any hoarder) and executes `ud2` (the scenario maps that illegal request to
-//!   `shutdown_success`, ending the run).
+//!   `shutdown_success`, ending the run);
+//! * `port-victim*`: port traffic through syssw while another partition restarts: it
+//!   creates a queuing port pair whose channel leads back into itself and, once per window,
+//!   sends a message, receives it back and asks for its partition status (three service
+//!   requests), timing each with the clock, and logs the round trip
+//!   (`port-victim: round=<n> wait_ns=<longest of the three> send=<ns> receive=<ns>
+//!   status=<ns> frame=<n>`); after `n` rounds (`port-victim-<n>`) it prints
+//!   `port-victim: done rounds=<n> max_wait_ns=<ns> lost=<n>` (`lost`: rounds whose message
+//!   did not come back unchanged or whose request failed) and executes `ud2` (the scenario
+//!   maps that to `shutdown_success`).
 //!
 //! A test program: it must never be needed by anything but its scenarios.
 #![no_std]
@@ -48,10 +57,12 @@ use user_rt::abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAP_MAX_PAGES, MAX_MAJOR_FRAME, PageRights,
     ROOT_INFO_BASE, ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
 };
+use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
 use user_rt::println;
-use user_rt::protocol::{OperatingMode, Request, ReturnCode};
+use user_rt::protocol::{Direction, OperatingMode, PortKind, Request, ReturnCode};
+use user_rt::service;
 use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
@@ -107,6 +118,13 @@ fn main(start: u64, _: u64) {
     } else if name.starts_with("hoard") {
         hoard();
         sys::sleep_until(u64::MAX);
+    } else if name.starts_with("port-victim") {
+        let rounds = name
+            .rsplit('-')
+            .next()
+            .and_then(|n| n.parse().ok())
+            .unwrap_or(VICTIM_FRAMES);
+        port_victim(info, rounds);
     } else if name.starts_with("victim") {
         let windows = name
             .rsplit('-')
@@ -250,6 +268,88 @@ fn forge(server: ThreadId) {
             println!("forge: {sent} requests, {accepted} accepted");
         }
     }
+}
+
+/// The port victim's queuing ports (their channel leads from `out` back to `in`).
+const PORT_VICTIM_PORTS: [(Direction, &[u8]); 2] =
+    [(Direction::Out, b"out"), (Direction::In, b"in")];
+
+/// The port victim: see the crate documentation.
+fn port_victim(info: &StartInfo, rounds: u64) {
+    let server = ThreadId(info.server);
+    let page = &raw const IPC_PAGE as u64;
+    let _ = sys::thread_set(None, ThreadAttribute::IpcBuffer, page);
+    #[allow(unsafe_code)]
+    // SAFETY: IPC_PAGE is a page-aligned page (more than an IPC buffer) of this task's
+    // writable data for good, registered just above, and only ever used through this ref.
+    let ipc = unsafe { IpcBufferRef::new(page) };
+    let call = |request: &Request| {
+        let start = sys::clock();
+        let reply = service::request(server, ipc, request);
+        let waited = sys::clock().saturating_sub(start);
+        let ok = reply.ok().filter(|r| r.label == ReturnCode::NoError.code());
+        (waited, ok)
+    };
+    let mut ports = [0u64; 2];
+    for (port, (direction, name)) in ports.iter_mut().zip(PORT_VICTIM_PORTS) {
+        let (_, reply) = call(&Request::CreatePort {
+            kind: PortKind::Queuing,
+            direction,
+            max_message_size: 8,
+            refresh_or_depth: 4,
+            name,
+        });
+        let Some(reply) = reply else {
+            println!(
+                "port-victim: cannot create port {:?}",
+                core::str::from_utf8(name)
+            );
+            return;
+        };
+        *port = reply.words[0];
+    }
+    let _ = call(&Request::SetPartitionMode {
+        mode: OperatingMode::Normal,
+    });
+    let (mut max_wait, mut lost) = (0u64, 0u64);
+    for round in 1..=rounds {
+        let Ok(window) = sys::partition_info(info.time_partition) else {
+            println!("port-victim: partition_info failed");
+            return;
+        };
+        let message = round.to_le_bytes();
+        let (send, sent) = call(&Request::SendQueuing {
+            port: ports[0],
+            timeout: 0,
+            message: &message,
+        });
+        let (receive, received) = call(&Request::ReceiveQueuing {
+            port: ports[1],
+            timeout: 0,
+        });
+        let mut back = [0u8; 8];
+        if received.is_some_and(|r| r.words[0] == back.len() as u64) {
+            ipc.read_data(0, &mut back);
+        }
+        let (status, known) = call(&Request::PartitionStatus);
+        if sent.is_none() || known.is_none() || back != message {
+            lost += 1;
+        }
+        let wait = send.max(receive).max(status);
+        max_wait = max_wait.max(wait);
+        println!(
+            "port-victim: round={round} wait_ns={wait} send={send} receive={receive} status={status} frame={}",
+            window.frames
+        );
+        // Ready again at the end of this window: runs at the start of the next one.
+        sys::sleep_until(window.next_window_start + window.window_length);
+    }
+    println!("port-victim: done rounds={rounds} max_wait_ns={max_wait} lost={lost}");
+    #[allow(unsafe_code)]
+    // SAFETY: ud2 only raises #UD (the scenario's end).
+    unsafe {
+        core::arch::asm!("ud2")
+    };
 }
 
 /// The hoarder: see the crate documentation.
