@@ -282,7 +282,7 @@ mod tests {
     fn programs_are_built_into_bin() {
         let mut g = hello();
         g.programs = vec!["linux-tests".into()];
-        let bytes = initramfs(b"ELF", &g).unwrap();
+        let bytes = initramfs(b"ELF", &applets(), &g).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         let program = fs.get("/bin/linux-tests").unwrap();
         assert!(program.data.starts_with(b"\x7fELF"));
@@ -296,11 +296,10 @@ mod tests {
         let fs = Archive::new(&bytes).unwrap();
         let files = guest::vfs::Fs::new(&fs, 1 << 20).unwrap();
         for applet in applets() {
-            let (data, path) =
-                guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
-                    .unwrap();
-            assert_eq!(path.as_str(), "bin/busybox", "{applet}");
-            assert_eq!(data, b"\x7fELF-busybox");
+            let found = guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
+                .unwrap();
+            assert_eq!(found.exe.as_str(), "bin/busybox", "{applet}");
+            assert_eq!(found.bytes, b"\x7fELF-busybox");
         }
         assert_eq!(fs.get("/bin/busybox").unwrap().mode, S_IFREG | 0o755);
         assert!(fs.get("/usr/bin").unwrap().is_dir());
@@ -326,7 +325,7 @@ mod tests {
         );
         let mut g = hello();
         g.console_com2 = true;
-        let with_console = initramfs(b"\x7fELF-busybox", &g).unwrap();
+        let with_console = initramfs(b"\x7fELF-busybox", &applets(), &g).unwrap();
         let console = Archive::new(&with_console).unwrap();
         assert_eq!(console.get(guest::CONSOLE_PATH).unwrap().data, b"com2\n");
         // Deterministic.
