@@ -357,3 +357,48 @@ fn guest_console() {
         "the console's output went to COM2, not the log",
     );
 }
+
+/// Scenario guest_restart (`tests/configs/guest_restart.toml`): guest `reboot`'s init
+/// prints `booted` and exits; the health monitor cold-restarts the guest each time.
+#[test]
+fn guest_restart() {
+    let o = boot("guest_restart");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): guest `timer` ends the run",
+    );
+    let boots = stdout_lines(&o, "reboot");
+    check(
+        &o,
+        boots.len() >= 3 && boots.iter().all(|l| l == "booted"),
+        &format!("reboot: {boots:?}"),
+    );
+    let exits = guest_lines(&o, "reboot", "guest: init exited with status 1");
+    check(&o, exits.len() >= 3, &format!("reboot: {exits:?}"));
+    let restarts: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("syssw: partition reboot: ") && l.contains("restart "))
+        .collect();
+    check(
+        &o,
+        restarts.len() >= 3,
+        &format!("the health monitor's restarts: {restarts:?}"),
+    );
+    check(
+        &o,
+        stdout_lines(&o, "timer") == ["time is up"],
+        "the other guest ran on",
+    );
+    check(
+        &o,
+        o.lines
+            .iter()
+            .filter(|l| l.contains("ticker: alive"))
+            .count()
+            >= 3,
+        "the windowed partition kept its windows",
+    );
+}
