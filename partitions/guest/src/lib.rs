@@ -62,6 +62,7 @@
 
 extern crate alloc;
 
+pub mod arinc;
 pub mod backing;
 pub mod console;
 pub mod cpio;
