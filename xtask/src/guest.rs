@@ -326,11 +326,10 @@ mod tests {
         let fs = Archive::new(&bytes).unwrap();
         let files = guest::vfs::Fs::new(&fs, 1 << 20).unwrap();
         for applet in applets() {
-            let (data, path) =
-                guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
-                    .unwrap();
-            assert_eq!(path.as_str(), "bin/busybox", "{applet}");
-            assert_eq!(data, b"\x7fELF-busybox");
+            let found = guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
+                .unwrap();
+            assert_eq!(found.exe.as_str(), "bin/busybox", "{applet}");
+            assert_eq!(found.bytes, b"\x7fELF-busybox");
         }
         assert_eq!(fs.get("/bin/busybox").unwrap().mode, S_IFREG | 0o755);
         assert!(fs.get("/usr/bin").unwrap().is_dir());
