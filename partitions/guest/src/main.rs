@@ -23,6 +23,12 @@
 //! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
 //! processes' console is a terminal ([`guest::tty`]) on COM2 ([`com2`]); without it, their
 //! output lines go to the log and reading the console gives end of file.
+//!
+//! The ARINC ports: the initramfs's port table (`/etc/guest/ports`, from the partition's
+//! `ports.*`) becomes `/dev/arinc/<port>` ([`guest::arinc`]); [`ports`] creates the ports
+//! through syssw before the first process starts. Their messages arrive without a word
+//! to the guest, so while it has destination ports and a call waits, the calls that wait
+//! are served again every [`PORT_POLL_NS`].
 #![no_std]
 #![no_main]
 
