@@ -1207,10 +1207,10 @@ impl System {
             State::Vforked { child, .. } => self.index(child),
             _ => None,
         };
-        if let Some(j) = borrower {
-            if let Some(ended) = self.end(j, signal::SIGKILL, fs, k) {
-                return Some(ended);
-            }
+        if let Some(j) = borrower
+            && let Some(ended) = self.end(j, signal::SIGKILL, fs, k)
+        {
+            return Some(ended);
         }
         let slot = self.slots[i].as_mut()?;
         close_files(&mut slot.process, &mut self.pipes, fs, false);
