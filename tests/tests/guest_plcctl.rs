@@ -1,7 +1,9 @@
 //! A guest partition reaching the soft-PLC and the plant through its ARINC ports
 //! (configuration `tests/configs/guest_plcctl.toml`): busybox reads the plant's level from
-//! `/dev/arinc/level`, and `plcctl` lists, reads, forces, unforces, watches and asks the
-//! statistics of the tank PLC over `/dev/arinc/plc-request` and `/dev/arinc/plc-response`.
+//! `/dev/arinc/level`, and `plcctl` lists, reads, forces, unforces, watches, asks the
+//! statistics of and downloads a file that is no program to the tank PLC over
+//! `/dev/arinc/plc-request` and `/dev/arinc/plc-response`, then reads from and is refused
+//! a force by a monitor-only PLC over two other ports.
 
 use scenarios::{boot, check};
 
@@ -124,8 +126,12 @@ fn guest_plcctl() {
     );
     for (first, second) in [
         (
-            "plcctl: DOWNLOAD_BEGIN: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)",
+            "plcctl: DOWNLOAD_COMMIT: REFUSED (the PLC's checks refused the program; its log says why)",
             "download status 1",
+        ),
+        (
+            "plcctl: FORCE Count.n: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)",
+            "force status 1",
         ),
         (
             "plcctl: READ nothing: UNKNOWN_NAME (no variable of that name)",
@@ -138,6 +144,17 @@ fn guest_plcctl() {
             &format!("a refusal: {first}"),
         );
     }
+    check(
+        &o,
+        o.line("[plc] plc: download refused: ").is_some(),
+        "the PLC logs why it refused the download",
+    );
+    let count = out.iter().find_map(|l| l.strip_prefix("Count.n = "));
+    check(
+        &o,
+        count.is_some_and(|n| n.parse::<u64>().is_ok()),
+        &format!("plcctl --request/--response read the counter PLC: {count:?}"),
+    );
     check(
         &o,
         out.last().is_some_and(|l| l == "done"),

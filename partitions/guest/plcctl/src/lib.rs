@@ -213,7 +213,7 @@ pub fn reason(status: Status) -> &'static str {
         Status::BadOffset => "a download chunk out of order",
         Status::TooLarge => "the program is larger than the PLC's download buffer",
         Status::ChecksumMismatch => "the program arrived damaged (CRC-32)",
-        Status::Refused => "the PLC's checks refused the program (its log says why)",
+        Status::Refused => "the PLC's checks refused the program; its log says why",
         Status::NoDownload => "no download in progress",
         Status::Incomplete => "not every byte of the program arrived",
     }
