@@ -80,6 +80,11 @@ fn guest_plcctl() {
             .any(|l| l == "dd: /dev/arinc/level: Message too long"),
         "a read smaller than the port's messages is EMSGSIZE",
     );
+    check(
+        &o,
+        out.iter().any(|l| l == "answer 2 7 0 10"),
+        "a READ written with printf, its answer (op, seq, OK, LREAL) read by a waiting dd",
+    );
     for var in [
         "level LREAL",
         "valve LREAL",
