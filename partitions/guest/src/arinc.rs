@@ -13,8 +13,9 @@
 //! - `read` of a destination (`in`) port takes one message (a queuing port's next one,
 //!   a sampling port's current one, which stays) and returns its length; a buffer smaller
 //!   than the port's message size is `EMSGSIZE` (nothing is taken). With nothing to read
-//!   (an empty queue, a sampling port never written) it waits, or gives `EAGAIN` with
-//!   `O_NONBLOCK`. Reading a source (`out`) port is `EINVAL`.
+//!   (an empty queue, a sampling port never written) it waits (the host then serves the
+//!   waiting calls again soon, [`crate::syscall::Host::port_wait`]: no message tells the
+//!   guest of an arrival), or gives `EAGAIN` with `O_NONBLOCK`. Reading a source (`out`) port is `EINVAL`.
 //! - `write` to a source port sends the bytes as one message; more than the port's size is
 //!   `EMSGSIZE`, 0 bytes send nothing and return 0. A full queue waits, or gives `EAGAIN`
 //!   with `O_NONBLOCK`. Writing a destination port is `EINVAL`.
@@ -169,7 +170,10 @@ pub fn read(
     }
     match host.port_receive(index, &mut buf[..port.size as usize]) {
         Ok(r) => Ok(r.len.min(port.size as usize)),
-        Err(Errno::EAGAIN) if !nonblock => Err(WOULD_BLOCK),
+        Err(Errno::EAGAIN) if !nonblock => {
+            host.port_wait();
+            Err(WOULD_BLOCK)
+        }
         Err(e) => Err(e),
     }
 }
@@ -193,18 +197,25 @@ pub fn write(
     }
     match host.port_send(index, data) {
         Ok(()) => Ok(data.len()),
-        Err(Errno::EAGAIN) if !nonblock => Err(WOULD_BLOCK),
+        Err(Errno::EAGAIN) if !nonblock => {
+            host.port_wait();
+            Err(WOULD_BLOCK)
+        }
         Err(e) => Err(e),
     }
 }
 
-/// The `poll` events of port `index`.
+/// The `poll` events of port `index` (a port that is not ready may be waited for:
+/// [`Host::port_wait`]).
 pub fn events(port: &Port, index: usize, host: &mut impl Host) -> u16 {
     let now = host.port_readiness(index);
     match port.direction {
         Direction::In if now.readable => POLLIN,
         Direction::Out if now.writable => POLLOUT,
-        _ => 0,
+        _ => {
+            host.port_wait();
+            0
+        }
     }
 }
 

@@ -27,8 +27,8 @@
 //! The ARINC ports: the initramfs's port table (`/etc/guest/ports`, from the partition's
 //! `ports.*`) becomes `/dev/arinc/<port>` ([`guest::arinc`]); [`ports`] creates the ports
 //! through syssw before the first process starts. Their messages arrive without a word
-//! to the guest, so while it has destination ports and a call waits, the calls that wait
-//! are served again every [`PORT_POLL_NS`].
+//! to the guest, so while a call waits for a port, the calls that wait are served again
+//! every [`PORT_POLL_NS`].
 #![no_std]
 #![no_main]
 
@@ -222,6 +222,7 @@ fn main(start: u64, _: u64) {
         seed: sys::rdtsc() | 1,
         tty: None,
         ports,
+        port_waiting: false,
     };
     let wants_terminal = archive
         .get(guest::CONSOLE_PATH)
@@ -287,6 +288,7 @@ fn main(start: u64, _: u64) {
         let now = host.now_ns();
         let timeout = match system.next_timer() {
             Some(at) if at <= now => {
+                host.port_waiting = false; // the calls served again say it anew
                 if let Some(ended) = system.tick(&mut fs, &mut host) {
                     break ended;
                 }
@@ -301,9 +303,9 @@ fn main(start: u64, _: u64) {
         // answered at once, which puts it behind the others. Taking them in turn (pid
         // order) follows the kernel's queue, so the one interrupted is the one that ran; a
         // Linux scheduler shares a CPU among busy processes the same way.
-        // A process waiting in a call (perhaps for a port: their messages arrive without
-        // a word to the guest) is served again at least every PORT_POLL_NS.
-        let timeout = if host.ports.has_inputs() && system.any_blocked() {
+        // A call waiting for a port (its messages arrive without a word to the guest) is
+        // served again at least every PORT_POLL_NS.
+        let timeout = if host.port_waiting && system.any_blocked() {
             timeout.min(PORT_POLL_NS)
         } else {
             timeout
@@ -329,6 +331,7 @@ fn main(start: u64, _: u64) {
         let received = match sys::receive(None, timeout) {
             Ok(r) => r,
             Err(user_rt::abi::syscall::Error::TimedOut) => {
+                host.port_waiting = false; // the calls served again say it anew
                 if let Some(ended) = system.tick(&mut fs, &mut host) {
                     break ended;
                 }
@@ -580,6 +583,8 @@ struct GuestHost<'p> {
     tty: Option<Tty>,
     /// The ARINC ports of `/dev/arinc`.
     ports: ports::Ports,
+    /// A call waited for a port when it was last served ([`Host::port_wait`]).
+    port_waiting: bool,
 }
 
 impl<'p> GuestHost<'p> {
@@ -748,6 +753,10 @@ impl Host for GuestHost<'_> {
         buf: &mut [u8],
     ) -> Result<guest::arinc::Received, Errno> {
         self.ports.receive(port, buf)
+    }
+
+    fn port_wait(&mut self) {
+        self.port_waiting = true;
     }
 
     fn port_readiness(&mut self, port: usize) -> guest::arinc::Readiness {

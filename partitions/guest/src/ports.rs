@@ -79,14 +79,6 @@ impl Ports {
         ports
     }
 
-    /// Whether a port delivers messages (then waiting reads are retried on a tick).
-    pub fn has_inputs(&self) -> bool {
-        self.created
-            .iter()
-            .flatten()
-            .any(|p| p.direction == Direction::In)
-    }
-
     /// One request: its return code and reply words (`Err` when syssw did not answer).
     fn call(&self, request: &Request) -> Result<(Result<(), ReturnCode>, [u64; 3]), ()> {
         let reply = user_rt::service::request(self.server, self.ipc, request).map_err(|_| ())?;

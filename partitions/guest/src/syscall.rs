@@ -137,6 +137,9 @@ pub trait Host {
         let _ = (port, buf);
         Err(Errno::ENXIO)
     }
+    /// A call waits for a port (to read or to write, or in `poll`): its messages arrive
+    /// without a word to the guest, so the host serves the waiting calls again soon.
+    fn port_wait(&mut self) {}
     /// What port `port` could do now.
     fn port_readiness(&mut self, port: usize) -> arinc::Readiness {
         let _ = port;

@@ -44,6 +44,8 @@ struct Model {
     /// what the sources sent; a source holds at most [`PORT_ROOM`] messages.
     port_messages: HashMap<usize, std::collections::VecDeque<(Vec<u8>, bool)>>,
     port_sent: HashMap<usize, Vec<Vec<u8>>>,
+    /// Calls that said they wait for a port ([`Host::port_wait`]).
+    port_waits: usize,
 }
 
 const PORT_ROOM: usize = 2;
@@ -104,6 +106,10 @@ impl Host for Model {
             len: m.len(),
             valid,
         })
+    }
+
+    fn port_wait(&mut self) {
+        self.port_waits += 1;
     }
 
     fn port_readiness(&mut self, port: usize) -> crate::arinc::Readiness {
@@ -2711,7 +2717,12 @@ fn arinc_ports_are_devices_that_move_one_message_a_call() {
     assert_eq!(r, Some(err(Errno::ENOTTY)));
     // Nothing there: O_NONBLOCK gives EAGAIN, a blocking read waits.
     assert_eq!(read(&mut g, reply, 16), Some(err(Errno::EAGAIN)));
+    assert_eq!(g.host.port_waits, 0);
     assert_eq!(read(&mut g, level, 8), None);
+    assert!(
+        g.host.port_waits > 0,
+        "the host learns that a call waits for a port"
+    );
     assert_eq!(
         g.system.state(1).map(|s| matches!(s, State::Blocked(_))),
         Some(true)
