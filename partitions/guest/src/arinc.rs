@@ -19,6 +19,7 @@
 //! - `write` to a source port sends the bytes as one message; more than the port's size is
 //!   `EMSGSIZE`, 0 bytes send nothing and return 0. A full queue waits, or gives `EAGAIN`
 //!   with `O_NONBLOCK`. Writing a destination port is `EINVAL`.
+//! - `readv` and `writev` move one message per buffer.
 //! - `poll`: `POLLIN` when a read would not wait, `POLLOUT` when a write would not.
 //! - The validity of a sampling port's message (ARINC's `VALIDITY`: younger than the
 //!   port's refresh period) is the `ioctl` [`IOCTL_VALIDITY`]: it stores an `int`, 1 for
@@ -189,7 +190,7 @@ pub fn write(
     if port.direction != Direction::Out {
         return Err(Errno::EINVAL);
     }
-    if data.len() > port.size as usize {
+    if too_long(port, data.len() as u64) {
         return Err(Errno::EMSGSIZE);
     }
     if data.is_empty() {
@@ -203,6 +204,11 @@ pub fn write(
         }
         Err(e) => Err(e),
     }
+}
+
+/// Whether `len` bytes are too many for one message of source port `port`.
+pub fn too_long(port: &Port, len: u64) -> bool {
+    port.direction == Direction::Out && len > u64::from(port.size)
 }
 
 /// The `poll` events of port `index` (a port that is not ready may be waited for:

@@ -2740,6 +2740,8 @@ fn arinc_ports_are_devices_that_move_one_message_a_call() {
     g.put(1, SCRATCH, &[7; 32]);
     let write = |g: &mut Guest, fd: u64, n: u64| g.call(1, nr::write, [fd, SCRATCH, n, 0, 0, 0]);
     assert_eq!(write(&mut g, cmd, 17), Some(err(Errno::EMSGSIZE)));
+    // Longer than a step of a write (not cut into messages): EMSGSIZE too.
+    assert_eq!(write(&mut g, cmd, 5000), Some(err(Errno::EMSGSIZE)));
     assert_eq!(write(&mut g, cmd, 0), Some(0));
     assert_eq!(write(&mut g, cmd, 3), Some(3));
     assert_eq!(write(&mut g, cmd, 16), Some(16));

@@ -474,6 +474,11 @@ pub fn write(
     count: u64,
     at: Option<u64>,
 ) -> SysResult<u64> {
+    if let Some((_, port)) = port_at(p, f.fs, fd)
+        && arinc::too_long(port, count)
+    {
+        return Err(Errno::EMSGSIZE); // not cut into pieces the size of a step
+    }
     let total = (count as usize).min(MAX_TRANSFER);
     check_user(p, buf, total, Rights::READ)?;
     let file = p.file(fd).ok_or(Errno::EBADF)?;
