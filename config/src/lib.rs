@@ -173,7 +173,8 @@
 //! `PATH=/bin:/usr/bin:/sbin:/usr/sbin`, `HOME=/`, `TERM=dumb`); together at most 64
 //! strings and 8192 bytes, no NUL bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
 //! initramfs (missing directories are created), each value a file on the host, relative to
-//! the description's directory (its permission bits are kept, owner root); they may replace
+//! the description's directory (its permission bits are kept, owner root; a `.st` file at a
+//! path ending in `.plcb` is compiled into its PLC bytecode image, for `plcctl download`); they may replace
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
 //! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `guest.programs` names
 //! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`

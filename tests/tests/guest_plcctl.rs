@@ -1,9 +1,10 @@
 //! A guest partition reaching the soft-PLC and the plant through its ARINC ports
 //! (configuration `tests/configs/guest_plcctl.toml`): busybox reads the plant's level from
 //! `/dev/arinc/level`, and `plcctl` lists, reads, forces, unforces, watches, asks the
-//! statistics of and downloads a file that is no program to the tank PLC over
-//! `/dev/arinc/plc-request` and `/dev/arinc/plc-response`, then reads from and is refused
-//! a force by a monitor-only PLC over two other ports.
+//! statistics of the tank PLC over `/dev/arinc/plc-request` and `/dev/arinc/plc-response`,
+//! downloads a file that is no program (refused) and the changed controller (which then
+//! runs), then reads from and is refused a force by a monitor-only PLC over two other
+//! ports.
 
 use scenarios::{boot, check};
 
@@ -139,6 +140,10 @@ fn guest_plcctl() {
             "force status 1",
         ),
         (
+            "plcctl: READ tank.revision: UNKNOWN_NAME (no variable of that name)",
+            "revision status 1",
+        ),
+        (
             "plcctl: READ nothing: UNKNOWN_NAME (no variable of that name)",
             "read status 1",
         ),
@@ -153,6 +158,15 @@ fn guest_plcctl() {
         &o,
         o.line("[plc] plc: download refused: ").is_some(),
         "the PLC logs why it refused the download",
+    );
+    let downloaded = from(&out, "downloaded ", 2);
+    check(
+        &o,
+        downloaded.len() == 2
+            && downloaded[0].starts_with("downloaded /root/tank_v2.plcb: ")
+            && downloaded[0].contains(" bytes, running from release ")
+            && downloaded[1] == "tank.revision = 2",
+        &format!("plcctl download of the changed controller: {downloaded:?}"),
     );
     let count = out.iter().find_map(|l| l.strip_prefix("Count.n = "));
     check(

@@ -12,7 +12,7 @@
 //! | `/etc/guest/ports` | the partition's `ports.*`, one a line: `<name> <sampling\|queuing> <in\|out> <size> <refresh ns\|depth>` (`guest::arinc::PORTS_PATH`): the guest's devices `/dev/arinc/<name>` |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
 //! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
-//! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
+//! | each `guest.files` path | the host file, with its permission bits (missing directories are added); a `.st` file at a path ending in `.plcb` is compiled into its bytecode image (what `plcc build` writes, for `plcctl download`) |
 //! | `/bin/<name>` of each `guest.programs` name | the Linux program built from `tests/linux` ([`crate::linux`]), or `plcctl` (a Rust program for `x86_64-unknown-linux-musl`, [`crate::linux::build`]) |
 //!
 //! Every entry belongs to root, has mtime 0 and a fixed inode number, so the archive only
@@ -202,8 +202,12 @@ pub fn initramfs(
         entries.push((format!("bin/{name}"), S_IFREG | 0o755, data));
     }
     for (target, source) in &guest.files {
-        let data = std::fs::read(&source.path)
-            .with_context(|| format!("guest.files: cannot read {}", source.path))?;
+        let data = if target.ends_with(".plcb") && source.path.ends_with(".st") {
+            crate::plc::image_of(&format!("guest.files {target}"), source)?
+        } else {
+            std::fs::read(&source.path)
+                .with_context(|| format!("guest.files: cannot read {}", source.path))?
+        };
         let mode = file_mode(Path::new(&source.path));
         let name = target.trim_start_matches('/');
         if let Some(existing) = entries.iter_mut().find(|e| e.0 == name) {
@@ -363,6 +367,23 @@ mod tests {
             bytes,
             initramfs(b"\x7fELF-busybox", &applets(), &hello(), &[]).unwrap()
         );
+    }
+
+    #[test]
+    fn a_structured_text_file_becomes_its_bytecode_image() {
+        let st = crate::workspace_root().join("tests/configs/plc/counter.st");
+        let mut g = hello();
+        g.files = vec![(
+            "/root/counter.plcb".into(),
+            config::system::SourceFile {
+                name: "counter.st".into(),
+                path: st.to_string_lossy().into_owned(),
+            },
+        )];
+        let bytes = initramfs(b"ELF", &applets(), &g, &[]).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        let image = fs.get("/root/counter.plcb").unwrap().data;
+        assert!(image.starts_with(b"PLCB"), "{:?}", &image[..8]);
     }
 
     #[test]
