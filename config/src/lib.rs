@@ -173,14 +173,17 @@
 //! `PATH=/bin:/usr/bin:/sbin:/usr/sbin`, `HOME=/`, `TERM=dumb`); together at most 64
 //! strings and 8192 bytes, no NUL bytes. `guest.files` adds files to the initramfs: each key is the absolute path in the
 //! initramfs (missing directories are created), each value a file on the host, relative to
-//! the description's directory (its permission bits are kept, owner root); they may replace
+//! the description's directory (its permission bits are kept, owner root; a `.st` file at a
+//! path ending in `.plcb` is compiled into its PLC bytecode image, for `plcctl download`); they may replace
 //! `/etc/passwd` and `/etc/group`, not what the guest needs to run (`/bin/busybox`, the
 //! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `guest.programs` names
 //! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`
 //! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, `linux-bench`, the
 //! guest benchmark, and `linux-probe`, the faults and forbidden accesses of the memory and
-//! isolation scenarios) and adds as `/bin/<name>` (not also a `guest.files` path, each
-//! once). `cargo xtask` builds the
+//! isolation scenarios), or the Rust program `plcctl` (the PLC online tool, built for
+//! `x86_64-unknown-linux-musl`), and adds as `/bin/<name>` (not also a `guest.files` path,
+//! each once). The partition's `ports.*` reach the guest as the devices
+//! `/dev/arinc/<name>` (the initramfs's `/etc/guest/ports`, see `guest::arinc`). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as
 //! `/bin/busybox` with the applet links `sh`, `echo`, `cat`, `ls`, `wc`, `true`,
 //! `/etc/passwd`, `/etc/group`, an `/init` script, these keys in `/etc/guest/init` and

@@ -90,8 +90,9 @@ pub const COM2_PORTS: crate::model::IoRange = crate::model::IoRange {
 pub const COM2_IRQ: u8 = 3;
 
 /// The Linux programs `guest.programs` may name: static executables `cargo xtask` builds
-/// from `tests/linux` with `gcc -static` (`xtask/src/linux.rs`).
-pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench", "linux-probe"];
+/// (`xtask/src/linux.rs`) from `tests/linux` with `gcc -static`, and `plcctl`, the PLC
+/// online tool (`partitions/guest/plcctl`, Rust for `x86_64-unknown-linux-musl`).
+pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench", "linux-probe", "plcctl"];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
 /// (busybox, its applet links, the guest's command line, `/init`).

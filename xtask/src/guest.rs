@@ -9,17 +9,18 @@
 //! | `/etc/passwd`, `/etc/group` | root (0) only |
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
 //! | `/etc/guest/console` | `com2` with `guest.console = "com2"` (`guest::CONSOLE_PATH`): the console is a terminal on COM2 |
+//! | `/etc/guest/ports` | the partition's `ports.*`, one a line: `<name> <sampling\|queuing> <in\|out> <size> <refresh ns\|depth>` (`guest::arinc::PORTS_PATH`): the guest's devices `/dev/arinc/<name>` |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
 //! | `/dev`, `/proc`, `/root`, `/tmp` | empty directories |
-//! | each `guest.files` path | the host file, with its permission bits (missing directories are added) |
-//! | `/bin/<name>` of each `guest.programs` name | the Linux program built from `tests/linux` ([`crate::linux`]) |
+//! | each `guest.files` path | the host file, with its permission bits (missing directories are added); a `.st` file at a path ending in `.plcb` is compiled into its bytecode image (what `plcc build` writes, for `plcctl download`) |
+//! | `/bin/<name>` of each `guest.programs` name | the Linux program built from `tests/linux` ([`crate::linux`]), or `plcctl` (a Rust program for `x86_64-unknown-linux-musl`, [`crate::linux::build`]) |
 //!
 //! Every entry belongs to root, has mtime 0 and a fixed inode number, so the archive only
 //! changes when busybox or the keys do.
 
 use anyhow::{Context, Result, bail};
 use config::System;
-use config::system::Guest;
+use config::system::{Guest, Port};
 use std::io::Cursor;
 use std::path::Path;
 
@@ -72,7 +73,8 @@ pub fn initramfs_images(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             busybox = Some(bytes);
             applets = applet_paths(&path);
         }
-        let archive = initramfs(busybox.as_deref().unwrap_or_default(), &applets, guest)
+        let busybox = busybox.as_deref().unwrap_or_default();
+        let archive = initramfs(busybox, &applets, guest, &p.ports)
             .with_context(|| format!("partition {}: cannot write its initramfs", p.name))?;
         out.push((p.name.clone(), archive));
     }
@@ -115,9 +117,34 @@ fn quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', "'\\''"))
 }
 
-/// The initramfs of a guest whose first process is `guest`, with `busybox` as
-/// `/bin/busybox` and a link to it at each of `applets` (`bin/ls`, `usr/bin/awk`).
-pub fn initramfs(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Vec<u8>> {
+/// The port table of `/etc/guest/ports` (see the module's table).
+fn port_table(ports: &[Port]) -> Vec<u8> {
+    let mut text = String::new();
+    for p in ports {
+        let refresh_or_depth = match p.kind {
+            config::model::PortKind::Sampling => p.refresh,
+            config::model::PortKind::Queuing => u64::from(p.depth),
+        };
+        text += &format!(
+            "{} {} {} {} {refresh_or_depth}\n",
+            p.name,
+            p.kind.name(),
+            p.direction.name(),
+            p.size
+        );
+    }
+    text.into_bytes()
+}
+
+/// The initramfs of a guest whose first process is `guest` and whose ARINC ports are
+/// `ports`, with `busybox` as `/bin/busybox` and a link to it at each of `applets`
+/// (`bin/ls`, `usr/bin/awk`).
+pub fn initramfs(
+    busybox: &[u8],
+    applets: &[String],
+    guest: &Guest,
+    ports: &[Port],
+) -> Result<Vec<u8>> {
     let dir = |name: &str| (name.to_string(), S_IFDIR | 0o755, Vec::new());
     let file = |name: &str, mode: u32, data: Vec<u8>| (name.to_string(), S_IFREG | mode, data);
     let mut entries = vec![
@@ -155,6 +182,9 @@ pub fn initramfs(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Ve
     if guest.console_com2 {
         entries.push(file("etc/guest/console", 0o644, b"com2\n".to_vec()));
     }
+    if !ports.is_empty() {
+        entries.push(file("etc/guest/ports", 0o644, port_table(ports)));
+    }
     entries.extend([
         file(
             "init",
@@ -172,8 +202,12 @@ pub fn initramfs(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Ve
         entries.push((format!("bin/{name}"), S_IFREG | 0o755, data));
     }
     for (target, source) in &guest.files {
-        let data = std::fs::read(&source.path)
-            .with_context(|| format!("guest.files: cannot read {}", source.path))?;
+        let data = if target.ends_with(".plcb") && source.path.ends_with(".st") {
+            crate::plc::image_of(&format!("guest.files {target}"), source)?
+        } else {
+            std::fs::read(&source.path)
+                .with_context(|| format!("guest.files: cannot read {}", source.path))?
+        };
         let mode = file_mode(Path::new(&source.path));
         let name = target.trim_start_matches('/');
         if let Some(existing) = entries.iter_mut().find(|e| e.0 == name) {
@@ -254,7 +288,7 @@ mod tests {
             ),
             ("/opt/app/run.sh".into(), source("run.sh", "echo hi\n")),
         ];
-        let bytes = initramfs(b"ELF", &applets(), &g).unwrap();
+        let bytes = initramfs(b"ELF", &applets(), &g, &[]).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         assert_eq!(
             fs.get("/etc/passwd").unwrap().data,
@@ -273,7 +307,7 @@ mod tests {
                 path: dir.join("gone").to_string_lossy().into_owned(),
             },
         )];
-        let err = initramfs(b"ELF", &applets(), &g).unwrap_err();
+        let err = initramfs(b"ELF", &applets(), &g, &[]).unwrap_err();
         assert!(format!("{err:#}").contains("cannot read"), "{err:#}");
         std::fs::remove_dir_all(&dir).unwrap();
     }
@@ -282,7 +316,7 @@ mod tests {
     fn programs_are_built_into_bin() {
         let mut g = hello();
         g.programs = vec!["linux-tests".into()];
-        let bytes = initramfs(b"ELF", &applets(), &g).unwrap();
+        let bytes = initramfs(b"ELF", &applets(), &g, &[]).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         let program = fs.get("/bin/linux-tests").unwrap();
         assert!(program.data.starts_with(b"\x7fELF"));
@@ -292,7 +326,7 @@ mod tests {
 
     #[test]
     fn the_guest_reads_the_initramfs_it_gets() {
-        let bytes = initramfs(b"\x7fELF-busybox", &applets(), &hello()).unwrap();
+        let bytes = initramfs(b"\x7fELF-busybox", &applets(), &hello(), &[]).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         let files = guest::vfs::Fs::new(&fs, 1 << 20).unwrap();
         for applet in applets() {
@@ -325,13 +359,72 @@ mod tests {
         );
         let mut g = hello();
         g.console_com2 = true;
-        let with_console = initramfs(b"\x7fELF-busybox", &applets(), &g).unwrap();
+        let with_console = initramfs(b"\x7fELF-busybox", &applets(), &g, &[]).unwrap();
         let console = Archive::new(&with_console).unwrap();
         assert_eq!(console.get(guest::CONSOLE_PATH).unwrap().data, b"com2\n");
         // Deterministic.
         assert_eq!(
             bytes,
-            initramfs(b"\x7fELF-busybox", &applets(), &hello()).unwrap()
+            initramfs(b"\x7fELF-busybox", &applets(), &hello(), &[]).unwrap()
+        );
+    }
+
+    #[test]
+    fn a_structured_text_file_becomes_its_bytecode_image() {
+        let st = crate::workspace_root().join("tests/configs/plc/counter.st");
+        let mut g = hello();
+        g.files = vec![(
+            "/root/counter.plcb".into(),
+            config::system::SourceFile {
+                name: "counter.st".into(),
+                path: st.to_string_lossy().into_owned(),
+            },
+        )];
+        let bytes = initramfs(b"ELF", &applets(), &g, &[]).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        let image = fs.get("/root/counter.plcb").unwrap().data;
+        assert!(image.starts_with(b"PLCB"), "{:?}", &image[..8]);
+    }
+
+    #[test]
+    fn the_port_table_is_what_the_guest_reads() {
+        use config::model::{Direction, PortKind};
+        let port = |name: &str, kind, direction, size, depth, refresh| Port {
+            name: name.into(),
+            kind,
+            direction,
+            size,
+            depth,
+            refresh,
+            channel: 0,
+        };
+        let ports = [
+            port(
+                "level",
+                PortKind::Sampling,
+                Direction::In,
+                8,
+                0,
+                100_000_000,
+            ),
+            port("plc-request", PortKind::Queuing, Direction::Out, 256, 4, 0),
+        ];
+        let bytes = initramfs(b"ELF", &applets(), &hello(), &ports).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        let table = fs.get(guest::arinc::PORTS_PATH).unwrap().data;
+        assert_eq!(
+            table,
+            b"level sampling in 8 100000000\nplc-request queuing out 256 4\n"
+        );
+        let read = guest::arinc::parse(table).unwrap();
+        assert_eq!(read[1].name, "plc-request");
+        assert_eq!(read[1].refresh_or_depth, 4);
+        let none = initramfs(b"ELF", &applets(), &hello(), &[]).unwrap();
+        assert!(
+            Archive::new(&none)
+                .unwrap()
+                .get(guest::arinc::PORTS_PATH)
+                .is_none()
         );
     }
 

@@ -9,6 +9,9 @@
 //! - `linux-bench` (`tests/linux/bench.c`): the guest benchmark of `cargo xtask bench`.
 //! - `linux-probe` (`tests/linux/probe.c`): the faults and forbidden accesses of the
 //!   scenarios `guest_faults` and `guest_isolation` (one per argument).
+//! - `plcctl` (`partitions/guest/plcctl`): the PLC online tool, a Rust program built with
+//!   cargo for [`MUSL_TARGET`] (static, profile `linux`) into
+//!   `target/x86_64-unknown-linux-musl/linux/plcctl`.
 //!
 //! They are built into `target/linux/<name>` (only when a source is newer) and reach a
 //! guest's initramfs as `/bin/<name>` through the partition key `guest.programs`
@@ -21,6 +24,10 @@ use std::process::Command;
 
 /// The Debian packages of `gcc -static` with glibc.
 pub const GCC_PACKAGES: &str = "gcc libc6-dev";
+/// The target of the Rust programs for the guest (static executables with musl).
+pub const MUSL_TARGET: &str = "x86_64-unknown-linux-musl";
+/// The Rust programs (each the workspace package of that name).
+const RUST_PROGRAMS: &[&str] = &["plcctl"];
 /// The programs built from one source file each; `linux-tests` is every other source.
 const SINGLE_FILE: &[(&str, &str)] = &[("linux-bench", "bench.c"), ("linux-probe", "probe.c")];
 /// How every program is compiled.
@@ -62,8 +69,37 @@ fn modified(path: &Path) -> Option<std::time::SystemTime> {
     std::fs::metadata(path).and_then(|m| m.modified()).ok()
 }
 
+/// Builds the Rust program `name` for [`MUSL_TARGET`] (cargo decides whether anything
+/// changed) and returns its path.
+fn build_rust(name: &str) -> Result<PathBuf> {
+    crate::tools::ensure_rust_targets()?;
+    let status = crate::artifacts::cargo()
+        .args([
+            "build",
+            "--quiet",
+            "--profile",
+            "linux",
+            "--target",
+            MUSL_TARGET,
+            "-p",
+            name,
+        ])
+        .status()
+        .with_context(|| format!("cannot run cargo to build {name}"))?;
+    if !status.success() {
+        bail!("building {name} for {MUSL_TARGET} failed ({status})");
+    }
+    Ok(crate::target_dir()
+        .join(MUSL_TARGET)
+        .join("linux")
+        .join(name))
+}
+
 /// Builds program `name` unless it is newer than its sources and headers; returns its path.
 pub fn build(name: &str) -> Result<PathBuf> {
+    if RUST_PROGRAMS.contains(&name) {
+        return build_rust(name);
+    }
     let sources = sources(name)?;
     let out = output_path(name);
     let headers: Vec<PathBuf> = std::fs::read_dir(source_dir())?
@@ -191,6 +227,9 @@ mod tests {
     #[test]
     fn every_guest_program_has_sources() {
         for name in config::system::GUEST_PROGRAMS {
+            if RUST_PROGRAMS.contains(name) {
+                continue;
+            }
             assert!(!sources(name).unwrap().is_empty(), "{name}");
         }
         assert!(sources("other").is_err());

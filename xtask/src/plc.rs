@@ -22,7 +22,10 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     let mut programs = Vec::new();
     for (index, p) in system.partitions.iter().enumerate() {
         if let Some(DataEntry::PlcImage(files)) = &p.data {
-            out.push((p.name.clone(), compile_sources(p, files)?.image));
+            out.push((
+                p.name.clone(),
+                compile_sources(&format!("partition {}", p.name), files)?.image,
+            ));
         }
         if let Some(plc) = &p.plc {
             programs.push((index, compile(system, index, p, plc)?));
@@ -117,7 +120,7 @@ fn compile(
     p: &Partition,
     plc: &config::system::Plc,
 ) -> Result<plc_compiler::Compiled> {
-    let compiled = compile_sources(p, &plc.program)?;
+    let compiled = compile_sources(&format!("partition {}", p.name), &plc.program)?;
     check_tasks(system, index, p, &compiled.image)?;
     let image = plc_vm::image::Image::parse(&compiled.image)
         .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
@@ -134,13 +137,20 @@ fn compile(
 
 /// The compiled ST sources `files` of partition `p` (a compile error is printed as
 /// `plcc check` prints it and stops the build).
-fn compile_sources(p: &Partition, files: &[SourceFile]) -> Result<plc_compiler::Compiled> {
+/// The bytecode image (what `plcc build` writes) of ST source `file` (a guest's
+/// `guest.files` entry `*.plcb` made from a `.st` file); `what` names it in errors.
+pub fn image_of(what: &str, file: &SourceFile) -> Result<Vec<u8>> {
+    Ok(compile_sources(what, std::slice::from_ref(file))?.image)
+}
+
+/// Compiles `files`; `what` (`partition NAME`) names them in errors.
+fn compile_sources(what: &str, files: &[SourceFile]) -> Result<plc_compiler::Compiled> {
     let sources = files
         .iter()
         .map(|file| {
             std::fs::read_to_string(&file.path)
                 .map(|text| (file.name.clone(), text))
-                .with_context(|| format!("partition {}: cannot read {}", p.name, file.path))
+                .with_context(|| format!("{what}: cannot read {}", file.path))
         })
         .collect::<Result<Vec<_>>>()?;
     match plc_compiler::compile(&sources, &plc_compiler::Options::default()) {
@@ -150,11 +160,7 @@ fn compile_sources(p: &Partition, files: &[SourceFile]) -> Result<plc_compiler::
                 "{}",
                 plc_compiler::diagnostics::render(&map, &diagnostics, false)
             );
-            bail!(
-                "partition {}: its PLC program has {} error(s)",
-                p.name,
-                diagnostics.len()
-            );
+            bail!("{what}: its PLC program has {} error(s)", diagnostics.len());
         }
     }
 }

@@ -12,7 +12,11 @@ pub const APT_PACKAGES: &[&str] = &["qemu-system-x86", "ovmf"];
 pub const BUSYBOX_PACKAGE: &str = "busybox-static";
 /// Where Debian's `busybox-static` installs it.
 pub const BUSYBOX_PATHS: &[&str] = &["/bin/busybox", "/usr/bin/busybox"];
-pub const RUST_TARGETS: &[&str] = &["x86_64-unknown-uefi", "x86_64-unknown-none"];
+pub const RUST_TARGETS: &[&str] = &[
+    "x86_64-unknown-uefi",
+    "x86_64-unknown-none",
+    crate::linux::MUSL_TARGET,
+];
 
 /// Paths of QEMU and the OVMF firmware pair.
 #[derive(Clone, Debug)]

@@ -15,10 +15,12 @@
 //! ([`syscall`]; the file calls in [`syscall::file`], the signal and timer calls in
 //! [`sigcalls`]), the signals' numbers, actions and frame ([`signal`]), the pipes
 //! ([`pipe`]), the process table with fork, exec, wait, signal delivery, process groups,
-//! timers and the deferred replies of waiting calls ([`system`]), and the console's
-//! terminal line discipline ([`tty`]); the partition program (`main.rs`) only moves
-//! messages, creates tasks, maps pages, drives COM2 (`com2.rs`), writes the log and gives
-//! the library its heap (a part of the memory pool: the file system's data and tables
+//! timers and the deferred replies of waiting calls ([`system`]), the console's
+//! terminal line discipline ([`tty`]) and the partition's ARINC ports as the devices
+//! `/dev/arinc/<port>` ([`arinc`]: their table, messages, `EMSGSIZE`, validity ioctl); the
+//! partition program (`main.rs`) only moves messages, creates tasks, maps pages, drives
+//! COM2 (`com2.rs`), moves port messages through syssw (`ports.rs`), writes the log and
+//! gives the library its heap (a part of the memory pool: the file system's data and tables
 //! live there, within the byte limit [`vfs::Fs::new`] gets).
 //!
 //! # The console
@@ -55,6 +57,10 @@
 //!   no UART at COM2's ports, the console is the log`;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS`, once per call number and process;
+//! - `guest: port <name>: cannot create it: <ARINC code, or no answer>` (its device
+//!   answers `ENXIO`),
+//!   `guest: /etc/guest/ports line <n>: <why>; no ports`, `guest: no room for the port
+//!   devices: <errno>`;
 //! - `guest: init ended with <n> other processes left` (zombies included), then
 //!   `guest: init exited with status <n>` or `guest: init killed by signal <n>` (also the
 //!   detail of the health report).
@@ -62,6 +68,7 @@
 
 extern crate alloc;
 
+pub mod arinc;
 pub mod backing;
 pub mod console;
 pub mod cpio;

@@ -10,6 +10,7 @@ impl Errno {
     pub const ENOENT: Self = Self(2);
     pub const EINTR: Self = Self(4);
     pub const EIO: Self = Self(5);
+    pub const ENXIO: Self = Self(6);
     pub const E2BIG: Self = Self(7);
     pub const ENOEXEC: Self = Self(8);
     pub const ESRCH: Self = Self(3);
@@ -38,6 +39,7 @@ impl Errno {
     pub const ENAMETOOLONG: Self = Self(36);
     pub const ENOSYS: Self = Self(38);
     pub const ENOTEMPTY: Self = Self(39);
+    pub const EMSGSIZE: Self = Self(90);
     pub const ETIMEDOUT: Self = Self(110);
     pub const ELOOP: Self = Self(40);
 

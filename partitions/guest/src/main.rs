@@ -23,10 +23,19 @@
 //! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
 //! processes' console is a terminal ([`guest::tty`]) on COM2 ([`com2`]); without it, their
 //! output lines go to the log and reading the console gives end of file.
+//!
+//! The ARINC ports: the initramfs's port table (`/etc/guest/ports`, from the partition's
+//! `ports.*`) becomes `/dev/arinc/<port>` ([`guest::arinc`]); [`ports`] creates the ports
+//! through syssw before the first process starts. Their messages arrive without a word
+//! to the guest, so while a call waits for a port, the calls that wait are served again
+//! every [`PORT_POLL_NS`].
 #![no_std]
 #![no_main]
 
+extern crate alloc;
+
 mod com2;
+mod ports;
 
 use guest::backing::ENTRY;
 use guest::console::{LineBuffer, stream_name};
@@ -58,6 +67,9 @@ user_rt::entry!(main);
 /// How long a process runs before another that may run gets the CPU (Linux's default
 /// scheduler gives a few milliseconds).
 const TIME_SLICE_NS: u64 = 10_000_000;
+/// How often calls that wait are served again while the guest has destination ports
+/// (an arriving message does not notify the guest).
+const PORT_POLL_NS: u64 = 1_000_000;
 /// Pages of the pool the IPC buffer takes (at its start).
 const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
 /// The part of the pool that is the heap (1/4: the processes' pages keep the rest; a
@@ -178,6 +190,23 @@ fn main(start: u64, _: u64) {
         }
     };
     fs.set_memory(info.pool_len);
+    // The ARINC ports of the configuration: created through syssw, devices in /dev/arinc.
+    let port_table = match archive
+        .get(guest::arinc::PORTS_PATH)
+        .map(|e| guest::arinc::parse(e.data))
+    {
+        None => alloc::vec::Vec::new(),
+        Some(Ok(table)) => table,
+        Some(Err(e)) => {
+            let path = guest::arinc::PORTS_PATH;
+            println!("guest: {path} line {}: {}; no ports", e.line, e.reason);
+            alloc::vec::Vec::new()
+        }
+    };
+    let ports = ports::Ports::create(ThreadId(info.server), ipc, &port_table);
+    if let Err(e) = fs.set_ports(port_table) {
+        println!("guest: no room for the port devices: {}", e.describe());
+    }
 
     let mcp = (info.priority as u8).saturating_sub(1).max(1);
     let mut host = GuestHost {
@@ -192,6 +221,8 @@ fn main(start: u64, _: u64) {
         wall_clock_at_boot: sys::wall_clock_at_boot(),
         seed: sys::rdtsc() | 1,
         tty: None,
+        ports,
+        port_waiting: false,
     };
     let wants_terminal = archive
         .get(guest::CONSOLE_PATH)
@@ -257,6 +288,7 @@ fn main(start: u64, _: u64) {
         let now = host.now_ns();
         let timeout = match system.next_timer() {
             Some(at) if at <= now => {
+                host.port_waiting = false; // the calls served again say it anew
                 if let Some(ended) = system.tick(&mut fs, &mut host) {
                     break ended;
                 }
@@ -271,6 +303,13 @@ fn main(start: u64, _: u64) {
         // answered at once, which puts it behind the others. Taking them in turn (pid
         // order) follows the kernel's queue, so the one interrupted is the one that ran; a
         // Linux scheduler shares a CPU among busy processes the same way.
+        // A call waiting for a port (its messages arrive without a word to the guest) is
+        // served again at least every PORT_POLL_NS.
+        let timeout = if host.port_waiting && system.any_blocked() {
+            timeout.min(PORT_POLL_NS)
+        } else {
+            timeout
+        };
         let timeout = if system.runnable().nth(1).is_none() {
             slice_end = now + TIME_SLICE_NS;
             timeout
@@ -292,6 +331,7 @@ fn main(start: u64, _: u64) {
         let received = match sys::receive(None, timeout) {
             Ok(r) => r,
             Err(user_rt::abi::syscall::Error::TimedOut) => {
+                host.port_waiting = false; // the calls served again say it anew
                 if let Some(ended) = system.tick(&mut fs, &mut host) {
                     break ended;
                 }
@@ -541,6 +581,10 @@ struct GuestHost<'p> {
     seed: u64,
     /// The console's terminal (COM2), if the guest has one.
     tty: Option<Tty>,
+    /// The ARINC ports of `/dev/arinc`.
+    ports: ports::Ports,
+    /// A call waited for a port when it was last served ([`Host::port_wait`]).
+    port_waiting: bool,
 }
 
 impl<'p> GuestHost<'p> {
@@ -697,6 +741,26 @@ impl Host for GuestHost<'_> {
 
     fn log(&mut self, line: core::fmt::Arguments) {
         println!("{line}");
+    }
+
+    fn port_send(&mut self, port: usize, message: &[u8]) -> Result<(), Errno> {
+        self.ports.send(port, message)
+    }
+
+    fn port_receive(
+        &mut self,
+        port: usize,
+        buf: &mut [u8],
+    ) -> Result<guest::arinc::Received, Errno> {
+        self.ports.receive(port, buf)
+    }
+
+    fn port_wait(&mut self) {
+        self.port_waiting = true;
+    }
+
+    fn port_readiness(&mut self, port: usize) -> guest::arinc::Readiness {
+        self.ports.readiness(port)
     }
 }
 

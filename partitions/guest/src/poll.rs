@@ -5,10 +5,11 @@
 //! `ppoll` and `pselect6` wait with the signal mask they were given and restore the
 //! caller's afterwards.
 
+use crate::arinc;
 use crate::linux::Errno;
-use crate::pipe::Pipes;
 use crate::process::{File, MAX_FILES, Process};
 use crate::signal::UNBLOCKABLE;
+use crate::syscall::file::{Files, port_at};
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 
 pub const POLLIN: u16 = 0x1;
@@ -26,11 +27,14 @@ const MAX_POLL: u64 = MAX_FILES as u64;
 /// The events descriptor `fd` of `p` has now (`POLLNVAL` for a closed one), the console's
 /// being `console` ([`console_events`]). `POLLERR` and `POLLHUP` are reported whether
 /// asked for or not.
-pub fn events(p: &Process, pipes: &Pipes, console: u16, fd: u64) -> u16 {
+pub fn events(p: &Process, f: &Files, host: &mut impl Host, console: u16, fd: u64) -> u16 {
     let ready = match p.file(fd) {
         None => return POLLNVAL,
-        Some(File::Pipe { pipe, write, .. }) => pipes.poll(pipe, write),
+        Some(File::Pipe { pipe, write, .. }) => f.pipes.poll(pipe, write),
         Some(File::Console(_)) => console,
+        Some(File::Open(_)) if let Some((index, port)) = port_at(p, f.fs, fd) => {
+            arinc::events(port, index, host)
+        }
         // Regular files never wait.
         Some(_) => POLLIN | POLLOUT,
     };
@@ -120,7 +124,7 @@ fn read_timeout(p: &Process, host: &mut impl Host, at: u64, micro: bool) -> SysR
 #[allow(clippy::too_many_arguments)] // the calls' arguments
 pub fn poll(
     p: &mut Process,
-    pipes: &Pipes,
+    f: &Files,
     host: &mut impl Host,
     fds: u64,
     nfds: u64,
@@ -143,7 +147,7 @@ pub fn poll(
         let got = if fd < 0 {
             0
         } else {
-            events(p, pipes, console, fd as u64) & (asked | POLLERR | POLLHUP | POLLNVAL)
+            events(p, f, host, console, fd as u64) & (asked | POLLERR | POLLHUP | POLLNVAL)
         };
         entry[6..8].copy_from_slice(&got.to_le_bytes());
         ready += u64::from(got != 0);
@@ -172,7 +176,7 @@ pub fn ppoll_timeout(p: &Process, host: &mut impl Host, at: u64) -> SysResult<Op
 /// {sigmask, size})`.
 pub fn select(
     p: &mut Process,
-    pipes: &Pipes,
+    f: &Files,
     host: &mut impl Host,
     a: [u64; 6],
     pselect: bool,
@@ -205,7 +209,7 @@ pub fn select(
         if (asked[0] | asked[1] | asked[2]) & bit == 0 {
             continue;
         }
-        let ev = events(p, pipes, console, fd);
+        let ev = events(p, f, host, console, fd);
         if ev & POLLNVAL != 0 {
             return Err(Errno::EBADF);
         }

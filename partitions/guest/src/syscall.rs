@@ -34,6 +34,7 @@
 //! ([`crate::memory::classify_fault`]): its handler runs if the process has one that is not
 //! blocked, else the process dies of it.
 
+use crate::arinc;
 use crate::linux::{self, Errno, nr};
 use crate::memory::{Fault, PAGE, Rights, USER_TOP, classify_fault};
 use crate::pipe::Pipes;
@@ -123,6 +124,31 @@ pub trait Host {
     fn set_fpu(&mut self, image: &[u8; 512]) -> Result<(), Errno>;
     fn random(&mut self, buf: &mut [u8]);
     fn log(&mut self, line: core::fmt::Arguments);
+    /// Sends `message` (at most the port's size) on port `port` (an index into the port
+    /// table, [`crate::arinc`]) without waiting: `EAGAIN` when its queue is full, `ENXIO`
+    /// when the port could not be created.
+    fn port_send(&mut self, port: usize, message: &[u8]) -> Result<(), Errno> {
+        let _ = (port, message);
+        Err(Errno::ENXIO)
+    }
+    /// Takes a message of port `port` into `buf` (as large as the port's size) without
+    /// waiting: `EAGAIN` when there is none.
+    fn port_receive(&mut self, port: usize, buf: &mut [u8]) -> Result<arinc::Received, Errno> {
+        let _ = (port, buf);
+        Err(Errno::ENXIO)
+    }
+    /// A call waits for a port (to read or to write, or in `poll`): its messages arrive
+    /// without a word to the guest, so the host serves the waiting calls again soon.
+    fn port_wait(&mut self) {}
+    /// What port `port` could do now.
+    fn port_readiness(&mut self, port: usize) -> arinc::Readiness {
+        let _ = port;
+        arinc::Readiness {
+            readable: false,
+            writable: false,
+            valid: false,
+        }
+    }
 }
 
 /// How the process goes on after [`handle`].
@@ -422,7 +448,7 @@ fn call(
         nr::fcntl => file::fcntl(p, f, a[0], a[1], a[2]),
         nr::ioctl => match p.file(a[0]).ok_or(Errno::EBADF)? {
             File::Console(_) => tty_ioctl(p, host, a[1], a[2]),
-            _ => Err(Errno::ENOTTY),
+            _ => file::port_ioctl(p, f, host, a[0], a[1], a[2]),
         },
         nr::brk => Ok(brk(p, host, a[0])),
         nr::mmap => mmap(p, f.fs, host, a),
@@ -455,14 +481,14 @@ fn call(
         nr::alarm => Ok(sigcalls::alarm(p, host, a[0])),
         nr::poll => {
             let timeout = poll::poll_timeout(a[2]);
-            poll::poll(p, f.pipes, host, a[0], a[1], timeout, 0, 0)
+            poll::poll(p, f, host, a[0], a[1], timeout, 0, 0)
         }
         nr::ppoll => {
             let timeout = poll::ppoll_timeout(p, host, a[2])?;
-            poll::poll(p, f.pipes, host, a[0], a[1], timeout, a[3], a[4])
+            poll::poll(p, f, host, a[0], a[1], timeout, a[3], a[4])
         }
-        nr::select => poll::select(p, f.pipes, host, a, false),
-        nr::pselect6 => poll::select(p, f.pipes, host, a, true),
+        nr::select => poll::select(p, f, host, a, false),
+        nr::pselect6 => poll::select(p, f, host, a, true),
         nr::getitimer => sigcalls::getitimer(p, host, a[0], a[1]),
         nr::setitimer => sigcalls::setitimer(p, host, a[0], a[1], a[2]),
         nr::prlimit64 => {

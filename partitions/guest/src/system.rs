@@ -288,6 +288,14 @@ impl System {
         self.wake(fs, k)
     }
 
+    /// Whether a process waits in a call (a kept message).
+    pub fn any_blocked(&self) -> bool {
+        self.slots
+            .iter()
+            .flatten()
+            .any(|s| matches!(s.state, State::Blocked(_)))
+    }
+
     /// The processes that may be running user code (not waiting in a call, stopped or
     /// ended): the ones a time slice is shared among.
     pub fn runnable(&self) -> impl Iterator<Item = u32> + '_ {

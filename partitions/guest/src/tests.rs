@@ -40,7 +40,15 @@ struct Model {
     interrupted: Vec<u32>,
     /// vfork children and the process whose memory they use.
     aliases: HashMap<u32, u32>,
+    /// ARINC ports: the messages waiting at each destination (with their validity), and
+    /// what the sources sent; a source holds at most [`PORT_ROOM`] messages.
+    port_messages: HashMap<usize, std::collections::VecDeque<(Vec<u8>, bool)>>,
+    port_sent: HashMap<usize, Vec<Vec<u8>>>,
+    /// Calls that said they wait for a port ([`Host::port_wait`]).
+    port_waits: usize,
 }
+
+const PORT_ROOM: usize = 2;
 
 impl Model {
     fn new(budget: u64) -> Self {
@@ -74,6 +82,48 @@ impl Model {
 }
 
 impl Host for Model {
+    fn port_send(&mut self, port: usize, message: &[u8]) -> Result<(), Errno> {
+        let sent = self.port_sent.entry(port).or_default();
+        if sent.len() == PORT_ROOM {
+            return Err(Errno::EAGAIN);
+        }
+        sent.push(message.to_vec());
+        Ok(())
+    }
+
+    fn port_receive(
+        &mut self,
+        port: usize,
+        buf: &mut [u8],
+    ) -> Result<crate::arinc::Received, Errno> {
+        let (m, valid) = self
+            .port_messages
+            .get_mut(&port)
+            .and_then(|q| q.pop_front())
+            .ok_or(Errno::EAGAIN)?;
+        buf[..m.len()].copy_from_slice(&m);
+        Ok(crate::arinc::Received {
+            len: m.len(),
+            valid,
+        })
+    }
+
+    fn port_wait(&mut self) {
+        self.port_waits += 1;
+    }
+
+    fn port_readiness(&mut self, port: usize) -> crate::arinc::Readiness {
+        let first = self.port_messages.get(&port).and_then(|q| q.front());
+        crate::arinc::Readiness {
+            readable: first.is_some(),
+            writable: self
+                .port_sent
+                .get(&port)
+                .is_none_or(|s| s.len() < PORT_ROOM),
+            valid: first.is_some_and(|m| m.1),
+        }
+    }
+
     fn read_user(&mut self, address: u64, buf: &mut [u8]) -> Result<(), Errno> {
         for (i, b) in buf.iter_mut().enumerate() {
             *b = self.byte(address + i as u64).unwrap_or(0);
@@ -2610,4 +2660,152 @@ fn listing_while_removing_copying_and_status() {
     assert_eq!(call(&mut g, nr::stat, [c, SCRATCH, 0, 0, 0, 0]), 0);
     assert_eq!(g.get(1, SCRATCH + 24, 4), (S_IFREG | 0o600).to_le_bytes());
     assert_eq!(g.get(1, SCRATCH + 88, 8), 1234u64.to_le_bytes(), "st_mtime");
+}
+
+#[test]
+fn arinc_ports_are_devices_that_move_one_message_a_call() {
+    use crate::arinc;
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let table = b"level sampling in 8 100000000\ncmd queuing out 16 4\nreply queuing in 16 4\n";
+    g.fs.set_ports(arinc::parse(table).unwrap()).unwrap();
+    let open = |g: &mut Guest, path: &str, flags: u64| {
+        let at = g.text(1, SCRATCH + 0x800, path);
+        g.call(1, nr::openat, [AT_FDCWD, at, flags, 0, 0, 0])
+            .unwrap()
+    };
+    let (level, cmd, reply) = (
+        open(&mut g, "/dev/arinc/level", 0),
+        open(&mut g, "/dev/arinc/cmd", 1),
+        open(&mut g, "/dev/arinc/reply", 0o4000), // O_NONBLOCK
+    );
+    // Device numbers: MAJOR, index.
+    g.call(1, nr::fstat, [reply, SCRATCH + 0x100, 0, 0, 0, 0]);
+    let rdev = u64::from_le_bytes(g.get(1, SCRATCH + 0x128, 8).try_into().unwrap());
+    assert_eq!(rdev, arinc::MAJOR << 8 | 2);
+    // A sampling message: one read takes it (8 bytes of a 64-byte read), its validity
+    // by ioctl; a buffer smaller than the port's size is EMSGSIZE.
+    g.host
+        .port_messages
+        .entry(0)
+        .or_default()
+        .extend([(b"12345678".to_vec(), false), (b"abcdefgh".to_vec(), true)]);
+    let validity = |g: &mut Guest| {
+        let r = g.call(
+            1,
+            nr::ioctl,
+            [level, arinc::IOCTL_VALIDITY, SCRATCH + 0x200, 0, 0, 0],
+        );
+        (r, g.word(1, SCRATCH + 0x200))
+    };
+    assert_eq!(validity(&mut g), (Some(0), 0));
+    let read = |g: &mut Guest, fd: u64, n: u64| g.call(1, nr::read, [fd, SCRATCH, n, 0, 0, 0]);
+    assert_eq!(read(&mut g, level, 7), Some(err(Errno::EMSGSIZE)));
+    assert_eq!(read(&mut g, level, 64), Some(8));
+    assert_eq!(g.get(1, SCRATCH, 8), b"12345678");
+    assert_eq!(validity(&mut g), (Some(0), 1));
+    assert_eq!(read(&mut g, level, 8), Some(8));
+    assert_eq!(g.get(1, SCRATCH, 8), b"abcdefgh");
+    // The ioctl on a queuing port, or another request: ENOTTY.
+    let r = g.call(
+        1,
+        nr::ioctl,
+        [reply, arinc::IOCTL_VALIDITY, SCRATCH, 0, 0, 0],
+    );
+    assert_eq!(r, Some(err(Errno::ENOTTY)));
+    let r = g.call(1, nr::ioctl, [level, 0x5401, SCRATCH, 0, 0, 0]);
+    assert_eq!(r, Some(err(Errno::ENOTTY)));
+    // Nothing there: O_NONBLOCK gives EAGAIN, a blocking read waits.
+    assert_eq!(read(&mut g, reply, 16), Some(err(Errno::EAGAIN)));
+    assert_eq!(g.host.port_waits, 0);
+    assert_eq!(read(&mut g, level, 8), None);
+    assert!(
+        g.host.port_waits > 0,
+        "the host learns that a call waits for a port"
+    );
+    assert_eq!(
+        g.system.state(1).map(|s| matches!(s, State::Blocked(_))),
+        Some(true)
+    );
+    g.host
+        .port_messages
+        .entry(0)
+        .or_default()
+        .push_back((b"zzzzzzzz".to_vec(), true));
+    g.host.resumed.clear();
+    assert_eq!(g.system.retry_blocked(&mut g.fs, &mut g.host), None);
+    assert_eq!(g.host.resumed[0].1.registers.rax, 8);
+    // Writing: one message a call; too long is EMSGSIZE, 0 bytes send nothing; reading a
+    // source or writing a destination is EINVAL (EBADF by the open mode first).
+    g.put(1, SCRATCH, &[7; 32]);
+    let write = |g: &mut Guest, fd: u64, n: u64| g.call(1, nr::write, [fd, SCRATCH, n, 0, 0, 0]);
+    assert_eq!(write(&mut g, cmd, 17), Some(err(Errno::EMSGSIZE)));
+    // Longer than a step of a write (not cut into messages): EMSGSIZE too.
+    assert_eq!(write(&mut g, cmd, 5000), Some(err(Errno::EMSGSIZE)));
+    assert_eq!(write(&mut g, cmd, 0), Some(0));
+    assert_eq!(write(&mut g, cmd, 3), Some(3));
+    assert_eq!(write(&mut g, cmd, 16), Some(16));
+    assert_eq!(g.host.port_sent[&1], [vec![7; 3], vec![7; 16]]);
+    assert_eq!(read(&mut g, cmd, 16), Some(err(Errno::EBADF)));
+    let cmd_rw = open(&mut g, "/dev/arinc/cmd", 2);
+    assert_eq!(read(&mut g, cmd_rw, 16), Some(err(Errno::EINVAL)));
+    let level_rw = open(&mut g, "/dev/arinc/level", 2);
+    assert_eq!(write(&mut g, level_rw, 8), Some(err(Errno::EINVAL)));
+    // poll: the full source is not writable, the empty queue not readable, the sampling
+    // port is (a message is there).
+    g.host
+        .port_messages
+        .entry(0)
+        .or_default()
+        .push_back((b"00000000".to_vec(), true));
+    let mut t = Vec::new();
+    for (fd, events) in [(cmd, 4u16), (reply, 1), (level, 1)] {
+        t.extend_from_slice(&(fd as i32).to_le_bytes());
+        t.extend_from_slice(&events.to_le_bytes());
+        t.extend_from_slice(&0u16.to_le_bytes());
+    }
+    g.put(1, SCRATCH + 0x400, &t);
+    assert_eq!(
+        g.call(1, nr::poll, [SCRATCH + 0x400, 3, 0, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x406, 2), 0u16.to_le_bytes());
+    assert_eq!(g.get(1, SCRATCH + 0x40e, 2), 0u16.to_le_bytes());
+    assert_eq!(g.get(1, SCRATCH + 0x416, 2), 1u16.to_le_bytes());
+    // A full source with O_NONBLOCK: EAGAIN.
+    let cmd_nb = open(&mut g, "/dev/arinc/cmd", 1 | 0o4000);
+    assert_eq!(write(&mut g, cmd_nb, 1), Some(err(Errno::EAGAIN)));
+    // pread on a port: ESPIPE.
+    let r = g.call(1, nr::pread64, [level, SCRATCH, 8, 0, 0, 0]);
+    assert_eq!(r, Some(err(Errno::ESPIPE)));
+}
+
+#[test]
+fn the_arinc_port_table_is_read_line_by_line_and_bad_lines_are_named() {
+    use crate::arinc::{Direction, Kind, parse};
+    let ports = parse(b"level sampling in 8 100000000\n\nplc-request queuing out 256 4\n").unwrap();
+    assert_eq!(ports.len(), 2);
+    assert_eq!(
+        (
+            ports[1].name.as_str(),
+            ports[1].kind,
+            ports[1].direction,
+            ports[1].size
+        ),
+        ("plc-request", Kind::Queuing, Direction::Out, 256)
+    );
+    assert_eq!(ports[0].refresh_or_depth, 100_000_000);
+    for (text, line) in [
+        (&b"a sampling in 8\n"[..], 1),
+        (b"a sampling in 8 0\nb fifo in 8 0\n", 2),
+        (b"a sampling up 8 0\n", 1),
+        (b"a sampling in 0 0\n", 1),
+        (b"a sampling in 5000 0\n", 1),
+        (b"a/b sampling in 8 0\n", 1),
+        (b"a sampling in 8 0\na queuing in 8 1\n", 2),
+        (b"a sampling in 8 0 9\n", 1),
+        (b"\xff sampling in 8 0\n", 1),
+    ] {
+        assert_eq!(parse(text).unwrap_err().line, line, "{text:?}");
+    }
 }

@@ -12,6 +12,7 @@ use super::{
     BROKEN_PIPE, Host, IOV_MAX, MAX_TRANSFER, O_CLOEXEC, SysResult, WOULD_BLOCK, check_user,
     read_cstr, read_u64, write_user,
 };
+use crate::arinc;
 use crate::linux::{self, Errno};
 use crate::memory::Rights;
 use crate::pipe::{Pipes, Transfer};
@@ -265,6 +266,13 @@ fn read_kernel(
             if f.fs.is_dir(node) {
                 return Err(Errno::EISDIR);
             }
+            if let Some((index, port)) = f.fs.port(node) {
+                if at.is_some() {
+                    return Err(Errno::ESPIPE);
+                }
+                let nonblock = o.flags & linux::O_NONBLOCK != 0;
+                return arinc::read(port, index, host, buf, nonblock);
+            }
             match f.fs.device(node) {
                 Some(Device::Null) => return Ok(0),
                 Some(Device::Zero) => {
@@ -275,7 +283,7 @@ fn read_kernel(
                     host.random(buf);
                     return Ok(buf.len());
                 }
-                Some(Device::Console | Device::Tty) | None => {}
+                Some(Device::Console | Device::Tty | Device::Port(_)) | None => {}
             }
             let offset = at.unwrap_or(o.offset);
             let bytes = match &o.snapshot {
@@ -325,6 +333,13 @@ fn write_kernel(
                 return Err(Errno::EBADF);
             }
             let node = o.node;
+            if let Some((index, port)) = f.fs.port(node) {
+                if at.is_some() {
+                    return Err(Errno::ESPIPE);
+                }
+                let nonblock = o.flags & linux::O_NONBLOCK != 0;
+                return arinc::write(port, index, host, data, nonblock);
+            }
             if f.fs.device(node).is_some() {
                 return Ok(data.len()); // null, zero, random: swallowed
             }
@@ -346,9 +361,43 @@ fn write_kernel(
 }
 
 /// Whether reading or writing `fd` may go on after a full step (files, devices and the
-/// console; a pipe moves at most one step per call, what it holds or has room for).
-fn streams(p: &Process, fd: u64) -> bool {
-    !matches!(p.file(fd), Some(File::Pipe { .. }))
+/// console; a pipe moves at most one step per call, what it holds or has room for, and a
+/// port one message).
+fn streams(p: &Process, f: &Files, fd: u64) -> bool {
+    match p.file(fd) {
+        Some(File::Pipe { .. }) => false,
+        Some(File::Open(id)) => {
+            f.fs.description(id)
+                .is_none_or(|o| f.fs.port(o.node).is_none())
+        }
+        _ => true,
+    }
+}
+
+/// The ARINC port open at `fd`, with its index ([`crate::arinc`]).
+pub fn port_at<'f>(p: &Process, fs: &'f Fs, fd: u64) -> Option<(usize, &'f arinc::Port)> {
+    match p.file(fd)? {
+        File::Open(id) => fs.port(fs.description(id)?.node),
+        _ => None,
+    }
+}
+
+/// `ioctl` on an ARINC port: [`arinc::IOCTL_VALIDITY`]; any other request is `ENOTTY`.
+pub fn port_ioctl(
+    p: &Process,
+    f: &Files,
+    host: &mut impl Host,
+    fd: u64,
+    request: u64,
+    arg: u64,
+) -> SysResult<u64> {
+    let (index, port) = port_at(p, f.fs, fd).ok_or(Errno::ENOTTY)?;
+    if request as u32 as u64 != arinc::IOCTL_VALIDITY {
+        return Err(Errno::ENOTTY);
+    }
+    let valid = arinc::validity(port, index, host)?;
+    write_user(p, host, arg, &valid.to_le_bytes())?;
+    Ok(0)
 }
 
 /// A `read` of the console: the terminal's input ([`crate::tty`]; waits for it), or end of
@@ -408,7 +457,7 @@ pub fn read(
         };
         host.write_user(buf + done as u64, &chunk[..n])?;
         done += n;
-        if n < want || done == total || !streams(p, fd) {
+        if n < want || done == total || !streams(p, f, fd) {
             break;
         }
     }
@@ -425,6 +474,11 @@ pub fn write(
     count: u64,
     at: Option<u64>,
 ) -> SysResult<u64> {
+    if let Some((_, port)) = port_at(p, f.fs, fd)
+        && arinc::too_long(port, count)
+    {
+        return Err(Errno::EMSGSIZE); // not cut into pieces the size of a step
+    }
     let total = (count as usize).min(MAX_TRANSFER);
     check_user(p, buf, total, Rights::READ)?;
     let file = p.file(fd).ok_or(Errno::EBADF)?;
@@ -448,7 +502,7 @@ pub fn write(
             Err(e) => return Err(e),
         };
         done += n;
-        if n < want || !streams(p, fd) {
+        if n < want || !streams(p, f, fd) {
             break;
         }
     }

@@ -1,7 +1,8 @@
 //! The device files of `/dev`: what each one is and its device number. Reading and writing
 //! them is the system calls' ([`crate::syscall`]): the console and `tty` are the guest's
 //! console, `null` reads end of file and swallows writes, `zero` reads zeros, `urandom` and
-//! `random` read the host's random bytes. A device never holds data in the file system.
+//! `random` read the host's random bytes, and `arinc/<name>` are the partition's ARINC 653
+//! ports ([`crate::arinc`]). A device never holds data in the file system.
 
 /// A device file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -12,6 +13,8 @@ pub enum Device {
     Zero,
     Urandom,
     Random,
+    /// Port `n` of the port table ([`crate::vfs::Fs::ports`]).
+    Port(u16),
 }
 
 impl Device {
@@ -34,6 +37,7 @@ impl Device {
             Device::Zero => (1, 5),
             Device::Urandom => (1, 9),
             Device::Random => (1, 8),
+            Device::Port(n) => (crate::arinc::MAJOR, n as u64),
         };
         major << 8 | minor
     }

@@ -206,6 +206,8 @@ pub struct Fs<'a> {
     opens: Vec<Option<Open>>,
     /// Bytes of the guest's memory (`/proc/meminfo`).
     memory: u64,
+    /// The partition's ARINC ports, `/dev/arinc/<name>` ([`crate::arinc`]).
+    ports: Vec<crate::arinc::Port>,
 }
 
 /// What the removal of a directory entry removes.
@@ -230,6 +232,7 @@ impl<'a> Fs<'a> {
             proc_dir: None,
             opens: Vec::new(),
             memory: 0,
+            ports: Vec::new(),
         };
         fs.add(
             S_IFDIR | 0o755,
@@ -281,6 +284,37 @@ impl<'a> Fs<'a> {
         fs.mkdir_all("tmp")?;
         fs.proc_dir = Some(fs.mkdir_all("proc")?);
         Ok(fs)
+    }
+
+    /// Gives the guest its ARINC ports: `/dev/arinc/<name>` for each (device
+    /// [`Device::Port`] of its index in `ports`; names that exist already are skipped).
+    pub fn set_ports(&mut self, ports: Vec<crate::arinc::Port>) -> Result<(), Errno> {
+        if !ports.is_empty() {
+            let dir = self.mkdir_all(crate::arinc::DEVICE_DIR)?;
+            for (i, port) in ports.iter().enumerate() {
+                let name = port.name.as_bytes();
+                if self.entry(dir, name).is_none() {
+                    let device = Body::Device(Device::Port(i as u16));
+                    let ino = self.add(S_IFCHR | 0o666, device, 0)?;
+                    self.link_entry(dir, name, ino)?;
+                }
+            }
+        }
+        self.ports = ports;
+        Ok(())
+    }
+
+    /// The ARINC ports ([`Fs::set_ports`]).
+    pub fn ports(&self) -> &[crate::arinc::Port] {
+        &self.ports
+    }
+
+    /// The port `node` is a device of, with its index.
+    pub fn port(&self, node: Node) -> Option<(usize, &crate::arinc::Port)> {
+        match self.device(node)? {
+            Device::Port(i) => self.ports.get(i as usize).map(|p| (i as usize, p)),
+            _ => None,
+        }
     }
 
     /// Records the guest's memory size (what `/proc/meminfo` shows as total).

@@ -1,0 +1,490 @@
+//! `plcctl`: the soft-PLC's online protocol ([`plc_online`]) from a Linux process, over a
+//! pair of message devices (in the guest partition the ARINC queuing ports
+//! `/dev/arinc/plc-request` and `/dev/arinc/plc-response`, connected by channels to the
+//! PLC's `plc.online` ports). This library is the tool without its files: the command
+//! line ([`Command::parse`]), values typed as text ([`parse_value`]), the exchanges of each
+//! command over a [`Link`] and the lines it prints; `main.rs` only opens the devices.
+//!
+//! # Commands and output (stdout; errors on stderr as `plcctl: <what>`)
+//!
+//! | command | prints |
+//! |---|---|
+//! | `plcctl list` | `<name> <TYPE>` per variable (`TYPE` as IEC names it: `BOOL`, `LREAL`, ...) |
+//! | `plcctl read NAME...` | `<name> = <value>` per name (IEC literal: `TRUE`, `42`, `0.5`, `T#20ms`, `'text'`) |
+//! | `plcctl watch NAME... [--interval T] [--count N]` | `t=<ms> <name>=<value> ...` every `T` (default 1s; `500ms`, `2s` or a number of ms), `N` times (default: until stopped) |
+//! | `plcctl force NAME=VALUE` | `forced <name> = <value>` (the value is parsed as the variable's type, which a READ tells) |
+//! | `plcctl unforce NAME` | `unforced <name>` |
+//! | `plcctl stats` | `task <name> stopped=<bool> cycles=<n> last_us=.. min_us=.. mean_us=.. max_us=.. last_jitter_us=.. max_jitter_us=.. overruns=<n> faults=<n>` per task |
+//! | `plcctl download FILE.plcb` | `downloaded FILE: <n> bytes, running from release <r>` |
+//!
+//! Options before or after the command: `--request PATH`, `--response PATH` (the devices;
+//! defaults [`DEFAULT_REQUEST`], [`DEFAULT_RESPONSE`]), `--timeout MS` (how long to wait
+//! for each answer, default 2000). A PLC that refuses prints
+//! `plcctl: <OP> <name>: <STATUS> (<reason>)`, e.g. `plcctl: FORCE valve: FORBIDDEN (the
+//! PLC's configuration, plc.online.access, does not allow it)`. Exit status: 0 done, 1 the
+//! PLC refused, 2 a usage error, 3 no answer or a device error.
+
+use plc_online::{
+    MAX_CHUNK, MAX_MESSAGE, Reader, Request, Status, crc32, decode_response, encode_request,
+    read_stats,
+};
+use plc_vm::image::VarType;
+use plc_vm::vm::Value;
+use std::fmt::Write as _;
+use std::time::Duration;
+
+pub const DEFAULT_REQUEST: &str = "/dev/arinc/plc-request";
+pub const DEFAULT_RESPONSE: &str = "/dev/arinc/plc-response";
+/// How long each answer is waited for by default.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(2000);
+
+pub const USAGE: &str = "usage: plcctl [--request PATH] [--response PATH] [--timeout MS] \
+list | read NAME... | watch NAME... [--interval T] [--count N] | force NAME=VALUE | \
+unforce NAME | stats | download FILE.plcb";
+
+/// What the command line asks.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Command {
+    pub request: String,
+    pub response: String,
+    pub timeout: Duration,
+    pub action: Action,
+}
+
+#[derive(Clone, Debug, PartialEq)]
+pub enum Action {
+    List,
+    Read(Vec<String>),
+    Watch {
+        names: Vec<String>,
+        interval: Duration,
+        count: Option<u64>,
+    },
+    Force {
+        name: String,
+        value: String,
+    },
+    Unforce(String),
+    Stats,
+    Download(String),
+}
+
+/// A duration as `500ms`, `2s` or a number of milliseconds.
+pub fn parse_duration(text: &str) -> Option<Duration> {
+    if let Some(ms) = text.strip_suffix("ms") {
+        return ms.parse().ok().map(Duration::from_millis);
+    }
+    if let Some(s) = text.strip_suffix('s') {
+        return s.parse().ok().map(Duration::from_secs);
+    }
+    text.parse().ok().map(Duration::from_millis)
+}
+
+impl Command {
+    /// The command of `args` (without the program name), or the usage error.
+    pub fn parse(args: &[String]) -> Result<Command, String> {
+        let mut request = DEFAULT_REQUEST.to_string();
+        let mut response = DEFAULT_RESPONSE.to_string();
+        let mut timeout = DEFAULT_TIMEOUT;
+        let mut interval = Duration::from_secs(1);
+        let mut count = None;
+        let mut words = Vec::new();
+        let mut it = args.iter();
+        while let Some(arg) = it.next() {
+            let mut value = |what: &str| {
+                it.next()
+                    .cloned()
+                    .ok_or_else(|| format!("{arg} needs {what}"))
+            };
+            match arg.as_str() {
+                "--request" => request = value("a path")?,
+                "--response" => response = value("a path")?,
+                "--timeout" => {
+                    timeout = parse_duration(&value("a time")?)
+                        .ok_or_else(|| format!("{arg}: not a time"))?
+                }
+                "--interval" => {
+                    interval = parse_duration(&value("a time")?)
+                        .filter(|d| !d.is_zero())
+                        .ok_or_else(|| format!("{arg}: not a time above 0"))?
+                }
+                "--count" => {
+                    count = Some(
+                        value("a number")?
+                            .parse()
+                            .map_err(|_| format!("{arg}: not a number"))?,
+                    )
+                }
+                flag if flag.starts_with("--") => return Err(format!("unknown option {flag}")),
+                word => words.push(word.to_string()),
+            }
+        }
+        let (verb, rest) = words.split_first().ok_or("no command")?;
+        let one = |what: &str| match rest {
+            [one] => Ok(one.clone()),
+            _ => Err(format!("{verb} takes one {what}")),
+        };
+        let some = |rest: &[String]| {
+            if rest.is_empty() {
+                Err(format!("{verb} needs at least one name"))
+            } else {
+                Ok(rest.to_vec())
+            }
+        };
+        let action = match verb.as_str() {
+            "list" if rest.is_empty() => Action::List,
+            "stats" if rest.is_empty() => Action::Stats,
+            "read" => Action::Read(some(rest)?),
+            "watch" => Action::Watch {
+                names: some(rest)?,
+                interval,
+                count,
+            },
+            "force" => {
+                let pair = one("NAME=VALUE")?;
+                let (name, value) = pair
+                    .split_once('=')
+                    .filter(|(n, v)| !n.is_empty() && !v.is_empty())
+                    .ok_or("force takes NAME=VALUE")?;
+                Action::Force {
+                    name: name.into(),
+                    value: value.into(),
+                }
+            }
+            "unforce" => Action::Unforce(one("NAME")?),
+            "download" => Action::Download(one("FILE")?),
+            "list" | "stats" => return Err(format!("{verb} takes no arguments")),
+            other => return Err(format!("unknown command {other}")),
+        };
+        Ok(Command {
+            request,
+            response,
+            timeout,
+            action,
+        })
+    }
+}
+
+/// `text` as a value of the kind `like` is (the variable's current value): `TRUE`/`FALSE`
+/// (or 1/0), integers, reals, `T#..ms`/`T#..s`/`T#..us`/`T#..ns`; `None` if it is not one.
+/// STRINGs cannot be forced.
+pub fn parse_value<'t>(text: &'t str, like: &Value) -> Option<Value<'t>> {
+    Some(match like {
+        Value::Bool(_) => match text.to_ascii_uppercase().as_str() {
+            "TRUE" | "1" => Value::Bool(true),
+            "FALSE" | "0" => Value::Bool(false),
+            _ => return None,
+        },
+        Value::Int(_) => Value::Int(text.parse().ok()?),
+        Value::UInt(_) => Value::UInt(text.parse().ok()?),
+        Value::Real(_) => Value::Real(text.parse().ok()?),
+        Value::LReal(_) => Value::LReal(text.parse().ok()?),
+        Value::Time(_) => {
+            let t = text
+                .strip_prefix("T#")
+                .or_else(|| text.strip_prefix("t#"))
+                .unwrap_or(text);
+            let (number, unit) = [
+                ("ms", 1_000_000),
+                ("us", 1_000),
+                ("ns", 1),
+                ("s", 1_000_000_000),
+            ]
+            .into_iter()
+            .find_map(|(suffix, unit)| t.strip_suffix(suffix).map(|n| (n, unit)))?;
+            Value::Time(number.parse::<i64>().ok()?.checked_mul(unit)?)
+        }
+        Value::String(_) => return None,
+    })
+}
+
+/// Why a PLC refuses, for people.
+pub fn reason(status: Status) -> &'static str {
+    match status {
+        Status::Ok => "done",
+        Status::Malformed => "the PLC could not decode the request",
+        Status::UnknownName => "no variable of that name",
+        Status::TypeMismatch => "the value does not fit the variable's type",
+        Status::Constant => "the variable is CONSTANT",
+        Status::Forbidden => "the PLC's configuration, plc.online.access, does not allow it",
+        Status::TooManyForces => "every force slot is in use",
+        Status::NoSuchTask => "no task of that number",
+        Status::Unsupported => "not supported for this variable",
+        Status::BadOffset => "a download chunk out of order",
+        Status::TooLarge => "the program is larger than the PLC's download buffer",
+        Status::ChecksumMismatch => "the program arrived damaged (CRC-32)",
+        Status::Refused => "the PLC's checks refused the program; its log says why",
+        Status::NoDownload => "no download in progress",
+        Status::Incomplete => "not every byte of the program arrived",
+    }
+}
+
+/// A failed command: its message (for stderr) and the exit status.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Failure {
+    pub message: String,
+    pub status: i32,
+}
+
+impl Failure {
+    fn refused(what: &str, status: Status) -> Self {
+        Failure {
+            message: format!("{what}: {} ({})", status.name(), reason(status)),
+            status: 1,
+        }
+    }
+
+    fn device(message: String) -> Self {
+        Failure { message, status: 3 }
+    }
+}
+
+/// The two message devices: one message a call each way.
+pub trait Transport {
+    /// Sends one request message.
+    fn send(&mut self, message: &[u8]) -> Result<(), String>;
+    /// One response message, if one is there now (never waits).
+    fn try_receive(&mut self, buf: &mut [u8; MAX_MESSAGE]) -> Result<Option<usize>, String>;
+    /// Waits a little before the next [`Transport::try_receive`] (or before the next
+    /// round of `watch`).
+    fn pause(&mut self, time: Duration);
+}
+
+/// Requests and their answers, matched by sequence number (answers to earlier requests,
+/// which timed out, are dropped).
+pub struct Link<T: Transport> {
+    pub transport: T,
+    pub timeout: Duration,
+    seq: u8,
+}
+
+/// How often a missing answer is looked for.
+const POLL: Duration = Duration::from_millis(2);
+
+impl<T: Transport> Link<T> {
+    pub fn new(transport: T, timeout: Duration) -> Self {
+        Link {
+            transport,
+            timeout,
+            seq: 0,
+        }
+    }
+
+    /// Sends `r` and returns the answer's status and its whole message.
+    pub fn ask(&mut self, r: &Request) -> Result<(Status, Vec<u8>), Failure> {
+        self.seq = self.seq.wrapping_add(1);
+        let mut message = [0u8; MAX_MESSAGE];
+        let n = encode_request(r, self.seq, &mut message).ok_or_else(|| {
+            Failure::device(format!("{}: too long for one message", r.op().name()))
+        })?;
+        let mut answer = [0u8; MAX_MESSAGE];
+        // Answers still queued from an earlier run are not this one's.
+        while self
+            .transport
+            .try_receive(&mut answer)
+            .map_err(Failure::device)?
+            .is_some()
+        {}
+        self.transport
+            .send(&message[..n])
+            .map_err(Failure::device)?;
+        let mut waited = Duration::ZERO;
+        loop {
+            if let Some(len) = self
+                .transport
+                .try_receive(&mut answer)
+                .map_err(Failure::device)?
+                && let Some((_, seq, status, _)) = decode_response(&answer[..len])
+                && seq == self.seq
+            {
+                return Ok((status, answer[..len].to_vec()));
+            }
+            if waited >= self.timeout {
+                return Err(Failure::device(format!(
+                    "{}: no answer from the PLC within {} ms",
+                    r.op().name(),
+                    self.timeout.as_millis()
+                )));
+            }
+            self.transport.pause(POLL);
+            waited += POLL;
+        }
+    }
+
+    /// [`Link::ask`], a refusal as a [`Failure`] naming `what`; the answer's result.
+    fn ok(&mut self, r: &Request, what: &str) -> Result<Vec<u8>, Failure> {
+        match self.ask(r)? {
+            (Status::Ok, message) => Ok(message),
+            (status, _) => Err(Failure::refused(what, status)),
+        }
+    }
+
+    /// The value of `name` (owned bytes: a STRING's borrow ends with its message).
+    fn read(&mut self, name: &str) -> Result<(Vec<u8>, String), Failure> {
+        let message = self.ok(&Request::Read { name }, &format!("READ {name}"))?;
+        let value = result(&message)
+            .and_then(|mut r| r.value().map(|v| v.to_string()))
+            .ok_or_else(|| Failure::device(format!("READ {name}: a malformed answer")))?;
+        Ok((message, value))
+    }
+
+    /// Runs `action`, writing its lines to `out`.
+    pub fn run(&mut self, action: &Action, out: &mut dyn FnMut(&str)) -> Result<(), Failure> {
+        match action {
+            Action::List => self.list(out),
+            Action::Read(names) => {
+                for name in names {
+                    let (_, value) = self.read(name)?;
+                    out(&format!("{name} = {value}"));
+                }
+                Ok(())
+            }
+            Action::Watch {
+                names,
+                interval,
+                count,
+            } => {
+                let mut round = 0u64;
+                let mut at = Duration::ZERO;
+                while count.is_none_or(|c| round < c) {
+                    let mut line = format!("t={}", at.as_millis());
+                    for name in names {
+                        let (_, value) = self.read(name)?;
+                        let _ = write!(line, " {name}={value}");
+                    }
+                    out(&line);
+                    round += 1;
+                    if count.is_none_or(|c| round < c) {
+                        self.transport.pause(*interval);
+                        at += *interval;
+                    }
+                }
+                Ok(())
+            }
+            Action::Force { name, value } => {
+                let (current, _) = self.read(name)?;
+                let like = result(&current)
+                    .and_then(|mut r| r.value())
+                    .ok_or_else(|| Failure::device(format!("READ {name}: a malformed answer")))?;
+                let parsed = parse_value(value, &like).ok_or_else(|| Failure {
+                    message: format!("FORCE {name}: {value} is no value of its type"),
+                    status: 2,
+                })?;
+                let force = Request::Force {
+                    name,
+                    value: parsed,
+                };
+                self.ok(&force, &format!("FORCE {name}"))?;
+                out(&format!("forced {name} = {parsed}"));
+                Ok(())
+            }
+            Action::Unforce(name) => {
+                self.ok(&Request::Unforce { name }, &format!("UNFORCE {name}"))?;
+                out(&format!("unforced {name}"));
+                Ok(())
+            }
+            Action::Stats => self.stats(out),
+            Action::Download(_) => Err(Failure {
+                message: "download: the file is read by the program".into(),
+                status: 2,
+            }),
+        }
+    }
+
+    fn list(&mut self, out: &mut dyn FnMut(&str)) -> Result<(), Failure> {
+        let mut from = 0u16;
+        loop {
+            let message = self.ok(&Request::List { from }, "LIST")?;
+            let malformed = || Failure::device("LIST: a malformed answer".into());
+            let mut r = result(&message).ok_or_else(malformed)?;
+            let total = r.u16().ok_or_else(malformed)?;
+            let count = r.u8().ok_or_else(malformed)?;
+            for _ in 0..count {
+                let ty = r.u8().ok_or_else(malformed)?;
+                let name = r.short_str().ok_or_else(malformed)?;
+                let ty = VarType::from_code(ty).map_or("?", |t| t.name());
+                out(&format!("{name} {ty}"));
+            }
+            from = from.saturating_add(u16::from(count));
+            if count == 0 || from >= total {
+                return Ok(());
+            }
+        }
+    }
+
+    fn stats(&mut self, out: &mut dyn FnMut(&str)) -> Result<(), Failure> {
+        for task in 0..=u8::MAX {
+            let message = match self.ask(&Request::Stats { task })? {
+                (Status::Ok, message) => message,
+                (Status::NoSuchTask, _) if task > 0 => return Ok(()),
+                (status, _) => return Err(Failure::refused("STATS", status)),
+            };
+            let s = result(&message)
+                .and_then(|mut r| read_stats(&mut r))
+                .ok_or_else(|| Failure::device("STATS: a malformed answer".into()))?;
+            let [
+                count,
+                last,
+                min,
+                mean,
+                max,
+                last_jitter,
+                max_jitter,
+                overruns,
+                faults,
+            ] = s.figures;
+            out(&format!(
+                "task {} stopped={} cycles={count} last_us={} min_us={} mean_us={} max_us={} last_jitter_us={} max_jitter_us={} overruns={overruns} faults={faults}",
+                s.name,
+                s.stopped,
+                last / 1000,
+                min / 1000,
+                mean / 1000,
+                max / 1000,
+                last_jitter / 1000,
+                max_jitter / 1000
+            ));
+        }
+        Ok(())
+    }
+
+    /// Downloads `image` (a `.plcb` file's bytes) named `file`: BEGIN, the chunks,
+    /// COMMIT.
+    pub fn download(
+        &mut self,
+        file: &str,
+        image: &[u8],
+        out: &mut dyn FnMut(&str),
+    ) -> Result<(), Failure> {
+        let size = u32::try_from(image.len()).map_err(|_| Failure {
+            message: format!("{file}: too large"),
+            status: 2,
+        })?;
+        let begin = Request::DownloadBegin {
+            size,
+            crc32: crc32(image),
+        };
+        self.ok(&begin, "DOWNLOAD_BEGIN")?;
+        for (i, bytes) in image.chunks(MAX_CHUNK).enumerate() {
+            let offset = (i * MAX_CHUNK) as u32;
+            self.ok(&Request::DownloadChunk { offset, bytes }, "DOWNLOAD_CHUNK")?;
+        }
+        let message = self.ok(&Request::DownloadCommit, "DOWNLOAD_COMMIT")?;
+        let release = result(&message)
+            .and_then(|mut r| r.u64())
+            .ok_or_else(|| Failure::device("DOWNLOAD_COMMIT: a malformed answer".into()))?;
+        out(&format!(
+            "downloaded {file}: {} bytes, running from release {release}",
+            image.len()
+        ));
+        Ok(())
+    }
+}
+
+/// The result part of an OK answer.
+fn result(message: &[u8]) -> Option<Reader<'_>> {
+    decode_response(message).map(|(_, _, _, r)| r)
+}
+
+#[cfg(test)]
+mod tests;

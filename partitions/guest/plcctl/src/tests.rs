@@ -1,0 +1,289 @@
+//! The commands against a model PLC answering through the online protocol's own encoder.
+
+use super::*;
+use plc_online::{Access, TaskStats, begin_response, decode_request, put_stats};
+use std::collections::VecDeque;
+
+fn args(text: &str) -> Vec<String> {
+    text.split_whitespace().map(String::from).collect()
+}
+
+/// A PLC with `valve` (LREAL), `alarm` (BOOL) and `tank.count` (DINT), one task, and an
+/// access level; answers go into a queue `try_receive` takes from.
+struct Plc {
+    access: Access,
+    valve: f64,
+    forced: Option<f64>,
+    answers: VecDeque<Vec<u8>>,
+    paused: Duration,
+    requests: usize,
+    image: Vec<u8>,
+}
+
+impl Plc {
+    fn new(access: Access) -> Self {
+        Plc {
+            access,
+            valve: 0.5,
+            forced: None,
+            answers: VecDeque::new(),
+            paused: Duration::ZERO,
+            requests: 0,
+            image: Vec::new(),
+        }
+    }
+}
+
+const VARS: [(&str, VarType); 3] = [
+    ("valve", VarType::LReal),
+    ("alarm", VarType::Bool),
+    ("tank.count", VarType::DInt),
+];
+
+impl Transport for Plc {
+    fn send(&mut self, message: &[u8]) -> Result<(), String> {
+        self.requests += 1;
+        let mut buf = [0u8; MAX_MESSAGE];
+        let (seq, request) = decode_request(message).map_err(|e| format!("{e:?}"))?;
+        let op = request.op();
+        if op.needs().code() > self.access.code() {
+            let w = begin_response(op.code(), seq, Status::Forbidden, &mut buf);
+            let n = w.len();
+            self.answers.push_back(buf[..n].to_vec());
+            return Ok(());
+        }
+        let mut w = begin_response(op.code(), seq, Status::Ok, &mut buf);
+        let value = |name: &str, valve: f64| match name {
+            "valve" => Some(Value::LReal(valve)),
+            "alarm" => Some(Value::Bool(false)),
+            "tank.count" => Some(Value::Int(7)),
+            _ => None,
+        };
+        let mut status = Status::Ok;
+        match request {
+            Request::List { from } => {
+                // Two a message, to page.
+                let rest = &VARS[(from as usize).min(3)..];
+                let page = &rest[..rest.len().min(2)];
+                w.put(&3u16.to_le_bytes()).unwrap();
+                w.put(&[page.len() as u8]).unwrap();
+                for (name, ty) in page {
+                    w.put(&[ty.code(), name.len() as u8]).unwrap();
+                    w.put(name.as_bytes()).unwrap();
+                }
+            }
+            Request::Read { name } => match value(name, self.forced.unwrap_or(self.valve)) {
+                Some(v) => w.value(&v).unwrap(),
+                None => status = Status::UnknownName,
+            },
+            Request::Force { name, value: v } => match (name, v) {
+                ("valve", Value::LReal(x)) => self.forced = Some(x),
+                ("valve", _) => status = Status::TypeMismatch,
+                _ => status = Status::UnknownName,
+            },
+            Request::Unforce { .. } => self.forced = None,
+            Request::Stats { task: 0 } => put_stats(
+                &mut w,
+                &TaskStats {
+                    name: "CYCLE.tank",
+                    stopped: false,
+                    figures: [10, 12_000, 9_000, 11_000, 86_000, 1_000, 99_000, 0, 0],
+                },
+            )
+            .unwrap(),
+            Request::Stats { .. } => status = Status::NoSuchTask,
+            Request::DownloadBegin { .. } => self.image.clear(),
+            Request::DownloadChunk { bytes, .. } => self.image.extend_from_slice(bytes),
+            Request::DownloadCommit => w.put(&42u64.to_le_bytes()).unwrap(),
+            _ => status = Status::Unsupported,
+        }
+        let n = if status == Status::Ok {
+            w.len()
+        } else {
+            begin_response(op.code(), seq, status, &mut buf).len()
+        };
+        self.answers.push_back(buf[..n].to_vec());
+        Ok(())
+    }
+
+    fn try_receive(&mut self, buf: &mut [u8; MAX_MESSAGE]) -> Result<Option<usize>, String> {
+        Ok(self.answers.pop_front().map(|a| {
+            buf[..a.len()].copy_from_slice(&a);
+            a.len()
+        }))
+    }
+
+    fn pause(&mut self, time: Duration) {
+        self.paused += time;
+    }
+}
+
+fn run(plc: Plc, command: &str) -> (Result<(), Failure>, Vec<String>, Plc) {
+    let c = Command::parse(&args(command)).unwrap();
+    let mut link = Link::new(plc, c.timeout);
+    let mut lines = Vec::new();
+    let r = link.run(&c.action, &mut |l| lines.push(l.to_string()));
+    (r, lines, link.transport)
+}
+
+#[test]
+fn the_command_line() {
+    let c = Command::parse(&args("--request /dev/arinc/cmd read a b --timeout 500ms")).unwrap();
+    assert_eq!(c.request, "/dev/arinc/cmd");
+    assert_eq!(c.response, DEFAULT_RESPONSE);
+    assert_eq!(c.timeout, Duration::from_millis(500));
+    assert_eq!(c.action, Action::Read(vec!["a".into(), "b".into()]));
+    let c = Command::parse(&args("watch level --interval 2s --count 3")).unwrap();
+    assert_eq!(
+        c.action,
+        Action::Watch {
+            names: vec!["level".into()],
+            interval: Duration::from_secs(2),
+            count: Some(3)
+        }
+    );
+    for bad in [
+        "",
+        "read",
+        "list x",
+        "force valve",
+        "force =1",
+        "unforce a b",
+        "frobnicate",
+        "--bogus list",
+        "read a --timeout",
+        "watch a --interval 0",
+    ] {
+        assert!(Command::parse(&args(bad)).is_err(), "{bad}");
+    }
+}
+
+#[test]
+fn values_are_parsed_as_the_variable_is_typed() {
+    assert_eq!(
+        parse_value("true", &Value::Bool(false)),
+        Some(Value::Bool(true))
+    );
+    assert_eq!(
+        parse_value("0", &Value::Bool(true)),
+        Some(Value::Bool(false))
+    );
+    assert_eq!(parse_value("-3", &Value::Int(0)), Some(Value::Int(-3)));
+    assert_eq!(
+        parse_value("0.25", &Value::LReal(0.0)),
+        Some(Value::LReal(0.25))
+    );
+    assert_eq!(
+        parse_value("T#20ms", &Value::Time(0)),
+        Some(Value::Time(20_000_000))
+    );
+    assert_eq!(
+        parse_value("2s", &Value::Time(0)),
+        Some(Value::Time(2_000_000_000))
+    );
+    assert_eq!(parse_value("x", &Value::Int(0)), None);
+    assert_eq!(parse_value("-1", &Value::UInt(0)), None);
+    assert_eq!(parse_value("'a'", &Value::String(b"")), None);
+}
+
+#[test]
+fn list_read_watch_force_unforce_and_stats() {
+    let (r, lines, _) = run(Plc::new(Access::Force), "list");
+    assert_eq!(r, Ok(()));
+    assert_eq!(lines, ["valve LREAL", "alarm BOOL", "tank.count DINT"]);
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "read valve alarm tank.count");
+    assert_eq!(r, Ok(()));
+    assert_eq!(lines, ["valve = 0.5", "alarm = FALSE", "tank.count = 7"]);
+    let (r, lines, plc) = run(
+        Plc::new(Access::Monitor),
+        "watch valve --interval 100 --count 3",
+    );
+    assert_eq!(r, Ok(()));
+    assert_eq!(
+        lines,
+        ["t=0 valve=0.5", "t=100 valve=0.5", "t=200 valve=0.5"]
+    );
+    assert_eq!(plc.paused, Duration::from_millis(200));
+    let (r, lines, plc) = run(Plc::new(Access::Force), "force valve=0.25");
+    assert_eq!(r, Ok(()));
+    assert_eq!(lines, ["forced valve = 0.25"]);
+    assert_eq!(plc.forced, Some(0.25));
+    let (r, lines, _) = run(Plc::new(Access::Force), "unforce valve");
+    assert_eq!((r, lines), (Ok(()), vec!["unforced valve".to_string()]));
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "stats");
+    assert_eq!(r, Ok(()));
+    assert_eq!(
+        lines,
+        [
+            "task CYCLE.tank stopped=false cycles=10 last_us=12 min_us=9 mean_us=11 max_us=86 last_jitter_us=1 max_jitter_us=99 overruns=0 faults=0"
+        ]
+    );
+}
+
+#[test]
+fn refusals_say_why() {
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "force valve=0.25");
+    assert!(lines.is_empty());
+    let f = r.unwrap_err();
+    assert_eq!(f.status, 1);
+    assert_eq!(
+        f.message,
+        "FORCE valve: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)"
+    );
+    let (r, _, _) = run(Plc::new(Access::Monitor), "read nothing");
+    assert_eq!(
+        r.unwrap_err().message,
+        "READ nothing: UNKNOWN_NAME (no variable of that name)"
+    );
+    let (r, _, _) = run(Plc::new(Access::Force), "force valve=open");
+    assert_eq!(r.unwrap_err().status, 2);
+    let c = Command::parse(&args("download x.plcb")).unwrap();
+    let mut link = Link::new(Plc::new(Access::Force), c.timeout);
+    let r = link.download("x.plcb", &[1; 600], &mut |_| {});
+    assert_eq!(
+        r.unwrap_err().message.split(':').next(),
+        Some("DOWNLOAD_BEGIN")
+    );
+}
+
+#[test]
+fn a_download_goes_in_chunks_and_reports_the_release() {
+    let mut link = Link::new(Plc::new(Access::Download), DEFAULT_TIMEOUT);
+    let image: Vec<u8> = (0..600u32).map(|i| i as u8).collect();
+    let mut lines = Vec::new();
+    let r = link.download("new.plcb", &image, &mut |l| lines.push(l.to_string()));
+    assert_eq!(r, Ok(()));
+    assert_eq!(
+        lines,
+        ["downloaded new.plcb: 600 bytes, running from release 42"]
+    );
+    assert_eq!(link.transport.image, image);
+    // BEGIN, three chunks, COMMIT.
+    assert_eq!(link.transport.requests, 5);
+}
+
+/// A PLC that never answers; and stale answers are dropped.
+#[test]
+fn no_answer_times_out_and_stale_answers_are_dropped() {
+    struct Silent(Duration);
+    impl Transport for Silent {
+        fn send(&mut self, _: &[u8]) -> Result<(), String> {
+            Ok(())
+        }
+        fn try_receive(&mut self, _: &mut [u8; MAX_MESSAGE]) -> Result<Option<usize>, String> {
+            Ok(None)
+        }
+        fn pause(&mut self, time: Duration) {
+            self.0 += time;
+        }
+    }
+    let mut link = Link::new(Silent(Duration::ZERO), Duration::from_millis(100));
+    let f = link.run(&Action::Stats, &mut |_| {}).unwrap_err();
+    assert_eq!(f.status, 3);
+    assert!(f.message.contains("no answer"), "{}", f.message);
+    assert!(link.transport.0 >= Duration::from_millis(100));
+    let mut plc = Plc::new(Access::Monitor);
+    plc.answers.push_back(vec![2, 9, 0]);
+    let (r, lines, _) = run(plc, "read valve");
+    assert_eq!((r, lines), (Ok(()), vec!["valve = 0.5".to_string()]));
+}
