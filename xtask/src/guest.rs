@@ -51,28 +51,36 @@ fn applet_paths(path: &Path) -> Vec<String> {
     paths
 }
 
-const S_IFREG: u32 = 0o100000;
-const S_IFDIR: u32 = 0o040000;
+pub const S_IFREG: u32 = 0o100000;
+pub const S_IFDIR: u32 = 0o040000;
 const S_IFLNK: u32 = 0o120000;
+
+/// An initramfs entry: its path (no leading `/`), mode (file type and permission bits) and
+/// contents (a symbolic link's target).
+pub type Entry = (String, u32, Vec<u8>);
+
+/// Debian's static busybox (installed if missing, refused if dynamic) and the paths of its
+/// applet links.
+pub fn busybox() -> Result<(Vec<u8>, Vec<String>)> {
+    let path = crate::tools::ensure_busybox()?;
+    let bytes = std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    check_static(&path, &bytes)?;
+    Ok((bytes, applet_paths(&path)))
+}
 
 /// `(partition name, initramfs)` for every guest partition of `system`.
 pub fn initramfs_images(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     let mut out = Vec::new();
-    let mut busybox = None;
-    let mut applets = Vec::new();
+    let mut busybox_and_applets = None;
     for p in &system.partitions {
         let Some(guest) = &p.guest else {
             continue;
         };
-        if busybox.is_none() {
-            let path = crate::tools::ensure_busybox()?;
-            let bytes =
-                std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
-            check_static(&path, &bytes)?;
-            busybox = Some(bytes);
-            applets = applet_paths(&path);
+        if busybox_and_applets.is_none() {
+            busybox_and_applets = Some(busybox()?);
         }
-        let archive = initramfs(busybox.as_deref().unwrap_or_default(), &applets, guest)
+        let (busybox, applets) = busybox_and_applets.as_ref().expect("just read");
+        let archive = initramfs(busybox, applets, guest)
             .with_context(|| format!("partition {}: cannot write its initramfs", p.name))?;
         out.push((p.name.clone(), archive));
     }
@@ -111,13 +119,18 @@ fn nul_terminated(strings: &[String]) -> Vec<u8> {
 }
 
 /// `s` quoted for the shell.
-fn quote(s: &str) -> String {
+pub fn quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', "'\\''"))
 }
 
 /// The initramfs of a guest whose first process is `guest`, with `busybox` as
 /// `/bin/busybox` and a link to it at each of `applets` (`bin/ls`, `usr/bin/awk`).
 pub fn initramfs(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Vec<u8>> {
+    archive(entries(busybox, applets, guest)?)
+}
+
+/// The entries of [`initramfs`], in archive order.
+pub fn entries(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Vec<Entry>> {
     let dir = |name: &str| (name.to_string(), S_IFDIR | 0o755, Vec::new());
     let file = |name: &str, mode: u32, data: Vec<u8>| (name.to_string(), S_IFREG | mode, data);
     let mut entries = vec![
@@ -193,6 +206,12 @@ pub fn initramfs(busybox: &[u8], applets: &[String], guest: &Guest) -> Result<Ve
         }
         entries.push((name.to_string(), S_IFREG | mode, data));
     }
+    Ok(entries)
+}
+
+/// `entries` as a cpio "newc" archive: each belongs to root, has mtime 0 and its position as
+/// inode number.
+pub fn archive(entries: Vec<Entry>) -> Result<Vec<u8>> {
     let inputs = entries
         .into_iter()
         .enumerate()
@@ -282,7 +301,7 @@ mod tests {
     fn programs_are_built_into_bin() {
         let mut g = hello();
         g.programs = vec!["linux-tests".into()];
-        let bytes = initramfs(b"ELF", &g).unwrap();
+        let bytes = initramfs(b"ELF", &applets(), &g).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         let program = fs.get("/bin/linux-tests").unwrap();
         assert!(program.data.starts_with(b"\x7fELF"));
@@ -296,11 +315,10 @@ mod tests {
         let fs = Archive::new(&bytes).unwrap();
         let files = guest::vfs::Fs::new(&fs, 1 << 20).unwrap();
         for applet in applets() {
-            let (data, path) =
-                guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
-                    .unwrap();
-            assert_eq!(path.as_str(), "bin/busybox", "{applet}");
-            assert_eq!(data, b"\x7fELF-busybox");
+            let found = guest::exec::find(&files, 1, guest::vfs::Node::Inode(0), applet.as_bytes())
+                .unwrap();
+            assert_eq!(found.exe.as_str(), "bin/busybox", "{applet}");
+            assert_eq!(found.bytes, b"\x7fELF-busybox");
         }
         assert_eq!(fs.get("/bin/busybox").unwrap().mode, S_IFREG | 0o755);
         assert!(fs.get("/usr/bin").unwrap().is_dir());
@@ -326,7 +344,7 @@ mod tests {
         );
         let mut g = hello();
         g.console_com2 = true;
-        let with_console = initramfs(b"\x7fELF-busybox", &g).unwrap();
+        let with_console = initramfs(b"\x7fELF-busybox", &applets(), &g).unwrap();
         let console = Archive::new(&with_console).unwrap();
         assert_eq!(console.get(guest::CONSOLE_PATH).unwrap().data, b"com2\n");
         // Deterministic.

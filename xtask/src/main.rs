@@ -58,10 +58,15 @@ enum Cmd {
         #[arg(long, value_name = "FRAMES", default_value_t = SOAK_FRAMES, requires = "soak")]
         frames: u64,
         /// Run only the guest benchmark (tests/configs/bench_guest.toml: linux-bench in a
-        /// guest partition, and on the host as `host_*` for comparison; also part of the
-        /// full bench); writes target/bench/guest.json.
+        /// guest partition, on the host as `host_*`, and natively on Debian's stock kernel
+        /// in the same QEMU as `native_*`, with `guest_ratio_*` = guest / native; also part
+        /// of the full bench); writes target/bench/guest.json.
         #[arg(long, conflicts_with = "soak")]
         guest: bool,
+        /// Run only the native leg of the guest benchmark (linux-bench on Debian's stock
+        /// kernel, `native_*`); writes target/bench/native.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest"])]
+        native: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -103,6 +108,7 @@ fn main() -> ExitCode {
             soak: true, frames, ..
         } => soak(frames),
         Cmd::Bench { guest: true, .. } => guest_bench(),
+        Cmd::Bench { native: true, .. } => native_bench(),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -434,10 +440,25 @@ fn guest_bench() -> Result<bool> {
     Ok(true)
 }
 
+/// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
+fn native_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
+    let metrics =
+        xtask::native::metrics(&qemu, &config, &xtask::target_dir().join("bench/native"))?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "native.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 /// The guest benchmark: `linux-bench` (tests/linux/bench.c) on the host Linux (`host_*`,
 /// the same loops, for comparison), then in the guest partition of
 /// tests/configs/bench_guest.toml (`guest_*`, on real time: the cycles are what the
-/// guest's calls cost under QEMU).
+/// guest's calls cost under QEMU), then natively on Debian's stock kernel in the same QEMU
+/// (`native_*`, [`xtask::native`]), and `guest_ratio_*` (guest / native).
 fn guest_metrics(
     qemu: &tools::Qemu,
     system: &artifacts::Artifacts,
@@ -500,6 +521,8 @@ fn guest_metrics(
         eprintln!("xtask: {note}");
     }
     metrics.extend(guest);
+    metrics.extend(xtask::native::metrics(qemu, &config, &dir.join("native"))?);
+    metrics.extend(xtask::native::ratios(&metrics));
     Ok(metrics)
 }
 
