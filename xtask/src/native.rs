@@ -130,6 +130,8 @@ pub fn guest_of(config: &Path) -> Result<config::system::Guest> {
 /// with status 0.
 pub fn metrics(qemu: &crate::tools::Qemu, config: &Path, dir: &Path) -> Result<Vec<Metric>> {
     let kernel = ensure_kernel()?;
+    // QEMU only says it cannot load it; some distributions keep /boot root-only.
+    std::fs::File::open(&kernel).with_context(|| format!("cannot read {}", kernel.display()))?;
     let guest = guest_of(config)?;
     let (busybox, applets) = crate::guest::busybox()?;
     std::fs::create_dir_all(dir)?;

@@ -1,6 +1,7 @@
-//! Boots an ESP folder under QEMU (TCG) and captures the serial log (COM1), with COM2 (the
-//! guest's console) unconnected, fed from a script ([`Com2::Scripted`]: scenarios) or on
-//! this terminal ([`Com2::Terminal`]: `cargo xtask run`).
+//! Boots an ESP folder (or, for the native reference of the guest benchmark, a Linux
+//! kernel directly: [`run_linux`]) under QEMU (TCG) and captures the serial log (COM1),
+//! with COM2 (the guest's console) unconnected, fed from a script ([`Com2::Scripted`]:
+//! scenarios) or on this terminal ([`Com2::Terminal`]: `cargo xtask run`).
 //!
 //! Exit convention (kernel `qemu::exit`): 0x10 written to isa-debug-exit at port 0xf4 makes
 //! QEMU exit with 33 (success), 0x11 with 35 (failure). Anything else, or a timeout, is a
