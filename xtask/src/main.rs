@@ -107,8 +107,16 @@ fn main() -> ExitCode {
         Cmd::Bench {
             soak: true, frames, ..
         } => soak(frames),
-        Cmd::Bench { guest: true, .. } => guest_bench(),
-        Cmd::Bench { native: true, .. } => native_bench(),
+        Cmd::Bench {
+            guest: true,
+            deterministic_time,
+            ..
+        } => guest_bench(deterministic_time),
+        Cmd::Bench {
+            native: true,
+            deterministic_time,
+            ..
+        } => native_bench(deterministic_time),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -428,10 +436,15 @@ fn plc_metrics(
 }
 
 /// `cargo xtask bench --guest`: only the guest benchmark; writes `target/bench/guest.json`.
-fn guest_bench() -> Result<bool> {
+fn guest_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
-    let metrics = guest_metrics(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    let metrics = guest_metrics(
+        &qemu,
+        &system,
+        &xtask::target_dir().join("bench"),
+        deterministic_time,
+    )?;
     for m in &metrics {
         println!("{}", xtask::bench::format_line(m));
     }
@@ -441,11 +454,15 @@ fn guest_bench() -> Result<bool> {
 }
 
 /// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
-fn native_bench() -> Result<bool> {
+fn native_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
-    let metrics =
-        xtask::native::metrics(&qemu, &config, &xtask::target_dir().join("bench/native"))?;
+    let metrics = xtask::native::metrics(
+        &qemu,
+        &config,
+        &xtask::target_dir().join("bench/native"),
+        deterministic_time,
+    )?;
     for m in &metrics {
         println!("{}", xtask::bench::format_line(m));
     }
@@ -457,12 +474,15 @@ fn native_bench() -> Result<bool> {
 /// The guest benchmark: `linux-bench` (tests/linux/bench.c) on the host Linux (`host_*`,
 /// the same loops, for comparison), then in the guest partition of
 /// tests/configs/bench_guest.toml (`guest_*`, on real time: the cycles are what the
-/// guest's calls cost under QEMU), then natively on Debian's stock kernel in the same QEMU
-/// (`native_*`, [`xtask::native`]), and `guest_ratio_*` (guest / native).
+/// guest's calls cost under QEMU, host load included), then natively on Debian's stock
+/// kernel in the same QEMU (`native_*`, [`xtask::native`]), and `guest_ratio_*` (guest /
+/// native). With `deterministic_time` both QEMU legs run on virtual time: their cycles
+/// then follow the instructions executed, the same from run to run.
 fn guest_metrics(
     qemu: &tools::Qemu,
     system: &artifacts::Artifacts,
     dir: &std::path::Path,
+    deterministic_time: bool,
 ) -> Result<Vec<xtask::bench::Metric>> {
     let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
     let described = xtask::check_config::load(&config)?;
@@ -497,7 +517,7 @@ fn guest_metrics(
         Some(&config),
         &dir.join("guest"),
         "guest benchmark system",
-        false,
+        deterministic_time,
         Duration::from_secs(3600),
     )?;
     let errors: Vec<&String> = outcome
@@ -521,7 +541,12 @@ fn guest_metrics(
         eprintln!("xtask: {note}");
     }
     metrics.extend(guest);
-    metrics.extend(xtask::native::metrics(qemu, &config, &dir.join("native"))?);
+    metrics.extend(xtask::native::metrics(
+        qemu,
+        &config,
+        &dir.join("native"),
+        deterministic_time,
+    )?);
     metrics.extend(xtask::native::ratios(&metrics));
     Ok(metrics)
 }
@@ -629,7 +654,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
-    metrics.extend(guest_metrics(&qemu, &system, &dir)?);
+    metrics.extend(guest_metrics(&qemu, &system, &dir, deterministic_time)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {

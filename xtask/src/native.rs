@@ -12,8 +12,9 @@
 //!   isa-debug-exit device as the Warden systems do (0x10: exit 33, success; 0x11: exit
 //!   35), with `poweroff -f` behind it.
 //! - QEMU runs the same machine as every Warden run ([`crate::qemu::MACHINE`]: q35, the
-//!   `qemu64` CPU model, 512 MiB, TCG, real time) under the same OVMF firmware, which boots
-//!   the kernel from `-kernel`/`-initrd` through its EFI stub.
+//!   `qemu64` CPU model, 512 MiB, TCG; real time, or virtual time when the guest leg runs on
+//!   it) under the same OVMF firmware, which boots the kernel from `-kernel`/`-initrd`
+//!   through its EFI stub.
 //!
 //! [`ratios`] turns a `guest_<metric>` and a `native_<metric>` into `guest_ratio_<metric>`.
 //! This module never changes the benchmark program or its arguments: both legs run what the
@@ -126,9 +127,14 @@ pub fn guest_of(config: &Path) -> Result<config::system::Guest> {
 }
 
 /// Boots the stock kernel with the native initramfs of the guest partition of `config` under
-/// `dir` and returns the `native_*` metrics it printed; an error unless the benchmark ended
-/// with status 0.
-pub fn metrics(qemu: &crate::tools::Qemu, config: &Path, dir: &Path) -> Result<Vec<Metric>> {
+/// `dir` (on virtual time with `deterministic_time`, as the guest leg) and returns the
+/// `native_*` metrics it printed; an error unless the benchmark ended with status 0.
+pub fn metrics(
+    qemu: &crate::tools::Qemu,
+    config: &Path,
+    dir: &Path,
+    deterministic_time: bool,
+) -> Result<Vec<Metric>> {
     let kernel = ensure_kernel()?;
     // QEMU only says it cannot load it; some distributions keep /boot root-only.
     std::fs::File::open(&kernel).with_context(|| format!("cannot read {}", kernel.display()))?;
@@ -154,7 +160,7 @@ pub fn metrics(qemu: &crate::tools::Qemu, config: &Path, dir: &Path) -> Result<V
             timeout: Some(TIMEOUT),
             echo: false,
             work_dir: dir.join("state"),
-            deterministic_time: false,
+            deterministic_time,
             com2: qemu::Com2::Unconnected,
         },
     )?;
