@@ -190,31 +190,39 @@ pub fn metrics(
     Ok(metrics)
 }
 
-/// `guest_ratio_<metric>` for each `guest_<metric>` that has a `native_<metric>` in
-/// `metrics`: the guest's median over the native one; `min` is the guest's minimum over the
-/// native maximum and `max` the guest's maximum over the native minimum (the extremes the
-/// two sample ranges allow); `samples` the fewer of the two.
-pub fn ratios(metrics: &[Metric]) -> Vec<Metric> {
-    metrics
-        .iter()
-        .filter_map(|guest| {
-            let name = guest.name.strip_prefix("guest_")?;
-            let native = metrics
-                .iter()
-                .find(|m| m.name.strip_prefix(PREFIX) == Some(name))?;
-            if guest.unit != native.unit || native.min <= 0.0 {
-                return None;
-            }
-            Some(Metric {
-                name: format!("guest_ratio_{name}"),
-                median: round(guest.median / native.median),
-                min: round(guest.min / native.max),
-                max: round(guest.max / native.min),
-                unit: "ratio".to_string(),
-                samples: guest.samples.min(native.samples),
-            })
-        })
-        .collect()
+/// `guest_ratio_<metric>` for each `guest_<metric>` in `metrics` from it and its
+/// `native_<metric>`: the guest's median over the native one; `min` is the guest's minimum
+/// over the native maximum and `max` the guest's maximum over the native minimum (the
+/// extremes the two sample ranges allow); `samples` the fewer of the two. An error names the
+/// guest metrics without a native one to divide by (a native line lost or garbled on the
+/// console, or a unit that differs).
+pub fn ratios(metrics: &[Metric]) -> Result<Vec<Metric>> {
+    let mut out = Vec::new();
+    let mut unmatched = Vec::new();
+    for guest in metrics {
+        let Some(name) = guest.name.strip_prefix("guest_") else {
+            continue;
+        };
+        let native = metrics.iter().find(|m| {
+            m.name.strip_prefix(PREFIX) == Some(name) && m.unit == guest.unit && m.min > 0.0
+        });
+        let Some(native) = native else {
+            unmatched.push(guest.name.as_str());
+            continue;
+        };
+        out.push(Metric {
+            name: format!("guest_ratio_{name}"),
+            median: round(guest.median / native.median),
+            min: round(guest.min / native.max),
+            max: round(guest.max / native.min),
+            unit: "ratio".to_string(),
+            samples: guest.samples.min(native.samples),
+        });
+    }
+    if !unmatched.is_empty() {
+        bail!("no native figure to compare {} with", unmatched.join(", "));
+    }
+    Ok(out)
 }
 
 /// `x` to three decimals (the figures are medians of five rounds, no finer).
@@ -244,12 +252,11 @@ mod tests {
             metric("host_getpid", 100.0, 90.0, 110.0, 5),
             metric("guest_getpid", 3000.0, 2800.0, 3600.0, 5),
             metric("native_getpid", 1000.0, 900.0, 1200.0, 5),
-            metric("guest_fork_exit", 9.0, 9.0, 9.0, 5),
             metric("native_gzip_4mib", 1.0, 1.0, 1.0, 5),
             metric("native_pipe_roundtrip", 2.0, 2.0, 2.0, 3),
             metric("guest_pipe_roundtrip", 4.0, 3.0, 5.0, 5),
         ];
-        let r = ratios(&metrics);
+        let r = ratios(&metrics).unwrap();
         assert_eq!(r.len(), 2, "{r:?}");
         assert_eq!(r[0].name, "guest_ratio_getpid");
         assert_eq!((r[0].median, r[0].min, r[0].max), (3.0, 2.333, 4.0));
@@ -258,6 +265,18 @@ mod tests {
         assert_eq!((r[1].median, r[1].samples), (2.0, 3));
         let line = crate::bench::format_line(&r[0]);
         assert_eq!(crate::bench::parse_line(&line).as_ref(), Some(&r[0]));
+        let mut lost = metrics.to_vec();
+        lost.push(metric("guest_fork_exit", 9.0, 9.0, 9.0, 5));
+        lost.push(metric("guest_vfork_exit", 9.0, 9.0, 9.0, 5));
+        lost.push(Metric {
+            unit: "ns".to_string(),
+            ..metric("native_vfork_exit", 9.0, 9.0, 9.0, 5)
+        });
+        let err = ratios(&lost).unwrap_err().to_string();
+        assert_eq!(
+            err,
+            "no native figure to compare guest_fork_exit, guest_vfork_exit with"
+        );
     }
 
     #[test]
