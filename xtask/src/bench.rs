@@ -4,7 +4,10 @@
 //! `plc_online_read`) and the attack systems whose victim measures its window starts on
 //! virtual time (`window_lateness_hostile*`) and the soak system on virtual time
 //! (`tests/configs/soak.toml`: `soak_window_lateness`, `soak_missed_windows`,
-//! `soak_window_drift`; alone with `--soak`), runs the host benchmarks, prints one line per
+//! `soak_window_drift`; alone with `--soak`) and the guest benchmark
+//! (`tests/configs/bench_guest.toml`: `linux-bench` as `guest_*`, on the host as `host_*`,
+//! on Debian's stock kernel in the same QEMU as `native_*` with `guest_ratio_*`, see
+//! [`crate::native`]; alone with `--guest`), runs the host benchmarks, prints one line per
 //! metric and writes `target/bench/report.json`.
 //!
 //! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio|count> samples=<n>`.

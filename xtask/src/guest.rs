@@ -52,29 +52,36 @@ fn applet_paths(path: &Path) -> Vec<String> {
     paths
 }
 
-const S_IFREG: u32 = 0o100000;
-const S_IFDIR: u32 = 0o040000;
+pub const S_IFREG: u32 = 0o100000;
+pub const S_IFDIR: u32 = 0o040000;
 const S_IFLNK: u32 = 0o120000;
+
+/// An initramfs entry: its path (no leading `/`), mode (file type and permission bits) and
+/// contents (a symbolic link's target).
+pub type Entry = (String, u32, Vec<u8>);
+
+/// Debian's static busybox (installed if missing, refused if dynamic) and the paths of its
+/// applet links.
+pub fn busybox() -> Result<(Vec<u8>, Vec<String>)> {
+    let path = crate::tools::ensure_busybox()?;
+    let bytes = std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
+    check_static(&path, &bytes)?;
+    Ok((bytes, applet_paths(&path)))
+}
 
 /// `(partition name, initramfs)` for every guest partition of `system`.
 pub fn initramfs_images(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     let mut out = Vec::new();
-    let mut busybox = None;
-    let mut applets = Vec::new();
+    let mut busybox_and_applets = None;
     for p in &system.partitions {
         let Some(guest) = &p.guest else {
             continue;
         };
-        if busybox.is_none() {
-            let path = crate::tools::ensure_busybox()?;
-            let bytes =
-                std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?;
-            check_static(&path, &bytes)?;
-            busybox = Some(bytes);
-            applets = applet_paths(&path);
+        if busybox_and_applets.is_none() {
+            busybox_and_applets = Some(busybox()?);
         }
-        let busybox = busybox.as_deref().unwrap_or_default();
-        let archive = initramfs(busybox, &applets, guest, &p.ports)
+        let (busybox, applets) = busybox_and_applets.as_ref().expect("just read");
+        let archive = initramfs(busybox, applets, guest, &p.ports)
             .with_context(|| format!("partition {}: cannot write its initramfs", p.name))?;
         out.push((p.name.clone(), archive));
     }
@@ -113,7 +120,7 @@ fn nul_terminated(strings: &[String]) -> Vec<u8> {
 }
 
 /// `s` quoted for the shell.
-fn quote(s: &str) -> String {
+pub fn quote(s: &str) -> String {
     format!("'{}'", s.replace('\'', "'\\''"))
 }
 
@@ -145,6 +152,16 @@ pub fn initramfs(
     guest: &Guest,
     ports: &[Port],
 ) -> Result<Vec<u8>> {
+    archive(entries(busybox, applets, guest, ports)?)
+}
+
+/// The entries of [`initramfs`], in archive order.
+pub fn entries(
+    busybox: &[u8],
+    applets: &[String],
+    guest: &Guest,
+    ports: &[Port],
+) -> Result<Vec<Entry>> {
     let dir = |name: &str| (name.to_string(), S_IFDIR | 0o755, Vec::new());
     let file = |name: &str, mode: u32, data: Vec<u8>| (name.to_string(), S_IFREG | mode, data);
     let mut entries = vec![
@@ -227,6 +244,12 @@ pub fn initramfs(
         }
         entries.push((name.to_string(), S_IFREG | mode, data));
     }
+    Ok(entries)
+}
+
+/// `entries` as a cpio "newc" archive: each belongs to root, has mtime 0 and its position as
+/// inode number.
+pub fn archive(entries: Vec<Entry>) -> Result<Vec<u8>> {
     let inputs = entries
         .into_iter()
         .enumerate()

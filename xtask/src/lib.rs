@@ -4,7 +4,8 @@
 //! bare-metal artifacts ([`artifacts`]), assembling an ESP folder with `system.img`
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
-//! lint gate ([`lint`]), and the Linux-side test programs ([`linux`]).
+//! lint gate ([`lint`]), the Linux-side test programs ([`linux`]) and the native Linux
+//! reference of the guest benchmark ([`native`]).
 
 pub mod artifacts;
 pub mod bench;
@@ -13,6 +14,7 @@ pub mod esp;
 pub mod guest;
 pub mod lint;
 pub mod linux;
+pub mod native;
 pub mod plc;
 pub mod qemu;
 pub mod scenario;

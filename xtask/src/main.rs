@@ -40,8 +40,9 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
-    /// Run the benchmarks (kernel, ports, soft-PLC, attack and soak systems under QEMU,
-    /// soft-PLC VM on the host); writes target/bench/report.json.
+    /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak and guest systems under
+    /// QEMU, the guest benchmark's native reference, soft-PLC VM on the host); writes
+    /// target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
         /// counts then follow the instructions executed, not the host's load, so two
@@ -58,10 +59,15 @@ enum Cmd {
         #[arg(long, value_name = "FRAMES", default_value_t = SOAK_FRAMES, requires = "soak")]
         frames: u64,
         /// Run only the guest benchmark (tests/configs/bench_guest.toml: linux-bench in a
-        /// guest partition, and on the host as `host_*` for comparison; also part of the
-        /// full bench); writes target/bench/guest.json.
+        /// guest partition, on the host as `host_*`, and natively on Debian's stock kernel
+        /// in the same QEMU as `native_*`, with `guest_ratio_*` = guest / native; also part
+        /// of the full bench); writes target/bench/guest.json.
         #[arg(long, conflicts_with = "soak")]
         guest: bool,
+        /// Run only the native leg of the guest benchmark (linux-bench on Debian's stock
+        /// kernel, `native_*`); writes target/bench/native.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest"])]
+        native: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -102,7 +108,16 @@ fn main() -> ExitCode {
         Cmd::Bench {
             soak: true, frames, ..
         } => soak(frames),
-        Cmd::Bench { guest: true, .. } => guest_bench(),
+        Cmd::Bench {
+            guest: true,
+            deterministic_time,
+            ..
+        } => guest_bench(deterministic_time),
+        Cmd::Bench {
+            native: true,
+            deterministic_time,
+            ..
+        } => native_bench(deterministic_time),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -422,10 +437,15 @@ fn plc_metrics(
 }
 
 /// `cargo xtask bench --guest`: only the guest benchmark; writes `target/bench/guest.json`.
-fn guest_bench() -> Result<bool> {
+fn guest_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
-    let metrics = guest_metrics(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    let metrics = guest_metrics(
+        &qemu,
+        &system,
+        &xtask::target_dir().join("bench"),
+        deterministic_time,
+    )?;
     for m in &metrics {
         println!("{}", xtask::bench::format_line(m));
     }
@@ -434,14 +454,36 @@ fn guest_bench() -> Result<bool> {
     Ok(true)
 }
 
+/// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
+fn native_bench(deterministic_time: bool) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
+    let metrics = xtask::native::metrics(
+        &qemu,
+        &config,
+        &xtask::target_dir().join("bench/native"),
+        deterministic_time,
+    )?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "native.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 /// The guest benchmark: `linux-bench` (tests/linux/bench.c) on the host Linux (`host_*`,
 /// the same loops, for comparison), then in the guest partition of
 /// tests/configs/bench_guest.toml (`guest_*`, on real time: the cycles are what the
-/// guest's calls cost under QEMU).
+/// guest's calls cost under QEMU, host load included), then natively on Debian's stock
+/// kernel in the same QEMU (`native_*`, [`xtask::native`]), and `guest_ratio_*` (guest /
+/// native). With `deterministic_time` both QEMU legs run on virtual time: their cycles
+/// then follow the instructions executed, the same from run to run.
 fn guest_metrics(
     qemu: &tools::Qemu,
     system: &artifacts::Artifacts,
     dir: &std::path::Path,
+    deterministic_time: bool,
 ) -> Result<Vec<xtask::bench::Metric>> {
     let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
     let described = xtask::check_config::load(&config)?;
@@ -476,7 +518,7 @@ fn guest_metrics(
         Some(&config),
         &dir.join("guest"),
         "guest benchmark system",
-        false,
+        deterministic_time,
         Duration::from_secs(3600),
     )?;
     let errors: Vec<&String> = outcome
@@ -500,6 +542,14 @@ fn guest_metrics(
         eprintln!("xtask: {note}");
     }
     metrics.extend(guest);
+    metrics.extend(xtask::native::metrics(
+        qemu,
+        &config,
+        &dir.join("native"),
+        deterministic_time,
+    )?);
+    let ratios = xtask::native::ratios(&metrics)?;
+    metrics.extend(ratios);
     Ok(metrics)
 }
 
@@ -606,7 +656,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
-    metrics.extend(guest_metrics(&qemu, &system, &dir)?);
+    metrics.extend(guest_metrics(&qemu, &system, &dir, deterministic_time)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {

@@ -1,6 +1,7 @@
-//! Boots an ESP folder under QEMU (TCG) and captures the serial log (COM1), with COM2 (the
-//! guest's console) unconnected, fed from a script ([`Com2::Scripted`]: scenarios) or on
-//! this terminal ([`Com2::Terminal`]: `cargo xtask run`).
+//! Boots an ESP folder (or, for the native reference of the guest benchmark, a Linux
+//! kernel directly: [`run_linux`]) under QEMU (TCG) and captures the serial log (COM1),
+//! with COM2 (the guest's console) unconnected, fed from a script ([`Com2::Scripted`]:
+//! scenarios) or on this terminal ([`Com2::Terminal`]: `cargo xtask run`).
 //!
 //! Exit convention (kernel `qemu::exit`): 0x10 written to isa-debug-exit at port 0xf4 makes
 //! QEMU exit with 33 (success), 0x11 with 35 (failure). Anything else, or a timeout, is a
@@ -115,36 +116,67 @@ impl Outcome {
     }
 }
 
+/// What QEMU boots.
+#[derive(Clone, Copy, Debug)]
+pub enum Media<'a> {
+    /// An ESP folder, as a FAT drive the firmware boots from.
+    Esp(&'a Path),
+    /// A Linux kernel and initramfs QEMU hands to the firmware (`-kernel`, `-initrd`,
+    /// `-append`; OVMF boots it through its EFI stub): no drive.
+    Linux(&'a LinuxBoot),
+}
+
+/// A Linux kernel to boot directly ([`run_linux`]).
+#[derive(Clone, Debug)]
+pub struct LinuxBoot {
+    pub kernel: PathBuf,
+    pub initrd: PathBuf,
+    pub command_line: String,
+}
+
+/// The emulated machine of every run: the same for the Warden systems and a stock Linux
+/// kernel ([`run_linux`]), so their cycle counts compare.
+pub const MACHINE: &[&str] = &[
+    "-nodefaults",
+    "-machine",
+    "q35",
+    "-m",
+    "512M",
+    "-cpu",
+    // QEMU 7.2's TCG has no TSC-deadline mode: the kernel's timer uses one-shot counts.
+    "qemu64",
+    "-display",
+    "none",
+    "-no-reboot",
+];
+
 pub fn command(
     qemu: &Qemu,
-    esp: &Path,
+    media: Media,
     vars: &Path,
     deterministic_time: bool,
     com2: &Com2,
     work_dir: &Path,
 ) -> Command {
     let mut cmd = Command::new(&qemu.binary);
-    cmd.args([
-        "-nodefaults",
-        "-machine",
-        "q35",
-        "-m",
-        "512M",
-        "-cpu",
-        // QEMU 7.2's TCG has no TSC-deadline mode: the kernel's timer uses one-shot counts.
-        "qemu64",
-        "-display",
-        "none",
-        "-no-reboot",
-    ]);
+    cmd.args(MACHINE);
     cmd.arg("-drive").arg(format!(
         "if=pflash,format=raw,readonly=on,file={}",
         qemu.ovmf_code.display()
     ));
     cmd.arg("-drive")
         .arg(format!("if=pflash,format=raw,file={}", vars.display()));
-    cmd.arg("-drive")
-        .arg(format!("format=raw,file=fat:rw:{}", esp.display()));
+    match media {
+        Media::Esp(esp) => {
+            cmd.arg("-drive")
+                .arg(format!("format=raw,file=fat:rw:{}", esp.display()));
+        }
+        Media::Linux(linux) => {
+            cmd.arg("-kernel").arg(&linux.kernel);
+            cmd.arg("-initrd").arg(&linux.initrd);
+            cmd.arg("-append").arg(&linux.command_line);
+        }
+    }
     // COM1 (the kernel log), then COM2 (0x2f8, IRQ 3).
     match com2 {
         Com2::Unconnected => {
@@ -313,7 +345,23 @@ fn follow(path: PathBuf, tx: mpsc::Sender<String>, done: Arc<Mutex<bool>>) {
     });
 }
 
+/// Boots `options.esp`.
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
+    launch(qemu, Media::Esp(&options.esp), options)
+}
+
+/// Boots the Linux kernel `linux` on the same machine and firmware as [`run`], with COM1
+/// (its console, if the command line says `console=ttyS0`) captured; `options.esp` and
+/// `options.com2` are not used (COM2 is unconnected).
+pub fn run_linux(qemu: &Qemu, linux: &LinuxBoot, options: &RunOptions) -> Result<Outcome> {
+    let options = RunOptions {
+        com2: Com2::Unconnected,
+        ..options.clone()
+    };
+    launch(qemu, Media::Linux(linux), &options)
+}
+
+fn launch(qemu: &Qemu, media: Media, options: &RunOptions) -> Result<Outcome> {
     std::fs::create_dir_all(&options.work_dir)?;
     let vars = options.work_dir.join("OVMF_VARS.fd");
     std::fs::copy(&qemu.ovmf_vars, &vars)
@@ -329,7 +377,7 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
     }
     let mut cmd = command(
         qemu,
-        &options.esp,
+        media,
         &vars,
         options.deterministic_time,
         &options.com2,

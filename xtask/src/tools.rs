@@ -70,7 +70,7 @@ fn is_root() -> bool {
 
 /// Installs `packages` with apt-get when running as root; otherwise (or if that fails) the
 /// error says the exact command (`what` names what is missing).
-fn install_packages(packages: &[&str], what: &str) -> Result<()> {
+pub fn install_packages(packages: &[&str], what: &str) -> Result<()> {
     let install = format!("apt-get install -y {}", packages.join(" "));
     if !is_root() || find_in_path("apt-get").is_none() {
         bail!(
