@@ -54,7 +54,7 @@ fn every_system_validates_and_round_trips() {
 fn plc_guest_system() {
     let s = load_file(&systems_dir().join("plc-guest.toml"));
     let names: Vec<&str> = s.partitions.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["plc", "plant", "guest"]);
+    assert_eq!(names, ["plc", "plant", "linux"]);
     let [plc, plant, guest] = &s.partitions[..] else {
         unreachable!()
     };
@@ -77,9 +77,9 @@ fn plc_guest_system() {
             normal.windows[0].duration,
             normal.windows[0].time_partition
         ),
-        (0, 2_000_000, 1)
+        (0, 3_000_000, 1)
     );
-    // plant.level -> plc.level and plc.valve -> plant.valve.
+    // The PLC's valve and setpoint to the plant, the plant's level to the PLC.
     let links: Vec<(String, String)> = s
         .channels
         .iter()
@@ -95,13 +95,18 @@ fn plc_guest_system() {
     assert_eq!(
         links,
         [
-            ("plant.level".to_string(), "plc.level".to_string()),
-            ("plc.valve".to_string(), "plant.valve".to_string())
+            ("plc.valve".to_string(), "plant.valve".to_string()),
+            ("plc.setpoint".to_string(), "plant.setpoint".to_string()),
+            ("plant.level".to_string(), "plc.level".to_string())
         ]
     );
     assert_eq!(
         plc.health.get(ErrorCode::DeadlineMissed),
-        Some(HealthAction::WarmRestart)
+        Some(HealthAction::Ignore)
+    );
+    assert_eq!(
+        guest.health.get(ErrorCode::ApplicationError),
+        Some(HealthAction::ColdRestart)
     );
     assert_eq!(
         s.health.get(ErrorCode::MemoryViolation),

@@ -28,10 +28,11 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
-    /// Build everything and boot it under QEMU with COM1 on this terminal.
+    /// Build everything and boot it under QEMU: COM1 on this terminal, or, when a guest's
+    /// console is COM2, COM2 on this terminal and COM1 in a file whose path is printed.
     Run {
         /// System description to put in system.img.
-        #[arg(long, default_value = "config/systems/plc.toml")]
+        #[arg(long, default_value = "config/systems/plc-guest.toml")]
         config: PathBuf,
         /// Stop after SECS; exit 0 only if the system reached "ready" and was still running
         /// without a crash.

@@ -9,6 +9,9 @@
 //!   for the health monitor;
 //! * `hog*`: spins without ever blocking (a CPU hog at its priority) and prints its CPU time
 //!   once a second;
+//! * `cpu*`: prints the CPU time of time partitions 0..=4 (0 is the background) and the
+//!   time the CPU was idle once a second: `<name>: at <s> s CPU time us TP0=<us> TP1=<us>
+//!   TP2=<us> TP3=<us> TP4=<us> idle=<us>`;
 //! * anything else: prints a heartbeat with its CPU time once a second.
 #![no_std]
 #![no_main]
@@ -45,6 +48,8 @@ fn main(start: u64, _: u64) {
         };
     } else if name.starts_with("hog") {
         hog(name, tp);
+    } else if name.starts_with("cpu") {
+        accounting(name);
     } else {
         heartbeat(name, tp);
     }
@@ -99,6 +104,25 @@ fn windows(name: &str, tp: u64) {
         println!(
             "{name}: first sample outside at {now} ns: {} us after window {window} ended at {end} ns, next starts at {next} ns",
             (now - end) / 1000
+        );
+    }
+}
+
+/// Once a second: the CPU time of time partitions 0..=4 and the idle time, in us.
+fn accounting(name: &str) -> ! {
+    let us = |tp: u64| sys::partition_info(tp).map_or(0, |i| i.cpu_ns / 1000);
+    loop {
+        let t = sys::clock();
+        sys::sleep_until((t / 1_000_000_000 + 1) * 1_000_000_000);
+        let idle = sys::partition_info(0).map_or(0, |i| i.idle_ns / 1000);
+        println!(
+            "{name}: at {} s CPU time us TP0={} TP1={} TP2={} TP3={} TP4={} idle={idle}",
+            sys::clock() / 1_000_000_000,
+            us(0),
+            us(1),
+            us(2),
+            us(3),
+            us(4)
         );
     }
 }
