@@ -175,6 +175,28 @@ fn attack_floods() {
 }
 
 #[test]
+fn attack_map() {
+    let o = boot("attack_map");
+    kernel_held(&o);
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    check(
+        &o,
+        o.line(&format!(
+            "flood-map: 1000 rounds of {} pages",
+            abi::syscall::MAP_MAX_PAGES
+        ))
+        .is_some()
+            && o.line("flood-map: a call failed").is_none(),
+        "the attacker did not map, protect and unmap the most pages a call takes",
+    );
+    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}
+
+#[test]
 fn attack_partitions() {
     let o = boot("attack_partitions");
     kernel_held(&o);

@@ -37,7 +37,7 @@ pub const PAGE_SIZE: u64 = 4096;
 /// Pages an [`IpcBuffer`](abi::ipc::IpcBuffer) needs.
 pub const IPC_BUFFER_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE_SIZE);
 /// Size of the window the spawner maps frames into to zero or fill them.
-const SCRATCH_PAGES: u64 = 64;
+const SCRATCH_PAGES: u64 = MAP_MAX_PAGES;
 
 /// Why a spawner operation failed.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -58,7 +58,7 @@ use user_rt::abi::syscall::{
     ROOT_INFO_BASE, ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
 };
 use user_rt::ipc_buffer::IpcBufferRef;
-use user_rt::partition::{DATA_BASE, SHARED_BASE, StartInfo};
+use user_rt::partition::{DATA_BASE, POOL_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
 use user_rt::println;
 use user_rt::protocol::{Direction, OperatingMode, PortKind, Request, ReturnCode};
@@ -99,6 +99,8 @@ fn main(start: u64, _: u64) {
         loop {
             let _ = sys::debug_write(&line);
         }
+    } else if name.starts_with("flood-map") {
+        flood_map(info.pool_len);
     } else if name.starts_with("ports") {
         touch_kernel_ports(ThreadId(info.server));
     } else if name.starts_with("fault-loop") {
@@ -749,4 +751,33 @@ fn fuzz(calls: u64, root: bool) {
     }
     histogram.print();
     println!("fuzz: done: {done} calls, {skipped} skipped, seed {SEED:#x}");
+}
+
+/// `flood-map`: the longest page-range calls a partition may make, without pause: map as
+/// many pages of its pool as one call takes ([`MAP_MAX_PAGES`]) into a child task, write-
+/// protect them, unmap them, again and again (the kernel walks every page of each range).
+fn flood_map(pool_len: u64) {
+    let pages = (pool_len / PAGE).min(MAP_MAX_PAGES);
+    let child = match sys::task_create(Abilities::empty(), 1, 0, "flood-map child") {
+        Ok(task) => task,
+        Err(e) => {
+            println!("flood-map: cannot create a task: {e:?}");
+            return;
+        }
+    };
+    const AT: u64 = 0x4000_0000;
+    let mut rounds: u64 = 0;
+    loop {
+        let mapped = sys::map(Some(child), POOL_BASE, AT, pages, PageRights::WRITE);
+        let protected = sys::protect(Some(child), AT, pages, PageRights::empty());
+        let unmapped = sys::unmap(Some(child), AT, pages);
+        if let Err(e) = mapped.and(protected).and(unmapped) {
+            println!("flood-map: a call failed: {e:?}");
+            return;
+        }
+        rounds += 1;
+        if rounds % 1000 == 0 {
+            println!("flood-map: {rounds} rounds of {pages} pages");
+        }
+    }
 }
