@@ -776,7 +776,7 @@ fn flood_map(pool_len: u64) {
             return;
         }
         rounds += 1;
-        if rounds % 1000 == 0 {
+        if rounds.is_multiple_of(1000) {
             println!("flood-map: {rounds} rounds of {pages} pages");
         }
     }
