@@ -180,8 +180,8 @@
 //! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`
 //! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, `linux-bench`, the
 //! guest benchmark, and `linux-probe`, the faults and forbidden accesses of the memory and
-//! isolation scenarios), or the Rust program `plcctl` (the PLC online tool, built for
-//! `x86_64-unknown-linux-musl`), and adds as `/bin/<name>` (not also a `guest.files` path,
+//! isolation scenarios), or the Rust programs `plcctl` (the PLC online tool) and `plcc` (the
+//! Structured Text compiler), built for `x86_64-unknown-linux-musl`, and adds as `/bin/<name>` (not also a `guest.files` path,
 //! each once). The partition's `ports.*` reach the guest as the devices
 //! `/dev/arinc/<name>` (the initramfs's `/etc/guest/ports`, see `guest::arinc`). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as

@@ -92,7 +92,13 @@ pub const COM2_IRQ: u8 = 3;
 /// The Linux programs `guest.programs` may name: static executables `cargo xtask` builds
 /// (`xtask/src/linux.rs`) from `tests/linux` with `gcc -static`, and `plcctl`, the PLC
 /// online tool (`partitions/guest/plcctl`, Rust for `x86_64-unknown-linux-musl`).
-pub const GUEST_PROGRAMS: &[&str] = &["linux-tests", "linux-bench", "linux-probe", "plcctl"];
+pub const GUEST_PROGRAMS: &[&str] = &[
+    "linux-tests",
+    "linux-bench",
+    "linux-probe",
+    "plcctl",
+    "plcc",
+];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
 /// (busybox, its applet links, the guest's command line, `/init`).

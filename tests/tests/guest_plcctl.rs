@@ -160,6 +160,11 @@ fn guest_plcctl() {
         o.line("[plc] plc: download refused: ").is_some(),
         "the PLC logs why it refused the download",
     );
+    check(
+        &o,
+        out.iter().any(|l| l == "compiled in the guest"),
+        "plcc did not compile the changed controller in the guest",
+    );
     let downloaded = from(&out, "downloaded ", 2);
     check(
         &o,

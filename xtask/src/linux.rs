@@ -12,6 +12,9 @@
 //! - `plcctl` (`partitions/guest/plcctl`): the PLC online tool, a Rust program built with
 //!   cargo for [`MUSL_TARGET`] (static, profile `linux`) into
 //!   `target/x86_64-unknown-linux-musl/linux/plcctl`.
+//! - `plcc` (`partitions/softplc/compiler`): the Structured Text compiler, the same Rust
+//!   binary as on the host built the same way, so a user can edit, compile and download a
+//!   PLC program from the guest's shell.
 //!
 //! They are built into `target/linux/<name>` (only when a source is newer) and reach a
 //! guest's initramfs as `/bin/<name>` through the partition key `guest.programs`
@@ -26,8 +29,8 @@ use std::process::Command;
 pub const GCC_PACKAGES: &str = "gcc libc6-dev";
 /// The target of the Rust programs for the guest (static executables with musl).
 pub const MUSL_TARGET: &str = "x86_64-unknown-linux-musl";
-/// The Rust programs (each the workspace package of that name).
-const RUST_PROGRAMS: &[&str] = &["plcctl"];
+/// The Rust programs: (program, the workspace package whose binary of that name it is).
+const RUST_PROGRAMS: &[(&str, &str)] = &[("plcctl", "plcctl"), ("plcc", "plc-compiler")];
 /// The programs built from one source file each; `linux-tests` is every other source.
 const SINGLE_FILE: &[(&str, &str)] = &[("linux-bench", "bench.c"), ("linux-probe", "probe.c")];
 /// How every program is compiled.
@@ -71,7 +74,7 @@ fn modified(path: &Path) -> Option<std::time::SystemTime> {
 
 /// Builds the Rust program `name` for [`MUSL_TARGET`] (cargo decides whether anything
 /// changed) and returns its path.
-fn build_rust(name: &str) -> Result<PathBuf> {
+fn build_rust(name: &str, package: &str) -> Result<PathBuf> {
     crate::tools::ensure_rust_targets()?;
     let status = crate::artifacts::cargo()
         .args([
@@ -82,6 +85,8 @@ fn build_rust(name: &str) -> Result<PathBuf> {
             "--target",
             MUSL_TARGET,
             "-p",
+            package,
+            "--bin",
             name,
         ])
         .status()
@@ -97,8 +102,8 @@ fn build_rust(name: &str) -> Result<PathBuf> {
 
 /// Builds program `name` unless it is newer than its sources and headers; returns its path.
 pub fn build(name: &str) -> Result<PathBuf> {
-    if RUST_PROGRAMS.contains(&name) {
-        return build_rust(name);
+    if let Some(&(_, package)) = RUST_PROGRAMS.iter().find(|(program, _)| *program == name) {
+        return build_rust(name, package);
     }
     let sources = sources(name)?;
     let out = output_path(name);
@@ -227,7 +232,7 @@ mod tests {
     #[test]
     fn every_guest_program_has_sources() {
         for name in config::system::GUEST_PROGRAMS {
-            if RUST_PROGRAMS.contains(name) {
+            if RUST_PROGRAMS.iter().any(|(program, _)| program == name) {
                 continue;
             }
             assert!(!sources(name).unwrap().is_empty(), "{name}");
