@@ -105,14 +105,7 @@ fn futex(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
                 if a[3] == 0 {
                     return Err(WOULD_BLOCK); // until a signal
                 }
-                let mut ts = [0u8; 16];
-                read_user(p, host, a[3], &mut ts)?;
-                let sec = u64::from_le_bytes(ts[..8].try_into().unwrap_or([0; 8]));
-                let nsec = u64::from_le_bytes(ts[8..].try_into().unwrap_or([0; 8]));
-                if sec > i64::MAX as u64 || nsec >= 1_000_000_000 {
-                    return Err(Errno::EINVAL);
-                }
-                let ns = sec.saturating_mul(1_000_000_000).saturating_add(nsec);
+                let ns = crate::sigcalls::read_timespec(p, host, a[3])?;
                 // FUTEX_WAIT's timeout is relative, the bitset form's absolute.
                 let now = host.now_ns();
                 p.wake_at = Some(if op == FUTEX_WAIT {

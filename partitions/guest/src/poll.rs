@@ -101,23 +101,7 @@ fn read_timeout(p: &Process, host: &mut impl Host, at: u64, micro: bool) -> SysR
     if at == 0 {
         return Ok(None);
     }
-    let mut b = [0u8; 16];
-    read_user(p, host, at, &mut b)?;
-    let sec = i64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
-    let frac = i64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
-    let (limit, unit) = if micro {
-        (1_000_000, 1000)
-    } else {
-        (1_000_000_000, 1)
-    };
-    if sec < 0 || !(0..limit).contains(&frac) {
-        return Err(Errno::EINVAL);
-    }
-    Ok(Some(
-        (sec as u64)
-            .saturating_mul(1_000_000_000)
-            .saturating_add(frac as u64 * unit),
-    ))
+    crate::sigcalls::read_time(p, host, at, micro).map(Some)
 }
 
 /// `poll(fds, nfds, timeout_ms)` and `ppoll(fds, nfds, timeout, sigmask, size)`.

@@ -289,15 +289,17 @@ impl Process {
         self.pending & !(self.sigmask & !crate::signal::UNBLOCKABLE)
     }
 
-    /// Takes the lowest deliverable signal off the pending set (SIGKILL and SIGSTOP first).
-    pub fn take_signal(&mut self) -> Option<Info> {
+    /// The signal delivered next: the lowest deliverable one, SIGKILL and SIGSTOP first.
+    pub fn next_signal(&self) -> Option<u32> {
         let ready = self.deliverable();
         let first = ready & crate::signal::UNBLOCKABLE;
         let bits = if first != 0 { first } else { ready };
-        if bits == 0 {
-            return None;
-        }
-        let signal = bits.trailing_zeros() + 1;
+        (bits != 0).then(|| bits.trailing_zeros() + 1)
+    }
+
+    /// Takes [`Process::next_signal`] off the pending set.
+    pub fn take_signal(&mut self) -> Option<Info> {
+        let signal = self.next_signal()?;
         self.pending &= !crate::signal::bit(signal);
         Some(self.pending_info[signal as usize - 1])
     }

@@ -7,7 +7,7 @@
 
 use crate::linux::{Errno, nr};
 use crate::process::Process;
-use crate::signal::{self, Action, AltStack, FPU_SIZE, FRAME_SIZE, SIGALRM, UNBLOCKABLE};
+use crate::signal::{self, Action, AltStack, FPU_SIZE, FRAME_SIZE, UNBLOCKABLE};
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 use abi::ipc::ExceptionMessage;
 
@@ -160,17 +160,38 @@ pub fn sigreturn(p: &mut Process, host: &mut impl Host, m: &mut ExceptionMessage
 }
 
 /// A `struct timespec` at `address`, in ns (`EINVAL` for a negative or denormal one).
-fn read_timespec(p: &Process, host: &mut impl Host, address: u64) -> SysResult<u64> {
+pub(crate) fn read_timespec(p: &Process, host: &mut impl Host, address: u64) -> SysResult<u64> {
+    read_time(p, host, address, false)
+}
+
+/// A `struct timespec` (`micro`: a `struct timeval`) at `address`, in ns.
+pub(crate) fn read_time(
+    p: &Process,
+    host: &mut impl Host,
+    address: u64,
+    micro: bool,
+) -> SysResult<u64> {
     let mut b = [0u8; 16];
     read_user(p, host, address, &mut b)?;
+    time_ns(&b, micro)
+}
+
+/// The ns of the 16 bytes of a `struct timespec` (`micro`: a `struct timeval`): `EINVAL`
+/// for negative seconds or a fraction out of range.
+fn time_ns(b: &[u8; 16], micro: bool) -> SysResult<u64> {
     let sec = i64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
-    let nsec = i64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
-    if sec < 0 || !(0..NS_PER_S as i64).contains(&nsec) {
+    let frac = i64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
+    let (limit, unit) = if micro {
+        (1_000_000, 1000)
+    } else {
+        (NS_PER_S as i64, 1)
+    };
+    if sec < 0 || !(0..limit).contains(&frac) {
         return Err(Errno::EINVAL);
     }
     Ok((sec as u64)
         .saturating_mul(NS_PER_S)
-        .saturating_add(nsec as u64))
+        .saturating_add(frac as u64 * unit))
 }
 
 fn timespec(ns: u64) -> [u8; 16] {
@@ -269,16 +290,7 @@ pub fn setitimer(
     if new != 0 {
         read_user(p, host, new, &mut b)?;
     }
-    let timeval = |at: usize| -> SysResult<u64> {
-        let sec = i64::from_le_bytes(b[at..at + 8].try_into().unwrap_or([0; 8]));
-        let usec = i64::from_le_bytes(b[at + 8..at + 16].try_into().unwrap_or([0; 8]));
-        if sec < 0 || !(0..1_000_000).contains(&usec) {
-            return Err(Errno::EINVAL);
-        }
-        Ok((sec as u64)
-            .saturating_mul(NS_PER_S)
-            .saturating_add(usec as u64 * 1000))
-    };
+    let timeval = |at: usize| time_ns(b[at..at + 16].try_into().unwrap_or(&[0; 16]), true);
     let (interval, value) = (timeval(0)?, timeval(16)?);
     if old != 0 {
         write_user(p, host, old, &itimer(p, now))?;
@@ -300,9 +312,6 @@ pub fn alarm_due(p: &mut Process, now: u64) -> bool {
         _ => false,
     }
 }
-
-/// The signal an alarm raises.
-pub const ALARM: u32 = SIGALRM;
 
 /// `rt_sigsuspend(mask)`: waits with `mask` until a signal is delivered; the old mask comes
 /// back when the handler returns (the frame saves it).

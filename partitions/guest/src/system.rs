@@ -331,7 +331,7 @@ impl System {
                 }
                 _ => false,
             };
-            if due && let Some(ended) = self.send(j, None, Info::kernel(sigcalls::ALARM), fs, k) {
+            if due && let Some(ended) = self.send(j, None, Info::kernel(signal::SIGALRM), fs, k) {
                 return Some(ended);
             }
         }
@@ -387,12 +387,7 @@ impl System {
     fn interrupting(&mut self, i: usize) -> Option<bool> {
         let p = &mut self.slots[i].as_mut()?.process;
         loop {
-            let ready = p.deliverable();
-            if ready == 0 {
-                return None;
-            }
-            let first = ready & signal::UNBLOCKABLE;
-            let sig = (if first != 0 { first } else { ready }).trailing_zeros() + 1;
+            let sig = p.next_signal()?;
             let action = p.action(sig);
             if sig != signal::SIGKILL && sig != signal::SIGSTOP && action.ignores(sig) {
                 p.pending &= !signal::bit(sig);
