@@ -239,7 +239,7 @@ impl Program {
 pub fn analyse(
     unit: &Unit,
     prelude_pous: usize,
-    program_override: Option<&str>,
+    opts: &crate::Options,
     diags: &mut Diagnostics,
 ) -> Program {
     let mut s = Sema {
@@ -256,7 +256,7 @@ pub fn analyse(
     for i in 0..s.prog.pous.len() {
         s.layout_pou(i);
     }
-    s.configure(program_override);
+    s.configure(opts.program.as_deref(), opts.library);
     s.prog
 }
 
@@ -1037,7 +1037,7 @@ impl Sema<'_> {
 
     /// Builds the task list from the CONFIGURATION, or one implicit cyclic task running the
     /// single PROGRAM (`program_override` picks one when there are several).
-    fn configure(&mut self, program_override: Option<&str>) {
+    fn configure(&mut self, program_override: Option<&str>, library: bool) {
         let unit = self.unit;
         if unit.configs.len() > 1 {
             self.diags.error(
@@ -1164,6 +1164,9 @@ impl Sema<'_> {
                         .push((b.instance.text.clone(), pi));
                 }
             }
+            return;
+        }
+        if library {
             return;
         }
         let programs: Vec<usize> = (0..self.prog.pous.len())
