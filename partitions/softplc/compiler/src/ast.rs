@@ -252,6 +252,9 @@ pub enum ExprKind {
     Bool(bool),
     Str(String),
     Time(i128),
+    /// A date/time literal other than TIME (`LT#`, `D#`, `TOD#`, `DT#`, ...): its type and
+    /// nanoseconds.
+    Temporal(crate::types::Elem, i128),
     /// `TYPE#literal`, e.g. `INT#5`, `REAL#1`, `Color#Red`.
     Typed(Ident, Box<Expr>),
     Name(Ident),

@@ -38,12 +38,15 @@ pub(crate) struct Place {
 
 pub(crate) fn mem_type(e: Elem) -> MemType {
     match e {
-        Elem::Bool | Elem::USInt | Elem::Byte => MemType::U8,
+        Elem::Bool | Elem::USInt | Elem::Byte | Elem::Char => MemType::U8,
         Elem::SInt => MemType::I8,
         Elem::Int => MemType::I16,
         Elem::DInt => MemType::I32,
-        Elem::LInt | Elem::Time => MemType::I64,
-        Elem::UInt | Elem::Word => MemType::U16,
+        Elem::LInt | Elem::Time | Elem::LTime | Elem::Date | Elem::LDate | Elem::Tod => {
+            MemType::I64
+        }
+        Elem::LTod | Elem::Dt | Elem::LDt => MemType::I64,
+        Elem::UInt | Elem::Word | Elem::WChar => MemType::U16,
         Elem::UDInt | Elem::DWord => MemType::U32,
         Elem::ULInt | Elem::LWord => MemType::U64,
         Elem::Real => MemType::F32,
@@ -458,7 +461,19 @@ impl<'a> Gen<'a> {
             (ConstVal::Int(i), Elem::LReal) => Some((*i as f64).to_bits()),
             (ConstVal::Real(r), Elem::Real) => Some((*r as f32).to_bits() as u64),
             (ConstVal::Real(r), Elem::LReal) => Some(r.to_bits()),
-            (ConstVal::Time(t), Elem::Time) => Some(*t as i64 as u64),
+            (ConstVal::Time(t), e) if e.is_duration() => Some(*t as i64 as u64),
+            (ConstVal::Temporal(k, t), e) if implicit_ok(*k, e) => Some(*t as i64 as u64),
+            (ConstVal::Int(i), e) if e.is_char() => {
+                let (lo, hi) = e.int_range();
+                if *i < lo || *i > hi {
+                    return bad(self);
+                }
+                Some(*i as u64)
+            }
+            (ConstVal::Str(text), e) if e.is_char() => match crate::sema::single_char(text) {
+                Some(c) if c <= e.int_range().1 => Some(c as u64),
+                _ => bad(self),
+            },
             _ => {
                 let msg = format!("initial value has the wrong type for {}", self.tname(ty));
                 self.diags.error(span, msg);
@@ -1477,6 +1492,20 @@ impl<'a> Gen<'a> {
         if f == t {
             return;
         }
+        if f.is_temporal() || t.is_temporal() {
+            self.convert_temporal(f, t);
+            return;
+        }
+        // Characters convert like the unsigned integers of their size.
+        let as_int = |e: Elem| match e {
+            Elem::Char => Elem::USInt,
+            Elem::WChar => Elem::UInt,
+            e => e,
+        };
+        if f.is_char() || t.is_char() {
+            self.convert(as_int(f), as_int(t));
+            return;
+        }
         match (f.is_real(), t.is_real()) {
             (false, false) => {
                 if t == Elem::Bool {
@@ -1484,37 +1513,11 @@ impl<'a> Gen<'a> {
                         b.push_i32(0);
                         b.op(Opcode::Ne);
                     });
-                } else if t == Elem::Time || f == Elem::Time {
-                    // TIME <-> integer: the integer counts milliseconds.
-                    if f == Elem::Time {
-                        self.emit(|b| {
-                            b.push_i32(1_000_000);
-                            b.op(Opcode::DivS);
-                        });
-                        self.wrap(t);
-                    } else {
-                        self.emit(|b| {
-                            b.push_i32(1_000_000);
-                            b.op(Opcode::Mul);
-                        });
-                    }
                 } else if t.size() < f.size() || t.signed_storage() != f.signed_storage() {
                     self.wrap(t);
                 }
             }
             (false, true) => {
-                if f == Elem::Time {
-                    // TIME -> REAL/LREAL gives milliseconds.
-                    self.emit(|b| {
-                        b.op(Opcode::IToF64S);
-                        b.push_f64(1e6);
-                        b.op(Opcode::DivF64);
-                    });
-                    if t == Elem::Real {
-                        self.op(Opcode::F64ToF32);
-                    }
-                    return;
-                }
                 let signed = !(f.is_unsigned_int() || f.is_bits() && f.size() == 8);
                 let op = match (t, signed) {
                     (Elem::Real, true) => Opcode::IToF32S,
@@ -1549,20 +1552,86 @@ impl<'a> Gen<'a> {
                         }
                         b.op(zero_op);
                     });
-                } else if t == Elem::Time {
-                    // REAL milliseconds -> TIME.
-                    if f == Elem::Real {
-                        self.op(Opcode::F32ToF64);
-                    }
-                    self.emit(|b| {
-                        b.push_f64(1e6);
-                        b.op(Opcode::MulF64);
-                        b.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway);
-                    });
                 } else {
                     self.emit(|b| b.float_to_int(op, mem_type(t), RoundMode::NearestTiesAway));
                 }
             }
+        }
+    }
+
+    /// Conversions to, from and between the date/time types. All hold nanoseconds; as
+    /// numbers (CODESYS's conventions) TIME and TOD count milliseconds, DATE and DT seconds,
+    /// the long forms nanoseconds. A DATE result is the midnight of its day, a TOD result
+    /// lies within its day.
+    fn convert_temporal(&mut self, f: Elem, t: Elem) {
+        fn unit(e: Elem) -> i64 {
+            match e {
+                Elem::Time | Elem::Tod => 1_000_000,
+                Elem::Date | Elem::Dt => 1_000_000_000,
+                _ => 1,
+            }
+        }
+        if f.is_temporal() && !t.is_temporal() {
+            let n = unit(f);
+            if t == Elem::Bool {
+                self.emit(|b| {
+                    b.push_i32(0);
+                    b.op(Opcode::Ne);
+                });
+            } else if t.is_real() {
+                self.op(Opcode::IToF64S);
+                if n != 1 {
+                    self.emit(|b| {
+                        b.push_f64(n as f64);
+                        b.op(Opcode::DivF64);
+                    });
+                }
+                if t == Elem::Real {
+                    self.op(Opcode::F64ToF32);
+                }
+            } else {
+                if n != 1 {
+                    self.emit(|b| {
+                        b.push_int(n);
+                        b.op(Opcode::DivS);
+                    });
+                }
+                let as_int = match t {
+                    Elem::Char => Elem::USInt,
+                    Elem::WChar => Elem::UInt,
+                    e => e,
+                };
+                self.wrap(as_int);
+            }
+            return;
+        }
+        if !f.is_temporal() {
+            let n = unit(t);
+            if f.is_real() {
+                if f == Elem::Real {
+                    self.op(Opcode::F32ToF64);
+                }
+                self.emit(|b| {
+                    b.push_f64(n as f64);
+                    b.op(Opcode::MulF64);
+                    b.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway);
+                });
+            } else if n != 1 {
+                self.emit(|b| {
+                    b.push_int(n);
+                    b.op(Opcode::Mul);
+                });
+            }
+        }
+        // Into the day: a DATE is a midnight, a TOD a time within its day.
+        match t.temporal_family() {
+            Some(Elem::Date) if f.temporal_family() != Some(Elem::Date) => {
+                self.emit(|b| b.call_builtin(Builtin::DateOf))
+            }
+            Some(Elem::Tod) if f.temporal_family() != Some(Elem::Tod) => {
+                self.emit(|b| b.call_builtin(Builtin::TodOf))
+            }
+            _ => {}
         }
     }
 
@@ -1607,6 +1676,26 @@ impl<'a> Gen<'a> {
             ExprKind::Time(t) => {
                 self.push_int(*t as i64);
                 Type::TIME
+            }
+            ExprKind::Temporal(elem, t) => {
+                self.push_int(*t as i64);
+                Type::Elem(*elem)
+            }
+            // A one-character string literal where a CHAR or WCHAR is expected.
+            ExprKind::Str(s)
+                if expected
+                    .and_then(|t| t.elem())
+                    .is_some_and(|e| e.is_char() && !matches!(expected, Some(Type::Enum(_))))
+                    && crate::sema::single_char(s).is_some() =>
+            {
+                let elem = expected.and_then(|t| t.elem()).unwrap_or(Elem::Char);
+                let code = crate::sema::single_char(s).unwrap_or(0);
+                if code > elem.int_range().1 {
+                    let msg = format!("character '{s}' does not fit type {elem}");
+                    self.error(e.span, msg);
+                }
+                self.push_int(code as i64);
+                Type::Elem(elem)
             }
             ExprKind::Str(s) => {
                 let a = self.string_literal(s);
@@ -1665,6 +1754,11 @@ impl<'a> Gen<'a> {
             t => t.elem(),
         });
         match exp_elem {
+            // IEC boolean literals include 0 and 1.
+            Some(Elem::Bool) if v == 0 || v == 1 => {
+                self.push_int(v as i64);
+                Type::BOOL
+            }
             Some(e) if e.is_real() => {
                 if e == Elem::Real {
                     self.emit(|b| b.push_f32(v as f32));
@@ -1786,7 +1880,7 @@ impl<'a> Gen<'a> {
             UnOp::Neg => match e {
                 Elem::Real => self.op(Opcode::NegF32),
                 Elem::LReal => self.op(Opcode::NegF64),
-                e if e.is_signed_int() || e == Elem::Time => {
+                e if e.is_signed_int() || e.is_duration() => {
                     self.op(Opcode::Neg);
                     self.wrap(e);
                 }
@@ -1860,7 +1954,7 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn binary(
+    pub(crate) fn binary(
         &mut self,
         op: BinOp,
         a: &Expr,
@@ -1916,56 +2010,18 @@ impl<'a> Gen<'a> {
         let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else {
             return mismatch(self);
         };
-        // TIME arithmetic.
-        if ea == Elem::Time || eb == Elem::Time {
-            let result = match op {
-                _ if is_cmp && ea == eb => Type::BOOL,
-                BinOp::Add | BinOp::Sub if ea == eb => Type::TIME,
-                BinOp::Mul
-                    if ea == Elem::Time && eb.is_integral()
-                        || eb == Elem::Time && ea.is_integral() =>
-                {
-                    Type::TIME
-                }
-                BinOp::Div if ea == Elem::Time && eb.is_integral() => Type::TIME,
-                BinOp::Mul | BinOp::Div if ea == Elem::Time && eb.is_real() => Type::TIME,
-                _ => return mismatch(self),
-            };
-            if eb.is_real() {
-                // TIME * REAL: computed in LREAL nanoseconds.
-                self.expr(a, Some(&ta));
-                self.op(Opcode::IToF64S);
-                self.value_to(b, &Type::LREAL);
-                self.op(if op == BinOp::Mul {
-                    Opcode::MulF64
-                } else {
-                    Opcode::DivF64
-                });
-                self.emit(|bb| {
-                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
-                });
-                return result;
+        if ea.is_temporal() || eb.is_temporal() {
+            return self.temporal_binary(op, (a, &ta, ea), (b, &tb, eb), span);
+        }
+        // Characters: comparisons within CHAR/WCHAR.
+        if ea.is_char() || eb.is_char() {
+            if !(is_cmp && ea.is_char() && eb.is_char()) {
+                return mismatch(self);
             }
-            let sa = if ea == Elem::Time {
-                ta.clone()
-            } else {
-                Type::LINT
-            };
-            let sb = if eb == Elem::Time {
-                tb.clone()
-            } else {
-                Type::LINT
-            };
-            self.value_to_any(a, &ta, &sa);
-            self.value_to_any(b, &tb, &sb);
-            self.op(match op {
-                BinOp::Add => Opcode::Add,
-                BinOp::Sub => Opcode::Sub,
-                BinOp::Mul => Opcode::Mul,
-                BinOp::Div => Opcode::DivS,
-                _ => cmp_op(op, true),
-            });
-            return result;
+            self.expr(a, Some(&ta));
+            self.expr(b, Some(&tb));
+            self.op(cmp_op(op, true));
+            return Type::BOOL;
         }
         // Booleans and bit strings: logic operators.
         if matches!(op, BinOp::And | BinOp::Or | BinOp::Xor) {
@@ -2097,6 +2153,145 @@ impl<'a> Gen<'a> {
             }
         }
         tt
+    }
+
+    /// Date and time arithmetic (IEC 61131-3 table of time operations): TIME +/- TIME,
+    /// TOD +/- TIME (wrapping within the day), DT +/- TIME, DATE - DATE, TOD - TOD, DT - DT
+    /// (giving TIME), TIME * and / numbers, comparisons within one family. The long forms
+    /// follow the same rules; an operation with a long operand gives the long result.
+    fn temporal_binary(
+        &mut self,
+        op: BinOp,
+        (a, ta, ea): (&Expr, &Type, Elem),
+        (b, tb, eb): (&Expr, &Type, Elem),
+        span: Span,
+    ) -> Type {
+        // A literal factor is a number, not a duration (`T#1s * 2`).
+        let literal_type = |e: &Expr| {
+            if Self::has_real_literal(e) {
+                Type::LREAL
+            } else {
+                Type::LINT
+            }
+        };
+        let (ta, ea) = if Self::is_flexible(a) && matches!(op, BinOp::Mul) {
+            let t = literal_type(a);
+            let e = t.elem().unwrap_or(Elem::LInt);
+            (&t.clone(), e)
+        } else {
+            (ta, ea)
+        };
+        let (tb, eb) = if Self::is_flexible(b) && matches!(op, BinOp::Mul | BinOp::Div) {
+            let t = literal_type(b);
+            let e = t.elem().unwrap_or(Elem::LInt);
+            (&t.clone(), e)
+        } else {
+            (tb, eb)
+        };
+        let fa = ea.temporal_family();
+        let fb = eb.temporal_family();
+        let long = ea.is_long_temporal() || eb.is_long_temporal();
+        let pick = |short: Elem| -> Elem {
+            match (short, long) {
+                (Elem::Time, true) => Elem::LTime,
+                (Elem::Tod, true) => Elem::LTod,
+                (Elem::Dt, true) => Elem::LDt,
+                (Elem::Date, true) => Elem::LDate,
+                (e, _) => e,
+            }
+        };
+        let is_cmp = matches!(
+            op,
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+        );
+        let time = Some(Elem::Time);
+        // (result, whether a TOD result wraps into its day)
+        let result = match op {
+            _ if is_cmp && fa == fb => Some((Elem::Bool, false)),
+            BinOp::Add if fa == time && fb == time => Some((pick(Elem::Time), false)),
+            BinOp::Add
+                if fa == Some(Elem::Tod) && fb == time || fa == time && fb == Some(Elem::Tod) =>
+            {
+                Some((pick(Elem::Tod), true))
+            }
+            BinOp::Add
+                if fa == Some(Elem::Dt) && fb == time || fa == time && fb == Some(Elem::Dt) =>
+            {
+                Some((pick(Elem::Dt), false))
+            }
+            BinOp::Sub if fa == fb && fa != Some(Elem::Dt) && fa != Some(Elem::Tod) => {
+                // TIME - TIME, DATE - DATE
+                Some((pick(Elem::Time), false))
+            }
+            BinOp::Sub if fa == fb => Some((pick(Elem::Time), false)),
+            BinOp::Sub if fa == Some(Elem::Tod) && fb == time => Some((pick(Elem::Tod), true)),
+            BinOp::Sub if fa == Some(Elem::Dt) && fb == time => Some((pick(Elem::Dt), false)),
+            BinOp::Mul | BinOp::Div
+                if fa == time && eb.is_numeric()
+                    || op == BinOp::Mul && fb == time && ea.is_numeric() =>
+            {
+                Some((if fa == time { ea } else { eb }, false))
+            }
+            _ => None,
+        };
+        let Some((result, wraps)) = result else {
+            let hint = match (op, fa, fb) {
+                (BinOp::Add | BinOp::Sub, Some(Elem::Date), Some(Elem::Time)) => {
+                    " (a DATE is a day: use DATE_TO_DT or CONCAT_DATE_TOD for a point in time)"
+                }
+                (BinOp::Add, Some(x), Some(y)) if x == y && x != Elem::Time => {
+                    " (two points in time cannot be added; subtract them for a TIME)"
+                }
+                _ => "",
+            };
+            let msg = format!(
+                "operator {} cannot be applied to {} and {}{hint}",
+                op.symbol(),
+                self.tname(ta),
+                self.tname(tb)
+            );
+            self.error(span, msg);
+            return Type::Error;
+        };
+        if matches!(op, BinOp::Mul | BinOp::Div) {
+            let (duration, number, number_type) = if fa == time { (a, b, tb) } else { (b, a, ta) };
+            let duration_type = Type::Elem(result);
+            if number_type.elem().is_some_and(|e| e.is_real()) {
+                // TIME * REAL: computed in LREAL nanoseconds, rounded.
+                self.value_to_any(duration, &duration_type, &duration_type);
+                self.op(Opcode::IToF64S);
+                self.value_to_any(number, number_type, &Type::LREAL);
+                self.op(if op == BinOp::Mul {
+                    Opcode::MulF64
+                } else {
+                    Opcode::DivF64
+                });
+                self.emit(|bb| {
+                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
+                });
+            } else {
+                self.value_to_any(duration, &duration_type, &duration_type);
+                self.value_to_any(number, number_type, &Type::LINT);
+                self.op(if op == BinOp::Mul {
+                    Opcode::Mul
+                } else {
+                    Opcode::DivS
+                });
+            }
+            return Type::Elem(result);
+        }
+        // The operands keep their nanoseconds (TIME widens to LTIME implicitly).
+        self.value_to_any(a, ta, ta);
+        self.value_to_any(b, tb, tb);
+        self.op(match op {
+            BinOp::Add => Opcode::Add,
+            BinOp::Sub => Opcode::Sub,
+            _ => cmp_op(op, true),
+        });
+        if wraps {
+            self.emit(|bb| bb.call_builtin(Builtin::TodOf));
+        }
+        Type::Elem(result)
     }
 
     /// Compiles `e` (whose type was inferred as `from`) and converts to `to` without the

@@ -12,7 +12,9 @@ use crate::lexer::{Tok, Token};
 struct Fail;
 type PResult<T> = Result<T, Fail>;
 
-/// Words that cannot be used as identifiers.
+/// Words that cannot be used as identifiers. The words that only a CONFIGURATION uses
+/// (RESOURCE, TASK, WITH, ON) are not among them: CODESYS code names variables `ON` or
+/// `TASK`.
 const RESERVED: &[&str] = &[
     "PROGRAM",
     "END_PROGRAM",
@@ -64,11 +66,6 @@ const RESERVED: &[&str] = &[
     "FALSE",
     "CONFIGURATION",
     "END_CONFIGURATION",
-    "RESOURCE",
-    "END_RESOURCE",
-    "TASK",
-    "WITH",
-    "ON",
     "__TRY",
     "__CATCH",
     "__FINALLY",
@@ -160,6 +157,7 @@ fn describe(t: &Tok) -> String {
         Tok::Int(v) => format!("number `{v}`"),
         Tok::Real(v) => format!("number `{v}`"),
         Tok::Time(_) => "duration literal".into(),
+        Tok::Temporal(e, _) => format!("{e} literal"),
         Tok::Str(_) => "string literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
@@ -1307,6 +1305,7 @@ impl Parser<'_> {
             Tok::Int(v) => ExprKind::Int(v),
             Tok::Real(v) => ExprKind::Real(v),
             Tok::Time(v) => ExprKind::Time(v),
+            Tok::Temporal(e, v) => ExprKind::Temporal(e, v),
             Tok::Str(s) => ExprKind::Str(s),
             Tok::LParen => {
                 self.bump();

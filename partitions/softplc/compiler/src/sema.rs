@@ -121,6 +121,8 @@ pub enum ConstVal {
     Real(f64),
     Bool(bool),
     Time(i128),
+    /// A date/time value other than TIME: its type and nanoseconds.
+    Temporal(Elem, i128),
     Str(String),
 }
 
@@ -287,6 +289,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         ExprKind::Real(v) => Real(*v),
         ExprKind::Bool(b) => Bool(*b),
         ExprKind::Time(t) => Time(*t),
+        ExprKind::Temporal(e, t) => Temporal(*e, *t),
         ExprKind::Str(s) => Str(s.clone()),
         ExprKind::Typed(ty, inner) => {
             if let Some(elem) = Elem::from_name(&ty.name) {
@@ -294,6 +297,8 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                 match (v, elem) {
                     (Int(i), e) if e.is_real() => Real(i as f64),
                     (Int(i), Elem::Bool) => Bool(i != 0),
+                    // `CHAR#'a'`: the character's code.
+                    (Str(s), e) if e.is_char() => Int(single_char(&s)?),
                     (v, _) => v,
                 }
             } else if let ExprKind::Name(n) = &inner.kind {
@@ -325,6 +330,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
             Int(i) => Int(-i),
             Real(r) => Real(-r),
             Time(t) => Time(-t),
+            Temporal(Elem::LTime, t) => Temporal(Elem::LTime, -t),
             _ => return None,
         },
         ExprKind::Unary(UnOp::Not, x) => match const_eval(prog, scope, x)? {
@@ -365,6 +371,11 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                     BinOp::Sub => Time(x.checked_sub(y)?),
                     _ => return None,
                 },
+                (Temporal(Elem::LTime, x), Temporal(Elem::LTime, y)) => match op {
+                    BinOp::Add => Temporal(Elem::LTime, x.checked_add(y)?),
+                    BinOp::Sub => Temporal(Elem::LTime, x.checked_sub(y)?),
+                    _ => return None,
+                },
                 (Bool(x), Bool(y)) => match op {
                     BinOp::And => Bool(x & y),
                     BinOp::Or => Bool(x | y),
@@ -376,6 +387,13 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         }
         _ => return None,
     })
+}
+
+/// The code of a one-character string (`CHAR#'a'`, `WCHAR#"ä"`).
+pub fn single_char(s: &str) -> Option<i128> {
+    let mut chars = s.chars();
+    let c = chars.next()?;
+    chars.next().is_none().then_some(c as i128)
 }
 
 /// Local constants of a POU being declared (for bounds like `ARRAY[1..N]` with a VAR CONSTANT N).
@@ -603,8 +621,7 @@ impl Sema<'_> {
                 match id.name.as_str() {
                     "STRING" => return Type::String(DEFAULT_STRING_LEN),
                     "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" | "LTIME" | "DATE" | "TIME_OF_DAY" | "TOD" | "DATE_AND_TIME"
-                    | "DT" | "CHAR" | "WCHAR" => {
+                    "WSTRING" => {
                         self.diags
                             .error(id.span, format!("type `{}` is not supported", id.text));
                         return Type::Error;
@@ -750,6 +767,27 @@ impl Sema<'_> {
                 retain: false,
             });
         }
+        // The POU's CONSTANTs may size arrays declared before them.
+        let constants: Vec<VarDef> = ast
+            .var_blocks
+            .iter()
+            .filter(|b| b.constant)
+            .flat_map(|b| &b.decls)
+            .flat_map(|d| {
+                d.names.iter().map(|n| VarDef {
+                    name: n.name.clone(),
+                    text: n.text.clone(),
+                    span: n.span,
+                    ty: Type::Error,
+                    offset: 0,
+                    kind: VarKind::Local,
+                    constant: true,
+                    init: d.init.clone(),
+                    location: None,
+                    retain: false,
+                })
+            })
+            .collect();
         for block in &ast.var_blocks {
             let allowed = match kind {
                 PouKind::Program => !matches!(block.kind, VarKind::InOut),
@@ -769,7 +807,7 @@ impl Sema<'_> {
             }
             for d in &block.decls {
                 self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
-                let ty = self.resolve_type(&d.ty, &vars);
+                let ty = self.resolve_type(&d.ty, &constants);
                 if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
                     self.diags.error(
                         d.ty.span(),
