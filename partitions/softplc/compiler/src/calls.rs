@@ -194,6 +194,7 @@ impl Gen<'_> {
                     loc,
                     ty: Type::Elem(Elem::UDInt),
                     writable: true,
+                    window: None,
                 };
                 self.store_checked(&p);
             } else {
@@ -202,6 +203,7 @@ impl Gen<'_> {
                     loc,
                     ty: a.param.ty.clone(),
                     writable: true,
+                    window: None,
                 };
                 self.store_expr(&p, a.value, a.value.span);
             }
@@ -229,6 +231,7 @@ impl Gen<'_> {
                 loc: src,
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }
@@ -237,6 +240,14 @@ impl Gen<'_> {
     /// Pushes the address of an in-out argument (which must be a variable of the same type).
     fn inout_address(&mut self, e: &Expr, ty: &Type) {
         match self.place(e) {
+            Some(p) if p.window.is_some() => {
+                self.error(
+                    e.span,
+                    "a partial access (`x.3`, `x.%B1`) cannot be passed to a VAR_IN_OUT",
+                );
+                self.drop_place(&p);
+                self.emit(|b| b.push_i32(0));
+            }
             Some(p) => {
                 if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
                     let msg = format!(
@@ -405,6 +416,7 @@ impl Gen<'_> {
                 loc: Loc::Abs(frame + a.param.offset),
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }

@@ -34,6 +34,27 @@ pub(crate) struct Place {
     pub loc: Loc,
     pub ty: Type,
     pub writable: bool,
+    /// A partial access (`x.3`, `x.%B1`): the bits of the variable at `loc` this place is.
+    pub window: Option<Window>,
+}
+
+/// `width` bits starting at bit `shift` of an integer or bit-string variable of type
+/// `container`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Window {
+    pub shift: u32,
+    pub width: u32,
+    pub container: Elem,
+}
+
+impl Window {
+    fn mask(self) -> u64 {
+        if self.width >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << self.width) - 1
+        }
+    }
 }
 
 pub(crate) fn mem_type(e: Elem) -> MemType {
@@ -776,6 +797,10 @@ impl<'a> Gen<'a> {
     /// only valid for static places (`Abs`/`Rel`).
     fn store_top(&mut self, p: &Place) {
         let Some(e) = p.ty.elem() else { return };
+        if p.window.is_some() {
+            self.store_checked(p);
+            return;
+        }
         let mt = mem_type(e);
         match p.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
@@ -922,7 +947,7 @@ impl<'a> Gen<'a> {
             self.error(var.span, msg);
             return;
         };
-        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) {
+        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) || vp.window.is_some() {
             self.error(var.span, "FOR control variable must be a plain variable");
             return;
         }
@@ -1079,6 +1104,46 @@ impl<'a> Gen<'a> {
 
     /// Stores the elementary value on top of the stack into `p`, checking subranges.
     pub(crate) fn store_checked(&mut self, p: &Place) {
+        if let Some(w) = p.window {
+            // Read, modify, write the variable: (old AND NOT m) OR (v << shift).
+            let mt = mem_type(w.container);
+            let keep = !(w.mask() << w.shift) as i64;
+            self.emit(|b| {
+                if w.width < 64 {
+                    b.push_int(w.mask() as i64);
+                    b.op(Opcode::And);
+                }
+                if w.shift != 0 {
+                    b.push_i32(w.shift as i32);
+                    b.op(Opcode::Shl);
+                }
+            });
+            match p.loc {
+                Loc::Abs(a) => self.emit(|b| {
+                    b.ld_abs(mt, a);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_abs(mt, a);
+                }),
+                Loc::Rel(o) => self.emit(|b| {
+                    b.ld_rel(mt, o);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_rel(mt, o);
+                }),
+                Loc::Ind(o) => self.emit(|b| {
+                    b.over();
+                    b.ld_ind(mt, o);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_ind(mt, o);
+                }),
+            }
+            return;
+        }
         if let Type::Subrange(e, lo, hi) = p.ty {
             if e.signed_storage() || e.size() < 8 {
                 self.emit(|b| b.chk_range_s(lo, hi));
@@ -1120,6 +1185,7 @@ impl<'a> Gen<'a> {
                             loc: offset_loc(bp.loc, mem.offset),
                             ty: mem.ty,
                             writable: bp.writable,
+                            window: None,
                         })
                     }
                     Type::Fb(pi) => {
@@ -1133,6 +1199,7 @@ impl<'a> Gen<'a> {
                                     loc: offset_loc(bp.loc, v.offset),
                                     ty: v.ty,
                                     writable,
+                                    window: None,
                                 })
                             }
                             Some(_) => {
@@ -1227,6 +1294,7 @@ impl<'a> Gen<'a> {
                         loc: offset_loc(bp.loc, static_off as u32),
                         ty: arr.elem.clone(),
                         writable: bp.writable,
+                        window: None,
                     });
                 }
                 let base_off = match bp.loc {
@@ -1271,8 +1339,10 @@ impl<'a> Gen<'a> {
                     loc: Loc::Ind(base_off + static_off as u32),
                     ty: arr.elem.clone(),
                     writable: bp.writable,
+                    window: None,
                 })
             }
+            ExprKind::Bits { base, width, index } => self.partial_place(e, base, *width, *index),
             _ => {
                 self.error(e.span, "expected a variable");
                 None
@@ -1280,7 +1350,64 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn drop_place(&mut self, p: &Place) {
+    /// `base.N`, `base.%B1`, ...: the bits of an integer or bit-string variable (or of such
+    /// a partial access).
+    fn partial_place(&mut self, e: &Expr, base: &Expr, width: u8, index: u32) -> Option<Place> {
+        let bp = self.place(base)?;
+        let (container, outer_shift, bits) = match (&bp.ty, bp.window) {
+            (_, Some(w)) => (w.container, w.shift, w.width),
+            (Type::Elem(c), None) if c.is_integral() => (*c, 0, c.size() * 8),
+            (ty, None) => {
+                if !ty.is_error() {
+                    let msg = format!(
+                        "partial access `.{}` needs a bit string or integer variable, found {}",
+                        index,
+                        self.tname(ty)
+                    );
+                    self.error(e.span, msg);
+                }
+                self.drop_place(&bp);
+                return None;
+            }
+        };
+        let width = width as u32;
+        if (index as u64 + 1) * width as u64 > bits as u64 {
+            let unit = match width {
+                1 => "bit",
+                8 => "byte",
+                16 => "word",
+                32 => "double word",
+                _ => "long word",
+            };
+            let msg = format!(
+                "{unit} {index} is outside the variable ({} bits: {unit}s 0..{})",
+                bits,
+                (bits / width).saturating_sub(1)
+            );
+            self.error(e.span, msg);
+            self.drop_place(&bp);
+            return None;
+        }
+        let ty = match width {
+            1 => Type::BOOL,
+            8 => Type::Elem(Elem::Byte),
+            16 => Type::Elem(Elem::Word),
+            32 => Type::Elem(Elem::DWord),
+            _ => Type::Elem(Elem::LWord),
+        };
+        Some(Place {
+            loc: bp.loc,
+            ty,
+            writable: bp.writable,
+            window: Some(Window {
+                shift: outer_shift + index * width,
+                width,
+                container,
+            }),
+        })
+    }
+
+    pub(crate) fn drop_place(&mut self, p: &Place) {
         if matches!(p.loc, Loc::Ind(_)) {
             self.op(Opcode::Drop);
         }
@@ -1305,6 +1432,7 @@ impl<'a> Gen<'a> {
                             loc: Loc::Abs(g.offset),
                             ty: g.ty.clone(),
                             writable: !g.constant && !v.constant,
+                            window: None,
                         })
                     }
                     None => {
@@ -1319,12 +1447,14 @@ impl<'a> Gen<'a> {
                         loc: Loc::Ind(0),
                         ty: v.ty,
                         writable: true,
+                        window: None,
                     })
                 }
                 _ => Some(Place {
                     loc: Loc::Rel(v.offset),
                     ty: v.ty,
                     writable: !v.constant,
+                    window: None,
                 }),
             };
         }
@@ -1333,6 +1463,7 @@ impl<'a> Gen<'a> {
                 loc: Loc::Abs(g.offset),
                 ty: g.ty.clone(),
                 writable: !g.constant,
+                window: None,
             });
         }
         let msg = format!("unknown variable `{}`", n.text);
@@ -1355,6 +1486,25 @@ impl<'a> Gen<'a> {
 
     /// Pushes the value of a place (elementary) or its address (aggregate).
     pub(crate) fn load(&mut self, p: &Place) {
+        if let Some(w) = p.window {
+            let mt = mem_type(w.container);
+            match p.loc {
+                Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
+                Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
+                Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
+            }
+            self.emit(|b| {
+                if w.shift != 0 {
+                    b.push_i32(w.shift as i32);
+                    b.op(Opcode::ShrU);
+                }
+                if w.width < 64 {
+                    b.push_int(w.mask() as i64);
+                    b.op(Opcode::And);
+                }
+            });
+            return;
+        }
         match p.ty.elem() {
             Some(e) => {
                 let mt = mem_type(e);
@@ -1735,13 +1885,15 @@ impl<'a> Gen<'a> {
                     None => Type::Error,
                 }
             }
-            ExprKind::Member(..) | ExprKind::Index(..) => match self.place(e) {
-                Some(p) => {
-                    self.load(&p);
-                    p.ty
+            ExprKind::Member(..) | ExprKind::Index(..) | ExprKind::Bits { .. } => {
+                match self.place(e) {
+                    Some(p) => {
+                        self.load(&p);
+                        p.ty
+                    }
+                    None => Type::Error,
                 }
-                None => Type::Error,
-            },
+            }
             ExprKind::Call { callee, args } => self.call(callee, args, expected, e.span),
             ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),

@@ -1225,6 +1225,18 @@ impl Parser<'_> {
         loop {
             if matches!(self.tok(), Tok::Dot) {
                 self.bump();
+                if let Some((width, index)) = self.partial_access()? {
+                    let span = e.span.to(self.prev_span());
+                    e = Expr {
+                        kind: ExprKind::Bits {
+                            base: Box::new(e),
+                            width,
+                            index,
+                        },
+                        span,
+                    };
+                    continue;
+                }
                 let member = self.ident()?;
                 let span = e.span.to(member.span);
                 e = Expr {
@@ -1272,6 +1284,38 @@ impl Parser<'_> {
                 return Ok(e);
             }
         }
+    }
+
+    /// After a `.`: a partial access `N` (bit N) or `%X3`, `%B1`, `%W0`, `%D1`, `%L0`, as
+    /// (width in bits, index); `None` when a member name follows instead.
+    fn partial_access(&mut self) -> PResult<Option<(u8, u32)>> {
+        let (width, index) = match self.tok().clone() {
+            Tok::Int(n) => (1, n),
+            Tok::Direct(text) => {
+                let width = match text.as_bytes().first() {
+                    Some(b'X') => 1,
+                    Some(b'B') => 8,
+                    Some(b'W') => 16,
+                    Some(b'D') => 32,
+                    Some(b'L') => 64,
+                    _ => 0,
+                };
+                match text[1..].parse::<u128>() {
+                    Ok(n) if width != 0 => (width, n),
+                    _ => {
+                        return Err(self.error_here(
+                            "a partial access such as `%X3`, `%B1`, `%W0`, `%D1` or `%L0`",
+                        ));
+                    }
+                }
+            }
+            _ => return Ok(None),
+        };
+        let Ok(index) = u32::try_from(index) else {
+            return Err(self.error_here("a bit number that fits the variable"));
+        };
+        self.bump();
+        Ok(Some((width, index)))
     }
 
     fn arg(&mut self) -> PResult<Arg> {
