@@ -87,11 +87,7 @@ impl Gen<'_> {
             let param = match &a.name {
                 Some(n) => {
                     named_seen = true;
-                    let v = self.prog.pous[pi]
-                        .vars
-                        .iter()
-                        .find(|v| v.name == n.name)
-                        .cloned();
+                    let v = self.prog.pous[pi].param(&n.name).cloned();
                     match v {
                         Some(v)
                             if a.output

@@ -1190,7 +1190,7 @@ impl<'a> Gen<'a> {
                     }
                     Type::Fb(pi) => {
                         let pi = *pi;
-                        let v = self.prog.pous[pi].var(&m.name).cloned();
+                        let v = self.prog.pous[pi].param(&m.name).cloned();
                         match v {
                             Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
                                 // Outputs are read-only from outside; inputs may be set before a call.
@@ -1538,6 +1538,10 @@ impl<'a> Gen<'a> {
     pub(crate) fn is_flexible(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Int(_) | ExprKind::Real(_) => true,
+            // TRUNC and SIZEOF give any integer type (IEC: ANY_INT), whatever their argument.
+            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
+                true
+            }
             // Numeric standard functions of literals are as untyped as the literals.
             ExprKind::Call { callee, args } => match &callee.kind {
                 ExprKind::Name(n) => {
@@ -1569,6 +1573,9 @@ impl<'a> Gen<'a> {
     pub(crate) fn has_real_literal(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Real(_) => true,
+            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
+                false
+            }
             ExprKind::Call { callee, args } => {
                 matches!(&callee.kind, ExprKind::Name(n) if !["ABS", "MAX", "MIN", "LIMIT"].contains(&n.name.as_str()))
                     || args.iter().any(|a| Self::has_real_literal(&a.value))
@@ -2036,6 +2043,13 @@ impl<'a> Gen<'a> {
                     self.op(Opcode::Neg);
                     self.wrap(e);
                 }
+                // `-step` of a BYTE (CODESYS): the negated value in a signed integer
+                // twice as wide (which holds it).
+                e if (e.is_unsigned_int() || e.is_bits()) && e.size() < 8 => {
+                    let signed = signed_of_size(e.size() * 2);
+                    self.op(Opcode::Neg);
+                    return Type::Elem(signed);
+                }
                 _ => {
                     let msg = format!("operator - cannot be applied to {e}");
                     self.error(span, msg);
@@ -2064,24 +2078,53 @@ impl<'a> Gen<'a> {
         let fb = Self::is_flexible(b);
         let ta = if fa { None } else { Some(self.infer(a)) };
         let tb = if fb { None } else { Some(self.infer(b)) };
-        let flex_type = |other: &Type, e: &Expr| -> Type {
+        // Only a plain literal: arithmetic of literals keeps wrapping in the other operand's
+        // type as it always did.
+        let int_value = |e: &Expr| match &e.kind {
+            ExprKind::Int(v) => Some(*v as i128),
+            ExprKind::Unary(UnOp::Neg, x) => match x.kind {
+                ExprKind::Int(v) => Some(-(v as i128)),
+                _ => None,
+            },
+            _ => None,
+        };
+        let (va, vb) = (int_value(a), int_value(b));
+        // An integer literal takes the other operand's type, or a wider one when it does not
+        // fit it (`int_var * 60000` is a DINT product, as the literal is a DINT).
+        let flex_type = |other: &Type, e: &Expr, value: Option<i128>| -> Type {
             if Self::has_real_literal(e) {
-                match other.elem() {
+                return match other.elem() {
                     Some(x) if x.is_real() => other.clone(),
                     _ => Type::LREAL,
+                };
+            }
+            match (other, value) {
+                (Type::Elem(x), Some(v)) if x.is_integral() => {
+                    let (lo, hi) = x.int_range();
+                    if lo <= v && v <= hi {
+                        return other.clone();
+                    }
+                    let literal = if i32::try_from(v).is_ok() {
+                        Elem::DInt
+                    } else {
+                        Elem::LInt
+                    };
+                    match common_numeric(*x, literal) {
+                        Some(c) if c.int_range().0 <= v && v <= c.int_range().1 => Type::Elem(c),
+                        _ => other.clone(),
+                    }
                 }
-            } else {
-                other.clone()
+                _ => other.clone(),
             }
         };
         match (ta, tb) {
             (Some(x), Some(y)) => (x, y),
             (Some(x), None) => {
-                let y = flex_type(&x, b);
+                let y = flex_type(&x, b, vb);
                 (x, y)
             }
             (None, Some(y)) => {
-                let x = flex_type(&y, a);
+                let x = flex_type(&y, a, va);
                 (x, y)
             }
             (None, None) => {

@@ -83,6 +83,19 @@ impl PouDef {
         self.vars.iter().find(|v| v.name == name)
     }
 
+    /// A parameter by name as a caller writes it: the standard counters (CTU, CTD, CTUD)
+    /// also take CODESYS's names RESET for R and LOAD for LD.
+    pub fn param(&self, name: &str) -> Option<&VarDef> {
+        self.var(name).or_else(|| {
+            let alias = match (self.builtin, name) {
+                (true, "RESET") => "R",
+                (true, "LOAD") => "LD",
+                _ => return None,
+            };
+            self.var(alias)
+        })
+    }
+
     /// Positional parameters (inputs, then in-outs, then outputs in declaration order is what
     /// IEC prescribes for non-formal calls; we use declaration order of inputs and in-outs).
     pub fn params(&self) -> impl Iterator<Item = &VarDef> {

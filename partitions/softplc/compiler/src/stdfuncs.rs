@@ -49,9 +49,26 @@ impl Gen<'_> {
             "SQRT", "LN", "LOG", "EXP", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "EXPT", "ABS",
             "TRUNC", "__NOW", "MOVE", "SEL", "MAX", "MIN", "LIMIT", "MUX", "SHL", "SHR", "ROL",
             "ROR", "LEN", "LEFT", "RIGHT", "MID", "DELETE", "INSERT", "REPLACE", "FIND", "CONCAT",
-            "ATAN2", "TIME", "LTIME",
+            "ATAN2", "TIME", "LTIME", "SIZEOF",
         ];
-        NAMES.contains(&name) || name.contains("_TO_") || Self::time_function(name).is_some()
+        NAMES.contains(&name)
+            || name.contains("_TO_")
+            || name.starts_with("TO_")
+            || Self::time_function(name).is_some()
+            || Self::typed_trunc(name).is_some()
+    }
+
+    /// `TRUNC_INT` and `REAL_TRUNC_INT`-style forms: (argument type if given, result type).
+    fn typed_trunc(name: &str) -> Option<(Option<Elem>, Elem)> {
+        let (from, to) = match name.split_once("TRUNC_")? {
+            ("", to) => (None, to),
+            (from, to) => (Some(Elem::from_name(from.strip_suffix('_')?)?), to),
+        };
+        let to = Elem::from_name(to).filter(|e| e.is_integral())?;
+        match from {
+            Some(f) if !f.is_real() => None,
+            f => Some((f, to)),
+        }
     }
 
     /// The date and time functions of IEC 61131-3 (3rd edition, tables 35 and 36).
@@ -117,15 +134,22 @@ impl Gen<'_> {
         if let Some(f) = Self::time_function(name) {
             return Some(self.std_time(f, id, args, expected, span));
         }
-        // Standard functions take their arguments in order; formal names are accepted but
-        // not reordered.
+        if name == "SIZEOF" {
+            return Some(self.std_sizeof(id, args, expected, span));
+        }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
         }
+        if let Some(target) = name.strip_prefix("TO_") {
+            return self.generic_conversion(target, id, args, span);
+        }
+        let Some(exprs) = self.std_arguments(name, id, args) else {
+            return Some(Type::Error);
+        };
         let c = StdArgs {
             name,
             id,
-            exprs: args.iter().map(|a| &a.value).collect(),
+            exprs,
             ctx,
             span,
         };
@@ -134,12 +158,166 @@ impl Gen<'_> {
             | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => {
                 self.std_numeric(&c)
             }
+            _ if Self::typed_trunc(name).is_some() => self.std_numeric(&c),
             "MOVE" | "SEL" | "MAX" | "MIN" | "LIMIT" | "MUX" => self.std_selection(&c),
             "SHL" | "SHR" | "ROL" | "ROR" => self.std_bits(&c),
             "LEN" | "LEFT" | "RIGHT" | "MID" | "DELETE" | "INSERT" | "REPLACE" | "FIND"
             | "CONCAT" => self.std_string(&c),
             _ => self.conversion(name, id, &c.exprs, span),
         }
+    }
+
+    /// The formal input names of a standard function called with `count` arguments
+    /// (IEC 61131-3: `IN`, `IN1`.., `G`, `K`, `MN`, `MX`, `N`, `L`, `P`, `YEAR`, ...).
+    fn std_formals(name: &str, count: usize) -> Vec<String> {
+        let numbered = |first: usize, n: usize| (first..first + n).map(|i| format!("IN{i}"));
+        let fixed: &[&str] = match name {
+            "MAX" | "MIN" | "CONCAT" => return numbered(1, count).collect(),
+            "MUX" => {
+                return std::iter::once("K".to_string())
+                    .chain(numbered(0, count.saturating_sub(1)))
+                    .collect();
+            }
+            "EXPT" | "ATAN2" | "FIND" => &["IN1", "IN2"],
+            "SEL" => &["G", "IN0", "IN1"],
+            "LIMIT" => &["MN", "IN", "MX"],
+            "SHL" | "SHR" | "ROL" | "ROR" => &["IN", "N"],
+            "LEFT" | "RIGHT" => &["IN", "L"],
+            "MID" | "DELETE" => &["IN", "L", "P"],
+            "INSERT" => &["IN1", "IN2", "P"],
+            "REPLACE" => &["IN1", "IN2", "L", "P"],
+            "CONCAT_DATE" => &["YEAR", "MONTH", "DAY"],
+            "CONCAT_TOD" | "CONCAT_LTOD" => &["HOUR", "MINUTE", "SECOND", "MILLISECOND"],
+            "CONCAT_DT" | "CONCAT_LDT" => &[
+                "YEAR",
+                "MONTH",
+                "DAY",
+                "HOUR",
+                "MINUTE",
+                "SECOND",
+                "MILLISECOND",
+            ],
+            _ if Self::time_function(name).is_some_and(|f| {
+                matches!(f, TimeFunction::Operator(..) | TimeFunction::DateTod(_))
+            }) =>
+            {
+                &["IN1", "IN2"]
+            }
+            _ => &["IN"],
+        };
+        fixed.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// The argument expressions of a standard function in the order of its inputs: the
+    /// positional ones first, the formal ones (`IN2 := x`) put in their place. `None` after
+    /// reporting a misplaced, unknown, repeated or missing one.
+    fn std_arguments<'e>(
+        &mut self,
+        name: &str,
+        id: &Ident,
+        args: &'e [Arg],
+    ) -> Option<Vec<&'e Expr>> {
+        let inputs: Vec<&Arg> = args.iter().filter(|a| !a.output).collect();
+        if inputs.iter().all(|a| a.name.is_none()) {
+            return Some(inputs.iter().map(|a| &a.value).collect());
+        }
+        let formals = Self::std_formals(name, inputs.len());
+        let mut slots: Vec<Option<&'e Expr>> = vec![None; formals.len().max(inputs.len())];
+        let mut ok = true;
+        let mut named_seen = false;
+        for (i, a) in inputs.iter().enumerate() {
+            let slot = match &a.name {
+                None if named_seen => {
+                    self.error(a.span, "positional arguments must come before named ones");
+                    ok = false;
+                    continue;
+                }
+                None => i,
+                Some(n) => {
+                    named_seen = true;
+                    match formals.iter().position(|f| *f == n.name) {
+                        Some(k) => k,
+                        None => {
+                            let msg = format!(
+                                "{} has no input `{}` (its inputs: {})",
+                                id.text,
+                                n.text,
+                                formals.join(", ")
+                            );
+                            self.error(n.span, msg);
+                            ok = false;
+                            continue;
+                        }
+                    }
+                }
+            };
+            if slots[slot].is_some() {
+                let msg = format!(
+                    "input `{}` given twice",
+                    formals.get(slot).map_or("?", |f| f)
+                );
+                self.error(a.span, msg);
+                ok = false;
+                continue;
+            }
+            slots[slot] = Some(&a.value);
+        }
+        let given = slots
+            .iter()
+            .rposition(Option::is_some)
+            .map_or(0, |last| last + 1);
+        if let Some(missing) = slots[..given].iter().position(Option::is_none) {
+            let msg = format!(
+                "{} needs its input `{}`",
+                id.text,
+                formals.get(missing).map_or("?", |f| f)
+            );
+            self.error(id.span, msg);
+            ok = false;
+        }
+        if !ok {
+            for a in args {
+                self.infer(&a.value);
+            }
+            return None;
+        }
+        Some(slots.into_iter().flatten().collect())
+    }
+
+    /// `TO_INT(x)`, `TO_STRING(x)`, ... (IEC 61131-3 3rd edition): the conversion from the
+    /// argument's type.
+    fn generic_conversion(
+        &mut self,
+        target: &str,
+        id: &Ident,
+        args: &[Arg],
+        span: Span,
+    ) -> Option<Type> {
+        if target != "STRING" && Elem::from_name(target).is_none() {
+            return None;
+        }
+        let inputs = self.std_arguments(&id.name, id, args)?;
+        let [arg] = inputs[..] else {
+            self.error(
+                span,
+                format!("{} takes 1 argument, {} given", id.text, inputs.len()),
+            );
+            return Some(Type::Error);
+        };
+        let source = match self.infer(arg) {
+            Type::Error => return Some(Type::Error),
+            Type::String(_) => "STRING".to_string(),
+            Type::Subrange(e, ..) => e.name().to_string(),
+            t @ Type::Elem(_) if !Self::is_flexible(arg) => self.tname(&t),
+            _ if Self::is_flexible(arg) && Self::has_real_literal(arg) => "LREAL".into(),
+            _ if Self::is_flexible(arg) => "LINT".into(),
+            t => return Some(self.bad_arg(arg, &t, "an elementary value")),
+        };
+        if source == target {
+            let t = self.expr(arg, None);
+            return Some(t);
+        }
+        self.conversion(&format!("{source}_TO_{target}"), id, &[arg], span)
     }
 
     /// Date and time functions (see [`TimeFunction`]).
@@ -157,7 +335,9 @@ impl Gen<'_> {
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
         }
-        let exprs: Vec<&Expr> = args.iter().map(|a| &a.value).collect();
+        let Some(exprs) = self.std_arguments(&id.name, id, args) else {
+            return Type::Error;
+        };
         let c = StdArgs {
             name: &id.name,
             id,
@@ -251,6 +431,67 @@ impl Gen<'_> {
             }
             TimeFunction::Split(_) => unreachable!("handled above"),
         }
+    }
+
+    /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the
+    /// integer type the context wants (UDINT without one).
+    fn std_sizeof(
+        &mut self,
+        id: &Ident,
+        args: &[Arg],
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
+        let [arg] = args else {
+            self.error(
+                span,
+                format!("{} takes 1 argument, {} given", id.text, args.len()),
+            );
+            return Type::Error;
+        };
+        let ty = match &arg.value.kind {
+            ExprKind::Name(n)
+                if self.prog.pous[self.cur].var(&n.name).is_none()
+                    && self.prog.global(&n.name).is_none() =>
+            {
+                match self.type_by_name(&n.name) {
+                    Some(t) => t,
+                    None => self.infer(&arg.value),
+                }
+            }
+            _ => self.infer(&arg.value),
+        };
+        if ty.is_error() {
+            // Report why (the dry inference reported nothing).
+            self.expr(&arg.value, None);
+            return Type::Error;
+        }
+        let size = self.prog.size_align(&ty).0 as i128;
+        let result = expected
+            .and_then(|t| t.elem())
+            .filter(|e| {
+                e.is_integral()
+                    && !matches!(expected, Some(Type::Enum(_)))
+                    && e.int_range().1 >= size
+            })
+            .unwrap_or(Elem::UDInt);
+        self.push_int(size as i64);
+        Type::Elem(result)
+    }
+
+    /// The data type called `name` (elementary, STRING, a TYPE or a function block).
+    fn type_by_name(&self, name: &str) -> Option<Type> {
+        if let Some(e) = Elem::from_name(name) {
+            return Some(Type::Elem(e));
+        }
+        if name == "STRING" {
+            return Some(Type::String(DEFAULT_STRING_LEN));
+        }
+        if let Some((t, _)) = self.prog.aliases.get(name) {
+            return Some(t.clone());
+        }
+        let &pi = self.prog.pou_by_name.get(name)?;
+        (self.prog.pous[pi].kind == PouKind::FunctionBlock).then_some(Type::Fb(pi))
     }
 
     /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),
@@ -401,7 +642,10 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref()) {
+                    Some(t) => t,
+                    None => return Some(Type::Error),
+                };
                 let single = rt == Elem::Real;
                 use Builtin::*;
                 let b = match (c.name, single) {
@@ -433,7 +677,10 @@ impl Gen<'_> {
                 if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref()) {
+                    Some(t) => t,
+                    None => return Some(Type::Error),
+                };
                 let t1 = self.infer(c.exprs[1]);
                 if !t1.elem().is_some_and(|e| e.is_numeric()) || matches!(t1, Type::Enum(_)) {
                     return Some(self.bad_arg(c.exprs[1], &t1, "a number"));
@@ -473,18 +720,48 @@ impl Gen<'_> {
                     t => t,
                 }
             }
-            "TRUNC" => {
+            // TRUNC gives the integer type the context wants (IEC: ANY_INT), else DINT;
+            // TRUNC_INT, REAL_TRUNC_INT, ... a fixed one. NUMERIC_ERROR when it does not fit.
+            name if name == "TRUNC" || Self::typed_trunc(name).is_some() => {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let (from, target) = match Self::typed_trunc(name) {
+                    Some(typed) => typed,
+                    None => (
+                        None,
+                        c.ctx
+                            .as_ref()
+                            .and_then(|t| t.elem())
+                            .filter(|e| e.is_integral())
+                            .unwrap_or(Elem::DInt),
+                    ),
+                };
+                let rt = match from {
+                    Some(f) => {
+                        let t = self.infer(c.exprs[0]);
+                        if !(t.elem().is_some_and(|e| implicit_ok(e, f))
+                            || Self::is_flexible(c.exprs[0]))
+                        {
+                            return Some(self.bad_arg(c.exprs[0], &t, &format!("a {f}")));
+                        }
+                        self.value_to(c.exprs[0], &Type::Elem(f));
+                        f
+                    }
+                    None => match self.real_operand(c.exprs[0], c.ctx.as_ref()) {
+                        Some(t) => t,
+                        None => return Some(Type::Error),
+                    },
+                };
                 let op = if rt == Elem::Real {
                     Opcode::F32ToInt
                 } else {
                     Opcode::F64ToInt
                 };
-                self.emit(|b| b.float_to_int(op, MemType::I32, RoundMode::Truncate));
-                Type::DINT
+                self.emit(|b| {
+                    b.float_to_int(op, crate::codegen::mem_type(target), RoundMode::Truncate)
+                });
+                Type::Elem(target)
             }
             // `TIME()` (CODESYS): the time since the PLC started, here the cycle time.
             "__NOW" | "TIME" | "LTIME" => {
