@@ -164,7 +164,9 @@ impl Lexer<'_> {
                 b'\'' => self.string(),
                 b'%' => {
                     self.pos += 1;
-                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' {
+                    // `%IX0.1` has dots; a partial access `x.%B1.%X2` ends at one.
+                    let partial = matches!(self.out.last().map(|t| &t.tok), Some(Tok::Dot));
+                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' && !partial {
                         self.pos += 1;
                     }
                     let text = self.text[start + 1..self.pos].to_ascii_uppercase();

@@ -1300,7 +1300,7 @@ impl Parser<'_> {
                     Some(b'L') => 64,
                     _ => 0,
                 };
-                match text[1..].parse::<u128>() {
+                match text.get(1..).unwrap_or("").parse::<u128>() {
                     Ok(n) if width != 0 => (width, n),
                     _ => {
                         return Err(self.error_here(
@@ -1453,6 +1453,48 @@ mod tests {
             panic!("{value:?}")
         };
         assert!(matches!(l.kind, ExprKind::Unary(UnOp::Neg, _)));
+    }
+
+    #[test]
+    fn partial_access_forms() {
+        let (u, d) = parse_src("PROGRAM P x.3 := x.%B1.%X2; END_PROGRAM");
+        assert!(d.is_empty(), "{d:?}");
+        let StmtKind::Assign { target, value } = &u.pous[0].body[0].kind else {
+            panic!()
+        };
+        assert!(matches!(
+            target.kind,
+            ExprKind::Bits {
+                width: 1,
+                index: 3,
+                ..
+            }
+        ));
+        let ExprKind::Bits {
+            base,
+            width: 1,
+            index: 2,
+        } = &value.kind
+        else {
+            panic!("{value:?}")
+        };
+        assert!(matches!(
+            base.kind,
+            ExprKind::Bits {
+                width: 8,
+                index: 1,
+                ..
+            }
+        ));
+        for bad in [
+            "x.% := 1;",
+            "x.%Q1 := 1;",
+            "x.%B := 1;",
+            "x.%X99999999999 := 1;",
+        ] {
+            let (_, d) = parse_src(&format!("PROGRAM P {bad} END_PROGRAM"));
+            assert_eq!(d.len(), 1, "{bad}: {d:?}");
+        }
     }
 
     #[test]

@@ -49,7 +49,7 @@ impl Gen<'_> {
             "SQRT", "LN", "LOG", "EXP", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "EXPT", "ABS",
             "TRUNC", "__NOW", "MOVE", "SEL", "MAX", "MIN", "LIMIT", "MUX", "SHL", "SHR", "ROL",
             "ROR", "LEN", "LEFT", "RIGHT", "MID", "DELETE", "INSERT", "REPLACE", "FIND", "CONCAT",
-            "ATAN2", "TIME", "LTIME", "SIZEOF",
+            "ATAN2", "TIME", "LTIME",
         ];
         NAMES.contains(&name)
             || name.contains("_TO_")
@@ -134,11 +134,9 @@ impl Gen<'_> {
         if let Some(f) = Self::time_function(name) {
             return Some(self.std_time(f, id, args, expected, span));
         }
-        if name == "SIZEOF" {
-            return Some(self.std_sizeof(id, args, expected, span));
-        }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
+            self.surface(&a.value);
         }
         if let Some(target) = name.strip_prefix("TO_") {
             return self.generic_conversion(target, id, args, span);
@@ -277,7 +275,7 @@ impl Gen<'_> {
         }
         if !ok {
             for a in args {
-                self.infer(&a.value);
+                self.surface(&a.value);
             }
             return None;
         }
@@ -302,16 +300,22 @@ impl Gen<'_> {
                 span,
                 format!("{} takes 1 argument, {} given", id.text, inputs.len()),
             );
+            for e in inputs {
+                self.surface(e);
+            }
             return Some(Type::Error);
         };
         let source = match self.infer(arg) {
-            Type::Error => return Some(Type::Error),
+            Type::Error => {
+                self.surface(arg);
+                return Some(Type::Error);
+            }
             Type::String(_) => "STRING".to_string(),
             Type::Subrange(e, ..) => e.name().to_string(),
             t @ Type::Elem(_) if !Self::is_flexible(arg) => self.tname(&t),
             _ if Self::is_flexible(arg) && Self::has_real_literal(arg) => "LREAL".into(),
             _ if Self::is_flexible(arg) => "LINT".into(),
-            t => return Some(self.bad_arg(arg, &t, "an elementary value")),
+            t => return Some(self.bad_inferred_arg(arg, &t, "an elementary value")),
         };
         if source == target {
             let t = self.expr(arg, None);
@@ -334,6 +338,7 @@ impl Gen<'_> {
         }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
+            self.surface(&a.value);
         }
         let Some(exprs) = self.std_arguments(&id.name, id, args) else {
             return Type::Error;
@@ -348,6 +353,16 @@ impl Gen<'_> {
         match f {
             TimeFunction::Operator(op, ta, tb) => {
                 if !self.arity(&c, 2) {
+                    return Type::Error;
+                }
+                let erroneous: Vec<&Expr> = c
+                    .exprs
+                    .iter()
+                    .copied()
+                    .filter(|e| self.infer(e).is_error())
+                    .collect();
+                if !erroneous.is_empty() {
+                    erroneous.iter().for_each(|e| self.surface(e));
                     return Type::Error;
                 }
                 for (e, want) in [(c.exprs[0], ta), (c.exprs[1], tb)] {
@@ -423,7 +438,7 @@ impl Gen<'_> {
                     .elem()
                     .is_some_and(|e| e.temporal_family() == Some(Elem::Date))
                 {
-                    return self.bad_arg(c.exprs[0], &t, "a DATE");
+                    return self.bad_inferred_arg(c.exprs[0], &t, "a DATE");
                 }
                 self.expr(c.exprs[0], None);
                 self.emit(|b| b.call_builtin(Builtin::DayOfWeek));
@@ -431,67 +446,6 @@ impl Gen<'_> {
             }
             TimeFunction::Split(_) => unreachable!("handled above"),
         }
-    }
-
-    /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the
-    /// integer type the context wants (UDINT without one).
-    fn std_sizeof(
-        &mut self,
-        id: &Ident,
-        args: &[Arg],
-        expected: Option<&Type>,
-        span: Span,
-    ) -> Type {
-        let [arg] = args else {
-            self.error(
-                span,
-                format!("{} takes 1 argument, {} given", id.text, args.len()),
-            );
-            return Type::Error;
-        };
-        let ty = match &arg.value.kind {
-            ExprKind::Name(n)
-                if self.prog.pous[self.cur].var(&n.name).is_none()
-                    && self.prog.global(&n.name).is_none() =>
-            {
-                match self.type_by_name(&n.name) {
-                    Some(t) => t,
-                    None => self.infer(&arg.value),
-                }
-            }
-            _ => self.infer(&arg.value),
-        };
-        if ty.is_error() {
-            // Report why (the dry inference reported nothing).
-            self.expr(&arg.value, None);
-            return Type::Error;
-        }
-        let size = self.prog.size_align(&ty).0 as i128;
-        let result = expected
-            .and_then(|t| t.elem())
-            .filter(|e| {
-                e.is_integral()
-                    && !matches!(expected, Some(Type::Enum(_)))
-                    && e.int_range().1 >= size
-            })
-            .unwrap_or(Elem::UDInt);
-        self.push_int(size as i64);
-        Type::Elem(result)
-    }
-
-    /// The data type called `name` (elementary, STRING, a TYPE or a function block).
-    fn type_by_name(&self, name: &str) -> Option<Type> {
-        if let Some(e) = Elem::from_name(name) {
-            return Some(Type::Elem(e));
-        }
-        if name == "STRING" {
-            return Some(Type::String(DEFAULT_STRING_LEN));
-        }
-        if let Some((t, _)) = self.prog.aliases.get(name) {
-            return Some(t.clone());
-        }
-        let &pi = self.prog.pou_by_name.get(name)?;
-        (self.prog.pous[pi].kind == PouKind::FunctionBlock).then_some(Type::Fb(pi))
     }
 
     /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),
@@ -533,14 +487,25 @@ impl Gen<'_> {
                 }
             }
         }
-        let Some(input) = input else {
-            self.error(span, format!("{} needs its input IN", id.text));
+        let input_type_ok = input
+            .map(|e| (e, self.infer(e)))
+            .filter(|(_, t)| t.elem().is_some_and(|e| e.temporal_family() == family));
+        let Some((input, _)) = input_type_ok else {
+            match input {
+                None => self.error(span, format!("{} needs its input IN", id.text)),
+                Some(e) => {
+                    let t = self.infer(e);
+                    self.bad_inferred_arg(e, &t, &format!("a {input_type}"));
+                }
+            }
+            // The outputs still say what is wrong with them.
+            for target in targets.into_iter().flatten() {
+                if let Some(p) = self.place(target) {
+                    self.drop_place(&p);
+                }
+            }
             return Type::Error;
         };
-        let t = self.infer(input);
-        if !t.elem().is_some_and(|e| e.temporal_family() == family) {
-            return self.bad_arg(input, &t, &format!("a {input_type}"));
-        }
         let value = self.temp_cell();
         self.expr(input, None);
         self.emit(|b| b.st_abs(MemType::I64, value));
@@ -630,7 +595,7 @@ impl Gen<'_> {
             ),
         );
         for e in &c.exprs {
-            self.infer(e);
+            self.surface(e);
         }
         false
     }
@@ -683,7 +648,7 @@ impl Gen<'_> {
                 };
                 let t1 = self.infer(c.exprs[1]);
                 if !t1.elem().is_some_and(|e| e.is_numeric()) || matches!(t1, Type::Enum(_)) {
-                    return Some(self.bad_arg(c.exprs[1], &t1, "a number"));
+                    return Some(self.bad_inferred_arg(c.exprs[1], &t1, "a number"));
                 }
                 self.value_to_any(c.exprs[1], &t1, &Type::Elem(rt));
                 let single = rt == Elem::Real;
@@ -743,7 +708,7 @@ impl Gen<'_> {
                         if !(t.elem().is_some_and(|e| implicit_ok(e, f))
                             || Self::is_flexible(c.exprs[0]))
                         {
-                            return Some(self.bad_arg(c.exprs[0], &t, &format!("a {f}")));
+                            return Some(self.bad_inferred_arg(c.exprs[0], &t, &format!("a {f}")));
                         }
                         self.value_to(c.exprs[0], &Type::Elem(f));
                         f
@@ -808,6 +773,7 @@ impl Gen<'_> {
             "MAX" | "MIN" => {
                 if c.exprs.len() < 2 {
                     self.error(c.span, format!("{} needs at least 2 arguments", c.id.text));
+                    c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
                 let t = self.common_of(&c.exprs, c.ctx.as_ref());
@@ -854,6 +820,7 @@ impl Gen<'_> {
             "MUX" => {
                 if c.exprs.len() < 2 {
                     self.error(c.span, "MUX needs a selector and at least one input");
+                    c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
                 let kt = self.expr(c.exprs[0], Some(&Type::DINT));
@@ -1063,6 +1030,23 @@ impl Gen<'_> {
         Type::Error
     }
 
+    /// [`Self::bad_arg`] for an argument so far only inferred: an erroneous one is compiled
+    /// for its own diagnostics.
+    fn bad_inferred_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
+        if t.is_error() {
+            self.surface(e);
+        }
+        self.bad_arg(e, t, what)
+    }
+
+    /// Compiles an expression whose inference failed, for the diagnostics saying why (the
+    /// code does not matter: the compilation fails).
+    fn surface(&mut self, e: &Expr) {
+        if !self.dry {
+            self.expr(e, None);
+        }
+    }
+
     /// Compiles a numeric argument of a REAL function: REAL stays REAL, an integer of up to
     /// 16 bits becomes REAL (which holds it exactly), everything else LREAL.
     fn real_operand(&mut self, e: &Expr, ctx: Option<&Type>) -> Option<Elem> {
@@ -1083,10 +1067,7 @@ impl Gen<'_> {
                 Some(target)
             }
             _ => {
-                if !t.is_error() {
-                    let msg = format!("expected a number, found {}", self.tname(&t));
-                    self.error(e.span, msg);
-                }
+                self.bad_inferred_arg(e, &t, "a number");
                 None
             }
         }
@@ -1101,6 +1082,7 @@ impl Gen<'_> {
             }
             let t = self.infer(e);
             if t.is_error() {
+                self.surface(e);
                 return Type::Error;
             }
             acc = Some(match acc {
@@ -1241,6 +1223,9 @@ impl Gen<'_> {
                 span,
                 format!("{} takes 1 argument, {} given", id.text, exprs.len()),
             );
+            for e in exprs {
+                self.surface(e);
+            }
             return Some(Type::Error);
         }
         let arg = exprs[0];
@@ -1333,6 +1318,7 @@ impl Gen<'_> {
                 }
                 let at = self.infer(arg);
                 if at.is_error() {
+                    self.surface(arg);
                     return Some(Type::Error);
                 }
                 let plain = !matches!(at, Type::Enum(_) | Type::Exception);
