@@ -159,6 +159,7 @@ fn describe(t: &Tok) -> String {
         Tok::Time(_) => "duration literal".into(),
         Tok::Temporal(e, _) => format!("{e} literal"),
         Tok::Str(_) => "string literal".into(),
+        Tok::WStr(_) => "WSTRING literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
         Tok::SharedAttribute(_) => "`{attribute 'shared'}`".into(),
@@ -658,7 +659,8 @@ impl Parser<'_> {
                 span: start.to(self.prev_span()),
             });
         }
-        if self.is_kw("STRING") {
+        if self.is_kw("STRING") || self.is_kw("WSTRING") {
+            let wide = self.is_kw("WSTRING");
             self.bump();
             let len = if self.eat(&Tok::LBracket) {
                 let e = self.expr()?;
@@ -671,7 +673,7 @@ impl Parser<'_> {
             } else {
                 None
             };
-            return Ok(TypeRef::String(len, start.to(self.prev_span())));
+            return Ok(TypeRef::String(len, start.to(self.prev_span()), wide));
         }
         let base = self.ident()?;
         if self.eat(&Tok::LParen) {
@@ -1351,6 +1353,7 @@ impl Parser<'_> {
             Tok::Time(v) => ExprKind::Time(v),
             Tok::Temporal(e, v) => ExprKind::Temporal(e, v),
             Tok::Str(s) => ExprKind::Str(s),
+            Tok::WStr(s) => ExprKind::WStr(s),
             Tok::LParen => {
                 self.bump();
                 let e = self.expr()?;
@@ -1380,6 +1383,10 @@ impl Parser<'_> {
                     },
                     Tok::Str(s) => Expr {
                         kind: ExprKind::Str(s),
+                        span: vspan,
+                    },
+                    Tok::WStr(s) => Expr {
+                        kind: ExprKind::WStr(s),
                         span: vspan,
                     },
                     Tok::Ident(u, _) if u == "TRUE" => Expr {

@@ -185,6 +185,7 @@ impl Program {
             Type::Elem(e) | Type::Subrange(e, ..) => (e.size(), e.size()),
             Type::Enum(_) | Type::Exception => (4, 4),
             Type::String(n) => (4 + n, 2),
+            Type::WString(n) => (4 + 2 * n, 2),
             Type::Array(a) => {
                 let (s, al) = self.size_align(&a.elem);
                 let stride = align_up(s, al);
@@ -208,6 +209,7 @@ impl Program {
         match ty {
             Type::Elem(e) => e.name().to_string(),
             Type::String(n) => format!("STRING[{n}]"),
+            Type::WString(n) => format!("WSTRING[{n}]"),
             Type::Array(a) => {
                 let dims: Vec<String> = a.dims.iter().map(|(l, h)| format!("{l}..{h}")).collect();
                 format!("ARRAY[{}] OF {}", dims.join(","), self.type_name(&a.elem))
@@ -303,7 +305,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         ExprKind::Bool(b) => Bool(*b),
         ExprKind::Time(t) => Time(*t),
         ExprKind::Temporal(e, t) => Temporal(*e, *t),
-        ExprKind::Str(s) => Str(s.clone()),
+        ExprKind::Str(s) | ExprKind::WStr(s) => Str(s.clone()),
         ExprKind::Typed(ty, inner) => {
             if let Some(elem) = Elem::from_name(&ty.name) {
                 let v = const_eval(prog, scope, inner)?;
@@ -634,11 +636,7 @@ impl Sema<'_> {
                 match id.name.as_str() {
                     "STRING" => return Type::String(DEFAULT_STRING_LEN),
                     "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" => {
-                        self.diags
-                            .error(id.span, format!("type `{}` is not supported", id.text));
-                        return Type::Error;
-                    }
+                    "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
                     _ => {}
                 }
                 if let Some(t) = self.resolve_named_type(&id.name, id.span) {
@@ -659,9 +657,16 @@ impl Sema<'_> {
                     .error(id.span, format!("unknown type `{}`", id.text));
                 Type::Error
             }
-            TypeRef::String(len, _) => match len {
+            TypeRef::String(len, _, wide) => match len {
+                None if *wide => Type::WString(DEFAULT_STRING_LEN),
                 None => Type::String(DEFAULT_STRING_LEN),
                 Some(e) => match self.const_int(e, locals, "string length") {
+                    Some(n) if *wide && (1..=32000).contains(&n) => Type::WString(n as u32),
+                    Some(_) if *wide => {
+                        self.diags
+                            .error(e.span, "WSTRING length must be between 1 and 32000");
+                        Type::Error
+                    }
                     Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
                     Some(_) => {
                         self.diags
