@@ -256,6 +256,21 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
                 .map(|v| Some(v.to_bits()))
                 .map_err(|_| Trap::NumericError)
         }
+        StrTerminate => {
+            let s = string_at(data, arg(0))?;
+            if s.addr + 5 + s.max > data.len() {
+                return Err(Trap::InvalidAddress);
+            }
+            data[s.addr + 4 + s.len] = 0;
+            Ok(None)
+        }
+        StrSync => {
+            let s = string_at(data, arg(0))?;
+            let text = &data[s.addr + 4..s.addr + 4 + s.max];
+            let len = text.iter().position(|&b| b == 0).unwrap_or(s.max);
+            data[s.addr + 2..s.addr + 4].copy_from_slice(&(len as u16).to_le_bytes());
+            Ok(None)
+        }
         _ => {
             // Builtins writing a string result to the string at arg(0).
             let dst = string_at(data, arg(0))?;
