@@ -44,11 +44,14 @@
 //!   verifier checks that each names a variable once, of an elementary type (BOOL to LREAL,
 //!   TIME, the bit strings; no STRING), that no two overlap in data memory, that at most one
 //!   is the validity flag and it is a BOOL, and that there are at most [`MAX_SHARED_VARS`].
-//! * `OBJECTS`: 8-byte records `start u32, len u32`: the variables a reference may reach
-//!   (see "References" in [`crate::isa`]). Sorted by `start`, not overlapping, each inside
-//!   data memory and at least one byte long (the verifier checks it). A reference made by
-//!   `REF_MAKE` names the record containing its address; `REF_CHECK` admits an access only
-//!   inside that record's bytes.
+//! * `OBJECTS`: 12-byte records `start u32, len u32, parent u32`: the variables (and parts of
+//!   variables) a reference may reach (see "References" in [`crate::isa`]). Sorted by
+//!   `start`, then by decreasing `len`; each inside data memory and at least one byte long;
+//!   two records either do not overlap or one contains the other, and `parent` is 1 + the
+//!   index of the smallest record containing this one (0 when none), at most
+//!   [`MAX_OBJECT_DEPTH`] levels deep (the verifier checks all of it). A reference made by
+//!   `REF_MAKE` names the smallest record containing the bytes it was made for; `REF_CHECK`
+//!   admits an access only inside that record's bytes.
 //! * `CLASSES`: 16-byte records `name_off u32, name_len u16, reserved u16, first u32,
 //!   count u32`: the function-block classes whose instances are called through `CALL_VIRT`
 //!   (see "Classes and dynamic dispatch" in [`crate::isa`]). An instance of class `k` holds
@@ -86,7 +89,9 @@ pub const LOCATED_RECORD: usize = 12;
 /// Shared-variable record size.
 pub const SHARED_RECORD: usize = 16;
 /// Object record size.
-pub const OBJECT_RECORD: usize = 8;
+pub const OBJECT_RECORD: usize = 12;
+/// Deepest nesting of object records (a variable, its members, their members, ...).
+pub const MAX_OBJECT_DEPTH: usize = 16;
 /// Class record size.
 pub const CLASS_RECORD: usize = 16;
 /// Dispatch record size.
@@ -626,11 +631,19 @@ impl<'a> Image<'a> {
         Some((read_u32(r, 0), read_u32(r, 4)))
     }
 
-    /// The index of the object record whose bytes contain `address` (binary search over
-    /// the sorted records; the verifier checks they are sorted and do not overlap).
-    pub fn object_containing(&self, address: u64) -> Option<usize> {
+    /// The index of object record `index`'s parent (the smallest record containing it).
+    pub fn object_parent(&self, index: usize) -> Option<usize> {
+        let r = self.record(Section::Objects, OBJECT_RECORD, index)?;
+        (read_u32(r, 8) as usize).checked_sub(1)
+    }
+
+    /// The index of the smallest object record containing the `size` bytes at `address`:
+    /// a binary search for the last record starting at or before `address`, then up its
+    /// parents (every record containing `address` is that record or one of its ancestors,
+    /// since records nest and are sorted by start, then by decreasing length). At most
+    /// [`MAX_OBJECT_DEPTH`] steps up in a verified image.
+    pub fn object_containing(&self, address: u64, size: u64) -> Option<usize> {
         let (mut lo, mut hi) = (0usize, self.object_count());
-        // Number of records starting at or before `address`.
         while lo < hi {
             let mid = lo + (hi - lo) / 2;
             match self.object(mid) {
@@ -638,9 +651,15 @@ impl<'a> Image<'a> {
                 _ => hi = mid,
             }
         }
-        let index = lo.checked_sub(1)?;
-        let (start, len) = self.object(index)?;
-        (address < start as u64 + len as u64).then_some(index)
+        let mut index = lo.checked_sub(1)?;
+        for _ in 0..=MAX_OBJECT_DEPTH {
+            let (start, len) = self.object(index)?;
+            if address >= start as u64 && address + size <= start as u64 + len as u64 {
+                return Some(index);
+            }
+            index = self.object_parent(index)?;
+        }
+        None
     }
 
     /// Number of class records.
@@ -1120,11 +1139,14 @@ mod builder {
             r.push(0);
         }
 
-        /// Adds an object record (records must be added sorted by `start`, not overlapping;
-        /// see [`Image::object`]).
-        pub fn add_object(&mut self, start: u32, len: u32) {
+        /// Adds an object record (see [`Image::object`]); `parent` is the index of the
+        /// smallest record added before that contains it. Returns the new record's index.
+        pub fn add_object(&mut self, start: u32, len: u32, parent: Option<u32>) -> u32 {
             self.objects.extend_from_slice(&start.to_le_bytes());
             self.objects.extend_from_slice(&len.to_le_bytes());
+            self.objects
+                .extend_from_slice(&parent.map_or(0, |p| p + 1).to_le_bytes());
+            self.object_count() - 1
         }
 
         /// Number of object records added so far.
@@ -1444,9 +1466,10 @@ mod builder {
             self.op_range(Opcode::Index, lo as u64, hi as u64);
             self.code.extend_from_slice(&stride.to_le_bytes());
         }
-        /// REF_MAKE.
-        pub fn ref_make(&mut self) {
-            self.op(Opcode::RefMake);
+        /// REF_MAKE for `size` bytes.
+        pub fn ref_make(&mut self, size: u32) {
+            self.start(Opcode::RefMake);
+            self.code.extend_from_slice(&size.to_le_bytes());
         }
         /// REF_CHECK of an access of `size` bytes.
         pub fn ref_check(&mut self, size: u32) {

@@ -17,17 +17,17 @@
 //! # References
 //!
 //! A *reference* (IEC `REF_TO`, CODESYS `POINTER TO`) is a cell `address | object << 32`:
-//! the low 32 bits are a data address, the high 32 bits name the variable the reference was
-//! taken from, as `1 +` the index of its record in the image's `OBJECTS` section
-//! ([`crate::image::Image::object`]). The cell 0 is `NULL`. `REF_MAKE` turns an address into
-//! a reference to the object containing it; `REF_ADD` moves a reference by a byte offset
-//! (only its address changes, wrapping in 32 bits, so arithmetic can never make it name
-//! another object); `REF_CHECK n` admits an access of `n` bytes at the reference's address
-//! only when it lies inside the named object's bytes and leaves the plain address for
-//! `LD_IND`/`ST_IND`/`COPY`/builtins. A reference therefore reaches the variable it was taken
-//! from and nothing else, whatever arithmetic the program did on it; NULL, a reference
-//! moved outside its variable and a cell that was never a reference all trap with
-//! [`Trap::InvalidReference`] at the access.
+//! the low 32 bits are a data address, the high 32 bits name the variable (or the part of a
+//! variable) the reference was taken from, as `1 +` the index of its record in the image's
+//! `OBJECTS` section ([`crate::image::Image::object`]). The cell 0 is `NULL`.
+//! `REF_MAKE n` turns an address into a reference to the smallest object containing the `n`
+//! bytes there; `REF_ADD` moves a reference by a byte offset (only its address changes,
+//! wrapping in 32 bits, so arithmetic can never make it name another object); `REF_CHECK n`
+//! admits an access of `n` bytes at the reference's address only when it lies inside the
+//! named object's bytes and leaves the plain address for `LD_IND`/`ST_IND`/`COPY`/builtins.
+//! A reference therefore reaches the variable it was taken from and nothing else, whatever
+//! arithmetic the program did on it; NULL, a reference moved outside its variable and a cell
+//! that was never a reference all trap with [`Trap::InvalidReference`] at the access.
 //!
 //! # Classes and dynamic dispatch
 //!
@@ -374,10 +374,10 @@ opcodes! {
     /// `[a b] -> []`: jumps when the comparison is **true**: the fused form of `<cmp>; JNZ target`.
     JumpIf = 0x8E, "JUMP_IF", CompareTarget;
 
-    /// `[addr] -> [ref]`: a reference to the object (`OBJECTS` record) whose bytes contain
-    /// `addr`: `addr | (index + 1) << 32` (see "References"). May trap: INVALID_REFERENCE when
-    /// no object contains `addr`.
-    RefMake = 0xB0, "REF_MAKE", None;
+    /// `[addr] -> [ref]`: a reference to the smallest object (`OBJECTS` record) containing
+    /// the `n` (the operand) bytes at `addr`: `addr | (index + 1) << 32` (see "References").
+    /// May trap: INVALID_REFERENCE when no object contains them.
+    RefMake = 0xB0, "REF_MAKE", U32;
     /// `[ref] -> [addr]`: checks an access of `n` (the operand) bytes through a reference and
     /// leaves its address (the low 32 bits). May trap: INVALID_REFERENCE unless the object
     /// the reference names exists and `start <= addr` and `addr + n <= start + len`.

@@ -670,11 +670,15 @@ impl<'a> Model<'a> {
             }
             Opcode::RefMake => {
                 let a = pop(&mut s);
-                // Linear scan (the VM binary-searches).
-                let found = (0..self.image.object_count()).find(|&k| {
-                    let (start, len) = self.image.object(k).unwrap();
-                    a >= start as u64 && a < start as u64 + len as u64
-                });
+                let size = imm_u32(code, i) as u64;
+                // The shortest record containing the bytes, by a linear scan (the VM
+                // binary-searches and walks up parents).
+                let found = (0..self.image.object_count())
+                    .filter(|&k| {
+                        let (start, len) = self.image.object(k).unwrap();
+                        a >= start as u64 && a + size <= start as u64 + len as u64
+                    })
+                    .min_by_key(|&k| self.image.object(k).unwrap().1);
                 let Some(k) = found else {
                     return Err(Trap::InvalidReference);
                 };

@@ -18,7 +18,7 @@
 //! of scratch per code byte (state + worklist); [`verify_with_scratch`]
 //! takes it from the caller (no allocation), `verify` (feature `alloc`) allocates it.
 
-use crate::image::{Image, Section, SharedDirection, TASK_RECORD, VarType};
+use crate::image::{Image, MAX_OBJECT_DEPTH, Section, SharedDirection, TASK_RECORD, VarType};
 use crate::isa::{
     Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect,
 };
@@ -191,8 +191,9 @@ pub enum Reason {
     /// Shared variable named twice, overlapping another shared variable in data memory, or a
     /// second validity flag.
     SharedOverlap,
-    /// Object record empty, outside data memory, or not after the previous one (the records
-    /// must be sorted by address and must not overlap).
+    /// Object record empty, outside data memory, not after the previous one (by start, then
+    /// decreasing length), partly overlapping another record, naming a parent other than the
+    /// smallest record containing it, or nested deeper than `MAX_OBJECT_DEPTH`.
     BadObject,
     /// Class record whose name is invalid or whose dispatch range lies outside the
     /// DISPATCH section.
@@ -329,7 +330,7 @@ impl core::fmt::Display for Reason {
             }
             Reason::BadObject => write!(
                 f,
-                "object empty, outside data memory, or not sorted after the previous one"
+                "object empty, outside data memory, out of order, partly overlapping, with a wrong parent or nested too deeply"
             ),
             Reason::BadClass => write!(f, "class name invalid or dispatch range outside the table"),
             Reason::BadDispatch => write!(
@@ -691,6 +692,55 @@ fn step(
     Ok(discovered)
 }
 
+/// Object record `index` against the ones before it: inside data memory, not empty, after
+/// the previous record in (start, decreasing length) order, overlapping only the records
+/// that contain it, with `parent` naming the smallest of those, at most
+/// [`MAX_OBJECT_DEPTH`] deep. The walk from the previous record up its parents passes only
+/// records that end before this one starts; they are never walked again (they cannot contain
+/// a later record either), so checking all records takes linear time.
+fn check_object(image: &Image<'_>, index: usize) -> Result<(), VerifyError> {
+    let bad = || err(Site::Object(index), Reason::BadObject);
+    let (start, len) = image.object(index).expect("counted");
+    let (start, end) = (start as u64, start as u64 + len as u64);
+    if len == 0 || end > image.data_size() as u64 {
+        return bad();
+    }
+    let contains = |k: usize| {
+        let (s, l) = image.object(k).expect("earlier record");
+        s as u64 <= start && end <= s as u64 + l as u64
+    };
+    if let Some(previous) = index.checked_sub(1) {
+        let (ps, pl) = image.object(previous).expect("earlier record");
+        if (ps as u64, u64::MAX - pl as u64) >= (start, u64::MAX - len as u64) {
+            return bad();
+        }
+    }
+    let mut enclosing = index.checked_sub(1);
+    while let Some(k) = enclosing {
+        if contains(k) {
+            break;
+        }
+        let (s, l) = image.object(k).expect("earlier record");
+        if s as u64 + l as u64 > start {
+            return bad();
+        }
+        enclosing = image.object_parent(k);
+    }
+    if image.object_parent(index) != enclosing {
+        return bad();
+    }
+    let mut depth = 0;
+    let mut up = enclosing;
+    while let Some(k) = up {
+        depth += 1;
+        if depth >= MAX_OBJECT_DEPTH {
+            return bad();
+        }
+        up = image.object_parent(k);
+    }
+    Ok(())
+}
+
 fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
     let data_size = image.data_size() as u64;
     if image.task_count() > MAX_TASKS {
@@ -792,14 +842,8 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
             return err(site, Reason::SharedOverlap);
         }
     }
-    let mut end = 0u64;
     for index in 0..image.object_count() {
-        let (start, len) = image.object(index).expect("counted");
-        let (start, len) = (start as u64, len as u64);
-        if len == 0 || start < end || start + len > data_size {
-            return err(Site::Object(index), Reason::BadObject);
-        }
-        end = start + len;
+        check_object(image, index)?;
     }
     for index in 0..image.class_count() {
         let site = Site::Class(index);

@@ -797,9 +797,10 @@ impl<'a, 'm> Machine<'a, 'm> {
             }
             RefMake => {
                 let address = self.pop();
+                let size = read_u32(code, imm) as u64;
                 let object = self
                     .image
-                    .object_containing(address)
+                    .object_containing(address, size)
                     .ok_or(Trap::InvalidReference)?;
                 self.push(address | ((object as u64 + 1) << 32))?;
             }

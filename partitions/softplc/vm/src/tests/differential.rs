@@ -47,8 +47,15 @@ const FUNC_FRAME: u32 = 32;
 const FUNC_BASE: u32 = 400;
 const AUX_BASE: u32 = 464;
 const AUX_FRAME: u32 = 48;
-/// Objects references may reach (inside the globals).
-const OBJECTS: [(u32, u32); 4] = [(8, 16), (24, 16), (40, 1), (64, 24)];
+/// Objects references may reach (inside the globals): (start, len, parent index).
+const OBJECTS: [(u32, u32, Option<u32>); 6] = [
+    (8, 16, None),
+    (24, 16, None),
+    (24, 4, Some(1)),
+    (32, 8, Some(1)),
+    (40, 1, None),
+    (64, 24, None),
+];
 /// Instances of class 0 and 1 (their class id at their first byte, in the globals).
 const INSTANCES: [u32; 2] = [88, 104];
 /// Method frame size and parameter frames of the two methods.
@@ -253,10 +260,11 @@ impl Gen<'_> {
             0 => self.b.push_i32(0),
             1 => self.constant(),
             _ => {
-                let (start, len) = self.rng.pick(&OBJECTS);
+                let (start, len, _) = self.rng.pick(&OBJECTS);
                 let address = start + self.rng.below(len as u64 + 2) as u32;
                 self.b.push_u32(address.saturating_sub(1));
-                self.b.ref_make();
+                let size = self.rng.below(6) as u32;
+                self.b.ref_make(size);
                 if self.rng.chance(50) {
                     let n = self.rng.below(24) as i32 - 8;
                     self.b.push_i32(n);
@@ -636,8 +644,8 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
         b.declare_pou("M0", 0, 0, METHOD_FRAME),
         b.declare_pou("M1", 0, 0, METHOD_FRAME),
     ];
-    for (start, len) in OBJECTS {
-        b.add_object(start, len);
+    for (start, len, parent) in OBJECTS {
+        b.add_object(start, len, parent);
     }
     // Class 0 runs M0 for slot 0 and M1 for slot 1; class 1 runs M1 for slots 0 and 2.
     b.add_class(

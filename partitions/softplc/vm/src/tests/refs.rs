@@ -7,11 +7,15 @@ use crate::image::Section;
 use crate::isa::{Builtin, MemType, Opcode, Trap};
 use crate::verify::{Reason, Site};
 
-/// Objects of the test programs: [16, 24), [24, 40), [64, 65).
+/// Objects of the test programs: [16, 24), [24, 40) with the parts [24, 28) and
+/// [28, 40) and in that [32, 36), and [64, 65). Records 1..=6 in that order.
 fn objects(b: &mut ImageBuilder) {
-    b.add_object(16, 8);
-    b.add_object(24, 16);
-    b.add_object(64, 1);
+    b.add_object(16, 8, None);
+    let whole = b.add_object(24, 16, None);
+    b.add_object(24, 4, Some(whole));
+    let tail = b.add_object(28, 12, Some(whole));
+    b.add_object(32, 4, Some(tail));
+    b.add_object(64, 1, None);
 }
 
 fn reference(object: u64, address: u64) -> u64 {
@@ -19,20 +23,50 @@ fn reference(object: u64, address: u64) -> u64 {
 }
 
 #[test]
-fn ref_make_names_the_object_containing_the_address() {
-    for (address, expected) in [(16, 1), (23, 1), (24, 2), (39, 2), (64, 3)] {
+fn ref_make_names_the_smallest_object_containing_the_bytes() {
+    for (address, size, expected) in [
+        (16, 1, 1),
+        (16, 8, 1),
+        (23, 1, 1),
+        (24, 16, 2),
+        (24, 5, 2),
+        (24, 4, 3),
+        (26, 2, 3),
+        (28, 1, 4),
+        (28, 12, 4),
+        (32, 4, 5),
+        (33, 1, 5),
+        (35, 2, 4),
+        (36, 4, 4),
+        (30, 8, 4),
+        (27, 2, 2),
+        (39, 1, 4),
+        (64, 1, 6),
+        (64, 0, 6),
+    ] {
         let r = eval(|b| {
             objects(b);
             b.push_u32(address);
-            b.ref_make();
+            b.ref_make(size);
         });
         assert_eq!(r, reference(expected, address as u64), "address {address}");
     }
-    for outside in [0u32, 15, 40, 63, 65, 511, u32::MAX] {
+    for (outside, size) in [
+        (0u32, 1u32),
+        (15, 1),
+        (40, 1),
+        (63, 1),
+        (65, 1),
+        (511, 1),
+        (u32::MAX, 1),
+        (20, 5),
+        (39, 2),
+        (64, 2),
+    ] {
         let fault = trap_of(|b| {
             objects(b);
             b.push_u32(outside);
-            b.ref_make();
+            b.ref_make(size);
             b.drop_();
         });
         assert_eq!(fault.trap, Trap::InvalidReference, "address {outside}");
@@ -41,7 +75,7 @@ fn ref_make_names_the_object_containing_the_address() {
     let fault = trap_of(|b| {
         objects(b);
         b.push_i64(1 << 32 | 16);
-        b.ref_make();
+        b.ref_make(1);
         b.drop_();
     });
     assert_eq!(fault.trap, Trap::InvalidReference);
@@ -55,7 +89,8 @@ fn ref_check_admits_only_accesses_inside_the_object() {
         (reference(1, 20), 4),
         (reference(1, 23), 1),
         (reference(2, 24), 16),
-        (reference(3, 64), 1),
+        (reference(6, 64), 1),
+        (reference(5, 32), 4),
         (reference(1, 16), 0),
     ] {
         let got = eval(|b| {
@@ -73,8 +108,10 @@ fn ref_check_admits_only_accesses_inside_the_object() {
         (reference(1, 24), 1),
         (reference(1, 15), 1),
         (reference(2, 23), 2),
-        (reference(3, 64), 2),
-        (reference(4, 16), 1),
+        (reference(6, 64), 2),
+        (reference(5, 31), 2),
+        (reference(3, 27), 2),
+        (reference(7, 16), 1),
         (reference(u32::MAX as u64, 16), 1),
         (reference(1, u32::MAX as u64), 1),
     ] {
@@ -110,7 +147,7 @@ fn ref_add_moves_the_address_and_keeps_the_object() {
     let got = eval(|b| {
         objects(b);
         b.push_u32(24);
-        b.ref_make();
+        b.ref_make(16);
         b.push_i32(-100);
         b.ref_add();
         b.push_i32(108);
@@ -128,7 +165,7 @@ fn loads_and_stores_through_checked_references() {
             objects(b);
             b.set_init(16, &0x1122_3344_5566_7788u64.to_le_bytes());
             b.push_u32(16);
-            b.ref_make();
+            b.ref_make(1);
             b.push_i32(6);
             b.ref_add();
             b.ref_check(1);
@@ -136,12 +173,12 @@ fn loads_and_stores_through_checked_references() {
             b.st_abs(MemType::U8, 0);
             // Store 0xAB at [24] through a reference, then try one byte past [16, 24).
             b.push_u32(24);
-            b.ref_make();
+            b.ref_make(1);
             b.ref_check(1);
             b.push_i32(0xAB);
             b.st_ind(MemType::U8, 0);
             b.push_u32(16);
-            b.ref_make();
+            b.ref_make(1);
             b.push_i32(8);
             b.ref_add();
             b.ref_check(1);
@@ -376,26 +413,109 @@ fn verifier_checks_objects_classes_and_dispatch() {
     assert_eq!(verdict(|b, _, _| objects(b)), Ok(()));
     let bad_object = |f: fn(&mut ImageBuilder)| verdict(|b, _, _| f(b)).unwrap_err();
     assert_eq!(
-        bad_object(|b| b.add_object(10, 0)),
-        (Site::Object(0), Reason::BadObject)
-    );
-    assert_eq!(
-        bad_object(|b| b.add_object(DATA - 4, 5)),
+        bad_object(|b| {
+            b.add_object(10, 0, None);
+        }),
         (Site::Object(0), Reason::BadObject)
     );
     assert_eq!(
         bad_object(|b| {
-            b.add_object(16, 8);
-            b.add_object(23, 1);
+            b.add_object(DATA - 4, 5, None);
+        }),
+        (Site::Object(0), Reason::BadObject)
+    );
+    // Partly overlapping.
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, None);
+            b.add_object(23, 2, None);
+        }),
+        (Site::Object(1), Reason::BadObject)
+    );
+    // Out of order.
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, None);
+            b.add_object(8, 1, None);
         }),
         (Site::Object(1), Reason::BadObject)
     );
     assert_eq!(
         bad_object(|b| {
-            b.add_object(16, 8);
-            b.add_object(8, 1);
+            b.add_object(16, 4, None);
+            b.add_object(16, 8, None);
         }),
         (Site::Object(1), Reason::BadObject)
+    );
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, None);
+            b.add_object(16, 8, Some(0));
+        }),
+        (Site::Object(1), Reason::BadObject)
+    );
+    // Wrong parents: none where there is one, one where there is none, not the smallest.
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, None);
+            b.add_object(18, 2, None);
+        }),
+        (Site::Object(1), Reason::BadObject)
+    );
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, None);
+            b.add_object(30, 2, Some(0));
+        }),
+        (Site::Object(1), Reason::BadObject)
+    );
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, None);
+            b.add_object(16, 4, Some(0));
+            b.add_object(17, 1, Some(0));
+        }),
+        (Site::Object(2), Reason::BadObject)
+    );
+    // A parent index that is not earlier.
+    assert_eq!(
+        bad_object(|b| {
+            b.add_object(16, 8, Some(0));
+        }),
+        (Site::Object(0), Reason::BadObject)
+    );
+    // Nesting depth.
+    assert_eq!(
+        verdict(|b, _, _| {
+            let mut parent = None;
+            for level in 0..crate::image::MAX_OBJECT_DEPTH as u32 {
+                parent = Some(b.add_object(16 + level, 64 - 2 * level, parent));
+            }
+        }),
+        Ok(())
+    );
+    assert_eq!(
+        bad_object(|b| {
+            let mut parent = None;
+            for level in 0..=crate::image::MAX_OBJECT_DEPTH as u32 {
+                parent = Some(b.add_object(16 + level, 64 - 2 * level, parent));
+            }
+        }),
+        (
+            Site::Object(crate::image::MAX_OBJECT_DEPTH),
+            Reason::BadObject
+        )
+    );
+    // Siblings after a nested chain close the chain.
+    assert_eq!(
+        verdict(|b, _, _| {
+            let a = b.add_object(16, 16, None);
+            let c = b.add_object(16, 8, Some(a));
+            b.add_object(18, 2, Some(c));
+            b.add_object(24, 8, Some(a));
+            b.add_object(40, 8, None);
+        }),
+        Ok(())
     );
     assert_eq!(
         verdict(|b, main, _| {
