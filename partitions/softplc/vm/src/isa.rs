@@ -609,8 +609,10 @@ macro_rules! builtins {
         ///
         /// String arguments are **addresses** of string variables in data memory, laid out as
         /// `max_len: u16 LE, cur_len: u16 LE, bytes[max_len]` (so a `STRING[n]` occupies
-        /// `4 + n` bytes and its initial value must have `max_len = n`). Results written to a
-        /// `dst` string are truncated to its `max_len`; `dst` may alias an argument. Length and
+        /// at least `4 + n` bytes and its initial value must have `max_len = n`). Results
+        /// written to a `dst` string are truncated to its `max_len`, and a result shorter than
+        /// `max_len` is followed by a NUL byte (CODESYS code reads strings through pointers up
+        /// to that terminator); `dst` may alias an argument. Length and
         /// position arguments are clamped (negative counts as 0, positions beyond the string
         /// to its end) instead of trapping; positions are 1-based as in IEC.
         #[repr(u16)]
@@ -738,15 +740,11 @@ builtins! {
     StrToI64 = 117, "STRING_TO_INT", 1, 1;
     /// `[s] -> [f64]`: parses a real number. NUMERIC_ERROR when malformed.
     StrToF64 = 118, "STRING_TO_LREAL", 1, 1;
-    /// `[s] -> []`: writes a NUL byte right after the string's text, at byte
-    /// `4 + min(cur_len, max_len)`: the terminator CODESYS code expects when it reads a STRING
-    /// through a byte pointer. A string written this way needs `5 + max_len` bytes (the
-    /// compiler gives every STRING[n] that terminator byte). INVALID_ADDRESS when the
-    /// `5 + max_len` bytes are not all in data memory.
-    StrTerminate = 192, "STRING_TERMINATE", 1, 0;
     /// `[s] -> []`: takes the text's length from its terminator: `cur_len` becomes the index
     /// of the first NUL among the `max_len` text bytes (`max_len` when there is none), as after
-    /// CODESYS code wrote the string's bytes through a pointer. INVALID_ADDRESS when the
+    /// CODESYS code wrote the string's bytes through a pointer. Every builtin writing a string
+    /// (and the monitor's write) leaves a NUL right after a text shorter than `max_len`, so
+    /// the length survives this whatever wrote the string last. INVALID_ADDRESS when the
     /// `4 + max_len` bytes are not all in data memory.
     StrSync = 193, "STRING_SYNC", 1, 0;
 }

@@ -978,21 +978,14 @@ pub fn string_builtin(
                 .map(|v| Some(v.to_bits()))
                 .map_err(|_| Trap::NumericError);
         }
-        StrTerminate | StrSync => {
-            let (capacity, text) = read_string(data, args[0])?;
+        StrSync => {
+            let (capacity, _) = read_string(data, args[0])?;
             let a = args[0] as usize;
-            if builtin == StrTerminate {
-                if a + 5 + capacity > data.len() {
-                    return Err(Trap::InvalidAddress);
-                }
-                data[a + 4 + text.len()] = 0;
-            } else {
-                let mut len = 0;
-                while len < capacity && data[a + 4 + len] != 0 {
-                    len += 1;
-                }
-                data[a + 2..a + 4].copy_from_slice(&(len as u16).to_le_bytes());
+            let mut len = 0;
+            while len < capacity && data[a + 4 + len] != 0 {
+                len += 1;
             }
+            data[a + 2..a + 4].copy_from_slice(&(len as u16).to_le_bytes());
             return Ok(None);
         }
         _ => {}
@@ -1054,5 +1047,8 @@ pub fn string_builtin(
     let a = args[0] as usize;
     data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
     data[a + 4..a + 4 + result.len()].copy_from_slice(&result);
+    if result.len() < capacity {
+        data[a + 4 + result.len()] = 0;
+    }
     Ok(None)
 }

@@ -943,6 +943,9 @@ impl<'a, 'm> Machine<'a, 'm> {
             let len = text.len().min(capacity);
             self.data[at + 2..at + 4].copy_from_slice(&(len as u16).to_le_bytes());
             self.data[at + 4..at + 4 + len].copy_from_slice(&text[..len]);
+            if len < capacity {
+                self.data[at + 4 + len] = 0;
+            }
             return Ok(());
         }
         let forced = Self::encode_scalar(&var, ty, value)?;

@@ -341,24 +341,32 @@ fn call_virt_respects_the_call_depth() {
 }
 
 #[test]
-fn string_terminate_and_sync() {
-    // STRING[6] at 32 holding 'abc' (5 + 6 bytes with the terminator byte).
+fn string_results_keep_a_terminator_and_sync_reads_it() {
+    // STRING[6] at 32 holding 'abcdef'.
     let out = run_both(
         &program_with(1000, |b, _| {
-            b.init_string(32, 6, "abc");
-            b.set_init(39, &[0xFF; 4]);
+            b.init_string(32, 6, "abcdef");
+            b.init_string(48, 6, "xy");
+            // A shorter result leaves a NUL after it: 'xy' then 0 over 'c'.
             b.push_u32(32);
-            b.call_builtin(Builtin::StrTerminate);
-            // A pointer writes 'X' over 'b'; the NUL after 'c' keeps the length 3.
-            b.push_u32(32);
-            b.call_builtin(Builtin::StrTerminate);
-            b.push_i32(b'X' as i32);
-            b.st_abs(MemType::U8, 37);
+            b.push_u32(48);
+            b.call_builtin(Builtin::StrAssign);
+            // A pointer writes 'Q' over the NUL: no NUL is left, the text is 'xyQdef'.
+            b.push_i32(b'Q' as i32);
+            b.st_abs(MemType::U8, 38);
             b.push_u32(32);
             b.call_builtin(Builtin::StrSync);
             b.push_u32(32);
             b.call_builtin(Builtin::StrLen);
             b.st_abs(MemType::U8, 0);
+            // A NUL written at 1: length 1.
+            b.push_i32(0);
+            b.st_abs(MemType::U8, 37);
+            b.push_u32(32);
+            b.call_builtin(Builtin::StrSync);
+            b.push_u32(32);
+            b.call_builtin(Builtin::StrLen);
+            b.st_abs(MemType::U8, 1);
             // No NUL among the 6 text bytes: the length is max_len.
             for i in 0..6 {
                 b.push_i32(b'a' as i32 + i);
@@ -368,26 +376,26 @@ fn string_terminate_and_sync() {
             b.call_builtin(Builtin::StrSync);
             b.push_u32(32);
             b.call_builtin(Builtin::StrLen);
-            b.st_abs(MemType::U8, 1);
-            b.push_u32(32);
-            b.call_builtin(Builtin::StrTerminate);
+            b.st_abs(MemType::U8, 2);
         }),
         1,
     );
     assert!(out.result.is_ok());
-    assert_eq!(
-        out.data[0], 3,
-        "NUL right after the text after STRING_TERMINATE"
+    assert_eq!(&out.data[0..3], &[6, 1, 6]);
+    assert_eq!(&out.data[36..42], b"abcdef");
+    // A full-length result writes no terminator (nothing beyond max_len is touched).
+    let out = run_both(
+        &program_with(1000, |b, _| {
+            b.init_string(32, 2, "");
+            b.set_init(38, &[0xEE]);
+            b.init_string(48, 6, "xyz");
+            b.push_u32(32);
+            b.push_u32(48);
+            b.call_builtin(Builtin::StrAssign);
+        }),
+        1,
     );
-    assert_eq!(out.data[1], 6);
-    assert_eq!(&out.data[36..43], b"abcdef\0");
-    // The terminator byte must be inside data memory.
-    let fault = trap_of(|b| {
-        b.init_string(DATA - 8, 4, "ab");
-        b.push_u32(DATA - 8);
-        b.call_builtin(Builtin::StrTerminate);
-    });
-    assert_eq!(fault.trap, Trap::InvalidAddress);
+    assert_eq!(&out.data[36..39], &[b'x', b'y', 0xEE]);
 }
 
 /// The verifier's verdict on a program whose tables `tables` adds.
