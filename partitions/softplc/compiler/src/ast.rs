@@ -110,6 +110,24 @@ pub enum TypeRef {
         members: Vec<VarDecl>,
         span: Span,
     },
+    /// `REF_TO T`, `POINTER TO T` (CODESYS) or `REFERENCE TO T` (CODESYS, dereferenced
+    /// implicitly).
+    Ref {
+        kind: RefKind,
+        target: Box<TypeRef>,
+        span: Span,
+    },
+}
+
+/// How a reference type was written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RefKind {
+    /// IEC `REF_TO T`.
+    RefTo,
+    /// CODESYS `POINTER TO T` (the same checked reference as `REF_TO`).
+    Pointer,
+    /// CODESYS `REFERENCE TO T`: an alias, dereferenced wherever it is used, bound with `REF=`.
+    Reference,
 }
 
 impl TypeRef {
@@ -120,7 +138,8 @@ impl TypeRef {
             | TypeRef::Array { span: s, .. }
             | TypeRef::Subrange { span: s, .. }
             | TypeRef::Enum { span: s, .. }
-            | TypeRef::Struct { span: s, .. } => *s,
+            | TypeRef::Struct { span: s, .. }
+            | TypeRef::Ref { span: s, .. } => *s,
         }
     }
 }
@@ -187,6 +206,11 @@ pub struct Stmt {
 #[derive(Debug, Clone)]
 pub enum StmtKind {
     Assign {
+        target: Expr,
+        value: Expr,
+    },
+    /// `r REF= x`: binds a `REFERENCE TO` variable.
+    RefAssign {
         target: Expr,
         value: Expr,
     },
@@ -263,6 +287,10 @@ pub enum ExprKind {
     },
     Unary(UnOp, Box<Expr>),
     Binary(BinOp, Box<Expr>, Box<Expr>),
+    /// `e^`: the variable a reference refers to.
+    Deref(Box<Expr>),
+    /// `NULL`: the reference to nothing.
+    Null,
     /// Placeholder produced after a syntax error so parsing can continue.
     Error,
 }

@@ -4,7 +4,7 @@
 use plc_vm::isa::{Builtin, MemType, Opcode};
 
 use crate::ast::*;
-use crate::codegen::{Gen, Loc, Place, mem_type};
+use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::VarDef;
 use crate::types::*;
@@ -24,6 +24,12 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
+        if let ExprKind::Name(n) = &callee.kind
+            && Self::is_ref_function(&n.name)
+            && !self.prog.pou_by_name.contains_key(&n.name)
+        {
+            return self.ref_function(n, args, expected, span);
+        }
         if let ExprKind::Name(n) = &callee.kind {
             // A variable is only callable when it is an FB instance; otherwise the name refers
             // to a function even if a variable happens to have the same name.
@@ -178,7 +184,7 @@ impl Gen<'_> {
             match base {
                 Ok(Loc::Abs(a)) => Loc::Abs(a + off),
                 Ok(Loc::Rel(o)) => Loc::Rel(o + off),
-                Ok(Loc::Ind(_)) => unreachable!("dynamic bases are parked"),
+                Ok(Loc::Ind(_) | Loc::Ref(_)) => unreachable!("dynamic bases are parked"),
                 Err(t) => {
                     g.emit(|b| b.ld_abs(MemType::U32, t));
                     Loc::Ind(off)
@@ -189,6 +195,7 @@ impl Gen<'_> {
         for a in bound.iter().filter(|a| !a.output) {
             if a.param.kind == VarKind::InOut {
                 let loc = member(self, a.param.offset);
+                self.record_inout(pi, &a.param.name, a.value);
                 self.inout_address(a.value, &a.param.ty);
                 let p = Place {
                     loc,
@@ -203,6 +210,9 @@ impl Gen<'_> {
                     ty: a.param.ty.clone(),
                     writable: true,
                 };
+                if p.ty.is_pointer_like() {
+                    self.check_escape(None, a.value, "an input of a function block instance");
+                }
                 self.store_expr(&p, a.value, a.value.span);
             }
         }
@@ -218,7 +228,7 @@ impl Gen<'_> {
         match base {
             Ok(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
             Ok(Loc::Rel(o)) => self.emit(|b| b.lea_rel(o)),
-            Ok(Loc::Ind(_)) => {}
+            Ok(Loc::Ind(_) | Loc::Ref(_)) => {}
             Err(t) => self.emit(|b| b.ld_abs(MemType::U32, t)),
         }
         let id = self.pou_ids[pi];
@@ -236,6 +246,7 @@ impl Gen<'_> {
 
     /// Pushes the address of an in-out argument (which must be a variable of the same type).
     fn inout_address(&mut self, e: &Expr, ty: &Type) {
+        self.sync_if_byte_viewed(e);
         match self.place(e) {
             Some(p) => {
                 if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
@@ -276,7 +287,7 @@ impl Gen<'_> {
                 self.aggregate_operands(&src, &dst);
                 self.emit(|b| b.call_builtin(Builtin::StrAssign));
             }
-            t if t.elem().is_some() => {
+            t if scalar_mem(t).is_some() => {
                 let st = src.ty.clone();
                 self.load(&src);
                 self.coerce(&st, &dst.ty.clone(), target.span);
@@ -316,7 +327,10 @@ impl Gen<'_> {
         // parameters already stored in the shared static frame.
         for a in &inputs {
             match a.param.kind {
-                VarKind::InOut => self.inout_address(a.value, &a.param.ty),
+                VarKind::InOut => {
+                    self.record_inout(pi, &a.param.name, a.value);
+                    self.inout_address(a.value, &a.param.ty)
+                }
                 _ => match &a.param.ty {
                     Type::String(_) => {
                         let t = self.expr(a.value, Some(&a.param.ty));
@@ -365,8 +379,8 @@ impl Gen<'_> {
                     });
                 }
                 (_, ty) => {
-                    if let Some(e) = ty.elem() {
-                        self.emit(|b| b.st_abs(mem_type(e), addr));
+                    if let Some(mt) = scalar_mem(ty) {
+                        self.emit(|b| b.st_abs(mt, addr));
                     } else {
                         self.op(Opcode::Drop);
                     }
@@ -434,8 +448,8 @@ impl Gen<'_> {
             }
             Type::Void | Type::Error => {}
             t => {
-                if let Some(e) = t.elem() {
-                    self.emit(|b| b.ld_abs(mem_type(e), addr));
+                if let Some(mt) = scalar_mem(t) {
+                    self.emit(|b| b.ld_abs(mt, addr));
                 }
             }
         }

@@ -48,6 +48,7 @@ pub enum Tok {
     Gt,       // >
     Ge,       // >=
     Amp,      // &
+    Caret,    // ^ (dereference)
     Eof,
 }
 
@@ -456,6 +457,7 @@ impl Lexer<'_> {
             b'<' => Tok::Lt,
             b'>' => Tok::Gt,
             b'&' => Tok::Amp,
+            b'^' => Tok::Caret,
             _ => {
                 let ch = self.text[self.pos..].chars().next().unwrap_or('?');
                 self.pos += ch.len_utf8();

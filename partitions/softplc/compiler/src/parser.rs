@@ -73,6 +73,8 @@ const RESERVED: &[&str] = &[
     "__CATCH",
     "__FINALLY",
     "__ENDTRY",
+    "REF_TO",
+    "NULL",
 ];
 
 /// Keywords that end a statement list.
@@ -194,6 +196,7 @@ fn punct_text(t: &Tok) -> &'static str {
         Tok::Gt => ">",
         Tok::Ge => ">=",
         Tok::Amp => "&",
+        Tok::Caret => "^",
         _ => "?",
     }
 }
@@ -598,6 +601,30 @@ impl Parser<'_> {
 
     fn type_ref_inner(&mut self) -> PResult<TypeRef> {
         let start = self.span();
+        // REF_TO T, POINTER TO T, REFERENCE TO T (the last two are CODESYS; POINTER and
+        // REFERENCE are keywords only before TO).
+        let ref_kind = if self.is_kw("REF_TO") {
+            Some(RefKind::RefTo)
+        } else if self.is_kw("POINTER") && matches!(self.tok_at(1), Tok::Ident(u, _) if u == "TO") {
+            Some(RefKind::Pointer)
+        } else if self.is_kw("REFERENCE") && matches!(self.tok_at(1), Tok::Ident(u, _) if u == "TO")
+        {
+            Some(RefKind::Reference)
+        } else {
+            None
+        };
+        if let Some(kind) = ref_kind {
+            self.bump();
+            if kind != RefKind::RefTo {
+                self.bump();
+            }
+            let target = self.type_ref()?;
+            return Ok(TypeRef::Ref {
+                kind,
+                target: Box::new(target),
+                span: start.to(self.prev_span()),
+            });
+        }
         if self.eat_kw("ARRAY") {
             self.expect(Tok::LBracket)?;
             let mut dims = Vec::new();
@@ -1091,6 +1118,11 @@ impl Parser<'_> {
             if self.eat(&Tok::Assign) {
                 let value = self.expr()?;
                 StmtKind::Assign { target, value }
+            } else if self.is_kw("REF") && matches!(self.tok_at(1), Tok::Eq) {
+                self.bump();
+                self.bump();
+                let value = self.expr()?;
+                StmtKind::RefAssign { target, value }
             } else if matches!(target.kind, ExprKind::Call { .. }) {
                 StmtKind::Call(target)
             } else {
@@ -1225,7 +1257,14 @@ impl Parser<'_> {
     fn postfix(&mut self) -> PResult<Expr> {
         let mut e = self.primary()?;
         loop {
-            if matches!(self.tok(), Tok::Dot) {
+            if matches!(self.tok(), Tok::Caret) {
+                let span = e.span.to(self.span());
+                self.bump();
+                e = Expr {
+                    kind: ExprKind::Deref(Box::new(e)),
+                    span,
+                };
+            } else if matches!(self.tok(), Tok::Dot) {
                 self.bump();
                 let member = self.ident()?;
                 let span = e.span.to(member.span);
@@ -1248,7 +1287,10 @@ impl Parser<'_> {
             } else if matches!(self.tok(), Tok::LParen)
                 && matches!(
                     e.kind,
-                    ExprKind::Name(_) | ExprKind::Member(..) | ExprKind::Index(..)
+                    ExprKind::Name(_)
+                        | ExprKind::Member(..)
+                        | ExprKind::Index(..)
+                        | ExprKind::Deref(..)
                 )
             {
                 self.bump();
@@ -1373,6 +1415,7 @@ impl Parser<'_> {
             Tok::Ident(u, o) => match u.as_str() {
                 "TRUE" => ExprKind::Bool(true),
                 "FALSE" => ExprKind::Bool(false),
+                "NULL" => ExprKind::Null,
                 _ if RESERVED.contains(&u.as_str()) => return Err(self.error_here("an expression")),
                 _ => ExprKind::Name(Ident {
                     name: u,

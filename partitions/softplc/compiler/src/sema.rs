@@ -144,6 +144,16 @@ pub struct Program {
     /// The globals shared with another PLC project (`{attribute 'shared'}`), in declaration
     /// order.
     pub shared: Vec<SharedGlobal>,
+    /// INTERFACE declarations.
+    pub interfaces: Vec<InterfaceDef>,
+}
+
+/// An INTERFACE.
+#[derive(Debug, Clone)]
+pub struct InterfaceDef {
+    pub name: String,
+    pub text: String,
+    pub span: Span,
 }
 
 /// A global variable shared with another PLC project.
@@ -155,6 +165,10 @@ pub struct SharedGlobal {
     /// Its name in the declaration.
     pub span: Span,
 }
+
+/// Bytes at the start of data memory that hold no variable, so that the address 0 of a
+/// reference to a function-block instance or an interface value means NULL.
+pub const NULL_GUARD: u32 = 8;
 
 /// Upper limit of data memory for one program (the PLC partition is small).
 pub const MAX_DATA: u32 = 16 << 20;
@@ -169,7 +183,10 @@ impl Program {
         match ty {
             Type::Elem(e) | Type::Subrange(e, ..) => (e.size(), e.size()),
             Type::Enum(_) | Type::Exception => (4, 4),
-            Type::String(n) => (4 + n, 2),
+            // Header, text and the terminator byte CODESYS code writes through pointers.
+            Type::String(n) => (5 + n, 2),
+            Type::Ref(_) | Type::Reference(_) | Type::Interface(_) => (8, 8),
+            Type::Null => (0, 1),
             Type::Array(a) => {
                 let (s, al) = self.size_align(&a.elem);
                 let stride = align_up(s, al);
@@ -202,9 +219,20 @@ impl Program {
             Type::Subrange(e, lo, hi) => format!("{}({lo}..{hi})", e.name()),
             Type::Fb(i) => self.pous[*i].text.clone(),
             Type::Exception => "__EXCEPTION".into(),
+            Type::Ref(t) => format!("REF_TO {}", self.type_name(t)),
+            Type::Reference(t) => format!("REFERENCE TO {}", self.type_name(t)),
+            Type::Interface(i) => self.interface_name(*i),
+            Type::Null => "NULL".into(),
             Type::Void => "no value".into(),
             Type::Error => "?".into(),
         }
+    }
+
+    /// The name of interface `i` as written.
+    pub fn interface_name(&self, i: usize) -> String {
+        self.interfaces
+            .get(i)
+            .map_or_else(|| "?".into(), |d| d.text.clone())
     }
 
     pub fn global(&self, name: &str) -> Option<&VarDef> {
@@ -244,9 +272,14 @@ pub fn analyse(
 ) -> Program {
     let mut s = Sema {
         unit,
-        prog: Program::default(),
+        // Data address 0 is never a variable: a zero reference or interface value is NULL.
+        prog: Program {
+            data_size: NULL_GUARD,
+            ..Program::default()
+        },
         diags,
         type_state: HashMap::new(),
+        structs_in_progress: HashMap::new(),
     };
     s.declare_types();
     s.declare_pous(prelude_pous);
@@ -266,6 +299,8 @@ struct Sema<'a> {
     diags: &'a mut Diagnostics,
     /// Resolution state of named TYPE declarations (cycle detection).
     type_state: HashMap<String, LayoutState>,
+    /// Structures being laid out (a reference to one may appear in its own members).
+    structs_in_progress: HashMap<String, usize>,
 }
 
 /// Scope used to look up names inside constant expressions.
@@ -524,6 +559,7 @@ impl Sema<'_> {
                     size: 0,
                     align: 1,
                 });
+                self.structs_in_progress.insert(name.to_string(), idx);
                 let mut defs = Vec::new();
                 let mut off = 0u32;
                 let mut align = 1;
@@ -559,6 +595,7 @@ impl Sema<'_> {
                         align = align.max(al);
                     }
                 }
+                self.structs_in_progress.remove(name);
                 let s = &mut self.prog.structs[idx];
                 s.members = defs;
                 s.size = align_up(off, align);
@@ -698,6 +735,23 @@ impl Sema<'_> {
                     _ => Type::Error,
                 }
             }
+            TypeRef::Ref { kind, target, span } => {
+                let t = self.resolve_ref_target(target, locals);
+                if matches!(t, Type::Reference(_))
+                    || (*kind == RefKind::Reference && matches!(t, Type::Ref(_)))
+                {
+                    self.diags
+                        .error(*span, "a REFERENCE TO cannot refer to a reference");
+                    return Type::Error;
+                }
+                if t.is_error() {
+                    return Type::Error;
+                }
+                match kind {
+                    RefKind::Reference => Type::Reference(Box::new(t)),
+                    _ => Type::Ref(Box::new(t)),
+                }
+            }
             TypeRef::Enum { span, .. } | TypeRef::Struct { span, .. } => {
                 self.diags.error(
                     *span,
@@ -706,6 +760,23 @@ impl Sema<'_> {
                 Type::Error
             }
         }
+    }
+
+    /// The target type of a reference: like [`Sema::resolve_type`], but a function block or
+    /// a structure still being laid out may be referred to (a reference has a fixed size),
+    /// which lets a structure or block hold a reference to its own type.
+    fn resolve_ref_target(&mut self, t: &TypeRef, locals: &[VarDef]) -> Type {
+        if let TypeRef::Named(id) = t {
+            if let Some(&i) = self.structs_in_progress.get(&id.name) {
+                return Type::Struct(i);
+            }
+            if let Some(&i) = self.prog.pou_by_name.get(&id.name)
+                && self.prog.pous[i].kind == PouKind::FunctionBlock
+            {
+                return Type::Fb(i);
+            }
+        }
+        self.resolve_type(t, locals)
     }
 
     /// Lays out the frame of POU `i` (recursively for the FB types it contains).
@@ -784,6 +855,7 @@ impl Sema<'_> {
                     self.diags
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
+                self.no_retained_reference(block, d, &ty);
                 let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
                 let location = self.location(d, &ty, may_locate);
                 for n in &d.names {
@@ -857,6 +929,7 @@ impl Sema<'_> {
                     self.diags
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
+                self.no_retained_reference(block, d, &ty);
                 let location = self.location(d, &ty, true);
                 let shared = self.shared_global(d, block, &ty);
                 for n in &d.names {
@@ -888,6 +961,33 @@ impl Sema<'_> {
                     });
                 }
             }
+        }
+    }
+
+    /// A RETAIN variable cannot hold references: a reference names a variable of this build
+    /// of the program, which a warm restart after a download would not have.
+    fn no_retained_reference(&mut self, block: &VarBlock, d: &VarDecl, ty: &Type) {
+        if block.retain && self.holds_references(ty, 0) {
+            self.diags.error(
+                d.ty.span(),
+                "a RETAIN variable cannot hold references or interface values (they name variables of this build of the program, which a restart after a download may not have)",
+            );
+        }
+    }
+
+    fn holds_references(&self, ty: &Type, depth: u32) -> bool {
+        match ty {
+            Type::Ref(_) | Type::Reference(_) | Type::Interface(_) => true,
+            Type::Array(a) => self.holds_references(&a.elem, depth),
+            Type::Struct(i) => self.prog.structs[*i]
+                .members
+                .iter()
+                .any(|m| self.holds_references(&m.ty, depth)),
+            Type::Fb(i) if depth < 32 => self.prog.pous[*i]
+                .vars
+                .iter()
+                .any(|v| v.kind != VarKind::InOut && self.holds_references(&v.ty, depth + 1)),
+            _ => false,
         }
     }
 
