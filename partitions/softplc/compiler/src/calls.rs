@@ -10,10 +10,21 @@ use crate::sema::VarDef;
 use crate::types::*;
 
 /// One argument bound to a parameter.
-struct Bound<'e> {
-    param: VarDef,
-    value: &'e Expr,
-    output: bool,
+pub(crate) struct Bound<'e> {
+    pub param: VarDef,
+    pub value: &'e Expr,
+    pub output: bool,
+}
+
+/// What a called FUNCTION or METHOD runs on (its frame base).
+#[derive(Clone, Copy)]
+pub(crate) enum CallBase {
+    /// A FUNCTION: its own static frame.
+    Frame,
+    /// A METHOD or action on an instance at a static place.
+    Instance(Loc),
+    /// A METHOD or action on an instance whose address is in a static temporary.
+    Parked(u32),
 }
 
 impl Gen<'_> {
@@ -30,12 +41,17 @@ impl Gen<'_> {
         {
             return self.ref_function(n, args, expected, span);
         }
+        if let Some(t) = self.member_call(callee, args, span) {
+            return t;
+        }
         if let ExprKind::Name(n) = &callee.kind {
             // A variable is only callable when it is an FB instance; otherwise the name refers
             // to a function even if a variable happens to have the same name.
             let var_ty = match self.prog.pous[self.cur].var(&n.name) {
                 Some(v) => Some(v.ty.clone()),
-                None => self.prog.global(&n.name).map(|g| g.ty.clone()),
+                None => self
+                    .owner_var_type(&n.name)
+                    .or_else(|| self.prog.global(&n.name).map(|g| g.ty.clone())),
             };
             let is_fb_var = matches!(var_ty, Some(Type::Fb(_)));
             let is_function =
@@ -67,6 +83,13 @@ impl Gen<'_> {
         };
         match p.ty.clone() {
             Type::Fb(pi) => {
+                if self.unit.pous[self.prog.pous[pi].ast].is_class {
+                    let msg = format!(
+                        "`{}` is a CLASS: it has no body to call; call its methods",
+                        self.prog.pous[pi].text
+                    );
+                    self.error(callee.span, msg);
+                }
                 self.call_fb(p, pi, args, span);
                 Type::Void
             }
@@ -85,24 +108,39 @@ impl Gen<'_> {
     /// Binds call arguments to parameters: positional ones in declaration order of the
     /// inputs and in-outs, named ones by name.
     fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg]) -> Vec<Bound<'e>> {
-        let pou_name = self.prog.pous[pi].text.clone();
-        let params: Vec<VarDef> = self.prog.pous[pi].params().cloned().collect();
+        let pou = &self.prog.pous[pi];
+        let pou_name = pou.text.clone();
+        let vars = pou.vars.clone();
+        // The result variable (a function's, method's or getter's) is no output.
+        let result = pou.return_type.as_ref().map(|_| pou.vars[0].name.clone());
+        self.bind_to(&pou_name, &vars, result.as_deref(), args)
+    }
+
+    /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order).
+    pub(crate) fn bind_to<'e>(
+        &mut self,
+        pou_name: &str,
+        vars: &[VarDef],
+        result: Option<&str>,
+        args: &'e [Arg],
+    ) -> Vec<Bound<'e>> {
+        let params: Vec<VarDef> = vars
+            .iter()
+            .filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
+            .cloned()
+            .collect();
         let mut out: Vec<Bound<'e>> = Vec::new();
         let mut named_seen = false;
         for (i, a) in args.iter().enumerate() {
             let param = match &a.name {
                 Some(n) => {
                     named_seen = true;
-                    let v = self.prog.pous[pi]
-                        .vars
-                        .iter()
-                        .find(|v| v.name == n.name)
-                        .cloned();
+                    let v = vars.iter().find(|v| v.name == n.name).cloned();
                     match v {
                         Some(v)
                             if a.output
                                 && v.kind == VarKind::Output
-                                && v.name != self.prog.pous[pi].name =>
+                                && Some(v.name.as_str()) != result =>
                         {
                             v
                         }
@@ -163,7 +201,7 @@ impl Gen<'_> {
         out
     }
 
-    fn call_fb(&mut self, inst: Place, pi: usize, args: &[Arg], span: Span) {
+    pub(crate) fn call_fb(&mut self, inst: Place, pi: usize, args: &[Arg], span: Span) {
         self.calls.push((self.cur, pi, span));
         // A dynamic instance address is parked in a static temporary while arguments are stored.
         let base = match inst.loc {
@@ -245,7 +283,7 @@ impl Gen<'_> {
     }
 
     /// Pushes the address of an in-out argument (which must be a variable of the same type).
-    fn inout_address(&mut self, e: &Expr, ty: &Type) {
+    pub(crate) fn inout_address(&mut self, e: &Expr, ty: &Type) {
         self.sync_if_byte_viewed(e);
         match self.place(e) {
             Some(p) => {
@@ -264,7 +302,7 @@ impl Gen<'_> {
     }
 
     /// `param => target` after a call: copies the output `src` into the target variable.
-    fn copy_out(&mut self, src: Place, target: &Expr) {
+    pub(crate) fn copy_out(&mut self, src: Place, target: &Expr) {
         let Some(dst) = self.place(target) else {
             if matches!(src.loc, Loc::Ind(_)) {
                 self.op(Opcode::Drop);
@@ -318,6 +356,18 @@ impl Gen<'_> {
     }
 
     fn call_function(&mut self, pi: usize, args: &[Arg], span: Span) -> Type {
+        self.call_static(pi, args, span, CallBase::Frame)
+    }
+
+    /// Calls FUNCTION, METHOD or property accessor `pi` (parameters through its static
+    /// frame) on `base`.
+    pub(crate) fn call_static(
+        &mut self,
+        pi: usize,
+        args: &[Arg],
+        span: Span,
+        base: CallBase,
+    ) -> Type {
         self.calls.push((self.cur, pi, span));
         let (frame, pristine) = self.frames.get(pi).copied().unwrap_or((Some(0), Some(0)));
         let (frame, pristine) = (frame.unwrap_or(0), pristine.unwrap_or(0));
@@ -410,10 +460,14 @@ impl Gen<'_> {
             }
         }
         let id = self.pou_ids[pi];
-        self.emit(|b| {
-            b.push_u32(frame);
-            b.call(id);
-        });
+        match base {
+            CallBase::Frame => self.emit(|b| b.push_u32(frame)),
+            CallBase::Instance(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
+            CallBase::Instance(Loc::Rel(o)) => self.emit(|b| b.lea_rel(o)),
+            CallBase::Instance(_) => unreachable!("dynamic instances are parked"),
+            CallBase::Parked(t) => self.emit(|b| b.ld_abs(MemType::U32, t)),
+        }
+        self.emit(|b| b.call(id));
         for a in bound.iter().filter(|a| a.output) {
             let src = Place {
                 loc: Loc::Abs(frame + a.param.offset),
@@ -425,7 +479,15 @@ impl Gen<'_> {
         let rt = self.prog.pous[pi].return_type.clone().unwrap_or(Type::Void);
         let ret_off = self.prog.pous[pi].vars.first().map_or(0, |v| v.offset);
         let addr = frame + ret_off;
-        match &rt {
+        self.push_result_copy(&rt, addr);
+        rt
+    }
+
+    /// Pushes a function's (method's) result from its static frame at `addr`: aggregates
+    /// are copied to a temporary first, so that a second call in the same expression cannot
+    /// overwrite them.
+    pub(crate) fn push_result_copy(&mut self, rt: &Type, addr: u32) {
+        match rt {
             Type::String(n) => {
                 // Copy so that a second call in the same expression cannot overwrite it.
                 let t = self.temp_string(*n);
@@ -437,7 +499,7 @@ impl Gen<'_> {
                 });
             }
             Type::Array(_) | Type::Struct(_) => {
-                let (size, al) = self.prog.size_align(&rt);
+                let (size, al) = self.prog.size_align(rt);
                 let t = self.alloc_static(size, al);
                 self.emit(|b| {
                     b.push_u32(t);
@@ -453,6 +515,5 @@ impl Gen<'_> {
                 }
             }
         }
-        rt
     }
 }

@@ -421,6 +421,10 @@ impl<'a> Gen<'a> {
                     }
                     None => Vec::new(),
                 };
+                if let Some(class) = self.prog.pous[*pi].class {
+                    // The class id dynamic dispatch reads (see `classes`).
+                    self.write_bytes(addr, &(class as u32).to_le_bytes());
+                }
                 let vars = self.prog.pous[*pi].vars.clone();
                 for (n, _) in &fields {
                     if !vars.iter().any(|m| {
@@ -505,7 +509,12 @@ impl<'a> Gen<'a> {
     pub fn generate(&mut self) {
         for i in 0..self.prog.pous.len() {
             let p = &self.prog.pous[i];
-            let id = self.b.declare_pou(&p.text, 0, 0, p.frame_size);
+            // Methods and actions run on their owner's instance.
+            let vm_frame = match &p.member {
+                Some(m) => self.prog.pous[m.owner].frame_size,
+                None => p.frame_size,
+            };
+            let id = self.b.declare_pou(&p.text, 0, 0, vm_frame);
             self.pou_ids.push(id);
         }
         // Static storage: globals and program instances are already allocated by sema.
@@ -547,6 +556,7 @@ impl<'a> Gen<'a> {
         }
         self.check_recursion();
         self.build_objects();
+        self.build_classes();
     }
 
     /// The static frames (of FUNCTIONs) with their POUs: `(POU, frame address)`.
@@ -564,20 +574,28 @@ impl<'a> Gen<'a> {
         self.try_depth = 0;
         let id = self.pou_ids[i];
         self.b.begin_pou(id);
-        let ast = &self.unit.pous[self.prog.pous[i].ast];
-        self.set_location(ast.name.span);
+        let source = crate::classes::pou_source(self.unit, &self.prog.pous[i]);
+        self.set_location(source.name.span);
         if let Some(pr) = pristine {
             let start = self.prog.pous[i].reinit_start;
             let len = self.prog.pous[i].frame_size - start;
-            self.emit(|b| {
-                b.lea_rel(start);
-                b.push_u32(pr + start);
-                b.copy(len);
-            });
+            match self.method_frame() {
+                // A method's variables are in its static frame, not in the instance.
+                Some(frame) => self.emit(|b| {
+                    b.push_u32(frame + start);
+                    b.push_u32(pr + start);
+                    b.copy(len);
+                }),
+                None => self.emit(|b| {
+                    b.lea_rel(start);
+                    b.push_u32(pr + start);
+                    b.copy(len);
+                }),
+            }
         }
         let ret = self.label();
         self.return_label = Some(ret);
-        let body = &ast.body;
+        let body = source.body;
         self.scan_byte_views(body);
         self.scan_temporary_references(body);
         self.stmts(body);
@@ -1055,6 +1073,9 @@ impl<'a> Gen<'a> {
     }
 
     fn assign(&mut self, target: &Expr, value: &Expr) {
+        if self.property_write(target, value) {
+            return;
+        }
         let Some(p) = self.place(target) else {
             // Still check the value for errors.
             self.infer(value);
@@ -1211,6 +1232,9 @@ impl<'a> Gen<'a> {
     fn place_unaliased(&mut self, e: &Expr) -> Option<Place> {
         match &e.kind {
             ExprKind::Name(n) => self.name_place(n),
+            ExprKind::Deref(inner) if matches!(inner.kind, ExprKind::This | ExprKind::Super) => {
+                self.this_place(matches!(inner.kind, ExprKind::Super), e.span)
+            }
             ExprKind::Deref(inner) => self.deref_place(inner, e.span),
             ExprKind::Member(base, m) => {
                 let bp = self.place_inner(base)?;
@@ -1403,7 +1427,16 @@ impl<'a> Gen<'a> {
 
     fn name_place(&mut self, n: &Ident) -> Option<Place> {
         let pou = &self.prog.pous[self.cur];
-        if let Some(v) = pou.var(&n.name).cloned() {
+        // A method's own variables are in its static frame; the instance's are frame-relative.
+        let (v, frame) = match pou.var(&n.name).cloned() {
+            Some(v) => (Some(v), self.method_frame()),
+            None => (
+                self.var_owner(&n.name)
+                    .and_then(|o| self.prog.pous[o].var(&n.name).cloned()),
+                None,
+            ),
+        };
+        if let Some(v) = v {
             return match v.kind {
                 VarKind::External => match self.prog.global(&n.name).cloned() {
                     Some(g) => {
@@ -1429,7 +1462,10 @@ impl<'a> Gen<'a> {
                     }
                 },
                 VarKind::InOut => {
-                    self.emit(|b| b.ld_rel(MemType::U32, v.offset));
+                    match frame {
+                        Some(f) => self.emit(|b| b.ld_abs(MemType::U32, f + v.offset)),
+                        None => self.emit(|b| b.ld_rel(MemType::U32, v.offset)),
+                    }
                     Some(Place {
                         loc: Loc::Ind(0),
                         ty: v.ty,
@@ -1437,7 +1473,10 @@ impl<'a> Gen<'a> {
                     })
                 }
                 _ => Some(Place {
-                    loc: Loc::Rel(v.offset),
+                    loc: match frame {
+                        Some(f) => Loc::Abs(f + v.offset),
+                        None => Loc::Rel(v.offset),
+                    },
                     ty: v.ty,
                     writable: !v.constant,
                 }),
@@ -1753,8 +1792,10 @@ impl<'a> Gen<'a> {
             ExprKind::Typed(ty, inner) => self.typed_literal(ty, inner, e.span),
             ExprKind::Name(n) => {
                 // Variables shadow enumeration values.
-                let is_var = self.prog.pous[self.cur].var(&n.name).is_some()
-                    || self.prog.global(&n.name).is_some();
+                let is_var = self.is_visible_var(&n.name);
+                if !is_var && let Some(t) = self.property_read(e) {
+                    return t;
+                }
                 if !is_var {
                     if let Some(Type::Enum(ei)) = expected
                         && let Some((_, v)) = self.prog.enums[*ei]
@@ -1788,6 +1829,9 @@ impl<'a> Gen<'a> {
                 self.push_int(0);
                 Type::Null
             }
+            ExprKind::This => self.this_expr(false, e.span),
+            ExprKind::Super => self.this_expr(true, e.span),
+            ExprKind::Member(..) if let Some(t) = self.property_read(e) => t,
             ExprKind::Member(..) | ExprKind::Index(..) | ExprKind::Deref(..) => match self.place(e)
             {
                 Some(p) => {

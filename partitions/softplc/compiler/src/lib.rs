@@ -7,6 +7,7 @@
 
 pub mod ast;
 mod calls;
+mod classes;
 pub mod codegen;
 pub mod diagnostics;
 pub mod lexer;
@@ -82,6 +83,8 @@ pub fn compile(
         unit.types.extend(u.types);
         unit.globals.extend(u.globals);
         unit.configs.extend(u.configs);
+        unit.interfaces.extend(u.interfaces);
+        unit.actions.extend(u.actions);
     }
     let mut diags = Diagnostics::default();
     for d in raw {
