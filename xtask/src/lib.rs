@@ -5,7 +5,7 @@
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
 //! lint gate ([`lint`]), the Linux-side test programs ([`linux`]) and the native Linux
-//! reference of the guest benchmark ([`native`]).
+//! reference of the guest benchmark ([`native`]) and the OSCAT library check ([`oscat`]).
 
 pub mod artifacts;
 pub mod bench;
@@ -15,6 +15,7 @@ pub mod guest;
 pub mod lint;
 pub mod linux;
 pub mod native;
+pub mod oscat;
 pub mod plc;
 pub mod qemu;
 pub mod scenario;

@@ -367,11 +367,21 @@ pub enum ExprKind {
     Bool(bool),
     Str(String),
     Time(i128),
+    /// A date/time literal other than TIME (`LT#`, `D#`, `TOD#`, `DT#`, ...): its type and
+    /// nanoseconds.
+    Temporal(crate::types::Elem, i128),
     /// `TYPE#literal`, e.g. `INT#5`, `REAL#1`, `Color#Red`.
     Typed(Ident, Box<Expr>),
     Name(Ident),
     Member(Box<Expr>, Ident),
     Index(Box<Expr>, Vec<Expr>),
+    /// Partial access of a bit string or integer: `x.3` and `x.%X3` (bit 3), `x.%B1`
+    /// (byte 1), `x.%W0`, `x.%D1`, `x.%L0`; `width` in bits, `index` counted in units of it.
+    Bits {
+        base: Box<Expr>,
+        width: u8,
+        index: u32,
+    },
     Call {
         callee: Box<Expr>,
         args: Vec<Arg>,

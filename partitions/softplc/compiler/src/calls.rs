@@ -113,12 +113,13 @@ impl Gen<'_> {
         let vars = pou.vars.clone();
         // The result variable (a function's, method's or getter's) is no output.
         let result = pou.return_type.as_ref().map(|_| pou.vars[0].name.clone());
-        self.bind_to(&pou_name, &vars, result.as_deref(), args)
+        self.bind_to(Some(pi), &pou_name, &vars, result.as_deref(), args)
     }
 
     /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order).
     pub(crate) fn bind_to<'e>(
         &mut self,
+        pou: Option<usize>,
         pou_name: &str,
         vars: &[VarDef],
         result: Option<&str>,
@@ -135,7 +136,11 @@ impl Gen<'_> {
             let param = match &a.name {
                 Some(n) => {
                     named_seen = true;
-                    let v = vars.iter().find(|v| v.name == n.name).cloned();
+                    let v = match pou {
+                        // The POU's own lookup knows the CODESYS aliases of some parameters.
+                        Some(pi) => self.prog.pous[pi].param(&n.name).cloned(),
+                        None => vars.iter().find(|v| v.name == n.name).cloned(),
+                    };
                     match v {
                         Some(v)
                             if a.output
@@ -239,6 +244,7 @@ impl Gen<'_> {
                     loc,
                     ty: Type::Elem(Elem::UDInt),
                     writable: true,
+                    window: None,
                 };
                 self.store_checked(&p);
             } else {
@@ -247,6 +253,7 @@ impl Gen<'_> {
                     loc,
                     ty: a.param.ty.clone(),
                     writable: true,
+                    window: None,
                 };
                 if p.ty.is_pointer_like() {
                     self.check_escape(None, a.value, "an input of a function block instance");
@@ -277,6 +284,7 @@ impl Gen<'_> {
                 loc: src,
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }
@@ -286,6 +294,14 @@ impl Gen<'_> {
     pub(crate) fn inout_address(&mut self, e: &Expr, ty: &Type) {
         self.sync_if_byte_viewed(e);
         match self.place(e) {
+            Some(p) if p.window.is_some() => {
+                self.error(
+                    e.span,
+                    "a partial access (`x.3`, `x.%B1`) cannot be passed to a VAR_IN_OUT",
+                );
+                self.drop_place(&p);
+                self.emit(|b| b.push_i32(0));
+            }
             Some(p) => {
                 if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
                     let msg = format!(
@@ -473,6 +489,7 @@ impl Gen<'_> {
                 loc: Loc::Abs(frame + a.param.offset),
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }

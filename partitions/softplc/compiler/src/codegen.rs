@@ -38,6 +38,27 @@ pub(crate) struct Place {
     pub loc: Loc,
     pub ty: Type,
     pub writable: bool,
+    /// A partial access (`x.3`, `x.%B1`): the bits of the variable at `loc` this place is.
+    pub window: Option<Window>,
+}
+
+/// `width` bits starting at bit `shift` of an integer or bit-string variable of type
+/// `container`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Window {
+    pub shift: u32,
+    pub width: u32,
+    pub container: Elem,
+}
+
+impl Window {
+    fn mask(self) -> u64 {
+        if self.width >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << self.width) - 1
+        }
+    }
 }
 
 /// The memory type a value of `ty` is loaded and stored with: elementary types by their
@@ -51,12 +72,15 @@ pub(crate) fn scalar_mem(ty: &Type) -> Option<MemType> {
 
 pub(crate) fn mem_type(e: Elem) -> MemType {
     match e {
-        Elem::Bool | Elem::USInt | Elem::Byte => MemType::U8,
+        Elem::Bool | Elem::USInt | Elem::Byte | Elem::Char => MemType::U8,
         Elem::SInt => MemType::I8,
         Elem::Int => MemType::I16,
         Elem::DInt => MemType::I32,
-        Elem::LInt | Elem::Time => MemType::I64,
-        Elem::UInt | Elem::Word => MemType::U16,
+        Elem::LInt | Elem::Time | Elem::LTime | Elem::Date | Elem::LDate | Elem::Tod => {
+            MemType::I64
+        }
+        Elem::LTod | Elem::Dt | Elem::LDt => MemType::I64,
+        Elem::UInt | Elem::Word | Elem::WChar => MemType::U16,
         Elem::UDInt | Elem::DWord => MemType::U32,
         Elem::ULInt | Elem::LWord => MemType::U64,
         Elem::Real => MemType::F32,
@@ -494,7 +518,19 @@ impl<'a> Gen<'a> {
             (ConstVal::Int(i), Elem::LReal) => Some((*i as f64).to_bits()),
             (ConstVal::Real(r), Elem::Real) => Some((*r as f32).to_bits() as u64),
             (ConstVal::Real(r), Elem::LReal) => Some(r.to_bits()),
-            (ConstVal::Time(t), Elem::Time) => Some(*t as i64 as u64),
+            (ConstVal::Time(t), e) if e.is_duration() => Some(*t as i64 as u64),
+            (ConstVal::Temporal(k, t), e) if implicit_ok(*k, e) => Some(*t as i64 as u64),
+            (ConstVal::Int(i), e) if e.is_char() => {
+                let (lo, hi) = e.int_range();
+                if *i < lo || *i > hi {
+                    return bad(self);
+                }
+                Some(*i as u64)
+            }
+            (ConstVal::Str(text), e) if e.is_char() => match crate::sema::single_char(text) {
+                Some(c) if c <= e.int_range().1 => Some(c as u64),
+                _ => bad(self),
+            },
             _ => {
                 let msg = format!("initial value has the wrong type for {}", self.tname(ty));
                 self.diags.error(span, msg);
@@ -824,6 +860,10 @@ impl<'a> Gen<'a> {
     /// Stores the top of stack into a place whose address part (if any) is below it...
     /// only valid for static places (`Abs`/`Rel`).
     fn store_top(&mut self, p: &Place) {
+        if p.window.is_some() {
+            self.store_checked(p);
+            return;
+        }
         let Some(mt) = scalar_mem(&p.ty) else { return };
         match p.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
@@ -970,7 +1010,7 @@ impl<'a> Gen<'a> {
             self.error(var.span, msg);
             return;
         };
-        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) {
+        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) || vp.window.is_some() {
             self.error(var.span, "FOR control variable must be a plain variable");
             return;
         }
@@ -1196,6 +1236,47 @@ impl<'a> Gen<'a> {
 
     /// Stores the elementary value on top of the stack into `p`, checking subranges.
     pub(crate) fn store_checked(&mut self, p: &Place) {
+        if let Some(w) = p.window {
+            // Read, modify, write the variable: (old AND NOT m) OR (v << shift).
+            let mt = mem_type(w.container);
+            let keep = !(w.mask() << w.shift) as i64;
+            self.emit(|b| {
+                if w.width < 64 {
+                    b.push_int(w.mask() as i64);
+                    b.op(Opcode::And);
+                }
+                if w.shift != 0 {
+                    b.push_i32(w.shift as i32);
+                    b.op(Opcode::Shl);
+                }
+            });
+            match p.loc {
+                Loc::Abs(a) => self.emit(|b| {
+                    b.ld_abs(mt, a);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_abs(mt, a);
+                }),
+                Loc::Rel(o) => self.emit(|b| {
+                    b.ld_rel(mt, o);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_rel(mt, o);
+                }),
+                Loc::Ind(o) => self.emit(|b| {
+                    b.over();
+                    b.ld_ind(mt, o);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_ind(mt, o);
+                }),
+                Loc::Ref(_) => unreachable!("places are finalized"),
+            }
+            return;
+        }
         if let Type::Subrange(e, lo, hi) = p.ty {
             if e.signed_storage() || e.size() < 8 {
                 self.emit(|b| b.chk_range_s(lo, hi));
@@ -1255,11 +1336,12 @@ impl<'a> Gen<'a> {
                             loc: offset_loc(bp.loc, mem.offset),
                             ty: mem.ty,
                             writable: bp.writable,
+                            window: None,
                         })
                     }
                     Type::Fb(pi) => {
                         let pi = *pi;
-                        let v = self.prog.pous[pi].var(&m.name).cloned();
+                        let v = self.prog.pous[pi].param(&m.name).cloned();
                         match v {
                             Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
                                 // Outputs are read-only from outside; inputs may be set before a call.
@@ -1268,6 +1350,7 @@ impl<'a> Gen<'a> {
                                     loc: offset_loc(bp.loc, v.offset),
                                     ty: v.ty,
                                     writable,
+                                    window: None,
                                 })
                             }
                             Some(_) => {
@@ -1362,6 +1445,7 @@ impl<'a> Gen<'a> {
                         loc: offset_loc(bp.loc, static_off as u32),
                         ty: arr.elem.clone(),
                         writable: bp.writable,
+                        window: None,
                     });
                 }
                 if let Loc::Ref(o) = bp.loc {
@@ -1410,8 +1494,10 @@ impl<'a> Gen<'a> {
                     loc: Loc::Ind(base_off + static_off as u32),
                     ty: arr.elem.clone(),
                     writable: bp.writable,
+                    window: None,
                 })
             }
+            ExprKind::Bits { base, width, index } => self.partial_place(e, base, *width, *index),
             _ => {
                 self.error(e.span, "expected a variable");
                 None
@@ -1419,7 +1505,64 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn drop_place(&mut self, p: &Place) {
+    /// `base.N`, `base.%B1`, ...: the bits of an integer or bit-string variable (or of such
+    /// a partial access).
+    fn partial_place(&mut self, e: &Expr, base: &Expr, width: u8, index: u32) -> Option<Place> {
+        let bp = self.place(base)?;
+        let (container, outer_shift, bits) = match (&bp.ty, bp.window) {
+            (_, Some(w)) => (w.container, w.shift, w.width),
+            (Type::Elem(c), None) if c.is_integral() => (*c, 0, c.size() * 8),
+            (ty, None) => {
+                if !ty.is_error() {
+                    let msg = format!(
+                        "partial access `.{}` needs a bit string or integer variable, found {}",
+                        index,
+                        self.tname(ty)
+                    );
+                    self.error(e.span, msg);
+                }
+                self.drop_place(&bp);
+                return None;
+            }
+        };
+        let width = width as u32;
+        if (index as u64 + 1) * width as u64 > bits as u64 {
+            let unit = match width {
+                1 => "bit",
+                8 => "byte",
+                16 => "word",
+                32 => "double word",
+                _ => "long word",
+            };
+            let msg = format!(
+                "{unit} {index} is outside the variable ({} bits: {unit}s 0..{})",
+                bits,
+                (bits / width).saturating_sub(1)
+            );
+            self.error(e.span, msg);
+            self.drop_place(&bp);
+            return None;
+        }
+        let ty = match width {
+            1 => Type::BOOL,
+            8 => Type::Elem(Elem::Byte),
+            16 => Type::Elem(Elem::Word),
+            32 => Type::Elem(Elem::DWord),
+            _ => Type::Elem(Elem::LWord),
+        };
+        Some(Place {
+            loc: bp.loc,
+            ty,
+            writable: bp.writable,
+            window: Some(Window {
+                shift: outer_shift + index * width,
+                width,
+                container,
+            }),
+        })
+    }
+
+    pub(crate) fn drop_place(&mut self, p: &Place) {
         if matches!(p.loc, Loc::Ind(_) | Loc::Ref(_)) {
             self.op(Opcode::Drop);
         }
@@ -1453,6 +1596,7 @@ impl<'a> Gen<'a> {
                             loc: Loc::Abs(g.offset),
                             ty: g.ty.clone(),
                             writable: !g.constant && !v.constant,
+                            window: None,
                         })
                     }
                     None => {
@@ -1470,6 +1614,7 @@ impl<'a> Gen<'a> {
                         loc: Loc::Ind(0),
                         ty: v.ty,
                         writable: true,
+                        window: None,
                     })
                 }
                 _ => Some(Place {
@@ -1479,6 +1624,7 @@ impl<'a> Gen<'a> {
                     },
                     ty: v.ty,
                     writable: !v.constant,
+                    window: None,
                 }),
             };
         }
@@ -1487,6 +1633,7 @@ impl<'a> Gen<'a> {
                 loc: Loc::Abs(g.offset),
                 ty: g.ty.clone(),
                 writable: !g.constant,
+                window: None,
             });
         }
         let msg = format!("unknown variable `{}`", n.text);
@@ -1510,6 +1657,26 @@ impl<'a> Gen<'a> {
 
     /// Pushes the value of a place (elementary) or its address (aggregate).
     pub(crate) fn load(&mut self, p: &Place) {
+        if let Some(w) = p.window {
+            let mt = mem_type(w.container);
+            match p.loc {
+                Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
+                Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
+                Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
+                Loc::Ref(_) => unreachable!("places are finalized"),
+            }
+            self.emit(|b| {
+                if w.shift != 0 {
+                    b.push_i32(w.shift as i32);
+                    b.op(Opcode::ShrU);
+                }
+                if w.width < 64 {
+                    b.push_int(w.mask() as i64);
+                    b.op(Opcode::And);
+                }
+            });
+            return;
+        }
         match scalar_mem(&p.ty) {
             Some(mt) => match p.loc {
                 Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
@@ -1541,6 +1708,10 @@ impl<'a> Gen<'a> {
     pub(crate) fn is_flexible(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Int(_) | ExprKind::Real(_) => true,
+            // TRUNC and SIZEOF give any integer type (IEC: ANY_INT), whatever their argument.
+            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
+                true
+            }
             // Numeric standard functions of literals are as untyped as the literals.
             ExprKind::Call { callee, args } => match &callee.kind {
                 ExprKind::Name(n) => {
@@ -1572,6 +1743,9 @@ impl<'a> Gen<'a> {
     pub(crate) fn has_real_literal(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Real(_) => true,
+            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
+                false
+            }
             ExprKind::Call { callee, args } => {
                 matches!(&callee.kind, ExprKind::Name(n) if !["ABS", "MAX", "MIN", "LIMIT"].contains(&n.name.as_str()))
                     || args.iter().any(|a| Self::has_real_literal(&a.value))
@@ -1653,6 +1827,20 @@ impl<'a> Gen<'a> {
         if f == t {
             return;
         }
+        if f.is_temporal() || t.is_temporal() {
+            self.convert_temporal(f, t);
+            return;
+        }
+        // Characters convert like the unsigned integers of their size.
+        let as_int = |e: Elem| match e {
+            Elem::Char => Elem::USInt,
+            Elem::WChar => Elem::UInt,
+            e => e,
+        };
+        if f.is_char() || t.is_char() {
+            self.convert(as_int(f), as_int(t));
+            return;
+        }
         match (f.is_real(), t.is_real()) {
             (false, false) => {
                 if t == Elem::Bool {
@@ -1660,37 +1848,11 @@ impl<'a> Gen<'a> {
                         b.push_i32(0);
                         b.op(Opcode::Ne);
                     });
-                } else if t == Elem::Time || f == Elem::Time {
-                    // TIME <-> integer: the integer counts milliseconds.
-                    if f == Elem::Time {
-                        self.emit(|b| {
-                            b.push_i32(1_000_000);
-                            b.op(Opcode::DivS);
-                        });
-                        self.wrap(t);
-                    } else {
-                        self.emit(|b| {
-                            b.push_i32(1_000_000);
-                            b.op(Opcode::Mul);
-                        });
-                    }
                 } else if t.size() < f.size() || t.signed_storage() != f.signed_storage() {
                     self.wrap(t);
                 }
             }
             (false, true) => {
-                if f == Elem::Time {
-                    // TIME -> REAL/LREAL gives milliseconds.
-                    self.emit(|b| {
-                        b.op(Opcode::IToF64S);
-                        b.push_f64(1e6);
-                        b.op(Opcode::DivF64);
-                    });
-                    if t == Elem::Real {
-                        self.op(Opcode::F64ToF32);
-                    }
-                    return;
-                }
                 let signed = !(f.is_unsigned_int() || f.is_bits() && f.size() == 8);
                 let op = match (t, signed) {
                     (Elem::Real, true) => Opcode::IToF32S,
@@ -1725,20 +1887,86 @@ impl<'a> Gen<'a> {
                         }
                         b.op(zero_op);
                     });
-                } else if t == Elem::Time {
-                    // REAL milliseconds -> TIME.
-                    if f == Elem::Real {
-                        self.op(Opcode::F32ToF64);
-                    }
-                    self.emit(|b| {
-                        b.push_f64(1e6);
-                        b.op(Opcode::MulF64);
-                        b.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway);
-                    });
                 } else {
                     self.emit(|b| b.float_to_int(op, mem_type(t), RoundMode::NearestTiesAway));
                 }
             }
+        }
+    }
+
+    /// Conversions to, from and between the date/time types. All hold nanoseconds; as
+    /// numbers (CODESYS's conventions) TIME and TOD count milliseconds, DATE and DT seconds,
+    /// the long forms nanoseconds. A DATE result is the midnight of its day, a TOD result
+    /// lies within its day.
+    fn convert_temporal(&mut self, f: Elem, t: Elem) {
+        fn unit(e: Elem) -> i64 {
+            match e {
+                Elem::Time | Elem::Tod => 1_000_000,
+                Elem::Date | Elem::Dt => 1_000_000_000,
+                _ => 1,
+            }
+        }
+        if f.is_temporal() && !t.is_temporal() {
+            let n = unit(f);
+            if t == Elem::Bool {
+                self.emit(|b| {
+                    b.push_i32(0);
+                    b.op(Opcode::Ne);
+                });
+            } else if t.is_real() {
+                self.op(Opcode::IToF64S);
+                if n != 1 {
+                    self.emit(|b| {
+                        b.push_f64(n as f64);
+                        b.op(Opcode::DivF64);
+                    });
+                }
+                if t == Elem::Real {
+                    self.op(Opcode::F64ToF32);
+                }
+            } else {
+                if n != 1 {
+                    self.emit(|b| {
+                        b.push_int(n);
+                        b.op(Opcode::DivS);
+                    });
+                }
+                let as_int = match t {
+                    Elem::Char => Elem::USInt,
+                    Elem::WChar => Elem::UInt,
+                    e => e,
+                };
+                self.wrap(as_int);
+            }
+            return;
+        }
+        if !f.is_temporal() {
+            let n = unit(t);
+            if f.is_real() {
+                if f == Elem::Real {
+                    self.op(Opcode::F32ToF64);
+                }
+                self.emit(|b| {
+                    b.push_f64(n as f64);
+                    b.op(Opcode::MulF64);
+                    b.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway);
+                });
+            } else if n != 1 {
+                self.emit(|b| {
+                    b.push_int(n);
+                    b.op(Opcode::Mul);
+                });
+            }
+        }
+        // Into the day: a DATE is a midnight, a TOD a time within its day.
+        match t.temporal_family() {
+            Some(Elem::Date) if f.temporal_family() != Some(Elem::Date) => {
+                self.emit(|b| b.call_builtin(Builtin::DateOf))
+            }
+            Some(Elem::Tod) if f.temporal_family() != Some(Elem::Tod) => {
+                self.emit(|b| b.call_builtin(Builtin::TodOf))
+            }
+            _ => {}
         }
     }
 
@@ -1783,6 +2011,26 @@ impl<'a> Gen<'a> {
             ExprKind::Time(t) => {
                 self.push_int(*t as i64);
                 Type::TIME
+            }
+            ExprKind::Temporal(elem, t) => {
+                self.push_int(*t as i64);
+                Type::Elem(*elem)
+            }
+            // A one-character string literal where a CHAR or WCHAR is expected.
+            ExprKind::Str(s)
+                if expected
+                    .and_then(|t| t.elem())
+                    .is_some_and(|e| e.is_char() && !matches!(expected, Some(Type::Enum(_))))
+                    && crate::sema::single_char(s).is_some() =>
+            {
+                let elem = expected.and_then(|t| t.elem()).unwrap_or(Elem::Char);
+                let code = crate::sema::single_char(s).unwrap_or(0);
+                if code > elem.int_range().1 {
+                    let msg = format!("character '{s}' does not fit type {elem}");
+                    self.error(e.span, msg);
+                }
+                self.push_int(code as i64);
+                Type::Elem(elem)
             }
             ExprKind::Str(s) => {
                 let a = self.string_literal(s);
@@ -1832,8 +2080,10 @@ impl<'a> Gen<'a> {
             ExprKind::This => self.this_expr(false, e.span),
             ExprKind::Super => self.this_expr(true, e.span),
             ExprKind::Member(..) if let Some(t) = self.property_read(e) => t,
-            ExprKind::Member(..) | ExprKind::Index(..) | ExprKind::Deref(..) => match self.place(e)
-            {
+            ExprKind::Member(..)
+            | ExprKind::Index(..)
+            | ExprKind::Deref(..)
+            | ExprKind::Bits { .. } => match self.place(e) {
                 Some(p) => {
                     self.load(&p);
                     p.ty
@@ -1852,6 +2102,11 @@ impl<'a> Gen<'a> {
             t => t.elem(),
         });
         match exp_elem {
+            // IEC boolean literals include 0 and 1.
+            Some(Elem::Bool) if v == 0 || v == 1 => {
+                self.push_int(v as i64);
+                Type::BOOL
+            }
             Some(e) if e.is_real() => {
                 if e == Elem::Real {
                     self.emit(|b| b.push_f32(v as f32));
@@ -1973,9 +2228,16 @@ impl<'a> Gen<'a> {
             UnOp::Neg => match e {
                 Elem::Real => self.op(Opcode::NegF32),
                 Elem::LReal => self.op(Opcode::NegF64),
-                e if e.is_signed_int() || e == Elem::Time => {
+                e if e.is_signed_int() || e.is_duration() => {
                     self.op(Opcode::Neg);
                     self.wrap(e);
+                }
+                // `-step` of a BYTE (CODESYS): the negated value in a signed integer
+                // twice as wide (which holds it).
+                e if (e.is_unsigned_int() || e.is_bits()) && e.size() < 8 => {
+                    let signed = signed_of_size(e.size() * 2);
+                    self.op(Opcode::Neg);
+                    return Type::Elem(signed);
                 }
                 _ => {
                     let msg = format!("operator - cannot be applied to {e}");
@@ -2005,24 +2267,53 @@ impl<'a> Gen<'a> {
         let fb = Self::is_flexible(b);
         let ta = if fa { None } else { Some(self.infer(a)) };
         let tb = if fb { None } else { Some(self.infer(b)) };
-        let flex_type = |other: &Type, e: &Expr| -> Type {
+        // Only a plain literal: arithmetic of literals keeps wrapping in the other operand's
+        // type as it always did.
+        let int_value = |e: &Expr| match &e.kind {
+            ExprKind::Int(v) => Some(*v as i128),
+            ExprKind::Unary(UnOp::Neg, x) => match x.kind {
+                ExprKind::Int(v) => Some(-(v as i128)),
+                _ => None,
+            },
+            _ => None,
+        };
+        let (va, vb) = (int_value(a), int_value(b));
+        // An integer literal takes the other operand's type, or a wider one when it does not
+        // fit it (`int_var * 60000` is a DINT product, as the literal is a DINT).
+        let flex_type = |other: &Type, e: &Expr, value: Option<i128>| -> Type {
             if Self::has_real_literal(e) {
-                match other.elem() {
+                return match other.elem() {
                     Some(x) if x.is_real() => other.clone(),
                     _ => Type::LREAL,
+                };
+            }
+            match (other, value) {
+                (Type::Elem(x), Some(v)) if x.is_integral() => {
+                    let (lo, hi) = x.int_range();
+                    if lo <= v && v <= hi {
+                        return other.clone();
+                    }
+                    let literal = if i32::try_from(v).is_ok() {
+                        Elem::DInt
+                    } else {
+                        Elem::LInt
+                    };
+                    match common_numeric(*x, literal) {
+                        Some(c) if c.int_range().0 <= v && v <= c.int_range().1 => Type::Elem(c),
+                        _ => other.clone(),
+                    }
                 }
-            } else {
-                other.clone()
+                _ => other.clone(),
             }
         };
         match (ta, tb) {
             (Some(x), Some(y)) => (x, y),
             (Some(x), None) => {
-                let y = flex_type(&x, b);
+                let y = flex_type(&x, b, vb);
                 (x, y)
             }
             (None, Some(y)) => {
-                let x = flex_type(&y, a);
+                let x = flex_type(&y, a, va);
                 (x, y)
             }
             (None, None) => {
@@ -2047,7 +2338,7 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn binary(
+    pub(crate) fn binary(
         &mut self,
         op: BinOp,
         a: &Expr,
@@ -2106,56 +2397,18 @@ impl<'a> Gen<'a> {
         let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else {
             return mismatch(self);
         };
-        // TIME arithmetic.
-        if ea == Elem::Time || eb == Elem::Time {
-            let result = match op {
-                _ if is_cmp && ea == eb => Type::BOOL,
-                BinOp::Add | BinOp::Sub if ea == eb => Type::TIME,
-                BinOp::Mul
-                    if ea == Elem::Time && eb.is_integral()
-                        || eb == Elem::Time && ea.is_integral() =>
-                {
-                    Type::TIME
-                }
-                BinOp::Div if ea == Elem::Time && eb.is_integral() => Type::TIME,
-                BinOp::Mul | BinOp::Div if ea == Elem::Time && eb.is_real() => Type::TIME,
-                _ => return mismatch(self),
-            };
-            if eb.is_real() {
-                // TIME * REAL: computed in LREAL nanoseconds.
-                self.expr(a, Some(&ta));
-                self.op(Opcode::IToF64S);
-                self.value_to(b, &Type::LREAL);
-                self.op(if op == BinOp::Mul {
-                    Opcode::MulF64
-                } else {
-                    Opcode::DivF64
-                });
-                self.emit(|bb| {
-                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
-                });
-                return result;
+        if ea.is_temporal() || eb.is_temporal() {
+            return self.temporal_binary(op, (a, &ta, ea), (b, &tb, eb), span);
+        }
+        // Characters: comparisons within CHAR/WCHAR.
+        if ea.is_char() || eb.is_char() {
+            if !(is_cmp && ea.is_char() && eb.is_char()) {
+                return mismatch(self);
             }
-            let sa = if ea == Elem::Time {
-                ta.clone()
-            } else {
-                Type::LINT
-            };
-            let sb = if eb == Elem::Time {
-                tb.clone()
-            } else {
-                Type::LINT
-            };
-            self.value_to_any(a, &ta, &sa);
-            self.value_to_any(b, &tb, &sb);
-            self.op(match op {
-                BinOp::Add => Opcode::Add,
-                BinOp::Sub => Opcode::Sub,
-                BinOp::Mul => Opcode::Mul,
-                BinOp::Div => Opcode::DivS,
-                _ => cmp_op(op, true),
-            });
-            return result;
+            self.expr(a, Some(&ta));
+            self.expr(b, Some(&tb));
+            self.op(cmp_op(op, true));
+            return Type::BOOL;
         }
         // Booleans and bit strings: logic operators.
         if matches!(op, BinOp::And | BinOp::Or | BinOp::Xor) {
@@ -2287,6 +2540,145 @@ impl<'a> Gen<'a> {
             }
         }
         tt
+    }
+
+    /// Date and time arithmetic (IEC 61131-3 table of time operations): TIME +/- TIME,
+    /// TOD +/- TIME (wrapping within the day), DT +/- TIME, DATE - DATE, TOD - TOD, DT - DT
+    /// (giving TIME), TIME * and / numbers, comparisons within one family. The long forms
+    /// follow the same rules; an operation with a long operand gives the long result.
+    fn temporal_binary(
+        &mut self,
+        op: BinOp,
+        (a, ta, ea): (&Expr, &Type, Elem),
+        (b, tb, eb): (&Expr, &Type, Elem),
+        span: Span,
+    ) -> Type {
+        // A literal factor is a number, not a duration (`T#1s * 2`).
+        let literal_type = |e: &Expr| {
+            if Self::has_real_literal(e) {
+                Type::LREAL
+            } else {
+                Type::LINT
+            }
+        };
+        let (ta, ea) = if Self::is_flexible(a) && matches!(op, BinOp::Mul) {
+            let t = literal_type(a);
+            let e = t.elem().unwrap_or(Elem::LInt);
+            (&t.clone(), e)
+        } else {
+            (ta, ea)
+        };
+        let (tb, eb) = if Self::is_flexible(b) && matches!(op, BinOp::Mul | BinOp::Div) {
+            let t = literal_type(b);
+            let e = t.elem().unwrap_or(Elem::LInt);
+            (&t.clone(), e)
+        } else {
+            (tb, eb)
+        };
+        let fa = ea.temporal_family();
+        let fb = eb.temporal_family();
+        let long = ea.is_long_temporal() || eb.is_long_temporal();
+        let pick = |short: Elem| -> Elem {
+            match (short, long) {
+                (Elem::Time, true) => Elem::LTime,
+                (Elem::Tod, true) => Elem::LTod,
+                (Elem::Dt, true) => Elem::LDt,
+                (Elem::Date, true) => Elem::LDate,
+                (e, _) => e,
+            }
+        };
+        let is_cmp = matches!(
+            op,
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+        );
+        let time = Some(Elem::Time);
+        // (result, whether a TOD result wraps into its day)
+        let result = match op {
+            _ if is_cmp && fa == fb => Some((Elem::Bool, false)),
+            BinOp::Add if fa == time && fb == time => Some((pick(Elem::Time), false)),
+            BinOp::Add
+                if fa == Some(Elem::Tod) && fb == time || fa == time && fb == Some(Elem::Tod) =>
+            {
+                Some((pick(Elem::Tod), true))
+            }
+            BinOp::Add
+                if fa == Some(Elem::Dt) && fb == time || fa == time && fb == Some(Elem::Dt) =>
+            {
+                Some((pick(Elem::Dt), false))
+            }
+            BinOp::Sub if fa == fb && fa != Some(Elem::Dt) && fa != Some(Elem::Tod) => {
+                // TIME - TIME, DATE - DATE
+                Some((pick(Elem::Time), false))
+            }
+            BinOp::Sub if fa == fb => Some((pick(Elem::Time), false)),
+            BinOp::Sub if fa == Some(Elem::Tod) && fb == time => Some((pick(Elem::Tod), true)),
+            BinOp::Sub if fa == Some(Elem::Dt) && fb == time => Some((pick(Elem::Dt), false)),
+            BinOp::Mul | BinOp::Div
+                if fa == time && eb.is_numeric()
+                    || op == BinOp::Mul && fb == time && ea.is_numeric() =>
+            {
+                Some((if fa == time { ea } else { eb }, false))
+            }
+            _ => None,
+        };
+        let Some((result, wraps)) = result else {
+            let hint = match (op, fa, fb) {
+                (BinOp::Add | BinOp::Sub, Some(Elem::Date), Some(Elem::Time)) => {
+                    " (a DATE is a day: use DATE_TO_DT or CONCAT_DATE_TOD for a point in time)"
+                }
+                (BinOp::Add, Some(x), Some(y)) if x == y && x != Elem::Time => {
+                    " (two points in time cannot be added; subtract them for a TIME)"
+                }
+                _ => "",
+            };
+            let msg = format!(
+                "operator {} cannot be applied to {} and {}{hint}",
+                op.symbol(),
+                self.tname(ta),
+                self.tname(tb)
+            );
+            self.error(span, msg);
+            return Type::Error;
+        };
+        if matches!(op, BinOp::Mul | BinOp::Div) {
+            let (duration, number, number_type) = if fa == time { (a, b, tb) } else { (b, a, ta) };
+            let duration_type = Type::Elem(result);
+            if number_type.elem().is_some_and(|e| e.is_real()) {
+                // TIME * REAL: computed in LREAL nanoseconds, rounded.
+                self.value_to_any(duration, &duration_type, &duration_type);
+                self.op(Opcode::IToF64S);
+                self.value_to_any(number, number_type, &Type::LREAL);
+                self.op(if op == BinOp::Mul {
+                    Opcode::MulF64
+                } else {
+                    Opcode::DivF64
+                });
+                self.emit(|bb| {
+                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
+                });
+            } else {
+                self.value_to_any(duration, &duration_type, &duration_type);
+                self.value_to_any(number, number_type, &Type::LINT);
+                self.op(if op == BinOp::Mul {
+                    Opcode::Mul
+                } else {
+                    Opcode::DivS
+                });
+            }
+            return Type::Elem(result);
+        }
+        // The operands keep their nanoseconds (TIME widens to LTIME implicitly).
+        self.value_to_any(a, ta, ta);
+        self.value_to_any(b, tb, tb);
+        self.op(match op {
+            BinOp::Add => Opcode::Add,
+            BinOp::Sub => Opcode::Sub,
+            _ => cmp_op(op, true),
+        });
+        if wraps {
+            self.emit(|bb| bb.call_builtin(Builtin::TodOf));
+        }
+        Type::Elem(result)
     }
 
     /// Compiles `e` (whose type was inferred as `from`) and converts to `to` without the

@@ -5,6 +5,7 @@
 //! are recognised here so the parser sees one token per literal.
 
 use crate::diagnostics::{Diagnostic, Span};
+use crate::types::Elem;
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum Tok {
@@ -15,6 +16,9 @@ pub enum Tok {
     Real(f64),
     /// Duration literal in nanoseconds.
     Time(i128),
+    /// Other date/time literal (`LT#`, `D#`, `TOD#`, `DT#` and the long forms): its type and
+    /// nanoseconds (since 1970-01-01, or since midnight for a time of day).
+    Temporal(Elem, i128),
     Str(String),
     /// `TYPE#` prefix of a typed literal such as `INT#5` or `Color#Red`.
     TypePrefix(String, String),
@@ -340,19 +344,57 @@ impl Lexer<'_> {
         let upper = orig.to_ascii_uppercase();
         if self.peek(0) == b'#' {
             self.pos += 1;
-            if matches!(upper.as_str(), "T" | "TIME" | "LTIME") {
-                self.duration(start);
-            } else {
-                self.push(Tok::TypePrefix(upper, orig), start);
+            let elem = match upper.as_str() {
+                "T" | "TIME" => Some(Elem::Time),
+                "LT" | "LTIME" => Some(Elem::LTime),
+                "D" | "DATE" => Some(Elem::Date),
+                "LD" | "LDATE" => Some(Elem::LDate),
+                "TOD" | "TIME_OF_DAY" => Some(Elem::Tod),
+                "LTOD" | "LTIME_OF_DAY" => Some(Elem::LTod),
+                "DT" | "DATE_AND_TIME" => Some(Elem::Dt),
+                "LDT" | "LDATE_AND_TIME" => Some(Elem::LDt),
+                _ => None,
+            };
+            match elem {
+                Some(e) if e.is_duration() => self.duration(start, e),
+                Some(e) => self.date_time(start, e),
+                None => self.push(Tok::TypePrefix(upper, orig), start),
             }
             return;
         }
         self.push(Tok::Ident(upper, orig), start);
     }
 
-    /// Duration after `T#`: `[-]` then components like `1d2h3m4s5ms6us7ns`, each optionally
-    /// fractional (`1.5s`), with `_` separators.
-    fn duration(&mut self, start: usize) {
+    /// A date (`D#2024-02-29`), time of day (`TOD#12:30:00.5`, seconds optional) or date
+    /// and time (`DT#2024-02-29-12:30:00`) after its `#`.
+    fn date_time(&mut self, start: usize, elem: Elem) {
+        let body_start = self.pos;
+        while matches!(self.peek(0), b'0'..=b'9' | b':' | b'.' | b'-') {
+            self.pos += 1;
+        }
+        let body = &self.src[body_start..self.pos];
+        let kind = elem.time_kind().expect("a date/time type");
+        let value = plc_vm::builtins::parse_date_time(body, kind);
+        if value.is_none() {
+            let example = match elem.temporal_family() {
+                Some(Elem::Date) => "D#2024-02-29",
+                Some(Elem::Tod) => "TOD#13:05:00 or TOD#13:05:00.250",
+                _ => "DT#2024-02-29-13:05:00",
+            };
+            self.error(
+                start,
+                format!(
+                    "malformed or invalid {} literal (expected e.g. {example})",
+                    elem.name()
+                ),
+            );
+        }
+        self.push(Tok::Temporal(elem, value.unwrap_or(0) as i128), start);
+    }
+
+    /// Duration after `T#` (or `LT#`): `[-]` then components like `1d2h3m4s5ms6us7ns`, each
+    /// optionally fractional (`1.5s`), with `_` separators.
+    fn duration(&mut self, start: usize, elem: Elem) {
         let negative = if self.peek(0) == b'-' {
             self.pos += 1;
             true
@@ -419,7 +461,11 @@ impl Lexer<'_> {
             self.error(start, "duration literal out of range");
             ns = 0;
         }
-        self.push(Tok::Time(ns), start);
+        if elem == Elem::Time {
+            self.push(Tok::Time(ns), start);
+        } else {
+            self.push(Tok::Temporal(elem, ns), start);
+        }
     }
 
     fn punct(&mut self) {
@@ -494,5 +540,18 @@ mod tests {
             Tok::TypePrefix("INT".into(), "INT".into())
         );
         assert_eq!(toks("x (* c (* n *) *) := 1")[1], Tok::Assign);
+        assert_eq!(toks("LT#1ms")[0], Tok::Temporal(Elem::LTime, 1_000_000));
+        assert_eq!(
+            toks("D#1970-01-02")[0],
+            Tok::Temporal(Elem::Date, 86_400_000_000_000)
+        );
+        assert_eq!(
+            toks("time_of_day#00:00:01.5")[0],
+            Tok::Temporal(Elem::Tod, 1_500_000_000)
+        );
+        assert_eq!(
+            toks("LDT#1970-01-01-00:01 - x")[0..2],
+            [Tok::Temporal(Elem::LDt, 60_000_000_000), Tok::Minus]
+        );
     }
 }

@@ -11,6 +11,7 @@ mod classes;
 pub mod codegen;
 pub mod diagnostics;
 pub mod lexer;
+pub mod library;
 pub mod monitor;
 mod oop;
 pub mod parser;
@@ -33,6 +34,9 @@ pub const PRELUDE_NAME: &str = "<prelude>";
 pub struct Options {
     /// Program to run when there is no CONFIGURATION and several PROGRAMs.
     pub program: Option<String>,
+    /// Compile a library: every POU is checked and compiled, no PROGRAM is needed and none
+    /// becomes a task (the image has no tasks unless a CONFIGURATION declares some).
+    pub library: bool,
 }
 
 /// A task as the host runner schedules it.
@@ -90,8 +94,8 @@ pub fn compile(
     for d in raw {
         diags.push(d);
     }
-    let mut prog = sema::analyse(&unit, prelude_pous, opts.program.as_deref(), &mut diags);
-    if prog.instances.is_empty() && diags.is_empty() {
+    let mut prog = sema::analyse(&unit, prelude_pous, opts, &mut diags);
+    if prog.instances.is_empty() && diags.is_empty() && !opts.library {
         diags.error(
             diagnostics::Span::new(0, 0, 0),
             "no PROGRAM to run (declare a PROGRAM or a CONFIGURATION)",

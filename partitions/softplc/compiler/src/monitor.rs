@@ -44,7 +44,13 @@ impl ValueKind {
                 Elem::LWord => VarType::LWord,
                 Elem::Real => VarType::Real,
                 Elem::LReal => VarType::LReal,
-                Elem::Time => VarType::Time,
+                // The image's variable map has no date types (yet): durations and times of
+                // day show as TIME, dates as their nanoseconds since 1970, characters as
+                // their codes.
+                Elem::Time | Elem::LTime | Elem::Tod | Elem::LTod => VarType::Time,
+                Elem::Date | Elem::LDate | Elem::Dt | Elem::LDt => VarType::LInt,
+                Elem::Char => VarType::Byte,
+                Elem::WChar => VarType::Word,
             },
             ValueKind::String(_) => VarType::String,
             ValueKind::Enum(_) | ValueKind::Exception => VarType::DInt,
@@ -260,6 +266,18 @@ pub fn format_cell(e: Elem, cell: u64) -> String {
         Elem::Real => format_real(f32::from_bits(cell as u32) as f64, true),
         Elem::LReal => format_real(f64::from_bits(cell), false),
         Elem::Time => format_time(cell as i64),
+        e if e.is_temporal() => {
+            let mut s = String::new();
+            if let Some(kind) = e.time_kind() {
+                plc_vm::builtins::format_date_time(&mut s, kind, cell as i64);
+            }
+            s
+        }
+        Elem::Char => format_string(&[cell as u8]),
+        Elem::WChar => match char::from_u32(cell as u32) {
+            Some(c) if c != '"' && c != '$' && !c.is_control() => format!("\"{c}\""),
+            _ => format!("\"${:04X}\"", cell),
+        },
         e if e.is_signed_int() => (cell as i64).to_string(),
         _ => cell.to_string(),
     }
@@ -404,6 +422,25 @@ fn parse_elem(e: Elem, text: &str) -> Result<u64, String> {
             .map(|v| v.to_bits() as u64)
             .map_err(|_| bad()),
         Elem::LReal => body.parse::<f64>().map(|v| v.to_bits()).map_err(|_| bad()),
+        e if e.is_temporal() && e != Elem::Time => e
+            .time_kind()
+            .and_then(|kind| plc_vm::builtins::parse_date_time(text.as_bytes(), kind))
+            .map(|v| v as u64)
+            .ok_or_else(bad),
+        e if e.is_char() => {
+            let quoted = body
+                .strip_prefix(['\'', '"'])
+                .and_then(|t| t.strip_suffix(['\'', '"']));
+            let code = match quoted {
+                Some(inner) if inner.chars().count() == 1 => inner.chars().next().map(|c| c as u32),
+                Some(_) => None,
+                None => body.parse::<u32>().ok(),
+            };
+            match code {
+                Some(c) if (c as i128) <= e.int_range().1 => Ok(c as u64),
+                _ => Err(bad()),
+            }
+        }
         Elem::Time => {
             let mut diags = Vec::new();
             let toks = crate::lexer::lex(0, text, &mut diags);
@@ -450,5 +487,15 @@ mod tests {
         assert_eq!(format_time(0), "T#0s");
         assert_eq!(format_time(90_061_001_001_001), "T#1d1h1m1s1ms1us1ns");
         assert_eq!(format_string(b"it's"), "'it$'s'");
+        assert_eq!(format_cell(Elem::Date, 86_400_000_000_000), "D#1970-01-02");
+        assert_eq!(format_cell(Elem::LTod, 1), "LTOD#00:00:00.000000001");
+        assert_eq!(format_cell(Elem::Char, 97), "'a'");
+        assert_eq!(format_cell(Elem::WChar, 0x20AC), "\"€\"");
+        assert_eq!(
+            parse_elem(Elem::Dt, "DT#1970-01-01-00:00:01"),
+            Ok(1_000_000_000)
+        );
+        assert_eq!(parse_elem(Elem::Char, "'a'"), Ok(97));
+        assert!(parse_elem(Elem::Char, "'ab'").is_err());
     }
 }

@@ -155,6 +155,7 @@ impl Gen<'_> {
             loc: Loc::Rel(0),
             ty: Type::Fb(c),
             writable: true,
+            window: None,
         })
     }
 
@@ -463,7 +464,7 @@ impl Gen<'_> {
         self.emit(|b| b.st_abs(MemType::U64, instance));
         let result_name = d.result.as_ref().map(|_| d.label.clone());
         let _ = result_name;
-        let bound = self.bind_to(&d.label, &d.params, None, args);
+        let bound = self.bind_to(None, &d.label, &d.params, None, args);
         let inputs: Vec<&crate::calls::Bound> = bound.iter().filter(|b| !b.output).collect();
         for a in &inputs {
             match a.param.kind {
@@ -509,6 +510,7 @@ impl Gen<'_> {
                 loc: Loc::Ind(a.param.offset),
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }

@@ -12,7 +12,9 @@ use crate::lexer::{Tok, Token};
 struct Fail;
 type PResult<T> = Result<T, Fail>;
 
-/// Words that cannot be used as identifiers.
+/// Words that cannot be used as identifiers. The words that only a CONFIGURATION uses
+/// (RESOURCE, TASK, WITH, ON) are not among them: CODESYS code names variables `ON` or
+/// `TASK`.
 const RESERVED: &[&str] = &[
     "PROGRAM",
     "END_PROGRAM",
@@ -64,11 +66,6 @@ const RESERVED: &[&str] = &[
     "FALSE",
     "CONFIGURATION",
     "END_CONFIGURATION",
-    "RESOURCE",
-    "END_RESOURCE",
-    "TASK",
-    "WITH",
-    "ON",
     "__TRY",
     "__CATCH",
     "__FINALLY",
@@ -211,6 +208,7 @@ fn describe(t: &Tok) -> String {
         Tok::Int(v) => format!("number `{v}`"),
         Tok::Real(v) => format!("number `{v}`"),
         Tok::Time(_) => "duration literal".into(),
+        Tok::Temporal(e, _) => format!("{e} literal"),
         Tok::Str(_) => "string literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
@@ -1682,6 +1680,18 @@ impl Parser<'_> {
                 };
             } else if matches!(self.tok(), Tok::Dot) {
                 self.bump();
+                if let Some((width, index)) = self.partial_access()? {
+                    let span = e.span.to(self.prev_span());
+                    e = Expr {
+                        kind: ExprKind::Bits {
+                            base: Box::new(e),
+                            width,
+                            index,
+                        },
+                        span,
+                    };
+                    continue;
+                }
                 let member = self.ident()?;
                 let span = e.span.to(member.span);
                 e = Expr {
@@ -1734,6 +1744,38 @@ impl Parser<'_> {
         }
     }
 
+    /// After a `.`: a partial access `N` (bit N) or `%X3`, `%B1`, `%W0`, `%D1`, `%L0`, as
+    /// (width in bits, index); `None` when a member name follows instead.
+    fn partial_access(&mut self) -> PResult<Option<(u8, u32)>> {
+        let (width, index) = match self.tok().clone() {
+            Tok::Int(n) => (1, n),
+            Tok::Direct(text) => {
+                let width = match text.as_bytes().first() {
+                    Some(b'X') => 1,
+                    Some(b'B') => 8,
+                    Some(b'W') => 16,
+                    Some(b'D') => 32,
+                    Some(b'L') => 64,
+                    _ => 0,
+                };
+                match text[1..].parse::<u128>() {
+                    Ok(n) if width != 0 => (width, n),
+                    _ => {
+                        return Err(self.error_here(
+                            "a partial access such as `%X3`, `%B1`, `%W0`, `%D1` or `%L0`",
+                        ));
+                    }
+                }
+            }
+            _ => return Ok(None),
+        };
+        let Ok(index) = u32::try_from(index) else {
+            return Err(self.error_here("a bit number that fits the variable"));
+        };
+        self.bump();
+        Ok(Some((width, index)))
+    }
+
     fn arg(&mut self) -> PResult<Arg> {
         let start = self.span();
         if let Tok::Ident(..) = self.tok()
@@ -1765,6 +1807,7 @@ impl Parser<'_> {
             Tok::Int(v) => ExprKind::Int(v),
             Tok::Real(v) => ExprKind::Real(v),
             Tok::Time(v) => ExprKind::Time(v),
+            Tok::Temporal(e, v) => ExprKind::Temporal(e, v),
             Tok::Str(s) => ExprKind::Str(s),
             Tok::LParen => {
                 self.bump();

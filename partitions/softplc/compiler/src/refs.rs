@@ -1,5 +1,5 @@
 //! References: `REF_TO T`, CODESYS `POINTER TO T` and `REFERENCE TO T`, `REF()`, `ADR()`,
-//! `SIZEOF`, `NULL`, `^`, pointer arithmetic and comparisons, and the object table that
+//! `NULL`, `^`, pointer arithmetic and comparisons, and the object table that
 //! bounds every reference (the VM's "References" in `plc_vm::isa`).
 //!
 //! A reference to data is a checked cell `address | object << 32`: `REF()` makes it with
@@ -111,10 +111,10 @@ fn split(prog: &crate::sema::Program, ty: &Type) -> bool {
 impl Gen<'_> {
     /// Whether `name` is one of the reference functions handled here.
     pub(crate) fn is_ref_function(name: &str) -> bool {
-        matches!(name, "REF" | "ADR" | "SIZEOF" | "__ISVALIDREF")
+        matches!(name, "REF" | "ADR" | "__ISVALIDREF")
     }
 
-    /// `REF(x)`, `ADR(x)`, `SIZEOF(x)`, `__ISVALIDREF(r)`.
+    /// `REF(x)`, `ADR(x)`, `__ISVALIDREF(r)`.
     pub(crate) fn ref_function(
         &mut self,
         id: &Ident,
@@ -131,7 +131,6 @@ impl Gen<'_> {
         }
         let arg = &args[0].value;
         match id.name.as_str() {
-            "SIZEOF" => self.size_of(arg, expected, span),
             "__ISVALIDREF" => {
                 let saved = std::mem::replace(&mut self.refs.keep_reference, true);
                 let t = self.expr(arg, None);
@@ -154,43 +153,6 @@ impl Gen<'_> {
             }
             _ => self.make_reference(arg, expected),
         }
-    }
-
-    /// `SIZEOF(variable)` or `SIZEOF(type)`: the bytes it occupies, as a constant (a
-    /// STRING[n] counts n + 1, its text with the terminator, as in CODESYS).
-    fn size_of(&mut self, arg: &Expr, expected: Option<&Type>, span: Span) -> Type {
-        let is_var = |g: &Self, n: &Ident| {
-            g.prog.pous[g.cur].var(&n.name).is_some() || g.prog.global(&n.name).is_some()
-        };
-        let ty = match &arg.kind {
-            ExprKind::Name(n) if !is_var(self, n) => {
-                if let Some(e) = Elem::from_name(&n.name) {
-                    Type::Elem(e)
-                } else if n.name == "STRING" {
-                    Type::String(DEFAULT_STRING_LEN)
-                } else if let Some((t, _)) = self.prog.aliases.get(&n.name) {
-                    t.clone()
-                } else if let Some(&pi) = self.prog.pou_by_name.get(&n.name) {
-                    Type::Fb(pi)
-                } else {
-                    self.infer(arg)
-                }
-            }
-            _ => self.infer(arg),
-        };
-        if ty.is_error() {
-            return Type::Error;
-        }
-        let size = match ty {
-            Type::String(n) => n + 1,
-            ref t => self.prog.size_align(t).0,
-        };
-        let _ = span;
-        let as_int = match expected {
-            Some(t) if t.elem().is_some_and(|e| e.is_integral()) => Some(t),
-            _ => None,
-        };
-        self.int_literal(size as i128, as_int, arg.span)
     }
 
     /// `REF(x)` / `ADR(x)`: a reference to variable `x` (for a function-block instance, its
@@ -339,6 +301,7 @@ impl Gen<'_> {
                         loc: Loc::Ind(0),
                         ty: Type::Fb(pi),
                         writable: true,
+                        window: None,
                     })
                 }
                 Type::Void | Type::Null => {
@@ -350,6 +313,7 @@ impl Gen<'_> {
                     loc: Loc::Ref(0),
                     ty: target,
                     writable: true,
+                    window: None,
                 }),
             },
             Type::Null => {
@@ -396,12 +360,14 @@ impl Gen<'_> {
                     loc: Loc::Ind(0),
                     ty: Type::Fb(pi),
                     writable: true,
+                    window: None,
                 }
             }
             t => Place {
                 loc: Loc::Ref(0),
                 ty: t,
                 writable: true,
+                window: None,
             },
         }
     }
@@ -473,6 +439,7 @@ impl Gen<'_> {
             loc: Loc::Ref(offset.wrapping_add(static_off as u32)),
             ty: arr.elem.clone(),
             writable: true,
+            window: None,
         })
     }
 

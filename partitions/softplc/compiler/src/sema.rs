@@ -157,6 +157,19 @@ impl PouDef {
         self.vars.iter().find(|v| v.name == name)
     }
 
+    /// A parameter by name as a caller writes it: the standard counters (CTU, CTD, CTUD)
+    /// also take CODESYS's names RESET for R and LOAD for LD.
+    pub fn param(&self, name: &str) -> Option<&VarDef> {
+        self.var(name).or_else(|| {
+            let alias = match (self.builtin, name) {
+                (true, "RESET") => "R",
+                (true, "LOAD") => "LD",
+                _ => return None,
+            };
+            self.var(alias)
+        })
+    }
+
     /// Positional parameters (inputs, then in-outs, then outputs in declaration order is what
     /// IEC prescribes for non-formal calls; we use declaration order of inputs and in-outs).
     pub fn params(&self) -> impl Iterator<Item = &VarDef> {
@@ -195,6 +208,8 @@ pub enum ConstVal {
     Real(f64),
     Bool(bool),
     Time(i128),
+    /// A date/time value other than TIME: its type and nanoseconds.
+    Temporal(Elem, i128),
     Str(String),
 }
 
@@ -410,7 +425,7 @@ impl Program {
 pub fn analyse(
     unit: &Unit,
     prelude_pous: usize,
-    program_override: Option<&str>,
+    opts: &crate::Options,
     diags: &mut Diagnostics,
 ) -> Program {
     let mut s = Sema {
@@ -435,7 +450,7 @@ pub fn analyse(
         s.layout_pou(i);
     }
     s.finish_classes();
-    s.configure(program_override);
+    s.configure(opts.program.as_deref(), opts.library);
     s.prog
 }
 
@@ -468,6 +483,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         ExprKind::Real(v) => Real(*v),
         ExprKind::Bool(b) => Bool(*b),
         ExprKind::Time(t) => Time(*t),
+        ExprKind::Temporal(e, t) => Temporal(*e, *t),
         ExprKind::Str(s) => Str(s.clone()),
         ExprKind::Typed(ty, inner) => {
             if let Some(elem) = Elem::from_name(&ty.name) {
@@ -475,6 +491,8 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                 match (v, elem) {
                     (Int(i), e) if e.is_real() => Real(i as f64),
                     (Int(i), Elem::Bool) => Bool(i != 0),
+                    // `CHAR#'a'`: the character's code.
+                    (Str(s), e) if e.is_char() => Int(single_char(&s)?),
                     (v, _) => v,
                 }
             } else if let ExprKind::Name(n) = &inner.kind {
@@ -506,6 +524,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
             Int(i) => Int(-i),
             Real(r) => Real(-r),
             Time(t) => Time(-t),
+            Temporal(Elem::LTime, t) => Temporal(Elem::LTime, -t),
             _ => return None,
         },
         ExprKind::Unary(UnOp::Not, x) => match const_eval(prog, scope, x)? {
@@ -546,6 +565,11 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                     BinOp::Sub => Time(x.checked_sub(y)?),
                     _ => return None,
                 },
+                (Temporal(Elem::LTime, x), Temporal(Elem::LTime, y)) => match op {
+                    BinOp::Add => Temporal(Elem::LTime, x.checked_add(y)?),
+                    BinOp::Sub => Temporal(Elem::LTime, x.checked_sub(y)?),
+                    _ => return None,
+                },
                 (Bool(x), Bool(y)) => match op {
                     BinOp::And => Bool(x & y),
                     BinOp::Or => Bool(x | y),
@@ -557,6 +581,13 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         }
         _ => return None,
     })
+}
+
+/// The code of a one-character string (`CHAR#'a'`, `WCHAR#"ä"`).
+pub fn single_char(s: &str) -> Option<i128> {
+    let mut chars = s.chars();
+    let c = chars.next()?;
+    chars.next().is_none().then_some(c as i128)
 }
 
 /// Local constants of a POU being declared (for bounds like `ARRAY[1..N]` with a VAR CONSTANT N).
@@ -791,8 +822,7 @@ impl Sema<'_> {
                 match id.name.as_str() {
                     "STRING" => return Type::String(DEFAULT_STRING_LEN),
                     "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" | "LTIME" | "DATE" | "TIME_OF_DAY" | "TOD" | "DATE_AND_TIME"
-                    | "DT" | "CHAR" | "WCHAR" => {
+                    "WSTRING" => {
                         self.diags
                             .error(id.span, format!("type `{}` is not supported", id.text));
                         return Type::Error;
@@ -1017,6 +1047,27 @@ impl Sema<'_> {
             });
         }
         let what = if is_method { "a METHOD" } else { "a FUNCTION" };
+        // The POU's CONSTANTs may size arrays declared before them.
+        let constants: Vec<VarDef> = source
+            .var_blocks
+            .iter()
+            .filter(|b| b.constant)
+            .flat_map(|b| &b.decls)
+            .flat_map(|d| {
+                d.names.iter().map(|n| VarDef {
+                    name: n.name.clone(),
+                    text: n.text.clone(),
+                    span: n.span,
+                    ty: Type::Error,
+                    offset: 0,
+                    kind: VarKind::Local,
+                    constant: true,
+                    init: d.init.clone(),
+                    location: None,
+                    retain: false,
+                })
+            })
+            .collect();
         for block in source.var_blocks {
             let allowed = match kind {
                 PouKind::Program => !matches!(block.kind, VarKind::InOut),
@@ -1036,7 +1087,7 @@ impl Sema<'_> {
             }
             for d in &block.decls {
                 self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
-                let ty = self.resolve_type(&d.ty, &vars);
+                let ty = self.resolve_type(&d.ty, &constants);
                 if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
                     self.diags.error(
                         d.ty.span(),
@@ -1310,7 +1361,7 @@ impl Sema<'_> {
 
     /// Builds the task list from the CONFIGURATION, or one implicit cyclic task running the
     /// single PROGRAM (`program_override` picks one when there are several).
-    fn configure(&mut self, program_override: Option<&str>) {
+    fn configure(&mut self, program_override: Option<&str>, library: bool) {
         let unit = self.unit;
         if unit.configs.len() > 1 {
             self.diags.error(
@@ -1437,6 +1488,9 @@ impl Sema<'_> {
                         .push((b.instance.text.clone(), pi));
                 }
             }
+            return;
+        }
+        if library {
             return;
         }
         let programs: Vec<usize> = (0..self.prog.pous.len())

@@ -23,6 +23,7 @@ fn check(src: &str) {
         &[("fuzz.st".to_string(), src.to_string())],
         &Options {
             program: Some("Main".into()),
+            ..Options::default()
         },
     );
     done.store(true, std::sync::atomic::Ordering::SeqCst);
@@ -30,6 +31,7 @@ fn check(src: &str) {
         &[("fuzz.st".to_string(), src.to_string())],
         &Options {
             program: Some("Main".into()),
+            ..Options::default()
         },
     );
 }

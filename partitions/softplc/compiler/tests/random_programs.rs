@@ -1,5 +1,6 @@
 //! Differential test on generated programs: random well-typed ST programs (integer, REAL,
-//! BOOL, arrays, IF/CASE/FOR/__TRY, possible traps) must compile, and the VM and the VM's
+//! BOOL, arrays, bit access, dates and times, IF/CASE/FOR/__TRY, possible traps) must
+//! compile, and the VM and the VM's
 //! reference model must agree on the complete data memory, stack and outcome after every
 //! cycle.
 
@@ -47,9 +48,36 @@ impl Gen {
             4 => format!("ABS({})", self.dint(depth - 1)),
             5 => format!("MAX({}, {})", self.dint(depth - 1), self.dint(depth - 1)),
             6 => format!("REAL_TO_DINT({})", self.real(depth - 1)),
+            7 => match self.rng.below(5) {
+                0 => "WORD_TO_DINT(w)".to_string(),
+                1 => format!("BYTE_TO_DINT(w.%B{})", self.rng.below(2)),
+                2 => "INT_TO_DINT(DAY_OF_WEEK(d1))".to_string(),
+                3 => format!("TIME_TO_DINT({})", self.time(depth - 1)),
+                _ => "DT_TO_DINT(dt1) MOD 100000".to_string(),
+            },
             _ => {
                 let op = self.rng.pick(&["+", "-", "*", "/", "MOD", "+", "-"]);
                 format!("({} {op} {})", self.dint(depth - 1), self.dint(depth - 1))
+            }
+        }
+    }
+
+    /// A TIME expression (durations of days at most, so sums stay in range).
+    fn time(&mut self, depth: u32) -> String {
+        let r = if depth == 0 {
+            self.rng.below(2)
+        } else {
+            self.rng.below(6)
+        };
+        match r {
+            0 => "t".to_string(),
+            1 => format!("T#{}ms", self.rng.below(100_000) as i64 - 50_000),
+            2 => format!("DINT_TO_TIME({} MOD 1000000)", self.dint(depth - 1)),
+            3 => "(tod1 - TOD#12:00:00)".to_string(),
+            4 => format!("({} * {})", self.time(depth - 1), self.rng.below(5)),
+            _ => {
+                let op = self.rng.pick(&["+", "-"]);
+                format!("({} {op} {})", self.time(depth - 1), self.time(depth - 1))
             }
         }
     }
@@ -104,6 +132,12 @@ impl Gen {
             }
             3 => format!("({} < {})", self.real(depth - 1), self.real(depth - 1)),
             4 => format!("NOT {}", self.boolean(depth - 1)),
+            5 => match self.rng.below(4) {
+                0 => format!("w.{}", self.rng.below(16)),
+                1 => format!("arr[{}].{}", self.rng.below(8), self.rng.below(32)),
+                2 => format!("(dt1 < DT#2000-01-01-00:00:00 + {})", self.time(depth - 1)),
+                _ => format!("(tod1 >= TOD#06:30:00 XOR {} > T#0s)", self.time(depth - 1)),
+            },
             _ => {
                 let op = self.rng.pick(&["AND", "OR", "XOR"]);
                 format!(
@@ -123,9 +157,9 @@ impl Gen {
 
     fn stmt(&mut self, depth: u32) {
         let r = if depth == 0 {
-            self.rng.below(5)
+            [0, 1, 2, 3, 4, 10, 11, 12][self.rng.below(8) as usize]
         } else {
-            self.rng.below(10)
+            self.rng.below(13)
         };
         let d = 2;
         match r {
@@ -188,6 +222,46 @@ impl Gen {
                 self.stmts(1, depth - 1);
                 self.out.push_str("END_CASE;\n");
             }
+            10 => {
+                let stmt = match self.rng.below(4) {
+                    0 => format!("w.{} := {};\n", self.rng.below(16), self.boolean(d)),
+                    1 => format!(
+                        "w.%B{} := DINT_TO_BYTE({});\n",
+                        self.rng.below(2),
+                        self.dint(d)
+                    ),
+                    2 => {
+                        // MOD 9 sometimes indexes one past the end: INDEX_OUT_OF_BOUNDS.
+                        let i = self.dint(1);
+                        format!(
+                            "arr[ABS({i}) MOD 9].{} := {};\n",
+                            self.rng.below(32),
+                            self.boolean(d)
+                        )
+                    }
+                    _ => format!("arr[{}].%W1 := w;\n", self.rng.below(8)),
+                };
+                self.out.push_str(&stmt);
+            }
+            11 => {
+                let stmt = match self.rng.below(5) {
+                    0 => format!("t := {};\n", self.time(d)),
+                    1 => format!("dt1 := dt1 + {};\n", self.time(d)),
+                    2 => format!("tod1 := tod1 - {};\n", self.time(d)),
+                    3 => "d1 := DT_TO_DATE(dt1);\n".to_string(),
+                    // Invalid months and days trap NUMERIC_ERROR.
+                    _ => format!(
+                        "d1 := CONCAT_DATE(2000 + ABS({}) MOD 50, ABS({}) MOD 13, ABS({}) MOD 32);\n",
+                        self.dint(1),
+                        self.dint(1),
+                        self.dint(1)
+                    ),
+                };
+                self.out.push_str(&stmt);
+            }
+            12 => self
+                .out
+                .push_str("SPLIT_DT(dt1, YEAR => x, MONTH => y, DAY => i, HOUR => x);\n"),
             8 => {
                 self.out.push_str("__TRY\n");
                 {
@@ -211,7 +285,7 @@ fn program(seed: u64) -> String {
     };
     g.out.push_str(
         "PROGRAM Main\nVAR\n a, b, c, cnt : DINT; x, y : INT; r, s : REAL; p, q : BOOL;\n \
-         arr : ARRAY[0..7] OF DINT; i : INT; e : __EXCEPTION;\nEND_VAR\n",
+         arr : ARRAY[0..7] OF DINT; i : INT; e : __EXCEPTION; w : WORD; t : TIME;\n          dt1 : DT := DT#2000-01-01-00:00:00; tod1 : TOD := TOD#12:00:00; d1 : DATE;\nEND_VAR\n",
     );
     let n = 2 + g.rng.below(6);
     g.stmts(n, 3);

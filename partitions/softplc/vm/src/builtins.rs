@@ -10,7 +10,7 @@
 //! `max_len`; a builtin that traps has written nothing.
 
 use crate::fmath;
-use crate::isa::{Builtin, Trap, read_u16};
+use crate::isa::{Builtin, TimeKind, Trap, read_u16};
 use core::fmt::Write;
 
 /// Longest string a string builtin produces.
@@ -130,6 +130,7 @@ fn math(builtin: Builtin, x: f64, y: f64) -> Option<f64> {
             }
         }
         AtanF64 | AtanF32 => fmath::atan(x),
+        Atan2F64 | Atan2F32 => fmath::atan2(x, y),
         ExptF64 | ExptF32 => fmath::pow(x, y)?,
         AbsF64 | AbsF32 => x.abs(),
         _ => return None,
@@ -148,7 +149,12 @@ fn format_float(buf: &mut Buf, v: impl core::fmt::Display) {
 
 /// Formats TIME nanoseconds as `T#1d2h3m4s5ms6us7ns` (zero components omitted, `T#0s` for 0).
 pub fn format_time(buf: &mut impl Write, ns: i64) {
-    let _ = buf.write_str("T#");
+    format_duration(buf, "T#", ns);
+}
+
+/// A duration after `prefix` (`T#` or `LT#`).
+fn format_duration(buf: &mut impl Write, prefix: &str, ns: i64) {
+    let _ = buf.write_str(prefix);
     if ns == 0 {
         let _ = buf.write_str("0s");
         return;
@@ -171,6 +177,251 @@ pub fn format_time(buf: &mut impl Write, ns: i64) {
         rest %= size;
         if count != 0 {
             let _ = write!(buf, "{count}{unit}");
+        }
+    }
+}
+
+/// Nanoseconds in a day.
+pub const NS_PER_DAY: i64 = 86_400_000_000_000;
+
+/// Days from 1970-01-01 to `year-month-day` in the proleptic Gregorian calendar (any month
+/// and day numbers; callers check them). `year` must be within a few million.
+pub fn days_from_civil(year: i64, month: u32, day: u32) -> i64 {
+    // Years start in March so that the leap day is the last day of a year.
+    let m = month as i64;
+    let y = if m <= 2 { year - 1 } else { year };
+    let era = y.div_euclid(400);
+    let year_of_era = y - era * 400;
+    let day_of_year = (153 * (if m > 2 { m - 3 } else { m + 9 }) + 2) / 5 + day as i64 - 1;
+    let day_of_era = year_of_era * 365 + year_of_era / 4 - year_of_era / 100 + day_of_year;
+    era * 146_097 + day_of_era - 719_468
+}
+
+/// The date `(year, month, day)` that is `days` days after 1970-01-01.
+pub fn civil_from_days(days: i64) -> (i64, u32, u32) {
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let day_of_era = z - era * 146_097;
+    let year_of_era =
+        (day_of_era - day_of_era / 1460 + day_of_era / 36_524 - day_of_era / 146_096) / 365;
+    let day_of_year = day_of_era - (365 * year_of_era + year_of_era / 4 - year_of_era / 100);
+    let mp = (5 * day_of_year + 2) / 153;
+    let day = (day_of_year - (153 * mp + 2) / 5 + 1) as u32;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 } as u32;
+    let year = year_of_era + era * 400 + (month <= 2) as i64;
+    (year, month, day)
+}
+
+/// Days of `month` (1..=12) in `year`.
+pub fn days_in_month(year: i64, month: u32) -> u32 {
+    match month {
+        4 | 6 | 9 | 11 => 30,
+        2 if year % 4 == 0 && (year % 100 != 0 || year % 400 == 0) => 29,
+        2 => 28,
+        _ => 31,
+    }
+}
+
+/// The nanosecond value of a valid date, `None` if the date is invalid or outside `i64`.
+pub fn date_from_parts(year: i64, month: i64, day: i64) -> Option<i64> {
+    if !(1..=12).contains(&month) || !(-1_000_000..=1_000_000).contains(&year) {
+        return None;
+    }
+    if day < 1 || day > days_in_month(year, month as u32) as i64 {
+        return None;
+    }
+    days_from_civil(year, month as u32, day as u32).checked_mul(NS_PER_DAY)
+}
+
+/// The nanosecond value of a valid time of day (`ns_fraction` below one second).
+fn tod_from_parts(hour: i64, minute: i64, second: i64, ns_fraction: i64) -> Option<i64> {
+    if !(0..24).contains(&hour)
+        || !(0..60).contains(&minute)
+        || !(0..60).contains(&second)
+        || !(0..1_000_000_000).contains(&ns_fraction)
+    {
+        return None;
+    }
+    Some(((hour * 60 + minute) * 60 + second) * 1_000_000_000 + ns_fraction)
+}
+
+/// `HH:MM:SS` and the fraction of a second (digits without trailing zeros, none when zero).
+fn format_tod(buf: &mut impl Write, tod: i64) {
+    let seconds = tod / 1_000_000_000;
+    let _ = write!(
+        buf,
+        "{:02}:{:02}:{:02}",
+        seconds / 3600,
+        seconds / 60 % 60,
+        seconds % 60
+    );
+    let mut fraction = tod % 1_000_000_000;
+    if fraction != 0 {
+        let mut digits = 9;
+        while fraction % 10 == 0 {
+            fraction /= 10;
+            digits -= 1;
+        }
+        let _ = write!(buf, ".{fraction:0digits$}");
+    }
+}
+
+fn format_date(buf: &mut impl Write, days: i64) {
+    let (year, month, day) = civil_from_days(days);
+    let _ = write!(buf, "{year:04}-{month:02}-{day:02}");
+}
+
+/// The IEC literal of a date/time value of `kind` (see [`Builtin::StrFromDateTime`]).
+pub fn format_date_time(buf: &mut impl Write, kind: TimeKind, ns: i64) {
+    let days = ns.div_euclid(NS_PER_DAY);
+    let tod = ns.rem_euclid(NS_PER_DAY);
+    match kind {
+        TimeKind::Time | TimeKind::LTime => format_duration(buf, kind.prefix(), ns),
+        TimeKind::Date | TimeKind::LDate => {
+            let _ = buf.write_str(kind.prefix());
+            format_date(buf, days);
+        }
+        TimeKind::Tod | TimeKind::LTod => {
+            let _ = buf.write_str(kind.prefix());
+            format_tod(buf, tod);
+        }
+        TimeKind::Dt | TimeKind::LDt => {
+            let _ = buf.write_str(kind.prefix());
+            format_date(buf, days);
+            let _ = buf.write_str("-");
+            format_tod(buf, tod);
+        }
+    }
+}
+
+/// Literal prefixes (upper case, with `#`) accepted before a value of each kind.
+fn prefixes(kind: TimeKind) -> &'static [&'static [u8]] {
+    match kind {
+        TimeKind::Time | TimeKind::LTime => &[b"T#", b"TIME#", b"LT#", b"LTIME#"],
+        TimeKind::Date | TimeKind::LDate => &[b"D#", b"DATE#", b"LD#", b"LDATE#"],
+        TimeKind::Tod | TimeKind::LTod => &[b"TOD#", b"TIME_OF_DAY#", b"LTOD#", b"LTIME_OF_DAY#"],
+        TimeKind::Dt | TimeKind::LDt => &[b"DT#", b"DATE_AND_TIME#", b"LDT#", b"LDATE_AND_TIME#"],
+    }
+}
+
+/// A run of decimal digits at the start of `text`: (value, digit count, rest).
+fn digits(text: &[u8]) -> Option<(i64, usize, &[u8])> {
+    let n = text.iter().take_while(|c| c.is_ascii_digit()).count();
+    if n == 0 || n > 18 {
+        return None;
+    }
+    let value = text[..n]
+        .iter()
+        .fold(0i64, |v, c| v * 10 + (c - b'0') as i64);
+    Some((value, n, &text[n..]))
+}
+
+/// `YYYY-MM-DD` at the start of `text`: (nanoseconds, rest).
+fn parse_date(text: &[u8]) -> Option<(i64, &[u8])> {
+    let (year, _, rest) = digits(text)?;
+    let (month, _, rest) = digits(rest.strip_prefix(b"-")?)?;
+    let (day, _, rest) = digits(rest.strip_prefix(b"-")?)?;
+    Some((date_from_parts(year, month, day)?, rest))
+}
+
+/// `HH:MM[:SS[.fraction]]` (all of `text`).
+fn parse_tod(text: &[u8]) -> Option<i64> {
+    let (hour, _, rest) = digits(text)?;
+    let (minute, _, mut rest) = digits(rest.strip_prefix(b":")?)?;
+    let (mut second, mut fraction) = (0, 0);
+    if let Some(after) = rest.strip_prefix(b":") {
+        let (s, _, after) = digits(after)?;
+        second = s;
+        rest = after;
+        if let Some(after) = rest.strip_prefix(b".") {
+            let n = after.iter().take_while(|c| c.is_ascii_digit()).count();
+            if n == 0 {
+                return None;
+            }
+            // Nanoseconds: the first nine digits (further digits are cut off).
+            for k in 0..9 {
+                let digit = after[..n].get(k).map_or(0, |c| c - b'0');
+                fraction = fraction * 10 + digit as i64;
+            }
+            rest = &after[n..];
+        }
+    }
+    if !rest.is_empty() {
+        return None;
+    }
+    tod_from_parts(hour, minute, second, fraction)
+}
+
+/// `[-]` then components `1d2h3m4s5ms6us7ns` (each optionally fractional, `_` between).
+fn parse_duration(text: &[u8]) -> Option<i64> {
+    let (negative, mut rest) = match text.strip_prefix(b"-") {
+        Some(r) => (true, r),
+        None => (false, text),
+    };
+    let mut total: i128 = 0;
+    let mut any = false;
+    while !rest.is_empty() {
+        if let Some(r) = rest.strip_prefix(b"_") {
+            rest = r;
+            continue;
+        }
+        let (whole, _, r) = digits(rest)?;
+        rest = r;
+        let (mut fraction, mut scale_down) = (0i128, 1i128);
+        if let Some(r) = rest.strip_prefix(b".") {
+            let n = r.iter().take_while(|c| c.is_ascii_digit()).count();
+            if n == 0 || n > 18 {
+                return None;
+            }
+            for c in &r[..n] {
+                fraction = fraction * 10 + (c - b'0') as i128;
+                scale_down *= 10;
+            }
+            rest = &r[n..];
+        }
+        let unit_len = rest.iter().take_while(|c| c.is_ascii_alphabetic()).count();
+        let unit = &rest[..unit_len];
+        rest = &rest[unit_len..];
+        const UNITS: [(&[u8], i128); 7] = [
+            (b"d", 86_400_000_000_000),
+            (b"h", 3_600_000_000_000),
+            (b"m", 60_000_000_000),
+            (b"s", 1_000_000_000),
+            (b"ms", 1_000_000),
+            (b"us", 1_000),
+            (b"ns", 1),
+        ];
+        let (_, scale) = *UNITS.iter().find(|(u, _)| unit.eq_ignore_ascii_case(u))?;
+        // Fractions round to the nearest nanosecond, halves away from zero.
+        total += whole as i128 * scale + (fraction * scale * 2 + scale_down) / (scale_down * 2);
+        any = true;
+    }
+    let total = if negative { -total } else { total };
+    if !any {
+        return None;
+    }
+    i64::try_from(total).ok()
+}
+
+/// Parses a date/time literal of `kind`, with or without its prefix (see
+/// [`Builtin::StrToDateTime`]); `None` when it is not one.
+pub fn parse_date_time(text: &[u8], kind: TimeKind) -> Option<i64> {
+    let text = text.trim_ascii();
+    let upper_prefix = |p: &[u8]| text.len() >= p.len() && text[..p.len()].eq_ignore_ascii_case(p);
+    let body = match prefixes(kind).iter().find(|p| upper_prefix(p)) {
+        Some(p) => &text[p.len()..],
+        None => text,
+    };
+    match kind {
+        TimeKind::Time | TimeKind::LTime => parse_duration(body),
+        TimeKind::Date | TimeKind::LDate => match parse_date(body)? {
+            (date, []) => Some(date),
+            _ => None,
+        },
+        TimeKind::Tod | TimeKind::LTod => parse_tod(body),
+        TimeKind::Dt | TimeKind::LDt => {
+            let (date, rest) = parse_date(body)?;
+            date.checked_add(parse_tod(rest.strip_prefix(b"-")?)?)
         }
     }
 }
@@ -221,9 +472,9 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
     };
     match builtin {
         SqrtF64 | LnF64 | LogF64 | ExpF64 | SinF64 | CosF64 | TanF64 | AsinF64 | AcosF64
-        | AtanF64 | ExptF64 | AbsF64 => f64_math(builtin),
+        | AtanF64 | ExptF64 | AbsF64 | Atan2F64 => f64_math(builtin),
         SqrtF32 | LnF32 | LogF32 | ExpF32 | SinF32 | CosF32 | TanF32 | AsinF32 | AcosF32
-        | AtanF32 | ExptF32 | AbsF32 => f32_math(builtin),
+        | AtanF32 | ExptF32 | AbsF32 | Atan2F32 => f32_math(builtin),
         StrLen => Ok(Some(string_at(data, arg(0))?.len as u64)),
         StrFind => {
             let (a, b) = (string_at(data, arg(0))?, string_at(data, arg(1))?);
@@ -248,6 +499,39 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
         StrToI64 => {
             let s = string_at(data, arg(0))?;
             parse_int(s.text(data))
+                .map(|v| Some(v as u64))
+                .ok_or(Trap::NumericError)
+        }
+        DateFromParts => date_from_parts(arg(0) as i64, arg(1) as i64, arg(2) as i64)
+            .map(|v| Some(v as u64))
+            .ok_or(Trap::NumericError),
+        TodFromParts => {
+            let ms = arg(3) as i64;
+            if !(0..1000).contains(&ms) {
+                return Err(Trap::NumericError);
+            }
+            tod_from_parts(arg(0) as i64, arg(1) as i64, arg(2) as i64, ms * 1_000_000)
+                .map(|v| Some(v as u64))
+                .ok_or(Trap::NumericError)
+        }
+        DateSplit => {
+            let (year, month, day) = civil_from_days((arg(0) as i64).div_euclid(NS_PER_DAY));
+            Ok(Some(((year << 16) as u64) | (month << 8 | day) as u64))
+        }
+        DateOf => (arg(0) as i64)
+            .div_euclid(NS_PER_DAY)
+            .checked_mul(NS_PER_DAY)
+            .map(|v| Some(v as u64))
+            .ok_or(Trap::NumericError),
+        TodOf => Ok(Some((arg(0) as i64).rem_euclid(NS_PER_DAY) as u64)),
+        // 1970-01-01 was a Thursday.
+        DayOfWeek => Ok(Some(
+            ((arg(0) as i64).div_euclid(NS_PER_DAY) + 4).rem_euclid(7) as u64,
+        )),
+        StrToDateTime => {
+            let s = string_at(data, arg(0))?;
+            let kind = TimeKind::from_u64(arg(1)).ok_or(Trap::NumericError)?;
+            parse_date_time(s.text(data), kind)
                 .map(|v| Some(v as u64))
                 .ok_or(Trap::NumericError)
         }
@@ -323,6 +607,10 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
                 StrFromF64 => format_float(&mut buf, f64::from_bits(arg(1))),
                 StrFromBool => buf.push(if arg(1) != 0 { b"TRUE" } else { b"FALSE" }),
                 StrFromTime => format_time(&mut buf, arg(1) as i64),
+                StrFromDateTime => {
+                    let kind = TimeKind::from_u64(arg(2)).ok_or(Trap::NumericError)?;
+                    format_date_time(&mut buf, kind, arg(1) as i64);
+                }
                 _ => unreachable!("all builtins handled"),
             }
             write_string(data, dst, buf.as_bytes());

@@ -552,6 +552,44 @@ impl MemType {
 }
 
 codes::code_enum! {
+    /// The date/time type a `kind` argument of the date/time builtins means.
+    pub enum TimeKind: u8 {
+        /// TIME (a duration).
+        Time = 0 => "TIME",
+        /// LTIME.
+        LTime = 1 => "LTIME",
+        /// DATE.
+        Date = 2 => "DATE",
+        /// LDATE.
+        LDate = 3 => "LDATE",
+        /// TIME_OF_DAY.
+        Tod = 4 => "TOD",
+        /// LTIME_OF_DAY.
+        LTod = 5 => "LTOD",
+        /// DATE_AND_TIME.
+        Dt = 6 => "DT",
+        /// LDATE_AND_TIME.
+        LDt = 7 => "LDT",
+    }
+}
+
+impl TimeKind {
+    /// The literal prefix printed by DATE_TIME_TO_STRING (`T#`, `LD#`, ...).
+    pub const fn prefix(self) -> &'static str {
+        match self {
+            TimeKind::Time => "T#",
+            TimeKind::LTime => "LT#",
+            TimeKind::Date => "D#",
+            TimeKind::LDate => "LD#",
+            TimeKind::Tod => "TOD#",
+            TimeKind::LTod => "LTOD#",
+            TimeKind::Dt => "DT#",
+            TimeKind::LDt => "LDT#",
+        }
+    }
+}
+
+codes::code_enum! {
     /// Rounding rule of float->integer conversions.
     pub enum RoundMode: u8 {
         /// Toward zero (IEC `TRUNC`).
@@ -700,6 +738,48 @@ builtins! {
     ExptF32 = 43, "EXPT_REAL", 2, 1;
     /// REAL ABS.
     AbsF32 = 44, "ABS_REAL", 1, 1;
+    /// `[y x] -> [atan2(y, x)]` LREAL: the angle of the point (x, y) in [-pi, pi].
+    Atan2F64 = 128, "ATAN2_LREAL", 2, 1;
+    /// `[y x] -> [atan2(y, x)]` REAL (computed in f64, rounded to f32).
+    Atan2F32 = 129, "ATAN2_REAL", 2, 1;
+
+    // Date and time. Every date/time type is an `i64` count of nanoseconds: TIME/LTIME a
+    // duration, TOD/LTOD since midnight, DATE/LDATE and DT/LDT since 1970-01-01 00:00
+    // (proleptic Gregorian calendar, no leap seconds). `kind` arguments are [`TimeKind`] codes.
+
+    /// `[year month day] -> [date]`: IEC CONCAT_DATE. NUMERIC_ERROR unless month is 1..=12,
+    /// day 1..=days of that month and the date lies in 1678..=2261 (the `i64` range).
+    DateFromParts = 130, "CONCAT_DATE", 3, 1;
+    /// `[date] -> [year << 16 | month << 8 | day]` (year signed): IEC SPLIT_DATE packed in
+    /// one cell; a value that is not midnight counts as its day.
+    DateSplit = 131, "SPLIT_DATE", 1, 1;
+    /// `[dt] -> [date]`: the midnight starting the day of `dt` (rounds toward minus
+    /// infinity). NUMERIC_ERROR when that midnight lies before the `i64` range.
+    DateOf = 132, "DT_TO_DATE", 1, 1;
+    /// `[dt] -> [tod]`: the time since that midnight, `0 <= tod < 24 h` (also wraps a TOD
+    /// that left its day after TOD +/- TIME).
+    TodOf = 133, "DT_TO_TOD", 1, 1;
+    /// `[date] -> [weekday]`: IEC DAY_OF_WEEK, 0 = Sunday .. 6 = Saturday.
+    DayOfWeek = 134, "DAY_OF_WEEK", 1, 1;
+    /// `[dst v kind] -> []`: the IEC literal of a date/time value: `T#1h2s`, `LT#5ns`,
+    /// `D#2024-02-29`, `TOD#13:05:00.25`, `DT#2024-02-29-13:05:00` (`LD#`, `LTOD#`, `LDT#`
+    /// for the long types; fractions of a second only when not zero).
+    StrFromDateTime = 135, "DATE_TIME_TO_STRING", 3, 0;
+    /// `[s kind] -> [v]`: parses a date/time literal of that kind, with or without its
+    /// prefix (`'D#2024-02-29'`, `'2024-02-29'`, `'12:30'`, `'T#1s500ms'`, `'1.5s'`).
+    /// After trimming blanks and an optional prefix of the kind's family (case-insensitive:
+    /// `T#`, `TIME#`, `LT#`, `LTIME#`; `D#`, `DATE#`, `LD#`, `LDATE#`; `TOD#`,
+    /// `TIME_OF_DAY#`, `LTOD#`, `LTIME_OF_DAY#`; `DT#`, `DATE_AND_TIME#`, `LDT#`,
+    /// `LDATE_AND_TIME#`) the text is: a date `Y-M-D`; a time of day `H:M`, `H:M:S` or
+    /// `H:M:S.F` (H < 24, M and S < 60, F one or more digits, cut to nanoseconds); a date
+    /// and time `Y-M-D-` then a time of day; a duration `[-]` then components `N[.F]unit`
+    /// (unit `d h m s ms us ns`, any case; `_` between components; fractions rounded to the
+    /// nearest nanosecond, halves away from zero). Numbers are 1 to 18 digits. NUMERIC_ERROR when
+    /// malformed, not a valid date or time of day, or outside the `i64` range.
+    StrToDateTime = 136, "STRING_TO_DATE_TIME", 2, 1;
+    /// `[hour minute second millisecond] -> [tod]`: IEC CONCAT_TOD. NUMERIC_ERROR unless
+    /// hour is 0..=23, minute and second 0..=59, millisecond 0..=999.
+    TodFromParts = 137, "CONCAT_TOD", 4, 1;
 
     /// `[s] -> [len]`.
     StrLen = 100, "LEN", 1, 1;
@@ -747,6 +827,14 @@ builtins! {
     /// the length survives this whatever wrote the string last. INVALID_ADDRESS when the
     /// `4 + max_len` bytes are not all in data memory.
     StrSync = 193, "STRING_SYNC", 1, 0;
+}
+
+impl Builtin {
+    /// The numeric builtins ([`crate::fmath`]: ids below 100 and the ATAN2 pair), which the
+    /// reference model shares with the VM; it re-implements every other builtin.
+    pub const fn is_math(self) -> bool {
+        (self as u16) < 100 || matches!(self, Builtin::Atan2F64 | Builtin::Atan2F32)
+    }
 }
 
 /// Reads `N` bytes at `at` (caller guarantees bounds; one bounds check).
