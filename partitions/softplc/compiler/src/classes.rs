@@ -820,13 +820,20 @@ impl Sema<'_> {
         self.prog.classes[k].dispatch = list;
     }
 
-    /// Members of function blocks that are not classes (and of programs): ABSTRACT needs
-    /// a class that is ABSTRACT.
+    /// Every member: its name is not also a variable of its block, and ABSTRACT needs an
+    /// ABSTRACT block.
     fn check_plain_members(&mut self) {
         for p in 0..self.prog.pous.len() {
             let Some(m) = self.prog.pous[p].member.clone() else {
                 continue;
             };
+            if self.prog.pous[m.owner].var(&m.name).is_some() && m.kind != MemberKind::Setter {
+                let owner = self.prog.pous[m.owner].text.clone();
+                self.diags.error(
+                    m_span(&self.prog.pous[p]),
+                    format!("`{owner}` already has a variable `{}`", m.text),
+                );
+            }
             if m.is_abstract && !self.prog.pous[m.owner].is_abstract {
                 let owner = self.prog.pous[m.owner].text.clone();
                 self.diags.error(

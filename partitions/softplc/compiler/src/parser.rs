@@ -1525,6 +1525,7 @@ impl Parser<'_> {
         } else {
             if let Tok::Ident(u, _) = self.tok()
                 && RESERVED.contains(&u.as_str())
+                && !matches!(u.as_str(), "THIS" | "SUPER")
             {
                 return Err(self.error_here("a statement"));
             }

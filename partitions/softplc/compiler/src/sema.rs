@@ -1494,7 +1494,10 @@ impl Sema<'_> {
             return;
         }
         let programs: Vec<usize> = (0..self.prog.pous.len())
-            .filter(|&i| self.prog.pous[i].kind == PouKind::Program && !self.prog.pous[i].builtin)
+            .filter(|&i| {
+                let p = &self.prog.pous[i];
+                p.kind == PouKind::Program && !p.builtin && p.member.is_none()
+            })
             .collect();
         let chosen = match program_override {
             Some(name) => {
