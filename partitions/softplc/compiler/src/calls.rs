@@ -44,6 +44,33 @@ impl Gen<'_> {
         if let Some(t) = self.member_call(callee, args, span) {
             return t;
         }
+        // `Lib.F(...)`: a function qualified by a namespace (ours or a library's).
+        if let ExprKind::Member(base, f) = &callee.kind
+            && let ExprKind::Name(ns) = &base.kind
+            && !self.is_visible_var(&ns.name)
+        {
+            let q = Ident {
+                name: format!("{}.{}", ns.name, f.name),
+                text: format!("{}.{}", ns.text, f.text),
+                span: callee.span,
+            };
+            let e = Expr {
+                kind: ExprKind::Name(q),
+                span: callee.span,
+            };
+            return self.call(&e, args, expected, span);
+        }
+        let resolved;
+        let callee = match &callee.kind {
+            ExprKind::Name(n) if !self.is_visible_var(&n.name) => {
+                resolved = Expr {
+                    kind: ExprKind::Name(self.function_name(n)),
+                    span: callee.span,
+                };
+                &resolved
+            }
+            _ => callee,
+        };
         if let ExprKind::Name(n) = &callee.kind {
             // A variable is only callable when it is an FB instance; otherwise the name refers
             // to a function even if a variable happens to have the same name.
@@ -102,6 +129,43 @@ impl Gen<'_> {
                 }
                 Type::Error
             }
+        }
+    }
+
+    /// The declared POU (or standard function) a called name refers to, with or without
+    /// its namespace (see [`crate::sema::qualified`]); the name itself when there is none.
+    fn function_name(&mut self, n: &Ident) -> Ident {
+        if self.prog.pou_by_name.contains_key(&n.name) {
+            return n.clone();
+        }
+        match crate::sema::qualified(&n.name, self.prog.pou_by_name.keys()) {
+            Ok(Some(full)) => Ident {
+                name: full,
+                ..n.clone()
+            },
+            Err(candidates) => {
+                let msg = format!(
+                    "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+                    n.text,
+                    candidates.join(", ")
+                );
+                self.error(n.span, msg);
+                n.clone()
+            }
+            Ok(None) => match n.name.rsplit_once('.') {
+                // `Standard.CONCAT`: a standard function under a library's name.
+                Some((_, last)) if Self::is_std_function(last) || Self::is_ref_function(last) => {
+                    Ident {
+                        name: last.to_string(),
+                        text: n
+                            .text
+                            .rsplit_once('.')
+                            .map_or(n.text.clone(), |t| t.1.to_string()),
+                        span: n.span,
+                    }
+                }
+                _ => n.clone(),
+            },
         }
     }
 

@@ -297,7 +297,10 @@ impl Sema<'_> {
                 is_class[i] = true;
             }
             let Some(base) = &ast.extends else { continue };
-            match self.prog.pou_by_name.get(&base.name) {
+            let found = crate::sema::qualified(&base.name, self.prog.pou_by_name.keys())
+                .ok()
+                .flatten();
+            match found.and_then(|n| self.prog.pou_by_name.get(&n)) {
                 Some(&b) if self.prog.pous[b].kind == PouKind::FunctionBlock && b != i => {
                     if self.prog.pous[b].is_final {
                         self.diags.error(
@@ -434,6 +437,14 @@ impl Sema<'_> {
         }
     }
 
+    /// The interface `name` (possibly namespace-qualified) refers to.
+    fn interface_named(&self, name: &str) -> Option<&usize> {
+        let full = crate::sema::qualified(name, self.prog.interface_by_name.keys())
+            .ok()
+            .flatten()?;
+        self.prog.interface_by_name.get(&full)
+    }
+
     /// The type of the property a getter or setter belongs to.
     pub(crate) fn property_type_of(&mut self, member: Option<&Member>) -> Type {
         let Some(Member {
@@ -488,7 +499,7 @@ impl Sema<'_> {
             let ast = &unit.interfaces[self.prog.interfaces[i].ast];
             let mut extends = Vec::new();
             for e in &ast.extends {
-                match self.prog.interface_by_name.get(&e.name) {
+                match self.interface_named(&e.name) {
                     Some(&j) => extends.push(j),
                     None => self
                         .diags
@@ -760,7 +771,7 @@ impl Sema<'_> {
         for &x in &chain {
             let ast = &self.unit.pous[self.prog.pous[x].ast];
             for name in &ast.implements {
-                match self.prog.interface_by_name.get(&name.name) {
+                match self.interface_named(&name.name) {
                     Some(&i) => {
                         for j in self.prog.interface_closure(i) {
                             if !interfaces.contains(&j) {

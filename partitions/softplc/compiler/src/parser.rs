@@ -355,7 +355,16 @@ impl Parser<'_> {
 
     fn unit(&mut self) -> Unit {
         let mut unit = Unit::default();
+        self.items(&mut unit, None);
+        unit
+    }
+
+    /// Top-level declarations until the end (or, inside a NAMESPACE, `END_NAMESPACE`).
+    fn items(&mut self, unit: &mut Unit, namespace: Option<&str>) {
         while !self.at_eof() {
+            if namespace.is_some() && self.is_kw("END_NAMESPACE") {
+                return;
+            }
             let start = self.pos;
             let ok = if self.is_kw("PROGRAM")
                 || self.is_kw("FUNCTION")
@@ -366,15 +375,27 @@ impl Parser<'_> {
             } else if self.is_kw("INTERFACE") {
                 self.interface().map(|i| unit.interfaces.push(i))
             } else if self.is_kw("ACTIONS") {
-                self.actions_block(&mut unit)
+                self.actions_block(unit)
             } else if self.is_kw("ACTION") {
-                self.qualified_action(&mut unit)
+                self.qualified_action(unit)
             } else if self.is_kw("TYPE") {
                 self.type_block(&mut unit.types)
             } else if self.is_kw("VAR_GLOBAL") {
                 self.var_block().map(|b| unit.globals.push(b))
             } else if self.is_kw("CONFIGURATION") {
-                self.configuration(&mut unit)
+                self.configuration(unit)
+            } else if self.is_kw("NAMESPACE") {
+                self.namespace(unit)
+            } else if self.is_kw("USING") {
+                // Names are found with or without their namespace (see `sema`), so USING
+                // needs no bookkeeping.
+                self.bump();
+                self.qualified_ident().and_then(|_| {
+                    while self.eat(&Tok::Comma) {
+                        self.qualified_ident()?;
+                    }
+                    self.expect(Tok::Semi)
+                })
             } else {
                 Err(self.error_here(
                     "PROGRAM, FUNCTION, FUNCTION_BLOCK, INTERFACE, TYPE, VAR_GLOBAL or CONFIGURATION",
@@ -390,7 +411,40 @@ impl Parser<'_> {
                 }
             }
         }
-        unit
+    }
+
+    /// `NAMESPACE N ... END_NAMESPACE`: the POUs, types and interfaces declared inside are
+    /// named `N.name`.
+    fn namespace(&mut self, unit: &mut Unit) -> PResult<()> {
+        self.expect_kw("NAMESPACE")?;
+        let name = self.qualified_ident()?;
+        let mut inner = Unit::default();
+        self.items(&mut inner, Some(&name.name));
+        self.expect_kw("END_NAMESPACE")?;
+        self.eat(&Tok::Semi);
+        let qualify = |id: &mut Ident| {
+            id.name = format!("{}.{}", name.name, id.name);
+            id.text = format!("{}.{}", name.text, id.text);
+        };
+        for mut p in inner.pous {
+            qualify(&mut p.name);
+            unit.pous.push(p);
+        }
+        for mut t in inner.types {
+            qualify(&mut t.name);
+            unit.types.push(t);
+        }
+        for mut i in inner.interfaces {
+            qualify(&mut i.name);
+            unit.interfaces.push(i);
+        }
+        for (mut p, a) in inner.actions {
+            qualify(&mut p);
+            unit.actions.push((p, a));
+        }
+        unit.globals.extend(inner.globals);
+        unit.configs.extend(inner.configs);
+        Ok(())
     }
 
     fn pou(&mut self) -> PResult<Pou> {
@@ -1126,7 +1180,7 @@ impl Parser<'_> {
             };
             return Ok(TypeRef::String(len, start.to(self.prev_span())));
         }
-        let base = self.ident()?;
+        let base = self.qualified_ident()?;
         if self.eat(&Tok::LParen) {
             let lo = self.expr()?;
             self.expect(Tok::DotDot)?;
@@ -1305,7 +1359,7 @@ impl Parser<'_> {
                 None
             };
             self.expect(Tok::Colon)?;
-            let program_type = self.ident()?;
+            let program_type = self.qualified_ident()?;
             if self.eat(&Tok::LParen) {
                 // Parameter connections to globals are not supported; skip them.
                 while !matches!(self.tok(), Tok::RParen | Tok::Eof | Tok::Semi) {

@@ -281,6 +281,31 @@ pub const NULL_GUARD: u32 = 8;
 /// Upper limit of data memory for one program (the PLC partition is small).
 pub const MAX_DATA: u32 = 16 << 20;
 
+/// Finds the declared name (among `declared`) that `name` refers to, for names of POUs,
+/// types and interfaces that may be qualified by a NAMESPACE: the name as written; for a
+/// qualified name `A.B.X` that is not declared, `B.X`, then `X` (a CODESYS library
+/// qualifier such as `Standard.TON` names the block this compiler provides); for a plain
+/// name, the one `N.X` of that name declared in a NAMESPACE. `Err` lists the candidates when
+/// a plain name is declared in several namespaces.
+pub fn qualified<'a>(
+    name: &str,
+    declared: impl Iterator<Item = &'a String> + Clone,
+) -> Result<Option<String>, Vec<String>> {
+    if declared.clone().any(|d| d == name) {
+        return Ok(Some(name.to_string()));
+    }
+    if let Some((_, rest)) = name.split_once('.') {
+        return qualified(rest, declared);
+    }
+    let suffix = format!(".{name}");
+    let found: Vec<String> = declared.filter(|d| d.ends_with(&suffix)).cloned().collect();
+    match found.len() {
+        0 => Ok(None),
+        1 => Ok(found.into_iter().next()),
+        _ => Err(found),
+    }
+}
+
 /// Gives `vars` their frame offsets from `first_offset` on and returns the frame size and
 /// where the part re-initialised on every call starts. Frame order: parameters first, then
 /// outputs and locals, temporaries last. A method's result and outputs come before its
@@ -846,6 +871,34 @@ impl Sema<'_> {
                     );
                     return Type::Error;
                 }
+                let declared: Vec<String> = self
+                    .type_state
+                    .keys()
+                    .chain(self.prog.interface_by_name.keys())
+                    .chain(self.prog.pou_by_name.keys())
+                    .cloned()
+                    .collect();
+                match qualified(&id.name, declared.iter()) {
+                    Ok(Some(full)) if full != id.name => {
+                        let id = Ident {
+                            name: full,
+                            ..id.clone()
+                        };
+                        return self.resolve_type(&TypeRef::Named(id), locals);
+                    }
+                    Err(candidates) => {
+                        self.diags.error(
+                            id.span,
+                            format!(
+                                "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+                                id.text,
+                                candidates.join(", ")
+                            ),
+                        );
+                        return Type::Error;
+                    }
+                    _ => {}
+                }
                 self.diags
                     .error(id.span, format!("unknown type `{}`", id.text));
                 Type::Error
@@ -1014,10 +1067,12 @@ impl Sema<'_> {
                 );
             }
             self.prog.pous[i].return_type = Some(t.clone());
-            // The result variable carries the function's (method's, property's) name.
+            // The result variable carries the function's (method's, property's) name, without
+            // its namespace.
+            let last = |n: &str| n.rsplit('.').next().unwrap_or(n).to_string();
             vars.push(VarDef {
-                name: source.name.name.clone(),
-                text: source.name.text.clone(),
+                name: last(&source.name.name),
+                text: last(&source.name.text),
                 span: source.name.span,
                 ty: t,
                 offset: 0,
@@ -1431,10 +1486,14 @@ impl Sema<'_> {
             }
             for res in &cfg.resources {
                 for b in &res.programs {
+                    let full = qualified(&b.program_type.name, self.prog.pou_by_name.keys())
+                        .ok()
+                        .flatten()
+                        .unwrap_or_default();
                     let Some(&pi) = self
                         .prog
                         .pou_by_name
-                        .get(&b.program_type.name)
+                        .get(&full)
                         .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
                     else {
                         self.diags.error(
