@@ -27,6 +27,10 @@ pub(crate) enum Loc {
     Rel(u32),
     /// Address on the operand stack plus an offset.
     Ind(u32),
+    /// A reference cell on the operand stack; the place is at its address plus an offset and
+    /// is checked against the reference's object (`REF_CHECK`) when the access is known
+    /// ([`Gen::place`] turns it into `Ind(0)`).
+    Ref(u32),
 }
 
 #[derive(Debug, Clone)]
@@ -54,6 +58,15 @@ impl Window {
         } else {
             (1u64 << self.width) - 1
         }
+    }
+}
+
+/// The memory type a value of `ty` is loaded and stored with: elementary types by their
+/// width, references and interface values as 64-bit cells; `None` for aggregates.
+pub(crate) fn scalar_mem(ty: &Type) -> Option<MemType> {
+    match ty {
+        Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Null => Some(MemType::U64),
+        t => t.elem().map(mem_type),
     }
 }
 
@@ -104,6 +117,8 @@ pub(crate) struct Gen<'a> {
     pub calls: Vec<(usize, usize, Span)>,
     /// Static frame address of each FUNCTION and the pristine copy of each POU frame.
     pub frames: Vec<(Option<u32>, Option<u32>)>,
+    /// What code generation learns about references (for the object table).
+    pub(crate) refs: crate::refs::RefState,
 }
 
 /// Constants visible in the POU being compiled.
@@ -149,6 +164,7 @@ impl<'a> Gen<'a> {
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
+            refs: Default::default(),
         }
     }
 
@@ -496,6 +512,10 @@ impl<'a> Gen<'a> {
                     }
                     None => Vec::new(),
                 };
+                if let Some(class) = self.prog.pous[*pi].class {
+                    // The class id dynamic dispatch reads (see `classes`).
+                    self.write_bytes(addr, &(class as u32).to_le_bytes());
+                }
                 let vars = self.prog.pous[*pi].vars.clone();
                 for (n, _) in &fields {
                     if !vars.iter().any(|m| {
@@ -518,6 +538,22 @@ impl<'a> Gen<'a> {
                         .map(|(_, i)| i.clone());
                     let iv = given.or_else(|| v.init.clone());
                     self.write_init(addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
+                }
+            }
+            Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Null => {
+                // A reference starts as NULL (the zeroed cell); nothing else is a constant.
+                match init {
+                    None
+                    | Some(Init::Expr(Expr {
+                        kind: ExprKind::Null | ExprKind::Int(0),
+                        ..
+                    })) => {}
+                    Some(other) => {
+                        self.diags.error(
+                            other.span(),
+                            "the initial value of a reference or interface variable must be NULL (assign REF()/ADR() in the program)",
+                        );
+                    }
                 }
             }
             Type::Void | Type::Error => {}
@@ -576,7 +612,12 @@ impl<'a> Gen<'a> {
     pub fn generate(&mut self) {
         for i in 0..self.prog.pous.len() {
             let p = &self.prog.pous[i];
-            let id = self.b.declare_pou(&p.text, 0, 0, p.frame_size);
+            // Methods and actions run on their owner's instance.
+            let vm_frame = match &p.member {
+                Some(m) => self.prog.pous[m.owner].frame_size,
+                None => p.frame_size,
+            };
+            let id = self.b.declare_pou(&p.text, 0, 0, vm_frame);
             self.pou_ids.push(id);
         }
         // Static storage: globals and program instances are already allocated by sema.
@@ -617,6 +658,17 @@ impl<'a> Gen<'a> {
             self.gen_pou(i, pristine);
         }
         self.check_recursion();
+        self.build_objects();
+        self.build_classes();
+    }
+
+    /// The static frames (of FUNCTIONs) with their POUs: `(POU, frame address)`.
+    pub(crate) fn static_frames(&self) -> Vec<(usize, u32)> {
+        self.frames
+            .iter()
+            .enumerate()
+            .filter_map(|(i, f)| f.0.map(|a| (i, a)))
+            .collect()
     }
 
     fn gen_pou(&mut self, i: usize, pristine: Option<u32>) {
@@ -625,22 +677,33 @@ impl<'a> Gen<'a> {
         self.try_depth = 0;
         let id = self.pou_ids[i];
         self.b.begin_pou(id);
-        let ast = &self.unit.pous[self.prog.pous[i].ast];
-        self.set_location(ast.name.span);
+        let source = crate::classes::pou_source(self.unit, &self.prog.pous[i]);
+        self.set_location(source.name.span);
         if let Some(pr) = pristine {
             let start = self.prog.pous[i].reinit_start;
             let len = self.prog.pous[i].frame_size - start;
-            self.emit(|b| {
-                b.lea_rel(start);
-                b.push_u32(pr + start);
-                b.copy(len);
-            });
+            match self.method_frame() {
+                // A method's variables are in its static frame, not in the instance.
+                Some(frame) => self.emit(|b| {
+                    b.push_u32(frame + start);
+                    b.push_u32(pr + start);
+                    b.copy(len);
+                }),
+                None => self.emit(|b| {
+                    b.lea_rel(start);
+                    b.push_u32(pr + start);
+                    b.copy(len);
+                }),
+            }
         }
         let ret = self.label();
         self.return_label = Some(ret);
-        let body = &ast.body;
+        let body = source.body;
+        self.scan_byte_views(body);
+        self.scan_temporary_references(body);
         self.stmts(body);
         self.bind(ret);
+        self.sync_byte_views_on_return();
         self.emit(|b| b.ret());
         self.b.end_pou(id);
     }
@@ -703,6 +766,7 @@ impl<'a> Gen<'a> {
         match &s.kind {
             StmtKind::Empty => {}
             StmtKind::Assign { target, value } => self.assign(target, value),
+            StmtKind::RefAssign { target, value } => self.ref_assign(target, value),
             StmtKind::Call(e) => {
                 let t = self.expr(e, None);
                 if !matches!(t, Type::Void | Type::Error) {
@@ -863,16 +927,15 @@ impl<'a> Gen<'a> {
     /// Stores the top of stack into a place whose address part (if any) is below it...
     /// only valid for static places (`Abs`/`Rel`).
     fn store_top(&mut self, p: &Place) {
-        let Some(e) = p.ty.elem() else { return };
         if p.window.is_some() {
             self.store_checked(p);
             return;
         }
-        let mt = mem_type(e);
+        let Some(mt) = scalar_mem(&p.ty) else { return };
         match p.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
-            Loc::Ind(_) => {
+            Loc::Ind(_) | Loc::Ref(_) => {
                 // The address was pushed before the value; not used for catch variables.
                 self.op(Opcode::Drop);
                 self.op(Opcode::Drop);
@@ -1055,7 +1118,7 @@ impl<'a> Gen<'a> {
         let load_var = |g: &mut Self| match vp.loc {
             Loc::Abs(a) => g.emit(|b| b.ld_abs(mt, a)),
             Loc::Rel(o) => g.emit(|b| b.ld_rel(mt, o)),
-            Loc::Ind(_) => {}
+            Loc::Ind(_) | Loc::Ref(_) => {}
         };
         match step_const {
             Some(s) => {
@@ -1110,13 +1173,16 @@ impl<'a> Gen<'a> {
         match vp.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
-            Loc::Ind(_) => {}
+            Loc::Ind(_) | Loc::Ref(_) => {}
         }
         self.emit(|b| b.jmp(top));
         self.bind(exit);
     }
 
     fn assign(&mut self, target: &Expr, value: &Expr) {
+        if self.property_write(target, value) {
+            return;
+        }
         let Some(p) = self.place(target) else {
             // Still check the value for errors.
             self.infer(value);
@@ -1128,7 +1194,73 @@ impl<'a> Gen<'a> {
                 "cannot assign to a constant or an input of another POU",
             );
         }
+        if p.ty.is_pointer_like() {
+            self.check_escape(Some(target), value, "this variable");
+        }
         self.store_expr(&p, value, target.span);
+    }
+
+    /// `r REF= x`: binds the `REFERENCE TO` variable `r` to `x` (or to NULL).
+    fn ref_assign(&mut self, target: &Expr, value: &Expr) {
+        let saved = std::mem::replace(&mut self.refs.keep_reference, true);
+        let p = self.place(target);
+        self.refs.keep_reference = saved;
+        let Some(p) = p else {
+            self.infer(value);
+            return;
+        };
+        let Type::Reference(t) = p.ty.clone() else {
+            if !p.ty.is_error() {
+                let msg = format!(
+                    "`REF=` binds a REFERENCE TO variable, not {}",
+                    self.tname(&p.ty)
+                );
+                self.error(target.span, msg);
+            }
+            self.drop_place_value(&p);
+            self.infer(value);
+            return;
+        };
+        let cell = Place {
+            ty: Type::Ref(t.clone()),
+            ..p
+        };
+        match &value.kind {
+            ExprKind::Null | ExprKind::Int(0) => self.push_int(0),
+            _ => {
+                let args = [Arg {
+                    name: None,
+                    output: false,
+                    value: value.clone(),
+                    span: value.span,
+                }];
+                let id = Ident {
+                    name: "REF".into(),
+                    text: "REF".into(),
+                    span: value.span,
+                };
+                let as_ref = Expr {
+                    kind: ExprKind::Call {
+                        callee: Box::new(Expr {
+                            kind: ExprKind::Name(id.clone()),
+                            span: value.span,
+                        }),
+                        args: args.to_vec(),
+                    },
+                    span: value.span,
+                };
+                self.check_escape(Some(target), &as_ref, "this variable");
+                let rt = self.ref_function(&id, &args, Some(&Type::Ref(t.clone())), value.span);
+                self.coerce(&rt, &Type::Ref(t), value.span);
+            }
+        }
+        self.store_checked(&cell);
+    }
+
+    fn drop_place_value(&mut self, p: &Place) {
+        if matches!(p.loc, Loc::Ind(_) | Loc::Ref(_)) {
+            self.op(Opcode::Drop);
+        }
     }
 
     /// Evaluates `value` and stores it into `p` (whose address, for `Ind`, is already on the stack).
@@ -1225,6 +1357,7 @@ impl<'a> Gen<'a> {
                     b.op(Opcode::Or);
                     b.st_ind(mt, o);
                 }),
+                Loc::Ref(_) => unreachable!("places are finalized"),
             }
             return;
         }
@@ -1235,23 +1368,41 @@ impl<'a> Gen<'a> {
                 self.emit(|b| b.chk_range_u(lo as u64, hi as u64));
             }
         }
-        let Some(e) = p.ty.elem() else { return };
-        let mt = mem_type(e);
+        let Some(mt) = scalar_mem(&p.ty) else { return };
         match p.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
             Loc::Ind(o) => self.emit(|b| b.st_ind(mt, o)),
+            Loc::Ref(_) => unreachable!("places are finalized"),
         }
     }
 
     // ----- places --------------------------------------------------------------------
 
-    /// Resolves an l-value; for dynamic places the base address is pushed.
+    /// Resolves an l-value; for dynamic places the base address is pushed (a place reached
+    /// through a reference is checked here, for the bytes of its type).
     pub(crate) fn place(&mut self, e: &Expr) -> Option<Place> {
+        let p = self.place_inner(e)?;
+        Some(self.finalize_place(p))
+    }
+
+    /// [`Gen::place`] without the final check: a place reached through a reference stays a
+    /// reference cell plus an offset (`Loc::Ref`) so that members and elements of it are
+    /// checked for their own bytes only.
+    pub(crate) fn place_inner(&mut self, e: &Expr) -> Option<Place> {
+        let p = self.place_unaliased(e)?;
+        Some(self.auto_deref(p))
+    }
+
+    fn place_unaliased(&mut self, e: &Expr) -> Option<Place> {
         match &e.kind {
             ExprKind::Name(n) => self.name_place(n),
+            ExprKind::Deref(inner) if matches!(inner.kind, ExprKind::This | ExprKind::Super) => {
+                self.this_place(matches!(inner.kind, ExprKind::Super), e.span)
+            }
+            ExprKind::Deref(inner) => self.deref_place(inner, e.span),
             ExprKind::Member(base, m) => {
-                let bp = self.place(base)?;
+                let bp = self.place_inner(base)?;
                 match &bp.ty {
                     Type::Struct(si) => {
                         let Some(mem) = self.prog.structs[*si]
@@ -1319,7 +1470,7 @@ impl<'a> Gen<'a> {
                 }
             }
             ExprKind::Index(base, idx) => {
-                let bp = self.place(base)?;
+                let bp = self.place_inner(base)?;
                 let Type::Array(arr) = bp.ty.clone() else {
                     if !bp.ty.is_error() {
                         let msg = format!("{} is not an array", self.tname(&bp.ty));
@@ -1381,6 +1532,10 @@ impl<'a> Gen<'a> {
                         window: None,
                     });
                 }
+                if let Loc::Ref(o) = bp.loc {
+                    return self
+                        .index_through_reference(o, &arr, idx, &consts, &strides, static_off);
+                }
                 let base_off = match bp.loc {
                     Loc::Abs(a) => {
                         self.emit(|b| b.push_u32(a));
@@ -1390,7 +1545,7 @@ impl<'a> Gen<'a> {
                         self.emit(|b| b.lea_rel(o));
                         0
                     }
-                    Loc::Ind(o) => o,
+                    Loc::Ind(o) | Loc::Ref(o) => o,
                 };
                 for (d, c) in consts.iter().enumerate() {
                     if c.is_some() {
@@ -1492,14 +1647,23 @@ impl<'a> Gen<'a> {
     }
 
     pub(crate) fn drop_place(&mut self, p: &Place) {
-        if matches!(p.loc, Loc::Ind(_)) {
+        if matches!(p.loc, Loc::Ind(_) | Loc::Ref(_)) {
             self.op(Opcode::Drop);
         }
     }
 
     fn name_place(&mut self, n: &Ident) -> Option<Place> {
         let pou = &self.prog.pous[self.cur];
-        if let Some(v) = pou.var(&n.name).cloned() {
+        // A method's own variables are in its static frame; the instance's are frame-relative.
+        let (v, frame) = match pou.var(&n.name).cloned() {
+            Some(v) => (Some(v), self.method_frame()),
+            None => (
+                self.var_owner(&n.name)
+                    .and_then(|o| self.prog.pous[o].var(&n.name).cloned()),
+                None,
+            ),
+        };
+        if let Some(v) = v {
             return match v.kind {
                 VarKind::External => match self.prog.global(&n.name).cloned() {
                     Some(g) => {
@@ -1526,7 +1690,10 @@ impl<'a> Gen<'a> {
                     }
                 },
                 VarKind::InOut => {
-                    self.emit(|b| b.ld_rel(MemType::U32, v.offset));
+                    match frame {
+                        Some(f) => self.emit(|b| b.ld_abs(MemType::U32, f + v.offset)),
+                        None => self.emit(|b| b.ld_rel(MemType::U32, v.offset)),
+                    }
                     Some(Place {
                         loc: Loc::Ind(0),
                         ty: v.ty,
@@ -1535,7 +1702,10 @@ impl<'a> Gen<'a> {
                     })
                 }
                 _ => Some(Place {
-                    loc: Loc::Rel(v.offset),
+                    loc: match frame {
+                        Some(f) => Loc::Abs(f + v.offset),
+                        None => Loc::Rel(v.offset),
+                    },
                     ty: v.ty,
                     writable: !v.constant,
                     window: None,
@@ -1565,6 +1735,7 @@ impl<'a> Gen<'a> {
                 b.push_u32(o);
                 b.op(Opcode::Add);
             }),
+            Loc::Ref(_) => unreachable!("places are finalized"),
         }
     }
 
@@ -1576,6 +1747,7 @@ impl<'a> Gen<'a> {
                 Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
                 Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
                 Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
+                Loc::Ref(_) => unreachable!("places are finalized"),
             }
             self.emit(|b| {
                 if w.shift != 0 {
@@ -1589,15 +1761,13 @@ impl<'a> Gen<'a> {
             });
             return;
         }
-        match p.ty.elem() {
-            Some(e) => {
-                let mt = mem_type(e);
-                match p.loc {
-                    Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
-                    Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
-                    Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
-                }
-            }
+        match scalar_mem(&p.ty) {
+            Some(mt) => match p.loc {
+                Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
+                Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
+                Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
+                Loc::Ref(_) => unreachable!("places are finalized"),
+            },
             None => self.addr_of(p),
         }
     }
@@ -1672,6 +1842,11 @@ impl<'a> Gen<'a> {
 
     /// Compiles `e` and converts the result to `to` (implicit conversions only).
     pub(crate) fn value_to(&mut self, e: &Expr, to: &Type) {
+        if to.is_pointer_like() && matches!(e.kind, ExprKind::Int(0)) {
+            // The literal 0 is NULL.
+            self.push_int(0);
+            return;
+        }
         let t = self.expr(e, Some(to));
         self.coerce(&t, to, e.span);
     }
@@ -1679,6 +1854,9 @@ impl<'a> Gen<'a> {
     /// Emits an implicit conversion from `from` to `to`, or reports a type mismatch.
     pub(crate) fn coerce(&mut self, from: &Type, to: &Type, span: Span) {
         if from.is_error() || to.is_error() || from == to {
+            return;
+        }
+        if self.coerce_pointer(from, to, span) {
             return;
         }
         match (from, to) {
@@ -1957,8 +2135,10 @@ impl<'a> Gen<'a> {
             ExprKind::Typed(ty, inner) => self.typed_literal(ty, inner, e.span),
             ExprKind::Name(n) => {
                 // Variables shadow enumeration values.
-                let is_var = self.prog.pous[self.cur].var(&n.name).is_some()
-                    || self.prog.global(&n.name).is_some();
+                let is_var = self.is_visible_var(&n.name);
+                if !is_var && let Some(t) = self.property_read(e) {
+                    return t;
+                }
                 if !is_var {
                     if let Some(Type::Enum(ei)) = expected
                         && let Some((_, v)) = self.prog.enums[*ei]
@@ -1979,6 +2159,7 @@ impl<'a> Gen<'a> {
                         return Type::Exception;
                     }
                 }
+                self.sync_if_byte_viewed(e);
                 match self.place(e) {
                     Some(p) => {
                         self.load(&p);
@@ -1987,22 +2168,30 @@ impl<'a> Gen<'a> {
                     None => Type::Error,
                 }
             }
-            ExprKind::Member(..) | ExprKind::Index(..) | ExprKind::Bits { .. } => {
-                match self.place(e) {
-                    Some(p) => {
-                        self.load(&p);
-                        p.ty
-                    }
-                    None => Type::Error,
-                }
+            ExprKind::Null => {
+                self.push_int(0);
+                Type::Null
             }
+            ExprKind::This => self.this_expr(false, e.span),
+            ExprKind::Super => self.this_expr(true, e.span),
+            ExprKind::Member(..) if let Some(t) = self.property_read(e) => t,
+            ExprKind::Member(..)
+            | ExprKind::Index(..)
+            | ExprKind::Deref(..)
+            | ExprKind::Bits { .. } => match self.place(e) {
+                Some(p) => {
+                    self.load(&p);
+                    p.ty
+                }
+                None => Type::Error,
+            },
             ExprKind::Call { callee, args } => self.call(callee, args, expected, e.span),
             ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),
         }
     }
 
-    fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
+    pub(crate) fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
         let exp_elem = expected.and_then(|t| match t {
             Type::Enum(_) | Type::Exception => None,
             t => t.elem(),
@@ -2252,6 +2441,9 @@ impl<'a> Gen<'a> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
+        if self.is_pointer_operation(a, b) {
+            return self.pointer_binary(op, a, b, expected, span);
+        }
         let (ta, tb) = self.operand_type(a, b, expected);
         if ta.is_error() || tb.is_error() {
             self.expr(a, None);
@@ -2618,6 +2810,7 @@ fn offset_loc(l: Loc, off: u32) -> Loc {
         Loc::Abs(a) => Loc::Abs(a.wrapping_add(off)),
         Loc::Rel(o) => Loc::Rel(o.wrapping_add(off)),
         Loc::Ind(o) => Loc::Ind(o.wrapping_add(off)),
+        Loc::Ref(o) => Loc::Ref(o.wrapping_add(off)),
     }
 }
 

@@ -54,6 +54,7 @@ pub enum Tok {
     Gt,       // >
     Ge,       // >=
     Amp,      // &
+    Caret,    // ^ (dereference)
     Eof,
 }
 
@@ -527,6 +528,7 @@ impl Lexer<'_> {
             b'<' => Tok::Lt,
             b'>' => Tok::Gt,
             b'&' => Tok::Amp,
+            b'^' => Tok::Caret,
             _ => {
                 let ch = self.text[self.pos..].chars().next().unwrap_or('?');
                 self.pos += ch.len_utf8();

@@ -7,12 +7,15 @@
 
 pub mod ast;
 mod calls;
+mod classes;
 pub mod codegen;
 pub mod diagnostics;
 pub mod lexer;
 pub mod library;
 pub mod monitor;
+mod oop;
 pub mod parser;
+mod refs;
 pub mod run;
 pub mod sema;
 mod stdfuncs;
@@ -84,6 +87,8 @@ pub fn compile(
         unit.types.extend(u.types);
         unit.globals.extend(u.globals);
         unit.configs.extend(u.configs);
+        unit.interfaces.extend(u.interfaces);
+        unit.actions.extend(u.actions);
     }
     let mut diags = Diagnostics::default();
     for d in raw {

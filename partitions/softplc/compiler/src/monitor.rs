@@ -193,7 +193,14 @@ fn flatten(
             }
             return;
         }
-        Type::Void | Type::Error => return,
+        // References and interface values are not monitored (an address means nothing
+        // outside this program build).
+        Type::Ref(_)
+        | Type::Reference(_)
+        | Type::Interface(_)
+        | Type::Null
+        | Type::Void
+        | Type::Error => return,
     };
     let size = match &kind {
         ValueKind::String(n) => 4 + n,
@@ -406,6 +413,10 @@ pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), 
             let a = var.addr as usize;
             data[a + 2..a + 4].copy_from_slice(&(len as u16).to_le_bytes());
             data[a + 4..a + 4 + len].copy_from_slice(&bytes[..len]);
+            if len < *n as usize {
+                // The terminator the VM keeps after a shorter text.
+                data[a + 4 + len] = 0;
+            }
             return Ok(());
         }
         ValueKind::WString(n) => {

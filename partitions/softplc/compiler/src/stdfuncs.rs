@@ -49,7 +49,7 @@ impl Gen<'_> {
             "SQRT", "LN", "LOG", "EXP", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "EXPT", "ABS",
             "TRUNC", "__NOW", "MOVE", "SEL", "MAX", "MIN", "LIMIT", "MUX", "SHL", "SHR", "ROL",
             "ROR", "LEN", "LEFT", "RIGHT", "MID", "DELETE", "INSERT", "REPLACE", "FIND", "CONCAT",
-            "ATAN2", "TIME", "LTIME",
+            "ATAN2", "TIME", "LTIME", "SIZEOF",
         ];
         NAMES.contains(&name)
             || name.contains("_TO_")
@@ -133,6 +133,9 @@ impl Gen<'_> {
             .map(|t| Type::Elem(t.elem().unwrap_or(Elem::DInt)));
         if let Some(f) = Self::time_function(name) {
             return Some(self.std_time(f, id, args, expected, span));
+        }
+        if name == "SIZEOF" {
+            return Some(self.std_sizeof(id, args, expected, span));
         }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
@@ -446,6 +449,72 @@ impl Gen<'_> {
             }
             TimeFunction::Split(_) => unreachable!("handled above"),
         }
+    }
+
+    /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the
+    /// integer type the context wants (UDINT without one).
+    fn std_sizeof(
+        &mut self,
+        id: &Ident,
+        args: &[Arg],
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
+        let [arg] = args else {
+            self.error(
+                span,
+                format!("{} takes 1 argument, {} given", id.text, args.len()),
+            );
+            return Type::Error;
+        };
+        let ty = match &arg.value.kind {
+            ExprKind::Name(n)
+                if self.prog.pous[self.cur].var(&n.name).is_none()
+                    && self.prog.global(&n.name).is_none() =>
+            {
+                match self.type_by_name(&n.name) {
+                    Some(t) => t,
+                    None => self.infer(&arg.value),
+                }
+            }
+            _ => self.infer(&arg.value),
+        };
+        if ty.is_error() {
+            // Report why (the dry inference reported nothing).
+            self.expr(&arg.value, None);
+            return Type::Error;
+        }
+        // A STRING[n] counts its text and terminator, n + 1 bytes as in CODESYS: what a byte
+        // pointer to it (`ADR(s)`) may walk (its length header is not part of that).
+        let size = match ty {
+            Type::String(n) => n as i128 + 1,
+            _ => self.prog.size_align(&ty).0 as i128,
+        };
+        let result = expected
+            .and_then(|t| t.elem())
+            .filter(|e| {
+                e.is_integral()
+                    && !matches!(expected, Some(Type::Enum(_)))
+                    && e.int_range().1 >= size
+            })
+            .unwrap_or(Elem::UDInt);
+        self.push_int(size as i64);
+        Type::Elem(result)
+    }
+
+    /// The data type called `name` (elementary, STRING, a TYPE or a function block).
+    fn type_by_name(&self, name: &str) -> Option<Type> {
+        if let Some(e) = Elem::from_name(name) {
+            return Some(Type::Elem(e));
+        }
+        if name == "STRING" {
+            return Some(Type::String(DEFAULT_STRING_LEN));
+        }
+        if let Some((t, _)) = self.prog.aliases.get(name) {
+            return Some(t.clone());
+        }
+        let &pi = self.prog.pou_by_name.get(name)?;
+        (self.prog.pous[pi].kind == PouKind::FunctionBlock).then_some(Type::Fb(pi))
     }
 
     /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),

@@ -260,6 +260,15 @@ pub enum Type {
     Fb(usize),
     /// `__EXCEPTION`: the trap code delivered to a `__CATCH` handler (held as a DINT).
     Exception,
+    /// `REF_TO T` / CODESYS `POINTER TO T`: a checked reference (a 64-bit cell, see the VM's
+    /// "References"); to a function block: the address of an instance.
+    Ref(Box<Type>),
+    /// CODESYS `REFERENCE TO T`: an alias of a `T`, dereferenced wherever it is used.
+    Reference(Box<Type>),
+    /// A variable of an INTERFACE type: the address of an instance implementing it (0: none).
+    Interface(usize),
+    /// The type of `NULL` (converts to every reference and interface type).
+    Null,
     /// Result of something that has no value (a call of a function without result).
     Void,
     /// Type of an expression that already produced an error; accepted everywhere.
@@ -273,6 +282,7 @@ impl Type {
     pub const INT: Type = Type::Elem(Elem::Int);
     pub const DINT: Type = Type::Elem(Elem::DInt);
     pub const LINT: Type = Type::Elem(Elem::LInt);
+    pub const ULINT: Type = Type::Elem(Elem::ULInt);
     pub const REAL: Type = Type::Elem(Elem::Real);
     pub const LREAL: Type = Type::Elem(Elem::LReal);
     pub const TIME: Type = Type::Elem(Elem::Time);
@@ -299,6 +309,11 @@ impl Type {
 
     pub fn is_wstring(&self) -> bool {
         matches!(self, Type::WString(_))
+    }
+
+    /// References, interface values and `NULL`: 64-bit cells that are not numbers.
+    pub fn is_pointer_like(&self) -> bool {
+        matches!(self, Type::Ref(_) | Type::Interface(_) | Type::Null)
     }
 }
 

@@ -5,7 +5,7 @@
 //!
 //! Strings live in data memory as `max_len: u16 LE, cur_len: u16 LE, bytes[max_len]`. A string
 //! whose header or bytes fall outside data memory raises INVALID_ADDRESS; `cur_len > max_len`
-//! is read as `max_len`. Results are assembled in a fixed buffer of [`MAX_STRING_LEN`] bytes
+//! is read as `max_len`. A written text shorter than `max_len` is followed by a NUL byte. Results are assembled in a fixed buffer of [`MAX_STRING_LEN`] bytes
 //! (so a result never exceeds that many characters) and then written to `dst` truncated to its
 //! `max_len`; a builtin that traps has written nothing.
 
@@ -77,6 +77,9 @@ fn write_string(data: &mut [u8], dst: StrRef, text: &[u8]) {
     let n = text.len().min(dst.max);
     data[dst.addr + 2..dst.addr + 4].copy_from_slice(&(n as u16).to_le_bytes());
     data[dst.addr + 4..dst.addr + 4 + n].copy_from_slice(&text[..n]);
+    if n < dst.max {
+        data[dst.addr + 4 + n] = 0;
+    }
 }
 
 /// Clamps a signed count to `0..=max`.
@@ -543,6 +546,13 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
                 .parse::<f64>()
                 .map(|v| Some(v.to_bits()))
                 .map_err(|_| Trap::NumericError)
+        }
+        StrSync => {
+            let s = string_at(data, arg(0))?;
+            let text = &data[s.addr + 4..s.addr + 4 + s.max];
+            let len = text.iter().position(|&b| b == 0).unwrap_or(s.max);
+            data[s.addr + 2..s.addr + 4].copy_from_slice(&(len as u16).to_le_bytes());
+            Ok(None)
         }
         _ => {
             // Builtins writing a string result to the string at arg(0).

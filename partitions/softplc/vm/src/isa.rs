@@ -13,6 +13,35 @@
 //! "May trap" lists the [`Trap`]s an instruction can raise; every data access may raise
 //! [`Trap::InvalidAddress`] when its (dynamic) address is outside data memory, every push may
 //! raise [`Trap::StackOverflow`] when the operand stack is full.
+//!
+//! # References
+//!
+//! A *reference* (IEC `REF_TO`, CODESYS `POINTER TO`) is a cell `address | object << 32`:
+//! the low 32 bits are a data address, the high 32 bits name the variable (or the part of a
+//! variable) the reference was taken from, as `1 +` the index of its record in the image's
+//! `OBJECTS` section ([`crate::image::Image::object`]). The cell 0 is `NULL`.
+//! `REF_MAKE n` turns an address into a reference to the smallest object containing the `n`
+//! bytes there; `REF_ADD` moves a reference by a byte offset (only its address changes,
+//! wrapping in 32 bits, so arithmetic can never make it name another object); `REF_CHECK n`
+//! admits an access of `n` bytes at the reference's address only when it lies inside the
+//! named object's bytes and leaves the plain address for `LD_IND`/`ST_IND`/`COPY`/builtins.
+//! A reference therefore reaches the variable it was taken from and nothing else, whatever
+//! arithmetic the program did on it; NULL, a reference moved outside its variable and a cell
+//! that was never a reference all trap with [`Trap::InvalidReference`] at the access.
+//!
+//! # Classes and dynamic dispatch
+//!
+//! A function-block instance whose methods are called through `CALL_VIRT` holds its class id
+//! (an index into the `CLASSES` section) as a `u32` at its first byte; references to such
+//! instances (and interface values) are plain instance addresses, 0 being `NULL`.
+//! `CALL_VIRT slot` reads the class of the instance on the stack, finds the class's
+//! `DISPATCH` record for `slot` and calls its POU with the instance as frame base, exactly as
+//! `CALL` would; `VIRT_FRAME slot` gives the data address of that method's parameter frame so
+//! the caller can store the arguments first. Every dispatch target is a POU the verifier
+//! checked (valid index, no argument or result cells), so the verifier still proves stack
+//! depths; which method runs is decided by the instance's class at run time. A NULL
+//! instance, an unknown class or a class without the slot trap with
+//! [`Trap::InvalidReference`].
 
 /// Operand layout of an instruction (all immediates little-endian).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -345,6 +374,30 @@ opcodes! {
     /// `[a b] -> []`: jumps when the comparison is **true**: the fused form of `<cmp>; JNZ target`.
     JumpIf = 0x8E, "JUMP_IF", CompareTarget;
 
+    /// `[addr] -> [ref]`: a reference to the smallest object (`OBJECTS` record) containing
+    /// the `n` (the operand) bytes at `addr`: `addr | (index + 1) << 32` (see "References").
+    /// May trap: INVALID_REFERENCE when no object contains them.
+    RefMake = 0xB0, "REF_MAKE", U32;
+    /// `[ref] -> [addr]`: checks an access of `n` (the operand) bytes through a reference and
+    /// leaves its address (the low 32 bits). May trap: INVALID_REFERENCE unless the object
+    /// the reference names exists and `start <= addr` and `addr + n <= start + len`.
+    RefCheck = 0xB1, "REF_CHECK", U32;
+    /// `[ref n] -> [ref']`: pointer arithmetic: adds `n` (wrapping) to the low 32 bits (the
+    /// address) and keeps the high 32 bits (the object): `ref' = (ref & !0xFFFF_FFFF) |
+    /// (ref as u32).wrapping_add(n as u32)`.
+    RefAdd = 0xB2, "REF_ADD", None;
+    /// `[a] -> [a]`: a reference to a function-block instance or an interface value must
+    /// not be NULL. May trap: INVALID_REFERENCE when `a == 0`.
+    ChkNull = 0xB3, "CHK_NULL", None;
+    /// `[inst] -> []`: dynamic dispatch (see "Classes and dynamic dispatch"): calls the method
+    /// the class of instance `inst` runs for `slot` (the operand), with `inst` as frame base,
+    /// as `CALL` does. May trap: INVALID_REFERENCE (NULL instance, class id unreadable or
+    /// unknown, no method for the slot), then CALL_DEPTH and INVALID_ADDRESS like `CALL`.
+    CallVirt = 0xB4, "CALL_VIRT", Index16;
+    /// `[inst] -> [frame]`: the data address of the parameter frame of the method `CALL_VIRT
+    /// slot` would call for `inst`. May trap: INVALID_REFERENCE like `CALL_VIRT`.
+    VirtFrame = 0xB5, "VIRT_FRAME", Index16;
+
     /// `[] -> []`: pushes a try frame (handler, stack depth, call depth). On a catchable trap
     /// the VM restores the stack to the recorded depth, pushes the trap code and jumps to
     /// `handler` (same POU; stack depth at handler = depth at TRY_BEGIN + 1). May trap:
@@ -571,6 +624,11 @@ codes::code_enum! {
         /// The task's time deadline passed while it ran (the runtime's clock check, see
         /// `Machine::run_cycle_until`). Not catchable, like WATCHDOG.
         Deadline = 9 => "DEADLINE",
+        /// A dereference through NULL or through a reference outside the variable it was
+        /// taken from (`REF_MAKE`, `REF_CHECK`), or a method call through a NULL instance, an
+        /// instance of unknown class or a class without that method (`CHK_NULL`,
+        /// `CALL_VIRT`, `VIRT_FRAME`).
+        InvalidReference = 10 => "INVALID_REFERENCE",
     }
 }
 
@@ -589,8 +647,10 @@ macro_rules! builtins {
         ///
         /// String arguments are **addresses** of string variables in data memory, laid out as
         /// `max_len: u16 LE, cur_len: u16 LE, bytes[max_len]` (so a `STRING[n]` occupies
-        /// `4 + n` bytes and its initial value must have `max_len = n`). Results written to a
-        /// `dst` string are truncated to its `max_len`; `dst` may alias an argument. Length and
+        /// at least `4 + n` bytes and its initial value must have `max_len = n`). Results
+        /// written to a `dst` string are truncated to its `max_len`, and a result shorter than
+        /// `max_len` is followed by a NUL byte (CODESYS code reads strings through pointers up
+        /// to that terminator); `dst` may alias an argument. Length and
         /// position arguments are clamped (negative counts as 0, positions beyond the string
         /// to its end) instead of trapping; positions are 1-based as in IEC.
         #[repr(u16)]
@@ -795,6 +855,13 @@ builtins! {
     StrToI64 = 117, "STRING_TO_INT", 1, 1;
     /// `[s] -> [f64]`: parses a real number. NUMERIC_ERROR when malformed.
     StrToF64 = 118, "STRING_TO_LREAL", 1, 1;
+    /// `[s] -> []`: takes the text's length from its terminator: `cur_len` becomes the index
+    /// of the first NUL among the `max_len` text bytes (`max_len` when there is none), as after
+    /// CODESYS code wrote the string's bytes through a pointer. Every builtin writing a string
+    /// (and the monitor's write) leaves a NUL right after a text shorter than `max_len`, so
+    /// the length survives this whatever wrote the string last. INVALID_ADDRESS when the
+    /// `4 + max_len` bytes are not all in data memory.
+    StrSync = 193, "STRING_SYNC", 1, 0;
 }
 
 impl Builtin {
@@ -849,6 +916,9 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         Index => (2, 1),
         AddImm => (1, 1),
         JumpIf | JumpIfNot => (2, 0),
+        RefMake | RefCheck | ChkNull | VirtFrame => (1, 1),
+        RefAdd => (2, 1),
+        CallVirt => (1, 0),
         Add | Sub | Mul | DivS | DivU | ModS | ModU | And | Or | Xor | Shl | ShrU | ShrS | Rol
         | Ror | Eq | Ne | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | AddF32 | SubF32
         | MulF32 | DivF32 | EqF32 | NeF32 | LtF32 | LeF32 | GtF32 | GeF32 | AddF64 | SubF64

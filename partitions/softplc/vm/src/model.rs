@@ -668,6 +668,80 @@ impl<'a> Model<'a> {
                 }
                 s.push(base.wrapping_add(index.wrapping_sub(lo).wrapping_mul(stride)) as u64);
             }
+            Opcode::RefMake => {
+                let a = pop(&mut s);
+                let size = imm_u32(code, i) as u64;
+                // The shortest record containing the bytes, by a linear scan (the VM
+                // binary-searches and walks up parents).
+                let found = (0..self.image.object_count())
+                    .filter(|&k| {
+                        let (start, len) = self.image.object(k).unwrap();
+                        a >= start as u64 && a + size <= start as u64 + len as u64
+                    })
+                    .min_by_key(|&k| self.image.object(k).unwrap().1);
+                let Some(k) = found else {
+                    return Err(Trap::InvalidReference);
+                };
+                s.push(a + (((k + 1) as u64) << 32));
+            }
+            Opcode::RefCheck => {
+                let r = pop(&mut s);
+                let object = r >> 32;
+                let address = r % (1u64 << 32);
+                let size = imm_u32(code, i) as u64;
+                if object == 0 || object > self.image.object_count() as u64 {
+                    return Err(Trap::InvalidReference);
+                }
+                let (start, len) = self.image.object(object as usize - 1).unwrap();
+                if address < start as u64 || address + size > start as u64 + len as u64 {
+                    return Err(Trap::InvalidReference);
+                }
+                s.push(address);
+            }
+            Opcode::RefAdd => {
+                let n = pop(&mut s);
+                let r = pop(&mut s);
+                let low = (r % (1u64 << 32) + n % (1u64 << 32)) % (1u64 << 32);
+                s.push((r >> 32 << 32) + low);
+            }
+            Opcode::ChkNull => {
+                if *s.last().unwrap() == 0 {
+                    return Err(Trap::InvalidReference);
+                }
+            }
+            Opcode::CallVirt | Opcode::VirtFrame => {
+                let instance = pop(&mut s);
+                let slot = imm_u16(code, i);
+                if instance == 0 || !self.addr_ok(instance, 4) {
+                    return Err(Trap::InvalidReference);
+                }
+                let class = self.read(MemType::U32, instance)? as usize;
+                if class >= self.image.class_count() {
+                    return Err(Trap::InvalidReference);
+                }
+                let c = self.image.class(class).unwrap();
+                // Linear scan of the class's methods (the VM binary-searches).
+                let Some(d) = (c.first..c.first + c.count)
+                    .map(|k| self.image.dispatch(k as usize).unwrap())
+                    .find(|d| d.slot == slot)
+                else {
+                    return Err(Trap::InvalidReference);
+                };
+                if op == Opcode::VirtFrame {
+                    s.push(d.frame as u64);
+                } else {
+                    let callee = self.image.pou(d.pou as usize).unwrap();
+                    if self.calls.len() >= self.call_limit {
+                        return Err(Trap::CallDepth);
+                    }
+                    if !self.addr_ok(instance, callee.frame_size as u64) {
+                        return Err(Trap::InvalidAddress);
+                    }
+                    self.calls.push((next, self.base));
+                    self.base = instance as u32;
+                    next = callee.code_start;
+                }
+            }
             Opcode::TryBegin => {
                 if self.tries.len() >= self.try_limit {
                     return Err(Trap::StackOverflow);
@@ -852,6 +926,10 @@ fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Op
             let a = args[0] as usize;
             data[a + 2..a + 4].copy_from_slice(&(out.len() as u16).to_le_bytes());
             data[a + 4..a + 4 + out.len()].copy_from_slice(&out);
+            // A STRING result shorter than its capacity ends with a NUL.
+            if out.len() < capacity {
+                data[a + 4 + out.len()] = 0;
+            }
             return Ok(None);
         }
         _ => {}
@@ -1296,6 +1374,16 @@ pub fn string_builtin(
                 .map(|v| Some(v.to_bits()))
                 .map_err(|_| Trap::NumericError);
         }
+        StrSync => {
+            let (capacity, _) = read_string(data, args[0])?;
+            let a = args[0] as usize;
+            let mut len = 0;
+            while len < capacity && data[a + 4 + len] != 0 {
+                len += 1;
+            }
+            data[a + 2..a + 4].copy_from_slice(&(len as u16).to_le_bytes());
+            return Ok(None);
+        }
         _ => {}
     }
     let (capacity, _) = read_string(data, args[0])?;
@@ -1358,5 +1446,8 @@ pub fn string_builtin(
     let a = args[0] as usize;
     data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
     data[a + 4..a + 4 + result.len()].copy_from_slice(&result);
+    if result.len() < capacity {
+        data[a + 4 + result.len()] = 0;
+    }
     Ok(None)
 }
