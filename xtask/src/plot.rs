@@ -247,6 +247,7 @@ fn draw_plant(area: &Area, plant: &[Status]) -> Result<()> {
         .configure_mesh()
         .x_desc("simulated time (s)")
         .y_desc("level, setpoint (m)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .draw()
         .map_err(plot_error)?;
     chart
@@ -301,14 +302,17 @@ fn draw_plant(area: &Area, plant: &[Status]) -> Result<()> {
     Ok(())
 }
 
-/// The lateness histogram over every release (us, log scale).
+/// Where the histogram's bars start on its log-scaled count axis (below one release).
+const BAR_BASE: f64 = 0.5;
+
+/// The lateness histogram over every release (us and counts, log scales).
 fn draw_histogram(area: &Area, plc: &str, periods: &[Period]) -> Result<()> {
     let bins = merged(periods);
     let releases: u64 = bins.iter().map(|b| b.count).sum();
     let us = |ns: u64| (ns as f64 / 1000.0).max(0.1);
     let low = bins.first().map_or(1.0, |b| us(b.low));
     let high = bins.last().map_or(10.0, |b| us(b.high).min(1e7));
-    let most = bins.iter().map(|b| b.count).max().unwrap_or(1);
+    let most = bins.iter().map(|b| b.count).max().unwrap_or(1) as f64;
     let min = periods.iter().map(|p| p.lateness_ns.0).min().unwrap_or(0);
     let max = periods.iter().map(|p| p.lateness_ns.2).max().unwrap_or(0);
     let mut chart = ChartBuilder::on(area)
@@ -323,9 +327,10 @@ fn draw_histogram(area: &Area, plc: &str, periods: &[Period]) -> Result<()> {
         .margin(12)
         .x_label_area_size(40)
         .y_label_area_size(60)
+        // Counts on a log scale too: the rare late releases are what matters.
         .build_cartesian_2d(
             (low * 0.8..high * 1.25).log_scale(),
-            0..most + most / 10 + 1,
+            (BAR_BASE..most * 2.0).log_scale(),
         )
         .map_err(plot_error)?;
     chart
@@ -333,14 +338,16 @@ fn draw_histogram(area: &Area, plc: &str, periods: &[Period]) -> Result<()> {
         .x_desc("cycle start minus window start (us)")
         .y_desc("releases")
         .x_label_formatter(&|x| format!("{x:.0}"))
+        .y_label_formatter(&|y| format!("{y:.0}"))
         .draw()
         .map_err(plot_error)?;
-    let fill = RGBColor(31, 100, 200).filled();
+    let bar = |b: &Bin| [(us(b.low), BAR_BASE), (us(b.high).min(1e7), b.count as f64)];
+    let (fill, edge) = (RGBColor(31, 100, 200).filled(), WHITE.stroke_width(1));
     chart
-        .draw_series(
-            bins.iter()
-                .map(|b| Rectangle::new([(us(b.low), 0), (us(b.high).min(1e7), b.count)], fill)),
-        )
+        .draw_series(bins.iter().map(|b| Rectangle::new(bar(b), fill)))
+        .map_err(plot_error)?;
+    chart
+        .draw_series(bins.iter().map(|b| Rectangle::new(bar(b), edge)))
         .map_err(plot_error)?;
     Ok(())
 }
@@ -375,6 +382,7 @@ fn draw_lateness(area: &Area, plc: &str, periods: &[Period]) -> Result<()> {
         .configure_mesh()
         .x_desc("PLC partition time (s)")
         .y_desc("lateness (us)")
+        .x_label_formatter(&|x| format!("{x:.0}"))
         .y_label_formatter(&|y| format!("{y:.0}"))
         .draw()
         .map_err(plot_error)?;
