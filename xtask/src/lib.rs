@@ -4,8 +4,9 @@
 //! bare-metal artifacts ([`artifacts`]), assembling an ESP folder with `system.img`
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
-//! lint gate ([`lint`]), the Linux-side test programs ([`linux`]) and the native Linux
-//! reference of the guest benchmark ([`native`]).
+//! lint gate ([`lint`]), the Linux-side test programs ([`linux`]), the native Linux
+//! reference of the guest benchmark ([`native`]) and the pictures of a run's serial log
+//! ([`plot`], whose parser the scenarios use too).
 
 pub mod artifacts;
 pub mod bench;
@@ -16,6 +17,7 @@ pub mod lint;
 pub mod linux;
 pub mod native;
 pub mod plc;
+pub mod plot;
 pub mod qemu;
 pub mod scenario;
 pub mod tools;
