@@ -124,7 +124,8 @@ pub fn health_error(trap: Trap) -> ErrorCode {
         | Trap::SubrangeViolation
         | Trap::CallDepth
         | Trap::StackOverflow
-        | Trap::InvalidAddress => ErrorCode::ApplicationError,
+        | Trap::InvalidAddress
+        | Trap::InvalidReference => ErrorCode::ApplicationError,
     }
 }
 

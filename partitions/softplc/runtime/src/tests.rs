@@ -458,6 +458,10 @@ fn traps_are_reported_as_the_fitting_arinc_error() {
         health_error(Trap::IndexOutOfBounds),
         ErrorCode::ApplicationError
     );
+    assert_eq!(
+        health_error(Trap::InvalidReference),
+        ErrorCode::ApplicationError
+    );
     assert!(names_task("spin", "SPIN.s") && names_task("Spin.S", "SPIN.s"));
     assert!(!names_task("spi", "SPIN.s") && !names_task("s", "SPIN.s"));
 }
