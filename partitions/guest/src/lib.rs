@@ -82,6 +82,7 @@ pub mod pipe;
 pub mod poll;
 pub mod pool;
 pub mod process;
+pub mod sched;
 pub mod sigcalls;
 pub mod signal;
 pub mod stack;
