@@ -2,10 +2,12 @@
 # The hostile guest of scenario system_hostile_guest: after 3 s of an idle guest (the
 # PLC's lateness then is the baseline), one attack after the other: a port flood, then a
 # CPU hog through all the others (memory hogs, a pipe flood), then a crash of init in the
-# middle of a fork bomb; every step logs a `hostile:` line. Every Linux process runs at
-# the same priority, the highest the guest gives its processes, so the hog is at the
-# guest's maximum. What it starts is bounded by the guest's memory, its file system and
-# its process table.
+# middle of a fork bomb; every step logs a `hostile:` line. A new Linux process, and one
+# that waits (the floods' and the fork bomb's), runs at the highest priority the guest
+# gives its processes (its scheduling policy, partitions/guest/src/sched.rs): the hog
+# starts there, at the guest's maximum, and returns there for a slice whenever it has
+# waited its turn too long. What it starts is bounded by the guest's memory, its file
+# system and its process table.
 echo "hostile: boot: a fresh shell, pid $$, $(echo runs commands)"
 sleep 3
 echo "hostile: idle phase over"
@@ -14,8 +16,7 @@ echo "hostile: idle phase over"
 # the PLC's online service as fast as they can without waiting (valid, forbidden and
 # garbage ones; the queue is mostly full) and drain the answers; a shell loop writes READ
 # requests that wait for room, a dd reads answers that wait for them, another reads the
-# plant's level as fast as it can; for 2 s. (Before the CPU hog: a process that makes
-# calls gets one a time slice beside a process that spins.)
+# plant's level as fast as it can; for 2 s.
 linux-arinc flood /dev/arinc/plc-request /dev/arinc/plc-response 2 &
 flooders=$!
 linux-arinc flood /dev/arinc/plc-request /dev/arinc/plc-response 2 &
