@@ -221,13 +221,21 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 fn task_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
-    let target = k.task(args::TaskKill::decode(r).task)?;
+    let target = k.task_to_kill(args::TaskKill::decode(r).task)?;
     if target == task || !k.is_within(target, task) {
         return Err(Error::NotPermitted);
     }
-    k.destroy_task(target);
-    Ok(Next::Return)
+    if k.destroy_task(target, crate::task::KILL_BUDGET) {
+        return Ok(Next::Return);
+    }
+    // Not done: the caller executes the same `syscall` again (2 bytes back, its registers
+    // unchanged), so a window boundary or a higher priority can come in between.
+    k.threads[t].context.rip = k.threads[t].context.rip.wrapping_sub(SYSCALL_LEN);
+    Ok(Next::Pending)
 }
+
+/// Length of the `syscall` instruction (0f 05).
+const SYSCALL_LEN: u64 = 2;
 
 fn task_allow_send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);

@@ -256,3 +256,59 @@ fn attack_partitions() {
     );
     victim_kept_its_windows(&o, 1_000, LATENESS_BOUND_NS);
 }
+
+#[test]
+fn attack_io() {
+    let o = boot("attack_io");
+    kernel_held(&o);
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    check(
+        &o,
+        o.line("flood-io: 100 rounds of 61440 ports").is_some() && o.line(" failed: ").is_none(),
+        "the attacker did not grant its whole port range again and again",
+    );
+    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}
+
+#[test]
+fn attack_kill() {
+    let o = boot("attack_kill");
+    kernel_held(&o);
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    let line = o.line("flood-kill: 1 rounds, each killing a task with ");
+    check(
+        &o,
+        line.is_some_and(|l| l.contains("with 127 threads and 760 page tables"))
+            && o.line("flood-kill: 10 rounds").is_some()
+            && o.line(" failed: ").is_none(),
+        "the attacker did not kill a task with its whole thread quota and 760 page tables again and again",
+    );
+    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}
+
+#[test]
+fn attack_root_paths() {
+    let o = boot("attack_root_paths");
+    kernel_held(&o);
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim thread ends the run",
+    );
+    check(
+        &o,
+        o.line("paths: 20 rounds: schedule of 32 windows, 64512 ports granted, a task with 200 threads and 760 page tables killed")
+            .is_some()
+            && o.line(" failed: ").is_none(),
+        "the root task did not make each longest call again and again",
+    );
+    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}

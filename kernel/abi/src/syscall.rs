@@ -93,8 +93,13 @@ codes::code_enum! {
         TaskCreate = 10 => "task_create",
         /// `task_kill(task)`: destroys a descendant task, its threads and all its descendants;
         /// their kernel memory returns to their resource partitions. Threads waiting on them
-        /// get `PeerGone`. Ability: `CREATE_TASK`. Errors: `NoSuchObject`, `NotPermitted` (not
-        /// a strict descendant).
+        /// get `PeerGone`. At once, no thread of the subtree runs again and no other call can
+        /// name its tasks; the rest is done a bounded piece at a time: until it is all done
+        /// the call restarts itself (the caller executes the same `syscall` again, registers
+        /// unchanged), so a large subtree never keeps the kernel from switching windows for
+        /// long. Ability: `CREATE_TASK`. Errors: `NoSuchObject` (also when another
+        /// `task_kill` finished destroying it meanwhile), `NotPermitted` (not a strict
+        /// descendant).
         TaskKill = 11 => "task_kill",
         /// `task_allow_send(from, to)`: lets threads of task `from` send IPC and notifications
         /// to threads of task `to` (0 = the caller's task, for either). Both must be the

@@ -49,6 +49,8 @@
 #![no_std]
 #![no_main]
 
+mod paths;
+
 use core::fmt::Write;
 use core::sync::atomic::{AtomicUsize, Ordering};
 use user_rt::abi::boot::KERNEL_BASE;
@@ -57,6 +59,7 @@ use user_rt::abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAP_MAX_PAGES, MAX_MAJOR_FRAME, PageRights,
     ROOT_INFO_BASE, ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
 };
+use user_rt::abi::sysimg::SystemImage;
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::{DATA_BASE, POOL_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
@@ -81,11 +84,17 @@ const PAGE: u64 = 4096;
 /// its own.
 const TOP_REGION: core::ops::Range<u64> = ROOT_INFO_BASE..USER_END;
 
-fn main(start: u64, _: u64) {
+fn main(start: u64, image_len: u64) {
     #[allow(unsafe_code)]
     // SAFETY: syssw starts every partition with the start record's address in rdi.
     let Some(info) = (unsafe { StartInfo::from_start(start) }) else {
-        // No start record: the kernel started it as the root task (rdi = system image).
+        // No start record: the kernel started it as the root task (rdi = system image,
+        // rsi = its length); the image's entry `test/mode` says what to do.
+        let image = SystemImage::parse(root_task::system_image(start, image_len));
+        let mode = image.ok().and_then(|i| i.find("test/mode")).map(|e| e.data);
+        if mode == Some(b"paths".as_slice()) {
+            paths::root_paths();
+        }
         fuzz(CALLS, true);
         let _ = sys::system_halt(true);
         return;
@@ -101,6 +110,10 @@ fn main(start: u64, _: u64) {
         }
     } else if name.starts_with("flood-map") {
         flood_map(info.pool_len);
+    } else if name.starts_with("flood-io") {
+        paths::flood_io();
+    } else if name.starts_with("flood-kill") {
+        paths::flood_kill();
     } else if name.starts_with("ports") {
         touch_kernel_ports(ThreadId(info.server));
     } else if name.starts_with("fault-loop") {
@@ -134,6 +147,11 @@ fn main(start: u64, _: u64) {
             .and_then(|n| n.parse().ok())
             .unwrap_or(VICTIM_FRAMES);
         victim(info.time_partition, windows);
+        #[allow(unsafe_code)]
+        // SAFETY: ud2 only raises #UD (the scenario's end).
+        unsafe {
+            core::arch::asm!("ud2")
+        };
     } else {
         println!("attack: no role for partition `{name}`");
     }
@@ -457,11 +475,6 @@ fn victim(tp: u64, windows: u64) {
         Err(e) => println!("victim: cannot create a thread: {e:?}"),
     }
     println!("victim: done");
-    #[allow(unsafe_code)]
-    // SAFETY: ud2 only raises #UD (the scenario's end).
-    unsafe {
-        core::arch::asm!("ud2")
-    };
 }
 
 /// xorshift64*: small, fast and good enough to cover argument space.
