@@ -96,8 +96,10 @@ fn victim_kept_its_windows(o: &xtask::qemu::Outcome, windows: u64, bound_ns: u64
     let last = summaries.last().copied();
     check(
         o,
-        o.line("victim: created a thread").is_some(),
-        "the victim could not create a thread at its end",
+        o.line("victim: created a thread").is_some()
+            && o.line(&format!("victim: created {windows} threads, 0 refused"))
+                .is_some(),
+        "the victim could not create a thread in each window and at its end",
     );
     check(
         o,
@@ -171,6 +173,30 @@ fn attack_floods() {
         forged.is_some_and(|(sent, accepted)| sent >= 10_000 && accepted == 0),
         &format!("syssw accepted forged requests (sent, accepted) = {forged:?}"),
     );
+    // Error reports and a mode change whose words name the victim are the forger's own:
+    // each report is charged to it, and IDLE stops it, never the victim.
+    let reports: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("health: ") && l.contains("error=application_error"))
+        .collect();
+    check(
+        &o,
+        reports.len() >= 4
+            && reports
+                .iter()
+                .all(|l| l.contains("partition=forge ") && l.contains("action=ignore")),
+        "the forged error reports were not all charged to the forger",
+    );
+    check(
+        &o,
+        o.line("syssw: partition forge: IDLE").is_some()
+            && o.line("forge: still running after IDLE").is_none()
+            && o.lines
+                .iter()
+                .all(|l| !l.contains("syssw: partition victim-200: IDLE")),
+        "IDLE with words naming the victim did not stop the forger alone",
+    );
     victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
 }
 
@@ -215,16 +241,17 @@ fn attack_partitions() {
             })
             .count()
     };
-    // Each kernel port faulted (9 warm restarts), none was reached.
+    // Each read and each write of a kernel port or an ungranted one faulted (24 warm
+    // restarts), none was reached.
     check(
         &o,
-        o.line("ports: all 9 accesses faulted").is_some() && o.line("did not fault").is_none(),
-        "a kernel port was reachable",
+        o.line("ports: all 24 accesses faulted").is_some() && o.line("did not fault").is_none(),
+        "a kernel or ungranted port was reachable",
     );
     check(
         &o,
-        health("ports", "illegal_request") == 9,
-        "one illegal_request per kernel port",
+        health("ports", "illegal_request") == 24,
+        "one illegal_request per port access",
     );
     check(
         &o,
@@ -311,4 +338,81 @@ fn attack_root_paths() {
         "the root task did not make each longest call again and again",
     );
     victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}
+
+#[test]
+fn attack_reach() {
+    let o = boot("attack_reach");
+    kernel_held(&o);
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    // Every read and write of memory not its own faulted as a memory violation.
+    let violations = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("health: ") && l.contains("partition=peek "))
+        .collect::<Vec<_>>();
+    check(
+        &o,
+        violations.len() == 7
+            && violations
+                .iter()
+                .all(|l| l.contains("error=memory_violation") && l.contains("action=warm_restart"))
+            && o.line("did not fault").is_none(),
+        "an access to the kernel's or another partition's memory was not a memory violation",
+    );
+    let maps = o
+        .line("peek: all 7 accesses faulted; ")
+        .and_then(|l| l.split("faulted; ").nth(1))
+        .map(|r| r.split_whitespace().map(str::to_string).collect::<Vec<_>>());
+    check(
+        &o,
+        maps.as_ref().is_some_and(|w| {
+            w.len() >= 7 && w[0].parse::<u64>().is_ok_and(|n| n >= 258) && w[6] == "0"
+        }),
+        &format!("a map into another task or of physical memory was accepted: {maps:?}"),
+    );
+    // Messages and notifications to every thread id: only syssw's threads (the partition's
+    // parent) took any, never the victim's; syssw answered every junk call.
+    let flood = o
+        .lines
+        .iter()
+        .rev()
+        .find_map(|l| l.split("ipc-flood: ").nth(1))
+        .map(|r| r.split_whitespace().map(str::to_string).collect::<Vec<_>>());
+    let victim = o
+        .line("victim: thread ")
+        .and_then(|l| l.split("victim: thread ").nth(1))
+        .unwrap_or("?")
+        .to_string();
+    let taken_by = o
+        .lines
+        .iter()
+        .rev()
+        .find_map(|l| l.split("taken by ").nth(1))
+        .unwrap_or("");
+    check(
+        &o,
+        flood.as_ref().is_some_and(|w| {
+            w.len() >= 7
+                && w[0].parse::<u64>().is_ok_and(|n| n >= 20_000)
+                && w[6].parse::<u64>().is_ok_and(|n| n >= 5_000)
+        }) && victim.starts_with("0x")
+            && !taken_by.split_whitespace().any(|id| id == victim),
+        &format!("the IPC flood reached the victim ({victim}) or did not run: {flood:?}"),
+    );
+    check(
+        &o,
+        o.lines
+            .iter()
+            .filter(|l| l.contains("spin: spinning at priority"))
+            .count()
+            == 2,
+        "the spinners did not raise themselves to their maximum priority",
+    );
+    victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
 }

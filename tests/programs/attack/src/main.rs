@@ -50,6 +50,7 @@
 #![no_main]
 
 mod paths;
+mod reach;
 
 use core::fmt::Write;
 use core::sync::atomic::{AtomicUsize, Ordering};
@@ -116,6 +117,12 @@ fn main(start: u64, image_len: u64) {
         paths::flood_kill();
     } else if name.starts_with("ports") {
         touch_kernel_ports(ThreadId(info.server));
+    } else if name.starts_with("peek") {
+        reach::peek(info);
+    } else if name.starts_with("ipc-flood") {
+        reach::ipc_flood(info);
+    } else if name.starts_with("spin") {
+        reach::spin(info);
     } else if name.starts_with("fault-loop") {
         #[allow(unsafe_code)]
         // SAFETY: ud2 only raises #UD.
@@ -197,10 +204,17 @@ fn fault_ignore(priority: u8) -> ! {
     }
 }
 
-/// The kernel's I/O ports and QEMU's exit device, which no partition may be granted.
-const KERNEL_PORTS: [u16; 9] = [0x3f8, 0x3fd, 0x20, 0xa1, 0x40, 0xf4, 0xf5, 0xf6, 0xf7];
+/// Ports no partition is granted: the kernel's (COM1, the PICs, the PIT, each port of QEMU's
+/// exit device) and ordinary ones this partition was not given (keyboard controller, COM2,
+/// PCI configuration).
+const FORBIDDEN_PORTS: [u16; 12] = [
+    0x3f8, 0x3fd, 0x20, 0xa1, 0x40, 0xf4, 0xf5, 0xf6, 0xf7, 0x60, 0x2f8, 0xcf8,
+];
 
-/// How many of [`KERNEL_PORTS`] were touched (kept across warm restarts).
+/// Accesses `ports` makes, one per start: a read, then a write, of each forbidden port.
+const PORT_ACCESSES: usize = 2 * FORBIDDEN_PORTS.len();
+
+/// How many of [`PORT_ACCESSES`] were made (kept across warm restarts).
 static PORTS_TOUCHED: AtomicUsize = AtomicUsize::new(0);
 
 fn touch_kernel_ports(server: ThreadId) {
@@ -212,17 +226,21 @@ fn touch_kernel_ports(server: ThreadId) {
         },
     );
     let next = PORTS_TOUCHED.fetch_add(1, Ordering::Relaxed);
-    match KERNEL_PORTS.get(next) {
-        Some(&port) => {
-            println!("ports: touching port {port:#x}");
-            // A write to the exit device would end the run; to COM1 it would garble the log.
-            outb(port, 0x01);
-            println!("ports: port {port:#x} did not fault");
-        }
-        None => {
-            println!("ports: all {} accesses faulted", KERNEL_PORTS.len());
-            sys::sleep_until(u64::MAX);
-        }
+    if next >= PORT_ACCESSES {
+        println!("ports: all {PORT_ACCESSES} accesses faulted");
+        sys::sleep_until(u64::MAX);
+        return;
+    }
+    let port = FORBIDDEN_PORTS[next / 2];
+    if next % 2 == 0 {
+        println!("ports: reading port {port:#x}");
+        let value = user_rt::port::inb(port);
+        println!("ports: read {value:#x} from port {port:#x}: did not fault");
+    } else {
+        // A write to the exit device would end the run; to COM1 it would garble the log.
+        println!("ports: writing port {port:#x}");
+        outb(port, 0x01);
+        println!("ports: port {port:#x} did not fault");
     }
 }
 
@@ -286,8 +304,59 @@ fn forge(server: ThreadId) {
         }
         if sent % 10_000 == 0 {
             println!("forge: {sent} requests, {accepted} accepted");
+            forge_report(server);
+        }
+        if sent == FORGE_REQUESTS {
+            forge_idle(server);
         }
     }
+}
+
+/// Requests the forger sends before it asks to be IDLE naming the victim.
+const FORGE_REQUESTS: u64 = 40_000;
+
+/// An error report whose words and text name the victim (partition 0 of `attack_floods`)
+/// and the kernel's fault label: the health monitor must charge it to the forger.
+fn forge_report(server: ThreadId) {
+    let mut wire = Request::ReportError {
+        error: user_rt::protocol::ErrorCode::ApplicationError,
+        detail: b"partition=victim-200",
+    }
+    .encode();
+    wire.words[1] = 0;
+    wire.words[2] = user_rt::abi::ipc::LABEL_FAULT_REPORT as u64;
+    let detail = b"partition=victim-200";
+    #[allow(unsafe_code)]
+    // SAFETY: IPC_PAGE is this thread's registered IPC buffer (set by `forge`), a page.
+    let ipc = unsafe { IpcBufferRef::new(&raw const IPC_PAGE as u64) };
+    ipc.write_data(0, detail);
+    let message = Message {
+        tag: MessageTag::new(wire.label, detail.len(), 0),
+        words: wire.words,
+    };
+    let ok = sys::ipc_call(server, 1_000_000, &message)
+        .is_ok_and(|r| r.message.tag.label() == ReturnCode::NoError.code());
+    println!(
+        "forge: error report naming the victim: {}",
+        if ok { "accepted as its own" } else { "refused" }
+    );
+}
+
+/// A mode change to IDLE whose words name the victim: syssw must idle the forger itself.
+fn forge_idle(server: ThreadId) {
+    let mut wire = Request::SetPartitionMode {
+        mode: OperatingMode::Idle,
+    }
+    .encode();
+    wire.words[1] = 0;
+    wire.words[2] = 0;
+    println!("forge: asking for IDLE with words naming the victim");
+    let message = Message {
+        tag: MessageTag::new(wire.label, 0, 0),
+        words: wire.words,
+    };
+    let _ = sys::ipc_call(server, 1_000_000, &message);
+    println!("forge: still running after IDLE");
 }
 
 /// The port victim's queuing ports (their channel leads from `out` back to `in`).
@@ -414,12 +483,14 @@ fn hoard() {
 /// starts the kernel reported off the ideal sequence: the first start plus whole major
 /// frames (the frame learnt from the first two windows, one window per frame).
 fn victim(tp: u64, windows: u64) {
+    println!("victim: thread {:#x}", sys::thread_self().0.0);
     let report_every = REPORT_EVERY.max(windows / 100);
     let mut lateness = histogram::Histogram::new();
     let mut first: Option<(u64, u64)> = None;
     let mut major_frame = None;
     let mut last_frame = None;
     let (mut missed, mut drift, mut max_late, mut sum_late) = (0u64, 0u64, 0u64, 0u64);
+    let (mut created, mut refused) = (0u64, 0u64);
     for window in 1..=windows {
         let now = sys::clock();
         let Ok(info) = sys::partition_info(tp) else {
@@ -457,9 +528,18 @@ fn victim(tp: u64, windows: u64) {
                 sum_late / (window - 1).max(1)
             );
         }
+        // Objects of its own, whatever a neighbour hoards: a thread each window.
+        match sys::thread_create(None, 0x1000, 0x2000, 1, 0) {
+            Ok(thread) => {
+                created += 1;
+                let _ = sys::thread_kill(thread);
+            }
+            Err(_) => refused += 1,
+        }
         // Ready again at the end of this window: runs at the start of the next one.
         sys::sleep_until(info.next_window_start + info.window_length);
     }
+    println!("victim: created {created} threads, {refused} refused");
     if let Some((min, median, max)) = lateness.summary() {
         println!(
             "victim: lateness windows={} min={min} median={median} max={max} missed={missed} drift={drift}",
