@@ -77,6 +77,12 @@ impl AddressSpace {
         destroyed_below: 0,
     };
 
+    /// Its top-level table's frame (0: none), for the host tests' checks of every table.
+    #[cfg(test)]
+    pub(crate) fn root_frame(&self) -> u64 {
+        self.root
+    }
+
     /// A new, empty user half sharing the kernel half.
     pub fn new() -> Result<Self, MapError> {
         let root = alloc_zeroed_frame().ok_or(MapError::OutOfMemory)?;
