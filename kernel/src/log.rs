@@ -48,10 +48,11 @@ impl Ring {
             self.dropped += 1;
             return false;
         }
-        for &byte in line {
-            self.bytes[(self.start + self.len) % LOG_BUFFER] = byte;
-            self.len += 1;
-        }
+        let at = (self.start + self.len) % LOG_BUFFER;
+        let (head, tail) = line.split_at(line.len().min(LOG_BUFFER - at));
+        self.bytes[at..at + head.len()].copy_from_slice(head);
+        self.bytes[..tail.len()].copy_from_slice(tail);
+        self.len += line.len();
         true
     }
 
@@ -212,6 +213,19 @@ mod tests {
         }
         assert_eq!(out.borrow().len(), pushed * 600);
         assert!(out.borrow().iter().all(|&b| b == b'L'));
+        // Lines that wrap around the end of the ring come out whole and in order.
+        out.borrow_mut().clear();
+        let mut expected = Vec::new();
+        for i in 0..3000 {
+            let line = format!("line {i} {}\n", "x".repeat(i % 700));
+            if ring.push(line.as_bytes()) {
+                expected.extend_from_slice(line.as_bytes());
+            }
+            room.set(true);
+            ring.drain(ready, |b| out.borrow_mut().push(b));
+        }
+        ring.drain(|| true, |b| out.borrow_mut().push(b));
+        assert!(*out.borrow() == expected);
         // A UART that is always ready (QEMU's) takes a line at once.
         assert!(ring.push(b"hello\n"));
         ring.drain(|| true, |b| out.borrow_mut().push(b));

@@ -331,31 +331,38 @@ impl Kernel {
         set
     }
 
+    /// Stops `task` and its whole subtree at once (bounded: a look at every task and
+    /// thread slot): every task of it is dying (no call can name it but `task_kill`), every
+    /// thread suspended and out of the run queues, the I/O bitmaps freed.
+    pub fn stop_task(&mut self, task: TaskIdx) {
+        let set = self.subtree(task);
+        for slot in TaskIdx::all().filter(|&t| set & bit(t) != 0) {
+            self.tasks[slot].dying = true;
+            let freed = self.release_io_bitmap(slot);
+            self.tasks[slot].pages_charged -= freed;
+            self.rps[self.tasks[slot].rp].release(Amount::pages(freed));
+        }
+        for t in ThreadIdx::all() {
+            if !self.threads[t].is_free() && set & bit(self.threads[t].task) != 0 {
+                self.threads[t].suspended = true;
+                self.run.remove(t.position());
+            }
+        }
+    }
+
     /// Destroys `task` and its whole subtree (threads, address spaces, I/O bitmaps, send
     /// rights), doing at most about `budget` units of work (a thread-table entry looked
     /// at; [`KILL_COST`] a thread killed, [`ENTRY_COST`] a page-table entry done with):
     /// true when all is gone, false
     /// when it must be called again (`task_kill` restarts itself, so a window boundary can
-    /// come in between). The first call stops the whole subtree at once: every task of it
-    /// is dying (no call can name it but this one) and every thread suspended.
+    /// come in between). The first call stops the whole subtree ([`Self::stop_task`]).
     pub fn destroy_task(&mut self, task: TaskIdx, mut budget: u64) -> bool {
-        let set = self.subtree(task);
-        let member = |t: TaskIdx| set & bit(t) != 0;
         if !self.tasks[task].dying {
-            for slot in TaskIdx::all().filter(|&t| member(t)) {
-                self.tasks[slot].dying = true;
-                let freed = self.release_io_bitmap(slot);
-                self.tasks[slot].pages_charged -= freed;
-                self.rps[self.tasks[slot].rp].release(Amount::pages(freed));
-            }
-            for t in ThreadIdx::all() {
-                if !self.threads[t].is_free() && member(self.threads[t].task) {
-                    self.threads[t].suspended = true;
-                    self.run.remove(t.position());
-                }
-            }
+            self.stop_task(task);
             budget = budget.saturating_sub(MAX_THREADS as u64);
         }
+        let set = self.subtree(task);
+        let member = |t: TaskIdx| set & bit(t) != 0;
         budget = budget.saturating_sub(MAX_THREADS as u64);
         for t in ThreadIdx::all() {
             if !self.threads[t].is_free() && member(self.threads[t].task) {

@@ -416,3 +416,31 @@ fn attack_reach() {
     );
     victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
 }
+
+#[test]
+fn attack_restart() {
+    let o = boot("attack_restart");
+    kernel_held(&o);
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the victim ends the run",
+    );
+    let restarts = o
+        .lines
+        .iter()
+        .filter(|l| {
+            l.contains("health: ")
+                && l.contains("partition=kill-loop error=illegal_request ")
+                && l.contains("action=cold_restart")
+        })
+        .count();
+    check(
+        &o,
+        restarts >= 20
+            && o.line("kill-loop: a child with 127 threads and 760 page tables, faulting")
+                .is_some(),
+        &format!("{restarts} restarts of kill-loop with its whole tree"),
+    );
+    victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
+}

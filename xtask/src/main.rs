@@ -382,7 +382,7 @@ enum Hostile {
 }
 
 /// The attack systems with the name of their metric: `window_lateness_hostile_<name>`.
-const HOSTILE_SYSTEMS: [(Hostile, &str); 8] = [
+const HOSTILE_SYSTEMS: [(Hostile, &str); 9] = [
     (Hostile::Config("syscall_fuzz"), "fuzz"),
     (Hostile::Config("attack_floods"), "floods"),
     (Hostile::Config("attack_partitions"), "restart_loop"),
@@ -390,6 +390,7 @@ const HOSTILE_SYSTEMS: [(Hostile, &str); 8] = [
     (Hostile::Config("attack_io"), "io"),
     (Hostile::Config("attack_kill"), "kill"),
     (Hostile::Config("attack_reach"), "reach"),
+    (Hostile::Config("attack_restart"), "restart_background"),
     (Hostile::Root("paths"), "root_paths"),
 ];
 

@@ -1,17 +1,26 @@
 //! Attacks on the kernel for the hardening scenarios. Run as the root task (every ability,
-//! all memory and ports), it is the system-call fuzzer below and then ends the run with
-//! success. syssw starts it as a partition; what it does then depends on the partition's
-//! name:
+//! all memory and ports), the system-image entry `test/mode` says what it does: `paths`,
+//! the longest calls beside a victim thread ([`paths::root_paths`]); otherwise the
+//! system-call fuzzer below, then it ends the run with success. syssw starts it as a
+//! partition; what it does then depends on the partition's name:
 //!
-//! * `fuzz*`: the system-call fuzzer: [`CALLS`] calls with random call numbers and random register arguments drawn from a fixed-seed generator
-//!   (seed printed, so a failing run can be replayed), then a histogram of the returned
-//!   codes per call, `fuzz: done ...`, and sleeps for ever;
+//! * `fuzz*`: the system-call fuzzer: [`CALLS`] calls with random call numbers and random
+//!   register arguments drawn from a fixed-seed generator (seed printed, so a failing run
+//!   can be replayed), then a histogram of the returned codes per call, `fuzz: done ...`,
+//!   and sleeps for ever;
 //! * `flood-log*`: writes 512-byte kernel log lines (the longest `debug_write`) as fast as
 //!   it can, for ever;
-//! * `ports*`: at each start touches the next of the kernel's I/O ports (COM1, the
-//!   PICs, the PIT, each port of QEMU's exit device 0xf4-0xf7), which it was not granted:
-//!   every access must raise #GP (the scenario warm-restarts it, so a counter in its memory
-//!   survives), then prints `ports: all <n> accesses faulted` and sleeps;
+//! * `flood-map*`, `flood-io*`, `flood-kill*`, `kill-loop*`: the longest page-range calls,
+//!   I/O-port grants and task kills, and a restart loop of a large task tree
+//!   ([`flood_map`], [`paths`]);
+//! * `peek*`, `ipc-flood*`, `spin*`: reaching for others' memory, threads and time
+//!   ([`reach`]);
+//! * `ports*`: at each start reads, then writes, the next of the ports no partition is
+//!   granted (the kernel's: COM1, the PICs, the PIT, each port of QEMU's exit device
+//!   0xf4-0xf7; and ordinary ones it was not given: keyboard controller, COM2, PCI
+//!   configuration): every access must raise #GP (the scenario warm-restarts it, so a
+//!   counter in its memory survives), then prints `ports: all <n> accesses faulted` and
+//!   sleeps;
 //! * `fault-loop*`: executes `ud2` at once at every start (the scenario cold-restarts it:
 //!   a restart loop);
 //! * `fault-ignore*`: a fault loop the partition survives: it starts one thread after
@@ -22,7 +31,9 @@
 //! * `forge*`: sends syssw service requests for ports it does not own (every port id
 //!   0..64, read, status, receive, clear) and unknown labels, as fast as it can, and
 //!   counts the requests syssw accepted (`forge: <n> requests, <m> accepted`) every
-//!   10,000 requests;
+//!   10,000 requests; with each count an error report whose words and text name the
+//!   victim and the kernel's fault label, and after [`FORGE_REQUESTS`] a request for IDLE
+//!   whose words name the victim (syssw must idle the forger, never the victim);
 //! * `hoard*`: exhausts its resource partition's kernel-memory quota: creates child tasks,
 //!   threads and mappings of one page at ever new addresses (each in the most page tables)
 //!   until the kernel says `QuotaExceeded`, prints `hoard: tasks=<n> threads=<n> maps=<n>,
@@ -31,10 +42,10 @@
 //!   with the window's start (`partition_info`), counts the major frames it saw to find a
 //!   missed window and whether the start is the ideal one (the first start plus whole major
 //!   frames: `drift`), keeps the lateness in a constant-size histogram (a soak logs 10^6
-//!   windows), prints a summary every [`REPORT_EVERY`] windows, and after
-//!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) creates and kills a thread (its
-//!   own quota is untouched by any hoarder) and executes `ud2` (the scenario maps that illegal request to
-//!   `shutdown_success`, ending the run);
+//!   windows), creates and kills a thread (its own quota is untouched by any hoarder),
+//!   prints a summary every [`REPORT_EVERY`] windows, and after [`VICTIM_FRAMES`] windows
+//!   (`victim-<n>`: `n` windows) creates and kills a thread once more and executes `ud2`
+//!   (the scenario maps that illegal request to `shutdown_success`, ending the run);
 //! * `port-victim*`: port traffic through syssw while another partition restarts: it
 //!   creates a queuing port pair whose channel leads back into itself and, once per window,
 //!   sends a message, receives it back and asks for its partition status (three service
@@ -115,6 +126,8 @@ fn main(start: u64, image_len: u64) {
         paths::flood_io();
     } else if name.starts_with("flood-kill") {
         paths::flood_kill();
+    } else if name.starts_with("kill-loop") {
+        paths::kill_loop();
     } else if name.starts_with("ports") {
         touch_kernel_ports(ThreadId(info.server));
     } else if name.starts_with("peek") {
@@ -232,7 +245,7 @@ fn touch_kernel_ports(server: ThreadId) {
         return;
     }
     let port = FORBIDDEN_PORTS[next / 2];
-    if next % 2 == 0 {
+    if next.is_multiple_of(2) {
         println!("ports: reading port {port:#x}");
         let value = user_rt::port::inb(port);
         println!("ports: read {value:#x} from port {port:#x}: did not fault");
@@ -326,9 +339,10 @@ fn forge_report(server: ThreadId) {
     wire.words[1] = 0;
     wire.words[2] = user_rt::abi::ipc::LABEL_FAULT_REPORT as u64;
     let detail = b"partition=victim-200";
+    let page = &raw const IPC_PAGE as u64;
     #[allow(unsafe_code)]
     // SAFETY: IPC_PAGE is this thread's registered IPC buffer (set by `forge`), a page.
-    let ipc = unsafe { IpcBufferRef::new(&raw const IPC_PAGE as u64) };
+    let ipc = unsafe { IpcBufferRef::new(page) };
     ipc.write_data(0, detail);
     let message = Message {
         tag: MessageTag::new(wire.label, detail.len(), 0),

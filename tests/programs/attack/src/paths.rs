@@ -8,6 +8,8 @@
 //!   child's bitmap, every grant checks and sets one bit a port, the kill frees it);
 //! * [`flood_kill`] (partition `flood-kill*`): gives a child task as many threads and page
 //!   tables as its quota allows, then kills it with one `task_kill`;
+//! * [`kill_loop`] (partition `kill-loop*`): the same tree at every start, then a fault
+//!   (restarted cold: syssw kills the whole tree at each restart);
 //! * [`root_paths`] (the root task, system-image entry `test/mode` = `paths`): installs
 //!   the largest schedule, grants every port it holds to a child and kills a child with
 //!   hundreds of threads and page tables, the worst of each that any caller can make, while
@@ -95,6 +97,25 @@ pub fn flood_kill() -> ! {
                 pages * 3 + 1
             );
         }
+    }
+}
+
+/// `kill-loop`: fills a child task as `flood-kill` does, then faults, at every start: its
+/// health table restarts it cold, and whoever kills the old task kills the whole tree.
+pub fn kill_loop() -> ! {
+    let child = match sys::task_create(Abilities::empty(), 1, 0, "loop child") {
+        Ok(task) => task,
+        Err(e) => fail("kill-loop", "task_create", e),
+    };
+    let (threads, pages) = fill(child, POOL_BASE, u64::MAX, SPARSE_SLOTS);
+    println!(
+        "kill-loop: a child with {threads} threads and {} page tables, faulting",
+        pages * 3 + 1
+    );
+    #[allow(unsafe_code)]
+    // SAFETY: ud2 only raises #UD.
+    unsafe {
+        core::arch::asm!("ud2", options(noreturn))
     }
 }
 

@@ -64,22 +64,25 @@ pub fn peek(info: &StartInfo) -> ! {
     let next = PEEKED.fetch_add(1, Ordering::Relaxed);
     if let Some(&target) = PEEKS.get(next) {
         let own_code = peek as *const () as u64;
-        #[allow(unsafe_code)]
-        // SAFETY: deliberately invalid: each address is outside what this task may touch
-        // (or read-only), so the access faults and never happens.
-        unsafe {
-            match target {
-                Peek::Read(at) => {
-                    println!("peek: reading {at:#x}");
-                    let value = core::ptr::read_volatile(at as *const u8);
-                    println!("peek: read {value:#x} at {at:#x}: did not fault");
-                }
-                Peek::Write(at) => {
-                    let at = if at == 0 { own_code } else { at };
-                    println!("peek: writing {at:#x}");
-                    core::ptr::write_volatile(at as *mut u8, 0x5a);
-                    println!("peek: wrote at {at:#x}: did not fault");
-                }
+        match target {
+            Peek::Read(at) => {
+                println!("peek: reading {at:#x}");
+                #[allow(unsafe_code)]
+                // SAFETY: deliberately invalid: the address is outside what this task may
+                // read, so the access faults and never happens.
+                let value = unsafe { core::ptr::read_volatile(at as *const u8) };
+                println!("peek: read {value:#x} at {at:#x}: did not fault");
+            }
+            Peek::Write(at) => {
+                let at = if at == 0 { own_code } else { at };
+                println!("peek: writing {at:#x}");
+                #[allow(unsafe_code)]
+                // SAFETY: deliberately invalid: the address is outside what this task may
+                // write (or read-only), so the access faults and never happens.
+                unsafe {
+                    core::ptr::write_volatile(at as *mut u8, 0x5a)
+                };
+                println!("peek: wrote at {at:#x}: did not fault");
             }
         }
     }
