@@ -4,6 +4,7 @@ mod differential;
 mod fuzz;
 mod library;
 mod ops;
+mod refs;
 mod traps;
 mod verifier;
 
