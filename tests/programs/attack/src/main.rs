@@ -42,7 +42,8 @@
 //!   with the window's start (`partition_info`), counts the major frames it saw to find a
 //!   missed window and whether the start is the ideal one (the first start plus whole major
 //!   frames: `drift`), keeps the lateness in a constant-size histogram (a soak logs 10^6
-//!   windows), creates and kills a thread (its own quota is untouched by any hoarder),
+//!   windows), creates and kills a thread if the window is at least 100 us long (its own
+//!   quota is untouched by any hoarder),
 //!   prints a summary every [`REPORT_EVERY`] windows, and after [`VICTIM_FRAMES`] windows
 //!   (`victim-<n>`: `n` windows) creates and kills a thread once more and executes `ud2`
 //!   (the scenario maps that illegal request to `shutdown_success`, ending the run);
@@ -489,6 +490,9 @@ fn hoard() {
     );
 }
 
+/// The shortest window in which the victim creates a thread besides logging its start.
+const OBJECTS_WINDOW_NS: u64 = 100_000;
+
 /// The victim: see the crate documentation. It reports every [`REPORT_EVERY`] windows, or
 /// 100 times in all for a long run (a line takes longer than a short window). Its last line
 /// is `victim: lateness windows=<n> min=<ns> median=<ns> max=<ns> missed=<n> drift=<n>`
@@ -542,13 +546,16 @@ fn victim(tp: u64, windows: u64) {
                 sum_late / (window - 1).max(1)
             );
         }
-        // Objects of its own, whatever a neighbour hoards: a thread each window.
-        match sys::thread_create(None, 0x1000, 0x2000, 1, 0) {
-            Ok(thread) => {
-                created += 1;
-                let _ = sys::thread_kill(thread);
+        // Objects of its own, whatever a neighbour hoards: a thread each window, if the
+        // window is long enough not to let that spill into the next (the soak's is 20 us).
+        if info.window_length >= OBJECTS_WINDOW_NS {
+            match sys::thread_create(None, 0x1000, 0x2000, 1, 0) {
+                Ok(thread) => {
+                    created += 1;
+                    let _ = sys::thread_kill(thread);
+                }
+                Err(_) => refused += 1,
             }
-            Err(_) => refused += 1,
         }
         // Ready again at the end of this window: runs at the start of the next one.
         sys::sleep_until(info.next_window_start + info.window_length);
