@@ -38,8 +38,9 @@ pub struct Task {
     pub io_bitmap: [u64; 2],
     /// Bit n: the task may attach interrupt line n.
     pub irq_lines: u32,
-    /// Being destroyed by a `task_kill` that is not finished: its threads never run again
-    /// and no call but that `task_kill` names it (see [`Kernel::destroy_task`]).
+    /// Stopped (`task_stop`) or being destroyed by a `task_kill` that is not finished: its
+    /// threads never run again and no call but `task_kill` and `task_stop` can name it
+    /// (see [`Kernel::stop_task`]).
     pub dying: bool,
 }
 
@@ -351,11 +352,11 @@ impl Kernel {
     }
 
     /// Destroys `task` and its whole subtree (threads, address spaces, I/O bitmaps, send
-    /// rights), doing at most about `budget` units of work (a thread-table entry looked
-    /// at; [`KILL_COST`] a thread killed, [`ENTRY_COST`] a page-table entry done with):
-    /// true when all is gone, false
-    /// when it must be called again (`task_kill` restarts itself, so a window boundary can
-    /// come in between). The first call stops the whole subtree ([`Self::stop_task`]).
+    /// rights), doing at most about `budget` units of work (a thread slot looked at;
+    /// [`KILL_COST`] a thread killed, [`ENTRY_COST`] a page-table entry done with): true
+    /// when all is gone, false when it must be called again (`task_kill` restarts itself,
+    /// so a window boundary can come in between). The first call stops the whole subtree
+    /// ([`Self::stop_task`]).
     pub fn destroy_task(&mut self, task: TaskIdx, mut budget: u64) -> bool {
         if !self.tasks[task].dying {
             self.stop_task(task);
@@ -399,7 +400,7 @@ impl Kernel {
 }
 
 /// What killing one thread costs in [`Kernel::destroy_task`]'s units (it looks at every
-/// thread once, and each look costs more than a page-table entry's).
+/// thread slot for threads waiting on it, each look about twice a plain one).
 pub const KILL_COST: u64 = 2 * MAX_THREADS as u64;
 
 /// What a page-table entry costs in [`Kernel::destroy_task`]'s units (measured on virtual
