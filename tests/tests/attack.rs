@@ -413,6 +413,17 @@ fn attack_reach() {
             == 2,
         "the spinners did not raise themselves to their maximum priority",
     );
+    // Spinning and refused IPC are no errors: the health monitor has nothing to say.
+    check(
+        &o,
+        o.lines.iter().all(|l| {
+            !(l.contains("health: ")
+                && ["spin", "spin-bg", "ipc-flood"]
+                    .iter()
+                    .any(|p| l.contains(&format!("partition={p} "))))
+        }),
+        "a health monitor line for a spinner or the IPC flood",
+    );
     victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
 }
 
