@@ -180,8 +180,8 @@ pub struct TypeDecl {
 #[derive(Debug, Clone)]
 pub enum TypeRef {
     Named(Ident),
-    /// `STRING` or `STRING[n]` / `STRING(n)`.
-    String(Option<Box<Expr>>, Span),
+    /// `STRING` or `STRING[n]` / `STRING(n)`; WSTRING when the flag is set.
+    String(Option<Box<Expr>>, Span, bool),
     Array {
         dims: Vec<(Expr, Expr)>,
         elem: Box<TypeRef>,
@@ -225,7 +225,7 @@ impl TypeRef {
     pub fn span(&self) -> Span {
         match self {
             TypeRef::Named(i) => i.span,
-            TypeRef::String(_, s)
+            TypeRef::String(_, s, _)
             | TypeRef::Array { span: s, .. }
             | TypeRef::Subrange { span: s, .. }
             | TypeRef::Enum { span: s, .. }
@@ -366,6 +366,8 @@ pub enum ExprKind {
     Real(f64),
     Bool(bool),
     Str(String),
+    /// `"..."`: a WSTRING literal.
+    WStr(String),
     Time(i128),
     /// A date/time literal other than TIME (`LT#`, `D#`, `TOD#`, `DT#`, ...): its type and
     /// nanoseconds.

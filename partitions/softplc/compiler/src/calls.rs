@@ -401,9 +401,22 @@ impl Gen<'_> {
             self.error(target.span, "output target is not writable");
         }
         match &dst.ty {
-            Type::String(_) => {
+            Type::String(_) | Type::WString(_) => {
+                if src.ty.is_wstring() != dst.ty.is_wstring() && !src.ty.is_error() {
+                    let msg = format!(
+                        "type mismatch: the output is {}, its target {}",
+                        self.tname(&src.ty),
+                        self.tname(&dst.ty)
+                    );
+                    self.error(target.span, msg);
+                }
                 self.aggregate_operands(&src, &dst);
-                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+                let assign = if dst.ty.is_wstring() {
+                    Builtin::WStrAssign
+                } else {
+                    Builtin::StrAssign
+                };
+                self.emit(|b| b.call_builtin(assign));
             }
             t if scalar_mem(t).is_some() => {
                 let st = src.ty.clone();
@@ -462,11 +475,23 @@ impl Gen<'_> {
                     self.inout_address(a.value, &a.param.ty)
                 }
                 _ => match &a.param.ty {
-                    Type::String(_) => {
+                    Type::String(_) | Type::WString(_) => {
                         let t = self.expr(a.value, Some(&a.param.ty));
-                        if !t.is_string() && !t.is_error() {
-                            let msg =
-                                format!("type mismatch: expected STRING, found {}", self.tname(&t));
+                        let fits = if a.param.ty.is_wstring() {
+                            t.is_wstring()
+                        } else {
+                            t.is_string()
+                        };
+                        if !fits && !t.is_error() {
+                            let msg = format!(
+                                "type mismatch: expected {}, found {}",
+                                if a.param.ty.is_wstring() {
+                                    "WSTRING"
+                                } else {
+                                    "STRING"
+                                },
+                                self.tname(&t)
+                            );
                             self.error(a.value.span, msg);
                         }
                     }
@@ -499,6 +524,11 @@ impl Gen<'_> {
                     b.push_u32(addr);
                     b.swap();
                     b.call_builtin(Builtin::StrAssign);
+                }),
+                (_, Type::WString(_)) => self.emit(|b| {
+                    b.push_u32(addr);
+                    b.swap();
+                    b.call_builtin(Builtin::WStrAssign);
                 }),
                 (_, Type::Array(_) | Type::Struct(_)) => {
                     let (size, _) = self.prog.size_align(&a.param.ty);
@@ -569,13 +599,18 @@ impl Gen<'_> {
     /// overwrite them.
     pub(crate) fn push_result_copy(&mut self, rt: &Type, addr: u32) {
         match rt {
-            Type::String(n) => {
+            Type::String(_) | Type::WString(_) => {
                 // Copy so that a second call in the same expression cannot overwrite it.
-                let t = self.temp_string(*n);
+                let t = self.temp_string_like(rt);
+                let assign = if rt.is_wstring() {
+                    Builtin::WStrAssign
+                } else {
+                    Builtin::StrAssign
+                };
                 self.emit(|b| {
                     b.push_u32(t);
                     b.push_u32(addr);
-                    b.call_builtin(Builtin::StrAssign);
+                    b.call_builtin(assign);
                     b.push_u32(t);
                 });
             }

@@ -228,6 +228,51 @@ impl<'a> Gen<'a> {
         a
     }
 
+    /// A static WSTRING[len] temporary with its header initialised.
+    pub fn temp_wstring(&mut self, len: u32) -> u32 {
+        if self.dry {
+            return 0;
+        }
+        let a = self.alloc_static(4 + 2 * len, 2);
+        self.write_bytes(a, &(len as u16).to_le_bytes());
+        a
+    }
+
+    /// A temporary of a string type's kind (STRING or WSTRING) and length.
+    pub fn temp_string_like(&mut self, ty: &Type) -> u32 {
+        match ty {
+            Type::WString(n) => self.temp_wstring(*n),
+            Type::String(n) => self.temp_string(*n),
+            _ => self.temp_string(DEFAULT_STRING_LEN),
+        }
+    }
+
+    /// A WSTRING constant in static data (shared by equal literals).
+    fn wstring_literal(&mut self, s: &str) -> u32 {
+        if self.dry {
+            return 0;
+        }
+        let key = format!("\u{0}W{s}");
+        if let Some(&a) = self.str_lits.get(&key) {
+            return a;
+        }
+        let units: Vec<u16> = s.encode_utf16().take(32000).collect();
+        let len = units.len() as u32;
+        let a = self.alloc_static(4 + 2 * len.max(1), 2);
+        self.write_wide(a, len, &units);
+        self.str_lits.insert(key, a);
+        a
+    }
+
+    /// Writes a WSTRING of capacity `max` holding `units` into the INIT image.
+    fn write_wide(&mut self, addr: u32, max: u32, units: &[u16]) {
+        let len = units.len().min(max as usize);
+        self.write_bytes(addr, &(max as u16).to_le_bytes());
+        self.write_bytes(addr + 2, &(len as u16).to_le_bytes());
+        let bytes: Vec<u8> = units[..len].iter().flat_map(|u| u.to_le_bytes()).collect();
+        self.write_bytes(addr + 4, &bytes);
+    }
+
     pub fn write_bytes(&mut self, addr: u32, bytes: &[u8]) {
         self.ensure_init(addr + bytes.len() as u32);
         self.init[addr as usize..addr as usize + bytes.len()].copy_from_slice(bytes);
@@ -340,6 +385,28 @@ impl<'a> Gen<'a> {
                 let w = elem.size() as usize;
                 let bytes = cell.to_le_bytes();
                 self.write_bytes(addr, &bytes[..w]);
+            }
+            Type::WString(n) => {
+                let text = match init {
+                    Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
+                        Some(ConstVal::Str(s)) => s,
+                        _ => {
+                            self.diags
+                                .error(e.span, "WSTRING initial value must be a string literal");
+                            String::new()
+                        }
+                    },
+                    Some(other) => {
+                        self.diags.error(
+                            other.span(),
+                            "WSTRING initial value must be a string literal",
+                        );
+                        String::new()
+                    }
+                    None => String::new(),
+                };
+                let units: Vec<u16> = text.encode_utf16().collect();
+                self.write_wide(addr, *n, &units);
             }
             Type::String(n) => {
                 let text = match init {
@@ -1199,14 +1266,31 @@ impl<'a> Gen<'a> {
     /// Evaluates `value` and stores it into `p` (whose address, for `Ind`, is already on the stack).
     pub(crate) fn store_expr(&mut self, p: &Place, value: &Expr, span: Span) {
         match &p.ty {
-            Type::String(_) => {
+            Type::String(_) | Type::WString(_) => {
                 self.addr_of(p);
                 let t = self.expr(value, Some(&p.ty));
-                if !t.is_string() && !t.is_error() {
-                    let msg = format!("cannot assign {} to {}", self.tname(&t), self.tname(&p.ty));
+                let wide = p.ty.is_wstring();
+                let text = t.is_string() || t.is_wstring();
+                if (t.is_wstring() != wide || !text) && !t.is_error() {
+                    let hint = match (wide, text) {
+                        (true, true) => " (use STRING_TO_WSTRING)",
+                        (false, true) => " (use WSTRING_TO_STRING)",
+                        _ => "",
+                    };
+                    let msg = format!(
+                        "cannot assign {} to {}{hint}",
+                        self.tname(&t),
+                        self.tname(&p.ty)
+                    );
                     self.error(value.span, msg);
                 }
-                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+                self.emit(|b| {
+                    b.call_builtin(if wide {
+                        Builtin::WStrAssign
+                    } else {
+                        Builtin::StrAssign
+                    })
+                });
             }
             Type::Array(_) | Type::Struct(_) | Type::Fb(_) => {
                 self.addr_of(p);
@@ -1776,7 +1860,7 @@ impl<'a> Gen<'a> {
             return;
         }
         match (from, to) {
-            (Type::String(_), Type::String(_)) => return,
+            (Type::String(_), Type::String(_)) | (Type::WString(_), Type::WString(_)) => return,
             (Type::Subrange(a, ..), _)
                 if to.elem() == Some(*a) && !matches!(to, Type::Enum(_) | Type::Exception) =>
             {
@@ -2031,6 +2115,17 @@ impl<'a> Gen<'a> {
                 }
                 self.push_int(code as i64);
                 Type::Elem(elem)
+            }
+            ExprKind::WStr(s) => {
+                let a = self.wstring_literal(s);
+                self.emit(|b| b.push_u32(a));
+                Type::WString(s.encode_utf16().count().max(1) as u32)
+            }
+            // A STRING literal where a WSTRING is expected is that WSTRING.
+            ExprKind::Str(s) if matches!(expected, Some(Type::WString(_))) => {
+                let a = self.wstring_literal(s);
+                self.emit(|b| b.push_u32(a));
+                Type::WString(s.encode_utf16().count().max(1) as u32)
             }
             ExprKind::Str(s) => {
                 let a = self.string_literal(s);
@@ -2369,15 +2464,26 @@ impl<'a> Gen<'a> {
             g.error(span, msg);
             Type::Error
         };
-        // Strings: comparisons only.
-        if ta.is_string() || tb.is_string() {
-            if !(ta.is_string() && tb.is_string() && is_cmp) {
+        // Strings: comparisons only (STRING with STRING, WSTRING with WSTRING).
+        if ta.is_string() || tb.is_string() || ta.is_wstring() || tb.is_wstring() {
+            let wide = ta.is_wstring() || tb.is_wstring();
+            let same_kind =
+                (ta.is_string() && tb.is_string()) || (ta.is_wstring() && tb.is_wstring());
+            // A STRING literal compared with a WSTRING is a WSTRING literal.
+            let literal = |e: &Expr| matches!(e.kind, ExprKind::Str(_));
+            let adapts = wide && (literal(a) && tb.is_wstring() || literal(b) && ta.is_wstring());
+            if !((same_kind || adapts) && is_cmp) {
                 return mismatch(self);
             }
-            self.expr(a, None);
-            self.expr(b, None);
+            let w = Type::WString(DEFAULT_STRING_LEN);
+            self.expr(a, wide.then_some(&w));
+            self.expr(b, wide.then_some(&w));
             self.emit(|bb| {
-                bb.call_builtin(Builtin::StrCompare);
+                bb.call_builtin(if wide {
+                    Builtin::WStrCompare
+                } else {
+                    Builtin::StrCompare
+                });
                 bb.push_i32(0);
             });
             self.op(cmp_op(op, true));
@@ -2402,6 +2508,13 @@ impl<'a> Gen<'a> {
         }
         // Characters: comparisons within CHAR/WCHAR.
         if ea.is_char() || eb.is_char() {
+            if Self::is_flexible(a) || Self::is_flexible(b) {
+                self.error(
+                    span,
+                    "a character is no number: compare it with a character (CHAR#'a') or convert it (CHAR_TO_BYTE)",
+                );
+                return Type::Error;
+            }
             if !(is_cmp && ea.is_char() && eb.is_char()) {
                 return mismatch(self);
             }

@@ -20,6 +20,8 @@ pub enum Tok {
     /// nanoseconds (since 1970-01-01, or since midnight for a time of day).
     Temporal(Elem, i128),
     Str(String),
+    /// `"..."`: a WSTRING literal.
+    WStr(String),
     /// `TYPE#` prefix of a typed literal such as `INT#5` or `Color#Red`.
     TypePrefix(String, String),
     /// Directly represented variable `%IX0.1`, `%QW4`, ...: the text after `%`, upper-cased
@@ -162,10 +164,13 @@ impl Lexer<'_> {
                         }
                     }
                 }
-                b'\'' => self.string(),
+                b'\'' => self.string(b'\''),
+                b'"' => self.string(b'"'),
                 b'%' => {
                     self.pos += 1;
-                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' {
+                    // `%IX0.1` has dots; a partial access `x.%B1.%X2` ends at one.
+                    let partial = matches!(self.out.last().map(|t| &t.tok), Some(Tok::Dot));
+                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' && !partial {
                         self.pos += 1;
                     }
                     let text = self.text[start + 1..self.pos].to_ascii_uppercase();
@@ -206,9 +211,12 @@ impl Lexer<'_> {
         self.pos = self.src.len();
     }
 
-    fn string(&mut self) {
+    /// A STRING literal `'...'` (`$NN` is a byte) or a WSTRING literal `"..."` (`$NNNN` is a
+    /// UTF-16 code unit).
+    fn string(&mut self, quote: u8) {
         let start = self.pos;
         self.pos += 1;
+        let wide = quote == b'"';
         let mut value = String::new();
         loop {
             if self.pos >= self.src.len() || self.peek(0) == b'\n' {
@@ -216,9 +224,19 @@ impl Lexer<'_> {
                 return;
             }
             let c = self.peek(0);
-            if c == b'\'' {
+            if c == quote {
                 self.pos += 1;
                 break;
+            }
+            if c == b'$' && wide {
+                let digits = &self.src[self.pos + 1..(self.pos + 5).min(self.src.len())];
+                if digits.len() == 4 && digits.iter().all(u8::is_ascii_hexdigit) {
+                    let hex = std::str::from_utf8(digits).unwrap_or("0");
+                    let unit = u32::from_str_radix(hex, 16).unwrap_or(0);
+                    value.push(char::from_u32(unit).unwrap_or(char::REPLACEMENT_CHARACTER));
+                    self.pos += 5;
+                    continue;
+                }
             }
             if c == b'$' {
                 let at = self.pos;
@@ -232,7 +250,7 @@ impl Lexer<'_> {
                     'P' => value.push('\x0c'),
                     'R' => value.push('\r'),
                     'T' => value.push('\t'),
-                    h if h.is_ascii_hexdigit() && self.peek(0).is_ascii_hexdigit() => {
+                    h if !wide && h.is_ascii_hexdigit() && self.peek(0).is_ascii_hexdigit() => {
                         let hex = [h as u8, self.peek(0)];
                         self.pos += 1;
                         let s = std::str::from_utf8(&hex).unwrap_or("0");
@@ -252,7 +270,14 @@ impl Lexer<'_> {
             value.push(ch);
             self.pos += ch.len_utf8();
         }
-        self.push(Tok::Str(value), start);
+        self.push(
+            if wide {
+                Tok::WStr(value)
+            } else {
+                Tok::Str(value)
+            },
+            start,
+        );
     }
 
     /// Digits with `_` separators in the given radix; returns the digit text without separators.
@@ -535,6 +560,7 @@ mod tests {
         assert_eq!(toks("T#1s500ms")[0], Tok::Time(1_500_000_000));
         assert_eq!(toks("t#-1.5s")[0], Tok::Time(-1_500_000_000));
         assert_eq!(toks("'a$'b$N'")[0], Tok::Str("a'b\n".into()));
+        assert_eq!(toks("\"a$\"b$20AC'\"")[0], Tok::WStr("a\"b€'".into()));
         assert_eq!(
             toks("INT#5")[0],
             Tok::TypePrefix("INT".into(), "INT".into())

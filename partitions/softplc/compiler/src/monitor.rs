@@ -18,6 +18,8 @@ pub enum ValueKind {
     Elem(Elem),
     /// STRING with its maximum length.
     String(u32),
+    /// WSTRING with its maximum length (not in the image's variable map).
+    WString(u32),
     /// Enumeration: value names with their numbers.
     Enum(Vec<(String, i64)>),
     /// `__EXCEPTION`: a trap code.
@@ -53,6 +55,7 @@ impl ValueKind {
                 Elem::WChar => VarType::Word,
             },
             ValueKind::String(_) => VarType::String,
+            ValueKind::WString(_) => return None,
             ValueKind::Enum(_) | ValueKind::Exception => VarType::DInt,
         })
     }
@@ -135,6 +138,7 @@ fn flatten(
         }
         Type::Exception => ValueKind::Exception,
         Type::String(n) => ValueKind::String(*n),
+        Type::WString(n) => ValueKind::WString(*n),
         Type::Struct(i) => {
             for m in &prog.structs[*i].members {
                 flatten(
@@ -200,6 +204,7 @@ fn flatten(
     };
     let size = match &kind {
         ValueKind::String(n) => 4 + n,
+        ValueKind::WString(n) => 4 + 2 * n,
         k => k.elem().size(),
     };
     out.push(MonitorVar {
@@ -240,6 +245,19 @@ pub fn format_value(var: &MonitorVar, data: &[u8]) -> String {
                 .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]) as usize);
             let bytes = data.get(a + 4..a + 4 + len).unwrap_or(&[]);
             format_string(bytes)
+        }
+        ValueKind::WString(_) => {
+            let a = var.addr as usize;
+            let len = data
+                .get(a + 2..a + 4)
+                .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]) as usize);
+            let units: Vec<u16> = data
+                .get(a + 4..a + 4 + 2 * len)
+                .unwrap_or(&[])
+                .chunks_exact(2)
+                .map(|u| u16::from_le_bytes([u[0], u[1]]))
+                .collect();
+            format_wstring(&units)
         }
         ValueKind::Enum(values) => {
             let v = read_cell(&var.kind, data, var.addr) as i64;
@@ -350,6 +368,26 @@ pub fn format_string(bytes: &[u8]) -> String {
     s
 }
 
+/// `"text"` with `$` escapes (`$"`, `$$`, `$N`, ...; other control characters and unpaired
+/// surrogates as `$NNNN`).
+pub fn format_wstring(units: &[u16]) -> String {
+    let mut s = String::from("\"");
+    for c in char::decode_utf16(units.iter().copied()) {
+        match c {
+            Ok('"') => s.push_str("$\""),
+            Ok('$') => s.push_str("$$"),
+            Ok('\n') => s.push_str("$N"),
+            Ok('\r') => s.push_str("$R"),
+            Ok('\t') => s.push_str("$T"),
+            Ok(c) if !c.is_control() => s.push(c),
+            Ok(c) => s.push_str(&format!("${:04X}", c as u32)),
+            Err(e) => s.push_str(&format!("${:04X}", e.unpaired_surrogate())),
+        }
+    }
+    s.push('"');
+    s
+}
+
 /// Parses a `--set` value for `var` and writes it into data memory.
 pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), String> {
     if var.constant {
@@ -378,6 +416,27 @@ pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), 
             if len < *n as usize {
                 // The terminator the VM keeps after a shorter text.
                 data[a + 4 + len] = 0;
+            }
+            return Ok(());
+        }
+        ValueKind::WString(n) => {
+            // `"text"` (IEC escapes) or bare text.
+            let s = match text.strip_prefix('"').and_then(|t| t.strip_suffix('"')) {
+                Some(inner) => {
+                    let mut diags = Vec::new();
+                    let toks = crate::lexer::lex(0, &format!("\"{inner}\""), &mut diags);
+                    match toks.first().map(|t| &t.tok) {
+                        Some(crate::lexer::Tok::WStr(s)) if diags.is_empty() => s.clone(),
+                        _ => return Err(format!("invalid WSTRING literal `{text}`")),
+                    }
+                }
+                None => text.to_string(),
+            };
+            let units: Vec<u16> = s.encode_utf16().take(*n as usize).collect();
+            let a = var.addr as usize;
+            data[a + 2..a + 4].copy_from_slice(&(units.len() as u16).to_le_bytes());
+            for (i, u) in units.iter().enumerate() {
+                data[a + 4 + 2 * i..a + 6 + 2 * i].copy_from_slice(&u.to_le_bytes());
             }
             return Ok(());
         }

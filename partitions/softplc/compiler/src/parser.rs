@@ -210,6 +210,7 @@ fn describe(t: &Tok) -> String {
         Tok::Time(_) => "duration literal".into(),
         Tok::Temporal(e, _) => format!("{e} literal"),
         Tok::Str(_) => "string literal".into(),
+        Tok::WStr(_) => "WSTRING literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
         Tok::SharedAttribute(_) => "`{attribute 'shared'}`".into(),
@@ -1165,7 +1166,8 @@ impl Parser<'_> {
                 span: start.to(self.prev_span()),
             });
         }
-        if self.is_kw("STRING") {
+        if self.is_kw("STRING") || self.is_kw("WSTRING") {
+            let wide = self.is_kw("WSTRING");
             self.bump();
             let len = if self.eat(&Tok::LBracket) {
                 let e = self.expr()?;
@@ -1178,7 +1180,7 @@ impl Parser<'_> {
             } else {
                 None
             };
-            return Ok(TypeRef::String(len, start.to(self.prev_span())));
+            return Ok(TypeRef::String(len, start.to(self.prev_span()), wide));
         }
         let base = self.qualified_ident()?;
         if self.eat(&Tok::LParen) {
@@ -1813,7 +1815,7 @@ impl Parser<'_> {
                     Some(b'L') => 64,
                     _ => 0,
                 };
-                match text[1..].parse::<u128>() {
+                match text.get(1..).unwrap_or("").parse::<u128>() {
                     Ok(n) if width != 0 => (width, n),
                     _ => {
                         return Err(self.error_here(
@@ -1864,6 +1866,7 @@ impl Parser<'_> {
             Tok::Time(v) => ExprKind::Time(v),
             Tok::Temporal(e, v) => ExprKind::Temporal(e, v),
             Tok::Str(s) => ExprKind::Str(s),
+            Tok::WStr(s) => ExprKind::WStr(s),
             Tok::LParen => {
                 self.bump();
                 let e = self.expr()?;
@@ -1893,6 +1896,10 @@ impl Parser<'_> {
                     },
                     Tok::Str(s) => Expr {
                         kind: ExprKind::Str(s),
+                        span: vspan,
+                    },
+                    Tok::WStr(s) => Expr {
+                        kind: ExprKind::WStr(s),
                         span: vspan,
                     },
                     Tok::Ident(u, _) if u == "TRUE" => Expr {
@@ -1969,6 +1976,48 @@ mod tests {
             panic!("{value:?}")
         };
         assert!(matches!(l.kind, ExprKind::Unary(UnOp::Neg, _)));
+    }
+
+    #[test]
+    fn partial_access_forms() {
+        let (u, d) = parse_src("PROGRAM P x.3 := x.%B1.%X2; END_PROGRAM");
+        assert!(d.is_empty(), "{d:?}");
+        let StmtKind::Assign { target, value } = &u.pous[0].body[0].kind else {
+            panic!()
+        };
+        assert!(matches!(
+            target.kind,
+            ExprKind::Bits {
+                width: 1,
+                index: 3,
+                ..
+            }
+        ));
+        let ExprKind::Bits {
+            base,
+            width: 1,
+            index: 2,
+        } = &value.kind
+        else {
+            panic!("{value:?}")
+        };
+        assert!(matches!(
+            base.kind,
+            ExprKind::Bits {
+                width: 8,
+                index: 1,
+                ..
+            }
+        ));
+        for bad in [
+            "x.% := 1;",
+            "x.%Q1 := 1;",
+            "x.%B := 1;",
+            "x.%X99999999999 := 1;",
+        ] {
+            let (_, d) = parse_src(&format!("PROGRAM P {bad} END_PROGRAM"));
+            assert_eq!(d.len(), 1, "{bad}: {d:?}");
+        }
     }
 
     #[test]

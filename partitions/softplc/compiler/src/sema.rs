@@ -368,6 +368,7 @@ impl Program {
             Type::Enum(_) | Type::Exception => (4, 4),
             // Header, text and the terminator byte CODESYS code writes through pointers.
             Type::String(n) => (5 + n, 2),
+            Type::WString(n) => (4 + 2 * n, 2),
             Type::Ref(_) | Type::Reference(_) | Type::Interface(_) => (8, 8),
             Type::Null => (0, 1),
             Type::Array(a) => {
@@ -393,6 +394,7 @@ impl Program {
         match ty {
             Type::Elem(e) => e.name().to_string(),
             Type::String(n) => format!("STRING[{n}]"),
+            Type::WString(n) => format!("WSTRING[{n}]"),
             Type::Array(a) => {
                 let dims: Vec<String> = a.dims.iter().map(|(l, h)| format!("{l}..{h}")).collect();
                 format!("ARRAY[{}] OF {}", dims.join(","), self.type_name(&a.elem))
@@ -509,7 +511,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         ExprKind::Bool(b) => Bool(*b),
         ExprKind::Time(t) => Time(*t),
         ExprKind::Temporal(e, t) => Temporal(*e, *t),
-        ExprKind::Str(s) => Str(s.clone()),
+        ExprKind::Str(s) | ExprKind::WStr(s) => Str(s.clone()),
         ExprKind::Typed(ty, inner) => {
             if let Some(elem) = Elem::from_name(&ty.name) {
                 let v = const_eval(prog, scope, inner)?;
@@ -847,11 +849,7 @@ impl Sema<'_> {
                 match id.name.as_str() {
                     "STRING" => return Type::String(DEFAULT_STRING_LEN),
                     "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" => {
-                        self.diags
-                            .error(id.span, format!("type `{}` is not supported", id.text));
-                        return Type::Error;
-                    }
+                    "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
                     _ => {}
                 }
                 if let Some(t) = self.resolve_named_type(&id.name, id.span) {
@@ -903,9 +901,16 @@ impl Sema<'_> {
                     .error(id.span, format!("unknown type `{}`", id.text));
                 Type::Error
             }
-            TypeRef::String(len, _) => match len {
+            TypeRef::String(len, _, wide) => match len {
+                None if *wide => Type::WString(DEFAULT_STRING_LEN),
                 None => Type::String(DEFAULT_STRING_LEN),
                 Some(e) => match self.const_int(e, locals, "string length") {
+                    Some(n) if *wide && (1..=32000).contains(&n) => Type::WString(n as u32),
+                    Some(_) if *wide => {
+                        self.diags
+                            .error(e.span, "WSTRING length must be between 1 and 32000");
+                        Type::Error
+                    }
                     Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
                     Some(_) => {
                         self.diags

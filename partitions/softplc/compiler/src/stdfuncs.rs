@@ -139,6 +139,7 @@ impl Gen<'_> {
         }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
+            self.surface(&a.value);
         }
         if let Some(target) = name.strip_prefix("TO_") {
             return self.generic_conversion(target, id, args, span);
@@ -277,7 +278,7 @@ impl Gen<'_> {
         }
         if !ok {
             for a in args {
-                self.infer(&a.value);
+                self.surface(&a.value);
             }
             return None;
         }
@@ -302,16 +303,22 @@ impl Gen<'_> {
                 span,
                 format!("{} takes 1 argument, {} given", id.text, inputs.len()),
             );
+            for e in inputs {
+                self.surface(e);
+            }
             return Some(Type::Error);
         };
         let source = match self.infer(arg) {
-            Type::Error => return Some(Type::Error),
+            Type::Error => {
+                self.surface(arg);
+                return Some(Type::Error);
+            }
             Type::String(_) => "STRING".to_string(),
             Type::Subrange(e, ..) => e.name().to_string(),
             t @ Type::Elem(_) if !Self::is_flexible(arg) => self.tname(&t),
             _ if Self::is_flexible(arg) && Self::has_real_literal(arg) => "LREAL".into(),
             _ if Self::is_flexible(arg) => "LINT".into(),
-            t => return Some(self.bad_arg(arg, &t, "an elementary value")),
+            t => return Some(self.bad_inferred_arg(arg, &t, "an elementary value")),
         };
         if source == target {
             let t = self.expr(arg, None);
@@ -334,6 +341,7 @@ impl Gen<'_> {
         }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
+            self.surface(&a.value);
         }
         let Some(exprs) = self.std_arguments(&id.name, id, args) else {
             return Type::Error;
@@ -348,6 +356,16 @@ impl Gen<'_> {
         match f {
             TimeFunction::Operator(op, ta, tb) => {
                 if !self.arity(&c, 2) {
+                    return Type::Error;
+                }
+                let erroneous: Vec<&Expr> = c
+                    .exprs
+                    .iter()
+                    .copied()
+                    .filter(|e| self.infer(e).is_error())
+                    .collect();
+                if !erroneous.is_empty() {
+                    erroneous.iter().for_each(|e| self.surface(e));
                     return Type::Error;
                 }
                 for (e, want) in [(c.exprs[0], ta), (c.exprs[1], tb)] {
@@ -423,7 +441,7 @@ impl Gen<'_> {
                     .elem()
                     .is_some_and(|e| e.temporal_family() == Some(Elem::Date))
                 {
-                    return self.bad_arg(c.exprs[0], &t, "a DATE");
+                    return self.bad_inferred_arg(c.exprs[0], &t, "a DATE");
                 }
                 self.expr(c.exprs[0], None);
                 self.emit(|b| b.call_builtin(Builtin::DayOfWeek));
@@ -538,14 +556,25 @@ impl Gen<'_> {
                 }
             }
         }
-        let Some(input) = input else {
-            self.error(span, format!("{} needs its input IN", id.text));
+        let input_type_ok = input
+            .map(|e| (e, self.infer(e)))
+            .filter(|(_, t)| t.elem().is_some_and(|e| e.temporal_family() == family));
+        let Some((input, _)) = input_type_ok else {
+            match input {
+                None => self.error(span, format!("{} needs its input IN", id.text)),
+                Some(e) => {
+                    let t = self.infer(e);
+                    self.bad_inferred_arg(e, &t, &format!("a {input_type}"));
+                }
+            }
+            // The outputs still say what is wrong with them.
+            for target in targets.into_iter().flatten() {
+                if let Some(p) = self.place(target) {
+                    self.drop_place(&p);
+                }
+            }
             return Type::Error;
         };
-        let t = self.infer(input);
-        if !t.elem().is_some_and(|e| e.temporal_family() == family) {
-            return self.bad_arg(input, &t, &format!("a {input_type}"));
-        }
         let value = self.temp_cell();
         self.expr(input, None);
         self.emit(|b| b.st_abs(MemType::I64, value));
@@ -635,7 +664,7 @@ impl Gen<'_> {
             ),
         );
         for e in &c.exprs {
-            self.infer(e);
+            self.surface(e);
         }
         false
     }
@@ -688,7 +717,7 @@ impl Gen<'_> {
                 };
                 let t1 = self.infer(c.exprs[1]);
                 if !t1.elem().is_some_and(|e| e.is_numeric()) || matches!(t1, Type::Enum(_)) {
-                    return Some(self.bad_arg(c.exprs[1], &t1, "a number"));
+                    return Some(self.bad_inferred_arg(c.exprs[1], &t1, "a number"));
                 }
                 self.value_to_any(c.exprs[1], &t1, &Type::Elem(rt));
                 let single = rt == Elem::Real;
@@ -748,7 +777,7 @@ impl Gen<'_> {
                         if !(t.elem().is_some_and(|e| implicit_ok(e, f))
                             || Self::is_flexible(c.exprs[0]))
                         {
-                            return Some(self.bad_arg(c.exprs[0], &t, &format!("a {f}")));
+                            return Some(self.bad_inferred_arg(c.exprs[0], &t, &format!("a {f}")));
                         }
                         self.value_to(c.exprs[0], &Type::Elem(f));
                         f
@@ -813,6 +842,7 @@ impl Gen<'_> {
             "MAX" | "MIN" => {
                 if c.exprs.len() < 2 {
                     self.error(c.span, format!("{} needs at least 2 arguments", c.id.text));
+                    c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
                 let t = self.common_of(&c.exprs, c.ctx.as_ref());
@@ -859,6 +889,7 @@ impl Gen<'_> {
             "MUX" => {
                 if c.exprs.len() < 2 {
                     self.error(c.span, "MUX needs a selector and at least one input");
+                    c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
                 let kt = self.expr(c.exprs[0], Some(&Type::DINT));
@@ -933,15 +964,46 @@ impl Gen<'_> {
         Some(t)
     }
 
-    /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT.
+    /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT, on
+    /// STRINGs or on WSTRINGs (the first string argument decides; STRING literals adapt).
     fn std_string(&mut self, c: &StdArgs) -> Option<Type> {
+        let wide = c
+            .exprs
+            .iter()
+            .find(|e| !matches!(e.kind, ExprKind::Str(_)))
+            .is_some_and(|e| self.infer(e).is_wstring());
+        let kind = |len: u32| {
+            if wide {
+                Type::WString(len)
+            } else {
+                Type::String(len)
+            }
+        };
+        // The builtin of the string kind.
+        let pick = |narrow: Builtin| -> Builtin {
+            if !wide {
+                return narrow;
+            }
+            match narrow {
+                Builtin::StrLen => Builtin::WStrLen,
+                Builtin::StrAssign => Builtin::WStrAssign,
+                Builtin::StrConcat => Builtin::WStrConcat,
+                Builtin::StrLeft => Builtin::WStrLeft,
+                Builtin::StrRight => Builtin::WStrRight,
+                Builtin::StrMid => Builtin::WStrMid,
+                Builtin::StrInsert => Builtin::WStrInsert,
+                Builtin::StrDelete => Builtin::WStrDelete,
+                Builtin::StrReplace => Builtin::WStrReplace,
+                _ => Builtin::WStrFind,
+            }
+        };
         let t = match c.name {
             "LEN" => {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                self.string_arg(c.exprs[0]);
-                self.emit(|b| b.call_builtin(Builtin::StrLen));
+                self.string_arg_of(c.exprs[0], wide);
+                self.emit(|b| b.call_builtin(pick(Builtin::StrLen)));
                 Type::INT
             }
             "LEFT" | "RIGHT" => {
@@ -949,82 +1011,74 @@ impl Gen<'_> {
                     return Some(Type::Error);
                 }
                 let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
+                self.string_arg_of(c.exprs[0], wide);
                 self.int_arg(c.exprs[1]);
-                self.emit(|b| {
-                    b.call_builtin(if c.name == "LEFT" {
-                        Builtin::StrLeft
-                    } else {
-                        Builtin::StrRight
-                    })
+                let builtin = pick(if c.name == "LEFT" {
+                    Builtin::StrLeft
+                } else {
+                    Builtin::StrRight
                 });
-                self.emit(|b| b.push_u32(dst));
-                Type::String(len)
+                self.emit(|b| {
+                    b.call_builtin(builtin);
+                    b.push_u32(dst);
+                });
+                kind(len)
             }
             "MID" | "DELETE" => {
                 if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
                 let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
+                self.string_arg_of(c.exprs[0], wide);
                 self.int_arg(c.exprs[1]);
                 self.int_arg(c.exprs[2]);
-                self.emit(|b| {
-                    b.call_builtin(if c.name == "MID" {
-                        Builtin::StrMid
-                    } else {
-                        Builtin::StrDelete
-                    })
+                let builtin = pick(if c.name == "MID" {
+                    Builtin::StrMid
+                } else {
+                    Builtin::StrDelete
                 });
-                self.emit(|b| b.push_u32(dst));
-                Type::String(len)
+                self.emit(|b| {
+                    b.call_builtin(builtin);
+                    b.push_u32(dst);
+                });
+                kind(len)
             }
-            "INSERT" => {
-                if !self.arity(c, 3) {
+            "INSERT" | "REPLACE" => {
+                let n = if c.name == "INSERT" { 3 } else { 4 };
+                if !self.arity(c, n) {
                     return Some(Type::Error);
                 }
                 let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
                     .min(MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
-                self.string_arg(c.exprs[1]);
-                self.int_arg(c.exprs[2]);
-                self.emit(|b| {
-                    b.call_builtin(Builtin::StrInsert);
-                    b.push_u32(dst);
-                });
-                Type::String(len)
-            }
-            "REPLACE" => {
-                if !self.arity(c, 4) {
-                    return Some(Type::Error);
+                self.string_arg_of(c.exprs[0], wide);
+                self.string_arg_of(c.exprs[1], wide);
+                for e in &c.exprs[2..] {
+                    self.int_arg(e);
                 }
-                let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
-                    .min(MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
-                self.string_arg(c.exprs[1]);
-                self.int_arg(c.exprs[2]);
-                self.int_arg(c.exprs[3]);
+                let builtin = pick(if c.name == "INSERT" {
+                    Builtin::StrInsert
+                } else {
+                    Builtin::StrReplace
+                });
                 self.emit(|b| {
-                    b.call_builtin(Builtin::StrReplace);
+                    b.call_builtin(builtin);
                     b.push_u32(dst);
                 });
-                Type::String(len)
+                kind(len)
             }
             "FIND" => {
                 if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                self.string_arg(c.exprs[0]);
-                self.string_arg(c.exprs[1]);
-                self.emit(|b| b.call_builtin(Builtin::StrFind));
+                self.string_arg_of(c.exprs[0], wide);
+                self.string_arg_of(c.exprs[1], wide);
+                self.emit(|b| b.call_builtin(pick(Builtin::StrFind)));
                 Type::INT
             }
             "CONCAT" => {
@@ -1038,21 +1092,21 @@ impl Gen<'_> {
                     .map(|e| self.string_len_of(e))
                     .sum::<u32>()
                     .clamp(1, MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 // dst := first; then dst := CONCAT(dst, next) for the rest.
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
-                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+                self.string_arg_of(c.exprs[0], wide);
+                self.emit(|b| b.call_builtin(pick(Builtin::StrAssign)));
                 for x in &c.exprs[1..] {
                     self.emit(|b| {
                         b.push_u32(dst);
                         b.push_u32(dst);
                     });
-                    self.string_arg(x);
-                    self.emit(|b| b.call_builtin(Builtin::StrConcat));
+                    self.string_arg_of(x, wide);
+                    self.emit(|b| b.call_builtin(pick(Builtin::StrConcat)));
                 }
                 self.emit(|b| b.push_u32(dst));
-                Type::String(len)
+                kind(len)
             }
 
             _ => unreachable!("std_string called for {}", c.name),
@@ -1066,6 +1120,23 @@ impl Gen<'_> {
             self.error(e.span, msg);
         }
         Type::Error
+    }
+
+    /// [`Self::bad_arg`] for an argument so far only inferred: an erroneous one is compiled
+    /// for its own diagnostics.
+    fn bad_inferred_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
+        if t.is_error() {
+            self.surface(e);
+        }
+        self.bad_arg(e, t, what)
+    }
+
+    /// Compiles an expression whose inference failed, for the diagnostics saying why (the
+    /// code does not matter: the compilation fails).
+    fn surface(&mut self, e: &Expr) {
+        if !self.dry {
+            self.expr(e, None);
+        }
     }
 
     /// Compiles a numeric argument of a REAL function: REAL stays REAL, an integer of up to
@@ -1088,10 +1159,7 @@ impl Gen<'_> {
                 Some(target)
             }
             _ => {
-                if !t.is_error() {
-                    let msg = format!("expected a number, found {}", self.tname(&t));
-                    self.error(e.span, msg);
-                }
+                self.bad_inferred_arg(e, &t, "a number");
                 None
             }
         }
@@ -1106,6 +1174,7 @@ impl Gen<'_> {
             }
             let t = self.infer(e);
             if t.is_error() {
+                self.surface(e);
                 return Type::Error;
             }
             acc = Some(match acc {
@@ -1128,7 +1197,7 @@ impl Gen<'_> {
                             }
                         }
                     }
-                    _ if a.is_string() && t.is_string() => a,
+                    _ if a.is_string() && t.is_string() || a.is_wstring() && t.is_wstring() => a,
                     _ => {
                         let msg = format!(
                             "arguments of incompatible types {} and {}",
@@ -1196,9 +1265,24 @@ impl Gen<'_> {
     }
 
     fn string_arg(&mut self, e: &Expr) {
-        let t = self.expr(e, None);
-        if !t.is_string() && !t.is_error() {
-            let msg = format!("expected a STRING, found {}", self.tname(&t));
+        self.string_arg_of(e, false);
+    }
+
+    /// A STRING (or, `wide`, a WSTRING; a STRING literal then is one) argument.
+    fn string_arg_of(&mut self, e: &Expr, wide: bool) {
+        let want = if wide {
+            Type::WString(DEFAULT_STRING_LEN)
+        } else {
+            Type::String(DEFAULT_STRING_LEN)
+        };
+        let t = self.expr(e, Some(&want));
+        let fits = if wide { t.is_wstring() } else { t.is_string() };
+        if !fits && !t.is_error() {
+            let msg = format!(
+                "expected a {}, found {}",
+                if wide { "WSTRING" } else { "STRING" },
+                self.tname(&t)
+            );
             self.error(e.span, msg);
         }
     }
@@ -1220,7 +1304,7 @@ impl Gen<'_> {
 
     fn string_len_of(&mut self, e: &Expr) -> u32 {
         match self.infer(e) {
-            Type::String(n) => n,
+            Type::String(n) | Type::WString(n) => n,
             _ => DEFAULT_STRING_LEN,
         }
     }
@@ -1232,10 +1316,10 @@ impl Gen<'_> {
     fn conversion(&mut self, name: &str, id: &Ident, exprs: &[&Expr], span: Span) -> Option<Type> {
         let (from, to) = name.split_once("_TO_")?;
         let parse = |s: &str| -> Option<Type> {
-            if s == "STRING" {
-                Some(Type::String(DEFAULT_STRING_LEN))
-            } else {
-                Elem::from_name(s).map(Type::Elem)
+            match s {
+                "STRING" => Some(Type::String(DEFAULT_STRING_LEN)),
+                "WSTRING" => Some(Type::WString(DEFAULT_STRING_LEN)),
+                _ => Elem::from_name(s).map(Type::Elem),
             }
         };
         let (Some(ft), Some(tt)) = (parse(from), parse(to)) else {
@@ -1246,6 +1330,9 @@ impl Gen<'_> {
                 span,
                 format!("{} takes 1 argument, {} given", id.text, exprs.len()),
             );
+            for e in exprs {
+                self.surface(e);
+            }
             return Some(Type::Error);
         }
         let arg = exprs[0];
@@ -1254,37 +1341,138 @@ impl Gen<'_> {
                 self.string_arg(arg);
                 Some(Type::String(DEFAULT_STRING_LEN))
             }
-            (Type::String(_), Type::Elem(t)) => {
+            (Type::WString(_), Type::WString(_)) => {
+                self.string_arg_of(arg, true);
+                Some(Type::WString(DEFAULT_STRING_LEN))
+            }
+            (Type::String(_), Type::WString(_)) => {
+                let len = self.string_len_of(arg);
+                let dst = self.temp_wstring(len);
+                self.emit(|b| b.push_u32(dst));
                 self.string_arg(arg);
-                if t.is_real() {
-                    self.emit(|b| b.call_builtin(Builtin::StrToF64));
-                    self.convert(Elem::LReal, *t);
-                } else if let Some(kind) = t.time_kind() {
-                    self.emit(|b| {
-                        b.push_int(kind.code() as i64);
-                        b.call_builtin(Builtin::StrToDateTime);
-                    });
-                } else if t.is_char() {
-                    // The first character, or 0 for an empty string.
-                    self.emit(|b| {
-                        b.dup();
-                        b.ld_ind(MemType::U16, 2);
-                        b.push_i32(0);
-                        b.op(Opcode::Ne);
-                        b.swap();
-                        b.ld_ind(MemType::U8, 4);
-                        b.op(Opcode::Mul);
-                    });
-                } else {
-                    self.emit(|b| b.call_builtin(Builtin::StrToI64));
-                    if *t == Elem::Bool {
-                        self.convert(Elem::LInt, Elem::Bool);
-                    } else {
-                        self.wrap(*t);
-                    }
-                }
+                self.emit(|b| {
+                    b.call_builtin(Builtin::WStrFromStr);
+                    b.push_u32(dst);
+                });
+                Some(Type::WString(len))
+            }
+            (Type::WString(_), Type::String(_)) => {
+                // Up to three UTF-8 bytes a unit.
+                let len = (self.string_len_of(arg) * 3).min(MAX_TEMP_STRING);
+                let dst = self.temp_string(len);
+                self.emit(|b| b.push_u32(dst));
+                self.string_arg_of(arg, true);
+                self.emit(|b| {
+                    b.call_builtin(Builtin::StrFromWStr);
+                    b.push_u32(dst);
+                });
+                Some(Type::String(len))
+            }
+            (Type::WString(_), Type::Elem(Elem::WChar)) => {
+                // The first unit, or 0 for an empty string.
+                self.string_arg_of(arg, true);
+                self.emit(|b| {
+                    b.dup();
+                    b.ld_ind(MemType::U16, 2);
+                    b.push_i32(0);
+                    b.op(Opcode::Ne);
+                    b.swap();
+                    b.ld_ind(MemType::U16, 4);
+                    b.op(Opcode::Mul);
+                });
                 Some(tt)
             }
+            (Type::Elem(Elem::WChar), Type::WString(_)) => {
+                let dst = self.temp_wstring(1);
+                self.value_to(arg, &ft);
+                self.emit(|b| {
+                    b.st_abs(MemType::U16, dst + 4);
+                    b.push_i32(1);
+                    b.st_abs(MemType::U16, dst + 2);
+                    b.push_u32(dst);
+                });
+                Some(Type::WString(1))
+            }
+            // Other WSTRING conversions go through STRING.
+            (Type::WString(_), Type::Elem(_)) => {
+                let len = (self.string_len_of(arg) * 3).min(MAX_TEMP_STRING);
+                let text = self.temp_string(len);
+                self.emit(|b| b.push_u32(text));
+                self.string_arg_of(arg, true);
+                self.emit(|b| {
+                    b.call_builtin(Builtin::StrFromWStr);
+                    b.push_u32(text);
+                });
+                self.convert_string_on_stack(match tt {
+                    Type::Elem(t) => t,
+                    _ => Elem::DInt,
+                });
+                Some(tt)
+            }
+            (Type::Elem(_), Type::WString(_)) => {
+                let text = self.conversion(&format!("{from}_TO_STRING"), id, exprs, span)?;
+                let dst = self.temp_wstring(40);
+                self.emit(|b| {
+                    b.push_u32(dst);
+                    b.swap();
+                    b.call_builtin(Builtin::WStrFromStr);
+                    b.push_u32(dst);
+                });
+                Some(if text.is_error() {
+                    text
+                } else {
+                    Type::WString(40)
+                })
+            }
+            (Type::String(_), Type::Elem(t)) => {
+                self.string_arg(arg);
+                self.convert_string_on_stack(*t);
+                Some(tt)
+            }
+            _ => self.conversion_elem((ft, tt), id, exprs),
+        }
+    }
+
+    /// Converts the STRING whose address is on the stack to `t` (STRING_TO_*).
+    fn convert_string_on_stack(&mut self, t: Elem) {
+        if t.is_real() {
+            self.emit(|b| b.call_builtin(Builtin::StrToF64));
+            self.convert(Elem::LReal, t);
+        } else if let Some(kind) = t.time_kind() {
+            self.emit(|b| {
+                b.push_int(kind.code() as i64);
+                b.call_builtin(Builtin::StrToDateTime);
+            });
+        } else if t.is_char() {
+            // The first character, or 0 for an empty string.
+            self.emit(|b| {
+                b.dup();
+                b.ld_ind(MemType::U16, 2);
+                b.push_i32(0);
+                b.op(Opcode::Ne);
+                b.swap();
+                b.ld_ind(MemType::U8, 4);
+                b.op(Opcode::Mul);
+            });
+        } else {
+            self.emit(|b| b.call_builtin(Builtin::StrToI64));
+            if t == Elem::Bool {
+                self.convert(Elem::LInt, Elem::Bool);
+            } else {
+                self.wrap(t);
+            }
+        }
+    }
+
+    /// The rest of [`Self::conversion`]: elementary types to STRING and among themselves.
+    fn conversion_elem(
+        &mut self,
+        (ft, tt): (Type, Type),
+        id: &Ident,
+        exprs: &[&Expr],
+    ) -> Option<Type> {
+        let arg = exprs[0];
+        match (&ft, &tt) {
             (Type::Elem(f), Type::String(_)) => {
                 let f = *f;
                 if f.is_char() {
@@ -1338,6 +1526,7 @@ impl Gen<'_> {
                 }
                 let at = self.infer(arg);
                 if at.is_error() {
+                    self.surface(arg);
                     return Some(Type::Error);
                 }
                 let plain = !matches!(at, Type::Enum(_) | Type::Exception);

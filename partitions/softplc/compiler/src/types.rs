@@ -249,6 +249,8 @@ pub enum Type {
     Elem(Elem),
     /// STRING with its maximum length in characters.
     String(u32),
+    /// WSTRING with its maximum length in UTF-16 code units.
+    WString(u32),
     Array(Rc<ArrayType>),
     Struct(usize),
     Enum(usize),
@@ -303,6 +305,10 @@ impl Type {
 
     pub fn is_string(&self) -> bool {
         matches!(self, Type::String(_))
+    }
+
+    pub fn is_wstring(&self) -> bool {
+        matches!(self, Type::WString(_))
     }
 
     /// References, interface values and `NULL`: 64-bit cells that are not numbers.

@@ -535,6 +535,10 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
                 .map(|v| Some(v as u64))
                 .ok_or(Trap::NumericError)
         }
+        WStrLen | WStrAssign | WStrConcat | WStrLeft | WStrRight | WStrMid | WStrInsert
+        | WStrDelete | WStrReplace | WStrFind | WStrCompare | WStrFromStr | StrFromWStr => {
+            wide(builtin, args, data)
+        }
         StrToF64 => {
             let s = string_at(data, arg(0))?;
             let text = core::str::from_utf8(s.text(data)).map_err(|_| Trap::NumericError)?;
@@ -617,4 +621,175 @@ pub fn call(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u6
             Ok(None)
         }
     }
+}
+
+/// A validated WSTRING operand: byte range of its code units and its capacity in units.
+#[derive(Clone, Copy)]
+struct WStrRef {
+    addr: usize,
+    max: usize,
+    len: usize,
+}
+
+fn wstring_at(data: &[u8], address: u64) -> Result<WStrRef, Trap> {
+    let addr = usize::try_from(address).map_err(|_| Trap::InvalidAddress)?;
+    if addr.checked_add(4).is_none_or(|end| end > data.len()) {
+        return Err(Trap::InvalidAddress);
+    }
+    let max = read_u16(data, addr) as usize;
+    if addr + 4 + 2 * max > data.len() {
+        return Err(Trap::InvalidAddress);
+    }
+    let len = (read_u16(data, addr + 2) as usize).min(max);
+    Ok(WStrRef { addr, max, len })
+}
+
+impl WStrRef {
+    /// Its text: `2 * len` bytes, units little-endian.
+    fn bytes<'d>(&self, data: &'d [u8]) -> &'d [u8] {
+        &data[self.addr + 4..self.addr + 4 + 2 * self.len]
+    }
+}
+
+fn units(bytes: &[u8]) -> impl Iterator<Item = u16> + '_ {
+    bytes
+        .chunks_exact(2)
+        .map(|u| u16::from_le_bytes([u[0], u[1]]))
+}
+
+/// A WSTRING result being assembled: up to [`MAX_STRING_LEN`] units (little-endian bytes).
+struct WBuf {
+    bytes: [u8; 2 * MAX_STRING_LEN],
+    len: usize,
+}
+
+impl WBuf {
+    fn push(&mut self, text: &[u8]) {
+        let n = text.len().min(self.bytes.len() - self.len) & !1;
+        self.bytes[self.len..self.len + n].copy_from_slice(&text[..n]);
+        self.len += n;
+    }
+    fn push_unit(&mut self, unit: u16) {
+        self.push(&unit.to_le_bytes());
+    }
+}
+
+/// The WSTRING builtins (ids 140-152).
+fn wide(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u64>, Trap> {
+    use Builtin::*;
+    let arg = |i: usize| args.get(i).copied().unwrap_or(0);
+    match builtin {
+        WStrLen => return Ok(Some(wstring_at(data, arg(0))?.len as u64)),
+        WStrFind => {
+            let (a, b) = (wstring_at(data, arg(0))?, wstring_at(data, arg(1))?);
+            let (hay, needle) = (a.bytes(data), b.bytes(data));
+            let position = if needle.is_empty() || needle.len() > hay.len() {
+                0
+            } else {
+                (0..=hay.len() - needle.len())
+                    .step_by(2)
+                    .position(|at| &hay[at..at + needle.len()] == needle)
+                    .map_or(0, |p| p + 1)
+            };
+            return Ok(Some(position as u64));
+        }
+        WStrCompare => {
+            let (a, b) = (wstring_at(data, arg(0))?, wstring_at(data, arg(1))?);
+            return Ok(Some(match units(a.bytes(data)).cmp(units(b.bytes(data))) {
+                core::cmp::Ordering::Less => -1i64 as u64,
+                core::cmp::Ordering::Equal => 0,
+                core::cmp::Ordering::Greater => 1,
+            }));
+        }
+        StrFromWStr => {
+            let dst = string_at(data, arg(0))?;
+            let src = wstring_at(data, arg(1))?;
+            let room = dst.max.min(MAX_STRING_LEN);
+            let mut buf = Buf::new();
+            for c in char::decode_utf16(units(src.bytes(data))) {
+                let mut utf8 = [0u8; 4];
+                let encoded = c
+                    .unwrap_or(char::REPLACEMENT_CHARACTER)
+                    .encode_utf8(&mut utf8);
+                if buf.len + encoded.len() > room {
+                    break;
+                }
+                buf.push(encoded.as_bytes());
+            }
+            write_string(data, dst, buf.as_bytes());
+            return Ok(None);
+        }
+        _ => {}
+    }
+    // Builtins writing a WSTRING result to the WSTRING at arg(0).
+    let dst = wstring_at(data, arg(0))?;
+    let mut buf = WBuf {
+        bytes: [0; 2 * MAX_STRING_LEN],
+        len: 0,
+    };
+    // Unit counts and positions, clamped as for STRING; `a` is in bytes (2 per unit).
+    let count = |cell: u64, max_units: usize| 2 * clamp_count(cell, max_units);
+    match builtin {
+        WStrAssign => buf.push(wstring_at(data, arg(1))?.bytes(data)),
+        WStrConcat => {
+            let (a, b) = (wstring_at(data, arg(1))?, wstring_at(data, arg(2))?);
+            buf.push(a.bytes(data));
+            buf.push(b.bytes(data));
+        }
+        WStrLeft | WStrRight => {
+            let a = wstring_at(data, arg(1))?.bytes(data);
+            let n = count(arg(2), a.len() / 2);
+            buf.push(if builtin == WStrLeft {
+                &a[..n]
+            } else {
+                &a[a.len() - n..]
+            });
+        }
+        WStrMid => {
+            let a = wstring_at(data, arg(1))?.bytes(data);
+            let start = (clamp_count(arg(3), a.len() / 2 + 1).max(1) - 1) * 2;
+            let n = count(arg(2), (a.len() - start) / 2);
+            buf.push(&a[start..start + n]);
+        }
+        WStrInsert => {
+            let (a, b) = (wstring_at(data, arg(1))?, wstring_at(data, arg(2))?);
+            let (a, b) = (a.bytes(data), b.bytes(data));
+            let p = count(arg(3), a.len() / 2);
+            buf.push(&a[..p]);
+            buf.push(b);
+            buf.push(&a[p..]);
+        }
+        WStrDelete | WStrReplace => {
+            let a = wstring_at(data, arg(1))?.bytes(data);
+            let (replacement, n_arg, p_arg) = if builtin == WStrReplace {
+                (wstring_at(data, arg(2))?.bytes(data), arg(3), arg(4))
+            } else {
+                (&[][..], arg(2), arg(3))
+            };
+            let start = (clamp_count(p_arg, a.len() / 2 + 1).max(1) - 1) * 2;
+            let n = count(n_arg, (a.len() - start) / 2);
+            buf.push(&a[..start]);
+            buf.push(replacement);
+            buf.push(&a[start + n..]);
+        }
+        WStrFromStr => {
+            let s = string_at(data, arg(1))?;
+            for chunk in s.text(data).utf8_chunks() {
+                for c in chunk.valid().chars() {
+                    let mut pair = [0u16; 2];
+                    for unit in c.encode_utf16(&mut pair) {
+                        buf.push_unit(*unit);
+                    }
+                }
+                for &byte in chunk.invalid() {
+                    buf.push_unit(byte as u16);
+                }
+            }
+        }
+        _ => unreachable!("all WSTRING builtins handled"),
+    }
+    let n = (buf.len / 2).min(dst.max);
+    data[dst.addr + 2..dst.addr + 4].copy_from_slice(&(n as u16).to_le_bytes());
+    data[dst.addr + 4..dst.addr + 4 + 2 * n].copy_from_slice(&buf.bytes[..2 * n]);
+    Ok(None)
 }

@@ -781,6 +781,41 @@ builtins! {
     /// hour is 0..=23, minute and second 0..=59, millisecond 0..=999.
     TodFromParts = 137, "CONCAT_TOD", 4, 1;
 
+    // WSTRING: the STRING builtins for strings of UTF-16 code units, laid out as
+    // `max_len: u16 LE, cur_len: u16 LE, units[max_len]: u16 LE` (a `WSTRING[n]` occupies
+    // `4 + 2n` bytes). Lengths and positions count code units; the same clamping rules as
+    // for STRING; results are at most [`crate::builtins::MAX_STRING_LEN`] units.
+
+    /// `[s] -> [len]`.
+    WStrLen = 140, "LEN_WSTRING", 1, 1;
+    /// `[dst src] -> []`.
+    WStrAssign = 141, "WSTRING_ASSIGN", 2, 0;
+    /// `[dst a b] -> []`.
+    WStrConcat = 142, "CONCAT_WSTRING", 3, 0;
+    /// `[dst a n] -> []`.
+    WStrLeft = 143, "LEFT_WSTRING", 3, 0;
+    /// `[dst a n] -> []`.
+    WStrRight = 144, "RIGHT_WSTRING", 3, 0;
+    /// `[dst a n p] -> []`.
+    WStrMid = 145, "MID_WSTRING", 4, 0;
+    /// `[dst a b p] -> []`.
+    WStrInsert = 146, "INSERT_WSTRING", 4, 0;
+    /// `[dst a n p] -> []`.
+    WStrDelete = 147, "DELETE_WSTRING", 4, 0;
+    /// `[dst a b n p] -> []`.
+    WStrReplace = 148, "REPLACE_WSTRING", 5, 0;
+    /// `[a b] -> [pos]`.
+    WStrFind = 149, "FIND_WSTRING", 2, 1;
+    /// `[a b] -> [-1|0|1]`: lexicographic comparison of the code units.
+    WStrCompare = 150, "WSTRING_COMPARE", 2, 1;
+    /// `[dst s] -> []`: the WSTRING `dst` from the STRING `s`, whose bytes are read as
+    /// UTF-8 (a byte that is not part of a valid UTF-8 sequence is the character of that
+    /// code, Latin-1); characters beyond U+FFFF take two units (a surrogate pair).
+    WStrFromStr = 151, "STRING_TO_WSTRING", 2, 0;
+    /// `[dst ws] -> []`: the STRING `dst` from the WSTRING `ws`, in UTF-8 (an unpaired
+    /// surrogate is U+FFFD), cut after the last whole character that fits.
+    StrFromWStr = 152, "WSTRING_TO_STRING", 2, 0;
+
     /// `[s] -> [len]`.
     StrLen = 100, "LEN", 1, 1;
     /// `[dst src] -> []`: string assignment (truncating).

@@ -860,6 +860,152 @@ fn read_string(data: &[u8], address: u64) -> Result<(usize, Vec<u8>), Trap> {
     Ok((capacity, data[a + 4..a + 4 + len].to_vec()))
 }
 
+/// Reads the WSTRING variable at `address`: (capacity, code units).
+fn read_wstring(data: &[u8], address: u64) -> Result<(usize, Vec<u16>), Trap> {
+    if address >= data.len() as u64 || data.len() as u64 - address < 4 {
+        return Err(Trap::InvalidAddress);
+    }
+    let a = address as usize;
+    let capacity = u16::from_le_bytes([data[a], data[a + 1]]) as usize;
+    let current = u16::from_le_bytes([data[a + 2], data[a + 3]]) as usize;
+    if a + 4 + 2 * capacity > data.len() {
+        return Err(Trap::InvalidAddress);
+    }
+    let len = current.min(capacity);
+    Ok((
+        capacity,
+        (0..len)
+            .map(|i| u16::from_le_bytes([data[a + 4 + 2 * i], data[a + 5 + 2 * i]]))
+            .collect(),
+    ))
+}
+
+/// The WSTRING builtins (ids 140-152), from their documentation.
+fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u64>, Trap> {
+    use Builtin::*;
+    match builtin {
+        WStrLen => return Ok(Some(read_wstring(data, args[0])?.1.len() as u64)),
+        WStrFind => {
+            let (_, a) = read_wstring(data, args[0])?;
+            let (_, b) = read_wstring(data, args[1])?;
+            let found = if b.is_empty() || b.len() > a.len() {
+                0
+            } else {
+                (0..=a.len() - b.len())
+                    .find(|&at| a[at..at + b.len()] == b[..])
+                    .map_or(0, |at| at + 1)
+            };
+            return Ok(Some(found as u64));
+        }
+        WStrCompare => {
+            let (_, a) = read_wstring(data, args[0])?;
+            let (_, b) = read_wstring(data, args[1])?;
+            let r: i64 = if a < b {
+                -1
+            } else if a > b {
+                1
+            } else {
+                0
+            };
+            return Ok(Some(r as u64));
+        }
+        StrFromWStr => {
+            let (capacity, _) = read_string(data, args[0])?;
+            let (_, units) = read_wstring(data, args[1])?;
+            let text = String::from_utf16_lossy(&units);
+            let room = capacity.min(crate::builtins::MAX_STRING_LEN);
+            let mut out: Vec<u8> = Vec::new();
+            for c in text.chars() {
+                let mut utf8 = [0u8; 4];
+                let bytes = c.encode_utf8(&mut utf8).as_bytes();
+                if out.len() + bytes.len() > room {
+                    break;
+                }
+                out.extend_from_slice(bytes);
+            }
+            let a = args[0] as usize;
+            data[a + 2..a + 4].copy_from_slice(&(out.len() as u16).to_le_bytes());
+            data[a + 4..a + 4 + out.len()].copy_from_slice(&out);
+            // A STRING result shorter than its capacity ends with a NUL.
+            if out.len() < capacity {
+                data[a + 4 + out.len()] = 0;
+            }
+            return Ok(None);
+        }
+        _ => {}
+    }
+    let (capacity, _) = read_wstring(data, args[0])?;
+    let mut result: Vec<u16> = match builtin {
+        WStrAssign => read_wstring(data, args[1])?.1,
+        WStrConcat => {
+            let mut a = read_wstring(data, args[1])?.1;
+            a.extend(read_wstring(data, args[2])?.1);
+            a
+        }
+        WStrLeft => {
+            let a = read_wstring(data, args[1])?.1;
+            a[..clamp(args[2], 0, a.len())].to_vec()
+        }
+        WStrRight => {
+            let a = read_wstring(data, args[1])?.1;
+            a[a.len() - clamp(args[2], 0, a.len())..].to_vec()
+        }
+        WStrMid => {
+            let a = read_wstring(data, args[1])?.1;
+            let p = clamp(args[3], 1, a.len() + 1);
+            let n = clamp(args[2], 0, a.len() + 1 - p);
+            a[p - 1..p - 1 + n].to_vec()
+        }
+        WStrInsert => {
+            let a = read_wstring(data, args[1])?.1;
+            let b = read_wstring(data, args[2])?.1;
+            let p = clamp(args[3], 0, a.len());
+            [&a[..p], &b[..], &a[p..]].concat()
+        }
+        WStrDelete | WStrReplace => {
+            let a = read_wstring(data, args[1])?.1;
+            let (b, n_cell, p_cell) = if builtin == WStrReplace {
+                (read_wstring(data, args[2])?.1, args[3], args[4])
+            } else {
+                (Vec::new(), args[2], args[3])
+            };
+            let p = clamp(p_cell, 1, a.len() + 1);
+            let n = clamp(n_cell, 0, a.len() + 1 - p);
+            [&a[..p - 1], &b[..], &a[p - 1 + n..]].concat()
+        }
+        WStrFromStr => {
+            // UTF-8 where valid, every other byte its Latin-1 character.
+            let (_, bytes) = read_string(data, args[1])?;
+            let mut out = Vec::new();
+            let mut rest = &bytes[..];
+            while !rest.is_empty() {
+                match core::str::from_utf8(rest) {
+                    Ok(text) => {
+                        out.extend(text.encode_utf16());
+                        break;
+                    }
+                    Err(e) => {
+                        let (valid, after) = rest.split_at(e.valid_up_to());
+                        out.extend(core::str::from_utf8(valid).unwrap_or("").encode_utf16());
+                        let bad = e.error_len().unwrap_or(after.len());
+                        out.extend(after[..bad].iter().map(|&b| b as u16));
+                        rest = &after[bad..];
+                    }
+                }
+            }
+            out
+        }
+        _ => unreachable!("WSTRING builtins only"),
+    };
+    result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
+    let a = args[0] as usize;
+    data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
+    for (i, unit) in result.iter().enumerate() {
+        data[a + 4 + 2 * i..a + 6 + 2 * i].copy_from_slice(&unit.to_le_bytes());
+    }
+    Ok(None)
+}
+
 /// Clamps a signed cell into `lo..=hi`.
 fn clamp(cell: u64, lo: usize, hi: usize) -> usize {
     let v = cell as i64;
@@ -1139,6 +1285,9 @@ pub fn string_builtin(
     data: &mut [u8],
 ) -> Result<Option<u64>, Trap> {
     use Builtin::*;
+    if (140..=152).contains(&(builtin as u16)) {
+        return wstring_builtin(builtin, args, data);
+    }
     match builtin {
         StrLen => return Ok(Some(read_string(data, args[0])?.1.len() as u64)),
         StrFind => {

@@ -87,10 +87,10 @@ fn string_case(
     for i in 0..builtin.args() {
         // Dst and string operands are addresses; numeric operands are numbers.
         let numeric = match builtin {
-            Builtin::StrLeft | Builtin::StrRight => i == 2,
-            Builtin::StrMid | Builtin::StrDelete => i >= 2,
-            Builtin::StrInsert => i == 3,
-            Builtin::StrReplace => i >= 3,
+            Builtin::StrLeft | Builtin::StrRight | Builtin::WStrLeft | Builtin::WStrRight => i == 2,
+            Builtin::StrMid | Builtin::StrDelete | Builtin::WStrMid | Builtin::WStrDelete => i >= 2,
+            Builtin::StrInsert | Builtin::WStrInsert => i == 3,
+            Builtin::StrReplace | Builtin::WStrReplace => i >= 3,
             Builtin::StrFromI64
             | Builtin::StrFromU64
             | Builtin::StrFromF32
@@ -123,7 +123,7 @@ fn string_case(
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 3000, failure_persistence: None, ..ProptestConfig::default() })]
 
     #[test]
     fn string_builtins_agree_with_the_model(

@@ -308,6 +308,77 @@ fn time_formatting() {
     assert!(fmt(i64::MIN).starts_with("T#-"));
 }
 
+/// WSTRINGs at 0 (capacity 12) and 40 (capacity 12), a result WSTRING at 80 (capacity 6),
+/// a STRING at 100 (capacity 7).
+fn wide_data(a: &str, b: &str, narrow: &[u8]) -> Vec<u8> {
+    let mut data = vec![0u8; 120];
+    for (at, text) in [(0usize, a), (40, b)] {
+        let units: Vec<u16> = text.encode_utf16().collect();
+        data[at..at + 2].copy_from_slice(&12u16.to_le_bytes());
+        data[at + 2..at + 4].copy_from_slice(&(units.len() as u16).to_le_bytes());
+        for (i, u) in units.iter().enumerate() {
+            data[at + 4 + 2 * i..at + 6 + 2 * i].copy_from_slice(&u.to_le_bytes());
+        }
+    }
+    data[80..82].copy_from_slice(&6u16.to_le_bytes());
+    data[100..102].copy_from_slice(&7u16.to_le_bytes());
+    data[102..104].copy_from_slice(&(narrow.len() as u16).to_le_bytes());
+    data[104..104 + narrow.len()].copy_from_slice(narrow);
+    data
+}
+
+fn wide_text(data: &[u8], at: usize) -> String {
+    let len = u16::from_le_bytes([data[at + 2], data[at + 3]]) as usize;
+    let units: Vec<u16> = (0..len)
+        .map(|i| u16::from_le_bytes([data[at + 4 + 2 * i], data[at + 5 + 2 * i]]))
+        .collect();
+    String::from_utf16_lossy(&units)
+}
+
+#[test]
+fn wide_strings() {
+    use Builtin::*;
+    let run = |b: Builtin, x: &str, y: &str, args: &[u64]| {
+        let mut data = wide_data(x, y, b"");
+        let mut all = vec![80u64];
+        all.extend_from_slice(args);
+        assert_eq!(builtins::call(b, &all, &mut data), Ok(None), "{b:?}");
+        let model = {
+            let mut m = wide_data(x, y, b"");
+            crate::model::string_builtin(b, &all, &mut m).unwrap();
+            m
+        };
+        assert_eq!(data, model, "{b:?} {x} {y} {args:?}");
+        wide_text(&data, 80)
+    };
+    assert_eq!(run(WStrAssign, "äb€", "", &[0]), "äb€");
+    assert_eq!(run(WStrConcat, "äb", "€xyzw", &[0, 40]), "äb€xyz");
+    assert_eq!(run(WStrLeft, "äb€", "", &[0, 2]), "äb");
+    assert_eq!(run(WStrRight, "äb€", "", &[0, 1]), "€");
+    assert_eq!(run(WStrMid, "abcdef", "", &[0, 2, 3]), "cd");
+    assert_eq!(run(WStrInsert, "abcd", "€", &[0, 40, 2]), "ab€cd");
+    assert_eq!(run(WStrDelete, "abcdef", "", &[0, 2, 2]), "adef");
+    assert_eq!(run(WStrReplace, "abcdef", "€", &[0, 40, 3, 2]), "a€ef");
+    let mut data = wide_data("ab€c€", "€", b"");
+    assert_eq!(builtins::call(WStrFind, &[0, 40], &mut data), Ok(Some(3)));
+    assert_eq!(builtins::call(WStrLen, &[0], &mut data), Ok(Some(5)));
+    assert_eq!(
+        builtins::call(WStrCompare, &[0, 40], &mut data),
+        Ok(Some(-1i64 as u64))
+    );
+    // 'ä' in UTF-8, then a lone Latin-1 byte 0xE9 ('é'), then a 4-byte character (2 units).
+    let mut data = wide_data("", "", &[0xC3, 0xA4, 0xE9, 0xF0, 0x9F, 0x98, 0x80]);
+    assert_eq!(builtins::call(WStrFromStr, &[80, 100], &mut data), Ok(None));
+    assert_eq!(wide_text(&data, 80), "äé😀");
+    // Back to UTF-8: the STRING (capacity 7) takes "äé" (4 bytes), the emoji no longer fits.
+    assert_eq!(builtins::call(StrFromWStr, &[100, 80], &mut data), Ok(None));
+    assert_eq!(text(&data, 100), "äé");
+    assert_eq!(
+        builtins::call(WStrLen, &[118], &mut data),
+        Err(Trap::InvalidAddress)
+    );
+}
+
 #[test]
 fn dates_and_times_of_day() {
     use crate::isa::TimeKind;
