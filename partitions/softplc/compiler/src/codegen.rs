@@ -1864,6 +1864,18 @@ impl<'a> Gen<'a> {
             self.push_int(0);
             return;
         }
+        if let Type::Reference(target) = to {
+            // A REFERENCE TO parameter is bound to the argument (as `REF=` does).
+            let as_ref = Type::Ref(target.clone());
+            if matches!(e.kind, ExprKind::Null) {
+                self.push_int(0);
+                return;
+            }
+            let r = crate::refs::reference_to(e);
+            let t = self.expr(&r, Some(&as_ref));
+            self.coerce(&t, &as_ref, e.span);
+            return;
+        }
         let t = self.expr(e, Some(to));
         self.coerce(&t, to, e.span);
     }

@@ -997,6 +997,30 @@ impl Gen<'_> {
     }
 }
 
+/// The expression `REF(e)`.
+pub(crate) fn reference_to(e: &Expr) -> Expr {
+    let id = Ident {
+        name: "REF".into(),
+        text: "REF".into(),
+        span: e.span,
+    };
+    Expr {
+        kind: ExprKind::Call {
+            callee: Box::new(Expr {
+                kind: ExprKind::Name(id),
+                span: e.span,
+            }),
+            args: vec![Arg {
+                name: None,
+                output: false,
+                value: e.clone(),
+                span: e.span,
+            }],
+        },
+        span: e.span,
+    }
+}
+
 /// Pushes the spans of the object of type `ty` at `addr` (and of its parts).
 fn object_tree(
     prog: &crate::sema::Program,
