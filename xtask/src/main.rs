@@ -90,6 +90,18 @@ enum Cmd {
         #[arg(long)]
         write_status: bool,
     },
+    /// Draw a run's serial log as an SVG: the plant's level, setpoint and valve over time,
+    /// the PLC's release-lateness histogram and each second's lateness.
+    Plot {
+        /// The serial log (COM1), e.g. target/esp/run-state/com1.log of `cargo xtask run`.
+        log: PathBuf,
+        /// The picture to write (*.svg); default: LOG with the extension .svg.
+        #[arg(short, long, value_name = "OUT")]
+        output: Option<PathBuf>,
+        /// The soft-PLC partition whose lateness to draw (default: the first by name).
+        #[arg(long, value_name = "NAME")]
+        plc: Option<String>,
+    },
     /// Validate a system description and print its diagnostics (exit 1 if any).
     CheckConfig {
         file: PathBuf,
@@ -138,6 +150,7 @@ fn main() -> ExitCode {
         } => test(filter.as_deref(), scenarios_only),
         Cmd::Lint => xtask::lint::run(),
         Cmd::Oscat { file, write_status } => xtask::oscat::run(file.as_deref(), write_status),
+        Cmd::Plot { log, output, plc } => xtask::plot::run(&log, output.as_deref(), plc.as_deref()),
         Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
     };
     match result {

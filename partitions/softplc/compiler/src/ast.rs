@@ -160,6 +160,9 @@ pub struct VarDecl {
     /// `{attribute 'shared' := 'write' | 'read'}` before it: a global shared with another
     /// PLC project.
     pub shared: Option<SharedAttr>,
+    /// `{attribute 'safe' := 'VALUE'}` before it: the value (as written) a located output
+    /// takes when the outputs go safe, and the pragma's span.
+    pub safe: Option<(String, Span)>,
 }
 
 /// A declaration's `{attribute 'shared'}` pragma.

@@ -31,6 +31,9 @@ pub enum Tok {
     /// `{attribute 'shared'}`); the parser attaches it to the declaration after it. Every
     /// other pragma carries no meaning for this compiler and is skipped.
     SharedAttribute(Option<String>),
+    /// The pragma `{attribute 'safe' := 'VALUE'}` before a located output: the value it
+    /// takes when the runtime sets the outputs safe.
+    SafeAttribute(Option<String>),
     Assign,   // :=
     Arrow,    // =>
     Colon,    // :
@@ -79,9 +82,9 @@ pub fn lex(file: u32, text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
     lx.out
 }
 
-/// The value of a CODESYS attribute pragma body `attribute 'shared' := 'VALUE'` (or `None`
-/// for `attribute 'shared'`); `None` outside when the body is any other pragma.
-fn shared_attribute(body: &str) -> Option<Option<String>> {
+/// The value of a CODESYS attribute pragma body `attribute 'NAME' := 'VALUE'` (or `None`
+/// for `attribute 'NAME'`) when NAME is `wanted`; `None` outside for any other pragma.
+fn attribute(body: &str, wanted: &str) -> Option<Option<String>> {
     let rest = body.trim_start();
     let keyword = rest.get(..9)?;
     if !keyword.eq_ignore_ascii_case("attribute") {
@@ -89,7 +92,7 @@ fn shared_attribute(body: &str) -> Option<Option<String>> {
     }
     let rest = rest[9..].trim_start().strip_prefix('\'')?;
     let (name, rest) = rest.split_once('\'')?;
-    if !name.trim().eq_ignore_ascii_case("shared") {
+    if !name.trim().eq_ignore_ascii_case(wanted) {
         return None;
     }
     let rest = rest.trim();
@@ -159,8 +162,11 @@ impl Lexer<'_> {
                         self.error(start, "unterminated pragma `{`");
                     } else {
                         self.pos += 1;
-                        if let Some(value) = shared_attribute(&self.text[start + 1..self.pos - 1]) {
+                        let body = &self.text[start + 1..self.pos - 1];
+                        if let Some(value) = attribute(body, "shared") {
                             self.push(Tok::SharedAttribute(value), start);
+                        } else if let Some(value) = attribute(body, "safe") {
+                            self.push(Tok::SafeAttribute(value), start);
                         }
                     }
                 }

@@ -463,7 +463,7 @@ pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), 
     Ok(())
 }
 
-fn parse_elem(e: Elem, text: &str) -> Result<u64, String> {
+pub(crate) fn parse_elem(e: Elem, text: &str) -> Result<u64, String> {
     let bad = || format!("`{text}` is not a valid {e} value");
     // Accept typed literals like INT#5 by dropping a leading type prefix.
     let body = match text.split_once('#') {

@@ -150,6 +150,14 @@ pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
         match t.tok {
             Tok::SharedAttribute(value) => attributes.push(PendingAttribute {
                 before: toks.len(),
+                safe: false,
+                value,
+                span: t.span,
+                taken: false,
+            }),
+            Tok::SafeAttribute(value) => attributes.push(PendingAttribute {
+                before: toks.len(),
+                safe: true,
                 value,
                 span: t.span,
                 taken: false,
@@ -169,14 +177,21 @@ pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
     for a in p.attributes.iter().filter(|a| !a.taken) {
         p.diags.push(Diagnostic::error(
             a.span,
-            "the attribute 'shared' must stand right before a variable declaration in VAR_GLOBAL",
+            if a.safe {
+                "the attribute 'safe' must stand right before the declaration of a located output (`AT %Q...`)"
+            } else {
+                "the attribute 'shared' must stand right before a variable declaration in VAR_GLOBAL"
+            },
         ));
     }
     unit
 }
 
-/// An `{attribute 'shared' ...}` pragma waiting for its declaration.
+/// An `{attribute 'shared' ...}` or `{attribute 'safe' ...}` pragma waiting for its
+/// declaration.
 struct PendingAttribute {
+    /// `'safe'` (else `'shared'`).
+    safe: bool,
     /// Index of the token after it.
     before: usize,
     value: Option<String>,
@@ -194,7 +209,7 @@ struct Parser<'a> {
     /// Current nesting of expressions and statements (bounded so that no input can
     /// exhaust the native stack of the compiler).
     depth: u32,
-    /// The `{attribute 'shared'}` pragmas of this file, in order.
+    /// The `{attribute 'shared'}` and `{attribute 'safe'}` pragmas of this file, in order.
     attributes: Vec<PendingAttribute>,
 }
 
@@ -214,6 +229,7 @@ fn describe(t: &Tok) -> String {
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
         Tok::SharedAttribute(_) => "`{attribute 'shared'}`".into(),
+        Tok::SafeAttribute(_) => "`{attribute 'safe'}`".into(),
         Tok::Eof => "end of file".into(),
         other => format!("`{}`", punct_text(other)),
     }
@@ -954,7 +970,7 @@ impl Parser<'_> {
             .attributes
             .iter_mut()
             .rev()
-            .find(|a| a.before == pos && !a.taken)?;
+            .find(|a| a.before == pos && !a.taken && !a.safe)?;
         a.taken = true;
         let span = a.span;
         let value = a.value.clone();
@@ -978,8 +994,32 @@ impl Parser<'_> {
         })
     }
 
+    /// The value of the `{attribute 'safe' := 'VALUE'}` pragma right before the current
+    /// token, if there is one (checked against the declaration by sema).
+    fn safe_attribute(&mut self) -> Option<(String, Span)> {
+        let pos = self.pos;
+        let a = self
+            .attributes
+            .iter_mut()
+            .rev()
+            .find(|a| a.before == pos && !a.taken && a.safe)?;
+        a.taken = true;
+        let span = a.span;
+        match a.value.clone() {
+            Some(v) => Some((v, span)),
+            None => {
+                self.diags.push(Diagnostic::error(
+                    span,
+                    "the attribute 'safe' needs the value: `{attribute 'safe' := '0.0'}`",
+                ));
+                None
+            }
+        }
+    }
+
     fn var_decl(&mut self) -> PResult<VarDecl> {
         let shared = self.shared_attribute();
+        let safe = self.safe_attribute();
         let start = self.span();
         let mut names = vec![self.ident()?];
         while self.eat(&Tok::Comma) {
@@ -1012,6 +1052,7 @@ impl Parser<'_> {
             init,
             span: start.to(self.prev_span()),
             shared,
+            safe,
         })
     }
 

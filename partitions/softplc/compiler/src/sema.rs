@@ -233,6 +233,8 @@ pub struct Program {
     /// The globals shared with another PLC project (`{attribute 'shared'}`), in declaration
     /// order.
     pub shared: Vec<SharedGlobal>,
+    /// The safe values of located outputs given by `{attribute 'safe' := 'VALUE'}`.
+    pub safe: Vec<SafeDefault>,
     /// INTERFACE declarations.
     pub interfaces: Vec<InterfaceDef>,
     /// Function blocks whose instances carry a class id (see [`ClassDef`]).
@@ -259,6 +261,20 @@ pub struct InterfaceDef {
     pub extends: Vec<usize>,
     /// Its own methods and accessors (not those of the interfaces it extends).
     pub members: Vec<InterfaceMember>,
+}
+
+/// A located output's safe value from its `{attribute 'safe'}` pragma.
+#[derive(Debug, Clone)]
+pub struct SafeDefault {
+    /// The PROGRAM declaring it (its VAR), `None` for a global.
+    pub pou: Option<usize>,
+    /// Its name (upper-cased) and as written.
+    pub name: String,
+    pub text: String,
+    /// Bytes of its address (`%QX` and `%QB` 1, `%QW` 2, ...).
+    pub width: u8,
+    /// The value's bits (the variable's little-endian cell).
+    pub value: u64,
 }
 
 /// A global variable shared with another PLC project.
@@ -774,6 +790,7 @@ impl Sema<'_> {
                 let mut align = 1;
                 for m in members {
                     self.no_shared_attribute(m, "structure members");
+                    self.safe_default(m, &Type::Error, None, None);
                     let mty = self.resolve_type(&m.ty, &[]);
                     if matches!(mty, Type::Fb(_)) {
                         self.diags.error(
@@ -1166,6 +1183,7 @@ impl Sema<'_> {
                 self.no_retained_reference(block, d, &ty);
                 let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
                 let location = self.location(d, &ty, may_locate);
+                self.safe_default(d, &ty, location, Some(i));
                 for n in &d.names {
                     if vars.iter().any(|v| v.name == n.name) {
                         self.diags
@@ -1215,6 +1233,7 @@ impl Sema<'_> {
                 }
                 self.no_retained_reference(block, d, &ty);
                 let location = self.location(d, &ty, true);
+                self.safe_default(d, &ty, location, None);
                 let shared = self.shared_global(d, block, &ty);
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
@@ -1272,6 +1291,48 @@ impl Sema<'_> {
                 .iter()
                 .any(|v| v.kind != VarKind::InOut && self.holds_references(&v.ty, depth + 1)),
             _ => false,
+        }
+    }
+
+    /// Records the `{attribute 'safe' := 'VALUE'}` of a located output (declared in `pou`,
+    /// or a global); reports one on any other declaration or with a value that does not fit.
+    fn safe_default(
+        &mut self,
+        d: &VarDecl,
+        ty: &Type,
+        location: Option<Location>,
+        pou: Option<usize>,
+    ) {
+        let Some((value, span)) = &d.safe else { return };
+        let Some(location) = location.filter(|l| l.area == plc_vm::located::Area::Output) else {
+            if d.at.is_none() || !ty.is_error() {
+                self.diags.error(
+                    *span,
+                    "the attribute 'safe' gives a located output (`AT %Q...`) the value it takes when the outputs go safe; this declaration is not one",
+                );
+            }
+            return;
+        };
+        let Type::Elem(e) = ty else { return };
+        match crate::monitor::parse_elem(*e, value) {
+            Ok(cell) => {
+                let bits = location.width.bytes() * 8;
+                let cell = if bits >= 64 {
+                    cell
+                } else {
+                    cell & ((1u64 << bits) - 1)
+                };
+                for n in &d.names {
+                    self.prog.safe.push(SafeDefault {
+                        pou,
+                        name: n.name.clone(),
+                        text: n.text.clone(),
+                        width: location.width.bytes() as u8,
+                        value: cell,
+                    });
+                }
+            }
+            Err(why) => self.diags.error(*span, format!("the safe value: {why}")),
         }
     }
 

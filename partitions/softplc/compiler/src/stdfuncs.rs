@@ -39,6 +39,9 @@ struct StdArgs<'e> {
     exprs: Vec<&'e Expr>,
     ctx: Option<Type>,
     span: Span,
+    /// The type of a typed form (`SQRT_LREAL`, `MAX_DINT`): its typed arguments convert
+    /// to it implicitly and it is the result.
+    typed: Option<Elem>,
 }
 
 impl Gen<'_> {
@@ -56,6 +59,7 @@ impl Gen<'_> {
             || name.starts_with("TO_")
             || Self::time_function(name).is_some()
             || Self::typed_trunc(name).is_some()
+            || Self::typed_overload(name).is_some()
     }
 
     /// `TRUNC_INT` and `REAL_TRUNC_INT`-style forms: (argument type if given, result type).
@@ -144,6 +148,10 @@ impl Gen<'_> {
         if let Some(target) = name.strip_prefix("TO_") {
             return self.generic_conversion(target, id, args, span);
         }
+        let (name, typed) = match Self::typed_overload(name) {
+            Some((base, t)) => (base, Some(t)),
+            None => (name, None),
+        };
         let Some(exprs) = self.std_arguments(name, id, args) else {
             return Some(Type::Error);
         };
@@ -151,9 +159,15 @@ impl Gen<'_> {
             name,
             id,
             exprs,
-            ctx,
+            ctx: typed.map(Type::Elem).or(ctx),
             span,
+            typed,
         };
+        if let Some(t) = typed
+            && !self.typed_arguments(&c, t)
+        {
+            return Some(Type::Error);
+        }
         match name {
             "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
             | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => {
@@ -166,6 +180,60 @@ impl Gen<'_> {
             | "CONCAT" => self.std_string(&c),
             _ => self.conversion(name, id, &c.exprs, span),
         }
+    }
+
+    /// A typed form of an overloaded standard function (IEC 61131-3: `SQRT_LREAL`,
+    /// `ABS_INT`, `MAX_DINT`, `EXPT_REAL`, `SEL_TIME`, ...): (the function, the type).
+    fn typed_overload(name: &str) -> Option<(&str, Elem)> {
+        let (base, ty) = name.rsplit_once('_')?;
+        let t = Elem::from_name(ty)?;
+        let fits = match base {
+            "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
+            | "ATAN2" | "EXPT" => t.is_real(),
+            "ABS" => t.is_numeric(),
+            "MAX" | "MIN" | "LIMIT" => t.is_numeric() || t.is_temporal() || t.is_char(),
+            "SEL" | "MUX" | "MOVE" => true,
+            _ => false,
+        };
+        fits.then_some((base, t))
+    }
+
+    /// Checks that the arguments of a typed form convert to its type implicitly (SEL's
+    /// selector, MUX's index and EXPT's exponent are not typed). False after reporting one
+    /// that does not.
+    fn typed_arguments(&mut self, c: &StdArgs, t: Elem) -> bool {
+        let untyped = match c.name {
+            "SEL" | "MUX" => 1,
+            _ => 0,
+        };
+        let typed_count = match c.name {
+            "EXPT" => 1,
+            _ => c.exprs.len(),
+        };
+        let mut ok = true;
+        for e in c.exprs.iter().take(typed_count).skip(untyped) {
+            if Self::is_flexible(e) {
+                continue;
+            }
+            let at = self.infer(e);
+            let fits = !matches!(at, Type::Enum(_) | Type::Exception)
+                && at.elem().is_some_and(|x| implicit_ok(x, t));
+            if !fits {
+                if at.is_error() {
+                    self.surface(e);
+                } else {
+                    let msg = format!(
+                        "{} takes {t} arguments, found {} (convert it with {}_TO_{t})",
+                        c.id.text,
+                        self.tname(&at),
+                        self.tname(&at)
+                    );
+                    self.error(e.span, msg);
+                }
+                ok = false;
+            }
+        }
+        ok
     }
 
     /// The formal input names of a standard function called with `count` arguments
@@ -352,6 +420,7 @@ impl Gen<'_> {
             exprs,
             ctx: None,
             span,
+            typed: None,
         };
         match f {
             TimeFunction::Operator(op, ta, tb) => {
@@ -676,7 +745,7 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref()) {
+                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
                     Some(t) => t,
                     None => return Some(Type::Error),
                 };
@@ -711,7 +780,7 @@ impl Gen<'_> {
                 if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref()) {
+                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
                     Some(t) => t,
                     None => return Some(Type::Error),
                 };
@@ -734,7 +803,13 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let t = self.expr(c.exprs[0], c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => {
+                        self.value_to(c.exprs[0], &Type::Elem(forced));
+                        Type::Elem(forced)
+                    }
+                    None => self.expr(c.exprs[0], c.ctx.as_ref()),
+                };
                 match t.elem() {
                     Some(Elem::Real) => self.emit(|b| b.call_builtin(Builtin::AbsF32)),
                     Some(Elem::LReal) => self.emit(|b| b.call_builtin(Builtin::AbsF64)),
@@ -782,7 +857,7 @@ impl Gen<'_> {
                         self.value_to(c.exprs[0], &Type::Elem(f));
                         f
                     }
-                    None => match self.real_operand(c.exprs[0], c.ctx.as_ref()) {
+                    None => match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
                         Some(t) => t,
                         None => return Some(Type::Error),
                     },
@@ -821,14 +896,23 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                self.expr(c.exprs[0], None)
+                match c.typed {
+                    Some(forced) => {
+                        self.value_to(c.exprs[0], &Type::Elem(forced));
+                        Type::Elem(forced)
+                    }
+                    None => self.expr(c.exprs[0], None),
+                }
             }
             "SEL" => {
                 if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
                 self.value_to(c.exprs[0], &Type::BOOL);
-                let t = self.common_of(&c.exprs[1..], c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs[1..], c.ctx.as_ref()),
+                };
                 if t.is_error() {
                     return Some(t);
                 }
@@ -845,7 +929,10 @@ impl Gen<'_> {
                     c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
-                let t = self.common_of(&c.exprs, c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs, c.ctx.as_ref()),
+                };
                 let Some(e) = t.elem() else {
                     if !t.is_error() {
                         let msg = format!(
@@ -871,7 +958,10 @@ impl Gen<'_> {
                 if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
-                let t = self.common_of(&c.exprs, c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs, c.ctx.as_ref()),
+                };
                 let Some(e) = t.elem() else {
                     return Some(Type::Error);
                 };
@@ -902,7 +992,10 @@ impl Gen<'_> {
                     b.chk_index(0, n - 1);
                     b.st_abs(MemType::I64, k);
                 });
-                let t = self.common_of(&c.exprs[1..], c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs[1..], c.ctx.as_ref()),
+                };
                 let end = self.label();
                 for (i, x) in c.exprs[1..].iter().enumerate() {
                     let next = self.label();
@@ -1141,7 +1234,12 @@ impl Gen<'_> {
 
     /// Compiles a numeric argument of a REAL function: REAL stays REAL, an integer of up to
     /// 16 bits becomes REAL (which holds it exactly), everything else LREAL.
-    fn real_operand(&mut self, e: &Expr, ctx: Option<&Type>) -> Option<Elem> {
+    fn real_operand(&mut self, e: &Expr, ctx: Option<&Type>, typed: Option<Elem>) -> Option<Elem> {
+        // A typed form (`SQRT_LREAL`): its type (the argument was checked).
+        if let Some(forced) = typed.filter(|t| t.is_real()) {
+            self.value_to(e, &Type::Elem(forced));
+            return Some(forced);
+        }
         let t = self.infer(e);
         let literal_in_real_context =
             Self::is_flexible(e) && ctx.and_then(|c| c.elem()) == Some(Elem::Real);

@@ -285,9 +285,30 @@ impl Gen {
                 };
                 self.out.push_str(&stmt);
             }
-            12 => self
+            12 if self.rng.below(2) == 0 => self
                 .out
                 .push_str("SPLIT_DT(dt1, YEAR => x, MONTH => y, DAY => i, HOUR => x);\n"),
+            12 => {
+                // WSTRING functions (results truncated to the capacity) and WCHAR.
+                let stmt = match self.rng.below(5) {
+                    0 => format!(
+                        "ws := CONCAT(ws, \"{}\", 'é');\n",
+                        self.rng.pick(&["ab", "€", "x"])
+                    ),
+                    1 => format!("ws := MID(ws, {}, {});\n", self.int(1), self.int(1)),
+                    2 => format!(
+                        "ws := REPLACE(ws, \"Zz\", {}, {});\n",
+                        self.int(1),
+                        self.int(1)
+                    ),
+                    3 => {
+                        "x := LEN(ws) + FIND(ws, \"b\");\nwc := WSTRING_TO_WCHAR(ws);\n".to_string()
+                    }
+                    _ => "ws := STRING_TO_WSTRING(WSTRING_TO_STRING(ws));\np := ws < \"b\";\n"
+                        .to_string(),
+                };
+                self.out.push_str(&stmt);
+            }
             8 => {
                 self.out.push_str("__TRY\n");
                 {
@@ -320,7 +341,8 @@ fn program(seed: u64) -> String {
     );
     g.out.push_str(
         "PROGRAM Main\nVAR\n pa : REF_TO DINT; pb : POINTER TO BYTE; sh : ICalc; ka : KA; kb : KB;\n a, b, c, cnt : DINT; x, y : INT; r, s : REAL; p, q : BOOL;\n \
-         arr : ARRAY[0..7] OF DINT; i : INT; e : __EXCEPTION; w : WORD; t : TIME;\n          dt1 : DT := DT#2000-01-01-00:00:00; tod1 : TOD := TOD#12:00:00; d1 : DATE;\nEND_VAR\n",
+         arr : ARRAY[0..7] OF DINT; i : INT; e : __EXCEPTION; w : WORD; t : TIME;\n          dt1 : DT := DT#2000-01-01-00:00:00; tod1 : TOD := TOD#12:00:00; d1 : DATE;\n \
+         ws : WSTRING[6] := \"abc\"; wc : WCHAR;\nEND_VAR\n",
     );
     g.out
         .push_str("IF pa = NULL THEN pa := REF(b); pb := ADR(w); sh := ka; END_IF;\n");
