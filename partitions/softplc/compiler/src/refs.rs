@@ -747,14 +747,14 @@ impl Gen<'_> {
                 if self.refs.borrowed.contains(&n.name) {
                     return Taint::Borrowed;
                 }
-                // A FUNCTION's reference inputs may point to its caller's temporaries.
+                // A FUNCTION's reference inputs, and a reference read from any POU's
+                // VAR_IN_OUT, may point to the caller's temporaries.
                 let pou = &self.prog.pous[self.cur];
-                let borrowed = pou.kind == PouKind::Function
-                    && !self.is_method(self.cur)
-                    && pou.var(&n.name).is_some_and(|v| {
-                        v.kind == VarKind::Input
-                            && matches!(v.ty, Type::Ref(_) | Type::Interface(_))
-                    });
+                let function = pou.kind == PouKind::Function && !self.is_method(self.cur);
+                let borrowed = pou.var(&n.name).is_some_and(|v| {
+                    matches!(v.ty, Type::Ref(_) | Type::Interface(_))
+                        && (v.kind == VarKind::InOut || function && v.kind == VarKind::Input)
+                });
                 if borrowed {
                     Taint::Borrowed
                 } else {
@@ -841,7 +841,7 @@ impl Gen<'_> {
         let pou = self.prog.pous[self.cur].text.clone();
         let msg = match taint {
             Taint::Borrowed => format!(
-                "this reference came into the FUNCTION `{pou}` as an input and may point to its caller's temporary variables; it may be returned (as the result or an output) but not stored in {what}, which outlives the call"
+                "this reference came from the caller of `{pou}` (a FUNCTION's reference input or a VAR_IN_OUT) and may point to the caller's temporary variables; a FUNCTION may return it (as its result or an output) but it cannot be stored in {what}, which outlives the call"
             ),
             _ => format!(
                 "this reference may point to a temporary variable of `{pou}` (a FUNCTION's or METHOD's variables, a VAR_TEMP), which the next call re-initialises; it cannot be stored in {what}, which outlives the call"
