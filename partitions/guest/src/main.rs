@@ -18,7 +18,10 @@
 //! fragmentation and the tables around the data take, so a full file system answers
 //! `ENOSPC` before an allocation can fail. Its stack holds the process table (the
 //! configuration gives a guest at least 1 MiB).
-//! This file is glue only: every decision about a Linux call is the library's.
+//! This file is glue only: every decision about a Linux call is the library's, and every
+//! decision about which process runs is [`guest::sched`]'s (this loop tells it of each
+//! message and answer, asks it at every turn and when it said a decision is due, and sets
+//! the priorities it names with `thread_set`).
 //!
 //! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
 //! processes' console is a terminal ([`guest::tty`]) on COM2 ([`com2`]); without it, their
