@@ -48,6 +48,18 @@
 //! one level down. The guest decides whose turn it is, and the holder is alone at its
 //! priority.
 //!
+//! **Why here, and why this policy.** The kernel offers fixed priorities, FIFO within one,
+//! and `thread_set` of a priority below a task's MCP; which Linux process deserves the CPU
+//! is the guest's business, as the partition's own (the processes stay below the guest's
+//! MCP whatever the policy does). A fair-share scheduler (Linux's CFS) was the other
+//! candidate: it would have to keep exactly one process above all others and move that
+//! mark at every decision, and a woken process would wait for its virtual time to come.
+//! The feedback queue lets the kernel's FIFO run the interactive processes without the
+//! guest choosing among them, reacts to a wake-up before the woken thread runs, and costs
+//! nothing for a call answered at once. Its known weakness: processes that wake each
+//! other often (a pipeline) count as interactive however much CPU they use between them,
+//! so beside them the CPU-bound ones get only what aging gives them.
+//!
 //! **The model of who runs.** The process whose message arrives is the one that ran since
 //! the guest last looked (the guest's thread is above all of them, so it sees every
 //! message at once); with no message (a time-out, console input), the model's choice ran:
@@ -56,7 +68,7 @@
 //! next message; one still unanswered when the guest next looks waits. Times are the
 //! guest's clock: the time a process held the CPU includes other partitions' windows and
 //! the guest's work for it, so a slice is one of wall-clock time while the process was
-//! the one to run, as the round robin before this policy had it.
+//! the one to run.
 //!
 //! **Cost.** A message that changes nothing but the sender's debt (a call answered at
 //! once) costs two lookups in the table and a comparison; the decisions are remade only
