@@ -31,8 +31,11 @@ wait $flooders
 kill $waiters
 echo "hostile: port flood done"
 
+# A CPU hog, alone for 3 s, then beside everything that follows (the guest's scheduling
+# policy keeps the shell and the other attacks as quick as without it).
 while :; do :; done &
 echo "hostile: cpu hog started"
+sleep 3
 
 # Memory hogs: a buffer larger than the guest's memory, a string doubled until the
 # memory is gone (stopped after 1 s), a file larger than the file system.
@@ -59,11 +62,12 @@ kill $readers
 echo "hostile: pipe flood done"
 
 # A fork bomb: every copy starts two more until the guest's process table is full, then
-# its forks fail (EAGAIN) while the copies that ended make room for new ones. Counting
-# the processes needs no fork: a glob. Init crashes while it runs.
+# its forks fail (EAGAIN) while the copies that ended make room for new ones; a copy whose
+# fork failed ends, so it burns out after about a second. Counting the processes needs no
+# fork: a glob. Init crashes while it runs.
 bomb() { bomb | bomb & }
 bomb
-sleep 1
+sleep 0.5
 set -- /proc/[0-9]*
 echo "hostile: fork bomb running: $# processes"
 
