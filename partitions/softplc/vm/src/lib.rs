@@ -93,6 +93,7 @@ pub mod builtins;
 pub mod fmath;
 pub mod image;
 pub mod isa;
+pub mod literal;
 pub mod located;
 pub mod verify;
 pub mod vm;
