@@ -94,6 +94,7 @@ pub mod fmath;
 pub mod image;
 pub mod isa;
 pub mod literal;
+pub mod monitor;
 pub mod located;
 pub mod verify;
 pub mod vm;

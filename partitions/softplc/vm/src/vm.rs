@@ -9,8 +9,8 @@
 //! `now_ns` (float ops are IEEE-754 with the math builtins implemented in [`crate::fmath`]).
 
 use crate::builtins;
-use crate::image::{Image, SourceLocation, Storage, VAR_FLAG_CONSTANT, Var, VarType};
-use crate::isa::{MemType, Opcode, RoundMode, TimeKind, Trap, read_u16, read_u32, read_u64};
+use crate::image::{Image, SourceLocation, VAR_FLAG_CONSTANT, Var, VarType};
+use crate::isa::{MemType, Opcode, RoundMode, Trap, read_u16, read_u32, read_u64};
 use crate::verify::{MAX_TASKS, VerifiedImage};
 
 /// A saved caller context.
@@ -99,214 +99,7 @@ pub struct CycleStats {
     pub caught_traps: u32,
 }
 
-/// A typed variable value for the monitor API.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Value<'s> {
-    /// BOOL.
-    Bool(bool),
-    /// Signed integers (SINT..LINT).
-    Int(i64),
-    /// Unsigned integers and bit strings (USINT..ULINT, BYTE..LWORD).
-    UInt(u64),
-    /// REAL.
-    Real(f32),
-    /// LREAL.
-    LReal(f64),
-    /// TIME in nanoseconds.
-    Time(i64),
-    /// STRING bytes.
-    String(&'s [u8]),
-    /// LTIME, DATE, TOD, DT or a long form (never TIME, which is [`Value::Time`]): its kind
-    /// and its nanoseconds (since 1970-01-01 for dates, since midnight for TOD).
-    Temporal(TimeKind, i64),
-    /// CHAR: its byte.
-    Char(u8),
-    /// WCHAR: its UTF-16 code unit.
-    WChar(u16),
-    /// WSTRING: its UTF-16 code units, two little-endian bytes each.
-    WString(&'s [u8]),
-    /// A reference: its target's data address (`None`: NULL) and, when the target is the
-    /// first byte of a variable of the map, that variable's name. Never written online.
-    Ref {
-        /// The target's data address.
-        address: Option<u32>,
-        /// The variable the target is the start of.
-        target: Option<&'s str>,
-    },
-}
-
-impl Value<'_> {
-    /// A date/time value of `kind` (TIME as [`Value::Time`]).
-    pub const fn temporal(kind: TimeKind, ns: i64) -> Value<'static> {
-        match kind {
-            TimeKind::Time => Value::Time(ns),
-            kind => Value::Temporal(kind, ns),
-        }
-    }
-
-    /// The value a scalar variable of type `ty` has when its memory holds `cell` (loaded,
-    /// i.e. sign- or zero-extended); `None` for STRING, WSTRING and references.
-    pub fn of_cell(ty: VarType, cell: u64) -> Option<Value<'static>> {
-        ty.mem_type()?;
-        Some(match ty {
-            VarType::Bool => Value::Bool(cell != 0),
-            VarType::Real => Value::Real(f32::from_bits(cell as u32)),
-            VarType::LReal => Value::LReal(f64::from_bits(cell)),
-            VarType::Char => Value::Char(cell as u8),
-            VarType::WChar => Value::WChar(cell as u16),
-            ty if ty.is_signed_int() => Value::Int(cell as i64),
-            ty => match ty.time_kind() {
-                Some(kind) => Value::temporal(kind, cell as i64),
-                None => Value::UInt(cell),
-            },
-        })
-    }
-
-    /// The cell a scalar variable of type `ty` takes for this value (stored truncated to
-    /// its width), or [`VarError::TypeMismatch`] when the value is not one of `ty`'s: any
-    /// integer for the integer and bit-string types (and an integer for TIME, as protocol
-    /// version 1 clients send it), otherwise the value's own type or one IEC widens to `ty`
-    /// without a conversion (TIME to LTIME, DATE to LDATE, TOD to LTOD, DT to LDT, CHAR to
-    /// WCHAR). A DATE must be a whole day and a TOD within a day. References are
-    /// [`VarError::ReadOnly`], STRING and WSTRING [`VarError::NotForceable`].
-    pub fn to_cell(&self, ty: VarType) -> Result<u64, VarError> {
-        use TimeKind as K;
-        match ty.storage() {
-            Storage::Reference => return Err(VarError::ReadOnly),
-            Storage::String | Storage::WString => return Err(VarError::NotForceable),
-            Storage::Scalar(_) => {}
-        }
-        let widens = |from: K, to: K| {
-            from == to
-                || matches!(
-                    (from, to),
-                    (K::Time, K::LTime) | (K::Date, K::LDate) | (K::Tod, K::LTod) | (K::Dt, K::LDt)
-                )
-        };
-        let cell = match (ty, *self) {
-            (VarType::Bool, Value::Bool(b)) => b as u64,
-            (VarType::Real, Value::Real(r)) => r.to_bits() as u64,
-            (VarType::LReal, Value::LReal(r)) => r.to_bits(),
-            (VarType::Char, Value::Char(c)) => c as u64,
-            (VarType::WChar, Value::Char(c)) => c as u64,
-            (VarType::WChar, Value::WChar(c)) => c as u64,
-            (VarType::Time, Value::Int(t)) => t as u64,
-            (ty, value) if ty.time_kind().is_some() => {
-                let to = ty.time_kind().unwrap_or(K::Time);
-                let (from, ns) = match value {
-                    Value::Time(ns) => (K::Time, ns),
-                    Value::Temporal(kind, ns) => (kind, ns),
-                    _ => return Err(VarError::TypeMismatch),
-                };
-                let valid = match to {
-                    K::Date | K::LDate => ns.rem_euclid(crate::builtins::NS_PER_DAY) == 0,
-                    K::Tod | K::LTod => (0..crate::builtins::NS_PER_DAY).contains(&ns),
-                    _ => true,
-                };
-                if !widens(from, to) || !valid {
-                    return Err(VarError::TypeMismatch);
-                }
-                ns as u64
-            }
-            (ty, Value::Int(i)) if ty.int_range().is_some() && !is_char(ty) => i as u64,
-            (ty, Value::UInt(u)) if ty.int_range().is_some() && !is_char(ty) => u,
-            _ => return Err(VarError::TypeMismatch),
-        };
-        Ok(cell)
-    }
-}
-
-impl<'s> Value<'s> {
-    /// The value of a variable of type `ty` whose bytes (its whole record, as the variable
-    /// map sizes it) are `bytes`; a STRING's or WSTRING's current length is clamped to its
-    /// capacity; a reference's target is not named. `None` when the size does not fit the
-    /// type.
-    pub fn load(ty: VarType, bytes: &'s [u8]) -> Option<Value<'s>> {
-        if !ty.size_fits(bytes.len() as u32) {
-            return None;
-        }
-        // The current length of a text, clamped to its header's and its record's capacity.
-        let text_len = |unit: usize| {
-            (read_u16(bytes, 2) as usize)
-                .min(read_u16(bytes, 0) as usize)
-                .min((bytes.len() - 4) / unit)
-        };
-        Some(match ty.storage() {
-            Storage::Scalar(mem) => Value::of_cell(ty, mem.cell_from_le(&bytes[..mem.width()]))?,
-            Storage::String => Value::String(&bytes[4..4 + text_len(1)]),
-            Storage::WString => Value::WString(&bytes[4..4 + 2 * text_len(2)]),
-            Storage::Reference => Value::Ref {
-                address: match read_u64(bytes, 0) {
-                    0 => None,
-                    cell => Some(cell as u32),
-                },
-                target: None,
-            },
-        })
-    }
-}
-
-impl Value<'_> {
-    /// Writes this value into the bytes of a variable of type `ty` (its whole record):
-    /// a scalar as [`Value::to_cell`] admits it, truncated to its width; a STRING or WSTRING
-    /// cut to its capacity (the smaller of its header's and its record's), a shorter STRING
-    /// followed by the NUL the VM keeps; a reference never ([`VarError::ReadOnly`]).
-    pub fn store(&self, ty: VarType, bytes: &mut [u8]) -> Result<(), VarError> {
-        if !ty.size_fits(bytes.len() as u32) {
-            return Err(VarError::TypeMismatch);
-        }
-        let (text, unit) = match (ty.storage(), *self) {
-            (Storage::String, Value::String(text)) => (text, 1),
-            (Storage::WString, Value::WString(text)) if text.len() % 2 == 0 => (text, 2),
-            (Storage::String | Storage::WString, _) => return Err(VarError::TypeMismatch),
-            (storage, _) => {
-                let cell = self.to_cell(ty)?;
-                if let Storage::Scalar(mem) = storage {
-                    bytes[..mem.width()].copy_from_slice(&cell.to_le_bytes()[..mem.width()]);
-                }
-                return Ok(());
-            }
-        };
-        let capacity = ((bytes.len() - 4) / unit).min(read_u16(bytes, 0) as usize);
-        let len = (text.len() / unit).min(capacity);
-        bytes[2..4].copy_from_slice(&(len as u16).to_le_bytes());
-        bytes[4..4 + unit * len].copy_from_slice(&text[..unit * len]);
-        if unit == 1 && len < capacity {
-            bytes[4 + len] = 0;
-        }
-        Ok(())
-    }
-}
-
-fn is_char(ty: VarType) -> bool {
-    matches!(ty, VarType::Char | VarType::WChar)
-}
-
-impl core::fmt::Display for Value<'_> {
-    /// The IEC literal ([`crate::literal`]): `TRUE`, `-3`, `0.5`, `T#1s500ms`,
-    /// `D#2024-06-15`, `'text'`, `"wide"`, `REF(Main.x)`, `NULL`.
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        crate::literal::write_value(f, self)
-    }
-}
-
-/// Why a monitor access failed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum VarError {
-    /// No variable of that name.
-    UnknownName,
-    /// Value kind does not fit the variable type.
-    TypeMismatch,
-    /// The variable is CONSTANT.
-    Constant,
-    /// STRING variables can be written but not forced.
-    NotForceable,
-    /// All [`MAX_FORCES`] force slots are in use.
-    TooManyForces,
-    /// A reference: a monitor reads it but never writes or forces it (a written address
-    /// could make the program reach another variable than the one it referenced, or trap).
-    ReadOnly,
-}
+pub use crate::monitor::{Value, VarError};
 
 /// Instructions between two deadline checks of [`Machine::run_cycle_until`] (a few
 /// microseconds of interpretation: the check's clock read stays below 1 % of the work).
@@ -1136,11 +929,10 @@ impl<'a, 'm> Machine<'a, 'm> {
     pub fn force_bytes(&mut self, name: &str, bytes: &[u8]) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
         let ty = VarType::from_code(var.ty).ok_or(VarError::TypeMismatch)?;
-        let mem = match ty.storage() {
-            Storage::Scalar(mem) => mem,
-            Storage::Reference => return Err(VarError::ReadOnly),
-            Storage::String | Storage::WString => return Err(VarError::NotForceable),
-        };
+        let mem = ty.mem_type().ok_or(match ty {
+            VarType::Ref => VarError::ReadOnly,
+            _ => VarError::NotForceable,
+        })?;
         if var.flags & VAR_FLAG_CONSTANT != 0 {
             return Err(VarError::Constant);
         }
