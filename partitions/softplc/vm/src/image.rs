@@ -298,7 +298,7 @@ impl VarType {
             Storage::Scalar(mem) => size as usize == mem.width(),
             Storage::String => size >= 4 && size - 4 <= u16::MAX as u32,
             Storage::WString => {
-                size >= 4 && (size - 4) % 2 == 0 && (size - 4) / 2 <= u16::MAX as u32
+                size >= 4 && (size - 4).is_multiple_of(2) && (size - 4) / 2 <= u16::MAX as u32
             }
             Storage::Reference => size == 8,
         }

@@ -94,8 +94,8 @@ pub mod fmath;
 pub mod image;
 pub mod isa;
 pub mod literal;
-pub mod monitor;
 pub mod located;
+pub mod monitor;
 pub mod verify;
 pub mod vm;
 

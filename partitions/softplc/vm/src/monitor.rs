@@ -7,6 +7,7 @@
 //! use it; [`crate::literal`] shows and parses the values. Never here: what a program's
 //! instructions do to its data.
 
+use crate::builtins::NS_PER_DAY;
 use crate::image::{Storage, VarType};
 use crate::isa::{TimeKind, read_u16, read_u64};
 
@@ -46,7 +47,7 @@ pub enum Value<'s> {
     },
 }
 
-impl Value<'_> {
+impl<'s> Value<'s> {
     /// A date/time value of `kind` (TIME as [`Value::Time`]).
     pub const fn temporal(kind: TimeKind, ns: i64) -> Value<'static> {
         match kind {
@@ -73,61 +74,6 @@ impl Value<'_> {
         })
     }
 
-    /// The cell a scalar variable of type `ty` takes for this value (stored truncated to
-    /// its width), or [`VarError::TypeMismatch`] when the value is not one of `ty`'s: any
-    /// integer for the integer and bit-string types (and an integer for TIME, as protocol
-    /// version 1 clients send it), otherwise the value's own type or one IEC widens to `ty`
-    /// without a conversion (TIME to LTIME, DATE to LDATE, TOD to LTOD, DT to LDT, CHAR to
-    /// WCHAR). A DATE must be a whole day and a TOD within a day. References are
-    /// [`VarError::ReadOnly`], STRING and WSTRING [`VarError::NotForceable`].
-    pub fn to_cell(&self, ty: VarType) -> Result<u64, VarError> {
-        use TimeKind as K;
-        match ty.storage() {
-            Storage::Reference => return Err(VarError::ReadOnly),
-            Storage::String | Storage::WString => return Err(VarError::NotForceable),
-            Storage::Scalar(_) => {}
-        }
-        let widens = |from: K, to: K| {
-            from == to
-                || matches!(
-                    (from, to),
-                    (K::Time, K::LTime) | (K::Date, K::LDate) | (K::Tod, K::LTod) | (K::Dt, K::LDt)
-                )
-        };
-        let cell = match (ty, *self) {
-            (VarType::Bool, Value::Bool(b)) => b as u64,
-            (VarType::Real, Value::Real(r)) => r.to_bits() as u64,
-            (VarType::LReal, Value::LReal(r)) => r.to_bits(),
-            (VarType::Char, Value::Char(c)) => c as u64,
-            (VarType::WChar, Value::Char(c)) => c as u64,
-            (VarType::WChar, Value::WChar(c)) => c as u64,
-            (VarType::Time, Value::Int(t)) => t as u64,
-            (ty, value) if ty.time_kind().is_some() => {
-                let to = ty.time_kind().unwrap_or(K::Time);
-                let (from, ns) = match value {
-                    Value::Time(ns) => (K::Time, ns),
-                    Value::Temporal(kind, ns) => (kind, ns),
-                    _ => return Err(VarError::TypeMismatch),
-                };
-                let valid = match to {
-                    K::Date | K::LDate => ns.rem_euclid(crate::builtins::NS_PER_DAY) == 0,
-                    K::Tod | K::LTod => (0..crate::builtins::NS_PER_DAY).contains(&ns),
-                    _ => true,
-                };
-                if !widens(from, to) || !valid {
-                    return Err(VarError::TypeMismatch);
-                }
-                ns as u64
-            }
-            (ty, Value::Int(i)) if ty.int_range().is_some() && !is_char(ty) => i as u64,
-            (ty, Value::UInt(u)) if ty.int_range().is_some() && !is_char(ty) => u,
-            _ => return Err(VarError::TypeMismatch),
-        };
-        Ok(cell)
-    }
-}
-
-impl<'s> Value<'s> {
     /// The value of a variable of type `ty` whose bytes (its whole record, as the variable
     /// map sizes it) are `bytes`; a STRING's or WSTRING's current length is clamped to its
     /// capacity; a reference's target is not named. `None` when the size does not fit the
@@ -155,9 +101,56 @@ impl<'s> Value<'s> {
             },
         })
     }
-}
 
-impl Value<'_> {
+    /// The cell a scalar variable of type `ty` takes for this value (stored truncated to
+    /// its width), or [`VarError::TypeMismatch`] when the value is not one of `ty`'s: any
+    /// integer for the integer and bit-string types (and an integer for TIME, as protocol
+    /// version 1 clients send it), otherwise the value's own type or one IEC widens to `ty`
+    /// without a conversion (TIME to LTIME, DATE to LDATE, TOD to LTOD, DT to LDT, CHAR to
+    /// WCHAR). A DATE must be a whole day and a TOD within a day. References are
+    /// [`VarError::ReadOnly`], STRING and WSTRING [`VarError::NotForceable`].
+    pub fn to_cell(&self, ty: VarType) -> Result<u64, VarError> {
+        use TimeKind as K;
+        match ty.storage() {
+            Storage::Reference => return Err(VarError::ReadOnly),
+            Storage::String | Storage::WString => return Err(VarError::NotForceable),
+            Storage::Scalar(_) => {}
+        }
+        if let (Some(to), Value::Time(ns) | Value::Temporal(_, ns)) = (ty.time_kind(), *self) {
+            let from = match *self {
+                Value::Temporal(kind, _) => kind,
+                _ => K::Time,
+            };
+            let widens = from == to
+                || matches!(
+                    (from, to),
+                    (K::Time, K::LTime) | (K::Date, K::LDate) | (K::Tod, K::LTod) | (K::Dt, K::LDt)
+                );
+            let valid = match to {
+                K::Date | K::LDate => ns.rem_euclid(NS_PER_DAY) == 0,
+                K::Tod | K::LTod => (0..NS_PER_DAY).contains(&ns),
+                _ => true,
+            };
+            return if widens && valid {
+                Ok(ns as u64)
+            } else {
+                Err(VarError::TypeMismatch)
+            };
+        }
+        let integer = ty.int_range().is_some() && !matches!(ty, VarType::Char | VarType::WChar);
+        Ok(match (ty, *self) {
+            (VarType::Bool, Value::Bool(b)) => b as u64,
+            (VarType::Real, Value::Real(r)) => r.to_bits() as u64,
+            (VarType::LReal, Value::LReal(r)) => r.to_bits(),
+            (VarType::Char | VarType::WChar, Value::Char(c)) => c as u64,
+            (VarType::WChar, Value::WChar(c)) => c as u64,
+            (VarType::Time, Value::Int(t)) => t as u64,
+            (_, Value::Int(i)) if integer => i as u64,
+            (_, Value::UInt(u)) if integer => u,
+            _ => return Err(VarError::TypeMismatch),
+        })
+    }
+
     /// Writes this value into the bytes of a variable of type `ty` (its whole record):
     /// a scalar as [`Value::to_cell`] admits it, truncated to its width; a STRING or WSTRING
     /// cut to its capacity (the smaller of its header's and its record's), a shorter STRING
@@ -168,7 +161,7 @@ impl Value<'_> {
         }
         let (text, unit) = match (ty.storage(), *self) {
             (Storage::String, Value::String(text)) => (text, 1),
-            (Storage::WString, Value::WString(text)) if text.len() % 2 == 0 => (text, 2),
+            (Storage::WString, Value::WString(text)) if text.len().is_multiple_of(2) => (text, 2),
             (Storage::String | Storage::WString, _) => return Err(VarError::TypeMismatch),
             (storage, _) => {
                 let cell = self.to_cell(ty)?;
@@ -189,10 +182,6 @@ impl Value<'_> {
     }
 }
 
-fn is_char(ty: VarType) -> bool {
-    matches!(ty, VarType::Char | VarType::WChar)
-}
-
 impl core::fmt::Display for Value<'_> {
     /// The IEC literal ([`crate::literal`]): `TRUE`, `-3`, `0.5`, `T#1s500ms`,
     /// `D#2024-06-15`, `'text'`, `"wide"`, `REF(Main.x)`, `NULL`.
@@ -210,9 +199,9 @@ pub enum VarError {
     TypeMismatch,
     /// The variable is CONSTANT.
     Constant,
-    /// STRING variables can be written but not forced.
+    /// STRING and WSTRING variables can be written but not forced.
     NotForceable,
-    /// All [`MAX_FORCES`] force slots are in use.
+    /// All [`crate::vm::MAX_FORCES`] force slots are in use.
     TooManyForces,
     /// A reference: a monitor reads it but never writes or forces it (a written address
     /// could make the program reach another variable than the one it referenced, or trap).
