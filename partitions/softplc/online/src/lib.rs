@@ -339,15 +339,20 @@ fn natural_type(value: &Value) -> VarType {
     }
 }
 
-/// Whether type code `ty` carries values of `value`'s kind (so the decoder gives it back).
+/// Whether type code `ty` carries `value` (so the decoder gives it back): its kind, and an
+/// integer within the type's range.
 fn holds(ty: VarType, value: &Value) -> bool {
-    match value {
-        Value::Int(_) => ty.is_signed_int(),
+    let in_range = |v: i128| {
+        ty.int_range()
+            .is_some_and(|(lo, hi)| (lo..=hi).contains(&v))
+    };
+    match *value {
+        Value::Int(v) => ty.is_signed_int() && in_range(v as i128),
         // CHAR and WCHAR carry `Char` and `WChar`.
-        Value::UInt(_) => {
-            ty.int_range().is_some()
-                && !ty.is_signed_int()
+        Value::UInt(v) => {
+            !ty.is_signed_int()
                 && !matches!(ty, VarType::Char | VarType::WChar)
+                && in_range(v as i128)
         }
         _ => natural_type(value) == ty,
     }
@@ -899,10 +904,12 @@ mod tests {
         w.value(&Value::UInt(1)).unwrap();
         assert_eq!(buf[0], VarType::LInt.code());
         assert_eq!(buf[9], VarType::ULInt.code());
-        // A type that cannot hold the value's kind is not used.
+        // A type that cannot hold the value is not used.
         let mut w = Writer::new(&mut buf);
         w.typed_value(VarType::Char, &Value::UInt(7)).unwrap();
+        w.typed_value(VarType::SInt, &Value::Int(300)).unwrap();
         assert_eq!(buf[0], VarType::ULInt.code());
+        assert_eq!(buf[9], VarType::LInt.code());
     }
 
     #[test]
