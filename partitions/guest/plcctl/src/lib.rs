@@ -24,8 +24,8 @@
 //! `plcctl: <OP> <name>: <STATUS> (<reason>)`, e.g. `plcctl: FORCE valve: FORBIDDEN (the
 //! PLC's configuration, plc.online.access, does not allow it)`; a reference is never forced
 //! (`plcctl: FORCE p: READ_ONLY (...)`, without asking). A value that is none of the
-//! variable's type prints `plcctl: FORCE <name>: `<text>` is not a TOD literal (expected
-//! ...)` or `... is out of the range of INT (-32768 to 32767)`. Exit status: 0 done, 1 the
+//! variable's type prints ``plcctl: FORCE <name>: `<text>` is not a TOD literal (expected
+//! ...)`` or ``... is out of the range of INT (-32768 to 32767)``. Exit status: 0 done, 1 the
 //! PLC refused, 2 a usage error (also a malformed value), 3 no answer or a device error.
 
 use plc_online::{
