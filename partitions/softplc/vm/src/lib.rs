@@ -93,7 +93,9 @@ pub mod builtins;
 pub mod fmath;
 pub mod image;
 pub mod isa;
+pub mod literal;
 pub mod located;
+pub mod monitor;
 pub mod verify;
 pub mod vm;
 
