@@ -94,6 +94,7 @@ pub mod fmath;
 pub mod image;
 pub mod isa;
 pub mod located;
+pub mod native;
 pub mod verify;
 pub mod vm;
 
@@ -105,6 +106,8 @@ pub use verify::{VerifiedImage, VerifyError, verify_with_scratch};
 pub use vm::{CallFrame, CycleStats, Fault, Machine, Memory, TryFrame, Value};
 #[cfg(any(feature = "model", test))]
 pub mod model;
+#[cfg(any(feature = "model", test))]
+pub mod testgen;
 
 #[cfg(test)]
 mod tests;

@@ -31,10 +31,10 @@ impl CallFrame {
 /// An open `TRY_BEGIN`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TryFrame {
-    handler: u32,
-    stack_depth: u32,
-    call_depth: u32,
-    base: u32,
+    pub(crate) handler: u32,
+    pub(crate) stack_depth: u32,
+    pub(crate) call_depth: u32,
+    pub(crate) base: u32,
 }
 
 impl TryFrame {
@@ -309,6 +309,40 @@ impl<'a, 'm> Machine<'a, 'm> {
         now_ns: i64,
         mut expired: impl FnMut() -> bool,
     ) -> Result<CycleStats, Fault> {
+        let budget = self.start_cycle(task, now_ns)?;
+        let mut stats = CycleStats::default();
+        let code: &'a [u8] = self.image.code();
+        loop {
+            if stats.instructions >= budget {
+                return Err(self.fault(task, Trap::Watchdog));
+            }
+            if stats.instructions % DEADLINE_CHECK_EVERY == DEADLINE_CHECK_EVERY - 1 && expired() {
+                return Err(self.fault(task, Trap::Deadline));
+            }
+            stats.instructions += 1;
+            // A trapping instruction has no effect: its pops are undone (pops never overwrite
+            // cells, and no instruction pushes before it can still trap).
+            let sp_before = self.sp;
+            match self.step(code) {
+                Ok(Flow::Next) => {}
+                Ok(Flow::EndOfCycle) => {
+                    self.apply_forces();
+                    return Ok(stats);
+                }
+                Err(trap) => {
+                    self.sp = sp_before;
+                    if !self.catch(trap) {
+                        return Err(self.fault(task, trap));
+                    }
+                    stats.caught_traps += 1;
+                }
+            }
+        }
+    }
+
+    /// The start of a cycle of `task` at `now_ns`: refused for an unknown or faulted task;
+    /// else the forces applied, the registers set for the task's POU, its budget returned.
+    fn start_cycle(&mut self, task: usize, now_ns: i64) -> Result<u32, Fault> {
         let Some(entry) = self.image.task(task) else {
             return Err(Fault {
                 trap: Trap::InvalidAddress,
@@ -340,32 +374,57 @@ impl<'a, 'm> Machine<'a, 'm> {
         self.call_depth = 1;
         self.base = entry.instance_base;
         self.pc = pou.code_start;
-        let mut stats = CycleStats::default();
-        let code: &'a [u8] = self.image.code();
-        loop {
-            if stats.instructions >= budget {
-                return Err(self.fault(task, Trap::Watchdog));
+        Ok(budget)
+    }
+
+    /// [`run_cycle_until`](Self::run_cycle_until) on the native execution tier: runs `program`,
+    /// the translation of this machine's image ([`crate::native`]; the caller checks
+    /// [`NativeProgram::is_translation_of`](crate::native::NativeProgram::is_translation_of)),
+    /// instead of interpreting it. Everything observable is the interpreter's: the result,
+    /// the instruction count, the traps at the same instructions (the deadline checks at the
+    /// same instruction counts), and afterwards data memory, the operand stack, `pc`, call
+    /// and try depth, the task's fault and the forces.
+    pub fn run_cycle_native(
+        &mut self,
+        task: usize,
+        now_ns: i64,
+        mut expired: impl FnMut() -> bool,
+        program: &crate::native::NativeProgram,
+    ) -> Result<CycleStats, Fault> {
+        let budget = self.start_cycle(task, now_ns)?;
+        let mut cycle = crate::native::Cycle::new(
+            self.stack,
+            self.calls.len(),
+            self.tries,
+            &mut expired,
+            now_ns,
+            budget,
+        );
+        let result = (program.run)(&mut cycle, self.data, task);
+        let end = cycle.end();
+        self.try_depth = end.try_depth as usize;
+        match (result, end.fault) {
+            (Ok(()), _) => {
+                self.pc = end.ret_pc;
+                self.sp = 0;
+                self.call_depth = 0;
+                self.apply_forces();
+                Ok(CycleStats {
+                    instructions: end.executed,
+                    caught_traps: end.caught,
+                })
             }
-            if stats.instructions % DEADLINE_CHECK_EVERY == DEADLINE_CHECK_EVERY - 1 && expired() {
-                return Err(self.fault(task, Trap::Deadline));
-            }
-            stats.instructions += 1;
-            // A trapping instruction has no effect: its pops are undone (pops never overwrite
-            // cells, and no instruction pushes before it can still trap).
-            let sp_before = self.sp;
-            match self.step(code) {
-                Ok(Flow::Next) => {}
-                Ok(Flow::EndOfCycle) => {
-                    self.apply_forces();
-                    return Ok(stats);
-                }
-                Err(trap) => {
-                    self.sp = sp_before;
-                    if !self.catch(trap) {
-                        return Err(self.fault(task, trap));
-                    }
-                    stats.caught_traps += 1;
-                }
+            (Err(_), fault) => {
+                let fault = fault.unwrap_or(crate::native::NativeFault {
+                    trap: Trap::InvalidAddress,
+                    pc: self.pc,
+                    sp: 0,
+                    call_depth: 1,
+                });
+                self.sp = fault.sp as usize;
+                self.pc = fault.pc;
+                self.call_depth = fault.call_depth as usize;
+                Err(self.fault(task, fault.trap))
             }
         }
     }
