@@ -25,6 +25,7 @@ pub fn boot(name: &str) -> Outcome {
             echo: false,
             work_dir: dir.join("state"),
             deterministic_time: s.manifest.deterministic_time,
+            done_when: s.manifest.done_when.clone(),
             com2: if s.manifest.console_input.is_empty() {
                 qemu::Com2::Unconnected
             } else {

@@ -191,6 +191,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
             } else {
                 qemu::Com2::Unconnected
             },
+            done_when: Vec::new(),
         },
     )?;
     let crashed = outcome
@@ -214,6 +215,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
             outcome.stderr
         )),
         Ending::Killed => Err("QEMU was killed".to_string()),
+        Ending::Done => unreachable!("`run` waits for no text"),
     };
     match verdict {
         Ok(msg) => {
@@ -337,6 +339,7 @@ fn boot_bench_system(
             work_dir: dir.join("state"),
             deterministic_time,
             com2: qemu::Com2::Unconnected,
+            done_when: Vec::new(),
         },
     )?;
     if !outcome.succeeded() {

@@ -162,6 +162,7 @@ pub fn metrics(
             work_dir: dir.join("state"),
             deterministic_time,
             com2: qemu::Com2::Unconnected,
+            done_when: Vec::new(),
         },
     )?;
     let status = outcome

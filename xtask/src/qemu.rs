@@ -35,6 +35,8 @@ pub struct RunOptions {
     /// scenarios that assert a timing property of the kernel rather than measure QEMU.
     pub deterministic_time: bool,
     pub com2: Com2,
+    /// Stop QEMU as soon as the log has shown each of these texts ([`Ending::Done`]).
+    pub done_when: Vec<String>,
 }
 
 /// Where COM2 goes.
@@ -68,6 +70,8 @@ pub enum Ending {
     TimedOut,
     /// A fatal marker line appeared; QEMU was stopped.
     Aborted(String),
+    /// Every text of [`RunOptions::done_when`] appeared; QEMU was stopped.
+    Done,
 }
 
 #[derive(Clone, Debug)]
@@ -356,6 +360,7 @@ pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
 pub fn run_linux(qemu: &Qemu, linux: &LinuxBoot, options: &RunOptions) -> Result<Outcome> {
     let options = RunOptions {
         com2: Com2::Unconnected,
+        done_when: Vec::new(),
         ..options.clone()
     };
     launch(qemu, Media::Linux(linux), &options)
@@ -420,6 +425,7 @@ fn launch(qemu: &Qemu, media: Media, options: &RunOptions) -> Result<Outcome> {
     });
 
     let mut lines = Vec::new();
+    let mut awaited: Vec<&str> = options.done_when.iter().map(String::as_str).collect();
     let deadline = options.timeout.map(|t| started + t);
     let ending = loop {
         let wait = deadline
@@ -432,10 +438,16 @@ fn launch(qemu: &Qemu, media: Media, options: &RunOptions) -> Result<Outcome> {
                     println!("{line}");
                 }
                 let fatal = FATAL_MARKERS.iter().any(|m| line.contains(m));
+                let was_awaited = !awaited.is_empty();
+                awaited.retain(|text| !line.contains(text));
                 lines.push(line.clone());
                 if fatal {
                     stop(&mut child);
                     break Ending::Aborted(line);
+                }
+                if was_awaited && awaited.is_empty() {
+                    stop(&mut child);
+                    break Ending::Done;
                 }
             }
             Err(mpsc::RecvTimeoutError::Timeout) => {

@@ -13,6 +13,9 @@
 //! corrupt_system_image = true   # optional: flip a byte of system.img after building it
 //! deterministic_time = true     # optional: QEMU on virtual time (-icount), for scenarios
 //!                               # that assert kernel timing, not measure QEMU's
+//! done_when = ["p0: alive at "] # optional: stop QEMU as soon as the log has shown each of
+//!                               # these texts (for systems that run for ever; the
+//!                               # timeout then only bounds a run that never gets there)
 //! console_input = ["echo hi\r", "\u0004"]   # optional: typed into COM2 (a guest's
 //!                               # console) once its output shows `console_start`, each
 //!                               # piece once the output grew and then stayed quiet for
@@ -47,6 +50,8 @@ pub struct Manifest {
     pub corrupt_system_image: bool,
     #[serde(default)]
     pub deterministic_time: bool,
+    #[serde(default)]
+    pub done_when: Vec<String>,
     #[serde(default)]
     pub console_input: Vec<String>,
     #[serde(default)]
