@@ -150,7 +150,10 @@ pub fn format_line(m: &Metric) -> String {
 /// hand-written Rust.
 pub fn host_metrics() -> Result<Vec<Metric>> {
     let mut metrics = Vec::new();
-    for (package, bin) in [("plc-compiler", "plc-bench"), ("plc-native", "plc-native-bench")] {
+    for (package, bin) in [
+        ("plc-compiler", "plc-bench"),
+        ("plc-native", "plc-native-bench"),
+    ] {
         let out = crate::artifacts::cargo()
             .args(["run", "--quiet", "--release", "-p", package, "--bin", bin])
             .output()

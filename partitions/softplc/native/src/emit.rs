@@ -9,27 +9,38 @@
 //!
 //! ```text
 //! fn pou_N(cx, d, base, sp0, cells) -> Result<[u64; RET], Unwind> {
-//!     let [mut s0, mut s1, ..] = cells;            // the activation's operand stack
-//!     let tw = if stack room < max depth { NB } else { 0 };   // checked twins only
-//!     let mut block = tw;
-//!     let live = 'fault: loop {
-//!         let (trap, pc, depth) = 'raise: loop {
-//!             match block {
-//!                 0 => { if cx.fuel() < L { block = NB; continue } cx.burn(L); ..; block = 3; continue }
-//!                 ..                                   // fast blocks 0..NB
-//!                 NB => { cx.tick()?; insn; cx.tick()?; insn; ..; block = 3 + tw; continue }
-//!                 ..                                   // checked twins NB..2*NB
+//!     let [mut s0, mut s1, ..] = cells;           // the activation's operand stack
+//!     let tight = stack room < largest depth;      // then every block runs checked
+//!     let mut fuel = cx.fuel();                     // instructions before the next event
+//!     let mut entry = 0;                            // the region to enter (0: the start)
+//!     let live = 'run: loop {
+//!         let site = 'raise: {
+//!             match entry {
+//!                 0 => { /* region 0, structured: */
+//!                     'l3: loop { ..                    // a loop header
+//!                         // every block:
+//!                         if tight || fuel < L { tick; insn; tick; insn; .. }   // checked
+//!                         else { fuel -= L; insn; insn; .. }                   // fast
+//!                         if s2 == 0 { continue 'l3 } else { break 'b7 } ..   // its branch
+//!                 } }
+//!                 1 => { /* region 1: a try handler */ .. }
+//!                 _ => break 'raise STRAY,
 //!             }
-//!         };
-//!         match cx.catch(trap, pc, me, sp0, depth) { Deliver => handler block, Outer => return, Fault => break }
+//!         };                                            // a trap: its site's entry in SITES_N
+//!         match cx.catch(trap, pc, ..) { Deliver => { entry = its handler's region }, Outer => return, Fault => break 'run live }
 //!     };
 //!     cx.spill(sp0, &[s0, s1, ..], live);
 //!     Err(Unwind::Fault)
 //! }
 //! ```
+//!
+//! The regions and their nesting come from [`crate::structure`]; a trap anywhere leaves
+//! through `'raise` with the number of its site (trap, code offset, stack depth, and the
+//! count of the block's instructions after it, given back to `fuel`).
 
 use crate::Error;
-use crate::analysis::{Block, Insn, PouPlan};
+use crate::analysis::{Insn, PouPlan};
+use crate::structure::{self, Structure};
 use plc_vm::image::Image;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use std::cell::RefCell;
@@ -107,22 +118,24 @@ impl Emitter<'_> {
     /// Writes POU `plan`'s function.
     pub fn pou(&mut self, plan: &PouPlan<'_>) -> Result<(), Error> {
         let m = plan.max_depth;
-        let nb = plan.blocks.len() as u32;
         let rets = plan.pou.ret_cells as u32;
         let name = pou_fn(plan.index);
         let cells: Vec<String> = (0..m).map(cell).collect();
-        let sites = RefCell::new(Vec::new());
-        // The body first (it fills the site table).
-        let body = std::mem::take(&mut self.out);
-        for mode in [Mode::Fast, Mode::Checked] {
-            for (b, block) in plan.blocks.iter().enumerate() {
-                let id = b as u32 + if mode == Mode::Checked { nb } else { 0 };
-                writeln!(self.out, "{id} => {{").ok();
-                self.block(plan, b, block, mode, &sites)?;
-                writeln!(self.out, "}}").ok();
-            }
+        let mut entries = vec![0usize];
+        for &h in &plan.handlers {
+            entries.push(plan.block_of(h)?);
         }
-        // Block numbers are produced by this function only; anything else is a bug here.
+        let st = structure::structure(plan, &entries);
+        let sites = RefCell::new(Vec::new());
+        // The regions first (they fill the site table).
+        let outer = std::mem::take(&mut self.out);
+        for (number, &head) in st.heads.iter().enumerate() {
+            writeln!(self.out, "{number} => {{").ok();
+            let mut context = Vec::new();
+            self.tree(plan, &st, head, &mut context, &sites)?;
+            writeln!(self.out, "}}").ok();
+        }
+        // Region numbers are produced here only; anything else is a bug here.
         let stray = Site {
             insn: &plan.insns[0],
             refund: 0,
@@ -135,7 +148,7 @@ impl Emitter<'_> {
             stray.raise("Trap::InvalidAddress")
         )
         .ok();
-        let arms = std::mem::replace(&mut self.out, body);
+        let regions = std::mem::replace(&mut self.out, outer);
         let o = &mut self.out;
         let table: Vec<String> = sites
             .borrow()
@@ -157,7 +170,7 @@ impl Emitter<'_> {
         .ok();
         writeln!(
             o,
-            "/// POU {} `{}`: code {}..{}, {} arg cell(s), {} result cell(s), frame {} bytes, {} stack cell(s), {} block(s).",
+            "/// POU {} `{}`: code {}..{}, {} arg cell(s), {} result cell(s), frame {} bytes, {} stack cell(s), {} block(s), {} region(s).",
             plan.index,
             plan.pou.name.escape_debug(),
             plan.pou.code_start,
@@ -166,7 +179,8 @@ impl Emitter<'_> {
             rets,
             plan.pou.frame_size,
             m,
-            nb
+            plan.blocks.len(),
+            st.heads.len()
         )
         .ok();
         writeln!(o, "#[inline]").ok();
@@ -187,17 +201,14 @@ impl Emitter<'_> {
         .ok();
         writeln!(o, "let me = cx.call_depth();").ok();
         writeln!(o, "let room = cx.room(sp0);").ok();
-        if m > 0 {
-            writeln!(o, "let tw: u32 = if room < {m} {{ {nb} }} else {{ 0 }};").ok();
-        } else {
-            writeln!(o, "let tw: u32 = 0;").ok();
-        }
-        writeln!(o, "let mut block: u32 = tw;").ok();
+        writeln!(o, "let tight = room < {m};").ok();
+        writeln!(o, "let mut fuel = cx.fuel();").ok();
+        writeln!(o, "let mut entry: u32 = 0;").ok();
         writeln!(o, "let (mut dt, mut dpc) = (Trap::InvalidAddress, 0u32);").ok();
-        writeln!(o, "let live: u32 = 'fault: loop {{").ok();
-        writeln!(o, "let site: u32 = 'raise: loop {{").ok();
-        writeln!(o, "match block {{").ok();
-        o.push_str(&arms);
+        writeln!(o, "let live: u32 = 'run: loop {{").ok();
+        writeln!(o, "let site: u32 = 'raise: {{").ok();
+        writeln!(o, "match entry {{").ok();
+        o.push_str(&regions);
         writeln!(o, "}}").ok(); // match
         writeln!(o, "}};").ok(); // 'raise
         // Unwinding.
@@ -207,81 +218,225 @@ impl Emitter<'_> {
             plan.index
         )
         .ok();
-        writeln!(o, "cx.refund(refund);").ok();
+        writeln!(o, "fuel += refund;\ncx.set_fuel(fuel);").ok();
         writeln!(
             o,
             "match cx.catch(ops::site_trap(code, dt), if pc == u32::MAX {{ dpc }} else {{ pc }}, me, sp0, depth) {{"
         )
         .ok();
         if plan.handlers.is_empty() {
-            writeln!(o, "Catch::Deliver {{ depth, .. }} => break 'fault depth,").ok();
+            writeln!(o, "Catch::Deliver {{ depth, .. }} => break 'run depth,").ok();
         } else {
             writeln!(o, "Catch::Deliver {{ handler, depth, code }} => {{").ok();
             writeln!(o, "match depth {{").ok();
             for i in 0..m {
                 writeln!(o, "{i} => s{i} = code,").ok();
             }
-            writeln!(o, "_ => break 'fault depth,").ok();
+            writeln!(o, "_ => break 'run depth,").ok();
             writeln!(o, "}}").ok();
-            writeln!(o, "block = tw + match handler {{").ok();
+            writeln!(o, "entry = match handler {{").ok();
             for &h in &plan.handlers {
-                writeln!(o, "{h} => {},", plan.block_of(h)?).ok();
+                writeln!(o, "{h} => {},", st.head_number(plan.block_of(h)?)).ok();
             }
-            writeln!(o, "_ => break 'fault depth,").ok();
+            writeln!(o, "_ => break 'run depth,").ok();
             writeln!(o, "}};").ok();
+            writeln!(o, "fuel = cx.fuel();").ok();
             writeln!(o, "}}").ok();
         }
         writeln!(o, "Catch::Outer => return Err(Unwind::Outer),").ok();
-        writeln!(o, "Catch::Fault {{ depth }} => break 'fault depth,").ok();
+        writeln!(o, "Catch::Fault {{ depth }} => break 'run depth,").ok();
         writeln!(o, "}}").ok(); // match catch
-        writeln!(o, "}};").ok(); // 'fault
+        writeln!(o, "}};").ok(); // 'run
         writeln!(o, "cx.spill(sp0, &[{}], live);", cells.join(", ")).ok();
         writeln!(o, "Err(Unwind::Fault)").ok();
         writeln!(o, "}}\n").ok();
         Ok(())
     }
 
+    /// Ramsey's `doTree`: block `x` and the blocks it dominates that are merge nodes.
+    fn tree(
+        &mut self,
+        plan: &PouPlan<'_>,
+        st: &Structure,
+        x: usize,
+        context: &mut Vec<Frame>,
+        sites: &RefCell<Vec<SiteEntry>>,
+    ) -> Result<(), Error> {
+        let mut merges: Vec<usize> = st.children[x]
+            .iter()
+            .copied()
+            .filter(|&c| st.merge[c])
+            .collect();
+        merges.sort_by_key(|&c| std::cmp::Reverse(st.rpo[c]));
+        if st.loop_header[x] {
+            writeln!(self.out, "'l{x}: loop {{").ok();
+            context.push(Frame::Loop(x));
+            self.within(plan, st, x, &merges, context, sites)?;
+            context.pop();
+            writeln!(self.out, "}}").ok();
+        } else {
+            self.within(plan, st, x, &merges, context, sites)?;
+        }
+        Ok(())
+    }
+
+    /// Ramsey's `nodeWithin`: block `x` inside labeled blocks that its merge children
+    /// follow (`merges`, the latest in reverse postorder first, so the earliest is nearest).
+    fn within(
+        &mut self,
+        plan: &PouPlan<'_>,
+        st: &Structure,
+        x: usize,
+        merges: &[usize],
+        context: &mut Vec<Frame>,
+        sites: &RefCell<Vec<SiteEntry>>,
+    ) -> Result<(), Error> {
+        match merges.split_first() {
+            Some((&y, rest)) => {
+                writeln!(self.out, "'b{y}: {{").ok();
+                context.push(Frame::Block(y));
+                self.within(plan, st, x, rest, context, sites)?;
+                context.pop();
+                writeln!(self.out, "}}").ok();
+                self.tree(plan, st, y, context, sites)
+            }
+            None => self.block(plan, st, x, context, sites),
+        }
+    }
+
+    /// Ramsey's `doBranch`: control goes from block `from` to block `to`.
+    fn branch(
+        &mut self,
+        plan: &PouPlan<'_>,
+        st: &Structure,
+        from: usize,
+        to: usize,
+        context: &mut Vec<Frame>,
+        sites: &RefCell<Vec<SiteEntry>>,
+    ) -> Result<(), Error> {
+        if st.dominates(to, from) && context.contains(&Frame::Loop(to)) {
+            writeln!(self.out, "continue 'l{to};").ok();
+        } else if st.is_head[to] {
+            writeln!(self.out, "entry = {};\ncontinue 'run;", st.head_number(to)).ok();
+        } else if st.merge[to] {
+            if !context.contains(&Frame::Block(to)) {
+                return Err(Error::internal(format!(
+                    "POU {}: merge block {to} outside its labeled block",
+                    plan.pou.name
+                )));
+            }
+            writeln!(self.out, "break 'b{to};").ok();
+        } else {
+            self.tree(plan, st, to, context, sites)?;
+        }
+        Ok(())
+    }
+
+    /// Block `b`: its instructions, checked or fast (see the module documentation), then its
+    /// branch.
     fn block(
         &mut self,
         plan: &PouPlan<'_>,
+        st: &Structure,
         b: usize,
-        block: &Block,
-        mode: Mode,
+        context: &mut Vec<Frame>,
         sites: &RefCell<Vec<SiteEntry>>,
     ) -> Result<(), Error> {
+        let block = &plan.blocks[b];
         let len = block.instructions();
-        let nb = plan.blocks.len();
-        if mode == Mode::Fast {
-            writeln!(
-                self.out,
-                "if cx.fuel() < {len} {{ block = {}; continue; }}\ncx.burn({len});",
-                b + nb
-            )
-            .ok();
-        }
-        for k in 0..len as usize {
-            let insn = &plan.insns[block.first + k];
+        let last = &plan.insns[block.last];
+        let control = matches!(
+            last.op,
+            Opcode::Jmp
+                | Opcode::Jz
+                | Opcode::Jnz
+                | Opcode::JumpIf
+                | Opcode::JumpIfNot
+                | Opcode::Call
+                | Opcode::Ret
+                | Opcode::Throw
+        );
+        let body = if control {
+            block.first..block.last
+        } else {
+            block.first..block.last + 1
+        };
+        writeln!(self.out, "if tight || fuel < {len} {{").ok();
+        for i in block.first..=block.last {
+            let insn = &plan.insns[i];
             let at = Site {
                 insn,
-                refund: len - k as u32 - 1,
-                mode,
+                refund: 0,
+                mode: Mode::Checked,
                 sites,
             };
-            if mode == Mode::Checked {
-                writeln!(
-                    self.out,
-                    "if let Err(t) = cx.tick() {{ {} }}",
-                    at.raise("t")
-                )
-                .ok();
+            writeln!(
+                self.out,
+                "if fuel == 0 {{ match cx.event() {{ Ok(f) => fuel = f, Err(t) => {} }} }}\nfuel -= 1;",
+                at.raise("t")
+            )
+            .ok();
+            if body.contains(&i) {
+                self.instruction(plan, &at)?;
             }
+        }
+        writeln!(self.out, "}} else {{\nfuel -= {len};").ok();
+        for (k, i) in body.clone().enumerate() {
+            let at = Site {
+                insn: &plan.insns[i],
+                refund: len - k as u32 - 1,
+                mode: Mode::Fast,
+                sites,
+            };
             self.instruction(plan, &at)?;
         }
-        // Fall through into the next block.
-        let last = &plan.insns[block.last];
-        if last.falls_through() && !last.ends_block() {
-            let next = plan.block_of(last.next())?;
-            writeln!(self.out, "block = {}; continue;", successor(next, mode)).ok();
+        writeln!(self.out, "}}").ok();
+        if control {
+            // The same in both modes: it is the block's last instruction.
+            let at = Site {
+                insn: last,
+                refund: 0,
+                mode: Mode::Fast,
+                sites,
+            };
+            self.instruction(plan, &at)?;
+        }
+        // Its branch.
+        let d = last.depth;
+        let cell_of = |k: u32| cell(d - k);
+        match last.op {
+            Opcode::Ret | Opcode::Throw => {}
+            Opcode::Jz | Opcode::Jnz | Opcode::JumpIf | Opcode::JumpIfNot => {
+                let cond = match last.op {
+                    Opcode::Jz => format!("{} == 0", cell_of(1)),
+                    Opcode::Jnz => format!("{} != 0", cell_of(1)),
+                    op => {
+                        let cmp = Opcode::from_u8(last.imm[0])
+                            .filter(|c| c.is_comparison())
+                            .ok_or_else(|| {
+                                Error::internal(format!("bad comparison at {}", last.pc))
+                            })?;
+                        let not = if op == Opcode::JumpIfNot { "!" } else { "" };
+                        format!(
+                            "{not}compare(Opcode::{cmp:?}, {}, {})",
+                            cell_of(2),
+                            cell_of(1)
+                        )
+                    }
+                };
+                let (taken, next) = (st.succ[b][0], st.succ[b][1]);
+                writeln!(self.out, "if {cond} {{").ok();
+                self.branch(plan, st, b, taken, context, sites)?;
+                writeln!(self.out, "}} else {{").ok();
+                self.branch(plan, st, b, next, context, sites)?;
+                writeln!(self.out, "}}").ok();
+            }
+            _ => {
+                let next = *st.succ[b].first().ok_or_else(|| {
+                    Error::internal(format!("block {b} of {} has no successor", plan.pou.name))
+                })?;
+                self.branch(plan, st, b, next, context, sites)?;
+            }
         }
         Ok(())
     }
@@ -544,40 +699,8 @@ impl Emitter<'_> {
                 )
                 .ok();
             }
-            Jmp => {
-                let t = plan.block_of(insn.u32_at(0))?;
-                writeln!(o, "block = {}; continue;", successor(t, at.mode)).ok();
-            }
-            Jz | Jnz => {
-                let t = plan.block_of(insn.u32_at(0))?;
-                let f = plan.block_of(insn.next())?;
-                let cmp = if insn.op == Jz { "==" } else { "!=" };
-                writeln!(
-                    o,
-                    "block = if {} {cmp} 0 {{ {} }} else {{ {} }}; continue;",
-                    top(1),
-                    successor(t, at.mode),
-                    successor(f, at.mode)
-                )
-                .ok();
-            }
-            JumpIf | JumpIfNot => {
-                let cmp = Opcode::from_u8(insn.imm[0])
-                    .filter(|c| c.is_comparison())
-                    .ok_or_else(|| Error::internal(format!("bad comparison at {pc}")))?;
-                let t = plan.block_of(insn.u32_at(1))?;
-                let f = plan.block_of(insn.next())?;
-                let not = if insn.op == JumpIfNot { "!" } else { "" };
-                writeln!(
-                    o,
-                    "block = if {not}compare(Opcode::{cmp:?}, {}, {}) {{ {} }} else {{ {} }}; continue;",
-                    top(2),
-                    top(1),
-                    successor(t, at.mode),
-                    successor(f, at.mode)
-                )
-                .ok();
-            }
+            // Their branches are the block's, written by `Emitter::block`.
+            Jmp | Jz | Jnz | JumpIf | JumpIfNot => {}
             Call => {
                 let index = insn.u16_at(0) as usize;
                 let callee = self
@@ -609,10 +732,10 @@ impl Emitter<'_> {
                     at.raise("Trap::InvalidAddress")
                 )
                 .ok();
-                writeln!(o, "cx.enter();").ok();
+                writeln!(o, "cx.enter();\ncx.set_fuel(fuel);").ok();
                 writeln!(
                     o,
-                    "match {}(cx, d, {} as u32, sp0 + {region}, [{}]) {{",
+                    "let r = {}(cx, d, {} as u32, sp0 + {region}, [{}]);\nfuel = cx.fuel();\nmatch r {{",
                     pou_fn(index),
                     top(1),
                     init.join(", ")
@@ -629,15 +752,18 @@ impl Emitter<'_> {
                     at.raise_from_callee()
                 )
                 .ok();
-                writeln!(o, "Err(Unwind::Fault) => break 'fault {region},").ok();
+                writeln!(o, "Err(Unwind::Fault) => break 'run {region},").ok();
                 writeln!(o, "}}").ok();
-                let next = plan.block_of(insn.next())?;
-                writeln!(o, "block = {}; continue;", successor(next, at.mode)).ok();
             }
             Ret => {
                 let rets = plan.pou.ret_cells as u32;
                 let results: Vec<String> = (d - rets..d).map(cell).collect();
-                writeln!(o, "cx.ret({pc});\nreturn Ok([{}]);", results.join(", ")).ok();
+                writeln!(
+                    o,
+                    "cx.set_fuel(fuel);\ncx.ret({pc});\nreturn Ok([{}]);",
+                    results.join(", ")
+                )
+                .ok();
             }
             CallBuiltin => {
                 let id = insn.u16_at(0);
@@ -796,13 +922,12 @@ fn known_builtin(id: u16) -> Option<Builtin> {
     .then_some(b)
 }
 
-/// The block number of a successor: the fast block, or in a checked twin the fast block
-/// plus `tw` (checked twins only when the activation's stack room is short).
-fn successor(block: usize, mode: Mode) -> String {
-    match mode {
-        Mode::Fast => block.to_string(),
-        Mode::Checked => format!("{block} + tw"),
-    }
+/// What encloses the code being written: a labeled loop (`'l<block>`, its header) or a
+/// labeled block (`'b<block>`, the merge block that follows it).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Frame {
+    Loop(usize),
+    Block(usize),
 }
 
 /// A place that raises a trap: `(trap code, 0 = dynamic; code offset, u32::MAX = dynamic;

@@ -77,6 +77,7 @@
 pub mod analysis;
 pub mod emit;
 pub mod harness;
+pub mod structure;
 
 use plc_vm::image::Image;
 use std::collections::BTreeSet;

@@ -9,15 +9,15 @@
 //! verifier proved each instruction's stack depth static) and turns jumps into a state
 //! machine of basic blocks; everything that is not specific to one image lives here, once:
 //!
-//! * **Counting** ([`Cycle::burn`], [`Cycle::tick`]): the cycle's instructions are counted as
-//!   the interpreter counts them. `fuel` is the number of instructions that may run before
-//!   the next *event*: the instruction budget (trap WATCHDOG) or a deadline check (every
-//!   [`DEADLINE_CHECK_EVERY`] instructions the clock is asked, trap DEADLINE), at exactly the
-//!   instruction where `Machine::run_cycle_until` asks. A basic block of `L` instructions runs
-//!   straight through when `fuel >= L` (one compare per block); otherwise its *checked twin*
-//!   runs it instruction by instruction with [`Cycle::tick`], which handles the event at its
+//! * **Counting** ([`Cycle::fuel`], [`Cycle::event`]): the cycle's instructions are counted
+//!   as the interpreter counts them. `fuel` is the number of instructions that may run
+//!   before the next *event*: the instruction budget (trap WATCHDOG) or a deadline check
+//!   (every [`DEADLINE_CHECK_EVERY`] instructions the clock is asked, trap DEADLINE), at
+//!   exactly the instruction where `Machine::run_cycle_until` asks. A basic block of `L`
+//!   instructions runs straight through when `fuel >= L` (one compare per block); otherwise
+//!   its *checked* copy runs it instruction by instruction and handles the event at its
 //!   exact instruction. A trap inside a block gives back the fuel of the instructions after
-//!   it ([`Cycle::refund`]).
+//!   it.
 //! * **Try frames and unwinding** ([`Cycle::try_begin`], [`Cycle::catch`]): the interpreter's
 //!   try frames in the machine's try memory, with the same limits; a trap is delivered to the
 //!   innermost frame (the stack cut back to the frame's depth, the trap code pushed), passed
@@ -205,41 +205,29 @@ impl<'c> Cycle<'c> {
         }
     }
 
-    /// Instructions that may run before the next event.
+    /// Instructions that may run before the next event (an activation keeps it in a local
+    /// and hands it back with [`set_fuel`](Self::set_fuel) before a call, a trap, a return).
     #[inline(always)]
     pub fn fuel(&self) -> u32 {
         self.fuel
     }
 
-    /// Counts `n` instructions of a block that [`fuel`](Self::fuel) covers.
+    /// Records the instructions left before the next event.
     #[inline(always)]
-    pub fn burn(&mut self, n: u32) {
-        self.fuel -= n;
+    pub fn set_fuel(&mut self, fuel: u32) {
+        self.fuel = fuel;
     }
 
-    /// Gives back the count of `n` instructions of a block that did not run (a trap left it).
-    #[inline(always)]
-    pub fn refund(&mut self, n: u32) {
-        self.fuel += n;
-    }
-
-    /// Counts one instruction of a checked block, handling the event due before it: `Err`
-    /// with WATCHDOG when the budget is spent, with DEADLINE when the deadline check says
-    /// the time is up (the instruction then does not run and is not counted).
-    #[inline(always)]
-    pub fn tick(&mut self) -> Result<(), Trap> {
-        if self.fuel == 0 {
-            self.event()?;
-        }
-        self.fuel -= 1;
-        Ok(())
-    }
-
-    /// The event at instruction index `event_at` (`fuel` is 0): the budget, or a deadline
-    /// check (indices `k` with `k % DEADLINE_CHECK_EVERY == DEADLINE_CHECK_EVERY - 1`).
+    /// The event due before the next instruction (the fuel is 0): at instruction index
+    /// `event_at`, the budget (`Err(WATCHDOG)`) or a deadline check, which asks the clock
+    /// (`Err(DEADLINE)` when it says the time is up; the instruction then does not run and is
+    /// not counted), as the interpreter does at indices `k` with
+    /// `k % DEADLINE_CHECK_EVERY == DEADLINE_CHECK_EVERY - 1`. `Ok` with the fuel up to the
+    /// next event.
     #[cold]
     #[inline(never)]
-    fn event(&mut self) -> Result<(), Trap> {
+    pub fn event(&mut self) -> Result<u32, Trap> {
+        self.fuel = 0;
         if self.event_at >= self.budget {
             return Err(Trap::Watchdog);
         }
@@ -252,7 +240,7 @@ impl<'c> Cycle<'c> {
             .min(self.budget);
         self.fuel = next - self.event_at;
         self.event_at = next;
-        Ok(())
+        Ok(self.fuel)
     }
 
     /// Operand-stack cells left above absolute depth `sp0` (an activation's first cell).

@@ -190,6 +190,19 @@ pub struct Machine<'a, 'm> {
     faults: [Option<Fault>; MAX_TASKS],
     budget_override: [Option<u32>; MAX_TASKS],
     forces: [Option<Forced>; MAX_FORCES],
+    /// Whether any slot of `forces` is in use (the common case, none, costs one test).
+    any_forced: bool,
+    /// Each task's start (from the task and POU tables, read once).
+    starts: [Option<TaskStart>; MAX_TASKS],
+}
+
+/// Where a task's cycle starts: its POU's first instruction, its instance base and the
+/// task table's instruction budget.
+#[derive(Clone, Copy, Debug)]
+struct TaskStart {
+    code_start: u32,
+    instance_base: u32,
+    budget: u32,
 }
 
 impl<'a, 'm> Machine<'a, 'm> {
@@ -221,7 +234,19 @@ impl<'a, 'm> Machine<'a, 'm> {
             faults: [None; MAX_TASKS],
             budget_override: [None; MAX_TASKS],
             forces: [None; MAX_FORCES],
+            any_forced: false,
+            starts: [None; MAX_TASKS],
         };
+        for (task, start) in machine.starts.iter_mut().enumerate() {
+            *start = image.task(task).map(|entry| TaskStart {
+                code_start: image
+                    .pou(entry.pou as usize)
+                    .expect("verified task POU")
+                    .code_start,
+                instance_base: entry.instance_base,
+                budget: entry.budget(),
+            });
+        }
         machine.reset();
         Ok(machine)
     }
@@ -343,7 +368,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     /// The start of a cycle of `task` at `now_ns`: refused for an unknown or faulted task;
     /// else the forces applied, the registers set for the task's POU, its budget returned.
     fn start_cycle(&mut self, task: usize, now_ns: i64) -> Result<u32, Fault> {
-        let Some(entry) = self.image.task(task) else {
+        let Some(start) = self.starts.get(task).copied().flatten() else {
             return Err(Fault {
                 trap: Trap::InvalidAddress,
                 task,
@@ -358,11 +383,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 ..fault
             });
         }
-        let pou = self
-            .image
-            .pou(entry.pou as usize)
-            .expect("verified task POU");
-        let budget = self.budget_override[task].unwrap_or(entry.budget());
+        let budget = self.budget_override[task].unwrap_or(start.budget);
         self.apply_forces();
         self.now_ns = now_ns;
         self.sp = 0;
@@ -372,8 +393,8 @@ impl<'a, 'm> Machine<'a, 'm> {
             saved_base: 0,
         };
         self.call_depth = 1;
-        self.base = entry.instance_base;
-        self.pc = pou.code_start;
+        self.base = start.instance_base;
+        self.pc = start.code_start;
         Ok(budget)
     }
 
@@ -965,6 +986,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 .ok_or(VarError::TooManyForces)?,
         };
         self.forces[slot] = Some(forced);
+        self.any_forced = true;
         self.write_forced(&forced);
         Ok(())
     }
@@ -977,6 +999,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 *slot = None;
             }
         }
+        self.any_forced = self.forces.iter().any(Option::is_some);
         Ok(())
     }
 
@@ -1017,6 +1040,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     /// Ends all forcing.
     pub fn clear_forces(&mut self) {
         self.forces = [None; MAX_FORCES];
+        self.any_forced = false;
     }
 
     fn encode_scalar(var: &Var<'_>, ty: VarType, value: Value<'_>) -> Result<Forced, VarError> {
@@ -1047,6 +1071,9 @@ impl<'a, 'm> Machine<'a, 'm> {
     }
 
     fn apply_forces(&mut self) {
+        if !self.any_forced {
+            return;
+        }
         for slot in 0..MAX_FORCES {
             if let Some(forced) = self.forces[slot] {
                 self.write_forced(&forced);
