@@ -1,6 +1,6 @@
 //! The native execution tier's run-time side: what code translated from a verified image
 //! calls (the translator is the host crate `plc-native`, whose module documentation explains
-//! the route), and the contract between such code and a [`Machine`]
+//! the route), and the contract between such code and a [`Machine`](crate::vm::Machine)
 //! ([`Machine::run_cycle_native`](crate::vm::Machine::run_cycle_native)).
 //!
 //! A translated program is a [`NativeProgram`]: the image it was translated from (byte for
