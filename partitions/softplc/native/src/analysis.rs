@@ -2,7 +2,7 @@
 //! reachable instructions with their static operand-stack depth (the verifier's abstract
 //! interpretation, redone here), the basic blocks, the largest depth (how many cell locals
 //! the POU's function needs), the try-handler targets, and the one pattern the native tier
-//! refuses (a try frame that could see cells a callee wrote, see [`check_try_frames`]).
+//! refuses (a try frame that could see cells a callee wrote, see `check_try_frames`).
 //!
 //! It never accepts an image the verifier has not accepted: [`crate::translate`] verifies
 //! first, and every inconsistency found here is reported, never patched.

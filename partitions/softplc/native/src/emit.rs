@@ -1,6 +1,6 @@
 //! Writes the Rust source of one analysed POU ([`crate::analysis::PouPlan`]).
 //!
-//! Every opcode is handled in exactly one place, [`Emitter::instruction`]: one arm per
+//! Every opcode is handled in exactly one place, `Emitter::instruction`: one arm per
 //! opcode that writes what the interpreter does (`plc_vm::vm`, `Machine::step`) over the cell
 //! locals `s0, s1, ...` (cell `k` of the activation's operand stack). An opcode without an
 //! arm is a translation error ([`Error::UnsupportedOpcode`]), never a guess.
