@@ -40,7 +40,8 @@
 
 use crate::Error;
 use crate::analysis::{Insn, PouPlan};
-use crate::structure::{self, Structure};
+use crate::promote::{Promotion, Sync};
+use crate::structure::Structure;
 use plc_vm::image::Image;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use std::cell::RefCell;
@@ -52,6 +53,8 @@ pub struct Emitter<'i> {
     /// Cell locals of every POU (its largest stack depth), by POU index.
     pub cells: Vec<u32>,
     pub out: String,
+    /// The frame variables of the POU being written that live in locals `v<k>`.
+    pub promotion: Promotion,
 }
 
 /// How a block runs.
@@ -110,22 +113,76 @@ fn cell_from(ty: MemType, bytes: &str) -> String {
     }
 }
 
+/// The memory type of a promoted variable's raw bytes (`width` bytes, zero-extended).
+fn raw_type(width: u8) -> &'static str {
+    match width {
+        1 => "MemType::U8",
+        2 => "MemType::U16",
+        4 => "MemType::U32",
+        _ => "MemType::U64",
+    }
+}
+
+/// The cell an `LD_REL` of type `ty` loads from a promoted variable's raw bytes `raw`.
+fn from_raw(ty: MemType, raw: &str) -> String {
+    match ty {
+        MemType::I8 => format!("({raw} as u8 as i8 as i64 as u64)"),
+        MemType::I16 => format!("({raw} as u16 as i16 as i64 as u64)"),
+        MemType::I32 => format!("({raw} as u32 as i32 as i64 as u64)"),
+        _ => raw.to_string(),
+    }
+}
+
+/// Writes every promoted variable back to data memory (inside the frame, which the
+/// function checked on entry).
+fn flush_code(promotion: &Promotion) -> String {
+    let mut o = String::new();
+    for (k, &(off, w)) in promotion.vars.iter().enumerate() {
+        writeln!(
+            o,
+            "let _ = ops::store(d, base as usize + {off}, {}, v{k});",
+            raw_type(w)
+        )
+        .ok();
+    }
+    o
+}
+
+/// Reads every promoted variable again from data memory.
+fn reload_code(promotion: &Promotion) -> String {
+    let mut o = String::new();
+    for (k, &(off, w)) in promotion.vars.iter().enumerate() {
+        writeln!(
+            o,
+            "if let Some(v) = ops::load(d, base as usize + {off}, {}) {{ v{k} = v; }}",
+            raw_type(w)
+        )
+        .ok();
+    }
+    o
+}
+
 fn hex(v: u64) -> String {
     format!("0x{v:x}u64")
 }
 
 impl Emitter<'_> {
-    /// Writes POU `plan`'s function.
-    pub fn pou(&mut self, plan: &PouPlan<'_>) -> Result<(), Error> {
+    /// Writes POU `plan`'s function, structured by `st` (the POU start its first entry), with
+    /// the frame variables of `promotion` in locals, its frame base fixed to `base` if that is
+    /// known.
+    pub fn pou(
+        &mut self,
+        plan: &PouPlan<'_>,
+        st: &Structure,
+        promotion: &Promotion,
+        base: Option<u32>,
+    ) -> Result<(), Error> {
+        let st = st.clone();
+        self.promotion = promotion.clone();
         let m = plan.max_depth;
         let rets = plan.pou.ret_cells as u32;
         let name = pou_fn(plan.index);
         let cells: Vec<String> = (0..m).map(cell).collect();
-        let mut entries = vec![0usize];
-        for &h in &plan.handlers {
-            entries.push(plan.block_of(h)?);
-        }
-        let st = structure::structure(plan, &entries);
         let sites = RefCell::new(Vec::new());
         // The regions first (they fill the site table).
         let outer = std::mem::take(&mut self.out);
@@ -138,6 +195,7 @@ impl Emitter<'_> {
         // Region numbers are produced here only; anything else is a bug here.
         let stray = Site {
             insn: &plan.insns[0],
+            index: 0,
             refund: 0,
             mode: Mode::Checked,
             sites: &sites,
@@ -199,6 +257,25 @@ impl Emitter<'_> {
                 .join(", ")
         )
         .ok();
+        if let Some(b) = base {
+            writeln!(o, "// Every activation has this frame base (its tasks and calls).\nlet base: u32 = {b};").ok();
+        }
+        if !promotion.vars.is_empty() {
+            writeln!(
+                o,
+                "// The frame is inside data memory (CALL and the verifier checked it); its promoted variables:\nif base as usize + {} > DATA {{ return Err(cx.refuse({})); }}",
+                plan.pou.frame_size, plan.pou.code_start
+            )
+            .ok();
+            for (k, &(off, w)) in promotion.vars.iter().enumerate() {
+                writeln!(
+                    o,
+                    "let mut v{k}: u64 = ops::load(d, base as usize + {off}, {}).unwrap_or(0);",
+                    raw_type(w)
+                )
+                .ok();
+            }
+        }
         writeln!(o, "let me = cx.call_depth();").ok();
         writeln!(o, "let room = cx.room(sp0);").ok();
         writeln!(o, "let tight = room < {m};").ok();
@@ -218,6 +295,7 @@ impl Emitter<'_> {
             plan.index
         )
         .ok();
+        o.push_str(&flush_code(promotion));
         writeln!(o, "fuel += refund;\ncx.set_fuel(fuel);").ok();
         writeln!(
             o,
@@ -366,6 +444,7 @@ impl Emitter<'_> {
             let insn = &plan.insns[i];
             let at = Site {
                 insn,
+                index: i,
                 refund: 0,
                 mode: Mode::Checked,
                 sites,
@@ -384,6 +463,7 @@ impl Emitter<'_> {
         for (k, i) in body.clone().enumerate() {
             let at = Site {
                 insn: &plan.insns[i],
+                index: i,
                 refund: len - k as u32 - 1,
                 mode: Mode::Fast,
                 sites,
@@ -395,6 +475,7 @@ impl Emitter<'_> {
             // The same in both modes: it is the block's last instruction.
             let at = Site {
                 insn: last,
+                index: block.last,
                 refund: 0,
                 mode: Mode::Fast,
                 sites,
@@ -447,7 +528,21 @@ impl Emitter<'_> {
         let insn = at.insn;
         let d = insn.depth;
         let top = |k: u32| cell(d - k); // top(1) is the top cell
+        // Promoted variables: written back before an instruction that may read them from
+        // memory, read again after one that may write it (a CALL: in its result arms).
+        let sync = self.promotion.sync(at.index);
+        let flush = flush_code(&self.promotion);
+        let reload = reload_code(&self.promotion);
+        let after = if sync == Sync::FlushReload && insn.op != Call {
+            reload.clone()
+        } else {
+            String::new()
+        };
+        let promoted = |off: u32, ty: MemType| self.promotion.var(off, ty.width() as u8);
         let o = &mut self.out;
+        if sync != Sync::None {
+            o.push_str(&flush);
+        }
         let pc = insn.pc;
         match insn.op {
             Nop => {}
@@ -499,6 +594,20 @@ impl Emitter<'_> {
                     }
                     StAbs => {
                         writeln!(o, "st::<DATA, {w}>(d, {off}, {});", top(1)).ok();
+                    }
+                    LdRel if promoted(off, ty).is_some() => {
+                        let k = promoted(off, ty).unwrap_or(0);
+                        at.push_check(o);
+                        writeln!(o, "{} = {};", cell(d), from_raw(ty, &format!("v{k}"))).ok();
+                    }
+                    StRel if promoted(off, ty).is_some() => {
+                        let k = promoted(off, ty).unwrap_or(0);
+                        let mask = if w == 8 {
+                            u64::MAX
+                        } else {
+                            (1u64 << (8 * w)) - 1
+                        };
+                        writeln!(o, "v{k} = {} & {};", top(1), hex(mask)).ok();
                     }
                     LdRel => {
                         writeln!(
@@ -741,14 +850,19 @@ impl Emitter<'_> {
                     init.join(", ")
                 )
                 .ok();
-                writeln!(o, "Ok([{}]) => {{ cx.leave();", results.join(", ")).ok();
+                writeln!(
+                    o,
+                    "Ok([{}]) => {{ cx.leave();\n{reload}",
+                    results.join(", ")
+                )
+                .ok();
                 for i in 0..rets {
                     writeln!(o, "{} = r{i};", cell(region + i)).ok();
                 }
                 writeln!(o, "}}").ok();
                 writeln!(
                     o,
-                    "Err(Unwind::Outer) => {{ cx.resume_at(me); (dt, dpc) = cx.raised(); {} }}",
+                    "Err(Unwind::Outer) => {{ {reload}cx.resume_at(me); (dt, dpc) = cx.raised(); {} }}",
                     at.raise_from_callee()
                 )
                 .ok();
@@ -760,7 +874,7 @@ impl Emitter<'_> {
                 let results: Vec<String> = (d - rets..d).map(cell).collect();
                 writeln!(
                     o,
-                    "cx.set_fuel(fuel);\ncx.ret({pc});\nreturn Ok([{}]);",
+                    "{flush}cx.set_fuel(fuel);\ncx.ret({pc});\nreturn Ok([{}]);",
                     results.join(", ")
                 )
                 .ok();
@@ -863,6 +977,7 @@ impl Emitter<'_> {
                 });
             }
         }
+        o.push_str(&after);
         Ok(())
     }
 }
@@ -937,6 +1052,8 @@ type SiteEntry = (u8, u32, u32, u32);
 /// Where an instruction stands in its block.
 struct Site<'p, 'a> {
     insn: &'p Insn<'a>,
+    /// Its index in `PouPlan::insns`.
+    index: usize,
     /// Instructions of the block after this one (their count is given back on a trap).
     refund: u32,
     mode: Mode,

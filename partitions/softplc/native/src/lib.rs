@@ -77,6 +77,7 @@
 pub mod analysis;
 pub mod emit;
 pub mod harness;
+pub mod promote;
 pub mod structure;
 
 use plc_vm::image::Image;
@@ -198,8 +199,15 @@ pub fn translate_with(image_bytes: &[u8], source: &ImageSource) -> Result<String
     for &index in &pous {
         let plan = analysis::plan(&image, index)?;
         cells[index] = plan.max_depth;
-        plans.push(plan);
+        let mut entries = vec![0usize];
+        for &h in &plan.handlers {
+            entries.push(plan.block_of(h)?);
+        }
+        let st = structure::structure(&plan, &entries);
+        let stacks = promote::addresses(&image, &plan, &st);
+        plans.push((plan, st, stacks));
     }
+    let bases = fixed_bases(&image, &plans);
     let mut out = String::new();
     let hash = plc_vm::native::image_hash(image_bytes);
     writeln!(
@@ -264,11 +272,58 @@ pub fn translate_with(image_bytes: &[u8], source: &ImageSource) -> Result<String
         image: &image,
         cells,
         out,
+        promotion: promote::Promotion::default(),
     };
-    for plan in &plans {
-        emitter.pou(plan)?;
+    for (plan, st, stacks) in &plans {
+        let base = bases[plan.index];
+        let promotion = promote::promote(plan, st, stacks, base);
+        emitter.pou(plan, st, &promotion, base)?;
     }
     Ok(emitter.out)
+}
+
+/// The frame base of each POU when every activation has the same one (its tasks' instance
+/// base, the base every CALL of it passes), found from the task table down the call graph.
+fn fixed_bases(
+    image: &Image<'_>,
+    plans: &[(
+        analysis::PouPlan<'_>,
+        structure::Structure,
+        Vec<Vec<promote::Addr>>,
+    )],
+) -> Vec<Option<u32>> {
+    let n = image.pou_count();
+    let mut bases: Vec<Option<u32>> = vec![None; n];
+    // Each round settles at least one more level of the call graph; a disagreement (which
+    // should not happen) ends in no fixed bases rather than a guess.
+    for _ in 0..n + 2 {
+        // Every way into each POU: Some(base) when known, None when not.
+        let mut seen: Vec<Vec<Option<u64>>> = vec![Vec::new(); n];
+        for task in (0..image.task_count()).filter_map(|t| image.task(t)) {
+            if let Some(ways) = seen.get_mut(task.pou as usize) {
+                ways.push(Some(task.instance_base as u64));
+            }
+        }
+        for (plan, _, stacks) in plans {
+            for (callee, base) in promote::call_bases(plan, stacks, bases[plan.index]) {
+                if let Some(ways) = seen.get_mut(callee) {
+                    ways.push(base);
+                }
+            }
+        }
+        let next: Vec<Option<u32>> = seen
+            .iter()
+            .map(|ways| match ways.first() {
+                Some(Some(b)) if ways.iter().all(|w| *w == Some(*b)) => u32::try_from(*b).ok(),
+                _ => None,
+            })
+            .collect();
+        if next == bases {
+            return bases;
+        }
+        bases = next;
+    }
+    vec![None; n]
 }
 
 /// `bytes` as the inside of a Rust byte-string literal.
