@@ -118,9 +118,12 @@ pub fn addresses(image: &Image<'_>, plan: &PouPlan<'_>, st: &Structure) -> Vec<V
                 continue;
             };
             let block = &plan.blocks[b];
-            for i in block.first..=block.last {
-                at[i] = stack.clone();
-                step(image, &plan.insns[i], &mut stack);
+            for (slot, insn) in at[block.first..=block.last]
+                .iter_mut()
+                .zip(&plan.insns[block.first..=block.last])
+            {
+                *slot = stack.clone();
+                step(image, insn, &mut stack);
             }
             // Region heads (the try handlers among them) start with unknown cells.
             for &s in &st.succ[b] {
