@@ -140,8 +140,8 @@
 //! force, unforce, stop and start a task) or `"download"` (also replace the program by
 //! online download); a request beyond it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
 //! they take when a task faults and the outputs go safe (a number or a boolean fitting the
-//! variable's type; checked when the program is compiled); without one they go to
-//! zero/FALSE. `plc.deadline` gives IEC tasks a time deadline (CODESYS's task watchdog
+//! variable's type; checked when the program is compiled); without one they take the value
+//! the program's `{attribute 'safe' := 'VALUE'}` pragma gives them, else zero/FALSE. `plc.deadline` gives IEC tasks a time deadline (CODESYS's task watchdog
 //! time), counted from the task's release (its window start), between 100 us and one hour;
 //! a task still running then is stopped with the trap DEADLINE (outputs safe, reported as
 //! DEADLINE_MISSED, like the instruction-budget WATCHDOG that watches every task). Keys are
@@ -186,8 +186,9 @@
 //! applet links, `/etc/guest/init`, `/etc/guest/env`, `/init`). `guest.programs` names
 //! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`
 //! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, `linux-bench`, the
-//! guest benchmark, and `linux-probe`, the faults and forbidden accesses of the memory and
-//! isolation scenarios), or the Rust programs `plcctl` (the PLC online tool) and `plcc` (the
+//! guest benchmark, `linux-probe`, the faults and forbidden accesses of the memory and
+//! isolation scenarios, and `linux-arinc`, the checks of the ARINC port devices and the
+//! hostile guest's port flood), or the Rust programs `plcctl` (the PLC online tool) and `plcc` (the
 //! Structured Text compiler), built for `x86_64-unknown-linux-musl`, and adds as `/bin/<name>` (not also a `guest.files` path,
 //! each once). The partition's `ports.*` reach the guest as the devices
 //! `/dev/arinc/<name>` (the initramfs's `/etc/guest/ports`, see `guest::arinc`). `cargo xtask` builds the

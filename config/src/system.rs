@@ -96,6 +96,7 @@ pub const GUEST_PROGRAMS: &[&str] = &[
     "linux-tests",
     "linux-bench",
     "linux-probe",
+    "linux-arinc",
     "plcctl",
     "plcc",
 ];

@@ -79,27 +79,48 @@ fn plc_guest_system() {
         ),
         (0, 3_000_000, 1)
     );
-    // The PLC's valve and setpoint to the plant, the plant's level to the PLC.
-    let links: Vec<(String, String)> = s
+    // The PLC's valve and setpoint to the plant, the plant's level to the PLC; the guest
+    // sees the level and the valve and reaches the PLC's online service.
+    let links: Vec<(PortKind, String, Vec<String>)> = s
         .channels
         .iter()
         .map(|c| {
-            assert_eq!(c.kind, PortKind::Sampling);
             let end = |r: config::system::PortRef| {
                 let p = &s.partitions[r.partition];
                 format!("{}.{}", p.name, p.ports[r.port].name)
             };
-            (end(c.source), end(c.destinations[0]))
+            let to = c.destinations.iter().map(|&d| end(d)).collect();
+            (c.kind, end(c.source), to)
         })
         .collect();
+    let link = |kind, from: &str, to: &[&str]| {
+        (
+            kind,
+            from.to_string(),
+            to.iter().map(|t| t.to_string()).collect::<Vec<_>>(),
+        )
+    };
     assert_eq!(
         links,
         [
-            ("plc.valve".to_string(), "plant.valve".to_string()),
-            ("plc.setpoint".to_string(), "plant.setpoint".to_string()),
-            ("plant.level".to_string(), "plc.level".to_string())
+            link(
+                PortKind::Sampling,
+                "plc.valve",
+                &["plant.valve", "linux.valve"]
+            ),
+            link(PortKind::Sampling, "plc.setpoint", &["plant.setpoint"]),
+            link(
+                PortKind::Sampling,
+                "plant.level",
+                &["plc.level", "linux.level"]
+            ),
+            link(PortKind::Queuing, "linux.plc-request", &["plc.cmd"]),
+            link(PortKind::Queuing, "plc.reply", &["linux.plc-response"]),
         ]
     );
+    let g = guest.guest.as_ref().expect("the guest's keys");
+    assert_eq!(g.programs, ["plcctl", "plcc"]);
+    assert!(g.console_com2);
     assert_eq!(
         plc.health.get(ErrorCode::DeadlineMissed),
         Some(HealthAction::Ignore)

@@ -4,8 +4,9 @@
 //! bare-metal artifacts ([`artifacts`]), assembling an ESP folder with `system.img`
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
-//! lint gate ([`lint`]), the Linux-side test programs ([`linux`]) and the native Linux
-//! reference of the guest benchmark ([`native`]).
+//! lint gate ([`lint`]), the Linux-side test programs ([`linux`]), the native Linux
+//! reference of the guest benchmark ([`native`]), the pictures of a run's serial log
+//! ([`plot`], whose parser the scenarios use too) and the OSCAT library check ([`oscat`]).
 
 pub mod artifacts;
 pub mod bench;
@@ -15,7 +16,9 @@ pub mod guest;
 pub mod lint;
 pub mod linux;
 pub mod native;
+pub mod oscat;
 pub mod plc;
+pub mod plot;
 pub mod qemu;
 pub mod scenario;
 pub mod tools;

@@ -9,6 +9,9 @@
 //! - `linux-bench` (`tests/linux/bench.c`): the guest benchmark of `cargo xtask bench`.
 //! - `linux-probe` (`tests/linux/probe.c`): the faults and forbidden accesses of the
 //!   scenarios `guest_faults` and `guest_isolation` (one per argument).
+//! - `linux-arinc` (`tests/linux/arinc.c`, with the checks' common part `check.c`): the
+//!   ARINC port devices `/dev/arinc/<port>` (scenario `system_devices`) and the port
+//!   flood of the hostile guest (scenario `system_hostile_guest`).
 //! - `plcctl` (`partitions/guest/plcctl`): the PLC online tool, a Rust program built with
 //!   cargo for [`MUSL_TARGET`] (static, profile `linux`) into
 //!   `target/x86_64-unknown-linux-musl/linux/plcctl`.
@@ -31,8 +34,13 @@ pub const GCC_PACKAGES: &str = "gcc libc6-dev";
 pub const MUSL_TARGET: &str = "x86_64-unknown-linux-musl";
 /// The Rust programs: (program, the workspace package whose binary of that name it is).
 const RUST_PROGRAMS: &[(&str, &str)] = &[("plcctl", "plcctl"), ("plcc", "plc-compiler")];
-/// The programs built from one source file each; `linux-tests` is every other source.
-const SINGLE_FILE: &[(&str, &str)] = &[("linux-bench", "bench.c"), ("linux-probe", "probe.c")];
+/// The programs built from a main source file of their own (and the shared sources they
+/// also need); `linux-tests` is every source that is no such main file.
+const OWN_MAIN: &[(&str, &str, &[&str])] = &[
+    ("linux-bench", "bench.c", &[]),
+    ("linux-probe", "probe.c", &[]),
+    ("linux-arinc", "arinc.c", &["check.c"]),
+];
 /// How every program is compiled.
 const CFLAGS: &[&str] = &["-static", "-O2", "-Wall", "-Werror"];
 
@@ -54,16 +62,22 @@ pub fn sources(name: &str) -> Result<Vec<PathBuf>> {
         .filter(|p| p.extension().is_some_and(|e| e == "c"))
         .collect();
     c_files.sort();
-    let own_file = |p: &PathBuf| {
-        SINGLE_FILE
+    let main_of_another = |p: &PathBuf| {
+        OWN_MAIN
             .iter()
-            .any(|(_, file)| p.file_name().is_some_and(|n| n == *file))
+            .any(|(_, main, _)| p.file_name().is_some_and(|n| n == *main))
     };
     if name == "linux-tests" {
-        return Ok(c_files.into_iter().filter(|p| !own_file(p)).collect());
+        return Ok(c_files
+            .into_iter()
+            .filter(|p| !main_of_another(p))
+            .collect());
     }
-    match SINGLE_FILE.iter().find(|(program, _)| *program == name) {
-        Some((_, file)) => Ok(vec![source_dir().join(file)]),
+    match OWN_MAIN.iter().find(|(program, _, _)| *program == name) {
+        Some((_, main, shared)) => Ok(std::iter::once(main)
+            .chain(shared.iter())
+            .map(|file| source_dir().join(file))
+            .collect()),
         None => bail!("no Linux program {name}"),
     }
 }
@@ -241,6 +255,10 @@ mod tests {
         let tests = sources("linux-tests").unwrap();
         assert!(tests.iter().any(|p| p.ends_with("main.c")));
         assert!(!tests.iter().any(|p| p.ends_with("bench.c")));
+        assert!(!tests.iter().any(|p| p.ends_with("arinc.c")));
+        assert!(tests.iter().any(|p| p.ends_with("check.c")));
+        let arinc = sources("linux-arinc").unwrap();
+        assert!(arinc.iter().any(|p| p.ends_with("check.c")) && arinc.len() == 2);
     }
 
     #[test]

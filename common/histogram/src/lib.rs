@@ -49,6 +49,26 @@ fn bucket(ns: u64) -> usize {
     LINEAR as usize + (top - SUB_BITS - 1) as usize * SUB + mantissa
 }
 
+/// The lowest value of bucket `index`.
+fn low(index: usize) -> u64 {
+    if index < LINEAR as usize {
+        return index as u64;
+    }
+    let above = index - LINEAR as usize;
+    ((SUB + above % SUB) as u64) << ((above / SUB) as u32 + 1)
+}
+
+/// The bin of `bits` significant bits that holds `ns`: `[low, high)`.
+fn coarse(ns: u64, bits: u32) -> (u64, u64) {
+    let top = 63 - ns.leading_zeros().min(63);
+    if top < bits {
+        return (ns, ns + 1);
+    }
+    let shift = top + 1 - bits;
+    let low = ns >> shift << shift;
+    (low, low + (1 << shift))
+}
+
 /// The middle of bucket `index`.
 fn midpoint(index: usize) -> u64 {
     if index < LINEAR as usize {
@@ -108,6 +128,36 @@ impl Histogram {
         }
         Some((self.min, median.clamp(self.min, self.max), self.max))
     }
+
+    /// The non-empty bins of `bits` (1 to 6) significant bits, in increasing order, as
+    /// `(low, high, count)` for the values in `[low, high)`: a bin is at most 2^(1 - bits)
+    /// of its values wide (a quarter with 3 bits), values below 2^bits have one each; the
+    /// bin of the largest values reaches to `u64::MAX` (see [`MAX_EXPONENT`]). A
+    /// coarser view than the buckets, for a log line or a picture.
+    pub fn bins(&self, bits: u32) -> impl Iterator<Item = (u64, u64, u64)> + '_ {
+        let bits = bits.clamp(1, SUB_BITS + 1);
+        let mut filled = self
+            .counts
+            .iter()
+            .enumerate()
+            .filter(|&(_, &c)| c > 0)
+            .map(move |(i, &c)| {
+                let (low, high) = coarse(low(i), bits);
+                // The last bucket also holds every larger value.
+                let high = if i == BUCKETS - 1 { u64::MAX } else { high };
+                ((low, high), u64::from(c))
+            })
+            .peekable();
+        core::iter::from_fn(move || {
+            let ((low, high), mut count) = filled.next()?;
+            // A bucket lies inside one bin: the bin's buckets follow each other.
+            while let Some(&(_, more)) = filled.peek().filter(|(bin, _)| *bin == (low, high)) {
+                count += more;
+                filled.next();
+            }
+            Some((low, high, count))
+        })
+    }
 }
 
 #[cfg(test)]
@@ -144,6 +194,72 @@ mod tests {
                 assert_eq!(b, BUCKETS - 1);
             }
         }
+    }
+
+    #[test]
+    fn bins_count_every_value_in_its_range() {
+        let mut h = Histogram::new();
+        let values = [
+            0,
+            3,
+            7,
+            8,
+            9,
+            11,
+            12,
+            63,
+            64,
+            100,
+            127,
+            20_000,
+            23_000,
+            24_576,
+            1 << 45,
+        ];
+        for ns in values {
+            h.record(ns);
+        }
+        let bins: Vec<(u64, u64, u64)> = h.bins(3).collect();
+        assert_eq!(
+            bins,
+            [
+                (0, 1, 1),
+                (3, 4, 1),
+                (7, 8, 1),
+                (8, 10, 2),
+                (10, 12, 1),
+                (12, 14, 1),
+                (56, 64, 1),
+                (64, 80, 1),
+                (96, 112, 1),
+                (112, 128, 1),
+                (16_384, 20_480, 1),
+                (20_480, 24_576, 1),
+                (24_576, 28_672, 1),
+                (7 << 38, u64::MAX, 1),
+            ]
+        );
+        for (low, high, _) in &bins {
+            assert!(
+                high - low <= (*low / 4).max(1) || *high == u64::MAX,
+                "{low}..{high}"
+            );
+        }
+        let mut many = Histogram::new();
+        for ns in 0..100_000u64 {
+            many.record(ns * 37);
+        }
+        let bins: Vec<_> = many.bins(3).collect();
+        assert_eq!(bins.iter().map(|b| b.2).sum::<u64>(), 100_000);
+        assert!(
+            bins.windows(2).all(|w| w[0].1 <= w[1].0),
+            "ordered, disjoint"
+        );
+        for ns in [0u64, 37, 40_000 * 37, 99_999 * 37] {
+            let (low, high, _) = *bins.iter().find(|b| b.0 <= ns && ns < b.1).unwrap();
+            assert!(low <= ns && ns < high);
+        }
+        assert_eq!(Histogram::new().bins(3).count(), 0);
     }
 
     #[test]

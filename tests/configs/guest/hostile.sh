@@ -1,35 +1,59 @@
 #!/bin/sh
-# The hostile guest of scenario plc_guest_hostile: one attack after the other with a CPU
-# hog through all of them, then a crash of init in the middle of a fork bomb; every step
-# logs a `hostile:` line. Every Linux process runs at the same priority, the highest the
-# guest gives its processes, so the hog is at the guest's maximum. What it starts is
-# bounded by the guest's memory, its file system and its process table.
+# The hostile guest of scenario system_hostile_guest: after 3 s of an idle guest (the
+# PLC's lateness then is the baseline), one attack after the other: a port flood, then a
+# CPU hog through all the others (memory hogs, a pipe flood), then a crash of init in the
+# middle of a fork bomb; every step logs a `hostile:` line. Every Linux process runs at
+# the same priority, the highest the guest gives its processes, so the hog is at the
+# guest's maximum. What it starts is bounded by the guest's memory, its file system and
+# its process table.
 echo "hostile: boot: a fresh shell, pid $$, $(echo runs commands)"
+sleep 3
+echo "hostile: idle phase over"
+
+# A port flood: every port call is a request to syssw. Two programs write requests to
+# the PLC's online service as fast as they can without waiting (valid, forbidden and
+# garbage ones; the queue is mostly full) and drain the answers; a shell loop writes READ
+# requests that wait for room, a dd reads answers that wait for them, another reads the
+# plant's level as fast as it can; for 2 s. (Before the CPU hog: a process that makes
+# calls gets one a time slice beside a process that spins.)
+linux-arinc flood /dev/arinc/plc-request /dev/arinc/plc-response 2 &
+flooders=$!
+linux-arinc flood /dev/arinc/plc-request /dev/arinc/plc-response 2 &
+flooders="$flooders $!"
+(while :; do printf '\002\001level' > /dev/arinc/plc-request; done) &
+waiters=$!
+dd if=/dev/arinc/plc-response of=/dev/null bs=256 2>/dev/null &
+waiters="$waiters $!"
+dd if=/dev/arinc/level of=/dev/null bs=8 2>/dev/null &
+waiters="$waiters $!"
+wait $flooders
+kill $waiters
+echo "hostile: port flood done"
 
 while :; do :; done &
 echo "hostile: cpu hog started"
 
 # Memory hogs: a buffer larger than the guest's memory, a string doubled until the
-# memory is gone (stopped after 2 s), a file larger than the file system.
+# memory is gone (stopped after 1 s), a file larger than the file system.
 dd if=/dev/zero of=/dev/null bs=200M count=1 2>/dev/null
 echo "hostile: dd of a 200 MiB block ended with status $?"
 awk 'BEGIN { s = "0123456789abcdef"; while (1) s = s s }' 2>/dev/null &
 hog=$!
-sleep 2
+sleep 1
 kill -9 $hog 2>/dev/null
 wait $hog
 echo "hostile: memory hog ended with status $?"
-dd if=/dev/zero of=/tmp/fill bs=64k count=1024 2>/dev/null
+dd if=/dev/zero of=/tmp/fill bs=1M count=64 2>/dev/null
 echo "hostile: 64 MiB into the file system, dd ended with status $?"
 rm /tmp/fill
 
-# A pipe flood: writers as fast as they can, each into a reader, for 2 s.
+# A pipe flood: writers as fast as they can, each into a reader, for 1 s.
 readers=
 for i in 1 2 3; do
     yes flood | cat >/dev/null &
     readers="$readers $!"
 done
-sleep 2
+sleep 1
 kill $readers
 echo "hostile: pipe flood done"
 

@@ -87,6 +87,7 @@ fn trap_path(trap: Trap) -> String {
         Trap::NumericError => "NumericError",
         Trap::InvalidAddress => "InvalidAddress",
         Trap::Deadline => "Deadline",
+        Trap::InvalidReference => "InvalidReference",
     };
     format!("Trap::{name}")
 }
@@ -431,6 +432,7 @@ impl Emitter<'_> {
                 | Opcode::JumpIf
                 | Opcode::JumpIfNot
                 | Opcode::Call
+                | Opcode::CallVirt
                 | Opcode::Ret
                 | Opcode::Throw
         );
@@ -533,7 +535,7 @@ impl Emitter<'_> {
         let sync = self.promotion.sync(at.index);
         let flush = flush_code(&self.promotion);
         let reload = reload_code(&self.promotion);
-        let after = if sync == Sync::FlushReload && insn.op != Call {
+        let after = if sync == Sync::FlushReload && !matches!(insn.op, Call | CallVirt) {
             reload.clone()
         } else {
             String::new()
@@ -869,6 +871,117 @@ impl Emitter<'_> {
                 writeln!(o, "Err(Unwind::Fault) => break 'run {region},").ok();
                 writeln!(o, "}}").ok();
             }
+            RefMake | RefCheck => {
+                let a = top(1);
+                let f = if insn.op == RefMake {
+                    "ref_make"
+                } else {
+                    "ref_check"
+                };
+                writeln!(
+                    o,
+                    "let Some(v) = cx.{f}({a}, {}) else {{ {} }};\n{a} = v;",
+                    insn.u32_at(0),
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+            }
+            RefAdd => {
+                let (r, n) = (top(2), top(1));
+                writeln!(
+                    o,
+                    "{r} = ({r} & !0xFFFF_FFFFu64) | ({r} as u32).wrapping_add({n} as u32) as u64;"
+                )
+                .ok();
+            }
+            ChkNull => {
+                writeln!(
+                    o,
+                    "if {} == 0 {{ {} }}",
+                    top(1),
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+            }
+            VirtFrame => {
+                let a = top(1);
+                writeln!(
+                    o,
+                    "let Some(m) = cx.method(d, {a}, {}) else {{ {} }};\n{a} = m.frame as u64;",
+                    insn.u16_at(0),
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+            }
+            CallVirt => {
+                // The class of the instance decides the POU: one arm per method any class
+                // runs for this slot; each as CALL does (no argument or result cells).
+                let slot = insn.u16_at(0);
+                let inst = top(1);
+                let region = d - 1;
+                let mut targets: Vec<usize> = (0..self.image.dispatch_count())
+                    .filter_map(|i| self.image.dispatch(i))
+                    .filter(|m| m.slot == slot)
+                    .map(|m| m.pou as usize)
+                    .collect();
+                targets.sort_unstable();
+                targets.dedup();
+                writeln!(
+                    o,
+                    "let Some(m) = cx.method(d, {inst}, {slot}) else {{ {} }};",
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+                writeln!(
+                    o,
+                    "if !cx.can_enter() {{ {} }}",
+                    at.raise("Trap::CallDepth")
+                )
+                .ok();
+                writeln!(o, "match m.pou {{").ok();
+                let data = self.image.data_size() as u64;
+                for pou in targets {
+                    let callee = self.image.pou(pou).ok_or_else(|| {
+                        Error::internal(format!("dispatch to unknown POU {pou} at {pc}"))
+                    })?;
+                    if callee.arg_cells != 0 || callee.ret_cells != 0 {
+                        return Err(Error::internal(format!(
+                            "dispatch target {} has argument or result cells",
+                            callee.name
+                        )));
+                    }
+                    let frame_outside = match data.checked_sub(callee.frame_size as u64) {
+                        Some(limit) => format!("{inst} > {limit}"),
+                        None => "true".to_string(),
+                    };
+                    writeln!(o, "{pou} => {{").ok();
+                    writeln!(
+                        o,
+                        "if {frame_outside} {{ {} }}",
+                        at.raise("Trap::InvalidAddress")
+                    )
+                    .ok();
+                    writeln!(o, "cx.enter();\ncx.set_fuel(fuel);").ok();
+                    writeln!(
+                        o,
+                        "let r = {}(cx, d, {inst} as u32, sp0 + {region}, [0; {}]);\nfuel = cx.fuel();\nmatch r {{",
+                        pou_fn(pou),
+                        self.cells[pou]
+                    )
+                    .ok();
+                    writeln!(o, "Ok([]) => {{ cx.leave();\n{reload}}}").ok();
+                    writeln!(
+                        o,
+                        "Err(Unwind::Outer) => {{ {reload}cx.resume_at(me); (dt, dpc) = cx.raised(); {} }}",
+                        at.raise_from_callee()
+                    )
+                    .ok();
+                    writeln!(o, "Err(Unwind::Fault) => break 'run {region},").ok();
+                    writeln!(o, "}}\n}}").ok();
+                }
+                writeln!(o, "_ => {{ {} }}", at.raise("Trap::InvalidReference")).ok();
+                writeln!(o, "}}").ok();
+            }
             Ret => {
                 let rets = plan.pou.ret_cells as u32;
                 let results: Vec<String> = (d - rets..d).map(cell).collect();
@@ -1033,6 +1146,30 @@ fn known_builtin(id: u16) -> Option<Builtin> {
             | StrFromTime
             | StrToI64
             | StrToF64
+            | Atan2F64
+            | Atan2F32
+            | DateFromParts
+            | DateSplit
+            | DateOf
+            | TodOf
+            | DayOfWeek
+            | StrFromDateTime
+            | StrToDateTime
+            | TodFromParts
+            | WStrLen
+            | WStrAssign
+            | WStrConcat
+            | WStrLeft
+            | WStrRight
+            | WStrMid
+            | WStrInsert
+            | WStrDelete
+            | WStrReplace
+            | WStrFind
+            | WStrCompare
+            | WStrFromStr
+            | StrFromWStr
+            | StrSync
     )
     .then_some(b)
 }

@@ -140,12 +140,21 @@ impl std::fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
-/// POUs reachable from the tasks through CALLs.
+/// The POUs of the image's dispatch records (the methods `CALL_VIRT` may run).
+fn dispatch_targets(image: &Image<'_>) -> Vec<usize> {
+    (0..image.dispatch_count())
+        .filter_map(|i| image.dispatch(i))
+        .map(|m| m.pou as usize)
+        .collect()
+}
+
+/// POUs reachable from the tasks through CALLs (and every method dispatch may run).
 fn reachable_pous(image: &Image<'_>) -> BTreeSet<usize> {
     let mut seen = BTreeSet::new();
     let mut work: Vec<usize> = (0..image.task_count())
         .filter_map(|t| image.task(t))
         .map(|t| t.pou as usize)
+        .chain(dispatch_targets(image))
         .collect();
     while let Some(index) = work.pop() {
         if !seen.insert(index) {
@@ -302,6 +311,12 @@ fn fixed_bases(
         for task in (0..image.task_count()).filter_map(|t| image.task(t)) {
             if let Some(ways) = seen.get_mut(task.pou as usize) {
                 ways.push(Some(task.instance_base as u64));
+            }
+        }
+        // A method runs on whatever instance is dispatched to.
+        for pou in dispatch_targets(image) {
+            if let Some(ways) = seen.get_mut(pou) {
+                ways.push(None);
             }
         }
         for (plan, _, stacks) in plans {

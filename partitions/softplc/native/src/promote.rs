@@ -253,45 +253,15 @@ fn touch(insn: &crate::analysis::Insn<'_>, stack: &[Addr], base: Option<u32>) ->
                 through(stack[d - 1], 0, len, false),
             ]
         }
-        Call => vec![Touch::Anything { write: true }],
+        Call | CallVirt => vec![Touch::Anything { write: true }],
+        // The class id of the instance.
+        VirtFrame => vec![Touch::Anything { write: false }],
         CallBuiltin => match Builtin::from_u16(insn.u16_at(0)) {
-            Some(b) if is_math(b) => vec![Touch::Nothing],
+            Some(b) if b.is_math() => vec![Touch::Nothing],
             _ => vec![Touch::Anything { write: true }],
         },
         _ => vec![Touch::Nothing],
     }
-}
-
-/// The builtins that compute on their argument cells only (no data memory).
-fn is_math(b: Builtin) -> bool {
-    use Builtin::*;
-    matches!(
-        b,
-        SqrtF64
-            | LnF64
-            | LogF64
-            | ExpF64
-            | SinF64
-            | CosF64
-            | TanF64
-            | AsinF64
-            | AcosF64
-            | AtanF64
-            | ExptF64
-            | AbsF64
-            | SqrtF32
-            | LnF32
-            | LogF32
-            | ExpF32
-            | SinF32
-            | CosF32
-            | TanF32
-            | AsinF32
-            | AcosF32
-            | AtanF32
-            | ExptF32
-            | AbsF32
-    )
 }
 
 /// Blocks that lie on a cycle of the POU's control flow (Tarjan's strongly connected

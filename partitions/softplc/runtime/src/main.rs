@@ -47,6 +47,14 @@
 //!   `plc_cycle_overhead`), and how many variables are forced now;
 //! - `plc: t=<ms>ms watch <name>=<value> ...` with them: the package's watch list (values
 //!   as IEC literals);
+//! - `plc: t=<ms>ms period releases=<n> lateness_ns=<min>/<median>/<max>
+//!   histogram_ns=<low>-<high>:<count>,...` after them: the lateness of the releases since
+//!   the previous statistics line (each one's, where the line before is over all of them)
+//!   and their histogram, the non-empty bins `[low, high)` in ns of
+//!   [`softplc::scan::LATENESS_BITS`] significant bits (a bin is at most a quarter of its
+//!   values wide); bins that do not fit a line follow on lines
+//!   `plc: t=<ms>ms period histogram_ns=<low>-<high>:<count>,...` (`cargo xtask plot` draws
+//!   them);
 //! - `plc: task <name> stopped: <TRAP> at <file>:<line>:<col>; outputs safe` on a fault
 //!   (a trap, the instruction budget WATCHDOG or the time DEADLINE), raised to the health
 //!   monitor as the error `softplc::scan::health_error` names (NUMERIC_ERROR,
@@ -646,6 +654,7 @@ extern "C" fn control() {
                     next_stats += STATS_EVERY_MS * 1_000_000;
                     let ms = (now - started) / 1_000_000;
                     log_stats(life.rt, &life.image, &life.package, &life.machine, ms);
+                    log_period(life.rt, ms);
                     if life
                         .shared
                         .is_some_and(|(layout, _)| layout.other.is_some())
@@ -676,6 +685,33 @@ extern "C" fn control() {
         // Withdrawn before the life's values go: the task processes wait for the next one.
         drop(published);
     }
+}
+
+/// The `period` line (and, when its histogram does not fit one line, more): the release
+/// lateness since the previous statistics line, which then starts over.
+fn log_period(rt: &mut Runtime, ms: u64) {
+    /// Longest text of a line (the kernel's limit less room for its prefix).
+    const LINE_MAX: usize = 480;
+    let recent = &rt.recent_lateness;
+    if let Some((min, median, max)) = recent.summary() {
+        let mut line = text!(
+            "plc: t={ms}ms period releases={} lateness_ns={min}/{median}/{max} histogram_ns=",
+            recent.count()
+        );
+        let mut separator = "";
+        for (low, high, count) in recent.bins(softplc::scan::LATENESS_BITS) {
+            let bin = text!("{separator}{low}-{high}:{count}");
+            if line.as_bytes().len() + bin.as_bytes().len() > LINE_MAX {
+                println!("{}", line.as_str());
+                line = text!("plc: t={ms}ms period histogram_ns={low}-{high}:{count}");
+            } else {
+                let _ = line.write_str(bin.as_str());
+            }
+            separator = ",";
+        }
+        println!("{}", line.as_str());
+    }
+    rt.recent_lateness.clear();
 }
 
 /// The statistics lines and the watch line at partition time `ms`.

@@ -127,7 +127,8 @@ pub fn health_error(trap: Trap) -> ErrorCode {
         | Trap::SubrangeViolation
         | Trap::CallDepth
         | Trap::StackOverflow
-        | Trap::InvalidAddress => ErrorCode::ApplicationError,
+        | Trap::InvalidAddress
+        | Trap::InvalidReference => ErrorCode::ApplicationError,
     }
 }
 
@@ -410,6 +411,10 @@ impl Stop {
     }
 }
 
+/// Significant bits of the release-lateness histogram the `period` log line carries
+/// ([`Histogram::bins`]): bins a quarter of their values wide.
+pub const LATENESS_BITS: u32 = 3;
+
 /// What the runtime keeps between releases.
 pub struct Runtime {
     pub schedule: Schedule,
@@ -422,6 +427,8 @@ pub struct Runtime {
     pub releases: u64,
     /// Release lateness: the first start at an instant minus its release time.
     pub lateness: Histogram,
+    /// The same since the last statistics line (whoever prints that line clears it).
+    pub recent_lateness: Histogram,
     /// The runtime's own work per release instant besides the VM's.
     pub overhead: Histogram,
     period_ns: u64,
@@ -459,6 +466,7 @@ impl Runtime {
             safe: SafeValues::new(),
             releases: 0,
             lateness: Histogram::new(),
+            recent_lateness: Histogram::new(),
             overhead: Histogram::new(),
             period_ns: 0,
             armed: [false; MAX_TASKS],
@@ -478,6 +486,7 @@ impl Runtime {
         self.safe = safe;
         self.releases = 0;
         self.lateness.clear();
+        self.recent_lateness.clear();
         self.overhead.clear();
         self.period_ns = period_ns;
         self.armed.fill(false);
@@ -548,6 +557,8 @@ impl Runtime {
         // start: its lateness says nothing about the release path.
         if self.releases > 0 {
             self.lateness.record(start.saturating_sub(release_ns));
+            self.recent_lateness
+                .record(start.saturating_sub(release_ns));
         }
         read_inputs(package, io, areas);
         let vars = || image.located_vars();

@@ -1,7 +1,7 @@
 //! Host tests of the scan cycle with programs compiled by the real compiler.
 
 use crate::package::{self, Package, PortMap};
-use crate::scan::{Areas, PlanError, PortIo, Runtime, SafeValues, Schedule, Stop};
+use crate::scan::{Areas, LATENESS_BITS, PlanError, PortIo, Runtime, SafeValues, Schedule, Stop};
 use plc_vm::image::Image;
 use plc_vm::isa::Trap;
 use plc_vm::verify::verify;
@@ -436,6 +436,11 @@ fn release_lateness_and_overhead_are_kept_per_release() {
     let rt = plc.run(50, &mut Wires::default(), &mut areas, |_, _, _, _| {});
     assert_eq!(rt.lateness.count(), 49);
     assert_eq!(rt.lateness.summary(), Some((4_000, 4_000, 4_000)));
+    // The same releases since the last statistics line, in the `period` line's bins.
+    assert_eq!(
+        rt.recent_lateness.bins(LATENESS_BITS).collect::<Vec<_>>(),
+        [(3_584, 4_096, 49)]
+    );
     assert_eq!(rt.overhead.count(), 50);
     let (min, _, max) = rt.overhead.summary().unwrap();
     assert!(min > 0 && max < 100_000, "{min}..{max}");
@@ -451,6 +456,10 @@ fn traps_are_reported_as_the_fitting_arinc_error() {
     assert_eq!(health_error(Trap::Deadline), ErrorCode::DeadlineMissed);
     assert_eq!(
         health_error(Trap::IndexOutOfBounds),
+        ErrorCode::ApplicationError
+    );
+    assert_eq!(
+        health_error(Trap::InvalidReference),
         ErrorCode::ApplicationError
     );
     assert!(names_task("spin", "SPIN.s") && names_task("Spin.S", "SPIN.s"));

@@ -414,6 +414,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     ) -> Result<CycleStats, Fault> {
         let budget = self.start_cycle(task, now_ns)?;
         let mut cycle = crate::native::Cycle::new(
+            self.image,
             self.stack,
             self.calls.len(),
             self.tries,
@@ -875,6 +876,63 @@ impl<'a, 'm> Machine<'a, 'm> {
                 let offset = (i as i64).wrapping_sub(lo) as u64;
                 self.push(base.wrapping_add(offset.wrapping_mul(stride)))?;
             }
+            RefMake => {
+                let address = self.pop();
+                let size = read_u32(code, imm) as u64;
+                let object = self
+                    .image
+                    .object_containing(address, size)
+                    .ok_or(Trap::InvalidReference)?;
+                self.push(address | ((object as u64 + 1) << 32))?;
+            }
+            RefCheck => {
+                let reference = self.pop();
+                let address = reference & 0xFFFF_FFFF;
+                let size = read_u32(code, imm) as u64;
+                let inside = (reference >> 32)
+                    .checked_sub(1)
+                    .and_then(|index| self.image.object(index as usize))
+                    .is_some_and(|(start, len)| {
+                        start as u64 <= address && address + size <= start as u64 + len as u64
+                    });
+                if !inside {
+                    return Err(Trap::InvalidReference);
+                }
+                self.push(address)?;
+            }
+            RefAdd => {
+                let (reference, n) = self.pop2();
+                let address = (reference as u32).wrapping_add(n as u32);
+                self.push((reference & !0xFFFF_FFFF) | address as u64)?;
+            }
+            ChkNull => {
+                if self.stack[self.sp - 1] == 0 {
+                    return Err(Trap::InvalidReference);
+                }
+            }
+            CallVirt | VirtFrame => {
+                let instance = self.pop();
+                let method = self.method(instance, read_u16(code, imm))?;
+                if op == VirtFrame {
+                    self.push(method.frame as u64)?;
+                } else {
+                    let callee = self.image.pou(method.pou as usize).expect("verified");
+                    if self.call_depth >= self.calls.len() {
+                        return Err(Trap::CallDepth);
+                    }
+                    if instance + callee.frame_size as u64 > self.data.len() as u64 {
+                        return Err(Trap::InvalidAddress);
+                    }
+                    self.calls[self.call_depth] = CallFrame {
+                        return_pc: next,
+                        saved_base: self.base,
+                    };
+                    self.call_depth += 1;
+                    self.base = instance as u32;
+                    self.pc = callee.code_start;
+                    return Ok(Flow::Next);
+                }
+            }
             TryBegin => {
                 let slot = self
                     .tries
@@ -902,6 +960,19 @@ impl<'a, 'm> Machine<'a, 'm> {
         }
         self.pc = next;
         Ok(Flow::Next)
+    }
+
+    /// The method instance `instance`'s class runs for `slot` (see `CALL_VIRT`).
+    fn method(&self, instance: u64, slot: u16) -> Result<crate::image::Dispatch, Trap> {
+        if instance == 0 {
+            return Err(Trap::InvalidReference);
+        }
+        let class = self
+            .load(MemType::U32, instance)
+            .map_err(|_| Trap::InvalidReference)?;
+        self.image
+            .lookup_method(class, slot)
+            .ok_or(Trap::InvalidReference)
     }
 
     // ---- monitor ----
@@ -953,6 +1024,9 @@ impl<'a, 'm> Machine<'a, 'm> {
             let len = text.len().min(capacity);
             self.data[at + 2..at + 4].copy_from_slice(&(len as u16).to_le_bytes());
             self.data[at + 4..at + 4 + len].copy_from_slice(&text[..len]);
+            if len < capacity {
+                self.data[at + 4 + len] = 0;
+            }
             return Ok(());
         }
         let forced = Self::encode_scalar(&var, ty, value)?;

@@ -1,10 +1,17 @@
-//! A guest partition reaching the soft-PLC and the plant through its ARINC ports
-//! (configuration `tests/configs/guest_plcctl.toml`): busybox reads the plant's level from
-//! `/dev/arinc/level`, and `plcctl` lists, reads, forces, unforces, watches, asks the
-//! statistics of the tank PLC over `/dev/arinc/plc-request` and `/dev/arinc/plc-response`,
-//! downloads a file that is no program (refused) and the changed controller (which then
-//! runs), then reads from and is refused a force by a monitor-only PLC over two other
-//! ports.
+//! A guest partition reaching its ARINC ports as Linux devices, `/dev/arinc/<port>`.
+//!
+//! `system_devices` (configuration `tests/configs/system_devices.toml`): the static C
+//! program `linux-arinc check` (`tests/linux/arinc.c`, expected output
+//! `tests/linux/arinc.out`) and busybox one-liners (`tests/configs/guest/devices.sh`)
+//! write, read, poll and ask the validity of ports looped back to the guest, and of the
+//! plant's level and the PLC's online ports.
+//!
+//! `system_plcctl` (configuration `tests/configs/system_plcctl.toml`): busybox reads the
+//! plant's level from `/dev/arinc/level`, and `plcctl` lists, reads, forces, unforces,
+//! watches, asks the statistics of the tank PLC over `/dev/arinc/plc-request` and
+//! `/dev/arinc/plc-response`, downloads a file that is no program (refused) and the
+//! changed controller (which then runs), then reads from and is refused a force and a
+//! download by a monitor-only PLC over two other ports.
 
 use scenarios::{boot, check};
 
@@ -40,9 +47,101 @@ fn number(line: &str, name: &str) -> Option<f64> {
     rest.split_whitespace().next()?.parse().ok()
 }
 
+/// What `linux-arinc check` prints in a guest of `system_devices`, line by line.
+const ARINC_EXPECTED: &str = include_str!("../linux/arinc.out");
+
 #[test]
-fn guest_plcctl() {
-    let o = boot("guest_plcctl");
+fn system_devices() {
+    let o = boot("system_devices");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the end of the guest's script ends the run",
+    );
+    for needle in [
+        "unsupported system call",
+        "cannot create it",
+        "/etc/guest/ports line",
+    ] {
+        check(
+            &o,
+            o.line(needle).is_none(),
+            &format!("unexpected {needle:?}"),
+        );
+    }
+    let out = output(&o);
+    // The C program: every check, in order, and its exit status.
+    let expected: Vec<&str> = ARINC_EXPECTED.lines().collect();
+    let got: Vec<&str> = out
+        .iter()
+        .map(String::as_str)
+        .take_while(|l| !l.starts_with("arinc status "))
+        .collect();
+    let differences: Vec<String> = expected
+        .iter()
+        .zip(got.iter().chain(std::iter::repeat(&"(nothing)")))
+        .filter(|(e, g)| e != g)
+        .map(|(e, g)| format!("expected {e:?} got {g:?}"))
+        .collect();
+    check(
+        &o,
+        differences.is_empty() && got.len() == expected.len(),
+        &format!(
+            "linux-arinc check: {} lines, expected {}; {differences:#?}",
+            got.len(),
+            expected.len()
+        ),
+    );
+    check(
+        &o,
+        out.iter().any(|l| l == "arinc status 0"),
+        "linux-arinc check exited with status 0",
+    );
+    // The busybox one-liners.
+    for line in [
+        "devices: level plc-request plc-response queue-in queue-out sample-in sample-out ",
+        "sampling: ping",
+        "sampling again: ping",
+        "queuing: onetwo",
+        "waited for: late",
+        "dd: /dev/arinc/sample-in: Message too long",
+        "dd: error writing '/dev/arinc/queue-out': Message too long",
+        "done",
+    ] {
+        check(
+            &o,
+            out.iter().any(|l| l == line),
+            &format!("the shell did not print {line:?}"),
+        );
+    }
+    let words = |prefix: &str| -> Vec<String> {
+        out.iter()
+            .find_map(|l| l.strip_prefix(prefix))
+            .map(|rest| rest.split_whitespace().map(str::to_string).collect())
+            .unwrap_or_default()
+    };
+    check(
+        &o,
+        words("queuing bytes: ") == ["1", "2", "255"],
+        "od of a queuing message's bytes",
+    );
+    check(
+        &o,
+        words("plc answer: ") == ["2", "7", "0", "10"],
+        "the PLC's answer to a READ written with printf (op, seq, OK, LREAL)",
+    );
+    let level = words("level: ").first().and_then(|v| v.parse::<f64>().ok());
+    check(
+        &o,
+        level.is_some_and(|l| (0.0..=2.0).contains(&l)),
+        &format!("od read the plant's level from /dev/arinc/level: {level:?}"),
+    );
+}
+
+#[test]
+fn system_plcctl() {
+    let o = boot("system_plcctl");
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,
@@ -139,6 +238,10 @@ fn guest_plcctl() {
         (
             "plcctl: FORCE Count.n: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)",
             "force status 1",
+        ),
+        (
+            "plcctl: DOWNLOAD_BEGIN: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)",
+            "counter download status 1",
         ),
         (
             "plcctl: READ tank.revision: UNKNOWN_NAME (no variable of that name)",
