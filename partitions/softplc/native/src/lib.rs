@@ -200,9 +200,23 @@ pub fn translate(image_bytes: &[u8]) -> Result<String, Error> {
 
 /// [`translate`], with the image embedded from `source`.
 pub fn translate_with(image_bytes: &[u8], source: &ImageSource) -> Result<String, Error> {
+    translate_pous(image_bytes, source, false)
+}
+
+/// [`translate`] of every POU of the image, reachable from a task or not: for checking
+/// that a library (which has no tasks) translates.
+pub fn translate_every_pou(image_bytes: &[u8]) -> Result<String, Error> {
+    translate_pous(image_bytes, &ImageSource::Inline, true)
+}
+
+fn translate_pous(image_bytes: &[u8], source: &ImageSource, every: bool) -> Result<String, Error> {
     let image = Image::parse(image_bytes).map_err(Error::Image)?;
     plc_vm::verify::verify(&image).map_err(Error::Verify)?;
-    let pous = reachable_pous(&image);
+    let pous = if every {
+        (0..image.pou_count()).collect()
+    } else {
+        reachable_pous(&image)
+    };
     let mut plans = Vec::new();
     let mut cells = vec![0u32; image.pou_count()];
     for &index in &pous {
