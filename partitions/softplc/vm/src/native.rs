@@ -144,7 +144,7 @@ pub struct CycleEnd {
 
 /// The state of one native cycle: counting, limits, try frames, the fault.
 pub struct Cycle<'c> {
-    image: Image<'c>,
+    image: &'c Image<'c>,
     stack: &'c mut [u64],
     tries: &'c mut [TryFrame],
     expired: &'c mut dyn FnMut() -> bool,
@@ -168,8 +168,9 @@ impl<'c> Cycle<'c> {
     /// A cycle at `now_ns` with `budget` instructions, over the machine's operand stack and
     /// try memory, `call_limit` call frames (the task's activation is the first) and the
     /// deadline check `expired`.
+    #[inline]
     pub(crate) fn new(
-        image: Image<'c>,
+        image: &'c Image<'c>,
         stack: &'c mut [u64],
         call_limit: usize,
         tries: &'c mut [TryFrame],
@@ -199,6 +200,7 @@ impl<'c> Cycle<'c> {
     }
 
     /// What the cycle left behind.
+    #[inline]
     pub(crate) fn end(&self) -> CycleEnd {
         CycleEnd {
             executed: self.event_at - self.fuel,
