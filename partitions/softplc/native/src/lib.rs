@@ -29,46 +29,56 @@
 //!
 //! # What the generated code looks like
 //!
-//! One function per POU reachable from a task ([`emit`] shows the shape). The verifier
-//! proved every instruction's operand-stack depth static, so the cells of an activation's
-//! stack are Rust locals `s0, s1, ...` (register-allocated by LLVM; floats travel as bit
-//! patterns, as in the VM); jumps become a state machine over basic blocks (`loop { match
-//! block { .. } }`, which LLVM turns into direct branches); CALL is a Rust call with the
-//! argument cells and returns the result cells. Data memory is the machine's own byte array
-//! (same layout, so the monitor's reads and forces by name keep working), as `&mut [u8;
-//! DATA_SIZE]`: static addresses, which the verifier proved inside it, need no run-time
-//! check; frame-relative and indirect accesses are checked as the interpreter checks them.
+//! One function per POU reachable from a task or a method dispatch ([`emit`] shows the
+//! shape). The verifier proved every instruction's operand-stack depth static, so the cells
+//! of an activation's stack are Rust locals `s0, s1, ...` (register-allocated by LLVM;
+//! floats travel as bit patterns, as in the VM). Jumps become structured control flow
+//! (labeled loops and blocks with `continue`/`break`, from the dominator tree: [`structure`]),
+//! so LLVM sees direct branches; only the entries from outside (the try handlers) and
+//! irreducible parts go through a small dispatch. CALL is a Rust call with the argument cells
+//! that returns the result cells; CALL_VIRT a call of one of the methods the slot can run.
+//! Data memory is the machine's own byte array (same layout, so the monitor's reads and
+//! forces by name keep working), as `&mut [u8; DATA_SIZE]`: static addresses, which the
+//! verifier proved inside it, need no run-time check; frame-relative and indirect accesses are
+//! checked as the interpreter checks them. A POU whose activations all have the same frame
+//! base (a program instance, a FUNCTION's static frame) gets it as a constant, and the frame
+//! variables its loops use live in locals where an abstract interpretation of the addresses
+//! shows that no other access can touch them ([`promote`]), written back wherever data memory
+//! can be observed (a call, a trap, the return).
 //!
 //! The interpreter's observable behaviour is kept instruction for instruction:
 //!
 //! * the instruction budget (WATCHDOG) and the deadline checks (DEADLINE, the clock asked
 //!   every 1,024 instructions, at the same instruction counts as `run_cycle_until`): a
 //!   block of `L` instructions is counted once at its start when no event falls inside it,
-//!   else its *checked twin* runs it counting instruction by instruction, so a watchdog or
+//!   else its *checked* copy runs it counting instruction by instruction, so a watchdog or
 //!   deadline stops the cycle before exactly the instruction the VM stops before, and a
 //!   completed cycle reports the VM's instruction count (fused instructions count one, as
 //!   decoded);
 //! * every trap at the same instruction with the same state (a trapping instruction has no
 //!   effect: values are computed and checked before any cell or byte is written); operand
 //!   stack overflow and call depth against the machine's limits (an activation whose stack
-//!   might not fit runs its checked twins, which check every push);
+//!   might not fit runs the checked copies, which check every push);
 //! * `__TRY`/`__CATCH`: the VM's try frames in the machine's try memory; a trap goes to the
 //!   innermost frame (stack cut back, code pushed), through the Rust call chain when the
 //!   frame belongs to a caller, or ends the cycle; RETHROW as the VM;
 //! * after a fault, the machine's stack, `pc`, call and try depth are the interpreter's (the
 //!   activations write their live cells back on the way out).
 //!
-//! One pattern is refused (the interpreter runs such an image): a try frame whose stack
-//! depth lies above the first cell of a POU called while the frame is open (see
-//! `analysis::check_try_frames`); the compiler never produces it.
+//! One pattern is refused ([`Error::TryFrameOverCall`]: the build stops and says so; without
+//! `plc.native` the interpreter runs the image): a try frame whose stack depth lies above the
+//! first cell of a POU called while the frame is open (see `analysis::check_try_frames`);
+//! the compiler never produces it.
 //!
 //! # Interface
 //!
 //! [`translate`] gives the module of one image (it exports `PROGRAM`, a
 //! [`plc_vm::native::NativeProgram`]); [`bundle`] puts several into one file with the
 //! table `PROGRAMS` that the PLC partition is built with (`plc.native = true`, see
-//! `cargo xtask`). [`harness`] writes and builds a stand-alone crate around generated
-//! modules (the differential tests and the benchmark use it).
+//! `cargo xtask`); [`translate_every_pou`] translates a library (no tasks) for checking.
+//! [`harness`] writes and builds a stand-alone workspace around generated modules (the
+//! differential tests and the benchmark use it). `cargo run -p plc-native --example
+//! translate -- IMAGE.plcb` prints the module of an image.
 //!
 //! This crate must never accept an image the verifier rejects, emit code for an opcode or
 //! builtin it does not know ([`Error::UnsupportedOpcode`], [`Error::UnsupportedBuiltin`]),
