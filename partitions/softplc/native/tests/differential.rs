@@ -7,9 +7,10 @@
 //! (see `harness/check.rs`).
 //!
 //! `PLC_RANDOM_CASES=N` sets how many cases of each random generator (default 500, so about
-//! 1,100 cases with the corpus); `PLC_NATIVE_OPT_LEVEL` the optimisation level of the
-//! generated program (default 1). The test prints how long translation, compilation and
-//! the run took.
+//! 1,040 cases with the corpus); `PLC_NATIVE_OPT_LEVEL` the optimisation level of the
+//! generated program (default 0: the same Rust semantics, compiled fastest; the partition
+//! builds at opt-level 3). The test prints how long translation, compilation and the run
+//! took.
 
 #[path = "../../compiler/tests/support/random_st.rs"]
 mod random_st;
