@@ -408,3 +408,90 @@ pub fn module_name(name: &str) -> String {
         .collect();
     format!("program_{body}")
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use plc_vm::image::{ImageBuilder, TaskDef, TaskKind};
+
+    /// Main (with `body`) run by one task, and a POU `f` without cells it may call.
+    fn image(body: impl FnOnce(&mut ImageBuilder, plc_vm::image::PouId)) -> Vec<u8> {
+        let mut b = ImageBuilder::new();
+        b.reserve_data(64);
+        let main = b.declare_pou("Main", 0, 0, 8);
+        let f = b.declare_pou("f", 0, 0, 8);
+        b.add_task(&TaskDef {
+            name: "T".into(),
+            kind: TaskKind::Cyclic,
+            priority: 0,
+            pou: main,
+            instance_base: 0,
+            interval_ns: 0,
+            watchdog_budget: 0,
+        });
+        b.begin_pou(f);
+        b.ret();
+        b.end_pou(f);
+        b.begin_pou(main);
+        body(&mut b, f);
+        b.end_pou(main);
+        b.build().expect("build")
+    }
+
+    #[test]
+    fn a_try_frame_over_a_callee_s_cells_is_refused() {
+        // TRY_BEGIN at depth 2, the stack emptied, then a call: the callee's cells would be
+        // the ones a trap cuts the stack back to.
+        let bytes = image(|b, f| {
+            let (handler, end) = (b.new_label(), b.new_label());
+            b.push_i32(1);
+            b.push_i32(2);
+            b.try_begin(handler);
+            b.drop_();
+            b.drop_();
+            b.push_u32(16);
+            b.call(f);
+            b.push_i32(3);
+            b.push_i32(4);
+            b.try_end();
+            b.drop_();
+            b.drop_();
+            b.jmp(end);
+            b.bind(handler);
+            b.drop_();
+            b.drop_();
+            b.drop_();
+            b.bind(end);
+            b.ret();
+        });
+        assert!(matches!(
+            translate(&bytes),
+            Err(Error::TryFrameOverCall { ref pou, .. }) if pou == "Main"
+        ));
+        // The same with the call above the frame's cells translates.
+        let fine = image(|b, f| {
+            let (handler, end) = (b.new_label(), b.new_label());
+            b.try_begin(handler);
+            b.push_u32(16);
+            b.call(f);
+            b.try_end();
+            b.jmp(end);
+            b.bind(handler);
+            b.drop_();
+            b.bind(end);
+            b.ret();
+        });
+        assert!(translate(&fine).is_ok());
+    }
+
+    #[test]
+    fn an_image_the_verifier_rejects_is_not_translated() {
+        let mut bytes = image(|b, _| b.ret());
+        assert!(matches!(translate(&bytes[..10]), Err(Error::Image(_))));
+        // Corrupt the only RET of Main into an unassigned opcode.
+        let code_at = u32::from_le_bytes(bytes[16..20].try_into().unwrap()) as usize;
+        let main_ret = code_at + 1; // f's RET comes first
+        bytes[main_ret] = 0xFF;
+        assert!(matches!(translate(&bytes), Err(Error::Verify(_))));
+    }
+}
