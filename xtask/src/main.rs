@@ -59,15 +59,21 @@ enum Cmd {
         /// Major frames of the soak.
         #[arg(long, value_name = "FRAMES", default_value_t = SOAK_FRAMES, requires = "soak")]
         frames: u64,
+        /// Run only the attack systems (virtual time; also part of the full bench): each
+        /// hostile loop beside a victim that logs its window starts; reports
+        /// `window_lateness_hostile_<attack>` and `window_lateness_hostile` and writes
+        /// target/bench/hostile.json.
+        #[arg(long, conflicts_with = "soak")]
+        hostile: bool,
         /// Run only the guest benchmark (tests/configs/bench_guest.toml: linux-bench in a
         /// guest partition, on the host as `host_*`, and natively on Debian's stock kernel
         /// in the same QEMU as `native_*`, with `guest_ratio_*` = guest / native; also part
         /// of the full bench); writes target/bench/guest.json.
-        #[arg(long, conflicts_with = "soak")]
+        #[arg(long, conflicts_with_all = ["soak", "hostile"])]
         guest: bool,
         /// Run only the native leg of the guest benchmark (linux-bench on Debian's stock
         /// kernel, `native_*`); writes target/bench/native.json.
-        #[arg(long, conflicts_with_all = ["soak", "guest"])]
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile"])]
         native: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
@@ -131,6 +137,7 @@ fn main() -> ExitCode {
         Cmd::Bench {
             soak: true, frames, ..
         } => soak(frames),
+        Cmd::Bench { hostile: true, .. } => hostile(),
         Cmd::Bench {
             guest: true,
             deterministic_time,
@@ -341,11 +348,29 @@ fn boot_bench_system(
     deterministic_time: bool,
     timeout: Duration,
 ) -> Result<qemu::Outcome> {
-    let esp_dir = esp::assemble(
-        &dir.join("esp"),
+    let entries = esp::standard_entries(artifacts, config)?;
+    boot_bench_image(
+        qemu,
         artifacts,
-        &esp::standard_entries(artifacts, config)?,
-    )?;
+        entries,
+        dir,
+        what,
+        deterministic_time,
+        timeout,
+    )
+}
+
+/// Boots an image of `artifacts` with `entries` (see [`boot_bench_system`]).
+fn boot_bench_image(
+    qemu: &tools::Qemu,
+    artifacts: &artifacts::Artifacts,
+    entries: Vec<esp::ImageEntry>,
+    dir: &std::path::Path,
+    what: &str,
+    deterministic_time: bool,
+    timeout: Duration,
+) -> Result<qemu::Outcome> {
+    let esp_dir = esp::assemble(&dir.join("esp"), artifacts, &entries)?;
     eprintln!(
         "xtask: booting the {what}{}",
         if deterministic_time {
@@ -375,12 +400,25 @@ fn boot_bench_system(
     Ok(outcome)
 }
 
-/// The attack systems whose victim measures its window starts (tests/configs), with the
-/// name of their metric: `window_lateness_hostile_<name>`.
-const HOSTILE_SYSTEMS: [(&str, &str); 3] = [
-    ("syscall_fuzz", "fuzz"),
-    ("attack_floods", "floods"),
-    ("attack_partitions", "restart_loop"),
+/// An attack system whose victim measures its window starts: a configuration of
+/// tests/configs (syssw starts its partitions), or the attack program as the root task in
+/// a mode (system-image entry `test/mode`, as scenario `attack_root_paths`).
+enum Hostile {
+    Config(&'static str),
+    Root(&'static str),
+}
+
+/// The attack systems with the name of their metric: `window_lateness_hostile_<name>`.
+const HOSTILE_SYSTEMS: [(Hostile, &str); 9] = [
+    (Hostile::Config("syscall_fuzz"), "fuzz"),
+    (Hostile::Config("attack_floods"), "floods"),
+    (Hostile::Config("attack_partitions"), "restart_loop"),
+    (Hostile::Config("attack_map"), "map"),
+    (Hostile::Config("attack_io"), "io"),
+    (Hostile::Config("attack_kill"), "kill"),
+    (Hostile::Config("attack_reach"), "reach"),
+    (Hostile::Config("attack_restart"), "restart_background"),
+    (Hostile::Root("paths"), "root_paths"),
 ];
 
 /// Boots each attack system on virtual time (the lateness is a property of the kernel and
@@ -392,17 +430,44 @@ fn hostile_lateness(
     dir: &std::path::Path,
 ) -> Result<Vec<xtask::bench::Metric>> {
     let mut metrics = Vec::new();
-    for (config, name) in HOSTILE_SYSTEMS {
-        let config_path = xtask::workspace_root().join(format!("tests/configs/{config}.toml"));
-        let outcome = boot_bench_system(
-            qemu,
-            system,
-            Some(&config_path),
-            &dir.join(config),
-            &format!("attack system {config}"),
-            true,
-            Duration::from_secs(900),
-        )?;
+    for (hostile, name) in HOSTILE_SYSTEMS {
+        let config = match hostile {
+            Hostile::Config(config) | Hostile::Root(config) => config,
+        };
+        let what = format!("attack system {config}");
+        let timeout = Duration::from_secs(900);
+        let outcome = match hostile {
+            Hostile::Config(_) => {
+                let path = xtask::workspace_root().join(format!("tests/configs/{config}.toml"));
+                boot_bench_system(
+                    qemu,
+                    system,
+                    Some(&path),
+                    &dir.join(config),
+                    &what,
+                    true,
+                    timeout,
+                )?
+            }
+            Hostile::Root(mode) => {
+                let mut root = system.clone();
+                root.syssw = artifacts::build_user_programs(&["attack".to_string()])?.remove(0);
+                let mut entries = esp::standard_entries(&root, None)?;
+                entries.push(esp::ImageEntry::Bytes {
+                    name: "test/mode".into(),
+                    data: mode.as_bytes().to_vec(),
+                });
+                boot_bench_image(
+                    qemu,
+                    &root,
+                    entries,
+                    &dir.join(config),
+                    &what,
+                    true,
+                    timeout,
+                )?
+            }
+        };
         let metric = outcome.lines.iter().find_map(|l| {
             xtask::bench::parse_victim_lateness(l, &format!("window_lateness_hostile_{name}"))
         });
@@ -585,6 +650,19 @@ fn guest_metrics(
 const SOAK_FRAMES: u64 = 1_000_000;
 
 /// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
+/// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
+fn hostile() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = hostile_lateness(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "hostile.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 fn soak(frames: u64) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
