@@ -75,6 +75,12 @@ enum Cmd {
         /// kernel, `native_*`); writes target/bench/native.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile"])]
         native: bool,
+        /// Run only the host soft-PLC benchmarks (also part of the full bench): the suite of
+        /// `partitions/softplc/bench` on the interpreter (`plc_vm_*`) and on the native
+        /// execution tier (`plc_native_*`), each with its ratio over hand-written Rust;
+        /// writes target/bench/plc.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native"])]
+        plc: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -138,6 +144,7 @@ fn main() -> ExitCode {
             soak: true, frames, ..
         } => soak(frames),
         Cmd::Bench { hostile: true, .. } => hostile(),
+        Cmd::Bench { plc: true, .. } => plc_bench(),
         Cmd::Bench {
             guest: true,
             deterministic_time,
@@ -650,6 +657,17 @@ fn guest_metrics(
 const SOAK_FRAMES: u64 = 1_000_000;
 
 /// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
+/// `bench --plc`: only the host soft-PLC benchmarks (`xtask::bench::host_metrics`).
+fn plc_bench() -> Result<bool> {
+    let metrics = xtask::bench::host_metrics()?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "plc.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
 fn hostile() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;

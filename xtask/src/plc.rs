@@ -230,7 +230,7 @@ fn package(
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(package::encode(
+    let mut bytes = package::encode(
         &ports,
         &compiled.image,
         &watch,
@@ -238,7 +238,90 @@ fn package(
         &safe,
         shared,
         &deadlines,
-    ))
+    );
+    if plc.native {
+        package::request_native(&mut bytes);
+    }
+    Ok(bytes)
+}
+
+/// The image name of the soft-PLC partition program (what `plc.native` rebuilds).
+pub const SOFTPLC_IMAGE: &str = "softplc";
+
+/// The native tier's code for the partitions with `plc.native = true`: each one's program
+/// (from its package in `packages`) translated by `plc-native`, written with the images as
+/// one file under `target/plc-native/programs/` (only rewritten when it changes), for the
+/// soft-PLC binary's build (`artifacts::build_native_softplc`); `None` when no partition
+/// asks for it. A program the translator refuses stops the build.
+pub fn native_programs(
+    system: &System,
+    packages: &[(String, Vec<u8>)],
+) -> Result<Option<std::path::PathBuf>> {
+    native_programs_in(
+        system,
+        packages,
+        &crate::target_dir().join("plc-native").join("programs"),
+    )
+}
+
+/// [`native_programs`], written under `dir`.
+fn native_programs_in(
+    system: &System,
+    packages: &[(String, Vec<u8>)],
+    dir: &std::path::Path,
+) -> Result<Option<std::path::PathBuf>> {
+    let mut modules: Vec<(String, String)> = Vec::new();
+    let mut seen: Vec<Vec<u8>> = Vec::new();
+    for p in &system.partitions {
+        if !p.plc.as_ref().is_some_and(|plc| plc.native) {
+            continue;
+        }
+        if p.image != SOFTPLC_IMAGE {
+            bail!(
+                "partition {}: plc.native needs the soft-PLC image (image = \"{SOFTPLC_IMAGE}\"), not {:?}",
+                p.name,
+                p.image
+            );
+        }
+        let bytes = packages
+            .iter()
+            .find(|(name, _)| *name == p.name)
+            .map(|(_, bytes)| bytes)
+            .with_context(|| format!("partition {}: no PLC package", p.name))?;
+        let program = package::Package::parse(bytes)
+            .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?
+            .program()
+            .to_vec();
+        if seen.contains(&program) {
+            continue;
+        }
+        let module = plc_native::module_name(&p.name);
+        let image_file = dir.join(format!("{module}.plcb"));
+        plc_native::harness::write_file(&image_file, &program).map_err(anyhow::Error::msg)?;
+        let source = plc_native::ImageSource::File(image_file.display().to_string());
+        let code = plc_native::translate_with(&program, &source).map_err(|e| {
+            anyhow::anyhow!(
+                "partition {}: plc.native: the native tier cannot run its program: {e} (remove plc.native to run it on the interpreter)",
+                p.name
+            )
+        })?;
+        eprintln!(
+            "xtask: partition {}: program translated for the native tier (image {:016x}, {} bytes, {} KiB of Rust)",
+            p.name,
+            plc_vm::native::image_hash(&program),
+            program.len(),
+            code.len() / 1024
+        );
+        modules.push((module, code));
+        seen.push(program);
+    }
+    if modules.is_empty() {
+        return Ok(None);
+    }
+    let file = dir.join("programs.rs");
+    plc_native::harness::write_file(&file, plc_native::bundle(&modules).as_bytes())
+        .map_err(anyhow::Error::msg)?;
+    Ok(Some(file))
 }
 
 /// The safe values of the outputs: those the program's `{attribute 'safe'}` pragmas give,
@@ -281,12 +364,11 @@ fn safe_value(image: &Image, name: &str, value: PlcValue) -> Result<package::Saf
         (VarType::Real, PlcValue::Int(i)) => (i as f32).to_bits() as u64,
         (VarType::LReal, PlcValue::Float(f)) => f,
         (VarType::LReal, PlcValue::Int(i)) => (i as f64).to_bits(),
-        (VarType::Bool | VarType::Real | VarType::LReal | VarType::String, _) => return Err(bad()),
+        (VarType::Bool | VarType::Real | VarType::LReal, _) => return Err(bad()),
+        (ty, _) if ty.mem_type().is_none() => return Err(bad()),
         (_, PlcValue::Int(i)) => {
-            let signed = matches!(
-                ty,
-                VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt | VarType::Time
-            );
+            // The date/time types are signed nanoseconds.
+            let signed = ty.is_signed_int() || ty.time_kind().is_some();
             let bits = u32::from(width) * 8;
             let fits = if bits == 64 {
                 signed || i >= 0
@@ -379,6 +461,60 @@ mod tests {
                     .join("\n")
             )
         })
+    }
+
+    /// Scenario plc_native's description: three partitions with `plc.native`.
+    #[test]
+    fn native_partitions_get_translated_programs_and_the_flag() {
+        let configs = crate::workspace_root().join("tests/configs");
+        let path = configs.join("plc_native.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut system = config::load(&path.to_string_lossy(), &text, &|_| true).unwrap();
+        let packages = data_entries(&system).unwrap();
+        for (name, bytes) in &packages {
+            let native = package::Package::parse(bytes).unwrap().native();
+            assert_eq!(
+                native,
+                ["plc", "trap", "loop"].contains(&name.as_str()),
+                "{name}"
+            );
+        }
+        let dir = crate::target_dir().join("tmp/xtask-native-programs");
+        let file = native_programs_in(&system, &packages, &dir)
+            .unwrap()
+            .expect("three native partitions");
+        let programs = std::fs::read_to_string(&file).unwrap();
+        for module in ["program_plc", "program_trap", "program_loop"] {
+            assert!(
+                programs.contains(&format!("pub mod {module} {{")),
+                "{module}"
+            );
+            assert!(dir.join(format!("{module}.plcb")).is_file());
+        }
+        assert!(programs.contains(
+            "PROGRAMS: &[&plc_vm::native::NativeProgram] = &[&program_plc::PROGRAM, &program_trap::PROGRAM, &program_loop::PROGRAM];"
+        ));
+        // Without plc.native: nothing to build; on another image: a clear error.
+        let plain: Vec<_> = packages.clone();
+        for p in &mut system.partitions {
+            if let Some(plc) = &mut p.plc {
+                plc.native = false;
+            }
+        }
+        assert!(native_programs_in(&system, &plain, &dir).unwrap().is_none());
+        let p = system
+            .partitions
+            .iter_mut()
+            .find(|p| p.name == "trap")
+            .unwrap();
+        p.plc.as_mut().unwrap().native = true;
+        p.image = "other".into();
+        let e = native_programs_in(&system, &plain, &dir).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("plc.native needs the soft-PLC image"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -14,7 +14,9 @@
 //!    (IEC: the lowest PRIORITY number first; ties in declaration order): one cycle under
 //!    two watchdogs, the VM's instruction budget (trap WATCHDOG) and, where the
 //!    configuration gives the task one (`plc.deadline`, as CODESYS's task watchdog time),
-//!    its time deadline (trap DEADLINE: the release time plus the deadline);
+//!    its time deadline (trap DEADLINE: the release time plus the deadline); on the
+//!    interpreter or, when the program runs natively ([`Runtime::set_native`],
+//!    [`crate::tier`]), on its native code, with the same semantics;
 //! 3. [`Runtime::end_release`], by the control process after them: copy the `%Q` and `%M`
 //!    located variables out and send every output port's bytes.
 //!
@@ -43,6 +45,7 @@ use crate::package::{Package, SafeValue};
 use plc_vm::image::Image;
 use plc_vm::isa::Trap;
 use plc_vm::located::{self, Area, MAX_AREA};
+use plc_vm::native::NativeProgram;
 use plc_vm::vm::{Fault, Machine};
 use protocol::{Direction, ErrorCode};
 
@@ -437,6 +440,8 @@ pub struct Runtime {
     instant: Option<u64>,
     /// The runtime's own work at the current instant so far (ns).
     own_work: u64,
+    /// The running program's native code (`None`: the interpreter runs it).
+    native: Option<&'static NativeProgram>,
 }
 
 impl Runtime {
@@ -468,6 +473,7 @@ impl Runtime {
             triggered: [false; MAX_TASKS],
             instant: None,
             own_work: 0,
+            native: None,
         }
     }
 
@@ -487,6 +493,13 @@ impl Runtime {
         self.triggered.fill(false);
         self.instant = None;
         self.own_work = 0;
+        self.native = None;
+    }
+
+    /// Runs the program's task cycles on its native code (`None`: on the interpreter), from
+    /// the next cycle on; see [`crate::tier`].
+    pub fn set_native(&mut self, native: Option<&'static NativeProgram>) {
+        self.native = native;
     }
 
     /// One release of every due task in priority order, as the task processes run it when
@@ -592,7 +605,11 @@ impl Runtime {
         // waited behind others has less of its time left.
         let deadline = release_ns.saturating_add(self.schedule.deadline[task]);
         let timed = self.schedule.deadline[task] != NO_DEADLINE;
-        let result = machine.run_cycle_until(task, t0 as i64, || timed && clock() > deadline);
+        let expired = || timed && clock() > deadline;
+        let result = match self.native {
+            Some(program) => machine.run_cycle_native(task, t0 as i64, expired, program),
+            None => machine.run_cycle_until(task, t0 as i64, expired),
+        };
         let t1 = clock();
         let exec = t1.saturating_sub(t0);
         // An event task has no interval: it overruns when it outlasts the period.
@@ -702,16 +719,21 @@ pub fn safe_outputs(image: &Image, safe: &SafeValues, task: usize, data: &mut [u
     }
 }
 
-/// Copies every RETAIN variable of `new_image` that `old_image` also has (same name, type
-/// and size) from `old_data` into `new_data`: the values a warm restart (same image) or an
-/// online download (a changed one) keeps. Returns how many were carried.
+/// Copies every RETAIN variable of `new_image` that `old_image` also has (same name and
+/// type) from `old_data` into `new_data`: the values a warm restart (same image) or an
+/// online download (a changed one) keeps. Same size: the bytes; a STRING or WSTRING whose
+/// capacity changed: its text, cut to the new capacity. A reference only into the same
+/// program (an address of another program means nothing in this one): otherwise it keeps
+/// the new program's initial value. Returns how many were carried.
 pub fn carry_retain(
     old_image: &Image,
     old_data: &[u8],
     new_image: &Image,
     new_data: &mut [u8],
 ) -> usize {
-    use plc_vm::image::VAR_FLAG_RETAIN;
+    use plc_vm::image::{Storage, VAR_FLAG_RETAIN, VarType};
+    use plc_vm::vm::Value;
+    let same_program = old_image.same_program(new_image);
     let mut carried = 0;
     for i in 0..new_image.var_count() {
         let Some(new) = new_image.var(i).filter(|v| v.flags & VAR_FLAG_RETAIN != 0) else {
@@ -719,19 +741,32 @@ pub fn carry_retain(
         };
         let Some(old) = old_image
             .find_var(new.name)
-            .filter(|o| o.flags & VAR_FLAG_RETAIN != 0 && o.ty == new.ty && o.size == new.size)
+            .filter(|o| o.flags & VAR_FLAG_RETAIN != 0 && o.ty == new.ty)
         else {
             continue;
         };
+        let Some(ty) = VarType::from_code(new.ty) else {
+            continue;
+        };
         let (from, to) = (old.addr as usize, new.addr as usize);
-        let len = new.size as usize;
-        if let (Some(src), Some(dst)) = (
-            old_data.get(from..from + len),
-            new_data.get_mut(to..to + len),
-        ) {
-            dst.copy_from_slice(src);
-            carried += 1;
-        }
+        let (Some(src), Some(dst)) = (
+            old_data.get(from..from + old.size as usize),
+            new_data.get_mut(to..to + new.size as usize),
+        ) else {
+            continue;
+        };
+        let kept = match ty.storage() {
+            Storage::Reference if !same_program => false,
+            _ if src.len() == dst.len() => {
+                dst.copy_from_slice(src);
+                true
+            }
+            Storage::String | Storage::WString => {
+                Value::load(ty, src).is_some_and(|text| text.store(ty, dst).is_ok())
+            }
+            _ => false,
+        };
+        carried += kept as usize;
     }
     carried
 }

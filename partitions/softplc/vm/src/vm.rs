@@ -31,10 +31,10 @@ impl CallFrame {
 /// An open `TRY_BEGIN`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TryFrame {
-    handler: u32,
-    stack_depth: u32,
-    call_depth: u32,
-    base: u32,
+    pub(crate) handler: u32,
+    pub(crate) stack_depth: u32,
+    pub(crate) call_depth: u32,
+    pub(crate) base: u32,
 }
 
 impl TryFrame {
@@ -99,59 +99,7 @@ pub struct CycleStats {
     pub caught_traps: u32,
 }
 
-/// A typed variable value for the monitor API.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Value<'s> {
-    /// BOOL.
-    Bool(bool),
-    /// Signed integers (SINT..LINT).
-    Int(i64),
-    /// Unsigned integers and bit strings (USINT..ULINT, BYTE..LWORD).
-    UInt(u64),
-    /// REAL.
-    Real(f32),
-    /// LREAL.
-    LReal(f64),
-    /// TIME in nanoseconds.
-    Time(i64),
-    /// STRING bytes.
-    String(&'s [u8]),
-}
-
-impl core::fmt::Display for Value<'_> {
-    /// IEC literal style: `TRUE`, `-3`, `0.5`, `T#20ms`, `'text'`.
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match *self {
-            Value::Bool(b) => f.write_str(if b { "TRUE" } else { "FALSE" }),
-            Value::Int(v) => write!(f, "{v}"),
-            Value::UInt(v) => write!(f, "{v}"),
-            Value::Real(v) => write!(f, "{v}"),
-            Value::LReal(v) => write!(f, "{v}"),
-            Value::Time(ns) if ns % 1_000_000 == 0 => write!(f, "T#{}ms", ns / 1_000_000),
-            Value::Time(ns) if ns % 1_000 == 0 => write!(f, "T#{}us", ns / 1_000),
-            Value::Time(ns) => write!(f, "T#{ns}ns"),
-            Value::String(bytes) => match core::str::from_utf8(bytes) {
-                Ok(text) => write!(f, "'{text}'"),
-                Err(_) => write!(f, "'<{} bytes>'", bytes.len()),
-            },
-        }
-    }
-}
-
-/// Why a monitor access failed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum VarError {
-    /// No variable of that name.
-    UnknownName,
-    /// Value kind does not fit the variable type.
-    TypeMismatch,
-    /// The variable is CONSTANT.
-    Constant,
-    /// STRING variables can be written but not forced.
-    NotForceable,
-    /// All [`MAX_FORCES`] force slots are in use.
-    TooManyForces,
-}
+pub use crate::monitor::{Value, VarError};
 
 /// Instructions between two deadline checks of [`Machine::run_cycle_until`] (a few
 /// microseconds of interpretation: the check's clock read stays below 1 % of the work).
@@ -190,6 +138,19 @@ pub struct Machine<'a, 'm> {
     faults: [Option<Fault>; MAX_TASKS],
     budget_override: [Option<u32>; MAX_TASKS],
     forces: [Option<Forced>; MAX_FORCES],
+    /// Whether any slot of `forces` is in use (the common case, none, costs one test).
+    any_forced: bool,
+    /// Each task's start (from the task and POU tables, read once).
+    starts: [Option<TaskStart>; MAX_TASKS],
+}
+
+/// Where a task's cycle starts: its POU's first instruction, its instance base and the
+/// task table's instruction budget.
+#[derive(Clone, Copy, Debug)]
+struct TaskStart {
+    code_start: u32,
+    instance_base: u32,
+    budget: u32,
 }
 
 impl<'a, 'm> Machine<'a, 'm> {
@@ -221,7 +182,19 @@ impl<'a, 'm> Machine<'a, 'm> {
             faults: [None; MAX_TASKS],
             budget_override: [None; MAX_TASKS],
             forces: [None; MAX_FORCES],
+            any_forced: false,
+            starts: [None; MAX_TASKS],
         };
+        for (task, start) in machine.starts.iter_mut().enumerate() {
+            *start = image.task(task).map(|entry| TaskStart {
+                code_start: image
+                    .pou(entry.pou as usize)
+                    .expect("verified task POU")
+                    .code_start,
+                instance_base: entry.instance_base,
+                budget: entry.budget(),
+            });
+        }
         machine.reset();
         Ok(machine)
     }
@@ -309,37 +282,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         now_ns: i64,
         mut expired: impl FnMut() -> bool,
     ) -> Result<CycleStats, Fault> {
-        let Some(entry) = self.image.task(task) else {
-            return Err(Fault {
-                trap: Trap::InvalidAddress,
-                task,
-                code_offset: 0,
-                location: None,
-                refused: true,
-            });
-        };
-        if let Some(fault) = self.faults[task] {
-            return Err(Fault {
-                refused: true,
-                ..fault
-            });
-        }
-        let pou = self
-            .image
-            .pou(entry.pou as usize)
-            .expect("verified task POU");
-        let budget = self.budget_override[task].unwrap_or(entry.budget());
-        self.apply_forces();
-        self.now_ns = now_ns;
-        self.sp = 0;
-        self.try_depth = 0;
-        self.calls[0] = CallFrame {
-            return_pc: u32::MAX,
-            saved_base: 0,
-        };
-        self.call_depth = 1;
-        self.base = entry.instance_base;
-        self.pc = pou.code_start;
+        let budget = self.start_cycle(task, now_ns)?;
         let mut stats = CycleStats::default();
         let code: &'a [u8] = self.image.code();
         loop {
@@ -366,6 +309,93 @@ impl<'a, 'm> Machine<'a, 'm> {
                     }
                     stats.caught_traps += 1;
                 }
+            }
+        }
+    }
+
+    /// The start of a cycle of `task` at `now_ns`: refused for an unknown or faulted task;
+    /// else the forces applied, the registers set for the task's POU, its budget returned.
+    #[inline]
+    fn start_cycle(&mut self, task: usize, now_ns: i64) -> Result<u32, Fault> {
+        let Some(start) = self.starts.get(task).copied().flatten() else {
+            return Err(Fault {
+                trap: Trap::InvalidAddress,
+                task,
+                code_offset: 0,
+                location: None,
+                refused: true,
+            });
+        };
+        if let Some(fault) = self.faults[task] {
+            return Err(Fault {
+                refused: true,
+                ..fault
+            });
+        }
+        let budget = self.budget_override[task].unwrap_or(start.budget);
+        self.apply_forces();
+        self.now_ns = now_ns;
+        self.sp = 0;
+        self.try_depth = 0;
+        self.calls[0] = CallFrame {
+            return_pc: u32::MAX,
+            saved_base: 0,
+        };
+        self.call_depth = 1;
+        self.base = start.instance_base;
+        self.pc = start.code_start;
+        Ok(budget)
+    }
+
+    /// [`run_cycle_until`](Self::run_cycle_until) on the native execution tier: runs `program`,
+    /// the translation of this machine's image ([`crate::native`]; the caller checks
+    /// [`NativeProgram::is_translation_of`](crate::native::NativeProgram::is_translation_of)),
+    /// instead of interpreting it. Everything observable is the interpreter's: the result,
+    /// the instruction count, the traps at the same instructions (the deadline checks at the
+    /// same instruction counts), and afterwards data memory, the operand stack, `pc`, call
+    /// and try depth, the task's fault and the forces.
+    pub fn run_cycle_native(
+        &mut self,
+        task: usize,
+        now_ns: i64,
+        mut expired: impl FnMut() -> bool,
+        program: &crate::native::NativeProgram,
+    ) -> Result<CycleStats, Fault> {
+        let budget = self.start_cycle(task, now_ns)?;
+        let mut cycle = crate::native::Cycle::new(
+            &self.image,
+            self.stack,
+            self.calls.len(),
+            self.tries,
+            &mut expired,
+            now_ns,
+            budget,
+        );
+        let result = (program.run)(&mut cycle, self.data, task);
+        let end = cycle.end();
+        self.try_depth = end.try_depth as usize;
+        match (result, end.fault) {
+            (Ok(()), _) => {
+                self.pc = end.ret_pc;
+                self.sp = 0;
+                self.call_depth = 0;
+                self.apply_forces();
+                Ok(CycleStats {
+                    instructions: end.executed,
+                    caught_traps: end.caught,
+                })
+            }
+            (Err(_), fault) => {
+                let fault = fault.unwrap_or(crate::native::NativeFault {
+                    trap: Trap::InvalidAddress,
+                    pc: self.pc,
+                    sp: 0,
+                    call_depth: 1,
+                });
+                self.sp = fault.sp as usize;
+                self.pc = fault.pc;
+                self.call_depth = fault.call_depth as usize;
+                Err(self.fault(task, fault.trap))
             }
         }
     }
@@ -902,32 +932,23 @@ impl<'a, 'm> Machine<'a, 'm> {
         Ok(self.read_entry(&var))
     }
 
-    /// Reads a variable-map entry (verified to lie inside data memory).
+    /// Reads a variable-map entry (verified to lie inside data memory); a reference's
+    /// target is named by the first variable of the map it is the start of.
     pub fn read_entry(&self, var: &Var<'_>) -> Value<'_> {
         let ty = VarType::from_code(var.ty).expect("verified");
         let at = var.addr as usize;
-        let Some(mem) = ty.mem_type() else {
-            let bytes = &self.data[at..at + var.size as usize];
-            let capacity = var.size as usize - 4;
-            let len = (read_u16(bytes, 2) as usize)
-                .min(capacity)
-                .min(read_u16(bytes, 0) as usize);
-            return Value::String(&bytes[4..4 + len]);
-        };
-        let cell = mem.cell_from_le(&self.data[at..at + mem.width()]);
-        match ty {
-            VarType::Bool => Value::Bool(cell != 0),
-            VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt => Value::Int(cell as i64),
-            VarType::Time => Value::Time(cell as i64),
-            VarType::Real => Value::Real(f32::from_bits(cell as u32)),
-            VarType::LReal => Value::LReal(f64::from_bits(cell)),
-            _ => Value::UInt(cell),
+        match Value::load(ty, &self.data[at..at + var.size as usize]).expect("verified") {
+            Value::Ref { address, .. } => Value::Ref {
+                address,
+                target: address.and_then(|a| self.image.var_at(a)).map(|v| v.name),
+            },
+            value => value,
         }
     }
 
-    /// Writes a variable by name (once; the program may change it again). Integers are
-    /// truncated to the variable's width; strings to its capacity. `Int`/`UInt` are accepted
-    /// for any integer type, `Int` also for TIME.
+    /// Writes a variable by name (once; the program may change it again), as
+    /// [`Value::store`] does: integers truncated to the variable's width, texts to its
+    /// capacity, references never ([`VarError::ReadOnly`]).
     pub fn write_var(&mut self, name: &str, value: Value<'_>) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
         if var.flags & VAR_FLAG_CONSTANT != 0 {
@@ -935,22 +956,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         }
         let ty = VarType::from_code(var.ty).expect("verified");
         let at = var.addr as usize;
-        if ty.mem_type().is_none() {
-            let Value::String(text) = value else {
-                return Err(VarError::TypeMismatch);
-            };
-            let capacity = (var.size as usize - 4).min(read_u16(self.data, at) as usize);
-            let len = text.len().min(capacity);
-            self.data[at + 2..at + 4].copy_from_slice(&(len as u16).to_le_bytes());
-            self.data[at + 4..at + 4 + len].copy_from_slice(&text[..len]);
-            if len < capacity {
-                self.data[at + 4 + len] = 0;
-            }
-            return Ok(());
-        }
-        let forced = Self::encode_scalar(&var, ty, value)?;
-        self.write_forced(&forced);
-        Ok(())
+        value.store(ty, &mut self.data[at..at + var.size as usize])
     }
 
     /// Forces a scalar variable: writes it now and re-writes it at the start and at the end
@@ -962,9 +968,6 @@ impl<'a, 'm> Machine<'a, 'm> {
             return Err(VarError::Constant);
         }
         let ty = VarType::from_code(var.ty).expect("verified");
-        if ty.mem_type().is_none() {
-            return Err(VarError::NotForceable);
-        }
         let forced = Self::encode_scalar(&var, ty, value)?;
         let slot = match self
             .forces
@@ -979,6 +982,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 .ok_or(VarError::TooManyForces)?,
         };
         self.forces[slot] = Some(forced);
+        self.any_forced = true;
         self.write_forced(&forced);
         Ok(())
     }
@@ -991,6 +995,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 *slot = None;
             }
         }
+        self.any_forced = self.forces.iter().any(Option::is_some);
         Ok(())
     }
 
@@ -1008,45 +1013,29 @@ impl<'a, 'm> Machine<'a, 'm> {
     pub fn force_bytes(&mut self, name: &str, bytes: &[u8]) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
         let ty = VarType::from_code(var.ty).ok_or(VarError::TypeMismatch)?;
-        let mem = ty.mem_type().ok_or(VarError::NotForceable)?;
+        let mem = ty.mem_type().ok_or(match ty {
+            VarType::Ref => VarError::ReadOnly,
+            _ => VarError::NotForceable,
+        })?;
         if var.flags & VAR_FLAG_CONSTANT != 0 {
             return Err(VarError::Constant);
         }
         if bytes.len() != mem.width() {
             return Err(VarError::TypeMismatch);
         }
-        let mut cell = [0u8; 8];
-        cell[..bytes.len()].copy_from_slice(bytes);
-        let value = u64::from_le_bytes(cell);
-        let value = match ty {
-            VarType::Bool => Value::Bool(value != 0),
-            VarType::Real => Value::Real(f32::from_bits(value as u32)),
-            VarType::LReal => Value::LReal(f64::from_bits(value)),
-            VarType::Time => Value::Time(value as i64),
-            _ => Value::UInt(value),
-        };
+        let value = Value::of_cell(ty, mem.cell_from_le(bytes)).ok_or(VarError::TypeMismatch)?;
         self.force_var(name, value)
     }
 
     /// Ends all forcing.
     pub fn clear_forces(&mut self) {
         self.forces = [None; MAX_FORCES];
+        self.any_forced = false;
     }
 
     fn encode_scalar(var: &Var<'_>, ty: VarType, value: Value<'_>) -> Result<Forced, VarError> {
+        let cell = value.to_cell(ty)?;
         let mem = ty.mem_type().ok_or(VarError::NotForceable)?;
-        let cell = match (ty, value) {
-            (VarType::Bool, Value::Bool(b)) => b as u64,
-            (VarType::Real, Value::Real(r)) => r.to_bits() as u64,
-            (VarType::LReal, Value::LReal(r)) => r.to_bits(),
-            (VarType::Time, Value::Time(t) | Value::Int(t)) => t as u64,
-            (VarType::Bool | VarType::Real | VarType::LReal | VarType::Time, _) => {
-                return Err(VarError::TypeMismatch);
-            }
-            (_, Value::Int(i)) => i as u64,
-            (_, Value::UInt(u)) => u,
-            _ => return Err(VarError::TypeMismatch),
-        };
         Ok(Forced {
             addr: var.addr,
             len: mem.width() as u8,
@@ -1060,7 +1049,15 @@ impl<'a, 'm> Machine<'a, 'm> {
         self.data[at..at + len].copy_from_slice(&forced.bytes[..len]);
     }
 
+    #[inline]
     fn apply_forces(&mut self) {
+        if self.any_forced {
+            self.write_forces();
+        }
+    }
+
+    #[cold]
+    fn write_forces(&mut self) {
         for slot in 0..MAX_FORCES {
             if let Some(forced) = self.forces[slot] {
                 self.write_forced(&forced);
