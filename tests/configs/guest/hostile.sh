@@ -14,13 +14,15 @@ echo "hostile: idle phase over"
 
 # A port flood: every port call is a request to syssw. Two programs write requests to
 # the PLC's online service as fast as they can without waiting (valid, forbidden and
-# garbage ones; the queue is mostly full) and drain the answers; a shell loop writes READ
-# requests that wait for room, a dd reads answers that wait for them, another reads the
-# plant's level as fast as it can; for 2 s.
+# garbage ones; the queue is mostly full) and drain the answers, for 2 s; in the second
+# second a shell loop writes READ requests that wait for room, a dd reads answers that
+# wait for them (woken first, these two take most of the room and of the answers: the
+# first second is the flooders' own), another reads the plant's level as fast as it can.
 linux-arinc flood /dev/arinc/plc-request /dev/arinc/plc-response 2 &
 flooders=$!
 linux-arinc flood /dev/arinc/plc-request /dev/arinc/plc-response 2 &
 flooders="$flooders $!"
+sleep 1
 (while :; do printf '\002\001level' > /dev/arinc/plc-request; done) &
 waiters=$!
 dd if=/dev/arinc/plc-response of=/dev/null bs=256 2>/dev/null &
