@@ -402,3 +402,102 @@ fn guest_restart() {
         "the windowed partition kept its windows",
     );
 }
+
+/// The kernel's time stamp of the guest's log line of partition `partition` that holds
+/// `stdout: <text>`, in ns.
+fn stamp_ns(o: &xtask::qemu::Outcome, partition: &str, text: &str) -> Option<u64> {
+    let prefix = format!("[{partition}] ");
+    let needle = format!(" stdout: {text}");
+    let line = o
+        .lines
+        .iter()
+        .find(|l| l.contains(&prefix) && l.ends_with(&needle))?;
+    let seconds: f64 = line
+        .strip_prefix('[')?
+        .split_once(']')?
+        .0
+        .trim()
+        .parse()
+        .ok()?;
+    Some((seconds * 1e9) as u64)
+}
+
+/// Scenario guest_sched (`tests/configs/guest_sched.toml`, virtual time): the guest's
+/// scheduling policy (`partitions/guest/src/sched.rs`). Beside a process spinning in user
+/// code, 2,000 system calls take about twice as long as alone (the caller is CPU-bound
+/// too and shares the CPU in turns; with every process at one priority they took 41 s
+/// instead of 0.12 s alone: one call per time slice) and a loop of 20 short processes
+/// about as long as alone (21.5 s before); two counters beside the spinner get a third of
+/// the CPU each and finish together; a counter beside a busy pipe finishes (aging).
+#[test]
+fn guest_sched() {
+    /// The guest's time slice and how long a CPU-bound process may wait for its turn
+    /// while interactive ones keep the CPU (`guest::sched`), in ms.
+    const SLICE: f64 = 10.0;
+    const STARVATION: f64 = 100.0;
+    let o = boot("guest_sched");
+    script_ran(&o, "sched");
+    let at = |text: &str| {
+        let t = stamp_ns(&o, "sched", &format!("sched: {text}"));
+        check(&o, t.is_some(), &format!("no line `sched: {text}`"));
+        t.unwrap_or(0)
+    };
+    let ms = |from: u64, to: u64| to.saturating_sub(from) as f64 / 1e6;
+    let counter_alone = ms(at("counter alone"), at("counter 0 done"));
+    let calls_alone = ms(at("calls alone"), at("calls alone done"));
+    let processes_alone = ms(at("calls alone done"), at("processes alone done"));
+    let calls_hog = ms(at("calls beside a hog"), at("calls beside a hog done"));
+    let processes_hog = ms(
+        at("calls beside a hog done"),
+        at("processes beside a hog done"),
+    );
+    let counters = at("counters");
+    let (first, second) = (
+        ms(counters, at("counter 1 done")),
+        ms(counters, at("counter 2 done")),
+    );
+    let beside_pipe = ms(at("counter beside a busy pipe"), at("counter 3 done"));
+    println!(
+        "guest_sched (virtual ms): a counter alone {counter_alone:.1}; 2000 calls alone {calls_alone:.1}, beside a hog {calls_hog:.1}; 20 processes alone {processes_alone:.1}, beside a hog {processes_hog:.1}; two counters beside a hog {first:.1} and {second:.1}; a counter beside a busy pipe {beside_pipe:.1}"
+    );
+    // The calls: interactive for a slice, then in turns with the spinner (which had a
+    // slice of its own when it started).
+    check(
+        &o,
+        calls_hog <= 2.0 * calls_alone + 4.0 * SLICE,
+        &format!("2000 calls beside a hog took {calls_hog:.1} ms, alone {calls_alone:.1} ms"),
+    );
+    // The processes wait for their children: interactive, but the spinner ages into a
+    // slice after STARVATION of waiting.
+    check(
+        &o,
+        processes_hog <= processes_alone * (1.0 + SLICE / STARVATION) + 2.0 * SLICE,
+        &format!(
+            "20 processes beside a hog took {processes_hog:.1} ms, alone {processes_alone:.1} ms"
+        ),
+    );
+    // Three CPU-bound processes in turns: a third of the CPU each, together.
+    for took in [first, second] {
+        check(
+            &o,
+            took >= 2.0 * counter_alone && took <= 3.0 * counter_alone + 3.0 * SLICE,
+            &format!(
+                "a counter beside a hog and another took {took:.1} ms, alone {counter_alone:.1} ms"
+            ),
+        );
+    }
+    check(
+        &o,
+        (first - second).abs() <= 2.0 * SLICE,
+        &format!("the counters finished {first:.1} and {second:.1} ms after they started"),
+    );
+    // At least a slice in every STARVATION + SLICE, however busy the pipe.
+    let bound = ((counter_alone / SLICE).ceil() + 1.0) * (STARVATION + SLICE);
+    check(
+        &o,
+        beside_pipe <= bound,
+        &format!(
+            "a counter beside a busy pipe took {beside_pipe:.1} ms (alone {counter_alone:.1} ms)"
+        ),
+    );
+}

@@ -15,8 +15,9 @@
 //! ([`syscall`]; the file calls in [`syscall::file`], the signal and timer calls in
 //! [`sigcalls`]), the signals' numbers, actions and frame ([`signal`]), the pipes
 //! ([`pipe`]), the process table with fork, exec, wait, signal delivery, process groups,
-//! timers and the deferred replies of waiting calls ([`system`]), the console's
-//! terminal line discipline ([`tty`]) and the partition's ARINC ports as the devices
+//! timers and the deferred replies of waiting calls ([`system`]), the scheduling policy
+//! that says at which of three priorities each process's thread runs ([`sched`]), the
+//! console's terminal line discipline ([`tty`]) and the partition's ARINC ports as the devices
 //! `/dev/arinc/<port>` ([`arinc`]: their table, messages, `EMSGSIZE`, validity ioctl); the
 //! partition program (`main.rs`) only moves messages, creates tasks, maps pages, drives
 //! COM2 (`com2.rs`), moves port messages through syssw (`ports.rs`), writes the log and
@@ -82,6 +83,7 @@ pub mod pipe;
 pub mod poll;
 pub mod pool;
 pub mod process;
+pub mod sched;
 pub mod sigcalls;
 pub mod signal;
 pub mod stack;

@@ -18,7 +18,10 @@
 //! fragmentation and the tables around the data take, so a full file system answers
 //! `ENOSPC` before an allocation can fail. Its stack holds the process table (the
 //! configuration gives a guest at least 1 MiB).
-//! This file is glue only: every decision about a Linux call is the library's.
+//! This file is glue only: every decision about a Linux call is the library's, and every
+//! decision about which process runs is [`guest::sched`]'s (this loop tells it of each
+//! message and answer, asks it at every turn and when it said a decision is due, and sets
+//! the priorities it names with `thread_set`).
 //!
 //! The console: with `guest.console = "com2"` (the initramfs's `/etc/guest/console`) the
 //! processes' console is a terminal ([`guest::tty`]) on COM2 ([`com2`]); without it, their
@@ -45,6 +48,7 @@ use guest::linux::Errno;
 use guest::memory::Areas;
 use guest::memory::{PAGE, Rights};
 use guest::process::Stream;
+use guest::sched::Scheduler;
 use guest::syscall::{Host, Outcome};
 use guest::system::{INIT_PID, Joined, MAX_PROCESSES, System, Tasks};
 use guest::tty::Tty;
@@ -64,9 +68,6 @@ use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
 
-/// How long a process runs before another that may run gets the CPU (Linux's default
-/// scheduler gives a few milliseconds).
-const TIME_SLICE_NS: u64 = 10_000_000;
 /// How often calls that wait are served again while the guest has destination ports
 /// (an arriving message does not notify the guest).
 const PORT_POLL_NS: u64 = 1_000_000;
@@ -223,6 +224,9 @@ fn main(start: u64, _: u64) {
         tty: None,
         ports,
         port_waiting: false,
+        sched: Scheduler::new(0),
+        levels_set: 0,
+        new_thread: true,
     };
     let wants_terminal = archive
         .get(guest::CONSOLE_PATH)
@@ -269,7 +273,7 @@ fn main(start: u64, _: u64) {
     match start_thread(task, loaded.entry, loaded.sp, mcp, me) {
         Ok(thread) => {
             if let Some(t) = host.tasks[0].as_mut() {
-                t.thread = thread;
+                (t.thread, t.priority) = (thread, mcp);
             }
         }
         Err(e) => {
@@ -281,11 +285,14 @@ fn main(start: u64, _: u64) {
     }
 
     let mut system = System::new(loaded.process, hwcap());
-    let (mut slice_end, mut sliced) = (0, 0);
     let outcome = loop {
-        // Wait for a message, or until the next sleep or alarm is due (a due one first:
-        // a busy guest must not starve its timers).
+        // The scheduling policy ([`guest::sched`]) makes the decisions due, and the
+        // processes' threads get the priorities of their levels.
         let now = host.now_ns();
+        let decision = host.sched.decide(now);
+        host.set_levels();
+        // Wait for a message, or until the next sleep or alarm is due (a due one first:
+        // a busy guest must not starve its timers), or the policy's next decision.
         let timeout = match system.next_timer() {
             Some(at) if at <= now => {
                 host.port_waiting = false; // the calls served again say it anew
@@ -297,12 +304,6 @@ fn main(start: u64, _: u64) {
             Some(at) => at - now,
             None => TIMEOUT_INFINITE,
         };
-        // Time slices: the processes' threads share one priority and the kernel runs the
-        // first ready one until it blocks (a preempted one resumes first), so with two or
-        // more that may run, each slice ends by interrupting one: its exception message is
-        // answered at once, which puts it behind the others. Taking them in turn (pid
-        // order) follows the kernel's queue, so the one interrupted is the one that ran; a
-        // Linux scheduler shares a CPU among busy processes the same way.
         // A call waiting for a port (its messages arrive without a word to the guest) is
         // served again at least every PORT_POLL_NS.
         let timeout = if host.port_waiting && system.any_blocked() {
@@ -310,23 +311,9 @@ fn main(start: u64, _: u64) {
         } else {
             timeout
         };
-        let timeout = if system.runnable().nth(1).is_none() {
-            slice_end = now + TIME_SLICE_NS;
-            timeout
-        } else if now >= slice_end {
-            let next = system
-                .runnable()
-                .filter(|&pid| pid > sliced)
-                .min()
-                .or_else(|| system.runnable().min());
-            if let Some(pid) = next {
-                host.interrupt(pid);
-                sliced = pid;
-            }
-            slice_end = now + TIME_SLICE_NS;
-            timeout.min(TIME_SLICE_NS)
-        } else {
-            timeout.min(slice_end - now)
+        let timeout = match decision {
+            Some(at) => timeout.min(at.saturating_sub(now).max(1)),
+            None => timeout,
         };
         let received = match sys::receive(None, timeout) {
             Ok(r) => r,
@@ -354,6 +341,7 @@ fn main(start: u64, _: u64) {
         let Some(pid) = host.pid_of(received.sender).filter(|_| from_kernel) else {
             continue;
         };
+        host.sched.received(pid);
         if let Some(ended) = system.serve(pid, &mut fs, &mut host, ipc.exception()) {
             break ended;
         }
@@ -467,6 +455,8 @@ struct Task {
     pid: u32,
     task: TaskId,
     thread: ThreadId,
+    /// The priority its thread has (set at creation, then by [`GuestHost::set_levels`]).
+    priority: u8,
     /// The process whose memory (task and frames) it uses: itself, or for a vfork child
     /// its parent's until it executes.
     memory: u32,
@@ -479,6 +469,7 @@ impl Task {
             pid,
             task,
             thread: ThreadId(0),
+            priority: 0,
             memory: pid,
             out: [LineBuffer::new(), LineBuffer::new()],
         }
@@ -570,7 +561,7 @@ struct GuestHost<'p> {
     /// The process the memory calls act on.
     current: u32,
     tasks: [Option<Task>; MAX_PROCESSES],
-    /// Priority of the processes' threads.
+    /// The processes' highest priority (their interactive level's).
     mcp: u8,
     /// This thread: the exception handler of the processes' threads.
     handler: ThreadId,
@@ -585,6 +576,12 @@ struct GuestHost<'p> {
     ports: ports::Ports,
     /// A call waited for a port when it was last served ([`Host::port_wait`]).
     port_waiting: bool,
+    /// The scheduling policy: the level of each process's thread.
+    sched: Scheduler,
+    /// The policy's generation the priorities were last set for.
+    levels_set: u64,
+    /// A thread was created (at `mcp`) since the priorities were last set.
+    new_thread: bool,
 }
 
 impl<'p> GuestHost<'p> {
@@ -603,6 +600,27 @@ impl<'p> GuestHost<'p> {
             .flatten()
             .find(|t| t.thread == thread)
             .map(|t| t.pid)
+    }
+
+    /// Gives each process's thread the priority of its level in [`GuestHost::sched`]
+    /// (`mcp`, one or two below), where it has another, if a level may have changed or a
+    /// thread is new.
+    fn set_levels(&mut self) {
+        let generation = self.sched.generation();
+        if generation == self.levels_set && !self.new_thread {
+            return;
+        }
+        (self.levels_set, self.new_thread) = (generation, false);
+        for t in self.tasks.iter_mut().flatten() {
+            let priority = self.mcp.saturating_sub(self.sched.level(t.pid).below_top());
+            if t.thread != ThreadId(0)
+                && t.priority != priority
+                && sys::thread_set(Some(t.thread), ThreadAttribute::Priority, priority as u64)
+                    .is_ok()
+            {
+                t.priority = priority;
+            }
+        }
     }
 
     /// The frames and the kernel calls that map them.
@@ -788,8 +806,9 @@ impl Tasks for GuestHost<'_> {
         match thread {
             Ok(thread) => {
                 if let Some(t) = self.tasks[slot].as_mut() {
-                    t.thread = thread;
+                    (t.thread, t.priority) = (thread, self.mcp);
                 }
+                self.new_thread = true;
                 copied
             }
             Err(e) => {
@@ -811,9 +830,11 @@ impl Tasks for GuestHost<'_> {
         let thread = start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)?;
         self.tasks[slot] = Some(Task {
             thread,
+            priority: self.mcp,
             memory,
             ..Task::new(child, task)
         });
+        self.new_thread = true;
         Ok(())
     }
 
@@ -836,8 +857,9 @@ impl Tasks for GuestHost<'_> {
         };
         if let Some(t) = self.tasks[slot].as_mut() {
             let _ = sys::thread_kill(t.thread);
-            (t.task, t.thread, t.memory) = (task, thread, pid);
+            (t.task, t.thread, t.priority, t.memory) = (task, thread, self.mcp, pid);
         }
+        self.new_thread = true;
         Ok(true)
     }
 
@@ -869,6 +891,7 @@ impl Tasks for GuestHost<'_> {
         }
         // The task's mappings went with it: only its references to frames are left.
         self.frames.release_all(pid);
+        self.sched.forget(pid);
     }
 
     fn interrupt(&mut self, pid: u32) {
@@ -886,6 +909,7 @@ impl Tasks for GuestHost<'_> {
         } else {
             sys::thread_resume(thread)
         };
+        self.sched.stopped(pid, stop);
     }
 
     fn resume(&mut self, pid: u32, m: &ExceptionMessage) {
@@ -897,8 +921,9 @@ impl Tasks for GuestHost<'_> {
             tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
             words: [0; 3],
         };
-        if let Err(e) = sys::reply(thread, &resume) {
-            println!("guest: cannot resume process {pid}: {e:?}");
+        match sys::reply(thread, &resume) {
+            Ok(()) => self.sched.replied(pid),
+            Err(e) => println!("guest: cannot resume process {pid}: {e:?}"),
         }
     }
 }

@@ -296,16 +296,6 @@ impl System {
             .any(|s| matches!(s.state, State::Blocked(_)))
     }
 
-    /// The processes that may be running user code (not waiting in a call, stopped or
-    /// ended): the ones a time slice is shared among.
-    pub fn runnable(&self) -> impl Iterator<Item = u32> + '_ {
-        self.slots
-            .iter()
-            .flatten()
-            .filter(|s| matches!(s.state, State::Running) && !s.stopped)
-            .map(|s| s.process.pid)
-    }
-
     /// The time the next sleeping call or alarm is due (the guest's clock), if any.
     pub fn next_timer(&self) -> Option<u64> {
         self.slots

@@ -1,6 +1,6 @@
 # Scenario guest_processes: 200 short processes one after the other, ten at once, and an
 # orphan that init (this shell) inherits and reaps, then 20 more beside a process spinning
-# in user code (the guest shares the CPU among them in time slices).
+# in user code (the guest's scheduling policy keeps them about as fast as alone).
 i=0
 while [ $i -lt 200 ]; do /bin/true; i=$((i+1)); done
 echo "ran $i processes"

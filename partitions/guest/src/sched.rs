@@ -1,0 +1,1024 @@
+//! The guest's scheduling policy: which of three priorities each Linux process's thread
+//! runs at, so that processes that wait (for a pipe, the console, a child, a timer, a port)
+//! run as soon as they may, while processes that keep the CPU share it in turn and are
+//! never starved for ever. Pure decisions over pids and times; the partition program
+//! (`main.rs`) reports what happens to the processes' threads ([`Scheduler::received`],
+//! [`Scheduler::replied`], [`Scheduler::stopped`], [`Scheduler::forget`]), asks for the
+//! decisions due ([`Scheduler::decide`]) and sets the priorities [`Scheduler::level`]
+//! names. It never calls the kernel and never looks at what a process does beyond when it
+//! runs, waits and is answered.
+//!
+//! **The mechanism it works with.** The kernel runs the highest-priority ready thread, FIFO
+//! within a priority (a preempted thread resumes first), and a thread whose exception
+//! message the guest answers joins the *tail* of its priority's queue. Each system call
+//! and page fault of a process is such a message. So with every process at one priority,
+//! a process that makes a call queues behind a process spinning in user code and makes one
+//! call per time slice: a command of 100 calls beside `while :; do :; done` took a second.
+//!
+//! **The policy** (a multi-level feedback queue, as in the schedulers of Solaris, the BSDs
+//! and Linux before CFS), three levels below the guest's own thread:
+//!
+//! - [`Level::Interactive`] (the processes' highest priority): processes that waited
+//!   recently, and new ones. A call they make puts them behind other interactive ones
+//!   only, which soon wait themselves.
+//! - [`Level::Turn`] (one below): the one CPU-bound process whose turn it is. Alone at its
+//!   priority, it keeps the CPU across its own calls and faults for its whole slice.
+//! - [`Level::Queued`] (two below): the other CPU-bound processes, waiting for their turn.
+//!
+//! Each process has a CPU *debt*: the time it ran (as the process the guest's model says
+//! holds the CPU, or whose message the guest served) less the time it waited, between 0
+//! and one [`SLICE_NS`]. An interactive process whose debt reaches a slice has run a whole
+//! slice more than it waited: it becomes CPU-bound and joins the back of the turn order. A
+//! process that waits (its reply deferred: a pipe, the console, `wait4`, a sleep, `poll`,
+//! a port; a vfork parent; or stopped) is interactive when it is woken, a CPU-bound one
+//! with a debt of a slice less the time it waited: one that waited a slice or longer
+//! starts afresh, one that waited a moment (a busy pipe's writer) soon is CPU-bound again,
+//! so waiting briefly buys no more CPU than the wait was long. The turn passes after its
+//! holder has run a slice to the next CPU-bound process in turn order (round robin): the
+//! CPU-bound processes share equally what the interactive ones leave.
+//!
+//! **Aging.** Interactive processes could keep the CPU busy between them for ever (a pipe
+//! whose two ends wake each other). A turn holder that has not run for [`STARVATION_NS`]
+//! is made interactive with no debt: it runs a slice at the top level, beside them, and is
+//! CPU-bound again. So the CPU-bound processes together get at least one slice in every
+//! `STARVATION_NS` plus a slice, each of n of them one in n such periods.
+//!
+//! **Why three priorities and not two.** With the CPU-bound processes at one priority,
+//! the kernel's FIFO would put one that makes a call behind the others: the bug above,
+//! one level down. The guest decides whose turn it is, and the holder is alone at its
+//! priority.
+//!
+//! **Why here, and why this policy.** The kernel offers fixed priorities, FIFO within one,
+//! and `thread_set` of a priority below a task's MCP; which Linux process deserves the CPU
+//! is the guest's business, as the partition's own (the processes stay below the guest's
+//! MCP whatever the policy does). A fair-share scheduler (Linux's CFS) was the other
+//! candidate: it would have to keep exactly one process above all others and move that
+//! mark at every decision, and a woken process would wait for its virtual time to come.
+//! The feedback queue lets the kernel's FIFO run the interactive processes without the
+//! guest choosing among them, reacts to a wake-up before the woken thread runs, and costs
+//! nothing for a call answered at once. Its known weakness: processes that wake each
+//! other often (a pipeline) count as interactive however much CPU they use between them,
+//! so beside them the CPU-bound ones get only what aging gives them.
+//!
+//! **The model of who runs.** The process whose message arrives is the one that ran since
+//! the guest last looked (the guest's thread is above all of them, so it sees every
+//! message at once); with no message (a time-out, console input), the model's choice ran:
+//! the first runnable interactive process in the kernel's FIFO order (the order of the
+//! guest's answers), else the turn holder. A process is runnable from its answer to its
+//! next message; one still unanswered when the guest next looks waits. Times are the
+//! guest's clock: the time a process held the CPU includes other partitions' windows and
+//! the guest's work for it, so a slice is one of wall-clock time while the process was
+//! the one to run.
+//!
+//! **Cost.** A message that changes nothing but the sender's debt (a call answered at
+//! once) costs two lookups in the table and a comparison; the decisions are remade only
+//! when a process waits, is woken, starts, ends or uses up its slice, or a decision is due.
+
+use crate::system::MAX_PROCESSES;
+
+/// How long a process runs before another that may run gets the CPU (Linux's default
+/// scheduler gives a few milliseconds).
+pub const SLICE_NS: u64 = 10_000_000;
+/// How long the CPU-bound process whose turn it is may go without the CPU while
+/// interactive processes keep it busy, before it runs a slice beside them.
+pub const STARVATION_NS: u64 = 10 * SLICE_NS;
+
+/// A process's scheduling level; each is one priority below the one before.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Level {
+    /// Processes that waited recently, and new ones: the processes' highest priority.
+    Interactive,
+    /// The CPU-bound process whose turn it is.
+    Turn,
+    /// The other CPU-bound processes.
+    Queued,
+}
+
+impl Level {
+    /// How many priorities below the processes' highest the level is.
+    pub const fn below_top(self) -> u8 {
+        match self {
+            Level::Interactive => 0,
+            Level::Turn => 1,
+            Level::Queued => 2,
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    pid: u32,
+    /// Ran a whole slice more than it waited: it runs in turns.
+    cpu_bound: bool,
+    /// Its message was received and is not answered yet.
+    in_call: bool,
+    /// Stopped by a signal (its thread suspended).
+    stopped: bool,
+    /// Since when it waits, once the guest saw it wait (unanswered, or stopped).
+    waiting_since: Option<u64>,
+    /// It waited and was answered (or continued) since the guest last looked: it is
+    /// woken when the guest looks next.
+    woken: bool,
+    /// Interactive: its debt (ns, at most a slice). CPU-bound: the time it ran in its
+    /// current turn.
+    used: u64,
+    /// Interactive: when it joined the tail of the kernel's queue (the model of the
+    /// kernel's FIFO order). CPU-bound: its place in the turn order.
+    order: u64,
+    /// When it last ran or got the turn (for aging).
+    since: u64,
+}
+
+impl Entry {
+    fn runnable(&self) -> bool {
+        !self.in_call && !self.stopped
+    }
+
+    /// Its debt has reached what ends its slice.
+    fn spent(&self) -> bool {
+        self.used >= SLICE_NS
+    }
+}
+
+/// What [`Scheduler::view`] sees.
+#[derive(Clone, Copy, Debug, Default)]
+struct View {
+    /// The first runnable interactive process in queue order: its slot and order.
+    first_interactive: Option<(usize, u64)>,
+    /// The first runnable CPU-bound process in turn order.
+    first_bound: Option<(usize, u64)>,
+    runnable: usize,
+    cpu_bound: usize,
+    /// A runnable interactive process has a slice of debt.
+    spent: bool,
+}
+
+/// The scheduling state of the guest's processes.
+#[derive(Clone, Debug)]
+pub struct Scheduler {
+    entries: [Option<Entry>; MAX_PROCESSES],
+    /// The next `order`: every join of a queue's tail takes one.
+    next_order: u64,
+    /// When the guest last looked ([`Scheduler::decide`]).
+    last: u64,
+    /// The process whose message arrived since then.
+    sender: Option<u32>,
+    /// The process the model said holds the CPU when the guest last looked.
+    head: Option<u32>,
+    /// The CPU-bound process whose turn it is (as of the last full decision).
+    turn: Option<u32>,
+    /// Something happened that the last decision did not see.
+    dirty: bool,
+    /// When the next decision is due (the last decision's answer).
+    due: Option<u64>,
+    /// Counts the decisions that may have changed a level.
+    generation: u64,
+    /// More than one interactive process was runnable at the last decision: an answer
+    /// to one may change which of them runs.
+    contended: bool,
+}
+
+impl Scheduler {
+    /// No processes yet; the clock reads `now`.
+    pub fn new(now: u64) -> Self {
+        Self {
+            entries: [None; MAX_PROCESSES],
+            next_order: 0,
+            last: now,
+            sender: None,
+            head: None,
+            turn: None,
+            dirty: true,
+            due: None,
+            generation: 0,
+            contended: false,
+        }
+    }
+
+    fn index(&self, pid: u32) -> Option<usize> {
+        self.entries
+            .iter()
+            .position(|e| e.is_some_and(|e| e.pid == pid))
+    }
+
+    fn get(&self, pid: u32) -> Option<&Entry> {
+        self.entries.iter().flatten().find(|e| e.pid == pid)
+    }
+
+    fn get_mut(&mut self, pid: u32) -> Option<&mut Entry> {
+        self.entries.iter_mut().flatten().find(|e| e.pid == pid)
+    }
+
+    /// The next place at a queue's tail.
+    fn tail(&mut self) -> u64 {
+        self.next_order += 1;
+        self.next_order
+    }
+
+    /// A message of process `pid`'s thread arrived (a call, a fault, an interruption):
+    /// it ran until now and waits for the answer.
+    pub fn received(&mut self, pid: u32) {
+        self.sender = Some(pid);
+        if let Some(e) = self.get_mut(pid) {
+            e.in_call = true;
+        }
+    }
+
+    /// The guest answered `pid`'s message: its thread joined the tail of its priority's
+    /// queue. One the guest had seen waiting was woken (see [`Scheduler::decide`]). A
+    /// process not seen before (a new child's first message) is added, interactive.
+    pub fn replied(&mut self, pid: u32) {
+        let (order, contended) = (self.tail(), self.contended);
+        let Some(e) = self.get_mut(pid) else {
+            return self.insert(pid, order);
+        };
+        e.in_call = false;
+        e.woken |= e.waiting_since.is_some() && !e.stopped;
+        let changed = e.woken || (!e.cpu_bound && contended);
+        if !e.cpu_bound {
+            e.order = order;
+        }
+        self.dirty |= changed;
+    }
+
+    /// Process `pid` was stopped (`stop`) or continued.
+    pub fn stopped(&mut self, pid: u32, stop: bool) {
+        let (order, now) = (self.tail(), self.last);
+        let Some(e) = self.get_mut(pid) else { return };
+        e.stopped = stop;
+        if stop {
+            e.waiting_since.get_or_insert(now);
+        } else if !e.in_call {
+            e.order = order; // resumed: the tail of its queue
+            e.woken = e.waiting_since.is_some();
+        }
+        self.dirty = true;
+    }
+
+    /// Wakes the process in slot `i` at `now`: interactive, with its debt (a CPU-bound
+    /// one's: a slice) less the time it waited.
+    fn wake(&mut self, i: usize, now: u64) {
+        let order = self.next_order + 1;
+        let Some(e) = self.entries[i].as_mut() else {
+            return;
+        };
+        e.woken = false;
+        let Some(since) = e.waiting_since.take() else {
+            return;
+        };
+        let debt = if e.cpu_bound { SLICE_NS } else { e.used };
+        e.used = debt.saturating_sub(now.saturating_sub(since));
+        e.since = now;
+        if e.cpu_bound {
+            // Its new priority puts it at the interactive queue's tail.
+            (e.cpu_bound, e.order) = (false, order);
+            self.next_order = order;
+        }
+    }
+
+    /// Adds `pid`: interactive, runnable, no debt, at the tail of the interactive queue.
+    fn insert(&mut self, pid: u32, order: u64) {
+        let now = self.last;
+        if let Some(slot) = self.entries.iter_mut().find(|e| e.is_none()) {
+            *slot = Some(Entry {
+                pid,
+                cpu_bound: false,
+                in_call: false,
+                stopped: false,
+                waiting_since: None,
+                woken: false,
+                used: 0,
+                order,
+                since: now,
+            });
+            self.dirty = true;
+        }
+    }
+
+    /// Process `pid` ended.
+    pub fn forget(&mut self, pid: u32) {
+        if let Some(i) = self.index(pid) {
+            self.entries[i] = None;
+            self.dirty = true;
+        }
+        if self.turn == Some(pid) {
+            self.turn = None;
+        }
+    }
+
+    /// The runnable processes at a glance (one pass over the table).
+    fn view(&self) -> View {
+        let mut v = View::default();
+        for (i, e) in self.entries.iter().enumerate() {
+            let Some(e) = e.filter(Entry::runnable) else {
+                continue;
+            };
+            v.runnable += 1;
+            let first = if e.cpu_bound {
+                v.cpu_bound += 1;
+                &mut v.first_bound
+            } else {
+                v.spent |= e.spent();
+                &mut v.first_interactive
+            };
+            if first.is_none_or(|(_, order)| e.order < order) {
+                *first = Some((i, e.order));
+            }
+        }
+        v
+    }
+
+    /// The process the model says holds the CPU: the first runnable interactive one in
+    /// the kernel's queue order, else the one whose turn it is.
+    pub fn running(&self) -> Option<u32> {
+        let v = self.view();
+        let (i, _) = v.first_interactive.or(v.first_bound)?;
+        self.entries[i].map(|e| e.pid)
+    }
+
+    /// Counts the decisions that may have changed a [`Scheduler::level`]: the priorities
+    /// need setting again only when it changed.
+    pub fn generation(&self) -> u64 {
+        self.generation
+    }
+
+    /// The guest looks at `now`: the time since it last looked is charged to the process
+    /// whose message arrived, or without one (a time-out, console input) to the one the
+    /// model said would run; that sender, if still unanswered, waits from now. The
+    /// processes answered after a wait are woken now: interactive, with their debt (a
+    /// CPU-bound one's: a slice) less the time they waited. Then the decisions due are
+    /// made: interactive processes whose debt reached a slice become CPU-bound (at the
+    /// back of the turn order), the turn passes on after a slice, a starving turn holder
+    /// becomes interactive. Returns when the next decision is due (the slice of the
+    /// process that runs ends while another may run, or the turn holder starts to
+    /// starve), if any: the guest looks again then even if nothing else happens.
+    pub fn decide(&mut self, now: u64) -> Option<u64> {
+        let ns = now.saturating_sub(self.last);
+        self.last = now;
+        let charged = self.sender.take().or(self.head);
+        if let Some(e) = charged.and_then(|pid| self.get_mut(pid)) {
+            e.used = e.used.saturating_add(ns);
+            if !e.cpu_bound {
+                e.used = e.used.min(SLICE_NS);
+            }
+            e.since = now;
+            let waits = e.in_call && e.waiting_since.is_none();
+            if waits {
+                e.waiting_since = Some(now);
+            }
+            self.dirty |= waits || e.spent();
+        }
+        if !self.dirty && self.due.is_none_or(|at| now < at) {
+            return self.due;
+        }
+        for i in 0..MAX_PROCESSES {
+            if self.entries[i].is_some_and(|e| e.woken) {
+                self.wake(i, now);
+            }
+        }
+        self.dirty = false;
+        self.generation += 1;
+        self.due = self.remake(now);
+        self.due
+    }
+
+    /// The decisions of [`Scheduler::decide`], remade from the table.
+    fn remake(&mut self, now: u64) -> Option<u64> {
+        let mut v = self.view();
+        if v.spent {
+            for i in 0..MAX_PROCESSES {
+                if self.entries[i].is_some_and(|e| e.runnable() && !e.cpu_bound && e.spent()) {
+                    let order = self.tail();
+                    if let Some(e) = self.entries[i].as_mut() {
+                        (e.cpu_bound, e.used, e.order) = (true, 0, order);
+                    }
+                }
+            }
+            v = self.view();
+        }
+        self.pass_turn(&v, now);
+        // The holder's slice is over: the next in turn order, if any, has the turn.
+        if let Some((i, _)) = v.first_bound
+            && self.entries[i].is_some_and(|e| e.spent())
+        {
+            let order = self.tail();
+            if let Some(e) = self.entries[i].as_mut() {
+                e.used = 0;
+                if v.cpu_bound > 1 {
+                    e.order = order;
+                }
+            }
+            v = self.view();
+            self.pass_turn(&v, now);
+        }
+        // The holder starves: a slice at the top.
+        if let Some((i, _)) = v.first_bound
+            && v.first_interactive.is_some()
+            && self.entries[i].is_some_and(|e| now.saturating_sub(e.since) >= STARVATION_NS)
+        {
+            let order = self.tail();
+            if let Some(e) = self.entries[i].as_mut() {
+                (e.cpu_bound, e.used, e.order, e.since) = (false, 0, order, now);
+            }
+            v = self.view();
+            self.pass_turn(&v, now);
+        }
+
+        self.contended = v.runnable - v.cpu_bound > 1;
+        self.head = v
+            .first_interactive
+            .or(v.first_bound)
+            .and_then(|(i, _)| self.entries[i])
+            .map(|e| e.pid);
+        let entry = |first: Option<(usize, u64)>| first.and_then(|(i, _)| self.entries[i]);
+        let holder = entry(v.first_bound);
+        let slice_end = match entry(v.first_interactive) {
+            Some(e) if v.runnable > 1 => Some(e.used),
+            Some(_) => None,
+            None => holder.filter(|_| v.cpu_bound > 1).map(|e| e.used),
+        }
+        .map(|used| now + SLICE_NS.saturating_sub(used));
+        let starving = holder
+            .filter(|_| v.first_interactive.is_some())
+            .map(|e| e.since + STARVATION_NS);
+        match (slice_end, starving) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
+        }
+    }
+
+    /// Gives the turn to the first runnable CPU-bound process in turn order (`v`), if it
+    /// is not the holder already (its turn starts now).
+    fn pass_turn(&mut self, v: &View, now: u64) {
+        let next = v
+            .first_bound
+            .and_then(|(i, _)| self.entries[i])
+            .map(|e| e.pid);
+        if next != self.turn {
+            self.turn = next;
+            if let Some((i, _)) = v.first_bound
+                && let Some(e) = self.entries[i].as_mut()
+            {
+                (e.used, e.since) = (0, now);
+            }
+        }
+    }
+
+    /// The level `pid`'s thread belongs at (a process not seen yet: interactive).
+    pub fn level(&self, pid: u32) -> Level {
+        match self.get(pid) {
+            Some(e) if e.cpu_bound && self.turn == Some(pid) => Level::Turn,
+            Some(e) if e.cpu_bound => Level::Queued,
+            _ => Level::Interactive,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::collections::VecDeque;
+
+    const MS: u64 = 1_000_000;
+    const US: u64 = 1_000;
+
+    /// Process `pid` makes a call that is answered at once.
+    fn call(s: &mut Scheduler, pid: u32) {
+        s.received(pid);
+        s.replied(pid);
+    }
+
+    #[test]
+    fn levels_are_three_priorities_in_a_row() {
+        assert_eq!(Level::Interactive.below_top(), 0);
+        assert_eq!(Level::Turn.below_top(), 1);
+        assert_eq!(Level::Queued.below_top(), 2);
+    }
+
+    #[test]
+    fn a_process_that_spins_a_slice_beside_another_runs_in_turns() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.replied(2);
+        assert_eq!(s.decide(0), Some(SLICE_NS), "the slice of the first ends");
+        assert_eq!(s.running(), Some(1));
+        assert_eq!(s.level(1), Level::Interactive);
+        let before = s.generation();
+        assert_eq!(
+            s.decide(SLICE_NS / 2),
+            Some(SLICE_NS),
+            "nothing to decide yet"
+        );
+        assert_eq!(s.generation(), before, "no level changed");
+        s.decide(SLICE_NS);
+        assert_eq!(s.level(1), Level::Turn, "alone of the CPU-bound: its turn");
+        assert_eq!(s.level(2), Level::Interactive);
+        assert_eq!(s.running(), Some(2));
+        s.decide(2 * SLICE_NS);
+        assert_eq!(
+            (s.level(1), s.level(2)),
+            (Level::Turn, Level::Queued),
+            "the second is CPU-bound too, behind the first"
+        );
+        assert_eq!(s.running(), Some(1));
+        assert_eq!(s.decide(2 * SLICE_NS), Some(3 * SLICE_NS));
+        s.decide(3 * SLICE_NS);
+        assert_eq!((s.level(1), s.level(2)), (Level::Queued, Level::Turn));
+        assert_eq!(s.running(), Some(2));
+    }
+
+    #[test]
+    fn a_call_keeps_the_turn() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        s.decide(SLICE_NS);
+        s.decide(2 * SLICE_NS);
+        assert_eq!((s.level(1), s.level(2)), (Level::Turn, Level::Queued));
+        for k in 1..10 {
+            call(&mut s, 1);
+            s.decide(2 * SLICE_NS + k * MS);
+            assert_eq!(s.level(1), Level::Turn, "{k} ms into its turn");
+        }
+        call(&mut s, 1);
+        s.decide(3 * SLICE_NS);
+        assert_eq!((s.level(1), s.level(2)), (Level::Queued, Level::Turn));
+    }
+
+    #[test]
+    fn a_process_alone_is_left_alone() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        assert_eq!(s.decide(0), None, "no other process: no time slice to end");
+        assert_eq!(s.decide(5 * SLICE_NS), None);
+        assert_eq!(s.level(1), Level::Turn, "it spun: CPU-bound, with the turn");
+    }
+
+    #[test]
+    fn a_woken_process_is_interactive_with_its_debt_less_its_wait() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        s.decide(SLICE_NS);
+        s.decide(2 * SLICE_NS);
+        assert_eq!((s.level(1), s.level(2)), (Level::Turn, Level::Queued));
+        // Process 1 runs 1 ms of its turn and its call waits (a pipe)...
+        let t = 2 * SLICE_NS + MS;
+        s.received(1);
+        s.decide(t);
+        assert_eq!(s.level(2), Level::Turn, "the turn passed on");
+        assert_eq!(s.running(), Some(2));
+        // ... for 3 ms: then the call is answered and it is woken.
+        let t = t + 3 * MS;
+        s.received(2); // a call of process 2 writes into the pipe
+        s.replied(1);
+        s.replied(2);
+        assert_eq!(
+            s.decide(t),
+            Some(t + 3 * MS),
+            "its debt is a slice less the 3 ms it waited: 3 ms more make a slice"
+        );
+        assert_eq!(s.level(1), Level::Interactive, "woken: interactive again");
+        assert_eq!(s.running(), Some(1), "it preempts the CPU-bound one");
+        call(&mut s, 1);
+        s.decide(t + 3 * MS);
+        assert_eq!(
+            s.level(1),
+            Level::Queued,
+            "CPU-bound again, behind the other"
+        );
+
+        // A wait of a slice or more forgives the whole debt.
+        let t = t + 4 * MS;
+        s.received(1);
+        s.decide(t);
+        s.decide(t + SLICE_NS);
+        s.replied(1);
+        assert_eq!(s.decide(t + SLICE_NS), Some(t + 2 * SLICE_NS));
+        assert_eq!(s.level(1), Level::Interactive);
+    }
+
+    #[test]
+    fn a_stopped_process_waits_and_is_woken_when_continued() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        s.decide(SLICE_NS);
+        s.decide(2 * SLICE_NS);
+        assert_eq!((s.level(1), s.level(2)), (Level::Turn, Level::Queued));
+        s.stopped(1, true);
+        s.decide(2 * SLICE_NS);
+        assert_eq!(s.running(), Some(2), "a stopped process does not run");
+        assert_eq!(s.level(2), Level::Turn);
+        s.stopped(1, false);
+        s.decide(4 * SLICE_NS);
+        assert_eq!(s.level(1), Level::Interactive, "continued after two slices");
+        assert_eq!(s.running(), Some(1));
+        // Stopped while its call waits: answered while stopped, woken when continued.
+        s.received(1);
+        s.decide(4 * SLICE_NS + MS);
+        s.stopped(1, true);
+        s.replied(1);
+        s.decide(5 * SLICE_NS);
+        assert_eq!(s.running(), Some(2));
+        s.stopped(1, false);
+        s.decide(5 * SLICE_NS);
+        assert_eq!(s.running(), Some(1));
+    }
+
+    #[test]
+    fn a_starving_turn_holder_runs_a_slice_beside_the_interactive_ones() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.decide(0);
+        s.decide(SLICE_NS);
+        assert_eq!(s.level(1), Level::Turn);
+        // Processes 2 and 3 are the ends of a busy pipe: each runs 1 ms, wakes the other
+        // and waits as long as it ran; between them they keep the CPU.
+        s.replied(2);
+        s.replied(3);
+        s.received(3);
+        s.decide(SLICE_NS);
+        let (mut t, mut due, mut ends) = (SLICE_NS, None, (2, 3));
+        let starves = SLICE_NS + STARVATION_NS;
+        while s.level(1) == Level::Turn {
+            assert!(t < starves, "never aged");
+            assert!(due.is_none_or(|at| at <= starves), "{due:?}: look by then");
+            t += MS;
+            s.received(ends.0);
+            s.replied(ends.1);
+            due = s.decide(t);
+            ends = (ends.1, ends.0);
+            if t < starves {
+                assert_eq!(s.running(), Some(ends.0));
+                assert_eq!(s.level(ends.0), Level::Interactive);
+            }
+        }
+        assert_eq!(t, starves);
+        assert_eq!(s.level(1), Level::Interactive, "aged: a slice at the top");
+        assert_eq!(
+            s.running(),
+            Some(ends.0),
+            "behind the pipe's end already queued"
+        );
+    }
+
+    #[test]
+    fn new_and_forgotten_processes() {
+        let mut s = Scheduler::new(0);
+        s.replied(7); // a new child's first message
+        assert_eq!(s.level(7), Level::Interactive);
+        s.decide(0);
+        assert_eq!(s.running(), Some(7));
+        s.forget(7);
+        s.decide(0);
+        assert_eq!(s.running(), None);
+        assert_eq!(s.level(9), Level::Interactive, "unknown: interactive");
+        s.received(9); // unknown: nothing to charge, no panic
+        s.decide(MS);
+        // The table never overflows: more pids than slots are left out, not a panic.
+        for pid in 1..=MAX_PROCESSES as u32 + 4 {
+            s.replied(pid);
+        }
+        s.decide(2 * MS);
+    }
+
+    /// What a simulated process does.
+    #[derive(Clone, Copy, Debug)]
+    enum Work {
+        /// Spins in user code for ever.
+        Spin,
+        /// `count` system calls the guest answers at once, `between` ns of user code before
+        /// each; then it is done.
+        Calls { between: u64, count: u32 },
+        /// Runs `run` ns, then sleeps `sleep` ns (a deferred reply the guest's timer ends),
+        /// for ever; the time from each wake-up to running again is recorded.
+        Sleeper { run: u64, sleep: u64 },
+        /// Runs `run` ns, then wakes process `peer` and waits until `peer` wakes it (the
+        /// two ends of a busy pipe).
+        PingPong { run: u64, peer: u32 },
+    }
+
+    #[derive(Debug)]
+    struct Proc {
+        pid: u32,
+        work: Work,
+        /// User code left until its next message.
+        left: u64,
+        /// Waits in a call: until this time (a sleep), or for ever (`u64::MAX`).
+        blocked_until: Option<u64>,
+        level: Level,
+        done_at: Option<u64>,
+        cpu: u64,
+        /// When it was last woken and has not run since.
+        woken_at: Option<u64>,
+        /// The longest time from a wake-up to running.
+        worst_latency: u64,
+    }
+
+    /// The kernel's ready queues (one per level, FIFO, the running thread at its head)
+    /// and the guest's main loop around a [`Scheduler`], as `main.rs` drives it; `flat`
+    /// keeps every process interactive (the guest before this policy, without its round
+    /// robin).
+    struct Sim {
+        t: u64,
+        procs: Vec<Proc>,
+        ready: [VecDeque<u32>; 3],
+        sched: Scheduler,
+        /// Time the guest takes to serve a message.
+        serve: u64,
+        flat: bool,
+        /// Who ran when, how long.
+        ran: Vec<(u64, u32, u64)>,
+    }
+
+    impl Sim {
+        fn new(works: &[Work]) -> Self {
+            let mut sim = Sim {
+                t: 0,
+                procs: Vec::new(),
+                ready: Default::default(),
+                sched: Scheduler::new(0),
+                serve: 5 * US,
+                flat: false,
+                ran: Vec::new(),
+            };
+            for (i, &work) in works.iter().enumerate() {
+                let pid = i as u32 + 1;
+                let left = match work {
+                    Work::Spin => u64::MAX,
+                    Work::Calls { between, .. } => between,
+                    Work::Sleeper { run, .. } | Work::PingPong { run, .. } => run,
+                };
+                sim.procs.push(Proc {
+                    pid,
+                    work,
+                    left,
+                    blocked_until: None,
+                    level: Level::Interactive,
+                    done_at: None,
+                    cpu: 0,
+                    woken_at: None,
+                    worst_latency: 0,
+                });
+                sim.reply(pid);
+            }
+            sim
+        }
+
+        fn proc(&mut self, pid: u32) -> &mut Proc {
+            &mut self.procs[pid as usize - 1]
+        }
+
+        /// The kernel: the thread at the head of the highest non-empty queue.
+        fn head(&self) -> Option<u32> {
+            self.ready.iter().find_map(|q| q.front().copied())
+        }
+
+        fn unqueue(&mut self, pid: u32) {
+            for q in &mut self.ready {
+                q.retain(|&p| p != pid);
+            }
+        }
+
+        /// The guest answers `pid`: its thread joins the tail of its priority's queue.
+        fn reply(&mut self, pid: u32) {
+            self.unqueue(pid);
+            let level = self.proc(pid).level;
+            self.ready[level.below_top() as usize].push_back(pid);
+            self.sched.replied(pid);
+        }
+
+        fn wake(&mut self, pid: u32) {
+            let t = self.t;
+            let p = self.proc(pid);
+            p.blocked_until = None;
+            p.woken_at = Some(t);
+            self.reply(pid);
+        }
+
+        /// The guest looks: decide, set the priorities; when the next decision is due.
+        fn look(&mut self) -> Option<u64> {
+            let due = self.sched.decide(self.t);
+            for i in 0..self.procs.len() {
+                let pid = self.procs[i].pid;
+                let level = if self.flat {
+                    Level::Interactive
+                } else {
+                    self.sched.level(pid)
+                };
+                if self.procs[i].level != level {
+                    self.procs[i].level = level;
+                    if self.ready.iter().any(|q| q.contains(&pid)) {
+                        // thread_set of a priority: the tail of the new one's queue.
+                        self.unqueue(pid);
+                        self.ready[level.below_top() as usize].push_back(pid);
+                    }
+                }
+            }
+            due
+        }
+
+        /// Runs until `end`.
+        fn run(&mut self, end: u64) {
+            while self.t < end {
+                let due = self.look();
+                let wake = self.procs.iter().filter_map(|p| p.blocked_until).min();
+                let limit = [due, wake, Some(end)].into_iter().flatten().min();
+                let limit = limit.unwrap_or(end).max(self.t);
+                let Some(pid) = self.head() else {
+                    self.t = limit;
+                    self.wake_due();
+                    continue;
+                };
+                let t = self.t;
+                let p = self.proc(pid);
+                if let Some(at) = p.woken_at.take() {
+                    p.worst_latency = p.worst_latency.max(t - at);
+                }
+                let slice = p.left.min(limit - t);
+                p.left -= slice;
+                p.cpu += slice;
+                self.ran.push((t, pid, slice));
+                self.t += slice;
+                if self.proc(pid).left == 0 {
+                    self.message(pid);
+                    self.t += self.serve;
+                }
+                self.wake_due();
+            }
+        }
+
+        fn wake_due(&mut self) {
+            let t = self.t;
+            let due: Vec<u32> = self
+                .procs
+                .iter()
+                .filter(|p| p.blocked_until.is_some_and(|at| at <= t))
+                .map(|p| p.pid)
+                .collect();
+            for pid in due {
+                self.wake(pid);
+            }
+        }
+
+        /// `pid` finished its user code: the message it sends, as the guest serves it.
+        fn message(&mut self, pid: u32) {
+            self.sched.received(pid);
+            let t = self.t;
+            match self.proc(pid).work {
+                Work::Spin => unreachable!(),
+                Work::Calls { between, count } => {
+                    let p = self.proc(pid);
+                    p.work = Work::Calls {
+                        between,
+                        count: count - 1,
+                    };
+                    if count == 1 {
+                        p.done_at = Some(t);
+                        self.unqueue(pid);
+                        self.sched.forget(pid);
+                    } else {
+                        p.left = between;
+                        self.reply(pid);
+                    }
+                }
+                Work::Sleeper { run, sleep } => {
+                    let p = self.proc(pid);
+                    p.left = run;
+                    p.blocked_until = Some(t + sleep);
+                    self.unqueue(pid);
+                }
+                Work::PingPong { run, peer } => {
+                    let p = self.proc(pid);
+                    p.left = run;
+                    p.blocked_until = Some(u64::MAX);
+                    self.unqueue(pid);
+                    if self.proc(peer).blocked_until.is_some() {
+                        self.wake(peer);
+                    }
+                }
+            }
+        }
+
+        /// CPU time of `pid` in `from..to`.
+        fn cpu_in(&self, pid: u32, from: u64, to: u64) -> u64 {
+            self.ran
+                .iter()
+                .filter(|&&(at, p, _)| p == pid && at >= from && at < to)
+                .map(|&(_, _, ns)| ns)
+                .sum()
+        }
+    }
+
+    #[test]
+    fn calls_beside_a_spinner_run_at_full_speed_until_they_are_cpu_bound() {
+        // 2,000 calls, 20 us of user code before each (plus 5 us of the guest's): 50 ms.
+        let calls = Work::Calls {
+            between: 20 * US,
+            count: 2000,
+        };
+        let mut alone = Sim::new(&[calls]);
+        alone.run(10_000 * MS);
+        let alone_ns = alone.procs[0].done_at.expect("done alone");
+        assert!(alone_ns <= 51 * MS, "alone: {alone_ns} ns");
+
+        let mut beside = Sim::new(&[Work::Spin, calls]);
+        beside.run(10_000 * MS);
+        let beside_ns = beside.procs[1].done_at.expect("done beside a spinner");
+        // The spinner's first slice, the caller's slice as an interactive process, then
+        // half the CPU in turns.
+        assert!(
+            beside_ns <= 2 * alone_ns + 2 * SLICE_NS,
+            "alone {alone_ns} ns, beside a spinner {beside_ns} ns"
+        );
+
+        // Every process at one priority: one call per time slice of the spinner's.
+        let mut flat = Sim::new(&[Work::Spin, calls]);
+        flat.flat = true;
+        flat.run(1_000 * MS);
+        assert!(
+            flat.procs[1].done_at.is_none(),
+            "the flat queue is no faster"
+        );
+        assert!(
+            flat.procs[1].cpu < 5 * MS,
+            "{} ns of CPU",
+            flat.procs[1].cpu
+        );
+    }
+
+    #[test]
+    fn a_woken_process_runs_at_once_beside_spinners() {
+        let mut sim = Sim::new(&[
+            Work::Spin,
+            Work::Spin,
+            Work::Sleeper {
+                run: 200 * US,
+                sleep: 7 * MS,
+            },
+        ]);
+        sim.run(2_000 * MS);
+        let sleeper = &sim.procs[2];
+        assert_eq!(sleeper.worst_latency, 0, "it runs when woken");
+        assert!(sleeper.cpu > 50 * MS, "it ran {} ns", sleeper.cpu);
+        let spun = [sim.procs[0].cpu, sim.procs[1].cpu];
+        assert!(spun[0].abs_diff(spun[1]) <= 2 * SLICE_NS, "{spun:?}");
+    }
+
+    #[test]
+    fn cpu_bound_processes_share_the_cpu_in_turns() {
+        let mut sim = Sim::new(&[Work::Spin, Work::Spin, Work::Spin]);
+        sim.run(3_000 * MS);
+        let cpu: Vec<u64> = sim.procs.iter().map(|p| p.cpu).collect();
+        let (min, max) = (cpu.iter().min().unwrap(), cpu.iter().max().unwrap());
+        assert!(max - min <= 2 * SLICE_NS, "CPU times {cpu:?}");
+        // In turns: over any 5 slices (after the first three), each ran at least one.
+        for from in (3..290).map(|k| k * SLICE_NS) {
+            for pid in 1..=3 {
+                assert!(
+                    sim.cpu_in(pid, from, from + 5 * SLICE_NS) >= SLICE_NS / 2,
+                    "process {pid} starved from {from} ns"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn spinners_beside_a_busy_pipe_are_not_starved() {
+        let mut sim = Sim::new(&[
+            Work::PingPong {
+                run: 100 * US,
+                peer: 2,
+            },
+            Work::PingPong {
+                run: 100 * US,
+                peer: 1,
+            },
+            Work::Spin,
+            Work::Spin,
+        ]);
+        // The pipe's reader starts waiting for the writer.
+        sim.procs[1].blocked_until = Some(u64::MAX);
+        sim.unqueue(2);
+        sim.sched.received(2);
+        sim.run(3_000 * MS);
+        // Each spinner gets a slice in every two periods of aging.
+        let period = STARVATION_NS + 2 * SLICE_NS;
+        for from in (0..25).map(|k| k * period) {
+            let spun = sim.cpu_in(3, from, from + period) + sim.cpu_in(4, from, from + period);
+            assert!(
+                spun >= SLICE_NS / 2,
+                "no CPU for the spinners from {from} ns"
+            );
+        }
+        for p in &sim.procs[2..] {
+            assert!(p.cpu >= 3_000 * MS / period / 2 * SLICE_NS / 2, "{p:?}");
+        }
+        let pipe = sim.procs[0].cpu + sim.procs[1].cpu;
+        assert!(pipe > 2_000 * MS, "the pipe ran {pipe} ns");
+    }
+}
