@@ -69,6 +69,7 @@
 //! plc.safe = { valve = 0.0, "tank.heater" = false }
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
 //! plc.shared = "frame"            # the segment its shared globals go through
+//! plc.native = true               # optional, default false: the native execution tier
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
@@ -155,7 +156,13 @@
 //! programs are compiled the segment is laid out (each writer's area; format and protocol
 //! in the runtime's `softplc::shared`) and paired: a variable written by both, a read
 //! variable the other does not write or writes with another type, or areas beyond the
-//! segment are build errors naming the declarations as `file:line:col`.
+//! segment are build errors naming the declarations as `file:line:col`. `plc.native = true`
+//! runs the program on the native execution tier instead of the interpreter: when the
+//! system is built, the verified bytecode is translated to Rust (crate `plc-native`) and
+//! compiled into the PLC partition's binary, which runs it natively when its package holds
+//! exactly that image (a translation error stops the build); the semantics, traps, watchdogs
+//! and monitoring are the interpreter's. A program downloaded online runs on the
+//! interpreter until the next build.
 //!
 //! **Data entries.** `cargo xtask` can give a partition a read-only data entry
 //! (`data/<partition>` in `system.img`, which syssw maps at `DATA_BASE`; see

@@ -120,6 +120,7 @@ pub struct Plc {
     #[serde(default)]
     pub deadline: Named<Scalar>,
     pub shared: Option<Spanned<String>>,
+    pub native: Option<Spanned<bool>>,
 }
 
 /// A value written in the description (`plc.safe`).

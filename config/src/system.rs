@@ -159,6 +159,9 @@ pub struct Plc {
     /// The shared-memory segment (index into [`System::segments`]) through which its
     /// shared globals meet another PLC project's (`plc.shared`).
     pub shared: Option<usize>,
+    /// Run the program on the native execution tier (`plc.native`): the build translates it
+    /// and compiles it into the partition's binary.
+    pub native: bool,
 }
 
 /// A value written in the description.

@@ -918,6 +918,7 @@ impl Validator<'_, '_> {
             safe,
             deadlines,
             shared: None,
+            native: raw.native.as_ref().is_some_and(|n| *n.get_ref()),
         })
     }
 

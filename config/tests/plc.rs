@@ -446,3 +446,33 @@ fn plc_image_data_entries_are_checked() {
         "a PLC partition's data entry is its PLC package",
     );
 }
+
+#[test]
+fn plc_native_selects_the_native_tier() {
+    let base = |extra: &str| {
+        plc(&[
+            (
+                "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+                "",
+            ),
+            ("plc.inputs.in", &format!("{extra}plc.inputs.in")),
+        ])
+    };
+    let tier = |text: &str| {
+        load_ok(text).partitions[1]
+            .plc
+            .as_ref()
+            .expect("plc")
+            .native
+    };
+    assert!(!tier(&base("")), "the interpreter is the default");
+    assert!(tier(&base("plc.native = true\n")));
+    assert!(!tier(&base("plc.native = false\n")));
+    expect_some(
+        &base("plc.native = \"yes\"\n"),
+        "\"yes\"",
+        0,
+        "partitions.b.plc.native",
+        "",
+    );
+}

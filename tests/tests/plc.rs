@@ -1,5 +1,7 @@
 //! The soft-PLC partition (`partitions/softplc/runtime`) running the example controller
-//! `config/plc/tank.st` against the plant (configuration `tests/configs/plc_tank.toml`).
+//! `config/plc/tank.st` against the plant (configuration `tests/configs/plc_tank.toml`; on
+//! the native execution tier `tests/configs/plc_native.toml`), and its traps, watchdogs,
+//! online services and shared globals.
 
 use plant::Status;
 use scenarios::{boot, check};
@@ -22,7 +24,127 @@ fn plc_tank() {
     );
     check(
         &o,
-        o.line("plc: program verified:").is_some(),
+        o.line("[plc] plc: tier interpreter").is_some(),
+        "the tank PLC does not say it runs on the interpreter",
+    );
+    tank_controls_the_plant(&o, "plc");
+}
+
+/// The native execution tier: the same tank control as plc_tank, the same trap handling as
+/// plc_trap (`ignore`) and the same watchdogs as plc_watchdog, with the programs compiled
+/// into the partition (`plc.native = true`).
+#[test]
+fn plc_native() {
+    let o = boot("plc_native");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the stopwatch ends the run",
+    );
+    for partition in ["plc", "trap", "loop"] {
+        check(
+            &o,
+            o.line(&format!("[{partition}] plc: tier native (image "))
+                .is_some(),
+            &format!("{partition}: no `plc: tier native` line"),
+        );
+    }
+    tank_controls_the_plant(&o, "plc");
+    // A division by zero in native code: the task stops with its output at the configured
+    // safe value, the trap and its ST line are logged and reported, the other task goes on.
+    check(
+        &o,
+        o.line("[trap] plc: task FAST.faulty stopped: DIVISION_BY_ZERO at plc/trap.st:15:3; outputs safe")
+            .is_some(),
+        "trap: no trap line naming DIVISION_BY_ZERO at plc/trap.st:15:3",
+    );
+    check(
+        &o,
+        o.line("partition=trap error=numeric_error")
+            .is_some_and(|l| l.contains("DIVISION_BY_ZERO\\x20at\\x20plc/trap.st:15:3")),
+        "trap: the health monitor did not hear of the trap",
+    );
+    let after: Vec<_> = watch_lines(&o.lines, "trap")
+        .into_iter()
+        .filter(|(t, _)| *t >= 2_000)
+        .collect();
+    check(
+        &o,
+        after.len() >= 10
+            && after.iter().all(|(_, v)| {
+                value(v, "faulty.cycles") == Some(150) && value(v, "faulty.out") == Some(5)
+            }),
+        "trap: the faulty task did not stay stopped with its output at its safe value 5",
+    );
+    let beats: Vec<u64> = after
+        .iter()
+        .filter_map(|(_, v)| value(v, "steady.beats"))
+        .collect();
+    check(
+        &o,
+        beats.windows(2).all(|w| w[1] > w[0]),
+        &format!("trap: the other task did not keep cycling: {beats:?}"),
+    );
+    // Endless loops in native code: stopped at the deadline and by the instruction budget
+    // inside the loop's lines, reported as DEADLINE_MISSED, outputs safe, BEAT goes on.
+    for (task, trap, lines) in [
+        ("HANG.h", "DEADLINE", 20..=22),
+        ("SPIN.s", "WATCHDOG", 10..=12),
+    ] {
+        let stopped = o.line(&format!(
+            "[loop] plc: task {task} stopped: {trap} at plc/watchdog.st:"
+        ));
+        let line = stopped
+            .and_then(|l| l.split("watchdog.st:").nth(1))
+            .and_then(|r| r.split(':').next())
+            .and_then(|n| n.parse::<u32>().ok());
+        check(
+            &o,
+            stopped.is_some_and(|l| l.ends_with("; outputs safe"))
+                && line.is_some_and(|n| lines.contains(&n)),
+            &format!(
+                "loop: {task}: no `{trap} at plc/watchdog.st:<line of the loop>:..; outputs safe` line"
+            ),
+        );
+        check(
+            &o,
+            o.lines.iter().any(|l| {
+                l.contains("partition=loop error=deadline_missed")
+                    && l.contains(&format!("{task}:\\x20{trap}"))
+                    && l.contains("action=ignore")
+            }),
+            &format!("loop: {task}: the health monitor did not hear of the {trap}"),
+        );
+    }
+    let late: Vec<_> = watch_lines(&o.lines, "loop")
+        .into_iter()
+        .filter(|(t, _)| *t >= 3_000)
+        .collect();
+    check(
+        &o,
+        late.len() >= 3
+            && late.iter().all(|(_, v)| {
+                value(v, "s.out") == Some(0)
+                    && value(v, "h.out") == Some(0)
+                    && value(v, "h.n") == Some(21)
+                    && value(v, "s.n") == Some(51)
+            })
+            && late
+                .windows(2)
+                .all(|w| value(&w[1].1, "b.beats") > value(&w[0].1, "b.beats")),
+        &format!("loop: stopped tasks not safe and still, or BEAT stopped cycling: {late:?}"),
+    );
+}
+
+/// The tank controller of PLC partition `partition` controlled the plant: the level
+/// reached the setpoint band within 8 s and held it until the disturbance, which raised the
+/// alarm (and nothing before it did), one scan per 10 ms frame without overrun or fault.
+fn tank_controls_the_plant(o: &xtask::qemu::Outcome, partition: &str) {
+    let plc = format!("[{partition}] plc: ");
+    check(
+        o,
+        o.line(&format!("{plc}program verified:")).is_some(),
         "the runtime did not verify the program",
     );
     let status: Vec<Status> = o
@@ -32,7 +154,7 @@ fn plc_tank() {
         .filter_map(|l| Status::parse(l))
         .collect();
     check(
-        &o,
+        o,
         status.len() >= 60,
         &format!("{} plant status lines", status.len()),
     );
@@ -41,7 +163,7 @@ fn plc_tank() {
         .find(|s| (s.level - 1.0).abs() <= BAND)
         .map(|s| s.t_ms);
     check(
-        &o,
+        o,
         settled.is_some_and(|t| t <= SETTLED_MS),
         &format!("level in the band at {settled:?} ms, not by {SETTLED_MS} ms"),
     );
@@ -50,39 +172,34 @@ fn plc_tank() {
         .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms))
     {
         check(
-            &o,
+            o,
             (s.level - 1.0).abs() <= BAND && s.setpoint == Some(1.0) && s.stale == 0,
             &format!("{s}: out of the band, without the PLC's setpoint, or a stale valve"),
         );
     }
     // The PLC logs its watched variables once a second: the alarm is raised during the
     // disturbance and was not before it.
-    let watch: Vec<(u64, bool)> = o
-        .lines
-        .iter()
-        .filter_map(|l| {
-            let rest = &l[l.find("plc: t=")? + "plc: t=".len()..];
-            let (t, rest) = rest.split_once("ms watch ")?;
-            let alarm = rest
-                .split_whitespace()
-                .find_map(|w| w.strip_prefix("alarm="))?;
-            Some((t.parse().ok()?, alarm == "TRUE"))
+    let watch: Vec<(u64, bool)> = watch_lines(&o.lines, partition)
+        .into_iter()
+        .filter_map(|(t, values)| {
+            let alarm = values.iter().find(|(n, _)| *n == "alarm")?;
+            Some((t, alarm.1 == "TRUE"))
         })
         .collect();
     check(
-        &o,
+        o,
         watch.len() >= 30,
         &format!("{} watch lines", watch.len()),
     );
     check(
-        &o,
+        o,
         watch
             .iter()
             .all(|&(t, alarm)| t >= DISTURBANCE_MS.0 || !alarm),
         "the alarm was raised before the disturbance",
     );
     check(
-        &o,
+        o,
         watch
             .iter()
             .any(|&(t, alarm)| (DISTURBANCE_MS.0..DISTURBANCE_MS.1 + 2_000).contains(&t) && alarm),
@@ -93,8 +210,8 @@ fn plc_tank() {
         .lines
         .iter()
         .rev()
-        .find(|l| l.contains("plc: t=") && l.contains(" task="));
-    check(&o, stats.is_some(), "no PLC statistics line");
+        .find(|l| l.contains(&format!("{plc}t=")) && l.contains(" task="));
+    check(o, stats.is_some(), "no PLC statistics line");
     if let Some(line) = stats {
         let field = |name: &str| {
             line.split_whitespace()
@@ -108,12 +225,12 @@ fn plc_tank() {
             .and_then(|t| t.parse::<u64>().ok());
         let cycles = field("cycles=");
         check(
-            &o,
+            o,
             matches!((t, cycles), (Some(t), Some(c)) if c + 2 >= t / 10 && c <= t / 10 + 2),
             &format!("{line}: not one cycle per 10 ms frame"),
         );
         check(
-            &o,
+            o,
             field("overruns=") == Some(0) && field("faults=") == Some(0),
             &format!("{line}: overruns or faults"),
         );

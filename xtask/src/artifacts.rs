@@ -114,3 +114,26 @@ pub fn build_user_programs(packages: &[String]) -> Result<Vec<PathBuf>> {
         .map(|p| crate::target_dir().join("user").join(p))
         .collect())
 }
+
+/// Builds the soft-PLC partition program with the native execution tier: the feature
+/// `native` and the generated programs file `programs` (see `plc::native_programs`), in its
+/// own target directory (`target/plc-native/`, so the interpreter-only binary is never
+/// overwritten); returns its path.
+pub fn build_native_softplc(programs: &std::path::Path) -> Result<PathBuf> {
+    let target = crate::target_dir().join("plc-native");
+    let mut cmd = cargo();
+    cmd.args([
+        "build",
+        "--quiet",
+        "--profile",
+        "user",
+        "-p",
+        crate::plc::SOFTPLC_IMAGE,
+        "--features",
+        "native",
+        "--target-dir",
+    ]);
+    cmd.arg(&target).env("PLC_NATIVE_PROGRAMS", programs);
+    run(cmd, "the soft-PLC partition with its native programs")?;
+    Ok(target.join("user").join(crate::plc::SOFTPLC_IMAGE))
+}

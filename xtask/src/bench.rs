@@ -144,34 +144,30 @@ pub fn format_line(m: &Metric) -> String {
     )
 }
 
-/// Runs the host-side benchmark binaries that exist (the soft-PLC VM's).
+/// Runs the host-side benchmarks: the soft-PLC suite (`plc-bench-suite`) on the interpreter
+/// (`plc-bench`: `plc_vm_*`) and on the native execution tier (`plc-native-bench`:
+/// `plc_native_*`), each program as ns per cycle and as a ratio to the same algorithm in
+/// hand-written Rust.
 pub fn host_metrics() -> Result<Vec<Metric>> {
-    let root = crate::workspace_root();
-    if !root
-        .join("partitions/softplc/compiler/src/bin/plc-bench.rs")
-        .exists()
-    {
-        return Ok(Vec::new());
+    let mut metrics = Vec::new();
+    for (package, bin) in [
+        ("plc-compiler", "plc-bench"),
+        ("plc-native", "plc-native-bench"),
+    ] {
+        let out = crate::artifacts::cargo()
+            .args(["run", "--quiet", "--release", "-p", package, "--bin", bin])
+            .output()
+            .with_context(|| format!("cannot run {bin}"))?;
+        if !out.status.success() {
+            bail!("{bin} failed: {}", String::from_utf8_lossy(&out.stderr));
+        }
+        metrics.extend(
+            String::from_utf8_lossy(&out.stdout)
+                .lines()
+                .filter_map(parse_line),
+        );
     }
-    let out = crate::artifacts::cargo()
-        .args([
-            "run",
-            "--quiet",
-            "--release",
-            "-p",
-            "plc-compiler",
-            "--bin",
-            "plc-bench",
-        ])
-        .output()
-        .context("cannot run plc-bench")?;
-    if !out.status.success() {
-        bail!("plc-bench failed: {}", String::from_utf8_lossy(&out.stderr));
-    }
-    Ok(String::from_utf8_lossy(&out.stdout)
-        .lines()
-        .filter_map(parse_line)
-        .collect())
+    Ok(metrics)
 }
 
 pub fn write_report(metrics: &[Metric]) -> Result<std::path::PathBuf> {

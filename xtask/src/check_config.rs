@@ -80,9 +80,10 @@ pub fn load(path: &Path) -> Result<config::System> {
 }
 
 /// The files of the partitions of the validated description `path` (`described`, decoded:
-/// `system`): each image the partitions name, built (by name), and each data entry (by
-/// partition: PLC packages, guest initramfs images), after [`check_budgets`] found that
-/// every partition fits at boot.
+/// `system`): each image the partitions name, built (by name; the soft-PLC one with the
+/// native programs when a partition has `plc.native`), and each data entry (by partition:
+/// PLC packages, guest initramfs images), after [`check_budgets`] found that every
+/// partition fits at boot.
 #[allow(clippy::type_complexity)]
 pub fn partition_files(
     path: &Path,
@@ -96,9 +97,20 @@ pub fn partition_files(
         .collect();
     images.sort();
     images.dedup();
-    let paths = crate::artifacts::build_user_programs(&images)?;
-    let built: Vec<(String, PathBuf)> = images.into_iter().zip(paths).collect();
     let mut packages = crate::plc::data_entries(described)?;
+    // With `plc.native`, the soft-PLC binary is built with the translated programs.
+    let native = crate::plc::native_programs(described, &packages)?;
+    let (native_images, plain): (Vec<String>, Vec<String>) = images
+        .into_iter()
+        .partition(|image| native.is_some() && image == crate::plc::SOFTPLC_IMAGE);
+    let paths = crate::artifacts::build_user_programs(&plain)?;
+    let mut built: Vec<(String, PathBuf)> = plain.into_iter().zip(paths).collect();
+    if let (Some(programs), Some(image)) = (&native, native_images.first()) {
+        built.push((
+            image.clone(),
+            crate::artifacts::build_native_softplc(programs)?,
+        ));
+    }
     packages.extend(crate::guest::initramfs_images(described)?);
     check_budgets(path, system, &built, &packages)?;
     Ok((built, packages))

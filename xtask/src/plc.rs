@@ -229,7 +229,7 @@ fn package(
             })
         })
         .collect::<Result<Vec<_>>>()?;
-    Ok(package::encode(
+    let mut bytes = package::encode(
         &ports,
         &compiled.image,
         &watch,
@@ -237,7 +237,78 @@ fn package(
         &safe,
         shared,
         &deadlines,
-    ))
+    );
+    if plc.native {
+        package::request_native(&mut bytes);
+    }
+    Ok(bytes)
+}
+
+/// The image name of the soft-PLC partition program (what `plc.native` rebuilds).
+pub const SOFTPLC_IMAGE: &str = "softplc";
+
+/// The native tier's code for the partitions with `plc.native = true`: each one's program
+/// (from its package in `packages`) translated by `plc-native`, written with the images as
+/// one file under `target/plc-native/programs/` (only rewritten when it changes), for the
+/// soft-PLC binary's build (`artifacts::build_native_softplc`); `None` when no partition
+/// asks for it. A program the translator refuses stops the build.
+pub fn native_programs(
+    system: &System,
+    packages: &[(String, Vec<u8>)],
+) -> Result<Option<std::path::PathBuf>> {
+    let dir = crate::target_dir().join("plc-native").join("programs");
+    let mut modules: Vec<(String, String)> = Vec::new();
+    let mut seen: Vec<Vec<u8>> = Vec::new();
+    for p in &system.partitions {
+        if !p.plc.as_ref().is_some_and(|plc| plc.native) {
+            continue;
+        }
+        if p.image != SOFTPLC_IMAGE {
+            bail!(
+                "partition {}: plc.native needs the soft-PLC image (image = \"{SOFTPLC_IMAGE}\"), not {:?}",
+                p.name,
+                p.image
+            );
+        }
+        let bytes = packages
+            .iter()
+            .find(|(name, _)| *name == p.name)
+            .map(|(_, bytes)| bytes)
+            .with_context(|| format!("partition {}: no PLC package", p.name))?;
+        let program = package::Package::parse(bytes)
+            .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?
+            .program()
+            .to_vec();
+        if seen.contains(&program) {
+            continue;
+        }
+        let module = plc_native::module_name(&p.name);
+        let image_file = dir.join(format!("{module}.plcb"));
+        plc_native::harness::write_file(&image_file, &program).map_err(anyhow::Error::msg)?;
+        let source = plc_native::ImageSource::File(image_file.display().to_string());
+        let code = plc_native::translate_with(&program, &source).map_err(|e| {
+            anyhow::anyhow!(
+                "partition {}: plc.native: the native tier cannot run its program: {e} (remove plc.native to run it on the interpreter)",
+                p.name
+            )
+        })?;
+        eprintln!(
+            "xtask: partition {}: program translated for the native tier (image {:016x}, {} bytes, {} KiB of Rust)",
+            p.name,
+            plc_vm::native::image_hash(&program),
+            program.len(),
+            code.len() / 1024
+        );
+        modules.push((module, code));
+        seen.push(program);
+    }
+    if modules.is_empty() {
+        return Ok(None);
+    }
+    let file = dir.join("programs.rs");
+    plc_native::harness::write_file(&file, plc_native::bundle(&modules).as_bytes())
+        .map_err(anyhow::Error::msg)?;
+    Ok(Some(file))
 }
 
 /// The safe value of `%Q` variable `name`: it must be a located output of the program and

@@ -6,7 +6,8 @@
 //! format the build writes ([`package`]), one scan cycle ([`scan`]: inputs, due tasks,
 //! statistics, faults and safe outputs, outputs), the latency statistics ([`histogram`]),
 //! the online services ([`online`]) and online download ([`download`]: chunk assembly,
-//! checks, takeover by name) and the globals shared with another project ([`shared`]).
+//! checks, takeover by name), the globals shared with another project ([`shared`]) and
+//! which execution tier runs the program ([`tier`]: the interpreter or native code).
 //! The partition program (`main.rs`) only re-verifies the program, creates the ports and
 //! the processes (one per IEC task and a control process) and moves bytes between them and
 //! this library. It must never trust the package: every structure is checked and
@@ -22,6 +23,7 @@ pub mod online;
 pub mod package;
 pub mod scan;
 pub mod shared;
+pub mod tier;
 
 #[cfg(test)]
 mod tests;

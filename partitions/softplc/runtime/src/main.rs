@@ -29,6 +29,11 @@
 //!
 //! Log lines (on the serial log as `[<partition>] plc: ...`; an interface):
 //! - `plc: program verified: <n> bytes, <t> task(s), <v> located variable(s), <p> port(s)`
+//! - `plc: tier native (image <hash>, <n> bytes)` when the program runs on its native code
+//!   (`plc.native`; the FNV-1a hash of the image, 16 hex digits), else `plc: tier
+//!   interpreter`, with the reason in parentheses when native code was asked for
+//!   (`softplc::tier::Tier`); for every program that starts (the configured one, a
+//!   downloaded one);
 //! - `plc: task <name> interval=<ms>ms every=<n> priority=<p> deadline=<us>us|none
 //!   process_priority=<n>` per task, at start (`priority` is the IEC one), then
 //!   `plc: control process_priority=<n>`;
@@ -99,6 +104,21 @@ use softplc::online::Loader;
 use softplc::package::{Package, PortMap, SharedLayout};
 use softplc::scan::{Areas, PortIo, Runtime, SafeValues, Schedule};
 use softplc::shared::SharedStats;
+use softplc::tier::Tier;
+
+/// The programs of this build on the native execution tier (`plc.native`): `cargo xtask`
+/// translates them and builds the partition with the feature `native` and the generated
+/// file in `PLC_NATIVE_PROGRAMS`.
+#[cfg(feature = "native")]
+mod native_programs {
+    include!(env!("PLC_NATIVE_PROGRAMS"));
+}
+
+/// No native code in this build: every program runs on the interpreter.
+#[cfg(not(feature = "native"))]
+mod native_programs {
+    pub static PROGRAMS: &[&plc_vm::native::NativeProgram] = &[];
+}
 
 /// Data memory the program may use.
 const MAX_DATA: usize = 256 * 1024;
@@ -545,6 +565,13 @@ extern "C" fn control() {
             report("refusing the program: not enough VM memory");
             return;
         };
+        let tier = Tier::select(
+            &package,
+            program,
+            matches!(running.program, Program::Downloaded { .. }),
+            native_programs::PROGRAMS,
+        );
+        println!("plc: tier {tier}");
         let mut safe = SafeValues::of(&package);
         let mut swapped = false;
         if let Some((was, takeover)) = previous.take() {
@@ -583,6 +610,7 @@ extern "C" fn control() {
             machine,
             rt: {
                 runtime.restart(schedule, period, safe);
+                runtime.set_native(tier.native());
                 &mut runtime
             },
             io: &mut io,

@@ -15,7 +15,10 @@
 //! 24     1    online request port (index of a queuing input; NO_ONLINE: none)
 //! 25     1    online response port (index of a queuing output)
 //! 26     1    online access (plc_online::Access code)
-//! 27     5    reserved (0)
+//! 27     1    flags: bit 0 (FLAG_NATIVE) run the program on the native execution tier
+//!             (`plc.native`), when this partition's binary holds its translation; the
+//!             other bits 0
+//! 28     4    reserved (0)
 //! 32     4    safe-value list offset
 //! 36     4    safe-value list length
 //! 40     4    shared-globals block offset
@@ -92,6 +95,9 @@ pub const SHARED_VAR_RECORD: usize = 12;
 pub const NO_AREA: u32 = u32::MAX;
 /// Bytes of one safe-value record.
 pub const SAFE_RECORD: usize = 16;
+/// Flags bit: the configuration asks for the native execution tier (`plc.native`).
+pub const FLAG_NATIVE: u8 = 1;
+
 /// Online port fields without online access.
 pub const NO_ONLINE: u8 = u8::MAX;
 /// Bytes of one port record.
@@ -135,6 +141,8 @@ pub enum PackageError {
     /// The online ports are not a queuing input and a queuing output, or the access code
     /// is unknown.
     BadOnline,
+    /// A flags bit this runtime does not know.
+    BadFlags(u8),
     /// The safe-value list lies outside the package, is ragged, holds more than
     /// [`crate::scan::MAX_SAFE_VALUES`] records, or has a record with a
     /// width other than 1, 2, 4, 8 or a value wider than it.
@@ -168,6 +176,7 @@ impl core::fmt::Display for PackageError {
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
             Self::BadShared => write!(f, "the shared-globals block is malformed"),
             Self::BadDeadlines => write!(f, "the task-deadline list is malformed"),
+            Self::BadFlags(flags) => write!(f, "unknown flags 0x{flags:02x}"),
         }
     }
 }
@@ -360,6 +369,9 @@ impl<'a> Package<'a> {
         if version != VERSION {
             return Err(PackageError::UnsupportedVersion(version));
         }
+        if bytes[27] & !FLAG_NATIVE != 0 {
+            return Err(PackageError::BadFlags(bytes[27]));
+        }
         let count = u16_at(bytes, 6);
         if count as usize > MAX_PORTS {
             return Err(PackageError::TooManyPorts(count));
@@ -435,6 +447,11 @@ impl<'a> Package<'a> {
     /// The bytecode image.
     pub fn program(&self) -> &'a [u8] {
         self.program
+    }
+
+    /// Whether the configuration asks for the native execution tier (`plc.native`).
+    pub fn native(&self) -> bool {
+        self.bytes[27] & FLAG_NATIVE != 0
     }
 
     /// Where the shared globals lie in the shared segment, if the program shares any.
@@ -605,6 +622,14 @@ pub fn encode(
     out
 }
 
+/// Marks an [`encode`]d package as asking for the native execution tier (`plc.native`).
+#[cfg(any(feature = "alloc", test))]
+pub fn request_native(package: &mut [u8]) {
+    if let Some(flags) = package.get_mut(27) {
+        *flags |= FLAG_NATIVE;
+    }
+}
+
 /// A project's shared-globals block as the image builder plans it (see the format above).
 #[cfg(any(feature = "alloc", test))]
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -729,6 +754,24 @@ mod tests {
         assert_eq!(shared.read().collect::<alloc::vec::Vec<_>>(), plan.read);
         let plain = encode(&[level()], b"P", &[], None, &[], None, &[]);
         assert_eq!(Package::parse(&plain).unwrap().shared(), None);
+    }
+
+    #[test]
+    fn the_native_flag() {
+        let mut bytes = encode(&[level()], b"P", &[], None, &[], None, &[]);
+        assert!(
+            !Package::parse(&bytes).unwrap().native(),
+            "the interpreter by default"
+        );
+        request_native(&mut bytes);
+        let p = Package::parse(&bytes).unwrap();
+        assert!(p.native());
+        assert_eq!(p.program(), b"P");
+        bytes[27] |= 0x80;
+        assert_eq!(
+            Package::parse(&bytes).unwrap_err(),
+            PackageError::BadFlags(0x81)
+        );
     }
 
     /// Writes a DINT at offset 8 of its area at 64, reads a BOOL at offset 8 and a LREAL at

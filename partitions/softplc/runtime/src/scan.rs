@@ -14,7 +14,9 @@
 //!    (IEC: the lowest PRIORITY number first; ties in declaration order): one cycle under
 //!    two watchdogs, the VM's instruction budget (trap WATCHDOG) and, where the
 //!    configuration gives the task one (`plc.deadline`, as CODESYS's task watchdog time),
-//!    its time deadline (trap DEADLINE: the release time plus the deadline);
+//!    its time deadline (trap DEADLINE: the release time plus the deadline); on the
+//!    interpreter or, when the program runs natively ([`Runtime::set_native`],
+//!    [`crate::tier`]), on its native code, with the same semantics;
 //! 3. [`Runtime::end_release`], by the control process after them: copy the `%Q` and `%M`
 //!    located variables out and send every output port's bytes.
 //!
@@ -43,6 +45,7 @@ use crate::package::{Package, SafeValue};
 use plc_vm::image::Image;
 use plc_vm::isa::Trap;
 use plc_vm::located::{self, Area, MAX_AREA};
+use plc_vm::native::NativeProgram;
 use plc_vm::vm::{Fault, Machine};
 use protocol::{Direction, ErrorCode};
 
@@ -436,6 +439,8 @@ pub struct Runtime {
     instant: Option<u64>,
     /// The runtime's own work at the current instant so far (ns).
     own_work: u64,
+    /// The running program's native code (`None`: the interpreter runs it).
+    native: Option<&'static NativeProgram>,
 }
 
 impl Runtime {
@@ -467,6 +472,7 @@ impl Runtime {
             triggered: [false; MAX_TASKS],
             instant: None,
             own_work: 0,
+            native: None,
         }
     }
 
@@ -486,6 +492,13 @@ impl Runtime {
         self.triggered.fill(false);
         self.instant = None;
         self.own_work = 0;
+        self.native = None;
+    }
+
+    /// Runs the program's task cycles on its native code (`None`: on the interpreter), from
+    /// the next cycle on; see [`crate::tier`].
+    pub fn set_native(&mut self, native: Option<&'static NativeProgram>) {
+        self.native = native;
     }
 
     /// One release of every due task in priority order, as the task processes run it when
@@ -591,7 +604,11 @@ impl Runtime {
         // waited behind others has less of its time left.
         let deadline = release_ns.saturating_add(self.schedule.deadline[task]);
         let timed = self.schedule.deadline[task] != NO_DEADLINE;
-        let result = machine.run_cycle_until(task, t0 as i64, || timed && clock() > deadline);
+        let expired = || timed && clock() > deadline;
+        let result = match self.native {
+            Some(program) => machine.run_cycle_native(task, t0 as i64, expired, program),
+            None => machine.run_cycle_until(task, t0 as i64, expired),
+        };
         let t1 = clock();
         let exec = t1.saturating_sub(t0);
         // An event task has no interval: it overruns when it outlasts the period.

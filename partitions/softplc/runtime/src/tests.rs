@@ -1543,3 +1543,154 @@ fn a_partition_runs_at_most_fifteen_tasks() {
     assert_eq!(e, PlanError::TooManyTasks { count: 16 });
     assert!(e.to_string().contains("at most 15"), "{e}");
 }
+
+/// The tier a program runs on (`plc.native`): native only for the package's own program
+/// when the binary holds its exact translation.
+#[test]
+fn the_tier_follows_the_configuration_and_the_compiled_code() {
+    use crate::tier::Tier;
+    use plc_vm::native::{Cycle, NativeProgram, Unwind, image_hash};
+    fn never(_: &mut Cycle<'_>, _: &mut [u8], _: usize) -> Result<(), Unwind> {
+        unreachable!("not run")
+    }
+    let program = compile(CONTROLLER);
+    let image: &'static [u8] = Box::leak(program.clone().into_boxed_slice());
+    let native: &'static NativeProgram = Box::leak(Box::new(NativeProgram {
+        image,
+        hash: image_hash(image),
+        run: never,
+    }));
+    let table: &'static [&'static NativeProgram] = Box::leak(Box::new([native]));
+    let mut bytes = package::encode(&[], &program, &[], None, &[], None, &[]);
+    let plain = Package::parse(&bytes).unwrap();
+    assert!(matches!(
+        Tier::select(&plain, &program, false, table),
+        Tier::Interpreter
+    ));
+    package::request_native(&mut bytes);
+    let asking = Package::parse(&bytes).unwrap();
+    let tier = Tier::select(&asking, &program, false, table);
+    assert!(tier.native().is_some_and(|p| core::ptr::eq(p, native)));
+    assert_eq!(
+        tier.to_string(),
+        format!(
+            "native (image {:016x}, {} bytes)",
+            image_hash(&program),
+            program.len()
+        )
+    );
+    // Another image (a changed program), or no native code at all: the interpreter.
+    let other = compile("PROGRAM P VAR x : INT; END_VAR x := x + 1; END_PROGRAM");
+    for (program, table) in [(&other, table), (&program, &[][..])] {
+        let tier = Tier::select(&asking, program, false, table);
+        assert!(tier.native().is_none());
+        assert_eq!(
+            tier.to_string(),
+            format!(
+                "interpreter (plc.native: this build has no native code for image {:016x}, {} bytes)",
+                image_hash(program),
+                program.len()
+            )
+        );
+    }
+    // A downloaded program: the interpreter until the next build.
+    let tier = Tier::select(&asking, &program, true, table);
+    assert!(tier.native().is_none());
+    assert!(
+        tier.to_string()
+            .contains("downloaded program runs on the interpreter")
+    );
+}
+
+/// With native code set, `run_task` runs it (not the interpreter), and its fault stops the
+/// task with safe outputs like an interpreted one.
+#[test]
+fn run_task_runs_the_native_code_and_handles_its_fault() {
+    use plc_vm::native::{Cycle, NativeProgram, Unwind, image_hash};
+    // Stand-ins for translated code: one writes a marker into the first data byte and
+    // completes, the other faults (as code for another image would).
+    fn completes(cx: &mut Cycle<'_>, data: &mut [u8], _: usize) -> Result<(), Unwind> {
+        data[0] = 0xA5;
+        cx.ret(0);
+        Ok(())
+    }
+    fn faults(cx: &mut Cycle<'_>, _: &mut [u8], _: usize) -> Result<(), Unwind> {
+        Err(cx.refuse(0))
+    }
+    let source = "
+VAR_GLOBAL marker AT %QB0 : BYTE; END_VAR
+PROGRAM P marker := 1; END_PROGRAM";
+    let ports = [PortMap {
+        size: 1,
+        ..output("marker", 0)
+    }];
+    let program = compile(source);
+    let bytes = package::encode(&ports, &program, &[], None, &[], None, &[]);
+    let package = Package::parse(&bytes).unwrap();
+    let image = Image::parse(package.program()).unwrap();
+    let marker = image.find_var("marker").unwrap().addr as usize;
+    assert_eq!(marker, 0, "the stand-in writes byte 0");
+    let leak = |run| -> &'static NativeProgram {
+        let image: &'static [u8] = Box::leak(program.clone().into_boxed_slice());
+        Box::leak(Box::new(NativeProgram {
+            image,
+            hash: image_hash(image),
+            run,
+        }))
+    };
+    let mut data = vec![0u8; image.data_size() as usize];
+    let (mut stack, mut calls, mut tries) =
+        ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+    let mut machine = Machine::new(
+        verify(&image).unwrap(),
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    )
+    .unwrap();
+    let mut rt = Runtime::new(
+        Schedule::new(&image, PERIOD).unwrap(),
+        PERIOD,
+        SafeValues::of(&package),
+    );
+    let mut faulted = Vec::new();
+    rt.set_native(Some(leak(completes)));
+    rt.run_task(
+        0,
+        &mut machine,
+        &image,
+        || 0,
+        0,
+        |t, f| faulted.push((t, *f)),
+    );
+    assert_eq!(machine.data()[marker], 0xA5, "the native code ran");
+    assert_eq!((rt.stats[0].count, rt.stats[0].faults), (1, 0));
+    rt.set_native(Some(leak(faults)));
+    rt.run_task(
+        0,
+        &mut machine,
+        &image,
+        || 0,
+        0,
+        |t, f| faulted.push((t, *f)),
+    );
+    assert_eq!(faulted.len(), 1);
+    assert_eq!(faulted[0].1.trap, Trap::InvalidAddress);
+    assert!(matches!(rt.stopped[0], Some(Stop::Fault(_))));
+    assert_eq!(machine.data()[marker], 0, "outputs safe");
+    // Back on the interpreter after START.
+    rt.set_native(None);
+    rt.start_task(0, &mut machine);
+    rt.run_task(
+        0,
+        &mut machine,
+        &image,
+        || 0,
+        0,
+        |t, f| faulted.push((t, *f)),
+    );
+    assert_eq!(machine.data()[marker], 1, "the interpreter ran");
+}

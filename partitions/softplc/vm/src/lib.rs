@@ -68,7 +68,10 @@
 //! → `verify::verify` (feature `alloc`) or [`verify::verify_with_scratch`] (no allocation) →
 //! [`vm::Machine::new`] with caller-provided memory → [`vm::Machine::run_cycle`]; monitor with
 //! [`vm::Machine::read_var`] / [`vm::Machine::write_var`]. The executable reference model is
-//! `model::Model` (feature `model`, needs `alloc`).
+//! `model::Model` (feature `model`, needs `alloc`), and `testgen` (the same feature) the
+//! random verified images of the differential tests. A program translated to native code
+//! (crate `plc-native`) runs on the same machine with [`vm::Machine::run_cycle_native`]; its
+//! run-time side is [`native`].
 //!
 //! ```text
 //! let image = Image::parse(&bytes)?;
@@ -94,6 +97,7 @@ pub mod fmath;
 pub mod image;
 pub mod isa;
 pub mod located;
+pub mod native;
 pub mod verify;
 pub mod vm;
 
@@ -105,6 +109,8 @@ pub use verify::{VerifiedImage, VerifyError, verify_with_scratch};
 pub use vm::{CallFrame, CycleStats, Fault, Machine, Memory, TryFrame, Value};
 #[cfg(any(feature = "model", test))]
 pub mod model;
+#[cfg(any(feature = "model", test))]
+pub mod testgen;
 
 #[cfg(test)]
 mod tests;

@@ -31,10 +31,10 @@ impl CallFrame {
 /// An open `TRY_BEGIN`.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct TryFrame {
-    handler: u32,
-    stack_depth: u32,
-    call_depth: u32,
-    base: u32,
+    pub(crate) handler: u32,
+    pub(crate) stack_depth: u32,
+    pub(crate) call_depth: u32,
+    pub(crate) base: u32,
 }
 
 impl TryFrame {
@@ -190,6 +190,19 @@ pub struct Machine<'a, 'm> {
     faults: [Option<Fault>; MAX_TASKS],
     budget_override: [Option<u32>; MAX_TASKS],
     forces: [Option<Forced>; MAX_FORCES],
+    /// Whether any slot of `forces` is in use (the common case, none, costs one test).
+    any_forced: bool,
+    /// Each task's start (from the task and POU tables, read once).
+    starts: [Option<TaskStart>; MAX_TASKS],
+}
+
+/// Where a task's cycle starts: its POU's first instruction, its instance base and the
+/// task table's instruction budget.
+#[derive(Clone, Copy, Debug)]
+struct TaskStart {
+    code_start: u32,
+    instance_base: u32,
+    budget: u32,
 }
 
 impl<'a, 'm> Machine<'a, 'm> {
@@ -221,7 +234,19 @@ impl<'a, 'm> Machine<'a, 'm> {
             faults: [None; MAX_TASKS],
             budget_override: [None; MAX_TASKS],
             forces: [None; MAX_FORCES],
+            any_forced: false,
+            starts: [None; MAX_TASKS],
         };
+        for (task, start) in machine.starts.iter_mut().enumerate() {
+            *start = image.task(task).map(|entry| TaskStart {
+                code_start: image
+                    .pou(entry.pou as usize)
+                    .expect("verified task POU")
+                    .code_start,
+                instance_base: entry.instance_base,
+                budget: entry.budget(),
+            });
+        }
         machine.reset();
         Ok(machine)
     }
@@ -309,37 +334,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         now_ns: i64,
         mut expired: impl FnMut() -> bool,
     ) -> Result<CycleStats, Fault> {
-        let Some(entry) = self.image.task(task) else {
-            return Err(Fault {
-                trap: Trap::InvalidAddress,
-                task,
-                code_offset: 0,
-                location: None,
-                refused: true,
-            });
-        };
-        if let Some(fault) = self.faults[task] {
-            return Err(Fault {
-                refused: true,
-                ..fault
-            });
-        }
-        let pou = self
-            .image
-            .pou(entry.pou as usize)
-            .expect("verified task POU");
-        let budget = self.budget_override[task].unwrap_or(entry.budget());
-        self.apply_forces();
-        self.now_ns = now_ns;
-        self.sp = 0;
-        self.try_depth = 0;
-        self.calls[0] = CallFrame {
-            return_pc: u32::MAX,
-            saved_base: 0,
-        };
-        self.call_depth = 1;
-        self.base = entry.instance_base;
-        self.pc = pou.code_start;
+        let budget = self.start_cycle(task, now_ns)?;
         let mut stats = CycleStats::default();
         let code: &'a [u8] = self.image.code();
         loop {
@@ -366,6 +361,91 @@ impl<'a, 'm> Machine<'a, 'm> {
                     }
                     stats.caught_traps += 1;
                 }
+            }
+        }
+    }
+
+    /// The start of a cycle of `task` at `now_ns`: refused for an unknown or faulted task;
+    /// else the forces applied, the registers set for the task's POU, its budget returned.
+    fn start_cycle(&mut self, task: usize, now_ns: i64) -> Result<u32, Fault> {
+        let Some(start) = self.starts.get(task).copied().flatten() else {
+            return Err(Fault {
+                trap: Trap::InvalidAddress,
+                task,
+                code_offset: 0,
+                location: None,
+                refused: true,
+            });
+        };
+        if let Some(fault) = self.faults[task] {
+            return Err(Fault {
+                refused: true,
+                ..fault
+            });
+        }
+        let budget = self.budget_override[task].unwrap_or(start.budget);
+        self.apply_forces();
+        self.now_ns = now_ns;
+        self.sp = 0;
+        self.try_depth = 0;
+        self.calls[0] = CallFrame {
+            return_pc: u32::MAX,
+            saved_base: 0,
+        };
+        self.call_depth = 1;
+        self.base = start.instance_base;
+        self.pc = start.code_start;
+        Ok(budget)
+    }
+
+    /// [`run_cycle_until`](Self::run_cycle_until) on the native execution tier: runs `program`,
+    /// the translation of this machine's image ([`crate::native`]; the caller checks
+    /// [`NativeProgram::is_translation_of`](crate::native::NativeProgram::is_translation_of)),
+    /// instead of interpreting it. Everything observable is the interpreter's: the result,
+    /// the instruction count, the traps at the same instructions (the deadline checks at the
+    /// same instruction counts), and afterwards data memory, the operand stack, `pc`, call
+    /// and try depth, the task's fault and the forces.
+    pub fn run_cycle_native(
+        &mut self,
+        task: usize,
+        now_ns: i64,
+        mut expired: impl FnMut() -> bool,
+        program: &crate::native::NativeProgram,
+    ) -> Result<CycleStats, Fault> {
+        let budget = self.start_cycle(task, now_ns)?;
+        let mut cycle = crate::native::Cycle::new(
+            self.stack,
+            self.calls.len(),
+            self.tries,
+            &mut expired,
+            now_ns,
+            budget,
+        );
+        let result = (program.run)(&mut cycle, self.data, task);
+        let end = cycle.end();
+        self.try_depth = end.try_depth as usize;
+        match (result, end.fault) {
+            (Ok(()), _) => {
+                self.pc = end.ret_pc;
+                self.sp = 0;
+                self.call_depth = 0;
+                self.apply_forces();
+                Ok(CycleStats {
+                    instructions: end.executed,
+                    caught_traps: end.caught,
+                })
+            }
+            (Err(_), fault) => {
+                let fault = fault.unwrap_or(crate::native::NativeFault {
+                    trap: Trap::InvalidAddress,
+                    pc: self.pc,
+                    sp: 0,
+                    call_depth: 1,
+                });
+                self.sp = fault.sp as usize;
+                self.pc = fault.pc;
+                self.call_depth = fault.call_depth as usize;
+                Err(self.fault(task, fault.trap))
             }
         }
     }
@@ -906,6 +986,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 .ok_or(VarError::TooManyForces)?,
         };
         self.forces[slot] = Some(forced);
+        self.any_forced = true;
         self.write_forced(&forced);
         Ok(())
     }
@@ -918,6 +999,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 *slot = None;
             }
         }
+        self.any_forced = self.forces.iter().any(Option::is_some);
         Ok(())
     }
 
@@ -958,6 +1040,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     /// Ends all forcing.
     pub fn clear_forces(&mut self) {
         self.forces = [None; MAX_FORCES];
+        self.any_forced = false;
     }
 
     fn encode_scalar(var: &Var<'_>, ty: VarType, value: Value<'_>) -> Result<Forced, VarError> {
@@ -988,6 +1071,9 @@ impl<'a, 'm> Machine<'a, 'm> {
     }
 
     fn apply_forces(&mut self) {
+        if !self.any_forced {
+            return;
+        }
         for slot in 0..MAX_FORCES {
             if let Some(forced) = self.forces[slot] {
                 self.write_forced(&forced);

@@ -1,6 +1,6 @@
 //! In-crate tests (they need the builder and the model, which are compiled for tests).
 
-mod differential;
+pub(crate) mod differential;
 mod fuzz;
 mod library;
 mod ops;
@@ -14,19 +14,11 @@ use crate::vm::{CallFrame, CycleStats, Fault, Machine, Memory, TryFrame};
 use alloc::vec;
 use alloc::vec::Vec;
 
-/// Data size of the test programs.
-pub const DATA: u32 = 512;
-/// Where the test program's instance frame starts.
-pub const MAIN_BASE: u32 = 256;
-/// The test program's frame size.
-pub const MAIN_FRAME: u32 = 64;
+/// The test programs' data layout and the test machines' limits (shared with the
+/// differential tests of other tiers).
+pub use crate::testgen::{CALLS, DATA, MAIN_BASE, MAIN_FRAME, STACK, TRIES};
 /// Address `eval` stores its result at.
 pub const RESULT: u32 = 0;
-
-/// Limits used by the test machines.
-pub const STACK: usize = 32;
-pub const CALLS: usize = 8;
-pub const TRIES: usize = 4;
 
 /// A builder with data memory, one program POU "Main" and a task running it; `body`
 /// emits Main's code (a RET is appended).
