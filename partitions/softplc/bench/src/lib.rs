@@ -18,8 +18,18 @@ use std::time::Instant;
 
 mod reference;
 
-/// Samples per metric.
+/// Samples per metric (unless the environment variable `PLC_BENCH_SAMPLES` says otherwise,
+/// e.g. 1 for a run under `valgrind --tool=callgrind`).
 pub const SAMPLES: usize = 25;
+
+/// The samples per metric: `PLC_BENCH_SAMPLES` or [`SAMPLES`].
+pub fn samples() -> usize {
+    std::env::var("PLC_BENCH_SAMPLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(SAMPLES)
+}
 
 /// A hand-written Rust implementation of a program's algorithm: its state and one cycle.
 pub trait Reference {
@@ -170,7 +180,7 @@ pub fn measure(mut cycle: impl FnMut(), cycles: u32) -> Vec<f64> {
     for _ in 0..cycles {
         cycle();
     }
-    (0..SAMPLES)
+    (0..samples())
         .map(|_| {
             let t = Instant::now();
             for _ in 0..cycles {

@@ -456,6 +456,13 @@ impl<'a> Image<'a> {
         self.section(Section::Pous).len() / POU_RECORD
     }
 
+    /// POU `index`'s code start and frame size (what a CALL needs; no name lookup).
+    #[inline(always)]
+    pub(crate) fn pou_entry(&self, index: usize) -> Option<(u32, u32)> {
+        let r = self.record(Section::Pous, POU_RECORD, index)?;
+        Some((read_u32(r, 8), read_u32(r, 16)))
+    }
+
     /// POU `index`.
     pub fn pou(&self, index: usize) -> Option<Pou<'a>> {
         let r = self.record(Section::Pous, POU_RECORD, index)?;
@@ -704,6 +711,63 @@ mod builder {
         no_fusion: bool,
     }
 
+    /// Whether executing `op` can raise no trap but STACK_OVERFLOW (for the store fusion):
+    /// loads of verified static addresses, constants, stack shuffles, integer and float
+    /// arithmetic but division, bit operations, comparisons, selections, conversions that
+    /// cannot fail.
+    fn cannot_trap(op: Opcode) -> bool {
+        use Opcode::*;
+        matches!(
+            op,
+            Nop | PushI32
+                | PushU32
+                | PushI64
+                | PushConst
+                | Dup
+                | Swap
+                | Over
+                | Drop
+                | LdAbs
+                | LdRel
+                | LeaRel
+                | Now
+                | Add
+                | Sub
+                | Mul
+                | Neg
+                | AbsS
+                | And
+                | Or
+                | Xor
+                | Not
+                | NotBool
+                | Shl
+                | ShrU
+                | ShrS
+                | Rol
+                | Ror
+                | Sext
+                | Zext
+                | Sel
+                | SelIf
+                | AddImm
+                | AddF32
+                | SubF32
+                | MulF32
+                | NegF32
+                | AddF64
+                | SubF64
+                | MulF64
+                | NegF64
+                | IToF32S
+                | IToF32U
+                | IToF64S
+                | IToF64U
+                | F32ToF64
+                | F64ToF32
+        ) || op.is_comparison()
+    }
+
     impl ImageBuilder {
         /// An empty builder.
         pub fn new() -> Self {
@@ -755,7 +819,7 @@ mod builder {
         /// sequence `CHK_INDEX lo hi; [PUSH lo; SUB | ADD_IMM -lo]; [PUSH s; MUL]; ADD` becomes
         /// `INDEX lo hi s` (same effect, same trap at the same offset), and `PUSH_I32 k; ADD`
         /// / `PUSH_I32 k; SUB` become `ADD_IMM k` / `ADD_IMM -k`.
-        fn fuse_arithmetic(&mut self, op: Opcode) {
+        fn fuse_arithmetic(&mut self, op: Opcode) -> bool {
             let n = self.insn_starts.len();
             if op == Opcode::Add && n >= 2 {
                 let mut i = n - 1;
@@ -766,6 +830,15 @@ mod builder {
                 {
                     stride = s;
                     i -= 2;
+                } else if i >= 1
+                    && let Some(s) = self.insn_at(i - 1).and_then(|d| {
+                        (d.op == Opcode::OpImm && d.immediates[0] == Opcode::Mul as u8)
+                            .then(|| read_u32(d.immediates, 1))
+                            .filter(|&k| k as i32 >= 0)
+                    })
+                {
+                    stride = s;
+                    i -= 1;
                 }
                 let mut subtracted = 0i64;
                 let before = if i >= 1 {
@@ -795,7 +868,7 @@ mod builder {
                     if lo == subtracted {
                         self.drop_from(i - 1);
                         self.index(lo, hi, stride);
-                        return;
+                        return true;
                     }
                 }
             }
@@ -812,22 +885,237 @@ mod builder {
                 if let Some(imm) = imm {
                     self.drop_from(n - 2);
                     self.add_imm(imm);
+                    return true;
                 }
+            }
+            false
+        }
+
+        /// Before NEG_F32/NEG_F64: a directly preceding push of a REAL (PUSH_U32) or LREAL
+        /// (PUSH_I64) constant gets its sign bit flipped instead (what the negation does);
+        /// true when folded.
+        fn fold_negation(&mut self, op: Opcode) -> bool {
+            let n = self.insn_starts.len();
+            if n == 0 || !self.rewritable_from(n - 1) {
+                return false;
+            }
+            let at = self.insn_starts[n - 1] as usize;
+            match (op, Opcode::from_u8(self.code[at])) {
+                (Opcode::NegF32, Some(Opcode::PushU32)) => self.code[at + 4] ^= 0x80,
+                (Opcode::NegF64, Some(Opcode::PushI64)) => self.code[at + 8] ^= 0x80,
+                _ => return false,
+            }
+            true
+        }
+
+        /// Peephole fusion after emitting a binary operator (index `n - 1`) whose right
+        /// operand was pushed by the instruction before it: `PUSH_I32 k; op` → `OP_IMM op k`
+        /// (also `PUSH_U32 k` when the cell is the same, or when `op` is a REAL operator,
+        /// which reads only the low 32 bits), `LD_REL ty o; op` → `OP_REL op ty o`, `LD_ABS
+        /// ty a; op` → `OP_ABS op ty a`.
+        fn fuse_operand(&mut self, op: Opcode) {
+            let n = self.insn_starts.len();
+            if n < 2 || !self.rewritable_from(n - 2) {
+                return;
+            }
+            let Some(d) = self.insn_at(n - 2) else { return };
+            let reads_low_32 = matches!(
+                op,
+                Opcode::AddF32
+                    | Opcode::SubF32
+                    | Opcode::MulF32
+                    | Opcode::DivF32
+                    | Opcode::EqF32
+                    | Opcode::NeF32
+                    | Opcode::LtF32
+                    | Opcode::LeF32
+                    | Opcode::GtF32
+                    | Opcode::GeF32
+            );
+            match d.op {
+                Opcode::PushI32 | Opcode::PushU32 => {
+                    let k = read_u32(d.immediates, 0);
+                    if d.op == Opcode::PushU32 && k > i32::MAX as u32 && !reads_low_32 {
+                        return;
+                    }
+                    self.drop_from(n - 2);
+                    self.start(Opcode::OpImm);
+                    self.code.push(op as u8);
+                    self.code.extend_from_slice(&k.to_le_bytes());
+                }
+                Opcode::LdRel | Opcode::LdAbs => {
+                    let (ty, addr) = (d.immediates[0], read_u32(d.immediates, 1));
+                    let fused = if d.op == Opcode::LdRel {
+                        Opcode::OpRel
+                    } else {
+                        Opcode::OpAbs
+                    };
+                    self.drop_from(n - 2);
+                    self.start(fused);
+                    self.code.push(op as u8);
+                    self.code.push(ty);
+                    self.code.extend_from_slice(&addr.to_le_bytes());
+                }
+                _ => {}
             }
         }
 
-        /// Before a JZ/JNZ: a directly preceding comparison is fused into JUMP_IF_NOT/JUMP_IF.
-        fn take_comparison(&mut self) -> Option<Opcode> {
+        /// Before a store of `ty` to `addr` (ST_REL/ST_ABS, `load` the matching load): `LD ty
+        /// addr; ADD_IMM k` directly before it becomes `INC_REL`/`INC_ABS ty addr k`; true
+        /// when fused (the store is then not emitted).
+        fn fuse_increment(&mut self, load: Opcode, ty: MemType, addr: u32) -> bool {
+            let n = self.insn_starts.len();
+            if n < 2 || !self.rewritable_from(n - 2) || !ty.is_integer() {
+                return false;
+            }
+            let (Some(ld), Some(add)) = (self.insn_at(n - 2), self.insn_at(n - 1)) else {
+                return false;
+            };
+            if ld.op != load
+                || ld.immediates[0] != ty as u8
+                || read_u32(ld.immediates, 1) != addr
+                || add.op != Opcode::AddImm
+            {
+                return false;
+            }
+            let k = read_u32(add.immediates, 0);
+            self.drop_from(n - 2);
+            self.start(if load == Opcode::LdRel {
+                Opcode::IncRel
+            } else {
+                Opcode::IncAbs
+            });
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&k.to_le_bytes());
+            true
+        }
+
+        /// Before `LD_IND ty 0`: a directly preceding ELEM_REL/ELEM_ABS becomes
+        /// `LD_ELEM_REL`/`LD_ELEM_ABS ty`; true when fused.
+        fn fuse_element_load(&mut self, ty: MemType) -> bool {
+            let n = self.insn_starts.len();
+            if n < 1 || !self.rewritable_from(n - 1) {
+                return false;
+            }
+            let Some(elem) = self.insn_at(n - 1) else {
+                return false;
+            };
+            let fused = match elem.op {
+                Opcode::ElemRel => Opcode::LdElemRel,
+                Opcode::ElemAbs => Opcode::LdElemAbs,
+                _ => return false,
+            };
+            let spec: Vec<u8> = elem.immediates.to_vec();
+            self.drop_from(n - 1);
+            self.start(fused);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&spec);
+            true
+        }
+
+        /// Before `ST_IND ty 0`: when the value was computed, right after an ELEM_REL/ELEM_ABS
+        /// that gave the address, by instructions that cannot trap (loads of verified static
+        /// addresses, pushes, integer and REAL/LREAL arithmetic but division, comparisons,
+        /// conversions that cannot fail), the ELEM is removed and the store becomes
+        /// `ST_ELEM_REL`/`ST_ELEM_ABS ty`: the index is then checked after the value is
+        /// computed, which nothing can observe (but a full operand stack, where the value's
+        /// push then traps STACK_OVERFLOW before a bad index would trap). True when fused.
+        fn fuse_element_store(&mut self, ty: MemType) -> bool {
+            let n = self.insn_starts.len();
+            // Walk back over the value's instructions: `need` cells still to be accounted for.
+            let mut need = 1i64;
+            let mut k = n;
+            while need > 0 {
+                if k == 0 {
+                    return false;
+                }
+                k -= 1;
+                let Some(d) = self.insn_at(k) else {
+                    return false;
+                };
+                if !cannot_trap(d.op) {
+                    return false;
+                }
+                let Some((pops, pushes)) = crate::isa::stack_effect(d.op) else {
+                    return false;
+                };
+                need += pops as i64 - pushes as i64;
+            }
+            if need != 0 || k == 0 || !self.rewritable_from(k - 1) {
+                return false;
+            }
+            // The value's code must not read the address under it (e.g. `DUP`).
+            let mut depth = 0u32;
+            for j in k..n {
+                let Some((pops, pushes)) = self.insn_at(j).and_then(|d| crate::isa::stack_effect(d.op))
+                else {
+                    return false;
+                };
+                if pops > depth {
+                    return false;
+                }
+                depth = depth - pops + pushes;
+            }
+            let Some(elem) = self.insn_at(k - 1) else {
+                return false;
+            };
+            let fused = match elem.op {
+                Opcode::ElemRel => Opcode::StElemRel,
+                Opcode::ElemAbs => Opcode::StElemAbs,
+                _ => return false,
+            };
+            let spec: Vec<u8> = elem.immediates.to_vec();
+            // Remove the ELEM: the value's code moves down by its size.
+            let (from, size) = (self.insn_starts[k - 1] as usize, elem.op.size());
+            self.code.drain(from..from + size);
+            self.insn_starts.remove(k - 1);
+            for start in &mut self.insn_starts[k - 1..] {
+                *start -= size as u32;
+            }
+            self.start(fused);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&spec);
+            true
+        }
+
+        /// Before a JZ/JNZ: a directly preceding comparison is fused into JUMP_IF_NOT/JUMP_IF,
+        /// a comparison with an immediate (OP_IMM) into JUMP_IF_NOT_IMM/JUMP_IF_IMM: the
+        /// comparison and the immediate (if any).
+        fn take_comparison(&mut self) -> Option<(Opcode, Option<u32>)> {
             let n = self.insn_starts.len();
             if n == 0 || !self.rewritable_from(n - 1) {
                 return None;
             }
-            let cmp = self
-                .insn_at(n - 1)
-                .map(|d| d.op)
-                .filter(|op| op.is_comparison())?;
+            let d = self.insn_at(n - 1)?;
+            let taken = if d.op.is_comparison() {
+                (d.op, None)
+            } else if d.op == Opcode::OpImm
+                && let Some(cmp) = Opcode::from_u8(d.immediates[0]).filter(|c| c.is_comparison())
+            {
+                (cmp, Some(read_u32(d.immediates, 1)))
+            } else {
+                return None;
+            };
             self.drop_from(n - 1);
-            Some(cmp)
+            Some(taken)
+        }
+
+        fn jump_on(&mut self, when: bool, taken: (Opcode, Option<u32>), target: Label) {
+            match taken {
+                (cmp, None) => self.jump_if(when, cmp, target),
+                (cmp, Some(k)) => {
+                    self.start(if when {
+                        Opcode::JumpIfImm
+                    } else {
+                        Opcode::JumpIfNotImm
+                    });
+                    self.code.push(cmp as u8);
+                    self.code.extend_from_slice(&k.to_le_bytes());
+                    self.fixups.push((self.code.len(), target));
+                    self.code.extend_from_slice(&0u32.to_le_bytes());
+                }
+            }
         }
 
         /// Before a store of `width` bytes: a directly preceding SEXT/ZEXT to at least that
@@ -1072,9 +1360,15 @@ mod builder {
         /// a source location or raw bytes.
         pub fn op(&mut self, op: Opcode) {
             debug_assert!(op.operands().is_empty(), "{} needs operands", op.mnemonic());
+            if matches!(op, Opcode::NegF32 | Opcode::NegF64) && self.fold_negation(op) {
+                return;
+            }
             self.start(op);
-            if matches!(op, Opcode::Add | Opcode::Sub) {
-                self.fuse_arithmetic(op);
+            if matches!(op, Opcode::Add | Opcode::Sub) && self.fuse_arithmetic(op) {
+                return;
+            }
+            if op.is_binary() {
+                self.fuse_operand(op);
             }
         }
 
@@ -1087,6 +1381,16 @@ mod builder {
         fn op_type_addr(&mut self, op: Opcode, ty: MemType, addr: u32) {
             if matches!(op, Opcode::StAbs | Opcode::StRel | Opcode::StInd) {
                 self.drop_redundant_extension(ty.width());
+            }
+            let fused = match op {
+                Opcode::StRel => self.fuse_increment(Opcode::LdRel, ty, addr),
+                Opcode::StAbs => self.fuse_increment(Opcode::LdAbs, ty, addr),
+                Opcode::LdInd if addr == 0 => self.fuse_element_load(ty),
+                Opcode::StInd if addr == 0 => self.fuse_element_store(ty),
+                _ => false,
+            };
+            if fused {
+                return;
             }
             self.start(op);
             self.code.push(ty as u8);
@@ -1209,23 +1513,36 @@ mod builder {
         pub fn jmp(&mut self, target: Label) {
             self.op_target(Opcode::Jmp, target);
         }
-        /// JZ (fused with a preceding comparison into JUMP_IF_NOT).
+        /// JZ (fused with a preceding comparison into JUMP_IF_NOT or JUMP_IF_NOT_IMM).
         pub fn jz(&mut self, target: Label) {
             match self.take_comparison() {
-                Some(cmp) => self.jump_if(false, cmp, target),
+                Some(taken) => self.jump_on(false, taken, target),
                 None => self.op_target(Opcode::Jz, target),
             }
         }
-        /// JNZ (fused with a preceding comparison into JUMP_IF).
+        /// JNZ (fused with a preceding comparison into JUMP_IF or JUMP_IF_IMM).
         pub fn jnz(&mut self, target: Label) {
             match self.take_comparison() {
-                Some(cmp) => self.jump_if(true, cmp, target),
+                Some(taken) => self.jump_on(true, taken, target),
                 None => self.op_target(Opcode::Jnz, target),
             }
         }
-        /// JUMP_IF (`when = true`) / JUMP_IF_NOT: compare the two top cells with `cmp` and jump.
+        /// JUMP_IF (`when = true`) / JUMP_IF_NOT: compare the two top cells with `cmp` and jump
+        /// (fused with a directly preceding `PUSH_I32 k` into JUMP_IF_IMM/JUMP_IF_NOT_IMM).
         pub fn jump_if(&mut self, when: bool, cmp: Opcode, target: Label) {
             debug_assert!(cmp.is_comparison());
+            let n = self.insn_starts.len();
+            if n >= 1
+                && self.rewritable_from(n - 1)
+                && let Some(k) = self
+                    .insn_at(n - 1)
+                    .filter(|d| d.op == Opcode::PushI32)
+                    .map(|d| read_u32(d.immediates, 0))
+            {
+                self.drop_from(n - 1);
+                self.jump_on(when, (cmp, Some(k)), target);
+                return;
+            }
             self.start(if when {
                 Opcode::JumpIf
             } else {
@@ -1275,6 +1592,28 @@ mod builder {
         pub fn index(&mut self, lo: i64, hi: i64, stride: u32) {
             self.op_range(Opcode::Index, lo as u64, hi as u64);
             self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        fn elem(&mut self, op: Opcode, addr: u32, lo: i64, hi: i64, stride: u32) {
+            self.start(op);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&lo.to_le_bytes());
+            self.code.extend_from_slice(&hi.to_le_bytes());
+            self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        /// ELEM_REL: `[i] -> [base + off + (i - lo) * stride]` (a following `LD_IND ty 0` fuses
+        /// into LD_ELEM_REL, a following trap-free value and `ST_IND ty 0` into ST_ELEM_REL).
+        pub fn elem_rel(&mut self, off: u32, lo: i64, hi: i64, stride: u32) {
+            self.elem(Opcode::ElemRel, off, lo, hi, stride);
+        }
+        /// ELEM_ABS: `[i] -> [addr + (i - lo) * stride]` (fuses as ELEM_REL does).
+        pub fn elem_abs(&mut self, addr: u32, lo: i64, hi: i64, stride: u32) {
+            self.elem(Opcode::ElemAbs, addr, lo, hi, stride);
+        }
+        /// SEL_IF: `[a b] -> [if cmp(a, b) { b } else { a }]` (MAX: `LT_x`, MIN: `GT_x`).
+        pub fn sel_if(&mut self, cmp: Opcode) {
+            debug_assert!(cmp.is_comparison());
+            self.start(Opcode::SelIf);
+            self.code.push(cmp as u8);
         }
         /// TRY_BEGIN with its handler label.
         pub fn try_begin(&mut self, handler: Label) {

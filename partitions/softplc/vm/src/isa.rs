@@ -43,6 +43,21 @@ pub enum Operands {
     IndexSpec,
     /// A comparison opcode byte (see [`Opcode::is_comparison`]) then a `u32` code target.
     CompareTarget,
+    /// A `u32` address/offset, two `i64` bounds (inclusive), a `u32` element stride.
+    AddrIndex,
+    /// A [`MemType`] byte, a `u32` address/offset, two `i64` bounds (inclusive), a `u32`
+    /// element stride.
+    TypeAddrIndex,
+    /// A [`MemType`] byte (an integer type), a `u32` address/offset, an `i32` immediate.
+    TypeAddrImm,
+    /// A comparison opcode byte.
+    Compare,
+    /// A comparison opcode byte, an `i32` immediate, a `u32` code target.
+    CompareImmTarget,
+    /// A binary-operator opcode byte (see [`Opcode::is_binary`]) then an `i32` immediate.
+    OpImm,
+    /// A binary-operator opcode byte, a [`MemType`] byte, a `u32` address/offset.
+    OpTypeAddr,
 }
 
 impl Operands {
@@ -58,6 +73,13 @@ impl Operands {
             Operands::Range => 16,
             Operands::IndexSpec => 20,
             Operands::CompareTarget => 5,
+            Operands::AddrIndex => 24,
+            Operands::TypeAddrIndex => 25,
+            Operands::TypeAddrImm => 9,
+            Operands::Compare => 1,
+            Operands::CompareImmTarget => 9,
+            Operands::OpImm => 5,
+            Operands::OpTypeAddr => 6,
         }
     }
 
@@ -112,6 +134,13 @@ macro_rules! opcodes {
             pub const fn size(self) -> usize {
                 SIZES[self as usize] as usize
             }
+        }
+
+        /// Each opcode's byte as a constant, for `match`ing on raw code bytes (the
+        /// interpreter's dispatch).
+        #[allow(non_upper_case_globals)]
+        pub mod byte {
+            $( #[doc = concat!("`", $mnemonic, "`.")] pub const $name: u8 = $val; )*
         }
 
         /// Opcode byte -> opcode (the interpreter's decode is one table load).
@@ -357,9 +386,95 @@ opcodes! {
     /// `[code] -> []`: re-raises a caught trap code; 0 does nothing (no exception); a code
     /// that is not a catchable trap raises NUMERIC_ERROR.
     Rethrow = 0x93, "RETHROW", None;
+
+    // ---- Superinstructions (0xC0..=0xDF): each is exactly the plain sequence named in its
+    // description (same result, same traps, checked in the same order), counted as one
+    // instruction by the watchdog, and never needs more operand stack than that sequence.
+    // The compiler and the builder's fusion produce them; the VM, the reference model and
+    // the native tier implement each one. Element addresses are computed as INDEX does
+    // (wrapping 64-bit arithmetic, then checked against data memory when accessed).
+
+    /// `[i] -> [base + off + (i - lo) * stride]`: the address of element `i` of a
+    /// frame-relative array: `LEA_REL off; SWAP; INDEX lo hi stride` (the index is pushed
+    /// first). May trap: INDEX_OUT_OF_BOUNDS unless `lo <= i <= hi` (signed).
+    ElemRel = 0xC0, "ELEM_REL", AddrIndex;
+    /// `[i] -> [addr + (i - lo) * stride]`: the address of element `i` of an array at
+    /// absolute address `addr`: `PUSH_U32 addr; SWAP; INDEX lo hi stride`. May trap:
+    /// INDEX_OUT_OF_BOUNDS.
+    ElemAbs = 0xC1, "ELEM_ABS", AddrIndex;
+    /// `[i] -> [v]`: loads element `i` of a frame-relative array: `ELEM_REL off lo hi stride;
+    /// LD_IND ty 0`. May trap: INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemRel = 0xC2, "LD_ELEM_REL", TypeAddrIndex;
+    /// `[i] -> [v]`: `ELEM_ABS addr lo hi stride; LD_IND ty 0`. May trap:
+    /// INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemAbs = 0xC3, "LD_ELEM_ABS", TypeAddrIndex;
+    /// `[i v] -> []`: stores `v` into element `i` of a frame-relative array: `SWAP; ELEM_REL
+    /// off lo hi stride; SWAP; ST_IND ty 0`. May trap: INDEX_OUT_OF_BOUNDS, then
+    /// INVALID_ADDRESS.
+    StElemRel = 0xC4, "ST_ELEM_REL", TypeAddrIndex;
+    /// `[i v] -> []`: `SWAP; ELEM_ABS addr lo hi stride; SWAP; ST_IND ty 0`. May trap:
+    /// INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    StElemAbs = 0xC5, "ST_ELEM_ABS", TypeAddrIndex;
+    /// `[] -> []`: adds `imm` to the integer variable at `base + off`: `LD_REL ty off; ADD_IMM
+    /// imm; ST_REL ty off` (wrapping, the store truncates to the type). The verifier checks
+    /// the type is an integer type and the variable lies in the frame, as for LD_REL.
+    IncRel = 0xC6, "INC_REL", TypeAddrImm;
+    /// `[] -> []`: `LD_ABS ty addr; ADD_IMM imm; ST_ABS ty addr` (integer type; the verifier
+    /// checks the address as for LD_ABS).
+    IncAbs = 0xC7, "INC_ABS", TypeAddrImm;
+    /// `[a b] -> [if cmp(a, b) { b } else { a }]` for a comparison opcode `cmp`: MAX is
+    /// `SEL_IF LT_x`, MIN is `SEL_IF GT_x` (NaN compares false: the first operand is kept).
+    SelIf = 0xC8, "SEL_IF", Compare;
+    /// `[a] -> []`: jumps to `target` when `cmp(a, imm)` holds, `imm` sign-extended to a cell:
+    /// `PUSH_I32 imm; JUMP_IF cmp target`.
+    JumpIfImm = 0xC9, "JUMP_IF_IMM", CompareImmTarget;
+    /// `[a] -> []`: jumps when `cmp(a, imm)` does **not** hold: `PUSH_I32 imm; JUMP_IF_NOT cmp
+    /// target`.
+    JumpIfNotImm = 0xCA, "JUMP_IF_NOT_IMM", CompareImmTarget;
+    /// `[a] -> [a op imm]`: a binary operator `op` (see [`Opcode::is_binary`]) with an
+    /// immediate right operand sign-extended to a cell: `PUSH_I32 imm; op`. May trap as `op`
+    /// (DIVISION_BY_ZERO for a division by 0).
+    OpImm = 0xCB, "OP_IMM", OpImm;
+    /// `[a] -> [a op v]`: a binary operator whose right operand is the frame variable at
+    /// `base + off`: `LD_REL ty off; op` (the verifier checks the variable as for LD_REL).
+    /// May trap as `op`.
+    OpRel = 0xCC, "OP_REL", OpTypeAddr;
+    /// `[a] -> [a op v]`: `LD_ABS ty addr; op` (the verifier checks the address as for
+    /// LD_ABS). May trap as `op`.
+    OpAbs = 0xCD, "OP_ABS", OpTypeAddr;
 }
 
 impl Opcode {
+    /// True for the binary operators `[a b] -> [a op b]` without operands (integer and float
+    /// arithmetic, bit operations, shifts and comparisons) that OP_IMM/OP_REL/OP_ABS accept.
+    pub const fn is_binary(self) -> bool {
+        use Opcode::*;
+        self.is_comparison()
+            || matches!(
+                self,
+                Add | Sub
+                    | Mul
+                    | DivS
+                    | DivU
+                    | ModS
+                    | ModU
+                    | And
+                    | Or
+                    | Xor
+                    | Shl
+                    | ShrU
+                    | ShrS
+                    | AddF32
+                    | SubF32
+                    | MulF32
+                    | DivF32
+                    | AddF64
+                    | SubF64
+                    | MulF64
+                    | DivF64
+            )
+    }
+
     /// True for the comparison opcodes (integer and float) that JUMP_IF/JUMP_IF_NOT accept.
     pub const fn is_comparison(self) -> bool {
         use Opcode::*;
@@ -448,6 +563,31 @@ codes::code_enum! {
         /// LREAL (f64 bits).
         F64 = 9 => "F64",
     }
+}
+
+/// Each [`MemType`]'s code byte as a constant, for `match`ing on raw operand bytes.
+pub mod mem_type_byte {
+    use super::MemType;
+    /// [`MemType::I8`].
+    pub const I8: u8 = MemType::I8 as u8;
+    /// [`MemType::I16`].
+    pub const I16: u8 = MemType::I16 as u8;
+    /// [`MemType::I32`].
+    pub const I32: u8 = MemType::I32 as u8;
+    /// [`MemType::I64`].
+    pub const I64: u8 = MemType::I64 as u8;
+    /// [`MemType::U8`].
+    pub const U8: u8 = MemType::U8 as u8;
+    /// [`MemType::U16`].
+    pub const U16: u8 = MemType::U16 as u8;
+    /// [`MemType::U32`].
+    pub const U32: u8 = MemType::U32 as u8;
+    /// [`MemType::U64`].
+    pub const U64: u8 = MemType::U64 as u8;
+    /// [`MemType::F32`].
+    pub const F32: u8 = MemType::F32 as u8;
+    /// [`MemType::F64`].
+    pub const F64: u8 = MemType::F64 as u8;
 }
 
 impl MemType {
@@ -726,6 +866,11 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         Index => (2, 1),
         AddImm => (1, 1),
         JumpIf | JumpIfNot => (2, 0),
+        ElemRel | ElemAbs | LdElemRel | LdElemAbs | OpImm | OpRel | OpAbs => (1, 1),
+        StElemRel | StElemAbs => (2, 0),
+        IncRel | IncAbs => (0, 0),
+        SelIf => (2, 1),
+        JumpIfImm | JumpIfNotImm => (1, 0),
         Add | Sub | Mul | DivS | DivU | ModS | ModU | And | Or | Xor | Shl | ShrU | ShrS | Rol
         | Ror | Eq | Ne | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | AddF32 | SubF32
         | MulF32 | DivF32 | EqF32 | NeF32 | LtF32 | LeF32 | GtF32 | GeF32 | AddF64 | SubF64
@@ -774,6 +919,7 @@ impl core::fmt::Display for Instruction<'_> {
         let imm = self.immediates;
         f.write_str(self.op.mnemonic())?;
         let ty = |b: u8| MemType::from_code(b).map_or("?", |t| t.name());
+        let opname = |b: u8| Opcode::from_u8(b).map_or("?", |op| op.mnemonic());
         match self.op.operands() {
             Operands::None => Ok(()),
             Operands::I32 => write!(f, " {}", read_u32(imm, 0) as i32),
@@ -807,16 +953,53 @@ impl core::fmt::Display for Instruction<'_> {
                 Some(t) => write!(f, " {}", t.name()),
                 None => write!(f, " #{}", imm[0]),
             },
-            Operands::CompareTarget => {
-                let cmp = Opcode::from_u8(imm[0]).map_or("?", |op| op.mnemonic());
-                write!(f, " {cmp} @{}", read_u32(imm, 1))
-            }
+            Operands::CompareTarget => write!(f, " {} @{}", opname(imm[0]), read_u32(imm, 1)),
             Operands::IndexSpec => write!(
                 f,
                 " {} {} {}",
                 read_u64(imm, 0) as i64,
                 read_u64(imm, 8) as i64,
                 read_u32(imm, 16)
+            ),
+            Operands::AddrIndex => write!(
+                f,
+                " {} {} {} {}",
+                read_u32(imm, 0),
+                read_u64(imm, 4) as i64,
+                read_u64(imm, 12) as i64,
+                read_u32(imm, 20)
+            ),
+            Operands::TypeAddrIndex => write!(
+                f,
+                " {} {} {} {} {}",
+                ty(imm[0]),
+                read_u32(imm, 1),
+                read_u64(imm, 5) as i64,
+                read_u64(imm, 13) as i64,
+                read_u32(imm, 21)
+            ),
+            Operands::TypeAddrImm => write!(
+                f,
+                " {} {} {}",
+                ty(imm[0]),
+                read_u32(imm, 1),
+                read_u32(imm, 5) as i32
+            ),
+            Operands::Compare => write!(f, " {}", opname(imm[0])),
+            Operands::CompareImmTarget => write!(
+                f,
+                " {} {} @{}",
+                opname(imm[0]),
+                read_u32(imm, 1) as i32,
+                read_u32(imm, 5)
+            ),
+            Operands::OpImm => write!(f, " {} {}", opname(imm[0]), read_u32(imm, 1) as i32),
+            Operands::OpTypeAddr => write!(
+                f,
+                " {} {} {}",
+                opname(imm[0]),
+                ty(imm[1]),
+                read_u32(imm, 2)
             ),
         }
     }

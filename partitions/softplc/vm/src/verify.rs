@@ -80,8 +80,11 @@ pub enum Reason {
     BadRoundMode(u8),
     /// THROW of something that is not a catchable trap code.
     BadTrapCode(u8),
-    /// JUMP_IF/JUMP_IF_NOT with an operand that is not a comparison opcode.
+    /// JUMP_IF/JUMP_IF_NOT/SEL_IF/JUMP_IF_IMM/JUMP_IF_NOT_IMM with an operand that is not a
+    /// comparison opcode.
     BadComparison(u8),
+    /// OP_IMM/OP_REL/OP_ABS with an operand that is not a binary operator.
+    BadOperator(u8),
     /// PUSH_CONST index beyond the constant pool.
     UnknownConstant(u16),
     /// CALL of a POU index beyond the POU table.
@@ -229,6 +232,7 @@ impl core::fmt::Display for Reason {
             Reason::BadRoundMode(b) => write!(f, "invalid rounding mode {b}"),
             Reason::BadTrapCode(b) => write!(f, "invalid trap code {b}"),
             Reason::BadComparison(b) => write!(f, "operand 0x{b:02x} is not a comparison opcode"),
+            Reason::BadOperator(b) => write!(f, "operand 0x{b:02x} is not a binary operator"),
             Reason::UnknownConstant(i) => write!(f, "constant {i} does not exist"),
             Reason::UnknownPou(i) => write!(f, "call of unknown POU {i}"),
             Reason::UnknownBuiltin(i) => write!(f, "call of unknown builtin {i}"),
@@ -389,17 +393,7 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     reason: Reason::BadType(code[imm]),
                 })?;
                 if matches!(op, Opcode::LdAbs | Opcode::StAbs) {
-                    let address = read_u32(code, imm + 1) as u64;
-                    if address + ty.width() as u64 > data_size as u64 {
-                        return err(
-                            site,
-                            Reason::AddressOutsideData {
-                                address,
-                                width: ty.width() as u32,
-                                data_size,
-                            },
-                        );
-                    }
+                    check_abs(site, read_u32(code, imm + 1), ty, data_size)?;
                 }
             }
             Operands::Width => {
@@ -421,10 +415,41 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     return err(site, Reason::BadRoundMode(code[imm + 1]));
                 }
             }
-            Operands::CompareTarget => match Opcode::from_u8(code[imm]) {
-                Some(cmp) if cmp.is_comparison() => {}
-                _ => return err(site, Reason::BadComparison(code[imm])),
-            },
+            Operands::CompareTarget | Operands::Compare | Operands::CompareImmTarget => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(cmp) if cmp.is_comparison() => {}
+                    _ => return err(site, Reason::BadComparison(code[imm])),
+                }
+            }
+            Operands::OpImm | Operands::OpTypeAddr => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(op) if op.is_binary() => {}
+                    _ => return err(site, Reason::BadOperator(code[imm])),
+                }
+                if op != Opcode::OpImm {
+                    let ty = MemType::from_code(code[imm + 1]).ok_or(VerifyError {
+                        site,
+                        reason: Reason::BadType(code[imm + 1]),
+                    })?;
+                    if op == Opcode::OpAbs {
+                        check_abs(site, read_u32(code, imm + 2), ty, data_size)?;
+                    }
+                }
+            }
+            Operands::TypeAddrIndex => {
+                if MemType::from_code(code[imm]).is_none() {
+                    return err(site, Reason::BadType(code[imm]));
+                }
+            }
+            Operands::TypeAddrImm => {
+                let ty = match MemType::from_code(code[imm]) {
+                    Some(ty) if ty.is_integer() => ty,
+                    _ => return err(site, Reason::BadType(code[imm])),
+                };
+                if op == Opcode::IncAbs {
+                    check_abs(site, read_u32(code, imm + 1), ty, data_size)?;
+                }
+            }
             Operands::TrapCode => match Trap::from_u64(code[imm] as u64) {
                 Some(trap) if trap.is_catchable() => {}
                 _ => return err(site, Reason::BadTrapCode(code[imm])),
@@ -447,6 +472,22 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
             _ => {}
         }
         pc += op.size();
+    }
+    Ok(())
+}
+
+/// An absolute access of a `ty` value at `address` must lie inside data memory.
+fn check_abs(site: Site, address: u32, ty: MemType, data_size: u32) -> Result<(), VerifyError> {
+    let address = address as u64;
+    if address + ty.width() as u64 > data_size as u64 {
+        return err(
+            site,
+            Reason::AddressOutsideData {
+                address,
+                width: ty.width() as u32,
+                data_size,
+            },
+        );
     }
     Ok(())
 }
@@ -521,9 +562,11 @@ fn step(
     let imm = pc + 1;
     // Frame-relative operands must lie inside this POU's frame.
     match op {
-        Opcode::LdRel | Opcode::StRel => {
-            let ty = MemType::from_code(code[imm]).expect("swept");
-            let offset = read_u32(code, imm + 1) as u64;
+        Opcode::LdRel | Opcode::StRel | Opcode::IncRel | Opcode::OpRel => {
+            // The type byte and the offset follow the opcode (OP_REL: after the operator).
+            let at = if op == Opcode::OpRel { imm + 1 } else { imm };
+            let ty = MemType::from_code(code[at]).expect("swept");
+            let offset = read_u32(code, at + 1) as u64;
             if offset + ty.width() as u64 > pou.frame_size as u64 {
                 return err(
                     site,
@@ -636,6 +679,10 @@ fn step(
         }
         Opcode::JumpIf | Opcode::JumpIfNot => {
             flow(read_u32(code, imm + 1) as usize, after, tries, true)?;
+            flow(next, after, tries, false)?;
+        }
+        Opcode::JumpIfImm | Opcode::JumpIfNotImm => {
+            flow(read_u32(code, imm + 5) as usize, after, tries, true)?;
             flow(next, after, tries, false)?;
         }
         Opcode::TryBegin => {

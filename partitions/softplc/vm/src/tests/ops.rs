@@ -828,16 +828,28 @@ fn fused_compare_and_jump() {
         c.op_width(Opcode::Sext, 32);
         c.st_abs(MemType::I32, 0);
     });
+    // `PUSH_I32 2; LT_S` is OP_IMM, which JZ turns into JUMP_IF_NOT_IMM; the load, ADD_IMM
+    // and store of the same variable become INC_ABS (the SEXT before the store is dropped).
     assert_eq!(
         disassemble(&bytes),
         [
             Opcode::PushI32,
-            Opcode::PushI32,
-            Opcode::JumpIfNot,
-            Opcode::LdAbs,
-            Opcode::AddImm,
-            Opcode::StAbs,
+            Opcode::JumpIfNotImm,
+            Opcode::IncAbs,
             Opcode::Ret
         ]
+    );
+    // Without an immediate: JUMP_IF_NOT.
+    let bytes = program_with(100, |c, _| {
+        let l = c.new_label();
+        c.ld_abs(MemType::I32, 0);
+        c.op(Opcode::Dup);
+        c.op(Opcode::LtS);
+        c.jz(l);
+        c.bind(l);
+    });
+    assert_eq!(
+        disassemble(&bytes),
+        [Opcode::LdAbs, Opcode::Dup, Opcode::JumpIfNot, Opcode::Ret]
     );
 }
