@@ -140,8 +140,8 @@
 //! force, unforce, stop and start a task) or `"download"` (also replace the program by
 //! online download); a request beyond it is answered FORBIDDEN. `plc.safe` gives located `%Q` variables (by name) the value
 //! they take when a task faults and the outputs go safe (a number or a boolean fitting the
-//! variable's type; checked when the program is compiled); without one they go to
-//! zero/FALSE. `plc.deadline` gives IEC tasks a time deadline (CODESYS's task watchdog
+//! variable's type; checked when the program is compiled); without one they take the value
+//! the program's `{attribute 'safe' := 'VALUE'}` pragma gives them, else zero/FALSE. `plc.deadline` gives IEC tasks a time deadline (CODESYS's task watchdog
 //! time), counted from the task's release (its window start), between 100 us and one hour;
 //! a task still running then is stopped with the trap DEADLINE (outputs safe, reported as
 //! DEADLINE_MISSED, like the instruction-budget WATCHDOG that watches every task). Keys are

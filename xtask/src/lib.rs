@@ -5,8 +5,8 @@
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
 //! lint gate ([`lint`]), the Linux-side test programs ([`linux`]), the native Linux
-//! reference of the guest benchmark ([`native`]) and the pictures of a run's serial log
-//! ([`plot`], whose parser the scenarios use too).
+//! reference of the guest benchmark ([`native`]), the pictures of a run's serial log
+//! ([`plot`], whose parser the scenarios use too) and the OSCAT library check ([`oscat`]).
 
 pub mod artifacts;
 pub mod bench;
@@ -16,6 +16,7 @@ pub mod guest;
 pub mod lint;
 pub mod linux;
 pub mod native;
+pub mod oscat;
 pub mod plc;
 pub mod plot;
 pub mod qemu;

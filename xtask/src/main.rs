@@ -80,6 +80,16 @@ enum Cmd {
     /// The lint gate of CI: cargo fmt --check, and clippy -D warnings on the host crates,
     /// the kernel, the loader and every user-mode program.
     Lint,
+    /// The OSCAT BASIC library check: compile the library text as one project and one POU at
+    /// a time; print how many POUs compile and why the others do not. FILE defaults to
+    /// $OSCAT_ST, else target/oscat/oscat.st; without it the check is skipped (exit 0).
+    Oscat {
+        file: Option<PathBuf>,
+        /// Also write the figures and the failure list into the generated section of
+        /// partitions/softplc/compiler/STATUS.md.
+        #[arg(long)]
+        write_status: bool,
+    },
     /// Draw a run's serial log as an SVG: the plant's level, setpoint and valve over time,
     /// the PLC's release-lateness histogram and each second's lateness.
     Plot {
@@ -139,6 +149,7 @@ fn main() -> ExitCode {
             scenarios_only,
         } => test(filter.as_deref(), scenarios_only),
         Cmd::Lint => xtask::lint::run(),
+        Cmd::Oscat { file, write_status } => xtask::oscat::run(file.as_deref(), write_status),
         Cmd::Plot { log, output, plc } => xtask::plot::run(&log, output.as_deref(), plc.as_deref()),
         Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
     };

@@ -199,12 +199,13 @@ fn package(
         }
     });
     let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
-    let safe = plc
+    let configured = plc
         .safe
         .iter()
         .map(|(name, value)| safe_value(&image, name, *value))
         .collect::<Result<Vec<_>, String>>()
         .map_err(|e| anyhow::anyhow!("partition {}: plc.safe: {e}", p.name))?;
+    let safe = merge_safe_values(&compiled.safe, configured);
     if safe.len() > softplc::scan::MAX_SAFE_VALUES {
         bail!(
             "partition {}: plc.safe gives {} values, at most {} are kept",
@@ -309,6 +310,26 @@ pub fn native_programs(
     plc_native::harness::write_file(&file, plc_native::bundle(&modules).as_bytes())
         .map_err(anyhow::Error::msg)?;
     Ok(Some(file))
+}
+
+/// The safe values of the outputs: those the program's `{attribute 'safe'}` pragmas give,
+/// replaced or completed by the configuration's `plc.safe` (the system integrator's word
+/// wins).
+fn merge_safe_values(
+    pragmas: &[plc_compiler::SafeOutput],
+    configured: Vec<package::SafeValue>,
+) -> Vec<package::SafeValue> {
+    let mut safe: Vec<package::SafeValue> = pragmas
+        .iter()
+        .filter(|s| !configured.iter().any(|c| c.address == s.address))
+        .map(|s| package::SafeValue {
+            address: s.address,
+            width: s.width,
+            value: s.value,
+        })
+        .collect();
+    safe.extend(configured);
+    safe
 }
 
 /// The safe value of `%Q` variable `name`: it must be a located output of the program and
@@ -508,6 +529,50 @@ mod tests {
         plc_compiler::compile(&files, &plc_compiler::Options::default())
             .map(|(c, _)| c.image)
             .unwrap_or_else(|_| panic!("does not compile"))
+    }
+
+    #[test]
+    fn pragma_safe_values_yield_to_the_configuration() {
+        let files = [(
+            "t.st".to_string(),
+            "VAR_GLOBAL
+               {attribute 'safe' := '0.25'} v AT %QL0 : LREAL;
+               {attribute 'safe' := 'TRUE'} b AT %QX8.0 : BOOL;
+             END_VAR
+             PROGRAM P VAR {attribute 'safe' := '-1'} s AT %QB9 : SINT; END_VAR s := 1; END_PROGRAM"
+                .to_string(),
+        )];
+        let (compiled, _) = plc_compiler::compile(&files, &plc_compiler::Options::default())
+            .unwrap_or_else(|_| panic!("does not compile"));
+        let names: Vec<(&str, u8, u64)> = compiled
+            .safe
+            .iter()
+            .map(|s| (s.name.as_str(), s.width, s.value))
+            .collect();
+        assert_eq!(
+            names,
+            [("v", 8, 0.25f64.to_bits()), ("b", 1, 1), ("P.s", 1, 0xff)]
+        );
+        let image = Image::parse(&compiled.image).unwrap();
+        let configured = vec![safe_value(&image, "b", PlcValue::Bool(false)).unwrap()];
+        let merged = merge_safe_values(&compiled.safe, configured);
+        let values: Vec<(u32, u64)> = merged.iter().map(|s| (s.address, s.value)).collect();
+        let address = |name: &str| {
+            compiled
+                .safe
+                .iter()
+                .find(|s| s.name == name)
+                .unwrap()
+                .address
+        };
+        assert_eq!(
+            values,
+            [
+                (address("v"), 0.25f64.to_bits()),
+                (address("P.s"), 0xff),
+                (address("b"), 0)
+            ]
+        );
     }
 
     #[test]

@@ -18,6 +18,9 @@ pub struct Unit {
     /// VAR_GLOBAL blocks at the top level or inside CONFIGURATION/RESOURCE.
     pub globals: Vec<VarBlock>,
     pub configs: Vec<Configuration>,
+    pub interfaces: Vec<Interface>,
+    /// Actions declared outside their POU (`ACTIONS P ... END_ACTIONS`, `ACTION P.a`).
+    pub actions: Vec<(Ident, Action)>,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -36,6 +39,94 @@ pub struct Pou {
     pub var_blocks: Vec<VarBlock>,
     pub body: Vec<Stmt>,
     pub span: Span,
+    /// ABSTRACT / FINAL (and an access specifier, accepted and ignored on a POU).
+    pub modifiers: Modifiers,
+    /// `EXTENDS Base` of a FUNCTION_BLOCK.
+    pub extends: Option<Ident>,
+    /// `IMPLEMENTS I1, I2` of a FUNCTION_BLOCK.
+    pub implements: Vec<Ident>,
+    pub methods: Vec<Method>,
+    pub properties: Vec<Property>,
+    pub actions: Vec<Action>,
+    /// Declared as a CLASS (IEC 61131-3 3rd edition): a function block without a body.
+    pub is_class: bool,
+}
+
+/// Access specifier of a method or property.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default)]
+pub enum Access {
+    #[default]
+    Public,
+    Private,
+    Protected,
+    Internal,
+}
+
+impl Access {
+    pub fn keyword(self) -> &'static str {
+        match self {
+            Access::Public => "PUBLIC",
+            Access::Private => "PRIVATE",
+            Access::Protected => "PROTECTED",
+            Access::Internal => "INTERNAL",
+        }
+    }
+}
+
+/// Modifiers of a POU, method or property.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Modifiers {
+    pub access: Access,
+    pub is_abstract: bool,
+    pub is_final: bool,
+    pub is_override: bool,
+}
+
+/// A METHOD (also the accessors of a PROPERTY, and the declarations of an INTERFACE).
+#[derive(Debug, Clone)]
+pub struct Method {
+    pub name: Ident,
+    pub modifiers: Modifiers,
+    pub return_type: Option<TypeRef>,
+    pub var_blocks: Vec<VarBlock>,
+    pub body: Vec<Stmt>,
+    pub span: Span,
+}
+
+/// A PROPERTY with its GET and SET accessors.
+#[derive(Debug, Clone)]
+pub struct Property {
+    pub name: Ident,
+    pub modifiers: Modifiers,
+    pub ty: TypeRef,
+    pub get: Option<Accessor>,
+    pub set: Option<Accessor>,
+    pub span: Span,
+}
+
+#[derive(Debug, Clone)]
+pub struct Accessor {
+    pub var_blocks: Vec<VarBlock>,
+    pub body: Vec<Stmt>,
+    pub span: Span,
+}
+
+/// An ACTION: statements run on the variables of its POU.
+#[derive(Debug, Clone)]
+pub struct Action {
+    pub name: Ident,
+    pub body: Vec<Stmt>,
+    pub span: Span,
+}
+
+/// An INTERFACE: method and property declarations.
+#[derive(Debug, Clone)]
+pub struct Interface {
+    pub name: Ident,
+    pub extends: Vec<Ident>,
+    pub methods: Vec<Method>,
+    pub properties: Vec<Property>,
+    pub span: Span,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -49,7 +140,7 @@ pub enum VarKind {
     Temp,
 }
 
-#[derive(Debug)]
+#[derive(Debug, Clone)]
 pub struct VarBlock {
     pub kind: VarKind,
     pub constant: bool,
@@ -69,6 +160,9 @@ pub struct VarDecl {
     /// `{attribute 'shared' := 'write' | 'read'}` before it: a global shared with another
     /// PLC project.
     pub shared: Option<SharedAttr>,
+    /// `{attribute 'safe' := 'VALUE'}` before it: the value (as written) a located output
+    /// takes when the outputs go safe, and the pragma's span.
+    pub safe: Option<(String, Span)>,
 }
 
 /// A declaration's `{attribute 'shared'}` pragma.
@@ -89,8 +183,8 @@ pub struct TypeDecl {
 #[derive(Debug, Clone)]
 pub enum TypeRef {
     Named(Ident),
-    /// `STRING` or `STRING[n]` / `STRING(n)`.
-    String(Option<Box<Expr>>, Span),
+    /// `STRING` or `STRING[n]` / `STRING(n)`; WSTRING when the flag is set.
+    String(Option<Box<Expr>>, Span, bool),
     Array {
         dims: Vec<(Expr, Expr)>,
         elem: Box<TypeRef>,
@@ -110,17 +204,36 @@ pub enum TypeRef {
         members: Vec<VarDecl>,
         span: Span,
     },
+    /// `REF_TO T`, `POINTER TO T` (CODESYS) or `REFERENCE TO T` (CODESYS, dereferenced
+    /// implicitly).
+    Ref {
+        kind: RefKind,
+        target: Box<TypeRef>,
+        span: Span,
+    },
+}
+
+/// How a reference type was written.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum RefKind {
+    /// IEC `REF_TO T`.
+    RefTo,
+    /// CODESYS `POINTER TO T` (the same checked reference as `REF_TO`).
+    Pointer,
+    /// CODESYS `REFERENCE TO T`: an alias, dereferenced wherever it is used, bound with `REF=`.
+    Reference,
 }
 
 impl TypeRef {
     pub fn span(&self) -> Span {
         match self {
             TypeRef::Named(i) => i.span,
-            TypeRef::String(_, s)
+            TypeRef::String(_, s, _)
             | TypeRef::Array { span: s, .. }
             | TypeRef::Subrange { span: s, .. }
             | TypeRef::Enum { span: s, .. }
-            | TypeRef::Struct { span: s, .. } => *s,
+            | TypeRef::Struct { span: s, .. }
+            | TypeRef::Ref { span: s, .. } => *s,
         }
     }
 }
@@ -190,6 +303,11 @@ pub enum StmtKind {
         target: Expr,
         value: Expr,
     },
+    /// `r REF= x`: binds a `REFERENCE TO` variable.
+    RefAssign {
+        target: Expr,
+        value: Expr,
+    },
     /// A call used as a statement: FB instance call or function call.
     Call(Expr),
     If {
@@ -251,18 +369,39 @@ pub enum ExprKind {
     Real(f64),
     Bool(bool),
     Str(String),
+    /// `"..."`: a WSTRING literal.
+    WStr(String),
     Time(i128),
+    /// A date/time literal other than TIME (`LT#`, `D#`, `TOD#`, `DT#`, ...): its type and
+    /// nanoseconds.
+    Temporal(crate::types::Elem, i128),
     /// `TYPE#literal`, e.g. `INT#5`, `REAL#1`, `Color#Red`.
     Typed(Ident, Box<Expr>),
     Name(Ident),
     Member(Box<Expr>, Ident),
     Index(Box<Expr>, Vec<Expr>),
+    /// Partial access of a bit string or integer: `x.3` and `x.%X3` (bit 3), `x.%B1`
+    /// (byte 1), `x.%W0`, `x.%D1`, `x.%L0`; `width` in bits, `index` counted in units of it.
+    Bits {
+        base: Box<Expr>,
+        width: u8,
+        index: u32,
+    },
     Call {
         callee: Box<Expr>,
         args: Vec<Arg>,
     },
     Unary(UnOp, Box<Expr>),
     Binary(BinOp, Box<Expr>, Box<Expr>),
+    /// `e^`: the variable a reference refers to.
+    Deref(Box<Expr>),
+    /// `NULL`: the reference to nothing.
+    Null,
+    /// `THIS`: a reference to the function-block instance a body, method or action runs on.
+    This,
+    /// `SUPER`: `THIS` seen as an instance of the base function block (`SUPER^.m()`,
+    /// `SUPER^()`).
+    Super,
     /// Placeholder produced after a syntax error so parsing can continue.
     Error,
 }

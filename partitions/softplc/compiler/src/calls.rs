@@ -4,16 +4,27 @@
 use plc_vm::isa::{Builtin, MemType, Opcode};
 
 use crate::ast::*;
-use crate::codegen::{Gen, Loc, Place, mem_type};
+use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::VarDef;
 use crate::types::*;
 
 /// One argument bound to a parameter.
-struct Bound<'e> {
-    param: VarDef,
-    value: &'e Expr,
-    output: bool,
+pub(crate) struct Bound<'e> {
+    pub param: VarDef,
+    pub value: &'e Expr,
+    pub output: bool,
+}
+
+/// What a called FUNCTION or METHOD runs on (its frame base).
+#[derive(Clone, Copy)]
+pub(crate) enum CallBase {
+    /// A FUNCTION: its own static frame.
+    Frame,
+    /// A METHOD or action on an instance at a static place.
+    Instance(Loc),
+    /// A METHOD or action on an instance whose address is in a static temporary.
+    Parked(u32),
 }
 
 impl Gen<'_> {
@@ -24,12 +35,50 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
+        if let ExprKind::Name(n) = &callee.kind
+            && Self::is_ref_function(&n.name)
+            && !self.prog.pou_by_name.contains_key(&n.name)
+        {
+            return self.ref_function(n, args, expected, span);
+        }
+        if let Some(t) = self.member_call(callee, args, span) {
+            return t;
+        }
+        // `Lib.F(...)`: a function qualified by a namespace (ours or a library's).
+        if let ExprKind::Member(base, f) = &callee.kind
+            && let ExprKind::Name(ns) = &base.kind
+            && !self.is_visible_var(&ns.name)
+        {
+            let q = Ident {
+                name: format!("{}.{}", ns.name, f.name),
+                text: format!("{}.{}", ns.text, f.text),
+                span: callee.span,
+            };
+            let e = Expr {
+                kind: ExprKind::Name(q),
+                span: callee.span,
+            };
+            return self.call(&e, args, expected, span);
+        }
+        let resolved;
+        let callee = match &callee.kind {
+            ExprKind::Name(n) if !self.is_visible_var(&n.name) => {
+                resolved = Expr {
+                    kind: ExprKind::Name(self.function_name(n)),
+                    span: callee.span,
+                };
+                &resolved
+            }
+            _ => callee,
+        };
         if let ExprKind::Name(n) = &callee.kind {
             // A variable is only callable when it is an FB instance; otherwise the name refers
             // to a function even if a variable happens to have the same name.
             let var_ty = match self.prog.pous[self.cur].var(&n.name) {
                 Some(v) => Some(v.ty.clone()),
-                None => self.prog.global(&n.name).map(|g| g.ty.clone()),
+                None => self
+                    .owner_var_type(&n.name)
+                    .or_else(|| self.prog.global(&n.name).map(|g| g.ty.clone())),
             };
             let is_fb_var = matches!(var_ty, Some(Type::Fb(_)));
             let is_function =
@@ -61,6 +110,13 @@ impl Gen<'_> {
         };
         match p.ty.clone() {
             Type::Fb(pi) => {
+                if self.unit.pous[self.prog.pous[pi].ast].is_class {
+                    let msg = format!(
+                        "`{}` is a CLASS: it has no body to call; call its methods",
+                        self.prog.pous[pi].text
+                    );
+                    self.error(callee.span, msg);
+                }
                 self.call_fb(p, pi, args, span);
                 Type::Void
             }
@@ -76,27 +132,84 @@ impl Gen<'_> {
         }
     }
 
+    /// The declared POU (or standard function) a called name refers to, with or without
+    /// its namespace (see [`crate::sema::qualified`]); the name itself when there is none.
+    fn function_name(&mut self, n: &Ident) -> Ident {
+        if self.prog.pou_by_name.contains_key(&n.name) {
+            return n.clone();
+        }
+        match crate::sema::qualified(&n.name, self.prog.pou_by_name.keys()) {
+            Ok(Some(full)) => Ident {
+                name: full,
+                ..n.clone()
+            },
+            Err(candidates) => {
+                let msg = format!(
+                    "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+                    n.text,
+                    candidates.join(", ")
+                );
+                self.error(n.span, msg);
+                n.clone()
+            }
+            Ok(None) => match n.name.rsplit_once('.') {
+                // `Standard.CONCAT`: a standard function under a library's name.
+                Some((_, last)) if Self::is_std_function(last) || Self::is_ref_function(last) => {
+                    Ident {
+                        name: last.to_string(),
+                        text: n
+                            .text
+                            .rsplit_once('.')
+                            .map_or(n.text.clone(), |t| t.1.to_string()),
+                        span: n.span,
+                    }
+                }
+                _ => n.clone(),
+            },
+        }
+    }
+
     /// Binds call arguments to parameters: positional ones in declaration order of the
     /// inputs and in-outs, named ones by name.
     fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg]) -> Vec<Bound<'e>> {
-        let pou_name = self.prog.pous[pi].text.clone();
-        let params: Vec<VarDef> = self.prog.pous[pi].params().cloned().collect();
+        let pou = &self.prog.pous[pi];
+        let pou_name = pou.text.clone();
+        let vars = pou.vars.clone();
+        // The result variable (a function's, method's or getter's) is no output.
+        let result = pou.return_type.as_ref().map(|_| pou.vars[0].name.clone());
+        self.bind_to(Some(pi), &pou_name, &vars, result.as_deref(), args)
+    }
+
+    /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order).
+    pub(crate) fn bind_to<'e>(
+        &mut self,
+        pou: Option<usize>,
+        pou_name: &str,
+        vars: &[VarDef],
+        result: Option<&str>,
+        args: &'e [Arg],
+    ) -> Vec<Bound<'e>> {
+        let params: Vec<VarDef> = vars
+            .iter()
+            .filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
+            .cloned()
+            .collect();
         let mut out: Vec<Bound<'e>> = Vec::new();
         let mut named_seen = false;
         for (i, a) in args.iter().enumerate() {
             let param = match &a.name {
                 Some(n) => {
                     named_seen = true;
-                    let v = self.prog.pous[pi]
-                        .vars
-                        .iter()
-                        .find(|v| v.name == n.name)
-                        .cloned();
+                    let v = match pou {
+                        // The POU's own lookup knows the CODESYS aliases of some parameters.
+                        Some(pi) => self.prog.pous[pi].param(&n.name).cloned(),
+                        None => vars.iter().find(|v| v.name == n.name).cloned(),
+                    };
                     match v {
                         Some(v)
                             if a.output
                                 && v.kind == VarKind::Output
-                                && v.name != self.prog.pous[pi].name =>
+                                && Some(v.name.as_str()) != result =>
                         {
                             v
                         }
@@ -157,7 +270,7 @@ impl Gen<'_> {
         out
     }
 
-    fn call_fb(&mut self, inst: Place, pi: usize, args: &[Arg], span: Span) {
+    pub(crate) fn call_fb(&mut self, inst: Place, pi: usize, args: &[Arg], span: Span) {
         self.calls.push((self.cur, pi, span));
         // A dynamic instance address is parked in a static temporary while arguments are stored.
         let base = match inst.loc {
@@ -178,7 +291,7 @@ impl Gen<'_> {
             match base {
                 Ok(Loc::Abs(a)) => Loc::Abs(a + off),
                 Ok(Loc::Rel(o)) => Loc::Rel(o + off),
-                Ok(Loc::Ind(_)) => unreachable!("dynamic bases are parked"),
+                Ok(Loc::Ind(_) | Loc::Ref(_)) => unreachable!("dynamic bases are parked"),
                 Err(t) => {
                     g.emit(|b| b.ld_abs(MemType::U32, t));
                     Loc::Ind(off)
@@ -189,11 +302,13 @@ impl Gen<'_> {
         for a in bound.iter().filter(|a| !a.output) {
             if a.param.kind == VarKind::InOut {
                 let loc = member(self, a.param.offset);
+                self.record_inout(pi, &a.param.name, a.value);
                 self.inout_address(a.value, &a.param.ty);
                 let p = Place {
                     loc,
                     ty: Type::Elem(Elem::UDInt),
                     writable: true,
+                    window: None,
                 };
                 self.store_checked(&p);
             } else {
@@ -202,7 +317,11 @@ impl Gen<'_> {
                     loc,
                     ty: a.param.ty.clone(),
                     writable: true,
+                    window: None,
                 };
+                if p.ty.is_pointer_like() {
+                    self.check_escape(None, a.value, "an input of a function block instance");
+                }
                 self.store_expr(&p, a.value, a.value.span);
             }
         }
@@ -218,7 +337,7 @@ impl Gen<'_> {
         match base {
             Ok(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
             Ok(Loc::Rel(o)) => self.emit(|b| b.lea_rel(o)),
-            Ok(Loc::Ind(_)) => {}
+            Ok(Loc::Ind(_) | Loc::Ref(_)) => {}
             Err(t) => self.emit(|b| b.ld_abs(MemType::U32, t)),
         }
         let id = self.pou_ids[pi];
@@ -229,14 +348,24 @@ impl Gen<'_> {
                 loc: src,
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }
     }
 
     /// Pushes the address of an in-out argument (which must be a variable of the same type).
-    fn inout_address(&mut self, e: &Expr, ty: &Type) {
+    pub(crate) fn inout_address(&mut self, e: &Expr, ty: &Type) {
+        self.sync_if_byte_viewed(e);
         match self.place(e) {
+            Some(p) if p.window.is_some() => {
+                self.error(
+                    e.span,
+                    "a partial access (`x.3`, `x.%B1`) cannot be passed to a VAR_IN_OUT",
+                );
+                self.drop_place(&p);
+                self.emit(|b| b.push_i32(0));
+            }
             Some(p) => {
                 if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
                     let msg = format!(
@@ -253,7 +382,7 @@ impl Gen<'_> {
     }
 
     /// `param => target` after a call: copies the output `src` into the target variable.
-    fn copy_out(&mut self, src: Place, target: &Expr) {
+    pub(crate) fn copy_out(&mut self, src: Place, target: &Expr) {
         let Some(dst) = self.place(target) else {
             if matches!(src.loc, Loc::Ind(_)) {
                 self.op(Opcode::Drop);
@@ -272,11 +401,24 @@ impl Gen<'_> {
             self.error(target.span, "output target is not writable");
         }
         match &dst.ty {
-            Type::String(_) => {
+            Type::String(_) | Type::WString(_) => {
+                if src.ty.is_wstring() != dst.ty.is_wstring() && !src.ty.is_error() {
+                    let msg = format!(
+                        "type mismatch: the output is {}, its target {}",
+                        self.tname(&src.ty),
+                        self.tname(&dst.ty)
+                    );
+                    self.error(target.span, msg);
+                }
                 self.aggregate_operands(&src, &dst);
-                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+                let assign = if dst.ty.is_wstring() {
+                    Builtin::WStrAssign
+                } else {
+                    Builtin::StrAssign
+                };
+                self.emit(|b| b.call_builtin(assign));
             }
-            t if t.elem().is_some() => {
+            t if scalar_mem(t).is_some() => {
                 let st = src.ty.clone();
                 self.load(&src);
                 self.coerce(&st, &dst.ty.clone(), target.span);
@@ -307,6 +449,18 @@ impl Gen<'_> {
     }
 
     fn call_function(&mut self, pi: usize, args: &[Arg], span: Span) -> Type {
+        self.call_static(pi, args, span, CallBase::Frame)
+    }
+
+    /// Calls FUNCTION, METHOD or property accessor `pi` (parameters through its static
+    /// frame) on `base`.
+    pub(crate) fn call_static(
+        &mut self,
+        pi: usize,
+        args: &[Arg],
+        span: Span,
+        base: CallBase,
+    ) -> Type {
         self.calls.push((self.cur, pi, span));
         let (frame, pristine) = self.frames.get(pi).copied().unwrap_or((Some(0), Some(0)));
         let (frame, pristine) = (frame.unwrap_or(0), pristine.unwrap_or(0));
@@ -316,13 +470,28 @@ impl Gen<'_> {
         // parameters already stored in the shared static frame.
         for a in &inputs {
             match a.param.kind {
-                VarKind::InOut => self.inout_address(a.value, &a.param.ty),
+                VarKind::InOut => {
+                    self.record_inout(pi, &a.param.name, a.value);
+                    self.inout_address(a.value, &a.param.ty)
+                }
                 _ => match &a.param.ty {
-                    Type::String(_) => {
+                    Type::String(_) | Type::WString(_) => {
                         let t = self.expr(a.value, Some(&a.param.ty));
-                        if !t.is_string() && !t.is_error() {
-                            let msg =
-                                format!("type mismatch: expected STRING, found {}", self.tname(&t));
+                        let fits = if a.param.ty.is_wstring() {
+                            t.is_wstring()
+                        } else {
+                            t.is_string()
+                        };
+                        if !fits && !t.is_error() {
+                            let msg = format!(
+                                "type mismatch: expected {}, found {}",
+                                if a.param.ty.is_wstring() {
+                                    "WSTRING"
+                                } else {
+                                    "STRING"
+                                },
+                                self.tname(&t)
+                            );
                             self.error(a.value.span, msg);
                         }
                     }
@@ -356,6 +525,11 @@ impl Gen<'_> {
                     b.swap();
                     b.call_builtin(Builtin::StrAssign);
                 }),
+                (_, Type::WString(_)) => self.emit(|b| {
+                    b.push_u32(addr);
+                    b.swap();
+                    b.call_builtin(Builtin::WStrAssign);
+                }),
                 (_, Type::Array(_) | Type::Struct(_)) => {
                     let (size, _) = self.prog.size_align(&a.param.ty);
                     self.emit(|b| {
@@ -365,8 +539,8 @@ impl Gen<'_> {
                     });
                 }
                 (_, ty) => {
-                    if let Some(e) = ty.elem() {
-                        self.emit(|b| b.st_abs(mem_type(e), addr));
+                    if let Some(mt) = scalar_mem(ty) {
+                        self.emit(|b| b.st_abs(mt, addr));
                     } else {
                         self.op(Opcode::Drop);
                     }
@@ -396,34 +570,52 @@ impl Gen<'_> {
             }
         }
         let id = self.pou_ids[pi];
-        self.emit(|b| {
-            b.push_u32(frame);
-            b.call(id);
-        });
+        match base {
+            CallBase::Frame => self.emit(|b| b.push_u32(frame)),
+            CallBase::Instance(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
+            CallBase::Instance(Loc::Rel(o)) => self.emit(|b| b.lea_rel(o)),
+            CallBase::Instance(_) => unreachable!("dynamic instances are parked"),
+            CallBase::Parked(t) => self.emit(|b| b.ld_abs(MemType::U32, t)),
+        }
+        self.emit(|b| b.call(id));
         for a in bound.iter().filter(|a| a.output) {
             let src = Place {
                 loc: Loc::Abs(frame + a.param.offset),
                 ty: a.param.ty.clone(),
                 writable: false,
+                window: None,
             };
             self.copy_out(src, a.value);
         }
         let rt = self.prog.pous[pi].return_type.clone().unwrap_or(Type::Void);
         let ret_off = self.prog.pous[pi].vars.first().map_or(0, |v| v.offset);
         let addr = frame + ret_off;
-        match &rt {
-            Type::String(n) => {
+        self.push_result_copy(&rt, addr);
+        rt
+    }
+
+    /// Pushes a function's (method's) result from its static frame at `addr`: aggregates
+    /// are copied to a temporary first, so that a second call in the same expression cannot
+    /// overwrite them.
+    pub(crate) fn push_result_copy(&mut self, rt: &Type, addr: u32) {
+        match rt {
+            Type::String(_) | Type::WString(_) => {
                 // Copy so that a second call in the same expression cannot overwrite it.
-                let t = self.temp_string(*n);
+                let t = self.temp_string_like(rt);
+                let assign = if rt.is_wstring() {
+                    Builtin::WStrAssign
+                } else {
+                    Builtin::StrAssign
+                };
                 self.emit(|b| {
                     b.push_u32(t);
                     b.push_u32(addr);
-                    b.call_builtin(Builtin::StrAssign);
+                    b.call_builtin(assign);
                     b.push_u32(t);
                 });
             }
             Type::Array(_) | Type::Struct(_) => {
-                let (size, al) = self.prog.size_align(&rt);
+                let (size, al) = self.prog.size_align(rt);
                 let t = self.alloc_static(size, al);
                 self.emit(|b| {
                     b.push_u32(t);
@@ -434,11 +626,10 @@ impl Gen<'_> {
             }
             Type::Void | Type::Error => {}
             t => {
-                if let Some(e) = t.elem() {
-                    self.emit(|b| b.ld_abs(mem_type(e), addr));
+                if let Some(mt) = scalar_mem(t) {
+                    self.emit(|b| b.ld_abs(mt, addr));
                 }
             }
         }
-        rt
     }
 }

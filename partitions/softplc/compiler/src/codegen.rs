@@ -27,6 +27,10 @@ pub(crate) enum Loc {
     Rel(u32),
     /// Address on the operand stack plus an offset.
     Ind(u32),
+    /// A reference cell on the operand stack; the place is at its address plus an offset and
+    /// is checked against the reference's object (`REF_CHECK`) when the access is known
+    /// ([`Gen::place`] turns it into `Ind(0)`).
+    Ref(u32),
 }
 
 #[derive(Debug, Clone)]
@@ -34,16 +38,49 @@ pub(crate) struct Place {
     pub loc: Loc,
     pub ty: Type,
     pub writable: bool,
+    /// A partial access (`x.3`, `x.%B1`): the bits of the variable at `loc` this place is.
+    pub window: Option<Window>,
+}
+
+/// `width` bits starting at bit `shift` of an integer or bit-string variable of type
+/// `container`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub(crate) struct Window {
+    pub shift: u32,
+    pub width: u32,
+    pub container: Elem,
+}
+
+impl Window {
+    fn mask(self) -> u64 {
+        if self.width >= 64 {
+            u64::MAX
+        } else {
+            (1u64 << self.width) - 1
+        }
+    }
+}
+
+/// The memory type a value of `ty` is loaded and stored with: elementary types by their
+/// width, references and interface values as 64-bit cells; `None` for aggregates.
+pub(crate) fn scalar_mem(ty: &Type) -> Option<MemType> {
+    match ty {
+        Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Null => Some(MemType::U64),
+        t => t.elem().map(mem_type),
+    }
 }
 
 pub(crate) fn mem_type(e: Elem) -> MemType {
     match e {
-        Elem::Bool | Elem::USInt | Elem::Byte => MemType::U8,
+        Elem::Bool | Elem::USInt | Elem::Byte | Elem::Char => MemType::U8,
         Elem::SInt => MemType::I8,
         Elem::Int => MemType::I16,
         Elem::DInt => MemType::I32,
-        Elem::LInt | Elem::Time => MemType::I64,
-        Elem::UInt | Elem::Word => MemType::U16,
+        Elem::LInt | Elem::Time | Elem::LTime | Elem::Date | Elem::LDate | Elem::Tod => {
+            MemType::I64
+        }
+        Elem::LTod | Elem::Dt | Elem::LDt => MemType::I64,
+        Elem::UInt | Elem::Word | Elem::WChar => MemType::U16,
         Elem::UDInt | Elem::DWord => MemType::U32,
         Elem::ULInt | Elem::LWord => MemType::U64,
         Elem::Real => MemType::F32,
@@ -80,6 +117,8 @@ pub(crate) struct Gen<'a> {
     pub calls: Vec<(usize, usize, Span)>,
     /// Static frame address of each FUNCTION and the pristine copy of each POU frame.
     pub frames: Vec<(Option<u32>, Option<u32>)>,
+    /// What code generation learns about references (for the object table).
+    pub(crate) refs: crate::refs::RefState,
 }
 
 /// Constants visible in the POU being compiled.
@@ -125,6 +164,7 @@ impl<'a> Gen<'a> {
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
+            refs: Default::default(),
         }
     }
 
@@ -186,6 +226,51 @@ impl<'a> Gen<'a> {
         let a = self.alloc_static(4 + len, 2);
         self.write_bytes(a, &(len as u16).to_le_bytes());
         a
+    }
+
+    /// A static WSTRING[len] temporary with its header initialised.
+    pub fn temp_wstring(&mut self, len: u32) -> u32 {
+        if self.dry {
+            return 0;
+        }
+        let a = self.alloc_static(4 + 2 * len, 2);
+        self.write_bytes(a, &(len as u16).to_le_bytes());
+        a
+    }
+
+    /// A temporary of a string type's kind (STRING or WSTRING) and length.
+    pub fn temp_string_like(&mut self, ty: &Type) -> u32 {
+        match ty {
+            Type::WString(n) => self.temp_wstring(*n),
+            Type::String(n) => self.temp_string(*n),
+            _ => self.temp_string(DEFAULT_STRING_LEN),
+        }
+    }
+
+    /// A WSTRING constant in static data (shared by equal literals).
+    fn wstring_literal(&mut self, s: &str) -> u32 {
+        if self.dry {
+            return 0;
+        }
+        let key = format!("\u{0}W{s}");
+        if let Some(&a) = self.str_lits.get(&key) {
+            return a;
+        }
+        let units: Vec<u16> = s.encode_utf16().take(32000).collect();
+        let len = units.len() as u32;
+        let a = self.alloc_static(4 + 2 * len.max(1), 2);
+        self.write_wide(a, len, &units);
+        self.str_lits.insert(key, a);
+        a
+    }
+
+    /// Writes a WSTRING of capacity `max` holding `units` into the INIT image.
+    fn write_wide(&mut self, addr: u32, max: u32, units: &[u16]) {
+        let len = units.len().min(max as usize);
+        self.write_bytes(addr, &(max as u16).to_le_bytes());
+        self.write_bytes(addr + 2, &(len as u16).to_le_bytes());
+        let bytes: Vec<u8> = units[..len].iter().flat_map(|u| u.to_le_bytes()).collect();
+        self.write_bytes(addr + 4, &bytes);
     }
 
     pub fn write_bytes(&mut self, addr: u32, bytes: &[u8]) {
@@ -301,6 +386,28 @@ impl<'a> Gen<'a> {
                 let bytes = cell.to_le_bytes();
                 self.write_bytes(addr, &bytes[..w]);
             }
+            Type::WString(n) => {
+                let text = match init {
+                    Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
+                        Some(ConstVal::Str(s)) => s,
+                        _ => {
+                            self.diags
+                                .error(e.span, "WSTRING initial value must be a string literal");
+                            String::new()
+                        }
+                    },
+                    Some(other) => {
+                        self.diags.error(
+                            other.span(),
+                            "WSTRING initial value must be a string literal",
+                        );
+                        String::new()
+                    }
+                    None => String::new(),
+                };
+                let units: Vec<u16> = text.encode_utf16().collect();
+                self.write_wide(addr, *n, &units);
+            }
             Type::String(n) => {
                 let text = match init {
                     Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
@@ -405,6 +512,10 @@ impl<'a> Gen<'a> {
                     }
                     None => Vec::new(),
                 };
+                if let Some(class) = self.prog.pous[*pi].class {
+                    // The class id dynamic dispatch reads (see `classes`).
+                    self.write_bytes(addr, &(class as u32).to_le_bytes());
+                }
                 let vars = self.prog.pous[*pi].vars.clone();
                 for (n, _) in &fields {
                     if !vars.iter().any(|m| {
@@ -427,6 +538,22 @@ impl<'a> Gen<'a> {
                         .map(|(_, i)| i.clone());
                     let iv = given.or_else(|| v.init.clone());
                     self.write_init(addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
+                }
+            }
+            Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Null => {
+                // A reference starts as NULL (the zeroed cell); nothing else is a constant.
+                match init {
+                    None
+                    | Some(Init::Expr(Expr {
+                        kind: ExprKind::Null | ExprKind::Int(0),
+                        ..
+                    })) => {}
+                    Some(other) => {
+                        self.diags.error(
+                            other.span(),
+                            "the initial value of a reference or interface variable must be NULL (assign REF()/ADR() in the program)",
+                        );
+                    }
                 }
             }
             Type::Void | Type::Error => {}
@@ -458,7 +585,19 @@ impl<'a> Gen<'a> {
             (ConstVal::Int(i), Elem::LReal) => Some((*i as f64).to_bits()),
             (ConstVal::Real(r), Elem::Real) => Some((*r as f32).to_bits() as u64),
             (ConstVal::Real(r), Elem::LReal) => Some(r.to_bits()),
-            (ConstVal::Time(t), Elem::Time) => Some(*t as i64 as u64),
+            (ConstVal::Time(t), e) if e.is_duration() => Some(*t as i64 as u64),
+            (ConstVal::Temporal(k, t), e) if implicit_ok(*k, e) => Some(*t as i64 as u64),
+            (ConstVal::Int(i), e) if e.is_char() => {
+                let (lo, hi) = e.int_range();
+                if *i < lo || *i > hi {
+                    return bad(self);
+                }
+                Some(*i as u64)
+            }
+            (ConstVal::Str(text), e) if e.is_char() => match crate::sema::single_char(text) {
+                Some(c) if c <= e.int_range().1 => Some(c as u64),
+                _ => bad(self),
+            },
             _ => {
                 let msg = format!("initial value has the wrong type for {}", self.tname(ty));
                 self.diags.error(span, msg);
@@ -473,7 +612,12 @@ impl<'a> Gen<'a> {
     pub fn generate(&mut self) {
         for i in 0..self.prog.pous.len() {
             let p = &self.prog.pous[i];
-            let id = self.b.declare_pou(&p.text, 0, 0, p.frame_size);
+            // Methods and actions run on their owner's instance.
+            let vm_frame = match &p.member {
+                Some(m) => self.prog.pous[m.owner].frame_size,
+                None => p.frame_size,
+            };
+            let id = self.b.declare_pou(&p.text, 0, 0, vm_frame);
             self.pou_ids.push(id);
         }
         // Static storage: globals and program instances are already allocated by sema.
@@ -514,6 +658,17 @@ impl<'a> Gen<'a> {
             self.gen_pou(i, pristine);
         }
         self.check_recursion();
+        self.build_objects();
+        self.build_classes();
+    }
+
+    /// The static frames (of FUNCTIONs) with their POUs: `(POU, frame address)`.
+    pub(crate) fn static_frames(&self) -> Vec<(usize, u32)> {
+        self.frames
+            .iter()
+            .enumerate()
+            .filter_map(|(i, f)| f.0.map(|a| (i, a)))
+            .collect()
     }
 
     fn gen_pou(&mut self, i: usize, pristine: Option<u32>) {
@@ -522,22 +677,33 @@ impl<'a> Gen<'a> {
         self.try_depth = 0;
         let id = self.pou_ids[i];
         self.b.begin_pou(id);
-        let ast = &self.unit.pous[self.prog.pous[i].ast];
-        self.set_location(ast.name.span);
+        let source = crate::classes::pou_source(self.unit, &self.prog.pous[i]);
+        self.set_location(source.name.span);
         if let Some(pr) = pristine {
             let start = self.prog.pous[i].reinit_start;
             let len = self.prog.pous[i].frame_size - start;
-            self.emit(|b| {
-                b.lea_rel(start);
-                b.push_u32(pr + start);
-                b.copy(len);
-            });
+            match self.method_frame() {
+                // A method's variables are in its static frame, not in the instance.
+                Some(frame) => self.emit(|b| {
+                    b.push_u32(frame + start);
+                    b.push_u32(pr + start);
+                    b.copy(len);
+                }),
+                None => self.emit(|b| {
+                    b.lea_rel(start);
+                    b.push_u32(pr + start);
+                    b.copy(len);
+                }),
+            }
         }
         let ret = self.label();
         self.return_label = Some(ret);
-        let body = &ast.body;
+        let body = source.body;
+        self.scan_byte_views(body);
+        self.scan_temporary_references(body);
         self.stmts(body);
         self.bind(ret);
+        self.sync_byte_views_on_return();
         self.emit(|b| b.ret());
         self.b.end_pou(id);
     }
@@ -600,6 +766,7 @@ impl<'a> Gen<'a> {
         match &s.kind {
             StmtKind::Empty => {}
             StmtKind::Assign { target, value } => self.assign(target, value),
+            StmtKind::RefAssign { target, value } => self.ref_assign(target, value),
             StmtKind::Call(e) => {
                 let t = self.expr(e, None);
                 if !matches!(t, Type::Void | Type::Error) {
@@ -764,12 +931,15 @@ impl<'a> Gen<'a> {
     /// Stores the top of stack into a place whose address part (if any) is below it...
     /// only valid for static places (`Abs`/`Rel`).
     fn store_top(&mut self, p: &Place) {
-        let Some(e) = p.ty.elem() else { return };
-        let mt = mem_type(e);
+        if p.window.is_some() {
+            self.store_checked(p);
+            return;
+        }
+        let Some(mt) = scalar_mem(&p.ty) else { return };
         match p.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
-            Loc::Ind(_) => {
+            Loc::Ind(_) | Loc::Ref(_) => {
                 // The address was pushed before the value; not used for catch variables.
                 self.op(Opcode::Drop);
                 self.op(Opcode::Drop);
@@ -911,7 +1081,7 @@ impl<'a> Gen<'a> {
             self.error(var.span, msg);
             return;
         };
-        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) {
+        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) || vp.window.is_some() {
             self.error(var.span, "FOR control variable must be a plain variable");
             return;
         }
@@ -959,7 +1129,7 @@ impl<'a> Gen<'a> {
         let load_var = |g: &mut Self| match vp.loc {
             Loc::Abs(a) => g.emit(|b| b.ld_abs(mt, a)),
             Loc::Rel(o) => g.emit(|b| b.ld_rel(mt, o)),
-            Loc::Ind(_) => {}
+            Loc::Ind(_) | Loc::Ref(_) => {}
         };
         let load_end = |g: &mut Self| match end_const {
             Some(v) => g.push_int(v),
@@ -1028,13 +1198,16 @@ impl<'a> Gen<'a> {
         match vp.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
-            Loc::Ind(_) => {}
+            Loc::Ind(_) | Loc::Ref(_) => {}
         }
         test(self, true, top);
         self.bind(exit);
     }
 
     fn assign(&mut self, target: &Expr, value: &Expr) {
+        if self.property_write(target, value) {
+            return;
+        }
         let Some(p) = self.place(target) else {
             // Still check the value for errors.
             self.infer(value);
@@ -1046,20 +1219,103 @@ impl<'a> Gen<'a> {
                 "cannot assign to a constant or an input of another POU",
             );
         }
+        if p.ty.is_pointer_like() {
+            self.check_escape(Some(target), value, "this variable");
+        }
         self.store_expr(&p, value, target.span);
+    }
+
+    /// `r REF= x`: binds the `REFERENCE TO` variable `r` to `x` (or to NULL).
+    fn ref_assign(&mut self, target: &Expr, value: &Expr) {
+        let saved = std::mem::replace(&mut self.refs.keep_reference, true);
+        let p = self.place(target);
+        self.refs.keep_reference = saved;
+        let Some(p) = p else {
+            self.infer(value);
+            return;
+        };
+        let Type::Reference(t) = p.ty.clone() else {
+            if !p.ty.is_error() {
+                let msg = format!(
+                    "`REF=` binds a REFERENCE TO variable, not {}",
+                    self.tname(&p.ty)
+                );
+                self.error(target.span, msg);
+            }
+            self.drop_place_value(&p);
+            self.infer(value);
+            return;
+        };
+        let cell = Place {
+            ty: Type::Ref(t.clone()),
+            ..p
+        };
+        match &value.kind {
+            ExprKind::Null | ExprKind::Int(0) => self.push_int(0),
+            _ => {
+                let args = [Arg {
+                    name: None,
+                    output: false,
+                    value: value.clone(),
+                    span: value.span,
+                }];
+                let id = Ident {
+                    name: "REF".into(),
+                    text: "REF".into(),
+                    span: value.span,
+                };
+                let as_ref = Expr {
+                    kind: ExprKind::Call {
+                        callee: Box::new(Expr {
+                            kind: ExprKind::Name(id.clone()),
+                            span: value.span,
+                        }),
+                        args: args.to_vec(),
+                    },
+                    span: value.span,
+                };
+                self.check_escape(Some(target), &as_ref, "this variable");
+                let rt = self.ref_function(&id, &args, Some(&Type::Ref(t.clone())), value.span);
+                self.coerce(&rt, &Type::Ref(t), value.span);
+            }
+        }
+        self.store_checked(&cell);
+    }
+
+    fn drop_place_value(&mut self, p: &Place) {
+        if matches!(p.loc, Loc::Ind(_) | Loc::Ref(_)) {
+            self.op(Opcode::Drop);
+        }
     }
 
     /// Evaluates `value` and stores it into `p` (whose address, for `Ind`, is already on the stack).
     pub(crate) fn store_expr(&mut self, p: &Place, value: &Expr, span: Span) {
         match &p.ty {
-            Type::String(_) => {
+            Type::String(_) | Type::WString(_) => {
                 self.addr_of(p);
                 let t = self.expr(value, Some(&p.ty));
-                if !t.is_string() && !t.is_error() {
-                    let msg = format!("cannot assign {} to {}", self.tname(&t), self.tname(&p.ty));
+                let wide = p.ty.is_wstring();
+                let text = t.is_string() || t.is_wstring();
+                if (t.is_wstring() != wide || !text) && !t.is_error() {
+                    let hint = match (wide, text) {
+                        (true, true) => " (use STRING_TO_WSTRING)",
+                        (false, true) => " (use WSTRING_TO_STRING)",
+                        _ => "",
+                    };
+                    let msg = format!(
+                        "cannot assign {} to {}{hint}",
+                        self.tname(&t),
+                        self.tname(&p.ty)
+                    );
                     self.error(value.span, msg);
                 }
-                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+                self.emit(|b| {
+                    b.call_builtin(if wide {
+                        Builtin::WStrAssign
+                    } else {
+                        Builtin::StrAssign
+                    })
+                });
             }
             Type::Array(_) | Type::Struct(_) | Type::Fb(_) => {
                 self.addr_of(p);
@@ -1089,6 +1345,47 @@ impl<'a> Gen<'a> {
 
     /// Stores the elementary value on top of the stack into `p`, checking subranges.
     pub(crate) fn store_checked(&mut self, p: &Place) {
+        if let Some(w) = p.window {
+            // Read, modify, write the variable: (old AND NOT m) OR (v << shift).
+            let mt = mem_type(w.container);
+            let keep = !(w.mask() << w.shift) as i64;
+            self.emit(|b| {
+                if w.width < 64 {
+                    b.push_int(w.mask() as i64);
+                    b.op(Opcode::And);
+                }
+                if w.shift != 0 {
+                    b.push_i32(w.shift as i32);
+                    b.op(Opcode::Shl);
+                }
+            });
+            match p.loc {
+                Loc::Abs(a) => self.emit(|b| {
+                    b.ld_abs(mt, a);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_abs(mt, a);
+                }),
+                Loc::Rel(o) => self.emit(|b| {
+                    b.ld_rel(mt, o);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_rel(mt, o);
+                }),
+                Loc::Ind(o) => self.emit(|b| {
+                    b.over();
+                    b.ld_ind(mt, o);
+                    b.push_int(keep);
+                    b.op(Opcode::And);
+                    b.op(Opcode::Or);
+                    b.st_ind(mt, o);
+                }),
+                Loc::Ref(_) => unreachable!("places are finalized"),
+            }
+            return;
+        }
         if let Type::Subrange(e, lo, hi) = p.ty {
             if e.signed_storage() || e.size() < 8 {
                 self.emit(|b| b.chk_range_s(lo, hi));
@@ -1096,23 +1393,41 @@ impl<'a> Gen<'a> {
                 self.emit(|b| b.chk_range_u(lo as u64, hi as u64));
             }
         }
-        let Some(e) = p.ty.elem() else { return };
-        let mt = mem_type(e);
+        let Some(mt) = scalar_mem(&p.ty) else { return };
         match p.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
             Loc::Ind(o) => self.emit(|b| b.st_ind(mt, o)),
+            Loc::Ref(_) => unreachable!("places are finalized"),
         }
     }
 
     // ----- places --------------------------------------------------------------------
 
-    /// Resolves an l-value; for dynamic places the base address is pushed.
+    /// Resolves an l-value; for dynamic places the base address is pushed (a place reached
+    /// through a reference is checked here, for the bytes of its type).
     pub(crate) fn place(&mut self, e: &Expr) -> Option<Place> {
+        let p = self.place_inner(e)?;
+        Some(self.finalize_place(p))
+    }
+
+    /// [`Gen::place`] without the final check: a place reached through a reference stays a
+    /// reference cell plus an offset (`Loc::Ref`) so that members and elements of it are
+    /// checked for their own bytes only.
+    pub(crate) fn place_inner(&mut self, e: &Expr) -> Option<Place> {
+        let p = self.place_unaliased(e)?;
+        Some(self.auto_deref(p))
+    }
+
+    fn place_unaliased(&mut self, e: &Expr) -> Option<Place> {
         match &e.kind {
             ExprKind::Name(n) => self.name_place(n),
+            ExprKind::Deref(inner) if matches!(inner.kind, ExprKind::This | ExprKind::Super) => {
+                self.this_place(matches!(inner.kind, ExprKind::Super), e.span)
+            }
+            ExprKind::Deref(inner) => self.deref_place(inner, e.span),
             ExprKind::Member(base, m) => {
-                let bp = self.place(base)?;
+                let bp = self.place_inner(base)?;
                 match &bp.ty {
                     Type::Struct(si) => {
                         let Some(mem) = self.prog.structs[*si]
@@ -1130,11 +1445,12 @@ impl<'a> Gen<'a> {
                             loc: offset_loc(bp.loc, mem.offset),
                             ty: mem.ty,
                             writable: bp.writable,
+                            window: None,
                         })
                     }
                     Type::Fb(pi) => {
                         let pi = *pi;
-                        let v = self.prog.pous[pi].var(&m.name).cloned();
+                        let v = self.prog.pous[pi].param(&m.name).cloned();
                         match v {
                             Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
                                 // Outputs are read-only from outside; inputs may be set before a call.
@@ -1143,6 +1459,7 @@ impl<'a> Gen<'a> {
                                     loc: offset_loc(bp.loc, v.offset),
                                     ty: v.ty,
                                     writable,
+                                    window: None,
                                 })
                             }
                             Some(_) => {
@@ -1178,7 +1495,7 @@ impl<'a> Gen<'a> {
                 }
             }
             ExprKind::Index(base, idx) => {
-                let bp = self.place(base)?;
+                let bp = self.place_inner(base)?;
                 let Type::Array(arr) = bp.ty.clone() else {
                     if !bp.ty.is_error() {
                         let msg = format!("{} is not an array", self.tname(&bp.ty));
@@ -1237,7 +1554,12 @@ impl<'a> Gen<'a> {
                         loc: offset_loc(bp.loc, static_off as u32),
                         ty: arr.elem.clone(),
                         writable: bp.writable,
+                        window: None,
                     });
+                }
+                if let Loc::Ref(o) = bp.loc {
+                    return self
+                        .index_through_reference(o, &arr, idx, &consts, &strides, static_off);
                 }
                 // A static array (absolute or frame-relative): the first computed index goes
                 // through ELEM_ABS/ELEM_REL, which gives the element's address (the constant
@@ -1247,10 +1569,10 @@ impl<'a> Gen<'a> {
                 let mut static_base = match bp.loc {
                     Loc::Abs(a) => Some(Loc::Abs(a.wrapping_add(static_off as u32))),
                     Loc::Rel(o) => Some(Loc::Rel(o.wrapping_add(static_off as u32))),
-                    Loc::Ind(_) => None,
+                    Loc::Ind(_) | Loc::Ref(_) => None,
                 };
                 let offset = match bp.loc {
-                    Loc::Ind(o) => o.wrapping_add(static_off as u32),
+                    Loc::Ind(o) | Loc::Ref(o) => o.wrapping_add(static_off as u32),
                     Loc::Abs(_) | Loc::Rel(_) => 0,
                 };
                 for (d, c) in consts.iter().enumerate() {
@@ -1277,8 +1599,10 @@ impl<'a> Gen<'a> {
                     loc: Loc::Ind(offset),
                     ty: arr.elem.clone(),
                     writable: bp.writable,
+                    window: None,
                 })
             }
+            ExprKind::Bits { base, width, index } => self.partial_place(e, base, *width, *index),
             _ => {
                 self.error(e.span, "expected a variable");
                 None
@@ -1286,15 +1610,81 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn drop_place(&mut self, p: &Place) {
-        if matches!(p.loc, Loc::Ind(_)) {
+    /// `base.N`, `base.%B1`, ...: the bits of an integer or bit-string variable (or of such
+    /// a partial access).
+    fn partial_place(&mut self, e: &Expr, base: &Expr, width: u8, index: u32) -> Option<Place> {
+        let bp = self.place(base)?;
+        let (container, outer_shift, bits) = match (&bp.ty, bp.window) {
+            (_, Some(w)) => (w.container, w.shift, w.width),
+            (Type::Elem(c), None) if c.is_integral() => (*c, 0, c.size() * 8),
+            (ty, None) => {
+                if !ty.is_error() {
+                    let msg = format!(
+                        "partial access `.{}` needs a bit string or integer variable, found {}",
+                        index,
+                        self.tname(ty)
+                    );
+                    self.error(e.span, msg);
+                }
+                self.drop_place(&bp);
+                return None;
+            }
+        };
+        let width = width as u32;
+        if (index as u64 + 1) * width as u64 > bits as u64 {
+            let unit = match width {
+                1 => "bit",
+                8 => "byte",
+                16 => "word",
+                32 => "double word",
+                _ => "long word",
+            };
+            let msg = format!(
+                "{unit} {index} is outside the variable ({} bits: {unit}s 0..{})",
+                bits,
+                (bits / width).saturating_sub(1)
+            );
+            self.error(e.span, msg);
+            self.drop_place(&bp);
+            return None;
+        }
+        let ty = match width {
+            1 => Type::BOOL,
+            8 => Type::Elem(Elem::Byte),
+            16 => Type::Elem(Elem::Word),
+            32 => Type::Elem(Elem::DWord),
+            _ => Type::Elem(Elem::LWord),
+        };
+        Some(Place {
+            loc: bp.loc,
+            ty,
+            writable: bp.writable,
+            window: Some(Window {
+                shift: outer_shift + index * width,
+                width,
+                container,
+            }),
+        })
+    }
+
+    pub(crate) fn drop_place(&mut self, p: &Place) {
+        if matches!(p.loc, Loc::Ind(_) | Loc::Ref(_)) {
             self.op(Opcode::Drop);
         }
     }
 
     fn name_place(&mut self, n: &Ident) -> Option<Place> {
         let pou = &self.prog.pous[self.cur];
-        if let Some(v) = pou.var(&n.name).cloned() {
+        // A method's own variables are in its static frame; the instance's are frame-relative.
+        let (v, frame) = match pou.var(&n.name).cloned() {
+            Some(v) => (Some(v), self.method_frame()),
+            None => (
+                self.var_owner(&n.name)
+                    .and_then(|o| self.prog.pous[o].var(&n.name).cloned()),
+                None,
+            ),
+        };
+        if let Some(v) = v {
             return match v.kind {
                 VarKind::External => match self.prog.global(&n.name).cloned() {
                     Some(g) => {
@@ -1311,6 +1701,7 @@ impl<'a> Gen<'a> {
                             loc: Loc::Abs(g.offset),
                             ty: g.ty.clone(),
                             writable: !g.constant && !v.constant,
+                            window: None,
                         })
                     }
                     None => {
@@ -1320,17 +1711,25 @@ impl<'a> Gen<'a> {
                     }
                 },
                 VarKind::InOut => {
-                    self.emit(|b| b.ld_rel(MemType::U32, v.offset));
+                    match frame {
+                        Some(f) => self.emit(|b| b.ld_abs(MemType::U32, f + v.offset)),
+                        None => self.emit(|b| b.ld_rel(MemType::U32, v.offset)),
+                    }
                     Some(Place {
                         loc: Loc::Ind(0),
                         ty: v.ty,
                         writable: true,
+                        window: None,
                     })
                 }
                 _ => Some(Place {
-                    loc: Loc::Rel(v.offset),
+                    loc: match frame {
+                        Some(f) => Loc::Abs(f + v.offset),
+                        None => Loc::Rel(v.offset),
+                    },
                     ty: v.ty,
                     writable: !v.constant,
+                    window: None,
                 }),
             };
         }
@@ -1339,6 +1738,7 @@ impl<'a> Gen<'a> {
                 loc: Loc::Abs(g.offset),
                 ty: g.ty.clone(),
                 writable: !g.constant,
+                window: None,
             });
         }
         let msg = format!("unknown variable `{}`", n.text);
@@ -1356,20 +1756,39 @@ impl<'a> Gen<'a> {
                 b.push_u32(o);
                 b.op(Opcode::Add);
             }),
+            Loc::Ref(_) => unreachable!("places are finalized"),
         }
     }
 
     /// Pushes the value of a place (elementary) or its address (aggregate).
     pub(crate) fn load(&mut self, p: &Place) {
-        match p.ty.elem() {
-            Some(e) => {
-                let mt = mem_type(e);
-                match p.loc {
-                    Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
-                    Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
-                    Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
-                }
+        if let Some(w) = p.window {
+            let mt = mem_type(w.container);
+            match p.loc {
+                Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
+                Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
+                Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
+                Loc::Ref(_) => unreachable!("places are finalized"),
             }
+            self.emit(|b| {
+                if w.shift != 0 {
+                    b.push_i32(w.shift as i32);
+                    b.op(Opcode::ShrU);
+                }
+                if w.width < 64 {
+                    b.push_int(w.mask() as i64);
+                    b.op(Opcode::And);
+                }
+            });
+            return;
+        }
+        match scalar_mem(&p.ty) {
+            Some(mt) => match p.loc {
+                Loc::Abs(a) => self.emit(|b| b.ld_abs(mt, a)),
+                Loc::Rel(o) => self.emit(|b| b.ld_rel(mt, o)),
+                Loc::Ind(o) => self.emit(|b| b.ld_ind(mt, o)),
+                Loc::Ref(_) => unreachable!("places are finalized"),
+            },
             None => self.addr_of(p),
         }
     }
@@ -1394,6 +1813,10 @@ impl<'a> Gen<'a> {
     pub(crate) fn is_flexible(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Int(_) | ExprKind::Real(_) => true,
+            // TRUNC and SIZEOF give any integer type (IEC: ANY_INT), whatever their argument.
+            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
+                true
+            }
             // Numeric standard functions of literals are as untyped as the literals.
             ExprKind::Call { callee, args } => match &callee.kind {
                 ExprKind::Name(n) => {
@@ -1425,6 +1848,9 @@ impl<'a> Gen<'a> {
     pub(crate) fn has_real_literal(e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Real(_) => true,
+            ExprKind::Call { callee, .. } if matches!(&callee.kind, ExprKind::Name(n) if n.name == "TRUNC" || n.name == "SIZEOF") => {
+                false
+            }
             ExprKind::Call { callee, args } => {
                 matches!(&callee.kind, ExprKind::Name(n) if !["ABS", "MAX", "MIN", "LIMIT"].contains(&n.name.as_str()))
                     || args.iter().any(|a| Self::has_real_literal(&a.value))
@@ -1437,6 +1863,11 @@ impl<'a> Gen<'a> {
 
     /// Compiles `e` and converts the result to `to` (implicit conversions only).
     pub(crate) fn value_to(&mut self, e: &Expr, to: &Type) {
+        if to.is_pointer_like() && matches!(e.kind, ExprKind::Int(0)) {
+            // The literal 0 is NULL.
+            self.push_int(0);
+            return;
+        }
         let t = self.expr(e, Some(to));
         self.coerce(&t, to, e.span);
     }
@@ -1446,8 +1877,11 @@ impl<'a> Gen<'a> {
         if from.is_error() || to.is_error() || from == to {
             return;
         }
+        if self.coerce_pointer(from, to, span) {
+            return;
+        }
         match (from, to) {
-            (Type::String(_), Type::String(_)) => return,
+            (Type::String(_), Type::String(_)) | (Type::WString(_), Type::WString(_)) => return,
             (Type::Subrange(a, ..), _)
                 if to.elem() == Some(*a) && !matches!(to, Type::Enum(_) | Type::Exception) =>
             {
@@ -1498,6 +1932,20 @@ impl<'a> Gen<'a> {
         if f == t {
             return;
         }
+        if f.is_temporal() || t.is_temporal() {
+            self.convert_temporal(f, t);
+            return;
+        }
+        // Characters convert like the unsigned integers of their size.
+        let as_int = |e: Elem| match e {
+            Elem::Char => Elem::USInt,
+            Elem::WChar => Elem::UInt,
+            e => e,
+        };
+        if f.is_char() || t.is_char() {
+            self.convert(as_int(f), as_int(t));
+            return;
+        }
         match (f.is_real(), t.is_real()) {
             (false, false) => {
                 if t == Elem::Bool {
@@ -1505,37 +1953,11 @@ impl<'a> Gen<'a> {
                         b.push_i32(0);
                         b.op(Opcode::Ne);
                     });
-                } else if t == Elem::Time || f == Elem::Time {
-                    // TIME <-> integer: the integer counts milliseconds.
-                    if f == Elem::Time {
-                        self.emit(|b| {
-                            b.push_i32(1_000_000);
-                            b.op(Opcode::DivS);
-                        });
-                        self.wrap(t);
-                    } else {
-                        self.emit(|b| {
-                            b.push_i32(1_000_000);
-                            b.op(Opcode::Mul);
-                        });
-                    }
                 } else if t.size() < f.size() || t.signed_storage() != f.signed_storage() {
                     self.wrap(t);
                 }
             }
             (false, true) => {
-                if f == Elem::Time {
-                    // TIME -> REAL/LREAL gives milliseconds.
-                    self.emit(|b| {
-                        b.op(Opcode::IToF64S);
-                        b.push_f64(1e6);
-                        b.op(Opcode::DivF64);
-                    });
-                    if t == Elem::Real {
-                        self.op(Opcode::F64ToF32);
-                    }
-                    return;
-                }
                 let signed = !(f.is_unsigned_int() || f.is_bits() && f.size() == 8);
                 let op = match (t, signed) {
                     (Elem::Real, true) => Opcode::IToF32S,
@@ -1570,20 +1992,86 @@ impl<'a> Gen<'a> {
                         }
                         b.op(zero_op);
                     });
-                } else if t == Elem::Time {
-                    // REAL milliseconds -> TIME.
-                    if f == Elem::Real {
-                        self.op(Opcode::F32ToF64);
-                    }
-                    self.emit(|b| {
-                        b.push_f64(1e6);
-                        b.op(Opcode::MulF64);
-                        b.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway);
-                    });
                 } else {
                     self.emit(|b| b.float_to_int(op, mem_type(t), RoundMode::NearestTiesAway));
                 }
             }
+        }
+    }
+
+    /// Conversions to, from and between the date/time types. All hold nanoseconds; as
+    /// numbers (CODESYS's conventions) TIME and TOD count milliseconds, DATE and DT seconds,
+    /// the long forms nanoseconds. A DATE result is the midnight of its day, a TOD result
+    /// lies within its day.
+    fn convert_temporal(&mut self, f: Elem, t: Elem) {
+        fn unit(e: Elem) -> i64 {
+            match e {
+                Elem::Time | Elem::Tod => 1_000_000,
+                Elem::Date | Elem::Dt => 1_000_000_000,
+                _ => 1,
+            }
+        }
+        if f.is_temporal() && !t.is_temporal() {
+            let n = unit(f);
+            if t == Elem::Bool {
+                self.emit(|b| {
+                    b.push_i32(0);
+                    b.op(Opcode::Ne);
+                });
+            } else if t.is_real() {
+                self.op(Opcode::IToF64S);
+                if n != 1 {
+                    self.emit(|b| {
+                        b.push_f64(n as f64);
+                        b.op(Opcode::DivF64);
+                    });
+                }
+                if t == Elem::Real {
+                    self.op(Opcode::F64ToF32);
+                }
+            } else {
+                if n != 1 {
+                    self.emit(|b| {
+                        b.push_int(n);
+                        b.op(Opcode::DivS);
+                    });
+                }
+                let as_int = match t {
+                    Elem::Char => Elem::USInt,
+                    Elem::WChar => Elem::UInt,
+                    e => e,
+                };
+                self.wrap(as_int);
+            }
+            return;
+        }
+        if !f.is_temporal() {
+            let n = unit(t);
+            if f.is_real() {
+                if f == Elem::Real {
+                    self.op(Opcode::F32ToF64);
+                }
+                self.emit(|b| {
+                    b.push_f64(n as f64);
+                    b.op(Opcode::MulF64);
+                    b.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway);
+                });
+            } else if n != 1 {
+                self.emit(|b| {
+                    b.push_int(n);
+                    b.op(Opcode::Mul);
+                });
+            }
+        }
+        // Into the day: a DATE is a midnight, a TOD a time within its day.
+        match t.temporal_family() {
+            Some(Elem::Date) if f.temporal_family() != Some(Elem::Date) => {
+                self.emit(|b| b.call_builtin(Builtin::DateOf))
+            }
+            Some(Elem::Tod) if f.temporal_family() != Some(Elem::Tod) => {
+                self.emit(|b| b.call_builtin(Builtin::TodOf))
+            }
+            _ => {}
         }
     }
 
@@ -1629,6 +2117,37 @@ impl<'a> Gen<'a> {
                 self.push_int(*t as i64);
                 Type::TIME
             }
+            ExprKind::Temporal(elem, t) => {
+                self.push_int(*t as i64);
+                Type::Elem(*elem)
+            }
+            // A one-character string literal where a CHAR or WCHAR is expected.
+            ExprKind::Str(s)
+                if expected
+                    .and_then(|t| t.elem())
+                    .is_some_and(|e| e.is_char() && !matches!(expected, Some(Type::Enum(_))))
+                    && crate::sema::single_char(s).is_some() =>
+            {
+                let elem = expected.and_then(|t| t.elem()).unwrap_or(Elem::Char);
+                let code = crate::sema::single_char(s).unwrap_or(0);
+                if code > elem.int_range().1 {
+                    let msg = format!("character '{s}' does not fit type {elem}");
+                    self.error(e.span, msg);
+                }
+                self.push_int(code as i64);
+                Type::Elem(elem)
+            }
+            ExprKind::WStr(s) => {
+                let a = self.wstring_literal(s);
+                self.emit(|b| b.push_u32(a));
+                Type::WString(s.encode_utf16().count().max(1) as u32)
+            }
+            // A STRING literal where a WSTRING is expected is that WSTRING.
+            ExprKind::Str(s) if matches!(expected, Some(Type::WString(_))) => {
+                let a = self.wstring_literal(s);
+                self.emit(|b| b.push_u32(a));
+                Type::WString(s.encode_utf16().count().max(1) as u32)
+            }
             ExprKind::Str(s) => {
                 let a = self.string_literal(s);
                 self.emit(|b| b.push_u32(a));
@@ -1637,8 +2156,10 @@ impl<'a> Gen<'a> {
             ExprKind::Typed(ty, inner) => self.typed_literal(ty, inner, e.span),
             ExprKind::Name(n) => {
                 // Variables shadow enumeration values.
-                let is_var = self.prog.pous[self.cur].var(&n.name).is_some()
-                    || self.prog.global(&n.name).is_some();
+                let is_var = self.is_visible_var(&n.name);
+                if !is_var && let Some(t) = self.property_read(e) {
+                    return t;
+                }
                 if !is_var {
                     if let Some(Type::Enum(ei)) = expected
                         && let Some((_, v)) = self.prog.enums[*ei]
@@ -1659,6 +2180,7 @@ impl<'a> Gen<'a> {
                         return Type::Exception;
                     }
                 }
+                self.sync_if_byte_viewed(e);
                 match self.place(e) {
                     Some(p) => {
                         self.load(&p);
@@ -1667,7 +2189,17 @@ impl<'a> Gen<'a> {
                     None => Type::Error,
                 }
             }
-            ExprKind::Member(..) | ExprKind::Index(..) => match self.place(e) {
+            ExprKind::Null => {
+                self.push_int(0);
+                Type::Null
+            }
+            ExprKind::This => self.this_expr(false, e.span),
+            ExprKind::Super => self.this_expr(true, e.span),
+            ExprKind::Member(..) if let Some(t) = self.property_read(e) => t,
+            ExprKind::Member(..)
+            | ExprKind::Index(..)
+            | ExprKind::Deref(..)
+            | ExprKind::Bits { .. } => match self.place(e) {
                 Some(p) => {
                     self.load(&p);
                     p.ty
@@ -1680,12 +2212,17 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
+    pub(crate) fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
         let exp_elem = expected.and_then(|t| match t {
             Type::Enum(_) | Type::Exception => None,
             t => t.elem(),
         });
         match exp_elem {
+            // IEC boolean literals include 0 and 1.
+            Some(Elem::Bool) if v == 0 || v == 1 => {
+                self.push_int(v as i64);
+                Type::BOOL
+            }
             Some(e) if e.is_real() => {
                 if e == Elem::Real {
                     self.emit(|b| b.push_f32(v as f32));
@@ -1807,9 +2344,16 @@ impl<'a> Gen<'a> {
             UnOp::Neg => match e {
                 Elem::Real => self.op(Opcode::NegF32),
                 Elem::LReal => self.op(Opcode::NegF64),
-                e if e.is_signed_int() || e == Elem::Time => {
+                e if e.is_signed_int() || e.is_duration() => {
                     self.op(Opcode::Neg);
                     self.wrap(e);
+                }
+                // `-step` of a BYTE (CODESYS): the negated value in a signed integer
+                // twice as wide (which holds it).
+                e if (e.is_unsigned_int() || e.is_bits()) && e.size() < 8 => {
+                    let signed = signed_of_size(e.size() * 2);
+                    self.op(Opcode::Neg);
+                    return Type::Elem(signed);
                 }
                 _ => {
                     let msg = format!("operator - cannot be applied to {e}");
@@ -1839,24 +2383,53 @@ impl<'a> Gen<'a> {
         let fb = Self::is_flexible(b);
         let ta = if fa { None } else { Some(self.infer(a)) };
         let tb = if fb { None } else { Some(self.infer(b)) };
-        let flex_type = |other: &Type, e: &Expr| -> Type {
+        // Only a plain literal: arithmetic of literals keeps wrapping in the other operand's
+        // type as it always did.
+        let int_value = |e: &Expr| match &e.kind {
+            ExprKind::Int(v) => Some(*v as i128),
+            ExprKind::Unary(UnOp::Neg, x) => match x.kind {
+                ExprKind::Int(v) => Some(-(v as i128)),
+                _ => None,
+            },
+            _ => None,
+        };
+        let (va, vb) = (int_value(a), int_value(b));
+        // An integer literal takes the other operand's type, or a wider one when it does not
+        // fit it (`int_var * 60000` is a DINT product, as the literal is a DINT).
+        let flex_type = |other: &Type, e: &Expr, value: Option<i128>| -> Type {
             if Self::has_real_literal(e) {
-                match other.elem() {
+                return match other.elem() {
                     Some(x) if x.is_real() => other.clone(),
                     _ => Type::LREAL,
+                };
+            }
+            match (other, value) {
+                (Type::Elem(x), Some(v)) if x.is_integral() => {
+                    let (lo, hi) = x.int_range();
+                    if lo <= v && v <= hi {
+                        return other.clone();
+                    }
+                    let literal = if i32::try_from(v).is_ok() {
+                        Elem::DInt
+                    } else {
+                        Elem::LInt
+                    };
+                    match common_numeric(*x, literal) {
+                        Some(c) if c.int_range().0 <= v && v <= c.int_range().1 => Type::Elem(c),
+                        _ => other.clone(),
+                    }
                 }
-            } else {
-                other.clone()
+                _ => other.clone(),
             }
         };
         match (ta, tb) {
             (Some(x), Some(y)) => (x, y),
             (Some(x), None) => {
-                let y = flex_type(&x, b);
+                let y = flex_type(&x, b, vb);
                 (x, y)
             }
             (None, Some(y)) => {
-                let x = flex_type(&y, a);
+                let x = flex_type(&y, a, va);
                 (x, y)
             }
             (None, None) => {
@@ -1881,7 +2454,7 @@ impl<'a> Gen<'a> {
         }
     }
 
-    fn binary(
+    pub(crate) fn binary(
         &mut self,
         op: BinOp,
         a: &Expr,
@@ -1889,6 +2462,9 @@ impl<'a> Gen<'a> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
+        if self.is_pointer_operation(a, b) {
+            return self.pointer_binary(op, a, b, expected, span);
+        }
         let (ta, tb) = self.operand_type(a, b, expected);
         if ta.is_error() || tb.is_error() {
             self.expr(a, None);
@@ -1909,15 +2485,26 @@ impl<'a> Gen<'a> {
             g.error(span, msg);
             Type::Error
         };
-        // Strings: comparisons only.
-        if ta.is_string() || tb.is_string() {
-            if !(ta.is_string() && tb.is_string() && is_cmp) {
+        // Strings: comparisons only (STRING with STRING, WSTRING with WSTRING).
+        if ta.is_string() || tb.is_string() || ta.is_wstring() || tb.is_wstring() {
+            let wide = ta.is_wstring() || tb.is_wstring();
+            let same_kind =
+                (ta.is_string() && tb.is_string()) || (ta.is_wstring() && tb.is_wstring());
+            // A STRING literal compared with a WSTRING is a WSTRING literal.
+            let literal = |e: &Expr| matches!(e.kind, ExprKind::Str(_));
+            let adapts = wide && (literal(a) && tb.is_wstring() || literal(b) && ta.is_wstring());
+            if !((same_kind || adapts) && is_cmp) {
                 return mismatch(self);
             }
-            self.expr(a, None);
-            self.expr(b, None);
+            let w = Type::WString(DEFAULT_STRING_LEN);
+            self.expr(a, wide.then_some(&w));
+            self.expr(b, wide.then_some(&w));
             self.emit(|bb| {
-                bb.call_builtin(Builtin::StrCompare);
+                bb.call_builtin(if wide {
+                    Builtin::WStrCompare
+                } else {
+                    Builtin::StrCompare
+                });
                 bb.push_i32(0);
             });
             self.op(cmp_op(op, true));
@@ -1937,56 +2524,25 @@ impl<'a> Gen<'a> {
         let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else {
             return mismatch(self);
         };
-        // TIME arithmetic.
-        if ea == Elem::Time || eb == Elem::Time {
-            let result = match op {
-                _ if is_cmp && ea == eb => Type::BOOL,
-                BinOp::Add | BinOp::Sub if ea == eb => Type::TIME,
-                BinOp::Mul
-                    if ea == Elem::Time && eb.is_integral()
-                        || eb == Elem::Time && ea.is_integral() =>
-                {
-                    Type::TIME
-                }
-                BinOp::Div if ea == Elem::Time && eb.is_integral() => Type::TIME,
-                BinOp::Mul | BinOp::Div if ea == Elem::Time && eb.is_real() => Type::TIME,
-                _ => return mismatch(self),
-            };
-            if eb.is_real() {
-                // TIME * REAL: computed in LREAL nanoseconds.
-                self.expr(a, Some(&ta));
-                self.op(Opcode::IToF64S);
-                self.value_to(b, &Type::LREAL);
-                self.op(if op == BinOp::Mul {
-                    Opcode::MulF64
-                } else {
-                    Opcode::DivF64
-                });
-                self.emit(|bb| {
-                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
-                });
-                return result;
+        if ea.is_temporal() || eb.is_temporal() {
+            return self.temporal_binary(op, (a, &ta, ea), (b, &tb, eb), span);
+        }
+        // Characters: comparisons within CHAR/WCHAR.
+        if ea.is_char() || eb.is_char() {
+            if Self::is_flexible(a) || Self::is_flexible(b) {
+                self.error(
+                    span,
+                    "a character is no number: compare it with a character (CHAR#'a') or convert it (CHAR_TO_BYTE)",
+                );
+                return Type::Error;
             }
-            let sa = if ea == Elem::Time {
-                ta.clone()
-            } else {
-                Type::LINT
-            };
-            let sb = if eb == Elem::Time {
-                tb.clone()
-            } else {
-                Type::LINT
-            };
-            self.value_to_any(a, &ta, &sa);
-            self.value_to_any(b, &tb, &sb);
-            self.op(match op {
-                BinOp::Add => Opcode::Add,
-                BinOp::Sub => Opcode::Sub,
-                BinOp::Mul => Opcode::Mul,
-                BinOp::Div => Opcode::DivS,
-                _ => cmp_op(op, true),
-            });
-            return result;
+            if !(is_cmp && ea.is_char() && eb.is_char()) {
+                return mismatch(self);
+            }
+            self.expr(a, Some(&ta));
+            self.expr(b, Some(&tb));
+            self.op(cmp_op(op, true));
+            return Type::BOOL;
         }
         // Booleans and bit strings: logic operators.
         if matches!(op, BinOp::And | BinOp::Or | BinOp::Xor) {
@@ -2120,6 +2676,145 @@ impl<'a> Gen<'a> {
         tt
     }
 
+    /// Date and time arithmetic (IEC 61131-3 table of time operations): TIME +/- TIME,
+    /// TOD +/- TIME (wrapping within the day), DT +/- TIME, DATE - DATE, TOD - TOD, DT - DT
+    /// (giving TIME), TIME * and / numbers, comparisons within one family. The long forms
+    /// follow the same rules; an operation with a long operand gives the long result.
+    fn temporal_binary(
+        &mut self,
+        op: BinOp,
+        (a, ta, ea): (&Expr, &Type, Elem),
+        (b, tb, eb): (&Expr, &Type, Elem),
+        span: Span,
+    ) -> Type {
+        // A literal factor is a number, not a duration (`T#1s * 2`).
+        let literal_type = |e: &Expr| {
+            if Self::has_real_literal(e) {
+                Type::LREAL
+            } else {
+                Type::LINT
+            }
+        };
+        let (ta, ea) = if Self::is_flexible(a) && matches!(op, BinOp::Mul) {
+            let t = literal_type(a);
+            let e = t.elem().unwrap_or(Elem::LInt);
+            (&t.clone(), e)
+        } else {
+            (ta, ea)
+        };
+        let (tb, eb) = if Self::is_flexible(b) && matches!(op, BinOp::Mul | BinOp::Div) {
+            let t = literal_type(b);
+            let e = t.elem().unwrap_or(Elem::LInt);
+            (&t.clone(), e)
+        } else {
+            (tb, eb)
+        };
+        let fa = ea.temporal_family();
+        let fb = eb.temporal_family();
+        let long = ea.is_long_temporal() || eb.is_long_temporal();
+        let pick = |short: Elem| -> Elem {
+            match (short, long) {
+                (Elem::Time, true) => Elem::LTime,
+                (Elem::Tod, true) => Elem::LTod,
+                (Elem::Dt, true) => Elem::LDt,
+                (Elem::Date, true) => Elem::LDate,
+                (e, _) => e,
+            }
+        };
+        let is_cmp = matches!(
+            op,
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+        );
+        let time = Some(Elem::Time);
+        // (result, whether a TOD result wraps into its day)
+        let result = match op {
+            _ if is_cmp && fa == fb => Some((Elem::Bool, false)),
+            BinOp::Add if fa == time && fb == time => Some((pick(Elem::Time), false)),
+            BinOp::Add
+                if fa == Some(Elem::Tod) && fb == time || fa == time && fb == Some(Elem::Tod) =>
+            {
+                Some((pick(Elem::Tod), true))
+            }
+            BinOp::Add
+                if fa == Some(Elem::Dt) && fb == time || fa == time && fb == Some(Elem::Dt) =>
+            {
+                Some((pick(Elem::Dt), false))
+            }
+            BinOp::Sub if fa == fb && fa != Some(Elem::Dt) && fa != Some(Elem::Tod) => {
+                // TIME - TIME, DATE - DATE
+                Some((pick(Elem::Time), false))
+            }
+            BinOp::Sub if fa == fb => Some((pick(Elem::Time), false)),
+            BinOp::Sub if fa == Some(Elem::Tod) && fb == time => Some((pick(Elem::Tod), true)),
+            BinOp::Sub if fa == Some(Elem::Dt) && fb == time => Some((pick(Elem::Dt), false)),
+            BinOp::Mul | BinOp::Div
+                if fa == time && eb.is_numeric()
+                    || op == BinOp::Mul && fb == time && ea.is_numeric() =>
+            {
+                Some((if fa == time { ea } else { eb }, false))
+            }
+            _ => None,
+        };
+        let Some((result, wraps)) = result else {
+            let hint = match (op, fa, fb) {
+                (BinOp::Add | BinOp::Sub, Some(Elem::Date), Some(Elem::Time)) => {
+                    " (a DATE is a day: use DATE_TO_DT or CONCAT_DATE_TOD for a point in time)"
+                }
+                (BinOp::Add, Some(x), Some(y)) if x == y && x != Elem::Time => {
+                    " (two points in time cannot be added; subtract them for a TIME)"
+                }
+                _ => "",
+            };
+            let msg = format!(
+                "operator {} cannot be applied to {} and {}{hint}",
+                op.symbol(),
+                self.tname(ta),
+                self.tname(tb)
+            );
+            self.error(span, msg);
+            return Type::Error;
+        };
+        if matches!(op, BinOp::Mul | BinOp::Div) {
+            let (duration, number, number_type) = if fa == time { (a, b, tb) } else { (b, a, ta) };
+            let duration_type = Type::Elem(result);
+            if number_type.elem().is_some_and(|e| e.is_real()) {
+                // TIME * REAL: computed in LREAL nanoseconds, rounded.
+                self.value_to_any(duration, &duration_type, &duration_type);
+                self.op(Opcode::IToF64S);
+                self.value_to_any(number, number_type, &Type::LREAL);
+                self.op(if op == BinOp::Mul {
+                    Opcode::MulF64
+                } else {
+                    Opcode::DivF64
+                });
+                self.emit(|bb| {
+                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
+                });
+            } else {
+                self.value_to_any(duration, &duration_type, &duration_type);
+                self.value_to_any(number, number_type, &Type::LINT);
+                self.op(if op == BinOp::Mul {
+                    Opcode::Mul
+                } else {
+                    Opcode::DivS
+                });
+            }
+            return Type::Elem(result);
+        }
+        // The operands keep their nanoseconds (TIME widens to LTIME implicitly).
+        self.value_to_any(a, ta, ta);
+        self.value_to_any(b, tb, tb);
+        self.op(match op {
+            BinOp::Add => Opcode::Add,
+            BinOp::Sub => Opcode::Sub,
+            _ => cmp_op(op, true),
+        });
+        if wraps {
+            self.emit(|bb| bb.call_builtin(Builtin::TodOf));
+        }
+        Type::Elem(result)
+    }
+
     /// Compiles `e` (whose type was inferred as `from`) and converts to `to` without the
     /// implicit-conversion restriction (used for operands already checked by the caller).
     pub(crate) fn value_to_any(&mut self, e: &Expr, from: &Type, to: &Type) {
@@ -2136,6 +2831,7 @@ fn offset_loc(l: Loc, off: u32) -> Loc {
         Loc::Abs(a) => Loc::Abs(a.wrapping_add(off)),
         Loc::Rel(o) => Loc::Rel(o.wrapping_add(off)),
         Loc::Ind(o) => Loc::Ind(o.wrapping_add(off)),
+        Loc::Ref(o) => Loc::Ref(o.wrapping_add(off)),
     }
 }
 

@@ -5,6 +5,7 @@
 //! are recognised here so the parser sees one token per literal.
 
 use crate::diagnostics::{Diagnostic, Span};
+use crate::types::Elem;
 
 #[derive(Debug, Clone, PartialEq)]
 pub enum Tok {
@@ -15,7 +16,12 @@ pub enum Tok {
     Real(f64),
     /// Duration literal in nanoseconds.
     Time(i128),
+    /// Other date/time literal (`LT#`, `D#`, `TOD#`, `DT#` and the long forms): its type and
+    /// nanoseconds (since 1970-01-01, or since midnight for a time of day).
+    Temporal(Elem, i128),
     Str(String),
+    /// `"..."`: a WSTRING literal.
+    WStr(String),
     /// `TYPE#` prefix of a typed literal such as `INT#5` or `Color#Red`.
     TypePrefix(String, String),
     /// Directly represented variable `%IX0.1`, `%QW4`, ...: the text after `%`, upper-cased
@@ -25,6 +31,9 @@ pub enum Tok {
     /// `{attribute 'shared'}`); the parser attaches it to the declaration after it. Every
     /// other pragma carries no meaning for this compiler and is skipped.
     SharedAttribute(Option<String>),
+    /// The pragma `{attribute 'safe' := 'VALUE'}` before a located output: the value it
+    /// takes when the runtime sets the outputs safe.
+    SafeAttribute(Option<String>),
     Assign,   // :=
     Arrow,    // =>
     Colon,    // :
@@ -48,6 +57,7 @@ pub enum Tok {
     Gt,       // >
     Ge,       // >=
     Amp,      // &
+    Caret,    // ^ (dereference)
     Eof,
 }
 
@@ -72,9 +82,9 @@ pub fn lex(file: u32, text: &str, diags: &mut Vec<Diagnostic>) -> Vec<Token> {
     lx.out
 }
 
-/// The value of a CODESYS attribute pragma body `attribute 'shared' := 'VALUE'` (or `None`
-/// for `attribute 'shared'`); `None` outside when the body is any other pragma.
-fn shared_attribute(body: &str) -> Option<Option<String>> {
+/// The value of a CODESYS attribute pragma body `attribute 'NAME' := 'VALUE'` (or `None`
+/// for `attribute 'NAME'`) when NAME is `wanted`; `None` outside for any other pragma.
+fn attribute(body: &str, wanted: &str) -> Option<Option<String>> {
     let rest = body.trim_start();
     let keyword = rest.get(..9)?;
     if !keyword.eq_ignore_ascii_case("attribute") {
@@ -82,7 +92,7 @@ fn shared_attribute(body: &str) -> Option<Option<String>> {
     }
     let rest = rest[9..].trim_start().strip_prefix('\'')?;
     let (name, rest) = rest.split_once('\'')?;
-    if !name.trim().eq_ignore_ascii_case("shared") {
+    if !name.trim().eq_ignore_ascii_case(wanted) {
         return None;
     }
     let rest = rest.trim();
@@ -152,15 +162,21 @@ impl Lexer<'_> {
                         self.error(start, "unterminated pragma `{`");
                     } else {
                         self.pos += 1;
-                        if let Some(value) = shared_attribute(&self.text[start + 1..self.pos - 1]) {
+                        let body = &self.text[start + 1..self.pos - 1];
+                        if let Some(value) = attribute(body, "shared") {
                             self.push(Tok::SharedAttribute(value), start);
+                        } else if let Some(value) = attribute(body, "safe") {
+                            self.push(Tok::SafeAttribute(value), start);
                         }
                     }
                 }
-                b'\'' => self.string(),
+                b'\'' => self.string(b'\''),
+                b'"' => self.string(b'"'),
                 b'%' => {
                     self.pos += 1;
-                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' {
+                    // `%IX0.1` has dots; a partial access `x.%B1.%X2` ends at one.
+                    let partial = matches!(self.out.last().map(|t| &t.tok), Some(Tok::Dot));
+                    while self.peek(0).is_ascii_alphanumeric() || self.peek(0) == b'.' && !partial {
                         self.pos += 1;
                     }
                     let text = self.text[start + 1..self.pos].to_ascii_uppercase();
@@ -201,9 +217,12 @@ impl Lexer<'_> {
         self.pos = self.src.len();
     }
 
-    fn string(&mut self) {
+    /// A STRING literal `'...'` (`$NN` is a byte) or a WSTRING literal `"..."` (`$NNNN` is a
+    /// UTF-16 code unit).
+    fn string(&mut self, quote: u8) {
         let start = self.pos;
         self.pos += 1;
+        let wide = quote == b'"';
         let mut value = String::new();
         loop {
             if self.pos >= self.src.len() || self.peek(0) == b'\n' {
@@ -211,9 +230,19 @@ impl Lexer<'_> {
                 return;
             }
             let c = self.peek(0);
-            if c == b'\'' {
+            if c == quote {
                 self.pos += 1;
                 break;
+            }
+            if c == b'$' && wide {
+                let digits = &self.src[self.pos + 1..(self.pos + 5).min(self.src.len())];
+                if digits.len() == 4 && digits.iter().all(u8::is_ascii_hexdigit) {
+                    let hex = std::str::from_utf8(digits).unwrap_or("0");
+                    let unit = u32::from_str_radix(hex, 16).unwrap_or(0);
+                    value.push(char::from_u32(unit).unwrap_or(char::REPLACEMENT_CHARACTER));
+                    self.pos += 5;
+                    continue;
+                }
             }
             if c == b'$' {
                 let at = self.pos;
@@ -227,7 +256,7 @@ impl Lexer<'_> {
                     'P' => value.push('\x0c'),
                     'R' => value.push('\r'),
                     'T' => value.push('\t'),
-                    h if h.is_ascii_hexdigit() && self.peek(0).is_ascii_hexdigit() => {
+                    h if !wide && h.is_ascii_hexdigit() && self.peek(0).is_ascii_hexdigit() => {
                         let hex = [h as u8, self.peek(0)];
                         self.pos += 1;
                         let s = std::str::from_utf8(&hex).unwrap_or("0");
@@ -247,7 +276,14 @@ impl Lexer<'_> {
             value.push(ch);
             self.pos += ch.len_utf8();
         }
-        self.push(Tok::Str(value), start);
+        self.push(
+            if wide {
+                Tok::WStr(value)
+            } else {
+                Tok::Str(value)
+            },
+            start,
+        );
     }
 
     /// Digits with `_` separators in the given radix; returns the digit text without separators.
@@ -339,19 +375,57 @@ impl Lexer<'_> {
         let upper = orig.to_ascii_uppercase();
         if self.peek(0) == b'#' {
             self.pos += 1;
-            if matches!(upper.as_str(), "T" | "TIME" | "LTIME") {
-                self.duration(start);
-            } else {
-                self.push(Tok::TypePrefix(upper, orig), start);
+            let elem = match upper.as_str() {
+                "T" | "TIME" => Some(Elem::Time),
+                "LT" | "LTIME" => Some(Elem::LTime),
+                "D" | "DATE" => Some(Elem::Date),
+                "LD" | "LDATE" => Some(Elem::LDate),
+                "TOD" | "TIME_OF_DAY" => Some(Elem::Tod),
+                "LTOD" | "LTIME_OF_DAY" => Some(Elem::LTod),
+                "DT" | "DATE_AND_TIME" => Some(Elem::Dt),
+                "LDT" | "LDATE_AND_TIME" => Some(Elem::LDt),
+                _ => None,
+            };
+            match elem {
+                Some(e) if e.is_duration() => self.duration(start, e),
+                Some(e) => self.date_time(start, e),
+                None => self.push(Tok::TypePrefix(upper, orig), start),
             }
             return;
         }
         self.push(Tok::Ident(upper, orig), start);
     }
 
-    /// Duration after `T#`: `[-]` then components like `1d2h3m4s5ms6us7ns`, each optionally
-    /// fractional (`1.5s`), with `_` separators.
-    fn duration(&mut self, start: usize) {
+    /// A date (`D#2024-02-29`), time of day (`TOD#12:30:00.5`, seconds optional) or date
+    /// and time (`DT#2024-02-29-12:30:00`) after its `#`.
+    fn date_time(&mut self, start: usize, elem: Elem) {
+        let body_start = self.pos;
+        while matches!(self.peek(0), b'0'..=b'9' | b':' | b'.' | b'-') {
+            self.pos += 1;
+        }
+        let body = &self.src[body_start..self.pos];
+        let kind = elem.time_kind().expect("a date/time type");
+        let value = plc_vm::builtins::parse_date_time(body, kind);
+        if value.is_none() {
+            let example = match elem.temporal_family() {
+                Some(Elem::Date) => "D#2024-02-29",
+                Some(Elem::Tod) => "TOD#13:05:00 or TOD#13:05:00.250",
+                _ => "DT#2024-02-29-13:05:00",
+            };
+            self.error(
+                start,
+                format!(
+                    "malformed or invalid {} literal (expected e.g. {example})",
+                    elem.name()
+                ),
+            );
+        }
+        self.push(Tok::Temporal(elem, value.unwrap_or(0) as i128), start);
+    }
+
+    /// Duration after `T#` (or `LT#`): `[-]` then components like `1d2h3m4s5ms6us7ns`, each
+    /// optionally fractional (`1.5s`), with `_` separators.
+    fn duration(&mut self, start: usize, elem: Elem) {
         let negative = if self.peek(0) == b'-' {
             self.pos += 1;
             true
@@ -418,7 +492,11 @@ impl Lexer<'_> {
             self.error(start, "duration literal out of range");
             ns = 0;
         }
-        self.push(Tok::Time(ns), start);
+        if elem == Elem::Time {
+            self.push(Tok::Time(ns), start);
+        } else {
+            self.push(Tok::Temporal(elem, ns), start);
+        }
     }
 
     fn punct(&mut self) {
@@ -456,6 +534,7 @@ impl Lexer<'_> {
             b'<' => Tok::Lt,
             b'>' => Tok::Gt,
             b'&' => Tok::Amp,
+            b'^' => Tok::Caret,
             _ => {
                 let ch = self.text[self.pos..].chars().next().unwrap_or('?');
                 self.pos += ch.len_utf8();
@@ -487,10 +566,24 @@ mod tests {
         assert_eq!(toks("T#1s500ms")[0], Tok::Time(1_500_000_000));
         assert_eq!(toks("t#-1.5s")[0], Tok::Time(-1_500_000_000));
         assert_eq!(toks("'a$'b$N'")[0], Tok::Str("a'b\n".into()));
+        assert_eq!(toks("\"a$\"b$20AC'\"")[0], Tok::WStr("a\"b€'".into()));
         assert_eq!(
             toks("INT#5")[0],
             Tok::TypePrefix("INT".into(), "INT".into())
         );
         assert_eq!(toks("x (* c (* n *) *) := 1")[1], Tok::Assign);
+        assert_eq!(toks("LT#1ms")[0], Tok::Temporal(Elem::LTime, 1_000_000));
+        assert_eq!(
+            toks("D#1970-01-02")[0],
+            Tok::Temporal(Elem::Date, 86_400_000_000_000)
+        );
+        assert_eq!(
+            toks("time_of_day#00:00:01.5")[0],
+            Tok::Temporal(Elem::Tod, 1_500_000_000)
+        );
+        assert_eq!(
+            toks("LDT#1970-01-01-00:01 - x")[0..2],
+            [Tok::Temporal(Elem::LDt, 60_000_000_000), Tok::Minus]
+        );
     }
 }

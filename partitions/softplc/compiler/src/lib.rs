@@ -7,11 +7,15 @@
 
 pub mod ast;
 mod calls;
+mod classes;
 pub mod codegen;
 pub mod diagnostics;
 pub mod lexer;
+pub mod library;
 pub mod monitor;
+mod oop;
 pub mod parser;
+mod refs;
 pub mod run;
 pub mod sema;
 mod stdfuncs;
@@ -30,6 +34,9 @@ pub const PRELUDE_NAME: &str = "<prelude>";
 pub struct Options {
     /// Program to run when there is no CONFIGURATION and several PROGRAMs.
     pub program: Option<String>,
+    /// Compile a library: every POU is checked and compiled, no PROGRAM is needed and none
+    /// becomes a task (the image has no tasks unless a CONFIGURATION declares some).
+    pub library: bool,
 }
 
 /// A task as the host runner schedules it.
@@ -45,6 +52,20 @@ pub struct TaskInfo {
     pub image_tasks: Vec<usize>,
 }
 
+/// A located output's safe value from an `{attribute 'safe' := 'VALUE'}` pragma: what the
+/// runtime writes when a task faults and the outputs go safe (the system configuration's
+/// `plc.safe` may override it).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SafeOutput {
+    /// The variable's name in the variable map (`out`, `Main.valve`).
+    pub name: String,
+    pub address: u32,
+    /// Bytes written (the `%Q` address's width).
+    pub width: u8,
+    /// The little-endian bits written.
+    pub value: u64,
+}
+
 /// Result of a successful compilation.
 #[derive(Debug, Clone)]
 pub struct Compiled {
@@ -54,6 +75,8 @@ pub struct Compiled {
     pub vars: Vec<monitor::MonitorVar>,
     pub tasks: Vec<TaskInfo>,
     pub has_configuration: bool,
+    /// The safe values the program's pragmas give its located outputs.
+    pub safe: Vec<SafeOutput>,
 }
 
 /// Compiles the given `(file name, source)` pairs. On failure returns the diagnostics together
@@ -80,13 +103,15 @@ pub fn compile(
         unit.types.extend(u.types);
         unit.globals.extend(u.globals);
         unit.configs.extend(u.configs);
+        unit.interfaces.extend(u.interfaces);
+        unit.actions.extend(u.actions);
     }
     let mut diags = Diagnostics::default();
     for d in raw {
         diags.push(d);
     }
-    let mut prog = sema::analyse(&unit, prelude_pous, opts.program.as_deref(), &mut diags);
-    if prog.instances.is_empty() && diags.is_empty() {
+    let mut prog = sema::analyse(&unit, prelude_pous, opts, &mut diags);
+    if prog.instances.is_empty() && diags.is_empty() && !opts.library {
         diags.error(
             diagnostics::Span::new(0, 0, 0),
             "no PROGRAM to run (declare a PROGRAM or a CONFIGURATION)",
@@ -176,6 +201,7 @@ pub fn compile(
         tasks.push(info);
     }
     let vars = monitor::variable_map(&prog);
+    let safe = safe_outputs(&prog);
     // Variable-record index of each global shared with another project.
     let mut shared_records = vec![None; prog.shared.len()];
     for v in &vars {
@@ -241,9 +267,42 @@ pub fn compile(
             vars,
             tasks,
             has_configuration: prog.has_configuration,
+            safe,
         },
         sources,
     ))
+}
+
+/// The safe values of the located outputs with an `{attribute 'safe'}`: a global's once, a
+/// PROGRAM variable's for each instance of the PROGRAM.
+fn safe_outputs(prog: &sema::Program) -> Vec<SafeOutput> {
+    let mut out = Vec::new();
+    for s in &prog.safe {
+        let mut add = |name: String, address: u32| {
+            out.push(SafeOutput {
+                name,
+                address,
+                width: s.width,
+                value: s.value,
+            })
+        };
+        match s.pou {
+            None => {
+                if let Some(g) = prog.global(&s.name) {
+                    add(s.text.clone(), g.offset);
+                }
+            }
+            Some(pi) => {
+                let Some(v) = prog.pous[pi].var(&s.name) else {
+                    continue;
+                };
+                for inst in prog.instances.iter().filter(|inst| inst.pou == pi) {
+                    add(format!("{}.{}", inst.name, s.text), inst.addr + v.offset);
+                }
+            }
+        }
+    }
+    out
 }
 
 /// The located variables in declaration order: globals, then each program instance's.

@@ -18,6 +18,8 @@ pub enum ValueKind {
     Elem(Elem),
     /// STRING with its maximum length.
     String(u32),
+    /// WSTRING with its maximum length (not in the image's variable map).
+    WString(u32),
     /// Enumeration: value names with their numbers.
     Enum(Vec<(String, i64)>),
     /// `__EXCEPTION`: a trap code.
@@ -44,9 +46,16 @@ impl ValueKind {
                 Elem::LWord => VarType::LWord,
                 Elem::Real => VarType::Real,
                 Elem::LReal => VarType::LReal,
-                Elem::Time => VarType::Time,
+                // The image's variable map has no date types (yet): durations and times of
+                // day show as TIME, dates as their nanoseconds since 1970, characters as
+                // their codes.
+                Elem::Time | Elem::LTime | Elem::Tod | Elem::LTod => VarType::Time,
+                Elem::Date | Elem::LDate | Elem::Dt | Elem::LDt => VarType::LInt,
+                Elem::Char => VarType::Byte,
+                Elem::WChar => VarType::Word,
             },
             ValueKind::String(_) => VarType::String,
+            ValueKind::WString(_) => return None,
             ValueKind::Enum(_) | ValueKind::Exception => VarType::DInt,
         })
     }
@@ -129,6 +138,7 @@ fn flatten(
         }
         Type::Exception => ValueKind::Exception,
         Type::String(n) => ValueKind::String(*n),
+        Type::WString(n) => ValueKind::WString(*n),
         Type::Struct(i) => {
             for m in &prog.structs[*i].members {
                 flatten(
@@ -183,10 +193,18 @@ fn flatten(
             }
             return;
         }
-        Type::Void | Type::Error => return,
+        // References and interface values are not monitored (an address means nothing
+        // outside this program build).
+        Type::Ref(_)
+        | Type::Reference(_)
+        | Type::Interface(_)
+        | Type::Null
+        | Type::Void
+        | Type::Error => return,
     };
     let size = match &kind {
         ValueKind::String(n) => 4 + n,
+        ValueKind::WString(n) => 4 + 2 * n,
         k => k.elem().size(),
     };
     out.push(MonitorVar {
@@ -228,6 +246,19 @@ pub fn format_value(var: &MonitorVar, data: &[u8]) -> String {
             let bytes = data.get(a + 4..a + 4 + len).unwrap_or(&[]);
             format_string(bytes)
         }
+        ValueKind::WString(_) => {
+            let a = var.addr as usize;
+            let len = data
+                .get(a + 2..a + 4)
+                .map_or(0, |b| u16::from_le_bytes([b[0], b[1]]) as usize);
+            let units: Vec<u16> = data
+                .get(a + 4..a + 4 + 2 * len)
+                .unwrap_or(&[])
+                .chunks_exact(2)
+                .map(|u| u16::from_le_bytes([u[0], u[1]]))
+                .collect();
+            format_wstring(&units)
+        }
         ValueKind::Enum(values) => {
             let v = read_cell(&var.kind, data, var.addr) as i64;
             match values.iter().find(|(_, x)| *x == v) {
@@ -253,6 +284,18 @@ pub fn format_cell(e: Elem, cell: u64) -> String {
         Elem::Real => format_real(f32::from_bits(cell as u32) as f64, true),
         Elem::LReal => format_real(f64::from_bits(cell), false),
         Elem::Time => format_time(cell as i64),
+        e if e.is_temporal() => {
+            let mut s = String::new();
+            if let Some(kind) = e.time_kind() {
+                plc_vm::builtins::format_date_time(&mut s, kind, cell as i64);
+            }
+            s
+        }
+        Elem::Char => format_string(&[cell as u8]),
+        Elem::WChar => match char::from_u32(cell as u32) {
+            Some(c) if c != '"' && c != '$' && !c.is_control() => format!("\"{c}\""),
+            _ => format!("\"${:04X}\"", cell),
+        },
         e if e.is_signed_int() => (cell as i64).to_string(),
         _ => cell.to_string(),
     }
@@ -325,6 +368,26 @@ pub fn format_string(bytes: &[u8]) -> String {
     s
 }
 
+/// `"text"` with `$` escapes (`$"`, `$$`, `$N`, ...; other control characters and unpaired
+/// surrogates as `$NNNN`).
+pub fn format_wstring(units: &[u16]) -> String {
+    let mut s = String::from("\"");
+    for c in char::decode_utf16(units.iter().copied()) {
+        match c {
+            Ok('"') => s.push_str("$\""),
+            Ok('$') => s.push_str("$$"),
+            Ok('\n') => s.push_str("$N"),
+            Ok('\r') => s.push_str("$R"),
+            Ok('\t') => s.push_str("$T"),
+            Ok(c) if !c.is_control() => s.push(c),
+            Ok(c) => s.push_str(&format!("${:04X}", c as u32)),
+            Err(e) => s.push_str(&format!("${:04X}", e.unpaired_surrogate())),
+        }
+    }
+    s.push('"');
+    s
+}
+
 /// Parses a `--set` value for `var` and writes it into data memory.
 pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), String> {
     if var.constant {
@@ -350,6 +413,31 @@ pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), 
             let a = var.addr as usize;
             data[a + 2..a + 4].copy_from_slice(&(len as u16).to_le_bytes());
             data[a + 4..a + 4 + len].copy_from_slice(&bytes[..len]);
+            if len < *n as usize {
+                // The terminator the VM keeps after a shorter text.
+                data[a + 4 + len] = 0;
+            }
+            return Ok(());
+        }
+        ValueKind::WString(n) => {
+            // `"text"` (IEC escapes) or bare text.
+            let s = match text.strip_prefix('"').and_then(|t| t.strip_suffix('"')) {
+                Some(inner) => {
+                    let mut diags = Vec::new();
+                    let toks = crate::lexer::lex(0, &format!("\"{inner}\""), &mut diags);
+                    match toks.first().map(|t| &t.tok) {
+                        Some(crate::lexer::Tok::WStr(s)) if diags.is_empty() => s.clone(),
+                        _ => return Err(format!("invalid WSTRING literal `{text}`")),
+                    }
+                }
+                None => text.to_string(),
+            };
+            let units: Vec<u16> = s.encode_utf16().take(*n as usize).collect();
+            let a = var.addr as usize;
+            data[a + 2..a + 4].copy_from_slice(&(units.len() as u16).to_le_bytes());
+            for (i, u) in units.iter().enumerate() {
+                data[a + 4 + 2 * i..a + 6 + 2 * i].copy_from_slice(&u.to_le_bytes());
+            }
             return Ok(());
         }
         ValueKind::Enum(values) => {
@@ -375,7 +463,7 @@ pub fn write_value(var: &MonitorVar, text: &str, data: &mut [u8]) -> Result<(), 
     Ok(())
 }
 
-fn parse_elem(e: Elem, text: &str) -> Result<u64, String> {
+pub(crate) fn parse_elem(e: Elem, text: &str) -> Result<u64, String> {
     let bad = || format!("`{text}` is not a valid {e} value");
     // Accept typed literals like INT#5 by dropping a leading type prefix.
     let body = match text.split_once('#') {
@@ -393,6 +481,25 @@ fn parse_elem(e: Elem, text: &str) -> Result<u64, String> {
             .map(|v| v.to_bits() as u64)
             .map_err(|_| bad()),
         Elem::LReal => body.parse::<f64>().map(|v| v.to_bits()).map_err(|_| bad()),
+        e if e.is_temporal() && e != Elem::Time => e
+            .time_kind()
+            .and_then(|kind| plc_vm::builtins::parse_date_time(text.as_bytes(), kind))
+            .map(|v| v as u64)
+            .ok_or_else(bad),
+        e if e.is_char() => {
+            let quoted = body
+                .strip_prefix(['\'', '"'])
+                .and_then(|t| t.strip_suffix(['\'', '"']));
+            let code = match quoted {
+                Some(inner) if inner.chars().count() == 1 => inner.chars().next().map(|c| c as u32),
+                Some(_) => None,
+                None => body.parse::<u32>().ok(),
+            };
+            match code {
+                Some(c) if (c as i128) <= e.int_range().1 => Ok(c as u64),
+                _ => Err(bad()),
+            }
+        }
         Elem::Time => {
             let mut diags = Vec::new();
             let toks = crate::lexer::lex(0, text, &mut diags);
@@ -439,5 +546,15 @@ mod tests {
         assert_eq!(format_time(0), "T#0s");
         assert_eq!(format_time(90_061_001_001_001), "T#1d1h1m1s1ms1us1ns");
         assert_eq!(format_string(b"it's"), "'it$'s'");
+        assert_eq!(format_cell(Elem::Date, 86_400_000_000_000), "D#1970-01-02");
+        assert_eq!(format_cell(Elem::LTod, 1), "LTOD#00:00:00.000000001");
+        assert_eq!(format_cell(Elem::Char, 97), "'a'");
+        assert_eq!(format_cell(Elem::WChar, 0x20AC), "\"€\"");
+        assert_eq!(
+            parse_elem(Elem::Dt, "DT#1970-01-01-00:00:01"),
+            Ok(1_000_000_000)
+        );
+        assert_eq!(parse_elem(Elem::Char, "'a'"), Ok(97));
+        assert!(parse_elem(Elem::Char, "'ab'").is_err());
     }
 }

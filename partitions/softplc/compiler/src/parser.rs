@@ -12,7 +12,9 @@ use crate::lexer::{Tok, Token};
 struct Fail;
 type PResult<T> = Result<T, Fail>;
 
-/// Words that cannot be used as identifiers.
+/// Words that cannot be used as identifiers. The words that only a CONFIGURATION uses
+/// (RESOURCE, TASK, WITH, ON) are not among them: CODESYS code names variables `ON` or
+/// `TASK`.
 const RESERVED: &[&str] = &[
     "PROGRAM",
     "END_PROGRAM",
@@ -64,15 +66,32 @@ const RESERVED: &[&str] = &[
     "FALSE",
     "CONFIGURATION",
     "END_CONFIGURATION",
-    "RESOURCE",
-    "END_RESOURCE",
-    "TASK",
-    "WITH",
-    "ON",
     "__TRY",
     "__CATCH",
     "__FINALLY",
     "__ENDTRY",
+    "REF_TO",
+    "NULL",
+    "METHOD",
+    "END_METHOD",
+    "PROPERTY",
+    "END_PROPERTY",
+    "END_GET",
+    "END_SET",
+    "INTERFACE",
+    "END_INTERFACE",
+    "EXTENDS",
+    "IMPLEMENTS",
+    "ACTION",
+    "END_ACTION",
+    "ACTIONS",
+    "END_ACTIONS",
+    "CLASS",
+    "END_CLASS",
+    "NAMESPACE",
+    "END_NAMESPACE",
+    "THIS",
+    "SUPER",
 ];
 
 /// Keywords that end a statement list.
@@ -91,6 +110,35 @@ const STMT_END: &[&str] = &[
     "__CATCH",
     "__FINALLY",
     "__ENDTRY",
+    "METHOD",
+    "END_METHOD",
+    "PROPERTY",
+    "END_PROPERTY",
+    "END_GET",
+    "END_SET",
+    "ACTION",
+    "END_ACTION",
+    "END_ACTIONS",
+    "END_CLASS",
+    "END_INTERFACE",
+    "END_NAMESPACE",
+];
+
+/// Keywords that start a top-level declaration (error recovery skips to one of them).
+const TOP: &[&str] = &[
+    "PROGRAM",
+    "FUNCTION",
+    "FUNCTION_BLOCK",
+    "CLASS",
+    "INTERFACE",
+    "ACTIONS",
+    "ACTION",
+    "NAMESPACE",
+    "END_NAMESPACE",
+    "USING",
+    "TYPE",
+    "VAR_GLOBAL",
+    "CONFIGURATION",
 ];
 
 pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
@@ -102,6 +150,14 @@ pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
         match t.tok {
             Tok::SharedAttribute(value) => attributes.push(PendingAttribute {
                 before: toks.len(),
+                safe: false,
+                value,
+                span: t.span,
+                taken: false,
+            }),
+            Tok::SafeAttribute(value) => attributes.push(PendingAttribute {
+                before: toks.len(),
+                safe: true,
                 value,
                 span: t.span,
                 taken: false,
@@ -121,14 +177,21 @@ pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
     for a in p.attributes.iter().filter(|a| !a.taken) {
         p.diags.push(Diagnostic::error(
             a.span,
-            "the attribute 'shared' must stand right before a variable declaration in VAR_GLOBAL",
+            if a.safe {
+                "the attribute 'safe' must stand right before the declaration of a located output (`AT %Q...`)"
+            } else {
+                "the attribute 'shared' must stand right before a variable declaration in VAR_GLOBAL"
+            },
         ));
     }
     unit
 }
 
-/// An `{attribute 'shared' ...}` pragma waiting for its declaration.
+/// An `{attribute 'shared' ...}` or `{attribute 'safe' ...}` pragma waiting for its
+/// declaration.
 struct PendingAttribute {
+    /// `'safe'` (else `'shared'`).
+    safe: bool,
     /// Index of the token after it.
     before: usize,
     value: Option<String>,
@@ -146,7 +209,7 @@ struct Parser<'a> {
     /// Current nesting of expressions and statements (bounded so that no input can
     /// exhaust the native stack of the compiler).
     depth: u32,
-    /// The `{attribute 'shared'}` pragmas of this file, in order.
+    /// The `{attribute 'shared'}` and `{attribute 'safe'}` pragmas of this file, in order.
     attributes: Vec<PendingAttribute>,
 }
 
@@ -160,10 +223,13 @@ fn describe(t: &Tok) -> String {
         Tok::Int(v) => format!("number `{v}`"),
         Tok::Real(v) => format!("number `{v}`"),
         Tok::Time(_) => "duration literal".into(),
+        Tok::Temporal(e, _) => format!("{e} literal"),
         Tok::Str(_) => "string literal".into(),
+        Tok::WStr(_) => "WSTRING literal".into(),
         Tok::TypePrefix(_, o) => format!("`{o}#`"),
         Tok::Direct(text) => format!("`%{text}`"),
         Tok::SharedAttribute(_) => "`{attribute 'shared'}`".into(),
+        Tok::SafeAttribute(_) => "`{attribute 'safe'}`".into(),
         Tok::Eof => "end of file".into(),
         other => format!("`{}`", punct_text(other)),
     }
@@ -194,6 +260,7 @@ fn punct_text(t: &Tok) -> &'static str {
         Tok::Gt => ">",
         Tok::Ge => ">=",
         Tok::Amp => "&",
+        Tok::Caret => "^",
         _ => "?",
     }
 }
@@ -305,30 +372,50 @@ impl Parser<'_> {
 
     fn unit(&mut self) -> Unit {
         let mut unit = Unit::default();
-        const TOP: &[&str] = &[
-            "PROGRAM",
-            "FUNCTION",
-            "FUNCTION_BLOCK",
-            "TYPE",
-            "VAR_GLOBAL",
-            "CONFIGURATION",
-        ];
+        self.items(&mut unit, None);
+        unit
+    }
+
+    /// Top-level declarations until the end (or, inside a NAMESPACE, `END_NAMESPACE`).
+    fn items(&mut self, unit: &mut Unit, namespace: Option<&str>) {
         while !self.at_eof() {
+            if namespace.is_some() && self.is_kw("END_NAMESPACE") {
+                return;
+            }
             let start = self.pos;
             let ok = if self.is_kw("PROGRAM")
                 || self.is_kw("FUNCTION")
                 || self.is_kw("FUNCTION_BLOCK")
+                || self.is_kw("CLASS")
             {
                 self.pou().map(|p| unit.pous.push(p))
+            } else if self.is_kw("INTERFACE") {
+                self.interface().map(|i| unit.interfaces.push(i))
+            } else if self.is_kw("ACTIONS") {
+                self.actions_block(unit)
+            } else if self.is_kw("ACTION") {
+                self.qualified_action(unit)
             } else if self.is_kw("TYPE") {
                 self.type_block(&mut unit.types)
             } else if self.is_kw("VAR_GLOBAL") {
                 self.var_block().map(|b| unit.globals.push(b))
             } else if self.is_kw("CONFIGURATION") {
-                self.configuration(&mut unit)
+                self.configuration(unit)
+            } else if self.is_kw("NAMESPACE") {
+                self.namespace(unit)
+            } else if self.is_kw("USING") {
+                // Names are found with or without their namespace (see `sema`), so USING
+                // needs no bookkeeping.
+                self.bump();
+                self.qualified_ident().and_then(|_| {
+                    while self.eat(&Tok::Comma) {
+                        self.qualified_ident()?;
+                    }
+                    self.expect(Tok::Semi)
+                })
             } else {
                 Err(self.error_here(
-                    "PROGRAM, FUNCTION, FUNCTION_BLOCK, TYPE, VAR_GLOBAL or CONFIGURATION",
+                    "PROGRAM, FUNCTION, FUNCTION_BLOCK, INTERFACE, TYPE, VAR_GLOBAL or CONFIGURATION",
                 ))
             };
             if ok.is_err() {
@@ -341,20 +428,94 @@ impl Parser<'_> {
                 }
             }
         }
-        unit
+    }
+
+    /// `NAMESPACE N ... END_NAMESPACE`: the POUs, types and interfaces declared inside are
+    /// named `N.name`.
+    fn namespace(&mut self, unit: &mut Unit) -> PResult<()> {
+        self.expect_kw("NAMESPACE")?;
+        let name = self.qualified_ident()?;
+        let mut inner = Unit::default();
+        self.items(&mut inner, Some(&name.name));
+        self.expect_kw("END_NAMESPACE")?;
+        self.eat(&Tok::Semi);
+        let qualify = |id: &mut Ident| {
+            id.name = format!("{}.{}", name.name, id.name);
+            id.text = format!("{}.{}", name.text, id.text);
+        };
+        for mut p in inner.pous {
+            qualify(&mut p.name);
+            unit.pous.push(p);
+        }
+        for mut t in inner.types {
+            qualify(&mut t.name);
+            unit.types.push(t);
+        }
+        for mut i in inner.interfaces {
+            qualify(&mut i.name);
+            unit.interfaces.push(i);
+        }
+        for (mut p, a) in inner.actions {
+            qualify(&mut p);
+            unit.actions.push((p, a));
+        }
+        unit.globals.extend(inner.globals);
+        unit.configs.extend(inner.configs);
+        Ok(())
     }
 
     fn pou(&mut self) -> PResult<Pou> {
         let start = self.span();
-        let (kind, end_kw) = if self.eat_kw("PROGRAM") {
-            (PouKind::Program, "END_PROGRAM")
+        let (kind, end_kw, is_class) = if self.eat_kw("PROGRAM") {
+            (PouKind::Program, "END_PROGRAM", false)
         } else if self.eat_kw("FUNCTION_BLOCK") {
-            (PouKind::FunctionBlock, "END_FUNCTION_BLOCK")
+            (PouKind::FunctionBlock, "END_FUNCTION_BLOCK", false)
+        } else if self.eat_kw("CLASS") {
+            (PouKind::FunctionBlock, "END_CLASS", true)
         } else {
             self.expect_kw("FUNCTION")?;
-            (PouKind::Function, "END_FUNCTION")
+            (PouKind::Function, "END_FUNCTION", false)
         };
+        let modifiers = self.modifiers();
         let name = self.ident()?;
+        let mut extends = None;
+        let mut implements = Vec::new();
+        loop {
+            if self.is_kw("EXTENDS") {
+                let at = self.span();
+                self.bump();
+                let base = self.qualified_ident()?;
+                if kind != PouKind::FunctionBlock {
+                    self.diags.push(Diagnostic::error(
+                        at,
+                        "only a FUNCTION_BLOCK can extend another one",
+                    ));
+                } else if extends.is_some() {
+                    self.diags.push(Diagnostic::error(
+                        at,
+                        "a function block extends at most one function block",
+                    ));
+                }
+                extends = Some(base);
+            } else if self.is_kw("IMPLEMENTS") {
+                let at = self.span();
+                self.bump();
+                if kind != PouKind::FunctionBlock {
+                    self.diags.push(Diagnostic::error(
+                        at,
+                        "only a FUNCTION_BLOCK can implement interfaces",
+                    ));
+                }
+                loop {
+                    implements.push(self.qualified_ident()?);
+                    if !self.eat(&Tok::Comma) {
+                        break;
+                    }
+                }
+            } else {
+                break;
+            }
+        }
         let mut return_type = None;
         if kind == PouKind::Function {
             if self.eat(&Tok::Colon) {
@@ -363,6 +524,123 @@ impl Parser<'_> {
                 return Err(self.error_here("`:` and the function's return type"));
             }
         }
+        let var_blocks = self.var_blocks(end_kw);
+        // The body and the methods, properties and actions, in any order.
+        let mut body = Vec::new();
+        let mut methods = Vec::new();
+        let mut properties = Vec::new();
+        let mut actions = Vec::new();
+        loop {
+            let before = self.pos;
+            if self.is_kw("METHOD") {
+                match self.method(false) {
+                    Ok(m) => methods.push(m),
+                    Err(Fail) => self.skip_past("END_METHOD", end_kw),
+                }
+            } else if self.is_kw("PROPERTY") {
+                match self.property(false) {
+                    Ok(p) => properties.push(p),
+                    Err(Fail) => self.skip_past("END_PROPERTY", end_kw),
+                }
+            } else if self.is_kw("ACTION") {
+                match self.action() {
+                    Ok(a) => actions.push(a),
+                    Err(Fail) => self.skip_past("END_ACTION", end_kw),
+                }
+            } else if self.is_kw(end_kw) || self.at_eof() {
+                break;
+            } else {
+                body.extend(self.stmt_list());
+            }
+            if self.pos == before {
+                break;
+            }
+        }
+        if is_class && !body.is_empty() {
+            self.diags.push(Diagnostic::error(
+                body[0].span,
+                "a CLASS has no body: write its code in methods",
+            ));
+        }
+        if kind != PouKind::FunctionBlock && kind != PouKind::Program {
+            if let Some(m) = methods.first() {
+                self.diags.push(Diagnostic::error(
+                    m.name.span,
+                    "methods belong to a FUNCTION_BLOCK or a PROGRAM",
+                ));
+            }
+            if let Some(a) = actions.first() {
+                self.diags.push(Diagnostic::error(
+                    a.name.span,
+                    "actions belong to a FUNCTION_BLOCK or a PROGRAM",
+                ));
+            }
+        }
+        if !self.eat_kw(end_kw) {
+            let f = self.error_here(&format!("`{end_kw}`"));
+            // Leave the offending token for the top-level loop only if it starts a new unit.
+            if !TOP.iter().any(|k| self.is_kw(k)) {
+                self.bump();
+            }
+            let _ = f;
+        }
+        self.eat(&Tok::Semi);
+        Ok(Pou {
+            kind,
+            name,
+            return_type,
+            var_blocks,
+            body,
+            span: start.to(self.prev_span()),
+            modifiers,
+            extends,
+            implements,
+            methods,
+            properties,
+            actions,
+            is_class,
+        })
+    }
+
+    /// `ABSTRACT`, `FINAL`, `OVERRIDE` and an access specifier, in any order.
+    fn modifiers(&mut self) -> Modifiers {
+        let mut m = Modifiers::default();
+        loop {
+            if self.eat_kw("ABSTRACT") {
+                m.is_abstract = true;
+            } else if self.eat_kw("FINAL") {
+                m.is_final = true;
+            } else if self.eat_kw("OVERRIDE") {
+                m.is_override = true;
+            } else if self.eat_kw("PUBLIC") {
+                m.access = Access::Public;
+            } else if self.eat_kw("PRIVATE") {
+                m.access = Access::Private;
+            } else if self.eat_kw("PROTECTED") {
+                m.access = Access::Protected;
+            } else if self.eat_kw("INTERNAL") {
+                m.access = Access::Internal;
+            } else {
+                return m;
+            }
+        }
+    }
+
+    /// An identifier, possibly qualified by namespaces (`Lib.Name`), as one name.
+    fn qualified_ident(&mut self) -> PResult<Ident> {
+        let mut id = self.ident()?;
+        while matches!(self.tok(), Tok::Dot) && matches!(self.tok_at(1), Tok::Ident(..)) {
+            self.bump();
+            let next = self.ident()?;
+            id.name = format!("{}.{}", id.name, next.name);
+            id.text = format!("{}.{}", id.text, next.text);
+            id.span = id.span.to(next.span);
+        }
+        Ok(id)
+    }
+
+    /// Variable blocks until something else (errors recover to END_VAR or `end_kw`).
+    fn var_blocks(&mut self, end_kw: &str) -> Vec<VarBlock> {
         let mut var_blocks = Vec::new();
         while self.is_var_block_start() {
             match self.var_block() {
@@ -375,21 +653,241 @@ impl Parser<'_> {
                 }
             }
         }
-        let body = self.stmt_list();
-        if !self.eat_kw(end_kw) {
-            let f = self.error_here(&format!("`{end_kw}`"));
-            // Leave the offending token for the top-level loop only if it starts a new unit.
-            if !self.is_kw("PROGRAM") && !self.is_kw("FUNCTION") && !self.is_kw("FUNCTION_BLOCK") {
-                self.bump();
-            }
-            let _ = f;
+        var_blocks
+    }
+
+    /// Error recovery inside a POU: skips to after `end` (or stops before `outer`).
+    fn skip_past(&mut self, end: &str, outer: &str) {
+        while !self.at_eof() && !self.is_kw(end) && !self.is_kw(outer) {
+            self.bump();
         }
-        Ok(Pou {
-            kind,
+        if self.eat_kw(end) {
+            self.eat(&Tok::Semi);
+        }
+    }
+
+    /// `METHOD [modifiers] name [: type] var-blocks [body] END_METHOD` (no body in an
+    /// INTERFACE).
+    fn method(&mut self, declaration_only: bool) -> PResult<Method> {
+        let start = self.span();
+        self.expect_kw("METHOD")?;
+        let modifiers = self.modifiers();
+        let name = self.ident()?;
+        let return_type = if self.eat(&Tok::Colon) {
+            Some(self.type_ref()?)
+        } else {
+            None
+        };
+        self.eat(&Tok::Semi);
+        let var_blocks = self.var_blocks("END_METHOD");
+        let body = self.stmt_list();
+        if declaration_only && let Some(first) = body.first() {
+            self.diags.push(Diagnostic::error(
+                first.span,
+                "an interface method has no implementation",
+            ));
+        }
+        self.expect_kw("END_METHOD")?;
+        self.eat(&Tok::Semi);
+        Ok(Method {
             name,
+            modifiers,
             return_type,
             var_blocks,
             body,
+            span: start.to(self.prev_span()),
+        })
+    }
+
+    /// `PROPERTY [modifiers] name : type [GET ... END_GET] [SET ... END_SET] END_PROPERTY`.
+    fn property(&mut self, declaration_only: bool) -> PResult<Property> {
+        let start = self.span();
+        self.expect_kw("PROPERTY")?;
+        let modifiers = self.modifiers();
+        let name = self.ident()?;
+        self.expect(Tok::Colon)?;
+        let ty = self.type_ref()?;
+        self.eat(&Tok::Semi);
+        let mut get = None;
+        let mut set = None;
+        loop {
+            let which = if self.is_kw("GET") {
+                "END_GET"
+            } else if self.is_kw("SET") {
+                "END_SET"
+            } else {
+                break;
+            };
+            let at = self.span();
+            self.bump();
+            self.eat(&Tok::Semi);
+            let var_blocks = self.var_blocks("END_PROPERTY");
+            let body = self.stmt_list();
+            if declaration_only && let Some(first) = body.first() {
+                self.diags.push(Diagnostic::error(
+                    first.span,
+                    "an interface property has no implementation",
+                ));
+            }
+            self.expect_kw(which)?;
+            self.eat(&Tok::Semi);
+            let accessor = Accessor {
+                var_blocks,
+                body,
+                span: at.to(self.prev_span()),
+            };
+            if which == "END_GET" {
+                get = Some(accessor);
+            } else {
+                set = Some(accessor);
+            }
+        }
+        self.expect_kw("END_PROPERTY")?;
+        self.eat(&Tok::Semi);
+        if get.is_none() && set.is_none() {
+            if !declaration_only {
+                return Err({
+                    let span = start;
+                    self.diags.push(Diagnostic::error(
+                        span,
+                        "a property needs a GET or a SET accessor",
+                    ));
+                    Fail
+                });
+            }
+            // An interface property declared without accessors has both.
+            let empty = || Accessor {
+                var_blocks: Vec::new(),
+                body: Vec::new(),
+                span: start,
+            };
+            get = Some(empty());
+            set = Some(empty());
+        }
+        Ok(Property {
+            name,
+            modifiers,
+            ty,
+            get,
+            set,
+            span: start.to(self.prev_span()),
+        })
+    }
+
+    /// `ACTION name [:] statements END_ACTION`.
+    fn action(&mut self) -> PResult<Action> {
+        let start = self.span();
+        self.expect_kw("ACTION")?;
+        let name = self.ident()?;
+        self.eat(&Tok::Colon);
+        let body = self.stmt_list();
+        self.expect_kw("END_ACTION")?;
+        self.eat(&Tok::Semi);
+        Ok(Action {
+            name,
+            body,
+            span: start.to(self.prev_span()),
+        })
+    }
+
+    /// `ACTIONS pou ACTION a ... END_ACTION ... END_ACTIONS` (the form RuSTy writes).
+    fn actions_block(&mut self, unit: &mut Unit) -> PResult<()> {
+        self.expect_kw("ACTIONS")?;
+        let pou = self.qualified_ident()?;
+        while self.is_kw("ACTION") {
+            let a = self.action()?;
+            unit.actions.push((pou.clone(), a));
+        }
+        self.expect_kw("END_ACTIONS")?;
+        self.eat(&Tok::Semi);
+        Ok(())
+    }
+
+    /// `ACTION pou.a [:] statements END_ACTION` outside its POU.
+    fn qualified_action(&mut self, unit: &mut Unit) -> PResult<()> {
+        let start = self.span();
+        self.expect_kw("ACTION")?;
+        let full = self.qualified_ident()?;
+        let Some((pou, name)) = full.name.rsplit_once('.') else {
+            self.diags.push(Diagnostic::error(
+                full.span,
+                "an ACTION outside its POU is written `ACTION Pou.Action`",
+            ));
+            return Err(Fail);
+        };
+        let (pou_text, name_text) = full.text.rsplit_once('.').unwrap_or((&full.text, ""));
+        let pou = Ident {
+            name: pou.to_string(),
+            text: pou_text.to_string(),
+            span: full.span,
+        };
+        let name = Ident {
+            name: name.to_string(),
+            text: name_text.to_string(),
+            span: full.span,
+        };
+        self.eat(&Tok::Colon);
+        let body = self.stmt_list();
+        self.expect_kw("END_ACTION")?;
+        self.eat(&Tok::Semi);
+        unit.actions.push((
+            pou,
+            Action {
+                name,
+                body,
+                span: start.to(self.prev_span()),
+            },
+        ));
+        Ok(())
+    }
+
+    /// `INTERFACE name [EXTENDS i, ...] methods and properties END_INTERFACE`.
+    fn interface(&mut self) -> PResult<Interface> {
+        let start = self.span();
+        self.expect_kw("INTERFACE")?;
+        let name = self.ident()?;
+        let mut extends = Vec::new();
+        if self.eat_kw("EXTENDS") {
+            loop {
+                extends.push(self.qualified_ident()?);
+                if !self.eat(&Tok::Comma) {
+                    break;
+                }
+            }
+        }
+        let mut methods = Vec::new();
+        let mut properties = Vec::new();
+        loop {
+            if self.is_kw("METHOD") {
+                match self.method(true) {
+                    Ok(m) => methods.push(m),
+                    Err(Fail) => self.skip_past("END_METHOD", "END_INTERFACE"),
+                }
+            } else if self.is_kw("PROPERTY") {
+                match self.property(true) {
+                    Ok(p) => properties.push(p),
+                    Err(Fail) => self.skip_past("END_PROPERTY", "END_INTERFACE"),
+                }
+            } else if self.is_var_block_start() {
+                // CODESYS writes an empty `VAR END_VAR` into interfaces.
+                let blocks = self.var_blocks("END_INTERFACE");
+                if let Some(d) = blocks.iter().flat_map(|b| &b.decls).next() {
+                    self.diags.push(Diagnostic::error(
+                        d.span,
+                        "an interface declares methods and properties, not variables",
+                    ));
+                }
+            } else {
+                break;
+            }
+        }
+        self.expect_kw("END_INTERFACE")?;
+        self.eat(&Tok::Semi);
+        Ok(Interface {
+            name,
+            extends,
+            methods,
+            properties,
             span: start.to(self.prev_span()),
         })
     }
@@ -472,7 +970,7 @@ impl Parser<'_> {
             .attributes
             .iter_mut()
             .rev()
-            .find(|a| a.before == pos && !a.taken)?;
+            .find(|a| a.before == pos && !a.taken && !a.safe)?;
         a.taken = true;
         let span = a.span;
         let value = a.value.clone();
@@ -496,8 +994,32 @@ impl Parser<'_> {
         })
     }
 
+    /// The value of the `{attribute 'safe' := 'VALUE'}` pragma right before the current
+    /// token, if there is one (checked against the declaration by sema).
+    fn safe_attribute(&mut self) -> Option<(String, Span)> {
+        let pos = self.pos;
+        let a = self
+            .attributes
+            .iter_mut()
+            .rev()
+            .find(|a| a.before == pos && !a.taken && a.safe)?;
+        a.taken = true;
+        let span = a.span;
+        match a.value.clone() {
+            Some(v) => Some((v, span)),
+            None => {
+                self.diags.push(Diagnostic::error(
+                    span,
+                    "the attribute 'safe' needs the value: `{attribute 'safe' := '0.0'}`",
+                ));
+                None
+            }
+        }
+    }
+
     fn var_decl(&mut self) -> PResult<VarDecl> {
         let shared = self.shared_attribute();
+        let safe = self.safe_attribute();
         let start = self.span();
         let mut names = vec![self.ident()?];
         while self.eat(&Tok::Comma) {
@@ -530,6 +1052,7 @@ impl Parser<'_> {
             init,
             span: start.to(self.prev_span()),
             shared,
+            safe,
         })
     }
 
@@ -598,6 +1121,30 @@ impl Parser<'_> {
 
     fn type_ref_inner(&mut self) -> PResult<TypeRef> {
         let start = self.span();
+        // REF_TO T, POINTER TO T, REFERENCE TO T (the last two are CODESYS; POINTER and
+        // REFERENCE are keywords only before TO).
+        let ref_kind = if self.is_kw("REF_TO") {
+            Some(RefKind::RefTo)
+        } else if self.is_kw("POINTER") && matches!(self.tok_at(1), Tok::Ident(u, _) if u == "TO") {
+            Some(RefKind::Pointer)
+        } else if self.is_kw("REFERENCE") && matches!(self.tok_at(1), Tok::Ident(u, _) if u == "TO")
+        {
+            Some(RefKind::Reference)
+        } else {
+            None
+        };
+        if let Some(kind) = ref_kind {
+            self.bump();
+            if kind != RefKind::RefTo {
+                self.bump();
+            }
+            let target = self.type_ref()?;
+            return Ok(TypeRef::Ref {
+                kind,
+                target: Box::new(target),
+                span: start.to(self.prev_span()),
+            });
+        }
         if self.eat_kw("ARRAY") {
             self.expect(Tok::LBracket)?;
             let mut dims = Vec::new();
@@ -660,7 +1207,8 @@ impl Parser<'_> {
                 span: start.to(self.prev_span()),
             });
         }
-        if self.is_kw("STRING") {
+        if self.is_kw("STRING") || self.is_kw("WSTRING") {
+            let wide = self.is_kw("WSTRING");
             self.bump();
             let len = if self.eat(&Tok::LBracket) {
                 let e = self.expr()?;
@@ -673,9 +1221,9 @@ impl Parser<'_> {
             } else {
                 None
             };
-            return Ok(TypeRef::String(len, start.to(self.prev_span())));
+            return Ok(TypeRef::String(len, start.to(self.prev_span()), wide));
         }
-        let base = self.ident()?;
+        let base = self.qualified_ident()?;
         if self.eat(&Tok::LParen) {
             let lo = self.expr()?;
             self.expect(Tok::DotDot)?;
@@ -854,7 +1402,7 @@ impl Parser<'_> {
                 None
             };
             self.expect(Tok::Colon)?;
-            let program_type = self.ident()?;
+            let program_type = self.qualified_ident()?;
             if self.eat(&Tok::LParen) {
                 // Parameter connections to globals are not supported; skip them.
                 while !matches!(self.tok(), Tok::RParen | Tok::Eof | Tok::Semi) {
@@ -884,17 +1432,7 @@ impl Parser<'_> {
             if STMT_END.contains(&u.as_str()) {
                 return true;
             }
-            if [
-                "END_CONFIGURATION",
-                "PROGRAM",
-                "FUNCTION",
-                "FUNCTION_BLOCK",
-                "TYPE",
-                "CONFIGURATION",
-                "VAR_GLOBAL",
-            ]
-            .contains(&u.as_str())
-            {
+            if u == "END_CONFIGURATION" || (TOP.contains(&u.as_str()) && u != "USING") {
                 return true;
             }
         }
@@ -1084,6 +1622,7 @@ impl Parser<'_> {
         } else {
             if let Tok::Ident(u, _) = self.tok()
                 && RESERVED.contains(&u.as_str())
+                && !matches!(u.as_str(), "THIS" | "SUPER")
             {
                 return Err(self.error_here("a statement"));
             }
@@ -1091,6 +1630,11 @@ impl Parser<'_> {
             if self.eat(&Tok::Assign) {
                 let value = self.expr()?;
                 StmtKind::Assign { target, value }
+            } else if self.is_kw("REF") && matches!(self.tok_at(1), Tok::Eq) {
+                self.bump();
+                self.bump();
+                let value = self.expr()?;
+                StmtKind::RefAssign { target, value }
             } else if matches!(target.kind, ExprKind::Call { .. }) {
                 StmtKind::Call(target)
             } else {
@@ -1225,8 +1769,27 @@ impl Parser<'_> {
     fn postfix(&mut self) -> PResult<Expr> {
         let mut e = self.primary()?;
         loop {
-            if matches!(self.tok(), Tok::Dot) {
+            if matches!(self.tok(), Tok::Caret) {
+                let span = e.span.to(self.span());
                 self.bump();
+                e = Expr {
+                    kind: ExprKind::Deref(Box::new(e)),
+                    span,
+                };
+            } else if matches!(self.tok(), Tok::Dot) {
+                self.bump();
+                if let Some((width, index)) = self.partial_access()? {
+                    let span = e.span.to(self.prev_span());
+                    e = Expr {
+                        kind: ExprKind::Bits {
+                            base: Box::new(e),
+                            width,
+                            index,
+                        },
+                        span,
+                    };
+                    continue;
+                }
                 let member = self.ident()?;
                 let span = e.span.to(member.span);
                 e = Expr {
@@ -1248,7 +1811,10 @@ impl Parser<'_> {
             } else if matches!(self.tok(), Tok::LParen)
                 && matches!(
                     e.kind,
-                    ExprKind::Name(_) | ExprKind::Member(..) | ExprKind::Index(..)
+                    ExprKind::Name(_)
+                        | ExprKind::Member(..)
+                        | ExprKind::Index(..)
+                        | ExprKind::Deref(..)
                 )
             {
                 self.bump();
@@ -1274,6 +1840,38 @@ impl Parser<'_> {
                 return Ok(e);
             }
         }
+    }
+
+    /// After a `.`: a partial access `N` (bit N) or `%X3`, `%B1`, `%W0`, `%D1`, `%L0`, as
+    /// (width in bits, index); `None` when a member name follows instead.
+    fn partial_access(&mut self) -> PResult<Option<(u8, u32)>> {
+        let (width, index) = match self.tok().clone() {
+            Tok::Int(n) => (1, n),
+            Tok::Direct(text) => {
+                let width = match text.as_bytes().first() {
+                    Some(b'X') => 1,
+                    Some(b'B') => 8,
+                    Some(b'W') => 16,
+                    Some(b'D') => 32,
+                    Some(b'L') => 64,
+                    _ => 0,
+                };
+                match text.get(1..).unwrap_or("").parse::<u128>() {
+                    Ok(n) if width != 0 => (width, n),
+                    _ => {
+                        return Err(self.error_here(
+                            "a partial access such as `%X3`, `%B1`, `%W0`, `%D1` or `%L0`",
+                        ));
+                    }
+                }
+            }
+            _ => return Ok(None),
+        };
+        let Ok(index) = u32::try_from(index) else {
+            return Err(self.error_here("a bit number that fits the variable"));
+        };
+        self.bump();
+        Ok(Some((width, index)))
     }
 
     fn arg(&mut self) -> PResult<Arg> {
@@ -1307,7 +1905,9 @@ impl Parser<'_> {
             Tok::Int(v) => ExprKind::Int(v),
             Tok::Real(v) => ExprKind::Real(v),
             Tok::Time(v) => ExprKind::Time(v),
+            Tok::Temporal(e, v) => ExprKind::Temporal(e, v),
             Tok::Str(s) => ExprKind::Str(s),
+            Tok::WStr(s) => ExprKind::WStr(s),
             Tok::LParen => {
                 self.bump();
                 let e = self.expr()?;
@@ -1337,6 +1937,10 @@ impl Parser<'_> {
                     },
                     Tok::Str(s) => Expr {
                         kind: ExprKind::Str(s),
+                        span: vspan,
+                    },
+                    Tok::WStr(s) => Expr {
+                        kind: ExprKind::WStr(s),
                         span: vspan,
                     },
                     Tok::Ident(u, _) if u == "TRUE" => Expr {
@@ -1373,6 +1977,9 @@ impl Parser<'_> {
             Tok::Ident(u, o) => match u.as_str() {
                 "TRUE" => ExprKind::Bool(true),
                 "FALSE" => ExprKind::Bool(false),
+                "NULL" => ExprKind::Null,
+                "THIS" => ExprKind::This,
+                "SUPER" => ExprKind::Super,
                 _ if RESERVED.contains(&u.as_str()) => return Err(self.error_here("an expression")),
                 _ => ExprKind::Name(Ident {
                     name: u,
@@ -1410,6 +2017,48 @@ mod tests {
             panic!("{value:?}")
         };
         assert!(matches!(l.kind, ExprKind::Unary(UnOp::Neg, _)));
+    }
+
+    #[test]
+    fn partial_access_forms() {
+        let (u, d) = parse_src("PROGRAM P x.3 := x.%B1.%X2; END_PROGRAM");
+        assert!(d.is_empty(), "{d:?}");
+        let StmtKind::Assign { target, value } = &u.pous[0].body[0].kind else {
+            panic!()
+        };
+        assert!(matches!(
+            target.kind,
+            ExprKind::Bits {
+                width: 1,
+                index: 3,
+                ..
+            }
+        ));
+        let ExprKind::Bits {
+            base,
+            width: 1,
+            index: 2,
+        } = &value.kind
+        else {
+            panic!("{value:?}")
+        };
+        assert!(matches!(
+            base.kind,
+            ExprKind::Bits {
+                width: 8,
+                index: 1,
+                ..
+            }
+        ));
+        for bad in [
+            "x.% := 1;",
+            "x.%Q1 := 1;",
+            "x.%B := 1;",
+            "x.%X99999999999 := 1;",
+        ] {
+            let (_, d) = parse_src(&format!("PROGRAM P {bad} END_PROGRAM"));
+            assert_eq!(d.len(), 1, "{bad}: {d:?}");
+        }
     }
 
     #[test]

@@ -52,7 +52,7 @@ pub struct VarDef {
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum LayoutState {
+pub(crate) enum LayoutState {
     NotStarted,
     InProgress,
     Done,
@@ -75,12 +75,99 @@ pub struct PouDef {
     pub reinit_start: u32,
     /// Whether this POU comes from the built-in prelude.
     pub builtin: bool,
-    state: LayoutState,
+    pub(crate) state: LayoutState,
+    /// A method, property accessor or action: what it belongs to.
+    pub member: Option<Member>,
+    /// A function block's base (`EXTENDS`).
+    pub base: Option<usize>,
+    /// Index in [`Program::classes`] when instances carry a class id (see `classes`).
+    pub class: Option<usize>,
+    /// ABSTRACT / FINAL function block.
+    pub is_abstract: bool,
+    pub is_final: bool,
+}
+
+/// What kind of member of a function block (or program) a POU is.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Hash, PartialOrd, Ord)]
+pub enum MemberKind {
+    Method,
+    /// The GET accessor of a property.
+    Getter,
+    /// The SET accessor of a property.
+    Setter,
+    Action,
+}
+
+/// Where a member's declaration is in the unit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum MemberSource {
+    /// `unit.pous[pou].methods[index]`.
+    Method(usize, usize),
+    /// `unit.pous[pou].properties[index]` (its GET or SET part).
+    Property(usize, usize),
+    /// `unit.pous[pou].actions[index]`.
+    Action(usize, usize),
+    /// `unit.actions[index]`.
+    UnitAction(usize),
+}
+
+/// A method, property accessor or action: a POU of its own that runs on an instance of its
+/// owner (the frame base register points at the instance). Methods and accessors have a
+/// static frame of their own for their parameters and variables, as functions do.
+#[derive(Debug, Clone)]
+pub struct Member {
+    pub owner: usize,
+    pub kind: MemberKind,
+    /// The method's, property's or action's name (upper case) and as written.
+    pub name: String,
+    pub text: String,
+    pub access: Access,
+    pub is_abstract: bool,
+    pub is_final: bool,
+    pub source: MemberSource,
+}
+
+/// A function block whose instances carry their class id in their first four bytes (it
+/// implements interfaces, extends another block or is extended): what `CALL_VIRT` needs.
+#[derive(Debug, Clone)]
+pub struct ClassDef {
+    pub pou: usize,
+    /// Every interface it implements, directly, through its base or through interfaces
+    /// extending others.
+    pub interfaces: Vec<usize>,
+    /// `(slot, method POU)`: what `CALL_VIRT slot` runs on its instances.
+    pub dispatch: Vec<(u16, usize)>,
+}
+
+/// A method or property accessor an INTERFACE declares.
+#[derive(Debug, Clone)]
+pub struct InterfaceMember {
+    pub name: String,
+    pub text: String,
+    pub kind: MemberKind,
+    pub return_type: Option<Type>,
+    /// Parameters and outputs in frame order (as a method implementing it lays them out).
+    pub params: Vec<VarDef>,
+    pub slot: u16,
+    pub span: Span,
 }
 
 impl PouDef {
     pub fn var(&self, name: &str) -> Option<&VarDef> {
         self.vars.iter().find(|v| v.name == name)
+    }
+
+    /// A parameter by name as a caller writes it: the standard counters (CTU, CTD, CTUD)
+    /// also take CODESYS's names RESET for R and LOAD for LD.
+    pub fn param(&self, name: &str) -> Option<&VarDef> {
+        self.var(name).or_else(|| {
+            let alias = match (self.builtin, name) {
+                (true, "RESET") => "R",
+                (true, "LOAD") => "LD",
+                _ => return None,
+            };
+            self.var(alias)
+        })
     }
 
     /// Positional parameters (inputs, then in-outs, then outputs in declaration order is what
@@ -121,6 +208,8 @@ pub enum ConstVal {
     Real(f64),
     Bool(bool),
     Time(i128),
+    /// A date/time value other than TIME: its type and nanoseconds.
+    Temporal(Elem, i128),
     Str(String),
 }
 
@@ -144,6 +233,48 @@ pub struct Program {
     /// The globals shared with another PLC project (`{attribute 'shared'}`), in declaration
     /// order.
     pub shared: Vec<SharedGlobal>,
+    /// The safe values of located outputs given by `{attribute 'safe' := 'VALUE'}`.
+    pub safe: Vec<SafeDefault>,
+    /// INTERFACE declarations.
+    pub interfaces: Vec<InterfaceDef>,
+    /// Function blocks whose instances carry a class id (see [`ClassDef`]).
+    pub classes: Vec<ClassDef>,
+    /// The dispatch slot of each method (and accessor) POU that can be called dynamically.
+    pub slots: HashMap<usize, u16>,
+    /// Number of slots handed out.
+    pub slot_count: u16,
+    /// Interfaces by upper-case name.
+    pub interface_by_name: HashMap<String, usize>,
+    /// Methods, accessors and actions by owner, name and kind.
+    pub members: HashMap<(usize, String, MemberKind), usize>,
+}
+
+/// An INTERFACE.
+#[derive(Debug, Clone)]
+pub struct InterfaceDef {
+    pub name: String,
+    pub text: String,
+    pub span: Span,
+    /// Index in `unit.interfaces`.
+    pub ast: usize,
+    /// The interfaces it extends (directly).
+    pub extends: Vec<usize>,
+    /// Its own methods and accessors (not those of the interfaces it extends).
+    pub members: Vec<InterfaceMember>,
+}
+
+/// A located output's safe value from its `{attribute 'safe'}` pragma.
+#[derive(Debug, Clone)]
+pub struct SafeDefault {
+    /// The PROGRAM declaring it (its VAR), `None` for a global.
+    pub pou: Option<usize>,
+    /// Its name (upper-cased) and as written.
+    pub name: String,
+    pub text: String,
+    /// Bytes of its address (`%QX` and `%QB` 1, `%QW` 2, ...).
+    pub width: u8,
+    /// The value's bits (the variable's little-endian cell).
+    pub value: u64,
 }
 
 /// A global variable shared with another PLC project.
@@ -156,8 +287,90 @@ pub struct SharedGlobal {
     pub span: Span,
 }
 
+/// Bytes at the start of an instance of a class that hold its class id (a `u32`, padded).
+pub const CLASS_HEADER: u32 = 8;
+
+/// Bytes at the start of data memory that hold no variable, so that the address 0 of a
+/// reference to a function-block instance or an interface value means NULL.
+pub const NULL_GUARD: u32 = 8;
+
 /// Upper limit of data memory for one program (the PLC partition is small).
 pub const MAX_DATA: u32 = 16 << 20;
+
+/// Finds the declared name (among `declared`) that `name` refers to, for names of POUs,
+/// types and interfaces that may be qualified by a NAMESPACE: the name as written; for a
+/// qualified name `A.B.X` that is not declared, `B.X`, then `X` (a CODESYS library
+/// qualifier such as `Standard.TON` names the block this compiler provides); for a plain
+/// name, the one `N.X` of that name declared in a NAMESPACE. `Err` lists the candidates when
+/// a plain name is declared in several namespaces.
+pub fn qualified<'a>(
+    name: &str,
+    declared: impl Iterator<Item = &'a String> + Clone,
+) -> Result<Option<String>, Vec<String>> {
+    if declared.clone().any(|d| d == name) {
+        return Ok(Some(name.to_string()));
+    }
+    if let Some((_, rest)) = name.split_once('.') {
+        return qualified(rest, declared);
+    }
+    let suffix = format!(".{name}");
+    let found: Vec<String> = declared.filter(|d| d.ends_with(&suffix)).cloned().collect();
+    match found.len() {
+        0 => Ok(None),
+        1 => Ok(found.into_iter().next()),
+        _ => Err(found),
+    }
+}
+
+/// Gives `vars` their frame offsets from `first_offset` on and returns the frame size and
+/// where the part re-initialised on every call starts. Frame order: parameters first, then
+/// outputs and locals, temporaries last. A method's result and outputs come before its
+/// locals, so that methods of the same signature (overrides, implementations of one
+/// interface method) agree on where the caller finds them.
+pub(crate) fn frame_layout(
+    prog: &Program,
+    vars: &mut [VarDef],
+    kind: PouKind,
+    is_method: bool,
+    first_offset: u32,
+) -> (u32, u32) {
+    let group = |v: &VarDef| match v.kind {
+        VarKind::Input | VarKind::InOut => 0,
+        VarKind::Temp => 3,
+        VarKind::Output if is_method => 1,
+        _ => 2,
+    };
+    let mut off = first_offset;
+    let mut reinit_start = None;
+    for g in 0..4 {
+        for v in vars.iter_mut().filter(|v| group(v) == g) {
+            if v.kind == VarKind::External || v.kind == VarKind::Global {
+                continue;
+            }
+            let (sz, al) = if v.kind == VarKind::InOut {
+                (4, 4)
+            } else {
+                prog.size_align(&v.ty)
+            };
+            off = align_up(off, al);
+            let first_reinit = match kind {
+                PouKind::Function => g >= 1,
+                _ => g == 3,
+            };
+            if first_reinit && reinit_start.is_none() {
+                reinit_start = Some(off);
+            }
+            v.offset = off;
+            off = off.saturating_add(sz);
+        }
+        if g == 0 && kind == PouKind::Function {
+            off = align_up(off, 8);
+            reinit_start = Some(off);
+        }
+    }
+    let frame_size = align_up(off, 8);
+    (frame_size, reinit_start.unwrap_or(frame_size))
+}
 
 pub fn align_up(v: u32, a: u32) -> u32 {
     let a = a.max(1);
@@ -169,7 +382,11 @@ impl Program {
         match ty {
             Type::Elem(e) | Type::Subrange(e, ..) => (e.size(), e.size()),
             Type::Enum(_) | Type::Exception => (4, 4),
-            Type::String(n) => (4 + n, 2),
+            // Header, text and the terminator byte CODESYS code writes through pointers.
+            Type::String(n) => (5 + n, 2),
+            Type::WString(n) => (4 + 2 * n, 2),
+            Type::Ref(_) | Type::Reference(_) | Type::Interface(_) => (8, 8),
+            Type::Null => (0, 1),
             Type::Array(a) => {
                 let (s, al) = self.size_align(&a.elem);
                 let stride = align_up(s, al);
@@ -193,6 +410,7 @@ impl Program {
         match ty {
             Type::Elem(e) => e.name().to_string(),
             Type::String(n) => format!("STRING[{n}]"),
+            Type::WString(n) => format!("WSTRING[{n}]"),
             Type::Array(a) => {
                 let dims: Vec<String> = a.dims.iter().map(|(l, h)| format!("{l}..{h}")).collect();
                 format!("ARRAY[{}] OF {}", dims.join(","), self.type_name(&a.elem))
@@ -202,9 +420,20 @@ impl Program {
             Type::Subrange(e, lo, hi) => format!("{}({lo}..{hi})", e.name()),
             Type::Fb(i) => self.pous[*i].text.clone(),
             Type::Exception => "__EXCEPTION".into(),
+            Type::Ref(t) => format!("REF_TO {}", self.type_name(t)),
+            Type::Reference(t) => format!("REFERENCE TO {}", self.type_name(t)),
+            Type::Interface(i) => self.interface_name(*i),
+            Type::Null => "NULL".into(),
             Type::Void => "no value".into(),
             Type::Error => "?".into(),
         }
+    }
+
+    /// The name of interface `i` as written.
+    pub fn interface_name(&self, i: usize) -> String {
+        self.interfaces
+            .get(i)
+            .map_or_else(|| "?".into(), |d| d.text.clone())
     }
 
     pub fn global(&self, name: &str) -> Option<&VarDef> {
@@ -239,33 +468,43 @@ impl Program {
 pub fn analyse(
     unit: &Unit,
     prelude_pous: usize,
-    program_override: Option<&str>,
+    opts: &crate::Options,
     diags: &mut Diagnostics,
 ) -> Program {
     let mut s = Sema {
         unit,
-        prog: Program::default(),
+        // Data address 0 is never a variable: a zero reference or interface value is NULL.
+        prog: Program {
+            data_size: NULL_GUARD,
+            ..Program::default()
+        },
         diags,
         type_state: HashMap::new(),
+        structs_in_progress: HashMap::new(),
     };
     s.declare_types();
     s.declare_pous(prelude_pous);
+    s.declare_members();
+    s.declare_interfaces();
     // Globals first: their CONSTANTs may size arrays in POUs (FB types they use are laid
     // out on demand).
     s.declare_globals();
     for i in 0..s.prog.pous.len() {
         s.layout_pou(i);
     }
-    s.configure(program_override);
+    s.finish_classes();
+    s.configure(opts.program.as_deref(), opts.library);
     s.prog
 }
 
-struct Sema<'a> {
-    unit: &'a Unit,
-    prog: Program,
-    diags: &'a mut Diagnostics,
+pub(crate) struct Sema<'a> {
+    pub(crate) unit: &'a Unit,
+    pub(crate) prog: Program,
+    pub(crate) diags: &'a mut Diagnostics,
     /// Resolution state of named TYPE declarations (cycle detection).
     type_state: HashMap<String, LayoutState>,
+    /// Structures being laid out (a reference to one may appear in its own members).
+    structs_in_progress: HashMap<String, usize>,
 }
 
 /// Scope used to look up names inside constant expressions.
@@ -287,13 +526,16 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         ExprKind::Real(v) => Real(*v),
         ExprKind::Bool(b) => Bool(*b),
         ExprKind::Time(t) => Time(*t),
-        ExprKind::Str(s) => Str(s.clone()),
+        ExprKind::Temporal(e, t) => Temporal(*e, *t),
+        ExprKind::Str(s) | ExprKind::WStr(s) => Str(s.clone()),
         ExprKind::Typed(ty, inner) => {
             if let Some(elem) = Elem::from_name(&ty.name) {
                 let v = const_eval(prog, scope, inner)?;
                 match (v, elem) {
                     (Int(i), e) if e.is_real() => Real(i as f64),
                     (Int(i), Elem::Bool) => Bool(i != 0),
+                    // `CHAR#'a'`: the character's code.
+                    (Str(s), e) if e.is_char() => Int(single_char(&s)?),
                     (v, _) => v,
                 }
             } else if let ExprKind::Name(n) = &inner.kind {
@@ -325,6 +567,7 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
             Int(i) => Int(-i),
             Real(r) => Real(-r),
             Time(t) => Time(-t),
+            Temporal(Elem::LTime, t) => Temporal(Elem::LTime, -t),
             _ => return None,
         },
         ExprKind::Unary(UnOp::Not, x) => match const_eval(prog, scope, x)? {
@@ -365,6 +608,11 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
                     BinOp::Sub => Time(x.checked_sub(y)?),
                     _ => return None,
                 },
+                (Temporal(Elem::LTime, x), Temporal(Elem::LTime, y)) => match op {
+                    BinOp::Add => Temporal(Elem::LTime, x.checked_add(y)?),
+                    BinOp::Sub => Temporal(Elem::LTime, x.checked_sub(y)?),
+                    _ => return None,
+                },
                 (Bool(x), Bool(y)) => match op {
                     BinOp::And => Bool(x & y),
                     BinOp::Or => Bool(x | y),
@@ -376,6 +624,13 @@ pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<Co
         }
         _ => return None,
     })
+}
+
+/// The code of a one-character string (`CHAR#'a'`, `WCHAR#"ä"`).
+pub fn single_char(s: &str) -> Option<i128> {
+    let mut chars = s.chars();
+    let c = chars.next()?;
+    chars.next().is_none().then_some(c as i128)
 }
 
 /// Local constants of a POU being declared (for bounds like `ARRAY[1..N]` with a VAR CONSTANT N).
@@ -453,6 +708,11 @@ impl Sema<'_> {
                 reinit_start: 0,
                 builtin: i < prelude_pous,
                 state: LayoutState::NotStarted,
+                member: None,
+                base: None,
+                class: None,
+                is_abstract: p.modifiers.is_abstract,
+                is_final: p.modifiers.is_final,
             });
         }
     }
@@ -524,11 +784,13 @@ impl Sema<'_> {
                     size: 0,
                     align: 1,
                 });
+                self.structs_in_progress.insert(name.to_string(), idx);
                 let mut defs = Vec::new();
                 let mut off = 0u32;
                 let mut align = 1;
                 for m in members {
                     self.no_shared_attribute(m, "structure members");
+                    self.safe_default(m, &Type::Error, None, None);
                     let mty = self.resolve_type(&m.ty, &[]);
                     if matches!(mty, Type::Fb(_)) {
                         self.diags.error(
@@ -559,6 +821,7 @@ impl Sema<'_> {
                         align = align.max(al);
                     }
                 }
+                self.structs_in_progress.remove(name);
                 let s = &mut self.prog.structs[idx];
                 s.members = defs;
                 s.size = align_up(off, align);
@@ -603,16 +866,14 @@ impl Sema<'_> {
                 match id.name.as_str() {
                     "STRING" => return Type::String(DEFAULT_STRING_LEN),
                     "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" | "LTIME" | "DATE" | "TIME_OF_DAY" | "TOD" | "DATE_AND_TIME"
-                    | "DT" | "CHAR" | "WCHAR" => {
-                        self.diags
-                            .error(id.span, format!("type `{}` is not supported", id.text));
-                        return Type::Error;
-                    }
+                    "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
                     _ => {}
                 }
                 if let Some(t) = self.resolve_named_type(&id.name, id.span) {
                     return t;
+                }
+                if let Some(&i) = self.prog.interface_by_name.get(&id.name) {
+                    return Type::Interface(i);
                 }
                 if let Some(&i) = self.prog.pou_by_name.get(&id.name) {
                     if self.prog.pous[i].kind == PouKind::FunctionBlock {
@@ -625,13 +886,48 @@ impl Sema<'_> {
                     );
                     return Type::Error;
                 }
+                let declared: Vec<String> = self
+                    .type_state
+                    .keys()
+                    .chain(self.prog.interface_by_name.keys())
+                    .chain(self.prog.pou_by_name.keys())
+                    .cloned()
+                    .collect();
+                match qualified(&id.name, declared.iter()) {
+                    Ok(Some(full)) if full != id.name => {
+                        let id = Ident {
+                            name: full,
+                            ..id.clone()
+                        };
+                        return self.resolve_type(&TypeRef::Named(id), locals);
+                    }
+                    Err(candidates) => {
+                        self.diags.error(
+                            id.span,
+                            format!(
+                                "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+                                id.text,
+                                candidates.join(", ")
+                            ),
+                        );
+                        return Type::Error;
+                    }
+                    _ => {}
+                }
                 self.diags
                     .error(id.span, format!("unknown type `{}`", id.text));
                 Type::Error
             }
-            TypeRef::String(len, _) => match len {
+            TypeRef::String(len, _, wide) => match len {
+                None if *wide => Type::WString(DEFAULT_STRING_LEN),
                 None => Type::String(DEFAULT_STRING_LEN),
                 Some(e) => match self.const_int(e, locals, "string length") {
+                    Some(n) if *wide && (1..=32000).contains(&n) => Type::WString(n as u32),
+                    Some(_) if *wide => {
+                        self.diags
+                            .error(e.span, "WSTRING length must be between 1 and 32000");
+                        Type::Error
+                    }
                     Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
                     Some(_) => {
                         self.diags
@@ -698,6 +994,23 @@ impl Sema<'_> {
                     _ => Type::Error,
                 }
             }
+            TypeRef::Ref { kind, target, span } => {
+                let t = self.resolve_ref_target(target, locals);
+                if matches!(t, Type::Reference(_))
+                    || (*kind == RefKind::Reference && matches!(t, Type::Ref(_)))
+                {
+                    self.diags
+                        .error(*span, "a REFERENCE TO cannot refer to a reference");
+                    return Type::Error;
+                }
+                if t.is_error() {
+                    return Type::Error;
+                }
+                match kind {
+                    RefKind::Reference => Type::Reference(Box::new(t)),
+                    _ => Type::Ref(Box::new(t)),
+                }
+            }
             TypeRef::Enum { span, .. } | TypeRef::Struct { span, .. } => {
                 self.diags.error(
                     *span,
@@ -708,26 +1021,66 @@ impl Sema<'_> {
         }
     }
 
+    /// The target type of a reference: like [`Sema::resolve_type`], but a function block or
+    /// a structure still being laid out may be referred to (a reference has a fixed size),
+    /// which lets a structure or block hold a reference to its own type.
+    fn resolve_ref_target(&mut self, t: &TypeRef, locals: &[VarDef]) -> Type {
+        if let TypeRef::Named(id) = t {
+            if let Some(&i) = self.structs_in_progress.get(&id.name) {
+                return Type::Struct(i);
+            }
+            if let Some(&i) = self.prog.pou_by_name.get(&id.name)
+                && self.prog.pous[i].kind == PouKind::FunctionBlock
+            {
+                return Type::Fb(i);
+            }
+        }
+        self.resolve_type(t, locals)
+    }
+
     /// Lays out the frame of POU `i` (recursively for the FB types it contains).
-    fn layout_pou(&mut self, i: usize) {
+    pub(crate) fn layout_pou(&mut self, i: usize) {
         match self.prog.pous[i].state {
             LayoutState::Done => return,
             LayoutState::InProgress => {
                 let span = self.prog.pous[i].span;
                 let name = self.prog.pous[i].text.clone();
-                self.diags.error(
-                    span,
-                    format!("function block `{name}` contains an instance of itself"),
-                );
+                let what = if self.prog.pous[i].base.is_some() {
+                    format!(
+                        "function block `{name}` extends itself or contains an instance of itself"
+                    )
+                } else {
+                    format!("function block `{name}` contains an instance of itself")
+                };
+                self.diags.error(span, what);
                 return;
             }
             LayoutState::NotStarted => {}
         }
         self.prog.pous[i].state = LayoutState::InProgress;
-        let ast = &self.unit.pous[self.prog.pous[i].ast];
-        let kind = ast.kind;
+        let source = crate::classes::pou_source(self.unit, &self.prog.pous[i]);
+        let kind = self.prog.pous[i].kind;
+        let member_kind = self.prog.pous[i].member.as_ref().map(|m| m.kind);
+        if member_kind == Some(MemberKind::Action) {
+            // An action runs on its owner's variables and has none of its own.
+            let p = &mut self.prog.pous[i];
+            p.state = LayoutState::Done;
+            return;
+        }
+        let is_method = member_kind.is_some();
+        // Inherited variables keep their place; own ones follow the base's frame. Instances
+        // of a class start with its class id.
+        let mut inherited: Vec<VarDef> = Vec::new();
+        let mut first_offset = 0u32;
+        if let Some(b) = self.prog.pous[i].base {
+            self.layout_pou(b);
+            inherited = self.prog.pous[b].vars.clone();
+            first_offset = align_up(self.prog.pous[b].frame_size, 8);
+        } else if self.prog.pous[i].class.is_some() {
+            first_offset = CLASS_HEADER;
+        }
         let mut vars: Vec<VarDef> = Vec::new();
-        if let Some(rt) = &ast.return_type {
+        if let Some(rt) = source.return_type {
             let t = self.resolve_type(rt, &[]);
             if matches!(t, Type::Fb(_)) {
                 self.diags.error(
@@ -736,11 +1089,13 @@ impl Sema<'_> {
                 );
             }
             self.prog.pous[i].return_type = Some(t.clone());
-            // The result variable carries the function's name.
+            // The result variable carries the function's (method's, property's) name, without
+            // its namespace.
+            let last = |n: &str| n.rsplit('.').next().unwrap_or(n).to_string();
             vars.push(VarDef {
-                name: ast.name.name.clone(),
-                text: ast.name.text.clone(),
-                span: ast.name.span,
+                name: last(&source.name.name),
+                text: last(&source.name.text),
+                span: source.name.span,
                 ty: t,
                 offset: 0,
                 kind: VarKind::Output,
@@ -750,7 +1105,47 @@ impl Sema<'_> {
                 retain: false,
             });
         }
-        for block in &ast.var_blocks {
+        if member_kind == Some(MemberKind::Setter) {
+            // The value being assigned, under the property's name.
+            let pou = &self.prog.pous[i];
+            let member = pou.member.clone();
+            let t = self.property_type_of(member.as_ref());
+            vars.push(VarDef {
+                name: source.name.name.clone(),
+                text: source.name.text.clone(),
+                span: source.name.span,
+                ty: t,
+                offset: 0,
+                kind: VarKind::Input,
+                constant: false,
+                init: None,
+                location: None,
+                retain: false,
+            });
+        }
+        let what = if is_method { "a METHOD" } else { "a FUNCTION" };
+        // The POU's CONSTANTs may size arrays declared before them.
+        let constants: Vec<VarDef> = source
+            .var_blocks
+            .iter()
+            .filter(|b| b.constant)
+            .flat_map(|b| &b.decls)
+            .flat_map(|d| {
+                d.names.iter().map(|n| VarDef {
+                    name: n.name.clone(),
+                    text: n.text.clone(),
+                    span: n.span,
+                    ty: Type::Error,
+                    offset: 0,
+                    kind: VarKind::Local,
+                    constant: true,
+                    init: d.init.clone(),
+                    location: None,
+                    retain: false,
+                })
+            })
+            .collect();
+        for block in source.var_blocks {
             let allowed = match kind {
                 PouKind::Program => !matches!(block.kind, VarKind::InOut),
                 PouKind::FunctionBlock => !matches!(block.kind, VarKind::Global),
@@ -769,13 +1164,14 @@ impl Sema<'_> {
             }
             for d in &block.decls {
                 self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
-                let ty = self.resolve_type(&d.ty, &vars);
+                let ty = self.resolve_type(&d.ty, &constants);
                 if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
                     self.diags.error(
                         d.ty.span(),
-                        "function block instances are not allowed inside a FUNCTION",
+                        format!("function block instances are not allowed inside {what}"),
                     );
                 }
+                self.no_abstract_instance(d, &ty);
                 if block.kind == VarKind::InOut && d.init.is_some() {
                     self.diags
                         .error(d.span, "VAR_IN_OUT variables cannot have initial values");
@@ -784,12 +1180,22 @@ impl Sema<'_> {
                     self.diags
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
+                self.no_retained_reference(block, d, &ty);
                 let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
                 let location = self.location(d, &ty, may_locate);
+                self.safe_default(d, &ty, location, Some(i));
                 for n in &d.names {
                     if vars.iter().any(|v| v.name == n.name) {
                         self.diags
                             .error(n.span, format!("`{}` is declared twice", n.text));
+                        continue;
+                    }
+                    if inherited.iter().any(|v| v.name == n.name) {
+                        let msg = format!(
+                            "`{}` is already a variable of the base function block",
+                            n.text
+                        );
+                        self.diags.error(n.span, msg);
                         continue;
                     }
                     vars.push(VarDef {
@@ -807,45 +1213,13 @@ impl Sema<'_> {
                 }
             }
         }
-        // Frame order: parameters first, then outputs and locals, temporaries last.
-        let group = |v: &VarDef| match v.kind {
-            VarKind::Input | VarKind::InOut => 0,
-            VarKind::Temp => 2,
-            _ => 1,
-        };
-        let mut off = 0u32;
-        let mut reinit_start = None;
-        for g in 0..3 {
-            for v in vars.iter_mut().filter(|v| group(v) == g) {
-                if v.kind == VarKind::External || v.kind == VarKind::Global {
-                    continue;
-                }
-                let (sz, al) = if v.kind == VarKind::InOut {
-                    (4, 4)
-                } else {
-                    self.prog.size_align(&v.ty)
-                };
-                off = align_up(off, al);
-                let first_reinit = match kind {
-                    PouKind::Function => g >= 1,
-                    _ => g == 2,
-                };
-                if first_reinit && reinit_start.is_none() {
-                    reinit_start = Some(off);
-                }
-                v.offset = off;
-                off = off.saturating_add(sz);
-            }
-            if g == 0 && kind == PouKind::Function {
-                off = align_up(off, 8);
-                reinit_start = Some(off);
-            }
-        }
-        let frame_size = align_up(off, 8);
+        let (frame_size, reinit_start) =
+            frame_layout(&self.prog, &mut vars, kind, is_method, first_offset);
+        inherited.extend(vars);
         let p = &mut self.prog.pous[i];
-        p.vars = vars;
+        p.vars = inherited;
         p.frame_size = frame_size;
-        p.reinit_start = reinit_start.unwrap_or(frame_size);
+        p.reinit_start = reinit_start;
         p.state = LayoutState::Done;
     }
 
@@ -857,7 +1231,9 @@ impl Sema<'_> {
                     self.diags
                         .error(d.span, "a CONSTANT needs an initial value");
                 }
+                self.no_retained_reference(block, d, &ty);
                 let location = self.location(d, &ty, true);
+                self.safe_default(d, &ty, location, None);
                 let shared = self.shared_global(d, block, &ty);
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
@@ -888,6 +1264,75 @@ impl Sema<'_> {
                     });
                 }
             }
+        }
+    }
+
+    /// A RETAIN variable cannot hold references: a reference names a variable of this build
+    /// of the program, which a warm restart after a download would not have.
+    fn no_retained_reference(&mut self, block: &VarBlock, d: &VarDecl, ty: &Type) {
+        if block.retain && self.holds_references(ty, 0) {
+            self.diags.error(
+                d.ty.span(),
+                "a RETAIN variable cannot hold references or interface values (they name variables of this build of the program, which a restart after a download may not have)",
+            );
+        }
+    }
+
+    fn holds_references(&self, ty: &Type, depth: u32) -> bool {
+        match ty {
+            Type::Ref(_) | Type::Reference(_) | Type::Interface(_) => true,
+            Type::Array(a) => self.holds_references(&a.elem, depth),
+            Type::Struct(i) => self.prog.structs[*i]
+                .members
+                .iter()
+                .any(|m| self.holds_references(&m.ty, depth)),
+            Type::Fb(i) if depth < 32 => self.prog.pous[*i]
+                .vars
+                .iter()
+                .any(|v| v.kind != VarKind::InOut && self.holds_references(&v.ty, depth + 1)),
+            _ => false,
+        }
+    }
+
+    /// Records the `{attribute 'safe' := 'VALUE'}` of a located output (declared in `pou`,
+    /// or a global); reports one on any other declaration or with a value that does not fit.
+    fn safe_default(
+        &mut self,
+        d: &VarDecl,
+        ty: &Type,
+        location: Option<Location>,
+        pou: Option<usize>,
+    ) {
+        let Some((value, span)) = &d.safe else { return };
+        let Some(location) = location.filter(|l| l.area == plc_vm::located::Area::Output) else {
+            if d.at.is_none() || !ty.is_error() {
+                self.diags.error(
+                    *span,
+                    "the attribute 'safe' gives a located output (`AT %Q...`) the value it takes when the outputs go safe; this declaration is not one",
+                );
+            }
+            return;
+        };
+        let Type::Elem(e) = ty else { return };
+        match crate::monitor::parse_elem(*e, value) {
+            Ok(cell) => {
+                let bits = location.width.bytes() * 8;
+                let cell = if bits >= 64 {
+                    cell
+                } else {
+                    cell & ((1u64 << bits) - 1)
+                };
+                for n in &d.names {
+                    self.prog.safe.push(SafeDefault {
+                        pou,
+                        name: n.name.clone(),
+                        text: n.text.clone(),
+                        width: location.width.bytes() as u8,
+                        value: cell,
+                    });
+                }
+            }
+            Err(why) => self.diags.error(*span, format!("the safe value: {why}")),
         }
     }
 
@@ -1037,7 +1482,7 @@ impl Sema<'_> {
 
     /// Builds the task list from the CONFIGURATION, or one implicit cyclic task running the
     /// single PROGRAM (`program_override` picks one when there are several).
-    fn configure(&mut self, program_override: Option<&str>) {
+    fn configure(&mut self, program_override: Option<&str>, library: bool) {
         let unit = self.unit;
         if unit.configs.len() > 1 {
             self.diags.error(
@@ -1107,10 +1552,14 @@ impl Sema<'_> {
             }
             for res in &cfg.resources {
                 for b in &res.programs {
+                    let full = qualified(&b.program_type.name, self.prog.pou_by_name.keys())
+                        .ok()
+                        .flatten()
+                        .unwrap_or_default();
                     let Some(&pi) = self
                         .prog
                         .pou_by_name
-                        .get(&b.program_type.name)
+                        .get(&full)
                         .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
                     else {
                         self.diags.error(
@@ -1166,8 +1615,14 @@ impl Sema<'_> {
             }
             return;
         }
+        if library {
+            return;
+        }
         let programs: Vec<usize> = (0..self.prog.pous.len())
-            .filter(|&i| self.prog.pous[i].kind == PouKind::Program && !self.prog.pous[i].builtin)
+            .filter(|&i| {
+                let p = &self.prog.pous[i];
+                p.kind == PouKind::Program && !p.builtin && p.member.is_none()
+            })
             .collect();
         let chosen = match program_override {
             Some(name) => {

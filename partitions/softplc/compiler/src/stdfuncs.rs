@@ -8,9 +8,25 @@
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 
 use crate::ast::*;
-use crate::codegen::{Gen, mem_type};
+use crate::codegen::Gen;
 use crate::diagnostics::Span;
 use crate::types::*;
+
+/// A date and time function: the typed form of an operator (`ADD_TOD_TIME` is TOD + TIME;
+/// the second type of MUL/DIV stands for any number), CONCAT_DATE_TOD, CONCAT_* of numbers
+/// giving the type, SPLIT_* of the type into numbers, DAY_OF_WEEK.
+#[derive(Debug, Clone, Copy)]
+enum TimeFunction {
+    Operator(BinOp, Elem, Elem),
+    DateTod(Elem),
+    Concat(Elem),
+    Split(Elem),
+    DayOfWeek,
+}
+
+/// The parts of a date or time of day: (name, how to get it as a number from the value).
+const YEAR_MONTH_DAY: [&str; 3] = ["YEAR", "MONTH", "DAY"];
+const HOUR_MINUTE_SECOND_MS: [&str; 4] = ["HOUR", "MINUTE", "SECOND", "MILLISECOND"];
 
 /// Maximum length of the temporaries that hold string function results.
 const MAX_TEMP_STRING: u32 = 1024;
@@ -23,6 +39,9 @@ struct StdArgs<'e> {
     exprs: Vec<&'e Expr>,
     ctx: Option<Type>,
     span: Span,
+    /// The type of a typed form (`SQRT_LREAL`, `MAX_DINT`): its typed arguments convert
+    /// to it implicitly and it is the result.
+    typed: Option<Elem>,
 }
 
 impl Gen<'_> {
@@ -33,8 +52,72 @@ impl Gen<'_> {
             "SQRT", "LN", "LOG", "EXP", "SIN", "COS", "TAN", "ASIN", "ACOS", "ATAN", "EXPT", "ABS",
             "TRUNC", "__NOW", "MOVE", "SEL", "MAX", "MIN", "LIMIT", "MUX", "SHL", "SHR", "ROL",
             "ROR", "LEN", "LEFT", "RIGHT", "MID", "DELETE", "INSERT", "REPLACE", "FIND", "CONCAT",
+            "ATAN2", "TIME", "LTIME", "SIZEOF",
         ];
-        NAMES.contains(&name) || name.contains("_TO_")
+        NAMES.contains(&name)
+            || name.contains("_TO_")
+            || name.starts_with("TO_")
+            || Self::time_function(name).is_some()
+            || Self::typed_trunc(name).is_some()
+            || Self::typed_overload(name).is_some()
+    }
+
+    /// `TRUNC_INT` and `REAL_TRUNC_INT`-style forms: (argument type if given, result type).
+    fn typed_trunc(name: &str) -> Option<(Option<Elem>, Elem)> {
+        let (from, to) = match name.split_once("TRUNC_")? {
+            ("", to) => (None, to),
+            (from, to) => (Some(Elem::from_name(from.strip_suffix('_')?)?), to),
+        };
+        let to = Elem::from_name(to).filter(|e| e.is_integral())?;
+        match from {
+            Some(f) if !f.is_real() => None,
+            f => Some((f, to)),
+        }
+    }
+
+    /// The date and time functions of IEC 61131-3 (3rd edition, tables 35 and 36).
+    fn time_function(name: &str) -> Option<TimeFunction> {
+        use Elem::*;
+        use TimeFunction::*;
+        let op = |op, a, b| Some(Operator(op, a, b));
+        match name {
+            "ADD_TIME" => op(BinOp::Add, Time, Time),
+            "ADD_LTIME" => op(BinOp::Add, LTime, LTime),
+            "ADD_TOD_TIME" => op(BinOp::Add, Tod, Time),
+            "ADD_LTOD_LTIME" => op(BinOp::Add, LTod, LTime),
+            "ADD_DT_TIME" => op(BinOp::Add, Dt, Time),
+            "ADD_LDT_LTIME" => op(BinOp::Add, LDt, LTime),
+            "SUB_TIME" => op(BinOp::Sub, Time, Time),
+            "SUB_LTIME" => op(BinOp::Sub, LTime, LTime),
+            "SUB_DATE_DATE" => op(BinOp::Sub, Date, Date),
+            "SUB_LDATE_LDATE" => op(BinOp::Sub, LDate, LDate),
+            "SUB_TOD_TIME" => op(BinOp::Sub, Tod, Time),
+            "SUB_LTOD_LTIME" => op(BinOp::Sub, LTod, LTime),
+            "SUB_TOD_TOD" => op(BinOp::Sub, Tod, Tod),
+            "SUB_LTOD_LTOD" => op(BinOp::Sub, LTod, LTod),
+            "SUB_DT_TIME" => op(BinOp::Sub, Dt, Time),
+            "SUB_LDT_LTIME" => op(BinOp::Sub, LDt, LTime),
+            "SUB_DT_DT" => op(BinOp::Sub, Dt, Dt),
+            "SUB_LDT_LDT" => op(BinOp::Sub, LDt, LDt),
+            "MUL_TIME" | "MULTIME" => op(BinOp::Mul, Time, LReal),
+            "MUL_LTIME" => op(BinOp::Mul, LTime, LReal),
+            "DIV_TIME" | "DIVTIME" => op(BinOp::Div, Time, LReal),
+            "DIV_LTIME" => op(BinOp::Div, LTime, LReal),
+            "CONCAT_DATE_TOD" => Some(DateTod(Dt)),
+            "CONCAT_DATE_LTOD" => Some(DateTod(LDt)),
+            "CONCAT_DATE" => Some(Concat(Date)),
+            "CONCAT_TOD" => Some(Concat(Tod)),
+            "CONCAT_LTOD" => Some(Concat(LTod)),
+            "CONCAT_DT" => Some(Concat(Dt)),
+            "CONCAT_LDT" => Some(Concat(LDt)),
+            "SPLIT_DATE" => Some(Split(Date)),
+            "SPLIT_TOD" => Some(Split(Tod)),
+            "SPLIT_LTOD" => Some(Split(LTod)),
+            "SPLIT_DT" => Some(Split(Dt)),
+            "SPLIT_LDT" => Some(Split(LDt)),
+            "DAY_OF_WEEK" => Some(DayOfWeek),
+            _ => None,
+        }
     }
 
     pub(crate) fn std_call(
@@ -52,27 +135,586 @@ impl Gen<'_> {
                     && !matches!(t, Type::Enum(_) | Type::Exception)
             })
             .map(|t| Type::Elem(t.elem().unwrap_or(Elem::DInt)));
-        // Standard functions take their arguments in order; formal names are accepted but
-        // not reordered.
+        if let Some(f) = Self::time_function(name) {
+            return Some(self.std_time(f, id, args, expected, span));
+        }
+        if name == "SIZEOF" {
+            return Some(self.std_sizeof(id, args, expected, span));
+        }
         if let Some(a) = args.iter().find(|a| a.output) {
             self.error(a.span, format!("{} has no outputs", id.text));
+            self.surface(&a.value);
         }
+        if let Some(target) = name.strip_prefix("TO_") {
+            return self.generic_conversion(target, id, args, span);
+        }
+        let (name, typed) = match Self::typed_overload(name) {
+            Some((base, t)) => (base, Some(t)),
+            None => (name, None),
+        };
+        let Some(exprs) = self.std_arguments(name, id, args) else {
+            return Some(Type::Error);
+        };
         let c = StdArgs {
             name,
             id,
-            exprs: args.iter().map(|a| &a.value).collect(),
-            ctx,
+            exprs,
+            ctx: typed.map(Type::Elem).or(ctx),
             span,
+            typed,
         };
+        if let Some(t) = typed
+            && !self.typed_arguments(&c, t)
+        {
+            return Some(Type::Error);
+        }
         match name {
             "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
-            | "EXPT" | "ABS" | "TRUNC" | "__NOW" => self.std_numeric(&c),
+            | "EXPT" | "ABS" | "TRUNC" | "__NOW" | "ATAN2" | "TIME" | "LTIME" => {
+                self.std_numeric(&c)
+            }
+            _ if Self::typed_trunc(name).is_some() => self.std_numeric(&c),
             "MOVE" | "SEL" | "MAX" | "MIN" | "LIMIT" | "MUX" => self.std_selection(&c),
             "SHL" | "SHR" | "ROL" | "ROR" => self.std_bits(&c),
             "LEN" | "LEFT" | "RIGHT" | "MID" | "DELETE" | "INSERT" | "REPLACE" | "FIND"
             | "CONCAT" => self.std_string(&c),
             _ => self.conversion(name, id, &c.exprs, span),
         }
+    }
+
+    /// A typed form of an overloaded standard function (IEC 61131-3: `SQRT_LREAL`,
+    /// `ABS_INT`, `MAX_DINT`, `EXPT_REAL`, `SEL_TIME`, ...): (the function, the type).
+    fn typed_overload(name: &str) -> Option<(&str, Elem)> {
+        let (base, ty) = name.rsplit_once('_')?;
+        let t = Elem::from_name(ty)?;
+        let fits = match base {
+            "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN"
+            | "ATAN2" | "EXPT" => t.is_real(),
+            "ABS" => t.is_numeric(),
+            "MAX" | "MIN" | "LIMIT" => t.is_numeric() || t.is_temporal() || t.is_char(),
+            "SEL" | "MUX" | "MOVE" => true,
+            _ => false,
+        };
+        fits.then_some((base, t))
+    }
+
+    /// Checks that the arguments of a typed form convert to its type implicitly (SEL's
+    /// selector, MUX's index and EXPT's exponent are not typed). False after reporting one
+    /// that does not.
+    fn typed_arguments(&mut self, c: &StdArgs, t: Elem) -> bool {
+        let untyped = match c.name {
+            "SEL" | "MUX" => 1,
+            _ => 0,
+        };
+        let typed_count = match c.name {
+            "EXPT" => 1,
+            _ => c.exprs.len(),
+        };
+        let mut ok = true;
+        for e in c.exprs.iter().take(typed_count).skip(untyped) {
+            if Self::is_flexible(e) {
+                continue;
+            }
+            let at = self.infer(e);
+            let fits = !matches!(at, Type::Enum(_) | Type::Exception)
+                && at.elem().is_some_and(|x| implicit_ok(x, t));
+            if !fits {
+                if at.is_error() {
+                    self.surface(e);
+                } else {
+                    let msg = format!(
+                        "{} takes {t} arguments, found {} (convert it with {}_TO_{t})",
+                        c.id.text,
+                        self.tname(&at),
+                        self.tname(&at)
+                    );
+                    self.error(e.span, msg);
+                }
+                ok = false;
+            }
+        }
+        ok
+    }
+
+    /// The formal input names of a standard function called with `count` arguments
+    /// (IEC 61131-3: `IN`, `IN1`.., `G`, `K`, `MN`, `MX`, `N`, `L`, `P`, `YEAR`, ...).
+    fn std_formals(name: &str, count: usize) -> Vec<String> {
+        let numbered = |first: usize, n: usize| (first..first + n).map(|i| format!("IN{i}"));
+        let fixed: &[&str] = match name {
+            "MAX" | "MIN" | "CONCAT" => return numbered(1, count).collect(),
+            "MUX" => {
+                return std::iter::once("K".to_string())
+                    .chain(numbered(0, count.saturating_sub(1)))
+                    .collect();
+            }
+            "EXPT" | "ATAN2" | "FIND" => &["IN1", "IN2"],
+            "SEL" => &["G", "IN0", "IN1"],
+            "LIMIT" => &["MN", "IN", "MX"],
+            "SHL" | "SHR" | "ROL" | "ROR" => &["IN", "N"],
+            "LEFT" | "RIGHT" => &["IN", "L"],
+            "MID" | "DELETE" => &["IN", "L", "P"],
+            "INSERT" => &["IN1", "IN2", "P"],
+            "REPLACE" => &["IN1", "IN2", "L", "P"],
+            "CONCAT_DATE" => &["YEAR", "MONTH", "DAY"],
+            "CONCAT_TOD" | "CONCAT_LTOD" => &["HOUR", "MINUTE", "SECOND", "MILLISECOND"],
+            "CONCAT_DT" | "CONCAT_LDT" => &[
+                "YEAR",
+                "MONTH",
+                "DAY",
+                "HOUR",
+                "MINUTE",
+                "SECOND",
+                "MILLISECOND",
+            ],
+            _ if Self::time_function(name).is_some_and(|f| {
+                matches!(f, TimeFunction::Operator(..) | TimeFunction::DateTod(_))
+            }) =>
+            {
+                &["IN1", "IN2"]
+            }
+            _ => &["IN"],
+        };
+        fixed.iter().map(|s| s.to_string()).collect()
+    }
+
+    /// The argument expressions of a standard function in the order of its inputs: the
+    /// positional ones first, the formal ones (`IN2 := x`) put in their place. `None` after
+    /// reporting a misplaced, unknown, repeated or missing one.
+    fn std_arguments<'e>(
+        &mut self,
+        name: &str,
+        id: &Ident,
+        args: &'e [Arg],
+    ) -> Option<Vec<&'e Expr>> {
+        let inputs: Vec<&Arg> = args.iter().filter(|a| !a.output).collect();
+        if inputs.iter().all(|a| a.name.is_none()) {
+            return Some(inputs.iter().map(|a| &a.value).collect());
+        }
+        let formals = Self::std_formals(name, inputs.len());
+        let mut slots: Vec<Option<&'e Expr>> = vec![None; formals.len().max(inputs.len())];
+        let mut ok = true;
+        let mut named_seen = false;
+        for (i, a) in inputs.iter().enumerate() {
+            let slot = match &a.name {
+                None if named_seen => {
+                    self.error(a.span, "positional arguments must come before named ones");
+                    ok = false;
+                    continue;
+                }
+                None => i,
+                Some(n) => {
+                    named_seen = true;
+                    match formals.iter().position(|f| *f == n.name) {
+                        Some(k) => k,
+                        None => {
+                            let msg = format!(
+                                "{} has no input `{}` (its inputs: {})",
+                                id.text,
+                                n.text,
+                                formals.join(", ")
+                            );
+                            self.error(n.span, msg);
+                            ok = false;
+                            continue;
+                        }
+                    }
+                }
+            };
+            if slots[slot].is_some() {
+                let msg = format!(
+                    "input `{}` given twice",
+                    formals.get(slot).map_or("?", |f| f)
+                );
+                self.error(a.span, msg);
+                ok = false;
+                continue;
+            }
+            slots[slot] = Some(&a.value);
+        }
+        let given = slots
+            .iter()
+            .rposition(Option::is_some)
+            .map_or(0, |last| last + 1);
+        if let Some(missing) = slots[..given].iter().position(Option::is_none) {
+            let msg = format!(
+                "{} needs its input `{}`",
+                id.text,
+                formals.get(missing).map_or("?", |f| f)
+            );
+            self.error(id.span, msg);
+            ok = false;
+        }
+        if !ok {
+            for a in args {
+                self.surface(&a.value);
+            }
+            return None;
+        }
+        Some(slots.into_iter().flatten().collect())
+    }
+
+    /// `TO_INT(x)`, `TO_STRING(x)`, ... (IEC 61131-3 3rd edition): the conversion from the
+    /// argument's type.
+    fn generic_conversion(
+        &mut self,
+        target: &str,
+        id: &Ident,
+        args: &[Arg],
+        span: Span,
+    ) -> Option<Type> {
+        if target != "STRING" && Elem::from_name(target).is_none() {
+            return None;
+        }
+        let inputs = self.std_arguments(&id.name, id, args)?;
+        let [arg] = inputs[..] else {
+            self.error(
+                span,
+                format!("{} takes 1 argument, {} given", id.text, inputs.len()),
+            );
+            for e in inputs {
+                self.surface(e);
+            }
+            return Some(Type::Error);
+        };
+        let source = match self.infer(arg) {
+            Type::Error => {
+                self.surface(arg);
+                return Some(Type::Error);
+            }
+            Type::String(_) => "STRING".to_string(),
+            Type::Subrange(e, ..) => e.name().to_string(),
+            t @ Type::Elem(_) if !Self::is_flexible(arg) => self.tname(&t),
+            _ if Self::is_flexible(arg) && Self::has_real_literal(arg) => "LREAL".into(),
+            _ if Self::is_flexible(arg) => "LINT".into(),
+            t => return Some(self.bad_inferred_arg(arg, &t, "an elementary value")),
+        };
+        if source == target {
+            let t = self.expr(arg, None);
+            return Some(t);
+        }
+        self.conversion(&format!("{source}_TO_{target}"), id, &[arg], span)
+    }
+
+    /// Date and time functions (see [`TimeFunction`]).
+    fn std_time(
+        &mut self,
+        f: TimeFunction,
+        id: &Ident,
+        args: &[Arg],
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
+        if let TimeFunction::Split(t) = f {
+            return self.std_split(t, id, args, span);
+        }
+        if let Some(a) = args.iter().find(|a| a.output) {
+            self.error(a.span, format!("{} has no outputs", id.text));
+            self.surface(&a.value);
+        }
+        let Some(exprs) = self.std_arguments(&id.name, id, args) else {
+            return Type::Error;
+        };
+        let c = StdArgs {
+            name: &id.name,
+            id,
+            exprs,
+            ctx: None,
+            span,
+            typed: None,
+        };
+        match f {
+            TimeFunction::Operator(op, ta, tb) => {
+                if !self.arity(&c, 2) {
+                    return Type::Error;
+                }
+                let erroneous: Vec<&Expr> = c
+                    .exprs
+                    .iter()
+                    .copied()
+                    .filter(|e| self.infer(e).is_error())
+                    .collect();
+                if !erroneous.is_empty() {
+                    erroneous.iter().for_each(|e| self.surface(e));
+                    return Type::Error;
+                }
+                for (e, want) in [(c.exprs[0], ta), (c.exprs[1], tb)] {
+                    let t = self.infer(e);
+                    let fits = match want {
+                        Elem::LReal => t.elem().is_some_and(|x| x.is_numeric()),
+                        w => t.elem().is_some_and(|x| x == w || implicit_ok(x, w)),
+                    } && !matches!(t, Type::Enum(_));
+                    let literal_number = Self::is_flexible(e) && want == Elem::LReal;
+                    if !(fits || t.is_error() || literal_number) {
+                        let what = if want == Elem::LReal {
+                            "a number".to_string()
+                        } else {
+                            format!("a {want}")
+                        };
+                        return self.bad_arg(e, &t, &what);
+                    }
+                }
+                self.binary(op, c.exprs[0], c.exprs[1], expected, span)
+            }
+            TimeFunction::DateTod(result) => {
+                if !self.arity(&c, 2) {
+                    return Type::Error;
+                }
+                let (date, tod) = if result == Elem::LDt {
+                    (Type::Elem(Elem::LDate), Type::Elem(Elem::LTod))
+                } else {
+                    (Type::Elem(Elem::Date), Type::Elem(Elem::Tod))
+                };
+                self.value_to(c.exprs[0], &date);
+                self.value_to(c.exprs[1], &tod);
+                self.op(Opcode::Add);
+                Type::Elem(result)
+            }
+            TimeFunction::Concat(result) => {
+                let family = result.temporal_family();
+                let n = match family {
+                    Some(Elem::Date) => 3,
+                    Some(Elem::Tod) => 4,
+                    _ => 7,
+                };
+                if !self.arity(&c, n) {
+                    return Type::Error;
+                }
+                let (date_args, tod_args) = match family {
+                    Some(Elem::Date) => (&c.exprs[..3], &c.exprs[..0]),
+                    Some(Elem::Tod) => (&c.exprs[..0], &c.exprs[..4]),
+                    _ => (&c.exprs[..3], &c.exprs[3..]),
+                };
+                if !date_args.is_empty() {
+                    for e in date_args {
+                        self.int_arg(e);
+                    }
+                    self.emit(|b| b.call_builtin(Builtin::DateFromParts));
+                }
+                if !tod_args.is_empty() {
+                    for e in tod_args {
+                        self.int_arg(e);
+                    }
+                    self.emit(|b| b.call_builtin(Builtin::TodFromParts));
+                }
+                if !date_args.is_empty() && !tod_args.is_empty() {
+                    self.op(Opcode::Add);
+                }
+                Type::Elem(result)
+            }
+            TimeFunction::DayOfWeek => {
+                if !self.arity(&c, 1) {
+                    return Type::Error;
+                }
+                let t = self.infer(c.exprs[0]);
+                if !t
+                    .elem()
+                    .is_some_and(|e| e.temporal_family() == Some(Elem::Date))
+                {
+                    return self.bad_inferred_arg(c.exprs[0], &t, "a DATE");
+                }
+                self.expr(c.exprs[0], None);
+                self.emit(|b| b.call_builtin(Builtin::DayOfWeek));
+                Type::INT
+            }
+            TimeFunction::Split(_) => unreachable!("handled above"),
+        }
+    }
+
+    /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the
+    /// integer type the context wants (UDINT without one).
+    fn std_sizeof(
+        &mut self,
+        id: &Ident,
+        args: &[Arg],
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
+        let [arg] = args else {
+            self.error(
+                span,
+                format!("{} takes 1 argument, {} given", id.text, args.len()),
+            );
+            return Type::Error;
+        };
+        let ty = match &arg.value.kind {
+            ExprKind::Name(n)
+                if self.prog.pous[self.cur].var(&n.name).is_none()
+                    && self.prog.global(&n.name).is_none() =>
+            {
+                match self.type_by_name(&n.name) {
+                    Some(t) => t,
+                    None => self.infer(&arg.value),
+                }
+            }
+            _ => self.infer(&arg.value),
+        };
+        if ty.is_error() {
+            // Report why (the dry inference reported nothing).
+            self.expr(&arg.value, None);
+            return Type::Error;
+        }
+        // A STRING[n] counts its text and terminator, n + 1 bytes as in CODESYS: what a byte
+        // pointer to it (`ADR(s)`) may walk (its length header is not part of that).
+        let size = match ty {
+            Type::String(n) => n as i128 + 1,
+            _ => self.prog.size_align(&ty).0 as i128,
+        };
+        let result = expected
+            .and_then(|t| t.elem())
+            .filter(|e| {
+                e.is_integral()
+                    && !matches!(expected, Some(Type::Enum(_)))
+                    && e.int_range().1 >= size
+            })
+            .unwrap_or(Elem::UDInt);
+        self.push_int(size as i64);
+        Type::Elem(result)
+    }
+
+    /// The data type called `name` (elementary, STRING, a TYPE or a function block).
+    fn type_by_name(&self, name: &str) -> Option<Type> {
+        if let Some(e) = Elem::from_name(name) {
+            return Some(Type::Elem(e));
+        }
+        if name == "STRING" {
+            return Some(Type::String(DEFAULT_STRING_LEN));
+        }
+        if let Some((t, _)) = self.prog.aliases.get(name) {
+            return Some(t.clone());
+        }
+        let &pi = self.prog.pou_by_name.get(name)?;
+        (self.prog.pous[pi].kind == PouKind::FunctionBlock).then_some(Type::Fb(pi))
+    }
+
+    /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),
+    /// SPLIT_DT(IN, YEAR, ..., MILLISECOND): the parts go to the outputs, given formally
+    /// (`YEAR => y`) or in order after the input.
+    fn std_split(&mut self, input_type: Elem, id: &Ident, args: &[Arg], span: Span) -> Type {
+        let family = input_type.temporal_family();
+        let parts: Vec<&str> = match family {
+            Some(Elem::Date) => YEAR_MONTH_DAY.to_vec(),
+            Some(Elem::Tod) => HOUR_MINUTE_SECOND_MS.to_vec(),
+            _ => YEAR_MONTH_DAY
+                .iter()
+                .chain(HOUR_MINUTE_SECOND_MS.iter())
+                .copied()
+                .collect(),
+        };
+        let mut input: Option<&Expr> = None;
+        let mut targets: Vec<Option<&Expr>> = vec![None; parts.len()];
+        for (i, a) in args.iter().enumerate() {
+            match (&a.name, a.output) {
+                (None, _) if i == 0 => input = Some(&a.value),
+                (Some(n), false) if n.name == "IN" => input = Some(&a.value),
+                (None, _) if i <= parts.len() => targets[i - 1] = Some(&a.value),
+                (Some(n), true) => match parts.iter().position(|p| *p == n.name) {
+                    Some(k) => targets[k] = Some(&a.value),
+                    None => {
+                        let msg = format!(
+                            "{} has no output `{}` (its outputs: {})",
+                            id.text,
+                            n.text,
+                            parts.join(", ")
+                        );
+                        self.error(n.span, msg);
+                    }
+                },
+                _ => {
+                    let msg = format!("{} takes IN and the outputs {}", id.text, parts.join(", "));
+                    self.error(a.span, msg);
+                }
+            }
+        }
+        let input_type_ok = input
+            .map(|e| (e, self.infer(e)))
+            .filter(|(_, t)| t.elem().is_some_and(|e| e.temporal_family() == family));
+        let Some((input, _)) = input_type_ok else {
+            match input {
+                None => self.error(span, format!("{} needs its input IN", id.text)),
+                Some(e) => {
+                    let t = self.infer(e);
+                    self.bad_inferred_arg(e, &t, &format!("a {input_type}"));
+                }
+            }
+            // The outputs still say what is wrong with them.
+            for target in targets.into_iter().flatten() {
+                if let Some(p) = self.place(target) {
+                    self.drop_place(&p);
+                }
+            }
+            return Type::Error;
+        };
+        let value = self.temp_cell();
+        self.expr(input, None);
+        self.emit(|b| b.st_abs(MemType::I64, value));
+        for (part, target) in parts.iter().zip(targets) {
+            let Some(target) = target else { continue };
+            let Some(place) = self.place(target) else {
+                continue;
+            };
+            let Some(te) = place
+                .ty
+                .elem()
+                .filter(|e| e.is_integral() && !matches!(place.ty, Type::Enum(_)))
+            else {
+                if !place.ty.is_error() {
+                    let msg = format!(
+                        "the output {part} is an integer, not {}",
+                        self.tname(&place.ty)
+                    );
+                    self.error(target.span, msg);
+                }
+                if matches!(place.loc, crate::codegen::Loc::Ind(_)) {
+                    self.op(Opcode::Drop);
+                }
+                continue;
+            };
+            if !place.writable {
+                self.error(target.span, "output target is not writable");
+            }
+            self.emit(|b| b.ld_abs(MemType::I64, value));
+            match *part {
+                "YEAR" | "MONTH" | "DAY" => {
+                    self.emit(|b| b.call_builtin(Builtin::DateSplit));
+                    match *part {
+                        "YEAR" => self.emit(|b| {
+                            b.push_i32(16);
+                            b.op(Opcode::ShrS);
+                        }),
+                        "MONTH" => self.emit(|b| {
+                            b.push_i32(8);
+                            b.op(Opcode::ShrU);
+                            b.push_i32(0xff);
+                            b.op(Opcode::And);
+                        }),
+                        _ => self.emit(|b| {
+                            b.push_i32(0xff);
+                            b.op(Opcode::And);
+                        }),
+                    }
+                }
+                _ => {
+                    let (unit, modulo): (i64, i64) = match *part {
+                        "HOUR" => (3_600_000_000_000, 0),
+                        "MINUTE" => (60_000_000_000, 60),
+                        "SECOND" => (1_000_000_000, 60),
+                        _ => (1_000_000, 1000),
+                    };
+                    self.emit(|b| {
+                        b.call_builtin(Builtin::TodOf);
+                        b.push_int(unit);
+                        b.op(Opcode::DivS);
+                        if modulo != 0 {
+                            b.push_int(modulo);
+                            b.op(Opcode::ModS);
+                        }
+                    });
+                }
+            }
+            self.convert(Elem::LInt, te);
+            self.store_checked(&place);
+        }
+        Type::Void
     }
 
     /// False (after reporting it and type-checking the arguments) unless the call has
@@ -91,7 +733,7 @@ impl Gen<'_> {
             ),
         );
         for e in &c.exprs {
-            self.infer(e);
+            self.surface(e);
         }
         false
     }
@@ -103,7 +745,10 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
+                    Some(t) => t,
+                    None => return Some(Type::Error),
+                };
                 let single = rt == Elem::Real;
                 use Builtin::*;
                 let b = match (c.name, single) {
@@ -131,32 +776,45 @@ impl Gen<'_> {
                 self.emit(|bb| bb.call_builtin(b));
                 Type::Elem(rt)
             }
-            "EXPT" => {
+            "EXPT" | "ATAN2" => {
                 if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
+                    Some(t) => t,
+                    None => return Some(Type::Error),
+                };
                 let t1 = self.infer(c.exprs[1]);
+                if !t1.elem().is_some_and(|e| e.is_numeric()) || matches!(t1, Type::Enum(_)) {
+                    return Some(self.bad_inferred_arg(c.exprs[1], &t1, "a number"));
+                }
                 self.value_to_any(c.exprs[1], &t1, &Type::Elem(rt));
-                self.emit(|bb| {
-                    bb.call_builtin(if rt == Elem::Real {
-                        Builtin::ExptF32
-                    } else {
-                        Builtin::ExptF64
-                    })
-                });
+                let single = rt == Elem::Real;
+                let builtin = match (c.name, single) {
+                    ("EXPT", true) => Builtin::ExptF32,
+                    ("EXPT", false) => Builtin::ExptF64,
+                    (_, true) => Builtin::Atan2F32,
+                    _ => Builtin::Atan2F64,
+                };
+                self.emit(|bb| bb.call_builtin(builtin));
                 Type::Elem(rt)
             }
             "ABS" => {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let t = self.expr(c.exprs[0], c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => {
+                        self.value_to(c.exprs[0], &Type::Elem(forced));
+                        Type::Elem(forced)
+                    }
+                    None => self.expr(c.exprs[0], c.ctx.as_ref()),
+                };
                 match t.elem() {
                     Some(Elem::Real) => self.emit(|b| b.call_builtin(Builtin::AbsF32)),
                     Some(Elem::LReal) => self.emit(|b| b.call_builtin(Builtin::AbsF64)),
                     Some(e)
-                        if (e.is_signed_int() || e == Elem::Time)
+                        if (e.is_signed_int() || e.is_duration())
                             && !matches!(t, Type::Enum(_) | Type::Exception) =>
                     {
                         self.op(Opcode::AbsS);
@@ -171,25 +829,60 @@ impl Gen<'_> {
                     t => t,
                 }
             }
-            "TRUNC" => {
+            // TRUNC gives the integer type the context wants (IEC: ANY_INT), else DINT;
+            // TRUNC_INT, REAL_TRUNC_INT, ... a fixed one. NUMERIC_ERROR when it does not fit.
+            name if name == "TRUNC" || Self::typed_trunc(name).is_some() => {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = self.real_operand(c.exprs[0], c.ctx.as_ref())?;
+                let (from, target) = match Self::typed_trunc(name) {
+                    Some(typed) => typed,
+                    None => (
+                        None,
+                        c.ctx
+                            .as_ref()
+                            .and_then(|t| t.elem())
+                            .filter(|e| e.is_integral())
+                            .unwrap_or(Elem::DInt),
+                    ),
+                };
+                let rt = match from {
+                    Some(f) => {
+                        let t = self.infer(c.exprs[0]);
+                        if !(t.elem().is_some_and(|e| implicit_ok(e, f))
+                            || Self::is_flexible(c.exprs[0]))
+                        {
+                            return Some(self.bad_inferred_arg(c.exprs[0], &t, &format!("a {f}")));
+                        }
+                        self.value_to(c.exprs[0], &Type::Elem(f));
+                        f
+                    }
+                    None => match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
+                        Some(t) => t,
+                        None => return Some(Type::Error),
+                    },
+                };
                 let op = if rt == Elem::Real {
                     Opcode::F32ToInt
                 } else {
                     Opcode::F64ToInt
                 };
-                self.emit(|b| b.float_to_int(op, MemType::I32, RoundMode::Truncate));
-                Type::DINT
+                self.emit(|b| {
+                    b.float_to_int(op, crate::codegen::mem_type(target), RoundMode::Truncate)
+                });
+                Type::Elem(target)
             }
-            "__NOW" => {
+            // `TIME()` (CODESYS): the time since the PLC started, here the cycle time.
+            "__NOW" | "TIME" | "LTIME" => {
                 if !self.arity(c, 0) {
                     return Some(Type::Error);
                 }
                 self.op(Opcode::Now);
-                Type::TIME
+                if c.name == "LTIME" {
+                    Type::Elem(Elem::LTime)
+                } else {
+                    Type::TIME
+                }
             }
             _ => unreachable!("std_numeric called for {}", c.name),
         };
@@ -203,14 +896,23 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                self.expr(c.exprs[0], None)
+                match c.typed {
+                    Some(forced) => {
+                        self.value_to(c.exprs[0], &Type::Elem(forced));
+                        Type::Elem(forced)
+                    }
+                    None => self.expr(c.exprs[0], None),
+                }
             }
             "SEL" => {
                 if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
                 self.value_to(c.exprs[0], &Type::BOOL);
-                let t = self.common_of(&c.exprs[1..], c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs[1..], c.ctx.as_ref()),
+                };
                 if t.is_error() {
                     return Some(t);
                 }
@@ -224,9 +926,13 @@ impl Gen<'_> {
             "MAX" | "MIN" => {
                 if c.exprs.len() < 2 {
                     self.error(c.span, format!("{} needs at least 2 arguments", c.id.text));
+                    c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
-                let t = self.common_of(&c.exprs, c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs, c.ctx.as_ref()),
+                };
                 let Some(e) = t.elem() else {
                     if !t.is_error() {
                         let msg = format!(
@@ -251,7 +957,10 @@ impl Gen<'_> {
                 if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
-                let t = self.common_of(&c.exprs, c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs, c.ctx.as_ref()),
+                };
                 let Some(e) = t.elem() else {
                     return Some(Type::Error);
                 };
@@ -268,6 +977,7 @@ impl Gen<'_> {
             "MUX" => {
                 if c.exprs.len() < 2 {
                     self.error(c.span, "MUX needs a selector and at least one input");
+                    c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
                 let kt = self.expr(c.exprs[0], Some(&Type::DINT));
@@ -280,7 +990,10 @@ impl Gen<'_> {
                     b.chk_index(0, n - 1);
                     b.st_abs(MemType::I64, k);
                 });
-                let t = self.common_of(&c.exprs[1..], c.ctx.as_ref());
+                let t = match c.typed {
+                    Some(forced) => Type::Elem(forced),
+                    None => self.common_of(&c.exprs[1..], c.ctx.as_ref()),
+                };
                 let end = self.label();
                 for (i, x) in c.exprs[1..].iter().enumerate() {
                     let next = self.label();
@@ -321,7 +1034,8 @@ impl Gen<'_> {
                 else {
                     return Some(self.bad_arg(c.exprs[0], &t, "a bit string or integer"));
                 };
-                self.value_to(c.exprs[1], &Type::LINT);
+                // The count may be of any integer type (IEC: ANY_INT).
+                self.int_arg(c.exprs[1]);
                 let w = (e.size() * 8) as u8;
                 match c.name {
                     "SHL" => self.op(Opcode::Shl),
@@ -341,15 +1055,46 @@ impl Gen<'_> {
         Some(t)
     }
 
-    /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT.
+    /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT, on
+    /// STRINGs or on WSTRINGs (the first string argument decides; STRING literals adapt).
     fn std_string(&mut self, c: &StdArgs) -> Option<Type> {
+        let wide = c
+            .exprs
+            .iter()
+            .find(|e| !matches!(e.kind, ExprKind::Str(_)))
+            .is_some_and(|e| self.infer(e).is_wstring());
+        let kind = |len: u32| {
+            if wide {
+                Type::WString(len)
+            } else {
+                Type::String(len)
+            }
+        };
+        // The builtin of the string kind.
+        let pick = |narrow: Builtin| -> Builtin {
+            if !wide {
+                return narrow;
+            }
+            match narrow {
+                Builtin::StrLen => Builtin::WStrLen,
+                Builtin::StrAssign => Builtin::WStrAssign,
+                Builtin::StrConcat => Builtin::WStrConcat,
+                Builtin::StrLeft => Builtin::WStrLeft,
+                Builtin::StrRight => Builtin::WStrRight,
+                Builtin::StrMid => Builtin::WStrMid,
+                Builtin::StrInsert => Builtin::WStrInsert,
+                Builtin::StrDelete => Builtin::WStrDelete,
+                Builtin::StrReplace => Builtin::WStrReplace,
+                _ => Builtin::WStrFind,
+            }
+        };
         let t = match c.name {
             "LEN" => {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                self.string_arg(c.exprs[0]);
-                self.emit(|b| b.call_builtin(Builtin::StrLen));
+                self.string_arg_of(c.exprs[0], wide);
+                self.emit(|b| b.call_builtin(pick(Builtin::StrLen)));
                 Type::INT
             }
             "LEFT" | "RIGHT" => {
@@ -357,82 +1102,74 @@ impl Gen<'_> {
                     return Some(Type::Error);
                 }
                 let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
+                self.string_arg_of(c.exprs[0], wide);
                 self.int_arg(c.exprs[1]);
-                self.emit(|b| {
-                    b.call_builtin(if c.name == "LEFT" {
-                        Builtin::StrLeft
-                    } else {
-                        Builtin::StrRight
-                    })
+                let builtin = pick(if c.name == "LEFT" {
+                    Builtin::StrLeft
+                } else {
+                    Builtin::StrRight
                 });
-                self.emit(|b| b.push_u32(dst));
-                Type::String(len)
+                self.emit(|b| {
+                    b.call_builtin(builtin);
+                    b.push_u32(dst);
+                });
+                kind(len)
             }
             "MID" | "DELETE" => {
                 if !self.arity(c, 3) {
                     return Some(Type::Error);
                 }
                 let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
+                self.string_arg_of(c.exprs[0], wide);
                 self.int_arg(c.exprs[1]);
                 self.int_arg(c.exprs[2]);
-                self.emit(|b| {
-                    b.call_builtin(if c.name == "MID" {
-                        Builtin::StrMid
-                    } else {
-                        Builtin::StrDelete
-                    })
+                let builtin = pick(if c.name == "MID" {
+                    Builtin::StrMid
+                } else {
+                    Builtin::StrDelete
                 });
-                self.emit(|b| b.push_u32(dst));
-                Type::String(len)
+                self.emit(|b| {
+                    b.call_builtin(builtin);
+                    b.push_u32(dst);
+                });
+                kind(len)
             }
-            "INSERT" => {
-                if !self.arity(c, 3) {
+            "INSERT" | "REPLACE" => {
+                let n = if c.name == "INSERT" { 3 } else { 4 };
+                if !self.arity(c, n) {
                     return Some(Type::Error);
                 }
                 let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
                     .min(MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
-                self.string_arg(c.exprs[1]);
-                self.int_arg(c.exprs[2]);
-                self.emit(|b| {
-                    b.call_builtin(Builtin::StrInsert);
-                    b.push_u32(dst);
-                });
-                Type::String(len)
-            }
-            "REPLACE" => {
-                if !self.arity(c, 4) {
-                    return Some(Type::Error);
+                self.string_arg_of(c.exprs[0], wide);
+                self.string_arg_of(c.exprs[1], wide);
+                for e in &c.exprs[2..] {
+                    self.int_arg(e);
                 }
-                let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
-                    .min(MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
-                self.string_arg(c.exprs[1]);
-                self.int_arg(c.exprs[2]);
-                self.int_arg(c.exprs[3]);
+                let builtin = pick(if c.name == "INSERT" {
+                    Builtin::StrInsert
+                } else {
+                    Builtin::StrReplace
+                });
                 self.emit(|b| {
-                    b.call_builtin(Builtin::StrReplace);
+                    b.call_builtin(builtin);
                     b.push_u32(dst);
                 });
-                Type::String(len)
+                kind(len)
             }
             "FIND" => {
                 if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                self.string_arg(c.exprs[0]);
-                self.string_arg(c.exprs[1]);
-                self.emit(|b| b.call_builtin(Builtin::StrFind));
+                self.string_arg_of(c.exprs[0], wide);
+                self.string_arg_of(c.exprs[1], wide);
+                self.emit(|b| b.call_builtin(pick(Builtin::StrFind)));
                 Type::INT
             }
             "CONCAT" => {
@@ -446,21 +1183,21 @@ impl Gen<'_> {
                     .map(|e| self.string_len_of(e))
                     .sum::<u32>()
                     .clamp(1, MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
+                let dst = self.temp_string_like(&kind(len));
                 // dst := first; then dst := CONCAT(dst, next) for the rest.
                 self.emit(|b| b.push_u32(dst));
-                self.string_arg(c.exprs[0]);
-                self.emit(|b| b.call_builtin(Builtin::StrAssign));
+                self.string_arg_of(c.exprs[0], wide);
+                self.emit(|b| b.call_builtin(pick(Builtin::StrAssign)));
                 for x in &c.exprs[1..] {
                     self.emit(|b| {
                         b.push_u32(dst);
                         b.push_u32(dst);
                     });
-                    self.string_arg(x);
-                    self.emit(|b| b.call_builtin(Builtin::StrConcat));
+                    self.string_arg_of(x, wide);
+                    self.emit(|b| b.call_builtin(pick(Builtin::StrConcat)));
                 }
                 self.emit(|b| b.push_u32(dst));
-                Type::String(len)
+                kind(len)
             }
 
             _ => unreachable!("std_string called for {}", c.name),
@@ -476,12 +1213,38 @@ impl Gen<'_> {
         Type::Error
     }
 
-    /// Compiles a numeric argument of a REAL function: REAL stays REAL, everything else LREAL.
-    fn real_operand(&mut self, e: &Expr, ctx: Option<&Type>) -> Option<Elem> {
+    /// [`Self::bad_arg`] for an argument so far only inferred: an erroneous one is compiled
+    /// for its own diagnostics.
+    fn bad_inferred_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
+        if t.is_error() {
+            self.surface(e);
+        }
+        self.bad_arg(e, t, what)
+    }
+
+    /// Compiles an expression whose inference failed, for the diagnostics saying why (the
+    /// code does not matter: the compilation fails).
+    fn surface(&mut self, e: &Expr) {
+        if !self.dry {
+            self.expr(e, None);
+        }
+    }
+
+    /// Compiles a numeric argument of a REAL function: REAL stays REAL, an integer of up to
+    /// 16 bits becomes REAL (which holds it exactly), everything else LREAL.
+    fn real_operand(&mut self, e: &Expr, ctx: Option<&Type>, typed: Option<Elem>) -> Option<Elem> {
+        // A typed form (`SQRT_LREAL`): its type (the argument was checked).
+        if let Some(forced) = typed.filter(|t| t.is_real()) {
+            self.value_to(e, &Type::Elem(forced));
+            return Some(forced);
+        }
         let t = self.infer(e);
         let literal_in_real_context =
             Self::is_flexible(e) && ctx.and_then(|c| c.elem()) == Some(Elem::Real);
-        let target = if t.elem() == Some(Elem::Real) || literal_in_real_context {
+        let small_integer = !Self::is_flexible(e)
+            && !matches!(t, Type::Enum(_) | Type::Exception)
+            && t.elem().is_some_and(|x| x.is_integral() && x.size() <= 2);
+        let target = if t.elem() == Some(Elem::Real) || literal_in_real_context || small_integer {
             Elem::Real
         } else {
             Elem::LReal
@@ -492,10 +1255,7 @@ impl Gen<'_> {
                 Some(target)
             }
             _ => {
-                if !t.is_error() {
-                    let msg = format!("expected a number, found {}", self.tname(&t));
-                    self.error(e.span, msg);
-                }
+                self.bad_inferred_arg(e, &t, "a number");
                 None
             }
         }
@@ -510,6 +1270,7 @@ impl Gen<'_> {
             }
             let t = self.infer(e);
             if t.is_error() {
+                self.surface(e);
                 return Type::Error;
             }
             acc = Some(match acc {
@@ -532,7 +1293,7 @@ impl Gen<'_> {
                             }
                         }
                     }
-                    _ if a.is_string() && t.is_string() => a,
+                    _ if a.is_string() && t.is_string() || a.is_wstring() && t.is_wstring() => a,
                     _ => {
                         let msg = format!(
                             "arguments of incompatible types {} and {}",
@@ -580,16 +1341,31 @@ impl Gen<'_> {
         let (lt, gt) = match e {
             Elem::Real => (Opcode::LtF32, Opcode::GtF32),
             Elem::LReal => (Opcode::LtF64, Opcode::GtF64),
-            e if e.is_unsigned_int() || e.is_bits() => (Opcode::LtU, Opcode::GtU),
+            e if e.is_unsigned_int() || e.is_bits() || e.is_char() => (Opcode::LtU, Opcode::GtU),
             _ => (Opcode::LtS, Opcode::GtS),
         };
         self.emit(|b| b.sel_if(if max { lt } else { gt }));
     }
 
     fn string_arg(&mut self, e: &Expr) {
-        let t = self.expr(e, None);
-        if !t.is_string() && !t.is_error() {
-            let msg = format!("expected a STRING, found {}", self.tname(&t));
+        self.string_arg_of(e, false);
+    }
+
+    /// A STRING (or, `wide`, a WSTRING; a STRING literal then is one) argument.
+    fn string_arg_of(&mut self, e: &Expr, wide: bool) {
+        let want = if wide {
+            Type::WString(DEFAULT_STRING_LEN)
+        } else {
+            Type::String(DEFAULT_STRING_LEN)
+        };
+        let t = self.expr(e, Some(&want));
+        let fits = if wide { t.is_wstring() } else { t.is_string() };
+        if !fits && !t.is_error() {
+            let msg = format!(
+                "expected a {}, found {}",
+                if wide { "WSTRING" } else { "STRING" },
+                self.tname(&t)
+            );
             self.error(e.span, msg);
         }
     }
@@ -611,19 +1387,22 @@ impl Gen<'_> {
 
     fn string_len_of(&mut self, e: &Expr) -> u32 {
         match self.infer(e) {
-            Type::String(n) => n,
+            Type::String(n) | Type::WString(n) => n,
             _ => DEFAULT_STRING_LEN,
         }
     }
 
-    /// `A_TO_B` conversions (and `TO_B` is not supported).
+    /// `A_TO_B` conversions (and `TO_B` is not supported). Between numbers and bit strings
+    /// any argument of those is taken (converted to A first, as CODESYS does: `INT_TO_BYTE`
+    /// of a DINT); the date/time types convert among themselves and to and from numbers;
+    /// CHAR and WCHAR to and from integers and bit strings; everything to and from STRING.
     fn conversion(&mut self, name: &str, id: &Ident, exprs: &[&Expr], span: Span) -> Option<Type> {
         let (from, to) = name.split_once("_TO_")?;
         let parse = |s: &str| -> Option<Type> {
-            if s == "STRING" {
-                Some(Type::String(DEFAULT_STRING_LEN))
-            } else {
-                Elem::from_name(s).map(Type::Elem)
+            match s {
+                "STRING" => Some(Type::String(DEFAULT_STRING_LEN)),
+                "WSTRING" => Some(Type::WString(DEFAULT_STRING_LEN)),
+                _ => Elem::from_name(s).map(Type::Elem),
             }
         };
         let (Some(ft), Some(tt)) = (parse(from), parse(to)) else {
@@ -634,6 +1413,9 @@ impl Gen<'_> {
                 span,
                 format!("{} takes 1 argument, {} given", id.text, exprs.len()),
             );
+            for e in exprs {
+                self.surface(e);
+            }
             return Some(Type::Error);
         }
         let arg = exprs[0];
@@ -642,26 +1424,152 @@ impl Gen<'_> {
                 self.string_arg(arg);
                 Some(Type::String(DEFAULT_STRING_LEN))
             }
-            (Type::String(_), Type::Elem(t)) => {
+            (Type::WString(_), Type::WString(_)) => {
+                self.string_arg_of(arg, true);
+                Some(Type::WString(DEFAULT_STRING_LEN))
+            }
+            (Type::String(_), Type::WString(_)) => {
+                let len = self.string_len_of(arg);
+                let dst = self.temp_wstring(len);
+                self.emit(|b| b.push_u32(dst));
                 self.string_arg(arg);
-                if t.is_real() {
-                    self.emit(|b| b.call_builtin(Builtin::StrToF64));
-                    self.convert(Elem::LReal, *t);
-                } else if *t == Elem::Time {
-                    self.error(span, "STRING_TO_TIME is not supported");
-                    return Some(Type::Error);
-                } else {
-                    self.emit(|b| b.call_builtin(Builtin::StrToI64));
-                    if *t == Elem::Bool {
-                        self.convert(Elem::LInt, Elem::Bool);
-                    } else {
-                        self.wrap(*t);
-                    }
-                }
+                self.emit(|b| {
+                    b.call_builtin(Builtin::WStrFromStr);
+                    b.push_u32(dst);
+                });
+                Some(Type::WString(len))
+            }
+            (Type::WString(_), Type::String(_)) => {
+                // Up to three UTF-8 bytes a unit.
+                let len = (self.string_len_of(arg) * 3).min(MAX_TEMP_STRING);
+                let dst = self.temp_string(len);
+                self.emit(|b| b.push_u32(dst));
+                self.string_arg_of(arg, true);
+                self.emit(|b| {
+                    b.call_builtin(Builtin::StrFromWStr);
+                    b.push_u32(dst);
+                });
+                Some(Type::String(len))
+            }
+            (Type::WString(_), Type::Elem(Elem::WChar)) => {
+                // The first unit, or 0 for an empty string.
+                self.string_arg_of(arg, true);
+                self.emit(|b| {
+                    b.dup();
+                    b.ld_ind(MemType::U16, 2);
+                    b.push_i32(0);
+                    b.op(Opcode::Ne);
+                    b.swap();
+                    b.ld_ind(MemType::U16, 4);
+                    b.op(Opcode::Mul);
+                });
                 Some(tt)
             }
+            (Type::Elem(Elem::WChar), Type::WString(_)) => {
+                let dst = self.temp_wstring(1);
+                self.value_to(arg, &ft);
+                self.emit(|b| {
+                    b.st_abs(MemType::U16, dst + 4);
+                    b.push_i32(1);
+                    b.st_abs(MemType::U16, dst + 2);
+                    b.push_u32(dst);
+                });
+                Some(Type::WString(1))
+            }
+            // Other WSTRING conversions go through STRING.
+            (Type::WString(_), Type::Elem(_)) => {
+                let len = (self.string_len_of(arg) * 3).min(MAX_TEMP_STRING);
+                let text = self.temp_string(len);
+                self.emit(|b| b.push_u32(text));
+                self.string_arg_of(arg, true);
+                self.emit(|b| {
+                    b.call_builtin(Builtin::StrFromWStr);
+                    b.push_u32(text);
+                });
+                self.convert_string_on_stack(match tt {
+                    Type::Elem(t) => t,
+                    _ => Elem::DInt,
+                });
+                Some(tt)
+            }
+            (Type::Elem(_), Type::WString(_)) => {
+                let text = self.conversion(&format!("{from}_TO_STRING"), id, exprs, span)?;
+                let dst = self.temp_wstring(40);
+                self.emit(|b| {
+                    b.push_u32(dst);
+                    b.swap();
+                    b.call_builtin(Builtin::WStrFromStr);
+                    b.push_u32(dst);
+                });
+                Some(if text.is_error() {
+                    text
+                } else {
+                    Type::WString(40)
+                })
+            }
+            (Type::String(_), Type::Elem(t)) => {
+                self.string_arg(arg);
+                self.convert_string_on_stack(*t);
+                Some(tt)
+            }
+            _ => self.conversion_elem((ft, tt), id, exprs),
+        }
+    }
+
+    /// Converts the STRING whose address is on the stack to `t` (STRING_TO_*).
+    fn convert_string_on_stack(&mut self, t: Elem) {
+        if t.is_real() {
+            self.emit(|b| b.call_builtin(Builtin::StrToF64));
+            self.convert(Elem::LReal, t);
+        } else if let Some(kind) = t.time_kind() {
+            self.emit(|b| {
+                b.push_int(kind.code() as i64);
+                b.call_builtin(Builtin::StrToDateTime);
+            });
+        } else if t.is_char() {
+            // The first character, or 0 for an empty string.
+            self.emit(|b| {
+                b.dup();
+                b.ld_ind(MemType::U16, 2);
+                b.push_i32(0);
+                b.op(Opcode::Ne);
+                b.swap();
+                b.ld_ind(MemType::U8, 4);
+                b.op(Opcode::Mul);
+            });
+        } else {
+            self.emit(|b| b.call_builtin(Builtin::StrToI64));
+            if t == Elem::Bool {
+                self.convert(Elem::LInt, Elem::Bool);
+            } else {
+                self.wrap(t);
+            }
+        }
+    }
+
+    /// The rest of [`Self::conversion`]: elementary types to STRING and among themselves.
+    fn conversion_elem(
+        &mut self,
+        (ft, tt): (Type, Type),
+        id: &Ident,
+        exprs: &[&Expr],
+    ) -> Option<Type> {
+        let arg = exprs[0];
+        match (&ft, &tt) {
             (Type::Elem(f), Type::String(_)) => {
                 let f = *f;
+                if f.is_char() {
+                    // A string of that one character.
+                    let dst = self.temp_string(1);
+                    self.value_to(arg, &ft);
+                    self.emit(|b| {
+                        b.st_abs(MemType::U8, dst + 4);
+                        b.push_i32(1);
+                        b.st_abs(MemType::U16, dst + 2);
+                        b.push_u32(dst);
+                    });
+                    return Some(Type::String(1));
+                }
                 let dst = self.temp_string(40);
                 self.emit(|b| b.push_u32(dst));
                 self.value_to(arg, &ft);
@@ -670,6 +1578,11 @@ impl Gen<'_> {
                     Elem::LReal => Builtin::StrFromF64,
                     Elem::Bool => Builtin::StrFromBool,
                     Elem::Time => Builtin::StrFromTime,
+                    e if e.is_temporal() => {
+                        let kind = e.time_kind().map_or(0, |k| k.code());
+                        self.push_int(kind as i64);
+                        Builtin::StrFromDateTime
+                    }
                     e if e.is_signed_int() => Builtin::StrFromI64,
                     _ => Builtin::StrFromU64,
                 };
@@ -681,15 +1594,34 @@ impl Gen<'_> {
             }
             (Type::Elem(f), Type::Elem(t)) => {
                 let (f, t) = (*f, *t);
-                let at = self.infer(arg);
-                if at.is_error() {
+                let number = |e: Elem| e.is_numeric() || e == Elem::Bool;
+                let allowed = number(f) && number(t)
+                    || f.is_temporal() && (t.is_temporal() || number(t))
+                    || t.is_temporal() && number(f)
+                    || f.is_char() && (t.is_char() || t.is_integral())
+                    || t.is_char() && f.is_integral();
+                if !allowed {
+                    self.error(id.span, format!("there is no conversion from {f} to {t}"));
+                    for e in exprs {
+                        self.infer(e);
+                    }
                     return Some(Type::Error);
                 }
+                let at = self.infer(arg);
+                if at.is_error() {
+                    self.surface(arg);
+                    return Some(Type::Error);
+                }
+                let plain = !matches!(at, Type::Enum(_) | Type::Exception);
                 match at.elem() {
-                    Some(ae)
-                        if !matches!(at, Type::Enum(_) | Type::Exception)
-                            && (ae == f || implicit_ok(ae, f)) => {}
-                    _ if Self::is_flexible(arg) => {}
+                    Some(ae) if plain && (ae == f || implicit_ok(ae, f)) => {
+                        self.value_to(arg, &ft);
+                    }
+                    _ if Self::is_flexible(arg) => self.value_to(arg, &ft),
+                    // Another number: converted to the declared source type first.
+                    Some(ae) if plain && ae.is_numeric() && f.is_numeric() => {
+                        self.value_to_any(arg, &at, &ft);
+                    }
                     _ => {
                         let msg = format!(
                             "{} expects a {} argument, found {}",
@@ -701,9 +1633,7 @@ impl Gen<'_> {
                         return Some(Type::Error);
                     }
                 }
-                self.value_to(arg, &ft);
                 self.convert(f, t);
-                let _ = mem_type(t);
                 Some(tt)
             }
             _ => None,

@@ -24,10 +24,19 @@ pub enum Elem {
     Real,
     LReal,
     Time,
+    LTime,
+    Date,
+    LDate,
+    Tod,
+    LTod,
+    Dt,
+    LDt,
+    Char,
+    WChar,
 }
 
 impl Elem {
-    pub const ALL: [Elem; 16] = [
+    pub const ALL: [Elem; 25] = [
         Elem::Bool,
         Elem::SInt,
         Elem::Int,
@@ -44,6 +53,15 @@ impl Elem {
         Elem::Real,
         Elem::LReal,
         Elem::Time,
+        Elem::LTime,
+        Elem::Date,
+        Elem::LDate,
+        Elem::Tod,
+        Elem::LTod,
+        Elem::Dt,
+        Elem::LDt,
+        Elem::Char,
+        Elem::WChar,
     ];
 
     pub fn name(self) -> &'static str {
@@ -64,20 +82,96 @@ impl Elem {
             Elem::Real => "REAL",
             Elem::LReal => "LREAL",
             Elem::Time => "TIME",
+            Elem::LTime => "LTIME",
+            Elem::Date => "DATE",
+            Elem::LDate => "LDATE",
+            Elem::Tod => "TOD",
+            Elem::LTod => "LTOD",
+            Elem::Dt => "DT",
+            Elem::LDt => "LDT",
+            Elem::Char => "CHAR",
+            Elem::WChar => "WCHAR",
         }
     }
 
+    /// The type named `upper` (IEC long names such as TIME_OF_DAY included).
     pub fn from_name(upper: &str) -> Option<Elem> {
-        Elem::ALL.iter().copied().find(|e| e.name() == upper)
+        let canonical = match upper {
+            "TIME_OF_DAY" => "TOD",
+            "LTIME_OF_DAY" => "LTOD",
+            "DATE_AND_TIME" => "DT",
+            "LDATE_AND_TIME" => "LDT",
+            other => other,
+        };
+        Elem::ALL.iter().copied().find(|e| e.name() == canonical)
     }
 
     pub fn size(self) -> u32 {
         match self {
-            Elem::Bool | Elem::SInt | Elem::USInt | Elem::Byte => 1,
-            Elem::Int | Elem::UInt | Elem::Word => 2,
+            Elem::Bool | Elem::SInt | Elem::USInt | Elem::Byte | Elem::Char => 1,
+            Elem::Int | Elem::UInt | Elem::Word | Elem::WChar => 2,
             Elem::DInt | Elem::UDInt | Elem::DWord | Elem::Real => 4,
-            Elem::LInt | Elem::ULInt | Elem::LWord | Elem::LReal | Elem::Time => 8,
+            Elem::LInt | Elem::ULInt | Elem::LWord | Elem::LReal => 8,
+            Elem::Time | Elem::LTime | Elem::Date | Elem::LDate | Elem::Tod | Elem::LTod => 8,
+            Elem::Dt | Elem::LDt => 8,
         }
+    }
+
+    /// TIME and LTIME: durations (`i64` nanoseconds).
+    pub fn is_duration(self) -> bool {
+        matches!(self, Elem::Time | Elem::LTime)
+    }
+
+    /// DATE, TOD, DT and their long forms: points in time (`i64` nanoseconds since
+    /// 1970-01-01, or since midnight for TOD).
+    pub fn is_date_time(self) -> bool {
+        matches!(
+            self,
+            Elem::Date | Elem::LDate | Elem::Tod | Elem::LTod | Elem::Dt | Elem::LDt
+        )
+    }
+
+    /// Durations and points in time.
+    pub fn is_temporal(self) -> bool {
+        self.is_duration() || self.is_date_time()
+    }
+
+    /// CHAR and WCHAR.
+    pub fn is_char(self) -> bool {
+        matches!(self, Elem::Char | Elem::WChar)
+    }
+
+    /// The VM's name for a date/time type (the `kind` argument of its date/time builtins).
+    pub fn time_kind(self) -> Option<plc_vm::TimeKind> {
+        use plc_vm::TimeKind as K;
+        Some(match self {
+            Elem::Time => K::Time,
+            Elem::LTime => K::LTime,
+            Elem::Date => K::Date,
+            Elem::LDate => K::LDate,
+            Elem::Tod => K::Tod,
+            Elem::LTod => K::LTod,
+            Elem::Dt => K::Dt,
+            Elem::LDt => K::LDt,
+            _ => return None,
+        })
+    }
+
+    /// The date/time family: DATE and LDATE are one, and so on (the long forms hold the
+    /// same nanoseconds; they differ in their conversions to numbers).
+    pub fn temporal_family(self) -> Option<Elem> {
+        Some(match self {
+            Elem::Time | Elem::LTime => Elem::Time,
+            Elem::Date | Elem::LDate => Elem::Date,
+            Elem::Tod | Elem::LTod => Elem::Tod,
+            Elem::Dt | Elem::LDt => Elem::Dt,
+            _ => return None,
+        })
+    }
+
+    /// The long form of a date/time type (LTIME for TIME, ...).
+    pub fn is_long_temporal(self) -> bool {
+        matches!(self, Elem::LTime | Elem::LDate | Elem::LTod | Elem::LDt)
     }
 
     pub fn is_signed_int(self) -> bool {
@@ -107,13 +201,13 @@ impl Elem {
 
     /// Whether cells of this type are sign-extended (vs zero-extended) from memory.
     pub fn signed_storage(self) -> bool {
-        self.is_signed_int() || self == Elem::Time
+        self.is_signed_int() || self.is_temporal()
     }
 
     /// Value range of an integral type.
     pub fn int_range(self) -> (i128, i128) {
         let bits = self.size() * 8;
-        if self.is_signed_int() || self == Elem::Time {
+        if self.signed_storage() {
             (-(1i128 << (bits - 1)), (1i128 << (bits - 1)) - 1)
         } else if self == Elem::Bool {
             (0, 1)
@@ -155,6 +249,8 @@ pub enum Type {
     Elem(Elem),
     /// STRING with its maximum length in characters.
     String(u32),
+    /// WSTRING with its maximum length in UTF-16 code units.
+    WString(u32),
     Array(Rc<ArrayType>),
     Struct(usize),
     Enum(usize),
@@ -164,6 +260,15 @@ pub enum Type {
     Fb(usize),
     /// `__EXCEPTION`: the trap code delivered to a `__CATCH` handler (held as a DINT).
     Exception,
+    /// `REF_TO T` / CODESYS `POINTER TO T`: a checked reference (a 64-bit cell, see the VM's
+    /// "References"); to a function block: the address of an instance.
+    Ref(Box<Type>),
+    /// CODESYS `REFERENCE TO T`: an alias of a `T`, dereferenced wherever it is used.
+    Reference(Box<Type>),
+    /// A variable of an INTERFACE type: the address of an instance implementing it (0: none).
+    Interface(usize),
+    /// The type of `NULL` (converts to every reference and interface type).
+    Null,
     /// Result of something that has no value (a call of a function without result).
     Void,
     /// Type of an expression that already produced an error; accepted everywhere.
@@ -177,9 +282,11 @@ impl Type {
     pub const INT: Type = Type::Elem(Elem::Int);
     pub const DINT: Type = Type::Elem(Elem::DInt);
     pub const LINT: Type = Type::Elem(Elem::LInt);
+    pub const ULINT: Type = Type::Elem(Elem::ULInt);
     pub const REAL: Type = Type::Elem(Elem::Real);
     pub const LREAL: Type = Type::Elem(Elem::LReal);
     pub const TIME: Type = Type::Elem(Elem::Time);
+    pub const LTIME: Type = Type::Elem(Elem::LTime);
 
     /// The elementary type values of this type are held as (subranges hold their base type,
     /// enums and exceptions a DINT).
@@ -199,6 +306,15 @@ impl Type {
     pub fn is_string(&self) -> bool {
         matches!(self, Type::String(_))
     }
+
+    pub fn is_wstring(&self) -> bool {
+        matches!(self, Type::WString(_))
+    }
+
+    /// References, interface values and `NULL`: 64-bit cells that are not numbers.
+    pub fn is_pointer_like(&self) -> bool {
+        matches!(self, Type::Ref(_) | Type::Interface(_) | Type::Null)
+    }
 }
 
 /// Result type of an arithmetic operation on two elementary operands, `None` if the mix is
@@ -206,6 +322,16 @@ impl Type {
 pub fn common_numeric(a: Elem, b: Elem) -> Option<Elem> {
     if a == b {
         return Some(a);
+    }
+    if a.is_temporal() || b.is_temporal() || a.is_char() || b.is_char() {
+        // TIME with LTIME and so on: the long form; CHAR with WCHAR: WCHAR.
+        return if implicit_ok(a, b) {
+            Some(b)
+        } else if implicit_ok(b, a) {
+            Some(a)
+        } else {
+            None
+        };
     }
     match (a.is_real(), b.is_real()) {
         (true, true) => return Some(Elem::LReal),
@@ -278,6 +404,19 @@ pub fn implicit_ok(from: Elem, to: Elem) -> bool {
     }
     if from == Elem::Real && to == Elem::LReal {
         return true;
+    }
+    // TIME -> LTIME, DATE -> LDATE, TOD -> LTOD, DT -> LDT (same nanoseconds), CHAR -> WCHAR.
+    if from.is_temporal() || to.is_temporal() {
+        return !from.is_long_temporal()
+            && to.is_long_temporal()
+            && from.temporal_family() == to.temporal_family();
+    }
+    if from.is_char() || to.is_char() {
+        return from == Elem::Char && to == Elem::WChar;
+    }
+    // A bit string fits a larger signed integer (CODESYS converts BYTE to INT implicitly).
+    if from.is_bits() && to.is_signed_int() {
+        return to.size() > from.size();
     }
     if from.is_integral() && to.is_real() {
         // Exact in the mantissa: up to INT for REAL, up to DINT for LREAL. Also allowed is

@@ -113,7 +113,7 @@ fn error_case(st: &Path, errors: &Path) -> Result<(), String> {
     let name = st.file_stem().unwrap().to_string_lossy().to_string();
     let src = std::fs::read_to_string(st).unwrap();
     let file = st.display().to_string();
-    let opts = Options { program: None };
+    let opts = Options::default();
     let diags = match compile(&[(file.clone(), src)], &opts) {
         Ok(_) => return Err(format!("{name}: compiled but errors were expected")),
         Err((d, map)) => d
@@ -200,8 +200,14 @@ fn differential(st: &Path, args: &[String]) -> Result<usize, String> {
         i += 2;
     }
     let src = std::fs::read_to_string(st).unwrap();
-    let (c, _) = compile(&[(st.display().to_string(), src)], &Options { program })
-        .map_err(|_| format!("{name}: compile failed"))?;
+    let (c, _) = compile(
+        &[(st.display().to_string(), src)],
+        &Options {
+            program,
+            ..Options::default()
+        },
+    )
+    .map_err(|_| format!("{name}: compile failed"))?;
     let image = Image::parse(&c.image).unwrap();
     let verified = plc_vm::verify::verify(&image).unwrap();
     let mut model = Model::new(&verified, STACK_CELLS, CALL_FRAMES, TRY_FRAMES);

@@ -1,6 +1,8 @@
 //! Property tests: the compiler never panics, whatever the input — random text, random
 //! token soups of ST words, and corpus programs with random edits. Whenever a program
-//! compiles, the image must pass the VM's verifier (checked inside `compile`).
+//! compiles, the image must pass the VM's verifier (checked inside `compile`), and a
+//! program that does not compile is told why by a diagnostic of its own, never by an
+//! internal error.
 
 use std::path::Path;
 
@@ -23,13 +25,25 @@ fn check(src: &str) {
         &[("fuzz.st".to_string(), src.to_string())],
         &Options {
             program: Some("Main".into()),
+            ..Options::default()
         },
     );
     done.store(true, std::sync::atomic::Ordering::SeqCst);
+    if let Err((diags, _)) = compile(
+        &[("fuzz.st".to_string(), src.to_string())],
+        &Options {
+            library: true,
+            ..Options::default()
+        },
+    ) && let Some(d) = diags.iter().find(|d| d.message.contains("internal error"))
+    {
+        panic!("{}\n{src}", d.message);
+    }
     let _ = compile(
         &[("fuzz.st".to_string(), src.to_string())],
         &Options {
             program: Some("Main".into()),
+            ..Options::default()
         },
     );
 }
@@ -148,11 +162,115 @@ const WORDS: &[&str] = &[
     "LIMIT",
     "SQRT",
     "INT_TO_REAL",
+    "TRUNC",
+    "TO_INT",
+    "ATAN2",
+    "SPLIT_DATE",
+    "CONCAT_DT",
+    "DAY_OF_WEEK",
+    "ADD_TOD_TIME",
+    "D#2024-02-29",
+    "TOD#12:00",
+    "DT#2024-02-29-12:00:00",
+    "LT#1ns",
+    "DATE",
+    "TOD",
+    "DT",
+    "LTIME",
+    "CHAR",
+    "x.3",
+    "x.%B1",
+    "YEAR",
+    "IN",
     "x[1]",
     "fb.Q",
     "(*c*)",
     "\n",
 ];
+
+/// Every standard function called with an erroneous argument, a wrong type and a wrong
+/// count: each is a diagnostic of the program, none an internal error.
+#[test]
+fn standard_functions_report_bad_arguments() {
+    const NAMES: &[&str] = &[
+        "ABS",
+        "SQRT",
+        "LN",
+        "EXP",
+        "ATAN2",
+        "EXPT",
+        "TRUNC",
+        "TRUNC_INT",
+        "REAL_TRUNC_DINT",
+        "MOVE",
+        "SEL",
+        "MAX",
+        "MIN",
+        "LIMIT",
+        "MUX",
+        "SHL",
+        "ROR",
+        "LEN",
+        "LEFT",
+        "MID",
+        "INSERT",
+        "REPLACE",
+        "FIND",
+        "CONCAT",
+        "INT_TO_REAL",
+        "STRING_TO_DATE",
+        "TO_INT",
+        "TO_STRING",
+        "ADD_TIME",
+        "SUB_DT_DT",
+        "MUL_TIME",
+        "CONCAT_DATE",
+        "CONCAT_TOD",
+        "CONCAT_DT",
+        "CONCAT_DATE_TOD",
+        "SPLIT_DATE",
+        "SPLIT_TOD",
+        "SPLIT_DT",
+        "DAY_OF_WEEK",
+        "TIME",
+        "DATE_TO_STRING",
+        "CHAR_TO_STRING",
+    ];
+    const ARGS: &[&str] = &[
+        "(nothing)",
+        "(nothing, 1)",
+        "(1, nothing, 2)",
+        "(s)",
+        "(r, s)",
+        "(IN := nothing)",
+        "(d, YEAR => nothing)",
+        "()",
+        "(1, 2, 3, 4, 5, 6, 7, 8)",
+    ];
+    for name in NAMES {
+        for args in ARGS {
+            let src = format!(
+                "PROGRAM Main\nVAR i : INT; r : REAL; s : STRING; d : DATE; END_VAR\ni := {name}{args};\n{name}{args};\nEND_PROGRAM\n"
+            );
+            match compile(&[("t.st".into(), src.clone())], &Options::default()) {
+                Ok(_) => assert!(!args.contains("nothing"), "accepted:\n{src}"),
+                Err((diags, _)) => {
+                    assert!(
+                        !diags.iter().any(|d| d.message.contains("internal error")),
+                        "{src}\n{diags:?}"
+                    );
+                    // A lone unknown argument is always the error reported.
+                    if *args == "(nothing)" {
+                        assert!(
+                            diags.iter().any(|d| d.message.contains("`nothing`")),
+                            "{src}\n{diags:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+}
 
 fn corpus_sources() -> Vec<String> {
     let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/corpus");

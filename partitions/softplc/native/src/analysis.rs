@@ -70,6 +70,7 @@ impl Insn<'_> {
                 | Opcode::JumpIf
                 | Opcode::JumpIfNot
                 | Opcode::Call
+                | Opcode::CallVirt
                 | Opcode::Ret
                 | Opcode::Throw
         )
@@ -314,11 +315,17 @@ fn check_try_frames(image: &Image<'_>, plan: &PouPlan<'_>) -> Result<(), Error> 
                 outer.pop();
                 merge(insn.next(), outer, &mut work);
             }
-            Opcode::Call => {
-                let callee = image
-                    .pou(insn.u16_at(0) as usize)
-                    .ok_or_else(|| Error::internal("CALL of unknown POU".into()))?;
-                let region = insn.depth - 1 - callee.arg_cells as u32;
+            Opcode::Call | Opcode::CallVirt => {
+                let args = match insn.op {
+                    Opcode::Call => {
+                        image
+                            .pou(insn.u16_at(0) as usize)
+                            .ok_or_else(|| Error::internal("CALL of unknown POU".into()))?
+                            .arg_cells as u32
+                    }
+                    _ => 0,
+                };
+                let region = insn.depth - 1 - args;
                 if merged.iter().any(|&d| d > region) {
                     return Err(Error::TryFrameOverCall {
                         pou: plan.pou.name.to_string(),

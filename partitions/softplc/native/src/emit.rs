@@ -40,7 +40,8 @@
 
 use crate::Error;
 use crate::analysis::{Insn, PouPlan};
-use crate::structure::{self, Structure};
+use crate::promote::{Promotion, Sync};
+use crate::structure::Structure;
 use plc_vm::image::Image;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use std::cell::RefCell;
@@ -52,6 +53,8 @@ pub struct Emitter<'i> {
     /// Cell locals of every POU (its largest stack depth), by POU index.
     pub cells: Vec<u32>,
     pub out: String,
+    /// The frame variables of the POU being written that live in locals `v<k>`.
+    pub promotion: Promotion,
 }
 
 /// How a block runs.
@@ -84,6 +87,7 @@ fn trap_path(trap: Trap) -> String {
         Trap::NumericError => "NumericError",
         Trap::InvalidAddress => "InvalidAddress",
         Trap::Deadline => "Deadline",
+        Trap::InvalidReference => "InvalidReference",
     };
     format!("Trap::{name}")
 }
@@ -110,22 +114,76 @@ fn cell_from(ty: MemType, bytes: &str) -> String {
     }
 }
 
+/// The memory type of a promoted variable's raw bytes (`width` bytes, zero-extended).
+fn raw_type(width: u8) -> &'static str {
+    match width {
+        1 => "MemType::U8",
+        2 => "MemType::U16",
+        4 => "MemType::U32",
+        _ => "MemType::U64",
+    }
+}
+
+/// The cell an `LD_REL` of type `ty` loads from a promoted variable's raw bytes `raw`.
+fn from_raw(ty: MemType, raw: &str) -> String {
+    match ty {
+        MemType::I8 => format!("({raw} as u8 as i8 as i64 as u64)"),
+        MemType::I16 => format!("({raw} as u16 as i16 as i64 as u64)"),
+        MemType::I32 => format!("({raw} as u32 as i32 as i64 as u64)"),
+        _ => raw.to_string(),
+    }
+}
+
+/// Writes every promoted variable back to data memory (inside the frame, which the
+/// function checked on entry).
+fn flush_code(promotion: &Promotion) -> String {
+    let mut o = String::new();
+    for (k, &(off, w)) in promotion.vars.iter().enumerate() {
+        writeln!(
+            o,
+            "let _ = ops::store(d, base as usize + {off}, {}, v{k});",
+            raw_type(w)
+        )
+        .ok();
+    }
+    o
+}
+
+/// Reads every promoted variable again from data memory.
+fn reload_code(promotion: &Promotion) -> String {
+    let mut o = String::new();
+    for (k, &(off, w)) in promotion.vars.iter().enumerate() {
+        writeln!(
+            o,
+            "if let Some(v) = ops::load(d, base as usize + {off}, {}) {{ v{k} = v; }}",
+            raw_type(w)
+        )
+        .ok();
+    }
+    o
+}
+
 fn hex(v: u64) -> String {
     format!("0x{v:x}u64")
 }
 
 impl Emitter<'_> {
-    /// Writes POU `plan`'s function.
-    pub fn pou(&mut self, plan: &PouPlan<'_>) -> Result<(), Error> {
+    /// Writes POU `plan`'s function, structured by `st` (the POU start its first entry), with
+    /// the frame variables of `promotion` in locals, its frame base fixed to `base` if that is
+    /// known.
+    pub fn pou(
+        &mut self,
+        plan: &PouPlan<'_>,
+        st: &Structure,
+        promotion: &Promotion,
+        base: Option<u32>,
+    ) -> Result<(), Error> {
+        let st = st.clone();
+        self.promotion = promotion.clone();
         let m = plan.max_depth;
         let rets = plan.pou.ret_cells as u32;
         let name = pou_fn(plan.index);
         let cells: Vec<String> = (0..m).map(cell).collect();
-        let mut entries = vec![0usize];
-        for &h in &plan.handlers {
-            entries.push(plan.block_of(h)?);
-        }
-        let st = structure::structure(plan, &entries);
         let sites = RefCell::new(Vec::new());
         // The regions first (they fill the site table).
         let outer = std::mem::take(&mut self.out);
@@ -138,6 +196,7 @@ impl Emitter<'_> {
         // Region numbers are produced here only; anything else is a bug here.
         let stray = Site {
             insn: &plan.insns[0],
+            index: 0,
             refund: 0,
             mode: Mode::Checked,
             sites: &sites,
@@ -199,6 +258,25 @@ impl Emitter<'_> {
                 .join(", ")
         )
         .ok();
+        if let Some(b) = base {
+            writeln!(o, "// Every activation has this frame base (its tasks and calls).\nlet base: u32 = {b};").ok();
+        }
+        if !promotion.vars.is_empty() {
+            writeln!(
+                o,
+                "// The frame is inside data memory (CALL and the verifier checked it); its promoted variables:\nif base as usize + {} > DATA {{ return Err(cx.refuse({})); }}",
+                plan.pou.frame_size, plan.pou.code_start
+            )
+            .ok();
+            for (k, &(off, w)) in promotion.vars.iter().enumerate() {
+                writeln!(
+                    o,
+                    "let mut v{k}: u64 = ops::load(d, base as usize + {off}, {}).unwrap_or(0);",
+                    raw_type(w)
+                )
+                .ok();
+            }
+        }
         writeln!(o, "let me = cx.call_depth();").ok();
         writeln!(o, "let room = cx.room(sp0);").ok();
         writeln!(o, "let tight = room < {m};").ok();
@@ -218,6 +296,7 @@ impl Emitter<'_> {
             plan.index
         )
         .ok();
+        o.push_str(&flush_code(promotion));
         writeln!(o, "fuel += refund;\ncx.set_fuel(fuel);").ok();
         writeln!(
             o,
@@ -353,6 +432,7 @@ impl Emitter<'_> {
                 | Opcode::JumpIf
                 | Opcode::JumpIfNot
                 | Opcode::Call
+                | Opcode::CallVirt
                 | Opcode::Ret
                 | Opcode::Throw
         );
@@ -366,6 +446,7 @@ impl Emitter<'_> {
             let insn = &plan.insns[i];
             let at = Site {
                 insn,
+                index: i,
                 refund: 0,
                 mode: Mode::Checked,
                 sites,
@@ -384,6 +465,7 @@ impl Emitter<'_> {
         for (k, i) in body.clone().enumerate() {
             let at = Site {
                 insn: &plan.insns[i],
+                index: i,
                 refund: len - k as u32 - 1,
                 mode: Mode::Fast,
                 sites,
@@ -395,6 +477,7 @@ impl Emitter<'_> {
             // The same in both modes: it is the block's last instruction.
             let at = Site {
                 insn: last,
+                index: block.last,
                 refund: 0,
                 mode: Mode::Fast,
                 sites,
@@ -447,7 +530,21 @@ impl Emitter<'_> {
         let insn = at.insn;
         let d = insn.depth;
         let top = |k: u32| cell(d - k); // top(1) is the top cell
+        // Promoted variables: written back before an instruction that may read them from
+        // memory, read again after one that may write it (a CALL: in its result arms).
+        let sync = self.promotion.sync(at.index);
+        let flush = flush_code(&self.promotion);
+        let reload = reload_code(&self.promotion);
+        let after = if sync == Sync::FlushReload && !matches!(insn.op, Call | CallVirt) {
+            reload.clone()
+        } else {
+            String::new()
+        };
+        let promoted = |off: u32, ty: MemType| self.promotion.var(off, ty.width() as u8);
         let o = &mut self.out;
+        if sync != Sync::None {
+            o.push_str(&flush);
+        }
         let pc = insn.pc;
         match insn.op {
             Nop => {}
@@ -499,6 +596,20 @@ impl Emitter<'_> {
                     }
                     StAbs => {
                         writeln!(o, "st::<DATA, {w}>(d, {off}, {});", top(1)).ok();
+                    }
+                    LdRel if promoted(off, ty).is_some() => {
+                        let k = promoted(off, ty).unwrap_or(0);
+                        at.push_check(o);
+                        writeln!(o, "{} = {};", cell(d), from_raw(ty, &format!("v{k}"))).ok();
+                    }
+                    StRel if promoted(off, ty).is_some() => {
+                        let k = promoted(off, ty).unwrap_or(0);
+                        let mask = if w == 8 {
+                            u64::MAX
+                        } else {
+                            (1u64 << (8 * w)) - 1
+                        };
+                        writeln!(o, "v{k} = {} & {};", top(1), hex(mask)).ok();
                     }
                     LdRel => {
                         writeln!(
@@ -741,18 +852,134 @@ impl Emitter<'_> {
                     init.join(", ")
                 )
                 .ok();
-                writeln!(o, "Ok([{}]) => {{ cx.leave();", results.join(", ")).ok();
+                writeln!(
+                    o,
+                    "Ok([{}]) => {{ cx.leave();\n{reload}",
+                    results.join(", ")
+                )
+                .ok();
                 for i in 0..rets {
                     writeln!(o, "{} = r{i};", cell(region + i)).ok();
                 }
                 writeln!(o, "}}").ok();
                 writeln!(
                     o,
-                    "Err(Unwind::Outer) => {{ cx.resume_at(me); (dt, dpc) = cx.raised(); {} }}",
+                    "Err(Unwind::Outer) => {{ {reload}cx.resume_at(me); (dt, dpc) = cx.raised(); {} }}",
                     at.raise_from_callee()
                 )
                 .ok();
                 writeln!(o, "Err(Unwind::Fault) => break 'run {region},").ok();
+                writeln!(o, "}}").ok();
+            }
+            RefMake | RefCheck => {
+                let a = top(1);
+                let f = if insn.op == RefMake {
+                    "ref_make"
+                } else {
+                    "ref_check"
+                };
+                writeln!(
+                    o,
+                    "let Some(v) = cx.{f}({a}, {}) else {{ {} }};\n{a} = v;",
+                    insn.u32_at(0),
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+            }
+            RefAdd => {
+                let (r, n) = (top(2), top(1));
+                writeln!(
+                    o,
+                    "{r} = ({r} & !0xFFFF_FFFFu64) | ({r} as u32).wrapping_add({n} as u32) as u64;"
+                )
+                .ok();
+            }
+            ChkNull => {
+                writeln!(
+                    o,
+                    "if {} == 0 {{ {} }}",
+                    top(1),
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+            }
+            VirtFrame => {
+                let a = top(1);
+                writeln!(
+                    o,
+                    "let Some(m) = cx.method(d, {a}, {}) else {{ {} }};\n{a} = m.frame as u64;",
+                    insn.u16_at(0),
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+            }
+            CallVirt => {
+                // The class of the instance decides the POU: one arm per method any class
+                // runs for this slot; each as CALL does (no argument or result cells).
+                let slot = insn.u16_at(0);
+                let inst = top(1);
+                let region = d - 1;
+                let mut targets: Vec<usize> = (0..self.image.dispatch_count())
+                    .filter_map(|i| self.image.dispatch(i))
+                    .filter(|m| m.slot == slot)
+                    .map(|m| m.pou as usize)
+                    .collect();
+                targets.sort_unstable();
+                targets.dedup();
+                writeln!(
+                    o,
+                    "let Some(m) = cx.method(d, {inst}, {slot}) else {{ {} }};",
+                    at.raise("Trap::InvalidReference")
+                )
+                .ok();
+                writeln!(
+                    o,
+                    "if !cx.can_enter() {{ {} }}",
+                    at.raise("Trap::CallDepth")
+                )
+                .ok();
+                writeln!(o, "match m.pou {{").ok();
+                let data = self.image.data_size() as u64;
+                for pou in targets {
+                    let callee = self.image.pou(pou).ok_or_else(|| {
+                        Error::internal(format!("dispatch to unknown POU {pou} at {pc}"))
+                    })?;
+                    if callee.arg_cells != 0 || callee.ret_cells != 0 {
+                        return Err(Error::internal(format!(
+                            "dispatch target {} has argument or result cells",
+                            callee.name
+                        )));
+                    }
+                    let frame_outside = match data.checked_sub(callee.frame_size as u64) {
+                        Some(limit) => format!("{inst} > {limit}"),
+                        None => "true".to_string(),
+                    };
+                    writeln!(o, "{pou} => {{").ok();
+                    writeln!(
+                        o,
+                        "if {frame_outside} {{ {} }}",
+                        at.raise("Trap::InvalidAddress")
+                    )
+                    .ok();
+                    writeln!(o, "cx.enter();\ncx.set_fuel(fuel);").ok();
+                    writeln!(
+                        o,
+                        "let r = {}(cx, d, {inst} as u32, sp0 + {region}, [0; {}]);\nfuel = cx.fuel();\nmatch r {{",
+                        pou_fn(pou),
+                        self.cells[pou]
+                    )
+                    .ok();
+                    writeln!(o, "Ok([]) => {{ cx.leave();\n{reload}}}").ok();
+                    writeln!(
+                        o,
+                        "Err(Unwind::Outer) => {{ {reload}cx.resume_at(me); (dt, dpc) = cx.raised(); {} }}",
+                        at.raise_from_callee()
+                    )
+                    .ok();
+                    writeln!(o, "Err(Unwind::Fault) => break 'run {region},").ok();
+                    writeln!(o, "}}\n}}").ok();
+                }
+                writeln!(o, "_ => {{ {} }}", at.raise("Trap::InvalidReference")).ok();
                 writeln!(o, "}}").ok();
             }
             Ret => {
@@ -760,7 +987,7 @@ impl Emitter<'_> {
                 let results: Vec<String> = (d - rets..d).map(cell).collect();
                 writeln!(
                     o,
-                    "cx.set_fuel(fuel);\ncx.ret({pc});\nreturn Ok([{}]);",
+                    "{flush}cx.set_fuel(fuel);\ncx.ret({pc});\nreturn Ok([{}]);",
                     results.join(", ")
                 )
                 .ok();
@@ -863,6 +1090,7 @@ impl Emitter<'_> {
                 });
             }
         }
+        o.push_str(&after);
         Ok(())
     }
 }
@@ -918,6 +1146,30 @@ fn known_builtin(id: u16) -> Option<Builtin> {
             | StrFromTime
             | StrToI64
             | StrToF64
+            | Atan2F64
+            | Atan2F32
+            | DateFromParts
+            | DateSplit
+            | DateOf
+            | TodOf
+            | DayOfWeek
+            | StrFromDateTime
+            | StrToDateTime
+            | TodFromParts
+            | WStrLen
+            | WStrAssign
+            | WStrConcat
+            | WStrLeft
+            | WStrRight
+            | WStrMid
+            | WStrInsert
+            | WStrDelete
+            | WStrReplace
+            | WStrFind
+            | WStrCompare
+            | WStrFromStr
+            | StrFromWStr
+            | StrSync
     )
     .then_some(b)
 }
@@ -937,6 +1189,8 @@ type SiteEntry = (u8, u32, u32, u32);
 /// Where an instruction stands in its block.
 struct Site<'p, 'a> {
     insn: &'p Insn<'a>,
+    /// Its index in `PouPlan::insns`.
+    index: usize,
     /// Instructions of the block after this one (their count is given back on a trap).
     refund: u32,
     mode: Mode,

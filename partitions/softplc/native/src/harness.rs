@@ -125,7 +125,8 @@ impl Workspace {
         )
     }
 
-    /// Writes the workspace and builds binary member `bin` (release profile).
+    /// Writes the workspace and builds member `bin` (release profile; for a library member
+    /// the returned path names no binary).
     pub fn build(&self, bin: &str) -> Result<Built, String> {
         write_file(&self.dir.join("Cargo.toml"), self.manifest().as_bytes())?;
         for member in &self.members {

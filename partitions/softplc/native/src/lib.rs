@@ -77,6 +77,7 @@
 pub mod analysis;
 pub mod emit;
 pub mod harness;
+pub mod promote;
 pub mod structure;
 
 use plc_vm::image::Image;
@@ -139,12 +140,21 @@ impl std::fmt::Display for Error {
 
 impl std::error::Error for Error {}
 
-/// POUs reachable from the tasks through CALLs.
+/// The POUs of the image's dispatch records (the methods `CALL_VIRT` may run).
+fn dispatch_targets(image: &Image<'_>) -> Vec<usize> {
+    (0..image.dispatch_count())
+        .filter_map(|i| image.dispatch(i))
+        .map(|m| m.pou as usize)
+        .collect()
+}
+
+/// POUs reachable from the tasks through CALLs (and every method dispatch may run).
 fn reachable_pous(image: &Image<'_>) -> BTreeSet<usize> {
     let mut seen = BTreeSet::new();
     let mut work: Vec<usize> = (0..image.task_count())
         .filter_map(|t| image.task(t))
         .map(|t| t.pou as usize)
+        .chain(dispatch_targets(image))
         .collect();
     while let Some(index) = work.pop() {
         if !seen.insert(index) {
@@ -190,16 +200,37 @@ pub fn translate(image_bytes: &[u8]) -> Result<String, Error> {
 
 /// [`translate`], with the image embedded from `source`.
 pub fn translate_with(image_bytes: &[u8], source: &ImageSource) -> Result<String, Error> {
+    translate_pous(image_bytes, source, false)
+}
+
+/// [`translate`] of every POU of the image, reachable from a task or not: for checking
+/// that a library (which has no tasks) translates.
+pub fn translate_every_pou(image_bytes: &[u8]) -> Result<String, Error> {
+    translate_pous(image_bytes, &ImageSource::Inline, true)
+}
+
+fn translate_pous(image_bytes: &[u8], source: &ImageSource, every: bool) -> Result<String, Error> {
     let image = Image::parse(image_bytes).map_err(Error::Image)?;
     plc_vm::verify::verify(&image).map_err(Error::Verify)?;
-    let pous = reachable_pous(&image);
+    let pous = if every {
+        (0..image.pou_count()).collect()
+    } else {
+        reachable_pous(&image)
+    };
     let mut plans = Vec::new();
     let mut cells = vec![0u32; image.pou_count()];
     for &index in &pous {
         let plan = analysis::plan(&image, index)?;
         cells[index] = plan.max_depth;
-        plans.push(plan);
+        let mut entries = vec![0usize];
+        for &h in &plan.handlers {
+            entries.push(plan.block_of(h)?);
+        }
+        let st = structure::structure(&plan, &entries);
+        let stacks = promote::addresses(&image, &plan, &st);
+        plans.push((plan, st, stacks));
     }
+    let bases = fixed_bases(&image, &plans);
     let mut out = String::new();
     let hash = plc_vm::native::image_hash(image_bytes);
     writeln!(
@@ -264,11 +295,64 @@ pub fn translate_with(image_bytes: &[u8], source: &ImageSource) -> Result<String
         image: &image,
         cells,
         out,
+        promotion: promote::Promotion::default(),
     };
-    for plan in &plans {
-        emitter.pou(plan)?;
+    for (plan, st, stacks) in &plans {
+        let base = bases[plan.index];
+        let promotion = promote::promote(plan, st, stacks, base);
+        emitter.pou(plan, st, &promotion, base)?;
     }
     Ok(emitter.out)
+}
+
+/// The frame base of each POU when every activation has the same one (its tasks' instance
+/// base, the base every CALL of it passes), found from the task table down the call graph.
+fn fixed_bases(
+    image: &Image<'_>,
+    plans: &[(
+        analysis::PouPlan<'_>,
+        structure::Structure,
+        Vec<Vec<promote::Addr>>,
+    )],
+) -> Vec<Option<u32>> {
+    let n = image.pou_count();
+    let mut bases: Vec<Option<u32>> = vec![None; n];
+    // Each round settles at least one more level of the call graph; a disagreement (which
+    // should not happen) ends in no fixed bases rather than a guess.
+    for _ in 0..n + 2 {
+        // Every way into each POU: Some(base) when known, None when not.
+        let mut seen: Vec<Vec<Option<u64>>> = vec![Vec::new(); n];
+        for task in (0..image.task_count()).filter_map(|t| image.task(t)) {
+            if let Some(ways) = seen.get_mut(task.pou as usize) {
+                ways.push(Some(task.instance_base as u64));
+            }
+        }
+        // A method runs on whatever instance is dispatched to.
+        for pou in dispatch_targets(image) {
+            if let Some(ways) = seen.get_mut(pou) {
+                ways.push(None);
+            }
+        }
+        for (plan, _, stacks) in plans {
+            for (callee, base) in promote::call_bases(plan, stacks, bases[plan.index]) {
+                if let Some(ways) = seen.get_mut(callee) {
+                    ways.push(base);
+                }
+            }
+        }
+        let next: Vec<Option<u32>> = seen
+            .iter()
+            .map(|ways| match ways.first() {
+                Some(Some(b)) if ways.iter().all(|w| *w == Some(*b)) => u32::try_from(*b).ok(),
+                _ => None,
+            })
+            .collect();
+        if next == bases {
+            return bases;
+        }
+        bases = next;
+    }
+    vec![None; n]
 }
 
 /// `bytes` as the inside of a Rust byte-string literal.

@@ -144,8 +144,14 @@ fn corpus_cases() -> Vec<Case> {
                 }
             }
             let src = std::fs::read_to_string(st).unwrap();
-            let (c, _) = compile(&[(st.display().to_string(), src)], &Options { program })
-                .unwrap_or_else(|_| panic!("corpus {name} does not compile"));
+            let (c, _) = compile(
+                &[(st.display().to_string(), src)],
+                &Options {
+                    program,
+                    ..Options::default()
+                },
+            )
+            .unwrap_or_else(|_| panic!("corpus {name} does not compile"));
             let image = Image::parse(&c.image).unwrap();
             let verified = plc_vm::verify::verify(&image).unwrap();
             let mut data = vec![0u8; image.data_size() as usize];

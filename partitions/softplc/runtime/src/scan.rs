@@ -127,7 +127,8 @@ pub fn health_error(trap: Trap) -> ErrorCode {
         | Trap::SubrangeViolation
         | Trap::CallDepth
         | Trap::StackOverflow
-        | Trap::InvalidAddress => ErrorCode::ApplicationError,
+        | Trap::InvalidAddress
+        | Trap::InvalidReference => ErrorCode::ApplicationError,
     }
 }
 

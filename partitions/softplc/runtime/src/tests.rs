@@ -458,6 +458,10 @@ fn traps_are_reported_as_the_fitting_arinc_error() {
         health_error(Trap::IndexOutOfBounds),
         ErrorCode::ApplicationError
     );
+    assert_eq!(
+        health_error(Trap::InvalidReference),
+        ErrorCode::ApplicationError
+    );
     assert!(names_task("spin", "SPIN.s") && names_task("Spin.S", "SPIN.s"));
     assert!(!names_task("spi", "SPIN.s") && !names_task("s", "SPIN.s"));
 }
@@ -1607,10 +1611,12 @@ fn the_tier_follows_the_configuration_and_the_compiled_code() {
 #[test]
 fn run_task_runs_the_native_code_and_handles_its_fault() {
     use plc_vm::native::{Cycle, NativeProgram, Unwind, image_hash};
-    // Stand-ins for translated code: one writes a marker into the first data byte and
+    use core::sync::atomic::{AtomicUsize, Ordering};
+    // Stand-ins for translated code: one writes a marker into the variable `marker` and
     // completes, the other faults (as code for another image would).
+    static MARKER: AtomicUsize = AtomicUsize::new(0);
     fn completes(cx: &mut Cycle<'_>, data: &mut [u8], _: usize) -> Result<(), Unwind> {
-        data[0] = 0xA5;
+        data[MARKER.load(Ordering::Relaxed)] = 0xA5;
         cx.ret(0);
         Ok(())
     }
@@ -1629,7 +1635,7 @@ PROGRAM P marker := 1; END_PROGRAM";
     let package = Package::parse(&bytes).unwrap();
     let image = Image::parse(package.program()).unwrap();
     let marker = image.find_var("marker").unwrap().addr as usize;
-    assert_eq!(marker, 0, "the stand-in writes byte 0");
+    MARKER.store(marker, Ordering::Relaxed);
     let leak = |run| -> &'static NativeProgram {
         let image: &'static [u8] = Box::leak(program.clone().into_boxed_slice());
         Box::leak(Box::new(NativeProgram {

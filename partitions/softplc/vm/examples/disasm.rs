@@ -28,6 +28,18 @@ fn main() {
     for i in 0..image.var_count() {
         println!("; var {:?}", image.var(i).unwrap());
     }
+    for i in 0..image.object_count() {
+        let (start, len) = image.object(i).unwrap();
+        println!("; object {}: [{start}, {})", i + 1, start + len);
+    }
+    for i in 0..image.class_count() {
+        let class = image.class(i).unwrap();
+        let methods: Vec<String> = (class.first..class.first + class.count)
+            .filter_map(|d| image.dispatch(d as usize))
+            .map(|d| format!("slot {} -> POU {} (frame {})", d.slot, d.pou, d.frame))
+            .collect();
+        println!("; class {i} {}: {}", class.name, methods.join(", "));
+    }
     let pous: Vec<_> = (0..image.pou_count())
         .filter_map(|i| image.pou(i))
         .collect();

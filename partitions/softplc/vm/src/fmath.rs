@@ -316,6 +316,39 @@ pub fn atan(x: f64) -> f64 {
     if negative { -r } else { r }
 }
 
+/// Angle of the point (x, y) in radians, in [-pi, pi] (IEEE `atan2` for the special values:
+/// signed zeros and infinities give the exact quadrant angles, a NaN gives NaN).
+pub fn atan2(y: f64, x: f64) -> f64 {
+    use core::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
+    // pi = PI + PI_LO exactly enough for pi - z.
+    const PI_LO: f64 = 1.224_646_799_147_353_207_2e-16;
+    if x.is_nan() || y.is_nan() {
+        return f64::NAN;
+    }
+    let negative_y = y.is_sign_negative();
+    let signed = |r: f64| if negative_y { -r } else { r };
+    if y == 0.0 {
+        // Toward +x the angle is y itself (+0/-0); toward -x it is +-pi.
+        return if x.is_sign_negative() { signed(PI) } else { y };
+    }
+    if x == 0.0 {
+        return signed(FRAC_PI_2);
+    }
+    if x.is_infinite() {
+        return match (y.is_infinite(), x > 0.0) {
+            (true, true) => signed(FRAC_PI_4),
+            (true, false) => signed(3.0 * FRAC_PI_4),
+            (false, true) => signed(0.0),
+            (false, false) => signed(PI),
+        };
+    }
+    if y.is_infinite() {
+        return signed(FRAC_PI_2);
+    }
+    let z = atan((y / x).abs());
+    signed(if x > 0.0 { z } else { PI - (z - PI_LO) })
+}
+
 /// Arc sine (NaN outside [-1, 1]).
 pub fn asin(x: f64) -> f64 {
     if !(-1.0..=1.0).contains(&x) {

@@ -1,17 +1,18 @@
-//! The bytecode image format (version 3), its zero-copy parser and (feature `alloc`) a builder.
+//! The bytecode image format (version 4), its zero-copy parser and (feature `alloc`) a builder.
 //!
 //! All integers are little-endian. Layout:
 //!
 //! ```text
 //! offset size  field
 //! 0      4     magic "PLCB"
-//! 4      2     version (= 3; version 1 had no LOCATED section, version 2 no SHARED section)
-//! 6      2     header length (= 104)
+//! 4      2     version (= 4; version 1 had no LOCATED section, version 2 no SHARED section,
+//!              version 3 no OBJECTS, CLASSES and DISPATCH sections)
+//! 6      2     header length (= 128)
 //! 8      4     data_size: bytes of data memory the program needs
 //! 12     4     reserved (0)
-//! 16     88    section table: 11 x (offset u32, length u32), offsets from the image start,
+//! 16     112   section table: 14 x (offset u32, length u32), offsets from the image start,
 //!              in this order: CODE, CONSTS, INIT, POUS, TASKS, VARS, SRCLOCS, FILES, NAMES,
-//!              LOCATED, SHARED
+//!              LOCATED, SHARED, OBJECTS, CLASSES, DISPATCH
 //! ```
 //!
 //! Sections:
@@ -43,6 +44,22 @@
 //!   verifier checks that each names a variable once, of an elementary type (BOOL to LREAL,
 //!   TIME, the bit strings; no STRING), that no two overlap in data memory, that at most one
 //!   is the validity flag and it is a BOOL, and that there are at most [`MAX_SHARED_VARS`].
+//! * `OBJECTS`: 12-byte records `start u32, len u32, parent u32`: the variables (and parts of
+//!   variables) a reference may reach (see "References" in [`crate::isa`]). Sorted by
+//!   `start`, then by decreasing `len`; each inside data memory and at least one byte long;
+//!   two records either do not overlap or one contains the other, and `parent` is 1 + the
+//!   index of the smallest record containing this one (0 when none), at most
+//!   [`MAX_OBJECT_DEPTH`] levels deep (the verifier checks all of it). A reference made by
+//!   `REF_MAKE` names the smallest record containing the bytes it was made for; `REF_CHECK`
+//!   admits an access only inside that record's bytes.
+//! * `CLASSES`: 16-byte records `name_off u32, name_len u16, reserved u16, first u32,
+//!   count u32`: the function-block classes whose instances are called through `CALL_VIRT`
+//!   (see "Classes and dynamic dispatch" in [`crate::isa`]). An instance of class `k` holds
+//!   `k` as a `u32` at its first byte; `first`/`count` are its range of `DISPATCH` records.
+//! * `DISPATCH`: 8-byte records `slot u16, pou u16, frame u32`: within one class's range
+//!   sorted by strictly increasing `slot`; `pou` is the method run for that slot (a POU
+//!   taking and leaving 0 cells), `frame` the data address of that method's parameter frame
+//!   (`VIRT_FRAME` gives it to the caller, which stores the arguments there).
 //!
 //! [`Image::parse`] checks only the structure (sizes, section bounds, record multiples); the
 //! semantic checks are the verifier's job ([`mod@crate::verify`]).
@@ -52,9 +69,9 @@ use crate::isa::{read_u16, read_u32, read_u64};
 /// Image magic.
 pub const MAGIC: [u8; 4] = *b"PLCB";
 /// Format version this crate reads and writes.
-pub const VERSION: u16 = 3;
+pub const VERSION: u16 = 4;
 /// Number of sections in the section table.
-pub const SECTION_COUNT: usize = 11;
+pub const SECTION_COUNT: usize = 14;
 /// Header length in bytes.
 pub const HEADER_LEN: usize = 16 + SECTION_COUNT * 8;
 /// POU record size.
@@ -71,6 +88,14 @@ pub const FILE_RECORD: usize = 8;
 pub const LOCATED_RECORD: usize = 12;
 /// Shared-variable record size.
 pub const SHARED_RECORD: usize = 16;
+/// Object record size.
+pub const OBJECT_RECORD: usize = 12;
+/// Deepest nesting of object records (a variable, its members, their members, ...).
+pub const MAX_OBJECT_DEPTH: usize = 16;
+/// Class record size.
+pub const CLASS_RECORD: usize = 16;
+/// Dispatch record size.
+pub const DISPATCH_RECORD: usize = 8;
 /// Most shared-variable records an image may have.
 pub const MAX_SHARED_VARS: usize = 256;
 /// Watchdog budget (instructions per cycle) used when a task record says 0.
@@ -106,6 +131,12 @@ pub enum Section {
     Located = 9,
     /// Variables shared with another PLC project.
     Shared = 10,
+    /// The variables references may reach.
+    Objects = 11,
+    /// Function-block classes (dynamic dispatch).
+    Classes = 12,
+    /// The classes' method tables.
+    Dispatch = 13,
 }
 
 /// Why [`Image::parse`] rejected the bytes.
@@ -322,6 +353,28 @@ pub struct SourceLocation {
     pub column: u32,
 }
 
+/// A class record: a function-block type whose instances are called through `CALL_VIRT`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Class<'a> {
+    /// Its name ("" when the name reference is invalid; the verifier rejects such images).
+    pub name: &'a str,
+    /// Index of its first `DISPATCH` record.
+    pub first: u32,
+    /// Number of its `DISPATCH` records.
+    pub count: u32,
+}
+
+/// A dispatch record: the method a class runs for a slot and that method's parameter frame.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Dispatch {
+    /// The slot (the operand of `CALL_VIRT` / `VIRT_FRAME`).
+    pub slot: u16,
+    /// The method's POU.
+    pub pou: u16,
+    /// Data address of the method's parameter frame.
+    pub frame: u32,
+}
+
 /// A parsed image: borrowed views of the sections (no copies, no allocation).
 #[derive(Clone, Copy, Debug)]
 pub struct Image<'a> {
@@ -359,6 +412,9 @@ impl<'a> Image<'a> {
             Section::Names,
             Section::Located,
             Section::Shared,
+            Section::Objects,
+            Section::Classes,
+            Section::Dispatch,
         ];
         let mut sections: [&'a [u8]; SECTION_COUNT] = [&[]; SECTION_COUNT];
         for (i, kind) in KINDS.iter().enumerate() {
@@ -379,6 +435,9 @@ impl<'a> Image<'a> {
                 Section::Files => FILE_RECORD,
                 Section::Located => LOCATED_RECORD,
                 Section::Shared => SHARED_RECORD,
+                Section::Objects => OBJECT_RECORD,
+                Section::Classes => CLASS_RECORD,
+                Section::Dispatch => DISPATCH_RECORD,
                 _ => 1,
             };
             if section.len() % record != 0 {
@@ -445,6 +504,7 @@ impl<'a> Image<'a> {
             Section::Tasks => TASK_RECORD,
             Section::Vars => VAR_RECORD,
             Section::Files => FILE_RECORD,
+            Section::Classes => CLASS_RECORD,
             _ => return None,
         };
         let r = self.record(section, size, index)?;
@@ -564,6 +624,96 @@ impl<'a> Image<'a> {
     /// Every shared variable, in declaration order.
     pub fn shared_vars(&self) -> impl Iterator<Item = Shared<'a>> + '_ {
         (0..self.shared_count()).filter_map(|i| self.shared(i))
+    }
+
+    /// Number of object records.
+    pub fn object_count(&self) -> usize {
+        self.section(Section::Objects).len() / OBJECT_RECORD
+    }
+
+    /// Object record `index` as `(start, len)`.
+    #[inline(always)]
+    pub fn object(&self, index: usize) -> Option<(u32, u32)> {
+        let r = self.record(Section::Objects, OBJECT_RECORD, index)?;
+        Some((read_u32(r, 0), read_u32(r, 4)))
+    }
+
+    /// The index of object record `index`'s parent (the smallest record containing it).
+    pub fn object_parent(&self, index: usize) -> Option<usize> {
+        let r = self.record(Section::Objects, OBJECT_RECORD, index)?;
+        (read_u32(r, 8) as usize).checked_sub(1)
+    }
+
+    /// The index of the smallest object record containing the `size` bytes at `address`:
+    /// a binary search for the last record starting at or before `address`, then up its
+    /// parents (every record containing `address` is that record or one of its ancestors,
+    /// since records nest and are sorted by start, then by decreasing length). At most
+    /// [`MAX_OBJECT_DEPTH`] steps up in a verified image.
+    pub fn object_containing(&self, address: u64, size: u64) -> Option<usize> {
+        let (mut lo, mut hi) = (0usize, self.object_count());
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            match self.object(mid) {
+                Some((start, _)) if start as u64 <= address => lo = mid + 1,
+                _ => hi = mid,
+            }
+        }
+        let mut index = lo.checked_sub(1)?;
+        for _ in 0..=MAX_OBJECT_DEPTH {
+            let (start, len) = self.object(index)?;
+            if address >= start as u64 && address + size <= start as u64 + len as u64 {
+                return Some(index);
+            }
+            index = self.object_parent(index)?;
+        }
+        None
+    }
+
+    /// Number of class records.
+    pub fn class_count(&self) -> usize {
+        self.section(Section::Classes).len() / CLASS_RECORD
+    }
+
+    /// Class record `index`.
+    pub fn class(&self, index: usize) -> Option<Class<'a>> {
+        let r = self.record(Section::Classes, CLASS_RECORD, index)?;
+        Some(Class {
+            name: self.name_at(read_u32(r, 0), read_u16(r, 4)).unwrap_or(""),
+            first: read_u32(r, 8),
+            count: read_u32(r, 12),
+        })
+    }
+
+    /// Number of dispatch records.
+    pub fn dispatch_count(&self) -> usize {
+        self.section(Section::Dispatch).len() / DISPATCH_RECORD
+    }
+
+    /// Dispatch record `index`.
+    pub fn dispatch(&self, index: usize) -> Option<Dispatch> {
+        let r = self.record(Section::Dispatch, DISPATCH_RECORD, index)?;
+        Some(Dispatch {
+            slot: read_u16(r, 0),
+            pou: read_u16(r, 2),
+            frame: read_u32(r, 4),
+        })
+    }
+
+    /// The method class `class` runs for `slot` (binary search in the class's sorted range);
+    /// `None` when the class does not exist or has no method for the slot.
+    pub fn lookup_method(&self, class: u64, slot: u16) -> Option<Dispatch> {
+        let c = self.class(usize::try_from(class).ok()?)?;
+        let (mut lo, mut hi) = (c.first as usize, c.first as usize + c.count as usize);
+        while lo < hi {
+            let mid = lo + (hi - lo) / 2;
+            let d = self.dispatch(mid)?;
+            match d.slot.cmp(&slot) {
+                core::cmp::Ordering::Equal => return Some(d),
+                core::cmp::Ordering::Less => lo = mid + 1,
+                core::cmp::Ordering::Greater => hi = mid,
+            }
+        }
+        None
     }
 
     /// Looks a variable up by exact name (linear scan; monitors are not hot paths).
@@ -702,6 +852,9 @@ mod builder {
         names: Vec<u8>,
         located: Vec<u8>,
         shared: Vec<u8>,
+        objects: Vec<u8>,
+        classes: Vec<u8>,
+        dispatch: Vec<u8>,
         labels: Vec<Option<u32>>,
         fixups: Vec<(usize, Label)>,
         /// Start offsets of the emitted instructions (for the peephole fusion).
@@ -1274,6 +1427,43 @@ mod builder {
             r.push(0);
         }
 
+        /// Adds an object record (see [`Image::object`]); `parent` is the index of the
+        /// smallest record added before that contains it. Returns the new record's index.
+        pub fn add_object(&mut self, start: u32, len: u32, parent: Option<u32>) -> u32 {
+            self.objects.extend_from_slice(&start.to_le_bytes());
+            self.objects.extend_from_slice(&len.to_le_bytes());
+            self.objects
+                .extend_from_slice(&parent.map_or(0, |p| p + 1).to_le_bytes());
+            self.object_count() - 1
+        }
+
+        /// Number of object records added so far.
+        pub fn object_count(&self) -> u32 {
+            (self.objects.len() / OBJECT_RECORD) as u32
+        }
+
+        /// Adds a class whose methods are `(slot, pou, parameter frame)` (any order; stored
+        /// sorted by slot) and returns its class id (the value its instances hold at their
+        /// first byte).
+        pub fn add_class(&mut self, name: &str, methods: &[(u16, PouId, u32)]) -> u32 {
+            let (off, len) = self.name_ref(name);
+            let first = (self.dispatch.len() / DISPATCH_RECORD) as u32;
+            let mut sorted = methods.to_vec();
+            sorted.sort_by_key(|m| m.0);
+            for (slot, pou, frame) in &sorted {
+                self.dispatch.extend_from_slice(&slot.to_le_bytes());
+                self.dispatch.extend_from_slice(&pou.0.to_le_bytes());
+                self.dispatch.extend_from_slice(&frame.to_le_bytes());
+            }
+            let r = &mut self.classes;
+            r.extend_from_slice(&off.to_le_bytes());
+            r.extend_from_slice(&len.to_le_bytes());
+            r.extend_from_slice(&0u16.to_le_bytes());
+            r.extend_from_slice(&first.to_le_bytes());
+            r.extend_from_slice(&(sorted.len() as u32).to_le_bytes());
+            (self.classes.len() / CLASS_RECORD - 1) as u32
+        }
+
         /// Adds a shared-variable record for variable record `var` (see [`Image::shared`]).
         pub fn add_shared(
             &mut self,
@@ -1615,6 +1805,34 @@ mod builder {
             self.start(Opcode::SelIf);
             self.code.push(cmp as u8);
         }
+        /// REF_MAKE for `size` bytes.
+        pub fn ref_make(&mut self, size: u32) {
+            self.start(Opcode::RefMake);
+            self.code.extend_from_slice(&size.to_le_bytes());
+        }
+        /// REF_CHECK of an access of `size` bytes.
+        pub fn ref_check(&mut self, size: u32) {
+            self.start(Opcode::RefCheck);
+            self.code.extend_from_slice(&size.to_le_bytes());
+        }
+        /// REF_ADD.
+        pub fn ref_add(&mut self) {
+            self.op(Opcode::RefAdd);
+        }
+        /// CHK_NULL.
+        pub fn chk_null(&mut self) {
+            self.op(Opcode::ChkNull);
+        }
+        /// CALL_VIRT of `slot`.
+        pub fn call_virt(&mut self, slot: u16) {
+            self.start(Opcode::CallVirt);
+            self.code.extend_from_slice(&slot.to_le_bytes());
+        }
+        /// VIRT_FRAME of `slot`.
+        pub fn virt_frame(&mut self, slot: u16) {
+            self.start(Opcode::VirtFrame);
+            self.code.extend_from_slice(&slot.to_le_bytes());
+        }
         /// TRY_BEGIN with its handler label.
         pub fn try_begin(&mut self, handler: Label) {
             self.op_target(Opcode::TryBegin, handler);
@@ -1671,6 +1889,9 @@ mod builder {
                 &names,
                 &self.located,
                 &self.shared,
+                &self.objects,
+                &self.classes,
+                &self.dispatch,
             ];
             let total: usize = HEADER_LEN + sections.iter().map(|s| s.len()).sum::<usize>();
             if total > u32::MAX as usize {

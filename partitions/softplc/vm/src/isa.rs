@@ -13,6 +13,35 @@
 //! "May trap" lists the [`Trap`]s an instruction can raise; every data access may raise
 //! [`Trap::InvalidAddress`] when its (dynamic) address is outside data memory, every push may
 //! raise [`Trap::StackOverflow`] when the operand stack is full.
+//!
+//! # References
+//!
+//! A *reference* (IEC `REF_TO`, CODESYS `POINTER TO`) is a cell `address | object << 32`:
+//! the low 32 bits are a data address, the high 32 bits name the variable (or the part of a
+//! variable) the reference was taken from, as `1 +` the index of its record in the image's
+//! `OBJECTS` section ([`crate::image::Image::object`]). The cell 0 is `NULL`.
+//! `REF_MAKE n` turns an address into a reference to the smallest object containing the `n`
+//! bytes there; `REF_ADD` moves a reference by a byte offset (only its address changes,
+//! wrapping in 32 bits, so arithmetic can never make it name another object); `REF_CHECK n`
+//! admits an access of `n` bytes at the reference's address only when it lies inside the
+//! named object's bytes and leaves the plain address for `LD_IND`/`ST_IND`/`COPY`/builtins.
+//! A reference therefore reaches the variable it was taken from and nothing else, whatever
+//! arithmetic the program did on it; NULL, a reference moved outside its variable and a cell
+//! that was never a reference all trap with [`Trap::InvalidReference`] at the access.
+//!
+//! # Classes and dynamic dispatch
+//!
+//! A function-block instance whose methods are called through `CALL_VIRT` holds its class id
+//! (an index into the `CLASSES` section) as a `u32` at its first byte; references to such
+//! instances (and interface values) are plain instance addresses, 0 being `NULL`.
+//! `CALL_VIRT slot` reads the class of the instance on the stack, finds the class's
+//! `DISPATCH` record for `slot` and calls its POU with the instance as frame base, exactly as
+//! `CALL` would; `VIRT_FRAME slot` gives the data address of that method's parameter frame so
+//! the caller can store the arguments first. Every dispatch target is a POU the verifier
+//! checked (valid index, no argument or result cells), so the verifier still proves stack
+//! depths; which method runs is decided by the instance's class at run time. A NULL
+//! instance, an unknown class or a class without the slot trap with
+//! [`Trap::InvalidReference`].
 
 /// Operand layout of an instruction (all immediates little-endian).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -374,6 +403,30 @@ opcodes! {
     /// `[a b] -> []`: jumps when the comparison is **true**: the fused form of `<cmp>; JNZ target`.
     JumpIf = 0x8E, "JUMP_IF", CompareTarget;
 
+    /// `[addr] -> [ref]`: a reference to the smallest object (`OBJECTS` record) containing
+    /// the `n` (the operand) bytes at `addr`: `addr | (index + 1) << 32` (see "References").
+    /// May trap: INVALID_REFERENCE when no object contains them.
+    RefMake = 0xB0, "REF_MAKE", U32;
+    /// `[ref] -> [addr]`: checks an access of `n` (the operand) bytes through a reference and
+    /// leaves its address (the low 32 bits). May trap: INVALID_REFERENCE unless the object
+    /// the reference names exists and `start <= addr` and `addr + n <= start + len`.
+    RefCheck = 0xB1, "REF_CHECK", U32;
+    /// `[ref n] -> [ref']`: pointer arithmetic: adds `n` (wrapping) to the low 32 bits (the
+    /// address) and keeps the high 32 bits (the object): `ref' = (ref & !0xFFFF_FFFF) |
+    /// (ref as u32).wrapping_add(n as u32)`.
+    RefAdd = 0xB2, "REF_ADD", None;
+    /// `[a] -> [a]`: a reference to a function-block instance or an interface value must
+    /// not be NULL. May trap: INVALID_REFERENCE when `a == 0`.
+    ChkNull = 0xB3, "CHK_NULL", None;
+    /// `[inst] -> []`: dynamic dispatch (see "Classes and dynamic dispatch"): calls the method
+    /// the class of instance `inst` runs for `slot` (the operand), with `inst` as frame base,
+    /// as `CALL` does. May trap: INVALID_REFERENCE (NULL instance, class id unreadable or
+    /// unknown, no method for the slot), then CALL_DEPTH and INVALID_ADDRESS like `CALL`.
+    CallVirt = 0xB4, "CALL_VIRT", Index16;
+    /// `[inst] -> [frame]`: the data address of the parameter frame of the method `CALL_VIRT
+    /// slot` would call for `inst`. May trap: INVALID_REFERENCE like `CALL_VIRT`.
+    VirtFrame = 0xB5, "VIRT_FRAME", Index16;
+
     /// `[] -> []`: pushes a try frame (handler, stack depth, call depth). On a catchable trap
     /// the VM restores the stack to the recorded depth, pushes the trap code and jumps to
     /// `handler` (same POU; stack depth at handler = depth at TRY_BEGIN + 1). May trap:
@@ -639,6 +692,44 @@ impl MemType {
 }
 
 codes::code_enum! {
+    /// The date/time type a `kind` argument of the date/time builtins means.
+    pub enum TimeKind: u8 {
+        /// TIME (a duration).
+        Time = 0 => "TIME",
+        /// LTIME.
+        LTime = 1 => "LTIME",
+        /// DATE.
+        Date = 2 => "DATE",
+        /// LDATE.
+        LDate = 3 => "LDATE",
+        /// TIME_OF_DAY.
+        Tod = 4 => "TOD",
+        /// LTIME_OF_DAY.
+        LTod = 5 => "LTOD",
+        /// DATE_AND_TIME.
+        Dt = 6 => "DT",
+        /// LDATE_AND_TIME.
+        LDt = 7 => "LDT",
+    }
+}
+
+impl TimeKind {
+    /// The literal prefix printed by DATE_TIME_TO_STRING (`T#`, `LD#`, ...).
+    pub const fn prefix(self) -> &'static str {
+        match self {
+            TimeKind::Time => "T#",
+            TimeKind::LTime => "LT#",
+            TimeKind::Date => "D#",
+            TimeKind::LDate => "LD#",
+            TimeKind::Tod => "TOD#",
+            TimeKind::LTod => "LTOD#",
+            TimeKind::Dt => "DT#",
+            TimeKind::LDt => "LDT#",
+        }
+    }
+}
+
+codes::code_enum! {
     /// Rounding rule of float->integer conversions.
     pub enum RoundMode: u8 {
         /// Toward zero (IEC `TRUNC`).
@@ -673,6 +764,11 @@ codes::code_enum! {
         /// The task's time deadline passed while it ran (the runtime's clock check, see
         /// `Machine::run_cycle_until`). Not catchable, like WATCHDOG.
         Deadline = 9 => "DEADLINE",
+        /// A dereference through NULL or through a reference outside the variable it was
+        /// taken from (`REF_MAKE`, `REF_CHECK`), or a method call through a NULL instance, an
+        /// instance of unknown class or a class without that method (`CHK_NULL`,
+        /// `CALL_VIRT`, `VIRT_FRAME`).
+        InvalidReference = 10 => "INVALID_REFERENCE",
     }
 }
 
@@ -691,8 +787,10 @@ macro_rules! builtins {
         ///
         /// String arguments are **addresses** of string variables in data memory, laid out as
         /// `max_len: u16 LE, cur_len: u16 LE, bytes[max_len]` (so a `STRING[n]` occupies
-        /// `4 + n` bytes and its initial value must have `max_len = n`). Results written to a
-        /// `dst` string are truncated to its `max_len`; `dst` may alias an argument. Length and
+        /// at least `4 + n` bytes and its initial value must have `max_len = n`). Results
+        /// written to a `dst` string are truncated to its `max_len`, and a result shorter than
+        /// `max_len` is followed by a NUL byte (CODESYS code reads strings through pointers up
+        /// to that terminator); `dst` may alias an argument. Length and
         /// position arguments are clamped (negative counts as 0, positions beyond the string
         /// to its end) instead of trapping; positions are 1-based as in IEC.
         #[repr(u16)]
@@ -780,6 +878,83 @@ builtins! {
     ExptF32 = 43, "EXPT_REAL", 2, 1;
     /// REAL ABS.
     AbsF32 = 44, "ABS_REAL", 1, 1;
+    /// `[y x] -> [atan2(y, x)]` LREAL: the angle of the point (x, y) in [-pi, pi].
+    Atan2F64 = 128, "ATAN2_LREAL", 2, 1;
+    /// `[y x] -> [atan2(y, x)]` REAL (computed in f64, rounded to f32).
+    Atan2F32 = 129, "ATAN2_REAL", 2, 1;
+
+    // Date and time. Every date/time type is an `i64` count of nanoseconds: TIME/LTIME a
+    // duration, TOD/LTOD since midnight, DATE/LDATE and DT/LDT since 1970-01-01 00:00
+    // (proleptic Gregorian calendar, no leap seconds). `kind` arguments are [`TimeKind`] codes.
+
+    /// `[year month day] -> [date]`: IEC CONCAT_DATE. NUMERIC_ERROR unless month is 1..=12,
+    /// day 1..=days of that month and the date lies in 1678..=2261 (the `i64` range).
+    DateFromParts = 130, "CONCAT_DATE", 3, 1;
+    /// `[date] -> [year << 16 | month << 8 | day]` (year signed): IEC SPLIT_DATE packed in
+    /// one cell; a value that is not midnight counts as its day.
+    DateSplit = 131, "SPLIT_DATE", 1, 1;
+    /// `[dt] -> [date]`: the midnight starting the day of `dt` (rounds toward minus
+    /// infinity). NUMERIC_ERROR when that midnight lies before the `i64` range.
+    DateOf = 132, "DT_TO_DATE", 1, 1;
+    /// `[dt] -> [tod]`: the time since that midnight, `0 <= tod < 24 h` (also wraps a TOD
+    /// that left its day after TOD +/- TIME).
+    TodOf = 133, "DT_TO_TOD", 1, 1;
+    /// `[date] -> [weekday]`: IEC DAY_OF_WEEK, 0 = Sunday .. 6 = Saturday.
+    DayOfWeek = 134, "DAY_OF_WEEK", 1, 1;
+    /// `[dst v kind] -> []`: the IEC literal of a date/time value: `T#1h2s`, `LT#5ns`,
+    /// `D#2024-02-29`, `TOD#13:05:00.25`, `DT#2024-02-29-13:05:00` (`LD#`, `LTOD#`, `LDT#`
+    /// for the long types; fractions of a second only when not zero).
+    StrFromDateTime = 135, "DATE_TIME_TO_STRING", 3, 0;
+    /// `[s kind] -> [v]`: parses a date/time literal of that kind, with or without its
+    /// prefix (`'D#2024-02-29'`, `'2024-02-29'`, `'12:30'`, `'T#1s500ms'`, `'1.5s'`).
+    /// After trimming blanks and an optional prefix of the kind's family (case-insensitive:
+    /// `T#`, `TIME#`, `LT#`, `LTIME#`; `D#`, `DATE#`, `LD#`, `LDATE#`; `TOD#`,
+    /// `TIME_OF_DAY#`, `LTOD#`, `LTIME_OF_DAY#`; `DT#`, `DATE_AND_TIME#`, `LDT#`,
+    /// `LDATE_AND_TIME#`) the text is: a date `Y-M-D`; a time of day `H:M`, `H:M:S` or
+    /// `H:M:S.F` (H < 24, M and S < 60, F one or more digits, cut to nanoseconds); a date
+    /// and time `Y-M-D-` then a time of day; a duration `[-]` then components `N[.F]unit`
+    /// (unit `d h m s ms us ns`, any case; `_` between components; fractions rounded to the
+    /// nearest nanosecond, halves away from zero). Numbers are 1 to 18 digits. NUMERIC_ERROR when
+    /// malformed, not a valid date or time of day, or outside the `i64` range.
+    StrToDateTime = 136, "STRING_TO_DATE_TIME", 2, 1;
+    /// `[hour minute second millisecond] -> [tod]`: IEC CONCAT_TOD. NUMERIC_ERROR unless
+    /// hour is 0..=23, minute and second 0..=59, millisecond 0..=999.
+    TodFromParts = 137, "CONCAT_TOD", 4, 1;
+
+    // WSTRING: the STRING builtins for strings of UTF-16 code units, laid out as
+    // `max_len: u16 LE, cur_len: u16 LE, units[max_len]: u16 LE` (a `WSTRING[n]` occupies
+    // `4 + 2n` bytes). Lengths and positions count code units; the same clamping rules as
+    // for STRING; results are at most [`crate::builtins::MAX_STRING_LEN`] units.
+
+    /// `[s] -> [len]`.
+    WStrLen = 140, "LEN_WSTRING", 1, 1;
+    /// `[dst src] -> []`.
+    WStrAssign = 141, "WSTRING_ASSIGN", 2, 0;
+    /// `[dst a b] -> []`.
+    WStrConcat = 142, "CONCAT_WSTRING", 3, 0;
+    /// `[dst a n] -> []`.
+    WStrLeft = 143, "LEFT_WSTRING", 3, 0;
+    /// `[dst a n] -> []`.
+    WStrRight = 144, "RIGHT_WSTRING", 3, 0;
+    /// `[dst a n p] -> []`.
+    WStrMid = 145, "MID_WSTRING", 4, 0;
+    /// `[dst a b p] -> []`.
+    WStrInsert = 146, "INSERT_WSTRING", 4, 0;
+    /// `[dst a n p] -> []`.
+    WStrDelete = 147, "DELETE_WSTRING", 4, 0;
+    /// `[dst a b n p] -> []`.
+    WStrReplace = 148, "REPLACE_WSTRING", 5, 0;
+    /// `[a b] -> [pos]`.
+    WStrFind = 149, "FIND_WSTRING", 2, 1;
+    /// `[a b] -> [-1|0|1]`: lexicographic comparison of the code units.
+    WStrCompare = 150, "WSTRING_COMPARE", 2, 1;
+    /// `[dst s] -> []`: the WSTRING `dst` from the STRING `s`, whose bytes are read as
+    /// UTF-8 (a byte that is not part of a valid UTF-8 sequence is the character of that
+    /// code, Latin-1); characters beyond U+FFFF take two units (a surrogate pair).
+    WStrFromStr = 151, "STRING_TO_WSTRING", 2, 0;
+    /// `[dst ws] -> []`: the STRING `dst` from the WSTRING `ws`, in UTF-8 (an unpaired
+    /// surrogate is U+FFFD), cut after the last whole character that fits.
+    StrFromWStr = 152, "WSTRING_TO_STRING", 2, 0;
 
     /// `[s] -> [len]`.
     StrLen = 100, "LEN", 1, 1;
@@ -820,6 +995,21 @@ builtins! {
     StrToI64 = 117, "STRING_TO_INT", 1, 1;
     /// `[s] -> [f64]`: parses a real number. NUMERIC_ERROR when malformed.
     StrToF64 = 118, "STRING_TO_LREAL", 1, 1;
+    /// `[s] -> []`: takes the text's length from its terminator: `cur_len` becomes the index
+    /// of the first NUL among the `max_len` text bytes (`max_len` when there is none), as after
+    /// CODESYS code wrote the string's bytes through a pointer. Every builtin writing a string
+    /// (and the monitor's write) leaves a NUL right after a text shorter than `max_len`, so
+    /// the length survives this whatever wrote the string last. INVALID_ADDRESS when the
+    /// `4 + max_len` bytes are not all in data memory.
+    StrSync = 193, "STRING_SYNC", 1, 0;
+}
+
+impl Builtin {
+    /// The numeric builtins ([`crate::fmath`]: ids below 100 and the ATAN2 pair), which the
+    /// reference model shares with the VM; it re-implements every other builtin.
+    pub const fn is_math(self) -> bool {
+        (self as u16) < 100 || matches!(self, Builtin::Atan2F64 | Builtin::Atan2F32)
+    }
 }
 
 /// Reads `N` bytes at `at` (caller guarantees bounds; one bounds check).
@@ -871,6 +1061,9 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         IncRel | IncAbs => (0, 0),
         SelIf => (2, 1),
         JumpIfImm | JumpIfNotImm => (1, 0),
+        RefMake | RefCheck | ChkNull | VirtFrame => (1, 1),
+        RefAdd => (2, 1),
+        CallVirt => (1, 0),
         Add | Sub | Mul | DivS | DivU | ModS | ModU | And | Or | Xor | Shl | ShrU | ShrS | Rol
         | Ror | Eq | Ne | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | AddF32 | SubF32
         | MulF32 | DivF32 | EqF32 | NeF32 | LtF32 | LeF32 | GtF32 | GeF32 | AddF64 | SubF64

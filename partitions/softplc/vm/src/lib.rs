@@ -102,7 +102,7 @@ pub mod verify;
 pub mod vm;
 
 pub use image::{Image, ImageError};
-pub use isa::{Builtin, MemType, Opcode, RoundMode, Trap};
+pub use isa::{Builtin, MemType, Opcode, RoundMode, TimeKind, Trap};
 #[cfg(any(feature = "alloc", test))]
 pub use verify::verify;
 pub use verify::{VerifiedImage, VerifyError, verify_with_scratch};

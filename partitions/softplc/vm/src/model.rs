@@ -520,7 +520,7 @@ impl<'a> Model<'a> {
             Opcode::CallBuiltin => {
                 let b = Builtin::from_u16(imm_u16(code, i)).unwrap();
                 let args: Vec<u64> = s.split_off(s.len() - b.args());
-                let result = if (b as u16) < 100 {
+                let result = if b.is_math() {
                     crate::builtins::call(b, &args, &mut self.data)?
                 } else {
                     string_builtin(b, &args, &mut self.data)?
@@ -650,6 +650,80 @@ impl<'a> Model<'a> {
                 let v = self.read(ty, address)?;
                 let a = pop(&mut s);
                 s.push(model_binary(Opcode::from_u8(code[i]).unwrap(), a, v)?);
+            }
+            Opcode::RefMake => {
+                let a = pop(&mut s);
+                let size = imm_u32(code, i) as u64;
+                // The shortest record containing the bytes, by a linear scan (the VM
+                // binary-searches and walks up parents).
+                let found = (0..self.image.object_count())
+                    .filter(|&k| {
+                        let (start, len) = self.image.object(k).unwrap();
+                        a >= start as u64 && a + size <= start as u64 + len as u64
+                    })
+                    .min_by_key(|&k| self.image.object(k).unwrap().1);
+                let Some(k) = found else {
+                    return Err(Trap::InvalidReference);
+                };
+                s.push(a + (((k + 1) as u64) << 32));
+            }
+            Opcode::RefCheck => {
+                let r = pop(&mut s);
+                let object = r >> 32;
+                let address = r % (1u64 << 32);
+                let size = imm_u32(code, i) as u64;
+                if object == 0 || object > self.image.object_count() as u64 {
+                    return Err(Trap::InvalidReference);
+                }
+                let (start, len) = self.image.object(object as usize - 1).unwrap();
+                if address < start as u64 || address + size > start as u64 + len as u64 {
+                    return Err(Trap::InvalidReference);
+                }
+                s.push(address);
+            }
+            Opcode::RefAdd => {
+                let n = pop(&mut s);
+                let r = pop(&mut s);
+                let low = (r % (1u64 << 32) + n % (1u64 << 32)) % (1u64 << 32);
+                s.push((r >> 32 << 32) + low);
+            }
+            Opcode::ChkNull => {
+                if *s.last().unwrap() == 0 {
+                    return Err(Trap::InvalidReference);
+                }
+            }
+            Opcode::CallVirt | Opcode::VirtFrame => {
+                let instance = pop(&mut s);
+                let slot = imm_u16(code, i);
+                if instance == 0 || !self.addr_ok(instance, 4) {
+                    return Err(Trap::InvalidReference);
+                }
+                let class = self.read(MemType::U32, instance)? as usize;
+                if class >= self.image.class_count() {
+                    return Err(Trap::InvalidReference);
+                }
+                let c = self.image.class(class).unwrap();
+                // Linear scan of the class's methods (the VM binary-searches).
+                let Some(d) = (c.first..c.first + c.count)
+                    .map(|k| self.image.dispatch(k as usize).unwrap())
+                    .find(|d| d.slot == slot)
+                else {
+                    return Err(Trap::InvalidReference);
+                };
+                if op == Opcode::VirtFrame {
+                    s.push(d.frame as u64);
+                } else {
+                    let callee = self.image.pou(d.pou as usize).unwrap();
+                    if self.calls.len() >= self.call_limit {
+                        return Err(Trap::CallDepth);
+                    }
+                    if !self.addr_ok(instance, callee.frame_size as u64) {
+                        return Err(Trap::InvalidAddress);
+                    }
+                    self.calls.push((next, self.base));
+                    self.base = instance as u32;
+                    next = callee.code_start;
+                }
             }
             Opcode::TryBegin => {
                 if self.tries.len() >= self.try_limit {
@@ -856,6 +930,152 @@ fn read_string(data: &[u8], address: u64) -> Result<(usize, Vec<u8>), Trap> {
     Ok((capacity, data[a + 4..a + 4 + len].to_vec()))
 }
 
+/// Reads the WSTRING variable at `address`: (capacity, code units).
+fn read_wstring(data: &[u8], address: u64) -> Result<(usize, Vec<u16>), Trap> {
+    if address >= data.len() as u64 || data.len() as u64 - address < 4 {
+        return Err(Trap::InvalidAddress);
+    }
+    let a = address as usize;
+    let capacity = u16::from_le_bytes([data[a], data[a + 1]]) as usize;
+    let current = u16::from_le_bytes([data[a + 2], data[a + 3]]) as usize;
+    if a + 4 + 2 * capacity > data.len() {
+        return Err(Trap::InvalidAddress);
+    }
+    let len = current.min(capacity);
+    Ok((
+        capacity,
+        (0..len)
+            .map(|i| u16::from_le_bytes([data[a + 4 + 2 * i], data[a + 5 + 2 * i]]))
+            .collect(),
+    ))
+}
+
+/// The WSTRING builtins (ids 140-152), from their documentation.
+fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u64>, Trap> {
+    use Builtin::*;
+    match builtin {
+        WStrLen => return Ok(Some(read_wstring(data, args[0])?.1.len() as u64)),
+        WStrFind => {
+            let (_, a) = read_wstring(data, args[0])?;
+            let (_, b) = read_wstring(data, args[1])?;
+            let found = if b.is_empty() || b.len() > a.len() {
+                0
+            } else {
+                (0..=a.len() - b.len())
+                    .find(|&at| a[at..at + b.len()] == b[..])
+                    .map_or(0, |at| at + 1)
+            };
+            return Ok(Some(found as u64));
+        }
+        WStrCompare => {
+            let (_, a) = read_wstring(data, args[0])?;
+            let (_, b) = read_wstring(data, args[1])?;
+            let r: i64 = if a < b {
+                -1
+            } else if a > b {
+                1
+            } else {
+                0
+            };
+            return Ok(Some(r as u64));
+        }
+        StrFromWStr => {
+            let (capacity, _) = read_string(data, args[0])?;
+            let (_, units) = read_wstring(data, args[1])?;
+            let text = String::from_utf16_lossy(&units);
+            let room = capacity.min(crate::builtins::MAX_STRING_LEN);
+            let mut out: Vec<u8> = Vec::new();
+            for c in text.chars() {
+                let mut utf8 = [0u8; 4];
+                let bytes = c.encode_utf8(&mut utf8).as_bytes();
+                if out.len() + bytes.len() > room {
+                    break;
+                }
+                out.extend_from_slice(bytes);
+            }
+            let a = args[0] as usize;
+            data[a + 2..a + 4].copy_from_slice(&(out.len() as u16).to_le_bytes());
+            data[a + 4..a + 4 + out.len()].copy_from_slice(&out);
+            // A STRING result shorter than its capacity ends with a NUL.
+            if out.len() < capacity {
+                data[a + 4 + out.len()] = 0;
+            }
+            return Ok(None);
+        }
+        _ => {}
+    }
+    let (capacity, _) = read_wstring(data, args[0])?;
+    let mut result: Vec<u16> = match builtin {
+        WStrAssign => read_wstring(data, args[1])?.1,
+        WStrConcat => {
+            let mut a = read_wstring(data, args[1])?.1;
+            a.extend(read_wstring(data, args[2])?.1);
+            a
+        }
+        WStrLeft => {
+            let a = read_wstring(data, args[1])?.1;
+            a[..clamp(args[2], 0, a.len())].to_vec()
+        }
+        WStrRight => {
+            let a = read_wstring(data, args[1])?.1;
+            a[a.len() - clamp(args[2], 0, a.len())..].to_vec()
+        }
+        WStrMid => {
+            let a = read_wstring(data, args[1])?.1;
+            let p = clamp(args[3], 1, a.len() + 1);
+            let n = clamp(args[2], 0, a.len() + 1 - p);
+            a[p - 1..p - 1 + n].to_vec()
+        }
+        WStrInsert => {
+            let a = read_wstring(data, args[1])?.1;
+            let b = read_wstring(data, args[2])?.1;
+            let p = clamp(args[3], 0, a.len());
+            [&a[..p], &b[..], &a[p..]].concat()
+        }
+        WStrDelete | WStrReplace => {
+            let a = read_wstring(data, args[1])?.1;
+            let (b, n_cell, p_cell) = if builtin == WStrReplace {
+                (read_wstring(data, args[2])?.1, args[3], args[4])
+            } else {
+                (Vec::new(), args[2], args[3])
+            };
+            let p = clamp(p_cell, 1, a.len() + 1);
+            let n = clamp(n_cell, 0, a.len() + 1 - p);
+            [&a[..p - 1], &b[..], &a[p - 1 + n..]].concat()
+        }
+        WStrFromStr => {
+            // UTF-8 where valid, every other byte its Latin-1 character.
+            let (_, bytes) = read_string(data, args[1])?;
+            let mut out = Vec::new();
+            let mut rest = &bytes[..];
+            while !rest.is_empty() {
+                match core::str::from_utf8(rest) {
+                    Ok(text) => {
+                        out.extend(text.encode_utf16());
+                        break;
+                    }
+                    Err(e) => {
+                        let (valid, after) = rest.split_at(e.valid_up_to());
+                        out.extend(core::str::from_utf8(valid).unwrap_or("").encode_utf16());
+                        let bad = e.error_len().unwrap_or(after.len());
+                        out.extend(after[..bad].iter().map(|&b| b as u16));
+                        rest = &after[bad..];
+                    }
+                }
+            }
+            out
+        }
+        _ => unreachable!("WSTRING builtins only"),
+    };
+    result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
+    let a = args[0] as usize;
+    data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
+    for (i, unit) in result.iter().enumerate() {
+        data[a + 4 + 2 * i..a + 6 + 2 * i].copy_from_slice(&unit.to_le_bytes());
+    }
+    Ok(None)
+}
+
 /// Clamps a signed cell into `lo..=hi`.
 fn clamp(cell: u64, lo: usize, hi: usize) -> usize {
     let v = cell as i64;
@@ -900,6 +1120,210 @@ fn time_literal(ns: i64) -> String {
     out
 }
 
+// ---- dates: counted with loops over years and months (the library uses era arithmetic) ----
+
+const DAY_NS: i64 = 86_400 * 1_000_000_000;
+
+fn leap_year(year: i64) -> bool {
+    year.rem_euclid(4) == 0 && (year.rem_euclid(100) != 0 || year.rem_euclid(400) == 0)
+}
+
+fn month_length(year: i64, month: i64) -> i64 {
+    const LENGTHS: [i64; 12] = [31, 28, 31, 30, 31, 30, 31, 31, 30, 31, 30, 31];
+    LENGTHS[(month - 1) as usize] + (month == 2 && leap_year(year)) as i64
+}
+
+/// Days from 1970-01-01: whole 400-year cycles (146097 days each), then year by year and
+/// month by month.
+fn model_days(year: i64, month: i64, day: i64) -> i64 {
+    let cycles = (year - 1970).div_euclid(400);
+    let mut days = cycles * 146_097;
+    for y in 1970 + cycles * 400..year {
+        days += 365 + leap_year(y) as i64;
+    }
+    for m in 1..month {
+        days += month_length(year, m);
+    }
+    days + day - 1
+}
+
+fn model_civil(days: i64) -> (i64, i64, i64) {
+    let cycles = days.div_euclid(146_097);
+    let mut rest = days - cycles * 146_097;
+    let mut year = 1970 + cycles * 400;
+    while rest >= 365 + leap_year(year) as i64 {
+        rest -= 365 + leap_year(year) as i64;
+        year += 1;
+    }
+    let mut month = 1;
+    while rest >= month_length(year, month) {
+        rest -= month_length(year, month);
+        month += 1;
+    }
+    (year, month, rest + 1)
+}
+
+fn model_date(year: i64, month: i64, day: i64) -> Option<i64> {
+    if !(-1_000_000..=1_000_000).contains(&year) || !(1..=12).contains(&month) {
+        return None;
+    }
+    if day < 1 || day > month_length(year, month) {
+        return None;
+    }
+    model_days(year, month, day).checked_mul(DAY_NS)
+}
+
+fn model_time_kind(cell: u64) -> Result<crate::isa::TimeKind, Trap> {
+    crate::isa::TimeKind::from_u64(cell).ok_or(Trap::NumericError)
+}
+
+fn model_date_time_literal(kind: crate::isa::TimeKind, ns: i64) -> String {
+    use crate::isa::TimeKind::*;
+    let prefix = kind.prefix();
+    let days = ns.div_euclid(DAY_NS);
+    let tod = ns.rem_euclid(DAY_NS);
+    let date = || {
+        let (y, m, d) = model_civil(days);
+        format!("{y:04}-{m:02}-{d:02}")
+    };
+    let time_of_day = || {
+        let s = tod / 1_000_000_000;
+        let fraction = format!("{:09}", tod % 1_000_000_000);
+        let fraction = fraction.trim_end_matches('0');
+        let mut text = format!("{:02}:{:02}:{:02}", s / 3600, s / 60 % 60, s % 60);
+        if !fraction.is_empty() {
+            text = format!("{text}.{fraction}");
+        }
+        text
+    };
+    match kind {
+        Time | LTime => format!("{prefix}{}", &time_literal(ns)[2..]),
+        Date | LDate => format!("{prefix}{}", date()),
+        Tod | LTod => format!("{prefix}{}", time_of_day()),
+        Dt | LDt => format!("{prefix}{}-{}", date(), time_of_day()),
+    }
+}
+
+/// A number of 1 to 18 decimal digits.
+fn model_number(text: &str) -> Option<i64> {
+    if text.is_empty() || text.len() > 18 || !text.bytes().all(|c| c.is_ascii_digit()) {
+        return None;
+    }
+    text.parse().ok()
+}
+
+fn model_parse_tod(text: &str) -> Option<i64> {
+    let parts: Vec<&str> = text.split(':').collect();
+    let (hour, minute, seconds) = match parts[..] {
+        [h, m] => (h, m, "0"),
+        [h, m, s] => (h, m, s),
+        _ => return None,
+    };
+    let (second, fraction) = match seconds.split_once('.') {
+        Some((s, f)) => {
+            if f.is_empty() || !f.bytes().all(|c| c.is_ascii_digit()) {
+                return None;
+            }
+            let nine: String = f.chars().chain("000000000".chars()).take(9).collect();
+            (s, nine.parse::<i64>().ok()?)
+        }
+        None => (seconds, 0),
+    };
+    let (h, m, s) = (
+        model_number(hour)?,
+        model_number(minute)?,
+        model_number(second)?,
+    );
+    if h >= 24 || m >= 60 || s >= 60 {
+        return None;
+    }
+    Some(h * 3_600_000_000_000 + m * 60_000_000_000 + s * 1_000_000_000 + fraction)
+}
+
+fn model_parse_duration(text: &str) -> Option<i64> {
+    let (negative, mut rest) = match text.strip_prefix('-') {
+        Some(r) => (true, r),
+        None => (false, text),
+    };
+    let mut total: i128 = 0;
+    let mut components = 0;
+    while !rest.is_empty() {
+        if let Some(r) = rest.strip_prefix('_') {
+            rest = r;
+            continue;
+        }
+        let end = rest
+            .find(|c: char| !c.is_ascii_digit())
+            .unwrap_or(rest.len());
+        let whole = model_number(&rest[..end])? as i128;
+        rest = &rest[end..];
+        let mut fraction = (0i128, 1i128);
+        if let Some(r) = rest.strip_prefix('.') {
+            let end = r.find(|c: char| !c.is_ascii_digit()).unwrap_or(r.len());
+            fraction = (model_number(&r[..end])? as i128, 10i128.pow(end as u32));
+            rest = &r[end..];
+        }
+        let end = rest
+            .find(|c: char| !c.is_ascii_alphabetic())
+            .unwrap_or(rest.len());
+        let scale: i128 = match rest[..end].to_ascii_lowercase().as_str() {
+            "d" => 86_400_000_000_000,
+            "h" => 3_600_000_000_000,
+            "m" => 60_000_000_000,
+            "s" => 1_000_000_000,
+            "ms" => 1_000_000,
+            "us" => 1_000,
+            "ns" => 1,
+            _ => return None,
+        };
+        rest = &rest[end..];
+        // Round half up: floor(x + 1/2).
+        let (f, denominator) = fraction;
+        total += whole * scale + (2 * f * scale + denominator) / (2 * denominator);
+        components += 1;
+    }
+    if components == 0 {
+        return None;
+    }
+    i64::try_from(if negative { -total } else { total }).ok()
+}
+
+fn model_parse_date(text: &str) -> Option<i64> {
+    match text.split('-').collect::<Vec<_>>()[..] {
+        [y, m, d] => model_date(model_number(y)?, model_number(m)?, model_number(d)?),
+        _ => None,
+    }
+}
+
+fn model_parse_date_time(text: &[u8], kind: crate::isa::TimeKind) -> Option<i64> {
+    use crate::isa::TimeKind::*;
+    let text = core::str::from_utf8(text)
+        .ok()?
+        .trim_matches(|c: char| c.is_ascii_whitespace());
+    let family: &[&str] = match kind {
+        Time | LTime => &["T#", "TIME#", "LT#", "LTIME#"],
+        Date | LDate => &["D#", "DATE#", "LD#", "LDATE#"],
+        Tod | LTod => &["TOD#", "TIME_OF_DAY#", "LTOD#", "LTIME_OF_DAY#"],
+        Dt | LDt => &["DT#", "DATE_AND_TIME#", "LDT#", "LDATE_AND_TIME#"],
+    };
+    let upper = text.to_ascii_uppercase();
+    let body = family
+        .iter()
+        .find(|p| upper.starts_with(*p))
+        .map_or(text, |p| &text[p.len()..]);
+    match kind {
+        Time | LTime => model_parse_duration(body),
+        Date | LDate => model_parse_date(body),
+        Tod | LTod => model_parse_tod(body),
+        Dt | LDt => {
+            let mut parts = body.splitn(4, '-');
+            let (y, m, d) = (parts.next()?, parts.next()?, parts.next()?);
+            let date = model_parse_date(&format!("{y}-{m}-{d}"))?;
+            date.checked_add(model_parse_tod(parts.next()?)?)
+        }
+    }
+}
+
 fn parse_integer(text: &[u8]) -> Option<i64> {
     let t = core::str::from_utf8(text).ok()?.trim();
     let (negative, body) = match (t.strip_prefix('-'), t.strip_prefix('+')) {
@@ -923,7 +1347,7 @@ fn parse_integer(text: &[u8]) -> Option<i64> {
     signed.parse::<i64>().ok()
 }
 
-/// Independent implementation of the STRING builtins (ids >= 100), written from the
+/// Independent implementation of the non-math builtins (STRING and date), written from the
 /// documentation of [`Builtin`].
 pub fn string_builtin(
     builtin: Builtin,
@@ -931,6 +1355,9 @@ pub fn string_builtin(
     data: &mut [u8],
 ) -> Result<Option<u64>, Trap> {
     use Builtin::*;
+    if (140..=152).contains(&(builtin as u16)) {
+        return wstring_builtin(builtin, args, data);
+    }
     match builtin {
         StrLen => return Ok(Some(read_string(data, args[0])?.1.len() as u64)),
         StrFind => {
@@ -965,6 +1392,49 @@ pub fn string_builtin(
                 .map(|v| Some(v as u64))
                 .ok_or(Trap::NumericError);
         }
+        DateFromParts => {
+            let [y, m, d] = [args[0], args[1], args[2]].map(|c| c as i64);
+            return model_date(y, m, d)
+                .map(|v| Some(v as u64))
+                .ok_or(Trap::NumericError);
+        }
+        TodFromParts => {
+            let [h, m, s, ms] = [args[0], args[1], args[2], args[3]].map(|c| c as i64);
+            let ok = (0..24).contains(&h)
+                && (0..60).contains(&m)
+                && (0..60).contains(&s)
+                && (0..1000).contains(&ms);
+            if !ok {
+                return Err(Trap::NumericError);
+            }
+            return Ok(Some(
+                (((h * 60 + m) * 60 + s) * 1000 + ms) as u64 * 1_000_000,
+            ));
+        }
+        DateSplit => {
+            let (y, m, d) = model_civil((args[0] as i64).div_euclid(DAY_NS));
+            return Ok(Some(((y as u64) << 16) + ((m as u64) << 8) + d as u64));
+        }
+        DateOf => {
+            let ns = args[0] as i64;
+            let midnight = (ns as i128) - (ns as i128).rem_euclid(DAY_NS as i128);
+            return i64::try_from(midnight)
+                .map(|v| Some(v as u64))
+                .map_err(|_| Trap::NumericError);
+        }
+        TodOf => return Ok(Some((args[0] as i64).rem_euclid(DAY_NS) as u64)),
+        DayOfWeek => {
+            // 1970-01-01 was a Thursday (4).
+            let days = (args[0] as i64).div_euclid(DAY_NS);
+            return Ok(Some((days % 7 + 7 + 4) as u64 % 7));
+        }
+        StrToDateTime => {
+            let (_, a) = read_string(data, args[0])?;
+            let kind = model_time_kind(args[1])?;
+            return model_parse_date_time(&a, kind)
+                .map(|v| Some(v as u64))
+                .ok_or(Trap::NumericError);
+        }
         StrToF64 => {
             let (_, a) = read_string(data, args[0])?;
             let text = core::str::from_utf8(&a).map_err(|_| Trap::NumericError)?;
@@ -973,6 +1443,16 @@ pub fn string_builtin(
                 .parse::<f64>()
                 .map(|v| Some(v.to_bits()))
                 .map_err(|_| Trap::NumericError);
+        }
+        StrSync => {
+            let (capacity, _) = read_string(data, args[0])?;
+            let a = args[0] as usize;
+            let mut len = 0;
+            while len < capacity && data[a + 4 + len] != 0 {
+                len += 1;
+            }
+            data[a + 2..a + 4].copy_from_slice(&(len as u16).to_le_bytes());
+            return Ok(None);
         }
         _ => {}
     }
@@ -1027,11 +1507,17 @@ pub fn string_builtin(
             .as_bytes()
             .to_vec(),
         StrFromTime => time_literal(args[1] as i64).into_bytes(),
+        StrFromDateTime => {
+            model_date_time_literal(model_time_kind(args[2])?, args[1] as i64).into_bytes()
+        }
         _ => unreachable!("math builtins are not string builtins"),
     };
     result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
     let a = args[0] as usize;
     data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
     data[a + 4..a + 4 + result.len()].copy_from_slice(&result);
+    if result.len() < capacity {
+        data[a + 4 + result.len()] = 0;
+    }
     Ok(None)
 }

@@ -34,7 +34,8 @@
 //! for that image ([`NativeProgram::is_translation_of`]), and every dynamic data access is
 //! checked here exactly as the interpreter checks it.
 
-use crate::isa::Trap;
+use crate::image::{Dispatch, Image};
+use crate::isa::{MemType, Trap};
 use crate::vm::{DEADLINE_CHECK_EVERY, TryFrame};
 
 /// A program translated to native code (what the translator's generated module exports).
@@ -143,6 +144,7 @@ pub struct CycleEnd {
 
 /// The state of one native cycle: counting, limits, try frames, the fault.
 pub struct Cycle<'c> {
+    image: Image<'c>,
     stack: &'c mut [u64],
     tries: &'c mut [TryFrame],
     expired: &'c mut dyn FnMut() -> bool,
@@ -167,6 +169,7 @@ impl<'c> Cycle<'c> {
     /// try memory, `call_limit` call frames (the task's activation is the first) and the
     /// deadline check `expired`.
     pub(crate) fn new(
+        image: Image<'c>,
         stack: &'c mut [u64],
         call_limit: usize,
         tries: &'c mut [TryFrame],
@@ -176,6 +179,7 @@ impl<'c> Cycle<'c> {
     ) -> Self {
         let first_event = budget.min(DEADLINE_CHECK_EVERY - 1);
         Cycle {
+            image,
             stack_limit: u32::try_from(stack.len()).unwrap_or(u32::MAX),
             stack,
             tries,
@@ -375,6 +379,38 @@ impl<'c> Cycle<'c> {
         if let Some(slots) = self.stack.get_mut(start..start.saturating_add(live)) {
             slots.copy_from_slice(&cells[..live]);
         }
+    }
+
+    /// REF_MAKE: a reference to the smallest object holding the `size` bytes at `address`
+    /// (`None`: INVALID_REFERENCE), as the interpreter makes it.
+    #[inline]
+    pub fn ref_make(&self, address: u64, size: u32) -> Option<u64> {
+        let object = self.image.object_containing(address, size as u64)?;
+        Some(address | ((object as u64 + 1) << 32))
+    }
+
+    /// REF_CHECK: the address of an access of `size` bytes through `reference` when it lies
+    /// inside the object the reference names (`None`: INVALID_REFERENCE).
+    #[inline]
+    pub fn ref_check(&self, reference: u64, size: u32) -> Option<u64> {
+        let address = reference & 0xFFFF_FFFF;
+        let (start, len) = self
+            .image
+            .object(((reference >> 32).checked_sub(1)?) as usize)?;
+        (start as u64 <= address && address + size as u64 <= start as u64 + len as u64)
+            .then_some(address)
+    }
+
+    /// CALL_VIRT / VIRT_FRAME: the method the class of `instance` runs for `slot` (`None`:
+    /// INVALID_REFERENCE: a NULL instance, a class id outside data memory, an unknown
+    /// class or no method for the slot).
+    #[inline]
+    pub fn method(&self, data: &[u8], instance: u64, slot: u16) -> Option<Dispatch> {
+        if instance == 0 {
+            return None;
+        }
+        let class = ops::load(data, usize::try_from(instance).ok()?, MemType::U32)?;
+        self.image.lookup_method(class, slot)
     }
 
     /// A fault before any instruction ran (data memory of the wrong size: the program is not

@@ -9,13 +9,16 @@
 //! stack depth and one try-nesting depth (equal at merge points, no underflow, at most
 //! [`MAX_POU_STACK`] cells, at most [`MAX_TRY_NESTING`] try frames, `RET` with exactly
 //! `ret_cells` cells and no open try frame, no fall-through past the POU's end); finally the
-//! task table, variable map, file table and source-location table.
+//! task table, variable map, located and shared variables, the object table (sorted, not
+//! overlapping, inside data memory), the class and dispatch tables (every dispatch target a
+//! POU taking and leaving no cells, so `CALL_VIRT` has the fixed stack effect `[inst] -> []`
+//! whichever method it runs), the file table and the source-location table.
 //!
 //! The abstract interpretation visits every instruction once (a worklist) and needs two `u32`
 //! of scratch per code byte (state + worklist); [`verify_with_scratch`]
 //! takes it from the caller (no allocation), `verify` (feature `alloc`) allocates it.
 
-use crate::image::{Image, Section, SharedDirection, TASK_RECORD, VarType};
+use crate::image::{Image, MAX_OBJECT_DEPTH, Section, SharedDirection, TASK_RECORD, VarType};
 use crate::isa::{
     Builtin, MemType, Opcode, Operands, RoundMode, Trap, read_u16, read_u32, stack_effect,
 };
@@ -61,6 +64,12 @@ pub enum Site {
     Located(usize),
     /// A shared-variable record.
     Shared(usize),
+    /// An object record.
+    Object(usize),
+    /// A class record.
+    Class(usize),
+    /// A dispatch record.
+    Dispatch(usize),
     /// The image as a whole.
     Image,
 }
@@ -185,6 +194,16 @@ pub enum Reason {
     /// Shared variable named twice, overlapping another shared variable in data memory, or a
     /// second validity flag.
     SharedOverlap,
+    /// Object record empty, outside data memory, not after the previous one (by start, then
+    /// decreasing length), partly overlapping another record, naming a parent other than the
+    /// smallest record containing it, or nested deeper than `MAX_OBJECT_DEPTH`.
+    BadObject,
+    /// Class record whose name is invalid or whose dispatch range lies outside the
+    /// DISPATCH section.
+    BadClass,
+    /// Dispatch record of an unknown POU, of a POU that takes or leaves cells, with a frame
+    /// outside data memory, or whose slot does not follow the previous one of its class.
+    BadDispatch,
     /// Source-location table not sorted by code offset.
     SrcLocUnsorted,
     /// Source location beyond the code or naming an unknown file.
@@ -215,6 +234,9 @@ impl core::fmt::Display for Site {
             Site::File(i) => write!(f, "in file table entry {i}"),
             Site::Located(i) => write!(f, "in located-variable entry {i}"),
             Site::Shared(i) => write!(f, "in shared-variable entry {i}"),
+            Site::Object(i) => write!(f, "in object entry {i}"),
+            Site::Class(i) => write!(f, "in class entry {i}"),
+            Site::Dispatch(i) => write!(f, "in dispatch entry {i}"),
             Site::Image => write!(f, "in image"),
         }
     }
@@ -310,6 +332,15 @@ impl core::fmt::Display for Reason {
             Reason::SharedOverlap => {
                 write!(f, "shared variable overlaps another shared variable")
             }
+            Reason::BadObject => write!(
+                f,
+                "object empty, outside data memory, out of order, partly overlapping, with a wrong parent or nested too deeply"
+            ),
+            Reason::BadClass => write!(f, "class name invalid or dispatch range outside the table"),
+            Reason::BadDispatch => write!(
+                f,
+                "dispatch entry: unknown POU, POU with argument or result cells, frame outside data memory, or slots not increasing"
+            ),
             Reason::SrcLocUnsorted => write!(f, "source locations not sorted by code offset"),
             Reason::SrcLocInvalid => {
                 write!(f, "source location beyond the code or with unknown file")
@@ -708,6 +739,55 @@ fn step(
     Ok(discovered)
 }
 
+/// Object record `index` against the ones before it: inside data memory, not empty, after
+/// the previous record in (start, decreasing length) order, overlapping only the records
+/// that contain it, with `parent` naming the smallest of those, at most
+/// [`MAX_OBJECT_DEPTH`] deep. The walk from the previous record up its parents passes only
+/// records that end before this one starts; they are never walked again (they cannot contain
+/// a later record either), so checking all records takes linear time.
+fn check_object(image: &Image<'_>, index: usize) -> Result<(), VerifyError> {
+    let bad = || err(Site::Object(index), Reason::BadObject);
+    let (start, len) = image.object(index).expect("counted");
+    let (start, end) = (start as u64, start as u64 + len as u64);
+    if len == 0 || end > image.data_size() as u64 {
+        return bad();
+    }
+    let contains = |k: usize| {
+        let (s, l) = image.object(k).expect("earlier record");
+        s as u64 <= start && end <= s as u64 + l as u64
+    };
+    if let Some(previous) = index.checked_sub(1) {
+        let (ps, pl) = image.object(previous).expect("earlier record");
+        if (ps as u64, u64::MAX - pl as u64) >= (start, u64::MAX - len as u64) {
+            return bad();
+        }
+    }
+    let mut enclosing = index.checked_sub(1);
+    while let Some(k) = enclosing {
+        if contains(k) {
+            break;
+        }
+        let (s, l) = image.object(k).expect("earlier record");
+        if s as u64 + l as u64 > start {
+            return bad();
+        }
+        enclosing = image.object_parent(k);
+    }
+    if image.object_parent(index) != enclosing {
+        return bad();
+    }
+    let mut depth = 0;
+    let mut up = enclosing;
+    while let Some(k) = up {
+        depth += 1;
+        if depth >= MAX_OBJECT_DEPTH {
+            return bad();
+        }
+        up = image.object_parent(k);
+    }
+    Ok(())
+}
+
 fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
     let data_size = image.data_size() as u64;
     if image.task_count() > MAX_TASKS {
@@ -807,6 +887,34 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         });
         if clash {
             return err(site, Reason::SharedOverlap);
+        }
+    }
+    for index in 0..image.object_count() {
+        check_object(image, index)?;
+    }
+    for index in 0..image.class_count() {
+        let site = Site::Class(index);
+        let class = image.class(index).expect("counted");
+        let (off, len) = image
+            .record_name_ref(Section::Classes, index)
+            .expect("counted");
+        let last = class.first as u64 + class.count as u64;
+        if image.name_at(off, len).is_none() || last > image.dispatch_count() as u64 {
+            return err(site, Reason::BadClass);
+        }
+        let mut previous: Option<u16> = None;
+        for d in class.first as usize..last as usize {
+            let entry = image.dispatch(d).expect("counted");
+            let pou_ok = image
+                .pou(entry.pou as usize)
+                .is_some_and(|p| p.arg_cells == 0 && p.ret_cells == 0);
+            if !pou_ok
+                || entry.frame as u64 >= data_size
+                || previous.is_some_and(|p| p >= entry.slot)
+            {
+                return err(Site::Dispatch(d), Reason::BadDispatch);
+            }
+            previous = Some(entry.slot);
         }
     }
     for index in 0..image.file_count() {

@@ -424,6 +424,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     ) -> Result<CycleStats, Fault> {
         let budget = self.start_cycle(task, now_ns)?;
         let mut cycle = crate::native::Cycle::new(
+            self.image,
             self.stack,
             self.calls.len(),
             self.tries,
@@ -1184,6 +1185,77 @@ impl<'a, 'm> Machine<'a, 'm> {
                     }
                     next!(OpRel);
                 }
+                op::RefMake => {
+                    let imm = imm!(RefMake);
+                    let address = cell!(1);
+                    let Some(object) = image.object_containing(address, u32_at(imm, 0) as u64)
+                    else {
+                        trap!(Trap::InvalidReference)
+                    };
+                    set_cell!(1, address | ((object as u64 + 1) << 32));
+                    next!(RefMake);
+                }
+                op::RefCheck => {
+                    let imm = imm!(RefCheck);
+                    let reference = cell!(1);
+                    let address = reference & 0xFFFF_FFFF;
+                    let size = u32_at(imm, 0) as u64;
+                    let inside = (reference >> 32)
+                        .checked_sub(1)
+                        .and_then(|index| image.object(index as usize))
+                        .is_some_and(|(start, len)| {
+                            start as u64 <= address && address + size <= start as u64 + len as u64
+                        });
+                    if !inside {
+                        trap!(Trap::InvalidReference);
+                    }
+                    set_cell!(1, address);
+                    next!(RefCheck);
+                }
+                op::RefAdd => {
+                    binary!(|reference, n| {
+                        let address = (reference as u32).wrapping_add(n as u32);
+                        (reference & !0xFFFF_FFFF) | address as u64
+                    });
+                    next!(RefAdd);
+                }
+                op::ChkNull => {
+                    if cell!(1) == 0 {
+                        trap!(Trap::InvalidReference);
+                    }
+                    next!(ChkNull);
+                }
+                op::CallVirt | op::VirtFrame => {
+                    let imm = imm!(CallVirt);
+                    let instance = cell!(1);
+                    let method = match method(image, data, instance, u16_at(imm, 0)) {
+                        Ok(method) => method,
+                        Err(trap) => trap!(trap),
+                    };
+                    if byte == op::VirtFrame {
+                        set_cell!(1, method.frame as u64);
+                        next!(VirtFrame);
+                    } else {
+                        let Some((code_start, frame_size)) = image.pou_entry(method.pou as usize)
+                        else {
+                            trap!(Trap::InvalidAddress)
+                        };
+                        if self.call_depth >= self.calls.len() {
+                            trap!(Trap::CallDepth);
+                        }
+                        if instance + frame_size as u64 > data.len() as u64 {
+                            trap!(Trap::InvalidAddress);
+                        }
+                        sp -= 1;
+                        self.calls[self.call_depth] = CallFrame {
+                            return_pc: (pc + const { Opcode::CallVirt.size() }) as u32,
+                            saved_base: base as u32,
+                        };
+                        self.call_depth += 1;
+                        base = instance;
+                        pc = code_start as usize;
+                    }
+                }
                 // Unassigned bytes: the verifier accepts none.
                 _ => trap!(Trap::InvalidAddress),
             }
@@ -1244,6 +1316,9 @@ impl<'a, 'm> Machine<'a, 'm> {
             let len = text.len().min(capacity);
             self.data[at + 2..at + 4].copy_from_slice(&(len as u16).to_le_bytes());
             self.data[at + 4..at + 4 + len].copy_from_slice(&text[..len]);
+            if len < capacity {
+                self.data[at + 4 + len] = 0;
+            }
             return Ok(());
         }
         let forced = Self::encode_scalar(&var, ty, value)?;
@@ -1448,6 +1523,22 @@ fn store_typed(data: &mut [u8], ty: u8, address: u64, value: u64) -> Option<()> 
         _ => *tail.first_chunk_mut()? = value.to_le_bytes(),
     }
     Some(())
+}
+
+/// The method instance `instance`'s class runs for `slot` (see `CALL_VIRT`).
+fn method(
+    image: &Image<'_>,
+    data: &[u8],
+    instance: u64,
+    slot: u16,
+) -> Result<crate::image::Dispatch, Trap> {
+    if instance == 0 {
+        return Err(Trap::InvalidReference);
+    }
+    let class = load_typed(data, MemType::U32 as u8, instance).ok_or(Trap::InvalidReference)?;
+    image
+        .lookup_method(class, slot)
+        .ok_or(Trap::InvalidReference)
 }
 
 /// The address of element `i` of the array at `array` (bounds `lo..=hi` as `i64`, element

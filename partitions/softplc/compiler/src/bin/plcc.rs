@@ -31,6 +31,9 @@ enum Command {
         /// Program to use when there are several PROGRAMs and no CONFIGURATION.
         #[arg(long)]
         program: Option<String>,
+        /// Check a library: every POU is compiled, no PROGRAM is needed.
+        #[arg(long, conflicts_with = "program")]
+        library: bool,
     },
     /// Compile to a bytecode image.
     Build {
@@ -126,10 +129,15 @@ fn read_files(files: &[PathBuf]) -> Result<Vec<(String, String)>, String> {
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    let (files, program) = match &cli.command {
-        Command::Check { files, program }
-        | Command::Build { files, program, .. }
-        | Command::Run { files, program, .. } => (files, program),
+    let (files, program, library) = match &cli.command {
+        Command::Check {
+            files,
+            program,
+            library,
+        } => (files, program, *library),
+        Command::Build { files, program, .. } | Command::Run { files, program, .. } => {
+            (files, program, false)
+        }
     };
     let sources = match read_files(files) {
         Ok(s) => s,
@@ -140,6 +148,7 @@ fn main() -> ExitCode {
     };
     let opts = Options {
         program: program.clone(),
+        library,
     };
     let compiled = match compile(&sources, &opts) {
         Ok((c, _)) => c,

@@ -7,6 +7,8 @@
 //! and stores of every type and addressing mode, including wild indirect addresses), `if`s,
 //! counted loops, nested try blocks with handlers that record or re-throw, calls with
 //! arguments/results (including unbounded recursion), string builtins on real strings,
+//! references made, moved and checked against an object table (valid, NULL, stale and wild),
+//! dynamic dispatch on instances of two classes (and on NULL, unknown and overwritten ones),
 //! explicit throws and the occasional endless loop. Small limits make every trap reachable.
 
 use super::*;
@@ -45,11 +47,27 @@ const FUNC_FRAME: u32 = 32;
 const FUNC_BASE: u32 = 400;
 const AUX_BASE: u32 = 464;
 const AUX_FRAME: u32 = 48;
+/// Objects references may reach (inside the globals): (start, len, parent index).
+const OBJECTS: [(u32, u32, Option<u32>); 6] = [
+    (8, 16, None),
+    (24, 16, None),
+    (24, 4, Some(1)),
+    (32, 8, Some(1)),
+    (40, 1, None),
+    (64, 24, None),
+];
+/// Instances of class 0 and 1 (their class id at their first byte, in the globals).
+const INSTANCES: [u32; 2] = [88, 104];
+/// Method frame size and parameter frames of the two methods.
+const METHOD_FRAME: u32 = 16;
+const METHOD_PARAMS: [u32; 2] = [336, 344];
 
 struct Gen<'r> {
     rng: &'r mut Rng,
     b: ImageBuilder,
     funcs: [PouId; 2],
+    /// In a method: no further dynamic calls (bounded depth apart from CALL_DEPTH tests).
+    in_method: bool,
     frame: u32,
     budget_left: u32,
     no_endless_loops: bool,
@@ -211,6 +229,13 @@ impl Gen<'_> {
                 self.b.lea_rel(off);
                 self.b.ld_ind(ty, self.rng.below(4) as u32);
             }
+            3 if self.rng.chance(30) => {
+                // through a reference: made from an address (sometimes outside every
+                // object), moved, checked for the access's width
+                self.reference();
+                self.b.ref_check(ty.width() as u32);
+                self.b.ld_ind(ty, 0);
+            }
             3 if self.rng.chance(50) => {
                 // array element: ARRAY[lo..lo+7] OF <8 bytes> in the globals
                 let lo = self.rng.below(7) as i64 - 3;
@@ -224,6 +249,41 @@ impl Gen<'_> {
                 let addr = self.rng.below(DATA as u64 + 16) as u32;
                 self.b.push_u32(addr);
                 self.b.ld_ind(ty, 0);
+            }
+        }
+    }
+
+    /// Pushes a reference cell: usually made by REF_MAKE from an address in or near an
+    /// object and moved by REF_ADD, sometimes NULL or an arbitrary cell.
+    fn reference(&mut self) {
+        match self.rng.below(10) {
+            0 => self.b.push_i32(0),
+            1 => self.constant(),
+            _ => {
+                let (start, len, _) = self.rng.pick(&OBJECTS);
+                let address = start + self.rng.below(len as u64 + 2) as u32;
+                self.b.push_u32(address.saturating_sub(1));
+                let size = self.rng.below(6) as u32;
+                self.b.ref_make(size);
+                if self.rng.chance(50) {
+                    let n = self.rng.below(24) as i32 - 8;
+                    self.b.push_i32(n);
+                    self.b.ref_add();
+                }
+            }
+        }
+    }
+
+    /// Pushes an instance address for a dynamic call: one of the two instances, NULL, or
+    /// anything.
+    fn instance(&mut self) {
+        match self.rng.below(8) {
+            0 => self.b.push_i32(0),
+            1 => self.expr(0),
+            2 => self.b.lea_rel(0),
+            _ => {
+                let i = self.rng.pick(&INSTANCES);
+                self.b.push_u32(i);
             }
         }
     }
@@ -339,7 +399,14 @@ impl Gen<'_> {
                 self.b.push_u32(base);
                 self.b.call(self.funcs[1]);
             }
-            _ => match self.rng.below(4) {
+            _ => match self.rng.below(5) {
+                4 => {
+                    self.reference();
+                    if self.rng.chance(60) {
+                        let size = self.rng.below(10) as u32;
+                        self.b.ref_check(size);
+                    }
+                }
                 0 => {
                     self.b.push_u32(STR_A);
                     self.b.call_builtin(Builtin::StrLen);
@@ -456,6 +523,26 @@ impl Gen<'_> {
                     }
                 }
             }
+            6 if !self.in_method && self.rng.chance(40) => {
+                // dynamic call: store a parameter through VIRT_FRAME, then CALL_VIRT
+                let slot = self.rng.below(3) as u16;
+                if self.rng.chance(70) {
+                    self.instance();
+                    self.b.virt_frame(slot);
+                    self.expr(1);
+                    self.b.st_ind(MemType::U8, 0);
+                }
+                self.instance();
+                self.b.call_virt(slot);
+            }
+            6 if self.rng.chance(20) => {
+                // a store through a reference
+                self.reference();
+                let ty = self.mem_type();
+                self.b.ref_check(ty.width() as u32);
+                self.expr(1);
+                self.b.st_ind(ty, 0);
+            }
             6 => {
                 if self.rng.chance(20) {
                     let trap = self.rng.pick(&[
@@ -553,6 +640,28 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
     let f0 = b.declare_pou("f0", 1, 1, FUNC_FRAME);
     let f1 = b.declare_pou("f1", 0, 1, FUNC_FRAME);
     let aux = b.declare_pou("Aux", 0, 0, AUX_FRAME);
+    let methods = [
+        b.declare_pou("M0", 0, 0, METHOD_FRAME),
+        b.declare_pou("M1", 0, 0, METHOD_FRAME),
+    ];
+    for (start, len, parent) in OBJECTS {
+        b.add_object(start, len, parent);
+    }
+    // Class 0 runs M0 for slot 0 and M1 for slot 1; class 1 runs M1 for slots 0 and 2.
+    b.add_class(
+        "C0",
+        &[
+            (0, methods[0], METHOD_PARAMS[0]),
+            (1, methods[1], METHOD_PARAMS[1]),
+        ],
+    );
+    b.add_class(
+        "C1",
+        &[
+            (0, methods[1], METHOD_PARAMS[1]),
+            (2, methods[1], METHOD_PARAMS[1]),
+        ],
+    );
     b.add_task(&TaskDef {
         name: "T".into(),
         kind: TaskKind::Cyclic,
@@ -576,6 +685,9 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
         *byte = rng.next() as u8;
     }
     b.set_init(0, &init);
+    for (class, instance) in INSTANCES.iter().enumerate() {
+        b.set_init(*instance, &(class as u32).to_le_bytes());
+    }
     b.init_string(STR_A, STR_LEN, "hello");
     b.init_string(STR_B, STR_LEN, "lo");
     b.add_var("Main.a", VarType::String, 0, STR_A, 4 + STR_LEN as u32);
@@ -583,6 +695,7 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
         rng: &mut rng,
         b,
         funcs: [f0, f1],
+        in_method: false,
         frame: MAIN_FRAME,
         budget_left: 12,
         no_endless_loops: false,
@@ -615,6 +728,24 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
     }
     g.b.ret();
     g.b.end_pou(f1);
+    // The methods: a few statements on their instance, sometimes a dynamic call that may
+    // come back to themselves (bounded only by CALL_DEPTH).
+    g.frame = METHOD_FRAME;
+    for (k, m) in methods.into_iter().enumerate() {
+        g.budget_left = 2;
+        g.in_method = true;
+        g.b.begin_pou(m);
+        g.b.ld_abs(MemType::U8, METHOD_PARAMS[k]);
+        g.b.st_rel(MemType::U8, 4 + k as u32);
+        g.block(1);
+        if g.rng.chance(20) {
+            g.instance();
+            g.b.call_virt(g.rng.below(3) as u16);
+        }
+        g.b.ret();
+        g.b.end_pou(m);
+    }
+    g.in_method = false;
     // Aux: a second program sharing the globals, with its own frame; no endless loops
     // (its watchdog budget is the large default).
     g.frame = AUX_FRAME;
@@ -630,7 +761,7 @@ pub fn random_program_with(seed: u64, fuse: bool) -> Vec<u8> {
 #[test]
 fn vm_matches_model_on_random_programs() {
     let programs = 10_000u64;
-    let mut traps = [0usize; 10];
+    let mut traps = [0usize; 16];
     let mut completed = 0usize;
     for seed in 0..programs {
         let bytes = random_program(seed);

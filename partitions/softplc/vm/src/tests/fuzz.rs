@@ -3,6 +3,8 @@
 
 use super::differential::random_program;
 use super::*;
+use crate::isa::Builtin;
+use alloc::string::{String, ToString};
 use proptest::prelude::*;
 
 /// Parses, verifies and — if it verifies — runs a few cycles: must never panic.
@@ -67,7 +69,7 @@ fn string_case(
     let string_builtins: Vec<Builtin> = Builtin::ALL
         .iter()
         .copied()
-        .filter(|b| (*b as u16) >= 100)
+        .filter(|b| !b.is_math())
         .collect();
     let builtin = string_builtins[builtin_index % string_builtins.len()];
     // Three string variables at 0, 40, 80 (capacity up to 32), data 124 bytes.
@@ -85,16 +87,24 @@ fn string_case(
     for i in 0..builtin.args() {
         // Dst and string operands are addresses; numeric operands are numbers.
         let numeric = match builtin {
-            Builtin::StrLeft | Builtin::StrRight => i == 2,
-            Builtin::StrMid | Builtin::StrDelete => i >= 2,
-            Builtin::StrInsert => i == 3,
-            Builtin::StrReplace => i >= 3,
+            Builtin::StrLeft | Builtin::StrRight | Builtin::WStrLeft | Builtin::WStrRight => i == 2,
+            Builtin::StrMid | Builtin::StrDelete | Builtin::WStrMid | Builtin::WStrDelete => i >= 2,
+            Builtin::StrInsert | Builtin::WStrInsert => i == 3,
+            Builtin::StrReplace | Builtin::WStrReplace => i >= 3,
             Builtin::StrFromI64
             | Builtin::StrFromU64
             | Builtin::StrFromF32
             | Builtin::StrFromF64
             | Builtin::StrFromBool
             | Builtin::StrFromTime => i == 1,
+            Builtin::StrFromDateTime => i >= 1,
+            Builtin::StrToDateTime => i == 1,
+            Builtin::DateFromParts
+            | Builtin::DateSplit
+            | Builtin::DateOf
+            | Builtin::TodOf
+            | Builtin::DayOfWeek
+            | Builtin::TodFromParts => true,
             _ => false,
         };
         args.push(if numeric {
@@ -113,7 +123,7 @@ fn string_case(
 }
 
 proptest! {
-    #![proptest_config(ProptestConfig { cases: 2000, failure_persistence: None, ..ProptestConfig::default() })]
+    #![proptest_config(ProptestConfig { cases: 3000, failure_persistence: None, ..ProptestConfig::default() })]
 
     #[test]
     fn string_builtins_agree_with_the_model(
@@ -132,6 +142,73 @@ proptest! {
         ),
     ) {
         string_case(&texts, builtin_index, &picks, &numbers)?;
+    }
+
+    /// Date/time literals built from the pieces they are made of: parsing agrees with the
+    /// model, and what DATE_TIME_TO_STRING prints parses back to the same value.
+    #[test]
+    fn date_time_builtins_agree_with_the_model(
+        pieces in proptest::collection::vec(
+            prop_oneof![
+                (0u32..3000).prop_map(|n| n.to_string()),
+                Just("-".to_string()), Just(":".to_string()), Just(".".to_string()),
+                Just("_".to_string()), Just(" ".to_string()), Just("#".to_string()),
+                Just("D#".to_string()), Just("tod#".to_string()), Just("DT#".to_string()),
+                Just("LT#".to_string()), Just("ms".to_string()), Just("S".to_string()),
+                Just("h".to_string()), Just("d".to_string()), Just("us".to_string()),
+                Just("2024-02-29".to_string()), Just("23:59:59.999999999".to_string()),
+            ],
+            0..8,
+        ),
+        kind in 0u64..9,
+        value in prop_oneof![any::<i64>(), -4_000_000_000_000_000_000i64..4_000_000_000_000_000_000],
+        parts in proptest::collection::vec(prop_oneof![-2i64..70, any::<i64>()], 4),
+    ) {
+        let text: String = pieces.concat();
+        let mut data = vec![0u8; 200];
+        data[..2].copy_from_slice(&100u16.to_le_bytes());
+        data[2..4].copy_from_slice(&(text.len().min(100) as u16).to_le_bytes());
+        data[4..4 + text.len().min(100)].copy_from_slice(&text.as_bytes()[..text.len().min(100)]);
+        data[110..112].copy_from_slice(&80u16.to_le_bytes());
+        let cases: [(Builtin, Vec<u64>); 8] = [
+            (Builtin::StrToDateTime, vec![0, kind]),
+            (Builtin::StrFromDateTime, vec![110, value as u64, kind]),
+            (Builtin::DateFromParts, vec![(parts[0] as u64).wrapping_add(1960), parts[1] as u64, parts[2] as u64]),
+            (Builtin::TodFromParts, parts.iter().map(|&p| p as u64).collect()),
+            (Builtin::DateSplit, vec![value as u64]),
+            (Builtin::DateOf, vec![value as u64]),
+            (Builtin::TodOf, vec![value as u64]),
+            (Builtin::DayOfWeek, vec![value as u64]),
+        ];
+        for (builtin, args) in cases {
+            let mut library_data = data.clone();
+            let library = crate::builtins::call(builtin, &args, &mut library_data);
+            let mut model_data = data.clone();
+            let model = crate::model::string_builtin(builtin, &args, &mut model_data);
+            prop_assert_eq!(library, model, "{:?} {:?} {:?}", builtin, args, text);
+            prop_assert_eq!(library_data, model_data, "{:?} {:?}", builtin, args);
+        }
+        if let Some(kind) = crate::isa::TimeKind::from_u64(kind) {
+            let mut printed = String::new();
+            crate::builtins::format_date_time(&mut printed, kind, value);
+            let expected = match kind {
+                crate::isa::TimeKind::Date | crate::isa::TimeKind::LDate => {
+                    value.div_euclid(crate::builtins::NS_PER_DAY).checked_mul(crate::builtins::NS_PER_DAY)
+                }
+                crate::isa::TimeKind::Tod | crate::isa::TimeKind::LTod => {
+                    Some(value.rem_euclid(crate::builtins::NS_PER_DAY))
+                }
+                _ => Some(value),
+            };
+            if expected.is_some() {
+                prop_assert_eq!(
+                    crate::builtins::parse_date_time(printed.as_bytes(), kind),
+                    expected,
+                    "{}",
+                    printed
+                );
+            }
+        }
     }
 
     #[test]

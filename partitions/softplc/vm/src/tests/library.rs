@@ -46,6 +46,16 @@ fn fmath_matches_std_within_a_few_ulps() {
         assert!((fmath::sin(x) - x.sin()).abs() < 1e-15, "sin({x})");
         assert!((fmath::cos(x) - x.cos()).abs() < 1e-15, "cos({x})");
         assert!(close(fmath::atan(x), x.atan(), 4.0), "atan({x})");
+        let y = (unit * 7.0).fract() * 2.0 - 1.0;
+        assert!(
+            (fmath::atan2(y * x, x) - (y * x).atan2(x)).abs() < 1e-15,
+            "atan2({}, {x})",
+            y * x
+        );
+        assert!(
+            (fmath::atan2(x, y) - x.atan2(y)).abs() < 4e-16 * x.atan2(y).abs().max(1.0),
+            "atan2({x}, {y})"
+        );
         let u = unit * 2.0 - 1.0;
         assert!((fmath::asin(u) - u.asin()).abs() < 1e-15, "asin({u})");
         assert!((fmath::acos(u) - u.acos()).abs() < 1e-15, "acos({u})");
@@ -122,6 +132,28 @@ fn math_builtins_through_the_vm() {
     assert_eq!(real(Builtin::AsinF32, 0.5), 0.5f32.asin());
     assert_eq!(real(Builtin::AcosF32, 0.5), 0.5f32.acos());
     assert_eq!(real(Builtin::AtanF32, 1.0), 1f32.atan());
+    let atan2 = |y: f64, x: f64| {
+        f64::from_bits(eval(|c| {
+            c.push_f64(y);
+            c.push_f64(x);
+            c.call_builtin(Builtin::Atan2F64);
+        }))
+    };
+    assert_eq!(atan2(1.0, 1.0), core::f64::consts::FRAC_PI_4);
+    assert_eq!(atan2(0.0, -1.0), core::f64::consts::PI);
+    assert_eq!(atan2(-0.0, -1.0), -core::f64::consts::PI);
+    assert_eq!(atan2(-1.0, 0.0), -core::f64::consts::FRAC_PI_2);
+    assert_eq!(atan2(0.0, 0.0), 0.0);
+    assert_eq!(
+        atan2(f64::INFINITY, f64::NEG_INFINITY),
+        0.75 * core::f64::consts::PI
+    );
+    let atan2_real = f32::from_bits(eval(|c| {
+        c.push_f32(-1.0);
+        c.push_f32(-1.0);
+        c.call_builtin(Builtin::Atan2F32);
+    }) as u32);
+    assert_eq!(atan2_real, (-1f32).atan2(-1.0));
     let expt32 = f32::from_bits(eval(|c| {
         c.push_f32(2.0);
         c.push_f32(-2.0);
@@ -274,6 +306,194 @@ fn time_formatting() {
     assert_eq!(fmt(-2_000_000), "T#-2ms");
     assert_eq!(fmt(90_061_001_001_001), "T#1d1h1m1s1ms1us1ns");
     assert!(fmt(i64::MIN).starts_with("T#-"));
+}
+
+/// WSTRINGs at 0 (capacity 12) and 40 (capacity 12), a result WSTRING at 80 (capacity 6),
+/// a STRING at 100 (capacity 7).
+fn wide_data(a: &str, b: &str, narrow: &[u8]) -> Vec<u8> {
+    let mut data = vec![0u8; 120];
+    for (at, text) in [(0usize, a), (40, b)] {
+        let units: Vec<u16> = text.encode_utf16().collect();
+        data[at..at + 2].copy_from_slice(&12u16.to_le_bytes());
+        data[at + 2..at + 4].copy_from_slice(&(units.len() as u16).to_le_bytes());
+        for (i, u) in units.iter().enumerate() {
+            data[at + 4 + 2 * i..at + 6 + 2 * i].copy_from_slice(&u.to_le_bytes());
+        }
+    }
+    data[80..82].copy_from_slice(&6u16.to_le_bytes());
+    data[100..102].copy_from_slice(&7u16.to_le_bytes());
+    data[102..104].copy_from_slice(&(narrow.len() as u16).to_le_bytes());
+    data[104..104 + narrow.len()].copy_from_slice(narrow);
+    data
+}
+
+fn wide_text(data: &[u8], at: usize) -> String {
+    let len = u16::from_le_bytes([data[at + 2], data[at + 3]]) as usize;
+    let units: Vec<u16> = (0..len)
+        .map(|i| u16::from_le_bytes([data[at + 4 + 2 * i], data[at + 5 + 2 * i]]))
+        .collect();
+    String::from_utf16_lossy(&units)
+}
+
+#[test]
+fn wide_strings() {
+    use Builtin::*;
+    let run = |b: Builtin, x: &str, y: &str, args: &[u64]| {
+        let mut data = wide_data(x, y, b"");
+        let mut all = vec![80u64];
+        all.extend_from_slice(args);
+        assert_eq!(builtins::call(b, &all, &mut data), Ok(None), "{b:?}");
+        let model = {
+            let mut m = wide_data(x, y, b"");
+            crate::model::string_builtin(b, &all, &mut m).unwrap();
+            m
+        };
+        assert_eq!(data, model, "{b:?} {x} {y} {args:?}");
+        wide_text(&data, 80)
+    };
+    assert_eq!(run(WStrAssign, "äb€", "", &[0]), "äb€");
+    assert_eq!(run(WStrConcat, "äb", "€xyzw", &[0, 40]), "äb€xyz");
+    assert_eq!(run(WStrLeft, "äb€", "", &[0, 2]), "äb");
+    assert_eq!(run(WStrRight, "äb€", "", &[0, 1]), "€");
+    assert_eq!(run(WStrMid, "abcdef", "", &[0, 2, 3]), "cd");
+    assert_eq!(run(WStrInsert, "abcd", "€", &[0, 40, 2]), "ab€cd");
+    assert_eq!(run(WStrDelete, "abcdef", "", &[0, 2, 2]), "adef");
+    assert_eq!(run(WStrReplace, "abcdef", "€", &[0, 40, 3, 2]), "a€ef");
+    let mut data = wide_data("ab€c€", "€", b"");
+    assert_eq!(builtins::call(WStrFind, &[0, 40], &mut data), Ok(Some(3)));
+    assert_eq!(builtins::call(WStrLen, &[0], &mut data), Ok(Some(5)));
+    assert_eq!(
+        builtins::call(WStrCompare, &[0, 40], &mut data),
+        Ok(Some(-1i64 as u64))
+    );
+    // 'ä' in UTF-8, then a lone Latin-1 byte 0xE9 ('é'), then a 4-byte character (2 units).
+    let mut data = wide_data("", "", &[0xC3, 0xA4, 0xE9, 0xF0, 0x9F, 0x98, 0x80]);
+    assert_eq!(builtins::call(WStrFromStr, &[80, 100], &mut data), Ok(None));
+    assert_eq!(wide_text(&data, 80), "äé😀");
+    // Back to UTF-8: the STRING (capacity 7) takes "äé" (4 bytes), the emoji no longer fits.
+    assert_eq!(builtins::call(StrFromWStr, &[100, 80], &mut data), Ok(None));
+    assert_eq!(text(&data, 100), "äé");
+    assert_eq!(
+        builtins::call(WStrLen, &[118], &mut data),
+        Err(Trap::InvalidAddress)
+    );
+}
+
+#[test]
+fn dates_and_times_of_day() {
+    use crate::isa::TimeKind;
+    use builtins::{
+        NS_PER_DAY, civil_from_days, days_from_civil, format_date_time, parse_date_time,
+    };
+    let call = |b: Builtin, args: &[u64]| builtins::call(b, args, &mut []);
+    // 2024-02-29 is day 19782 after 1970-01-01, a Thursday like 1970-01-01 itself.
+    assert_eq!(days_from_civil(2024, 2, 29), 19782);
+    assert_eq!(civil_from_days(19782), (2024, 2, 29));
+    assert_eq!(civil_from_days(-1), (1969, 12, 31));
+    for days in [-200_000i64, -719_468, -1, 0, 59, 10_957, 11_016, 106_751] {
+        let (y, m, d) = civil_from_days(days);
+        assert_eq!(days_from_civil(y, m, d), days);
+    }
+    let leap_day = 19782 * NS_PER_DAY as u64;
+    assert_eq!(
+        call(Builtin::DateFromParts, &[2024, 2, 29]),
+        Ok(Some(leap_day))
+    );
+    for bad in [
+        [2023u64, 2, 29],
+        [2024, 13, 1],
+        [2024, 4, 31],
+        [2024, 0, 1],
+        [3000, 1, 1],
+    ] {
+        assert_eq!(
+            call(Builtin::DateFromParts, &bad),
+            Err(Trap::NumericError),
+            "{bad:?}"
+        );
+    }
+    assert_eq!(
+        call(Builtin::DateSplit, &[leap_day + 5]),
+        Ok(Some(2024 << 16 | 2 << 8 | 29))
+    );
+    let before_1970 = call(Builtin::DateSplit, &[(-NS_PER_DAY) as u64])
+        .unwrap()
+        .unwrap();
+    assert_eq!(
+        ((before_1970 as i64) >> 16, before_1970 & 0xffff),
+        (1969, 12 << 8 | 31)
+    );
+    assert_eq!(call(Builtin::DayOfWeek, &[leap_day]), Ok(Some(4)));
+    assert_eq!(
+        call(Builtin::DayOfWeek, &[leap_day + 3 * NS_PER_DAY as u64]),
+        Ok(Some(0))
+    );
+    let noon = 12 * 3_600_000_000_000u64;
+    assert_eq!(
+        call(Builtin::DateOf, &[leap_day + noon]),
+        Ok(Some(leap_day))
+    );
+    assert_eq!(call(Builtin::TodOf, &[leap_day + noon]), Ok(Some(noon)));
+    assert_eq!(
+        call(Builtin::TodOf, &[(-1i64) as u64]),
+        Ok(Some(NS_PER_DAY as u64 - 1))
+    );
+    assert_eq!(
+        call(Builtin::DateOf, &[i64::MIN as u64]),
+        Err(Trap::NumericError)
+    );
+    assert_eq!(call(Builtin::TodFromParts, &[12, 0, 0, 0]), Ok(Some(noon)));
+    assert_eq!(
+        call(Builtin::TodFromParts, &[24, 0, 0, 0]),
+        Err(Trap::NumericError)
+    );
+    assert_eq!(
+        call(Builtin::TodFromParts, &[1, 2, 3, 1000]),
+        Err(Trap::NumericError)
+    );
+    let fmt = |kind, ns: i64| {
+        let mut s = String::new();
+        format_date_time(&mut s, kind, ns);
+        s
+    };
+    let dt = leap_day as i64 + 13 * 3_600_000_000_000 + 5 * 60_000_000_000 + 250_000_000;
+    assert_eq!(fmt(TimeKind::Dt, dt), "DT#2024-02-29-13:05:00.25");
+    assert_eq!(fmt(TimeKind::LDt, dt), "LDT#2024-02-29-13:05:00.25");
+    assert_eq!(fmt(TimeKind::Date, leap_day as i64), "D#2024-02-29");
+    assert_eq!(
+        fmt(TimeKind::Tod, noon as i64 + 7),
+        "TOD#12:00:00.000000007"
+    );
+    assert_eq!(fmt(TimeKind::LTime, 1_500_000_000), "LT#1s500ms");
+    assert_eq!(fmt(TimeKind::Date, -NS_PER_DAY), "D#1969-12-31");
+    for (text, kind, value) in [
+        ("DT#2024-02-29-13:05:00.25", TimeKind::Dt, Some(dt)),
+        (
+            "date_and_time#2024-02-29-13:05:00.25",
+            TimeKind::LDt,
+            Some(dt),
+        ),
+        (" 2024-02-29 ", TimeKind::Date, Some(leap_day as i64)),
+        ("ld#2024-02-29", TimeKind::Date, Some(leap_day as i64)),
+        ("2023-02-29", TimeKind::Date, None),
+        ("TOD#12:00", TimeKind::Tod, Some(noon as i64)),
+        ("12:00:00.0000000071", TimeKind::LTod, Some(noon as i64 + 7)),
+        ("24:00", TimeKind::Tod, None),
+        ("12:60", TimeKind::Tod, None),
+        ("T#1s500ms", TimeKind::Time, Some(1_500_000_000)),
+        ("-1.5S", TimeKind::Time, Some(-1_500_000_000)),
+        ("1d_2h", TimeKind::LTime, Some(93_600_000_000_000)),
+        ("0.5ns", TimeKind::Time, Some(1)),
+        ("T#", TimeKind::Time, None),
+        ("1x", TimeKind::Time, None),
+        ("D#2024-02-29", TimeKind::Tod, None),
+    ] {
+        assert_eq!(
+            parse_date_time(text.as_bytes(), kind),
+            value,
+            "{text} as {kind}"
+        );
+    }
 }
 
 #[test]

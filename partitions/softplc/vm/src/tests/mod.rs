@@ -4,6 +4,7 @@ pub(crate) mod differential;
 mod fuzz;
 mod library;
 mod ops;
+mod refs;
 mod traps;
 mod verifier;
 

@@ -1,0 +1,802 @@
+//! Code generation for the object-oriented extensions (declarations: [`crate::classes`]):
+//! calls of methods and actions, property accesses, `THIS` and `SUPER`, interface values,
+//! dynamic dispatch and the image's class tables.
+//!
+//! A method runs with the frame base register on its instance; its own parameters and
+//! variables live in its static frame (absolute addresses), the instance's variables are
+//! frame-relative as in the block's body. A call is static when the instance's exact type
+//! is known (a function-block variable holds exactly its declared type) or no derived
+//! block overrides the method; otherwise (through `^`, `THIS`, a REFERENCE TO or an
+//! interface) it goes through the method's slot: `VIRT_FRAME` gives the frame of the
+//! method the instance's class runs, the caller stores the arguments there, `CALL_VIRT`
+//! calls it.
+
+use plc_vm::isa::{Builtin, MemType, Opcode};
+
+use crate::ast::*;
+use crate::calls::CallBase;
+use crate::codegen::{Gen, Loc, Place, scalar_mem};
+use crate::diagnostics::Span;
+use crate::sema::{MemberKind, VarDef};
+use crate::types::*;
+
+/// What a method is called on.
+#[derive(Debug, Clone, Copy)]
+enum Receiver {
+    /// A function-block instance of static type `class`; `exact` when it cannot be an
+    /// instance of a derived block; `superclass` for `SUPER^`.
+    Instance {
+        class: usize,
+        exact: bool,
+        superclass: bool,
+    },
+    /// An interface value.
+    Interface(usize),
+}
+
+/// A method as a call sees it: the slot and signature of a dynamic call, or the POU of a
+/// static one.
+struct Dynamic {
+    slot: u16,
+    label: String,
+    /// Parameters (and outputs) in frame order.
+    params: Vec<VarDef>,
+    /// Result type and its offset in the method frame.
+    result: Option<(Type, u32)>,
+    /// The methods the call may run (for the recursion check).
+    targets: Vec<usize>,
+}
+
+impl Gen<'_> {
+    /// The function block (or program) whose instance the current POU runs on: the POU
+    /// itself for a body, the owner for a method or action; `None` in a FUNCTION.
+    pub(crate) fn context_class(&self) -> Option<usize> {
+        let p = &self.prog.pous[self.cur];
+        match &p.member {
+            Some(m) => Some(m.owner),
+            None if p.kind != PouKind::Function => Some(self.cur),
+            None => None,
+        }
+    }
+
+    /// The owner of the current method or action when `name` is one of the owner's
+    /// variables (and not one of the POU's own).
+    pub(crate) fn var_owner(&self, name: &str) -> Option<usize> {
+        let p = &self.prog.pous[self.cur];
+        let owner = p.member.as_ref()?.owner;
+        if p.var(name).is_some() {
+            return None;
+        }
+        self.prog.pous[owner].var(name).map(|_| owner)
+    }
+
+    /// The type of variable `name` of the current POU's owner.
+    pub(crate) fn owner_var_type(&self, name: &str) -> Option<Type> {
+        let owner = self.var_owner(name)?;
+        self.prog.pous[owner].var(name).map(|v| v.ty.clone())
+    }
+
+    /// Whether POU `pi` is a METHOD or a property accessor.
+    pub(crate) fn is_method(&self, pi: usize) -> bool {
+        self.prog.pous[pi]
+            .member
+            .as_ref()
+            .is_some_and(|m| m.kind != MemberKind::Action)
+    }
+
+    /// The static frame of the current POU when it is a method (its own variables live
+    /// there; the frame base register points at the instance).
+    pub(crate) fn method_frame(&self) -> Option<u32> {
+        if self.is_method(self.cur) {
+            Some(self.frames.get(self.cur).and_then(|f| f.0).unwrap_or(0))
+        } else {
+            None
+        }
+    }
+
+    pub(crate) fn derives_from(&self, class: usize, base: usize) -> bool {
+        self.prog.derives_from(class, base)
+    }
+
+    pub(crate) fn implements(&self, class: usize, interface: usize) -> bool {
+        self.prog.implements(class, interface)
+    }
+
+    pub(crate) fn interface_extends(&self, a: usize, b: usize) -> bool {
+        self.prog.interface_extends(a, b)
+    }
+
+    // ----- THIS and SUPER --------------------------------------------------------------
+
+    /// The class `THIS` (or, with `superclass`, `SUPER`) stands for here.
+    fn this_class(&mut self, superclass: bool, span: Span) -> Option<usize> {
+        let Some(c) = self
+            .context_class()
+            .filter(|&c| self.prog.pous[c].kind == PouKind::FunctionBlock)
+        else {
+            let what = if superclass { "SUPER" } else { "THIS" };
+            self.error(
+                span,
+                format!("{what} is the instance a function block's body, method or action runs on; there is none here"),
+            );
+            return None;
+        };
+        if !superclass {
+            return Some(c);
+        }
+        match self.prog.pous[c].base {
+            Some(b) => Some(b),
+            None => {
+                let name = self.prog.pous[c].text.clone();
+                self.error(
+                    span,
+                    format!("`{name}` extends no function block: there is no SUPER"),
+                );
+                None
+            }
+        }
+    }
+
+    /// `THIS` / `SUPER`: a reference to the instance (the frame base).
+    pub(crate) fn this_expr(&mut self, superclass: bool, span: Span) -> Type {
+        match self.this_class(superclass, span) {
+            Some(c) => {
+                self.emit(|b| b.lea_rel(0));
+                Type::Ref(Box::new(Type::Fb(c)))
+            }
+            None => Type::Error,
+        }
+    }
+
+    /// `THIS^` / `SUPER^`: the instance itself.
+    pub(crate) fn this_place(&mut self, superclass: bool, span: Span) -> Option<Place> {
+        let c = self.this_class(superclass, span)?;
+        Some(Place {
+            loc: Loc::Rel(0),
+            ty: Type::Fb(c),
+            writable: true,
+            window: None,
+        })
+    }
+
+    // ----- receivers and lookups ---------------------------------------------------------
+
+    /// What `base` in `base.m(...)` is, when it is an instance or an interface value.
+    fn receiver(&mut self, base: &Expr) -> Option<Receiver> {
+        match self.infer(base) {
+            Type::Fb(class) => Some(Receiver::Instance {
+                class,
+                exact: self.is_exact_instance(base),
+                superclass: matches!(&base.kind, ExprKind::Deref(i) if matches!(i.kind, ExprKind::Super)),
+            }),
+            Type::Interface(i) => Some(Receiver::Interface(i)),
+            _ => None,
+        }
+    }
+
+    /// Whether the instance `e` names is exactly of its static type: a function-block
+    /// variable, member or element is; what a reference, `THIS` or a REFERENCE TO refers
+    /// to may be an instance of a derived block.
+    fn is_exact_instance(&mut self, e: &Expr) -> bool {
+        match &e.kind {
+            ExprKind::Deref(_) | ExprKind::This | ExprKind::Super => false,
+            ExprKind::Name(n) => !self.is_reference_var(&n.name),
+            _ => true,
+        }
+    }
+
+    fn is_reference_var(&self, name: &str) -> bool {
+        let own = self.prog.pous[self.cur].var(name).map(|v| v.ty.clone());
+        let ty = own
+            .or_else(|| self.owner_var_type(name))
+            .or_else(|| self.prog.global(name).map(|g| g.ty.clone()));
+        matches!(ty, Some(Type::Reference(_)))
+    }
+
+    /// Whether `name` is a variable visible in the current POU.
+    pub(crate) fn is_visible_var(&self, name: &str) -> bool {
+        self.prog.pous[self.cur].var(name).is_some()
+            || self.var_owner(name).is_some()
+            || self.prog.global(name).is_some()
+    }
+
+    /// Reports a call of a PRIVATE or PROTECTED member from where it may not be called.
+    fn check_access(&mut self, member: usize, span: Span) {
+        let Some(m) = self.prog.pous[member].member.clone() else {
+            return;
+        };
+        let ctx = self.context_class();
+        let allowed = match m.access {
+            Access::Private => ctx == Some(m.owner),
+            Access::Protected => ctx.is_some_and(|c| self.prog.derives_from(c, m.owner)),
+            Access::Public | Access::Internal => true,
+        };
+        if !allowed {
+            let owner = self.prog.pous[m.owner].text.clone();
+            let who = if m.access == Access::Private {
+                format!("only `{owner}` itself may use it")
+            } else {
+                format!("only `{owner}` and blocks derived from it may use it")
+            };
+            let msg = format!(
+                "`{}` is {}: {who}",
+                self.prog.pous[member].text,
+                m.access.keyword()
+            );
+            self.error(span, msg);
+        }
+    }
+
+    /// The methods a call of `member` on an instance of static type `class` may run: the
+    /// implementations of `class` and of the blocks derived from it.
+    fn possible_targets(&self, class: usize, member: usize) -> Vec<usize> {
+        let Some(m) = &self.prog.pous[member].member else {
+            return vec![member];
+        };
+        let mut out = vec![member];
+        for d in self.prog.derived_classes(class) {
+            if let Some(p) = self.prog.find_member(d, &m.name, m.kind)
+                && !out.contains(&p)
+            {
+                out.push(p);
+            }
+        }
+        out
+    }
+
+    /// The dynamic view of method POU `member` (called through its class slot).
+    fn dynamic_of(&self, member: usize, targets: Vec<usize>) -> Option<Dynamic> {
+        let slot = *self.prog.slots.get(&member)?;
+        let p = &self.prog.pous[member];
+        let result = p
+            .return_type
+            .clone()
+            .map(|t| (t, p.vars.first().map_or(0, |v| v.offset)));
+        let params = self.prog.signature(member).into_iter().cloned().collect();
+        Some(Dynamic {
+            slot,
+            label: p.text.clone(),
+            params,
+            result,
+            targets,
+        })
+    }
+
+    // ----- calls -------------------------------------------------------------------------
+
+    /// A call of a method or action: `m(...)` inside a block, `inst.m(...)`, `p^.m(...)`,
+    /// `itf.m(...)`, `SUPER^.m(...)`; `None` when `callee` is no such call.
+    pub(crate) fn member_call(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Option<Type> {
+        match &callee.kind {
+            ExprKind::Name(n) => {
+                if self.is_visible_var(&n.name) {
+                    return None;
+                }
+                let ctx = self.context_class()?;
+                let member = self
+                    .prog
+                    .find_member(ctx, &n.name, MemberKind::Method)
+                    .or_else(|| self.prog.find_member(ctx, &n.name, MemberKind::Action))?;
+                let recv = Receiver::Instance {
+                    class: ctx,
+                    exact: self.prog.pous[ctx].kind == PouKind::Program,
+                    superclass: false,
+                };
+                Some(self.call_member(None, recv, member, args, span))
+            }
+            ExprKind::Member(base, m) => {
+                let recv = self.receiver(base)?;
+                match recv {
+                    Receiver::Interface(i) => {
+                        let Some(im) = self
+                            .prog
+                            .interface_member(i, &m.name, MemberKind::Method)
+                            .cloned()
+                        else {
+                            let msg = format!(
+                                "interface `{}` has no method `{}`",
+                                self.prog.interfaces[i].text, m.text
+                            );
+                            self.error(m.span, msg);
+                            for a in args {
+                                self.infer(&a.value);
+                            }
+                            return Some(Type::Error);
+                        };
+                        let dynamic = self.interface_dynamic(i, &im);
+                        Some(self.call_dynamic(Some(base), dynamic, args, span))
+                    }
+                    Receiver::Instance { class, .. } => {
+                        let member = self
+                            .prog
+                            .find_member(class, &m.name, MemberKind::Method)
+                            .or_else(|| {
+                                self.prog.find_member(class, &m.name, MemberKind::Action)
+                            })?;
+                        Some(self.call_member(Some(base), recv, member, args, span))
+                    }
+                }
+            }
+            _ => None,
+        }
+    }
+
+    /// The dynamic view of interface member `im` of interface `i`.
+    fn interface_dynamic(&self, i: usize, im: &crate::sema::InterfaceMember) -> Dynamic {
+        let targets = self
+            .prog
+            .classes
+            .iter()
+            .filter(|c| c.interfaces.contains(&i))
+            .filter_map(|c| c.dispatch.iter().find(|d| d.0 == im.slot).map(|d| d.1))
+            .collect();
+        // The result lies after the parameters, where an implementing method puts it.
+        let result = im.return_type.clone().map(|t| {
+            let end = im
+                .params
+                .iter()
+                .filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
+                .map(|v| {
+                    v.offset
+                        + if v.kind == VarKind::InOut {
+                            4
+                        } else {
+                            self.prog.size_align(&v.ty).0
+                        }
+                })
+                .max()
+                .unwrap_or(0);
+            let (_, al) = self.prog.size_align(&t);
+            let off = crate::sema::align_up(crate::sema::align_up(end, 8), al);
+            (t, off)
+        });
+        Dynamic {
+            slot: im.slot,
+            label: format!("{}.{}", self.prog.interfaces[i].text, im.text),
+            params: im.params.clone(),
+            result,
+            targets,
+        }
+    }
+
+    /// Calls member `member` (method, accessor or action) on the instance `base` (`None`:
+    /// the current instance).
+    fn call_member(
+        &mut self,
+        base: Option<&Expr>,
+        recv: Receiver,
+        member: usize,
+        args: &[Arg],
+        span: Span,
+    ) -> Type {
+        self.check_access(member, span);
+        let Receiver::Instance {
+            class,
+            exact,
+            superclass,
+        } = recv
+        else {
+            unreachable!("interfaces have no static members")
+        };
+        let kind = self.prog.pous[member].member.as_ref().map(|m| m.kind);
+        if kind == Some(MemberKind::Action) {
+            if let Some(a) = args.first() {
+                self.error(a.span, "an action takes no arguments");
+            }
+            self.calls.push((self.cur, member, span));
+            let id = self.pou_ids[member];
+            match base {
+                None => self.emit(|b| b.lea_rel(0)),
+                Some(e) => {
+                    let Some(p) = self.place(e) else {
+                        return Type::Error;
+                    };
+                    self.addr_of(&p);
+                }
+            }
+            self.emit(|b| b.call(id));
+            return Type::Void;
+        }
+        if self.prog.pous[member]
+            .member
+            .as_ref()
+            .is_some_and(|m| m.is_abstract)
+            && (exact || superclass)
+        {
+            let msg = format!(
+                "`{}` is ABSTRACT: it has no implementation to call",
+                self.prog.pous[member].text
+            );
+            self.error(span, msg);
+        }
+        let targets = self.possible_targets(class, member);
+        if !exact && !superclass && targets.len() > 1 {
+            let dynamic = self.dynamic_of(member, targets);
+            if let Some(d) = dynamic {
+                return self.call_dynamic(base, d, args, span);
+            }
+        }
+        // A static call on the instance.
+        let call_base = match base {
+            None => CallBase::Instance(Loc::Rel(0)),
+            Some(e) => {
+                let Some(p) = self.place(e) else {
+                    for a in args {
+                        self.infer(&a.value);
+                    }
+                    return Type::Error;
+                };
+                match p.loc {
+                    Loc::Abs(_) | Loc::Rel(_) => CallBase::Instance(p.loc),
+                    _ => {
+                        let t = self.temp_cell();
+                        self.addr_of(&p);
+                        self.emit(|b| b.st_abs(MemType::U32, t));
+                        CallBase::Parked(t)
+                    }
+                }
+            }
+        };
+        self.call_static(member, args, span, call_base)
+    }
+
+    /// A dynamic call: the instance (`base`'s value, or the current instance), then the
+    /// arguments into the frame `VIRT_FRAME` names, then `CALL_VIRT`.
+    fn call_dynamic(&mut self, base: Option<&Expr>, d: Dynamic, args: &[Arg], span: Span) -> Type {
+        for &t in &d.targets {
+            self.calls.push((self.cur, t, span));
+        }
+        // The instance, parked.
+        let instance = self.temp_cell();
+        match base {
+            None => self.emit(|b| b.lea_rel(0)),
+            Some(e) => {
+                let t = self.expr(e, None);
+                if t.is_error() {
+                    self.op(Opcode::Drop);
+                    for a in args {
+                        self.infer(&a.value);
+                    }
+                    return Type::Error;
+                }
+            }
+        }
+        self.emit(|b| b.st_abs(MemType::U64, instance));
+        let result_name = d.result.as_ref().map(|_| d.label.clone());
+        let _ = result_name;
+        let bound = self.bind_to(None, &d.label, &d.params, None, args);
+        let inputs: Vec<&crate::calls::Bound> = bound.iter().filter(|b| !b.output).collect();
+        for a in &inputs {
+            match a.param.kind {
+                VarKind::InOut => {
+                    for &t in &d.targets {
+                        self.record_inout(t, &a.param.name, a.value);
+                    }
+                    self.inout_address(a.value, &a.param.ty)
+                }
+                _ => self.argument_value(a.value, &a.param.ty),
+            }
+        }
+        let frame = self.temp_cell();
+        let slot = d.slot;
+        self.emit(|b| {
+            b.ld_abs(MemType::U64, instance);
+            b.virt_frame(slot);
+            b.st_abs(MemType::U32, frame);
+        });
+        for a in inputs.iter().rev() {
+            self.store_into_frame(frame, &a.param, a.param.kind == VarKind::InOut);
+        }
+        for v in &d.params {
+            if bound.iter().any(|b| b.param.name == v.name) {
+                continue;
+            }
+            match v.kind {
+                VarKind::Input => self.default_into_frame(frame, v),
+                VarKind::InOut => {
+                    let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
+                    self.error(span, msg);
+                }
+                _ => {}
+            }
+        }
+        self.emit(|b| {
+            b.ld_abs(MemType::U64, instance);
+            b.call_virt(slot);
+        });
+        for a in bound.iter().filter(|a| a.output) {
+            self.emit(|b| b.ld_abs(MemType::U32, frame));
+            let src = Place {
+                loc: Loc::Ind(a.param.offset),
+                ty: a.param.ty.clone(),
+                writable: false,
+                window: None,
+            };
+            self.copy_out(src, a.value);
+        }
+        match d.result {
+            None => Type::Void,
+            Some((t, off)) => {
+                self.emit(|b| b.ld_abs(MemType::U32, frame));
+                self.push_result_from_stack(&t, off);
+                t
+            }
+        }
+    }
+
+    /// Pushes an input argument's value (for a string or aggregate: its address).
+    fn argument_value(&mut self, e: &Expr, ty: &Type) {
+        match ty {
+            Type::String(_) => {
+                let t = self.expr(e, Some(ty));
+                if !t.is_string() && !t.is_error() {
+                    let msg = format!("type mismatch: expected STRING, found {}", self.tname(&t));
+                    self.error(e.span, msg);
+                }
+            }
+            Type::Array(_) | Type::Struct(_) => {
+                let t = self.expr(e, Some(ty));
+                if t != *ty && !t.is_error() {
+                    let msg = format!(
+                        "type mismatch: expected {}, found {}",
+                        self.tname(ty),
+                        self.tname(&t)
+                    );
+                    self.error(e.span, msg);
+                }
+            }
+            ty => {
+                let ty = ty.clone();
+                if ty.is_pointer_like() {
+                    self.check_escape(None, e, "an input of a method");
+                }
+                self.value_to(e, &ty);
+                if let Type::Subrange(_, lo, hi) = ty {
+                    self.emit(|b| b.chk_range_s(lo, hi));
+                }
+            }
+        }
+    }
+
+    /// Stores the value on top of the stack into parameter `v` of the frame whose address is
+    /// in the temporary `frame`.
+    fn store_into_frame(&mut self, frame: u32, v: &VarDef, inout: bool) {
+        let off = v.offset;
+        self.emit(|b| {
+            b.ld_abs(MemType::U32, frame);
+            if off != 0 {
+                b.add_imm(off as i32);
+            }
+            b.swap();
+        });
+        if inout {
+            self.emit(|b| b.st_ind(MemType::U32, 0));
+            return;
+        }
+        match &v.ty {
+            Type::String(_) => self.emit(|b| b.call_builtin(Builtin::StrAssign)),
+            Type::Array(_) | Type::Struct(_) => {
+                let (size, _) = self.prog.size_align(&v.ty);
+                self.emit(|b| b.copy(size));
+            }
+            t => match scalar_mem(t) {
+                Some(mt) => self.emit(|b| b.st_ind(mt, 0)),
+                None => {
+                    self.op(Opcode::Drop);
+                    self.op(Opcode::Drop);
+                }
+            },
+        }
+    }
+
+    /// An unconnected input of a dynamic call gets its declared initial value (or zero).
+    fn default_into_frame(&mut self, frame: u32, v: &VarDef) {
+        match (&v.ty, &v.init) {
+            (Type::String(_), init) => {
+                let text = match init {
+                    Some(Init::Expr(e)) => match self.const_value(e) {
+                        Some(crate::sema::ConstVal::Str(s)) => s,
+                        _ => String::new(),
+                    },
+                    _ => String::new(),
+                };
+                let e = Expr {
+                    kind: ExprKind::Str(text),
+                    span: v.span,
+                };
+                self.expr(&e, None);
+            }
+            (t, Some(Init::Expr(e))) if scalar_mem(t).is_some() => {
+                let (t, e) = (t.clone(), e.clone());
+                self.value_to(&e, &t);
+            }
+            (t, _) if scalar_mem(t).is_some() => self.push_int(0),
+            (t, _) => {
+                let (size, al) = self.prog.size_align(t);
+                let zero = self.alloc_static(size, al);
+                self.emit(|b| b.push_u32(zero));
+            }
+        }
+        self.store_into_frame(frame, v, false);
+    }
+
+    /// Pushes a method's result from the frame whose address is on the stack (`off` into
+    /// it); aggregates are copied to a temporary first.
+    fn push_result_from_stack(&mut self, t: &Type, off: u32) {
+        match t {
+            Type::String(n) => {
+                let tmp = self.temp_string(*n);
+                self.emit(|b| {
+                    if off != 0 {
+                        b.add_imm(off as i32);
+                    }
+                    b.push_u32(tmp);
+                    b.swap();
+                    b.call_builtin(Builtin::StrAssign);
+                    b.push_u32(tmp);
+                });
+            }
+            Type::Array(_) | Type::Struct(_) => {
+                let (size, al) = self.prog.size_align(t);
+                let tmp = self.alloc_static(size, al);
+                self.emit(|b| {
+                    if off != 0 {
+                        b.add_imm(off as i32);
+                    }
+                    b.push_u32(tmp);
+                    b.swap();
+                    b.copy(size);
+                    b.push_u32(tmp);
+                });
+            }
+            t => match scalar_mem(t) {
+                Some(mt) => self.emit(|b| b.ld_ind(mt, off)),
+                None => self.op(Opcode::Drop),
+            },
+        }
+    }
+
+    // ----- properties --------------------------------------------------------------------
+
+    /// `e` as a property access: the instance expression (`None`: the current instance),
+    /// what it is and the property's name.
+    fn property_target<'e>(
+        &mut self,
+        e: &'e Expr,
+    ) -> Option<(Option<&'e Expr>, Receiver, &'e Ident)> {
+        match &e.kind {
+            ExprKind::Name(n) => {
+                if self.is_visible_var(&n.name) {
+                    return None;
+                }
+                let ctx = self.context_class()?;
+                let has = self
+                    .prog
+                    .find_member(ctx, &n.name, MemberKind::Getter)
+                    .is_some()
+                    || self
+                        .prog
+                        .find_member(ctx, &n.name, MemberKind::Setter)
+                        .is_some();
+                has.then_some((
+                    None,
+                    Receiver::Instance {
+                        class: ctx,
+                        exact: self.prog.pous[ctx].kind == PouKind::Program,
+                        superclass: false,
+                    },
+                    n,
+                ))
+            }
+            ExprKind::Member(base, m) => {
+                let recv = self.receiver(base)?;
+                let has = match recv {
+                    Receiver::Instance { class, .. } => {
+                        self.prog
+                            .find_member(class, &m.name, MemberKind::Getter)
+                            .is_some()
+                            || self
+                                .prog
+                                .find_member(class, &m.name, MemberKind::Setter)
+                                .is_some()
+                    }
+                    Receiver::Interface(i) => {
+                        self.prog
+                            .interface_member(i, &m.name, MemberKind::Getter)
+                            .is_some()
+                            || self
+                                .prog
+                                .interface_member(i, &m.name, MemberKind::Setter)
+                                .is_some()
+                    }
+                };
+                has.then_some((Some(&**base), recv, m))
+            }
+            _ => None,
+        }
+    }
+
+    /// Reads a property through its GET accessor; `None` when `e` is no property.
+    pub(crate) fn property_read(&mut self, e: &Expr) -> Option<Type> {
+        let (base, recv, name) = self.property_target(e)?;
+        Some(self.accessor_call(base, recv, name, MemberKind::Getter, &[], e.span))
+    }
+
+    /// Writes a property through its SET accessor; `false` when `target` is no property.
+    pub(crate) fn property_write(&mut self, target: &Expr, value: &Expr) -> bool {
+        let Some((base, recv, name)) = self.property_target(target) else {
+            return false;
+        };
+        let args = [Arg {
+            name: None,
+            output: false,
+            value: value.clone(),
+            span: value.span,
+        }];
+        self.accessor_call(base, recv, name, MemberKind::Setter, &args, target.span);
+        true
+    }
+
+    fn accessor_call(
+        &mut self,
+        base: Option<&Expr>,
+        recv: Receiver,
+        name: &Ident,
+        kind: MemberKind,
+        args: &[Arg],
+        span: Span,
+    ) -> Type {
+        let missing = |g: &mut Self| {
+            let what = if kind == MemberKind::Getter {
+                "is write-only (it has no GET accessor)"
+            } else {
+                "is read-only (it has no SET accessor)"
+            };
+            g.error(name.span, format!("property `{}` {what}", name.text));
+            for a in args {
+                g.infer(&a.value);
+            }
+            Type::Error
+        };
+        match recv {
+            Receiver::Instance { class, .. } => {
+                match self.prog.find_member(class, &name.name, kind) {
+                    Some(m) => self.call_member(base, recv, m, args, span),
+                    None => missing(self),
+                }
+            }
+            Receiver::Interface(i) => {
+                match self.prog.interface_member(i, &name.name, kind).cloned() {
+                    Some(im) => {
+                        let d = self.interface_dynamic(i, &im);
+                        self.call_dynamic(base, d, args, span)
+                    }
+                    None => missing(self),
+                }
+            }
+        }
+    }
+
+    // ----- the image's class tables --------------------------------------------------------
+
+    /// The CLASSES and DISPATCH tables: for each class (in class-id order) the method and
+    /// method frame it runs for each slot.
+    pub(crate) fn build_classes(&mut self) {
+        for k in 0..self.prog.classes.len() {
+            let class = &self.prog.classes[k];
+            let name = self.prog.pous[class.pou].text.clone();
+            let methods: Vec<(u16, plc_vm::image::PouId, u32)> = class
+                .dispatch
+                .iter()
+                .map(|&(slot, p)| {
+                    (
+                        slot,
+                        self.pou_ids[p],
+                        self.frames.get(p).and_then(|f| f.0).unwrap_or(0),
+                    )
+                })
+                .collect();
+            self.b.add_class(&name, &methods);
+        }
+    }
+}
