@@ -42,8 +42,8 @@ enum Cmd {
         release: bool,
     },
     /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak and guest systems under
-    /// QEMU, the guest benchmark's native reference, soft-PLC VM on the host); writes
-    /// target/bench/report.json.
+    /// QEMU, the guest benchmark's native reference, the soft-PLC suite on the host: VM,
+    /// native tier, IronPLC with IRONPLC set); writes target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
         /// counts then follow the instructions executed, not the host's load, so two
@@ -69,6 +69,12 @@ enum Cmd {
         /// kernel, `native_*`); writes target/bench/native.json.
         #[arg(long, conflicts_with_all = ["soak", "guest"])]
         native: bool,
+        /// Run only the soft-PLC suite on the host (no QEMU; also part of the full bench):
+        /// the interpreter (`plc_vm_*`), the native tier (`plc_native_*`) and, with
+        /// IRONPLC=<an IronPLC checkout or its ironplcc>, IronPLC's VM (`plc_ironplc_*`,
+        /// `plc_vm_*_vs_ironplc`); writes target/bench/plc.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "native"])]
+        plc: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -141,6 +147,7 @@ fn main() -> ExitCode {
             deterministic_time,
             ..
         } => native_bench(deterministic_time),
+        Cmd::Bench { plc: true, .. } => plc_bench(),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -496,6 +503,18 @@ fn native_bench(deterministic_time: bool) -> Result<bool> {
         println!("{}", xtask::bench::format_line(m));
     }
     let report = xtask::bench::write_report_as(&metrics, "native.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
+/// `cargo xtask bench --plc`: only the soft-PLC suite on the host; writes
+/// `target/bench/plc.json`.
+fn plc_bench() -> Result<bool> {
+    let metrics = xtask::bench::host_metrics()?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "plc.json")?;
     eprintln!("xtask: wrote {}", report.display());
     Ok(true)
 }

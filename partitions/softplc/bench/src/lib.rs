@@ -16,6 +16,7 @@ use plc_vm::vm::Value;
 use std::hint::black_box;
 use std::time::Instant;
 
+pub mod ironplc;
 mod reference;
 
 /// Samples per metric (unless the environment variable `PLC_BENCH_SAMPLES` says otherwise,

@@ -185,6 +185,21 @@ fn step(image: &Image<'_>, insn: &crate::analysis::Insn<'_>, stack: &mut Vec<Add
                 top(2).shift(0, (hi - lo) * stride)
             })
         }
+        ElemRel | ElemAbs => {
+            let (a, lo, hi) = (
+                insn.u32_at(0) as i128,
+                insn.u64_at(4) as i64 as i128,
+                insn.u64_at(12) as i64 as i128,
+            );
+            let stride = insn.u32_at(20) as i128;
+            Some(if hi < lo {
+                Addr::Unknown
+            } else if insn.op == ElemRel {
+                Addr::Frame(a, a + (hi - lo) * stride)
+            } else {
+                Addr::Abs(a, a + (hi - lo) * stride)
+            })
+        }
         Add => match (top(2), top(1)) {
             (a, Addr::Abs(c, e)) | (Addr::Abs(c, e), a) if matches!(a, Addr::Frame(..)) => {
                 Some(a.shift(c, e))
@@ -252,6 +267,36 @@ fn touch(insn: &crate::analysis::Insn<'_>, stack: &[Addr], base: Option<u32>) ->
                 through(stack[d - 2], 0, len, true),
                 through(stack[d - 1], 0, len, false),
             ]
+        }
+        LdElemRel | LdElemAbs | StElemRel | StElemAbs => {
+            let (a, lo, hi) = (
+                insn.u32_at(1) as i128,
+                insn.u64_at(5) as i64 as i128,
+                insn.u64_at(13) as i64 as i128,
+            );
+            let stride = insn.u32_at(21) as i128;
+            let write = matches!(insn.op, StElemRel | StElemAbs);
+            let array = if hi < lo {
+                Addr::Unknown
+            } else if matches!(insn.op, LdElemRel | StElemRel) {
+                Addr::Frame(a, a + (hi - lo) * stride)
+            } else {
+                Addr::Abs(a, a + (hi - lo) * stride)
+            };
+            vec![through(array, 0, width(insn.imm[0]), write)]
+        }
+        // A frame variable or global read (and for INC written) in place.
+        IncRel | IncAbs | OpRel | OpAbs => {
+            let (ty, off) = match insn.op {
+                IncRel | IncAbs => (insn.imm[0], insn.u32_at(1)),
+                _ => (insn.imm[1], insn.u32_at(2)),
+            };
+            let a = if matches!(insn.op, IncRel | OpRel) {
+                Addr::Frame(off as i128, off as i128)
+            } else {
+                Addr::Abs(off as i128, off as i128)
+            };
+            vec![through(a, 0, width(ty), matches!(insn.op, IncRel | IncAbs))]
         }
         Call | CallVirt => vec![Touch::Anything { write: true }],
         // The class id of the instance.

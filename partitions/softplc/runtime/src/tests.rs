@@ -1610,8 +1610,8 @@ fn the_tier_follows_the_configuration_and_the_compiled_code() {
 /// task with safe outputs like an interpreted one.
 #[test]
 fn run_task_runs_the_native_code_and_handles_its_fault() {
-    use plc_vm::native::{Cycle, NativeProgram, Unwind, image_hash};
     use core::sync::atomic::{AtomicUsize, Ordering};
+    use plc_vm::native::{Cycle, NativeProgram, Unwind, image_hash};
     // Stand-ins for translated code: one writes a marker into the variable `marker` and
     // completes, the other faults (as code for another image would).
     static MARKER: AtomicUsize = AtomicUsize::new(0);

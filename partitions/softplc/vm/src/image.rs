@@ -1201,7 +1201,8 @@ mod builder {
             // The value's code must not read the address under it (e.g. `DUP`).
             let mut depth = 0u32;
             for j in k..n {
-                let Some((pops, pushes)) = self.insn_at(j).and_then(|d| crate::isa::stack_effect(d.op))
+                let Some((pops, pushes)) =
+                    self.insn_at(j).and_then(|d| crate::isa::stack_effect(d.op))
                 else {
                     return false;
                 };

@@ -1187,13 +1187,9 @@ impl core::fmt::Display for Instruction<'_> {
                 read_u32(imm, 5)
             ),
             Operands::OpImm => write!(f, " {} {}", opname(imm[0]), read_u32(imm, 1) as i32),
-            Operands::OpTypeAddr => write!(
-                f,
-                " {} {} {}",
-                opname(imm[0]),
-                ty(imm[1]),
-                read_u32(imm, 2)
-            ),
+            Operands::OpTypeAddr => {
+                write!(f, " {} {} {}", opname(imm[0]), ty(imm[1]), read_u32(imm, 2))
+            }
         }
     }
 }

@@ -895,8 +895,18 @@ impl<'a, 'm> Machine<'a, 'm> {
                     unary!(|a| (-f64::from_bits(a)).to_bits());
                     next!(NegF64);
                 }
-                op::EqF32 | op::NeF32 | op::LtF32 | op::LeF32 | op::GtF32 | op::GeF32
-                | op::EqF64 | op::NeF64 | op::LtF64 | op::LeF64 | op::GtF64 | op::GeF64 => {
+                op::EqF32
+                | op::NeF32
+                | op::LtF32
+                | op::LeF32
+                | op::GtF32
+                | op::GeF32
+                | op::EqF64
+                | op::NeF64
+                | op::LtF64
+                | op::LeF64
+                | op::GtF64
+                | op::GeF64 => {
                     binary!(|a, b| compare_byte(byte, a, b) as u64);
                     next!(EqF32);
                 }
@@ -926,10 +936,9 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
                 op::F32ToInt | op::F64ToInt => {
                     let imm = imm!(F32ToInt);
-                    let (Some(target), Some(mode)) = (
-                        MemType::from_code(imm[0]),
-                        RoundMode::from_code(imm[1]),
-                    ) else {
+                    let (Some(target), Some(mode)) =
+                        (MemType::from_code(imm[0]), RoundMode::from_code(imm[1]))
+                    else {
                         trap!(Trap::NumericError)
                     };
                     let a = cell!(1);
@@ -970,8 +979,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
                 op::Call => {
                     let imm = imm!(Call);
-                    let Some((code_start, frame_size)) =
-                        image.pou_entry(u16_at(imm, 0) as usize)
+                    let Some((code_start, frame_size)) = image.pou_entry(u16_at(imm, 0) as usize)
                     else {
                         trap!(Trap::InvalidAddress)
                     };
@@ -1005,8 +1013,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
                 op::CallBuiltin => {
                     let imm = imm!(CallBuiltin);
-                    let Some(builtin) = crate::isa::Builtin::from_u16(u16_at(imm, 0))
-                    else {
+                    let Some(builtin) = crate::isa::Builtin::from_u16(u16_at(imm, 0)) else {
                         trap!(Trap::NumericError)
                     };
                     let argc = builtin.args();
@@ -1100,7 +1107,13 @@ impl<'a, 'm> Machine<'a, 'm> {
                     } else {
                         u32_at(imm, 0) as u64
                     };
-                    match element(array, cell!(1), u64_at(imm, 4), u64_at(imm, 12), u32_at(imm, 20)) {
+                    match element(
+                        array,
+                        cell!(1),
+                        u64_at(imm, 4),
+                        u64_at(imm, 12),
+                        u32_at(imm, 20),
+                    ) {
                         Some(address) => set_cell!(1, address),
                         None => trap!(Trap::IndexOutOfBounds),
                     }
@@ -1113,9 +1126,13 @@ impl<'a, 'm> Machine<'a, 'm> {
                     } else {
                         u32_at(imm, 1) as u64
                     };
-                    let Some(address) =
-                        element(array, cell!(1), u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
-                    else {
+                    let Some(address) = element(
+                        array,
+                        cell!(1),
+                        u64_at(imm, 5),
+                        u64_at(imm, 13),
+                        u32_at(imm, 21),
+                    ) else {
                         trap!(Trap::IndexOutOfBounds)
                     };
                     set_cell!(1, load!(imm[0], address));
@@ -1128,9 +1145,13 @@ impl<'a, 'm> Machine<'a, 'm> {
                     } else {
                         u32_at(imm, 1) as u64
                     };
-                    let Some(address) =
-                        element(array, cell!(2), u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
-                    else {
+                    let Some(address) = element(
+                        array,
+                        cell!(2),
+                        u64_at(imm, 5),
+                        u64_at(imm, 13),
+                        u32_at(imm, 21),
+                    ) else {
                         trap!(Trap::IndexOutOfBounds)
                     };
                     store!(imm[0], address, cell!(1));
@@ -1145,7 +1166,11 @@ impl<'a, 'm> Machine<'a, 'm> {
                         u32_at(imm, 1) as u64
                     };
                     let v = load!(imm[0], address);
-                    store!(imm[0], address, v.wrapping_add(u32_at(imm, 5) as i32 as i64 as u64));
+                    store!(
+                        imm[0],
+                        address,
+                        v.wrapping_add(u32_at(imm, 5) as i32 as i64 as u64)
+                    );
                     next!(IncRel);
                 }
                 op::SelIf => {
@@ -1491,7 +1516,8 @@ fn u64_at<const N: usize>(imm: &[u8; N], at: usize) -> u64 {
 /// `N` bytes of data memory at `address`, if they lie inside it.
 #[inline(always)]
 fn chunk<const N: usize>(data: &[u8], address: u64) -> Option<&[u8; N]> {
-    data.get(usize::try_from(address).ok()?..)?.first_chunk::<N>()
+    data.get(usize::try_from(address).ok()?..)?
+        .first_chunk::<N>()
 }
 
 /// A typed load (a [`MemType`] code byte): the cell, sign- or zero-extended; `None` outside
