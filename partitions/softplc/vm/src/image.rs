@@ -864,12 +864,22 @@ mod builder {
         no_fusion: bool,
     }
 
-    /// Whether executing `op` can raise no trap but STACK_OVERFLOW (for the store fusion):
+    /// Whether executing `insn` can raise no trap but STACK_OVERFLOW (for the store fusion):
     /// loads of verified static addresses, constants, stack shuffles, integer and float
-    /// arithmetic but division, bit operations, comparisons, selections, conversions that
-    /// cannot fail.
-    fn cannot_trap(op: Opcode) -> bool {
+    /// arithmetic but division (also with an immediate or a static operand), bit operations,
+    /// comparisons, selections, conversions that cannot fail.
+    fn cannot_trap(insn: &crate::isa::Instruction<'_>) -> bool {
         use Opcode::*;
+        let op = insn.op;
+        if matches!(op, IncRel | IncAbs) {
+            return true;
+        }
+        if matches!(op, OpImm | OpRel | OpAbs) {
+            return !matches!(
+                Opcode::from_u8(insn.immediates[0]),
+                Some(DivS | DivU | ModS | ModU | DivF32 | DivF64)
+            );
+        }
         matches!(
             op,
             Nop | PushI32
@@ -1092,22 +1102,15 @@ mod builder {
                         return;
                     }
                     self.drop_from(n - 2);
-                    self.start(Opcode::OpImm);
-                    self.code.push(op as u8);
-                    self.code.extend_from_slice(&k.to_le_bytes());
+                    self.op_imm(op, k as i32);
                 }
                 Opcode::LdRel | Opcode::LdAbs => {
                     let (ty, addr) = (d.immediates[0], read_u32(d.immediates, 1));
-                    let fused = if d.op == Opcode::LdRel {
-                        Opcode::OpRel
-                    } else {
-                        Opcode::OpAbs
+                    let (Some(ty), rel) = (MemType::from_code(ty), d.op == Opcode::LdRel) else {
+                        return;
                     };
                     self.drop_from(n - 2);
-                    self.start(fused);
-                    self.code.push(op as u8);
-                    self.code.push(ty);
-                    self.code.extend_from_slice(&addr.to_le_bytes());
+                    self.op_at(rel, op, ty, addr);
                 }
                 _ => {}
             }
@@ -1131,16 +1134,9 @@ mod builder {
             {
                 return false;
             }
-            let k = read_u32(add.immediates, 0);
+            let k = read_u32(add.immediates, 0) as i32;
             self.drop_from(n - 2);
-            self.start(if load == Opcode::LdRel {
-                Opcode::IncRel
-            } else {
-                Opcode::IncAbs
-            });
-            self.code.push(ty as u8);
-            self.code.extend_from_slice(&addr.to_le_bytes());
-            self.code.extend_from_slice(&k.to_le_bytes());
+            self.inc(load == Opcode::LdRel, ty, addr, k);
             true
         }
 
@@ -1187,7 +1183,7 @@ mod builder {
                 let Some(d) = self.insn_at(k) else {
                     return false;
                 };
-                if !cannot_trap(d.op) {
+                if !cannot_trap(&d) {
                     return false;
                 }
                 let Some((pops, pushes)) = crate::isa::stack_effect(d.op) else {
@@ -1799,6 +1795,84 @@ mod builder {
         /// ELEM_ABS: `[i] -> [addr + (i - lo) * stride]` (fuses as ELEM_REL does).
         pub fn elem_abs(&mut self, addr: u32, lo: i64, hi: i64, stride: u32) {
             self.elem(Opcode::ElemAbs, addr, lo, hi, stride);
+        }
+        fn elem_access(
+            &mut self,
+            op: Opcode,
+            ty: MemType,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+        ) {
+            self.start(op);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&lo.to_le_bytes());
+            self.code.extend_from_slice(&hi.to_le_bytes());
+            self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        /// LD_ELEM_REL (`rel`) or LD_ELEM_ABS: `[i] -> [v]` (what the builder makes of ELEM
+        /// and `LD_IND ty 0`).
+        pub fn ld_elem(
+            &mut self,
+            rel: bool,
+            ty: MemType,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+        ) {
+            let op = if rel {
+                Opcode::LdElemRel
+            } else {
+                Opcode::LdElemAbs
+            };
+            self.elem_access(op, ty, addr, lo, hi, stride);
+        }
+        /// ST_ELEM_REL (`rel`) or ST_ELEM_ABS: `[i v] -> []`.
+        pub fn st_elem(
+            &mut self,
+            rel: bool,
+            ty: MemType,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+        ) {
+            let op = if rel {
+                Opcode::StElemRel
+            } else {
+                Opcode::StElemAbs
+            };
+            self.elem_access(op, ty, addr, lo, hi, stride);
+        }
+        /// INC_REL (`rel`) or INC_ABS: adds `imm` to an integer variable in place.
+        pub fn inc(&mut self, rel: bool, ty: MemType, addr: u32, imm: i32) {
+            self.start(if rel { Opcode::IncRel } else { Opcode::IncAbs });
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&imm.to_le_bytes());
+        }
+        /// OP_IMM: `[a] -> [a op imm]` for a binary operator `op`.
+        pub fn op_imm(&mut self, op: Opcode, imm: i32) {
+            debug_assert!(op.is_binary());
+            self.start(Opcode::OpImm);
+            self.code.push(op as u8);
+            self.code.extend_from_slice(&imm.to_le_bytes());
+        }
+        /// OP_REL (`rel`) or OP_ABS: `[a] -> [a op v]`, `v` the `ty` variable at `addr`.
+        pub fn op_at(&mut self, rel: bool, op: Opcode, ty: MemType, addr: u32) {
+            debug_assert!(op.is_binary());
+            self.start(if rel { Opcode::OpRel } else { Opcode::OpAbs });
+            self.code.push(op as u8);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+        }
+        /// JUMP_IF_IMM (`when`) / JUMP_IF_NOT_IMM: `[a] -> []`, jumps on `cmp(a, imm)`.
+        pub fn jump_if_imm(&mut self, when: bool, cmp: Opcode, imm: i32, target: Label) {
+            debug_assert!(cmp.is_comparison());
+            self.jump_on(when, (cmp, Some(imm as u32)), target);
         }
         /// SEL_IF: `[a b] -> [if cmp(a, b) { b } else { a }]` (MAX: `LT_x`, MIN: `GT_x`).
         pub fn sel_if(&mut self, cmp: Opcode) {
