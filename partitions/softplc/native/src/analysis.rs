@@ -57,6 +57,7 @@ impl Insn<'_> {
             Opcode::Jmp | Opcode::Jz | Opcode::Jnz | Opcode::TryBegin => Some(self.u32_at(0)),
             Opcode::JumpIf | Opcode::JumpIfNot => Some(self.u32_at(1)),
             Opcode::JumpIfImm | Opcode::JumpIfNotImm => Some(self.u32_at(5)),
+            Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => Some(self.u32_at(10)),
             _ => None,
         }
     }
@@ -73,6 +74,8 @@ impl Insn<'_> {
                 | Opcode::JumpIfNot
                 | Opcode::JumpIfImm
                 | Opcode::JumpIfNotImm
+                | Opcode::JumpIfRelImm
+                | Opcode::JumpIfNotRelImm
                 | Opcode::Call
                 | Opcode::CallVirt
                 | Opcode::Ret

@@ -92,6 +92,20 @@ fn trap_path(trap: Trap) -> String {
     format!("Trap::{name}")
 }
 
+/// The [`MemType`] operand byte at `at` of `insn`.
+fn type_at(insn: &Insn<'_>, at: usize) -> Result<MemType, Error> {
+    MemType::from_code(insn.imm[at])
+        .ok_or_else(|| Error::internal(format!("bad type at {}", insn.pc)))
+}
+
+/// The bits a store of `ty` keeps.
+fn width_mask(ty: MemType) -> u64 {
+    match ty.width() {
+        8 => u64::MAX,
+        w => (1u64 << (8 * w)) - 1,
+    }
+}
+
 /// The comparison opcode byte `byte` (of SEL_IF and the immediate jumps).
 fn comparison(byte: u8, pc: u32) -> Result<Opcode, Error> {
     Opcode::from_u8(byte)
@@ -494,6 +508,8 @@ impl Emitter<'_> {
                 | Opcode::JumpIfNot
                 | Opcode::JumpIfImm
                 | Opcode::JumpIfNotImm
+                | Opcode::JumpIfRelImm
+                | Opcode::JumpIfNotRelImm
                 | Opcode::Call
                 | Opcode::CallVirt
                 | Opcode::Ret
@@ -557,8 +573,23 @@ impl Emitter<'_> {
             | Opcode::JumpIf
             | Opcode::JumpIfNot
             | Opcode::JumpIfImm
-            | Opcode::JumpIfNotImm => {
+            | Opcode::JumpIfNotImm
+            | Opcode::JumpIfRelImm
+            | Opcode::JumpIfNotRelImm => {
                 let cond = match last.op {
+                    op @ (Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm) => {
+                        // The variable was loaded into `rv` by the instruction's translation.
+                        let cmp = comparison(last.imm[0], last.pc)?;
+                        let not = if op == Opcode::JumpIfNotRelImm {
+                            "!"
+                        } else {
+                            ""
+                        };
+                        format!(
+                            "{not}compare(Opcode::{cmp:?}, rv, {})",
+                            hex(last.u32_at(6) as i32 as i64 as u64)
+                        )
+                    }
                     Opcode::Jz => format!("{} == 0", cell_of(1)),
                     Opcode::Jnz => format!("{} != 0", cell_of(1)),
                     op @ (Opcode::JumpIfImm | Opcode::JumpIfNotImm) => {
@@ -893,6 +924,51 @@ impl Emitter<'_> {
             }
             // Their branches are the block's, written by `Emitter::block`.
             Jmp | Jz | Jnz | JumpIf | JumpIfNot | JumpIfImm | JumpIfNotImm => {}
+            JumpIfRelImm | JumpIfNotRelImm => {
+                // Load the variable (its test is the block's branch).
+                let ty = type_at(insn, 1)?;
+                let off = insn.u32_at(2);
+                match promoted(off, ty) {
+                    Some(k) => writeln!(o, "let rv = {};", from_raw(ty, &format!("v{k}"))),
+                    None => writeln!(
+                        o,
+                        "let Some(rv) = ops::load(d, base as usize + {off}, {}) else {{ {} }};",
+                        mem_type_path(ty),
+                        at.raise("Trap::InvalidAddress")
+                    ),
+                }
+                .ok();
+            }
+            OpRelRel => {
+                let op = Opcode::from_u8(insn.imm[0])
+                    .filter(|op| op.is_binary())
+                    .ok_or_else(|| Error::internal(format!("bad operator at {pc}")))?;
+                at.push_check(o);
+                for (name, at_type) in [("a", 1usize), ("b", 6)] {
+                    let ty = type_at(insn, at_type)?;
+                    let off = insn.u32_at(at_type + 1);
+                    match promoted(off, ty) {
+                        Some(k) => writeln!(o, "let {name} = {};", from_raw(ty, &format!("v{k}"))),
+                        None => writeln!(
+                            o,
+                            "let Some({name}) = ops::load(d, base as usize + {off}, {}) else {{ {} }};",
+                            mem_type_path(ty),
+                            at.raise("Trap::InvalidAddress")
+                        ),
+                    }
+                    .ok();
+                }
+                let (check, result) = binary(op, "a", "b");
+                if let Some(condition) = check {
+                    writeln!(
+                        o,
+                        "if {condition} {{ {} }}",
+                        at.raise("Trap::DivisionByZero")
+                    )
+                    .ok();
+                }
+                writeln!(o, "{} = {result};", cell(d)).ok();
+            }
             ElemRel | ElemAbs | LdElemRel | LdElemAbs | StElemRel | StElemAbs => {
                 // The element's address as ELEM_REL/ELEM_ABS computes it (INDEX's arithmetic).
                 let (ty_at, spec) = match insn.op {
@@ -943,6 +1019,19 @@ impl Emitter<'_> {
                     .ok(),
                 };
             }
+            IncRel if promoted(insn.u32_at(1), type_at(insn, 0)?).is_some() => {
+                let ty = type_at(insn, 0)?;
+                let k = promoted(insn.u32_at(1), ty).unwrap_or(0);
+                let imm = insn.u32_at(5) as i32 as i64 as u64;
+                writeln!(
+                    o,
+                    "v{k} = {}.wrapping_add({}) & {};",
+                    from_raw(ty, &format!("v{k}")),
+                    hex(imm),
+                    hex(width_mask(ty))
+                )
+                .ok();
+            }
             IncRel | IncAbs => {
                 let ty = MemType::from_code(insn.imm[0])
                     .ok_or_else(|| Error::internal(format!("bad type at {pc}")))?;
@@ -985,6 +1074,11 @@ impl Emitter<'_> {
                 let a = top(1);
                 let b = match insn.op {
                     OpImm => hex(insn.u32_at(1) as i32 as i64 as u64),
+                    OpRel if promoted(insn.u32_at(2), type_at(insn, 1)?).is_some() => {
+                        let ty = type_at(insn, 1)?;
+                        let k = promoted(insn.u32_at(2), ty).unwrap_or(0);
+                        from_raw(ty, &format!("v{k}"))
+                    }
                     _ => {
                         let ty = MemType::from_code(insn.imm[1])
                             .ok_or_else(|| Error::internal(format!("bad type at {pc}")))?;

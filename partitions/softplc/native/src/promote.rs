@@ -225,6 +225,19 @@ fn step(image: &Image<'_>, insn: &crate::analysis::Insn<'_>, stack: &mut Vec<Add
     }
 }
 
+/// The frame variables an instruction reads or writes by offset, as `(offset, type byte)`:
+/// LD_REL, ST_REL and the superinstructions with frame-relative operands (which the
+/// emitter translates against a promoted variable's local as it does those two).
+pub fn frame_variables(insn: &crate::analysis::Insn<'_>) -> Vec<(u32, u8)> {
+    use Opcode::*;
+    match insn.op {
+        LdRel | StRel | IncRel => vec![(insn.u32_at(1), insn.imm[0])],
+        OpRel | JumpIfRelImm | JumpIfNotRelImm => vec![(insn.u32_at(2), insn.imm[1])],
+        OpRelRel => vec![(insn.u32_at(2), insn.imm[1]), (insn.u32_at(7), insn.imm[6])],
+        _ => Vec::new(),
+    }
+}
+
 /// Bytes of an access through abstract address `a` plus `off`, `width` long, relative to
 /// the frame base (`None`: cannot tell).
 fn frame_bytes(a: Addr, off: i128, width: i128, base: Option<u32>) -> Option<(i128, i128)> {
@@ -285,18 +298,15 @@ fn touch(insn: &crate::analysis::Insn<'_>, stack: &[Addr], base: Option<u32>) ->
             };
             vec![through(array, 0, width(insn.imm[0]), write)]
         }
-        // A frame variable or global read (and for INC written) in place.
-        IncRel | IncAbs | OpRel | OpAbs => {
+        // A global read (and for INC written) in place. (Their frame-relative forms access
+        // frame variables as LD_REL/ST_REL do: see `frame_variables`.)
+        IncAbs | OpAbs => {
             let (ty, off) = match insn.op {
-                IncRel | IncAbs => (insn.imm[0], insn.u32_at(1)),
+                IncAbs => (insn.imm[0], insn.u32_at(1)),
                 _ => (insn.imm[1], insn.u32_at(2)),
             };
-            let a = if matches!(insn.op, IncRel | OpRel) {
-                Addr::Frame(off as i128, off as i128)
-            } else {
-                Addr::Abs(off as i128, off as i128)
-            };
-            vec![through(a, 0, width(ty), matches!(insn.op, IncRel | IncAbs))]
+            let a = Addr::Abs(off as i128, off as i128);
+            vec![through(a, 0, width(ty), insn.op == IncAbs)]
         }
         Call | CallVirt => vec![Touch::Anything { write: true }],
         // The class id of the instance.
@@ -419,11 +429,11 @@ pub fn promote(
     // Candidates: frame variables as (offset, width), used in a loop.
     let mut groups: BTreeMap<(u32, u8), bool> = BTreeMap::new();
     for (i, insn) in plan.insns.iter().enumerate() {
-        if matches!(insn.op, Opcode::LdRel | Opcode::StRel) {
-            let Some(ty) = MemType::from_code(insn.imm[0]) else {
+        for (off, ty) in frame_variables(insn) {
+            let Some(ty) = MemType::from_code(ty) else {
                 return none;
             };
-            let key = (insn.u32_at(1), ty.width() as u8);
+            let key = (off, ty.width() as u8);
             *groups.entry(key).or_default() |= looping[block_of[i]];
         }
     }

@@ -72,7 +72,9 @@ fn successors(plan: &PouPlan<'_>, b: usize) -> Vec<usize> {
         | Opcode::JumpIf
         | Opcode::JumpIfNot
         | Opcode::JumpIfImm
-        | Opcode::JumpIfNotImm => {
+        | Opcode::JumpIfNotImm
+        | Opcode::JumpIfRelImm
+        | Opcode::JumpIfNotRelImm => {
             out.extend(last.target().and_then(block_at));
             out.extend(block_at(last.next()));
         }

@@ -874,7 +874,7 @@ mod builder {
         if matches!(op, IncRel | IncAbs) {
             return true;
         }
-        if matches!(op, OpImm | OpRel | OpAbs) {
+        if matches!(op, OpImm | OpRel | OpAbs | OpRelRel) {
             return !matches!(
                 Opcode::from_u8(insn.immediates[0]),
                 Some(DivS | DivU | ModS | ModU | DivF32 | DivF64)
@@ -1109,6 +1109,24 @@ mod builder {
                     let (Some(ty), rel) = (MemType::from_code(ty), d.op == Opcode::LdRel) else {
                         return;
                     };
+                    // Both operands frame variables: OP_REL_REL.
+                    if rel
+                        && n >= 3
+                        && self.rewritable_from(n - 3)
+                        && let Some((ty1, off1)) = self
+                            .insn_at(n - 3)
+                            .filter(|d| d.op == Opcode::LdRel)
+                            .and_then(|d| {
+                                Some((
+                                    MemType::from_code(d.immediates[0])?,
+                                    read_u32(d.immediates, 1),
+                                ))
+                            })
+                    {
+                        self.drop_from(n - 3);
+                        self.op_rel_rel(op, (ty1, off1), (ty, addr));
+                        return;
+                    }
                     self.drop_from(n - 2);
                     self.op_at(rel, op, ty, addr);
                 }
@@ -1255,6 +1273,29 @@ mod builder {
             match taken {
                 (cmp, None) => self.jump_if(when, cmp, target),
                 (cmp, Some(k)) => {
+                    // A frame variable compared with the immediate: JUMP_IF(_NOT)_REL_IMM.
+                    let n = self.insn_starts.len();
+                    if n >= 1
+                        && self.rewritable_from(n - 1)
+                        && let Some((ty, off)) = self
+                            .insn_at(n - 1)
+                            .filter(|d| d.op == Opcode::LdRel)
+                            .map(|d| (d.immediates[0], read_u32(d.immediates, 1)))
+                    {
+                        self.drop_from(n - 1);
+                        self.start(if when {
+                            Opcode::JumpIfRelImm
+                        } else {
+                            Opcode::JumpIfNotRelImm
+                        });
+                        self.code.push(cmp as u8);
+                        self.code.push(ty);
+                        self.code.extend_from_slice(&off.to_le_bytes());
+                        self.code.extend_from_slice(&k.to_le_bytes());
+                        self.fixups.push((self.code.len(), target));
+                        self.code.extend_from_slice(&0u32.to_le_bytes());
+                        return;
+                    }
                     self.start(if when {
                         Opcode::JumpIfImm
                     } else {
@@ -1869,7 +1910,18 @@ mod builder {
             self.code.push(ty as u8);
             self.code.extend_from_slice(&addr.to_le_bytes());
         }
-        /// JUMP_IF_IMM (`when`) / JUMP_IF_NOT_IMM: `[a] -> []`, jumps on `cmp(a, imm)`.
+        /// OP_REL_REL: `[] -> [a op b]` for two frame variables `(type, offset)`.
+        pub fn op_rel_rel(&mut self, op: Opcode, a: (MemType, u32), b: (MemType, u32)) {
+            debug_assert!(op.is_binary());
+            self.start(Opcode::OpRelRel);
+            self.code.push(op as u8);
+            self.code.push(a.0 as u8);
+            self.code.extend_from_slice(&a.1.to_le_bytes());
+            self.code.push(b.0 as u8);
+            self.code.extend_from_slice(&b.1.to_le_bytes());
+        }
+        /// JUMP_IF_IMM (`when`) / JUMP_IF_NOT_IMM: `[a] -> []`, jumps on `cmp(a, imm)` (fused
+        /// with a directly preceding LD_REL into JUMP_IF_REL_IMM/JUMP_IF_NOT_REL_IMM).
         pub fn jump_if_imm(&mut self, when: bool, cmp: Opcode, imm: i32, target: Label) {
             debug_assert!(cmp.is_comparison());
             self.jump_on(when, (cmp, Some(imm as u32)), target);

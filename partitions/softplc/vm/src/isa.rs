@@ -87,6 +87,12 @@ pub enum Operands {
     OpImm,
     /// A binary-operator opcode byte, a [`MemType`] byte, a `u32` address/offset.
     OpTypeAddr,
+    /// A binary-operator opcode byte, then two operands of a [`MemType`] byte and a `u32`
+    /// offset each.
+    OpTypeAddr2,
+    /// A comparison opcode byte, a [`MemType`] byte, a `u32` offset, an `i32` immediate, a
+    /// `u32` code target.
+    CompareTypeAddrImmTarget,
 }
 
 impl Operands {
@@ -109,6 +115,8 @@ impl Operands {
             Operands::CompareImmTarget => 9,
             Operands::OpImm => 5,
             Operands::OpTypeAddr => 6,
+            Operands::OpTypeAddr2 => 11,
+            Operands::CompareTypeAddrImmTarget => 14,
         }
     }
 
@@ -495,6 +503,17 @@ opcodes! {
     /// `[a] -> [a op v]`: `LD_ABS ty addr; op` (the verifier checks the address as for
     /// LD_ABS). May trap as `op`.
     OpAbs = 0xCD, "OP_ABS", OpTypeAddr;
+    /// `[] -> [a op b]`: a binary operator on two frame variables, `a` the `ty1` variable at
+    /// `base + off1`, `b` the `ty2` one at `base + off2`: `LD_REL ty1 off1; LD_REL ty2 off2;
+    /// op` (the verifier checks both as for LD_REL). May trap: STACK_OVERFLOW (checked
+    /// first, as the first load would), then as `op`.
+    OpRelRel = 0xCE, "OP_REL_REL", OpTypeAddr2;
+    /// `[] -> []`: jumps to `target` when `cmp(v, imm)` holds for the `ty` frame variable `v`
+    /// at `base + off`: `LD_REL ty off; JUMP_IF_IMM cmp imm target`.
+    JumpIfRelImm = 0xCF, "JUMP_IF_REL_IMM", CompareTypeAddrImmTarget;
+    /// `[] -> []`: jumps when `cmp(v, imm)` does **not** hold: `LD_REL ty off;
+    /// JUMP_IF_NOT_IMM cmp imm target`.
+    JumpIfNotRelImm = 0xD0, "JUMP_IF_NOT_REL_IMM", CompareTypeAddrImmTarget;
 }
 
 impl Opcode {
@@ -1061,6 +1080,8 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         IncRel | IncAbs => (0, 0),
         SelIf => (2, 1),
         JumpIfImm | JumpIfNotImm => (1, 0),
+        OpRelRel => (0, 1),
+        JumpIfRelImm | JumpIfNotRelImm => (0, 0),
         RefMake | RefCheck | ChkNull | VirtFrame => (1, 1),
         RefAdd => (2, 1),
         CallVirt => (1, 0),
@@ -1187,6 +1208,24 @@ impl core::fmt::Display for Instruction<'_> {
                 read_u32(imm, 5)
             ),
             Operands::OpImm => write!(f, " {} {}", opname(imm[0]), read_u32(imm, 1) as i32),
+            Operands::OpTypeAddr2 => write!(
+                f,
+                " {} {} {} {} {}",
+                opname(imm[0]),
+                ty(imm[1]),
+                read_u32(imm, 2),
+                ty(imm[6]),
+                read_u32(imm, 7)
+            ),
+            Operands::CompareTypeAddrImmTarget => write!(
+                f,
+                " {} {} {} {} @{}",
+                opname(imm[0]),
+                ty(imm[1]),
+                read_u32(imm, 2),
+                read_u32(imm, 6) as i32,
+                read_u32(imm, 10)
+            ),
             Operands::OpTypeAddr => {
                 write!(f, " {} {} {}", opname(imm[0]), ty(imm[1]), read_u32(imm, 2))
             }

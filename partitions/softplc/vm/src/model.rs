@@ -651,6 +651,31 @@ impl<'a> Model<'a> {
                 let a = pop(&mut s);
                 s.push(model_binary(Opcode::from_u8(code[i]).unwrap(), a, v)?);
             }
+            Opcode::OpRelRel => {
+                if s.len() >= limit {
+                    return Err(Trap::StackOverflow);
+                }
+                let a = self.read(
+                    MemType::from_code(code[i + 1]).unwrap(),
+                    self.base as u64 + imm_u32(code, i + 2) as u64,
+                )?;
+                let b = self.read(
+                    MemType::from_code(code[i + 6]).unwrap(),
+                    self.base as u64 + imm_u32(code, i + 7) as u64,
+                )?;
+                let r = model_binary(Opcode::from_u8(code[i]).unwrap(), a, b)?;
+                push(&mut s, r)?;
+            }
+            Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => {
+                let v = self.read(
+                    MemType::from_code(code[i + 1]).unwrap(),
+                    self.base as u64 + imm_u32(code, i + 2) as u64,
+                )?;
+                let k = imm_u32(code, i + 6) as i32 as i64 as u64;
+                if model_compare(code[i], v, k) == (op == Opcode::JumpIfRelImm) {
+                    next = imm_u32(code, i + 10);
+                }
+            }
             Opcode::RefMake => {
                 let a = pop(&mut s);
                 let size = imm_u32(code, i) as u64;

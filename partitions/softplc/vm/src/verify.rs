@@ -452,6 +452,26 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     _ => return err(site, Reason::BadComparison(code[imm])),
                 }
             }
+            Operands::CompareTypeAddrImmTarget => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(cmp) if cmp.is_comparison() => {}
+                    _ => return err(site, Reason::BadComparison(code[imm])),
+                }
+                if MemType::from_code(code[imm + 1]).is_none() {
+                    return err(site, Reason::BadType(code[imm + 1]));
+                }
+            }
+            Operands::OpTypeAddr2 => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(op) if op.is_binary() => {}
+                    _ => return err(site, Reason::BadOperator(code[imm])),
+                }
+                for at in [imm + 1, imm + 6] {
+                    if MemType::from_code(code[at]).is_none() {
+                        return err(site, Reason::BadType(code[at]));
+                    }
+                }
+            }
             Operands::OpImm | Operands::OpTypeAddr => {
                 match Opcode::from_u8(code[imm]) {
                     Some(op) if op.is_binary() => {}
@@ -593,19 +613,31 @@ fn step(
     let imm = pc + 1;
     // Frame-relative operands must lie inside this POU's frame.
     match op {
-        Opcode::LdRel | Opcode::StRel | Opcode::IncRel | Opcode::OpRel => {
-            // The type byte and the offset follow the opcode (OP_REL: after the operator).
-            let at = if op == Opcode::OpRel { imm + 1 } else { imm };
-            let ty = MemType::from_code(code[at]).expect("swept");
-            let offset = read_u32(code, at + 1) as u64;
-            if offset + ty.width() as u64 > pou.frame_size as u64 {
-                return err(
-                    site,
-                    Reason::OffsetOutsideFrame {
-                        offset,
-                        frame_size: pou.frame_size,
-                    },
-                );
+        Opcode::LdRel
+        | Opcode::StRel
+        | Opcode::IncRel
+        | Opcode::OpRel
+        | Opcode::OpRelRel
+        | Opcode::JumpIfRelImm
+        | Opcode::JumpIfNotRelImm => {
+            // Where each (type byte, offset) operand is.
+            let operands: &[usize] = match op {
+                Opcode::OpRel | Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => &[1],
+                Opcode::OpRelRel => &[1, 6],
+                _ => &[0],
+            };
+            for &at in operands {
+                let ty = MemType::from_code(code[imm + at]).expect("swept");
+                let offset = read_u32(code, imm + at + 1) as u64;
+                if offset + ty.width() as u64 > pou.frame_size as u64 {
+                    return err(
+                        site,
+                        Reason::OffsetOutsideFrame {
+                            offset,
+                            frame_size: pou.frame_size,
+                        },
+                    );
+                }
             }
         }
         Opcode::LeaRel => {
@@ -714,6 +746,10 @@ fn step(
         }
         Opcode::JumpIfImm | Opcode::JumpIfNotImm => {
             flow(read_u32(code, imm + 5) as usize, after, tries, true)?;
+            flow(next, after, tries, false)?;
+        }
+        Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => {
+            flow(read_u32(code, imm + 10) as usize, after, tries, true)?;
             flow(next, after, tries, false)?;
         }
         Opcode::TryBegin => {

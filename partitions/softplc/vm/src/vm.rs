@@ -1281,6 +1281,30 @@ impl<'a, 'm> Machine<'a, 'm> {
                         pc = code_start as usize;
                     }
                 }
+                op::OpRelRel => {
+                    let imm = imm!(OpRelRel);
+                    // As its first load would: no room, no operation.
+                    if sp >= stack.len() {
+                        trap!(Trap::StackOverflow);
+                    }
+                    let a = load!(imm[1], base + u32_at(imm, 2) as u64);
+                    let b = load!(imm[6], base + u32_at(imm, 7) as u64);
+                    match binary_op(imm[0], a, b) {
+                        Ok(r) => push!(r),
+                        Err(trap) => trap!(trap),
+                    }
+                    next!(OpRelRel);
+                }
+                op::JumpIfRelImm | op::JumpIfNotRelImm => {
+                    let imm = imm!(JumpIfRelImm);
+                    let v = load!(imm[1], base + u32_at(imm, 2) as u64);
+                    let holds = compare_byte(imm[0], v, u32_at(imm, 6) as i32 as i64 as u64);
+                    if holds == (byte == op::JumpIfRelImm) {
+                        pc = u32_at(imm, 10) as usize;
+                    } else {
+                        next!(JumpIfRelImm);
+                    }
+                }
                 // Unassigned bytes: the verifier accepts none.
                 _ => trap!(Trap::InvalidAddress),
             }
@@ -1579,7 +1603,8 @@ fn element(array: u64, i: u64, lo: u64, hi: u64, stride: u32) -> Option<u64> {
 }
 
 /// A binary operator (an opcode byte for which [`Opcode::is_binary`] holds) applied to `a`
-/// and `b` as the plain instruction does: OP_IMM, OP_REL and OP_ABS.
+/// and `b` as the plain instruction does: OP_IMM, OP_REL, OP_ABS and OP_REL_REL.
+#[inline(always)]
 fn binary_op(op: u8, a: u64, b: u64) -> Result<u64, Trap> {
     use crate::isa::byte as op;
     let f32_of = |cell: u64| f32::from_bits(cell as u32);

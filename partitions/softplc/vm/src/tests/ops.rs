@@ -977,6 +977,29 @@ fn immediate_jumps_compare_with_a_sign_extended_immediate() {
             });
             let holds = crate::isa::compare(cmp, a as u64, k as i64 as u64);
             assert_eq!(jumped == 1, holds == when, "{cmp:?} {a} {k} {when}");
+            // The frame-variable form: LD_REL fused into JUMP_IF_REL_IMM.
+            let bytes = program_with(100, |c, _| {
+                let target = c.new_label();
+                let end = c.new_label();
+                c.push_int(a);
+                c.st_rel(MemType::I64, 8);
+                c.ld_rel(MemType::I64, 8);
+                c.jump_if_imm(when, cmp, k, target);
+                c.push_i32(0);
+                c.jmp(end);
+                c.bind(target);
+                c.push_i32(1);
+                c.bind(end);
+                c.st_abs(MemType::U64, RESULT);
+            });
+            let fused = if when {
+                Opcode::JumpIfRelImm
+            } else {
+                Opcode::JumpIfNotRelImm
+            };
+            assert!(disassemble(&bytes).contains(&fused));
+            let out = run_both(&bytes, 1);
+            assert_eq!(out.data[RESULT as usize] == 1, holds == when);
         }
     }
 }
@@ -1008,7 +1031,18 @@ fn operator_forms_compute_as_the_plain_operators() {
                 c.push_int(a);
                 c.op_at(false, op, MemType::I64, 48);
             });
-            assert_eq!((imm, rel, abs), (plain, plain, plain), "{op:?} {a} {k}");
+            let rel_rel = eval(|c| {
+                c.push_int(a);
+                c.st_rel(MemType::I64, 16);
+                c.push_i32(k);
+                c.st_rel(MemType::I32, 4);
+                c.op_rel_rel(op, (MemType::I64, 16), (MemType::I32, 4));
+            });
+            assert_eq!(
+                (imm, rel, abs, rel_rel),
+                (plain, plain, plain, plain),
+                "{op:?} {a} {k}"
+            );
         }
     }
     // A division by zero traps as the plain division does.
@@ -1119,6 +1153,10 @@ fn superinstructions_disassemble() {
         c.op_at(true, Opcode::Add, MemType::I16, 6);
         c.jump_if_imm(false, Opcode::LeS, 99, l);
         c.inc(true, MemType::I16, 2, -1);
+        c.op_rel_rel(Opcode::SubF32, (MemType::F32, 4), (MemType::F32, 8));
+        c.drop_();
+        c.ld_rel(MemType::I16, 2);
+        c.jump_if_imm(true, Opcode::GtS, -5, l);
         c.bind(l);
     });
     let image = Image::parse(&bytes).unwrap();
@@ -1134,8 +1172,11 @@ fn superinstructions_disassemble() {
             "SEL_IF LT_F32",
             "OP_IMM MUL_F32 7",
             "OP_REL ADD I16 6",
-            "JUMP_IF_NOT_IMM LE_S 99 @71",
+            "JUMP_IF_NOT_IMM LE_S 99 @99",
             "INC_REL I16 2 -1",
+            "OP_REL_REL SUB_F32 F32 4 F32 8",
+            "DROP",
+            "JUMP_IF_REL_IMM GT_S I16 2 -5 @99",
             "RET"
         ]
     );

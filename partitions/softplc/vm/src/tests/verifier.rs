@@ -787,6 +787,20 @@ fn superinstruction_addresses() {
         c.drop_();
     });
     assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        c.op_rel_rel(Opcode::Add, (MemType::I32, 0), (MemType::I64, MAIN_FRAME - 4));
+        c.drop_();
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        let l = c.new_label();
+        c.push_i32(0);
+        c.st_rel(MemType::I32, 0);
+        c.ld_rel(MemType::I32, MAIN_FRAME - 2);
+        c.jump_if_imm(true, Opcode::Eq, 0, l);
+        c.bind(l);
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
     // Immediate jumps: targets and stack depths as JUMP_IF.
     let e = rejects(|c, _| {
         c.push_i32(1);
