@@ -778,12 +778,15 @@ impl<'a> Gen<'a> {
                 else_body,
             } => {
                 let end = self.label();
-                for (cond, body) in branches {
+                for (k, (cond, body)) in branches.iter().enumerate() {
                     let next = self.label();
                     self.condition(cond);
                     self.emit(|b| b.jz(next));
                     self.stmts(body);
-                    self.emit(|b| b.jmp(end));
+                    // The last branch without ELSE falls through to the end.
+                    if k + 1 < branches.len() || else_body.is_some() {
+                        self.emit(|b| b.jmp(end));
+                    }
                     self.bind(next);
                 }
                 if let Some(b) = else_body {

@@ -969,21 +969,50 @@ impl Emitter<'_> {
                 }
                 writeln!(o, "{} = {result};", cell(d)).ok();
             }
-            ElemRel | ElemAbs | LdElemRel | LdElemAbs | StElemRel | StElemAbs => {
-                // The element's address as ELEM_REL/ELEM_ABS computes it (INDEX's arithmetic).
-                let (ty_at, spec) = match insn.op {
-                    ElemRel | ElemAbs => (None, 0),
-                    _ => (Some(0), 1),
-                };
+            ElemRel | ElemAbs | LdElemRel | LdElemAbs | StElemRel | StElemAbs | ElemRelAt
+            | ElemAbsAt | LdElemRelAt | LdElemAbsAt | StElemRelAt | StElemAbsAt => {
+                // The element's address as ELEM_REL/ELEM_ABS computes it (INDEX's arithmetic);
+                // the _AT forms read the index from a frame variable and push their result.
+                let op = insn.op;
+                let indexed_at = matches!(
+                    op,
+                    ElemRelAt | ElemAbsAt | LdElemRelAt | LdElemAbsAt | StElemRelAt | StElemAbsAt
+                );
+                let address_only = matches!(op, ElemRel | ElemAbs | ElemRelAt | ElemAbsAt);
+                let store = matches!(op, StElemRel | StElemAbs | StElemRelAt | StElemAbsAt);
+                let rel = matches!(
+                    op,
+                    ElemRel | LdElemRel | StElemRel | ElemRelAt | LdElemRelAt | StElemRelAt
+                );
+                let spec = usize::from(!address_only);
                 let array = insn.u32_at(spec);
                 let (lo, hi) = (insn.u64_at(spec + 4) as i64, insn.u64_at(spec + 12) as i64);
                 let stride = insn.u32_at(spec + 20);
-                let index = if matches!(insn.op, StElemRel | StElemAbs) {
+                let index = if indexed_at {
+                    if !store {
+                        at.push_check(o);
+                    }
+                    let ity = type_at(insn, spec + 24)?;
+                    let ioff = insn.u32_at(spec + 25);
+                    match promoted(ioff, ity) {
+                        Some(k) => writeln!(o, "let ix = {};", from_raw(ity, &format!("v{k}"))),
+                        None => writeln!(
+                            o,
+                            "let Some(ix) = ops::load(d, base as usize + {ioff}, {}) else {{ {} }};",
+                            mem_type_path(ity),
+                            at.raise("Trap::InvalidAddress")
+                        ),
+                    }
+                    .ok();
+                    "ix".to_string()
+                } else if store {
                     top(2)
                 } else {
                     top(1)
                 };
-                let start = if matches!(insn.op, ElemRel | LdElemRel | StElemRel) {
+                // Where a pushed result goes: the new cell, or the index's.
+                let result = if indexed_at { cell(d) } else { top(1) };
+                let start = if rel {
                     format!("base as u64 + {array}")
                 } else {
                     format!("{array}u64")
@@ -999,25 +1028,26 @@ impl Emitter<'_> {
                     "let a = ({start}).wrapping_add((({index} as i64).wrapping_sub({lo}i64) as u64).wrapping_mul({stride}));"
                 )
                 .ok();
-                match ty_at.map(|at| MemType::from_code(insn.imm[at])) {
-                    None => writeln!(o, "{index} = a;").ok(),
-                    Some(None) => return Err(Error::internal(format!("bad type at {pc}"))),
-                    Some(Some(ty)) if matches!(insn.op, LdElemRel | LdElemAbs) => writeln!(
-                        o,
-                        "let Some(v) = ops::load_at(d, a, 0, {}) else {{ {} }};\n{index} = v;",
-                        mem_type_path(ty),
-                        at.raise("Trap::InvalidAddress")
-                    )
-                    .ok(),
-                    Some(Some(ty)) => writeln!(
+                if address_only {
+                    writeln!(o, "{result} = a;").ok();
+                } else if store {
+                    writeln!(
                         o,
                         "if ops::store_at(d, a, 0, {}, {}).is_none() {{ {} }}",
-                        mem_type_path(ty),
+                        mem_type_path(type_at(insn, 0)?),
                         top(1),
                         at.raise("Trap::InvalidAddress")
                     )
-                    .ok(),
-                };
+                    .ok();
+                } else {
+                    writeln!(
+                        o,
+                        "let Some(v) = ops::load_at(d, a, 0, {}) else {{ {} }};\n{result} = v;",
+                        mem_type_path(type_at(insn, 0)?),
+                        at.raise("Trap::InvalidAddress")
+                    )
+                    .ok();
+                }
             }
             IncRel if promoted(insn.u32_at(1), type_at(insn, 0)?).is_some() => {
                 let ty = type_at(insn, 0)?;

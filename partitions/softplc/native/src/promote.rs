@@ -185,7 +185,7 @@ fn step(image: &Image<'_>, insn: &crate::analysis::Insn<'_>, stack: &mut Vec<Add
                 top(2).shift(0, (hi - lo) * stride)
             })
         }
-        ElemRel | ElemAbs => {
+        ElemRel | ElemAbs | ElemRelAt | ElemAbsAt => {
             let (a, lo, hi) = (
                 insn.u32_at(0) as i128,
                 insn.u64_at(4) as i64 as i128,
@@ -194,7 +194,7 @@ fn step(image: &Image<'_>, insn: &crate::analysis::Insn<'_>, stack: &mut Vec<Add
             let stride = insn.u32_at(20) as i128;
             Some(if hi < lo {
                 Addr::Unknown
-            } else if insn.op == ElemRel {
+            } else if matches!(insn.op, ElemRel | ElemRelAt) {
                 Addr::Frame(a, a + (hi - lo) * stride)
             } else {
                 Addr::Abs(a, a + (hi - lo) * stride)
@@ -234,6 +234,11 @@ pub fn frame_variables(insn: &crate::analysis::Insn<'_>) -> Vec<(u32, u8)> {
         LdRel | StRel | IncRel => vec![(insn.u32_at(1), insn.imm[0])],
         OpRel | JumpIfRelImm | JumpIfNotRelImm => vec![(insn.u32_at(2), insn.imm[1])],
         OpRelRel => vec![(insn.u32_at(2), insn.imm[1]), (insn.u32_at(7), insn.imm[6])],
+        // The index variable.
+        ElemRelAt | ElemAbsAt => vec![(insn.u32_at(25), insn.imm[24])],
+        LdElemRelAt | LdElemAbsAt | StElemRelAt | StElemAbsAt => {
+            vec![(insn.u32_at(26), insn.imm[25])]
+        }
         _ => Vec::new(),
     }
 }
@@ -281,17 +286,18 @@ fn touch(insn: &crate::analysis::Insn<'_>, stack: &[Addr], base: Option<u32>) ->
                 through(stack[d - 1], 0, len, false),
             ]
         }
-        LdElemRel | LdElemAbs | StElemRel | StElemAbs => {
+        LdElemRel | LdElemAbs | StElemRel | StElemAbs | LdElemRelAt | LdElemAbsAt | StElemRelAt
+        | StElemAbsAt => {
             let (a, lo, hi) = (
                 insn.u32_at(1) as i128,
                 insn.u64_at(5) as i64 as i128,
                 insn.u64_at(13) as i64 as i128,
             );
             let stride = insn.u32_at(21) as i128;
-            let write = matches!(insn.op, StElemRel | StElemAbs);
+            let write = matches!(insn.op, StElemRel | StElemAbs | StElemRelAt | StElemAbsAt);
             let array = if hi < lo {
                 Addr::Unknown
-            } else if matches!(insn.op, LdElemRel | StElemRel) {
+            } else if matches!(insn.op, LdElemRel | StElemRel | LdElemRelAt | StElemRelAt) {
                 Addr::Frame(a, a + (hi - lo) * stride)
             } else {
                 Addr::Abs(a, a + (hi - lo) * stride)

@@ -864,16 +864,14 @@ mod builder {
         no_fusion: bool,
     }
 
-    /// Whether executing `insn` can raise no trap but STACK_OVERFLOW (for the store fusion):
-    /// loads of verified static addresses, constants, stack shuffles, integer and float
-    /// arithmetic but division (also with an immediate or a static operand), bit operations,
-    /// comparisons, selections, conversions that cannot fail.
-    fn cannot_trap(insn: &crate::isa::Instruction<'_>) -> bool {
+    /// Whether `insn` is pure: it writes no memory and can raise no trap but STACK_OVERFLOW
+    /// (for the store fusion): loads of verified static addresses, constants, stack
+    /// shuffles, integer and float arithmetic but division (also with an immediate or a
+    /// static operand), bit operations, comparisons, selections, conversions that cannot
+    /// fail.
+    fn pure(insn: &crate::isa::Instruction<'_>) -> bool {
         use Opcode::*;
         let op = insn.op;
-        if matches!(op, IncRel | IncAbs) {
-            return true;
-        }
         if matches!(op, OpImm | OpRel | OpAbs | OpRelRel) {
             return !matches!(
                 Opcode::from_u8(insn.immediates[0]),
@@ -1171,6 +1169,8 @@ mod builder {
             let fused = match elem.op {
                 Opcode::ElemRel => Opcode::LdElemRel,
                 Opcode::ElemAbs => Opcode::LdElemAbs,
+                Opcode::ElemRelAt => Opcode::LdElemRelAt,
+                Opcode::ElemAbsAt => Opcode::LdElemAbsAt,
                 _ => return false,
             };
             let spec: Vec<u8> = elem.immediates.to_vec();
@@ -1201,7 +1201,7 @@ mod builder {
                 let Some(d) = self.insn_at(k) else {
                     return false;
                 };
-                if !cannot_trap(&d) {
+                if !pure(&d) {
                     return false;
                 }
                 let Some((pops, pushes)) = crate::isa::stack_effect(d.op) else {
@@ -1231,6 +1231,10 @@ mod builder {
             let fused = match elem.op {
                 Opcode::ElemRel => Opcode::StElemRel,
                 Opcode::ElemAbs => Opcode::StElemAbs,
+                // The index variable is then read after the value is computed, which pure
+                // code cannot change.
+                Opcode::ElemRelAt => Opcode::StElemRelAt,
+                Opcode::ElemAbsAt => Opcode::StElemAbsAt,
                 _ => return false,
             };
             let spec: Vec<u8> = elem.immediates.to_vec();
@@ -1741,19 +1745,45 @@ mod builder {
         pub fn jmp(&mut self, target: Label) {
             self.op_target(Opcode::Jmp, target);
         }
-        /// JZ (fused with a preceding comparison into JUMP_IF_NOT or JUMP_IF_NOT_IMM).
+        /// JZ (fused with a preceding comparison into JUMP_IF_NOT or JUMP_IF_NOT_IMM; after
+        /// NOT_BOOL it is JNZ; a frame variable tested directly becomes JUMP_IF_REL_IMM).
         pub fn jz(&mut self, target: Label) {
-            match self.take_comparison() {
-                Some(taken) => self.jump_on(false, taken, target),
-                None => self.op_target(Opcode::Jz, target),
-            }
+            self.jump_on_zero(true, target);
         }
-        /// JNZ (fused with a preceding comparison into JUMP_IF or JUMP_IF_IMM).
+        /// JNZ (fused as [`ImageBuilder::jz`] is, with the opposite sense).
         pub fn jnz(&mut self, target: Label) {
-            match self.take_comparison() {
-                Some(taken) => self.jump_on(true, taken, target),
-                None => self.op_target(Opcode::Jnz, target),
+            self.jump_on_zero(false, target);
+        }
+        /// JZ (`zero`) or JNZ, fused with what computed the tested cell.
+        fn jump_on_zero(&mut self, mut zero: bool, target: Label) {
+            let n = self.insn_starts.len();
+            // NOT_BOOL then JZ is JNZ (and the reverse).
+            if n >= 1
+                && self.rewritable_from(n - 1)
+                && self.insn_at(n - 1).map(|d| d.op) == Some(Opcode::NotBool)
+            {
+                self.drop_from(n - 1);
+                zero = !zero;
             }
+            if let Some(taken) = self.take_comparison() {
+                self.jump_on(!zero, taken, target);
+                return;
+            }
+            let n = self.insn_starts.len();
+            if !self.no_fusion
+                && n >= 1
+                && self.rewritable_from(n - 1)
+                && self.insn_at(n - 1).map(|d| d.op) == Some(Opcode::LdRel)
+            {
+                // `LD_REL; JZ` is a frame variable compared with 0.
+                self.jump_on(
+                    false,
+                    (if zero { Opcode::Ne } else { Opcode::Eq }, Some(0)),
+                    target,
+                );
+                return;
+            }
+            self.op_target(if zero { Opcode::Jz } else { Opcode::Jnz }, target);
         }
         /// JUMP_IF (`when = true`) / JUMP_IF_NOT: compare the two top cells with `cmp` and jump
         /// (fused with a directly preceding `PUSH_I32 k` into JUMP_IF_IMM/JUMP_IF_NOT_IMM).
@@ -1822,11 +1852,63 @@ mod builder {
             self.code.extend_from_slice(&stride.to_le_bytes());
         }
         fn elem(&mut self, op: Opcode, addr: u32, lo: i64, hi: i64, stride: u32) {
+            // The index just loaded from a frame variable: ELEM_REL_AT/ELEM_ABS_AT.
+            let n = self.insn_starts.len();
+            if n >= 1
+                && self.rewritable_from(n - 1)
+                && let Some((ity, ioff)) = self
+                    .insn_at(n - 1)
+                    .filter(|d| d.op == Opcode::LdRel)
+                    .map(|d| (d.immediates[0], read_u32(d.immediates, 1)))
+            {
+                self.drop_from(n - 1);
+                self.start(if op == Opcode::ElemRel {
+                    Opcode::ElemRelAt
+                } else {
+                    Opcode::ElemAbsAt
+                });
+                self.elem_spec(addr, lo, hi, stride);
+                self.code.push(ity);
+                self.code.extend_from_slice(&ioff.to_le_bytes());
+                return;
+            }
             self.start(op);
+            self.elem_spec(addr, lo, hi, stride);
+        }
+        fn elem_spec(&mut self, addr: u32, lo: i64, hi: i64, stride: u32) {
             self.code.extend_from_slice(&addr.to_le_bytes());
             self.code.extend_from_slice(&lo.to_le_bytes());
             self.code.extend_from_slice(&hi.to_le_bytes());
             self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        /// An element access indexed by the `index` frame variable `(type, offset)`:
+        /// ELEM_*_AT (`ty` None), LD_ELEM_*_AT (`load`) or ST_ELEM_*_AT.
+        #[allow(clippy::too_many_arguments)]
+        pub fn elem_at(
+            &mut self,
+            rel: bool,
+            ty: Option<(MemType, bool)>,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+            index: (MemType, u32),
+        ) {
+            let op = match (rel, ty) {
+                (true, None) => Opcode::ElemRelAt,
+                (false, None) => Opcode::ElemAbsAt,
+                (true, Some((_, true))) => Opcode::LdElemRelAt,
+                (false, Some((_, true))) => Opcode::LdElemAbsAt,
+                (true, Some((_, false))) => Opcode::StElemRelAt,
+                (false, Some((_, false))) => Opcode::StElemAbsAt,
+            };
+            self.start(op);
+            if let Some((ty, _)) = ty {
+                self.code.push(ty as u8);
+            }
+            self.elem_spec(addr, lo, hi, stride);
+            self.code.push(index.0 as u8);
+            self.code.extend_from_slice(&index.1.to_le_bytes());
         }
         /// ELEM_REL: `[i] -> [base + off + (i - lo) * stride]` (a following `LD_IND ty 0` fuses
         /// into LD_ELEM_REL, a following trap-free value and `ST_IND ty 0` into ST_ELEM_REL).

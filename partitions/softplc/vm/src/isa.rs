@@ -93,6 +93,12 @@ pub enum Operands {
     /// A comparison opcode byte, a [`MemType`] byte, a `u32` offset, an `i32` immediate, a
     /// `u32` code target.
     CompareTypeAddrImmTarget,
+    /// As [`Operands::AddrIndex`], then the index variable: a [`MemType`] byte and a `u32`
+    /// frame offset.
+    AddrIndexAt,
+    /// As [`Operands::TypeAddrIndex`], then the index variable: a [`MemType`] byte and a
+    /// `u32` frame offset.
+    TypeAddrIndexAt,
 }
 
 impl Operands {
@@ -117,6 +123,8 @@ impl Operands {
             Operands::OpTypeAddr => 6,
             Operands::OpTypeAddr2 => 11,
             Operands::CompareTypeAddrImmTarget => 14,
+            Operands::AddrIndexAt => 29,
+            Operands::TypeAddrIndexAt => 30,
         }
     }
 
@@ -514,6 +522,26 @@ opcodes! {
     /// `[] -> []`: jumps when `cmp(v, imm)` does **not** hold: `LD_REL ty off;
     /// JUMP_IF_NOT_IMM cmp imm target`.
     JumpIfNotRelImm = 0xD0, "JUMP_IF_NOT_REL_IMM", CompareTypeAddrImmTarget;
+    /// `[] -> [address]`: ELEM_REL with the index read from the `ity` frame variable at
+    /// `base + ioff`: `LD_REL ity ioff; ELEM_REL off lo hi stride` (the verifier checks the
+    /// index variable as for LD_REL). May trap: STACK_OVERFLOW (checked first, as the load
+    /// would), then INDEX_OUT_OF_BOUNDS.
+    ElemRelAt = 0xD1, "ELEM_REL_AT", AddrIndexAt;
+    /// `[] -> [address]`: `LD_REL ity ioff; ELEM_ABS addr lo hi stride`. May trap:
+    /// STACK_OVERFLOW, then INDEX_OUT_OF_BOUNDS.
+    ElemAbsAt = 0xD2, "ELEM_ABS_AT", AddrIndexAt;
+    /// `[] -> [v]`: `LD_REL ity ioff; LD_ELEM_REL ty off lo hi stride`. May trap:
+    /// STACK_OVERFLOW, then INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemRelAt = 0xD3, "LD_ELEM_REL_AT", TypeAddrIndexAt;
+    /// `[] -> [v]`: `LD_REL ity ioff; LD_ELEM_ABS ty addr lo hi stride`. May trap:
+    /// STACK_OVERFLOW, then INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemAbsAt = 0xD4, "LD_ELEM_ABS_AT", TypeAddrIndexAt;
+    /// `[v] -> []`: `LD_REL ity ioff; SWAP; ST_ELEM_REL ty off lo hi stride` (the index is
+    /// read when the store runs). May trap: INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    StElemRelAt = 0xD5, "ST_ELEM_REL_AT", TypeAddrIndexAt;
+    /// `[v] -> []`: `LD_REL ity ioff; SWAP; ST_ELEM_ABS ty addr lo hi stride`. May trap:
+    /// INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    StElemAbsAt = 0xD6, "ST_ELEM_ABS_AT", TypeAddrIndexAt;
 }
 
 impl Opcode {
@@ -1080,7 +1108,8 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         IncRel | IncAbs => (0, 0),
         SelIf => (2, 1),
         JumpIfImm | JumpIfNotImm => (1, 0),
-        OpRelRel => (0, 1),
+        OpRelRel | ElemRelAt | ElemAbsAt | LdElemRelAt | LdElemAbsAt => (0, 1),
+        StElemRelAt | StElemAbsAt => (1, 0),
         JumpIfRelImm | JumpIfNotRelImm => (0, 0),
         RefMake | RefCheck | ChkNull | VirtFrame => (1, 1),
         RefAdd => (2, 1),
@@ -1208,6 +1237,27 @@ impl core::fmt::Display for Instruction<'_> {
                 read_u32(imm, 5)
             ),
             Operands::OpImm => write!(f, " {} {}", opname(imm[0]), read_u32(imm, 1) as i32),
+            Operands::AddrIndexAt => write!(
+                f,
+                " {} {} {} {} [{} {}]",
+                read_u32(imm, 0),
+                read_u64(imm, 4) as i64,
+                read_u64(imm, 12) as i64,
+                read_u32(imm, 20),
+                ty(imm[24]),
+                read_u32(imm, 25)
+            ),
+            Operands::TypeAddrIndexAt => write!(
+                f,
+                " {} {} {} {} {} [{} {}]",
+                ty(imm[0]),
+                read_u32(imm, 1),
+                read_u64(imm, 5) as i64,
+                read_u64(imm, 13) as i64,
+                read_u32(imm, 21),
+                ty(imm[25]),
+                read_u32(imm, 26)
+            ),
             Operands::OpTypeAddr2 => write!(
                 f,
                 " {} {} {} {} {}",

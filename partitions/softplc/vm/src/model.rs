@@ -676,6 +676,49 @@ impl<'a> Model<'a> {
                     next = imm_u32(code, i + 10);
                 }
             }
+            Opcode::ElemRelAt
+            | Opcode::ElemAbsAt
+            | Opcode::LdElemRelAt
+            | Opcode::LdElemAbsAt
+            | Opcode::StElemRelAt
+            | Opcode::StElemAbsAt => {
+                // The operands after the opcode: [ty] addr lo hi stride ity ioff.
+                let typed = !matches!(op, Opcode::ElemRelAt | Opcode::ElemAbsAt);
+                let o = i + typed as usize;
+                let pushes = !matches!(op, Opcode::StElemRelAt | Opcode::StElemAbsAt);
+                if pushes && s.len() >= limit {
+                    return Err(Trap::StackOverflow);
+                }
+                let index = self.read(
+                    MemType::from_code(code[o + 24]).unwrap(),
+                    self.base as u64 + imm_u32(code, o + 25) as u64,
+                )?;
+                let mut array = imm_u32(code, o) as u64;
+                if matches!(
+                    op,
+                    Opcode::ElemRelAt | Opcode::LdElemRelAt | Opcode::StElemRelAt
+                ) {
+                    array += self.base as u64;
+                }
+                let address = model_element(
+                    array,
+                    index,
+                    imm_u64(code, o + 4),
+                    imm_u64(code, o + 12),
+                    imm_u32(code, o + 20),
+                )?;
+                match op {
+                    Opcode::ElemRelAt | Opcode::ElemAbsAt => s.push(address),
+                    Opcode::LdElemRelAt | Opcode::LdElemAbsAt => {
+                        let v = self.read(MemType::from_code(code[i]).unwrap(), address)?;
+                        s.push(v);
+                    }
+                    _ => {
+                        let v = pop(&mut s);
+                        self.write(MemType::from_code(code[i]).unwrap(), address, v)?;
+                    }
+                }
+            }
             Opcode::RefMake => {
                 let a = pop(&mut s);
                 let size = imm_u32(code, i) as u64;

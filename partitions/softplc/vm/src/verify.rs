@@ -492,6 +492,19 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     return err(site, Reason::BadType(code[imm]));
                 }
             }
+            Operands::AddrIndexAt | Operands::TypeAddrIndexAt => {
+                let index_type = if op.operands() == Operands::AddrIndexAt {
+                    imm + 24
+                } else {
+                    if MemType::from_code(code[imm]).is_none() {
+                        return err(site, Reason::BadType(code[imm]));
+                    }
+                    imm + 25
+                };
+                if MemType::from_code(code[index_type]).is_none() {
+                    return err(site, Reason::BadType(code[index_type]));
+                }
+            }
             Operands::TypeAddrImm => {
                 let ty = match MemType::from_code(code[imm]) {
                     Some(ty) if ty.is_integer() => ty,
@@ -619,11 +632,22 @@ fn step(
         | Opcode::OpRel
         | Opcode::OpRelRel
         | Opcode::JumpIfRelImm
-        | Opcode::JumpIfNotRelImm => {
+        | Opcode::JumpIfNotRelImm
+        | Opcode::ElemRelAt
+        | Opcode::ElemAbsAt
+        | Opcode::LdElemRelAt
+        | Opcode::LdElemAbsAt
+        | Opcode::StElemRelAt
+        | Opcode::StElemAbsAt => {
             // Where each (type byte, offset) operand is.
             let operands: &[usize] = match op {
                 Opcode::OpRel | Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => &[1],
                 Opcode::OpRelRel => &[1, 6],
+                Opcode::ElemRelAt | Opcode::ElemAbsAt => &[24],
+                Opcode::LdElemRelAt
+                | Opcode::LdElemAbsAt
+                | Opcode::StElemRelAt
+                | Opcode::StElemAbsAt => &[25],
                 _ => &[0],
             };
             for &at in operands {

@@ -1305,6 +1305,59 @@ impl<'a, 'm> Machine<'a, 'm> {
                         next!(JumpIfRelImm);
                     }
                 }
+                op::ElemRelAt | op::ElemAbsAt => {
+                    let imm = imm!(ElemRelAt);
+                    if sp >= stack.len() {
+                        trap!(Trap::StackOverflow);
+                    }
+                    let i = load!(imm[24], base + u32_at(imm, 25) as u64);
+                    let array = if byte == op::ElemRelAt {
+                        base + u32_at(imm, 0) as u64
+                    } else {
+                        u32_at(imm, 0) as u64
+                    };
+                    match element(array, i, u64_at(imm, 4), u64_at(imm, 12), u32_at(imm, 20)) {
+                        Some(address) => push!(address),
+                        None => trap!(Trap::IndexOutOfBounds),
+                    }
+                    next!(ElemRelAt);
+                }
+                op::LdElemRelAt | op::LdElemAbsAt => {
+                    let imm = imm!(LdElemRelAt);
+                    if sp >= stack.len() {
+                        trap!(Trap::StackOverflow);
+                    }
+                    let i = load!(imm[25], base + u32_at(imm, 26) as u64);
+                    let array = if byte == op::LdElemRelAt {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let Some(address) =
+                        element(array, i, u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
+                    else {
+                        trap!(Trap::IndexOutOfBounds)
+                    };
+                    push!(load!(imm[0], address));
+                    next!(LdElemRelAt);
+                }
+                op::StElemRelAt | op::StElemAbsAt => {
+                    let imm = imm!(StElemRelAt);
+                    let i = load!(imm[25], base + u32_at(imm, 26) as u64);
+                    let array = if byte == op::StElemRelAt {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let Some(address) =
+                        element(array, i, u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
+                    else {
+                        trap!(Trap::IndexOutOfBounds)
+                    };
+                    store!(imm[0], address, cell!(1));
+                    sp -= 1;
+                    next!(StElemRelAt);
+                }
                 // Unassigned bytes: the verifier accepts none.
                 _ => trap!(Trap::InvalidAddress),
             }

@@ -901,6 +901,37 @@ fn elements_are_addressed_loaded_and_stored() {
         c.ld_elem(true, MemType::F32, 0, 5, 9, 4);
     });
     assert_eq!(f32::from_bits(f as u32), 2.5);
+    // Indexed by a frame variable (an INT at offset 60).
+    for rel in [true, false] {
+        let array = if rel { 8 } else { 40 };
+        let v = eval(|c| {
+            c.push_i32(-2);
+            c.st_rel(MemType::I16, 60);
+            c.push_i32(-300);
+            c.elem_at(
+                rel,
+                Some((MemType::I16, false)),
+                array,
+                -3,
+                0,
+                2,
+                (MemType::I16, 60),
+            );
+            c.elem_at(rel, None, array, -3, 0, 2, (MemType::I16, 60));
+            c.ld_ind(MemType::I16, 0);
+            c.elem_at(
+                rel,
+                Some((MemType::I16, true)),
+                array,
+                -3,
+                0,
+                2,
+                (MemType::I16, 60),
+            );
+            c.op(Opcode::Add);
+        });
+        assert_eq!(v as i64, -600);
+    }
 }
 
 #[test]
@@ -1058,32 +1089,51 @@ fn operator_forms_compute_as_the_plain_operators() {
 
 #[test]
 fn builder_fuses_superinstructions() {
-    // Element load and store; the store only when computing the value cannot trap.
-    let bytes = program_with(100, |c, _| {
-        c.ld_rel(MemType::I16, 0);
-        c.elem_rel(8, 0, 3, 4);
-        c.ld_ind(MemType::F32, 0);
-        c.st_rel(MemType::F32, 24);
-        c.ld_rel(MemType::I16, 0);
-        c.elem_abs(40, 1, 4, 4);
-        c.ld_rel(MemType::F32, 24);
-        c.push_f32(2.0);
-        c.op(Opcode::MulF32);
-        c.st_ind(MemType::F32, 0);
-    });
-    assert_eq!(
-        disassemble(&bytes),
-        [
-            Opcode::LdRel,
-            Opcode::LdElemRel,
-            Opcode::StRel,
-            Opcode::LdRel,
-            Opcode::LdRel,
-            Opcode::OpImm,
-            Opcode::StElemAbs,
-            Opcode::Ret
-        ]
-    );
+    // Element load and store; the store only when computing the value cannot trap. With
+    // the index a frame variable: the _AT forms.
+    for index_in_frame in [false, true] {
+        let bytes = program_with(100, |c, _| {
+            let index = |c: &mut ImageBuilder| {
+                if index_in_frame {
+                    c.ld_rel(MemType::I16, 0);
+                } else {
+                    c.ld_abs(MemType::I16, 0);
+                }
+            };
+            index(c);
+            c.elem_rel(8, 0, 3, 4);
+            c.ld_ind(MemType::F32, 0);
+            c.st_rel(MemType::F32, 24);
+            index(c);
+            c.elem_abs(40, 1, 4, 4);
+            c.ld_rel(MemType::F32, 24);
+            c.push_f32(2.0);
+            c.op(Opcode::MulF32);
+            c.st_ind(MemType::F32, 0);
+        });
+        let expected: &[Opcode] = if index_in_frame {
+            &[
+                Opcode::LdElemRelAt,
+                Opcode::StRel,
+                Opcode::LdRel,
+                Opcode::OpImm,
+                Opcode::StElemAbsAt,
+                Opcode::Ret,
+            ]
+        } else {
+            &[
+                Opcode::LdAbs,
+                Opcode::LdElemRel,
+                Opcode::StRel,
+                Opcode::LdAbs,
+                Opcode::LdRel,
+                Opcode::OpImm,
+                Opcode::StElemAbs,
+                Opcode::Ret,
+            ]
+        };
+        assert_eq!(disassemble(&bytes), expected);
+    }
     // A value that may trap (a division, another element) keeps ELEM and ST_IND; so does
     // a value that reads the address (DUP) and a store at an offset.
     for value in [

@@ -104,6 +104,41 @@ fn index_out_of_bounds() {
 }
 
 #[test]
+fn elements_indexed_by_a_variable_trap_at_the_instruction() {
+    for (k, ty) in [
+        None,
+        Some((MemType::I32, true)),
+        Some((MemType::I32, false)),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        for rel in [true, false] {
+            let mut at = 0;
+            let bytes = program_with(100, |c, _| {
+                c.push_i32(9);
+                c.st_rel(MemType::I16, 40);
+                if ty.is_some_and(|(_, load)| !load) {
+                    c.push_i32(77);
+                }
+                at = c.code_offset();
+                c.elem_at(rel, ty, 0, 0, 7, 4, (MemType::I16, 40));
+                if ty.is_none_or(|(_, load)| load) {
+                    c.drop_();
+                }
+            });
+            let out = run_both(&bytes, 1);
+            let fault = out.result.unwrap_err();
+            assert_eq!(
+                (fault.trap, fault.code_offset),
+                (Trap::IndexOutOfBounds, at),
+                "{k}"
+            );
+        }
+    }
+}
+
+#[test]
 fn elements_outside_data_are_invalid_addresses() {
     // An array whose last elements lie past the end of data memory: the index is fine, the
     // access is not.

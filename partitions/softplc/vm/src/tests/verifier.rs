@@ -788,7 +788,11 @@ fn superinstruction_addresses() {
     });
     assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
     let e = rejects(|c, _| {
-        c.op_rel_rel(Opcode::Add, (MemType::I32, 0), (MemType::I64, MAIN_FRAME - 4));
+        c.op_rel_rel(
+            Opcode::Add,
+            (MemType::I32, 0),
+            (MemType::I64, MAIN_FRAME - 4),
+        );
         c.drop_();
     });
     assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
@@ -801,6 +805,19 @@ fn superinstruction_addresses() {
         c.bind(l);
     });
     assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    // The index variable of the _AT forms lies in the frame and has a valid type.
+    let e = rejects(|c, _| {
+        c.elem_at(true, None, 0, 0, 3, 4, (MemType::I16, MAIN_FRAME - 1));
+        c.drop_();
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.emit_raw(&[Opcode::StElemAbsAt as u8, MemType::I8 as u8]);
+        c.emit_raw(&[0; 24]);
+        c.emit_raw(&[11, 0, 0, 0, 0]);
+    });
+    assert_eq!(e.reason, Reason::BadType(11));
     // Immediate jumps: targets and stack depths as JUMP_IF.
     let e = rejects(|c, _| {
         c.push_i32(1);
