@@ -44,6 +44,26 @@ pub fn line_column(source: &str, offset: usize) -> (usize, usize) {
     (line, before[line_start..].chars().count() + 1)
 }
 
+/// The description `bytes` as text, or a diagnostic at the first byte that is not UTF-8
+/// (a binary file given by mistake): descriptions are UTF-8 TOML.
+pub fn text<'a>(file: &str, bytes: &'a [u8]) -> Result<&'a str, Diagnostic> {
+    std::str::from_utf8(bytes).map_err(|e| {
+        let valid = std::str::from_utf8(&bytes[..e.valid_up_to()]).unwrap_or_default();
+        let (line, column) = line_column(valid, valid.len());
+        Diagnostic {
+            file: file.to_string(),
+            line,
+            column,
+            key_path: String::new(),
+            message: format!(
+                "not UTF-8 text (byte {:#04x} at offset {}): a description is a TOML file",
+                bytes[e.valid_up_to()],
+                e.valid_up_to()
+            ),
+        }
+    })
+}
+
 impl Diagnostic {
     /// A diagnostic at the value of the key `keys` (e.g. `["partitions", "plc", "memory"]`)
     /// of the description `source`, for checks made after validation (the boot-time budget,

@@ -249,7 +249,7 @@ mod validate;
 
 pub use binary::{DecodeError, SystemView, decode};
 #[cfg(feature = "host")]
-pub use diagnostic::Diagnostic;
+pub use diagnostic::{Diagnostic, text};
 #[cfg(feature = "host")]
 pub use system::System;
 #[cfg(feature = "host")]

@@ -1519,3 +1519,101 @@ fn very_large_descriptions_are_refused_by_the_limits_not_by_exhaustion() {
         &diags[..diags.len().min(5)]
     );
 }
+
+// ---- hostile input: what a mistaken or malicious file gives check-config -----------------
+
+#[test]
+fn bytes_that_are_not_utf8_are_reported_where_they_start() {
+    let mut bytes = b"[system]\nmemory = \"512MiB\"\nname = \"caf".to_vec();
+    bytes.extend_from_slice(&[0xe9, b'"', b'\n']); // Latin-1 e-acute, not UTF-8
+    let d = config::text("test.toml", &bytes).unwrap_err();
+    assert_eq!(
+        (d.file.as_str(), d.line, d.column),
+        ("test.toml", 3, 12),
+        "{d}"
+    );
+    assert!(d.key_path.is_empty());
+    assert!(
+        d.message
+            .contains("not UTF-8 text (byte 0xe9 at offset 38)"),
+        "{d}"
+    );
+    // A whole binary file: the first byte already.
+    let d = config::text("test.toml", &[0x7f, 0x45, 0x4c, 0x46, 0x02, 0xff, 0x00]).unwrap_err();
+    assert_eq!((d.line, d.column), (1, 6), "{d}");
+    assert_eq!(config::text("test.toml", b"[system]\n"), Ok("[system]\n"));
+}
+
+#[test]
+fn a_nul_byte_in_a_string_is_a_syntax_error_at_the_byte() {
+    let src = doc(&[(
+        "memory = \"512MiB\"",
+        "memory = \"512MiB\"\nname = \"a\u{0}b\"",
+    )]);
+    expect_one(
+        &src,
+        "name = \"a^\u{0}",
+        0,
+        "system.name",
+        "TOML syntax: invalid basic string",
+    );
+}
+
+#[test]
+fn control_characters_as_a_key_are_a_syntax_error_at_the_key() {
+    let src = doc(&[("# tail", "\u{1}\u{2} = 3")]);
+    let diags = load(&src).unwrap_err();
+    let (line, column) = position(&src, "\u{1}\u{2} = 3", 0);
+    assert!(
+        diags.iter().any(|d| (d.line, d.column) == (line, column)
+            && d.message.contains("TOML syntax: invalid unquoted key")),
+        "{diags:?}"
+    );
+}
+
+#[test]
+fn deeply_nested_values_are_refused_not_a_stack_overflow() {
+    for value in [
+        format!("{}{}", "[".repeat(100_000), "]".repeat(100_000)),
+        format!("{}1{}", "{ a = ".repeat(50_000), " }".repeat(50_000)),
+    ] {
+        // (`# tail` lies in the last `[[channels]]` table.)
+        let src = doc(&[("# tail", &format!("deep = {value}"))]);
+        let diags = load(&src).unwrap_err();
+        let (line, _) = position(&src, "deep = ", 0);
+        assert!(
+            diags.iter().any(|d| d.line == line
+                && d.key_path.starts_with("channels[0].deep")
+                && d.message.contains("max recursion depth")),
+            "{:?}",
+            &diags[..diags.len().min(3)]
+        );
+    }
+}
+
+#[test]
+fn a_megabyte_name_is_refused_by_the_name_rule_at_its_key() {
+    let name = "p".repeat(1 << 20);
+    let src = doc(&[(
+        "# tail",
+        &format!(
+            "[partitions.{name}]\nimage = \"app\"\nmemory = \"1MiB\"\nkernel_memory = \"64KiB\"\nmax_priority = 10\ntime = \"background\""
+        ),
+    )]);
+    expect_one(
+        &src,
+        &format!("[partitions.^{name}]"),
+        0,
+        &format!("partitions.{name}"),
+        "is longer than 15 bytes",
+    );
+}
+
+#[test]
+fn an_eight_megabyte_file_is_checked_in_seconds() {
+    // An 8 MB comment: valid, and checked in seconds (about 3 s in a debug build).
+    let src = format!("{BASE}# {}\n", "x".repeat(8 << 20));
+    let started = std::time::Instant::now();
+    load_ok(&src);
+    assert!(started.elapsed().as_secs() < 60, "{:?}", started.elapsed());
+}

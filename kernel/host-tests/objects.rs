@@ -90,12 +90,20 @@ impl Fixture {
     }
 
     /// Thread `t` makes system call `call`; returns `rax` (meaningful unless it blocked).
+    /// A call that restarts itself (its `syscall` again: `rip` 2 bytes back) is made
+    /// again, as the thread would.
     fn sys(&mut self, t: ThreadIdx, call: Call, a: [u64; 6]) -> u64 {
         let c = &mut self.k.threads[t].context;
         c.rax = call as u64;
         [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
-        assert_eq!(on_syscall(&mut self.k, t, || 0), Outcome::Continue);
-        self.k.threads[t].context.rax
+        loop {
+            let rip = self.k.threads[t].context.rip;
+            assert_eq!(on_syscall(&mut self.k, t, || 0), Outcome::Continue);
+            if self.k.threads[t].is_free() || self.k.threads[t].context.rip != rip.wrapping_sub(2) {
+                return self.k.threads[t].context.rax;
+            }
+            self.k.threads[t].context.rip = rip;
+        }
     }
 
     fn id(&self, t: ThreadIdx) -> u64 {
@@ -112,6 +120,20 @@ impl Fixture {
         let mut out = vec![0; len];
         assert!(self.k.tasks[task].space.copy_from_user(at, &mut out));
         out
+    }
+}
+
+/// The arena's frame allocator lives for the whole test run: a test gives its page tables
+/// and bitmaps back, so that hundreds of generated cases fit.
+impl Drop for Fixture {
+    fn drop(&mut self) {
+        for slot in TaskIdx::all() {
+            if self.k.tasks[slot].in_use {
+                self.k.release_io_bitmap(slot);
+                let mut all = u64::MAX;
+                self.k.tasks[slot].space.destroy_some(&mut all);
+            }
+        }
     }
 }
 
@@ -734,26 +756,149 @@ fn io_ports_are_granted_down_the_tree_only() {
     let pages = f.k.rps[RpIdx::ROOT].used.pages;
     assert_eq!(f.sys(root, Call::IoGrant, [cid, 0x2f8, 8, 0, 0, 0]), OK);
     assert_eq!(f.k.rps[RpIdx::ROOT].used.pages, pages + 2, "bitmap charged");
-    assert!(f.k.holds_port(child, 0x2f8) && f.k.holds_port(child, 0x2ff));
-    assert!(!f.k.holds_port(child, 0x300) && !f.k.holds_port(child, 0x2f7));
+    let holds = |f: &Fixture, task, port: u64| f.k.holds_ports(task, port, port + 1);
+    assert!(holds(&f, child, 0x2f8) && holds(&f, child, 0x2ff));
+    assert!(!holds(&f, child, 0x300) && !holds(&f, child, 0x2f7));
     assert_eq!(
         f.sys(c, Call::IoGrant, [gid, 0x2f8, 9, 0, 0, 0]),
         err(Error::NotPermitted),
         "0x300 not held"
     );
     assert_eq!(f.sys(c, Call::IoGrant, [gid, 0x2fc, 4, 0, 0, 0]), OK);
-    assert!(f.k.holds_port(grandchild, 0x2fc) && !f.k.holds_port(grandchild, 0x2f8));
+    assert!(holds(&f, grandchild, 0x2fc) && !holds(&f, grandchild, 0x2f8));
     let rt = f.k.task_id(ROOT);
     assert_eq!(
         f.sys(c, Call::IoGrant, [rt, 0x2f8, 1, 0, 0, 0]),
         err(Error::NotPermitted),
         "not upwards"
     );
-    f.k.destroy_task(child);
+    f.k.destroy_task(child, u64::MAX);
     assert_eq!(
         f.k.rps[RpIdx::ROOT].used.pages,
         before,
         "bitmaps and tables returned"
+    );
+}
+
+#[test]
+fn io_grants_work_a_word_of_ports_at_a_time() {
+    let mut f = Fixture::new();
+    let root = f.thread(ROOT, 200);
+    let child = f.task(ROOT, Abilities::all(), 100);
+    let grandchild = f.task(child, Abilities::all(), 100);
+    let c = f.thread(child, 50);
+    let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
+    // The whole space above the kernel's ports, and the edges of 64-port words.
+    assert_eq!(
+        f.sys(root, Call::IoGrant, [cid, 0x400, 0xfc00, 0, 0, 0]),
+        OK
+    );
+    assert!(f.k.holds_ports(child, 0x400, 0x1_0000));
+    assert!(!f.k.holds_ports(child, 0x3ff, 0x401));
+    for (first, count) in [
+        (0x43f, 2),
+        (0x480, 64),
+        (0x4c1, 63),
+        (0xffff, 1),
+        (0x500, 129),
+    ] {
+        assert_eq!(
+            f.sys(c, Call::IoGrant, [gid, first, count, 0, 0, 0]),
+            OK,
+            "{first:#x}+{count}"
+        );
+    }
+    let granted = |port: u64| {
+        [
+            (0x43f, 2),
+            (0x480, 64),
+            (0x4c1, 63),
+            (0xffff, 1),
+            (0x500, 129),
+        ]
+        .iter()
+        .any(|&(first, count)| (first..first + count).contains(&port))
+    };
+    for port in 0x400..0x1_0000 {
+        assert_eq!(
+            f.k.holds_ports(grandchild, port, port + 1),
+            granted(port),
+            "port {port:#x}"
+        );
+    }
+    assert!(f.k.holds_ports(grandchild, 0x4c1, 0x581));
+    assert!(
+        !f.k.holds_ports(grandchild, 0x480, 0x581),
+        "0x4c0 is not granted"
+    );
+    assert!(!f.k.holds_ports(grandchild, 0x43e, 0x440));
+    assert_eq!(
+        f.sys(c, Call::IoGrant, [gid, 0x3c0, 0x41, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "one port of the range not held"
+    );
+}
+
+#[test]
+fn killing_a_large_subtree_takes_bounded_steps() {
+    let mut f = Fixture::new();
+    let root = f.thread(ROOT, 200);
+    let before = (
+        f.k.rps[RpIdx::ROOT].used,
+        f.k.tasks.iter().filter(|(_, t)| t.in_use).count(),
+    );
+    // A chain of tasks, each with threads, page tables far apart and an I/O bitmap.
+    let top = f.task(ROOT, Abilities::all(), 100);
+    let mut task = top;
+    let mut chain = vec![top];
+    for depth in 0..6 {
+        for i in 0..4u64 {
+            f.give(
+                task,
+                0x0000_0100_0000_0000 + (depth * 4 + i) * (512 << 30),
+                1,
+                PageRights::empty(),
+            );
+            f.k.create_thread(task, 0x1000, 0x2000, 10, 0, 0).unwrap();
+        }
+        let id = f.k.task_id(task);
+        assert_eq!(f.sys(root, Call::IoGrant, [id, 0x2f8, 8, 0, 0, 0]), OK);
+        task = f.task(task, Abilities::all(), 100);
+        chain.push(task);
+    }
+    let ready = f.k.create_thread(task, 0x1000, 0x2000, 10, 0, 0).unwrap();
+    f.k.set_state(ready, State::Ready);
+    let (tid, other) = (f.k.task_id(top), f.task(ROOT, Abilities::all(), 100));
+    let mut calls = 0;
+    loop {
+        calls += 1;
+        let c = &mut f.k.threads[root].context;
+        (c.rax, c.rdi, c.rip) = (Call::TaskKill as u64, tid, 0x1002);
+        assert_eq!(on_syscall(&mut f.k, root, || 0), Outcome::Continue);
+        let c = &f.k.threads[root].context;
+        if c.rip == 0x1002 {
+            assert_eq!(c.rax, OK);
+            break;
+        }
+        // Not done: the call restarts itself at its `syscall`, registers untouched.
+        assert_eq!((c.rip, c.rax, c.rdi), (0x1000, Call::TaskKill as u64, tid));
+        // Meanwhile the subtree is stopped and out of reach; the rest goes on.
+        assert!(!f.k.run.is_queued(ready.position()) || f.k.threads[ready].is_free());
+        assert_eq!(f.k.task(tid), Err(Error::NoSuchObject));
+        assert_eq!(f.k.task(f.k.task_id(other)), Ok(other));
+        invariants(&f.k).unwrap();
+        assert!(calls < 1_000, "no progress");
+    }
+    assert!(calls > 3, "{calls} calls: the work was not split");
+    assert!(chain.iter().all(|&t| !f.k.tasks[t].in_use));
+    f.k.destroy_task(other, u64::MAX);
+    assert_eq!(
+        (
+            f.k.rps[RpIdx::ROOT].used,
+            f.k.tasks.iter().filter(|(_, t)| t.in_use).count()
+        ),
+        before,
+        "every task, thread, table and bitmap returned"
     );
 }
 
@@ -928,8 +1073,97 @@ proptest::proptest! {
     }
 }
 
+/// The page tables and user pages of a task's address space (`root`: its top table):
+/// calls `table` with each table frame and `page` with each mapped user page's frame and
+/// whether it is writable.
+#[allow(unsafe_code)] // reads page tables in the host-test arena
+fn walk(root: u64, level: u32, table: &mut impl FnMut(u64), page: &mut impl FnMut(u64, bool)) {
+    table(root);
+    // SAFETY: a page-table frame of a live space in the arena (8-byte aligned, 4 KiB).
+    let entries = unsafe { &*(crate::mem::phys_to_virt(root) as *const [u64; 512]) };
+    let user = if level == 3 { 256 } else { 512 };
+    for &entry in entries[..user].iter().filter(|&&e| e & 1 != 0) {
+        let frame = entry & 0x000f_ffff_ffff_f000;
+        if level == 0 {
+            page(frame, entry & 2 != 0);
+        } else {
+            walk(frame, level - 1, table, page);
+        }
+    }
+}
+
+/// A task, the frames the kernel keeps for it (page tables, I/O bitmap) and its user
+/// pages (frame, writable).
+type TaskFrames = (TaskIdx, Vec<u64>, Vec<(u64, bool)>);
+
+/// The frames of each live task.
+fn frames_of(k: &Kernel) -> Vec<TaskFrames> {
+    k.tasks
+        .iter()
+        .filter(|(_, t)| t.in_use && t.space.root_frame() != 0)
+        .map(|(slot, t)| {
+            let (mut tables, mut pages) = (Vec::new(), Vec::new());
+            walk(
+                t.space.root_frame(),
+                3,
+                &mut |f| tables.push(f),
+                &mut |f, w| pages.push((f, w)),
+            );
+            tables.extend(t.io_bitmap.iter().filter(|&&f| f != 0));
+            (slot, tables, pages)
+        })
+        .collect()
+}
+
 /// What must hold after every system call, whatever the arguments were.
 fn invariants(k: &Kernel) -> Result<(), String> {
+    // Send queues: a thread is in at most one, exactly when it is sending to its owner.
+    let mut queued = vec![0u32; crate::state::MAX_THREADS];
+    for (receiver, r) in k.threads.iter() {
+        let mut at = r.senders;
+        let mut steps = 0;
+        while let Some(s) = at {
+            queued[s.position()] += 1;
+            if !matches!(k.threads[s].state, State::Sending { to, .. } if to == receiver) {
+                return Err(format!(
+                    "{s:?} is queued on {receiver:?} but {:?}",
+                    k.threads[s].state
+                ));
+            }
+            steps += 1;
+            if steps > crate::state::MAX_THREADS {
+                return Err(format!("the send queue of {receiver:?} loops"));
+            }
+            at = k.threads[s].next_sender;
+        }
+    }
+    for (slot, t) in k.threads.iter() {
+        let sending = matches!(t.state, State::Sending { .. });
+        if queued[slot.position()] != u32::from(sending) {
+            return Err(format!(
+                "{slot:?} ({:?}) is in {} send queues",
+                t.state,
+                queued[slot.position()]
+            ));
+        }
+    }
+    // No kernel frame (page table, I/O bitmap) is a user page or belongs to two tasks.
+    let frames = frames_of(k);
+    let mut kernel_frames = std::collections::HashMap::new();
+    for (task, tables, _) in &frames {
+        for &f in tables {
+            if let Some(other) = kernel_frames.insert(f, *task) {
+                return Err(format!(
+                    "table or bitmap frame {f:#x} of {task:?} and {other:?}"
+                ));
+            }
+        }
+    }
+    for (task, _, pages) in &frames {
+        if let Some((f, _)) = pages.iter().find(|(f, _)| kernel_frames.contains_key(f)) {
+            return Err(format!("{task:?} maps the kernel's frame {f:#x}"));
+        }
+    }
     for (rp, r) in k.rps.iter().filter(|(_, r)| r.in_use) {
         let tasks: Vec<&Task> = k
             .tasks
@@ -1061,6 +1295,93 @@ proptest::proptest! {
             if let Err(broken) = invariants(&f.k) {
                 proptest::prop_assert!(false, "after call {} by {:?} with {:x?}: {}", number, t, a, broken);
             }
+        }
+    }
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig::with_cases(128))]
+
+    /// Two partitions (sibling tasks of the root, each in its own resource partition, with
+    /// every ability a partition may have and pages of their own) make random calls with
+    /// random arguments, the other's ids among them; the root makes none. After each call
+    /// the kernel's invariants hold and no frame is mapped in both partitions' task trees:
+    /// neither can reach the other's memory (only the root could share a frame).
+    #[test]
+    fn two_partitions_never_share_a_frame(
+        calls in proptest::collection::vec(
+            (0usize..8, 0usize..128, proptest::collection::vec((0usize..20, proptest::prelude::any::<u64>()), 6)),
+            1..150,
+        ),
+    ) {
+        let mut f = Fixture::new();
+        f.thread(ROOT, 200);
+        let partition = Abilities::CREATE_THREAD | Abilities::CREATE_TASK | Abilities::MAP | Abilities::DEBUG_LOG | Abilities::NATIVE_SYSCALLS;
+        let mut tops = Vec::new();
+        for i in 0..2u64 {
+            let rp = f.k.rp_create(ROOT, Amount { tasks: 4, threads: 6, pages: 64 }).unwrap();
+            let top = f.k.create_task(ROOT, partition, 100, rp, "p").unwrap();
+            f.give(top, 0x40_0000, 8, PageRights::WRITE);
+            f.give(top, 0x80_0000 + i * 0x10_0000, 4, PageRights::WRITE | PageRights::EXECUTE);
+            f.thread(top, 90);
+            f.thread(top, 80);
+            tops.push(top);
+        }
+        // Half the calls are the ones that move memory and make objects, with arguments
+        // in the shapes they take (the other partition's ids among them); the rest random.
+        let focus = [Call::Map, Call::Unmap, Call::Protect, Call::TaskCreate, Call::ThreadCreate, Call::TaskKill, Call::TaskAllowSend, Call::Send, Call::Call];
+        let numbers: Vec<u64> = focus.iter().chain(Call::ALL.iter()).map(|c| c.code()).collect();
+        for (caller, call, args) in calls {
+            let runnable: Vec<ThreadIdx> = f
+                .k
+                .threads
+                .iter()
+                .filter(|(_, t)| t.state == State::Ready && !t.suspended && t.task != ROOT)
+                .map(|(slot, _)| slot)
+                .collect();
+            if runnable.is_empty() {
+                break;
+            }
+            let t = runnable[caller % runnable.len()];
+            let number = if call % 2 == 0 { focus[call / 2 % focus.len()].code() } else { numbers[call / 2 % numbers.len()] };
+            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s)).collect();
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s)));
+            let page = |raw: u64| match raw % 3 {
+                0 => 0x40_0000 + (raw / 3 % 8) * 0x1000,
+                1 => 0x80_0000 + (raw / 3 % 0x200) * 0x1000,
+                _ => 0x4000_0000 + (raw / 3 % 16) * 0x1000,
+            };
+            let pick = |(position, (kind, raw)): (usize, (usize, u64))| -> u64 {
+                match (kind, position) {
+                    (0..=9, 0) => ids[raw as usize % ids.len()],
+                    (0..=9, 1 | 2) => page(raw),
+                    (0..=9, _) => raw % 4,
+                    (10..=12, _) => ids[raw as usize % ids.len()],
+                    (13, _) => 0,
+                    (14, _) => test_arena::USER_BASE + (raw % 64) * 0x1000,
+                    (15, _) => 0xffff_8000_0000_0000 + (raw % 64) * 0x1000,
+                    (16, _) => BUFFER_AT,
+                    _ => raw,
+                }
+            };
+            let a: Vec<u64> = args.into_iter().enumerate().map(pick).collect();
+            let c = &mut f.k.threads[t].context;
+            c.rax = number;
+            [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = [a[0], a[1], a[2], a[3], a[4], a[5]];
+            let _ = on_syscall(&mut f.k, t, || 0);
+            if let Err(broken) = invariants(&f.k) {
+                proptest::prop_assert!(false, "after call {} by {:?} with {:x?}: {}", number, t, a, broken);
+            }
+            let frames = frames_of(&f.k);
+            let pages_under = |top: TaskIdx| -> std::collections::HashSet<u64> {
+                frames
+                    .iter()
+                    .filter(|(task, _, _)| f.k.is_within(*task, top))
+                    .flat_map(|(_, _, pages)| pages.iter().map(|&(frame, _)| frame))
+                    .collect()
+            };
+            let (a, b) = (pages_under(tops[0]), pages_under(tops[1]));
+            proptest::prop_assert!(a.is_disjoint(&b), "after call {}: shared frames {:x?}", number, a.intersection(&b).collect::<Vec<_>>());
         }
     }
 }

@@ -9,32 +9,65 @@ use crate::state::Kernel;
 use crate::table::TaskIdx;
 use abi::syscall::Error;
 
-/// Byte `index` of an I/O bitmap frame.
+/// The words of an I/O bitmap (two frames of 512 words, 64 ports a word, a clear bit
+/// grants the port) that hold ports `first..end` (`end` <= 0x10000): for each frame, the
+/// index of its first and last such word and the ports' bits in those two. Ports are
+/// checked and granted a word at a time, whole words in a plain loop: a grant of the whole
+/// port space looks at 1,024 words.
+fn words(first: u64, end: u64) -> impl Iterator<Item = (usize, usize, usize, u64, u64)> {
+    (0..2).filter_map(move |half| {
+        let base = half as u64 * 32768;
+        let (lo, hi) = (first.max(base), end.min(base + 32768));
+        (lo < hi).then(|| {
+            let (a, b) = (lo - base, hi - 1 - base);
+            let first_mask = u64::MAX << (a % 64);
+            let last_mask = u64::MAX >> (63 - b % 64);
+            (
+                half,
+                (a / 64) as usize,
+                (b / 64) as usize,
+                first_mask,
+                last_mask,
+            )
+        })
+    })
+}
+
+/// Frame `frame` of an I/O bitmap as its 512 words.
 ///
 /// # Safety
-/// `frame` must be a live bitmap frame of a task (allocated by `io_grant`, not yet freed)
-/// and `index` < 4096.
+/// `frame` must be a task's live bitmap frame (allocated by `io_grant`, not yet freed), and
+/// no other reference into it may live while this one does.
 #[allow(unsafe_code)] // the bitmap is a raw frame
-unsafe fn io_byte(frame: u64, index: usize) -> u8 {
+unsafe fn bitmap_words(frame: u64) -> &'static mut [u64; 512] {
     // SAFETY: the caller's contract; the direct map covers the frame.
-    unsafe { *((crate::mem::phys_to_virt(frame) + index as u64) as *const u8) }
+    unsafe { &mut *(crate::mem::phys_to_virt(frame) as *mut [u64; 512]) }
 }
 
 impl Kernel {
-    /// True if `task` may use `port` (the root: every port but the kernel's).
-    #[allow(unsafe_code)] // reads the task's bitmap frame
-    pub fn holds_port(&self, task: TaskIdx, port: u16) -> bool {
+    /// True if `task` may use every port of `first..end` (the root: every port but the
+    /// kernel's).
+    #[allow(unsafe_code)] // reads the task's bitmap frames
+    pub fn holds_ports(&self, task: TaskIdx, first: u64, end: u64) -> bool {
         if task == TaskIdx::ROOT {
             return !abi::syscall::KERNEL_PORTS
                 .iter()
-                .any(|&(lo, hi)| (lo..=hi).contains(&port));
+                .any(|&(lo, hi)| first <= u64::from(hi) && u64::from(lo) < end);
         }
-        let frame = self.tasks[task].io_bitmap[port as usize / 32768];
-        frame != 0 && {
-            let bit = port as usize % 32768;
-            // SAFETY: the task's own bitmap frame (non-zero: allocated), and bit / 8 < 4096.
-            (unsafe { io_byte(frame, bit / 8) }) & (1 << (bit % 8)) == 0
-        }
+        let bitmap = self.tasks[task].io_bitmap;
+        bitmap[0] != 0
+            && words(first, end).all(|(half, a, b, first_mask, last_mask)| {
+                // SAFETY: the task's own bitmap frame (non-zero: allocated), read only here.
+                let w = unsafe { bitmap_words(bitmap[half]) };
+                let (head, tail) = if a == b {
+                    (first_mask & last_mask, 0)
+                } else {
+                    (first_mask, last_mask)
+                };
+                w[a] & head == 0
+                    && w[b] & tail == 0
+                    && w[a + 1..b.max(a + 1)].iter().all(|&x| x == 0)
+            })
     }
 
     /// Grants ports `first..first + count` of `caller` to the descendant `target`.
@@ -46,14 +79,14 @@ impl Kernel {
         first: u64,
         count: u64,
     ) -> Result<(), Error> {
-        if count == 0 || first.checked_add(count).is_none_or(|end| end > 0x1_0000) {
-            return Err(Error::InvalidArgument);
-        }
+        let end = first
+            .checked_add(count)
+            .filter(|&e| count > 0 && e <= 0x1_0000);
+        let end = end.ok_or(Error::InvalidArgument)?;
         if target == caller || !self.is_within(target, caller) {
             return Err(Error::NotPermitted);
         }
-        let ports = first as u16..=(first + count - 1) as u16;
-        if !ports.clone().all(|p| self.holds_port(caller, p)) {
+        if !self.holds_ports(caller, first, end) {
             return Err(Error::NotPermitted);
         }
         if self.tasks[target].io_bitmap[0] == 0 {
@@ -84,12 +117,14 @@ impl Kernel {
             self.tasks[target].io_bitmap = [a, b];
             self.tasks[target].pages_charged += 2;
         }
-        for port in ports {
-            let frame = self.tasks[target].io_bitmap[port as usize / 32768];
-            let bit = port as usize % 32768;
-            let byte = crate::mem::phys_to_virt(frame) + (bit / 8) as u64;
-            // SAFETY: inside the task's bitmap frame (bit / 8 < 4096), direct-mapped.
-            unsafe { *(byte as *mut u8) &= !(1 << (bit % 8)) };
+        let bitmap = self.tasks[target].io_bitmap;
+        for (half, a, b, first_mask, last_mask) in words(first, end) {
+            // SAFETY: the target's bitmap frame (allocated above if it had none), only
+            // written through this reference.
+            let w = unsafe { bitmap_words(bitmap[half]) };
+            w[a + 1..b.max(a + 1)].fill(0);
+            w[a] &= !first_mask | if a == b { !last_mask } else { 0 };
+            w[b] &= !last_mask | if a == b { !first_mask } else { 0 };
         }
         if self.io_loaded == self.task_id(target) {
             self.io_loaded = 0;

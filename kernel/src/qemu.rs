@@ -15,6 +15,8 @@ pub enum ExitCode {
 pub const DEBUG_EXIT_PORT: u16 = 0xf4;
 
 pub fn exit(code: ExitCode) -> ! {
+    // What the log still holds goes out first (QEMU stops at once).
+    crate::log::flush();
     crate::arch::cpu::outl(DEBUG_EXIT_PORT, code as u32);
     crate::arch::cpu::halt_forever()
 }

@@ -64,7 +64,8 @@ macro_rules! handlers {
 handlers! {
     DebugWrite => debug_write, Clock => clock, ThreadExit => thread_exit,
     SystemHalt => system_halt, Yield => yield_now, SleepUntil => sleep_until,
-    TaskCreate => task_create, TaskKill => task_kill, TaskAllowSend => task_allow_send,
+    TaskCreate => task_create, TaskKill => task_kill, TaskStop => task_stop,
+    TaskAllowSend => task_allow_send,
     ThreadCreate => thread_create, ThreadStart => thread_start, ThreadSuspend => thread_suspend,
     ThreadResume => thread_resume, ThreadKill => thread_kill, ThreadSet => thread_set,
     ThreadSelf => thread_self, ThreadFpu => thread_fpu,
@@ -218,16 +219,36 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     Ok(Next::Return)
 }
 
-fn task_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+/// The strict descendant (live or dying) that `task_kill` or `task_stop` names.
+fn descendant_to_kill(k: &Kernel, t: ThreadIdx, r: &ArgRegs) -> Result<TaskIdx, Error> {
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
-    let target = k.task(args::TaskKill::decode(r).task)?;
+    let target = k.task_to_kill(args::TaskKill::decode(r).task)?;
     if target == task || !k.is_within(target, task) {
         return Err(Error::NotPermitted);
     }
-    k.destroy_task(target);
+    Ok(target)
+}
+
+fn task_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    let target = descendant_to_kill(k, t, r)?;
+    if k.destroy_task(target, crate::task::KILL_BUDGET) {
+        return Ok(Next::Return);
+    }
+    // Not done: the caller executes the same `syscall` again (2 bytes back, its registers
+    // unchanged), so a window boundary or a higher priority can come in between.
+    k.threads[t].context.rip = k.threads[t].context.rip.wrapping_sub(SYSCALL_LEN);
+    Ok(Next::Pending)
+}
+
+fn task_stop(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    let target = descendant_to_kill(k, t, r)?;
+    k.stop_task(target);
     Ok(Next::Return)
 }
+
+/// Length of the `syscall` instruction (0f 05).
+const SYSCALL_LEN: u64 = 2;
 
 fn task_allow_send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let task = task_of(k, t);

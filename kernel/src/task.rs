@@ -3,7 +3,7 @@
 use crate::mem::paging::{AddressSpace, MapError};
 use crate::mem::{PAGE_SIZE, alloc_zeroed_frame, phys_to_virt};
 use crate::rp::Amount;
-use crate::state::{Kernel, MAX_TASKS, slot_of};
+use crate::state::{Kernel, MAX_TASKS, MAX_THREADS, slot_of};
 use crate::table::{RpIdx, Slot, TaskIdx, ThreadIdx};
 
 /// `task`'s bit in the `send_to` masks.
@@ -38,6 +38,10 @@ pub struct Task {
     pub io_bitmap: [u64; 2],
     /// Bit n: the task may attach interrupt line n.
     pub irq_lines: u32,
+    /// Stopped (`task_stop`) or being destroyed by a `task_kill` that is not finished: its
+    /// threads never run again and no call but `task_kill` and `task_stop` can name it
+    /// (see [`Kernel::stop_task`]).
+    pub dying: bool,
 }
 
 impl Task {
@@ -55,6 +59,7 @@ impl Task {
         pages_charged: 0,
         io_bitmap: [0; 2],
         irq_lines: 0,
+        dying: false,
     };
 
     pub fn name(&self) -> &str {
@@ -128,7 +133,6 @@ pub fn create_root(
     user_memory: &[PhysRegion],
 ) -> Result<u64, LoadError> {
     use crate::rp::{Amount, ResourcePartition};
-    use crate::state::{MAX_TASKS, MAX_THREADS};
     let mut space = AddressSpace::new()?;
     let entry = load_elf(syssw, &mut space)?;
     for offset in (0..image_len.max(1)).step_by(PAGE_SIZE as usize) {
@@ -209,7 +213,15 @@ impl Kernel {
         make_id(t.position(), self.tasks[t].generation)
     }
 
+    /// The live task `id` names (a dying one is gone for every call but `task_kill`).
     pub fn task(&self, id: u64) -> Result<TaskIdx, Error> {
+        slot_of(&self.tasks, id, |t| {
+            (t.in_use && !t.dying).then_some(t.generation)
+        })
+    }
+
+    /// The task `id` names, live or dying (`task_kill` goes on destroying a dying one).
+    pub fn task_to_kill(&self, id: u64) -> Result<TaskIdx, Error> {
         slot_of(&self.tasks, id, |t| t.in_use.then_some(t.generation))
     }
 
@@ -303,35 +315,103 @@ impl Kernel {
         Ok(slot)
     }
 
-    /// Destroys `task` and its whole subtree: threads, address spaces, send rights.
-    pub fn destroy_task(&mut self, task: TaskIdx) {
-        // Children first (bounded: each round removes one task).
-        for _ in 0..MAX_TASKS {
-            let Some(child) = self.tasks.find(|c| c.in_use && c.parent == Some(task)) else {
-                break;
-            };
-            self.destroy_task(child);
-        }
-        for t in ThreadIdx::all() {
-            if !self.threads[t].is_free() && self.threads[t].task == task {
-                self.kill_thread(t);
+    /// The task slots of `task` and all its descendants, as a set of bits ([`bit`]).
+    pub fn subtree(&self, task: TaskIdx) -> u64 {
+        let mut children = [0u64; MAX_TASKS];
+        for (slot, t) in self.tasks.iter() {
+            if let (true, Some(parent)) = (t.in_use, t.parent) {
+                children[parent.position()] |= bit(slot);
             }
         }
-        let rp = self.tasks[task].rp;
-        let freed = self.tasks[task].space.destroy() + self.release_io_bitmap(task);
-        debug_assert_eq!(freed, self.tasks[task].pages_charged);
-        self.rps[rp].release(Amount {
-            tasks: 1,
-            threads: 0,
-            pages: self.tasks[task].pages_charged,
-        });
-        for (_, other) in self.tasks.iter_mut() {
-            other.send_to &= !bit(task);
+        let (mut set, mut todo) = (bit(task), bit(task));
+        while todo != 0 {
+            let next = children[todo.trailing_zeros() as usize] & !set;
+            todo = (todo & (todo - 1)) | next;
+            set |= next;
         }
-        let generation = self.tasks[task].generation.wrapping_add(1);
-        self.tasks[task] = Task {
-            generation,
-            ..Task::FREE
-        };
+        set
+    }
+
+    /// Stops `task` and its whole subtree at once (bounded: a look at every task and
+    /// thread slot): every task of it is dying (no call can name it but `task_kill`), every
+    /// thread suspended and out of the run queues, the I/O bitmaps freed.
+    pub fn stop_task(&mut self, task: TaskIdx) {
+        let set = self.subtree(task);
+        for slot in TaskIdx::all().filter(|&t| set & bit(t) != 0) {
+            self.tasks[slot].dying = true;
+            let freed = self.release_io_bitmap(slot);
+            self.tasks[slot].pages_charged -= freed;
+            self.rps[self.tasks[slot].rp].release(Amount::pages(freed));
+        }
+        for t in ThreadIdx::all() {
+            if !self.threads[t].is_free() && set & bit(self.threads[t].task) != 0 {
+                self.threads[t].suspended = true;
+                self.run.remove(t.position());
+            }
+        }
+    }
+
+    /// Destroys `task` and its whole subtree (threads, address spaces, I/O bitmaps, send
+    /// rights), doing at most about `budget` units of work (a thread slot looked at;
+    /// [`KILL_COST`] a thread killed, [`ENTRY_COST`] a page-table entry done with): true
+    /// when all is gone, false when it must be called again (`task_kill` restarts itself,
+    /// so a window boundary can come in between). The first call stops the whole subtree
+    /// ([`Self::stop_task`]).
+    pub fn destroy_task(&mut self, task: TaskIdx, mut budget: u64) -> bool {
+        if !self.tasks[task].dying {
+            self.stop_task(task);
+            budget = budget.saturating_sub(MAX_THREADS as u64);
+        }
+        let set = self.subtree(task);
+        let member = |t: TaskIdx| set & bit(t) != 0;
+        budget = budget.saturating_sub(MAX_THREADS as u64);
+        for t in ThreadIdx::all() {
+            if !self.threads[t].is_free() && member(self.threads[t].task) {
+                if budget < KILL_COST {
+                    return false;
+                }
+                self.kill_thread(t);
+                budget -= KILL_COST;
+            }
+        }
+        let mut entries = budget / ENTRY_COST;
+        for slot in TaskIdx::all().filter(|&t| member(t)) {
+            let freed = self.tasks[slot].space.destroy_some(&mut entries);
+            self.tasks[slot].pages_charged -= freed;
+            self.rps[self.tasks[slot].rp].release(Amount::pages(freed));
+            if !self.tasks[slot].space.is_destroyed() {
+                return false;
+            }
+        }
+        for slot in TaskIdx::all().filter(|&t| member(t)) {
+            debug_assert_eq!(self.tasks[slot].pages_charged, 0);
+            self.rps[self.tasks[slot].rp].release(Amount::tasks(1));
+            let generation = self.tasks[slot].generation.wrapping_add(1);
+            self.tasks[slot] = Task {
+                generation,
+                ..Task::FREE
+            };
+        }
+        for (_, other) in self.tasks.iter_mut() {
+            other.send_to &= !set;
+        }
+        true
     }
 }
+
+/// What killing one thread costs in [`Kernel::destroy_task`]'s units (it looks at every
+/// thread slot for threads waiting on it, each look about twice a plain one).
+pub const KILL_COST: u64 = 2 * MAX_THREADS as u64;
+
+/// What a page-table entry costs in [`Kernel::destroy_task`]'s units (measured on virtual
+/// time: about three looks at a thread slot).
+pub const ENTRY_COST: u64 = 3;
+
+/// The work one `task_kill` call does at most before it restarts itself, about 10 us of
+/// virtual time (measured, scenario `attack_kill`: a call killing a thread and one freeing
+/// page tables each take 9-11 us; one call of 760 tables and 127 threads took 6 ms).
+/// Every call makes progress: after stopping the subtree and looking at the thread table
+/// it can still kill a thread, and each page-table entry looked at is progress
+/// (`AddressSpace::destroy_some`).
+pub const KILL_BUDGET: u64 = 1024;
+const _: () = assert!(KILL_BUDGET >= 2 * MAX_THREADS as u64 + KILL_COST);

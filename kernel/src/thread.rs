@@ -178,7 +178,10 @@ impl Kernel {
         } else {
             self.thread(id)?
         };
-        if self.is_within(self.threads[thread].task, self.threads[caller_thread].task) {
+        let task = self.threads[thread].task;
+        if self.tasks[task].dying {
+            Err(Error::NoSuchObject)
+        } else if self.is_within(task, self.threads[caller_thread].task) {
             Ok(thread)
         } else {
             Err(Error::NotPermitted)

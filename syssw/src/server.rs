@@ -453,19 +453,19 @@ impl<'a> Server<'a> {
     /// Restarts partition `index`. The worker kills the old task and logs `health` (the
     /// error that caused the restart, if any) in the partition's window when it can start
     /// at once; otherwise (busy with another partition, or a background partition) this
-    /// thread does both now, so that nothing of the partition runs on while it waits.
+    /// thread stops the old task now (`task_stop`: bounded, so that nothing of the
+    /// partition runs on while it waits) and logs, and the worker destroys the task when the
+    /// job starts, in the partition's own time. This thread, above every partition in every
+    /// window, never destroys a task itself: a large one would take the time of whichever
+    /// partition's window is running.
     fn restart(&mut self, index: usize, warm: bool, health: Option<Record>) {
         let old = self.forget(index);
         let at_once =
             self.system.partition(index).time_partition != 0 && self.restarts.worker_idle();
-        let kill = match old {
-            Some(task) if at_once => Some(task.0),
-            Some(task) => {
-                let _ = sys::task_kill(task);
-                None
-            }
-            None => None,
-        };
+        if let (Some(task), false) = (old, at_once) {
+            let _ = sys::task_stop(task);
+        }
+        let kill = old.map(|task| task.0);
         if let Some(record) = health
             && !(at_once && crate::restart::hand_over_record(index, record))
         {
@@ -486,10 +486,12 @@ impl<'a> Server<'a> {
         self.dispatch();
     }
 
-    /// Kills the partition's task (every thread of it) and resets its ports.
+    /// Stops the partition's task (no thread of it runs again; `task_stop`, bounded) and
+    /// resets its ports. The task keeps its kernel memory and its slot, from the
+    /// partition's own quota, until the module restarts: IDLE is for good.
     fn stop(&mut self, index: usize) {
         if let Some(task) = self.forget(index) {
-            let _ = sys::task_kill(task);
+            let _ = sys::task_stop(task);
         }
     }
 

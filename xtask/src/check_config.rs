@@ -59,15 +59,24 @@ pub fn compile(path: &Path) -> Result<Vec<u8>> {
     load(path).map(|system| config::binary::encode(&system))
 }
 
+/// The description `path` (as given, or relative to the workspace root) as bytes, with the
+/// name its diagnostics use (also the base of relative paths in it: PLC programs).
+fn read(path: &Path) -> Result<(String, Vec<u8>)> {
+    let resolved = resolve(path);
+    let bytes =
+        std::fs::read(&resolved).with_context(|| format!("cannot read {}", path.display()))?;
+    Ok((resolved.display().to_string(), bytes))
+}
+
 /// Validates `path` and returns the system it describes; the error lists every diagnostic.
 pub fn load(path: &Path) -> Result<config::System> {
     let images = known_images()?;
-    let resolved = resolve(path);
-    let source = std::fs::read_to_string(&resolved)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    // The name is also the base of relative paths in the file (PLC programs).
-    let name = resolved.display().to_string();
-    match config::load_with_warnings(&name, &source, &|image| images.iter().any(|i| i == image)) {
+    let (name, source) = read(path)?;
+    let source = match config::text(&name, &source) {
+        Ok(source) => source,
+        Err(d) => bail!("configuration {name} is invalid:\n{d}"),
+    };
+    match config::load_with_warnings(&name, source, &|image| images.iter().any(|i| i == image)) {
         Ok((system, warnings)) => {
             print_warnings(&warnings);
             Ok(system)
@@ -128,10 +137,8 @@ pub fn check_budgets(
     images: &[(String, PathBuf)],
     packages: &[(String, Vec<u8>)],
 ) -> Result<()> {
-    let resolved = resolve(path);
-    let source = std::fs::read_to_string(&resolved)
-        .with_context(|| format!("cannot read {}", path.display()))?;
-    let name = resolved.display().to_string();
+    let (name, source) = read(path)?;
+    let source = String::from_utf8_lossy(&source);
     let mut problems = Vec::new();
     for p in system.partitions() {
         let Some((_, elf_path)) = images.iter().find(|(image, _)| image == p.image) else {
@@ -216,12 +223,17 @@ pub fn run(file: &Path, any_image: bool) -> Result<bool> {
     } else {
         known_images()?
     };
-    let resolved = resolve(file);
-    let source = std::fs::read_to_string(&resolved)
-        .with_context(|| format!("cannot read {}", file.display()))?;
-    let name = resolved.display().to_string();
+    let (name, source) = read(file)?;
+    let source = match config::text(&name, &source) {
+        Ok(source) => source,
+        Err(d) => {
+            eprintln!("{d}");
+            eprintln!("config {name}: 1 error");
+            return Ok(false);
+        }
+    };
     let known = |image: &str| any_image || images.iter().any(|i| i == image);
-    match config::load_with_warnings(&name, &source, &known) {
+    match config::load_with_warnings(&name, source, &known) {
         Ok((system, warnings)) => {
             print_warnings(&warnings);
             // The encoder's output must pass the decoder's own checks.
@@ -279,6 +291,39 @@ mod tests {
         let images = known_images().unwrap();
         assert!(images.iter().any(|i| i == "test-usermode"), "{images:?}");
         assert!(!images.iter().any(|i| i == "syssw" || i == "xtask"));
+    }
+
+    #[test]
+    fn hostile_files_are_refused_without_a_panic() {
+        let dir = crate::target_dir().join("check-config-test");
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut x: u64 = 0x5eed;
+        let garbage: Vec<u8> = (0..65_536)
+            .map(|_| {
+                x ^= x << 13;
+                x ^= x >> 7;
+                x ^= x << 17;
+                x as u8
+            })
+            .collect();
+        let files: [(&str, Vec<u8>); 5] = [
+            ("empty", Vec::new()),
+            ("binary", garbage),
+            (
+                "latin1",
+                b"[system]\nmemory = \"512MiB\"\nname = \"caf\xe9\"\n".to_vec(),
+            ),
+            (
+                "nested",
+                format!("x = {}{}", "[".repeat(100_000), "]".repeat(100_000)).into_bytes(),
+            ),
+            ("nul", b"[system]\nmemory = \"512MiB\0\"\n".to_vec()),
+        ];
+        for (name, bytes) in files {
+            let file = dir.join(format!("{name}.toml"));
+            std::fs::write(&file, bytes).unwrap();
+            assert!(!run(&file, true).unwrap(), "{name} accepted");
+        }
     }
 
     #[test]

@@ -59,21 +59,28 @@ enum Cmd {
         /// Major frames of the soak.
         #[arg(long, value_name = "FRAMES", default_value_t = SOAK_FRAMES, requires = "soak")]
         frames: u64,
+        /// Run only the attack systems (virtual time; also part of the full bench): each
+        /// hostile loop beside a victim that logs its window starts; reports
+        /// `window_lateness_hostile_<attack>` and `window_lateness_hostile` and writes
+        /// target/bench/hostile.json.
+        #[arg(long, conflicts_with = "soak")]
+        hostile: bool,
         /// Run only the guest benchmark (tests/configs/bench_guest.toml: linux-bench in a
         /// guest partition, on the host as `host_*`, and natively on Debian's stock kernel
         /// in the same QEMU as `native_*`, with `guest_ratio_*` = guest / native; also part
         /// of the full bench); writes target/bench/guest.json.
-        #[arg(long, conflicts_with = "soak")]
+        #[arg(long, conflicts_with_all = ["soak", "hostile"])]
         guest: bool,
         /// Run only the native leg of the guest benchmark (linux-bench on Debian's stock
         /// kernel, `native_*`); writes target/bench/native.json.
-        #[arg(long, conflicts_with_all = ["soak", "guest"])]
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile"])]
         native: bool,
-        /// Run only the soft-PLC suite on the host (no QEMU; also part of the full bench):
-        /// the interpreter (`plc_vm_*`), the native tier (`plc_native_*`) and, with
-        /// IRONPLC=<an IronPLC checkout or its ironplcc>, IronPLC's VM (`plc_ironplc_*`,
-        /// `plc_vm_*_vs_ironplc`); writes target/bench/plc.json.
-        #[arg(long, conflicts_with_all = ["soak", "guest", "native"])]
+        /// Run only the host soft-PLC benchmarks (also part of the full bench): the suite of
+        /// `partitions/softplc/bench` on the interpreter (`plc_vm_*`), on the native
+        /// execution tier (`plc_native_*`), each with its ratio over hand-written Rust, and,
+        /// with IRONPLC=<an IronPLC checkout or its ironplcc>, on IronPLC's VM
+        /// (`plc_ironplc_*`, `plc_vm_*_vs_ironplc`); writes target/bench/plc.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native"])]
         plc: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
@@ -137,6 +144,8 @@ fn main() -> ExitCode {
         Cmd::Bench {
             soak: true, frames, ..
         } => soak(frames),
+        Cmd::Bench { hostile: true, .. } => hostile(),
+        Cmd::Bench { plc: true, .. } => plc_bench(),
         Cmd::Bench {
             guest: true,
             deterministic_time,
@@ -147,7 +156,6 @@ fn main() -> ExitCode {
             deterministic_time,
             ..
         } => native_bench(deterministic_time),
-        Cmd::Bench { plc: true, .. } => plc_bench(),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -348,11 +356,29 @@ fn boot_bench_system(
     deterministic_time: bool,
     timeout: Duration,
 ) -> Result<qemu::Outcome> {
-    let esp_dir = esp::assemble(
-        &dir.join("esp"),
+    let entries = esp::standard_entries(artifacts, config)?;
+    boot_bench_image(
+        qemu,
         artifacts,
-        &esp::standard_entries(artifacts, config)?,
-    )?;
+        entries,
+        dir,
+        what,
+        deterministic_time,
+        timeout,
+    )
+}
+
+/// Boots an image of `artifacts` with `entries` (see [`boot_bench_system`]).
+fn boot_bench_image(
+    qemu: &tools::Qemu,
+    artifacts: &artifacts::Artifacts,
+    entries: Vec<esp::ImageEntry>,
+    dir: &std::path::Path,
+    what: &str,
+    deterministic_time: bool,
+    timeout: Duration,
+) -> Result<qemu::Outcome> {
+    let esp_dir = esp::assemble(&dir.join("esp"), artifacts, &entries)?;
     eprintln!(
         "xtask: booting the {what}{}",
         if deterministic_time {
@@ -382,12 +408,25 @@ fn boot_bench_system(
     Ok(outcome)
 }
 
-/// The attack systems whose victim measures its window starts (tests/configs), with the
-/// name of their metric: `window_lateness_hostile_<name>`.
-const HOSTILE_SYSTEMS: [(&str, &str); 3] = [
-    ("syscall_fuzz", "fuzz"),
-    ("attack_floods", "floods"),
-    ("attack_partitions", "restart_loop"),
+/// An attack system whose victim measures its window starts: a configuration of
+/// tests/configs (syssw starts its partitions), or the attack program as the root task in
+/// a mode (system-image entry `test/mode`, as scenario `attack_root_paths`).
+enum Hostile {
+    Config(&'static str),
+    Root(&'static str),
+}
+
+/// The attack systems with the name of their metric: `window_lateness_hostile_<name>`.
+const HOSTILE_SYSTEMS: [(Hostile, &str); 9] = [
+    (Hostile::Config("syscall_fuzz"), "fuzz"),
+    (Hostile::Config("attack_floods"), "floods"),
+    (Hostile::Config("attack_partitions"), "restart_loop"),
+    (Hostile::Config("attack_map"), "map"),
+    (Hostile::Config("attack_io"), "io"),
+    (Hostile::Config("attack_kill"), "kill"),
+    (Hostile::Config("attack_reach"), "reach"),
+    (Hostile::Config("attack_restart"), "restart_background"),
+    (Hostile::Root("paths"), "root_paths"),
 ];
 
 /// Boots each attack system on virtual time (the lateness is a property of the kernel and
@@ -399,17 +438,44 @@ fn hostile_lateness(
     dir: &std::path::Path,
 ) -> Result<Vec<xtask::bench::Metric>> {
     let mut metrics = Vec::new();
-    for (config, name) in HOSTILE_SYSTEMS {
-        let config_path = xtask::workspace_root().join(format!("tests/configs/{config}.toml"));
-        let outcome = boot_bench_system(
-            qemu,
-            system,
-            Some(&config_path),
-            &dir.join(config),
-            &format!("attack system {config}"),
-            true,
-            Duration::from_secs(900),
-        )?;
+    for (hostile, name) in HOSTILE_SYSTEMS {
+        let config = match hostile {
+            Hostile::Config(config) | Hostile::Root(config) => config,
+        };
+        let what = format!("attack system {config}");
+        let timeout = Duration::from_secs(900);
+        let outcome = match hostile {
+            Hostile::Config(_) => {
+                let path = xtask::workspace_root().join(format!("tests/configs/{config}.toml"));
+                boot_bench_system(
+                    qemu,
+                    system,
+                    Some(&path),
+                    &dir.join(config),
+                    &what,
+                    true,
+                    timeout,
+                )?
+            }
+            Hostile::Root(mode) => {
+                let mut root = system.clone();
+                root.syssw = artifacts::build_user_programs(&["attack".to_string()])?.remove(0);
+                let mut entries = esp::standard_entries(&root, None)?;
+                entries.push(esp::ImageEntry::Bytes {
+                    name: "test/mode".into(),
+                    data: mode.as_bytes().to_vec(),
+                });
+                boot_bench_image(
+                    qemu,
+                    &root,
+                    entries,
+                    &dir.join(config),
+                    &what,
+                    true,
+                    timeout,
+                )?
+            }
+        };
         let metric = outcome.lines.iter().find_map(|l| {
             xtask::bench::parse_victim_lateness(l, &format!("window_lateness_hostile_{name}"))
         });
@@ -507,18 +573,6 @@ fn native_bench(deterministic_time: bool) -> Result<bool> {
     Ok(true)
 }
 
-/// `cargo xtask bench --plc`: only the soft-PLC suite on the host; writes
-/// `target/bench/plc.json`.
-fn plc_bench() -> Result<bool> {
-    let metrics = xtask::bench::host_metrics()?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "plc.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
-}
-
 /// The guest benchmark: `linux-bench` (tests/linux/bench.c) on the host Linux (`host_*`,
 /// the same loops, for comparison), then in the guest partition of
 /// tests/configs/bench_guest.toml (`guest_*`, on real time: the cycles are what the
@@ -602,6 +656,30 @@ fn guest_metrics(
 
 /// Major frames of `cargo xtask bench --soak` by default.
 const SOAK_FRAMES: u64 = 1_000_000;
+
+/// `bench --plc`: only the host soft-PLC benchmarks (`xtask::bench::host_metrics`).
+fn plc_bench() -> Result<bool> {
+    let metrics = xtask::bench::host_metrics()?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "plc.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
+/// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
+fn hostile() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = hostile_lateness(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "hostile.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
 
 /// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
 fn soak(frames: u64) -> Result<bool> {

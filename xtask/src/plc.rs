@@ -257,7 +257,19 @@ pub fn native_programs(
     system: &System,
     packages: &[(String, Vec<u8>)],
 ) -> Result<Option<std::path::PathBuf>> {
-    let dir = crate::target_dir().join("plc-native").join("programs");
+    native_programs_in(
+        system,
+        packages,
+        &crate::target_dir().join("plc-native").join("programs"),
+    )
+}
+
+/// [`native_programs`], written under `dir`.
+fn native_programs_in(
+    system: &System,
+    packages: &[(String, Vec<u8>)],
+    dir: &std::path::Path,
+) -> Result<Option<std::path::PathBuf>> {
     let mut modules: Vec<(String, String)> = Vec::new();
     let mut seen: Vec<Vec<u8>> = Vec::new();
     for p in &system.partitions {
@@ -450,6 +462,60 @@ mod tests {
                     .join("\n")
             )
         })
+    }
+
+    /// Scenario plc_native's description: three partitions with `plc.native`.
+    #[test]
+    fn native_partitions_get_translated_programs_and_the_flag() {
+        let configs = crate::workspace_root().join("tests/configs");
+        let path = configs.join("plc_native.toml");
+        let text = std::fs::read_to_string(&path).unwrap();
+        let mut system = config::load(&path.to_string_lossy(), &text, &|_| true).unwrap();
+        let packages = data_entries(&system).unwrap();
+        for (name, bytes) in &packages {
+            let native = package::Package::parse(bytes).unwrap().native();
+            assert_eq!(
+                native,
+                ["plc", "trap", "loop"].contains(&name.as_str()),
+                "{name}"
+            );
+        }
+        let dir = crate::target_dir().join("tmp/xtask-native-programs");
+        let file = native_programs_in(&system, &packages, &dir)
+            .unwrap()
+            .expect("three native partitions");
+        let programs = std::fs::read_to_string(&file).unwrap();
+        for module in ["program_plc", "program_trap", "program_loop"] {
+            assert!(
+                programs.contains(&format!("pub mod {module} {{")),
+                "{module}"
+            );
+            assert!(dir.join(format!("{module}.plcb")).is_file());
+        }
+        assert!(programs.contains(
+            "PROGRAMS: &[&plc_vm::native::NativeProgram] = &[&program_plc::PROGRAM, &program_trap::PROGRAM, &program_loop::PROGRAM];"
+        ));
+        // Without plc.native: nothing to build; on another image: a clear error.
+        let plain: Vec<_> = packages.clone();
+        for p in &mut system.partitions {
+            if let Some(plc) = &mut p.plc {
+                plc.native = false;
+            }
+        }
+        assert!(native_programs_in(&system, &plain, &dir).unwrap().is_none());
+        let p = system
+            .partitions
+            .iter_mut()
+            .find(|p| p.name == "trap")
+            .unwrap();
+        p.plc.as_mut().unwrap().native = true;
+        p.image = "other".into();
+        let e = native_programs_in(&system, &plain, &dir).unwrap_err();
+        assert!(
+            e.to_string()
+                .contains("plc.native needs the soft-PLC image"),
+            "{e}"
+        );
     }
 
     #[test]

@@ -76,7 +76,7 @@ call_args! {
     SleepUntil { time: rdi }
     /// `task_create`.
     TaskCreate { abilities: rdi, mcp: rsi, rp: rdx, name_ptr: r10, name_len: r8 }
-    /// `task_kill`.
+    /// `task_kill`, `task_stop`.
     TaskKill { task: rdi }
     /// `task_allow_send`.
     TaskAllowSend { from: rdi, to: rsi }

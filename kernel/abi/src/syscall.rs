@@ -93,9 +93,20 @@ codes::code_enum! {
         TaskCreate = 10 => "task_create",
         /// `task_kill(task)`: destroys a descendant task, its threads and all its descendants;
         /// their kernel memory returns to their resource partitions. Threads waiting on them
-        /// get `PeerGone`. Ability: `CREATE_TASK`. Errors: `NoSuchObject`, `NotPermitted` (not
-        /// a strict descendant).
+        /// get `PeerGone`. At once, no thread of the subtree runs again and no other call can
+        /// name its tasks; the rest is done a bounded piece at a time: until it is all done
+        /// the call restarts itself (the caller executes the same `syscall` again, registers
+        /// unchanged), so a large subtree never keeps the kernel from switching windows for
+        /// long. Ability: `CREATE_TASK`. Errors: `NoSuchObject` (also when another
+        /// `task_kill` finished destroying it meanwhile), `NotPermitted` (not a strict
+        /// descendant).
         TaskKill = 11 => "task_kill",
+        /// `task_stop(task)`: the first, bounded part of `task_kill` alone: no thread of the
+        /// descendant task or its subtree runs again and no call but `task_kill` (which then
+        /// destroys it) can name its tasks. For a caller that must not spend long in one
+        /// place (syssw's server) and leaves the rest to a thread that may take its time.
+        /// Ability: `CREATE_TASK`. Errors: as `task_kill`.
+        TaskStop = 13 => "task_stop",
         /// `task_allow_send(from, to)`: lets threads of task `from` send IPC and notifications
         /// to threads of task `to` (0 = the caller's task, for either). Both must be the
         /// caller's task or its descendants. By default a task may send to itself, its parent

@@ -1,4 +1,5 @@
-//! 16550 UART on COM1 (0x3f8), the kernel log. 115200 baud, 8N1, polled (no interrupts).
+//! 16550 UART on COM1 (0x3f8), the kernel log. 115200 baud, 8N1, FIFO on, polled (no
+//! interrupts).
 
 use super::cpu::{inb, outb};
 
@@ -24,14 +25,26 @@ impl Uart {
         outb(b + 4, 0x03); // DTR + RTS
     }
 
+    /// True when the transmit FIFO is empty ("transmit holding register empty"): it takes
+    /// 16 bytes without waiting.
+    pub fn ready(&self) -> bool {
+        inb(self.base + 5) & 0x20 != 0
+    }
+
+    /// Hands the UART one byte (the caller knows it has room).
+    pub fn send(&self, byte: u8) {
+        outb(self.base, byte);
+    }
+
+    /// Waits until the UART has room, then sends `byte`.
     pub fn write_byte(&self, byte: u8) {
-        // Bounded wait for "transmit holding register empty": a missing UART must not hang us.
+        // Bounded wait: a missing UART must not hang us.
         for _ in 0..100_000 {
-            if inb(self.base + 5) & 0x20 != 0 {
+            if self.ready() {
                 break;
             }
             core::hint::spin_loop();
         }
-        outb(self.base, byte);
+        self.send(byte);
     }
 }

@@ -25,6 +25,9 @@ pub enum MapError {
 #[derive(Debug, Default, Clone, Copy, PartialEq, Eq)]
 pub struct AddressSpace {
     root: u64,
+    /// How far [`AddressSpace::destroy_some`] got: every table below this user address
+    /// is freed.
+    destroyed_below: u64,
 }
 
 /// The page table in frame `phys`, through the direct map.
@@ -69,7 +72,16 @@ fn leaf_bits(rights: PageRights) -> u64 {
 }
 
 impl AddressSpace {
-    pub const NONE: Self = Self { root: 0 };
+    pub const NONE: Self = Self {
+        root: 0,
+        destroyed_below: 0,
+    };
+
+    /// Its top-level table's frame (0: none), for the host tests' checks of every table.
+    #[cfg(test)]
+    pub(crate) fn root_frame(&self) -> u64 {
+        self.root
+    }
 
     /// A new, empty user half sharing the kernel half.
     pub fn new() -> Result<Self, MapError> {
@@ -83,7 +95,10 @@ impl AddressSpace {
             let new_root = unsafe { table(root) };
             new_root[256..].copy_from_slice(&kernel[256..]);
         }
-        Ok(Self { root })
+        Ok(Self {
+            root,
+            destroyed_below: 0,
+        })
     }
 
     pub fn root(&self) -> u64 {
@@ -283,38 +298,66 @@ impl AddressSpace {
         true
     }
 
-    /// Frees every page-table frame of the user half and the top-level table; returns how
-    /// many frames that was. Mapped frames themselves are not the kernel's and stay.
-    pub fn destroy(&mut self) -> u64 {
+    /// Frees the page-table frames of the user half and then the top-level table, doing at
+    /// most `budget` units of work (an entry done with; `budget` is reduced by what was
+    /// done); returns how many frames were freed. The space is gone
+    /// ([`Self::is_destroyed`]) once a call got through; until then a later call goes on
+    /// where this one stopped, so every unit is progress. Mapped frames themselves are not
+    /// the kernel's and stay.
+    pub fn destroy_some(&mut self, budget: &mut u64) -> u64 {
+        /// Frees table `t` of `level` (0: a page table, whose entries are user frames),
+        /// which maps the user addresses from `base`, and the tables below it that map
+        /// addresses from `*below` on, clearing each entry whose table it freed. Returns the
+        /// frames freed; `*below` says how far it got (past the table: all of it).
+        fn free_level(t: u64, level: u32, base: u64, below: &mut u64, budget: &mut u64) -> u64 {
+            let span = 1u64 << (12 + 9 * level);
+            let entries = if level == 3 { 256 } else { 512 };
+            let mut freed = 0;
+            if level > 0 {
+                // SAFETY: a table of this space; entries are cleared as their tables go.
+                let table = unsafe { table(t) };
+                // A plain index loop: this is where a large teardown spends its time.
+                let mut i = (below.saturating_sub(base) / span) as usize;
+                while i < entries {
+                    let at = base + i as u64 * span;
+                    if *budget == 0 {
+                        *below = (*below).max(at);
+                        return freed;
+                    }
+                    let entry = table[i];
+                    if entry & PRESENT != 0 {
+                        *below = (*below).max(at);
+                        freed += free_level(entry & ADDRESS, level - 1, at, below, budget);
+                        if *below < at + span {
+                            return freed;
+                        }
+                        table[i] = 0;
+                    }
+                    // An entry is paid for once it is done with (the way down to the
+                    // first undone one is at most three tables, whatever the budget).
+                    *budget = budget.saturating_sub(1);
+                    i += 1;
+                }
+            }
+            // SAFETY: a table of this space, no longer referenced: its parent's entry is
+            // cleared right after, or it is the root, which the space forgets.
+            unsafe { free_frame(t) };
+            *below = base + entries as u64 * span;
+            freed + 1
+        }
         if self.root == 0 {
             return 0;
         }
-        fn free_level(t: u64, level: u32) -> u64 {
-            let mut freed = 0;
-            if level > 0 {
-                // SAFETY: a present non-leaf entry's frame, freed only after this walk.
-                for entry in unsafe { table(t) }.iter().copied() {
-                    if entry & PRESENT != 0 {
-                        freed += free_level(entry & ADDRESS, level - 1);
-                    }
-                }
-            }
-            // SAFETY: a table of this space, no longer referenced (its parent goes next).
-            unsafe { free_frame(t) };
-            freed + 1
+        let freed = free_level(self.root, 3, 0, &mut self.destroyed_below, budget);
+        if self.destroyed_below >= USER_END {
+            self.root = 0;
         }
-        let mut freed = 0;
-        for slot in 0..256 {
-            // SAFETY: this space's root.
-            let entry = unsafe { table(self.root) }[slot];
-            if entry & PRESENT != 0 {
-                freed += free_level(entry & ADDRESS, 2);
-            }
-        }
-        // SAFETY: the root, after every table below it; the space forgets it right away.
-        unsafe { free_frame(self.root) };
-        self.root = 0;
-        freed + 1
+        freed
+    }
+
+    /// True once [`Self::destroy_some`] freed the whole space (or it never had tables).
+    pub fn is_destroyed(&self) -> bool {
+        self.root == 0
     }
 
     pub fn is_active(&self) -> bool {
@@ -374,8 +417,49 @@ mod tests {
             assert_eq!(before - crate::mem::free_frames(), needed, "at {virt:#x}");
             assert_eq!(space.tables_needed(virt, pages), 0);
         }
-        let freed = space.destroy();
+        let freed = space.destroy_some(&mut { u64::MAX });
         assert!(freed > 5);
+    }
+
+    #[test]
+    fn destroying_in_small_steps_frees_every_table_once() {
+        let _arena = test_arena::init();
+        let before = crate::mem::free_frames();
+        let mut space = AddressSpace::new().unwrap();
+        for virt in [
+            0x1000,
+            0x40_0000,
+            0x4000_0000,
+            0x80_0000_0000,
+            0x7fff_ffff_f000,
+        ] {
+            space.map(virt, 0x1000, RW).unwrap();
+        }
+        let tables = before - crate::mem::free_frames();
+        for budget in [1, 7, 300] {
+            let mut copy = AddressSpace::new().unwrap();
+            copy.map(0x1000, 0x1000, RW).unwrap();
+            let (mut freed, mut calls) = (0, 0);
+            while !copy.is_destroyed() {
+                let mut left = budget;
+                freed += copy.destroy_some(&mut left);
+                calls += 1;
+                assert!(calls < 10_000, "no progress with budget {budget}");
+            }
+            assert_eq!(freed, 4, "budget {budget}");
+        }
+        let (mut freed, mut calls) = (0, 0);
+        while !space.is_destroyed() {
+            let mut left = 5;
+            freed += space.destroy_some(&mut left);
+            calls += 1;
+        }
+        assert_eq!(freed, tables);
+        assert!(
+            calls > 100,
+            "{calls} calls of 5 entries for {tables} tables"
+        );
+        assert_eq!(crate::mem::free_frames(), before);
     }
 
     #[test]
@@ -402,7 +486,7 @@ mod tests {
         assert_eq!(space.unmap(0x1000), Some(frame));
         assert_eq!(space.translate(0x1000), None);
         assert_eq!(space.unmap(0x1000), None);
-        space.destroy();
+        space.destroy_some(&mut { u64::MAX });
         // SAFETY: allocated by this test and no longer mapped.
         unsafe { crate::mem::free_frame(frame) };
     }

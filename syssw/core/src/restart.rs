@@ -15,11 +15,15 @@
 //! the restart: the worker, first thing in the partition's window, when the job starts at
 //! once ([`Restarts::worker_idle`]) and the partition has windows (the record is left for
 //! it next to the job, `syssw/src/restart.rs`); else (the worker is busy with another
-//! partition, or a background partition restarts) the server at once, so that no thread of
-//! a partition being restarted ever runs on. So in a restart loop the server's share of a
-//! fault report is its bookkeeping and one reply: short, however large the partition, when
-//! the partition's window ends in the middle of it (the next window starts late by that
-//! much at most).
+//! partition, or a background partition restarts) the server stops the old task at once
+//! (`task_stop`, a bounded kernel call), so that no thread of a partition being restarted
+//! ever runs on, and prints the line, and the worker destroys the task when the job starts.
+//! The worker always destroys it, in the partition's own time (its windows, or the
+//! background at its priority): the server, above every partition in every window, never
+//! does, or a large partition's teardown would take another partition's window. So in a
+//! restart loop the server's share of a fault report is its bookkeeping and one reply:
+//! short, however large the partition, when the partition's window ends in the middle of
+//! it (the next window starts late by that much at most).
 //!
 //! Invariants kept here: a partition is queued or being restarted at most once (its old
 //! task is dead from the moment it is queued, so nothing of it can ask for another restart
@@ -53,8 +57,8 @@ pub struct Job {
     pub condition: StartCondition,
     /// The partition's restarts so far, this one included (for the mode-change log line).
     pub restarts: u32,
-    /// The old task the worker kills first, in the partition's window (`None`: the server
-    /// killed it already).
+    /// The old task the worker kills first, in the partition's time (the server may have
+    /// stopped it already; `None`: there was none).
     pub kill: Option<u64>,
 }
 

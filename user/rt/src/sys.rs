@@ -100,6 +100,11 @@ pub fn task_kill(task: TaskId) -> Result<(), Error> {
     call(Call::TaskKill, args::TaskKill { task: task.0 }.encode()).map(drop)
 }
 
+/// Stops a descendant task and its subtree at once; `task_kill` destroys it later.
+pub fn task_stop(task: TaskId) -> Result<(), Error> {
+    call(Call::TaskStop, args::TaskKill { task: task.0 }.encode()).map(drop)
+}
+
 /// Lets `from` send to `to` (`None` = the caller's task).
 pub fn task_allow_send(from: Option<TaskId>, to: Option<TaskId>) -> Result<(), Error> {
     let a = args::TaskAllowSend {

@@ -322,6 +322,10 @@ impl Gen<'_> {
                 if p.ty.is_pointer_like() {
                     self.check_escape(None, a.value, "an input of a function block instance");
                 }
+                if matches!(p.ty, Type::Reference(_)) {
+                    let r = crate::refs::reference_to(a.value);
+                    self.check_escape(None, &r, "an input of a function block instance");
+                }
                 self.store_expr(&p, a.value, a.value.span);
             }
         }

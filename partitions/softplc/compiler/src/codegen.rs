@@ -1454,7 +1454,24 @@ impl<'a> Gen<'a> {
                     Type::Fb(pi) => {
                         let pi = *pi;
                         let v = self.prog.pous[pi].param(&m.name).cloned();
+                        // `THIS^.x` / `SUPER^.x`: the block's own variables, all of them.
+                        let own = matches!(&base.kind, ExprKind::Deref(i) if matches!(i.kind, ExprKind::This | ExprKind::Super));
                         match v {
+                            Some(v)
+                                if own
+                                    && !matches!(v.kind, VarKind::External | VarKind::Global) =>
+                            {
+                                if v.kind == VarKind::InOut {
+                                    self.drop_place(&bp);
+                                    return self.name_place(m);
+                                }
+                                Some(Place {
+                                    loc: offset_loc(bp.loc, v.offset),
+                                    ty: v.ty,
+                                    writable: bp.writable && !v.constant,
+                                    window: None,
+                                })
+                            }
                             Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
                                 // Outputs are read-only from outside; inputs may be set before a call.
                                 let writable = bp.writable && v.kind == VarKind::Input;
@@ -1869,6 +1886,18 @@ impl<'a> Gen<'a> {
         if to.is_pointer_like() && matches!(e.kind, ExprKind::Int(0)) {
             // The literal 0 is NULL.
             self.push_int(0);
+            return;
+        }
+        if let Type::Reference(target) = to {
+            // A REFERENCE TO parameter is bound to the argument (as `REF=` does).
+            let as_ref = Type::Ref(target.clone());
+            if matches!(e.kind, ExprKind::Null) {
+                self.push_int(0);
+                return;
+            }
+            let r = crate::refs::reference_to(e);
+            let t = self.expr(&r, Some(&as_ref));
+            self.coerce(&t, &as_ref, e.span);
             return;
         }
         let t = self.expr(e, Some(to));

@@ -59,6 +59,19 @@ pub(crate) struct RefState {
     /// Temporary variables of the POU being compiled that may hold a reference to its
     /// temporary storage (see [`Gen::check_escape`]).
     tainted: HashSet<String>,
+    /// ... or one of a FUNCTION's borrowed reference inputs.
+    borrowed: HashSet<String>,
+}
+
+/// Where a reference value may point, for the checks of references to temporaries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord)]
+enum Taint {
+    /// Nowhere temporary.
+    None,
+    /// Into what the caller of the current FUNCTION passed (its reference inputs).
+    Borrowed,
+    /// Into the current POU's temporary storage.
+    Local,
 }
 
 /// Deepest object nesting the VM accepts (`plc_vm::image::MAX_OBJECT_DEPTH`).
@@ -669,9 +682,11 @@ impl Gen<'_> {
     // stored anywhere but in a temporary variable of the same POU (a global, a variable of an
     // instance, an output or the function's result, through a dereference or a VAR_IN_OUT),
     // or passed to a FUNCTION_BLOCK or METHOD input (which may keep it). Passing it to a
-    // FUNCTION input is allowed: a FUNCTION's reference inputs are treated as temporary in
-    // turn, so the function cannot keep them either. Temporary reference variables that are
-    // assigned such a reference anywhere in the POU count as holding one everywhere.
+    // FUNCTION input is allowed: a FUNCTION's reference inputs are *borrowed* in turn: the
+    // function may return them (as its result or an output) but not keep them, and its
+    // caller treats the result as derived from the references it passed in. Temporary
+    // reference variables that are assigned such a reference anywhere in the POU count as
+    // holding one everywhere.
 
     /// Whether `name` is temporary storage of the current POU.
     fn is_temporary_var(&self, name: &str) -> bool {
@@ -680,59 +695,104 @@ impl Gen<'_> {
             return false;
         };
         let function_like = matches!(pou.kind, PouKind::Function) || self.is_method(self.cur);
+        let is_result =
+            pou.return_type.is_some() && pou.vars.first().is_some_and(|r| r.name == v.name);
         match v.kind {
             VarKind::Temp => true,
-            VarKind::Local | VarKind::Input => function_like && v.name != pou.name,
+            VarKind::Local | VarKind::Input => function_like && !is_result,
             _ => false,
         }
     }
 
-    /// Whether `e` may evaluate to a reference to temporary storage of the current POU.
-    fn temp_derived(&mut self, e: &Expr) -> bool {
+    /// Whether `name` is what a FUNCTION hands back to its caller: its result or an output.
+    fn is_function_output(&self, name: &str) -> bool {
+        let pou = &self.prog.pous[self.cur];
+        pou.kind == PouKind::Function
+            && !self.is_method(self.cur)
+            && pou.var(name).is_some_and(|v| v.kind == VarKind::Output)
+    }
+
+    /// Whether `e` may evaluate to a reference to temporary storage of the current POU
+    /// (`Local`), or to one of a FUNCTION's borrowed reference inputs (`Borrowed`).
+    fn temp_derived(&mut self, e: &Expr) -> Taint {
         match &e.kind {
             ExprKind::Call { callee, args } => {
-                if let ExprKind::Name(f) = &callee.kind
-                    && matches!(f.name.as_str(), "REF" | "ADR")
-                    && let [a] = args.as_slice()
-                {
-                    return self.place_is_temporary(&a.value);
+                let ExprKind::Name(f) = &callee.kind else {
+                    return Taint::None;
+                };
+                if matches!(f.name.as_str(), "REF" | "ADR") {
+                    return match args.as_slice() {
+                        [a] if self.place_is_temporary(&a.value) => Taint::Local,
+                        [a] => self.deref_taint(&a.value),
+                        _ => Taint::None,
+                    };
                 }
-                false
+                // A function's result may be one of the references passed to it.
+                let Some(&pi) = self.prog.pou_by_name.get(&f.name) else {
+                    return Taint::None;
+                };
+                if self.prog.pous[pi].kind != PouKind::Function {
+                    return Taint::None;
+                }
+                args.iter()
+                    .filter(|a| !a.output)
+                    .map(|a| self.temp_derived(&a.value))
+                    .max()
+                    .unwrap_or(Taint::None)
             }
             ExprKind::Name(n) => {
                 if self.refs.tainted.contains(&n.name) {
-                    return true;
+                    return Taint::Local;
                 }
-                // A FUNCTION's reference inputs may point to its caller's temporaries.
+                if self.refs.borrowed.contains(&n.name) {
+                    return Taint::Borrowed;
+                }
+                // A FUNCTION's reference inputs, and a reference read from any POU's
+                // VAR_IN_OUT, may point to the caller's temporaries.
                 let pou = &self.prog.pous[self.cur];
-                pou.kind == PouKind::Function
-                    && pou.var(&n.name).is_some_and(|v| {
-                        v.kind == VarKind::Input
-                            && matches!(v.ty, Type::Ref(_) | Type::Interface(_))
-                    })
+                let function = pou.kind == PouKind::Function && !self.is_method(self.cur);
+                let borrowed = pou.var(&n.name).is_some_and(|v| {
+                    matches!(v.ty, Type::Ref(_) | Type::Interface(_))
+                        && (v.kind == VarKind::InOut || function && v.kind == VarKind::Input)
+                });
+                if borrowed {
+                    Taint::Borrowed
+                } else {
+                    Taint::None
+                }
             }
             ExprKind::Binary(BinOp::Add | BinOp::Sub, a, b) => {
-                self.temp_derived(a) || self.temp_derived(b)
+                self.temp_derived(a).max(self.temp_derived(b))
             }
-            _ => false,
+            _ => Taint::None,
         }
     }
 
-    /// Whether place expression `e` lies in temporary storage of the current POU (or in what
-    /// a reference to such storage refers to).
+    /// The taint of the reference a place expression is reached through, if any.
+    fn deref_taint(&mut self, e: &Expr) -> Taint {
+        match &e.kind {
+            ExprKind::Member(b, _) | ExprKind::Index(b, _) => self.deref_taint(b),
+            ExprKind::Deref(r) => self.temp_derived(r),
+            _ => Taint::None,
+        }
+    }
+
+    /// Whether place expression `e` lies in temporary storage of the current POU.
     fn place_is_temporary(&mut self, e: &Expr) -> bool {
         match &e.kind {
             ExprKind::Name(n) => self.is_temporary_var(&n.name),
             ExprKind::Member(b, _) | ExprKind::Index(b, _) => self.place_is_temporary(b),
-            ExprKind::Deref(r) => self.temp_derived(r),
+            ExprKind::Deref(r) => self.temp_derived(r) == Taint::Local,
             _ => false,
         }
     }
 
     /// Finds the temporary reference variables of the current POU that may hold a reference
-    /// to its temporary storage (assignments anywhere in `body`, to a fixpoint).
+    /// to its temporary storage or a borrowed one (assignments anywhere in `body`, to a
+    /// fixpoint).
     pub(crate) fn scan_temporary_references(&mut self, body: &[Stmt]) {
         self.refs.tainted.clear();
+        self.refs.borrowed.clear();
         let mut assigns: Vec<(Ident, Expr)> = Vec::new();
         for s in body {
             collect_assignments(s, &mut assigns);
@@ -740,11 +800,16 @@ impl Gen<'_> {
         loop {
             let mut changed = false;
             for (target, value) in &assigns {
-                if !self.refs.tainted.contains(&target.name)
-                    && self.is_temporary_var(&target.name)
-                    && self.temp_derived(value)
-                {
-                    self.refs.tainted.insert(target.name.clone());
+                if !self.is_temporary_var(&target.name) {
+                    continue;
+                }
+                let taint = self.temp_derived(value);
+                let set = match taint {
+                    Taint::Local => &mut self.refs.tainted,
+                    Taint::Borrowed => &mut self.refs.borrowed,
+                    Taint::None => continue,
+                };
+                if set.insert(target.name.clone()) {
                     changed = true;
                 }
             }
@@ -756,21 +821,32 @@ impl Gen<'_> {
 
     /// Rejects storing `value`, a reference that may point to temporary storage of the
     /// current POU, into `target` (`None`: a destination that outlives the call, named by
-    /// `what`) unless `target` is itself temporary storage of this POU.
+    /// `what`) unless `target` is itself temporary storage of this POU (or, for a borrowed
+    /// reference, the result or an output of the FUNCTION it was passed to).
     pub(crate) fn check_escape(&mut self, target: Option<&Expr>, value: &Expr, what: &str) {
-        if self.dry || !self.temp_derived(value) {
+        if self.dry {
+            return;
+        }
+        let taint = self.temp_derived(value);
+        if taint == Taint::None {
             return;
         }
         if let Some(t) = target
             && let ExprKind::Name(n) = &t.kind
-            && self.is_temporary_var(&n.name)
+            && (self.is_temporary_var(&n.name)
+                || taint == Taint::Borrowed && self.is_function_output(&n.name))
         {
             return;
         }
         let pou = self.prog.pous[self.cur].text.clone();
-        let msg = format!(
-            "this reference may point to a temporary variable of `{pou}` (a FUNCTION's or METHOD's variables, a VAR_TEMP, or a FUNCTION's reference input), which the next call re-initialises; it cannot be stored in {what}, which outlives the call"
-        );
+        let msg = match taint {
+            Taint::Borrowed => format!(
+                "this reference came from the caller of `{pou}` (a FUNCTION's reference input or a VAR_IN_OUT) and may point to the caller's temporary variables; a FUNCTION may return it (as its result or an output) but it cannot be stored in {what}, which outlives the call"
+            ),
+            _ => format!(
+                "this reference may point to a temporary variable of `{pou}` (a FUNCTION's or METHOD's variables, a VAR_TEMP), which the next call re-initialises; it cannot be stored in {what}, which outlives the call"
+            ),
+        };
         self.error(value.span, msg);
     }
 
@@ -918,6 +994,30 @@ impl Gen<'_> {
             let index = self.b.add_object(start, len, parent);
             open.push((index, start, end));
         }
+    }
+}
+
+/// The expression `REF(e)`.
+pub(crate) fn reference_to(e: &Expr) -> Expr {
+    let id = Ident {
+        name: "REF".into(),
+        text: "REF".into(),
+        span: e.span,
+    };
+    Expr {
+        kind: ExprKind::Call {
+            callee: Box::new(Expr {
+                kind: ExprKind::Name(id),
+                span: e.span,
+            }),
+            args: vec![Arg {
+                name: None,
+                output: false,
+                value: e.clone(),
+                span: e.span,
+            }],
+        },
+        span: e.span,
     }
 }
 

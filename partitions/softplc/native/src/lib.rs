@@ -29,46 +29,56 @@
 //!
 //! # What the generated code looks like
 //!
-//! One function per POU reachable from a task ([`emit`] shows the shape). The verifier
-//! proved every instruction's operand-stack depth static, so the cells of an activation's
-//! stack are Rust locals `s0, s1, ...` (register-allocated by LLVM; floats travel as bit
-//! patterns, as in the VM); jumps become a state machine over basic blocks (`loop { match
-//! block { .. } }`, which LLVM turns into direct branches); CALL is a Rust call with the
-//! argument cells and returns the result cells. Data memory is the machine's own byte array
-//! (same layout, so the monitor's reads and forces by name keep working), as `&mut [u8;
-//! DATA_SIZE]`: static addresses, which the verifier proved inside it, need no run-time
-//! check; frame-relative and indirect accesses are checked as the interpreter checks them.
+//! One function per POU reachable from a task or a method dispatch ([`emit`] shows the
+//! shape). The verifier proved every instruction's operand-stack depth static, so the cells
+//! of an activation's stack are Rust locals `s0, s1, ...` (register-allocated by LLVM;
+//! floats travel as bit patterns, as in the VM). Jumps become structured control flow
+//! (labeled loops and blocks with `continue`/`break`, from the dominator tree: [`structure`]),
+//! so LLVM sees direct branches; only the entries from outside (the try handlers) and
+//! irreducible parts go through a small dispatch. CALL is a Rust call with the argument cells
+//! that returns the result cells; CALL_VIRT a call of one of the methods the slot can run.
+//! Data memory is the machine's own byte array (same layout, so the monitor's reads and
+//! forces by name keep working), as `&mut [u8; DATA_SIZE]`: static addresses, which the
+//! verifier proved inside it, need no run-time check; frame-relative and indirect accesses are
+//! checked as the interpreter checks them. A POU whose activations all have the same frame
+//! base (a program instance, a FUNCTION's static frame) gets it as a constant, and the frame
+//! variables its loops use live in locals where an abstract interpretation of the addresses
+//! shows that no other access can touch them ([`promote`]), written back wherever data memory
+//! can be observed (a call, a trap, the return).
 //!
 //! The interpreter's observable behaviour is kept instruction for instruction:
 //!
 //! * the instruction budget (WATCHDOG) and the deadline checks (DEADLINE, the clock asked
 //!   every 1,024 instructions, at the same instruction counts as `run_cycle_until`): a
 //!   block of `L` instructions is counted once at its start when no event falls inside it,
-//!   else its *checked twin* runs it counting instruction by instruction, so a watchdog or
+//!   else its *checked* copy runs it counting instruction by instruction, so a watchdog or
 //!   deadline stops the cycle before exactly the instruction the VM stops before, and a
 //!   completed cycle reports the VM's instruction count (fused instructions count one, as
 //!   decoded);
 //! * every trap at the same instruction with the same state (a trapping instruction has no
 //!   effect: values are computed and checked before any cell or byte is written); operand
 //!   stack overflow and call depth against the machine's limits (an activation whose stack
-//!   might not fit runs its checked twins, which check every push);
+//!   might not fit runs the checked copies, which check every push);
 //! * `__TRY`/`__CATCH`: the VM's try frames in the machine's try memory; a trap goes to the
 //!   innermost frame (stack cut back, code pushed), through the Rust call chain when the
 //!   frame belongs to a caller, or ends the cycle; RETHROW as the VM;
 //! * after a fault, the machine's stack, `pc`, call and try depth are the interpreter's (the
 //!   activations write their live cells back on the way out).
 //!
-//! One pattern is refused (the interpreter runs such an image): a try frame whose stack
-//! depth lies above the first cell of a POU called while the frame is open (see
-//! `analysis::check_try_frames`); the compiler never produces it.
+//! One pattern is refused ([`Error::TryFrameOverCall`]: the build stops and says so; without
+//! `plc.native` the interpreter runs the image): a try frame whose stack depth lies above the
+//! first cell of a POU called while the frame is open (see `analysis::check_try_frames`);
+//! the compiler never produces it.
 //!
 //! # Interface
 //!
 //! [`translate`] gives the module of one image (it exports `PROGRAM`, a
 //! [`plc_vm::native::NativeProgram`]); [`bundle`] puts several into one file with the
 //! table `PROGRAMS` that the PLC partition is built with (`plc.native = true`, see
-//! `cargo xtask`). [`harness`] writes and builds a stand-alone crate around generated
-//! modules (the differential tests and the benchmark use it).
+//! `cargo xtask`); [`translate_every_pou`] translates a library (no tasks) for checking.
+//! [`harness`] writes and builds a stand-alone workspace around generated modules (the
+//! differential tests and the benchmark use it). `cargo run -p plc-native --example
+//! translate -- IMAGE.plcb` prints the module of an image.
 //!
 //! This crate must never accept an image the verifier rejects, emit code for an opcode or
 //! builtin it does not know ([`Error::UnsupportedOpcode`], [`Error::UnsupportedBuiltin`]),
@@ -397,4 +407,91 @@ pub fn module_name(name: &str) -> String {
         .map(|c| if c.is_ascii_alphanumeric() { c } else { '_' })
         .collect();
     format!("program_{body}")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use plc_vm::image::{ImageBuilder, TaskDef, TaskKind};
+
+    /// Main (with `body`) run by one task, and a POU `f` without cells it may call.
+    fn image(body: impl FnOnce(&mut ImageBuilder, plc_vm::image::PouId)) -> Vec<u8> {
+        let mut b = ImageBuilder::new();
+        b.reserve_data(64);
+        let main = b.declare_pou("Main", 0, 0, 8);
+        let f = b.declare_pou("f", 0, 0, 8);
+        b.add_task(&TaskDef {
+            name: "T".into(),
+            kind: TaskKind::Cyclic,
+            priority: 0,
+            pou: main,
+            instance_base: 0,
+            interval_ns: 0,
+            watchdog_budget: 0,
+        });
+        b.begin_pou(f);
+        b.ret();
+        b.end_pou(f);
+        b.begin_pou(main);
+        body(&mut b, f);
+        b.end_pou(main);
+        b.build().expect("build")
+    }
+
+    #[test]
+    fn a_try_frame_over_a_callee_s_cells_is_refused() {
+        // TRY_BEGIN at depth 2, the stack emptied, then a call: the callee's cells would be
+        // the ones a trap cuts the stack back to.
+        let bytes = image(|b, f| {
+            let (handler, end) = (b.new_label(), b.new_label());
+            b.push_i32(1);
+            b.push_i32(2);
+            b.try_begin(handler);
+            b.drop_();
+            b.drop_();
+            b.push_u32(16);
+            b.call(f);
+            b.push_i32(3);
+            b.push_i32(4);
+            b.try_end();
+            b.drop_();
+            b.drop_();
+            b.jmp(end);
+            b.bind(handler);
+            b.drop_();
+            b.drop_();
+            b.drop_();
+            b.bind(end);
+            b.ret();
+        });
+        assert!(matches!(
+            translate(&bytes),
+            Err(Error::TryFrameOverCall { ref pou, .. }) if pou == "Main"
+        ));
+        // The same with the call above the frame's cells translates.
+        let fine = image(|b, f| {
+            let (handler, end) = (b.new_label(), b.new_label());
+            b.try_begin(handler);
+            b.push_u32(16);
+            b.call(f);
+            b.try_end();
+            b.jmp(end);
+            b.bind(handler);
+            b.drop_();
+            b.bind(end);
+            b.ret();
+        });
+        assert!(translate(&fine).is_ok());
+    }
+
+    #[test]
+    fn an_image_the_verifier_rejects_is_not_translated() {
+        let mut bytes = image(|b, _| b.ret());
+        assert!(matches!(translate(&bytes[..10]), Err(Error::Image(_))));
+        // Corrupt the only RET of Main into an unassigned opcode.
+        let code_at = u32::from_le_bytes(bytes[16..20].try_into().unwrap()) as usize;
+        let main_ret = code_at + 1; // f's RET comes first
+        bytes[main_ret] = 0xFF;
+        assert!(matches!(translate(&bytes), Err(Error::Verify(_))));
+    }
 }

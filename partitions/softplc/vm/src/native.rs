@@ -144,7 +144,7 @@ pub struct CycleEnd {
 
 /// The state of one native cycle: counting, limits, try frames, the fault.
 pub struct Cycle<'c> {
-    image: Image<'c>,
+    image: &'c Image<'c>,
     stack: &'c mut [u64],
     tries: &'c mut [TryFrame],
     expired: &'c mut dyn FnMut() -> bool,
@@ -168,8 +168,9 @@ impl<'c> Cycle<'c> {
     /// A cycle at `now_ns` with `budget` instructions, over the machine's operand stack and
     /// try memory, `call_limit` call frames (the task's activation is the first) and the
     /// deadline check `expired`.
+    #[inline]
     pub(crate) fn new(
-        image: Image<'c>,
+        image: &'c Image<'c>,
         stack: &'c mut [u64],
         call_limit: usize,
         tries: &'c mut [TryFrame],
@@ -199,6 +200,7 @@ impl<'c> Cycle<'c> {
     }
 
     /// What the cycle left behind.
+    #[inline]
     pub(crate) fn end(&self) -> CycleEnd {
         CycleEnd {
             executed: self.event_at - self.fuel,
@@ -595,5 +597,69 @@ pub mod ops {
         let (dst, src, len) = (dst as usize, src as usize, len as usize);
         data.copy_within(src..src + len, dst);
         Some(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    //! The machine's side of a native cycle, with stand-ins for translated code (the
+    //! translations themselves are checked against the model by `plc-native`'s tests).
+    use super::*;
+    use crate::image::{Image, VarType};
+    use crate::tests::program_with;
+    use crate::verify::verify;
+    use crate::vm::{CallFrame, Machine, Memory, TryFrame, Value};
+    use alloc::vec;
+    use core::sync::atomic::{AtomicU8, Ordering};
+
+    /// What the stand-in saw in `x` when it ran.
+    static SEEN: AtomicU8 = AtomicU8::new(0);
+
+    /// Records `x` (data byte 8) and writes 7 into it, as the program `x := 7` would.
+    fn writes_seven(cx: &mut Cycle<'_>, data: &mut [u8], _: usize) -> Result<(), Unwind> {
+        SEEN.store(data[8], Ordering::Relaxed);
+        data[8] = 7;
+        cx.ret(42);
+        Ok(())
+    }
+
+    #[test]
+    fn forces_apply_around_a_native_cycle_and_the_monitor_reads_its_data() {
+        let bytes = program_with(100, |b, _| {
+            b.push_i32(7);
+            b.st_abs(MemType::U8, 8);
+            b.add_var("x", VarType::USInt, 0, 8, 1);
+        });
+        let image = Image::parse(&bytes).unwrap();
+        let program = NativeProgram {
+            image: alloc::boxed::Box::leak(bytes.clone().into_boxed_slice()),
+            hash: image_hash(&bytes),
+            run: writes_seven,
+        };
+        assert!(program.is_translation_of(&bytes));
+        let mut data = vec![0u8; image.data_size() as usize];
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 8], [CallFrame::EMPTY; 4], [TryFrame::EMPTY; 2]);
+        let mut m = Machine::new(
+            verify(&image).unwrap(),
+            Memory {
+                data: &mut data,
+                stack: &mut stack,
+                calls: &mut calls,
+                tries: &mut tries,
+            },
+        )
+        .unwrap();
+        let stats = m.run_cycle_native(0, 0, || false, &program).unwrap();
+        assert_eq!(m.read_var("x"), Ok(Value::UInt(7)));
+        assert_eq!((m.pc(), m.call_depth(), m.stack().len()), (42, 0, 0));
+        assert_eq!(stats.caught_traps, 0);
+        m.force_var("x", Value::UInt(3)).unwrap();
+        m.run_cycle_native(0, 0, || false, &program).unwrap();
+        assert_eq!(SEEN.load(Ordering::Relaxed), 3, "forced before the cycle");
+        assert_eq!(m.read_var("x"), Ok(Value::UInt(3)), "and after it");
+        m.unforce_var("x").unwrap();
+        m.run_cycle_native(0, 0, || false, &program).unwrap();
+        assert_eq!(m.read_var("x"), Ok(Value::UInt(7)));
     }
 }

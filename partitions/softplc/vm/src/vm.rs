@@ -377,6 +377,7 @@ impl<'a, 'm> Machine<'a, 'm> {
 
     /// The start of a cycle of `task` at `now_ns`: refused for an unknown or faulted task;
     /// else the forces applied, the registers set for the task's POU, its budget returned.
+    #[inline]
     fn start_cycle(&mut self, task: usize, now_ns: i64) -> Result<u32, Fault> {
         let Some(start) = self.starts.get(task).copied().flatten() else {
             return Err(Fault {
@@ -424,7 +425,7 @@ impl<'a, 'm> Machine<'a, 'm> {
     ) -> Result<CycleStats, Fault> {
         let budget = self.start_cycle(task, now_ns)?;
         let mut cycle = crate::native::Cycle::new(
-            self.image,
+            &self.image,
             self.stack,
             self.calls.len(),
             self.tries,
@@ -1538,10 +1539,15 @@ impl<'a, 'm> Machine<'a, 'm> {
         self.data[at..at + len].copy_from_slice(&forced.bytes[..len]);
     }
 
+    #[inline]
     fn apply_forces(&mut self) {
-        if !self.any_forced {
-            return;
+        if self.any_forced {
+            self.write_forces();
         }
+    }
+
+    #[cold]
+    fn write_forces(&mut self) {
         for slot in 0..MAX_FORCES {
             if let Some(forced) = self.forces[slot] {
                 self.write_forced(&forced);

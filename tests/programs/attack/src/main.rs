@@ -1,17 +1,26 @@
 //! Attacks on the kernel for the hardening scenarios. Run as the root task (every ability,
-//! all memory and ports), it is the system-call fuzzer below and then ends the run with
-//! success. syssw starts it as a partition; what it does then depends on the partition's
-//! name:
+//! all memory and ports), the system-image entry `test/mode` says what it does: `paths`,
+//! the longest calls beside a victim thread ([`paths::root_paths`]); otherwise the
+//! system-call fuzzer below, then it ends the run with success. syssw starts it as a
+//! partition; what it does then depends on the partition's name:
 //!
-//! * `fuzz*`: the system-call fuzzer: [`CALLS`] calls with random call numbers and random register arguments drawn from a fixed-seed generator
-//!   (seed printed, so a failing run can be replayed), then a histogram of the returned
-//!   codes per call, `fuzz: done ...`, and sleeps for ever;
+//! * `fuzz*`: the system-call fuzzer: [`CALLS`] calls with random call numbers and random
+//!   register arguments drawn from a fixed-seed generator (seed printed, so a failing run
+//!   can be replayed), then a histogram of the returned codes per call, `fuzz: done ...`,
+//!   and sleeps for ever;
 //! * `flood-log*`: writes 512-byte kernel log lines (the longest `debug_write`) as fast as
 //!   it can, for ever;
-//! * `ports*`: at each start touches the next of the kernel's I/O ports (COM1, the
-//!   PICs, the PIT, each port of QEMU's exit device 0xf4-0xf7), which it was not granted:
-//!   every access must raise #GP (the scenario warm-restarts it, so a counter in its memory
-//!   survives), then prints `ports: all <n> accesses faulted` and sleeps;
+//! * `flood-map*`, `flood-io*`, `flood-kill*`, `kill-loop*`: the longest page-range calls,
+//!   I/O-port grants and task kills, and a restart loop of a large task tree
+//!   ([`flood_map`], [`paths`]);
+//! * `peek*`, `ipc-flood*`, `spin*`: reaching for others' memory, threads and time
+//!   ([`reach`]);
+//! * `ports*`: at each start reads, then writes, the next of the ports no partition is
+//!   granted (the kernel's: COM1, the PICs, the PIT, each port of QEMU's exit device
+//!   0xf4-0xf7; and ordinary ones it was not given: keyboard controller, COM2, PCI
+//!   configuration): every access must raise #GP (the scenario warm-restarts it, so a
+//!   counter in its memory survives), then prints `ports: all <n> accesses faulted` and
+//!   sleeps;
 //! * `fault-loop*`: executes `ud2` at once at every start (the scenario cold-restarts it:
 //!   a restart loop);
 //! * `fault-ignore*`: a fault loop the partition survives: it starts one thread after
@@ -22,7 +31,9 @@
 //! * `forge*`: sends syssw service requests for ports it does not own (every port id
 //!   0..64, read, status, receive, clear) and unknown labels, as fast as it can, and
 //!   counts the requests syssw accepted (`forge: <n> requests, <m> accepted`) every
-//!   10,000 requests;
+//!   10,000 requests; with each count an error report whose words and text name the
+//!   victim and the kernel's fault label, and after [`FORGE_REQUESTS`] a request for IDLE
+//!   whose words name the victim (syssw must idle the forger, never the victim);
 //! * `hoard*`: exhausts its resource partition's kernel-memory quota: creates child tasks,
 //!   threads and mappings of one page at ever new addresses (each in the most page tables)
 //!   until the kernel says `QuotaExceeded`, prints `hoard: tasks=<n> threads=<n> maps=<n>,
@@ -31,10 +42,11 @@
 //!   with the window's start (`partition_info`), counts the major frames it saw to find a
 //!   missed window and whether the start is the ideal one (the first start plus whole major
 //!   frames: `drift`), keeps the lateness in a constant-size histogram (a soak logs 10^6
-//!   windows), prints a summary every [`REPORT_EVERY`] windows, and after
-//!   [`VICTIM_FRAMES`] windows (`victim-<n>`: `n` windows) creates and kills a thread (its
-//!   own quota is untouched by any hoarder) and executes `ud2` (the scenario maps that illegal request to
-//!   `shutdown_success`, ending the run);
+//!   windows), creates and kills a thread if the window is at least 100 us long (its own
+//!   quota is untouched by any hoarder),
+//!   prints a summary every [`REPORT_EVERY`] windows, and after [`VICTIM_FRAMES`] windows
+//!   (`victim-<n>`: `n` windows) creates and kills a thread once more and executes `ud2`
+//!   (the scenario maps that illegal request to `shutdown_success`, ending the run);
 //! * `port-victim*`: port traffic through syssw while another partition restarts: it
 //!   creates a queuing port pair whose channel leads back into itself and, once per window,
 //!   sends a message, receives it back and asks for its partition status (three service
@@ -49,6 +61,9 @@
 #![no_std]
 #![no_main]
 
+mod paths;
+mod reach;
+
 use core::fmt::Write;
 use core::sync::atomic::{AtomicUsize, Ordering};
 use user_rt::abi::boot::KERNEL_BASE;
@@ -57,6 +72,7 @@ use user_rt::abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAP_MAX_PAGES, MAX_MAJOR_FRAME, PageRights,
     ROOT_INFO_BASE, ThreadAttribute, ThreadId, USER_END, USER_MIN, make_id,
 };
+use user_rt::abi::sysimg::SystemImage;
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::{DATA_BASE, POOL_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
@@ -81,11 +97,17 @@ const PAGE: u64 = 4096;
 /// its own.
 const TOP_REGION: core::ops::Range<u64> = ROOT_INFO_BASE..USER_END;
 
-fn main(start: u64, _: u64) {
+fn main(start: u64, image_len: u64) {
     #[allow(unsafe_code)]
     // SAFETY: syssw starts every partition with the start record's address in rdi.
     let Some(info) = (unsafe { StartInfo::from_start(start) }) else {
-        // No start record: the kernel started it as the root task (rdi = system image).
+        // No start record: the kernel started it as the root task (rdi = system image,
+        // rsi = its length); the image's entry `test/mode` says what to do.
+        let image = SystemImage::parse(root_task::system_image(start, image_len));
+        let mode = image.ok().and_then(|i| i.find("test/mode")).map(|e| e.data);
+        if mode == Some(b"paths".as_slice()) {
+            paths::root_paths();
+        }
         fuzz(CALLS, true);
         let _ = sys::system_halt(true);
         return;
@@ -101,8 +123,20 @@ fn main(start: u64, _: u64) {
         }
     } else if name.starts_with("flood-map") {
         flood_map(info.pool_len);
+    } else if name.starts_with("flood-io") {
+        paths::flood_io();
+    } else if name.starts_with("flood-kill") {
+        paths::flood_kill();
+    } else if name.starts_with("kill-loop") {
+        paths::kill_loop();
     } else if name.starts_with("ports") {
         touch_kernel_ports(ThreadId(info.server));
+    } else if name.starts_with("peek") {
+        reach::peek(info);
+    } else if name.starts_with("ipc-flood") {
+        reach::ipc_flood(info);
+    } else if name.starts_with("spin") {
+        reach::spin(info);
     } else if name.starts_with("fault-loop") {
         #[allow(unsafe_code)]
         // SAFETY: ud2 only raises #UD.
@@ -134,6 +168,11 @@ fn main(start: u64, _: u64) {
             .and_then(|n| n.parse().ok())
             .unwrap_or(VICTIM_FRAMES);
         victim(info.time_partition, windows);
+        #[allow(unsafe_code)]
+        // SAFETY: ud2 only raises #UD (the scenario's end).
+        unsafe {
+            core::arch::asm!("ud2")
+        };
     } else {
         println!("attack: no role for partition `{name}`");
     }
@@ -179,10 +218,17 @@ fn fault_ignore(priority: u8) -> ! {
     }
 }
 
-/// The kernel's I/O ports and QEMU's exit device, which no partition may be granted.
-const KERNEL_PORTS: [u16; 9] = [0x3f8, 0x3fd, 0x20, 0xa1, 0x40, 0xf4, 0xf5, 0xf6, 0xf7];
+/// Ports no partition is granted: the kernel's (COM1, the PICs, the PIT, each port of QEMU's
+/// exit device) and ordinary ones this partition was not given (keyboard controller, COM2,
+/// PCI configuration).
+const FORBIDDEN_PORTS: [u16; 12] = [
+    0x3f8, 0x3fd, 0x20, 0xa1, 0x40, 0xf4, 0xf5, 0xf6, 0xf7, 0x60, 0x2f8, 0xcf8,
+];
 
-/// How many of [`KERNEL_PORTS`] were touched (kept across warm restarts).
+/// Accesses `ports` makes, one per start: a read, then a write, of each forbidden port.
+const PORT_ACCESSES: usize = 2 * FORBIDDEN_PORTS.len();
+
+/// How many of [`PORT_ACCESSES`] were made (kept across warm restarts).
 static PORTS_TOUCHED: AtomicUsize = AtomicUsize::new(0);
 
 fn touch_kernel_ports(server: ThreadId) {
@@ -194,17 +240,21 @@ fn touch_kernel_ports(server: ThreadId) {
         },
     );
     let next = PORTS_TOUCHED.fetch_add(1, Ordering::Relaxed);
-    match KERNEL_PORTS.get(next) {
-        Some(&port) => {
-            println!("ports: touching port {port:#x}");
-            // A write to the exit device would end the run; to COM1 it would garble the log.
-            outb(port, 0x01);
-            println!("ports: port {port:#x} did not fault");
-        }
-        None => {
-            println!("ports: all {} accesses faulted", KERNEL_PORTS.len());
-            sys::sleep_until(u64::MAX);
-        }
+    if next >= PORT_ACCESSES {
+        println!("ports: all {PORT_ACCESSES} accesses faulted");
+        sys::sleep_until(u64::MAX);
+        return;
+    }
+    let port = FORBIDDEN_PORTS[next / 2];
+    if next.is_multiple_of(2) {
+        println!("ports: reading port {port:#x}");
+        let value = user_rt::port::inb(port);
+        println!("ports: read {value:#x} from port {port:#x}: did not fault");
+    } else {
+        // A write to the exit device would end the run; to COM1 it would garble the log.
+        println!("ports: writing port {port:#x}");
+        outb(port, 0x01);
+        println!("ports: port {port:#x} did not fault");
     }
 }
 
@@ -268,8 +318,60 @@ fn forge(server: ThreadId) {
         }
         if sent % 10_000 == 0 {
             println!("forge: {sent} requests, {accepted} accepted");
+            forge_report(server);
+        }
+        if sent == FORGE_REQUESTS {
+            forge_idle(server);
         }
     }
+}
+
+/// Requests the forger sends before it asks to be IDLE naming the victim.
+const FORGE_REQUESTS: u64 = 40_000;
+
+/// An error report whose words and text name the victim (partition 0 of `attack_floods`)
+/// and the kernel's fault label: the health monitor must charge it to the forger.
+fn forge_report(server: ThreadId) {
+    let mut wire = Request::ReportError {
+        error: user_rt::protocol::ErrorCode::ApplicationError,
+        detail: b"partition=victim-200",
+    }
+    .encode();
+    wire.words[1] = 0;
+    wire.words[2] = user_rt::abi::ipc::LABEL_FAULT_REPORT as u64;
+    let detail = b"partition=victim-200";
+    let page = &raw const IPC_PAGE as u64;
+    #[allow(unsafe_code)]
+    // SAFETY: IPC_PAGE is this thread's registered IPC buffer (set by `forge`), a page.
+    let ipc = unsafe { IpcBufferRef::new(page) };
+    ipc.write_data(0, detail);
+    let message = Message {
+        tag: MessageTag::new(wire.label, detail.len(), 0),
+        words: wire.words,
+    };
+    let ok = sys::ipc_call(server, 1_000_000, &message)
+        .is_ok_and(|r| r.message.tag.label() == ReturnCode::NoError.code());
+    println!(
+        "forge: error report naming the victim: {}",
+        if ok { "accepted as its own" } else { "refused" }
+    );
+}
+
+/// A mode change to IDLE whose words name the victim: syssw must idle the forger itself.
+fn forge_idle(server: ThreadId) {
+    let mut wire = Request::SetPartitionMode {
+        mode: OperatingMode::Idle,
+    }
+    .encode();
+    wire.words[1] = 0;
+    wire.words[2] = 0;
+    println!("forge: asking for IDLE with words naming the victim");
+    let message = Message {
+        tag: MessageTag::new(wire.label, 0, 0),
+        words: wire.words,
+    };
+    let _ = sys::ipc_call(server, 1_000_000, &message);
+    println!("forge: still running after IDLE");
 }
 
 /// The port victim's queuing ports (their channel leads from `out` back to `in`).
@@ -388,6 +490,9 @@ fn hoard() {
     );
 }
 
+/// The shortest window in which the victim creates a thread besides logging its start.
+const OBJECTS_WINDOW_NS: u64 = 100_000;
+
 /// The victim: see the crate documentation. It reports every [`REPORT_EVERY`] windows, or
 /// 100 times in all for a long run (a line takes longer than a short window). Its last line
 /// is `victim: lateness windows=<n> min=<ns> median=<ns> max=<ns> missed=<n> drift=<n>`
@@ -396,12 +501,14 @@ fn hoard() {
 /// starts the kernel reported off the ideal sequence: the first start plus whole major
 /// frames (the frame learnt from the first two windows, one window per frame).
 fn victim(tp: u64, windows: u64) {
+    println!("victim: thread {:#x}", sys::thread_self().0.0);
     let report_every = REPORT_EVERY.max(windows / 100);
     let mut lateness = histogram::Histogram::new();
     let mut first: Option<(u64, u64)> = None;
     let mut major_frame = None;
     let mut last_frame = None;
     let (mut missed, mut drift, mut max_late, mut sum_late) = (0u64, 0u64, 0u64, 0u64);
+    let (mut created, mut refused) = (0u64, 0u64);
     for window in 1..=windows {
         let now = sys::clock();
         let Ok(info) = sys::partition_info(tp) else {
@@ -439,9 +546,21 @@ fn victim(tp: u64, windows: u64) {
                 sum_late / (window - 1).max(1)
             );
         }
+        // Objects of its own, whatever a neighbour hoards: a thread each window, if the
+        // window is long enough not to let that spill into the next (the soak's is 20 us).
+        if info.window_length >= OBJECTS_WINDOW_NS {
+            match sys::thread_create(None, 0x1000, 0x2000, 1, 0) {
+                Ok(thread) => {
+                    created += 1;
+                    let _ = sys::thread_kill(thread);
+                }
+                Err(_) => refused += 1,
+            }
+        }
         // Ready again at the end of this window: runs at the start of the next one.
         sys::sleep_until(info.next_window_start + info.window_length);
     }
+    println!("victim: created {created} threads, {refused} refused");
     if let Some((min, median, max)) = lateness.summary() {
         println!(
             "victim: lateness windows={} min={min} median={median} max={max} missed={missed} drift={drift}",
@@ -457,11 +576,6 @@ fn victim(tp: u64, windows: u64) {
         Err(e) => println!("victim: cannot create a thread: {e:?}"),
     }
     println!("victim: done");
-    #[allow(unsafe_code)]
-    // SAFETY: ud2 only raises #UD (the scenario's end).
-    unsafe {
-        core::arch::asm!("ud2")
-    };
 }
 
 /// xorshift64*: small, fast and good enough to cover argument space.
