@@ -5,7 +5,8 @@
 //! reporting both legs share.
 //!
 //! A leg (the interpreter: `plc-bench` in `plc-compiler`; the native tier:
-//! `plc-native-bench` in `plc-native`) compiles each [`Program`], runs it, checks that it
+//! `plc-native-bench` in `plc-native`; IronPLC's VM: `plc-ironplc-bench` here, see
+//! [`ironplc`]) compiles each [`Program`], runs it, checks that it
 //! computes what its reference computes ([`Program::outputs`], [`check_outputs`]), measures
 //! both with [`measure`] and prints [`report`]'s two lines per program:
 //! `bench plc_<tier>_<name>` (ns per cycle) and `bench plc_<tier>_<name>_ratio` (its cycle
@@ -245,14 +246,19 @@ pub fn stats(v: &[f64]) -> (f64, f64, f64) {
     (s[s.len() / 2], s[0], s[s.len() - 1])
 }
 
+/// `bench plc_<tier>_<name>` for ns-per-cycle `samples` (median, min, max).
+pub fn metric_line(tier: &str, name: &str, samples: &[f64]) -> String {
+    let (med, min, max) = stats(samples);
+    format!(
+        "bench plc_{tier}_{name} median={med:.1} min={min:.1} max={max:.1} unit=ns samples={}",
+        samples.len()
+    )
+}
+
 /// The two lines of a program on a tier: `bench plc_<tier>_<name>` (ns per cycle) and
 /// `bench plc_<tier>_<name>_ratio` (over the reference, sample by sample).
 pub fn report(tier: &str, name: &str, plc: &[f64], reference: &[f64]) -> [String; 2] {
-    let (med, min, max) = stats(plc);
-    let time = format!(
-        "bench plc_{tier}_{name} median={med:.1} min={min:.1} max={max:.1} unit=ns samples={}",
-        plc.len()
-    );
+    let time = metric_line(tier, name, plc);
     let ratios: Vec<f64> = plc
         .iter()
         .zip(reference)

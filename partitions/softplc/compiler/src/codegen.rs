@@ -4,9 +4,16 @@
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
 //! are 64-bit cells; aggregates (STRING, arrays, structs) are represented by their address.
-//! Hidden temporaries (string results, FOR bounds, CASE selectors, MIN/MAX operands) get a
-//! static data slot per use site, which is sound because IEC programs are not recursive
-//! (checked) and tasks do not preempt each other on the host runner.
+//! Hidden temporaries (string results, FOR bounds, CASE selectors) get a static data slot
+//! per use site, which is sound because IEC programs are not recursive (checked) and tasks
+//! do not preempt each other on the host runner.
+//!
+//! Code shape, for the interpreter's speed (the builder fuses what follows): an element of a
+//! static array is addressed by `ELEM_REL`/`ELEM_ABS` after its index (one instruction with
+//! the bounds check, the constant indices folded in); MIN, MAX and LIMIT use `SEL_IF` on the
+//! stack; FOR and WHILE loops are rotated (the test after the body, one jump per iteration),
+//! a FOR loop with a constant bound compares with the constant; the last IF branch without
+//! ELSE falls through.
 
 use std::collections::HashMap;
 
@@ -2869,7 +2876,7 @@ fn offset_loc(l: Loc, off: u32) -> Loc {
 
 /// Whether `v` lies in the range of integer type `e`.
 fn type_holds(e: Elem, v: i128) -> bool {
-    let bits = e.size() as u32 * 8;
+    let bits = e.size() * 8;
     if e.signed_storage() {
         let half = 1i128 << (bits - 1);
         -half <= v && v < half

@@ -1584,12 +1584,24 @@ mod builder {
 
         /// Emits an instruction without operands (panics in debug if `op` has operands).
         ///
-        /// The builder fuses a few common sequences as they are emitted (same effect, fewer
-        /// dispatches, never more stack; see [`ImageBuilder::disable_fusion`]): array addressing
-        /// `CHK_INDEX; [PUSH lo; SUB]; [PUSH s; MUL]; ADD` → `INDEX`, `PUSH_I32 k; ADD|SUB` →
-        /// `ADD_IMM`, `<comparison>; JZ|JNZ` → `JUMP_IF_NOT|JUMP_IF`, and a `SEXT`/`ZEXT` directly
-        /// before a store that truncates anyway is dropped. Fusion never crosses a bound label,
-        /// a source location or raw bytes.
+        /// The builder fuses common sequences as they are emitted (same effect, fewer
+        /// dispatches, never more stack; see [`ImageBuilder::disable_fusion`] and the ISA's
+        /// "Fused instructions and superinstructions"):
+        ///
+        /// * array addressing `CHK_INDEX; [PUSH lo; SUB]; [PUSH s; MUL]; ADD` → `INDEX`;
+        ///   `LD_REL i; ELEM_*` → `ELEM_*_AT`; `ELEM_*[_AT]; LD_IND ty 0` → `LD_ELEM_*[_AT]`;
+        ///   `ELEM_*[_AT]; <pure value>; ST_IND ty 0` → `<pure value>; ST_ELEM_*[_AT]`;
+        /// * `PUSH_I32 k; ADD|SUB` → `ADD_IMM`; `PUSH_I32 k; op` → `OP_IMM` (also `PUSH_U32`
+        ///   where the cell is the same); `LD_REL|LD_ABS; op` → `OP_REL|OP_ABS`; `LD_REL a;
+        ///   LD_REL b; op` → `OP_REL_REL`; `LD ty x; ADD_IMM k; ST ty x` → `INC_*`;
+        /// * `<comparison>; JZ|JNZ` → `JUMP_IF_NOT|JUMP_IF`, with an immediate operand →
+        ///   `JUMP_IF_NOT_IMM|JUMP_IF_IMM`, on a frame variable → `JUMP_IF_NOT_REL_IMM|
+        ///   JUMP_IF_REL_IMM` (also `LD_REL x; JZ|JNZ`, a test against 0); `NOT_BOOL; JZ` →
+        ///   `JNZ` (and the reverse);
+        /// * `PUSH_U32|PUSH_I64 c; NEG_F32|NEG_F64` → the negated constant; a `SEXT`/`ZEXT`
+        ///   directly before a store that truncates anyway is dropped.
+        ///
+        /// Fusion never crosses a bound label, a source location or raw bytes.
         pub fn op(&mut self, op: Opcode) {
             debug_assert!(op.operands().is_empty(), "{} needs operands", op.mnemonic());
             if matches!(op, Opcode::NegF32 | Opcode::NegF64) && self.fold_negation(op) {

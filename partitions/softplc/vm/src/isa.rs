@@ -42,6 +42,25 @@
 //! depths; which method runs is decided by the instance's class at run time. A NULL
 //! instance, an unknown class or a class without the slot trap with
 //! [`Trap::InvalidReference`].
+//!
+//! # Fused instructions and superinstructions
+//!
+//! Some instructions exist only to cut dispatches: `INDEX`, `ADD_IMM`, `JUMP_IF`,
+//! `JUMP_IF_NOT` and the superinstructions `0xC0..=0xD6` (array elements with and without a
+//! frame variable as the index, `INC_*`, `SEL_IF`, comparisons and operators with an
+//! immediate or frame/static operands, immediate jumps on a frame variable). Each one's
+//! description names the plain sequence it is; it has exactly that sequence's effect, raises
+//! the traps that sequence can raise in the same order, and never needs more operand stack
+//! (it may need less: a fused push that would overflow is not there), but the watchdog
+//! counts it as **one** instruction and a trap leaves the stack as it was before the fused
+//! instruction (as before every trapping instruction). `ST_ELEM_*` reads its index and checks
+//! it after the value is computed; the builder makes it (from `ELEM_*`, the value's code,
+//! `ST_IND ty 0`) only when the value's code is pure (no memory write, no trap but
+//! STACK_OVERFLOW), so nothing can tell. Element addresses are computed as `INDEX` does
+//! (wrapping 64-bit arithmetic), then checked against data memory at the access.
+//! `image::ImageBuilder` fuses the plain sequences as they are emitted (see its `op`); the
+//! VM, the reference model ([`crate::model`]) and the native tier (`plc-native`) implement
+//! every one.
 
 /// Operand layout of an instruction (all immediates little-endian).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

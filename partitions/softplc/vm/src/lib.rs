@@ -37,8 +37,11 @@
 //! * **Checks**: `CHK_INDEX lo hi` (INDEX_OUT_OF_BOUNDS), `CHK_RANGE_S/U lo hi`
 //!   (SUBRANGE_VIOLATION) leave the checked value on the stack; `INDEX lo hi stride` computes an
 //!   array element address with the index check in one instruction.
-//! * **Fused forms** (`INDEX`, `ADD_IMM`, `JUMP_IF`, `JUMP_IF_NOT`) exist only to cut dispatches;
-//!   the builder produces them from the plain sequences automatically.
+//! * **Fused forms** (`INDEX`, `ADD_IMM`, `JUMP_IF`, `JUMP_IF_NOT` and the superinstructions
+//!   `0xC0..=0xD6`: array elements, increments, MIN/MAX, operators and comparisons with
+//!   immediate or frame/static operands) exist only to cut dispatches; the builder produces
+//!   them from the plain sequences automatically (see [`isa`], "Fused instructions and
+//!   superinstructions").
 //!
 //! # Semantics worth knowing
 //!

@@ -1,10 +1,12 @@
 //! The verifier: the only way to obtain a [`VerifiedImage`], the only thing the VM executes.
 //!
 //! Checks, in order: every instruction of the code section decodes (linear sweep from 0:
-//! known opcode, complete operands, valid type/width/mode/trap bytes, existing constant, POU
-//! and builtin indices, absolute data operands inside `data_size`); then per POU: its code
-//! range is inside the code and on instruction boundaries, frame-relative operands are inside
-//! its frame, jump and handler targets are instruction starts inside the same POU, and an
+//! known opcode, complete operands, valid type/width/mode/trap bytes, comparison and
+//! binary-operator operand bytes of the fused instructions, an integer type for `INC_*`,
+//! existing constant, POU and builtin indices, absolute data operands inside `data_size`);
+//! then per POU: its code range is inside the code and on instruction boundaries,
+//! frame-relative operands (the superinstructions' frame variables and index variables
+//! too) are inside its frame, jump and handler targets are instruction starts inside the same POU, and an
 //! abstract interpretation over all paths finds, for every reachable instruction, one operand
 //! stack depth and one try-nesting depth (equal at merge points, no underflow, at most
 //! [`MAX_POU_STACK`] cells, at most [`MAX_TRY_NESTING`] try frames, `RET` with exactly
@@ -487,10 +489,8 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     }
                 }
             }
-            Operands::TypeAddrIndex => {
-                if MemType::from_code(code[imm]).is_none() {
-                    return err(site, Reason::BadType(code[imm]));
-                }
+            Operands::TypeAddrIndex if MemType::from_code(code[imm]).is_none() => {
+                return err(site, Reason::BadType(code[imm]));
             }
             Operands::AddrIndexAt | Operands::TypeAddrIndexAt => {
                 let index_type = if op.operands() == Operands::AddrIndexAt {

@@ -7,6 +7,16 @@
 //!
 //! Determinism: the result of a cycle depends only on the image, data memory, the task and
 //! `now_ns` (float ops are IEEE-754 with the math builtins implemented in [`crate::fmath`]).
+//!
+//! How it runs (for speed, without `unsafe`): `Machine::interpret` keeps the registers (`pc`,
+//! `sp`, the frame base) and the slices of code, data and stack in locals and dispatches on
+//! the raw opcode byte (one jump table); immediates are read from one bounds-checked
+//! fixed-size slice per instruction. The watchdog budget and the deadline checks share one
+//! down-counter ("fuel": the instructions left before the next check is due, a watchdog at
+//! the budget or a clock question every [`DEADLINE_CHECK_EVERY`] instructions), so an
+//! instruction costs one decrement and test for both, and both fire before exactly the
+//! instruction they would stop with a count per instruction. Every arm checks before it
+//! writes, so a trapping instruction leaves no trace (its `pc` and the stack as before it).
 
 use crate::builtins;
 use crate::image::{Image, SourceLocation, VAR_FLAG_CONSTANT, Var, VarType};
