@@ -148,7 +148,7 @@ fn binary(op: Opcode, a: &str, b: &str) -> (Option<String>, String) {
             };
             (
                 (op == DivF32).then(|| format!("f32_of({b}) == 0.0")),
-                format!("f32_cell(f32_of({a}) {sym} f32_of({b}))"),
+                format!("ops::real_result(f32_of({a}) {sym} f32_of({b}))"),
             )
         }
         AddF64 | SubF64 | MulF64 | DivF64 => {
@@ -160,7 +160,7 @@ fn binary(op: Opcode, a: &str, b: &str) -> (Option<String>, String) {
             };
             (
                 (op == DivF64).then(|| format!("f64_of({b}) == 0.0")),
-                format!("f64_cell(f64_of({a}) {sym} f64_of({b}))"),
+                format!("ops::lreal_result(f64_of({a}) {sym} f64_of({b}))"),
             )
         }
         cmp => (None, format!("compare(Opcode::{cmp:?}, {a}, {b}) as u64")),
@@ -863,7 +863,7 @@ impl Emitter<'_> {
                     MulF32 => "*",
                     _ => "/",
                 };
-                writeln!(o, "{a} = f32_cell(f32_of({a}) {sym} f32_of({b}));").ok();
+                writeln!(o, "{a} = ops::real_result(f32_of({a}) {sym} f32_of({b}));").ok();
             }
             AddF64 | SubF64 | MulF64 | DivF64 => {
                 let (a, b) = (top(2), top(1));
@@ -881,7 +881,7 @@ impl Emitter<'_> {
                     MulF64 => "*",
                     _ => "/",
                 };
-                writeln!(o, "{a} = f64_cell(f64_of({a}) {sym} f64_of({b}));").ok();
+                writeln!(o, "{a} = ops::lreal_result(f64_of({a}) {sym} f64_of({b}));").ok();
             }
             NegF32 => {
                 let a = top(1);

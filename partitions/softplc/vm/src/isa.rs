@@ -6,7 +6,8 @@
 //!
 //! * integers: two's complement `i64` (unsigned values zero-extended into the cell);
 //! * `REAL` (f32): the f32 bit pattern in the low 32 bits, upper 32 bits zero;
-//! * `LREAL` (f64): the f64 bit pattern;
+//! * `LREAL` (f64): the f64 bit pattern (a NaN that `+ - * /` produce is the canonical
+//!   quiet NaN, for REAL too: [`real_result`], [`lreal_result`]);
 //! * `BOOL`: 0 or 1; `TIME`: `i64` nanoseconds; addresses: unsigned byte offsets into data memory.
 //!
 //! Stack effects are written `[before] -> [after]` with the top of stack on the right.
@@ -621,6 +622,34 @@ impl Opcode {
                 | GtF64
                 | GeF64
         )
+    }
+}
+
+/// The bits every REAL arithmetic result that is NaN has (a quiet NaN).
+pub const CANONICAL_NAN_F32: u32 = 0x7FC0_0000;
+/// The bits every LREAL arithmetic result that is NaN has (a quiet NaN).
+pub const CANONICAL_NAN_F64: u64 = 0x7FF8_0000_0000_0000;
+
+/// The cell of a REAL result of `+ - * /` (`ADD_F32` .. `DIV_F32`, also inside the fused
+/// operators): its bits, a NaN as [`CANONICAL_NAN_F32`]. Which NaN operand's payload the
+/// hardware passes on depends on the machine code's operand order, which the compiler is
+/// free to choose; a canonical NaN keeps every execution tier bit-identical.
+#[inline(always)]
+pub fn real_result(v: f32) -> u64 {
+    if v.is_nan() {
+        CANONICAL_NAN_F32 as u64
+    } else {
+        v.to_bits() as u64
+    }
+}
+
+/// The cell of an LREAL result of `+ - * /`: its bits, a NaN as [`CANONICAL_NAN_F64`].
+#[inline(always)]
+pub fn lreal_result(v: f64) -> u64 {
+    if v.is_nan() {
+        CANONICAL_NAN_F64
+    } else {
+        v.to_bits()
     }
 }
 

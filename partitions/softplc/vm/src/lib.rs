@@ -52,7 +52,9 @@
 //! * Float division by zero traps DIVISION_BY_ZERO (rather than producing infinity);
 //!   float->integer conversions trap NUMERIC_ERROR for NaN, infinities and out-of-range values;
 //!   `REAL_TO_INT`-style rounding is to nearest with ties **away from zero** (2.5 -> 3).
-//! * Everything is deterministic: the math library ([`fmath`]) uses only IEEE basic operations.
+//! * Everything is deterministic: the math library ([`fmath`]) uses only IEEE basic operations,
+//!   and a NaN that REAL/LREAL `+ - * /` produce is the canonical quiet NaN (which operand's
+//!   NaN the hardware would pass on depends on the machine code; [`isa::real_result`]).
 //!
 //! # Limits
 //!

@@ -825,7 +825,21 @@ impl<'a> Model<'a> {
 fn model_binary(op: Opcode, a: u64, b: u64) -> Result<u64, Trap> {
     let b2 = |x: bool| if x { 1u64 } else { 0 };
     let r32 = |c: u64| f32::from_bits(c as u32);
-    let c32 = |f: f32| f.to_bits() as u64;
+    // Arithmetic results: a NaN is the canonical one (`isa::CANONICAL_NAN_F32`/`_F64`).
+    let c32 = |f: f32| {
+        if f.is_nan() {
+            crate::isa::CANONICAL_NAN_F32 as u64
+        } else {
+            f.to_bits() as u64
+        }
+    };
+    let c64 = |f: f64| {
+        if f.is_nan() {
+            crate::isa::CANONICAL_NAN_F64
+        } else {
+            f.to_bits()
+        }
+    };
     let r64 = f64::from_bits;
     let (x, y) = (a as i64, b as i64);
     Ok(match op {
@@ -884,14 +898,14 @@ fn model_binary(op: Opcode, a: u64, b: u64) -> Result<u64, Trap> {
             }
             c32(r32(a) / r32(b))
         }
-        Opcode::AddF64 => (r64(a) + r64(b)).to_bits(),
-        Opcode::SubF64 => (r64(a) - r64(b)).to_bits(),
-        Opcode::MulF64 => (r64(a) * r64(b)).to_bits(),
+        Opcode::AddF64 => c64(r64(a) + r64(b)),
+        Opcode::SubF64 => c64(r64(a) - r64(b)),
+        Opcode::MulF64 => c64(r64(a) * r64(b)),
         Opcode::DivF64 => {
             if r64(b) == 0.0 {
                 return Err(Trap::DivisionByZero);
             }
-            (r64(a) / r64(b)).to_bits()
+            c64(r64(a) / r64(b))
         }
         cmp => b2(model_compare(cmp as u8, a, b)),
     })

@@ -20,7 +20,7 @@
 
 use crate::builtins;
 use crate::image::{Image, SourceLocation, VAR_FLAG_CONSTANT, Var, VarType};
-use crate::isa::{MemType, Opcode, RoundMode, Trap, read_u16};
+use crate::isa::{MemType, Opcode, RoundMode, Trap, lreal_result, read_u16, real_result};
 use crate::verify::{MAX_TASKS, VerifiedImage};
 
 /// A saved caller context.
@@ -859,15 +859,15 @@ impl<'a, 'm> Machine<'a, 'm> {
                     next!(Sel);
                 }
                 op::AddF32 => {
-                    binary!(|a, b| cell_f32(f32_of(a) + f32_of(b)));
+                    binary!(|a, b| real_result(f32_of(a) + f32_of(b)));
                     next!(AddF32);
                 }
                 op::SubF32 => {
-                    binary!(|a, b| cell_f32(f32_of(a) - f32_of(b)));
+                    binary!(|a, b| real_result(f32_of(a) - f32_of(b)));
                     next!(SubF32);
                 }
                 op::MulF32 => {
-                    binary!(|a, b| cell_f32(f32_of(a) * f32_of(b)));
+                    binary!(|a, b| real_result(f32_of(a) * f32_of(b)));
                     next!(MulF32);
                 }
                 op::DivF32 => {
@@ -875,7 +875,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                     if y == 0.0 {
                         trap!(Trap::DivisionByZero);
                     }
-                    binary!(|a, _b| cell_f32(f32_of(a) / y));
+                    binary!(|a, _b| real_result(f32_of(a) / y));
                     next!(DivF32);
                 }
                 op::NegF32 => {
@@ -883,15 +883,15 @@ impl<'a, 'm> Machine<'a, 'm> {
                     next!(NegF32);
                 }
                 op::AddF64 => {
-                    binary!(|a, b| (f64::from_bits(a) + f64::from_bits(b)).to_bits());
+                    binary!(|a, b| lreal_result(f64::from_bits(a) + f64::from_bits(b)));
                     next!(AddF64);
                 }
                 op::SubF64 => {
-                    binary!(|a, b| (f64::from_bits(a) - f64::from_bits(b)).to_bits());
+                    binary!(|a, b| lreal_result(f64::from_bits(a) - f64::from_bits(b)));
                     next!(SubF64);
                 }
                 op::MulF64 => {
-                    binary!(|a, b| (f64::from_bits(a) * f64::from_bits(b)).to_bits());
+                    binary!(|a, b| lreal_result(f64::from_bits(a) * f64::from_bits(b)));
                     next!(MulF64);
                 }
                 op::DivF64 => {
@@ -899,7 +899,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                     if y == 0.0 {
                         trap!(Trap::DivisionByZero);
                     }
-                    binary!(|a, _b| (f64::from_bits(a) / y).to_bits());
+                    binary!(|a, _b| lreal_result(f64::from_bits(a) / y));
                     next!(DivF64);
                 }
                 op::NegF64 => {
@@ -1677,7 +1677,6 @@ fn element(array: u64, i: u64, lo: u64, hi: u64, stride: u32) -> Option<u64> {
 fn binary_op(op: u8, a: u64, b: u64) -> Result<u64, Trap> {
     use crate::isa::byte as op;
     let f32_of = |cell: u64| f32::from_bits(cell as u32);
-    let cell_f32 = |v: f32| v.to_bits() as u64;
     let f64_of = f64::from_bits;
     Ok(match op {
         op::Add => a.wrapping_add(b),
@@ -1694,16 +1693,16 @@ fn binary_op(op: u8, a: u64, b: u64) -> Result<u64, Trap> {
         op::Shl => a.checked_shl(b.min(64) as u32).unwrap_or(0),
         op::ShrU => a.checked_shr(b.min(64) as u32).unwrap_or(0),
         op::ShrS => ((a as i64) >> b.min(63)) as u64,
-        op::AddF32 => cell_f32(f32_of(a) + f32_of(b)),
-        op::SubF32 => cell_f32(f32_of(a) - f32_of(b)),
-        op::MulF32 => cell_f32(f32_of(a) * f32_of(b)),
+        op::AddF32 => real_result(f32_of(a) + f32_of(b)),
+        op::SubF32 => real_result(f32_of(a) - f32_of(b)),
+        op::MulF32 => real_result(f32_of(a) * f32_of(b)),
         op::DivF32 if f32_of(b) == 0.0 => return Err(Trap::DivisionByZero),
-        op::DivF32 => cell_f32(f32_of(a) / f32_of(b)),
-        op::AddF64 => (f64_of(a) + f64_of(b)).to_bits(),
-        op::SubF64 => (f64_of(a) - f64_of(b)).to_bits(),
-        op::MulF64 => (f64_of(a) * f64_of(b)).to_bits(),
+        op::DivF32 => real_result(f32_of(a) / f32_of(b)),
+        op::AddF64 => lreal_result(f64_of(a) + f64_of(b)),
+        op::SubF64 => lreal_result(f64_of(a) - f64_of(b)),
+        op::MulF64 => lreal_result(f64_of(a) * f64_of(b)),
         op::DivF64 if f64_of(b) == 0.0 => return Err(Trap::DivisionByZero),
-        op::DivF64 => (f64_of(a) / f64_of(b)).to_bits(),
+        op::DivF64 => lreal_result(f64_of(a) / f64_of(b)),
         cmp => compare_byte(cmp, a, b) as u64,
     })
 }

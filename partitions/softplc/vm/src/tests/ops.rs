@@ -1231,3 +1231,63 @@ fn superinstructions_disassemble() {
         ]
     );
 }
+
+#[test]
+fn arithmetic_nans_are_canonical() {
+    use crate::isa::{CANONICAL_NAN_F32, CANONICAL_NAN_F64};
+    // Two NaNs with different payloads (and a NaN from an invalid operation): whichever the
+    // hardware would pass on, the result is the canonical NaN, in every form.
+    let (n1, n2) = (0x7FA0_1234u32, 0xFFAB_CDEFu32);
+    for op in [
+        Opcode::AddF32,
+        Opcode::SubF32,
+        Opcode::MulF32,
+        Opcode::DivF32,
+    ] {
+        let plain = eval(|c| {
+            c.disable_fusion();
+            c.push_u32(n1);
+            c.push_u32(n2);
+            c.op(op);
+        });
+        let fused = eval(|c| {
+            c.push_u32(n1);
+            c.op_imm(op, n2 as i32);
+        });
+        assert_eq!(
+            (plain, fused),
+            (CANONICAL_NAN_F32 as u64, CANONICAL_NAN_F32 as u64)
+        );
+    }
+    let (d1, d2) = (0x7FF4_0000_0000_0001u64, 0xFFF8_0000_DEAD_BEEFu64);
+    for op in [
+        Opcode::AddF64,
+        Opcode::SubF64,
+        Opcode::MulF64,
+        Opcode::DivF64,
+    ] {
+        let v = eval(|c| {
+            c.push_i64(d1 as i64);
+            c.push_i64(d2 as i64);
+            c.op(op);
+        });
+        assert_eq!(v, CANONICAL_NAN_F64);
+    }
+    assert_eq!(
+        eval(|c| {
+            c.push_f64(f64::INFINITY);
+            c.push_f64(f64::INFINITY);
+            c.op(Opcode::SubF64);
+        }),
+        CANONICAL_NAN_F64
+    );
+    // NEG only flips the sign bit, of a NaN too.
+    assert_eq!(
+        eval(|c| {
+            c.disable_fusion();
+            c.push_u32(n1);
+            c.op(Opcode::NegF32);
+        }),
+        (n1 ^ 0x8000_0000) as u64
+    );
+}
