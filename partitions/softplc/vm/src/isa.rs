@@ -566,7 +566,8 @@ opcodes! {
 
 impl Opcode {
     /// True for the binary operators `[a b] -> [a op b]` without operands (integer and float
-    /// arithmetic, bit operations, shifts and comparisons) that OP_IMM/OP_REL/OP_ABS accept.
+    /// arithmetic, bit operations, shifts and comparisons) that OP_IMM, OP_REL, OP_ABS and
+    /// OP_REL_REL accept.
     pub const fn is_binary(self) -> bool {
         use Opcode::*;
         self.is_comparison()
