@@ -397,6 +397,14 @@ fn plc_online() {
         ),
         ("client: valve = 0.25", "the forced value read back"),
         ("viewer: READ -> OK", "the monitor-only client's READ"),
+        (
+            "viewer: Count.shift_start = TOD#06:30:00.25",
+            "a TOD read as its IEC literal",
+        ),
+        (
+            "viewer: Count.label = \"north $\"pump$\"\"",
+            "a WSTRING read as its IEC literal",
+        ),
         ("viewer: WRITE -> FORBIDDEN", "the refusal of a write"),
         ("viewer: FORCE -> FORBIDDEN", "the refusal of a force"),
         ("viewer: STOP -> FORBIDDEN", "the refusal of a STOP"),

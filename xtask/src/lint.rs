@@ -4,9 +4,15 @@
 //! APEX runtime, the plant, the PLC runtime and the guest, the kernel for `x86_64-unknown-none`, the loader for
 //! `x86_64-unknown-uefi`, and syssw and every user program for the user target. The lint
 //! policy itself lives once, in `[workspace.lints]` of the root `Cargo.toml`; this only runs
-//! it everywhere.
+//! it everywhere. It also holds the kernel to its size budget: [`KERNEL_CODE_LINES`] code
+//! lines in `kernel/src` (what everyone must trust stays small enough to read).
 
-use anyhow::Result;
+use anyhow::{Context, Result};
+use std::path::Path;
+
+/// The most code lines `kernel/src` may have: lines that are neither blank nor only a
+/// comment, without the host-test modules (`#[cfg(test)] mod ...` to the end of a file).
+pub const KERNEL_CODE_LINES: usize = 6_000;
 
 /// Runs every check (all of them, even after a failure, so one run shows everything) and
 /// returns whether all passed.
@@ -64,6 +70,15 @@ pub fn run() -> Result<bool> {
     checks.push(user_check);
 
     let mut ok = true;
+    let kernel = kernel_code_lines(&crate::workspace_root().join("kernel/src"))?;
+    if kernel > KERNEL_CODE_LINES {
+        eprintln!(
+            "xtask: lint FAILED: kernel/src has {kernel} code lines, more than its budget of {KERNEL_CODE_LINES}: move policy to syssw or a partition"
+        );
+        ok = false;
+    } else {
+        eprintln!("xtask: kernel/src has {kernel} code lines (budget {KERNEL_CODE_LINES})");
+    }
     for mut args in checks {
         if args[0] == "clippy" {
             args.extend(["--", "-D", "warnings"]);
@@ -76,4 +91,64 @@ pub fn run() -> Result<bool> {
         }
     }
     Ok(ok)
+}
+
+/// Code lines of the Rust files below `dir` (see [`KERNEL_CODE_LINES`]).
+pub fn kernel_code_lines(dir: &Path) -> Result<usize> {
+    let mut total = 0;
+    for entry in std::fs::read_dir(dir).with_context(|| format!("cannot read {}", dir.display()))? {
+        let path = entry?.path();
+        if path.is_dir() {
+            total += kernel_code_lines(&path)?;
+        } else if path.extension().is_some_and(|e| e == "rs") {
+            let text = std::fs::read_to_string(&path)
+                .with_context(|| format!("cannot read {}", path.display()))?;
+            total += code_lines(&text);
+        }
+    }
+    Ok(total)
+}
+
+/// Lines of `text` that are neither blank nor only a comment, up to a `#[cfg(test)]` that
+/// opens a module (host tests, which the kernel binary does not contain).
+fn code_lines(text: &str) -> usize {
+    let mut lines = text.lines().map(str::trim).filter(|l| !l.is_empty());
+    let mut count = 0;
+    while let Some(line) = lines.next() {
+        if line == "#[cfg(test)]" {
+            if lines
+                .clone()
+                .next()
+                .is_some_and(|next| next.starts_with("mod "))
+            {
+                break;
+            }
+        } else if line.starts_with("//") {
+            continue;
+        }
+        count += 1;
+    }
+    count
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn code_lines_skip_blanks_comments_and_test_modules() {
+        let text = "//! doc\n\nfn a() {\n    // why\n    b();\n}\n#[cfg(test)]\nfn helper() {}\n\n#[cfg(test)]\nmod tests {\n    fn t() {}\n}\n";
+        // fn a, b(), }, #[cfg(test)], fn helper
+        assert_eq!(code_lines(text), 5);
+    }
+
+    #[test]
+    fn the_kernel_is_within_its_budget() {
+        let lines = kernel_code_lines(&crate::workspace_root().join("kernel/src")).unwrap();
+        assert!(lines > 1_000, "counted {lines}: the walk missed the kernel");
+        assert!(
+            lines <= KERNEL_CODE_LINES,
+            "kernel/src has {lines} code lines, budget {KERNEL_CODE_LINES}"
+        );
+    }
 }

@@ -364,12 +364,11 @@ fn safe_value(image: &Image, name: &str, value: PlcValue) -> Result<package::Saf
         (VarType::Real, PlcValue::Int(i)) => (i as f32).to_bits() as u64,
         (VarType::LReal, PlcValue::Float(f)) => f,
         (VarType::LReal, PlcValue::Int(i)) => (i as f64).to_bits(),
-        (VarType::Bool | VarType::Real | VarType::LReal | VarType::String, _) => return Err(bad()),
+        (VarType::Bool | VarType::Real | VarType::LReal, _) => return Err(bad()),
+        (ty, _) if ty.mem_type().is_none() => return Err(bad()),
         (_, PlcValue::Int(i)) => {
-            let signed = matches!(
-                ty,
-                VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt | VarType::Time
-            );
+            // The date/time types are signed nanoseconds.
+            let signed = ty.is_signed_int() || ty.time_kind().is_some();
             let bits = u32::from(width) * 8;
             let fits = if bits == 64 {
                 signed || i >= 0

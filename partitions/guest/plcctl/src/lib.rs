@@ -9,26 +9,31 @@
 //!
 //! | command | prints |
 //! |---|---|
-//! | `plcctl list` | `<name> <TYPE>` per variable (`TYPE` as IEC names it: `BOOL`, `LREAL`, ...) |
-//! | `plcctl read NAME...` | `<name> = <value>` per name (IEC literal: `TRUE`, `42`, `0.5`, `T#20ms`, `'text'`) |
+//! | `plcctl list` | `<name> <TYPE>` per variable (`TYPE` as IEC names it: `BOOL`, `LREAL`, `TOD`, `WSTRING`, `REF_TO`, ...) |
+//! | `plcctl read NAME...` | `<name> = <value>` per name (IEC literal: `TRUE`, `42`, `0.5`, `T#20ms`, `D#2024-06-15`, `TOD#12:30:00`, `DT#2024-06-15-12:30:00`, `LT#1ms`, `'a'`, `"€"`, `'text'`, `"text"`, `REF(Main.x)`, `NULL`) |
 //! | `plcctl watch NAME... [--interval T] [--count N]` | `t=<ms> <name>=<value> ...` every `T` (default 1s; `500ms`, `2s` or a number of ms), `N` times (default: until stopped) |
-//! | `plcctl force NAME=VALUE` | `forced <name> = <value>` (the value is parsed as the variable's type, which a READ tells) |
+//! | `plcctl force NAME=VALUE` | `forced <name> = <value>` (the value is parsed as the variable's type, which a READ tells: an IEC literal as `read` shows it, with or without its prefix; a STRING or WSTRING also unquoted) |
 //! | `plcctl unforce NAME` | `unforced <name>` |
 //! | `plcctl stats` | `task <name> stopped=<bool> cycles=<n> last_us=.. min_us=.. mean_us=.. max_us=.. last_jitter_us=.. max_jitter_us=.. overruns=<n> faults=<n>` per task |
 //! | `plcctl download FILE.plcb` | `downloaded FILE: <n> bytes, running from release <r>` |
+//! | `plcctl version` | `protocol: plcctl <n>, PLC <m>`: the online protocol versions plcctl and the PLC speak (a PLC of version 1 does not know the question: `PLC 1`) |
 //!
 //! Options before or after the command: `--request PATH`, `--response PATH` (the devices;
 //! defaults [`DEFAULT_REQUEST`], [`DEFAULT_RESPONSE`]), `--timeout MS` (how long to wait
 //! for each answer, default 2000). A PLC that refuses prints
 //! `plcctl: <OP> <name>: <STATUS> (<reason>)`, e.g. `plcctl: FORCE valve: FORBIDDEN (the
-//! PLC's configuration, plc.online.access, does not allow it)`. Exit status: 0 done, 1 the
-//! PLC refused, 2 a usage error, 3 no answer or a device error.
+//! PLC's configuration, plc.online.access, does not allow it)`; a reference is never forced
+//! (`plcctl: FORCE p: READ_ONLY (...)`, without asking). A value that is none of the
+//! variable's type prints ``plcctl: FORCE <name>: `<text>` is not a TOD literal (expected
+//! ...)`` or ``... is out of the range of INT (-32768 to 32767)``. Exit status: 0 done, 1 the
+//! PLC refused, 2 a usage error (also a malformed value), 3 no answer or a device error.
 
 use plc_online::{
-    MAX_CHUNK, MAX_MESSAGE, Reader, Request, Status, crc32, decode_response, encode_request,
-    read_stats,
+    MAX_CHUNK, MAX_MESSAGE, PROTOCOL_VERSION, Reader, Request, Status, crc32, decode_response,
+    encode_request, read_stats,
 };
 use plc_vm::image::VarType;
+use plc_vm::literal::{self, LiteralError};
 use plc_vm::vm::Value;
 use std::fmt::Write as _;
 use std::time::Duration;
@@ -40,7 +45,7 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(2000);
 
 pub const USAGE: &str = "usage: plcctl [--request PATH] [--response PATH] [--timeout MS] \
 list | read NAME... | watch NAME... [--interval T] [--count N] | force NAME=VALUE | \
-unforce NAME | stats | download FILE.plcb";
+unforce NAME | stats | download FILE.plcb | version";
 
 /// What the command line asks.
 #[derive(Clone, Debug, PartialEq)]
@@ -67,6 +72,7 @@ pub enum Action {
     Unforce(String),
     Stats,
     Download(String),
+    Version,
 }
 
 /// A duration as `500ms`, `2s` or a number of milliseconds.
@@ -134,6 +140,7 @@ impl Command {
         let action = match verb.as_str() {
             "list" if rest.is_empty() => Action::List,
             "stats" if rest.is_empty() => Action::Stats,
+            "version" if rest.is_empty() => Action::Version,
             "read" => Action::Read(some(rest)?),
             "watch" => Action::Watch {
                 names: some(rest)?,
@@ -153,7 +160,7 @@ impl Command {
             }
             "unforce" => Action::Unforce(one("NAME")?),
             "download" => Action::Download(one("FILE")?),
-            "list" | "stats" => return Err(format!("{verb} takes no arguments")),
+            "list" | "stats" | "version" => return Err(format!("{verb} takes no arguments")),
             other => return Err(format!("unknown command {other}")),
         };
         Ok(Command {
@@ -165,37 +172,22 @@ impl Command {
     }
 }
 
-/// `text` as a value of the kind `like` is (the variable's current value): `TRUE`/`FALSE`
-/// (or 1/0), integers, reals, `T#..ms`/`T#..s`/`T#..us`/`T#..ns`; `None` if it is not one.
-/// STRINGs cannot be forced.
-pub fn parse_value<'t>(text: &'t str, like: &Value) -> Option<Value<'t>> {
-    Some(match like {
-        Value::Bool(_) => match text.to_ascii_uppercase().as_str() {
-            "TRUE" | "1" => Value::Bool(true),
-            "FALSE" | "0" => Value::Bool(false),
-            _ => return None,
-        },
-        Value::Int(_) => Value::Int(text.parse().ok()?),
-        Value::UInt(_) => Value::UInt(text.parse().ok()?),
-        Value::Real(_) => Value::Real(text.parse().ok()?),
-        Value::LReal(_) => Value::LReal(text.parse().ok()?),
-        Value::Time(_) => {
-            let t = text
-                .strip_prefix("T#")
-                .or_else(|| text.strip_prefix("t#"))
-                .unwrap_or(text);
-            let (number, unit) = [
-                ("ms", 1_000_000),
-                ("us", 1_000),
-                ("ns", 1),
-                ("s", 1_000_000_000),
-            ]
-            .into_iter()
-            .find_map(|(suffix, unit)| t.strip_suffix(suffix).map(|n| (n, unit)))?;
-            Value::Time(number.parse::<i64>().ok()?.checked_mul(unit)?)
-        }
-        Value::String(_) => return None,
-    })
+/// Most bytes a typed STRING or WSTRING may take: what a FORCE or WRITE message carries
+/// besides its head, the value's type and length and a one-byte name.
+pub const MAX_TEXT: usize = MAX_MESSAGE - 2 - 3 - 1;
+
+/// `text` as a value of a variable of type `ty` (the type a READ of it tells), parsed as
+/// the PLC's monitors parse values ([`plc_vm::literal`]): `TRUE`/`FALSE` (or 1/0),
+/// integers (`-5`, `16#FF`, `INT#7`), reals, `T#1s500ms`, `LT#2ms`, `D#2024-06-15`,
+/// `TOD#12:30:00.5`, `DT#2024-06-15-12:30:00`, `'a'` or `a` or `97` for a CHAR, `"€"` for
+/// a WCHAR, `'text'` or bare text for a STRING and `"text"` for a WSTRING (into `buf`); or
+/// why it is none. A reference is never parsed ([`LiteralError::ReadOnly`]).
+pub fn parse_value<'b>(
+    text: &str,
+    ty: VarType,
+    buf: &'b mut [u8],
+) -> Result<Value<'b>, LiteralError> {
+    literal::parse(text, ty, buf)
 }
 
 /// Why a PLC refuses, for people.
@@ -216,6 +208,9 @@ pub fn reason(status: Status) -> &'static str {
         Status::Refused => "the PLC's checks refused the program; its log says why",
         Status::NoDownload => "no download in progress",
         Status::Incomplete => "not every byte of the program arrived",
+        Status::ReadOnly => {
+            "a reference is read-only online: a written address could make the program reach another variable than the one it referenced, or trap"
+        }
     }
 }
 
@@ -319,13 +314,13 @@ impl<T: Transport> Link<T> {
         }
     }
 
-    /// The value of `name` (owned bytes: a STRING's borrow ends with its message).
-    fn read(&mut self, name: &str) -> Result<(Vec<u8>, String), Failure> {
+    /// The value of `name`: its type and its IEC literal.
+    fn read(&mut self, name: &str) -> Result<(VarType, String), Failure> {
         let message = self.ok(&Request::Read { name }, &format!("READ {name}"))?;
-        let value = result(&message)
-            .and_then(|mut r| r.value().map(|v| v.to_string()))
-            .ok_or_else(|| Failure::device(format!("READ {name}: a malformed answer")))?;
-        Ok((message, value))
+        result(&message)
+            .and_then(|mut r| r.typed_value())
+            .map(|(ty, value)| (ty, value.to_string()))
+            .ok_or_else(|| Failure::device(format!("READ {name}: a malformed answer")))
     }
 
     /// Runs `action`, writing its lines to `out`.
@@ -362,19 +357,26 @@ impl<T: Transport> Link<T> {
                 Ok(())
             }
             Action::Force { name, value } => {
-                let (current, _) = self.read(name)?;
-                let like = result(&current)
-                    .and_then(|mut r| r.value())
-                    .ok_or_else(|| Failure::device(format!("READ {name}: a malformed answer")))?;
-                let parsed = parse_value(value, &like).ok_or_else(|| Failure {
-                    message: format!("FORCE {name}: {value} is no value of its type"),
-                    status: 2,
-                })?;
+                let (ty, _) = self.read(name)?;
+                let what = format!("FORCE {name}");
+                let mut buf = [0u8; MAX_TEXT];
+                let parsed = match parse_value(value, ty, &mut buf) {
+                    Ok(parsed) => parsed,
+                    Err(LiteralError::ReadOnly) => {
+                        return Err(Failure::refused(&what, Status::ReadOnly));
+                    }
+                    Err(e) => {
+                        return Err(Failure {
+                            message: format!("{what}: `{value}` is {e}"),
+                            status: 2,
+                        });
+                    }
+                };
                 let force = Request::Force {
                     name,
                     value: parsed,
                 };
-                self.ok(&force, &format!("FORCE {name}"))?;
+                self.ok(&force, &what)?;
                 out(&format!("forced {name} = {parsed}"));
                 Ok(())
             }
@@ -384,6 +386,18 @@ impl<T: Transport> Link<T> {
                 Ok(())
             }
             Action::Stats => self.stats(out),
+            Action::Version => {
+                let plc = match self.ask(&Request::Version)? {
+                    (Status::Ok, message) => result(&message)
+                        .and_then(|mut r| r.u16())
+                        .ok_or_else(|| Failure::device("VERSION: a malformed answer".into()))?,
+                    // A version 1 PLC does not know the question.
+                    (Status::Malformed, _) => 1,
+                    (status, _) => return Err(Failure::refused("VERSION", status)),
+                };
+                out(&format!("protocol: plcctl {PROTOCOL_VERSION}, PLC {plc}"));
+                Ok(())
+            }
             Action::Download(_) => Err(Failure {
                 message: "download: the file is read by the program".into(),
                 status: 2,
@@ -402,8 +416,11 @@ impl<T: Transport> Link<T> {
             for _ in 0..count {
                 let ty = r.u8().ok_or_else(malformed)?;
                 let name = r.short_str().ok_or_else(malformed)?;
-                let ty = VarType::from_code(ty).map_or("?", |t| t.name());
-                out(&format!("{name} {ty}"));
+                match VarType::from_code(ty) {
+                    Some(ty) => out(&format!("{name} {}", ty.name())),
+                    // A type of a later protocol version.
+                    None => out(&format!("{name} ?{ty}")),
+                }
             }
             from = from.saturating_add(u16::from(count));
             if count == 0 || from >= total {

@@ -2,18 +2,24 @@
 
 use super::*;
 use plc_online::{Access, TaskStats, begin_response, decode_request, put_stats};
+use plc_vm::isa::TimeKind;
 use std::collections::VecDeque;
 
 fn args(text: &str) -> Vec<String> {
     text.split_whitespace().map(String::from).collect()
 }
 
-/// A PLC with `valve` (LREAL), `alarm` (BOOL) and `tank.count` (DINT), one task, and an
-/// access level; answers go into a queue `try_receive` takes from.
+/// A PLC with `valve` (LREAL), `alarm` (BOOL), `tank.count` (DINT), `start` (TOD), `label`
+/// (WSTRING) and `p` (a reference to `tank.count`), one task, and an access level; answers
+/// go into a queue `try_receive` takes from.
 struct Plc {
     access: Access,
     valve: f64,
     forced: Option<f64>,
+    /// The forced TOD's nanoseconds.
+    start: Option<i64>,
+    /// Answers VERSION as protocol version 1 did (MALFORMED).
+    version_1: bool,
     answers: VecDeque<Vec<u8>>,
     paused: Duration,
     requests: usize,
@@ -26,6 +32,8 @@ impl Plc {
             access,
             valve: 0.5,
             forced: None,
+            start: None,
+            version_1: false,
             answers: VecDeque::new(),
             paused: Duration::ZERO,
             requests: 0,
@@ -34,11 +42,17 @@ impl Plc {
     }
 }
 
-const VARS: [(&str, VarType); 3] = [
+const VARS: [(&str, VarType); 6] = [
     ("valve", VarType::LReal),
     ("alarm", VarType::Bool),
     ("tank.count", VarType::DInt),
+    ("start", VarType::Tod),
+    ("label", VarType::WString),
+    ("p", VarType::Ref),
 ];
+
+/// "Grüße" in UTF-16.
+const LABEL: [u8; 10] = [b'G', 0, b'r', 0, 0xfc, 0, 0xdf, 0, b'e', 0];
 
 impl Transport for Plc {
     fn send(&mut self, message: &[u8]) -> Result<(), String> {
@@ -53,19 +67,31 @@ impl Transport for Plc {
             return Ok(());
         }
         let mut w = begin_response(op.code(), seq, Status::Ok, &mut buf);
+        let start = self.start.unwrap_or(6 * 3600 * 1_000_000_000);
         let value = |name: &str, valve: f64| match name {
             "valve" => Some(Value::LReal(valve)),
             "alarm" => Some(Value::Bool(false)),
             "tank.count" => Some(Value::Int(7)),
+            "start" => Some(Value::Temporal(TimeKind::Tod, start)),
+            "label" => Some(Value::WString(&LABEL)),
+            "p" => Some(Value::Ref {
+                address: Some(8),
+                target: Some("tank.count"),
+            }),
             _ => None,
         };
+        if self.version_1 && request == Request::Version {
+            let n = begin_response(op.code(), seq, Status::Malformed, &mut buf).len();
+            self.answers.push_back(buf[..n].to_vec());
+            return Ok(());
+        }
         let mut status = Status::Ok;
         match request {
             Request::List { from } => {
                 // Two a message, to page.
-                let rest = &VARS[(from as usize).min(3)..];
+                let rest = &VARS[(from as usize).min(VARS.len())..];
                 let page = &rest[..rest.len().min(2)];
-                w.put(&3u16.to_le_bytes()).unwrap();
+                w.put(&(VARS.len() as u16).to_le_bytes()).unwrap();
                 w.put(&[page.len() as u8]).unwrap();
                 for (name, ty) in page {
                     w.put(&[ty.code(), name.len() as u8]).unwrap();
@@ -73,14 +99,21 @@ impl Transport for Plc {
                 }
             }
             Request::Read { name } => match value(name, self.forced.unwrap_or(self.valve)) {
-                Some(v) => w.value(&v).unwrap(),
+                Some(v) => {
+                    let ty = VARS.iter().find(|(n, _)| *n == name).unwrap().1;
+                    w.typed_value(ty, &v).unwrap()
+                }
                 None => status = Status::UnknownName,
             },
             Request::Force { name, value: v } => match (name, v) {
                 ("valve", Value::LReal(x)) => self.forced = Some(x),
-                ("valve", _) => status = Status::TypeMismatch,
+                ("start", Value::Temporal(TimeKind::Tod, ns)) => self.start = Some(ns),
+                ("p", _) => status = Status::ReadOnly,
+                ("label", _) => status = Status::Unsupported,
+                ("valve" | "start", _) => status = Status::TypeMismatch,
                 _ => status = Status::UnknownName,
             },
+            Request::Version => w.put(&PROTOCOL_VERSION.to_le_bytes()).unwrap(),
             Request::Unforce { .. } => self.forced = None,
             Request::Stats { task: 0 } => put_stats(
                 &mut w,
@@ -160,37 +193,119 @@ fn the_command_line() {
 
 #[test]
 fn values_are_parsed_as_the_variable_is_typed() {
+    let parsed = |text: &str, ty| {
+        let mut buf = [0u8; MAX_TEXT];
+        parse_value(text, ty, &mut buf).map(|v| v.to_string())
+    };
+    assert_eq!(parsed("true", VarType::Bool), Ok("TRUE".into()));
+    assert_eq!(parsed("0", VarType::Bool), Ok("FALSE".into()));
+    assert_eq!(parsed("-3", VarType::DInt), Ok("-3".into()));
+    assert_eq!(parsed("16#FF", VarType::Byte), Ok("255".into()));
+    assert_eq!(parsed("0.25", VarType::LReal), Ok("0.25".into()));
+    assert_eq!(parsed("T#20ms", VarType::Time), Ok("T#20ms".into()));
+    assert_eq!(parsed("2s", VarType::Time), Ok("T#2s".into()));
+    assert_eq!(parsed("T#1s500ms", VarType::Time), Ok("T#1s500ms".into()));
+    assert_eq!(parsed("LT#5us", VarType::LTime), Ok("LT#5us".into()));
     assert_eq!(
-        parse_value("true", &Value::Bool(false)),
-        Some(Value::Bool(true))
+        parsed("D#2024-06-15", VarType::Date),
+        Ok("D#2024-06-15".into())
+    );
+    assert_eq!(parsed("12:30", VarType::Tod), Ok("TOD#12:30:00".into()));
+    assert_eq!(
+        parsed("DT#2024-06-15-12:30:00", VarType::Dt),
+        Ok("DT#2024-06-15-12:30:00".into())
+    );
+    assert_eq!(parsed("a", VarType::Char), Ok("'a'".into()));
+    assert_eq!(parsed("\"€\"", VarType::WChar), Ok("\"€\"".into()));
+    assert_eq!(parsed("'a b'", VarType::String), Ok("'a b'".into()));
+    assert_eq!(parsed("Grüße", VarType::WString), Ok("\"Grüße\"".into()));
+    assert_eq!(
+        parsed("x", VarType::Int),
+        Err(LiteralError::Syntax(VarType::Int))
     );
     assert_eq!(
-        parse_value("0", &Value::Bool(true)),
-        Some(Value::Bool(false))
-    );
-    assert_eq!(parse_value("-3", &Value::Int(0)), Some(Value::Int(-3)));
-    assert_eq!(
-        parse_value("0.25", &Value::LReal(0.0)),
-        Some(Value::LReal(0.25))
+        parsed("-1", VarType::UInt),
+        Err(LiteralError::OutOfRange(VarType::UInt))
     );
     assert_eq!(
-        parse_value("T#20ms", &Value::Time(0)),
-        Some(Value::Time(20_000_000))
+        parsed("TOD#25:00:00", VarType::Tod),
+        Err(LiteralError::Syntax(VarType::Tod))
     );
+    assert_eq!(parsed("NULL", VarType::Ref), Err(LiteralError::ReadOnly));
+}
+
+#[test]
+fn the_new_types_are_read_forced_and_refused() {
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "list");
+    assert_eq!(r, Ok(()));
+    assert_eq!(&lines[3..], ["start TOD", "label WSTRING", "p REF_TO"]);
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "read start label p");
+    assert_eq!(r, Ok(()));
     assert_eq!(
-        parse_value("2s", &Value::Time(0)),
-        Some(Value::Time(2_000_000_000))
+        lines,
+        [
+            "start = TOD#06:00:00",
+            "label = \"Grüße\"",
+            "p = REF(tank.count)"
+        ]
     );
-    assert_eq!(parse_value("x", &Value::Int(0)), None);
-    assert_eq!(parse_value("-1", &Value::UInt(0)), None);
-    assert_eq!(parse_value("'a'", &Value::String(b"")), None);
+    let (r, lines, plc) = run(Plc::new(Access::Force), "force start=TOD#12:30:00.5");
+    assert_eq!(r, Ok(()));
+    assert_eq!(lines, ["forced start = TOD#12:30:00.5"]);
+    assert_eq!(plc.start, Some(45_000_500_000_000));
+    // A malformed literal: a usage error naming what was expected, nothing sent.
+    let (r, _, plc) = run(Plc::new(Access::Force), "force start=25:00");
+    let f = r.unwrap_err();
+    assert_eq!(f.status, 2);
+    assert_eq!(
+        f.message,
+        "FORCE start: `25:00` is not a TOD literal (expected a time of day such as TOD#12:30:00 or TOD#12:30:00.25 (hours 0 to 23))"
+    );
+    assert_eq!((plc.requests, plc.start), (1, None), "only the READ");
+    // A reference: refused with the reason, without asking the PLC to change it.
+    let (r, _, plc) = run(Plc::new(Access::Force), "force p=NULL");
+    let f = r.unwrap_err();
+    assert_eq!(f.status, 1);
+    assert!(
+        f.message
+            .starts_with("FORCE p: READ_ONLY (a reference is read-only online"),
+        "{}",
+        f.message
+    );
+    assert_eq!(plc.requests, 1, "only the READ");
+    // A WSTRING is read, not forced: the PLC says so.
+    let (r, _, _) = run(Plc::new(Access::Force), "force label=x");
+    assert_eq!(
+        r.unwrap_err().message,
+        "FORCE label: UNSUPPORTED (not supported for this variable)"
+    );
+}
+
+#[test]
+fn version_tells_both_protocols() {
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "version");
+    assert_eq!(
+        (r, lines),
+        (Ok(()), vec!["protocol: plcctl 2, PLC 2".to_string()])
+    );
+    let mut old = Plc::new(Access::Monitor);
+    old.version_1 = true;
+    let (r, lines, _) = run(old, "version");
+    assert_eq!(
+        (r, lines),
+        (Ok(()), vec!["protocol: plcctl 2, PLC 1".to_string()])
+    );
+    assert!(Command::parse(&args("version x")).is_err());
 }
 
 #[test]
 fn list_read_watch_force_unforce_and_stats() {
     let (r, lines, _) = run(Plc::new(Access::Force), "list");
     assert_eq!(r, Ok(()));
-    assert_eq!(lines, ["valve LREAL", "alarm BOOL", "tank.count DINT"]);
+    assert_eq!(
+        &lines[..3],
+        ["valve LREAL", "alarm BOOL", "tank.count DINT"]
+    );
     let (r, lines, _) = run(Plc::new(Access::Monitor), "read valve alarm tank.count");
     assert_eq!(r, Ok(()));
     assert_eq!(lines, ["valve = 0.5", "alarm = FALSE", "tank.count = 7"]);

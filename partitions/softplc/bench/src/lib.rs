@@ -214,6 +214,11 @@ pub fn number(value: &Value<'_>) -> f64 {
         Value::Real(v) => v as f64,
         Value::LReal(v) => v,
         Value::String(s) => s.len() as f64,
+        Value::Temporal(_, v) => v as f64,
+        Value::Char(c) => c as f64,
+        Value::WChar(c) => c as f64,
+        Value::WString(units) => (units.len() / 2) as f64,
+        Value::Ref { address, .. } => address.map_or(0.0, |a| a as f64),
     }
 }
 

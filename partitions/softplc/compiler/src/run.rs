@@ -135,11 +135,20 @@ pub fn apply_sets(c: &Compiled, sets: &[(String, String)], data: &mut [u8]) -> R
     Ok(())
 }
 
-/// One output line for cycle `k`.
-pub fn cycle_line(k: u64, prints: &[(&MonitorVar, String)], data: &[u8]) -> String {
+/// One output line for cycle `k` (`vars`: the whole variable map, to name references).
+pub fn cycle_line(
+    k: u64,
+    prints: &[(&MonitorVar, String)],
+    vars: &[MonitorVar],
+    data: &[u8],
+) -> String {
     let mut line = format!("cycle {k}:");
     for (v, name) in prints {
-        line.push_str(&format!(" {}={}", name, monitor::format_value(v, data)));
+        line.push_str(&format!(
+            " {}={}",
+            name,
+            monitor::format_value(v, vars, data)
+        ));
     }
     line
 }
@@ -213,7 +222,8 @@ pub fn run(c: &Compiled, cfg: &RunConfig) -> RunOutput {
                 return out;
             }
         }
-        out.stdout.push_str(&cycle_line(k, &prints, m.data()));
+        out.stdout
+            .push_str(&cycle_line(k, &prints, &c.vars, m.data()));
         out.stdout.push('\n');
     }
     out

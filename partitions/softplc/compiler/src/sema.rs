@@ -1395,7 +1395,7 @@ impl Sema<'_> {
             self.diags.error(
                 d.ty.span(),
                 format!(
-                    "a shared variable must have an elementary type (BOOL, integers, REAL, LREAL, TIME, bit strings), not {}",
+                    "a shared variable must have an elementary type (BOOL, integers, REAL, LREAL, bit strings, the date/time types, CHAR, WCHAR), not {}",
                     self.prog.type_name(ty)
                 ),
             );
@@ -1452,10 +1452,13 @@ impl Sema<'_> {
                 use plc_vm::located::Width;
                 let (size, expected) = match location.width {
                     Width::Bit => ("a bit", "BOOL"),
-                    Width::Byte => ("a byte", "BYTE, SINT or USINT"),
-                    Width::Word => ("a word (2 bytes)", "WORD, INT or UINT"),
+                    Width::Byte => ("a byte", "BYTE, SINT, USINT or CHAR"),
+                    Width::Word => ("a word (2 bytes)", "WORD, INT, UINT or WCHAR"),
                     Width::DWord => ("a double word (4 bytes)", "DWORD, DINT, UDINT or REAL"),
-                    Width::LWord => ("a long word (8 bytes)", "LWORD, LINT, ULINT, LREAL or TIME"),
+                    Width::LWord => (
+                        "a long word (8 bytes)",
+                        "LWORD, LINT, ULINT, LREAL or a date/time type (TIME, LTIME, DATE, TOD, DT and the long forms)",
+                    ),
                 };
                 self.diags.error(
                     d.ty.span(),

@@ -43,6 +43,38 @@ fn check_exit_codes() {
 }
 
 #[test]
+fn a_malformed_set_value_says_what_was_expected() {
+    let src = write(
+        "typed.st",
+        "PROGRAM Main VAR t : TOD; n : USINT; p : REF_TO USINT; END_VAR p := REF(n); END_PROGRAM",
+    );
+    for (set, want) in [
+        (
+            "Main.t=TOD#25:00",
+            "--set Main.t: `TOD#25:00` is not a TOD literal (expected a time of day such as TOD#12:30:00",
+        ),
+        (
+            "Main.n=300",
+            "--set Main.n: `300` is out of the range of USINT (0 to 255)",
+        ),
+        (
+            "Main.p=NULL",
+            "--set Main.p: `NULL` is not writable: a reference is read-only",
+        ),
+    ] {
+        let out = plcc()
+            .arg("run")
+            .arg(&src)
+            .args(["--set", set])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "{set}: {err}");
+        assert!(err.starts_with(want), "{set}: {err}");
+    }
+}
+
+#[test]
 fn usage_errors_exit_2() {
     assert_eq!(plcc().arg("run").status().unwrap().code(), Some(2));
     assert_eq!(plcc().arg("frobnicate").status().unwrap().code(), Some(2));

@@ -17,7 +17,8 @@
 //!   width), the forces (a variable of the same name and type) and the watch list (names
 //!   that must exist) — or the reason the new program cannot take over.
 //! - [`hand_over`]: at the swap, the new machine gets the RETAIN values of the old data
-//!   ([`carry_retain`]) and the forces.
+//!   ([`carry_retain`]: by name and type; a STRING or WSTRING whose capacity changed keeps
+//!   its text cut to fit; a reference keeps the new program's initial value) and the forces.
 //! - [`Running`]: which program runs from which of the partition's two image buffers and
 //!   two data memories, so that a download never overwrites the running program or its
 //!   data, and the old ones stay intact until the handover.

@@ -9,8 +9,8 @@ use crate::download::{Download, Refusal, Takeover, check_program, fit_configurat
 use crate::package::Package;
 use crate::scan::{MAX_TASKS, PortIo, Runtime};
 use plc_online::{
-    Access, MAX_CHUNK, MAX_MESSAGE, Op, Request, Status, TaskStats, begin_response, decode_request,
-    put_stats,
+    Access, MAX_CHUNK, MAX_MESSAGE, Op, PROTOCOL_VERSION, Request, Status, TaskStats,
+    begin_response, decode_request, put_stats,
 };
 use plc_vm::image::{Image, VarType};
 use plc_vm::vm::{Machine, VarError};
@@ -25,6 +25,7 @@ fn status_of(e: VarError) -> Status {
         VarError::Constant => Status::Constant,
         VarError::NotForceable => Status::Unsupported,
         VarError::TooManyForces => Status::TooManyForces,
+        VarError::ReadOnly => Status::ReadOnly,
     }
 }
 
@@ -188,25 +189,22 @@ pub fn serve(
             out[count_at] = count;
             len
         }
-        Request::Read { name } => match machine.read_var(name) {
-            Ok(value) => {
-                let mut w = begin_response(Op::Read.code(), seq, Status::Ok, out);
-                if w.value(&value).is_none() {
-                    // A STRING longer than a message: say so rather than cut it.
-                    return begin_response(op.code(), seq, Status::Unsupported, out).len();
-                }
-                w.len()
+        Request::Read { name } => {
+            let Some(var) = machine.image().find_var(name) else {
+                return done(out, Err(VarError::UnknownName));
+            };
+            let ty = VarType::from_code(var.ty).expect("verified");
+            let mut w = begin_response(Op::Read.code(), seq, Status::Ok, out);
+            if w.typed_value(ty, &machine.read_entry(&var)).is_none() {
+                // A text longer than a message: say so rather than cut it.
+                return begin_response(op.code(), seq, Status::Unsupported, out).len();
             }
-            Err(e) => done(out, Err(e)),
-        },
-        Request::Write { name, value } => {
-            let converted = convert(image, name, value);
-            done(out, converted.and_then(|v| machine.write_var(name, v)))
+            w.len()
         }
-        Request::Force { name, value } => {
-            let converted = convert(image, name, value);
-            done(out, converted.and_then(|v| machine.force_var(name, v)))
-        }
+        // Any integer fits an integer variable and references are refused
+        // ([`plc_vm::vm::Value::to_cell`]).
+        Request::Write { name, value } => done(out, machine.write_var(name, value)),
+        Request::Force { name, value } => done(out, machine.force_var(name, value)),
         Request::Unforce { name } => done(out, machine.unforce_var(name)),
         Request::Stats { task } => {
             let task = task as usize;
@@ -263,6 +261,11 @@ pub fn serve(
             };
             begin_response(op.code(), seq, status, out).len()
         }
+        Request::Version => {
+            let mut w = begin_response(op.code(), seq, Status::Ok, out);
+            let _ = w.put(&PROTOCOL_VERSION.to_le_bytes());
+            w.len()
+        }
         Request::DownloadCommit => match loader.commit(package, machine, rt) {
             Ok(()) => {
                 let mut w = begin_response(op.code(), seq, Status::Ok, out);
@@ -272,25 +275,4 @@ pub fn serve(
             Err(status) => begin_response(op.code(), seq, status, out).len(),
         },
     }
-}
-
-/// The wire value in the variable's own kind: the protocol carries integers as 64 bits,
-/// the VM wants signed values for signed types and unsigned ones for the others.
-fn convert<'v>(
-    image: &Image,
-    name: &str,
-    value: plc_vm::vm::Value<'v>,
-) -> Result<plc_vm::vm::Value<'v>, VarError> {
-    use plc_vm::vm::Value;
-    let var = image.find_var(name).ok_or(VarError::UnknownName)?;
-    let ty = VarType::from_code(var.ty).ok_or(VarError::TypeMismatch)?;
-    let signed = matches!(
-        ty,
-        VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt
-    );
-    Ok(match value {
-        Value::UInt(v) if signed => Value::Int(v as i64),
-        Value::Int(v) if !signed && ty != VarType::Time => Value::UInt(v as u64),
-        other => other,
-    })
 }

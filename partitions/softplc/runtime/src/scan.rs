@@ -719,16 +719,21 @@ pub fn safe_outputs(image: &Image, safe: &SafeValues, task: usize, data: &mut [u
     }
 }
 
-/// Copies every RETAIN variable of `new_image` that `old_image` also has (same name, type
-/// and size) from `old_data` into `new_data`: the values a warm restart (same image) or an
-/// online download (a changed one) keeps. Returns how many were carried.
+/// Copies every RETAIN variable of `new_image` that `old_image` also has (same name and
+/// type) from `old_data` into `new_data`: the values a warm restart (same image) or an
+/// online download (a changed one) keeps. Same size: the bytes; a STRING or WSTRING whose
+/// capacity changed: its text, cut to the new capacity. A reference only into the same
+/// program (an address of another program means nothing in this one): otherwise it keeps
+/// the new program's initial value. Returns how many were carried.
 pub fn carry_retain(
     old_image: &Image,
     old_data: &[u8],
     new_image: &Image,
     new_data: &mut [u8],
 ) -> usize {
-    use plc_vm::image::VAR_FLAG_RETAIN;
+    use plc_vm::image::{Storage, VAR_FLAG_RETAIN, VarType};
+    use plc_vm::vm::Value;
+    let same_program = old_image.same_program(new_image);
     let mut carried = 0;
     for i in 0..new_image.var_count() {
         let Some(new) = new_image.var(i).filter(|v| v.flags & VAR_FLAG_RETAIN != 0) else {
@@ -736,19 +741,32 @@ pub fn carry_retain(
         };
         let Some(old) = old_image
             .find_var(new.name)
-            .filter(|o| o.flags & VAR_FLAG_RETAIN != 0 && o.ty == new.ty && o.size == new.size)
+            .filter(|o| o.flags & VAR_FLAG_RETAIN != 0 && o.ty == new.ty)
         else {
             continue;
         };
+        let Some(ty) = VarType::from_code(new.ty) else {
+            continue;
+        };
         let (from, to) = (old.addr as usize, new.addr as usize);
-        let len = new.size as usize;
-        if let (Some(src), Some(dst)) = (
-            old_data.get(from..from + len),
-            new_data.get_mut(to..to + len),
-        ) {
-            dst.copy_from_slice(src);
-            carried += 1;
-        }
+        let (Some(src), Some(dst)) = (
+            old_data.get(from..from + old.size as usize),
+            new_data.get_mut(to..to + new.size as usize),
+        ) else {
+            continue;
+        };
+        let kept = match ty.storage() {
+            Storage::Reference if !same_program => false,
+            _ if src.len() == dst.len() => {
+                dst.copy_from_slice(src);
+                true
+            }
+            Storage::String | Storage::WString => {
+                Value::load(ty, src).is_some_and(|text| text.store(ty, dst).is_ok())
+            }
+            _ => false,
+        };
+        carried += kept as usize;
     }
     carried
 }

@@ -5,8 +5,9 @@ use crate::scan::{Areas, LATENESS_BITS, PlanError, PortIo, Runtime, SafeValues, 
 use plc_vm::image::Image;
 use plc_vm::isa::Trap;
 use plc_vm::verify::verify;
-use plc_vm::vm::{CallFrame, Machine, Memory, TryFrame};
+use plc_vm::vm::{CallFrame, Machine, Memory, TryFrame, Value};
 use protocol::{Direction, PortKind};
+use std::string::ToString;
 use std::vec::Vec;
 
 const PERIOD: u64 = 10_000_000;
@@ -566,7 +567,6 @@ fn online_requests_between_cycles() {
     use plc_online::{
         Access, MAX_MESSAGE, Op, Request, Status, decode_response, encode_request, read_stats,
     };
-    use plc_vm::vm::Value;
     let source = "
 VAR_GLOBAL out AT %QD0 : DINT; limit : INT := 5; k : INT := 3; END_VAR
 VAR_GLOBAL CONSTANT fixed : INT := 1; END_VAR
@@ -738,6 +738,352 @@ PROGRAM P VAR n : DINT; END_VAR n := n + 1; out := n * k; END_PROGRAM";
         (false, 6),
         "six cycles so far"
     );
+}
+
+/// A program of the date/time types, CHAR, WCHAR, WSTRING and references, for the monitor
+/// tests below.
+const TYPED: &str = "
+TYPE Pair : STRUCT a : INT; b : INT; END_STRUCT END_TYPE
+PROGRAM P
+VAR
+  d : DATE := D#2024-06-15;
+  t : TOD := TOD#12:30:00;
+  dt : DT := DT#2024-06-15-12:30:00;
+  lt : LTIME := LT#1ms500us;
+  ld : LDATE := LD#2024-06-15;
+  ltod : LTOD := LTOD#12:30:00.5;
+  ldt : LDT := LDT#2024-06-15-00:00:00;
+  c : CHAR := 'a';
+  wc : WCHAR := WCHAR#\"€\";
+  ws : WSTRING[10] := \"Grüße\";
+  x : INT := 5;
+  pair : Pair;
+  p : REF_TO INT;
+  q : POINTER TO INT;
+  n : REF_TO INT;
+  count : DINT;
+END_VAR
+p := REF(x);
+q := ADR(pair.b);
+count := count + 1;
+END_PROGRAM";
+
+#[test]
+fn online_monitor_of_dates_characters_wide_strings_and_references() {
+    use crate::online::{Loader, serve};
+    use plc_online::{
+        Access, MAX_MESSAGE, Op, PROTOCOL_VERSION, Request, Status, decode_response, encode_request,
+    };
+    use plc_vm::image::VarType;
+    use plc_vm::literal;
+    let program = compile(TYPED);
+    let bytes = package::encode(&[], &program, &[], None, &[], None, &[]);
+    let package = Package::parse(&bytes).unwrap();
+    let image = Image::parse(package.program()).unwrap();
+    let mut data = vec![0u8; image.data_size() as usize];
+    let (mut stack, mut calls, mut tries) =
+        ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+    let mut machine = Machine::new(
+        verify(&image).unwrap(),
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut tries,
+        },
+    )
+    .unwrap();
+    let mut rt = Runtime::new(
+        Schedule::new(&image, PERIOD).unwrap(),
+        PERIOD,
+        SafeValues::of(&package),
+    );
+    let mut wires = Wires::default();
+    let mut areas = Areas::new();
+    let (mut buffer, mut scratch) = (vec![0u8; 4096], vec![0u32; 8192]);
+    let mut loader = Loader::new(&mut buffer, &mut scratch, 4096, PERIOD, 0);
+    let mut ask = |machine: &mut Machine, rt: &mut Runtime, r: Request| {
+        let mut req = [0u8; MAX_MESSAGE];
+        let n = encode_request(&r, 5, &mut req).unwrap();
+        let mut out = [0u8; MAX_MESSAGE];
+        let len = serve(
+            &req[..n],
+            Access::Force,
+            &package,
+            machine,
+            &image,
+            rt,
+            &mut loader,
+            &mut out,
+        );
+        out[..len].to_vec()
+    };
+    rt.scan(
+        &mut machine,
+        &image,
+        &package,
+        &mut wires,
+        &mut areas,
+        || 0,
+        0,
+        |_, _| {},
+    );
+    // READ: each variable typed as it is declared, shown as its IEC literal.
+    fn read(
+        ask: &mut impl FnMut(&mut Machine, &mut Runtime, Request) -> Vec<u8>,
+        machine: &mut Machine,
+        rt: &mut Runtime,
+        name: &str,
+    ) -> (VarType, std::string::String) {
+        let reply = ask(machine, rt, Request::Read { name });
+        let (op, seq, status, mut r) = decode_response(&reply).unwrap();
+        assert_eq!((op, seq, status), (Op::Read, 5, Status::Ok), "READ {name}");
+        let (ty, value) = r.typed_value().unwrap();
+        (ty, value.to_string())
+    }
+    for (name, ty, shown) in [
+        ("P.d", VarType::Date, "D#2024-06-15"),
+        ("P.t", VarType::Tod, "TOD#12:30:00"),
+        ("P.dt", VarType::Dt, "DT#2024-06-15-12:30:00"),
+        ("P.lt", VarType::LTime, "LT#1ms500us"),
+        ("P.ld", VarType::LDate, "LD#2024-06-15"),
+        ("P.ltod", VarType::LTod, "LTOD#12:30:00.5"),
+        ("P.ldt", VarType::LDt, "LDT#2024-06-15-00:00:00"),
+        ("P.c", VarType::Char, "'a'"),
+        ("P.wc", VarType::WChar, "\"€\""),
+        ("P.ws", VarType::WString, "\"Grüße\""),
+        ("P.x", VarType::Int, "5"),
+        ("P.count", VarType::DInt, "1"),
+        ("P.p", VarType::Ref, "REF(P.x)"),
+        ("P.q", VarType::Ref, "REF(P.pair.b)"),
+        ("P.n", VarType::Ref, "NULL"),
+    ] {
+        assert_eq!(
+            read(&mut ask, &mut machine, &mut rt, name),
+            (ty, shown.into()),
+            "{name}"
+        );
+    }
+
+    // FORCE and WRITE values parsed from text as the variable's type (what plcctl does).
+    for (force, name, ty, text) in [
+        (true, "P.t", VarType::Tod, "TOD#06:00:00.25"),
+        (true, "P.d", VarType::Date, "D#2000-02-29"),
+        (false, "P.ldt", VarType::Dt, "DT#2024-12-24-18:00:00"),
+        (true, "P.lt", VarType::Time, "T#2s"),
+        (true, "P.c", VarType::Char, "'$41'"),
+        (false, "P.wc", VarType::Char, "z"),
+        (false, "P.ws", VarType::WString, "\"Zoë $N\""),
+    ] {
+        let mut text_buf = [0u8; 64];
+        let value = literal::parse(text, ty, &mut text_buf).unwrap();
+        let r = if force {
+            Request::Force { name, value }
+        } else {
+            Request::Write { name, value }
+        };
+        let reply = ask(&mut machine, &mut rt, r);
+        assert_eq!(decode_response(&reply).unwrap().2, Status::Ok, "{name}");
+    }
+    rt.scan(
+        &mut machine,
+        &image,
+        &package,
+        &mut wires,
+        &mut areas,
+        || 0,
+        0,
+        |_, _| {},
+    );
+    for (name, shown) in [
+        ("P.t", "TOD#06:00:00.25"),
+        ("P.d", "D#2000-02-29"),
+        ("P.ldt", "LDT#2024-12-24-18:00:00"),
+        ("P.lt", "LT#2s"),
+        ("P.c", "'A'"),
+        ("P.wc", "\"z\""),
+        ("P.ws", "\"Zoë $N\""),
+    ] {
+        assert_eq!(
+            read(&mut ask, &mut machine, &mut rt, name).1,
+            shown,
+            "{name}"
+        );
+    }
+
+    // What does not fit the variable's type; a reference is never written.
+    let tod = Value::Temporal(plc_vm::TimeKind::Tod, 0);
+    let null = Value::Ref {
+        address: None,
+        target: None,
+    };
+    for (r, want) in [
+        (
+            Request::Force {
+                name: "P.d",
+                value: tod,
+            },
+            Status::TypeMismatch,
+        ),
+        (
+            Request::Force {
+                name: "P.t",
+                value: Value::Time(0),
+            },
+            Status::TypeMismatch,
+        ),
+        (
+            Request::Write {
+                name: "P.c",
+                value: Value::UInt(65),
+            },
+            Status::TypeMismatch,
+        ),
+        (
+            Request::Force {
+                name: "P.ws",
+                value: Value::WString(b"a\0"),
+            },
+            Status::Unsupported,
+        ),
+        (
+            Request::Force {
+                name: "P.p",
+                value: null,
+            },
+            Status::ReadOnly,
+        ),
+        (
+            Request::Write {
+                name: "P.p",
+                value: Value::UInt(0),
+            },
+            Status::ReadOnly,
+        ),
+        (
+            Request::Force {
+                name: "P.q",
+                value: Value::Int(4),
+            },
+            Status::ReadOnly,
+        ),
+    ] {
+        let reply = ask(&mut machine, &mut rt, r);
+        assert_eq!(decode_response(&reply).unwrap().2, want, "{r:?}");
+    }
+    assert_eq!(
+        read(&mut ask, &mut machine, &mut rt, "P.p").1,
+        "REF(P.x)",
+        "unchanged"
+    );
+
+    // VERSION.
+    let reply = ask(&mut machine, &mut rt, Request::Version);
+    let (op, _, status, mut r) = decode_response(&reply).unwrap();
+    assert_eq!(
+        (op, status, r.u16()),
+        (Op::Version, Status::Ok, Some(PROTOCOL_VERSION))
+    );
+
+    // LIST names every variable with its own type.
+    let reply = ask(&mut machine, &mut rt, Request::List { from: 0 });
+    let (_, _, _, mut r) = decode_response(&reply).unwrap();
+    let (_, count) = (r.u16().unwrap(), r.u8().unwrap());
+    let listed: Vec<(u8, &str)> = (0..count)
+        .map(|_| (r.u8().unwrap(), r.short_str().unwrap()))
+        .collect();
+    for (ty, name) in [
+        (VarType::Tod, "P.t"),
+        (VarType::WString, "P.ws"),
+        (VarType::Ref, "P.q"),
+        (VarType::LDt, "P.ldt"),
+    ] {
+        assert!(listed.contains(&(ty.code(), name)), "{name} in {listed:?}");
+    }
+}
+
+/// Sets the RETAIN flag of variable `name` in `image` (what the compiler never does for a
+/// reference, but a hand-made image may).
+fn mark_retain(image: &mut [u8], name: &str) {
+    let parsed = Image::parse(image).unwrap();
+    let index = (0..parsed.var_count())
+        .find(|&i| parsed.var(i).unwrap().name == name)
+        .unwrap();
+    let vars = 16 + 5 * 8; // the VARS entry of the section table
+    let at = u32::from_le_bytes(image[vars..vars + 4].try_into().unwrap()) as usize;
+    image[at + index * plc_vm::image::VAR_RECORD + 7] |= plc_vm::image::VAR_FLAG_RETAIN;
+}
+
+/// RETAIN values of the new types go over to a downloaded program by name and type: the
+/// dates and characters as they are, a WSTRING also into a larger or smaller one (its text
+/// cut), a reference only within the same program.
+#[test]
+fn retain_dates_texts_and_references_are_handed_over() {
+    // The compiler refuses RETAIN references; the runtime does not rely on it.
+    let mut old = compile(
+        "PROGRAM P VAR RETAIN t : TOD; d : DT; c : WCHAR; big : WSTRING[10]; small : WSTRING[10];
+           x : INT; END_VAR VAR p : REF_TO INT; END_VAR
+         t := TOD#01:02:03; d := DT#2024-06-15-12:30:00; c := WCHAR#\"€\"; big := \"Grüße\";
+         small := \"Grüße\"; p := REF(x); END_PROGRAM",
+    );
+    let mut new = compile(
+        "PROGRAM P VAR RETAIN x : INT; small : WSTRING[3]; big : WSTRING[40];
+           c : WCHAR; d : DT; t : TOD; END_VAR VAR p : REF_TO INT; END_VAR
+           x := x; p := REF(x); END_PROGRAM",
+    );
+    mark_retain(&mut old, "P.p");
+    mark_retain(&mut new, "P.p");
+    let (old_image, new_image) = (Image::parse(&old).unwrap(), Image::parse(&new).unwrap());
+    let run_once = |image: &Image, data: &mut Vec<u8>| {
+        let (mut stack, mut calls, mut tries) =
+            ([0u64; 256], [CallFrame::EMPTY; 32], [TryFrame::EMPTY; 16]);
+        let mut machine = Machine::new(
+            verify(image).unwrap(),
+            Memory {
+                data,
+                stack: &mut stack,
+                calls: &mut calls,
+                tries: &mut tries,
+            },
+        )
+        .unwrap();
+        machine.run_cycle(0, 0).unwrap();
+    };
+    let mut old_data = vec![0u8; old_image.data_size() as usize];
+    run_once(&old_image, &mut old_data);
+    let shown = |image: &Image, data: &[u8], name: &str| {
+        let v = image.find_var(name).unwrap();
+        let ty = plc_vm::image::VarType::from_code(v.ty).unwrap();
+        let value = Value::load(ty, &data[v.addr as usize..(v.addr + v.size) as usize]).unwrap();
+        value.to_string()
+    };
+    // A download: a changed program.
+    let mut new_data = vec![0u8; new_image.data_size() as usize];
+    {
+        // Initialised as Machine::new does.
+        let init = new_image.init_data();
+        new_data[..init.len()].copy_from_slice(init);
+    }
+    let carried = crate::scan::carry_retain(&old_image, &old_data, &new_image, &mut new_data);
+    assert_eq!(carried, 6, "all but the reference");
+    for (name, want) in [
+        ("P.t", "TOD#01:02:03"),
+        ("P.d", "DT#2024-06-15-12:30:00"),
+        ("P.c", "\"€\""),
+        ("P.big", "\"Grüße\""),
+        ("P.small", "\"Grü\""),
+        ("P.x", "0"),
+        ("P.p", "NULL"),
+    ] {
+        assert_eq!(shown(&new_image, &new_data, name), want, "{name}");
+    }
+    // A warm restart: the same program keeps its reference too.
+    let mut again = vec![0u8; old_image.data_size() as usize];
+    let init = old_image.init_data();
+    again[..init.len()].copy_from_slice(init);
+    let carried = crate::scan::carry_retain(&old_image, &old_data, &old_image, &mut again);
+    assert_eq!(carried, 7);
+    assert_eq!(again, old_data);
 }
 
 #[test]

@@ -26,7 +26,11 @@
 //!   cycle, 0 = [`DEFAULT_WATCHDOG_BUDGET`]), interval_ns u64, trigger u32` (event tasks:
 //!   1 + the data address of the BOOL whose rising edge releases the task, 0 = none).
 //! * `VARS`: 16-byte records `name_off u32, name_len u16, type u8 ([`VarType`]), flags u8
-//!   ([`VAR_FLAG_RETAIN`], [`VAR_FLAG_CONSTANT`]), address u32, size u32` — the monitor map.
+//!   ([`VAR_FLAG_RETAIN`], [`VAR_FLAG_CONSTANT`]), address u32, size u32` — the monitor map:
+//!   every elementary variable, STRING, WSTRING and reference of the program by its full
+//!   name, with its own type (each date/time type, CHAR and WCHAR have codes of their own
+//!   since version 4). The verifier refuses an unknown type code and a size that does not
+//!   fit the type ([`VarType::size_fits`]).
 //! * `SRCLOCS`: 16-byte records `code_offset u32, line u32, column u32, file u16, reserved u16`,
 //!   sorted by code offset; an entry covers code up to the next entry's offset.
 //! * `FILES`: 8-byte records `name_off u32, name_len u16, reserved u16`.
@@ -216,26 +220,143 @@ codes::code_enum! {
         DWord = 15 => "DWORD",
         /// LWORD.
         LWord = 16 => "LWORD",
+        /// DATE (i64 nanoseconds since 1970-01-01, a whole number of days).
+        Date = 17 => "DATE",
+        /// TIME_OF_DAY (i64 nanoseconds since midnight, below one day).
+        Tod = 18 => "TOD",
+        /// DATE_AND_TIME (i64 nanoseconds since 1970-01-01).
+        Dt = 19 => "DT",
+        /// LTIME (i64 nanoseconds).
+        LTime = 20 => "LTIME",
+        /// LDATE (as DATE).
+        LDate = 21 => "LDATE",
+        /// LTIME_OF_DAY (as TOD).
+        LTod = 22 => "LTOD",
+        /// LDATE_AND_TIME (as DT).
+        LDt = 23 => "LDT",
+        /// CHAR (1 byte).
+        Char = 24 => "CHAR",
+        /// WCHAR (a UTF-16 code unit, 2 bytes).
+        WChar = 25 => "WCHAR",
+        /// WSTRING (`max_len u16, cur_len u16, units[max_len] u16`, see [`crate::isa::Builtin`]).
+        WString = 26 => "WSTRING",
+        /// A reference (`REF_TO`, `POINTER TO`, `REFERENCE TO`, an interface or a reference
+        /// to a function-block instance): a 64-bit cell whose low 32 bits are the data address
+        /// of its target, 0 being NULL (see "References" in [`crate::isa`]). Read-only for a
+        /// monitor: a written address could name another variable or trap the program.
+        Ref = 27 => "REF_TO",
     }
 }
 
+/// How a variable of a [`VarType`] is held in data memory.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Storage {
+    /// A number, bit string, BOOL, date/time or character of this memory type.
+    Scalar(crate::isa::MemType),
+    /// A STRING: `max_len u16, cur_len u16, bytes[max_len]` (record size `4 + max_len`).
+    String,
+    /// A WSTRING: `max_len u16, cur_len u16, units[max_len] u16` (record size `4 + 2 max_len`).
+    WString,
+    /// A reference cell (`u64`, record size 8).
+    Reference,
+}
+
 impl VarType {
-    /// The storage type of a scalar (`None` for STRING).
-    pub const fn mem_type(self) -> Option<crate::isa::MemType> {
+    /// How a variable of this type is held.
+    pub const fn storage(self) -> Storage {
         use crate::isa::MemType as M;
         use VarType::*;
-        Some(match self {
-            Bool | USInt | Byte => M::U8,
+        Storage::Scalar(match self {
+            Bool | USInt | Byte | Char => M::U8,
             SInt => M::I8,
             Int => M::I16,
             DInt => M::I32,
-            LInt | Time => M::I64,
-            UInt | Word => M::U16,
+            LInt | Time | LTime | Date | LDate | Tod | LTod | Dt | LDt => M::I64,
+            UInt | Word | WChar => M::U16,
             UDInt | DWord => M::U32,
             ULInt | LWord => M::U64,
             Real => M::F32,
             LReal => M::F64,
-            String => return None,
+            String => return Storage::String,
+            WString => return Storage::WString,
+            Ref => return Storage::Reference,
+        })
+    }
+
+    /// The storage type of a scalar: a number, bit string, BOOL, date/time or character
+    /// (`None` for STRING, WSTRING and references).
+    pub const fn mem_type(self) -> Option<crate::isa::MemType> {
+        match self.storage() {
+            Storage::Scalar(mem) => Some(mem),
+            _ => None,
+        }
+    }
+
+    /// Whether the record size `size` fits a variable of this type.
+    pub const fn size_fits(self, size: u32) -> bool {
+        match self.storage() {
+            Storage::Scalar(mem) => size as usize == mem.width(),
+            Storage::String => size >= 4 && size - 4 <= u16::MAX as u32,
+            Storage::WString => {
+                size >= 4 && (size - 4).is_multiple_of(2) && (size - 4) / 2 <= u16::MAX as u32
+            }
+            Storage::Reference => size == 8,
+        }
+    }
+
+    /// SINT, INT, DINT, LINT: the integers whose values are signed.
+    pub const fn is_signed_int(self) -> bool {
+        matches!(
+            self,
+            VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt
+        )
+    }
+
+    /// The date/time kind of TIME, LTIME, DATE, TOD, DT and the long forms.
+    pub const fn time_kind(self) -> Option<crate::isa::TimeKind> {
+        use crate::isa::TimeKind as K;
+        Some(match self {
+            VarType::Time => K::Time,
+            VarType::LTime => K::LTime,
+            VarType::Date => K::Date,
+            VarType::LDate => K::LDate,
+            VarType::Tod => K::Tod,
+            VarType::LTod => K::LTod,
+            VarType::Dt => K::Dt,
+            VarType::LDt => K::LDt,
+            _ => return None,
+        })
+    }
+
+    /// The variable type of a date/time kind.
+    pub const fn of_time_kind(kind: crate::isa::TimeKind) -> VarType {
+        use crate::isa::TimeKind as K;
+        match kind {
+            K::Time => VarType::Time,
+            K::LTime => VarType::LTime,
+            K::Date => VarType::Date,
+            K::LDate => VarType::LDate,
+            K::Tod => VarType::Tod,
+            K::LTod => VarType::LTod,
+            K::Dt => VarType::Dt,
+            K::LDt => VarType::LDt,
+        }
+    }
+
+    /// The inclusive range of an integer, bit-string or character type's values (as
+    /// `i128`, to hold both LINT's and ULINT's); `None` for the other types.
+    pub const fn int_range(self) -> Option<(i128, i128)> {
+        use VarType::*;
+        Some(match self {
+            SInt => (i8::MIN as i128, i8::MAX as i128),
+            Int => (i16::MIN as i128, i16::MAX as i128),
+            DInt => (i32::MIN as i128, i32::MAX as i128),
+            LInt => (i64::MIN as i128, i64::MAX as i128),
+            USInt | Byte | Char => (0, u8::MAX as i128),
+            UInt | Word | WChar => (0, u16::MAX as i128),
+            UDInt | DWord => (0, u32::MAX as i128),
+            ULInt | LWord => (0, u64::MAX as i128),
+            _ => return None,
         })
     }
 }
@@ -452,6 +573,12 @@ impl<'a> Image<'a> {
             data_size,
             sections,
         })
+    }
+
+    /// Whether `other` is the same program: the same data size and sections, byte for byte
+    /// (so a data address means the same variable in both).
+    pub fn same_program(&self, other: &Image) -> bool {
+        self.data_size == other.data_size && self.sections == other.sections
     }
 
     fn section(&self, section: Section) -> &'a [u8] {
@@ -721,6 +848,14 @@ impl<'a> Image<'a> {
         (0..self.var_count())
             .filter_map(|i| self.var(i))
             .find(|v| v.name == name)
+    }
+
+    /// The first variable of the map whose first byte is at data address `address` (what a
+    /// monitor names a reference's target by; a linear scan).
+    pub fn var_at(&self, address: u32) -> Option<Var<'a>> {
+        (0..self.var_count())
+            .filter_map(|i| self.var(i))
+            .find(|v| v.addr == address)
     }
 
     /// Number of source-location records.

@@ -68,10 +68,10 @@ impl Width {
         use VarType::*;
         match self {
             Width::Bit => ty == Bool,
-            Width::Byte => matches!(ty, Byte | SInt | USInt),
-            Width::Word => matches!(ty, Word | Int | UInt),
+            Width::Byte => matches!(ty, Byte | SInt | USInt | Char),
+            Width::Word => matches!(ty, Word | Int | UInt | WChar),
             Width::DWord => matches!(ty, DWord | DInt | UDInt | Real),
-            Width::LWord => matches!(ty, LWord | LInt | ULInt | LReal | Time),
+            Width::LWord => matches!(ty, LWord | LInt | ULInt | LReal) || ty.time_kind().is_some(),
         }
     }
 }
@@ -323,6 +323,11 @@ mod tests {
         assert!(Width::LWord.fits(VarType::LReal));
         assert!(!Width::Word.fits(VarType::DInt));
         assert!(!Width::LWord.fits(VarType::String));
+        // The date/time types are 64-bit, the characters a byte and a word; never a
+        // reference or a WSTRING.
+        assert!(Width::LWord.fits(VarType::Tod) && Width::LWord.fits(VarType::LDt));
+        assert!(Width::Byte.fits(VarType::Char) && Width::Word.fits(VarType::WChar));
+        assert!(!Width::LWord.fits(VarType::Ref) && !Width::LWord.fits(VarType::WString));
     }
 
     #[test]

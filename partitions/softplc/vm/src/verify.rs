@@ -322,7 +322,11 @@ impl core::fmt::Display for Reason {
             Reason::BadTaskKind(k) => write!(f, "unknown task kind {k}"),
             Reason::TriggerOutsideData => write!(f, "event trigger outside data memory"),
             Reason::FrameOutsideData => write!(f, "instance frame outside data memory"),
-            Reason::BadVarType(t) => write!(f, "unknown variable type {t}"),
+            Reason::BadVarType(t) => write!(
+                f,
+                "unknown variable type code {t} (known: 0 to {}; an image of a newer compiler?)",
+                VarType::ALL[VarType::COUNT - 1].code()
+            ),
             Reason::VarOutsideData => write!(f, "variable outside data memory"),
             Reason::VarSizeMismatch => write!(f, "variable size does not match its type"),
             Reason::BadLocation => write!(f, "invalid located-variable address"),
@@ -896,11 +900,7 @@ fn check_tables(image: &Image<'_>) -> Result<(), VerifyError> {
         if var.addr as u64 + var.size as u64 > data_size {
             return err(site, Reason::VarOutsideData);
         }
-        let size_ok = match ty.mem_type() {
-            Some(mem) => var.size as usize == mem.width(),
-            None => (4..=4 + u16::MAX as u32).contains(&var.size),
-        };
-        if !size_ok {
+        if !ty.size_fits(var.size) {
             return err(site, Reason::VarSizeMismatch);
         }
     }

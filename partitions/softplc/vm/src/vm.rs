@@ -109,59 +109,7 @@ pub struct CycleStats {
     pub caught_traps: u32,
 }
 
-/// A typed variable value for the monitor API.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub enum Value<'s> {
-    /// BOOL.
-    Bool(bool),
-    /// Signed integers (SINT..LINT).
-    Int(i64),
-    /// Unsigned integers and bit strings (USINT..ULINT, BYTE..LWORD).
-    UInt(u64),
-    /// REAL.
-    Real(f32),
-    /// LREAL.
-    LReal(f64),
-    /// TIME in nanoseconds.
-    Time(i64),
-    /// STRING bytes.
-    String(&'s [u8]),
-}
-
-impl core::fmt::Display for Value<'_> {
-    /// IEC literal style: `TRUE`, `-3`, `0.5`, `T#20ms`, `'text'`.
-    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
-        match *self {
-            Value::Bool(b) => f.write_str(if b { "TRUE" } else { "FALSE" }),
-            Value::Int(v) => write!(f, "{v}"),
-            Value::UInt(v) => write!(f, "{v}"),
-            Value::Real(v) => write!(f, "{v}"),
-            Value::LReal(v) => write!(f, "{v}"),
-            Value::Time(ns) if ns % 1_000_000 == 0 => write!(f, "T#{}ms", ns / 1_000_000),
-            Value::Time(ns) if ns % 1_000 == 0 => write!(f, "T#{}us", ns / 1_000),
-            Value::Time(ns) => write!(f, "T#{ns}ns"),
-            Value::String(bytes) => match core::str::from_utf8(bytes) {
-                Ok(text) => write!(f, "'{text}'"),
-                Err(_) => write!(f, "'<{} bytes>'", bytes.len()),
-            },
-        }
-    }
-}
-
-/// Why a monitor access failed.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum VarError {
-    /// No variable of that name.
-    UnknownName,
-    /// Value kind does not fit the variable type.
-    TypeMismatch,
-    /// The variable is CONSTANT.
-    Constant,
-    /// STRING variables can be written but not forced.
-    NotForceable,
-    /// All [`MAX_FORCES`] force slots are in use.
-    TooManyForces,
-}
+pub use crate::monitor::{Value, VarError};
 
 /// Instructions between two deadline checks of [`Machine::run_cycle_until`] (a few
 /// microseconds of interpretation: the check's clock read stays below 1 % of the work).
@@ -1388,32 +1336,23 @@ impl<'a, 'm> Machine<'a, 'm> {
         Ok(self.read_entry(&var))
     }
 
-    /// Reads a variable-map entry (verified to lie inside data memory).
+    /// Reads a variable-map entry (verified to lie inside data memory); a reference's
+    /// target is named by the first variable of the map it is the start of.
     pub fn read_entry(&self, var: &Var<'_>) -> Value<'_> {
         let ty = VarType::from_code(var.ty).expect("verified");
         let at = var.addr as usize;
-        let Some(mem) = ty.mem_type() else {
-            let bytes = &self.data[at..at + var.size as usize];
-            let capacity = var.size as usize - 4;
-            let len = (read_u16(bytes, 2) as usize)
-                .min(capacity)
-                .min(read_u16(bytes, 0) as usize);
-            return Value::String(&bytes[4..4 + len]);
-        };
-        let cell = mem.cell_from_le(&self.data[at..at + mem.width()]);
-        match ty {
-            VarType::Bool => Value::Bool(cell != 0),
-            VarType::SInt | VarType::Int | VarType::DInt | VarType::LInt => Value::Int(cell as i64),
-            VarType::Time => Value::Time(cell as i64),
-            VarType::Real => Value::Real(f32::from_bits(cell as u32)),
-            VarType::LReal => Value::LReal(f64::from_bits(cell)),
-            _ => Value::UInt(cell),
+        match Value::load(ty, &self.data[at..at + var.size as usize]).expect("verified") {
+            Value::Ref { address, .. } => Value::Ref {
+                address,
+                target: address.and_then(|a| self.image.var_at(a)).map(|v| v.name),
+            },
+            value => value,
         }
     }
 
-    /// Writes a variable by name (once; the program may change it again). Integers are
-    /// truncated to the variable's width; strings to its capacity. `Int`/`UInt` are accepted
-    /// for any integer type, `Int` also for TIME.
+    /// Writes a variable by name (once; the program may change it again), as
+    /// [`Value::store`] does: integers truncated to the variable's width, texts to its
+    /// capacity, references never ([`VarError::ReadOnly`]).
     pub fn write_var(&mut self, name: &str, value: Value<'_>) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
         if var.flags & VAR_FLAG_CONSTANT != 0 {
@@ -1421,22 +1360,7 @@ impl<'a, 'm> Machine<'a, 'm> {
         }
         let ty = VarType::from_code(var.ty).expect("verified");
         let at = var.addr as usize;
-        if ty.mem_type().is_none() {
-            let Value::String(text) = value else {
-                return Err(VarError::TypeMismatch);
-            };
-            let capacity = (var.size as usize - 4).min(read_u16(self.data, at) as usize);
-            let len = text.len().min(capacity);
-            self.data[at + 2..at + 4].copy_from_slice(&(len as u16).to_le_bytes());
-            self.data[at + 4..at + 4 + len].copy_from_slice(&text[..len]);
-            if len < capacity {
-                self.data[at + 4 + len] = 0;
-            }
-            return Ok(());
-        }
-        let forced = Self::encode_scalar(&var, ty, value)?;
-        self.write_forced(&forced);
-        Ok(())
+        value.store(ty, &mut self.data[at..at + var.size as usize])
     }
 
     /// Forces a scalar variable: writes it now and re-writes it at the start and at the end
@@ -1448,9 +1372,6 @@ impl<'a, 'm> Machine<'a, 'm> {
             return Err(VarError::Constant);
         }
         let ty = VarType::from_code(var.ty).expect("verified");
-        if ty.mem_type().is_none() {
-            return Err(VarError::NotForceable);
-        }
         let forced = Self::encode_scalar(&var, ty, value)?;
         let slot = match self
             .forces
@@ -1496,23 +1417,17 @@ impl<'a, 'm> Machine<'a, 'm> {
     pub fn force_bytes(&mut self, name: &str, bytes: &[u8]) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
         let ty = VarType::from_code(var.ty).ok_or(VarError::TypeMismatch)?;
-        let mem = ty.mem_type().ok_or(VarError::NotForceable)?;
+        let mem = ty.mem_type().ok_or(match ty {
+            VarType::Ref => VarError::ReadOnly,
+            _ => VarError::NotForceable,
+        })?;
         if var.flags & VAR_FLAG_CONSTANT != 0 {
             return Err(VarError::Constant);
         }
         if bytes.len() != mem.width() {
             return Err(VarError::TypeMismatch);
         }
-        let mut cell = [0u8; 8];
-        cell[..bytes.len()].copy_from_slice(bytes);
-        let value = u64::from_le_bytes(cell);
-        let value = match ty {
-            VarType::Bool => Value::Bool(value != 0),
-            VarType::Real => Value::Real(f32::from_bits(value as u32)),
-            VarType::LReal => Value::LReal(f64::from_bits(value)),
-            VarType::Time => Value::Time(value as i64),
-            _ => Value::UInt(value),
-        };
+        let value = Value::of_cell(ty, mem.cell_from_le(bytes)).ok_or(VarError::TypeMismatch)?;
         self.force_var(name, value)
     }
 
@@ -1523,19 +1438,8 @@ impl<'a, 'm> Machine<'a, 'm> {
     }
 
     fn encode_scalar(var: &Var<'_>, ty: VarType, value: Value<'_>) -> Result<Forced, VarError> {
+        let cell = value.to_cell(ty)?;
         let mem = ty.mem_type().ok_or(VarError::NotForceable)?;
-        let cell = match (ty, value) {
-            (VarType::Bool, Value::Bool(b)) => b as u64,
-            (VarType::Real, Value::Real(r)) => r.to_bits() as u64,
-            (VarType::LReal, Value::LReal(r)) => r.to_bits(),
-            (VarType::Time, Value::Time(t) | Value::Int(t)) => t as u64,
-            (VarType::Bool | VarType::Real | VarType::LReal | VarType::Time, _) => {
-                return Err(VarError::TypeMismatch);
-            }
-            (_, Value::Int(i)) => i as u64,
-            (_, Value::UInt(u)) => u,
-            _ => return Err(VarError::TypeMismatch),
-        };
         Ok(Forced {
             addr: var.addr,
             len: mem.width() as u8,

@@ -10,8 +10,9 @@
 //!   data entry (the image of tests/configs/plc/tank_v2.st, `data.plc_image`) and READ
 //!   `tank.revision` and `tank.alarm_count` from the new program; then it ends the run (an
 //!   application error the configuration maps to `shutdown_success`);
-//! * `viewer` (a PLC with access "monitor"): READ, then a WRITE, a FORCE, a STOP and a
-//!   DOWNLOAD_BEGIN, which must be refused;
+//! * `viewer` (a PLC with access "monitor"): READs (also of a TOD and a WSTRING, printed as
+//!   their IEC literals), then a WRITE, a FORCE, a STOP and a DOWNLOAD_BEGIN, which must be
+//!   refused;
 //! * `bench` (`cargo xtask bench`, tests/configs/bench_plc.toml): times [`BENCH_READS`] READs
 //!   of `Count.n` from sending the request to receiving the answer (TSC cycles) and prints
 //!   `bench plc_online_read ...`, then lets the PLC run [`BENCH_FRAMES`] more frames before it
@@ -258,6 +259,8 @@ fn bench(link: &mut Link) {
 
 fn viewer(link: &mut Link) {
     read(link, "Count.n");
+    read(link, "Count.shift_start");
+    read(link, "Count.label");
     link.ask(Request::Write {
         name: "Count.n",
         value: Value::UInt(0),

@@ -7,7 +7,7 @@ use crate::fmath;
 use crate::image::VarType;
 use crate::isa::{Builtin, MemType, Trap};
 use crate::vm::{Value, VarError};
-use alloc::string::String;
+use alloc::string::{String, ToString};
 
 fn close(a: f64, b: f64, ulps: f64) -> bool {
     if a == b || (a.is_nan() && b.is_nan()) {
@@ -601,6 +601,166 @@ fn monitor_reads_and_forces_variables_by_name() {
         Err(VarError::TypeMismatch)
     );
     vm.clear_forces();
+}
+
+/// The date/time types, CHAR, WCHAR, WSTRING and references through the monitor API:
+/// each read as its own kind, written and forced only with a value of its type (or one IEC
+/// widens to it), a reference never written.
+#[test]
+fn monitor_of_dates_characters_wide_strings_and_references() {
+    use crate::builtins::{NS_PER_DAY, date_from_parts};
+    use crate::isa::TimeKind;
+    let mut b = ImageBuilder::new();
+    b.reserve_data(160);
+    let main = b.declare_pou("Main", 0, 0, 0);
+    b.add_task(&TaskDef {
+        name: "T".into(),
+        kind: TaskKind::Cyclic,
+        priority: 0,
+        pou: main,
+        instance_base: 0,
+        interval_ns: 1,
+        watchdog_budget: 0,
+    });
+    let date = date_from_parts(2024, 6, 15).unwrap();
+    let tod = (12 * 3600 + 30 * 60) * 1_000_000_000i64;
+    b.set_init(0, &date.to_le_bytes());
+    b.set_init(8, &tod.to_le_bytes());
+    b.set_init(16, &(date + tod).to_le_bytes());
+    b.set_init(24, &1_500_000i64.to_le_bytes());
+    b.set_init(32, b"a");
+    b.set_init(34, &0x20acu16.to_le_bytes());
+    // WSTRING[4] "Zoë" at 40 (4 + 2 * 4 bytes).
+    let mut wide = alloc::vec![4u8, 0, 3, 0];
+    wide.extend("Zoë".encode_utf16().flat_map(u16::to_le_bytes));
+    wide.resize(12, 0);
+    b.set_init(40, &wide);
+    // References: to `Main.tod` (object 0 is its 8 bytes), to the middle of it, NULL.
+    let object = b.add_object(8, 8, None);
+    let cell = |address: u64| address | ((object as u64 + 1) << 32);
+    b.set_init(56, &cell(8).to_le_bytes());
+    b.set_init(64, &cell(12).to_le_bytes());
+    b.add_var("Main.date", VarType::Date, 0, 0, 8);
+    b.add_var("Main.tod", VarType::Tod, 0, 8, 8);
+    b.add_var("Main.dt", VarType::Dt, 0, 16, 8);
+    b.add_var("Main.lt", VarType::LTime, 0, 24, 8);
+    b.add_var("Main.c", VarType::Char, 0, 32, 1);
+    b.add_var("Main.wc", VarType::WChar, 0, 34, 2);
+    b.add_var("Main.ws", VarType::WString, 0, 40, 12);
+    b.add_var("Main.p", VarType::Ref, 0, 56, 8);
+    b.add_var("Main.q", VarType::Ref, 0, 64, 8);
+    b.add_var("Main.n", VarType::Ref, 0, 72, 8);
+    b.add_var("Main.ld", VarType::LDate, 0, 80, 8);
+    b.begin_pou(main);
+    b.ret();
+    b.end_pou(main);
+    let bytes = b.build().unwrap();
+    let image = Image::parse(&bytes).unwrap();
+    let mut data = [0u8; 160];
+    let mut stack = [0u64; 4];
+    let mut calls = [CallFrame::EMPTY; 1];
+    let mut vm = Machine::new(
+        verify(&image).unwrap(),
+        Memory {
+            data: &mut data,
+            stack: &mut stack,
+            calls: &mut calls,
+            tries: &mut [],
+        },
+    )
+    .unwrap();
+    let shown = |vm: &Machine, name: &str| vm.read_var(name).unwrap().to_string();
+    assert_eq!(shown(&vm, "Main.date"), "D#2024-06-15");
+    assert_eq!(shown(&vm, "Main.tod"), "TOD#12:30:00");
+    assert_eq!(shown(&vm, "Main.dt"), "DT#2024-06-15-12:30:00");
+    assert_eq!(shown(&vm, "Main.lt"), "LT#1ms500us");
+    assert_eq!(shown(&vm, "Main.c"), "'a'");
+    assert_eq!(shown(&vm, "Main.wc"), "\"€\"");
+    assert_eq!(shown(&vm, "Main.ws"), "\"Zoë\"");
+    assert_eq!(shown(&vm, "Main.p"), "REF(Main.tod)");
+    assert_eq!(shown(&vm, "Main.q"), "16#0000000C");
+    assert_eq!(shown(&vm, "Main.n"), "NULL");
+
+    // Writes and forces of their own kinds, and of the kinds IEC widens.
+    vm.write_var("Main.tod", Value::Temporal(TimeKind::Tod, 1))
+        .unwrap();
+    assert_eq!(shown(&vm, "Main.tod"), "TOD#00:00:00.000000001");
+    vm.write_var("Main.lt", Value::Time(2_000)).unwrap();
+    assert_eq!(
+        vm.read_var("Main.lt"),
+        Ok(Value::Temporal(TimeKind::LTime, 2_000))
+    );
+    vm.force_var("Main.ld", Value::Temporal(TimeKind::Date, -NS_PER_DAY))
+        .unwrap();
+    assert_eq!(shown(&vm, "Main.ld"), "LD#1969-12-31");
+    vm.force_var("Main.c", Value::Char(b'z')).unwrap();
+    vm.write_var("Main.wc", Value::Char(b'A')).unwrap();
+    assert_eq!(
+        (shown(&vm, "Main.c"), shown(&vm, "Main.wc")),
+        ("'z'".into(), "\"A\"".into())
+    );
+    let long: Vec<u8> = "Grüße".encode_utf16().flat_map(u16::to_le_bytes).collect();
+    vm.write_var("Main.ws", Value::WString(&long)).unwrap();
+    assert_eq!(shown(&vm, "Main.ws"), "\"Grüß\"", "cut to its capacity");
+    // Forces follow a download by their bytes: a date/time keeps its kind.
+    vm.force_bytes("Main.dt", &7i64.to_le_bytes()).unwrap();
+    assert_eq!(vm.read_var("Main.dt"), Ok(Value::Temporal(TimeKind::Dt, 7)));
+
+    // What does not fit.
+    for (name, value, error) in [
+        (
+            "Main.date",
+            Value::Temporal(TimeKind::Date, 1),
+            VarError::TypeMismatch,
+        ),
+        (
+            "Main.date",
+            Value::Temporal(TimeKind::Dt, 0),
+            VarError::TypeMismatch,
+        ),
+        ("Main.date", Value::Int(0), VarError::TypeMismatch),
+        (
+            "Main.tod",
+            Value::Temporal(TimeKind::Tod, NS_PER_DAY),
+            VarError::TypeMismatch,
+        ),
+        (
+            "Main.tod",
+            Value::Temporal(TimeKind::LTod, 0),
+            VarError::TypeMismatch,
+        ),
+        ("Main.lt", Value::Int(5), VarError::TypeMismatch),
+        ("Main.c", Value::WChar(65), VarError::TypeMismatch),
+        ("Main.c", Value::UInt(65), VarError::TypeMismatch),
+        ("Main.ws", Value::String(b"x"), VarError::TypeMismatch),
+        ("Main.ws", Value::WString(b"odd"), VarError::TypeMismatch),
+        ("Main.p", Value::UInt(8), VarError::ReadOnly),
+        (
+            "Main.n",
+            Value::Ref {
+                address: Some(8),
+                target: None,
+            },
+            VarError::ReadOnly,
+        ),
+    ] {
+        assert_eq!(
+            vm.write_var(name, value),
+            Err(error),
+            "write {name} {value:?}"
+        );
+        let force_error = match name {
+            "Main.ws" => VarError::NotForceable,
+            _ => error,
+        };
+        assert_eq!(
+            vm.force_var(name, value),
+            Err(force_error),
+            "force {name} {value:?}"
+        );
+    }
+    assert_eq!(vm.force_bytes("Main.p", &[0; 8]), Err(VarError::ReadOnly));
+    assert_eq!(shown(&vm, "Main.p"), "REF(Main.tod)", "unchanged");
 }
 
 #[test]

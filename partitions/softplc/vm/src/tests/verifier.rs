@@ -410,10 +410,38 @@ fn variable_map_entries() {
             .reason,
         Reason::VarSizeMismatch
     );
+    // The date/time types, characters, WSTRINGs and references: each size checked.
+    for (ty, good, bad) in [
+        (VarType::Date, 8, 4),
+        (VarType::Tod, 8, 2),
+        (VarType::LDt, 8, 16),
+        (VarType::Char, 1, 2),
+        (VarType::WChar, 2, 1),
+        (VarType::WString, 4 + 2 * 10, 4 + 9),
+        (VarType::WString, 4, 3),
+        (VarType::Ref, 8, 4),
+    ] {
+        assert_eq!(verdict(&var_image(ty, 0, good)), Ok(()), "{ty:?}");
+        assert_eq!(
+            verdict(&var_image(ty, 0, bad)).unwrap_err().reason,
+            Reason::VarSizeMismatch,
+            "{ty:?} of {bad} bytes"
+        );
+    }
     let mut bytes = var_image(VarType::Int, 0, 2);
     let at = u32::from_le_bytes(bytes[16 + 5 * 8..16 + 5 * 8 + 4].try_into().unwrap()) as usize;
     bytes[at + 6] = 99;
     assert_eq!(verdict(&bytes).unwrap_err().reason, Reason::BadVarType(99));
+    // The first code after the last known one is unknown, and says so.
+    bytes[at + 6] = VarType::Ref.code() + 1;
+    let error = verdict(&bytes).unwrap_err();
+    assert_eq!(error.reason, Reason::BadVarType(28));
+    assert!(
+        error
+            .to_string()
+            .contains("unknown variable type code 28 (known: 0 to 27"),
+        "{error}"
+    );
     let names = u32::from_le_bytes(bytes[16 + 8 * 8..16 + 8 * 8 + 4].try_into().unwrap()) as usize;
     let mut bytes = var_image(VarType::Int, 0, 2);
     bytes[names] = 0xFF; // not UTF-8
