@@ -20,7 +20,7 @@
 
 use crate::builtins;
 use crate::image::{Image, SourceLocation, VAR_FLAG_CONSTANT, Var, VarType};
-use crate::isa::{MemType, Opcode, RoundMode, Trap, lreal_result, read_u16, real_result};
+use crate::isa::{MemType, Opcode, RoundMode, Trap, lreal_result, real_result};
 use crate::verify::{MAX_TASKS, VerifiedImage};
 
 /// A saved caller context.
