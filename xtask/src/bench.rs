@@ -145,21 +145,25 @@ pub fn format_line(m: &Metric) -> String {
 }
 
 /// Runs the host-side benchmarks: the soft-PLC suite (`plc-bench-suite`) on the interpreter
-/// (`plc-bench`: `plc_vm_*`) and on the native execution tier (`plc-native-bench`:
-/// `plc_native_*`), each program as ns per cycle and as a ratio to the same algorithm in
-/// hand-written Rust.
+/// (`plc-bench`: `plc_vm_*`), on the native execution tier (`plc-native-bench`:
+/// `plc_native_*`) and, when `IRONPLC` names an IronPLC checkout (or its ironplcc), on
+/// IronPLC's VM (`plc-ironplc-bench`: `plc_ironplc_*`; else its `skipped: ...` lines go to
+/// stderr), each program as ns per cycle and as a ratio to the same algorithm in
+/// hand-written Rust; then [`versus_ironplc`]. The legs' diagnostics go to stderr.
 pub fn host_metrics() -> Result<Vec<Metric>> {
     let mut metrics = Vec::new();
     for (package, bin) in [
         ("plc-compiler", "plc-bench"),
         ("plc-native", "plc-native-bench"),
+        ("plc-bench-suite", "plc-ironplc-bench"),
     ] {
         let out = crate::artifacts::cargo()
             .args(["run", "--quiet", "--release", "-p", package, "--bin", bin])
             .output()
             .with_context(|| format!("cannot run {bin}"))?;
+        eprint!("{}", String::from_utf8_lossy(&out.stderr));
         if !out.status.success() {
-            bail!("{bin} failed: {}", String::from_utf8_lossy(&out.stderr));
+            bail!("{bin} failed");
         }
         metrics.extend(
             String::from_utf8_lossy(&out.stdout)
@@ -167,7 +171,53 @@ pub fn host_metrics() -> Result<Vec<Metric>> {
                 .filter_map(parse_line),
         );
     }
+    let versus = versus_ironplc(&metrics);
+    metrics.extend(versus);
     Ok(metrics)
+}
+
+/// How many times faster the interpreter runs each program than IronPLC's VM:
+/// `plc_vm_<name>_vs_ironplc` (unit ratio; median = IronPLC's median over ours, min = its
+/// min over our max, max = its max over our min) for every program both legs measured, and
+/// `plc_vm_vs_ironplc_geomean` (the geometric mean of the medians, min and max likewise;
+/// samples = programs).
+pub fn versus_ironplc(metrics: &[Metric]) -> Vec<Metric> {
+    let find = |name: &str| metrics.iter().find(|m| m.name == name);
+    let mut out = Vec::new();
+    for vm in metrics {
+        let Some(program) = vm.name.strip_prefix("plc_vm_") else {
+            continue;
+        };
+        if program.ends_with("_ratio") || vm.unit != "ns" {
+            continue;
+        }
+        let Some(ironplc) = find(&format!("plc_ironplc_{program}")) else {
+            continue;
+        };
+        out.push(Metric {
+            name: format!("plc_vm_{program}_vs_ironplc"),
+            median: ironplc.median / vm.median,
+            min: ironplc.min / vm.max,
+            max: ironplc.max / vm.min,
+            unit: "ratio".to_string(),
+            samples: vm.samples.min(ironplc.samples),
+        });
+    }
+    if !out.is_empty() {
+        let geomean = |f: fn(&Metric) -> f64| {
+            (out.iter().map(|m| f(m).ln()).sum::<f64>() / out.len() as f64).exp()
+        };
+        let mean = Metric {
+            name: "plc_vm_vs_ironplc_geomean".to_string(),
+            median: geomean(|m| m.median),
+            min: geomean(|m| m.min),
+            max: geomean(|m| m.max),
+            unit: "ratio".to_string(),
+            samples: out.len() as u64,
+        };
+        out.push(mean);
+    }
+    out
 }
 
 pub fn write_report(metrics: &[Metric]) -> Result<std::path::PathBuf> {
@@ -253,6 +303,36 @@ mod tests {
         );
         assert!(parse_plc_scan("[plc] plc: t=1ms scan releases=3 lateness_ns=1/2").is_none());
         assert!(parse_plc_scan("[plc] plc: t=1ms watch x=1").is_none());
+    }
+
+    #[test]
+    fn compares_the_interpreter_with_ironplc() {
+        let lines = [
+            "bench plc_vm_pid median=10 min=8 max=20 unit=ns samples=25",
+            "bench plc_vm_pid_ratio median=5 min=4 max=6 unit=ratio samples=25",
+            "bench plc_ironplc_pid median=20 min=16 max=40 unit=ns samples=25",
+            "bench plc_vm_fib median=100 min=100 max=100 unit=ns samples=25",
+            "bench plc_ironplc_fib median=800 min=800 max=800 unit=ns samples=25",
+            "bench plc_vm_string median=100 min=100 max=100 unit=ns samples=25",
+        ];
+        let metrics: Vec<Metric> = lines.iter().filter_map(|l| parse_line(l)).collect();
+        let versus = versus_ironplc(&metrics);
+        let names: Vec<&str> = versus.iter().map(|m| m.name.as_str()).collect();
+        assert_eq!(
+            names,
+            [
+                "plc_vm_pid_vs_ironplc",
+                "plc_vm_fib_vs_ironplc",
+                "plc_vm_vs_ironplc_geomean"
+            ]
+        );
+        assert_eq!(
+            (versus[0].median, versus[0].min, versus[0].max),
+            (2.0, 0.8, 5.0)
+        );
+        assert!((versus[2].median - 4.0).abs() < 1e-12);
+        assert_eq!(versus[2].samples, 2);
+        assert!(versus_ironplc(&metrics[..2]).is_empty());
     }
 
     #[test]

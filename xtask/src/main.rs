@@ -42,8 +42,8 @@ enum Cmd {
         release: bool,
     },
     /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak and guest systems under
-    /// QEMU, the guest benchmark's native reference, soft-PLC VM on the host); writes
-    /// target/bench/report.json.
+    /// QEMU, the guest benchmark's native reference, the soft-PLC suite on the host: VM,
+    /// native tier, IronPLC with IRONPLC set); writes target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
         /// counts then follow the instructions executed, not the host's load, so two
@@ -76,9 +76,10 @@ enum Cmd {
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile"])]
         native: bool,
         /// Run only the host soft-PLC benchmarks (also part of the full bench): the suite of
-        /// `partitions/softplc/bench` on the interpreter (`plc_vm_*`) and on the native
-        /// execution tier (`plc_native_*`), each with its ratio over hand-written Rust;
-        /// writes target/bench/plc.json.
+        /// `partitions/softplc/bench` on the interpreter (`plc_vm_*`), on the native
+        /// execution tier (`plc_native_*`), each with its ratio over hand-written Rust, and,
+        /// with IRONPLC=<an IronPLC checkout or its ironplcc>, on IronPLC's VM
+        /// (`plc_ironplc_*`, `plc_vm_*_vs_ironplc`); writes target/bench/plc.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native"])]
         plc: bool,
     },
@@ -656,7 +657,6 @@ fn guest_metrics(
 /// Major frames of `cargo xtask bench --soak` by default.
 const SOAK_FRAMES: u64 = 1_000_000;
 
-/// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
 /// `bench --plc`: only the host soft-PLC benchmarks (`xtask::bench::host_metrics`).
 fn plc_bench() -> Result<bool> {
     let metrics = xtask::bench::host_metrics()?;
@@ -681,6 +681,7 @@ fn hostile() -> Result<bool> {
     Ok(true)
 }
 
+/// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
 fn soak(frames: u64) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;

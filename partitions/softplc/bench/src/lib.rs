@@ -5,7 +5,8 @@
 //! reporting both legs share.
 //!
 //! A leg (the interpreter: `plc-bench` in `plc-compiler`; the native tier:
-//! `plc-native-bench` in `plc-native`) compiles each [`Program`], runs it, checks that it
+//! `plc-native-bench` in `plc-native`; IronPLC's VM: `plc-ironplc-bench` here, see
+//! [`ironplc`]) compiles each [`Program`], runs it, checks that it
 //! computes what its reference computes ([`Program::outputs`], [`check_outputs`]), measures
 //! both with [`measure`] and prints [`report`]'s two lines per program:
 //! `bench plc_<tier>_<name>` (ns per cycle) and `bench plc_<tier>_<name>_ratio` (its cycle
@@ -16,10 +17,21 @@ use plc_vm::vm::Value;
 use std::hint::black_box;
 use std::time::Instant;
 
+pub mod ironplc;
 mod reference;
 
-/// Samples per metric.
+/// Samples per metric (unless the environment variable `PLC_BENCH_SAMPLES` says otherwise,
+/// e.g. 1 for a run under `valgrind --tool=callgrind`).
 pub const SAMPLES: usize = 25;
+
+/// The samples per metric: `PLC_BENCH_SAMPLES` or [`SAMPLES`].
+pub fn samples() -> usize {
+    std::env::var("PLC_BENCH_SAMPLES")
+        .ok()
+        .and_then(|v| v.parse().ok())
+        .filter(|&n| n > 0)
+        .unwrap_or(SAMPLES)
+}
 
 /// A hand-written Rust implementation of a program's algorithm: its state and one cycle.
 pub trait Reference {
@@ -170,7 +182,7 @@ pub fn measure(mut cycle: impl FnMut(), cycles: u32) -> Vec<f64> {
     for _ in 0..cycles {
         cycle();
     }
-    (0..SAMPLES)
+    (0..samples())
         .map(|_| {
             let t = Instant::now();
             for _ in 0..cycles {
@@ -239,14 +251,19 @@ pub fn stats(v: &[f64]) -> (f64, f64, f64) {
     (s[s.len() / 2], s[0], s[s.len() - 1])
 }
 
+/// `bench plc_<tier>_<name>` for ns-per-cycle `samples` (median, min, max).
+pub fn metric_line(tier: &str, name: &str, samples: &[f64]) -> String {
+    let (med, min, max) = stats(samples);
+    format!(
+        "bench plc_{tier}_{name} median={med:.1} min={min:.1} max={max:.1} unit=ns samples={}",
+        samples.len()
+    )
+}
+
 /// The two lines of a program on a tier: `bench plc_<tier>_<name>` (ns per cycle) and
 /// `bench plc_<tier>_<name>_ratio` (over the reference, sample by sample).
 pub fn report(tier: &str, name: &str, plc: &[f64], reference: &[f64]) -> [String; 2] {
-    let (med, min, max) = stats(plc);
-    let time = format!(
-        "bench plc_{tier}_{name} median={med:.1} min={min:.1} max={max:.1} unit=ns samples={}",
-        plc.len()
-    );
+    let time = metric_line(tier, name, plc);
     let ratios: Vec<f64> = plc
         .iter()
         .zip(reference)

@@ -275,7 +275,8 @@ pub struct Expn {
 
 fn power_int(base: f32, exponent: i16) -> f32 {
     let negative = exponent < 0;
-    let mut e = exponent.wrapping_abs();
+    // A WORD, as the ST program.
+    let mut e = exponent.wrapping_abs() as u16;
     let (mut acc, mut square) = (1.0f32, base);
     while e > 0 {
         if e & 1 == 1 {
@@ -335,13 +336,14 @@ pub struct Gcd {
     result: i32,
 }
 
-fn binary_gcd(u: i32, v: i32) -> i32 {
-    let (mut u, mut v) = (u.wrapping_abs(), v.wrapping_abs());
+fn binary_gcd(a: i32, b: i32) -> i32 {
+    // DWORDs, as the ST program.
+    let (mut u, mut v) = (a.wrapping_abs() as u32, b.wrapping_abs() as u32);
     if u == 0 {
-        return v;
+        return v as i32;
     }
     if v == 0 {
-        return u;
+        return u as i32;
     }
     let mut shift = 0;
     while (u | v) & 1 == 0 {
@@ -364,7 +366,7 @@ fn binary_gcd(u: i32, v: i32) -> i32 {
             break;
         }
     }
-    u << shift
+    (u << shift) as i32
 }
 
 impl Reference for Gcd {
@@ -464,7 +466,7 @@ pub struct PolynomInt {
     result: f32,
 }
 
-/// `t` by value, as the ST function's VAR_INPUT.
+/// The divided differences on a copy of `t` (the program sets its table anew every cycle).
 fn newton(x: f32, mut t: [[f32; 2]; 5], count: i16) -> f32 {
     let count = count.min(5) as usize;
     for j in 1..count {

@@ -4,9 +4,16 @@
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
 //! are 64-bit cells; aggregates (STRING, arrays, structs) are represented by their address.
-//! Hidden temporaries (string results, FOR bounds, CASE selectors, MIN/MAX operands) get a
-//! static data slot per use site, which is sound because IEC programs are not recursive
-//! (checked) and tasks do not preempt each other on the host runner.
+//! Hidden temporaries (string results, FOR bounds, CASE selectors) get a static data slot
+//! per use site, which is sound because IEC programs are not recursive (checked) and tasks
+//! do not preempt each other on the host runner.
+//!
+//! Code shape, for the interpreter's speed (the builder fuses what follows): an element of a
+//! static array is addressed by `ELEM_REL`/`ELEM_ABS` after its index (one instruction with
+//! the bounds check, the constant indices folded in); MIN, MAX and LIMIT use `SEL_IF` on the
+//! stack; FOR and WHILE loops are rotated (the test after the body, one jump per iteration),
+//! a FOR loop with a constant bound compares with the constant; the last IF branch without
+//! ELSE falls through.
 
 use std::collections::HashMap;
 
@@ -778,12 +785,15 @@ impl<'a> Gen<'a> {
                 else_body,
             } => {
                 let end = self.label();
-                for (cond, body) in branches {
+                for (k, (cond, body)) in branches.iter().enumerate() {
                     let next = self.label();
                     self.condition(cond);
                     self.emit(|b| b.jz(next));
                     self.stmts(body);
-                    self.emit(|b| b.jmp(end));
+                    // The last branch without ELSE falls through to the end.
+                    if k + 1 < branches.len() || else_body.is_some() {
+                        self.emit(|b| b.jmp(end));
+                    }
                     self.bind(next);
                 }
                 if let Some(b) = else_body {
@@ -804,18 +814,22 @@ impl<'a> Gen<'a> {
                 body,
             } => self.for_loop(var, from, to, by.as_ref(), body),
             StmtKind::While { cond, body } => {
+                // Rotated: the condition is tested after the body (one jump per iteration).
                 let top = self.label();
+                let test = self.label();
                 let exit = self.label();
+                self.emit(|b| b.jmp(test));
                 self.bind(top);
-                self.condition(cond);
-                self.emit(|b| b.jz(exit));
                 self.loops.push(LoopCtx {
                     exit,
                     try_depth: self.try_depth,
                 });
                 self.stmts(body);
                 self.loops.pop();
-                self.emit(|b| b.jmp(top));
+                self.bind(test);
+                self.set_location(s.span);
+                self.condition(cond);
+                self.emit(|b| b.jnz(top));
                 self.bind(exit);
             }
             StmtKind::Repeat { body, until } => {
@@ -1095,6 +1109,14 @@ impl<'a> Gen<'a> {
         if step_const == Some(0) {
             self.error(by.map_or(var.span, |e| e.span), "FOR step must not be zero");
         }
+        // The end value is evaluated once into a hidden temporary; the loop tests compare
+        // with the constant instead when `to` is one that fits the control variable's type.
+        let end_const = match self.const_value(to) {
+            Some(ConstVal::Int(v)) if type_holds(elem, v) && i32::try_from(v).is_ok() => {
+                Some(v as i64)
+            }
+            _ => None,
+        };
         let end_slot = self.temp_cell();
         self.value_to(to, &vty);
         self.emit(|b| b.st_abs(MemType::I64, end_slot));
@@ -1113,49 +1135,63 @@ impl<'a> Gen<'a> {
         };
         let top = self.label();
         let exit = self.label();
-        self.bind(top);
         let mt = mem_type(elem);
         let load_var = |g: &mut Self| match vp.loc {
             Loc::Abs(a) => g.emit(|b| b.ld_abs(mt, a)),
             Loc::Rel(o) => g.emit(|b| b.ld_rel(mt, o)),
             Loc::Ind(_) | Loc::Ref(_) => {}
         };
-        match step_const {
+        let load_end = |g: &mut Self| match end_const {
+            Some(v) => g.push_int(v),
+            None => g.emit(|b| b.ld_abs(MemType::I64, end_slot)),
+        };
+        // The loop test `i <= end` (`>=` for a negative step; both, chosen by the step's sign,
+        // for a computed step): jumps to `target` when it holds (`when`) or when it does not.
+        let test = |g: &mut Self, when: bool, target: Label| match step_const {
             Some(s) => {
-                load_var(self);
-                self.emit(|b| {
-                    b.ld_abs(MemType::I64, end_slot);
-                    b.op(if s > 0 { le } else { ge });
-                    b.jz(exit);
-                });
+                load_var(g);
+                load_end(g);
+                g.op(if s > 0 { le } else { ge });
+                g.emit(|b| if when { b.jnz(target) } else { b.jz(target) });
             }
             None => {
-                // (step >= 0 AND i <= end) OR (step < 0 AND i >= end)
-                let neg = self.label();
-                let go = self.label();
-                self.emit(|b| {
+                let neg = g.label();
+                let done = g.label();
+                g.emit(|b| {
                     b.ld_abs(MemType::I64, step_slot);
                     b.push_i32(0);
                     b.op(Opcode::LtS);
                     b.jnz(neg);
                 });
-                load_var(self);
-                self.emit(|b| {
-                    b.ld_abs(MemType::I64, end_slot);
-                    b.op(le);
-                    b.jz(exit);
-                    b.jmp(go);
+                load_var(g);
+                load_end(g);
+                g.op(le);
+                g.emit(|b| {
+                    if when {
+                        b.jnz(target);
+                    } else {
+                        b.jz(target);
+                    }
+                    b.jmp(done);
                     b.bind(neg);
                 });
-                load_var(self);
-                self.emit(|b| {
-                    b.ld_abs(MemType::I64, end_slot);
-                    b.op(ge);
-                    b.jz(exit);
-                    b.bind(go);
+                load_var(g);
+                load_end(g);
+                g.op(ge);
+                g.emit(|b| {
+                    if when {
+                        b.jnz(target);
+                    } else {
+                        b.jz(target);
+                    }
+                    b.bind(done);
                 });
             }
-        }
+        };
+        // Rotated: tested once before the first iteration, then after each increment (one
+        // jump per iteration).
+        test(self, false, exit);
+        self.bind(top);
         self.loops.push(LoopCtx {
             exit,
             try_depth: self.try_depth,
@@ -1169,13 +1205,12 @@ impl<'a> Gen<'a> {
         }
         self.op(Opcode::Add);
         self.wrap(elem);
-        // Stop instead of wrapping around when the control variable would overflow.
         match vp.loc {
             Loc::Abs(a) => self.emit(|b| b.st_abs(mt, a)),
             Loc::Rel(o) => self.emit(|b| b.st_rel(mt, o)),
             Loc::Ind(_) | Loc::Ref(_) => {}
         }
-        self.emit(|b| b.jmp(top));
+        test(self, true, top);
         self.bind(exit);
     }
 
@@ -1553,16 +1588,19 @@ impl<'a> Gen<'a> {
                     return self
                         .index_through_reference(o, &arr, idx, &consts, &strides, static_off);
                 }
-                let base_off = match bp.loc {
-                    Loc::Abs(a) => {
-                        self.emit(|b| b.push_u32(a));
-                        0
-                    }
-                    Loc::Rel(o) => {
-                        self.emit(|b| b.lea_rel(o));
-                        0
-                    }
-                    Loc::Ind(o) | Loc::Ref(o) => o,
+                // A static array (absolute or frame-relative): the first computed index goes
+                // through ELEM_ABS/ELEM_REL, which gives the element's address (the constant
+                // indices' offset included; the builder fuses it with the load or store);
+                // further computed indices, and arrays whose address is on the stack, through
+                // INDEX.
+                let mut static_base = match bp.loc {
+                    Loc::Abs(a) => Some(Loc::Abs(a.wrapping_add(static_off as u32))),
+                    Loc::Rel(o) => Some(Loc::Rel(o.wrapping_add(static_off as u32))),
+                    Loc::Ind(_) | Loc::Ref(_) => None,
+                };
+                let offset = match bp.loc {
+                    Loc::Ind(o) | Loc::Ref(o) => o.wrapping_add(static_off as u32),
+                    Loc::Abs(_) | Loc::Rel(_) => 0,
                 };
                 for (d, c) in consts.iter().enumerate() {
                     if c.is_some() {
@@ -1577,22 +1615,15 @@ impl<'a> Gen<'a> {
                             format!("array index must be an integer, found {}", self.tname(&t));
                         self.error(idx[d].span, msg);
                     }
-                    let stride = strides[d];
-                    self.emit(|b| {
-                        b.chk_index(lo, hi);
-                        if lo != 0 {
-                            b.push_int(lo);
-                            b.op(Opcode::Sub);
-                        }
-                        if stride != 1 {
-                            b.push_int(stride);
-                            b.op(Opcode::Mul);
-                        }
-                        b.op(Opcode::Add);
-                    });
+                    let stride = strides[d] as u32;
+                    match static_base.take() {
+                        Some(Loc::Abs(a)) => self.emit(|b| b.elem_abs(a, lo, hi, stride)),
+                        Some(Loc::Rel(o)) => self.emit(|b| b.elem_rel(o, lo, hi, stride)),
+                        _ => self.emit(|b| b.index(lo, hi, stride)),
+                    }
                 }
                 Some(Place {
-                    loc: Loc::Ind(base_off + static_off as u32),
+                    loc: Loc::Ind(offset),
                     ty: arr.elem.clone(),
                     writable: bp.writable,
                     window: None,
@@ -2840,6 +2871,17 @@ fn offset_loc(l: Loc, off: u32) -> Loc {
         Loc::Rel(o) => Loc::Rel(o.wrapping_add(off)),
         Loc::Ind(o) => Loc::Ind(o.wrapping_add(off)),
         Loc::Ref(o) => Loc::Ref(o.wrapping_add(off)),
+    }
+}
+
+/// Whether `v` lies in the range of integer type `e`.
+fn type_holds(e: Elem, v: i128) -> bool {
+    let bits = e.size() * 8;
+    if e.signed_storage() {
+        let half = 1i128 << (bits - 1);
+        -half <= v && v < half
+    } else {
+        0 <= v && v < (1i128 << bits)
     }
 }
 

@@ -944,13 +944,12 @@ impl Gen<'_> {
                     }
                     return Some(Type::Error);
                 };
-                let (ta, tb) = (self.temp_cell(), self.temp_cell());
                 let first_t = self.infer(c.exprs[0]);
                 self.value_to_any(c.exprs[0], &first_t, &t);
                 for x in &c.exprs[1..] {
                     let xt = self.infer(x);
                     self.value_to_any(x, &xt, &t);
-                    self.select_min_max(c.name == "MAX", e, ta, tb);
+                    self.select_min_max(c.name == "MAX", e);
                 }
                 t
             }
@@ -965,15 +964,14 @@ impl Gen<'_> {
                 let Some(e) = t.elem() else {
                     return Some(Type::Error);
                 };
-                let (ta, tb) = (self.temp_cell(), self.temp_cell());
                 let it = self.infer(c.exprs[1]);
                 self.value_to_any(c.exprs[1], &it, &t);
                 let mt = self.infer(c.exprs[0]);
                 self.value_to_any(c.exprs[0], &mt, &t);
-                self.select_min_max(true, e, ta, tb);
+                self.select_min_max(true, e);
                 let xt = self.infer(c.exprs[2]);
                 self.value_to_any(c.exprs[2], &xt, &t);
-                self.select_min_max(false, e, ta, tb);
+                self.select_min_max(false, e);
                 t
             }
             "MUX" => {
@@ -1337,29 +1335,16 @@ impl Gen<'_> {
     }
 
     /// `[acc x] -> [max(acc, x)]` (or min) using two static temporaries.
-    fn select_min_max(&mut self, max: bool, e: Elem, ta: u32, tb: u32) {
-        let lt = match e {
-            Elem::Real => Opcode::LtF32,
-            Elem::LReal => Opcode::LtF64,
-            e if e.is_unsigned_int() || e.is_bits() || e.is_char() => Opcode::LtU,
-            _ => Opcode::LtS,
+    /// `[a b] -> [MAX(a, b)]` (`max`) or `[MIN(a, b)]`: SEL_IF takes `b` when `a < b`
+    /// (MAX) or `a > b` (MIN), in the type's order (NaN compares false: `a` is kept).
+    fn select_min_max(&mut self, max: bool, e: Elem) {
+        let (lt, gt) = match e {
+            Elem::Real => (Opcode::LtF32, Opcode::GtF32),
+            Elem::LReal => (Opcode::LtF64, Opcode::GtF64),
+            e if e.is_unsigned_int() || e.is_bits() || e.is_char() => (Opcode::LtU, Opcode::GtU),
+            _ => (Opcode::LtS, Opcode::GtS),
         };
-        self.emit(|b| {
-            b.st_abs(MemType::I64, tb);
-            b.st_abs(MemType::I64, ta);
-            // MAX: take b when a < b. MIN: take b when b < a.
-            if max {
-                b.ld_abs(MemType::I64, ta);
-                b.ld_abs(MemType::I64, tb);
-            } else {
-                b.ld_abs(MemType::I64, tb);
-                b.ld_abs(MemType::I64, ta);
-            }
-            b.op(lt);
-            b.ld_abs(MemType::I64, ta);
-            b.ld_abs(MemType::I64, tb);
-            b.op(Opcode::Sel);
-        });
+        self.emit(|b| b.sel_if(if max { lt } else { gt }));
     }
 
     fn string_arg(&mut self, e: &Expr) {

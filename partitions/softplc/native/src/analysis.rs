@@ -50,11 +50,14 @@ impl Insn<'_> {
         u64::from_le_bytes(self.imm[at..at + 8].try_into().expect("8 bytes"))
     }
 
-    /// Jump target (JMP/JZ/JNZ/TRY_BEGIN) or the target of JUMP_IF/JUMP_IF_NOT.
+    /// Jump target (JMP/JZ/JNZ/TRY_BEGIN) or the target of JUMP_IF/JUMP_IF_NOT and their
+    /// immediate forms.
     pub fn target(&self) -> Option<u32> {
         match self.op {
             Opcode::Jmp | Opcode::Jz | Opcode::Jnz | Opcode::TryBegin => Some(self.u32_at(0)),
             Opcode::JumpIf | Opcode::JumpIfNot => Some(self.u32_at(1)),
+            Opcode::JumpIfImm | Opcode::JumpIfNotImm => Some(self.u32_at(5)),
+            Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => Some(self.u32_at(10)),
             _ => None,
         }
     }
@@ -69,6 +72,10 @@ impl Insn<'_> {
                 | Opcode::Jnz
                 | Opcode::JumpIf
                 | Opcode::JumpIfNot
+                | Opcode::JumpIfImm
+                | Opcode::JumpIfNotImm
+                | Opcode::JumpIfRelImm
+                | Opcode::JumpIfNotRelImm
                 | Opcode::Call
                 | Opcode::CallVirt
                 | Opcode::Ret

@@ -92,6 +92,81 @@ fn trap_path(trap: Trap) -> String {
     format!("Trap::{name}")
 }
 
+/// The [`MemType`] operand byte at `at` of `insn`.
+fn type_at(insn: &Insn<'_>, at: usize) -> Result<MemType, Error> {
+    MemType::from_code(insn.imm[at])
+        .ok_or_else(|| Error::internal(format!("bad type at {}", insn.pc)))
+}
+
+/// The bits a store of `ty` keeps.
+fn width_mask(ty: MemType) -> u64 {
+    match ty.width() {
+        8 => u64::MAX,
+        w => (1u64 << (8 * w)) - 1,
+    }
+}
+
+/// The comparison opcode byte `byte` (of SEL_IF and the immediate jumps).
+fn comparison(byte: u8, pc: u32) -> Result<Opcode, Error> {
+    Opcode::from_u8(byte)
+        .filter(|c| c.is_comparison())
+        .ok_or_else(|| Error::internal(format!("bad comparison at {pc}")))
+}
+
+/// Binary operator `op` (`Opcode::is_binary`) on the cells `a` and `b` (expressions) as the
+/// interpreter computes it: the condition under which it traps DIVISION_BY_ZERO (if it can)
+/// and the result.
+fn binary(op: Opcode, a: &str, b: &str) -> (Option<String>, String) {
+    use Opcode::*;
+    let int_zero = Some(format!("{b} == 0"));
+    match op {
+        Add => (None, format!("{a}.wrapping_add({b})")),
+        Sub => (None, format!("{a}.wrapping_sub({b})")),
+        Mul => (None, format!("{a}.wrapping_mul({b})")),
+        DivS => (
+            int_zero,
+            format!("({a} as i64).wrapping_div({b} as i64) as u64"),
+        ),
+        DivU => (int_zero, format!("{a} / {b}")),
+        ModS => (
+            int_zero,
+            format!("({a} as i64).wrapping_rem({b} as i64) as u64"),
+        ),
+        ModU => (int_zero, format!("{a} % {b}")),
+        And => (None, format!("{a} & {b}")),
+        Or => (None, format!("{a} | {b}")),
+        Xor => (None, format!("{a} ^ {b}")),
+        Shl => (None, format!("ops::shl({a}, {b})")),
+        ShrU => (None, format!("ops::shr_u({a}, {b})")),
+        ShrS => (None, format!("ops::shr_s({a}, {b})")),
+        AddF32 | SubF32 | MulF32 | DivF32 => {
+            let sym = match op {
+                AddF32 => "+",
+                SubF32 => "-",
+                MulF32 => "*",
+                _ => "/",
+            };
+            (
+                (op == DivF32).then(|| format!("f32_of({b}) == 0.0")),
+                format!("ops::real_result(f32_of({a}) {sym} f32_of({b}))"),
+            )
+        }
+        AddF64 | SubF64 | MulF64 | DivF64 => {
+            let sym = match op {
+                AddF64 => "+",
+                SubF64 => "-",
+                MulF64 => "*",
+                _ => "/",
+            };
+            (
+                (op == DivF64).then(|| format!("f64_of({b}) == 0.0")),
+                format!("ops::lreal_result(f64_of({a}) {sym} f64_of({b}))"),
+            )
+        }
+        cmp => (None, format!("compare(Opcode::{cmp:?}, {a}, {b}) as u64")),
+    }
+}
+
 fn mem_type_path(ty: MemType) -> String {
     format!("MemType::{ty:?}")
 }
@@ -431,6 +506,10 @@ impl Emitter<'_> {
                 | Opcode::Jnz
                 | Opcode::JumpIf
                 | Opcode::JumpIfNot
+                | Opcode::JumpIfImm
+                | Opcode::JumpIfNotImm
+                | Opcode::JumpIfRelImm
+                | Opcode::JumpIfNotRelImm
                 | Opcode::Call
                 | Opcode::CallVirt
                 | Opcode::Ret
@@ -489,10 +568,43 @@ impl Emitter<'_> {
         let cell_of = |k: u32| cell(d - k);
         match last.op {
             Opcode::Ret | Opcode::Throw => {}
-            Opcode::Jz | Opcode::Jnz | Opcode::JumpIf | Opcode::JumpIfNot => {
+            Opcode::Jz
+            | Opcode::Jnz
+            | Opcode::JumpIf
+            | Opcode::JumpIfNot
+            | Opcode::JumpIfImm
+            | Opcode::JumpIfNotImm
+            | Opcode::JumpIfRelImm
+            | Opcode::JumpIfNotRelImm => {
                 let cond = match last.op {
+                    op @ (Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm) => {
+                        // The variable was loaded into `rv` by the instruction's translation.
+                        let cmp = comparison(last.imm[0], last.pc)?;
+                        let not = if op == Opcode::JumpIfNotRelImm {
+                            "!"
+                        } else {
+                            ""
+                        };
+                        format!(
+                            "{not}compare(Opcode::{cmp:?}, rv, {})",
+                            hex(last.u32_at(6) as i32 as i64 as u64)
+                        )
+                    }
                     Opcode::Jz => format!("{} == 0", cell_of(1)),
                     Opcode::Jnz => format!("{} != 0", cell_of(1)),
+                    op @ (Opcode::JumpIfImm | Opcode::JumpIfNotImm) => {
+                        let cmp = Opcode::from_u8(last.imm[0])
+                            .filter(|c| c.is_comparison())
+                            .ok_or_else(|| {
+                                Error::internal(format!("bad comparison at {}", last.pc))
+                            })?;
+                        let not = if op == Opcode::JumpIfNotImm { "!" } else { "" };
+                        format!(
+                            "{not}compare(Opcode::{cmp:?}, {}, {})",
+                            cell_of(1),
+                            hex(last.u32_at(1) as i32 as i64 as u64)
+                        )
+                    }
                     op => {
                         let cmp = Opcode::from_u8(last.imm[0])
                             .filter(|c| c.is_comparison())
@@ -751,7 +863,7 @@ impl Emitter<'_> {
                     MulF32 => "*",
                     _ => "/",
                 };
-                writeln!(o, "{a} = f32_cell(f32_of({a}) {sym} f32_of({b}));").ok();
+                writeln!(o, "{a} = ops::real_result(f32_of({a}) {sym} f32_of({b}));").ok();
             }
             AddF64 | SubF64 | MulF64 | DivF64 => {
                 let (a, b) = (top(2), top(1));
@@ -769,7 +881,7 @@ impl Emitter<'_> {
                     MulF64 => "*",
                     _ => "/",
                 };
-                writeln!(o, "{a} = f64_cell(f64_of({a}) {sym} f64_of({b}));").ok();
+                writeln!(o, "{a} = ops::lreal_result(f64_of({a}) {sym} f64_of({b}));").ok();
             }
             NegF32 => {
                 let a = top(1);
@@ -811,7 +923,222 @@ impl Emitter<'_> {
                 .ok();
             }
             // Their branches are the block's, written by `Emitter::block`.
-            Jmp | Jz | Jnz | JumpIf | JumpIfNot => {}
+            Jmp | Jz | Jnz | JumpIf | JumpIfNot | JumpIfImm | JumpIfNotImm => {}
+            JumpIfRelImm | JumpIfNotRelImm => {
+                // Load the variable (its test is the block's branch).
+                let ty = type_at(insn, 1)?;
+                let off = insn.u32_at(2);
+                match promoted(off, ty) {
+                    Some(k) => writeln!(o, "let rv = {};", from_raw(ty, &format!("v{k}"))),
+                    None => writeln!(
+                        o,
+                        "let Some(rv) = ops::load(d, base as usize + {off}, {}) else {{ {} }};",
+                        mem_type_path(ty),
+                        at.raise("Trap::InvalidAddress")
+                    ),
+                }
+                .ok();
+            }
+            OpRelRel => {
+                let op = Opcode::from_u8(insn.imm[0])
+                    .filter(|op| op.is_binary())
+                    .ok_or_else(|| Error::internal(format!("bad operator at {pc}")))?;
+                at.push_check(o);
+                for (name, at_type) in [("a", 1usize), ("b", 6)] {
+                    let ty = type_at(insn, at_type)?;
+                    let off = insn.u32_at(at_type + 1);
+                    match promoted(off, ty) {
+                        Some(k) => writeln!(o, "let {name} = {};", from_raw(ty, &format!("v{k}"))),
+                        None => writeln!(
+                            o,
+                            "let Some({name}) = ops::load(d, base as usize + {off}, {}) else {{ {} }};",
+                            mem_type_path(ty),
+                            at.raise("Trap::InvalidAddress")
+                        ),
+                    }
+                    .ok();
+                }
+                let (check, result) = binary(op, "a", "b");
+                if let Some(condition) = check {
+                    writeln!(
+                        o,
+                        "if {condition} {{ {} }}",
+                        at.raise("Trap::DivisionByZero")
+                    )
+                    .ok();
+                }
+                writeln!(o, "{} = {result};", cell(d)).ok();
+            }
+            ElemRel | ElemAbs | LdElemRel | LdElemAbs | StElemRel | StElemAbs | ElemRelAt
+            | ElemAbsAt | LdElemRelAt | LdElemAbsAt | StElemRelAt | StElemAbsAt => {
+                // The element's address as ELEM_REL/ELEM_ABS computes it (INDEX's arithmetic);
+                // the _AT forms read the index from a frame variable and push their result.
+                let op = insn.op;
+                let indexed_at = matches!(
+                    op,
+                    ElemRelAt | ElemAbsAt | LdElemRelAt | LdElemAbsAt | StElemRelAt | StElemAbsAt
+                );
+                let address_only = matches!(op, ElemRel | ElemAbs | ElemRelAt | ElemAbsAt);
+                let store = matches!(op, StElemRel | StElemAbs | StElemRelAt | StElemAbsAt);
+                let rel = matches!(
+                    op,
+                    ElemRel | LdElemRel | StElemRel | ElemRelAt | LdElemRelAt | StElemRelAt
+                );
+                let spec = usize::from(!address_only);
+                let array = insn.u32_at(spec);
+                let (lo, hi) = (insn.u64_at(spec + 4) as i64, insn.u64_at(spec + 12) as i64);
+                let stride = insn.u32_at(spec + 20);
+                let index = if indexed_at {
+                    if !store {
+                        at.push_check(o);
+                    }
+                    let ity = type_at(insn, spec + 24)?;
+                    let ioff = insn.u32_at(spec + 25);
+                    match promoted(ioff, ity) {
+                        Some(k) => writeln!(o, "let ix = {};", from_raw(ity, &format!("v{k}"))),
+                        None => writeln!(
+                            o,
+                            "let Some(ix) = ops::load(d, base as usize + {ioff}, {}) else {{ {} }};",
+                            mem_type_path(ity),
+                            at.raise("Trap::InvalidAddress")
+                        ),
+                    }
+                    .ok();
+                    "ix".to_string()
+                } else if store {
+                    top(2)
+                } else {
+                    top(1)
+                };
+                // Where a pushed result goes: the new cell, or the index's.
+                let result = if indexed_at { cell(d) } else { top(1) };
+                let start = if rel {
+                    format!("base as u64 + {array}")
+                } else {
+                    format!("{array}u64")
+                };
+                writeln!(
+                    o,
+                    "if ({index} as i64) < {lo}i64 || ({index} as i64) > {hi}i64 {{ {} }}",
+                    at.raise("Trap::IndexOutOfBounds")
+                )
+                .ok();
+                writeln!(
+                    o,
+                    "let a = ({start}).wrapping_add((({index} as i64).wrapping_sub({lo}i64) as u64).wrapping_mul({stride}));"
+                )
+                .ok();
+                if address_only {
+                    writeln!(o, "{result} = a;").ok();
+                } else if store {
+                    writeln!(
+                        o,
+                        "if ops::store_at(d, a, 0, {}, {}).is_none() {{ {} }}",
+                        mem_type_path(type_at(insn, 0)?),
+                        top(1),
+                        at.raise("Trap::InvalidAddress")
+                    )
+                    .ok();
+                } else {
+                    writeln!(
+                        o,
+                        "let Some(v) = ops::load_at(d, a, 0, {}) else {{ {} }};\n{result} = v;",
+                        mem_type_path(type_at(insn, 0)?),
+                        at.raise("Trap::InvalidAddress")
+                    )
+                    .ok();
+                }
+            }
+            IncRel if promoted(insn.u32_at(1), type_at(insn, 0)?).is_some() => {
+                let ty = type_at(insn, 0)?;
+                let k = promoted(insn.u32_at(1), ty).unwrap_or(0);
+                let imm = insn.u32_at(5) as i32 as i64 as u64;
+                writeln!(
+                    o,
+                    "v{k} = {}.wrapping_add({}) & {};",
+                    from_raw(ty, &format!("v{k}")),
+                    hex(imm),
+                    hex(width_mask(ty))
+                )
+                .ok();
+            }
+            IncRel | IncAbs => {
+                let ty = MemType::from_code(insn.imm[0])
+                    .ok_or_else(|| Error::internal(format!("bad type at {pc}")))?;
+                let off = insn.u32_at(1);
+                let imm = insn.u32_at(5) as i32 as i64 as u64;
+                let at_expr = if insn.op == IncRel {
+                    format!("base as usize + {off}")
+                } else {
+                    format!("{off}usize")
+                };
+                writeln!(
+                    o,
+                    "let Some(v) = ops::load(d, {at_expr}, {}) else {{ {} }};",
+                    mem_type_path(ty),
+                    at.raise("Trap::InvalidAddress")
+                )
+                .ok();
+                writeln!(
+                    o,
+                    "if ops::store(d, {at_expr}, {}, v.wrapping_add({})).is_none() {{ {} }}",
+                    mem_type_path(ty),
+                    hex(imm),
+                    at.raise("Trap::InvalidAddress")
+                )
+                .ok();
+            }
+            SelIf => {
+                let cmp = comparison(insn.imm[0], pc)?;
+                let (a, b) = (top(2), top(1));
+                writeln!(
+                    o,
+                    "{a} = if compare(Opcode::{cmp:?}, {a}, {b}) {{ {b} }} else {{ {a} }};"
+                )
+                .ok();
+            }
+            OpImm | OpRel | OpAbs => {
+                let op = Opcode::from_u8(insn.imm[0])
+                    .filter(|op| op.is_binary())
+                    .ok_or_else(|| Error::internal(format!("bad operator at {pc}")))?;
+                let a = top(1);
+                let b = match insn.op {
+                    OpImm => hex(insn.u32_at(1) as i32 as i64 as u64),
+                    OpRel if promoted(insn.u32_at(2), type_at(insn, 1)?).is_some() => {
+                        let ty = type_at(insn, 1)?;
+                        let k = promoted(insn.u32_at(2), ty).unwrap_or(0);
+                        from_raw(ty, &format!("v{k}"))
+                    }
+                    _ => {
+                        let ty = MemType::from_code(insn.imm[1])
+                            .ok_or_else(|| Error::internal(format!("bad type at {pc}")))?;
+                        let off = insn.u32_at(2);
+                        let at_expr = if insn.op == OpRel {
+                            format!("base as usize + {off}")
+                        } else {
+                            format!("{off}usize")
+                        };
+                        writeln!(
+                            o,
+                            "let Some(b) = ops::load(d, {at_expr}, {}) else {{ {} }};",
+                            mem_type_path(ty),
+                            at.raise("Trap::InvalidAddress")
+                        )
+                        .ok();
+                        "b".to_string()
+                    }
+                };
+                let (check, result) = binary(op, &a, &b);
+                if let Some(condition) = check {
+                    writeln!(
+                        o,
+                        "if {condition} {{ {} }}",
+                        at.raise("Trap::DivisionByZero")
+                    )
+                    .ok();
+                }
+                writeln!(o, "{a} = {result};").ok();
+            }
             Call => {
                 let index = insn.u16_at(0) as usize;
                 let callee = self

@@ -185,6 +185,21 @@ fn step(image: &Image<'_>, insn: &crate::analysis::Insn<'_>, stack: &mut Vec<Add
                 top(2).shift(0, (hi - lo) * stride)
             })
         }
+        ElemRel | ElemAbs | ElemRelAt | ElemAbsAt => {
+            let (a, lo, hi) = (
+                insn.u32_at(0) as i128,
+                insn.u64_at(4) as i64 as i128,
+                insn.u64_at(12) as i64 as i128,
+            );
+            let stride = insn.u32_at(20) as i128;
+            Some(if hi < lo {
+                Addr::Unknown
+            } else if matches!(insn.op, ElemRel | ElemRelAt) {
+                Addr::Frame(a, a + (hi - lo) * stride)
+            } else {
+                Addr::Abs(a, a + (hi - lo) * stride)
+            })
+        }
         Add => match (top(2), top(1)) {
             (a, Addr::Abs(c, e)) | (Addr::Abs(c, e), a) if matches!(a, Addr::Frame(..)) => {
                 Some(a.shift(c, e))
@@ -207,6 +222,24 @@ fn step(image: &Image<'_>, insn: &crate::analysis::Insn<'_>, stack: &mut Vec<Add
                 *slot = r;
             }
         }
+    }
+}
+
+/// The frame variables an instruction reads or writes by offset, as `(offset, type byte)`:
+/// LD_REL, ST_REL and the superinstructions with frame-relative operands (which the
+/// emitter translates against a promoted variable's local as it does those two).
+pub fn frame_variables(insn: &crate::analysis::Insn<'_>) -> Vec<(u32, u8)> {
+    use Opcode::*;
+    match insn.op {
+        LdRel | StRel | IncRel => vec![(insn.u32_at(1), insn.imm[0])],
+        OpRel | JumpIfRelImm | JumpIfNotRelImm => vec![(insn.u32_at(2), insn.imm[1])],
+        OpRelRel => vec![(insn.u32_at(2), insn.imm[1]), (insn.u32_at(7), insn.imm[6])],
+        // The index variable.
+        ElemRelAt | ElemAbsAt => vec![(insn.u32_at(25), insn.imm[24])],
+        LdElemRelAt | LdElemAbsAt | StElemRelAt | StElemAbsAt => {
+            vec![(insn.u32_at(26), insn.imm[25])]
+        }
+        _ => Vec::new(),
     }
 }
 
@@ -252,6 +285,34 @@ fn touch(insn: &crate::analysis::Insn<'_>, stack: &[Addr], base: Option<u32>) ->
                 through(stack[d - 2], 0, len, true),
                 through(stack[d - 1], 0, len, false),
             ]
+        }
+        LdElemRel | LdElemAbs | StElemRel | StElemAbs | LdElemRelAt | LdElemAbsAt | StElemRelAt
+        | StElemAbsAt => {
+            let (a, lo, hi) = (
+                insn.u32_at(1) as i128,
+                insn.u64_at(5) as i64 as i128,
+                insn.u64_at(13) as i64 as i128,
+            );
+            let stride = insn.u32_at(21) as i128;
+            let write = matches!(insn.op, StElemRel | StElemAbs | StElemRelAt | StElemAbsAt);
+            let array = if hi < lo {
+                Addr::Unknown
+            } else if matches!(insn.op, LdElemRel | StElemRel | LdElemRelAt | StElemRelAt) {
+                Addr::Frame(a, a + (hi - lo) * stride)
+            } else {
+                Addr::Abs(a, a + (hi - lo) * stride)
+            };
+            vec![through(array, 0, width(insn.imm[0]), write)]
+        }
+        // A global read (and for INC written) in place. (Their frame-relative forms access
+        // frame variables as LD_REL/ST_REL do: see `frame_variables`.)
+        IncAbs | OpAbs => {
+            let (ty, off) = match insn.op {
+                IncAbs => (insn.imm[0], insn.u32_at(1)),
+                _ => (insn.imm[1], insn.u32_at(2)),
+            };
+            let a = Addr::Abs(off as i128, off as i128);
+            vec![through(a, 0, width(ty), insn.op == IncAbs)]
         }
         Call | CallVirt => vec![Touch::Anything { write: true }],
         // The class id of the instance.
@@ -374,11 +435,11 @@ pub fn promote(
     // Candidates: frame variables as (offset, width), used in a loop.
     let mut groups: BTreeMap<(u32, u8), bool> = BTreeMap::new();
     for (i, insn) in plan.insns.iter().enumerate() {
-        if matches!(insn.op, Opcode::LdRel | Opcode::StRel) {
-            let Some(ty) = MemType::from_code(insn.imm[0]) else {
+        for (off, ty) in frame_variables(insn) {
+            let Some(ty) = MemType::from_code(ty) else {
                 return none;
             };
-            let key = (insn.u32_at(1), ty.width() as u8);
+            let key = (off, ty.width() as u8);
             *groups.entry(key).or_default() |= looping[block_of[i]];
         }
     }

@@ -67,7 +67,14 @@ fn successors(plan: &PouPlan<'_>, b: usize) -> Vec<usize> {
     let mut out = Vec::new();
     match last.op {
         Opcode::Jmp => out.extend(last.target().and_then(block_at)),
-        Opcode::Jz | Opcode::Jnz | Opcode::JumpIf | Opcode::JumpIfNot => {
+        Opcode::Jz
+        | Opcode::Jnz
+        | Opcode::JumpIf
+        | Opcode::JumpIfNot
+        | Opcode::JumpIfImm
+        | Opcode::JumpIfNotImm
+        | Opcode::JumpIfRelImm
+        | Opcode::JumpIfNotRelImm => {
             out.extend(last.target().and_then(block_at));
             out.extend(block_at(last.next()));
         }

@@ -643,6 +643,13 @@ impl<'a> Image<'a> {
         self.section(Section::Pous).len() / POU_RECORD
     }
 
+    /// POU `index`'s code start and frame size (what a CALL needs; no name lookup).
+    #[inline(always)]
+    pub(crate) fn pou_entry(&self, index: usize) -> Option<(u32, u32)> {
+        let r = self.record(Section::Pous, POU_RECORD, index)?;
+        Some((read_u32(r, 8), read_u32(r, 16)))
+    }
+
     /// POU `index`.
     pub fn pou(&self, index: usize) -> Option<Pou<'a>> {
         let r = self.record(Section::Pous, POU_RECORD, index)?;
@@ -992,6 +999,71 @@ mod builder {
         no_fusion: bool,
     }
 
+    /// Whether `insn` is pure: it writes no memory and can raise no trap but STACK_OVERFLOW
+    /// (for the store fusion): loads of verified static addresses, constants, stack
+    /// shuffles, integer and float arithmetic but division (also with an immediate or a
+    /// static operand), bit operations, comparisons, selections, conversions that cannot
+    /// fail.
+    fn pure(insn: &crate::isa::Instruction<'_>) -> bool {
+        use Opcode::*;
+        let op = insn.op;
+        if matches!(op, OpImm | OpRel | OpAbs | OpRelRel) {
+            return !matches!(
+                Opcode::from_u8(insn.immediates[0]),
+                Some(DivS | DivU | ModS | ModU | DivF32 | DivF64)
+            );
+        }
+        matches!(
+            op,
+            Nop | PushI32
+                | PushU32
+                | PushI64
+                | PushConst
+                | Dup
+                | Swap
+                | Over
+                | Drop
+                | LdAbs
+                | LdRel
+                | LeaRel
+                | Now
+                | Add
+                | Sub
+                | Mul
+                | Neg
+                | AbsS
+                | And
+                | Or
+                | Xor
+                | Not
+                | NotBool
+                | Shl
+                | ShrU
+                | ShrS
+                | Rol
+                | Ror
+                | Sext
+                | Zext
+                | Sel
+                | SelIf
+                | AddImm
+                | AddF32
+                | SubF32
+                | MulF32
+                | NegF32
+                | AddF64
+                | SubF64
+                | MulF64
+                | NegF64
+                | IToF32S
+                | IToF32U
+                | IToF64S
+                | IToF64U
+                | F32ToF64
+                | F64ToF32
+        ) || op.is_comparison()
+    }
+
     impl ImageBuilder {
         /// An empty builder.
         pub fn new() -> Self {
@@ -1043,7 +1115,7 @@ mod builder {
         /// sequence `CHK_INDEX lo hi; [PUSH lo; SUB | ADD_IMM -lo]; [PUSH s; MUL]; ADD` becomes
         /// `INDEX lo hi s` (same effect, same trap at the same offset), and `PUSH_I32 k; ADD`
         /// / `PUSH_I32 k; SUB` become `ADD_IMM k` / `ADD_IMM -k`.
-        fn fuse_arithmetic(&mut self, op: Opcode) {
+        fn fuse_arithmetic(&mut self, op: Opcode) -> bool {
             let n = self.insn_starts.len();
             if op == Opcode::Add && n >= 2 {
                 let mut i = n - 1;
@@ -1054,6 +1126,15 @@ mod builder {
                 {
                     stride = s;
                     i -= 2;
+                } else if i >= 1
+                    && let Some(s) = self.insn_at(i - 1).and_then(|d| {
+                        (d.op == Opcode::OpImm && d.immediates[0] == Opcode::Mul as u8)
+                            .then(|| read_u32(d.immediates, 1))
+                            .filter(|&k| k as i32 >= 0)
+                    })
+                {
+                    stride = s;
+                    i -= 1;
                 }
                 let mut subtracted = 0i64;
                 let before = if i >= 1 {
@@ -1083,7 +1164,7 @@ mod builder {
                     if lo == subtracted {
                         self.drop_from(i - 1);
                         self.index(lo, hi, stride);
-                        return;
+                        return true;
                     }
                 }
             }
@@ -1100,22 +1181,271 @@ mod builder {
                 if let Some(imm) = imm {
                     self.drop_from(n - 2);
                     self.add_imm(imm);
+                    return true;
                 }
+            }
+            false
+        }
+
+        /// Before NEG_F32/NEG_F64: a directly preceding push of a REAL (PUSH_U32) or LREAL
+        /// (PUSH_I64) constant gets its sign bit flipped instead (what the negation does);
+        /// true when folded.
+        fn fold_negation(&mut self, op: Opcode) -> bool {
+            let n = self.insn_starts.len();
+            if n == 0 || !self.rewritable_from(n - 1) {
+                return false;
+            }
+            let at = self.insn_starts[n - 1] as usize;
+            match (op, Opcode::from_u8(self.code[at])) {
+                (Opcode::NegF32, Some(Opcode::PushU32)) => self.code[at + 4] ^= 0x80,
+                (Opcode::NegF64, Some(Opcode::PushI64)) => self.code[at + 8] ^= 0x80,
+                _ => return false,
+            }
+            true
+        }
+
+        /// Peephole fusion after emitting a binary operator (index `n - 1`) whose right
+        /// operand was pushed by the instruction before it: `PUSH_I32 k; op` → `OP_IMM op k`
+        /// (also `PUSH_U32 k` when the cell is the same, or when `op` is a REAL operator,
+        /// which reads only the low 32 bits), `LD_REL ty o; op` → `OP_REL op ty o`, `LD_ABS
+        /// ty a; op` → `OP_ABS op ty a`.
+        fn fuse_operand(&mut self, op: Opcode) {
+            let n = self.insn_starts.len();
+            if n < 2 || !self.rewritable_from(n - 2) {
+                return;
+            }
+            let Some(d) = self.insn_at(n - 2) else { return };
+            let reads_low_32 = matches!(
+                op,
+                Opcode::AddF32
+                    | Opcode::SubF32
+                    | Opcode::MulF32
+                    | Opcode::DivF32
+                    | Opcode::EqF32
+                    | Opcode::NeF32
+                    | Opcode::LtF32
+                    | Opcode::LeF32
+                    | Opcode::GtF32
+                    | Opcode::GeF32
+            );
+            match d.op {
+                Opcode::PushI32 | Opcode::PushU32 => {
+                    let k = read_u32(d.immediates, 0);
+                    if d.op == Opcode::PushU32 && k > i32::MAX as u32 && !reads_low_32 {
+                        return;
+                    }
+                    self.drop_from(n - 2);
+                    self.op_imm(op, k as i32);
+                }
+                Opcode::LdRel | Opcode::LdAbs => {
+                    let (ty, addr) = (d.immediates[0], read_u32(d.immediates, 1));
+                    let (Some(ty), rel) = (MemType::from_code(ty), d.op == Opcode::LdRel) else {
+                        return;
+                    };
+                    // Both operands frame variables: OP_REL_REL.
+                    if rel
+                        && n >= 3
+                        && self.rewritable_from(n - 3)
+                        && let Some((ty1, off1)) = self
+                            .insn_at(n - 3)
+                            .filter(|d| d.op == Opcode::LdRel)
+                            .and_then(|d| {
+                                Some((
+                                    MemType::from_code(d.immediates[0])?,
+                                    read_u32(d.immediates, 1),
+                                ))
+                            })
+                    {
+                        self.drop_from(n - 3);
+                        self.op_rel_rel(op, (ty1, off1), (ty, addr));
+                        return;
+                    }
+                    self.drop_from(n - 2);
+                    self.op_at(rel, op, ty, addr);
+                }
+                _ => {}
             }
         }
 
-        /// Before a JZ/JNZ: a directly preceding comparison is fused into JUMP_IF_NOT/JUMP_IF.
-        fn take_comparison(&mut self) -> Option<Opcode> {
+        /// Before a store of `ty` to `addr` (ST_REL/ST_ABS, `load` the matching load): `LD ty
+        /// addr; ADD_IMM k` directly before it becomes `INC_REL`/`INC_ABS ty addr k`; true
+        /// when fused (the store is then not emitted).
+        fn fuse_increment(&mut self, load: Opcode, ty: MemType, addr: u32) -> bool {
+            let n = self.insn_starts.len();
+            if n < 2 || !self.rewritable_from(n - 2) || !ty.is_integer() {
+                return false;
+            }
+            let (Some(ld), Some(add)) = (self.insn_at(n - 2), self.insn_at(n - 1)) else {
+                return false;
+            };
+            if ld.op != load
+                || ld.immediates[0] != ty as u8
+                || read_u32(ld.immediates, 1) != addr
+                || add.op != Opcode::AddImm
+            {
+                return false;
+            }
+            let k = read_u32(add.immediates, 0) as i32;
+            self.drop_from(n - 2);
+            self.inc(load == Opcode::LdRel, ty, addr, k);
+            true
+        }
+
+        /// Before `LD_IND ty 0`: a directly preceding ELEM_REL/ELEM_ABS becomes
+        /// `LD_ELEM_REL`/`LD_ELEM_ABS ty`; true when fused.
+        fn fuse_element_load(&mut self, ty: MemType) -> bool {
+            let n = self.insn_starts.len();
+            if n < 1 || !self.rewritable_from(n - 1) {
+                return false;
+            }
+            let Some(elem) = self.insn_at(n - 1) else {
+                return false;
+            };
+            let fused = match elem.op {
+                Opcode::ElemRel => Opcode::LdElemRel,
+                Opcode::ElemAbs => Opcode::LdElemAbs,
+                Opcode::ElemRelAt => Opcode::LdElemRelAt,
+                Opcode::ElemAbsAt => Opcode::LdElemAbsAt,
+                _ => return false,
+            };
+            let spec: Vec<u8> = elem.immediates.to_vec();
+            self.drop_from(n - 1);
+            self.start(fused);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&spec);
+            true
+        }
+
+        /// Before `ST_IND ty 0`: when the value was computed, right after an ELEM_REL/ELEM_ABS
+        /// that gave the address, by instructions that cannot trap (loads of verified static
+        /// addresses, pushes, integer and REAL/LREAL arithmetic but division, comparisons,
+        /// conversions that cannot fail), the ELEM is removed and the store becomes
+        /// `ST_ELEM_REL`/`ST_ELEM_ABS ty`: the index is then checked after the value is
+        /// computed, which nothing can observe (but a full operand stack, where the value's
+        /// push then traps STACK_OVERFLOW before a bad index would trap). True when fused.
+        fn fuse_element_store(&mut self, ty: MemType) -> bool {
+            let n = self.insn_starts.len();
+            // Walk back over the value's instructions: `need` cells still to be accounted for.
+            let mut need = 1i64;
+            let mut k = n;
+            while need > 0 {
+                if k == 0 {
+                    return false;
+                }
+                k -= 1;
+                let Some(d) = self.insn_at(k) else {
+                    return false;
+                };
+                if !pure(&d) {
+                    return false;
+                }
+                let Some((pops, pushes)) = crate::isa::stack_effect(d.op) else {
+                    return false;
+                };
+                need += pops as i64 - pushes as i64;
+            }
+            if need != 0 || k == 0 || !self.rewritable_from(k - 1) {
+                return false;
+            }
+            // The value's code must not read the address under it (e.g. `DUP`).
+            let mut depth = 0u32;
+            for j in k..n {
+                let Some((pops, pushes)) =
+                    self.insn_at(j).and_then(|d| crate::isa::stack_effect(d.op))
+                else {
+                    return false;
+                };
+                if pops > depth {
+                    return false;
+                }
+                depth = depth - pops + pushes;
+            }
+            let Some(elem) = self.insn_at(k - 1) else {
+                return false;
+            };
+            let fused = match elem.op {
+                Opcode::ElemRel => Opcode::StElemRel,
+                Opcode::ElemAbs => Opcode::StElemAbs,
+                // The index variable is then read after the value is computed, which pure
+                // code cannot change.
+                Opcode::ElemRelAt => Opcode::StElemRelAt,
+                Opcode::ElemAbsAt => Opcode::StElemAbsAt,
+                _ => return false,
+            };
+            let spec: Vec<u8> = elem.immediates.to_vec();
+            // Remove the ELEM: the value's code moves down by its size.
+            let (from, size) = (self.insn_starts[k - 1] as usize, elem.op.size());
+            self.code.drain(from..from + size);
+            self.insn_starts.remove(k - 1);
+            for start in &mut self.insn_starts[k - 1..] {
+                *start -= size as u32;
+            }
+            self.start(fused);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&spec);
+            true
+        }
+
+        /// Before a JZ/JNZ: a directly preceding comparison is fused into JUMP_IF_NOT/JUMP_IF,
+        /// a comparison with an immediate (OP_IMM) into JUMP_IF_NOT_IMM/JUMP_IF_IMM: the
+        /// comparison and the immediate (if any).
+        fn take_comparison(&mut self) -> Option<(Opcode, Option<u32>)> {
             let n = self.insn_starts.len();
             if n == 0 || !self.rewritable_from(n - 1) {
                 return None;
             }
-            let cmp = self
-                .insn_at(n - 1)
-                .map(|d| d.op)
-                .filter(|op| op.is_comparison())?;
+            let d = self.insn_at(n - 1)?;
+            let taken = if d.op.is_comparison() {
+                (d.op, None)
+            } else if d.op == Opcode::OpImm
+                && let Some(cmp) = Opcode::from_u8(d.immediates[0]).filter(|c| c.is_comparison())
+            {
+                (cmp, Some(read_u32(d.immediates, 1)))
+            } else {
+                return None;
+            };
             self.drop_from(n - 1);
-            Some(cmp)
+            Some(taken)
+        }
+
+        fn jump_on(&mut self, when: bool, taken: (Opcode, Option<u32>), target: Label) {
+            match taken {
+                (cmp, None) => self.jump_if(when, cmp, target),
+                (cmp, Some(k)) => {
+                    // A frame variable compared with the immediate: JUMP_IF(_NOT)_REL_IMM.
+                    let n = self.insn_starts.len();
+                    if n >= 1
+                        && self.rewritable_from(n - 1)
+                        && let Some((ty, off)) = self
+                            .insn_at(n - 1)
+                            .filter(|d| d.op == Opcode::LdRel)
+                            .map(|d| (d.immediates[0], read_u32(d.immediates, 1)))
+                    {
+                        self.drop_from(n - 1);
+                        self.start(if when {
+                            Opcode::JumpIfRelImm
+                        } else {
+                            Opcode::JumpIfNotRelImm
+                        });
+                        self.code.push(cmp as u8);
+                        self.code.push(ty);
+                        self.code.extend_from_slice(&off.to_le_bytes());
+                        self.code.extend_from_slice(&k.to_le_bytes());
+                        self.fixups.push((self.code.len(), target));
+                        self.code.extend_from_slice(&0u32.to_le_bytes());
+                        return;
+                    }
+                    self.start(if when {
+                        Opcode::JumpIfImm
+                    } else {
+                        Opcode::JumpIfNotImm
+                    });
+                    self.code.push(cmp as u8);
+                    self.code.extend_from_slice(&k.to_le_bytes());
+                    self.fixups.push((self.code.len(), target));
+                    self.code.extend_from_slice(&0u32.to_le_bytes());
+                }
+            }
         }
 
         /// Before a store of `width` bytes: a directly preceding SEXT/ZEXT to at least that
@@ -1389,17 +1719,35 @@ mod builder {
 
         /// Emits an instruction without operands (panics in debug if `op` has operands).
         ///
-        /// The builder fuses a few common sequences as they are emitted (same effect, fewer
-        /// dispatches, never more stack; see [`ImageBuilder::disable_fusion`]): array addressing
-        /// `CHK_INDEX; [PUSH lo; SUB]; [PUSH s; MUL]; ADD` → `INDEX`, `PUSH_I32 k; ADD|SUB` →
-        /// `ADD_IMM`, `<comparison>; JZ|JNZ` → `JUMP_IF_NOT|JUMP_IF`, and a `SEXT`/`ZEXT` directly
-        /// before a store that truncates anyway is dropped. Fusion never crosses a bound label,
-        /// a source location or raw bytes.
+        /// The builder fuses common sequences as they are emitted (same effect, fewer
+        /// dispatches, never more stack; see [`ImageBuilder::disable_fusion`] and the ISA's
+        /// "Fused instructions and superinstructions"):
+        ///
+        /// * array addressing `CHK_INDEX; [PUSH lo; SUB]; [PUSH s; MUL]; ADD` → `INDEX`;
+        ///   `LD_REL i; ELEM_*` → `ELEM_*_AT`; `ELEM_*[_AT]; LD_IND ty 0` → `LD_ELEM_*[_AT]`;
+        ///   `ELEM_*[_AT]; <pure value>; ST_IND ty 0` → `<pure value>; ST_ELEM_*[_AT]`;
+        /// * `PUSH_I32 k; ADD|SUB` → `ADD_IMM`; `PUSH_I32 k; op` → `OP_IMM` (also `PUSH_U32`
+        ///   where the cell is the same); `LD_REL|LD_ABS; op` → `OP_REL|OP_ABS`; `LD_REL a;
+        ///   LD_REL b; op` → `OP_REL_REL`; `LD ty x; ADD_IMM k; ST ty x` → `INC_*`;
+        /// * `<comparison>; JZ|JNZ` → `JUMP_IF_NOT|JUMP_IF`, with an immediate operand →
+        ///   `JUMP_IF_NOT_IMM|JUMP_IF_IMM`, on a frame variable → `JUMP_IF_NOT_REL_IMM|
+        ///   JUMP_IF_REL_IMM` (also `LD_REL x; JZ|JNZ`, a test against 0); `NOT_BOOL; JZ` →
+        ///   `JNZ` (and the reverse);
+        /// * `PUSH_U32|PUSH_I64 c; NEG_F32|NEG_F64` → the negated constant; a `SEXT`/`ZEXT`
+        ///   directly before a store that truncates anyway is dropped.
+        ///
+        /// Fusion never crosses a bound label, a source location or raw bytes.
         pub fn op(&mut self, op: Opcode) {
             debug_assert!(op.operands().is_empty(), "{} needs operands", op.mnemonic());
+            if matches!(op, Opcode::NegF32 | Opcode::NegF64) && self.fold_negation(op) {
+                return;
+            }
             self.start(op);
-            if matches!(op, Opcode::Add | Opcode::Sub) {
-                self.fuse_arithmetic(op);
+            if matches!(op, Opcode::Add | Opcode::Sub) && self.fuse_arithmetic(op) {
+                return;
+            }
+            if op.is_binary() {
+                self.fuse_operand(op);
             }
         }
 
@@ -1412,6 +1760,16 @@ mod builder {
         fn op_type_addr(&mut self, op: Opcode, ty: MemType, addr: u32) {
             if matches!(op, Opcode::StAbs | Opcode::StRel | Opcode::StInd) {
                 self.drop_redundant_extension(ty.width());
+            }
+            let fused = match op {
+                Opcode::StRel => self.fuse_increment(Opcode::LdRel, ty, addr),
+                Opcode::StAbs => self.fuse_increment(Opcode::LdAbs, ty, addr),
+                Opcode::LdInd if addr == 0 => self.fuse_element_load(ty),
+                Opcode::StInd if addr == 0 => self.fuse_element_store(ty),
+                _ => false,
+            };
+            if fused {
+                return;
             }
             self.start(op);
             self.code.push(ty as u8);
@@ -1534,23 +1892,62 @@ mod builder {
         pub fn jmp(&mut self, target: Label) {
             self.op_target(Opcode::Jmp, target);
         }
-        /// JZ (fused with a preceding comparison into JUMP_IF_NOT).
+        /// JZ (fused with a preceding comparison into JUMP_IF_NOT or JUMP_IF_NOT_IMM; after
+        /// NOT_BOOL it is JNZ; a frame variable tested directly becomes JUMP_IF_REL_IMM).
         pub fn jz(&mut self, target: Label) {
-            match self.take_comparison() {
-                Some(cmp) => self.jump_if(false, cmp, target),
-                None => self.op_target(Opcode::Jz, target),
-            }
+            self.jump_on_zero(true, target);
         }
-        /// JNZ (fused with a preceding comparison into JUMP_IF).
+        /// JNZ (fused as [`ImageBuilder::jz`] is, with the opposite sense).
         pub fn jnz(&mut self, target: Label) {
-            match self.take_comparison() {
-                Some(cmp) => self.jump_if(true, cmp, target),
-                None => self.op_target(Opcode::Jnz, target),
-            }
+            self.jump_on_zero(false, target);
         }
-        /// JUMP_IF (`when = true`) / JUMP_IF_NOT: compare the two top cells with `cmp` and jump.
+        /// JZ (`zero`) or JNZ, fused with what computed the tested cell.
+        fn jump_on_zero(&mut self, mut zero: bool, target: Label) {
+            let n = self.insn_starts.len();
+            // NOT_BOOL then JZ is JNZ (and the reverse).
+            if n >= 1
+                && self.rewritable_from(n - 1)
+                && self.insn_at(n - 1).map(|d| d.op) == Some(Opcode::NotBool)
+            {
+                self.drop_from(n - 1);
+                zero = !zero;
+            }
+            if let Some(taken) = self.take_comparison() {
+                self.jump_on(!zero, taken, target);
+                return;
+            }
+            let n = self.insn_starts.len();
+            if !self.no_fusion
+                && n >= 1
+                && self.rewritable_from(n - 1)
+                && self.insn_at(n - 1).map(|d| d.op) == Some(Opcode::LdRel)
+            {
+                // `LD_REL; JZ` is a frame variable compared with 0.
+                self.jump_on(
+                    false,
+                    (if zero { Opcode::Ne } else { Opcode::Eq }, Some(0)),
+                    target,
+                );
+                return;
+            }
+            self.op_target(if zero { Opcode::Jz } else { Opcode::Jnz }, target);
+        }
+        /// JUMP_IF (`when = true`) / JUMP_IF_NOT: compare the two top cells with `cmp` and jump
+        /// (fused with a directly preceding `PUSH_I32 k` into JUMP_IF_IMM/JUMP_IF_NOT_IMM).
         pub fn jump_if(&mut self, when: bool, cmp: Opcode, target: Label) {
             debug_assert!(cmp.is_comparison());
+            let n = self.insn_starts.len();
+            if n >= 1
+                && self.rewritable_from(n - 1)
+                && let Some(k) = self
+                    .insn_at(n - 1)
+                    .filter(|d| d.op == Opcode::PushI32)
+                    .map(|d| read_u32(d.immediates, 0))
+            {
+                self.drop_from(n - 1);
+                self.jump_on(when, (cmp, Some(k)), target);
+                return;
+            }
             self.start(if when {
                 Opcode::JumpIf
             } else {
@@ -1600,6 +1997,169 @@ mod builder {
         pub fn index(&mut self, lo: i64, hi: i64, stride: u32) {
             self.op_range(Opcode::Index, lo as u64, hi as u64);
             self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        fn elem(&mut self, op: Opcode, addr: u32, lo: i64, hi: i64, stride: u32) {
+            // The index just loaded from a frame variable: ELEM_REL_AT/ELEM_ABS_AT.
+            let n = self.insn_starts.len();
+            if n >= 1
+                && self.rewritable_from(n - 1)
+                && let Some((ity, ioff)) = self
+                    .insn_at(n - 1)
+                    .filter(|d| d.op == Opcode::LdRel)
+                    .map(|d| (d.immediates[0], read_u32(d.immediates, 1)))
+            {
+                self.drop_from(n - 1);
+                self.start(if op == Opcode::ElemRel {
+                    Opcode::ElemRelAt
+                } else {
+                    Opcode::ElemAbsAt
+                });
+                self.elem_spec(addr, lo, hi, stride);
+                self.code.push(ity);
+                self.code.extend_from_slice(&ioff.to_le_bytes());
+                return;
+            }
+            self.start(op);
+            self.elem_spec(addr, lo, hi, stride);
+        }
+        fn elem_spec(&mut self, addr: u32, lo: i64, hi: i64, stride: u32) {
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&lo.to_le_bytes());
+            self.code.extend_from_slice(&hi.to_le_bytes());
+            self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        /// An element access indexed by the `index` frame variable `(type, offset)`:
+        /// ELEM_*_AT (`ty` None), LD_ELEM_*_AT (`load`) or ST_ELEM_*_AT.
+        #[allow(clippy::too_many_arguments)]
+        pub fn elem_at(
+            &mut self,
+            rel: bool,
+            ty: Option<(MemType, bool)>,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+            index: (MemType, u32),
+        ) {
+            let op = match (rel, ty) {
+                (true, None) => Opcode::ElemRelAt,
+                (false, None) => Opcode::ElemAbsAt,
+                (true, Some((_, true))) => Opcode::LdElemRelAt,
+                (false, Some((_, true))) => Opcode::LdElemAbsAt,
+                (true, Some((_, false))) => Opcode::StElemRelAt,
+                (false, Some((_, false))) => Opcode::StElemAbsAt,
+            };
+            self.start(op);
+            if let Some((ty, _)) = ty {
+                self.code.push(ty as u8);
+            }
+            self.elem_spec(addr, lo, hi, stride);
+            self.code.push(index.0 as u8);
+            self.code.extend_from_slice(&index.1.to_le_bytes());
+        }
+        /// ELEM_REL: `[i] -> [base + off + (i - lo) * stride]` (a following `LD_IND ty 0` fuses
+        /// into LD_ELEM_REL, a following trap-free value and `ST_IND ty 0` into ST_ELEM_REL).
+        pub fn elem_rel(&mut self, off: u32, lo: i64, hi: i64, stride: u32) {
+            self.elem(Opcode::ElemRel, off, lo, hi, stride);
+        }
+        /// ELEM_ABS: `[i] -> [addr + (i - lo) * stride]` (fuses as ELEM_REL does).
+        pub fn elem_abs(&mut self, addr: u32, lo: i64, hi: i64, stride: u32) {
+            self.elem(Opcode::ElemAbs, addr, lo, hi, stride);
+        }
+        fn elem_access(
+            &mut self,
+            op: Opcode,
+            ty: MemType,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+        ) {
+            self.start(op);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&lo.to_le_bytes());
+            self.code.extend_from_slice(&hi.to_le_bytes());
+            self.code.extend_from_slice(&stride.to_le_bytes());
+        }
+        /// LD_ELEM_REL (`rel`) or LD_ELEM_ABS: `[i] -> [v]` (what the builder makes of ELEM
+        /// and `LD_IND ty 0`).
+        pub fn ld_elem(
+            &mut self,
+            rel: bool,
+            ty: MemType,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+        ) {
+            let op = if rel {
+                Opcode::LdElemRel
+            } else {
+                Opcode::LdElemAbs
+            };
+            self.elem_access(op, ty, addr, lo, hi, stride);
+        }
+        /// ST_ELEM_REL (`rel`) or ST_ELEM_ABS: `[i v] -> []`.
+        pub fn st_elem(
+            &mut self,
+            rel: bool,
+            ty: MemType,
+            addr: u32,
+            lo: i64,
+            hi: i64,
+            stride: u32,
+        ) {
+            let op = if rel {
+                Opcode::StElemRel
+            } else {
+                Opcode::StElemAbs
+            };
+            self.elem_access(op, ty, addr, lo, hi, stride);
+        }
+        /// INC_REL (`rel`) or INC_ABS: adds `imm` to an integer variable in place.
+        pub fn inc(&mut self, rel: bool, ty: MemType, addr: u32, imm: i32) {
+            self.start(if rel { Opcode::IncRel } else { Opcode::IncAbs });
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+            self.code.extend_from_slice(&imm.to_le_bytes());
+        }
+        /// OP_IMM: `[a] -> [a op imm]` for a binary operator `op`.
+        pub fn op_imm(&mut self, op: Opcode, imm: i32) {
+            debug_assert!(op.is_binary());
+            self.start(Opcode::OpImm);
+            self.code.push(op as u8);
+            self.code.extend_from_slice(&imm.to_le_bytes());
+        }
+        /// OP_REL (`rel`) or OP_ABS: `[a] -> [a op v]`, `v` the `ty` variable at `addr`.
+        pub fn op_at(&mut self, rel: bool, op: Opcode, ty: MemType, addr: u32) {
+            debug_assert!(op.is_binary());
+            self.start(if rel { Opcode::OpRel } else { Opcode::OpAbs });
+            self.code.push(op as u8);
+            self.code.push(ty as u8);
+            self.code.extend_from_slice(&addr.to_le_bytes());
+        }
+        /// OP_REL_REL: `[] -> [a op b]` for two frame variables `(type, offset)`.
+        pub fn op_rel_rel(&mut self, op: Opcode, a: (MemType, u32), b: (MemType, u32)) {
+            debug_assert!(op.is_binary());
+            self.start(Opcode::OpRelRel);
+            self.code.push(op as u8);
+            self.code.push(a.0 as u8);
+            self.code.extend_from_slice(&a.1.to_le_bytes());
+            self.code.push(b.0 as u8);
+            self.code.extend_from_slice(&b.1.to_le_bytes());
+        }
+        /// JUMP_IF_IMM (`when`) / JUMP_IF_NOT_IMM: `[a] -> []`, jumps on `cmp(a, imm)` (fused
+        /// with a directly preceding LD_REL into JUMP_IF_REL_IMM/JUMP_IF_NOT_REL_IMM).
+        pub fn jump_if_imm(&mut self, when: bool, cmp: Opcode, imm: i32, target: Label) {
+            debug_assert!(cmp.is_comparison());
+            self.jump_on(when, (cmp, Some(imm as u32)), target);
+        }
+        /// SEL_IF: `[a b] -> [if cmp(a, b) { b } else { a }]` (MAX: `LT_x`, MIN: `GT_x`).
+        pub fn sel_if(&mut self, cmp: Opcode) {
+            debug_assert!(cmp.is_comparison());
+            self.start(Opcode::SelIf);
+            self.code.push(cmp as u8);
         }
         /// REF_MAKE for `size` bytes.
         pub fn ref_make(&mut self, size: u32) {

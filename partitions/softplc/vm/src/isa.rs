@@ -6,7 +6,8 @@
 //!
 //! * integers: two's complement `i64` (unsigned values zero-extended into the cell);
 //! * `REAL` (f32): the f32 bit pattern in the low 32 bits, upper 32 bits zero;
-//! * `LREAL` (f64): the f64 bit pattern;
+//! * `LREAL` (f64): the f64 bit pattern (a NaN that `+ - * /` produce is the canonical
+//!   quiet NaN, for REAL too: [`real_result`], [`lreal_result`]);
 //! * `BOOL`: 0 or 1; `TIME`: `i64` nanoseconds; addresses: unsigned byte offsets into data memory.
 //!
 //! Stack effects are written `[before] -> [after]` with the top of stack on the right.
@@ -42,6 +43,25 @@
 //! depths; which method runs is decided by the instance's class at run time. A NULL
 //! instance, an unknown class or a class without the slot trap with
 //! [`Trap::InvalidReference`].
+//!
+//! # Fused instructions and superinstructions
+//!
+//! Some instructions exist only to cut dispatches: `INDEX`, `ADD_IMM`, `JUMP_IF`,
+//! `JUMP_IF_NOT` and the superinstructions `0xC0..=0xD6` (array elements with and without a
+//! frame variable as the index, `INC_*`, `SEL_IF`, comparisons and operators with an
+//! immediate or frame/static operands, immediate jumps on a frame variable). Each one's
+//! description names the plain sequence it is; it has exactly that sequence's effect, raises
+//! the traps that sequence can raise in the same order, and never needs more operand stack
+//! (it may need less: a fused push that would overflow is not there), but the watchdog
+//! counts it as **one** instruction and a trap leaves the stack as it was before the fused
+//! instruction (as before every trapping instruction). `ST_ELEM_*` reads its index and checks
+//! it after the value is computed; the builder makes it (from `ELEM_*`, the value's code,
+//! `ST_IND ty 0`) only when the value's code is pure (no memory write, no trap but
+//! STACK_OVERFLOW), so nothing can tell. Element addresses are computed as `INDEX` does
+//! (wrapping 64-bit arithmetic), then checked against data memory at the access.
+//! `image::ImageBuilder` fuses the plain sequences as they are emitted (see its `op`); the
+//! VM, the reference model ([`crate::model`]) and the native tier (`plc-native`) implement
+//! every one.
 
 /// Operand layout of an instruction (all immediates little-endian).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -72,6 +92,33 @@ pub enum Operands {
     IndexSpec,
     /// A comparison opcode byte (see [`Opcode::is_comparison`]) then a `u32` code target.
     CompareTarget,
+    /// A `u32` address/offset, two `i64` bounds (inclusive), a `u32` element stride.
+    AddrIndex,
+    /// A [`MemType`] byte, a `u32` address/offset, two `i64` bounds (inclusive), a `u32`
+    /// element stride.
+    TypeAddrIndex,
+    /// A [`MemType`] byte (an integer type), a `u32` address/offset, an `i32` immediate.
+    TypeAddrImm,
+    /// A comparison opcode byte.
+    Compare,
+    /// A comparison opcode byte, an `i32` immediate, a `u32` code target.
+    CompareImmTarget,
+    /// A binary-operator opcode byte (see [`Opcode::is_binary`]) then an `i32` immediate.
+    OpImm,
+    /// A binary-operator opcode byte, a [`MemType`] byte, a `u32` address/offset.
+    OpTypeAddr,
+    /// A binary-operator opcode byte, then two operands of a [`MemType`] byte and a `u32`
+    /// offset each.
+    OpTypeAddr2,
+    /// A comparison opcode byte, a [`MemType`] byte, a `u32` offset, an `i32` immediate, a
+    /// `u32` code target.
+    CompareTypeAddrImmTarget,
+    /// As [`Operands::AddrIndex`], then the index variable: a [`MemType`] byte and a `u32`
+    /// frame offset.
+    AddrIndexAt,
+    /// As [`Operands::TypeAddrIndex`], then the index variable: a [`MemType`] byte and a
+    /// `u32` frame offset.
+    TypeAddrIndexAt,
 }
 
 impl Operands {
@@ -87,6 +134,17 @@ impl Operands {
             Operands::Range => 16,
             Operands::IndexSpec => 20,
             Operands::CompareTarget => 5,
+            Operands::AddrIndex => 24,
+            Operands::TypeAddrIndex => 25,
+            Operands::TypeAddrImm => 9,
+            Operands::Compare => 1,
+            Operands::CompareImmTarget => 9,
+            Operands::OpImm => 5,
+            Operands::OpTypeAddr => 6,
+            Operands::OpTypeAddr2 => 11,
+            Operands::CompareTypeAddrImmTarget => 14,
+            Operands::AddrIndexAt => 29,
+            Operands::TypeAddrIndexAt => 30,
         }
     }
 
@@ -141,6 +199,13 @@ macro_rules! opcodes {
             pub const fn size(self) -> usize {
                 SIZES[self as usize] as usize
             }
+        }
+
+        /// Each opcode's byte as a constant, for `match`ing on raw code bytes (the
+        /// interpreter's dispatch).
+        #[allow(non_upper_case_globals)]
+        pub mod byte {
+            $( #[doc = concat!("`", $mnemonic, "`.")] pub const $name: u8 = $val; )*
         }
 
         /// Opcode byte -> opcode (the interpreter's decode is one table load).
@@ -410,9 +475,127 @@ opcodes! {
     /// `[code] -> []`: re-raises a caught trap code; 0 does nothing (no exception); a code
     /// that is not a catchable trap raises NUMERIC_ERROR.
     Rethrow = 0x93, "RETHROW", None;
+
+    // ---- Superinstructions (0xC0..=0xDF): each is exactly the plain sequence named in its
+    // description (same result, same traps, checked in the same order), counted as one
+    // instruction by the watchdog, and never needs more operand stack than that sequence.
+    // The compiler and the builder's fusion produce them; the VM, the reference model and
+    // the native tier implement each one. Element addresses are computed as INDEX does
+    // (wrapping 64-bit arithmetic, then checked against data memory when accessed).
+
+    /// `[i] -> [base + off + (i - lo) * stride]`: the address of element `i` of a
+    /// frame-relative array: `LEA_REL off; SWAP; INDEX lo hi stride` (the index is pushed
+    /// first). May trap: INDEX_OUT_OF_BOUNDS unless `lo <= i <= hi` (signed).
+    ElemRel = 0xC0, "ELEM_REL", AddrIndex;
+    /// `[i] -> [addr + (i - lo) * stride]`: the address of element `i` of an array at
+    /// absolute address `addr`: `PUSH_U32 addr; SWAP; INDEX lo hi stride`. May trap:
+    /// INDEX_OUT_OF_BOUNDS.
+    ElemAbs = 0xC1, "ELEM_ABS", AddrIndex;
+    /// `[i] -> [v]`: loads element `i` of a frame-relative array: `ELEM_REL off lo hi stride;
+    /// LD_IND ty 0`. May trap: INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemRel = 0xC2, "LD_ELEM_REL", TypeAddrIndex;
+    /// `[i] -> [v]`: `ELEM_ABS addr lo hi stride; LD_IND ty 0`. May trap:
+    /// INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemAbs = 0xC3, "LD_ELEM_ABS", TypeAddrIndex;
+    /// `[i v] -> []`: stores `v` into element `i` of a frame-relative array: `SWAP; ELEM_REL
+    /// off lo hi stride; SWAP; ST_IND ty 0`. May trap: INDEX_OUT_OF_BOUNDS, then
+    /// INVALID_ADDRESS.
+    StElemRel = 0xC4, "ST_ELEM_REL", TypeAddrIndex;
+    /// `[i v] -> []`: `SWAP; ELEM_ABS addr lo hi stride; SWAP; ST_IND ty 0`. May trap:
+    /// INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    StElemAbs = 0xC5, "ST_ELEM_ABS", TypeAddrIndex;
+    /// `[] -> []`: adds `imm` to the integer variable at `base + off`: `LD_REL ty off; ADD_IMM
+    /// imm; ST_REL ty off` (wrapping, the store truncates to the type). The verifier checks
+    /// the type is an integer type and the variable lies in the frame, as for LD_REL.
+    IncRel = 0xC6, "INC_REL", TypeAddrImm;
+    /// `[] -> []`: `LD_ABS ty addr; ADD_IMM imm; ST_ABS ty addr` (integer type; the verifier
+    /// checks the address as for LD_ABS).
+    IncAbs = 0xC7, "INC_ABS", TypeAddrImm;
+    /// `[a b] -> [if cmp(a, b) { b } else { a }]` for a comparison opcode `cmp`: MAX is
+    /// `SEL_IF LT_x`, MIN is `SEL_IF GT_x` (NaN compares false: the first operand is kept).
+    SelIf = 0xC8, "SEL_IF", Compare;
+    /// `[a] -> []`: jumps to `target` when `cmp(a, imm)` holds, `imm` sign-extended to a cell:
+    /// `PUSH_I32 imm; JUMP_IF cmp target`.
+    JumpIfImm = 0xC9, "JUMP_IF_IMM", CompareImmTarget;
+    /// `[a] -> []`: jumps when `cmp(a, imm)` does **not** hold: `PUSH_I32 imm; JUMP_IF_NOT cmp
+    /// target`.
+    JumpIfNotImm = 0xCA, "JUMP_IF_NOT_IMM", CompareImmTarget;
+    /// `[a] -> [a op imm]`: a binary operator `op` (see [`Opcode::is_binary`]) with an
+    /// immediate right operand sign-extended to a cell: `PUSH_I32 imm; op`. May trap as `op`
+    /// (DIVISION_BY_ZERO for a division by 0).
+    OpImm = 0xCB, "OP_IMM", OpImm;
+    /// `[a] -> [a op v]`: a binary operator whose right operand is the frame variable at
+    /// `base + off`: `LD_REL ty off; op` (the verifier checks the variable as for LD_REL).
+    /// May trap as `op`.
+    OpRel = 0xCC, "OP_REL", OpTypeAddr;
+    /// `[a] -> [a op v]`: `LD_ABS ty addr; op` (the verifier checks the address as for
+    /// LD_ABS). May trap as `op`.
+    OpAbs = 0xCD, "OP_ABS", OpTypeAddr;
+    /// `[] -> [a op b]`: a binary operator on two frame variables, `a` the `ty1` variable at
+    /// `base + off1`, `b` the `ty2` one at `base + off2`: `LD_REL ty1 off1; LD_REL ty2 off2;
+    /// op` (the verifier checks both as for LD_REL). May trap: STACK_OVERFLOW (checked
+    /// first, as the first load would), then as `op`.
+    OpRelRel = 0xCE, "OP_REL_REL", OpTypeAddr2;
+    /// `[] -> []`: jumps to `target` when `cmp(v, imm)` holds for the `ty` frame variable `v`
+    /// at `base + off`: `LD_REL ty off; JUMP_IF_IMM cmp imm target`.
+    JumpIfRelImm = 0xCF, "JUMP_IF_REL_IMM", CompareTypeAddrImmTarget;
+    /// `[] -> []`: jumps when `cmp(v, imm)` does **not** hold: `LD_REL ty off;
+    /// JUMP_IF_NOT_IMM cmp imm target`.
+    JumpIfNotRelImm = 0xD0, "JUMP_IF_NOT_REL_IMM", CompareTypeAddrImmTarget;
+    /// `[] -> [address]`: ELEM_REL with the index read from the `ity` frame variable at
+    /// `base + ioff`: `LD_REL ity ioff; ELEM_REL off lo hi stride` (the verifier checks the
+    /// index variable as for LD_REL). May trap: STACK_OVERFLOW (checked first, as the load
+    /// would), then INDEX_OUT_OF_BOUNDS.
+    ElemRelAt = 0xD1, "ELEM_REL_AT", AddrIndexAt;
+    /// `[] -> [address]`: `LD_REL ity ioff; ELEM_ABS addr lo hi stride`. May trap:
+    /// STACK_OVERFLOW, then INDEX_OUT_OF_BOUNDS.
+    ElemAbsAt = 0xD2, "ELEM_ABS_AT", AddrIndexAt;
+    /// `[] -> [v]`: `LD_REL ity ioff; LD_ELEM_REL ty off lo hi stride`. May trap:
+    /// STACK_OVERFLOW, then INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemRelAt = 0xD3, "LD_ELEM_REL_AT", TypeAddrIndexAt;
+    /// `[] -> [v]`: `LD_REL ity ioff; LD_ELEM_ABS ty addr lo hi stride`. May trap:
+    /// STACK_OVERFLOW, then INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    LdElemAbsAt = 0xD4, "LD_ELEM_ABS_AT", TypeAddrIndexAt;
+    /// `[v] -> []`: `LD_REL ity ioff; SWAP; ST_ELEM_REL ty off lo hi stride` (the index is
+    /// read when the store runs). May trap: INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    StElemRelAt = 0xD5, "ST_ELEM_REL_AT", TypeAddrIndexAt;
+    /// `[v] -> []`: `LD_REL ity ioff; SWAP; ST_ELEM_ABS ty addr lo hi stride`. May trap:
+    /// INDEX_OUT_OF_BOUNDS, then INVALID_ADDRESS.
+    StElemAbsAt = 0xD6, "ST_ELEM_ABS_AT", TypeAddrIndexAt;
 }
 
 impl Opcode {
+    /// True for the binary operators `[a b] -> [a op b]` without operands (integer and float
+    /// arithmetic, bit operations, shifts and comparisons) that OP_IMM, OP_REL, OP_ABS and
+    /// OP_REL_REL accept.
+    pub const fn is_binary(self) -> bool {
+        use Opcode::*;
+        self.is_comparison()
+            || matches!(
+                self,
+                Add | Sub
+                    | Mul
+                    | DivS
+                    | DivU
+                    | ModS
+                    | ModU
+                    | And
+                    | Or
+                    | Xor
+                    | Shl
+                    | ShrU
+                    | ShrS
+                    | AddF32
+                    | SubF32
+                    | MulF32
+                    | DivF32
+                    | AddF64
+                    | SubF64
+                    | MulF64
+                    | DivF64
+            )
+    }
+
     /// True for the comparison opcodes (integer and float) that JUMP_IF/JUMP_IF_NOT accept.
     pub const fn is_comparison(self) -> bool {
         use Opcode::*;
@@ -440,6 +623,34 @@ impl Opcode {
                 | GtF64
                 | GeF64
         )
+    }
+}
+
+/// The bits every REAL arithmetic result that is NaN has (a quiet NaN).
+pub const CANONICAL_NAN_F32: u32 = 0x7FC0_0000;
+/// The bits every LREAL arithmetic result that is NaN has (a quiet NaN).
+pub const CANONICAL_NAN_F64: u64 = 0x7FF8_0000_0000_0000;
+
+/// The cell of a REAL result of `+ - * /` (`ADD_F32` .. `DIV_F32`, also inside the fused
+/// operators): its bits, a NaN as [`CANONICAL_NAN_F32`]. Which NaN operand's payload the
+/// hardware passes on depends on the machine code's operand order, which the compiler is
+/// free to choose; a canonical NaN keeps every execution tier bit-identical.
+#[inline(always)]
+pub fn real_result(v: f32) -> u64 {
+    if v.is_nan() {
+        CANONICAL_NAN_F32 as u64
+    } else {
+        v.to_bits() as u64
+    }
+}
+
+/// The cell of an LREAL result of `+ - * /`: its bits, a NaN as [`CANONICAL_NAN_F64`].
+#[inline(always)]
+pub fn lreal_result(v: f64) -> u64 {
+    if v.is_nan() {
+        CANONICAL_NAN_F64
+    } else {
+        v.to_bits()
     }
 }
 
@@ -501,6 +712,31 @@ codes::code_enum! {
         /// LREAL (f64 bits).
         F64 = 9 => "F64",
     }
+}
+
+/// Each [`MemType`]'s code byte as a constant, for `match`ing on raw operand bytes.
+pub mod mem_type_byte {
+    use super::MemType;
+    /// [`MemType::I8`].
+    pub const I8: u8 = MemType::I8 as u8;
+    /// [`MemType::I16`].
+    pub const I16: u8 = MemType::I16 as u8;
+    /// [`MemType::I32`].
+    pub const I32: u8 = MemType::I32 as u8;
+    /// [`MemType::I64`].
+    pub const I64: u8 = MemType::I64 as u8;
+    /// [`MemType::U8`].
+    pub const U8: u8 = MemType::U8 as u8;
+    /// [`MemType::U16`].
+    pub const U16: u8 = MemType::U16 as u8;
+    /// [`MemType::U32`].
+    pub const U32: u8 = MemType::U32 as u8;
+    /// [`MemType::U64`].
+    pub const U64: u8 = MemType::U64 as u8;
+    /// [`MemType::F32`].
+    pub const F32: u8 = MemType::F32 as u8;
+    /// [`MemType::F64`].
+    pub const F64: u8 = MemType::F64 as u8;
 }
 
 impl MemType {
@@ -916,6 +1152,14 @@ pub const fn stack_effect(op: Opcode) -> Option<(u32, u32)> {
         Index => (2, 1),
         AddImm => (1, 1),
         JumpIf | JumpIfNot => (2, 0),
+        ElemRel | ElemAbs | LdElemRel | LdElemAbs | OpImm | OpRel | OpAbs => (1, 1),
+        StElemRel | StElemAbs => (2, 0),
+        IncRel | IncAbs => (0, 0),
+        SelIf => (2, 1),
+        JumpIfImm | JumpIfNotImm => (1, 0),
+        OpRelRel | ElemRelAt | ElemAbsAt | LdElemRelAt | LdElemAbsAt => (0, 1),
+        StElemRelAt | StElemAbsAt => (1, 0),
+        JumpIfRelImm | JumpIfNotRelImm => (0, 0),
         RefMake | RefCheck | ChkNull | VirtFrame => (1, 1),
         RefAdd => (2, 1),
         CallVirt => (1, 0),
@@ -967,6 +1211,7 @@ impl core::fmt::Display for Instruction<'_> {
         let imm = self.immediates;
         f.write_str(self.op.mnemonic())?;
         let ty = |b: u8| MemType::from_code(b).map_or("?", |t| t.name());
+        let opname = |b: u8| Opcode::from_u8(b).map_or("?", |op| op.mnemonic());
         match self.op.operands() {
             Operands::None => Ok(()),
             Operands::I32 => write!(f, " {}", read_u32(imm, 0) as i32),
@@ -1000,10 +1245,7 @@ impl core::fmt::Display for Instruction<'_> {
                 Some(t) => write!(f, " {}", t.name()),
                 None => write!(f, " #{}", imm[0]),
             },
-            Operands::CompareTarget => {
-                let cmp = Opcode::from_u8(imm[0]).map_or("?", |op| op.mnemonic());
-                write!(f, " {cmp} @{}", read_u32(imm, 1))
-            }
+            Operands::CompareTarget => write!(f, " {} @{}", opname(imm[0]), read_u32(imm, 1)),
             Operands::IndexSpec => write!(
                 f,
                 " {} {} {}",
@@ -1011,6 +1253,81 @@ impl core::fmt::Display for Instruction<'_> {
                 read_u64(imm, 8) as i64,
                 read_u32(imm, 16)
             ),
+            Operands::AddrIndex => write!(
+                f,
+                " {} {} {} {}",
+                read_u32(imm, 0),
+                read_u64(imm, 4) as i64,
+                read_u64(imm, 12) as i64,
+                read_u32(imm, 20)
+            ),
+            Operands::TypeAddrIndex => write!(
+                f,
+                " {} {} {} {} {}",
+                ty(imm[0]),
+                read_u32(imm, 1),
+                read_u64(imm, 5) as i64,
+                read_u64(imm, 13) as i64,
+                read_u32(imm, 21)
+            ),
+            Operands::TypeAddrImm => write!(
+                f,
+                " {} {} {}",
+                ty(imm[0]),
+                read_u32(imm, 1),
+                read_u32(imm, 5) as i32
+            ),
+            Operands::Compare => write!(f, " {}", opname(imm[0])),
+            Operands::CompareImmTarget => write!(
+                f,
+                " {} {} @{}",
+                opname(imm[0]),
+                read_u32(imm, 1) as i32,
+                read_u32(imm, 5)
+            ),
+            Operands::OpImm => write!(f, " {} {}", opname(imm[0]), read_u32(imm, 1) as i32),
+            Operands::AddrIndexAt => write!(
+                f,
+                " {} {} {} {} [{} {}]",
+                read_u32(imm, 0),
+                read_u64(imm, 4) as i64,
+                read_u64(imm, 12) as i64,
+                read_u32(imm, 20),
+                ty(imm[24]),
+                read_u32(imm, 25)
+            ),
+            Operands::TypeAddrIndexAt => write!(
+                f,
+                " {} {} {} {} {} [{} {}]",
+                ty(imm[0]),
+                read_u32(imm, 1),
+                read_u64(imm, 5) as i64,
+                read_u64(imm, 13) as i64,
+                read_u32(imm, 21),
+                ty(imm[25]),
+                read_u32(imm, 26)
+            ),
+            Operands::OpTypeAddr2 => write!(
+                f,
+                " {} {} {} {} {}",
+                opname(imm[0]),
+                ty(imm[1]),
+                read_u32(imm, 2),
+                ty(imm[6]),
+                read_u32(imm, 7)
+            ),
+            Operands::CompareTypeAddrImmTarget => write!(
+                f,
+                " {} {} {} {} @{}",
+                opname(imm[0]),
+                ty(imm[1]),
+                read_u32(imm, 2),
+                read_u32(imm, 6) as i32,
+                read_u32(imm, 10)
+            ),
+            Operands::OpTypeAddr => {
+                write!(f, " {} {} {}", opname(imm[0]), ty(imm[1]), read_u32(imm, 2))
+            }
         }
     }
 }

@@ -37,8 +37,11 @@
 //! * **Checks**: `CHK_INDEX lo hi` (INDEX_OUT_OF_BOUNDS), `CHK_RANGE_S/U lo hi`
 //!   (SUBRANGE_VIOLATION) leave the checked value on the stack; `INDEX lo hi stride` computes an
 //!   array element address with the index check in one instruction.
-//! * **Fused forms** (`INDEX`, `ADD_IMM`, `JUMP_IF`, `JUMP_IF_NOT`) exist only to cut dispatches;
-//!   the builder produces them from the plain sequences automatically.
+//! * **Fused forms** (`INDEX`, `ADD_IMM`, `JUMP_IF`, `JUMP_IF_NOT` and the superinstructions
+//!   `0xC0..=0xD6`: array elements, increments, MIN/MAX, operators and comparisons with
+//!   immediate or frame/static operands) exist only to cut dispatches; the builder produces
+//!   them from the plain sequences automatically (see [`isa`], "Fused instructions and
+//!   superinstructions").
 //!
 //! # Semantics worth knowing
 //!
@@ -49,7 +52,9 @@
 //! * Float division by zero traps DIVISION_BY_ZERO (rather than producing infinity);
 //!   float->integer conversions trap NUMERIC_ERROR for NaN, infinities and out-of-range values;
 //!   `REAL_TO_INT`-style rounding is to nearest with ties **away from zero** (2.5 -> 3).
-//! * Everything is deterministic: the math library ([`fmath`]) uses only IEEE basic operations.
+//! * Everything is deterministic: the math library ([`fmath`]) uses only IEEE basic operations,
+//!   and a NaN that REAL/LREAL `+ - * /` produce is the canonical quiet NaN (which operand's
+//!   NaN the hardware would pass on depends on the machine code; [`isa::real_result`]).
 //!
 //! # Limits
 //!

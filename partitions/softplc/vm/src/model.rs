@@ -334,6 +334,7 @@ impl<'a> Model<'a> {
                 self.data[dst as usize..(dst + len) as usize].copy_from_slice(&tmp);
             }
             Opcode::Now => push(&mut s, now_ns as u64)?,
+            // The binary operators (`Opcode::is_binary`).
             Opcode::Add
             | Opcode::Sub
             | Opcode::Mul
@@ -356,69 +357,30 @@ impl<'a> Model<'a> {
             | Opcode::LtU
             | Opcode::LeU
             | Opcode::GtU
-            | Opcode::GeU => {
+            | Opcode::GeU
+            | Opcode::AddF32
+            | Opcode::SubF32
+            | Opcode::MulF32
+            | Opcode::DivF32
+            | Opcode::EqF32
+            | Opcode::NeF32
+            | Opcode::LtF32
+            | Opcode::LeF32
+            | Opcode::GtF32
+            | Opcode::GeF32
+            | Opcode::AddF64
+            | Opcode::SubF64
+            | Opcode::MulF64
+            | Opcode::DivF64
+            | Opcode::EqF64
+            | Opcode::NeF64
+            | Opcode::LtF64
+            | Opcode::LeF64
+            | Opcode::GtF64
+            | Opcode::GeF64 => {
                 let b = pop(&mut s);
                 let a = pop(&mut s);
-                let (x, y) = (a as i64, b as i64);
-                let r = match op {
-                    Opcode::Add => x.wrapping_add(y) as u64,
-                    Opcode::Sub => x.wrapping_sub(y) as u64,
-                    Opcode::Mul => x.wrapping_mul(y) as u64,
-                    Opcode::DivS | Opcode::DivU | Opcode::ModS | Opcode::ModU if b == 0 => {
-                        return Err(Trap::DivisionByZero);
-                    }
-                    Opcode::DivS => {
-                        if x == i64::MIN && y == -1 {
-                            i64::MIN as u64
-                        } else {
-                            (x / y) as u64
-                        }
-                    }
-                    Opcode::ModS => {
-                        if y == -1 {
-                            0
-                        } else {
-                            (x % y) as u64
-                        }
-                    }
-                    Opcode::DivU => a / b,
-                    Opcode::ModU => a % b,
-                    Opcode::And => a & b,
-                    Opcode::Or => a | b,
-                    Opcode::Xor => a ^ b,
-                    Opcode::Shl => {
-                        if b >= 64 {
-                            0
-                        } else {
-                            a << b
-                        }
-                    }
-                    Opcode::ShrU => {
-                        if b >= 64 {
-                            0
-                        } else {
-                            a >> b
-                        }
-                    }
-                    Opcode::ShrS => {
-                        if b >= 64 {
-                            if x < 0 { u64::MAX } else { 0 }
-                        } else {
-                            (x >> b) as u64
-                        }
-                    }
-                    Opcode::Eq => b2(a == b),
-                    Opcode::Ne => b2(a != b),
-                    Opcode::LtS => b2(x < y),
-                    Opcode::LeS => b2(x <= y),
-                    Opcode::GtS => b2(x > y),
-                    Opcode::GeS => b2(x >= y),
-                    Opcode::LtU => b2(a < b),
-                    Opcode::LeU => b2(a <= b),
-                    Opcode::GtU => b2(a > b),
-                    _ => b2(a >= b),
-                };
-                s.push(r);
+                s.push(model_binary(op, a, b)?);
             }
             Opcode::Neg => {
                 let a = pop(&mut s) as i64;
@@ -477,66 +439,6 @@ impl<'a> Model<'a> {
                 let a = pop(&mut s);
                 let g = pop(&mut s);
                 s.push(if g == 0 { a } else { b });
-            }
-            Opcode::AddF32
-            | Opcode::SubF32
-            | Opcode::MulF32
-            | Opcode::DivF32
-            | Opcode::EqF32
-            | Opcode::NeF32
-            | Opcode::LtF32
-            | Opcode::LeF32
-            | Opcode::GtF32
-            | Opcode::GeF32 => {
-                let y = r32(pop(&mut s));
-                let x = r32(pop(&mut s));
-                s.push(match op {
-                    Opcode::AddF32 => c32(x + y),
-                    Opcode::SubF32 => c32(x - y),
-                    Opcode::MulF32 => c32(x * y),
-                    Opcode::DivF32 => {
-                        if y == 0.0 {
-                            return Err(Trap::DivisionByZero);
-                        }
-                        c32(x / y)
-                    }
-                    Opcode::EqF32 => b2(x == y),
-                    Opcode::NeF32 => b2(x != y),
-                    Opcode::LtF32 => b2(x < y),
-                    Opcode::LeF32 => b2(x <= y),
-                    Opcode::GtF32 => b2(x > y),
-                    _ => b2(x >= y),
-                });
-            }
-            Opcode::AddF64
-            | Opcode::SubF64
-            | Opcode::MulF64
-            | Opcode::DivF64
-            | Opcode::EqF64
-            | Opcode::NeF64
-            | Opcode::LtF64
-            | Opcode::LeF64
-            | Opcode::GtF64
-            | Opcode::GeF64 => {
-                let y = r64(pop(&mut s));
-                let x = r64(pop(&mut s));
-                s.push(match op {
-                    Opcode::AddF64 => (x + y).to_bits(),
-                    Opcode::SubF64 => (x - y).to_bits(),
-                    Opcode::MulF64 => (x * y).to_bits(),
-                    Opcode::DivF64 => {
-                        if y == 0.0 {
-                            return Err(Trap::DivisionByZero);
-                        }
-                        (x / y).to_bits()
-                    }
-                    Opcode::EqF64 => b2(x == y),
-                    Opcode::NeF64 => b2(x != y),
-                    Opcode::LtF64 => b2(x < y),
-                    Opcode::LeF64 => b2(x <= y),
-                    Opcode::GtF64 => b2(x > y),
-                    _ => b2(x >= y),
-                });
             }
             Opcode::NegF32 => {
                 let a = pop(&mut s);
@@ -668,6 +570,155 @@ impl<'a> Model<'a> {
                 }
                 s.push(base.wrapping_add(index.wrapping_sub(lo).wrapping_mul(stride)) as u64);
             }
+            Opcode::ElemRel | Opcode::ElemAbs => {
+                let i_ = pop(&mut s);
+                let mut array = imm_u32(code, i) as u64;
+                if op == Opcode::ElemRel {
+                    array += self.base as u64;
+                }
+                let lo = imm_u64(code, i + 4);
+                let hi = imm_u64(code, i + 12);
+                let stride = imm_u32(code, i + 20);
+                s.push(model_element(array, i_, lo, hi, stride)?);
+            }
+            Opcode::LdElemRel | Opcode::LdElemAbs => {
+                let ty = MemType::from_code(code[i]).unwrap();
+                let mut array = imm_u32(code, i + 1) as u64;
+                if op == Opcode::LdElemRel {
+                    array += self.base as u64;
+                }
+                let index = pop(&mut s);
+                let address = model_element(
+                    array,
+                    index,
+                    imm_u64(code, i + 5),
+                    imm_u64(code, i + 13),
+                    imm_u32(code, i + 21),
+                )?;
+                s.push(self.read(ty, address)?);
+            }
+            Opcode::StElemRel | Opcode::StElemAbs => {
+                let ty = MemType::from_code(code[i]).unwrap();
+                let mut array = imm_u32(code, i + 1) as u64;
+                if op == Opcode::StElemRel {
+                    array += self.base as u64;
+                }
+                let v = pop(&mut s);
+                let index = pop(&mut s);
+                let address = model_element(
+                    array,
+                    index,
+                    imm_u64(code, i + 5),
+                    imm_u64(code, i + 13),
+                    imm_u32(code, i + 21),
+                )?;
+                self.write(ty, address, v)?;
+            }
+            Opcode::IncRel | Opcode::IncAbs => {
+                let ty = MemType::from_code(code[i]).unwrap();
+                let mut address = imm_u32(code, i + 1) as u64;
+                if op == Opcode::IncRel {
+                    address += self.base as u64;
+                }
+                let v = self.read(ty, address)? as i64;
+                let k = imm_u32(code, i + 5) as i32 as i64;
+                self.write(ty, address, v.wrapping_add(k) as u64)?;
+            }
+            Opcode::SelIf => {
+                let b = pop(&mut s);
+                let a = pop(&mut s);
+                s.push(if model_compare(code[i], a, b) { b } else { a });
+            }
+            Opcode::JumpIfImm | Opcode::JumpIfNotImm => {
+                let a = pop(&mut s);
+                let k = imm_u32(code, i + 1) as i32 as i64 as u64;
+                if model_compare(code[i], a, k) == (op == Opcode::JumpIfImm) {
+                    next = imm_u32(code, i + 5);
+                }
+            }
+            Opcode::OpImm => {
+                let a = pop(&mut s);
+                let k = imm_u32(code, i + 1) as i32 as i64 as u64;
+                s.push(model_binary(Opcode::from_u8(code[i]).unwrap(), a, k)?);
+            }
+            Opcode::OpRel | Opcode::OpAbs => {
+                let ty = MemType::from_code(code[i + 1]).unwrap();
+                let mut address = imm_u32(code, i + 2) as u64;
+                if op == Opcode::OpRel {
+                    address += self.base as u64;
+                }
+                let v = self.read(ty, address)?;
+                let a = pop(&mut s);
+                s.push(model_binary(Opcode::from_u8(code[i]).unwrap(), a, v)?);
+            }
+            Opcode::OpRelRel => {
+                if s.len() >= limit {
+                    return Err(Trap::StackOverflow);
+                }
+                let a = self.read(
+                    MemType::from_code(code[i + 1]).unwrap(),
+                    self.base as u64 + imm_u32(code, i + 2) as u64,
+                )?;
+                let b = self.read(
+                    MemType::from_code(code[i + 6]).unwrap(),
+                    self.base as u64 + imm_u32(code, i + 7) as u64,
+                )?;
+                let r = model_binary(Opcode::from_u8(code[i]).unwrap(), a, b)?;
+                push(&mut s, r)?;
+            }
+            Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => {
+                let v = self.read(
+                    MemType::from_code(code[i + 1]).unwrap(),
+                    self.base as u64 + imm_u32(code, i + 2) as u64,
+                )?;
+                let k = imm_u32(code, i + 6) as i32 as i64 as u64;
+                if model_compare(code[i], v, k) == (op == Opcode::JumpIfRelImm) {
+                    next = imm_u32(code, i + 10);
+                }
+            }
+            Opcode::ElemRelAt
+            | Opcode::ElemAbsAt
+            | Opcode::LdElemRelAt
+            | Opcode::LdElemAbsAt
+            | Opcode::StElemRelAt
+            | Opcode::StElemAbsAt => {
+                // The operands after the opcode: [ty] addr lo hi stride ity ioff.
+                let typed = !matches!(op, Opcode::ElemRelAt | Opcode::ElemAbsAt);
+                let o = i + typed as usize;
+                let pushes = !matches!(op, Opcode::StElemRelAt | Opcode::StElemAbsAt);
+                if pushes && s.len() >= limit {
+                    return Err(Trap::StackOverflow);
+                }
+                let index = self.read(
+                    MemType::from_code(code[o + 24]).unwrap(),
+                    self.base as u64 + imm_u32(code, o + 25) as u64,
+                )?;
+                let mut array = imm_u32(code, o) as u64;
+                if matches!(
+                    op,
+                    Opcode::ElemRelAt | Opcode::LdElemRelAt | Opcode::StElemRelAt
+                ) {
+                    array += self.base as u64;
+                }
+                let address = model_element(
+                    array,
+                    index,
+                    imm_u64(code, o + 4),
+                    imm_u64(code, o + 12),
+                    imm_u32(code, o + 20),
+                )?;
+                match op {
+                    Opcode::ElemRelAt | Opcode::ElemAbsAt => s.push(address),
+                    Opcode::LdElemRelAt | Opcode::LdElemAbsAt => {
+                        let v = self.read(MemType::from_code(code[i]).unwrap(), address)?;
+                        s.push(v);
+                    }
+                    _ => {
+                        let v = pop(&mut s);
+                        self.write(MemType::from_code(code[i]).unwrap(), address, v)?;
+                    }
+                }
+            }
             Opcode::RefMake => {
                 let a = pop(&mut s);
                 let size = imm_u32(code, i) as u64;
@@ -767,6 +818,107 @@ impl<'a> Model<'a> {
         self.pc = next;
         Ok(ended)
     }
+}
+
+/// A binary operator (`[a b] -> [a op b]`, [`Opcode::is_binary`]): the plain instruction and
+/// the right operand of OP_IMM, OP_REL and OP_ABS.
+fn model_binary(op: Opcode, a: u64, b: u64) -> Result<u64, Trap> {
+    let b2 = |x: bool| if x { 1u64 } else { 0 };
+    let r32 = |c: u64| f32::from_bits(c as u32);
+    // Arithmetic results: a NaN is the canonical one (`isa::CANONICAL_NAN_F32`/`_F64`).
+    let c32 = |f: f32| {
+        if f.is_nan() {
+            crate::isa::CANONICAL_NAN_F32 as u64
+        } else {
+            f.to_bits() as u64
+        }
+    };
+    let c64 = |f: f64| {
+        if f.is_nan() {
+            crate::isa::CANONICAL_NAN_F64
+        } else {
+            f.to_bits()
+        }
+    };
+    let r64 = f64::from_bits;
+    let (x, y) = (a as i64, b as i64);
+    Ok(match op {
+        Opcode::Add => x.wrapping_add(y) as u64,
+        Opcode::Sub => x.wrapping_sub(y) as u64,
+        Opcode::Mul => x.wrapping_mul(y) as u64,
+        Opcode::DivS | Opcode::DivU | Opcode::ModS | Opcode::ModU if b == 0 => {
+            return Err(Trap::DivisionByZero);
+        }
+        Opcode::DivS => {
+            if x == i64::MIN && y == -1 {
+                i64::MIN as u64
+            } else {
+                (x / y) as u64
+            }
+        }
+        Opcode::ModS => {
+            if y == -1 {
+                0
+            } else {
+                (x % y) as u64
+            }
+        }
+        Opcode::DivU => a / b,
+        Opcode::ModU => a % b,
+        Opcode::And => a & b,
+        Opcode::Or => a | b,
+        Opcode::Xor => a ^ b,
+        Opcode::Shl => {
+            if b >= 64 {
+                0
+            } else {
+                a << b
+            }
+        }
+        Opcode::ShrU => {
+            if b >= 64 {
+                0
+            } else {
+                a >> b
+            }
+        }
+        Opcode::ShrS => {
+            if b >= 64 {
+                if x < 0 { u64::MAX } else { 0 }
+            } else {
+                (x >> b) as u64
+            }
+        }
+        Opcode::AddF32 => c32(r32(a) + r32(b)),
+        Opcode::SubF32 => c32(r32(a) - r32(b)),
+        Opcode::MulF32 => c32(r32(a) * r32(b)),
+        Opcode::DivF32 => {
+            if r32(b) == 0.0 {
+                return Err(Trap::DivisionByZero);
+            }
+            c32(r32(a) / r32(b))
+        }
+        Opcode::AddF64 => c64(r64(a) + r64(b)),
+        Opcode::SubF64 => c64(r64(a) - r64(b)),
+        Opcode::MulF64 => c64(r64(a) * r64(b)),
+        Opcode::DivF64 => {
+            if r64(b) == 0.0 {
+                return Err(Trap::DivisionByZero);
+            }
+            c64(r64(a) / r64(b))
+        }
+        cmp => b2(model_compare(cmp as u8, a, b)),
+    })
+}
+
+/// Element `i` of an array at `array` with bounds `lo..=hi` and element `stride`: its
+/// address as INDEX computes it (wrapping), or INDEX_OUT_OF_BOUNDS.
+fn model_element(array: u64, i: u64, lo: u64, hi: u64, stride: u32) -> Result<u64, Trap> {
+    let (i, lo, hi) = (i as i64, lo as i64, hi as i64);
+    if i < lo || i > hi {
+        return Err(Trap::IndexOutOfBounds);
+    }
+    Ok((array as i64).wrapping_add(i.wrapping_sub(lo).wrapping_mul(stride as i64)) as u64)
 }
 
 /// A comparison opcode byte applied to two cells (the model's own table, not `isa::compare`).

@@ -484,6 +484,12 @@ pub mod ops {
         v.to_bits() as u64
     }
 
+    /// The cell of a REAL `+ - * /` result (a NaN canonical, as in the interpreter).
+    pub use crate::isa::real_result;
+
+    /// The cell of an LREAL `+ - * /` result (a NaN canonical, as in the interpreter).
+    pub use crate::isa::lreal_result;
+
     /// The f64 in a cell.
     #[inline(always)]
     pub fn f64_of(cell: u64) -> f64 {

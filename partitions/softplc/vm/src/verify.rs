@@ -1,10 +1,12 @@
 //! The verifier: the only way to obtain a [`VerifiedImage`], the only thing the VM executes.
 //!
 //! Checks, in order: every instruction of the code section decodes (linear sweep from 0:
-//! known opcode, complete operands, valid type/width/mode/trap bytes, existing constant, POU
-//! and builtin indices, absolute data operands inside `data_size`); then per POU: its code
-//! range is inside the code and on instruction boundaries, frame-relative operands are inside
-//! its frame, jump and handler targets are instruction starts inside the same POU, and an
+//! known opcode, complete operands, valid type/width/mode/trap bytes, comparison and
+//! binary-operator operand bytes of the fused instructions, an integer type for `INC_*`,
+//! existing constant, POU and builtin indices, absolute data operands inside `data_size`);
+//! then per POU: its code range is inside the code and on instruction boundaries,
+//! frame-relative operands (the superinstructions' frame variables and index variables
+//! too) are inside its frame, jump and handler targets are instruction starts inside the same POU, and an
 //! abstract interpretation over all paths finds, for every reachable instruction, one operand
 //! stack depth and one try-nesting depth (equal at merge points, no underflow, at most
 //! [`MAX_POU_STACK`] cells, at most [`MAX_TRY_NESTING`] try frames, `RET` with exactly
@@ -89,8 +91,11 @@ pub enum Reason {
     BadRoundMode(u8),
     /// THROW of something that is not a catchable trap code.
     BadTrapCode(u8),
-    /// JUMP_IF/JUMP_IF_NOT with an operand that is not a comparison opcode.
+    /// JUMP_IF/JUMP_IF_NOT/SEL_IF/JUMP_IF_IMM/JUMP_IF_NOT_IMM with an operand that is not a
+    /// comparison opcode.
     BadComparison(u8),
+    /// OP_IMM/OP_REL/OP_ABS with an operand that is not a binary operator.
+    BadOperator(u8),
     /// PUSH_CONST index beyond the constant pool.
     UnknownConstant(u16),
     /// CALL of a POU index beyond the POU table.
@@ -251,6 +256,7 @@ impl core::fmt::Display for Reason {
             Reason::BadRoundMode(b) => write!(f, "invalid rounding mode {b}"),
             Reason::BadTrapCode(b) => write!(f, "invalid trap code {b}"),
             Reason::BadComparison(b) => write!(f, "operand 0x{b:02x} is not a comparison opcode"),
+            Reason::BadOperator(b) => write!(f, "operand 0x{b:02x} is not a binary operator"),
             Reason::UnknownConstant(i) => write!(f, "constant {i} does not exist"),
             Reason::UnknownPou(i) => write!(f, "call of unknown POU {i}"),
             Reason::UnknownBuiltin(i) => write!(f, "call of unknown builtin {i}"),
@@ -424,17 +430,7 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     reason: Reason::BadType(code[imm]),
                 })?;
                 if matches!(op, Opcode::LdAbs | Opcode::StAbs) {
-                    let address = read_u32(code, imm + 1) as u64;
-                    if address + ty.width() as u64 > data_size as u64 {
-                        return err(
-                            site,
-                            Reason::AddressOutsideData {
-                                address,
-                                width: ty.width() as u32,
-                                data_size,
-                            },
-                        );
-                    }
+                    check_abs(site, read_u32(code, imm + 1), ty, data_size)?;
                 }
             }
             Operands::Width => {
@@ -456,10 +452,72 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
                     return err(site, Reason::BadRoundMode(code[imm + 1]));
                 }
             }
-            Operands::CompareTarget => match Opcode::from_u8(code[imm]) {
-                Some(cmp) if cmp.is_comparison() => {}
-                _ => return err(site, Reason::BadComparison(code[imm])),
-            },
+            Operands::CompareTarget | Operands::Compare | Operands::CompareImmTarget => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(cmp) if cmp.is_comparison() => {}
+                    _ => return err(site, Reason::BadComparison(code[imm])),
+                }
+            }
+            Operands::CompareTypeAddrImmTarget => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(cmp) if cmp.is_comparison() => {}
+                    _ => return err(site, Reason::BadComparison(code[imm])),
+                }
+                if MemType::from_code(code[imm + 1]).is_none() {
+                    return err(site, Reason::BadType(code[imm + 1]));
+                }
+            }
+            Operands::OpTypeAddr2 => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(op) if op.is_binary() => {}
+                    _ => return err(site, Reason::BadOperator(code[imm])),
+                }
+                for at in [imm + 1, imm + 6] {
+                    if MemType::from_code(code[at]).is_none() {
+                        return err(site, Reason::BadType(code[at]));
+                    }
+                }
+            }
+            Operands::OpImm | Operands::OpTypeAddr => {
+                match Opcode::from_u8(code[imm]) {
+                    Some(op) if op.is_binary() => {}
+                    _ => return err(site, Reason::BadOperator(code[imm])),
+                }
+                if op != Opcode::OpImm {
+                    let ty = MemType::from_code(code[imm + 1]).ok_or(VerifyError {
+                        site,
+                        reason: Reason::BadType(code[imm + 1]),
+                    })?;
+                    if op == Opcode::OpAbs {
+                        check_abs(site, read_u32(code, imm + 2), ty, data_size)?;
+                    }
+                }
+            }
+            Operands::TypeAddrIndex if MemType::from_code(code[imm]).is_none() => {
+                return err(site, Reason::BadType(code[imm]));
+            }
+            Operands::AddrIndexAt | Operands::TypeAddrIndexAt => {
+                let index_type = if op.operands() == Operands::AddrIndexAt {
+                    imm + 24
+                } else {
+                    if MemType::from_code(code[imm]).is_none() {
+                        return err(site, Reason::BadType(code[imm]));
+                    }
+                    imm + 25
+                };
+                if MemType::from_code(code[index_type]).is_none() {
+                    return err(site, Reason::BadType(code[index_type]));
+                }
+            }
+            Operands::TypeAddrImm => {
+                let ty = match MemType::from_code(code[imm]) {
+                    Some(ty) if ty.is_integer() => ty,
+                    _ => return err(site, Reason::BadType(code[imm])),
+                };
+                if op == Opcode::IncAbs {
+                    check_abs(site, read_u32(code, imm + 1), ty, data_size)?;
+                }
+            }
             Operands::TrapCode => match Trap::from_u64(code[imm] as u64) {
                 Some(trap) if trap.is_catchable() => {}
                 _ => return err(site, Reason::BadTrapCode(code[imm])),
@@ -482,6 +540,22 @@ fn sweep_code(image: &Image<'_>, scratch: &mut [u32]) -> Result<(), VerifyError>
             _ => {}
         }
         pc += op.size();
+    }
+    Ok(())
+}
+
+/// An absolute access of a `ty` value at `address` must lie inside data memory.
+fn check_abs(site: Site, address: u32, ty: MemType, data_size: u32) -> Result<(), VerifyError> {
+    let address = address as u64;
+    if address + ty.width() as u64 > data_size as u64 {
+        return err(
+            site,
+            Reason::AddressOutsideData {
+                address,
+                width: ty.width() as u32,
+                data_size,
+            },
+        );
     }
     Ok(())
 }
@@ -556,17 +630,42 @@ fn step(
     let imm = pc + 1;
     // Frame-relative operands must lie inside this POU's frame.
     match op {
-        Opcode::LdRel | Opcode::StRel => {
-            let ty = MemType::from_code(code[imm]).expect("swept");
-            let offset = read_u32(code, imm + 1) as u64;
-            if offset + ty.width() as u64 > pou.frame_size as u64 {
-                return err(
-                    site,
-                    Reason::OffsetOutsideFrame {
-                        offset,
-                        frame_size: pou.frame_size,
-                    },
-                );
+        Opcode::LdRel
+        | Opcode::StRel
+        | Opcode::IncRel
+        | Opcode::OpRel
+        | Opcode::OpRelRel
+        | Opcode::JumpIfRelImm
+        | Opcode::JumpIfNotRelImm
+        | Opcode::ElemRelAt
+        | Opcode::ElemAbsAt
+        | Opcode::LdElemRelAt
+        | Opcode::LdElemAbsAt
+        | Opcode::StElemRelAt
+        | Opcode::StElemAbsAt => {
+            // Where each (type byte, offset) operand is.
+            let operands: &[usize] = match op {
+                Opcode::OpRel | Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => &[1],
+                Opcode::OpRelRel => &[1, 6],
+                Opcode::ElemRelAt | Opcode::ElemAbsAt => &[24],
+                Opcode::LdElemRelAt
+                | Opcode::LdElemAbsAt
+                | Opcode::StElemRelAt
+                | Opcode::StElemAbsAt => &[25],
+                _ => &[0],
+            };
+            for &at in operands {
+                let ty = MemType::from_code(code[imm + at]).expect("swept");
+                let offset = read_u32(code, imm + at + 1) as u64;
+                if offset + ty.width() as u64 > pou.frame_size as u64 {
+                    return err(
+                        site,
+                        Reason::OffsetOutsideFrame {
+                            offset,
+                            frame_size: pou.frame_size,
+                        },
+                    );
+                }
             }
         }
         Opcode::LeaRel => {
@@ -671,6 +770,14 @@ fn step(
         }
         Opcode::JumpIf | Opcode::JumpIfNot => {
             flow(read_u32(code, imm + 1) as usize, after, tries, true)?;
+            flow(next, after, tries, false)?;
+        }
+        Opcode::JumpIfImm | Opcode::JumpIfNotImm => {
+            flow(read_u32(code, imm + 5) as usize, after, tries, true)?;
+            flow(next, after, tries, false)?;
+        }
+        Opcode::JumpIfRelImm | Opcode::JumpIfNotRelImm => {
+            flow(read_u32(code, imm + 10) as usize, after, tries, true)?;
             flow(next, after, tries, false)?;
         }
         Opcode::TryBegin => {

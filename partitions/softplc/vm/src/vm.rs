@@ -7,10 +7,20 @@
 //!
 //! Determinism: the result of a cycle depends only on the image, data memory, the task and
 //! `now_ns` (float ops are IEEE-754 with the math builtins implemented in [`crate::fmath`]).
+//!
+//! How it runs (for speed, without `unsafe`): `Machine::interpret` keeps the registers (`pc`,
+//! `sp`, the frame base) and the slices of code, data and stack in locals and dispatches on
+//! the raw opcode byte (one jump table); immediates are read from one bounds-checked
+//! fixed-size slice per instruction. The watchdog budget and the deadline checks share one
+//! down-counter ("fuel": the instructions left before the next check is due, a watchdog at
+//! the budget or a clock question every [`DEADLINE_CHECK_EVERY`] instructions), so an
+//! instruction costs one decrement and test for both, and both fire before exactly the
+//! instruction they would stop with a count per instruction. Every arm checks before it
+//! writes, so a trapping instruction leaves no trace (its `pc` and the stack as before it).
 
 use crate::builtins;
 use crate::image::{Image, SourceLocation, VAR_FLAG_CONSTANT, Var, VarType};
-use crate::isa::{MemType, Opcode, RoundMode, Trap, read_u16, read_u32, read_u64};
+use crate::isa::{MemType, Opcode, RoundMode, Trap, lreal_result, real_result};
 use crate::verify::{MAX_TASKS, VerifiedImage};
 
 /// A saved caller context.
@@ -116,10 +126,14 @@ struct Forced {
     bytes: [u8; 8],
 }
 
-/// Internal control-flow outcome of one instruction.
-enum Flow {
-    Next,
-    EndOfCycle,
+/// Why [`Machine::interpret`] returned.
+enum Exit {
+    /// The task POU's final RET (`pc` at it).
+    End,
+    /// The instruction at `pc` trapped (and had no effect).
+    Trap(Trap),
+    /// The fuel ran out before the instruction at `pc`: a watchdog or deadline check is due.
+    Event,
 }
 
 /// A machine executing one verified image in runtime-provided memory.
@@ -283,31 +297,37 @@ impl<'a, 'm> Machine<'a, 'm> {
         mut expired: impl FnMut() -> bool,
     ) -> Result<CycleStats, Fault> {
         let budget = self.start_cycle(task, now_ns)?;
-        let mut stats = CycleStats::default();
-        let code: &'a [u8] = self.image.code();
+        let mut caught_traps = 0;
+        // The interpreter counts instructions down from `limit` (the count at which the next
+        // watchdog or deadline check is due) in `fuel`: `limit - fuel` have been executed.
+        let mut limit = budget.min(DEADLINE_CHECK_EVERY - 1);
+        let mut fuel = limit;
         loop {
-            if stats.instructions >= budget {
-                return Err(self.fault(task, Trap::Watchdog));
-            }
-            if stats.instructions % DEADLINE_CHECK_EVERY == DEADLINE_CHECK_EVERY - 1 && expired() {
-                return Err(self.fault(task, Trap::Deadline));
-            }
-            stats.instructions += 1;
-            // A trapping instruction has no effect: its pops are undone (pops never overwrite
-            // cells, and no instruction pushes before it can still trap).
-            let sp_before = self.sp;
-            match self.step(code) {
-                Ok(Flow::Next) => {}
-                Ok(Flow::EndOfCycle) => {
-                    self.apply_forces();
-                    return Ok(stats);
+            match self.interpret(&mut fuel) {
+                Exit::Event => {
+                    let executed = limit;
+                    if executed >= budget {
+                        return Err(self.fault(task, Trap::Watchdog));
+                    }
+                    // Not the budget, so a deadline check point (count % EVERY == EVERY - 1).
+                    if expired() {
+                        return Err(self.fault(task, Trap::Deadline));
+                    }
+                    limit = budget.min(executed.saturating_add(DEADLINE_CHECK_EVERY));
+                    fuel = limit - executed;
                 }
-                Err(trap) => {
-                    self.sp = sp_before;
+                Exit::End => {
+                    self.apply_forces();
+                    return Ok(CycleStats {
+                        instructions: limit - fuel,
+                        caught_traps,
+                    });
+                }
+                Exit::Trap(trap) => {
                     if !self.catch(trap) {
                         return Err(self.fault(task, trap));
                     }
-                    stats.caught_traps += 1;
+                    caught_traps += 1;
                 }
             }
         }
@@ -443,485 +463,869 @@ impl<'a, 'm> Machine<'a, 'm> {
         Ok(())
     }
 
-    #[inline(always)]
-    fn pop(&mut self) -> u64 {
-        // The verifier guarantees the depth; a defensive 0 keeps an impossible underflow panic-free.
-        if self.sp == 0 {
-            return 0;
+    /// Runs instructions from `pc` until the task's final RET, a trap or the fuel (the
+    /// instructions left before the next watchdog/deadline check) running out; counts every
+    /// instruction it starts, a trapping one too. Registers (`pc`, `sp`, `base`) live in
+    /// locals here and are written back on the way out: after a trap `pc` is the trapping
+    /// instruction and the stack is as before it (every arm checks before it writes).
+    ///
+    /// Data accesses and stack pushes are checked (INVALID_ADDRESS, STACK_OVERFLOW); stack
+    /// reads rely on the verifier's depths and fall back to 0 rather than panic.
+    #[inline(never)]
+    fn interpret(&mut self, fuel: &mut u32) -> Exit {
+        use crate::isa::byte as op;
+        let image = &self.image;
+        let code: &[u8] = image.code();
+        let data: &mut [u8] = self.data;
+        let stack: &mut [u64] = self.stack;
+        let mut pc = self.pc as usize;
+        let mut sp = self.sp;
+        let mut base = self.base as u64;
+        let mut left = *fuel;
+
+        macro_rules! trap {
+            ($trap:expr) => {
+                break Exit::Trap($trap)
+            };
         }
-        self.sp -= 1;
-        self.stack[self.sp]
-    }
-
-    #[inline(always)]
-    fn pop2(&mut self) -> (u64, u64) {
-        let b = self.pop();
-        let a = self.pop();
-        (a, b)
-    }
-
-    #[inline(always)]
-    fn load(&self, ty: MemType, address: u64) -> Result<u64, Trap> {
-        let start = usize::try_from(address).map_err(|_| Trap::InvalidAddress)?;
-        let bytes = start
-            .checked_add(ty.width())
-            .and_then(|end| self.data.get(start..end))
-            .ok_or(Trap::InvalidAddress)?;
-        Ok(ty.cell_from_le(bytes))
-    }
-
-    #[inline(always)]
-    fn store(&mut self, ty: MemType, address: u64, value: u64) -> Result<(), Trap> {
-        fn put<const N: usize>(data: &mut [u8], start: usize, value: u64) -> Result<(), Trap> {
-            let end = start.checked_add(N).ok_or(Trap::InvalidAddress)?;
-            let bytes = data.get_mut(start..end).ok_or(Trap::InvalidAddress)?;
-            let mut raw = [0u8; N];
-            raw.copy_from_slice(&value.to_le_bytes()[..N]);
-            bytes.copy_from_slice(&raw);
-            Ok(())
+        // Cell `$k` from the top (1 = top).
+        macro_rules! cell {
+            ($k:expr) => {
+                stack.get(sp.wrapping_sub($k)).copied().unwrap_or(0)
+            };
         }
-        let start = usize::try_from(address).map_err(|_| Trap::InvalidAddress)?;
-        match ty.width() {
-            1 => put::<1>(self.data, start, value),
-            2 => put::<2>(self.data, start, value),
-            4 => put::<4>(self.data, start, value),
-            _ => put::<8>(self.data, start, value),
+        macro_rules! set_cell {
+            ($k:expr, $v:expr) => {{
+                let v = $v;
+                if let Some(slot) = stack.get_mut(sp.wrapping_sub($k)) {
+                    *slot = v;
+                }
+            }};
         }
-    }
-
-    /// Executes the instruction at `pc`. On error `pc` still points at the instruction.
-    #[inline(always)]
-    fn step(&mut self, code: &'a [u8]) -> Result<Flow, Trap> {
-        let pc = self.pc as usize;
-        let op = Opcode::from_u8(code[pc]).expect("verified opcode");
-        let imm = pc + 1;
-        let next = (pc + op.size()) as u32;
-        let f32_of = |cell: u64| f32::from_bits(cell as u32);
-        let f64_of = f64::from_bits;
-        let cell_f32 = |v: f32| v.to_bits() as u64;
-        let cell_bool = |b: bool| b as u64;
-        use Opcode::*;
-        match op {
-            Nop => {}
-            PushI32 => self.push(read_u32(code, imm) as i32 as i64 as u64)?,
-            PushU32 => self.push(read_u32(code, imm) as u64)?,
-            PushI64 => self.push(read_u64(code, imm))?,
-            PushConst => self.push(
-                self.image
-                    .constant(read_u16(code, imm) as usize)
-                    .expect("verified"),
-            )?,
-            Drop => {
-                self.pop();
-            }
-            Dup => {
-                let a = self.pop();
-                self.push(a)?;
-                self.push(a)?;
-            }
-            Swap => {
-                let (a, b) = self.pop2();
-                self.push(b)?;
-                self.push(a)?;
-            }
-            Over => {
-                let (a, b) = self.pop2();
-                self.push(a)?;
-                self.push(b)?;
-                self.push(a)?;
-            }
-            LdAbs | LdRel | StAbs | StRel => {
-                let ty = MemType::from_code(code[imm]).expect("verified");
-                let mut address = read_u32(code, imm + 1) as u64;
-                if matches!(op, LdRel | StRel) {
-                    address += self.base as u64;
-                }
-                if matches!(op, LdAbs | LdRel) {
-                    let v = self.load(ty, address)?;
-                    self.push(v)?;
-                } else {
-                    let v = self.pop();
-                    self.store(ty, address, v)?;
-                }
-            }
-            LdInd => {
-                let ty = MemType::from_code(code[imm]).expect("verified");
-                let address = self
-                    .pop()
-                    .checked_add(read_u32(code, imm + 1) as u64)
-                    .ok_or(Trap::InvalidAddress)?;
-                let v = self.load(ty, address)?;
-                self.push(v)?;
-            }
-            StInd => {
-                let ty = MemType::from_code(code[imm]).expect("verified");
-                let (address, v) = self.pop2();
-                let address = address
-                    .checked_add(read_u32(code, imm + 1) as u64)
-                    .ok_or(Trap::InvalidAddress)?;
-                self.store(ty, address, v)?;
-            }
-            LeaRel => self.push(self.base as u64 + read_u32(code, imm) as u64)?,
-            Copy => {
-                let len = read_u32(code, imm) as u64;
-                let (dst, src) = self.pop2();
-                let in_data = |a: u64| {
-                    a.checked_add(len)
-                        .is_some_and(|end| end <= self.data.len() as u64)
-                };
-                if !in_data(dst) || !in_data(src) {
-                    return Err(Trap::InvalidAddress);
-                }
-                let (dst, src, len) = (dst as usize, src as usize, len as usize);
-                self.data.copy_within(src..src + len, dst);
-            }
-            Now => self.push(self.now_ns as u64)?,
-            Add | Sub | Mul | And | Or | Xor | Shl | ShrU | ShrS | Eq | Ne | LtS | LeS | GtS
-            | GeS | LtU | LeU | GtU | GeU => {
-                let (a, b) = self.pop2();
-                let (sa, sb) = (a as i64, b as i64);
-                let r = match op {
-                    Add => a.wrapping_add(b),
-                    Sub => a.wrapping_sub(b),
-                    Mul => a.wrapping_mul(b),
-                    And => a & b,
-                    Or => a | b,
-                    Xor => a ^ b,
-                    Shl => a.checked_shl(b.min(64) as u32).unwrap_or(0),
-                    ShrU => a.checked_shr(b.min(64) as u32).unwrap_or(0),
-                    ShrS => (sa >> b.min(63)) as u64,
-                    Eq => cell_bool(a == b),
-                    Ne => cell_bool(a != b),
-                    LtS => cell_bool(sa < sb),
-                    LeS => cell_bool(sa <= sb),
-                    GtS => cell_bool(sa > sb),
-                    GeS => cell_bool(sa >= sb),
-                    LtU => cell_bool(a < b),
-                    LeU => cell_bool(a <= b),
-                    GtU => cell_bool(a > b),
-                    _ => cell_bool(a >= b),
-                };
-                self.push(r)?;
-            }
-            DivS | DivU | ModS | ModU => {
-                let (a, b) = self.pop2();
-                if b == 0 {
-                    return Err(Trap::DivisionByZero);
-                }
-                let r = match op {
-                    DivS => (a as i64).wrapping_div(b as i64) as u64,
-                    DivU => a / b,
-                    ModS => (a as i64).wrapping_rem(b as i64) as u64,
-                    _ => a % b,
-                };
-                self.push(r)?;
-            }
-            Neg | AbsS | Not | NotBool => {
-                let a = self.pop();
-                let r = match op {
-                    Neg => (a as i64).wrapping_neg() as u64,
-                    AbsS => (a as i64).wrapping_abs() as u64,
-                    Not => !a,
-                    _ => cell_bool(a == 0),
-                };
-                self.push(r)?;
-            }
-            Rol | Ror => {
-                let width = code[imm] as u32;
-                let (a, n) = self.pop2();
-                let r = rotate(a, n, width, op == Rol);
-                self.push(r)?;
-            }
-            Sext | Zext => {
-                let width = code[imm] as u32;
-                let a = self.pop();
-                let shift = 64 - width;
-                let r = if op == Sext {
-                    (((a << shift) as i64) >> shift) as u64
-                } else {
-                    (a << shift) >> shift
-                };
-                self.push(r)?;
-            }
-            Sel => {
-                let b = self.pop();
-                let a = self.pop();
-                let g = self.pop();
-                self.push(if g != 0 { b } else { a })?;
-            }
-            AddF32 | SubF32 | MulF32 | DivF32 | EqF32 | NeF32 | LtF32 | LeF32 | GtF32 | GeF32 => {
-                let (a, b) = self.pop2();
-                let (x, y) = (f32_of(a), f32_of(b));
-                let r = match op {
-                    AddF32 => cell_f32(x + y),
-                    SubF32 => cell_f32(x - y),
-                    MulF32 => cell_f32(x * y),
-                    DivF32 => {
-                        if y == 0.0 {
-                            return Err(Trap::DivisionByZero);
-                        }
-                        cell_f32(x / y)
+        macro_rules! push {
+            ($v:expr) => {{
+                let v = $v;
+                match stack.get_mut(sp) {
+                    Some(slot) => {
+                        *slot = v;
+                        sp += 1;
                     }
-                    EqF32 => cell_bool(x == y),
-                    NeF32 => cell_bool(x != y),
-                    LtF32 => cell_bool(x < y),
-                    LeF32 => cell_bool(x <= y),
-                    GtF32 => cell_bool(x > y),
-                    _ => cell_bool(x >= y),
-                };
-                self.push(r)?;
-            }
-            AddF64 | SubF64 | MulF64 | DivF64 | EqF64 | NeF64 | LtF64 | LeF64 | GtF64 | GeF64 => {
-                let (a, b) = self.pop2();
-                let (x, y) = (f64_of(a), f64_of(b));
-                let r = match op {
-                    AddF64 => (x + y).to_bits(),
-                    SubF64 => (x - y).to_bits(),
-                    MulF64 => (x * y).to_bits(),
-                    DivF64 => {
-                        if y == 0.0 {
-                            return Err(Trap::DivisionByZero);
-                        }
-                        (x / y).to_bits()
-                    }
-                    EqF64 => cell_bool(x == y),
-                    NeF64 => cell_bool(x != y),
-                    LtF64 => cell_bool(x < y),
-                    LeF64 => cell_bool(x <= y),
-                    GtF64 => cell_bool(x > y),
-                    _ => cell_bool(x >= y),
-                };
-                self.push(r)?;
-            }
-            NegF32 => {
-                let a = self.pop();
-                self.push(cell_f32(-f32_of(a)))?;
-            }
-            NegF64 => {
-                let a = self.pop();
-                self.push((-f64_of(a)).to_bits())?;
-            }
-            IToF32S | IToF32U | IToF64S | IToF64U | F32ToF64 | F64ToF32 => {
-                let a = self.pop();
-                let r = match op {
-                    IToF32S => cell_f32(a as i64 as f32),
-                    IToF32U => cell_f32(a as f32),
-                    IToF64S => (a as i64 as f64).to_bits(),
-                    IToF64U => (a as f64).to_bits(),
-                    F32ToF64 => (f32_of(a) as f64).to_bits(),
-                    _ => cell_f32(f64_of(a) as f32),
-                };
-                self.push(r)?;
-            }
-            F32ToInt | F64ToInt => {
-                let target = MemType::from_code(code[imm]).expect("verified");
-                let mode = RoundMode::from_code(code[imm + 1]).expect("verified");
-                let a = self.pop();
-                let x = if op == F32ToInt {
-                    f32_of(a) as f64
-                } else {
-                    f64_of(a)
-                };
-                match crate::fmath::float_to_int(x, target, mode) {
-                    Some(r) => self.push(r)?,
-                    None => {
-                        return Err(Trap::NumericError);
-                    }
+                    None => trap!(Trap::StackOverflow),
                 }
-            }
-            Jmp => {
-                self.pc = read_u32(code, imm);
-                return Ok(Flow::Next);
-            }
-            Jz | Jnz => {
-                let c = self.pop();
-                if (c == 0) == (op == Jz) {
-                    self.pc = read_u32(code, imm);
-                    return Ok(Flow::Next);
-                }
-            }
-            Call => {
-                let callee = self
-                    .image
-                    .pou(read_u16(code, imm) as usize)
-                    .expect("verified");
-                let base = self.stack[self.sp - 1];
-                if self.call_depth >= self.calls.len() {
-                    return Err(Trap::CallDepth);
-                }
-                if base
-                    .checked_add(callee.frame_size as u64)
-                    .is_none_or(|end| end > self.data.len() as u64)
+            }};
+        }
+        // `[a b] -> [f(a, b)]`.
+        macro_rules! binary {
+            (|$a:ident, $b:ident| $e:expr) => {{
+                let ($a, $b) = (cell!(2), cell!(1));
+                set_cell!(2, $e);
+                sp -= 1;
+            }};
+        }
+        // `[a] -> [f(a)]`.
+        macro_rules! unary {
+            (|$a:ident| $e:expr) => {{
+                let $a = cell!(1);
+                set_cell!(1, $e);
+            }};
+        }
+        macro_rules! next {
+            ($name:ident) => {
+                pc += const { Opcode::$name.size() }
+            };
+        }
+        // The instruction's immediates (`Opcode::$name.size() - 1` bytes, complete in
+        // verified code): one check, then constant offsets into a fixed-size array.
+        macro_rules! imm {
+            ($name:ident) => {
+                match code
+                    .get(pc + 1..)
+                    .and_then(<[u8]>::first_chunk::<{ Opcode::$name.size() - 1 }>)
                 {
-                    return Err(Trap::InvalidAddress);
+                    Some(imm) => imm,
+                    None => trap!(Trap::InvalidAddress),
                 }
-                self.pop();
-                self.calls[self.call_depth] = CallFrame {
-                    return_pc: next,
-                    saved_base: self.base,
-                };
-                self.call_depth += 1;
-                self.base = base as u32;
-                self.pc = callee.code_start;
-                return Ok(Flow::Next);
-            }
-            Ret => {
-                self.call_depth -= 1;
-                let frame = self.calls[self.call_depth];
-                if self.call_depth == 0 {
-                    return Ok(Flow::EndOfCycle);
+            };
+        }
+        macro_rules! load {
+            ($ty:expr, $addr:expr) => {
+                match load_typed(data, $ty, $addr) {
+                    Some(v) => v,
+                    None => trap!(Trap::InvalidAddress),
                 }
-                self.pc = frame.return_pc;
-                self.base = frame.saved_base;
-                return Ok(Flow::Next);
-            }
-            CallBuiltin => {
-                let builtin = crate::isa::Builtin::from_u16(read_u16(code, imm)).expect("verified");
-                let argc = builtin.args();
-                let args_start = self.sp - argc;
-                let mut args = [0u64; 8];
-                args[..argc].copy_from_slice(&self.stack[args_start..self.sp]);
-                let result = builtins::call(builtin, &args[..argc], self.data)?;
-                self.sp = args_start;
-                if let Some(r) = result {
-                    self.push(r)?;
+            };
+        }
+        macro_rules! store {
+            ($ty:expr, $addr:expr, $v:expr) => {
+                if store_typed(data, $ty, $addr, $v).is_none() {
+                    trap!(Trap::InvalidAddress)
                 }
+            };
+        }
+        let f32_of = |cell: u64| f32::from_bits(cell as u32);
+        let cell_f32 = |v: f32| v.to_bits() as u64;
+
+        let exit = loop {
+            if left == 0 {
+                break Exit::Event;
             }
-            ChkIndex | ChkRangeS | ChkRangeU => {
-                let v = self.stack[self.sp - 1];
-                let (lo, hi) = (read_u64(code, imm), read_u64(code, imm + 8));
-                let ok = if op == ChkRangeU {
-                    lo <= v && v <= hi
-                } else {
-                    (lo as i64) <= (v as i64) && (v as i64) <= (hi as i64)
-                };
-                if !ok {
-                    return Err(if op == ChkIndex {
-                        Trap::IndexOutOfBounds
+            left -= 1;
+            let Some(&byte) = code.get(pc) else {
+                // Unreachable for verified code (every path ends in RET or a jump).
+                trap!(Trap::InvalidAddress)
+            };
+            match byte {
+                op::Nop => next!(Nop),
+                op::PushI32 => {
+                    let imm = imm!(PushI32);
+                    push!(u32_at(imm, 0) as i32 as i64 as u64);
+                    next!(PushI32);
+                }
+                op::PushU32 => {
+                    let imm = imm!(PushU32);
+                    push!(u32_at(imm, 0) as u64);
+                    next!(PushU32);
+                }
+                op::PushI64 => {
+                    let imm = imm!(PushI64);
+                    push!(u64_at(imm, 0));
+                    next!(PushI64);
+                }
+                op::PushConst => {
+                    let imm = imm!(PushConst);
+                    push!(image.constant(u16_at(imm, 0) as usize).unwrap_or(0));
+                    next!(PushConst);
+                }
+                op::Drop => {
+                    sp -= 1;
+                    next!(Drop);
+                }
+                op::Dup => {
+                    push!(cell!(1));
+                    next!(Dup);
+                }
+                op::Swap => {
+                    let (a, b) = (cell!(2), cell!(1));
+                    set_cell!(2, b);
+                    set_cell!(1, a);
+                    next!(Swap);
+                }
+                op::Over => {
+                    push!(cell!(2));
+                    next!(Over);
+                }
+                op::LdAbs => {
+                    let imm = imm!(LdAbs);
+                    push!(load!(imm[0], u32_at(imm, 1) as u64));
+                    next!(LdAbs);
+                }
+                op::LdRel => {
+                    let imm = imm!(LdRel);
+                    push!(load!(imm[0], base + u32_at(imm, 1) as u64));
+                    next!(LdRel);
+                }
+                op::StAbs => {
+                    let imm = imm!(StAbs);
+                    store!(imm[0], u32_at(imm, 1) as u64, cell!(1));
+                    sp -= 1;
+                    next!(StAbs);
+                }
+                op::StRel => {
+                    let imm = imm!(StRel);
+                    store!(imm[0], base + u32_at(imm, 1) as u64, cell!(1));
+                    sp -= 1;
+                    next!(StRel);
+                }
+                op::LdInd => {
+                    let imm = imm!(LdInd);
+                    let address = cell!(1).checked_add(u32_at(imm, 1) as u64);
+                    let v = load!(imm[0], address.unwrap_or(u64::MAX));
+                    set_cell!(1, v);
+                    next!(LdInd);
+                }
+                op::StInd => {
+                    let imm = imm!(StInd);
+                    let address = cell!(2).checked_add(u32_at(imm, 1) as u64);
+                    store!(imm[0], address.unwrap_or(u64::MAX), cell!(1));
+                    sp -= 2;
+                    next!(StInd);
+                }
+                op::LeaRel => {
+                    let imm = imm!(LeaRel);
+                    push!(base + u32_at(imm, 0) as u64);
+                    next!(LeaRel);
+                }
+                op::Copy => {
+                    let imm = imm!(Copy);
+                    let len = u32_at(imm, 0) as u64;
+                    let (dst, src) = (cell!(2), cell!(1));
+                    let in_data = |a: u64| {
+                        a.checked_add(len)
+                            .is_some_and(|end| end <= data.len() as u64)
+                    };
+                    if !in_data(dst) || !in_data(src) {
+                        trap!(Trap::InvalidAddress);
+                    }
+                    let (dst, src, len) = (dst as usize, src as usize, len as usize);
+                    data.copy_within(src..src + len, dst);
+                    sp -= 2;
+                    next!(Copy);
+                }
+                op::Now => {
+                    push!(self.now_ns as u64);
+                    next!(Now);
+                }
+                op::Add => {
+                    binary!(|a, b| a.wrapping_add(b));
+                    next!(Add);
+                }
+                op::Sub => {
+                    binary!(|a, b| a.wrapping_sub(b));
+                    next!(Sub);
+                }
+                op::Mul => {
+                    binary!(|a, b| a.wrapping_mul(b));
+                    next!(Mul);
+                }
+                op::DivS | op::DivU | op::ModS | op::ModU => {
+                    let (a, b) = (cell!(2), cell!(1));
+                    if b == 0 {
+                        trap!(Trap::DivisionByZero);
+                    }
+                    let r = match byte {
+                        op::DivS => (a as i64).wrapping_div(b as i64) as u64,
+                        op::DivU => a / b,
+                        op::ModS => (a as i64).wrapping_rem(b as i64) as u64,
+                        _ => a % b,
+                    };
+                    set_cell!(2, r);
+                    sp -= 1;
+                    next!(DivS);
+                }
+                op::Neg => {
+                    unary!(|a| (a as i64).wrapping_neg() as u64);
+                    next!(Neg);
+                }
+                op::AbsS => {
+                    unary!(|a| (a as i64).wrapping_abs() as u64);
+                    next!(AbsS);
+                }
+                op::And => {
+                    binary!(|a, b| a & b);
+                    next!(And);
+                }
+                op::Or => {
+                    binary!(|a, b| a | b);
+                    next!(Or);
+                }
+                op::Xor => {
+                    binary!(|a, b| a ^ b);
+                    next!(Xor);
+                }
+                op::Not => {
+                    unary!(|a| !a);
+                    next!(Not);
+                }
+                op::NotBool => {
+                    unary!(|a| (a == 0) as u64);
+                    next!(NotBool);
+                }
+                op::Shl => {
+                    binary!(|a, b| a.checked_shl(b.min(64) as u32).unwrap_or(0));
+                    next!(Shl);
+                }
+                op::ShrU => {
+                    binary!(|a, b| a.checked_shr(b.min(64) as u32).unwrap_or(0));
+                    next!(ShrU);
+                }
+                op::ShrS => {
+                    binary!(|a, b| ((a as i64) >> b.min(63)) as u64);
+                    next!(ShrS);
+                }
+                op::Rol | op::Ror => {
+                    let imm = imm!(Rol);
+                    let width = imm[0] as u32;
+                    binary!(|a, n| rotate(a, n, width, byte == op::Rol));
+                    next!(Rol);
+                }
+                op::Sext => {
+                    let imm = imm!(Sext);
+                    let shift = 64 - imm[0] as u32;
+                    unary!(|a| (((a << shift) as i64) >> shift) as u64);
+                    next!(Sext);
+                }
+                op::Zext => {
+                    let imm = imm!(Zext);
+                    let shift = 64 - imm[0] as u32;
+                    unary!(|a| (a << shift) >> shift);
+                    next!(Zext);
+                }
+                op::Eq => {
+                    binary!(|a, b| (a == b) as u64);
+                    next!(Eq);
+                }
+                op::Ne => {
+                    binary!(|a, b| (a != b) as u64);
+                    next!(Ne);
+                }
+                op::LtS => {
+                    binary!(|a, b| ((a as i64) < (b as i64)) as u64);
+                    next!(LtS);
+                }
+                op::LeS => {
+                    binary!(|a, b| ((a as i64) <= (b as i64)) as u64);
+                    next!(LeS);
+                }
+                op::GtS => {
+                    binary!(|a, b| ((a as i64) > (b as i64)) as u64);
+                    next!(GtS);
+                }
+                op::GeS => {
+                    binary!(|a, b| ((a as i64) >= (b as i64)) as u64);
+                    next!(GeS);
+                }
+                op::LtU => {
+                    binary!(|a, b| (a < b) as u64);
+                    next!(LtU);
+                }
+                op::LeU => {
+                    binary!(|a, b| (a <= b) as u64);
+                    next!(LeU);
+                }
+                op::GtU => {
+                    binary!(|a, b| (a > b) as u64);
+                    next!(GtU);
+                }
+                op::GeU => {
+                    binary!(|a, b| (a >= b) as u64);
+                    next!(GeU);
+                }
+                op::Sel => {
+                    let (g, a, b) = (cell!(3), cell!(2), cell!(1));
+                    set_cell!(3, if g != 0 { b } else { a });
+                    sp -= 2;
+                    next!(Sel);
+                }
+                op::AddF32 => {
+                    binary!(|a, b| real_result(f32_of(a) + f32_of(b)));
+                    next!(AddF32);
+                }
+                op::SubF32 => {
+                    binary!(|a, b| real_result(f32_of(a) - f32_of(b)));
+                    next!(SubF32);
+                }
+                op::MulF32 => {
+                    binary!(|a, b| real_result(f32_of(a) * f32_of(b)));
+                    next!(MulF32);
+                }
+                op::DivF32 => {
+                    let y = f32_of(cell!(1));
+                    if y == 0.0 {
+                        trap!(Trap::DivisionByZero);
+                    }
+                    binary!(|a, _b| real_result(f32_of(a) / y));
+                    next!(DivF32);
+                }
+                op::NegF32 => {
+                    unary!(|a| cell_f32(-f32_of(a)));
+                    next!(NegF32);
+                }
+                op::AddF64 => {
+                    binary!(|a, b| lreal_result(f64::from_bits(a) + f64::from_bits(b)));
+                    next!(AddF64);
+                }
+                op::SubF64 => {
+                    binary!(|a, b| lreal_result(f64::from_bits(a) - f64::from_bits(b)));
+                    next!(SubF64);
+                }
+                op::MulF64 => {
+                    binary!(|a, b| lreal_result(f64::from_bits(a) * f64::from_bits(b)));
+                    next!(MulF64);
+                }
+                op::DivF64 => {
+                    let y = f64::from_bits(cell!(1));
+                    if y == 0.0 {
+                        trap!(Trap::DivisionByZero);
+                    }
+                    binary!(|a, _b| lreal_result(f64::from_bits(a) / y));
+                    next!(DivF64);
+                }
+                op::NegF64 => {
+                    unary!(|a| (-f64::from_bits(a)).to_bits());
+                    next!(NegF64);
+                }
+                op::EqF32
+                | op::NeF32
+                | op::LtF32
+                | op::LeF32
+                | op::GtF32
+                | op::GeF32
+                | op::EqF64
+                | op::NeF64
+                | op::LtF64
+                | op::LeF64
+                | op::GtF64
+                | op::GeF64 => {
+                    binary!(|a, b| compare_byte(byte, a, b) as u64);
+                    next!(EqF32);
+                }
+                op::IToF32S => {
+                    unary!(|a| cell_f32(a as i64 as f32));
+                    next!(IToF32S);
+                }
+                op::IToF32U => {
+                    unary!(|a| cell_f32(a as f32));
+                    next!(IToF32U);
+                }
+                op::IToF64S => {
+                    unary!(|a| (a as i64 as f64).to_bits());
+                    next!(IToF64S);
+                }
+                op::IToF64U => {
+                    unary!(|a| (a as f64).to_bits());
+                    next!(IToF64U);
+                }
+                op::F32ToF64 => {
+                    unary!(|a| (f32_of(a) as f64).to_bits());
+                    next!(F32ToF64);
+                }
+                op::F64ToF32 => {
+                    unary!(|a| cell_f32(f64::from_bits(a) as f32));
+                    next!(F64ToF32);
+                }
+                op::F32ToInt | op::F64ToInt => {
+                    let imm = imm!(F32ToInt);
+                    let (Some(target), Some(mode)) =
+                        (MemType::from_code(imm[0]), RoundMode::from_code(imm[1]))
+                    else {
+                        trap!(Trap::NumericError)
+                    };
+                    let a = cell!(1);
+                    let x = if byte == op::F32ToInt {
+                        f32_of(a) as f64
                     } else {
-                        Trap::SubrangeViolation
-                    });
+                        f64::from_bits(a)
+                    };
+                    match crate::fmath::float_to_int(x, target, mode) {
+                        Some(r) => set_cell!(1, r),
+                        None => trap!(Trap::NumericError),
+                    }
+                    next!(F32ToInt);
                 }
-            }
-            AddImm => {
-                let a = self.pop();
-                self.push(a.wrapping_add(read_u32(code, imm) as i32 as i64 as u64))?;
-            }
-            JumpIf | JumpIfNot => {
-                let cmp = Opcode::from_u8(code[imm]).expect("verified");
-                let (a, b) = self.pop2();
-                if crate::isa::compare(cmp, a, b) == (op == JumpIf) {
-                    self.pc = read_u32(code, imm + 1);
-                    return Ok(Flow::Next);
+                op::Jmp => {
+                    let imm = imm!(Jmp);
+                    pc = u32_at(imm, 0) as usize;
                 }
-            }
-            Index => {
-                let (lo, hi) = (read_u64(code, imm) as i64, read_u64(code, imm + 8) as i64);
-                let stride = read_u32(code, imm + 16) as u64;
-                let (base, i) = self.pop2();
-                if (i as i64) < lo || (i as i64) > hi {
-                    return Err(Trap::IndexOutOfBounds);
+                op::Jz | op::Jnz => {
+                    let imm = imm!(Jz);
+                    let c = cell!(1);
+                    sp -= 1;
+                    if (c == 0) == (byte == op::Jz) {
+                        pc = u32_at(imm, 0) as usize;
+                    } else {
+                        next!(Jz);
+                    }
                 }
-                let offset = (i as i64).wrapping_sub(lo) as u64;
-                self.push(base.wrapping_add(offset.wrapping_mul(stride)))?;
-            }
-            RefMake => {
-                let address = self.pop();
-                let size = read_u32(code, imm) as u64;
-                let object = self
-                    .image
-                    .object_containing(address, size)
-                    .ok_or(Trap::InvalidReference)?;
-                self.push(address | ((object as u64 + 1) << 32))?;
-            }
-            RefCheck => {
-                let reference = self.pop();
-                let address = reference & 0xFFFF_FFFF;
-                let size = read_u32(code, imm) as u64;
-                let inside = (reference >> 32)
-                    .checked_sub(1)
-                    .and_then(|index| self.image.object(index as usize))
-                    .is_some_and(|(start, len)| {
-                        start as u64 <= address && address + size <= start as u64 + len as u64
-                    });
-                if !inside {
-                    return Err(Trap::InvalidReference);
+                op::JumpIf | op::JumpIfNot => {
+                    let imm = imm!(JumpIf);
+                    let holds = compare_byte(imm[0], cell!(2), cell!(1));
+                    sp -= 2;
+                    if holds == (byte == op::JumpIf) {
+                        pc = u32_at(imm, 1) as usize;
+                    } else {
+                        next!(JumpIf);
+                    }
                 }
-                self.push(address)?;
-            }
-            RefAdd => {
-                let (reference, n) = self.pop2();
-                let address = (reference as u32).wrapping_add(n as u32);
-                self.push((reference & !0xFFFF_FFFF) | address as u64)?;
-            }
-            ChkNull => {
-                if self.stack[self.sp - 1] == 0 {
-                    return Err(Trap::InvalidReference);
-                }
-            }
-            CallVirt | VirtFrame => {
-                let instance = self.pop();
-                let method = self.method(instance, read_u16(code, imm))?;
-                if op == VirtFrame {
-                    self.push(method.frame as u64)?;
-                } else {
-                    let callee = self.image.pou(method.pou as usize).expect("verified");
+                op::Call => {
+                    let imm = imm!(Call);
+                    let Some((code_start, frame_size)) = image.pou_entry(u16_at(imm, 0) as usize)
+                    else {
+                        trap!(Trap::InvalidAddress)
+                    };
+                    let frame_base = cell!(1);
                     if self.call_depth >= self.calls.len() {
-                        return Err(Trap::CallDepth);
+                        trap!(Trap::CallDepth);
                     }
-                    if instance + callee.frame_size as u64 > self.data.len() as u64 {
-                        return Err(Trap::InvalidAddress);
+                    if frame_base
+                        .checked_add(frame_size as u64)
+                        .is_none_or(|end| end > data.len() as u64)
+                    {
+                        trap!(Trap::InvalidAddress);
                     }
+                    sp -= 1;
                     self.calls[self.call_depth] = CallFrame {
-                        return_pc: next,
-                        saved_base: self.base,
+                        return_pc: (pc + const { Opcode::Call.size() }) as u32,
+                        saved_base: base as u32,
                     };
                     self.call_depth += 1;
-                    self.base = instance as u32;
-                    self.pc = callee.code_start;
-                    return Ok(Flow::Next);
+                    base = frame_base;
+                    pc = code_start as usize;
                 }
-            }
-            TryBegin => {
-                let slot = self
-                    .tries
-                    .get_mut(self.try_depth)
-                    .ok_or(Trap::StackOverflow)?;
-                *slot = TryFrame {
-                    handler: read_u32(code, imm),
-                    stack_depth: self.sp as u32,
-                    call_depth: self.call_depth as u32,
-                    base: self.base,
-                };
-                self.try_depth += 1;
-            }
-            TryEnd => self.try_depth = self.try_depth.saturating_sub(1),
-            Throw => return Err(Trap::from_u64(code[imm] as u64).expect("verified")),
-            Rethrow => {
-                let c = self.pop();
-                if c != 0 {
-                    return Err(match Trap::from_u64(c) {
-                        Some(trap) if trap.is_catchable() => trap,
-                        _ => Trap::NumericError,
+                op::Ret => {
+                    self.call_depth -= 1;
+                    let frame = self.calls[self.call_depth];
+                    if self.call_depth == 0 {
+                        break Exit::End;
+                    }
+                    pc = frame.return_pc as usize;
+                    base = frame.saved_base as u64;
+                }
+                op::CallBuiltin => {
+                    let imm = imm!(CallBuiltin);
+                    let Some(builtin) = crate::isa::Builtin::from_u16(u16_at(imm, 0)) else {
+                        trap!(Trap::NumericError)
+                    };
+                    let argc = builtin.args();
+                    let args_start = sp - argc;
+                    let mut args = [0u64; 8];
+                    args[..argc].copy_from_slice(&stack[args_start..sp]);
+                    match builtins::call(builtin, &args[..argc], data) {
+                        Err(trap) => trap!(trap),
+                        Ok(result) => {
+                            sp = args_start;
+                            if let Some(r) = result {
+                                push!(r);
+                            }
+                        }
+                    }
+                    next!(CallBuiltin);
+                }
+                op::ChkIndex | op::ChkRangeS | op::ChkRangeU => {
+                    let imm = imm!(ChkIndex);
+                    let v = cell!(1);
+                    let (lo, hi) = (u64_at(imm, 0), u64_at(imm, 8));
+                    let ok = if byte == op::ChkRangeU {
+                        lo <= v && v <= hi
+                    } else {
+                        (lo as i64) <= (v as i64) && (v as i64) <= (hi as i64)
+                    };
+                    if !ok {
+                        trap!(if byte == op::ChkIndex {
+                            Trap::IndexOutOfBounds
+                        } else {
+                            Trap::SubrangeViolation
+                        });
+                    }
+                    next!(ChkIndex);
+                }
+                op::Index => {
+                    let imm = imm!(Index);
+                    let (lo, hi) = (u64_at(imm, 0) as i64, u64_at(imm, 8) as i64);
+                    let stride = u32_at(imm, 16) as u64;
+                    let (array, i) = (cell!(2), cell!(1));
+                    if (i as i64) < lo || (i as i64) > hi {
+                        trap!(Trap::IndexOutOfBounds);
+                    }
+                    let offset = (i as i64).wrapping_sub(lo) as u64;
+                    set_cell!(2, array.wrapping_add(offset.wrapping_mul(stride)));
+                    sp -= 1;
+                    next!(Index);
+                }
+                op::AddImm => {
+                    let imm = imm!(AddImm);
+                    unary!(|a| a.wrapping_add(u32_at(imm, 0) as i32 as i64 as u64));
+                    next!(AddImm);
+                }
+                op::TryBegin => {
+                    let imm = imm!(TryBegin);
+                    let Some(slot) = self.tries.get_mut(self.try_depth) else {
+                        trap!(Trap::StackOverflow)
+                    };
+                    *slot = TryFrame {
+                        handler: u32_at(imm, 0),
+                        stack_depth: sp as u32,
+                        call_depth: self.call_depth as u32,
+                        base: base as u32,
+                    };
+                    self.try_depth += 1;
+                    next!(TryBegin);
+                }
+                op::TryEnd => {
+                    self.try_depth = self.try_depth.saturating_sub(1);
+                    next!(TryEnd);
+                }
+                op::Throw => {
+                    let imm = imm!(Throw);
+                    trap!(Trap::from_u64(imm[0] as u64).unwrap_or(Trap::NumericError))
+                }
+                op::Rethrow => {
+                    let c = cell!(1);
+                    if c != 0 {
+                        trap!(match Trap::from_u64(c) {
+                            Some(trap) if trap.is_catchable() => trap,
+                            _ => Trap::NumericError,
+                        });
+                    }
+                    sp -= 1;
+                    next!(Rethrow);
+                }
+                op::ElemRel | op::ElemAbs => {
+                    let imm = imm!(ElemRel);
+                    let array = if byte == op::ElemRel {
+                        base + u32_at(imm, 0) as u64
+                    } else {
+                        u32_at(imm, 0) as u64
+                    };
+                    match element(
+                        array,
+                        cell!(1),
+                        u64_at(imm, 4),
+                        u64_at(imm, 12),
+                        u32_at(imm, 20),
+                    ) {
+                        Some(address) => set_cell!(1, address),
+                        None => trap!(Trap::IndexOutOfBounds),
+                    }
+                    next!(ElemRel);
+                }
+                op::LdElemRel | op::LdElemAbs => {
+                    let imm = imm!(LdElemRel);
+                    let array = if byte == op::LdElemRel {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let Some(address) = element(
+                        array,
+                        cell!(1),
+                        u64_at(imm, 5),
+                        u64_at(imm, 13),
+                        u32_at(imm, 21),
+                    ) else {
+                        trap!(Trap::IndexOutOfBounds)
+                    };
+                    set_cell!(1, load!(imm[0], address));
+                    next!(LdElemRel);
+                }
+                op::StElemRel | op::StElemAbs => {
+                    let imm = imm!(StElemRel);
+                    let array = if byte == op::StElemRel {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let Some(address) = element(
+                        array,
+                        cell!(2),
+                        u64_at(imm, 5),
+                        u64_at(imm, 13),
+                        u32_at(imm, 21),
+                    ) else {
+                        trap!(Trap::IndexOutOfBounds)
+                    };
+                    store!(imm[0], address, cell!(1));
+                    sp -= 2;
+                    next!(StElemRel);
+                }
+                op::IncRel | op::IncAbs => {
+                    let imm = imm!(IncRel);
+                    let address = if byte == op::IncRel {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let v = load!(imm[0], address);
+                    store!(
+                        imm[0],
+                        address,
+                        v.wrapping_add(u32_at(imm, 5) as i32 as i64 as u64)
+                    );
+                    next!(IncRel);
+                }
+                op::SelIf => {
+                    let imm = imm!(SelIf);
+                    binary!(|a, b| if compare_byte(imm[0], a, b) { b } else { a });
+                    next!(SelIf);
+                }
+                op::JumpIfImm | op::JumpIfNotImm => {
+                    let imm = imm!(JumpIfImm);
+                    let holds = compare_byte(imm[0], cell!(1), u32_at(imm, 1) as i32 as i64 as u64);
+                    sp -= 1;
+                    if holds == (byte == op::JumpIfImm) {
+                        pc = u32_at(imm, 5) as usize;
+                    } else {
+                        next!(JumpIfImm);
+                    }
+                }
+                op::OpImm => {
+                    let imm = imm!(OpImm);
+                    match binary_op(imm[0], cell!(1), u32_at(imm, 1) as i32 as i64 as u64) {
+                        Ok(r) => set_cell!(1, r),
+                        Err(trap) => trap!(trap),
+                    }
+                    next!(OpImm);
+                }
+                op::OpRel | op::OpAbs => {
+                    let imm = imm!(OpRel);
+                    let address = if byte == op::OpRel {
+                        base + u32_at(imm, 2) as u64
+                    } else {
+                        u32_at(imm, 2) as u64
+                    };
+                    let v = load!(imm[1], address);
+                    match binary_op(imm[0], cell!(1), v) {
+                        Ok(r) => set_cell!(1, r),
+                        Err(trap) => trap!(trap),
+                    }
+                    next!(OpRel);
+                }
+                op::RefMake => {
+                    let imm = imm!(RefMake);
+                    let address = cell!(1);
+                    let Some(object) = image.object_containing(address, u32_at(imm, 0) as u64)
+                    else {
+                        trap!(Trap::InvalidReference)
+                    };
+                    set_cell!(1, address | ((object as u64 + 1) << 32));
+                    next!(RefMake);
+                }
+                op::RefCheck => {
+                    let imm = imm!(RefCheck);
+                    let reference = cell!(1);
+                    let address = reference & 0xFFFF_FFFF;
+                    let size = u32_at(imm, 0) as u64;
+                    let inside = (reference >> 32)
+                        .checked_sub(1)
+                        .and_then(|index| image.object(index as usize))
+                        .is_some_and(|(start, len)| {
+                            start as u64 <= address && address + size <= start as u64 + len as u64
+                        });
+                    if !inside {
+                        trap!(Trap::InvalidReference);
+                    }
+                    set_cell!(1, address);
+                    next!(RefCheck);
+                }
+                op::RefAdd => {
+                    binary!(|reference, n| {
+                        let address = (reference as u32).wrapping_add(n as u32);
+                        (reference & !0xFFFF_FFFF) | address as u64
                     });
+                    next!(RefAdd);
                 }
+                op::ChkNull => {
+                    if cell!(1) == 0 {
+                        trap!(Trap::InvalidReference);
+                    }
+                    next!(ChkNull);
+                }
+                op::CallVirt | op::VirtFrame => {
+                    let imm = imm!(CallVirt);
+                    let instance = cell!(1);
+                    let method = match method(image, data, instance, u16_at(imm, 0)) {
+                        Ok(method) => method,
+                        Err(trap) => trap!(trap),
+                    };
+                    if byte == op::VirtFrame {
+                        set_cell!(1, method.frame as u64);
+                        next!(VirtFrame);
+                    } else {
+                        let Some((code_start, frame_size)) = image.pou_entry(method.pou as usize)
+                        else {
+                            trap!(Trap::InvalidAddress)
+                        };
+                        if self.call_depth >= self.calls.len() {
+                            trap!(Trap::CallDepth);
+                        }
+                        if instance + frame_size as u64 > data.len() as u64 {
+                            trap!(Trap::InvalidAddress);
+                        }
+                        sp -= 1;
+                        self.calls[self.call_depth] = CallFrame {
+                            return_pc: (pc + const { Opcode::CallVirt.size() }) as u32,
+                            saved_base: base as u32,
+                        };
+                        self.call_depth += 1;
+                        base = instance;
+                        pc = code_start as usize;
+                    }
+                }
+                op::OpRelRel => {
+                    let imm = imm!(OpRelRel);
+                    // As its first load would: no room, no operation.
+                    if sp >= stack.len() {
+                        trap!(Trap::StackOverflow);
+                    }
+                    let a = load!(imm[1], base + u32_at(imm, 2) as u64);
+                    let b = load!(imm[6], base + u32_at(imm, 7) as u64);
+                    match binary_op(imm[0], a, b) {
+                        Ok(r) => push!(r),
+                        Err(trap) => trap!(trap),
+                    }
+                    next!(OpRelRel);
+                }
+                op::JumpIfRelImm | op::JumpIfNotRelImm => {
+                    let imm = imm!(JumpIfRelImm);
+                    let v = load!(imm[1], base + u32_at(imm, 2) as u64);
+                    let holds = compare_byte(imm[0], v, u32_at(imm, 6) as i32 as i64 as u64);
+                    if holds == (byte == op::JumpIfRelImm) {
+                        pc = u32_at(imm, 10) as usize;
+                    } else {
+                        next!(JumpIfRelImm);
+                    }
+                }
+                op::ElemRelAt | op::ElemAbsAt => {
+                    let imm = imm!(ElemRelAt);
+                    if sp >= stack.len() {
+                        trap!(Trap::StackOverflow);
+                    }
+                    let i = load!(imm[24], base + u32_at(imm, 25) as u64);
+                    let array = if byte == op::ElemRelAt {
+                        base + u32_at(imm, 0) as u64
+                    } else {
+                        u32_at(imm, 0) as u64
+                    };
+                    match element(array, i, u64_at(imm, 4), u64_at(imm, 12), u32_at(imm, 20)) {
+                        Some(address) => push!(address),
+                        None => trap!(Trap::IndexOutOfBounds),
+                    }
+                    next!(ElemRelAt);
+                }
+                op::LdElemRelAt | op::LdElemAbsAt => {
+                    let imm = imm!(LdElemRelAt);
+                    if sp >= stack.len() {
+                        trap!(Trap::StackOverflow);
+                    }
+                    let i = load!(imm[25], base + u32_at(imm, 26) as u64);
+                    let array = if byte == op::LdElemRelAt {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let Some(address) =
+                        element(array, i, u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
+                    else {
+                        trap!(Trap::IndexOutOfBounds)
+                    };
+                    push!(load!(imm[0], address));
+                    next!(LdElemRelAt);
+                }
+                op::StElemRelAt | op::StElemAbsAt => {
+                    let imm = imm!(StElemRelAt);
+                    let i = load!(imm[25], base + u32_at(imm, 26) as u64);
+                    let array = if byte == op::StElemRelAt {
+                        base + u32_at(imm, 1) as u64
+                    } else {
+                        u32_at(imm, 1) as u64
+                    };
+                    let Some(address) =
+                        element(array, i, u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
+                    else {
+                        trap!(Trap::IndexOutOfBounds)
+                    };
+                    store!(imm[0], address, cell!(1));
+                    sp -= 1;
+                    next!(StElemRelAt);
+                }
+                // Unassigned bytes: the verifier accepts none.
+                _ => trap!(Trap::InvalidAddress),
             }
-        }
-        self.pc = next;
-        Ok(Flow::Next)
-    }
-
-    /// The method instance `instance`'s class runs for `slot` (see `CALL_VIRT`).
-    fn method(&self, instance: u64, slot: u16) -> Result<crate::image::Dispatch, Trap> {
-        if instance == 0 {
-            return Err(Trap::InvalidReference);
-        }
-        let class = self
-            .load(MemType::U32, instance)
-            .map_err(|_| Trap::InvalidReference)?;
-        self.image
-            .lookup_method(class, slot)
-            .ok_or(Trap::InvalidReference)
+        };
+        self.pc = pc as u32;
+        self.sp = sp;
+        self.base = base as u32;
+        *fuel = left;
+        exit
     }
 
     // ---- monitor ----
@@ -1084,4 +1488,159 @@ pub(crate) fn rotate(value: u64, amount: u64, width: u32, left: bool) -> u64 {
         (v >> n) | (v << (width - n))
     };
     r & mask
+}
+
+/// The little-endian `u16` at `at` of an instruction's immediates.
+#[inline(always)]
+fn u16_at<const N: usize>(imm: &[u8; N], at: usize) -> u16 {
+    u16::from_le_bytes([imm[at], imm[at + 1]])
+}
+
+/// The little-endian `u32` at `at` of an instruction's immediates.
+#[inline(always)]
+fn u32_at<const N: usize>(imm: &[u8; N], at: usize) -> u32 {
+    u32::from_le_bytes([imm[at], imm[at + 1], imm[at + 2], imm[at + 3]])
+}
+
+/// The little-endian `u64` at `at` of an instruction's immediates.
+#[inline(always)]
+fn u64_at<const N: usize>(imm: &[u8; N], at: usize) -> u64 {
+    let mut bytes = [0u8; 8];
+    bytes.copy_from_slice(&imm[at..at + 8]);
+    u64::from_le_bytes(bytes)
+}
+
+/// `N` bytes of data memory at `address`, if they lie inside it.
+#[inline(always)]
+fn chunk<const N: usize>(data: &[u8], address: u64) -> Option<&[u8; N]> {
+    data.get(usize::try_from(address).ok()?..)?
+        .first_chunk::<N>()
+}
+
+/// A typed load (a [`MemType`] code byte): the cell, sign- or zero-extended; `None` outside
+/// data memory.
+#[inline(always)]
+fn load_typed(data: &[u8], ty: u8, address: u64) -> Option<u64> {
+    use crate::isa::mem_type_byte as t;
+    Some(match ty {
+        t::I8 => chunk::<1>(data, address)?[0] as i8 as i64 as u64,
+        t::U8 => chunk::<1>(data, address)?[0] as u64,
+        t::I16 => i16::from_le_bytes(*chunk(data, address)?) as i64 as u64,
+        t::U16 => u16::from_le_bytes(*chunk(data, address)?) as u64,
+        t::I32 => i32::from_le_bytes(*chunk(data, address)?) as i64 as u64,
+        t::U32 | t::F32 => u32::from_le_bytes(*chunk(data, address)?) as u64,
+        _ => u64::from_le_bytes(*chunk(data, address)?),
+    })
+}
+
+/// A typed store: the low bytes of `value` (truncation to the type's width); `None` (and
+/// nothing written) outside data memory.
+#[inline(always)]
+fn store_typed(data: &mut [u8], ty: u8, address: u64, value: u64) -> Option<()> {
+    use crate::isa::mem_type_byte as t;
+    let tail = data.get_mut(usize::try_from(address).ok()?..)?;
+    match ty {
+        t::I8 | t::U8 => *tail.first_chunk_mut()? = (value as u8).to_le_bytes(),
+        t::I16 | t::U16 => *tail.first_chunk_mut()? = (value as u16).to_le_bytes(),
+        t::I32 | t::U32 | t::F32 => *tail.first_chunk_mut()? = (value as u32).to_le_bytes(),
+        _ => *tail.first_chunk_mut()? = value.to_le_bytes(),
+    }
+    Some(())
+}
+
+/// The method instance `instance`'s class runs for `slot` (see `CALL_VIRT`).
+fn method(
+    image: &Image<'_>,
+    data: &[u8],
+    instance: u64,
+    slot: u16,
+) -> Result<crate::image::Dispatch, Trap> {
+    if instance == 0 {
+        return Err(Trap::InvalidReference);
+    }
+    let class = load_typed(data, MemType::U32 as u8, instance).ok_or(Trap::InvalidReference)?;
+    image
+        .lookup_method(class, slot)
+        .ok_or(Trap::InvalidReference)
+}
+
+/// The address of element `i` of the array at `array` (bounds `lo..=hi` as `i64`, element
+/// `stride`), as INDEX computes it (wrapping); `None` when `i` is outside the bounds.
+#[inline(always)]
+fn element(array: u64, i: u64, lo: u64, hi: u64, stride: u32) -> Option<u64> {
+    let (i, lo, hi) = (i as i64, lo as i64, hi as i64);
+    if i < lo || i > hi {
+        return None;
+    }
+    Some(array.wrapping_add((i.wrapping_sub(lo) as u64).wrapping_mul(stride as u64)))
+}
+
+/// A binary operator (an opcode byte for which [`Opcode::is_binary`] holds) applied to `a`
+/// and `b` as the plain instruction does: OP_IMM, OP_REL, OP_ABS and OP_REL_REL.
+#[inline(always)]
+fn binary_op(op: u8, a: u64, b: u64) -> Result<u64, Trap> {
+    use crate::isa::byte as op;
+    let f32_of = |cell: u64| f32::from_bits(cell as u32);
+    let f64_of = f64::from_bits;
+    Ok(match op {
+        op::Add => a.wrapping_add(b),
+        op::Sub => a.wrapping_sub(b),
+        op::Mul => a.wrapping_mul(b),
+        op::DivS | op::DivU | op::ModS | op::ModU if b == 0 => return Err(Trap::DivisionByZero),
+        op::DivS => (a as i64).wrapping_div(b as i64) as u64,
+        op::DivU => a / b,
+        op::ModS => (a as i64).wrapping_rem(b as i64) as u64,
+        op::ModU => a % b,
+        op::And => a & b,
+        op::Or => a | b,
+        op::Xor => a ^ b,
+        op::Shl => a.checked_shl(b.min(64) as u32).unwrap_or(0),
+        op::ShrU => a.checked_shr(b.min(64) as u32).unwrap_or(0),
+        op::ShrS => ((a as i64) >> b.min(63)) as u64,
+        op::AddF32 => real_result(f32_of(a) + f32_of(b)),
+        op::SubF32 => real_result(f32_of(a) - f32_of(b)),
+        op::MulF32 => real_result(f32_of(a) * f32_of(b)),
+        op::DivF32 if f32_of(b) == 0.0 => return Err(Trap::DivisionByZero),
+        op::DivF32 => real_result(f32_of(a) / f32_of(b)),
+        op::AddF64 => lreal_result(f64_of(a) + f64_of(b)),
+        op::SubF64 => lreal_result(f64_of(a) - f64_of(b)),
+        op::MulF64 => lreal_result(f64_of(a) * f64_of(b)),
+        op::DivF64 if f64_of(b) == 0.0 => return Err(Trap::DivisionByZero),
+        op::DivF64 => lreal_result(f64_of(a) / f64_of(b)),
+        cmp => compare_byte(cmp, a, b) as u64,
+    })
+}
+
+/// [`crate::isa::compare`] on a comparison opcode byte (`false` for other bytes).
+#[inline(always)]
+fn compare_byte(cmp: u8, a: u64, b: u64) -> bool {
+    use crate::isa::byte as op;
+    let (sa, sb) = (a as i64, b as i64);
+    let (fa, fb) = (f32::from_bits(a as u32), f32::from_bits(b as u32));
+    let (da, db) = (f64::from_bits(a), f64::from_bits(b));
+    match cmp {
+        op::Eq => a == b,
+        op::Ne => a != b,
+        op::LtS => sa < sb,
+        op::LeS => sa <= sb,
+        op::GtS => sa > sb,
+        op::GeS => sa >= sb,
+        op::LtU => a < b,
+        op::LeU => a <= b,
+        op::GtU => a > b,
+        op::GeU => a >= b,
+        op::EqF32 => fa == fb,
+        op::NeF32 => fa != fb,
+        op::LtF32 => fa < fb,
+        op::LeF32 => fa <= fb,
+        op::GtF32 => fa > fb,
+        op::GeF32 => fa >= fb,
+        op::EqF64 => da == db,
+        op::NeF64 => da != db,
+        op::LtF64 => da < db,
+        op::LeF64 => da <= db,
+        op::GtF64 => da > db,
+        op::GeF64 => da >= db,
+        _ => false,
+    }
 }

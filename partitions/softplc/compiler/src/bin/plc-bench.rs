@@ -1,7 +1,8 @@
 //! `plc-bench`: the interpreter's leg of the soft-PLC benchmark suite (`plc-bench-suite`):
 //! compiles each program, checks that the VM computes what the hand-written Rust reference
-//! computes, and measures both. Prints two lines per program (`bench plc_vm_<name>`, ns per
-//! cycle, and `bench plc_vm_<name>_ratio`, over the reference):
+//! computes, and measures both. Prints three lines per program (`bench plc_vm_<name>`, ns per
+//! cycle, `bench plc_vm_<name>_ratio`, over the reference, and `bench plc_rust_<name>`, the
+//! reference's ns per cycle):
 //! `bench <name> median=<n> min=<n> max=<n> unit=<ns|ratio> samples=<n>`.
 
 use std::hint::black_box;
@@ -72,6 +73,10 @@ fn main() {
                 for line in report("vm", program.name, &vm, &reference) {
                     println!("{line}");
                 }
+                println!(
+                    "{}",
+                    plc_bench_suite::metric_line("rust", program.name, &reference)
+                );
             }
             Err(e) => {
                 eprintln!("plc-bench: {e}");

@@ -828,16 +828,466 @@ fn fused_compare_and_jump() {
         c.op_width(Opcode::Sext, 32);
         c.st_abs(MemType::I32, 0);
     });
+    // `PUSH_I32 2; LT_S` is OP_IMM, which JZ turns into JUMP_IF_NOT_IMM; the load, ADD_IMM
+    // and store of the same variable become INC_ABS (the SEXT before the store is dropped).
     assert_eq!(
         disassemble(&bytes),
         [
             Opcode::PushI32,
-            Opcode::PushI32,
-            Opcode::JumpIfNot,
+            Opcode::JumpIfNotImm,
+            Opcode::IncAbs,
+            Opcode::Ret
+        ]
+    );
+    // Without an immediate: JUMP_IF_NOT.
+    let bytes = program_with(100, |c, _| {
+        let l = c.new_label();
+        c.ld_abs(MemType::I32, 0);
+        c.op(Opcode::Dup);
+        c.op(Opcode::LtS);
+        c.jz(l);
+        c.bind(l);
+    });
+    assert_eq!(
+        disassemble(&bytes),
+        [Opcode::LdAbs, Opcode::Dup, Opcode::JumpIfNot, Opcode::Ret]
+    );
+}
+
+#[test]
+fn elements_are_addressed_loaded_and_stored() {
+    // ARRAY[-2..5] OF INT at absolute 40: ELEM_ABS gives the address of element 3.
+    assert_eq!(
+        eval(|c| {
+            c.push_i32(3);
+            c.elem_abs(40, -2, 5, 2);
+        }),
+        50
+    );
+    // Frame-relative: base (MAIN_BASE) + offset + (i - lo) * stride.
+    assert_eq!(
+        eval(|c| {
+            c.push_i32(1);
+            c.elem_rel(8, 0, 3, 4);
+        }),
+        (MAIN_BASE + 12) as u64
+    );
+    // LD_ELEM extends as its type; ST_ELEM truncates.
+    assert_eq!(
+        eval(|c| {
+            c.push_i32(2);
+            c.push_i32(-5);
+            c.st_elem(false, MemType::I16, 40, 1, 4, 2);
+            c.push_i32(2);
+            c.ld_elem(false, MemType::I16, 40, 1, 4, 2);
+        }) as i64,
+        -5
+    );
+    assert_eq!(
+        eval(|c| {
+            c.push_i32(0);
+            c.push_u32(0x1_0000_00FF_u64 as u32);
+            c.st_elem(true, MemType::U8, 16, 0, 7, 1);
+            c.push_i32(0);
+            c.ld_elem(true, MemType::U8, 16, 0, 7, 1);
+        }),
+        0xFF
+    );
+    let f = eval(|c| {
+        c.push_i32(7);
+        c.push_f32(2.5);
+        c.st_elem(true, MemType::F32, 0, 5, 9, 4);
+        c.push_i32(7);
+        c.ld_elem(true, MemType::F32, 0, 5, 9, 4);
+    });
+    assert_eq!(f32::from_bits(f as u32), 2.5);
+    // Indexed by a frame variable (an INT at offset 60).
+    for rel in [true, false] {
+        let array = if rel { 8 } else { 40 };
+        let v = eval(|c| {
+            c.push_i32(-2);
+            c.st_rel(MemType::I16, 60);
+            c.push_i32(-300);
+            c.elem_at(
+                rel,
+                Some((MemType::I16, false)),
+                array,
+                -3,
+                0,
+                2,
+                (MemType::I16, 60),
+            );
+            c.elem_at(rel, None, array, -3, 0, 2, (MemType::I16, 60));
+            c.ld_ind(MemType::I16, 0);
+            c.elem_at(
+                rel,
+                Some((MemType::I16, true)),
+                array,
+                -3,
+                0,
+                2,
+                (MemType::I16, 60),
+            );
+            c.op(Opcode::Add);
+        });
+        assert_eq!(v as i64, -600);
+    }
+}
+
+#[test]
+fn increments_wrap_to_the_type() {
+    let inc = |ty: MemType, start: i64, k: i32, rel: bool| {
+        eval(|c| {
+            c.push_int(start);
+            if rel {
+                c.st_rel(ty, 8);
+                c.inc(true, ty, 8, k);
+                c.ld_rel(ty, 8);
+            } else {
+                c.st_abs(ty, 40);
+                c.inc(false, ty, 40, k);
+                c.ld_abs(ty, 40);
+            }
+        }) as i64
+    };
+    assert_eq!(inc(MemType::I16, 5, 1, true), 6);
+    assert_eq!(inc(MemType::I8, 127, 1, true), -128);
+    assert_eq!(inc(MemType::U8, 255, 1, false), 0);
+    assert_eq!(inc(MemType::U16, 0, -1, false), 65535);
+    assert_eq!(inc(MemType::I64, i64::MAX, 1, true), i64::MIN);
+    assert_eq!(
+        inc(MemType::I32, -10, -2_000_000_000, false),
+        -2_000_000_010
+    );
+}
+
+#[test]
+fn sel_if_is_min_and_max() {
+    let sel = |cmp: Opcode, a: u64, b: u64| {
+        eval(|c| {
+            c.push_i64(a as i64);
+            c.push_i64(b as i64);
+            c.sel_if(cmp);
+        })
+    };
+    // MAX = SEL_IF LT, MIN = SEL_IF GT, in the type's order.
+    assert_eq!(sel(Opcode::LtS, -3i64 as u64, 2), 2);
+    assert_eq!(sel(Opcode::GtS, -3i64 as u64, 2), -3i64 as u64);
+    assert_eq!(sel(Opcode::LtU, -3i64 as u64, 2), -3i64 as u64);
+    let f = |x: f32| x.to_bits() as u64;
+    assert_eq!(sel(Opcode::LtF32, f(1.5), f(-0.5)), f(1.5));
+    assert_eq!(sel(Opcode::GtF32, f(1.5), f(-0.5)), f(-0.5));
+    // NaN compares false: the first operand stays.
+    assert_eq!(sel(Opcode::LtF32, f(f32::NAN), f(1.0)), f(f32::NAN));
+    assert_eq!(sel(Opcode::LtF32, f(1.0), f(f32::NAN)), f(1.0));
+    let d = |x: f64| x.to_bits();
+    assert_eq!(sel(Opcode::GtF64, d(3.0), d(2.0)), d(2.0));
+}
+
+#[test]
+fn immediate_jumps_compare_with_a_sign_extended_immediate() {
+    let cases = [
+        (Opcode::LeS, 99i64, 99),
+        (Opcode::LeS, 100, 99),
+        (Opcode::Eq, 0, 0),
+        (Opcode::LtU, 5, -1),
+        (Opcode::GtS, -2, -3),
+    ];
+    for (cmp, a, k) in cases {
+        for when in [true, false] {
+            let jumped = eval(|c| {
+                let target = c.new_label();
+                let end = c.new_label();
+                c.push_int(a);
+                c.jump_if_imm(when, cmp, k, target);
+                c.push_i32(0);
+                c.jmp(end);
+                c.bind(target);
+                c.push_i32(1);
+                c.bind(end);
+            });
+            let holds = crate::isa::compare(cmp, a as u64, k as i64 as u64);
+            assert_eq!(jumped == 1, holds == when, "{cmp:?} {a} {k} {when}");
+            // The frame-variable form: LD_REL fused into JUMP_IF_REL_IMM.
+            let bytes = program_with(100, |c, _| {
+                let target = c.new_label();
+                let end = c.new_label();
+                c.push_int(a);
+                c.st_rel(MemType::I64, 8);
+                c.ld_rel(MemType::I64, 8);
+                c.jump_if_imm(when, cmp, k, target);
+                c.push_i32(0);
+                c.jmp(end);
+                c.bind(target);
+                c.push_i32(1);
+                c.bind(end);
+                c.st_abs(MemType::U64, RESULT);
+            });
+            let fused = if when {
+                Opcode::JumpIfRelImm
+            } else {
+                Opcode::JumpIfNotRelImm
+            };
+            assert!(disassemble(&bytes).contains(&fused));
+            let out = run_both(&bytes, 1);
+            assert_eq!(out.data[RESULT as usize] == 1, holds == when);
+        }
+    }
+}
+
+#[test]
+fn operator_forms_compute_as_the_plain_operators() {
+    let operands: [(i64, i32); 5] = [(7, 3), (-7, 2), (i64::MIN, -1), (0x7FFF_FFFF, 1), (5, 64)];
+    for &op in Opcode::ALL.iter().filter(|op| op.is_binary()) {
+        for (a, k) in operands {
+            let plain = eval(|c| {
+                c.disable_fusion();
+                c.push_int(a);
+                c.push_i32(k);
+                c.op(op);
+            });
+            let imm = eval(|c| {
+                c.push_int(a);
+                c.op_imm(op, k);
+            });
+            let rel = eval(|c| {
+                c.push_i32(k);
+                c.st_rel(MemType::I32, 4);
+                c.push_int(a);
+                c.op_at(true, op, MemType::I32, 4);
+            });
+            let abs = eval(|c| {
+                c.push_i32(k);
+                c.st_abs(MemType::I64, 48);
+                c.push_int(a);
+                c.op_at(false, op, MemType::I64, 48);
+            });
+            let rel_rel = eval(|c| {
+                c.push_int(a);
+                c.st_rel(MemType::I64, 16);
+                c.push_i32(k);
+                c.st_rel(MemType::I32, 4);
+                c.op_rel_rel(op, (MemType::I64, 16), (MemType::I32, 4));
+            });
+            assert_eq!(
+                (imm, rel, abs, rel_rel),
+                (plain, plain, plain, plain),
+                "{op:?} {a} {k}"
+            );
+        }
+    }
+    // A division by zero traps as the plain division does.
+    for op in [Opcode::DivS, Opcode::ModU, Opcode::DivF32, Opcode::DivF64] {
+        let fault = trap_of(|c| {
+            c.push_i32(3);
+            c.op_imm(op, 0);
+            c.drop_();
+        });
+        assert_eq!(fault.trap, crate::isa::Trap::DivisionByZero);
+    }
+}
+
+#[test]
+fn builder_fuses_superinstructions() {
+    // Element load and store; the store only when computing the value cannot trap. With
+    // the index a frame variable: the _AT forms.
+    for index_in_frame in [false, true] {
+        let bytes = program_with(100, |c, _| {
+            let index = |c: &mut ImageBuilder| {
+                if index_in_frame {
+                    c.ld_rel(MemType::I16, 0);
+                } else {
+                    c.ld_abs(MemType::I16, 0);
+                }
+            };
+            index(c);
+            c.elem_rel(8, 0, 3, 4);
+            c.ld_ind(MemType::F32, 0);
+            c.st_rel(MemType::F32, 24);
+            index(c);
+            c.elem_abs(40, 1, 4, 4);
+            c.ld_rel(MemType::F32, 24);
+            c.push_f32(2.0);
+            c.op(Opcode::MulF32);
+            c.st_ind(MemType::F32, 0);
+        });
+        let expected: &[Opcode] = if index_in_frame {
+            &[
+                Opcode::LdElemRelAt,
+                Opcode::StRel,
+                Opcode::LdRel,
+                Opcode::OpImm,
+                Opcode::StElemAbsAt,
+                Opcode::Ret,
+            ]
+        } else {
+            &[
+                Opcode::LdAbs,
+                Opcode::LdElemRel,
+                Opcode::StRel,
+                Opcode::LdAbs,
+                Opcode::LdRel,
+                Opcode::OpImm,
+                Opcode::StElemAbs,
+                Opcode::Ret,
+            ]
+        };
+        assert_eq!(disassemble(&bytes), expected);
+    }
+    // A value that may trap (a division, another element) keeps ELEM and ST_IND; so does
+    // a value that reads the address (DUP) and a store at an offset.
+    for value in [
+        |c: &mut ImageBuilder| {
+            c.ld_rel(MemType::I32, 4);
+            c.ld_rel(MemType::I32, 8);
+            c.op(Opcode::DivS);
+        },
+        |c: &mut ImageBuilder| {
+            c.push_i32(9);
+            c.elem_abs(40, 1, 4, 4);
+            c.ld_ind(MemType::I32, 0);
+        },
+        |c: &mut ImageBuilder| c.dup(),
+    ] {
+        let bytes = program_with(100, |c, _| {
+            c.push_i32(1);
+            c.elem_abs(40, 1, 4, 4);
+            value(c);
+            c.st_ind(MemType::I32, 0);
+        });
+        let ops = disassemble(&bytes);
+        assert!(ops.contains(&Opcode::ElemAbs), "{ops:?}");
+        assert!(ops.contains(&Opcode::StInd), "{ops:?}");
+    }
+    // x := x + k, an operand pushed by a load, NEG of a constant.
+    let bytes = program_with(100, |c, _| {
+        c.ld_rel(MemType::I16, 2);
+        c.push_i32(1);
+        c.op(Opcode::Add);
+        c.op_width(Opcode::Sext, 16);
+        c.st_rel(MemType::I16, 2);
+        c.ld_abs(MemType::I32, 0);
+        c.ld_abs(MemType::I32, 4);
+        c.op(Opcode::Sub);
+        c.push_f32(100.0);
+        c.op(Opcode::NegF32);
+        c.op(Opcode::Drop);
+        c.st_abs(MemType::I32, 8);
+    });
+    assert_eq!(
+        disassemble(&bytes),
+        [
+            Opcode::IncRel,
             Opcode::LdAbs,
-            Opcode::AddImm,
+            Opcode::OpAbs,
+            Opcode::PushU32,
+            Opcode::Drop,
             Opcode::StAbs,
             Opcode::Ret
         ]
+    );
+    let image = Image::parse(&bytes).unwrap();
+    let push = crate::isa::instructions(image.code()).nth(3).unwrap();
+    assert_eq!(push.immediates, (-100.0f32).to_bits().to_le_bytes());
+}
+
+#[test]
+fn superinstructions_disassemble() {
+    let bytes = program_with(100, |c, _| {
+        let l = c.new_label();
+        c.push_i32(1);
+        c.ld_elem(true, MemType::F32, 800, 0, 99, 4);
+        c.push_i32(1);
+        c.sel_if(Opcode::LtF32);
+        c.op_imm(Opcode::MulF32, 7);
+        c.op_at(true, Opcode::Add, MemType::I16, 6);
+        c.jump_if_imm(false, Opcode::LeS, 99, l);
+        c.inc(true, MemType::I16, 2, -1);
+        c.op_rel_rel(Opcode::SubF32, (MemType::F32, 4), (MemType::F32, 8));
+        c.drop_();
+        c.ld_rel(MemType::I16, 2);
+        c.jump_if_imm(true, Opcode::GtS, -5, l);
+        c.bind(l);
+    });
+    let image = Image::parse(&bytes).unwrap();
+    let text: Vec<alloc::string::String> = crate::isa::instructions(image.code())
+        .map(|i| alloc::format!("{i}"))
+        .collect();
+    assert_eq!(
+        text,
+        [
+            "PUSH_I32 1",
+            "LD_ELEM_REL F32 800 0 99 4",
+            "PUSH_I32 1",
+            "SEL_IF LT_F32",
+            "OP_IMM MUL_F32 7",
+            "OP_REL ADD I16 6",
+            "JUMP_IF_NOT_IMM LE_S 99 @99",
+            "INC_REL I16 2 -1",
+            "OP_REL_REL SUB_F32 F32 4 F32 8",
+            "DROP",
+            "JUMP_IF_REL_IMM GT_S I16 2 -5 @99",
+            "RET"
+        ]
+    );
+}
+
+#[test]
+fn arithmetic_nans_are_canonical() {
+    use crate::isa::{CANONICAL_NAN_F32, CANONICAL_NAN_F64};
+    // Two NaNs with different payloads (and a NaN from an invalid operation): whichever the
+    // hardware would pass on, the result is the canonical NaN, in every form.
+    let (n1, n2) = (0x7FA0_1234u32, 0xFFAB_CDEFu32);
+    for op in [
+        Opcode::AddF32,
+        Opcode::SubF32,
+        Opcode::MulF32,
+        Opcode::DivF32,
+    ] {
+        let plain = eval(|c| {
+            c.disable_fusion();
+            c.push_u32(n1);
+            c.push_u32(n2);
+            c.op(op);
+        });
+        let fused = eval(|c| {
+            c.push_u32(n1);
+            c.op_imm(op, n2 as i32);
+        });
+        assert_eq!(
+            (plain, fused),
+            (CANONICAL_NAN_F32 as u64, CANONICAL_NAN_F32 as u64)
+        );
+    }
+    let (d1, d2) = (0x7FF4_0000_0000_0001u64, 0xFFF8_0000_DEAD_BEEFu64);
+    for op in [
+        Opcode::AddF64,
+        Opcode::SubF64,
+        Opcode::MulF64,
+        Opcode::DivF64,
+    ] {
+        let v = eval(|c| {
+            c.push_i64(d1 as i64);
+            c.push_i64(d2 as i64);
+            c.op(op);
+        });
+        assert_eq!(v, CANONICAL_NAN_F64);
+    }
+    assert_eq!(
+        eval(|c| {
+            c.push_f64(f64::INFINITY);
+            c.push_f64(f64::INFINITY);
+            c.op(Opcode::SubF64);
+        }),
+        CANONICAL_NAN_F64
+    );
+    // NEG only flips the sign bit, of a NaN too.
+    assert_eq!(
+        eval(|c| {
+            c.disable_fusion();
+            c.push_u32(n1);
+            c.op(Opcode::NegF32);
+        }),
+        (n1 ^ 0x8000_0000) as u64
     );
 }

@@ -57,6 +57,111 @@ fn index_out_of_bounds() {
         assert_eq!(out.result.unwrap_err().trap, Trap::IndexOutOfBounds);
         assert_eq!(out.stack, [100, bad as u64], "INDEX trapped without effect");
     }
+    // The element superinstructions: the fault is at the instruction, the stack as before
+    // it (a store's value still there), data memory untouched.
+    let element_ops: [fn(&mut ImageBuilder); 4] = [
+        |c| c.elem_rel(0, -2, 5, 4),
+        |c| c.elem_abs(100, -2, 5, 4),
+        |c| c.ld_elem(true, MemType::I32, 0, -2, 5, 4),
+        |c| c.ld_elem(false, MemType::U8, 100, -2, 5, 1),
+    ];
+    for (k, op) in element_ops.iter().enumerate() {
+        for bad in [-3i64, 6] {
+            let mut at = 0;
+            let bytes = program_with(100, |c, _| {
+                c.push_int(bad);
+                at = c.code_offset();
+                op(c);
+                c.drop_();
+            });
+            let out = run_both(&bytes, 1);
+            let fault = out.result.unwrap_err();
+            assert_eq!(
+                (fault.trap, fault.code_offset),
+                (Trap::IndexOutOfBounds, at),
+                "{k}"
+            );
+            assert_eq!(out.stack, [bad as u64]);
+        }
+    }
+    for rel in [true, false] {
+        let mut at = 0;
+        let bytes = program_with(100, |c, _| {
+            c.push_i32(8);
+            c.push_i32(-1);
+            at = c.code_offset();
+            c.st_elem(rel, MemType::I16, 4, 0, 7, 2);
+        });
+        let out = run_both(&bytes, 1);
+        let fault = out.result.unwrap_err();
+        assert_eq!(
+            (fault.trap, fault.code_offset),
+            (Trap::IndexOutOfBounds, at)
+        );
+        assert_eq!(out.stack, [8, -1i64 as u64]);
+        assert!(out.data.iter().all(|&b| b == 0));
+    }
+}
+
+#[test]
+fn elements_indexed_by_a_variable_trap_at_the_instruction() {
+    for (k, ty) in [
+        None,
+        Some((MemType::I32, true)),
+        Some((MemType::I32, false)),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        for rel in [true, false] {
+            let mut at = 0;
+            let bytes = program_with(100, |c, _| {
+                c.push_i32(9);
+                c.st_rel(MemType::I16, 40);
+                if ty.is_some_and(|(_, load)| !load) {
+                    c.push_i32(77);
+                }
+                at = c.code_offset();
+                c.elem_at(rel, ty, 0, 0, 7, 4, (MemType::I16, 40));
+                if ty.is_none_or(|(_, load)| load) {
+                    c.drop_();
+                }
+            });
+            let out = run_both(&bytes, 1);
+            let fault = out.result.unwrap_err();
+            assert_eq!(
+                (fault.trap, fault.code_offset),
+                (Trap::IndexOutOfBounds, at),
+                "{k}"
+            );
+        }
+    }
+}
+
+#[test]
+fn elements_outside_data_are_invalid_addresses() {
+    // An array whose last elements lie past the end of data memory: the index is fine, the
+    // access is not.
+    let fault = trap_of(|c| {
+        c.push_i32(3);
+        c.ld_elem(false, MemType::I32, DATA - 8, 0, 3, 4);
+        c.drop_();
+    });
+    assert_eq!(fault.trap, Trap::InvalidAddress);
+    let fault = trap_of(|c| {
+        c.push_i32(2);
+        c.push_i32(7);
+        c.st_elem(false, MemType::I64, DATA - 16, 0, 3, 8);
+    });
+    assert_eq!(fault.trap, Trap::InvalidAddress);
+    // In range: fine.
+    assert_eq!(
+        eval(|c| {
+            c.push_i32(1);
+            c.ld_elem(false, MemType::I32, DATA - 8, 0, 3, 4);
+        }),
+        0
+    );
 }
 
 #[test]
@@ -335,8 +440,9 @@ fn fault_reports_location_and_the_task_stays_faulted_until_reset() {
     b.st_abs(MemType::I32, 0);
     b.source_location(file, 4, 9);
     b.push_i32(1);
-    b.ld_abs(MemType::I32, 4);
+    // `LD_ABS; DIV_S` fuses into one OP_ABS where the load was.
     let div_at = b.code_offset();
+    b.ld_abs(MemType::I32, 4);
     b.op(Opcode::DivS);
     b.st_abs(MemType::I32, 8);
     b.ret();
@@ -471,4 +577,43 @@ fn a_cycle_shorter_than_the_check_interval_never_reads_the_clock() {
         vm.run_cycle_until(0, 0, || panic!("asked the clock"))
             .is_ok()
     );
+}
+
+#[test]
+fn watchdog_and_deadline_stop_before_exactly_the_counted_instruction() {
+    // 3,000 NOPs: instruction k (0-based) is at code offset k.
+    let nops = |budget: u32| {
+        program_with(budget, |c, _| {
+            for _ in 0..3000 {
+                c.nop();
+            }
+        })
+    };
+    // The watchdog: after exactly `budget` instructions (VM and model agree on the pc).
+    for budget in [1, 1022, 1023, 1024, 2047, 2999] {
+        let out = run_both(&nops(budget), 1);
+        let fault = out.result.unwrap_err();
+        assert_eq!((fault.trap, fault.code_offset), (Trap::Watchdog, budget));
+    }
+    // A budget that the cycle needs exactly.
+    assert_eq!(run_both(&nops(3001), 1).result.unwrap().instructions, 3001);
+    // The clock is asked before instructions 1023, 2047, ...: expiring at the second
+    // question stops the cycle before instruction 2047.
+    let bytes = nops(u32::MAX);
+    let mut memory = VmMemory::for_image(&bytes);
+    let mut vm = memory.machine(&bytes);
+    let mut asked = 0;
+    let fault = vm
+        .run_cycle_until(0, 0, || {
+            asked += 1;
+            asked == 2
+        })
+        .unwrap_err();
+    assert_eq!((fault.trap, fault.code_offset), (Trap::Deadline, 2047));
+    // Where the budget and a check point coincide, the watchdog comes first.
+    let bytes = nops(1023);
+    let mut memory = VmMemory::for_image(&bytes);
+    let mut vm = memory.machine(&bytes);
+    let fault = vm.run_cycle_until(0, 0, || true).unwrap_err();
+    assert_eq!((fault.trap, fault.code_offset), (Trap::Watchdog, 1023));
 }

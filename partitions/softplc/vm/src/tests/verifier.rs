@@ -758,3 +758,121 @@ fn shared_records() {
         })
     );
 }
+
+#[test]
+fn superinstruction_operands() {
+    // SEL_IF and the immediate jumps need a comparison, OP_* a binary operator.
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.push_i32(2);
+        c.emit_raw(&[Opcode::SelIf as u8, Opcode::Add as u8, Opcode::Drop as u8]);
+    });
+    assert_eq!(e.reason, Reason::BadComparison(Opcode::Add as u8));
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.emit_raw(&[Opcode::OpImm as u8, Opcode::Neg as u8, 1, 0, 0, 0]);
+        c.drop_();
+    });
+    assert_eq!(e.reason, Reason::BadOperator(Opcode::Neg as u8));
+    assert_eq!(
+        e.to_string(),
+        "at code offset 5: operand 0x27 is not a binary operator"
+    );
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.emit_raw(&[Opcode::OpRel as u8, Opcode::Add as u8, 12, 0, 0, 0, 0]);
+        c.drop_();
+    });
+    assert_eq!(e.reason, Reason::BadType(12));
+    // INC needs an integer type.
+    let e = rejects(|c, _| c.inc(true, MemType::F32, 0, 1));
+    assert_eq!(e.reason, Reason::BadType(MemType::F32 as u8));
+    let e = rejects(|c, _| {
+        c.push_i32(0);
+        c.emit_raw(&[Opcode::LdElemRel as u8, 10]);
+        c.emit_raw(&[0; 24]);
+        c.drop_();
+    });
+    assert_eq!(e.reason, Reason::BadType(10));
+}
+
+#[test]
+fn superinstruction_addresses() {
+    // Static addresses: as LD_ABS (data) and LD_REL (frame).
+    let e = rejects(|c, _| c.inc(false, MemType::I32, DATA - 2, 1));
+    assert!(matches!(e.reason, Reason::AddressOutsideData { .. }));
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.op_at(false, Opcode::Add, MemType::I64, DATA - 4);
+        c.drop_();
+    });
+    assert!(matches!(e.reason, Reason::AddressOutsideData { .. }));
+    let e = rejects(|c, _| c.inc(true, MemType::I16, MAIN_FRAME - 1, 1));
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.op_at(true, Opcode::Mul, MemType::U32, MAIN_FRAME);
+        c.drop_();
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        c.op_rel_rel(
+            Opcode::Add,
+            (MemType::I32, 0),
+            (MemType::I64, MAIN_FRAME - 4),
+        );
+        c.drop_();
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        let l = c.new_label();
+        c.push_i32(0);
+        c.st_rel(MemType::I32, 0);
+        c.ld_rel(MemType::I32, MAIN_FRAME - 2);
+        c.jump_if_imm(true, Opcode::Eq, 0, l);
+        c.bind(l);
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    // The index variable of the _AT forms lies in the frame and has a valid type.
+    let e = rejects(|c, _| {
+        c.elem_at(true, None, 0, 0, 3, 4, (MemType::I16, MAIN_FRAME - 1));
+        c.drop_();
+    });
+    assert!(matches!(e.reason, Reason::OffsetOutsideFrame { .. }));
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.emit_raw(&[Opcode::StElemAbsAt as u8, MemType::I8 as u8]);
+        c.emit_raw(&[0; 24]);
+        c.emit_raw(&[11, 0, 0, 0, 0]);
+    });
+    assert_eq!(e.reason, Reason::BadType(11));
+    // Immediate jumps: targets and stack depths as JUMP_IF.
+    let e = rejects(|c, _| {
+        c.push_i32(1);
+        c.emit_raw(&[
+            Opcode::JumpIfImm as u8,
+            Opcode::Eq as u8,
+            0,
+            0,
+            0,
+            0,
+            1,
+            0,
+            0,
+            0,
+        ]);
+    });
+    assert_eq!(e.reason, Reason::TargetInsideInstruction(1));
+    let e = rejects(|c, _| {
+        let l = c.new_label();
+        c.jump_if_imm(true, Opcode::Eq, 0, l);
+        c.bind(l);
+    });
+    assert_eq!(
+        e.reason,
+        Reason::StackUnderflow {
+            depth: 0,
+            needed: 1
+        }
+    );
+}
