@@ -519,6 +519,19 @@ fn plc_online() {
         status[safe_at..].iter().any(|s| s.valve != 0.1),
         "the valve stayed safe after START",
     );
+    // The configured program ran natively; the downloaded one runs on the interpreter
+    // (until the next build translates it).
+    check(
+        &o,
+        o.line("[plc] plc: tier native (image ").is_some(),
+        "the tank PLC did not start on the native tier",
+    );
+    check(
+        &o,
+        o.line("[plc] plc: tier interpreter (a downloaded program runs on the interpreter until the next build)")
+            .is_some(),
+        "the downloaded program's tier line is missing",
+    );
     // The download is swapped in at a release and keeps the RETAIN counter.
     let swapped = o.line("plc: download: ");
     check(
