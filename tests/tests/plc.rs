@@ -780,7 +780,10 @@ fn plc_shared() {
         );
     }
     // The reader took a record every cycle and saw the sequence advance by one per cycle,
-    // as fast as the writer counts (the writer runs first in each frame).
+    // as fast as the writer counts (the writer runs first in each frame). The one
+    // exception is the start: a partition's first release follows its start, not a window
+    // start, so when the reader starts inside its window its first periodic release comes
+    // in that same window and takes the same record once more.
     let (_, last_reader) = reader.last().expect("counted");
     let (_, last_writer) = writer.last().expect("counted");
     let records = value(last_reader, "Reader.records").unwrap_or(0);
@@ -788,7 +791,7 @@ fn plc_shared() {
     let cycles = value(last_writer, "Writer.cycles").unwrap_or(0);
     check(
         &o,
-        records >= 1_000 && advanced + 1 == records,
+        records >= 1_000 && (advanced + 1 == records || advanced + 2 == records),
         &format!("the reader saw {records} records, the sequence advanced by {advanced}"),
     );
     check(
