@@ -61,6 +61,7 @@ pub fn run() -> Result<bool> {
             "--lib",
             "--tests",
         ],
+        vec!["clippy", "-p", "user-rt", "--lib", "--tests"],
         // The targets that run under QEMU.
         vec!["clippy", "-p", "kernel", "--target", "x86_64-unknown-none"],
         vec!["clippy", "-p", "loader", "--target", "x86_64-unknown-uefi"],

@@ -278,8 +278,8 @@ fn cargo_test(args: &[&str]) -> Result<bool> {
 fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
     tools::ensure_qemu()?;
     // Host unit tests: the host crates (the workspace's default members), plus the pure
-    // logic of the kernel, the APEX runtime, the plant, the PLC runtime and the guest (their
-    // library parts), and the Linux-side checks (tests/linux) on the host Linux.
+    // logic of the kernel, the APEX runtime, the plant, the PLC runtime, the guest and the
+    // user-mode runtime (their library parts), and the Linux-side checks (tests/linux) on the host Linux.
     let host_ok = scenarios_only
         || (cargo_test(&[])?
             & cargo_test(&["-p", "kernel", "--lib"])?
@@ -287,6 +287,7 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
             & cargo_test(&["-p", "plant", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "guest", "--no-default-features", "--lib"])?
+            & cargo_test(&["-p", "user-rt", "--lib"])?
             & xtask::linux::host_check()?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");

@@ -57,9 +57,16 @@ impl IpcBufferRef {
             offset + out.len() <= IPC_DATA_MAX,
             "outside the IPC data area"
         );
-        for (i, byte) in out.iter_mut().enumerate() {
+        // Whole words from the first 8-aligned offset on (a message starts at 0): a
+        // byte-wise volatile copy took ~1,500 instructions for an exception message.
+        let (head, words, tail) = split_at_words(offset, out.len());
+        for i in (0..head).chain(head + words * 8..head + words * 8 + tail) {
             // SAFETY: offset + i < IPC_DATA_MAX, inside the mapped buffer (`new`).
-            *byte = unsafe { core::ptr::read_volatile(self.at(offset + i)) };
+            out[i] = unsafe { core::ptr::read_volatile(self.at(offset + i)) };
+        }
+        for w in 0..words {
+            let at = head + w * 8;
+            out[at..at + 8].copy_from_slice(&self.read_u64(offset + at).to_ne_bytes());
         }
     }
 
@@ -69,9 +76,15 @@ impl IpcBufferRef {
             offset + bytes.len() <= IPC_DATA_MAX,
             "outside the IPC data area"
         );
-        for (i, byte) in bytes.iter().enumerate() {
+        let (head, words, tail) = split_at_words(offset, bytes.len());
+        for i in (0..head).chain(head + words * 8..head + words * 8 + tail) {
             // SAFETY: offset + i < IPC_DATA_MAX, inside the mapped, writable buffer (`new`).
-            unsafe { core::ptr::write_volatile(self.at(offset + i), *byte) };
+            unsafe { core::ptr::write_volatile(self.at(offset + i), bytes[i]) };
+        }
+        for w in 0..words {
+            let at = head + w * 8;
+            let word = u64::from_ne_bytes(bytes[at..at + 8].try_into().expect("8 bytes"));
+            self.write_u64(offset + at, word);
         }
     }
 
@@ -133,7 +146,65 @@ impl IpcBufferRef {
     }
 }
 
+/// A copy of `len` bytes at buffer offset `offset` as `(head, words, tail)`: `head` bytes up
+/// to the first 8-aligned offset, then `words` whole words, then `tail` bytes.
+fn split_at_words(offset: usize, len: usize) -> (usize, usize, usize) {
+    let head = ((8 - offset % 8) % 8).min(len);
+    let rest = len - head;
+    (head, rest / 8, rest % 8)
+}
+
 // The item layout `set_item` writes: source, then pages (low half) and flags (high half).
 const _: () = assert!(core::mem::size_of::<MapItem>() == 16);
 const _: () = assert!(core::mem::offset_of!(MapItem, pages) == 8);
 const _: () = assert!(core::mem::offset_of!(MapItem, flags) == 12);
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use abi::ipc::IPC_BUFFER_SIZE;
+
+    #[test]
+    fn copies_split_into_bytes_and_words() {
+        assert_eq!(split_at_words(0, 200), (0, 25, 0));
+        assert_eq!(split_at_words(0, 13), (0, 1, 5));
+        assert_eq!(split_at_words(3, 2), (2, 0, 0));
+        assert_eq!(split_at_words(3, 20), (5, 1, 7));
+        assert_eq!(split_at_words(8, 7), (0, 0, 7));
+        assert_eq!(split_at_words(4095, 1), (1, 0, 0));
+    }
+
+    /// Every offset and length round-trips, and a write touches exactly its bytes.
+    #[test]
+    fn data_round_trips_at_any_offset_and_length() {
+        let mut memory = [0u64; IPC_BUFFER_SIZE / 8];
+        // SAFETY: `memory` is IPC_BUFFER_SIZE bytes, 8-aligned, outlives `ipc` and is not
+        // touched through a reference while `ipc` is used.
+        let ipc = unsafe { IpcBufferRef::new(memory.as_mut_ptr() as u64) };
+        for offset in 0..24 {
+            for len in 0..40 {
+                ipc.write_data(0, &[0xEE; 64]);
+                let mut bytes = [0u8; 40];
+                for (i, b) in bytes.iter_mut().enumerate() {
+                    *b = i as u8 + 1;
+                }
+                let bytes = &bytes[..len];
+                ipc.write_data(offset, bytes);
+                let mut back = [0u8; 40];
+                ipc.read_data(offset, &mut back[..len]);
+                assert_eq!(&back[..len], bytes, "offset {offset} len {len}");
+                let mut around = [0u8; 64];
+                ipc.read_data(0, &mut around);
+                assert!(around[..offset].iter().all(|&b| b == 0xEE));
+                assert!(around[offset + len..].iter().all(|&b| b == 0xEE));
+            }
+        }
+        let m = ExceptionMessage {
+            vector: 14,
+            fault_address: 0xdead_beef,
+            ..Default::default()
+        };
+        ipc.set_exception(&m);
+        assert_eq!(ipc.exception(), m);
+    }
+}

@@ -52,7 +52,9 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 
 /// The precompiled `core` carries unwind tables that name this symbol; with `panic=abort`
 /// nothing ever unwinds, so it is never called.
-// SAFETY: a unique definition of the symbol (no std, no libgcc in these binaries).
+// SAFETY: a unique definition of the symbol (no std, no libgcc in these binaries; the
+// host's unit tests link std's).
+#[cfg(not(test))]
 #[allow(unsafe_code)]
 #[unsafe(no_mangle)]
 pub extern "C" fn rust_eh_personality() {}
