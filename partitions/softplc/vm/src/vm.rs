@@ -1061,18 +1061,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
                 op::ElemRel | op::ElemAbs => {
                     let imm = imm!(ElemRel);
-                    let array = if byte == op::ElemRel {
-                        base + u32_at(imm, 0) as u64
-                    } else {
-                        u32_at(imm, 0) as u64
-                    };
-                    match element(
-                        array,
-                        cell!(1),
-                        u64_at(imm, 4),
-                        u64_at(imm, 12),
-                        u32_at(imm, 20),
-                    ) {
+                    match element(imm, 0, byte == op::ElemRel, base, cell!(1)) {
                         Some(address) => set_cell!(1, address),
                         None => trap!(Trap::IndexOutOfBounds),
                     }
@@ -1080,18 +1069,8 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
                 op::LdElemRel | op::LdElemAbs => {
                     let imm = imm!(LdElemRel);
-                    let array = if byte == op::LdElemRel {
-                        base + u32_at(imm, 1) as u64
-                    } else {
-                        u32_at(imm, 1) as u64
-                    };
-                    let Some(address) = element(
-                        array,
-                        cell!(1),
-                        u64_at(imm, 5),
-                        u64_at(imm, 13),
-                        u32_at(imm, 21),
-                    ) else {
+                    let Some(address) = element(imm, 1, byte == op::LdElemRel, base, cell!(1))
+                    else {
                         trap!(Trap::IndexOutOfBounds)
                     };
                     set_cell!(1, load!(imm[0], address));
@@ -1099,18 +1078,8 @@ impl<'a, 'm> Machine<'a, 'm> {
                 }
                 op::StElemRel | op::StElemAbs => {
                     let imm = imm!(StElemRel);
-                    let array = if byte == op::StElemRel {
-                        base + u32_at(imm, 1) as u64
-                    } else {
-                        u32_at(imm, 1) as u64
-                    };
-                    let Some(address) = element(
-                        array,
-                        cell!(2),
-                        u64_at(imm, 5),
-                        u64_at(imm, 13),
-                        u32_at(imm, 21),
-                    ) else {
+                    let Some(address) = element(imm, 1, byte == op::StElemRel, base, cell!(2))
+                    else {
                         trap!(Trap::IndexOutOfBounds)
                     };
                     store!(imm[0], address, cell!(1));
@@ -1270,12 +1239,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                         trap!(Trap::StackOverflow);
                     }
                     let i = load!(imm[24], base + u32_at(imm, 25) as u64);
-                    let array = if byte == op::ElemRelAt {
-                        base + u32_at(imm, 0) as u64
-                    } else {
-                        u32_at(imm, 0) as u64
-                    };
-                    match element(array, i, u64_at(imm, 4), u64_at(imm, 12), u32_at(imm, 20)) {
+                    match element(imm, 0, byte == op::ElemRelAt, base, i) {
                         Some(address) => push!(address),
                         None => trap!(Trap::IndexOutOfBounds),
                     }
@@ -1287,14 +1251,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                         trap!(Trap::StackOverflow);
                     }
                     let i = load!(imm[25], base + u32_at(imm, 26) as u64);
-                    let array = if byte == op::LdElemRelAt {
-                        base + u32_at(imm, 1) as u64
-                    } else {
-                        u32_at(imm, 1) as u64
-                    };
-                    let Some(address) =
-                        element(array, i, u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
-                    else {
+                    let Some(address) = element(imm, 1, byte == op::LdElemRelAt, base, i) else {
                         trap!(Trap::IndexOutOfBounds)
                     };
                     push!(load!(imm[0], address));
@@ -1303,14 +1260,7 @@ impl<'a, 'm> Machine<'a, 'm> {
                 op::StElemRelAt | op::StElemAbsAt => {
                     let imm = imm!(StElemRelAt);
                     let i = load!(imm[25], base + u32_at(imm, 26) as u64);
-                    let array = if byte == op::StElemRelAt {
-                        base + u32_at(imm, 1) as u64
-                    } else {
-                        u32_at(imm, 1) as u64
-                    };
-                    let Some(address) =
-                        element(array, i, u64_at(imm, 5), u64_at(imm, 13), u32_at(imm, 21))
-                    else {
+                    let Some(address) = element(imm, 1, byte == op::StElemRelAt, base, i) else {
                         trap!(Trap::IndexOutOfBounds)
                     };
                     store!(imm[0], address, cell!(1));
@@ -1564,15 +1514,30 @@ fn method(
         .ok_or(Trap::InvalidReference)
 }
 
-/// The address of element `i` of the array at `array` (bounds `lo..=hi` as `i64`, element
-/// `stride`), as INDEX computes it (wrapping); `None` when `i` is outside the bounds.
+/// The address of element `i` of the array that an ELEM-family immediate describes from
+/// byte `at` on (`isa`: the array's address, u32, frame-relative when `relative`; its
+/// bounds `lo..=hi`, i64 each; the element stride, u32), as INDEX computes it (wrapping);
+/// `None` when `i` is outside the bounds.
 #[inline(always)]
-fn element(array: u64, i: u64, lo: u64, hi: u64, stride: u32) -> Option<u64> {
-    let (i, lo, hi) = (i as i64, lo as i64, hi as i64);
+fn element<const N: usize>(
+    imm: &[u8; N],
+    at: usize,
+    relative: bool,
+    base: u64,
+    i: u64,
+) -> Option<u64> {
+    let array = u32_at(imm, at) as u64;
+    let array = if relative { base + array } else { array };
+    let (i, lo, hi) = (
+        i as i64,
+        u64_at(imm, at + 4) as i64,
+        u64_at(imm, at + 12) as i64,
+    );
     if i < lo || i > hi {
         return None;
     }
-    Some(array.wrapping_add((i.wrapping_sub(lo) as u64).wrapping_mul(stride as u64)))
+    let stride = u32_at(imm, at + 20) as u64;
+    Some(array.wrapping_add((i.wrapping_sub(lo) as u64).wrapping_mul(stride)))
 }
 
 /// A binary operator (an opcode byte for which [`Opcode::is_binary`] holds) applied to `a`
