@@ -787,35 +787,12 @@ impl Emitter<'_> {
                 at.push_check(o);
                 writeln!(o, "{} = cx.now();", cell(d)).ok();
             }
-            Add | Sub | Mul | And | Or | Xor | Shl | ShrU | ShrS => {
+            op if op.is_binary() => {
                 let (a, b) = (top(2), top(1));
-                let r = match insn.op {
-                    Add => format!("{a}.wrapping_add({b})"),
-                    Sub => format!("{a}.wrapping_sub({b})"),
-                    Mul => format!("{a}.wrapping_mul({b})"),
-                    And => format!("{a} & {b}"),
-                    Or => format!("{a} | {b}"),
-                    Xor => format!("{a} ^ {b}"),
-                    Shl => format!("ops::shl({a}, {b})"),
-                    ShrU => format!("ops::shr_u({a}, {b})"),
-                    _ => format!("ops::shr_s({a}, {b})"),
-                };
-                writeln!(o, "{a} = {r};").ok();
-            }
-            Eq | Ne | LtS | LeS | GtS | GeS | LtU | LeU | GtU | GeU | EqF32 | NeF32 | LtF32
-            | LeF32 | GtF32 | GeF32 | EqF64 | NeF64 | LtF64 | LeF64 | GtF64 | GeF64 => {
-                let (a, b) = (top(2), top(1));
-                writeln!(o, "{a} = compare(Opcode::{:?}, {a}, {b}) as u64;", insn.op).ok();
-            }
-            DivS | DivU | ModS | ModU => {
-                let (a, b) = (top(2), top(1));
-                writeln!(o, "if {b} == 0 {{ {} }}", at.raise("Trap::DivisionByZero")).ok();
-                let r = match insn.op {
-                    DivS => format!("({a} as i64).wrapping_div({b} as i64) as u64"),
-                    DivU => format!("{a} / {b}"),
-                    ModS => format!("({a} as i64).wrapping_rem({b} as i64) as u64"),
-                    _ => format!("{a} % {b}"),
-                };
+                let (traps, r) = binary(op, &a, &b);
+                if let Some(zero) = traps {
+                    writeln!(o, "if {zero} {{ {} }}", at.raise("Trap::DivisionByZero")).ok();
+                }
                 writeln!(o, "{a} = {r};").ok();
             }
             Neg | AbsS | Not | NotBool => {
@@ -846,42 +823,6 @@ impl Emitter<'_> {
             Sel => {
                 let (g, a, b) = (top(3), top(2), top(1));
                 writeln!(o, "{g} = if {g} != 0 {{ {b} }} else {{ {a} }};").ok();
-            }
-            AddF32 | SubF32 | MulF32 | DivF32 => {
-                let (a, b) = (top(2), top(1));
-                if insn.op == DivF32 {
-                    writeln!(
-                        o,
-                        "if f32_of({b}) == 0.0 {{ {} }}",
-                        at.raise("Trap::DivisionByZero")
-                    )
-                    .ok();
-                }
-                let sym = match insn.op {
-                    AddF32 => "+",
-                    SubF32 => "-",
-                    MulF32 => "*",
-                    _ => "/",
-                };
-                writeln!(o, "{a} = ops::real_result(f32_of({a}) {sym} f32_of({b}));").ok();
-            }
-            AddF64 | SubF64 | MulF64 | DivF64 => {
-                let (a, b) = (top(2), top(1));
-                if insn.op == DivF64 {
-                    writeln!(
-                        o,
-                        "if f64_of({b}) == 0.0 {{ {} }}",
-                        at.raise("Trap::DivisionByZero")
-                    )
-                    .ok();
-                }
-                let sym = match insn.op {
-                    AddF64 => "+",
-                    SubF64 => "-",
-                    MulF64 => "*",
-                    _ => "/",
-                };
-                writeln!(o, "{a} = ops::lreal_result(f64_of({a}) {sym} f64_of({b}));").ok();
             }
             NegF32 => {
                 let a = top(1);
