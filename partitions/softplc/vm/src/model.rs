@@ -1094,37 +1094,21 @@ fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Op
             a.extend(read_wstring(data, args[2])?.1);
             a
         }
-        WStrLeft => {
-            let a = read_wstring(data, args[1])?.1;
-            a[..clamp(args[2], 0, a.len())].to_vec()
-        }
-        WStrRight => {
-            let a = read_wstring(data, args[1])?.1;
-            a[a.len() - clamp(args[2], 0, a.len())..].to_vec()
-        }
-        WStrMid => {
-            let a = read_wstring(data, args[1])?.1;
-            let p = clamp(args[3], 1, a.len() + 1);
-            let n = clamp(args[2], 0, a.len() + 1 - p);
-            a[p - 1..p - 1 + n].to_vec()
-        }
-        WStrInsert => {
-            let a = read_wstring(data, args[1])?.1;
-            let b = read_wstring(data, args[2])?.1;
-            let p = clamp(args[3], 0, a.len());
-            [&a[..p], &b[..], &a[p..]].concat()
-        }
-        WStrDelete | WStrReplace => {
-            let a = read_wstring(data, args[1])?.1;
-            let (b, n_cell, p_cell) = if builtin == WStrReplace {
-                (read_wstring(data, args[2])?.1, args[3], args[4])
-            } else {
-                (Vec::new(), args[2], args[3])
-            };
-            let p = clamp(p_cell, 1, a.len() + 1);
-            let n = clamp(n_cell, 0, a.len() + 1 - p);
-            [&a[..p - 1], &b[..], &a[p - 1 + n..]].concat()
-        }
+        WStrLeft => left(&read_wstring(data, args[1])?.1, args[2]),
+        WStrRight => right(&read_wstring(data, args[1])?.1, args[2]),
+        WStrMid => mid(&read_wstring(data, args[1])?.1, args[2], args[3]),
+        WStrInsert => insert(
+            &read_wstring(data, args[1])?.1,
+            &read_wstring(data, args[2])?.1,
+            args[3],
+        ),
+        WStrDelete => replace(&read_wstring(data, args[1])?.1, &[], args[2], args[3]),
+        WStrReplace => replace(
+            &read_wstring(data, args[1])?.1,
+            &read_wstring(data, args[2])?.1,
+            args[3],
+            args[4],
+        ),
         WStrFromStr => {
             // UTF-8 where valid, every other byte its Latin-1 character.
             let (_, bytes) = read_string(data, args[1])?;
@@ -1159,6 +1143,36 @@ fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Op
 }
 
 /// Clamps a signed cell into `lo..=hi`.
+/// LEFT of a STRING's bytes or a WSTRING's UTF-16 units: the first `n` (clamped).
+fn left<T: Copy>(a: &[T], n: u64) -> Vec<T> {
+    a[..clamp(n, 0, a.len())].to_vec()
+}
+
+/// RIGHT: the last `n` (clamped).
+fn right<T: Copy>(a: &[T], n: u64) -> Vec<T> {
+    a[a.len() - clamp(n, 0, a.len())..].to_vec()
+}
+
+/// MID: `n` from position `p` (1-based; both clamped).
+fn mid<T: Copy>(a: &[T], n: u64, p: u64) -> Vec<T> {
+    let p = clamp(p, 1, a.len() + 1);
+    let n = clamp(n, 0, a.len() + 1 - p);
+    a[p - 1..p - 1 + n].to_vec()
+}
+
+/// INSERT: `b` after the first `p` of `a` (clamped).
+fn insert<T: Copy>(a: &[T], b: &[T], p: u64) -> Vec<T> {
+    let p = clamp(p, 0, a.len());
+    [&a[..p], b, &a[p..]].concat()
+}
+
+/// REPLACE (DELETE: an empty `b`): `n` of `a` from position `p` (1-based) replaced by `b`.
+fn replace<T: Copy>(a: &[T], b: &[T], n: u64, p: u64) -> Vec<T> {
+    let p = clamp(p, 1, a.len() + 1);
+    let n = clamp(n, 0, a.len() + 1 - p);
+    [&a[..p - 1], b, &a[p - 1 + n..]].concat()
+}
+
 fn clamp(cell: u64, lo: usize, hi: usize) -> usize {
     let v = cell as i64;
     if v < lo as i64 {
@@ -1546,39 +1560,21 @@ pub fn string_builtin(
             a.extend(read_string(data, args[2])?.1);
             a
         }
-        StrLeft => {
-            let a = read_string(data, args[1])?.1;
-            let n = clamp(args[2], 0, a.len());
-            a[..n].to_vec()
-        }
-        StrRight => {
-            let a = read_string(data, args[1])?.1;
-            let n = clamp(args[2], 0, a.len());
-            a[a.len() - n..].to_vec()
-        }
-        StrMid => {
-            let a = read_string(data, args[1])?.1;
-            let p = clamp(args[3], 1, a.len() + 1);
-            let n = clamp(args[2], 0, a.len() + 1 - p);
-            a[p - 1..p - 1 + n].to_vec()
-        }
-        StrInsert => {
-            let a = read_string(data, args[1])?.1;
-            let b = read_string(data, args[2])?.1;
-            let p = clamp(args[3], 0, a.len());
-            [&a[..p], &b[..], &a[p..]].concat()
-        }
-        StrDelete | StrReplace => {
-            let a = read_string(data, args[1])?.1;
-            let (b, n_cell, p_cell) = if builtin == StrReplace {
-                (read_string(data, args[2])?.1, args[3], args[4])
-            } else {
-                (Vec::new(), args[2], args[3])
-            };
-            let p = clamp(p_cell, 1, a.len() + 1);
-            let n = clamp(n_cell, 0, a.len() + 1 - p);
-            [&a[..p - 1], &b[..], &a[p - 1 + n..]].concat()
-        }
+        StrLeft => left(&read_string(data, args[1])?.1, args[2]),
+        StrRight => right(&read_string(data, args[1])?.1, args[2]),
+        StrMid => mid(&read_string(data, args[1])?.1, args[2], args[3]),
+        StrInsert => insert(
+            &read_string(data, args[1])?.1,
+            &read_string(data, args[2])?.1,
+            args[3],
+        ),
+        StrDelete => replace(&read_string(data, args[1])?.1, &[], args[2], args[3]),
+        StrReplace => replace(
+            &read_string(data, args[1])?.1,
+            &read_string(data, args[2])?.1,
+            args[3],
+            args[4],
+        ),
         StrFromI64 => format!("{}", args[1] as i64).into_bytes(),
         StrFromU64 => format!("{}", args[1]).into_bytes(),
         StrFromF32 => {
