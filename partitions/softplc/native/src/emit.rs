@@ -139,28 +139,21 @@ fn binary(op: Opcode, a: &str, b: &str) -> (Option<String>, String) {
         Shl => (None, format!("ops::shl({a}, {b})")),
         ShrU => (None, format!("ops::shr_u({a}, {b})")),
         ShrS => (None, format!("ops::shr_s({a}, {b})")),
-        AddF32 | SubF32 | MulF32 | DivF32 => {
+        AddF32 | SubF32 | MulF32 | DivF32 | AddF64 | SubF64 | MulF64 | DivF64 => {
+            let (of, result) = if matches!(op, AddF32 | SubF32 | MulF32 | DivF32) {
+                ("f32_of", "real_result")
+            } else {
+                ("f64_of", "lreal_result")
+            };
             let sym = match op {
-                AddF32 => "+",
-                SubF32 => "-",
-                MulF32 => "*",
+                AddF32 | AddF64 => "+",
+                SubF32 | SubF64 => "-",
+                MulF32 | MulF64 => "*",
                 _ => "/",
             };
             (
-                (op == DivF32).then(|| format!("f32_of({b}) == 0.0")),
-                format!("ops::real_result(f32_of({a}) {sym} f32_of({b}))"),
-            )
-        }
-        AddF64 | SubF64 | MulF64 | DivF64 => {
-            let sym = match op {
-                AddF64 => "+",
-                SubF64 => "-",
-                MulF64 => "*",
-                _ => "/",
-            };
-            (
-                (op == DivF64).then(|| format!("f64_of({b}) == 0.0")),
-                format!("ops::lreal_result(f64_of({a}) {sym} f64_of({b}))"),
+                matches!(op, DivF32 | DivF64).then(|| format!("{of}({b}) == 0.0")),
+                format!("ops::{result}({of}({a}) {sym} {of}({b}))"),
             )
         }
         cmp => (None, format!("compare(Opcode::{cmp:?}, {a}, {b}) as u64")),
