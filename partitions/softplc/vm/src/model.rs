@@ -993,53 +993,136 @@ fn model_float_to_int(x: f64, ty: MemType, mode: RoundMode) -> Result<u64, Trap>
     Ok(if signed { r as i64 as u64 } else { r as u64 })
 }
 
-/// Reads the string variable at `address`: (capacity, text).
-fn read_string(data: &[u8], address: u64) -> Result<(usize, Vec<u8>), Trap> {
+/// A code unit of a string variable: a STRING's byte or a WSTRING's UTF-16 unit. The
+/// builtins that both types have are written once over it ([`text_builtin`]).
+trait Unit: Copy + Ord {
+    /// Bytes per unit in data memory.
+    const SIZE: usize;
+    fn from_le(bytes: &[u8]) -> Self;
+    fn put_le(self, out: &mut [u8]);
+    /// Whether a result shorter than its capacity ends with a NUL (STRING's does).
+    const NUL_TERMINATED: bool;
+}
+
+impl Unit for u8 {
+    const SIZE: usize = 1;
+    const NUL_TERMINATED: bool = true;
+    fn from_le(bytes: &[u8]) -> Self {
+        bytes[0]
+    }
+    fn put_le(self, out: &mut [u8]) {
+        out[0] = self;
+    }
+}
+
+impl Unit for u16 {
+    const SIZE: usize = 2;
+    const NUL_TERMINATED: bool = false;
+    fn from_le(bytes: &[u8]) -> Self {
+        u16::from_le_bytes([bytes[0], bytes[1]])
+    }
+    fn put_le(self, out: &mut [u8]) {
+        out[..2].copy_from_slice(&self.to_le_bytes());
+    }
+}
+
+/// Reads the string variable of unit `U` at `address`: (capacity, units).
+fn read_text<U: Unit>(data: &[u8], address: u64) -> Result<(usize, Vec<U>), Trap> {
     if address >= data.len() as u64 || data.len() as u64 - address < 4 {
         return Err(Trap::InvalidAddress);
     }
     let a = address as usize;
     let capacity = u16::from_le_bytes([data[a], data[a + 1]]) as usize;
     let current = u16::from_le_bytes([data[a + 2], data[a + 3]]) as usize;
-    if a + 4 + capacity > data.len() {
+    if a + 4 + U::SIZE * capacity > data.len() {
         return Err(Trap::InvalidAddress);
     }
-    let len = if current > capacity {
-        capacity
-    } else {
-        current
-    };
-    Ok((capacity, data[a + 4..a + 4 + len].to_vec()))
+    let len = current.min(capacity);
+    let units = data[a + 4..a + 4 + U::SIZE * len].chunks_exact(U::SIZE);
+    Ok((capacity, units.map(U::from_le).collect()))
+}
+
+/// Reads the STRING variable at `address`: (capacity, bytes).
+fn read_string(data: &[u8], address: u64) -> Result<(usize, Vec<u8>), Trap> {
+    read_text(data, address)
 }
 
 /// Reads the WSTRING variable at `address`: (capacity, code units).
 fn read_wstring(data: &[u8], address: u64) -> Result<(usize, Vec<u16>), Trap> {
-    if address >= data.len() as u64 || data.len() as u64 - address < 4 {
-        return Err(Trap::InvalidAddress);
-    }
-    let a = address as usize;
-    let capacity = u16::from_le_bytes([data[a], data[a + 1]]) as usize;
-    let current = u16::from_le_bytes([data[a + 2], data[a + 3]]) as usize;
-    if a + 4 + 2 * capacity > data.len() {
-        return Err(Trap::InvalidAddress);
-    }
-    let len = current.min(capacity);
-    Ok((
-        capacity,
-        (0..len)
-            .map(|i| u16::from_le_bytes([data[a + 4 + 2 * i], data[a + 5 + 2 * i]]))
-            .collect(),
-    ))
+    read_text(data, address)
 }
 
-/// The WSTRING builtins (ids 140-152), from their documentation.
-fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Option<u64>, Trap> {
+/// Stores `result` into the string variable of unit `U` at `address` (checked by the
+/// caller's read of its capacity), cut to the capacity and to the longest string.
+fn store_text<U: Unit>(data: &mut [u8], address: u64, mut result: Vec<U>) -> Result<(), Trap> {
+    let (capacity, _) = read_text::<U>(data, address)?;
+    result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
+    let a = address as usize;
+    data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
+    for (i, unit) in result.iter().enumerate() {
+        unit.put_le(&mut data[a + 4 + U::SIZE * i..]);
+    }
+    if U::NUL_TERMINATED && result.len() < capacity {
+        data[a + 4 + U::SIZE * result.len()] = 0;
+    }
+    Ok(())
+}
+
+/// The builtins STRING and WSTRING both have, by what they do.
+#[derive(Clone, Copy)]
+enum TextOp {
+    Len,
+    Find,
+    Compare,
+    Assign,
+    Concat,
+    Left,
+    Right,
+    Mid,
+    Insert,
+    Delete,
+    Replace,
+}
+
+/// `builtin` as a [`TextOp`] and whether it works on WSTRING.
+fn text_op(builtin: Builtin) -> Option<(TextOp, bool)> {
     use Builtin::*;
-    match builtin {
-        WStrLen => return Ok(Some(read_wstring(data, args[0])?.1.len() as u64)),
-        WStrFind => {
-            let (_, a) = read_wstring(data, args[0])?;
-            let (_, b) = read_wstring(data, args[1])?;
+    Some(match builtin {
+        StrLen => (TextOp::Len, false),
+        StrFind => (TextOp::Find, false),
+        StrCompare => (TextOp::Compare, false),
+        StrAssign => (TextOp::Assign, false),
+        StrConcat => (TextOp::Concat, false),
+        StrLeft => (TextOp::Left, false),
+        StrRight => (TextOp::Right, false),
+        StrMid => (TextOp::Mid, false),
+        StrInsert => (TextOp::Insert, false),
+        StrDelete => (TextOp::Delete, false),
+        StrReplace => (TextOp::Replace, false),
+        WStrLen => (TextOp::Len, true),
+        WStrFind => (TextOp::Find, true),
+        WStrCompare => (TextOp::Compare, true),
+        WStrAssign => (TextOp::Assign, true),
+        WStrConcat => (TextOp::Concat, true),
+        WStrLeft => (TextOp::Left, true),
+        WStrRight => (TextOp::Right, true),
+        WStrMid => (TextOp::Mid, true),
+        WStrInsert => (TextOp::Insert, true),
+        WStrDelete => (TextOp::Delete, true),
+        WStrReplace => (TextOp::Replace, true),
+        _ => return None,
+    })
+}
+
+/// A builtin that STRING and WSTRING share, on strings of unit `U`, from the builtins'
+/// documentation: LEN, FIND (1-based, 0 when absent or the pattern is empty), the
+/// three-way compare, and the edits whose result goes to the string at `args[0]`.
+fn text_builtin<U: Unit>(op: TextOp, args: &[u64], data: &mut [u8]) -> Result<Option<u64>, Trap> {
+    let text = |i: usize| read_text::<U>(data, args[i]).map(|(_, units)| units);
+    let result = match op {
+        TextOp::Len => return Ok(Some(text(0)?.len() as u64)),
+        TextOp::Find => {
+            let (a, b) = (text(0)?, text(1)?);
             let found = if b.is_empty() || b.len() > a.len() {
                 0
             } else {
@@ -1049,96 +1132,71 @@ fn wstring_builtin(builtin: Builtin, args: &[u64], data: &mut [u8]) -> Result<Op
             };
             return Ok(Some(found as u64));
         }
-        WStrCompare => {
-            let (_, a) = read_wstring(data, args[0])?;
-            let (_, b) = read_wstring(data, args[1])?;
-            let r: i64 = if a < b {
-                -1
-            } else if a > b {
-                1
-            } else {
-                0
-            };
-            return Ok(Some(r as u64));
+        TextOp::Compare => {
+            let order = text(0)?.cmp(&text(1)?);
+            return Ok(Some(order as i8 as i64 as u64));
         }
-        StrFromWStr => {
-            let (capacity, _) = read_string(data, args[0])?;
-            let (_, units) = read_wstring(data, args[1])?;
-            let text = String::from_utf16_lossy(&units);
-            let room = capacity.min(crate::builtins::MAX_STRING_LEN);
-            let mut out: Vec<u8> = Vec::new();
-            for c in text.chars() {
-                let mut utf8 = [0u8; 4];
-                let bytes = c.encode_utf8(&mut utf8).as_bytes();
-                if out.len() + bytes.len() > room {
-                    break;
-                }
-                out.extend_from_slice(bytes);
-            }
-            let a = args[0] as usize;
-            data[a + 2..a + 4].copy_from_slice(&(out.len() as u16).to_le_bytes());
-            data[a + 4..a + 4 + out.len()].copy_from_slice(&out);
-            // A STRING result shorter than its capacity ends with a NUL.
-            if out.len() < capacity {
-                data[a + 4 + out.len()] = 0;
-            }
-            return Ok(None);
-        }
-        _ => {}
-    }
-    let (capacity, _) = read_wstring(data, args[0])?;
-    let mut result: Vec<u16> = match builtin {
-        WStrAssign => read_wstring(data, args[1])?.1,
-        WStrConcat => {
-            let mut a = read_wstring(data, args[1])?.1;
-            a.extend(read_wstring(data, args[2])?.1);
+        TextOp::Assign => text(1)?,
+        TextOp::Concat => {
+            let mut a = text(1)?;
+            a.extend(text(2)?);
             a
         }
-        WStrLeft => left(&read_wstring(data, args[1])?.1, args[2]),
-        WStrRight => right(&read_wstring(data, args[1])?.1, args[2]),
-        WStrMid => mid(&read_wstring(data, args[1])?.1, args[2], args[3]),
-        WStrInsert => insert(
-            &read_wstring(data, args[1])?.1,
-            &read_wstring(data, args[2])?.1,
-            args[3],
-        ),
-        WStrDelete => replace(&read_wstring(data, args[1])?.1, &[], args[2], args[3]),
-        WStrReplace => replace(
-            &read_wstring(data, args[1])?.1,
-            &read_wstring(data, args[2])?.1,
-            args[3],
-            args[4],
-        ),
-        WStrFromStr => {
-            // UTF-8 where valid, every other byte its Latin-1 character.
-            let (_, bytes) = read_string(data, args[1])?;
-            let mut out = Vec::new();
-            let mut rest = &bytes[..];
-            while !rest.is_empty() {
-                match core::str::from_utf8(rest) {
-                    Ok(text) => {
-                        out.extend(text.encode_utf16());
-                        break;
-                    }
-                    Err(e) => {
-                        let (valid, after) = rest.split_at(e.valid_up_to());
-                        out.extend(core::str::from_utf8(valid).unwrap_or("").encode_utf16());
-                        let bad = e.error_len().unwrap_or(after.len());
-                        out.extend(after[..bad].iter().map(|&b| b as u16));
-                        rest = &after[bad..];
-                    }
-                }
-            }
-            out
-        }
-        _ => unreachable!("WSTRING builtins only"),
+        TextOp::Left => left(&text(1)?, args[2]),
+        TextOp::Right => right(&text(1)?, args[2]),
+        TextOp::Mid => mid(&text(1)?, args[2], args[3]),
+        TextOp::Insert => insert(&text(1)?, &text(2)?, args[3]),
+        TextOp::Delete => replace(&text(1)?, &[], args[2], args[3]),
+        TextOp::Replace => replace(&text(1)?, &text(2)?, args[3], args[4]),
     };
-    result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
-    let a = args[0] as usize;
-    data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
-    for (i, unit) in result.iter().enumerate() {
-        data[a + 4 + 2 * i..a + 6 + 2 * i].copy_from_slice(&unit.to_le_bytes());
+    store_text(data, args[0], result)?;
+    Ok(None)
+}
+
+/// The conversions between STRING and WSTRING (ids 151, 152).
+fn wstring_conversion(
+    builtin: Builtin,
+    args: &[u64],
+    data: &mut [u8],
+) -> Result<Option<u64>, Trap> {
+    if builtin == Builtin::StrFromWStr {
+        let (capacity, _) = read_string(data, args[0])?;
+        let (_, units) = read_wstring(data, args[1])?;
+        let text = String::from_utf16_lossy(&units);
+        let room = capacity.min(crate::builtins::MAX_STRING_LEN);
+        // Whole characters only: a character that does not fit ends the text.
+        let mut out: Vec<u8> = Vec::new();
+        for c in text.chars() {
+            let mut utf8 = [0u8; 4];
+            let bytes = c.encode_utf8(&mut utf8).as_bytes();
+            if out.len() + bytes.len() > room {
+                break;
+            }
+            out.extend_from_slice(bytes);
+        }
+        store_text(data, args[0], out)?;
+        return Ok(None);
     }
+    // STRING_TO_WSTRING: UTF-8 where valid, every other byte its Latin-1 character.
+    let (_, bytes) = read_string(data, args[1])?;
+    let mut out = Vec::new();
+    let mut rest = &bytes[..];
+    while !rest.is_empty() {
+        match core::str::from_utf8(rest) {
+            Ok(text) => {
+                out.extend(text.encode_utf16());
+                break;
+            }
+            Err(e) => {
+                let (valid, after) = rest.split_at(e.valid_up_to());
+                out.extend(core::str::from_utf8(valid).unwrap_or("").encode_utf16());
+                let bad = e.error_len().unwrap_or(after.len());
+                out.extend(after[..bad].iter().map(|&b| b as u16));
+                rest = &after[bad..];
+            }
+        }
+    }
+    store_text(data, args[0], out)?;
     Ok(None)
 }
 
@@ -1451,37 +1509,15 @@ pub fn string_builtin(
     data: &mut [u8],
 ) -> Result<Option<u64>, Trap> {
     use Builtin::*;
-    if (140..=152).contains(&(builtin as u16)) {
-        return wstring_builtin(builtin, args, data);
+    match text_op(builtin) {
+        Some((op, false)) => return text_builtin::<u8>(op, args, data),
+        Some((op, true)) => return text_builtin::<u16>(op, args, data),
+        None => {}
+    }
+    if matches!(builtin, StrFromWStr | WStrFromStr) {
+        return wstring_conversion(builtin, args, data);
     }
     match builtin {
-        StrLen => return Ok(Some(read_string(data, args[0])?.1.len() as u64)),
-        StrFind => {
-            let (_, a) = read_string(data, args[0])?;
-            let (_, b) = read_string(data, args[1])?;
-            let mut found = 0;
-            if !b.is_empty() && b.len() <= a.len() {
-                for start in 0..=a.len() - b.len() {
-                    if a[start..start + b.len()] == b[..] {
-                        found = start + 1;
-                        break;
-                    }
-                }
-            }
-            return Ok(Some(found as u64));
-        }
-        StrCompare => {
-            let (_, a) = read_string(data, args[0])?;
-            let (_, b) = read_string(data, args[1])?;
-            let r: i64 = if a < b {
-                -1
-            } else if a > b {
-                1
-            } else {
-                0
-            };
-            return Ok(Some(r as u64));
-        }
         StrToI64 => {
             let (_, a) = read_string(data, args[0])?;
             return parse_integer(&a)
@@ -1552,29 +1588,9 @@ pub fn string_builtin(
         }
         _ => {}
     }
-    let (capacity, _) = read_string(data, args[0])?;
-    let mut result: Vec<u8> = match builtin {
-        StrAssign => read_string(data, args[1])?.1,
-        StrConcat => {
-            let mut a = read_string(data, args[1])?.1;
-            a.extend(read_string(data, args[2])?.1);
-            a
-        }
-        StrLeft => left(&read_string(data, args[1])?.1, args[2]),
-        StrRight => right(&read_string(data, args[1])?.1, args[2]),
-        StrMid => mid(&read_string(data, args[1])?.1, args[2], args[3]),
-        StrInsert => insert(
-            &read_string(data, args[1])?.1,
-            &read_string(data, args[2])?.1,
-            args[3],
-        ),
-        StrDelete => replace(&read_string(data, args[1])?.1, &[], args[2], args[3]),
-        StrReplace => replace(
-            &read_string(data, args[1])?.1,
-            &read_string(data, args[2])?.1,
-            args[3],
-            args[4],
-        ),
+    // The target is checked before the value is made (a bad target traps first).
+    read_string(data, args[0])?;
+    let result: Vec<u8> = match builtin {
         StrFromI64 => format!("{}", args[1] as i64).into_bytes(),
         StrFromU64 => format!("{}", args[1]).into_bytes(),
         StrFromF32 => {
@@ -1590,12 +1606,6 @@ pub fn string_builtin(
         }
         _ => unreachable!("math builtins are not string builtins"),
     };
-    result.truncate(crate::builtins::MAX_STRING_LEN.min(capacity));
-    let a = args[0] as usize;
-    data[a + 2..a + 4].copy_from_slice(&(result.len() as u16).to_le_bytes());
-    data[a + 4..a + 4 + result.len()].copy_from_slice(&result);
-    if result.len() < capacity {
-        data[a + 4 + result.len()] = 0;
-    }
+    store_text(data, args[0], result)?;
     Ok(None)
 }
