@@ -1,6 +1,7 @@
 //! In-crate tests (they need the builder and the model, which are compiled for tests).
 
 pub(crate) mod differential;
+mod dispatch;
 mod fuzz;
 mod library;
 mod ops;
