@@ -100,6 +100,29 @@ fn start<T>(s: &Spanned<T>) -> usize {
     s.span().start
 }
 
+/// One entry of a list or table of the description: its place in the list, its key path
+/// and where it starts in the source.
+struct Entry<I> {
+    index: usize,
+    path: KeyPath,
+    at: usize,
+    item: I,
+}
+
+/// The entries of the array `items` at `base` (key paths `base[i]`).
+fn array_entries<'d, T>(items: &'d [Spanned<T>], base: &KeyPath) -> Vec<Entry<&'d Spanned<T>>> {
+    items
+        .iter()
+        .enumerate()
+        .map(|(index, item)| Entry {
+            index,
+            path: base.index(index),
+            at: start(item),
+            item,
+        })
+        .collect()
+}
+
 fn list<T: Copy>(items: &[T], name: impl Fn(T) -> &'static str) -> String {
     items
         .iter()
@@ -126,6 +149,23 @@ fn shown(value: &Scalar) -> String {
 impl Validator<'_, '_> {
     fn error(&mut self, at: usize, path: &KeyPath, message: impl core::fmt::Display) {
         self.r.error(at, path, message);
+    }
+
+    /// `entries`, of which at most `max` are allowed: the first one past `max` is reported
+    /// as "too many {what} (at most {max}{why})". All are returned, so every entry is still
+    /// checked and one run reports every other error too.
+    fn at_most<I>(
+        &mut self,
+        entries: Vec<Entry<I>>,
+        max: usize,
+        what: &str,
+        why: &str,
+    ) -> Vec<Entry<I>> {
+        if let Some(first_too_many) = entries.get(max) {
+            let (at, path) = (first_too_many.at, first_too_many.path.clone());
+            self.error(at, &path, format!("too many {what} (at most {max}{why})"));
+        }
+        entries
     }
 
     fn size(&mut self, value: &Spanned<Scalar>, path: &KeyPath) -> Option<u64> {
@@ -273,16 +313,13 @@ impl Validator<'_, '_> {
 
     fn segments(&mut self, doc: &schema::Document) -> Vec<(Segment, usize)> {
         let mut out: Vec<(Segment, usize)> = Vec::new();
-        for (i, seg) in doc.shared_memory.iter().enumerate() {
-            let path = KeyPath::root().key("shared_memory").index(i);
+        let base = KeyPath::root().key("shared_memory");
+        let entries = array_entries(&doc.shared_memory, &base);
+        for Entry {
+            path, item: seg, ..
+        } in self.at_most(entries, MAX_SEGMENTS, "shared memory segments", "")
+        {
             let raw = seg.get_ref();
-            if i == MAX_SEGMENTS {
-                self.error(
-                    start(seg),
-                    &path,
-                    format!("too many shared memory segments (at most {MAX_SEGMENTS})"),
-                );
-            }
             let name_path = path.key("name");
             self.name(&raw.name, &name_path, NAME_MAX, "segment");
             if let Some((_, at)) = out.iter().find(|(s, _)| s.name == *raw.name.get_ref()) {
@@ -321,19 +358,31 @@ impl Validator<'_, '_> {
         let mut irq_seen: Vec<(u8, usize, usize)> = Vec::new();
         let mut attachment_total = 0;
         let base = KeyPath::root().key("partitions");
-        for (index, (key, value)) in in_source_order(&doc.partitions).into_iter().enumerate() {
-            let path = base.key(key.get_ref());
+        let entries = in_source_order(&doc.partitions)
+            .into_iter()
+            .enumerate()
+            .map(|(index, (key, value))| Entry {
+                index,
+                path: base.key(key.get_ref()),
+                at: start(key),
+                item: (key, value),
+            })
+            .collect();
+        let entries = self.at_most(
+            entries,
+            MAX_PARTITIONS,
+            "partitions",
+            ": the kernel has 16 resource partitions and syssw keeps one",
+        );
+        for Entry {
+            index,
+            path,
+            item: (key, value),
+            ..
+        } in entries
+        {
             let raw = value.get_ref();
             let name = key.get_ref().clone();
-            if index == MAX_PARTITIONS {
-                self.error(
-                    start(key),
-                    &path,
-                    format!(
-                        "too many partitions (at most {MAX_PARTITIONS}: the kernel has 16 resource partitions and syssw keeps one)"
-                    ),
-                );
-            }
             self.name(key, &path, PARTITION_NAME_MAX, "partition");
 
             let image_path = path.key("image");
@@ -1464,6 +1513,27 @@ impl Validator<'_, '_> {
         }
     }
 
+    /// The `kind` of a port or channel (`what`): "sampling" or "queuing".
+    fn port_kind(
+        &mut self,
+        kind: &Spanned<String>,
+        path: &KeyPath,
+        what: &str,
+    ) -> Option<PortKind> {
+        let parsed = PortKind::from_name(kind.get_ref());
+        if parsed.is_none() {
+            self.error(
+                start(kind),
+                &path.key("kind"),
+                format!(
+                    "unknown {what} kind {:?}: expected \"sampling\" or \"queuing\"",
+                    kind.get_ref()
+                ),
+            );
+        }
+        parsed
+    }
+
     fn port(
         &mut self,
         port: &Spanned<schema::Port>,
@@ -1471,17 +1541,7 @@ impl Validator<'_, '_> {
         path: &KeyPath,
     ) -> (Port, bool) {
         let raw = port.get_ref();
-        let kind = PortKind::from_name(raw.kind.get_ref());
-        if kind.is_none() {
-            self.error(
-                start(&raw.kind),
-                &path.key("kind"),
-                format!(
-                    "unknown port kind {:?}: expected \"sampling\" or \"queuing\"",
-                    raw.kind.get_ref()
-                ),
-            );
-        }
+        let kind = self.port_kind(&raw.kind, path, "port");
         let direction = Direction::from_name(raw.direction.get_ref());
         if direction.is_none() {
             self.error(
@@ -1595,17 +1655,21 @@ impl Validator<'_, '_> {
         let mut names: Vec<(String, usize)> = Vec::new();
         // Partitions some window names (even a window with other errors).
         let mut named = vec![false; partitions.len()];
-        for (i, (path, schedule)) in entries.iter().enumerate() {
+        let entries = self.at_most(
+            entries,
+            MAX_SCHEDULES,
+            "schedules",
+            ", the kernel's schedule slots",
+        );
+        for Entry {
+            index: i,
+            path,
+            item: schedule,
+            ..
+        } in &entries
+        {
+            let (i, schedule) = (*i, *schedule);
             let raw = schedule.get_ref();
-            if i == MAX_SCHEDULES {
-                self.error(
-                    start(schedule),
-                    path,
-                    format!(
-                        "too many schedules (at most {MAX_SCHEDULES}, the kernel's schedule slots)"
-                    ),
-                );
-            }
             let name = self.schedule_name(i, path, schedule, &mut names);
             let mut windows = self.schedule_windows(path, raw, partitions, times, &mut named);
             let major_frame = self.major_frame(path, schedule, &windows);
@@ -1643,9 +1707,9 @@ impl Validator<'_, '_> {
     fn schedule_entries<'d>(
         &mut self,
         doc: &'d schema::Document,
-    ) -> Vec<(KeyPath, &'d Spanned<schema::Schedule>)> {
+    ) -> Vec<Entry<&'d Spanned<schema::Schedule>>> {
         let root = KeyPath::root();
-        let mut entries: Vec<(KeyPath, &Spanned<schema::Schedule>)> = Vec::new();
+        let mut entries = Vec::new();
         if let Some(single) = &doc.schedule {
             if !doc.schedules.is_empty() {
                 self.error(
@@ -1654,10 +1718,16 @@ impl Validator<'_, '_> {
                     "give either one [schedule] or a list of [[schedules]], not both",
                 );
             }
-            entries.push((root.key("schedule"), single));
+            entries.push(Entry {
+                index: 0,
+                path: root.key("schedule"),
+                at: start(single),
+                item: single,
+            });
         }
-        for (i, s) in doc.schedules.iter().enumerate() {
-            entries.push((root.key("schedules").index(i), s));
+        for entry in array_entries(&doc.schedules, &root.key("schedules")) {
+            let index = entries.len();
+            entries.push(Entry { index, ..entry });
         }
         entries
     }
@@ -1713,16 +1783,15 @@ impl Validator<'_, '_> {
         named: &mut [bool],
     ) -> Vec<(u64, u64, usize, usize)> {
         let mut windows: Vec<(u64, u64, usize, usize)> = Vec::new();
-        for (j, window) in raw.windows.iter().enumerate() {
-            let wpath = path.key("windows").index(j);
+        let entries = array_entries(&raw.windows, &path.key("windows"));
+        for Entry {
+            index: j,
+            path: wpath,
+            item: window,
+            ..
+        } in self.at_most(entries, MAX_WINDOWS, "windows", " per schedule")
+        {
             let w = window.get_ref();
-            if j == MAX_WINDOWS {
-                self.error(
-                    start(window),
-                    &wpath,
-                    format!("too many windows (at most {MAX_WINDOWS} per schedule)"),
-                );
-            }
             let part_path = wpath.key("partition");
             let partition = partitions
                 .iter()
@@ -2037,27 +2106,16 @@ impl Validator<'_, '_> {
     ) -> Vec<Channel> {
         let mut channels: Vec<Channel> = Vec::new();
         let mut names: Vec<(String, usize)> = Vec::new();
-        for (c, channel) in doc.channels.iter().enumerate() {
-            let path = KeyPath::root().key("channels").index(c);
+        let entries = array_entries(&doc.channels, &KeyPath::root().key("channels"));
+        for Entry {
+            index: c,
+            path,
+            item: channel,
+            ..
+        } in self.at_most(entries, MAX_CHANNELS, "channels", "")
+        {
             let raw = channel.get_ref();
-            if c == MAX_CHANNELS {
-                self.error(
-                    start(channel),
-                    &path,
-                    format!("too many channels (at most {MAX_CHANNELS})"),
-                );
-            }
-            let kind = PortKind::from_name(raw.kind.get_ref());
-            if kind.is_none() {
-                self.error(
-                    start(&raw.kind),
-                    &path.key("kind"),
-                    format!(
-                        "unknown channel kind {:?}: expected \"sampling\" or \"queuing\"",
-                        raw.kind.get_ref()
-                    ),
-                );
-            }
+            let kind = self.port_kind(&raw.kind, &path, "channel");
             let (name, name_at, name_path) = match &raw.name {
                 Some(n) => {
                     self.name(n, &path.key("name"), NAME_MAX, "channel");
