@@ -105,6 +105,8 @@
 
 #![no_std]
 
+pub mod session;
+
 use plc_vm::builtins::NS_PER_DAY;
 use plc_vm::image::VarType;
 use plc_vm::isa::TimeKind;
