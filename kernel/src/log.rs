@@ -1,4 +1,4 @@
-//! The kernel log on COM1. Serial line format (an interface, see README):
+//! The kernel log on COM1. Serial line format (an interface, see docs/interfaces.md):
 //! `[SSSS.UUUUUU] text` — seconds and microseconds since kernel entry, then the message.
 //!
 //! Writing the log never makes the kernel wait for the UART (at 115,200 baud a 512-byte

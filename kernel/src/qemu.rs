@@ -1,6 +1,6 @@
 //! Ending a run under QEMU through the isa-debug-exit device (port 0xf4).
 //!
-//! Convention (an interface, see README): 0x10 = success (QEMU exits 33), 0x11 = failure
+//! Convention (an interface, see docs/interfaces.md): 0x10 = success (QEMU exits 33), 0x11 = failure
 //! (QEMU exits 35). On a machine without the device the write does nothing and we halt.
 
 /// The two outcomes a run can report.

@@ -6,7 +6,7 @@ use scenarios::{boot, check};
 /// The victim's window-start lateness asserted while an attacker runs in the window just
 /// before its own, on virtual time: the quiet case is about 2 us (the timer interrupt, the
 /// window switch and the wake-up from `sleep_until`); the margin is what the issue of
-/// bounded kernel paths allows any partition to add (50 us). Measured per attack: README,
+/// bounded kernel paths allows any partition to add (50 us). Measured per attack: docs/isolation.md,
 /// "Isolation guarantees" (from 5.5 us after a spinning partition to 39 us after a
 /// background restart loop).
 const LATENESS_BOUND_NS: u64 = 52_000;

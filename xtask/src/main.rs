@@ -1,4 +1,4 @@
-//! `cargo xtask` — build, run and test the system. See README.md for the commands.
+//! `cargo xtask` — build, run and test the system. See docs/commands.md for the commands.
 //!
 //! Exit codes: 0 success; 1 failure (build error, failed test, crashed or hung system).
 
