@@ -596,6 +596,8 @@ fn guest_metrics(
         .map(|g| g.init.iter().skip(1).cloned().collect())
         .unwrap_or_default();
     let program = xtask::linux::build("linux-bench")?;
+    // The macro workloads run `/bin/busybox` (gzip, sh) on the host leg as in the guest.
+    tools::ensure_busybox()?;
     eprintln!("xtask: running linux-bench on the host");
     let out = std::process::Command::new(&program)
         .args(&args)
