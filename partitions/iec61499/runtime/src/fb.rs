@@ -1,0 +1,187 @@
+//! What a function-block type is to the resource: its interface and how it reacts to an
+//! input event or a timer.
+
+use crate::value::{DataType, Value};
+use alloc::string::String;
+use alloc::vec::Vec;
+
+/// An event of an interface with the variables it carries (indices into the inputs for an
+/// input event, into the outputs for an output event).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct EventSpec {
+    pub name: String,
+    pub with: Vec<usize>,
+}
+
+/// A data input or output.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct VarSpec {
+    pub name: String,
+    pub ty: DataType,
+    /// Elements of an array, `None` for a scalar.
+    pub array: Option<usize>,
+}
+
+impl VarSpec {
+    /// The variable's initial value.
+    pub fn initial(&self) -> Value {
+        match self.array {
+            Some(n) => Value::Array((0..n).map(|_| self.ty.zero()).collect()),
+            None => self.ty.zero(),
+        }
+    }
+}
+
+/// The interface of a function-block type.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Interface {
+    pub event_inputs: Vec<EventSpec>,
+    pub event_outputs: Vec<EventSpec>,
+    pub inputs: Vec<VarSpec>,
+    pub outputs: Vec<VarSpec>,
+}
+
+/// `(name, WITH names)` of an event, as [`Interface::build`] takes it.
+pub type EventDecl<'a> = (&'a str, &'a [&'a str]);
+/// `(name, type, array elements)` of a variable.
+pub type VarDecl<'a> = (&'a str, DataType, Option<usize>);
+
+impl Interface {
+    /// An interface from names; WITH names that are not variables of the event's
+    /// direction are an error naming them.
+    pub fn build(
+        event_inputs: &[EventDecl<'_>],
+        event_outputs: &[EventDecl<'_>],
+        inputs: &[VarDecl<'_>],
+        outputs: &[VarDecl<'_>],
+    ) -> Result<Self, String> {
+        let vars = |list: &[VarDecl<'_>]| -> Vec<VarSpec> {
+            list.iter()
+                .map(|(name, ty, array)| VarSpec {
+                    name: (*name).into(),
+                    ty: *ty,
+                    array: *array,
+                })
+                .collect()
+        };
+        let (inputs, outputs) = (vars(inputs), vars(outputs));
+        let events = |list: &[EventDecl<'_>], vars: &[VarSpec]| -> Result<Vec<EventSpec>, String> {
+            list.iter()
+                .map(|(name, with)| {
+                    let with = with
+                        .iter()
+                        .map(|w| {
+                            vars.iter().position(|v| v.name == *w).ok_or_else(|| {
+                                alloc::format!("event {name}: WITH `{w}` is no variable")
+                            })
+                        })
+                        .collect::<Result<_, _>>()?;
+                    Ok(EventSpec {
+                        name: (*name).into(),
+                        with,
+                    })
+                })
+                .collect()
+        };
+        Ok(Interface {
+            event_inputs: events(event_inputs, &inputs)?,
+            event_outputs: events(event_outputs, &outputs)?,
+            inputs,
+            outputs,
+        })
+    }
+
+    pub fn event_input(&self, name: &str) -> Option<usize> {
+        self.event_inputs.iter().position(|e| e.name == name)
+    }
+
+    pub fn event_output(&self, name: &str) -> Option<usize> {
+        self.event_outputs.iter().position(|e| e.name == name)
+    }
+
+    pub fn input(&self, name: &str) -> Option<usize> {
+        self.inputs.iter().position(|v| v.name == name)
+    }
+
+    pub fn output(&self, name: &str) -> Option<usize> {
+        self.outputs.iter().position(|v| v.name == name)
+    }
+
+    /// Whether some input event carries input `var`.
+    pub fn input_is_with(&self, var: usize) -> bool {
+        self.event_inputs.iter().any(|e| e.with.contains(&var))
+    }
+}
+
+/// A timer request of an FB: arm timer `id` for the absolute instant `at` (ns), or disarm it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TimerRequest {
+    Arm { id: u8, at: i64 },
+    Disarm { id: u8 },
+}
+
+/// What an FB may do while it reacts: set its outputs, send output events (in order; each
+/// carries the outputs as they are when it is sent), arm and disarm its timers, read the
+/// time.
+pub struct Context<'a> {
+    pub(crate) now: i64,
+    pub(crate) outputs: &'a mut [Value],
+    /// Output events sent, each with the outputs at the moment it was sent.
+    pub(crate) sent: &'a mut Vec<(usize, Vec<Value>)>,
+    pub(crate) timers: &'a mut Vec<TimerRequest>,
+}
+
+impl Context<'_> {
+    /// The instant the chain runs for: the external event's time, or a timer's deadline.
+    pub fn now(&self) -> i64 {
+        self.now
+    }
+
+    /// Output `index` as it is now.
+    pub fn output(&self, index: usize) -> &Value {
+        &self.outputs[index]
+    }
+
+    pub fn set(&mut self, index: usize, value: Value) {
+        self.outputs[index] = value;
+    }
+
+    /// Sends output event `output`; its receivers get the outputs as they are now.
+    pub fn send(&mut self, output: usize) {
+        self.sent.push((output, self.outputs.to_vec()));
+    }
+
+    /// Arms timer `id` for the absolute instant `at` (re-arming replaces the deadline).
+    pub fn arm(&mut self, id: u8, at: i64) {
+        self.timers.push(TimerRequest::Arm { id, at });
+    }
+
+    pub fn disarm(&mut self, id: u8) {
+        self.timers.push(TimerRequest::Disarm { id });
+    }
+}
+
+/// Why the resource calls [`FunctionBlock::restart`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Restart {
+    Cold,
+    Warm,
+    Stop,
+}
+
+/// A function-block instance's behaviour.
+pub trait FunctionBlock {
+    fn interface(&self) -> &Interface;
+
+    /// Input event `event` arrived; `inputs` hold the values delivered with it.
+    fn event(&mut self, event: usize, inputs: &[Value], ctx: &mut Context<'_>);
+
+    /// Timer `id` is due (at `ctx.now()`, its deadline).
+    fn timer(&mut self, _id: u8, _inputs: &[Value], _ctx: &mut Context<'_>) {}
+
+    /// The resource starts (cold or warm) or stops.
+    fn restart(&mut self, _kind: Restart, _ctx: &mut Context<'_>) {}
+
+    /// Back to the state of a new instance (the resource's reset).
+    fn reset(&mut self);
+}

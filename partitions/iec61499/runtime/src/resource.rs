@@ -1,0 +1,487 @@
+//! A resource: FB instances, connections, the event queue and the timers, executed as the
+//! crate documentation says.
+
+use crate::fb::{Context, FunctionBlock, Restart, TimerRequest};
+use crate::value::Value;
+use alloc::boxed::Box;
+use alloc::collections::VecDeque;
+use alloc::format;
+use alloc::string::String;
+use alloc::vec::Vec;
+
+/// The resource's limits, from the configuration.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Limits {
+    /// Events the queue holds.
+    pub queue: usize,
+    /// Events one chain may deliver.
+    pub chain_events: usize,
+    pub instances: usize,
+    pub connections: usize,
+    pub timers: usize,
+}
+
+impl Default for Limits {
+    fn default() -> Self {
+        Limits {
+            queue: 256,
+            chain_events: 10_000,
+            instances: 256,
+            connections: 1024,
+            timers: 256,
+        }
+    }
+}
+
+/// Why the resource stopped.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Fault {
+    /// The queue was full when `fb` sent `event`.
+    QueueOverflow { fb: String, event: String },
+    /// A chain delivered more than [`Limits::chain_events`] events; the last was `event`
+    /// to `fb`.
+    ChainTooLong { fb: String, event: String },
+    /// More timers armed than [`Limits::timers`]; `fb` armed the one too many.
+    TooManyTimers { fb: String },
+}
+
+impl core::fmt::Display for Fault {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Fault::QueueOverflow { fb, event } => {
+                write!(f, "event queue full: {fb}.{event} could not be queued")
+            }
+            Fault::ChainTooLong { fb, event } => {
+                write!(f, "event chain too long (an event loop?) at {fb}.{event}")
+            }
+            Fault::TooManyTimers { fb } => write!(f, "too many timers armed ({fb})"),
+        }
+    }
+}
+
+/// Why a deployment request was refused (nothing was changed).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum DeployError {
+    /// An instance of this name exists.
+    Duplicate(String),
+    /// No such instance or port (`FB.PORT`).
+    NotFound(String),
+    /// The endpoints do not fit (an output to an output, different types).
+    Mismatch(String),
+    /// A limit of [`Limits`] is reached.
+    Limit(&'static str),
+    /// An input with a data connection takes no parameter.
+    Connected(String),
+}
+
+impl core::fmt::Display for DeployError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            DeployError::Duplicate(n) => write!(f, "an instance named {n} exists"),
+            DeployError::NotFound(p) => write!(f, "no such instance or port: {p}"),
+            DeployError::Mismatch(m) => write!(f, "cannot connect: {m}"),
+            DeployError::Limit(what) => write!(f, "too many {what}"),
+            DeployError::Connected(p) => write!(f, "{p} has a data connection"),
+        }
+    }
+}
+
+struct Instance {
+    name: String,
+    fb: Box<dyn FunctionBlock>,
+    inputs: Vec<Value>,
+    outputs: Vec<Value>,
+}
+
+/// `(instance, port index)`.
+type End = (usize, usize);
+
+struct Queued {
+    to: End,
+    /// The destination's inputs sampled when the event was sent.
+    data: Vec<(usize, Value)>,
+}
+
+struct Timer {
+    instance: usize,
+    id: u8,
+    at: i64,
+    /// Arming order, for ties.
+    seq: u64,
+}
+
+/// A resource of an IEC 61499 device.
+pub struct Resource {
+    limits: Limits,
+    instances: Vec<Instance>,
+    /// In creation order: the fan-out order.
+    event_connections: Vec<(End, End)>,
+    /// `(source output, destination input)`.
+    data_connections: Vec<(End, End)>,
+    /// Inputs set by [`Resource::write`], applied again by a reset.
+    parameters: Vec<(End, Value)>,
+    queue: VecDeque<Queued>,
+    timers: Vec<Timer>,
+    timer_seq: u64,
+    fault: Option<Fault>,
+    /// Events delivered since the resource was created (a statistic).
+    delivered: u64,
+}
+
+impl Resource {
+    pub fn new(limits: Limits) -> Self {
+        Resource {
+            limits,
+            instances: Vec::new(),
+            event_connections: Vec::new(),
+            data_connections: Vec::new(),
+            parameters: Vec::new(),
+            queue: VecDeque::new(),
+            timers: Vec::new(),
+            timer_seq: 0,
+            fault: None,
+            delivered: 0,
+        }
+    }
+
+    /// Creates instance `name` of `fb`; returns its index.
+    pub fn create(&mut self, name: &str, fb: Box<dyn FunctionBlock>) -> Result<usize, DeployError> {
+        if self.instance(name).is_some() {
+            return Err(DeployError::Duplicate(name.into()));
+        }
+        if self.instances.len() >= self.limits.instances {
+            return Err(DeployError::Limit("instances"));
+        }
+        let interface = fb.interface();
+        let inputs = interface.inputs.iter().map(|v| v.initial()).collect();
+        let outputs = interface.outputs.iter().map(|v| v.initial()).collect();
+        self.instances.push(Instance {
+            name: name.into(),
+            fb,
+            inputs,
+            outputs,
+        });
+        Ok(self.instances.len() - 1)
+    }
+
+    fn instance(&self, name: &str) -> Option<usize> {
+        self.instances.iter().position(|i| i.name == name)
+    }
+
+    /// `FB.PORT` → (instance, name of the port).
+    fn split<'p>(&self, path: &'p str) -> Result<(usize, &'p str), DeployError> {
+        let (fb, port) = path
+            .split_once('.')
+            .ok_or_else(|| DeployError::NotFound(path.into()))?;
+        let i = self
+            .instance(fb)
+            .ok_or_else(|| DeployError::NotFound(path.into()))?;
+        Ok((i, port))
+    }
+
+    fn port(
+        &self,
+        path: &str,
+        find: impl Fn(&crate::fb::Interface, &str) -> Option<usize>,
+    ) -> Result<End, DeployError> {
+        let (i, port) = self.split(path)?;
+        let index = find(self.instances[i].fb.interface(), port)
+            .ok_or_else(|| DeployError::NotFound(path.into()))?;
+        Ok((i, index))
+    }
+
+    fn connections(&self) -> usize {
+        self.event_connections.len() + self.data_connections.len()
+    }
+
+    /// Connects output event `from` (`FB.EO`) to input event `to` (`FB.EI`).
+    pub fn connect_event(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
+        let source = self.port(from, |i, p| i.event_output(p))?;
+        let destination = self.port(to, |i, p| i.event_input(p))?;
+        if self.connections() >= self.limits.connections {
+            return Err(DeployError::Limit("connections"));
+        }
+        self.event_connections.push((source, destination));
+        Ok(())
+    }
+
+    /// Connects data output `from` (`FB.OUT`) to data input `to` (`FB.IN`; an input has at
+    /// most one source).
+    pub fn connect_data(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
+        let source = self.port(from, |i, p| i.output(p))?;
+        let destination = self.port(to, |i, p| i.input(p))?;
+        let out = &self.instances[source.0].fb.interface().outputs[source.1];
+        let input = &self.instances[destination.0].fb.interface().inputs[destination.1];
+        if (out.ty, out.array) != (input.ty, input.array) {
+            return Err(DeployError::Mismatch(format!(
+                "{from} is {:?}, {to} is {:?}",
+                out.ty, input.ty
+            )));
+        }
+        if self.data_connections.iter().any(|(_, d)| *d == destination) {
+            return Err(DeployError::Mismatch(format!("{to} already has a source")));
+        }
+        if self.connections() >= self.limits.connections {
+            return Err(DeployError::Limit("connections"));
+        }
+        self.data_connections.push((source, destination));
+        Ok(())
+    }
+
+    /// Sets input `to` (`FB.IN`) as a parameter (an input without a data connection).
+    pub fn write(&mut self, to: &str, value: Value) -> Result<(), DeployError> {
+        let destination = self.port(to, |i, p| i.input(p))?;
+        if self.data_connections.iter().any(|(_, d)| *d == destination) {
+            return Err(DeployError::Connected(to.into()));
+        }
+        self.instances[destination.0].inputs[destination.1] = value.clone();
+        self.parameters.retain(|(end, _)| *end != destination);
+        self.parameters.push((destination, value));
+        Ok(())
+    }
+
+    /// The value of `FB.PORT`, an output or else an input.
+    pub fn read(&self, path: &str) -> Option<&Value> {
+        let (i, port) = self.split(path).ok()?;
+        let inst = &self.instances[i];
+        let interface = inst.fb.interface();
+        if let Some(o) = interface.output(port) {
+            return inst.outputs.get(o);
+        }
+        interface.input(port).and_then(|n| inst.inputs.get(n))
+    }
+
+    pub fn fault(&self) -> Option<&Fault> {
+        self.fault.as_ref()
+    }
+
+    /// Events delivered so far.
+    pub fn delivered(&self) -> u64 {
+        self.delivered
+    }
+
+    /// The values a delivery of input event `event` to `instance` carries: its WITH inputs
+    /// and the inputs no event carries, each from its connected source now, or, for a
+    /// source that is the `sender`, from the sender's outputs as they were when it sent.
+    fn sample(
+        &self,
+        instance: usize,
+        event: usize,
+        sender: Option<(usize, &[Value])>,
+    ) -> Vec<(usize, Value)> {
+        let interface = self.instances[instance].fb.interface();
+        let with = &interface.event_inputs[event].with;
+        self.data_connections
+            .iter()
+            .filter(|(_, (i, var))| {
+                *i == instance && (with.contains(var) || !interface.input_is_with(*var))
+            })
+            .map(|((si, so), (_, var))| {
+                let value = match sender {
+                    Some((s, outputs)) if s == *si => outputs[*so].clone(),
+                    _ => self.instances[*si].outputs[*so].clone(),
+                };
+                (*var, value)
+            })
+            .collect()
+    }
+
+    fn enqueue(&mut self, to: End, sender: Option<(usize, &[Value])>) -> Result<(), ()> {
+        if self.queue.len() >= self.limits.queue {
+            return Err(());
+        }
+        let data = self.sample(to.0, to.1, sender);
+        self.queue.push_back(Queued { to, data });
+        Ok(())
+    }
+
+    /// Queues the destinations of output `event` of `instance`, in connection order, with
+    /// the outputs it had when it sent the event.
+    fn send(&mut self, instance: usize, event: usize, outputs: &[Value]) -> Result<(), Fault> {
+        let destinations: Vec<End> = self
+            .event_connections
+            .iter()
+            .filter(|(s, _)| *s == (instance, event))
+            .map(|(_, d)| *d)
+            .collect();
+        for to in destinations {
+            if self.enqueue(to, Some((instance, outputs))).is_err() {
+                let inst = &self.instances[instance];
+                return Err(Fault::QueueOverflow {
+                    fb: inst.name.clone(),
+                    event: inst.fb.interface().event_outputs[event].name.clone(),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Runs `react` on `instance`, then carries out what it asked: its output events (in
+    /// order) and timer requests.
+    fn react(
+        &mut self,
+        instance: usize,
+        now: i64,
+        react: impl FnOnce(&mut dyn FunctionBlock, &[Value], &mut Context<'_>),
+    ) -> Result<(), Fault> {
+        let mut sent = Vec::new();
+        let mut requests = Vec::new();
+        {
+            let inst = &mut self.instances[instance];
+            let mut ctx = Context {
+                now,
+                outputs: &mut inst.outputs,
+                sent: &mut sent,
+                timers: &mut requests,
+            };
+            react(inst.fb.as_mut(), &inst.inputs, &mut ctx);
+        }
+        for request in requests {
+            self.timer_request(instance, request)?;
+        }
+        for (event, outputs) in sent {
+            self.send(instance, event, &outputs)?;
+        }
+        Ok(())
+    }
+
+    fn timer_request(&mut self, instance: usize, request: TimerRequest) -> Result<(), Fault> {
+        match request {
+            TimerRequest::Disarm { id } => {
+                self.timers.retain(|t| (t.instance, t.id) != (instance, id));
+            }
+            TimerRequest::Arm { id, at } => {
+                self.timers.retain(|t| (t.instance, t.id) != (instance, id));
+                if self.timers.len() >= self.limits.timers {
+                    return Err(Fault::TooManyTimers {
+                        fb: self.instances[instance].name.clone(),
+                    });
+                }
+                self.timer_seq += 1;
+                self.timers.push(Timer {
+                    instance,
+                    id,
+                    at,
+                    seq: self.timer_seq,
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Delivers queued events until the queue is empty (one chain).
+    fn run_chain(&mut self, now: i64) -> Result<(), Fault> {
+        let mut delivered = 0usize;
+        while let Some(Queued {
+            to: (instance, event),
+            data,
+        }) = self.queue.pop_front()
+        {
+            delivered += 1;
+            if delivered > self.limits.chain_events {
+                let inst = &self.instances[instance];
+                return Err(Fault::ChainTooLong {
+                    fb: inst.name.clone(),
+                    event: inst.fb.interface().event_inputs[event].name.clone(),
+                });
+            }
+            self.delivered += 1;
+            let inst = &mut self.instances[instance];
+            for (var, value) in data {
+                inst.inputs[var] = value;
+            }
+            self.react(instance, now, |fb, i, ctx| fb.event(event, i, ctx))?;
+        }
+        Ok(())
+    }
+
+    /// Runs `f` as a chain unless the resource is faulted; a fault abandons the chain.
+    fn chain(
+        &mut self,
+        now: i64,
+        f: impl FnOnce(&mut Self) -> Result<(), Fault>,
+    ) -> Result<(), Fault> {
+        if let Some(fault) = &self.fault {
+            return Err(fault.clone());
+        }
+        let result = f(self).and_then(|()| self.run_chain(now));
+        if let Err(fault) = &result {
+            self.queue.clear();
+            self.fault = Some(fault.clone());
+        }
+        result
+    }
+
+    /// An external event: input event `to` (`FB.EI`) at instant `now`, and its chain.
+    pub fn trigger(&mut self, to: &str, now: i64) -> Result<(), DeployError> {
+        let destination = self.port(to, |i, p| i.event_input(p))?;
+        let _ = self.chain(now, |r| {
+            r.enqueue(destination, None)
+                .map_err(|()| Fault::QueueOverflow {
+                    fb: String::from("(external)"),
+                    event: to.into(),
+                })
+        });
+        Ok(())
+    }
+
+    /// Starts (cold or warm) or stops the resource: every instance hears it (E_RESTART
+    /// sends its COLD, WARM or STOP), in creation order, as one chain.
+    pub fn restart(&mut self, kind: Restart, now: i64) -> Result<(), Fault> {
+        self.chain(now, |r| {
+            for i in 0..r.instances.len() {
+                r.react(i, now, |fb, _, ctx| fb.restart(kind, ctx))?;
+            }
+            Ok(())
+        })
+    }
+
+    /// The earliest armed timer's deadline.
+    pub fn next_deadline(&self) -> Option<i64> {
+        self.timers.iter().map(|t| t.at).min()
+    }
+
+    /// Fires every timer due at `now` (and those they arm that are due too), each at its
+    /// own deadline and as its own chain; returns how many fired. At most
+    /// [`Limits::chain_events`] fire in one call, so a zero-period timer cannot hang it.
+    pub fn advance(&mut self, now: i64) -> Result<usize, Fault> {
+        let mut fired = 0;
+        while fired < self.limits.chain_events {
+            let Some(next) = self
+                .timers
+                .iter()
+                .enumerate()
+                .filter(|(_, t)| t.at <= now)
+                .min_by_key(|(_, t)| (t.at, t.seq))
+                .map(|(i, _)| i)
+            else {
+                break;
+            };
+            let timer = self.timers.swap_remove(next);
+            fired += 1;
+            let (instance, id, at) = (timer.instance, timer.id, timer.at);
+            self.chain(at, |r| {
+                r.react(instance, at, |fb, i, ctx| fb.timer(id, i, ctx))
+            })?;
+        }
+        Ok(fired)
+    }
+
+    /// Clears the fault, the queue and the timers, puts every instance back to its
+    /// initial state and every variable to its initial value or parameter; instances,
+    /// connections and parameters stay.
+    pub fn reset(&mut self) {
+        self.fault = None;
+        self.queue.clear();
+        self.timers.clear();
+        for inst in &mut self.instances {
+            inst.fb.reset();
+            let interface = inst.fb.interface();
+            inst.inputs = interface.inputs.iter().map(|v| v.initial()).collect();
+            inst.outputs = interface.outputs.iter().map(|v| v.initial()).collect();
+        }
+        for ((i, var), value) in &self.parameters {
+            self.instances[*i].inputs[*var] = value.clone();
+        }
+    }
+}
