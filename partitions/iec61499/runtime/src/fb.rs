@@ -129,6 +129,8 @@ pub struct Context<'a> {
     /// Output events sent, each with the outputs at the moment it was sent.
     pub(crate) sent: &'a mut Vec<(usize, Vec<Value>)>,
     pub(crate) timers: &'a mut Vec<TimerRequest>,
+    /// Why the reaction failed (a trapping algorithm), if it did.
+    pub(crate) failed: &'a mut Option<String>,
 }
 
 impl Context<'_> {
@@ -144,6 +146,20 @@ impl Context<'_> {
 
     pub fn set(&mut self, index: usize, value: Value) {
         self.outputs[index] = value;
+    }
+
+    /// All outputs, for code that writes several.
+    pub fn outputs_mut(&mut self) -> &mut [Value] {
+        self.outputs
+    }
+
+    /// The reaction failed (an algorithm trapped): the resource stops with
+    /// [`crate::Fault::Trap`] naming the FB and `reason`; the events this reaction sent
+    /// before are not delivered.
+    pub fn fail(&mut self, reason: String) {
+        if self.failed.is_none() {
+            *self.failed = Some(reason);
+        }
     }
 
     /// Sends output event `output`; its receivers get the outputs as they are now.

@@ -35,6 +35,7 @@
 
 extern crate alloc;
 
+pub mod basic;
 pub mod fb;
 pub mod resource;
 pub mod stdlib;

@@ -43,6 +43,8 @@ pub enum Fault {
     ChainTooLong { fb: String, event: String },
     /// More timers armed than [`Limits::timers`]; `fb` armed the one too many.
     TooManyTimers { fb: String },
+    /// `fb` failed while it reacted (an algorithm trapped), for `reason`.
+    Trap { fb: String, reason: String },
 }
 
 impl core::fmt::Display for Fault {
@@ -55,6 +57,7 @@ impl core::fmt::Display for Fault {
                 write!(f, "event chain too long (an event loop?) at {fb}.{event}")
             }
             Fault::TooManyTimers { fb } => write!(f, "too many timers armed ({fb})"),
+            Fault::Trap { fb, reason } => write!(f, "{fb} trapped: {reason}"),
         }
     }
 }
@@ -326,6 +329,7 @@ impl Resource {
     ) -> Result<(), Fault> {
         let mut sent = Vec::new();
         let mut requests = Vec::new();
+        let mut failed = None;
         {
             let inst = &mut self.instances[instance];
             let mut ctx = Context {
@@ -333,8 +337,15 @@ impl Resource {
                 outputs: &mut inst.outputs,
                 sent: &mut sent,
                 timers: &mut requests,
+                failed: &mut failed,
             };
             react(inst.fb.as_mut(), &inst.inputs, &mut ctx);
+        }
+        if let Some(reason) = failed {
+            return Err(Fault::Trap {
+                fb: self.instances[instance].name.clone(),
+                reason,
+            });
         }
         for request in requests {
             self.timer_request(instance, request)?;
