@@ -90,6 +90,7 @@ impl core::fmt::Display for DeployError {
 }
 
 struct Instance {
+    /// Empty for a deleted instance's slot (reused by the next creation).
     name: String,
     fb: Box<dyn FunctionBlock>,
     inputs: Vec<Value>,
@@ -98,6 +99,13 @@ struct Instance {
 
 /// `(instance, port index)`.
 type End = (usize, usize);
+
+/// A forced input or output.
+struct Force {
+    end: End,
+    output: bool,
+    value: Value,
+}
 
 struct Queued {
     to: End,
@@ -123,6 +131,7 @@ pub struct Resource {
     data_connections: Vec<(End, End)>,
     /// Inputs set by [`Resource::write`], applied again by a reset.
     parameters: Vec<(End, Value)>,
+    forces: Vec<Force>,
     queue: VecDeque<Queued>,
     timers: Vec<Timer>,
     timer_seq: u64,
@@ -139,6 +148,7 @@ impl Resource {
             event_connections: Vec::new(),
             data_connections: Vec::new(),
             parameters: Vec::new(),
+            forces: Vec::new(),
             queue: VecDeque::new(),
             timers: Vec::new(),
             timer_seq: 0,
@@ -149,26 +159,161 @@ impl Resource {
 
     /// Creates instance `name` of `fb`; returns its index.
     pub fn create(&mut self, name: &str, fb: Box<dyn FunctionBlock>) -> Result<usize, DeployError> {
+        if name.is_empty() || name.contains('.') {
+            return Err(DeployError::NotFound(name.into()));
+        }
         if self.instance(name).is_some() {
             return Err(DeployError::Duplicate(name.into()));
         }
-        if self.instances.len() >= self.limits.instances {
+        let free = self.instances.iter().position(|i| i.name.is_empty());
+        if free.is_none() && self.instances.len() >= self.limits.instances {
             return Err(DeployError::Limit("instances"));
         }
         let interface = fb.interface();
         let inputs = interface.inputs.iter().map(|v| v.initial()).collect();
         let outputs = interface.outputs.iter().map(|v| v.initial()).collect();
-        self.instances.push(Instance {
+        let instance = Instance {
             name: name.into(),
             fb,
             inputs,
             outputs,
-        });
-        Ok(self.instances.len() - 1)
+        };
+        Ok(match free {
+            Some(slot) => {
+                self.instances[slot] = instance;
+                slot
+            }
+            None => {
+                self.instances.push(instance);
+                self.instances.len() - 1
+            }
+        })
     }
 
     fn instance(&self, name: &str) -> Option<usize> {
+        if name.is_empty() {
+            return None;
+        }
         self.instances.iter().position(|i| i.name == name)
+    }
+
+    /// The instances' names and the interfaces of their types, in creation order.
+    pub fn instances(&self) -> impl Iterator<Item = (&str, &crate::fb::Interface)> {
+        self.instances
+            .iter()
+            .filter(|i| !i.name.is_empty())
+            .map(|i| (i.name.as_str(), i.fb.interface()))
+    }
+
+    /// Deletes instance `name` with its connections, parameters, forces and timers.
+    pub fn delete(&mut self, name: &str) -> Result<(), DeployError> {
+        let i = self
+            .instance(name)
+            .ok_or_else(|| DeployError::NotFound(name.into()))?;
+        self.event_connections.retain(|(s, d)| s.0 != i && d.0 != i);
+        self.data_connections.retain(|(s, d)| s.0 != i && d.0 != i);
+        self.parameters.retain(|((p, _), _)| *p != i);
+        self.forces.retain(|f| f.end.0 != i);
+        self.timers.retain(|t| t.instance != i);
+        self.queue.retain(|q| q.to.0 != i);
+        self.instances[i].name.clear();
+        Ok(())
+    }
+
+    /// Deletes the event connection `from` → `to`.
+    pub fn disconnect_event(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
+        let source = self.port(from, |i, p| i.event_output(p))?;
+        let destination = self.port(to, |i, p| i.event_input(p))?;
+        let before = self.event_connections.len();
+        self.event_connections
+            .retain(|c| *c != (source, destination));
+        if before == self.event_connections.len() {
+            return Err(DeployError::NotFound(format!("{from} -> {to}")));
+        }
+        Ok(())
+    }
+
+    /// Deletes the data connection `from` → `to`.
+    pub fn disconnect_data(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
+        let source = self.port(from, |i, p| i.output(p))?;
+        let destination = self.port(to, |i, p| i.input(p))?;
+        let before = self.data_connections.len();
+        self.data_connections
+            .retain(|c| *c != (source, destination));
+        if before == self.data_connections.len() {
+            return Err(DeployError::NotFound(format!("{from} -> {to}")));
+        }
+        Ok(())
+    }
+
+    /// Forces data input or output `path` (`FB.PORT`) to `value` until [`Resource::unforce`]:
+    /// a forced input keeps it whatever its events deliver, a forced output whatever the FB
+    /// writes (its receivers get the forced value).
+    pub fn force(&mut self, path: &str, value: Value) -> Result<(), DeployError> {
+        let (i, port) = self.split(path)?;
+        let interface = self.instances[i].fb.interface();
+        let (end, output) = match (interface.input(port), interface.output(port)) {
+            (Some(n), _) => ((i, n), false),
+            (None, Some(n)) => ((i, n), true),
+            (None, None) => return Err(DeployError::NotFound(path.into())),
+        };
+        self.forces.retain(|f| (f.end, f.output) != (end, output));
+        let inst = &mut self.instances[i];
+        if output {
+            inst.outputs[end.1] = value.clone();
+        } else {
+            inst.inputs[end.1] = value.clone();
+        }
+        self.forces.push(Force { end, output, value });
+        Ok(())
+    }
+
+    /// Ends the force of `path`; it keeps the forced value until it is next written.
+    pub fn unforce(&mut self, path: &str) -> Result<(), DeployError> {
+        let (i, port) = self.split(path)?;
+        let interface = self.instances[i].fb.interface();
+        let ends = [
+            interface.input(port).map(|n| ((i, n), false)),
+            interface.output(port).map(|n| ((i, n), true)),
+        ];
+        let before = self.forces.len();
+        self.forces
+            .retain(|f| !ends.contains(&Some((f.end, f.output))));
+        if before == self.forces.len() {
+            return Err(DeployError::NotFound(path.into()));
+        }
+        Ok(())
+    }
+
+    /// Whether `path` is forced.
+    pub fn is_forced(&self, path: &str) -> bool {
+        let Ok((i, port)) = self.split(path) else {
+            return false;
+        };
+        let interface = self.instances[i].fb.interface();
+        self.forces.iter().any(|f| {
+            f.end.0 == i
+                && if f.output {
+                    interface.output(port) == Some(f.end.1)
+                } else {
+                    interface.input(port) == Some(f.end.1)
+                }
+        })
+    }
+
+    /// Puts the forced values of `instance` back (inputs, or outputs).
+    fn apply_forces(&mut self, instance: usize, outputs: bool) {
+        for f in &self.forces {
+            if f.end.0 == instance && f.output == outputs {
+                let inst = &mut self.instances[instance];
+                let slot = if outputs {
+                    &mut inst.outputs
+                } else {
+                    &mut inst.inputs
+                };
+                slot[f.end.1] = f.value.clone();
+            }
+        }
     }
 
     /// `FB.PORT` → (instance, name of the port).
@@ -238,6 +383,7 @@ impl Resource {
             return Err(DeployError::Connected(to.into()));
         }
         self.instances[destination.0].inputs[destination.1] = value.clone();
+        self.apply_forces(destination.0, false);
         self.parameters.retain(|(end, _)| *end != destination);
         self.parameters.push((destination, value));
         Ok(())
@@ -347,6 +493,16 @@ impl Resource {
                 reason,
             });
         }
+        self.apply_forces(instance, true);
+        for (_, outputs) in &mut sent {
+            for f in self
+                .forces
+                .iter()
+                .filter(|f| f.end.0 == instance && f.output)
+            {
+                outputs[f.end.1] = f.value.clone();
+            }
+        }
         for request in requests {
             self.timer_request(instance, request)?;
         }
@@ -401,6 +557,7 @@ impl Resource {
             for (var, value) in data {
                 inst.inputs[var] = value;
             }
+            self.apply_forces(instance, false);
             self.react(instance, now, |fb, i, ctx| fb.event(event, i, ctx))?;
         }
         Ok(())
@@ -441,7 +598,9 @@ impl Resource {
     pub fn restart(&mut self, kind: Restart, now: i64) -> Result<(), Fault> {
         self.chain(now, |r| {
             for i in 0..r.instances.len() {
-                r.react(i, now, |fb, _, ctx| fb.restart(kind, ctx))?;
+                if !r.instances[i].name.is_empty() {
+                    r.react(i, now, |fb, _, ctx| fb.restart(kind, ctx))?;
+                }
             }
             Ok(())
         })
@@ -485,7 +644,7 @@ impl Resource {
         self.fault = None;
         self.queue.clear();
         self.timers.clear();
-        for inst in &mut self.instances {
+        for inst in self.instances.iter_mut().filter(|i| !i.name.is_empty()) {
             inst.fb.reset();
             let interface = inst.fb.interface();
             inst.inputs = interface.inputs.iter().map(|v| v.initial()).collect();
@@ -493,6 +652,10 @@ impl Resource {
         }
         for ((i, var), value) in &self.parameters {
             self.instances[*i].inputs[*var] = value.clone();
+        }
+        for i in 0..self.instances.len() {
+            self.apply_forces(i, false);
+            self.apply_forces(i, true);
         }
     }
 }

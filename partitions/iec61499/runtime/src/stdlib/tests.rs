@@ -545,3 +545,65 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn delete_and_disconnect() {
+    let mut r = Resource::new(Limits {
+        instances: 2,
+        ..Limits::default()
+    });
+    r.create("S", create("E_SPLIT").unwrap()).unwrap();
+    let (rec, log) = recorder(&[]);
+    r.create("REC", rec).unwrap();
+    r.connect_event("S.EO1", "REC.E0").unwrap();
+    r.connect_event("S.EO2", "REC.E1").unwrap();
+    r.disconnect_event("S.EO1", "REC.E0").unwrap();
+    assert!(matches!(
+        r.disconnect_event("S.EO1", "REC.E0"),
+        Err(DeployError::NotFound(_))
+    ));
+    r.trigger("S.EI", 0).unwrap();
+    assert_eq!(seen(&log), [1]);
+    r.delete("S").unwrap();
+    assert!(matches!(
+        r.trigger("S.EI", 0),
+        Err(DeployError::NotFound(_))
+    ));
+    // The slot is reused; the old connections are gone with it.
+    r.create("S", create("E_SPLIT").unwrap()).unwrap();
+    r.trigger("S.EI", 0).unwrap();
+    assert_eq!(seen(&log), []);
+    assert_eq!(
+        r.instances().map(|(n, _)| n).collect::<Vec<_>>(),
+        ["S", "REC"]
+    );
+}
+
+#[test]
+fn forced_inputs_and_outputs_hold() {
+    let (mut r, log) = harness("E_CTU");
+    r.write("FB.PV", Value::UInt(5)).unwrap();
+    r.force("FB.CV", Value::UInt(40)).unwrap();
+    fire(&mut r, &["CU"]);
+    // The counter counts on from the forced 40 (Q: 41 >= 5), but its CV stays forced.
+    assert_eq!(
+        counter_log(&log),
+        [(0, vec![Value::Bool(true), Value::UInt(40)])]
+    );
+    assert!(r.is_forced("FB.CV"));
+    r.force("FB.PV", Value::UInt(0)).unwrap();
+    r.write("FB.PV", Value::UInt(9)).unwrap();
+    assert_eq!(
+        r.read("FB.PV"),
+        Some(&Value::UInt(0)),
+        "a forced input keeps its value"
+    );
+    r.unforce("FB.CV").unwrap();
+    r.unforce("FB.PV").unwrap();
+    assert!(!r.is_forced("FB.CV"));
+    assert!(matches!(r.unforce("FB.CV"), Err(DeployError::NotFound(_))));
+    assert!(matches!(
+        r.force("FB.NOPE", Value::UInt(0)),
+        Err(DeployError::NotFound(_))
+    ));
+}
