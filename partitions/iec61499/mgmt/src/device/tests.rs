@@ -1,0 +1,346 @@
+//! Deployment, monitoring and boot files as 4diac IDE and FORTE's system tests use them, and
+//! hostile requests.
+
+extern crate std;
+
+use super::*;
+use crate::literal;
+use iec61499_runtime::{DataType, Value, VarSpec};
+use proptest::prelude::*;
+use std::string::ToString;
+
+fn device() -> Device {
+    Device::new(Limits::default(), 4)
+}
+
+/// Sends `request` (the `Request` element's content and action) to `dst`; returns the
+/// response's reason, or "" when done.
+fn send(d: &mut Device, dst: &str, action: &str, object: &str) -> String {
+    let text = format!("<Request ID=\"7\" Action=\"{action}\">{object}</Request>");
+    let answer = d.execute(dst, &text, 0);
+    assert!(answer.starts_with("<Response ID=\"7\""), "{answer}");
+    answer.split("Reason=\"").nth(1).map_or(String::new(), |r| {
+        r.split('"').next().unwrap_or("").to_string()
+    })
+}
+
+fn fb(name: &str, ty: &str) -> String {
+    format!("<FB Name=\"{name}\" Type=\"{ty}\"/>")
+}
+
+fn conn(s: &str, d: &str) -> String {
+    format!("<Connection Source=\"{s}\" Destination=\"{d}\"/>")
+}
+
+#[test]
+fn deploy_run_watch_and_force() {
+    let mut d = device();
+    assert_eq!(send(&mut d, "", "CREATE", &fb("R", "EMB_RES")), "");
+    for (name, ty) in [("C", "E_CTU"), ("SW", "E_SWITCH")] {
+        assert_eq!(send(&mut d, "R", "CREATE", &fb(name, ty)), "");
+    }
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("START.COLD", "C.R")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("C.Q", "SW.G")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("C.CUO", "SW.EI")), "");
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("UINT#2", "C.PV")), "");
+    assert_eq!(
+        send(
+            &mut d,
+            "R",
+            "CREATE",
+            "<Watch Source=\"C.CV\" Destination=\"*\"/>"
+        ),
+        ""
+    );
+    assert_eq!(
+        send(
+            &mut d,
+            "R",
+            "CREATE",
+            "<Watch Source=\"SW.G\" Destination=\"*\"/>"
+        ),
+        ""
+    );
+    assert_eq!(send(&mut d, "R", "START", ""), "");
+    for _ in 0..3 {
+        assert_eq!(send(&mut d, "R", "WRITE", &conn("$e", "C.CU")), "");
+    }
+    let watches = d.execute(
+        "R",
+        "<Request ID=\"8\" Action=\"READ\"><Watch Source=\"*\" Destination=\"*\"/></Request>",
+        0,
+    );
+    assert!(
+        watches.contains("<FB name=\"C\"><Port name=\"CV\"><Data value=\"3\" forced=\"false\"/>"),
+        "{watches}"
+    );
+    assert!(
+        watches.contains("<Port name=\"G\"><Data value=\"TRUE\""),
+        "{watches}"
+    );
+    assert_eq!(
+        send(
+            &mut d,
+            "R",
+            "WRITE",
+            "<Connection Source=\"10\" Destination=\"C.CV\" force=\"true\"/>"
+        ),
+        ""
+    );
+    let watches = d.execute(
+        "R",
+        "<Request ID=\"9\" Action=\"READ\"><Watch Source=\"*\" Destination=\"*\"/></Request>",
+        0,
+    );
+    assert!(
+        watches.contains("<Data value=\"10\" forced=\"true\"/>"),
+        "{watches}"
+    );
+    assert_eq!(
+        send(
+            &mut d,
+            "R",
+            "WRITE",
+            "<Connection Source=\"10\" Destination=\"C.CV\" force=\"false\"/>"
+        ),
+        ""
+    );
+    let read = d.execute("R", "<Request ID=\"10\" Action=\"READ\"><Connection Source=\"C.Q\" Destination=\"\"/></Request>", 0);
+    assert!(read.contains("Source=\"TRUE\""), "{read}");
+    let list = d.execute(
+        "R",
+        "<Request ID=\"11\" Action=\"QUERY\"><FB Name=\"*\" Type=\"*\"/></Request>",
+        0,
+    );
+    assert!(
+        list.contains("<FB Name=\"START\" Type=\"E_RESTART\" />")
+            && list.contains("<FB Name=\"C\" Type=\"E_CTU\" />"),
+        "{list}"
+    );
+}
+
+#[test]
+fn refusals_have_their_reasons_and_change_nothing() {
+    let mut d = device();
+    assert_eq!(send(&mut d, "", "CREATE", &fb("R", "EMB_RES")), "");
+    assert_eq!(
+        send(&mut d, "", "CREATE", &fb("R", "EMB_RES")),
+        "INVALID_STATE"
+    );
+    assert_eq!(
+        send(&mut d, "", "CREATE", &fb("X", "PANEL_RESOURCE")),
+        "UNSUPPORTED_TYPE"
+    );
+    assert_eq!(
+        send(&mut d, "NOPE", "CREATE", &fb("A", "E_CTU")),
+        "INVALID_DST"
+    );
+    assert_eq!(
+        send(&mut d, "R", "CREATE", &fb("A", "E_NOPE")),
+        "UNSUPPORTED_TYPE"
+    );
+    assert_eq!(send(&mut d, "R", "CREATE", &fb("A", "E_CTU")), "");
+    assert_eq!(
+        send(&mut d, "R", "CREATE", &fb("A", "E_CTU")),
+        "INVALID_STATE"
+    );
+    assert_eq!(
+        send(&mut d, "R", "CREATE", &conn("A.CUO", "B.EI")),
+        "NO_SUCH_OBJECT"
+    );
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("A.CV", "A.PV")), "");
+    assert_eq!(
+        send(&mut d, "R", "CREATE", &conn("A.Q", "A.PV")),
+        "INVALID_OPERATION"
+    );
+    assert_eq!(
+        send(&mut d, "R", "WRITE", &conn("5", "A.PV")),
+        "INVALID_OPERATION",
+        "connected input"
+    );
+    assert_eq!(
+        send(&mut d, "R", "WRITE", &conn("-1", "A.CV")),
+        "INVALID_OBJECT",
+        "UINT out of range"
+    );
+    assert_eq!(
+        send(&mut d, "R", "WRITE", &conn("$e", "A.CU")),
+        "INVALID_STATE",
+        "not started"
+    );
+    assert_eq!(
+        send(
+            &mut d,
+            "R",
+            "DELETE",
+            "<Watch Source=\"A.CV\" Destination=\"*\"/>"
+        ),
+        "NO_SUCH_OBJECT"
+    );
+    assert_eq!(send(&mut d, "R", "START", ""), "");
+    assert_eq!(
+        send(&mut d, "R", "DELETE", &fb("A", "E_CTU")),
+        "INVALID_STATE",
+        "running"
+    );
+    assert_eq!(send(&mut d, "R", "RESET", ""), "INVALID_STATE");
+    assert_eq!(send(&mut d, "R", "STOP", ""), "");
+    assert_eq!(send(&mut d, "R", "DELETE", &fb("A", "E_CTU")), "");
+    assert_eq!(
+        send(&mut d, "R", "READ", &conn("A.CV", "")),
+        "NO_SUCH_OBJECT"
+    );
+    assert_eq!(send(&mut d, "R", "FROB", ""), "UNSUPPORTED_CMD");
+    assert!(
+        d.execute("R", "<Request ID=\"1\" Action=\"CREATE\"><FB Name=", 0)
+            .contains("BAD_PARAMS")
+    );
+    assert!(d.execute("R", "not xml", 0).contains("BAD_PARAMS"));
+}
+
+#[test]
+fn literals() {
+    let spec = |ty, array| VarSpec {
+        name: "X".into(),
+        ty,
+        array,
+    };
+    let ok = [
+        ("TRUE", spec(DataType::Bool, None), Value::Bool(true)),
+        ("false", spec(DataType::Bool, None), Value::Bool(false)),
+        ("BOOL#1", spec(DataType::Bool, None), Value::Bool(true)),
+        ("UINT#2", spec(DataType::UInt, None), Value::UInt(2)),
+        ("16#FF", spec(DataType::Byte, None), Value::UInt(255)),
+        ("2#1010_1010", spec(DataType::Byte, None), Value::UInt(170)),
+        ("DINT#-26", spec(DataType::DInt, None), Value::Int(-26)),
+        ("-1.5E3", spec(DataType::LReal, None), Value::Real(-1500.0)),
+        (
+            "T#500ms",
+            spec(DataType::Time, None),
+            Value::Time(500_000_000),
+        ),
+        (
+            "TIME#1h2m3s4ms5us6ns",
+            spec(DataType::Time, None),
+            Value::Time(3_723_004_005_006),
+        ),
+        (
+            "t#1.5s",
+            spec(DataType::Time, None),
+            Value::Time(1_500_000_000),
+        ),
+        (
+            "T#-250ms",
+            spec(DataType::Time, None),
+            Value::Time(-250_000_000),
+        ),
+        (
+            "'a$'b$$c$N$41'",
+            spec(DataType::String, None),
+            Value::String("a'b$c\nA".into()),
+        ),
+        (
+            "239.192.0.2:61499",
+            spec(DataType::String, None),
+            Value::String("239.192.0.2:61499".into()),
+        ),
+        (
+            "[T#1s, T#2s]",
+            spec(DataType::Time, Some(3)),
+            Value::Array(std::vec![
+                Value::Time(1_000_000_000),
+                Value::Time(2_000_000_000),
+                Value::Time(0)
+            ]),
+        ),
+    ];
+    for (text, spec, value) in ok {
+        assert_eq!(literal::parse(text, &spec), Ok(value.clone()), "{text}");
+        if !matches!(value, Value::Array(_) | Value::Real(_)) && !text.contains(':') {
+            assert_eq!(
+                literal::parse(&literal::show(&value), &spec),
+                Ok(value),
+                "round trip of {text}"
+            );
+        }
+    }
+    let bad = [
+        ("maybe", spec(DataType::Bool, None)),
+        ("256", spec(DataType::USInt, None)),
+        ("-1", spec(DataType::UInt, None)),
+        ("INT#5", spec(DataType::UInt, None)),
+        ("T#5", spec(DataType::Time, None)),
+        ("T#5x", spec(DataType::Time, None)),
+        ("'open", spec(DataType::String, None)),
+        ("[1, 2, 3]", spec(DataType::Int, Some(2))),
+        ("1, 2", spec(DataType::Int, Some(2))),
+        ("16#", spec(DataType::Int, None)),
+    ];
+    for (text, spec) in bad {
+        assert!(literal::parse(text, &spec).is_err(), "{text} accepted");
+    }
+}
+
+/// A boot file in FORTE's system-test style, written for this test.
+const PASS: &str = ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"T\" Type=\"EMB_RES\" /></Request>
+T;<Request ID=\"2\" Action=\"CREATE\"><FB Name=\"END\" Type=\"STEST_END\" /></Request>
+T;<Request ID=\"3\" Action=\"CREATE\"><FB Name=\"CHECK\" Type=\"TEST_CONDITION\" /></Request>
+T;<Request ID=\"4\" Action=\"CREATE\"><FB Name=\"B\" Type=\"BOOL2BOOL\" /></Request>
+T;<Request ID=\"5\" Action=\"WRITE\"><Connection Source=\"true\" Destination=\"B.IN\" /></Request>
+T;<Request ID=\"6\" Action=\"CREATE\"><Connection Source=\"CHECK.CNF\" Destination=\"END.REQ\" /></Request>
+T;<Request ID=\"7\" Action=\"CREATE\"><Connection Source=\"B.CNF\" Destination=\"CHECK.REQ\" /></Request>
+T;<Request ID=\"8\" Action=\"CREATE\"><Connection Source=\"START.COLD\" Destination=\"B.REQ\" /></Request>
+T;<Request ID=\"9\" Action=\"CREATE\"><Connection Source=\"B.OUT\" Destination=\"CHECK.check\" /></Request>
+T;<Request ID=\"10\" Action=\"START\"/>
+";
+
+#[test]
+fn boot_files_run_and_report() {
+    let mut d = device();
+    assert_eq!(d.boot(PASS, 0), Ok(10));
+    let report = d.report().clone();
+    assert_eq!((report.executed, report.failed, report.ended), (1, 0, true));
+    assert_eq!(report.log, ["TEST_CONDITION_PASSED T.CHECK passed"]);
+
+    let mut d = device();
+    d.boot(&PASS.replace("Source=\"true\"", "Source=\"false\""), 0)
+        .unwrap();
+    assert_eq!((d.report().executed, d.report().failed), (1, 1));
+
+    let mut d = device();
+    let err = d
+        .boot(
+            &PASS.replace("T;<Request ID=\"4\"", "T<Request ID=\"4\""),
+            0,
+        )
+        .unwrap_err();
+    assert!(err.contains("line 4: no ';'"), "{err}");
+    let err = device()
+        .boot(&PASS.replace("BOOL2BOOL", "BOOL2BOOLUnknown"), 0)
+        .unwrap_err();
+    assert!(
+        err.contains("line 4") && err.contains("UNSUPPORTED_TYPE"),
+        "{err}"
+    );
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(2_000))]
+
+    /// Mangled requests: always a response with a reason or none, never a panic.
+    #[test]
+    fn hostile_requests(cut in 0usize..PASS.len(), junk in "[<>/=\"A-Za-z#$. ]{0,16}", dst in "(|T|X)") {
+        let mut d = device();
+        d.boot(PASS, 0).unwrap();
+        let mut text = PASS.as_bytes()[..cut].to_vec();
+        text.extend_from_slice(junk.as_bytes());
+        text.extend_from_slice(&PASS.as_bytes()[cut..]);
+        if let Ok(text) = std::str::from_utf8(&text) {
+            for line in text.lines() {
+                let request = line.split_once(';').map_or(line, |(_, r)| r);
+                let answer = d.execute(&dst, request, 0);
+                prop_assert!(answer.starts_with("<Response ID=\""));
+            }
+        }
+    }
+}

@@ -1,0 +1,147 @@
+//! The FB types a device can create: the standard event FBs, the same-type conversion FBs
+//! of 4diac's library (`BOOL2BOOL`, `DINT2DINT`, ...), and the test FBs FORTE's system
+//! tests report with: `TEST_CONDITION` (REQ with `check`: counts a passed or failed test,
+//! logs it, CNF) and `STEST_END` (REQ: the test is over).
+
+use alloc::boxed::Box;
+use alloc::format;
+use alloc::rc::Rc;
+use alloc::string::String;
+use alloc::vec::Vec;
+use core::cell::RefCell;
+use iec61499_runtime::fb::EventDecl;
+use iec61499_runtime::{Context, DataType, FunctionBlock, Interface, Value, stdlib};
+
+/// What the test FBs tell the device.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct Report {
+    pub executed: u32,
+    pub failed: u32,
+    /// A STEST_END received its REQ.
+    pub ended: bool,
+    /// Lines for the partition's log.
+    pub log: Vec<String>,
+}
+
+pub type SharedReport = Rc<RefCell<Report>>;
+
+/// The data types of the conversion FBs (`X2X`).
+const CONVERTIBLE: [&str; 17] = [
+    "BOOL", "SINT", "INT", "DINT", "LINT", "USINT", "UINT", "UDINT", "ULINT", "BYTE", "WORD",
+    "DWORD", "LWORD", "REAL", "LREAL", "TIME", "STRING",
+];
+
+/// A new instance of type `ty` named `name` in resource `resource`, or `None` for a type
+/// this device does not have.
+pub fn create(
+    ty: &str,
+    resource: &str,
+    name: &str,
+    report: &SharedReport,
+) -> Option<Box<dyn FunctionBlock>> {
+    if let Some(fb) = stdlib::create(ty) {
+        return Some(fb);
+    }
+    match ty {
+        "TEST_CONDITION" => {
+            let interface = build(
+                &[("REQ", &["check"])],
+                &[("CNF", &[])],
+                &[("check", DataType::Bool)],
+                &[],
+            );
+            Some(Box::new(TestCondition {
+                interface,
+                label: format!("{resource}.{name}"),
+                report: report.clone(),
+            }))
+        }
+        "STEST_END" => Some(Box::new(TestEnd {
+            interface: build(&[("REQ", &[])], &[], &[], &[]),
+            report: report.clone(),
+        })),
+        _ => {
+            let (from, to) = ty.split_once('2')?;
+            if from != to || !CONVERTIBLE.contains(&from) {
+                return None;
+            }
+            let dt = DataType::from_name(from)?;
+            let interface = build(
+                &[("REQ", &["IN"])],
+                &[("CNF", &["OUT"])],
+                &[("IN", dt)],
+                &[("OUT", dt)],
+            );
+            Some(Box::new(Convert { interface }))
+        }
+    }
+}
+
+fn build(
+    ei: &[EventDecl<'_>],
+    eo: &[EventDecl<'_>],
+    inputs: &[(&str, DataType)],
+    outputs: &[(&str, DataType)],
+) -> Interface {
+    let ins: Vec<_> = inputs.iter().map(|(n, t)| (*n, *t, None)).collect();
+    let outs: Vec<_> = outputs.iter().map(|(n, t)| (*n, *t, None)).collect();
+    match Interface::build(ei, eo, &ins, &outs) {
+        Ok(i) => i,
+        Err(e) => unreachable!("the built-in interfaces are well-formed: {e}"),
+    }
+}
+
+struct TestCondition {
+    interface: Interface,
+    label: String,
+    report: SharedReport,
+}
+
+impl FunctionBlock for TestCondition {
+    fn interface(&self) -> &Interface {
+        &self.interface
+    }
+    fn event(&mut self, _: usize, inputs: &[Value], ctx: &mut Context<'_>) {
+        let mut report = self.report.borrow_mut();
+        report.executed += 1;
+        let line = if inputs[0].as_bool() {
+            format!("TEST_CONDITION_PASSED {} passed", self.label)
+        } else {
+            report.failed += 1;
+            format!("TEST_CONDITION_FAILED {} failed", self.label)
+        };
+        report.log.push(line);
+        ctx.send(0);
+    }
+    fn reset(&mut self) {}
+}
+
+struct TestEnd {
+    interface: Interface,
+    report: SharedReport,
+}
+
+impl FunctionBlock for TestEnd {
+    fn interface(&self) -> &Interface {
+        &self.interface
+    }
+    fn event(&mut self, _: usize, _: &[Value], _: &mut Context<'_>) {
+        self.report.borrow_mut().ended = true;
+    }
+    fn reset(&mut self) {}
+}
+
+struct Convert {
+    interface: Interface,
+}
+
+impl FunctionBlock for Convert {
+    fn interface(&self) -> &Interface {
+        &self.interface
+    }
+    fn event(&mut self, _: usize, inputs: &[Value], ctx: &mut Context<'_>) {
+        ctx.set(0, inputs[0].clone());
+        ctx.send(0);
+    }
+    fn reset(&mut self) {}
+}
