@@ -5,7 +5,7 @@
 use alloc::format;
 use alloc::string::{String, ToString};
 use alloc::vec::Vec;
-use iec61499_runtime::{DataType, Value, VarSpec};
+use iec61499_runtime::{DataType, Value, VarSpec, type_named, zero};
 
 /// Reads `text` as a value for a port declared as `spec`.
 pub fn parse(text: &str, spec: &VarSpec) -> Result<Value, String> {
@@ -28,7 +28,7 @@ pub fn parse(text: &str, spec: &VarSpec) -> Result<Value, String> {
                 .iter()
                 .map(|p| scalar(p.trim(), spec.ty))
                 .collect::<Result<_, _>>()?;
-            values.resize(n, spec.ty.zero());
+            values.resize(n, zero(spec.ty));
             Ok(Value::Array(values))
         }
     }
@@ -73,8 +73,8 @@ fn range(ty: DataType) -> Option<(i128, i128)> {
 /// Strips a `TYPE#` prefix, checking that the type may be given to `ty`.
 fn untyped(text: &str, ty: DataType) -> Result<&str, String> {
     match text.split_once('#') {
-        Some((prefix, rest)) if DataType::from_name(prefix).is_some() => {
-            let named = DataType::from_name(prefix).unwrap_or(ty);
+        Some((prefix, rest)) if type_named(prefix).is_some() => {
+            let named = type_named(prefix).unwrap_or(ty);
             if named != ty && !(named == DataType::Time && ty == DataType::Time) {
                 return Err(format!("`{text}` is a {prefix}, not a {ty:?}"));
             }

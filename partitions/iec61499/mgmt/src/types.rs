@@ -65,7 +65,7 @@ pub fn create(
             if from != to || !CONVERTIBLE.contains(&from) {
                 return None;
             }
-            let dt = DataType::from_name(from)?;
+            let dt = iec61499_runtime::type_named(from)?;
             let interface = build(
                 &[("REQ", &["IN"])],
                 &[("CNF", &["OUT"])],

@@ -26,8 +26,8 @@ impl VarSpec {
     /// The variable's initial value.
     pub fn initial(&self) -> Value {
         match self.array {
-            Some(n) => Value::Array((0..n).map(|_| self.ty.zero()).collect()),
-            None => self.ty.zero(),
+            Some(n) => Value::Array((0..n).map(|_| crate::value::zero(self.ty)).collect()),
+            None => crate::value::zero(self.ty),
         }
     }
 }

@@ -43,4 +43,4 @@ pub mod value;
 
 pub use fb::{Context, EventSpec, FunctionBlock, Interface, VarSpec};
 pub use resource::{Fault, Limits, Resource};
-pub use value::{DataType, Value};
+pub use value::{DataType, Value, type_named, zero};

@@ -3,65 +3,25 @@
 use alloc::string::String;
 use alloc::vec::Vec;
 
-/// The elementary types an interface declares.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DataType {
-    Bool,
-    SInt,
-    Int,
-    DInt,
-    LInt,
-    USInt,
-    UInt,
-    UDInt,
-    ULInt,
-    Byte,
-    Word,
-    DWord,
-    LWord,
-    Real,
-    LReal,
-    Time,
-    String,
+/// The elementary types an interface declares: the PLC VM's variable types (one vocabulary
+/// with the bytecode the algorithms will run on).
+pub use plc_vm::image::VarType as DataType;
+
+/// The type named `name` (case-insensitive, as 4diac writes `UINT` or `uint`).
+pub fn type_named(name: &str) -> Option<DataType> {
+    DataType::from_name(&name.to_ascii_uppercase())
 }
 
-impl DataType {
-    /// The type of an IEC name (`UINT`, `TIME`, ...).
-    pub fn from_name(name: &str) -> Option<Self> {
-        use DataType::*;
-        Some(match name.to_ascii_uppercase().as_str() {
-            "BOOL" => Bool,
-            "SINT" => SInt,
-            "INT" => Int,
-            "DINT" => DInt,
-            "LINT" => LInt,
-            "USINT" => USInt,
-            "UINT" => UInt,
-            "UDINT" => UDInt,
-            "ULINT" => ULInt,
-            "BYTE" => Byte,
-            "WORD" => Word,
-            "DWORD" => DWord,
-            "LWORD" => LWord,
-            "REAL" => Real,
-            "LREAL" => LReal,
-            "TIME" => Time,
-            "STRING" => String,
-            _ => return None,
-        })
-    }
-
-    /// The initial value of a variable of this type.
-    pub fn zero(self) -> Value {
-        use DataType::*;
-        match self {
-            Bool => Value::Bool(false),
-            SInt | Int | DInt | LInt => Value::Int(0),
-            USInt | UInt | UDInt | ULInt | Byte | Word | DWord | LWord => Value::UInt(0),
-            Real | LReal => Value::Real(0.0),
-            Time => Value::Time(0),
-            String => Value::String(alloc::string::String::new()),
-        }
+/// The initial value of a variable of type `ty`.
+pub fn zero(ty: DataType) -> Value {
+    use DataType::*;
+    match ty {
+        Bool => Value::Bool(false),
+        SInt | Int | DInt | LInt => Value::Int(0),
+        Real | LReal => Value::Real(0.0),
+        String | WString => Value::String(alloc::string::String::new()),
+        Time | LTime | Date | LDate | Tod | LTod | Dt | LDt => Value::Time(0),
+        _ => Value::UInt(0),
     }
 }
 

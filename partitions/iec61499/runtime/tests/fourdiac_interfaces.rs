@@ -86,7 +86,7 @@ fn standard_interfaces_match_fourdiac() {
         let their_vars = |list: &[iec61499_xml::Var]| -> Vec<String> {
             list.iter()
                 .map(|v| {
-                    let ty = iec61499_runtime::DataType::from_name(&v.ty)
+                    let ty = iec61499_runtime::type_named(&v.ty)
                         .map_or(v.ty.clone(), |t| format!("{t:?}"));
                     format!(
                         "{}:{ty}{}",
