@@ -6,8 +6,10 @@
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
 //! lint gate ([`lint`]), the Linux-side test programs ([`linux`]), the native Linux
 //! reference of the guest benchmark ([`native`]), the pictures of a run's serial log
-//! ([`plot`], whose parser the scenarios use too) and the OSCAT library check ([`oscat`]).
+//! ([`plot`], whose parser the scenarios use too), the OSCAT library check ([`oscat`]) and
+//! the importer of a653rs-linux system descriptions ([`a653rs`]).
 
+pub mod a653rs;
 pub mod artifacts;
 pub mod bench;
 pub mod check_config;

@@ -115,6 +115,17 @@ enum Cmd {
         #[arg(long, value_name = "NAME")]
         plc: Option<String>,
     },
+    /// Convert a system description of DLR's a653rs-linux hypervisor (YAML) into Warden's
+    /// TOML, validated; what has no equivalent is reported as file:line:col (exit 1).
+    ImportA653rs {
+        file: PathBuf,
+        /// Write the TOML here (default: print it).
+        #[arg(short, long, value_name = "OUT")]
+        output: Option<PathBuf>,
+        /// Rename a partition (a name longer than Warden's 15 bytes, say): OLD=NEW; repeatable.
+        #[arg(long, value_name = "OLD=NEW")]
+        rename: Vec<String>,
+    },
     /// Validate a system description and print its diagnostics (exit 1 if any).
     CheckConfig {
         file: PathBuf,
@@ -167,6 +178,11 @@ fn main() -> ExitCode {
         Cmd::Oscat { file, write_status } => xtask::oscat::run(file.as_deref(), write_status),
         Cmd::Plot { log, output, plc } => xtask::plot::run(&log, output.as_deref(), plc.as_deref()),
         Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
+        Cmd::ImportA653rs {
+            file,
+            output,
+            rename,
+        } => xtask::a653rs::run(&file, output.as_deref(), &rename),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
