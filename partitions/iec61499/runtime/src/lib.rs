@@ -40,6 +40,7 @@ pub mod fb;
 pub mod resource;
 pub mod stdlib;
 pub mod value;
+pub mod vmcode;
 
 pub use fb::{Context, EventSpec, FunctionBlock, Interface, VarSpec};
 pub use resource::{Fault, Limits, Resource};

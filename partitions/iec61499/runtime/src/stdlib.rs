@@ -240,7 +240,7 @@ impl Kind {
 /// The state every standard FB keeps (each uses a part).
 #[derive(Clone, Copy, Debug, Default)]
 struct State {
-    /// E_SR/E_RS: `None` until the first S or R; E_D_FF, E_T_FF, E_R_TRIG, E_F_TRIG: Q.
+    /// E_SR, E_RS, E_D_FF, E_T_FF, E_R_TRIG, E_F_TRIG: Q (`None`: FALSE, as initially).
     q: Option<bool>,
     /// E_REND: which of EI1, EI2 arrived.
     got: [bool; 2],
@@ -316,8 +316,9 @@ impl FunctionBlock for Standard {
             }
             Kind::Switch => ctx.send(usize::from(inputs[0].as_bool())),
             Kind::Sr | Kind::Rs => {
+                // Annex A's ECC: the initial state is RESET's (Q FALSE): R there does nothing.
                 let set = (event == 0) == (self.kind == Kind::Sr);
-                if s.q != Some(set) {
+                if s.q.unwrap_or(false) != set {
                     s.q = Some(set);
                     ctx.set(0, Value::Bool(set));
                     ctx.send(0);

@@ -19,7 +19,8 @@
 //!
 //! 4diac writes a condition as `1` (always), `EVENT` (when that input event arrived),
 //! `EVENT[guard]` or `[guard]`, or a bare guard (a Boolean ST expression). [`Condition`]
-//! keeps the event and the guard's text with its position for the compiler.
+//! keeps the event and the guard's text with its position for the compiler (a column inside
+//! an attribute counts the attribute's characters after `&lt;` and the like are replaced).
 
 use roxmltree::{Document, Node, ParsingOptions};
 use std::fmt;

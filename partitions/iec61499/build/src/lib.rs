@@ -1,0 +1,362 @@
+//! Basic FB types from 4diac's XML to what the IEC 61499 runtime executes: the interface
+//! and the ECC as the runtime's verified data, the algorithms and transition guards
+//! compiled by the PLC's ST compiler into one verified bytecode program (see
+//! `iec61499_runtime::vmcode`). Runs on the host (the engineering side, or a helper in the
+//! Linux guest); the real-time partition accepts only the result. Errors name the `.fbt`
+//! file, line and column, also for ST errors inside an algorithm or guard.
+//!
+//! A simple FB (one algorithm per input event) becomes an ECC of its own: from START, each
+//! input event enters the state of its name, which runs the algorithm of that name, and
+//! returns to START.
+
+use iec61499_runtime::basic::{Action, BasicFb, Ecc, State, Transition};
+use iec61499_runtime::fb::{EventDecl, Interface, VarDecl, VarSpec};
+use iec61499_runtime::vmcode::{GUARD_BASE, INSTANCE, VmCode};
+use iec61499_runtime::{FunctionBlock, type_named};
+use iec61499_xml::{Body, Condition, FbType, Pos, Var, read_fbt};
+use std::fmt::Write as _;
+
+/// A compiled basic FB type: what its instances are made from.
+#[derive(Clone, Debug)]
+pub struct BasicType {
+    pub name: String,
+    pub interface: Interface,
+    pub ecc: Ecc,
+    pub internals: Vec<VarSpec>,
+    pub code: VmCode,
+}
+
+impl BasicType {
+    /// A new instance.
+    pub fn instantiate(&self) -> Box<dyn FunctionBlock> {
+        match BasicFb::new(
+            self.interface.clone(),
+            self.ecc.clone(),
+            self.internals.clone(),
+            Box::new(self.code.clone()),
+        ) {
+            Ok(fb) => Box::new(fb),
+            Err(e) => unreachable!("the ECC was verified when the type was compiled: {e}"),
+        }
+    }
+}
+
+/// ST text with the place its first character has in the `.fbt`.
+type Text = (String, Pos);
+
+/// What a body is made of, before the code is compiled.
+struct Parts<'f> {
+    internals: Vec<(VarSpec, &'f Var)>,
+    algorithms: Vec<Text>,
+    guards: Vec<Text>,
+    ecc: Ecc,
+}
+
+fn spec(file: &str, v: &Var) -> Result<VarSpec, String> {
+    let ty = type_named(&v.ty).ok_or_else(|| {
+        format!(
+            "{file}:{}:{}: variable {}: type {} is not supported",
+            v.pos.line, v.pos.col, v.name, v.ty
+        )
+    })?;
+    Ok(VarSpec {
+        name: v.name.clone(),
+        ty,
+        array: v.array_size.map(|n| n as usize),
+    })
+}
+
+fn specs<'f>(file: &str, vars: &'f [Var]) -> Result<Vec<(VarSpec, &'f Var)>, Vec<String>> {
+    vars.iter()
+        .map(|v| spec(file, v).map(|s| (s, v)).map_err(|e| vec![e]))
+        .collect()
+}
+
+/// The runtime's interface of `fb`.
+fn interface_of(file: &str, fb: &FbType) -> Result<Interface, Vec<String>> {
+    let ifc = &fb.interface;
+    let inputs: Vec<VarSpec> = specs(file, &ifc.inputs)?
+        .into_iter()
+        .map(|(s, _)| s)
+        .collect();
+    let outputs: Vec<VarSpec> = specs(file, &ifc.outputs)?
+        .into_iter()
+        .map(|(s, _)| s)
+        .collect();
+    let ei_with: Vec<Vec<&str>> = ifc
+        .event_inputs
+        .iter()
+        .map(|e| e.with.iter().map(String::as_str).collect())
+        .collect();
+    let eo_with: Vec<Vec<&str>> = ifc
+        .event_outputs
+        .iter()
+        .map(|e| e.with.iter().map(String::as_str).collect())
+        .collect();
+    let ei: Vec<EventDecl<'_>> = ifc
+        .event_inputs
+        .iter()
+        .zip(&ei_with)
+        .map(|(e, w)| (e.name.as_str(), w.as_slice()))
+        .collect();
+    let eo: Vec<EventDecl<'_>> = ifc
+        .event_outputs
+        .iter()
+        .zip(&eo_with)
+        .map(|(e, w)| (e.name.as_str(), w.as_slice()))
+        .collect();
+    let decl = |v: &Vec<VarSpec>| -> Vec<(String, VarSpec)> {
+        v.iter().map(|s| (s.name.clone(), s.clone())).collect()
+    };
+    let (ins, outs) = (decl(&inputs), decl(&outputs));
+    let ins: Vec<VarDecl<'_>> = ins
+        .iter()
+        .map(|(n, s)| (n.as_str(), s.ty, s.array))
+        .collect();
+    let outs: Vec<VarDecl<'_>> = outs
+        .iter()
+        .map(|(n, s)| (n.as_str(), s.ty, s.array))
+        .collect();
+    Interface::build(&ei, &eo, &ins, &outs).map_err(|e| vec![format!("{file}: {}: {e}", fb.name)])
+}
+
+/// States, transitions, algorithms and guards of `fb`'s body.
+fn parts_of<'f>(
+    file: &str,
+    fb: &'f FbType,
+    interface: &Interface,
+) -> Result<Parts<'f>, Vec<String>> {
+    match &fb.body {
+        Body::Basic(b) => {
+            let state = |name: &str| b.states.iter().position(|s| s.name == name).unwrap_or(0);
+            let algorithm = |name: &str| b.algorithms.iter().position(|a| a.name == name);
+            let states = b
+                .states
+                .iter()
+                .map(|s| State {
+                    name: s.name.clone(),
+                    actions: s
+                        .actions
+                        .iter()
+                        .map(|a| Action {
+                            algorithm: a.algorithm.as_deref().and_then(algorithm),
+                            output: a.output.as_deref().and_then(|o| interface.event_output(o)),
+                        })
+                        .collect(),
+                })
+                .collect();
+            let mut guards = Vec::new();
+            let transitions = b
+                .transitions
+                .iter()
+                .map(|t| {
+                    let (event, guard) = match &t.condition {
+                        Condition::Always => (None, None),
+                        Condition::When { event, guard } => (
+                            event.as_deref().and_then(|e| interface.event_input(e)),
+                            guard.as_ref().map(|g| {
+                                guards.push(g.clone());
+                                guards.len() - 1
+                            }),
+                        ),
+                    };
+                    Transition {
+                        source: state(&t.source),
+                        destination: state(&t.destination),
+                        event,
+                        guard,
+                    }
+                })
+                .collect();
+            Ok(Parts {
+                internals: specs(file, &b.internals)?,
+                algorithms: b.algorithms.iter().map(|a| (a.st.clone(), a.pos)).collect(),
+                guards,
+                ecc: Ecc {
+                    states,
+                    transitions,
+                },
+            })
+        }
+        Body::Simple(s) => {
+            let mut states = vec![State {
+                name: "START".into(),
+                actions: Vec::new(),
+            }];
+            let mut transitions = Vec::new();
+            for (i, event) in interface.event_inputs.iter().enumerate() {
+                let algorithm = s.algorithms.iter().position(|a| a.name == event.name);
+                states.push(State {
+                    name: event.name.clone(),
+                    actions: vec![Action {
+                        algorithm,
+                        output: None,
+                    }],
+                });
+                transitions.push(Transition {
+                    source: 0,
+                    destination: i + 1,
+                    event: Some(i),
+                    guard: None,
+                });
+                transitions.push(Transition {
+                    source: i + 1,
+                    destination: 0,
+                    event: None,
+                    guard: None,
+                });
+            }
+            Ok(Parts {
+                internals: specs(file, &s.internals)?,
+                algorithms: s.algorithms.iter().map(|a| (a.st.clone(), a.pos)).collect(),
+                guards: Vec::new(),
+                ecc: Ecc {
+                    states,
+                    transitions,
+                },
+            })
+        }
+        Body::Composite(_) | Body::Service => Err(vec![format!(
+            "{file}: {} is not a basic or simple FB (composite and service FBs are built otherwise)",
+            fb.name
+        )]),
+    }
+}
+
+fn st_type(spec: &VarSpec) -> String {
+    match spec.array {
+        Some(n) => format!("ARRAY[0..{}] OF {}", n.saturating_sub(1), spec.ty.name()),
+        None => spec.ty.name().to_string(),
+    }
+}
+
+/// The ST program of the type, and for each algorithm and guard the program line its text
+/// starts at with its place in the `.fbt`.
+fn program_of(
+    fb: &FbType,
+    interface: &Interface,
+    parts: &Parts<'_>,
+) -> (String, Vec<(usize, Pos)>) {
+    let mut program = String::from("PROGRAM FB_TYPE\nVAR\n");
+    let declared = interface
+        .inputs
+        .iter()
+        .zip(&fb.interface.inputs)
+        .chain(interface.outputs.iter().zip(&fb.interface.outputs))
+        .chain(parts.internals.iter().map(|(s, v)| (s, *v)));
+    for (spec, var) in declared {
+        let init = var
+            .initial
+            .as_ref()
+            .map_or(String::new(), |i| format!(" := {i}"));
+        let _ = writeln!(program, "  {} : {}{init};", spec.name, st_type(spec));
+    }
+    program.push_str("  __SEL : LINT;\n  __GUARD : BOOL;\nEND_VAR\nCASE __SEL OF\n");
+    let mut places = Vec::new();
+    let labelled = parts
+        .algorithms
+        .iter()
+        .enumerate()
+        .map(|(i, t)| (i as i64, t, false))
+        .chain(
+            parts
+                .guards
+                .iter()
+                .enumerate()
+                .map(|(k, t)| (GUARD_BASE + k as i64, t, true)),
+        );
+    for (label, (text, pos), guard) in labelled {
+        let _ = writeln!(program, "{label}:");
+        let line = program.lines().count() + 1;
+        if guard {
+            // The guard's text starts after `__GUARD := (`.
+            places.push((
+                line,
+                Pos {
+                    line: pos.line,
+                    col: pos.col.saturating_sub(12),
+                },
+            ));
+            let _ = writeln!(program, "__GUARD := ({text});");
+        } else {
+            places.push((line, *pos));
+            let _ = writeln!(program, "{text}");
+        }
+    }
+    let _ = write!(
+        program,
+        "END_CASE\nEND_PROGRAM\nCONFIGURATION C\n  TASK T (INTERVAL := T#1s, PRIORITY := 1);\n  PROGRAM {INSTANCE} WITH T : FB_TYPE;\nEND_CONFIGURATION\n"
+    );
+    (program, places)
+}
+
+/// Reads and compiles the basic or simple FB type in the `.fbt` text of `file`.
+pub fn compile(file: &str, text: &str) -> Result<BasicType, Vec<String>> {
+    let fb = read_fbt(file, text).map_err(|e| vec![e.to_string()])?;
+    compile_type(file, &fb)
+}
+
+/// Compiles an FB type read from `file`.
+pub fn compile_type(file: &str, fb: &FbType) -> Result<BasicType, Vec<String>> {
+    let interface = interface_of(file, fb)?;
+    let parts = parts_of(file, fb, &interface)?;
+    let (program, places) = program_of(fb, &interface, &parts);
+    let compiled = plc_compiler::compile(
+        &[(format!("{}.st", fb.name), program)],
+        &plc_compiler::Options::default(),
+    );
+    let image = match compiled {
+        Ok((compiled, _)) => compiled.image,
+        Err((diagnostics, sources)) => {
+            let generated = &sources.files[0];
+            return Err(diagnostics
+                .iter()
+                .map(|d| {
+                    let (line, col) = generated.line_col(d.span.start as usize);
+                    match places.iter().rev().find(|(start, _)| *start <= line) {
+                        // Inside an algorithm or guard: its place in the .fbt.
+                        Some(&(start, pos)) if line > start => format!(
+                            "{file}:{}:{col}: {}",
+                            pos.line as usize + line - start,
+                            d.message
+                        ),
+                        Some(&(_, pos)) => format!(
+                            "{file}:{}:{}: {}",
+                            pos.line,
+                            pos.col as usize + col - 1,
+                            d.message
+                        ),
+                        None => format!(
+                            "{file}: {} (in the variables of {}): {}",
+                            line, fb.name, d.message
+                        ),
+                    }
+                })
+                .collect());
+        }
+    };
+    let internals: Vec<VarSpec> = parts.internals.iter().map(|(s, _)| s.clone()).collect();
+    let code = VmCode::new(
+        image,
+        interface.inputs.clone(),
+        interface.outputs.clone(),
+        internals.clone(),
+        parts.algorithms.len(),
+        parts.guards.len(),
+    )
+    .map_err(|e| vec![format!("{file}: {e}")])?;
+    parts
+        .ecc
+        .verify(&interface, parts.algorithms.len(), parts.guards.len())
+        .map_err(|e| vec![format!("{file}: {e}")])?;
+    Ok(BasicType {
+        name: fb.name.clone(),
+        interface,
+        ecc: parts.ecc,
+        internals,
+        code,
+    })
+}
+
+#[cfg(test)]
+mod tests;

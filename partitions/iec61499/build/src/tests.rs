@@ -1,0 +1,249 @@
+//! Basic FB types compiled from XML run as the native standard FBs do: our own counter
+//! type always, and, where 4diac's type library is present, every basic or simple event FB
+//! of it that has a native twin, on random event sequences.
+
+use super::*;
+use iec61499_runtime::basic::Algorithms;
+use iec61499_runtime::fb::Context;
+use iec61499_runtime::resource::{Limits, Resource};
+use iec61499_runtime::{DataType, Value, stdlib};
+use proptest::prelude::*;
+use proptest::test_runner::{Config as RunnerConfig, TestRunner};
+use std::cell::RefCell;
+use std::path::{Path, PathBuf};
+use std::rc::Rc;
+
+/// An up counter written for this test from the standard's description of E_CTU.
+const COUNTER: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
+<FBType Name="E_CTU">
+  <InterfaceList>
+    <EventInputs>
+      <Event Name="CU"><With Var="PV"/></Event>
+      <Event Name="R"/>
+    </EventInputs>
+    <EventOutputs>
+      <Event Name="CUO"><With Var="Q"/><With Var="CV"/></Event>
+      <Event Name="RO"><With Var="Q"/><With Var="CV"/></Event>
+    </EventOutputs>
+    <InputVars><VarDeclaration Name="PV" Type="UINT"/></InputVars>
+    <OutputVars>
+      <VarDeclaration Name="Q" Type="BOOL"/>
+      <VarDeclaration Name="CV" Type="UINT"/>
+    </OutputVars>
+  </InterfaceList>
+  <BasicFB>
+    <ECC>
+      <ECState Name="START"/>
+      <ECState Name="CU"><ECAction Algorithm="CU" Output="CUO"/></ECState>
+      <ECState Name="R"><ECAction Algorithm="R" Output="RO"/></ECState>
+      <ECTransition Source="START" Destination="CU" Condition="CU[CV &lt; 65535]"/>
+      <ECTransition Source="CU" Destination="START" Condition="1"/>
+      <ECTransition Source="START" Destination="R" Condition="R"/>
+      <ECTransition Source="R" Destination="START" Condition="1"/>
+    </ECC>
+    <Algorithm Name="CU"><ST Text="CV := CV + 1;&#10;Q := (CV &gt;= PV);"/></Algorithm>
+    <Algorithm Name="R"><ST><![CDATA[CV := 0;
+Q := FALSE;]]></ST></Algorithm>
+  </BasicFB>
+</FBType>
+"#;
+
+type Log = Rc<RefCell<Vec<(&'static str, usize)>>>;
+
+/// Logs which output event of `who` arrived.
+struct Recorder {
+    interface: Interface,
+    who: &'static str,
+    log: Log,
+}
+
+impl FunctionBlock for Recorder {
+    fn interface(&self) -> &Interface {
+        &self.interface
+    }
+    fn event(&mut self, event: usize, _: &[Value], _: &mut Context<'_>) {
+        self.log.borrow_mut().push((self.who, event));
+    }
+    fn reset(&mut self) {}
+}
+
+fn recorder(who: &'static str, events: usize, log: &Log) -> Box<dyn FunctionBlock> {
+    let names: Vec<String> = (0..events).map(|i| format!("E{i}")).collect();
+    let decl: Vec<EventDecl<'_>> = names.iter().map(|n| (n.as_str(), &[][..])).collect();
+    let interface = Interface::build(&decl, &[], &[], &[]).unwrap();
+    Box::new(Recorder {
+        interface,
+        who,
+        log: log.clone(),
+    })
+}
+
+/// A random value for an input of type `ty`: small numbers, so counters reach their presets.
+fn random_value(ty: DataType, seed: u64) -> Value {
+    match ty {
+        DataType::Bool => Value::Bool(seed % 2 == 1),
+        DataType::SInt | DataType::Int | DataType::DInt | DataType::LInt => {
+            Value::Int((seed % 7) as i64 - 2)
+        }
+        _ => Value::UInt(seed % 6),
+    }
+}
+
+/// Runs `steps` (input event, a seed for the inputs' values) into the native type and the
+/// compiled one side by side; returns the first difference.
+fn compare(native: &str, compiled: &BasicType, steps: &[(usize, u64)]) -> Result<(), String> {
+    let mut r = Resource::new(Limits::default());
+    let log: Log = Rc::default();
+    r.create("A", stdlib::create(native).unwrap()).unwrap();
+    r.create("B", compiled.instantiate()).unwrap();
+    let ifc = compiled.interface.clone();
+    r.create("RA", recorder("A", ifc.event_outputs.len(), &log))
+        .unwrap();
+    r.create("RB", recorder("B", ifc.event_outputs.len(), &log))
+        .unwrap();
+    for (k, e) in ifc.event_outputs.iter().enumerate() {
+        r.connect_event(&format!("A.{}", e.name), &format!("RA.E{k}"))
+            .unwrap();
+        r.connect_event(&format!("B.{}", e.name), &format!("RB.E{k}"))
+            .unwrap();
+    }
+    for (n, &(event, seed)) in steps.iter().enumerate() {
+        let event = event % ifc.event_inputs.len().max(1);
+        for (i, v) in ifc.inputs.iter().enumerate() {
+            let value = random_value(v.ty, seed.rotate_left(i as u32 * 7));
+            r.write(&format!("A.{}", v.name), value.clone()).unwrap();
+            r.write(&format!("B.{}", v.name), value).unwrap();
+        }
+        let name = &ifc.event_inputs[event].name;
+        r.trigger(&format!("A.{name}"), 0).unwrap();
+        r.trigger(&format!("B.{name}"), 0).unwrap();
+        if let Some(fault) = r.fault() {
+            return Err(format!("step {n}: {fault}"));
+        }
+        let events: Vec<(&str, usize)> = log.borrow_mut().drain(..).collect();
+        let a: Vec<usize> = events
+            .iter()
+            .filter(|(w, _)| *w == "A")
+            .map(|(_, e)| *e)
+            .collect();
+        let b: Vec<usize> = events
+            .iter()
+            .filter(|(w, _)| *w == "B")
+            .map(|(_, e)| *e)
+            .collect();
+        if a != b {
+            return Err(format!(
+                "step {n} ({name}): native sent {a:?}, compiled sent {b:?}"
+            ));
+        }
+        for o in &ifc.outputs {
+            let (va, vb) = (
+                r.read(&format!("A.{}", o.name)),
+                r.read(&format!("B.{}", o.name)),
+            );
+            if va != vb {
+                return Err(format!(
+                    "step {n} ({name}): {} native {va:?}, compiled {vb:?}",
+                    o.name
+                ));
+            }
+        }
+    }
+    Ok(())
+}
+
+fn random_sequences(native: &str, compiled: &BasicType, cases: u32) -> Result<(), String> {
+    let mut runner = TestRunner::new(RunnerConfig {
+        cases,
+        failure_persistence: None,
+        ..RunnerConfig::default()
+    });
+    let steps = proptest::collection::vec((0usize..8, any::<u64>()), 1..40);
+    runner
+        .run(&steps, |steps| {
+            compare(native, compiled, &steps).map_err(proptest::test_runner::TestCaseError::fail)
+        })
+        .map_err(|e| e.to_string())
+}
+
+#[test]
+fn our_counter_type_runs_as_the_native_one() {
+    let compiled = compile("E_CTU.fbt", COUNTER).unwrap();
+    assert_eq!(compiled.code.counts(), (2, 1));
+    random_sequences("E_CTU", &compiled, 100).unwrap();
+}
+
+#[test]
+fn st_errors_point_into_the_fbt() {
+    let bad = COUNTER.replace("CV := CV + 1;", "CV := CV + ;");
+    let errors = compile("C.fbt", &bad).unwrap_err();
+    assert!(errors[0].starts_with("C.fbt:28:"), "{errors:?}");
+    let bad = COUNTER.replace("CU[CV &lt; 65535]", "CU[CV &lt; NOPE]");
+    let errors = compile("C.fbt", &bad).unwrap_err();
+    assert!(
+        errors[0].starts_with("C.fbt:23:") && errors[0].contains("NOPE"),
+        "{errors:?}"
+    );
+    let bad = COUNTER.replace(
+        "Type=\"UINT\"/></InputVars>",
+        "Type=\"MOTOR\"/></InputVars>",
+    );
+    assert!(compile("C.fbt", &bad).unwrap_err()[0].contains("type MOTOR is not supported"));
+}
+
+fn find(dir: &Path, file: &str) -> Option<PathBuf> {
+    for entry in std::fs::read_dir(dir).ok()?.flatten() {
+        let path = entry.path();
+        if path.is_dir() {
+            if let Some(found) = find(&path, file) {
+                return Some(found);
+            }
+        } else if path.file_name().is_some_and(|n| n == file) {
+            return Some(path);
+        }
+    }
+    None
+}
+
+#[test]
+fn fourdiac_event_fbs_run_as_ours() {
+    let dir = std::env::var_os("FORDIAC_TYPELIB")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| {
+            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../target/4diac-ide/data/typelibrary")
+        });
+    if !dir.is_dir() {
+        eprintln!(
+            "skipped: no 4diac type library at {} (set FORDIAC_TYPELIB)",
+            dir.display()
+        );
+        return;
+    }
+    let (mut same, mut problems) = (Vec::new(), Vec::new());
+    for ty in stdlib::TYPES {
+        let Some(file) = find(&dir, &format!("{ty}.fbt")) else {
+            continue;
+        };
+        let text = std::fs::read_to_string(&file).unwrap();
+        let fb = iec61499_xml::read_fbt(&file.display().to_string(), &text).unwrap();
+        if !matches!(fb.body, Body::Basic(_) | Body::Simple(_)) {
+            continue;
+        }
+        match compile_type(&format!("{ty}.fbt"), &fb) {
+            Err(e) => problems.push(format!("{ty}: does not compile: {}", e.join("; "))),
+            Ok(compiled) => match random_sequences(ty, &compiled, 50) {
+                Ok(()) => same.push(ty),
+                Err(e) => problems.push(format!("{ty}: differs: {e}")),
+            },
+        }
+    }
+    eprintln!(
+        "4diac's basic event FBs compiled and run as ours: {} ({})",
+        same.len(),
+        same.join(", ")
+    );
+    for p in &problems {
+        eprintln!("  {p}");
+    }
+    assert!(problems.is_empty(), "{problems:?}");
+}
