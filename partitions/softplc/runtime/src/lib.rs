@@ -7,7 +7,8 @@
 //! statistics, faults and safe outputs, outputs), the latency statistics ([`histogram`]),
 //! the online services ([`online`]) and online download ([`download`]: chunk assembly,
 //! checks, takeover by name), the globals shared with another project ([`shared`]) and
-//! which execution tier runs the program ([`tier`]: the interpreter or native code).
+//! which execution tier runs the program ([`tier`]: the interpreter or native code) and the
+//! records kept across a power cut ([`store`]: boot project, RETAIN snapshots).
 //! The partition program (`main.rs`) only re-verifies the program, creates the ports and
 //! the processes (one per IEC task and a control process) and moves bytes between them and
 //! this library. It must never trust the package: every structure is checked and
@@ -23,6 +24,7 @@ pub mod online;
 pub mod package;
 pub mod scan;
 pub mod shared;
+pub mod store;
 pub mod tier;
 
 #[cfg(test)]

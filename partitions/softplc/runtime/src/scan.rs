@@ -731,8 +731,7 @@ pub fn carry_retain(
     new_image: &Image,
     new_data: &mut [u8],
 ) -> usize {
-    use plc_vm::image::{Storage, VAR_FLAG_RETAIN, VarType};
-    use plc_vm::vm::Value;
+    use plc_vm::image::{VAR_FLAG_RETAIN, VarType};
     let same_program = old_image.same_program(new_image);
     let mut carried = 0;
     for i in 0..new_image.var_count() {
@@ -755,18 +754,31 @@ pub fn carry_retain(
         ) else {
             continue;
         };
-        let kept = match ty.storage() {
-            Storage::Reference if !same_program => false,
-            _ if src.len() == dst.len() => {
-                dst.copy_from_slice(src);
-                true
-            }
-            Storage::String | Storage::WString => {
-                Value::load(ty, src).is_some_and(|text| text.store(ty, dst).is_ok())
-            }
-            _ => false,
-        };
-        carried += kept as usize;
+        carried += carry_value(ty, same_program, src, dst) as usize;
     }
     carried
+}
+
+/// Carries one RETAIN value of type `ty` from its old bytes `src` into `dst` (the rules of
+/// [`carry_retain`]: same size, the bytes; a STRING or WSTRING of another capacity, its
+/// text cut to the new one; a reference only within the same program). Whether it did.
+pub fn carry_value(
+    ty: plc_vm::image::VarType,
+    same_program: bool,
+    src: &[u8],
+    dst: &mut [u8],
+) -> bool {
+    use plc_vm::image::Storage;
+    use plc_vm::vm::Value;
+    match ty.storage() {
+        Storage::Reference if !same_program => false,
+        _ if src.len() == dst.len() => {
+            dst.copy_from_slice(src);
+            true
+        }
+        Storage::String | Storage::WString => {
+            Value::load(ty, src).is_some_and(|text| text.store(ty, dst).is_ok())
+        }
+        _ => false,
+    }
 }
