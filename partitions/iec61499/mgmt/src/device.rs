@@ -9,6 +9,7 @@ use alloc::string::String;
 use alloc::vec::Vec;
 use core::cell::Ref;
 use iec61499_runtime::fb::Restart;
+use iec61499_runtime::package::{self, PackageError, TypePackage};
 use iec61499_runtime::resource::DeployError;
 use iec61499_runtime::{Limits, Resource, stdlib};
 
@@ -28,6 +29,8 @@ struct Res {
 /// An IEC 61499 device.
 pub struct Device {
     limits: Limits,
+    /// Basic FB types added at run time ([`Device::add_type`]), by name.
+    types: Vec<TypePackage>,
     max_resources: usize,
     resources: Vec<Res>,
     report: SharedReport,
@@ -48,6 +51,7 @@ impl Device {
     pub fn new(limits: Limits, max_resources: usize) -> Self {
         Device {
             limits,
+            types: Vec::new(),
             max_resources,
             resources: Vec::new(),
             report: SharedReport::default(),
@@ -171,8 +175,15 @@ impl Device {
         let deploy = |e: DeployError| deploy_reason(&e);
         match (request.action, &request.object) {
             (Action::Create, Object::Fb { name, ty }) => {
-                let fb =
-                    types::create(ty, destination, name, &report).ok_or(Reason::UnsupportedType)?;
+                let added = self
+                    .types
+                    .iter()
+                    .find(|t| t.name == *ty)
+                    .map(TypePackage::instantiate);
+                let r = &mut self.resources[index];
+                let fb = added
+                    .or_else(|| types::create(ty, destination, name, &report))
+                    .ok_or(Reason::UnsupportedType)?;
                 r.resource.create(name, fb).map_err(deploy)?;
                 r.types.push((name.clone(), ty.clone()));
             }
@@ -342,6 +353,22 @@ impl Device {
                 r.running = false;
             }
         }
+    }
+
+    /// Adds (or replaces) a basic FB type from its package (compiled outside the real-time
+    /// partition; checked whole here: structure, ECC, bytecode verification). New instances
+    /// of the name are of this type; existing ones keep theirs. Returns the type's name.
+    pub fn add_type(&mut self, bytes: &[u8]) -> Result<String, PackageError> {
+        let package = package::decode(bytes)?;
+        let name = package.name.clone();
+        if stdlib::create(&name).is_some() {
+            return Err(PackageError::Rejected(format!(
+                "{name} is a standard type and cannot be replaced"
+            )));
+        }
+        self.types.retain(|t| t.name != name);
+        self.types.push(package);
+        Ok(name)
     }
 
     /// The earliest timer of a running resource.

@@ -37,6 +37,7 @@ extern crate alloc;
 
 pub mod basic;
 pub mod fb;
+pub mod package;
 pub mod resource;
 pub mod stdlib;
 pub mod value;

@@ -78,6 +78,11 @@ impl VmCode {
         })
     }
 
+    /// The bytecode image.
+    pub fn image(&self) -> &[u8] {
+        &self.image
+    }
+
     /// Runs the code selected by `selector` on `vars`; returns `__GUARD`.
     fn call(&mut self, selector: i64, vars: &mut Vars<'_>) -> Result<bool, String> {
         let parsed = Image::parse(&self.image).map_err(|e| format!("{e:?}"))?;
