@@ -10,7 +10,6 @@ use iec61499_runtime::{DataType, Value, stdlib};
 use proptest::prelude::*;
 use proptest::test_runner::{Config as RunnerConfig, TestRunner};
 use std::cell::RefCell;
-use std::path::{Path, PathBuf};
 use std::rc::Rc;
 
 /// An up counter written for this test from the standard's description of E_CTU.
@@ -191,37 +190,15 @@ fn st_errors_point_into_the_fbt() {
     assert!(compile("C.fbt", &bad).unwrap_err()[0].contains("type MOTOR is not supported"));
 }
 
-fn find(dir: &Path, file: &str) -> Option<PathBuf> {
-    for entry in std::fs::read_dir(dir).ok()?.flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            if let Some(found) = find(&path, file) {
-                return Some(found);
-            }
-        } else if path.file_name().is_some_and(|n| n == file) {
-            return Some(path);
-        }
-    }
-    None
-}
-
 #[test]
 fn fourdiac_event_fbs_run_as_ours() {
-    let dir = std::env::var_os("FORDIAC_TYPELIB")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../target/4diac-ide/data/typelibrary")
-        });
-    if !dir.is_dir() {
-        eprintln!(
-            "skipped: no 4diac type library at {} (set FORDIAC_TYPELIB)",
-            dir.display()
-        );
+    let Some(dir) = iec61499_xml::fourdiac_library() else {
+        eprintln!("skipped: no 4diac type library (set FORDIAC_TYPELIB)");
         return;
-    }
+    };
     let (mut same, mut problems) = (Vec::new(), Vec::new());
     for ty in stdlib::TYPES {
-        let Some(file) = find(&dir, &format!("{ty}.fbt")) else {
+        let Some(file) = iec61499_xml::find_file(&dir, &format!("{ty}.fbt")) else {
             continue;
         };
         let text = std::fs::read_to_string(&file).unwrap();

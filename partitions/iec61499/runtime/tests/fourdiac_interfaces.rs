@@ -7,40 +7,17 @@
 //! standard (Annex A: an array of four TIMEs), as E_TABLE does in both.
 
 use iec61499_runtime::stdlib;
-use std::path::{Path, PathBuf};
-
-fn find(dir: &Path, file: &str) -> Option<PathBuf> {
-    for entry in std::fs::read_dir(dir).ok()?.flatten() {
-        let path = entry.path();
-        if path.is_dir() {
-            if let Some(found) = find(&path, file) {
-                return Some(found);
-            }
-        } else if path.file_name().is_some_and(|n| n == file) {
-            return Some(path);
-        }
-    }
-    None
-}
 
 #[test]
 fn standard_interfaces_match_fourdiac() {
-    let dir = std::env::var_os("FORDIAC_TYPELIB")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| {
-            Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../target/4diac-ide/data/typelibrary")
-        });
-    if !dir.is_dir() {
-        eprintln!(
-            "skipped: no 4diac type library at {} (set FORDIAC_TYPELIB)",
-            dir.display()
-        );
+    let Some(dir) = iec61499_xml::fourdiac_library() else {
+        eprintln!("skipped: no 4diac type library (set FORDIAC_TYPELIB)");
         return;
-    }
+    };
     let mut compared = 0;
     let mut differences = Vec::new();
     for ty in stdlib::TYPES {
-        let Some(file) = find(&dir, &format!("{ty}.fbt")) else {
+        let Some(file) = iec61499_xml::find_file(&dir, &format!("{ty}.fbt")) else {
             differences.push(format!("{ty}: no {ty}.fbt in the library"));
             continue;
         };

@@ -725,3 +725,36 @@ fn text_offset(raw: Option<&str>, n: usize) -> usize {
 
 #[cfg(test)]
 mod tests;
+
+/// Where 4diac IDE's type library is for the compatibility checks: the directory named by
+/// `FORDIAC_TYPELIB`, else `target/4diac-ide/data/typelibrary` of the workspace (a copy of
+/// eclipse-4diac/4diac-ide's `data/typelibrary`, never committed); `None` when neither exists.
+pub fn fourdiac_library() -> Option<std::path::PathBuf> {
+    let dir = std::env::var_os("FORDIAC_TYPELIB")
+        .map(std::path::PathBuf::from)
+        .unwrap_or_else(|| {
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR"))
+                .join("../../../target/4diac-ide/data/typelibrary")
+        });
+    dir.is_dir().then_some(dir)
+}
+
+/// Every file named `name` below `dir`, depth first, in directory order sorted by path.
+pub fn find_file(dir: &std::path::Path, name: &str) -> Option<std::path::PathBuf> {
+    let mut entries: Vec<_> = std::fs::read_dir(dir)
+        .ok()?
+        .flatten()
+        .map(|e| e.path())
+        .collect();
+    entries.sort();
+    for path in entries {
+        if path.is_dir() {
+            if let Some(found) = find_file(&path, name) {
+                return Some(found);
+            }
+        } else if path.file_name().is_some_and(|n| n == name) {
+            return Some(path);
+        }
+    }
+    None
+}
