@@ -15,6 +15,7 @@
 //! a FOR loop with a constant bound compares with the constant; the last IF branch without
 //! ELSE falls through.
 
+use crate::codes::{self, Code};
 use std::collections::HashMap;
 
 use plc_vm::image::{ImageBuilder, Label, PouId};
@@ -177,9 +178,9 @@ impl<'a> Gen<'a> {
 
     // ----- small helpers -------------------------------------------------------------
 
-    pub fn error(&mut self, span: Span, msg: impl Into<String>) {
+    pub fn error(&mut self, code: Code, span: Span, msg: impl Into<String>) {
         if !self.dry {
-            self.diags.error(span, msg);
+            self.diags.error(code, span, msg);
         }
     }
 
@@ -361,14 +362,18 @@ impl<'a> Gen<'a> {
                         match v {
                             Some(v) => v,
                             None => {
-                                self.diags
-                                    .error(e.span, "initial value must be a constant expression");
+                                self.diags.error(
+                                    codes::NOT_CONSTANT,
+                                    e.span,
+                                    "initial value must be a constant expression",
+                                );
                                 return;
                             }
                         }
                     }
                     Some(other) => {
                         self.diags.error(
+                            codes::INITIAL_VALUE_SHAPE,
                             other.span(),
                             format!(
                                 "a value of type {} cannot be initialised with an aggregate",
@@ -398,13 +403,17 @@ impl<'a> Gen<'a> {
                     Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
                         Some(ConstVal::Str(s)) => s,
                         _ => {
-                            self.diags
-                                .error(e.span, "WSTRING initial value must be a string literal");
+                            self.diags.error(
+                                codes::STRING_INITIAL_VALUE,
+                                e.span,
+                                "WSTRING initial value must be a string literal",
+                            );
                             String::new()
                         }
                     },
                     Some(other) => {
                         self.diags.error(
+                            codes::STRING_INITIAL_VALUE,
                             other.span(),
                             "WSTRING initial value must be a string literal",
                         );
@@ -420,13 +429,17 @@ impl<'a> Gen<'a> {
                     Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
                         Some(ConstVal::Str(s)) => s,
                         _ => {
-                            self.diags
-                                .error(e.span, "STRING initial value must be a string literal");
+                            self.diags.error(
+                                codes::STRING_INITIAL_VALUE,
+                                e.span,
+                                "STRING initial value must be a string literal",
+                            );
                             String::new()
                         }
                     },
                     Some(other) => {
                         self.diags.error(
+                            codes::STRING_INITIAL_VALUE,
                             other.span(),
                             "STRING initial value must be a string literal",
                         );
@@ -456,6 +469,7 @@ impl<'a> Gen<'a> {
                         let given: u64 = items.iter().map(|i| i.repeat).sum();
                         if given > count {
                             self.diags.error(
+                                codes::INITIAL_VALUE_SHAPE,
                                 *span,
                                 format!("too many initial values: the array has {count} elements"),
                             );
@@ -464,6 +478,7 @@ impl<'a> Gen<'a> {
                     Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
                     Some(other) => {
                         self.diags.error(
+                            codes::INITIAL_VALUE_SHAPE,
                             other.span(),
                             "array initial value must be written `[v1, v2, n(v)]`",
                         );
@@ -483,6 +498,7 @@ impl<'a> Gen<'a> {
                     Some(Init::Struct(f, _)) => f.clone(),
                     Some(other) => {
                         self.diags.error(
+                            codes::INITIAL_VALUE_SHAPE,
                             other.span(),
                             "structure initial value must be written `(member := value, ...)`",
                         );
@@ -493,6 +509,7 @@ impl<'a> Gen<'a> {
                 for (n, _) in &fields {
                     if !members.iter().any(|m| m.name == n.name) {
                         self.diags.error(
+                            codes::INITIAL_VALUE_MEMBER,
                             n.span,
                             format!("`{}` is not a member of {}", n.text, self.tname(ty)),
                         );
@@ -512,6 +529,7 @@ impl<'a> Gen<'a> {
                     Some(Init::Struct(f, _)) => f.clone(),
                     Some(other) => {
                         self.diags.error(
+                            codes::INITIAL_VALUE_SHAPE,
                             other.span(),
                             "function block initial values must be written `(input := value, ...)`",
                         );
@@ -530,6 +548,7 @@ impl<'a> Gen<'a> {
                             && matches!(m.kind, VarKind::Input | VarKind::Output | VarKind::Local)
                     }) {
                         self.diags.error(
+                            codes::INITIAL_VALUE_MEMBER,
                             n.span,
                             format!("`{}` is not a variable of {}", n.text, self.tname(ty)),
                         );
@@ -556,7 +575,7 @@ impl<'a> Gen<'a> {
                         ..
                     })) => {}
                     Some(other) => {
-                        self.diags.error(
+                        self.diags.error(codes::REFERENCE_INITIAL_VALUE,
                             other.span(),
                             "the initial value of a reference or interface variable must be NULL (assign REF()/ADR() in the program)",
                         );
@@ -571,7 +590,7 @@ impl<'a> Gen<'a> {
     pub fn const_cell(&mut self, v: &ConstVal, ty: &Type, elem: Elem, span: Span) -> Option<u64> {
         let bad = |s: &mut Self| {
             let msg = format!("constant does not fit type {}", s.tname(ty));
-            s.diags.error(span, msg);
+            s.diags.error(codes::VALUE_OUT_OF_RANGE, span, msg);
             None
         };
         match (v, elem) {
@@ -607,7 +626,7 @@ impl<'a> Gen<'a> {
             },
             _ => {
                 let msg = format!("initial value has the wrong type for {}", self.tname(ty));
-                self.diags.error(span, msg);
+                self.diags.error(codes::INITIAL_VALUE_TYPE, span, msg);
                 None
             }
         }
@@ -751,6 +770,7 @@ impl<'a> Gen<'a> {
                 if let Some((w, span)) = found {
                     let name = self.prog.pous[w].text.clone();
                     self.diags.error(
+                        codes::RECURSION,
                         span,
                         format!("recursive call of `{name}` (IEC 61131-3 forbids recursion)"),
                     );
@@ -855,7 +875,7 @@ impl<'a> Gen<'a> {
                     }
                     self.emit(|b| b.jmp(exit));
                 }
-                None => self.error(s.span, "EXIT outside of a loop"),
+                None => self.error(codes::EXIT_OUTSIDE_LOOP, s.span, "EXIT outside of a loop"),
             },
             StmtKind::Return => {
                 for _ in 0..self.try_depth {
@@ -915,7 +935,7 @@ impl<'a> Gen<'a> {
                                 "exception variable must be declared `: __EXCEPTION`, not {}",
                                 self.tname(&p.ty)
                             );
-                            self.error(v.span, msg);
+                            self.error(codes::EXCEPTION_VARIABLE, v.span, msg);
                             self.op(Opcode::Drop);
                         }
                         None => self.op(Opcode::Drop),
@@ -961,7 +981,7 @@ impl<'a> Gen<'a> {
         let t = self.expr(e, Some(&Type::BOOL));
         if !t.is_error() && t != Type::BOOL {
             let msg = format!("condition must be BOOL, found {}", self.tname(&t));
-            self.error(e.span, msg);
+            self.error(codes::TYPE_MISMATCH, e.span, msg);
         }
     }
 
@@ -974,7 +994,7 @@ impl<'a> Gen<'a> {
                 "CASE selector must be an integer or enumeration, found {}",
                 self.tname(&st)
             );
-            self.error(selector.span, msg);
+            self.error(codes::CASE_SELECTOR, selector.span, msg);
         }
         let signed = st
             .elem()
@@ -997,13 +1017,18 @@ impl<'a> Gen<'a> {
                 };
                 if lo > hi {
                     self.error(
+                        codes::CASE_LABEL,
                         lo_e.span.to(hi_e.span),
                         "empty CASE range (lower bound exceeds upper bound)",
                     );
                 }
                 if let Some(prev) = seen.iter().find(|(a, b, _)| lo <= *b && *a <= hi) {
                     let _ = prev;
-                    self.error(lo_e.span, "CASE label overlaps an earlier label");
+                    self.error(
+                        codes::CASE_LABEL,
+                        lo_e.span,
+                        "CASE label overlaps an earlier label",
+                    );
                 }
                 seen.push((lo, hi, lo_e.span));
                 if lo == hi {
@@ -1065,6 +1090,7 @@ impl<'a> Gen<'a> {
             Some(ConstVal::Int(v)) => Some(v),
             _ => {
                 self.error(
+                    codes::CASE_LABEL,
                     e.span,
                     "CASE label must be a constant integer or enumeration value",
                 );
@@ -1088,11 +1114,15 @@ impl<'a> Gen<'a> {
                 "FOR control variable must be an integer, found {}",
                 self.tname(&vp.ty)
             );
-            self.error(var.span, msg);
+            self.error(codes::FOR_VARIABLE, var.span, msg);
             return;
         };
         if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) || vp.window.is_some() {
-            self.error(var.span, "FOR control variable must be a plain variable");
+            self.error(
+                codes::FOR_VARIABLE,
+                var.span,
+                "FOR control variable must be a plain variable",
+            );
             return;
         }
         let vty = vp.ty.clone();
@@ -1107,7 +1137,11 @@ impl<'a> Gen<'a> {
             },
         };
         if step_const == Some(0) {
-            self.error(by.map_or(var.span, |e| e.span), "FOR step must not be zero");
+            self.error(
+                codes::FOR_STEP_ZERO,
+                by.map_or(var.span, |e| e.span),
+                "FOR step must not be zero",
+            );
         }
         // The end value is evaluated once into a hidden temporary; the loop tests compare
         // with the constant instead when `to` is one that fits the control variable's type.
@@ -1225,6 +1259,7 @@ impl<'a> Gen<'a> {
         };
         if !p.writable {
             self.error(
+                codes::ASSIGN_TO_READ_ONLY,
                 target.span,
                 "cannot assign to a constant or an input of another POU",
             );
@@ -1250,7 +1285,7 @@ impl<'a> Gen<'a> {
                     "`REF=` binds a REFERENCE TO variable, not {}",
                     self.tname(&p.ty)
                 );
-                self.error(target.span, msg);
+                self.error(codes::REF_ASSIGN_TARGET, target.span, msg);
             }
             self.drop_place_value(&p);
             self.infer(value);
@@ -1317,7 +1352,7 @@ impl<'a> Gen<'a> {
                         self.tname(&t),
                         self.tname(&p.ty)
                     );
-                    self.error(value.span, msg);
+                    self.error(codes::ASSIGN_TYPE, value.span, msg);
                 }
                 self.emit(|b| {
                     b.call_builtin(if wide {
@@ -1332,10 +1367,14 @@ impl<'a> Gen<'a> {
                 let t = self.expr(value, Some(&p.ty));
                 if t != p.ty && !t.is_error() {
                     let msg = format!("cannot assign {} to {}", self.tname(&t), self.tname(&p.ty));
-                    self.error(value.span, msg);
+                    self.error(codes::ASSIGN_TYPE, value.span, msg);
                 }
                 if matches!(p.ty, Type::Fb(_)) {
-                    self.error(span, "function block instances cannot be assigned");
+                    self.error(
+                        codes::ASSIGN_FB_INSTANCE,
+                        span,
+                        "function block instances cannot be assigned",
+                    );
                 }
                 let (size, _) = self.prog.size_align(&p.ty);
                 self.emit(|b| b.copy(size));
@@ -1447,7 +1486,7 @@ impl<'a> Gen<'a> {
                             .cloned()
                         else {
                             let msg = format!("{} has no member `{}`", self.tname(&bp.ty), m.text);
-                            self.error(m.span, msg);
+                            self.error(codes::NO_SUCH_MEMBER, m.span, msg);
                             self.drop_place(&bp);
                             return None;
                         };
@@ -1494,7 +1533,7 @@ impl<'a> Gen<'a> {
                                     "`{}` is not an input or output of {}",
                                     m.text, self.prog.pous[pi].text
                                 );
-                                self.error(m.span, msg);
+                                self.error(codes::NO_SUCH_MEMBER, m.span, msg);
                                 self.drop_place(&bp);
                                 None
                             }
@@ -1503,7 +1542,7 @@ impl<'a> Gen<'a> {
                                     "{} has no input or output `{}`",
                                     self.prog.pous[pi].text, m.text
                                 );
-                                self.error(m.span, msg);
+                                self.error(codes::NO_SUCH_MEMBER, m.span, msg);
                                 self.drop_place(&bp);
                                 None
                             }
@@ -1515,7 +1554,7 @@ impl<'a> Gen<'a> {
                     }
                     other => {
                         let msg = format!("{} has no members (`.{}`)", self.tname(other), m.text);
-                        self.error(m.span, msg);
+                        self.error(codes::NO_SUCH_MEMBER, m.span, msg);
                         self.drop_place(&bp);
                         None
                     }
@@ -1526,7 +1565,7 @@ impl<'a> Gen<'a> {
                 let Type::Array(arr) = bp.ty.clone() else {
                     if !bp.ty.is_error() {
                         let msg = format!("{} is not an array", self.tname(&bp.ty));
-                        self.error(base.span, msg);
+                        self.error(codes::NOT_AN_ARRAY, base.span, msg);
                     }
                     self.drop_place(&bp);
                     for i in idx {
@@ -1540,7 +1579,7 @@ impl<'a> Gen<'a> {
                         arr.dims.len(),
                         idx.len()
                     );
-                    self.error(e.span, msg);
+                    self.error(codes::NOT_AN_ARRAY, e.span, msg);
                     self.drop_place(&bp);
                     return None;
                 }
@@ -1568,7 +1607,7 @@ impl<'a> Gen<'a> {
                             if *v < lo as i128 || *v > hi as i128 {
                                 let msg =
                                     format!("index {v} is outside the array bounds {lo}..{hi}");
-                                self.error(idx[d].span, msg);
+                                self.error(codes::INDEX_OUT_OF_BOUNDS, idx[d].span, msg);
                             } else {
                                 static_off += (*v as i64 - lo) * strides[d];
                             }
@@ -1613,7 +1652,7 @@ impl<'a> Gen<'a> {
                     {
                         let msg =
                             format!("array index must be an integer, found {}", self.tname(&t));
-                        self.error(idx[d].span, msg);
+                        self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
                     }
                     let stride = strides[d] as u32;
                     match static_base.take() {
@@ -1631,7 +1670,7 @@ impl<'a> Gen<'a> {
             }
             ExprKind::Bits { base, width, index } => self.partial_place(e, base, *width, *index),
             _ => {
-                self.error(e.span, "expected a variable");
+                self.error(codes::EXPECTED_VARIABLE, e.span, "expected a variable");
                 None
             }
         }
@@ -1651,7 +1690,7 @@ impl<'a> Gen<'a> {
                         index,
                         self.tname(ty)
                     );
-                    self.error(e.span, msg);
+                    self.error(codes::PARTIAL_ACCESS, e.span, msg);
                 }
                 self.drop_place(&bp);
                 return None;
@@ -1671,7 +1710,7 @@ impl<'a> Gen<'a> {
                 bits,
                 (bits / width).saturating_sub(1)
             );
-            self.error(e.span, msg);
+            self.error(codes::PARTIAL_ACCESS, e.span, msg);
             self.drop_place(&bp);
             return None;
         }
@@ -1722,7 +1761,7 @@ impl<'a> Gen<'a> {
                                 self.tname(&v.ty),
                                 self.tname(&g.ty)
                             );
-                            self.error(v.span, msg);
+                            self.error(codes::VAR_EXTERNAL, v.span, msg);
                         }
                         Some(Place {
                             loc: Loc::Abs(g.offset),
@@ -1733,7 +1772,7 @@ impl<'a> Gen<'a> {
                     }
                     None => {
                         let msg = format!("VAR_EXTERNAL `{}` has no matching VAR_GLOBAL", v.text);
-                        self.error(n.span, msg);
+                        self.error(codes::VAR_EXTERNAL, n.span, msg);
                         None
                     }
                 },
@@ -1769,7 +1808,7 @@ impl<'a> Gen<'a> {
             });
         }
         let msg = format!("unknown variable `{}`", n.text);
-        self.error(n.span, msg);
+        self.error(codes::UNKNOWN_VARIABLE, n.span, msg);
         None
     }
 
@@ -1934,7 +1973,7 @@ impl<'a> Gen<'a> {
                 self.tname(to),
                 self.tname(from)
             );
-            self.error(span, msg);
+            self.error(codes::TYPE_MISMATCH, span, msg);
             return;
         };
         let enumish = |x: &Type| matches!(x, Type::Enum(_) | Type::Exception);
@@ -1944,7 +1983,7 @@ impl<'a> Gen<'a> {
                 self.tname(to),
                 self.tname(from)
             );
-            self.error(span, msg);
+            self.error(codes::TYPE_MISMATCH, span, msg);
             return;
         }
         if !implicit_ok(f, t) {
@@ -1960,7 +1999,7 @@ impl<'a> Gen<'a> {
                     self.tname(from)
                 )
             };
-            self.error(span, msg);
+            self.error(codes::IMPLICIT_CONVERSION, span, msg);
             return;
         }
         self.convert(f, t);
@@ -2171,7 +2210,7 @@ impl<'a> Gen<'a> {
                 let code = crate::sema::single_char(s).unwrap_or(0);
                 if code > elem.int_range().1 {
                     let msg = format!("character '{s}' does not fit type {elem}");
-                    self.error(e.span, msg);
+                    self.error(codes::VALUE_OUT_OF_RANGE, e.span, msg);
                 }
                 self.push_int(code as i64);
                 Type::Elem(elem)
@@ -2274,7 +2313,7 @@ impl<'a> Gen<'a> {
                 let (lo, hi) = e.int_range();
                 if v < lo || v > hi {
                     let msg = format!("constant {v} does not fit type {e}");
-                    self.error(span, msg);
+                    self.error(codes::VALUE_OUT_OF_RANGE, span, msg);
                     return Type::Error;
                 }
                 self.push_int(v as i64);
@@ -2282,7 +2321,7 @@ impl<'a> Gen<'a> {
             }
             _ => {
                 if v > u64::MAX as i128 || v < i64::MIN as i128 {
-                    self.error(span, "integer constant too large");
+                    self.error(codes::INTEGER_TOO_LARGE, span, "integer constant too large");
                     return Type::Error;
                 }
                 self.push_int(v as i64);
@@ -2303,7 +2342,11 @@ impl<'a> Gen<'a> {
             let v = match const_eval(self.prog, &(), inner) {
                 Some(v) => v,
                 None => {
-                    self.error(inner.span, format!("invalid {} literal", elem));
+                    self.error(
+                        codes::MALFORMED_LITERAL,
+                        inner.span,
+                        format!("invalid {} literal", elem),
+                    );
                     return Type::Error;
                 }
             };
@@ -2338,10 +2381,11 @@ impl<'a> Gen<'a> {
                 return Type::Enum(ei);
             }
             let msg = format!("`{}` is not a value of {}", n.text, ty.text);
-            self.error(n.span, msg);
+            self.error(codes::UNKNOWN_ENUMERATION_VALUE, n.span, msg);
             return Type::Error;
         }
         self.error(
+            codes::UNKNOWN_TYPE,
             ty.span,
             format!("unknown type `{}` in typed literal", ty.text),
         );
@@ -2375,7 +2419,7 @@ impl<'a> Gen<'a> {
                     if op == UnOp::Neg { "-" } else { "NOT" },
                     self.tname(&t)
                 );
-                self.error(span, msg);
+                self.error(codes::OPERATOR_TYPES, span, msg);
             }
             return Type::Error;
         };
@@ -2396,7 +2440,7 @@ impl<'a> Gen<'a> {
                 }
                 _ => {
                     let msg = format!("operator - cannot be applied to {e}");
-                    self.error(span, msg);
+                    self.error(codes::OPERATOR_TYPES, span, msg);
                     return Type::Error;
                 }
             },
@@ -2408,7 +2452,7 @@ impl<'a> Gen<'a> {
                 }
                 _ => {
                     let msg = format!("operator NOT cannot be applied to {e}");
-                    self.error(span, msg);
+                    self.error(codes::OPERATOR_TYPES, span, msg);
                     return Type::Error;
                 }
             },
@@ -2521,7 +2565,7 @@ impl<'a> Gen<'a> {
                 g.tname(&ta),
                 g.tname(&tb)
             );
-            g.error(span, msg);
+            g.error(codes::OPERATOR_TYPES, span, msg);
             Type::Error
         };
         // Strings: comparisons only (STRING with STRING, WSTRING with WSTRING).
@@ -2569,7 +2613,7 @@ impl<'a> Gen<'a> {
         // Characters: comparisons within CHAR/WCHAR.
         if ea.is_char() || eb.is_char() {
             if Self::is_flexible(a) || Self::is_flexible(b) {
-                self.error(
+                self.error(codes::CHARACTER_IS_NO_NUMBER,
                     span,
                     "a character is no number: compare it with a character (CHAR#'a') or convert it (CHAR_TO_BYTE)",
                 );
@@ -2810,7 +2854,7 @@ impl<'a> Gen<'a> {
                 self.tname(ta),
                 self.tname(tb)
             );
-            self.error(span, msg);
+            self.error(codes::OPERATOR_TYPES, span, msg);
             return Type::Error;
         };
         if matches!(op, BinOp::Mul | BinOp::Div) {

@@ -9,6 +9,7 @@ pub mod ast;
 mod calls;
 mod classes;
 pub mod codegen;
+pub mod codes;
 pub mod diagnostics;
 pub mod lexer;
 pub mod library;
@@ -113,6 +114,7 @@ pub fn compile(
     let mut prog = sema::analyse(&unit, prelude_pous, opts, &mut diags);
     if prog.instances.is_empty() && diags.is_empty() && !opts.library {
         diags.error(
+            codes::PROGRAM_SELECTION,
             diagnostics::Span::new(0, 0, 0),
             "no PROGRAM to run (declare a PROGRAM or a CONFIGURATION)",
         );
@@ -127,6 +129,7 @@ pub fn compile(
             .map(|c| c.name.span)
             .unwrap_or_default();
         generator.diags.error(
+            codes::TOO_MANY_PROGRAM_INSTANCES,
             span,
             format!(
                 "too many program instances: the VM runs at most {}",
@@ -142,6 +145,7 @@ pub fn compile(
             .map(|i| generator.prog.pous[i.pou].span)
             .unwrap_or_default();
         generator.diags.error(
+            codes::DATA_MEMORY_EXCEEDED,
             span,
             format!(
                 "the program needs more than {} MiB of data memory",
@@ -247,6 +251,7 @@ pub fn compile(
         Ok(i) => i,
         Err(e) => {
             let d = Diagnostic::error(
+                codes::INTERNAL_ERROR,
                 diagnostics::Span::new(0, 0, 0),
                 format!("internal error building the image: {e}"),
             );
@@ -256,6 +261,7 @@ pub fn compile(
     // The VM's verifier is the final judge; a rejection here is a compiler bug.
     if let Err(e) = verify_image(&image) {
         let d = Diagnostic::error(
+            codes::INTERNAL_ERROR,
             diagnostics::Span::new(0, 0, 0),
             format!("internal error: generated image rejected by the verifier: {e}"),
         );

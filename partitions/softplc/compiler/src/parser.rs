@@ -4,6 +4,7 @@
 //! statement or declaration boundary, so one run reports several independent errors.
 
 use crate::ast::*;
+use crate::codes;
 use crate::diagnostics::{Diagnostic, Span};
 use crate::lexer::{Tok, Token};
 
@@ -175,7 +176,7 @@ pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
     };
     let unit = p.unit();
     for a in p.attributes.iter().filter(|a| !a.taken) {
-        p.diags.push(Diagnostic::error(
+        p.diags.push(Diagnostic::error(codes::SAFE_ATTRIBUTE,
             a.span,
             if a.safe {
                 "the attribute 'safe' must stand right before the declaration of a located output (`AT %Q...`)"
@@ -317,8 +318,9 @@ impl Parser<'_> {
     fn error_here(&mut self, expected: &str) -> Fail {
         let msg = format!("expected {expected}, found {}", describe(self.tok()));
         let span = self.span();
-        self.diags
-            .push(Diagnostic::error(span, msg).with_label(format!("expected {expected}")));
+        self.diags.push(
+            Diagnostic::error(codes::SYNTAX, span, msg).with_label(format!("expected {expected}")),
+        );
         Fail
     }
 
@@ -487,11 +489,13 @@ impl Parser<'_> {
                 let base = self.qualified_ident()?;
                 if kind != PouKind::FunctionBlock {
                     self.diags.push(Diagnostic::error(
+                        codes::MISPLACED_POU_ELEMENT,
                         at,
                         "only a FUNCTION_BLOCK can extend another one",
                     ));
                 } else if extends.is_some() {
                     self.diags.push(Diagnostic::error(
+                        codes::MISPLACED_POU_ELEMENT,
                         at,
                         "a function block extends at most one function block",
                     ));
@@ -502,6 +506,7 @@ impl Parser<'_> {
                 self.bump();
                 if kind != PouKind::FunctionBlock {
                     self.diags.push(Diagnostic::error(
+                        codes::MISPLACED_POU_ELEMENT,
                         at,
                         "only a FUNCTION_BLOCK can implement interfaces",
                     ));
@@ -558,6 +563,7 @@ impl Parser<'_> {
         }
         if is_class && !body.is_empty() {
             self.diags.push(Diagnostic::error(
+                codes::MISPLACED_POU_ELEMENT,
                 body[0].span,
                 "a CLASS has no body: write its code in methods",
             ));
@@ -565,12 +571,14 @@ impl Parser<'_> {
         if kind != PouKind::FunctionBlock && kind != PouKind::Program {
             if let Some(m) = methods.first() {
                 self.diags.push(Diagnostic::error(
+                    codes::MISPLACED_POU_ELEMENT,
                     m.name.span,
                     "methods belong to a FUNCTION_BLOCK or a PROGRAM",
                 ));
             }
             if let Some(a) = actions.first() {
                 self.diags.push(Diagnostic::error(
+                    codes::MISPLACED_POU_ELEMENT,
                     a.name.span,
                     "actions belong to a FUNCTION_BLOCK or a PROGRAM",
                 ));
@@ -683,6 +691,7 @@ impl Parser<'_> {
         let body = self.stmt_list();
         if declaration_only && let Some(first) = body.first() {
             self.diags.push(Diagnostic::error(
+                codes::INTERFACE_CONTENT,
                 first.span,
                 "an interface method has no implementation",
             ));
@@ -725,6 +734,7 @@ impl Parser<'_> {
             let body = self.stmt_list();
             if declaration_only && let Some(first) = body.first() {
                 self.diags.push(Diagnostic::error(
+                    codes::INTERFACE_CONTENT,
                     first.span,
                     "an interface property has no implementation",
                 ));
@@ -749,6 +759,7 @@ impl Parser<'_> {
                 return Err({
                     let span = start;
                     self.diags.push(Diagnostic::error(
+                        codes::PROPERTY_WITHOUT_ACCESSOR,
                         span,
                         "a property needs a GET or a SET accessor",
                     ));
@@ -810,6 +821,7 @@ impl Parser<'_> {
         let full = self.qualified_ident()?;
         let Some((pou, name)) = full.name.rsplit_once('.') else {
             self.diags.push(Diagnostic::error(
+                codes::MISPLACED_POU_ELEMENT,
                 full.span,
                 "an ACTION outside its POU is written `ACTION Pou.Action`",
             ));
@@ -873,6 +885,7 @@ impl Parser<'_> {
                 let blocks = self.var_blocks("END_INTERFACE");
                 if let Some(d) = blocks.iter().flat_map(|b| &b.decls).next() {
                     self.diags.push(Diagnostic::error(
+                        codes::INTERFACE_CONTENT,
                         d.span,
                         "an interface declares methods and properties, not variables",
                     ));
@@ -982,7 +995,7 @@ impl Parser<'_> {
                 Some(v) => format!("unknown value '{v}' of the attribute 'shared'"),
                 None => "the attribute 'shared' needs a value".into(),
             };
-            self.diags.push(Diagnostic::error(
+            self.diags.push(Diagnostic::error(codes::SHARED_ATTRIBUTE,
                 span,
                 format!("{what}: write `{{attribute 'shared' := 'write'}}` (this project writes it), `{{attribute 'shared' := 'read'}}` (it reads it from the other project) or `{{attribute 'shared' := 'valid'}}` (a BOOL: the read ones are a fresh copy)"),
             ));
@@ -1009,6 +1022,7 @@ impl Parser<'_> {
             Some(v) => Some((v, span)),
             None => {
                 self.diags.push(Diagnostic::error(
+                    codes::SAFE_ATTRIBUTE,
                     span,
                     "the attribute 'safe' needs the value: `{attribute 'safe' := '0.0'}`",
                 ));
@@ -1109,8 +1123,11 @@ impl Parser<'_> {
         self.depth += 1;
         let r = if self.depth > MAX_DEPTH {
             let span = self.span();
-            self.diags
-                .push(Diagnostic::error(span, format!("{what} nested too deeply")));
+            self.diags.push(Diagnostic::error(
+                codes::NESTED_TOO_DEEPLY,
+                span,
+                format!("{what} nested too deeply"),
+            ));
             Err(Fail)
         } else {
             f(self)
@@ -1380,7 +1397,7 @@ impl Parser<'_> {
                     "SINGLE" => task.single = Some(v),
                     "PRIORITY" => task.priority = Some(v),
                     _ => {
-                        self.diags.push(Diagnostic::error(
+                        self.diags.push(Diagnostic::error(codes::UNKNOWN_TASK_PROPERTY,
                             key.span,
                             format!("unknown task property `{}` (expected INTERVAL, SINGLE or PRIORITY)", key.text),
                         ));

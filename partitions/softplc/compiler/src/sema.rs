@@ -8,6 +8,7 @@
 //! frame (IEC forbids recursion, which is checked). A POU body addresses its own variables
 //! relative to the frame base register.
 
+use crate::codes;
 use std::collections::HashMap;
 use std::rc::Rc;
 
@@ -670,6 +671,7 @@ impl Sema<'_> {
             if self.type_state.contains_key(&d.name.name) || Elem::from_name(&d.name.name).is_some()
             {
                 self.diags.error(
+                    codes::DUPLICATE_DEFINITION,
                     d.name.span,
                     format!("type `{}` is already defined", d.name.text),
                 );
@@ -689,8 +691,11 @@ impl Sema<'_> {
             if self.prog.pou_by_name.contains_key(&p.name.name)
                 || self.type_state.contains_key(&p.name.name)
             {
-                self.diags
-                    .error(p.name.span, format!("`{}` is already defined", p.name.text));
+                self.diags.error(
+                    codes::DUPLICATE_DEFINITION,
+                    p.name.span,
+                    format!("`{}` is already defined", p.name.text),
+                );
                 continue;
             }
             self.prog
@@ -732,6 +737,7 @@ impl Sema<'_> {
                     .find(|d| d.name.name == name)
                     .map_or(name, |d| d.name.text.as_str());
                 self.diags.error(
+                    codes::RECURSIVE_TYPE,
                     use_span,
                     format!("type `{text}` is defined in terms of itself"),
                 );
@@ -753,8 +759,11 @@ impl Sema<'_> {
                         Some(e) => match const_eval(&self.prog, &(), e) {
                             Some(ConstVal::Int(i)) => i as i64,
                             _ => {
-                                self.diags
-                                    .error(e.span, "enumeration value must be a constant integer");
+                                self.diags.error(
+                                    codes::NOT_CONSTANT,
+                                    e.span,
+                                    "enumeration value must be a constant integer",
+                                );
                                 next
                             }
                         },
@@ -762,6 +771,7 @@ impl Sema<'_> {
                     };
                     if vals.iter().any(|(n, _)| *n == id.name) {
                         self.diags.error(
+                            codes::DUPLICATE_MEMBER,
                             id.span,
                             format!("duplicate enumeration value `{}`", id.text),
                         );
@@ -794,6 +804,7 @@ impl Sema<'_> {
                     let mty = self.resolve_type(&m.ty, &[]);
                     if matches!(mty, Type::Fb(_)) {
                         self.diags.error(
+                            codes::FB_INSTANCE_NOT_ALLOWED,
                             m.ty.span(),
                             "function block instances cannot be structure members",
                         );
@@ -801,8 +812,11 @@ impl Sema<'_> {
                     let (sz, al) = self.prog.size_align(&mty);
                     for n in &m.names {
                         if defs.iter().any(|d: &VarDef| d.name == n.name) {
-                            self.diags
-                                .error(n.span, format!("duplicate member `{}`", n.text));
+                            self.diags.error(
+                                codes::DUPLICATE_MEMBER,
+                                n.span,
+                                format!("duplicate member `{}`", n.text),
+                            );
                         }
                         off = align_up(off, al);
                         defs.push(VarDef {
@@ -848,6 +862,7 @@ impl Sema<'_> {
             }
             _ => {
                 self.diags.error(
+                    codes::NOT_CONSTANT,
                     e.span,
                     format!("{what} must be a constant integer expression"),
                 );
@@ -881,6 +896,7 @@ impl Sema<'_> {
                         return Type::Fb(i);
                     }
                     self.diags.error(
+                        codes::UNKNOWN_TYPE,
                         id.span,
                         format!("`{}` is not a data type or function block", id.text),
                     );
@@ -902,7 +918,7 @@ impl Sema<'_> {
                         return self.resolve_type(&TypeRef::Named(id), locals);
                     }
                     Err(candidates) => {
-                        self.diags.error(
+                        self.diags.error(codes::AMBIGUOUS_NAME,
                             id.span,
                             format!(
                                 "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
@@ -914,8 +930,11 @@ impl Sema<'_> {
                     }
                     _ => {}
                 }
-                self.diags
-                    .error(id.span, format!("unknown type `{}`", id.text));
+                self.diags.error(
+                    codes::UNKNOWN_TYPE,
+                    id.span,
+                    format!("unknown type `{}`", id.text),
+                );
                 Type::Error
             }
             TypeRef::String(len, _, wide) => match len {
@@ -924,14 +943,20 @@ impl Sema<'_> {
                 Some(e) => match self.const_int(e, locals, "string length") {
                     Some(n) if *wide && (1..=32000).contains(&n) => Type::WString(n as u32),
                     Some(_) if *wide => {
-                        self.diags
-                            .error(e.span, "WSTRING length must be between 1 and 32000");
+                        self.diags.error(
+                            codes::STRING_LENGTH,
+                            e.span,
+                            "WSTRING length must be between 1 and 32000",
+                        );
                         Type::Error
                     }
                     Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
                     Some(_) => {
-                        self.diags
-                            .error(e.span, "string length must be between 1 and 65000");
+                        self.diags.error(
+                            codes::STRING_LENGTH,
+                            e.span,
+                            "string length must be between 1 and 65000",
+                        );
                         Type::Error
                     }
                     None => Type::Error,
@@ -950,7 +975,7 @@ impl Sema<'_> {
                             out.push((l, h))
                         }
                         (Some(_), Some(_)) => {
-                            self.diags.error(lo.span.to(hi.span), "array upper bound must be >= lower bound (and the array not absurdly large)");
+                            self.diags.error(codes::ARRAY_BOUNDS, lo.span.to(hi.span), "array upper bound must be >= lower bound (and the array not absurdly large)");
                             return Type::Error;
                         }
                         _ => return Type::Error,
@@ -962,15 +987,19 @@ impl Sema<'_> {
                 };
                 let (sz, al) = self.prog.size_align(&arr.elem);
                 if (align_up(sz, al) as u64).saturating_mul(arr.len()) > MAX_DATA as u64 {
-                    self.diags.error(t.span(), "array too large");
+                    self.diags
+                        .error(codes::ARRAY_BOUNDS, t.span(), "array too large");
                     return Type::Error;
                 }
                 Type::Array(Rc::new(arr))
             }
             TypeRef::Subrange { base, lo, hi, .. } => {
                 let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
-                    self.diags
-                        .error(base.span, "subrange base type must be an integer type");
+                    self.diags.error(
+                        codes::INVALID_SUBRANGE,
+                        base.span,
+                        "subrange base type must be an integer type",
+                    );
                     return Type::Error;
                 };
                 let l = self.const_int(lo, locals, "subrange bound");
@@ -980,6 +1009,7 @@ impl Sema<'_> {
                         let (min, max) = e.int_range();
                         if (l as i128) < min || (h as i128) > max {
                             self.diags.error(
+                                codes::INVALID_SUBRANGE,
                                 t.span(),
                                 format!("subrange exceeds the range of {}", e.name()),
                             );
@@ -987,8 +1017,11 @@ impl Sema<'_> {
                         Type::Subrange(e, l, h)
                     }
                     (Some(_), Some(_)) => {
-                        self.diags
-                            .error(t.span(), "subrange lower bound exceeds upper bound");
+                        self.diags.error(
+                            codes::INVALID_SUBRANGE,
+                            t.span(),
+                            "subrange lower bound exceeds upper bound",
+                        );
                         Type::Error
                     }
                     _ => Type::Error,
@@ -999,8 +1032,11 @@ impl Sema<'_> {
                 if matches!(t, Type::Reference(_))
                     || (*kind == RefKind::Reference && matches!(t, Type::Ref(_)))
                 {
-                    self.diags
-                        .error(*span, "a REFERENCE TO cannot refer to a reference");
+                    self.diags.error(
+                        codes::REFERENCE_TO_REFERENCE,
+                        *span,
+                        "a REFERENCE TO cannot refer to a reference",
+                    );
                     return Type::Error;
                 }
                 if t.is_error() {
@@ -1013,6 +1049,7 @@ impl Sema<'_> {
             }
             TypeRef::Enum { span, .. } | TypeRef::Struct { span, .. } => {
                 self.diags.error(
+                    codes::ANONYMOUS_TYPE,
                     *span,
                     "anonymous enumerations and structures must be declared in a TYPE block",
                 );
@@ -1052,7 +1089,7 @@ impl Sema<'_> {
                 } else {
                     format!("function block `{name}` contains an instance of itself")
                 };
-                self.diags.error(span, what);
+                self.diags.error(codes::RECURSIVE_TYPE, span, what);
                 return;
             }
             LayoutState::NotStarted => {}
@@ -1084,6 +1121,7 @@ impl Sema<'_> {
             let t = self.resolve_type(rt, &[]);
             if matches!(t, Type::Fb(_)) {
                 self.diags.error(
+                    codes::FB_INSTANCE_NOT_ALLOWED,
                     rt.span(),
                     "a function cannot return a function block instance",
                 );
@@ -1158,6 +1196,7 @@ impl Sema<'_> {
             };
             if !allowed || (kind != PouKind::Program && block.kind == VarKind::Global) {
                 self.diags.error(
+                    codes::VAR_BLOCK_NOT_ALLOWED,
                     block.span,
                     "this kind of VAR block is not allowed in this POU",
                 );
@@ -1167,18 +1206,25 @@ impl Sema<'_> {
                 let ty = self.resolve_type(&d.ty, &constants);
                 if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
                     self.diags.error(
+                        codes::FB_INSTANCE_NOT_ALLOWED,
                         d.ty.span(),
                         format!("function block instances are not allowed inside {what}"),
                     );
                 }
                 self.no_abstract_instance(d, &ty);
                 if block.kind == VarKind::InOut && d.init.is_some() {
-                    self.diags
-                        .error(d.span, "VAR_IN_OUT variables cannot have initial values");
+                    self.diags.error(
+                        codes::INOUT_INITIAL_VALUE,
+                        d.span,
+                        "VAR_IN_OUT variables cannot have initial values",
+                    );
                 }
                 if block.constant && d.init.is_none() {
-                    self.diags
-                        .error(d.span, "a CONSTANT needs an initial value");
+                    self.diags.error(
+                        codes::CONSTANT_WITHOUT_VALUE,
+                        d.span,
+                        "a CONSTANT needs an initial value",
+                    );
                 }
                 self.no_retained_reference(block, d, &ty);
                 let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
@@ -1186,8 +1232,11 @@ impl Sema<'_> {
                 self.safe_default(d, &ty, location, Some(i));
                 for n in &d.names {
                     if vars.iter().any(|v| v.name == n.name) {
-                        self.diags
-                            .error(n.span, format!("`{}` is declared twice", n.text));
+                        self.diags.error(
+                            codes::DUPLICATE_VARIABLE,
+                            n.span,
+                            format!("`{}` is declared twice", n.text),
+                        );
                         continue;
                     }
                     if inherited.iter().any(|v| v.name == n.name) {
@@ -1195,7 +1244,7 @@ impl Sema<'_> {
                             "`{}` is already a variable of the base function block",
                             n.text
                         );
-                        self.diags.error(n.span, msg);
+                        self.diags.error(codes::DUPLICATE_VARIABLE, n.span, msg);
                         continue;
                     }
                     vars.push(VarDef {
@@ -1228,8 +1277,11 @@ impl Sema<'_> {
             for d in &block.decls {
                 let ty = self.resolve_type(&d.ty, &[]);
                 if block.constant && d.init.is_none() {
-                    self.diags
-                        .error(d.span, "a CONSTANT needs an initial value");
+                    self.diags.error(
+                        codes::CONSTANT_WITHOUT_VALUE,
+                        d.span,
+                        "a CONSTANT needs an initial value",
+                    );
                 }
                 self.no_retained_reference(block, d, &ty);
                 let location = self.location(d, &ty, true);
@@ -1237,8 +1289,11 @@ impl Sema<'_> {
                 let shared = self.shared_global(d, block, &ty);
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
-                        self.diags
-                            .error(n.span, format!("global `{}` is declared twice", n.text));
+                        self.diags.error(
+                            codes::DUPLICATE_VARIABLE,
+                            n.span,
+                            format!("global `{}` is declared twice", n.text),
+                        );
                         continue;
                     }
                     if let Some(direction) = shared {
@@ -1271,7 +1326,7 @@ impl Sema<'_> {
     /// of the program, which a warm restart after a download would not have.
     fn no_retained_reference(&mut self, block: &VarBlock, d: &VarDecl, ty: &Type) {
         if block.retain && self.holds_references(ty, 0) {
-            self.diags.error(
+            self.diags.error(codes::RETAIN_REFERENCE,
                 d.ty.span(),
                 "a RETAIN variable cannot hold references or interface values (they name variables of this build of the program, which a restart after a download may not have)",
             );
@@ -1306,7 +1361,7 @@ impl Sema<'_> {
         let Some((value, span)) = &d.safe else { return };
         let Some(location) = location.filter(|l| l.area == plc_vm::located::Area::Output) else {
             if d.at.is_none() || !ty.is_error() {
-                self.diags.error(
+                self.diags.error(codes::SAFE_ATTRIBUTE,
                     *span,
                     "the attribute 'safe' gives a located output (`AT %Q...`) the value it takes when the outputs go safe; this declaration is not one",
                 );
@@ -1332,7 +1387,11 @@ impl Sema<'_> {
                     });
                 }
             }
-            Err(why) => self.diags.error(*span, format!("the safe value: {why}")),
+            Err(why) => self.diags.error(
+                codes::SAFE_ATTRIBUTE,
+                *span,
+                format!("the safe value: {why}"),
+            ),
         }
     }
 
@@ -1340,6 +1399,7 @@ impl Sema<'_> {
     fn no_shared_attribute(&mut self, d: &VarDecl, what: &str) {
         if let Some(a) = d.shared {
             self.diags.error(
+                codes::SHARED_ATTRIBUTE,
                 a.span,
                 format!("the attribute 'shared' applies to global variables only, not to {what}"),
             );
@@ -1360,7 +1420,7 @@ impl Sema<'_> {
         let a = d.shared?;
         if a.direction == SharedDirection::Valid {
             if !matches!(ty, Type::Elem(crate::types::Elem::Bool) | Type::Error) {
-                self.diags.error(
+                self.diags.error(codes::SHARED_VARIABLE,
                     d.ty.span(),
                     format!(
                         "the validity flag of the shared globals (`'valid'`) must be a BOOL, not {}",
@@ -1378,6 +1438,7 @@ impl Sema<'_> {
                     .count();
             if names > 1 {
                 self.diags.error(
+                    codes::SHARED_VARIABLE,
                     a.span,
                     "a program has at most one validity flag of its shared globals",
                 );
@@ -1392,7 +1453,7 @@ impl Sema<'_> {
             _ => false,
         };
         if !elementary {
-            self.diags.error(
+            self.diags.error(codes::SHARED_VARIABLE,
                 d.ty.span(),
                 format!(
                     "a shared variable must have an elementary type (BOOL, integers, REAL, LREAL, bit strings, the date/time types, CHAR, WCHAR), not {}",
@@ -1402,14 +1463,14 @@ impl Sema<'_> {
             return None;
         }
         if let Some((_, span)) = &d.at {
-            self.diags.error(
+            self.diags.error(codes::SHARED_VARIABLE,
                 *span,
                 "a shared variable cannot be located (`AT %...`): it lives in the shared segment, not in the process image",
             );
             return None;
         }
         if block.constant && a.direction != SharedDirection::Write {
-            self.diags.error(
+            self.diags.error(codes::SHARED_VARIABLE,
                 a.span,
                 "a CONSTANT cannot be read from another project or be the validity flag (it would change)",
             );
@@ -1424,22 +1485,28 @@ impl Sema<'_> {
     fn location(&mut self, d: &VarDecl, ty: &Type, allowed: bool) -> Option<Location> {
         let (text, span) = d.at.as_ref()?;
         if !allowed {
-            self.diags.error(
+            self.diags.error(codes::LOCATED_NOT_ALLOWED,
                 *span,
                 "located variables (`AT %...`) are allowed only in a PROGRAM's VAR block and in VAR_GLOBAL",
             );
             return None;
         }
         if d.names.len() > 1 {
-            self.diags
-                .error(*span, "a direct address locates exactly one variable");
+            self.diags.error(
+                codes::LOCATED_NOT_ALLOWED,
+                *span,
+                "a direct address locates exactly one variable",
+            );
             return None;
         }
         let location = match Location::parse(text) {
             Ok(l) => l,
             Err(e) => {
-                self.diags
-                    .error(*span, format!("invalid direct address `%{text}`: {e}"));
+                self.diags.error(
+                    codes::DIRECT_ADDRESS,
+                    *span,
+                    format!("invalid direct address `%{text}`: {e}"),
+                );
                 return None;
             }
         };
@@ -1461,6 +1528,7 @@ impl Sema<'_> {
                     ),
                 };
                 self.diags.error(
+                    codes::DIRECT_ADDRESS,
                     d.ty.span(),
                     format!("`%{text}` is {size}: its variable must be {expected}"),
                 );
@@ -1475,6 +1543,7 @@ impl Sema<'_> {
             Some(ConstVal::Time(t)) if t > 0 => Some(t as i64),
             _ => {
                 self.diags.error(
+                    codes::TASK_DECLARATION,
                     e.span,
                     "task INTERVAL must be a positive TIME literal such as T#10ms",
                 );
@@ -1489,6 +1558,7 @@ impl Sema<'_> {
         let unit = self.unit;
         if unit.configs.len() > 1 {
             self.diags.error(
+                codes::ONE_CONFIGURATION,
                 unit.configs[1].name.span,
                 "only one CONFIGURATION is supported",
             );
@@ -1509,21 +1579,30 @@ impl Sema<'_> {
                         }) => match self.prog.global(&n.name) {
                             Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
                             _ => {
-                                self.diags
-                                    .error(n.span, "SINGLE must name a global BOOL variable");
+                                self.diags.error(
+                                    codes::TASK_DECLARATION,
+                                    n.span,
+                                    "SINGLE must name a global BOOL variable",
+                                );
                                 None
                             }
                         },
                         Some(e) => {
-                            self.diags
-                                .error(e.span, "SINGLE must name a global BOOL variable");
+                            self.diags.error(
+                                codes::TASK_DECLARATION,
+                                e.span,
+                                "SINGLE must name a global BOOL variable",
+                            );
                             None
                         }
                         None => None,
                     };
                     if t.interval.is_none() && t.single.is_none() {
-                        self.diags
-                            .error(t.name.span, "a task needs INTERVAL or SINGLE");
+                        self.diags.error(
+                            codes::TASK_DECLARATION,
+                            t.name.span,
+                            "a task needs INTERVAL or SINGLE",
+                        );
                     }
                     let priority = match &t.priority {
                         Some(e) => match const_eval(&self.prog, &(), e) {
@@ -1531,8 +1610,11 @@ impl Sema<'_> {
                                 p as u32
                             }
                             _ => {
-                                self.diags
-                                    .error(e.span, "PRIORITY must be a non-negative integer");
+                                self.diags.error(
+                                    codes::TASK_DECLARATION,
+                                    e.span,
+                                    "PRIORITY must be a non-negative integer",
+                                );
                                 0
                             }
                         },
@@ -1540,6 +1622,7 @@ impl Sema<'_> {
                     };
                     if self.prog.tasks.iter().any(|x| x.name == t.name.name) {
                         self.diags.error(
+                            codes::DUPLICATE_CONFIGURATION_NAME,
                             t.name.span,
                             format!("task `{}` is declared twice", t.name.text),
                         );
@@ -1566,6 +1649,7 @@ impl Sema<'_> {
                         .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
                     else {
                         self.diags.error(
+                            codes::UNKNOWN_PROGRAM,
                             b.program_type.span,
                             format!("unknown PROGRAM `{}`", b.program_type.text),
                         );
@@ -1578,6 +1662,7 @@ impl Sema<'_> {
                         .any(|x| x.name.eq_ignore_ascii_case(&b.instance.text))
                     {
                         self.diags.error(
+                            codes::DUPLICATE_CONFIGURATION_NAME,
                             b.instance.span,
                             format!("program instance `{}` is declared twice", b.instance.text),
                         );
@@ -1594,8 +1679,11 @@ impl Sema<'_> {
                         Some(t) => match self.prog.tasks.iter().position(|x| x.name == t.name) {
                             Some(i) => i,
                             None => {
-                                self.diags
-                                    .error(t.span, format!("unknown task `{}`", t.text));
+                                self.diags.error(
+                                    codes::UNKNOWN_TASK,
+                                    t.span,
+                                    format!("unknown task `{}`", t.text),
+                                );
                                 continue;
                             }
                         },
@@ -1634,6 +1722,7 @@ impl Sema<'_> {
                     Some(&i) => Some(i),
                     None => {
                         self.diags.error(
+                            codes::UNKNOWN_PROGRAM,
                             Span::default(),
                             format!("there is no PROGRAM named `{name}`"),
                         );
@@ -1647,6 +1736,7 @@ impl Sema<'_> {
                 _ => {
                     let p = &self.prog.pous[programs[1]];
                     self.diags.error(
+                        codes::PROGRAM_SELECTION,
                         p.span,
                         "several PROGRAMs and no CONFIGURATION: choose one with --program",
                     );

@@ -5,6 +5,7 @@
 //! truncates; TIME<->number conversions count milliseconds; string results go to a static
 //! temporary per call site.
 
+use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 
 use crate::ast::*;
@@ -142,7 +143,11 @@ impl Gen<'_> {
             return Some(self.std_sizeof(id, args, expected, span));
         }
         if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(a.span, format!("{} has no outputs", id.text));
+            self.error(
+                codes::UNKNOWN_PARAMETER,
+                a.span,
+                format!("{} has no outputs", id.text),
+            );
             self.surface(&a.value);
         }
         if let Some(target) = name.strip_prefix("TO_") {
@@ -228,7 +233,7 @@ impl Gen<'_> {
                         self.tname(&at),
                         self.tname(&at)
                     );
-                    self.error(e.span, msg);
+                    self.error(codes::IMPLICIT_CONVERSION, e.span, msg);
                 }
                 ok = false;
             }
@@ -297,7 +302,11 @@ impl Gen<'_> {
         for (i, a) in inputs.iter().enumerate() {
             let slot = match &a.name {
                 None if named_seen => {
-                    self.error(a.span, "positional arguments must come before named ones");
+                    self.error(
+                        codes::ARGUMENT_ORDER,
+                        a.span,
+                        "positional arguments must come before named ones",
+                    );
                     ok = false;
                     continue;
                 }
@@ -313,7 +322,7 @@ impl Gen<'_> {
                                 n.text,
                                 formals.join(", ")
                             );
-                            self.error(n.span, msg);
+                            self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                             ok = false;
                             continue;
                         }
@@ -325,7 +334,7 @@ impl Gen<'_> {
                     "input `{}` given twice",
                     formals.get(slot).map_or("?", |f| f)
                 );
-                self.error(a.span, msg);
+                self.error(codes::DUPLICATE_ARGUMENT, a.span, msg);
                 ok = false;
                 continue;
             }
@@ -341,7 +350,7 @@ impl Gen<'_> {
                 id.text,
                 formals.get(missing).map_or("?", |f| f)
             );
-            self.error(id.span, msg);
+            self.error(codes::MISSING_ARGUMENT, id.span, msg);
             ok = false;
         }
         if !ok {
@@ -368,6 +377,7 @@ impl Gen<'_> {
         let inputs = self.std_arguments(&id.name, id, args)?;
         let [arg] = inputs[..] else {
             self.error(
+                codes::ARGUMENT_COUNT,
                 span,
                 format!("{} takes 1 argument, {} given", id.text, inputs.len()),
             );
@@ -408,7 +418,11 @@ impl Gen<'_> {
             return self.std_split(t, id, args, span);
         }
         if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(a.span, format!("{} has no outputs", id.text));
+            self.error(
+                codes::UNKNOWN_PARAMETER,
+                a.span,
+                format!("{} has no outputs", id.text),
+            );
             self.surface(&a.value);
         }
         let Some(exprs) = self.std_arguments(&id.name, id, args) else {
@@ -531,6 +545,7 @@ impl Gen<'_> {
     ) -> Type {
         let [arg] = args else {
             self.error(
+                codes::ARGUMENT_COUNT,
                 span,
                 format!("{} takes 1 argument, {} given", id.text, args.len()),
             );
@@ -616,12 +631,12 @@ impl Gen<'_> {
                             n.text,
                             parts.join(", ")
                         );
-                        self.error(n.span, msg);
+                        self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                     }
                 },
                 _ => {
                     let msg = format!("{} takes IN and the outputs {}", id.text, parts.join(", "));
-                    self.error(a.span, msg);
+                    self.error(codes::UNKNOWN_PARAMETER, a.span, msg);
                 }
             }
         }
@@ -630,7 +645,11 @@ impl Gen<'_> {
             .filter(|(_, t)| t.elem().is_some_and(|e| e.temporal_family() == family));
         let Some((input, _)) = input_type_ok else {
             match input {
-                None => self.error(span, format!("{} needs its input IN", id.text)),
+                None => self.error(
+                    codes::MISSING_ARGUMENT,
+                    span,
+                    format!("{} needs its input IN", id.text),
+                ),
                 Some(e) => {
                     let t = self.infer(e);
                     self.bad_inferred_arg(e, &t, &format!("a {input_type}"));
@@ -662,7 +681,7 @@ impl Gen<'_> {
                         "the output {part} is an integer, not {}",
                         self.tname(&place.ty)
                     );
-                    self.error(target.span, msg);
+                    self.error(codes::OUTPUT_TARGET, target.span, msg);
                 }
                 if matches!(place.loc, crate::codegen::Loc::Ind(_)) {
                     self.op(Opcode::Drop);
@@ -670,7 +689,11 @@ impl Gen<'_> {
                 continue;
             };
             if !place.writable {
-                self.error(target.span, "output target is not writable");
+                self.error(
+                    codes::ASSIGN_TO_READ_ONLY,
+                    target.span,
+                    "output target is not writable",
+                );
             }
             self.emit(|b| b.ld_abs(MemType::I64, value));
             match *part {
@@ -724,6 +747,7 @@ impl Gen<'_> {
             return true;
         }
         self.error(
+            codes::ARGUMENT_COUNT,
             c.span,
             format!(
                 "{} takes {} argument(s), {} given",
@@ -925,7 +949,11 @@ impl Gen<'_> {
             }
             "MAX" | "MIN" => {
                 if c.exprs.len() < 2 {
-                    self.error(c.span, format!("{} needs at least 2 arguments", c.id.text));
+                    self.error(
+                        codes::ARGUMENT_COUNT,
+                        c.span,
+                        format!("{} needs at least 2 arguments", c.id.text),
+                    );
                     c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
@@ -940,7 +968,7 @@ impl Gen<'_> {
                             c.id.text,
                             self.tname(&t)
                         );
-                        self.error(c.span, msg);
+                        self.error(codes::INCOMPATIBLE_ARGUMENTS, c.span, msg);
                     }
                     return Some(Type::Error);
                 };
@@ -976,7 +1004,11 @@ impl Gen<'_> {
             }
             "MUX" => {
                 if c.exprs.len() < 2 {
-                    self.error(c.span, "MUX needs a selector and at least one input");
+                    self.error(
+                        codes::ARGUMENT_COUNT,
+                        c.span,
+                        "MUX needs a selector and at least one input",
+                    );
                     c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
@@ -1174,7 +1206,7 @@ impl Gen<'_> {
             }
             "CONCAT" => {
                 if c.exprs.is_empty() {
-                    self.error(c.span, "CONCAT needs arguments");
+                    self.error(codes::ARGUMENT_COUNT, c.span, "CONCAT needs arguments");
                     return Some(Type::Error);
                 }
                 let len = c
@@ -1208,7 +1240,7 @@ impl Gen<'_> {
     fn bad_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
         if !t.is_error() {
             let msg = format!("expected {what}, found {}", self.tname(t));
-            self.error(e.span, msg);
+            self.error(codes::TYPE_MISMATCH, e.span, msg);
         }
         Type::Error
     }
@@ -1288,7 +1320,7 @@ impl Gen<'_> {
                                     self.tname(&a),
                                     self.tname(&t)
                                 );
-                                self.error(e.span, msg);
+                                self.error(codes::INCOMPATIBLE_ARGUMENTS, e.span, msg);
                                 return Type::Error;
                             }
                         }
@@ -1300,7 +1332,7 @@ impl Gen<'_> {
                             self.tname(&a),
                             self.tname(&t)
                         );
-                        self.error(e.span, msg);
+                        self.error(codes::INCOMPATIBLE_ARGUMENTS, e.span, msg);
                         return Type::Error;
                     }
                 },
@@ -1366,7 +1398,7 @@ impl Gen<'_> {
                 if wide { "WSTRING" } else { "STRING" },
                 self.tname(&t)
             );
-            self.error(e.span, msg);
+            self.error(codes::TYPE_MISMATCH, e.span, msg);
         }
     }
 
@@ -1377,7 +1409,7 @@ impl Gen<'_> {
         {
             if !t.is_error() {
                 let msg = format!("expected an integer, found {}", self.tname(&t));
-                self.error(e.span, msg);
+                self.error(codes::TYPE_MISMATCH, e.span, msg);
             }
             self.expr(e, None);
             return;
@@ -1410,6 +1442,7 @@ impl Gen<'_> {
         };
         if exprs.len() != 1 {
             self.error(
+                codes::ARGUMENT_COUNT,
                 span,
                 format!("{} takes 1 argument, {} given", id.text, exprs.len()),
             );
@@ -1601,7 +1634,11 @@ impl Gen<'_> {
                     || f.is_char() && (t.is_char() || t.is_integral())
                     || t.is_char() && f.is_integral();
                 if !allowed {
-                    self.error(id.span, format!("there is no conversion from {f} to {t}"));
+                    self.error(
+                        codes::NO_CONVERSION,
+                        id.span,
+                        format!("there is no conversion from {f} to {t}"),
+                    );
                     for e in exprs {
                         self.infer(e);
                     }
@@ -1629,7 +1666,7 @@ impl Gen<'_> {
                             f,
                             self.tname(&at)
                         );
-                        self.error(arg.span, msg);
+                        self.error(codes::TYPE_MISMATCH, arg.span, msg);
                         return Some(Type::Error);
                     }
                 }
