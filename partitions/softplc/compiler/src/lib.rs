@@ -6,7 +6,6 @@
 //! [`run`] is the host runner behind `plcc run`.
 
 pub mod ast;
-mod calls;
 mod classes;
 pub mod codegen;
 pub mod codes;
@@ -14,12 +13,9 @@ pub mod diagnostics;
 pub mod lexer;
 pub mod library;
 pub mod monitor;
-mod oop;
 pub mod parser;
-mod refs;
 pub mod run;
 pub mod sema;
-mod stdfuncs;
 pub mod types;
 
 use diagnostics::{Diagnostic, Diagnostics, SourceMap};

@@ -328,7 +328,7 @@ impl Gen<'_> {
                     self.check_escape(None, a.value, "an input of a function block instance");
                 }
                 if matches!(p.ty, Type::Reference(_)) {
-                    let r = crate::refs::reference_to(a.value);
+                    let r = crate::codegen::refs::reference_to(a.value);
                     self.check_escape(None, &r, "an input of a function block instance");
                 }
                 self.store_expr(&p, a.value, a.value.span);

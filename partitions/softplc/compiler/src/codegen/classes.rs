@@ -15,7 +15,7 @@ use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode};
 
 use crate::ast::*;
-use crate::calls::CallBase;
+use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::{MemberKind, VarDef};
@@ -471,7 +471,8 @@ impl Gen<'_> {
         let result_name = d.result.as_ref().map(|_| d.label.clone());
         let _ = result_name;
         let bound = self.bind_to(None, &d.label, &d.params, None, args);
-        let inputs: Vec<&crate::calls::Bound> = bound.iter().filter(|b| !b.output).collect();
+        let inputs: Vec<&crate::codegen::calls::Bound> =
+            bound.iter().filter(|b| !b.output).collect();
         for a in &inputs {
             match a.param.kind {
                 VarKind::InOut => {
