@@ -71,174 +71,11 @@ impl Gen<'_> {
                 let bytes = cell.to_le_bytes();
                 self.write_bytes(addr, &bytes[..w]);
             }
-            Type::WString(n) => {
-                let text = match init {
-                    Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
-                        Some(ConstVal::Str(s)) => s,
-                        _ => {
-                            self.diags.error(
-                                codes::STRING_INITIAL_VALUE,
-                                e.span,
-                                "WSTRING initial value must be a string literal",
-                            );
-                            String::new()
-                        }
-                    },
-                    Some(other) => {
-                        self.diags.error(
-                            codes::STRING_INITIAL_VALUE,
-                            other.span(),
-                            "WSTRING initial value must be a string literal",
-                        );
-                        String::new()
-                    }
-                    None => String::new(),
-                };
-                let units: Vec<u16> = text.encode_utf16().collect();
-                self.write_wide(addr, *n, &units);
-            }
-            Type::String(n) => {
-                let text = match init {
-                    Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
-                        Some(ConstVal::Str(s)) => s,
-                        _ => {
-                            self.diags.error(
-                                codes::STRING_INITIAL_VALUE,
-                                e.span,
-                                "STRING initial value must be a string literal",
-                            );
-                            String::new()
-                        }
-                    },
-                    Some(other) => {
-                        self.diags.error(
-                            codes::STRING_INITIAL_VALUE,
-                            other.span(),
-                            "STRING initial value must be a string literal",
-                        );
-                        String::new()
-                    }
-                    None => String::new(),
-                };
-                let len = text.len().min(*n as usize);
-                self.write_bytes(addr, &(*n as u16).to_le_bytes());
-                self.write_bytes(addr + 2, &(len as u16).to_le_bytes());
-                self.write_bytes(addr + 4, &text.as_bytes()[..len]);
-            }
-            Type::Array(a) => {
-                let stride = self.prog.stride(&a.elem);
-                let count = a.len();
-                let mut values: Vec<Option<&Init>> = Vec::new();
-                match init {
-                    Some(Init::Array(items, span)) => {
-                        for it in items {
-                            for _ in 0..it.repeat {
-                                if values.len() as u64 >= count {
-                                    break;
-                                }
-                                values.push(it.value.as_ref());
-                            }
-                        }
-                        let given: u64 = items.iter().map(|i| i.repeat).sum();
-                        if given > count {
-                            self.diags.error(
-                                codes::INITIAL_VALUE_SHAPE,
-                                *span,
-                                format!("too many initial values: the array has {count} elements"),
-                            );
-                        }
-                    }
-                    Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
-                    Some(other) => {
-                        self.diags.error(
-                            codes::INITIAL_VALUE_SHAPE,
-                            other.span(),
-                            "array initial value must be written `[v1, v2, n(v)]`",
-                        );
-                    }
-                    None => {}
-                }
-                let elem = a.elem.clone();
-                for i in 0..count {
-                    let v = values.get(i as usize).copied().flatten();
-                    // Default elements still need headers (strings) and FB defaults.
-                    self.write_init(addr + i as u32 * stride, &elem, v, scope_pou);
-                }
-            }
-            Type::Struct(si) => {
-                let members = self.prog.structs[*si].members.clone();
-                let fields: Vec<(Ident, Init)> = match init {
-                    Some(Init::Struct(f, _)) => f.clone(),
-                    Some(other) => {
-                        self.diags.error(
-                            codes::INITIAL_VALUE_SHAPE,
-                            other.span(),
-                            "structure initial value must be written `(member := value, ...)`",
-                        );
-                        Vec::new()
-                    }
-                    None => Vec::new(),
-                };
-                for (n, _) in &fields {
-                    if !members.iter().any(|m| m.name == n.name) {
-                        self.diags.error(
-                            codes::INITIAL_VALUE_MEMBER,
-                            n.span,
-                            format!("`{}` is not a member of {}", n.text, self.tname(ty)),
-                        );
-                    }
-                }
-                for m in &members {
-                    let given = fields
-                        .iter()
-                        .find(|(n, _)| n.name == m.name)
-                        .map(|(_, i)| i.clone());
-                    let v = given.or_else(|| m.init.clone());
-                    self.write_init(addr + m.offset, &m.ty, v.as_ref(), None);
-                }
-            }
-            Type::Fb(pi) => {
-                let fields: Vec<(Ident, Init)> = match init {
-                    Some(Init::Struct(f, _)) => f.clone(),
-                    Some(other) => {
-                        self.diags.error(
-                            codes::INITIAL_VALUE_SHAPE,
-                            other.span(),
-                            "function block initial values must be written `(input := value, ...)`",
-                        );
-                        Vec::new()
-                    }
-                    None => Vec::new(),
-                };
-                if let Some(class) = self.prog.pous[*pi].class {
-                    // The class id dynamic dispatch reads (see `classes`).
-                    self.write_bytes(addr, &(class as u32).to_le_bytes());
-                }
-                let vars = self.prog.pous[*pi].vars.clone();
-                for (n, _) in &fields {
-                    if !vars.iter().any(|m| {
-                        m.name == n.name
-                            && matches!(m.kind, VarKind::Input | VarKind::Output | VarKind::Local)
-                    }) {
-                        self.diags.error(
-                            codes::INITIAL_VALUE_MEMBER,
-                            n.span,
-                            format!("`{}` is not a variable of {}", n.text, self.tname(ty)),
-                        );
-                    }
-                }
-                for v in &vars {
-                    if matches!(v.kind, VarKind::External | VarKind::Global | VarKind::InOut) {
-                        continue;
-                    }
-                    let given = fields
-                        .iter()
-                        .find(|(n, _)| n.name == v.name)
-                        .map(|(_, i)| i.clone());
-                    let iv = given.or_else(|| v.init.clone());
-                    self.write_init(addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
-                }
-            }
+            Type::WString(_) => self.write_wstring_init(addr, ty, init),
+            Type::String(_) => self.write_string_init(addr, ty, init),
+            Type::Array(_) => self.write_array_init(addr, ty, init, scope_pou),
+            Type::Struct(_) => self.write_struct_init(addr, ty, init),
+            Type::Fb(_) => self.write_fb_init(addr, ty, init),
             Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Null => {
                 // A reference starts as NULL (the zeroed cell); nothing else is a constant.
                 match init {
@@ -256,6 +93,195 @@ impl Gen<'_> {
                 }
             }
             Type::Void | Type::Error => {}
+        }
+    }
+
+    /// `write_init` of a WSTRING.
+    fn write_wstring_init(&mut self, addr: u32, ty: &Type, init: Option<&Init>) {
+        let Type::WString(n) = ty else { return };
+        let text = match init {
+            Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
+                Some(ConstVal::Str(s)) => s,
+                _ => {
+                    self.diags.error(
+                        codes::STRING_INITIAL_VALUE,
+                        e.span,
+                        "WSTRING initial value must be a string literal",
+                    );
+                    String::new()
+                }
+            },
+            Some(other) => {
+                self.diags.error(
+                    codes::STRING_INITIAL_VALUE,
+                    other.span(),
+                    "WSTRING initial value must be a string literal",
+                );
+                String::new()
+            }
+            None => String::new(),
+        };
+        let units: Vec<u16> = text.encode_utf16().collect();
+        self.write_wide(addr, *n, &units);
+    }
+
+    /// `write_init` of a STRING.
+    fn write_string_init(&mut self, addr: u32, ty: &Type, init: Option<&Init>) {
+        let Type::String(n) = ty else { return };
+        let text = match init {
+            Some(Init::Expr(e)) => match const_eval(self.prog, &(), e) {
+                Some(ConstVal::Str(s)) => s,
+                _ => {
+                    self.diags.error(
+                        codes::STRING_INITIAL_VALUE,
+                        e.span,
+                        "STRING initial value must be a string literal",
+                    );
+                    String::new()
+                }
+            },
+            Some(other) => {
+                self.diags.error(
+                    codes::STRING_INITIAL_VALUE,
+                    other.span(),
+                    "STRING initial value must be a string literal",
+                );
+                String::new()
+            }
+            None => String::new(),
+        };
+        let len = text.len().min(*n as usize);
+        self.write_bytes(addr, &(*n as u16).to_le_bytes());
+        self.write_bytes(addr + 2, &(len as u16).to_le_bytes());
+        self.write_bytes(addr + 4, &text.as_bytes()[..len]);
+    }
+
+    /// `write_init` of an array.
+    fn write_array_init(
+        &mut self,
+        addr: u32,
+        ty: &Type,
+        init: Option<&Init>,
+        scope_pou: Option<usize>,
+    ) {
+        let Type::Array(a) = ty else { return };
+        let stride = self.prog.stride(&a.elem);
+        let count = a.len();
+        let mut values: Vec<Option<&Init>> = Vec::new();
+        match init {
+            Some(Init::Array(items, span)) => {
+                for it in items {
+                    for _ in 0..it.repeat {
+                        if values.len() as u64 >= count {
+                            break;
+                        }
+                        values.push(it.value.as_ref());
+                    }
+                }
+                let given: u64 = items.iter().map(|i| i.repeat).sum();
+                if given > count {
+                    self.diags.error(
+                        codes::INITIAL_VALUE_SHAPE,
+                        *span,
+                        format!("too many initial values: the array has {count} elements"),
+                    );
+                }
+            }
+            Some(i @ Init::Expr(_)) if count == 1 => values.push(Some(i)),
+            Some(other) => {
+                self.diags.error(
+                    codes::INITIAL_VALUE_SHAPE,
+                    other.span(),
+                    "array initial value must be written `[v1, v2, n(v)]`",
+                );
+            }
+            None => {}
+        }
+        let elem = a.elem.clone();
+        for i in 0..count {
+            let v = values.get(i as usize).copied().flatten();
+            // Default elements still need headers (strings) and FB defaults.
+            self.write_init(addr + i as u32 * stride, &elem, v, scope_pou);
+        }
+    }
+
+    /// `write_init` of a structure.
+    fn write_struct_init(&mut self, addr: u32, ty: &Type, init: Option<&Init>) {
+        let Type::Struct(si) = ty else { return };
+        let members = self.prog.structs[*si].members.clone();
+        let fields: Vec<(Ident, Init)> = match init {
+            Some(Init::Struct(f, _)) => f.clone(),
+            Some(other) => {
+                self.diags.error(
+                    codes::INITIAL_VALUE_SHAPE,
+                    other.span(),
+                    "structure initial value must be written `(member := value, ...)`",
+                );
+                Vec::new()
+            }
+            None => Vec::new(),
+        };
+        for (n, _) in &fields {
+            if !members.iter().any(|m| m.name == n.name) {
+                self.diags.error(
+                    codes::INITIAL_VALUE_MEMBER,
+                    n.span,
+                    format!("`{}` is not a member of {}", n.text, self.tname(ty)),
+                );
+            }
+        }
+        for m in &members {
+            let given = fields
+                .iter()
+                .find(|(n, _)| n.name == m.name)
+                .map(|(_, i)| i.clone());
+            let v = given.or_else(|| m.init.clone());
+            self.write_init(addr + m.offset, &m.ty, v.as_ref(), None);
+        }
+    }
+
+    /// `write_init` of a function block instance.
+    fn write_fb_init(&mut self, addr: u32, ty: &Type, init: Option<&Init>) {
+        let Type::Fb(pi) = ty else { return };
+        let fields: Vec<(Ident, Init)> = match init {
+            Some(Init::Struct(f, _)) => f.clone(),
+            Some(other) => {
+                self.diags.error(
+                    codes::INITIAL_VALUE_SHAPE,
+                    other.span(),
+                    "function block initial values must be written `(input := value, ...)`",
+                );
+                Vec::new()
+            }
+            None => Vec::new(),
+        };
+        if let Some(class) = self.prog.pous[*pi].class {
+            // The class id dynamic dispatch reads (see `classes`).
+            self.write_bytes(addr, &(class as u32).to_le_bytes());
+        }
+        let vars = self.prog.pous[*pi].vars.clone();
+        for (n, _) in &fields {
+            if !vars.iter().any(|m| {
+                m.name == n.name
+                    && matches!(m.kind, VarKind::Input | VarKind::Output | VarKind::Local)
+            }) {
+                self.diags.error(
+                    codes::INITIAL_VALUE_MEMBER,
+                    n.span,
+                    format!("`{}` is not a variable of {}", n.text, self.tname(ty)),
+                );
+            }
+        }
+        for v in &vars {
+            if matches!(v.kind, VarKind::External | VarKind::Global | VarKind::InOut) {
+                continue;
+            }
+            let given = fields
+                .iter()
+                .find(|(n, _)| n.name == v.name)
+                .map(|(_, i)| i.clone());
+            let iv = given.or_else(|| v.init.clone());
+            self.write_init(addr + v.offset, &v.ty, iv.as_ref(), Some(*pi));
         }
     }
 

@@ -149,31 +149,18 @@ impl Gen<'_> {
         self.value_to_any(a, &ta, &tt);
         self.value_to_any(b, &tb, &tt);
         if is_cmp {
-            let opc = if ct == Elem::Real {
-                match op {
-                    BinOp::Eq => Opcode::EqF32,
-                    BinOp::Ne => Opcode::NeF32,
-                    BinOp::Lt => Opcode::LtF32,
-                    BinOp::Le => Opcode::LeF32,
-                    BinOp::Gt => Opcode::GtF32,
-                    _ => Opcode::GeF32,
-                }
-            } else if ct == Elem::LReal {
-                match op {
-                    BinOp::Eq => Opcode::EqF64,
-                    BinOp::Ne => Opcode::NeF64,
-                    BinOp::Lt => Opcode::LtF64,
-                    BinOp::Le => Opcode::LeF64,
-                    BinOp::Gt => Opcode::GtF64,
-                    _ => Opcode::GeF64,
-                }
-            } else {
-                // Only 64-bit unsigned values can exceed i64; narrower ones are zero-extended.
-                cmp_op(op, ct.size() != 8 || ct.is_signed_int())
-            };
-            self.op(opc);
+            self.op(numeric_cmp_op(op, ct));
             return Type::BOOL;
         }
+        if !self.numeric_arithmetic(op, ct) {
+            return mismatch(self);
+        }
+        tt
+    }
+
+    /// Emits the arithmetic operator `op` on two values of the numeric type `ct` (already on
+    /// the stack); `false` if `op` is not an arithmetic operator of `ct`.
+    fn numeric_arithmetic(&mut self, op: BinOp, ct: Elem) -> bool {
         match ct {
             Elem::Real => self.op(match op {
                 BinOp::Add => Opcode::AddF32,
@@ -182,9 +169,9 @@ impl Gen<'_> {
                 BinOp::Div => Opcode::DivF32,
                 BinOp::Pow => {
                     self.emit(|bb| bb.call_builtin(Builtin::ExptF32));
-                    return tt;
+                    return true;
                 }
-                _ => return mismatch(self),
+                _ => return false,
             }),
             Elem::LReal => self.op(match op {
                 BinOp::Add => Opcode::AddF64,
@@ -193,9 +180,9 @@ impl Gen<'_> {
                 BinOp::Div => Opcode::DivF64,
                 BinOp::Pow => {
                     self.emit(|bb| bb.call_builtin(Builtin::ExptF64));
-                    return tt;
+                    return true;
                 }
-                _ => return mismatch(self),
+                _ => return false,
             }),
             _ => {
                 let signed = ct.is_signed_int();
@@ -217,12 +204,12 @@ impl Gen<'_> {
                             Opcode::ModU
                         }
                     }
-                    _ => return mismatch(self),
+                    _ => return false,
                 });
                 self.wrap(ct);
             }
         }
-        tt
+        true
     }
 
     /// Date and time arithmetic (IEC 61131-3 table of time operations): TIME +/- TIME,
@@ -371,5 +358,31 @@ impl Gen<'_> {
         if let (Some(f), Some(t2)) = (t.elem(), to.elem()) {
             self.convert(f, t2);
         }
+    }
+}
+
+/// The comparison opcode of a numeric common type.
+fn numeric_cmp_op(op: BinOp, ct: Elem) -> Opcode {
+    if ct == Elem::Real {
+        match op {
+            BinOp::Eq => Opcode::EqF32,
+            BinOp::Ne => Opcode::NeF32,
+            BinOp::Lt => Opcode::LtF32,
+            BinOp::Le => Opcode::LeF32,
+            BinOp::Gt => Opcode::GtF32,
+            _ => Opcode::GeF32,
+        }
+    } else if ct == Elem::LReal {
+        match op {
+            BinOp::Eq => Opcode::EqF64,
+            BinOp::Ne => Opcode::NeF64,
+            BinOp::Lt => Opcode::LtF64,
+            BinOp::Le => Opcode::LeF64,
+            BinOp::Gt => Opcode::GtF64,
+            _ => Opcode::GeF64,
+        }
+    } else {
+        // Only 64-bit unsigned values can exceed i64; narrower ones are zero-extended.
+        cmp_op(op, ct.size() != 8 || ct.is_signed_int())
     }
 }

@@ -25,205 +25,205 @@ impl Gen<'_> {
                 self.this_place(matches!(inner.kind, ExprKind::Super), e.span)
             }
             ExprKind::Deref(inner) => self.deref_place(inner, e.span),
-            ExprKind::Member(base, m) => {
-                let bp = self.place_inner(base)?;
-                match &bp.ty {
-                    Type::Struct(si) => {
-                        let Some(mem) = self.prog.structs[*si]
-                            .members
-                            .iter()
-                            .find(|x| x.name == m.name)
-                            .cloned()
-                        else {
-                            let msg = format!("{} has no member `{}`", self.tname(&bp.ty), m.text);
-                            self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                            self.drop_place(&bp);
-                            return None;
-                        };
-                        Some(Place {
-                            loc: offset_loc(bp.loc, mem.offset),
-                            ty: mem.ty,
-                            writable: bp.writable,
-                            window: None,
-                        })
-                    }
-                    Type::Fb(pi) => {
-                        let pi = *pi;
-                        let v = self.prog.pous[pi].param(&m.name).cloned();
-                        // `THIS^.x` / `SUPER^.x`: the block's own variables, all of them.
-                        let own = matches!(&base.kind, ExprKind::Deref(i) if matches!(i.kind, ExprKind::This | ExprKind::Super));
-                        match v {
-                            Some(v)
-                                if own
-                                    && !matches!(v.kind, VarKind::External | VarKind::Global) =>
-                            {
-                                if v.kind == VarKind::InOut {
-                                    self.drop_place(&bp);
-                                    return self.name_place(m);
-                                }
-                                Some(Place {
-                                    loc: offset_loc(bp.loc, v.offset),
-                                    ty: v.ty,
-                                    writable: bp.writable && !v.constant,
-                                    window: None,
-                                })
-                            }
-                            Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
-                                // Outputs are read-only from outside; inputs may be set before a call.
-                                let writable = bp.writable && v.kind == VarKind::Input;
-                                Some(Place {
-                                    loc: offset_loc(bp.loc, v.offset),
-                                    ty: v.ty,
-                                    writable,
-                                    window: None,
-                                })
-                            }
-                            Some(_) => {
-                                let msg = format!(
-                                    "`{}` is not an input or output of {}",
-                                    m.text, self.prog.pous[pi].text
-                                );
-                                self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                                self.drop_place(&bp);
-                                None
-                            }
-                            None => {
-                                let msg = format!(
-                                    "{} has no input or output `{}`",
-                                    self.prog.pous[pi].text, m.text
-                                );
-                                self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                                self.drop_place(&bp);
-                                None
-                            }
-                        }
-                    }
-                    Type::Error => {
-                        self.drop_place(&bp);
-                        None
-                    }
-                    other => {
-                        let msg = format!("{} has no members (`.{}`)", self.tname(other), m.text);
-                        self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                        self.drop_place(&bp);
-                        None
-                    }
-                }
-            }
-            ExprKind::Index(base, idx) => {
-                let bp = self.place_inner(base)?;
-                let Type::Array(arr) = bp.ty.clone() else {
-                    if !bp.ty.is_error() {
-                        let msg = format!("{} is not an array", self.tname(&bp.ty));
-                        self.error(codes::NOT_AN_ARRAY, base.span, msg);
-                    }
-                    self.drop_place(&bp);
-                    for i in idx {
-                        self.infer(i);
-                    }
-                    return None;
-                };
-                if idx.len() != arr.dims.len() {
-                    let msg = format!(
-                        "array has {} dimension(s) but {} index(es) given",
-                        arr.dims.len(),
-                        idx.len()
-                    );
-                    self.error(codes::NOT_AN_ARRAY, e.span, msg);
-                    self.drop_place(&bp);
-                    return None;
-                }
-                let elem_stride = self.prog.stride(&arr.elem) as i64;
-                // Dimension strides, row-major.
-                let mut strides = vec![elem_stride; arr.dims.len()];
-                for d in (0..arr.dims.len().saturating_sub(1)).rev() {
-                    let (lo, hi) = arr.dims[d + 1];
-                    strides[d] = strides[d + 1] * (hi - lo + 1);
-                }
-                // Constant indices fold into the static offset.
-                let consts: Vec<Option<i128>> = idx
-                    .iter()
-                    .map(|i| match self.const_value(i) {
-                        Some(ConstVal::Int(v)) => Some(v),
-                        _ => None,
-                    })
-                    .collect();
-                let mut static_off: i64 = 0;
-                let mut dynamic = false;
-                for (d, c) in consts.iter().enumerate() {
-                    let (lo, hi) = arr.dims[d];
-                    match c {
-                        Some(v) => {
-                            if *v < lo as i128 || *v > hi as i128 {
-                                let msg =
-                                    format!("index {v} is outside the array bounds {lo}..{hi}");
-                                self.error(codes::INDEX_OUT_OF_BOUNDS, idx[d].span, msg);
-                            } else {
-                                static_off += (*v as i64 - lo) * strides[d];
-                            }
-                        }
-                        None => dynamic = true,
-                    }
-                }
-                if !dynamic {
-                    return Some(Place {
-                        loc: offset_loc(bp.loc, static_off as u32),
-                        ty: arr.elem.clone(),
-                        writable: bp.writable,
-                        window: None,
-                    });
-                }
-                if let Loc::Ref(o) = bp.loc {
-                    return self
-                        .index_through_reference(o, &arr, idx, &consts, &strides, static_off);
-                }
-                // A static array (absolute or frame-relative): the first computed index goes
-                // through ELEM_ABS/ELEM_REL, which gives the element's address (the constant
-                // indices' offset included; the builder fuses it with the load or store);
-                // further computed indices, and arrays whose address is on the stack, through
-                // INDEX.
-                let mut static_base = match bp.loc {
-                    Loc::Abs(a) => Some(Loc::Abs(a.wrapping_add(static_off as u32))),
-                    Loc::Rel(o) => Some(Loc::Rel(o.wrapping_add(static_off as u32))),
-                    Loc::Ind(_) | Loc::Ref(_) => None,
-                };
-                let offset = match bp.loc {
-                    Loc::Ind(o) | Loc::Ref(o) => o.wrapping_add(static_off as u32),
-                    Loc::Abs(_) | Loc::Rel(_) => 0,
-                };
-                for (d, c) in consts.iter().enumerate() {
-                    if c.is_some() {
-                        continue;
-                    }
-                    let (lo, hi) = arr.dims[d];
-                    let t = self.expr(&idx[d], Some(&Type::DINT));
-                    if !t.is_error() && !t.elem().is_some_and(|e| e.is_integral())
-                        || matches!(t, Type::Enum(_))
-                    {
-                        let msg =
-                            format!("array index must be an integer, found {}", self.tname(&t));
-                        self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
-                    }
-                    let stride = strides[d] as u32;
-                    match static_base.take() {
-                        Some(Loc::Abs(a)) => self.emit(|b| b.elem_abs(a, lo, hi, stride)),
-                        Some(Loc::Rel(o)) => self.emit(|b| b.elem_rel(o, lo, hi, stride)),
-                        _ => self.emit(|b| b.index(lo, hi, stride)),
-                    }
-                }
-                Some(Place {
-                    loc: Loc::Ind(offset),
-                    ty: arr.elem.clone(),
-                    writable: bp.writable,
-                    window: None,
-                })
-            }
+            ExprKind::Member(base, m) => self.member_place(base, m),
+            ExprKind::Index(base, idx) => self.index_place(e, base, idx),
             ExprKind::Bits { base, width, index } => self.partial_place(e, base, *width, *index),
             _ => {
                 self.error(codes::EXPECTED_VARIABLE, e.span, "expected a variable");
                 None
             }
         }
+    }
+
+    /// `base.m`: a member of a structure or an input or output of a function block instance.
+    fn member_place(&mut self, base: &Expr, m: &Ident) -> Option<Place> {
+        let bp = self.place_inner(base)?;
+        match &bp.ty {
+            Type::Struct(si) => {
+                let Some(mem) = self.prog.structs[*si]
+                    .members
+                    .iter()
+                    .find(|x| x.name == m.name)
+                    .cloned()
+                else {
+                    let msg = format!("{} has no member `{}`", self.tname(&bp.ty), m.text);
+                    self.error(codes::NO_SUCH_MEMBER, m.span, msg);
+                    self.drop_place(&bp);
+                    return None;
+                };
+                Some(Place {
+                    loc: offset_loc(bp.loc, mem.offset),
+                    ty: mem.ty,
+                    writable: bp.writable,
+                    window: None,
+                })
+            }
+            Type::Fb(pi) => {
+                let pi = *pi;
+                let v = self.prog.pous[pi].param(&m.name).cloned();
+                // `THIS^.x` / `SUPER^.x`: the block's own variables, all of them.
+                let own = matches!(&base.kind, ExprKind::Deref(i) if matches!(i.kind, ExprKind::This | ExprKind::Super));
+                match v {
+                    Some(v) if own && !matches!(v.kind, VarKind::External | VarKind::Global) => {
+                        if v.kind == VarKind::InOut {
+                            self.drop_place(&bp);
+                            return self.name_place(m);
+                        }
+                        Some(Place {
+                            loc: offset_loc(bp.loc, v.offset),
+                            ty: v.ty,
+                            writable: bp.writable && !v.constant,
+                            window: None,
+                        })
+                    }
+                    Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
+                        // Outputs are read-only from outside; inputs may be set before a call.
+                        let writable = bp.writable && v.kind == VarKind::Input;
+                        Some(Place {
+                            loc: offset_loc(bp.loc, v.offset),
+                            ty: v.ty,
+                            writable,
+                            window: None,
+                        })
+                    }
+                    Some(_) => {
+                        let msg = format!(
+                            "`{}` is not an input or output of {}",
+                            m.text, self.prog.pous[pi].text
+                        );
+                        self.error(codes::NO_SUCH_MEMBER, m.span, msg);
+                        self.drop_place(&bp);
+                        None
+                    }
+                    None => {
+                        let msg = format!(
+                            "{} has no input or output `{}`",
+                            self.prog.pous[pi].text, m.text
+                        );
+                        self.error(codes::NO_SUCH_MEMBER, m.span, msg);
+                        self.drop_place(&bp);
+                        None
+                    }
+                }
+            }
+            Type::Error => {
+                self.drop_place(&bp);
+                None
+            }
+            other => {
+                let msg = format!("{} has no members (`.{}`)", self.tname(other), m.text);
+                self.error(codes::NO_SUCH_MEMBER, m.span, msg);
+                self.drop_place(&bp);
+                None
+            }
+        }
+    }
+
+    /// `base[i, ...]`: an array element, its constant indices folded in.
+    fn index_place(&mut self, e: &Expr, base: &Expr, idx: &[Expr]) -> Option<Place> {
+        let bp = self.place_inner(base)?;
+        let Type::Array(arr) = bp.ty.clone() else {
+            if !bp.ty.is_error() {
+                let msg = format!("{} is not an array", self.tname(&bp.ty));
+                self.error(codes::NOT_AN_ARRAY, base.span, msg);
+            }
+            self.drop_place(&bp);
+            for i in idx {
+                self.infer(i);
+            }
+            return None;
+        };
+        if idx.len() != arr.dims.len() {
+            let msg = format!(
+                "array has {} dimension(s) but {} index(es) given",
+                arr.dims.len(),
+                idx.len()
+            );
+            self.error(codes::NOT_AN_ARRAY, e.span, msg);
+            self.drop_place(&bp);
+            return None;
+        }
+        let elem_stride = self.prog.stride(&arr.elem) as i64;
+        // Dimension strides, row-major.
+        let mut strides = vec![elem_stride; arr.dims.len()];
+        for d in (0..arr.dims.len().saturating_sub(1)).rev() {
+            let (lo, hi) = arr.dims[d + 1];
+            strides[d] = strides[d + 1] * (hi - lo + 1);
+        }
+        // Constant indices fold into the static offset.
+        let consts: Vec<Option<i128>> = idx
+            .iter()
+            .map(|i| match self.const_value(i) {
+                Some(ConstVal::Int(v)) => Some(v),
+                _ => None,
+            })
+            .collect();
+        let mut static_off: i64 = 0;
+        let mut dynamic = false;
+        for (d, c) in consts.iter().enumerate() {
+            let (lo, hi) = arr.dims[d];
+            match c {
+                Some(v) => {
+                    if *v < lo as i128 || *v > hi as i128 {
+                        let msg = format!("index {v} is outside the array bounds {lo}..{hi}");
+                        self.error(codes::INDEX_OUT_OF_BOUNDS, idx[d].span, msg);
+                    } else {
+                        static_off += (*v as i64 - lo) * strides[d];
+                    }
+                }
+                None => dynamic = true,
+            }
+        }
+        if !dynamic {
+            return Some(Place {
+                loc: offset_loc(bp.loc, static_off as u32),
+                ty: arr.elem.clone(),
+                writable: bp.writable,
+                window: None,
+            });
+        }
+        if let Loc::Ref(o) = bp.loc {
+            return self.index_through_reference(o, &arr, idx, &consts, &strides, static_off);
+        }
+        // A static array (absolute or frame-relative): the first computed index goes
+        // through ELEM_ABS/ELEM_REL, which gives the element's address (the constant
+        // indices' offset included; the builder fuses it with the load or store);
+        // further computed indices, and arrays whose address is on the stack, through
+        // INDEX.
+        let mut static_base = match bp.loc {
+            Loc::Abs(a) => Some(Loc::Abs(a.wrapping_add(static_off as u32))),
+            Loc::Rel(o) => Some(Loc::Rel(o.wrapping_add(static_off as u32))),
+            Loc::Ind(_) | Loc::Ref(_) => None,
+        };
+        let offset = match bp.loc {
+            Loc::Ind(o) | Loc::Ref(o) => o.wrapping_add(static_off as u32),
+            Loc::Abs(_) | Loc::Rel(_) => 0,
+        };
+        for (d, c) in consts.iter().enumerate() {
+            if c.is_some() {
+                continue;
+            }
+            let (lo, hi) = arr.dims[d];
+            let t = self.expr(&idx[d], Some(&Type::DINT));
+            if !t.is_error() && !t.elem().is_some_and(|e| e.is_integral())
+                || matches!(t, Type::Enum(_))
+            {
+                let msg = format!("array index must be an integer, found {}", self.tname(&t));
+                self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
+            }
+            let stride = strides[d] as u32;
+            match static_base.take() {
+                Some(Loc::Abs(a)) => self.emit(|b| b.elem_abs(a, lo, hi, stride)),
+                Some(Loc::Rel(o)) => self.emit(|b| b.elem_rel(o, lo, hi, stride)),
+                _ => self.emit(|b| b.index(lo, hi, stride)),
+            }
+        }
+        Some(Place {
+            loc: Loc::Ind(offset),
+            ty: arr.elem.clone(),
+            writable: bp.writable,
+            window: None,
+        })
     }
 
     /// `base.N`, `base.%B1`, ...: the bits of an integer or bit-string variable (or of such

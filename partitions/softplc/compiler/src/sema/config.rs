@@ -206,6 +206,142 @@ impl Sema<'_> {
             }
         }
     }
+    /// Records a TASK of the CONFIGURATION.
+    fn declare_task(&mut self, t: &TaskDecl) {
+        let interval = t
+            .interval
+            .as_ref()
+            .and_then(|e| self.task_time(e))
+            .unwrap_or(0);
+        let single = match &t.single {
+            Some(Expr {
+                kind: ExprKind::Name(n),
+                ..
+            }) => match self.prog.global(&n.name) {
+                Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
+                _ => {
+                    self.diags.error(
+                        codes::TASK_DECLARATION,
+                        n.span,
+                        "SINGLE must name a global BOOL variable",
+                    );
+                    None
+                }
+            },
+            Some(e) => {
+                self.diags.error(
+                    codes::TASK_DECLARATION,
+                    e.span,
+                    "SINGLE must name a global BOOL variable",
+                );
+                None
+            }
+            None => None,
+        };
+        if t.interval.is_none() && t.single.is_none() {
+            self.diags.error(
+                codes::TASK_DECLARATION,
+                t.name.span,
+                "a task needs INTERVAL or SINGLE",
+            );
+        }
+        let priority = match &t.priority {
+            Some(e) => match const_eval(&self.prog, &(), e) {
+                Some(ConstVal::Int(p)) if (0..=u32::MAX as i128).contains(&p) => p as u32,
+                _ => {
+                    self.diags.error(
+                        codes::TASK_DECLARATION,
+                        e.span,
+                        "PRIORITY must be a non-negative integer",
+                    );
+                    0
+                }
+            },
+            None => 0,
+        };
+        if self.prog.tasks.iter().any(|x| x.name == t.name.name) {
+            self.diags.error(
+                codes::DUPLICATE_CONFIGURATION_NAME,
+                t.name.span,
+                format!("task `{}` is declared twice", t.name.text),
+            );
+        }
+        self.prog.tasks.push(TaskDef {
+            name: t.name.name.clone(),
+            interval_ns: interval,
+            single,
+            priority,
+            programs: Vec::new(),
+        });
+    }
+
+    /// Allocates a program instance of the CONFIGURATION and attaches it to its task.
+    fn declare_program_instance(&mut self, b: &ProgramBinding) {
+        let full = qualified(&b.program_type.name, self.prog.pou_by_name.keys())
+            .ok()
+            .flatten()
+            .unwrap_or_default();
+        let Some(&pi) = self
+            .prog
+            .pou_by_name
+            .get(&full)
+            .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
+        else {
+            self.diags.error(
+                codes::UNKNOWN_PROGRAM,
+                b.program_type.span,
+                format!("unknown PROGRAM `{}`", b.program_type.text),
+            );
+            return;
+        };
+        if self
+            .prog
+            .instances
+            .iter()
+            .any(|x| x.name.eq_ignore_ascii_case(&b.instance.text))
+        {
+            self.diags.error(
+                codes::DUPLICATE_CONFIGURATION_NAME,
+                b.instance.span,
+                format!("program instance `{}` is declared twice", b.instance.text),
+            );
+            return;
+        }
+        let (sz, _) = (self.prog.pous[pi].frame_size, 8);
+        let addr = self.prog.alloc(sz, 8);
+        self.prog.instances.push(ProgramInstance {
+            name: b.instance.text.clone(),
+            pou: pi,
+            addr,
+        });
+        let task_idx = match &b.task {
+            Some(t) => match self.prog.tasks.iter().position(|x| x.name == t.name) {
+                Some(i) => i,
+                None => {
+                    self.diags.error(
+                        codes::UNKNOWN_TASK,
+                        t.span,
+                        format!("unknown task `{}`", t.text),
+                    );
+                    return;
+                }
+            },
+            None => {
+                // A program without a task runs cyclically at the base tick.
+                self.prog.tasks.push(TaskDef {
+                    name: format!("__{}", b.instance.name),
+                    interval_ns: 0,
+                    single: None,
+                    priority: u32::MAX,
+                    programs: Vec::new(),
+                });
+                self.prog.tasks.len() - 1
+            }
+        };
+        self.prog.tasks[task_idx]
+            .programs
+            .push((b.instance.text.clone(), pi));
+    }
 
     /// Builds the task list from the CONFIGURATION, or one implicit cyclic task running the
     /// single PROGRAM (`program_override` picks one when there are several).
@@ -222,141 +358,12 @@ impl Sema<'_> {
             self.prog.has_configuration = true;
             for res in &cfg.resources {
                 for t in &res.tasks {
-                    let interval = t
-                        .interval
-                        .as_ref()
-                        .and_then(|e| self.task_time(e))
-                        .unwrap_or(0);
-                    let single = match &t.single {
-                        Some(Expr {
-                            kind: ExprKind::Name(n),
-                            ..
-                        }) => match self.prog.global(&n.name) {
-                            Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
-                            _ => {
-                                self.diags.error(
-                                    codes::TASK_DECLARATION,
-                                    n.span,
-                                    "SINGLE must name a global BOOL variable",
-                                );
-                                None
-                            }
-                        },
-                        Some(e) => {
-                            self.diags.error(
-                                codes::TASK_DECLARATION,
-                                e.span,
-                                "SINGLE must name a global BOOL variable",
-                            );
-                            None
-                        }
-                        None => None,
-                    };
-                    if t.interval.is_none() && t.single.is_none() {
-                        self.diags.error(
-                            codes::TASK_DECLARATION,
-                            t.name.span,
-                            "a task needs INTERVAL or SINGLE",
-                        );
-                    }
-                    let priority = match &t.priority {
-                        Some(e) => match const_eval(&self.prog, &(), e) {
-                            Some(ConstVal::Int(p)) if (0..=u32::MAX as i128).contains(&p) => {
-                                p as u32
-                            }
-                            _ => {
-                                self.diags.error(
-                                    codes::TASK_DECLARATION,
-                                    e.span,
-                                    "PRIORITY must be a non-negative integer",
-                                );
-                                0
-                            }
-                        },
-                        None => 0,
-                    };
-                    if self.prog.tasks.iter().any(|x| x.name == t.name.name) {
-                        self.diags.error(
-                            codes::DUPLICATE_CONFIGURATION_NAME,
-                            t.name.span,
-                            format!("task `{}` is declared twice", t.name.text),
-                        );
-                    }
-                    self.prog.tasks.push(TaskDef {
-                        name: t.name.name.clone(),
-                        interval_ns: interval,
-                        single,
-                        priority,
-                        programs: Vec::new(),
-                    });
+                    self.declare_task(t);
                 }
             }
             for res in &cfg.resources {
                 for b in &res.programs {
-                    let full = qualified(&b.program_type.name, self.prog.pou_by_name.keys())
-                        .ok()
-                        .flatten()
-                        .unwrap_or_default();
-                    let Some(&pi) = self
-                        .prog
-                        .pou_by_name
-                        .get(&full)
-                        .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
-                    else {
-                        self.diags.error(
-                            codes::UNKNOWN_PROGRAM,
-                            b.program_type.span,
-                            format!("unknown PROGRAM `{}`", b.program_type.text),
-                        );
-                        continue;
-                    };
-                    if self
-                        .prog
-                        .instances
-                        .iter()
-                        .any(|x| x.name.eq_ignore_ascii_case(&b.instance.text))
-                    {
-                        self.diags.error(
-                            codes::DUPLICATE_CONFIGURATION_NAME,
-                            b.instance.span,
-                            format!("program instance `{}` is declared twice", b.instance.text),
-                        );
-                        continue;
-                    }
-                    let (sz, _) = (self.prog.pous[pi].frame_size, 8);
-                    let addr = self.prog.alloc(sz, 8);
-                    self.prog.instances.push(ProgramInstance {
-                        name: b.instance.text.clone(),
-                        pou: pi,
-                        addr,
-                    });
-                    let task_idx = match &b.task {
-                        Some(t) => match self.prog.tasks.iter().position(|x| x.name == t.name) {
-                            Some(i) => i,
-                            None => {
-                                self.diags.error(
-                                    codes::UNKNOWN_TASK,
-                                    t.span,
-                                    format!("unknown task `{}`", t.text),
-                                );
-                                continue;
-                            }
-                        },
-                        None => {
-                            // A program without a task runs cyclically at the base tick.
-                            self.prog.tasks.push(TaskDef {
-                                name: format!("__{}", b.instance.name),
-                                interval_ns: 0,
-                                single: None,
-                                priority: u32::MAX,
-                                programs: Vec::new(),
-                            });
-                            self.prog.tasks.len() - 1
-                        }
-                    };
-                    self.prog.tasks[task_idx]
-                        .programs
-                        .push((b.instance.text.clone(), pi));
+                    self.declare_program_instance(b);
                 }
             }
             return;
