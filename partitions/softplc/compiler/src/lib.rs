@@ -161,6 +161,49 @@ pub fn compile(
     }
     b.set_init(0, &init);
     b.reserve_data(prog.data_size.max(8));
+    let tasks = add_tasks(&prog, &mut b, &pou_ids);
+    let vars = monitor::variable_map(&prog);
+    let safe = safe_outputs(&prog);
+    add_variables(&prog, &mut b, &vars, &sources, &file_ids);
+    let image = match b.build() {
+        Ok(i) => i,
+        Err(e) => {
+            let d = Diagnostic::error(
+                codes::INTERNAL_ERROR,
+                diagnostics::Span::new(0, 0, 0),
+                format!("internal error building the image: {e}"),
+            );
+            return Err((vec![d], sources));
+        }
+    };
+    // The VM's verifier is the final judge; a rejection here is a compiler bug.
+    if let Err(e) = verify_image(&image) {
+        let d = Diagnostic::error(
+            codes::INTERNAL_ERROR,
+            diagnostics::Span::new(0, 0, 0),
+            format!("internal error: generated image rejected by the verifier: {e}"),
+        );
+        return Err((vec![d], sources));
+    }
+    Ok((
+        Compiled {
+            image,
+            vars,
+            tasks,
+            has_configuration: prog.has_configuration,
+            safe,
+        },
+        sources,
+    ))
+}
+
+/// Adds one task record per program instance to the image; returns the tasks as the host
+/// runner schedules them.
+fn add_tasks(
+    prog: &sema::Program,
+    b: &mut plc_vm::image::ImageBuilder,
+    pou_ids: &[plc_vm::image::PouId],
+) -> Vec<TaskInfo> {
     let mut tasks = Vec::new();
     let mut image_task = 0usize;
     for t in &prog.tasks {
@@ -200,11 +243,20 @@ pub fn compile(
         }
         tasks.push(info);
     }
-    let vars = monitor::variable_map(&prog);
-    let safe = safe_outputs(&prog);
+    tasks
+}
+
+/// Adds the variable records, the located variables and the shared globals to the image.
+fn add_variables(
+    prog: &sema::Program,
+    b: &mut plc_vm::image::ImageBuilder,
+    vars: &[monitor::MonitorVar],
+    sources: &SourceMap,
+    file_ids: &[u16],
+) {
     // Variable-record index of each global shared with another project.
     let mut shared_records = vec![None; prog.shared.len()];
-    for v in &vars {
+    for v in vars {
         if let Some(vt) = v.kind.var_type() {
             if let Some(i) = prog.shared.iter().position(|s| s.text == v.name) {
                 shared_records[i] = Some(b.var_count());
@@ -226,7 +278,7 @@ pub fn compile(
             );
         }
     }
-    for located in located_vars(&prog) {
+    for located in located_vars(prog) {
         b.add_located(&located);
     }
     for (shared, record) in prog.shared.iter().zip(shared_records) {
@@ -243,36 +295,6 @@ pub fn compile(
             b.add_shared(record, shared.direction, location);
         }
     }
-    let image = match b.build() {
-        Ok(i) => i,
-        Err(e) => {
-            let d = Diagnostic::error(
-                codes::INTERNAL_ERROR,
-                diagnostics::Span::new(0, 0, 0),
-                format!("internal error building the image: {e}"),
-            );
-            return Err((vec![d], sources));
-        }
-    };
-    // The VM's verifier is the final judge; a rejection here is a compiler bug.
-    if let Err(e) = verify_image(&image) {
-        let d = Diagnostic::error(
-            codes::INTERNAL_ERROR,
-            diagnostics::Span::new(0, 0, 0),
-            format!("internal error: generated image rejected by the verifier: {e}"),
-        );
-        return Err((vec![d], sources));
-    }
-    Ok((
-        Compiled {
-            image,
-            vars,
-            tasks,
-            has_configuration: prog.has_configuration,
-            safe,
-        },
-        sources,
-    ))
 }
 
 /// The safe values of the located outputs with an `{attribute 'safe'}`: a global's once, a

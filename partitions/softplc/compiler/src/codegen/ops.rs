@@ -36,28 +36,9 @@ impl Gen<'_> {
         };
         // Strings: comparisons only (STRING with STRING, WSTRING with WSTRING).
         if ta.is_string() || tb.is_string() || ta.is_wstring() || tb.is_wstring() {
-            let wide = ta.is_wstring() || tb.is_wstring();
-            let same_kind =
-                (ta.is_string() && tb.is_string()) || (ta.is_wstring() && tb.is_wstring());
-            // A STRING literal compared with a WSTRING is a WSTRING literal.
-            let literal = |e: &Expr| matches!(e.kind, ExprKind::Str(_));
-            let adapts = wide && (literal(a) && tb.is_wstring() || literal(b) && ta.is_wstring());
-            if !((same_kind || adapts) && is_cmp) {
-                return mismatch(self);
-            }
-            let w = Type::WString(DEFAULT_STRING_LEN);
-            self.expr(a, wide.then_some(&w));
-            self.expr(b, wide.then_some(&w));
-            self.emit(|bb| {
-                bb.call_builtin(if wide {
-                    Builtin::WStrCompare
-                } else {
-                    Builtin::StrCompare
-                });
-                bb.push_i32(0);
-            });
-            self.op(cmp_op(op, true));
-            return Type::BOOL;
+            return self
+                .string_compare(op, a, b, &ta, &tb)
+                .unwrap_or_else(|| mismatch(self));
         }
         // Enumerations (and exceptions): equality/ordering within the same type.
         let enumish = |t: &Type| matches!(t, Type::Enum(_) | Type::Exception);
@@ -156,6 +137,43 @@ impl Gen<'_> {
             return mismatch(self);
         }
         tt
+    }
+
+    /// A comparison of two STRINGs or two WSTRINGs (a STRING literal adapts to a WSTRING);
+    /// `None` if the operator or the operand types do not allow it.
+    fn string_compare(
+        &mut self,
+        op: BinOp,
+        a: &Expr,
+        b: &Expr,
+        ta: &Type,
+        tb: &Type,
+    ) -> Option<Type> {
+        let is_cmp = matches!(
+            op,
+            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
+        );
+        let wide = ta.is_wstring() || tb.is_wstring();
+        let same_kind = (ta.is_string() && tb.is_string()) || (ta.is_wstring() && tb.is_wstring());
+        // A STRING literal compared with a WSTRING is a WSTRING literal.
+        let literal = |e: &Expr| matches!(e.kind, ExprKind::Str(_));
+        let adapts = wide && (literal(a) && tb.is_wstring() || literal(b) && ta.is_wstring());
+        if !((same_kind || adapts) && is_cmp) {
+            return None;
+        }
+        let w = Type::WString(DEFAULT_STRING_LEN);
+        self.expr(a, wide.then_some(&w));
+        self.expr(b, wide.then_some(&w));
+        self.emit(|bb| {
+            bb.call_builtin(if wide {
+                Builtin::WStrCompare
+            } else {
+                Builtin::StrCompare
+            });
+            bb.push_i32(0);
+        });
+        self.op(cmp_op(op, true));
+        Some(Type::BOOL)
     }
 
     /// Emits the arithmetic operator `op` on two values of the numeric type `ct` (already on

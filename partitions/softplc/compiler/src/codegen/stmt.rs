@@ -320,19 +320,14 @@ impl Gen<'_> {
         }
     }
 
-    pub(super) fn for_loop(
-        &mut self,
-        var: &Ident,
-        from: &Expr,
-        to: &Expr,
-        by: Option<&Expr>,
-        body: &[Stmt],
-    ) {
+    /// The control variable of a FOR loop and its integer type; reported unless it is a plain
+    /// integer variable.
+    fn for_control_variable(&mut self, var: &Ident) -> Option<(Place, Elem)> {
         let ve = Expr {
             kind: ExprKind::Name(var.clone()),
             span: var.span,
         };
-        let Some(vp) = self.place(&ve) else { return };
+        let vp = self.place(&ve)?;
         let Some(elem) = vp
             .ty
             .elem()
@@ -343,7 +338,7 @@ impl Gen<'_> {
                 self.tname(&vp.ty)
             );
             self.error(codes::FOR_VARIABLE, var.span, msg);
-            return;
+            return None;
         };
         if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) || vp.window.is_some() {
             self.error(
@@ -351,8 +346,22 @@ impl Gen<'_> {
                 var.span,
                 "FOR control variable must be a plain variable",
             );
-            return;
+            return None;
         }
+        Some((vp, elem))
+    }
+
+    pub(super) fn for_loop(
+        &mut self,
+        var: &Ident,
+        from: &Expr,
+        to: &Expr,
+        by: Option<&Expr>,
+        body: &[Stmt],
+    ) {
+        let Some((vp, elem)) = self.for_control_variable(var) else {
+            return;
+        };
         let vty = vp.ty.clone();
         // i := from
         self.value_to(from, &vty);

@@ -59,6 +59,77 @@ impl Parser<'_> {
         self.guarded("statements", |p| p.stmt_inner())
     }
 
+    /// `IF ... THEN ... ELSIF ... ELSE ... END_IF` after its `IF`.
+    fn if_stmt(&mut self) -> PResult<StmtKind> {
+        let mut branches = Vec::new();
+        let cond = self.expr()?;
+        self.expect_kw("THEN")?;
+        let body = self.stmt_list();
+        branches.push((cond, body));
+        let mut else_body = None;
+        loop {
+            if self.eat_kw("ELSIF") {
+                let c = self.expr()?;
+                self.expect_kw("THEN")?;
+                let b = self.stmt_list();
+                branches.push((c, b));
+            } else if self.eat_kw("ELSE") {
+                else_body = Some(self.stmt_list());
+            } else {
+                break;
+            }
+        }
+        self.expect_kw("END_IF")?;
+        Ok(StmtKind::If {
+            branches,
+            else_body,
+        })
+    }
+
+    /// `CASE selector OF labels: ... ELSE ... END_CASE` after its `CASE`.
+    fn case_stmt(&mut self) -> PResult<StmtKind> {
+        let selector = self.expr()?;
+        self.expect_kw("OF")?;
+        let mut arms = Vec::new();
+        let mut else_body = None;
+        self.in_case += 1;
+        let r = (|| -> PResult<()> {
+            while !self.is_kw("END_CASE") && !self.at_eof() {
+                if self.eat_kw("ELSE") {
+                    self.in_case -= 1;
+                    else_body = Some(self.stmt_list());
+                    self.in_case += 1;
+                    break;
+                }
+                let mut labels = Vec::new();
+                loop {
+                    let a = self.expr()?;
+                    if self.eat(&Tok::DotDot) {
+                        let b = self.expr()?;
+                        labels.push(CaseLabel::Range(a, b));
+                    } else {
+                        labels.push(CaseLabel::Value(a));
+                    }
+                    if !self.eat(&Tok::Comma) {
+                        break;
+                    }
+                }
+                self.expect(Tok::Colon)?;
+                let body = self.stmt_list();
+                arms.push(CaseArm { labels, body });
+            }
+            Ok(())
+        })();
+        self.in_case -= 1;
+        r?;
+        self.expect_kw("END_CASE")?;
+        Ok(StmtKind::Case {
+            selector,
+            arms,
+            else_body,
+        })
+    }
+
     pub(super) fn stmt_inner(&mut self) -> PResult<Stmt> {
         let start = self.span();
         let kind = if self.eat(&Tok::Semi) {
@@ -67,70 +138,9 @@ impl Parser<'_> {
                 span: start,
             });
         } else if self.eat_kw("IF") {
-            let mut branches = Vec::new();
-            let cond = self.expr()?;
-            self.expect_kw("THEN")?;
-            let body = self.stmt_list();
-            branches.push((cond, body));
-            let mut else_body = None;
-            loop {
-                if self.eat_kw("ELSIF") {
-                    let c = self.expr()?;
-                    self.expect_kw("THEN")?;
-                    let b = self.stmt_list();
-                    branches.push((c, b));
-                } else if self.eat_kw("ELSE") {
-                    else_body = Some(self.stmt_list());
-                } else {
-                    break;
-                }
-            }
-            self.expect_kw("END_IF")?;
-            StmtKind::If {
-                branches,
-                else_body,
-            }
+            self.if_stmt()?
         } else if self.eat_kw("CASE") {
-            let selector = self.expr()?;
-            self.expect_kw("OF")?;
-            let mut arms = Vec::new();
-            let mut else_body = None;
-            self.in_case += 1;
-            let r = (|| -> PResult<()> {
-                while !self.is_kw("END_CASE") && !self.at_eof() {
-                    if self.eat_kw("ELSE") {
-                        self.in_case -= 1;
-                        else_body = Some(self.stmt_list());
-                        self.in_case += 1;
-                        break;
-                    }
-                    let mut labels = Vec::new();
-                    loop {
-                        let a = self.expr()?;
-                        if self.eat(&Tok::DotDot) {
-                            let b = self.expr()?;
-                            labels.push(CaseLabel::Range(a, b));
-                        } else {
-                            labels.push(CaseLabel::Value(a));
-                        }
-                        if !self.eat(&Tok::Comma) {
-                            break;
-                        }
-                    }
-                    self.expect(Tok::Colon)?;
-                    let body = self.stmt_list();
-                    arms.push(CaseArm { labels, body });
-                }
-                Ok(())
-            })();
-            self.in_case -= 1;
-            r?;
-            self.expect_kw("END_CASE")?;
-            StmtKind::Case {
-                selector,
-                arms,
-                else_body,
-            }
+            self.case_stmt()?
         } else if self.eat_kw("FOR") {
             let var = self.ident()?;
             self.expect(Tok::Assign)?;

@@ -873,72 +873,119 @@ impl Sema<'_> {
         }
     }
 
-    /// Resolves a type reference; `locals` supplies constants of the enclosing POU.
-    pub(crate) fn resolve_type(&mut self, t: &TypeRef, locals: &[VarDef]) -> Type {
-        match t {
-            TypeRef::Named(id) => {
-                if let Some(e) = Elem::from_name(&id.name) {
-                    return Type::Elem(e);
-                }
-                match id.name.as_str() {
-                    "STRING" => return Type::String(DEFAULT_STRING_LEN),
-                    "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
-                    _ => {}
-                }
-                if let Some(t) = self.resolve_named_type(&id.name, id.span) {
-                    return t;
-                }
-                if let Some(&i) = self.prog.interface_by_name.get(&id.name) {
-                    return Type::Interface(i);
-                }
-                if let Some(&i) = self.prog.pou_by_name.get(&id.name) {
-                    if self.prog.pous[i].kind == PouKind::FunctionBlock {
-                        self.layout_pou(i);
-                        return Type::Fb(i);
-                    }
-                    self.diags.error(
-                        codes::UNKNOWN_TYPE,
-                        id.span,
-                        format!("`{}` is not a data type or function block", id.text),
-                    );
-                    return Type::Error;
-                }
-                let declared: Vec<String> = self
-                    .type_state
-                    .keys()
-                    .chain(self.prog.interface_by_name.keys())
-                    .chain(self.prog.pou_by_name.keys())
-                    .cloned()
-                    .collect();
-                match qualified(&id.name, declared.iter()) {
-                    Ok(Some(full)) if full != id.name => {
-                        let id = Ident {
-                            name: full,
-                            ..id.clone()
-                        };
-                        return self.resolve_type(&TypeRef::Named(id), locals);
-                    }
-                    Err(candidates) => {
-                        self.diags.error(codes::AMBIGUOUS_NAME,
-                            id.span,
-                            format!(
-                                "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
-                                id.text,
-                                candidates.join(", ")
-                            ),
-                        );
-                        return Type::Error;
-                    }
-                    _ => {}
-                }
+    /// The type a name stands for: elementary, declared, an interface or a function block.
+    fn resolve_type_name(&mut self, id: &Ident, locals: &[VarDef]) -> Type {
+        if let Some(e) = Elem::from_name(&id.name) {
+            return Type::Elem(e);
+        }
+        match id.name.as_str() {
+            "STRING" => return Type::String(DEFAULT_STRING_LEN),
+            "__EXCEPTION" => return Type::Exception,
+            "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
+            _ => {}
+        }
+        if let Some(t) = self.resolve_named_type(&id.name, id.span) {
+            return t;
+        }
+        if let Some(&i) = self.prog.interface_by_name.get(&id.name) {
+            return Type::Interface(i);
+        }
+        if let Some(&i) = self.prog.pou_by_name.get(&id.name) {
+            if self.prog.pous[i].kind == PouKind::FunctionBlock {
+                self.layout_pou(i);
+                return Type::Fb(i);
+            }
+            self.diags.error(
+                codes::UNKNOWN_TYPE,
+                id.span,
+                format!("`{}` is not a data type or function block", id.text),
+            );
+            return Type::Error;
+        }
+        let declared: Vec<String> = self
+            .type_state
+            .keys()
+            .chain(self.prog.interface_by_name.keys())
+            .chain(self.prog.pou_by_name.keys())
+            .cloned()
+            .collect();
+        match qualified(&id.name, declared.iter()) {
+            Ok(Some(full)) if full != id.name => {
+                let id = Ident {
+                    name: full,
+                    ..id.clone()
+                };
+                return self.resolve_type(&TypeRef::Named(id), locals);
+            }
+            Err(candidates) => {
                 self.diags.error(
-                    codes::UNKNOWN_TYPE,
+                    codes::AMBIGUOUS_NAME,
                     id.span,
-                    format!("unknown type `{}`", id.text),
+                    format!(
+                        "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+                        id.text,
+                        candidates.join(", ")
+                    ),
+                );
+                return Type::Error;
+            }
+            _ => {}
+        }
+        self.diags.error(
+            codes::UNKNOWN_TYPE,
+            id.span,
+            format!("unknown type `{}`", id.text),
+        );
+        Type::Error
+    }
+
+    /// `BASE(lo..hi)`: an integer subrange, its bounds checked against the base type.
+    fn resolve_subrange(
+        &mut self,
+        t: &TypeRef,
+        base: &Ident,
+        lo: &Expr,
+        hi: &Expr,
+        locals: &[VarDef],
+    ) -> Type {
+        let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
+            self.diags.error(
+                codes::INVALID_SUBRANGE,
+                base.span,
+                "subrange base type must be an integer type",
+            );
+            return Type::Error;
+        };
+        let l = self.const_int(lo, locals, "subrange bound");
+        let h = self.const_int(hi, locals, "subrange bound");
+        match (l, h) {
+            (Some(l), Some(h)) if l <= h => {
+                let (min, max) = e.int_range();
+                if (l as i128) < min || (h as i128) > max {
+                    self.diags.error(
+                        codes::INVALID_SUBRANGE,
+                        t.span(),
+                        format!("subrange exceeds the range of {}", e.name()),
+                    );
+                }
+                Type::Subrange(e, l, h)
+            }
+            (Some(_), Some(_)) => {
+                self.diags.error(
+                    codes::INVALID_SUBRANGE,
+                    t.span(),
+                    "subrange lower bound exceeds upper bound",
                 );
                 Type::Error
             }
+            _ => Type::Error,
+        }
+    }
+
+    /// Resolves a type reference; `locals` supplies constants of the enclosing POU.
+    pub(crate) fn resolve_type(&mut self, t: &TypeRef, locals: &[VarDef]) -> Type {
+        match t {
+            TypeRef::Named(id) => self.resolve_type_name(id, locals),
             TypeRef::String(len, _, wide) => match len {
                 None if *wide => Type::WString(DEFAULT_STRING_LEN),
                 None => Type::String(DEFAULT_STRING_LEN),
@@ -996,38 +1043,7 @@ impl Sema<'_> {
                 Type::Array(Rc::new(arr))
             }
             TypeRef::Subrange { base, lo, hi, .. } => {
-                let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
-                    self.diags.error(
-                        codes::INVALID_SUBRANGE,
-                        base.span,
-                        "subrange base type must be an integer type",
-                    );
-                    return Type::Error;
-                };
-                let l = self.const_int(lo, locals, "subrange bound");
-                let h = self.const_int(hi, locals, "subrange bound");
-                match (l, h) {
-                    (Some(l), Some(h)) if l <= h => {
-                        let (min, max) = e.int_range();
-                        if (l as i128) < min || (h as i128) > max {
-                            self.diags.error(
-                                codes::INVALID_SUBRANGE,
-                                t.span(),
-                                format!("subrange exceeds the range of {}", e.name()),
-                            );
-                        }
-                        Type::Subrange(e, l, h)
-                    }
-                    (Some(_), Some(_)) => {
-                        self.diags.error(
-                            codes::INVALID_SUBRANGE,
-                            t.span(),
-                            "subrange lower bound exceeds upper bound",
-                        );
-                        Type::Error
-                    }
-                    _ => Type::Error,
-                }
+                self.resolve_subrange(t, base, lo, hi, locals)
             }
             TypeRef::Ref { kind, target, span } => {
                 let t = self.resolve_ref_target(target, locals);
@@ -1075,6 +1091,83 @@ impl Sema<'_> {
             }
         }
         self.resolve_type(t, locals)
+    }
+
+    /// Declares the variables of one declaration `d` of a VAR block of POU `i` (`inherited`:
+    /// the base function block's variables; `constants`: the POU's CONSTANTs).
+    fn declare_pou_var(
+        &mut self,
+        i: usize,
+        block: &VarBlock,
+        d: &VarDecl,
+        constants: &[VarDef],
+        inherited: &[VarDef],
+        vars: &mut Vec<VarDef>,
+    ) {
+        let kind = self.prog.pous[i].kind;
+        let what = if self.prog.pous[i].member.is_some() {
+            "a METHOD"
+        } else {
+            "a FUNCTION"
+        };
+        self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
+        let ty = self.resolve_type(&d.ty, constants);
+        if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
+            self.diags.error(
+                codes::FB_INSTANCE_NOT_ALLOWED,
+                d.ty.span(),
+                format!("function block instances are not allowed inside {what}"),
+            );
+        }
+        self.no_abstract_instance(d, &ty);
+        if block.kind == VarKind::InOut && d.init.is_some() {
+            self.diags.error(
+                codes::INOUT_INITIAL_VALUE,
+                d.span,
+                "VAR_IN_OUT variables cannot have initial values",
+            );
+        }
+        if block.constant && d.init.is_none() {
+            self.diags.error(
+                codes::CONSTANT_WITHOUT_VALUE,
+                d.span,
+                "a CONSTANT needs an initial value",
+            );
+        }
+        self.no_retained_reference(block, d, &ty);
+        let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
+        let location = self.location(d, &ty, may_locate);
+        self.safe_default(d, &ty, location, Some(i));
+        for n in &d.names {
+            if vars.iter().any(|v| v.name == n.name) {
+                self.diags.error(
+                    codes::DUPLICATE_VARIABLE,
+                    n.span,
+                    format!("`{}` is declared twice", n.text),
+                );
+                continue;
+            }
+            if inherited.iter().any(|v| v.name == n.name) {
+                let msg = format!(
+                    "`{}` is already a variable of the base function block",
+                    n.text
+                );
+                self.diags.error(codes::DUPLICATE_VARIABLE, n.span, msg);
+                continue;
+            }
+            vars.push(VarDef {
+                name: n.name.clone(),
+                text: n.text.clone(),
+                span: n.span,
+                ty: ty.clone(),
+                offset: 0,
+                kind: block.kind,
+                constant: block.constant,
+                init: self.init_of(&d.ty, &d.init),
+                location,
+                retain: block.retain,
+            });
+        }
     }
 
     /// Lays out the frame of POU `i` (recursively for the FB types it contains).
@@ -1163,7 +1256,6 @@ impl Sema<'_> {
                 retain: false,
             });
         }
-        let what = if is_method { "a METHOD" } else { "a FUNCTION" };
         // The POU's CONSTANTs may size arrays declared before them.
         let constants: Vec<VarDef> = source
             .var_blocks
@@ -1204,64 +1296,7 @@ impl Sema<'_> {
                 );
             }
             for d in &block.decls {
-                self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
-                let ty = self.resolve_type(&d.ty, &constants);
-                if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
-                    self.diags.error(
-                        codes::FB_INSTANCE_NOT_ALLOWED,
-                        d.ty.span(),
-                        format!("function block instances are not allowed inside {what}"),
-                    );
-                }
-                self.no_abstract_instance(d, &ty);
-                if block.kind == VarKind::InOut && d.init.is_some() {
-                    self.diags.error(
-                        codes::INOUT_INITIAL_VALUE,
-                        d.span,
-                        "VAR_IN_OUT variables cannot have initial values",
-                    );
-                }
-                if block.constant && d.init.is_none() {
-                    self.diags.error(
-                        codes::CONSTANT_WITHOUT_VALUE,
-                        d.span,
-                        "a CONSTANT needs an initial value",
-                    );
-                }
-                self.no_retained_reference(block, d, &ty);
-                let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
-                let location = self.location(d, &ty, may_locate);
-                self.safe_default(d, &ty, location, Some(i));
-                for n in &d.names {
-                    if vars.iter().any(|v| v.name == n.name) {
-                        self.diags.error(
-                            codes::DUPLICATE_VARIABLE,
-                            n.span,
-                            format!("`{}` is declared twice", n.text),
-                        );
-                        continue;
-                    }
-                    if inherited.iter().any(|v| v.name == n.name) {
-                        let msg = format!(
-                            "`{}` is already a variable of the base function block",
-                            n.text
-                        );
-                        self.diags.error(codes::DUPLICATE_VARIABLE, n.span, msg);
-                        continue;
-                    }
-                    vars.push(VarDef {
-                        name: n.name.clone(),
-                        text: n.text.clone(),
-                        span: n.span,
-                        ty: ty.clone(),
-                        offset: 0,
-                        kind: block.kind,
-                        constant: block.constant,
-                        init: self.init_of(&d.ty, &d.init),
-                        location,
-                        retain: block.retain,
-                    });
-                }
+                self.declare_pou_var(i, block, d, &constants, &inherited, &mut vars);
             }
         }
         let (frame_size, reinit_start) =
