@@ -1,7 +1,8 @@
 //! IEC 61131-3 Structured Text compiler (host): source -> verified plc-vm bytecode image.
 //!
 //! Pipeline: [`lexer`] -> [`parser`] ([`ast`]) -> [`sema`] (declarations, types, layout) ->
-//! [`codegen`] (body checking + emission via `plc_vm::image::ImageBuilder`) -> image.
+//! [`typed::check`] (bodies: every diagnostic, the type of every expression) ->
+//! [`typed::emit`] ([`codegen`], through `plc_vm::image::ImageBuilder`) -> image.
 //! The standard function blocks come from an ST [`PRELUDE`] compiled with every program.
 //! [`run`] is the host runner behind `plcc run`.
 
@@ -16,6 +17,7 @@ pub mod monitor;
 pub mod parser;
 pub mod run;
 pub mod sema;
+pub mod typed;
 pub mod types;
 
 use diagnostics::{Diagnostic, Diagnostics, SourceMap};
@@ -115,16 +117,16 @@ pub fn compile(
             "no PROGRAM to run (declare a PROGRAM or a CONFIGURATION)",
         );
     }
-    let mut generator = codegen::Gen::new(&mut prog, &unit, &sources, &mut diags);
-    generator.generate();
-    let task_records: usize = generator.prog.tasks.iter().map(|t| t.programs.len()).sum();
+    // Check every body (all diagnostics, the type of every expression), then emit.
+    let types = typed::check(&mut prog, &unit, &sources, &mut diags);
+    let task_records: usize = prog.tasks.iter().map(|t| t.programs.len()).sum();
     if task_records > plc_vm::verify::MAX_TASKS {
         let span = unit
             .configs
             .first()
             .map(|c| c.name.span)
             .unwrap_or_default();
-        generator.diags.error(
+        diags.error(
             codes::TOO_MANY_PROGRAM_INSTANCES,
             span,
             format!(
@@ -133,14 +135,25 @@ pub fn compile(
             ),
         );
     }
-    if generator.prog.data_overflow {
-        let span = generator
-            .prog
+    let emitted = if diags.is_empty() {
+        match typed::emit(&mut prog, &unit, &sources, types) {
+            Ok(emitted) => Some(emitted),
+            Err(internal) => {
+                internal.list.into_iter().for_each(|d| diags.push(d));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    // The data of the declarations and, once emitted, the temporaries of the bodies.
+    if prog.data_overflow {
+        let span = prog
             .instances
             .first()
-            .map(|i| generator.prog.pous[i.pou].span)
+            .map(|i| prog.pous[i.pou].span)
             .unwrap_or_default();
-        generator.diags.error(
+        diags.error(
             codes::DATA_MEMORY_EXCEEDED,
             span,
             format!(
@@ -149,16 +162,17 @@ pub fn compile(
             ),
         );
     }
-    let mut b = std::mem::take(&mut generator.b);
-    let init = std::mem::take(&mut generator.init);
-    let pou_ids = generator.pou_ids.clone();
-    let file_ids = generator.file_ids.clone();
-    drop(generator);
-    if !diags.is_empty() {
+    let Some(emitted) = emitted.filter(|_| diags.is_empty()) else {
         let mut list = diags.list;
         list.sort_by_key(|d| (d.span.file, d.span.start));
         return Err((list, sources));
-    }
+    };
+    let typed::Emitted {
+        builder: mut b,
+        init,
+        pou_ids,
+        file_ids,
+    } = emitted;
     b.set_init(0, &init);
     b.reserve_data(prog.data_size.max(8));
     let tasks = add_tasks(&prog, &mut b, &pou_ids);

@@ -5,15 +5,14 @@ use super::*;
 impl Gen<'_> {
     /// Type of an expression without emitting code or reporting errors (memoised).
     pub(crate) fn infer(&mut self, e: &Expr) -> Type {
-        let key = e as *const Expr as usize;
-        if let Some(t) = self.infer_cache.get(&key) {
+        if let Some(t) = self.types.of(e) {
             return t.clone();
         }
         let saved = self.dry;
         self.dry = true;
         let t = self.expr(e, None);
         self.dry = saved;
-        self.infer_cache.insert(key, t.clone());
+        self.types.record(e, t.clone());
         t
     }
 

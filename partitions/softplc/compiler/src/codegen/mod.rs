@@ -36,6 +36,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
+use crate::typed::ExprTypes;
 use crate::types::*;
 
 /// Where a value lives.
@@ -131,7 +132,12 @@ pub(crate) struct Gen<'a> {
     return_label: Option<Label>,
     /// When set, nothing is emitted and no diagnostics are reported (type inference).
     pub dry: bool,
-    infer_cache: HashMap<usize, Type>,
+    /// When set, the bodies are checked (every diagnostic reported, every expression's type
+    /// recorded) but nothing is allocated or emitted: the checking pass.
+    pub check_only: bool,
+    /// The type of each expression inferred so far; the emission pass starts with the
+    /// checking pass's (see [`crate::typed`]).
+    pub(crate) types: ExprTypes,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs (for the recursion check).
     pub calls: Vec<(usize, usize, Span)>,
@@ -180,7 +186,8 @@ impl<'a> Gen<'a> {
             try_depth: 0,
             return_label: None,
             dry: false,
-            infer_cache: HashMap::new(),
+            check_only: false,
+            types: ExprTypes::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
@@ -196,8 +203,13 @@ impl<'a> Gen<'a> {
         }
     }
 
+    /// Whether nothing is emitted or allocated (inference, or the checking pass).
+    fn silent(&self) -> bool {
+        self.dry || self.check_only
+    }
+
     pub fn emit(&mut self, f: impl FnOnce(&mut ImageBuilder)) {
-        if !self.dry {
+        if !self.silent() {
             f(&mut self.b);
         }
     }
@@ -220,7 +232,7 @@ impl<'a> Gen<'a> {
 
     /// Allocates zero-initialised static data; nothing in dry mode.
     pub fn alloc_static(&mut self, size: u32, align: u32) -> u32 {
-        if self.dry {
+        if self.silent() {
             return 0;
         }
         let a = self.prog.alloc(size, align);
@@ -240,7 +252,7 @@ impl<'a> Gen<'a> {
 
     /// A static STRING[len] temporary with its header initialised.
     pub fn temp_string(&mut self, len: u32) -> u32 {
-        if self.dry {
+        if self.silent() {
             return 0;
         }
         let a = self.alloc_static(4 + len, 2);
@@ -250,7 +262,7 @@ impl<'a> Gen<'a> {
 
     /// A static WSTRING[len] temporary with its header initialised.
     pub fn temp_wstring(&mut self, len: u32) -> u32 {
-        if self.dry {
+        if self.silent() {
             return 0;
         }
         let a = self.alloc_static(4 + 2 * len, 2);
@@ -269,7 +281,7 @@ impl<'a> Gen<'a> {
 
     /// A WSTRING constant in static data (shared by equal literals).
     fn wstring_literal(&mut self, s: &str) -> u32 {
-        if self.dry {
+        if self.silent() {
             return 0;
         }
         let key = format!("\u{0}W{s}");
@@ -299,7 +311,7 @@ impl<'a> Gen<'a> {
     }
 
     fn string_literal(&mut self, s: &str) -> u32 {
-        if self.dry {
+        if self.silent() {
             return 0;
         }
         if let Some(&a) = self.str_lits.get(s) {
@@ -320,7 +332,7 @@ impl<'a> Gen<'a> {
     }
 
     fn set_location(&mut self, span: Span) {
-        if self.dry {
+        if self.silent() {
             return;
         }
         let file = self.sources.file(span.file);
@@ -410,7 +422,9 @@ impl<'a> Gen<'a> {
         self.loops.clear();
         self.try_depth = 0;
         let id = self.pou_ids[i];
-        self.b.begin_pou(id);
+        if !self.check_only {
+            self.b.begin_pou(id);
+        }
         let source = crate::classes::pou_source(self.unit, &self.prog.pous[i]);
         self.set_location(source.name.span);
         if let Some(pr) = pristine {
@@ -439,7 +453,9 @@ impl<'a> Gen<'a> {
         self.bind(ret);
         self.sync_byte_views_on_return();
         self.emit(|b| b.ret());
-        self.b.end_pou(id);
+        if !self.check_only {
+            self.b.end_pou(id);
+        }
     }
 
     fn check_recursion(&mut self) {
