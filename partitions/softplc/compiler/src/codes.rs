@@ -256,7 +256,7 @@ pub static TABLE: &[Entry] = &[
     Entry {
         code: UNTERMINATED_COMMENT,
         title: "unterminated comment or pragma",
-        explanation: "A comment (`(* ... *)` or `/* ... */`) or a pragma (`{ ... }`) was opened but the file ends before it is closed. Everything after the opening is swallowed, so the rest of the file is not compiled. Close the comment with `*)` or `*/`, or the pragma with `}`; comments do not nest, so an inner `(*` does not need its own `*)`.",
+        explanation: "A comment (`(* ... *)` or `/* ... */`) or a pragma (`{ ... }`) was opened but the file ends before it is closed. Everything after the opening is swallowed, so the rest of the file is not compiled. Close the comment with `*)` or `*/`, or the pragma with `}`. Comments nest: each `(*` (or `/*`) inside a comment needs its own `*)` (or `*/`).",
     },
     Entry {
         code: UNTERMINATED_STRING,
@@ -396,7 +396,7 @@ pub static TABLE: &[Entry] = &[
     Entry {
         code: FB_INSTANCE_NOT_ALLOWED,
         title: "function block instance not allowed here",
-        explanation: "Function block instances keep state between calls, so they cannot live where that state would be lost or copied: as structure members, as a FUNCTION's result, or in the variables of a FUNCTION or a METHOD, or VAR_TEMP. Declare the instance in a FUNCTION_BLOCK or PROGRAM and pass it as VAR_IN_OUT if needed.",
+        explanation: "Function block instances keep state between calls, so they cannot live where that state would be lost or copied: as structure members, as a FUNCTION's result, or in the variables of a FUNCTION or a METHOD. Declare the instance in a FUNCTION_BLOCK or PROGRAM and pass it as VAR_IN_OUT if needed.",
     },
     Entry {
         code: VAR_BLOCK_NOT_ALLOWED,
@@ -571,7 +571,7 @@ pub static TABLE: &[Entry] = &[
     Entry {
         code: ASSIGN_TO_READ_ONLY,
         title: "assignment to a read-only variable",
-        explanation: "The target of the assignment or output connection cannot be written: a CONSTANT, an input of another POU's instance (`fb.IN := ...` from outside is allowed only through the call), a function's result outside that function, or an expression that is not a variable.",
+        explanation: "The target of the assignment or output connection cannot be written: a CONSTANT, or an input of another POU's instance (set it through the call, `fb(IN := ...)`).",
     },
     Entry {
         code: ASSIGN_TYPE,
