@@ -17,6 +17,7 @@
 //! signature (checked here), so they lay out their parameters alike and the caller can store
 //! the arguments without knowing which one runs.
 
+use crate::codes;
 use std::collections::HashMap;
 
 use crate::ast::*;
@@ -275,15 +276,18 @@ impl Sema<'_> {
                     );
                 }
                 Some(_) => self.diags.error(
+                    codes::MISPLACED_POU_ELEMENT,
                     pou.span,
                     format!(
                         "`{}` is a FUNCTION: actions belong to a FUNCTION_BLOCK or a PROGRAM",
                         pou.text
                     ),
                 ),
-                None => self
-                    .diags
-                    .error(pou.span, format!("unknown POU `{}`", pou.text)),
+                None => self.diags.error(
+                    codes::UNKNOWN_POU,
+                    pou.span,
+                    format!("unknown POU `{}`", pou.text),
+                ),
             }
         }
         // EXTENDS, and which blocks are classes (their instances carry a class id).
@@ -304,6 +308,7 @@ impl Sema<'_> {
                 Some(&b) if self.prog.pous[b].kind == PouKind::FunctionBlock && b != i => {
                     if self.prog.pous[b].is_final {
                         self.diags.error(
+                            codes::INVALID_EXTENDS,
                             base.span,
                             format!("`{}` is FINAL and cannot be extended", base.text),
                         );
@@ -313,12 +318,15 @@ impl Sema<'_> {
                     is_class[b] = true;
                 }
                 Some(_) => self.diags.error(
+                    codes::INVALID_EXTENDS,
                     base.span,
                     format!("`{}` is not a function block to extend", base.text),
                 ),
-                None => self
-                    .diags
-                    .error(base.span, format!("unknown function block `{}`", base.text)),
+                None => self.diags.error(
+                    codes::INVALID_EXTENDS,
+                    base.span,
+                    format!("unknown function block `{}`", base.text),
+                ),
             }
         }
         for (i, class) in is_class.into_iter().enumerate() {
@@ -362,6 +370,7 @@ impl Sema<'_> {
         });
         if clash {
             self.diags.error(
+                codes::DUPLICATE_VARIABLE,
                 name.span,
                 format!("`{owner_name}` already has a member `{}`", name.text),
             );
@@ -419,8 +428,11 @@ impl Sema<'_> {
                 || self.prog.interface_by_name.contains_key(&i.name.name)
                 || self.unit.types.iter().any(|t| t.name.name == i.name.name);
             if taken {
-                self.diags
-                    .error(i.name.span, format!("`{}` is already defined", i.name.text));
+                self.diags.error(
+                    codes::DUPLICATE_DEFINITION,
+                    i.name.span,
+                    format!("`{}` is already defined", i.name.text),
+                );
                 continue;
             }
             self.prog
@@ -469,6 +481,7 @@ impl Sema<'_> {
         {
             let name = self.prog.pous[*i].text.clone();
             self.diags.error(
+                codes::ABSTRACT_INSTANCE,
                 d.ty.span(),
                 format!(
                     "`{name}` is ABSTRACT: declare an instance of a function block derived from it"
@@ -501,9 +514,11 @@ impl Sema<'_> {
             for e in &ast.extends {
                 match self.interface_named(&e.name) {
                     Some(&j) => extends.push(j),
-                    None => self
-                        .diags
-                        .error(e.span, format!("unknown interface `{}`", e.text)),
+                    None => self.diags.error(
+                        codes::UNKNOWN_INTERFACE,
+                        e.span,
+                        format!("unknown interface `{}`", e.text),
+                    ),
                 }
             }
             self.prog.interfaces[i].extends = extends;
@@ -519,8 +534,11 @@ impl Sema<'_> {
                     self.prog.interfaces[i].span,
                     self.prog.interfaces[i].text.clone(),
                 );
-                self.diags
-                    .error(span, format!("interface `{text}` extends itself"));
+                self.diags.error(
+                    codes::INTERFACE_CYCLE,
+                    span,
+                    format!("interface `{text}` extends itself"),
+                );
                 self.prog.interfaces[i].extends.clear();
             }
         }
@@ -553,8 +571,11 @@ impl Sema<'_> {
                     .iter()
                     .any(|o| o.name == m.name && o.kind == m.kind)
                 {
-                    self.diags
-                        .error(m.span, format!("`{}` is declared twice", m.text));
+                    self.diags.error(
+                        codes::DUPLICATE_VARIABLE,
+                        m.span,
+                        format!("`{}` is declared twice", m.text),
+                    );
                 }
             }
             self.prog.interfaces[i].members = members;
@@ -584,9 +605,11 @@ impl Sema<'_> {
         let slot = self.prog.slot_count;
         match slot.checked_add(1) {
             Some(next) => self.prog.slot_count = next,
-            None => self
-                .diags
-                .error(span, "too many methods that can be called dynamically"),
+            None => self.diags.error(
+                codes::TOO_MANY_DYNAMIC_METHODS,
+                span,
+                "too many methods that can be called dynamically",
+            ),
         }
         slot
     }
@@ -622,6 +645,7 @@ impl Sema<'_> {
         for b in blocks {
             if !matches!(b.kind, VarKind::Input | VarKind::Output | VarKind::InOut) {
                 self.diags.error(
+                    codes::INTERFACE_CONTENT,
                     b.span,
                     "an interface method declares VAR_INPUT, VAR_OUTPUT and VAR_IN_OUT only",
                 );
@@ -674,6 +698,7 @@ impl Sema<'_> {
                     let bm = self.prog.pous[base_pou].member.clone().expect("member");
                     if bm.is_final {
                         self.diags.error(
+                            codes::FINAL_OVERRIDE,
                             m_span(&self.prog.pous[pou]),
                             format!(
                                 "`{}` is FINAL in `{}` and cannot be overridden",
@@ -706,7 +731,8 @@ impl Sema<'_> {
                 "`{}` {relation} `{}` but has another signature (return type, or names, kinds and types of its parameters)",
                 self.prog.pous[a].text, self.prog.pous[b].text
             );
-            self.diags.error(m_span(&self.prog.pous[a]), msg);
+            self.diags
+                .error(codes::SIGNATURE_MISMATCH, m_span(&self.prog.pous[a]), msg);
         }
     }
 
@@ -754,7 +780,7 @@ impl Sema<'_> {
                 .collect();
             missing.sort();
             if let Some(m) = missing.first() {
-                self.diags.error(
+                self.diags.error(codes::MISSING_IMPLEMENTATION,
                     span,
                     format!("`{class_name}` must implement the ABSTRACT method `{m}` or be declared ABSTRACT"),
                 );
@@ -779,9 +805,11 @@ impl Sema<'_> {
                             }
                         }
                     }
-                    None if x == c => self
-                        .diags
-                        .error(name.span, format!("unknown interface `{}`", name.text)),
+                    None if x == c => self.diags.error(
+                        codes::UNKNOWN_INTERFACE,
+                        name.span,
+                        format!("unknown interface `{}`", name.text),
+                    ),
                     None => {}
                 }
             }
@@ -809,13 +837,18 @@ impl Sema<'_> {
                                 "`{}` implements {what} of interface `{iface}` but has another signature (return type, or names, kinds and types of its parameters)",
                                 self.prog.pous[p].text
                             );
-                            self.diags.error(m_span(&self.prog.pous[p]), msg);
+                            self.diags.error(
+                                codes::SIGNATURE_MISMATCH,
+                                m_span(&self.prog.pous[p]),
+                                msg,
+                            );
                         }
                         dispatch.insert(m.slot, p);
                     }
                     None if is_abstract => {}
                     None => {
                         self.diags.error(
+                            codes::MISSING_IMPLEMENTATION,
                             span,
                             format!(
                                 "`{class_name}` does not implement {what} of interface `{iface}`"
@@ -841,13 +874,14 @@ impl Sema<'_> {
             if self.prog.pous[m.owner].var(&m.name).is_some() && m.kind != MemberKind::Setter {
                 let owner = self.prog.pous[m.owner].text.clone();
                 self.diags.error(
+                    codes::DUPLICATE_VARIABLE,
                     m_span(&self.prog.pous[p]),
                     format!("`{owner}` already has a variable `{}`", m.text),
                 );
             }
             if m.is_abstract && !self.prog.pous[m.owner].is_abstract {
                 let owner = self.prog.pous[m.owner].text.clone();
-                self.diags.error(
+                self.diags.error(codes::ABSTRACT_METHOD_OWNER,
                     m_span(&self.prog.pous[p]),
                     format!("the ABSTRACT method `{}` needs an ABSTRACT function block (`FUNCTION_BLOCK ABSTRACT {owner}`)", m.text),
                 );

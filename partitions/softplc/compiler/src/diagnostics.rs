@@ -5,6 +5,8 @@
 
 use std::fmt;
 
+pub use crate::codes::Code;
+
 /// A byte range inside one source file of a [`SourceMap`].
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Hash)]
 pub struct Span {
@@ -96,6 +98,8 @@ impl SourceMap {
 /// One compile error.
 #[derive(Debug, Clone, PartialEq)]
 pub struct Diagnostic {
+    /// The stable code of the kind of error ([`codes`](crate::codes)).
+    pub code: Code,
     pub span: Span,
     pub message: String,
     /// Text attached to the marker under the source line.
@@ -103,8 +107,9 @@ pub struct Diagnostic {
 }
 
 impl Diagnostic {
-    pub fn error(span: Span, message: impl Into<String>) -> Diagnostic {
+    pub fn error(code: Code, span: Span, message: impl Into<String>) -> Diagnostic {
         Diagnostic {
+            code,
             span,
             message: message.into(),
             label: None,
@@ -141,8 +146,8 @@ impl Diagnostics {
         }
     }
 
-    pub fn error(&mut self, span: Span, message: impl Into<String>) {
-        self.push(Diagnostic::error(span, message));
+    pub fn error(&mut self, code: Code, span: Span, message: impl Into<String>) {
+        self.push(Diagnostic::error(code, span, message));
     }
 
     pub fn is_empty(&self) -> bool {
@@ -150,7 +155,7 @@ impl Diagnostics {
     }
 }
 
-/// Renders diagnostics with ariadne. The first line of each report is `file:line:col: error: msg`
+/// Renders diagnostics with ariadne. The first line of each report is `file:line:col: error[E0042]: msg`
 /// so that tools (and the tests) can pick up the location without parsing the drawing.
 pub fn render(sources: &SourceMap, diags: &[Diagnostic], color: bool) -> String {
     use ariadne::{Config, IndexType, Label, Report, ReportKind, Source};
@@ -166,8 +171,9 @@ pub fn render(sources: &SourceMap, diags: &[Diagnostic], color: bool) -> String 
             end += 1;
         }
         out.push_str(&format!(
-            "{}: error: {}\n",
+            "{}: error[{}]: {}\n",
             sources.location(d.span),
+            d.code,
             d.message
         ));
         let label = Label::new((file.name.clone(), start..end))
@@ -178,6 +184,7 @@ pub fn render(sources: &SourceMap, diags: &[Diagnostic], color: bool) -> String 
                     .with_index_type(IndexType::Byte)
                     .with_color(color),
             )
+            .with_code(d.code)
             .with_message(&d.message)
             .with_label(label)
             .finish();

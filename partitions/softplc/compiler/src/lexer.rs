@@ -4,6 +4,7 @@
 //! and with their original spelling for messages. Typed literals (`INT#5`, `T#1s`, `16#FF`)
 //! are recognised here so the parser sees one token per literal.
 
+use crate::codes::{self, Code};
 use crate::diagnostics::{Diagnostic, Span};
 use crate::types::Elem;
 
@@ -127,13 +128,13 @@ impl Lexer<'_> {
         Span::new(self.file, start, self.pos)
     }
 
-    fn error(&mut self, start: usize, msg: impl Into<String>) {
+    fn error(&mut self, code: Code, start: usize, msg: impl Into<String>) {
         let mut end = self.pos.max(start + 1).min(self.src.len().max(start));
         while !self.text.is_char_boundary(end) {
             end += 1;
         }
         let span = Span::new(self.file, start, end);
-        self.diags.push(Diagnostic::error(span, msg));
+        self.diags.push(Diagnostic::error(code, span, msg));
     }
 
     fn push(&mut self, tok: Tok, start: usize) {
@@ -159,7 +160,11 @@ impl Lexer<'_> {
                         self.pos += 1;
                     }
                     if self.pos >= self.src.len() {
-                        self.error(start, "unterminated pragma `{`");
+                        self.error(
+                            codes::UNTERMINATED_COMMENT,
+                            start,
+                            "unterminated pragma `{`",
+                        );
                     } else {
                         self.pos += 1;
                         let body = &self.text[start + 1..self.pos - 1];
@@ -213,7 +218,7 @@ impl Lexer<'_> {
             }
         }
         self.pos = start + 2;
-        self.error(start, "unterminated comment");
+        self.error(codes::UNTERMINATED_COMMENT, start, "unterminated comment");
         self.pos = self.src.len();
     }
 
@@ -226,7 +231,11 @@ impl Lexer<'_> {
         let mut value = String::new();
         loop {
             if self.pos >= self.src.len() || self.peek(0) == b'\n' {
-                self.error(start, "unterminated string literal");
+                self.error(
+                    codes::UNTERMINATED_STRING,
+                    start,
+                    "unterminated string literal",
+                );
                 return;
             }
             let c = self.peek(0);
@@ -264,6 +273,7 @@ impl Lexer<'_> {
                     }
                     _ => {
                         self.diags.push(Diagnostic::error(
+                            codes::INVALID_ESCAPE,
                             Span::new(self.file, at, self.pos),
                             "invalid escape sequence in string literal",
                         ));
@@ -312,6 +322,7 @@ impl Lexer<'_> {
             let radix: u32 = int.parse().unwrap_or(0);
             if ![2, 8, 16].contains(&radix) {
                 self.error(
+                    codes::INVALID_BASED_LITERAL,
                     start,
                     format!("unsupported number base {radix} (use 2, 8 or 16)"),
                 );
@@ -323,7 +334,11 @@ impl Lexer<'_> {
             match u128::from_str_radix(&d, radix) {
                 Ok(v) if !d.is_empty() => self.push(Tok::Int(v), start),
                 _ => {
-                    self.error(start, "invalid based integer literal");
+                    self.error(
+                        codes::INVALID_BASED_LITERAL,
+                        start,
+                        "invalid based integer literal",
+                    );
                     self.push(Tok::Int(0), start);
                 }
             }
@@ -357,7 +372,7 @@ impl Lexer<'_> {
             match text.parse::<u128>() {
                 Ok(v) => self.push(Tok::Int(v), start),
                 Err(_) => {
-                    self.error(start, "integer literal too large");
+                    self.error(codes::INTEGER_TOO_LARGE, start, "integer literal too large");
                     self.push(Tok::Int(0), start);
                 }
             }
@@ -413,6 +428,7 @@ impl Lexer<'_> {
                 _ => "DT#2024-02-29-13:05:00",
             };
             self.error(
+                codes::MALFORMED_LITERAL,
                 start,
                 format!(
                     "malformed or invalid {} literal (expected e.g. {example})",
@@ -464,6 +480,7 @@ impl Lexer<'_> {
                 "ns" => 1,
                 _ => {
                     self.error(
+                        codes::MALFORMED_DURATION,
                         ustart,
                         format!("unknown time unit `{unit}` (use d, h, m, s, ms, us, ns)"),
                     );
@@ -480,6 +497,7 @@ impl Lexer<'_> {
         }
         if !any {
             self.error(
+                codes::MALFORMED_DURATION,
                 start,
                 "malformed duration literal (expected e.g. T#1s500ms)",
             );
@@ -489,7 +507,11 @@ impl Lexer<'_> {
             ns = -ns;
         }
         if ns > i64::MAX as i128 || ns < i64::MIN as i128 {
-            self.error(start, "duration literal out of range");
+            self.error(
+                codes::MALFORMED_DURATION,
+                start,
+                "duration literal out of range",
+            );
             ns = 0;
         }
         if elem == Elem::Time {
@@ -538,7 +560,11 @@ impl Lexer<'_> {
             _ => {
                 let ch = self.text[self.pos..].chars().next().unwrap_or('?');
                 self.pos += ch.len_utf8();
-                self.error(start, format!("unexpected character `{ch}`"));
+                self.error(
+                    codes::UNEXPECTED_CHARACTER,
+                    start,
+                    format!("unexpected character `{ch}`"),
+                );
                 return;
             }
         };

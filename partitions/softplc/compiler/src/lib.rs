@@ -1,24 +1,23 @@
 //! IEC 61131-3 Structured Text compiler (host): source -> verified plc-vm bytecode image.
 //!
 //! Pipeline: [`lexer`] -> [`parser`] ([`ast`]) -> [`sema`] (declarations, types, layout) ->
-//! [`codegen`] (body checking + emission via `plc_vm::image::ImageBuilder`) -> image.
+//! [`typed::check`] (bodies: every diagnostic, the type of every expression) ->
+//! [`typed::emit`] ([`codegen`], through `plc_vm::image::ImageBuilder`) -> image.
 //! The standard function blocks come from an ST [`PRELUDE`] compiled with every program.
 //! [`run`] is the host runner behind `plcc run`.
 
 pub mod ast;
-mod calls;
 mod classes;
 pub mod codegen;
+pub mod codes;
 pub mod diagnostics;
 pub mod lexer;
 pub mod library;
 pub mod monitor;
-mod oop;
 pub mod parser;
-mod refs;
 pub mod run;
 pub mod sema;
-mod stdfuncs;
+pub mod typed;
 pub mod types;
 
 use diagnostics::{Diagnostic, Diagnostics, SourceMap};
@@ -113,20 +112,22 @@ pub fn compile(
     let mut prog = sema::analyse(&unit, prelude_pous, opts, &mut diags);
     if prog.instances.is_empty() && diags.is_empty() && !opts.library {
         diags.error(
+            codes::PROGRAM_SELECTION,
             diagnostics::Span::new(0, 0, 0),
             "no PROGRAM to run (declare a PROGRAM or a CONFIGURATION)",
         );
     }
-    let mut generator = codegen::Gen::new(&mut prog, &unit, &sources, &mut diags);
-    generator.generate();
-    let task_records: usize = generator.prog.tasks.iter().map(|t| t.programs.len()).sum();
+    // Check every body (all diagnostics, the type of every expression), then emit.
+    let types = typed::check(&mut prog, &unit, &sources, &mut diags);
+    let task_records: usize = prog.tasks.iter().map(|t| t.programs.len()).sum();
     if task_records > plc_vm::verify::MAX_TASKS {
         let span = unit
             .configs
             .first()
             .map(|c| c.name.span)
             .unwrap_or_default();
-        generator.diags.error(
+        diags.error(
+            codes::TOO_MANY_PROGRAM_INSTANCES,
             span,
             format!(
                 "too many program instances: the VM runs at most {}",
@@ -134,14 +135,26 @@ pub fn compile(
             ),
         );
     }
-    if generator.prog.data_overflow {
-        let span = generator
-            .prog
+    let emitted = if diags.is_empty() {
+        match typed::emit(&mut prog, &unit, &sources, types) {
+            Ok(emitted) => Some(emitted),
+            Err(internal) => {
+                internal.list.into_iter().for_each(|d| diags.push(d));
+                None
+            }
+        }
+    } else {
+        None
+    };
+    // The data of the declarations and, once emitted, the temporaries of the bodies.
+    if prog.data_overflow {
+        let span = prog
             .instances
             .first()
-            .map(|i| generator.prog.pous[i.pou].span)
+            .map(|i| prog.pous[i.pou].span)
             .unwrap_or_default();
-        generator.diags.error(
+        diags.error(
+            codes::DATA_MEMORY_EXCEEDED,
             span,
             format!(
                 "the program needs more than {} MiB of data memory",
@@ -149,18 +162,62 @@ pub fn compile(
             ),
         );
     }
-    let mut b = std::mem::take(&mut generator.b);
-    let init = std::mem::take(&mut generator.init);
-    let pou_ids = generator.pou_ids.clone();
-    let file_ids = generator.file_ids.clone();
-    drop(generator);
-    if !diags.is_empty() {
+    let Some(emitted) = emitted.filter(|_| diags.is_empty()) else {
         let mut list = diags.list;
         list.sort_by_key(|d| (d.span.file, d.span.start));
         return Err((list, sources));
-    }
+    };
+    let typed::Emitted {
+        builder: mut b,
+        init,
+        pou_ids,
+        file_ids,
+    } = emitted;
     b.set_init(0, &init);
     b.reserve_data(prog.data_size.max(8));
+    let tasks = add_tasks(&prog, &mut b, &pou_ids);
+    let vars = monitor::variable_map(&prog);
+    let safe = safe_outputs(&prog);
+    add_variables(&prog, &mut b, &vars, &sources, &file_ids);
+    let image = match b.build() {
+        Ok(i) => i,
+        Err(e) => {
+            let d = Diagnostic::error(
+                codes::INTERNAL_ERROR,
+                diagnostics::Span::new(0, 0, 0),
+                format!("internal error building the image: {e}"),
+            );
+            return Err((vec![d], sources));
+        }
+    };
+    // The VM's verifier is the final judge; a rejection here is a compiler bug.
+    if let Err(e) = verify_image(&image) {
+        let d = Diagnostic::error(
+            codes::INTERNAL_ERROR,
+            diagnostics::Span::new(0, 0, 0),
+            format!("internal error: generated image rejected by the verifier: {e}"),
+        );
+        return Err((vec![d], sources));
+    }
+    Ok((
+        Compiled {
+            image,
+            vars,
+            tasks,
+            has_configuration: prog.has_configuration,
+            safe,
+        },
+        sources,
+    ))
+}
+
+/// Adds one task record per program instance to the image; returns the tasks as the host
+/// runner schedules them.
+fn add_tasks(
+    prog: &sema::Program,
+    b: &mut plc_vm::image::ImageBuilder,
+    pou_ids: &[plc_vm::image::PouId],
+) -> Vec<TaskInfo> {
     let mut tasks = Vec::new();
     let mut image_task = 0usize;
     for t in &prog.tasks {
@@ -200,11 +257,20 @@ pub fn compile(
         }
         tasks.push(info);
     }
-    let vars = monitor::variable_map(&prog);
-    let safe = safe_outputs(&prog);
+    tasks
+}
+
+/// Adds the variable records, the located variables and the shared globals to the image.
+fn add_variables(
+    prog: &sema::Program,
+    b: &mut plc_vm::image::ImageBuilder,
+    vars: &[monitor::MonitorVar],
+    sources: &SourceMap,
+    file_ids: &[u16],
+) {
     // Variable-record index of each global shared with another project.
     let mut shared_records = vec![None; prog.shared.len()];
-    for v in &vars {
+    for v in vars {
         if let Some(vt) = v.kind.var_type() {
             if let Some(i) = prog.shared.iter().position(|s| s.text == v.name) {
                 shared_records[i] = Some(b.var_count());
@@ -226,7 +292,7 @@ pub fn compile(
             );
         }
     }
-    for located in located_vars(&prog) {
+    for located in located_vars(prog) {
         b.add_located(&located);
     }
     for (shared, record) in prog.shared.iter().zip(shared_records) {
@@ -243,34 +309,6 @@ pub fn compile(
             b.add_shared(record, shared.direction, location);
         }
     }
-    let image = match b.build() {
-        Ok(i) => i,
-        Err(e) => {
-            let d = Diagnostic::error(
-                diagnostics::Span::new(0, 0, 0),
-                format!("internal error building the image: {e}"),
-            );
-            return Err((vec![d], sources));
-        }
-    };
-    // The VM's verifier is the final judge; a rejection here is a compiler bug.
-    if let Err(e) = verify_image(&image) {
-        let d = Diagnostic::error(
-            diagnostics::Span::new(0, 0, 0),
-            format!("internal error: generated image rejected by the verifier: {e}"),
-        );
-        return Err((vec![d], sources));
-    }
-    Ok((
-        Compiled {
-            image,
-            vars,
-            tasks,
-            has_configuration: prog.has_configuration,
-            safe,
-        },
-        sources,
-    ))
 }
 
 /// The safe values of the located outputs with an `{attribute 'safe'}`: a global's once, a

@@ -32,11 +32,11 @@ fn check_exit_codes() {
     let err = String::from_utf8_lossy(&out.stderr);
     // Several errors, each with file:line:column, the source line and a marker.
     assert!(
-        err.contains("bad.st:3:6: error: unknown variable `y`"),
+        err.contains("bad.st:3:6: error[E0049]: unknown variable `y`"),
         "{err}"
     );
     assert!(
-        err.contains("bad.st:4:6: error: expected an expression"),
+        err.contains("bad.st:4:6: error[E0009]: expected an expression"),
         "{err}"
     );
     assert!(err.contains("x := y;"), "{err}");
@@ -168,4 +168,59 @@ fn multiple_files() {
         String::from_utf8_lossy(&out.stdout),
         "cycle 1: Main.x=2\ncycle 2: Main.x=4\n"
     );
+}
+
+#[test]
+fn explain_prints_the_paragraph_of_a_code() {
+    let out = plcc().args(["explain", "E0049"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(0));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.starts_with("E0049: unknown variable\n\n"), "{text}");
+    let out = plcc().args(["explain", "E9999"]).output().unwrap();
+    assert_eq!(out.status.code(), Some(2));
+    assert!(String::from_utf8_lossy(&out.stderr).contains("not a diagnostic code"));
+}
+
+/// docs/plc-diagnostics.md is the table of `codes.rs` (regenerate it with
+/// `plcc explain --markdown > docs/plc-diagnostics.md`).
+#[test]
+fn the_diagnostics_document_matches_the_table() {
+    let doc =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../../docs/plc-diagnostics.md");
+    let doc = std::fs::read_to_string(doc).unwrap();
+    assert!(
+        doc == plc_compiler::codes::markdown(),
+        "docs/plc-diagnostics.md differs from the code table: regenerate it with `plcc explain --markdown`"
+    );
+}
+
+/// Every code of the table is reported somewhere in the compiler (no dead entries).
+#[test]
+fn every_code_is_used() {
+    let src = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut text = String::new();
+    let mut dirs = vec![src];
+    while let Some(d) = dirs.pop() {
+        for e in std::fs::read_dir(d).unwrap() {
+            let p = e.unwrap().path();
+            if p.is_dir() {
+                dirs.push(p);
+            } else if p.extension().is_some_and(|x| x == "rs") && !p.ends_with("codes.rs") {
+                text.push_str(&std::fs::read_to_string(&p).unwrap());
+            }
+        }
+    }
+    let table = std::fs::read_to_string(
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("src/codes.rs"),
+    )
+    .unwrap();
+    for line in table.lines() {
+        if let Some(rest) = line.strip_prefix("pub const ") {
+            let name = rest.split(':').next().unwrap();
+            assert!(
+                text.contains(&format!("codes::{name},")),
+                "{name} is never reported"
+            );
+        }
+    }
 }

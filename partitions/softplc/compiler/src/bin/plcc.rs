@@ -1,7 +1,7 @@
 //! `plcc`: check, build and run IEC 61131-3 Structured Text programs.
 //!
-//! Exit codes: 0 success, 1 compile errors (or I/O errors), 2 usage errors, 3 uncaught trap
-//! during `run`.
+//! Exit codes: 0 success, 1 compile errors (or I/O errors), 2 usage errors (and an unknown
+//! code given to `explain`), 3 uncaught trap during `run`.
 
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
@@ -9,7 +9,7 @@ use std::process::ExitCode;
 
 use clap::{Parser, Subcommand};
 use plc_compiler::run::{RunConfig, run};
-use plc_compiler::{Options, compile, diagnostics};
+use plc_compiler::{Options, codes, compile, diagnostics};
 
 #[derive(Parser)]
 #[command(
@@ -65,6 +65,37 @@ enum Command {
         #[arg(long, value_parser = parse_set)]
         set: Vec<(String, String)>,
     },
+    /// Explain a diagnostic code, e.g. `plcc explain E0042`.
+    Explain {
+        /// The code, as printed in `error[E0042]`.
+        #[arg(required_unless_present = "markdown")]
+        code: Option<String>,
+        /// Print every code as Markdown (the text of docs/plc-diagnostics.md).
+        #[arg(long, conflicts_with = "code")]
+        markdown: bool,
+    },
+}
+
+/// `plcc explain`: the explanation of one code, or the whole list as Markdown.
+fn explain(code: Option<&str>, markdown: bool) -> ExitCode {
+    if markdown {
+        print!("{}", codes::markdown());
+        return ExitCode::SUCCESS;
+    }
+    let code = code.unwrap_or_default();
+    match codes::lookup(code) {
+        Some(e) => {
+            println!("{}: {}\n\n{}", e.code, e.title, e.explanation);
+            ExitCode::SUCCESS
+        }
+        None => {
+            eprintln!(
+                "plcc: `{code}` is not a diagnostic code (they are E0001 to E{:04})",
+                codes::TABLE.len()
+            );
+            ExitCode::from(2)
+        }
+    }
 }
 
 fn parse_interval(s: &str) -> Result<i64, String> {
@@ -138,6 +169,7 @@ fn main() -> ExitCode {
         Command::Build { files, program, .. } | Command::Run { files, program, .. } => {
             (files, program, false)
         }
+        Command::Explain { code, markdown } => return explain(code.as_deref(), *markdown),
     };
     let sources = match read_files(files) {
         Ok(s) => s,
@@ -160,7 +192,7 @@ fn main() -> ExitCode {
         }
     };
     match cli.command {
-        Command::Check { .. } => ExitCode::SUCCESS,
+        Command::Check { .. } | Command::Explain { .. } => ExitCode::SUCCESS,
         Command::Build { output, .. } => match std::fs::write(&output, &compiled.image) {
             Ok(()) => ExitCode::SUCCESS,
             Err(e) => {

@@ -1,6 +1,7 @@
 //! Calls of user FUNCTIONs and function block instances (argument binding, parameter
 //! passing through the callee's frame, outputs `=>`).
 
+use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode};
 
 use crate::ast::*;
@@ -89,7 +90,7 @@ impl Gen<'_> {
                         PouKind::Function => self.call_function(pi, args, span),
                         _ => {
                             let msg = format!("`{}` is a type; call an instance of it", n.text);
-                            self.error(n.span, msg);
+                            self.error(codes::NOT_CALLABLE, n.span, msg);
                             Type::Error
                         }
                     };
@@ -98,7 +99,7 @@ impl Gen<'_> {
                     return t;
                 }
                 let msg = format!("unknown function `{}`", n.text);
-                self.error(n.span, msg);
+                self.error(codes::UNKNOWN_FUNCTION, n.span, msg);
                 for a in args {
                     self.infer(&a.value);
                 }
@@ -115,7 +116,7 @@ impl Gen<'_> {
                         "`{}` is a CLASS: it has no body to call; call its methods",
                         self.prog.pous[pi].text
                     );
-                    self.error(callee.span, msg);
+                    self.error(codes::NOT_CALLABLE, callee.span, msg);
                 }
                 self.call_fb(p, pi, args, span);
                 Type::Void
@@ -123,7 +124,7 @@ impl Gen<'_> {
             Type::Error => Type::Error,
             other => {
                 let msg = format!("{} is not callable", self.tname(&other));
-                self.error(callee.span, msg);
+                self.error(codes::NOT_CALLABLE, callee.span, msg);
                 if matches!(p.loc, Loc::Ind(_)) {
                     self.op(Opcode::Drop);
                 }
@@ -149,7 +150,7 @@ impl Gen<'_> {
                     n.text,
                     candidates.join(", ")
                 );
-                self.error(n.span, msg);
+                self.error(codes::AMBIGUOUS_NAME, n.span, msg);
                 n.clone()
             }
             Ok(None) => match n.name.rsplit_once('.') {
@@ -230,19 +231,23 @@ impl Gen<'_> {
                                     n.text
                                 )
                             };
-                            self.error(n.span, msg);
+                            self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                             continue;
                         }
                         None => {
                             let msg = format!("{pou_name} has no parameter `{}`", n.text);
-                            self.error(n.span, msg);
+                            self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                             continue;
                         }
                     }
                 }
                 None => {
                     if named_seen {
-                        self.error(a.span, "positional arguments must come before named ones");
+                        self.error(
+                            codes::ARGUMENT_ORDER,
+                            a.span,
+                            "positional arguments must come before named ones",
+                        );
                         continue;
                     }
                     match params.get(i) {
@@ -250,7 +255,7 @@ impl Gen<'_> {
                         None => {
                             let msg =
                                 format!("too many arguments: {pou_name} takes {}", params.len());
-                            self.error(a.span, msg);
+                            self.error(codes::ARGUMENT_COUNT, a.span, msg);
                             continue;
                         }
                     }
@@ -258,7 +263,7 @@ impl Gen<'_> {
             };
             if out.iter().any(|b| b.param.name == param.name) {
                 let msg = format!("parameter `{}` given twice", param.text);
-                self.error(a.span, msg);
+                self.error(codes::DUPLICATE_ARGUMENT, a.span, msg);
                 continue;
             }
             out.push(Bound {
@@ -323,7 +328,7 @@ impl Gen<'_> {
                     self.check_escape(None, a.value, "an input of a function block instance");
                 }
                 if matches!(p.ty, Type::Reference(_)) {
-                    let r = crate::refs::reference_to(a.value);
+                    let r = crate::codegen::refs::reference_to(a.value);
                     self.check_escape(None, &r, "an input of a function block instance");
                 }
                 self.store_expr(&p, a.value, a.value.span);
@@ -336,7 +341,7 @@ impl Gen<'_> {
             .map(|v| v.text.clone());
         if let Some(m) = missing_inout {
             let msg = format!("VAR_IN_OUT parameter `{m}` must be connected");
-            self.error(span, msg);
+            self.error(codes::MISSING_ARGUMENT, span, msg);
         }
         match base {
             Ok(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
@@ -364,6 +369,7 @@ impl Gen<'_> {
         match self.place(e) {
             Some(p) if p.window.is_some() => {
                 self.error(
+                    codes::IN_OUT_ARGUMENT,
                     e.span,
                     "a partial access (`x.3`, `x.%B1`) cannot be passed to a VAR_IN_OUT",
                 );
@@ -377,7 +383,7 @@ impl Gen<'_> {
                         self.tname(ty),
                         self.tname(&p.ty)
                     );
-                    self.error(e.span, msg);
+                    self.error(codes::IN_OUT_ARGUMENT, e.span, msg);
                 }
                 self.addr_of(&p);
             }
@@ -396,13 +402,17 @@ impl Gen<'_> {
         // A dynamic source address was pushed before the target's; keep the order valid by
         // loading the source first only when the target is static.
         if let (Loc::Ind(_), Loc::Ind(_)) = (&src.loc, &dst.loc) {
-            self.error(target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
+            self.error(codes::OUTPUT_TARGET, target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
             self.op(Opcode::Drop);
             self.op(Opcode::Drop);
             return;
         }
         if !dst.writable {
-            self.error(target.span, "output target is not writable");
+            self.error(
+                codes::ASSIGN_TO_READ_ONLY,
+                target.span,
+                "output target is not writable",
+            );
         }
         match &dst.ty {
             Type::String(_) | Type::WString(_) => {
@@ -412,7 +422,7 @@ impl Gen<'_> {
                         self.tname(&src.ty),
                         self.tname(&dst.ty)
                     );
-                    self.error(target.span, msg);
+                    self.error(codes::TYPE_MISMATCH, target.span, msg);
                 }
                 self.aggregate_operands(&src, &dst);
                 let assign = if dst.ty.is_wstring() {
@@ -496,7 +506,7 @@ impl Gen<'_> {
                                 },
                                 self.tname(&t)
                             );
-                            self.error(a.value.span, msg);
+                            self.error(codes::TYPE_MISMATCH, a.value.span, msg);
                         }
                     }
                     Type::Array(_) | Type::Struct(_) => {
@@ -507,7 +517,7 @@ impl Gen<'_> {
                                 self.tname(&a.param.ty),
                                 self.tname(&t)
                             );
-                            self.error(a.value.span, msg);
+                            self.error(codes::TYPE_MISMATCH, a.value.span, msg);
                         }
                     }
                     ty => {
@@ -568,7 +578,7 @@ impl Gen<'_> {
                 }
                 VarKind::InOut => {
                     let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
-                    self.error(span, msg);
+                    self.error(codes::MISSING_ARGUMENT, span, msg);
                 }
                 _ => {}
             }

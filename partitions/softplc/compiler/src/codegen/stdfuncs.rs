@@ -5,6 +5,7 @@
 //! truncates; TIME<->number conversions count milliseconds; string results go to a static
 //! temporary per call site.
 
+use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 
 use crate::ast::*;
@@ -16,7 +17,7 @@ use crate::types::*;
 /// the second type of MUL/DIV stands for any number), CONCAT_DATE_TOD, CONCAT_* of numbers
 /// giving the type, SPLIT_* of the type into numbers, DAY_OF_WEEK.
 #[derive(Debug, Clone, Copy)]
-enum TimeFunction {
+pub(super) enum TimeFunction {
     Operator(BinOp, Elem, Elem),
     DateTod(Elem),
     Concat(Elem),
@@ -29,19 +30,19 @@ const YEAR_MONTH_DAY: [&str; 3] = ["YEAR", "MONTH", "DAY"];
 const HOUR_MINUTE_SECOND_MS: [&str; 4] = ["HOUR", "MINUTE", "SECOND", "MILLISECOND"];
 
 /// Maximum length of the temporaries that hold string function results.
-const MAX_TEMP_STRING: u32 = 1024;
+pub(super) const MAX_TEMP_STRING: u32 = 1024;
 
 /// A standard-function call being compiled: its name, arguments and the type the context
 /// expects of literal-only arguments.
-struct StdArgs<'e> {
-    name: &'e str,
-    id: &'e Ident,
-    exprs: Vec<&'e Expr>,
-    ctx: Option<Type>,
-    span: Span,
+pub(super) struct StdArgs<'e> {
+    pub(super) name: &'e str,
+    pub(super) id: &'e Ident,
+    pub(super) exprs: Vec<&'e Expr>,
+    pub(super) ctx: Option<Type>,
+    pub(super) span: Span,
     /// The type of a typed form (`SQRT_LREAL`, `MAX_DINT`): its typed arguments convert
     /// to it implicitly and it is the result.
-    typed: Option<Elem>,
+    pub(super) typed: Option<Elem>,
 }
 
 impl Gen<'_> {
@@ -63,7 +64,7 @@ impl Gen<'_> {
     }
 
     /// `TRUNC_INT` and `REAL_TRUNC_INT`-style forms: (argument type if given, result type).
-    fn typed_trunc(name: &str) -> Option<(Option<Elem>, Elem)> {
+    pub(super) fn typed_trunc(name: &str) -> Option<(Option<Elem>, Elem)> {
         let (from, to) = match name.split_once("TRUNC_")? {
             ("", to) => (None, to),
             (from, to) => (Some(Elem::from_name(from.strip_suffix('_')?)?), to),
@@ -76,7 +77,7 @@ impl Gen<'_> {
     }
 
     /// The date and time functions of IEC 61131-3 (3rd edition, tables 35 and 36).
-    fn time_function(name: &str) -> Option<TimeFunction> {
+    pub(super) fn time_function(name: &str) -> Option<TimeFunction> {
         use Elem::*;
         use TimeFunction::*;
         let op = |op, a, b| Some(Operator(op, a, b));
@@ -142,7 +143,11 @@ impl Gen<'_> {
             return Some(self.std_sizeof(id, args, expected, span));
         }
         if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(a.span, format!("{} has no outputs", id.text));
+            self.error(
+                codes::UNKNOWN_PARAMETER,
+                a.span,
+                format!("{} has no outputs", id.text),
+            );
             self.surface(&a.value);
         }
         if let Some(target) = name.strip_prefix("TO_") {
@@ -184,7 +189,7 @@ impl Gen<'_> {
 
     /// A typed form of an overloaded standard function (IEC 61131-3: `SQRT_LREAL`,
     /// `ABS_INT`, `MAX_DINT`, `EXPT_REAL`, `SEL_TIME`, ...): (the function, the type).
-    fn typed_overload(name: &str) -> Option<(&str, Elem)> {
+    pub(super) fn typed_overload(name: &str) -> Option<(&str, Elem)> {
         let (base, ty) = name.rsplit_once('_')?;
         let t = Elem::from_name(ty)?;
         let fits = match base {
@@ -201,7 +206,7 @@ impl Gen<'_> {
     /// Checks that the arguments of a typed form convert to its type implicitly (SEL's
     /// selector, MUX's index and EXPT's exponent are not typed). False after reporting one
     /// that does not.
-    fn typed_arguments(&mut self, c: &StdArgs, t: Elem) -> bool {
+    pub(super) fn typed_arguments(&mut self, c: &StdArgs, t: Elem) -> bool {
         let untyped = match c.name {
             "SEL" | "MUX" => 1,
             _ => 0,
@@ -228,7 +233,7 @@ impl Gen<'_> {
                         self.tname(&at),
                         self.tname(&at)
                     );
-                    self.error(e.span, msg);
+                    self.error(codes::IMPLICIT_CONVERSION, e.span, msg);
                 }
                 ok = false;
             }
@@ -238,7 +243,7 @@ impl Gen<'_> {
 
     /// The formal input names of a standard function called with `count` arguments
     /// (IEC 61131-3: `IN`, `IN1`.., `G`, `K`, `MN`, `MX`, `N`, `L`, `P`, `YEAR`, ...).
-    fn std_formals(name: &str, count: usize) -> Vec<String> {
+    pub(super) fn std_formals(name: &str, count: usize) -> Vec<String> {
         let numbered = |first: usize, n: usize| (first..first + n).map(|i| format!("IN{i}"));
         let fixed: &[&str] = match name {
             "MAX" | "MIN" | "CONCAT" => return numbered(1, count).collect(),
@@ -280,7 +285,7 @@ impl Gen<'_> {
     /// The argument expressions of a standard function in the order of its inputs: the
     /// positional ones first, the formal ones (`IN2 := x`) put in their place. `None` after
     /// reporting a misplaced, unknown, repeated or missing one.
-    fn std_arguments<'e>(
+    pub(super) fn std_arguments<'e>(
         &mut self,
         name: &str,
         id: &Ident,
@@ -297,7 +302,11 @@ impl Gen<'_> {
         for (i, a) in inputs.iter().enumerate() {
             let slot = match &a.name {
                 None if named_seen => {
-                    self.error(a.span, "positional arguments must come before named ones");
+                    self.error(
+                        codes::ARGUMENT_ORDER,
+                        a.span,
+                        "positional arguments must come before named ones",
+                    );
                     ok = false;
                     continue;
                 }
@@ -313,7 +322,7 @@ impl Gen<'_> {
                                 n.text,
                                 formals.join(", ")
                             );
-                            self.error(n.span, msg);
+                            self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                             ok = false;
                             continue;
                         }
@@ -325,7 +334,7 @@ impl Gen<'_> {
                     "input `{}` given twice",
                     formals.get(slot).map_or("?", |f| f)
                 );
-                self.error(a.span, msg);
+                self.error(codes::DUPLICATE_ARGUMENT, a.span, msg);
                 ok = false;
                 continue;
             }
@@ -341,7 +350,7 @@ impl Gen<'_> {
                 id.text,
                 formals.get(missing).map_or("?", |f| f)
             );
-            self.error(id.span, msg);
+            self.error(codes::MISSING_ARGUMENT, id.span, msg);
             ok = false;
         }
         if !ok {
@@ -355,7 +364,7 @@ impl Gen<'_> {
 
     /// `TO_INT(x)`, `TO_STRING(x)`, ... (IEC 61131-3 3rd edition): the conversion from the
     /// argument's type.
-    fn generic_conversion(
+    pub(super) fn generic_conversion(
         &mut self,
         target: &str,
         id: &Ident,
@@ -368,6 +377,7 @@ impl Gen<'_> {
         let inputs = self.std_arguments(&id.name, id, args)?;
         let [arg] = inputs[..] else {
             self.error(
+                codes::ARGUMENT_COUNT,
                 span,
                 format!("{} takes 1 argument, {} given", id.text, inputs.len()),
             );
@@ -396,7 +406,7 @@ impl Gen<'_> {
     }
 
     /// Date and time functions (see [`TimeFunction`]).
-    fn std_time(
+    pub(super) fn std_time(
         &mut self,
         f: TimeFunction,
         id: &Ident,
@@ -408,7 +418,11 @@ impl Gen<'_> {
             return self.std_split(t, id, args, span);
         }
         if let Some(a) = args.iter().find(|a| a.output) {
-            self.error(a.span, format!("{} has no outputs", id.text));
+            self.error(
+                codes::UNKNOWN_PARAMETER,
+                a.span,
+                format!("{} has no outputs", id.text),
+            );
             self.surface(&a.value);
         }
         let Some(exprs) = self.std_arguments(&id.name, id, args) else {
@@ -522,7 +536,7 @@ impl Gen<'_> {
 
     /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the
     /// integer type the context wants (UDINT without one).
-    fn std_sizeof(
+    pub(super) fn std_sizeof(
         &mut self,
         id: &Ident,
         args: &[Arg],
@@ -531,6 +545,7 @@ impl Gen<'_> {
     ) -> Type {
         let [arg] = args else {
             self.error(
+                codes::ARGUMENT_COUNT,
                 span,
                 format!("{} takes 1 argument, {} given", id.text, args.len()),
             );
@@ -572,7 +587,7 @@ impl Gen<'_> {
     }
 
     /// The data type called `name` (elementary, STRING, a TYPE or a function block).
-    fn type_by_name(&self, name: &str) -> Option<Type> {
+    pub(super) fn type_by_name(&self, name: &str) -> Option<Type> {
         if let Some(e) = Elem::from_name(name) {
             return Some(Type::Elem(e));
         }
@@ -589,7 +604,13 @@ impl Gen<'_> {
     /// SPLIT_DATE(IN, YEAR, MONTH, DAY), SPLIT_TOD(IN, HOUR, MINUTE, SECOND, MILLISECOND),
     /// SPLIT_DT(IN, YEAR, ..., MILLISECOND): the parts go to the outputs, given formally
     /// (`YEAR => y`) or in order after the input.
-    fn std_split(&mut self, input_type: Elem, id: &Ident, args: &[Arg], span: Span) -> Type {
+    pub(super) fn std_split(
+        &mut self,
+        input_type: Elem,
+        id: &Ident,
+        args: &[Arg],
+        span: Span,
+    ) -> Type {
         let family = input_type.temporal_family();
         let parts: Vec<&str> = match family {
             Some(Elem::Date) => YEAR_MONTH_DAY.to_vec(),
@@ -616,12 +637,12 @@ impl Gen<'_> {
                             n.text,
                             parts.join(", ")
                         );
-                        self.error(n.span, msg);
+                        self.error(codes::UNKNOWN_PARAMETER, n.span, msg);
                     }
                 },
                 _ => {
                     let msg = format!("{} takes IN and the outputs {}", id.text, parts.join(", "));
-                    self.error(a.span, msg);
+                    self.error(codes::UNKNOWN_PARAMETER, a.span, msg);
                 }
             }
         }
@@ -630,7 +651,11 @@ impl Gen<'_> {
             .filter(|(_, t)| t.elem().is_some_and(|e| e.temporal_family() == family));
         let Some((input, _)) = input_type_ok else {
             match input {
-                None => self.error(span, format!("{} needs its input IN", id.text)),
+                None => self.error(
+                    codes::MISSING_ARGUMENT,
+                    span,
+                    format!("{} needs its input IN", id.text),
+                ),
                 Some(e) => {
                     let t = self.infer(e);
                     self.bad_inferred_arg(e, &t, &format!("a {input_type}"));
@@ -662,7 +687,7 @@ impl Gen<'_> {
                         "the output {part} is an integer, not {}",
                         self.tname(&place.ty)
                     );
-                    self.error(target.span, msg);
+                    self.error(codes::OUTPUT_TARGET, target.span, msg);
                 }
                 if matches!(place.loc, crate::codegen::Loc::Ind(_)) {
                     self.op(Opcode::Drop);
@@ -670,7 +695,11 @@ impl Gen<'_> {
                 continue;
             };
             if !place.writable {
-                self.error(target.span, "output target is not writable");
+                self.error(
+                    codes::ASSIGN_TO_READ_ONLY,
+                    target.span,
+                    "output target is not writable",
+                );
             }
             self.emit(|b| b.ld_abs(MemType::I64, value));
             match *part {
@@ -719,11 +748,12 @@ impl Gen<'_> {
 
     /// False (after reporting it and type-checking the arguments) unless the call has
     /// exactly `n` arguments.
-    fn arity(&mut self, c: &StdArgs, n: usize) -> bool {
+    pub(super) fn arity(&mut self, c: &StdArgs, n: usize) -> bool {
         if c.exprs.len() == n {
             return true;
         }
         self.error(
+            codes::ARGUMENT_COUNT,
             c.span,
             format!(
                 "{} takes {} argument(s), {} given",
@@ -739,7 +769,7 @@ impl Gen<'_> {
     }
 
     /// Numeric functions: SQRT and the other REAL functions, EXPT, ABS, TRUNC, __NOW.
-    fn std_numeric(&mut self, c: &StdArgs) -> Option<Type> {
+    pub(super) fn std_numeric(&mut self, c: &StdArgs) -> Option<Type> {
         let t = match c.name {
             "SQRT" | "LN" | "LOG" | "EXP" | "SIN" | "COS" | "TAN" | "ASIN" | "ACOS" | "ATAN" => {
                 if !self.arity(c, 1) {
@@ -890,7 +920,7 @@ impl Gen<'_> {
     }
 
     /// Selection: MOVE, SEL, MAX/MIN, LIMIT, MUX.
-    fn std_selection(&mut self, c: &StdArgs) -> Option<Type> {
+    pub(super) fn std_selection(&mut self, c: &StdArgs) -> Option<Type> {
         let t = match c.name {
             "MOVE" => {
                 if !self.arity(c, 1) {
@@ -925,7 +955,11 @@ impl Gen<'_> {
             }
             "MAX" | "MIN" => {
                 if c.exprs.len() < 2 {
-                    self.error(c.span, format!("{} needs at least 2 arguments", c.id.text));
+                    self.error(
+                        codes::ARGUMENT_COUNT,
+                        c.span,
+                        format!("{} needs at least 2 arguments", c.id.text),
+                    );
                     c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
@@ -940,7 +974,7 @@ impl Gen<'_> {
                             c.id.text,
                             self.tname(&t)
                         );
-                        self.error(c.span, msg);
+                        self.error(codes::INCOMPATIBLE_ARGUMENTS, c.span, msg);
                     }
                     return Some(Type::Error);
                 };
@@ -976,7 +1010,11 @@ impl Gen<'_> {
             }
             "MUX" => {
                 if c.exprs.len() < 2 {
-                    self.error(c.span, "MUX needs a selector and at least one input");
+                    self.error(
+                        codes::ARGUMENT_COUNT,
+                        c.span,
+                        "MUX needs a selector and at least one input",
+                    );
                     c.exprs.iter().for_each(|e| self.surface(e));
                     return Some(Type::Error);
                 }
@@ -1021,7 +1059,7 @@ impl Gen<'_> {
     }
 
     /// Bit shifts and rotations: SHL, SHR, ROL, ROR.
-    fn std_bits(&mut self, c: &StdArgs) -> Option<Type> {
+    pub(super) fn std_bits(&mut self, c: &StdArgs) -> Option<Type> {
         let t = match c.name {
             "SHL" | "SHR" | "ROL" | "ROR" => {
                 if !self.arity(c, 2) {
@@ -1055,167 +1093,17 @@ impl Gen<'_> {
         Some(t)
     }
 
-    /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT, on
-    /// STRINGs or on WSTRINGs (the first string argument decides; STRING literals adapt).
-    fn std_string(&mut self, c: &StdArgs) -> Option<Type> {
-        let wide = c
-            .exprs
-            .iter()
-            .find(|e| !matches!(e.kind, ExprKind::Str(_)))
-            .is_some_and(|e| self.infer(e).is_wstring());
-        let kind = |len: u32| {
-            if wide {
-                Type::WString(len)
-            } else {
-                Type::String(len)
-            }
-        };
-        // The builtin of the string kind.
-        let pick = |narrow: Builtin| -> Builtin {
-            if !wide {
-                return narrow;
-            }
-            match narrow {
-                Builtin::StrLen => Builtin::WStrLen,
-                Builtin::StrAssign => Builtin::WStrAssign,
-                Builtin::StrConcat => Builtin::WStrConcat,
-                Builtin::StrLeft => Builtin::WStrLeft,
-                Builtin::StrRight => Builtin::WStrRight,
-                Builtin::StrMid => Builtin::WStrMid,
-                Builtin::StrInsert => Builtin::WStrInsert,
-                Builtin::StrDelete => Builtin::WStrDelete,
-                Builtin::StrReplace => Builtin::WStrReplace,
-                _ => Builtin::WStrFind,
-            }
-        };
-        let t = match c.name {
-            "LEN" => {
-                if !self.arity(c, 1) {
-                    return Some(Type::Error);
-                }
-                self.string_arg_of(c.exprs[0], wide);
-                self.emit(|b| b.call_builtin(pick(Builtin::StrLen)));
-                Type::INT
-            }
-            "LEFT" | "RIGHT" => {
-                if !self.arity(c, 2) {
-                    return Some(Type::Error);
-                }
-                let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string_like(&kind(len));
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg_of(c.exprs[0], wide);
-                self.int_arg(c.exprs[1]);
-                let builtin = pick(if c.name == "LEFT" {
-                    Builtin::StrLeft
-                } else {
-                    Builtin::StrRight
-                });
-                self.emit(|b| {
-                    b.call_builtin(builtin);
-                    b.push_u32(dst);
-                });
-                kind(len)
-            }
-            "MID" | "DELETE" => {
-                if !self.arity(c, 3) {
-                    return Some(Type::Error);
-                }
-                let len = self.string_len_of(c.exprs[0]);
-                let dst = self.temp_string_like(&kind(len));
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg_of(c.exprs[0], wide);
-                self.int_arg(c.exprs[1]);
-                self.int_arg(c.exprs[2]);
-                let builtin = pick(if c.name == "MID" {
-                    Builtin::StrMid
-                } else {
-                    Builtin::StrDelete
-                });
-                self.emit(|b| {
-                    b.call_builtin(builtin);
-                    b.push_u32(dst);
-                });
-                kind(len)
-            }
-            "INSERT" | "REPLACE" => {
-                let n = if c.name == "INSERT" { 3 } else { 4 };
-                if !self.arity(c, n) {
-                    return Some(Type::Error);
-                }
-                let len = (self.string_len_of(c.exprs[0]) + self.string_len_of(c.exprs[1]))
-                    .min(MAX_TEMP_STRING);
-                let dst = self.temp_string_like(&kind(len));
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg_of(c.exprs[0], wide);
-                self.string_arg_of(c.exprs[1], wide);
-                for e in &c.exprs[2..] {
-                    self.int_arg(e);
-                }
-                let builtin = pick(if c.name == "INSERT" {
-                    Builtin::StrInsert
-                } else {
-                    Builtin::StrReplace
-                });
-                self.emit(|b| {
-                    b.call_builtin(builtin);
-                    b.push_u32(dst);
-                });
-                kind(len)
-            }
-            "FIND" => {
-                if !self.arity(c, 2) {
-                    return Some(Type::Error);
-                }
-                self.string_arg_of(c.exprs[0], wide);
-                self.string_arg_of(c.exprs[1], wide);
-                self.emit(|b| b.call_builtin(pick(Builtin::StrFind)));
-                Type::INT
-            }
-            "CONCAT" => {
-                if c.exprs.is_empty() {
-                    self.error(c.span, "CONCAT needs arguments");
-                    return Some(Type::Error);
-                }
-                let len = c
-                    .exprs
-                    .iter()
-                    .map(|e| self.string_len_of(e))
-                    .sum::<u32>()
-                    .clamp(1, MAX_TEMP_STRING);
-                let dst = self.temp_string_like(&kind(len));
-                // dst := first; then dst := CONCAT(dst, next) for the rest.
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg_of(c.exprs[0], wide);
-                self.emit(|b| b.call_builtin(pick(Builtin::StrAssign)));
-                for x in &c.exprs[1..] {
-                    self.emit(|b| {
-                        b.push_u32(dst);
-                        b.push_u32(dst);
-                    });
-                    self.string_arg_of(x, wide);
-                    self.emit(|b| b.call_builtin(pick(Builtin::StrConcat)));
-                }
-                self.emit(|b| b.push_u32(dst));
-                kind(len)
-            }
-
-            _ => unreachable!("std_string called for {}", c.name),
-        };
-        Some(t)
-    }
-
-    fn bad_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
+    pub(super) fn bad_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
         if !t.is_error() {
             let msg = format!("expected {what}, found {}", self.tname(t));
-            self.error(e.span, msg);
+            self.error(codes::TYPE_MISMATCH, e.span, msg);
         }
         Type::Error
     }
 
     /// [`Self::bad_arg`] for an argument so far only inferred: an erroneous one is compiled
     /// for its own diagnostics.
-    fn bad_inferred_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
+    pub(super) fn bad_inferred_arg(&mut self, e: &Expr, t: &Type, what: &str) -> Type {
         if t.is_error() {
             self.surface(e);
         }
@@ -1224,7 +1112,7 @@ impl Gen<'_> {
 
     /// Compiles an expression whose inference failed, for the diagnostics saying why (the
     /// code does not matter: the compilation fails).
-    fn surface(&mut self, e: &Expr) {
+    pub(super) fn surface(&mut self, e: &Expr) {
         if !self.dry {
             self.expr(e, None);
         }
@@ -1232,7 +1120,12 @@ impl Gen<'_> {
 
     /// Compiles a numeric argument of a REAL function: REAL stays REAL, an integer of up to
     /// 16 bits becomes REAL (which holds it exactly), everything else LREAL.
-    fn real_operand(&mut self, e: &Expr, ctx: Option<&Type>, typed: Option<Elem>) -> Option<Elem> {
+    pub(super) fn real_operand(
+        &mut self,
+        e: &Expr,
+        ctx: Option<&Type>,
+        typed: Option<Elem>,
+    ) -> Option<Elem> {
         // A typed form (`SQRT_LREAL`): its type (the argument was checked).
         if let Some(forced) = typed.filter(|t| t.is_real()) {
             self.value_to(e, &Type::Elem(forced));
@@ -1262,7 +1155,7 @@ impl Gen<'_> {
     }
 
     /// Common type of several arguments (for SEL/MAX/MIN/LIMIT/MUX).
-    fn common_of(&mut self, exprs: &[&Expr], ctx: Option<&Type>) -> Type {
+    pub(super) fn common_of(&mut self, exprs: &[&Expr], ctx: Option<&Type>) -> Type {
         let mut acc: Option<Type> = None;
         for e in exprs {
             if Self::is_flexible(e) {
@@ -1288,7 +1181,7 @@ impl Gen<'_> {
                                     self.tname(&a),
                                     self.tname(&t)
                                 );
-                                self.error(e.span, msg);
+                                self.error(codes::INCOMPATIBLE_ARGUMENTS, e.span, msg);
                                 return Type::Error;
                             }
                         }
@@ -1300,7 +1193,7 @@ impl Gen<'_> {
                             self.tname(&a),
                             self.tname(&t)
                         );
-                        self.error(e.span, msg);
+                        self.error(codes::INCOMPATIBLE_ARGUMENTS, e.span, msg);
                         return Type::Error;
                     }
                 },
@@ -1337,7 +1230,7 @@ impl Gen<'_> {
     /// `[acc x] -> [max(acc, x)]` (or min) using two static temporaries.
     /// `[a b] -> [MAX(a, b)]` (`max`) or `[MIN(a, b)]`: SEL_IF takes `b` when `a < b`
     /// (MAX) or `a > b` (MIN), in the type's order (NaN compares false: `a` is kept).
-    fn select_min_max(&mut self, max: bool, e: Elem) {
+    pub(super) fn select_min_max(&mut self, max: bool, e: Elem) {
         let (lt, gt) = match e {
             Elem::Real => (Opcode::LtF32, Opcode::GtF32),
             Elem::LReal => (Opcode::LtF64, Opcode::GtF64),
@@ -1345,298 +1238,5 @@ impl Gen<'_> {
             _ => (Opcode::LtS, Opcode::GtS),
         };
         self.emit(|b| b.sel_if(if max { lt } else { gt }));
-    }
-
-    fn string_arg(&mut self, e: &Expr) {
-        self.string_arg_of(e, false);
-    }
-
-    /// A STRING (or, `wide`, a WSTRING; a STRING literal then is one) argument.
-    fn string_arg_of(&mut self, e: &Expr, wide: bool) {
-        let want = if wide {
-            Type::WString(DEFAULT_STRING_LEN)
-        } else {
-            Type::String(DEFAULT_STRING_LEN)
-        };
-        let t = self.expr(e, Some(&want));
-        let fits = if wide { t.is_wstring() } else { t.is_string() };
-        if !fits && !t.is_error() {
-            let msg = format!(
-                "expected a {}, found {}",
-                if wide { "WSTRING" } else { "STRING" },
-                self.tname(&t)
-            );
-            self.error(e.span, msg);
-        }
-    }
-
-    fn int_arg(&mut self, e: &Expr) {
-        let t = self.infer(e);
-        if !t.elem().is_some_and(|x| x.is_integral())
-            || matches!(t, Type::Enum(_) | Type::Exception)
-        {
-            if !t.is_error() {
-                let msg = format!("expected an integer, found {}", self.tname(&t));
-                self.error(e.span, msg);
-            }
-            self.expr(e, None);
-            return;
-        }
-        self.value_to_any(e, &t, &Type::LINT);
-    }
-
-    fn string_len_of(&mut self, e: &Expr) -> u32 {
-        match self.infer(e) {
-            Type::String(n) | Type::WString(n) => n,
-            _ => DEFAULT_STRING_LEN,
-        }
-    }
-
-    /// `A_TO_B` conversions (and `TO_B` is not supported). Between numbers and bit strings
-    /// any argument of those is taken (converted to A first, as CODESYS does: `INT_TO_BYTE`
-    /// of a DINT); the date/time types convert among themselves and to and from numbers;
-    /// CHAR and WCHAR to and from integers and bit strings; everything to and from STRING.
-    fn conversion(&mut self, name: &str, id: &Ident, exprs: &[&Expr], span: Span) -> Option<Type> {
-        let (from, to) = name.split_once("_TO_")?;
-        let parse = |s: &str| -> Option<Type> {
-            match s {
-                "STRING" => Some(Type::String(DEFAULT_STRING_LEN)),
-                "WSTRING" => Some(Type::WString(DEFAULT_STRING_LEN)),
-                _ => Elem::from_name(s).map(Type::Elem),
-            }
-        };
-        let (Some(ft), Some(tt)) = (parse(from), parse(to)) else {
-            return None;
-        };
-        if exprs.len() != 1 {
-            self.error(
-                span,
-                format!("{} takes 1 argument, {} given", id.text, exprs.len()),
-            );
-            for e in exprs {
-                self.surface(e);
-            }
-            return Some(Type::Error);
-        }
-        let arg = exprs[0];
-        match (&ft, &tt) {
-            (Type::String(_), Type::String(_)) => {
-                self.string_arg(arg);
-                Some(Type::String(DEFAULT_STRING_LEN))
-            }
-            (Type::WString(_), Type::WString(_)) => {
-                self.string_arg_of(arg, true);
-                Some(Type::WString(DEFAULT_STRING_LEN))
-            }
-            (Type::String(_), Type::WString(_)) => {
-                let len = self.string_len_of(arg);
-                let dst = self.temp_wstring(len);
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg(arg);
-                self.emit(|b| {
-                    b.call_builtin(Builtin::WStrFromStr);
-                    b.push_u32(dst);
-                });
-                Some(Type::WString(len))
-            }
-            (Type::WString(_), Type::String(_)) => {
-                // Up to three UTF-8 bytes a unit.
-                let len = (self.string_len_of(arg) * 3).min(MAX_TEMP_STRING);
-                let dst = self.temp_string(len);
-                self.emit(|b| b.push_u32(dst));
-                self.string_arg_of(arg, true);
-                self.emit(|b| {
-                    b.call_builtin(Builtin::StrFromWStr);
-                    b.push_u32(dst);
-                });
-                Some(Type::String(len))
-            }
-            (Type::WString(_), Type::Elem(Elem::WChar)) => {
-                // The first unit, or 0 for an empty string.
-                self.string_arg_of(arg, true);
-                self.emit(|b| {
-                    b.dup();
-                    b.ld_ind(MemType::U16, 2);
-                    b.push_i32(0);
-                    b.op(Opcode::Ne);
-                    b.swap();
-                    b.ld_ind(MemType::U16, 4);
-                    b.op(Opcode::Mul);
-                });
-                Some(tt)
-            }
-            (Type::Elem(Elem::WChar), Type::WString(_)) => {
-                let dst = self.temp_wstring(1);
-                self.value_to(arg, &ft);
-                self.emit(|b| {
-                    b.st_abs(MemType::U16, dst + 4);
-                    b.push_i32(1);
-                    b.st_abs(MemType::U16, dst + 2);
-                    b.push_u32(dst);
-                });
-                Some(Type::WString(1))
-            }
-            // Other WSTRING conversions go through STRING.
-            (Type::WString(_), Type::Elem(_)) => {
-                let len = (self.string_len_of(arg) * 3).min(MAX_TEMP_STRING);
-                let text = self.temp_string(len);
-                self.emit(|b| b.push_u32(text));
-                self.string_arg_of(arg, true);
-                self.emit(|b| {
-                    b.call_builtin(Builtin::StrFromWStr);
-                    b.push_u32(text);
-                });
-                self.convert_string_on_stack(match tt {
-                    Type::Elem(t) => t,
-                    _ => Elem::DInt,
-                });
-                Some(tt)
-            }
-            (Type::Elem(_), Type::WString(_)) => {
-                let text = self.conversion(&format!("{from}_TO_STRING"), id, exprs, span)?;
-                let dst = self.temp_wstring(40);
-                self.emit(|b| {
-                    b.push_u32(dst);
-                    b.swap();
-                    b.call_builtin(Builtin::WStrFromStr);
-                    b.push_u32(dst);
-                });
-                Some(if text.is_error() {
-                    text
-                } else {
-                    Type::WString(40)
-                })
-            }
-            (Type::String(_), Type::Elem(t)) => {
-                self.string_arg(arg);
-                self.convert_string_on_stack(*t);
-                Some(tt)
-            }
-            _ => self.conversion_elem((ft, tt), id, exprs),
-        }
-    }
-
-    /// Converts the STRING whose address is on the stack to `t` (STRING_TO_*).
-    fn convert_string_on_stack(&mut self, t: Elem) {
-        if t.is_real() {
-            self.emit(|b| b.call_builtin(Builtin::StrToF64));
-            self.convert(Elem::LReal, t);
-        } else if let Some(kind) = t.time_kind() {
-            self.emit(|b| {
-                b.push_int(kind.code() as i64);
-                b.call_builtin(Builtin::StrToDateTime);
-            });
-        } else if t.is_char() {
-            // The first character, or 0 for an empty string.
-            self.emit(|b| {
-                b.dup();
-                b.ld_ind(MemType::U16, 2);
-                b.push_i32(0);
-                b.op(Opcode::Ne);
-                b.swap();
-                b.ld_ind(MemType::U8, 4);
-                b.op(Opcode::Mul);
-            });
-        } else {
-            self.emit(|b| b.call_builtin(Builtin::StrToI64));
-            if t == Elem::Bool {
-                self.convert(Elem::LInt, Elem::Bool);
-            } else {
-                self.wrap(t);
-            }
-        }
-    }
-
-    /// The rest of [`Self::conversion`]: elementary types to STRING and among themselves.
-    fn conversion_elem(
-        &mut self,
-        (ft, tt): (Type, Type),
-        id: &Ident,
-        exprs: &[&Expr],
-    ) -> Option<Type> {
-        let arg = exprs[0];
-        match (&ft, &tt) {
-            (Type::Elem(f), Type::String(_)) => {
-                let f = *f;
-                if f.is_char() {
-                    // A string of that one character.
-                    let dst = self.temp_string(1);
-                    self.value_to(arg, &ft);
-                    self.emit(|b| {
-                        b.st_abs(MemType::U8, dst + 4);
-                        b.push_i32(1);
-                        b.st_abs(MemType::U16, dst + 2);
-                        b.push_u32(dst);
-                    });
-                    return Some(Type::String(1));
-                }
-                let dst = self.temp_string(40);
-                self.emit(|b| b.push_u32(dst));
-                self.value_to(arg, &ft);
-                let bi = match f {
-                    Elem::Real => Builtin::StrFromF32,
-                    Elem::LReal => Builtin::StrFromF64,
-                    Elem::Bool => Builtin::StrFromBool,
-                    Elem::Time => Builtin::StrFromTime,
-                    e if e.is_temporal() => {
-                        let kind = e.time_kind().map_or(0, |k| k.code());
-                        self.push_int(kind as i64);
-                        Builtin::StrFromDateTime
-                    }
-                    e if e.is_signed_int() => Builtin::StrFromI64,
-                    _ => Builtin::StrFromU64,
-                };
-                self.emit(|b| {
-                    b.call_builtin(bi);
-                    b.push_u32(dst);
-                });
-                Some(Type::String(40))
-            }
-            (Type::Elem(f), Type::Elem(t)) => {
-                let (f, t) = (*f, *t);
-                let number = |e: Elem| e.is_numeric() || e == Elem::Bool;
-                let allowed = number(f) && number(t)
-                    || f.is_temporal() && (t.is_temporal() || number(t))
-                    || t.is_temporal() && number(f)
-                    || f.is_char() && (t.is_char() || t.is_integral())
-                    || t.is_char() && f.is_integral();
-                if !allowed {
-                    self.error(id.span, format!("there is no conversion from {f} to {t}"));
-                    for e in exprs {
-                        self.infer(e);
-                    }
-                    return Some(Type::Error);
-                }
-                let at = self.infer(arg);
-                if at.is_error() {
-                    self.surface(arg);
-                    return Some(Type::Error);
-                }
-                let plain = !matches!(at, Type::Enum(_) | Type::Exception);
-                match at.elem() {
-                    Some(ae) if plain && (ae == f || implicit_ok(ae, f)) => {
-                        self.value_to(arg, &ft);
-                    }
-                    _ if Self::is_flexible(arg) => self.value_to(arg, &ft),
-                    // Another number: converted to the declared source type first.
-                    Some(ae) if plain && ae.is_numeric() && f.is_numeric() => {
-                        self.value_to_any(arg, &at, &ft);
-                    }
-                    _ => {
-                        let msg = format!(
-                            "{} expects a {} argument, found {}",
-                            id.text,
-                            f,
-                            self.tname(&at)
-                        );
-                        self.error(arg.span, msg);
-                        return Some(Type::Error);
-                    }
-                }
-                self.convert(f, t);
-                Some(tt)
-            }
-            _ => None,
-        }
     }
 }

@@ -3,7 +3,11 @@
 //! Errors are reported into the diagnostic list and the parser resynchronises at the next
 //! statement or declaration boundary, so one run reports several independent errors.
 
+mod expr;
+mod stmt;
+
 use crate::ast::*;
+use crate::codes;
 use crate::diagnostics::{Diagnostic, Span};
 use crate::lexer::{Tok, Token};
 
@@ -175,7 +179,7 @@ pub fn parse(tokens: Vec<Token>, diags: &mut Vec<Diagnostic>) -> Unit {
     };
     let unit = p.unit();
     for a in p.attributes.iter().filter(|a| !a.taken) {
-        p.diags.push(Diagnostic::error(
+        p.diags.push(Diagnostic::error(codes::SAFE_ATTRIBUTE,
             a.span,
             if a.safe {
                 "the attribute 'safe' must stand right before the declaration of a located output (`AT %Q...`)"
@@ -317,8 +321,9 @@ impl Parser<'_> {
     fn error_here(&mut self, expected: &str) -> Fail {
         let msg = format!("expected {expected}, found {}", describe(self.tok()));
         let span = self.span();
-        self.diags
-            .push(Diagnostic::error(span, msg).with_label(format!("expected {expected}")));
+        self.diags.push(
+            Diagnostic::error(codes::SYNTAX, span, msg).with_label(format!("expected {expected}")),
+        );
         Fail
     }
 
@@ -487,11 +492,13 @@ impl Parser<'_> {
                 let base = self.qualified_ident()?;
                 if kind != PouKind::FunctionBlock {
                     self.diags.push(Diagnostic::error(
+                        codes::MISPLACED_POU_ELEMENT,
                         at,
                         "only a FUNCTION_BLOCK can extend another one",
                     ));
                 } else if extends.is_some() {
                     self.diags.push(Diagnostic::error(
+                        codes::MISPLACED_POU_ELEMENT,
                         at,
                         "a function block extends at most one function block",
                     ));
@@ -502,6 +509,7 @@ impl Parser<'_> {
                 self.bump();
                 if kind != PouKind::FunctionBlock {
                     self.diags.push(Diagnostic::error(
+                        codes::MISPLACED_POU_ELEMENT,
                         at,
                         "only a FUNCTION_BLOCK can implement interfaces",
                     ));
@@ -558,6 +566,7 @@ impl Parser<'_> {
         }
         if is_class && !body.is_empty() {
             self.diags.push(Diagnostic::error(
+                codes::MISPLACED_POU_ELEMENT,
                 body[0].span,
                 "a CLASS has no body: write its code in methods",
             ));
@@ -565,12 +574,14 @@ impl Parser<'_> {
         if kind != PouKind::FunctionBlock && kind != PouKind::Program {
             if let Some(m) = methods.first() {
                 self.diags.push(Diagnostic::error(
+                    codes::MISPLACED_POU_ELEMENT,
                     m.name.span,
                     "methods belong to a FUNCTION_BLOCK or a PROGRAM",
                 ));
             }
             if let Some(a) = actions.first() {
                 self.diags.push(Diagnostic::error(
+                    codes::MISPLACED_POU_ELEMENT,
                     a.name.span,
                     "actions belong to a FUNCTION_BLOCK or a PROGRAM",
                 ));
@@ -683,6 +694,7 @@ impl Parser<'_> {
         let body = self.stmt_list();
         if declaration_only && let Some(first) = body.first() {
             self.diags.push(Diagnostic::error(
+                codes::INTERFACE_CONTENT,
                 first.span,
                 "an interface method has no implementation",
             ));
@@ -725,6 +737,7 @@ impl Parser<'_> {
             let body = self.stmt_list();
             if declaration_only && let Some(first) = body.first() {
                 self.diags.push(Diagnostic::error(
+                    codes::INTERFACE_CONTENT,
                     first.span,
                     "an interface property has no implementation",
                 ));
@@ -749,6 +762,7 @@ impl Parser<'_> {
                 return Err({
                     let span = start;
                     self.diags.push(Diagnostic::error(
+                        codes::PROPERTY_WITHOUT_ACCESSOR,
                         span,
                         "a property needs a GET or a SET accessor",
                     ));
@@ -810,6 +824,7 @@ impl Parser<'_> {
         let full = self.qualified_ident()?;
         let Some((pou, name)) = full.name.rsplit_once('.') else {
             self.diags.push(Diagnostic::error(
+                codes::MISPLACED_POU_ELEMENT,
                 full.span,
                 "an ACTION outside its POU is written `ACTION Pou.Action`",
             ));
@@ -873,6 +888,7 @@ impl Parser<'_> {
                 let blocks = self.var_blocks("END_INTERFACE");
                 if let Some(d) = blocks.iter().flat_map(|b| &b.decls).next() {
                     self.diags.push(Diagnostic::error(
+                        codes::INTERFACE_CONTENT,
                         d.span,
                         "an interface declares methods and properties, not variables",
                     ));
@@ -982,7 +998,7 @@ impl Parser<'_> {
                 Some(v) => format!("unknown value '{v}' of the attribute 'shared'"),
                 None => "the attribute 'shared' needs a value".into(),
             };
-            self.diags.push(Diagnostic::error(
+            self.diags.push(Diagnostic::error(codes::SHARED_ATTRIBUTE,
                 span,
                 format!("{what}: write `{{attribute 'shared' := 'write'}}` (this project writes it), `{{attribute 'shared' := 'read'}}` (it reads it from the other project) or `{{attribute 'shared' := 'valid'}}` (a BOOL: the read ones are a fresh copy)"),
             ));
@@ -1009,6 +1025,7 @@ impl Parser<'_> {
             Some(v) => Some((v, span)),
             None => {
                 self.diags.push(Diagnostic::error(
+                    codes::SAFE_ATTRIBUTE,
                     span,
                     "the attribute 'safe' needs the value: `{attribute 'safe' := '0.0'}`",
                 ));
@@ -1109,8 +1126,11 @@ impl Parser<'_> {
         self.depth += 1;
         let r = if self.depth > MAX_DEPTH {
             let span = self.span();
-            self.diags
-                .push(Diagnostic::error(span, format!("{what} nested too deeply")));
+            self.diags.push(Diagnostic::error(
+                codes::NESTED_TOO_DEEPLY,
+                span,
+                format!("{what} nested too deeply"),
+            ));
             Err(Fail)
         } else {
             f(self)
@@ -1380,7 +1400,7 @@ impl Parser<'_> {
                     "SINGLE" => task.single = Some(v),
                     "PRIORITY" => task.priority = Some(v),
                     _ => {
-                        self.diags.push(Diagnostic::error(
+                        self.diags.push(Diagnostic::error(codes::UNKNOWN_TASK_PROPERTY,
                             key.span,
                             format!("unknown task property `{}` (expected INTERVAL, SINGLE or PRIORITY)", key.text),
                         ));
@@ -1421,650 +1441,7 @@ impl Parser<'_> {
             Err(self.error_here("TASK, PROGRAM, RESOURCE or END_CONFIGURATION"))
         }
     }
-
-    // ----- statements ------------------------------------------------------------------
-
-    fn at_stmt_end(&self) -> bool {
-        if self.at_eof() {
-            return true;
-        }
-        if let Tok::Ident(u, _) = self.tok() {
-            if STMT_END.contains(&u.as_str()) {
-                return true;
-            }
-            if u == "END_CONFIGURATION" || (TOP.contains(&u.as_str()) && u != "USING") {
-                return true;
-            }
-        }
-        self.in_case > 0 && self.looks_like_case_label()
-    }
-
-    /// `1, 2..5, Red :` — literals, names, ranges and commas followed by a lone `:`.
-    fn looks_like_case_label(&self) -> bool {
-        let mut i = 0;
-        loop {
-            match self.tok_at(i) {
-                Tok::Colon => return i > 0,
-                Tok::Int(_)
-                | Tok::Minus
-                | Tok::Plus
-                | Tok::DotDot
-                | Tok::Comma
-                | Tok::TypePrefix(..)
-                | Tok::Dot => {}
-                Tok::Ident(u, _) if !RESERVED.contains(&u.as_str()) => {}
-                _ => return false,
-            }
-            i += 1;
-        }
-    }
-
-    fn stmt_list(&mut self) -> Vec<Stmt> {
-        let mut out = Vec::new();
-        while !self.at_stmt_end() {
-            let before = self.pos;
-            match self.stmt() {
-                Ok(s) => out.push(s),
-                Err(Fail) => {
-                    self.recover(STMT_END);
-                    if self.pos == before {
-                        self.bump();
-                    }
-                }
-            }
-        }
-        out
-    }
-
-    fn stmt(&mut self) -> PResult<Stmt> {
-        self.guarded("statements", |p| p.stmt_inner())
-    }
-
-    fn stmt_inner(&mut self) -> PResult<Stmt> {
-        let start = self.span();
-        let kind = if self.eat(&Tok::Semi) {
-            return Ok(Stmt {
-                kind: StmtKind::Empty,
-                span: start,
-            });
-        } else if self.eat_kw("IF") {
-            let mut branches = Vec::new();
-            let cond = self.expr()?;
-            self.expect_kw("THEN")?;
-            let body = self.stmt_list();
-            branches.push((cond, body));
-            let mut else_body = None;
-            loop {
-                if self.eat_kw("ELSIF") {
-                    let c = self.expr()?;
-                    self.expect_kw("THEN")?;
-                    let b = self.stmt_list();
-                    branches.push((c, b));
-                } else if self.eat_kw("ELSE") {
-                    else_body = Some(self.stmt_list());
-                } else {
-                    break;
-                }
-            }
-            self.expect_kw("END_IF")?;
-            StmtKind::If {
-                branches,
-                else_body,
-            }
-        } else if self.eat_kw("CASE") {
-            let selector = self.expr()?;
-            self.expect_kw("OF")?;
-            let mut arms = Vec::new();
-            let mut else_body = None;
-            self.in_case += 1;
-            let r = (|| -> PResult<()> {
-                while !self.is_kw("END_CASE") && !self.at_eof() {
-                    if self.eat_kw("ELSE") {
-                        self.in_case -= 1;
-                        else_body = Some(self.stmt_list());
-                        self.in_case += 1;
-                        break;
-                    }
-                    let mut labels = Vec::new();
-                    loop {
-                        let a = self.expr()?;
-                        if self.eat(&Tok::DotDot) {
-                            let b = self.expr()?;
-                            labels.push(CaseLabel::Range(a, b));
-                        } else {
-                            labels.push(CaseLabel::Value(a));
-                        }
-                        if !self.eat(&Tok::Comma) {
-                            break;
-                        }
-                    }
-                    self.expect(Tok::Colon)?;
-                    let body = self.stmt_list();
-                    arms.push(CaseArm { labels, body });
-                }
-                Ok(())
-            })();
-            self.in_case -= 1;
-            r?;
-            self.expect_kw("END_CASE")?;
-            StmtKind::Case {
-                selector,
-                arms,
-                else_body,
-            }
-        } else if self.eat_kw("FOR") {
-            let var = self.ident()?;
-            self.expect(Tok::Assign)?;
-            let from = self.expr()?;
-            self.expect_kw("TO")?;
-            let to = self.expr()?;
-            let by = if self.eat_kw("BY") {
-                Some(self.expr()?)
-            } else {
-                None
-            };
-            self.expect_kw("DO")?;
-            let saved = std::mem::take(&mut self.in_case);
-            let body = self.stmt_list();
-            self.in_case = saved;
-            self.expect_kw("END_FOR")?;
-            StmtKind::For {
-                var,
-                from,
-                to,
-                by,
-                body,
-            }
-        } else if self.eat_kw("WHILE") {
-            let cond = self.expr()?;
-            self.expect_kw("DO")?;
-            let saved = std::mem::take(&mut self.in_case);
-            let body = self.stmt_list();
-            self.in_case = saved;
-            self.expect_kw("END_WHILE")?;
-            StmtKind::While { cond, body }
-        } else if self.eat_kw("REPEAT") {
-            let saved = std::mem::take(&mut self.in_case);
-            let body = self.stmt_list();
-            self.in_case = saved;
-            self.expect_kw("UNTIL")?;
-            let until = self.expr()?;
-            self.expect_kw("END_REPEAT")?;
-            StmtKind::Repeat { body, until }
-        } else if self.eat_kw("EXIT") {
-            StmtKind::Exit
-        } else if self.eat_kw("RETURN") {
-            StmtKind::Return
-        } else if self.eat_kw("__TRY") {
-            let saved = std::mem::take(&mut self.in_case);
-            let body = self.stmt_list();
-            let mut catch_var = None;
-            let mut catch_body = Vec::new();
-            let mut finally_body = Vec::new();
-            if self.eat_kw("__CATCH") {
-                if self.eat(&Tok::LParen) {
-                    catch_var = Some(self.ident()?);
-                    self.expect(Tok::RParen)?;
-                }
-                catch_body = self.stmt_list();
-            }
-            if self.eat_kw("__FINALLY") {
-                finally_body = self.stmt_list();
-            }
-            self.in_case = saved;
-            self.expect_kw("__ENDTRY")?;
-            StmtKind::Try {
-                body,
-                catch_var,
-                catch_body,
-                finally_body,
-            }
-        } else {
-            if let Tok::Ident(u, _) = self.tok()
-                && RESERVED.contains(&u.as_str())
-                && !matches!(u.as_str(), "THIS" | "SUPER")
-            {
-                return Err(self.error_here("a statement"));
-            }
-            let target = self.expr()?;
-            if self.eat(&Tok::Assign) {
-                let value = self.expr()?;
-                StmtKind::Assign { target, value }
-            } else if self.is_kw("REF") && matches!(self.tok_at(1), Tok::Eq) {
-                self.bump();
-                self.bump();
-                let value = self.expr()?;
-                StmtKind::RefAssign { target, value }
-            } else if matches!(target.kind, ExprKind::Call { .. }) {
-                StmtKind::Call(target)
-            } else {
-                return Err(self.error_here("`:=`"));
-            }
-        };
-        let span = start.to(self.prev_span());
-        // IEC requires `;` after every statement; CODESYS also accepts a statement that ends
-        // with its own keyword (END_IF, END_CASE, END_FOR, END_WHILE, END_REPEAT, __ENDTRY)
-        // without one, and so does this parser.
-        let ends_with_keyword = matches!(
-            kind,
-            StmtKind::If { .. }
-                | StmtKind::Case { .. }
-                | StmtKind::For { .. }
-                | StmtKind::While { .. }
-                | StmtKind::Repeat { .. }
-                | StmtKind::Try { .. }
-        );
-        if !self.eat(&Tok::Semi) && !ends_with_keyword {
-            return Err(self.error_here("`;`"));
-        }
-        Ok(Stmt { kind, span })
-    }
-
-    // ----- expressions -----------------------------------------------------------------
-
-    pub(crate) fn expr(&mut self) -> PResult<Expr> {
-        self.guarded("expression", |p| p.binary(0))
-    }
-
-    fn binop(&self) -> Option<(BinOp, u8)> {
-        let op = match self.tok() {
-            Tok::Ident(u, _) => match u.as_str() {
-                "OR" => BinOp::Or,
-                "XOR" => BinOp::Xor,
-                "AND" => BinOp::And,
-                "MOD" => BinOp::Mod,
-                _ => return None,
-            },
-            Tok::Amp => BinOp::And,
-            Tok::Eq => BinOp::Eq,
-            Tok::Ne => BinOp::Ne,
-            Tok::Lt => BinOp::Lt,
-            Tok::Le => BinOp::Le,
-            Tok::Gt => BinOp::Gt,
-            Tok::Ge => BinOp::Ge,
-            Tok::Plus => BinOp::Add,
-            Tok::Minus => BinOp::Sub,
-            Tok::Star => BinOp::Mul,
-            Tok::Slash => BinOp::Div,
-            Tok::Power => BinOp::Pow,
-            _ => return None,
-        };
-        let prec = match op {
-            BinOp::Or => 1,
-            BinOp::Xor => 2,
-            BinOp::And => 3,
-            BinOp::Eq | BinOp::Ne => 4,
-            BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge => 5,
-            BinOp::Add | BinOp::Sub => 6,
-            BinOp::Mul | BinOp::Div | BinOp::Mod => 7,
-            BinOp::Pow => 9,
-        };
-        Some((op, prec))
-    }
-
-    /// Precedence climbing; all binary operators are left-associative (IEC 61131-3 table 71).
-    fn binary(&mut self, min_prec: u8) -> PResult<Expr> {
-        let mut lhs = self.unary()?;
-        while let Some((op, prec)) = self.binop() {
-            if prec < min_prec {
-                break;
-            }
-            self.bump();
-            let rhs = if op == BinOp::Pow {
-                self.power_operand()?
-            } else {
-                self.binary(prec + 1)?
-            };
-            let span = lhs.span.to(rhs.span);
-            lhs = Expr {
-                kind: ExprKind::Binary(op, Box::new(lhs), Box::new(rhs)),
-                span,
-            };
-        }
-        Ok(lhs)
-    }
-
-    /// Right operand of `**`: binds tighter than unary minus, but `2 ** -1` is accepted.
-    fn power_operand(&mut self) -> PResult<Expr> {
-        if matches!(self.tok(), Tok::Minus) || self.is_kw("NOT") {
-            return self.unary();
-        }
-        self.postfix()
-    }
-
-    fn unary(&mut self) -> PResult<Expr> {
-        let start = self.span();
-        let op = if matches!(self.tok(), Tok::Minus) {
-            Some(UnOp::Neg)
-        } else if self.is_kw("NOT") {
-            Some(UnOp::Not)
-        } else if matches!(self.tok(), Tok::Plus) {
-            self.bump();
-            return self.guarded("expression", |p| p.unary());
-        } else {
-            None
-        };
-        if let Some(op) = op {
-            self.bump();
-            // The operand of a unary operator may itself be a power expression: -2**2 = -(2**2).
-            let mut operand = self.guarded("expression", |p| p.unary())?;
-            while matches!(self.tok(), Tok::Power) {
-                self.bump();
-                let rhs = self.power_operand()?;
-                let span = operand.span.to(rhs.span);
-                operand = Expr {
-                    kind: ExprKind::Binary(BinOp::Pow, Box::new(operand), Box::new(rhs)),
-                    span,
-                };
-            }
-            let span = start.to(operand.span);
-            return Ok(Expr {
-                kind: ExprKind::Unary(op, Box::new(operand)),
-                span,
-            });
-        }
-        self.postfix()
-    }
-
-    fn postfix(&mut self) -> PResult<Expr> {
-        let mut e = self.primary()?;
-        loop {
-            if matches!(self.tok(), Tok::Caret) {
-                let span = e.span.to(self.span());
-                self.bump();
-                e = Expr {
-                    kind: ExprKind::Deref(Box::new(e)),
-                    span,
-                };
-            } else if matches!(self.tok(), Tok::Dot) {
-                self.bump();
-                if let Some((width, index)) = self.partial_access()? {
-                    let span = e.span.to(self.prev_span());
-                    e = Expr {
-                        kind: ExprKind::Bits {
-                            base: Box::new(e),
-                            width,
-                            index,
-                        },
-                        span,
-                    };
-                    continue;
-                }
-                let member = self.ident()?;
-                let span = e.span.to(member.span);
-                e = Expr {
-                    kind: ExprKind::Member(Box::new(e), member),
-                    span,
-                };
-            } else if matches!(self.tok(), Tok::LBracket) {
-                self.bump();
-                let mut idx = vec![self.expr()?];
-                while self.eat(&Tok::Comma) {
-                    idx.push(self.expr()?);
-                }
-                self.expect(Tok::RBracket)?;
-                let span = e.span.to(self.prev_span());
-                e = Expr {
-                    kind: ExprKind::Index(Box::new(e), idx),
-                    span,
-                };
-            } else if matches!(self.tok(), Tok::LParen)
-                && matches!(
-                    e.kind,
-                    ExprKind::Name(_)
-                        | ExprKind::Member(..)
-                        | ExprKind::Index(..)
-                        | ExprKind::Deref(..)
-                )
-            {
-                self.bump();
-                let mut args = Vec::new();
-                if !matches!(self.tok(), Tok::RParen) {
-                    loop {
-                        args.push(self.arg()?);
-                        if !self.eat(&Tok::Comma) {
-                            break;
-                        }
-                    }
-                }
-                self.expect(Tok::RParen)?;
-                let span = e.span.to(self.prev_span());
-                e = Expr {
-                    kind: ExprKind::Call {
-                        callee: Box::new(e),
-                        args,
-                    },
-                    span,
-                };
-            } else {
-                return Ok(e);
-            }
-        }
-    }
-
-    /// After a `.`: a partial access `N` (bit N) or `%X3`, `%B1`, `%W0`, `%D1`, `%L0`, as
-    /// (width in bits, index); `None` when a member name follows instead.
-    fn partial_access(&mut self) -> PResult<Option<(u8, u32)>> {
-        let (width, index) = match self.tok().clone() {
-            Tok::Int(n) => (1, n),
-            Tok::Direct(text) => {
-                let width = match text.as_bytes().first() {
-                    Some(b'X') => 1,
-                    Some(b'B') => 8,
-                    Some(b'W') => 16,
-                    Some(b'D') => 32,
-                    Some(b'L') => 64,
-                    _ => 0,
-                };
-                match text.get(1..).unwrap_or("").parse::<u128>() {
-                    Ok(n) if width != 0 => (width, n),
-                    _ => {
-                        return Err(self.error_here(
-                            "a partial access such as `%X3`, `%B1`, `%W0`, `%D1` or `%L0`",
-                        ));
-                    }
-                }
-            }
-            _ => return Ok(None),
-        };
-        let Ok(index) = u32::try_from(index) else {
-            return Err(self.error_here("a bit number that fits the variable"));
-        };
-        self.bump();
-        Ok(Some((width, index)))
-    }
-
-    fn arg(&mut self) -> PResult<Arg> {
-        let start = self.span();
-        if let Tok::Ident(..) = self.tok()
-            && matches!(self.tok_at(1), Tok::Assign | Tok::Arrow)
-        {
-            let output = matches!(self.tok_at(1), Tok::Arrow);
-            let name = self.ident()?;
-            self.bump();
-            let value = self.expr()?;
-            return Ok(Arg {
-                name: Some(name),
-                output,
-                value,
-                span: start.to(self.prev_span()),
-            });
-        }
-        let value = self.expr()?;
-        Ok(Arg {
-            name: None,
-            output: false,
-            span: value.span,
-            value,
-        })
-    }
-
-    fn primary(&mut self) -> PResult<Expr> {
-        let span = self.span();
-        let kind = match self.tok().clone() {
-            Tok::Int(v) => ExprKind::Int(v),
-            Tok::Real(v) => ExprKind::Real(v),
-            Tok::Time(v) => ExprKind::Time(v),
-            Tok::Temporal(e, v) => ExprKind::Temporal(e, v),
-            Tok::Str(s) => ExprKind::Str(s),
-            Tok::WStr(s) => ExprKind::WStr(s),
-            Tok::LParen => {
-                self.bump();
-                let e = self.expr()?;
-                self.expect(Tok::RParen)?;
-                return Ok(Expr {
-                    kind: e.kind,
-                    span: span.to(self.prev_span()),
-                });
-            }
-            Tok::TypePrefix(u, o) => {
-                self.bump();
-                let ty = Ident {
-                    name: u,
-                    text: o,
-                    span,
-                };
-                let neg = self.eat(&Tok::Minus);
-                let vspan = self.span();
-                let mut value = match self.tok().clone() {
-                    Tok::Int(v) => Expr {
-                        kind: ExprKind::Int(v),
-                        span: vspan,
-                    },
-                    Tok::Real(v) => Expr {
-                        kind: ExprKind::Real(v),
-                        span: vspan,
-                    },
-                    Tok::Str(s) => Expr {
-                        kind: ExprKind::Str(s),
-                        span: vspan,
-                    },
-                    Tok::WStr(s) => Expr {
-                        kind: ExprKind::WStr(s),
-                        span: vspan,
-                    },
-                    Tok::Ident(u, _) if u == "TRUE" => Expr {
-                        kind: ExprKind::Bool(true),
-                        span: vspan,
-                    },
-                    Tok::Ident(u, _) if u == "FALSE" => Expr {
-                        kind: ExprKind::Bool(false),
-                        span: vspan,
-                    },
-                    Tok::Ident(u, o) if !neg && !RESERVED.contains(&u.as_str()) => Expr {
-                        kind: ExprKind::Name(Ident {
-                            name: u,
-                            text: o,
-                            span: vspan,
-                        }),
-                        span: vspan,
-                    },
-                    _ => return Err(self.error_here("a literal after the type prefix")),
-                };
-                self.bump();
-                if neg {
-                    value = Expr {
-                        kind: ExprKind::Unary(UnOp::Neg, Box::new(value)),
-                        span: vspan,
-                    };
-                }
-                let full = span.to(self.prev_span());
-                return Ok(Expr {
-                    kind: ExprKind::Typed(ty, Box::new(value)),
-                    span: full,
-                });
-            }
-            Tok::Ident(u, o) => match u.as_str() {
-                "TRUE" => ExprKind::Bool(true),
-                "FALSE" => ExprKind::Bool(false),
-                "NULL" => ExprKind::Null,
-                "THIS" => ExprKind::This,
-                "SUPER" => ExprKind::Super,
-                _ if RESERVED.contains(&u.as_str()) => return Err(self.error_here("an expression")),
-                _ => ExprKind::Name(Ident {
-                    name: u,
-                    text: o,
-                    span,
-                }),
-            },
-            _ => return Err(self.error_here("an expression")),
-        };
-        self.bump();
-        Ok(Expr { kind, span })
-    }
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use crate::lexer::lex;
-
-    fn parse_src(s: &str) -> (Unit, Vec<Diagnostic>) {
-        let mut d = Vec::new();
-        let t = lex(0, s, &mut d);
-        let u = parse(t, &mut d);
-        (u, d)
-    }
-
-    #[test]
-    fn precedence() {
-        let (u, d) = parse_src("PROGRAM P VAR x : INT; END_VAR x := -2 ** 2 + 3 * 4; END_PROGRAM");
-        assert!(d.is_empty(), "{d:?}");
-        let StmtKind::Assign { value, .. } = &u.pous[0].body[0].kind else {
-            panic!()
-        };
-        let ExprKind::Binary(BinOp::Add, l, _) = &value.kind else {
-            panic!("{value:?}")
-        };
-        assert!(matches!(l.kind, ExprKind::Unary(UnOp::Neg, _)));
-    }
-
-    #[test]
-    fn partial_access_forms() {
-        let (u, d) = parse_src("PROGRAM P x.3 := x.%B1.%X2; END_PROGRAM");
-        assert!(d.is_empty(), "{d:?}");
-        let StmtKind::Assign { target, value } = &u.pous[0].body[0].kind else {
-            panic!()
-        };
-        assert!(matches!(
-            target.kind,
-            ExprKind::Bits {
-                width: 1,
-                index: 3,
-                ..
-            }
-        ));
-        let ExprKind::Bits {
-            base,
-            width: 1,
-            index: 2,
-        } = &value.kind
-        else {
-            panic!("{value:?}")
-        };
-        assert!(matches!(
-            base.kind,
-            ExprKind::Bits {
-                width: 8,
-                index: 1,
-                ..
-            }
-        ));
-        for bad in [
-            "x.% := 1;",
-            "x.%Q1 := 1;",
-            "x.%B := 1;",
-            "x.%X99999999999 := 1;",
-        ] {
-            let (_, d) = parse_src(&format!("PROGRAM P {bad} END_PROGRAM"));
-            assert_eq!(d.len(), 1, "{bad}: {d:?}");
-        }
-    }
-
-    #[test]
-    fn recovers_multiple_errors() {
-        let (_, d) =
-            parse_src("PROGRAM P\nVAR x : INT; END_VAR\nx := ;\nx := 1 +;\nx := 2;\nEND_PROGRAM");
-        assert_eq!(d.len(), 2, "{d:?}");
-    }
-}
+mod tests;

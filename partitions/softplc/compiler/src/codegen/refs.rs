@@ -22,6 +22,7 @@
 //! Never here: an integer becoming a reference (an address could name any variable; only
 //! `REF()`/`ADR()` and arithmetic on a reference make references).
 
+use crate::codes;
 use std::collections::HashSet;
 
 use plc_vm::isa::{Builtin, Opcode};
@@ -136,7 +137,11 @@ impl Gen<'_> {
         span: Span,
     ) -> Type {
         if args.len() != 1 || args[0].name.is_some() || args[0].output {
-            self.error(span, format!("{} takes one argument", id.text));
+            self.error(
+                codes::ARGUMENT_COUNT,
+                span,
+                format!("{} takes one argument", id.text),
+            );
             for a in args {
                 self.infer(&a.value);
             }
@@ -156,7 +161,7 @@ impl Gen<'_> {
                         "__ISVALIDREF needs a reference or interface, found {}",
                         self.tname(&t)
                     );
-                    self.error(arg.span, msg);
+                    self.error(codes::REF_OPERAND, arg.span, msg);
                 }
                 self.emit(|b| {
                     b.push_i32(0);
@@ -188,7 +193,7 @@ impl Gen<'_> {
                 Type::Ref(Box::new(Type::Fb(pi)))
             }
             Type::Array(a) if self.holds_instances(&a.elem) => {
-                self.error(
+                self.error(codes::REF_OPERAND,
                     arg.span,
                     "REF()/ADR() of an array of function block instances is not supported; take the address of one element",
                 );
@@ -214,7 +219,7 @@ impl Gen<'_> {
                                 }
                             }
                             _ => {
-                                self.error(
+                                self.error(codes::REF_OPERAND,
                                     arg.span,
                                     "a byte pointer to the text of a STRING can be taken of a STRING variable or parameter only (its length is re-read from the terminator there)",
                                 );
@@ -318,7 +323,7 @@ impl Gen<'_> {
                     })
                 }
                 Type::Void | Type::Null => {
-                    self.error(span, "NULL cannot be dereferenced");
+                    self.error(codes::NULL_DEREFERENCE, span, "NULL cannot be dereferenced");
                     self.op(Opcode::Drop);
                     None
                 }
@@ -330,7 +335,7 @@ impl Gen<'_> {
                 }),
             },
             Type::Null => {
-                self.error(span, "NULL cannot be dereferenced");
+                self.error(codes::NULL_DEREFERENCE, span, "NULL cannot be dereferenced");
                 self.op(Opcode::Drop);
                 None
             }
@@ -343,7 +348,7 @@ impl Gen<'_> {
                     "`^` dereferences a reference (REF_TO, POINTER TO), not {}",
                     self.tname(&other)
                 );
-                self.error(span, msg);
+                self.error(codes::DEREFERENCE_NON_REFERENCE, span, msg);
                 if !matches!(other, Type::Void) {
                     self.op(Opcode::Drop);
                 }
@@ -432,7 +437,7 @@ impl Gen<'_> {
                 || matches!(t, Type::Enum(_))
             {
                 let msg = format!("array index must be an integer, found {}", self.tname(&t));
-                self.error(idx[d].span, msg);
+                self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
             }
             let stride = strides[d];
             self.emit(|b| {
@@ -543,7 +548,7 @@ impl Gen<'_> {
                     name(self, &ta),
                     name(self, &tb)
                 );
-                self.error(span, msg);
+                self.error(codes::POINTER_ARITHMETIC, span, msg);
                 Type::Error
             }
         }
@@ -561,7 +566,7 @@ impl Gen<'_> {
                     "pointer arithmetic on {} is not allowed: it could reach a reference or instance stored there (only references to plain data can be moved)",
                     self.tname(&rt)
                 );
-                self.error(span, msg);
+                self.error(codes::POINTER_ARITHMETIC, span, msg);
                 Type::Error
             }
             Type::Ref(_) | Type::Error => rt,
@@ -570,7 +575,7 @@ impl Gen<'_> {
                     "pointer arithmetic needs a reference, found {}",
                     self.tname(other)
                 );
-                self.error(span, msg);
+                self.error(codes::POINTER_ARITHMETIC, span, msg);
                 Type::Error
             }
         }
@@ -584,7 +589,7 @@ impl Gen<'_> {
                 "a reference moves by an integer number of bytes, not by {}",
                 self.tname(&t)
             );
-            self.error(e.span, msg);
+            self.error(codes::POINTER_ARITHMETIC, e.span, msg);
         }
     }
 
@@ -603,7 +608,7 @@ impl Gen<'_> {
                     "a reference can be compared with a reference, an interface or an address, not with {}",
                     self.tname(other)
                 );
-                self.error(e.span, msg);
+                self.error(codes::REFERENCE_COMPARISON, e.span, msg);
             }
         }
     }
@@ -622,13 +627,13 @@ impl Gen<'_> {
                 if a == b || matches!(**a, Type::Void) {
                     true
                 } else if matches!(**a, Type::String(_)) && is_byte_view(b) {
-                    self.error(
+                    self.error(codes::REFERENCE_CONVERSION,
                         span,
                         "a reference to a STRING cannot become a byte pointer; take REF()/ADR() of the STRING variable itself where the byte pointer is needed",
                     );
                     return true;
                 } else if matches!(**b, Type::String(_)) && is_byte_view(a) {
-                    self.error(
+                    self.error(codes::REFERENCE_CONVERSION,
                         span,
                         "a byte pointer cannot become a reference to a STRING: STRINGs here carry a length header in front of their text",
                     );
@@ -657,7 +662,7 @@ impl Gen<'_> {
                     "an integer cannot become {}: references come from REF()/ADR() (and moving one by a byte offset), so that every access through them can be checked against the variable they were taken from",
                     self.tname(to)
                 );
-                self.error(span, msg);
+                self.error(codes::REFERENCE_CONVERSION, span, msg);
                 return true;
             }
             _ => false,
@@ -668,7 +673,7 @@ impl Gen<'_> {
                 self.tname(to),
                 self.tname(from)
             );
-            self.error(span, msg);
+            self.error(codes::TYPE_MISMATCH, span, msg);
         }
         true
     }
@@ -847,7 +852,7 @@ impl Gen<'_> {
                 "this reference may point to a temporary variable of `{pou}` (a FUNCTION's or METHOD's variables, a VAR_TEMP), which the next call re-initialises; it cannot be stored in {what}, which outlives the call"
             ),
         };
-        self.error(value.span, msg);
+        self.error(codes::REFERENCE_ESCAPE, value.span, msg);
     }
 
     // ----- STRING byte views ------------------------------------------------------------

@@ -8,6 +8,9 @@
 //! frame (IEC forbids recursion, which is checked). A POU body addresses its own variables
 //! relative to the frame base register.
 
+mod config;
+
+use crate::codes;
 use std::collections::HashMap;
 use std::rc::Rc;
 
@@ -670,6 +673,7 @@ impl Sema<'_> {
             if self.type_state.contains_key(&d.name.name) || Elem::from_name(&d.name.name).is_some()
             {
                 self.diags.error(
+                    codes::DUPLICATE_DEFINITION,
                     d.name.span,
                     format!("type `{}` is already defined", d.name.text),
                 );
@@ -689,8 +693,11 @@ impl Sema<'_> {
             if self.prog.pou_by_name.contains_key(&p.name.name)
                 || self.type_state.contains_key(&p.name.name)
             {
-                self.diags
-                    .error(p.name.span, format!("`{}` is already defined", p.name.text));
+                self.diags.error(
+                    codes::DUPLICATE_DEFINITION,
+                    p.name.span,
+                    format!("`{}` is already defined", p.name.text),
+                );
                 continue;
             }
             self.prog
@@ -732,6 +739,7 @@ impl Sema<'_> {
                     .find(|d| d.name.name == name)
                     .map_or(name, |d| d.name.text.as_str());
                 self.diags.error(
+                    codes::RECURSIVE_TYPE,
                     use_span,
                     format!("type `{text}` is defined in terms of itself"),
                 );
@@ -753,8 +761,11 @@ impl Sema<'_> {
                         Some(e) => match const_eval(&self.prog, &(), e) {
                             Some(ConstVal::Int(i)) => i as i64,
                             _ => {
-                                self.diags
-                                    .error(e.span, "enumeration value must be a constant integer");
+                                self.diags.error(
+                                    codes::NOT_CONSTANT,
+                                    e.span,
+                                    "enumeration value must be a constant integer",
+                                );
                                 next
                             }
                         },
@@ -762,6 +773,7 @@ impl Sema<'_> {
                     };
                     if vals.iter().any(|(n, _)| *n == id.name) {
                         self.diags.error(
+                            codes::DUPLICATE_MEMBER,
                             id.span,
                             format!("duplicate enumeration value `{}`", id.text),
                         );
@@ -794,6 +806,7 @@ impl Sema<'_> {
                     let mty = self.resolve_type(&m.ty, &[]);
                     if matches!(mty, Type::Fb(_)) {
                         self.diags.error(
+                            codes::FB_INSTANCE_NOT_ALLOWED,
                             m.ty.span(),
                             "function block instances cannot be structure members",
                         );
@@ -801,8 +814,11 @@ impl Sema<'_> {
                     let (sz, al) = self.prog.size_align(&mty);
                     for n in &m.names {
                         if defs.iter().any(|d: &VarDef| d.name == n.name) {
-                            self.diags
-                                .error(n.span, format!("duplicate member `{}`", n.text));
+                            self.diags.error(
+                                codes::DUPLICATE_MEMBER,
+                                n.span,
+                                format!("duplicate member `{}`", n.text),
+                            );
                         }
                         off = align_up(off, al);
                         defs.push(VarDef {
@@ -848,6 +864,7 @@ impl Sema<'_> {
             }
             _ => {
                 self.diags.error(
+                    codes::NOT_CONSTANT,
                     e.span,
                     format!("{what} must be a constant integer expression"),
                 );
@@ -856,82 +873,139 @@ impl Sema<'_> {
         }
     }
 
+    /// The type a name stands for: elementary, declared, an interface or a function block.
+    fn resolve_type_name(&mut self, id: &Ident, locals: &[VarDef]) -> Type {
+        if let Some(e) = Elem::from_name(&id.name) {
+            return Type::Elem(e);
+        }
+        match id.name.as_str() {
+            "STRING" => return Type::String(DEFAULT_STRING_LEN),
+            "__EXCEPTION" => return Type::Exception,
+            "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
+            _ => {}
+        }
+        if let Some(t) = self.resolve_named_type(&id.name, id.span) {
+            return t;
+        }
+        if let Some(&i) = self.prog.interface_by_name.get(&id.name) {
+            return Type::Interface(i);
+        }
+        if let Some(&i) = self.prog.pou_by_name.get(&id.name) {
+            if self.prog.pous[i].kind == PouKind::FunctionBlock {
+                self.layout_pou(i);
+                return Type::Fb(i);
+            }
+            self.diags.error(
+                codes::UNKNOWN_TYPE,
+                id.span,
+                format!("`{}` is not a data type or function block", id.text),
+            );
+            return Type::Error;
+        }
+        let declared: Vec<String> = self
+            .type_state
+            .keys()
+            .chain(self.prog.interface_by_name.keys())
+            .chain(self.prog.pou_by_name.keys())
+            .cloned()
+            .collect();
+        match qualified(&id.name, declared.iter()) {
+            Ok(Some(full)) if full != id.name => {
+                let id = Ident {
+                    name: full,
+                    ..id.clone()
+                };
+                return self.resolve_type(&TypeRef::Named(id), locals);
+            }
+            Err(candidates) => {
+                self.diags.error(
+                    codes::AMBIGUOUS_NAME,
+                    id.span,
+                    format!(
+                        "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+                        id.text,
+                        candidates.join(", ")
+                    ),
+                );
+                return Type::Error;
+            }
+            _ => {}
+        }
+        self.diags.error(
+            codes::UNKNOWN_TYPE,
+            id.span,
+            format!("unknown type `{}`", id.text),
+        );
+        Type::Error
+    }
+
+    /// `BASE(lo..hi)`: an integer subrange, its bounds checked against the base type.
+    fn resolve_subrange(
+        &mut self,
+        t: &TypeRef,
+        base: &Ident,
+        lo: &Expr,
+        hi: &Expr,
+        locals: &[VarDef],
+    ) -> Type {
+        let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
+            self.diags.error(
+                codes::INVALID_SUBRANGE,
+                base.span,
+                "subrange base type must be an integer type",
+            );
+            return Type::Error;
+        };
+        let l = self.const_int(lo, locals, "subrange bound");
+        let h = self.const_int(hi, locals, "subrange bound");
+        match (l, h) {
+            (Some(l), Some(h)) if l <= h => {
+                let (min, max) = e.int_range();
+                if (l as i128) < min || (h as i128) > max {
+                    self.diags.error(
+                        codes::INVALID_SUBRANGE,
+                        t.span(),
+                        format!("subrange exceeds the range of {}", e.name()),
+                    );
+                }
+                Type::Subrange(e, l, h)
+            }
+            (Some(_), Some(_)) => {
+                self.diags.error(
+                    codes::INVALID_SUBRANGE,
+                    t.span(),
+                    "subrange lower bound exceeds upper bound",
+                );
+                Type::Error
+            }
+            _ => Type::Error,
+        }
+    }
+
     /// Resolves a type reference; `locals` supplies constants of the enclosing POU.
     pub(crate) fn resolve_type(&mut self, t: &TypeRef, locals: &[VarDef]) -> Type {
         match t {
-            TypeRef::Named(id) => {
-                if let Some(e) = Elem::from_name(&id.name) {
-                    return Type::Elem(e);
-                }
-                match id.name.as_str() {
-                    "STRING" => return Type::String(DEFAULT_STRING_LEN),
-                    "__EXCEPTION" => return Type::Exception,
-                    "WSTRING" => return Type::WString(DEFAULT_STRING_LEN),
-                    _ => {}
-                }
-                if let Some(t) = self.resolve_named_type(&id.name, id.span) {
-                    return t;
-                }
-                if let Some(&i) = self.prog.interface_by_name.get(&id.name) {
-                    return Type::Interface(i);
-                }
-                if let Some(&i) = self.prog.pou_by_name.get(&id.name) {
-                    if self.prog.pous[i].kind == PouKind::FunctionBlock {
-                        self.layout_pou(i);
-                        return Type::Fb(i);
-                    }
-                    self.diags.error(
-                        id.span,
-                        format!("`{}` is not a data type or function block", id.text),
-                    );
-                    return Type::Error;
-                }
-                let declared: Vec<String> = self
-                    .type_state
-                    .keys()
-                    .chain(self.prog.interface_by_name.keys())
-                    .chain(self.prog.pou_by_name.keys())
-                    .cloned()
-                    .collect();
-                match qualified(&id.name, declared.iter()) {
-                    Ok(Some(full)) if full != id.name => {
-                        let id = Ident {
-                            name: full,
-                            ..id.clone()
-                        };
-                        return self.resolve_type(&TypeRef::Named(id), locals);
-                    }
-                    Err(candidates) => {
-                        self.diags.error(
-                            id.span,
-                            format!(
-                                "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
-                                id.text,
-                                candidates.join(", ")
-                            ),
-                        );
-                        return Type::Error;
-                    }
-                    _ => {}
-                }
-                self.diags
-                    .error(id.span, format!("unknown type `{}`", id.text));
-                Type::Error
-            }
+            TypeRef::Named(id) => self.resolve_type_name(id, locals),
             TypeRef::String(len, _, wide) => match len {
                 None if *wide => Type::WString(DEFAULT_STRING_LEN),
                 None => Type::String(DEFAULT_STRING_LEN),
                 Some(e) => match self.const_int(e, locals, "string length") {
                     Some(n) if *wide && (1..=32000).contains(&n) => Type::WString(n as u32),
                     Some(_) if *wide => {
-                        self.diags
-                            .error(e.span, "WSTRING length must be between 1 and 32000");
+                        self.diags.error(
+                            codes::STRING_LENGTH,
+                            e.span,
+                            "WSTRING length must be between 1 and 32000",
+                        );
                         Type::Error
                     }
                     Some(n) if (1..=65000).contains(&n) => Type::String(n as u32),
                     Some(_) => {
-                        self.diags
-                            .error(e.span, "string length must be between 1 and 65000");
+                        self.diags.error(
+                            codes::STRING_LENGTH,
+                            e.span,
+                            "string length must be between 1 and 65000",
+                        );
                         Type::Error
                     }
                     None => Type::Error,
@@ -950,7 +1024,7 @@ impl Sema<'_> {
                             out.push((l, h))
                         }
                         (Some(_), Some(_)) => {
-                            self.diags.error(lo.span.to(hi.span), "array upper bound must be >= lower bound (and the array not absurdly large)");
+                            self.diags.error(codes::ARRAY_BOUNDS, lo.span.to(hi.span), "array upper bound must be >= lower bound (and the array not absurdly large)");
                             return Type::Error;
                         }
                         _ => return Type::Error,
@@ -962,45 +1036,25 @@ impl Sema<'_> {
                 };
                 let (sz, al) = self.prog.size_align(&arr.elem);
                 if (align_up(sz, al) as u64).saturating_mul(arr.len()) > MAX_DATA as u64 {
-                    self.diags.error(t.span(), "array too large");
+                    self.diags
+                        .error(codes::ARRAY_BOUNDS, t.span(), "array too large");
                     return Type::Error;
                 }
                 Type::Array(Rc::new(arr))
             }
             TypeRef::Subrange { base, lo, hi, .. } => {
-                let Some(e) = Elem::from_name(&base.name).filter(|e| e.is_integral()) else {
-                    self.diags
-                        .error(base.span, "subrange base type must be an integer type");
-                    return Type::Error;
-                };
-                let l = self.const_int(lo, locals, "subrange bound");
-                let h = self.const_int(hi, locals, "subrange bound");
-                match (l, h) {
-                    (Some(l), Some(h)) if l <= h => {
-                        let (min, max) = e.int_range();
-                        if (l as i128) < min || (h as i128) > max {
-                            self.diags.error(
-                                t.span(),
-                                format!("subrange exceeds the range of {}", e.name()),
-                            );
-                        }
-                        Type::Subrange(e, l, h)
-                    }
-                    (Some(_), Some(_)) => {
-                        self.diags
-                            .error(t.span(), "subrange lower bound exceeds upper bound");
-                        Type::Error
-                    }
-                    _ => Type::Error,
-                }
+                self.resolve_subrange(t, base, lo, hi, locals)
             }
             TypeRef::Ref { kind, target, span } => {
                 let t = self.resolve_ref_target(target, locals);
                 if matches!(t, Type::Reference(_))
                     || (*kind == RefKind::Reference && matches!(t, Type::Ref(_)))
                 {
-                    self.diags
-                        .error(*span, "a REFERENCE TO cannot refer to a reference");
+                    self.diags.error(
+                        codes::REFERENCE_TO_REFERENCE,
+                        *span,
+                        "a REFERENCE TO cannot refer to a reference",
+                    );
                     return Type::Error;
                 }
                 if t.is_error() {
@@ -1013,6 +1067,7 @@ impl Sema<'_> {
             }
             TypeRef::Enum { span, .. } | TypeRef::Struct { span, .. } => {
                 self.diags.error(
+                    codes::ANONYMOUS_TYPE,
                     *span,
                     "anonymous enumerations and structures must be declared in a TYPE block",
                 );
@@ -1038,6 +1093,83 @@ impl Sema<'_> {
         self.resolve_type(t, locals)
     }
 
+    /// Declares the variables of one declaration `d` of a VAR block of POU `i` (`inherited`:
+    /// the base function block's variables; `constants`: the POU's CONSTANTs).
+    fn declare_pou_var(
+        &mut self,
+        i: usize,
+        block: &VarBlock,
+        d: &VarDecl,
+        constants: &[VarDef],
+        inherited: &[VarDef],
+        vars: &mut Vec<VarDef>,
+    ) {
+        let kind = self.prog.pous[i].kind;
+        let what = if self.prog.pous[i].member.is_some() {
+            "a METHOD"
+        } else {
+            "a FUNCTION"
+        };
+        self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
+        let ty = self.resolve_type(&d.ty, constants);
+        if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
+            self.diags.error(
+                codes::FB_INSTANCE_NOT_ALLOWED,
+                d.ty.span(),
+                format!("function block instances are not allowed inside {what}"),
+            );
+        }
+        self.no_abstract_instance(d, &ty);
+        if block.kind == VarKind::InOut && d.init.is_some() {
+            self.diags.error(
+                codes::INOUT_INITIAL_VALUE,
+                d.span,
+                "VAR_IN_OUT variables cannot have initial values",
+            );
+        }
+        if block.constant && d.init.is_none() {
+            self.diags.error(
+                codes::CONSTANT_WITHOUT_VALUE,
+                d.span,
+                "a CONSTANT needs an initial value",
+            );
+        }
+        self.no_retained_reference(block, d, &ty);
+        let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
+        let location = self.location(d, &ty, may_locate);
+        self.safe_default(d, &ty, location, Some(i));
+        for n in &d.names {
+            if vars.iter().any(|v| v.name == n.name) {
+                self.diags.error(
+                    codes::DUPLICATE_VARIABLE,
+                    n.span,
+                    format!("`{}` is declared twice", n.text),
+                );
+                continue;
+            }
+            if inherited.iter().any(|v| v.name == n.name) {
+                let msg = format!(
+                    "`{}` is already a variable of the base function block",
+                    n.text
+                );
+                self.diags.error(codes::DUPLICATE_VARIABLE, n.span, msg);
+                continue;
+            }
+            vars.push(VarDef {
+                name: n.name.clone(),
+                text: n.text.clone(),
+                span: n.span,
+                ty: ty.clone(),
+                offset: 0,
+                kind: block.kind,
+                constant: block.constant,
+                init: self.init_of(&d.ty, &d.init),
+                location,
+                retain: block.retain,
+            });
+        }
+    }
+
     /// Lays out the frame of POU `i` (recursively for the FB types it contains).
     pub(crate) fn layout_pou(&mut self, i: usize) {
         match self.prog.pous[i].state {
@@ -1052,7 +1184,7 @@ impl Sema<'_> {
                 } else {
                     format!("function block `{name}` contains an instance of itself")
                 };
-                self.diags.error(span, what);
+                self.diags.error(codes::RECURSIVE_TYPE, span, what);
                 return;
             }
             LayoutState::NotStarted => {}
@@ -1084,6 +1216,7 @@ impl Sema<'_> {
             let t = self.resolve_type(rt, &[]);
             if matches!(t, Type::Fb(_)) {
                 self.diags.error(
+                    codes::FB_INSTANCE_NOT_ALLOWED,
                     rt.span(),
                     "a function cannot return a function block instance",
                 );
@@ -1123,7 +1256,6 @@ impl Sema<'_> {
                 retain: false,
             });
         }
-        let what = if is_method { "a METHOD" } else { "a FUNCTION" };
         // The POU's CONSTANTs may size arrays declared before them.
         let constants: Vec<VarDef> = source
             .var_blocks
@@ -1158,59 +1290,13 @@ impl Sema<'_> {
             };
             if !allowed || (kind != PouKind::Program && block.kind == VarKind::Global) {
                 self.diags.error(
+                    codes::VAR_BLOCK_NOT_ALLOWED,
                     block.span,
                     "this kind of VAR block is not allowed in this POU",
                 );
             }
             for d in &block.decls {
-                self.no_shared_attribute(d, "variables of a POU (only top-level and CONFIGURATION/RESOURCE VAR_GLOBAL variables are shared)");
-                let ty = self.resolve_type(&d.ty, &constants);
-                if kind == PouKind::Function && matches!(ty, Type::Fb(_)) {
-                    self.diags.error(
-                        d.ty.span(),
-                        format!("function block instances are not allowed inside {what}"),
-                    );
-                }
-                self.no_abstract_instance(d, &ty);
-                if block.kind == VarKind::InOut && d.init.is_some() {
-                    self.diags
-                        .error(d.span, "VAR_IN_OUT variables cannot have initial values");
-                }
-                if block.constant && d.init.is_none() {
-                    self.diags
-                        .error(d.span, "a CONSTANT needs an initial value");
-                }
-                self.no_retained_reference(block, d, &ty);
-                let may_locate = kind == PouKind::Program && block.kind == VarKind::Local;
-                let location = self.location(d, &ty, may_locate);
-                self.safe_default(d, &ty, location, Some(i));
-                for n in &d.names {
-                    if vars.iter().any(|v| v.name == n.name) {
-                        self.diags
-                            .error(n.span, format!("`{}` is declared twice", n.text));
-                        continue;
-                    }
-                    if inherited.iter().any(|v| v.name == n.name) {
-                        let msg = format!(
-                            "`{}` is already a variable of the base function block",
-                            n.text
-                        );
-                        self.diags.error(n.span, msg);
-                        continue;
-                    }
-                    vars.push(VarDef {
-                        name: n.name.clone(),
-                        text: n.text.clone(),
-                        span: n.span,
-                        ty: ty.clone(),
-                        offset: 0,
-                        kind: block.kind,
-                        constant: block.constant,
-                        init: self.init_of(&d.ty, &d.init),
-                        location,
-                        retain: block.retain,
-                    });
-                }
+                self.declare_pou_var(i, block, d, &constants, &inherited, &mut vars);
             }
         }
         let (frame_size, reinit_start) =
@@ -1228,8 +1314,11 @@ impl Sema<'_> {
             for d in &block.decls {
                 let ty = self.resolve_type(&d.ty, &[]);
                 if block.constant && d.init.is_none() {
-                    self.diags
-                        .error(d.span, "a CONSTANT needs an initial value");
+                    self.diags.error(
+                        codes::CONSTANT_WITHOUT_VALUE,
+                        d.span,
+                        "a CONSTANT needs an initial value",
+                    );
                 }
                 self.no_retained_reference(block, d, &ty);
                 let location = self.location(d, &ty, true);
@@ -1237,8 +1326,11 @@ impl Sema<'_> {
                 let shared = self.shared_global(d, block, &ty);
                 for n in &d.names {
                     if self.prog.global(&n.name).is_some() {
-                        self.diags
-                            .error(n.span, format!("global `{}` is declared twice", n.text));
+                        self.diags.error(
+                            codes::DUPLICATE_VARIABLE,
+                            n.span,
+                            format!("global `{}` is declared twice", n.text),
+                        );
                         continue;
                     }
                     if let Some(direction) = shared {
@@ -1271,7 +1363,7 @@ impl Sema<'_> {
     /// of the program, which a warm restart after a download would not have.
     fn no_retained_reference(&mut self, block: &VarBlock, d: &VarDecl, ty: &Type) {
         if block.retain && self.holds_references(ty, 0) {
-            self.diags.error(
+            self.diags.error(codes::RETAIN_REFERENCE,
                 d.ty.span(),
                 "a RETAIN variable cannot hold references or interface values (they name variables of this build of the program, which a restart after a download may not have)",
             );
@@ -1291,384 +1383,6 @@ impl Sema<'_> {
                 .iter()
                 .any(|v| v.kind != VarKind::InOut && self.holds_references(&v.ty, depth + 1)),
             _ => false,
-        }
-    }
-
-    /// Records the `{attribute 'safe' := 'VALUE'}` of a located output (declared in `pou`,
-    /// or a global); reports one on any other declaration or with a value that does not fit.
-    fn safe_default(
-        &mut self,
-        d: &VarDecl,
-        ty: &Type,
-        location: Option<Location>,
-        pou: Option<usize>,
-    ) {
-        let Some((value, span)) = &d.safe else { return };
-        let Some(location) = location.filter(|l| l.area == plc_vm::located::Area::Output) else {
-            if d.at.is_none() || !ty.is_error() {
-                self.diags.error(
-                    *span,
-                    "the attribute 'safe' gives a located output (`AT %Q...`) the value it takes when the outputs go safe; this declaration is not one",
-                );
-            }
-            return;
-        };
-        let Type::Elem(e) = ty else { return };
-        match crate::monitor::parse_elem(*e, value) {
-            Ok(cell) => {
-                let bits = location.width.bytes() * 8;
-                let cell = if bits >= 64 {
-                    cell
-                } else {
-                    cell & ((1u64 << bits) - 1)
-                };
-                for n in &d.names {
-                    self.prog.safe.push(SafeDefault {
-                        pou,
-                        name: n.name.clone(),
-                        text: n.text.clone(),
-                        width: location.width.bytes() as u8,
-                        value: cell,
-                    });
-                }
-            }
-            Err(why) => self.diags.error(*span, format!("the safe value: {why}")),
-        }
-    }
-
-    /// Reports an `{attribute 'shared'}` pragma on a declaration that cannot be shared.
-    fn no_shared_attribute(&mut self, d: &VarDecl, what: &str) {
-        if let Some(a) = d.shared {
-            self.diags.error(
-                a.span,
-                format!("the attribute 'shared' applies to global variables only, not to {what}"),
-            );
-        }
-    }
-
-    /// The checked direction of a global's `{attribute 'shared'}` pragma, if it has one: an
-    /// elementary type other than STRING (the other project's bytes are taken as they are,
-    /// so no type with an invariant such as a length), not located, and not a CONSTANT that
-    /// the other project would overwrite.
-    fn shared_global(
-        &mut self,
-        d: &VarDecl,
-        block: &VarBlock,
-        ty: &Type,
-    ) -> Option<plc_vm::image::SharedDirection> {
-        use plc_vm::image::SharedDirection;
-        let a = d.shared?;
-        if a.direction == SharedDirection::Valid {
-            if !matches!(ty, Type::Elem(crate::types::Elem::Bool) | Type::Error) {
-                self.diags.error(
-                    d.ty.span(),
-                    format!(
-                        "the validity flag of the shared globals (`'valid'`) must be a BOOL, not {}",
-                        self.prog.type_name(ty)
-                    ),
-                );
-                return None;
-            }
-            let names = d.names.len()
-                + self
-                    .prog
-                    .shared
-                    .iter()
-                    .filter(|s| s.direction == SharedDirection::Valid)
-                    .count();
-            if names > 1 {
-                self.diags.error(
-                    a.span,
-                    "a program has at most one validity flag of its shared globals",
-                );
-                return None;
-            }
-        }
-        let elementary = match ty {
-            Type::Elem(e) => crate::monitor::ValueKind::Elem(*e)
-                .var_type()
-                .is_some_and(|t| t.mem_type().is_some()),
-            Type::Error => return None,
-            _ => false,
-        };
-        if !elementary {
-            self.diags.error(
-                d.ty.span(),
-                format!(
-                    "a shared variable must have an elementary type (BOOL, integers, REAL, LREAL, bit strings, the date/time types, CHAR, WCHAR), not {}",
-                    self.prog.type_name(ty)
-                ),
-            );
-            return None;
-        }
-        if let Some((_, span)) = &d.at {
-            self.diags.error(
-                *span,
-                "a shared variable cannot be located (`AT %...`): it lives in the shared segment, not in the process image",
-            );
-            return None;
-        }
-        if block.constant && a.direction != SharedDirection::Write {
-            self.diags.error(
-                a.span,
-                "a CONSTANT cannot be read from another project or be the validity flag (it would change)",
-            );
-            return None;
-        }
-        Some(a.direction)
-    }
-
-    /// The checked direct address of a declaration (`AT %...`), if it has one: only in
-    /// `allowed` places (a PROGRAM's VAR, VAR_GLOBAL), for one variable of an elementary type
-    /// of the address's size.
-    fn location(&mut self, d: &VarDecl, ty: &Type, allowed: bool) -> Option<Location> {
-        let (text, span) = d.at.as_ref()?;
-        if !allowed {
-            self.diags.error(
-                *span,
-                "located variables (`AT %...`) are allowed only in a PROGRAM's VAR block and in VAR_GLOBAL",
-            );
-            return None;
-        }
-        if d.names.len() > 1 {
-            self.diags
-                .error(*span, "a direct address locates exactly one variable");
-            return None;
-        }
-        let location = match Location::parse(text) {
-            Ok(l) => l,
-            Err(e) => {
-                self.diags
-                    .error(*span, format!("invalid direct address `%{text}`: {e}"));
-                return None;
-            }
-        };
-        let var_type = match ty {
-            Type::Elem(e) => crate::monitor::ValueKind::Elem(*e).var_type(),
-            _ => None,
-        };
-        if !var_type.is_some_and(|t| location.width.fits(t)) {
-            if !ty.is_error() {
-                use plc_vm::located::Width;
-                let (size, expected) = match location.width {
-                    Width::Bit => ("a bit", "BOOL"),
-                    Width::Byte => ("a byte", "BYTE, SINT, USINT or CHAR"),
-                    Width::Word => ("a word (2 bytes)", "WORD, INT, UINT or WCHAR"),
-                    Width::DWord => ("a double word (4 bytes)", "DWORD, DINT, UDINT or REAL"),
-                    Width::LWord => (
-                        "a long word (8 bytes)",
-                        "LWORD, LINT, ULINT, LREAL or a date/time type (TIME, LTIME, DATE, TOD, DT and the long forms)",
-                    ),
-                };
-                self.diags.error(
-                    d.ty.span(),
-                    format!("`%{text}` is {size}: its variable must be {expected}"),
-                );
-            }
-            return None;
-        }
-        Some(location)
-    }
-
-    fn task_time(&mut self, e: &Expr) -> Option<i64> {
-        match const_eval(&self.prog, &(), e) {
-            Some(ConstVal::Time(t)) if t > 0 => Some(t as i64),
-            _ => {
-                self.diags.error(
-                    e.span,
-                    "task INTERVAL must be a positive TIME literal such as T#10ms",
-                );
-                None
-            }
-        }
-    }
-
-    /// Builds the task list from the CONFIGURATION, or one implicit cyclic task running the
-    /// single PROGRAM (`program_override` picks one when there are several).
-    fn configure(&mut self, program_override: Option<&str>, library: bool) {
-        let unit = self.unit;
-        if unit.configs.len() > 1 {
-            self.diags.error(
-                unit.configs[1].name.span,
-                "only one CONFIGURATION is supported",
-            );
-        }
-        if let Some(cfg) = unit.configs.first() {
-            self.prog.has_configuration = true;
-            for res in &cfg.resources {
-                for t in &res.tasks {
-                    let interval = t
-                        .interval
-                        .as_ref()
-                        .and_then(|e| self.task_time(e))
-                        .unwrap_or(0);
-                    let single = match &t.single {
-                        Some(Expr {
-                            kind: ExprKind::Name(n),
-                            ..
-                        }) => match self.prog.global(&n.name) {
-                            Some(g) if g.ty == Type::BOOL => Some(n.name.clone()),
-                            _ => {
-                                self.diags
-                                    .error(n.span, "SINGLE must name a global BOOL variable");
-                                None
-                            }
-                        },
-                        Some(e) => {
-                            self.diags
-                                .error(e.span, "SINGLE must name a global BOOL variable");
-                            None
-                        }
-                        None => None,
-                    };
-                    if t.interval.is_none() && t.single.is_none() {
-                        self.diags
-                            .error(t.name.span, "a task needs INTERVAL or SINGLE");
-                    }
-                    let priority = match &t.priority {
-                        Some(e) => match const_eval(&self.prog, &(), e) {
-                            Some(ConstVal::Int(p)) if (0..=u32::MAX as i128).contains(&p) => {
-                                p as u32
-                            }
-                            _ => {
-                                self.diags
-                                    .error(e.span, "PRIORITY must be a non-negative integer");
-                                0
-                            }
-                        },
-                        None => 0,
-                    };
-                    if self.prog.tasks.iter().any(|x| x.name == t.name.name) {
-                        self.diags.error(
-                            t.name.span,
-                            format!("task `{}` is declared twice", t.name.text),
-                        );
-                    }
-                    self.prog.tasks.push(TaskDef {
-                        name: t.name.name.clone(),
-                        interval_ns: interval,
-                        single,
-                        priority,
-                        programs: Vec::new(),
-                    });
-                }
-            }
-            for res in &cfg.resources {
-                for b in &res.programs {
-                    let full = qualified(&b.program_type.name, self.prog.pou_by_name.keys())
-                        .ok()
-                        .flatten()
-                        .unwrap_or_default();
-                    let Some(&pi) = self
-                        .prog
-                        .pou_by_name
-                        .get(&full)
-                        .filter(|&&i| self.prog.pous[i].kind == PouKind::Program)
-                    else {
-                        self.diags.error(
-                            b.program_type.span,
-                            format!("unknown PROGRAM `{}`", b.program_type.text),
-                        );
-                        continue;
-                    };
-                    if self
-                        .prog
-                        .instances
-                        .iter()
-                        .any(|x| x.name.eq_ignore_ascii_case(&b.instance.text))
-                    {
-                        self.diags.error(
-                            b.instance.span,
-                            format!("program instance `{}` is declared twice", b.instance.text),
-                        );
-                        continue;
-                    }
-                    let (sz, _) = (self.prog.pous[pi].frame_size, 8);
-                    let addr = self.prog.alloc(sz, 8);
-                    self.prog.instances.push(ProgramInstance {
-                        name: b.instance.text.clone(),
-                        pou: pi,
-                        addr,
-                    });
-                    let task_idx = match &b.task {
-                        Some(t) => match self.prog.tasks.iter().position(|x| x.name == t.name) {
-                            Some(i) => i,
-                            None => {
-                                self.diags
-                                    .error(t.span, format!("unknown task `{}`", t.text));
-                                continue;
-                            }
-                        },
-                        None => {
-                            // A program without a task runs cyclically at the base tick.
-                            self.prog.tasks.push(TaskDef {
-                                name: format!("__{}", b.instance.name),
-                                interval_ns: 0,
-                                single: None,
-                                priority: u32::MAX,
-                                programs: Vec::new(),
-                            });
-                            self.prog.tasks.len() - 1
-                        }
-                    };
-                    self.prog.tasks[task_idx]
-                        .programs
-                        .push((b.instance.text.clone(), pi));
-                }
-            }
-            return;
-        }
-        if library {
-            return;
-        }
-        let programs: Vec<usize> = (0..self.prog.pous.len())
-            .filter(|&i| {
-                let p = &self.prog.pous[i];
-                p.kind == PouKind::Program && !p.builtin && p.member.is_none()
-            })
-            .collect();
-        let chosen = match program_override {
-            Some(name) => {
-                let up = name.to_ascii_uppercase();
-                match programs.iter().find(|&&i| self.prog.pous[i].name == up) {
-                    Some(&i) => Some(i),
-                    None => {
-                        self.diags.error(
-                            Span::default(),
-                            format!("there is no PROGRAM named `{name}`"),
-                        );
-                        None
-                    }
-                }
-            }
-            None => match programs.len() {
-                0 => None,
-                1 => Some(programs[0]),
-                _ => {
-                    let p = &self.prog.pous[programs[1]];
-                    self.diags.error(
-                        p.span,
-                        "several PROGRAMs and no CONFIGURATION: choose one with --program",
-                    );
-                    None
-                }
-            },
-        };
-        if let Some(pi) = chosen {
-            let addr = self.prog.alloc(self.prog.pous[pi].frame_size, 8);
-            let name = self.prog.pous[pi].text.clone();
-            self.prog.instances.push(ProgramInstance {
-                name: name.clone(),
-                pou: pi,
-                addr,
-            });
-            self.prog.tasks.push(TaskDef {
-                name: "__MAIN".into(),
-                interval_ns: 0,
-                single: None,
-                priority: 0,
-                programs: vec![(name, pi)],
-            });
         }
     }
 }

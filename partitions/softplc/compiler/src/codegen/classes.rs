@@ -11,10 +11,11 @@
 //! method the instance's class runs, the caller stores the arguments there, `CALL_VIRT`
 //! calls it.
 
+use crate::codes;
 use plc_vm::isa::{Builtin, MemType, Opcode};
 
 use crate::ast::*;
-use crate::calls::CallBase;
+use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::{MemberKind, VarDef};
@@ -115,7 +116,7 @@ impl Gen<'_> {
             .filter(|&c| self.prog.pous[c].kind == PouKind::FunctionBlock)
         else {
             let what = if superclass { "SUPER" } else { "THIS" };
-            self.error(
+            self.error(codes::NO_INSTANCE,
                 span,
                 format!("{what} is the instance a function block's body, method or action runs on; there is none here"),
             );
@@ -129,6 +130,7 @@ impl Gen<'_> {
             None => {
                 let name = self.prog.pous[c].text.clone();
                 self.error(
+                    codes::NO_INSTANCE,
                     span,
                     format!("`{name}` extends no function block: there is no SUPER"),
                 );
@@ -223,7 +225,7 @@ impl Gen<'_> {
                 self.prog.pous[member].text,
                 m.access.keyword()
             );
-            self.error(span, msg);
+            self.error(codes::ACCESS_DENIED, span, msg);
         }
     }
 
@@ -297,7 +299,7 @@ impl Gen<'_> {
                                 "interface `{}` has no method `{}`",
                                 self.prog.interfaces[i].text, m.text
                             );
-                            self.error(m.span, msg);
+                            self.error(codes::UNKNOWN_METHOD, m.span, msg);
                             for a in args {
                                 self.infer(&a.value);
                             }
@@ -381,7 +383,11 @@ impl Gen<'_> {
         let kind = self.prog.pous[member].member.as_ref().map(|m| m.kind);
         if kind == Some(MemberKind::Action) {
             if let Some(a) = args.first() {
-                self.error(a.span, "an action takes no arguments");
+                self.error(
+                    codes::ARGUMENT_COUNT,
+                    a.span,
+                    "an action takes no arguments",
+                );
             }
             self.calls.push((self.cur, member, span));
             let id = self.pou_ids[member];
@@ -407,7 +413,7 @@ impl Gen<'_> {
                 "`{}` is ABSTRACT: it has no implementation to call",
                 self.prog.pous[member].text
             );
-            self.error(span, msg);
+            self.error(codes::ABSTRACT_INSTANCE, span, msg);
         }
         let targets = self.possible_targets(class, member);
         if !exact && !superclass && targets.len() > 1 {
@@ -465,7 +471,8 @@ impl Gen<'_> {
         let result_name = d.result.as_ref().map(|_| d.label.clone());
         let _ = result_name;
         let bound = self.bind_to(None, &d.label, &d.params, None, args);
-        let inputs: Vec<&crate::calls::Bound> = bound.iter().filter(|b| !b.output).collect();
+        let inputs: Vec<&crate::codegen::calls::Bound> =
+            bound.iter().filter(|b| !b.output).collect();
         for a in &inputs {
             match a.param.kind {
                 VarKind::InOut => {
@@ -495,7 +502,7 @@ impl Gen<'_> {
                 VarKind::Input => self.default_into_frame(frame, v),
                 VarKind::InOut => {
                     let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
-                    self.error(span, msg);
+                    self.error(codes::MISSING_ARGUMENT, span, msg);
                 }
                 _ => {}
             }
@@ -531,7 +538,7 @@ impl Gen<'_> {
                 let t = self.expr(e, Some(ty));
                 if !t.is_string() && !t.is_error() {
                     let msg = format!("type mismatch: expected STRING, found {}", self.tname(&t));
-                    self.error(e.span, msg);
+                    self.error(codes::TYPE_MISMATCH, e.span, msg);
                 }
             }
             Type::Array(_) | Type::Struct(_) => {
@@ -542,7 +549,7 @@ impl Gen<'_> {
                         self.tname(ty),
                         self.tname(&t)
                     );
-                    self.error(e.span, msg);
+                    self.error(codes::TYPE_MISMATCH, e.span, msg);
                 }
             }
             ty => {
@@ -752,7 +759,11 @@ impl Gen<'_> {
             } else {
                 "is read-only (it has no SET accessor)"
             };
-            g.error(name.span, format!("property `{}` {what}", name.text));
+            g.error(
+                codes::PROPERTY_ACCESS,
+                name.span,
+                format!("property `{}` {what}", name.text),
+            );
             for a in args {
                 g.infer(&a.value);
             }
