@@ -11,7 +11,9 @@ use crate::task::Task;
 use crate::thread::{Fault, State};
 use abi::ipc::*;
 use abi::root::PhysRegion;
-use abi::syscall::{Abilities, Call, Error, PageRights, TIMEOUT_INFINITE, ThreadAttribute};
+use abi::syscall::{
+    Abilities, Call, Error, PageRights, TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId,
+};
 
 struct Fixture {
     k: Box<Kernel>,
@@ -107,7 +109,7 @@ impl Fixture {
     }
 
     fn id(&self, t: ThreadIdx) -> u64 {
-        self.k.thread_id(t)
+        self.k.thread_id(t).0
     }
 
     fn write(&self, t: ThreadIdx, at: u64, data: &[u8]) {
@@ -167,7 +169,7 @@ fn abilities_and_mcp_bound_children() {
         f.sys(root, Call::TaskCreate, [all, 256, 0, at, 1, 0]),
         err(Error::McpExceeded)
     );
-    let wid = f.k.task_id(weak);
+    let wid = f.k.task_id(weak).0;
     assert_eq!(
         f.sys(root, Call::ThreadCreate, [wid, 0x1000, 0x2000, 101, 0, 0]),
         err(Error::McpExceeded)
@@ -208,7 +210,7 @@ fn thread_lifecycle_and_stale_ids() {
         OK
     );
     let id = f.k.threads[root].context.rdi;
-    let t = f.k.thread(id).unwrap();
+    let t = f.k.thread(ThreadId(id)).unwrap();
     assert_eq!(f.k.threads[t].state, State::Inactive);
     assert_eq!(f.k.threads[t].context.rdi, 7, "argument in rdi");
     assert_eq!(f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]), OK);
@@ -261,7 +263,7 @@ fn exhausting_one_partition_leaves_the_other_working() {
         err(Error::QuotaExceeded)
     );
     // Page tables: the first page of a fresh space needs 3 tables; 8 - 1 (PML4) = 7 left.
-    let (ita, itb) = (f.k.task(ta).unwrap(), f.k.task(tb).unwrap());
+    let (ita, itb) = (f.k.task(TaskId(ta)).unwrap(), f.k.task(TaskId(tb)).unwrap());
     let phys = test_arena::USER_BASE;
     let map = |task, at| [task, phys, at, 1, 0, 0];
     assert_eq!(f.sys(root, Call::MapPhysical, map(ta, 0x1000)), OK);
@@ -294,7 +296,7 @@ fn map_protect_unmap_rules() {
     let mut f = Fixture::new();
     let root = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
-    let cid = f.k.task_id(child);
+    let cid = f.k.task_id(child).0;
     let ro = PageRights::empty().bits();
     let rw = PageRights::WRITE.bits();
     f.give(ROOT, 0x50_0000, 2, PageRights::empty());
@@ -396,7 +398,7 @@ fn call_reply_with_data_and_words() {
         (c.rax, c.rdi, c.rdx, c.r10, c.r8, c.r9),
         (OK, f.id(client), tag, 1, 2, 3)
     );
-    let client_task = f.k.task_id(f.k.threads[client].task);
+    let client_task = f.k.task_id(f.k.threads[client].task).0;
     assert_eq!(
         c.rsi, client_task,
         "the sender's task, for the server to trust"
@@ -501,7 +503,7 @@ fn communication_rights_restrict_senders() {
         f.sys(tx, Call::NotifySignal, [yid, 1, 0, 0, 0, 0]),
         err(Error::NotPermitted)
     );
-    let (xid, yid_task) = (f.k.task_id(x), f.k.task_id(y));
+    let (xid, yid_task) = (f.k.task_id(x).0, f.k.task_id(y).0);
     assert_eq!(
         f.sys(tx, Call::TaskAllowSend, [0, yid_task, 0, 0, 0, 0]),
         err(Error::NotPermitted),
@@ -584,7 +586,7 @@ fn exception_round_trip_with_edited_registers() {
     let handler = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
     let t = f.thread(child, 50);
-    f.k.threads[t].exception_handler = f.id(handler);
+    f.k.threads[t].exception_handler = ThreadId(f.id(handler));
     f.k.threads[t].context.rip = 0x40_1000;
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     let fault = Fault {
@@ -641,7 +643,7 @@ fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
     // Without a handler there is nobody to tell.
     let interrupt = |f: &mut Fixture| f.sys(handler, Call::ThreadInterrupt, [tid, 0, 0, 0, 0, 0]);
     assert_eq!(interrupt(&mut f), err(Error::InvalidArgument));
-    f.k.threads[t].exception_handler = f.id(handler);
+    f.k.threads[t].exception_handler = ThreadId(f.id(handler));
     assert_eq!(f.k.threads[t].state, State::Ready);
     assert_eq!(interrupt(&mut f), OK);
     assert_eq!(f.k.threads[handler].context.rdi, 1);
@@ -675,7 +677,7 @@ fn syscalls_of_non_native_tasks_go_to_the_handler() {
     let handler = f.thread(ROOT, 200);
     let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
     let t = f.thread(guest, 50);
-    f.k.threads[t].exception_handler = f.id(handler);
+    f.k.threads[t].exception_handler = ThreadId(f.id(handler));
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     f.sys(t, Call::Clock, [0; 6]);
     assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
@@ -743,7 +745,7 @@ fn io_ports_are_granted_down_the_tree_only() {
     let child = f.task(ROOT, Abilities::all(), 100);
     let grandchild = f.task(child, Abilities::all(), 100);
     let c = f.thread(child, 50);
-    let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
+    let (cid, gid) = (f.k.task_id(child).0, f.k.task_id(grandchild).0);
     assert_eq!(
         f.sys(root, Call::IoGrant, [cid, 0x3f8, 8, 0, 0, 0]),
         err(Error::NotPermitted),
@@ -766,7 +768,7 @@ fn io_ports_are_granted_down_the_tree_only() {
     );
     assert_eq!(f.sys(c, Call::IoGrant, [gid, 0x2fc, 4, 0, 0, 0]), OK);
     assert!(holds(&f, grandchild, 0x2fc) && !holds(&f, grandchild, 0x2f8));
-    let rt = f.k.task_id(ROOT);
+    let rt = f.k.task_id(ROOT).0;
     assert_eq!(
         f.sys(c, Call::IoGrant, [rt, 0x2f8, 1, 0, 0, 0]),
         err(Error::NotPermitted),
@@ -787,7 +789,7 @@ fn io_grants_work_a_word_of_ports_at_a_time() {
     let child = f.task(ROOT, Abilities::all(), 100);
     let grandchild = f.task(child, Abilities::all(), 100);
     let c = f.thread(child, 50);
-    let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
+    let (cid, gid) = (f.k.task_id(child).0, f.k.task_id(grandchild).0);
     // The whole space above the kernel's ports, and the edges of 64-port words.
     assert_eq!(
         f.sys(root, Call::IoGrant, [cid, 0x400, 0xfc00, 0, 0, 0]),
@@ -861,14 +863,14 @@ fn killing_a_large_subtree_takes_bounded_steps() {
             );
             f.k.create_thread(task, 0x1000, 0x2000, 10, 0, 0).unwrap();
         }
-        let id = f.k.task_id(task);
+        let id = f.k.task_id(task).0;
         assert_eq!(f.sys(root, Call::IoGrant, [id, 0x2f8, 8, 0, 0, 0]), OK);
         task = f.task(task, Abilities::all(), 100);
         chain.push(task);
     }
     let ready = f.k.create_thread(task, 0x1000, 0x2000, 10, 0, 0).unwrap();
     f.k.set_state(ready, State::Ready);
-    let (tid, other) = (f.k.task_id(top), f.task(ROOT, Abilities::all(), 100));
+    let (tid, other) = (f.k.task_id(top).0, f.task(ROOT, Abilities::all(), 100));
     let mut calls = 0;
     loop {
         calls += 1;
@@ -884,8 +886,8 @@ fn killing_a_large_subtree_takes_bounded_steps() {
         assert_eq!((c.rip, c.rax, c.rdi), (0x1000, Call::TaskKill as u64, tid));
         // Meanwhile the subtree is stopped and out of reach; the rest goes on.
         assert!(!f.k.run.is_queued(ready.position()) || f.k.threads[ready].is_free());
-        assert_eq!(f.k.task(tid), Err(Error::NoSuchObject));
-        assert_eq!(f.k.task(f.k.task_id(other)), Ok(other));
+        assert_eq!(f.k.task(TaskId(tid)), Err(Error::NoSuchObject));
+        assert_eq!(f.k.task(TaskId(f.k.task_id(other).0)), Ok(other));
         invariants(&f.k).unwrap();
         assert!(calls < 1_000, "no progress");
     }
@@ -907,7 +909,7 @@ fn irq_lines_are_granted_attached_masked_until_acknowledged() {
     let mut f = Fixture::new();
     let root = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
-    let cid = f.k.task_id(child);
+    let cid = f.k.task_id(child).0;
     let c = f.thread(child, 50);
     let c2 = f.thread(child, 50);
     assert_eq!(
@@ -1268,8 +1270,8 @@ proptest::proptest! {
             if number == Call::SystemHalt.code() {
                 continue;
             }
-            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s)).collect();
-            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s)));
+            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s).0).collect();
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s).0));
             let pick = |(kind, raw): (usize, u64)| -> u64 {
                 match kind {
                     0..=7 => ids[raw as usize % ids.len()],
@@ -1344,8 +1346,8 @@ proptest::proptest! {
             }
             let t = runnable[caller % runnable.len()];
             let number = if call % 2 == 0 { focus[call / 2 % focus.len()].code() } else { numbers[call / 2 % numbers.len()] };
-            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s)).collect();
-            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s)));
+            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s).0).collect();
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s).0));
             let page = |raw: u64| match raw % 3 {
                 0 => 0x40_0000 + (raw / 3 % 8) * 0x1000,
                 1 => 0x80_0000 + (raw / 3 % 0x200) * 0x1000,

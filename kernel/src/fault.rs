@@ -41,7 +41,7 @@ pub fn deliver_or_report(k: &mut Kernel, t: ThreadIdx, fault: Fault) -> Outcome 
     }
     kprintln!(
         "kernel: thread {:#x} of task {} killed (no exception handler, no health monitor)",
-        k.thread_id(t),
+        k.thread_id(t).0,
         k.tasks[task].name()
     );
     k.kill_thread(t);

@@ -7,7 +7,7 @@ use crate::mem::PAGE_SIZE;
 use crate::rp::Amount;
 use crate::state::Kernel;
 use crate::table::TaskIdx;
-use abi::syscall::Error;
+use abi::syscall::{Error, TaskId};
 
 /// The words of an I/O bitmap (two frames of 512 words, 64 ports a word, a clear bit
 /// grants the port) that hold ports `first..end` (`end` <= 0x10000): for each frame, the
@@ -127,7 +127,7 @@ impl Kernel {
             w[b] &= !last_mask | if a == b { !first_mask } else { 0 };
         }
         if self.io_loaded == self.task_id(target) {
-            self.io_loaded = 0;
+            self.io_loaded = TaskId::OWN;
         }
         Ok(())
     }
@@ -145,7 +145,7 @@ impl Kernel {
             }
         }
         if self.io_loaded == self.task_id(task) {
-            self.io_loaded = 0;
+            self.io_loaded = TaskId::OWN;
         }
         freed
     }

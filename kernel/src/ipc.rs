@@ -11,6 +11,7 @@ use crate::mem::paging::is_user_range;
 use crate::state::{Kernel, MAX_THREADS, USER_RFLAGS};
 use crate::table::ThreadIdx;
 use crate::thread::{Fault, NEVER, State};
+use abi::args::results;
 use abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET,
     LABEL_FAULT_REPORT, MAP_ITEM_GRANT, MapItem, MessageTag, REPLY_KILL, REPLY_RESUME,
@@ -58,8 +59,8 @@ impl Kernel {
             vector: fault.vector,
             error_code: fault.error_code,
             fault_address: fault.address,
-            thread: self.thread_id(t),
-            task: self.task_id(th.task),
+            thread: self.thread_id(t).0,
+            task: self.task_id(th.task).0,
             registers: Registers {
                 rax: c.rax,
                 rbx: c.rbx,
@@ -106,15 +107,15 @@ impl Kernel {
             }
             self.transfer_payload(from, to, tag)?;
         }
-        let sender_id = self.thread_id(from);
-        let sender_task = self.task_id(self.threads[from].task);
-        let c = &mut self.threads[to].context;
-        c.rdi = sender_id;
-        c.rsi = sender_task;
-        c.rdx = tag.0;
-        c.r10 = words[0];
-        c.r8 = words[1];
-        c.r9 = words[2];
+        let received = results::Ipc {
+            sender: self.thread_id(from),
+            sender_task: self.task_id(self.threads[from].task),
+            tag: tag.0,
+            word0: words[0],
+            word1: words[1],
+            word2: words[2],
+        };
+        self.threads[to].set_results(|r| received.encode_into(r));
         Ok(())
     }
 
@@ -368,8 +369,9 @@ impl Kernel {
         if let State::WaitingNotify { mask } = th.state
             && th.notify_bits & mask != 0
         {
-            th.context.rdi = th.notify_bits & mask;
+            let bits = th.notify_bits & mask;
             th.notify_bits &= !mask;
+            th.set_results(|r| results::NotifyWait { bits }.encode_into(r));
             self.wake(target, Error::Ok);
         }
     }
@@ -380,7 +382,7 @@ impl Kernel {
         let got = th.notify_bits & mask;
         if got != 0 {
             th.notify_bits &= !mask;
-            th.context.rdi = got;
+            th.set_results(|r| results::NotifyWait { bits: got }.encode_into(r));
             th.context.rax = Error::Ok as u64;
         } else if poll {
             th.context.rax = Error::TimedOut as u64;

@@ -18,7 +18,7 @@ use crate::task::Task;
 use crate::thread::{NEVER, Thread};
 use crate::timepart::TimeTable;
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
-use abi::syscall::{Error, MAP_MAX_PAGES, PageRights};
+use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TaskId, ThreadId};
 
 /// The slot an object identifier names, if that slot holds a live object (`live` gives its
 /// generation) of the identifier's generation: a stale id never names a successor.
@@ -62,8 +62,8 @@ pub struct Kernel {
     pub(crate) current: Option<ThreadIdx>,
     /// The active window's time partition (none until a schedule exists).
     pub(crate) active_partition: Option<u8>,
-    /// Raw thread id of the root task's health monitor (0 = none).
-    pub(crate) health_monitor: u64,
+    /// The root task's health monitor ([`ThreadId::OWN`] = none).
+    pub(crate) health_monitor: ThreadId,
     /// Physical memory the root task may map.
     pub(crate) user_memory: [PhysRegion; ROOT_INFO_MAX_REGIONS],
     pub(crate) user_memory_count: usize,
@@ -83,8 +83,8 @@ pub struct Kernel {
     /// Time partition of the thread that ran since `last_account` (None: idle).
     pub(crate) running_partition: Option<u8>,
     pub(crate) last_account: u64,
-    /// Raw id of the task whose I/O bitmap is in the TSS (0: ports disabled).
-    pub(crate) io_loaded: u64,
+    /// The task whose I/O bitmap is in the TSS ([`TaskId::OWN`]: ports disabled).
+    pub(crate) io_loaded: TaskId,
     /// Interrupt lines attached to threads.
     pub(crate) irqs: crate::irq::Irqs,
 }
@@ -104,7 +104,7 @@ impl Kernel {
             run: RunQueues::new(),
             current: None,
             active_partition: None,
-            health_monitor: 0,
+            health_monitor: ThreadId::OWN,
             user_memory: [PhysRegion { start: 0, pages: 0 }; ROOT_INFO_MAX_REGIONS],
             user_memory_count: 0,
             next_deadline: NEVER,
@@ -116,7 +116,7 @@ impl Kernel {
             idle_ticks: 0,
             running_partition: None,
             last_account: 0,
-            io_loaded: 0,
+            io_loaded: TaskId::OWN,
             irqs: crate::irq::Irqs::new(),
         }
     }

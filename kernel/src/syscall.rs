@@ -11,13 +11,13 @@ use crate::state::{Kernel, Source};
 use crate::table::{Slot, TaskIdx, ThreadIdx};
 use crate::thread::{Fault, State};
 use crate::timepart::{Schedule, Window};
-use abi::args::{self, ArgRegs};
+use abi::args::{self, ArgRegs, RpCounts, results};
 use abi::ipc::{
     IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL, MessageTag, VECTOR_INTERRUPT, VECTOR_SYSCALL,
 };
 use abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_SCHEDULES, MAX_WINDOWS, PageRights, TASK_NAME_MAX,
-    TIME_PARTITIONS, ThreadAttribute, USER_END,
+    TIME_PARTITIONS, ThreadAttribute, ThreadId, USER_END, WindowSpec,
 };
 
 /// What the entry glue must do after a kernel operation.
@@ -79,12 +79,6 @@ handlers! {
     IrqDetach => irq_detach,
 }
 
-/// The argument registers of thread `t`.
-fn args(k: &Kernel, t: ThreadIdx) -> ArgRegs {
-    let c = &k.threads[t].context;
-    ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
-}
-
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
 /// ns since boot, read only by calls that need it (it costs a division).
 pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
@@ -101,7 +95,7 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
     let raw = k.threads[t].context.rax;
     let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
-        Some(call) => dispatch(call, k, t, &args(k, t), clock),
+        Some(call) => dispatch(call, k, t, &k.threads[t].arg_regs(), clock),
     };
     match result {
         Ok(Next::Return) => {
@@ -149,9 +143,13 @@ fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 }
 
 fn clock(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, clock: Clock) -> Handled {
-    let c = &mut k.threads[t].context;
-    (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
-    c.r10 = crate::time::wall_clock_at_boot();
+    let now = results::Clock {
+        ns: clock(),
+        tsc_hz: crate::time::tsc_hz(),
+        boot_tsc: crate::time::boot_tsc(),
+        wall_clock_at_boot: crate::time::wall_clock_at_boot(),
+    };
+    k.threads[t].set_results(|r| now.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -215,7 +213,8 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     let name = core::str::from_utf8(name).map_err(|_| Error::InvalidArgument)?;
     let child = k.create_task(task, abilities, mcp, rp, name)?;
-    k.threads[t].context.rdi = k.task_id(child);
+    let task = k.task_id(child);
+    k.threads[t].set_results(|r| results::TaskCreate { task }.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -268,7 +267,8 @@ fn thread_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled
     let priority = u8::try_from(a.priority).map_err(|_| Error::McpExceeded)?;
     let tp = k.threads[t].time_partition;
     let new = k.create_thread(target, a.entry, a.stack, priority, tp, a.arg)?;
-    k.threads[t].context.rdi = k.thread_id(new);
+    let thread = k.thread_id(new);
+    k.threads[t].set_results(|r| results::ThreadCreate { thread }.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -352,13 +352,16 @@ fn thread_interrupt(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Hand
         };
         k.raise_fault(target, fault);
     }
-    k.threads[t].context.rdi = interrupted as u64;
+    k.threads[t].set_results(|r| results::ThreadInterrupt { interrupted }.encode_into(r));
     Ok(Next::Return)
 }
 
 fn thread_self(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, _: Clock) -> Handled {
-    k.threads[t].context.rdi = k.thread_id(t);
-    k.threads[t].context.rsi = k.task_id(task_of(k, t));
+    let me = results::ThreadSelf {
+        thread: k.thread_id(t),
+        task: k.task_id(task_of(k, t)),
+    };
+    k.threads[t].set_results(|r| me.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -447,9 +450,9 @@ fn ipc_call(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled 
 
 fn receive(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let a = args::Ipc::decode(r);
-    let from = match a.peer {
-        0 => None,
-        id => Some(k.thread(id)?),
+    let from = match a.peer.named() {
+        None => None,
+        Some(id) => Some(k.thread(id)?),
     };
     k.receive(t, from, deadline(clock, a.timeout), a.timeout == 0);
     Ok(Next::Pending)
@@ -460,8 +463,8 @@ fn answer_caller(k: &mut Kernel, t: ThreadIdx, a: &args::Ipc) -> Result<(), Erro
     if !MessageTag(a.tag).is_valid() {
         return Err(Error::InvalidArgument);
     }
-    if a.peer != 0 {
-        let caller = k.thread(a.peer).map_err(|_| Error::NotWaiting)?;
+    if let Some(peer) = a.peer.named() {
+        let caller = k.thread(peer).map_err(|_| Error::NotWaiting)?;
         k.reply(t, caller)?;
     }
     Ok(())
@@ -507,20 +510,25 @@ fn rp_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
             pages: a.pages,
         },
     )?;
-    k.threads[t].context.rdi = rp.position() as u64 + 1;
+    let rp = rp.position() as u64 + 1;
+    k.threads[t].set_results(|r| results::RpCreate { rp }.encode_into(r));
     Ok(Next::Return)
 }
 
 fn rp_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let rp = k.resource_partition(task_of(k, t), args::RpInfo::decode(r).rp)?;
-    let r = k.rps[rp];
-    let c = &mut k.threads[t].context;
-    c.rdi = r.used.pages;
-    c.rsi = r.quota.pages;
-    c.rdx = (r.used.threads & 0xffff)
-        | (r.quota.threads & 0xffff) << 16
-        | (r.used.tasks & 0xffff) << 32
-        | (r.quota.tasks & 0xffff) << 48;
+    let (used, quota) = (k.rps[rp].used, k.rps[rp].quota);
+    let info = results::RpInfo {
+        pages_used: used.pages,
+        pages_quota: quota.pages,
+        counts: RpCounts {
+            threads_used: used.threads as u16,
+            threads_quota: quota.threads as u16,
+            tasks_used: used.tasks as u16,
+            tasks_quota: quota.tasks as u16,
+        },
+    };
+    k.threads[t].set_results(|r| info.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -545,19 +553,18 @@ fn schedule_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled 
     }
     let mut windows = [Window::default(); MAX_WINDOWS as usize];
     for (i, w) in windows.iter_mut().take(a.count as usize).enumerate() {
-        let mut raw = [0u8; 24];
-        let at = a
-            .windows
-            .checked_add(i as u64 * 24)
+        let mut raw = [0u8; WindowSpec::SIZE];
+        let at = (a.windows)
+            .checked_add((i * WindowSpec::SIZE) as u64)
             .ok_or(Error::BadAddress)?;
         if !k.tasks[task].space.copy_from_user(at, &mut raw) {
             return Err(Error::BadAddress);
         }
-        let word = |n: usize| u64::from_ne_bytes(raw[n * 8..n * 8 + 8].try_into().unwrap());
+        let spec = WindowSpec::from_bytes(&raw);
         *w = Window {
-            offset: word(0),
-            duration: word(1),
-            partition: u8::try_from(word(2)).map_err(|_| Error::InvalidArgument)?,
+            offset: spec.offset,
+            duration: spec.duration,
+            partition: u8::try_from(spec.partition).map_err(|_| Error::InvalidArgument)?,
         };
     }
     let schedule = Schedule::new(a.major_frame, &windows[..a.count as usize])
@@ -593,9 +600,15 @@ fn partition_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Ha
         ns(k.idle_ticks),
         k.time.frames,
     );
-    let active = k.active_partition.unwrap_or(0) as u64;
-    let c = &mut k.threads[t].context;
-    (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);
+    let info = results::PartitionInfo {
+        active: k.active_partition.unwrap_or(0) as u64,
+        window_start: start,
+        window_length: length,
+        cpu_ns: cpu,
+        idle_ns: idle,
+        frames,
+    };
+    k.threads[t].set_results(|r| info.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -654,19 +667,20 @@ fn set_attribute(
     attribute: u64,
     value: u64,
 ) -> Result<(), Error> {
+    let handler = ThreadId(value);
     match ThreadAttribute::from_code(attribute).ok_or(Error::InvalidArgument)? {
         ThreadAttribute::Priority => {
             let priority = u8::try_from(value).map_err(|_| Error::McpExceeded)?;
             k.set_priority(target, priority)
         }
         ThreadAttribute::ExceptionHandler => {
-            if value != 0 {
-                let handler = k.thread(value)?;
+            if let Some(handler) = handler.named() {
+                let handler = k.thread(handler)?;
                 if !k.is_within(k.threads[target].task, k.threads[handler].task) {
                     return Err(Error::NotPermitted);
                 }
             }
-            k.threads[target].exception_handler = value;
+            k.threads[target].exception_handler = handler;
             Ok(())
         }
         ThreadAttribute::IpcBuffer => {

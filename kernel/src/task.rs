@@ -15,7 +15,7 @@ use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
     ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
 };
-use abi::syscall::{Error, TASK_NAME_MAX, make_id};
+use abi::syscall::{Error, TASK_NAME_MAX, TaskId, make_id};
 
 #[derive(Clone, Copy)]
 pub struct Task {
@@ -209,20 +209,20 @@ pub fn create_root(
 }
 
 impl Kernel {
-    pub fn task_id(&self, t: TaskIdx) -> u64 {
-        make_id(t.position(), self.tasks[t].generation)
+    pub fn task_id(&self, t: TaskIdx) -> TaskId {
+        TaskId(make_id(t.position(), self.tasks[t].generation))
     }
 
     /// The live task `id` names (a dying one is gone for every call but `task_kill`).
-    pub fn task(&self, id: u64) -> Result<TaskIdx, Error> {
-        slot_of(&self.tasks, id, |t| {
+    pub fn task(&self, id: TaskId) -> Result<TaskIdx, Error> {
+        slot_of(&self.tasks, id.0, |t| {
             (t.in_use && !t.dying).then_some(t.generation)
         })
     }
 
     /// The task `id` names, live or dying (`task_kill` goes on destroying a dying one).
-    pub fn task_to_kill(&self, id: u64) -> Result<TaskIdx, Error> {
-        slot_of(&self.tasks, id, |t| t.in_use.then_some(t.generation))
+    pub fn task_to_kill(&self, id: TaskId) -> Result<TaskIdx, Error> {
+        slot_of(&self.tasks, id.0, |t| t.in_use.then_some(t.generation))
     }
 
     /// True if `task` is `ancestor` or one of its descendants.
@@ -240,8 +240,11 @@ impl Kernel {
     }
 
     /// The task named by `id` (0 = `caller`'s own), if the caller controls it.
-    pub fn controlled_task(&self, caller: TaskIdx, id: u64) -> Result<TaskIdx, Error> {
-        let task = if id == 0 { caller } else { self.task(id)? };
+    pub fn controlled_task(&self, caller: TaskIdx, id: TaskId) -> Result<TaskIdx, Error> {
+        let task = match id.named() {
+            None => caller,
+            Some(id) => self.task(id)?,
+        };
         if self.is_within(task, caller) {
             Ok(task)
         } else {

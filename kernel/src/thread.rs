@@ -5,7 +5,8 @@ use crate::rp::Amount;
 use crate::sched::TIME_PARTITIONS;
 use crate::state::{Kernel, USER_CS, USER_RFLAGS, USER_SS, slot_of};
 use crate::table::{Slot, TaskIdx, ThreadIdx};
-use abi::syscall::{Error, USER_END, make_id};
+use abi::args::ArgRegs;
+use abi::syscall::{Error, ThreadId, USER_END, make_id};
 
 /// No thread (end of an intrusive list).
 pub const NIL: u16 = u16::MAX;
@@ -91,8 +92,8 @@ pub struct Thread {
     pub fs_base: u64,
     pub gs_base: u64,
     pub fpu: FpuState,
-    /// Raw thread identifier of the exception handler (0 = none), resolved at fault time.
-    pub exception_handler: u64,
+    /// The exception handler ([`ThreadId::OWN`] = none), resolved at fault time.
+    pub exception_handler: ThreadId,
     pub ipc_buffer: u64,
     /// Absolute time (ns since boot) at which a blocking call times out.
     pub deadline: u64,
@@ -141,7 +142,7 @@ impl Thread {
         fs_base: 0,
         gs_base: 0,
         fpu: FpuState::initial(),
-        exception_handler: 0,
+        exception_handler: ThreadId::OWN,
         ipc_buffer: 0,
         deadline: NEVER,
         fault: None,
@@ -158,25 +159,45 @@ impl Thread {
     pub fn is_runnable(&self) -> bool {
         self.state == State::Ready && !self.suspended
     }
+
+    /// The argument registers of its system call.
+    #[inline(always)]
+    pub fn arg_regs(&self) -> ArgRegs {
+        let c = &self.context;
+        ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
+    }
+
+    /// Writes a call's results into its argument registers: `encode` (an `abi::args::results`
+    /// struct's `encode_into`) sets those the results use, the others keep their values.
+    #[inline(always)]
+    pub fn set_results(&mut self, encode: impl FnOnce(&mut ArgRegs)) {
+        let mut regs = self.arg_regs();
+        encode(&mut regs);
+        let c = &mut self.context;
+        [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = regs.to_array();
+    }
 }
 
 impl Kernel {
-    pub fn thread_id(&self, t: ThreadIdx) -> u64 {
-        make_id(t.position(), self.threads[t].generation)
+    pub fn thread_id(&self, t: ThreadIdx) -> ThreadId {
+        ThreadId(make_id(t.position(), self.threads[t].generation))
     }
 
-    pub fn thread(&self, id: u64) -> Result<ThreadIdx, Error> {
-        slot_of(&self.threads, id, |t| {
+    pub fn thread(&self, id: ThreadId) -> Result<ThreadIdx, Error> {
+        slot_of(&self.threads, id.0, |t| {
             (!t.is_free()).then_some(t.generation)
         })
     }
 
     /// The thread named by `id` (0 = `caller_thread`), if the caller's task controls it.
-    pub fn controlled_thread(&self, caller_thread: ThreadIdx, id: u64) -> Result<ThreadIdx, Error> {
-        let thread = if id == 0 {
-            caller_thread
-        } else {
-            self.thread(id)?
+    pub fn controlled_thread(
+        &self,
+        caller_thread: ThreadIdx,
+        id: ThreadId,
+    ) -> Result<ThreadIdx, Error> {
+        let thread = match id.named() {
+            None => caller_thread,
+            Some(id) => self.thread(id)?,
         };
         let task = self.threads[thread].task;
         if self.tasks[task].dying {
@@ -306,7 +327,7 @@ impl Kernel {
             }
         }
         if self.health_monitor == id {
-            self.health_monitor = 0;
+            self.health_monitor = ThreadId::OWN;
         }
         if self.current == Some(t) {
             self.current = None;

@@ -218,9 +218,9 @@ fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
     }
     let [lo, hi] = k.tasks[task].io_bitmap;
     if lo == 0 {
-        if k.io_loaded != 0 {
+        if k.io_loaded != abi::syscall::TaskId::OWN {
             super::gdt::load_io_bitmap(None);
-            k.io_loaded = 0;
+            k.io_loaded = abi::syscall::TaskId::OWN;
         }
         return;
     }
