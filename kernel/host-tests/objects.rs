@@ -37,18 +37,8 @@ impl Fixture {
             },
         );
         k.rps[RpIdx::ROOT].charge(Amount::tasks(1)).unwrap();
-        let mut root = Task {
-            in_use: true,
-            abilities: Abilities::all(),
-            irq_lines: crate::irq::root_lines(),
-            mcp: 255,
-            space: crate::mem::paging::AddressSpace::new().unwrap(),
-            send_to: 1,
-            ..Task::FREE
-        };
-        root.name[..4].copy_from_slice(b"root");
-        root.name_len = 4;
-        k.tasks[ROOT] = root;
+        let space = crate::mem::paging::AddressSpace::new().unwrap();
+        k.tasks[ROOT] = Task::root(space, "root");
         k.user_memory[0] = PhysRegion {
             start: test_arena::USER_BASE,
             pages: test_arena::FRAMES / 2,
@@ -69,10 +59,10 @@ impl Fixture {
             .unwrap();
         self.k.set_state(t, State::Ready);
         let at = BUFFER_AT + t.position() as u64 * 0x4000;
-        if self.k.tasks[task].space.translate(at).is_none() {
+        if self.k.tasks[task].space().translate(at).is_none() {
             self.give(task, at, 2, PageRights::WRITE);
         }
-        self.k.threads[t].ipc_buffer = at;
+        self.k.threads[t].set_ipc_buffer(at);
         t
     }
 
@@ -87,7 +77,7 @@ impl Fixture {
 
     fn task(&mut self, parent: TaskIdx, abilities: Abilities, mcp: u8) -> TaskIdx {
         self.k
-            .create_task(parent, abilities, mcp, self.k.tasks[parent].rp, "t")
+            .create_task(parent, abilities, mcp, self.k.tasks[parent].rp(), "t")
             .unwrap()
     }
 
@@ -95,16 +85,17 @@ impl Fixture {
     /// A call that restarts itself (its `syscall` again: `rip` 2 bytes back) is made
     /// again, as the thread would.
     fn sys(&mut self, t: ThreadIdx, call: Call, a: [u64; 6]) -> u64 {
-        let c = &mut self.k.threads[t].context;
+        let c = self.k.threads[t].context_mut();
         c.rax = call as u64;
         [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
         loop {
-            let rip = self.k.threads[t].context.rip;
+            let rip = self.k.threads[t].context().rip;
             assert_eq!(on_syscall(&mut self.k, t, || 0), Outcome::Continue);
-            if self.k.threads[t].is_free() || self.k.threads[t].context.rip != rip.wrapping_sub(2) {
-                return self.k.threads[t].context.rax;
+            if self.k.threads[t].is_free() || self.k.threads[t].context().rip != rip.wrapping_sub(2)
+            {
+                return self.k.threads[t].context().rax;
             }
-            self.k.threads[t].context.rip = rip;
+            self.k.threads[t].context_mut().rip = rip;
         }
     }
 
@@ -113,14 +104,14 @@ impl Fixture {
     }
 
     fn write(&self, t: ThreadIdx, at: u64, data: &[u8]) {
-        let task = self.k.threads[t].task;
-        assert!(self.k.tasks[task].space.copy_to_user(at, data));
+        let task = self.k.threads[t].task();
+        assert!(self.k.tasks[task].space().copy_to_user(at, data));
     }
 
     fn read(&self, t: ThreadIdx, at: u64, len: usize) -> Vec<u8> {
-        let task = self.k.threads[t].task;
+        let task = self.k.threads[t].task();
         let mut out = vec![0; len];
-        assert!(self.k.tasks[task].space.copy_from_user(at, &mut out));
+        assert!(self.k.tasks[task].space().copy_from_user(at, &mut out));
         out
     }
 }
@@ -130,10 +121,9 @@ impl Fixture {
 impl Drop for Fixture {
     fn drop(&mut self) {
         for slot in TaskIdx::all() {
-            if self.k.tasks[slot].in_use {
+            if self.k.tasks[slot].in_use() {
                 self.k.release_io_bitmap(slot);
-                let mut all = u64::MAX;
-                self.k.tasks[slot].space.destroy_some(&mut all);
+                self.k.tasks[slot].destroy_space();
             }
         }
     }
@@ -185,7 +175,7 @@ fn abilities_and_mcp_bound_children() {
         err(Error::McpExceeded)
     );
     assert_eq!(f.sys(root, Call::ThreadSet, [wt, prio, 99, 0, 0, 0]), OK);
-    assert_eq!(f.k.threads[w].priority, 99);
+    assert_eq!(f.k.threads[w].priority(), 99);
     // Children cannot control their parent.
     let rt = f.id(root);
     assert_eq!(
@@ -196,7 +186,7 @@ fn abilities_and_mcp_bound_children() {
 
 /// Writes a one-byte task name into the root's buffer; returns its address.
 fn root_name(f: &mut Fixture, root: ThreadIdx) -> u64 {
-    let at = f.k.threads[root].ipc_buffer;
+    let at = f.k.threads[root].ipc_buffer();
     f.write(root, at, b"c");
     at
 }
@@ -209,10 +199,10 @@ fn thread_lifecycle_and_stale_ids() {
         f.sys(root, Call::ThreadCreate, [0, 0x1000, 0x2000, 10, 7, 0]),
         OK
     );
-    let id = f.k.threads[root].context.rdi;
+    let id = f.k.threads[root].context().rdi;
     let t = f.k.thread(ThreadId(id)).unwrap();
-    assert_eq!(f.k.threads[t].state, State::Inactive);
-    assert_eq!(f.k.threads[t].context.rdi, 7, "argument in rdi");
+    assert_eq!(f.k.threads[t].state(), State::Inactive);
+    assert_eq!(f.k.threads[t].context().rdi, 7, "argument in rdi");
     assert_eq!(f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]), OK);
     assert_eq!(
         f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]),
@@ -242,9 +232,9 @@ fn exhausting_one_partition_leaves_the_other_working() {
     let root = f.thread(ROOT, 200);
     let quota = |threads, pages| [2, threads, pages, 0, 0, 0];
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
-    let a = f.k.threads[root].context.rdi;
+    let a = f.k.threads[root].context().rdi;
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
-    let b = f.k.threads[root].context.rdi;
+    let b = f.k.threads[root].context().rdi;
     assert_eq!(
         f.sys(root, Call::RpCreate, quota(1000, 8)),
         err(Error::QuotaExceeded)
@@ -252,9 +242,9 @@ fn exhausting_one_partition_leaves_the_other_working() {
     let at = root_name(&mut f, root);
     let all = Abilities::all().bits();
     assert_eq!(f.sys(root, Call::TaskCreate, [all, 100, a, at, 1, 0]), OK);
-    let ta = f.k.threads[root].context.rdi;
+    let ta = f.k.threads[root].context().rdi;
     assert_eq!(f.sys(root, Call::TaskCreate, [all, 100, b, at, 1, 0]), OK);
-    let tb = f.k.threads[root].context.rdi;
+    let tb = f.k.threads[root].context().rdi;
     let create = |task| [task, 0x1000, 0x2000, 10, 0, 0];
     assert_eq!(f.sys(root, Call::ThreadCreate, create(ta)), OK);
     assert_eq!(f.sys(root, Call::ThreadCreate, create(ta)), OK);
@@ -277,14 +267,14 @@ fn exhausting_one_partition_leaves_the_other_working() {
         err(Error::QuotaExceeded)
     );
     assert_eq!(
-        f.k.tasks[ita].space.translate(0x80_0000_0000),
+        f.k.tasks[ita].space().translate(0x80_0000_0000),
         None,
         "nothing changed"
     );
     // B is untouched by A's exhaustion.
     assert_eq!(f.sys(root, Call::ThreadCreate, create(tb)), OK);
     assert_eq!(f.sys(root, Call::MapPhysical, map(tb, 0x1000)), OK);
-    assert!(f.k.tasks[itb].space.translate(0x1000).is_some());
+    assert!(f.k.tasks[itb].space().translate(0x1000).is_some());
     // Killing A returns everything.
     assert_eq!(f.sys(root, Call::TaskKill, [ta, 0, 0, 0, 0, 0]), OK);
     let rp_a = f.k.rps.slot(a as usize - 1).unwrap();
@@ -358,11 +348,11 @@ fn map_protect_unmap_rules() {
     );
     assert_eq!(f.sys(root, Call::Protect, [0, 0x51_0000, 1, ro, 0, 0]), OK);
     assert_eq!(
-        f.k.tasks[ROOT].space.translate(0x51_0000).unwrap().1,
+        f.k.tasks[ROOT].space().translate(0x51_0000).unwrap().1,
         PageRights::empty()
     );
     assert_eq!(f.sys(root, Call::Unmap, [cid, 0x60_0000, 2, 0, 0, 0]), OK);
-    assert_eq!(f.k.tasks[child].space.translate(0x60_0000), None);
+    assert_eq!(f.k.tasks[child].space().translate(0x60_0000), None);
     // No MAP ability, no map.
     let weak = f.task(ROOT, Abilities::NATIVE_SYSCALLS, 10);
     let w = f.thread(weak, 5);
@@ -380,25 +370,25 @@ fn call_reply_with_data_and_words() {
     let server = f.thread(server_task, 150);
     // The server waits first.
     f.sys(server, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
-    assert_eq!(f.k.threads[server].state, State::Receiving { from: None });
+    assert_eq!(f.k.threads[server].state(), State::Receiving { from: None });
     let (cbuf, sbuf) = (
-        f.k.threads[client].ipc_buffer,
-        f.k.threads[server].ipc_buffer,
+        f.k.threads[client].ipc_buffer(),
+        f.k.threads[server].ipc_buffer(),
     );
     f.write(client, cbuf, b"hello server");
     let tag = MessageTag::new(7, 12, 0).0;
     let sid = f.id(server);
     f.sys(client, Call::Call, [sid, TIMEOUT_INFINITE, tag, 1, 2, 3]);
     assert_eq!(
-        f.k.threads[client].state,
+        f.k.threads[client].state(),
         State::WaitingReply { from: server }
     );
-    let c = f.k.threads[server].context;
+    let c = f.k.threads[server].context();
     assert_eq!(
         (c.rax, c.rdi, c.rdx, c.r10, c.r8, c.r9),
         (OK, f.id(client), tag, 1, 2, 3)
     );
-    let client_task = f.k.task_id(f.k.threads[client].task).0;
+    let client_task = f.k.task_id(f.k.threads[client].task()).0;
     assert_eq!(
         c.rsi, client_task,
         "the sender's task, for the server to trust"
@@ -412,14 +402,14 @@ fn call_reply_with_data_and_words() {
         Call::ReplyWait,
         [cid, TIMEOUT_INFINITE, MessageTag::new(9, 2, 0).0, 4, 5, 6],
     );
-    assert_eq!(f.k.threads[server].state, State::Receiving { from: None });
-    let c = f.k.threads[client].context;
+    assert_eq!(f.k.threads[server].state(), State::Receiving { from: None });
+    let c = f.k.threads[client].context();
     assert_eq!(
         (c.rax, c.rdx, c.r10, c.r8, c.r9),
         (OK, MessageTag::new(9, 2, 0).0, 4, 5, 6)
     );
     assert_eq!(f.read(client, cbuf, 2), b"ok");
-    assert_eq!(f.k.threads[client].state, State::Ready);
+    assert_eq!(f.k.threads[client].state(), State::Ready);
     // A reply to a thread not waiting for one.
     assert_eq!(
         f.sys(client, Call::Reply, [sid, 0, 0, 0, 0, 0]),
@@ -438,12 +428,12 @@ fn senders_queue_by_priority_then_fifo() {
         .collect();
     for (i, &s) in senders.iter().enumerate() {
         f.sys(s, Call::Send, [rid, TIMEOUT_INFINITE, 0, i as u64, 0, 0]);
-        assert!(matches!(f.k.threads[s].state, State::Sending { .. }));
+        assert!(matches!(f.k.threads[s].state(), State::Sending { .. }));
     }
     let mut order = vec![];
     for _ in 0..4 {
         assert_eq!(f.sys(receiver, Call::Receive, [0, 0, 0, 0, 0, 0]), OK);
-        order.push(f.k.threads[receiver].context.r10);
+        order.push(f.k.threads[receiver].context().r10);
     }
     assert_eq!(
         order,
@@ -456,7 +446,7 @@ fn senders_queue_by_priority_then_fifo() {
         "poll"
     );
     for s in senders {
-        assert_eq!(f.k.threads[s].context.rax, OK);
+        assert_eq!(f.k.threads[s].context().rax, OK);
     }
 }
 
@@ -470,18 +460,18 @@ fn timeouts_expire_at_their_deadline() {
     f.sys(b, Call::NotifyWait, [1, 500, 0, 0, 0, 0]);
     assert_eq!(f.k.next_deadline, 500);
     f.k.expire_timeouts(499);
-    assert_eq!(f.k.threads[a].state, State::Receiving { from: None });
+    assert_eq!(f.k.threads[a].state(), State::Receiving { from: None });
     f.k.expire_timeouts(500);
-    assert_eq!(f.k.threads[b].state, State::Ready);
-    assert_eq!(f.k.threads[b].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.threads[b].state(), State::Ready);
+    assert_eq!(f.k.threads[b].context().rax, err(Error::TimedOut));
     assert_eq!(f.k.next_deadline, 1000);
     f.k.expire_timeouts(1000);
-    assert_eq!(f.k.threads[a].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.threads[a].context().rax, err(Error::TimedOut));
     // A queued sender times out and leaves the queue.
     let aid = f.id(a);
     f.sys(b, Call::Send, [aid, 10, 0, 0, 0, 0]);
     f.k.expire_timeouts(10);
-    assert_eq!(f.k.threads[b].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.threads[b].context().rax, err(Error::TimedOut));
     assert_eq!(f.k.first_sender(a, None), None);
     let _ = bid;
 }
@@ -520,7 +510,7 @@ fn communication_rights_restrict_senders() {
     );
     assert_eq!(f.sys(tx, Call::NotifySignal, [yid, 0b100, 0, 0, 0, 0]), OK);
     assert_eq!(f.sys(ty, Call::NotifyWait, [0b110, 0, 0, 0, 0, 0]), OK);
-    assert_eq!(f.k.threads[ty].context.rdi, 0b100);
+    assert_eq!(f.k.threads[ty].context().rdi, 0b100);
 }
 
 #[test]
@@ -556,15 +546,15 @@ fn map_and_grant_items() {
     );
     assert_eq!(f.read(receiver, 0x90_0000, 6), b"shared");
     assert!(
-        f.k.tasks[ROOT].space.translate(0x70_0000).is_some(),
+        f.k.tasks[ROOT].space().translate(0x70_0000).is_some(),
         "mapped: sender keeps it"
     );
     assert!(
-        f.k.tasks[ROOT].space.translate(0x70_1000).is_none(),
+        f.k.tasks[ROOT].space().translate(0x70_1000).is_none(),
         "granted: sender lost it"
     );
     assert_eq!(
-        f.k.tasks[rtask].space.translate(0x90_1000).unwrap().1,
+        f.k.tasks[rtask].space().translate(0x90_1000).unwrap().1,
         PageRights::empty()
     );
     // Mapping into occupied window pages fails for the sender; the receiver keeps waiting.
@@ -577,7 +567,10 @@ fn map_and_grant_items() {
         ),
         err(Error::AlreadyMapped)
     );
-    assert_eq!(f.k.threads[receiver].state, State::Receiving { from: None });
+    assert_eq!(
+        f.k.threads[receiver].state(),
+        State::Receiving { from: None }
+    );
 }
 
 #[test]
@@ -586,8 +579,9 @@ fn exception_round_trip_with_edited_registers() {
     let handler = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
     let t = f.thread(child, 50);
-    f.k.threads[t].exception_handler = ThreadId(f.id(handler));
-    f.k.threads[t].context.rip = 0x40_1000;
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
+    f.k.threads[t].context_mut().rip = 0x40_1000;
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     let fault = Fault {
         label: LABEL_EXCEPTION,
@@ -596,8 +590,11 @@ fn exception_round_trip_with_edited_registers() {
         address: 0,
     };
     assert!(f.k.raise_fault(t, fault));
-    assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
-    let c = f.k.threads[handler].context;
+    assert_eq!(
+        f.k.threads[t].state(),
+        State::WaitingReply { from: handler }
+    );
+    let c = f.k.threads[handler].context();
     assert_eq!(MessageTag(c.rdx).label(), LABEL_EXCEPTION);
     let bytes = f.read(
         handler,
@@ -620,10 +617,10 @@ fn exception_round_trip_with_edited_registers() {
     let tid = f.id(t);
     let tag = MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0).0;
     assert_eq!(f.sys(handler, Call::Reply, [tid, 0, tag, 0, 0, 0]), OK);
-    let c = f.k.threads[t].context;
+    let c = f.k.threads[t].context();
     assert_eq!((c.rip, c.rax), (0x40_1002, 0x1234));
     assert_eq!(c.rflags & !USER_RFLAGS_MASK, 0x202, "IF on, IOPL 0");
-    assert_eq!(f.k.threads[t].state, State::Ready);
+    assert_eq!(f.k.threads[t].state(), State::Ready);
     // Second fault: kill.
     assert!(f.k.raise_fault(t, fault));
     f.sys(handler, Call::Receive, [0, 0, 0, 0, 0, 0]);
@@ -639,16 +636,17 @@ fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
     let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
     let t = f.thread(guest, 50);
     let tid = f.id(t);
-    f.k.threads[t].context.rip = 0x40_2000;
+    f.k.threads[t].context_mut().rip = 0x40_2000;
     // Without a handler there is nobody to tell.
     let interrupt = |f: &mut Fixture| f.sys(handler, Call::ThreadInterrupt, [tid, 0, 0, 0, 0, 0]);
     assert_eq!(interrupt(&mut f), err(Error::InvalidArgument));
-    f.k.threads[t].exception_handler = ThreadId(f.id(handler));
-    assert_eq!(f.k.threads[t].state, State::Ready);
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
+    assert_eq!(f.k.threads[t].state(), State::Ready);
     assert_eq!(interrupt(&mut f), OK);
-    assert_eq!(f.k.threads[handler].context.rdi, 1);
+    assert_eq!(f.k.threads[handler].context().rdi, 1);
     assert_eq!(
-        f.k.threads[t].state,
+        f.k.threads[t].state(),
         State::Sending {
             to: handler,
             call: true
@@ -664,7 +662,7 @@ fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
     assert_eq!((m.vector, m.registers.rip), (VECTOR_INTERRUPT, 0x40_2000));
     // Now it waits for the reply (in the kernel): left alone.
     assert_eq!(interrupt(&mut f), OK);
-    assert_eq!(f.k.threads[handler].context.rdi, 0);
+    assert_eq!(f.k.threads[handler].context().rdi, 0);
     assert_eq!(
         f.sys(handler, Call::ThreadInterrupt, [0, 0, 0, 0, 0, 0]),
         err(Error::InvalidArgument)
@@ -677,11 +675,15 @@ fn syscalls_of_non_native_tasks_go_to_the_handler() {
     let handler = f.thread(ROOT, 200);
     let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
     let t = f.thread(guest, 50);
-    f.k.threads[t].exception_handler = ThreadId(f.id(handler));
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     f.sys(t, Call::Clock, [0; 6]);
-    assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
-    let c = f.k.threads[handler].context;
+    assert_eq!(
+        f.k.threads[t].state(),
+        State::WaitingReply { from: handler }
+    );
+    let c = f.k.threads[handler].context();
     assert_eq!(MessageTag(c.rdx).label(), LABEL_SYSCALL);
     assert_eq!(c.r10, VECTOR_SYSCALL);
 }
@@ -712,7 +714,7 @@ fn faults_without_handler_go_to_the_health_monitor_or_kill() {
     );
     f.sys(monitor, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     assert!(f.k.raise_fault(t, fault));
-    let c = f.k.threads[monitor].context;
+    let c = f.k.threads[monitor].context();
     assert_eq!(MessageTag(c.rdx).label(), LABEL_FAULT_REPORT);
     assert_eq!((c.r10, c.r8, c.r9), (14, 4, 0xdead));
 }
@@ -728,13 +730,13 @@ fn killing_a_server_releases_its_clients() {
     f.sys(waiting, Call::Call, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     f.sys(queued, Call::Send, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     assert_eq!(
-        f.k.threads[waiting].state,
+        f.k.threads[waiting].state(),
         State::WaitingReply { from: server }
     );
-    assert!(matches!(f.k.threads[queued].state, State::Sending { .. }));
+    assert!(matches!(f.k.threads[queued].state(), State::Sending { .. }));
     f.k.kill_thread(server);
-    assert_eq!(f.k.threads[waiting].context.rax, err(Error::PeerGone));
-    assert_eq!(f.k.threads[queued].context.rax, err(Error::PeerGone));
+    assert_eq!(f.k.threads[waiting].context().rax, err(Error::PeerGone));
+    assert_eq!(f.k.threads[queued].context().rax, err(Error::PeerGone));
 }
 
 #[test]
@@ -847,7 +849,7 @@ fn killing_a_large_subtree_takes_bounded_steps() {
     let root = f.thread(ROOT, 200);
     let before = (
         f.k.rps[RpIdx::ROOT].used,
-        f.k.tasks.iter().filter(|(_, t)| t.in_use).count(),
+        f.k.tasks.iter().filter(|(_, t)| t.in_use()).count(),
     );
     // A chain of tasks, each with threads, page tables far apart and an I/O bitmap.
     let top = f.task(ROOT, Abilities::all(), 100);
@@ -874,10 +876,10 @@ fn killing_a_large_subtree_takes_bounded_steps() {
     let mut calls = 0;
     loop {
         calls += 1;
-        let c = &mut f.k.threads[root].context;
+        let c = f.k.threads[root].context_mut();
         (c.rax, c.rdi, c.rip) = (Call::TaskKill as u64, tid, 0x1002);
         assert_eq!(on_syscall(&mut f.k, root, || 0), Outcome::Continue);
-        let c = &f.k.threads[root].context;
+        let c = &f.k.threads[root].context();
         if c.rip == 0x1002 {
             assert_eq!(c.rax, OK);
             break;
@@ -892,12 +894,12 @@ fn killing_a_large_subtree_takes_bounded_steps() {
         assert!(calls < 1_000, "no progress");
     }
     assert!(calls > 3, "{calls} calls: the work was not split");
-    assert!(chain.iter().all(|&t| !f.k.tasks[t].in_use));
+    assert!(chain.iter().all(|&t| !f.k.tasks[t].in_use()));
     f.k.destroy_task(other, u64::MAX);
     assert_eq!(
         (
             f.k.rps[RpIdx::ROOT].used,
-            f.k.tasks.iter().filter(|(_, t)| t.in_use).count()
+            f.k.tasks.iter().filter(|(_, t)| t.in_use()).count()
         ),
         before,
         "every task, thread, table and bitmap returned"
@@ -951,10 +953,13 @@ fn irq_lines_are_granted_attached_masked_until_acknowledged() {
 
     // Waiting, then the line fires: it closes and the waiter wakes.
     f.sys(c, Call::IrqWait, [3, TIMEOUT_INFINITE, 0, 0, 0, 0]);
-    assert!(matches!(f.k.threads[c].state, State::WaitingNotify { .. }));
+    assert!(matches!(
+        f.k.threads[c].state(),
+        State::WaitingNotify { .. }
+    ));
     f.k.irq_fired(3);
-    assert_eq!(f.k.threads[c].state, State::Ready);
-    assert_eq!(f.k.threads[c].context.rax, OK);
+    assert_eq!(f.k.threads[c].state(), State::Ready);
+    assert_eq!(f.k.threads[c].context().rax, OK);
     assert_eq!(f.k.irqs.unmasked, 0, "masked until acknowledged");
     // A second interrupt before the next wait is latched.
     f.k.irq_fired(3);
@@ -1102,16 +1107,16 @@ type TaskFrames = (TaskIdx, Vec<u64>, Vec<(u64, bool)>);
 fn frames_of(k: &Kernel) -> Vec<TaskFrames> {
     k.tasks
         .iter()
-        .filter(|(_, t)| t.in_use && t.space.root_frame() != 0)
+        .filter(|(_, t)| t.in_use() && t.space().root_frame() != 0)
         .map(|(slot, t)| {
             let (mut tables, mut pages) = (Vec::new(), Vec::new());
             walk(
-                t.space.root_frame(),
+                t.space().root_frame(),
                 3,
                 &mut |f| tables.push(f),
                 &mut |f, w| pages.push((f, w)),
             );
-            tables.extend(t.io_bitmap.iter().filter(|&&f| f != 0));
+            tables.extend(t.io_bitmap().iter().filter(|&&f| f != 0));
             (slot, tables, pages)
         })
         .collect()
@@ -1122,29 +1127,29 @@ fn invariants(k: &Kernel) -> Result<(), String> {
     // Send queues: a thread is in at most one, exactly when it is sending to its owner.
     let mut queued = vec![0u32; crate::state::MAX_THREADS];
     for (receiver, r) in k.threads.iter() {
-        let mut at = r.senders;
+        let mut at = r.senders();
         let mut steps = 0;
         while let Some(s) = at {
             queued[s.position()] += 1;
-            if !matches!(k.threads[s].state, State::Sending { to, .. } if to == receiver) {
+            if !matches!(k.threads[s].state(), State::Sending { to, .. } if to == receiver) {
                 return Err(format!(
                     "{s:?} is queued on {receiver:?} but {:?}",
-                    k.threads[s].state
+                    k.threads[s].state()
                 ));
             }
             steps += 1;
             if steps > crate::state::MAX_THREADS {
                 return Err(format!("the send queue of {receiver:?} loops"));
             }
-            at = k.threads[s].next_sender;
+            at = k.threads[s].next_sender();
         }
     }
     for (slot, t) in k.threads.iter() {
-        let sending = matches!(t.state, State::Sending { .. });
+        let sending = matches!(t.state(), State::Sending { .. });
         if queued[slot.position()] != u32::from(sending) {
             return Err(format!(
                 "{slot:?} ({:?}) is in {} send queues",
-                t.state,
+                t.state(),
                 queued[slot.position()]
             ));
         }
@@ -1170,14 +1175,14 @@ fn invariants(k: &Kernel) -> Result<(), String> {
         let tasks: Vec<&Task> = k
             .tasks
             .iter()
-            .filter(|(_, t)| t.in_use && t.rp == rp)
+            .filter(|(_, t)| t.in_use() && t.rp() == rp)
             .map(|(_, t)| t)
             .collect();
-        let pages: u64 = tasks.iter().map(|t| t.pages_charged).sum();
+        let pages: u64 = tasks.iter().map(|t| t.pages_charged()).sum();
         let threads = k
             .threads
             .iter()
-            .filter(|(_, t)| !t.is_free() && k.tasks[t.task].rp == rp)
+            .filter(|(_, t)| !t.is_free() && k.tasks[t.task()].rp() == rp)
             .count() as u64;
         let counted = Amount {
             tasks: tasks.len() as u64,
@@ -1202,28 +1207,32 @@ fn invariants(k: &Kernel) -> Result<(), String> {
             ));
         }
     }
-    for (slot, t) in k.tasks.iter().filter(|(_, t)| t.in_use) {
-        if let Some(parent) = t.parent {
+    for (slot, t) in k.tasks.iter().filter(|(_, t)| t.in_use()) {
+        if let Some(parent) = t.parent() {
             let p = &k.tasks[parent];
-            if !p.in_use {
+            if !p.in_use() {
                 return Err(format!("{slot:?}: its parent {parent:?} is gone"));
             }
-            if !p.abilities.contains(t.abilities) || t.mcp > p.mcp {
+            if !p.abilities().contains(t.abilities()) || t.mcp() > p.mcp() {
                 return Err(format!("{slot:?}: more abilities or MCP than its parent"));
             }
         }
     }
     for (slot, t) in k.threads.iter().filter(|(_, t)| !t.is_free()) {
-        let task = &k.tasks[t.task];
-        if !task.in_use {
-            return Err(format!("{slot:?}: its task {:?} is gone", t.task));
+        let task = &k.tasks[t.task()];
+        if !task.in_use() {
+            return Err(format!("{slot:?}: its task {:?} is gone", t.task()));
         }
-        if t.priority > task.mcp {
-            return Err(format!("{slot:?}: priority {} above its MCP", t.priority));
+        if t.priority() > task.mcp() {
+            return Err(format!("{slot:?}: priority {} above its MCP", t.priority()));
         }
-        let runnable = t.state == State::Ready && !t.suspended;
+        let runnable = t.state() == State::Ready && !t.is_suspended();
         if k.run.is_queued(slot.position()) != runnable {
-            return Err(format!("{slot:?}: {:?} but queued: {}", t.state, !runnable));
+            return Err(format!(
+                "{slot:?}: {:?} but queued: {}",
+                t.state(),
+                !runnable
+            ));
         }
     }
     Ok(())
@@ -1259,7 +1268,7 @@ proptest::proptest! {
                 .k
                 .threads
                 .iter()
-                .filter(|(_, t)| t.state == State::Ready && !t.suspended)
+                .filter(|(_, t)| t.state() == State::Ready && !t.is_suspended())
                 .map(|(slot, _)| slot)
                 .collect();
             if runnable.is_empty() {
@@ -1271,7 +1280,7 @@ proptest::proptest! {
                 continue;
             }
             let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s).0).collect();
-            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s).0));
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use()).map(|(s, _)| f.k.task_id(s).0));
             let pick = |(kind, raw): (usize, u64)| -> u64 {
                 match kind {
                     0..=7 => ids[raw as usize % ids.len()],
@@ -1290,7 +1299,7 @@ proptest::proptest! {
                 }
             };
             let a: Vec<u64> = args.into_iter().map(pick).collect();
-            let c = &mut f.k.threads[t].context;
+            let c = f.k.threads[t].context_mut();
             c.rax = number;
             [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = [a[0], a[1], a[2], a[3], a[4], a[5]];
             let _ = on_syscall(&mut f.k, t, || 0);
@@ -1338,7 +1347,7 @@ proptest::proptest! {
                 .k
                 .threads
                 .iter()
-                .filter(|(_, t)| t.state == State::Ready && !t.suspended && t.task != ROOT)
+                .filter(|(_, t)| t.state() == State::Ready && !t.is_suspended() && t.task() != ROOT)
                 .map(|(slot, _)| slot)
                 .collect();
             if runnable.is_empty() {
@@ -1347,7 +1356,7 @@ proptest::proptest! {
             let t = runnable[caller % runnable.len()];
             let number = if call % 2 == 0 { focus[call / 2 % focus.len()].code() } else { numbers[call / 2 % numbers.len()] };
             let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s).0).collect();
-            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s).0));
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use()).map(|(s, _)| f.k.task_id(s).0));
             let page = |raw: u64| match raw % 3 {
                 0 => 0x40_0000 + (raw / 3 % 8) * 0x1000,
                 1 => 0x80_0000 + (raw / 3 % 0x200) * 0x1000,
@@ -1367,7 +1376,7 @@ proptest::proptest! {
                 }
             };
             let a: Vec<u64> = args.into_iter().enumerate().map(pick).collect();
-            let c = &mut f.k.threads[t].context;
+            let c = f.k.threads[t].context_mut();
             c.rax = number;
             [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = [a[0], a[1], a[2], a[3], a[4], a[5]];
             let _ = on_syscall(&mut f.k, t, || 0);

@@ -11,7 +11,7 @@
 
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
-use crate::rp::{Amount, ResourcePartition};
+use crate::rp::ResourcePartition;
 use crate::sched::{RunQueues, TIME_PARTITIONS};
 use crate::table::{RpIdx, Slot, Table, TaskIdx, ThreadIdx};
 use crate::task::Task;
@@ -148,7 +148,7 @@ impl Kernel {
         let frame_of = |k: &Self, i: u64| -> Result<u64, Error> {
             match source {
                 Source::Virtual(base) => {
-                    match k.tasks[caller].space.translate(base + i * PAGE_SIZE) {
+                    match k.tasks[caller].space().translate(base + i * PAGE_SIZE) {
                         Some((frame, have)) if have.contains(rights) => Ok(frame),
                         _ => Err(Error::BadAddress),
                     }
@@ -168,7 +168,7 @@ impl Kernel {
             }
             _ => {}
         }
-        let space = self.tasks[target].space;
+        let space = self.tasks[target].space();
         for i in 0..pages {
             frame_of(self, i)?;
             if space.translate(destination + i * PAGE_SIZE).is_some() {
@@ -179,8 +179,7 @@ impl Kernel {
         for i in 0..pages {
             let frame = frame_of(self, i)?;
             self.tasks[target]
-                .space
-                .map(destination + i * PAGE_SIZE, frame, rights)
+                .map_page(destination + i * PAGE_SIZE, frame, rights)
                 .expect("checked and charged");
         }
         Ok(())
@@ -188,14 +187,12 @@ impl Kernel {
 
     /// Charges the page tables a map of `pages` at `at` in `task` will need.
     pub fn charge_tables(&mut self, task: TaskIdx, at: u64, pages: u64) -> Result<(), Error> {
-        let needed = self.tasks[task].space.tables_needed(at, pages);
+        let needed = self.tasks[task].space().tables_needed(at, pages);
         if needed > crate::mem::free_frames() {
             // Cannot happen while quotas stay within the reserved pool; refuse anyway.
             return Err(Error::OutOfResources);
         }
-        self.rps[self.tasks[task].rp].charge(Amount::pages(needed))?;
-        self.tasks[task].pages_charged += needed;
-        Ok(())
+        self.charge_pages(task, needed)
     }
 
     pub fn unmap(&mut self, target: TaskIdx, address: u64, pages: u64) -> Result<(), Error> {
@@ -203,7 +200,7 @@ impl Kernel {
             return Err(Error::InvalidArgument);
         }
         for i in 0..pages {
-            self.tasks[target].space.unmap(address + i * PAGE_SIZE);
+            self.tasks[target].unmap_page(address + i * PAGE_SIZE);
         }
         Ok(())
     }
@@ -218,7 +215,7 @@ impl Kernel {
         if pages == 0 || pages > MAP_MAX_PAGES || !is_user_range(address, pages) {
             return Err(Error::InvalidArgument);
         }
-        let space = &mut self.tasks[target].space;
+        let space = *self.tasks[target].space();
         for i in 0..pages {
             match space.translate(address + i * PAGE_SIZE) {
                 Some((_, have)) if have.contains(rights) => {}
@@ -226,7 +223,7 @@ impl Kernel {
             }
         }
         for i in 0..pages {
-            space.set_rights(address + i * PAGE_SIZE, rights);
+            self.tasks[target].set_page_rights(address + i * PAGE_SIZE, rights);
         }
         Ok(())
     }

@@ -82,8 +82,11 @@ handlers! {
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
 /// ns since boot, read only by calls that need it (it costs a division).
 pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
-    let task = k.threads[t].task;
-    if !k.tasks[task].abilities.contains(Abilities::NATIVE_SYSCALLS) {
+    let task = k.threads[t].task();
+    if !k.tasks[task]
+        .abilities()
+        .contains(Abilities::NATIVE_SYSCALLS)
+    {
         let fault = Fault {
             label: LABEL_SYSCALL,
             vector: VECTOR_SYSCALL,
@@ -92,20 +95,20 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
         };
         return crate::fault::deliver_or_report(k, t, fault);
     }
-    let raw = k.threads[t].context.rax;
+    let raw = k.threads[t].context().rax;
     let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
         Some(call) => dispatch(call, k, t, &k.threads[t].arg_regs(), clock),
     };
     match result {
         Ok(Next::Return) => {
-            k.threads[t].context.rax = Error::Ok as u64;
+            k.threads[t].set_status(Error::Ok);
             Outcome::Continue
         }
         Ok(Next::Pending) => Outcome::Continue,
         Ok(Next::Halt { success }) => Outcome::Halt { success },
         Err(e) => {
-            k.threads[t].context.rax = e as u64;
+            k.threads[t].set_status(e);
             Outcome::Continue
         }
     }
@@ -113,7 +116,7 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
 
 /// `rax` = Ok now, for calls that may block: the wake-up sets it again if the wait fails.
 fn ok_unless_changed(k: &mut Kernel, t: ThreadIdx) {
-    k.threads[t].context.rax = Error::Ok as u64;
+    k.threads[t].set_status(Error::Ok);
 }
 
 fn rights(bits: u64) -> Result<PageRights, Error> {
@@ -122,7 +125,7 @@ fn rights(bits: u64) -> Result<PageRights, Error> {
 
 /// The calling thread's task.
 fn task_of(k: &Kernel, t: ThreadIdx) -> TaskIdx {
-    k.threads[t].task
+    k.threads[t].task()
 }
 
 fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
@@ -134,7 +137,7 @@ fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     let mut buf = [0u8; DEBUG_WRITE_MAX as usize];
     let text = &mut buf[..a.len as usize];
-    if !k.tasks[task].space.copy_from_user(a.ptr, text) {
+    if !k.tasks[task].space().copy_from_user(a.ptr, text) {
         return Err(Error::BadAddress);
     }
     let text = core::str::from_utf8(text).unwrap_or("<invalid UTF-8>");
@@ -197,7 +200,7 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let abilities = Abilities::from_bits(a.abilities).ok_or(Error::InvalidArgument)?;
     let mcp = u8::try_from(a.mcp).map_err(|_| Error::McpExceeded)?;
     let rp = k.resource_partition(task, a.rp)?;
-    if rp != k.tasks[task].rp {
+    if rp != k.tasks[task].rp() {
         k.require(task, Abilities::PARTITION_CONTROL)?;
         if k.rps[rp].owner != task {
             return Err(Error::NotPermitted);
@@ -208,7 +211,7 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     let mut name = [0u8; TASK_NAME_MAX as usize];
     let name = &mut name[..a.name_len as usize];
-    if !k.tasks[task].space.copy_from_user(a.name_ptr, name) {
+    if !k.tasks[task].space().copy_from_user(a.name_ptr, name) {
         return Err(Error::BadAddress);
     }
     let name = core::str::from_utf8(name).map_err(|_| Error::InvalidArgument)?;
@@ -236,7 +239,7 @@ fn task_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     // Not done: the caller executes the same `syscall` again (2 bytes back, its registers
     // unchanged), so a window boundary or a higher priority can come in between.
-    k.threads[t].context.rip = k.threads[t].context.rip.wrapping_sub(SYSCALL_LEN);
+    k.threads[t].rewind(SYSCALL_LEN);
     Ok(Next::Pending)
 }
 
@@ -255,7 +258,7 @@ fn task_allow_send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handl
     let a = args::TaskAllowSend::decode(r);
     let from = k.controlled_task(task, a.from)?;
     let to = k.controlled_task(task, a.to)?;
-    k.tasks[from].send_to |= crate::task::bit(to);
+    k.allow_send(from, to);
     Ok(Next::Return)
 }
 
@@ -265,7 +268,7 @@ fn thread_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled
     let a = args::ThreadCreate::decode(r);
     let target = k.controlled_task(task, a.task)?;
     let priority = u8::try_from(a.priority).map_err(|_| Error::McpExceeded)?;
-    let tp = k.threads[t].time_partition;
+    let tp = k.threads[t].time_partition();
     let new = k.create_thread(target, a.entry, a.stack, priority, tp, a.arg)?;
     let thread = k.thread_id(new);
     k.threads[t].set_results(|r| results::ThreadCreate { thread }.encode_into(r));
@@ -275,7 +278,7 @@ fn thread_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled
 fn thread_start(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::CREATE_THREAD)?;
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
-    if k.threads[target].state != State::Inactive {
+    if k.threads[target].state() != State::Inactive {
         return Err(Error::InvalidArgument);
     }
     k.set_state(target, State::Ready);
@@ -318,9 +321,9 @@ fn thread_fpu(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     if target == t || a.write > 1 {
         return Err(Error::InvalidArgument);
     }
-    let space = &k.tasks[task_of(k, t)].space;
+    let space = &k.tasks[task_of(k, t)].space();
     if a.write == 0 {
-        let image = k.threads[target].fpu.0;
+        let image = k.threads[target].fpu().0;
         return if space.copy_to_user(a.buffer, &image) {
             Ok(Next::Return)
         } else {
@@ -331,18 +334,18 @@ fn thread_fpu(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     if !space.copy_from_user(a.buffer, &mut image) {
         return Err(Error::BadAddress);
     }
-    k.threads[target].fpu = k.threads[target].fpu.sanitized(image);
+    k.threads[target].load_fpu(image);
     Ok(Next::Return)
 }
 
 fn thread_interrupt(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
-    let handler = k.thread(k.threads[target].exception_handler);
+    let handler = k.thread(k.threads[target].exception_handler());
     if target == t || handler.is_err() {
         return Err(Error::InvalidArgument);
     }
     // One CPU: the caller runs, so a ready target is preempted in user mode.
-    let interrupted = k.threads[target].state == State::Ready;
+    let interrupted = k.threads[target].state() == State::Ready;
     if interrupted {
         let fault = Fault {
             label: LABEL_EXCEPTION,
@@ -424,7 +427,7 @@ fn send_message(
 ) -> Handled {
     let a = args::Ipc::decode(r);
     let dest = k.thread(a.peer)?;
-    if !k.may_send(task_of(k, t), k.threads[dest].task) {
+    if !k.may_send(task_of(k, t), k.threads[dest].task()) {
         return Err(Error::NotPermitted);
     }
     if !MessageTag(a.tag).is_valid() {
@@ -485,7 +488,7 @@ fn reply(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 fn notify_signal(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let a = args::NotifySignal::decode(r);
     let target = k.thread(a.thread)?;
-    if !k.may_send(task_of(k, t), k.threads[target].task) {
+    if !k.may_send(task_of(k, t), k.threads[target].task()) {
         return Err(Error::NotPermitted);
     }
     k.signal(target, a.bits);
@@ -537,7 +540,7 @@ fn set_health_monitor(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Ha
     k.require(task, Abilities::PARTITION_CONTROL)?;
     let id = args::SetHealthMonitor::decode(r).thread;
     let monitor = k.thread(id)?;
-    if task != TaskIdx::ROOT || k.threads[monitor].task != TaskIdx::ROOT {
+    if task != TaskIdx::ROOT || k.threads[monitor].task() != TaskIdx::ROOT {
         return Err(Error::NotPermitted);
     }
     k.health_monitor = id;
@@ -557,7 +560,7 @@ fn schedule_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled 
         let at = (a.windows)
             .checked_add((i * WindowSpec::SIZE) as u64)
             .ok_or(Error::BadAddress)?;
-        if !k.tasks[task].space.copy_from_user(at, &mut raw) {
+        if !k.tasks[task].space().copy_from_user(at, &mut raw) {
             return Err(Error::BadAddress);
         }
         let spec = WindowSpec::from_bytes(&raw);
@@ -676,32 +679,29 @@ fn set_attribute(
         ThreadAttribute::ExceptionHandler => {
             if let Some(handler) = handler.named() {
                 let handler = k.thread(handler)?;
-                if !k.is_within(k.threads[target].task, k.threads[handler].task) {
+                if !k.is_within(k.threads[target].task(), k.threads[handler].task()) {
                     return Err(Error::NotPermitted);
                 }
             }
-            k.threads[target].exception_handler = handler;
+            k.threads[target].set_exception_handler(handler);
             Ok(())
         }
         ThreadAttribute::IpcBuffer => {
-            let space = k.tasks[k.threads[target].task].space;
+            let space = k.tasks[k.threads[target].task()].space();
             if value != 0
                 && (!value.is_multiple_of(8) || !space.accessible(value, IPC_BUFFER_SIZE, true))
             {
                 return Err(Error::BadAddress);
             }
-            k.threads[target].ipc_buffer = value;
+            k.threads[target].set_ipc_buffer(value);
             Ok(())
         }
         ThreadAttribute::FsBase | ThreadAttribute::GsBase => {
             if value >= USER_END {
                 return Err(Error::InvalidArgument);
             }
-            if attribute == ThreadAttribute::FsBase as u64 {
-                k.threads[target].fs_base = value;
-            } else {
-                k.threads[target].gs_base = value;
-            }
+            let fs = attribute == ThreadAttribute::FsBase as u64;
+            k.threads[target].set_base(fs, value);
             k.reload_bases |= k.current == Some(target);
             Ok(())
         }
