@@ -333,6 +333,10 @@ mod tests {
         check(results::TaskCreate::decode, results::TaskCreate::encode);
         check(results::ThreadCreate::decode, results::ThreadCreate::encode);
         check(results::ThreadSelf::decode, results::ThreadSelf::encode);
+        check(
+            results::ThreadInterrupt::decode,
+            results::ThreadInterrupt::encode,
+        );
         check(results::Ipc::decode, results::Ipc::encode);
         check(results::NotifyWait::decode, results::NotifyWait::encode);
         check(results::RpCreate::decode, results::RpCreate::encode);

@@ -195,7 +195,7 @@ fn switch_to(k: &mut Kernel, next: ThreadIdx) {
             if let Some(previous) = k.current {
                 super::fpu::save(k.threads[previous].fpu_save_area());
             }
-            super::fpu::restore(&k.threads[next].fpu());
+            super::fpu::restore(k.threads[next].fpu());
             let space = k.tasks[k.threads[next].task()].space();
             if !space.is_active() {
                 space.activate();
