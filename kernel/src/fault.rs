@@ -49,7 +49,7 @@ pub fn deliver_or_report(k: &mut Kernel, t: ThreadIdx, fault: Fault) -> Outcome 
 }
 
 fn log_fault(k: &Kernel, t: ThreadIdx, fault: &Fault) {
-    let c = &k.threads[t].context();
+    let c = k.threads[t].context();
     let (mnemonic, description) = if fault.vector == abi::ipc::VECTOR_SYSCALL {
         ("SYSCALL", "forwarded system call")
     } else {

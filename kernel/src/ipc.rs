@@ -100,7 +100,7 @@ impl Kernel {
             tag = MessageTag::new(fault.label, EXCEPTION_MESSAGE_SIZE, 0);
             words = [fault.vector, fault.error_code, fault.address];
         } else {
-            let c = &self.threads[from].context();
+            let c = self.threads[from].context();
             tag = MessageTag(c.rdx);
             words = [c.r10, c.r8, c.r9];
             if !tag.is_valid() {
