@@ -11,7 +11,9 @@ use crate::task::Task;
 use crate::thread::{Fault, State};
 use abi::ipc::*;
 use abi::root::PhysRegion;
-use abi::syscall::{Abilities, Call, Error, PageRights, TIMEOUT_INFINITE, ThreadAttribute};
+use abi::syscall::{
+    Abilities, Call, Error, PageRights, TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId,
+};
 
 struct Fixture {
     k: Box<Kernel>,
@@ -35,18 +37,8 @@ impl Fixture {
             },
         );
         k.rps[RpIdx::ROOT].charge(Amount::tasks(1)).unwrap();
-        let mut root = Task {
-            in_use: true,
-            abilities: Abilities::all(),
-            irq_lines: crate::irq::root_lines(),
-            mcp: 255,
-            space: crate::mem::paging::AddressSpace::new().unwrap(),
-            send_to: 1,
-            ..Task::FREE
-        };
-        root.name[..4].copy_from_slice(b"root");
-        root.name_len = 4;
-        k.tasks[ROOT] = root;
+        let space = crate::mem::paging::AddressSpace::new().unwrap();
+        k.tasks[ROOT] = Task::root(space, "root");
         k.user_memory[0] = PhysRegion {
             start: test_arena::USER_BASE,
             pages: test_arena::FRAMES / 2,
@@ -67,10 +59,10 @@ impl Fixture {
             .unwrap();
         self.k.set_state(t, State::Ready);
         let at = BUFFER_AT + t.position() as u64 * 0x4000;
-        if self.k.tasks[task].space.translate(at).is_none() {
+        if self.k.tasks[task].space().translate(at).is_none() {
             self.give(task, at, 2, PageRights::WRITE);
         }
-        self.k.threads[t].ipc_buffer = at;
+        self.k.threads[t].set_ipc_buffer(at);
         t
     }
 
@@ -85,7 +77,7 @@ impl Fixture {
 
     fn task(&mut self, parent: TaskIdx, abilities: Abilities, mcp: u8) -> TaskIdx {
         self.k
-            .create_task(parent, abilities, mcp, self.k.tasks[parent].rp, "t")
+            .create_task(parent, abilities, mcp, self.k.tasks[parent].rp(), "t")
             .unwrap()
     }
 
@@ -93,32 +85,33 @@ impl Fixture {
     /// A call that restarts itself (its `syscall` again: `rip` 2 bytes back) is made
     /// again, as the thread would.
     fn sys(&mut self, t: ThreadIdx, call: Call, a: [u64; 6]) -> u64 {
-        let c = &mut self.k.threads[t].context;
+        let c = self.k.threads[t].context_mut();
         c.rax = call as u64;
         [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
         loop {
-            let rip = self.k.threads[t].context.rip;
+            let rip = self.k.threads[t].context().rip;
             assert_eq!(on_syscall(&mut self.k, t, || 0), Outcome::Continue);
-            if self.k.threads[t].is_free() || self.k.threads[t].context.rip != rip.wrapping_sub(2) {
-                return self.k.threads[t].context.rax;
+            if self.k.threads[t].is_free() || self.k.threads[t].context().rip != rip.wrapping_sub(2)
+            {
+                return self.k.threads[t].context().rax;
             }
-            self.k.threads[t].context.rip = rip;
+            self.k.threads[t].context_mut().rip = rip;
         }
     }
 
     fn id(&self, t: ThreadIdx) -> u64 {
-        self.k.thread_id(t)
+        self.k.thread_id(t).0
     }
 
     fn write(&self, t: ThreadIdx, at: u64, data: &[u8]) {
-        let task = self.k.threads[t].task;
-        assert!(self.k.tasks[task].space.copy_to_user(at, data));
+        let task = self.k.threads[t].task();
+        assert!(self.k.tasks[task].space().copy_to_user(at, data));
     }
 
     fn read(&self, t: ThreadIdx, at: u64, len: usize) -> Vec<u8> {
-        let task = self.k.threads[t].task;
+        let task = self.k.threads[t].task();
         let mut out = vec![0; len];
-        assert!(self.k.tasks[task].space.copy_from_user(at, &mut out));
+        assert!(self.k.tasks[task].space().copy_from_user(at, &mut out));
         out
     }
 }
@@ -128,10 +121,9 @@ impl Fixture {
 impl Drop for Fixture {
     fn drop(&mut self) {
         for slot in TaskIdx::all() {
-            if self.k.tasks[slot].in_use {
+            if self.k.tasks[slot].in_use() {
                 self.k.release_io_bitmap(slot);
-                let mut all = u64::MAX;
-                self.k.tasks[slot].space.destroy_some(&mut all);
+                self.k.tasks[slot].destroy_space();
             }
         }
     }
@@ -167,7 +159,7 @@ fn abilities_and_mcp_bound_children() {
         f.sys(root, Call::TaskCreate, [all, 256, 0, at, 1, 0]),
         err(Error::McpExceeded)
     );
-    let wid = f.k.task_id(weak);
+    let wid = f.k.task_id(weak).0;
     assert_eq!(
         f.sys(root, Call::ThreadCreate, [wid, 0x1000, 0x2000, 101, 0, 0]),
         err(Error::McpExceeded)
@@ -183,7 +175,7 @@ fn abilities_and_mcp_bound_children() {
         err(Error::McpExceeded)
     );
     assert_eq!(f.sys(root, Call::ThreadSet, [wt, prio, 99, 0, 0, 0]), OK);
-    assert_eq!(f.k.threads[w].priority, 99);
+    assert_eq!(f.k.threads[w].priority(), 99);
     // Children cannot control their parent.
     let rt = f.id(root);
     assert_eq!(
@@ -194,7 +186,7 @@ fn abilities_and_mcp_bound_children() {
 
 /// Writes a one-byte task name into the root's buffer; returns its address.
 fn root_name(f: &mut Fixture, root: ThreadIdx) -> u64 {
-    let at = f.k.threads[root].ipc_buffer;
+    let at = f.k.threads[root].ipc_buffer();
     f.write(root, at, b"c");
     at
 }
@@ -207,10 +199,10 @@ fn thread_lifecycle_and_stale_ids() {
         f.sys(root, Call::ThreadCreate, [0, 0x1000, 0x2000, 10, 7, 0]),
         OK
     );
-    let id = f.k.threads[root].context.rdi;
-    let t = f.k.thread(id).unwrap();
-    assert_eq!(f.k.threads[t].state, State::Inactive);
-    assert_eq!(f.k.threads[t].context.rdi, 7, "argument in rdi");
+    let id = f.k.threads[root].context().rdi;
+    let t = f.k.thread(ThreadId(id)).unwrap();
+    assert_eq!(f.k.threads[t].state(), State::Inactive);
+    assert_eq!(f.k.threads[t].context().rdi, 7, "argument in rdi");
     assert_eq!(f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]), OK);
     assert_eq!(
         f.sys(root, Call::ThreadStart, [id, 0, 0, 0, 0, 0]),
@@ -240,9 +232,9 @@ fn exhausting_one_partition_leaves_the_other_working() {
     let root = f.thread(ROOT, 200);
     let quota = |threads, pages| [2, threads, pages, 0, 0, 0];
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
-    let a = f.k.threads[root].context.rdi;
+    let a = f.k.threads[root].context().rdi;
     assert_eq!(f.sys(root, Call::RpCreate, quota(2, 8)), OK);
-    let b = f.k.threads[root].context.rdi;
+    let b = f.k.threads[root].context().rdi;
     assert_eq!(
         f.sys(root, Call::RpCreate, quota(1000, 8)),
         err(Error::QuotaExceeded)
@@ -250,9 +242,9 @@ fn exhausting_one_partition_leaves_the_other_working() {
     let at = root_name(&mut f, root);
     let all = Abilities::all().bits();
     assert_eq!(f.sys(root, Call::TaskCreate, [all, 100, a, at, 1, 0]), OK);
-    let ta = f.k.threads[root].context.rdi;
+    let ta = f.k.threads[root].context().rdi;
     assert_eq!(f.sys(root, Call::TaskCreate, [all, 100, b, at, 1, 0]), OK);
-    let tb = f.k.threads[root].context.rdi;
+    let tb = f.k.threads[root].context().rdi;
     let create = |task| [task, 0x1000, 0x2000, 10, 0, 0];
     assert_eq!(f.sys(root, Call::ThreadCreate, create(ta)), OK);
     assert_eq!(f.sys(root, Call::ThreadCreate, create(ta)), OK);
@@ -261,7 +253,7 @@ fn exhausting_one_partition_leaves_the_other_working() {
         err(Error::QuotaExceeded)
     );
     // Page tables: the first page of a fresh space needs 3 tables; 8 - 1 (PML4) = 7 left.
-    let (ita, itb) = (f.k.task(ta).unwrap(), f.k.task(tb).unwrap());
+    let (ita, itb) = (f.k.task(TaskId(ta)).unwrap(), f.k.task(TaskId(tb)).unwrap());
     let phys = test_arena::USER_BASE;
     let map = |task, at| [task, phys, at, 1, 0, 0];
     assert_eq!(f.sys(root, Call::MapPhysical, map(ta, 0x1000)), OK);
@@ -275,14 +267,14 @@ fn exhausting_one_partition_leaves_the_other_working() {
         err(Error::QuotaExceeded)
     );
     assert_eq!(
-        f.k.tasks[ita].space.translate(0x80_0000_0000),
+        f.k.tasks[ita].space().translate(0x80_0000_0000),
         None,
         "nothing changed"
     );
     // B is untouched by A's exhaustion.
     assert_eq!(f.sys(root, Call::ThreadCreate, create(tb)), OK);
     assert_eq!(f.sys(root, Call::MapPhysical, map(tb, 0x1000)), OK);
-    assert!(f.k.tasks[itb].space.translate(0x1000).is_some());
+    assert!(f.k.tasks[itb].space().translate(0x1000).is_some());
     // Killing A returns everything.
     assert_eq!(f.sys(root, Call::TaskKill, [ta, 0, 0, 0, 0, 0]), OK);
     let rp_a = f.k.rps.slot(a as usize - 1).unwrap();
@@ -294,7 +286,7 @@ fn map_protect_unmap_rules() {
     let mut f = Fixture::new();
     let root = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
-    let cid = f.k.task_id(child);
+    let cid = f.k.task_id(child).0;
     let ro = PageRights::empty().bits();
     let rw = PageRights::WRITE.bits();
     f.give(ROOT, 0x50_0000, 2, PageRights::empty());
@@ -356,11 +348,11 @@ fn map_protect_unmap_rules() {
     );
     assert_eq!(f.sys(root, Call::Protect, [0, 0x51_0000, 1, ro, 0, 0]), OK);
     assert_eq!(
-        f.k.tasks[ROOT].space.translate(0x51_0000).unwrap().1,
+        f.k.tasks[ROOT].space().translate(0x51_0000).unwrap().1,
         PageRights::empty()
     );
     assert_eq!(f.sys(root, Call::Unmap, [cid, 0x60_0000, 2, 0, 0, 0]), OK);
-    assert_eq!(f.k.tasks[child].space.translate(0x60_0000), None);
+    assert_eq!(f.k.tasks[child].space().translate(0x60_0000), None);
     // No MAP ability, no map.
     let weak = f.task(ROOT, Abilities::NATIVE_SYSCALLS, 10);
     let w = f.thread(weak, 5);
@@ -378,25 +370,25 @@ fn call_reply_with_data_and_words() {
     let server = f.thread(server_task, 150);
     // The server waits first.
     f.sys(server, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
-    assert_eq!(f.k.threads[server].state, State::Receiving { from: None });
+    assert_eq!(f.k.threads[server].state(), State::Receiving { from: None });
     let (cbuf, sbuf) = (
-        f.k.threads[client].ipc_buffer,
-        f.k.threads[server].ipc_buffer,
+        f.k.threads[client].ipc_buffer(),
+        f.k.threads[server].ipc_buffer(),
     );
     f.write(client, cbuf, b"hello server");
     let tag = MessageTag::new(7, 12, 0).0;
     let sid = f.id(server);
     f.sys(client, Call::Call, [sid, TIMEOUT_INFINITE, tag, 1, 2, 3]);
     assert_eq!(
-        f.k.threads[client].state,
+        f.k.threads[client].state(),
         State::WaitingReply { from: server }
     );
-    let c = f.k.threads[server].context;
+    let c = f.k.threads[server].context();
     assert_eq!(
         (c.rax, c.rdi, c.rdx, c.r10, c.r8, c.r9),
         (OK, f.id(client), tag, 1, 2, 3)
     );
-    let client_task = f.k.task_id(f.k.threads[client].task);
+    let client_task = f.k.task_id(f.k.threads[client].task()).0;
     assert_eq!(
         c.rsi, client_task,
         "the sender's task, for the server to trust"
@@ -410,14 +402,14 @@ fn call_reply_with_data_and_words() {
         Call::ReplyWait,
         [cid, TIMEOUT_INFINITE, MessageTag::new(9, 2, 0).0, 4, 5, 6],
     );
-    assert_eq!(f.k.threads[server].state, State::Receiving { from: None });
-    let c = f.k.threads[client].context;
+    assert_eq!(f.k.threads[server].state(), State::Receiving { from: None });
+    let c = f.k.threads[client].context();
     assert_eq!(
         (c.rax, c.rdx, c.r10, c.r8, c.r9),
         (OK, MessageTag::new(9, 2, 0).0, 4, 5, 6)
     );
     assert_eq!(f.read(client, cbuf, 2), b"ok");
-    assert_eq!(f.k.threads[client].state, State::Ready);
+    assert_eq!(f.k.threads[client].state(), State::Ready);
     // A reply to a thread not waiting for one.
     assert_eq!(
         f.sys(client, Call::Reply, [sid, 0, 0, 0, 0, 0]),
@@ -436,12 +428,12 @@ fn senders_queue_by_priority_then_fifo() {
         .collect();
     for (i, &s) in senders.iter().enumerate() {
         f.sys(s, Call::Send, [rid, TIMEOUT_INFINITE, 0, i as u64, 0, 0]);
-        assert!(matches!(f.k.threads[s].state, State::Sending { .. }));
+        assert!(matches!(f.k.threads[s].state(), State::Sending { .. }));
     }
     let mut order = vec![];
     for _ in 0..4 {
         assert_eq!(f.sys(receiver, Call::Receive, [0, 0, 0, 0, 0, 0]), OK);
-        order.push(f.k.threads[receiver].context.r10);
+        order.push(f.k.threads[receiver].context().r10);
     }
     assert_eq!(
         order,
@@ -454,7 +446,7 @@ fn senders_queue_by_priority_then_fifo() {
         "poll"
     );
     for s in senders {
-        assert_eq!(f.k.threads[s].context.rax, OK);
+        assert_eq!(f.k.threads[s].context().rax, OK);
     }
 }
 
@@ -468,18 +460,18 @@ fn timeouts_expire_at_their_deadline() {
     f.sys(b, Call::NotifyWait, [1, 500, 0, 0, 0, 0]);
     assert_eq!(f.k.next_deadline, 500);
     f.k.expire_timeouts(499);
-    assert_eq!(f.k.threads[a].state, State::Receiving { from: None });
+    assert_eq!(f.k.threads[a].state(), State::Receiving { from: None });
     f.k.expire_timeouts(500);
-    assert_eq!(f.k.threads[b].state, State::Ready);
-    assert_eq!(f.k.threads[b].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.threads[b].state(), State::Ready);
+    assert_eq!(f.k.threads[b].context().rax, err(Error::TimedOut));
     assert_eq!(f.k.next_deadline, 1000);
     f.k.expire_timeouts(1000);
-    assert_eq!(f.k.threads[a].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.threads[a].context().rax, err(Error::TimedOut));
     // A queued sender times out and leaves the queue.
     let aid = f.id(a);
     f.sys(b, Call::Send, [aid, 10, 0, 0, 0, 0]);
     f.k.expire_timeouts(10);
-    assert_eq!(f.k.threads[b].context.rax, err(Error::TimedOut));
+    assert_eq!(f.k.threads[b].context().rax, err(Error::TimedOut));
     assert_eq!(f.k.first_sender(a, None), None);
     let _ = bid;
 }
@@ -501,7 +493,7 @@ fn communication_rights_restrict_senders() {
         f.sys(tx, Call::NotifySignal, [yid, 1, 0, 0, 0, 0]),
         err(Error::NotPermitted)
     );
-    let (xid, yid_task) = (f.k.task_id(x), f.k.task_id(y));
+    let (xid, yid_task) = (f.k.task_id(x).0, f.k.task_id(y).0);
     assert_eq!(
         f.sys(tx, Call::TaskAllowSend, [0, yid_task, 0, 0, 0, 0]),
         err(Error::NotPermitted),
@@ -518,7 +510,7 @@ fn communication_rights_restrict_senders() {
     );
     assert_eq!(f.sys(tx, Call::NotifySignal, [yid, 0b100, 0, 0, 0, 0]), OK);
     assert_eq!(f.sys(ty, Call::NotifyWait, [0b110, 0, 0, 0, 0, 0]), OK);
-    assert_eq!(f.k.threads[ty].context.rdi, 0b100);
+    assert_eq!(f.k.threads[ty].context().rdi, 0b100);
 }
 
 #[test]
@@ -554,15 +546,15 @@ fn map_and_grant_items() {
     );
     assert_eq!(f.read(receiver, 0x90_0000, 6), b"shared");
     assert!(
-        f.k.tasks[ROOT].space.translate(0x70_0000).is_some(),
+        f.k.tasks[ROOT].space().translate(0x70_0000).is_some(),
         "mapped: sender keeps it"
     );
     assert!(
-        f.k.tasks[ROOT].space.translate(0x70_1000).is_none(),
+        f.k.tasks[ROOT].space().translate(0x70_1000).is_none(),
         "granted: sender lost it"
     );
     assert_eq!(
-        f.k.tasks[rtask].space.translate(0x90_1000).unwrap().1,
+        f.k.tasks[rtask].space().translate(0x90_1000).unwrap().1,
         PageRights::empty()
     );
     // Mapping into occupied window pages fails for the sender; the receiver keeps waiting.
@@ -575,7 +567,10 @@ fn map_and_grant_items() {
         ),
         err(Error::AlreadyMapped)
     );
-    assert_eq!(f.k.threads[receiver].state, State::Receiving { from: None });
+    assert_eq!(
+        f.k.threads[receiver].state(),
+        State::Receiving { from: None }
+    );
 }
 
 #[test]
@@ -584,8 +579,9 @@ fn exception_round_trip_with_edited_registers() {
     let handler = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
     let t = f.thread(child, 50);
-    f.k.threads[t].exception_handler = f.id(handler);
-    f.k.threads[t].context.rip = 0x40_1000;
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
+    f.k.threads[t].context_mut().rip = 0x40_1000;
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     let fault = Fault {
         label: LABEL_EXCEPTION,
@@ -594,8 +590,11 @@ fn exception_round_trip_with_edited_registers() {
         address: 0,
     };
     assert!(f.k.raise_fault(t, fault));
-    assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
-    let c = f.k.threads[handler].context;
+    assert_eq!(
+        f.k.threads[t].state(),
+        State::WaitingReply { from: handler }
+    );
+    let c = f.k.threads[handler].context();
     assert_eq!(MessageTag(c.rdx).label(), LABEL_EXCEPTION);
     let bytes = f.read(
         handler,
@@ -618,10 +617,10 @@ fn exception_round_trip_with_edited_registers() {
     let tid = f.id(t);
     let tag = MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0).0;
     assert_eq!(f.sys(handler, Call::Reply, [tid, 0, tag, 0, 0, 0]), OK);
-    let c = f.k.threads[t].context;
+    let c = f.k.threads[t].context();
     assert_eq!((c.rip, c.rax), (0x40_1002, 0x1234));
     assert_eq!(c.rflags & !USER_RFLAGS_MASK, 0x202, "IF on, IOPL 0");
-    assert_eq!(f.k.threads[t].state, State::Ready);
+    assert_eq!(f.k.threads[t].state(), State::Ready);
     // Second fault: kill.
     assert!(f.k.raise_fault(t, fault));
     f.sys(handler, Call::Receive, [0, 0, 0, 0, 0, 0]);
@@ -637,16 +636,17 @@ fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
     let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
     let t = f.thread(guest, 50);
     let tid = f.id(t);
-    f.k.threads[t].context.rip = 0x40_2000;
+    f.k.threads[t].context_mut().rip = 0x40_2000;
     // Without a handler there is nobody to tell.
     let interrupt = |f: &mut Fixture| f.sys(handler, Call::ThreadInterrupt, [tid, 0, 0, 0, 0, 0]);
     assert_eq!(interrupt(&mut f), err(Error::InvalidArgument));
-    f.k.threads[t].exception_handler = f.id(handler);
-    assert_eq!(f.k.threads[t].state, State::Ready);
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
+    assert_eq!(f.k.threads[t].state(), State::Ready);
     assert_eq!(interrupt(&mut f), OK);
-    assert_eq!(f.k.threads[handler].context.rdi, 1);
+    assert_eq!(f.k.threads[handler].context().rdi, 1);
     assert_eq!(
-        f.k.threads[t].state,
+        f.k.threads[t].state(),
         State::Sending {
             to: handler,
             call: true
@@ -662,7 +662,7 @@ fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
     assert_eq!((m.vector, m.registers.rip), (VECTOR_INTERRUPT, 0x40_2000));
     // Now it waits for the reply (in the kernel): left alone.
     assert_eq!(interrupt(&mut f), OK);
-    assert_eq!(f.k.threads[handler].context.rdi, 0);
+    assert_eq!(f.k.threads[handler].context().rdi, 0);
     assert_eq!(
         f.sys(handler, Call::ThreadInterrupt, [0, 0, 0, 0, 0, 0]),
         err(Error::InvalidArgument)
@@ -675,11 +675,15 @@ fn syscalls_of_non_native_tasks_go_to_the_handler() {
     let handler = f.thread(ROOT, 200);
     let guest = f.task(ROOT, Abilities::DEBUG_LOG, 100);
     let t = f.thread(guest, 50);
-    f.k.threads[t].exception_handler = f.id(handler);
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
     f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     f.sys(t, Call::Clock, [0; 6]);
-    assert_eq!(f.k.threads[t].state, State::WaitingReply { from: handler });
-    let c = f.k.threads[handler].context;
+    assert_eq!(
+        f.k.threads[t].state(),
+        State::WaitingReply { from: handler }
+    );
+    let c = f.k.threads[handler].context();
     assert_eq!(MessageTag(c.rdx).label(), LABEL_SYSCALL);
     assert_eq!(c.r10, VECTOR_SYSCALL);
 }
@@ -710,7 +714,7 @@ fn faults_without_handler_go_to_the_health_monitor_or_kill() {
     );
     f.sys(monitor, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     assert!(f.k.raise_fault(t, fault));
-    let c = f.k.threads[monitor].context;
+    let c = f.k.threads[monitor].context();
     assert_eq!(MessageTag(c.rdx).label(), LABEL_FAULT_REPORT);
     assert_eq!((c.r10, c.r8, c.r9), (14, 4, 0xdead));
 }
@@ -726,13 +730,13 @@ fn killing_a_server_releases_its_clients() {
     f.sys(waiting, Call::Call, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     f.sys(queued, Call::Send, [sid, TIMEOUT_INFINITE, 0, 0, 0, 0]);
     assert_eq!(
-        f.k.threads[waiting].state,
+        f.k.threads[waiting].state(),
         State::WaitingReply { from: server }
     );
-    assert!(matches!(f.k.threads[queued].state, State::Sending { .. }));
+    assert!(matches!(f.k.threads[queued].state(), State::Sending { .. }));
     f.k.kill_thread(server);
-    assert_eq!(f.k.threads[waiting].context.rax, err(Error::PeerGone));
-    assert_eq!(f.k.threads[queued].context.rax, err(Error::PeerGone));
+    assert_eq!(f.k.threads[waiting].context().rax, err(Error::PeerGone));
+    assert_eq!(f.k.threads[queued].context().rax, err(Error::PeerGone));
 }
 
 #[test]
@@ -743,7 +747,7 @@ fn io_ports_are_granted_down_the_tree_only() {
     let child = f.task(ROOT, Abilities::all(), 100);
     let grandchild = f.task(child, Abilities::all(), 100);
     let c = f.thread(child, 50);
-    let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
+    let (cid, gid) = (f.k.task_id(child).0, f.k.task_id(grandchild).0);
     assert_eq!(
         f.sys(root, Call::IoGrant, [cid, 0x3f8, 8, 0, 0, 0]),
         err(Error::NotPermitted),
@@ -766,7 +770,7 @@ fn io_ports_are_granted_down_the_tree_only() {
     );
     assert_eq!(f.sys(c, Call::IoGrant, [gid, 0x2fc, 4, 0, 0, 0]), OK);
     assert!(holds(&f, grandchild, 0x2fc) && !holds(&f, grandchild, 0x2f8));
-    let rt = f.k.task_id(ROOT);
+    let rt = f.k.task_id(ROOT).0;
     assert_eq!(
         f.sys(c, Call::IoGrant, [rt, 0x2f8, 1, 0, 0, 0]),
         err(Error::NotPermitted),
@@ -787,7 +791,7 @@ fn io_grants_work_a_word_of_ports_at_a_time() {
     let child = f.task(ROOT, Abilities::all(), 100);
     let grandchild = f.task(child, Abilities::all(), 100);
     let c = f.thread(child, 50);
-    let (cid, gid) = (f.k.task_id(child), f.k.task_id(grandchild));
+    let (cid, gid) = (f.k.task_id(child).0, f.k.task_id(grandchild).0);
     // The whole space above the kernel's ports, and the edges of 64-port words.
     assert_eq!(
         f.sys(root, Call::IoGrant, [cid, 0x400, 0xfc00, 0, 0, 0]),
@@ -845,7 +849,7 @@ fn killing_a_large_subtree_takes_bounded_steps() {
     let root = f.thread(ROOT, 200);
     let before = (
         f.k.rps[RpIdx::ROOT].used,
-        f.k.tasks.iter().filter(|(_, t)| t.in_use).count(),
+        f.k.tasks.iter().filter(|(_, t)| t.in_use()).count(),
     );
     // A chain of tasks, each with threads, page tables far apart and an I/O bitmap.
     let top = f.task(ROOT, Abilities::all(), 100);
@@ -861,21 +865,21 @@ fn killing_a_large_subtree_takes_bounded_steps() {
             );
             f.k.create_thread(task, 0x1000, 0x2000, 10, 0, 0).unwrap();
         }
-        let id = f.k.task_id(task);
+        let id = f.k.task_id(task).0;
         assert_eq!(f.sys(root, Call::IoGrant, [id, 0x2f8, 8, 0, 0, 0]), OK);
         task = f.task(task, Abilities::all(), 100);
         chain.push(task);
     }
     let ready = f.k.create_thread(task, 0x1000, 0x2000, 10, 0, 0).unwrap();
     f.k.set_state(ready, State::Ready);
-    let (tid, other) = (f.k.task_id(top), f.task(ROOT, Abilities::all(), 100));
+    let (tid, other) = (f.k.task_id(top).0, f.task(ROOT, Abilities::all(), 100));
     let mut calls = 0;
     loop {
         calls += 1;
-        let c = &mut f.k.threads[root].context;
+        let c = f.k.threads[root].context_mut();
         (c.rax, c.rdi, c.rip) = (Call::TaskKill as u64, tid, 0x1002);
         assert_eq!(on_syscall(&mut f.k, root, || 0), Outcome::Continue);
-        let c = &f.k.threads[root].context;
+        let c = &f.k.threads[root].context();
         if c.rip == 0x1002 {
             assert_eq!(c.rax, OK);
             break;
@@ -884,18 +888,18 @@ fn killing_a_large_subtree_takes_bounded_steps() {
         assert_eq!((c.rip, c.rax, c.rdi), (0x1000, Call::TaskKill as u64, tid));
         // Meanwhile the subtree is stopped and out of reach; the rest goes on.
         assert!(!f.k.run.is_queued(ready.position()) || f.k.threads[ready].is_free());
-        assert_eq!(f.k.task(tid), Err(Error::NoSuchObject));
-        assert_eq!(f.k.task(f.k.task_id(other)), Ok(other));
+        assert_eq!(f.k.task(TaskId(tid)), Err(Error::NoSuchObject));
+        assert_eq!(f.k.task(TaskId(f.k.task_id(other).0)), Ok(other));
         invariants(&f.k).unwrap();
         assert!(calls < 1_000, "no progress");
     }
     assert!(calls > 3, "{calls} calls: the work was not split");
-    assert!(chain.iter().all(|&t| !f.k.tasks[t].in_use));
+    assert!(chain.iter().all(|&t| !f.k.tasks[t].in_use()));
     f.k.destroy_task(other, u64::MAX);
     assert_eq!(
         (
             f.k.rps[RpIdx::ROOT].used,
-            f.k.tasks.iter().filter(|(_, t)| t.in_use).count()
+            f.k.tasks.iter().filter(|(_, t)| t.in_use()).count()
         ),
         before,
         "every task, thread, table and bitmap returned"
@@ -907,7 +911,7 @@ fn irq_lines_are_granted_attached_masked_until_acknowledged() {
     let mut f = Fixture::new();
     let root = f.thread(ROOT, 200);
     let child = f.task(ROOT, Abilities::all(), 100);
-    let cid = f.k.task_id(child);
+    let cid = f.k.task_id(child).0;
     let c = f.thread(child, 50);
     let c2 = f.thread(child, 50);
     assert_eq!(
@@ -949,10 +953,13 @@ fn irq_lines_are_granted_attached_masked_until_acknowledged() {
 
     // Waiting, then the line fires: it closes and the waiter wakes.
     f.sys(c, Call::IrqWait, [3, TIMEOUT_INFINITE, 0, 0, 0, 0]);
-    assert!(matches!(f.k.threads[c].state, State::WaitingNotify { .. }));
+    assert!(matches!(
+        f.k.threads[c].state(),
+        State::WaitingNotify { .. }
+    ));
     f.k.irq_fired(3);
-    assert_eq!(f.k.threads[c].state, State::Ready);
-    assert_eq!(f.k.threads[c].context.rax, OK);
+    assert_eq!(f.k.threads[c].state(), State::Ready);
+    assert_eq!(f.k.threads[c].context().rax, OK);
     assert_eq!(f.k.irqs.unmasked, 0, "masked until acknowledged");
     // A second interrupt before the next wait is latched.
     f.k.irq_fired(3);
@@ -1100,16 +1107,16 @@ type TaskFrames = (TaskIdx, Vec<u64>, Vec<(u64, bool)>);
 fn frames_of(k: &Kernel) -> Vec<TaskFrames> {
     k.tasks
         .iter()
-        .filter(|(_, t)| t.in_use && t.space.root_frame() != 0)
+        .filter(|(_, t)| t.in_use() && t.space().root_frame() != 0)
         .map(|(slot, t)| {
             let (mut tables, mut pages) = (Vec::new(), Vec::new());
             walk(
-                t.space.root_frame(),
+                t.space().root_frame(),
                 3,
                 &mut |f| tables.push(f),
                 &mut |f, w| pages.push((f, w)),
             );
-            tables.extend(t.io_bitmap.iter().filter(|&&f| f != 0));
+            tables.extend(t.io_bitmap().iter().filter(|&&f| f != 0));
             (slot, tables, pages)
         })
         .collect()
@@ -1120,29 +1127,29 @@ fn invariants(k: &Kernel) -> Result<(), String> {
     // Send queues: a thread is in at most one, exactly when it is sending to its owner.
     let mut queued = vec![0u32; crate::state::MAX_THREADS];
     for (receiver, r) in k.threads.iter() {
-        let mut at = r.senders;
+        let mut at = r.senders();
         let mut steps = 0;
         while let Some(s) = at {
             queued[s.position()] += 1;
-            if !matches!(k.threads[s].state, State::Sending { to, .. } if to == receiver) {
+            if !matches!(k.threads[s].state(), State::Sending { to, .. } if to == receiver) {
                 return Err(format!(
                     "{s:?} is queued on {receiver:?} but {:?}",
-                    k.threads[s].state
+                    k.threads[s].state()
                 ));
             }
             steps += 1;
             if steps > crate::state::MAX_THREADS {
                 return Err(format!("the send queue of {receiver:?} loops"));
             }
-            at = k.threads[s].next_sender;
+            at = k.threads[s].next_sender();
         }
     }
     for (slot, t) in k.threads.iter() {
-        let sending = matches!(t.state, State::Sending { .. });
+        let sending = matches!(t.state(), State::Sending { .. });
         if queued[slot.position()] != u32::from(sending) {
             return Err(format!(
                 "{slot:?} ({:?}) is in {} send queues",
-                t.state,
+                t.state(),
                 queued[slot.position()]
             ));
         }
@@ -1168,14 +1175,14 @@ fn invariants(k: &Kernel) -> Result<(), String> {
         let tasks: Vec<&Task> = k
             .tasks
             .iter()
-            .filter(|(_, t)| t.in_use && t.rp == rp)
+            .filter(|(_, t)| t.in_use() && t.rp() == rp)
             .map(|(_, t)| t)
             .collect();
-        let pages: u64 = tasks.iter().map(|t| t.pages_charged).sum();
+        let pages: u64 = tasks.iter().map(|t| t.pages_charged()).sum();
         let threads = k
             .threads
             .iter()
-            .filter(|(_, t)| !t.is_free() && k.tasks[t.task].rp == rp)
+            .filter(|(_, t)| !t.is_free() && k.tasks[t.task()].rp() == rp)
             .count() as u64;
         let counted = Amount {
             tasks: tasks.len() as u64,
@@ -1200,28 +1207,32 @@ fn invariants(k: &Kernel) -> Result<(), String> {
             ));
         }
     }
-    for (slot, t) in k.tasks.iter().filter(|(_, t)| t.in_use) {
-        if let Some(parent) = t.parent {
+    for (slot, t) in k.tasks.iter().filter(|(_, t)| t.in_use()) {
+        if let Some(parent) = t.parent() {
             let p = &k.tasks[parent];
-            if !p.in_use {
+            if !p.in_use() {
                 return Err(format!("{slot:?}: its parent {parent:?} is gone"));
             }
-            if !p.abilities.contains(t.abilities) || t.mcp > p.mcp {
+            if !p.abilities().contains(t.abilities()) || t.mcp() > p.mcp() {
                 return Err(format!("{slot:?}: more abilities or MCP than its parent"));
             }
         }
     }
     for (slot, t) in k.threads.iter().filter(|(_, t)| !t.is_free()) {
-        let task = &k.tasks[t.task];
-        if !task.in_use {
-            return Err(format!("{slot:?}: its task {:?} is gone", t.task));
+        let task = &k.tasks[t.task()];
+        if !task.in_use() {
+            return Err(format!("{slot:?}: its task {:?} is gone", t.task()));
         }
-        if t.priority > task.mcp {
-            return Err(format!("{slot:?}: priority {} above its MCP", t.priority));
+        if t.priority() > task.mcp() {
+            return Err(format!("{slot:?}: priority {} above its MCP", t.priority()));
         }
-        let runnable = t.state == State::Ready && !t.suspended;
+        let runnable = t.state() == State::Ready && !t.is_suspended();
         if k.run.is_queued(slot.position()) != runnable {
-            return Err(format!("{slot:?}: {:?} but queued: {}", t.state, !runnable));
+            return Err(format!(
+                "{slot:?}: {:?} but queued: {}",
+                t.state(),
+                !runnable
+            ));
         }
     }
     Ok(())
@@ -1257,7 +1268,7 @@ proptest::proptest! {
                 .k
                 .threads
                 .iter()
-                .filter(|(_, t)| t.state == State::Ready && !t.suspended)
+                .filter(|(_, t)| t.state() == State::Ready && !t.is_suspended())
                 .map(|(slot, _)| slot)
                 .collect();
             if runnable.is_empty() {
@@ -1268,8 +1279,8 @@ proptest::proptest! {
             if number == Call::SystemHalt.code() {
                 continue;
             }
-            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s)).collect();
-            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s)));
+            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s).0).collect();
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use()).map(|(s, _)| f.k.task_id(s).0));
             let pick = |(kind, raw): (usize, u64)| -> u64 {
                 match kind {
                     0..=7 => ids[raw as usize % ids.len()],
@@ -1288,7 +1299,7 @@ proptest::proptest! {
                 }
             };
             let a: Vec<u64> = args.into_iter().map(pick).collect();
-            let c = &mut f.k.threads[t].context;
+            let c = f.k.threads[t].context_mut();
             c.rax = number;
             [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = [a[0], a[1], a[2], a[3], a[4], a[5]];
             let _ = on_syscall(&mut f.k, t, || 0);
@@ -1336,7 +1347,7 @@ proptest::proptest! {
                 .k
                 .threads
                 .iter()
-                .filter(|(_, t)| t.state == State::Ready && !t.suspended && t.task != ROOT)
+                .filter(|(_, t)| t.state() == State::Ready && !t.is_suspended() && t.task() != ROOT)
                 .map(|(slot, _)| slot)
                 .collect();
             if runnable.is_empty() {
@@ -1344,8 +1355,8 @@ proptest::proptest! {
             }
             let t = runnable[caller % runnable.len()];
             let number = if call % 2 == 0 { focus[call / 2 % focus.len()].code() } else { numbers[call / 2 % numbers.len()] };
-            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s)).collect();
-            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use).map(|(s, _)| f.k.task_id(s)));
+            let mut ids: Vec<u64> = f.k.threads.iter().filter(|(_, x)| !x.is_free()).map(|(s, _)| f.k.thread_id(s).0).collect();
+            ids.extend(f.k.tasks.iter().filter(|(_, x)| x.in_use()).map(|(s, _)| f.k.task_id(s).0));
             let page = |raw: u64| match raw % 3 {
                 0 => 0x40_0000 + (raw / 3 % 8) * 0x1000,
                 1 => 0x80_0000 + (raw / 3 % 0x200) * 0x1000,
@@ -1365,7 +1376,7 @@ proptest::proptest! {
                 }
             };
             let a: Vec<u64> = args.into_iter().enumerate().map(pick).collect();
-            let c = &mut f.k.threads[t].context;
+            let c = f.k.threads[t].context_mut();
             c.rax = number;
             [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = [a[0], a[1], a[2], a[3], a[4], a[5]];
             let _ = on_syscall(&mut f.k, t, || 0);

@@ -33,7 +33,7 @@ pub fn deliver_or_report(k: &mut Kernel, t: ThreadIdx, fault: Fault) -> Outcome 
     if k.raise_fault(t, fault) {
         return Outcome::Continue;
     }
-    let task = k.threads[t].task;
+    let task = k.threads[t].task();
     log_fault(k, t, &fault);
     if task == TaskIdx::ROOT {
         kprintln!("kernel: the root task faulted without a handler; halting with failure");
@@ -41,7 +41,7 @@ pub fn deliver_or_report(k: &mut Kernel, t: ThreadIdx, fault: Fault) -> Outcome 
     }
     kprintln!(
         "kernel: thread {:#x} of task {} killed (no exception handler, no health monitor)",
-        k.thread_id(t),
+        k.thread_id(t).0,
         k.tasks[task].name()
     );
     k.kill_thread(t);
@@ -49,7 +49,7 @@ pub fn deliver_or_report(k: &mut Kernel, t: ThreadIdx, fault: Fault) -> Outcome 
 }
 
 fn log_fault(k: &Kernel, t: ThreadIdx, fault: &Fault) {
-    let c = &k.threads[t].context;
+    let c = k.threads[t].context();
     let (mnemonic, description) = if fault.vector == abi::ipc::VECTOR_SYSCALL {
         ("SYSCALL", "forwarded system call")
     } else {
@@ -59,7 +59,7 @@ fn log_fault(k: &Kernel, t: ThreadIdx, fault: &Fault) {
         "EXCEPTION {mnemonic} ({description}, vector {}) error={:#x} in user mode, task {}",
         fault.vector,
         fault.error_code,
-        k.tasks[k.threads[t].task].name()
+        k.tasks[k.threads[t].task()].name()
     );
     kprintln!(
         "  rip={:#018x} rsp={:#018x} cr2={:#018x} rflags={:#x}",

@@ -4,10 +4,9 @@
 //! bitmap (every port denied, nothing charged).
 
 use crate::mem::PAGE_SIZE;
-use crate::rp::Amount;
 use crate::state::Kernel;
 use crate::table::TaskIdx;
-use abi::syscall::Error;
+use abi::syscall::{Error, TaskId};
 
 /// The words of an I/O bitmap (two frames of 512 words, 64 ports a word, a clear bit
 /// grants the port) that hold ports `first..end` (`end` <= 0x10000): for each frame, the
@@ -54,7 +53,7 @@ impl Kernel {
                 .iter()
                 .any(|&(lo, hi)| first <= u64::from(hi) && u64::from(lo) < end);
         }
-        let bitmap = self.tasks[task].io_bitmap;
+        let bitmap = self.tasks[task].io_bitmap();
         bitmap[0] != 0
             && words(first, end).all(|(half, a, b, first_mask, last_mask)| {
                 // SAFETY: the task's own bitmap frame (non-zero: allocated), read only here.
@@ -89,8 +88,8 @@ impl Kernel {
         if !self.holds_ports(caller, first, end) {
             return Err(Error::NotPermitted);
         }
-        if self.tasks[target].io_bitmap[0] == 0 {
-            self.rps[self.tasks[target].rp].charge(Amount::pages(2))?;
+        if self.tasks[target].io_bitmap()[0] == 0 {
+            self.charge_pages(target, 2)?;
             let frames = [
                 crate::mem::alloc_zeroed_frame(),
                 crate::mem::alloc_zeroed_frame(),
@@ -101,7 +100,7 @@ impl Kernel {
                     // SAFETY: just allocated above and referenced nowhere.
                     unsafe { crate::mem::free_frame(frame) };
                 }
-                self.rps[self.tasks[target].rp].release(Amount::pages(2));
+                self.release_pages(target, 2);
                 return Err(Error::OutOfResources);
             };
             for frame in [a, b] {
@@ -114,10 +113,9 @@ impl Kernel {
                     )
                 };
             }
-            self.tasks[target].io_bitmap = [a, b];
-            self.tasks[target].pages_charged += 2;
+            self.tasks[target].set_io_bitmap([a, b]);
         }
-        let bitmap = self.tasks[target].io_bitmap;
+        let bitmap = self.tasks[target].io_bitmap();
         for (half, a, b, first_mask, last_mask) in words(first, end) {
             // SAFETY: the target's bitmap frame (allocated above if it had none), only
             // written through this reference.
@@ -127,7 +125,7 @@ impl Kernel {
             w[b] &= !last_mask | if a == b { !first_mask } else { 0 };
         }
         if self.io_loaded == self.task_id(target) {
-            self.io_loaded = 0;
+            self.io_loaded = TaskId::OWN;
         }
         Ok(())
     }
@@ -136,7 +134,7 @@ impl Kernel {
     #[allow(unsafe_code)] // the bitmap frames go back to the allocator
     pub fn release_io_bitmap(&mut self, task: TaskIdx) -> u64 {
         let mut freed = 0;
-        for frame in core::mem::take(&mut self.tasks[task].io_bitmap) {
+        for frame in self.tasks[task].take_io_bitmap() {
             if frame != 0 {
                 // SAFETY: the task's own bitmap frame, allocated by `io_grant`; the task is
                 // dying and the TSS stops using it below (`io_loaded`).
@@ -145,7 +143,7 @@ impl Kernel {
             }
         }
         if self.io_loaded == self.task_id(task) {
-            self.io_loaded = 0;
+            self.io_loaded = TaskId::OWN;
         }
         freed
     }

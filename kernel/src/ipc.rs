@@ -8,15 +8,16 @@
 
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
-use crate::state::{Kernel, MAX_THREADS, USER_RFLAGS};
+use crate::state::{Kernel, MAX_THREADS};
 use crate::table::ThreadIdx;
 use crate::thread::{Fault, NEVER, State};
+use abi::args::results;
 use abi::ipc::{
     EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET,
     LABEL_FAULT_REPORT, MAP_ITEM_GRANT, MapItem, MessageTag, REPLY_KILL, REPLY_RESUME,
-    ReceiveWindow, Registers, USER_RFLAGS_MASK,
+    ReceiveWindow, Registers,
 };
-use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, USER_END};
+use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE};
 
 /// Which side of a transfer could not take part.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -38,7 +39,7 @@ pub fn deadline(clock: fn() -> u64, timeout: u64) -> u64 {
 fn read_struct<const N: usize>(k: &Kernel, t: ThreadIdx, at: u64) -> Option<[u8; N]> {
     let mut out = [0u8; N];
     let th = &k.threads[t];
-    (th.ipc_buffer != 0 && k.tasks[th.task].space.copy_from_user(at, &mut out)).then_some(out)
+    (th.ipc_buffer() != 0 && k.tasks[th.task()].space().copy_from_user(at, &mut out)).then_some(out)
 }
 
 fn item_from(bytes: &[u8]) -> MapItem {
@@ -53,13 +54,14 @@ impl Kernel {
     /// The registers of an exception message for thread `t`.
     pub fn exception_message(&self, t: ThreadIdx, fault: Fault) -> ExceptionMessage {
         let th = &self.threads[t];
-        let c = &th.context;
+        let c = th.context();
+        let (fs_base, gs_base) = th.bases();
         ExceptionMessage {
             vector: fault.vector,
             error_code: fault.error_code,
             fault_address: fault.address,
-            thread: self.thread_id(t),
-            task: self.task_id(th.task),
+            thread: self.thread_id(t).0,
+            task: self.task_id(th.task()).0,
             registers: Registers {
                 rax: c.rax,
                 rbx: c.rbx,
@@ -79,8 +81,8 @@ impl Kernel {
                 r15: c.r15,
                 rip: c.rip,
                 rflags: c.rflags,
-                fs_base: th.fs_base,
-                gs_base: th.gs_base,
+                fs_base,
+                gs_base,
             },
         }
     }
@@ -88,17 +90,17 @@ impl Kernel {
     /// Moves the message of `from` (its registers, or its fault) to `to`.
     pub fn deliver(&mut self, from: ThreadIdx, to: ThreadIdx) -> Result<(), Blame> {
         let (tag, words);
-        if let Some(fault) = self.threads[from].fault {
+        if let Some(fault) = self.threads[from].fault() {
             let bytes = self.exception_message(from, fault).to_bytes();
             let receiver = &self.threads[to];
-            let space = self.tasks[receiver.task].space;
-            if receiver.ipc_buffer == 0 || !space.copy_to_user(receiver.ipc_buffer, &bytes) {
+            let space = self.tasks[receiver.task()].space();
+            if receiver.ipc_buffer() == 0 || !space.copy_to_user(receiver.ipc_buffer(), &bytes) {
                 return Err(Blame::Receiver(Error::BadAddress));
             }
             tag = MessageTag::new(fault.label, EXCEPTION_MESSAGE_SIZE, 0);
             words = [fault.vector, fault.error_code, fault.address];
         } else {
-            let c = &self.threads[from].context;
+            let c = self.threads[from].context();
             tag = MessageTag(c.rdx);
             words = [c.r10, c.r8, c.r9];
             if !tag.is_valid() {
@@ -106,15 +108,15 @@ impl Kernel {
             }
             self.transfer_payload(from, to, tag)?;
         }
-        let sender_id = self.thread_id(from);
-        let sender_task = self.task_id(self.threads[from].task);
-        let c = &mut self.threads[to].context;
-        c.rdi = sender_id;
-        c.rsi = sender_task;
-        c.rdx = tag.0;
-        c.r10 = words[0];
-        c.r8 = words[1];
-        c.r9 = words[2];
+        let received = results::Ipc {
+            sender: self.thread_id(from),
+            sender_task: self.task_id(self.threads[from].task()),
+            tag: tag.0,
+            word0: words[0],
+            word1: words[1],
+            word2: words[2],
+        };
+        self.threads[to].set_results(|r| received.encode_into(r));
         Ok(())
     }
 
@@ -126,8 +128,8 @@ impl Kernel {
         tag: MessageTag,
     ) -> Result<(), Blame> {
         let (s, r) = (&self.threads[from], &self.threads[to]);
-        let (s_space, r_space) = (self.tasks[s.task].space, self.tasks[r.task].space);
-        let (s_buf, r_buf) = (s.ipc_buffer, r.ipc_buffer);
+        let (s_space, r_space) = (*self.tasks[s.task()].space(), *self.tasks[r.task()].space());
+        let (s_buf, r_buf) = (s.ipc_buffer(), r.ipc_buffer());
         if tag.is_empty() && tag.items() == 0 {
             return Ok(());
         }
@@ -181,22 +183,21 @@ impl Kernel {
                     dest += PAGE_SIZE;
                 }
             }
-            self.charge_tables(r.task, window.base, total)
+            self.charge_tables(r.task(), window.base, total)
                 .map_err(Blame::Sender)?;
             // Commit the mappings.
-            let (s_task, r_task) = (self.threads[from].task, self.threads[to].task);
+            let (s_task, r_task) = (self.threads[from].task(), self.threads[to].task());
             let mut dest = window.base;
             for item in &items[..tag.items()] {
                 let rights = PageRights::from_bits_truncate(item.flags as u64);
                 for p in 0..item.pages as u64 {
                     let src = item.source + p * PAGE_SIZE;
-                    let (frame, _) = self.tasks[s_task].space.translate(src).expect("checked");
+                    let (frame, _) = self.tasks[s_task].space().translate(src).expect("checked");
                     self.tasks[r_task]
-                        .space
-                        .map(dest, frame, rights)
+                        .map_page(dest, frame, rights)
                         .expect("checked and charged");
                     if item.flags & MAP_ITEM_GRANT != 0 {
-                        self.tasks[s_task].space.unmap(src);
+                        self.tasks[s_task].unmap_page(src);
                     }
                     dest += PAGE_SIZE;
                 }
@@ -210,7 +211,7 @@ impl Kernel {
     /// `send`/`call` from thread `t` to `dest` (rights already checked), or an exception
     /// message if `t` has a fault pending.
     pub fn send(&mut self, t: ThreadIdx, dest: ThreadIdx, call: bool, deadline: u64, poll: bool) {
-        if let State::Receiving { from } = self.threads[dest].state
+        if let State::Receiving { from } = self.threads[dest].state()
             && from.is_none_or(|f| f == t)
         {
             match self.deliver(t, dest) {
@@ -220,14 +221,14 @@ impl Kernel {
                     return;
                 }
                 Err(Blame::Sender(e)) => {
-                    self.threads[t].context.rax = e as u64;
+                    self.threads[t].set_status(e);
                     return;
                 }
                 Err(Blame::Receiver(e)) => self.wake(dest, e),
             }
         }
         if poll {
-            self.threads[t].context.rax = Error::TimedOut as u64;
+            self.threads[t].set_status(Error::TimedOut);
             return;
         }
         self.block(t, State::Sending { to: dest, call }, deadline);
@@ -259,10 +260,10 @@ impl Kernel {
             match self.deliver(s, t) {
                 Ok(()) => {
                     self.unqueue_sender(t, s);
-                    let call = matches!(self.threads[s].state, State::Sending { call: true, .. });
-                    let s_deadline = self.threads[s].deadline;
+                    let call = matches!(self.threads[s].state(), State::Sending { call: true, .. });
+                    let s_deadline = self.threads[s].deadline();
                     self.after_delivery(s, t, call, s_deadline);
-                    self.threads[t].context.rax = Error::Ok as u64;
+                    self.threads[t].set_status(Error::Ok);
                     return;
                 }
                 Err(Blame::Sender(e)) => {
@@ -270,13 +271,13 @@ impl Kernel {
                     self.wake(s, e);
                 }
                 Err(Blame::Receiver(e)) => {
-                    self.threads[t].context.rax = e as u64;
+                    self.threads[t].set_status(e);
                     return;
                 }
             }
         }
         if poll {
-            self.threads[t].context.rax = Error::TimedOut as u64;
+            self.threads[t].set_status(Error::TimedOut);
             return;
         }
         self.block(t, State::Receiving { from }, deadline);
@@ -284,10 +285,10 @@ impl Kernel {
 
     /// `reply` from thread `t` to `caller`. On success `t`'s `rax` is `Ok`.
     pub fn reply(&mut self, t: ThreadIdx, caller: ThreadIdx) -> Result<(), Error> {
-        if self.threads[caller].state != (State::WaitingReply { from: t }) {
+        if self.threads[caller].state() != (State::WaitingReply { from: t }) {
             return Err(Error::NotWaiting);
         }
-        if self.threads[caller].fault.is_some() {
+        if self.threads[caller].fault().is_some() {
             return self.answer_fault(t, caller);
         }
         match self.deliver(t, caller) {
@@ -301,7 +302,7 @@ impl Kernel {
     /// The handler `t` answers the exception message of `faulted`: resume (with the
     /// registers of the reply, if it carries them) or kill.
     fn answer_fault(&mut self, t: ThreadIdx, faulted: ThreadIdx) -> Result<(), Error> {
-        let tag = MessageTag(self.threads[t].context.rdx);
+        let tag = MessageTag(self.threads[t].context().rdx);
         match tag.label() {
             REPLY_KILL => {
                 self.kill_thread(faulted);
@@ -310,43 +311,22 @@ impl Kernel {
             REPLY_RESUME => {
                 if tag.len() >= EXCEPTION_MESSAGE_SIZE {
                     let bytes: [u8; EXCEPTION_MESSAGE_SIZE] =
-                        read_struct(self, t, self.threads[t].ipc_buffer)
+                        read_struct(self, t, self.threads[t].ipc_buffer())
                             .ok_or(Error::BadAddress)?;
                     let m = ExceptionMessage::from_bytes(&bytes).ok_or(Error::BadAddress)?;
-                    self.set_registers(faulted, &m.registers)?;
+                    self.threads[faulted].load_registers(&m.registers)?;
                 }
-                let th = &mut self.threads[faulted];
-                th.fault = None;
-                th.deadline = NEVER;
-                self.set_state(faulted, State::Ready);
+                self.resume(faulted);
                 Ok(())
             }
             _ => Err(Error::InvalidArgument),
         }
     }
 
-    /// Loads edited registers into a thread, keeping it in user mode with IF set.
-    fn set_registers(&mut self, t: ThreadIdx, r: &Registers) -> Result<(), Error> {
-        if r.rip >= USER_END || r.fs_base >= USER_END || r.gs_base >= USER_END {
-            return Err(Error::InvalidArgument);
-        }
-        let th = &mut self.threads[t];
-        let c = &mut th.context;
-        (c.rax, c.rbx, c.rcx, c.rdx) = (r.rax, r.rbx, r.rcx, r.rdx);
-        (c.rsi, c.rdi, c.rbp, c.rsp) = (r.rsi, r.rdi, r.rbp, r.rsp);
-        (c.r8, c.r9, c.r10, c.r11) = (r.r8, r.r9, r.r10, r.r11);
-        (c.r12, c.r13, c.r14, c.r15) = (r.r12, r.r13, r.r14, r.r15);
-        c.rip = r.rip;
-        c.rflags = (r.rflags & USER_RFLAGS_MASK) | USER_RFLAGS;
-        th.fs_base = r.fs_base;
-        th.gs_base = r.gs_base;
-        Ok(())
-    }
-
     /// A fault of thread `t`: blocks it on an exception message to its handler, or to the
     /// health monitor. `false` if there is neither (the caller decides what then).
     pub fn raise_fault(&mut self, t: ThreadIdx, mut fault: Fault) -> bool {
-        let handler = match self.thread(self.threads[t].exception_handler) {
+        let handler = match self.thread(self.threads[t].exception_handler()) {
             Ok(h) if h != t => h,
             _ => match self.thread(self.health_monitor) {
                 Ok(h) if h != t => {
@@ -356,7 +336,7 @@ impl Kernel {
                 _ => return false,
             },
         };
-        self.threads[t].fault = Some(fault);
+        self.threads[t].set_fault(fault);
         self.send(t, handler, true, NEVER, false);
         true
     }
@@ -364,77 +344,27 @@ impl Kernel {
     /// `notify_signal` (rights already checked).
     pub fn signal(&mut self, target: ThreadIdx, bits: u64) {
         let th = &mut self.threads[target];
-        th.notify_bits |= bits;
-        if let State::WaitingNotify { mask } = th.state
-            && th.notify_bits & mask != 0
-        {
-            th.context.rdi = th.notify_bits & mask;
-            th.notify_bits &= !mask;
-            self.wake(target, Error::Ok);
+        th.add_notify_bits(bits);
+        if let State::WaitingNotify { mask } = th.state() {
+            let bits = th.take_notify_bits(mask);
+            if bits != 0 {
+                th.set_results(|r| results::NotifyWait { bits }.encode_into(r));
+                self.wake(target, Error::Ok);
+            }
         }
     }
 
     /// `notify_wait` by thread `t`.
     pub fn wait_notify(&mut self, t: ThreadIdx, mask: u64, deadline: u64, poll: bool) {
         let th = &mut self.threads[t];
-        let got = th.notify_bits & mask;
+        let got = th.take_notify_bits(mask);
         if got != 0 {
-            th.notify_bits &= !mask;
-            th.context.rdi = got;
-            th.context.rax = Error::Ok as u64;
+            th.set_results(|r| results::NotifyWait { bits: got }.encode_into(r));
+            th.set_status(Error::Ok);
         } else if poll {
-            th.context.rax = Error::TimedOut as u64;
+            th.set_status(Error::TimedOut);
         } else {
             self.block(t, State::WaitingNotify { mask }, deadline);
         }
-    }
-}
-
-impl Kernel {
-    pub fn enqueue_sender(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
-        let priority = self.threads[sender].priority;
-        // Insert before the first queued sender of lower priority.
-        let mut prev = None;
-        let mut at = self.threads[receiver].senders;
-        while let Some(a) = at
-            && self.threads[a].priority >= priority
-        {
-            prev = at;
-            at = self.threads[a].next_sender;
-        }
-        self.threads[sender].next_sender = at;
-        match prev {
-            None => self.threads[receiver].senders = Some(sender),
-            Some(p) => self.threads[p].next_sender = Some(sender),
-        }
-    }
-
-    pub fn unqueue_sender(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
-        let mut prev = None;
-        let mut at = self.threads[receiver].senders;
-        while let Some(a) = at {
-            if a == sender {
-                let next = self.threads[sender].next_sender.take();
-                match prev {
-                    None => self.threads[receiver].senders = next,
-                    Some(p) => self.threads[p].next_sender = next,
-                }
-                return;
-            }
-            prev = at;
-            at = self.threads[a].next_sender;
-        }
-    }
-
-    /// The first queued sender to `receiver` (from `from` only, if given).
-    pub fn first_sender(&self, receiver: ThreadIdx, from: Option<ThreadIdx>) -> Option<ThreadIdx> {
-        let mut at = self.threads[receiver].senders;
-        while let Some(a) = at {
-            if from.is_none_or(|f| f == a) {
-                return Some(a);
-            }
-            at = self.threads[a].next_sender;
-        }
-        None
     }
 }

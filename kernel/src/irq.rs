@@ -67,7 +67,7 @@ fn line_index(line: u64) -> Result<usize, Error> {
 
 impl Kernel {
     pub fn holds_irq(&self, task: TaskIdx, line: usize) -> bool {
-        self.tasks[task].irq_lines & (1 << line) != 0
+        self.tasks[task].irq_lines() & (1 << line) != 0
     }
 
     /// `irq_grant` by `caller` to the descendant `target`.
@@ -76,7 +76,7 @@ impl Kernel {
         if target == caller || !self.is_within(target, caller) || !self.holds_irq(caller, line) {
             return Err(Error::NotPermitted);
         }
-        self.tasks[target].irq_lines |= 1 << line;
+        self.tasks[target].grant_irq_line(line);
         Ok(())
     }
 
@@ -96,7 +96,7 @@ impl Kernel {
             return Err(Error::InvalidArgument);
         }
         let owner = self.irqs.lines[index].thread;
-        if !self.holds_irq(self.threads[t].task, index) || owner.is_some_and(|o| o != t) {
+        if !self.holds_irq(self.threads[t].task(), index) || owner.is_some_and(|o| o != t) {
             return Err(Error::NotPermitted);
         }
         self.irqs.lines[index] = Binding {

@@ -121,7 +121,7 @@ impl Kernel {
     /// The resource partition named by user-visible number `id` (slot + 1; 0 = `task`'s).
     pub fn resource_partition(&self, task: TaskIdx, id: u64) -> Result<RpIdx, Error> {
         match id {
-            0 => Ok(self.tasks[task].rp),
+            0 => Ok(self.tasks[task].rp()),
             n => usize::try_from(n - 1)
                 .ok()
                 .and_then(|r| self.rps.slot(r))
@@ -132,7 +132,7 @@ impl Kernel {
 
     pub fn rp_create(&mut self, caller_task: TaskIdx, quota: Amount) -> Result<RpIdx, Error> {
         let slot = self.rps.find(|r| !r.in_use).ok_or(Error::OutOfResources)?;
-        let own = self.tasks[caller_task].rp;
+        let own = self.tasks[caller_task].rp();
         self.rps[slot] = self.rps[own].carve(caller_task, quota)?;
         Ok(slot)
     }

@@ -11,14 +11,14 @@
 
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
-use crate::rp::{Amount, ResourcePartition};
+use crate::rp::ResourcePartition;
 use crate::sched::{RunQueues, TIME_PARTITIONS};
 use crate::table::{RpIdx, Slot, Table, TaskIdx, ThreadIdx};
 use crate::task::Task;
 use crate::thread::{NEVER, Thread};
 use crate::timepart::TimeTable;
 use abi::root::{PhysRegion, ROOT_INFO_MAX_REGIONS};
-use abi::syscall::{Error, MAP_MAX_PAGES, PageRights};
+use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TaskId, ThreadId};
 
 /// The slot an object identifier names, if that slot holds a live object (`live` gives its
 /// generation) of the identifier's generation: a stale id never names a successor.
@@ -62,8 +62,8 @@ pub struct Kernel {
     pub(crate) current: Option<ThreadIdx>,
     /// The active window's time partition (none until a schedule exists).
     pub(crate) active_partition: Option<u8>,
-    /// Raw thread id of the root task's health monitor (0 = none).
-    pub(crate) health_monitor: u64,
+    /// The root task's health monitor ([`ThreadId::OWN`] = none).
+    pub(crate) health_monitor: ThreadId,
     /// Physical memory the root task may map.
     pub(crate) user_memory: [PhysRegion; ROOT_INFO_MAX_REGIONS],
     pub(crate) user_memory_count: usize,
@@ -83,8 +83,8 @@ pub struct Kernel {
     /// Time partition of the thread that ran since `last_account` (None: idle).
     pub(crate) running_partition: Option<u8>,
     pub(crate) last_account: u64,
-    /// Raw id of the task whose I/O bitmap is in the TSS (0: ports disabled).
-    pub(crate) io_loaded: u64,
+    /// The task whose I/O bitmap is in the TSS ([`TaskId::OWN`]: ports disabled).
+    pub(crate) io_loaded: TaskId,
     /// Interrupt lines attached to threads.
     pub(crate) irqs: crate::irq::Irqs,
 }
@@ -104,7 +104,7 @@ impl Kernel {
             run: RunQueues::new(),
             current: None,
             active_partition: None,
-            health_monitor: 0,
+            health_monitor: ThreadId::OWN,
             user_memory: [PhysRegion { start: 0, pages: 0 }; ROOT_INFO_MAX_REGIONS],
             user_memory_count: 0,
             next_deadline: NEVER,
@@ -116,7 +116,7 @@ impl Kernel {
             idle_ticks: 0,
             running_partition: None,
             last_account: 0,
-            io_loaded: 0,
+            io_loaded: TaskId::OWN,
             irqs: crate::irq::Irqs::new(),
         }
     }
@@ -148,7 +148,7 @@ impl Kernel {
         let frame_of = |k: &Self, i: u64| -> Result<u64, Error> {
             match source {
                 Source::Virtual(base) => {
-                    match k.tasks[caller].space.translate(base + i * PAGE_SIZE) {
+                    match k.tasks[caller].space().translate(base + i * PAGE_SIZE) {
                         Some((frame, have)) if have.contains(rights) => Ok(frame),
                         _ => Err(Error::BadAddress),
                     }
@@ -168,7 +168,7 @@ impl Kernel {
             }
             _ => {}
         }
-        let space = self.tasks[target].space;
+        let space = self.tasks[target].space();
         for i in 0..pages {
             frame_of(self, i)?;
             if space.translate(destination + i * PAGE_SIZE).is_some() {
@@ -179,8 +179,7 @@ impl Kernel {
         for i in 0..pages {
             let frame = frame_of(self, i)?;
             self.tasks[target]
-                .space
-                .map(destination + i * PAGE_SIZE, frame, rights)
+                .map_page(destination + i * PAGE_SIZE, frame, rights)
                 .expect("checked and charged");
         }
         Ok(())
@@ -188,14 +187,12 @@ impl Kernel {
 
     /// Charges the page tables a map of `pages` at `at` in `task` will need.
     pub fn charge_tables(&mut self, task: TaskIdx, at: u64, pages: u64) -> Result<(), Error> {
-        let needed = self.tasks[task].space.tables_needed(at, pages);
+        let needed = self.tasks[task].space().tables_needed(at, pages);
         if needed > crate::mem::free_frames() {
             // Cannot happen while quotas stay within the reserved pool; refuse anyway.
             return Err(Error::OutOfResources);
         }
-        self.rps[self.tasks[task].rp].charge(Amount::pages(needed))?;
-        self.tasks[task].pages_charged += needed;
-        Ok(())
+        self.charge_pages(task, needed)
     }
 
     pub fn unmap(&mut self, target: TaskIdx, address: u64, pages: u64) -> Result<(), Error> {
@@ -203,7 +200,7 @@ impl Kernel {
             return Err(Error::InvalidArgument);
         }
         for i in 0..pages {
-            self.tasks[target].space.unmap(address + i * PAGE_SIZE);
+            self.tasks[target].unmap_page(address + i * PAGE_SIZE);
         }
         Ok(())
     }
@@ -218,7 +215,7 @@ impl Kernel {
         if pages == 0 || pages > MAP_MAX_PAGES || !is_user_range(address, pages) {
             return Err(Error::InvalidArgument);
         }
-        let space = &mut self.tasks[target].space;
+        let space = *self.tasks[target].space();
         for i in 0..pages {
             match space.translate(address + i * PAGE_SIZE) {
                 Some((_, have)) if have.contains(rights) => {}
@@ -226,7 +223,7 @@ impl Kernel {
             }
         }
         for i in 0..pages {
-            space.set_rights(address + i * PAGE_SIZE, rights);
+            self.tasks[target].set_page_rights(address + i * PAGE_SIZE, rights);
         }
         Ok(())
     }

@@ -11,13 +11,13 @@ use crate::state::{Kernel, Source};
 use crate::table::{Slot, TaskIdx, ThreadIdx};
 use crate::thread::{Fault, State};
 use crate::timepart::{Schedule, Window};
-use abi::args::{self, ArgRegs};
+use abi::args::{self, ArgRegs, RpCounts, results};
 use abi::ipc::{
     IPC_BUFFER_SIZE, LABEL_EXCEPTION, LABEL_SYSCALL, MessageTag, VECTOR_INTERRUPT, VECTOR_SYSCALL,
 };
 use abi::syscall::{
     Abilities, Call, DEBUG_WRITE_MAX, Error, MAX_SCHEDULES, MAX_WINDOWS, PageRights, TASK_NAME_MAX,
-    TIME_PARTITIONS, ThreadAttribute, USER_END,
+    TIME_PARTITIONS, ThreadAttribute, ThreadId, USER_END, WindowSpec,
 };
 
 /// What the entry glue must do after a kernel operation.
@@ -79,17 +79,14 @@ handlers! {
     IrqDetach => irq_detach,
 }
 
-/// The argument registers of thread `t`.
-fn args(k: &Kernel, t: ThreadIdx) -> ArgRegs {
-    let c = &k.threads[t].context;
-    ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
-}
-
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
 /// ns since boot, read only by calls that need it (it costs a division).
 pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
-    let task = k.threads[t].task;
-    if !k.tasks[task].abilities.contains(Abilities::NATIVE_SYSCALLS) {
+    let task = k.threads[t].task();
+    if !k.tasks[task]
+        .abilities()
+        .contains(Abilities::NATIVE_SYSCALLS)
+    {
         let fault = Fault {
             label: LABEL_SYSCALL,
             vector: VECTOR_SYSCALL,
@@ -98,20 +95,20 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
         };
         return crate::fault::deliver_or_report(k, t, fault);
     }
-    let raw = k.threads[t].context.rax;
+    let raw = k.threads[t].context().rax;
     let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
-        Some(call) => dispatch(call, k, t, &args(k, t), clock),
+        Some(call) => dispatch(call, k, t, &k.threads[t].arg_regs(), clock),
     };
     match result {
         Ok(Next::Return) => {
-            k.threads[t].context.rax = Error::Ok as u64;
+            k.threads[t].set_status(Error::Ok);
             Outcome::Continue
         }
         Ok(Next::Pending) => Outcome::Continue,
         Ok(Next::Halt { success }) => Outcome::Halt { success },
         Err(e) => {
-            k.threads[t].context.rax = e as u64;
+            k.threads[t].set_status(e);
             Outcome::Continue
         }
     }
@@ -119,7 +116,7 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
 
 /// `rax` = Ok now, for calls that may block: the wake-up sets it again if the wait fails.
 fn ok_unless_changed(k: &mut Kernel, t: ThreadIdx) {
-    k.threads[t].context.rax = Error::Ok as u64;
+    k.threads[t].set_status(Error::Ok);
 }
 
 fn rights(bits: u64) -> Result<PageRights, Error> {
@@ -128,7 +125,7 @@ fn rights(bits: u64) -> Result<PageRights, Error> {
 
 /// The calling thread's task.
 fn task_of(k: &Kernel, t: ThreadIdx) -> TaskIdx {
-    k.threads[t].task
+    k.threads[t].task()
 }
 
 fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
@@ -140,7 +137,7 @@ fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     let mut buf = [0u8; DEBUG_WRITE_MAX as usize];
     let text = &mut buf[..a.len as usize];
-    if !k.tasks[task].space.copy_from_user(a.ptr, text) {
+    if !k.tasks[task].space().copy_from_user(a.ptr, text) {
         return Err(Error::BadAddress);
     }
     let text = core::str::from_utf8(text).unwrap_or("<invalid UTF-8>");
@@ -149,9 +146,13 @@ fn debug_write(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 }
 
 fn clock(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, clock: Clock) -> Handled {
-    let c = &mut k.threads[t].context;
-    (c.rdi, c.rsi, c.rdx) = (clock(), crate::time::tsc_hz(), crate::time::boot_tsc());
-    c.r10 = crate::time::wall_clock_at_boot();
+    let now = results::Clock {
+        ns: clock(),
+        tsc_hz: crate::time::tsc_hz(),
+        boot_tsc: crate::time::boot_tsc(),
+        wall_clock_at_boot: crate::time::wall_clock_at_boot(),
+    };
+    k.threads[t].set_results(|r| now.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -199,7 +200,7 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let abilities = Abilities::from_bits(a.abilities).ok_or(Error::InvalidArgument)?;
     let mcp = u8::try_from(a.mcp).map_err(|_| Error::McpExceeded)?;
     let rp = k.resource_partition(task, a.rp)?;
-    if rp != k.tasks[task].rp {
+    if rp != k.tasks[task].rp() {
         k.require(task, Abilities::PARTITION_CONTROL)?;
         if k.rps[rp].owner != task {
             return Err(Error::NotPermitted);
@@ -210,12 +211,13 @@ fn task_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     let mut name = [0u8; TASK_NAME_MAX as usize];
     let name = &mut name[..a.name_len as usize];
-    if !k.tasks[task].space.copy_from_user(a.name_ptr, name) {
+    if !k.tasks[task].space().copy_from_user(a.name_ptr, name) {
         return Err(Error::BadAddress);
     }
     let name = core::str::from_utf8(name).map_err(|_| Error::InvalidArgument)?;
     let child = k.create_task(task, abilities, mcp, rp, name)?;
-    k.threads[t].context.rdi = k.task_id(child);
+    let task = k.task_id(child);
+    k.threads[t].set_results(|r| results::TaskCreate { task }.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -237,7 +239,7 @@ fn task_kill(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     }
     // Not done: the caller executes the same `syscall` again (2 bytes back, its registers
     // unchanged), so a window boundary or a higher priority can come in between.
-    k.threads[t].context.rip = k.threads[t].context.rip.wrapping_sub(SYSCALL_LEN);
+    k.threads[t].rewind(SYSCALL_LEN);
     Ok(Next::Pending)
 }
 
@@ -256,7 +258,7 @@ fn task_allow_send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handl
     let a = args::TaskAllowSend::decode(r);
     let from = k.controlled_task(task, a.from)?;
     let to = k.controlled_task(task, a.to)?;
-    k.tasks[from].send_to |= crate::task::bit(to);
+    k.allow_send(from, to);
     Ok(Next::Return)
 }
 
@@ -266,16 +268,17 @@ fn thread_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled
     let a = args::ThreadCreate::decode(r);
     let target = k.controlled_task(task, a.task)?;
     let priority = u8::try_from(a.priority).map_err(|_| Error::McpExceeded)?;
-    let tp = k.threads[t].time_partition;
+    let tp = k.threads[t].time_partition();
     let new = k.create_thread(target, a.entry, a.stack, priority, tp, a.arg)?;
-    k.threads[t].context.rdi = k.thread_id(new);
+    let thread = k.thread_id(new);
+    k.threads[t].set_results(|r| results::ThreadCreate { thread }.encode_into(r));
     Ok(Next::Return)
 }
 
 fn thread_start(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     k.require(task_of(k, t), Abilities::CREATE_THREAD)?;
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
-    if k.threads[target].state != State::Inactive {
+    if k.threads[target].state() != State::Inactive {
         return Err(Error::InvalidArgument);
     }
     k.set_state(target, State::Ready);
@@ -318,9 +321,9 @@ fn thread_fpu(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     if target == t || a.write > 1 {
         return Err(Error::InvalidArgument);
     }
-    let space = &k.tasks[task_of(k, t)].space;
+    let space = &k.tasks[task_of(k, t)].space();
     if a.write == 0 {
-        let image = k.threads[target].fpu.0;
+        let image = k.threads[target].fpu().0;
         return if space.copy_to_user(a.buffer, &image) {
             Ok(Next::Return)
         } else {
@@ -331,18 +334,18 @@ fn thread_fpu(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     if !space.copy_from_user(a.buffer, &mut image) {
         return Err(Error::BadAddress);
     }
-    k.threads[target].fpu = k.threads[target].fpu.sanitized(image);
+    k.threads[target].load_fpu(image);
     Ok(Next::Return)
 }
 
 fn thread_interrupt(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let target = k.controlled_thread(t, args::OnThread::decode(r).thread)?;
-    let handler = k.thread(k.threads[target].exception_handler);
+    let handler = k.thread(k.threads[target].exception_handler());
     if target == t || handler.is_err() {
         return Err(Error::InvalidArgument);
     }
     // One CPU: the caller runs, so a ready target is preempted in user mode.
-    let interrupted = k.threads[target].state == State::Ready;
+    let interrupted = k.threads[target].state() == State::Ready;
     if interrupted {
         let fault = Fault {
             label: LABEL_EXCEPTION,
@@ -352,13 +355,16 @@ fn thread_interrupt(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Hand
         };
         k.raise_fault(target, fault);
     }
-    k.threads[t].context.rdi = interrupted as u64;
+    k.threads[t].set_results(|r| results::ThreadInterrupt { interrupted }.encode_into(r));
     Ok(Next::Return)
 }
 
 fn thread_self(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, _: Clock) -> Handled {
-    k.threads[t].context.rdi = k.thread_id(t);
-    k.threads[t].context.rsi = k.task_id(task_of(k, t));
+    let me = results::ThreadSelf {
+        thread: k.thread_id(t),
+        task: k.task_id(task_of(k, t)),
+    };
+    k.threads[t].set_results(|r| me.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -421,7 +427,7 @@ fn send_message(
 ) -> Handled {
     let a = args::Ipc::decode(r);
     let dest = k.thread(a.peer)?;
-    if !k.may_send(task_of(k, t), k.threads[dest].task) {
+    if !k.may_send(task_of(k, t), k.threads[dest].task()) {
         return Err(Error::NotPermitted);
     }
     if !MessageTag(a.tag).is_valid() {
@@ -447,9 +453,9 @@ fn ipc_call(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled 
 
 fn receive(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {
     let a = args::Ipc::decode(r);
-    let from = match a.peer {
-        0 => None,
-        id => Some(k.thread(id)?),
+    let from = match a.peer.named() {
+        None => None,
+        Some(id) => Some(k.thread(id)?),
     };
     k.receive(t, from, deadline(clock, a.timeout), a.timeout == 0);
     Ok(Next::Pending)
@@ -460,8 +466,8 @@ fn answer_caller(k: &mut Kernel, t: ThreadIdx, a: &args::Ipc) -> Result<(), Erro
     if !MessageTag(a.tag).is_valid() {
         return Err(Error::InvalidArgument);
     }
-    if a.peer != 0 {
-        let caller = k.thread(a.peer).map_err(|_| Error::NotWaiting)?;
+    if let Some(peer) = a.peer.named() {
+        let caller = k.thread(peer).map_err(|_| Error::NotWaiting)?;
         k.reply(t, caller)?;
     }
     Ok(())
@@ -482,7 +488,7 @@ fn reply(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 fn notify_signal(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let a = args::NotifySignal::decode(r);
     let target = k.thread(a.thread)?;
-    if !k.may_send(task_of(k, t), k.threads[target].task) {
+    if !k.may_send(task_of(k, t), k.threads[target].task()) {
         return Err(Error::NotPermitted);
     }
     k.signal(target, a.bits);
@@ -507,20 +513,25 @@ fn rp_create(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
             pages: a.pages,
         },
     )?;
-    k.threads[t].context.rdi = rp.position() as u64 + 1;
+    let rp = rp.position() as u64 + 1;
+    k.threads[t].set_results(|r| results::RpCreate { rp }.encode_into(r));
     Ok(Next::Return)
 }
 
 fn rp_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let rp = k.resource_partition(task_of(k, t), args::RpInfo::decode(r).rp)?;
-    let r = k.rps[rp];
-    let c = &mut k.threads[t].context;
-    c.rdi = r.used.pages;
-    c.rsi = r.quota.pages;
-    c.rdx = (r.used.threads & 0xffff)
-        | (r.quota.threads & 0xffff) << 16
-        | (r.used.tasks & 0xffff) << 32
-        | (r.quota.tasks & 0xffff) << 48;
+    let (used, quota) = (k.rps[rp].used, k.rps[rp].quota);
+    let info = results::RpInfo {
+        pages_used: used.pages,
+        pages_quota: quota.pages,
+        counts: RpCounts {
+            threads_used: used.threads as u16,
+            threads_quota: quota.threads as u16,
+            tasks_used: used.tasks as u16,
+            tasks_quota: quota.tasks as u16,
+        },
+    };
+    k.threads[t].set_results(|r| info.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -529,7 +540,7 @@ fn set_health_monitor(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Ha
     k.require(task, Abilities::PARTITION_CONTROL)?;
     let id = args::SetHealthMonitor::decode(r).thread;
     let monitor = k.thread(id)?;
-    if task != TaskIdx::ROOT || k.threads[monitor].task != TaskIdx::ROOT {
+    if task != TaskIdx::ROOT || k.threads[monitor].task() != TaskIdx::ROOT {
         return Err(Error::NotPermitted);
     }
     k.health_monitor = id;
@@ -545,19 +556,18 @@ fn schedule_set(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled 
     }
     let mut windows = [Window::default(); MAX_WINDOWS as usize];
     for (i, w) in windows.iter_mut().take(a.count as usize).enumerate() {
-        let mut raw = [0u8; 24];
-        let at = a
-            .windows
-            .checked_add(i as u64 * 24)
+        let mut raw = [0u8; WindowSpec::SIZE];
+        let at = (a.windows)
+            .checked_add((i * WindowSpec::SIZE) as u64)
             .ok_or(Error::BadAddress)?;
-        if !k.tasks[task].space.copy_from_user(at, &mut raw) {
+        if !k.tasks[task].space().copy_from_user(at, &mut raw) {
             return Err(Error::BadAddress);
         }
-        let word = |n: usize| u64::from_ne_bytes(raw[n * 8..n * 8 + 8].try_into().unwrap());
+        let spec = WindowSpec::from_bytes(&raw);
         *w = Window {
-            offset: word(0),
-            duration: word(1),
-            partition: u8::try_from(word(2)).map_err(|_| Error::InvalidArgument)?,
+            offset: spec.offset,
+            duration: spec.duration,
+            partition: u8::try_from(spec.partition).map_err(|_| Error::InvalidArgument)?,
         };
     }
     let schedule = Schedule::new(a.major_frame, &windows[..a.count as usize])
@@ -593,9 +603,15 @@ fn partition_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Ha
         ns(k.idle_ticks),
         k.time.frames,
     );
-    let active = k.active_partition.unwrap_or(0) as u64;
-    let c = &mut k.threads[t].context;
-    (c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9) = (active, start, length, cpu, idle, frames);
+    let info = results::PartitionInfo {
+        active: k.active_partition.unwrap_or(0) as u64,
+        window_start: start,
+        window_length: length,
+        cpu_ns: cpu,
+        idle_ns: idle,
+        frames,
+    };
+    k.threads[t].set_results(|r| info.encode_into(r));
     Ok(Next::Return)
 }
 
@@ -654,40 +670,38 @@ fn set_attribute(
     attribute: u64,
     value: u64,
 ) -> Result<(), Error> {
+    let handler = ThreadId(value);
     match ThreadAttribute::from_code(attribute).ok_or(Error::InvalidArgument)? {
         ThreadAttribute::Priority => {
             let priority = u8::try_from(value).map_err(|_| Error::McpExceeded)?;
             k.set_priority(target, priority)
         }
         ThreadAttribute::ExceptionHandler => {
-            if value != 0 {
-                let handler = k.thread(value)?;
-                if !k.is_within(k.threads[target].task, k.threads[handler].task) {
+            if let Some(handler) = handler.named() {
+                let handler = k.thread(handler)?;
+                if !k.is_within(k.threads[target].task(), k.threads[handler].task()) {
                     return Err(Error::NotPermitted);
                 }
             }
-            k.threads[target].exception_handler = value;
+            k.threads[target].set_exception_handler(handler);
             Ok(())
         }
         ThreadAttribute::IpcBuffer => {
-            let space = k.tasks[k.threads[target].task].space;
+            let space = k.tasks[k.threads[target].task()].space();
             if value != 0
                 && (!value.is_multiple_of(8) || !space.accessible(value, IPC_BUFFER_SIZE, true))
             {
                 return Err(Error::BadAddress);
             }
-            k.threads[target].ipc_buffer = value;
+            k.threads[target].set_ipc_buffer(value);
             Ok(())
         }
         ThreadAttribute::FsBase | ThreadAttribute::GsBase => {
             if value >= USER_END {
                 return Err(Error::InvalidArgument);
             }
-            if attribute == ThreadAttribute::FsBase as u64 {
-                k.threads[target].fs_base = value;
-            } else {
-                k.threads[target].gs_base = value;
-            }
+            let fs = attribute == ThreadAttribute::FsBase as u64;
+            k.threads[target].set_base(fs, value);
             k.reload_bases |= k.current == Some(target);
             Ok(())
         }

@@ -15,33 +15,36 @@ use abi::syscall::{
     Abilities, MAX_PRIORITY, PageRights, ROOT_INFO_BASE, ROOT_PRIORITY, ROOT_STACK_SIZE,
     ROOT_STACK_TOP, ROOT_SYSTEM_IMAGE_BASE, USER_END, USER_MIN,
 };
-use abi::syscall::{Error, TASK_NAME_MAX, make_id};
+use abi::syscall::{Error, TASK_NAME_MAX, TaskId, make_id};
 
+/// A task control block. Its fields change only here, through methods that keep them
+/// consistent: abilities and MCP within the parent's, the pages charged to its resource
+/// partition with what its page tables and I/O bitmap hold ([`Kernel::charge_pages`]).
 #[derive(Clone, Copy)]
 pub struct Task {
-    pub in_use: bool,
-    pub generation: u16,
-    pub name: [u8; 16],
-    pub name_len: u8,
-    pub parent: Option<TaskIdx>,
-    pub abilities: Abilities,
-    pub mcp: u8,
+    in_use: bool,
+    generation: u16,
+    name: [u8; 16],
+    name_len: u8,
+    parent: Option<TaskIdx>,
+    abilities: Abilities,
+    mcp: u8,
     /// Resource partition slot it belongs to and is charged to.
-    pub rp: RpIdx,
-    pub space: AddressSpace,
+    rp: RpIdx,
+    space: AddressSpace,
     /// Bit i set: threads of this task may send to threads of task slot i.
-    pub send_to: u64,
+    send_to: u64,
     /// Page-table and I/O-bitmap frames charged to the resource partition (returned when
     /// it dies).
-    pub pages_charged: u64,
+    pages_charged: u64,
     /// The two frames of its I/O permission bitmap (0: no ports).
-    pub io_bitmap: [u64; 2],
+    io_bitmap: [u64; 2],
     /// Bit n: the task may attach interrupt line n.
-    pub irq_lines: u32,
+    irq_lines: u32,
     /// Stopped (`task_stop`) or being destroyed by a `task_kill` that is not finished: its
     /// threads never run again and no call but `task_kill` and `task_stop` can name it
     /// (see [`Kernel::stop_task`]).
-    pub dying: bool,
+    dying: bool,
 }
 
 impl Task {
@@ -62,8 +65,109 @@ impl Task {
         dying: false,
     };
 
+    /// A root task named `name` (at most 16 bytes) in `space`: every ability, the highest
+    /// MCP, the root resource partition, every interrupt line but the kernel's.
+    pub fn root(space: AddressSpace, name: &str) -> Self {
+        let mut task = Task {
+            in_use: true,
+            abilities: Abilities::all(),
+            mcp: MAX_PRIORITY,
+            rp: RpIdx::ROOT,
+            space,
+            send_to: 1,
+            irq_lines: crate::irq::root_lines(),
+            ..Task::FREE
+        };
+        task.name[..name.len()].copy_from_slice(name.as_bytes());
+        task.name_len = name.len() as u8;
+        task
+    }
+
     pub fn name(&self) -> &str {
         core::str::from_utf8(&self.name[..self.name_len as usize]).unwrap_or("?")
+    }
+
+    #[inline(always)]
+    pub fn in_use(&self) -> bool {
+        self.in_use
+    }
+
+    #[inline(always)]
+    pub fn is_dying(&self) -> bool {
+        self.dying
+    }
+
+    #[inline(always)]
+    pub fn parent(&self) -> Option<TaskIdx> {
+        self.parent
+    }
+
+    #[inline(always)]
+    pub fn abilities(&self) -> Abilities {
+        self.abilities
+    }
+
+    #[inline(always)]
+    pub fn mcp(&self) -> u8 {
+        self.mcp
+    }
+
+    #[inline(always)]
+    pub fn rp(&self) -> RpIdx {
+        self.rp
+    }
+
+    #[inline(always)]
+    pub fn space(&self) -> &AddressSpace {
+        &self.space
+    }
+
+    #[inline(always)]
+    pub fn pages_charged(&self) -> u64 {
+        self.pages_charged
+    }
+
+    #[inline(always)]
+    pub fn io_bitmap(&self) -> [u64; 2] {
+        self.io_bitmap
+    }
+
+    #[inline(always)]
+    pub fn irq_lines(&self) -> u32 {
+        self.irq_lines
+    }
+
+    /// Maps a page (its page tables charged before: [`Kernel::charge_pages`]).
+    pub fn map_page(&mut self, virt: u64, frame: u64, rights: PageRights) -> Result<(), MapError> {
+        self.space.map(virt, frame, rights)
+    }
+
+    pub fn unmap_page(&mut self, virt: u64) -> Option<u64> {
+        self.space.unmap(virt)
+    }
+
+    pub fn set_page_rights(&mut self, virt: u64, rights: PageRights) -> bool {
+        self.space.set_rights(virt, rights)
+    }
+
+    /// Frees its page tables, for host tests' clean-up.
+    #[cfg(test)]
+    pub fn destroy_space(&mut self) {
+        self.space.destroy_some(&mut u64::MAX.clone());
+    }
+
+    /// Its I/O bitmap frames (charged before: [`Kernel::charge_pages`]).
+    pub fn set_io_bitmap(&mut self, frames: [u64; 2]) {
+        self.io_bitmap = frames;
+    }
+
+    /// Takes its I/O bitmap frames away (they are freed and released by the caller).
+    pub fn take_io_bitmap(&mut self) -> [u64; 2] {
+        core::mem::take(&mut self.io_bitmap)
+    }
+
+    pub fn grant_irq_line(&mut self, line: usize) {
+        self.irq_lines |= 1 << line;
     }
 }
 
@@ -179,18 +283,7 @@ pub fn create_root(
     k.rps[RpIdx::ROOT]
         .charge(Amount::tasks(1))
         .expect("fresh quota");
-    let mut task = Task {
-        in_use: true,
-        abilities: Abilities::all(),
-        mcp: MAX_PRIORITY,
-        rp: RpIdx::ROOT,
-        space,
-        send_to: 1,
-        irq_lines: crate::irq::root_lines(),
-        ..Task::FREE
-    };
-    task.name[..5].copy_from_slice(b"syssw");
-    task.name_len = 5;
+    let task = Task::root(space, "syssw");
     k.tasks[TaskIdx::ROOT] = task;
     let thread = k
         .create_thread(
@@ -202,27 +295,26 @@ pub fn create_root(
             ROOT_SYSTEM_IMAGE_BASE,
         )
         .expect("fresh tables");
-    k.threads[thread].context.rsi = image_len;
-    k.threads[thread].context.rdx = ROOT_INFO_BASE;
+    k.threads[thread].set_start_registers(image_len, ROOT_INFO_BASE);
     k.set_state(thread, crate::thread::State::Ready);
     Ok(entry)
 }
 
 impl Kernel {
-    pub fn task_id(&self, t: TaskIdx) -> u64 {
-        make_id(t.position(), self.tasks[t].generation)
+    pub fn task_id(&self, t: TaskIdx) -> TaskId {
+        TaskId(make_id(t.position(), self.tasks[t].generation))
     }
 
     /// The live task `id` names (a dying one is gone for every call but `task_kill`).
-    pub fn task(&self, id: u64) -> Result<TaskIdx, Error> {
-        slot_of(&self.tasks, id, |t| {
+    pub fn task(&self, id: TaskId) -> Result<TaskIdx, Error> {
+        slot_of(&self.tasks, id.0, |t| {
             (t.in_use && !t.dying).then_some(t.generation)
         })
     }
 
     /// The task `id` names, live or dying (`task_kill` goes on destroying a dying one).
-    pub fn task_to_kill(&self, id: u64) -> Result<TaskIdx, Error> {
-        slot_of(&self.tasks, id, |t| t.in_use.then_some(t.generation))
+    pub fn task_to_kill(&self, id: TaskId) -> Result<TaskIdx, Error> {
+        slot_of(&self.tasks, id.0, |t| t.in_use.then_some(t.generation))
     }
 
     /// True if `task` is `ancestor` or one of its descendants.
@@ -240,13 +332,35 @@ impl Kernel {
     }
 
     /// The task named by `id` (0 = `caller`'s own), if the caller controls it.
-    pub fn controlled_task(&self, caller: TaskIdx, id: u64) -> Result<TaskIdx, Error> {
-        let task = if id == 0 { caller } else { self.task(id)? };
+    pub fn controlled_task(&self, caller: TaskIdx, id: TaskId) -> Result<TaskIdx, Error> {
+        let task = match id.named() {
+            None => caller,
+            Some(id) => self.task(id)?,
+        };
         if self.is_within(task, caller) {
             Ok(task)
         } else {
             Err(Error::NotPermitted)
         }
+    }
+
+    /// Charges `pages` kernel pages of `task` (page tables, I/O bitmap) to its resource
+    /// partition.
+    pub fn charge_pages(&mut self, task: TaskIdx, pages: u64) -> Result<(), Error> {
+        self.rps[self.tasks[task].rp].charge(Amount::pages(pages))?;
+        self.tasks[task].pages_charged += pages;
+        Ok(())
+    }
+
+    /// Returns `pages` kernel pages of `task` (freed) to its resource partition.
+    pub fn release_pages(&mut self, task: TaskIdx, pages: u64) {
+        self.tasks[task].pages_charged -= pages;
+        self.rps[self.tasks[task].rp].release(Amount::pages(pages));
+    }
+
+    /// Lets threads of `from` send to threads of `to`.
+    pub fn allow_send(&mut self, from: TaskIdx, to: TaskIdx) {
+        self.tasks[from].send_to |= bit(to);
     }
 
     pub fn may_send(&self, from_task: TaskIdx, to_task: TaskIdx) -> bool {
@@ -340,13 +454,11 @@ impl Kernel {
         for slot in TaskIdx::all().filter(|&t| set & bit(t) != 0) {
             self.tasks[slot].dying = true;
             let freed = self.release_io_bitmap(slot);
-            self.tasks[slot].pages_charged -= freed;
-            self.rps[self.tasks[slot].rp].release(Amount::pages(freed));
+            self.release_pages(slot, freed);
         }
         for t in ThreadIdx::all() {
-            if !self.threads[t].is_free() && set & bit(self.threads[t].task) != 0 {
-                self.threads[t].suspended = true;
-                self.run.remove(t.position());
+            if !self.threads[t].is_free() && set & bit(self.threads[t].task()) != 0 {
+                self.set_suspended(t, true);
             }
         }
     }
@@ -366,7 +478,7 @@ impl Kernel {
         let member = |t: TaskIdx| set & bit(t) != 0;
         budget = budget.saturating_sub(MAX_THREADS as u64);
         for t in ThreadIdx::all() {
-            if !self.threads[t].is_free() && member(self.threads[t].task) {
+            if !self.threads[t].is_free() && member(self.threads[t].task()) {
                 if budget < KILL_COST {
                     return false;
                 }
@@ -377,8 +489,7 @@ impl Kernel {
         let mut entries = budget / ENTRY_COST;
         for slot in TaskIdx::all().filter(|&t| member(t)) {
             let freed = self.tasks[slot].space.destroy_some(&mut entries);
-            self.tasks[slot].pages_charged -= freed;
-            self.rps[self.tasks[slot].rp].release(Amount::pages(freed));
+            self.release_pages(slot, freed);
             if !self.tasks[slot].space.is_destroyed() {
                 return false;
             }

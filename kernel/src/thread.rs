@@ -5,7 +5,9 @@ use crate::rp::Amount;
 use crate::sched::TIME_PARTITIONS;
 use crate::state::{Kernel, USER_CS, USER_RFLAGS, USER_SS, slot_of};
 use crate::table::{Slot, TaskIdx, ThreadIdx};
-use abi::syscall::{Error, USER_END, make_id};
+use abi::args::ArgRegs;
+use abi::ipc::{Registers, USER_RFLAGS_MASK};
+use abi::syscall::{Error, ThreadId, USER_END, make_id};
 
 /// No thread (end of an intrusive list).
 pub const NIL: u16 = u16::MAX;
@@ -78,30 +80,35 @@ impl FpuState {
     }
 }
 
+/// A thread control block. Its fields change only here, through methods that keep them
+/// consistent: the state with the run and send queues ([`Kernel::set_state`],
+/// [`Kernel::block`], [`Kernel::wake`]), the priority within the task's MCP, the thread
+/// quota of its resource partition ([`Kernel::create_thread`], [`Kernel::kill_thread`]),
+/// user registers in user mode with interrupts on.
 #[derive(Clone, Copy)]
 pub struct Thread {
-    pub state: State,
-    pub generation: u16,
-    pub task: TaskIdx,
-    pub priority: u8,
-    pub time_partition: u8,
-    pub suspended: bool,
+    state: State,
+    generation: u16,
+    task: TaskIdx,
+    priority: u8,
+    time_partition: u8,
+    suspended: bool,
     /// User registers while the thread is not running (the live copy is the entry frame).
-    pub context: TrapFrame,
-    pub fs_base: u64,
-    pub gs_base: u64,
-    pub fpu: FpuState,
-    /// Raw thread identifier of the exception handler (0 = none), resolved at fault time.
-    pub exception_handler: u64,
-    pub ipc_buffer: u64,
+    context: TrapFrame,
+    fs_base: u64,
+    gs_base: u64,
+    fpu: FpuState,
+    /// The exception handler ([`ThreadId::OWN`] = none), resolved at fault time.
+    exception_handler: ThreadId,
+    ipc_buffer: u64,
     /// Absolute time (ns since boot) at which a blocking call times out.
-    pub deadline: u64,
-    pub fault: Option<Fault>,
+    deadline: u64,
+    fault: Option<Fault>,
     /// Head of the queue of threads waiting to send to this one (by priority, then FIFO).
-    pub senders: Option<ThreadIdx>,
+    senders: Option<ThreadIdx>,
     /// Link in the send queue this thread waits in.
-    pub next_sender: Option<ThreadIdx>,
-    pub notify_bits: u64,
+    next_sender: Option<ThreadIdx>,
+    notify_bits: u64,
 }
 
 pub const EMPTY_CONTEXT: TrapFrame = TrapFrame {
@@ -141,7 +148,7 @@ impl Thread {
         fs_base: 0,
         gs_base: 0,
         fpu: FpuState::initial(),
-        exception_handler: 0,
+        exception_handler: ThreadId::OWN,
         ipc_buffer: 0,
         deadline: NEVER,
         fault: None,
@@ -158,28 +165,213 @@ impl Thread {
     pub fn is_runnable(&self) -> bool {
         self.state == State::Ready && !self.suspended
     }
+
+    #[inline(always)]
+    pub fn state(&self) -> State {
+        self.state
+    }
+
+    #[inline(always)]
+    pub fn task(&self) -> TaskIdx {
+        self.task
+    }
+
+    #[inline(always)]
+    pub fn priority(&self) -> u8 {
+        self.priority
+    }
+
+    #[inline(always)]
+    pub fn time_partition(&self) -> u8 {
+        self.time_partition
+    }
+
+    /// Its user registers as saved when it left user mode.
+    #[inline(always)]
+    pub fn context(&self) -> &TrapFrame {
+        &self.context
+    }
+
+    #[inline(always)]
+    pub fn bases(&self) -> (u64, u64) {
+        (self.fs_base, self.gs_base)
+    }
+
+    #[inline(always)]
+    pub fn fpu(&self) -> &FpuState {
+        &self.fpu
+    }
+
+    #[inline(always)]
+    pub fn exception_handler(&self) -> ThreadId {
+        self.exception_handler
+    }
+
+    #[inline(always)]
+    pub fn ipc_buffer(&self) -> u64 {
+        self.ipc_buffer
+    }
+
+    #[inline(always)]
+    pub fn deadline(&self) -> u64 {
+        self.deadline
+    }
+
+    #[inline(always)]
+    pub fn fault(&self) -> Option<Fault> {
+        self.fault
+    }
+
+    #[inline(always)]
+    pub fn is_suspended(&self) -> bool {
+        self.suspended
+    }
+
+    /// The first thread in its send queue.
+    #[inline(always)]
+    pub fn senders(&self) -> Option<ThreadIdx> {
+        self.senders
+    }
+
+    /// The thread behind it in the send queue it waits in.
+    #[inline(always)]
+    pub fn next_sender(&self) -> Option<ThreadIdx> {
+        self.next_sender
+    }
+
+    /// Saves the registers of the entry frame when it leaves user mode.
+    #[inline(always)]
+    pub fn save_context(&mut self, frame: &TrapFrame) {
+        self.context = *frame;
+    }
+
+    /// Where the processor saves its FPU state when it stops running.
+    #[inline(always)]
+    pub fn fpu_save_area(&mut self) -> &mut FpuState {
+        &mut self.fpu
+    }
+
+    /// Loads an FPU image from user space, without the MXCSR bits FXRSTOR refuses.
+    pub fn load_fpu(&mut self, image: [u8; 512]) {
+        self.fpu = self.fpu.sanitized(image);
+    }
+
+    /// A system call's status in `rax`.
+    #[inline(always)]
+    pub fn set_status(&mut self, status: Error) {
+        self.context.rax = status as u64;
+    }
+
+    /// Makes it execute its `syscall` (`len` bytes) again when it runs.
+    pub fn rewind(&mut self, len: u64) {
+        self.context.rip = self.context.rip.wrapping_sub(len);
+    }
+
+    /// `rsi` and `rdx` of a thread that has not started (the root task's start convention).
+    pub fn set_start_registers(&mut self, rsi: u64, rdx: u64) {
+        (self.context.rsi, self.context.rdx) = (rsi, rdx);
+    }
+
+    /// FS or GS base (a user address, checked by the caller).
+    pub fn set_base(&mut self, fs: bool, value: u64) {
+        if fs {
+            self.fs_base = value;
+        } else {
+            self.gs_base = value;
+        }
+    }
+
+    /// The exception handler (a thread allowed to be one, checked by the caller).
+    pub fn set_exception_handler(&mut self, handler: ThreadId) {
+        self.exception_handler = handler;
+    }
+
+    /// The IPC buffer (checked by the caller: aligned and writable, or 0).
+    pub fn set_ipc_buffer(&mut self, at: u64) {
+        self.ipc_buffer = at;
+    }
+
+    /// The fault it reports (an exception message is sent for it next).
+    pub fn set_fault(&mut self, fault: Fault) {
+        self.fault = Some(fault);
+    }
+
+    /// Sets notification bits.
+    pub fn add_notify_bits(&mut self, bits: u64) {
+        self.notify_bits |= bits;
+    }
+
+    /// Takes (clears and returns) the set notification bits of `mask`.
+    pub fn take_notify_bits(&mut self, mask: u64) -> u64 {
+        let got = self.notify_bits & mask;
+        self.notify_bits &= !mask;
+        got
+    }
+
+    /// Loads edited registers (an exception handler's reply), keeping it in user mode with
+    /// interrupts on.
+    pub fn load_registers(&mut self, r: &Registers) -> Result<(), Error> {
+        if r.rip >= USER_END || r.fs_base >= USER_END || r.gs_base >= USER_END {
+            return Err(Error::InvalidArgument);
+        }
+        let c = &mut self.context;
+        (c.rax, c.rbx, c.rcx, c.rdx) = (r.rax, r.rbx, r.rcx, r.rdx);
+        (c.rsi, c.rdi, c.rbp, c.rsp) = (r.rsi, r.rdi, r.rbp, r.rsp);
+        (c.r8, c.r9, c.r10, c.r11) = (r.r8, r.r9, r.r10, r.r11);
+        (c.r12, c.r13, c.r14, c.r15) = (r.r12, r.r13, r.r14, r.r15);
+        c.rip = r.rip;
+        c.rflags = (r.rflags & USER_RFLAGS_MASK) | USER_RFLAGS;
+        (self.fs_base, self.gs_base) = (r.fs_base, r.gs_base);
+        Ok(())
+    }
+
+    /// Its user registers, for host tests that play a thread's part.
+    #[cfg(test)]
+    pub fn context_mut(&mut self) -> &mut TrapFrame {
+        &mut self.context
+    }
+
+    /// The argument registers of its system call.
+    #[inline(always)]
+    pub fn arg_regs(&self) -> ArgRegs {
+        let c = &self.context;
+        ArgRegs::from_array([c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9])
+    }
+
+    /// Writes a call's results into its argument registers: `encode` (an `abi::args::results`
+    /// struct's `encode_into`) sets those the results use, the others keep their values.
+    #[inline(always)]
+    pub fn set_results(&mut self, encode: impl FnOnce(&mut ArgRegs)) {
+        let mut regs = self.arg_regs();
+        encode(&mut regs);
+        let c = &mut self.context;
+        [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = regs.to_array();
+    }
 }
 
 impl Kernel {
-    pub fn thread_id(&self, t: ThreadIdx) -> u64 {
-        make_id(t.position(), self.threads[t].generation)
+    pub fn thread_id(&self, t: ThreadIdx) -> ThreadId {
+        ThreadId(make_id(t.position(), self.threads[t].generation))
     }
 
-    pub fn thread(&self, id: u64) -> Result<ThreadIdx, Error> {
-        slot_of(&self.threads, id, |t| {
+    pub fn thread(&self, id: ThreadId) -> Result<ThreadIdx, Error> {
+        slot_of(&self.threads, id.0, |t| {
             (!t.is_free()).then_some(t.generation)
         })
     }
 
     /// The thread named by `id` (0 = `caller_thread`), if the caller's task controls it.
-    pub fn controlled_thread(&self, caller_thread: ThreadIdx, id: u64) -> Result<ThreadIdx, Error> {
-        let thread = if id == 0 {
-            caller_thread
-        } else {
-            self.thread(id)?
+    pub fn controlled_thread(
+        &self,
+        caller_thread: ThreadIdx,
+        id: ThreadId,
+    ) -> Result<ThreadIdx, Error> {
+        let thread = match id.named() {
+            None => caller_thread,
+            Some(id) => self.thread(id)?,
         };
         let task = self.threads[thread].task;
-        if self.tasks[task].dying {
+        if self.tasks[task].is_dying() {
             Err(Error::NoSuchObject)
         } else if self.is_within(task, self.threads[caller_thread].task) {
             Ok(thread)
@@ -213,6 +405,14 @@ impl Kernel {
         self.set_state(t, State::Ready);
     }
 
+    /// Resumes `t` after its fault was answered (its registers as the handler left them).
+    pub fn resume(&mut self, t: ThreadIdx) {
+        let th = &mut self.threads[t];
+        th.fault = None;
+        th.deadline = NEVER;
+        self.set_state(t, State::Ready);
+    }
+
     /// Blocks `t` in `state` until `deadline` (absolute ns; [`NEVER`] for none).
     pub fn block(&mut self, t: ThreadIdx, state: State, deadline: u64) {
         self.threads[t].deadline = deadline;
@@ -234,7 +434,7 @@ impl Kernel {
         time_partition: u8,
         arg: u64,
     ) -> Result<ThreadIdx, Error> {
-        if priority > self.tasks[task].mcp {
+        if priority > self.tasks[task].mcp() {
             return Err(Error::McpExceeded);
         }
         if entry >= USER_END || stack > USER_END || time_partition as usize >= TIME_PARTITIONS {
@@ -244,7 +444,7 @@ impl Kernel {
             .threads
             .find(|t| t.is_free())
             .ok_or(Error::QuotaExceeded)?;
-        self.rps[self.tasks[task].rp].charge(Amount::threads(1))?;
+        self.rps[self.tasks[task].rp()].charge(Amount::threads(1))?;
         let generation = self.threads[slot].generation;
         self.threads[slot] = Thread {
             state: State::Inactive,
@@ -306,12 +506,12 @@ impl Kernel {
             }
         }
         if self.health_monitor == id {
-            self.health_monitor = 0;
+            self.health_monitor = ThreadId::OWN;
         }
         if self.current == Some(t) {
             self.current = None;
         }
-        let rp = self.tasks[self.threads[t].task].rp;
+        let rp = self.tasks[self.threads[t].task].rp();
         self.rps[rp].release(Amount::threads(1));
         let generation = self.threads[t].generation.wrapping_add(1);
         self.threads[t] = Thread {
@@ -326,7 +526,7 @@ impl Kernel {
     }
 
     pub fn set_priority(&mut self, t: ThreadIdx, priority: u8) -> Result<(), Error> {
-        if priority > self.tasks[self.threads[t].task].mcp {
+        if priority > self.tasks[self.threads[t].task].mcp() {
             return Err(Error::McpExceeded);
         }
         self.run.remove(t.position());
@@ -377,6 +577,55 @@ impl Kernel {
             State::Sleeping => self.wake(t, Error::Ok),
             State::Free | State::Inactive | State::Ready => self.threads[t].deadline = NEVER,
         }
+    }
+}
+
+impl Kernel {
+    pub fn enqueue_sender(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
+        let priority = self.threads[sender].priority;
+        // Insert before the first queued sender of lower priority.
+        let mut prev = None;
+        let mut at = self.threads[receiver].senders;
+        while let Some(a) = at
+            && self.threads[a].priority >= priority
+        {
+            prev = at;
+            at = self.threads[a].next_sender;
+        }
+        self.threads[sender].next_sender = at;
+        match prev {
+            None => self.threads[receiver].senders = Some(sender),
+            Some(p) => self.threads[p].next_sender = Some(sender),
+        }
+    }
+
+    pub fn unqueue_sender(&mut self, receiver: ThreadIdx, sender: ThreadIdx) {
+        let mut prev = None;
+        let mut at = self.threads[receiver].senders;
+        while let Some(a) = at {
+            if a == sender {
+                let next = self.threads[sender].next_sender.take();
+                match prev {
+                    None => self.threads[receiver].senders = next,
+                    Some(p) => self.threads[p].next_sender = next,
+                }
+                return;
+            }
+            prev = at;
+            at = self.threads[a].next_sender;
+        }
+    }
+
+    /// The first queued sender to `receiver` (from `from` only, if given).
+    pub fn first_sender(&self, receiver: ThreadIdx, from: Option<ThreadIdx>) -> Option<ThreadIdx> {
+        let mut at = self.threads[receiver].senders;
+        while let Some(a) = at {
+            if from.is_none_or(|f| f == a) {
+                return Some(a);
+            }
+            at = self.threads[a].next_sender;
+        }
+        None
     }
 }
 

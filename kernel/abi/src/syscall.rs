@@ -331,6 +331,21 @@ pub struct WindowSpec {
     pub partition: u64,
 }
 
+impl WindowSpec {
+    /// Its size in user memory (three `u64`, no padding).
+    pub const SIZE: usize = 24;
+
+    /// The spec as it lies in user memory (native byte order, as `repr(C)` lays it out).
+    pub fn from_bytes(raw: &[u8; Self::SIZE]) -> Self {
+        let word = |n: usize| u64::from_ne_bytes(raw[n * 8..n * 8 + 8].try_into().unwrap());
+        Self {
+            offset: word(0),
+            duration: word(1),
+            partition: word(2),
+        }
+    }
+}
+
 codes::code_enum! {
     /// Attributes `thread_set` can change.
     pub enum ThreadAttribute: u64 {
@@ -417,12 +432,49 @@ bitflags! {
 
 /// A thread identifier: slot index in bits 0..16, generation in bits 16..32 (so a stale
 /// identifier of a killed thread never names its successor in the slot). Never 0.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+/// In arguments, 0 ([`ThreadId::OWN`]) means the caller (or no thread) where a call says so.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct ThreadId(pub u64);
 
+impl ThreadId {
+    /// 0: the calling thread, or none, where a call says so.
+    pub const OWN: Self = Self(0);
+
+    /// `id`, or [`Self::OWN`] for none.
+    pub const fn or_own(id: Option<Self>) -> Self {
+        match id {
+            Some(id) => id,
+            None => Self::OWN,
+        }
+    }
+
+    /// `None` for [`Self::OWN`].
+    pub const fn named(self) -> Option<Self> {
+        if self.0 == 0 { None } else { Some(self) }
+    }
+}
+
 /// A task identifier, encoded like [`ThreadId`]. Never 0.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct TaskId(pub u64);
+
+impl TaskId {
+    /// 0: the caller's task, where a call says so.
+    pub const OWN: Self = Self(0);
+
+    /// `id`, or [`Self::OWN`] for none.
+    pub const fn or_own(id: Option<Self>) -> Self {
+        match id {
+            Some(id) => id,
+            None => Self::OWN,
+        }
+    }
+
+    /// `None` for [`Self::OWN`].
+    pub const fn named(self) -> Option<Self> {
+        if self.0 == 0 { None } else { Some(self) }
+    }
+}
 
 /// Packs a slot index and generation into an identifier (shared by threads and tasks).
 pub const fn make_id(index: usize, generation: u16) -> u64 {
@@ -452,6 +504,17 @@ mod tests {
         // QEMU's isa-debug-exit (iobase 0xf4, iosize 4): any of its ports ends the run.
         assert!((0xf4..=0xf7).all(kernel_port));
         assert!(!kernel_port(0xf3) && !kernel_port(0xf8));
+    }
+
+    #[test]
+    fn a_window_spec_decodes_from_its_memory_layout() {
+        assert_eq!(core::mem::size_of::<WindowSpec>(), WindowSpec::SIZE);
+        let mut raw = [0u8; WindowSpec::SIZE];
+        for (n, v) in [7u64, 8, 9].iter().enumerate() {
+            raw[n * 8..n * 8 + 8].copy_from_slice(&v.to_ne_bytes());
+        }
+        let w = WindowSpec::from_bytes(&raw);
+        assert_eq!((w.offset, w.duration, w.partition), (7, 8, 9));
     }
 
     #[test]

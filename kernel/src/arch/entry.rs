@@ -88,7 +88,7 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
 extern "sysv64" fn on_syscall() {
     let mut k = KERNEL.lock();
     let t = k.current.expect("syscall without a current thread");
-    k.threads[t].context = *frame();
+    k.threads[t].save_context(frame());
     k.account(super::cpu::rdtsc());
     let outcome = crate::syscall::on_syscall(&mut k, t, time::since_boot_ns);
     finish(k, outcome);
@@ -99,7 +99,7 @@ pub fn on_user_exception(vector: u64, error_code: u64) {
     let cr2 = x86_64::registers::control::Cr2::read_raw();
     let mut k = KERNEL.lock();
     let t = k.current.expect("user exception without a current thread");
-    k.threads[t].context = *frame();
+    k.threads[t].save_context(frame());
     k.account(super::cpu::rdtsc());
     let outcome = fault::on_exception(&mut k, t, vector, error_code, cr2);
     finish(k, outcome);
@@ -125,7 +125,7 @@ fn on_interrupt(from_user: bool, event: impl FnOnce(&mut Kernel)) {
     let mut k = KERNEL.lock();
     if from_user {
         let t = k.current.expect("user interrupt without a current thread");
-        k.threads[t].context = *frame();
+        k.threads[t].save_context(frame());
     }
     k.account(super::cpu::rdtsc());
     event(&mut k);
@@ -172,7 +172,7 @@ fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
         program_timer(&mut k);
         if let Some(next) = k.choose() {
             switch_to(&mut k, next);
-            k.running_partition = Some(k.threads[next].time_partition);
+            k.running_partition = Some(k.threads[next].time_partition());
             return;
         }
         k.running_partition = None;
@@ -193,21 +193,21 @@ fn switch_to(k: &mut Kernel, next: ThreadIdx) {
     if k.current != Some(next) || k.reload_bases {
         if k.current != Some(next) {
             if let Some(previous) = k.current {
-                super::fpu::save(&mut k.threads[previous].fpu);
+                super::fpu::save(k.threads[previous].fpu_save_area());
             }
-            super::fpu::restore(&k.threads[next].fpu);
-            let space = k.tasks[k.threads[next].task].space;
+            super::fpu::restore(k.threads[next].fpu());
+            let space = k.tasks[k.threads[next].task()].space();
             if !space.is_active() {
                 space.activate();
             }
             k.current = Some(next);
         }
-        load_io_permissions(k, k.threads[next].task);
-        let th = &k.threads[next];
-        super::fpu::set_bases(th.fs_base, th.gs_base);
+        load_io_permissions(k, k.threads[next].task());
+        let (fs, gs) = k.threads[next].bases();
+        super::fpu::set_bases(fs, gs);
         k.reload_bases = false;
     }
-    *frame() = k.threads[next].context;
+    *frame() = *k.threads[next].context();
 }
 
 /// Puts `task`'s I/O bitmap into the TSS, copying 8 KiB only if another task's is there.
@@ -216,11 +216,11 @@ fn load_io_permissions(k: &mut Kernel, task: TaskIdx) {
     if k.io_loaded == id {
         return;
     }
-    let [lo, hi] = k.tasks[task].io_bitmap;
+    let [lo, hi] = k.tasks[task].io_bitmap();
     if lo == 0 {
-        if k.io_loaded != 0 {
+        if k.io_loaded != abi::syscall::TaskId::OWN {
             super::gdt::load_io_bitmap(None);
-            k.io_loaded = 0;
+            k.io_loaded = abi::syscall::TaskId::OWN;
         }
         return;
     }

@@ -1,7 +1,7 @@
 //! System-call stubs and typed wrappers: call numbers and meanings in `abi::syscall`, which
 //! register carries which argument in `abi::args` (used here to encode every call).
 
-use abi::args::{self, ArgRegs};
+use abi::args::{self, ArgRegs, results};
 use abi::ipc::MessageTag;
 use abi::syscall::{Abilities, Call, Error, PageRights, TaskId, ThreadAttribute, ThreadId};
 use core::arch::asm;
@@ -65,7 +65,12 @@ pub fn debug_write(text: &[u8]) -> Result<(), Error> {
 
 /// Nanoseconds since boot.
 pub fn clock() -> u64 {
-    raw(Call::Clock as u64, 0, 0, 0, 0).1
+    clock_results().ns
+}
+
+/// Everything `clock` returns.
+fn clock_results() -> results::Clock {
+    results::Clock::decode(&raw6(Call::Clock as u64, [0; 6]).1)
 }
 
 pub fn thread_exit() -> ! {
@@ -93,23 +98,23 @@ pub fn task_create(abilities: Abilities, mcp: u8, rp: u64, name: &str) -> Result
         name_ptr: name.as_ptr() as u64,
         name_len: name.len() as u64,
     };
-    call(Call::TaskCreate, a.encode()).map(|r| TaskId(r.rdi))
+    call(Call::TaskCreate, a.encode()).map(|r| results::TaskCreate::decode(&r).task)
 }
 
 pub fn task_kill(task: TaskId) -> Result<(), Error> {
-    call(Call::TaskKill, args::TaskKill { task: task.0 }.encode()).map(drop)
+    call(Call::TaskKill, args::TaskKill { task }.encode()).map(drop)
 }
 
 /// Stops a descendant task and its subtree at once; `task_kill` destroys it later.
 pub fn task_stop(task: TaskId) -> Result<(), Error> {
-    call(Call::TaskStop, args::TaskKill { task: task.0 }.encode()).map(drop)
+    call(Call::TaskStop, args::TaskKill { task }.encode()).map(drop)
 }
 
 /// Lets `from` send to `to` (`None` = the caller's task).
 pub fn task_allow_send(from: Option<TaskId>, to: Option<TaskId>) -> Result<(), Error> {
     let a = args::TaskAllowSend {
-        from: from.map_or(0, |t| t.0),
-        to: to.map_or(0, |t| t.0),
+        from: TaskId::or_own(from),
+        to: TaskId::or_own(to),
     };
     call(Call::TaskAllowSend, a.encode()).map(drop)
 }
@@ -123,17 +128,17 @@ pub fn thread_create(
     arg: u64,
 ) -> Result<ThreadId, Error> {
     let a = args::ThreadCreate {
-        task: task.map_or(0, |t| t.0),
+        task: TaskId::or_own(task),
         entry,
         stack,
         priority: priority as u64,
         arg,
     };
-    call(Call::ThreadCreate, a.encode()).map(|r| ThreadId(r.rdi))
+    call(Call::ThreadCreate, a.encode()).map(|r| results::ThreadCreate::decode(&r).thread)
 }
 
 fn on_thread(c: Call, thread: ThreadId) -> Result<(), Error> {
-    call(c, args::OnThread { thread: thread.0 }.encode()).map(drop)
+    call(c, args::OnThread { thread }.encode()).map(drop)
 }
 
 pub fn thread_start(thread: ThreadId) -> Result<(), Error> {
@@ -159,7 +164,7 @@ pub fn thread_set(
     value: u64,
 ) -> Result<(), Error> {
     let a = args::ThreadSet {
-        thread: thread.map_or(0, |t| t.0),
+        thread: ThreadId::or_own(thread),
         attribute: attribute as u64,
         value,
     };
@@ -170,7 +175,7 @@ pub fn thread_set(
 /// `image` (`write` = false) or loads it from there (`write` = true).
 pub fn thread_fpu(thread: ThreadId, image: &mut [u8; 512], write: bool) -> Result<(), Error> {
     let a = args::ThreadFpu {
-        thread: thread.0,
+        thread,
         buffer: image.as_mut_ptr() as u64,
         write: write as u64,
     };
@@ -180,14 +185,15 @@ pub fn thread_fpu(thread: ThreadId, image: &mut [u8; 512], write: bool) -> Resul
 /// Makes `thread` (of a descendant task), if it is running user code, report to its
 /// exception handler now; whether it did.
 pub fn thread_interrupt(thread: ThreadId) -> Result<bool, Error> {
-    let a = args::OnThread { thread: thread.0 };
-    call(Call::ThreadInterrupt, a.encode()).map(|r| r.rdi != 0)
+    let a = args::OnThread { thread };
+    call(Call::ThreadInterrupt, a.encode())
+        .map(|r| results::ThreadInterrupt::decode(&r).interrupted)
 }
 
 /// The calling thread and its task.
 pub fn thread_self() -> (ThreadId, TaskId) {
-    let (_, r) = raw6(Call::ThreadSelf as u64, [0; 6]);
-    (ThreadId(r.rdi), TaskId(r.rsi))
+    let r = results::ThreadSelf::decode(&raw6(Call::ThreadSelf as u64, [0; 6]).1);
+    (r.thread, r.task)
 }
 
 pub fn map(
@@ -228,7 +234,7 @@ fn map_from(
     rights: PageRights,
 ) -> Result<(), Error> {
     let a = args::Map {
-        task: task.map_or(0, |t| t.0),
+        task: TaskId::or_own(task),
         source,
         destination,
         pages,
@@ -239,7 +245,7 @@ fn map_from(
 
 pub fn unmap(task: Option<TaskId>, address: u64, pages: u64) -> Result<(), Error> {
     let a = args::Unmap {
-        task: task.map_or(0, |t| t.0),
+        task: TaskId::or_own(task),
         address,
         pages,
     };
@@ -253,7 +259,7 @@ pub fn protect(
     rights: PageRights,
 ) -> Result<(), Error> {
     let a = args::Protect {
-        task: task.map_or(0, |t| t.0),
+        task: TaskId::or_own(task),
         address,
         pages,
         rights: rights.bits(),
@@ -286,7 +292,7 @@ pub struct Received {
     pub message: Message,
 }
 
-fn ipc(c: Call, peer: u64, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
+fn ipc(c: Call, peer: ThreadId, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
     let a = args::Ipc {
         peer,
         timeout: timeout_ns,
@@ -295,32 +301,35 @@ fn ipc(c: Call, peer: u64, timeout_ns: u64, m: &Message) -> Result<Received, Err
         word1: m.words[1],
         word2: m.words[2],
     };
-    call(c, a.encode()).map(|r| Received {
-        sender: ThreadId(r.rdi),
-        sender_task: TaskId(r.rsi),
-        message: Message {
-            tag: MessageTag(r.rdx),
-            words: [r.r10, r.r8, r.r9],
-        },
+    call(c, a.encode()).map(|r| {
+        let r = results::Ipc::decode(&r);
+        Received {
+            sender: r.sender,
+            sender_task: r.sender_task,
+            message: Message {
+                tag: MessageTag(r.tag),
+                words: [r.word0, r.word1, r.word2],
+            },
+        }
     })
 }
 
 /// Timeouts in ns; `abi::syscall::TIMEOUT_INFINITE` waits forever, 0 polls.
 pub fn send(to: ThreadId, timeout_ns: u64, m: &Message) -> Result<(), Error> {
-    ipc(Call::Send, to.0, timeout_ns, m).map(drop)
+    ipc(Call::Send, to, timeout_ns, m).map(drop)
 }
 
 pub fn receive(from: Option<ThreadId>, timeout_ns: u64) -> Result<Received, Error> {
     ipc(
         Call::Receive,
-        from.map_or(0, |t| t.0),
+        ThreadId::or_own(from),
         timeout_ns,
         &Message::default(),
     )
 }
 
 pub fn ipc_call(to: ThreadId, timeout_ns: u64, m: &Message) -> Result<Received, Error> {
-    ipc(Call::Call, to.0, timeout_ns, m)
+    ipc(Call::Call, to, timeout_ns, m)
 }
 
 pub fn reply_wait(
@@ -328,18 +337,15 @@ pub fn reply_wait(
     timeout_ns: u64,
     m: &Message,
 ) -> Result<Received, Error> {
-    ipc(Call::ReplyWait, caller.map_or(0, |t| t.0), timeout_ns, m)
+    ipc(Call::ReplyWait, ThreadId::or_own(caller), timeout_ns, m)
 }
 
 pub fn reply(caller: ThreadId, m: &Message) -> Result<(), Error> {
-    ipc(Call::Reply, caller.0, 0, m).map(drop)
+    ipc(Call::Reply, caller, 0, m).map(drop)
 }
 
 pub fn notify_signal(thread: ThreadId, bits: u64) -> Result<(), Error> {
-    let a = args::NotifySignal {
-        thread: thread.0,
-        bits,
-    };
+    let a = args::NotifySignal { thread, bits };
     call(Call::NotifySignal, a.encode()).map(drop)
 }
 
@@ -349,7 +355,7 @@ pub fn notify_wait(mask: u64, timeout_ns: u64) -> Result<u64, Error> {
         mask,
         timeout: timeout_ns,
     };
-    call(Call::NotifyWait, a.encode()).map(|r| r.rdi)
+    call(Call::NotifyWait, a.encode()).map(|r| results::NotifyWait::decode(&r).bits)
 }
 
 /// Sleeps for `ns` nanoseconds.
@@ -363,7 +369,7 @@ pub fn rp_create(tasks: u16, threads: u16, pages: u64) -> Result<u64, Error> {
         threads: threads as u64,
         pages,
     };
-    call(Call::RpCreate, a.encode()).map(|r| r.rdi)
+    call(Call::RpCreate, a.encode()).map(|r| results::RpCreate::decode(&r).rp)
 }
 
 /// Usage of a resource partition (0 = the caller's).
@@ -378,18 +384,21 @@ pub struct RpUsage {
 }
 
 pub fn rp_info(rp: u64) -> Result<RpUsage, Error> {
-    call(Call::RpInfo, args::RpInfo { rp }.encode()).map(|r| RpUsage {
-        pages_used: r.rdi,
-        pages_quota: r.rsi,
-        threads_used: r.rdx as u16,
-        threads_quota: (r.rdx >> 16) as u16,
-        tasks_used: (r.rdx >> 32) as u16,
-        tasks_quota: (r.rdx >> 48) as u16,
+    call(Call::RpInfo, args::RpInfo { rp }.encode()).map(|r| {
+        let r = results::RpInfo::decode(&r);
+        RpUsage {
+            pages_used: r.pages_used,
+            pages_quota: r.pages_quota,
+            threads_used: r.counts.threads_used,
+            threads_quota: r.counts.threads_quota,
+            tasks_used: r.counts.tasks_used,
+            tasks_quota: r.counts.tasks_quota,
+        }
     })
 }
 
 pub fn set_health_monitor(thread: ThreadId) -> Result<(), Error> {
-    let a = args::SetHealthMonitor { thread: thread.0 };
+    let a = args::SetHealthMonitor { thread };
     call(Call::SetHealthMonitor, a.encode()).map(drop)
 }
 
@@ -430,20 +439,23 @@ pub struct PartitionInfo {
 
 pub fn partition_info(tp: u64) -> Result<PartitionInfo, Error> {
     let a = args::PartitionInfo { partition: tp };
-    call(Call::PartitionInfo, a.encode()).map(|r| PartitionInfo {
-        active: r.rdi,
-        next_window_start: r.rsi,
-        window_length: r.rdx,
-        cpu_ns: r.r10,
-        idle_ns: r.r8,
-        frames: r.r9,
+    call(Call::PartitionInfo, a.encode()).map(|r| {
+        let r = results::PartitionInfo::decode(&r);
+        PartitionInfo {
+            active: r.active,
+            next_window_start: r.window_start,
+            window_length: r.window_length,
+            cpu_ns: r.cpu_ns,
+            idle_ns: r.idle_ns,
+            frames: r.frames,
+        }
     })
 }
 
 /// Grants I/O ports `first..first + count` to a descendant task.
 pub fn io_grant(task: TaskId, first: u16, count: u32) -> Result<(), Error> {
     let a = args::IoGrant {
-        task: task.0,
+        task,
         first: first as u64,
         count: count as u64,
     };
@@ -452,7 +464,7 @@ pub fn io_grant(task: TaskId, first: u16, count: u32) -> Result<(), Error> {
 
 /// Lets a descendant task attach interrupt line `line`.
 pub fn irq_grant(task: TaskId, line: u64) -> Result<(), Error> {
-    let a = args::IrqGrant { task: task.0, line };
+    let a = args::IrqGrant { task, line };
     call(Call::IrqGrant, a.encode()).map(drop)
 }
 
@@ -482,8 +494,7 @@ pub fn irq_detach(line: u64) -> Result<(), Error> {
 /// The Unix time in ns at boot, from the firmware's real-time clock (`None` without one):
 /// the wall-clock time is this plus [`clock`].
 pub fn wall_clock_at_boot() -> Option<u64> {
-    let (_, r) = raw6(Call::Clock as u64, [0; 6]);
-    Some(r.r10).filter(|&ns| ns != 0)
+    Some(clock_results().wall_clock_at_boot).filter(|&ns| ns != 0)
 }
 
 /// The TSC time base: converts `rdtsc` readings to `clock()` nanoseconds and back.
@@ -495,10 +506,10 @@ pub struct TscBase {
 
 impl TscBase {
     pub fn get() -> Self {
-        let (_, r) = raw6(Call::Clock as u64, [0; 6]);
+        let r = clock_results();
         Self {
-            hz: r.rsi,
-            at_boot: r.rdx,
+            hz: r.tsc_hz,
+            at_boot: r.boot_tsc,
         }
     }
 
