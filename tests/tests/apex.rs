@@ -259,6 +259,7 @@ fn apex_intra() {
             "intra: unknown ids: Some(InvalidParam) Some(InvalidParam) Some(InvalidParam) Some(InvalidParam) Some(InvalidParam)",
             "intra: unknown names: Some(InvalidConfig) Some(InvalidConfig) Some(InvalidConfig) Some(InvalidConfig) Some(InvalidConfig)",
             "intra: ACQUIRE_MUTEX above its ceiling: Some(InvalidConfig); RELEASE_MUTEX not owned: Some(InvalidMode)",
+            "intra: unknown process: RESET_MUTEX Some(InvalidParam); GET_PROCESS_MUTEX_STATE Some(InvalidParam); driver owns -2",
             "intra: STOP of a waiter: waiting 1 -> 0; SIGNAL_SEMAPHORE then leaves 1",
             "intra: done",
         ],

@@ -544,6 +544,13 @@ extern "C" fn driver() {
         code(<Warden as ApexMutexP1>::release_mutex(mutex("mtx_prio"))),
     );
 
+    println!(
+        "intra: unknown process: RESET_MUTEX {:?}; GET_PROCESS_MUTEX_STATE {:?}; driver owns {}",
+        code(<Warden as ApexMutexP1>::reset_mutex(mutex("mtx_prio"), 999)),
+        code(<Warden as ApexMutexP1>::get_process_mutex_state(999)),
+        <Warden as ApexMutexP1>::get_process_mutex_state(me).unwrap_or(0),
+    );
+
     // ---- a stopped waiter leaves the queue
     let s = sem("sem_prio");
     PHASE.store(SEM_PRIORITY, Ordering::Relaxed);
