@@ -82,6 +82,25 @@ fn ev() -> b::EventId {
 fn process_id(name: &str) -> b::ProcessId {
     <Warden as ApexProcessP1>::get_process_id(apex_name(name)).expect("process")
 }
+/// RECEIVE_BUFFER into `out`.
+fn receive(id: b::BufferId, timeout: i64, out: &mut [u8]) -> Result<u32, ErrorReturnCode> {
+    #[allow(unsafe_code)]
+    // SAFETY: a653rs's contract only asks for a writable slice, which `out` is; every
+    // caller passes at least the buffer's message size.
+    unsafe {
+        <Warden as ApexBufferP1>::receive_buffer(id, timeout, out)
+    }
+}
+
+/// READ_BLACKBOARD into `out`.
+fn read(id: b::BlackboardId, timeout: i64, out: &mut [u8]) -> Result<u32, ErrorReturnCode> {
+    #[allow(unsafe_code)]
+    // SAFETY: as for `receive`.
+    unsafe {
+        <Warden as ApexBlackboardP1>::read_blackboard(id, timeout, out)
+    }
+}
+
 fn current_priority(id: b::ProcessId) -> i32 {
     <Warden as ApexProcessP1>::get_process_status(id).map_or(-1, |s| s.current_priority)
 }
@@ -196,23 +215,12 @@ extern "C" fn worker() {
                 } else {
                     ("buf_prio", 500 * MS)
                 };
-                // SAFETY (a653rs contract): the buffer holds the buffer's 4-byte messages.
-                #[allow(unsafe_code)]
-                unsafe {
-                    <Warden as ApexBufferP1>::receive_buffer(buf(name), timeout, &mut message)
-                }
-                .map(|n| Some(message[..n as usize].first().copied().unwrap_or(b'?')))
+                receive(buf(name), timeout, &mut message)
+                    .map(|n| Some(message[..n as usize].first().copied().unwrap_or(b'?')))
             }
             BUF_SEND => <Warden as ApexBufferP1>::send_buffer(buf("buf_prio"), &[digit], 500 * MS)
                 .map(|()| Some(b's')),
-            BLACKBOARD => {
-                // SAFETY (a653rs contract): 8 bytes, the board's message size.
-                #[allow(unsafe_code)]
-                unsafe {
-                    <Warden as ApexBlackboardP1>::read_blackboard(bb(), INFINITE, &mut message)
-                }
-                .map(|_| Some(message[0]))
-            }
+            BLACKBOARD => read(bb(), INFINITE, &mut message).map(|_| Some(message[0])),
             EVENT => <Warden as ApexEventP1>::wait_event(ev(), 500 * MS).map(|()| None),
             MUTEX_FIFO | MUTEX_PRIORITY => {
                 let id = mutex(if phase == MUTEX_FIFO {
@@ -320,9 +328,7 @@ extern "C" fn driver() {
     let mut got = [b' '; 10];
     let mut message = [0u8; 4];
     for i in 0..5 {
-        // SAFETY (a653rs contract): 4 bytes, the buffer's message size.
-        #[allow(unsafe_code)]
-        let n = unsafe { <Warden as ApexBufferP1>::receive_buffer(id, 0, &mut message) };
+        let n = receive(id, 0, &mut message);
         got[2 * i] = if n.is_ok() { message[0] } else { b'-' };
     }
     print_log("buffer PRIORITY senders sent");
@@ -432,14 +438,8 @@ extern "C" fn driver() {
     );
     let f = buf("buf_fifo");
     let mut message = [0u8; 4];
-    // SAFETY (a653rs contract): 4 bytes, the buffer's message size.
-    #[allow(unsafe_code)]
-    let empty = t(
-        &|| code(unsafe { <Warden as ApexBufferP1>::receive_buffer(f, 5 * MS, &mut [0u8; 4]) }),
-        5,
-    );
-    #[allow(unsafe_code)]
-    let empty0 = code(unsafe { <Warden as ApexBufferP1>::receive_buffer(f, 0, &mut message) });
+    let empty = t(&|| code(receive(f, 5 * MS, &mut [0u8; 4])), 5);
+    let empty0 = code(receive(f, 0, &mut message));
     for m in [b"1", b"2"] {
         <Warden as ApexBufferP1>::send_buffer(f, m, 0).expect("SEND_BUFFER");
     }
@@ -453,17 +453,8 @@ extern "C" fn driver() {
     );
     <Warden as ApexBlackboardP1>::clear_blackboard(board).expect("CLEAR_BLACKBOARD");
     let mut text = [0u8; 8];
-    #[allow(unsafe_code)]
-    let read0 = code(unsafe { <Warden as ApexBlackboardP1>::read_blackboard(board, 0, &mut text) });
-    #[allow(unsafe_code)]
-    let read5 = t(
-        &|| {
-            code(unsafe {
-                <Warden as ApexBlackboardP1>::read_blackboard(board, 5 * MS, &mut [0u8; 8])
-            })
-        },
-        5,
-    );
+    let read0 = code(read(board, 0, &mut text));
+    let read5 = t(&|| code(read(board, 5 * MS, &mut [0u8; 8])), 5);
     println!(
         "intra: READ_BLACKBOARD cleared 0: {read0:?}; 5 ms: {read5:?}; WAIT_EVENT 5 ms: {:?}",
         t(
