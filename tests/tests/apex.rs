@@ -261,6 +261,10 @@ fn apex_intra() {
             "intra: ACQUIRE_MUTEX above its ceiling: Some(InvalidConfig); RELEASE_MUTEX not owned: Some(InvalidMode)",
             "intra: unknown process: RESET_MUTEX Some(InvalidParam); GET_PROCESS_MUTEX_STATE Some(InvalidParam); driver owns -2",
             "intra: STOP of a waiter: waiting 1 -> 0; SIGNAL_SEMAPHORE then leaves 1",
+            // A SUSPENDed waiter leaves the queue when the event is set, but runs only
+            // when RESUMEd.
+            "intra: SUSPENDed waiter: 0 waiting after SET_EVENT, state Ok(Waiting)",
+            "intra: SUSPENDed waiter after RESUME: woke 2",
             "intra: done",
         ],
     );
@@ -270,6 +274,13 @@ fn apex_intra() {
             .iter()
             .all(|l| !l.contains("intra: w") || !l.contains(" phase ")),
         "a worker's wait failed",
+    );
+    check(
+        &o,
+        o.lines
+            .iter()
+            .any(|l| l.ends_with("intra: SUSPENDed waiter after SET_EVENT: woke")),
+        "a SUSPENDed waiter must not run before RESUME",
     );
     check(
         &o,

@@ -57,7 +57,10 @@ fn print_log(what: &str) {
         *byte = LOG[i].load(Ordering::Relaxed);
     }
     let text = core::str::from_utf8(&text[..length]).unwrap_or("?");
-    println!("intra: {what} {}", text.trim_end());
+    match text.trim_end() {
+        "" => println!("intra: {what}"),
+        text => println!("intra: {what} {text}"),
+    }
 }
 
 fn code<T>(result: Result<T, ErrorReturnCode>) -> Option<ErrorReturnCode> {
@@ -554,6 +557,21 @@ extern "C" fn driver() {
         "intra: STOP of a waiter: waiting {before} -> {after}; SIGNAL_SEMAPHORE then leaves {}",
         <Warden as ApexSemaphoreP1>::get_semaphore_status(s).map_or(-1, |s| s.current_value)
     );
+    // ---- a SUSPENDed waiter: the wake is decided, it goes on when RESUMEd
+    PHASE.store(EVENT, Ordering::Relaxed);
+    <Warden as ApexSemaphoreP1>::signal_semaphore(sem("gate2")).expect("gate2");
+    let w2 = process_id("w2");
+    <Warden as ApexProcessP1>::suspend(w2).expect("SUSPEND");
+    <Warden as ApexEventP1>::set_event(ev()).expect("SET_EVENT");
+    let waiting =
+        <Warden as ApexEventP1>::get_event_status(ev()).map_or(-1, |s| s.waiting_processes);
+    sleep(5);
+    print_log("SUSPENDed waiter after SET_EVENT: woke");
+    let state = <Warden as ApexProcessP1>::get_process_status(w2).map(|s| s.process_state);
+    <Warden as ApexProcessP1>::resume(w2).expect("RESUME");
+    println!("intra: SUSPENDed waiter: {waiting} waiting after SET_EVENT, state {state:?}");
+    print_log("SUSPENDed waiter after RESUME: woke");
+    <Warden as ApexEventP1>::reset_event(ev()).expect("RESET_EVENT");
     println!("intra: done");
     let _ = <Warden as ApexErrorP4>::raise_application_error(
         b::ErrorCode::ApplicationError,
