@@ -641,3 +641,37 @@ fn reset_clears_everything() {
     assert!(!i.is_waiting(0));
     i.create_buffer(false, n("b"), 256, 100, Fifo).unwrap();
 }
+
+#[test]
+fn a_mutex_owner_may_only_poll_other_objects() {
+    let mut i = intra();
+    let m = i.create_mutex(false, MCP, n("m"), 50, Fifo).unwrap();
+    let buffer = i.create_buffer(false, n("b"), 4, 1, Fifo).unwrap();
+    let board = i.create_blackboard(false, n("bb"), 4).unwrap();
+    let event = i.create_event(false, n("e")).unwrap();
+    assert_eq!(done(i.acquire_mutex(p(0, 10), m, 0)), Ok(()));
+    let owner = p(0, 50);
+    let mut out = [0u8; 4];
+    for time_out in [FINITE, INFINITE] {
+        assert_eq!(
+            done(i.receive_buffer(owner, buffer, time_out, &mut out)),
+            Err(InvalidMode)
+        );
+        assert_eq!(
+            done(i.read_blackboard(owner, board, time_out, &mut out)),
+            Err(InvalidMode)
+        );
+        assert_eq!(done(i.wait_event(owner, event, time_out)), Err(InvalidMode));
+    }
+    assert_eq!(
+        done(i.receive_buffer(owner, buffer, 0, &mut out)),
+        Err(NotAvailable)
+    );
+    assert_eq!(done(i.send_buffer(owner, buffer, b"1", 0)), Ok(()));
+    assert_eq!(
+        done(i.send_buffer(owner, buffer, b"2", FINITE)),
+        Err(InvalidMode)
+    );
+    // Nothing was queued.
+    assert!(!i.is_waiting(0));
+}
