@@ -207,3 +207,90 @@ fn forged_fault_report() {
         &format!("unexpected health events: {health:?}"),
     );
 }
+
+#[test]
+fn apex_intra() {
+    let o = boot("apex_intra");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the driver's end is shutdown_success",
+    );
+    // Workers w1 (priority 10), w2 (30), w3 (20) arrive in the order w1, w2, w3: FIFO
+    // serves 1 2 3, PRIORITY 2 3 1; wake-all services let them run by priority.
+    expect_lines(
+        &o,
+        &[
+            // INIT mode.
+            "intra: init CREATE_SEMAPHORE again: Some(NoAction)",
+            "intra: init CREATE_SEMAPHORE 4 of 3: Some(InvalidParam)",
+            "intra: init CREATE_MUTEX at the MCP: Some(InvalidConfig)",
+            "intra: init 8 mutexes, then CREATE_MUTEX: InvalidConfig",
+            "intra: init WAIT_SEMAPHORE 5 ms outside a process: Some(InvalidMode)",
+            // Wake order.
+            "intra: semaphore FIFO waiting 3 woken 1 2 3",
+            "intra: semaphore PRIORITY waiting 3 woken 2 3 1",
+            "intra: buffer FIFO receivers got 1a 2b 3c",
+            "intra: buffer PRIORITY receivers got 2a 3b 1c",
+            "intra: buffer PRIORITY senders sent 2s 3s 1s",
+            "intra: buffer PRIORITY 3 senders waited, received x y 2 3 1",
+            "intra: DISPLAY_BLACKBOARD with 3 waiting woke 2g 3g 1g",
+            "intra: SET_EVENT with 3 waiting woke 2 3 1",
+            "intra: after RESET_EVENT WAIT_EVENT 0: Some(NotAvailable)",
+            // Mutexes: the owner runs at the ceiling (60), hand-over by discipline.
+            "intra: mutex PRIORITY: the driver ran at 60, back at 5, 3 waiting",
+            "intra: mutex PRIORITY owners 2@60 3@60 1@60",
+            "intra: mutex FIFO: the driver ran at 60, back at 5, 3 waiting",
+            "intra: mutex FIFO owners 1@60 2@60 3@60",
+            "intra: worker priorities after the mutexes: 10 30 20",
+            "intra: w3 owns mtx_fifo at priority 60; WAIT_SEMAPHORE while owning it: Some(InvalidMode)",
+            "intra: ACQUIRE_MUTEX owned by w3: 0 -> Some(NotAvailable), 5 ms -> Some(TimedOut) after >= 5 ms: true",
+            "intra: GET_PROCESS_MUTEX_STATE(w3) is mtx_fifo: true; status owner w3: true Owned lock count 1 priority 60",
+            "intra: RELEASE_MUTEX not owner: Some(InvalidMode); RESET_MUTEX(w3): None; then Ok(Available), w3 at priority 20",
+            "intra: w3 after the reset: RELEASE_MUTEX Some(InvalidMode), priority 20",
+            // Time-outs: 0 is NOT_AVAILABLE, a finite one TIMED_OUT after it has passed.
+            "intra: WAIT_SEMAPHORE 0: Some(NotAvailable); 10 ms: (Some(TimedOut), true); waiting after: 0",
+            "intra: RECEIVE_BUFFER empty 0: Some(NotAvailable); 5 ms: (Some(TimedOut), true); SEND_BUFFER full 0: Some(NotAvailable); 5 ms: (Some(TimedOut), true)",
+            "intra: READ_BLACKBOARD cleared 0: Some(NotAvailable); 5 ms: (Some(TimedOut), true); WAIT_EVENT 5 ms: (Some(TimedOut), true)",
+            // NORMAL mode.
+            "intra: CREATE in NORMAL: Some(InvalidMode) Some(InvalidMode) Some(InvalidMode) Some(InvalidMode) Some(InvalidMode)",
+            "intra: SIGNAL_SEMAPHORE at its maximum: Some(NoAction); SEND_BUFFER too long: Some(InvalidParam); DISPLAY_BLACKBOARD too long: Some(InvalidParam)",
+            "intra: unknown ids: Some(InvalidParam) Some(InvalidParam) Some(InvalidParam) Some(InvalidParam) Some(InvalidParam)",
+            "intra: unknown names: Some(InvalidConfig) Some(InvalidConfig) Some(InvalidConfig) Some(InvalidConfig) Some(InvalidConfig)",
+            "intra: ACQUIRE_MUTEX above its ceiling: Some(InvalidConfig); RELEASE_MUTEX not owned: Some(InvalidMode)",
+            "intra: unknown process: RESET_MUTEX Some(InvalidParam); GET_PROCESS_MUTEX_STATE Some(InvalidParam); driver owns -2",
+            "intra: STOP of a waiter: waiting 1 -> 0; SIGNAL_SEMAPHORE then leaves 1",
+            // A SUSPENDed waiter leaves the queue when the event is set, but runs only
+            // when RESUMEd.
+            "intra: SUSPENDed waiter: 0 waiting after SET_EVENT, state Ok(Waiting)",
+            "intra: SUSPENDed waiter after RESUME: woke 2",
+            "intra: done",
+        ],
+    );
+    check(
+        &o,
+        o.lines
+            .iter()
+            .all(|l| !l.contains("intra: w") || !l.contains(" phase ")),
+        "a worker's wait failed",
+    );
+    check(
+        &o,
+        o.lines
+            .iter()
+            .any(|l| l.ends_with("intra: SUSPENDed waiter after SET_EVENT: woke")),
+        "a SUSPENDed waiter must not run before RESUME",
+    );
+    check(
+        &o,
+        health(
+            &o,
+            "intra",
+            "application_error",
+            "\"intra",
+            "shutdown_success",
+        ) == 1,
+        "the driver's final error is logged with its configured action",
+    );
+}

@@ -37,6 +37,7 @@
 #![no_std]
 
 pub mod codes;
+pub mod intra;
 pub mod table;
 pub mod time;
 

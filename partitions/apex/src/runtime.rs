@@ -18,6 +18,7 @@
 #![allow(unsafe_code)]
 
 use crate::codes;
+use crate::intra::Intra;
 use crate::table::{self, Delivery, ERROR_HANDLER_SLOT, PendingError, SLOTS, STACK_SIZE, Table};
 use crate::time;
 use a653rs::bindings::{ErrorCode, ErrorReturnCode, ProcessId};
@@ -44,6 +45,9 @@ const THREADS: usize = SLOTS + 2;
 /// Notification bit that wakes the watchdog (an earlier deadline) or a SUSPEND_SELF
 /// (RESUME).
 pub const WAKE_BIT: u64 = 1;
+/// Notification bit that ends a process's wait on an intra-partition object (its outcome
+/// is decided in [`Intra`] by the waker).
+pub const OBJECT_BIT: u64 = 2;
 
 /// One thread stack (16-byte aligned as the SysV ABI wants).
 #[repr(C, align(16))]
@@ -61,12 +65,14 @@ static mut HEAP_ARENA: Arena = Arena([0; HEAP_SIZE]);
 
 struct State {
     table: Table,
+    intra: Intra,
     heap: Heap,
     heap_ready: bool,
 }
 
 static STATE: SpinMutex<State> = SpinMutex::new(State {
     table: Table::EMPTY,
+    intra: Intra::EMPTY,
     heap: Heap::empty(),
     heap_ready: false,
 });
@@ -143,6 +149,12 @@ impl Critical {
         &mut self.guard.as_mut().expect("held until dropped").table
     }
 
+    /// The process table and the intra-partition objects.
+    pub fn parts(&mut self) -> (&mut Table, &mut Intra) {
+        let state: &mut State = self.guard.as_mut().expect("held until dropped");
+        (&mut state.table, &mut state.intra)
+    }
+
     /// Leaves the section and ends the calling thread without dropping its priority first,
     /// so nothing of the partition runs between (e.g. START reusing its stack).
     pub fn exit(mut self) -> ! {
@@ -209,6 +221,7 @@ fn reset_state(table: Table) {
     }
     let mut state = STATE.lock();
     state.table = table;
+    state.intra.reset();
     if !state.heap_ready || was_locked {
         state.heap = Heap::empty();
         let arena = (&raw mut HEAP_ARENA).cast::<u8>();
@@ -405,10 +418,39 @@ pub fn stop_self() -> ! {
     let slot = own_slot();
     let mut critical = Critical::enter();
     if let Some(slot) = slot {
-        let _ = critical.table().stop(slot);
+        let (table, intra) = critical.parts();
+        let _ = table.stop(slot);
+        intra.forget(slot);
+        apply_intra(table, intra, Some(slot));
         forget_thread(slot);
     }
     critical.exit()
+}
+
+/// Carries out what intra-partition services decided for other threads: priorities
+/// (mutex ceilings and restores) and the wakes of waiters whose outcome is decided. The
+/// caller's own priority is set by its table entry when it leaves the critical section.
+pub fn apply_intra(table: &mut Table, intra: &mut Intra, caller: Option<usize>) {
+    for slot in 0..SLOTS {
+        if let Some(priority) = intra.take_priority(slot)
+            && let Some(thread) = table.set_current_priority(slot, priority)
+            && Some(slot) != caller
+        {
+            let _ = sys::thread_set(
+                Some(ThreadId(thread)),
+                ThreadAttribute::Priority,
+                u64::from(priority),
+            );
+        }
+    }
+    let woken = intra.take_woken();
+    for slot in 0..SLOTS {
+        if woken & (1 << slot) != 0
+            && let Some(thread) = table.get(slot).and_then(|p| p.thread)
+        {
+            let _ = sys::notify_signal(ThreadId(thread), OBJECT_BIT);
+        }
+    }
 }
 
 /// Sends an error where it belongs: the error handler (started if dormant) or syssw's

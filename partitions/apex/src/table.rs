@@ -72,6 +72,8 @@ pub enum Wait {
     SelfSuspended,
     /// A queuing-port send or receive that may block.
     Port,
+    /// An intra-partition object (buffer, blackboard, semaphore, event, mutex).
+    Object,
 }
 
 #[derive(Clone, Debug)]
@@ -433,6 +435,23 @@ impl Table {
         }
         process.deadline = deadline;
         Ok(())
+    }
+
+    /// Sets the current priority of `slot` (a mutex's ceiling or the priority it retained);
+    /// returns its thread.
+    pub fn set_current_priority(&mut self, slot: usize, priority: u8) -> Option<u64> {
+        let process = self.get_mut(slot).ok()?;
+        process.priority = priority;
+        process.thread
+    }
+
+    /// The current priority of the thread of `slot` (the main thread's for `None`).
+    pub fn current_priority(&self, slot: Option<usize>) -> u8 {
+        match slot {
+            None => self.main_priority,
+            Some(ERROR_HANDLER_SLOT) => self.mcp,
+            Some(slot) => self.get(slot).map_or(self.main_priority, |p| p.priority),
+        }
     }
 
     /// Marks what `slot` waits for (TIMED_WAIT, port waits; `Wait::None` when it is over).

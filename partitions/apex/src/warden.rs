@@ -1,8 +1,10 @@
 //! [`Warden`]: the a653rs APEX traits implemented on the Warden kernel and syssw.
 
 use crate::codes::{self, id_word, name_bytes};
+use crate::intra::{Caller, Intra, Step};
 use crate::runtime::{
-    self, Critical, WAKE_BIT, own_index, own_slot, request, request_code, request_words,
+    self, Critical, OBJECT_BIT, WAKE_BIT, apply_intra, own_index, own_slot, request, request_code,
+    request_words,
 };
 use crate::table::{self, ERROR_HANDLER_SLOT, MAX_PROCESSES, Wait};
 use crate::time::{self, finite, protocol_timeout};
@@ -91,11 +93,18 @@ impl ApexProcessP1 for Warden {
     fn set_priority(process_id: ProcessId, priority: Priority) -> Result<()> {
         let caller = own_slot();
         let mut critical = Critical::enter();
-        let table = critical.table();
+        let (table, intra) = critical.parts();
         let slot = table.slot(process_id)?;
+        let current = table.current_priority(Some(slot));
+        let thread = table.set_priority(slot, priority)?;
+        if intra.set_retained_priority(slot, priority as u8) {
+            // A mutex owner keeps the mutex's priority; the new one is what it gets back.
+            table.set_current_priority(slot, current);
+            return Ok(());
+        }
         // The caller's own new priority takes effect when it leaves the critical section
         // (lowering it inside would let others preempt the lock holder).
-        if let Some(thread) = table.set_priority(slot, priority)?
+        if let Some(thread) = thread
             && Some(slot) != caller
         {
             let _ = sys::thread_set(
@@ -156,9 +165,12 @@ impl ApexProcessP1 for Warden {
             drop(critical);
             runtime::stop_self()
         }
-        if let Some(thread) = critical.table().stop(slot)? {
+        let (table, intra) = critical.parts();
+        if let Some(thread) = table.stop(slot)? {
             let _ = sys::thread_kill(ThreadId(thread));
         }
+        intra.forget(slot);
+        apply_intra(table, intra, caller);
         runtime::forget_thread(slot);
         Ok(())
     }
@@ -573,5 +585,317 @@ impl ApexErrorP1 for Warden {
             return Err(ErrorReturnCode::InvalidConfig);
         }
         Ok(())
+    }
+}
+
+// ---------------------------------------------------------------- intra-partition (3.7.2)
+
+/// What the intra-partition services need to know of the caller and the partition.
+struct Context {
+    caller: Caller,
+    normal: bool,
+    mcp: u8,
+}
+
+/// A service on the intra-partition objects that does not wait.
+fn with_intra<R>(f: impl FnOnce(&mut Intra, Context) -> R) -> R {
+    let slot = own_slot();
+    let mut critical = Critical::enter();
+    let (table, intra) = critical.parts();
+    let context = Context {
+        caller: Caller {
+            slot,
+            priority: table.current_priority(slot),
+        },
+        normal: table.normal,
+        mcp: table.mcp,
+    };
+    let result = f(intra, context);
+    apply_intra(table, intra, slot);
+    result
+}
+
+/// A service that may wait: `start` runs under the runtime lock; if it queued the caller,
+/// the caller's thread waits (outside the lock) for OBJECT_BIT until `time_out` has passed,
+/// then collects the outcome the waker decided, or TIMED_OUT. `woken` turns a waker's
+/// outcome (a message length) into the result, copying the mailbox into `out`.
+fn blocking<T>(
+    time_out: ApexSystemTime,
+    out: &mut [u8],
+    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Step<T>,
+    woken: impl FnOnce(&Intra, usize, usize, &mut [u8]) -> T,
+) -> Result<T> {
+    let slot = own_slot();
+    let deadline = finite(time_out).map(|t| sys::clock().saturating_add(t));
+    {
+        let mut critical = Critical::enter();
+        let (table, intra) = critical.parts();
+        let caller = Caller {
+            slot,
+            priority: table.current_priority(slot),
+        };
+        let step = start(intra, caller, out);
+        apply_intra(table, intra, slot);
+        match (step, slot) {
+            (Step::Done(result), _) => return result,
+            (Step::Wait, Some(slot)) => table.set_wait(slot, Wait::Object),
+            (Step::Wait, None) => unreachable!("only processes are queued"),
+        }
+    }
+    let slot = slot.expect("a queued process");
+    loop {
+        let timeout = deadline.map_or(time::PROTOCOL_FOREVER, |d| d.saturating_sub(sys::clock()));
+        let notified = timeout != 0 && sys::notify_wait(OBJECT_BIT, timeout).is_ok();
+        let mut critical = Critical::enter();
+        let (table, intra) = critical.parts();
+        let expired = deadline.is_some_and(|d| sys::clock() >= d);
+        if let Some(outcome) = intra.end_wait(slot, expired) {
+            table.set_wait(slot, Wait::None);
+            let result = outcome.map(|length| woken(intra, slot, length, out));
+            drop(critical);
+            if !notified && result.is_ok() {
+                // The wake raced with the time-out: its notification is still pending.
+                let _ = sys::notify_wait(OBJECT_BIT, 0);
+            }
+            return result;
+        }
+    }
+}
+
+/// A waiter's message from its mailbox.
+fn take_mail(intra: &Intra, slot: usize, length: usize, out: &mut [u8]) -> MessageSize {
+    out[..length].copy_from_slice(intra.mail(slot));
+    length as MessageSize
+}
+
+impl ApexBufferP1 for Warden {
+    fn create_buffer(
+        buffer_name: BufferName,
+        max_message_size: MessageSize,
+        max_nb_message: MessageRange,
+        queuing_discipline: QueuingDiscipline,
+    ) -> Result<BufferId> {
+        with_intra(|intra, c| {
+            intra.create_buffer(
+                c.normal,
+                buffer_name,
+                max_message_size,
+                max_nb_message,
+                queuing_discipline,
+            )
+        })
+    }
+
+    fn send_buffer(
+        buffer_id: BufferId,
+        message: &[ApexByte],
+        time_out: ApexSystemTime,
+    ) -> Result<()> {
+        blocking(
+            time_out,
+            &mut [],
+            |intra, caller, _| intra.send_buffer(caller, buffer_id, message, time_out),
+            |_, _, _, _| (),
+        )
+    }
+
+    /// # Safety
+    /// None beyond a653rs's contract: at most `message.len()` bytes are written; a buffer
+    /// shorter than the buffer's MAX_MESSAGE_SIZE is refused with INVALID_PARAM.
+    #[allow(unsafe_code)] // a653rs declares the method unsafe; its body needs no unsafe
+    unsafe fn receive_buffer(
+        buffer_id: BufferId,
+        time_out: ApexSystemTime,
+        message: &mut [ApexByte],
+    ) -> Result<MessageSize> {
+        blocking(
+            time_out,
+            message,
+            |intra, caller, out| match intra.receive_buffer(caller, buffer_id, time_out, out) {
+                Step::Done(r) => Step::Done(r.map(|n| n as MessageSize)),
+                Step::Wait => Step::Wait,
+            },
+            take_mail,
+        )
+    }
+
+    fn get_buffer_id(buffer_name: BufferName) -> Result<BufferId> {
+        with_intra(|intra, _| intra.get_buffer_id(&buffer_name))
+    }
+
+    fn get_buffer_status(buffer_id: BufferId) -> Result<BufferStatus> {
+        with_intra(|intra, _| intra.get_buffer_status(buffer_id))
+    }
+}
+
+impl ApexBlackboardP1 for Warden {
+    fn create_blackboard(
+        blackboard_name: BlackboardName,
+        max_message_size: MessageSize,
+    ) -> Result<BlackboardId> {
+        with_intra(|intra, c| intra.create_blackboard(c.normal, blackboard_name, max_message_size))
+    }
+
+    fn display_blackboard(blackboard_id: BlackboardId, message: &[ApexByte]) -> Result<()> {
+        with_intra(|intra, _| intra.display_blackboard(blackboard_id, message))
+    }
+
+    /// # Safety
+    /// None beyond a653rs's contract: at most `message.len()` bytes are written; a buffer
+    /// shorter than the blackboard's MAX_MESSAGE_SIZE is refused with INVALID_PARAM.
+    #[allow(unsafe_code)] // a653rs declares the method unsafe; its body needs no unsafe
+    unsafe fn read_blackboard(
+        blackboard_id: BlackboardId,
+        time_out: ApexSystemTime,
+        message: &mut [ApexByte],
+    ) -> Result<MessageSize> {
+        blocking(
+            time_out,
+            message,
+            |intra, caller, out| match intra.read_blackboard(caller, blackboard_id, time_out, out) {
+                Step::Done(r) => Step::Done(r.map(|n| n as MessageSize)),
+                Step::Wait => Step::Wait,
+            },
+            take_mail,
+        )
+    }
+
+    fn clear_blackboard(blackboard_id: BlackboardId) -> Result<()> {
+        with_intra(|intra, _| intra.clear_blackboard(blackboard_id))
+    }
+
+    fn get_blackboard_id(blackboard_name: BlackboardName) -> Result<BlackboardId> {
+        with_intra(|intra, _| intra.get_blackboard_id(&blackboard_name))
+    }
+
+    fn get_blackboard_status(blackboard_id: BlackboardId) -> Result<BlackboardStatus> {
+        with_intra(|intra, _| intra.get_blackboard_status(blackboard_id))
+    }
+}
+
+impl ApexSemaphoreP1 for Warden {
+    fn create_semaphore(
+        semaphore_name: SemaphoreName,
+        current_value: SemaphoreValue,
+        maximum_value: SemaphoreValue,
+        queuing_discipline: QueuingDiscipline,
+    ) -> Result<SemaphoreId> {
+        with_intra(|intra, c| {
+            intra.create_semaphore(
+                c.normal,
+                semaphore_name,
+                current_value,
+                maximum_value,
+                queuing_discipline,
+            )
+        })
+    }
+
+    fn wait_semaphore(semaphore_id: SemaphoreId, time_out: ApexSystemTime) -> Result<()> {
+        blocking(
+            time_out,
+            &mut [],
+            |intra, caller, _| intra.wait_semaphore(caller, semaphore_id, time_out),
+            |_, _, _, _| (),
+        )
+    }
+
+    fn signal_semaphore(semaphore_id: SemaphoreId) -> Result<()> {
+        with_intra(|intra, _| intra.signal_semaphore(semaphore_id))
+    }
+
+    fn get_semaphore_id(semaphore_name: SemaphoreName) -> Result<SemaphoreId> {
+        with_intra(|intra, _| intra.get_semaphore_id(&semaphore_name))
+    }
+
+    fn get_semaphore_status(semaphore_id: SemaphoreId) -> Result<SemaphoreStatus> {
+        with_intra(|intra, _| intra.get_semaphore_status(semaphore_id))
+    }
+}
+
+impl ApexEventP1 for Warden {
+    fn create_event(event_name: EventName) -> Result<EventId> {
+        with_intra(|intra, c| intra.create_event(c.normal, event_name))
+    }
+
+    fn set_event(event_id: EventId) -> Result<()> {
+        with_intra(|intra, _| intra.set_event(event_id))
+    }
+
+    fn reset_event(event_id: EventId) -> Result<()> {
+        with_intra(|intra, _| intra.reset_event(event_id))
+    }
+
+    fn wait_event(event_id: EventId, time_out: ApexSystemTime) -> Result<()> {
+        blocking(
+            time_out,
+            &mut [],
+            |intra, caller, _| intra.wait_event(caller, event_id, time_out),
+            |_, _, _, _| (),
+        )
+    }
+
+    fn get_event_id(event_name: EventName) -> Result<EventId> {
+        with_intra(|intra, _| intra.get_event_id(&event_name))
+    }
+
+    fn get_event_status(event_id: EventId) -> Result<EventStatus> {
+        with_intra(|intra, _| intra.get_event_status(event_id))
+    }
+}
+
+impl ApexMutexP1 for Warden {
+    fn create_mutex(
+        mutex_name: MutexName,
+        mutex_priority: Priority,
+        queuing_discipline: QueuingDiscipline,
+    ) -> Result<MutexId> {
+        with_intra(|intra, c| {
+            intra.create_mutex(
+                c.normal,
+                c.mcp,
+                mutex_name,
+                mutex_priority,
+                queuing_discipline,
+            )
+        })
+    }
+
+    fn acquire_mutex(mutex_id: MutexId, time_out: ApexSystemTime) -> Result<()> {
+        blocking(
+            time_out,
+            &mut [],
+            |intra, caller, _| intra.acquire_mutex(caller, mutex_id, time_out),
+            |_, _, _, _| (),
+        )
+    }
+
+    fn release_mutex(mutex_id: MutexId) -> Result<()> {
+        with_intra(|intra, c| intra.release_mutex(c.caller, mutex_id))
+    }
+
+    fn reset_mutex(mutex_id: MutexId, process_id: ProcessId) -> Result<()> {
+        let caller = own_slot();
+        let mut critical = Critical::enter();
+        let (table, intra) = critical.parts();
+        let slot = table.slot(process_id)?;
+        let result = intra.reset_mutex(mutex_id, slot);
+        apply_intra(table, intra, caller);
+        result
+    }
+
+    fn get_mutex_id(mutex_name: MutexName) -> Result<MutexId> {
+        with_intra(|intra, _| intra.get_mutex_id(&mutex_name))
+    }
+
+    fn get_mutex_status(mutex_id: MutexId) -> Result<MutexStatus> {
+        with_intra(|intra, _| intra.get_mutex_status(mutex_id))
+    }
+
+    fn get_process_mutex_state(process_id: ProcessId) -> Result<MutexId> {
+        let mut critical = Critical::enter();
+        let (table, intra) = critical.parts();
+        let slot = table.slot(process_id)?;
+        Ok(intra.process_mutex_state(slot))
     }
 }

@@ -12,6 +12,9 @@
 //!   keeps its windows; the restarter shows what a warm and a cold restart keep; a periodic
 //!   process overruns its time capacity (DEADLINE_MISSED); the victim finally raises an
 //!   error configured as `shutdown` (failure exit);
+//! * `intra` (scenario `apex_intra`): buffers, blackboards, semaphores, events and mutexes
+//!   between processes of different priorities: FIFO and PRIORITY wake order, time-outs,
+//!   the mutex priority ceiling and the return codes in both modes (see `intra.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
@@ -23,6 +26,7 @@
 #![no_main]
 
 mod bench;
+mod intra;
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
@@ -118,6 +122,7 @@ impl Partition<Warden> for Test {
             ),
             "restarter" => restarter(ctx),
             "bench-q" => bench::create(ctx),
+            "intra" => intra::create(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             other => println!("{other}: no role for this partition name"),
