@@ -280,3 +280,20 @@ mod tests {
         assert_eq!(Errno::ENOSYS.result(), (-38i64) as u64);
     }
 }
+
+/// `struct timespec` of `ns` nanoseconds (seconds, nanoseconds).
+pub fn timespec(ns: u64) -> [u8; 16] {
+    seconds_and(ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+/// `struct timeval` of `ns` nanoseconds (seconds, microseconds).
+pub fn timeval(ns: u64) -> [u8; 16] {
+    seconds_and(ns / 1_000_000_000, ns % 1_000_000_000 / 1000)
+}
+
+fn seconds_and(seconds: u64, fraction: u64) -> [u8; 16] {
+    let mut b = [0u8; 16];
+    b[..8].copy_from_slice(&seconds.to_le_bytes());
+    b[8..].copy_from_slice(&fraction.to_le_bytes());
+    b
+}
