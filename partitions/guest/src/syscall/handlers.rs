@@ -586,18 +586,15 @@ pub fn sched_setaffinity<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 // Nice 0 for everyone (the raw call returns 20 - nice); only root sets it, and the guest
 // schedules its processes alike anyway.
 pub fn getpriority<H: Host>(_: &mut Ctx<H>, a: Args) -> Result {
-    if a.raw(0) > 2 {
-        Err(Errno::EINVAL)
-    } else {
-        Ok(20)
-    }
+    einval_unless(a.raw(0) <= 2, 20)
 }
 pub fn setpriority<H: Host>(_: &mut Ctx<H>, a: Args) -> Result {
-    if a.raw(0) > 2 {
-        Err(Errno::EINVAL)
-    } else {
-        Ok(0)
-    }
+    einval_unless(a.raw(0) <= 2, 0)
+}
+
+/// `value` when the arguments are `valid`, else `EINVAL`.
+fn einval_unless(valid: bool, value: u64) -> Result {
+    if valid { Ok(value) } else { Err(Errno::EINVAL) }
 }
 
 // Identity: one user, root, and one thread per process.
@@ -648,22 +645,19 @@ pub fn getresuid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 /// No supplementary groups.
 pub fn getgroups<H: Host>(_: &mut Ctx<H>, a: Args) -> Result {
-    if a.i32(0) < 0 {
-        Err(Errno::EINVAL)
-    } else {
-        Ok(0)
-    }
+    einval_unless(a.i32(0) >= 0, 0)
 }
 /// Root may set (and so drop) the supplementary groups.
 pub fn setgroups<H: Host>(_: &mut Ctx<H>, a: Args) -> Result {
-    if a.usize(0) > 65536 {
-        Err(Errno::EINVAL)
-    } else {
-        Ok(0)
-    }
+    einval_unless(a.usize(0) <= 65536, 0)
 }
 
 // The process table's: decoded here, served by [`crate::system`].
+
+/// Hands the decoded `call` to the process table.
+fn to_process_table<H: Host>(c: &mut Ctx<H>, call: ProcessCall) -> Result {
+    c.finish(Outcome::Process(call))
+}
 
 /// `exit`, `exit_group` (one thread per process: both end it).
 pub fn exit<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
@@ -676,51 +670,66 @@ pub fn exit<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 pub fn clone<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (flags, stack, parent_tid, child_tid) = (a.flags(0), a.ptr(1), a.ptr(2), a.ptr(3));
-    c.finish(Outcome::Process(ProcessCall::Clone {
-        flags,
-        args: [stack, parent_tid, child_tid],
-    }))
+    to_process_table(
+        c,
+        ProcessCall::Clone {
+            flags,
+            args: [stack, parent_tid, child_tid],
+        },
+    )
 }
 pub fn fork<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
     let flags = crate::signal::SIGCHLD as u64;
-    c.finish(Outcome::Process(ProcessCall::Clone {
-        flags,
-        args: [0; 3],
-    }))
+    to_process_table(
+        c,
+        ProcessCall::Clone {
+            flags,
+            args: [0; 3],
+        },
+    )
 }
 pub fn vfork<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
     let flags =
         crate::system::CLONE_VM | crate::system::CLONE_VFORK | crate::signal::SIGCHLD as u64;
-    c.finish(Outcome::Process(ProcessCall::Clone {
-        flags,
-        args: [0; 3],
-    }))
+    to_process_table(
+        c,
+        ProcessCall::Clone {
+            flags,
+            args: [0; 3],
+        },
+    )
 }
 pub fn execve<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (path, argv, envp) = (a.ptr(0), a.ptr(1), a.ptr(2));
-    c.finish(Outcome::Process(ProcessCall::Execve { path, argv, envp }))
+    to_process_table(c, ProcessCall::Execve { path, argv, envp })
 }
 pub fn wait4<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (pid, status, options, rusage) = (a.i32(0), a.ptr(1), a.flags(2), a.ptr(3));
-    c.finish(Outcome::Process(ProcessCall::Wait4 {
-        pid,
-        status,
-        options,
-        rusage,
-    }))
+    to_process_table(
+        c,
+        ProcessCall::Wait4 {
+            pid,
+            status,
+            options,
+            rusage,
+        },
+    )
 }
 pub fn waitid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (idtype, id, info, options) = (a.raw(0), a.raw(1), a.ptr(2), a.flags(3));
-    c.finish(Outcome::Process(ProcessCall::Waitid {
-        idtype,
-        id,
-        info,
-        options,
-    }))
+    to_process_table(
+        c,
+        ProcessCall::Waitid {
+            idtype,
+            id,
+            info,
+            options,
+        },
+    )
 }
 /// Sends `signal` to `target` (a pid, or a group as `kill` encodes it).
 fn send<H: Host>(c: &mut Ctx<H>, target: i64, signal: u64) -> Result {
-    c.finish(Outcome::Process(ProcessCall::Kill { target, signal }))
+    to_process_table(c, ProcessCall::Kill { target, signal })
 }
 pub fn kill<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     send(c, a.i32(0) as i64, a.raw(1))
@@ -740,27 +749,27 @@ pub fn tgkill<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 pub fn setpgid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (pid, pgid) = (a.raw(0), a.raw(1));
-    c.finish(Outcome::Process(ProcessCall::SetPgid { pid, pgid }))
+    to_process_table(c, ProcessCall::SetPgid { pid, pgid })
 }
 pub fn getpgid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let pid = a.raw(0);
-    c.finish(Outcome::Process(ProcessCall::GroupOf {
-        pid,
-        session: false,
-    }))
+    to_process_table(
+        c,
+        ProcessCall::GroupOf {
+            pid,
+            session: false,
+        },
+    )
 }
 pub fn getsid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let pid = a.raw(0);
-    c.finish(Outcome::Process(ProcessCall::GroupOf {
-        pid,
-        session: true,
-    }))
+    to_process_table(c, ProcessCall::GroupOf { pid, session: true })
 }
 pub fn setsid<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
-    c.finish(Outcome::Process(ProcessCall::SetSid))
+    to_process_table(c, ProcessCall::SetSid)
 }
 /// The process count is the process table's.
 pub fn sysinfo<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let record = a.ptr(0);
-    c.finish(Outcome::Process(ProcessCall::Sysinfo { record }))
+    to_process_table(c, ProcessCall::Sysinfo { record })
 }
