@@ -269,18 +269,6 @@ pub const RLIMIT_CORE: u64 = 4;
 pub const RLIMIT_NOFILE: u64 = 7;
 pub const RLIM_INFINITY: u64 = u64::MAX;
 
-#[cfg(test)]
-mod tests {
-    use super::*;
-
-    #[test]
-    fn names_and_errors() {
-        assert_eq!(syscall_name(nr::exit_group), Some("exit_group"));
-        assert_eq!(syscall_name(1000), None);
-        assert_eq!(Errno::ENOSYS.result(), (-38i64) as u64);
-    }
-}
-
 /// `struct timespec` of `ns` nanoseconds (seconds, nanoseconds).
 pub fn timespec(ns: u64) -> [u8; 16] {
     seconds_and(ns / 1_000_000_000, ns % 1_000_000_000)
@@ -296,4 +284,16 @@ fn seconds_and(seconds: u64, fraction: u64) -> [u8; 16] {
     b[..8].copy_from_slice(&seconds.to_le_bytes());
     b[8..].copy_from_slice(&fraction.to_le_bytes());
     b
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn names_and_errors() {
+        assert_eq!(syscall_name(nr::exit_group), Some("exit_group"));
+        assert_eq!(syscall_name(1000), None);
+        assert_eq!(Errno::ENOSYS.result(), (-38i64) as u64);
+    }
 }

@@ -771,7 +771,7 @@ impl System {
                     matches!(call, ProcessCall::Clone { flags, .. } if flags & CLONE_VFORK != 0);
                 let result = match call {
                     ProcessCall::Clone { flags, args } => {
-                        self.fork(i, fs, k, flags, args, &mut m.registers)
+                        self.fork(i, fs, k, flags, args, &m.registers)
                     }
                     ProcessCall::Kill { target, signal } => self.kill(i, fs, k, target, signal),
                     ProcessCall::SetPgid { pid, pgid } => self.setpgid(i, pid, pgid),

@@ -112,7 +112,7 @@ pub fn fcntl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match c.p.file(a.fd(0)).ok_or(Errno::EBADF)? {
         File::Console(_) => super::tty_ioctl(c.p, c.host, a.flags(1), a.raw(2)),
-        _ => file::port_ioctl(c.p, &mut c.f, c.host, a.fd(0), a.flags(1), a.raw(2)),
+        _ => file::port_ioctl(c.p, &c.f, c.host, a.fd(0), a.flags(1), a.raw(2)),
     }
 }
 /// `fsync`, `fdatasync`, `syncfs`, `fadvise64`: the files live in memory.
@@ -447,27 +447,18 @@ pub fn setitimer<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 
 pub fn poll<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let timeout = poll::poll_timeout(a.raw(2));
-    poll::poll(c.p, &mut c.f, c.host, a.ptr(0), a.usize(1), timeout, 0, 0)
+    poll::poll(c.p, &c.f, c.host, a.ptr(0), a.usize(1), timeout, 0, 0)
 }
 pub fn ppoll<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let timeout = poll::ppoll_timeout(c.p, c.host, a.ptr(2))?;
     let (mask, size) = (a.ptr(3), a.usize(4));
-    poll::poll(
-        c.p,
-        &mut c.f,
-        c.host,
-        a.ptr(0),
-        a.usize(1),
-        timeout,
-        mask,
-        size,
-    )
+    poll::poll(c.p, &c.f, c.host, a.ptr(0), a.usize(1), timeout, mask, size)
 }
 pub fn select<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    poll::select(c.p, &mut c.f, c.host, a.0, false)
+    poll::select(c.p, &c.f, c.host, a.0, false)
 }
 pub fn pselect6<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    poll::select(c.p, &mut c.f, c.host, a.0, true)
+    poll::select(c.p, &c.f, c.host, a.0, true)
 }
 
 // Time, randomness, the system.
