@@ -19,105 +19,81 @@ type Result = SysResult<u64>;
 // Files: descriptors, reading and writing.
 
 pub fn read<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::read(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.usize(2), None)
+    file::read(c, a.fd(0), a.ptr(1), a.usize(2), None)
 }
 pub fn write<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::write(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.usize(2), None)
+    file::write(c, a.fd(0), a.ptr(1), a.usize(2), None)
 }
 pub fn pread64<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let at = Some(a.offset(3)?);
-    file::read(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.usize(2), at)
+    file::read(c, a.fd(0), a.ptr(1), a.usize(2), at)
 }
 pub fn pwrite64<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let at = Some(a.offset(3)?);
-    file::write(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.usize(2), at)
+    file::write(c, a.fd(0), a.ptr(1), a.usize(2), at)
 }
 pub fn readv<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::vectored(c.p, &mut c.f, c.host, false, a.fd(0), a.ptr(1), a.usize(2))
+    file::vectored(c, false, a.fd(0), a.ptr(1), a.usize(2))
 }
 pub fn writev<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::vectored(c.p, &mut c.f, c.host, true, a.fd(0), a.ptr(1), a.usize(2))
+    file::vectored(c, true, a.fd(0), a.ptr(1), a.usize(2))
 }
 pub fn sendfile<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::sendfile(
-        c.p,
-        &mut c.f,
-        c.host,
-        a.fd(0),
-        a.fd(1),
-        a.ptr(2),
-        a.usize(3),
-    )
+    file::sendfile(c, a.fd(0), a.fd(1), a.ptr(2), a.usize(3))
 }
 pub fn open<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::openat(
-        c.p,
-        &mut c.f,
-        c.host,
-        AT_FDCWD,
-        a.ptr(0),
-        a.flags(1),
-        a.flags(2),
-    )
+    file::openat(c, AT_FDCWD, a.ptr(0), a.flags(1), a.flags(2))
 }
 pub fn creat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let flags = linux::O_CREAT | linux::O_WRONLY | linux::O_TRUNC;
-    file::openat(c.p, &mut c.f, c.host, AT_FDCWD, a.ptr(0), flags, a.flags(1))
+    file::openat(c, AT_FDCWD, a.ptr(0), flags, a.flags(1))
 }
 pub fn openat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::openat(
-        c.p,
-        &mut c.f,
-        c.host,
-        a.fd(0),
-        a.ptr(1),
-        a.flags(2),
-        a.flags(3),
-    )
+    file::openat(c, a.fd(0), a.ptr(1), a.flags(2), a.flags(3))
 }
 pub fn close<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::close_fd(c.p, &mut c.f, a.fd(0))
+    file::close_fd(c, a.fd(0))
 }
 pub fn dup<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::dup(c.p, &mut c.f, a.fd(0))
+    file::dup(c, a.fd(0))
 }
 pub fn dup2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::dup3(c.p, &mut c.f, a.fd(0), a.fd(1), None)
+    file::dup3(c, a.fd(0), a.fd(1), None)
 }
 pub fn dup3<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::dup3(c.p, &mut c.f, a.fd(0), a.fd(1), Some(a.flags(2)))
+    file::dup3(c, a.fd(0), a.fd(1), Some(a.flags(2)))
 }
 pub fn pipe<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::pipe(c.p, &mut c.f, c.host, a.ptr(0), 0)
+    file::pipe(c, a.ptr(0), 0)
 }
 pub fn pipe2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::pipe(c.p, &mut c.f, c.host, a.ptr(0), a.flags(1))
+    file::pipe(c, a.ptr(0), a.flags(1))
 }
 pub fn lseek<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::lseek(c.p, &mut c.f, a.fd(0), a.raw(1) as i64, a.flags(2))
+    file::lseek(c, a.fd(0), a.raw(1) as i64, a.flags(2))
 }
 pub fn ftruncate<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::ftruncate(c.p, &mut c.f, c.host, a.fd(0), a.raw(1))
+    file::ftruncate(c, a.fd(0), a.raw(1))
 }
 pub fn truncate<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::truncate(c.p, &mut c.f, c.host, a.ptr(0), a.raw(1))
+    file::truncate(c, a.ptr(0), a.raw(1))
 }
 pub fn getdents64<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::getdents64(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.usize(2))
+    file::getdents64(c, a.fd(0), a.ptr(1), a.usize(2))
 }
 pub fn fcntl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::fcntl(c.p, &mut c.f, a.fd(0), a.flags(1), a.raw(2))
+    file::fcntl(c, a.fd(0), a.flags(1), a.raw(2))
 }
 /// The terminal requests on the console ([`tty_ioctl`]), the port requests on a port.
 pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match c.p.file(a.fd(0)).ok_or(Errno::EBADF)? {
         File::Console(_) => super::tty_ioctl(c.p, c.host, a.flags(1), a.raw(2)),
-        _ => file::port_ioctl(c.p, &c.f, c.host, a.fd(0), a.flags(1), a.raw(2)),
+        _ => file::port_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
     }
 }
 /// `fsync`, `fdatasync`, `syncfs`, `fadvise64`: the files live in memory.
 pub fn sync_fd<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::nothing(c.p, a.fd(0))
+    file::nothing(c, a.fd(0))
 }
 /// Calls with nothing to do (`sync`, `sched_yield`).
 pub fn nothing<H: Host>(_: &mut Ctx<H>, _: Args) -> Result {
@@ -127,158 +103,120 @@ pub fn nothing<H: Host>(_: &mut Ctx<H>, _: Args) -> Result {
 // Names and status.
 
 pub fn stat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::stat(c.p, &mut c.f, c.host, a.ptr(0), a.ptr(1), true)
+    file::stat(c, a.ptr(0), a.ptr(1), true)
 }
 pub fn lstat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::stat(c.p, &mut c.f, c.host, a.ptr(0), a.ptr(1), false)
+    file::stat(c, a.ptr(0), a.ptr(1), false)
 }
 pub fn fstat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::fstat(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1))
+    file::fstat(c, a.fd(0), a.ptr(1))
 }
 pub fn newfstatat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::newfstatat(
-        c.p,
-        &mut c.f,
-        c.host,
-        a.fd(0),
-        a.ptr(1),
-        a.ptr(2),
-        a.flags(3),
-    )
+    file::newfstatat(c, a.fd(0), a.ptr(1), a.ptr(2), a.flags(3))
 }
 pub fn statx<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::statx(
-        c.p,
-        &mut c.f,
-        c.host,
-        a.fd(0),
-        a.ptr(1),
-        a.flags(2),
-        a.ptr(4),
-    )
+    file::statx(c, a.fd(0), a.ptr(1), a.flags(2), a.ptr(4))
 }
 pub fn statfs<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::statfs(c.p, &mut c.f, c.host, a.ptr(0), None, a.ptr(1))
+    file::statfs(c, a.ptr(0), None, a.ptr(1))
 }
 pub fn fstatfs<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::statfs(c.p, &mut c.f, c.host, 0, Some(a.fd(0)), a.ptr(1))
+    file::statfs(c, 0, Some(a.fd(0)), a.ptr(1))
 }
 pub fn access<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::access(c.p, &mut c.f, c.host, AT_FDCWD, a.ptr(0), a.flags(1))
+    file::access(c, AT_FDCWD, a.ptr(0), a.flags(1))
 }
 /// `faccessat`, `faccessat2`.
 pub fn faccessat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::access(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.flags(2))
+    file::access(c, a.fd(0), a.ptr(1), a.flags(2))
 }
 pub fn readlink<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::readlinkat(
-        c.p,
-        &mut c.f,
-        c.host,
-        AT_FDCWD,
-        a.ptr(0),
-        a.ptr(1),
-        a.usize(2),
-    )
+    file::readlinkat(c, AT_FDCWD, a.ptr(0), a.ptr(1), a.usize(2))
 }
 pub fn readlinkat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::readlinkat(
-        c.p,
-        &mut c.f,
-        c.host,
-        a.fd(0),
-        a.ptr(1),
-        a.ptr(2),
-        a.usize(3),
-    )
+    file::readlinkat(c, a.fd(0), a.ptr(1), a.ptr(2), a.usize(3))
 }
 pub fn mkdir<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::mkdirat(c.p, &mut c.f, c.host, AT_FDCWD, a.ptr(0), a.flags(1))
+    file::mkdirat(c, AT_FDCWD, a.ptr(0), a.flags(1))
 }
 pub fn mkdirat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::mkdirat(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.flags(2))
+    file::mkdirat(c, a.fd(0), a.ptr(1), a.flags(2))
 }
 pub fn unlink<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::unlinkat(c.p, &mut c.f, c.host, AT_FDCWD, a.ptr(0), 0)
+    file::unlinkat(c, AT_FDCWD, a.ptr(0), 0)
 }
 pub fn rmdir<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let flags = linux::AT_REMOVEDIR;
-    file::unlinkat(c.p, &mut c.f, c.host, AT_FDCWD, a.ptr(0), flags)
+    file::unlinkat(c, AT_FDCWD, a.ptr(0), flags)
 }
 pub fn unlinkat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::unlinkat(c.p, &mut c.f, c.host, a.fd(0), a.ptr(1), a.flags(2))
+    file::unlinkat(c, a.fd(0), a.ptr(1), a.flags(2))
 }
 pub fn rename<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (from, to) = (a.ptr(0), a.ptr(1));
-    file::renameat2(c.p, &mut c.f, c.host, AT_FDCWD, from, AT_FDCWD, to, 0)
+    file::renameat2(c, AT_FDCWD, from, AT_FDCWD, to, 0)
 }
 pub fn renameat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (from, to) = (a.ptr(1), a.ptr(3));
-    file::renameat2(c.p, &mut c.f, c.host, a.fd(0), from, a.fd(2), to, 0)
+    file::renameat2(c, a.fd(0), from, a.fd(2), to, 0)
 }
 pub fn renameat2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (from, to, flags) = (a.ptr(1), a.ptr(3), a.flags(4));
-    file::renameat2(c.p, &mut c.f, c.host, a.fd(0), from, a.fd(2), to, flags)
+    file::renameat2(c, a.fd(0), from, a.fd(2), to, flags)
 }
 pub fn symlink<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::symlinkat(c.p, &mut c.f, c.host, a.ptr(0), AT_FDCWD, a.ptr(1))
+    file::symlinkat(c, a.ptr(0), AT_FDCWD, a.ptr(1))
 }
 pub fn symlinkat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::symlinkat(c.p, &mut c.f, c.host, a.ptr(0), a.fd(1), a.ptr(2))
+    file::symlinkat(c, a.ptr(0), a.fd(1), a.ptr(2))
 }
 pub fn link<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (from, to) = (a.ptr(0), a.ptr(1));
-    file::linkat(c.p, &mut c.f, c.host, AT_FDCWD, from, AT_FDCWD, to, 0)
+    file::linkat(c, AT_FDCWD, from, AT_FDCWD, to, 0)
 }
 pub fn linkat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (from, to, flags) = (a.ptr(1), a.ptr(3), a.flags(4));
-    file::linkat(c.p, &mut c.f, c.host, a.fd(0), from, a.fd(2), to, flags)
+    file::linkat(c, a.fd(0), from, a.fd(2), to, flags)
 }
 pub fn chdir<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chdir(c.p, &mut c.f, c.host, a.ptr(0))
+    file::chdir(c, a.ptr(0))
 }
 pub fn fchdir<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::fchdir(c.p, &mut c.f, a.fd(0))
+    file::fchdir(c, a.fd(0))
 }
 pub fn getcwd<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::getcwd(c.p, &mut c.f, c.host, a.ptr(0), a.usize(1))
+    file::getcwd(c, a.ptr(0), a.usize(1))
 }
 pub fn chmod<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chmod(
-        c.p,
-        &mut c.f,
-        c.host,
-        Target::path(a.ptr(0), true),
-        a.flags(1),
-    )
+    file::chmod(c, Target::path(a.ptr(0), true), a.flags(1))
 }
 pub fn fchmod<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chmod(c.p, &mut c.f, c.host, Target::Fd(a.fd(0)), a.flags(1))
+    file::chmod(c, Target::Fd(a.fd(0)), a.flags(1))
 }
 pub fn fchmodat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let target = Target::at(a.fd(0), a.ptr(1), a.flags(3));
-    file::chmod(c.p, &mut c.f, c.host, target, a.flags(2))
+    file::chmod(c, target, a.flags(2))
 }
 pub fn chown<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chown(c.p, &mut c.f, c.host, Target::path(a.ptr(0), true))
+    file::chown(c, Target::path(a.ptr(0), true))
 }
 pub fn lchown<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chown(c.p, &mut c.f, c.host, Target::path(a.ptr(0), false))
+    file::chown(c, Target::path(a.ptr(0), false))
 }
 pub fn fchown<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chown(c.p, &mut c.f, c.host, Target::Fd(a.fd(0)))
+    file::chown(c, Target::Fd(a.fd(0)))
 }
 pub fn fchownat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let target = Target::at(a.fd(0), a.ptr(1), a.flags(4));
-    file::chown(c.p, &mut c.f, c.host, target)
+    file::chown(c, target)
 }
 pub fn utimensat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let target = Target::at(a.fd(0), a.ptr(1), a.flags(3));
-    file::utimensat(c.p, &mut c.f, c.host, target, a.ptr(2))
+    file::utimensat(c, target, a.ptr(2))
 }
 /// `utime`, `utimes`: the file must exist (its times are not kept), as `chown` checks.
 pub fn utimes<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    file::chown(c.p, &mut c.f, c.host, Target::path(a.ptr(0), true))
+    file::chown(c, Target::path(a.ptr(0), true))
 }
 pub fn umask<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let old = c.p.umask;

@@ -28,8 +28,8 @@ pub struct Ctx<'c, 'a, H> {
     pub outcome: Option<Outcome>,
 }
 
-impl<H: Host> Ctx<'_, '_, H> {
-    pub fn new<'c, 'a>(
+impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
+    pub fn new(
         p: &'c mut Process,
         pipes: &'c mut Pipes,
         fs: &'c mut crate::vfs::Fs<'a>,
@@ -44,6 +44,11 @@ impl<H: Host> Ctx<'_, '_, H> {
             m,
             outcome: None,
         }
+    }
+
+    /// The process, its files and the host at once, for a handler that works with all three.
+    pub fn parts(&mut self) -> (&mut Process, &mut Files<'c, 'a>, &mut H) {
+        (&mut *self.p, &mut self.f, &mut *self.host)
     }
 
     /// The call ends with `outcome` instead of a return value in `rax`.
