@@ -4,12 +4,12 @@
 //! wait can only end by its timeout or a signal, a wake finds nobody), plus `sysinfo`'s
 //! record ([`sysinfo_record`]).
 
-use crate::linux::{Errno, nr};
+use crate::linux::Errno;
 use crate::process::Process;
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 
 /// Clock ticks per second (`sysconf(_SC_CLK_TCK)`, `times`).
-const TICKS_PER_S: u64 = 100;
+pub(crate) const TICKS_PER_S: u64 = 100;
 const FUTEX_WAIT: u64 = 0;
 const FUTEX_WAKE: u64 = 1;
 const FUTEX_WAIT_BITSET: u64 = 9;
@@ -17,81 +17,9 @@ const FUTEX_WAKE_BITSET: u64 = 10;
 const FUTEX_PRIVATE: u64 = 128;
 const FUTEX_CLOCK_REALTIME: u64 = 256;
 
-/// Serves `number` if it is one of this module's calls.
-pub fn call(
-    p: &mut Process,
-    host: &mut impl Host,
-    number: u64,
-    a: [u64; 6],
-) -> Option<SysResult<u64>> {
-    let only_root = |ids: &[u64]| {
-        // -1 keeps an id; 0 is the only one there is.
-        if ids
-            .iter()
-            .all(|&id| id as u32 == 0 || id as u32 == u32::MAX)
-        {
-            Ok(0)
-        } else {
-            Err(Errno::EPERM)
-        }
-    };
-    Some(match number {
-        nr::setuid | nr::setgid => only_root(&a[..1]),
-        nr::setreuid | nr::setregid => only_root(&a[..2]),
-        nr::setresuid | nr::setresgid => only_root(&a[..3]),
-        nr::getresuid | nr::getresgid => (|| {
-            for at in &a[..3] {
-                write_user(p, host, *at, &0u32.to_le_bytes())?;
-            }
-            Ok(0)
-        })(),
-        // No supplementary groups; root may set (and so drop) them.
-        nr::getgroups if (a[0] as i32) < 0 => Err(Errno::EINVAL),
-        nr::getgroups => Ok(0),
-        nr::setgroups if a[0] > 65536 => Err(Errno::EINVAL),
-        nr::setgroups => Ok(0),
-        nr::getrusage => match a[0] as i32 {
-            // RUSAGE_SELF, RUSAGE_CHILDREN, RUSAGE_THREAD
-            -1..=1 => write_user(p, host, a[1], &[0; 144]).map(|()| 0),
-            _ => Err(Errno::EINVAL),
-        },
-        nr::times => {
-            if a[0] != 0
-                && let Err(e) = write_user(p, host, a[0], &[0; 32])
-            {
-                return Some(Err(e));
-            }
-            Ok(host.now_ns() / (1_000_000_000 / TICKS_PER_S))
-        }
-        nr::sched_getaffinity => match a[1] {
-            len if len < 8 || len % 8 != 0 => Err(Errno::EINVAL),
-            _ => write_user(p, host, a[2], &1u64.to_le_bytes()).map(|()| 8),
-        },
-        nr::sched_setaffinity => {
-            let mut mask = [0u8; 8];
-            match a[1] {
-                len if len < 8 => Err(Errno::EINVAL),
-                _ => read_user(p, host, a[2], &mut mask).and_then(|()| {
-                    if u64::from_le_bytes(mask) & 1 == 0 {
-                        Err(Errno::EINVAL)
-                    } else {
-                        Ok(0)
-                    }
-                }),
-            }
-        }
-        // Nice 0 for everyone (the raw call returns 20 - nice); only root sets it, and
-        // the guest schedules its processes alike anyway.
-        nr::getpriority if a[0] > 2 => Err(Errno::EINVAL),
-        nr::getpriority => Ok(20),
-        nr::setpriority if a[0] > 2 => Err(Errno::EINVAL),
-        nr::setpriority => Ok(0),
-        nr::futex => futex(p, host, a),
-        _ => return None,
-    })
-}
-
-fn futex(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+/// `futex`: one thread per process, so a wait ends by its timeout or a signal only and a
+/// wake finds nobody.
+pub(crate) fn futex(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
     let op = a[1] & !(FUTEX_PRIVATE | FUTEX_CLOCK_REALTIME);
     match op {
         FUTEX_WAKE | FUTEX_WAKE_BITSET => Ok(0),
@@ -135,4 +63,48 @@ pub fn sysinfo_record(uptime_ns: u64, total: u64, free: u64, processes: u16) -> 
     b[80..82].copy_from_slice(&processes.to_le_bytes());
     b[104..108].copy_from_slice(&1u32.to_le_bytes()); // mem_unit
     b
+}
+
+/// `prlimit64` of the process itself, `getrlimit`, `setrlimit`: sets the limit of `resource`
+/// from `new` and reports the old one at `old` (each when not 0).
+pub(crate) fn rlimit(
+    p: &mut Process,
+    host: &mut impl Host,
+    resource: u64,
+    new: u64,
+    old: u64,
+) -> SysResult<u64> {
+    let index = usize::try_from(resource)
+        .ok()
+        .filter(|&r| r < crate::process::LIMITS)
+        .ok_or(Errno::EINVAL)?;
+    let replacement = if new != 0 {
+        let mut b = [0u8; 16];
+        read_user(p, host, new, &mut b)?;
+        let soft = u64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
+        let hard = u64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
+        if soft > hard {
+            return Err(Errno::EINVAL);
+        }
+        // Root may raise a hard limit, but not beyond what the guest has (descriptors,
+        // the stack's fixed size).
+        let ceiling = crate::process::default_limits()[index].hard;
+        if hard > ceiling {
+            return Err(Errno::EPERM);
+        }
+        Some(crate::process::Limit { soft, hard })
+    } else {
+        None
+    };
+    if old != 0 {
+        let limit = p.limits[index];
+        let mut b = [0u8; 16];
+        b[..8].copy_from_slice(&limit.soft.to_le_bytes());
+        b[8..].copy_from_slice(&limit.hard.to_le_bytes());
+        write_user(p, host, old, &b)?;
+    }
+    if let Some(limit) = replacement {
+        p.limits[index] = limit;
+    }
+    Ok(0)
 }

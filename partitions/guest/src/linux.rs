@@ -269,6 +269,23 @@ pub const RLIMIT_CORE: u64 = 4;
 pub const RLIMIT_NOFILE: u64 = 7;
 pub const RLIM_INFINITY: u64 = u64::MAX;
 
+/// `struct timespec` of `ns` nanoseconds (seconds, nanoseconds).
+pub fn timespec(ns: u64) -> [u8; 16] {
+    seconds_and(ns / 1_000_000_000, ns % 1_000_000_000)
+}
+
+/// `struct timeval` of `ns` nanoseconds (seconds, microseconds).
+pub fn timeval(ns: u64) -> [u8; 16] {
+    seconds_and(ns / 1_000_000_000, ns % 1_000_000_000 / 1000)
+}
+
+fn seconds_and(seconds: u64, fraction: u64) -> [u8; 16] {
+    let mut b = [0u8; 16];
+    b[..8].copy_from_slice(&seconds.to_le_bytes());
+    b[8..].copy_from_slice(&fraction.to_le_bytes());
+    b
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

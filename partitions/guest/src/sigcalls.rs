@@ -5,7 +5,7 @@
 //! ([`interrupted`]). Sending signals and delivering them is the process table's
 //! ([`crate::system`]).
 
-use crate::linux::{Errno, nr};
+use crate::linux::{self, Errno, nr};
 use crate::process::Process;
 use crate::signal::{self, Action, AltStack, FPU_SIZE, FRAME_SIZE, UNBLOCKABLE};
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
@@ -194,13 +194,6 @@ fn time_ns(b: &[u8; 16], micro: bool) -> SysResult<u64> {
         .saturating_add(frac as u64 * unit))
 }
 
-fn timespec(ns: u64) -> [u8; 16] {
-    let mut b = [0u8; 16];
-    b[..8].copy_from_slice(&(ns / NS_PER_S).to_le_bytes());
-    b[8..].copy_from_slice(&(ns % NS_PER_S).to_le_bytes());
-    b
-}
-
 /// `nanosleep(req, rem)` and `clock_nanosleep(clock, flags, req, rem)`: the first time
 /// served, records when the call ends and waits; served again, ends once that time came.
 pub fn sleep(
@@ -252,17 +245,10 @@ pub fn alarm(p: &mut Process, host: &mut impl Host, seconds: u64) -> u64 {
 
 /// `struct itimerval` (interval, value) of the real-time timer.
 fn itimer(p: &Process, now: u64) -> [u8; 32] {
-    let usec = |ns: u64| {
-        let mut b = [0u8; 16];
-        b[..8].copy_from_slice(&(ns / NS_PER_S).to_le_bytes());
-        b[8..].copy_from_slice(&(ns % NS_PER_S / 1000).to_le_bytes());
-        b
-    };
+    let left = p.alarm_at.map_or(0, |at| at.saturating_sub(now).max(1));
     let mut b = [0u8; 32];
-    b[..16].copy_from_slice(&usec(p.alarm_interval));
-    b[16..].copy_from_slice(&usec(
-        p.alarm_at.map_or(0, |at| at.saturating_sub(now).max(1)),
-    ));
+    b[..16].copy_from_slice(&linux::timeval(p.alarm_interval));
+    b[16..].copy_from_slice(&linux::timeval(left));
     b
 }
 
@@ -372,7 +358,7 @@ pub fn interrupted(
         && rem != 0
     {
         let left = at.saturating_sub(host.now_ns());
-        let _ = write_user(p, host, rem, &timespec(left));
+        let _ = write_user(p, host, rem, &linux::timespec(left));
     }
     r.rax = Errno::EINTR.result();
     r.rcx = r.rip;

@@ -35,22 +35,22 @@
 //! blocked, else the process dies of it.
 
 use crate::arinc;
-use crate::linux::{self, Errno, nr};
+use crate::linux::{self, Errno};
 use crate::memory::{Fault, PAGE, Rights, USER_TOP, classify_fault};
 use crate::pipe::Pipes;
-use crate::poll;
-use crate::process::{File, Process, Stream};
-use crate::sigcalls;
-use crate::signal::{self, Info, SIGSEGV};
+use crate::process::{Process, Stream};
+use crate::signal::{self, Info};
 use crate::tty::{self, Termios, Tty, Winsize};
 use crate::vfs::Fs;
 use crate::vfs::proc::ProcessTable;
-use abi::ipc::{ExceptionMessage, Registers, VECTOR_INTERRUPT, VECTOR_SYSCALL};
+use abi::ipc::{ExceptionMessage, VECTOR_INTERRUPT, VECTOR_SYSCALL};
 pub use file::{Files, Target, close_files, share_files};
-use memory::{brk, madvise, mmap, mprotect, mremap, munmap};
+use table::{Args, Ctx};
 
 pub mod file;
+mod handlers;
 mod memory;
+pub mod table;
 
 /// Lowest address `mmap` places mappings at without a hint.
 pub const MMAP_BOTTOM: u64 = 1 << 36;
@@ -163,13 +163,59 @@ pub enum Outcome {
     /// The call waits for another process (an empty or full pipe): nothing changed; serve
     /// the same message again when something happened, and only then reply.
     Block,
-    /// The call is one of the process table's ([`crate::system`]): `clone`, `fork`,
-    /// `vfork`, `execve`, `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, the process-group
-    /// and session calls.
-    Process,
+    /// The call is one of the process table's ([`crate::system`]), decoded; the registers
+    /// are unchanged.
+    Process(ProcessCall),
     /// A fault raised this signal and the process has a handler for it: the process table
     /// delivers it (the registers are those of the faulting instruction).
     Signal(Info),
+}
+
+/// A call the process table serves ([`crate::system`]), its arguments decoded.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ProcessCall {
+    /// `clone`, `fork` (`SIGCHLD`), `vfork` (`CLONE_VM | CLONE_VFORK | SIGCHLD`): `args`
+    /// are `clone`'s stack, parent and child tid addresses.
+    Clone {
+        flags: u64,
+        args: [u64; 3],
+    },
+    Execve {
+        path: u64,
+        argv: u64,
+        envp: u64,
+    },
+    Wait4 {
+        pid: i32,
+        status: u64,
+        options: u64,
+        rusage: u64,
+    },
+    Waitid {
+        idtype: u64,
+        id: u64,
+        info: u64,
+        options: u64,
+    },
+    /// `kill`, `tkill`, `tgkill`: `target` as `kill` reads it (a pid, 0, -1 or -group).
+    Kill {
+        target: i64,
+        signal: u64,
+    },
+    SetPgid {
+        pid: u64,
+        pgid: u64,
+    },
+    /// `getpgid`, `getsid` (`session`).
+    GroupOf {
+        pid: u64,
+        session: bool,
+    },
+    SetSid,
+    /// `sysinfo`, writing its record at `record`.
+    Sysinfo {
+        record: u64,
+    },
 }
 
 /// Internal results that are no error number: the call would block, or wrote to a pipe
@@ -180,7 +226,8 @@ const BROKEN_PIPE: Errno = Errno(0xfff1);
 pub const O_CLOEXEC: u64 = 0o2000000;
 
 /// Serves one exception message of process `p`, whose files live in `fs` and whose pipes
-/// are in `pipes`; `others` are the other processes (`/proc`).
+/// are in `pipes`; `others` are the other processes (`/proc`). A system call goes to its
+/// handler in [`table`]; a number without one answers `ENOSYS`, logged once per number.
 pub fn handle(
     p: &mut Process,
     pipes: &mut Pipes,
@@ -196,53 +243,36 @@ pub fn handle(
     if m.vector != VECTOR_SYSCALL {
         return fault(p, host, m);
     }
-    let r = &mut m.registers;
-    let number = r.rax;
-    let args = [r.rdi, r.rsi, r.rdx, r.r10, r.r8, r.r9];
-    let result = match number {
-        nr::exit | nr::exit_group => {
-            let status = args[0] as u8;
-            host.log(format_args!(
-                "guest: process {} exited with status {status}",
-                p.pid
-            ));
-            return Outcome::Exit(status);
-        }
-        nr::clone
-        | nr::fork
-        | nr::vfork
-        | nr::execve
-        | nr::wait4
-        | nr::waitid
-        | nr::kill
-        | nr::tkill
-        | nr::tgkill
-        | nr::setpgid
-        | nr::getpgid
-        | nr::setsid
-        | nr::getsid
-        | nr::sysinfo => return Outcome::Process,
-        nr::rt_sigreturn => {
-            return match sigcalls::sigreturn(p, host, m) {
-                Some(()) => Outcome::Resume,
-                None => {
-                    host.log(format_args!(
-                        "guest: process {} ({}) killed by signal {SIGSEGV} (SIGSEGV): rt_sigreturn without a readable signal frame",
-                        p.pid,
-                        p.name()
-                    ));
-                    Outcome::Killed(SIGSEGV)
-                }
-            };
-        }
-        _ => match crate::info::call(p, host, number, args) {
-            Some(result) => result,
-            None => {
-                let mut files = Files { pipes, fs, others };
-                call(p, &mut files, host, number, args, r)
-            }
-        },
+    let number = m.registers.rax;
+    let args = Args::of(m);
+    let Some(entry) = table::lookup(number) else {
+        let e = unsupported(p, host, number);
+        return reply(p, m, Err(e));
     };
+    let mut ctx = Ctx::new(p, pipes, fs, others, host, m);
+    let result = (entry.handler)(&mut ctx, args);
+    if let Some(outcome) = ctx.outcome {
+        return outcome;
+    }
+    reply(p, m, result)
+}
+
+/// A call the guest does not serve: `ENOSYS`, logged the first time the process makes it.
+fn unsupported(p: &mut Process, host: &mut impl Host, number: u64) -> Errno {
+    if p.first_unsupported(number) {
+        host.log(format_args!(
+            "guest: process {} ({}): unsupported system call {number} ({}), returning ENOSYS",
+            p.pid,
+            p.name(),
+            linux::syscall_name(number).unwrap_or("unknown")
+        ));
+    }
+    Errno::ENOSYS
+}
+
+/// Puts the call's `result` in the registers of the reply, or blocks the call.
+fn reply(p: &mut Process, m: &mut ExceptionMessage, result: SysResult<u64>) -> Outcome {
+    let r = &mut m.registers;
     r.rax = match result {
         Ok(value) => value,
         Err(WOULD_BLOCK) => return Outcome::Block,
@@ -373,249 +403,20 @@ pub(crate) fn read_cstr<'b>(
     Err(Errno::ENAMETOOLONG)
 }
 
-#[allow(clippy::too_many_arguments)] // the call, its arguments and what it acts on
-fn call(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    number: u64,
-    a: [u64; 6],
-    regs: &mut Registers,
-) -> SysResult<u64> {
-    const AT_FDCWD: u64 = linux::AT_FDCWD as u64;
-    match number {
-        nr::read => file::read(p, f, host, a[0], a[1], a[2], None),
-        nr::write => file::write(p, f, host, a[0], a[1], a[2], None),
-        nr::pread64 => file::read(p, f, host, a[0], a[1], a[2], Some(offset(a[3])?)),
-        nr::pwrite64 => file::write(p, f, host, a[0], a[1], a[2], Some(offset(a[3])?)),
-        nr::sendfile => file::sendfile(p, f, host, a[0], a[1], a[2], a[3]),
-        nr::readv | nr::writev => {
-            file::vectored(p, f, host, number == nr::writev, a[0], a[1], a[2])
-        }
-        nr::open => file::openat(p, f, host, AT_FDCWD, a[0], a[1], a[2]),
-        nr::creat => {
-            let flags = linux::O_CREAT | linux::O_WRONLY | linux::O_TRUNC;
-            file::openat(p, f, host, AT_FDCWD, a[0], flags, a[1])
-        }
-        nr::openat => file::openat(p, f, host, a[0], a[1], a[2], a[3]),
-        nr::close => file::close_fd(p, f, a[0]),
-        nr::dup => file::dup(p, f, a[0]),
-        nr::dup2 => file::dup3(p, f, a[0], a[1], None),
-        nr::dup3 => file::dup3(p, f, a[0], a[1], Some(a[2])),
-        nr::pipe => file::pipe(p, f, host, a[0], 0),
-        nr::pipe2 => file::pipe(p, f, host, a[0], a[1]),
-        nr::lseek => file::lseek(p, f, a[0], a[1] as i64, a[2]),
-        nr::ftruncate => file::ftruncate(p, f, host, a[0], a[1]),
-        nr::truncate => file::truncate(p, f, host, a[0], a[1]),
-        nr::getdents64 => file::getdents64(p, f, host, a[0], a[1], a[2]),
-        nr::stat => file::stat(p, f, host, a[0], a[1], true),
-        nr::lstat => file::stat(p, f, host, a[0], a[1], false),
-        nr::fstat => file::fstat(p, f, host, a[0], a[1]),
-        nr::newfstatat => file::newfstatat(p, f, host, a[0], a[1], a[2], a[3]),
-        nr::statx => file::statx(p, f, host, a[0], a[1], a[2], a[4]),
-        nr::statfs => file::statfs(p, f, host, a[0], None, a[1]),
-        nr::fstatfs => file::statfs(p, f, host, 0, Some(a[0]), a[1]),
-        nr::access => file::access(p, f, host, AT_FDCWD, a[0], a[1]),
-        nr::faccessat | nr::faccessat2 => file::access(p, f, host, a[0], a[1], a[2]),
-        nr::readlink => file::readlinkat(p, f, host, AT_FDCWD, a[0], a[1], a[2]),
-        nr::readlinkat => file::readlinkat(p, f, host, a[0], a[1], a[2], a[3]),
-        nr::mkdir => file::mkdirat(p, f, host, AT_FDCWD, a[0], a[1]),
-        nr::mkdirat => file::mkdirat(p, f, host, a[0], a[1], a[2]),
-        nr::unlink => file::unlinkat(p, f, host, AT_FDCWD, a[0], 0),
-        nr::rmdir => file::unlinkat(p, f, host, AT_FDCWD, a[0], linux::AT_REMOVEDIR),
-        nr::unlinkat => file::unlinkat(p, f, host, a[0], a[1], a[2]),
-        nr::rename => file::renameat2(p, f, host, AT_FDCWD, a[0], AT_FDCWD, a[1], 0),
-        nr::renameat => file::renameat2(p, f, host, a[0], a[1], a[2], a[3], 0),
-        nr::renameat2 => file::renameat2(p, f, host, a[0], a[1], a[2], a[3], a[4]),
-        nr::symlink => file::symlinkat(p, f, host, a[0], AT_FDCWD, a[1]),
-        nr::symlinkat => file::symlinkat(p, f, host, a[0], a[1], a[2]),
-        nr::link => file::linkat(p, f, host, AT_FDCWD, a[0], AT_FDCWD, a[1], 0),
-        nr::linkat => file::linkat(p, f, host, a[0], a[1], a[2], a[3], a[4]),
-        nr::chdir => file::chdir(p, f, host, a[0]),
-        nr::fchdir => file::fchdir(p, f, a[0]),
-        nr::getcwd => file::getcwd(p, f, host, a[0], a[1]),
-        nr::chmod => file::chmod(p, f, host, Target::path(a[0], true), a[1]),
-        nr::fchmod => file::chmod(p, f, host, Target::Fd(a[0]), a[1]),
-        nr::fchmodat => file::chmod(p, f, host, Target::at(a[0], a[1], a[3]), a[2]),
-        nr::chown => file::chown(p, f, host, Target::path(a[0], true)),
-        nr::lchown => file::chown(p, f, host, Target::path(a[0], false)),
-        nr::fchown => file::chown(p, f, host, Target::Fd(a[0])),
-        nr::fchownat => file::chown(p, f, host, Target::at(a[0], a[1], a[4])),
-        nr::utimensat => file::utimensat(p, f, host, Target::at(a[0], a[1], a[3]), a[2]),
-        nr::utime | nr::utimes => file::chown(p, f, host, Target::path(a[0], true)),
-        nr::fsync | nr::fdatasync | nr::syncfs | nr::fadvise64 => file::nothing(p, a[0]),
-        nr::sync => Ok(0),
-        nr::fcntl => file::fcntl(p, f, a[0], a[1], a[2]),
-        nr::ioctl => match p.file(a[0]).ok_or(Errno::EBADF)? {
-            File::Console(_) => tty_ioctl(p, host, a[1], a[2]),
-            _ => file::port_ioctl(p, f, host, a[0], a[1], a[2]),
-        },
-        nr::brk => Ok(brk(p, host, a[0])),
-        nr::mmap => mmap(p, f.fs, host, a),
-        nr::munmap => munmap(p, host, a[0], a[1]),
-        nr::mprotect => mprotect(p, host, a[0], a[1], a[2]),
-        nr::madvise => madvise(p, host, a[0], a[1], a[2]),
-        nr::mremap => mremap(p, host, a[0], a[1], a[2], a[3]),
-        nr::arch_prctl => arch_prctl(p, host, regs, a[0], a[1]),
-        nr::set_tid_address => {
-            p.clear_child_tid = a[0];
-            Ok(p.pid as u64)
-        }
-        nr::set_robust_list => {
-            // Its one valid length: sizeof(struct robust_list_head).
-            if a[1] != 24 {
-                return Err(Errno::EINVAL);
-            }
-            p.robust_list = a[0];
-            Ok(0)
-        }
-        nr::rseq => Err(Errno::ENOSYS),
-        nr::rt_sigaction => sigcalls::sigaction(p, host, a[0], a[1], a[2], a[3]),
-        nr::rt_sigprocmask => sigcalls::sigprocmask(p, host, a[0], a[1], a[2], a[3]),
-        nr::rt_sigpending => sigcalls::sigpending(p, host, a[0], a[1]),
-        nr::sigaltstack => sigcalls::sigaltstack(p, host, regs.rsp, a[0], a[1]),
-        nr::rt_sigsuspend => sigcalls::sigsuspend(p, host, a[0], a[1]),
-        nr::pause => Err(WOULD_BLOCK),
-        nr::nanosleep => sigcalls::sleep(p, host, linux::CLOCK_MONOTONIC, 0, a[0]),
-        nr::clock_nanosleep => sigcalls::sleep(p, host, a[0], a[1], a[2]),
-        nr::alarm => Ok(sigcalls::alarm(p, host, a[0])),
-        nr::poll => {
-            let timeout = poll::poll_timeout(a[2]);
-            poll::poll(p, f, host, a[0], a[1], timeout, 0, 0)
-        }
-        nr::ppoll => {
-            let timeout = poll::ppoll_timeout(p, host, a[2])?;
-            poll::poll(p, f, host, a[0], a[1], timeout, a[3], a[4])
-        }
-        nr::select => poll::select(p, f, host, a, false),
-        nr::pselect6 => poll::select(p, f, host, a, true),
-        nr::getitimer => sigcalls::getitimer(p, host, a[0], a[1]),
-        nr::setitimer => sigcalls::setitimer(p, host, a[0], a[1], a[2]),
-        nr::prlimit64 => {
-            if a[0] != 0 && a[0] != p.pid as u64 {
-                return Err(Errno::ESRCH);
-            }
-            rlimit(p, host, a[1], a[2], a[3])
-        }
-        nr::getrlimit => rlimit(p, host, a[0], 0, a[1]),
-        nr::setrlimit => rlimit(p, host, a[0], a[1], 0),
-        nr::getrandom => {
-            if a[2] & !7 != 0 {
-                return Err(Errno::EINVAL);
-            }
-            let mut bytes = [0u8; 256];
-            let n = (a[1] as usize).min(bytes.len());
-            host.random(&mut bytes[..n]);
-            write_user(p, host, a[0], &bytes[..n])?;
-            Ok(n as u64)
-        }
-        nr::clock_gettime => {
-            // CLOCK_REALTIME .. CLOCK_BOOTTIME: the real-time ones the wall clock, the others
-            // the guest's clock.
-            if a[0] > 7 {
-                return Err(Errno::EINVAL);
-            }
-            let ns = if is_realtime(a[0]) {
-                host.wall_clock_ns()
-            } else {
-                host.now_ns()
-            };
-            let mut ts = [0u8; 16];
-            ts[..8].copy_from_slice(&(ns / 1_000_000_000).to_le_bytes());
-            ts[8..].copy_from_slice(&(ns % 1_000_000_000).to_le_bytes());
-            write_user(p, host, a[1], &ts)?;
-            Ok(0)
-        }
-        nr::clock_getres => {
-            if a[0] > 7 {
-                return Err(Errno::EINVAL);
-            }
-            // The guest's clock counts nanoseconds (the kernel's, from the TSC).
-            if a[1] != 0 {
-                let mut ts = [0u8; 16];
-                ts[8..].copy_from_slice(&1u64.to_le_bytes());
-                write_user(p, host, a[1], &ts)?;
-            }
-            Ok(0)
-        }
-        nr::gettimeofday => {
-            let ns = host.wall_clock_ns();
-            if a[0] != 0 {
-                let mut tv = [0u8; 16];
-                tv[..8].copy_from_slice(&(ns / 1_000_000_000).to_le_bytes());
-                tv[8..].copy_from_slice(&(ns % 1_000_000_000 / 1000).to_le_bytes());
-                write_user(p, host, a[0], &tv)?;
-            }
-            Ok(0)
-        }
-        nr::time => {
-            let seconds = host.wall_clock_ns() / 1_000_000_000;
-            if a[0] != 0 {
-                write_user(p, host, a[0], &seconds.to_le_bytes())?;
-            }
-            Ok(seconds)
-        }
-        nr::uname => {
-            let mut u = [0u8; 6 * 65];
-            for (i, field) in [
-                &b"Linux"[..],
-                b"warden",
-                b"6.1.0-warden",
-                b"#1 Warden paravirtualized guest",
-                b"x86_64",
-                b"(none)",
-            ]
-            .iter()
-            .enumerate()
-            {
-                u[i * 65..i * 65 + field.len()].copy_from_slice(field);
-            }
-            write_user(p, host, a[0], &u)?;
-            Ok(0)
-        }
-        nr::umask => {
-            let old = p.umask;
-            p.umask = a[0] as u32 & 0o777;
-            Ok(old as u64)
-        }
-        nr::prctl => prctl(p, host, a[0], a[1]),
-        nr::sched_yield => Ok(0),
-        nr::getpid | nr::gettid => Ok(p.pid as u64),
-        nr::getpgrp => Ok(p.pgid as u64),
-        nr::getppid => Ok(p.ppid as u64),
-        nr::getuid | nr::geteuid | nr::getgid | nr::getegid => Ok(0),
-        _ => {
-            if p.first_unsupported(number) {
-                host.log(format_args!(
-                    "guest: process {} ({}): unsupported system call {number} ({}), returning ENOSYS",
-                    p.pid,
-                    p.name(),
-                    linux::syscall_name(number).unwrap_or("unknown")
-                ));
-            }
-            Err(Errno::ENOSYS)
-        }
-    }
-}
-
 /// Whether clock id `clock` counts wall-clock time (`CLOCK_REALTIME`,
 /// `CLOCK_REALTIME_COARSE`).
 pub(crate) fn is_realtime(clock: u64) -> bool {
     matches!(clock, 0 | 5)
 }
 
-/// A file offset argument (`pread64`, `pwrite64`): negative ones are `EINVAL`.
-fn offset(value: u64) -> SysResult<u64> {
-    if (value as i64) < 0 {
-        Err(Errno::EINVAL)
-    } else {
-        Ok(value)
-    }
-}
-
 /// The terminal ioctls on a console descriptor ([`crate::tty`]): `ENOTTY` without a
 /// terminal or for any other request.
-fn tty_ioctl(p: &Process, host: &mut impl Host, request: u64, arg: u64) -> SysResult<u64> {
+pub(super) fn tty_ioctl(
+    p: &Process,
+    host: &mut impl Host,
+    request: u64,
+    arg: u64,
+) -> SysResult<u64> {
     use tty::ioctl::*;
     let tty = host.tty().ok_or(Errno::ENOTTY)?;
     match request {
@@ -669,116 +470,6 @@ fn tty_ioctl(p: &Process, host: &mut impl Host, request: u64, arg: u64) -> SysRe
         }
         TCXONC => {}
         _ => return Err(Errno::ENOTTY),
-    }
-    Ok(0)
-}
-
-fn arch_prctl(
-    p: &Process,
-    host: &mut impl Host,
-    regs: &mut Registers,
-    code: u64,
-    address: u64,
-) -> SysResult<u64> {
-    match code {
-        linux::ARCH_SET_FS | linux::ARCH_SET_GS => {
-            if address >= abi::syscall::USER_END {
-                return Err(Errno::EPERM);
-            }
-            // The reply that resumes the thread sets its FS/GS base.
-            if code == linux::ARCH_SET_FS {
-                regs.fs_base = address;
-            } else {
-                regs.gs_base = address;
-            }
-            Ok(0)
-        }
-        linux::ARCH_GET_FS | linux::ARCH_GET_GS => {
-            let base = if code == linux::ARCH_GET_FS {
-                regs.fs_base
-            } else {
-                regs.gs_base
-            };
-            write_user(p, host, address, &base.to_le_bytes())?;
-            Ok(0)
-        }
-        _ => Err(Errno::EINVAL),
-    }
-}
-
-fn prctl(p: &mut Process, host: &mut impl Host, option: u64, arg: u64) -> SysResult<u64> {
-    const PR_SET_NAME: u64 = 15;
-    const PR_GET_NAME: u64 = 16;
-    match option {
-        PR_SET_NAME => {
-            let mut buf = [0u8; 16];
-            let name = match read_cstr(p, host, arg, &mut buf) {
-                Ok(name) => name,
-                // Longer names are cut (Linux copies 16 bytes and ends them with a NUL).
-                Err(Errno::ENAMETOOLONG) => &buf[..crate::process::NAME_LEN],
-                Err(e) => return Err(e),
-            };
-            let name = core::str::from_utf8(name).unwrap_or("?");
-            p.set_name(name);
-            Ok(0)
-        }
-        PR_GET_NAME => {
-            let mut buf = [0u8; 16];
-            buf[..p.name().len()].copy_from_slice(p.name().as_bytes());
-            write_user(p, host, arg, &buf)?;
-            Ok(0)
-        }
-        _ => {
-            if p.first_unsupported(nr::prctl) {
-                host.log(format_args!(
-                    "guest: process {} ({}): unsupported prctl option {option}, returning EINVAL",
-                    p.pid,
-                    p.name()
-                ));
-            }
-            Err(Errno::EINVAL)
-        }
-    }
-}
-
-fn rlimit(
-    p: &mut Process,
-    host: &mut impl Host,
-    resource: u64,
-    new: u64,
-    old: u64,
-) -> SysResult<u64> {
-    let index = usize::try_from(resource)
-        .ok()
-        .filter(|&r| r < crate::process::LIMITS)
-        .ok_or(Errno::EINVAL)?;
-    let replacement = if new != 0 {
-        let mut b = [0u8; 16];
-        read_user(p, host, new, &mut b)?;
-        let soft = u64::from_le_bytes(b[..8].try_into().unwrap_or([0; 8]));
-        let hard = u64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
-        if soft > hard {
-            return Err(Errno::EINVAL);
-        }
-        // Root may raise a hard limit, but not beyond what the guest has (descriptors,
-        // the stack's fixed size).
-        let ceiling = crate::process::default_limits()[index].hard;
-        if hard > ceiling {
-            return Err(Errno::EPERM);
-        }
-        Some(crate::process::Limit { soft, hard })
-    } else {
-        None
-    };
-    if old != 0 {
-        let limit = p.limits[index];
-        let mut b = [0u8; 16];
-        b[..8].copy_from_slice(&limit.soft.to_le_bytes());
-        b[8..].copy_from_slice(&limit.hard.to_le_bytes());
-        write_user(p, host, old, &b)?;
-    }
-    if let Some(limit) = replacement {
-        p.limits[index] = limit;
     }
     Ok(0)
 }

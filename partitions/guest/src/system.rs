@@ -27,14 +27,14 @@
 //! beyond either, `fork` fails with `EAGAIN`.
 
 use crate::exec::{self, ARG_MAX, ExecError};
-use crate::linux::{Errno, nr};
+use crate::linux::Errno;
 use crate::memory::{Areas, PAGE};
 use crate::pipe::Pipes;
 use crate::process::Process;
 use crate::sigcalls;
 use crate::signal::{self, Action, Default, Info, SIGCHLD, SIGSEGV};
 use crate::stack::MAX_STRINGS;
-use crate::syscall::{self, Host, Outcome, SysResult, close_files, share_files};
+use crate::syscall::{self, Host, Outcome, ProcessCall, SysResult, close_files, share_files};
 use crate::vfs::Fs;
 use crate::vfs::proc::{ProcInfo, ProcessTable};
 use abi::ipc::{ExceptionMessage, Registers};
@@ -56,8 +56,8 @@ fn next_pid(pid: u32) -> u32 {
     }
 }
 
-const CLONE_VM: u64 = 0x100;
-const CLONE_VFORK: u64 = 0x4000;
+pub(crate) const CLONE_VM: u64 = 0x100;
+pub(crate) const CLONE_VFORK: u64 = 0x4000;
 const CLONE_PARENT_SETTID: u64 = 0x10_0000;
 const CLONE_CHILD_CLEARTID: u64 = 0x20_0000;
 const CLONE_CHILD_SETTID: u64 = 0x100_0000;
@@ -766,78 +766,69 @@ impl System {
                 let trap = (m.vector, m.error_code, m.fault_address);
                 self.resume(i, fs, k, m, Some(trap))
             }
-            Outcome::Process => {
-                let r = &mut m.registers;
-                let args = [r.rdi, r.rsi, r.rdx, r.r10, r.r8];
-                let (flags, vfork_flags) = (args[0], CLONE_VM | CLONE_VFORK | SIGCHLD as u64);
-                let vfork = r.rax == nr::vfork || (r.rax == nr::clone && flags & CLONE_VFORK != 0);
-                let result = match r.rax {
-                    nr::clone => self.fork(i, fs, k, flags, [args[1], args[2], args[3]], r),
-                    nr::fork => self.fork(i, fs, k, SIGCHLD as u64, [0; 3], r),
-                    nr::vfork => self.fork(i, fs, k, vfork_flags, [0; 3], r),
-                    nr::kill => self.kill(i, fs, k, args[0] as i32 as i64, args[1]),
-                    nr::tkill => match args[0] as i32 {
-                        t if t <= 0 => Err(Errno::EINVAL),
-                        t => self.kill(i, fs, k, t as i64, args[1]),
-                    },
-                    nr::tgkill => match (args[0] as i32, args[1] as i32) {
-                        (g, t) if g <= 0 || t <= 0 => Err(Errno::EINVAL),
-                        (g, t) if g != t => Err(Errno::ESRCH),
-                        (_, t) => self.kill(i, fs, k, t as i64, args[2]),
-                    },
-                    nr::setpgid => self.setpgid(i, args[0], args[1]),
-                    nr::getpgid => self.group_of(i, args[0], false),
-                    nr::getsid => self.group_of(i, args[0], true),
-                    nr::setsid => self.setsid(i),
-                    nr::sysinfo => {
-                        let (total, free) = k.memory();
-                        let count = self.pids().count() as u16;
-                        let record = crate::info::sysinfo_record(k.now_ns(), total, free, count);
-                        let p = &self.slots[i].as_ref()?.process;
-                        syscall::write_user(p, k, args[0], &record).map(|()| 0)
+            Outcome::Process(call) => {
+                let vfork =
+                    matches!(call, ProcessCall::Clone { flags, .. } if flags & CLONE_VFORK != 0);
+                let result = match call {
+                    ProcessCall::Clone { flags, args } => {
+                        self.fork(i, fs, k, flags, args, &m.registers)
                     }
-                    nr::wait4 | nr::waitid => {
-                        let waited = if r.rax == nr::wait4 {
-                            self.wait(i, k, Wait::wait4(args[0] as i32, args[2]), args[1], args[3])
-                        } else {
-                            Wait::waitid(args[0], args[1], args[3])
-                                .and_then(|w| self.wait(i, k, w, args[2], 0))
-                        };
+                    ProcessCall::Kill { target, signal } => self.kill(i, fs, k, target, signal),
+                    ProcessCall::SetPgid { pid, pgid } => self.setpgid(i, pid, pgid),
+                    ProcessCall::GroupOf { pid, session } => self.group_of(i, pid, session),
+                    ProcessCall::SetSid => self.setsid(i),
+                    ProcessCall::Sysinfo { record } => self.sysinfo(i, k, record),
+                    ProcessCall::Wait4 {
+                        pid,
+                        status,
+                        options,
+                        rusage,
+                    } => {
+                        let waited = self.wait(i, k, Wait::wait4(pid, options), status, rusage);
                         match waited {
-                            Ok(None) => {
-                                if let Some(slot) = self.slots[i].as_mut() {
-                                    slot.state = State::Blocked(kept);
-                                }
-                                return None;
-                            }
-                            // waitid returns 0 and reports the pid in the siginfo.
-                            result if r.rax == nr::waitid => result.map(|_| 0),
+                            Ok(None) => return self.block(i, kept),
                             result => result.map(|pid| pid.unwrap_or(0)),
                         }
                     }
-                    _ => match self.execve(i, fs, k, args[0], args[1], args[2]) {
-                        Ok(Some((entry, sp, new_thread))) => {
-                            m.registers = Registers {
-                                rip: entry,
-                                rsp: sp,
-                                rflags: m.registers.rflags,
-                                ..Registers::default()
-                            };
-                            let ended = if new_thread {
-                                // Its new thread reports first (a fault at address 0).
-                                if let Some(slot) = self.slots[i].as_mut() {
-                                    slot.state = State::Starting(m.registers);
-                                }
-                                None
-                            } else {
-                                self.resume(i, fs, k, m, None)
-                            };
-                            return ended.or_else(|| self.release_vfork_parent(pid, fs, k));
+                    ProcessCall::Waitid {
+                        idtype,
+                        id,
+                        info,
+                        options,
+                    } => {
+                        let waited = Wait::waitid(idtype, id, options)
+                            .and_then(|w| self.wait(i, k, w, info, 0));
+                        match waited {
+                            Ok(None) => return self.block(i, kept),
+                            // waitid returns 0 and reports the pid in the siginfo.
+                            result => result.map(|_| 0),
                         }
-                        // The old image is gone and the new one did not load.
-                        Ok(None) => return self.end(i, SIGSEGV, fs, k),
-                        Err(e) => Err(e),
-                    },
+                    }
+                    ProcessCall::Execve { path, argv, envp } => {
+                        match self.execve(i, fs, k, path, argv, envp) {
+                            Ok(Some((entry, sp, new_thread))) => {
+                                m.registers = Registers {
+                                    rip: entry,
+                                    rsp: sp,
+                                    rflags: m.registers.rflags,
+                                    ..Registers::default()
+                                };
+                                let ended = if new_thread {
+                                    // Its new thread reports first (a fault at address 0).
+                                    if let Some(slot) = self.slots[i].as_mut() {
+                                        slot.state = State::Starting(m.registers);
+                                    }
+                                    None
+                                } else {
+                                    self.resume(i, fs, k, m, None)
+                                };
+                                return ended.or_else(|| self.release_vfork_parent(pid, fs, k));
+                            }
+                            // The old image is gone and the new one did not load.
+                            Ok(None) => return self.end(i, SIGSEGV, fs, k),
+                            Err(e) => Err(e),
+                        }
+                    }
                 };
                 if let Some(ended) = self.ended.take() {
                     return Some(ended);
@@ -863,6 +854,23 @@ impl System {
                 }
             }
         }
+    }
+
+    /// The call of the process in slot `i` waits: message `m` is served again later.
+    fn block(&mut self, i: usize, m: ExceptionMessage) -> Option<Outcome> {
+        if let Some(slot) = self.slots[i].as_mut() {
+            slot.state = State::Blocked(m);
+        }
+        None
+    }
+
+    /// `sysinfo` of the process in slot `i`: its record at `record`.
+    fn sysinfo(&mut self, i: usize, k: &mut impl Tasks, record: u64) -> SysResult<u64> {
+        let (total, free) = k.memory();
+        let count = self.pids().count() as u16;
+        let bytes = crate::info::sysinfo_record(k.now_ns(), total, free, count);
+        let p = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
+        syscall::write_user(p, k, record, &bytes).map(|()| 0)
     }
 
     /// The parent that vforked `child` goes on (the child executed or ended).

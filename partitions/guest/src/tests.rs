@@ -1028,6 +1028,66 @@ fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
     out
 }
 
+/// Every number of the dispatch table reaches the handler of its line (the call it names,
+/// never the unsupported path); every other number answers `ENOSYS`, logged once.
+#[test]
+fn dispatch_table() {
+    use crate::syscall::table::{NUMBERS, lookup};
+    let bytes = initramfs();
+    let mut lines = std::collections::BTreeSet::new();
+    for &number in NUMBERS {
+        assert!(lines.insert(number), "call {number} has two lines");
+        let entry = lookup::<Model>(number).expect("a line of the table");
+        assert_eq!(Some(entry.name), crate::linux::syscall_name(number));
+        let mut w = World::new(&bytes);
+        let (outcome, m) = w.run(number, [0; 6]);
+        let logged_unsupported = w
+            .host
+            .log
+            .iter()
+            .any(|l| l.contains("unsupported system call"));
+        assert!(!logged_unsupported, "{} ({number})", entry.name);
+        let process_table = matches!(outcome, Outcome::Process(_));
+        let handler_is_process_tables = [
+            "exit", "clone", "fork", "vfork", "execve", "wait4", "waitid", "kill", "tkill",
+            "tgkill", "setpgid", "getpgid", "setsid", "getsid", "sysinfo",
+        ]
+        .contains(&entry.handler_name);
+        // The process table's calls reach it (kill and exit whatever their arguments;
+        // tkill and tgkill of pid 0 fail before).
+        if !matches!(entry.handler_name, "exit" | "tkill" | "tgkill") {
+            assert_eq!(process_table, handler_is_process_tables, "{}", entry.name);
+        }
+        // rseq is the one served call that answers ENOSYS (as on kernels without it).
+        if outcome == Outcome::Resume && m.registers.rax == Errno::ENOSYS.result() {
+            assert_eq!(entry.handler_name, "no_rseq", "{}", entry.name);
+        }
+    }
+    let mut w = World::new(&bytes);
+    let unknown: Vec<u64> = (0..=600)
+        .chain([1000, 5000, 1 << 32, u64::MAX])
+        .filter(|n| !NUMBERS.contains(n))
+        .collect();
+    for _ in 0..2 {
+        for &number in &unknown {
+            assert!(lookup::<Model>(number).is_none());
+            assert_eq!(w.call(number, [0; 6]), err(Errno::ENOSYS), "call {number}");
+        }
+    }
+    // Once per number; the numbers from 511 up share one record.
+    let below = unknown.iter().filter(|&&n| n < 511).count();
+    assert_eq!(w.host.log.len(), below + 1);
+    for (line, number) in w.host.log.iter().zip(&unknown) {
+        let name = crate::linux::syscall_name(*number).unwrap_or("unknown");
+        assert_eq!(
+            *line,
+            format!(
+                "guest: process 1 (busybox): unsupported system call {number} ({name}), returning ENOSYS"
+            )
+        );
+    }
+}
+
 #[test]
 fn unsupported_calls_and_faults() {
     let bytes = initramfs();

@@ -8,6 +8,7 @@
 //! root). The file system itself is [`crate::vfs`]; this module copies paths and data
 //! between it and the process and never keeps state of its own.
 
+use super::table::Ctx;
 use super::{
     BROKEN_PIPE, Host, IOV_MAX, MAX_TRANSFER, O_CLOEXEC, SysResult, WOULD_BLOCK, check_user,
     read_cstr, read_u64, write_user,
@@ -105,13 +106,15 @@ fn duplicate(p: &mut Process, f: &mut Files, file: File, fd: usize, cloexec: boo
     p.install(fd, file, cloexec);
 }
 
-pub fn close_fd(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
+pub fn close_fd(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
+    let (p, f, _) = c.parts();
     p.file(fd).ok_or(Errno::EBADF)?;
     close(p, f.pipes, f.fs, fd as usize);
     Ok(0)
 }
 
-pub fn dup(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
+pub fn dup(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
+    let (p, f, _) = c.parts();
     let file = p.file(fd).ok_or(Errno::EBADF)?;
     let new = p.free_fd().ok_or(Errno::EMFILE)?;
     duplicate(p, f, file, new, false);
@@ -120,12 +123,12 @@ pub fn dup(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
 
 /// `dup2` (`flags: None`) and `dup3`.
 pub fn dup3(
-    p: &mut Process,
-    f: &mut Files,
+    c: &mut Ctx<'_, '_, impl Host>,
     old: u64,
     new: u64,
     flags: Option<u64>,
 ) -> SysResult<u64> {
+    let (p, f, _) = c.parts();
     let bits = flags.unwrap_or(0);
     if bits & !O_CLOEXEC != 0 || (flags.is_some() && old == new) {
         return Err(Errno::EINVAL);
@@ -142,13 +145,8 @@ pub fn dup3(
     Ok(fd as u64)
 }
 
-pub fn pipe(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    fds: u64,
-    flags: u64,
-) -> SysResult<u64> {
+pub fn pipe(c: &mut Ctx<'_, '_, impl Host>, fds: u64, flags: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if flags & !(O_CLOEXEC | linux::O_NONBLOCK) != 0 {
         return Err(Errno::EINVAL);
     }
@@ -172,7 +170,8 @@ pub fn pipe(
     Ok(0)
 }
 
-pub fn fcntl(p: &mut Process, f: &mut Files, fd: u64, cmd: u64, arg: u64) -> SysResult<u64> {
+pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> SysResult<u64> {
+    let (p, f, _) = c.parts();
     const F_DUPFD: u64 = 0;
     const F_GETFD: u64 = 1;
     const F_SETFD: u64 = 2;
@@ -384,13 +383,14 @@ pub fn port_at<'f>(p: &Process, fs: &'f Fs, fd: u64) -> Option<(usize, &'f arinc
 
 /// `ioctl` on an ARINC port: [`arinc::IOCTL_VALIDITY`]; any other request is `ENOTTY`.
 pub fn port_ioctl(
-    p: &Process,
-    f: &Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     fd: u64,
     request: u64,
     arg: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
+    let p = &*p;
+    let f = &*f;
     let (index, port) = port_at(p, f.fs, fd).ok_or(Errno::ENOTTY)?;
     if request as u32 as u64 != arinc::IOCTL_VALIDITY {
         return Err(Errno::ENOTTY);
@@ -426,14 +426,13 @@ fn console_read(p: &mut Process, host: &mut impl Host, buf: u64, count: u64) -> 
 
 /// `read` (`at: None`) and `pread64`.
 pub fn read(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     fd: u64,
     buf: u64,
     count: u64,
     at: Option<u64>,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if at.is_none() && matches!(p.file(fd), Some(File::Console(_))) {
         return console_read(p, host, buf, count);
     }
@@ -466,14 +465,13 @@ pub fn read(
 
 /// `write` (`at: None`) and `pwrite64`.
 pub fn write(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     fd: u64,
     buf: u64,
     count: u64,
     at: Option<u64>,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if let Some((_, port)) = port_at(p, f.fs, fd)
         && arinc::too_long(port, count)
     {
@@ -543,9 +541,7 @@ fn pipe_write(
 }
 
 pub fn vectored(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     is_write: bool,
     fd: u64,
     iov: u64,
@@ -554,18 +550,18 @@ pub fn vectored(
     if count > IOV_MAX {
         return Err(Errno::EINVAL);
     }
-    p.file(fd).ok_or(Errno::EBADF)?;
+    c.p.file(fd).ok_or(Errno::EBADF)?;
     let mut total = 0u64;
     for i in 0..count {
-        let base = read_u64(p, host, iov + i * 16)?;
-        let len = read_u64(p, host, iov + i * 16 + 8)?;
+        let base = read_u64(c.p, c.host, iov + i * 16)?;
+        let len = read_u64(c.p, c.host, iov + i * 16 + 8)?;
         if len == 0 {
             continue;
         }
         let n = match if is_write {
-            write(p, f, host, fd, base, len, None)
+            write(c, fd, base, len, None)
         } else {
-            read(p, f, host, fd, base, len, None)
+            read(c, fd, base, len, None)
         } {
             Ok(n) => n,
             // What moved already counts; the rest waits for the next call.
@@ -583,14 +579,13 @@ pub fn vectored(
 /// `sendfile`: from a file (or device) at its offset or at `*offset_ptr`, to any
 /// writable descriptor, one step per call (callers loop).
 pub fn sendfile(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     out_fd: u64,
     in_fd: u64,
     offset_ptr: u64,
     count: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let writable = match p.file(out_fd).ok_or(Errno::EBADF)? {
         File::Console(_) | File::Pipe { write: true, .. } => true,
         File::Pipe { .. } => false,
@@ -631,7 +626,8 @@ pub fn sendfile(
     Ok(written as u64)
 }
 
-pub fn lseek(p: &mut Process, f: &mut Files, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
+pub fn lseek(c: &mut Ctx<'_, '_, impl Host>, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
+    let (p, f, _) = c.parts();
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::ESPIPE);
     };
@@ -666,13 +662,8 @@ pub fn lseek(p: &mut Process, f: &mut Files, fd: u64, offset: i64, whence: u64) 
 }
 
 /// `ftruncate`.
-pub fn ftruncate(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    fd: u64,
-    len: u64,
-) -> SysResult<u64> {
+pub fn ftruncate(c: &mut Ctx<'_, '_, impl Host>, fd: u64, len: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::EINVAL);
     };
@@ -690,13 +681,8 @@ pub fn ftruncate(
 }
 
 /// `truncate`.
-pub fn truncate(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    path: u64,
-    len: u64,
-) -> SysResult<u64> {
+pub fn truncate(c: &mut Ctx<'_, '_, impl Host>, path: u64, len: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?;
     if (len as i64) < 0 {
         return Err(Errno::EINVAL);
@@ -759,14 +745,13 @@ fn resolve_parent<'b>(
 
 /// `openat` (and `open`, `creat`).
 pub fn openat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     dirfd: u64,
     path: u64,
     flags: u64,
     mode: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     const KEPT: u64 = linux::O_ACCMODE | linux::O_APPEND | linux::O_NONBLOCK;
     let access = flags & linux::O_ACCMODE;
     if access == linux::O_ACCMODE {
@@ -839,14 +824,8 @@ pub fn openat(
     Ok(fd as u64)
 }
 
-pub fn mkdirat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    dirfd: u64,
-    path: u64,
-    mode: u64,
-) -> SysResult<u64> {
+pub fn mkdirat(c: &mut Ctx<'_, '_, impl Host>, dirfd: u64, path: u64, mode: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let mut buf = [0u8; PATH_MAX];
     let (dir, name) = match resolve_parent(p, f, host, dirfd, path, &mut buf) {
         Err(Errno::EINVAL | Errno::EBUSY) => return Err(Errno::EEXIST), // ".", "..", "/"
@@ -859,13 +838,12 @@ pub fn mkdirat(
 
 /// `unlinkat` (`AT_REMOVEDIR`: `rmdir`), `unlink`, `rmdir`.
 pub fn unlinkat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     dirfd: u64,
     path: u64,
     flags: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if flags & !linux::AT_REMOVEDIR != 0 {
         return Err(Errno::EINVAL);
     }
@@ -884,15 +862,14 @@ pub fn unlinkat(
 /// `renameat2` (`RENAME_NOREPLACE` only), `renameat`, `rename`.
 #[allow(clippy::too_many_arguments)] // the call's arguments
 pub fn renameat2(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     old_dirfd: u64,
     old: u64,
     new_dirfd: u64,
     new: u64,
     flags: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     const RENAME_NOREPLACE: u64 = 1;
     if flags & !RENAME_NOREPLACE != 0 {
         return Err(Errno::EINVAL);
@@ -914,13 +891,12 @@ pub fn renameat2(
 }
 
 pub fn symlinkat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     target: u64,
     dirfd: u64,
     path: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let mut target_buf = [0u8; PATH_MAX];
     let target = read_cstr(p, host, target, &mut target_buf)?;
     let mut buf = [0u8; PATH_MAX];
@@ -933,15 +909,14 @@ pub fn symlinkat(
 /// `linkat` (and `link`: links not followed).
 #[allow(clippy::too_many_arguments)] // the call's arguments
 pub fn linkat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     old_dirfd: u64,
     old: u64,
     new_dirfd: u64,
     new: u64,
     flags: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if flags & !linux::AT_SYMLINK_FOLLOW != 0 {
         return Err(Errno::EINVAL);
     }
@@ -956,14 +931,13 @@ pub fn linkat(
 
 #[allow(clippy::too_many_arguments)] // the system call's arguments
 pub fn readlinkat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     dirfd: u64,
     path: u64,
     buf: u64,
     size: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if size as i64 <= 0 {
         return Err(Errno::EINVAL);
     }
@@ -1019,56 +993,46 @@ fn stat_at(
     Ok(f.fs.stat(node))
 }
 
-/// `stat` and `lstat`.
-pub fn stat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    path: u64,
-    buf: u64,
-    follow: bool,
-) -> SysResult<u64> {
-    let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, follow)?;
-    let st = f.fs.stat(node);
+/// Writes `st` as a `struct stat` at `buf` (`stat`, `lstat`, `fstat`, `newfstatat`).
+fn write_stat(p: &Process, host: &mut impl Host, buf: u64, st: &Stat) -> SysResult<u64> {
     write_user(p, host, buf, &st.to_bytes())?;
     Ok(0)
 }
 
-pub fn fstat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    fd: u64,
-    buf: u64,
-) -> SysResult<u64> {
+/// `stat` and `lstat`.
+pub fn stat(c: &mut Ctx<'_, '_, impl Host>, path: u64, buf: u64, follow: bool) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
+    let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, follow)?;
+    let st = f.fs.stat(node);
+    write_stat(p, host, buf, &st)
+}
+
+pub fn fstat(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let st = stat_fd(p, f, fd)?;
-    write_user(p, host, buf, &st.to_bytes())?;
-    Ok(0)
+    write_stat(p, host, buf, &st)
 }
 
 pub fn newfstatat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     dirfd: u64,
     path: u64,
     buf: u64,
     flags: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let st = stat_at(p, f, host, dirfd, path, flags)?;
-    write_user(p, host, buf, &st.to_bytes())?;
-    Ok(0)
+    write_stat(p, host, buf, &st)
 }
 
 pub fn statx(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     dirfd: u64,
     path: u64,
     flags: u64,
     buf: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let st = stat_at(p, f, host, dirfd, path, flags)?;
     write_user(p, host, buf, &st.to_statx())?;
     Ok(0)
@@ -1076,13 +1040,12 @@ pub fn statx(
 
 /// `statfs` (`fd: None`) and `fstatfs`: one tmpfs, its blocks the byte limit.
 pub fn statfs(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     path: u64,
     fd: Option<u64>,
     buf: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     match fd {
         Some(fd) => {
             stat_fd(p, f, fd)?;
@@ -1118,14 +1081,8 @@ pub fn statfs(
 
 /// `faccessat` (and `access`, `faccessat2`): every process is root, so only existence
 /// and, for `X_OK`, an execute bit of a non-directory count.
-pub fn access(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    dirfd: u64,
-    path: u64,
-    mode: u64,
-) -> SysResult<u64> {
+pub fn access(c: &mut Ctx<'_, '_, impl Host>, dirfd: u64, path: u64, mode: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     const W_OK: u64 = 2;
     const X_OK: u64 = 1;
     if mode & !7 != 0 {
@@ -1143,14 +1100,8 @@ pub fn access(
 
 /// `getdents64`: the directory's entries from its position (`.`, `..`, then its entries
 /// in name order) as `struct linux_dirent64` records, as many as fit in `count` bytes.
-pub fn getdents64(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    fd: u64,
-    buf: u64,
-    count: u64,
-) -> SysResult<u64> {
+pub fn getdents64(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64, count: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     const HEADER: usize = 19; // d_ino, d_off, d_reclen, d_type
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::ENOTDIR);
@@ -1220,7 +1171,8 @@ pub fn getdents64(
 
 // ---- the working directory and attributes ----
 
-pub fn chdir(p: &mut Process, f: &mut Files, host: &mut impl Host, path: u64) -> SysResult<u64> {
+pub fn chdir(c: &mut Ctx<'_, '_, impl Host>, path: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let node = resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?;
     if !f.fs.is_dir(node) {
         return Err(Errno::ENOTDIR);
@@ -1229,7 +1181,8 @@ pub fn chdir(p: &mut Process, f: &mut Files, host: &mut impl Host, path: u64) ->
     Ok(0)
 }
 
-pub fn fchdir(p: &mut Process, f: &mut Files, fd: u64) -> SysResult<u64> {
+pub fn fchdir(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
+    let (p, f, _) = c.parts();
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::ENOTDIR);
     };
@@ -1247,13 +1200,8 @@ fn set_cwd(p: &mut Process, f: &mut Files, node: Node) {
     p.cwd = node;
 }
 
-pub fn getcwd(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    buf: u64,
-    size: u64,
-) -> SysResult<u64> {
+pub fn getcwd(c: &mut Ctx<'_, '_, impl Host>, buf: u64, size: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let path = f.fs.path_of(p.cwd)?;
     let text = path.as_str().as_bytes();
     let len = text.len() + 2; // the leading '/' and the NUL
@@ -1268,13 +1216,8 @@ pub fn getcwd(
 }
 
 /// `fchmodat` (and `chmod`), or `fchmod` (`fd`).
-pub fn chmod(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    target: Target,
-    mode: u64,
-) -> SysResult<u64> {
+pub fn chmod(c: &mut Ctx<'_, '_, impl Host>, target: Target, mode: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let node = target.node(p, f, host)?;
     f.fs.chmod(node, mode as u32)?;
     Ok(0)
@@ -1282,13 +1225,8 @@ pub fn chmod(
 
 /// `chown`, `utimensat` and their relatives: the node must exist; the owner stays root.
 /// `utimensat` sets the modification time (`times` null: now).
-pub fn utimensat(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    target: Target,
-    times: u64,
-) -> SysResult<u64> {
+pub fn utimensat(c: &mut Ctx<'_, '_, impl Host>, target: Target, times: u64) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     const UTIME_NOW: u64 = (1 << 30) - 1;
     const UTIME_OMIT: u64 = (1 << 30) - 2;
     let node = target.node(p, f, host)?;
@@ -1352,18 +1290,15 @@ impl Target {
 }
 
 /// `fchownat` and relatives: accepted for existing nodes (no owners but root).
-pub fn chown(
-    p: &mut Process,
-    f: &mut Files,
-    host: &mut impl Host,
-    target: Target,
-) -> SysResult<u64> {
+pub fn chown(c: &mut Ctx<'_, '_, impl Host>, target: Target) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     target.node(p, f, host)?;
     Ok(0)
 }
 
 /// `fsync`, `fdatasync`, `syncfs`, `fadvise64`: nothing to do for a valid descriptor.
-pub fn nothing(p: &mut Process, fd: u64) -> SysResult<u64> {
+pub fn nothing(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
+    let (p, _, _) = c.parts();
     p.file(fd).ok_or(Errno::EBADF)?;
     Ok(0)
 }

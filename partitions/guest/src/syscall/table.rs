@@ -1,0 +1,290 @@
+//! The guest's Linux system calls: one line per x86-64 number ([`crate::linux::nr`]) naming
+//! the handler that serves it ([`super::handlers`]). A number without a line answers
+//! `ENOSYS` ([`super::handle`]). Adding a call is one line here plus its handler, a
+//! `fn(&mut Ctx, Args) -> SysResult<u64>`.
+//!
+//! The table expands to a `match` on the number (a jump table, as cheap as the hand-written
+//! match it replaced) that yields the handler, and to [`NUMBERS`], the numbers it serves.
+
+use super::handlers::*;
+use super::{Host, SysResult};
+use crate::linux::nr;
+use crate::pipe::Pipes;
+use crate::process::Process;
+use crate::syscall::Outcome;
+use crate::syscall::file::Files;
+use abi::ipc::ExceptionMessage;
+
+/// What a handler works with: the calling process, its files (descriptors, pipes, the file
+/// system, the other processes for `/proc`), the guest's services and the exception
+/// message of the call (its registers, for the calls that read or set them).
+pub struct Ctx<'c, 'a, H> {
+    pub p: &'c mut Process,
+    pub f: Files<'c, 'a>,
+    pub host: &'c mut H,
+    pub m: &'c mut ExceptionMessage,
+    /// Set by the calls that do not simply return a value: the process ends, is given to
+    /// the process table, or resumes with registers the call restored.
+    pub outcome: Option<Outcome>,
+}
+
+impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
+    pub fn new(
+        p: &'c mut Process,
+        pipes: &'c mut Pipes,
+        fs: &'c mut crate::vfs::Fs<'a>,
+        others: &'c dyn crate::vfs::proc::ProcessTable,
+        host: &'c mut H,
+        m: &'c mut ExceptionMessage,
+    ) -> Ctx<'c, 'a, H> {
+        Ctx {
+            p,
+            f: Files { pipes, fs, others },
+            host,
+            m,
+            outcome: None,
+        }
+    }
+
+    /// The process, its files and the host at once, for a handler that works with all three.
+    pub fn parts(&mut self) -> (&mut Process, &mut Files<'c, 'a>, &mut H) {
+        (&mut *self.p, &mut self.f, &mut *self.host)
+    }
+
+    /// The call ends with `outcome` instead of a return value in `rax`.
+    pub fn finish(&mut self, outcome: Outcome) -> SysResult<u64> {
+        self.outcome = Some(outcome);
+        Ok(0)
+    }
+}
+
+/// The six argument registers of a call (`rdi`, `rsi`, `rdx`, `r10`, `r8`, `r9`), read as
+/// what the call means by them.
+#[derive(Clone, Copy, Debug)]
+pub struct Args(pub [u64; 6]);
+
+impl Args {
+    pub fn of(m: &ExceptionMessage) -> Self {
+        let r = &m.registers;
+        Args([r.rdi, r.rsi, r.rdx, r.r10, r.r8, r.r9])
+    }
+    /// Argument `i` as the register holds it.
+    pub fn raw(self, i: usize) -> u64 {
+        self.0[i]
+    }
+    /// A file descriptor.
+    pub fn fd(self, i: usize) -> u64 {
+        self.0[i]
+    }
+    /// An address in the process.
+    pub fn ptr(self, i: usize) -> u64 {
+        self.0[i]
+    }
+    /// A length or count.
+    pub fn usize(self, i: usize) -> u64 {
+        self.0[i]
+    }
+    /// A C `int` (the register's low half, sign and all).
+    pub fn i32(self, i: usize) -> i32 {
+        self.0[i] as i32
+    }
+    /// Flags, a mode or an option.
+    pub fn flags(self, i: usize) -> u64 {
+        self.0[i]
+    }
+    /// A file offset (`pread64`, `pwrite64`): negative ones are `EINVAL`.
+    pub fn offset(self, i: usize) -> SysResult<u64> {
+        if (self.0[i] as i64) < 0 {
+            Err(crate::linux::Errno::EINVAL)
+        } else {
+            Ok(self.0[i])
+        }
+    }
+}
+
+/// A handler of one or more system calls.
+pub type Handler<H> = fn(&mut Ctx<'_, '_, H>, Args) -> SysResult<u64>;
+
+/// The table's line for a number: the call's name and its handler's.
+pub struct Entry<H> {
+    pub name: &'static str,
+    pub handler_name: &'static str,
+    pub handler: Handler<H>,
+}
+
+macro_rules! table {
+    ($($name:ident => $handler:ident,)*) => {
+        /// The line of `number`, if the guest serves it.
+        #[inline]
+        pub fn lookup<H: Host>(number: u64) -> Option<Entry<H>> {
+            match number {
+                $(nr::$name => Some(Entry {
+                    name: stringify!($name),
+                    handler_name: stringify!($handler),
+                    handler: $handler::<H>,
+                }),)*
+                _ => None,
+            }
+        }
+
+        /// Every number the table serves.
+        #[cfg_attr(not(test), allow(dead_code))]
+        pub const NUMBERS: &[u64] = &[$(nr::$name),*];
+    };
+}
+
+table! {
+    // Files: descriptors, reading and writing ([`super::file`]).
+    read => read,
+    write => write,
+    pread64 => pread64,
+    pwrite64 => pwrite64,
+    readv => readv,
+    writev => writev,
+    sendfile => sendfile,
+    open => open,
+    creat => creat,
+    openat => openat,
+    close => close,
+    dup => dup,
+    dup2 => dup2,
+    dup3 => dup3,
+    pipe => pipe,
+    pipe2 => pipe2,
+    lseek => lseek,
+    ftruncate => ftruncate,
+    truncate => truncate,
+    getdents64 => getdents64,
+    fcntl => fcntl,
+    ioctl => ioctl,
+    fsync => sync_fd,
+    fdatasync => sync_fd,
+    syncfs => sync_fd,
+    fadvise64 => sync_fd,
+    sync => nothing,
+    // Names and status.
+    stat => stat,
+    lstat => lstat,
+    fstat => fstat,
+    newfstatat => newfstatat,
+    statx => statx,
+    statfs => statfs,
+    fstatfs => fstatfs,
+    access => access,
+    faccessat => faccessat,
+    faccessat2 => faccessat,
+    readlink => readlink,
+    readlinkat => readlinkat,
+    mkdir => mkdir,
+    mkdirat => mkdirat,
+    unlink => unlink,
+    rmdir => rmdir,
+    unlinkat => unlinkat,
+    rename => rename,
+    renameat => renameat,
+    renameat2 => renameat2,
+    symlink => symlink,
+    symlinkat => symlinkat,
+    link => link,
+    linkat => linkat,
+    chdir => chdir,
+    fchdir => fchdir,
+    getcwd => getcwd,
+    chmod => chmod,
+    fchmod => fchmod,
+    fchmodat => fchmodat,
+    chown => chown,
+    lchown => lchown,
+    fchown => fchown,
+    fchownat => fchownat,
+    utimensat => utimensat,
+    utime => utimes,
+    utimes => utimes,
+    umask => umask,
+    // Memory ([`super::memory`]).
+    brk => brk,
+    mmap => mmap,
+    munmap => munmap,
+    mprotect => mprotect,
+    madvise => madvise,
+    mremap => mremap,
+    // The thread.
+    arch_prctl => arch_prctl,
+    set_tid_address => set_tid_address,
+    set_robust_list => set_robust_list,
+    rseq => no_rseq,
+    prctl => prctl,
+    futex => futex,
+    // Signals and timers ([`crate::sigcalls`]).
+    rt_sigaction => rt_sigaction,
+    rt_sigprocmask => rt_sigprocmask,
+    rt_sigpending => rt_sigpending,
+    rt_sigreturn => rt_sigreturn,
+    sigaltstack => sigaltstack,
+    rt_sigsuspend => rt_sigsuspend,
+    pause => pause,
+    nanosleep => nanosleep,
+    clock_nanosleep => clock_nanosleep,
+    alarm => alarm,
+    getitimer => getitimer,
+    setitimer => setitimer,
+    // Waiting for descriptors ([`crate::poll`]).
+    poll => poll,
+    ppoll => ppoll,
+    select => select,
+    pselect6 => pselect6,
+    // Time, randomness, the system.
+    clock_gettime => clock_gettime,
+    clock_getres => clock_getres,
+    gettimeofday => gettimeofday,
+    time => time,
+    getrandom => getrandom,
+    uname => uname,
+    sched_yield => nothing,
+    // Limits and resources ([`crate::info`]).
+    prlimit64 => prlimit64,
+    getrlimit => getrlimit,
+    setrlimit => setrlimit,
+    getrusage => getrusage,
+    times => times,
+    sched_getaffinity => sched_getaffinity,
+    sched_setaffinity => sched_setaffinity,
+    getpriority => getpriority,
+    setpriority => setpriority,
+    // Identity: one user (root).
+    getpid => getpid,
+    gettid => getpid,
+    getppid => getppid,
+    getpgrp => getpgrp,
+    getuid => root_id,
+    geteuid => root_id,
+    getgid => root_id,
+    getegid => root_id,
+    setuid => setuid,
+    setgid => setuid,
+    setreuid => setreuid,
+    setregid => setreuid,
+    setresuid => setresuid,
+    setresgid => setresuid,
+    getresuid => getresuid,
+    getresgid => getresuid,
+    getgroups => getgroups,
+    setgroups => setgroups,
+    // The process table's ([`crate::system`]).
+    exit => exit,
+    exit_group => exit,
+    clone => clone,
+    fork => fork,
+    vfork => vfork,
+    execve => execve,
+    wait4 => wait4,
+    waitid => waitid,
+    kill => kill,
+    tkill => tkill,
+    tgkill => tgkill,
+    setpgid => setpgid,
+    getpgid => getpgid,
+    setsid => setsid,
+    getsid => getsid,
+    sysinfo => sysinfo,
+}
