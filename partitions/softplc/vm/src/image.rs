@@ -845,9 +845,13 @@ impl<'a> Image<'a> {
 
     /// Looks a variable up by exact name (linear scan; monitors are not hot paths).
     pub fn find_var(&self, name: &str) -> Option<Var<'a>> {
-        (0..self.var_count())
-            .filter_map(|i| self.var(i))
-            .find(|v| v.name == name)
+        self.find_var_index(name).and_then(|i| self.var(i))
+    }
+
+    /// The index in the variable map of the variable named exactly `name` (for callers that
+    /// look a name up once and then reach it by [`Image::var`]).
+    pub fn find_var_index(&self, name: &str) -> Option<usize> {
+        (0..self.var_count()).find(|&i| self.var(i).is_some_and(|v| v.name == name))
     }
 
     /// The first variable of the map whose first byte is at data address `address` (what a

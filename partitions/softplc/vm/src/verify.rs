@@ -376,6 +376,50 @@ pub fn verify<'a>(image: &Image<'a>) -> Result<VerifiedImage<'a>, VerifyError> {
     verify_with_scratch(image, &mut scratch)
 }
 
+/// An owned image verified once and run many times (an IEC 61499 type's algorithms, called
+/// at every event): the bytes never change after [`VerifiedBytes::new`] verified them, so
+/// [`VerifiedBytes::image`] only parses the section table again and never re-verifies.
+#[cfg(any(feature = "alloc", test))]
+#[derive(Clone, Debug)]
+pub struct VerifiedBytes {
+    bytes: alloc::boxed::Box<[u8]>,
+}
+
+/// Why [`VerifiedBytes::new`] refused an image.
+#[cfg(any(feature = "alloc", test))]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum OwnedImageError {
+    /// The image does not parse.
+    Image(crate::image::ImageError),
+    /// The image parses but does not verify.
+    Verify(VerifyError),
+}
+
+#[cfg(any(feature = "alloc", test))]
+impl VerifiedBytes {
+    /// Parses and verifies `bytes`, keeping them.
+    pub fn new(bytes: alloc::vec::Vec<u8>) -> Result<Self, OwnedImageError> {
+        let image = Image::parse(&bytes).map_err(OwnedImageError::Image)?;
+        verify(&image).map_err(OwnedImageError::Verify)?;
+        Ok(VerifiedBytes {
+            bytes: bytes.into_boxed_slice(),
+        })
+    }
+
+    /// The image's bytes.
+    pub fn bytes(&self) -> &[u8] {
+        &self.bytes
+    }
+
+    /// The verified image (the section table parsed again; the code is not re-verified).
+    pub fn image(&self) -> VerifiedImage<'_> {
+        match Image::parse(&self.bytes) {
+            Ok(image) => VerifiedImage { image },
+            Err(e) => unreachable!("immutable bytes parsed when they were verified: {e:?}"),
+        }
+    }
+}
+
 // Scratch encoding per code byte: bit 31 = instruction start; bit 30 = state known;
 // bits 0..16 = stack depth; bits 16..24 = try nesting.
 const INSN_START: u32 = 1 << 31;

@@ -1305,12 +1305,22 @@ impl<'a, 'm> Machine<'a, 'm> {
     /// capacity, references never ([`VarError::ReadOnly`]).
     pub fn write_var(&mut self, name: &str, value: Value<'_>) -> Result<(), VarError> {
         let var = self.image.find_var(name).ok_or(VarError::UnknownName)?;
+        self.write_entry(&var, value)
+    }
+
+    /// Writes a variable-map entry of this machine's image, as [`Machine::write_var`] does.
+    pub fn write_entry(&mut self, var: &Var<'_>, value: Value<'_>) -> Result<(), VarError> {
         if var.flags & VAR_FLAG_CONSTANT != 0 {
             return Err(VarError::Constant);
         }
-        let ty = VarType::from_code(var.ty).expect("verified");
+        // An entry of another image is refused rather than trusted.
+        let ty = VarType::from_code(var.ty).ok_or(VarError::UnknownName)?;
         let at = var.addr as usize;
-        value.store(ty, &mut self.data[at..at + var.size as usize])
+        let cell = self
+            .data
+            .get_mut(at..at + var.size as usize)
+            .ok_or(VarError::UnknownName)?;
+        value.store(ty, cell)
     }
 
     /// Forces a scalar variable: writes it now and re-writes it at the start and at the end

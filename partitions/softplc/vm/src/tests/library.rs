@@ -572,6 +572,26 @@ fn monitor_reads_and_forces_variables_by_name() {
     );
     assert_eq!(vm.write_var("K", Value::Int(1)), Err(VarError::Constant));
     assert_eq!(vm.read_var("nope"), Err(VarError::UnknownName));
+    // By map entry, looked up once: the same rules as by name; an entry outside this
+    // machine's data (another image's) is refused, not trusted.
+    let b_entry = image.var(image.find_var_index("Main.b").unwrap()).unwrap();
+    vm.write_entry(&b_entry, Value::Bool(false)).unwrap();
+    assert_eq!(vm.read_entry(&b_entry), Value::Bool(false));
+    let foreign = crate::image::Var {
+        addr: 4096,
+        ..b_entry
+    };
+    assert_eq!(
+        vm.write_entry(&foreign, Value::Bool(true)),
+        Err(VarError::UnknownName)
+    );
+    // Verified once, kept: the owned image runs without verifying again; a corrupt one is
+    // refused when kept.
+    let kept = crate::verify::VerifiedBytes::new(bytes.clone()).unwrap();
+    assert!(kept.image().image().same_program(&image));
+    let mut corrupt = bytes.clone();
+    corrupt.truncate(8);
+    assert!(crate::verify::VerifiedBytes::new(corrupt).is_err());
     // Cold restart restores initial values.
     vm.reset();
     assert_eq!(vm.read_var("Main.i"), Ok(Value::Int(-5)));
