@@ -43,6 +43,7 @@ fn deploy_reason(e: &DeployError) -> Reason {
         DeployError::Mismatch(_) => Reason::InvalidOperation,
         DeployError::Limit(_) => Reason::Overflow,
         DeployError::Connected(_) => Reason::InvalidOperation,
+        DeployError::Faulted(_) => Reason::InvalidState,
     }
 }
 

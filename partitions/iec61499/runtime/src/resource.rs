@@ -75,6 +75,8 @@ pub enum DeployError {
     Limit(&'static str),
     /// An input with a data connection takes no parameter.
     Connected(String),
+    /// The resource stopped on a fault and takes no events until it is restarted.
+    Faulted(Fault),
 }
 
 impl core::fmt::Display for DeployError {
@@ -85,6 +87,7 @@ impl core::fmt::Display for DeployError {
             DeployError::Mismatch(m) => write!(f, "cannot connect: {m}"),
             DeployError::Limit(what) => write!(f, "too many {what}"),
             DeployError::Connected(p) => write!(f, "{p} has a data connection"),
+            DeployError::Faulted(fault) => write!(f, "the resource stopped on a fault: {fault}"),
         }
     }
 }
@@ -580,9 +583,14 @@ impl Resource {
         result
     }
 
-    /// An external event: input event `to` (`FB.EI`) at instant `now`, and its chain.
+    /// An external event: input event `to` (`FB.EI`) at instant `now`, and its chain. A
+    /// resource that has stopped on a fault refuses it; a fault of this event's own chain
+    /// stops the resource (see [`Resource::fault`]) but the event was taken.
     pub fn trigger(&mut self, to: &str, now: i64) -> Result<(), DeployError> {
         let destination = self.port(to, |i, p| i.event_input(p))?;
+        if let Some(fault) = &self.fault {
+            return Err(DeployError::Faulted(fault.clone()));
+        }
         let _ = self.chain(now, |r| {
             r.enqueue(destination, None)
                 .map_err(|()| Fault::QueueOverflow {

@@ -10,10 +10,12 @@ use crate::fb::VarSpec;
 use crate::value::{DataType, Value};
 use alloc::format;
 use alloc::string::{String, ToString};
+use alloc::sync::Arc;
 use alloc::vec;
 use alloc::vec::Vec;
 use plc_vm::image::Image;
 use plc_vm::monitor::Value as VmValue;
+use plc_vm::verify::VerifiedBytes;
 use plc_vm::vm::{CallFrame, Machine, Memory, TryFrame};
 
 /// `__SEL` of guard `k` is `GUARD_BASE + k`.
@@ -23,17 +25,34 @@ pub const INSTANCE: &str = "FB";
 /// The instruction budget of one algorithm or guard (the watchdog of a runaway loop).
 pub const BUDGET: u32 = 1_000_000;
 
-/// The compiled code of a basic FB type, shared by its instances.
+/// The compiled code of a basic FB type: verified once, shared by the type's instances
+/// (cloning shares it), each instance with its own data memory.
 #[derive(Clone, Debug)]
 pub struct VmCode {
-    image: Vec<u8>,
-    /// Inputs, outputs and internals, in the order of [`Vars`]' three slices.
-    inputs: Vec<VarSpec>,
-    outputs: Vec<VarSpec>,
-    internals: Vec<VarSpec>,
+    code: Arc<Code>,
+    data: Vec<u8>,
+}
+
+/// What every instance of a type shares: the verified image and where each FB variable
+/// lies in it, looked up once.
+#[derive(Debug)]
+struct Code {
+    image: VerifiedBytes,
+    inputs: Vec<Slot>,
+    outputs: Vec<Slot>,
+    internals: Vec<Slot>,
+    selector: usize,
+    guard: usize,
     algorithms: usize,
     guards: usize,
-    data: Vec<u8>,
+}
+
+/// An FB variable and the indexes of its entries in the image's variable map (one for a
+/// scalar, one per element for an array).
+#[derive(Debug)]
+struct Slot {
+    spec: VarSpec,
+    entries: Vec<usize>,
 }
 
 impl VmCode {
@@ -47,46 +66,62 @@ impl VmCode {
         algorithms: usize,
         guards: usize,
     ) -> Result<Self, String> {
-        let parsed = Image::parse(&image).map_err(|e| format!("bytecode image: {e:?}"))?;
-        plc_vm::verify::verify(&parsed).map_err(|e| format!("bytecode does not verify: {e:?}"))?;
+        let image = VerifiedBytes::new(image).map_err(|e| match e {
+            plc_vm::verify::OwnedImageError::Image(e) => format!("bytecode image: {e:?}"),
+            plc_vm::verify::OwnedImageError::Verify(e) => format!("bytecode does not verify: {e}"),
+        })?;
+        let parsed = *image.image().image();
         if parsed.task(0).is_none() {
             return Err("bytecode image has no task".into());
         }
-        for var in inputs.iter().chain(&outputs).chain(&internals) {
-            if var.array.is_none()
-                && parsed
-                    .find_var(&format!("{INSTANCE}.{}", var.name))
-                    .is_none()
-            {
-                return Err(format!("bytecode image lacks variable {}", var.name));
-            }
-        }
-        for name in ["__SEL", "__GUARD"] {
-            if parsed.find_var(&format!("{INSTANCE}.{name}")).is_none() {
-                return Err(format!("bytecode image lacks {name}"));
-            }
-        }
+        let entry = |name: &str| {
+            parsed
+                .find_var_index(&format!("{INSTANCE}.{name}"))
+                .ok_or_else(|| format!("bytecode image lacks variable {name}"))
+        };
+        let slots = |specs: Vec<VarSpec>| -> Result<Vec<Slot>, String> {
+            specs
+                .into_iter()
+                .map(|spec| {
+                    let entries = match spec.array {
+                        None => vec![entry(&spec.name)?],
+                        Some(n) => (0..n)
+                            .map(|i| entry(&format!("{}[{i}]", spec.name)))
+                            .collect::<Result<_, _>>()?,
+                    };
+                    Ok(Slot { spec, entries })
+                })
+                .collect()
+        };
+        let (inputs, outputs, internals) = (slots(inputs)?, slots(outputs)?, slots(internals)?);
+        let (selector, guard) = (entry("__SEL")?, entry("__GUARD")?);
         let data = vec![0; parsed.data_size() as usize];
-        Ok(VmCode {
+        let code = Code {
             image,
             inputs,
             outputs,
             internals,
+            selector,
+            guard,
             algorithms,
             guards,
+        };
+        Ok(VmCode {
+            code: Arc::new(code),
             data,
         })
     }
 
     /// The bytecode image.
     pub fn image(&self) -> &[u8] {
-        &self.image
+        self.code.image.bytes()
     }
 
     /// Runs the code selected by `selector` on `vars`; returns `__GUARD`.
     fn call(&mut self, selector: i64, vars: &mut Vars<'_>) -> Result<bool, String> {
-        let parsed = Image::parse(&self.image).map_err(|e| format!("{e:?}"))?;
-        let verified = plc_vm::verify::verify(&parsed).map_err(|e| format!("{e:?}"))?;
+        let code = &*self.code;
+        let verified = code.image.image();
+        let image = *verified.image();
         let mut stack = [0u64; 256];
         let mut calls = [CallFrame::EMPTY; 32];
         let mut tries = [TryFrame::EMPTY; 8];
@@ -98,46 +133,40 @@ impl VmCode {
         };
         let mut machine = Machine::new(verified, memory).map_err(|e| format!("{e:?}"))?;
         machine.set_watchdog_budget(0, Some(BUDGET));
-        let sections: [(&[VarSpec], &[Value]); 3] = [
-            (&self.inputs, vars.inputs),
-            (&self.outputs, &*vars.outputs),
-            (&self.internals, &*vars.internals),
+        let sections: [(&[Slot], &[Value]); 3] = [
+            (&code.inputs, vars.inputs),
+            (&code.outputs, &*vars.outputs),
+            (&code.internals, &*vars.internals),
         ];
-        for (specs, values) in sections {
-            for (spec, value) in specs.iter().zip(values) {
-                store(&mut machine, spec, value)?;
+        for (slots, values) in sections {
+            for (slot, value) in slots.iter().zip(values) {
+                store(&mut machine, &image, slot, value)?;
             }
         }
-        machine
-            .write_var(&format!("{INSTANCE}.__SEL"), VmValue::Int(selector))
-            .map_err(|e| format!("__SEL: {e:?}"))?;
+        write(
+            &mut machine,
+            &image,
+            code.selector,
+            VmValue::Int(selector),
+            "__SEL",
+        )?;
         if let Err(fault) = machine.run_cycle(0, 0) {
             return Err(fault.trap.name().to_string());
         }
-        for (specs, values) in [
-            (&self.outputs, &mut *vars.outputs),
-            (&self.internals, &mut *vars.internals),
+        for (slots, values) in [
+            (&code.outputs, &mut *vars.outputs),
+            (&code.internals, &mut *vars.internals),
         ] {
-            for (spec, value) in specs.iter().zip(values.iter_mut()) {
-                if let Some(v) = load(&machine, spec)? {
+            for (slot, value) in slots.iter().zip(values.iter_mut()) {
+                if let Some(v) = load(&machine, &image, slot) {
                     *value = v;
                 }
             }
         }
-        match machine.read_var(&format!("{INSTANCE}.__GUARD")) {
-            Ok(VmValue::Bool(b)) => Ok(b),
+        match image.var(code.guard).map(|var| machine.read_entry(&var)) {
+            Some(VmValue::Bool(b)) => Ok(b),
             _ => Err("__GUARD is not a BOOL".into()),
         }
-    }
-}
-
-/// A scalar's name in the image; array elements as `NAME[i]`.
-fn names(spec: &VarSpec) -> Vec<String> {
-    match spec.array {
-        None => vec![format!("{INSTANCE}.{}", spec.name)],
-        Some(n) => (0..n)
-            .map(|i| format!("{INSTANCE}.{}[{i}]", spec.name))
-            .collect(),
     }
 }
 
@@ -167,36 +196,50 @@ fn from_vm(value: VmValue<'_>) -> Option<Value> {
     })
 }
 
-fn store(machine: &mut Machine<'_, '_>, spec: &VarSpec, value: &Value) -> Result<(), String> {
+fn write(
+    machine: &mut Machine<'_, '_>,
+    image: &Image<'_>,
+    entry: usize,
+    value: VmValue<'_>,
+    what: &str,
+) -> Result<(), String> {
+    let var = image
+        .var(entry)
+        .ok_or_else(|| format!("{what}: no variable-map entry {entry}"))?;
+    machine
+        .write_entry(&var, value)
+        .map_err(|e| format!("{}: {e:?}", var.name))
+}
+
+fn store(
+    machine: &mut Machine<'_, '_>,
+    image: &Image<'_>,
+    slot: &Slot,
+    value: &Value,
+) -> Result<(), String> {
     let elements: Vec<&Value> = match value {
         Value::Array(items) => items.iter().collect(),
         single => vec![single],
     };
-    for (name, element) in names(spec).iter().zip(elements) {
-        let v = to_vm(spec.ty, element)
-            .ok_or_else(|| format!("{name}: nested arrays are not supported"))?;
-        machine
-            .write_var(name, v)
-            .map_err(|e| format!("{name}: {e:?}"))?;
+    for (&entry, element) in slot.entries.iter().zip(elements) {
+        let v = to_vm(slot.spec.ty, element)
+            .ok_or_else(|| format!("{}: nested arrays are not supported", slot.spec.name))?;
+        write(machine, image, entry, v, &slot.spec.name)?;
     }
     Ok(())
 }
 
-fn load(machine: &Machine<'_, '_>, spec: &VarSpec) -> Result<Option<Value>, String> {
-    let mut values = Vec::new();
-    for name in names(spec) {
-        let v = machine
-            .read_var(&name)
-            .map_err(|e| format!("{name}: {e:?}"))?;
-        match from_vm(v) {
-            Some(v) => values.push(v),
-            None => return Ok(None),
-        }
+/// The value of `slot` after a call, or `None` if one of its entries has a type the FB
+/// values do not represent (left as it was).
+fn load(machine: &Machine<'_, '_>, image: &Image<'_>, slot: &Slot) -> Option<Value> {
+    let mut values = Vec::with_capacity(slot.entries.len());
+    for &entry in &slot.entries {
+        values.push(from_vm(machine.read_entry(&image.var(entry)?))?);
     }
-    Ok(Some(match spec.array {
-        None => values.pop().unwrap_or(Value::Bool(false)),
+    Some(match slot.spec.array {
+        None => values.pop()?,
         Some(_) => Value::Array(values),
-    }))
+    })
 }
 
 impl Algorithms for VmCode {
@@ -209,6 +252,6 @@ impl Algorithms for VmCode {
     }
 
     fn counts(&self) -> (usize, usize) {
-        (self.algorithms, self.guards)
+        (self.code.algorithms, self.code.guards)
     }
 }

@@ -199,6 +199,22 @@ fn refusals_have_their_reasons_and_change_nothing() {
 }
 
 #[test]
+fn a_resource_stopped_by_a_fault_refuses_events_until_reset() {
+    let mut d = device();
+    assert_eq!(send(&mut d, "", "CREATE", &fb("R", "EMB_RES")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &fb("M", "E_MERGE")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("M.EO", "M.EI1")), "");
+    assert_eq!(send(&mut d, "R", "START", ""), "");
+    // The event is taken; its chain loops until the chain limit stops the resource.
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("$e", "M.EI2")), "");
+    assert_eq!(
+        send(&mut d, "R", "WRITE", &conn("$e", "M.EI2")),
+        "INVALID_STATE",
+        "stopped by the fault"
+    );
+}
+
+#[test]
 fn literals() {
     let spec = |ty, array| VarSpec {
         name: "X".into(),

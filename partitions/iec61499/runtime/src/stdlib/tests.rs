@@ -423,7 +423,14 @@ fn a_full_queue_and_an_event_loop_are_faults() {
         })
     );
     assert!(log.borrow().is_empty(), "the chain was abandoned");
-    r.trigger("S.EI", 0).unwrap();
+    assert_eq!(
+        r.trigger("S.EI", 0),
+        Err(DeployError::Faulted(Fault::QueueOverflow {
+            fb: "S".into(),
+            event: "EO1".into()
+        })),
+        "a faulted resource refuses events"
+    );
     assert!(log.borrow().is_empty(), "a faulted resource runs nothing");
     r.reset();
     assert_eq!(r.fault(), None);
@@ -543,7 +550,11 @@ proptest! {
             let (name, fb) = &names[f % n];
             now += dt;
             if let Some(e) = fb.interface().event_inputs.get(ei) {
-                r.trigger(&format!("{name}.{}", e.name), now).unwrap();
+                match r.trigger(&format!("{name}.{}", e.name), now) {
+                    Ok(()) => {}
+                    Err(DeployError::Faulted(_)) => prop_assert!(r.fault().is_some()),
+                    Err(other) => prop_assert!(false, "{other}"),
+                }
             }
             let _ = r.advance(now);
         }
