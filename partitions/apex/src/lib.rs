@@ -24,7 +24,8 @@
 //! own task (fixed table, static stacks and IPC buffers). Partition modes, ports and error
 //! reports go to syssw through the request protocol of `user_rt::service`; time comes from
 //! the kernel clock; deadlines are watched by one thread at the task's MCP. A bounded heap
-//! ([`runtime::HEAP_SIZE`] bytes) serves `alloc`.
+//! (a static arena of the program, [`runtime::HEAP_SIZE`] bytes unless [`partition_entry!`]
+//! names another size) serves `alloc`.
 //!
 //! What it must never do: fake success (a service it cannot provide answers with the ARINC
 //! code that says so), block while holding its lock, allocate outside its fixed arena, or
@@ -60,16 +61,24 @@ static HEAP: runtime::BoundedHeap = runtime::BoundedHeap;
 /// Defines the partition program's ELF entry `_start(start_record)`: sets up the runtime
 /// (IPC buffer, syssw's server, process table, heap), then calls `$main` (a `fn()`, which
 /// usually runs `Partition::run`) on the initialisation thread. The thread ends when the
-/// partition enters NORMAL mode, or when `$main` returns.
+/// partition enters NORMAL mode, or when `$main` returns. The heap is a static arena of
+/// [`runtime::HEAP_SIZE`] bytes, or of `heap = BYTES` (`partition_entry!(main, heap = 1 << 20)`)
+/// for a program that allocates more.
 #[cfg(feature = "runtime")]
 #[macro_export]
 macro_rules! partition_entry {
     ($main:path) => {
+        $crate::partition_entry!($main, heap = $crate::runtime::HEAP_SIZE);
+    };
+    ($main:path, heap = $size:expr) => {
         // SAFETY: `_start` is the ELF entry symbol; no C start files define it.
         #[allow(unsafe_code)]
         #[unsafe(no_mangle)]
         pub extern "C" fn _start(start_record: u64) -> ! {
-            $crate::runtime::start(start_record, $main)
+            const SIZE: usize = $size;
+            static mut ARENA: $crate::runtime::Arena<SIZE> = $crate::runtime::Arena([0; SIZE]);
+            // SAFETY: `ARENA` is this function's own static, used by nothing but the heap.
+            unsafe { $crate::runtime::start(start_record, $main, &raw mut ARENA) }
         }
     };
 }

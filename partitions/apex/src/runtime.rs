@@ -35,7 +35,7 @@ use user_rt::partition::StartInfo;
 use user_rt::service::{self, Reply};
 use user_rt::sys;
 
-/// Bytes of the heap arena.
+/// Bytes of the heap arena [`crate::partition_entry!`] gives a program that names none.
 pub const HEAP_SIZE: usize = 64 * 1024;
 /// Thread index of the initialisation (main) thread; 0..SLOTS are the process slots.
 pub const MAIN: usize = SLOTS;
@@ -59,9 +59,13 @@ struct Stack([u8; STACK_SIZE]);
 static mut PROCESS_STACKS: [Stack; SLOTS + 1] = [const { Stack([0; STACK_SIZE]) }; SLOTS + 1];
 static mut IPC_BUFFERS: [IpcBuffer; THREADS] = [const { IpcBuffer::new() }; THREADS];
 
+/// A heap arena: static memory of the partition program, `N` bytes, used by nothing but
+/// the runtime's heap ([`crate::partition_entry!`] defines one and passes it to [`start`]).
 #[repr(C, align(16))]
-struct Arena([u8; HEAP_SIZE]);
-static mut HEAP_ARENA: Arena = Arena([0; HEAP_SIZE]);
+pub struct Arena<const N: usize>(pub [u8; N]);
+
+/// The arena [`start`] was given: its address and size.
+static HEAP_ARENA: SpinMutex<(usize, usize)> = SpinMutex::new((0, 0));
 
 struct State {
     table: Table,
@@ -177,8 +181,13 @@ impl Drop for Critical {
 }
 
 /// Starts the runtime on the partition's first thread and runs `main` on it (what
-/// [`crate::partition_entry!`] expands to). Ends the thread when `main` returns.
-pub fn start(start_record: u64, main: fn()) -> ! {
+/// [`crate::partition_entry!`] expands to), `arena` serving as the heap. Ends the thread
+/// when `main` returns.
+///
+/// # Safety
+/// `arena` is a static of the program that nothing else ever uses (the macro's own).
+pub unsafe fn start<const N: usize>(start_record: u64, main: fn(), arena: *mut Arena<N>) -> ! {
+    *HEAP_ARENA.lock() = (arena as usize, N);
     // SAFETY: syssw starts every partition's first thread with the address of its start
     // record in rdi (`user_rt::partition`), which `_start` passes on unchanged.
     let Some(info) = (unsafe { StartInfo::from_start(start_record) }) else {
@@ -224,11 +233,13 @@ fn reset_state(table: Table) {
     state.intra.reset();
     if !state.heap_ready || was_locked {
         state.heap = Heap::empty();
-        let arena = (&raw mut HEAP_ARENA).cast::<u8>();
-        // SAFETY: the arena is a static used by nothing but this heap; after a restart with
-        // the lock held, the old heap's blocks are abandoned with it (no thread that owned
-        // them exists any more).
-        unsafe { state.heap.init(arena, HEAP_SIZE) };
+        let (arena, size) = *HEAP_ARENA.lock();
+        if size > 0 {
+            // SAFETY: the arena is a static of the program used by nothing but this heap
+            // (`start`'s contract); after a restart with the lock held, the old heap's
+            // blocks are abandoned with it (no thread that owned them exists any more).
+            unsafe { state.heap.init(arena as *mut u8, size) };
+        }
         state.heap_ready = true;
     }
 }

@@ -58,3 +58,15 @@ fn panic(info: &core::panic::PanicInfo) -> ! {
 #[allow(unsafe_code)]
 #[unsafe(no_mangle)]
 pub extern "C" fn rust_eh_personality() {}
+
+/// The precompiled `alloc` has landing pads (in `format!`, `String::from_utf8_lossy`) that
+/// resume unwinding through this symbol; with `panic=abort` nothing ever unwinds, so it is
+/// never called. Were it reached, it stops the thread rather than run on.
+// SAFETY: a unique definition of the symbol (no libgcc_eh in these binaries; the host's
+// unit tests link std's).
+#[cfg(not(test))]
+#[allow(unsafe_code, non_snake_case)]
+#[unsafe(no_mangle)]
+pub extern "C" fn _Unwind_Resume() -> ! {
+    sys::thread_exit()
+}
