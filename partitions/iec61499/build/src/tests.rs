@@ -173,6 +173,28 @@ fn our_counter_type_runs_as_the_native_one() {
 }
 
 #[test]
+fn internal_initial_values_hold_at_start_and_after_a_reset() {
+    // The type scenario iec61499_trap runs: Q := 300 / LEFT; LEFT := LEFT - 1 from LEFT = 3.
+    let text = include_str!("../../../../tests/configs/iec61499/COUNTDOWN.fbt");
+    let t = compile("COUNTDOWN.fbt", text).unwrap();
+    let mut r = Resource::new(Limits::default());
+    r.create("D", t.instantiate()).unwrap();
+    for want in [100, 150, 300] {
+        r.trigger("D.REQ", 0).unwrap();
+        assert_eq!(r.read("D.Q"), Some(&Value::Int(want)));
+    }
+    r.trigger("D.REQ", 0).unwrap();
+    assert!(
+        matches!(r.fault(), Some(iec61499_runtime::resource::Fault::Trap { fb, reason }) if fb == "D" && reason == "DIVISION_BY_ZERO"),
+        "{:?}",
+        r.fault()
+    );
+    r.reset();
+    r.trigger("D.REQ", 0).unwrap();
+    assert_eq!(r.read("D.Q"), Some(&Value::Int(100)), "LEFT is 3 again");
+}
+
+#[test]
 fn st_errors_point_into_the_fbt() {
     let bad = COUNTER.replace("CV := CV + 1;", "CV := CV + ;");
     let errors = compile("C.fbt", &bad).unwrap_err();
@@ -227,9 +249,9 @@ fn fourdiac_event_fbs_run_as_ours() {
 
 #[test]
 fn packages_round_trip_and_refuse_damage() {
-    use iec61499_runtime::package::{PackageError, decode, encode};
+    use iec61499_runtime::package::{PackageError, decode};
     let t = compile("E_CTU.fbt", COUNTER).unwrap();
-    let bytes = encode(&t.name, &t.interface, &t.internals, &t.ecc, &t.code);
+    let bytes = t.package();
     let p = decode(&bytes).unwrap();
     assert_eq!(
         (p.name.as_str(), &p.interface, &p.ecc),
@@ -278,8 +300,7 @@ fn a_device_takes_a_type_package_and_runs_it() {
     use iec61499_mgmt::Device;
     let renamed = COUNTER.replace("Name=\"E_CTU\"", "Name=\"MY_COUNTER\"");
     let t = compile("MY_COUNTER.fbt", &renamed).unwrap();
-    let bytes =
-        iec61499_runtime::package::encode(&t.name, &t.interface, &t.internals, &t.ecc, &t.code);
+    let bytes = t.package();
     let mut d = Device::new(Limits::default(), 2);
     let req = |action: &str, object: &str| {
         format!("<Request ID=\"1\" Action=\"{action}\">{object}</Request>")

@@ -122,6 +122,11 @@ pub trait Algorithms {
     fn guard(&mut self, index: usize, vars: &mut Vars<'_>) -> Result<bool, String>;
     /// How many of each there are.
     fn counts(&self) -> (usize, usize);
+    /// Sets `internals` to the type's initial values where it declares them
+    /// (`InitialValue`); the others keep their type's default.
+    fn initialise(&mut self, internals: &mut [Value]) {
+        let _ = internals;
+    }
 }
 
 /// An instance of a basic FB type.
@@ -144,14 +149,22 @@ impl BasicFb {
     ) -> Result<Self, String> {
         let (algorithms, guards) = code.counts();
         ecc.verify(&interface, algorithms, guards)?;
-        Ok(BasicFb {
+        let mut fb = BasicFb {
             interface,
             ecc,
-            internals: internals.iter().map(VarSpec::initial).collect(),
+            internals: Vec::new(),
             internal_specs: internals,
             state: 0,
             code,
-        })
+        };
+        fb.initialise();
+        Ok(fb)
+    }
+
+    /// The internal variables as the type declares them.
+    fn initialise(&mut self) {
+        self.internals = self.internal_specs.iter().map(VarSpec::initial).collect();
+        self.code.initialise(&mut self.internals);
     }
 
     /// The current ECC state's name.
@@ -230,7 +243,7 @@ impl FunctionBlock for BasicFb {
 
     fn reset(&mut self) {
         self.state = 0;
-        self.internals = self.internal_specs.iter().map(VarSpec::initial).collect();
+        self.initialise();
     }
 }
 

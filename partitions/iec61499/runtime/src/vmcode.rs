@@ -117,8 +117,12 @@ impl VmCode {
         self.code.image.bytes()
     }
 
-    /// Runs the code selected by `selector` on `vars`; returns `__GUARD`.
-    fn call(&mut self, selector: i64, vars: &mut Vars<'_>) -> Result<bool, String> {
+    /// Runs `f` on a machine over this instance's data, which [`Machine::new`] sets to the
+    /// image's initial data.
+    fn with_machine<R>(
+        &mut self,
+        f: impl FnOnce(&mut Machine<'_, '_>, &Image<'_>, &Code) -> Result<R, String>,
+    ) -> Result<R, String> {
         let code = &*self.code;
         let verified = code.image.image();
         let image = *verified.image();
@@ -133,39 +137,57 @@ impl VmCode {
         };
         let mut machine = Machine::new(verified, memory).map_err(|e| format!("{e:?}"))?;
         machine.set_watchdog_budget(0, Some(BUDGET));
-        let sections: [(&[Slot], &[Value]); 3] = [
-            (&code.inputs, vars.inputs),
-            (&code.outputs, &*vars.outputs),
-            (&code.internals, &*vars.internals),
-        ];
-        for (slots, values) in sections {
-            for (slot, value) in slots.iter().zip(values) {
-                store(&mut machine, &image, slot, value)?;
-            }
+        f(&mut machine, &image, code)
+    }
+
+    /// Runs the code selected by `selector` on `vars`; returns `__GUARD`.
+    fn call(&mut self, selector: i64, vars: &mut Vars<'_>) -> Result<bool, String> {
+        self.with_machine(|machine, image, code| run(machine, image, code, selector, vars))
+    }
+}
+
+/// Copies `vars` in, runs one cycle with `__SEL = selector`, copies the outputs and
+/// internals out; returns `__GUARD`.
+fn run(
+    machine: &mut Machine<'_, '_>,
+    image: &Image<'_>,
+    code: &Code,
+    selector: i64,
+    vars: &mut Vars<'_>,
+) -> Result<bool, String> {
+    let sections: [(&[Slot], &[Value]); 3] = [
+        (&code.inputs, vars.inputs),
+        (&code.outputs, &*vars.outputs),
+        (&code.internals, &*vars.internals),
+    ];
+    for (slots, values) in sections {
+        for (slot, value) in slots.iter().zip(values) {
+            store(machine, image, slot, value)?;
         }
-        write(
-            &mut machine,
-            &image,
-            code.selector,
-            VmValue::Int(selector),
-            "__SEL",
-        )?;
-        if let Err(fault) = machine.run_cycle(0, 0) {
-            return Err(fault.trap.name().to_string());
-        }
-        for (slots, values) in [
-            (&code.outputs, &mut *vars.outputs),
-            (&code.internals, &mut *vars.internals),
-        ] {
-            for (slot, value) in slots.iter().zip(values.iter_mut()) {
-                if let Some(v) = load(&machine, &image, slot) {
-                    *value = v;
-                }
-            }
-        }
-        match image.var(code.guard).map(|var| machine.read_entry(&var)) {
-            Some(VmValue::Bool(b)) => Ok(b),
-            _ => Err("__GUARD is not a BOOL".into()),
+    }
+    let selector = VmValue::Int(selector);
+    write(machine, image, code.selector, selector, "__SEL")?;
+    if let Err(fault) = machine.run_cycle(0, 0) {
+        return Err(fault.trap.name().to_string());
+    }
+    for (slots, values) in [
+        (&code.outputs, &mut *vars.outputs),
+        (&code.internals, &mut *vars.internals),
+    ] {
+        load_into(machine, image, slots, values);
+    }
+    match image.var(code.guard).map(|var| machine.read_entry(&var)) {
+        Some(VmValue::Bool(b)) => Ok(b),
+        _ => Err("__GUARD is not a BOOL".into()),
+    }
+}
+
+/// Sets each of `values` to its slot's value in the machine (one whose type the FB values
+/// do not represent keeps its value).
+fn load_into(machine: &Machine<'_, '_>, image: &Image<'_>, slots: &[Slot], values: &mut [Value]) {
+    for (slot, value) in slots.iter().zip(values.iter_mut()) {
+        if let Some(v) = load(machine, image, slot) {
+            *value = v;
         }
     }
 }
@@ -253,5 +275,13 @@ impl Algorithms for VmCode {
 
     fn counts(&self) -> (usize, usize) {
         (self.code.algorithms, self.code.guards)
+    }
+
+    fn initialise(&mut self, internals: &mut [Value]) {
+        // A fresh machine holds the image's initial data: the declared initial values.
+        let _ = self.with_machine(|machine, image, code| {
+            load_into(machine, image, &code.internals, internals);
+            Ok(())
+        });
     }
 }
