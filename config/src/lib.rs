@@ -71,6 +71,8 @@
 //! plc.shared = "frame"            # the segment its shared globals go through
 //! plc.native = true               # optional, default false: the native execution tier
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
+//! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
+//! iec61499.types = ["PID.fbt"]     # optional
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
@@ -172,6 +174,15 @@
 //! verified bytecode image — what `plcc build` writes as `.plcb` — becomes its data
 //! entry: for example the program an online-download client sends to a PLC. A partition
 //! cannot have both, and `data` has no other keys.
+//!
+//! **IEC 61499.** A partition running the IEC 61499 runtime (`image = "iec61499"`,
+//! `partitions/iec61499/partition`) names its boot file, `iec61499.boot` (a 4diac `.fboot`
+//! file: one management request a line, carried out at every start), and the basic FB
+//! types (`.fbt`) it uses beyond the standard library, `iec61499.types` (paths as for
+//! `plc.program`). `cargo xtask` compiles each type (algorithms and guards by the ST
+//! compiler; an error names the `.fbt` file, line and column) and writes the types and the
+//! boot file as the partition's data entry (`iec61499_mgmt::package`); such a partition
+//! has no `plc`, `guest` or `data` keys.
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,

@@ -84,6 +84,15 @@ pub struct Partition {
     pub plc: Option<Spanned<Plc>>,
     pub data: Option<Spanned<Data>>,
     pub guest: Option<Spanned<Guest>>,
+    pub iec61499: Option<Spanned<Iec61499>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Iec61499 {
+    pub boot: Spanned<String>,
+    #[serde(default)]
+    pub types: Vec<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

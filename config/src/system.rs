@@ -64,6 +64,16 @@ pub struct Partition {
     pub data: Option<DataEntry>,
     /// Its first Linux process (`guest.*`), if it runs the paravirtualized guest.
     pub guest: Option<Guest>,
+    /// Its boot file and FB types (`iec61499.*`), if it runs the IEC 61499 runtime.
+    pub iec61499: Option<Iec61499>,
+}
+
+/// An IEC 61499 partition's boot file and the basic FB types (`.fbt`) it needs beyond the
+/// standard library; `cargo xtask` compiles the types and writes both into its data entry.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Iec61499 {
+    pub boot: SourceFile,
+    pub types: Vec<SourceFile>,
 }
 
 /// What a guest partition starts: `argv` and the environment of its first process, and the
@@ -295,10 +305,11 @@ impl System {
                     health: p.health,
                     // The binary form carries none of these: they travel in the
                     // partition's data entry (the PLC package, the compiled image, the
-                    // guest's initramfs) instead.
+                    // guest's initramfs, the IEC 61499 device package) instead.
                     plc: None,
                     data: None,
                     guest: None,
+                    iec61499: None,
                 })
                 .collect(),
             segments: view

@@ -450,6 +450,10 @@ impl Validator<'_, '_> {
                     "a guest partition's data entry is its initramfs (from `guest.*`): `data` is for other partitions",
                 );
             }
+            let iec61499 = raw
+                .iec61499
+                .as_ref()
+                .and_then(|fb| self.iec61499(raw, fb, &path.key("iec61499")));
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -471,6 +475,7 @@ impl Validator<'_, '_> {
                 plc,
                 data,
                 guest,
+                iec61499,
             });
         }
         (partitions, times, ports)
@@ -701,6 +706,41 @@ impl Validator<'_, '_> {
             });
         }
         program
+    }
+
+    /// An IEC 61499 partition's boot file and types (see the crate documentation).
+    fn iec61499(
+        &mut self,
+        raw: &schema::Partition,
+        fb: &Spanned<schema::Iec61499>,
+        path: &KeyPath,
+    ) -> Option<Iec61499> {
+        let before = self.r.diagnostics.len();
+        let others = [
+            (raw.plc.is_some(), "the soft-PLC (`plc`)"),
+            (raw.guest.is_some(), "the guest (`guest`)"),
+            (raw.data.is_some(), "a `data` entry"),
+        ];
+        for (_, what) in others.iter().filter(|(has, _)| *has) {
+            self.error(
+                start(fb),
+                path,
+                format!(
+                    "a partition runs the IEC 61499 runtime (`iec61499`) or {what}, not both: its data entry is its device package"
+                ),
+            );
+        }
+        let f = fb.get_ref();
+        let boot_path = path.key("boot");
+        let boot = self.source_files(core::slice::from_ref(&f.boot), &boot_path);
+        let types = self.source_files(&f.types, &path.key("types"));
+        if self.r.diagnostics.len() != before {
+            return None;
+        }
+        Some(Iec61499 {
+            boot: boot.into_iter().next()?,
+            types,
+        })
     }
 
     /// `data`: what `cargo xtask` puts into the partition's data entry (see the crate

@@ -15,6 +15,7 @@ pub mod bench;
 pub mod check_config;
 pub mod esp;
 pub mod guest;
+pub mod iec61499;
 pub mod lint;
 pub mod linux;
 pub mod native;

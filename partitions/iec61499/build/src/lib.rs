@@ -27,6 +27,17 @@ pub struct BasicType {
 }
 
 impl BasicType {
+    /// The type as a package (`iec61499_runtime::package`): what a device is sent.
+    pub fn package(&self) -> Vec<u8> {
+        iec61499_runtime::package::encode(
+            &self.name,
+            &self.interface,
+            &self.internals,
+            &self.ecc,
+            &self.code,
+        )
+    }
+
     /// A new instance.
     pub fn instantiate(&self) -> Box<dyn FunctionBlock> {
         match BasicFb::new(

@@ -350,7 +350,9 @@ impl Device {
                 && r.running
             {
                 let line = format!("resource {} stopped: {fault}", r.name);
-                self.report.borrow_mut().log.push(line);
+                let mut report = self.report.borrow_mut();
+                report.log.push(line);
+                report.faults += 1;
                 r.running = false;
             }
         }

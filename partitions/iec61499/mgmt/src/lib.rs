@@ -40,6 +40,7 @@ extern crate alloc;
 pub mod device;
 pub mod fboot;
 pub mod literal;
+pub mod package;
 pub mod request;
 pub mod types;
 

@@ -21,6 +21,8 @@ pub struct Report {
     pub ended: bool,
     /// Lines for the partition's log.
     pub log: Vec<String>,
+    /// Resources stopped by a fault so far (each also a log line).
+    pub faults: u32,
 }
 
 pub type SharedReport = Rc<RefCell<Report>>;

@@ -1,0 +1,280 @@
+//! What an IEC 61499 partition boots from: its data entry, written by `cargo xtask` from the
+//! partition's `iec61499.*` keys. The basic FB types it needs beyond the standard library
+//! (compiled on the host into type packages, `iec61499_runtime::package`) and the boot file
+//! (`.fboot` text) the device carries out at start. An interface, integers little-endian;
+//! decoding never panics and checks everything but the types themselves, which
+//! [`crate::Device::add_type`] checks whole.
+//!
+//! ```text
+//! 0  4 magic "W61D"          4 2 version (1)            6 2 type count
+//! 8  4 CRC-32 of the bytes from offset 12 to the end
+//! 12 4 boot file length      16 4 queue depth (events)  20 4 events per chain
+//! 24 .. per type: length u32, the type package; then the boot file (UTF-8)
+//! ```
+//!
+//! [`boot`] makes the device a package describes; `cargo xtask` runs it on the host too, so
+//! a boot file the device would refuse stops the build.
+
+use crate::Device;
+use alloc::format;
+use alloc::string::String;
+use alloc::vec::Vec;
+use iec61499_runtime::Limits;
+
+const MAGIC: &[u8; 4] = b"W61D";
+const VERSION: u16 = 1;
+/// The most types one package may carry.
+pub const MAX_TYPES: usize = 256;
+/// The most resources a device holds.
+pub const MAX_RESOURCES: usize = 4;
+/// The largest event queue and chain a package may ask for.
+pub const MAX_QUEUE: usize = 4096;
+pub const MAX_CHAIN_EVENTS: usize = 1_000_000;
+
+/// A decoded device package: borrowed views of its parts.
+#[derive(Debug, PartialEq, Eq)]
+pub struct DevicePackage<'a> {
+    /// Each type package, in the order the configuration names them.
+    pub types: Vec<&'a [u8]>,
+    /// The boot file.
+    pub boot: &'a str,
+    /// Each resource's event-queue depth and the events one chain may deliver.
+    pub queue: usize,
+    pub chain_events: usize,
+}
+
+/// Why a device package was refused.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DevicePackageError {
+    /// It does not start with the magic bytes (not a device package).
+    Magic,
+    /// A version this runtime does not read.
+    Version(u16),
+    /// The checksum does not match (damaged).
+    Checksum,
+    /// The bytes end inside the field at this offset.
+    Truncated(usize),
+    /// More types than [`MAX_TYPES`].
+    TooManyTypes(usize),
+    /// The boot file is not UTF-8.
+    BootText,
+    /// Bytes follow the boot file.
+    Trailing(usize),
+    /// A queue depth or chain length of 0 or above [`MAX_QUEUE`] / [`MAX_CHAIN_EVENTS`].
+    Limit(&'static str, usize),
+}
+
+impl core::fmt::Display for DevicePackageError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Magic => f.write_str("not an IEC 61499 device package (bad magic)"),
+            Self::Version(v) => write!(
+                f,
+                "device package version {v} (this runtime reads {VERSION})"
+            ),
+            Self::Checksum => f.write_str("device package checksum mismatch (damaged)"),
+            Self::Truncated(at) => write!(f, "device package ends inside the field at offset {at}"),
+            Self::TooManyTypes(n) => {
+                write!(f, "device package has {n} types (at most {MAX_TYPES})")
+            }
+            Self::BootText => f.write_str("the boot file is not UTF-8"),
+            Self::Trailing(at) => write!(f, "bytes after the boot file at offset {at}"),
+            Self::Limit(what, n) => write!(f, "{what} {n} is out of range"),
+        }
+    }
+}
+
+fn crc(bytes: &[u8]) -> u32 {
+    let mut c = abi::crc32::Crc32::new();
+    c.update(bytes);
+    c.finish()
+}
+
+/// A device package of `types` (type packages), `boot` (the boot file), each resource's
+/// `queue` depth and `chain_events` limit.
+pub fn encode(types: &[Vec<u8>], boot: &str, queue: usize, chain_events: usize) -> Vec<u8> {
+    let mut out = Vec::new();
+    out.extend_from_slice(MAGIC);
+    out.extend_from_slice(&VERSION.to_le_bytes());
+    out.extend_from_slice(&(types.len() as u16).to_le_bytes());
+    let mut body = Vec::new();
+    body.extend_from_slice(&(boot.len() as u32).to_le_bytes());
+    body.extend_from_slice(&(queue as u32).to_le_bytes());
+    body.extend_from_slice(&(chain_events as u32).to_le_bytes());
+    for t in types {
+        body.extend_from_slice(&(t.len() as u32).to_le_bytes());
+        body.extend_from_slice(t);
+    }
+    body.extend_from_slice(boot.as_bytes());
+    out.extend_from_slice(&crc(&body).to_le_bytes());
+    out.extend_from_slice(&body);
+    out
+}
+
+fn take<'a>(bytes: &'a [u8], at: &mut usize, len: usize) -> Result<&'a [u8], DevicePackageError> {
+    let end = at
+        .checked_add(len)
+        .filter(|&end| end <= bytes.len())
+        .ok_or(DevicePackageError::Truncated(*at))?;
+    let part = &bytes[*at..end];
+    *at = end;
+    Ok(part)
+}
+
+fn u32_at(bytes: &[u8], at: &mut usize) -> Result<usize, DevicePackageError> {
+    let b = take(bytes, at, 4)?;
+    Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+}
+
+/// Reads a device package.
+pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
+    let mut at = 0;
+    if take(bytes, &mut at, 4)? != MAGIC {
+        return Err(DevicePackageError::Magic);
+    }
+    let header = take(bytes, &mut at, 4)?;
+    let version = u16::from_le_bytes([header[0], header[1]]);
+    if version != VERSION {
+        return Err(DevicePackageError::Version(version));
+    }
+    let count = usize::from(u16::from_le_bytes([header[2], header[3]]));
+    if count > MAX_TYPES {
+        return Err(DevicePackageError::TooManyTypes(count));
+    }
+    let sum = u32_at(bytes, &mut at)? as u32;
+    if crc(&bytes[at..]) != sum {
+        return Err(DevicePackageError::Checksum);
+    }
+    let boot_len = u32_at(bytes, &mut at)?;
+    let queue = u32_at(bytes, &mut at)?;
+    if !(1..=MAX_QUEUE).contains(&queue) {
+        return Err(DevicePackageError::Limit("queue depth", queue));
+    }
+    let chain_events = u32_at(bytes, &mut at)?;
+    if !(1..=MAX_CHAIN_EVENTS).contains(&chain_events) {
+        return Err(DevicePackageError::Limit("events per chain", chain_events));
+    }
+    let mut types = Vec::with_capacity(count);
+    for _ in 0..count {
+        let len = u32_at(bytes, &mut at)?;
+        types.push(take(bytes, &mut at, len)?);
+    }
+    let boot = core::str::from_utf8(take(bytes, &mut at, boot_len)?)
+        .map_err(|_| DevicePackageError::BootText)?;
+    if at != bytes.len() {
+        return Err(DevicePackageError::Trailing(at));
+    }
+    Ok(DevicePackage {
+        types,
+        boot,
+        queue,
+        chain_events,
+    })
+}
+
+/// What [`boot`] did.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Booted {
+    pub types: usize,
+    pub requests: usize,
+}
+
+/// The device a package describes, its types added and its boot file carried out at
+/// instant `now`; or why not (the package, a type or a boot-file line, named).
+pub fn boot(bytes: &[u8], now: i64) -> Result<(Device, Booted), String> {
+    let package = decode(bytes).map_err(|e| format!("{e}"))?;
+    let limits = Limits {
+        queue: package.queue,
+        chain_events: package.chain_events,
+        ..Limits::default()
+    };
+    let mut device = Device::new(limits, MAX_RESOURCES);
+    for (index, t) in package.types.iter().enumerate() {
+        device
+            .add_type(t)
+            .map_err(|e| format!("type {} of the package: {e}", index + 1))?;
+    }
+    let requests = device.boot(package.boot, now)?;
+    Ok((
+        device,
+        Booted {
+            types: package.types.len(),
+            requests,
+        },
+    ))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alloc::vec;
+
+    #[test]
+    fn round_trip() {
+        let types = vec![vec![1, 2, 3], vec![], vec![9; 300]];
+        let bytes = encode(&types, "R;<Request ID=\"1\" Action=\"START\"/>\n", 8, 100);
+        let package = decode(&bytes).unwrap();
+        assert_eq!(package.types, [&[1, 2, 3][..], &[], &[9; 300][..]]);
+        assert!(package.boot.contains("START"));
+        assert_eq!((package.queue, package.chain_events), (8, 100));
+    }
+
+    #[test]
+    fn damage_is_refused_never_panics() {
+        let bytes = encode(&[vec![7; 20]], "boot", 1, 1);
+        assert_eq!(
+            decode(&encode(&[], "", 0, 1)),
+            Err(DevicePackageError::Limit("queue depth", 0))
+        );
+        assert_eq!(decode(b"W61"), Err(DevicePackageError::Truncated(0)));
+        assert_eq!(decode(b"W61TXXXXXXXXXXXX"), Err(DevicePackageError::Magic));
+        let mut v2 = bytes.clone();
+        v2[4] = 2;
+        assert_eq!(decode(&v2), Err(DevicePackageError::Version(2)));
+        for i in 12..bytes.len() {
+            let mut flipped = bytes.clone();
+            flipped[i] ^= 0x40;
+            assert_eq!(
+                decode(&flipped),
+                Err(DevicePackageError::Checksum),
+                "byte {i}"
+            );
+        }
+        for len in 0..bytes.len() {
+            assert!(decode(&bytes[..len]).is_err(), "truncated to {len}");
+        }
+        let mut longer = bytes.clone();
+        longer.push(0);
+        assert!(decode(&longer).is_err());
+    }
+
+    #[test]
+    fn boot_runs_the_file_and_names_a_refused_line() {
+        let ok = "\n;<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"EMB_RES\"/></Request>\nR;<Request ID=\"2\" Action=\"START\"/>\n";
+        let (_, booted) = boot(&encode(&[], ok, 16, 100), 0).unwrap();
+        assert_eq!(
+            booted,
+            Booted {
+                types: 0,
+                requests: 2
+            }
+        );
+        let bad = ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"NOPE\"/></Request>\n";
+        let e = boot(&encode(&[], bad, 16, 100), 0).err().unwrap();
+        assert!(
+            e.contains("line 1") && e.contains("UNSUPPORTED_TYPE"),
+            "{e}"
+        );
+        let e = boot(&encode(&[vec![1, 2, 3]], ok, 16, 100), 0)
+            .err()
+            .unwrap();
+        assert!(e.starts_with("type 1 of the package"), "{e}");
+    }
+
+    proptest::proptest! {
+        #[test]
+        fn arbitrary_bytes_never_panic(bytes in proptest::collection::vec(proptest::num::u8::ANY, 0..200)) {
+            let _ = decode(&bytes);
+        }
+    }
+}

@@ -1,0 +1,178 @@
+//! The IEC 61499 partition program: a device of function-block resources
+//! (`iec61499_mgmt::Device`) booted from the partition's data entry, the device package
+//! `cargo xtask` wrote from `iec61499.*` (`iec61499_mgmt::package`).
+//!
+//! One APEX process, the device process, owns the device: it boots the package at its
+//! first run, then sleeps (TIMED_WAIT) until the earliest timer of a running resource
+//! (E_CYCLE, E_DELAY, ...), fires every timer due, and sleeps again. Timers are absolute
+//! instants (`Device::advance`), so a late wake-up delays one firing but never shifts the
+//! ones after it.
+//!
+//! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
+//! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted;
+//! - `iec61499: refusing the boot package: <reason>` when it did not (reported to the
+//!   health monitor as APPLICATION_ERROR; the process stops, the partition idles);
+//! - every line the device logs (`iec61499_mgmt::Device::take_log`): the test FBs'
+//!   results and `resource <name> stopped: <fault>` when a fault (an event-queue overflow,
+//!   a chain too long, an algorithm's trap) stops a resource, which is also reported to
+//!   the health monitor as APPLICATION_ERROR with that text (the other resources go on);
+//! - `iec61499: t=<ms>ms timers=<n> lateness_ns=<min>/<mean>/<max>` at every whole
+//!   [`STATS_EVERY_MS`] of the partition's clock (`t`) while timers fire: how many wake-ups
+//!   for timers there were since the line before and how late after its instant each ran
+//!   (on virtual time, the runtime's own cost).
+#![no_std]
+#![no_main]
+
+extern crate alloc;
+
+use apex::Warden;
+use apex::a653rs::prelude::*;
+use apex::user_rt::println;
+use core::str::FromStr;
+use core::time::Duration;
+use iec61499_mgmt::Device;
+
+/// How often the statistics line is printed.
+const STATS_EVERY_MS: i64 = 1000;
+/// How long the device process sleeps when no resource has a timer.
+const IDLE: Duration = Duration::from_millis(100);
+/// The heap: the device's resources, FB instances, types and event queues.
+const HEAP: usize = 1024 * 1024;
+
+fn now_ns() -> i64 {
+    <Warden as ApexTimeP4Ext>::get_time()
+        .unwrap_duration()
+        .as_nanos() as i64
+}
+
+/// Prints `text` and reports it to the health monitor as an application error.
+fn report(text: &str) {
+    println!("iec61499: {text}");
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(text.as_bytes());
+}
+
+/// Prints the lines the device logged; a fault among them goes to the health monitor.
+fn drain(device: &mut Device, faults_seen: &mut u32) {
+    let faults = device.report().faults;
+    for line in device.take_log() {
+        println!("iec61499: {line}");
+        if faults != *faults_seen && line.starts_with("resource ") {
+            let _ = <Warden as ApexErrorP4Ext>::raise_application_error(line.as_bytes());
+        }
+    }
+    *faults_seen = faults;
+}
+
+/// Lateness of the timer wake-ups since the last statistics line.
+#[derive(Default)]
+struct Lateness {
+    count: u64,
+    sum: i64,
+    min: i64,
+    max: i64,
+}
+
+impl Lateness {
+    fn add(&mut self, ns: i64) {
+        if self.count == 0 || ns < self.min {
+            self.min = ns;
+        }
+        self.max = self.max.max(ns);
+        self.sum += ns;
+        self.count += 1;
+    }
+}
+
+extern "C" fn device_process() {
+    let info = apex::runtime::start_info();
+    let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), now_ns()) {
+        Ok(booted) => booted,
+        Err(reason) => {
+            report(&alloc::format!("refusing the boot package: {reason}"));
+            return;
+        }
+    };
+    println!(
+        "iec61499: booted: {} type(s), {} boot request(s)",
+        booted.types, booted.requests
+    );
+    let mut faults_seen = 0;
+    drain(&mut device, &mut faults_seen);
+    let mut lateness = Lateness::default();
+    // On the whole seconds of the partition's clock, so a log names them predictably.
+    let every = STATS_EVERY_MS * 1_000_000;
+    let mut next_stats = (now_ns() / every + 1) * every;
+    loop {
+        let now = now_ns();
+        if let Some(due) = device.next_deadline().filter(|&due| due <= now) {
+            lateness.add(now - due);
+            device.advance(now);
+            drain(&mut device, &mut faults_seen);
+        }
+        if now >= next_stats && lateness.count > 0 {
+            println!(
+                "iec61499: t={}ms timers={} lateness_ns={}/{}/{}",
+                next_stats / 1_000_000,
+                lateness.count,
+                lateness.min,
+                lateness.sum / lateness.count as i64,
+                lateness.max
+            );
+            lateness = Lateness::default();
+            next_stats = (now / every + 1) * every;
+        }
+        let now = now_ns();
+        let sleep = match device.next_deadline() {
+            Some(due) if due <= now => continue,
+            Some(due) => Duration::from_nanos((due - now) as u64).min(IDLE),
+            None => IDLE,
+        };
+        if <Warden as ApexTimeP1Ext>::timed_wait(sleep).is_err() {
+            report("TIMED_WAIT failed; stopping");
+            return;
+        }
+    }
+}
+
+struct Iec61499Partition;
+
+impl Iec61499Partition {
+    fn start(&self, ctx: &mut StartContext<Warden>) {
+        let Ok(name) = Name::from_str("device") else {
+            return;
+        };
+        let attributes = ProcessAttribute {
+            period: SystemTime::Infinite,
+            time_capacity: SystemTime::Infinite,
+            entry_point: device_process,
+            stack_size: apex::table::STACK_SIZE as u32,
+            base_priority: i32::from(apex::runtime::mcp().saturating_sub(1)),
+            deadline: Deadline::Soft,
+            name,
+        };
+        match ctx.create_process(attributes) {
+            Ok(process) => {
+                if let Err(e) = process.start() {
+                    report(&alloc::format!("START device failed: {e:?}"));
+                }
+            }
+            Err(e) => report(&alloc::format!("CREATE_PROCESS device failed: {e:?}")),
+        }
+    }
+}
+
+impl Partition<Warden> for Iec61499Partition {
+    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+        self.start(ctx)
+    }
+
+    fn warm_start(&self, ctx: &mut StartContext<Warden>) {
+        self.start(ctx)
+    }
+}
+
+fn main() {
+    Iec61499Partition.run()
+}
+
+apex::partition_entry!(main, heap = HEAP);

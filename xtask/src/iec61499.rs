@@ -1,0 +1,59 @@
+//! The IEC 61499 build step of `system.img`: for each partition with `iec61499.*` keys,
+//! compile its basic FB types (`iec61499_build`: an error names the `.fbt` file, line and
+//! column and stops the build), pack them with the boot file into the partition's data
+//! entry (`iec61499_mgmt::package`), and boot that package once on the host, so a boot
+//! file the device would refuse stops the build with the line and the reason instead of
+//! leaving a partition that refuses to start.
+
+use anyhow::{Context, Result, bail};
+use config::System;
+use config::system::SourceFile;
+use iec61499_runtime::Limits;
+
+/// The partition program (`image = "iec61499"`).
+pub const IMAGE: &str = "iec61499";
+
+/// `(partition name, device package)` for every IEC 61499 partition.
+pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
+    let mut out = Vec::new();
+    for p in &system.partitions {
+        let Some(fb) = &p.iec61499 else { continue };
+        let what = format!("partition {}", p.name);
+        let types = fb
+            .types
+            .iter()
+            .map(|file| compile_type(&what, file))
+            .collect::<Result<Vec<_>>>()?;
+        let boot = read(&what, &fb.boot)?;
+        let limits = Limits::default();
+        let package =
+            iec61499_mgmt::package::encode(&types, &boot, limits.queue, limits.chain_events);
+        if let Err(reason) = iec61499_mgmt::package::boot(&package, 0) {
+            bail!("{what}: {}: {reason}", fb.boot.name);
+        }
+        out.push((p.name.clone(), package));
+    }
+    Ok(out)
+}
+
+fn read(what: &str, file: &SourceFile) -> Result<String> {
+    std::fs::read_to_string(&file.path)
+        .with_context(|| format!("{what}: cannot read {}", file.path))
+}
+
+fn compile_type(what: &str, file: &SourceFile) -> Result<Vec<u8>> {
+    let text = read(what, file)?;
+    match iec61499_build::compile(&file.name, &text) {
+        Ok(t) => Ok(t.package()),
+        Err(errors) => {
+            for e in &errors {
+                eprintln!("{e}");
+            }
+            bail!(
+                "{what}: FB type {} has {} error(s)",
+                file.name,
+                errors.len()
+            );
+        }
+    }
+}
