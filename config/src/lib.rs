@@ -73,6 +73,7 @@
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
 //! iec61499.types = ["PID.fbt"]     # optional
+//! iec61499.mgmt = { request = "fb-req", response = "fb-resp", access = "download" }  # optional
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
@@ -182,7 +183,12 @@
 //! `plc.program`). `cargo xtask` compiles each type (algorithms and guards by the ST
 //! compiler; an error names the `.fbt` file, line and column) and writes the types and the
 //! boot file as the partition's data entry (`iec61499_mgmt::package`); such a partition
-//! has no `plc`, `guest` or `data` keys.
+//! has no `plc`, `guest` or `data` keys. `iec61499.mgmt` names a queuing input and a
+//! queuing output of the partition (both `size = 4096`) that carry 4diac's management
+//! requests, one a message (`iec61499_mgmt::serve`), and what their client may do:
+//! `"monitor"` (READ, QUERY, watches), `"force"` (also WRITE: parameters, forcing, event
+//! triggers) or `"download"` (also resources, FBs, connections, START/STOP/KILL/RESET and
+//! FB types); a request beyond it is answered ACCESS_DENIED.
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,

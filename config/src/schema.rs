@@ -93,6 +93,7 @@ pub struct Iec61499 {
     pub boot: Spanned<String>,
     #[serde(default)]
     pub types: Vec<Spanned<String>>,
+    pub mgmt: Option<Spanned<OnlinePorts>>,
 }
 
 #[derive(Debug, Deserialize)]
@@ -123,7 +124,7 @@ pub struct Plc {
     pub outputs: Named<PlcOutput>,
     #[serde(default)]
     pub watch: Vec<Spanned<String>>,
-    pub online: Option<Spanned<PlcOnline>>,
+    pub online: Option<Spanned<OnlinePorts>>,
     #[serde(default)]
     pub safe: Named<PlcValue>,
     #[serde(default)]
@@ -143,7 +144,7 @@ pub enum PlcValue {
 
 #[derive(Debug, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct PlcOnline {
+pub struct OnlinePorts {
     pub request: Spanned<String>,
     pub response: Spanned<String>,
     pub access: Spanned<String>,

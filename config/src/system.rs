@@ -74,6 +74,8 @@ pub struct Partition {
 pub struct Iec61499 {
     pub boot: SourceFile,
     pub types: Vec<SourceFile>,
+    /// The management protocol's ports and the client's access (`iec61499.mgmt`).
+    pub mgmt: Option<OnlinePorts>,
 }
 
 /// What a guest partition starts: `argv` and the environment of its first process, and the
@@ -100,8 +102,10 @@ pub const COM2_PORTS: crate::model::IoRange = crate::model::IoRange {
 pub const COM2_IRQ: u8 = 3;
 
 /// The Linux programs `guest.programs` may name: static executables `cargo xtask` builds
-/// (`xtask/src/linux.rs`) from `tests/linux` with `gcc -static`, and `plcctl`, the PLC
-/// online tool (`partitions/guest/plcctl`, Rust for `x86_64-unknown-linux-musl`).
+/// (`xtask/src/linux.rs`) from `tests/linux` with `gcc -static`, and the Rust tools for
+/// `x86_64-unknown-linux-musl`: `plcctl`, the PLC online tool (`partitions/guest/plcctl`),
+/// `plcc`, the ST compiler, and `fbctl`, the IEC 61499 management tool
+/// (`partitions/iec61499/fbctl`).
 pub const GUEST_PROGRAMS: &[&str] = &[
     "linux-tests",
     "linux-bench",
@@ -109,6 +113,7 @@ pub const GUEST_PROGRAMS: &[&str] = &[
     "linux-arinc",
     "plcctl",
     "plcc",
+    "fbctl",
 ];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run
@@ -159,7 +164,7 @@ pub struct Plc {
     /// it is compiled).
     pub watch: Vec<String>,
     /// The online ports (indices into the partition's `ports`) and what their client may do.
-    pub online: Option<PlcOnline>,
+    pub online: Option<OnlinePorts>,
     /// Safe values of `%Q` variables by name (checked against the program when it is
     /// compiled); the others go to zero/FALSE.
     pub safe: Vec<(String, PlcValue)>,
@@ -184,7 +189,7 @@ pub enum PlcValue {
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PlcOnline {
+pub struct OnlinePorts {
     pub request: usize,
     pub response: usize,
     pub access: plc_online::Access,

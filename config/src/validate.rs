@@ -453,7 +453,7 @@ impl Validator<'_, '_> {
             let iec61499 = raw
                 .iec61499
                 .as_ref()
-                .and_then(|fb| self.iec61499(raw, fb, &path.key("iec61499")));
+                .and_then(|fb| self.iec61499(raw, fb, &path.key("iec61499"), &own_ports));
             times.push(time);
             partitions.push(Partition {
                 name,
@@ -714,6 +714,7 @@ impl Validator<'_, '_> {
         raw: &schema::Partition,
         fb: &Spanned<schema::Iec61499>,
         path: &KeyPath,
+        ports: &[Port],
     ) -> Option<Iec61499> {
         let before = self.r.diagnostics.len();
         let others = [
@@ -734,12 +735,17 @@ impl Validator<'_, '_> {
         let boot_path = path.key("boot");
         let boot = self.source_files(core::slice::from_ref(&f.boot), &boot_path);
         let types = self.source_files(&f.types, &path.key("types"));
+        let mgmt = f
+            .mgmt
+            .as_ref()
+            .and_then(|m| self.online_ports(m, &path.key("mgmt"), ports, MAX_MESSAGE_SIZE));
         if self.r.diagnostics.len() != before {
             return None;
         }
         Some(Iec61499 {
             boot: boot.into_iter().next()?,
             types,
+            mgmt,
         })
     }
 
@@ -827,7 +833,8 @@ impl Validator<'_, '_> {
         let mut outputs = Vec::new();
         let mut mapped = vec![false; ports.len()];
         let online = raw.online.as_ref().and_then(|o| {
-            let online = self.plc_online(o, &path.key("online"), ports)?;
+            let size = plc_online::MAX_MESSAGE as u32;
+            let online = self.online_ports(o, &path.key("online"), ports, size)?;
             mapped[online.request] = true;
             mapped[online.response] = true;
             Some(online)
@@ -1069,16 +1076,16 @@ impl Validator<'_, '_> {
         Some(index)
     }
 
-    /// `plc.online`: a queuing input for requests and a queuing output for responses, both
-    /// of the protocol's message size, and the access level.
-    fn plc_online(
+    /// `plc.online` and `iec61499.mgmt`: a queuing input for requests and a queuing output
+    /// for responses, both of the protocol's message `size`, and the access level.
+    fn online_ports(
         &mut self,
-        raw: &Spanned<schema::PlcOnline>,
+        raw: &Spanned<schema::OnlinePorts>,
         path: &KeyPath,
         ports: &[Port],
-    ) -> Option<PlcOnline> {
+        size: u32,
+    ) -> Option<OnlinePorts> {
         let raw = raw.get_ref();
-        let size = plc_online::MAX_MESSAGE as u32;
         let port = |v: &mut Self, key: &str, name: &Spanned<String>, direction: Direction| {
             let found = ports.iter().position(|p| &p.name == name.get_ref());
             let ok = found.is_some_and(|i| {
@@ -1090,7 +1097,7 @@ impl Validator<'_, '_> {
                     start(name),
                     &path.key(key),
                     format!(
-                        "`{}` must be a queuing `{}` port of this partition with size = {size} (one online message)",
+                        "`{}` must be a queuing `{}` port of this partition with size = {size} (one message of the protocol)",
                         name.get_ref(),
                         direction.name()
                     ),
@@ -1106,12 +1113,12 @@ impl Validator<'_, '_> {
                 start(&raw.access),
                 &path.key("access"),
                 format!(
-                    "unknown access {:?}: expected \"monitor\" (list, read, statistics), \"force\" (also write, force, unforce, stop and start a task) or \"download\" (also online download)",
+                    "unknown access {:?}: expected \"monitor\", \"force\" or \"download\" (what each allows: the \"PLC\" and \"IEC 61499\" sections of the format)",
                     raw.access.get_ref()
                 ),
             );
         }
-        Some(PlcOnline {
+        Some(OnlinePorts {
             request: request?,
             response: response?,
             access: access?,

@@ -69,3 +69,32 @@ fn one_runtime_per_partition() {
         "{errors:?}"
     );
 }
+
+#[test]
+fn management_ports() {
+    let ports = "ports.req = { kind = \"queuing\", direction = \"in\", size = 4096, depth = 4 }\nports.resp = { kind = \"queuing\", direction = \"out\", size = SIZE, depth = 4 }\niec61499.boot = \"tests/data/app.fboot\"\n";
+    // The ports' channels are left out here, so only the iec61499 diagnostics matter.
+    for access in ["monitor", "force", "download"] {
+        let diags = load(&with(&format!(
+            "{}iec61499.mgmt = {{ request = \"req\", response = \"resp\", access = \"{access}\" }}",
+            ports.replace("SIZE", "4096")
+        )))
+        .unwrap_err();
+        assert!(
+            diags
+                .iter()
+                .all(|d| !d.key_path.starts_with("partitions.b.iec61499")),
+            "{diags:?}"
+        );
+    }
+    expect_some(
+        &with(&format!(
+            "{}iec61499.mgmt = {{ request = \"req\", response = \"resp\", access = \"force\" }}",
+            ports.replace("SIZE", "256")
+        )),
+        "\"resp\"",
+        0,
+        "partitions.b.iec61499.mgmt.response",
+        "`resp` must be a queuing `out` port of this partition with size = 4096",
+    );
+}

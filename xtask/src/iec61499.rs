@@ -8,6 +8,8 @@
 use anyhow::{Context, Result, bail};
 use config::System;
 use config::system::SourceFile;
+use iec61499_mgmt::package::{DevicePackage, MgmtPorts, QueuingPort};
+use iec61499_mgmt::serve::Access;
 use iec61499_runtime::Limits;
 
 /// The partition program (`image = "iec61499"`).
@@ -26,8 +28,26 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             .collect::<Result<Vec<_>>>()?;
         let boot = read(&what, &fb.boot)?;
         let limits = Limits::default();
-        let package =
-            iec61499_mgmt::package::encode(&types, &boot, limits.queue, limits.chain_events);
+        let port = |index: usize| {
+            let port = &p.ports[index];
+            QueuingPort {
+                name: &port.name,
+                size: port.size,
+                depth: port.depth,
+            }
+        };
+        let mgmt = fb.mgmt.map(|m| MgmtPorts {
+            access: Access::from_code(m.access as u8).expect("the same codes"),
+            request: port(m.request),
+            response: port(m.response),
+        });
+        let package = iec61499_mgmt::package::encode(&DevicePackage {
+            types: types.iter().map(Vec::as_slice).collect(),
+            boot: &boot,
+            queue: limits.queue,
+            chain_events: limits.chain_events,
+            mgmt,
+        });
         if let Err(reason) = iec61499_mgmt::package::boot(&package, 0) {
             bail!("{what}: {}: {reason}", fb.boot.name);
         }

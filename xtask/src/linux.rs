@@ -18,6 +18,8 @@
 //! - `plcc` (`partitions/softplc/compiler`): the Structured Text compiler, the same Rust
 //!   binary as on the host built the same way, so a user can edit, compile and download a
 //!   PLC program from the guest's shell.
+//! - `fbctl` (`partitions/iec61499/fbctl`): the IEC 61499 management tool (deploy, monitor,
+//!   force, compile and add FB types), built as `plcctl` is.
 //!
 //! They are built into `target/linux/<name>` (only when a source is newer) and reach a
 //! guest's initramfs as `/bin/<name>` through the partition key `guest.programs`
@@ -33,7 +35,11 @@ pub const GCC_PACKAGES: &str = "gcc libc6-dev";
 /// The target of the Rust programs for the guest (static executables with musl).
 pub const MUSL_TARGET: &str = "x86_64-unknown-linux-musl";
 /// The Rust programs: (program, the workspace package whose binary of that name it is).
-const RUST_PROGRAMS: &[(&str, &str)] = &[("plcctl", "plcctl"), ("plcc", "plc-compiler")];
+const RUST_PROGRAMS: &[(&str, &str)] = &[
+    ("plcctl", "plcctl"),
+    ("plcc", "plc-compiler"),
+    ("fbctl", "fbctl"),
+];
 /// The programs built from a main source file of their own (and the shared sources they
 /// also need); `linux-tests` is every source that is no such main file.
 const OWN_MAIN: &[(&str, &str, &[&str])] = &[

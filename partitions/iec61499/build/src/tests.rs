@@ -195,6 +195,74 @@ fn internal_initial_values_hold_at_start_and_after_a_reset() {
 }
 
 #[test]
+fn types_download_in_parts_and_a_bad_one_leaves_the_old_type_running() {
+    use iec61499_mgmt::serve::{Access, serve, type_messages};
+    let text = include_str!("../../../../tests/configs/iec61499/COUNTDOWN.fbt");
+    let old = compile("COUNTDOWN.fbt", text).unwrap().package();
+    let new = compile("COUNTDOWN.fbt", &text.replace("300 / LEFT", "600 / LEFT"))
+        .unwrap()
+        .package();
+    let mut d = iec61499_mgmt::Device::new(Limits::default(), 4);
+    let send =
+        |d: &mut iec61499_mgmt::Device, m: &str| serve(d, m.as_bytes(), Access::Download, 4096, 0);
+    let parts = type_messages("COUNTDOWN", &old, 1024, 10);
+    assert!(
+        parts.len() > 1 && parts.iter().all(|m| m.len() <= 1024),
+        "{}",
+        parts.len()
+    );
+    for m in &parts {
+        assert!(!send(&mut d, m).contains("Reason"), "{m}");
+    }
+    assert_eq!(
+        d.take_log(),
+        [format!(
+            "type COUNTDOWN added: {} bytes, checked",
+            old.len()
+        )]
+    );
+    for m in [
+        ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"EMB_RES\"/></Request>",
+        "R;<Request ID=\"2\" Action=\"CREATE\"><FB Name=\"D\" Type=\"COUNTDOWN\"/></Request>",
+        "R;<Request ID=\"3\" Action=\"START\"/>",
+        "R;<Request ID=\"4\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"D.REQ\"/></Request>",
+    ] {
+        assert!(!send(&mut d, m).contains("Reason"), "{m}");
+    }
+    let q = "R;<Request ID=\"5\" Action=\"READ\"><Connection Source=\"D.Q\" Destination=\"\"/></Request>";
+    assert!(send(&mut d, q).contains("100"), "{}", send(&mut d, q));
+    // A damaged package: refused whole with its reason; the type in use stays.
+    let mut damaged = new.clone();
+    let at = damaged.len() / 2;
+    damaged[at] ^= 0x55;
+    let parts = type_messages("COUNTDOWN", &damaged, 1024, 20);
+    let answers: Vec<String> = parts.iter().map(|m| send(&mut d, m)).collect();
+    assert!(
+        answers.last().unwrap().contains("INVALID_OBJECT"),
+        "{answers:?}"
+    );
+    let log = d.take_log();
+    assert!(log[0].starts_with("type COUNTDOWN refused: "), "{log:?}");
+    // Parts out of order are refused and drop the unfinished package.
+    let parts = type_messages("COUNTDOWN", &new, 1024, 30);
+    assert!(send(&mut d, &parts[1]).contains("INVALID_STATE"));
+    // The new type, whole: new instances are of it, the existing one keeps the old.
+    for m in &parts {
+        assert!(!send(&mut d, m).contains("Reason"), "{m}");
+    }
+    for m in [
+        "R;<Request ID=\"6\" Action=\"STOP\"/>",
+        "R;<Request ID=\"7\" Action=\"CREATE\"><FB Name=\"E\" Type=\"COUNTDOWN\"/></Request>",
+        "R;<Request ID=\"8\" Action=\"START\"/>",
+        "R;<Request ID=\"9\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"E.REQ\"/></Request>",
+    ] {
+        assert!(!send(&mut d, m).contains("Reason"), "{m}");
+    }
+    let q = "R;<Request ID=\"10\" Action=\"READ\"><Connection Source=\"E.Q\" Destination=\"\"/></Request>";
+    assert!(send(&mut d, q).contains("200"), "{}", send(&mut d, q));
+}
+
+#[test]
 fn st_errors_point_into_the_fbt() {
     let bad = COUNTER.replace("CV := CV + 1;", "CV := CV + ;");
     let errors = compile("C.fbt", &bad).unwrap_err();

@@ -34,7 +34,12 @@ pub struct Device {
     max_resources: usize,
     resources: Vec<Res>,
     report: SharedReport,
+    /// A type package arriving in parts: its name and the bytes so far.
+    staged: Option<(String, Vec<u8>)>,
 }
+
+/// The largest type package a device takes.
+pub const MAX_TYPE_PACKAGE: usize = 256 * 1024;
 
 fn deploy_reason(e: &DeployError) -> Reason {
     match e {
@@ -56,6 +61,7 @@ impl Device {
             max_resources,
             resources: Vec::new(),
             report: SharedReport::default(),
+            staged: None,
         }
     }
 
@@ -88,8 +94,69 @@ impl Device {
         response(&request.id, reason, body.as_deref())
     }
 
+    /// A part of a type package ([`Object::FbType`]): parts come in order, the first at
+    /// offset 0 (which drops any unfinished package); the last one adds the type, or
+    /// refuses it whole with its reason logged, the types in use staying as they were.
+    fn type_part(&mut self, name: &str, offset: usize, size: usize, data: &[u8]) -> Option<Reason> {
+        if size > MAX_TYPE_PACKAGE {
+            return Some(Reason::Overflow);
+        }
+        if offset == 0 {
+            self.staged = Some((name.into(), Vec::new()));
+        }
+        let fits = offset
+            .checked_add(data.len())
+            .is_some_and(|end| end <= size);
+        let Some((_, bytes)) = self
+            .staged
+            .as_mut()
+            .filter(|(n, b)| n == name && b.len() == offset && fits)
+        else {
+            self.staged = None;
+            return Some(Reason::InvalidState);
+        };
+        bytes.extend_from_slice(data);
+        if bytes.len() < size {
+            return None;
+        }
+        let Some((_, bytes)) = self.staged.take() else {
+            return Some(Reason::InvalidState);
+        };
+        let checked = package::decode(&bytes).and_then(|p| {
+            if p.name == name {
+                self.install(p)
+            } else {
+                Err(PackageError::Rejected(format!(
+                    "the package holds type {}",
+                    p.name
+                )))
+            }
+        });
+        let line = match checked {
+            Ok(_) => {
+                self.report
+                    .borrow_mut()
+                    .log
+                    .push(format!("type {name} added: {} bytes, checked", bytes.len()));
+                return None;
+            }
+            Err(e) => format!("type {name} refused: {e}"),
+        };
+        self.report.borrow_mut().log.push(line);
+        Some(Reason::InvalidObject)
+    }
+
     fn device_request(&mut self, request: &Request, now: i64) -> Option<Reason> {
         match (&request.action, &request.object) {
+            (
+                Action::Create,
+                Object::FbType {
+                    name,
+                    offset,
+                    size,
+                    data,
+                },
+            ) => self.type_part(name, *offset, *size, data),
             (Action::Create, Object::Fb { name, ty }) => {
                 if ty != EMB_RES {
                     return Some(Reason::UnsupportedType);
@@ -362,7 +429,11 @@ impl Device {
     /// partition; checked whole here: structure, ECC, bytecode verification). New instances
     /// of the name are of this type; existing ones keep theirs. Returns the type's name.
     pub fn add_type(&mut self, bytes: &[u8]) -> Result<String, PackageError> {
-        let package = package::decode(bytes)?;
+        self.install(package::decode(bytes)?)
+    }
+
+    /// Adds (or replaces) a decoded, checked type.
+    fn install(&mut self, package: TypePackage) -> Result<String, PackageError> {
         let name = package.name.clone();
         if stdlib::create(&name).is_some() {
             return Err(PackageError::Rejected(format!(

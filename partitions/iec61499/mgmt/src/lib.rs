@@ -42,6 +42,7 @@ pub mod fboot;
 pub mod literal;
 pub mod package;
 pub mod request;
+pub mod serve;
 pub mod types;
 
 pub use device::Device;

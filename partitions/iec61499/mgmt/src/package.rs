@@ -9,13 +9,17 @@
 //! 0  4 magic "W61D"          4 2 version (1)            6 2 type count
 //! 8  4 CRC-32 of the bytes from offset 12 to the end
 //! 12 4 boot file length      16 4 queue depth (events)  20 4 events per chain
-//! 24 .. per type: length u32, the type package; then the boot file (UTF-8)
+//! 24 1 management ports: 0 none, 1 the ports follow
+//!   [1 access (`serve::Access` code), then request and response port: name length u8,
+//!    name (UTF-8), message size u32, depth u32]
+//! .. per type: length u32, the type package; then the boot file (UTF-8)
 //! ```
 //!
 //! [`boot`] makes the device a package describes; `cargo xtask` runs it on the host too, so
 //! a boot file the device would refuse stops the build.
 
 use crate::Device;
+use crate::serve::Access;
 use alloc::format;
 use alloc::string::String;
 use alloc::vec::Vec;
@@ -31,7 +35,7 @@ pub const MAX_RESOURCES: usize = 4;
 pub const MAX_QUEUE: usize = 4096;
 pub const MAX_CHAIN_EVENTS: usize = 1_000_000;
 
-/// A decoded device package: borrowed views of its parts.
+/// A device package: borrowed views of its parts.
 #[derive(Debug, PartialEq, Eq)]
 pub struct DevicePackage<'a> {
     /// Each type package, in the order the configuration names them.
@@ -41,6 +45,24 @@ pub struct DevicePackage<'a> {
     /// Each resource's event-queue depth and the events one chain may deliver.
     pub queue: usize,
     pub chain_events: usize,
+    /// The queuing ports of the management protocol, if it has a client.
+    pub mgmt: Option<MgmtPorts<'a>>,
+}
+
+/// The management protocol's ports ([`crate::serve`]) and what their client may do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct MgmtPorts<'a> {
+    pub access: Access,
+    pub request: QueuingPort<'a>,
+    pub response: QueuingPort<'a>,
+}
+
+/// A queuing port as the partition creates it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct QueuingPort<'a> {
+    pub name: &'a str,
+    pub size: u32,
+    pub depth: u32,
 }
 
 /// Why a device package was refused.
@@ -62,6 +84,8 @@ pub enum DevicePackageError {
     Trailing(usize),
     /// A queue depth or chain length of 0 or above [`MAX_QUEUE`] / [`MAX_CHAIN_EVENTS`].
     Limit(&'static str, usize),
+    /// The management-ports field at this offset is not valid.
+    Mgmt(usize),
 }
 
 impl core::fmt::Display for DevicePackageError {
@@ -80,6 +104,7 @@ impl core::fmt::Display for DevicePackageError {
             Self::BootText => f.write_str("the boot file is not UTF-8"),
             Self::Trailing(at) => write!(f, "bytes after the boot file at offset {at}"),
             Self::Limit(what, n) => write!(f, "{what} {n} is out of range"),
+            Self::Mgmt(at) => write!(f, "invalid management ports at offset {at}"),
         }
     }
 }
@@ -90,22 +115,35 @@ fn crc(bytes: &[u8]) -> u32 {
     c.finish()
 }
 
-/// A device package of `types` (type packages), `boot` (the boot file), each resource's
-/// `queue` depth and `chain_events` limit.
-pub fn encode(types: &[Vec<u8>], boot: &str, queue: usize, chain_events: usize) -> Vec<u8> {
+/// The bytes of `package`.
+pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
     let mut out = Vec::new();
     out.extend_from_slice(MAGIC);
     out.extend_from_slice(&VERSION.to_le_bytes());
-    out.extend_from_slice(&(types.len() as u16).to_le_bytes());
+    out.extend_from_slice(&(package.types.len() as u16).to_le_bytes());
     let mut body = Vec::new();
-    body.extend_from_slice(&(boot.len() as u32).to_le_bytes());
-    body.extend_from_slice(&(queue as u32).to_le_bytes());
-    body.extend_from_slice(&(chain_events as u32).to_le_bytes());
-    for t in types {
+    body.extend_from_slice(&(package.boot.len() as u32).to_le_bytes());
+    body.extend_from_slice(&(package.queue as u32).to_le_bytes());
+    body.extend_from_slice(&(package.chain_events as u32).to_le_bytes());
+    match &package.mgmt {
+        None => body.push(0),
+        Some(m) => {
+            body.push(1);
+            body.push(m.access as u8);
+            for port in [m.request, m.response] {
+                let name = &port.name.as_bytes()[..port.name.len().min(255)];
+                body.push(name.len() as u8);
+                body.extend_from_slice(name);
+                body.extend_from_slice(&port.size.to_le_bytes());
+                body.extend_from_slice(&port.depth.to_le_bytes());
+            }
+        }
+    }
+    for t in &package.types {
         body.extend_from_slice(&(t.len() as u32).to_le_bytes());
         body.extend_from_slice(t);
     }
-    body.extend_from_slice(boot.as_bytes());
+    body.extend_from_slice(package.boot.as_bytes());
     out.extend_from_slice(&crc(&body).to_le_bytes());
     out.extend_from_slice(&body);
     out
@@ -154,6 +192,31 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
     if !(1..=MAX_CHAIN_EVENTS).contains(&chain_events) {
         return Err(DevicePackageError::Limit("events per chain", chain_events));
     }
+    let mgmt = match take(bytes, &mut at, 1)?[0] {
+        0 => None,
+        1 => {
+            let field = at;
+            let access = Access::from_code(take(bytes, &mut at, 1)?[0])
+                .ok_or(DevicePackageError::Mgmt(field))?;
+            let mut port = || -> Result<QueuingPort<'_>, DevicePackageError> {
+                let field = at;
+                let len = usize::from(take(bytes, &mut at, 1)?[0]);
+                let name = core::str::from_utf8(take(bytes, &mut at, len)?)
+                    .map_err(|_| DevicePackageError::Mgmt(field))?;
+                let size = u32_at(bytes, &mut at)? as u32;
+                let depth = u32_at(bytes, &mut at)? as u32;
+                Ok(QueuingPort { name, size, depth })
+            };
+            let request = port()?;
+            let response = port()?;
+            Some(MgmtPorts {
+                access,
+                request,
+                response,
+            })
+        }
+        _ => return Err(DevicePackageError::Mgmt(at - 1)),
+    };
     let mut types = Vec::with_capacity(count);
     for _ in 0..count {
         let len = u32_at(bytes, &mut at)?;
@@ -169,6 +232,7 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         boot,
         queue,
         chain_events,
+        mgmt,
     })
 }
 
@@ -209,21 +273,49 @@ mod tests {
     use super::*;
     use alloc::vec;
 
+    fn package<'a>(
+        types: &[&'a [u8]],
+        boot: &'a str,
+        queue: usize,
+        chain: usize,
+    ) -> DevicePackage<'a> {
+        DevicePackage {
+            types: types.to_vec(),
+            boot,
+            queue,
+            chain_events: chain,
+            mgmt: None,
+        }
+    }
+
     #[test]
     fn round_trip() {
-        let types = vec![vec![1, 2, 3], vec![], vec![9; 300]];
-        let bytes = encode(&types, "R;<Request ID=\"1\" Action=\"START\"/>\n", 8, 100);
-        let package = decode(&bytes).unwrap();
-        assert_eq!(package.types, [&[1, 2, 3][..], &[], &[9; 300][..]]);
-        assert!(package.boot.contains("START"));
-        assert_eq!((package.queue, package.chain_events), (8, 100));
+        let port = |name, depth| QueuingPort {
+            name,
+            size: 4096,
+            depth,
+        };
+        let original = DevicePackage {
+            types: vec![&[1, 2, 3], &[], &[9; 300]],
+            boot: "R;<Request ID=\"1\" Action=\"START\"/>\n",
+            queue: 8,
+            chain_events: 100,
+            mgmt: Some(MgmtPorts {
+                access: Access::Force,
+                request: port("fb-req", 4),
+                response: port("fb-resp", 2),
+            }),
+        };
+        assert_eq!(decode(&encode(&original)).unwrap(), original);
+        let plain = package(&[], "", 1, 1);
+        assert_eq!(decode(&encode(&plain)).unwrap(), plain);
     }
 
     #[test]
     fn damage_is_refused_never_panics() {
-        let bytes = encode(&[vec![7; 20]], "boot", 1, 1);
+        let bytes = encode(&package(&[&[7; 20]], "boot", 1, 1));
         assert_eq!(
-            decode(&encode(&[], "", 0, 1)),
+            decode(&encode(&package(&[], "", 0, 1))),
             Err(DevicePackageError::Limit("queue depth", 0))
         );
         assert_eq!(decode(b"W61"), Err(DevicePackageError::Truncated(0)));
@@ -251,7 +343,7 @@ mod tests {
     #[test]
     fn boot_runs_the_file_and_names_a_refused_line() {
         let ok = "\n;<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"EMB_RES\"/></Request>\nR;<Request ID=\"2\" Action=\"START\"/>\n";
-        let (_, booted) = boot(&encode(&[], ok, 16, 100), 0).unwrap();
+        let (_, booted) = boot(&encode(&package(&[], ok, 16, 100)), 0).unwrap();
         assert_eq!(
             booted,
             Booted {
@@ -260,12 +352,12 @@ mod tests {
             }
         );
         let bad = ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"NOPE\"/></Request>\n";
-        let e = boot(&encode(&[], bad, 16, 100), 0).err().unwrap();
+        let e = boot(&encode(&package(&[], bad, 16, 100)), 0).err().unwrap();
         assert!(
             e.contains("line 1") && e.contains("UNSUPPORTED_TYPE"),
             "{e}"
         );
-        let e = boot(&encode(&[vec![1, 2, 3]], ok, 16, 100), 0)
+        let e = boot(&encode(&package(&[&[1, 2, 3]], ok, 16, 100)), 0)
             .err()
             .unwrap();
         assert!(e.starts_with("type 1 of the package"), "{e}");

@@ -2,6 +2,7 @@
 
 use alloc::format;
 use alloc::string::{String, ToString};
+use alloc::vec::Vec;
 
 /// What a request does.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -52,6 +53,16 @@ pub enum Object {
         source: String,
         destination: String,
     },
+    /// A part of a compiled FB type's package (ours: 4diac has no compiled types):
+    /// `<FBType Name="T" Offset="0" Size="5234" Data="base64"/>`, the bytes `Offset..` of a
+    /// package of `Size` bytes; the part that completes it adds the type
+    /// ([`crate::Device::add_type`]).
+    FbType {
+        name: String,
+        offset: usize,
+        size: usize,
+        data: Vec<u8>,
+    },
 }
 
 /// A request.
@@ -76,6 +87,9 @@ pub enum Reason {
     InvalidState,
     Overflow,
     InvalidDst,
+    /// The client's access level does not allow the request (ours; see
+    /// [`crate::serve::Access`]).
+    AccessDenied,
 }
 
 impl Reason {
@@ -91,6 +105,7 @@ impl Reason {
             Reason::InvalidState => "INVALID_STATE",
             Reason::Overflow => "OVERFLOW",
             Reason::InvalidDst => "INVALID_DST",
+            Reason::AccessDenied => "ACCESS_DENIED",
         }
     }
 }
@@ -135,6 +150,25 @@ impl Request {
                     source: attr(node, "Source").map_err(bad)?,
                     destination: attr(node, "Destination").map_err(bad)?,
                 },
+                "FBType" => {
+                    let number = |name: &str| {
+                        node.attribute(name)
+                            .and_then(|v| v.parse::<usize>().ok())
+                            .ok_or(())
+                    };
+                    let data = node.attribute("Data").ok_or(()).and_then(|d| {
+                        use base64::Engine as _;
+                        base64::engine::general_purpose::STANDARD
+                            .decode(d)
+                            .map_err(|_| ())
+                    });
+                    Object::FbType {
+                        name: attr(node, "Name").map_err(bad)?,
+                        offset: number("Offset").map_err(bad)?,
+                        size: number("Size").map_err(bad)?,
+                        data: data.map_err(bad)?,
+                    }
+                }
                 _ => return Err((id, Reason::UnsupportedCmd)),
             },
         };

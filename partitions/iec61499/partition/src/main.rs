@@ -3,13 +3,17 @@
 //! `cargo xtask` wrote from `iec61499.*` (`iec61499_mgmt::package`).
 //!
 //! One APEX process, the device process, owns the device: it boots the package at its
-//! first run, then sleeps (TIMED_WAIT) until the earliest timer of a running resource
-//! (E_CYCLE, E_DELAY, ...), fires every timer due, and sleeps again. Timers are absolute
-//! instants (`Device::advance`), so a late wake-up delays one firing but never shifts the
-//! ones after it.
+//! first run, then waits until the earliest timer of a running resource (E_CYCLE,
+//! E_DELAY, ...), fires every timer due, and waits again. Timers are absolute instants
+//! (`Device::advance`), so a late wake-up delays one firing but never shifts the ones
+//! after it. With management ports (`iec61499.mgmt`, created at start), the wait is a
+//! RECEIVE_QUEUING_MESSAGE on the request port: a request is answered on the response port
+//! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
+//! one.
 //!
 //! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
-//! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted;
+//! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted, then
+//!   `iec61499: management on <request>/<response>, access <level>` with management ports;
 //! - `iec61499: refusing the boot package: <reason>` when it did not (reported to the
 //!   health monitor as APPLICATION_ERROR; the process stops, the partition idles);
 //! - every line the device logs (`iec61499_mgmt::Device::take_log`): the test FBs'
@@ -19,7 +23,8 @@
 //! - `iec61499: t=<ms>ms timers=<n> lateness_ns=<min>/<mean>/<max>` at every whole
 //!   [`STATS_EVERY_MS`] of the partition's clock (`t`) while timers fire: how many wake-ups
 //!   for timers there were since the line before and how late after its instant each ran
-//!   (on virtual time, the runtime's own cost).
+//!   (an instant outside the partition's windows waits for the next one; inside them, on
+//!   virtual time, the lateness is the runtime's own cost).
 #![no_std]
 #![no_main]
 
@@ -31,6 +36,8 @@ use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
 use iec61499_mgmt::Device;
+use iec61499_mgmt::package::{MgmtPorts, QueuingPort};
+use iec61499_mgmt::serve::{Access, serve};
 
 /// How often the statistics line is printed.
 const STATS_EVERY_MS: i64 = 1000;
@@ -83,8 +90,65 @@ impl Lateness {
     }
 }
 
+/// The management ports, opened by the device process (created at start).
+struct Mgmt {
+    request: QueuingPortReceiver<Warden>,
+    response: QueuingPortSender<Warden>,
+    access: Access,
+    size: usize,
+}
+
+impl Mgmt {
+    fn open(ports: &MgmtPorts<'_>) -> Option<Self> {
+        Some(Mgmt {
+            request: QueuingPortReceiver::from_name(Name::from_str(ports.request.name).ok()?)
+                .ok()?,
+            response: QueuingPortSender::from_name(Name::from_str(ports.response.name).ok()?)
+                .ok()?,
+            access: ports.access,
+            size: ports.response.size as usize,
+        })
+    }
+}
+
+/// Waits `timeout` for a request and answers it; false when the wait failed.
+fn wait(device: &mut Device, mgmt: Option<&Mgmt>, timeout: Duration, buf: &mut [u8]) -> bool {
+    let Some(m) = mgmt else {
+        return <Warden as ApexTimeP1Ext>::timed_wait(timeout).is_ok();
+    };
+    match m.request.receive(buf, SystemTime::Normal(timeout)) {
+        Ok((message, _)) => {
+            let answer = serve(device, message, m.access, m.size, now_ns());
+            if m.response
+                .send(answer.as_bytes(), SystemTime::Normal(Duration::ZERO))
+                .is_err()
+            {
+                println!("iec61499: management response dropped: the response port is full");
+            }
+            true
+        }
+        Err(Error::TimedOut) => true,
+        // A message the port could not hand over whole: sleep as without a client rather
+        // than spin on it.
+        Err(Error::InvalidConfig | Error::NotAvailable) => {
+            <Warden as ApexTimeP1Ext>::timed_wait(timeout).is_ok()
+        }
+        Err(e) => {
+            report(&alloc::format!("RECEIVE_QUEUING_MESSAGE failed: {e:?}"));
+            false
+        }
+    }
+}
+
 extern "C" fn device_process() {
     let info = apex::runtime::start_info();
+    let package = match iec61499_mgmt::package::decode(info.data()) {
+        Ok(package) => package,
+        Err(reason) => {
+            report(&alloc::format!("refusing the boot package: {reason}"));
+            return;
+        }
+    };
     let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), now_ns()) {
         Ok(booted) => booted,
         Err(reason) => {
@@ -96,6 +160,20 @@ extern "C" fn device_process() {
         "iec61499: booted: {} type(s), {} boot request(s)",
         booted.types, booted.requests
     );
+    let mgmt = package.mgmt.as_ref().and_then(Mgmt::open);
+    match (&package.mgmt, &mgmt) {
+        (Some(p), Some(m)) => println!(
+            "iec61499: management on {}/{}, access {:?}",
+            p.request.name, p.response.name, m.access
+        ),
+        (Some(p), None) => report(&alloc::format!(
+            "cannot open the management ports {}/{}",
+            p.request.name,
+            p.response.name
+        )),
+        (None, _) => {}
+    }
+    let mut buf = alloc::vec![0u8; package.mgmt.map_or(0, |p| p.request.size as usize)];
     let mut faults_seen = 0;
     drain(&mut device, &mut faults_seen);
     let mut lateness = Lateness::default();
@@ -127,10 +205,10 @@ extern "C" fn device_process() {
             Some(due) => Duration::from_nanos((due - now) as u64).min(IDLE),
             None => IDLE,
         };
-        if <Warden as ApexTimeP1Ext>::timed_wait(sleep).is_err() {
-            report("TIMED_WAIT failed; stopping");
+        if !wait(&mut device, mgmt.as_ref(), sleep, &mut buf) {
             return;
         }
+        drain(&mut device, &mut faults_seen);
     }
 }
 
@@ -138,6 +216,37 @@ struct Iec61499Partition;
 
 impl Iec61499Partition {
     fn start(&self, ctx: &mut StartContext<Warden>) {
+        if let Ok(package) = iec61499_mgmt::package::decode(apex::runtime::start_info().data())
+            && let Some(m) = package.mgmt
+        {
+            let port =
+                |p: &QueuingPort<'_>| Name::from_str(p.name).map_err(|_| Error::InvalidParam);
+            let created = port(&m.request)
+                .and_then(|n| {
+                    ctx.create_queuing_port_receiver(
+                        n,
+                        m.request.size,
+                        m.request.depth,
+                        QueuingDiscipline::Fifo,
+                    )
+                    .map(drop)
+                })
+                .and_then(|()| port(&m.response))
+                .and_then(|n| {
+                    ctx.create_queuing_port_sender(
+                        n,
+                        m.response.size,
+                        m.response.depth,
+                        QueuingDiscipline::Fifo,
+                    )
+                    .map(drop)
+                });
+            if let Err(e) = created {
+                report(&alloc::format!(
+                    "creating the management ports failed: {e:?}"
+                ));
+            }
+        }
         let Ok(name) = Name::from_str("device") else {
             return;
         };
