@@ -1,6 +1,7 @@
 //! IEC 61499 scenarios: the function-block runtime partition (`partitions/iec61499/partition`)
 //! booted from its configured boot file.
 
+use plant::Status;
 use scenarios::{boot, check};
 use xtask::qemu::{Ending, Outcome};
 
@@ -153,5 +154,173 @@ fn iec61499_deploy() {
             .count()
             == 2,
         "the type was added twice (the original, the changed one)",
+    );
+}
+
+/// The band around the 1 m setpoint (as `plc_tank`), when the level must be in it, and the
+/// plant's first disturbance.
+const BAND: f64 = 0.1;
+const SETTLED_MS: u64 = 8_000;
+const DISTURBANCE_MS: (u64, u64) = (20_000, 25_000);
+
+/// The `watch` values of the fb partition: `(t in ms, name, value)`.
+fn watches(o: &Outcome) -> Vec<(u64, String, String)> {
+    let mut out = Vec::new();
+    for l in &o.lines {
+        let Some(rest) = l.split_once("[fb] iec61499: t=").map(|(_, r)| r) else {
+            continue;
+        };
+        let Some((t, values)) = rest.split_once("ms watch ") else {
+            continue;
+        };
+        let Ok(t) = t.parse::<u64>() else { continue };
+        for pair in values.split(' ') {
+            if let Some((name, value)) = pair.split_once('=') {
+                out.push((t, name.to_string(), value.to_string()));
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn iec61499_tank() {
+    let o = boot("iec61499_tank");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the stopwatch ends the run",
+    );
+    check(
+        &o,
+        o.line("[fb] iec61499: booted: 2 type(s), ").is_some(),
+        "the device booted with its two FB types",
+    );
+    let status: Vec<Status> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("plant: t="))
+        .filter_map(|l| Status::parse(l))
+        .collect();
+    check(
+        &o,
+        status.len() >= 60,
+        &format!("{} plant status lines", status.len()),
+    );
+    let settled = status
+        .iter()
+        .find(|s| (s.level - 1.0).abs() <= BAND)
+        .map(|s| s.t_ms);
+    check(
+        &o,
+        settled.is_some_and(|t| t <= SETTLED_MS),
+        &format!("level in the band at {settled:?} ms, not by {SETTLED_MS} ms"),
+    );
+    // The plant counts the releases that found no fresh valve command; those before the
+    // device's first cycle (while it boots) are the only ones.
+    let stale_at_start = status
+        .iter()
+        .find(|s| s.t_ms >= 1_000)
+        .map_or(0, |s| s.stale);
+    for s in status
+        .iter()
+        .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms))
+    {
+        check(
+            &o,
+            (s.level - 1.0).abs() <= BAND && s.setpoint == Some(1.0) && s.stale == stale_at_start,
+            &format!("{s}: out of the band, without the setpoint, or a stale valve"),
+        );
+    }
+    let alarm: Vec<(u64, bool)> = watches(&o)
+        .into_iter()
+        .filter(|(_, name, _)| name == "TANK.ALARM.ALARM")
+        .map(|(t, _, v)| (t, v == "TRUE"))
+        .collect();
+    check(
+        &o,
+        alarm.len() >= 30,
+        &format!("{} alarm watch values", alarm.len()),
+    );
+    check(
+        &o,
+        alarm.iter().all(|&(t, on)| t >= DISTURBANCE_MS.0 || !on),
+        "the alarm was raised before the disturbance",
+    );
+    check(
+        &o,
+        alarm
+            .iter()
+            .any(|&(t, on)| on && (DISTURBANCE_MS.0..=DISTURBANCE_MS.1 + 2_000).contains(&t)),
+        "the alarm was not raised during the disturbance",
+    );
+    // 100 cycles a second: one timer wake-up each, none lost.
+    let timers: Vec<u64> = o
+        .lines
+        .iter()
+        .filter_map(|l| {
+            l.split_once("[fb] iec61499: t=")?
+                .1
+                .split_once(" timers=")?
+                .1
+                .split(' ')
+                .next()?
+                .parse()
+                .ok()
+        })
+        .collect();
+    check(
+        &o,
+        timers.len() >= 30 && timers[1..].iter().all(|&n| n == 100),
+        &format!("the E_CYCLE fires 100 times a second: {timers:?}"),
+    );
+}
+
+#[test]
+fn iec61499_system() {
+    let o = boot("iec61499_system");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        matches!(o.ending, Ending::TimedOut),
+        "expected the system to run until the timeout",
+    );
+    // Both tanks get their controller's setpoint: each controller runs and reaches its plant.
+    for plant in ["plant", "plant2"] {
+        let status: Vec<Status> = o
+            .lines
+            .iter()
+            .filter(|l| l.contains(&format!("[{plant}] plant: t=")))
+            .filter_map(|l| Status::parse(l))
+            .collect();
+        check(
+            &o,
+            status
+                .iter()
+                .any(|s| s.setpoint == Some(1.0) && s.level > 0.5),
+            &format!("{plant}: no status line with the setpoint 1.0 and a rising level"),
+        );
+    }
+    let console = o.console_lines();
+    check(
+        &o,
+        console
+            .iter()
+            .any(|l| l.starts_with("Warden: two tanks, two PLC models")),
+        "console: no banner",
+    );
+    check(
+        &o,
+        console
+            .iter()
+            .any(|l| l.contains("<Port name=\"IN\"><Data value=\"")),
+        "console: fbctl did not read the device's watches",
+    );
+    check(
+        &o,
+        console.iter().any(|l| l.contains("refused: ACCESS_DENIED"))
+            && console.contains(&"type status 1"),
+        "console: a monitor client's type download was not refused",
     );
 }

@@ -7,9 +7,11 @@
 
 use anyhow::{Context, Result, bail};
 use config::System;
+use config::model::{Direction, PortKind};
 use config::system::SourceFile;
-use iec61499_mgmt::package::{DevicePackage, MgmtPorts, QueuingPort};
+use iec61499_mgmt::package::{DevicePackage, MgmtPorts, QueuingPort, SamplingPort};
 use iec61499_mgmt::serve::Access;
+use iec61499_mgmt::sifb::NoPorts;
 use iec61499_runtime::Limits;
 
 /// The partition program (`image = "iec61499"`).
@@ -41,14 +43,26 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             request: port(m.request),
             response: port(m.response),
         });
+        let ports = p
+            .ports
+            .iter()
+            .filter(|port| port.kind == PortKind::Sampling)
+            .map(|port| SamplingPort {
+                name: &port.name,
+                input: port.direction == Direction::In,
+                size: port.size,
+                refresh_ns: port.refresh,
+            })
+            .collect();
         let package = iec61499_mgmt::package::encode(&DevicePackage {
             types: types.iter().map(Vec::as_slice).collect(),
             boot: &boot,
             queue: limits.queue,
             chain_events: limits.chain_events,
             mgmt,
+            ports,
         });
-        if let Err(reason) = iec61499_mgmt::package::boot(&package, 0) {
+        if let Err(reason) = iec61499_mgmt::package::boot(&package, Box::new(NoPorts), 0) {
             bail!("{what}: {}: {reason}", fb.boot.name);
         }
         out.push((p.name.clone(), package));

@@ -3,6 +3,7 @@
 use crate::fboot;
 use crate::literal;
 use crate::request::{Action, Object, Reason, Request, escape, response};
+use crate::sifb;
 use crate::types::{self, Report, SharedReport};
 use alloc::format;
 use alloc::string::String;
@@ -36,6 +37,8 @@ pub struct Device {
     report: SharedReport,
     /// A type package arriving in parts: its name and the bytes so far.
     staged: Option<(String, Vec<u8>)>,
+    /// The partition's ports, for the process-image FBs ([`crate::sifb`]).
+    io: sifb::Io,
 }
 
 /// The largest type package a device takes.
@@ -62,7 +65,13 @@ impl Device {
             resources: Vec::new(),
             report: SharedReport::default(),
             staged: None,
+            io: sifb::share(alloc::boxed::Box::new(sifb::NoPorts)),
         }
+    }
+
+    /// The ports the process-image FBs created from now on use (a new device has none).
+    pub fn set_io(&mut self, io: alloc::boxed::Box<dyn sifb::ProcessIo>) {
+        self.io = sifb::share(io);
     }
 
     /// What the test FBs reported.
@@ -239,6 +248,7 @@ impl Device {
             .position(|r| r.name == destination)
             .ok_or(Reason::InvalidDst)?;
         let report = self.report.clone();
+        let io = self.io.clone();
         let r = &mut self.resources[index];
         let deploy = |e: DeployError| deploy_reason(&e);
         match (request.action, &request.object) {
@@ -251,6 +261,7 @@ impl Device {
                 let r = &mut self.resources[index];
                 let fb = added
                     .or_else(|| types::create(ty, destination, name, &report))
+                    .or_else(|| sifb::create(ty, &io))
                     .ok_or(Reason::UnsupportedType)?;
                 r.resource.create(name, fb).map_err(deploy)?;
                 r.types.push((name.clone(), ty.clone()));
@@ -379,6 +390,19 @@ impl Device {
     }
 
     /// Every watched port's value, as READ of the watches answers.
+    /// Every watched port as `RESOURCE.FB.PORT` and its value as an IEC literal (`?` for a
+    /// port that is gone), in creation order.
+    pub fn watched(&self) -> Vec<(String, String)> {
+        let mut out = Vec::new();
+        for r in &self.resources {
+            for w in &r.watches {
+                let value = r.resource.read(w).map_or(String::from("?"), literal::show);
+                out.push((format!("{}.{w}", r.name), value));
+            }
+        }
+        out
+    }
+
     fn watches(&self) -> String {
         let mut out = String::from("<Watches>");
         for r in self.resources.iter().filter(|r| !r.watches.is_empty()) {

@@ -43,6 +43,7 @@ pub mod literal;
 pub mod package;
 pub mod request;
 pub mod serve;
+pub mod sifb;
 pub mod types;
 
 pub use device::Device;

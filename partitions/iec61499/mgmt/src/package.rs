@@ -12,6 +12,8 @@
 //! 24 1 management ports: 0 none, 1 the ports follow
 //!   [1 access (`serve::Access` code), then request and response port: name length u8,
 //!    name (UTF-8), message size u32, depth u32]
+//! .. sampling ports (for the process-image FBs, `crate::sifb`): count u16, per port: name
+//!    length u8, name, direction u8 (1 in, 0 out), message size u32, refresh period u64 (ns)
 //! .. per type: length u32, the type package; then the boot file (UTF-8)
 //! ```
 //!
@@ -29,6 +31,8 @@ const MAGIC: &[u8; 4] = b"W61D";
 const VERSION: u16 = 1;
 /// The most types one package may carry.
 pub const MAX_TYPES: usize = 256;
+/// The most sampling ports a package names (a partition has fewer).
+pub const MAX_PORTS: usize = 128;
 /// The most resources a device holds.
 pub const MAX_RESOURCES: usize = 4;
 /// The largest event queue and chain a package may ask for.
@@ -47,6 +51,17 @@ pub struct DevicePackage<'a> {
     pub chain_events: usize,
     /// The queuing ports of the management protocol, if it has a client.
     pub mgmt: Option<MgmtPorts<'a>>,
+    /// The partition's sampling ports.
+    pub ports: Vec<SamplingPort<'a>>,
+}
+
+/// A sampling port as the partition creates it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct SamplingPort<'a> {
+    pub name: &'a str,
+    pub input: bool,
+    pub size: u32,
+    pub refresh_ns: u64,
 }
 
 /// The management protocol's ports ([`crate::serve`]) and what their client may do.
@@ -86,6 +101,8 @@ pub enum DevicePackageError {
     Limit(&'static str, usize),
     /// The management-ports field at this offset is not valid.
     Mgmt(usize),
+    /// The sampling-ports field at this offset is not valid.
+    Ports(usize),
 }
 
 impl core::fmt::Display for DevicePackageError {
@@ -105,6 +122,7 @@ impl core::fmt::Display for DevicePackageError {
             Self::Trailing(at) => write!(f, "bytes after the boot file at offset {at}"),
             Self::Limit(what, n) => write!(f, "{what} {n} is out of range"),
             Self::Mgmt(at) => write!(f, "invalid management ports at offset {at}"),
+            Self::Ports(at) => write!(f, "invalid sampling ports at offset {at}"),
         }
     }
 }
@@ -131,13 +149,18 @@ pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
             body.push(1);
             body.push(m.access as u8);
             for port in [m.request, m.response] {
-                let name = &port.name.as_bytes()[..port.name.len().min(255)];
-                body.push(name.len() as u8);
-                body.extend_from_slice(name);
+                push_name(&mut body, port.name);
                 body.extend_from_slice(&port.size.to_le_bytes());
                 body.extend_from_slice(&port.depth.to_le_bytes());
             }
         }
+    }
+    body.extend_from_slice(&(package.ports.len() as u16).to_le_bytes());
+    for port in &package.ports {
+        push_name(&mut body, port.name);
+        body.push(u8::from(port.input));
+        body.extend_from_slice(&port.size.to_le_bytes());
+        body.extend_from_slice(&port.refresh_ns.to_le_bytes());
     }
     for t in &package.types {
         body.extend_from_slice(&(t.len() as u32).to_le_bytes());
@@ -147,6 +170,19 @@ pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
     out.extend_from_slice(&crc(&body).to_le_bytes());
     out.extend_from_slice(&body);
     out
+}
+
+/// A name: length u8, then at most 255 bytes of it (port names are far shorter).
+fn push_name(body: &mut Vec<u8>, name: &str) {
+    let name = &name.as_bytes()[..name.len().min(255)];
+    body.push(name.len() as u8);
+    body.extend_from_slice(name);
+}
+
+fn name_at<'a>(bytes: &'a [u8], at: &mut usize) -> Result<&'a str, DevicePackageError> {
+    let field = *at;
+    let len = usize::from(take(bytes, at, 1)?[0]);
+    core::str::from_utf8(take(bytes, at, len)?).map_err(|_| DevicePackageError::Ports(field))
 }
 
 fn take<'a>(bytes: &'a [u8], at: &mut usize, len: usize) -> Result<&'a [u8], DevicePackageError> {
@@ -199,10 +235,7 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
             let access = Access::from_code(take(bytes, &mut at, 1)?[0])
                 .ok_or(DevicePackageError::Mgmt(field))?;
             let mut port = || -> Result<QueuingPort<'_>, DevicePackageError> {
-                let field = at;
-                let len = usize::from(take(bytes, &mut at, 1)?[0]);
-                let name = core::str::from_utf8(take(bytes, &mut at, len)?)
-                    .map_err(|_| DevicePackageError::Mgmt(field))?;
+                let name = name_at(bytes, &mut at)?;
                 let size = u32_at(bytes, &mut at)? as u32;
                 let depth = u32_at(bytes, &mut at)? as u32;
                 Ok(QueuingPort { name, size, depth })
@@ -217,6 +250,32 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         }
         _ => return Err(DevicePackageError::Mgmt(at - 1)),
     };
+    let field = at;
+    let port_count = take(bytes, &mut at, 2)?;
+    let port_count = usize::from(u16::from_le_bytes([port_count[0], port_count[1]]));
+    if port_count > MAX_PORTS {
+        return Err(DevicePackageError::Ports(field));
+    }
+    let mut ports = Vec::with_capacity(port_count);
+    for _ in 0..port_count {
+        let name = name_at(bytes, &mut at)?;
+        let field = at;
+        let input = match take(bytes, &mut at, 1)?[0] {
+            0 => false,
+            1 => true,
+            _ => return Err(DevicePackageError::Ports(field)),
+        };
+        let size = u32_at(bytes, &mut at)? as u32;
+        let refresh = take(bytes, &mut at, 8)?;
+        let mut raw = [0u8; 8];
+        raw.copy_from_slice(refresh);
+        ports.push(SamplingPort {
+            name,
+            input,
+            size,
+            refresh_ns: u64::from_le_bytes(raw),
+        });
+    }
     let mut types = Vec::with_capacity(count);
     for _ in 0..count {
         let len = u32_at(bytes, &mut at)?;
@@ -233,6 +292,7 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         queue,
         chain_events,
         mgmt,
+        ports,
     })
 }
 
@@ -243,9 +303,14 @@ pub struct Booted {
     pub requests: usize,
 }
 
-/// The device a package describes, its types added and its boot file carried out at
-/// instant `now`; or why not (the package, a type or a boot-file line, named).
-pub fn boot(bytes: &[u8], now: i64) -> Result<(Device, Booted), String> {
+/// The device a package describes, its process-image FBs on `io`, its types added and its
+/// boot file carried out at instant `now`; or why not (the package, a type or a boot-file
+/// line, named).
+pub fn boot(
+    bytes: &[u8],
+    io: alloc::boxed::Box<dyn crate::sifb::ProcessIo>,
+    now: i64,
+) -> Result<(Device, Booted), String> {
     let package = decode(bytes).map_err(|e| format!("{e}"))?;
     let limits = Limits {
         queue: package.queue,
@@ -253,6 +318,7 @@ pub fn boot(bytes: &[u8], now: i64) -> Result<(Device, Booted), String> {
         ..Limits::default()
     };
     let mut device = Device::new(limits, MAX_RESOURCES);
+    device.set_io(io);
     for (index, t) in package.types.iter().enumerate() {
         device
             .add_type(t)
@@ -271,6 +337,8 @@ pub fn boot(bytes: &[u8], now: i64) -> Result<(Device, Booted), String> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::sifb::NoPorts;
+    use alloc::boxed::Box;
     use alloc::vec;
 
     fn package<'a>(
@@ -285,6 +353,7 @@ mod tests {
             queue,
             chain_events: chain,
             mgmt: None,
+            ports: Vec::new(),
         }
     }
 
@@ -305,6 +374,20 @@ mod tests {
                 request: port("fb-req", 4),
                 response: port("fb-resp", 2),
             }),
+            ports: vec![
+                SamplingPort {
+                    name: "level",
+                    input: true,
+                    size: 8,
+                    refresh_ns: 100_000_000,
+                },
+                SamplingPort {
+                    name: "valve",
+                    input: false,
+                    size: 8,
+                    refresh_ns: 0,
+                },
+            ],
         };
         assert_eq!(decode(&encode(&original)).unwrap(), original);
         let plain = package(&[], "", 1, 1);
@@ -343,7 +426,7 @@ mod tests {
     #[test]
     fn boot_runs_the_file_and_names_a_refused_line() {
         let ok = "\n;<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"EMB_RES\"/></Request>\nR;<Request ID=\"2\" Action=\"START\"/>\n";
-        let (_, booted) = boot(&encode(&package(&[], ok, 16, 100)), 0).unwrap();
+        let (_, booted) = boot(&encode(&package(&[], ok, 16, 100)), Box::new(NoPorts), 0).unwrap();
         assert_eq!(
             booted,
             Booted {
@@ -352,14 +435,20 @@ mod tests {
             }
         );
         let bad = ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"NOPE\"/></Request>\n";
-        let e = boot(&encode(&package(&[], bad, 16, 100)), 0).err().unwrap();
+        let e = boot(&encode(&package(&[], bad, 16, 100)), Box::new(NoPorts), 0)
+            .err()
+            .unwrap();
         assert!(
             e.contains("line 1") && e.contains("UNSUPPORTED_TYPE"),
             "{e}"
         );
-        let e = boot(&encode(&package(&[&[1, 2, 3]], ok, 16, 100)), 0)
-            .err()
-            .unwrap();
+        let e = boot(
+            &encode(&package(&[&[1, 2, 3]], ok, 16, 100)),
+            Box::new(NoPorts),
+            0,
+        )
+        .err()
+        .unwrap();
         assert!(e.starts_with("type 1 of the package"), "{e}");
     }
 

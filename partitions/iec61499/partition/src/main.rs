@@ -6,7 +6,8 @@
 //! first run, then waits until the earliest timer of a running resource (E_CYCLE,
 //! E_DELAY, ...), fires every timer due, and waits again. Timers are absolute instants
 //! (`Device::advance`), so a late wake-up delays one firing but never shifts the ones
-//! after it. With management ports (`iec61499.mgmt`, created at start), the wait is a
+//! after it. The partition's sampling ports (created at start) are the process image of
+//! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`). With management ports (`iec61499.mgmt`, created at start), the wait is a
 //! RECEIVE_QUEUING_MESSAGE on the request port: a request is answered on the response port
 //! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
 //! one.
@@ -24,20 +25,26 @@
 //!   [`STATS_EVERY_MS`] of the partition's clock (`t`) while timers fire: how many wake-ups
 //!   for timers there were since the line before and how late after its instant each ran
 //!   (an instant outside the partition's windows waits for the next one; inside them, on
-//!   virtual time, the lateness is the runtime's own cost).
+//!   virtual time, the lateness is the runtime's own cost), then
+//!   `iec61499: t=<ms>ms watch <RESOURCE>.<FB>.<PORT>=<value> ...` for the watched ports
+//!   (values as IEC literals; as many lines as they need).
 #![no_std]
 #![no_main]
 
 extern crate alloc;
 
+use alloc::boxed::Box;
+use alloc::string::String;
+use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
 use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
 use iec61499_mgmt::Device;
-use iec61499_mgmt::package::{MgmtPorts, QueuingPort};
+use iec61499_mgmt::package::{MgmtPorts, QueuingPort, SamplingPort};
 use iec61499_mgmt::serve::{Access, serve};
+use iec61499_mgmt::sifb::ProcessIo;
 
 /// How often the statistics line is printed.
 const STATS_EVERY_MS: i64 = 1000;
@@ -68,6 +75,22 @@ fn drain(device: &mut Device, faults_seen: &mut u32) {
         }
     }
     *faults_seen = faults;
+}
+
+/// The watched ports' values (watches come from the boot file or a management client),
+/// as many to a line as fit the partition's log lines.
+fn print_watches(device: &Device, at_ns: i64) {
+    let mut line = String::new();
+    for (name, value) in device.watched() {
+        if line.len() + name.len() + value.len() > 160 {
+            println!("iec61499: t={}ms watch{line}", at_ns / 1_000_000);
+            line.clear();
+        }
+        line.push_str(&alloc::format!(" {name}={value}"));
+    }
+    if !line.is_empty() {
+        println!("iec61499: t={}ms watch{line}", at_ns / 1_000_000);
+    }
 }
 
 /// Lateness of the timer wake-ups since the last statistics line.
@@ -111,6 +134,66 @@ impl Mgmt {
     }
 }
 
+/// The partition's sampling ports (created at start) for the process-image FBs.
+struct ApexIo {
+    ports: Vec<(String, usize, Sampling)>,
+}
+
+enum Sampling {
+    In(SamplingPortDestination<Warden>),
+    Out(SamplingPortSource<Warden>),
+}
+
+impl ApexIo {
+    fn open(ports: &[SamplingPort<'_>]) -> Self {
+        let ports = ports
+            .iter()
+            .filter_map(|p| {
+                let name = Name::from_str(p.name).ok()?;
+                let port = if p.input {
+                    Sampling::In(SamplingPortDestination::from_name(name).ok()?)
+                } else {
+                    Sampling::Out(SamplingPortSource::from_name(name).ok()?)
+                };
+                Some((p.name.into(), p.size as usize, port))
+            })
+            .collect();
+        ApexIo { ports }
+    }
+
+    fn find(&self, port: &str) -> Option<&(String, usize, Sampling)> {
+        self.ports.iter().find(|(name, _, _)| name == port)
+    }
+}
+
+impl ProcessIo for ApexIo {
+    fn size(&self, port: &str, input: bool) -> Option<usize> {
+        match self.find(port)? {
+            (_, size, Sampling::In(_)) if input => Some(*size),
+            (_, size, Sampling::Out(_)) if !input => Some(*size),
+            _ => None,
+        }
+    }
+
+    fn read(&mut self, port: &str, buf: &mut [u8]) -> Option<bool> {
+        match self.find(port)? {
+            (_, _, Sampling::In(p)) => p
+                .receive(buf)
+                .ok()
+                .filter(|(_, message)| !message.is_empty())
+                .map(|(validity, _)| validity == Validity::Valid),
+            _ => None,
+        }
+    }
+
+    fn write(&mut self, port: &str, message: &[u8]) -> bool {
+        match self.find(port) {
+            Some((_, _, Sampling::Out(p))) => p.send(message).is_ok(),
+            _ => false,
+        }
+    }
+}
+
 /// Waits `timeout` for a request and answers it; false when the wait failed.
 fn wait(device: &mut Device, mgmt: Option<&Mgmt>, timeout: Duration, buf: &mut [u8]) -> bool {
     let Some(m) = mgmt else {
@@ -149,7 +232,8 @@ extern "C" fn device_process() {
             return;
         }
     };
-    let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), now_ns()) {
+    let io = Box::new(ApexIo::open(&package.ports));
+    let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), io, now_ns()) {
         Ok(booted) => booted,
         Err(reason) => {
             report(&alloc::format!("refusing the boot package: {reason}"));
@@ -197,6 +281,7 @@ extern "C" fn device_process() {
                 lateness.max
             );
             lateness = Lateness::default();
+            print_watches(&device, next_stats);
             next_stats = (now / every + 1) * every;
         }
         let now = now_ns();
@@ -216,9 +301,30 @@ struct Iec61499Partition;
 
 impl Iec61499Partition {
     fn start(&self, ctx: &mut StartContext<Warden>) {
-        if let Ok(package) = iec61499_mgmt::package::decode(apex::runtime::start_info().data())
-            && let Some(m) = package.mgmt
-        {
+        let Ok(package) = iec61499_mgmt::package::decode(apex::runtime::start_info().data()) else {
+            // The device process reports it.
+            return self.spawn(ctx);
+        };
+        for p in &package.ports {
+            let created = Name::from_str(p.name)
+                .map_err(|_| Error::InvalidParam)
+                .and_then(|n| {
+                    if p.input {
+                        let refresh = Duration::from_nanos(p.refresh_ns);
+                        ctx.create_sampling_port_destination(n, p.size, refresh)
+                            .map(drop)
+                    } else {
+                        ctx.create_sampling_port_source(n, p.size).map(drop)
+                    }
+                });
+            if let Err(e) = created {
+                report(&alloc::format!(
+                    "creating sampling port {} failed: {e:?}",
+                    p.name
+                ));
+            }
+        }
+        if let Some(m) = package.mgmt {
             let port =
                 |p: &QueuingPort<'_>| Name::from_str(p.name).map_err(|_| Error::InvalidParam);
             let created = port(&m.request)
@@ -247,6 +353,11 @@ impl Iec61499Partition {
                 ));
             }
         }
+        self.spawn(ctx);
+    }
+
+    /// Creates and starts the device process.
+    fn spawn(&self, ctx: &mut StartContext<Warden>) {
         let Ok(name) = Name::from_str("device") else {
             return;
         };
