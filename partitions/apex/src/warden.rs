@@ -622,7 +622,7 @@ fn with_intra<R>(f: impl FnOnce(&mut Intra, Context) -> R) -> R {
 fn blocking<T>(
     time_out: ApexSystemTime,
     out: &mut [u8],
-    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Step<T>,
+    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Result<Step<T>>,
     woken: impl FnOnce(&Intra, usize, usize, &mut [u8]) -> T,
 ) -> Result<T> {
     let slot = own_slot();
@@ -636,8 +636,8 @@ fn blocking<T>(
         };
         let step = start(intra, caller, out);
         apply_intra(table, intra, slot);
-        match (step, slot) {
-            (Step::Done(result), _) => return result,
+        match (step?, slot) {
+            (Step::Done(value), _) => return Ok(value),
             (Step::Wait, Some(slot)) => table.set_wait(slot, Wait::Object),
             (Step::Wait, None) => unreachable!("only processes are queued"),
         }
@@ -662,10 +662,32 @@ fn blocking<T>(
     }
 }
 
-/// A waiter's message from its mailbox.
-fn take_mail(intra: &Intra, slot: usize, length: usize, out: &mut [u8]) -> MessageSize {
-    out[..length].copy_from_slice(intra.mail(slot));
-    length as MessageSize
+/// A service that may wait and whose wait ends with nothing to hand over (SEND_BUFFER,
+/// WAIT_SEMAPHORE, WAIT_EVENT, ACQUIRE_MUTEX).
+fn blocking_unit(
+    time_out: ApexSystemTime,
+    start: impl FnOnce(&mut Intra, Caller) -> Result<Step<()>>,
+) -> Result<()> {
+    blocking(
+        time_out,
+        &mut [],
+        |intra, caller, _| start(intra, caller),
+        |_, _, _, _| (),
+    )
+}
+
+/// A read that may wait (RECEIVE_BUFFER, READ_BLACKBOARD): the message lands in `out`,
+/// read at once or handed over through the waiter's mailbox.
+fn blocking_read(
+    time_out: ApexSystemTime,
+    out: &mut [u8],
+    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Result<Step<usize>>,
+) -> Result<MessageSize> {
+    let take_mail = |intra: &Intra, slot, length: usize, out: &mut [u8]| {
+        out[..length].copy_from_slice(intra.mail(slot));
+        length
+    };
+    blocking(time_out, out, start, take_mail).map(|length| length as MessageSize)
 }
 
 impl ApexBufferP1 for Warden {
@@ -691,12 +713,9 @@ impl ApexBufferP1 for Warden {
         message: &[ApexByte],
         time_out: ApexSystemTime,
     ) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.send_buffer(caller, buffer_id, message, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.send_buffer(caller, buffer_id, message, time_out)
+        })
     }
 
     /// # Safety
@@ -708,15 +727,9 @@ impl ApexBufferP1 for Warden {
         time_out: ApexSystemTime,
         message: &mut [ApexByte],
     ) -> Result<MessageSize> {
-        blocking(
-            time_out,
-            message,
-            |intra, caller, out| match intra.receive_buffer(caller, buffer_id, time_out, out) {
-                Step::Done(r) => Step::Done(r.map(|n| n as MessageSize)),
-                Step::Wait => Step::Wait,
-            },
-            take_mail,
-        )
+        blocking_read(time_out, message, |intra, caller, out| {
+            intra.receive_buffer(caller, buffer_id, time_out, out)
+        })
     }
 
     fn get_buffer_id(buffer_name: BufferName) -> Result<BufferId> {
@@ -749,15 +762,9 @@ impl ApexBlackboardP1 for Warden {
         time_out: ApexSystemTime,
         message: &mut [ApexByte],
     ) -> Result<MessageSize> {
-        blocking(
-            time_out,
-            message,
-            |intra, caller, out| match intra.read_blackboard(caller, blackboard_id, time_out, out) {
-                Step::Done(r) => Step::Done(r.map(|n| n as MessageSize)),
-                Step::Wait => Step::Wait,
-            },
-            take_mail,
-        )
+        blocking_read(time_out, message, |intra, caller, out| {
+            intra.read_blackboard(caller, blackboard_id, time_out, out)
+        })
     }
 
     fn clear_blackboard(blackboard_id: BlackboardId) -> Result<()> {
@@ -792,12 +799,9 @@ impl ApexSemaphoreP1 for Warden {
     }
 
     fn wait_semaphore(semaphore_id: SemaphoreId, time_out: ApexSystemTime) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.wait_semaphore(caller, semaphore_id, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.wait_semaphore(caller, semaphore_id, time_out)
+        })
     }
 
     fn signal_semaphore(semaphore_id: SemaphoreId) -> Result<()> {
@@ -827,12 +831,9 @@ impl ApexEventP1 for Warden {
     }
 
     fn wait_event(event_id: EventId, time_out: ApexSystemTime) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.wait_event(caller, event_id, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.wait_event(caller, event_id, time_out)
+        })
     }
 
     fn get_event_id(event_name: EventName) -> Result<EventId> {
@@ -862,12 +863,9 @@ impl ApexMutexP1 for Warden {
     }
 
     fn acquire_mutex(mutex_id: MutexId, time_out: ApexSystemTime) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.acquire_mutex(caller, mutex_id, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.acquire_mutex(caller, mutex_id, time_out)
+        })
     }
 
     fn release_mutex(mutex_id: MutexId) -> Result<()> {

@@ -32,15 +32,15 @@ fn n(text: &str) -> ApexName {
     apex_name(text)
 }
 
-fn done<T>(step: Step<T>) -> Result<T> {
-    match step {
-        Step::Done(r) => r,
+fn done<T>(step: Result<Step<T>>) -> Result<T> {
+    match step? {
+        Step::Done(r) => Ok(r),
         Step::Wait => panic!("the service waits"),
     }
 }
 
-fn waits<T: core::fmt::Debug + PartialEq>(step: Step<T>) {
-    assert_eq!(step, Step::Wait);
+fn waits<T: core::fmt::Debug + PartialEq>(step: Result<Step<T>>) {
+    assert_eq!(step, Ok(Step::Wait));
 }
 
 /// The order in which `slots` were woken, by taking each one's outcome (`end_wait`).
