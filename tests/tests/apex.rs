@@ -294,3 +294,40 @@ fn apex_intra() {
         "the driver's final error is logged with its configured action",
     );
 }
+
+#[test]
+fn apex_preemption() {
+    let o = boot("apex_preemption");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the holder's end is shutdown_success",
+    );
+    // The holder (priority 10) locks; the rival (50) readied meanwhile runs only at level 0.
+    expect_lines(
+        &o,
+        &[
+            "preempt: init LOCK_PREEMPTION: Some(NoAction)",
+            "preempt: LOCK_PREEMPTION Ok(1) Ok(2); partition lock level 2; priority 100",
+            "preempt: rival readied, 3 ms later it ran 0 times",
+            "preempt: locked: TIMED_WAIT Some(InvalidMode); WAIT_SEMAPHORE 5 ms Some(InvalidMode), 0 Some(NotAvailable); SUSPEND_SELF 5 ms Some(InvalidMode); ACQUIRE_MUTEX Some(InvalidMode); GET_PROCESS_MUTEX_STATE is PREEMPTION_LOCK_MUTEX: true",
+            "preempt: locked up to 16 (MAX_LOCK_LEVEL 16), then Some(InvalidConfig)",
+            "preempt: unlocked to 1: rival ran 0 times, priority 100",
+            "preempt: UNLOCK_PREEMPTION Ok(0): rival ran 1 times, priority 20; again Some(NoAction)",
+            "preempt: unlocked: TIMED_WAIT 1 ms None",
+            "preempt: done",
+        ],
+    );
+    check(
+        &o,
+        health(
+            &o,
+            "preempt",
+            "application_error",
+            "\"preempt",
+            "shutdown_success",
+        ) == 1,
+        "the holder's final error is logged with its configured action",
+    );
+}

@@ -27,6 +27,18 @@
 //! mutex's priority while it holds it and gets its retained priority back when it releases
 //! it (lock count 0) or the mutex is reset. A process owns at most one mutex at a time and
 //! may not wait on anything else (other than with a zero time-out) while it owns one.
+//!
+//! # Preemption lock
+//!
+//! LOCK_PREEMPTION makes the caller the owner of the partition's preemption lock (ARINC's
+//! PREEMPTION_LOCK_MUTEX) and counts the lock level up to MAX_LOCK_LEVEL; UNLOCK_PREEMPTION
+//! counts it down. While the level is above 0 the owner runs at [`Intra::lock_priority`],
+//! the partition's MCP: above every process, so no other process of the partition runs
+//! until the level is back at 0 and the owner gets its retained priority back. The error
+//! handler and the runtime's deadline watchdog share the MCP: they run when the owner
+//! next calls a service (each critical section of the runtime requeues the caller at the
+//! MCP). The lock is a mutex like the others: its owner owns no other mutex and may not
+//! wait (INVALID_MODE for a non-zero time-out).
 
 use crate::codes::name_bytes;
 use crate::table::{ERROR_HANDLER_SLOT, SLOTS, id_of};
@@ -196,6 +208,15 @@ struct Mutex {
     retained: u8,
 }
 
+/// The preemption lock's owner (one process; nobody else runs while the level is above 0).
+#[derive(Clone, Copy, Debug)]
+struct PreemptionLock {
+    owner: usize,
+    level: LockLevel,
+    /// The owner's priority before it locked.
+    retained: u8,
+}
+
 /// The calling thread as the services see it.
 #[derive(Clone, Copy, Debug)]
 pub struct Caller {
@@ -229,6 +250,7 @@ pub struct Intra {
     semaphores: [Option<Semaphore>; MAX_SEMAPHORES],
     events: [Option<Event>; MAX_EVENTS],
     mutexes: [Option<Mutex>; MAX_MUTEXES],
+    preemption: Option<PreemptionLock>,
     waiters: [Option<Waiter>; SLOTS],
     /// Outcomes decided for waiters (Ok(message length)).
     done: [Option<Result<usize>>; SLOTS],
@@ -249,6 +271,7 @@ impl Intra {
         semaphores: [None; MAX_SEMAPHORES],
         events: [None; MAX_EVENTS],
         mutexes: [None; MAX_MUTEXES],
+        preemption: None,
         waiters: [None; SLOTS],
         done: [None; SLOTS],
         mail: [[0; MAX_MESSAGE_SIZE]; SLOTS],
@@ -268,6 +291,7 @@ impl Intra {
         self.semaphores = [None; MAX_SEMAPHORES];
         self.events = [None; MAX_EVENTS];
         self.mutexes = [None; MAX_MUTEXES];
+        self.preemption = None;
         self.waiters = [None; SLOTS];
         self.done = [None; SLOTS];
         self.mail_len = [0; SLOTS];
@@ -300,10 +324,10 @@ impl Intra {
     // ------------------------------------------------------------ waiting
 
     /// Checks a caller that would wait with a non-zero `time_out`: processes only, not the
-    /// error handler, not while owning a mutex (INVALID_MODE).
+    /// error handler, not while owning a mutex or the preemption lock (INVALID_MODE).
     fn may_wait(&self, caller: Caller) -> Result<usize> {
         let slot = caller.slot.ok_or(ErrorReturnCode::InvalidMode)?;
-        if slot == ERROR_HANDLER_SLOT || self.owned_by(slot).is_some() {
+        if slot == ERROR_HANDLER_SLOT || self.owns_a_mutex(slot) {
             return Err(ErrorReturnCode::InvalidMode);
         }
         Ok(slot)
@@ -391,7 +415,7 @@ impl Intra {
     }
 
     /// STOP of `slot` (or its thread's end): it leaves every queue and gives up its mutex
-    /// (handed to the next waiter).
+    /// (handed to the next waiter) and the preemption lock (lock level 0).
     pub fn forget(&mut self, slot: usize) {
         if slot >= SLOTS {
             return;
@@ -401,6 +425,9 @@ impl Intra {
         self.priorities[slot] = None;
         if let Some(m) = self.owned_by(slot) {
             self.hand_over(m);
+        }
+        if self.preemption.is_some_and(|l| l.owner == slot) {
+            self.preemption = None;
         }
     }
 
@@ -829,7 +856,7 @@ impl Intra {
             .slot
             .filter(|&s| s != ERROR_HANDLER_SLOT)
             .ok_or(ErrorReturnCode::InvalidMode)?;
-        if self.owned_by(slot).is_some_and(|owned| owned != index) {
+        if self.owned_by(slot).is_some_and(|owned| owned != index) || self.holds_lock(slot) {
             return Err(ErrorReturnCode::InvalidMode);
         }
         if m.owner == Some(slot) {
@@ -898,13 +925,21 @@ impl Intra {
 
     /// GET_PROCESS_MUTEX_STATE of `slot` (a process the caller checked exists).
     pub fn process_mutex_state(&self, slot: usize) -> MutexId {
+        if self.holds_lock(slot) {
+            return PREEMPTION_LOCK_MUTEX;
+        }
         self.owned_by(slot)
             .map_or(NO_MUTEX_OWNED, |i| Mutex::BASE + i as i64)
     }
 
-    /// SET_PRIORITY of a mutex owner changes only the priority it gets back on release.
-    /// Returns whether `slot` owns a mutex (then its current priority stays).
+    /// SET_PRIORITY of a mutex owner (or of the preemption lock's) changes only the
+    /// priority it gets back on release. Returns whether `slot` owns one (then its current
+    /// priority stays).
     pub fn set_retained_priority(&mut self, slot: usize, priority: u8) -> bool {
+        if let Some(lock) = self.preemption.as_mut().filter(|l| l.owner == slot) {
+            lock.retained = priority;
+            return true;
+        }
         match self.owned_by(slot) {
             Some(index) => {
                 if let Some(m) = self.mutexes[index].as_mut() {
@@ -914,6 +949,82 @@ impl Intra {
             }
             None => false,
         }
+    }
+
+    // ------------------------------------------------------------ preemption (3.3.2.7-8)
+
+    /// Whether `slot` owns a mutex or the preemption lock.
+    fn owns_a_mutex(&self, slot: usize) -> bool {
+        self.owned_by(slot).is_some() || self.holds_lock(slot)
+    }
+
+    /// Whether `slot` holds the preemption lock (lock level above 0).
+    pub fn holds_lock(&self, slot: usize) -> bool {
+        self.preemption.is_some_and(|l| l.owner == slot)
+    }
+
+    /// The partition's lock level (GET_PARTITION_STATUS).
+    pub fn lock_level(&self) -> LockLevel {
+        self.preemption.map_or(0, |l| l.level)
+    }
+
+    /// The priority the preemption lock's owner runs at: the MCP, which no process reaches
+    /// (at MCP - 1 a process of that priority would overtake it after each critical
+    /// section of the runtime, which requeues the caller at the tail of its level).
+    pub fn lock_priority(mcp: u8) -> u8 {
+        mcp
+    }
+
+    /// LOCK_PREEMPTION: the new lock level. NO_ACTION outside NORMAL mode and for the error
+    /// handler (or the initialisation thread); INVALID_CONFIG at MAX_LOCK_LEVEL; INVALID_MODE
+    /// for an owner of another mutex (a process owns one mutex at a time).
+    pub fn lock_preemption(&mut self, caller: Caller, normal: bool, mcp: u8) -> Result<LockLevel> {
+        let slot = caller
+            .slot
+            .filter(|&s| normal && s != ERROR_HANDLER_SLOT)
+            .ok_or(ErrorReturnCode::NoAction)?;
+        match self.preemption.as_mut() {
+            Some(lock) if lock.owner == slot => {
+                if lock.level >= MAX_LOCK_LEVEL {
+                    return Err(ErrorReturnCode::InvalidConfig);
+                }
+                lock.level += 1;
+                Ok(lock.level)
+            }
+            // Another process holds it: only possible while that one is stopped by the
+            // error handler's SUSPEND; the lock is not shared.
+            Some(_) => Err(ErrorReturnCode::InvalidMode),
+            None => {
+                if self.owned_by(slot).is_some() {
+                    return Err(ErrorReturnCode::InvalidMode);
+                }
+                self.preemption = Some(PreemptionLock {
+                    owner: slot,
+                    level: 1,
+                    retained: caller.priority,
+                });
+                self.priorities[slot] = Some(Self::lock_priority(mcp));
+                Ok(1)
+            }
+        }
+    }
+
+    /// UNLOCK_PREEMPTION: the new lock level; at 0 the owner gets its retained priority back
+    /// (and other processes may run again). NO_ACTION outside NORMAL mode, for the error
+    /// handler, and for a caller that does not hold the lock (level 0).
+    pub fn unlock_preemption(&mut self, caller: Caller, normal: bool) -> Result<LockLevel> {
+        let slot = caller
+            .slot
+            .filter(|&s| normal && s != ERROR_HANDLER_SLOT && self.holds_lock(s))
+            .ok_or(ErrorReturnCode::NoAction)?;
+        let lock = self.preemption.as_mut().expect("held");
+        lock.level -= 1;
+        let level = lock.level;
+        if level == 0 {
+            self.priorities[slot] = Some(lock.retained);
+            self.preemption = None;
+        }
+        Ok(level)
     }
 }
 

@@ -51,7 +51,7 @@ impl ApexPartitionP4 for Warden {
             period,
             duration,
             identifier,
-            lock_level: 0,
+            lock_level: Critical::enter().parts().1.lock_level(),
             operating_mode: OperatingMode::try_from(mode).unwrap_or(OperatingMode::Idle),
             start_condition: StartCondition::try_from(start_condition)
                 .unwrap_or(StartCondition::NormalStart),
@@ -118,8 +118,15 @@ impl ApexProcessP1 for Warden {
 
     fn suspend_self(time_out: ApexSystemTime) -> Result<()> {
         let slot = own_slot().ok_or(ErrorReturnCode::InvalidMode)?;
-        if !Critical::enter().table().suspend_self(slot, time_out)? {
-            return Ok(());
+        {
+            let mut critical = Critical::enter();
+            let (table, intra) = critical.parts();
+            if intra.holds_lock(slot) {
+                return Err(ErrorReturnCode::InvalidMode);
+            }
+            if !table.suspend_self(slot, time_out)? {
+                return Ok(());
+            }
         }
         let woken = sys::notify_wait(WAKE_BIT, protocol_timeout(time_out)).is_ok();
         let (result, stale_wake) = Critical::enter().table().suspend_self_end(slot, woken);
@@ -195,15 +202,16 @@ impl ApexProcessP1 for Warden {
         runtime::launch(table, slot, release)
     }
 
-    /// Not supported: preemption locking would need a partition-wide scheduler lock the
-    /// kernel does not offer (processes are plain threads with fixed priorities).
+    /// The owner runs above every process of the partition while the level is above 0
+    /// (`Intra::lock_preemption`); its priority is set when it leaves the critical section.
     fn lock_preemption() -> Result<LockLevel> {
-        Err(ErrorReturnCode::NotAvailable)
+        with_intra(|intra, c| intra.lock_preemption(c.caller, c.normal, c.mcp))
     }
 
-    /// Not supported (see `lock_preemption`).
+    /// At level 0 the caller drops to its retained priority on leaving the critical section,
+    /// and a higher-priority process that became ready meanwhile runs at once.
     fn unlock_preemption() -> Result<LockLevel> {
-        Err(ErrorReturnCode::NotAvailable)
+        with_intra(|intra, c| intra.unlock_preemption(c.caller, c.normal))
     }
 
     /// INVALID_MODE for the initialisation thread and the watchdog (they are no processes).
@@ -260,7 +268,10 @@ impl ApexTimeP4 for Warden {
         let slot = own_slot().ok_or(ErrorReturnCode::InvalidMode)?;
         let release = {
             let mut critical = Critical::enter();
-            let table = critical.table();
+            let (table, intra) = critical.parts();
+            if intra.holds_lock(slot) {
+                return Err(ErrorReturnCode::InvalidMode);
+            }
             let release = table.periodic_wait(slot)?;
             runtime::poke_watchdog(table);
             release
@@ -277,11 +288,11 @@ impl ApexTimeP4 for Warden {
 
 impl ApexTimeP1 for Warden {
     fn timed_wait(delay_time: ApexSystemTime) -> Result<()> {
-        let delay = finite(delay_time).ok_or(ErrorReturnCode::InvalidParam)?;
         let slot = own_slot();
-        if slot == Some(ERROR_HANDLER_SLOT) {
+        if may_not_wait(slot) {
             return Err(ErrorReturnCode::InvalidMode);
         }
+        let delay = finite(delay_time).ok_or(ErrorReturnCode::InvalidParam)?;
         if delay == 0 {
             // ARINC: a zero delay moves the caller behind its equal-priority peers.
             sys::yield_now();
@@ -300,6 +311,13 @@ impl ApexTimeP1 for Warden {
         runtime::poke_watchdog(table);
         Ok(())
     }
+}
+
+/// ARINC's "the current process is the error handler, or preemption is locked": a caller
+/// that may not wait (INVALID_MODE). Takes the runtime lock.
+fn may_not_wait(slot: Option<usize>) -> bool {
+    slot == Some(ERROR_HANDLER_SLOT)
+        || slot.is_some_and(|slot| Critical::enter().parts().1.holds_lock(slot))
 }
 
 /// Runs `wait` with the calling process marked as waiting (ARINC state WAITING).
@@ -407,14 +425,14 @@ impl ApexSamplingPortP1 for Warden {
     }
 }
 
-/// Queuing-port calls that may block: not from the error handler (ARINC), and the caller
-/// shows as WAITING meanwhile.
+/// Queuing-port calls that may block: not from the error handler or while preemption is
+/// locked (ARINC), and the caller shows as WAITING meanwhile.
 fn blocking_port_call<R>(time_out: ApexSystemTime, f: impl FnOnce() -> R) -> Result<R> {
     let slot = own_slot();
     if time_out == 0 {
         return Ok(f());
     }
-    if slot == Some(ERROR_HANDLER_SLOT) {
+    if may_not_wait(slot) {
         return Err(ErrorReturnCode::InvalidMode);
     }
     Ok(with_wait(slot, Wait::Port, f))

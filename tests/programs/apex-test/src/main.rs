@@ -15,6 +15,10 @@
 //! * `intra` (scenario `apex_intra`): buffers, blackboards, semaphores, events and mutexes
 //!   between processes of different priorities: FIFO and PRIORITY wake order, time-outs,
 //!   the mutex priority ceiling and the return codes in both modes (see `intra.rs`);
+//! * `preempt` (scenario `apex_preemption`): LOCK_PREEMPTION / UNLOCK_PREEMPTION: a
+//!   higher-priority process readied while the lock is held runs only at level 0, the
+//!   codes of the services a lock owner may not call, the lock level's bound (see
+//!   `preemption.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
@@ -27,6 +31,7 @@
 
 mod bench;
 mod intra;
+mod preemption;
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
@@ -123,6 +128,7 @@ impl Partition<Warden> for Test {
             "restarter" => restarter(ctx),
             "bench-q" => bench::create(ctx),
             "intra" => intra::create(ctx),
+            "preempt" => preemption::create(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             other => println!("{other}: no role for this partition name"),
