@@ -88,7 +88,8 @@
 //! 48     2    channel index
 //! 50     1    kind: 1 = sampling, 2 = queuing
 //! 51     1    direction: 1 = in (destination), 2 = out (source)
-//! 52     4    reserved
+//! 52     1    queuing discipline: 0 = FIFO, 1 = PRIORITY; 0 for a sampling port
+//! 53     3    reserved
 //!
 //! Channel (40 bytes) x C
 //! 0      32   name
@@ -278,9 +279,10 @@ pub mod port {
     pub const CHANNEL: Field = Field::new(48, 2);
     pub const KIND: Field = Field::new(50, 1);
     pub const DIRECTION: Field = Field::new(51, 1);
-    pub const RESERVED: Field = Field::new(52, 4);
+    pub const DISCIPLINE: Field = Field::new(52, 1);
+    pub const RESERVED: Field = Field::new(53, 3);
     pub const SIZE: usize = 56;
-    pub const FIELDS: [Field; 8] = [
+    pub const FIELDS: [Field; 9] = [
         NAME,
         MESSAGE_SIZE,
         DEPTH,
@@ -288,6 +290,7 @@ pub mod port {
         CHANNEL,
         KIND,
         DIRECTION,
+        DISCIPLINE,
         RESERVED,
     ];
 }
@@ -865,6 +868,11 @@ impl<'a> SystemView<'a> {
             if !depth_ok {
                 return Err(fail("depth not 1..=256 (queuing) or not 0 (sampling)"));
             }
+            let discipline =
+                Discipline::from_code(T::DISCIPLINE.u8(r)).ok_or(fail("unknown discipline"))?;
+            if kind == PortKind::Sampling && discipline != Discipline::Fifo {
+                return Err(fail("queuing discipline on a sampling port"));
+            }
             if T::REFRESH.get(r) != 0 && (kind, direction) != (PortKind::Sampling, Direction::In) {
                 return Err(fail(
                     "refresh period on a port that is not a sampling input",
@@ -1095,6 +1103,7 @@ impl<'a> SystemView<'a> {
             channel: port::CHANNEL.u16(r),
             kind: PortKind::from_code(port::KIND.u8(r)).unwrap_or(PortKind::Sampling),
             direction: Direction::from_code(port::DIRECTION.u8(r)).unwrap_or(Direction::In),
+            discipline: Discipline::from_code(port::DISCIPLINE.u8(r)).unwrap_or(Discipline::Fifo),
         }
     }
 
@@ -1253,6 +1262,8 @@ pub struct PortView<'a> {
     pub depth: u32,
     /// Sampling input: validity period (ns), 0 = none.
     pub refresh: u64,
+    /// Queuing: the order waiting processes are served in; sampling: FIFO.
+    pub discipline: Discipline,
     /// Index of its channel.
     pub channel: usize,
 }
@@ -1429,6 +1440,7 @@ mod encode {
                 .index(T::CHANNEL, t.channel)
                 .set(T::KIND, u64::from(t.kind.code()))
                 .set(T::DIRECTION, u64::from(t.direction.code()))
+                .set(T::DISCIPLINE, u64::from(t.discipline.code()))
                 .write(&mut out);
         }
         let mut first = 0;

@@ -59,7 +59,7 @@
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
-//! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
+//! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
 //! health.deadline_missed = "warm_restart"
 //! plc.program = ["../plc/tank.st"]   # soft-PLC partitions only: see "PLC"
 //! plc.inputs.level = { at = "%IB0", valid = "%IX8.0" }
@@ -108,7 +108,11 @@
 //!
 //! **Ports and channels.** Ports have `kind` (`sampling` | `queuing`), `direction` (`in` |
 //! `out`), `size` (largest message, 1..=4096 bytes), `depth` (queuing only, 1..=256) and
-//! `refresh` (sampling inputs only: how long a message stays valid). A sampling channel goes
+//! `refresh` (sampling inputs only: how long a message stays valid), and queuing ports
+//! `discipline` (`fifo`, the default, | `priority`: the order in which processes waiting on
+//! the port are served, ARINC's QUEUING_DISCIPLINE; an APEX partition must create the port
+//! with the same one; a guest partition's ports stay FIFO, since its calls never wait).
+//! A sampling channel goes
 //! from one output port to one or more input ports; a queuing channel connects exactly one
 //! output to one input. Both ends must have the channel's kind, and each destination's size
 //! must be at least the source's (the receiver can hold every message). Every port belongs to

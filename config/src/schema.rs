@@ -161,6 +161,7 @@ pub struct Port {
     pub size: Spanned<Scalar>,
     pub depth: Option<Spanned<i64>>,
     pub refresh: Option<Spanned<Scalar>>,
+    pub discipline: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

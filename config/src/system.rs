@@ -210,6 +210,8 @@ pub struct Port {
     pub depth: u32,
     /// Sampling input: ns, 0 = none.
     pub refresh: u64,
+    /// Queuing: the order waiting processes are served in; sampling: FIFO.
+    pub discipline: Discipline,
     /// Index into [`System::channels`].
     pub channel: usize,
 }
@@ -289,6 +291,7 @@ impl System {
                             size: t.size,
                             depth: t.depth,
                             refresh: t.refresh,
+                            discipline: t.discipline,
                             channel: t.channel,
                         })
                         .collect(),

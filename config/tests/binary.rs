@@ -8,7 +8,7 @@ use config::binary::{
     self, DecodeError, Table, attachment, channel, header, io_range, partition, port, schedule,
     window,
 };
-use config::model::{Direction, ErrorCode, HealthAction, PortKind, Rights};
+use config::model::{Direction, Discipline, ErrorCode, HealthAction, PortKind, Rights};
 use config::{System, decode};
 use proptest::prelude::*;
 
@@ -61,7 +61,7 @@ priority = 120
 abilities = ["create_thread", "debug_log"]
 shared = { frame = "rw", code = "rx" }
 ports.level = { kind = "sampling", direction = "in", size = 16, refresh = "20ms" }
-ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
+ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
 health.deadline_missed = "warm_restart"
 health.application_error = "shutdown_success"
 
@@ -195,6 +195,12 @@ fn round_trip() {
         (PortKind::Queuing, 8, 1)
     );
     assert_eq!(ctl.find_port("level").unwrap().refresh, 20_000_000);
+    assert_eq!(cmd.discipline, Discipline::Priority);
+    assert_eq!(
+        ctl.find_port("level").unwrap().discipline,
+        Discipline::Fifo,
+        "a port without `discipline` is FIFO"
+    );
     assert_eq!(
         view.health().get(ErrorCode::PowerFail),
         Some(HealthAction::Shutdown)
@@ -475,6 +481,14 @@ fn port_and_channel_damage() {
     invalid(Table::Port, 1, "depth")(damaged(|b| {
         let at = t(b, 1);
         port::DEPTH.set(&mut b[at..], 0);
+    }));
+    invalid(Table::Port, 0, "queuing discipline on a sampling port")(damaged(|b| {
+        let at = t(b, 0);
+        port::DISCIPLINE.set(&mut b[at..], 1);
+    }));
+    invalid(Table::Port, 1, "unknown discipline")(damaged(|b| {
+        let at = t(b, 1);
+        port::DISCIPLINE.set(&mut b[at..], 2);
     }));
     invalid(Table::Port, 0, "refresh period on a port")(damaged(|b| {
         // ctl.level becomes an output: refresh no longer allowed.

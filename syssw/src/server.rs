@@ -28,7 +28,7 @@ use syssw_core::health::{
     Detail, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
-use syssw_core::ports::{Completion, NEVER, Outcome, Ports};
+use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
 use syssw_core::restart::{Job, Kind, Report, Restarts};
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
 use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
@@ -194,18 +194,26 @@ impl<'a> Server<'a> {
             Request::CreatePort {
                 kind,
                 direction,
+                discipline,
                 max_message_size,
                 refresh_or_depth,
                 name,
             } => {
-                let (code, port) = self.create_port(
-                    index,
-                    name,
-                    kind,
-                    direction,
-                    max_message_size,
-                    refresh_or_depth,
-                );
+                let (code, port) = self.create_port(index, name, kind, |port| {
+                    port.direction == direction
+                        && port.size as u64 == max_message_size
+                        && match port.kind {
+                            // ARINC: only a destination has a refresh period (a source's
+                            // is ignored).
+                            PortKind::Sampling => {
+                                port.direction == Direction::Out || port.refresh == refresh_or_depth
+                            }
+                            PortKind::Queuing => {
+                                port.depth as u64 == refresh_or_depth
+                                    && port.discipline == discipline
+                            }
+                        }
+                });
                 reply(code, PortIdReply { port }.to_words());
             }
             Request::PortId { kind, name } => {
@@ -236,6 +244,7 @@ impl<'a> Server<'a> {
             Request::SendQueuing {
                 port,
                 timeout,
+                priority,
                 message,
             } => {
                 let outcome = self.ports.send_queuing(
@@ -244,20 +253,30 @@ impl<'a> Server<'a> {
                     message,
                     now,
                     timeout,
-                    m.sender.0,
+                    Waiter {
+                        token: m.sender.0,
+                        priority,
+                    },
                     |c| complete(ipc, c),
                 );
                 if let Outcome::Done { code, .. } = outcome {
                     reply(code, [0; 3]);
                 }
             }
-            Request::ReceiveQueuing { port, timeout } => {
+            Request::ReceiveQueuing {
+                port,
+                timeout,
+                priority,
+            } => {
                 let outcome = self.ports.receive_queuing(
                     index,
                     port as usize,
                     now,
                     timeout,
-                    m.sender.0,
+                    Waiter {
+                        token: m.sender.0,
+                        priority,
+                    },
                     buffer,
                     |c| complete(ipc, c),
                 );
@@ -315,23 +334,12 @@ impl<'a> Server<'a> {
         index: usize,
         name: &[u8],
         kind: PortKind,
-        direction: Direction,
-        size: u64,
-        refresh_or_depth: u64,
+        matches: impl FnOnce(&config::binary::PortView<'a>) -> bool,
     ) -> (ReturnCode, u64) {
         let Some(port) = self.find_port(index, name, kind) else {
             return (ReturnCode::InvalidConfig, 0);
         };
-        let matches = port.direction == direction
-            && port.size as u64 == size
-            && match port.kind {
-                // ARINC: only a destination has a refresh period (a source's is ignored).
-                PortKind::Sampling => {
-                    port.direction == Direction::Out || port.refresh == refresh_or_depth
-                }
-                PortKind::Queuing => port.depth as u64 == refresh_or_depth,
-            };
-        if !matches {
+        if !matches(&port) {
             return (ReturnCode::InvalidConfig, 0);
         }
         let mode = self.running(index).mode.mode();

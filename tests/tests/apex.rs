@@ -331,3 +331,33 @@ fn apex_preemption() {
         "the holder's final error is logged with its configured action",
     );
 }
+
+#[test]
+fn apex_port_priority() {
+    let o = boot("apex_port_priority");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the last receiver's end is shutdown_success",
+    );
+    // Waiters of priorities 10 (1), 30 (2), 20 (3) arrive in the order 1, 2, 3.
+    expect_lines(
+        &o,
+        &[
+            "prio_rx: CREATE_QUEUING_PORT req as FIFO: Some(InvalidConfig)",
+            "prio_tx: back full: Some(NotAvailable)",
+            "prio_tx: back waiting senders: 3",
+            // Senders on the PRIORITY source port enter the channel 2, 3, 1.
+            "prio_rx: req waiting receivers: 3; back got x y 2 3 1",
+            "prio_tx: sent a b c",
+            // Receivers on the PRIORITY destination port are served 2, 3, 1.
+            "prio_rx: PRIORITY receivers got r1=c r2=a r3=b",
+        ],
+    );
+    check(
+        &o,
+        o.lines.iter().all(|l| !l.contains(" failed: ")),
+        "a waiter's send or receive failed",
+    );
+}

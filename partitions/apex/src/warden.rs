@@ -9,7 +9,9 @@ use crate::runtime::{
 use crate::table::{self, ERROR_HANDLER_SLOT, MAX_PROCESSES, Wait};
 use crate::time::{self, finite, protocol_timeout};
 use a653rs::bindings::*;
-use protocol::{PortIdReply, PortKind, QueuingMessage, ReplyWords, Request, SamplingMessage};
+use protocol::{
+    Discipline, PortIdReply, PortKind, QueuingMessage, ReplyWords, Request, SamplingMessage,
+};
 use user_rt::abi::ipc::IPC_DATA_MAX;
 use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
 use user_rt::sys;
@@ -359,6 +361,7 @@ impl ApexSamplingPortP4 for Warden {
         let reply: PortIdReply = request_words(&Request::CreatePort {
             kind: PortKind::Sampling,
             direction: codes::direction(port_direction),
+            discipline: Discipline::Fifo,
             max_message_size: u64::from(max_message_size),
             refresh_or_depth: refresh,
             name: name_bytes(&sampling_port_name),
@@ -438,9 +441,15 @@ fn blocking_port_call<R>(time_out: ApexSystemTime, f: impl FnOnce() -> R) -> Res
     Ok(with_wait(slot, Wait::Port, f))
 }
 
+/// The caller's current priority, its place among the processes waiting on a PRIORITY
+/// queuing port (syssw keeps those queues).
+fn own_priority() -> u8 {
+    Critical::enter().table().current_priority(own_slot())
+}
+
 impl ApexQueuingPortP4 for Warden {
-    /// syssw queues waiting processes FIFO only (the configuration has no discipline), so
-    /// PRIORITY is refused with INVALID_CONFIG rather than silently served FIFO.
+    /// The discipline must be the port's configured one (INVALID_CONFIG otherwise); syssw
+    /// serves the port's waiting processes by it.
     fn create_queuing_port(
         queuing_port_name: QueuingPortName,
         max_message_size: MessageSize,
@@ -448,12 +457,10 @@ impl ApexQueuingPortP4 for Warden {
         port_direction: PortDirection,
         queuing_discipline: QueuingDiscipline,
     ) -> Result<QueuingPortId> {
-        if queuing_discipline != QueuingDiscipline::Fifo {
-            return Err(ErrorReturnCode::InvalidConfig);
-        }
         let reply: PortIdReply = request_words(&Request::CreatePort {
             kind: PortKind::Queuing,
             direction: codes::direction(port_direction),
+            discipline: codes::discipline(queuing_discipline),
             max_message_size: u64::from(max_message_size),
             refresh_or_depth: u64::from(max_nb_message),
             name: name_bytes(&queuing_port_name),
@@ -468,10 +475,12 @@ impl ApexQueuingPortP4 for Warden {
     ) -> Result<()> {
         check_message(message)?;
         let id = id_word(queuing_port_id)?;
+        let priority = own_priority();
         blocking_port_call(time_out, || {
             request_code(&Request::SendQueuing {
                 port: id,
                 timeout: protocol_timeout(time_out),
+                priority,
                 message,
             })
         })??;
@@ -489,10 +498,12 @@ impl ApexQueuingPortP4 for Warden {
         message: &mut [ApexByte],
     ) -> Result<(MessageSize, QueueOverflow)> {
         let id = id_word(queuing_port_id)?;
+        let priority = own_priority();
         let (reply, ipc) = blocking_port_call(time_out, || {
             request(&Request::ReceiveQueuing {
                 port: id,
                 timeout: protocol_timeout(time_out),
+                priority,
             })
         })??;
         codes::from_reply(reply.label)?;

@@ -19,6 +19,9 @@
 //!   higher-priority process readied while the lock is held runs only at level 0, the
 //!   codes of the services a lock owner may not call, the lock level's bound (see
 //!   `preemption.rs`);
+//! * `prio_tx` / `prio_rx` (scenario `apex_port_priority`): queuing ports with the
+//!   PRIORITY discipline: waiting receivers and waiting senders served by priority, FIFO
+//!   among equals (see `port_priority.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
@@ -31,6 +34,7 @@
 
 mod bench;
 mod intra;
+mod port_priority;
 mod preemption;
 
 use apex::Warden;
@@ -129,6 +133,8 @@ impl Partition<Warden> for Test {
             "bench-q" => bench::create(ctx),
             "intra" => intra::create(ctx),
             "preempt" => preemption::create(ctx),
+            "prio_tx" => port_priority::create_tx(ctx),
+            "prio_rx" => port_priority::create_rx(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             other => println!("{other}: no role for this partition name"),
