@@ -62,7 +62,7 @@
 //! 108    1    MCP (1..=199)
 //! 109    1    priority of the first thread (<= MCP)
 //! 110    1    time partition (0 = background, else 1..=15)
-//! 111    1    reserved
+//! 111    1    flags: bit 0 = may switch the module schedule (`schedule_control`); others 0
 //! 112    8    partition health table (as the module's)
 //! 120    2    first I/O range,  122  2  I/O range count
 //! 124    2    first attachment, 126  2  attachment count
@@ -215,7 +215,7 @@ pub mod partition {
     pub const MCP: Field = Field::new(108, 1);
     pub const PRIORITY: Field = Field::new(109, 1);
     pub const TIME_PARTITION: Field = Field::new(110, 1);
-    pub const RESERVED_A: Field = Field::new(111, 1);
+    pub const FLAGS: Field = Field::new(111, 1);
     pub const HEALTH: Field = Field::new(112, 8);
     pub const FIRST_IO: Field = Field::new(120, 2);
     pub const IO_COUNT: Field = Field::new(122, 2);
@@ -238,7 +238,7 @@ pub mod partition {
         MCP,
         PRIORITY,
         TIME_PARTITION,
-        RESERVED_A,
+        FLAGS,
         HEALTH,
         FIRST_IO,
         IO_COUNT,
@@ -294,6 +294,9 @@ pub mod port {
         RESERVED,
     ];
 }
+
+/// Partition flag: the partition may switch the module schedule.
+pub const FLAG_SCHEDULE_CONTROL: u8 = 1;
 
 /// Channel record fields.
 pub mod channel {
@@ -765,8 +768,11 @@ impl<'a> SystemView<'a> {
             if P::TIME_PARTITION.u8(r) >= TIME_PARTITIONS {
                 return Err(fail("time partition above 15"));
             }
-            if !P::RESERVED_A.is_zero(r) || !P::RESERVED_B.is_zero(r) {
+            if !P::RESERVED_B.is_zero(r) {
                 return Err(fail("reserved bytes are not zero"));
+            }
+            if P::FLAGS.u8(r) & !FLAG_SCHEDULE_CONTROL != 0 {
+                return Err(fail("unknown flags"));
             }
             if HealthTable::from_bytes(P::HEALTH.bytes(r)).is_none() {
                 return Err(fail("unknown health action"));
@@ -1046,6 +1052,7 @@ impl<'a> SystemView<'a> {
             mcp: P::MCP.u8(r),
             priority: P::PRIORITY.u8(r),
             time_partition: P::TIME_PARTITION.u8(r),
+            schedule_control: P::FLAGS.u8(r) & FLAG_SCHEDULE_CONTROL != 0,
             health: HealthTable::from_bytes(P::HEALTH.bytes(r)).unwrap_or_default(),
             io: self.sub_range(i, P::FIRST_IO, P::IO_COUNT),
             attachments: self.sub_range(i, P::FIRST_ATTACHMENT, P::ATTACHMENT_COUNT),
@@ -1200,6 +1207,8 @@ pub struct PartitionView<'a> {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
+    /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
+    pub schedule_control: bool,
     pub health: HealthTable,
     io: (usize, usize),
     attachments: (usize, usize),
@@ -1406,6 +1415,14 @@ mod encode {
                 .set(P::MCP, u64::from(p.mcp))
                 .set(P::PRIORITY, u64::from(p.priority))
                 .set(P::TIME_PARTITION, u64::from(p.time_partition))
+                .set(
+                    P::FLAGS,
+                    u64::from(if p.schedule_control {
+                        FLAG_SCHEDULE_CONTROL
+                    } else {
+                        0
+                    }),
+                )
                 .raw(P::HEALTH, &p.health.to_bytes())
                 .index(P::FIRST_IO, io_at)
                 .index(P::IO_COUNT, p.io_ports.len())

@@ -55,6 +55,7 @@
 //! native_syscalls = true          # optional, default true; a paravirtualized guest says false
 //! time = 1                        # optional: "background" (TP0) or a time partition 1..=15
 //! preempts_windows = false         # optional, background only: see "Time"
+//! schedule_control = false        # optional: may switch the module schedule, see "Time"
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
@@ -97,7 +98,10 @@
 //! every windowed partition (the floor the windowed partition's own threads keep to; a thread
 //! it runs below its floor may lose its window to the background). A background partition
 //! that is meant to preempt windows says `preempts_windows = true`; the tools then print a
-//! warning instead of refusing the file.
+//! warning instead of refusing the file. A partition with `schedule_control = true` may
+//! switch the module to another of the `[[schedules]]` (ARINC SET_MODULE_SCHEDULE; the
+//! switch takes effect at the end of the running major frame); every partition may ask
+//! which schedule runs.
 //!
 //! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
 //! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,

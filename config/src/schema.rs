@@ -71,6 +71,7 @@ pub struct Partition {
     pub native_syscalls: Option<Spanned<bool>>,
     pub time: Option<Spanned<Scalar>>,
     pub preempts_windows: Option<Spanned<bool>>,
+    pub schedule_control: Option<Spanned<bool>>,
     #[serde(default)]
     pub io_ports: Vec<Spanned<Scalar>>,
     #[serde(default)]

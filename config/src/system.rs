@@ -52,6 +52,8 @@ pub struct Partition {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
+    /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
+    pub schedule_control: bool,
     pub io_ports: Vec<IoRange>,
     pub irqs: IrqMask,
     pub shared: Vec<Attachment>,
@@ -279,6 +281,7 @@ impl System {
                     mcp: p.mcp,
                     priority: p.priority,
                     time_partition: p.time_partition,
+                    schedule_control: p.schedule_control,
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,
                     shared: p.shared().collect(),

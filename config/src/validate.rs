@@ -475,6 +475,7 @@ impl Validator<'_, '_> {
                 mcp,
                 priority,
                 time_partition: 0,
+                schedule_control: raw.schedule_control.as_ref().is_some_and(|b| *b.get_ref()),
                 io_ports,
                 irqs,
                 shared,

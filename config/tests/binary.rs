@@ -58,6 +58,7 @@ kernel_threads = 8
 kernel_tasks = 2
 max_priority = 150
 priority = 120
+schedule_control = true
 abilities = ["create_thread", "debug_log"]
 shared = { frame = "rw", code = "rx" }
 ports.level = { kind = "sampling", direction = "in", size = 16, refresh = "20ms" }
@@ -156,6 +157,11 @@ fn round_trip() {
     let ctl = view.find_partition("ctl").unwrap();
     assert_eq!((ctl.mcp, ctl.priority, ctl.time_partition), (150, 120, 1));
     assert_eq!(ctl.stack, 128 << 10);
+    assert!(ctl.schedule_control);
+    assert!(
+        !view.find_partition("io").unwrap().schedule_control,
+        "schedule_control is off unless the file says so"
+    );
     assert!(ctl.is_image_entry("partition/ctl"));
     let shared: Vec<_> = ctl.shared().collect();
     assert_eq!(shared[0].rights, Rights::ReadWrite);
@@ -411,6 +417,10 @@ fn partition_damage() {
     invalid(Table::Partition, 0, "MCP")(damaged(|b| {
         let at = p(b, 0);
         partition::MCP.set(&mut b[at..], 200);
+    }));
+    invalid(Table::Partition, 0, "unknown flags")(damaged(|b| {
+        let at = p(b, 0);
+        partition::FLAGS.set(&mut b[at..], 2);
     }));
     invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
         let at = p(b, 0);

@@ -361,3 +361,55 @@ fn apex_port_priority() {
         "a waiter's send or receive failed",
     );
 }
+
+#[test]
+fn apex_schedule_switch() {
+    let o = boot("apex_schedule_switch");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): sched's end is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "sched: status current 0 next 0 last switch none",
+            "sched: GET_MODULE_SCHEDULE_ID second Ok(1), nonesuch Some(InvalidConfig); SET_MODULE_SCHEDULE 7 Some(InvalidParam)",
+            "sched: SET_MODULE_SCHEDULE second None",
+            "sched: status current 0 next 1 last switch none",
+            "sched: status current 1 next 1 last switch set",
+            "plain: GET_MODULE_SCHEDULE_ID first Ok(0); SET_MODULE_SCHEDULE second Some(InvalidConfig), first Some(InvalidConfig)",
+            "sched: done",
+        ],
+    );
+    // The switch lands exactly on the end of the 50 ms frame in which it was asked for,
+    // and sched's next window is the new schedule's, 20 ms after the boundary.
+    let line = o.line("sched: asked ").expect("the switch's timing line");
+    check(
+        &o,
+        line.ends_with("the switch came 50000 us after that window's frame began"),
+        &format!("switch not on the frame boundary: {line}"),
+    );
+    let after = o
+        .line("sched: its window under second begins ")
+        .expect("the window line");
+    let ran: u64 = after
+        .rsplit("it ran ")
+        .next()
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    check(
+        &o,
+        after.contains("begins 20000 us after the switch") && (20_000..21_000).contains(&ran),
+        &format!("sched did not run in second's window: {after}"),
+    );
+    check(
+        &o,
+        o.lines.iter().any(|l| {
+            l.contains("schedule: t=") && l.contains("partition=sched asks for schedule second")
+        }),
+        "syssw logs the requested switch",
+    );
+}

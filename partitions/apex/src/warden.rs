@@ -548,6 +548,36 @@ impl ApexQueuingPortP1 for Warden {
     }
 }
 
+// ---------------------------------------------------------------- module schedules (Part 2, 3.4)
+
+/// Schedule ids are the schedules' indexes in the configuration; syssw keeps the status
+/// and lets only a partition with `schedule_control` switch (INVALID_CONFIG otherwise). The
+/// switch takes effect at the end of the running major frame.
+impl ApexScheduleP2 for Warden {
+    fn set_module_schedule(schedule_id: ScheduleId) -> Result<()> {
+        let schedule = u64::try_from(schedule_id).map_err(|_| ErrorReturnCode::InvalidParam)?;
+        request_code(&Request::SetModuleSchedule { schedule })?;
+        Ok(())
+    }
+
+    fn get_module_schedule_status() -> Result<ApexScheduleStatus> {
+        let status: protocol::ScheduleStatus = request_words(&Request::ModuleScheduleStatus)?;
+        let id = |index: u64| ScheduleId::try_from(index).unwrap_or(ScheduleId::MAX);
+        Ok(ApexScheduleStatus {
+            time_of_last_schedule_switch: i64::try_from(status.last_switch).unwrap_or(i64::MAX),
+            current_schedule: id(status.current),
+            next_schedule: id(status.next),
+        })
+    }
+
+    fn get_module_schedule_id(schedule_name: ScheduleName) -> Result<ScheduleId> {
+        let reply: protocol::ScheduleIdReply = request_words(&Request::ModuleScheduleId {
+            name: name_bytes(&schedule_name),
+        })?;
+        ScheduleId::try_from(reply.schedule).map_err(|_| ErrorReturnCode::InvalidConfig)
+    }
+}
+
 // ---------------------------------------------------------------- health monitoring (3.8.2)
 
 impl ApexErrorP4 for Warden {

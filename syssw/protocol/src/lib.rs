@@ -28,11 +28,14 @@
 //! | `CLEAR_QUEUING` = 18 | w0 = port id | – |
 //! | `REPORT_ERROR` = 20 | w0 = error ([`ErrorCode`]); data = detail text | – (or no reply: the action stopped the caller) |
 //! | `APPLICATION_MESSAGE` = 21 | data = text | – |
+//! | `SET_MODULE_SCHEDULE` = 30 | w0 = schedule id | – |
+//! | `MODULE_SCHEDULE_STATUS` = 31 | – | w0 = time of the last switch (ns since boot, 0 = none), w1 = current schedule id, w2 = next schedule id ([`ScheduleStatus`]) |
+//! | `MODULE_SCHEDULE_ID` = 32 | data = name | w0 = schedule id ([`ScheduleIdReply`]) |
 //!
 //! Codes travel as their numbers ([`PortKind`], [`Direction`], [`Validity`], ...; each table
 //! is written once below). Port ids are the ports' global indexes in the configuration; a
 //! port must be created (in COLD_START or WARM_START mode, matching its configuration)
-//! before use. Time-outs: 0 = do not wait, `u64::MAX` = forever, else nanoseconds. Words a
+//! before use. Schedule ids are the schedules' indexes in the configuration. Time-outs: 0 = do not wait, `u64::MAX` = forever, else nanoseconds. Words a
 //! request does not use are ignored. The caller's priority orders it among the processes
 //! waiting on a PRIORITY port; syssw takes it as given, since only processes of the caller's
 //! own partition wait on the same port.
@@ -60,6 +63,9 @@ codes::code_enum! {
         ClearQueuing = 18 => "CLEAR_QUEUING",
         ReportError = 20 => "REPORT_ERROR",
         ApplicationMessage = 21 => "APPLICATION_MESSAGE",
+        SetModuleSchedule = 30 => "SET_MODULE_SCHEDULE",
+        ModuleScheduleStatus = 31 => "MODULE_SCHEDULE_STATUS",
+        ModuleScheduleId = 32 => "MODULE_SCHEDULE_ID",
     }
 }
 
@@ -263,6 +269,13 @@ pub enum Request<'a> {
     ApplicationMessage {
         text: &'a [u8],
     },
+    SetModuleSchedule {
+        schedule: u64,
+    },
+    ModuleScheduleStatus,
+    ModuleScheduleId {
+        name: &'a [u8],
+    },
 }
 
 /// A request or reply as it travels: label, three words and the data bytes.
@@ -290,6 +303,9 @@ impl<'a> Request<'a> {
             Self::ClearQueuing { .. } => Label::ClearQueuing,
             Self::ReportError { .. } => Label::ReportError,
             Self::ApplicationMessage { .. } => Label::ApplicationMessage,
+            Self::SetModuleSchedule { .. } => Label::SetModuleSchedule,
+            Self::ModuleScheduleStatus => Label::ModuleScheduleStatus,
+            Self::ModuleScheduleId { .. } => Label::ModuleScheduleId,
         }
     }
 
@@ -348,6 +364,9 @@ impl<'a> Request<'a> {
             } => ([port, timeout, u64::from(priority)], &[]),
             Self::ReportError { error, detail } => ([u64::from(error.code()), 0, 0], detail),
             Self::ApplicationMessage { text } => ([0; 3], text),
+            Self::SetModuleSchedule { schedule } => ([schedule, 0, 0], &[]),
+            Self::ModuleScheduleStatus => ([0; 3], &[]),
+            Self::ModuleScheduleId { name } => ([0; 3], name),
         };
         Wire {
             label: self.label().code(),
@@ -405,6 +424,9 @@ impl<'a> Request<'a> {
                 detail: wire.data,
             },
             Label::ApplicationMessage => Self::ApplicationMessage { text: wire.data },
+            Label::SetModuleSchedule => Self::SetModuleSchedule { schedule: w0 },
+            Label::ModuleScheduleStatus => Self::ModuleScheduleStatus,
+            Label::ModuleScheduleId => Self::ModuleScheduleId { name: wire.data },
         })
     }
 }
@@ -476,6 +498,48 @@ impl ReplyWords for PortIdReply {
 
     fn from_words([port, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
         Ok(Self { port })
+    }
+}
+
+/// Reply to MODULE_SCHEDULE_ID.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScheduleIdReply {
+    pub schedule: u64,
+}
+
+impl ReplyWords for ScheduleIdReply {
+    fn to_words(&self) -> [u64; 3] {
+        [self.schedule, 0, 0]
+    }
+
+    fn from_words([schedule, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self { schedule })
+    }
+}
+
+/// Reply to MODULE_SCHEDULE_STATUS (ARINC 653 Part 2 `SCHEDULE_STATUS_TYPE`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScheduleStatus {
+    /// When the running schedule took over from another (ns since boot); 0 if it is the
+    /// initial one.
+    pub last_switch: u64,
+    pub current: u64,
+    /// The schedule from the next major-frame boundary (the current one if no switch is
+    /// pending).
+    pub next: u64,
+}
+
+impl ReplyWords for ScheduleStatus {
+    fn to_words(&self) -> [u64; 3] {
+        [self.last_switch, self.current, self.next]
+    }
+
+    fn from_words([last_switch, current, next]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self {
+            last_switch,
+            current,
+            next,
+        })
     }
 }
 

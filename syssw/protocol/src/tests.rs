@@ -47,6 +47,9 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
             detail: b"detail",
         },
         Request::ApplicationMessage { text: b"hello" },
+        Request::SetModuleSchedule { schedule: 2 },
+        Request::ModuleScheduleStatus,
+        Request::ModuleScheduleId { name: NAME },
     ]
 }
 
@@ -195,6 +198,12 @@ fn every_reply_round_trips() {
         last_msg_validity: Validity::Invalid,
     });
     check(QueuingMessage { len: 0 });
+    check(ScheduleIdReply { schedule: 3 });
+    check(ScheduleStatus {
+        last_switch: 150_000_000,
+        current: 1,
+        next: 0,
+    });
     check(QueuingStatus {
         nb_message: 3,
         max_nb_message: 256,

@@ -22,6 +22,9 @@
 //! * `prio_tx` / `prio_rx` (scenario `apex_port_priority`): queuing ports with the
 //!   PRIORITY discipline: waiting receivers and waiting senders served by priority, FIFO
 //!   among equals (see `port_priority.rs`);
+//! * `sched` / `plain` (scenario `apex_schedule_switch`): module schedules: a switch
+//!   that lands on the major-frame boundary, and a partition that may not switch (see
+//!   `schedules.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
@@ -36,6 +39,7 @@ mod bench;
 mod intra;
 mod port_priority;
 mod preemption;
+mod schedules;
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
@@ -135,6 +139,8 @@ impl Partition<Warden> for Test {
             "preempt" => preemption::create(ctx),
             "prio_tx" => port_priority::create_tx(ctx),
             "prio_rx" => port_priority::create_rx(ctx),
+            "sched" => schedules::create_sched(ctx),
+            "plain" => schedules::create_plain(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             other => println!("{other}: no role for this partition name"),
