@@ -413,3 +413,39 @@ fn apex_schedule_switch() {
         "syssw logs the requested switch",
     );
 }
+
+#[test]
+fn apex_error_handler() {
+    let o = boot("apex_error_handler");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the handler's own error is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "handled: init CREATE_ERROR_HANDLER again: Some(NoAction)",
+            "handled: faulty: GET_ERROR_STATUS Some(InvalidConfig); RAISE_APPLICATION_ERROR with a 129-byte message Some(InvalidParam), as DEADLINE_MISSED Some(InvalidParam)",
+            "handled: handler: ApplicationError from faulty message \"first\"",
+            "handled: handler: LOCK_PREEMPTION Some(NoAction); TIMED_WAIT Some(InvalidMode); GET_MY_ID true",
+            "handled: handler: GET_ERROR_STATUS then NoAction",
+            "handled: faulty: RAISE_APPLICATION_ERROR first None, handled 1",
+            "handled: handler: ApplicationError from faulty message \"end\"",
+        ],
+    );
+    // Only the handler's own error reaches the health monitor.
+    let health: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("health: t="))
+        .collect();
+    check(
+        &o,
+        health.len() == 1
+            && health[0].contains("partition=handled error=application_error detail=\"handler")
+            && health[0].ends_with("action=shutdown_success"),
+        &format!("unexpected health events: {health:?}"),
+    );
+}

@@ -25,6 +25,8 @@
 //! * `sched` / `plain` (scenario `apex_schedule_switch`): module schedules: a switch
 //!   that lands on the major-frame boundary, and a partition that may not switch (see
 //!   `schedules.rs`);
+//! * `handled` (scenario `apex_error_handler`): the error handler with GET_ERROR_STATUS,
+//!   RAISE_APPLICATION_ERROR's codes, and what a handler may not do (see `errors.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
@@ -36,6 +38,7 @@
 #![no_main]
 
 mod bench;
+mod errors;
 mod intra;
 mod port_priority;
 mod preemption;
@@ -140,6 +143,7 @@ impl Partition<Warden> for Test {
             "prio_tx" => port_priority::create_tx(ctx),
             "prio_rx" => port_priority::create_rx(ctx),
             "sched" => schedules::create_sched(ctx),
+            "handled" => errors::create(ctx),
             "plain" => schedules::create_plain(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
