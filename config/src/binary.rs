@@ -62,7 +62,7 @@
 //! 108    1    MCP (1..=199)
 //! 109    1    priority of the first thread (<= MCP)
 //! 110    1    time partition (0 = background, else 1..=15)
-//! 111    1    reserved
+//! 111    1    flags: bit 0 = may switch the module schedule (`schedule_control`); others 0
 //! 112    8    partition health table (as the module's)
 //! 120    2    first I/O range,  122  2  I/O range count
 //! 124    2    first attachment, 126  2  attachment count
@@ -88,7 +88,8 @@
 //! 48     2    channel index
 //! 50     1    kind: 1 = sampling, 2 = queuing
 //! 51     1    direction: 1 = in (destination), 2 = out (source)
-//! 52     4    reserved
+//! 52     1    queuing discipline: 0 = FIFO, 1 = PRIORITY; 0 for a sampling port
+//! 53     3    reserved
 //!
 //! Channel (40 bytes) x C
 //! 0      32   name
@@ -214,7 +215,7 @@ pub mod partition {
     pub const MCP: Field = Field::new(108, 1);
     pub const PRIORITY: Field = Field::new(109, 1);
     pub const TIME_PARTITION: Field = Field::new(110, 1);
-    pub const RESERVED_A: Field = Field::new(111, 1);
+    pub const FLAGS: Field = Field::new(111, 1);
     pub const HEALTH: Field = Field::new(112, 8);
     pub const FIRST_IO: Field = Field::new(120, 2);
     pub const IO_COUNT: Field = Field::new(122, 2);
@@ -237,7 +238,7 @@ pub mod partition {
         MCP,
         PRIORITY,
         TIME_PARTITION,
-        RESERVED_A,
+        FLAGS,
         HEALTH,
         FIRST_IO,
         IO_COUNT,
@@ -278,9 +279,10 @@ pub mod port {
     pub const CHANNEL: Field = Field::new(48, 2);
     pub const KIND: Field = Field::new(50, 1);
     pub const DIRECTION: Field = Field::new(51, 1);
-    pub const RESERVED: Field = Field::new(52, 4);
+    pub const DISCIPLINE: Field = Field::new(52, 1);
+    pub const RESERVED: Field = Field::new(53, 3);
     pub const SIZE: usize = 56;
-    pub const FIELDS: [Field; 8] = [
+    pub const FIELDS: [Field; 9] = [
         NAME,
         MESSAGE_SIZE,
         DEPTH,
@@ -288,9 +290,13 @@ pub mod port {
         CHANNEL,
         KIND,
         DIRECTION,
+        DISCIPLINE,
         RESERVED,
     ];
 }
+
+/// Partition flag: the partition may switch the module schedule.
+pub const FLAG_SCHEDULE_CONTROL: u8 = 1;
 
 /// Channel record fields.
 pub mod channel {
@@ -762,8 +768,11 @@ impl<'a> SystemView<'a> {
             if P::TIME_PARTITION.u8(r) >= TIME_PARTITIONS {
                 return Err(fail("time partition above 15"));
             }
-            if !P::RESERVED_A.is_zero(r) || !P::RESERVED_B.is_zero(r) {
+            if !P::RESERVED_B.is_zero(r) {
                 return Err(fail("reserved bytes are not zero"));
+            }
+            if P::FLAGS.u8(r) & !FLAG_SCHEDULE_CONTROL != 0 {
+                return Err(fail("unknown flags"));
             }
             if HealthTable::from_bytes(P::HEALTH.bytes(r)).is_none() {
                 return Err(fail("unknown health action"));
@@ -864,6 +873,11 @@ impl<'a> SystemView<'a> {
             };
             if !depth_ok {
                 return Err(fail("depth not 1..=256 (queuing) or not 0 (sampling)"));
+            }
+            let discipline =
+                Discipline::from_code(T::DISCIPLINE.u8(r)).ok_or(fail("unknown discipline"))?;
+            if kind == PortKind::Sampling && discipline != Discipline::Fifo {
+                return Err(fail("queuing discipline on a sampling port"));
             }
             if T::REFRESH.get(r) != 0 && (kind, direction) != (PortKind::Sampling, Direction::In) {
                 return Err(fail(
@@ -1038,6 +1052,7 @@ impl<'a> SystemView<'a> {
             mcp: P::MCP.u8(r),
             priority: P::PRIORITY.u8(r),
             time_partition: P::TIME_PARTITION.u8(r),
+            schedule_control: P::FLAGS.u8(r) & FLAG_SCHEDULE_CONTROL != 0,
             health: HealthTable::from_bytes(P::HEALTH.bytes(r)).unwrap_or_default(),
             io: self.sub_range(i, P::FIRST_IO, P::IO_COUNT),
             attachments: self.sub_range(i, P::FIRST_ATTACHMENT, P::ATTACHMENT_COUNT),
@@ -1095,6 +1110,7 @@ impl<'a> SystemView<'a> {
             channel: port::CHANNEL.u16(r),
             kind: PortKind::from_code(port::KIND.u8(r)).unwrap_or(PortKind::Sampling),
             direction: Direction::from_code(port::DIRECTION.u8(r)).unwrap_or(Direction::In),
+            discipline: Discipline::from_code(port::DISCIPLINE.u8(r)).unwrap_or(Discipline::Fifo),
         }
     }
 
@@ -1191,6 +1207,8 @@ pub struct PartitionView<'a> {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
+    /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
+    pub schedule_control: bool,
     pub health: HealthTable,
     io: (usize, usize),
     attachments: (usize, usize),
@@ -1253,6 +1271,8 @@ pub struct PortView<'a> {
     pub depth: u32,
     /// Sampling input: validity period (ns), 0 = none.
     pub refresh: u64,
+    /// Queuing: the order waiting processes are served in; sampling: FIFO.
+    pub discipline: Discipline,
     /// Index of its channel.
     pub channel: usize,
 }
@@ -1395,6 +1415,14 @@ mod encode {
                 .set(P::MCP, u64::from(p.mcp))
                 .set(P::PRIORITY, u64::from(p.priority))
                 .set(P::TIME_PARTITION, u64::from(p.time_partition))
+                .set(
+                    P::FLAGS,
+                    u64::from(if p.schedule_control {
+                        FLAG_SCHEDULE_CONTROL
+                    } else {
+                        0
+                    }),
+                )
                 .raw(P::HEALTH, &p.health.to_bytes())
                 .index(P::FIRST_IO, io_at)
                 .index(P::IO_COUNT, p.io_ports.len())
@@ -1429,6 +1457,7 @@ mod encode {
                 .index(T::CHANNEL, t.channel)
                 .set(T::KIND, u64::from(t.kind.code()))
                 .set(T::DIRECTION, u64::from(t.direction.code()))
+                .set(T::DISCIPLINE, u64::from(t.discipline.code()))
                 .write(&mut out);
         }
         let mut first = 0;

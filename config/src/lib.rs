@@ -55,11 +55,12 @@
 //! native_syscalls = true          # optional, default true; a paravirtualized guest says false
 //! time = 1                        # optional: "background" (TP0) or a time partition 1..=15
 //! preempts_windows = false         # optional, background only: see "Time"
+//! schedule_control = false        # optional: may switch the module schedule, see "Time"
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
-//! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
+//! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
 //! health.deadline_missed = "warm_restart"
 //! plc.program = ["../plc/tank.st"]   # soft-PLC partitions only: see "PLC"
 //! plc.inputs.level = { at = "%IB0", valid = "%IX8.0" }
@@ -100,7 +101,10 @@
 //! every windowed partition (the floor the windowed partition's own threads keep to; a thread
 //! it runs below its floor may lose its window to the background). A background partition
 //! that is meant to preempt windows says `preempts_windows = true`; the tools then print a
-//! warning instead of refusing the file.
+//! warning instead of refusing the file. A partition with `schedule_control = true` may
+//! switch the module to another of the `[[schedules]]` (ARINC SET_MODULE_SCHEDULE; the
+//! switch takes effect at the end of the running major frame); every partition may ask
+//! which schedule runs.
 //!
 //! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
 //! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,
@@ -111,7 +115,11 @@
 //!
 //! **Ports and channels.** Ports have `kind` (`sampling` | `queuing`), `direction` (`in` |
 //! `out`), `size` (largest message, 1..=4096 bytes), `depth` (queuing only, 1..=256) and
-//! `refresh` (sampling inputs only: how long a message stays valid). A sampling channel goes
+//! `refresh` (sampling inputs only: how long a message stays valid), and queuing ports
+//! `discipline` (`fifo`, the default, | `priority`: the order in which processes waiting on
+//! the port are served, ARINC's QUEUING_DISCIPLINE; an APEX partition must create the port
+//! with the same one; a guest partition's ports stay FIFO, since its calls never wait).
+//! A sampling channel goes
 //! from one output port to one or more input ports; a queuing channel connects exactly one
 //! output to one input. Both ends must have the channel's kind, and each destination's size
 //! must be at least the source's (the receiver can hold every message). Every port belongs to

@@ -129,7 +129,7 @@ pub fn ability_by_name(name: &str) -> Option<Abilities> {
 
 /// The errors the health monitor handles, the port kinds and directions: the service
 /// protocol's code tables (one definition for the configuration, syssw and the partitions).
-pub use protocol::{Direction, ErrorCode, PortKind};
+pub use protocol::{Direction, Discipline, ErrorCode, PortKind};
 
 codes::code_enum! {
     /// What the health monitor does about an error (binary code 0 means "not set").

@@ -71,6 +71,7 @@ pub struct Partition {
     pub native_syscalls: Option<Spanned<bool>>,
     pub time: Option<Spanned<Scalar>>,
     pub preempts_windows: Option<Spanned<bool>>,
+    pub schedule_control: Option<Spanned<bool>>,
     #[serde(default)]
     pub io_ports: Vec<Spanned<Scalar>>,
     #[serde(default)]
@@ -171,6 +172,7 @@ pub struct Port {
     pub size: Spanned<Scalar>,
     pub depth: Option<Spanned<i64>>,
     pub refresh: Option<Spanned<Scalar>>,
+    pub discipline: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

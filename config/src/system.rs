@@ -52,6 +52,8 @@ pub struct Partition {
     pub priority: u8,
     /// 0 = background.
     pub time_partition: u8,
+    /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
+    pub schedule_control: bool,
     pub io_ports: Vec<IoRange>,
     pub irqs: IrqMask,
     pub shared: Vec<Attachment>,
@@ -225,6 +227,8 @@ pub struct Port {
     pub depth: u32,
     /// Sampling input: ns, 0 = none.
     pub refresh: u64,
+    /// Queuing: the order waiting processes are served in; sampling: FIFO.
+    pub discipline: Discipline,
     /// Index into [`System::channels`].
     pub channel: usize,
 }
@@ -292,6 +296,7 @@ impl System {
                     mcp: p.mcp,
                     priority: p.priority,
                     time_partition: p.time_partition,
+                    schedule_control: p.schedule_control,
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,
                     shared: p.shared().collect(),
@@ -304,6 +309,7 @@ impl System {
                             size: t.size,
                             depth: t.depth,
                             refresh: t.refresh,
+                            discipline: t.discipline,
                             channel: t.channel,
                         })
                         .collect(),

@@ -443,6 +443,18 @@ impl Validator<'_, '_> {
                 let device = (io_ports.as_slice(), irqs);
                 self.guest(raw, guest, &path.key("guest"), abilities, stack, device)
             });
+            if raw.guest.is_some() {
+                for (port_key, port) in in_source_order(&raw.ports) {
+                    let discipline = port.get_ref().discipline.as_ref();
+                    if let Some(d) = discipline.filter(|d| d.get_ref() == "priority") {
+                        self.error(
+                            start(d),
+                            &path.key("ports").key(port_key.get_ref()).key("discipline"),
+                            "a guest never waits on a port (its calls do not block): a PRIORITY discipline is for APEX partitions",
+                        );
+                    }
+                }
+            }
             if let (Some(_), Some(data)) = (&raw.guest, &raw.data) {
                 self.error(
                     start(data),
@@ -467,6 +479,7 @@ impl Validator<'_, '_> {
                 mcp,
                 priority,
                 time_partition: 0,
+                schedule_control: raw.schedule_control.as_ref().is_some_and(|b| *b.get_ref()),
                 io_ports,
                 irqs,
                 shared,
@@ -1673,11 +1686,38 @@ impl Validator<'_, '_> {
                 }
             }
         };
+        let discipline = match (&raw.discipline, kind) {
+            (None, _) => Some(Discipline::Fifo),
+            (Some(d), Some(PortKind::Queuing)) => {
+                let parsed = Discipline::from_name(d.get_ref());
+                if parsed.is_none() {
+                    self.error(
+                        start(d),
+                        &path.key("discipline"),
+                        format!(
+                            "unknown queuing discipline {:?}: expected \"fifo\" or \"priority\"",
+                            d.get_ref()
+                        ),
+                    );
+                }
+                parsed
+            }
+            (Some(_), None) => None,
+            (Some(d), Some(PortKind::Sampling)) => {
+                self.error(
+                    start(d),
+                    &path.key("discipline"),
+                    "`discipline` is only for queuing ports",
+                );
+                None
+            }
+        };
         let valid = kind.is_some()
             && direction.is_some()
             && size.is_some()
             && depth.is_some()
-            && refresh.is_some();
+            && refresh.is_some()
+            && discipline.is_some();
         let port = Port {
             name: key.get_ref().clone(),
             kind: kind.unwrap_or(PortKind::Sampling),
@@ -1685,6 +1725,7 @@ impl Validator<'_, '_> {
             size: size.unwrap_or(0),
             depth: depth.unwrap_or(0),
             refresh: refresh.unwrap_or(0),
+            discipline: discipline.unwrap_or(Discipline::Fifo),
             channel: usize::MAX,
         };
         (port, valid)

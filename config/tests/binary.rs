@@ -8,7 +8,7 @@ use config::binary::{
     self, DecodeError, Table, attachment, channel, header, io_range, partition, port, schedule,
     window,
 };
-use config::model::{Direction, ErrorCode, HealthAction, PortKind, Rights};
+use config::model::{Direction, Discipline, ErrorCode, HealthAction, PortKind, Rights};
 use config::{System, decode};
 use proptest::prelude::*;
 
@@ -58,10 +58,11 @@ kernel_threads = 8
 kernel_tasks = 2
 max_priority = 150
 priority = 120
+schedule_control = true
 abilities = ["create_thread", "debug_log"]
 shared = { frame = "rw", code = "rx" }
 ports.level = { kind = "sampling", direction = "in", size = 16, refresh = "20ms" }
-ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8 }
+ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
 health.deadline_missed = "warm_restart"
 health.application_error = "shutdown_success"
 
@@ -156,6 +157,11 @@ fn round_trip() {
     let ctl = view.find_partition("ctl").unwrap();
     assert_eq!((ctl.mcp, ctl.priority, ctl.time_partition), (150, 120, 1));
     assert_eq!(ctl.stack, 128 << 10);
+    assert!(ctl.schedule_control);
+    assert!(
+        !view.find_partition("io").unwrap().schedule_control,
+        "schedule_control is off unless the file says so"
+    );
     assert!(ctl.is_image_entry("partition/ctl"));
     let shared: Vec<_> = ctl.shared().collect();
     assert_eq!(shared[0].rights, Rights::ReadWrite);
@@ -195,6 +201,12 @@ fn round_trip() {
         (PortKind::Queuing, 8, 1)
     );
     assert_eq!(ctl.find_port("level").unwrap().refresh, 20_000_000);
+    assert_eq!(cmd.discipline, Discipline::Priority);
+    assert_eq!(
+        ctl.find_port("level").unwrap().discipline,
+        Discipline::Fifo,
+        "a port without `discipline` is FIFO"
+    );
     assert_eq!(
         view.health().get(ErrorCode::PowerFail),
         Some(HealthAction::Shutdown)
@@ -406,6 +418,10 @@ fn partition_damage() {
         let at = p(b, 0);
         partition::MCP.set(&mut b[at..], 200);
     }));
+    invalid(Table::Partition, 0, "unknown flags")(damaged(|b| {
+        let at = p(b, 0);
+        partition::FLAGS.set(&mut b[at..], 2);
+    }));
     invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
         let at = p(b, 0);
         partition::PRIORITY.set(&mut b[at..], 151);
@@ -475,6 +491,14 @@ fn port_and_channel_damage() {
     invalid(Table::Port, 1, "depth")(damaged(|b| {
         let at = t(b, 1);
         port::DEPTH.set(&mut b[at..], 0);
+    }));
+    invalid(Table::Port, 0, "queuing discipline on a sampling port")(damaged(|b| {
+        let at = t(b, 0);
+        port::DISCIPLINE.set(&mut b[at..], 1);
+    }));
+    invalid(Table::Port, 1, "unknown discipline")(damaged(|b| {
+        let at = t(b, 1);
+        port::DISCIPLINE.set(&mut b[at..], 2);
     }));
     invalid(Table::Port, 0, "refresh period on a port")(damaged(|b| {
         // ctl.level becomes an output: refresh no longer allowed.

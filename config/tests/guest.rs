@@ -173,6 +173,19 @@ fn a_guest_has_no_other_data_entry() {
 }
 
 #[test]
+fn a_guest_port_is_fifo() {
+    expect_some(
+        &guest(
+            "guest.init = [\"/bin/sh\"]\nports.q = { kind = \"queuing\", direction = \"in\", size = 8, depth = 2, discipline = \"priority\" }",
+        ),
+        "\"priority\"",
+        0,
+        "partitions.b.ports.q.discipline",
+        "a guest never waits on a port",
+    );
+}
+
+#[test]
 fn a_guest_needs_a_stack_for_its_process_table() {
     let src = guest("guest.init = [\"/bin/sh\"]").replace("stack = \"1MiB\"", "stack = \"256KiB\"");
     expect_some(

@@ -950,6 +950,32 @@ fn queue_depth_range() {
 }
 
 #[test]
+fn queuing_discipline_names_and_kind() {
+    let src = doc(&[(
+        "# a",
+        "ports.q = { kind = \"queuing\", direction = \"out\", size = 8, depth = 2, discipline = \"lifo\" }",
+    )]);
+    expect_some(
+        &src,
+        "\"lifo\"",
+        0,
+        "partitions.a.ports.q.discipline",
+        "unknown queuing discipline \"lifo\": expected \"fifo\" or \"priority\"",
+    );
+    let src = doc(&[(
+        "direction = \"out\", size = 8 }",
+        "direction = \"out\", size = 8, discipline = \"priority\" }",
+    )]);
+    expect_one(
+        &src,
+        "\"priority\" }",
+        0,
+        "partitions.a.ports.out.discipline",
+        "`discipline` is only for queuing ports",
+    );
+}
+
+#[test]
 fn refresh_on_output_port() {
     let src = doc(&[(
         "direction = \"out\", size = 8 }",

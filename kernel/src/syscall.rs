@@ -582,12 +582,13 @@ fn schedule_switch(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> H
     let now = clock();
     k.require(task_of(k, t), Abilities::SCHEDULING)?;
     let slot = args::ScheduleSwitch::decode(r).slot;
-    if slot < MAX_SCHEDULES && k.time.switch_to(slot as usize, now) {
-        k.update_window(now);
-        Ok(Next::Return)
-    } else {
-        Err(Error::InvalidArgument)
-    }
+    let at = (slot < MAX_SCHEDULES)
+        .then(|| k.time.switch_to(slot as usize, now))
+        .flatten()
+        .ok_or(Error::InvalidArgument)?;
+    k.update_window(now);
+    k.threads[t].set_results(|r| results::ScheduleSwitch { at }.encode_into(r));
+    Ok(Next::Return)
 }
 
 fn partition_info(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, clock: Clock) -> Handled {

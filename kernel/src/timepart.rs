@@ -154,19 +154,23 @@ impl TimeTable {
         Ok(())
     }
 
-    /// Asks for schedule `slot`: at once if none runs, else from the next frame boundary.
-    pub fn switch_to(&mut self, slot: usize, now: u64) -> bool {
+    /// Asks for schedule `slot`: at once if none runs, else from the next frame boundary
+    /// (a later request before that boundary replaces this one). The time it takes effect;
+    /// None for an empty slot.
+    pub fn switch_to(&mut self, slot: usize, now: u64) -> Option<u64> {
         if slot >= MAX_SCHEDULES || self.schedules[slot].is_none() {
-            return false;
+            return None;
         }
-        if self.running.is_none() {
+        let Some(running) = self.running else {
             self.running = Some(slot);
             self.frame_start = now;
             self.frames = 1;
-        } else {
-            self.pending = Some(slot);
-        }
-        true
+            return Some(now);
+        };
+        self.advance(now);
+        self.pending = Some(slot);
+        let major = self.schedules[running].map_or(0, |s| s.major_frame);
+        Some(self.frame_start + major)
     }
 
     pub fn running(&self) -> Option<usize> {
@@ -328,7 +332,7 @@ mod tests {
             Schedule::new(100 * US, &[w(10, 30, 1), w(60, 20, 2)]).unwrap(),
         )
         .unwrap();
-        assert!(t.switch_to(0, 1000 * US));
+        assert_eq!(t.switch_to(0, 1000 * US), Some(1000 * US));
         let p = t.advance(1000 * US);
         assert_eq!((p.partition, p.next_boundary), (None, 1010 * US));
         let p = t.advance(1010 * US);
@@ -364,7 +368,8 @@ mod tests {
             .unwrap();
         t.switch_to(0, 0);
         t.advance(30 * US);
-        assert!(t.switch_to(1, 30 * US));
+        assert_eq!(t.switch_to(1, 30 * US), Some(100 * US), "the frame's end");
+        assert_eq!(t.switch_to(5, 30 * US), None, "an empty slot");
         assert_eq!(t.advance(99 * US).partition, Some(1), "not mid-frame");
         let p = t.advance(100 * US);
         assert_eq!(

@@ -113,6 +113,7 @@ fn main(image_base: u64, image_len: u64) {
         worker: worker.id,
         restarts: syssw_core::restart::Restarts::new(),
         worker_place: None,
+        schedule: syssw_core::schedule::ModuleSchedule::new(system.schedule_count()),
     };
     for s in system.schedules() {
         let mut windows = [user_rt::abi::syscall::WindowSpec::default(); 32];

@@ -28,15 +28,16 @@ use syssw_core::health::{
     Detail, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
-use syssw_core::ports::{Completion, NEVER, Outcome, Ports};
+use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
 use syssw_core::restart::{Job, Kind, Report, Restarts};
+use syssw_core::schedule::ModuleSchedule;
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
 use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
 use user_rt::protocol::{
     PartitionStatus, PortIdReply, QueuingMessage, ReplyWords, Request, ReturnCode, SamplingMessage,
-    Wire,
+    ScheduleIdReply, Wire,
 };
 use user_rt::sys::{self, Message, Received};
 
@@ -62,6 +63,8 @@ pub struct Server<'a> {
     pub restarts: Restarts,
     /// The worker's time partition and priority since the last job (`None`: as created).
     pub worker_place: Option<(u8, u8)>,
+    /// Which schedule runs and comes next, as SET/GET_MODULE_SCHEDULE_* see it.
+    pub schedule: ModuleSchedule,
 }
 
 /// A request's data (name, message, text), copied out of the IPC buffer before anything
@@ -194,18 +197,26 @@ impl<'a> Server<'a> {
             Request::CreatePort {
                 kind,
                 direction,
+                discipline,
                 max_message_size,
                 refresh_or_depth,
                 name,
             } => {
-                let (code, port) = self.create_port(
-                    index,
-                    name,
-                    kind,
-                    direction,
-                    max_message_size,
-                    refresh_or_depth,
-                );
+                let (code, port) = self.create_port(index, name, kind, |port| {
+                    port.direction == direction
+                        && port.size as u64 == max_message_size
+                        && match port.kind {
+                            // ARINC: only a destination has a refresh period (a source's
+                            // is ignored).
+                            PortKind::Sampling => {
+                                port.direction == Direction::Out || port.refresh == refresh_or_depth
+                            }
+                            PortKind::Queuing => {
+                                port.depth as u64 == refresh_or_depth
+                                    && port.discipline == discipline
+                            }
+                        }
+                });
                 reply(code, PortIdReply { port }.to_words());
             }
             Request::PortId { kind, name } => {
@@ -236,6 +247,7 @@ impl<'a> Server<'a> {
             Request::SendQueuing {
                 port,
                 timeout,
+                priority,
                 message,
             } => {
                 let outcome = self.ports.send_queuing(
@@ -244,20 +256,30 @@ impl<'a> Server<'a> {
                     message,
                     now,
                     timeout,
-                    m.sender.0,
+                    Waiter {
+                        token: m.sender.0,
+                        priority,
+                    },
                     |c| complete(ipc, c),
                 );
                 if let Outcome::Done { code, .. } = outcome {
                     reply(code, [0; 3]);
                 }
             }
-            Request::ReceiveQueuing { port, timeout } => {
+            Request::ReceiveQueuing {
+                port,
+                timeout,
+                priority,
+            } => {
                 let outcome = self.ports.receive_queuing(
                     index,
                     port as usize,
                     now,
                     timeout,
-                    m.sender.0,
+                    Waiter {
+                        token: m.sender.0,
+                        priority,
+                    },
                     buffer,
                     |c| complete(ipc, c),
                 );
@@ -298,6 +320,52 @@ impl<'a> Server<'a> {
                 );
                 reply(ReturnCode::NoError, [0; 3]);
             }
+            Request::SetModuleSchedule { schedule } => {
+                let code = self.set_module_schedule(index, schedule, now);
+                reply(code, [0; 3]);
+            }
+            Request::ModuleScheduleStatus => {
+                reply(ReturnCode::NoError, self.schedule.status(now).to_words());
+            }
+            Request::ModuleScheduleId { name } => {
+                let found = self.system.schedules().find(|s| s.name.as_bytes() == name);
+                match found {
+                    Some(s) => reply(
+                        ReturnCode::NoError,
+                        ScheduleIdReply {
+                            schedule: s.index as u64,
+                        }
+                        .to_words(),
+                    ),
+                    None => reply(ReturnCode::InvalidConfig, [0; 3]),
+                }
+            }
+        }
+    }
+
+    /// ARINC SET_MODULE_SCHEDULE by partition `index`: the kernel switches at the end of the
+    /// running major frame and says when.
+    fn set_module_schedule(&mut self, index: usize, schedule: u64, now: u64) -> ReturnCode {
+        let partition = self.system.partition(index);
+        if let Err(code) = self.schedule.check(partition.schedule_control, schedule) {
+            return code;
+        }
+        match sys::schedule_switch(schedule) {
+            Ok(at) => {
+                self.schedule.requested(schedule, at, now);
+                println!(
+                    "schedule: t={}.{:03}ms partition={} asks for schedule {} from t={}.{:03}ms",
+                    now / 1_000_000,
+                    now / 1000 % 1000,
+                    partition.name,
+                    self.system.schedule(schedule as usize).name,
+                    at / 1_000_000,
+                    at / 1000 % 1000,
+                );
+                ReturnCode::NoError
+            }
+            // Every configured schedule is installed: the kernel has no reason to refuse.
+            Err(_) => ReturnCode::InvalidParam,
         }
     }
 
@@ -315,23 +383,12 @@ impl<'a> Server<'a> {
         index: usize,
         name: &[u8],
         kind: PortKind,
-        direction: Direction,
-        size: u64,
-        refresh_or_depth: u64,
+        matches: impl FnOnce(&config::binary::PortView<'a>) -> bool,
     ) -> (ReturnCode, u64) {
         let Some(port) = self.find_port(index, name, kind) else {
             return (ReturnCode::InvalidConfig, 0);
         };
-        let matches = port.direction == direction
-            && port.size as u64 == size
-            && match port.kind {
-                // ARINC: only a destination has a refresh period (a source's is ignored).
-                PortKind::Sampling => {
-                    port.direction == Direction::Out || port.refresh == refresh_or_depth
-                }
-                PortKind::Queuing => port.depth as u64 == refresh_or_depth,
-            };
-        if !matches {
+        if !matches(&port) {
             return (ReturnCode::InvalidConfig, 0);
         }
         let mode = self.running(index).mode.mode();

@@ -294,3 +294,158 @@ fn apex_intra() {
         "the driver's final error is logged with its configured action",
     );
 }
+
+#[test]
+fn apex_preemption() {
+    let o = boot("apex_preemption");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the holder's end is shutdown_success",
+    );
+    // The holder (priority 10) locks; the rival (50) readied meanwhile runs only at level 0.
+    expect_lines(
+        &o,
+        &[
+            "preempt: init LOCK_PREEMPTION: Some(NoAction)",
+            "preempt: LOCK_PREEMPTION Ok(1) Ok(2); partition lock level 2; priority 100",
+            "preempt: rival readied, 3 ms later it ran 0 times",
+            "preempt: locked: TIMED_WAIT Some(InvalidMode); WAIT_SEMAPHORE 5 ms Some(InvalidMode), 0 Some(NotAvailable); SUSPEND_SELF 5 ms Some(InvalidMode); ACQUIRE_MUTEX Some(InvalidMode); GET_PROCESS_MUTEX_STATE is PREEMPTION_LOCK_MUTEX: true",
+            "preempt: locked up to 16 (MAX_LOCK_LEVEL 16), then Some(InvalidConfig)",
+            "preempt: unlocked to 1: rival ran 0 times, priority 100",
+            "preempt: UNLOCK_PREEMPTION Ok(0): rival ran 1 times, priority 20; again Some(NoAction)",
+            "preempt: unlocked: TIMED_WAIT 1 ms None",
+            "preempt: done",
+        ],
+    );
+    check(
+        &o,
+        health(
+            &o,
+            "preempt",
+            "application_error",
+            "\"preempt",
+            "shutdown_success",
+        ) == 1,
+        "the holder's final error is logged with its configured action",
+    );
+}
+
+#[test]
+fn apex_port_priority() {
+    let o = boot("apex_port_priority");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the last receiver's end is shutdown_success",
+    );
+    // Waiters of priorities 10 (1), 30 (2), 20 (3) arrive in the order 1, 2, 3.
+    expect_lines(
+        &o,
+        &[
+            "prio_rx: CREATE_QUEUING_PORT req as FIFO: Some(InvalidConfig)",
+            "prio_tx: back full: Some(NotAvailable)",
+            "prio_tx: back waiting senders: 3",
+            // Senders on the PRIORITY source port enter the channel 2, 3, 1.
+            "prio_rx: req waiting receivers: 3; back got x y 2 3 1",
+            "prio_tx: sent a b c",
+            // Receivers on the PRIORITY destination port are served 2, 3, 1.
+            "prio_rx: PRIORITY receivers got r1=c r2=a r3=b",
+        ],
+    );
+    check(
+        &o,
+        o.lines.iter().all(|l| !l.contains(" failed: ")),
+        "a waiter's send or receive failed",
+    );
+}
+
+#[test]
+fn apex_schedule_switch() {
+    let o = boot("apex_schedule_switch");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): sched's end is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "sched: status current 0 next 0 last switch none",
+            "sched: GET_MODULE_SCHEDULE_ID second Ok(1), nonesuch Some(InvalidConfig); SET_MODULE_SCHEDULE 7 Some(InvalidParam)",
+            "sched: SET_MODULE_SCHEDULE second None",
+            "sched: status current 0 next 1 last switch none",
+            "sched: status current 1 next 1 last switch set",
+            "plain: GET_MODULE_SCHEDULE_ID first Ok(0); SET_MODULE_SCHEDULE second Some(InvalidConfig), first Some(InvalidConfig)",
+            "sched: done",
+        ],
+    );
+    // The switch lands exactly on the end of the 50 ms frame in which it was asked for,
+    // and sched's next window is the new schedule's, 20 ms after the boundary.
+    let line = o.line("sched: asked ").expect("the switch's timing line");
+    check(
+        &o,
+        line.ends_with("the switch came 50000 us after that window's frame began"),
+        &format!("switch not on the frame boundary: {line}"),
+    );
+    let after = o
+        .line("sched: its window under second begins ")
+        .expect("the window line");
+    let ran: u64 = after
+        .rsplit("it ran ")
+        .next()
+        .and_then(|t| t.split(' ').next())
+        .and_then(|n| n.parse().ok())
+        .unwrap_or(0);
+    check(
+        &o,
+        after.contains("begins 20000 us after the switch") && (20_000..21_000).contains(&ran),
+        &format!("sched did not run in second's window: {after}"),
+    );
+    check(
+        &o,
+        o.lines.iter().any(|l| {
+            l.contains("schedule: t=") && l.contains("partition=sched asks for schedule second")
+        }),
+        "syssw logs the requested switch",
+    );
+}
+
+#[test]
+fn apex_error_handler() {
+    let o = boot("apex_error_handler");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): the handler's own error is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "handled: init CREATE_ERROR_HANDLER again: Some(NoAction)",
+            "handled: faulty: GET_ERROR_STATUS Some(InvalidConfig); RAISE_APPLICATION_ERROR with a 129-byte message Some(InvalidParam), as DEADLINE_MISSED Some(InvalidParam)",
+            "handled: handler: ApplicationError from faulty message \"first\"",
+            "handled: handler: LOCK_PREEMPTION Some(NoAction); TIMED_WAIT Some(InvalidMode); GET_MY_ID true",
+            "handled: handler: GET_ERROR_STATUS then NoAction",
+            "handled: faulty: RAISE_APPLICATION_ERROR first None, handled 1",
+            "handled: handler: ApplicationError from faulty message \"end\"",
+        ],
+    );
+    // Only the handler's own error reaches the health monitor.
+    let health: Vec<&String> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("health: t="))
+        .collect();
+    check(
+        &o,
+        health.len() == 1
+            && health[0].contains("partition=handled error=application_error detail=\"handler")
+            && health[0].ends_with("action=shutdown_success"),
+        &format!("unexpected health events: {health:?}"),
+    );
+}

@@ -411,7 +411,7 @@ mod tests {
 
     #[test]
     fn the_port_table_is_what_the_guest_reads() {
-        use config::model::{Direction, PortKind};
+        use config::model::{Direction, Discipline, PortKind};
         let port = |name: &str, kind, direction, size, depth, refresh| Port {
             name: name.into(),
             kind,
@@ -419,6 +419,7 @@ mod tests {
             size,
             depth,
             refresh,
+            discipline: Discipline::Fifo,
             channel: 0,
         };
         let ports = [

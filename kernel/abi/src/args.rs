@@ -259,6 +259,8 @@ call_results! {
     RpCreate { rp: u64 = rdi }
     /// `rp_info`: page use and quota, thread and task counts.
     RpInfo { pages_used: u64 = rdi, pages_quota: u64 = rsi, counts: RpCounts = rdx }
+    /// `schedule_switch`: when the schedule takes effect (ns since boot).
+    ScheduleSwitch { at: u64 = rdi }
     /// `partition_info`: see [`Call::PartitionInfo`](crate::syscall::Call::PartitionInfo).
     PartitionInfo { active: u64 = rdi, window_start: u64 = rsi, window_length: u64 = rdx, cpu_ns: u64 = r10, idle_ns: u64 = r8, frames: u64 = r9 }
 }
@@ -341,6 +343,10 @@ mod tests {
         check(results::NotifyWait::decode, results::NotifyWait::encode);
         check(results::RpCreate::decode, results::RpCreate::encode);
         check(results::RpInfo::decode, results::RpInfo::encode);
+        check(
+            results::ScheduleSwitch::decode,
+            results::ScheduleSwitch::encode,
+        );
         check(
             results::PartitionInfo::decode,
             results::PartitionInfo::encode,

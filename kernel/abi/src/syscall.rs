@@ -243,9 +243,11 @@ codes::code_enum! {
         /// `SCHEDULING`. Errors: `InvalidArgument` (slot, frame, windows), `BadAddress`,
         /// `NotPermitted` (slot in use).
         ScheduleSet = 70 => "schedule_set",
-        /// `schedule_switch(slot)`: runs schedule `slot`; the first schedule starts at once,
-        /// later switches take effect at the next major-frame boundary. Ability: `SCHEDULING`.
-        /// Errors: `InvalidArgument` (empty slot).
+        /// `schedule_switch(slot) -> rdi = when it takes effect (ns since boot)`: runs
+        /// schedule `slot`; the first schedule starts at once, later switches take effect at
+        /// the next major-frame boundary of the running schedule (a later switch before it
+        /// replaces the earlier one). Ability: `SCHEDULING`. Errors: `InvalidArgument`
+        /// (empty slot).
         ScheduleSwitch = 71 => "schedule_switch",
         /// `partition_info(tp) -> rdi = active time partition (0 in a gap or without a
         /// schedule), rsi = start of tp's current or next window (ns since boot; u64::MAX if it

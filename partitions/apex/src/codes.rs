@@ -4,9 +4,9 @@
 
 use a653rs::bindings::{
     ApexName, ErrorCode as ApexErrorCode, ErrorReturnCode, OperatingMode as ApexMode,
-    PortDirection, Validity as ApexValidity,
+    PortDirection, QueuingDiscipline, Validity as ApexValidity,
 };
-use protocol::{Direction, ErrorCode, OperatingMode, Validity, reply_result};
+use protocol::{Direction, Discipline, ErrorCode, OperatingMode, Validity, reply_result};
 
 /// A protocol reply label (an ARINC 653 `RETURN_CODE_TYPE`) as a result.
 ///
@@ -26,6 +26,14 @@ pub fn direction(direction: PortDirection) -> Direction {
     match direction {
         PortDirection::Source => Direction::Out,
         PortDirection::Destination => Direction::In,
+    }
+}
+
+/// A queuing discipline as the protocol carries it.
+pub fn discipline(discipline: QueuingDiscipline) -> Discipline {
+    match discipline {
+        QueuingDiscipline::Fifo => Discipline::Fifo,
+        QueuingDiscipline::Priority => Discipline::Priority,
     }
 }
 
@@ -108,6 +116,10 @@ mod tests {
             assert_eq!(port_direction(direction(d)), d);
         }
         assert_eq!(direction(PortDirection::Source), Direction::Out);
+        for d in [QueuingDiscipline::Fifo, QueuingDiscipline::Priority] {
+            // The protocol numbers them as ARINC (and a653rs) do.
+            assert_eq!(u32::from(discipline(d).code()), d as u32);
+        }
         assert_eq!(validity(Validity::Valid), ApexValidity::Valid);
         assert_eq!(validity(Validity::Invalid), ApexValidity::Invalid);
         assert_eq!(mode(ApexMode::WarmStart), Some(OperatingMode::WarmStart));

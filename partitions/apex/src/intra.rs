@@ -27,6 +27,18 @@
 //! mutex's priority while it holds it and gets its retained priority back when it releases
 //! it (lock count 0) or the mutex is reset. A process owns at most one mutex at a time and
 //! may not wait on anything else (other than with a zero time-out) while it owns one.
+//!
+//! # Preemption lock
+//!
+//! LOCK_PREEMPTION makes the caller the owner of the partition's preemption lock (ARINC's
+//! PREEMPTION_LOCK_MUTEX) and counts the lock level up to MAX_LOCK_LEVEL; UNLOCK_PREEMPTION
+//! counts it down. While the level is above 0 the owner runs at [`Intra::lock_priority`],
+//! the partition's MCP: above every process, so no other process of the partition runs
+//! until the level is back at 0 and the owner gets its retained priority back. The error
+//! handler and the runtime's deadline watchdog share the MCP: they run when the owner
+//! next calls a service (each critical section of the runtime requeues the caller at the
+//! MCP). The lock is a mutex like the others: its owner owns no other mutex and may not
+//! wait (INVALID_MODE for a non-zero time-out).
 
 use crate::codes::name_bytes;
 use crate::table::{ERROR_HANDLER_SLOT, SLOTS, id_of};
@@ -54,18 +66,70 @@ pub const POOL_SIZE: usize = 32 * 1024;
 /// The largest semaphore value (ARINC's MAX_SEMAPHORE_VALUE).
 pub const MAX_SEMAPHORE_VALUE: SemaphoreValue = 32767;
 
-/// Object ids: the kind in the hundreds, the index below (ids of different kinds never
-/// coincide, so a wrong kind of id is INVALID_PARAM).
-const BUFFER_BASE: i64 = 0x100;
-const BLACKBOARD_BASE: i64 = 0x200;
-const SEMAPHORE_BASE: i64 = 0x300;
-const EVENT_BASE: i64 = 0x400;
-const MUTEX_BASE: i64 = 0x500;
+/// An object of a kind (a table of `Option<Self>` whose ids start at `BASE`).
+trait Object: Copy {
+    const BASE: i64;
+    fn name(&self) -> &ApexName;
+}
 
-fn index_of(id: i64, base: i64, limit: usize) -> Option<usize> {
-    usize::try_from(id.checked_sub(base)?)
-        .ok()
-        .filter(|&i| i < limit)
+macro_rules! object {
+    ($kind:ty, $base:expr) => {
+        impl Object for $kind {
+            const BASE: i64 = $base;
+            fn name(&self) -> &ApexName {
+                &self.name
+            }
+        }
+    };
+}
+
+// Object ids: the kind in the hundreds, the index below (ids of different kinds never
+// coincide, so a wrong kind of id is INVALID_PARAM).
+object!(Buffer, 0x100);
+object!(Blackboard, 0x200);
+object!(Semaphore, 0x300);
+object!(Event, 0x400);
+object!(Mutex, 0x500);
+
+/// The index of the object named `name`.
+fn find_name<T: Object>(objects: &[Option<T>], name: &ApexName) -> Option<usize> {
+    let wanted = name_bytes(name);
+    objects
+        .iter()
+        .position(|o| o.as_ref().is_some_and(|o| name_bytes(o.name()) == wanted))
+}
+
+/// GET_*_ID: the id of the object named `name`, INVALID_CONFIG if there is none.
+fn id_by_name<T: Object>(objects: &[Option<T>], name: &ApexName) -> Result<i64> {
+    find_name(objects, name)
+        .map(|i| T::BASE + i as i64)
+        .ok_or(ErrorReturnCode::InvalidConfig)
+}
+
+/// The object of `id` and its index, INVALID_PARAM for an unknown id (or another kind's).
+fn by_id<T: Object>(objects: &[Option<T>], id: i64) -> Result<(usize, T)> {
+    let index = id
+        .checked_sub(T::BASE)
+        .and_then(|i| usize::try_from(i).ok())
+        .filter(|&i| i < objects.len())
+        .ok_or(ErrorReturnCode::InvalidParam)?;
+    let object = objects[index].ok_or(ErrorReturnCode::InvalidParam)?;
+    Ok((index, object))
+}
+
+/// CREATE_*: the free index for a new object named `name` (INVALID_MODE in NORMAL mode,
+/// NO_ACTION if the name exists, INVALID_CONFIG if the table is full).
+fn free_index<T: Object>(objects: &[Option<T>], normal: bool, name: &ApexName) -> Result<usize> {
+    if normal {
+        return Err(ErrorReturnCode::InvalidMode);
+    }
+    if find_name(objects, name).is_some() {
+        return Err(ErrorReturnCode::NoAction);
+    }
+    objects
+        .iter()
+        .position(Option::is_none)
+        .ok_or(ErrorReturnCode::InvalidConfig)
 }
 
 /// What an object waiter waits on.
@@ -144,6 +208,15 @@ struct Mutex {
     retained: u8,
 }
 
+/// The preemption lock's owner (one process; nobody else runs while the level is above 0).
+#[derive(Clone, Copy, Debug)]
+struct PreemptionLock {
+    owner: usize,
+    level: LockLevel,
+    /// The owner's priority before it locked.
+    retained: u8,
+}
+
 /// The calling thread as the services see it.
 #[derive(Clone, Copy, Debug)]
 pub struct Caller {
@@ -162,10 +235,10 @@ impl Caller {
     }
 }
 
-/// What a service that may wait did.
+/// What a service that may wait did (its errors are the `Err` around it).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Step<T> {
-    Done(Result<T>),
+    Done(T),
     /// The caller is queued; block it, then call [`Intra::end_wait`].
     Wait,
 }
@@ -177,6 +250,7 @@ pub struct Intra {
     semaphores: [Option<Semaphore>; MAX_SEMAPHORES],
     events: [Option<Event>; MAX_EVENTS],
     mutexes: [Option<Mutex>; MAX_MUTEXES],
+    preemption: Option<PreemptionLock>,
     waiters: [Option<Waiter>; SLOTS],
     /// Outcomes decided for waiters (Ok(message length)).
     done: [Option<Result<usize>>; SLOTS],
@@ -197,6 +271,7 @@ impl Intra {
         semaphores: [None; MAX_SEMAPHORES],
         events: [None; MAX_EVENTS],
         mutexes: [None; MAX_MUTEXES],
+        preemption: None,
         waiters: [None; SLOTS],
         done: [None; SLOTS],
         mail: [[0; MAX_MESSAGE_SIZE]; SLOTS],
@@ -216,6 +291,7 @@ impl Intra {
         self.semaphores = [None; MAX_SEMAPHORES];
         self.events = [None; MAX_EVENTS];
         self.mutexes = [None; MAX_MUTEXES];
+        self.preemption = None;
         self.waiters = [None; SLOTS];
         self.done = [None; SLOTS];
         self.mail_len = [0; SLOTS];
@@ -248,23 +324,39 @@ impl Intra {
     // ------------------------------------------------------------ waiting
 
     /// Checks a caller that would wait with a non-zero `time_out`: processes only, not the
-    /// error handler, not while owning a mutex (INVALID_MODE).
+    /// error handler, not while owning a mutex or the preemption lock (INVALID_MODE).
     fn may_wait(&self, caller: Caller) -> Result<usize> {
         let slot = caller.slot.ok_or(ErrorReturnCode::InvalidMode)?;
-        if slot == ERROR_HANDLER_SLOT || self.owned_by(slot).is_some() {
+        if slot == ERROR_HANDLER_SLOT || self.owns_a_mutex(slot) {
             return Err(ErrorReturnCode::InvalidMode);
         }
         Ok(slot)
     }
 
-    fn enqueue(&mut self, slot: usize, on: On, priority: u8) {
+    /// The object cannot serve the caller now: NOT_AVAILABLE for a zero `time_out`, else
+    /// the caller (if it may wait) is queued on `on` with `mail` (a waiting sender's
+    /// message, else empty) in its mailbox.
+    fn wait_on<T>(
+        &mut self,
+        caller: Caller,
+        on: On,
+        time_out: ApexSystemTime,
+        mail: &[u8],
+    ) -> Result<Step<T>> {
+        if time_out == 0 {
+            return Err(ErrorReturnCode::NotAvailable);
+        }
+        let slot = self.may_wait(caller)?;
+        self.mail[slot][..mail.len()].copy_from_slice(mail);
+        self.mail_len[slot] = mail.len();
         self.seq += 1;
         self.done[slot] = None;
         self.waiters[slot] = Some(Waiter {
             on,
             seq: self.seq,
-            priority,
+            priority: caller.priority,
         });
+        Ok(Step::Wait)
     }
 
     /// The waiter on `on` to serve next under `discipline`.
@@ -323,7 +415,7 @@ impl Intra {
     }
 
     /// STOP of `slot` (or its thread's end): it leaves every queue and gives up its mutex
-    /// (handed to the next waiter).
+    /// (handed to the next waiter) and the preemption lock (lock level 0).
     pub fn forget(&mut self, slot: usize) {
         if slot >= SLOTS {
             return;
@@ -334,22 +426,12 @@ impl Intra {
         if let Some(m) = self.owned_by(slot) {
             self.hand_over(m);
         }
+        if self.preemption.is_some_and(|l| l.owner == slot) {
+            self.preemption = None;
+        }
     }
 
-    // ------------------------------------------------------------ names and storage
-
-    fn check_create(&self, normal: bool, taken: bool, free: bool) -> Result<()> {
-        if normal {
-            return Err(ErrorReturnCode::InvalidMode);
-        }
-        if taken {
-            return Err(ErrorReturnCode::NoAction);
-        }
-        if !free {
-            return Err(ErrorReturnCode::InvalidConfig);
-        }
-        Ok(())
-    }
+    // ------------------------------------------------------------ storage
 
     fn carve(&mut self, bytes: usize) -> Result<usize> {
         let start = self.pool_used;
@@ -368,18 +450,14 @@ impl Intra {
         Ok(size)
     }
 
-    // ------------------------------------------------------------ buffers (3.7.2.1)
-
-    fn find_name<T>(
-        objects: &[Option<T>],
-        name: &ApexName,
-        name_of: impl Fn(&T) -> &ApexName,
-    ) -> Option<usize> {
-        let wanted = name_bytes(name);
-        objects
-            .iter()
-            .position(|o| o.as_ref().is_some_and(|o| name_bytes(name_of(o)) == wanted))
+    /// Hands `message` to the waiting `slot` (its mailbox) and ends its wait.
+    fn deliver(&mut self, slot: usize, message: &[u8]) {
+        self.mail[slot][..message.len()].copy_from_slice(message);
+        self.mail_len[slot] = message.len();
+        self.wake(slot, Ok(message.len()));
     }
+
+    // ------------------------------------------------------------ buffers (3.7.2.1)
 
     pub fn create_buffer(
         &mut self,
@@ -389,16 +467,13 @@ impl Intra {
         max_nb_message: MessageRange,
         discipline: QueuingDiscipline,
     ) -> Result<BufferId> {
-        let taken = Self::find_name(&self.buffers, &name, |b| &b.name).is_some();
-        let free = self.buffers.iter().position(Option::is_none);
-        self.check_create(normal, taken, free.is_some())?;
+        let index = free_index(&self.buffers, normal, &name)?;
         let max_size = Self::size_param(max_message_size)?;
         let capacity = max_nb_message as usize;
         if capacity == 0 || capacity > MAX_BUFFER_MESSAGES {
             return Err(ErrorReturnCode::InvalidParam);
         }
         let start = self.carve(capacity * (2 + max_size))?;
-        let index = free.expect("checked");
         self.buffers[index] = Some(Buffer {
             name,
             max_size,
@@ -408,13 +483,7 @@ impl Intra {
             head: 0,
             count: 0,
         });
-        Ok(BUFFER_BASE + index as i64)
-    }
-
-    fn buffer(&self, id: BufferId) -> Result<(usize, Buffer)> {
-        let index = index_of(id, BUFFER_BASE, MAX_BUFFERS).ok_or(ErrorReturnCode::InvalidParam)?;
-        let buffer = self.buffers[index].ok_or(ErrorReturnCode::InvalidParam)?;
-        Ok((index, buffer))
+        Ok(Buffer::BASE + index as i64)
     }
 
     fn push_message(&mut self, index: usize, message: &[u8]) {
@@ -433,36 +502,20 @@ impl Intra {
         id: BufferId,
         message: &[u8],
         time_out: ApexSystemTime,
-    ) -> Step<()> {
-        let (index, buffer) = match self.buffer(id) {
-            Ok(b) => b,
-            Err(e) => return Step::Done(Err(e)),
-        };
+    ) -> Result<Step<()>> {
+        let (index, buffer) = by_id(&self.buffers, id)?;
         if message.is_empty() || message.len() > buffer.max_size {
-            return Step::Done(Err(ErrorReturnCode::InvalidParam));
+            return Err(ErrorReturnCode::InvalidParam);
         }
-        if buffer.count < buffer.capacity {
-            // Not full: a waiting receiver (the buffer is empty then) gets it directly.
-            if let Some(receiver) = self.next(On::BufferReceive(index), buffer.discipline) {
-                self.mail[receiver][..message.len()].copy_from_slice(message);
-                self.mail_len[receiver] = message.len();
-                self.wake(receiver, Ok(message.len()));
-            } else {
-                self.push_message(index, message);
-            }
-            return Step::Done(Ok(()));
+        if buffer.count == buffer.capacity {
+            return self.wait_on(caller, On::BufferSend(index), time_out, message);
         }
-        if time_out == 0 {
-            return Step::Done(Err(ErrorReturnCode::NotAvailable));
+        // Not full: a waiting receiver (the buffer is empty then) gets it directly.
+        match self.next(On::BufferReceive(index), buffer.discipline) {
+            Some(receiver) => self.deliver(receiver, message),
+            None => self.push_message(index, message),
         }
-        let slot = match self.may_wait(caller) {
-            Ok(slot) => slot,
-            Err(e) => return Step::Done(Err(e)),
-        };
-        self.mail[slot][..message.len()].copy_from_slice(message);
-        self.mail_len[slot] = message.len();
-        self.enqueue(slot, On::BufferSend(index), caller.priority);
-        Step::Wait
+        Ok(Step::Done(()))
     }
 
     /// RECEIVE_BUFFER into `out` (at least the buffer's MAX_MESSAGE_SIZE long, else
@@ -474,54 +527,40 @@ impl Intra {
         id: BufferId,
         time_out: ApexSystemTime,
         out: &mut [u8],
-    ) -> Step<usize> {
-        let (index, buffer) = match self.buffer(id) {
-            Ok(b) => b,
-            Err(e) => return Step::Done(Err(e)),
-        };
+    ) -> Result<Step<usize>> {
+        let (index, buffer) = by_id(&self.buffers, id)?;
         if out.len() < buffer.max_size {
-            return Step::Done(Err(ErrorReturnCode::InvalidParam));
+            return Err(ErrorReturnCode::InvalidParam);
         }
-        if buffer.count > 0 {
-            let at = buffer.slot_offset(0);
-            let length = usize::from(u16::from_le_bytes([self.pool[at], self.pool[at + 1]]));
-            out[..length].copy_from_slice(&self.pool[at + 2..at + 2 + length]);
-            {
-                let b = self.buffers[index].as_mut().expect("exists");
-                b.head = (b.head + 1) % b.capacity;
-                b.count -= 1;
-            }
-            // Room now: the next waiting sender's message goes in.
-            if let Some(sender) = self.next(On::BufferSend(index), buffer.discipline) {
-                let mut message = [0u8; MAX_MESSAGE_SIZE];
-                let n = self.mail_len[sender];
-                message[..n].copy_from_slice(&self.mail[sender][..n]);
-                self.push_message(index, &message[..n]);
-                self.mail_len[sender] = 0;
-                self.wake(sender, Ok(0));
-            }
-            return Step::Done(Ok(length));
+        if buffer.count == 0 {
+            return self.wait_on(caller, On::BufferReceive(index), time_out, &[]);
         }
-        if time_out == 0 {
-            return Step::Done(Err(ErrorReturnCode::NotAvailable));
+        let at = buffer.slot_offset(0);
+        let length = usize::from(u16::from_le_bytes([self.pool[at], self.pool[at + 1]]));
+        out[..length].copy_from_slice(&self.pool[at + 2..at + 2 + length]);
+        {
+            let b = self.buffers[index].as_mut().expect("exists");
+            b.head = (b.head + 1) % b.capacity;
+            b.count -= 1;
         }
-        let slot = match self.may_wait(caller) {
-            Ok(slot) => slot,
-            Err(e) => return Step::Done(Err(e)),
-        };
-        self.mail_len[slot] = 0;
-        self.enqueue(slot, On::BufferReceive(index), caller.priority);
-        Step::Wait
+        // Room now: the next waiting sender's message goes in.
+        if let Some(sender) = self.next(On::BufferSend(index), buffer.discipline) {
+            let mut message = [0u8; MAX_MESSAGE_SIZE];
+            let n = self.mail_len[sender];
+            message[..n].copy_from_slice(&self.mail[sender][..n]);
+            self.push_message(index, &message[..n]);
+            self.mail_len[sender] = 0;
+            self.wake(sender, Ok(0));
+        }
+        Ok(Step::Done(length))
     }
 
     pub fn get_buffer_id(&self, name: &ApexName) -> Result<BufferId> {
-        Self::find_name(&self.buffers, name, |b| &b.name)
-            .map(|i| BUFFER_BASE + i as i64)
-            .ok_or(ErrorReturnCode::InvalidConfig)
+        id_by_name(&self.buffers, name)
     }
 
     pub fn get_buffer_status(&self, id: BufferId) -> Result<BufferStatus> {
-        let (index, b) = self.buffer(id)?;
+        let (index, b) = by_id(&self.buffers, id)?;
         Ok(BufferStatus {
             nb_message: b.count as MessageRange,
             max_nb_message: b.capacity as MessageRange,
@@ -539,31 +578,21 @@ impl Intra {
         name: ApexName,
         max_message_size: MessageSize,
     ) -> Result<BlackboardId> {
-        let taken = Self::find_name(&self.blackboards, &name, |b| &b.name).is_some();
-        let free = self.blackboards.iter().position(Option::is_none);
-        self.check_create(normal, taken, free.is_some())?;
+        let index = free_index(&self.blackboards, normal, &name)?;
         let max_size = Self::size_param(max_message_size)?;
         let start = self.carve(max_size)?;
-        let index = free.expect("checked");
         self.blackboards[index] = Some(Blackboard {
             name,
             max_size,
             start,
             message: None,
         });
-        Ok(BLACKBOARD_BASE + index as i64)
-    }
-
-    fn blackboard(&self, id: BlackboardId) -> Result<(usize, Blackboard)> {
-        let index =
-            index_of(id, BLACKBOARD_BASE, MAX_BLACKBOARDS).ok_or(ErrorReturnCode::InvalidParam)?;
-        let b = self.blackboards[index].ok_or(ErrorReturnCode::InvalidParam)?;
-        Ok((index, b))
+        Ok(Blackboard::BASE + index as i64)
     }
 
     /// DISPLAY_BLACKBOARD: every waiting reader gets the message.
     pub fn display_blackboard(&mut self, id: BlackboardId, message: &[u8]) -> Result<()> {
-        let (index, b) = self.blackboard(id)?;
+        let (index, b) = by_id(&self.blackboards, id)?;
         if message.is_empty() || message.len() > b.max_size {
             return Err(ErrorReturnCode::InvalidParam);
         }
@@ -573,9 +602,7 @@ impl Intra {
         }
         for slot in 0..SLOTS {
             if self.waiters[slot].is_some_and(|w| w.on == On::Blackboard(index)) {
-                self.mail[slot][..message.len()].copy_from_slice(message);
-                self.mail_len[slot] = message.len();
-                self.wake(slot, Ok(message.len()));
+                self.deliver(slot, message);
             }
         }
         Ok(())
@@ -588,32 +615,20 @@ impl Intra {
         id: BlackboardId,
         time_out: ApexSystemTime,
         out: &mut [u8],
-    ) -> Step<usize> {
-        let (index, b) = match self.blackboard(id) {
-            Ok(b) => b,
-            Err(e) => return Step::Done(Err(e)),
-        };
+    ) -> Result<Step<usize>> {
+        let (index, b) = by_id(&self.blackboards, id)?;
         if out.len() < b.max_size {
-            return Step::Done(Err(ErrorReturnCode::InvalidParam));
+            return Err(ErrorReturnCode::InvalidParam);
         }
-        if let Some(length) = b.message {
-            out[..length].copy_from_slice(&self.pool[b.start..b.start + length]);
-            return Step::Done(Ok(length));
-        }
-        if time_out == 0 {
-            return Step::Done(Err(ErrorReturnCode::NotAvailable));
-        }
-        let slot = match self.may_wait(caller) {
-            Ok(slot) => slot,
-            Err(e) => return Step::Done(Err(e)),
+        let Some(length) = b.message else {
+            return self.wait_on(caller, On::Blackboard(index), time_out, &[]);
         };
-        self.mail_len[slot] = 0;
-        self.enqueue(slot, On::Blackboard(index), caller.priority);
-        Step::Wait
+        out[..length].copy_from_slice(&self.pool[b.start..b.start + length]);
+        Ok(Step::Done(length))
     }
 
     pub fn clear_blackboard(&mut self, id: BlackboardId) -> Result<()> {
-        let (index, _) = self.blackboard(id)?;
+        let (index, _) = by_id(&self.blackboards, id)?;
         if let Some(b) = self.blackboards[index].as_mut() {
             b.message = None;
         }
@@ -621,13 +636,11 @@ impl Intra {
     }
 
     pub fn get_blackboard_id(&self, name: &ApexName) -> Result<BlackboardId> {
-        Self::find_name(&self.blackboards, name, |b| &b.name)
-            .map(|i| BLACKBOARD_BASE + i as i64)
-            .ok_or(ErrorReturnCode::InvalidConfig)
+        id_by_name(&self.blackboards, name)
     }
 
     pub fn get_blackboard_status(&self, id: BlackboardId) -> Result<BlackboardStatus> {
-        let (index, b) = self.blackboard(id)?;
+        let (index, b) = by_id(&self.blackboards, id)?;
         Ok(BlackboardStatus {
             empty_indicator: if b.message.is_some() {
                 EmptyIndicator::Occupied
@@ -649,29 +662,19 @@ impl Intra {
         maximum_value: SemaphoreValue,
         discipline: QueuingDiscipline,
     ) -> Result<SemaphoreId> {
-        let taken = Self::find_name(&self.semaphores, &name, |s| &s.name).is_some();
-        let free = self.semaphores.iter().position(Option::is_none);
-        self.check_create(normal, taken, free.is_some())?;
+        let index = free_index(&self.semaphores, normal, &name)?;
         if !(0..=MAX_SEMAPHORE_VALUE).contains(&maximum_value)
             || !(0..=maximum_value).contains(&current_value)
         {
             return Err(ErrorReturnCode::InvalidParam);
         }
-        let index = free.expect("checked");
         self.semaphores[index] = Some(Semaphore {
             name,
             value: current_value,
             max: maximum_value,
             discipline,
         });
-        Ok(SEMAPHORE_BASE + index as i64)
-    }
-
-    fn semaphore(&self, id: SemaphoreId) -> Result<(usize, Semaphore)> {
-        let index =
-            index_of(id, SEMAPHORE_BASE, MAX_SEMAPHORES).ok_or(ErrorReturnCode::InvalidParam)?;
-        let s = self.semaphores[index].ok_or(ErrorReturnCode::InvalidParam)?;
-        Ok((index, s))
+        Ok(Semaphore::BASE + index as i64)
     }
 
     pub fn wait_semaphore(
@@ -679,32 +682,21 @@ impl Intra {
         caller: Caller,
         id: SemaphoreId,
         time_out: ApexSystemTime,
-    ) -> Step<()> {
-        let (index, s) = match self.semaphore(id) {
-            Ok(s) => s,
-            Err(e) => return Step::Done(Err(e)),
-        };
-        if s.value > 0 {
-            if let Some(s) = self.semaphores[index].as_mut() {
-                s.value -= 1;
-            }
-            return Step::Done(Ok(()));
+    ) -> Result<Step<()>> {
+        let (index, s) = by_id(&self.semaphores, id)?;
+        if s.value == 0 {
+            return self.wait_on(caller, On::Semaphore(index), time_out, &[]);
         }
-        if time_out == 0 {
-            return Step::Done(Err(ErrorReturnCode::NotAvailable));
+        if let Some(s) = self.semaphores[index].as_mut() {
+            s.value -= 1;
         }
-        let slot = match self.may_wait(caller) {
-            Ok(slot) => slot,
-            Err(e) => return Step::Done(Err(e)),
-        };
-        self.enqueue(slot, On::Semaphore(index), caller.priority);
-        Step::Wait
+        Ok(Step::Done(()))
     }
 
     /// SIGNAL_SEMAPHORE: a waiter takes the unit, else the value goes up (NO_ACTION at its
     /// maximum).
     pub fn signal_semaphore(&mut self, id: SemaphoreId) -> Result<()> {
-        let (index, s) = self.semaphore(id)?;
+        let (index, s) = by_id(&self.semaphores, id)?;
         if let Some(waiter) = self.next(On::Semaphore(index), s.discipline) {
             self.wake(waiter, Ok(0));
             return Ok(());
@@ -719,13 +711,11 @@ impl Intra {
     }
 
     pub fn get_semaphore_id(&self, name: &ApexName) -> Result<SemaphoreId> {
-        Self::find_name(&self.semaphores, name, |s| &s.name)
-            .map(|i| SEMAPHORE_BASE + i as i64)
-            .ok_or(ErrorReturnCode::InvalidConfig)
+        id_by_name(&self.semaphores, name)
     }
 
     pub fn get_semaphore_status(&self, id: SemaphoreId) -> Result<SemaphoreStatus> {
-        let (index, s) = self.semaphore(id)?;
+        let (index, s) = by_id(&self.semaphores, id)?;
         Ok(SemaphoreStatus {
             current_value: s.value,
             maximum_value: s.max,
@@ -736,23 +726,14 @@ impl Intra {
     // ------------------------------------------------------------ events (3.7.2.4)
 
     pub fn create_event(&mut self, normal: bool, name: ApexName) -> Result<EventId> {
-        let taken = Self::find_name(&self.events, &name, |e| &e.name).is_some();
-        let free = self.events.iter().position(Option::is_none);
-        self.check_create(normal, taken, free.is_some())?;
-        let index = free.expect("checked");
+        let index = free_index(&self.events, normal, &name)?;
         self.events[index] = Some(Event { name, up: false });
-        Ok(EVENT_BASE + index as i64)
-    }
-
-    fn event(&self, id: EventId) -> Result<(usize, Event)> {
-        let index = index_of(id, EVENT_BASE, MAX_EVENTS).ok_or(ErrorReturnCode::InvalidParam)?;
-        let e = self.events[index].ok_or(ErrorReturnCode::InvalidParam)?;
-        Ok((index, e))
+        Ok(Event::BASE + index as i64)
     }
 
     /// SET_EVENT: UP, and every waiter goes on.
     pub fn set_event(&mut self, id: EventId) -> Result<()> {
-        let (index, _) = self.event(id)?;
+        let (index, _) = by_id(&self.events, id)?;
         if let Some(e) = self.events[index].as_mut() {
             e.up = true;
         }
@@ -765,7 +746,7 @@ impl Intra {
     }
 
     pub fn reset_event(&mut self, id: EventId) -> Result<()> {
-        let (index, _) = self.event(id)?;
+        let (index, _) = by_id(&self.events, id)?;
         if let Some(e) = self.events[index].as_mut() {
             e.up = false;
         }
@@ -777,33 +758,20 @@ impl Intra {
         caller: Caller,
         id: EventId,
         time_out: ApexSystemTime,
-    ) -> Step<()> {
-        let (index, e) = match self.event(id) {
-            Ok(e) => e,
-            Err(e) => return Step::Done(Err(e)),
-        };
+    ) -> Result<Step<()>> {
+        let (index, e) = by_id(&self.events, id)?;
         if e.up {
-            return Step::Done(Ok(()));
+            return Ok(Step::Done(()));
         }
-        if time_out == 0 {
-            return Step::Done(Err(ErrorReturnCode::NotAvailable));
-        }
-        let slot = match self.may_wait(caller) {
-            Ok(slot) => slot,
-            Err(e) => return Step::Done(Err(e)),
-        };
-        self.enqueue(slot, On::Event(index), caller.priority);
-        Step::Wait
+        self.wait_on(caller, On::Event(index), time_out, &[])
     }
 
     pub fn get_event_id(&self, name: &ApexName) -> Result<EventId> {
-        Self::find_name(&self.events, name, |e| &e.name)
-            .map(|i| EVENT_BASE + i as i64)
-            .ok_or(ErrorReturnCode::InvalidConfig)
+        id_by_name(&self.events, name)
     }
 
     pub fn get_event_status(&self, id: EventId) -> Result<EventStatus> {
-        let (index, e) = self.event(id)?;
+        let (index, e) = by_id(&self.events, id)?;
         Ok(EventStatus {
             event_state: if e.up {
                 EventState::Up
@@ -826,16 +794,13 @@ impl Intra {
         priority: Priority,
         discipline: QueuingDiscipline,
     ) -> Result<MutexId> {
-        let taken = Self::find_name(&self.mutexes, &name, |m| &m.name).is_some();
-        let free = self.mutexes.iter().position(Option::is_none);
-        self.check_create(normal, taken, free.is_some())?;
+        let index = free_index(&self.mutexes, normal, &name)?;
         if !(MIN_PRIORITY_VALUE..=MAX_PRIORITY_VALUE).contains(&priority) {
             return Err(ErrorReturnCode::InvalidParam);
         }
         if priority >= i32::from(mcp) {
             return Err(ErrorReturnCode::InvalidConfig);
         }
-        let index = free.expect("checked");
         self.mutexes[index] = Some(Mutex {
             name,
             priority: priority as u8,
@@ -844,13 +809,7 @@ impl Intra {
             lock_count: 0,
             retained: 0,
         });
-        Ok(MUTEX_BASE + index as i64)
-    }
-
-    fn mutex(&self, id: MutexId) -> Result<(usize, Mutex)> {
-        let index = index_of(id, MUTEX_BASE, MAX_MUTEXES).ok_or(ErrorReturnCode::InvalidParam)?;
-        let m = self.mutexes[index].ok_or(ErrorReturnCode::InvalidParam)?;
-        Ok((index, m))
+        Ok(Mutex::BASE + index as i64)
     }
 
     /// The mutex `slot` owns.
@@ -891,42 +850,36 @@ impl Intra {
         caller: Caller,
         id: MutexId,
         time_out: ApexSystemTime,
-    ) -> Step<()> {
-        let (index, m) = match self.mutex(id) {
-            Ok(m) => m,
-            Err(e) => return Step::Done(Err(e)),
-        };
-        let Some(slot) = caller.slot.filter(|&s| s != ERROR_HANDLER_SLOT) else {
-            return Step::Done(Err(ErrorReturnCode::InvalidMode));
-        };
-        if self.owned_by(slot).is_some_and(|owned| owned != index) {
-            return Step::Done(Err(ErrorReturnCode::InvalidMode));
+    ) -> Result<Step<()>> {
+        let (index, m) = by_id(&self.mutexes, id)?;
+        let slot = caller
+            .slot
+            .filter(|&s| s != ERROR_HANDLER_SLOT)
+            .ok_or(ErrorReturnCode::InvalidMode)?;
+        if self.owned_by(slot).is_some_and(|owned| owned != index) || self.holds_lock(slot) {
+            return Err(ErrorReturnCode::InvalidMode);
         }
         if m.owner == Some(slot) {
             if m.lock_count >= MAX_LOCK_LEVEL {
-                return Step::Done(Err(ErrorReturnCode::InvalidConfig));
+                return Err(ErrorReturnCode::InvalidConfig);
             }
             if let Some(m) = self.mutexes[index].as_mut() {
                 m.lock_count += 1;
             }
-            return Step::Done(Ok(()));
+            return Ok(Step::Done(()));
         }
         if caller.priority > m.priority {
-            return Step::Done(Err(ErrorReturnCode::InvalidConfig));
+            return Err(ErrorReturnCode::InvalidConfig);
         }
-        if m.owner.is_none() {
-            self.take_mutex(index, slot, caller.priority);
-            return Step::Done(Ok(()));
+        if m.owner.is_some() {
+            return self.wait_on(caller, On::Mutex(index), time_out, &[]);
         }
-        if time_out == 0 {
-            return Step::Done(Err(ErrorReturnCode::NotAvailable));
-        }
-        self.enqueue(slot, On::Mutex(index), caller.priority);
-        Step::Wait
+        self.take_mutex(index, slot, caller.priority);
+        Ok(Step::Done(()))
     }
 
     pub fn release_mutex(&mut self, caller: Caller, id: MutexId) -> Result<()> {
-        let (index, m) = self.mutex(id)?;
+        let (index, m) = by_id(&self.mutexes, id)?;
         if caller.slot.is_none() || m.owner != caller.slot {
             return Err(ErrorReturnCode::InvalidMode);
         }
@@ -943,7 +896,7 @@ impl Intra {
     /// RESET_MUTEX: `process` (a slot the caller checked exists) loses the mutex whatever
     /// its lock count.
     pub fn reset_mutex(&mut self, id: MutexId, process: usize) -> Result<()> {
-        let (index, m) = self.mutex(id)?;
+        let (index, m) = by_id(&self.mutexes, id)?;
         if m.owner != Some(process) {
             return Err(ErrorReturnCode::InvalidMode);
         }
@@ -952,13 +905,11 @@ impl Intra {
     }
 
     pub fn get_mutex_id(&self, name: &ApexName) -> Result<MutexId> {
-        Self::find_name(&self.mutexes, name, |m| &m.name)
-            .map(|i| MUTEX_BASE + i as i64)
-            .ok_or(ErrorReturnCode::InvalidConfig)
+        id_by_name(&self.mutexes, name)
     }
 
     pub fn get_mutex_status(&self, id: MutexId) -> Result<MutexStatus> {
-        let (index, m) = self.mutex(id)?;
+        let (index, m) = by_id(&self.mutexes, id)?;
         Ok(MutexStatus {
             mutex_owner: m.owner.map_or(NULL_PROCESS_ID, id_of),
             mutex_state: if m.owner.is_some() {
@@ -974,13 +925,21 @@ impl Intra {
 
     /// GET_PROCESS_MUTEX_STATE of `slot` (a process the caller checked exists).
     pub fn process_mutex_state(&self, slot: usize) -> MutexId {
+        if self.holds_lock(slot) {
+            return PREEMPTION_LOCK_MUTEX;
+        }
         self.owned_by(slot)
-            .map_or(NO_MUTEX_OWNED, |i| MUTEX_BASE + i as i64)
+            .map_or(NO_MUTEX_OWNED, |i| Mutex::BASE + i as i64)
     }
 
-    /// SET_PRIORITY of a mutex owner changes only the priority it gets back on release.
-    /// Returns whether `slot` owns a mutex (then its current priority stays).
+    /// SET_PRIORITY of a mutex owner (or of the preemption lock's) changes only the
+    /// priority it gets back on release. Returns whether `slot` owns one (then its current
+    /// priority stays).
     pub fn set_retained_priority(&mut self, slot: usize, priority: u8) -> bool {
+        if let Some(lock) = self.preemption.as_mut().filter(|l| l.owner == slot) {
+            lock.retained = priority;
+            return true;
+        }
         match self.owned_by(slot) {
             Some(index) => {
                 if let Some(m) = self.mutexes[index].as_mut() {
@@ -990,6 +949,82 @@ impl Intra {
             }
             None => false,
         }
+    }
+
+    // ------------------------------------------------------------ preemption (3.3.2.7-8)
+
+    /// Whether `slot` owns a mutex or the preemption lock.
+    fn owns_a_mutex(&self, slot: usize) -> bool {
+        self.owned_by(slot).is_some() || self.holds_lock(slot)
+    }
+
+    /// Whether `slot` holds the preemption lock (lock level above 0).
+    pub fn holds_lock(&self, slot: usize) -> bool {
+        self.preemption.is_some_and(|l| l.owner == slot)
+    }
+
+    /// The partition's lock level (GET_PARTITION_STATUS).
+    pub fn lock_level(&self) -> LockLevel {
+        self.preemption.map_or(0, |l| l.level)
+    }
+
+    /// The priority the preemption lock's owner runs at: the MCP, which no process reaches
+    /// (at MCP - 1 a process of that priority would overtake it after each critical
+    /// section of the runtime, which requeues the caller at the tail of its level).
+    pub fn lock_priority(mcp: u8) -> u8 {
+        mcp
+    }
+
+    /// LOCK_PREEMPTION: the new lock level. NO_ACTION outside NORMAL mode and for the error
+    /// handler (or the initialisation thread); INVALID_CONFIG at MAX_LOCK_LEVEL; INVALID_MODE
+    /// for an owner of another mutex (a process owns one mutex at a time).
+    pub fn lock_preemption(&mut self, caller: Caller, normal: bool, mcp: u8) -> Result<LockLevel> {
+        let slot = caller
+            .slot
+            .filter(|&s| normal && s != ERROR_HANDLER_SLOT)
+            .ok_or(ErrorReturnCode::NoAction)?;
+        match self.preemption.as_mut() {
+            Some(lock) if lock.owner == slot => {
+                if lock.level >= MAX_LOCK_LEVEL {
+                    return Err(ErrorReturnCode::InvalidConfig);
+                }
+                lock.level += 1;
+                Ok(lock.level)
+            }
+            // Another process holds it: only possible while that one is stopped by the
+            // error handler's SUSPEND; the lock is not shared.
+            Some(_) => Err(ErrorReturnCode::InvalidMode),
+            None => {
+                if self.owned_by(slot).is_some() {
+                    return Err(ErrorReturnCode::InvalidMode);
+                }
+                self.preemption = Some(PreemptionLock {
+                    owner: slot,
+                    level: 1,
+                    retained: caller.priority,
+                });
+                self.priorities[slot] = Some(Self::lock_priority(mcp));
+                Ok(1)
+            }
+        }
+    }
+
+    /// UNLOCK_PREEMPTION: the new lock level; at 0 the owner gets its retained priority back
+    /// (and other processes may run again). NO_ACTION outside NORMAL mode, for the error
+    /// handler, and for a caller that does not hold the lock (level 0).
+    pub fn unlock_preemption(&mut self, caller: Caller, normal: bool) -> Result<LockLevel> {
+        let slot = caller
+            .slot
+            .filter(|&s| normal && s != ERROR_HANDLER_SLOT && self.holds_lock(s))
+            .ok_or(ErrorReturnCode::NoAction)?;
+        let lock = self.preemption.as_mut().expect("held");
+        lock.level -= 1;
+        let level = lock.level;
+        if level == 0 {
+            self.priorities[slot] = Some(lock.retained);
+            self.preemption = None;
+        }
+        Ok(level)
     }
 }
 

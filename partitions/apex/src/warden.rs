@@ -9,7 +9,9 @@ use crate::runtime::{
 use crate::table::{self, ERROR_HANDLER_SLOT, MAX_PROCESSES, Wait};
 use crate::time::{self, finite, protocol_timeout};
 use a653rs::bindings::*;
-use protocol::{PortIdReply, PortKind, QueuingMessage, ReplyWords, Request, SamplingMessage};
+use protocol::{
+    Discipline, PortIdReply, PortKind, QueuingMessage, ReplyWords, Request, SamplingMessage,
+};
 use user_rt::abi::ipc::IPC_DATA_MAX;
 use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
 use user_rt::sys;
@@ -51,7 +53,7 @@ impl ApexPartitionP4 for Warden {
             period,
             duration,
             identifier,
-            lock_level: 0,
+            lock_level: Critical::enter().parts().1.lock_level(),
             operating_mode: OperatingMode::try_from(mode).unwrap_or(OperatingMode::Idle),
             start_condition: StartCondition::try_from(start_condition)
                 .unwrap_or(StartCondition::NormalStart),
@@ -118,8 +120,15 @@ impl ApexProcessP1 for Warden {
 
     fn suspend_self(time_out: ApexSystemTime) -> Result<()> {
         let slot = own_slot().ok_or(ErrorReturnCode::InvalidMode)?;
-        if !Critical::enter().table().suspend_self(slot, time_out)? {
-            return Ok(());
+        {
+            let mut critical = Critical::enter();
+            let (table, intra) = critical.parts();
+            if intra.holds_lock(slot) {
+                return Err(ErrorReturnCode::InvalidMode);
+            }
+            if !table.suspend_self(slot, time_out)? {
+                return Ok(());
+            }
         }
         let woken = sys::notify_wait(WAKE_BIT, protocol_timeout(time_out)).is_ok();
         let (result, stale_wake) = Critical::enter().table().suspend_self_end(slot, woken);
@@ -195,15 +204,16 @@ impl ApexProcessP1 for Warden {
         runtime::launch(table, slot, release)
     }
 
-    /// Not supported: preemption locking would need a partition-wide scheduler lock the
-    /// kernel does not offer (processes are plain threads with fixed priorities).
+    /// The owner runs above every process of the partition while the level is above 0
+    /// (`Intra::lock_preemption`); its priority is set when it leaves the critical section.
     fn lock_preemption() -> Result<LockLevel> {
-        Err(ErrorReturnCode::NotAvailable)
+        with_intra(|intra, c| intra.lock_preemption(c.caller, c.normal, c.mcp))
     }
 
-    /// Not supported (see `lock_preemption`).
+    /// At level 0 the caller drops to its retained priority on leaving the critical section,
+    /// and a higher-priority process that became ready meanwhile runs at once.
     fn unlock_preemption() -> Result<LockLevel> {
-        Err(ErrorReturnCode::NotAvailable)
+        with_intra(|intra, c| intra.unlock_preemption(c.caller, c.normal))
     }
 
     /// INVALID_MODE for the initialisation thread and the watchdog (they are no processes).
@@ -260,7 +270,10 @@ impl ApexTimeP4 for Warden {
         let slot = own_slot().ok_or(ErrorReturnCode::InvalidMode)?;
         let release = {
             let mut critical = Critical::enter();
-            let table = critical.table();
+            let (table, intra) = critical.parts();
+            if intra.holds_lock(slot) {
+                return Err(ErrorReturnCode::InvalidMode);
+            }
             let release = table.periodic_wait(slot)?;
             runtime::poke_watchdog(table);
             release
@@ -277,11 +290,11 @@ impl ApexTimeP4 for Warden {
 
 impl ApexTimeP1 for Warden {
     fn timed_wait(delay_time: ApexSystemTime) -> Result<()> {
-        let delay = finite(delay_time).ok_or(ErrorReturnCode::InvalidParam)?;
         let slot = own_slot();
-        if slot == Some(ERROR_HANDLER_SLOT) {
+        if may_not_wait(slot) {
             return Err(ErrorReturnCode::InvalidMode);
         }
+        let delay = finite(delay_time).ok_or(ErrorReturnCode::InvalidParam)?;
         if delay == 0 {
             // ARINC: a zero delay moves the caller behind its equal-priority peers.
             sys::yield_now();
@@ -300,6 +313,13 @@ impl ApexTimeP1 for Warden {
         runtime::poke_watchdog(table);
         Ok(())
     }
+}
+
+/// ARINC's "the current process is the error handler, or preemption is locked": a caller
+/// that may not wait (INVALID_MODE). Takes the runtime lock.
+fn may_not_wait(slot: Option<usize>) -> bool {
+    slot == Some(ERROR_HANDLER_SLOT)
+        || slot.is_some_and(|slot| Critical::enter().parts().1.holds_lock(slot))
 }
 
 /// Runs `wait` with the calling process marked as waiting (ARINC state WAITING).
@@ -341,6 +361,7 @@ impl ApexSamplingPortP4 for Warden {
         let reply: PortIdReply = request_words(&Request::CreatePort {
             kind: PortKind::Sampling,
             direction: codes::direction(port_direction),
+            discipline: Discipline::Fifo,
             max_message_size: u64::from(max_message_size),
             refresh_or_depth: refresh,
             name: name_bytes(&sampling_port_name),
@@ -407,22 +428,28 @@ impl ApexSamplingPortP1 for Warden {
     }
 }
 
-/// Queuing-port calls that may block: not from the error handler (ARINC), and the caller
-/// shows as WAITING meanwhile.
+/// Queuing-port calls that may block: not from the error handler or while preemption is
+/// locked (ARINC), and the caller shows as WAITING meanwhile.
 fn blocking_port_call<R>(time_out: ApexSystemTime, f: impl FnOnce() -> R) -> Result<R> {
     let slot = own_slot();
     if time_out == 0 {
         return Ok(f());
     }
-    if slot == Some(ERROR_HANDLER_SLOT) {
+    if may_not_wait(slot) {
         return Err(ErrorReturnCode::InvalidMode);
     }
     Ok(with_wait(slot, Wait::Port, f))
 }
 
+/// The caller's current priority, its place among the processes waiting on a PRIORITY
+/// queuing port (syssw keeps those queues).
+fn own_priority() -> u8 {
+    Critical::enter().table().current_priority(own_slot())
+}
+
 impl ApexQueuingPortP4 for Warden {
-    /// syssw queues waiting processes FIFO only (the configuration has no discipline), so
-    /// PRIORITY is refused with INVALID_CONFIG rather than silently served FIFO.
+    /// The discipline must be the port's configured one (INVALID_CONFIG otherwise); syssw
+    /// serves the port's waiting processes by it.
     fn create_queuing_port(
         queuing_port_name: QueuingPortName,
         max_message_size: MessageSize,
@@ -430,12 +457,10 @@ impl ApexQueuingPortP4 for Warden {
         port_direction: PortDirection,
         queuing_discipline: QueuingDiscipline,
     ) -> Result<QueuingPortId> {
-        if queuing_discipline != QueuingDiscipline::Fifo {
-            return Err(ErrorReturnCode::InvalidConfig);
-        }
         let reply: PortIdReply = request_words(&Request::CreatePort {
             kind: PortKind::Queuing,
             direction: codes::direction(port_direction),
+            discipline: codes::discipline(queuing_discipline),
             max_message_size: u64::from(max_message_size),
             refresh_or_depth: u64::from(max_nb_message),
             name: name_bytes(&queuing_port_name),
@@ -450,10 +475,12 @@ impl ApexQueuingPortP4 for Warden {
     ) -> Result<()> {
         check_message(message)?;
         let id = id_word(queuing_port_id)?;
+        let priority = own_priority();
         blocking_port_call(time_out, || {
             request_code(&Request::SendQueuing {
                 port: id,
                 timeout: protocol_timeout(time_out),
+                priority,
                 message,
             })
         })??;
@@ -471,10 +498,12 @@ impl ApexQueuingPortP4 for Warden {
         message: &mut [ApexByte],
     ) -> Result<(MessageSize, QueueOverflow)> {
         let id = id_word(queuing_port_id)?;
+        let priority = own_priority();
         let (reply, ipc) = blocking_port_call(time_out, || {
             request(&Request::ReceiveQueuing {
                 port: id,
                 timeout: protocol_timeout(time_out),
+                priority,
             })
         })??;
         codes::from_reply(reply.label)?;
@@ -516,6 +545,36 @@ impl ApexQueuingPortP1 for Warden {
             name: name_bytes(&queuing_port_name),
         })?;
         Ok(reply.port as QueuingPortId)
+    }
+}
+
+// ---------------------------------------------------------------- module schedules (Part 2, 3.4)
+
+/// Schedule ids are the schedules' indexes in the configuration; syssw keeps the status
+/// and lets only a partition with `schedule_control` switch (INVALID_CONFIG otherwise). The
+/// switch takes effect at the end of the running major frame.
+impl ApexScheduleP2 for Warden {
+    fn set_module_schedule(schedule_id: ScheduleId) -> Result<()> {
+        let schedule = u64::try_from(schedule_id).map_err(|_| ErrorReturnCode::InvalidParam)?;
+        request_code(&Request::SetModuleSchedule { schedule })?;
+        Ok(())
+    }
+
+    fn get_module_schedule_status() -> Result<ApexScheduleStatus> {
+        let status: protocol::ScheduleStatus = request_words(&Request::ModuleScheduleStatus)?;
+        let id = |index: u64| ScheduleId::try_from(index).unwrap_or(ScheduleId::MAX);
+        Ok(ApexScheduleStatus {
+            time_of_last_schedule_switch: i64::try_from(status.last_switch).unwrap_or(i64::MAX),
+            current_schedule: id(status.current),
+            next_schedule: id(status.next),
+        })
+    }
+
+    fn get_module_schedule_id(schedule_name: ScheduleName) -> Result<ScheduleId> {
+        let reply: protocol::ScheduleIdReply = request_words(&Request::ModuleScheduleId {
+            name: name_bytes(&schedule_name),
+        })?;
+        ScheduleId::try_from(reply.schedule).map_err(|_| ErrorReturnCode::InvalidConfig)
     }
 }
 
@@ -622,7 +681,7 @@ fn with_intra<R>(f: impl FnOnce(&mut Intra, Context) -> R) -> R {
 fn blocking<T>(
     time_out: ApexSystemTime,
     out: &mut [u8],
-    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Step<T>,
+    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Result<Step<T>>,
     woken: impl FnOnce(&Intra, usize, usize, &mut [u8]) -> T,
 ) -> Result<T> {
     let slot = own_slot();
@@ -636,8 +695,8 @@ fn blocking<T>(
         };
         let step = start(intra, caller, out);
         apply_intra(table, intra, slot);
-        match (step, slot) {
-            (Step::Done(result), _) => return result,
+        match (step?, slot) {
+            (Step::Done(value), _) => return Ok(value),
             (Step::Wait, Some(slot)) => table.set_wait(slot, Wait::Object),
             (Step::Wait, None) => unreachable!("only processes are queued"),
         }
@@ -662,10 +721,32 @@ fn blocking<T>(
     }
 }
 
-/// A waiter's message from its mailbox.
-fn take_mail(intra: &Intra, slot: usize, length: usize, out: &mut [u8]) -> MessageSize {
-    out[..length].copy_from_slice(intra.mail(slot));
-    length as MessageSize
+/// A service that may wait and whose wait ends with nothing to hand over (SEND_BUFFER,
+/// WAIT_SEMAPHORE, WAIT_EVENT, ACQUIRE_MUTEX).
+fn blocking_unit(
+    time_out: ApexSystemTime,
+    start: impl FnOnce(&mut Intra, Caller) -> Result<Step<()>>,
+) -> Result<()> {
+    blocking(
+        time_out,
+        &mut [],
+        |intra, caller, _| start(intra, caller),
+        |_, _, _, _| (),
+    )
+}
+
+/// A read that may wait (RECEIVE_BUFFER, READ_BLACKBOARD): the message lands in `out`,
+/// read at once or handed over through the waiter's mailbox.
+fn blocking_read(
+    time_out: ApexSystemTime,
+    out: &mut [u8],
+    start: impl FnOnce(&mut Intra, Caller, &mut [u8]) -> Result<Step<usize>>,
+) -> Result<MessageSize> {
+    let take_mail = |intra: &Intra, slot, length: usize, out: &mut [u8]| {
+        out[..length].copy_from_slice(intra.mail(slot));
+        length
+    };
+    blocking(time_out, out, start, take_mail).map(|length| length as MessageSize)
 }
 
 impl ApexBufferP1 for Warden {
@@ -691,12 +772,9 @@ impl ApexBufferP1 for Warden {
         message: &[ApexByte],
         time_out: ApexSystemTime,
     ) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.send_buffer(caller, buffer_id, message, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.send_buffer(caller, buffer_id, message, time_out)
+        })
     }
 
     /// # Safety
@@ -708,15 +786,9 @@ impl ApexBufferP1 for Warden {
         time_out: ApexSystemTime,
         message: &mut [ApexByte],
     ) -> Result<MessageSize> {
-        blocking(
-            time_out,
-            message,
-            |intra, caller, out| match intra.receive_buffer(caller, buffer_id, time_out, out) {
-                Step::Done(r) => Step::Done(r.map(|n| n as MessageSize)),
-                Step::Wait => Step::Wait,
-            },
-            take_mail,
-        )
+        blocking_read(time_out, message, |intra, caller, out| {
+            intra.receive_buffer(caller, buffer_id, time_out, out)
+        })
     }
 
     fn get_buffer_id(buffer_name: BufferName) -> Result<BufferId> {
@@ -749,15 +821,9 @@ impl ApexBlackboardP1 for Warden {
         time_out: ApexSystemTime,
         message: &mut [ApexByte],
     ) -> Result<MessageSize> {
-        blocking(
-            time_out,
-            message,
-            |intra, caller, out| match intra.read_blackboard(caller, blackboard_id, time_out, out) {
-                Step::Done(r) => Step::Done(r.map(|n| n as MessageSize)),
-                Step::Wait => Step::Wait,
-            },
-            take_mail,
-        )
+        blocking_read(time_out, message, |intra, caller, out| {
+            intra.read_blackboard(caller, blackboard_id, time_out, out)
+        })
     }
 
     fn clear_blackboard(blackboard_id: BlackboardId) -> Result<()> {
@@ -792,12 +858,9 @@ impl ApexSemaphoreP1 for Warden {
     }
 
     fn wait_semaphore(semaphore_id: SemaphoreId, time_out: ApexSystemTime) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.wait_semaphore(caller, semaphore_id, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.wait_semaphore(caller, semaphore_id, time_out)
+        })
     }
 
     fn signal_semaphore(semaphore_id: SemaphoreId) -> Result<()> {
@@ -827,12 +890,9 @@ impl ApexEventP1 for Warden {
     }
 
     fn wait_event(event_id: EventId, time_out: ApexSystemTime) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.wait_event(caller, event_id, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.wait_event(caller, event_id, time_out)
+        })
     }
 
     fn get_event_id(event_name: EventName) -> Result<EventId> {
@@ -862,12 +922,9 @@ impl ApexMutexP1 for Warden {
     }
 
     fn acquire_mutex(mutex_id: MutexId, time_out: ApexSystemTime) -> Result<()> {
-        blocking(
-            time_out,
-            &mut [],
-            |intra, caller, _| intra.acquire_mutex(caller, mutex_id, time_out),
-            |_, _, _, _| (),
-        )
+        blocking_unit(time_out, |intra, caller| {
+            intra.acquire_mutex(caller, mutex_id, time_out)
+        })
     }
 
     fn release_mutex(mutex_id: MutexId) -> Result<()> {

@@ -49,6 +49,8 @@ impl Ports {
                     Direction::In => protocol::Direction::In,
                     Direction::Out => protocol::Direction::Out,
                 },
+                // Its calls never wait (the configuration keeps its ports FIFO).
+                discipline: protocol::Discipline::Fifo,
                 max_message_size: u64::from(port.size),
                 refresh_or_depth: port.refresh_or_depth,
                 name: port.name.as_bytes(),
@@ -104,6 +106,7 @@ impl Ports {
             Kind::Queuing => Request::SendQueuing {
                 port: p.id,
                 timeout: 0,
+                priority: 0,
                 message,
             },
         };
@@ -128,6 +131,7 @@ impl Ports {
                 let request = Request::ReceiveQueuing {
                     port: p.id,
                     timeout: 0,
+                    priority: 0,
                 };
                 let (code, words) = self.call(&request).map_err(|()| Errno::EIO)?;
                 let m = QueuingMessage::from_words(words).map_err(|_| Errno::EIO)?;

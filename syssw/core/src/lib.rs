@@ -1,8 +1,9 @@
 //! The pure logic of Warden's system software (syssw, the root task): ARINC 653
 //! inter-partition ports ([`ports`]), the health monitor's decisions and its event log
 //! ([`health`]), the partitions' operating modes ([`mode`]) and what a partition needs of
-//! its memory and kernel-memory quota to start ([`budget`]) and the queue of partition
-//! restarts its restart worker carries out ([`restart`]); the codes they answer with
+//! its memory and kernel-memory quota to start ([`budget`]), the queue of partition
+//! restarts its restart worker carries out ([`restart`]) and the module schedule the
+//! partitions see ([`schedule`]); the codes they answer with
 //! and the requests they serve are the service protocol's (`syssw/protocol`).
 //!
 //! syssw itself (`syssw/src`) is thin glue: it receives the partitions' requests and the
@@ -27,6 +28,7 @@ pub mod health;
 pub mod mode;
 pub mod ports;
 pub mod restart;
+pub mod schedule;
 
 #[cfg(test)]
 mod generated_systems;

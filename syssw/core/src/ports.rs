@@ -13,8 +13,8 @@
 //!   the table);
 //! - queuing: a ring of `source depth + destination depth` slots of `2 + size` bytes (a
 //!   little-endian `u16` length, then the message), then [`MAX_WAITERS`] waiter records of
-//!   `24 + size` bytes (caller token `u64`, deadline `u64`, message length `u32`, 4 reserved
-//!   bytes, then the message of a parked sender).
+//!   `24 + size` bytes (caller token `u64`, deadline `u64`, message length `u32`, the
+//!   caller's priority `u8`, 3 reserved bytes, then the message of a parked sender).
 //!
 //! "size" is always the source port's size: the largest message the channel carries
 //! (every destination's size is at least that, the configuration guarantees it).
@@ -48,8 +48,12 @@
 //!   sender is parked the oldest one's message enters the FIFO and that sender completes
 //!   with [`ReturnCode::NoError`]; else empty: time-out 0 → [`ReturnCode::NotAvailable`],
 //!   otherwise the receiver is parked.
-//! - Waiting discipline: FIFO (ARINC lets a port choose FIFO or PRIORITY; the configuration
-//!   has no discipline field, and FIFO needs no process priorities from the glue).
+//! - Waiting discipline: each queuing port has the configuration's `discipline`; the
+//!   waiting port's decides (the source port's for parked senders, the destination's for
+//!   parked receivers). FIFO serves waiters in the order they were parked; PRIORITY the
+//!   highest [`Waiter::priority`] first, FIFO among equal priorities. The waiter list is
+//!   kept in serving order (a PRIORITY waiter is inserted behind every waiter of its
+//!   priority or above), so "the oldest" below means "the first to serve".
 //! - Time-outs are in nanoseconds: 0 = do not wait, [`TIMEOUT_INFINITE`] = wait forever,
 //!   else a deadline `now + timeout`. A waiter whose deadline is `<= now` completes with
 //!   [`ReturnCode::TimedOut`] (a sender's message is discarded; a receiver gets length 0),
@@ -97,7 +101,7 @@
 
 use abi::syscall::TIMEOUT_INFINITE;
 use config::binary::{ChannelView, SystemView};
-use config::model::{Direction, MAX_CHANNELS, MAX_PORTS, PortKind};
+use config::model::{Direction, Discipline, MAX_CHANNELS, MAX_PORTS, PortKind};
 pub use protocol::{QueuingStatus, SamplingStatus};
 use protocol::{ReturnCode, Validity};
 
@@ -110,6 +114,20 @@ pub const NEVER: u64 = u64::MAX;
 const LEN_BYTES: usize = 2;
 /// Bytes of a waiter record's header (token, deadline, length, reserved).
 const WAITER_HEADER: usize = 24;
+
+/// A caller that may be parked: the token its completion names and its process priority
+/// (its place among the waiters of a PRIORITY port). A bare token is a waiter of priority 0.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Waiter {
+    pub token: u64,
+    pub priority: u8,
+}
+
+impl From<u64> for Waiter {
+    fn from(token: u64) -> Self {
+        Waiter { token, priority: 0 }
+    }
+}
 
 /// What [`Ports::read_sampling`] returns.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -222,9 +240,13 @@ struct Channel {
     capacity: usize,
     head: usize,
     count: usize,
+    /// The source port's and the destination port's disciplines (parked senders, parked
+    /// receivers).
+    send_discipline: Discipline,
+    receive_discipline: Discipline,
     /// The waiters are senders (else receivers); meaningful while `waiting > 0`.
     senders: bool,
-    /// Waiter record numbers in FIFO order (`order[..waiting]`).
+    /// Waiter record numbers in serving order (`order[..waiting]`).
     order: [u8; MAX_WAITERS],
     waiting: usize,
 }
@@ -242,6 +264,8 @@ const NO_CHANNEL: Channel = Channel {
     capacity: 0,
     head: 0,
     count: 0,
+    send_discipline: Discipline::Fifo,
+    receive_discipline: Discipline::Fifo,
     senders: false,
     order: [0; MAX_WAITERS],
     waiting: 0,
@@ -259,6 +283,8 @@ impl Channel {
             source: view.source,
             destination,
             dest_depth,
+            send_discipline: source.discipline,
+            receive_discipline: system.port(destination).discipline,
             capacity: source.depth as usize + dest_depth,
             ..NO_CHANNEL
         }
@@ -359,6 +385,10 @@ impl Queue<'_> {
         get_u64(self.arena, self.record(self.ch.order[k]) + 8)
     }
 
+    fn priority(&self, k: usize) -> u8 {
+        self.arena[self.record(self.ch.order[k]) + 20]
+    }
+
     /// The port the waiters wait on.
     fn waiting_port(&self) -> usize {
         if self.ch.senders {
@@ -368,20 +398,34 @@ impl Queue<'_> {
         }
     }
 
-    /// Parks a waiter at the end of the list (the caller checked there is a free record and
-    /// that the list holds the same side or is empty). `msg` is empty for a receiver.
-    fn park(&mut self, senders: bool, token: u64, deadline: u64, msg: &[u8]) {
+    /// Parks a waiter in serving order: at the end (FIFO), or behind every waiter of its
+    /// priority or above (PRIORITY). The caller checked there is a free record and that the
+    /// list holds the same side or is empty. `msg` is empty for a receiver.
+    fn park(&mut self, senders: bool, waiter: Waiter, deadline: u64, msg: &[u8]) {
         let used = &self.ch.order[..self.ch.waiting];
         let free = (0..MAX_WAITERS as u8)
             .find(|r| !used.contains(r))
             .unwrap_or(0);
         let at = self.record(free);
-        put_u64(self.arena, at, token);
+        put_u64(self.arena, at, waiter.token);
         put_u64(self.arena, at + 8, deadline);
         self.arena[at + 16..at + 20].copy_from_slice(&(msg.len() as u32).to_le_bytes());
+        self.arena[at + 20] = waiter.priority;
         let data = at + WAITER_HEADER;
         self.arena[data..data + msg.len()].copy_from_slice(msg);
-        self.ch.order[self.ch.waiting] = free;
+        let discipline = if senders {
+            self.ch.send_discipline
+        } else {
+            self.ch.receive_discipline
+        };
+        let place = match discipline {
+            Discipline::Fifo => self.ch.waiting,
+            Discipline::Priority => (0..self.ch.waiting)
+                .find(|&k| self.priority(k) < waiter.priority)
+                .unwrap_or(self.ch.waiting),
+        };
+        self.ch.order.copy_within(place..self.ch.waiting, place + 1);
+        self.ch.order[place] = free;
         self.ch.waiting += 1;
         self.ch.senders = senders;
     }
@@ -394,7 +438,7 @@ impl Queue<'_> {
         record
     }
 
-    /// Moves parked senders' messages into the FIFO while there is room, oldest first.
+    /// Moves parked senders' messages into the FIFO while there is room, in serving order.
     fn admit(&mut self, done: &mut dyn FnMut(Completion<'_>)) {
         while self.ch.senders && self.ch.waiting > 0 && self.ch.count < self.ch.capacity {
             let token = self.token(0);
@@ -612,7 +656,7 @@ impl<'a> Ports<'a> {
 
     /// ARINC SEND_QUEUING_MESSAGE: `partition` sends `msg` on its queuing source port
     /// `port` at `now`, waiting at most `timeout` ns (0: not at all; [`TIMEOUT_INFINITE`]:
-    /// forever) as the waiter `token`. Other waiters this finishes go to `done`.
+    /// forever) as `waiter`. Other waiters this finishes go to `done`.
     #[allow(clippy::too_many_arguments)]
     pub fn send_queuing(
         &mut self,
@@ -621,7 +665,7 @@ impl<'a> Ports<'a> {
         msg: &[u8],
         now: u64,
         timeout: u64,
-        token: u64,
+        waiter: impl Into<Waiter>,
         mut done: impl FnMut(Completion<'_>),
     ) -> Outcome {
         let p = match self.lookup(partition, port, PortKind::Queuing) {
@@ -640,7 +684,7 @@ impl<'a> Ports<'a> {
         let mut q = self.queue(p.channel);
         q.expire(now, &mut done);
         if q.ch.waiting > 0 && !q.ch.senders {
-            // Receivers wait only on an empty FIFO: hand the message to the oldest.
+            // Receivers wait only on an empty FIFO: hand the message to the first.
             let token = q.token(0);
             q.unpark(0);
             done(Completion {
@@ -661,13 +705,13 @@ impl<'a> Ports<'a> {
         if q.ch.waiting == MAX_WAITERS {
             return Outcome::reply(ReturnCode::InvalidConfig);
         }
-        q.park(true, token, deadline(now, timeout), msg);
+        q.park(true, waiter.into(), deadline(now, timeout), msg);
         Outcome::Parked
     }
 
     /// ARINC RECEIVE_QUEUING_MESSAGE: `partition` receives from its queuing destination
     /// port `port` at `now` into `buf` (at least the port's size), waiting at most `timeout`
-    /// ns as the waiter `token`. Other waiters this finishes go to `done`.
+    /// ns as `waiter`. Other waiters this finishes go to `done`.
     #[allow(clippy::too_many_arguments)]
     pub fn receive_queuing(
         &mut self,
@@ -675,7 +719,7 @@ impl<'a> Ports<'a> {
         port: usize,
         now: u64,
         timeout: u64,
-        token: u64,
+        waiter: impl Into<Waiter>,
         buf: &mut [u8],
         mut done: impl FnMut(Completion<'_>),
     ) -> Outcome {
@@ -705,7 +749,7 @@ impl<'a> Ports<'a> {
         if q.ch.waiting == MAX_WAITERS {
             return Outcome::reply(ReturnCode::InvalidConfig);
         }
-        q.park(false, token, deadline(now, timeout), &[]);
+        q.park(false, waiter.into(), deadline(now, timeout), &[]);
         Outcome::Parked
     }
 
@@ -866,6 +910,20 @@ impl<'a> Ports<'a> {
             for (i, r) in used.iter().enumerate() {
                 assert!((*r as usize) < MAX_WAITERS);
                 assert!(!used[i + 1..].contains(r), "a record is used twice");
+            }
+            let discipline = if ch.senders {
+                ch.send_discipline
+            } else {
+                ch.receive_discipline
+            };
+            if discipline == Discipline::Priority {
+                let records = ch.base + ch.capacity * (LEN_BYTES + ch.size);
+                let priority =
+                    |r: u8| self.arena[records + r as usize * (WAITER_HEADER + ch.size) + 20];
+                assert!(
+                    used.windows(2).all(|w| priority(w[0]) >= priority(w[1])),
+                    "PRIORITY waiters out of order"
+                );
             }
         }
     }

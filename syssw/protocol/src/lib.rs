@@ -17,23 +17,28 @@
 //! |---|---|---|
 //! | `PARTITION_STATUS` = 1 | – | w0 = mode \| start condition << 8 \| index << 16, w1 = period ns, w2 = duration ns ([`PartitionStatus`]) |
 //! | `SET_PARTITION_MODE` = 2 | w0 = mode ([`OperatingMode`]) | – (no reply for IDLE/restarts: the caller's thread is gone) |
-//! | `CREATE_PORT` = 10 | w0 = kind \| direction << 8, w1 = max message size, w2 = refresh ns (sampling) or depth (queuing); data = name | w0 = port id ([`PortIdReply`]) |
+//! | `CREATE_PORT` = 10 | w0 = kind \| direction << 8 \| queuing discipline << 16 (FIFO for sampling), w1 = max message size, w2 = refresh ns (sampling) or depth (queuing); data = name | w0 = port id ([`PortIdReply`]) |
 //! | `PORT_ID` = 11 | w0 = kind; data = name | w0 = port id ([`PortIdReply`]) |
 //! | `WRITE_SAMPLING` = 12 | w0 = port id; data = message | – |
 //! | `READ_SAMPLING` = 13 | w0 = port id | w0 = length, w1 = validity; data = message ([`SamplingMessage`]) |
 //! | `SAMPLING_STATUS` = 14 | w0 = port id | w0 = max size \| direction << 32, w1 = refresh ns, w2 = last validity ([`SamplingStatus`]) |
-//! | `SEND_QUEUING` = 15 | w0 = port id, w1 = time-out ns; data = message | – |
-//! | `RECEIVE_QUEUING` = 16 | w0 = port id, w1 = time-out ns | w0 = length; data = message ([`QueuingMessage`]) |
+//! | `SEND_QUEUING` = 15 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255); data = message | – |
+//! | `RECEIVE_QUEUING` = 16 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255) | w0 = length; data = message ([`QueuingMessage`]) |
 //! | `QUEUING_STATUS` = 17 | w0 = port id | w0 = messages \| max messages << 32, w1 = max size \| direction << 32, w2 = waiting processes ([`QueuingStatus`]) |
 //! | `CLEAR_QUEUING` = 18 | w0 = port id | – |
 //! | `REPORT_ERROR` = 20 | w0 = error ([`ErrorCode`]); data = detail text | – (or no reply: the action stopped the caller) |
 //! | `APPLICATION_MESSAGE` = 21 | data = text | – |
+//! | `SET_MODULE_SCHEDULE` = 30 | w0 = schedule id | – |
+//! | `MODULE_SCHEDULE_STATUS` = 31 | – | w0 = time of the last switch (ns since boot, 0 = none), w1 = current schedule id, w2 = next schedule id ([`ScheduleStatus`]) |
+//! | `MODULE_SCHEDULE_ID` = 32 | data = name | w0 = schedule id ([`ScheduleIdReply`]) |
 //!
 //! Codes travel as their numbers ([`PortKind`], [`Direction`], [`Validity`], ...; each table
 //! is written once below). Port ids are the ports' global indexes in the configuration; a
 //! port must be created (in COLD_START or WARM_START mode, matching its configuration)
-//! before use. Time-outs: 0 = do not wait, `u64::MAX` = forever, else nanoseconds. Words a
-//! request does not use are ignored.
+//! before use. Schedule ids are the schedules' indexes in the configuration. Time-outs: 0 = do not wait, `u64::MAX` = forever, else nanoseconds. Words a
+//! request does not use are ignored. The caller's priority orders it among the processes
+//! waiting on a PRIORITY port; syssw takes it as given, since only processes of the caller's
+//! own partition wait on the same port.
 //!
 //! Decoding is total: any label, words and data decode to a typed value or to a
 //! [`DecodeError`], which names the return code syssw answers it with. This crate must stay
@@ -58,6 +63,9 @@ codes::code_enum! {
         ClearQueuing = 18 => "CLEAR_QUEUING",
         ReportError = 20 => "REPORT_ERROR",
         ApplicationMessage = 21 => "APPLICATION_MESSAGE",
+        SetModuleSchedule = 30 => "SET_MODULE_SCHEDULE",
+        ModuleScheduleStatus = 31 => "MODULE_SCHEDULE_STATUS",
+        ModuleScheduleId = 32 => "MODULE_SCHEDULE_ID",
     }
 }
 
@@ -146,6 +154,18 @@ codes::code_enum! {
 }
 
 codes::code_enum! {
+    /// ARINC 653 `QUEUING_DISCIPLINE_TYPE` of a queuing port: the order in which the
+    /// processes waiting on it (senders on a full port, receivers on an empty one) are
+    /// served (also the configuration's `discipline`).
+    pub enum Discipline: u8 {
+        /// In the order they began to wait.
+        Fifo = 0 => "fifo",
+        /// Highest process priority first, in the order they began to wait among equals.
+        Priority = 1 => "priority",
+    }
+}
+
+codes::code_enum! {
     /// ARINC 653 `VALIDITY_TYPE` of a sampling message: whether it is younger than the
     /// destination port's refresh period.
     pub enum Validity: u8 {
@@ -168,6 +188,10 @@ pub enum DecodeError {
     /// A port kind or direction that no port can have.
     UnknownPortKind(u64),
     UnknownDirection(u64),
+    /// A queuing discipline ARINC does not define.
+    UnknownDiscipline(u64),
+    /// A process priority above 255.
+    BadPriority(u64),
     /// A reply word holds a value its field cannot (a mode, condition or validity code).
     BadReplyWord(u64),
 }
@@ -178,7 +202,9 @@ impl DecodeError {
     /// not provide (INVALID_CONFIG); anything else is a wrong parameter (INVALID_PARAM).
     pub const fn return_code(self) -> ReturnCode {
         match self {
-            Self::UnknownPortKind(_) | Self::UnknownDirection(_) => ReturnCode::InvalidConfig,
+            Self::UnknownPortKind(_) | Self::UnknownDirection(_) | Self::UnknownDiscipline(_) => {
+                ReturnCode::InvalidConfig
+            }
             _ => ReturnCode::InvalidParam,
         }
     }
@@ -197,6 +223,8 @@ pub enum Request<'a> {
     CreatePort {
         kind: PortKind,
         direction: Direction,
+        /// Queuing: the configured discipline it must match; sampling: FIFO.
+        discipline: Discipline,
         max_message_size: u64,
         /// Refresh period in ns (sampling; a source's is ignored) or depth (queuing).
         refresh_or_depth: u64,
@@ -219,11 +247,14 @@ pub enum Request<'a> {
     SendQueuing {
         port: PortId,
         timeout: u64,
+        /// The caller's current priority (its place among PRIORITY waiters).
+        priority: u8,
         message: &'a [u8],
     },
     ReceiveQueuing {
         port: PortId,
         timeout: u64,
+        priority: u8,
     },
     QueuingStatus {
         port: PortId,
@@ -237,6 +268,13 @@ pub enum Request<'a> {
     },
     ApplicationMessage {
         text: &'a [u8],
+    },
+    SetModuleSchedule {
+        schedule: u64,
+    },
+    ModuleScheduleStatus,
+    ModuleScheduleId {
+        name: &'a [u8],
     },
 }
 
@@ -265,6 +303,9 @@ impl<'a> Request<'a> {
             Self::ClearQueuing { .. } => Label::ClearQueuing,
             Self::ReportError { .. } => Label::ReportError,
             Self::ApplicationMessage { .. } => Label::ApplicationMessage,
+            Self::SetModuleSchedule { .. } => Label::SetModuleSchedule,
+            Self::ModuleScheduleStatus => Label::ModuleScheduleStatus,
+            Self::ModuleScheduleId { .. } => Label::ModuleScheduleId,
         }
     }
 
@@ -290,12 +331,15 @@ impl<'a> Request<'a> {
             Self::CreatePort {
                 kind,
                 direction,
+                discipline,
                 max_message_size,
                 refresh_or_depth,
                 name,
             } => (
                 [
-                    u64::from(kind.code()) | u64::from(direction.code()) << 8,
+                    u64::from(kind.code())
+                        | u64::from(direction.code()) << 8
+                        | u64::from(discipline.code()) << 16,
                     max_message_size,
                     refresh_or_depth,
                 ],
@@ -310,11 +354,19 @@ impl<'a> Request<'a> {
             Self::SendQueuing {
                 port,
                 timeout,
+                priority,
                 message,
-            } => ([port, timeout, 0], message),
-            Self::ReceiveQueuing { port, timeout } => ([port, timeout, 0], &[]),
+            } => ([port, timeout, u64::from(priority)], message),
+            Self::ReceiveQueuing {
+                port,
+                timeout,
+                priority,
+            } => ([port, timeout, u64::from(priority)], &[]),
             Self::ReportError { error, detail } => ([u64::from(error.code()), 0, 0], detail),
             Self::ApplicationMessage { text } => ([0; 3], text),
+            Self::SetModuleSchedule { schedule } => ([schedule, 0, 0], &[]),
+            Self::ModuleScheduleStatus => ([0; 3], &[]),
+            Self::ModuleScheduleId { name } => ([0; 3], name),
         };
         Wire {
             label: self.label().code(),
@@ -328,6 +380,7 @@ impl<'a> Request<'a> {
         let [w0, w1, w2] = wire.words;
         let label = Label::from_code(wire.label).ok_or(DecodeError::UnknownLabel(wire.label))?;
         let kind = |word: u64| PortKind::from_u64(word).ok_or(DecodeError::UnknownPortKind(word));
+        let priority = |word: u64| u8::try_from(word).map_err(|_| DecodeError::BadPriority(word));
         Ok(match label {
             Label::PartitionStatus => Self::PartitionStatus,
             Label::SetPartitionMode => Self::SetPartitionMode {
@@ -337,6 +390,8 @@ impl<'a> Request<'a> {
                 kind: kind(w0 & 0xff)?,
                 direction: Direction::from_u64(w0 >> 8 & 0xff)
                     .ok_or(DecodeError::UnknownDirection(w0 >> 8 & 0xff))?,
+                discipline: Discipline::from_u64(w0 >> 16 & 0xff)
+                    .ok_or(DecodeError::UnknownDiscipline(w0 >> 16 & 0xff))?,
                 max_message_size: w1,
                 refresh_or_depth: w2,
                 name: wire.data,
@@ -354,11 +409,13 @@ impl<'a> Request<'a> {
             Label::SendQueuing => Self::SendQueuing {
                 port: w0,
                 timeout: w1,
+                priority: priority(w2)?,
                 message: wire.data,
             },
             Label::ReceiveQueuing => Self::ReceiveQueuing {
                 port: w0,
                 timeout: w1,
+                priority: priority(w2)?,
             },
             Label::QueuingStatus => Self::QueuingStatus { port: w0 },
             Label::ClearQueuing => Self::ClearQueuing { port: w0 },
@@ -367,6 +424,9 @@ impl<'a> Request<'a> {
                 detail: wire.data,
             },
             Label::ApplicationMessage => Self::ApplicationMessage { text: wire.data },
+            Label::SetModuleSchedule => Self::SetModuleSchedule { schedule: w0 },
+            Label::ModuleScheduleStatus => Self::ModuleScheduleStatus,
+            Label::ModuleScheduleId => Self::ModuleScheduleId { name: wire.data },
         })
     }
 }
@@ -438,6 +498,48 @@ impl ReplyWords for PortIdReply {
 
     fn from_words([port, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
         Ok(Self { port })
+    }
+}
+
+/// Reply to MODULE_SCHEDULE_ID.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScheduleIdReply {
+    pub schedule: u64,
+}
+
+impl ReplyWords for ScheduleIdReply {
+    fn to_words(&self) -> [u64; 3] {
+        [self.schedule, 0, 0]
+    }
+
+    fn from_words([schedule, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self { schedule })
+    }
+}
+
+/// Reply to MODULE_SCHEDULE_STATUS (ARINC 653 Part 2 `SCHEDULE_STATUS_TYPE`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ScheduleStatus {
+    /// When the running schedule took over from another (ns since boot); 0 if it is the
+    /// initial one.
+    pub last_switch: u64,
+    pub current: u64,
+    /// The schedule from the next major-frame boundary (the current one if no switch is
+    /// pending).
+    pub next: u64,
+}
+
+impl ReplyWords for ScheduleStatus {
+    fn to_words(&self) -> [u64; 3] {
+        [self.last_switch, self.current, self.next]
+    }
+
+    fn from_words([last_switch, current, next]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self {
+            last_switch,
+            current,
+            next,
+        })
     }
 }
 

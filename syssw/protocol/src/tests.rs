@@ -14,6 +14,7 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
         Request::CreatePort {
             kind: PortKind::Queuing,
             direction: Direction::In,
+            discipline: Discipline::Priority,
             max_message_size: 64,
             refresh_or_depth: 4,
             name: NAME,
@@ -31,11 +32,13 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
         Request::SendQueuing {
             port: 3,
             timeout: 1_000_000,
+            priority: 200,
             message: MESSAGE,
         },
         Request::ReceiveQueuing {
             port: 4,
             timeout: u64::MAX,
+            priority: 7,
         },
         Request::QueuingStatus { port: 5 },
         Request::ClearQueuing { port: 6 },
@@ -44,6 +47,9 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
             detail: b"detail",
         },
         Request::ApplicationMessage { text: b"hello" },
+        Request::SetModuleSchedule { schedule: 2 },
+        Request::ModuleScheduleStatus,
+        Request::ModuleScheduleId { name: NAME },
     ]
 }
 
@@ -68,6 +74,7 @@ fn the_documented_word_packing() {
     let wire = Request::CreatePort {
         kind: PortKind::Sampling,
         direction: Direction::Out,
+        discipline: Discipline::Fifo,
         max_message_size: 8,
         refresh_or_depth: 20_000_000,
         name: NAME,
@@ -76,6 +83,23 @@ fn the_documented_word_packing() {
     assert_eq!(wire.label, 10);
     assert_eq!(wire.words, [1 | 2 << 8, 8, 20_000_000]);
     assert_eq!(wire.data, NAME);
+    let wire = Request::CreatePort {
+        kind: PortKind::Queuing,
+        direction: Direction::In,
+        discipline: Discipline::Priority,
+        max_message_size: 8,
+        refresh_or_depth: 4,
+        name: NAME,
+    }
+    .encode();
+    assert_eq!(wire.words, [2 | 1 << 8 | 1 << 16, 8, 4]);
+    let wire = Request::ReceiveQueuing {
+        port: 3,
+        timeout: 5,
+        priority: 42,
+    }
+    .encode();
+    assert_eq!((wire.label, wire.words), (16, [3, 5, 42]));
     let status = PartitionStatus {
         mode: OperatingMode::Normal,
         start_condition: StartCondition::HmPartitionRestart,
@@ -123,6 +147,16 @@ fn bad_codes_are_errors_with_the_answer_syssw_gives() {
             ReturnCode::InvalidConfig,
         ),
         (
+            wire(10, [2 | 1 << 8 | 2 << 16, 0, 0]),
+            DecodeError::UnknownDiscipline(2),
+            ReturnCode::InvalidConfig,
+        ),
+        (
+            wire(15, [0, 0, 256]),
+            DecodeError::BadPriority(256),
+            ReturnCode::InvalidParam,
+        ),
+        (
             wire(11, [0, 0, 0]),
             DecodeError::UnknownPortKind(0),
             ReturnCode::InvalidConfig,
@@ -164,6 +198,12 @@ fn every_reply_round_trips() {
         last_msg_validity: Validity::Invalid,
     });
     check(QueuingMessage { len: 0 });
+    check(ScheduleIdReply { schedule: 3 });
+    check(ScheduleStatus {
+        last_switch: 150_000_000,
+        current: 1,
+        next: 0,
+    });
     check(QueuingStatus {
         nb_message: 3,
         max_nb_message: 256,

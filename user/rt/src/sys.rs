@@ -422,8 +422,10 @@ pub fn schedule_set(
     call(Call::ScheduleSet, a.encode()).map(drop)
 }
 
-pub fn schedule_switch(slot: u64) -> Result<(), Error> {
-    call(Call::ScheduleSwitch, args::ScheduleSwitch { slot }.encode()).map(drop)
+/// Returns when the switch takes effect (ns since boot).
+pub fn schedule_switch(slot: u64) -> Result<u64, Error> {
+    call(Call::ScheduleSwitch, args::ScheduleSwitch { slot }.encode())
+        .map(|r| results::ScheduleSwitch::decode(&r).at)
 }
 
 /// What `partition_info` reports (see `abi::syscall::Call::PartitionInfo`).

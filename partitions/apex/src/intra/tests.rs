@@ -32,15 +32,15 @@ fn n(text: &str) -> ApexName {
     apex_name(text)
 }
 
-fn done<T>(step: Step<T>) -> Result<T> {
-    match step {
-        Step::Done(r) => r,
+fn done<T>(step: Result<Step<T>>) -> Result<T> {
+    match step? {
+        Step::Done(r) => Ok(r),
         Step::Wait => panic!("the service waits"),
     }
 }
 
-fn waits<T: core::fmt::Debug + PartialEq>(step: Step<T>) {
-    assert_eq!(step, Step::Wait);
+fn waits<T: core::fmt::Debug + PartialEq>(step: Result<Step<T>>) {
+    assert_eq!(step, Ok(Step::Wait));
 }
 
 /// The order in which `slots` were woken, by taking each one's outcome (`end_wait`).
@@ -674,4 +674,88 @@ fn a_mutex_owner_may_only_poll_other_objects() {
     );
     // Nothing was queued.
     assert!(!i.is_waiting(0));
+}
+
+// ---------------------------------------------------------------- preemption lock
+
+#[test]
+fn preemption_lock_levels_and_codes() {
+    let mut i = intra();
+    let lock_priority = Intra::lock_priority(MCP);
+    // Not in NORMAL mode, the error handler, the initialisation thread: NO_ACTION.
+    assert_eq!(i.lock_preemption(p(0, 10), false, MCP), Err(NoAction));
+    assert_eq!(
+        i.lock_preemption(p(ERROR_HANDLER_SLOT, MCP), true, MCP),
+        Err(NoAction)
+    );
+    assert_eq!(i.lock_preemption(INIT, true, MCP), Err(NoAction));
+    assert_eq!(i.unlock_preemption(p(0, 10), true), Err(NoAction));
+    assert_eq!(i.lock_level(), 0);
+
+    // Levels 1..=MAX_LOCK_LEVEL, then INVALID_CONFIG; the owner runs above every process.
+    assert_eq!(i.lock_preemption(p(0, 10), true, MCP), Ok(1));
+    assert_eq!(i.take_priority(0), Some(lock_priority));
+    assert_eq!(lock_priority, MCP);
+    for level in 2..=MAX_LOCK_LEVEL {
+        assert_eq!(i.lock_preemption(p(0, lock_priority), true, MCP), Ok(level));
+    }
+    assert_eq!(
+        i.lock_preemption(p(0, lock_priority), true, MCP),
+        Err(InvalidConfig)
+    );
+    assert_eq!(i.lock_level(), MAX_LOCK_LEVEL);
+    assert_eq!(i.process_mutex_state(0), PREEMPTION_LOCK_MUTEX);
+    // Not the owner: NO_ACTION for unlock, INVALID_MODE for a second lock.
+    assert_eq!(i.unlock_preemption(p(1, 10), true), Err(NoAction));
+    assert_eq!(i.lock_preemption(p(1, 10), true, MCP), Err(InvalidMode));
+    // Unlocking outside NORMAL mode (after a mode change) or from the handler: NO_ACTION.
+    assert_eq!(
+        i.unlock_preemption(p(0, lock_priority), false),
+        Err(NoAction)
+    );
+    for level in (1..MAX_LOCK_LEVEL).rev() {
+        assert_eq!(i.unlock_preemption(p(0, lock_priority), true), Ok(level));
+        assert_eq!(i.take_priority(0), None, "still locked at {level}");
+    }
+    assert_eq!(i.unlock_preemption(p(0, lock_priority), true), Ok(0));
+    assert_eq!(i.take_priority(0), Some(10));
+    assert_eq!(i.lock_level(), 0);
+    assert_eq!(i.process_mutex_state(0), NO_MUTEX_OWNED);
+    assert_eq!(i.unlock_preemption(p(0, 10), true), Err(NoAction));
+}
+
+#[test]
+fn the_preemption_lock_owner_may_not_wait_or_take_a_mutex() {
+    let mut i = intra();
+    let s = i
+        .create_semaphore(false, n("s"), 0, 1, Fifo)
+        .expect("semaphore");
+    let e = i.create_event(false, n("e")).expect("event");
+    let b = i.create_buffer(false, n("b"), 8, 1, Fifo).expect("buffer");
+    let m = i.create_mutex(false, MCP, n("m"), 50, Fifo).expect("mutex");
+    let owner = p(0, Intra::lock_priority(MCP));
+    i.lock_preemption(p(0, 10), true, MCP).expect("locked");
+    assert_eq!(done(i.wait_semaphore(owner, s, FINITE)), Err(InvalidMode));
+    assert_eq!(done(i.wait_event(owner, e, INFINITE)), Err(InvalidMode));
+    let mut out = [0u8; 8];
+    assert_eq!(
+        done(i.receive_buffer(owner, b, FINITE, &mut out)),
+        Err(InvalidMode)
+    );
+    // Polling is still allowed.
+    assert_eq!(done(i.wait_semaphore(owner, s, 0)), Err(NotAvailable));
+    assert_eq!(done(i.acquire_mutex(owner, m, 0)), Err(InvalidMode));
+    // SET_PRIORITY of the owner changes only what it gets back.
+    assert!(i.set_retained_priority(0, 20));
+    assert_eq!(i.unlock_preemption(owner, true), Ok(0));
+    assert_eq!(i.take_priority(0), Some(20));
+    // A mutex owner cannot lock preemption; STOP of the owner clears the lock.
+    assert_eq!(done(i.acquire_mutex(p(1, 20), m, 0)), Ok(()));
+    assert_eq!(i.lock_preemption(p(1, 50), true, MCP), Err(InvalidMode));
+    i.lock_preemption(p(2, 10), true, MCP).expect("locked");
+    i.forget(2);
+    assert_eq!(i.lock_level(), 0);
+    assert_eq!(i.lock_preemption(p(3, 10), true, MCP), Ok(1));
+    i.reset();
+    assert_eq!(i.lock_level(), 0);
 }

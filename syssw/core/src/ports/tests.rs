@@ -1083,3 +1083,171 @@ proptest! {
         }
     }
 }
+
+// ---------------------------------------------------------------- PRIORITY discipline
+
+/// Queuing `a.ptx` (8 bytes, depth 1, `send`) -> `b.prx` (8 bytes, depth 1, `receive`).
+fn with_priority_ports(send: &str, receive: &str, f: impl FnOnce(&mut Ports<'_>, [usize; 4])) {
+    let text = with(&[
+        (
+            "# a",
+            &std::format!(
+                r#"ports.ptx = {{ kind = "queuing", direction = "out", size = 8, depth = 1, discipline = "{send}" }}"#
+            ),
+        ),
+        (
+            "# b",
+            &std::format!(
+                r#"ports.prx = {{ kind = "queuing", direction = "in", size = 8, depth = 1, discipline = "{receive}" }}"#
+            ),
+        ),
+        (
+            "# tail",
+            r#"[[channels]]
+kind = "queuing"
+from = "a.ptx"
+to = "b.prx""#,
+        ),
+    ]);
+    let bytes = blob(&text);
+    let system = decode(&bytes).unwrap();
+    let (a, tx) = port(&system, "a", "ptx");
+    let (b, rx) = port(&system, "b", "prx");
+    let mut arena = vec![0u8; arena_size(&system)];
+    let mut ports = Ports::new(&system, &mut arena).unwrap();
+    f(&mut ports, [a, tx, b, rx]);
+    ports.check_invariants();
+}
+
+fn waiter(token: u64, priority: u8) -> Waiter {
+    Waiter { token, priority }
+}
+
+/// Tokens 1..=4 wait with priorities 10, 30, 20, 30.
+const ARRIVALS: [(u64, u8); 4] = [(1, 10), (2, 30), (3, 20), (4, 30)];
+
+#[test]
+fn priority_receivers_are_served_highest_first_fifo_among_equals() {
+    for (discipline, order) in [("priority", [2, 4, 3, 1]), ("fifo", [1, 2, 3, 4])] {
+        with_priority_ports("fifo", discipline, |ports, [a, tx, b, rx]| {
+            let mut buf = [0u8; 8];
+            for (token, priority) in ARRIVALS {
+                let parked = ports.receive_queuing(
+                    b,
+                    rx,
+                    0,
+                    100 * MS,
+                    waiter(token, priority),
+                    &mut buf,
+                    no_completion,
+                );
+                assert_eq!(parked, Outcome::Parked);
+            }
+            assert_eq!(ports.queuing_status(b, rx).unwrap().waiting_processes, 4);
+            let mut done = Done::new();
+            for message in [b"m1", b"m2", b"m3", b"m4"] {
+                assert_eq!(
+                    ports.send_queuing(a, tx, message, MS, 0, 99, collect(&mut done)),
+                    sent()
+                );
+            }
+            let served: Vec<(u64, Vec<u8>)> = done
+                .into_iter()
+                .map(|(token, _, _, m)| (token, m))
+                .collect();
+            let expected: Vec<(u64, Vec<u8>)> = order
+                .iter()
+                .zip([b"m1", b"m2", b"m3", b"m4"])
+                .map(|(&token, m)| (token, m.to_vec()))
+                .collect();
+            assert_eq!(served, expected, "{discipline} receivers");
+        });
+    }
+}
+
+#[test]
+fn priority_senders_enter_highest_first_fifo_among_equals() {
+    for (discipline, order) in [("priority", [2u8, 4, 3, 1]), ("fifo", [1, 2, 3, 4])] {
+        with_priority_ports(discipline, "fifo", |ports, [a, tx, b, rx]| {
+            // Capacity 2 (depth 1 + 1): full after two sends.
+            for message in [b"x", b"y"] {
+                assert_eq!(
+                    ports.send_queuing(a, tx, message, 0, 0, 99, no_completion),
+                    sent()
+                );
+            }
+            for (token, priority) in ARRIVALS {
+                let message = [b'0' + token as u8];
+                let parked = ports.send_queuing(
+                    a,
+                    tx,
+                    &message,
+                    0,
+                    TIMEOUT_INFINITE,
+                    waiter(token, priority),
+                    no_completion,
+                );
+                assert_eq!(parked, Outcome::Parked);
+            }
+            // Each receive makes room for the next sender by the discipline.
+            let mut admitted = Vec::new();
+            let mut received = Vec::new();
+            let mut buf = [0u8; 8];
+            for _ in 0..6 {
+                let mut done = Done::new();
+                match ports.receive_queuing(b, rx, MS, 0, 98, &mut buf, collect(&mut done)) {
+                    Outcome::Done {
+                        code: ReturnCode::NoError,
+                        len,
+                    } => received.push(buf[..len].to_vec()),
+                    other => panic!("receive: {other:?}"),
+                }
+                admitted.extend(done.iter().map(|(token, ..)| *token as u8));
+            }
+            assert_eq!(admitted, order, "{discipline} senders");
+            let mut expected = vec![b"x".to_vec(), b"y".to_vec()];
+            expected.extend(order.iter().map(|&t| vec![b'0' + t]));
+            assert_eq!(
+                received, expected,
+                "{discipline}: messages in admission order"
+            );
+        });
+    }
+}
+
+#[test]
+fn a_priority_waiter_times_out_and_a_cancel_keeps_the_order() {
+    with_priority_ports("fifo", "priority", |ports, [a, tx, b, rx]| {
+        let mut buf = [0u8; 8];
+        for (token, priority, timeout) in [
+            (1, 10, TIMEOUT_INFINITE),
+            (2, 30, 5 * MS),
+            (3, 20, TIMEOUT_INFINITE),
+            (4, 25, TIMEOUT_INFINITE),
+        ] {
+            let parked = ports.receive_queuing(
+                b,
+                rx,
+                0,
+                timeout,
+                waiter(token, priority),
+                &mut buf,
+                no_completion,
+            );
+            assert_eq!(parked, Outcome::Parked);
+        }
+        assert!(ports.cancel(4));
+        let mut done = Done::new();
+        assert_eq!(ports.expire(5 * MS, collect(&mut done)), None);
+        assert_eq!(done, vec![(2, rx, ReturnCode::TimedOut, vec![])]);
+        let mut done = Done::new();
+        for message in [b"p", b"q"] {
+            assert_eq!(
+                ports.send_queuing(a, tx, message, 6 * MS, 0, 99, collect(&mut done)),
+                sent()
+            );
+        }
+        let tokens: Vec<u64> = done.iter().map(|(token, ..)| *token).collect();
+        assert_eq!(tokens, [3, 1]);
+    });
+}

@@ -15,6 +15,18 @@
 //! * `intra` (scenario `apex_intra`): buffers, blackboards, semaphores, events and mutexes
 //!   between processes of different priorities: FIFO and PRIORITY wake order, time-outs,
 //!   the mutex priority ceiling and the return codes in both modes (see `intra.rs`);
+//! * `preempt` (scenario `apex_preemption`): LOCK_PREEMPTION / UNLOCK_PREEMPTION: a
+//!   higher-priority process readied while the lock is held runs only at level 0, the
+//!   codes of the services a lock owner may not call, the lock level's bound (see
+//!   `preemption.rs`);
+//! * `prio_tx` / `prio_rx` (scenario `apex_port_priority`): queuing ports with the
+//!   PRIORITY discipline: waiting receivers and waiting senders served by priority, FIFO
+//!   among equals (see `port_priority.rs`);
+//! * `sched` / `plain` (scenario `apex_schedule_switch`): module schedules: a switch
+//!   that lands on the major-frame boundary, and a partition that may not switch (see
+//!   `schedules.rs`);
+//! * `handled` (scenario `apex_error_handler`): the error handler with GET_ERROR_STATUS,
+//!   RAISE_APPLICATION_ERROR's codes, and what a handler may not do (see `errors.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
@@ -26,7 +38,11 @@
 #![no_main]
 
 mod bench;
+mod errors;
 mod intra;
+mod port_priority;
+mod preemption;
+mod schedules;
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
@@ -123,6 +139,12 @@ impl Partition<Warden> for Test {
             "restarter" => restarter(ctx),
             "bench-q" => bench::create(ctx),
             "intra" => intra::create(ctx),
+            "preempt" => preemption::create(ctx),
+            "prio_tx" => port_priority::create_tx(ctx),
+            "prio_rx" => port_priority::create_rx(ctx),
+            "sched" => schedules::create_sched(ctx),
+            "handled" => errors::create(ctx),
+            "plain" => schedules::create_plain(ctx),
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             other => println!("{other}: no role for this partition name"),

@@ -77,7 +77,7 @@ use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::{DATA_BASE, POOL_BASE, SHARED_BASE, StartInfo};
 use user_rt::port::outb;
 use user_rt::println;
-use user_rt::protocol::{Direction, OperatingMode, PortKind, Request, ReturnCode};
+use user_rt::protocol::{Direction, Discipline, OperatingMode, PortKind, Request, ReturnCode};
 use user_rt::service;
 use user_rt::sys::{self, Message};
 
@@ -295,7 +295,11 @@ fn forge(server: ThreadId) {
         let request = match rng.below(6) {
             0 => Request::ReadSampling { port },
             1 => Request::SamplingStatus { port },
-            2 => Request::ReceiveQueuing { port, timeout: 0 },
+            2 => Request::ReceiveQueuing {
+                port,
+                timeout: 0,
+                priority: 0,
+            },
             3 => Request::QueuingStatus { port },
             4 => Request::ClearQueuing { port },
             _ => Request::PartitionStatus,
@@ -399,6 +403,7 @@ fn port_victim(info: &StartInfo, rounds: u64) {
         let (_, reply) = call(&Request::CreatePort {
             kind: PortKind::Queuing,
             direction,
+            discipline: Discipline::Fifo,
             max_message_size: 8,
             refresh_or_depth: 4,
             name,
@@ -425,11 +430,13 @@ fn port_victim(info: &StartInfo, rounds: u64) {
         let (send, sent) = call(&Request::SendQueuing {
             port: ports[0],
             timeout: 0,
+            priority: 0,
             message: &message,
         });
         let (receive, received) = call(&Request::ReceiveQueuing {
             port: ports[1],
             timeout: 0,
+            priority: 0,
         });
         let mut back = [0u8; 8];
         if received.is_some_and(|r| r.words[0] == back.len() as u64) {

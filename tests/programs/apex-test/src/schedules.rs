@@ -1,0 +1,129 @@
+//! Partitions `sched` and `plain` (scenario `apex_schedule_switch`): module schedules
+//! through a653rs's `ApexScheduleP2`. Schedule `first` (50 ms frame) gives `sched` the
+//! window at 0-10 ms and `plain` 20-30 ms; `second` (40 ms frame) gives `plain` 0-10 ms and
+//! `sched` 20-30 ms. `sched` (configured with `schedule_control`) switches to `second` in
+//! its first window; the switch must land exactly on the end of that major frame, and its
+//! next window must start 20 ms after it. `plain` may not switch.
+//!
+//! Every line starts with the partition's name.
+
+use apex::Warden;
+use apex::a653rs::bindings::{
+    self as b, ApexErrorP4, ApexProcessP4, ApexScheduleP2, ApexTimeP1, ApexTimeP4, ErrorReturnCode,
+};
+use apex::a653rs::prelude::{Deadline, StartContext};
+use apex::codes::apex_name;
+use apex::user_rt::{println, sys};
+
+const MS: i64 = 1_000_000;
+const INFINITE: i64 = b::INFINITE_TIME_VALUE;
+
+fn code<T>(result: Result<T, ErrorReturnCode>) -> Option<ErrorReturnCode> {
+    result.err()
+}
+
+fn status() -> b::ApexScheduleStatus {
+    <Warden as ApexScheduleP2>::get_module_schedule_status().expect("GET_MODULE_SCHEDULE_STATUS")
+}
+
+fn schedule_id(name: &str) -> Result<b::ScheduleId, ErrorReturnCode> {
+    <Warden as ApexScheduleP2>::get_module_schedule_id(apex_name(name))
+}
+
+fn set(id: b::ScheduleId) -> Result<(), ErrorReturnCode> {
+    <Warden as ApexScheduleP2>::set_module_schedule(id)
+}
+
+fn now() -> u64 {
+    <Warden as ApexTimeP4>::get_time() as u64
+}
+
+/// The start of the partition's current window (ns since boot), from the kernel's
+/// running schedule.
+fn window_start() -> u64 {
+    let tp = apex::runtime::start_info().time_partition;
+    sys::partition_info(tp).map_or(0, |i| i.next_window_start)
+}
+
+fn start(name: &str, entry: extern "C" fn()) {
+    let attributes = b::ApexProcessAttribute {
+        period: INFINITE,
+        time_capacity: INFINITE,
+        entry_point: entry,
+        stack_size: 16 * 1024,
+        base_priority: 10,
+        deadline: Deadline::Soft,
+        name: apex_name(name),
+    };
+    let id = <Warden as ApexProcessP4>::create_process(&attributes)
+        .unwrap_or_else(|e| panic!("CREATE_PROCESS {name}: {e:?}"));
+    <Warden as ApexProcessP4>::start(id).unwrap_or_else(|e| panic!("START {name}: {e:?}"));
+}
+
+pub fn create_sched(_ctx: &mut StartContext<Warden>) {
+    start("switcher", switcher);
+}
+
+pub fn create_plain(_ctx: &mut StartContext<Warden>) {
+    start("asker", asker);
+}
+
+fn print_status(who: &str, s: &b::ApexScheduleStatus) {
+    println!(
+        "{who}: status current {} next {} last switch {}",
+        s.current_schedule,
+        s.next_schedule,
+        if s.time_of_last_schedule_switch == 0 {
+            "none"
+        } else {
+            "set"
+        }
+    );
+}
+
+extern "C" fn switcher() {
+    print_status("sched", &status());
+    let second = schedule_id("second");
+    println!(
+        "sched: GET_MODULE_SCHEDULE_ID second {:?}, nonesuch {:?}; SET_MODULE_SCHEDULE 7 {:?}",
+        second,
+        code(schedule_id("nonesuch")),
+        code(set(7))
+    );
+    let second = second.expect("schedule second");
+    let frame = window_start();
+    let asked = now();
+    println!("sched: SET_MODULE_SCHEDULE second {:?}", code(set(second)));
+    print_status("sched", &status());
+    // Wakes in the next window of `sched`, under `second`.
+    let _ = <Warden as ApexTimeP1>::timed_wait(30 * MS);
+    let woke = now();
+    let s = status();
+    print_status("sched", &s);
+    let switched = s.time_of_last_schedule_switch as u64;
+    println!(
+        "sched: asked {} us into its window; the switch came {} us after that window's frame began",
+        (asked - frame) / 1000,
+        switched.wrapping_sub(frame) / 1000
+    );
+    println!(
+        "sched: its window under second begins {} us after the switch; it ran {} us after it",
+        window_start().wrapping_sub(switched) / 1000,
+        woke.wrapping_sub(switched) / 1000
+    );
+    println!("sched: done");
+    let _ = <Warden as ApexErrorP4>::raise_application_error(
+        b::ErrorCode::ApplicationError,
+        b"schedules done",
+    );
+}
+
+extern "C" fn asker() {
+    let first = schedule_id("first");
+    println!(
+        "plain: GET_MODULE_SCHEDULE_ID first {first:?}; SET_MODULE_SCHEDULE second {:?}, first {:?}",
+        code(set(1)),
+        code(set(0))
+    );
+    print_status("plain", &status());
+}
