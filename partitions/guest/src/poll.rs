@@ -8,8 +8,8 @@
 use crate::arinc;
 use crate::linux::Errno;
 use crate::process::{File, MAX_FILES, Process};
-use crate::signal::UNBLOCKABLE;
 use crate::syscall::file::{Files, port_at};
+use crate::syscall::table::Ctx;
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 
 pub const POLLIN: u16 = 0x1;
@@ -80,20 +80,12 @@ fn finish(p: &mut Process) {
     }
 }
 
-/// Installs the mask `ppoll`/`pselect6` wait with (once: the call is served again while it
-/// waits).
+/// Installs the mask `ppoll`/`pselect6` wait with, if they were given one.
 fn wait_mask(p: &mut Process, host: &mut impl Host, set: u64, size: u64) -> SysResult<()> {
-    if set == 0 || p.saved_mask.is_some() {
+    if set == 0 {
         return Ok(());
     }
-    if size != 8 {
-        return Err(Errno::EINVAL);
-    }
-    let mut b = [0u8; 8];
-    read_user(p, host, set, &mut b)?;
-    p.saved_mask = Some(p.sigmask);
-    p.sigmask = u64::from_le_bytes(b) & !UNBLOCKABLE;
-    Ok(())
+    crate::sigcalls::wait_with_mask(p, host, set, size)
 }
 
 /// A `struct timespec` (`ppoll`, `pselect6`) in ns; `None` for a null pointer.
@@ -107,15 +99,14 @@ fn read_timeout(p: &Process, host: &mut impl Host, at: u64, micro: bool) -> SysR
 /// `poll(fds, nfds, timeout_ms)` and `ppoll(fds, nfds, timeout, sigmask, size)`.
 #[allow(clippy::too_many_arguments)] // the calls' arguments
 pub fn poll(
-    p: &mut Process,
-    f: &Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     fds: u64,
     nfds: u64,
     timeout_ns: Option<u64>,
     mask: u64,
     mask_size: u64,
 ) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     if nfds > MAX_POLL {
         return Err(Errno::EINVAL);
     }
@@ -152,19 +143,15 @@ pub fn poll_timeout(ms: u64) -> Option<u64> {
 }
 
 /// `ppoll`'s timeout.
-pub fn ppoll_timeout(p: &Process, host: &mut impl Host, at: u64) -> SysResult<Option<u64>> {
+pub fn ppoll_timeout(c: &mut Ctx<'_, '_, impl Host>, at: u64) -> SysResult<Option<u64>> {
+    let (p, _, host) = c.parts();
     read_timeout(p, host, at, false)
 }
 
 /// `select(nfds, readfds, writefds, exceptfds, timeval)` and `pselect6(..., timespec,
 /// {sigmask, size})`.
-pub fn select(
-    p: &mut Process,
-    f: &Files,
-    host: &mut impl Host,
-    a: [u64; 6],
-    pselect: bool,
-) -> SysResult<u64> {
+pub fn select(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6], pselect: bool) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let [nfds, sets @ .., timeout] = [a[0], a[1], a[2], a[3], a[4]];
     if nfds > MAX_FILES as u64 {
         return Err(Errno::EINVAL);

@@ -411,12 +411,8 @@ pub(crate) fn is_realtime(clock: u64) -> bool {
 
 /// The terminal ioctls on a console descriptor ([`crate::tty`]): `ENOTTY` without a
 /// terminal or for any other request.
-pub(super) fn tty_ioctl(
-    p: &Process,
-    host: &mut impl Host,
-    request: u64,
-    arg: u64,
-) -> SysResult<u64> {
+pub(super) fn tty_ioctl(c: &mut Ctx<'_, '_, impl Host>, request: u64, arg: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     use tty::ioctl::*;
     let tty = host.tty().ok_or(Errno::ENOTTY)?;
     match request {

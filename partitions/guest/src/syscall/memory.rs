@@ -5,16 +5,17 @@
 //! whether a private mapping sees later writes to the file; this one does not). They never
 //! map a page writable and executable (W^X).
 
+use super::table::Ctx;
 use super::{Host, MAX_HEAP, MMAP_BOTTOM, SysResult};
 use crate::linux::{self, Errno};
 use crate::memory::{Area, AreaError, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_up};
 use crate::process::{File, Process};
-use crate::vfs::Fs;
 use crate::vfs::dev::Device;
 
 /// Linux's `brk`: returns the new break, or the old one if it cannot move there. The heap's
 /// pages are backed when first touched.
-pub(super) fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 {
+pub(super) fn brk(c: &mut Ctx<'_, '_, impl Host>, requested: u64) -> u64 {
+    let (p, _, host) = c.parts();
     if requested < p.brk_start || requested - p.brk_start > MAX_HEAP {
         return p.brk;
     }
@@ -60,7 +61,9 @@ const MMAP_MIN_ADDR: u64 = 0x1_0000;
 /// write the files) mappings at a free place (below [`MMAP_TOP`], the hint if it is free),
 /// or at a fixed address (`MAP_FIXED` replaces what was there, `MAP_FIXED_NOREPLACE`
 /// fails with `EEXIST`).
-pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+pub(super) fn mmap(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6]) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
+    let fs = &*f.fs;
     let [hint, len, prot, flags, fd, offset] = a;
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
     if rights.writable_and_executable() {
@@ -114,7 +117,7 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
             if flags & linux::MAP_FIXED_NOREPLACE != 0 {
                 return Err(Errno::EEXIST);
             }
-            munmap(p, host, hint, len)?;
+            unmap(p, host, hint, len)?;
         }
         hint
     } else {
@@ -158,7 +161,7 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
                 frame[..piece.len()].copy_from_slice(piece)
             });
             if let Err(e) = filled {
-                let _ = munmap(p, host, start, len);
+                let _ = unmap(p, host, start, len);
                 return Err(e);
             }
             page += PAGE;
@@ -168,12 +171,7 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
 }
 
 /// Linux's `munmap` (parts of areas too; pages not mapped are fine).
-pub(super) fn munmap(
-    p: &mut Process,
-    host: &mut impl Host,
-    start: u64,
-    len: u64,
-) -> SysResult<u64> {
+fn unmap(p: &mut Process, host: &mut impl Host, start: u64, len: u64) -> SysResult<u64> {
     if !start.is_multiple_of(PAGE) || len == 0 {
         return Err(Errno::EINVAL);
     }
@@ -198,13 +196,19 @@ pub(super) fn munmap(
 }
 
 /// Linux's `mprotect` (every page of the range must be in some area: else `ENOMEM`).
+/// Linux's `munmap`.
+pub(super) fn munmap(c: &mut Ctx<'_, '_, impl Host>, start: u64, len: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
+    unmap(p, host, start, len)
+}
+
 pub(super) fn mprotect(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     start: u64,
     len: u64,
     prot: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
     if rights.writable_and_executable() {
         return Err(Errno::EACCES);
@@ -233,12 +237,12 @@ pub(super) fn mprotect(
 /// zeros, or a file mapping's bytes again); other advice changes nothing. `ENOMEM` when a
 /// page of the range is in no area.
 pub(super) fn madvise(
-    p: &Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     start: u64,
     len: u64,
     advice: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     const MADV_DONTNEED: u64 = 4;
     if !start.is_multiple_of(PAGE) {
         return Err(Errno::EINVAL);
@@ -276,13 +280,13 @@ pub(super) fn madvise(
 /// free place with `MREMAP_MAYMOVE` (`ENOMEM` without). `MREMAP_FIXED` and
 /// `MREMAP_DONTUNMAP` are not served (`EINVAL`).
 pub(super) fn mremap(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     old: u64,
     old_len: u64,
     new_len: u64,
     flags: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     const MREMAP_MAYMOVE: u64 = 1;
     if !old.is_multiple_of(PAGE) || new_len == 0 || flags & !MREMAP_MAYMOVE != 0 {
         return Err(Errno::EINVAL);
@@ -297,7 +301,7 @@ pub(super) fn mremap(
     let new_end = old.checked_add(new_len).ok_or(Errno::ENOMEM)?;
     if new_len <= old_len {
         if new_len < old_len {
-            munmap(p, host, new_end, old_len - new_len)?;
+            unmap(p, host, new_end, old_len - new_len)?;
         }
         return Ok(old);
     }

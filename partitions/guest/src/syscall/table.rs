@@ -51,6 +51,23 @@ impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
         (&mut *self.p, &mut self.f, &mut *self.host)
     }
 
+    /// Copies the process's memory at `address` into `buf` (`EFAULT` outside its readable
+    /// areas).
+    pub fn read_user(&mut self, address: u64, buf: &mut [u8]) -> SysResult<()> {
+        super::read_user(self.p, self.host, address, buf)
+    }
+
+    /// Copies `data` into the process's memory at `address` (`EFAULT` outside its writable
+    /// areas).
+    pub fn write_user(&mut self, address: u64, data: &[u8]) -> SysResult<()> {
+        super::write_user(self.p, self.host, address, data)
+    }
+
+    /// The NUL-terminated string at `address` (at most `buf.len() - 1` bytes).
+    pub fn read_cstr<'b>(&mut self, address: u64, buf: &'b mut [u8]) -> SysResult<&'b [u8]> {
+        super::read_cstr(self.p, self.host, address, buf)
+    }
+
     /// The call ends with `outcome` instead of a return value in `rax`.
     pub fn finish(&mut self, outcome: Outcome) -> SysResult<u64> {
         self.outcome = Some(outcome);
