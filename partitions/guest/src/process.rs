@@ -118,9 +118,6 @@ pub struct Process {
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
-    /// System-call numbers already logged as unsupported (0..511; 511 stands for every
-    /// number from 511 up).
-    unsupported_logged: [u64; 8],
 }
 
 impl Process {
@@ -165,7 +162,6 @@ impl Process {
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,
-            unsupported_logged: [0; 8],
         }
     }
 
@@ -302,15 +298,5 @@ impl Process {
         let signal = self.next_signal()?;
         self.pending &= !crate::signal::bit(signal);
         Some(self.pending_info[signal as usize - 1])
-    }
-
-    /// Whether an unsupported call `number` is seen for the first time (then it is logged).
-    pub fn first_unsupported(&mut self, number: u64) -> bool {
-        let number = number.min(511);
-        let word = &mut self.unsupported_logged[(number / 64) as usize];
-        let bit = 1 << (number % 64);
-        let first = *word & bit == 0;
-        *word |= bit;
-        first
     }
 }

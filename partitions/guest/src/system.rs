@@ -211,6 +211,8 @@ pub const fn exit_status(code: u8) -> u32 {
 pub struct System {
     slots: [Option<Slot>; MAX_PROCESSES],
     pub pipes: Pipes,
+    /// The unsupported calls logged so far.
+    reported: syscall::Reported,
     next_pid: u32,
     /// How init ended, when a call of another process ended it.
     ended: Option<Outcome>,
@@ -232,6 +234,7 @@ impl System {
         Self {
             slots,
             pipes: Pipes::new(),
+            reported: syscall::Reported::default(),
             next_pid,
             ended: None,
             hwcap,
@@ -753,7 +756,15 @@ impl System {
         let pid = slot.process.pid;
         k.select(pid);
         let kept = m;
-        match syscall::handle(&mut slot.process, &mut self.pipes, fs, &others, k, &mut m) {
+        match syscall::handle(
+            &mut slot.process,
+            &mut self.pipes,
+            fs,
+            &others,
+            &mut self.reported,
+            k,
+            &mut m,
+        ) {
             Outcome::Resume => self.resume(i, fs, k, m, None),
             Outcome::Block => {
                 slot.state = State::Blocked(kept);

@@ -262,6 +262,7 @@ struct World<'a> {
     fs: Fs<'a>,
     p: Process,
     pipes: crate::pipe::Pipes,
+    reported: crate::syscall::Reported,
     host: Model,
     fs_base: u64,
 }
@@ -286,6 +287,7 @@ impl<'a> World<'a> {
             fs,
             p: loaded.process,
             pipes: crate::pipe::Pipes::new(),
+            reported: Default::default(),
             host,
             fs_base: 0,
         };
@@ -320,6 +322,7 @@ impl<'a> World<'a> {
             &mut self.pipes,
             &mut self.fs,
             &(),
+            &mut self.reported,
             &mut self.host,
             &mut m,
         )
@@ -332,6 +335,7 @@ impl<'a> World<'a> {
             &mut self.pipes,
             &mut self.fs,
             &(),
+            &mut self.reported,
             &mut self.host,
             &mut m,
         );
@@ -857,7 +861,15 @@ fn the_stack_is_paged_in_on_demand_and_guarded_below() {
     );
     let mut m = World::message(0, [0; 6], 0);
     m.vector = 0;
-    let outcome = handle(&mut w.p, &mut w.pipes, &mut w.fs, &(), &mut w.host, &mut m);
+    let outcome = handle(
+        &mut w.p,
+        &mut w.pipes,
+        &mut w.fs,
+        &(),
+        &mut w.reported,
+        &mut w.host,
+        &mut m,
+    );
     assert_eq!(outcome, Outcome::Killed(crate::signal::SIGFPE));
 }
 
@@ -1088,6 +1100,40 @@ fn dispatch_table() {
     }
 }
 
+/// An unsupported call is logged by its Linux name once per guest: a process started after
+/// another made it (a loop starting processes) adds no line. Every number of the 64-bit
+/// ABI has its name.
+#[test]
+fn unsupported_calls_logged_once_per_guest() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    assert_eq!(w.call(nr::socket, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+    for pid in 2..50 {
+        let mut next = crate::process::Process::new(pid, 1, w.p.exe);
+        next.areas = w.p.areas.clone();
+        w.p = next;
+        assert_eq!(w.call(nr::socket, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+        assert_eq!(w.call(nr::io_uring_setup, [0; 6]), err(Errno::ENOSYS));
+    }
+    assert_eq!(
+        w.host.log,
+        [
+            "guest: process 1 (busybox): unsupported system call 41 (socket), returning ENOSYS",
+            "guest: process 2 (busybox): unsupported system call 425 (io_uring_setup), returning ENOSYS",
+        ]
+    );
+    let unnamed: Vec<u64> = (0..=466)
+        .filter(|&n| !(336..424).contains(&n))
+        .filter(|&n| crate::linux::syscall_name(n).is_none())
+        .collect();
+    assert!(unnamed.is_empty(), "{unnamed:?}");
+    assert_eq!(
+        crate::linux::syscall_name(nr::close_range),
+        Some("close_range")
+    );
+    assert_eq!(crate::linux::syscall_name(149), Some("mlock"));
+}
+
 #[test]
 fn unsupported_calls_and_faults() {
     let bytes = initramfs();
@@ -1110,7 +1156,15 @@ fn unsupported_calls_and_faults() {
         ..Default::default()
     };
     m.registers.rip = 0x40_1010;
-    let outcome = handle(&mut w.p, &mut w.pipes, &mut w.fs, &(), &mut w.host, &mut m);
+    let outcome = handle(
+        &mut w.p,
+        &mut w.pipes,
+        &mut w.fs,
+        &(),
+        &mut w.reported,
+        &mut w.host,
+        &mut m,
+    );
     assert_eq!(outcome, Outcome::Killed(11));
     assert_eq!(
         w.host.log.last().unwrap(),
@@ -1118,7 +1172,15 @@ fn unsupported_calls_and_faults() {
     );
     m.vector = 6;
     assert_eq!(
-        handle(&mut w.p, &mut w.pipes, &mut w.fs, &(), &mut w.host, &mut m),
+        handle(
+            &mut w.p,
+            &mut w.pipes,
+            &mut w.fs,
+            &(),
+            &mut w.reported,
+            &mut w.host,
+            &mut m,
+        ),
         Outcome::Killed(4)
     );
 }

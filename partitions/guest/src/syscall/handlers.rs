@@ -312,7 +312,7 @@ pub fn prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
             Ok(0)
         }
         _ => {
-            if c.p.first_unsupported(nr::prctl) {
+            if c.reported.first(nr::prctl) {
                 c.host.log(format_args!(
                     "guest: process {} ({}): unsupported prctl option {option}, returning EINVAL",
                     c.p.pid,

@@ -7,7 +7,7 @@
 //! match it replaced) that yields the handler, and to [`NUMBERS`], the numbers it serves.
 
 use super::handlers::*;
-use super::{Host, SysResult};
+use super::{Host, Reported, SysResult};
 use crate::linux::nr;
 use crate::pipe::Pipes;
 use crate::process::Process;
@@ -23,6 +23,8 @@ pub struct Ctx<'c, 'a, H> {
     pub f: Files<'c, 'a>,
     pub host: &'c mut H,
     pub m: &'c mut ExceptionMessage,
+    /// What the guest has logged as unsupported (once per guest).
+    pub reported: &'c mut Reported,
     /// Set by the calls that do not simply return a value: the process ends, is given to
     /// the process table, or resumes with registers the call restored.
     pub outcome: Option<Outcome>,
@@ -34,6 +36,7 @@ impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
         pipes: &'c mut Pipes,
         fs: &'c mut crate::vfs::Fs<'a>,
         others: &'c dyn crate::vfs::proc::ProcessTable,
+        reported: &'c mut Reported,
         host: &'c mut H,
         m: &'c mut ExceptionMessage,
     ) -> Ctx<'c, 'a, H> {
@@ -42,6 +45,7 @@ impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
             f: Files { pipes, fs, others },
             host,
             m,
+            reported,
             outcome: None,
         }
     }
