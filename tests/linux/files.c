@@ -1,11 +1,12 @@
 /* Area `files`: reading files and directories that every Linux system (and the guest's
  * initramfs) has — `/`, `/etc`, `/etc/passwd` (whose first line is root's) and this program
  * itself: open/openat, read, lseek, pread, dup/dup2/dup3, fcntl, getdents64, stat, fstat,
- * lstat, access, readlink, and the errors ENOENT, EBADF, EISDIR, ENOTDIR, EINVAL, ESPIPE,
+ * lstat, access, readlink, close_range, and the errors ENOENT, EBADF, EISDIR, ENOTDIR, EINVAL, ESPIPE,
  * EFAULT. Writing files is area `writes`. */
 #include "check.h"
 
 #include <dirent.h>
+#include <linux/close_range.h>
 #include <fcntl.h>
 #include <sys/stat.h>
 #include <sys/syscall.h>
@@ -151,4 +152,22 @@ void area_files(void)
 	check("own executable has the x bit", fstat(fd, &st) == 0 && (st.st_mode & 0100),
 	      "expected mode with 0100");
 	close(fd);
+
+	/* close_range (glibc's closefrom): closes a range, or marks it close-on-exec. */
+	int a = open("/etc/passwd", O_RDONLY), b = dup(a), c = dup(a);
+	check_eq("close_range CLOSE_RANGE_CLOEXEC", 0,
+		 syscall(SYS_close_range, b, c, CLOSE_RANGE_CLOEXEC));
+	check("close_range CLOSE_RANGE_CLOEXEC keeps them open with FD_CLOEXEC",
+	      fcntl(b, F_GETFD) == FD_CLOEXEC && fcntl(c, F_GETFD) == FD_CLOEXEC &&
+		      fcntl(a, F_GETFD) == 0,
+	      "expected FD_CLOEXEC on both, not on the first");
+	check_eq("close_range", 0, syscall(SYS_close_range, b, ~0u, 0));
+	check("close_range closed the range only",
+	      fcntl(b, F_GETFD) == -1 && fcntl(c, F_GETFD) == -1 && fcntl(a, F_GETFD) == 0,
+	      "expected the two closed, the first open");
+	check_errno("close_range with first > last EINVAL", syscall(SYS_close_range, 5, 4, 0),
+		    EINVAL);
+	check_errno("close_range with an unknown flag EINVAL",
+		    syscall(SYS_close_range, b, c, 1 << 8), EINVAL);
+	close(a);
 }

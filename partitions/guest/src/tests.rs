@@ -1022,6 +1022,42 @@ fn files_of_the_initramfs() {
     assert_eq!(last, err(Errno::EMFILE));
 }
 
+/// `close_range` closes the open descriptors of a range (the closed ones and those beyond
+/// the table are skipped), or marks them close-on-exec; bad flags or a reversed range are
+/// EINVAL.
+#[test]
+fn close_range() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let passwd = w.path("/etc/passwd");
+    let fds: Vec<u64> = (0..6)
+        .map(|_| w.call(nr::open, [passwd, 0, 0, 0, 0, 0]))
+        .collect();
+    assert_eq!(fds, [3, 4, 5, 6, 7, 8]);
+    assert_eq!(w.call(nr::close, [5, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::close_range, [4, 6, 0, 0, 0, 0]), 0);
+    for fd in 4..=6 {
+        assert!(w.p.file(fd).is_none(), "fd {fd}");
+    }
+    assert!(w.p.file(3).is_some() && w.p.file(7).is_some());
+    // CLOSE_RANGE_CLOEXEC (4), with CLOSE_RANGE_UNSHARE (2): open stays, close-on-exec set.
+    assert_eq!(w.call(nr::close_range, [7, u32::MAX as u64, 6, 0, 0, 0]), 0);
+    assert!(w.p.file(7).is_some() && w.p.is_cloexec(7) && w.p.is_cloexec(8));
+    assert!(!w.p.is_cloexec(3));
+    assert_eq!(
+        w.call(nr::close_range, [3, 2, 0, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::close_range, [3, 3, 1, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    // Everything from 3 up, as closefrom(3) asks.
+    assert_eq!(w.call(nr::close_range, [3, u32::MAX as u64, 0, 0, 0, 0]), 0);
+    assert!((3..64).all(|fd| w.p.file(fd).is_none()));
+    assert!(w.p.file(0).is_some());
+}
+
 /// The (name, type) of each `linux_dirent64` record in `bytes`.
 fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
     let mut out = Vec::new();

@@ -1,4 +1,5 @@
-//! The file system calls of a process: descriptors (`dup*`, `pipe*`, `close`, `fcntl`),
+//! The file system calls of a process: descriptors (`dup*`, `pipe*`, `close`,
+//! `close_range`, `fcntl`),
 //! reading and writing (`read`, `write`, `readv`, `writev`, `pread64`, `pwrite64`,
 //! `sendfile`, `lseek`, `ftruncate`, `truncate`), names (`open`, `openat`, `creat`,
 //! `mkdir*`, `unlink*`, `rmdir`, `rename*`, `symlink*`, `link*`, `readlink*`), status
@@ -110,6 +111,36 @@ pub fn close_fd(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
     let (p, f, _) = c.parts();
     p.file(fd).ok_or(Errno::EBADF)?;
     close(p, f.pipes, f.fs, fd as usize);
+    Ok(0)
+}
+
+/// `close_range(first, last, flags)`: closes the open descriptors from `first` to `last`,
+/// or with `CLOSE_RANGE_CLOEXEC` marks them close-on-exec. `CLOSE_RANGE_UNSHARE` has
+/// nothing to do: no two processes share a descriptor table here (`fork` copies it).
+pub fn close_range(
+    c: &mut Ctx<'_, '_, impl Host>,
+    first: u64,
+    last: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const CLOSE_RANGE_UNSHARE: u64 = 1 << 1;
+    const CLOSE_RANGE_CLOEXEC: u64 = 1 << 2;
+    let (first, last) = (first as u32, last as u32);
+    if flags & !(CLOSE_RANGE_UNSHARE | CLOSE_RANGE_CLOEXEC) != 0 || first > last {
+        return Err(Errno::EINVAL);
+    }
+    let (p, f, _) = c.parts();
+    let end = (last as usize).saturating_add(1).min(p.files.len());
+    for fd in (first as usize).min(end)..end {
+        if p.files[fd].is_none() {
+            continue;
+        }
+        if flags & CLOSE_RANGE_CLOEXEC != 0 {
+            p.set_cloexec(fd, true);
+        } else {
+            close(p, f.pipes, f.fs, fd);
+        }
+    }
     Ok(0)
 }
 

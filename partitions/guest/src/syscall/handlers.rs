@@ -51,6 +51,9 @@ pub fn openat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn close<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::close_fd(c, a.fd(0))
 }
+pub fn close_range<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    file::close_range(c, a.fd(0), a.fd(1), a.flags(2))
+}
 pub fn dup<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::dup(c, a.fd(0))
 }

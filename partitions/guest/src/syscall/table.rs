@@ -167,6 +167,7 @@ table! {
     creat => creat,
     openat => openat,
     close => close,
+    close_range => close_range,
     dup => dup,
     dup2 => dup2,
     dup3 => dup3,
