@@ -89,7 +89,7 @@ pub(crate) fn rlimit(
         }
         // Root may raise a hard limit, but not beyond what the guest has (descriptors,
         // the stack's fixed size).
-        let ceiling = crate::process::default_limits()[index].hard;
+        let ceiling = crate::process::ceiling(index);
         if hard > ceiling {
             return Err(Errno::EPERM);
         }

@@ -502,6 +502,7 @@ pub const CLOCK_MONOTONIC: u64 = 1;
 pub const RLIMIT_STACK: u64 = 3;
 pub const RLIMIT_CORE: u64 = 4;
 pub const RLIMIT_NOFILE: u64 = 7;
+pub const RLIMIT_MEMLOCK: u64 = 8;
 pub const RLIM_INFINITY: u64 = u64::MAX;
 
 /// `struct timespec` of `ns` nanoseconds (seconds, nanoseconds).

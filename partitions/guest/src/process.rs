@@ -35,7 +35,20 @@ pub fn default_limits() -> [Limit; LIMITS] {
     limits[linux::RLIMIT_STACK as usize] = fixed(crate::memory::STACK_SIZE);
     limits[linux::RLIMIT_NOFILE as usize] = fixed(MAX_FILES as u64);
     limits[linux::RLIMIT_CORE as usize] = fixed(0);
+    // Linux's default since 5.16.
+    limits[linux::RLIMIT_MEMLOCK as usize] = fixed(8 << 20);
     limits
+}
+
+/// The highest hard limit of `resource` root may set: what the guest has for the stack and
+/// the descriptors (their fixed sizes), no core dumps; the rest has no limit of its own.
+pub fn ceiling(resource: usize) -> u64 {
+    match resource as u64 {
+        linux::RLIMIT_STACK | linux::RLIMIT_NOFILE | linux::RLIMIT_CORE => {
+            default_limits()[resource].hard
+        }
+        _ => linux::RLIM_INFINITY,
+    }
 }
 
 /// Longest process name (Linux's `TASK_COMM_LEN` without the NUL).
@@ -118,6 +131,10 @@ pub struct Process {
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
+    /// Its ranges locked in memory (`mlock`; not inherited by `fork`, gone with `execve`).
+    pub locks: crate::memory::Locks,
+    /// `mlockall(MCL_FUTURE)` is in force (recorded; new mappings are not counted).
+    pub lock_future: bool,
 }
 
 impl Process {
@@ -162,6 +179,8 @@ impl Process {
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,
+            locks: Default::default(),
+            lock_future: false,
         }
     }
 

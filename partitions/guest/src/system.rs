@@ -949,6 +949,9 @@ impl System {
         child.wake_at = None;
         child.saved_mask = None;
         child.executed = false;
+        // Memory locks are not inherited (mlock(2)).
+        child.locks = crate::memory::Locks::default();
+        child.lock_future = false;
         child.clear_child_tid = if flags & CLONE_CHILD_CLEARTID != 0 {
             child_tid
         } else {
@@ -1173,6 +1176,7 @@ impl System {
                 new.pending = old.pending;
                 new.pending_info = old.pending_info;
                 new.umask = old.umask;
+                new.limits = old.limits;
                 (new.pgid, new.sid, new.executed) = (old.pgid, old.sid, true);
                 (new.alarm_at, new.alarm_interval) = (old.alarm_at, old.alarm_interval);
                 // Handlers are gone with the image; ignored signals stay ignored.

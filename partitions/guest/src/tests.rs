@@ -1058,6 +1058,102 @@ fn close_range() {
     assert!(w.p.file(0).is_some());
 }
 
+/// The memory locks as for a process without `CAP_IPC_LOCK`: small locks succeed within
+/// `RLIMIT_MEMLOCK` (8 MiB), a lock of unmapped memory or beyond the limit is ENOMEM, a
+/// limit of 0 EPERM; a range locked twice counts once; `munmap` unlocks.
+#[test]
+fn memory_locks() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    assert_eq!(
+        w.p.limits[crate::linux::RLIMIT_MEMLOCK as usize].soft,
+        8 << 20
+    );
+    let map = |w: &mut World, len: u64| w.call(nr::mmap, [0, len, 3, 0x22, u64::MAX, 0]);
+    let a = map(&mut w, 6 << 20);
+    assert_eq!(w.call(nr::mlock, [a + 10, 2 * PAGE, 0, 0, 0, 0]), 0);
+    assert_eq!(w.p.locks.bytes(), 3 * PAGE); // the pages it touches
+    assert_eq!(w.call(nr::mlock, [a, 6 << 20, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::mlock, [a, 6 << 20, 0, 0, 0, 0]), 0);
+    assert_eq!(w.p.locks.bytes(), 6 << 20);
+    let b = map(&mut w, 4 << 20);
+    assert_eq!(
+        w.call(nr::mlock, [b, 4 << 20, 0, 0, 0, 0]),
+        err(Errno::ENOMEM)
+    );
+    assert_eq!(w.call(nr::mlock2, [b, 2 << 20, 1, 0, 0, 0]), 0);
+    assert_eq!(
+        w.call(nr::mlock2, [b, PAGE, 2, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::mlock, [b + (2 << 20), PAGE, 0, 0, 0, 0]),
+        err(Errno::ENOMEM)
+    );
+    // munlock of part of a range, munmap of another part: both free their bytes.
+    assert_eq!(w.call(nr::munlock, [a, 1 << 20, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::munmap, [a + (5 << 20), 1 << 20, 0, 0, 0, 0]), 0);
+    assert_eq!(w.p.locks.bytes(), 6 << 20);
+    assert_eq!(
+        w.call(nr::munlock, [a + (5 << 20), PAGE, 0, 0, 0, 0]),
+        err(Errno::ENOMEM)
+    );
+    assert_eq!(
+        w.call(nr::mlock, [0x1000, PAGE, 0, 0, 0, 0]),
+        err(Errno::ENOMEM)
+    );
+    // mlockall: the process has more than 8 MiB mapped.
+    assert_eq!(w.call(nr::mlockall, [1, 0, 0, 0, 0, 0]), err(Errno::ENOMEM));
+    assert_eq!(w.call(nr::mlockall, [0, 0, 0, 0, 0, 0]), err(Errno::EINVAL));
+    assert_eq!(w.call(nr::mlockall, [4, 0, 0, 0, 0, 0]), err(Errno::EINVAL));
+    assert_eq!(w.call(nr::mlockall, [2, 0, 0, 0, 0, 0]), 0);
+    assert!(w.p.lock_future);
+    assert_eq!(w.call(nr::munlockall, [0; 6]), 0);
+    assert_eq!((w.p.locks.bytes(), w.p.lock_future), (0, false));
+    assert_eq!(w.call(nr::munmap, [b, 4 << 20, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::munmap, [a, 5 << 20, 0, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::mlockall, [1, 0, 0, 0, 0, 0]), 0);
+    let mapped: u64 = w.p.areas.iter().map(|a| a.end - a.start).sum();
+    assert_eq!(w.p.locks.bytes(), mapped);
+    // RLIMIT_MEMLOCK 0: nothing may be locked; root may raise it beyond 8 MiB.
+    w.put(SCRATCH, &[0; 16]);
+    assert_eq!(w.call(nr::setrlimit, [8, SCRATCH, 0, 0, 0, 0]), 0);
+    assert_eq!(
+        w.call(nr::mlock, [SCRATCH, PAGE, 0, 0, 0, 0]),
+        err(Errno::EPERM)
+    );
+    assert_eq!(w.call(nr::mlockall, [1, 0, 0, 0, 0, 0]), err(Errno::EPERM));
+    let mut limit = [0u8; 16];
+    limit[..8].copy_from_slice(&(1u64 << 30).to_le_bytes());
+    limit[8..].copy_from_slice(&(1u64 << 30).to_le_bytes());
+    w.put(SCRATCH, &limit);
+    assert_eq!(w.call(nr::setrlimit, [8, SCRATCH, 0, 0, 0, 0]), 0);
+}
+
+/// [`crate::memory::Locks`] joins touching and overlapping ranges and cuts them.
+#[test]
+fn lock_ranges() {
+    let mut l = crate::memory::Locks::default();
+    l.lock(0x1000, 0x3000).unwrap();
+    l.lock(0x3000, 0x4000).unwrap();
+    l.lock(0x2000, 0x5000).unwrap();
+    assert_eq!(l.bytes(), 0x4000);
+    assert_eq!(l.unlocked_in(0x0, 0x6000), 0x2000);
+    l.unlock(0x2000, 0x3000).unwrap();
+    assert_eq!(l.bytes(), 0x3000);
+    assert_eq!(l.unlocked_in(0x1000, 0x5000), 0x1000);
+    for i in 0..crate::memory::MAX_AREAS as u64 - 2 {
+        l.lock(0x10_0000 + i * 0x2000, 0x10_1000 + i * 0x2000)
+            .unwrap();
+    }
+    // Full: a range apart does not fit, one joining others does; cutting one in two not.
+    assert!(l.lock(0x9000_0000, 0x9000_1000).is_err());
+    l.lock(0x10_0000, 0x10_3000).unwrap();
+    l.unlock(0x10_0800, 0x10_1000).unwrap();
+    assert!(l.unlock(0x10_1800, 0x10_2000).is_err());
+    assert_eq!(l.bytes(), 0x3000 + 0x2800 + 0x1000 * 60);
+}
+
 /// The (name, type) of each `linux_dirent64` record in `bytes`.
 fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
     let mut out = Vec::new();

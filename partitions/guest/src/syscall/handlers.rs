@@ -244,6 +244,21 @@ pub fn madvise<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn mremap<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     memory::mremap(c, a.ptr(0), a.usize(1), a.usize(2), a.flags(3))
 }
+pub fn mlock<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::mlock(c, a.ptr(0), a.usize(1), 0)
+}
+pub fn mlock2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::mlock(c, a.ptr(0), a.usize(1), a.flags(2))
+}
+pub fn munlock<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::munlock(c, a.ptr(0), a.usize(1))
+}
+pub fn mlockall<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::mlockall(c, a.flags(0))
+}
+pub fn munlockall<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
+    memory::munlockall(c)
+}
 
 // The thread.
 

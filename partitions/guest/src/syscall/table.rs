@@ -230,6 +230,11 @@ table! {
     mprotect => mprotect,
     madvise => madvise,
     mremap => mremap,
+    mlock => mlock,
+    mlock2 => mlock2,
+    munlock => munlock,
+    mlockall => mlockall,
+    munlockall => munlockall,
     // The thread.
     arch_prctl => arch_prctl,
     set_tid_address => set_tid_address,
