@@ -8,6 +8,7 @@
 #include <dirent.h>
 #include <linux/close_range.h>
 #include <fcntl.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/syscall.h>
 
@@ -170,4 +171,19 @@ void area_files(void)
 	check_errno("close_range with an unknown flag EINVAL",
 		    syscall(SYS_close_range, b, c, 1 << 8), EINVAL);
 	close(a);
+
+	/* As many descriptors as RLIMIT_NOFILE's soft limit allows, set below any hard one. */
+	struct rlimit old_limit, limit = { 200, 200 };
+	getrlimit(RLIMIT_NOFILE, &old_limit);
+	limit.rlim_max = old_limit.rlim_max;
+	check_eq("setrlimit RLIMIT_NOFILE 200", 0, setrlimit(RLIMIT_NOFILE, &limit));
+	int high = 0;
+	for (int i = 0; i < 150; i++)
+		high = dup(0);
+	check("150 more descriptors", high >= 150, "expected a descriptor above 149 got %d", high);
+	check_eq("dup2 to descriptor 199", 199, dup2(0, 199));
+	check_errno("dup2 to descriptor 200 EBADF", dup2(0, 200), EBADF);
+	check_errno("F_DUPFD from the limit EINVAL", fcntl(0, F_DUPFD, 200), EINVAL);
+	syscall(SYS_close_range, 3, ~0u, 0);
+	setrlimit(RLIMIT_NOFILE, &old_limit);
 }

@@ -1170,8 +1170,8 @@ impl System {
         match exec::load_file(fs, k, ids, cwd, file, argv, env, self.hwcap) {
             Ok(loaded) => {
                 let mut new = loaded.process;
-                new.files = old.files;
-                new.cloexec = 0;
+                new.files = core::mem::take(&mut old.files);
+                new.clear_cloexec();
                 new.sigmask = old.sigmask;
                 new.pending = old.pending;
                 new.pending_info = old.pending_info;

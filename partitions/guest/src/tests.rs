@@ -1013,13 +1013,17 @@ fn files_of_the_initramfs() {
         w.call(nr::open, [u64::MAX - 2, 0, 0, 0, 0, 0]),
         err(Errno::EFAULT)
     );
-    // Descriptors run out at MAX_FILES.
+    // Descriptors run out at the soft RLIMIT_NOFILE (1024, as on Linux).
     let passwd = w.path("/etc/passwd");
-    let mut last = 0;
-    for _ in 0..crate::process::MAX_FILES {
-        last = w.call(nr::open, [passwd, 0, 0, 0, 0, 0]);
-    }
-    assert_eq!(last, err(Errno::EMFILE));
+    let opened: Vec<u64> = (0..crate::process::DEFAULT_FILES)
+        .map(|_| w.call(nr::open, [passwd, 0, 0, 0, 0, 0]))
+        .take_while(|&fd| fd != err(Errno::EMFILE))
+        .collect();
+    assert_eq!(opened.last(), Some(&1023));
+    assert_eq!(
+        w.call(nr::open, [passwd, 0, 0, 0, 0, 0]),
+        err(Errno::EMFILE)
+    );
 }
 
 /// `close_range` closes the open descriptors of a range (the closed ones and those beyond
@@ -1152,6 +1156,62 @@ fn lock_ranges() {
     l.unlock(0x10_0800, 0x10_1000).unwrap();
     assert!(l.unlock(0x10_1800, 0x10_2000).is_err());
     assert_eq!(l.bytes(), 0x3000 + 0x2800 + 0x1000 * 60);
+}
+
+/// A process may have as many descriptors as its soft `RLIMIT_NOFILE` says (1024 at
+/// first, up to [`crate::process::MAX_FILES`]); the table grows with the highest in use
+/// and shrinks when it is closed; `poll` and `select` watch them all.
+#[test]
+fn descriptors_up_to_the_nofile_limit() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let limit = |w: &mut World, soft: u64, hard: u64| {
+        let mut b = [0u8; 16];
+        b[..8].copy_from_slice(&soft.to_le_bytes());
+        b[8..].copy_from_slice(&hard.to_le_bytes());
+        w.put(SCRATCH, &b);
+        w.call(nr::setrlimit, [7, SCRATCH, 0, 0, 0, 0])
+    };
+    assert_eq!(w.call(nr::dup2, [1, 1023, 0, 0, 0, 0]), 1023);
+    assert_eq!(w.call(nr::dup2, [1, 1024, 0, 0, 0, 0]), err(Errno::EBADF));
+    let max = crate::process::MAX_FILES as u64;
+    assert_eq!(limit(&mut w, max + 1, max + 1), err(Errno::EPERM));
+    assert_eq!(limit(&mut w, 3000, max), 0);
+    assert_eq!(w.call(nr::dup2, [1, 2999, 0, 0, 0, 0]), 2999);
+    assert_eq!(w.call(nr::fcntl, [1, 1030, 2000, 0, 0, 0]), 2000); // F_DUPFD_CLOEXEC
+    assert!(w.p.is_cloexec(2000) && !w.p.is_cloexec(2999));
+    assert_eq!(w.p.files.len(), 3000);
+    // poll and select see a high descriptor.
+    let mut pollfd = [0u8; 8];
+    pollfd[..4].copy_from_slice(&2999i32.to_le_bytes());
+    pollfd[4..6].copy_from_slice(&4u16.to_le_bytes()); // POLLOUT
+    w.put(SCRATCH + 0x100, &pollfd);
+    assert_eq!(w.call(nr::poll, [SCRATCH + 0x100, 1, 0, 0, 0, 0]), 1);
+    assert_eq!(
+        w.call(nr::poll, [SCRATCH + 0x100, 3001, 0, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    let mut set = [0u8; 384];
+    set[2000 / 8] |= 1 << (2000 % 8);
+    w.put(SCRATCH + 0x200, &set);
+    w.put(SCRATCH + 0x180, &[0; 16]); // no wait
+    assert_eq!(
+        w.call(
+            nr::select,
+            [2001, 0, SCRATCH + 0x200, 0, SCRATCH + 0x180, 0]
+        ),
+        1
+    );
+    assert_eq!(w.get(SCRATCH + 0x200, 251)[250], 1);
+    // Closing the highest shrinks the table; a lower limit keeps what is open.
+    assert_eq!(w.call(nr::close, [2999, 0, 0, 0, 0, 0]), 0);
+    assert_eq!(w.p.files.len(), 2001);
+    assert_eq!(limit(&mut w, 100, max), 0);
+    assert_eq!(w.call(nr::dup, [0, 0, 0, 0, 0, 0]), 3);
+    assert!(w.p.file(2000).is_some());
+    assert_eq!(w.call(nr::dup2, [1, 100, 0, 0, 0, 0]), err(Errno::EBADF));
+    assert_eq!(w.call(nr::close_range, [3, u32::MAX as u64, 0, 0, 0, 0]), 0);
+    assert_eq!(w.p.files.len(), 3);
 }
 
 /// The (name, type) of each `linux_dirent64` record in `bytes`.
@@ -1926,9 +1986,7 @@ fn random_process_calls(bytes: &[u8], mut seed: u64) {
         }
     }
     assert!(g.host.released.len() >= end);
-    for fd in 0..64 {
-        let _ = g.call(1, nr::close, [fd, 0, 0, 0, 0, 0]);
-    }
+    let _ = g.call(1, nr::close_range, [0, u32::MAX as u64, 0, 0, 0, 0]);
     let blocked_or_starting = g
         .pids()
         .into_iter()

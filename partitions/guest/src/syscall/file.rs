@@ -18,7 +18,7 @@ use crate::arinc;
 use crate::linux::{self, Errno};
 use crate::memory::Rights;
 use crate::pipe::{Pipes, Transfer};
-use crate::process::{File, MAX_FILES, Process, Stream};
+use crate::process::{File, Process, Stream};
 use crate::signal::{self, Info};
 use crate::tty;
 use crate::vfs::dev::Device;
@@ -61,20 +61,17 @@ fn seconds(host: &mut impl Host) -> u64 {
 /// Closes descriptor `fd` if open (a pipe end or open file description counts one
 /// descriptor less).
 pub fn close(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, fd: usize) {
-    match p.files.get_mut(fd).and_then(Option::take) {
+    match p.take_fd(fd) {
         Some(File::Pipe { pipe, write, .. }) => pipes.close_end(pipe, write),
         Some(File::Open(id)) => fs.release(id),
         _ => {}
-    }
-    if fd < MAX_FILES {
-        p.set_cloexec(fd, false);
     }
 }
 
 /// Closes every descriptor of `p` and lets its working directory go (it ends), or closes
 /// only the close-on-exec ones (`execve`).
 pub fn close_files(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, only_cloexec: bool) {
-    for fd in 0..MAX_FILES {
+    for fd in (0..p.files.len()).rev() {
         if !only_cloexec || p.is_cloexec(fd) {
             close(p, pipes, fs, fd);
         }
@@ -131,8 +128,9 @@ pub fn close_range(
     }
     let (p, f, _) = c.parts();
     let end = (last as usize).saturating_add(1).min(p.files.len());
-    for fd in (first as usize).min(end)..end {
-        if p.files[fd].is_none() {
+    // Downwards: closing the highest shrinks the table.
+    for fd in ((first as usize).min(end)..end).rev() {
+        if p.files.get(fd).is_none_or(Option::is_none) {
             continue;
         }
         if flags & CLOSE_RANGE_CLOEXEC != 0 {

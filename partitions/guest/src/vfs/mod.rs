@@ -42,8 +42,9 @@ pub const PATH_MAX: usize = 4096;
 pub const NAME_MAX: usize = 255;
 /// Most symbolic links followed in one lookup.
 pub const MAX_LINKS: usize = 8;
-/// Most open file descriptions of the guest (over all processes; `ENFILE` beyond).
-pub const MAX_OPEN: usize = 256;
+/// Most open file descriptions of the guest (over all processes; `ENFILE` beyond): as
+/// many as one process may have descriptors.
+pub const MAX_OPEN: usize = crate::process::MAX_FILES;
 /// Longest normalised path the guest keeps for an executable (`/proc/<pid>/exe`).
 const MAX_PATH: usize = 256;
 /// What an inode costs against the byte limit beside its data: its slot and its
