@@ -1214,6 +1214,66 @@ fn descriptors_up_to_the_nofile_limit() {
     assert_eq!(w.p.files.len(), 3);
 }
 
+/// `/proc/self/fd` lists the open descriptors as links (a file's path, a pipe, the
+/// console); opening one, or `/dev/fd/<n>`, opens what it has: a pipe's end (bash's
+/// process substitution), a file anew (its own offset), even an unlinked one.
+#[test]
+fn descriptors_in_proc_and_dev_fd() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    assert_eq!(w.call(nr::pipe, [SCRATCH + 0x100, 0, 0, 0, 0, 0]), 0);
+    let ends = w.get(SCRATCH + 0x100, 8);
+    let (r, wr) = (ends[0] as u64, ends[4] as u64);
+    assert_eq!((r, wr), (3, 4));
+    let passwd = w.path("/etc/passwd");
+    assert_eq!(w.call(nr::open, [passwd, 0, 0, 0, 0, 0]), 5);
+    assert_eq!(w.call(nr::read, [5, SCRATCH, 4, 0, 0, 0]), 4);
+    let readlink = |w: &mut World, path: &str| {
+        let at = w.path(path);
+        let n = w.call(nr::readlink, [at, SCRATCH + 0x200, 100, 0, 0, 0]);
+        String::from_utf8(w.get(SCRATCH + 0x200, n as usize)).unwrap()
+    };
+    assert_eq!(readlink(&mut w, "/proc/self/fd/5"), "/etc/passwd");
+    assert_eq!(readlink(&mut w, "/proc/self/fd/0"), "/dev/console");
+    assert!(readlink(&mut w, "/proc/self/fd/3").starts_with("pipe:["));
+    assert_eq!(readlink(&mut w, "/dev/fd"), "/proc/self/fd");
+    let dir = w.path("/proc/self/fd");
+    let dir = w.call(nr::open, [dir, 0o200000, 0, 0, 0, 0]);
+    let n = w.call(nr::getdents64, [dir, SCRATCH + 0x400, 0x400, 0, 0, 0]);
+    let names: Vec<&str> = dirents(&w.get(SCRATCH + 0x400, n as usize))
+        .into_iter()
+        .map(|(name, _)| name)
+        .collect();
+    assert_eq!(names, [".", "..", "0", "1", "2", "3", "4", "5", "6"]);
+    assert_eq!(w.call(nr::close, [dir, 0, 0, 0, 0, 0]), 0);
+    // The pipe's read end through /dev/fd, the write end through /proc/self/fd.
+    let path = w.path("/dev/fd/4");
+    let writer = w.call(nr::open, [path, 1, 0, 0, 0, 0]);
+    w.put(SCRATCH, b"hi");
+    assert_eq!(w.call(nr::write, [writer, SCRATCH, 2, 0, 0, 0]), 2);
+    let path = w.path("/dev/fd/3");
+    let reader = w.call(nr::open, [path, 0, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::read, [reader, SCRATCH + 0x10, 8, 0, 0, 0]), 2);
+    assert_eq!(w.get(SCRATCH + 0x10, 2), b"hi");
+    // A file opened anew starts at offset 0, even once unlinked.
+    let path = w.path("/proc/self/fd/5");
+    let again = w.call(nr::open, [path, 0, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::lseek, [again, 0, 1, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::lseek, [5, 0, 1, 0, 0, 0]), 4);
+    let tmp = w.path("/tmp/gone");
+    let gone = w.call(nr::open, [tmp, 0o102, 0o600, 0, 0, 0]);
+    let tmp = w.path("/tmp/gone");
+    assert_eq!(w.call(nr::unlink, [tmp, 0, 0, 0, 0, 0]), 0);
+    let path = w.path(&format!("/dev/fd/{gone}"));
+    assert!(w.call(nr::open, [path, 2, 0, 0, 0, 0]) < 100);
+    let path = w.path("/dev/fd/0");
+    assert!(w.call(nr::open, [path, 2, 0, 0, 0, 0]) < 100);
+    let path = w.path("/dev/fd/99");
+    assert_eq!(w.call(nr::open, [path, 0, 0, 0, 0, 0]), err(Errno::ENOENT));
+    let path = w.path("/dev/fd/3/x");
+    assert_eq!(w.call(nr::open, [path, 0, 0, 0, 0, 0]), err(Errno::ENOTDIR));
+}
+
 /// The (name, type) of each `linux_dirent64` record in `bytes`.
 fn dirents(bytes: &[u8]) -> Vec<(&'static str, u8)> {
     let mut out = Vec::new();

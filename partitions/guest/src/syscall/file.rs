@@ -812,6 +812,32 @@ pub fn openat(
         }
         Err(e) => return Err(e),
     };
+    if let Node::Proc(proc::Node::Fd(pid, n)) = node
+        && follow
+    {
+        // `/proc/<pid>/fd/<n>` of a pipe or the console: what that descriptor has, the
+        // pipe's end as the access mode asks (a file resolved to itself in the lookup).
+        let file = proc::fd_file(&procs(p, f), pid, n).ok_or(Errno::ENOENT)?;
+        let file = match file {
+            File::Pipe { pipe, write, .. } => {
+                let write = match access {
+                    0 => false, // O_RDONLY
+                    linux::O_WRONLY => true,
+                    _ => write,
+                };
+                let nonblock = flags & linux::O_NONBLOCK != 0;
+                File::Pipe {
+                    pipe,
+                    write,
+                    nonblock,
+                }
+            }
+            File::Console(_) => File::Console(Stream::Stdout),
+            File::Open(_) => return Err(Errno::ENOENT),
+        };
+        duplicate(p, f, file, fd, flags & O_CLOEXEC != 0);
+        return Ok(fd as u64);
+    }
     if f.fs.is_symlink(node) {
         return Err(Errno::ELOOP); // O_NOFOLLOW on a link
     }
