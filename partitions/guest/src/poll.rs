@@ -93,6 +93,14 @@ fn read_timeout(p: &Process, host: &mut impl Host, at: u64, micro: bool) -> SysR
     crate::sigcalls::read_time(p, host, at, micro).map(Some)
 }
 
+/// `len` zero bytes from the guest's heap (`ENOMEM` when it has no room).
+fn zeroed(len: usize) -> SysResult<alloc::vec::Vec<u8>> {
+    let mut bytes = alloc::vec::Vec::new();
+    bytes.try_reserve_exact(len).map_err(|_| Errno::ENOMEM)?;
+    bytes.resize(len, 0);
+    Ok(bytes)
+}
+
 /// `poll(fds, nfds, timeout_ms)` and `ppoll(fds, nfds, timeout, sigmask, size)`.
 #[allow(clippy::too_many_arguments)] // the calls' arguments
 pub fn poll(
@@ -108,7 +116,7 @@ pub fn poll(
     if nfds > p.max_fd() as u64 {
         return Err(Errno::EINVAL);
     }
-    let mut table = alloc::vec![0u8; nfds as usize * 8];
+    let mut table = zeroed(nfds as usize * 8)?;
     let table = &mut table[..];
     read_user(p, host, fds, table)?;
     wait_mask(p, host, mask, mask_size)?;
@@ -164,7 +172,7 @@ pub fn select(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6], pselect: bool) -> Sys
     }
     // The three sets (read, write, except) as bytes, `bytes` each: one bit a descriptor.
     let bytes = (nfds as usize).div_ceil(64) * 8;
-    let mut asked = alloc::vec![0u8; 3 * bytes];
+    let mut asked = zeroed(3 * bytes)?;
     for (set, &at) in asked.chunks_exact_mut(bytes.max(1)).zip(&sets) {
         if at != 0 {
             read_user(p, host, at, &mut set[..bytes])?;
@@ -172,7 +180,7 @@ pub fn select(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6], pselect: bool) -> Sys
     }
     let bit = |set: &[u8], fd: usize| set[fd / 8] & (1 << (fd % 8)) != 0;
     let console = console_events(host);
-    let mut got = alloc::vec![0u8; 3 * bytes];
+    let mut got = zeroed(3 * bytes)?;
     let mut ready = 0u64;
     for fd in 0..nfds as usize {
         let wanted = [0, 1, 2].map(|s| bit(&asked[s * bytes..], fd));
