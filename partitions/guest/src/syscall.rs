@@ -9,7 +9,9 @@
 //! descriptors, reading and writing, names, status, the working directory), `ioctl`, `brk`,
 //! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mremap` (in place, or moved
 //! with `MREMAP_MAYMOVE`), `mprotect`, `madvise`
-//! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), `arch_prctl`, `set_tid_address`,
+//! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), the memory
+//! locks (`mlock`, `mlock2`, `munlock`, `mlockall`, `munlockall`, against
+//! `RLIMIT_MEMLOCK`), `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
 //! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
 //! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), the
