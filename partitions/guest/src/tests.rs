@@ -309,6 +309,19 @@ impl<'a> World<'a> {
         m
     }
 
+    /// Serves message `m` of the process.
+    fn handle(&mut self, m: &mut ExceptionMessage) -> Outcome {
+        handle(
+            &mut self.p,
+            &mut self.pipes,
+            &mut self.fs,
+            &(),
+            &mut self.reported,
+            &mut self.host,
+            m,
+        )
+    }
+
     /// A page fault of the process at `address` with `error` (the CPU's error code).
     fn fault(&mut self, error: u64, address: u64) -> Outcome {
         let mut m = ExceptionMessage {
@@ -317,28 +330,12 @@ impl<'a> World<'a> {
             fault_address: address,
             ..Default::default()
         };
-        handle(
-            &mut self.p,
-            &mut self.pipes,
-            &mut self.fs,
-            &(),
-            &mut self.reported,
-            &mut self.host,
-            &mut m,
-        )
+        self.handle(&mut m)
     }
 
     fn run(&mut self, number: u64, a: [u64; 6]) -> (Outcome, ExceptionMessage) {
         let mut m = Self::message(number, a, self.fs_base);
-        let outcome = handle(
-            &mut self.p,
-            &mut self.pipes,
-            &mut self.fs,
-            &(),
-            &mut self.reported,
-            &mut self.host,
-            &mut m,
-        );
+        let outcome = self.handle(&mut m);
         self.fs_base = m.registers.fs_base;
         (outcome, m)
     }
@@ -861,15 +858,7 @@ fn the_stack_is_paged_in_on_demand_and_guarded_below() {
     );
     let mut m = World::message(0, [0; 6], 0);
     m.vector = 0;
-    let outcome = handle(
-        &mut w.p,
-        &mut w.pipes,
-        &mut w.fs,
-        &(),
-        &mut w.reported,
-        &mut w.host,
-        &mut m,
-    );
+    let outcome = w.handle(&mut m);
     assert_eq!(outcome, Outcome::Killed(crate::signal::SIGFPE));
 }
 
@@ -1408,15 +1397,7 @@ fn unsupported_calls_and_faults() {
         ..Default::default()
     };
     m.registers.rip = 0x40_1010;
-    let outcome = handle(
-        &mut w.p,
-        &mut w.pipes,
-        &mut w.fs,
-        &(),
-        &mut w.reported,
-        &mut w.host,
-        &mut m,
-    );
+    let outcome = w.handle(&mut m);
     assert_eq!(outcome, Outcome::Killed(11));
     assert_eq!(
         w.host.log.last().unwrap(),
