@@ -1,12 +1,15 @@
 /* Area `files`: reading files and directories that every Linux system (and the guest's
  * initramfs) has — `/`, `/etc`, `/etc/passwd` (whose first line is root's) and this program
  * itself: open/openat, read, lseek, pread, dup/dup2/dup3, fcntl, getdents64, stat, fstat,
- * lstat, access, readlink, and the errors ENOENT, EBADF, EISDIR, ENOTDIR, EINVAL, ESPIPE,
+ * lstat, access, readlink, close_range, /proc/self/fd and /dev/fd, and the errors ENOENT, EBADF, EISDIR, ENOTDIR, EINVAL, ESPIPE,
  * EFAULT. Writing files is area `writes`. */
 #include "check.h"
 
 #include <dirent.h>
+#include <linux/close_range.h>
 #include <fcntl.h>
+#include <stdlib.h>
+#include <sys/resource.h>
 #include <sys/stat.h>
 #include <sys/syscall.h>
 
@@ -151,4 +154,74 @@ void area_files(void)
 	check("own executable has the x bit", fstat(fd, &st) == 0 && (st.st_mode & 0100),
 	      "expected mode with 0100");
 	close(fd);
+
+	/* close_range (glibc's closefrom): closes a range, or marks it close-on-exec. */
+	int a = open("/etc/passwd", O_RDONLY), b = dup(a), c = dup(a);
+	check_eq("close_range CLOSE_RANGE_CLOEXEC", 0,
+		 syscall(SYS_close_range, b, c, CLOSE_RANGE_CLOEXEC));
+	check("close_range CLOSE_RANGE_CLOEXEC keeps them open with FD_CLOEXEC",
+	      fcntl(b, F_GETFD) == FD_CLOEXEC && fcntl(c, F_GETFD) == FD_CLOEXEC &&
+		      fcntl(a, F_GETFD) == 0,
+	      "expected FD_CLOEXEC on both, not on the first");
+	check_eq("close_range", 0, syscall(SYS_close_range, b, ~0u, 0));
+	check("close_range closed the range only",
+	      fcntl(b, F_GETFD) == -1 && fcntl(c, F_GETFD) == -1 && fcntl(a, F_GETFD) == 0,
+	      "expected the two closed, the first open");
+	check_errno("close_range with first > last EINVAL", syscall(SYS_close_range, 5, 4, 0),
+		    EINVAL);
+	check_errno("close_range with an unknown flag EINVAL",
+		    syscall(SYS_close_range, b, c, 1 << 8), EINVAL);
+	close(a);
+
+	/* As many descriptors as RLIMIT_NOFILE's soft limit allows, set below any hard one. */
+	struct rlimit old_limit, limit = { 200, 200 };
+	getrlimit(RLIMIT_NOFILE, &old_limit);
+	limit.rlim_max = old_limit.rlim_max;
+	check_eq("setrlimit RLIMIT_NOFILE 200", 0, setrlimit(RLIMIT_NOFILE, &limit));
+	int high = 0;
+	for (int i = 0; i < 150; i++)
+		high = dup(0);
+	check("150 more descriptors", high >= 150, "expected a descriptor above 149 got %d", high);
+	check_eq("dup2 to descriptor 199", 199, dup2(0, 199));
+	check_errno("dup2 to descriptor 200 EBADF", dup2(0, 200), EBADF);
+	check_errno("F_DUPFD from the limit EINVAL", fcntl(0, F_DUPFD, 200), EINVAL);
+	syscall(SYS_close_range, 3, ~0u, 0);
+	setrlimit(RLIMIT_NOFILE, &old_limit);
+
+	/* /proc/self/fd and /dev/fd (bash's <(...), glibc's closefrom): a link per descriptor;
+	 * opening one opens what the descriptor has. */
+	int ends[2], file = open("/etc/passwd", O_RDONLY);
+	pipe(ends);
+	char path[64], target[64];
+	snprintf(path, sizeof path, "/proc/self/fd/%d", file);
+	n = readlink(path, target, sizeof target - 1);
+	target[n > 0 ? n : 0] = 0;
+	check("readlink /proc/self/fd/N of a file gives its path", strcmp(target, "/etc/passwd") == 0,
+	      "expected /etc/passwd got %s", target);
+	snprintf(path, sizeof path, "/proc/self/fd/%d", ends[0]);
+	n = readlink(path, target, sizeof target - 1);
+	target[n > 0 ? n : 0] = 0;
+	check("readlink /proc/self/fd/N of a pipe gives pipe:[...]",
+	      strncmp(target, "pipe:[", 6) == 0, "expected pipe:[...] got %s", target);
+	snprintf(path, sizeof path, "/dev/fd/%d", ends[0]);
+	int reader = open(path, O_RDONLY);
+	check_ok("open /dev/fd/N of a pipe", reader);
+	write(ends[1], "fd", 2);
+	check("/dev/fd/N reads the pipe", read(reader, buf, 8) == 2 && memcmp(buf, "fd", 2) == 0,
+	      "expected the 2 bytes written");
+	snprintf(path, sizeof path, "/dev/fd/%d", file);
+	int again = open(path, O_RDONLY);
+	lseek(file, 5, SEEK_SET);
+	check_eq("a file opened through /dev/fd/N has its own offset", 0, lseek(again, 0, SEEK_CUR));
+	DIR *fds = opendir("/proc/self/fd");
+	int seen = 0;
+	for (struct dirent *e; fds && (e = readdir(fds));)
+		seen += atoi(e->d_name) == reader;
+	check("/proc/self/fd lists an open descriptor", seen == 1, "expected it once got %d", seen);
+	if (fds)
+		closedir(fds);
+	snprintf(path, sizeof path, "/proc/self/fd/%d", again + 1);
+	check_errno("open /proc/self/fd/N of a closed descriptor ENOENT", open(path, O_RDONLY),
+		    ENOENT);
+	syscall(SYS_close_range, 3, ~0u, 0);
 }

@@ -1,7 +1,7 @@
 /* Area `memory`: brk, anonymous mmap (plain, fixed, hinted, large and untouched), private
  * file mappings, munmap and mprotect with their errors, the SIGSEGV a child gets for
  * touching memory it has not (or no longer, or not writable), and vfork's child borrowing
- * its parent's memory. */
+ * its parent's memory; mlock, munlock, mlockall's errors and munlockall. */
 #include "check.h"
 
 #include <fcntl.h>
@@ -198,4 +198,21 @@ void area_memory(void)
 		      "expected the bytes written");
 		munmap(huge, big);
 	}
+
+	/* Memory locks: a page locks within any RLIMIT_MEMLOCK a system gives (8 MiB by
+	 * default); an unmapped range or a bad flag fails as Linux says. */
+	char *lockable = mmap(NULL, 2 * PAGE, PROT_READ | PROT_WRITE, MAP_PRIVATE | MAP_ANONYMOUS,
+			      -1, 0);
+	check_eq("mlock of a page", 0, mlock(lockable + 1, PAGE - 1));
+	check_eq("mlock of the same page again", 0, mlock(lockable, PAGE));
+	check_eq("munlock", 0, munlock(lockable, 2 * PAGE));
+	check_eq("mlock2 MLOCK_ONFAULT", 0, syscall(SYS_mlock2, lockable, PAGE, 1));
+	check_errno("mlock2 with an unknown flag EINVAL", syscall(SYS_mlock2, lockable, PAGE, 2),
+		    EINVAL);
+	munmap(lockable, 2 * PAGE);
+	check_errno("mlock of unmapped memory ENOMEM", mlock(lockable, PAGE), ENOMEM);
+	check_errno("munlock of unmapped memory ENOMEM", munlock(lockable, PAGE), ENOMEM);
+	check_errno("mlockall without MCL_CURRENT or MCL_FUTURE EINVAL", mlockall(MCL_ONFAULT),
+		    EINVAL);
+	check_eq("munlockall", 0, munlockall());
 }

@@ -4,6 +4,7 @@
  * on); `probe memory` checks demand paging, copy-on-write fork, mprotect, munmap,
  * madvise, mremap and mmap and prints "memory: <check> ok" for each (exit 0 when all passed). */
 #define _GNU_SOURCE
+#include <errno.h>
 #include <fcntl.h>
 #include <signal.h>
 #include <stdint.h>
@@ -11,6 +12,7 @@
 #include <stdlib.h>
 #include <string.h>
 #include <sys/mman.h>
+#include <sys/syscall.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -160,8 +162,13 @@ int main(int argc, char **argv) {
         out_port(0xf4, 0); /* QEMU's exit device */
     else if (strcmp(what, "cli") == 0)
         __asm__ volatile("cli");
-    else {
-        printf("usage: probe memory|segv|ill|div|stack|kernel|pool|data|port|console|exit|cli\n");
+    else if (strcmp(what, "enosys") == 0) {
+        /* A call the guest does not serve (socket): ENOSYS, logged once per guest. */
+        long r = syscall(SYS_socket, 2, 1, 0);
+        printf("enosys: %s\n", r == -1 && errno == ENOSYS ? "ENOSYS" : "served");
+        return 0;
+    } else {
+        printf("usage: probe memory|segv|ill|div|stack|kernel|pool|data|port|console|exit|cli|enosys\n");
         return 2;
     }
     printf("%s: not contained\n", what);

@@ -5,7 +5,7 @@
 //! record ([`sysinfo_record`]).
 
 use crate::linux::Errno;
-use crate::process::Process;
+use crate::syscall::table::Ctx;
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 
 /// Clock ticks per second (`sysconf(_SC_CLK_TCK)`, `times`).
@@ -19,7 +19,8 @@ const FUTEX_CLOCK_REALTIME: u64 = 256;
 
 /// `futex`: one thread per process, so a wait ends by its timeout or a signal only and a
 /// wake finds nobody.
-pub(crate) fn futex(p: &mut Process, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+pub(crate) fn futex(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6]) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     let op = a[1] & !(FUTEX_PRIVATE | FUTEX_CLOCK_REALTIME);
     match op {
         FUTEX_WAKE | FUTEX_WAKE_BITSET => Ok(0),
@@ -68,12 +69,12 @@ pub fn sysinfo_record(uptime_ns: u64, total: u64, free: u64, processes: u16) -> 
 /// `prlimit64` of the process itself, `getrlimit`, `setrlimit`: sets the limit of `resource`
 /// from `new` and reports the old one at `old` (each when not 0).
 pub(crate) fn rlimit(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     resource: u64,
     new: u64,
     old: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     let index = usize::try_from(resource)
         .ok()
         .filter(|&r| r < crate::process::LIMITS)
@@ -88,7 +89,7 @@ pub(crate) fn rlimit(
         }
         // Root may raise a hard limit, but not beyond what the guest has (descriptors,
         // the stack's fixed size).
-        let ceiling = crate::process::default_limits()[index].hard;
+        let ceiling = crate::process::ceiling(index);
         if hard > ceiling {
             return Err(Errno::EPERM);
         }

@@ -57,7 +57,8 @@
 //!   attach interrupt line 3: <error>` (the console then has no input), `guest: console:
 //!   no UART at COM2's ports, the console is the log`;
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
-//!   ENOSYS`, once per call number and process;
+//!   ENOSYS` (the call's Linux name, `unknown` beyond the 64-bit ABI), once per call number
+//!   and guest (a loop starting processes that make it adds no line);
 //! - `guest: port <name>: cannot create it: <ARINC code, or no answer>` (its device
 //!   answers `ENXIO`),
 //!   `guest: /etc/guest/ports line <n>: <why>; no ports`, `guest: no room for the port

@@ -138,6 +138,91 @@ pub enum AreaError {
     TooMany,
 }
 
+/// The ranges of a process locked in memory (`mlock`, `mlockall`): sorted, disjoint and
+/// never adjacent (a lock next to another joins it). The guest never pages memory out, so
+/// a lock only counts against `RLIMIT_MEMLOCK`. As many ranges as areas: `mlockall` of
+/// every area always fits.
+#[derive(Clone, Copy, Debug)]
+pub struct Locks {
+    ranges: [(u64, u64); MAX_AREAS],
+    count: usize,
+}
+
+impl Default for Locks {
+    fn default() -> Self {
+        Self {
+            ranges: [(0, 0); MAX_AREAS],
+            count: 0,
+        }
+    }
+}
+
+/// More separate locked ranges than [`Locks`] holds.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct TooManyLocks;
+
+impl Locks {
+    /// The locked bytes.
+    pub fn bytes(&self) -> u64 {
+        self.iter().map(|(s, e)| e - s).sum()
+    }
+
+    fn iter(&self) -> impl Iterator<Item = (u64, u64)> + '_ {
+        self.ranges[..self.count].iter().copied()
+    }
+
+    /// The bytes of `start..end` not locked yet.
+    pub fn unlocked_in(&self, start: u64, end: u64) -> u64 {
+        let locked: u64 = self
+            .iter()
+            .map(|(s, e)| e.min(end).saturating_sub(s.max(start)))
+            .sum();
+        (end - start) - locked
+    }
+
+    /// Locks `start..end` (`start < end`).
+    pub fn lock(&mut self, start: u64, end: u64) -> Result<(), TooManyLocks> {
+        let (mut s, mut e) = (start, end);
+        let mut kept = [(0, 0); MAX_AREAS + 1];
+        let mut n = 0;
+        for (rs, re) in self.iter() {
+            if re < s || rs > e {
+                kept[n] = (rs, re);
+                n += 1;
+            } else {
+                (s, e) = (s.min(rs), e.max(re));
+            }
+        }
+        kept[n] = (s, e);
+        self.replace(&mut kept[..n + 1])
+    }
+
+    /// Unlocks `start..end` (`start < end`): a range around it is cut in two.
+    pub fn unlock(&mut self, start: u64, end: u64) -> Result<(), TooManyLocks> {
+        let mut kept = [(0, 0); MAX_AREAS + 2];
+        let mut n = 0;
+        for (rs, re) in self.iter() {
+            for (ps, pe) in [(rs, re.min(start)), (rs.max(end), re)] {
+                if ps < pe {
+                    kept[n] = (ps, pe);
+                    n += 1;
+                }
+            }
+        }
+        self.replace(&mut kept[..n])
+    }
+
+    fn replace(&mut self, ranges: &mut [(u64, u64)]) -> Result<(), TooManyLocks> {
+        if ranges.len() > MAX_AREAS {
+            return Err(TooManyLocks);
+        }
+        ranges.sort_unstable();
+        self.ranges[..ranges.len()].copy_from_slice(ranges);
+        self.count = ranges.len();
+        Ok(())
+    }
+}
+
 /// The areas of one process, sorted by address, disjoint.
 #[derive(Clone, Debug)]
 pub struct Areas {

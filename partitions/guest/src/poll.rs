@@ -7,9 +7,9 @@
 
 use crate::arinc;
 use crate::linux::Errno;
-use crate::process::{File, MAX_FILES, Process};
-use crate::signal::UNBLOCKABLE;
+use crate::process::{File, Process};
 use crate::syscall::file::{Files, port_at};
+use crate::syscall::table::Ctx;
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 
 pub const POLLIN: u16 = 0x1;
@@ -20,9 +20,6 @@ pub const POLLHUP: u16 = 0x10;
 pub const POLLNVAL: u16 = 0x20;
 pub const POLLRDNORM: u16 = 0x40;
 pub const POLLWRNORM: u16 = 0x100;
-
-/// Most descriptors one `poll` watches (the process's descriptor limit).
-const MAX_POLL: u64 = MAX_FILES as u64;
 
 /// The events descriptor `fd` of `p` has now (`POLLNVAL` for a closed one), the console's
 /// being `console` ([`console_events`]). `POLLERR` and `POLLHUP` are reported whether
@@ -80,20 +77,12 @@ fn finish(p: &mut Process) {
     }
 }
 
-/// Installs the mask `ppoll`/`pselect6` wait with (once: the call is served again while it
-/// waits).
+/// Installs the mask `ppoll`/`pselect6` wait with, if they were given one.
 fn wait_mask(p: &mut Process, host: &mut impl Host, set: u64, size: u64) -> SysResult<()> {
-    if set == 0 || p.saved_mask.is_some() {
+    if set == 0 {
         return Ok(());
     }
-    if size != 8 {
-        return Err(Errno::EINVAL);
-    }
-    let mut b = [0u8; 8];
-    read_user(p, host, set, &mut b)?;
-    p.saved_mask = Some(p.sigmask);
-    p.sigmask = u64::from_le_bytes(b) & !UNBLOCKABLE;
-    Ok(())
+    crate::sigcalls::wait_with_mask(p, host, set, size)
 }
 
 /// A `struct timespec` (`ppoll`, `pselect6`) in ns; `None` for a null pointer.
@@ -104,23 +93,31 @@ fn read_timeout(p: &Process, host: &mut impl Host, at: u64, micro: bool) -> SysR
     crate::sigcalls::read_time(p, host, at, micro).map(Some)
 }
 
+/// `len` zero bytes from the guest's heap (`ENOMEM` when it has no room).
+fn zeroed(len: usize) -> SysResult<alloc::vec::Vec<u8>> {
+    let mut bytes = alloc::vec::Vec::new();
+    bytes.try_reserve_exact(len).map_err(|_| Errno::ENOMEM)?;
+    bytes.resize(len, 0);
+    Ok(bytes)
+}
+
 /// `poll(fds, nfds, timeout_ms)` and `ppoll(fds, nfds, timeout, sigmask, size)`.
 #[allow(clippy::too_many_arguments)] // the calls' arguments
 pub fn poll(
-    p: &mut Process,
-    f: &Files,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     fds: u64,
     nfds: u64,
     timeout_ns: Option<u64>,
     mask: u64,
     mask_size: u64,
 ) -> SysResult<u64> {
-    if nfds > MAX_POLL {
+    let (p, f, host) = c.parts();
+    // As many as it may have descriptors (`RLIMIT_NOFILE`), as Linux.
+    if nfds > p.max_fd() as u64 {
         return Err(Errno::EINVAL);
     }
-    let mut table = [0u8; MAX_POLL as usize * 8];
-    let table = &mut table[..nfds as usize * 8];
+    let mut table = zeroed(nfds as usize * 8)?;
+    let table = &mut table[..];
     read_user(p, host, fds, table)?;
     wait_mask(p, host, mask, mask_size)?;
     let console = console_events(host);
@@ -152,21 +149,17 @@ pub fn poll_timeout(ms: u64) -> Option<u64> {
 }
 
 /// `ppoll`'s timeout.
-pub fn ppoll_timeout(p: &Process, host: &mut impl Host, at: u64) -> SysResult<Option<u64>> {
+pub fn ppoll_timeout(c: &mut Ctx<'_, '_, impl Host>, at: u64) -> SysResult<Option<u64>> {
+    let (p, _, host) = c.parts();
     read_timeout(p, host, at, false)
 }
 
 /// `select(nfds, readfds, writefds, exceptfds, timeval)` and `pselect6(..., timespec,
 /// {sigmask, size})`.
-pub fn select(
-    p: &mut Process,
-    f: &Files,
-    host: &mut impl Host,
-    a: [u64; 6],
-    pselect: bool,
-) -> SysResult<u64> {
+pub fn select(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6], pselect: bool) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
     let [nfds, sets @ .., timeout] = [a[0], a[1], a[2], a[3], a[4]];
-    if nfds > MAX_FILES as u64 {
+    if nfds > p.max_fd() as u64 {
         return Err(Errno::EINVAL);
     }
     let timeout_ns = read_timeout(p, host, timeout, !pselect)?;
@@ -177,46 +170,48 @@ pub fn select(
         let size = u64::from_le_bytes(b[8..].try_into().unwrap_or([0; 8]));
         wait_mask(p, host, set, size)?;
     }
+    // The three sets (read, write, except) as bytes, `bytes` each: one bit a descriptor.
     let bytes = (nfds as usize).div_ceil(64) * 8;
-    let mut asked = [0u64; 3];
-    for (set, &at) in asked.iter_mut().zip(&sets) {
+    let mut asked = zeroed(3 * bytes)?;
+    for (set, &at) in asked.chunks_exact_mut(bytes.max(1)).zip(&sets) {
         if at != 0 {
-            let mut b = [0u8; 8];
-            read_user(p, host, at, &mut b[..bytes])?;
-            *set = u64::from_le_bytes(b);
+            read_user(p, host, at, &mut set[..bytes])?;
         }
     }
+    let bit = |set: &[u8], fd: usize| set[fd / 8] & (1 << (fd % 8)) != 0;
     let console = console_events(host);
-    let mut got = [0u64; 3];
-    for fd in 0..nfds {
-        let bit = 1 << fd;
-        if (asked[0] | asked[1] | asked[2]) & bit == 0 {
+    let mut got = zeroed(3 * bytes)?;
+    let mut ready = 0u64;
+    for fd in 0..nfds as usize {
+        let wanted = [0, 1, 2].map(|s| bit(&asked[s * bytes..], fd));
+        if wanted == [false; 3] {
             continue;
         }
-        let ev = events(p, f, host, console, fd);
+        let ev = events(p, f, host, console, fd as u64);
         if ev & POLLNVAL != 0 {
             return Err(Errno::EBADF);
         }
-        if ev & (POLLIN | POLLHUP | POLLERR) != 0 {
-            got[0] |= asked[0] & bit;
-        }
-        if ev & (POLLOUT | POLLERR) != 0 {
-            got[1] |= asked[1] & bit;
-        }
-        if ev & POLLPRI != 0 {
-            got[2] |= asked[2] & bit;
+        let has = [
+            ev & (POLLIN | POLLHUP | POLLERR) != 0,
+            ev & (POLLOUT | POLLERR) != 0,
+            ev & POLLPRI != 0,
+        ];
+        for s in 0..3 {
+            if wanted[s] && has[s] {
+                got[s * bytes + fd / 8] |= 1 << (fd % 8);
+                ready += 1;
+            }
         }
     }
-    let ready: u32 = got.iter().map(|s| s.count_ones()).sum();
     let deadline = deadline(p, host, timeout_ns);
     if ready == 0 && !timed_out(host, deadline) {
         return Err(WOULD_BLOCK);
     }
     finish(p);
-    for (set, &at) in got.iter().zip(&sets) {
+    for (set, &at) in got.chunks_exact(bytes.max(1)).zip(&sets) {
         if at != 0 {
-            write_user(p, host, at, &set.to_le_bytes()[..bytes])?;
+            write_user(p, host, at, &set[..bytes])?;
         }
     }
-    Ok(ready as u64)
+    Ok(ready)
 }

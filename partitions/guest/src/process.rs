@@ -9,8 +9,11 @@ use crate::signal::{Action, AltStack, Info};
 use crate::vfs::{self, Node, OpenId, PathBuf};
 use alloc::vec::Vec;
 
-/// Most open files of a process (`RLIMIT_NOFILE`).
-pub const MAX_FILES: usize = 64;
+/// Most descriptors a process may have: the highest `RLIMIT_NOFILE` root may set. The
+/// table grows with the highest descriptor in use, so a process pays only for those.
+pub const MAX_FILES: usize = 4096;
+/// The soft `RLIMIT_NOFILE` a process starts with (Linux's).
+pub const DEFAULT_FILES: u64 = 1024;
 /// Most bytes of arguments `/proc/<pid>/cmdline` shows (Linux shows them all; `ps`
 /// reads one page).
 pub const CMDLINE_MAX: usize = 4096;
@@ -33,9 +36,25 @@ pub fn default_limits() -> [Limit; LIMITS] {
     }; LIMITS];
     let fixed = |n: u64| Limit { soft: n, hard: n };
     limits[linux::RLIMIT_STACK as usize] = fixed(crate::memory::STACK_SIZE);
-    limits[linux::RLIMIT_NOFILE as usize] = fixed(MAX_FILES as u64);
+    limits[linux::RLIMIT_NOFILE as usize] = Limit {
+        soft: DEFAULT_FILES,
+        hard: MAX_FILES as u64,
+    };
     limits[linux::RLIMIT_CORE as usize] = fixed(0);
+    // Linux's default since 5.16.
+    limits[linux::RLIMIT_MEMLOCK as usize] = fixed(8 << 20);
     limits
+}
+
+/// The highest hard limit of `resource` root may set: what the guest has for the stack and
+/// the descriptors (their fixed sizes), no core dumps; the rest has no limit of its own.
+pub fn ceiling(resource: usize) -> u64 {
+    match resource as u64 {
+        linux::RLIMIT_STACK | linux::RLIMIT_NOFILE | linux::RLIMIT_CORE => {
+            default_limits()[resource].hard
+        }
+        _ => linux::RLIM_INFINITY,
+    }
 }
 
 /// Longest process name (Linux's `TASK_COMM_LEN` without the NUL).
@@ -86,9 +105,10 @@ pub struct Process {
     /// Start of the heap (after the executable) and the current program break.
     pub brk_start: u64,
     pub brk: u64,
-    pub files: [Option<File>; MAX_FILES],
+    /// The descriptors, as many as the highest one in use (at most [`MAX_FILES`]).
+    pub files: Vec<Option<File>>,
     /// Close-on-exec, one bit per descriptor.
-    pub cloexec: u64,
+    cloexec: Vec<u64>,
     /// Process group and session.
     pub pgid: u32,
     pub sid: u32,
@@ -118,9 +138,10 @@ pub struct Process {
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
-    /// System-call numbers already logged as unsupported (0..511; 511 stands for every
-    /// number from 511 up).
-    unsupported_logged: [u64; 8],
+    /// Its ranges locked in memory (`mlock`; not inherited by `fork`, gone with `execve`).
+    pub locks: crate::memory::Locks,
+    /// `mlockall(MCL_FUTURE)` is in force (recorded; new mappings are not counted).
+    pub lock_future: bool,
 }
 
 impl Process {
@@ -131,10 +152,11 @@ impl Process {
         let name_len = base.len().min(NAME_LEN);
         let mut name = [0u8; NAME_LEN];
         name[..name_len].copy_from_slice(&base[..name_len]);
-        let mut files = [None; MAX_FILES];
-        files[0] = Some(File::Console(Stream::Stdout));
-        files[1] = Some(File::Console(Stream::Stdout));
-        files[2] = Some(File::Console(Stream::Stderr));
+        let files = alloc::vec![
+            Some(File::Console(Stream::Stdout)),
+            Some(File::Console(Stream::Stdout)),
+            Some(File::Console(Stream::Stderr)),
+        ];
         Self {
             pid,
             ppid,
@@ -147,7 +169,7 @@ impl Process {
             brk_start: 0,
             brk: 0,
             files,
-            cloexec: 0,
+            cloexec: Vec::new(),
             pgid: pid,
             sid: pid,
             executed: false,
@@ -165,7 +187,8 @@ impl Process {
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,
-            unsupported_logged: [0; 8],
+            locks: Default::default(),
+            lock_future: false,
         }
     }
 
@@ -239,7 +262,7 @@ impl Process {
 
     /// The lowest free descriptor from `low` on.
     pub fn free_fd_from(&self, low: usize) -> Option<usize> {
-        (low..self.max_fd()).find(|&fd| self.files[fd].is_none())
+        (low..self.max_fd()).find(|&fd| self.files.get(fd).is_none_or(Option::is_none))
     }
 
     /// One more than the highest descriptor it may open (`RLIMIT_NOFILE`).
@@ -248,23 +271,48 @@ impl Process {
         usize::try_from(soft).unwrap_or(MAX_FILES).min(MAX_FILES)
     }
 
-    /// Puts `file` at descriptor `fd` (free or closed by the caller before), with its
-    /// close-on-exec flag.
+    /// Puts `file` at descriptor `fd` (below [`MAX_FILES`], free or closed by the caller
+    /// before), with its close-on-exec flag.
     pub fn install(&mut self, fd: usize, file: File, cloexec: bool) {
+        if fd >= self.files.len() {
+            self.files.resize(fd + 1, None);
+        }
         self.files[fd] = Some(file);
         self.set_cloexec(fd, cloexec);
     }
 
+    /// Takes descriptor `fd` out of the table (closing it is the caller's); the table
+    /// shrinks to the highest descriptor left.
+    pub fn take_fd(&mut self, fd: usize) -> Option<File> {
+        let file = self.files.get_mut(fd).and_then(Option::take);
+        self.set_cloexec(fd, false);
+        while self.files.last() == Some(&None) {
+            self.files.pop();
+        }
+        file
+    }
+
     pub fn set_cloexec(&mut self, fd: usize, on: bool) {
+        let (word, bit) = (fd / 64, 1 << (fd % 64));
         if on {
-            self.cloexec |= 1 << fd;
-        } else {
-            self.cloexec &= !(1 << fd);
+            if word >= self.cloexec.len() {
+                self.cloexec.resize(word + 1, 0);
+            }
+            self.cloexec[word] |= bit;
+        } else if let Some(w) = self.cloexec.get_mut(word) {
+            *w &= !bit;
         }
     }
 
     pub fn is_cloexec(&self, fd: usize) -> bool {
-        self.cloexec & (1 << fd) != 0
+        self.cloexec
+            .get(fd / 64)
+            .is_some_and(|w| w & (1 << (fd % 64)) != 0)
+    }
+
+    /// No descriptor is close-on-exec any more (`execve` closed them).
+    pub fn clear_cloexec(&mut self) {
+        self.cloexec = Vec::new();
     }
 
     pub fn file(&self, fd: u64) -> Option<File> {
@@ -302,15 +350,5 @@ impl Process {
         let signal = self.next_signal()?;
         self.pending &= !crate::signal::bit(signal);
         Some(self.pending_info[signal as usize - 1])
-    }
-
-    /// Whether an unsupported call `number` is seen for the first time (then it is logged).
-    pub fn first_unsupported(&mut self, number: u64) -> bool {
-        let number = number.min(511);
-        let word = &mut self.unsupported_logged[(number / 64) as usize];
-        let bit = 1 << (number % 64);
-        let first = *word & bit == 0;
-        *word |= bit;
-        first
     }
 }

@@ -8,6 +8,7 @@
 use crate::linux::{self, Errno, nr};
 use crate::process::Process;
 use crate::signal::{self, Action, AltStack, FPU_SIZE, FRAME_SIZE, UNBLOCKABLE};
+use crate::syscall::table::Ctx;
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 use abi::ipc::ExceptionMessage;
 
@@ -16,13 +17,13 @@ const ITIMER_REAL: u64 = 0;
 const NS_PER_S: u64 = 1_000_000_000;
 
 pub fn sigaction(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     number: u64,
     act: u64,
     old: u64,
     size: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     if size != 8 || number == 0 || number > signal::NSIG as u64 {
         return Err(Errno::EINVAL);
     }
@@ -52,13 +53,13 @@ pub fn sigaction(
 }
 
 pub fn sigprocmask(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     how: u64,
     set: u64,
     old: u64,
     size: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     if size != 8 {
         return Err(Errno::EINVAL);
     }
@@ -84,7 +85,8 @@ pub fn sigprocmask(
     Ok(0)
 }
 
-pub fn sigpending(p: &Process, host: &mut impl Host, set: u64, size: u64) -> SysResult<u64> {
+pub fn sigpending(c: &mut Ctx<'_, '_, impl Host>, set: u64, size: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     if size > 8 {
         return Err(Errno::EINVAL);
     }
@@ -98,13 +100,8 @@ pub fn sigpending(p: &Process, host: &mut impl Host, set: u64, size: u64) -> Sys
 }
 
 /// `sigaltstack(new, old)` of a process whose stack pointer is `sp`.
-pub fn sigaltstack(
-    p: &mut Process,
-    host: &mut impl Host,
-    sp: u64,
-    new: u64,
-    old: u64,
-) -> SysResult<u64> {
+pub fn sigaltstack(c: &mut Ctx<'_, '_, impl Host>, sp: u64, new: u64, old: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     let on_it = p.alt_stack.contains(sp);
     let replacement = if new != 0 {
         let mut b = [0u8; 24];
@@ -143,7 +140,8 @@ pub fn sigaltstack(
 
 /// `rt_sigreturn`: the registers, mask and FPU state the frame below the stack pointer
 /// saved; `None` when the frame is unreadable (the process then dies with SIGSEGV).
-pub fn sigreturn(p: &mut Process, host: &mut impl Host, m: &mut ExceptionMessage) -> Option<()> {
+pub fn sigreturn(c: &mut Ctx<'_, '_, impl Host>) -> Option<()> {
+    let (p, host, m) = (&mut *c.p, &mut *c.host, &mut *c.m);
     // The handler's `ret` popped the return address: the frame starts 8 bytes below.
     let frame = m.registers.rsp.checked_sub(8)?;
     let mut bytes = [0u8; FRAME_SIZE];
@@ -197,12 +195,12 @@ fn time_ns(b: &[u8; 16], micro: bool) -> SysResult<u64> {
 /// `nanosleep(req, rem)` and `clock_nanosleep(clock, flags, req, rem)`: the first time
 /// served, records when the call ends and waits; served again, ends once that time came.
 pub fn sleep(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     clock: u64,
     flags: u64,
     request: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     let now = host.now_ns();
     if let Some(at) = p.wake_at {
         if now >= at {
@@ -233,7 +231,8 @@ pub fn sleep(
 }
 
 /// `alarm(seconds)`: the seconds left of the previous alarm (rounded up).
-pub fn alarm(p: &mut Process, host: &mut impl Host, seconds: u64) -> u64 {
+pub fn alarm(c: &mut Ctx<'_, '_, impl Host>, seconds: u64) -> u64 {
+    let (p, _, host) = c.parts();
     let now = host.now_ns();
     let left = p
         .alarm_at
@@ -252,7 +251,8 @@ fn itimer(p: &Process, now: u64) -> [u8; 32] {
     b
 }
 
-pub fn getitimer(p: &Process, host: &mut impl Host, which: u64, value: u64) -> SysResult<u64> {
+pub fn getitimer(c: &mut Ctx<'_, '_, impl Host>, which: u64, value: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     if which != ITIMER_REAL {
         return Err(Errno::EINVAL);
     }
@@ -261,13 +261,8 @@ pub fn getitimer(p: &Process, host: &mut impl Host, which: u64, value: u64) -> S
     Ok(0)
 }
 
-pub fn setitimer(
-    p: &mut Process,
-    host: &mut impl Host,
-    which: u64,
-    new: u64,
-    old: u64,
-) -> SysResult<u64> {
+pub fn setitimer(c: &mut Ctx<'_, '_, impl Host>, which: u64, new: u64, old: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     if which != ITIMER_REAL {
         return Err(Errno::EINVAL);
     }
@@ -301,17 +296,32 @@ pub fn alarm_due(p: &mut Process, now: u64) -> bool {
 
 /// `rt_sigsuspend(mask)`: waits with `mask` until a signal is delivered; the old mask comes
 /// back when the handler returns (the frame saves it).
-pub fn sigsuspend(p: &mut Process, host: &mut impl Host, set: u64, size: u64) -> SysResult<u64> {
-    if p.saved_mask.is_none() {
-        if size != 8 {
-            return Err(Errno::EINVAL);
-        }
-        let mut b = [0u8; 8];
-        read_user(p, host, set, &mut b)?;
-        p.saved_mask = Some(p.sigmask);
-        p.sigmask = u64::from_le_bytes(b) & !UNBLOCKABLE;
-    }
+pub fn sigsuspend(c: &mut Ctx<'_, '_, impl Host>, set: u64, size: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
+    wait_with_mask(p, host, set, size)?;
     Err(WOULD_BLOCK)
+}
+
+/// Installs the mask at `set` (`size` bytes) that a waiting call (`rt_sigsuspend`, `ppoll`,
+/// `pselect6`) waits with, saving the caller's for when the wait ends; once: the call is
+/// served again while it waits.
+pub(crate) fn wait_with_mask(
+    p: &mut Process,
+    host: &mut impl Host,
+    set: u64,
+    size: u64,
+) -> SysResult<()> {
+    if p.saved_mask.is_some() {
+        return Ok(());
+    }
+    if size != 8 {
+        return Err(Errno::EINVAL);
+    }
+    let mut b = [0u8; 8];
+    read_user(p, host, set, &mut b)?;
+    p.saved_mask = Some(p.sigmask);
+    p.sigmask = u64::from_le_bytes(b) & !UNBLOCKABLE;
+    Ok(())
 }
 
 /// Whether a waiting call continues after a handler with `SA_RESTART` (`signal(7)`: reads,

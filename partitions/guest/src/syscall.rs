@@ -9,7 +9,9 @@
 //! descriptors, reading and writing, names, status, the working directory), `ioctl`, `brk`,
 //! `mmap` (anonymous and file-backed, [`memory`]), `munmap`, `mremap` (in place, or moved
 //! with `MREMAP_MAYMOVE`), `mprotect`, `madvise`
-//! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), `arch_prctl`, `set_tid_address`,
+//! (`MADV_DONTNEED` drops the pages; other advice is accepted and ignored), the memory
+//! locks (`mlock`, `mlock2`, `munlock`, `mlockall`, `munlockall`, against
+//! `RLIMIT_MEMLOCK`), `arch_prctl`, `set_tid_address`,
 //! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
 //! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
 //! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), the
@@ -25,7 +27,8 @@
 //! takes the terminal's input (waiting for it) and `ioctl` serves the terminal requests
 //! of [`crate::tty::ioctl`] when the guest has a terminal ([`Host::tty`]); without one,
 //! reading gives end of file and every `ioctl` `ENOTTY`, as on any other file. `rseq` answers `ENOSYS` (as on kernels
-//! without it); any other call answers `ENOSYS` and is logged once per number and process.
+//! without it); any other call answers `ENOSYS` and is logged by its Linux name
+//! ([`crate::linux::syscall_name`]) once per number and guest ([`Reported`]).
 //! Pages are never writable and executable at once (W^X): `mmap` and `mprotect` asking for
 //! both fail with `EACCES`.
 //! A page fault inside the process's areas backs (or copies) the page and resumes it; any
@@ -218,6 +221,25 @@ pub enum ProcessCall {
     },
 }
 
+/// The system calls the guest has logged as unsupported (and `prctl`, for its unsupported
+/// options): each is logged once per guest, not once per process, so a loop starting
+/// processes that make an unknown call does not flood the log. Numbers 0..511 have a bit
+/// each; 511 stands for every number from 511 up.
+#[derive(Debug, Default)]
+pub struct Reported([u64; 8]);
+
+impl Reported {
+    /// Whether `number` is reported for the first time (then it is logged).
+    pub fn first(&mut self, number: u64) -> bool {
+        let number = number.min(511);
+        let word = &mut self.0[(number / 64) as usize];
+        let bit = 1 << (number % 64);
+        let first = *word & bit == 0;
+        *word |= bit;
+        first
+    }
+}
+
 /// Internal results that are no error number: the call would block, or wrote to a pipe
 /// without readers.
 pub(crate) const WOULD_BLOCK: Errno = Errno(0xfff0);
@@ -227,12 +249,14 @@ pub const O_CLOEXEC: u64 = 0o2000000;
 
 /// Serves one exception message of process `p`, whose files live in `fs` and whose pipes
 /// are in `pipes`; `others` are the other processes (`/proc`). A system call goes to its
-/// handler in [`table`]; a number without one answers `ENOSYS`, logged once per number.
+/// handler in [`table`]; a number without one answers `ENOSYS`, logged once per number and
+/// guest (`reported`).
 pub fn handle(
     p: &mut Process,
     pipes: &mut Pipes,
     fs: &mut Fs,
     others: &dyn ProcessTable,
+    reported: &mut Reported,
     host: &mut impl Host,
     m: &mut ExceptionMessage,
 ) -> Outcome {
@@ -246,10 +270,10 @@ pub fn handle(
     let number = m.registers.rax;
     let args = Args::of(m);
     let Some(entry) = table::lookup(number) else {
-        let e = unsupported(p, host, number);
+        let e = unsupported(p, reported, host, number);
         return reply(p, m, Err(e));
     };
-    let mut ctx = Ctx::new(p, pipes, fs, others, host, m);
+    let mut ctx = Ctx::new(p, pipes, fs, others, reported, host, m);
     let result = (entry.handler)(&mut ctx, args);
     if let Some(outcome) = ctx.outcome {
         return outcome;
@@ -257,9 +281,10 @@ pub fn handle(
     reply(p, m, result)
 }
 
-/// A call the guest does not serve: `ENOSYS`, logged the first time the process makes it.
-fn unsupported(p: &mut Process, host: &mut impl Host, number: u64) -> Errno {
-    if p.first_unsupported(number) {
+/// A call the guest does not serve: `ENOSYS`, logged, with its Linux name, the first time
+/// a process of the guest makes it.
+fn unsupported(p: &Process, reported: &mut Reported, host: &mut impl Host, number: u64) -> Errno {
+    if reported.first(number) {
         host.log(format_args!(
             "guest: process {} ({}): unsupported system call {number} ({}), returning ENOSYS",
             p.pid,
@@ -411,12 +436,8 @@ pub(crate) fn is_realtime(clock: u64) -> bool {
 
 /// The terminal ioctls on a console descriptor ([`crate::tty`]): `ENOTTY` without a
 /// terminal or for any other request.
-pub(super) fn tty_ioctl(
-    p: &Process,
-    host: &mut impl Host,
-    request: u64,
-    arg: u64,
-) -> SysResult<u64> {
+pub(super) fn tty_ioctl(c: &mut Ctx<'_, '_, impl Host>, request: u64, arg: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     use tty::ioctl::*;
     let tty = host.tty().ok_or(Errno::ENOTTY)?;
     match request {

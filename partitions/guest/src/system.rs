@@ -211,6 +211,8 @@ pub const fn exit_status(code: u8) -> u32 {
 pub struct System {
     slots: [Option<Slot>; MAX_PROCESSES],
     pub pipes: Pipes,
+    /// The unsupported calls logged so far.
+    reported: syscall::Reported,
     next_pid: u32,
     /// How init ended, when a call of another process ended it.
     ended: Option<Outcome>,
@@ -232,6 +234,7 @@ impl System {
         Self {
             slots,
             pipes: Pipes::new(),
+            reported: syscall::Reported::default(),
             next_pid,
             ended: None,
             hwcap,
@@ -753,7 +756,15 @@ impl System {
         let pid = slot.process.pid;
         k.select(pid);
         let kept = m;
-        match syscall::handle(&mut slot.process, &mut self.pipes, fs, &others, k, &mut m) {
+        match syscall::handle(
+            &mut slot.process,
+            &mut self.pipes,
+            fs,
+            &others,
+            &mut self.reported,
+            k,
+            &mut m,
+        ) {
             Outcome::Resume => self.resume(i, fs, k, m, None),
             Outcome::Block => {
                 slot.state = State::Blocked(kept);
@@ -938,6 +949,9 @@ impl System {
         child.wake_at = None;
         child.saved_mask = None;
         child.executed = false;
+        // Memory locks are not inherited (mlock(2)).
+        child.locks = crate::memory::Locks::default();
+        child.lock_future = false;
         child.clear_child_tid = if flags & CLONE_CHILD_CLEARTID != 0 {
             child_tid
         } else {
@@ -1156,12 +1170,13 @@ impl System {
         match exec::load_file(fs, k, ids, cwd, file, argv, env, self.hwcap) {
             Ok(loaded) => {
                 let mut new = loaded.process;
-                new.files = old.files;
-                new.cloexec = 0;
+                new.files = core::mem::take(&mut old.files);
+                new.clear_cloexec();
                 new.sigmask = old.sigmask;
                 new.pending = old.pending;
                 new.pending_info = old.pending_info;
                 new.umask = old.umask;
+                new.limits = old.limits;
                 (new.pgid, new.sid, new.executed) = (old.pgid, old.sid, true);
                 (new.alarm_at, new.alarm_interval) = (old.alarm_at, old.alarm_interval);
                 // Handlers are gone with the image; ignored signals stay ignored.

@@ -1,4 +1,5 @@
-//! The file system calls of a process: descriptors (`dup*`, `pipe*`, `close`, `fcntl`),
+//! The file system calls of a process: descriptors (`dup*`, `pipe*`, `close`,
+//! `close_range`, `fcntl`),
 //! reading and writing (`read`, `write`, `readv`, `writev`, `pread64`, `pwrite64`,
 //! `sendfile`, `lseek`, `ftruncate`, `truncate`), names (`open`, `openat`, `creat`,
 //! `mkdir*`, `unlink*`, `rmdir`, `rename*`, `symlink*`, `link*`, `readlink*`), status
@@ -17,7 +18,7 @@ use crate::arinc;
 use crate::linux::{self, Errno};
 use crate::memory::Rights;
 use crate::pipe::{Pipes, Transfer};
-use crate::process::{File, MAX_FILES, Process, Stream};
+use crate::process::{File, Process, Stream};
 use crate::signal::{self, Info};
 use crate::tty;
 use crate::vfs::dev::Device;
@@ -60,20 +61,17 @@ fn seconds(host: &mut impl Host) -> u64 {
 /// Closes descriptor `fd` if open (a pipe end or open file description counts one
 /// descriptor less).
 pub fn close(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, fd: usize) {
-    match p.files.get_mut(fd).and_then(Option::take) {
+    match p.take_fd(fd) {
         Some(File::Pipe { pipe, write, .. }) => pipes.close_end(pipe, write),
         Some(File::Open(id)) => fs.release(id),
         _ => {}
-    }
-    if fd < MAX_FILES {
-        p.set_cloexec(fd, false);
     }
 }
 
 /// Closes every descriptor of `p` and lets its working directory go (it ends), or closes
 /// only the close-on-exec ones (`execve`).
 pub fn close_files(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, only_cloexec: bool) {
-    for fd in 0..MAX_FILES {
+    for fd in (0..p.files.len()).rev() {
         if !only_cloexec || p.is_cloexec(fd) {
             close(p, pipes, fs, fd);
         }
@@ -110,6 +108,37 @@ pub fn close_fd(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
     let (p, f, _) = c.parts();
     p.file(fd).ok_or(Errno::EBADF)?;
     close(p, f.pipes, f.fs, fd as usize);
+    Ok(0)
+}
+
+/// `close_range(first, last, flags)`: closes the open descriptors from `first` to `last`,
+/// or with `CLOSE_RANGE_CLOEXEC` marks them close-on-exec. `CLOSE_RANGE_UNSHARE` has
+/// nothing to do: no two processes share a descriptor table here (`fork` copies it).
+pub fn close_range(
+    c: &mut Ctx<'_, '_, impl Host>,
+    first: u64,
+    last: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const CLOSE_RANGE_UNSHARE: u64 = 1 << 1;
+    const CLOSE_RANGE_CLOEXEC: u64 = 1 << 2;
+    let (first, last) = (first as u32, last as u32);
+    if flags & !(CLOSE_RANGE_UNSHARE | CLOSE_RANGE_CLOEXEC) != 0 || first > last {
+        return Err(Errno::EINVAL);
+    }
+    let (p, f, _) = c.parts();
+    let end = (last as usize).saturating_add(1).min(p.files.len());
+    // Downwards: closing the highest shrinks the table.
+    for fd in ((first as usize).min(end)..end).rev() {
+        if p.files.get(fd).is_none_or(Option::is_none) {
+            continue;
+        }
+        if flags & CLOSE_RANGE_CLOEXEC != 0 {
+            p.set_cloexec(fd, true);
+        } else {
+            close(p, f.pipes, f.fs, fd);
+        }
+    }
     Ok(0)
 }
 
@@ -783,6 +812,32 @@ pub fn openat(
         }
         Err(e) => return Err(e),
     };
+    if let Node::Proc(proc::Node::Fd(pid, n)) = node
+        && follow
+    {
+        // `/proc/<pid>/fd/<n>` of a pipe or the console: what that descriptor has, the
+        // pipe's end as the access mode asks (a file resolved to itself in the lookup).
+        let file = proc::fd_file(&procs(p, f), pid, n).ok_or(Errno::ENOENT)?;
+        let file = match file {
+            File::Pipe { pipe, write, .. } => {
+                let write = match access {
+                    0 => false, // O_RDONLY
+                    linux::O_WRONLY => true,
+                    _ => write,
+                };
+                let nonblock = flags & linux::O_NONBLOCK != 0;
+                File::Pipe {
+                    pipe,
+                    write,
+                    nonblock,
+                }
+            }
+            File::Console(_) => File::Console(Stream::Stdout),
+            File::Open(_) => return Err(Errno::ENOENT),
+        };
+        duplicate(p, f, file, fd, flags & O_CLOEXEC != 0);
+        return Ok(fd as u64);
+    }
     if f.fs.is_symlink(node) {
         return Err(Errno::ELOOP); // O_NOFOLLOW on a link
     }

@@ -2,10 +2,7 @@
 //! serves it, mostly through the modules that own the state it acts on.
 
 use super::table::{Args, Ctx};
-use super::{
-    Host, Outcome, ProcessCall, SysResult, Target, WOULD_BLOCK, file, memory, read_cstr, read_user,
-    write_user,
-};
+use super::{Host, Outcome, ProcessCall, SysResult, Target, WOULD_BLOCK, file, memory};
 use crate::linux::{self, Errno, nr};
 use crate::process::File;
 use crate::signal::SIGSEGV;
@@ -54,6 +51,9 @@ pub fn openat<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn close<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::close_fd(c, a.fd(0))
 }
+pub fn close_range<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    file::close_range(c, a.fd(0), a.fd(1), a.flags(2))
+}
 pub fn dup<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::dup(c, a.fd(0))
 }
@@ -87,7 +87,7 @@ pub fn fcntl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 /// The terminal requests on the console ([`tty_ioctl`]), the port requests on a port.
 pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match c.p.file(a.fd(0)).ok_or(Errno::EBADF)? {
-        File::Console(_) => super::tty_ioctl(c.p, c.host, a.flags(1), a.raw(2)),
+        File::Console(_) => super::tty_ioctl(c, a.flags(1), a.raw(2)),
         _ => file::port_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
     }
 }
@@ -227,22 +227,37 @@ pub fn umask<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 // Memory.
 
 pub fn brk<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    Ok(memory::brk(c.p, c.host, a.ptr(0)))
+    Ok(memory::brk(c, a.ptr(0)))
 }
 pub fn mmap<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    memory::mmap(c.p, c.f.fs, c.host, a.0)
+    memory::mmap(c, a.0)
 }
 pub fn munmap<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    memory::munmap(c.p, c.host, a.ptr(0), a.usize(1))
+    memory::munmap(c, a.ptr(0), a.usize(1))
 }
 pub fn mprotect<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    memory::mprotect(c.p, c.host, a.ptr(0), a.usize(1), a.flags(2))
+    memory::mprotect(c, a.ptr(0), a.usize(1), a.flags(2))
 }
 pub fn madvise<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    memory::madvise(c.p, c.host, a.ptr(0), a.usize(1), a.flags(2))
+    memory::madvise(c, a.ptr(0), a.usize(1), a.flags(2))
 }
 pub fn mremap<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    memory::mremap(c.p, c.host, a.ptr(0), a.usize(1), a.usize(2), a.flags(3))
+    memory::mremap(c, a.ptr(0), a.usize(1), a.usize(2), a.flags(3))
+}
+pub fn mlock<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::mlock(c, a.ptr(0), a.usize(1), 0)
+}
+pub fn mlock2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::mlock(c, a.ptr(0), a.usize(1), a.flags(2))
+}
+pub fn munlock<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::munlock(c, a.ptr(0), a.usize(1))
+}
+pub fn mlockall<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    memory::mlockall(c, a.flags(0))
+}
+pub fn munlockall<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
+    memory::munlockall(c)
 }
 
 // The thread.
@@ -269,7 +284,7 @@ pub fn arch_prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
             } else {
                 regs.gs_base
             };
-            write_user(c.p, c.host, address, &base.to_le_bytes())?;
+            c.write_user(address, &base.to_le_bytes())?;
             Ok(0)
         }
         _ => Err(Errno::EINVAL),
@@ -298,7 +313,7 @@ pub fn prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match option {
         PR_SET_NAME => {
             let mut buf = [0u8; 16];
-            let name = match read_cstr(c.p, c.host, arg, &mut buf) {
+            let name = match c.read_cstr(arg, &mut buf) {
                 Ok(name) => name,
                 // Longer names are cut (Linux copies 16 bytes and ends them with a NUL).
                 Err(Errno::ENAMETOOLONG) => &buf[..crate::process::NAME_LEN],
@@ -311,11 +326,11 @@ pub fn prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
         PR_GET_NAME => {
             let mut buf = [0u8; 16];
             buf[..c.p.name().len()].copy_from_slice(c.p.name().as_bytes());
-            write_user(c.p, c.host, arg, &buf)?;
+            c.write_user(arg, &buf)?;
             Ok(0)
         }
         _ => {
-            if c.p.first_unsupported(nr::prctl) {
+            if c.reported.first(nr::prctl) {
                 c.host.log(format_args!(
                     "guest: process {} ({}): unsupported prctl option {option}, returning EINVAL",
                     c.p.pid,
@@ -327,24 +342,24 @@ pub fn prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     }
 }
 pub fn futex<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    info::futex(c.p, c.host, a.0)
+    info::futex(c, a.0)
 }
 
 // Signals and timers.
 
 pub fn rt_sigaction<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::sigaction(c.p, c.host, a.raw(0), a.ptr(1), a.ptr(2), a.usize(3))
+    sigcalls::sigaction(c, a.raw(0), a.ptr(1), a.ptr(2), a.usize(3))
 }
 pub fn rt_sigprocmask<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::sigprocmask(c.p, c.host, a.flags(0), a.ptr(1), a.ptr(2), a.usize(3))
+    sigcalls::sigprocmask(c, a.flags(0), a.ptr(1), a.ptr(2), a.usize(3))
 }
 pub fn rt_sigpending<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::sigpending(c.p, c.host, a.ptr(0), a.usize(1))
+    sigcalls::sigpending(c, a.ptr(0), a.usize(1))
 }
 /// Restores the registers the signal frame saved: the thread resumes with them, not with
 /// a return value.
 pub fn rt_sigreturn<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
-    if sigcalls::sigreturn(c.p, c.host, c.m).is_some() {
+    if sigcalls::sigreturn(c).is_some() {
         return c.finish(Outcome::Resume);
     }
     c.host.log(format_args!(
@@ -356,47 +371,47 @@ pub fn rt_sigreturn<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
 }
 pub fn sigaltstack<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let sp = c.m.registers.rsp;
-    sigcalls::sigaltstack(c.p, c.host, sp, a.ptr(0), a.ptr(1))
+    sigcalls::sigaltstack(c, sp, a.ptr(0), a.ptr(1))
 }
 pub fn rt_sigsuspend<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::sigsuspend(c.p, c.host, a.ptr(0), a.usize(1))
+    sigcalls::sigsuspend(c, a.ptr(0), a.usize(1))
 }
 /// Waits until a signal.
 pub fn pause<H: Host>(_: &mut Ctx<H>, _: Args) -> Result {
     Err(WOULD_BLOCK)
 }
 pub fn nanosleep<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::sleep(c.p, c.host, linux::CLOCK_MONOTONIC, 0, a.ptr(0))
+    sigcalls::sleep(c, linux::CLOCK_MONOTONIC, 0, a.ptr(0))
 }
 pub fn clock_nanosleep<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::sleep(c.p, c.host, a.raw(0), a.flags(1), a.ptr(2))
+    sigcalls::sleep(c, a.raw(0), a.flags(1), a.ptr(2))
 }
 pub fn alarm<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    Ok(sigcalls::alarm(c.p, c.host, a.raw(0)))
+    Ok(sigcalls::alarm(c, a.raw(0)))
 }
 pub fn getitimer<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::getitimer(c.p, c.host, a.raw(0), a.ptr(1))
+    sigcalls::getitimer(c, a.raw(0), a.ptr(1))
 }
 pub fn setitimer<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    sigcalls::setitimer(c.p, c.host, a.raw(0), a.ptr(1), a.ptr(2))
+    sigcalls::setitimer(c, a.raw(0), a.ptr(1), a.ptr(2))
 }
 
 // Waiting for descriptors.
 
 pub fn poll<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let timeout = poll::poll_timeout(a.raw(2));
-    poll::poll(c.p, &c.f, c.host, a.ptr(0), a.usize(1), timeout, 0, 0)
+    poll::poll(c, a.ptr(0), a.usize(1), timeout, 0, 0)
 }
 pub fn ppoll<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    let timeout = poll::ppoll_timeout(c.p, c.host, a.ptr(2))?;
+    let timeout = poll::ppoll_timeout(c, a.ptr(2))?;
     let (mask, size) = (a.ptr(3), a.usize(4));
-    poll::poll(c.p, &c.f, c.host, a.ptr(0), a.usize(1), timeout, mask, size)
+    poll::poll(c, a.ptr(0), a.usize(1), timeout, mask, size)
 }
 pub fn select<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    poll::select(c.p, &c.f, c.host, a.0, false)
+    poll::select(c, a.0, false)
 }
 pub fn pselect6<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    poll::select(c.p, &c.f, c.host, a.0, true)
+    poll::select(c, a.0, true)
 }
 
 // Time, randomness, the system.
@@ -413,7 +428,7 @@ pub fn clock_gettime<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     } else {
         c.host.now_ns()
     };
-    write_user(c.p, c.host, a.ptr(1), &linux::timespec(ns))?;
+    c.write_user(a.ptr(1), &linux::timespec(ns))?;
     Ok(0)
 }
 pub fn clock_getres<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
@@ -422,21 +437,21 @@ pub fn clock_getres<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     }
     // The guest's clock counts nanoseconds (the kernel's, from the TSC).
     if a.ptr(1) != 0 {
-        write_user(c.p, c.host, a.ptr(1), &linux::timespec(1))?;
+        c.write_user(a.ptr(1), &linux::timespec(1))?;
     }
     Ok(0)
 }
 pub fn gettimeofday<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let ns = c.host.wall_clock_ns();
     if a.ptr(0) != 0 {
-        write_user(c.p, c.host, a.ptr(0), &linux::timeval(ns))?;
+        c.write_user(a.ptr(0), &linux::timeval(ns))?;
     }
     Ok(0)
 }
 pub fn time<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let seconds = c.host.wall_clock_ns() / 1_000_000_000;
     if a.ptr(0) != 0 {
-        write_user(c.p, c.host, a.ptr(0), &seconds.to_le_bytes())?;
+        c.write_user(a.ptr(0), &seconds.to_le_bytes())?;
     }
     Ok(seconds)
 }
@@ -447,7 +462,7 @@ pub fn getrandom<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let mut bytes = [0u8; 256];
     let n = (a.usize(1) as usize).min(bytes.len());
     c.host.random(&mut bytes[..n]);
-    write_user(c.p, c.host, a.ptr(0), &bytes[..n])?;
+    c.write_user(a.ptr(0), &bytes[..n])?;
     Ok(n as u64)
 }
 pub fn uname<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
@@ -463,7 +478,7 @@ pub fn uname<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     for (i, field) in fields.iter().enumerate() {
         u[i * 65..i * 65 + field.len()].copy_from_slice(field);
     }
-    write_user(c.p, c.host, a.ptr(0), &u)?;
+    c.write_user(a.ptr(0), &u)?;
     Ok(0)
 }
 
@@ -473,24 +488,24 @@ pub fn prlimit64<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     if a.raw(0) != 0 && a.raw(0) != c.p.pid as u64 {
         return Err(Errno::ESRCH);
     }
-    info::rlimit(c.p, c.host, a.raw(1), a.ptr(2), a.ptr(3))
+    info::rlimit(c, a.raw(1), a.ptr(2), a.ptr(3))
 }
 pub fn getrlimit<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    info::rlimit(c.p, c.host, a.raw(0), 0, a.ptr(1))
+    info::rlimit(c, a.raw(0), 0, a.ptr(1))
 }
 pub fn setrlimit<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    info::rlimit(c.p, c.host, a.raw(0), a.ptr(1), 0)
+    info::rlimit(c, a.raw(0), a.ptr(1), 0)
 }
 pub fn getrusage<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match a.i32(0) {
         // RUSAGE_SELF, RUSAGE_CHILDREN, RUSAGE_THREAD
-        -1..=1 => write_user(c.p, c.host, a.ptr(1), &[0; 144]).map(|()| 0),
+        -1..=1 => c.write_user(a.ptr(1), &[0; 144]).map(|()| 0),
         _ => Err(Errno::EINVAL),
     }
 }
 pub fn times<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     if a.ptr(0) != 0 {
-        write_user(c.p, c.host, a.ptr(0), &[0; 32])?;
+        c.write_user(a.ptr(0), &[0; 32])?;
     }
     Ok(c.host.now_ns() / (1_000_000_000 / info::TICKS_PER_S))
 }
@@ -498,7 +513,7 @@ pub fn times<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn sched_getaffinity<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match a.usize(1) {
         len if len < 8 || len % 8 != 0 => Err(Errno::EINVAL),
-        _ => write_user(c.p, c.host, a.ptr(2), &1u64.to_le_bytes()).map(|()| 8),
+        _ => c.write_user(a.ptr(2), &1u64.to_le_bytes()).map(|()| 8),
     }
 }
 pub fn sched_setaffinity<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
@@ -506,7 +521,7 @@ pub fn sched_setaffinity<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
         return Err(Errno::EINVAL);
     }
     let mut mask = [0u8; 8];
-    read_user(c.p, c.host, a.ptr(2), &mut mask)?;
+    c.read_user(a.ptr(2), &mut mask)?;
     if u64::from_le_bytes(mask) & 1 == 0 {
         return Err(Errno::EINVAL);
     }
@@ -568,7 +583,7 @@ pub fn setresuid<H: Host>(_: &mut Ctx<H>, a: Args) -> Result {
 /// `getresuid`, `getresgid`.
 pub fn getresuid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     for i in 0..3 {
-        write_user(c.p, c.host, a.ptr(i), &0u32.to_le_bytes())?;
+        c.write_user(a.ptr(i), &0u32.to_le_bytes())?;
     }
     Ok(0)
 }

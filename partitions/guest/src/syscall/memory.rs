@@ -1,20 +1,21 @@
 //! The memory calls of a process: `brk`, `mmap`, `munmap`, `mremap`, `mprotect`,
-//! `madvise`. The calls change the process's areas ([`crate::memory::Areas`]); an
+//! `madvise`, and the locks (`mlock`, `mlock2`, `munlock`, `mlockall`, `munlockall`). The calls change the process's areas ([`crate::memory::Areas`]); an
 //! anonymous page is backed when first touched ([`Host::fault_in`]); a file mapping's
 //! pages are filled from the file when it is mapped ([`Host::fill_in`]: POSIX leaves it open
 //! whether a private mapping sees later writes to the file; this one does not). They never
 //! map a page writable and executable (W^X).
 
+use super::table::Ctx;
 use super::{Host, MAX_HEAP, MMAP_BOTTOM, SysResult};
 use crate::linux::{self, Errno};
 use crate::memory::{Area, AreaError, Kind, MMAP_TOP, PAGE, Rights, USER_TOP, page_up};
 use crate::process::{File, Process};
-use crate::vfs::Fs;
 use crate::vfs::dev::Device;
 
 /// Linux's `brk`: returns the new break, or the old one if it cannot move there. The heap's
 /// pages are backed when first touched.
-pub(super) fn brk(p: &mut Process, host: &mut impl Host, requested: u64) -> u64 {
+pub(super) fn brk(c: &mut Ctx<'_, '_, impl Host>, requested: u64) -> u64 {
+    let (p, _, host) = c.parts();
     if requested < p.brk_start || requested - p.brk_start > MAX_HEAP {
         return p.brk;
     }
@@ -60,7 +61,9 @@ const MMAP_MIN_ADDR: u64 = 0x1_0000;
 /// write the files) mappings at a free place (below [`MMAP_TOP`], the hint if it is free),
 /// or at a fixed address (`MAP_FIXED` replaces what was there, `MAP_FIXED_NOREPLACE`
 /// fails with `EEXIST`).
-pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) -> SysResult<u64> {
+pub(super) fn mmap(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6]) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
+    let fs = &*f.fs;
     let [hint, len, prot, flags, fd, offset] = a;
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
     if rights.writable_and_executable() {
@@ -114,7 +117,7 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
             if flags & linux::MAP_FIXED_NOREPLACE != 0 {
                 return Err(Errno::EEXIST);
             }
-            munmap(p, host, hint, len)?;
+            unmap(p, host, hint, len)?;
         }
         hint
     } else {
@@ -158,7 +161,7 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
                 frame[..piece.len()].copy_from_slice(piece)
             });
             if let Err(e) = filled {
-                let _ = munmap(p, host, start, len);
+                let _ = unmap(p, host, start, len);
                 return Err(e);
             }
             page += PAGE;
@@ -168,12 +171,7 @@ pub(super) fn mmap(p: &mut Process, fs: &Fs, host: &mut impl Host, a: [u64; 6]) 
 }
 
 /// Linux's `munmap` (parts of areas too; pages not mapped are fine).
-pub(super) fn munmap(
-    p: &mut Process,
-    host: &mut impl Host,
-    start: u64,
-    len: u64,
-) -> SysResult<u64> {
+fn unmap(p: &mut Process, host: &mut impl Host, start: u64, len: u64) -> SysResult<u64> {
     if !start.is_multiple_of(PAGE) || len == 0 {
         return Err(Errno::EINVAL);
     }
@@ -181,6 +179,9 @@ pub(super) fn munmap(
         .checked_add(page_up(len))
         .filter(|&e| e <= USER_TOP)
         .ok_or(Errno::EINVAL)?;
+    // Locks go with the pages (checked first: cutting a locked range may not fit).
+    let mut locks = p.locks;
+    locks.unlock(start, end).map_err(|_| Errno::ENOMEM)?;
     let mut parts = [(0u64, 0u64); crate::memory::MAX_AREAS + 2];
     let mut n = 0;
     p.areas
@@ -191,20 +192,27 @@ pub(super) fn munmap(
             }
         })
         .map_err(area_error)?;
+    p.locks = locks;
     for &(s, e) in &parts[..n] {
         host.unmap(s, (e - s) / PAGE);
     }
     Ok(0)
 }
 
+/// Linux's `munmap`.
+pub(super) fn munmap(c: &mut Ctx<'_, '_, impl Host>, start: u64, len: u64) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
+    unmap(p, host, start, len)
+}
+
 /// Linux's `mprotect` (every page of the range must be in some area: else `ENOMEM`).
 pub(super) fn mprotect(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     start: u64,
     len: u64,
     prot: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     let rights = Rights::from_prot(prot).ok_or(Errno::EINVAL)?;
     if rights.writable_and_executable() {
         return Err(Errno::EACCES);
@@ -233,12 +241,12 @@ pub(super) fn mprotect(
 /// zeros, or a file mapping's bytes again); other advice changes nothing. `ENOMEM` when a
 /// page of the range is in no area.
 pub(super) fn madvise(
-    p: &Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     start: u64,
     len: u64,
     advice: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     const MADV_DONTNEED: u64 = 4;
     if !start.is_multiple_of(PAGE) {
         return Err(Errno::EINVAL);
@@ -276,13 +284,13 @@ pub(super) fn madvise(
 /// free place with `MREMAP_MAYMOVE` (`ENOMEM` without). `MREMAP_FIXED` and
 /// `MREMAP_DONTUNMAP` are not served (`EINVAL`).
 pub(super) fn mremap(
-    p: &mut Process,
-    host: &mut impl Host,
+    c: &mut Ctx<'_, '_, impl Host>,
     old: u64,
     old_len: u64,
     new_len: u64,
     flags: u64,
 ) -> SysResult<u64> {
+    let (p, _, host) = c.parts();
     const MREMAP_MAYMOVE: u64 = 1;
     if !old.is_multiple_of(PAGE) || new_len == 0 || flags & !MREMAP_MAYMOVE != 0 {
         return Err(Errno::EINVAL);
@@ -297,7 +305,7 @@ pub(super) fn mremap(
     let new_end = old.checked_add(new_len).ok_or(Errno::ENOMEM)?;
     if new_len <= old_len {
         if new_len < old_len {
-            munmap(p, host, new_end, old_len - new_len)?;
+            unmap(p, host, new_end, old_len - new_len)?;
         }
         return Ok(old);
     }
@@ -330,4 +338,102 @@ pub(super) fn mremap(
     }
     host.move_pages(old, to, old_len / PAGE);
     Ok(to)
+}
+
+/// The bytes `RLIMIT_MEMLOCK` lets `p` lock (whole pages), or `EPERM` when it may lock
+/// none: the guest gives no process `CAP_IPC_LOCK`, so its locks are bounded as those of
+/// an unprivileged Linux process.
+fn lock_limit(p: &Process) -> SysResult<u64> {
+    match p.limits[linux::RLIMIT_MEMLOCK as usize].soft {
+        0 => Err(Errno::EPERM),
+        limit => Ok(limit & !(PAGE - 1)),
+    }
+}
+
+/// The pages `start..start + len` touches, as `mlock` and `munlock` round them (`EINVAL`
+/// when the range wraps, `ENOMEM` beyond user space).
+fn lock_range(start: u64, len: u64) -> SysResult<(u64, u64)> {
+    let end = start.checked_add(len).ok_or(Errno::EINVAL)?;
+    let end = end.checked_next_multiple_of(PAGE).ok_or(Errno::EINVAL)?;
+    if end > USER_TOP {
+        return Err(Errno::ENOMEM);
+    }
+    Ok((start & !(PAGE - 1), end))
+}
+
+/// Linux's `mlock` and `mlock2` (`MLOCK_ONFAULT`): the range must be mapped (`ENOMEM`),
+/// and the process's locked bytes stay within `RLIMIT_MEMLOCK` (`ENOMEM`; `EPERM` when it
+/// is 0). The pages are backed when touched, as always: the guest never pages out.
+pub(super) fn mlock(
+    c: &mut Ctx<'_, '_, impl Host>,
+    start: u64,
+    len: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const MLOCK_ONFAULT: u64 = 1;
+    if flags & !MLOCK_ONFAULT != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let p = &mut *c.p;
+    let limit = lock_limit(p)?;
+    let (start, end) = lock_range(start, len)?;
+    if start == end {
+        return Ok(0);
+    }
+    if p.locks.bytes() + p.locks.unlocked_in(start, end) > limit || !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    p.locks.lock(start, end).map_err(|_| Errno::EAGAIN)?;
+    Ok(0)
+}
+
+/// Linux's `munlock`: the range must be mapped (`ENOMEM`).
+pub(super) fn munlock(c: &mut Ctx<'_, '_, impl Host>, start: u64, len: u64) -> SysResult<u64> {
+    let p = &mut *c.p;
+    let (start, end) = lock_range(start, len)?;
+    if start == end {
+        return Ok(0);
+    }
+    if !p.areas.covers(start, end) {
+        return Err(Errno::ENOMEM);
+    }
+    p.locks.unlock(start, end).map_err(|_| Errno::EAGAIN)?;
+    Ok(0)
+}
+
+/// Linux's `mlockall`: `MCL_CURRENT` locks every area (`ENOMEM` when they are more than
+/// `RLIMIT_MEMLOCK`), `MCL_FUTURE` is recorded (new mappings are not counted against the
+/// limit), `MCL_ONFAULT` goes with one of them.
+pub(super) fn mlockall(c: &mut Ctx<'_, '_, impl Host>, flags: u64) -> SysResult<u64> {
+    const MCL_CURRENT: u64 = 1;
+    const MCL_FUTURE: u64 = 2;
+    const MCL_ONFAULT: u64 = 4;
+    if flags & !(MCL_CURRENT | MCL_FUTURE | MCL_ONFAULT) != 0
+        || flags & (MCL_CURRENT | MCL_FUTURE) == 0
+    {
+        return Err(Errno::EINVAL);
+    }
+    let p = &mut *c.p;
+    let limit = lock_limit(p)?;
+    if flags & MCL_CURRENT != 0 {
+        let total: u64 = p.areas.iter().map(|a| a.end - a.start).sum();
+        if total > limit {
+            return Err(Errno::ENOMEM);
+        }
+        let mut locks = crate::memory::Locks::default();
+        for a in p.areas.iter() {
+            // As many ranges as areas at most: always fits.
+            locks.lock(a.start, a.end).map_err(|_| Errno::EAGAIN)?;
+        }
+        p.locks = locks;
+    }
+    p.lock_future = flags & MCL_FUTURE != 0;
+    Ok(0)
+}
+
+/// Linux's `munlockall`.
+pub(super) fn munlockall(c: &mut Ctx<'_, '_, impl Host>) -> SysResult<u64> {
+    c.p.locks = Default::default();
+    c.p.lock_future = false;
+    Ok(0)
 }

@@ -7,7 +7,7 @@
 //! match it replaced) that yields the handler, and to [`NUMBERS`], the numbers it serves.
 
 use super::handlers::*;
-use super::{Host, SysResult};
+use super::{Host, Reported, SysResult};
 use crate::linux::nr;
 use crate::pipe::Pipes;
 use crate::process::Process;
@@ -23,6 +23,8 @@ pub struct Ctx<'c, 'a, H> {
     pub f: Files<'c, 'a>,
     pub host: &'c mut H,
     pub m: &'c mut ExceptionMessage,
+    /// What the guest has logged as unsupported (once per guest).
+    pub reported: &'c mut Reported,
     /// Set by the calls that do not simply return a value: the process ends, is given to
     /// the process table, or resumes with registers the call restored.
     pub outcome: Option<Outcome>,
@@ -34,6 +36,7 @@ impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
         pipes: &'c mut Pipes,
         fs: &'c mut crate::vfs::Fs<'a>,
         others: &'c dyn crate::vfs::proc::ProcessTable,
+        reported: &'c mut Reported,
         host: &'c mut H,
         m: &'c mut ExceptionMessage,
     ) -> Ctx<'c, 'a, H> {
@@ -42,6 +45,7 @@ impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
             f: Files { pipes, fs, others },
             host,
             m,
+            reported,
             outcome: None,
         }
     }
@@ -49,6 +53,23 @@ impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
     /// The process, its files and the host at once, for a handler that works with all three.
     pub fn parts(&mut self) -> (&mut Process, &mut Files<'c, 'a>, &mut H) {
         (&mut *self.p, &mut self.f, &mut *self.host)
+    }
+
+    /// Copies the process's memory at `address` into `buf` (`EFAULT` outside its readable
+    /// areas).
+    pub fn read_user(&mut self, address: u64, buf: &mut [u8]) -> SysResult<()> {
+        super::read_user(self.p, self.host, address, buf)
+    }
+
+    /// Copies `data` into the process's memory at `address` (`EFAULT` outside its writable
+    /// areas).
+    pub fn write_user(&mut self, address: u64, data: &[u8]) -> SysResult<()> {
+        super::write_user(self.p, self.host, address, data)
+    }
+
+    /// The NUL-terminated string at `address` (at most `buf.len() - 1` bytes).
+    pub fn read_cstr<'b>(&mut self, address: u64, buf: &'b mut [u8]) -> SysResult<&'b [u8]> {
+        super::read_cstr(self.p, self.host, address, buf)
     }
 
     /// The call ends with `outcome` instead of a return value in `rax`.
@@ -146,6 +167,7 @@ table! {
     creat => creat,
     openat => openat,
     close => close,
+    close_range => close_range,
     dup => dup,
     dup2 => dup2,
     dup3 => dup3,
@@ -208,6 +230,11 @@ table! {
     mprotect => mprotect,
     madvise => madvise,
     mremap => mremap,
+    mlock => mlock,
+    mlock2 => mlock2,
+    munlock => munlock,
+    mlockall => mlockall,
+    munlockall => munlockall,
     // The thread.
     arch_prctl => arch_prctl,
     set_tid_address => set_tid_address,

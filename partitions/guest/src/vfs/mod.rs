@@ -30,6 +30,7 @@ pub mod proc;
 
 use crate::cpio::{Archive, S_IFCHR, S_IFDIR, S_IFLNK, S_IFMT, S_IFREG};
 use crate::linux::Errno;
+use crate::process::File;
 use alloc::boxed::Box;
 use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
@@ -42,8 +43,9 @@ pub const PATH_MAX: usize = 4096;
 pub const NAME_MAX: usize = 255;
 /// Most symbolic links followed in one lookup.
 pub const MAX_LINKS: usize = 8;
-/// Most open file descriptions of the guest (over all processes; `ENFILE` beyond).
-pub const MAX_OPEN: usize = 256;
+/// Most open file descriptions of the guest (over all processes; `ENFILE` beyond): as
+/// many as one process may have descriptors.
+pub const MAX_OPEN: usize = crate::process::MAX_FILES;
 /// Longest normalised path the guest keeps for an executable (`/proc/<pid>/exe`).
 const MAX_PATH: usize = 256;
 /// What an inode costs against the byte limit beside its data: its slot and its
@@ -280,6 +282,12 @@ impl<'a> Fs<'a> {
                 let ino = fs.add(S_IFCHR | 0o666, Body::Device(device), 0)?;
                 fs.link_entry(dev, name.as_bytes(), ino)?;
             }
+        }
+        if fs.entry(dev, b"fd").is_none() {
+            // Bash's process substitution names `/dev/fd/<n>`.
+            let target = Body::Symlink(Data::Borrowed(b"/proc/self/fd"));
+            let ino = fs.add(S_IFLNK | 0o777, target, 0)?;
+            fs.link_entry(dev, b"fd", ino)?;
         }
         fs.mkdir_all("tmp")?;
         fs.proc_dir = Some(fs.mkdir_all("proc")?);
@@ -628,6 +636,19 @@ impl<'a> Fs<'a> {
                 _ => self.child(procs, at, part).ok_or(Errno::ENOENT)?,
             };
             let last = parts.peek().is_none();
+            if let Node::Proc(proc::Node::Fd(pid, fd)) = next
+                && (!last || follow_last || trailing_slash)
+            {
+                // A magic link: to the descriptor's file itself (even unlinked); a pipe
+                // or the console is no directory, and only `open` can follow to it.
+                at = match proc::fd_file(procs, pid, fd) {
+                    Some(File::Open(id)) => self.description(id).ok_or(Errno::ENOENT)?.node,
+                    Some(_) if last => next,
+                    Some(_) => return Err(Errno::ENOTDIR),
+                    None => return Err(Errno::ENOENT),
+                };
+                continue;
+            }
             if self.is_symlink(next) && (!last || follow_last || trailing_slash) {
                 *links += 1;
                 if *links > MAX_LINKS {
@@ -664,6 +685,17 @@ impl<'a> Fs<'a> {
             Node::Inode(ino) => match self.inode(ino).map(|i| &i.body) {
                 Some(Body::Symlink(d)) => Ok(d.bytes()),
                 _ => Err(Errno::EINVAL),
+            },
+            Node::Proc(proc::Node::Fd(pid, fd)) => match proc::fd_file(procs, pid, fd) {
+                Some(File::Open(id)) => {
+                    let node = self.description(id).ok_or(Errno::ENOENT)?.node;
+                    let path = self.path_of(node)?;
+                    let len = (path.as_str().len() + 1).min(buf.len());
+                    buf[0] = b'/';
+                    buf[1..len].copy_from_slice(&path.as_str().as_bytes()[..len - 1]);
+                    Ok(&buf[..len])
+                }
+                _ => proc::link(proc::Node::Fd(pid, fd), procs, buf).ok_or(Errno::ENOENT),
             },
             Node::Proc(n) if proc::is_link(n) => proc::link(n, procs, buf).ok_or(Errno::ENOENT),
             Node::Proc(_) => Err(Errno::EINVAL),
@@ -729,6 +761,9 @@ impl<'a> Fs<'a> {
                     proc::Node::Root => {}
                     proc::Node::Process(pid) => {
                         let _ = core::fmt::Write::write_fmt(&mut w, format_args!("{pid}"));
+                    }
+                    proc::Node::Fds(pid) => {
+                        let _ = core::fmt::Write::write_fmt(&mut w, format_args!("{pid}/fd"));
                     }
                     _ => return Err(Errno::ENOENT), // only directories are asked for
                 }

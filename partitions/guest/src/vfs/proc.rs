@@ -3,7 +3,9 @@
 //! Linux is). `/proc/self` (a link to the caller's directory), `/proc/<pid>/` with `exe`
 //! (a link to the executable), `stat` (Linux's format, what `ps` parses), `status`
 //! (name, state, ids and size as `Name:\t...` lines) and `cmdline` (the arguments, each
-//! NUL-terminated), `/proc/meminfo`, `/proc/uptime` and
+//! NUL-terminated) and `fd/` (a link per open descriptor: to the file's path,
+//! `/dev/console` or `pipe:[<n>]`; opening one opens what the descriptor has, even a pipe,
+//! as Linux's magic links do: `/dev/fd` links here), `/proc/meminfo`, `/proc/uptime` and
 //! `/proc/mounts`. Nothing here can be written, created or removed.
 //!
 //! The process table belongs to [`crate::system`]; the system calls see it through
@@ -28,6 +30,10 @@ pub enum Node {
     Process(u32),
     /// `/proc/<pid>/<file>`.
     File(u32, File),
+    /// `/proc/<pid>/fd`.
+    Fds(u32),
+    /// `/proc/<pid>/fd/<n>`: a link to what descriptor `n` has open.
+    Fd(u32, u32),
 }
 
 /// A file of `/proc/<pid>/`.
@@ -66,6 +72,8 @@ pub struct ProcInfo<'s> {
     pub exe: &'s str,
     /// Bytes of its address space.
     pub size: u64,
+    /// Its descriptors.
+    pub files: &'s [Option<crate::process::File>],
 }
 
 impl<'s> ProcInfo<'s> {
@@ -79,6 +87,7 @@ impl<'s> ProcInfo<'s> {
             cmdline: &p.cmdline,
             exe: p.exe.as_str(),
             size: p.areas.iter().map(|a| a.end - a.start).sum(),
+            files: &p.files,
         }
     }
 }
@@ -123,6 +132,7 @@ impl<'s> Procs<'s> {
                 cmdline: b"",
                 exe: "",
                 size: 0,
+                files: &[],
             },
             others: &(),
             now_ns: 0,
@@ -158,6 +168,19 @@ fn parse_pid(name: &[u8]) -> Option<u32> {
     text.parse().ok()
 }
 
+/// What descriptor `fd` of process `pid` has open (`None`: closed, or no such process).
+pub fn fd_file(procs: &Procs, pid: u32, fd: u32) -> Option<crate::process::File> {
+    procs.find(pid)?.files.get(fd as usize).copied().flatten()
+}
+
+/// A descriptor number as `/proc/<pid>/fd` names it.
+fn parse_fd(name: &[u8]) -> Option<u32> {
+    match name {
+        b"0" => Some(0),
+        _ => parse_pid(name),
+    }
+}
+
 /// The entry `name` in directory `dir` (`None`: no such entry; not a directory: the
 /// caller checked).
 pub fn child(dir: Node, name: &[u8], procs: &Procs) -> Option<Node> {
@@ -170,10 +193,15 @@ pub fn child(dir: Node, name: &[u8], procs: &Procs) -> Option<Node> {
                 let pid = parse_pid(name)?;
                 procs.find(pid).map(|_| Node::Process(pid))
             }),
+        Node::Process(pid) if name == b"fd" => Some(Node::Fds(pid)),
         Node::Process(pid) => PROCESS_FILES
             .iter()
             .find(|(n, _)| n.as_bytes() == name)
             .map(|&(_, file)| Node::File(pid, file)),
+        Node::Fds(pid) => {
+            let fd = parse_fd(name)?;
+            fd_file(procs, pid, fd).map(|_| Node::Fd(pid, fd))
+        }
         _ => None,
     }
 }
@@ -182,17 +210,21 @@ pub fn child(dir: Node, name: &[u8], procs: &Procs) -> Option<Node> {
 pub fn parent(node: Node) -> Option<Node> {
     match node {
         Node::Root => None,
-        Node::File(pid, _) => Some(Node::Process(pid)),
+        Node::File(pid, _) | Node::Fds(pid) => Some(Node::Process(pid)),
+        Node::Fd(pid, _) => Some(Node::Fds(pid)),
         _ => Some(Node::Root),
     }
 }
 
 pub fn is_dir(node: Node) -> bool {
-    matches!(node, Node::Root | Node::Process(_))
+    matches!(node, Node::Root | Node::Process(_) | Node::Fds(_))
 }
 
 pub fn is_link(node: Node) -> bool {
-    matches!(node, Node::SelfLink | Node::File(_, File::Exe))
+    matches!(
+        node,
+        Node::SelfLink | Node::File(_, File::Exe) | Node::Fd(..)
+    )
 }
 
 /// A link's target, written into `buf` (`None`: not a link, or its process is gone).
@@ -201,15 +233,27 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
     match node {
         Node::SelfLink => write!(w, "{}", procs.me.pid).ok()?,
         Node::File(pid, File::Exe) => write!(w, "/{}", procs.find(pid)?.exe).ok()?,
+        // A file's path is the file system's ([`super::Fs::link_target`]).
+        Node::Fd(pid, fd) => match fd_file(procs, pid, fd)? {
+            crate::process::File::Console(_) => write!(w, "/dev/console").ok()?,
+            crate::process::File::Pipe { pipe, .. } => {
+                write!(w, "pipe:[{}]", PIPE_INO + pipe as u64).ok()?
+            }
+            crate::process::File::Open(_) => return None,
+        },
         _ => return None,
     }
     let len = w.len;
     Some(&buf[..len])
 }
 
+/// The inode number `pipe:[<n>]` gives pipe 0 (a range of its own).
+const PIPE_INO: u64 = 0x3000_0000;
+
 /// Its inode number (in a range of its own, apart from the file system's).
 fn ino(node: Node) -> u64 {
     const BASE: u64 = 0x4000_0000;
+    const FD_BASE: u64 = 0x8000_0000;
     match node {
         Node::Root => BASE,
         Node::SelfLink => BASE + 1,
@@ -218,6 +262,10 @@ fn ino(node: Node) -> u64 {
         Node::Mounts => BASE + 4,
         Node::Process(pid) => BASE + 16 * (pid as u64 + 1),
         Node::File(pid, f) => BASE + 16 * (pid as u64 + 1) + 1 + f as u64,
+        Node::Fds(pid) => BASE + 16 * (pid as u64 + 1) + 8,
+        Node::Fd(pid, fd) => {
+            FD_BASE + (pid as u64) * (crate::process::MAX_FILES as u64) + fd as u64
+        }
     }
 }
 
@@ -255,6 +303,15 @@ pub fn entries(dir: Node, procs: &Procs) -> Vec<(Vec<u8>, Node)> {
         Node::Process(pid) => {
             for (name, file) in PROCESS_FILES {
                 out.push((name.as_bytes().to_vec(), Node::File(pid, file)));
+            }
+            out.push((b"fd".to_vec(), Node::Fds(pid)));
+        }
+        Node::Fds(pid) => {
+            let files = procs.find(pid).map_or(&[][..], |p| p.files);
+            for (fd, _) in files.iter().enumerate().filter(|(_, f)| f.is_some()) {
+                let mut name = Vec::new();
+                let _ = write!(VecWriter(&mut name), "{fd}");
+                out.push((name, Node::Fd(pid, fd as u32)));
             }
         }
         _ => {}

@@ -80,7 +80,7 @@ fn files_are_created_written_renamed_and_removed() {
     );
     assert_eq!(
         names(&fs, dir(&fs, "/dev")),
-        ["console", "null", "random", "tty", "urandom", "zero"]
+        ["console", "fd", "null", "random", "tty", "urandom", "zero"]
     );
     let tmp = dir(&fs, "/tmp");
     let f = Node::Inode(fs.create(tmp, b"f", 0o644, 7).unwrap());
@@ -209,6 +209,7 @@ fn proc_shows_the_processes() {
                 cmdline: b"sleep\x0010\x00",
                 exe: "bin/busybox",
                 size: 8192,
+                files: &[],
             })
         }
         fn each_pid(&self, f: &mut dyn FnMut(u32)) {
