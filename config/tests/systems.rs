@@ -35,14 +35,15 @@ fn every_system_validates_and_round_trips() {
         let blob = config::binary::encode(&system);
         let view = config::decode(&blob)
             .unwrap_or_else(|e| panic!("{}: the encoded form is rejected: {e}", path.display()));
-        // The PLC mapping, other data entries and the guest's init travel in the
-        // partitions' data entries (PLC package, compiled image, initramfs), not in the
-        // binary form.
+        // The PLC mapping, other data entries, the guest's init and the IEC 61499 boot file
+        // travel in the partitions' data entries (PLC package, compiled image, initramfs,
+        // device package), not in the binary form.
         let mut without_data = system.clone();
         for p in &mut without_data.partitions {
             p.plc = None;
             p.data = None;
             p.guest = None;
+            p.iec61499 = None;
         }
         assert_eq!(System::from_view(&view), without_data, "{}", path.display());
         count += 1;
