@@ -122,7 +122,7 @@ pub use abi::layout::Field;
 use abi::syscall::Abilities;
 
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 pub const NAME_SIZE: usize = 32;
 pub const HEADER_SIZE: usize = header::SIZE;
 pub const SCHEDULE_SIZE: usize = schedule::SIZE;
@@ -214,7 +214,8 @@ pub mod partition {
     pub const MCP: Field = Field::new(108, 1);
     pub const PRIORITY: Field = Field::new(109, 1);
     pub const TIME_PARTITION: Field = Field::new(110, 1);
-    pub const RESERVED_A: Field = Field::new(111, 1);
+    /// How many of `DEVICES` are used (at most `pci::MAX_PARTITION_DEVICES`).
+    pub const DEVICE_COUNT: Field = Field::new(111, 1);
     pub const HEALTH: Field = Field::new(112, 8);
     pub const FIRST_IO: Field = Field::new(120, 2);
     pub const IO_COUNT: Field = Field::new(122, 2);
@@ -223,8 +224,11 @@ pub mod partition {
     pub const FIRST_PORT: Field = Field::new(128, 2);
     pub const PORT_COUNT: Field = Field::new(130, 2);
     pub const RESERVED_B: Field = Field::new(132, 4);
-    pub const SIZE: usize = 136;
-    pub const FIELDS: [Field; 21] = [
+    /// The PCI functions it owns: `DEVICE_COUNT` routing ids (`pci::Address::id`, u16 LE),
+    /// the unused ones zero.
+    pub const DEVICES: Field = Field::new(136, 16);
+    pub const SIZE: usize = 152;
+    pub const FIELDS: [Field; 22] = [
         NAME,
         IMAGE,
         MEMORY,
@@ -237,7 +241,7 @@ pub mod partition {
         MCP,
         PRIORITY,
         TIME_PARTITION,
-        RESERVED_A,
+        DEVICE_COUNT,
         HEALTH,
         FIRST_IO,
         IO_COUNT,
@@ -246,6 +250,7 @@ pub mod partition {
         FIRST_PORT,
         PORT_COUNT,
         RESERVED_B,
+        DEVICES,
     ];
 }
 
@@ -762,8 +767,26 @@ impl<'a> SystemView<'a> {
             if P::TIME_PARTITION.u8(r) >= TIME_PARTITIONS {
                 return Err(fail("time partition above 15"));
             }
-            if !P::RESERVED_A.is_zero(r) || !P::RESERVED_B.is_zero(r) {
+            if !P::RESERVED_B.is_zero(r) {
                 return Err(fail("reserved bytes are not zero"));
+            }
+            let devices = usize::from(P::DEVICE_COUNT.u8(r));
+            if devices > pci::MAX_PARTITION_DEVICES
+                || !P::DEVICES.bytes(r)[2 * devices..].iter().all(|&b| b == 0)
+            {
+                return Err(fail(
+                    "more PCI devices than a partition may own, or unused device slots not zero",
+                ));
+            }
+            let mine = self.partition_view_devices(p);
+            let taken = (0..p).flat_map(|o| self.partition_view_devices(o));
+            if taken.clone().any(|d| mine.clone().any(|m| m == d))
+                || mine
+                    .clone()
+                    .enumerate()
+                    .any(|(i, m)| mine.clone().take(i).any(|o| o == m))
+            {
+                return Err(fail("a PCI device owned twice"));
             }
             if HealthTable::from_bytes(P::HEALTH.bytes(r)).is_none() {
                 return Err(fail("unknown health action"));
@@ -1046,6 +1069,16 @@ impl<'a> SystemView<'a> {
         }
     }
 
+    /// The PCI functions partition `i` owns (its record's device slots).
+    fn partition_view_devices(&self, i: usize) -> impl Iterator<Item = pci::Address> + Clone + 'a {
+        use partition as P;
+        let r = self.record(Table::Partition, i);
+        let count = usize::from(P::DEVICE_COUNT.u8(r)).min(pci::MAX_PARTITION_DEVICES);
+        P::DEVICES.bytes(r)[..2 * count]
+            .chunks_exact(2)
+            .map(|id| pci::Address::from_id(u16::from_le_bytes([id[0], id[1]])))
+    }
+
     pub fn partitions(&self) -> impl Iterator<Item = PartitionView<'a>> + 'a {
         let sys = *self;
         (0..sys.partition_count()).map(move |i| sys.partition(i))
@@ -1199,6 +1232,11 @@ pub struct PartitionView<'a> {
 }
 
 impl<'a> PartitionView<'a> {
+    /// The PCI functions it owns (`devices`), in configuration order.
+    pub fn devices(&self) -> impl Iterator<Item = pci::Address> + 'a {
+        self.sys.partition_view_devices(self.index)
+    }
+
     /// Its I/O port ranges (inclusive; for `io_grant(task, first, count())`).
     pub fn io_ports(&self) -> impl Iterator<Item = IoRange> + 'a {
         let sys = self.sys;
@@ -1289,6 +1327,15 @@ mod encode {
     use super::*;
     use crate::system::System;
     use std::vec::Vec;
+
+    /// A partition's device slots: the routing ids, the rest zero.
+    fn device_ids(devices: &[pci::Address]) -> [u8; 16] {
+        let mut out = [0u8; 16];
+        for (slot, d) in out.chunks_exact_mut(2).zip(devices) {
+            slot.copy_from_slice(&d.id().to_le_bytes());
+        }
+        out
+    }
 
     /// A record being written: zeroed (so reserved bytes are zero), fields set by name.
     struct Record<const N: usize>([u8; N]);
@@ -1395,6 +1442,8 @@ mod encode {
                 .set(P::MCP, u64::from(p.mcp))
                 .set(P::PRIORITY, u64::from(p.priority))
                 .set(P::TIME_PARTITION, u64::from(p.time_partition))
+                .set(P::DEVICE_COUNT, p.devices.len() as u64)
+                .raw(P::DEVICES, &device_ids(&p.devices))
                 .raw(P::HEALTH, &p.health.to_bytes())
                 .index(P::FIRST_IO, io_at)
                 .index(P::IO_COUNT, p.io_ports.len())

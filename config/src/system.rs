@@ -54,6 +54,8 @@ pub struct Partition {
     pub time_partition: u8,
     pub io_ports: Vec<IoRange>,
     pub irqs: IrqMask,
+    /// PCI functions it owns (`devices`), in the order given.
+    pub devices: Vec<pci::Address>,
     pub shared: Vec<Attachment>,
     pub ports: Vec<Port>,
     pub health: HealthTable,
@@ -279,6 +281,7 @@ impl System {
                     time_partition: p.time_partition,
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,
+                    devices: p.devices().collect(),
                     shared: p.shared().collect(),
                     ports: p
                         .ports()

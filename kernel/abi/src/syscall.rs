@@ -296,15 +296,18 @@ pub const IRQ_LINES: u64 = 24;
 /// (COM1, the kernel log).
 pub const KERNEL_IRQS: [u64; 3] = [0, 2, 4];
 
-/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit). QEMU's
-/// isa-debug-exit device decodes 0xf4..=0xf7 (`iosize=0x04`): a write to any of them ends
-/// the whole run, so all four are the kernel's.
-pub const KERNEL_PORTS: [(u16, u16); 5] = [
+/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit, PCI
+/// configuration space). QEMU's isa-debug-exit device decodes 0xf4..=0xf7 (`iosize=0x04`):
+/// a write to any of them ends the whole run, so all four are the kernel's. Whoever holds
+/// 0xcf8..=0xcff can reprogram every PCI device (move BARs over another partition's
+/// memory, turn on DMA): configuration space is reached only through `pci_config`.
+pub const KERNEL_PORTS: [(u16, u16); 6] = [
     (0x20, 0x21),
     (0x40, 0x43),
     (0xa0, 0xa1),
     (0x3f8, 0x3ff),
     (0xf4, 0xf7),
+    (0xcf8, 0xcff),
 ];
 
 /// Number of time partitions (0 = background).
