@@ -173,6 +173,14 @@ codes::code_enum! {
         /// task ([`RootInfo`](crate::root::RootInfo)). Ability: `PHYSICAL_MEMORY`. Errors as
         /// `map`, with `BadAddress` for frames outside the handed-out memory.
         MapPhysical = 31 => "map_physical",
+        /// `map_device(task, physical, destination, pages, rights)`: like `map_physical`, for
+        /// the registers of a device (a PCI memory BAR): frames that are no memory the
+        /// firmware lists (RAM, firmware, ACPI, flash), not below 1 MiB and not the
+        /// interrupt controllers' and timer's 0xfec00000..0xff000000. Mapped uncached (PCD and
+        /// PWT: PAT entry 3, UC). Such a page is never the source of `map`, a map item or a
+        /// buffer of any call (`BadAddress`): the kernel never touches device registers for
+        /// user space. Ability: `PHYSICAL_MEMORY`. Errors as `map_physical`.
+        MapDevice = 34 => "map_device",
         /// `unmap(task, address, pages)`: removes the mappings of `pages` pages (unmapped ones
         /// are skipped). Ability: `MAP`. Errors: `InvalidArgument`, `NoSuchObject`,
         /// `NotPermitted`.
@@ -287,6 +295,16 @@ codes::code_enum! {
         IrqAck = 84 => "irq_ack",
         /// `irq_detach(line)`: masks the line and releases it. Errors: as `irq_ack`.
         IrqDetach = 85 => "irq_detach",
+
+        /// `pci_config(address, value, write) -> rdi = value`: one dword of PCI
+        /// configuration space through ports 0xcf8/0xcfc (which the kernel keeps, see
+        /// [`KERNEL_PORTS`]): `address` = bus << 16 | device << 11 | function << 8 |
+        /// register (dword-aligned, < 256); reads (`write` = 0) return the dword, writes
+        /// (`write` = 1) store `value`. For syssw, which grants devices' BARs to partitions;
+        /// nobody else may reach configuration space. Ability: `PHYSICAL_MEMORY`, caller in
+        /// the root task. Errors: `NotPermitted` (not the root task), `InvalidArgument`
+        /// (address beyond 24 bits or unaligned, `write` > 1, `value` beyond 32 bits).
+        PciConfig = 86 => "pci_config",
     }
 }
 
