@@ -20,6 +20,7 @@
 #![no_std]
 #![no_main]
 
+mod devices;
 mod partitions;
 mod restart;
 mod server;
@@ -76,13 +77,31 @@ fn main(image_base: u64, image_len: u64) {
     let mut loader = partitions::Loader::new(spawner, system, me)
         .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
     let mut placed = [const { None }; config::model::MAX_PARTITIONS];
+    let mut not_started = 0;
     for p in system.partitions() {
         let entry = image.entries().find(|e| p.is_image_entry(e.name));
         let data = image.entries().find(|e| p.is_data_entry(e.name));
         let placement = entry
             .ok_or(partitions::LoadError::NoImage)
-            .and_then(|e| loader.place(&p, e.data, data.map_or(&[][..], |d| d.data)))
-            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+            .and_then(|e| loader.place(&p, e.data, data.map_or(&[][..], |d| d.data)));
+        let placement = match placement {
+            Ok(placement) => placement,
+            Err(partitions::LoadError::Devices(problem)) => {
+                // Only this partition stays stopped (IDLE); the others start.
+                println!("syssw: partition {} not started: {problem}", p.name);
+                placed[p.index] = Some(server::Partition {
+                    stack_guard: 0..0,
+                    instance: None,
+                    mode: syssw_core::mode::PartitionMode::never_started(),
+                });
+                not_started += 1;
+                continue;
+            }
+            Err(e) => reject(format_args!("partition {}: {e}", p.name)),
+        };
+        if let Some(devices) = &placement.devices {
+            devices::log(p.name, devices);
+        }
         let used = placement.used;
         let stack_guard = placement.stack_guard.clone();
         let mode = syssw_core::mode::PartitionMode::boot();
@@ -148,7 +167,7 @@ fn main(image_base: u64, image_len: u64) {
     let first = (system.schedule_count() > 0).then(|| system.schedule(0));
     println!(
         "syssw: {} partitions started, schedule {} (major frame {} us, {} windows)",
-        system.partition_count(),
+        system.partition_count() - not_started,
         first.map_or("none", |s| s.name),
         first.map_or(0, |s| s.major_frame / 1000),
         first.map_or(0, |s| s.window_count())

@@ -247,6 +247,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
                 qemu::Com2::Unconnected
             },
             done_when: Vec::new(),
+            extra_args: qemu::nic(qemu::RUN_FORWARDS),
         },
     )?;
     let crashed = outcome
@@ -414,6 +415,7 @@ fn boot_bench_image(
             deterministic_time,
             com2: qemu::Com2::Unconnected,
             done_when: Vec::new(),
+            extra_args: Vec::new(),
         },
     )?;
     if !outcome.succeeded() {
