@@ -14,7 +14,17 @@ fn pci_devices() {
     for line in [
         // The absent function stops only its partition, with the device named.
         "syssw: partition absent not started: PCI device 00:05.0: no such device at boot",
-        "syssw: 2 partitions started",
+        "syssw: 3 partitions started",
+        "syssw: partition edu: PCI device 00:04.0 [1234:11e8], memory 0x",
+        "edu: device 00:04.0 id 0x010000ed, interrupt line 20",
+        "edu: check ok: irq_attach of its line",
+        "edu: check ok: no interrupt before the device raises one",
+        "edu: check ok: the raised interrupt arrives",
+        "edu: check ok: the line stays masked until irq_ack though the device still asserts it",
+        "edu: check ok: irq_ack",
+        "edu: check ok: after irq_ack the still-asserted level fires again",
+        "edu: check ok: once the device is served and the line acknowledged, nothing more comes",
+        "edu: done",
         // syssw's grant: the legacy I/O BAR, the memory BARs mapped, INTA on line 23.
         "syssw: partition nic: PCI device 00:03.0 [1af4:1000], I/O 0x",
         ", interrupt line 23 (level)",
@@ -35,6 +45,7 @@ fn pci_devices() {
         o.line(", memory 0x").is_some() && o.line("nic: BAR4 memory at 0x680000").is_some(),
         "memory BARs mapped at DEVICES_BASE and after",
     );
+    check(&o, o.line("check FAILED").is_none(), "a check failed");
     check(
         &o,
         o.line("configuration space reached").is_none(),

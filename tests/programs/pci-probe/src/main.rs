@@ -5,8 +5,14 @@
 //!   I/O BAR's host-features and device-status registers, the modern common configuration
 //!   (memory BAR 4, mapped uncached: selects feature word 0, reads it), and attaches the
 //!   function's interrupt line; a line it was not granted is refused. Logs
-//!   `nic: done` and, after 200 ms (the `cfg` partition had its window), executes `ud2`,
+//!   `nic: done` and, after 1 s (the other partitions are done by then), executes `ud2`,
 //!   which the scenario maps to `shutdown_success`.
+//! * `edu*`: owns QEMU's `edu` test function, which raises its INTx (level) when told to
+//!   through its memory BAR and keeps it asserted until its status is acknowledged there.
+//!   Shows the interrupt path: the line fires; it stays masked while the driver has not
+//!   called `irq_ack` although the device still asserts it; after `irq_ack` the still
+//!   asserted level fires again (level-triggered); once the device is served and the line
+//!   acknowledged, nothing more comes. Logs `edu: done`.
 //! * `cfg*`: reads CONFIG_ADDRESS (port 0xcf8), which no partition is ever granted: the #GP
 //!   reaches the health monitor (`illegal_request`).
 //! * anything else: logs `<name>: started` (a partition that must never start).
@@ -53,6 +59,8 @@ fn main(start: u64, _: u64) {
     let name = info.name();
     if name.starts_with("nic") {
         nic();
+    } else if name.starts_with("edu") {
+        edu();
     } else if name.starts_with("cfg") {
         println!("cfg: reading port 0xcf8 (PCI CONFIG_ADDRESS)");
         let value = inl(0xcf8);
@@ -132,11 +140,74 @@ fn nic() {
     let refused = sys::irq_attach(other, 2);
     println!("nic: irq_attach of line {other}, not granted: {refused:?}");
     println!("nic: done");
-    sys::sleep_until(sys::clock() + 200_000_000);
+    sys::sleep_until(sys::clock() + 1_000_000_000);
     // SAFETY: `ud2` only raises #UD, which syssw's health monitor turns into the
     // scenario's end (illegal_request = shutdown_success).
     #[allow(unsafe_code)]
     unsafe {
         core::arch::asm!("ud2")
     };
+}
+
+/// `edu`'s registers in its memory BAR 0: identification, interrupt status, raise, ack.
+const EDU_ID: u64 = 0x00;
+const EDU_STATUS: u64 = 0x24;
+const EDU_RAISE: u64 = 0x60;
+const EDU_ACK: u64 = 0x64;
+const MS: u64 = 1_000_000;
+
+fn edu() {
+    #[allow(unsafe_code)]
+    // SAFETY: as in `nic`: syssw's records page, read-only for the task's life.
+    let page = unsafe { core::slice::from_raw_parts(DEVICES_BASE as *const u8, 4096) };
+    let Some(record) = pci::records(page).next() else {
+        println!("edu: check FAILED: no device record");
+        return;
+    };
+    let (Some(Bar::Memory { base, .. }), Some(line)) = (record.bars[0], record.interrupt_line)
+    else {
+        println!("edu: check FAILED: no memory BAR0 or no interrupt line");
+        return;
+    };
+    let register = |offset: u64| (base + offset) as *mut u32;
+    #[allow(unsafe_code)]
+    // SAFETY: syssw mapped edu's BAR 0 (1 MiB) uncached at `base`; aligned 32-bit registers.
+    let read = |offset: u64| unsafe { core::ptr::read_volatile(register(offset)) };
+    #[allow(unsafe_code)]
+    // SAFETY: as for `read`.
+    let write =
+        |offset: u64, value: u32| unsafe { core::ptr::write_volatile(register(offset), value) };
+    let line = u64::from(line);
+    println!(
+        "edu: device {} id {:#010x}, interrupt line {line}",
+        record.address,
+        read(EDU_ID)
+    );
+    let report = |what: &str, ok: bool| {
+        println!("edu: check {}: {what}", if ok { "ok" } else { "FAILED" });
+    };
+    let wait = |ms: u64| sys::irq_wait(line, ms * MS);
+    report("irq_attach of its line", sys::irq_attach(line, 0).is_ok());
+    report(
+        "no interrupt before the device raises one",
+        wait(20).is_err(),
+    );
+    write(EDU_RAISE, 1);
+    report("the raised interrupt arrives", wait(100).is_ok());
+    report(
+        "the line stays masked until irq_ack though the device still asserts it",
+        read(EDU_STATUS) == 1 && wait(50).is_err(),
+    );
+    report("irq_ack", sys::irq_ack(line).is_ok());
+    report(
+        "after irq_ack the still-asserted level fires again",
+        wait(100).is_ok(),
+    );
+    write(EDU_ACK, 1);
+    let _ = sys::irq_ack(line);
+    report(
+        "once the device is served and the line acknowledged, nothing more comes",
+        read(EDU_STATUS) == 0 && wait(50).is_err(),
+    );
+    println!("edu: done");
 }
