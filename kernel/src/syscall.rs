@@ -411,7 +411,7 @@ fn pci_config(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
         return Err(Error::NotPermitted);
     }
     let a = args::PciConfig::decode(r);
-    if a.address >> 24 != 0 || a.address % 4 != 0 || a.write > 1 || a.value >> 32 != 0 {
+    if a.address >> 24 != 0 || !a.address.is_multiple_of(4) || a.write > 1 || a.value >> 32 != 0 {
         return Err(Error::InvalidArgument);
     }
     let value = crate::arch::pci::config(a.address as u32, a.value as u32, a.write == 1);

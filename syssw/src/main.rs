@@ -77,7 +77,7 @@ fn main(image_base: u64, image_len: u64) {
     let mut loader = partitions::Loader::new(spawner, system, me)
         .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
     let mut placed = [const { None }; config::model::MAX_PARTITIONS];
-    let mut not_started = 0;
+    let mut stopped = 0;
     for p in system.partitions() {
         let entry = image.entries().find(|e| p.is_image_entry(e.name));
         let data = image.entries().find(|e| p.is_data_entry(e.name));
@@ -87,14 +87,8 @@ fn main(image_base: u64, image_len: u64) {
         let placement = match placement {
             Ok(placement) => placement,
             Err(partitions::LoadError::Devices(problem)) => {
-                // Only this partition stays stopped (IDLE); the others start.
-                println!("syssw: partition {} not started: {problem}", p.name);
-                placed[p.index] = Some(server::Partition {
-                    stack_guard: 0..0,
-                    instance: None,
-                    mode: syssw_core::mode::PartitionMode::never_started(),
-                });
-                not_started += 1;
+                placed[p.index] = Some(not_started(p.name, &problem));
+                stopped += 1;
                 continue;
             }
             Err(e) => reject(format_args!("partition {}: {e}", p.name)),
@@ -105,13 +99,22 @@ fn main(image_base: u64, image_len: u64) {
         let used = placement.used;
         let stack_guard = placement.stack_guard.clone();
         let mode = syssw_core::mode::PartitionMode::boot();
-        let instance = loader
-            .instantiate(
-                p.index,
-                partitions::Start::Boot,
-                mode.start_condition() as u64,
-            )
-            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+        let instance = loader.instantiate(
+            p.index,
+            partitions::Start::Boot,
+            mode.start_condition() as u64,
+        );
+        let instance = match instance {
+            Ok(instance) => instance,
+            // A device's grant the kernel refused (a BAR over its ports or memory, a quota
+            // too small for the BARs' page tables): again only this partition stays stopped.
+            Err(partitions::LoadError::Devices(problem)) => {
+                placed[p.index] = Some(not_started(p.name, &problem));
+                stopped += 1;
+                continue;
+            }
+            Err(e) => reject(format_args!("partition {}: {e}", p.name)),
+        };
         placed[p.index] = Some(server::Partition {
             stack_guard,
             instance: Some(instance),
@@ -167,12 +170,23 @@ fn main(image_base: u64, image_len: u64) {
     let first = (system.schedule_count() > 0).then(|| system.schedule(0));
     println!(
         "syssw: {} partitions started, schedule {} (major frame {} us, {} windows)",
-        system.partition_count() - not_started,
+        system.partition_count() - stopped,
         first.map_or("none", |s| s.name),
         first.map_or(0, |s| s.major_frame / 1000),
         first.map_or(0, |s| s.window_count())
     );
     server.run()
+}
+
+/// A partition whose PCI devices cannot be granted: logged and left IDLE (never started);
+/// the others start.
+fn not_started(name: &str, problem: &devices::DeviceProblem) -> server::Partition {
+    println!("syssw: partition {name} not started: {problem}");
+    server::Partition {
+        stack_guard: 0..0,
+        instance: None,
+        mode: syssw_core::mode::PartitionMode::never_started(),
+    }
 }
 
 fn log_partition(p: &config::binary::PartitionView, used: u64) {

@@ -188,6 +188,14 @@ mod tests {
     }
 
     #[test]
+    fn a_partition_never_started_is_idle_and_stays_so() {
+        let mut m = PartitionMode::never_started();
+        assert_eq!(m.mode(), M::Idle);
+        assert_eq!(m.request(M::Normal), Err(ReturnCode::InvalidMode));
+        assert_eq!(m.mode(), M::Idle);
+    }
+
+    #[test]
     fn codes_are_arinc() {
         for (mode, code) in [
             (M::Idle, 0),

@@ -107,16 +107,17 @@ fn nic() {
                 Some(Bar::Memory { base, size, .. }) => {
                     println!("nic: BAR{i} memory at {base:#x}+{size:#x}");
                     if i == 4 {
+                        let select = (base + COMMON_FEATURE_SELECT) as *mut u32;
+                        let feature = (base + COMMON_DEVICE_FEATURE) as *const u32;
                         #[allow(unsafe_code)]
                         // SAFETY: syssw mapped this BAR (`size` bytes at `base`) uncached for
-                        // this partition; volatile accesses of two aligned registers.
-                        let features = unsafe {
-                            core::ptr::write_volatile(
-                                (base + COMMON_FEATURE_SELECT) as *mut u32,
-                                0,
-                            );
-                            core::ptr::read_volatile((base + COMMON_DEVICE_FEATURE) as *const u32)
+                        // this partition; a volatile write of an aligned register.
+                        unsafe {
+                            core::ptr::write_volatile(select, 0)
                         };
+                        #[allow(unsafe_code)]
+                        // SAFETY: as above, a volatile read of the next register.
+                        let features = unsafe { core::ptr::read_volatile(feature) };
                         println!(
                             "nic: modern device features 0..31 {features:#010x} (MAC {}; selected and read through memory BAR4)",
                             if features & VIRTIO_NET_F_MAC != 0 {
