@@ -219,6 +219,24 @@ mod tests {
     }
 
     #[test]
+    fn the_device_page_of_a_partition_with_devices_costs_its_page_tables() {
+        let budget = |edit: &str| {
+            let blob = crate::testsys::blob(&crate::testsys::with(&[("# a", edit)]));
+            let system = config::decode(&blob).unwrap();
+            let a = system.partition(0);
+            start_budget(&system, &a, &elf(0x20_0000, 3 * PAGE), 0).unwrap()
+        };
+        let without = budget("abilities = [\"irq\"]");
+        let with = budget("abilities = [\"irq\"]\ndevices = [\"00:03.0\"]");
+        // DEVICES_BASE has a 512 GiB span of its own: one table per level.
+        assert_eq!(with.kernel_memory, without.kernel_memory + 3 * PAGE);
+        assert_eq!(
+            with.memory, without.memory,
+            "syssw's page, not the partition's memory"
+        );
+    }
+
+    #[test]
     fn a_gigabyte_run() {
         // 1 GiB aligned: 512 last-level tables, one of each level above.
         assert_eq!(tables(&[(1 << 30, 512 * 512)]), 512 + 1 + 1);
