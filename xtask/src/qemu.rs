@@ -547,3 +547,26 @@ fn spawn_line_reader(stdout: std::process::ChildStdout, tx: mpsc::Sender<String>
         }
     });
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_nic_forwards_listen_on_the_loopback_address_only() {
+        let args = nic(RUN_FORWARDS);
+        assert_eq!(args[0], "-netdev");
+        let forwards: Vec<&str> = args[1]
+            .split(',')
+            .filter(|a| a.starts_with("hostfwd="))
+            .collect();
+        assert_eq!(forwards.len(), RUN_FORWARDS.len());
+        assert!(
+            forwards
+                .iter()
+                .all(|f| f.starts_with("hostfwd=tcp:127.0.0.1:"))
+        );
+        assert!(args[1].contains("hostfwd=tcp:127.0.0.1:10502-:502"));
+        assert_eq!(args[3], "virtio-net-pci,netdev=net0,addr=03.0");
+    }
+}
