@@ -123,7 +123,7 @@ pub use abi::layout::Field;
 use abi::syscall::Abilities;
 
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
-pub const VERSION: u32 = 1;
+pub const VERSION: u32 = 2;
 pub const NAME_SIZE: usize = 32;
 pub const HEADER_SIZE: usize = header::SIZE;
 pub const SCHEDULE_SIZE: usize = schedule::SIZE;
@@ -223,9 +223,14 @@ pub mod partition {
     pub const ATTACHMENT_COUNT: Field = Field::new(126, 2);
     pub const FIRST_PORT: Field = Field::new(128, 2);
     pub const PORT_COUNT: Field = Field::new(130, 2);
-    pub const RESERVED_B: Field = Field::new(132, 4);
-    pub const SIZE: usize = 136;
-    pub const FIELDS: [Field; 21] = [
+    /// How many of `DEVICES` are used (at most `pci::MAX_PARTITION_DEVICES`).
+    pub const DEVICE_COUNT: Field = Field::new(132, 1);
+    pub const RESERVED_B: Field = Field::new(133, 3);
+    /// The PCI functions it owns: `DEVICE_COUNT` routing ids (`pci::Address::id`, u16 LE),
+    /// the unused ones zero.
+    pub const DEVICES: Field = Field::new(136, 16);
+    pub const SIZE: usize = 152;
+    pub const FIELDS: [Field; 23] = [
         NAME,
         IMAGE,
         MEMORY,
@@ -246,7 +251,9 @@ pub mod partition {
         ATTACHMENT_COUNT,
         FIRST_PORT,
         PORT_COUNT,
+        DEVICE_COUNT,
         RESERVED_B,
+        DEVICES,
     ];
 }
 
@@ -774,6 +781,24 @@ impl<'a> SystemView<'a> {
             if P::FLAGS.u8(r) & !FLAG_SCHEDULE_CONTROL != 0 {
                 return Err(fail("unknown flags"));
             }
+            let devices = usize::from(P::DEVICE_COUNT.u8(r));
+            if devices > pci::MAX_PARTITION_DEVICES
+                || !P::DEVICES.bytes(r)[2 * devices..].iter().all(|&b| b == 0)
+            {
+                return Err(fail(
+                    "more PCI devices than a partition may own, or unused device slots not zero",
+                ));
+            }
+            let mine = self.partition_view_devices(p);
+            let taken = (0..p).flat_map(|o| self.partition_view_devices(o));
+            if taken.clone().any(|d| mine.clone().any(|m| m == d))
+                || mine
+                    .clone()
+                    .enumerate()
+                    .any(|(i, m)| mine.clone().take(i).any(|o| o == m))
+            {
+                return Err(fail("a PCI device owned twice"));
+            }
             if HealthTable::from_bytes(P::HEALTH.bytes(r)).is_none() {
                 return Err(fail("unknown health action"));
             }
@@ -1061,6 +1086,16 @@ impl<'a> SystemView<'a> {
         }
     }
 
+    /// The PCI functions partition `i` owns (its record's device slots).
+    fn partition_view_devices(&self, i: usize) -> impl Iterator<Item = pci::Address> + Clone + 'a {
+        use partition as P;
+        let r = self.record(Table::Partition, i);
+        let count = usize::from(P::DEVICE_COUNT.u8(r)).min(pci::MAX_PARTITION_DEVICES);
+        P::DEVICES.bytes(r)[..2 * count]
+            .chunks_exact(2)
+            .map(|id| pci::Address::from_id(u16::from_le_bytes([id[0], id[1]])))
+    }
+
     pub fn partitions(&self) -> impl Iterator<Item = PartitionView<'a>> + 'a {
         let sys = *self;
         (0..sys.partition_count()).map(move |i| sys.partition(i))
@@ -1217,6 +1252,11 @@ pub struct PartitionView<'a> {
 }
 
 impl<'a> PartitionView<'a> {
+    /// The PCI functions it owns (`devices`), in configuration order.
+    pub fn devices(&self) -> impl Iterator<Item = pci::Address> + 'a {
+        self.sys.partition_view_devices(self.index)
+    }
+
     /// Its I/O port ranges (inclusive; for `io_grant(task, first, count())`).
     pub fn io_ports(&self) -> impl Iterator<Item = IoRange> + 'a {
         let sys = self.sys;
@@ -1309,6 +1349,15 @@ mod encode {
     use super::*;
     use crate::system::System;
     use std::vec::Vec;
+
+    /// A partition's device slots: the routing ids, the rest zero.
+    fn device_ids(devices: &[pci::Address]) -> [u8; 16] {
+        let mut out = [0u8; 16];
+        for (slot, d) in out.chunks_exact_mut(2).zip(devices) {
+            slot.copy_from_slice(&d.id().to_le_bytes());
+        }
+        out
+    }
 
     /// A record being written: zeroed (so reserved bytes are zero), fields set by name.
     struct Record<const N: usize>([u8; N]);
@@ -1423,6 +1472,8 @@ mod encode {
                         0
                     }),
                 )
+                .set(P::DEVICE_COUNT, p.devices.len() as u64)
+                .raw(P::DEVICES, &device_ids(&p.devices))
                 .raw(P::HEALTH, &p.health.to_bytes())
                 .index(P::FIRST_IO, io_at)
                 .index(P::IO_COUNT, p.io_ports.len())

@@ -58,6 +58,7 @@
 //! schedule_control = false        # optional: may switch the module schedule, see "Time"
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
+//! devices = ["00:03.0"]          # PCI functions it owns (bus:device.function); needs "irq"
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
 //! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
@@ -236,8 +237,22 @@
 //! scenarios feed it from `console_input`. Without it, the processes' output lines go to
 //! the log and reading the console gives end of file.
 //!
+//! **PCI devices.** `devices` names the PCI functions a partition owns by bus address
+//! (`BB:DD.F` in hex, as `lspci` prints it; an optional `0000:` in front), at most 8 a
+//! partition and none named twice in the system; the partition needs the `irq` ability.
+//! At boot syssw reads each function's configuration header through the kernel (no
+//! partition ever reaches configuration space: the kernel keeps ports 0xcf8-0xcff and never
+//! maps ECAM), turns its decoding on (bus mastering stays off until an IOMMU confines DMA)
+//! and grants exactly its BARs: I/O BARs as I/O-port grants, memory BARs (whole pages)
+//! mapped uncached at `protocol::layout::DEVICES_BASE` and after, and its INTx interrupt
+//! line (q35: IOAPIC inputs 20..23, level-triggered, masked from when it fires until the
+//! driver's `irq_ack`). The page at `DEVICES_BASE` tells the partition what it got (the
+//! records of `pci::Record`). A function that is absent at boot, a bridge, or one whose
+//! BARs or interrupt line cannot be granted alone stops only its partition: syssw logs
+//! `syssw: partition NAME not started: PCI device BB:DD.F: WHY` and starts the others.
+//!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
-//! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)
+//! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7, PCI configuration 0xcf8-0xcff) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)
 //! are refused; no two partitions may share an I/O port or an IRQ.
 //!
 //! **Budgets.** Partition memory plus shared segments must fit in `memory` minus the kernel's

@@ -282,6 +282,9 @@ pub fn kernel_port_use(range: IoRange) -> &'static str {
         0xa0 => "the slave PIC",
         0x3f8 => "COM1, the kernel log",
         0xf4 => "QEMU's isa-debug-exit",
+        0xcf8 => {
+            "PCI configuration space (no partition ever gets it; its devices are granted by `devices`)"
+        }
         _ => "the kernel",
     }
 }

@@ -77,6 +77,8 @@ pub struct Partition {
     #[serde(default)]
     pub irqs: Vec<Spanned<i64>>,
     #[serde(default)]
+    pub devices: Vec<Spanned<String>>,
+    #[serde(default)]
     pub shared: Named<String>,
     #[serde(default)]
     pub ports: Named<Port>,

@@ -56,6 +56,8 @@ pub struct Partition {
     pub schedule_control: bool,
     pub io_ports: Vec<IoRange>,
     pub irqs: IrqMask,
+    /// PCI functions it owns (`devices`), in the order given.
+    pub devices: Vec<pci::Address>,
     pub shared: Vec<Attachment>,
     pub ports: Vec<Port>,
     pub health: HealthTable,
@@ -299,6 +301,7 @@ impl System {
                     schedule_control: p.schedule_control,
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,
+                    devices: p.devices().collect(),
                     shared: p.shared().collect(),
                     ports: p
                         .ports()

@@ -356,6 +356,7 @@ impl Validator<'_, '_> {
         // (range, partition index, offset) of every I/O range and IRQ so far.
         let mut io_seen: Vec<(IoRange, usize, usize)> = Vec::new();
         let mut irq_seen: Vec<(u8, usize, usize)> = Vec::new();
+        let mut devices_seen: Vec<(pci::Address, usize, usize)> = Vec::new();
         let mut attachment_total = 0;
         let base = KeyPath::root().key("partitions");
         let entries = in_source_order(&doc.partitions)
@@ -419,6 +420,7 @@ impl Validator<'_, '_> {
             let io_ports = self.io_ports(doc, raw, &path, index, &mut io_seen);
 
             let irqs = self.irqs(doc, raw, &path, index, &mut irq_seen, abilities);
+            let devices = self.devices(doc, raw, &path, index, &mut devices_seen, abilities);
 
             let shared = self.attachments(raw, &path, segments, &mut attachment_total);
 
@@ -482,6 +484,7 @@ impl Validator<'_, '_> {
                 schedule_control: raw.schedule_control.as_ref().is_some_and(|b| *b.get_ref()),
                 io_ports,
                 irqs,
+                devices,
                 shared,
                 ports: own_ports,
                 health,
@@ -1322,6 +1325,67 @@ impl Validator<'_, '_> {
             );
         }
         irqs
+    }
+
+    /// A partition's PCI functions (`devices`): well-formed bus addresses, none named twice
+    /// in the system, at most [`pci::MAX_PARTITION_DEVICES`], and the `irq` ability to
+    /// attach their interrupts. Whether each exists is known only at boot (syssw).
+    fn devices(
+        &mut self,
+        doc: &schema::Document,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        index: usize,
+        seen: &mut Vec<(pci::Address, usize, usize)>,
+        abilities: Abilities,
+    ) -> Vec<pci::Address> {
+        let mut devices = Vec::new();
+        for (i, entry) in raw.devices.iter().enumerate() {
+            let here = path.key("devices").index(i);
+            let text = entry.get_ref();
+            let address = match pci::Address::parse(text) {
+                Ok(a) => a,
+                Err(e) => {
+                    self.error(
+                        start(entry),
+                        &here,
+                        format!("`{text}` is not a PCI bus address: {e}"),
+                    );
+                    continue;
+                }
+            };
+            if let Some(&(_, owner, at)) = seen.iter().find(|(d, _, _)| *d == address) {
+                let line = self.r.line_of(at);
+                let whose = holder(doc, owner, index);
+                self.error(
+                    start(entry),
+                    &here,
+                    format!("PCI device {address} is named twice: it is {whose} at line {line}"),
+                );
+                continue;
+            }
+            if devices.len() == pci::MAX_PARTITION_DEVICES {
+                self.error(
+                    start(entry),
+                    &here,
+                    format!(
+                        "too many PCI devices (at most {} a partition)",
+                        pci::MAX_PARTITION_DEVICES
+                    ),
+                );
+                continue;
+            }
+            seen.push((address, index, start(entry)));
+            devices.push(address);
+        }
+        if !devices.is_empty() && !abilities.contains(Abilities::IRQ) {
+            self.error(
+                start(&raw.devices[0]),
+                &path.key("devices"),
+                "PCI devices are listed but the partition lacks the `irq` ability it needs to attach their interrupts (add \"irq\" to `abilities`)",
+            );
+        }
+        devices
     }
 
     /// A partition's shared-memory attachments (`attachment_total` counts the system's).

@@ -74,6 +74,7 @@ max_priority = 140
 abilities = ["io_ports", "irq"]
 io_ports = ["0x60", "0x2f8-0x2ff", 0x378]
 irqs = [3, 7]
+devices = ["00:03.0", "00:04.0"]
 shared = { frame = "r" }
 ports.level = { kind = "sampling", direction = "out", size = 8 }
 ports.cmd = { kind = "queuing", direction = "in", size = 128, depth = 4 }
@@ -325,8 +326,8 @@ fn header_damage() {
     header::MAGIC.bytes_mut(&mut b)[0] = b'X';
     assert_eq!(decode(&b).unwrap_err(), DecodeError::BadMagic);
     let mut b = blob.clone();
-    header::VERSION.set(&mut b, 2);
-    assert_eq!(decode(&b).unwrap_err(), DecodeError::UnsupportedVersion(2));
+    header::VERSION.set(&mut b, 1);
+    assert_eq!(decode(&b).unwrap_err(), DecodeError::UnsupportedVersion(1));
     let mut b = blob.clone();
     let last = b.len() - 1;
     b[last] ^= 0x40;
@@ -452,6 +453,24 @@ fn partition_damage() {
     invalid(Table::Partition, 1, "do not tile")(damaged(|b| {
         let at = p(b, 1);
         partition::FIRST_PORT.bytes_mut(&mut b[at..])[0] += 1;
+    }));
+    invalid(Table::Partition, 2, "a PCI device owned twice")(damaged(|b| {
+        let (from, to) = (p(b, 1), p(b, 2));
+        let ids: Vec<u8> = partition::DEVICES.bytes(&b[from..])[..2].to_vec();
+        partition::DEVICES.bytes_mut(&mut b[to..])[..2].copy_from_slice(&ids);
+        partition::DEVICE_COUNT.set(&mut b[to..], 1);
+    }));
+    invalid(Table::Partition, 1, "a PCI device owned twice")(damaged(|b| {
+        let at = p(b, 1);
+        partition::DEVICES.bytes_mut(&mut b[at..])[2] = 0x18; // 00:03.0 twice
+    }));
+    invalid(Table::Partition, 1, "more PCI devices")(damaged(|b| {
+        let at = p(b, 1);
+        partition::DEVICE_COUNT.set(&mut b[at..], 9);
+    }));
+    invalid(Table::Partition, 1, "unused device slots not zero")(damaged(|b| {
+        let at = p(b, 1);
+        partition::DEVICES.bytes_mut(&mut b[at..])[15] = 1;
     }));
     invalid(Table::Header, 0, "exceed the budget")(damaged(|b| {
         let at = p(b, 2);

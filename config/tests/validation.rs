@@ -797,6 +797,104 @@ fn irq_shared_between_partitions() {
     );
 }
 
+// ---- PCI devices -------------------------------------------------------------------------
+
+#[test]
+fn pci_devices_are_kept_in_order() {
+    let src = doc(&[(
+        "# a",
+        "abilities = [\"irq\"]\ndevices = [\"00:03.0\", \"0000:00:1f.7\"]",
+    )]);
+    let s = load_ok(&src);
+    let shown: Vec<String> = s.partitions[0]
+        .devices
+        .iter()
+        .map(|d| d.to_string())
+        .collect();
+    assert_eq!(shown, ["00:03.0", "00:1f.7"]);
+    assert!(s.partitions[1].devices.is_empty());
+}
+
+#[test]
+fn malformed_pci_address() {
+    let src = doc(&[("# a", "abilities = [\"irq\"]\ndevices = [\"00:1g.0\"]")]);
+    expect_one(
+        &src,
+        "\"00:1g.0\"",
+        0,
+        "partitions.a.devices[0]",
+        "`00:1g.0` is not a PCI bus address: expected BUS:DEVICE.FUNCTION",
+    );
+    let src = doc(&[("# a", "abilities = [\"irq\"]\ndevices = [\"00:03.9\"]")]);
+    expect_one(
+        &src,
+        "\"00:03.9\"",
+        0,
+        "partitions.a.devices[0]",
+        "function 9 is beyond the 8 functions",
+    );
+}
+
+#[test]
+fn pci_device_named_twice() {
+    let src = doc(&[
+        ("# a", "abilities = [\"irq\"]\ndevices = [\"00:03.0\"]"),
+        (
+            "# b",
+            "abilities = [\"irq\"]\ndevices = [\"00:04.0\", \"0000:00:03.0\"]",
+        ),
+    ]);
+    expect_one(
+        &src,
+        "\"0000:00:03.0\"",
+        0,
+        "partitions.b.devices[1]",
+        "PCI device 00:03.0 is named twice: it is given to partition `a` at line 20",
+    );
+    let src = doc(&[(
+        "# a",
+        "abilities = [\"irq\"]\ndevices = [\"00:03.0\", \"00:03.0\"]",
+    )]);
+    expect_one(
+        &src,
+        "\"00:03.0\"",
+        1,
+        "partitions.a.devices[1]",
+        "listed already",
+    );
+}
+
+#[test]
+fn pci_devices_need_the_irq_ability() {
+    let src = doc(&[("# a", "devices = [\"00:03.0\"]")]);
+    expect_one(
+        &src,
+        "\"00:03.0\"",
+        0,
+        "partitions.a.devices",
+        "lacks the `irq` ability",
+    );
+}
+
+#[test]
+fn pci_configuration_ports_are_never_granted() {
+    for ports in [
+        "\"0xcf8-0xcff\"",
+        "0xcfc",
+        "\"0xc00-0xcf8\"",
+        "\"0xcff-0xd00\"",
+    ] {
+        let src = doc(&[("# a", &format!("io_ports = [{ports}]"))]);
+        expect_one(
+            &src,
+            ports,
+            0,
+            "partitions.a.io_ports[0]",
+            "include 0xcf8-0xcff, which the kernel keeps for PCI configuration space",
+        );
+    }
+}
+
 // ---- shared memory -----------------------------------------------------------------------
 
 const SEGMENT: &str = "[[shared_memory]]\nname = \"frame\"\nsize = \"64KiB\"\n";

@@ -792,13 +792,24 @@ fn io_grants_work_a_word_of_ports_at_a_time() {
     let grandchild = f.task(child, Abilities::all(), 100);
     let c = f.thread(child, 50);
     let (cid, gid) = (f.k.task_id(child).0, f.k.task_id(grandchild).0);
-    // The whole space above the kernel's ports, and the edges of 64-port words.
+    // The whole space above COM1 but for PCI configuration (the kernel's), and the edges
+    // of 64-port words.
     assert_eq!(
-        f.sys(root, Call::IoGrant, [cid, 0x400, 0xfc00, 0, 0, 0]),
+        f.sys(root, Call::IoGrant, [cid, 0x400, 0xcf8 - 0x400, 0, 0, 0]),
         OK
     );
-    assert!(f.k.holds_ports(child, 0x400, 0x1_0000));
+    assert_eq!(
+        f.sys(root, Call::IoGrant, [cid, 0xcf8, 1, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "configuration space is the kernel's"
+    );
+    assert_eq!(
+        f.sys(root, Call::IoGrant, [cid, 0xd00, 0x1_0000 - 0xd00, 0, 0, 0]),
+        OK
+    );
+    assert!(f.k.holds_ports(child, 0x400, 0xcf8) && f.k.holds_ports(child, 0xd00, 0x1_0000));
     assert!(!f.k.holds_ports(child, 0x3ff, 0x401));
+    assert!(!f.k.holds_ports(child, 0xcf0, 0xd00));
     for (first, count) in [
         (0x43f, 2),
         (0x480, 64),
@@ -823,7 +834,7 @@ fn io_grants_work_a_word_of_ports_at_a_time() {
         .iter()
         .any(|&(first, count)| (first..first + count).contains(&port))
     };
-    for port in 0x400..0x1_0000 {
+    for port in (0x400..0xcf8).chain(0xd00..0x1_0000) {
         assert_eq!(
             f.k.holds_ports(grandchild, port, port + 1),
             granted(port),
@@ -1395,4 +1406,76 @@ proptest::proptest! {
             proptest::prop_assert!(a.is_disjoint(&b), "after call {}: shared frames {:x?}", number, a.intersection(&b).collect::<Vec<_>>());
         }
     }
+}
+
+#[test]
+fn device_registers_are_mapped_uncached_and_never_touched_by_the_kernel() {
+    use abi::boot::{MemoryKind, MemoryRegion};
+    static MAP: [MemoryRegion; 1] = [MemoryRegion {
+        start: 0,
+        pages: 0x2_0000, // 512 MiB of RAM
+        kind: MemoryKind::USABLE,
+        _reserved: 0,
+    }];
+    crate::mem::MEMORY_MAP.call_once(|| &MAP);
+    let mut f = Fixture::new();
+    let root = f.thread(ROOT, 200);
+    let child = f.task(ROOT, Abilities::all(), 100);
+    let c = f.thread(child, 50);
+    let cid = f.k.task_id(child).0;
+    let rw = PageRights::WRITE.bits();
+    for (physical, why) in [
+        (0x1000_0000, "RAM the firmware lists"),
+        (0x8_0000, "the first MiB"),
+        (0xfee0_0000, "the local APIC"),
+        (0xfec0_0000, "the IOAPIC"),
+    ] {
+        assert_eq!(
+            f.sys(root, Call::MapDevice, [cid, physical, 0x60_0000, 1, rw, 0]),
+            err(Error::BadAddress),
+            "{why}"
+        );
+    }
+    assert_eq!(
+        f.sys(
+            root,
+            Call::MapDevice,
+            [cid, 0xc000_0000, 0x60_0000, 2, rw, 0]
+        ),
+        OK
+    );
+    let leaf = f.k.tasks[child].space().translate(0x60_0000);
+    assert_eq!(leaf, None, "invisible to the kernel's user-memory accesses");
+    // Neither a source of another mapping nor a buffer of a call.
+    let grandchild = f.task(child, Abilities::all(), 90);
+    let gid = f.k.task_id(grandchild).0;
+    assert_eq!(
+        f.sys(c, Call::Map, [gid, 0x60_0000, 0x70_0000, 1, 0, 0]),
+        err(Error::BadAddress)
+    );
+    assert_eq!(
+        f.sys(c, Call::DebugWrite, [0x60_0000, 8, 0, 0, 0, 0]),
+        err(Error::BadAddress)
+    );
+    // The same frames again: the destination is taken.
+    assert_eq!(
+        f.sys(
+            root,
+            Call::MapDevice,
+            [cid, 0xc000_0000, 0x60_1000, 1, rw, 0]
+        ),
+        err(Error::AlreadyMapped)
+    );
+    // Only the root task reaches configuration space (host tests have no bus: all ones).
+    assert_eq!(
+        f.sys(c, Call::PciConfig, [0x1800, 0, 0, 0, 0, 0]),
+        err(Error::NotPermitted)
+    );
+    assert_eq!(
+        f.sys(root, Call::PciConfig, [0x1802, 0, 0, 0, 0, 0]),
+        err(Error::InvalidArgument),
+        "unaligned"
+    );
+    assert_eq!(f.sys(root, Call::PciConfig, [0x1800, 0, 0, 0, 0, 0]), OK);
+    f.k.destroy_task(child, u64::MAX);
 }

@@ -99,6 +99,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         )
     };
     log_memory_summary(regions);
+    crate::mem::MEMORY_MAP.call_once(|| regions);
     let mut user_memory = [PhysRegion::default(); ROOT_INFO_MAX_REGIONS];
     let mut frames = FrameAllocator::new(regions, FRAME_FLOOR);
     // The kernel keeps a pool for page tables (1/8 of RAM, 16..128 MiB); the rest is user

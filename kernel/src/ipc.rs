@@ -177,7 +177,7 @@ impl Kernel {
                         Some((_, have)) if have.contains(rights) => {}
                         _ => return Err(Blame::Sender(Error::BadAddress)),
                     }
-                    if r_space.translate(dest).is_some() {
+                    if r_space.is_mapped(dest) {
                         return Err(Blame::Sender(Error::AlreadyMapped));
                     }
                     dest += PAGE_SIZE;

@@ -51,6 +51,8 @@ pub enum Source {
     Virtual(u64),
     /// Physical memory handed to the root task.
     Physical(u64),
+    /// A device's registers ([`crate::mem::is_device_memory`]), mapped uncached.
+    Device(u64),
 }
 
 pub struct Kernel {
@@ -153,17 +155,20 @@ impl Kernel {
                         _ => Err(Error::BadAddress),
                     }
                 }
-                Source::Physical(base) => Ok(base + i * PAGE_SIZE),
+                Source::Physical(base) | Source::Device(base) => Ok(base + i * PAGE_SIZE),
             }
         };
         match source {
             Source::Virtual(base) if !is_user_range(base, pages) => {
                 return Err(Error::InvalidArgument);
             }
-            Source::Physical(base) if base % PAGE_SIZE != 0 => {
+            Source::Physical(base) | Source::Device(base) if base % PAGE_SIZE != 0 => {
                 return Err(Error::InvalidArgument);
             }
             Source::Physical(base) if !self.is_user_memory(base, pages) => {
+                return Err(Error::BadAddress);
+            }
+            Source::Device(base) if !crate::mem::is_device_memory(base, pages) => {
                 return Err(Error::BadAddress);
             }
             _ => {}
@@ -171,16 +176,19 @@ impl Kernel {
         let space = self.tasks[target].space();
         for i in 0..pages {
             frame_of(self, i)?;
-            if space.translate(destination + i * PAGE_SIZE).is_some() {
+            if space.is_mapped(destination + i * PAGE_SIZE) {
                 return Err(Error::AlreadyMapped);
             }
         }
         self.charge_tables(target, destination, pages)?;
         for i in 0..pages {
-            let frame = frame_of(self, i)?;
-            self.tasks[target]
-                .map_page(destination + i * PAGE_SIZE, frame, rights)
-                .expect("checked and charged");
+            let (frame, at) = (frame_of(self, i)?, destination + i * PAGE_SIZE);
+            let task = &mut self.tasks[target];
+            match source {
+                Source::Device(_) => task.map_device_page(at, frame, rights),
+                _ => task.map_page(at, frame, rights),
+            }
+            .expect("checked and charged");
         }
         Ok(())
     }

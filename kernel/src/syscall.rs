@@ -69,14 +69,15 @@ handlers! {
     ThreadCreate => thread_create, ThreadStart => thread_start, ThreadSuspend => thread_suspend,
     ThreadResume => thread_resume, ThreadKill => thread_kill, ThreadSet => thread_set,
     ThreadSelf => thread_self, ThreadFpu => thread_fpu,
-    ThreadInterrupt => thread_interrupt, Map => map, MapPhysical => map_physical, Unmap => unmap,
+    ThreadInterrupt => thread_interrupt, Map => map, MapPhysical => map_physical,
+    MapDevice => map_device, Unmap => unmap,
     Protect => protect, Send => send, Receive => receive, Call => ipc_call,
     ReplyWait => reply_wait, Reply => reply, NotifySignal => notify_signal,
     NotifyWait => notify_wait, RpCreate => rp_create, RpInfo => rp_info,
     SetHealthMonitor => set_health_monitor, ScheduleSet => schedule_set,
     ScheduleSwitch => schedule_switch, PartitionInfo => partition_info, IoGrant => io_grant,
     IrqGrant => irq_grant, IrqAttach => irq_attach, IrqWait => irq_wait, IrqAck => irq_ack,
-    IrqDetach => irq_detach,
+    IrqDetach => irq_detach, PciConfig => pci_config,
 }
 
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
@@ -397,6 +398,28 @@ fn map(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 
 fn map_physical(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     map_from(k, t, r, Abilities::PHYSICAL_MEMORY, Source::Physical)
+}
+
+fn map_device(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    map_from(k, t, r, Abilities::PHYSICAL_MEMORY, Source::Device)
+}
+
+fn pci_config(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    let task = task_of(k, t);
+    k.require(task, Abilities::PHYSICAL_MEMORY)?;
+    if task != TaskIdx::ROOT {
+        return Err(Error::NotPermitted);
+    }
+    let a = args::PciConfig::decode(r);
+    if a.address >> 24 != 0 || !a.address.is_multiple_of(4) || a.write > 1 || a.value >> 32 != 0 {
+        return Err(Error::InvalidArgument);
+    }
+    let value = crate::arch::pci::config(a.address as u32, a.value as u32, a.write == 1);
+    let result = results::PciConfig {
+        value: u64::from(value),
+    };
+    k.threads[t].set_results(|r| result.encode_into(r));
+    Ok(Next::Return)
 }
 
 fn unmap(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {

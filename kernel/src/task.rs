@@ -142,6 +142,15 @@ impl Task {
         self.space.map(virt, frame, rights)
     }
 
+    pub fn map_device_page(
+        &mut self,
+        virt: u64,
+        frame: u64,
+        rights: PageRights,
+    ) -> Result<(), MapError> {
+        self.space.map_device(virt, frame, rights)
+    }
+
     pub fn unmap_page(&mut self, virt: u64) -> Option<u64> {
         self.space.unmap(virt)
     }

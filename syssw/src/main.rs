@@ -20,6 +20,7 @@
 #![no_std]
 #![no_main]
 
+mod devices;
 mod partitions;
 mod restart;
 mod server;
@@ -76,23 +77,44 @@ fn main(image_base: u64, image_len: u64) {
     let mut loader = partitions::Loader::new(spawner, system, me)
         .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
     let mut placed = [const { None }; config::model::MAX_PARTITIONS];
+    let mut stopped = 0;
     for p in system.partitions() {
         let entry = image.entries().find(|e| p.is_image_entry(e.name));
         let data = image.entries().find(|e| p.is_data_entry(e.name));
         let placement = entry
             .ok_or(partitions::LoadError::NoImage)
-            .and_then(|e| loader.place(&p, e.data, data.map_or(&[][..], |d| d.data)))
-            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+            .and_then(|e| loader.place(&p, e.data, data.map_or(&[][..], |d| d.data)));
+        let placement = match placement {
+            Ok(placement) => placement,
+            Err(partitions::LoadError::Devices(problem)) => {
+                placed[p.index] = Some(not_started(p.name, &problem));
+                stopped += 1;
+                continue;
+            }
+            Err(e) => reject(format_args!("partition {}: {e}", p.name)),
+        };
+        if let Some(devices) = &placement.devices {
+            devices::log(p.name, devices);
+        }
         let used = placement.used;
         let stack_guard = placement.stack_guard.clone();
         let mode = syssw_core::mode::PartitionMode::boot();
-        let instance = loader
-            .instantiate(
-                p.index,
-                partitions::Start::Boot,
-                mode.start_condition() as u64,
-            )
-            .unwrap_or_else(|e| reject(format_args!("partition {}: {e}", p.name)));
+        let instance = loader.instantiate(
+            p.index,
+            partitions::Start::Boot,
+            mode.start_condition() as u64,
+        );
+        let instance = match instance {
+            Ok(instance) => instance,
+            // A device's grant the kernel refused (a BAR over its ports or memory, a quota
+            // too small for the BARs' page tables): again only this partition stays stopped.
+            Err(partitions::LoadError::Devices(problem)) => {
+                placed[p.index] = Some(not_started(p.name, &problem));
+                stopped += 1;
+                continue;
+            }
+            Err(e) => reject(format_args!("partition {}: {e}", p.name)),
+        };
         placed[p.index] = Some(server::Partition {
             stack_guard,
             instance: Some(instance),
@@ -149,12 +171,23 @@ fn main(image_base: u64, image_len: u64) {
     let first = (system.schedule_count() > 0).then(|| system.schedule(0));
     println!(
         "syssw: {} partitions started, schedule {} (major frame {} us, {} windows)",
-        system.partition_count(),
+        system.partition_count() - stopped,
         first.map_or("none", |s| s.name),
         first.map_or(0, |s| s.major_frame / 1000),
         first.map_or(0, |s| s.window_count())
     );
     server.run()
+}
+
+/// A partition whose PCI devices cannot be granted: logged and left IDLE (never started);
+/// the others start.
+fn not_started(name: &str, problem: &devices::DeviceProblem) -> server::Partition {
+    println!("syssw: partition {name} not started: {problem}");
+    server::Partition {
+        stack_guard: 0..0,
+        instance: None,
+        mode: syssw_core::mode::PartitionMode::never_started(),
+    }
 }
 
 fn log_partition(p: &config::binary::PartitionView, used: u64) {

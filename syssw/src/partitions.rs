@@ -32,10 +32,18 @@ const PAGE: u64 = 4096;
 pub enum LoadError {
     NoImage,
     Image(user_rt::abi::elf::ElfError),
-    TooBig { needed: u64, memory: u64 },
-    KernelMemory { needed: u64, quota: u64 },
+    TooBig {
+        needed: u64,
+        memory: u64,
+    },
+    KernelMemory {
+        needed: u64,
+        quota: u64,
+    },
     Spawn(SpawnError),
     Kernel(&'static str, Error),
+    /// Its PCI devices cannot be granted: only this partition stays stopped.
+    Devices(crate::devices::DeviceProblem),
 }
 
 impl core::fmt::Display for LoadError {
@@ -57,6 +65,7 @@ impl core::fmt::Display for LoadError {
             ),
             Self::Spawn(e) => write!(f, "out of memory or addresses: {e:?}"),
             Self::Kernel(call, e) => write!(f, "{call} failed: {e:?}"),
+            Self::Devices(problem) => write!(f, "{problem}"),
         }
     }
 }
@@ -84,6 +93,8 @@ pub struct Placement {
     pub used: u64,
     /// The unmapped page below the stack: a fault there is a stack overflow.
     pub stack_guard: core::ops::Range<u64>,
+    /// Its PCI functions, probed and enabled at boot.
+    pub devices: Option<crate::devices::Devices>,
 }
 
 const MAX_SEGMENTS: usize = budget::MAX_IMAGE_SEGMENTS;
@@ -104,6 +115,8 @@ pub struct Loader {
     shared: [u64; MAX_SHARED],
     /// syssw's server thread (named in every start record).
     server: ThreadId,
+    /// Interrupt lines partitions hold: their `irqs` and their devices' lines so far.
+    lines: u32,
 }
 
 impl Loader {
@@ -126,6 +139,7 @@ impl Loader {
             placed: [const { None }; MAX_PARTITIONS],
             shared,
             server,
+            lines: system.partitions().fold(0, |m, p| m | p.irqs.0),
         })
     }
 
@@ -141,8 +155,13 @@ impl Loader {
         elf: &'static [u8],
         data: &'static [u8],
     ) -> Result<&Placement, LoadError> {
+        let devices = crate::devices::prepare(&mut self.spawner, p.devices(), &mut self.lines)
+            .map_err(LoadError::Devices)?;
         let placement = place(&mut self.spawner, &self.system, p, elf, data)?;
-        Ok(self.placed[p.index].insert(placement))
+        Ok(self.placed[p.index].insert(Placement {
+            devices,
+            ..placement
+        }))
     }
 
     /// A new instance of placed partition `index`; see [`instantiate`]. On an error nothing
@@ -276,6 +295,7 @@ fn place(
         pool: (pool_frames, budget.pool),
         used: budget.memory,
         stack_guard: stack_base - PAGE..stack_base,
+        devices: None,
     })
 }
 
@@ -382,6 +402,9 @@ fn instantiate(
     }
     for line in p.irqs.lines() {
         kernel("irq_grant", sys::irq_grant(task, line as u64))?;
+    }
+    if let Some(devices) = &placed.devices {
+        crate::devices::grant(devices, task).map_err(LoadError::Devices)?;
     }
     for a in p.shared() {
         let size = system.segment(a.segment).size;

@@ -26,6 +26,7 @@ pub fn boot(name: &str) -> Outcome {
             work_dir: dir.join("state"),
             deterministic_time: s.manifest.deterministic_time,
             done_when: s.manifest.done_when.clone(),
+            extra_args: s.manifest.qemu_args.clone(),
             com2: if s.manifest.console_input.is_empty() {
                 qemu::Com2::Unconnected
             } else {

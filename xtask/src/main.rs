@@ -227,6 +227,14 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
             (None, Some(_)) => " (stop with Ctrl-A X)".into(),
         }
     );
+    let forwards: Vec<String> = qemu::RUN_FORWARDS
+        .iter()
+        .map(|(host, guest)| format!("127.0.0.1:{host} -> {guest}"))
+        .collect();
+    eprintln!(
+        "xtask: NIC: virtio-net at PCI 00:03.0 on QEMU's user network, TCP forwarded (host only): {}",
+        forwards.join(", ")
+    );
     if let Some(partition) = &console {
         eprintln!(
             "xtask: this terminal is the console of guest `{partition}` (COM2; Ctrl-A X quits QEMU, Ctrl-A C its monitor); the kernel log (COM1) goes to {}",
@@ -247,6 +255,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
                 qemu::Com2::Unconnected
             },
             done_when: Vec::new(),
+            extra_args: qemu::nic(qemu::RUN_FORWARDS),
         },
     )?;
     let crashed = outcome
@@ -414,6 +423,7 @@ fn boot_bench_image(
             deterministic_time,
             com2: qemu::Com2::Unconnected,
             done_when: Vec::new(),
+            extra_args: Vec::new(),
         },
     )?;
     if !outcome.succeeded() {

@@ -163,6 +163,7 @@ pub fn metrics(
             deterministic_time,
             com2: qemu::Com2::Unconnected,
             done_when: Vec::new(),
+            extra_args: Vec::new(),
         },
     )?;
     let status = outcome

@@ -37,7 +37,30 @@ pub struct RunOptions {
     pub com2: Com2,
     /// Stop QEMU as soon as the log has shown each of these texts ([`Ending::Done`]).
     pub done_when: Vec<String>,
+    /// More QEMU arguments: devices such as the NIC ([`nic`]).
+    pub extra_args: Vec<String>,
 }
+
+/// The NIC of `cargo xtask run`: a virtio-net function at PCI address 00:03.0 (its INTA
+/// reaches IOAPIC input 23 on q35) on QEMU's user-mode network, each of `forwards`
+/// (host port, guest port) a TCP forward that listens on 127.0.0.1 only, never on
+/// another interface of the host.
+pub fn nic(forwards: &[(u16, u16)]) -> Vec<String> {
+    let mut netdev = String::from("user,id=net0");
+    for (host, guest) in forwards {
+        netdev.push_str(&format!(",hostfwd=tcp:127.0.0.1:{host}-:{guest}"));
+    }
+    vec![
+        "-netdev".into(),
+        netdev,
+        "-device".into(),
+        "virtio-net-pci,netdev=net0,addr=03.0".into(),
+    ]
+}
+
+/// What `cargo xtask run` forwards to the NIC (host port on 127.0.0.1, guest port): the
+/// soft-PLC's Modbus/TCP server and an HTTP port, documented in docs/commands.md.
+pub const RUN_FORWARDS: &[(u16, u16)] = &[(10502, 502), (10080, 80)];
 
 /// Where COM2 goes.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -388,6 +411,7 @@ fn launch(qemu: &Qemu, media: Media, options: &RunOptions) -> Result<Outcome> {
         &options.com2,
         &options.work_dir,
     );
+    cmd.args(&options.extra_args);
     if terminal {
         cmd.stdin(Stdio::inherit()).stdout(Stdio::inherit());
     } else {
@@ -522,4 +546,27 @@ fn spawn_line_reader(stdout: std::process::ChildStdout, tx: mpsc::Sender<String>
             buf.clear();
         }
     });
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_nic_forwards_listen_on_the_loopback_address_only() {
+        let args = nic(RUN_FORWARDS);
+        assert_eq!(args[0], "-netdev");
+        let forwards: Vec<&str> = args[1]
+            .split(',')
+            .filter(|a| a.starts_with("hostfwd="))
+            .collect();
+        assert_eq!(forwards.len(), RUN_FORWARDS.len());
+        assert!(
+            forwards
+                .iter()
+                .all(|f| f.starts_with("hostfwd=tcp:127.0.0.1:"))
+        );
+        assert!(args[1].contains("hostfwd=tcp:127.0.0.1:10502-:502"));
+        assert_eq!(args[3], "virtio-net-pci,netdev=net0,addr=03.0");
+    }
 }

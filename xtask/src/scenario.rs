@@ -21,6 +21,8 @@
 //!                               # piece once the output grew and then stayed quiet for
 //!                               # `qemu::QUIET` (a prompt came); the test reads COM2's
 //!                               # output as `Outcome::console`
+//! qemu_args = ["-device", "virtio-net-pci,addr=03.0,netdev=n", "-netdev", "user,id=n,restrict=on"]
+//!                               # optional: more QEMU arguments (devices a partition owns)
 //! console_start = "built-in shell"   # with console_input: typing starts once the
 //!                               # output shows this (the firmware and the loader write
 //!                               # to COM2 first); default "": at the first quiet output
@@ -56,6 +58,8 @@ pub struct Manifest {
     pub console_input: Vec<String>,
     #[serde(default)]
     pub console_start: String,
+    #[serde(default)]
+    pub qemu_args: Vec<String>,
 }
 
 impl Manifest {

@@ -171,8 +171,8 @@ call_args! {
     ThreadSet { thread: ThreadId = rdi, attribute: u64 = rsi, value: u64 = rdx }
     /// `thread_fpu`.
     ThreadFpu { thread: ThreadId = rdi, buffer: u64 = rsi, write: u64 = rdx }
-    /// `map` (`source` = a page of the caller) and `map_physical` (`source` = a physical
-    /// address).
+    /// `map` (`source` = a page of the caller), `map_physical` and `map_device` (`source` =
+    /// a physical address).
     Map { task: TaskId = rdi, source: u64 = rsi, destination: u64 = rdx, pages: u64 = r10, rights: u64 = r8 }
     /// `unmap`.
     Unmap { task: TaskId = rdi, address: u64 = rsi, pages: u64 = rdx }
@@ -208,6 +208,8 @@ call_args! {
     IrqWait { line: u64 = rdi, timeout: u64 = rsi }
     /// `irq_ack`, `irq_detach`.
     IrqLine { line: u64 = rdi }
+    /// `pci_config`.
+    PciConfig { address: u64 = rdi, value: u64 = rsi, write: u64 = rdx }
 }
 
 /// Thread and task counts of a resource partition, 16 bits each in one register.
@@ -263,6 +265,8 @@ call_results! {
     ScheduleSwitch { at: u64 = rdi }
     /// `partition_info`: see [`Call::PartitionInfo`](crate::syscall::Call::PartitionInfo).
     PartitionInfo { active: u64 = rdi, window_start: u64 = rsi, window_length: u64 = rdx, cpu_ns: u64 = r10, idle_ns: u64 = r8, frames: u64 = r9 }
+    /// `pci_config`: the dword read (0 after a write).
+    PciConfig { value: u64 = rdi }
 }
 
 #[cfg(test)]

@@ -173,6 +173,14 @@ codes::code_enum! {
         /// task ([`RootInfo`](crate::root::RootInfo)). Ability: `PHYSICAL_MEMORY`. Errors as
         /// `map`, with `BadAddress` for frames outside the handed-out memory.
         MapPhysical = 31 => "map_physical",
+        /// `map_device(task, physical, destination, pages, rights)`: like `map_physical`, for
+        /// the registers of a device (a PCI memory BAR): frames that are no memory the
+        /// firmware lists (RAM, firmware, ACPI, flash), not below 1 MiB and not the
+        /// interrupt controllers' and timer's 0xfec00000..0xff000000. Mapped uncached (PCD and
+        /// PWT: PAT entry 3, UC). Such a page is never the source of `map`, a map item or a
+        /// buffer of any call (`BadAddress`): the kernel never touches device registers for
+        /// user space. Ability: `PHYSICAL_MEMORY`. Errors as `map_physical`.
+        MapDevice = 34 => "map_device",
         /// `unmap(task, address, pages)`: removes the mappings of `pages` pages (unmapped ones
         /// are skipped). Ability: `MAP`. Errors: `InvalidArgument`, `NoSuchObject`,
         /// `NotPermitted`.
@@ -289,6 +297,16 @@ codes::code_enum! {
         IrqAck = 84 => "irq_ack",
         /// `irq_detach(line)`: masks the line and releases it. Errors: as `irq_ack`.
         IrqDetach = 85 => "irq_detach",
+
+        /// `pci_config(address, value, write) -> rdi = value`: one dword of PCI
+        /// configuration space through ports 0xcf8/0xcfc (which the kernel keeps, see
+        /// [`KERNEL_PORTS`]): `address` = bus << 16 | device << 11 | function << 8 |
+        /// register (dword-aligned, < 256); reads (`write` = 0) return the dword, writes
+        /// (`write` = 1) store `value`. For syssw, which grants devices' BARs to partitions;
+        /// nobody else may reach configuration space. Ability: `PHYSICAL_MEMORY`, caller in
+        /// the root task. Errors: `NotPermitted` (not the root task), `InvalidArgument`
+        /// (address beyond 24 bits or unaligned, `write` > 1, `value` beyond 32 bits).
+        PciConfig = 86 => "pci_config",
     }
 }
 
@@ -298,15 +316,18 @@ pub const IRQ_LINES: u64 = 24;
 /// (COM1, the kernel log).
 pub const KERNEL_IRQS: [u64; 3] = [0, 2, 4];
 
-/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit). QEMU's
-/// isa-debug-exit device decodes 0xf4..=0xf7 (`iosize=0x04`): a write to any of them ends
-/// the whole run, so all four are the kernel's.
-pub const KERNEL_PORTS: [(u16, u16); 5] = [
+/// Port ranges the kernel keeps for itself (PIC, PIT, COM1 log, QEMU debug exit, PCI
+/// configuration space). QEMU's isa-debug-exit device decodes 0xf4..=0xf7 (`iosize=0x04`):
+/// a write to any of them ends the whole run, so all four are the kernel's. Whoever holds
+/// 0xcf8..=0xcff can reprogram every PCI device (move BARs over another partition's
+/// memory, turn on DMA): configuration space is reached only through `pci_config`.
+pub const KERNEL_PORTS: [(u16, u16); 6] = [
     (0x20, 0x21),
     (0x40, 0x43),
     (0xa0, 0xa1),
     (0x3f8, 0x3ff),
     (0xf4, 0xf7),
+    (0xcf8, 0xcff),
 ];
 
 /// Number of time partitions (0 = background).

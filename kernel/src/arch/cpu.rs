@@ -18,6 +18,11 @@ pub fn outl(port: u16, value: u32) {
     unsafe { Port::<u32>::new(port).write(value) }
 }
 
+pub fn inl(port: u16) -> u32 {
+    // SAFETY: as for `inb`.
+    unsafe { Port::<u32>::new(port).read() }
+}
+
 pub fn rdtsc() -> u64 {
     // SAFETY: RDTSC only reads the time-stamp counter.
     unsafe { core::arch::x86_64::_rdtsc() }

@@ -9,6 +9,7 @@ pub mod hpet;
 pub mod idt;
 pub mod ioapic;
 pub mod lapic;
+pub mod pci;
 pub mod pic;
 pub mod pit;
 pub mod serial;

@@ -47,6 +47,33 @@ pub unsafe fn free_frame(frame: u64) {
     }
 }
 
+/// The firmware's memory map, kept from boot (its BOOT_INFO frames are never reused).
+pub static MEMORY_MAP: spin::Once<&'static [abi::boot::MemoryRegion]> = spin::Once::new();
+
+/// The local APIC's, IOAPIC's and HPET's fixed window of the PC platform.
+const INTERRUPT_WINDOW: (u64, u64) = (0xfec0_0000, 0xff00_0000);
+
+/// True if the pages from `start` can only be device registers: above the first MiB, below
+/// 64 TiB, outside the interrupt controllers' window and outside every region of the
+/// firmware's memory map, whatever its kind (RAM, ACPI, firmware, reserved such as ECAM,
+/// flash). False until the memory map is known.
+pub fn is_device_memory(start: u64, pages: u64) -> bool {
+    let Some(end) = pages
+        .checked_mul(PAGE_SIZE)
+        .and_then(|len| start.checked_add(len))
+    else {
+        return false;
+    };
+    let overlaps = |(lo, hi): (u64, u64)| start < hi && lo < end;
+    start >= 1 << 20
+        && end <= 1 << 46
+        && !overlaps(INTERRUPT_WINDOW)
+        && MEMORY_MAP.get().is_some_and(|map| {
+            !map.iter()
+                .any(|r| overlaps((r.start, r.start + r.pages * PAGE_SIZE)))
+        })
+}
+
 /// Frames the kernel allocator can still hand out.
 pub fn free_frames() -> u64 {
     crate::boot::FRAMES

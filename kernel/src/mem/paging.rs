@@ -10,7 +10,13 @@ use abi::syscall::{PageRights, USER_END, USER_MIN};
 const PRESENT: u64 = 1;
 const WRITABLE: u64 = 1 << 1;
 const USER: u64 = 1 << 2;
+const WRITE_THROUGH: u64 = 1 << 3;
+const CACHE_DISABLE: u64 = 1 << 4;
 const HUGE: u64 = 1 << 7;
+/// Software bit: the page is a device's registers (`map_device`), never RAM. `translate`
+/// does not see it, so the kernel never reads or writes it for user space and it is never
+/// the source of another mapping.
+const DEVICE: u64 = 1 << 9;
 const NO_EXECUTE: u64 = 1 << 63;
 const ADDRESS: u64 = 0x000f_ffff_ffff_f000;
 
@@ -162,6 +168,17 @@ impl AddressSpace {
 
     /// Maps the user page `virt` to frame `phys`.
     pub fn map(&mut self, virt: u64, phys: u64, rights: PageRights) -> Result<(), MapError> {
+        self.map_leaf(virt, phys, leaf_bits(rights))
+    }
+
+    /// Maps the user page `virt` to device registers at `phys`, uncached (PCD | PWT: PAT
+    /// entry 3, UC, which the kernel leaves as the CPU resets it).
+    pub fn map_device(&mut self, virt: u64, phys: u64, rights: PageRights) -> Result<(), MapError> {
+        let bits = leaf_bits(rights) | DEVICE | CACHE_DISABLE | WRITE_THROUGH;
+        self.map_leaf(virt, phys, bits)
+    }
+
+    fn map_leaf(&mut self, virt: u64, phys: u64, bits: u64) -> Result<(), MapError> {
         if !is_user_range(virt, 1) {
             return Err(MapError::NotUserAddress);
         }
@@ -169,7 +186,7 @@ impl AddressSpace {
         if *leaf & PRESENT != 0 {
             return Err(MapError::AlreadyMapped);
         }
-        *leaf = (phys & ADDRESS) | leaf_bits(rights);
+        *leaf = (phys & ADDRESS) | bits;
         Ok(())
     }
 
@@ -198,8 +215,23 @@ impl AddressSpace {
         true
     }
 
-    /// The frame and rights behind user address `virt`, if it is a present user page.
+    /// The frame and rights behind user address `virt`, if it is a present user page of
+    /// memory (device registers are not: the kernel never accesses them for user space).
     pub fn translate(&self, virt: u64) -> Option<(u64, PageRights)> {
+        let entry = self.user_leaf(virt).filter(|e| e & DEVICE == 0)?;
+        let mut rights = PageRights::empty();
+        rights.set(PageRights::WRITE, entry & WRITABLE != 0);
+        rights.set(PageRights::EXECUTE, entry & NO_EXECUTE == 0);
+        Some((entry & ADDRESS, rights))
+    }
+
+    /// True if user address `virt` is mapped, to memory or to device registers.
+    pub fn is_mapped(&self, virt: u64) -> bool {
+        self.user_leaf(virt).is_some()
+    }
+
+    /// The present user leaf entry of `virt`.
+    fn user_leaf(&self, virt: u64) -> Option<u64> {
         if self.root == 0 || !(USER_MIN..USER_END).contains(&virt) {
             return None;
         }
@@ -211,10 +243,7 @@ impl AddressSpace {
                 return None;
             }
             if level == 0 {
-                let mut rights = PageRights::empty();
-                rights.set(PageRights::WRITE, entry & WRITABLE != 0);
-                rights.set(PageRights::EXECUTE, entry & NO_EXECUTE == 0);
-                return Some((entry & ADDRESS, rights));
+                return Some(entry);
             }
             t = entry & ADDRESS;
         }

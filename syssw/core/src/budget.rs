@@ -14,13 +14,15 @@
 use abi::elf::{ElfError, load_segments};
 use abi::syscall::{Abilities, USER_MIN};
 use config::binary::{PartitionView, SystemView};
-use protocol::layout::{DATA_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address};
+use protocol::layout::{
+    DATA_BASE, DEVICES_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address,
+};
 
 const PAGE: u64 = 4096;
 /// Loadable segments an image may have (syssw's limit).
 pub const MAX_IMAGE_SEGMENTS: usize = 16;
-/// Regions mapped at start: image segments, stack, data entry, shared segments.
-const MAX_REGIONS: usize = MAX_IMAGE_SEGMENTS + 2 + config::model::MAX_SEGMENTS;
+/// Regions mapped at start: image segments, stack, data entry, device page, shared segments.
+const MAX_REGIONS: usize = MAX_IMAGE_SEGMENTS + 3 + config::model::MAX_SEGMENTS;
 /// Pages of the top-level table (charged by `task_create`) and of the I/O bitmap.
 const TOP_TABLE_PAGES: u64 = 1;
 const IO_BITMAP_PAGES: u64 = 2;
@@ -73,6 +75,11 @@ pub fn start_budget(
     } else {
         0
     };
+    if p.devices().next().is_some() {
+        // The device page; memory BARs whose page tables go beyond it are known only at
+        // boot (syssw then refuses the partition if its quota falls short).
+        regions.add(DEVICES_BASE, 1);
+    }
     regions.add(POOL_BASE, pool_pages);
     regions.add(POOL_EXEC_BASE, pool_pages);
     let io = if p.io_ports().next().is_some() {
@@ -208,6 +215,24 @@ mod tests {
         assert_eq!(
             without.kernel_memory,
             (TOP_TABLE_PAGES + no_pool.page_tables() + tables) * PAGE
+        );
+    }
+
+    #[test]
+    fn the_device_page_of_a_partition_with_devices_costs_its_page_tables() {
+        let budget = |edit: &str| {
+            let blob = crate::testsys::blob(&crate::testsys::with(&[("# a", edit)]));
+            let system = config::decode(&blob).unwrap();
+            let a = system.partition(0);
+            start_budget(&system, &a, &elf(0x20_0000, 3 * PAGE), 0).unwrap()
+        };
+        let without = budget("abilities = [\"irq\"]");
+        let with = budget("abilities = [\"irq\"]\ndevices = [\"00:03.0\"]");
+        // DEVICES_BASE has a 512 GiB span of its own: one table per level.
+        assert_eq!(with.kernel_memory, without.kernel_memory + 3 * PAGE);
+        assert_eq!(
+            with.memory, without.memory,
+            "syssw's page, not the partition's memory"
         );
     }
 

@@ -74,6 +74,16 @@ impl PartitionMode {
         Self::starting(StartCondition::NormalStart)
     }
 
+    /// A partition that was never started (IDLE from boot): its configuration could not be
+    /// carried out (a PCI device missing at boot).
+    pub const fn never_started() -> Self {
+        PartitionMode {
+            mode: OperatingMode::Idle,
+            start_condition: StartCondition::NormalStart,
+            restarts: 0,
+        }
+    }
+
     /// A partition cold-starting for `condition` (e.g. HM_MODULE_RESTART after a module
     /// restart).
     pub const fn starting(condition: StartCondition) -> Self {
@@ -175,6 +185,14 @@ mod tests {
             mode,
             ..PartitionMode::boot()
         }
+    }
+
+    #[test]
+    fn a_partition_never_started_is_idle_and_stays_so() {
+        let mut m = PartitionMode::never_started();
+        assert_eq!(m.mode(), M::Idle);
+        assert_eq!(m.request(M::Normal), Err(ReturnCode::InvalidMode));
+        assert_eq!(m.mode(), M::Idle);
     }
 
     #[test]

@@ -8,6 +8,8 @@
 //! | its memory pool: the rest of its `memory`, for a partition with the `map` ability | [`POOL_BASE`] | read-write |
 //! | the same frames again | [`POOL_EXEC_BASE`] | read-execute |
 //! | shared-memory segments it is attached to | [`shared_address`] | as configured |
+//! | its PCI functions' records (`pci::records`), if it owns any (`devices`) | [`DEVICES_BASE`] | read-only |
+//! | their memory BARs, uncached, each after an unmapped page | from [`DEVICES_BASE`] + 8 KiB, in the records | read-write |
 //! | the stack, the start record at its very top | below [`STACK_TOP`], one unmapped guard page under it | read-write |
 
 /// Where syssw maps a partition's shared-memory segments: the first configured segment
@@ -31,6 +33,13 @@ pub const POOL_BASE: u64 = 0x0000_5800_0000_0000;
 /// executable in one mapping). Page `i` of the pool is at `POOL_BASE + i * 4096` and
 /// `POOL_EXEC_BASE + i * 4096`.
 pub const POOL_EXEC_BASE: u64 = 0x0000_5c00_0000_0000;
+
+/// Where syssw maps the page that tells a partition which PCI functions it owns and what
+/// of them it got (`pci::records`: I/O ports, the addresses of the memory BARs, the
+/// interrupt line); the memory BARs follow, in record order, each after an unmapped page.
+/// Memory a partition's devices may reach by DMA would be declared and mapped beside them
+/// once an IOMMU confines the devices to it (until then bus mastering stays off).
+pub const DEVICES_BASE: u64 = 0x0000_6800_0000_0000;
 
 /// Top of a partition's stack (its start record is at the very top).
 pub const STACK_TOP: u64 = 0x0000_7ff0_0000_0000;
@@ -63,7 +72,8 @@ mod tests {
                 DATA_BASE < POOL_BASE
                     && POOL_BASE < POOL_EXEC_BASE
                     && POOL_EXEC_BASE < SHARED_BASE
-                    && SHARED_BASE < STACK_TOP
+                    && SHARED_BASE < DEVICES_BASE
+                    && DEVICES_BASE < STACK_TOP
             )
         };
     }

@@ -223,6 +223,17 @@ pub fn map_physical(
     )
 }
 
+/// Maps device registers (a PCI memory BAR) uncached: see `Call::MapDevice`.
+pub fn map_device(
+    task: Option<TaskId>,
+    physical: u64,
+    destination: u64,
+    pages: u64,
+    rights: PageRights,
+) -> Result<(), Error> {
+    map_from(Call::MapDevice, task, physical, destination, pages, rights)
+}
+
 /// `map` and `map_physical` take the same arguments; `source` is a page of the caller or a
 /// physical address.
 fn map_from(
@@ -462,6 +473,17 @@ pub fn io_grant(task: TaskId, first: u16, count: u32) -> Result<(), Error> {
         count: count as u64,
     };
     call(Call::IoGrant, a.encode()).map(drop)
+}
+
+/// One dword of PCI configuration space (root task only): `address` = bus << 16 |
+/// device << 11 | function << 8 | register; `Some(value)` writes it (and returns 0).
+pub fn pci_config(address: u32, write: Option<u32>) -> Result<u32, Error> {
+    let a = args::PciConfig {
+        address: u64::from(address),
+        value: u64::from(write.unwrap_or(0)),
+        write: u64::from(write.is_some()),
+    };
+    call(Call::PciConfig, a.encode()).map(|r| results::PciConfig::decode(&r).value as u32)
 }
 
 /// Lets a descendant task attach interrupt line `line`.

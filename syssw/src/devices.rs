@@ -1,0 +1,206 @@
+//! The PCI functions a partition owns (`devices`): probed, checked and enabled once at
+//! boot ([`prepare`], with `pci`'s logic over the kernel's `pci_config`), granted to every
+//! instance of the partition ([`grant`]): its I/O BARs as I/O-port grants, its memory BARs
+//! mapped uncached from `DEVICES_BASE` on, its INTx line, and the read-only page of records
+//! that tells the partition what it got. A function that cannot be granted alone (absent,
+//! a bridge, a BAR that shares its page, an interrupt line another partition holds) stops
+//! only its partition.
+
+use pci::{Address, Bar, ConfigSpace, DeviceError, Function, RECORD_SIZE, RECORDS_AT, Record};
+use root_task::spawn::{SpawnError, Spawner};
+use user_rt::abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TaskId};
+use user_rt::protocol::layout::DEVICES_BASE;
+use user_rt::sys;
+
+const PAGE: u64 = 4096;
+
+/// Configuration space through the kernel (only the root task may).
+struct KernelConfigSpace;
+
+impl ConfigSpace for KernelConfigSpace {
+    fn read(&mut self, at: Address, register: u8) -> u32 {
+        // An error cannot happen for the root task and an aligned register; read as absent.
+        sys::pci_config(config_address(at, register), None).unwrap_or(!0)
+    }
+
+    fn write(&mut self, at: Address, register: u8, value: u32) {
+        let _ = sys::pci_config(config_address(at, register), Some(value));
+    }
+}
+
+fn config_address(at: Address, register: u8) -> u32 {
+    pci::Address::config_address(at, register) & 0x00ff_ffff
+}
+
+/// Why a partition's devices cannot be granted.
+#[derive(Debug)]
+pub enum DeviceProblem {
+    Function(Address, DeviceError),
+    /// Its INTx line is another partition's (`irqs`) or another device's.
+    SharedLine(Address, u8),
+    Spawn(SpawnError),
+    Kernel(&'static str, Error),
+}
+
+impl core::fmt::Display for DeviceProblem {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::Function(a, why) => write!(f, "PCI device {a}: {why}"),
+            Self::SharedLine(a, line) => write!(
+                f,
+                "PCI device {a}: its interrupt line {line} is another partition's or another device's (a level-triggered line cannot be shared between partitions)"
+            ),
+            Self::Spawn(e) => write!(f, "PCI devices: out of memory or addresses: {e:?}"),
+            Self::Kernel(call, e) => write!(f, "PCI devices: {call} failed: {e:?}"),
+        }
+    }
+}
+
+/// A partition's functions as granted at every start.
+pub struct Devices {
+    /// The frame of the records page.
+    page: u64,
+    functions: [Option<(Function, Record)>; pci::MAX_PARTITION_DEVICES],
+}
+
+/// Probes, checks and enables the functions `addresses`, lays out their memory BARs from
+/// `DEVICES_BASE` and writes the records page; `lines` holds the interrupt lines taken so
+/// far (gets the new ones). `None` for a partition without devices.
+pub fn prepare(
+    spawner: &mut Spawner,
+    addresses: impl Iterator<Item = Address>,
+    lines: &mut u32,
+) -> Result<Option<Devices>, DeviceProblem> {
+    let mut cs = KernelConfigSpace;
+    let mut functions = [None; pci::MAX_PARTITION_DEVICES];
+    let mut next = DEVICES_BASE + 2 * PAGE;
+    let mut taken = *lines;
+    let mut count = 0;
+    for (slot, at) in functions.iter_mut().zip(addresses) {
+        let fail = |why| DeviceProblem::Function(at, why);
+        let f = pci::probe(&mut cs, at).map_err(fail)?;
+        pci::check_bars(&f).map_err(fail)?;
+        let line = match f.interrupt_pin {
+            0 => None,
+            pin => Some(
+                pci::q35_interrupt_line(at, pin)
+                    .ok_or(fail(DeviceError::UnroutedInterrupt { pin }))?,
+            ),
+        };
+        if let Some(line) = line {
+            if taken & (1 << line) != 0 {
+                return Err(DeviceProblem::SharedLine(at, line));
+            }
+            taken |= 1 << line;
+        }
+        let mut bars = f.bars;
+        for bar in bars.iter_mut() {
+            if let Some(Bar::Memory { base, size, .. }) = bar {
+                *base = next;
+                next += *size + PAGE;
+            }
+        }
+        *slot = Some((
+            f,
+            Record {
+                address: at,
+                vendor: f.vendor,
+                device: f.device,
+                interrupt_line: line,
+                interrupt_pin: f.interrupt_pin,
+                class: f.class,
+                bars,
+            },
+        ));
+        count += 1;
+    }
+    if count == 0 {
+        return Ok(None);
+    }
+    let page = spawner
+        .filled_frames(1, |chunk, offset| {
+            if offset != 0 {
+                return;
+            }
+            chunk[..8].copy_from_slice(&(count as u64).to_le_bytes());
+            for (i, (_, record)) in functions.iter().flatten().enumerate() {
+                let at = RECORDS_AT + i * RECORD_SIZE;
+                chunk[at..at + RECORD_SIZE].copy_from_slice(&record.encode());
+            }
+        })
+        .map_err(DeviceProblem::Spawn)?;
+    for (f, _) in functions.iter().flatten() {
+        pci::enable(&mut cs, f);
+    }
+    *lines = taken;
+    Ok(Some(Devices { page, functions }))
+}
+
+/// Grants `devices` to a new instance's `task`.
+pub fn grant(devices: &Devices, task: TaskId) -> Result<(), DeviceProblem> {
+    let kernel = |call, r: Result<(), Error>| r.map_err(|e| DeviceProblem::Kernel(call, e));
+    kernel(
+        "map_physical",
+        sys::map_physical(
+            Some(task),
+            devices.page,
+            DEVICES_BASE,
+            1,
+            PageRights::empty(),
+        ),
+    )?;
+    for (f, record) in devices.functions.iter().flatten() {
+        for (bar, granted) in f.bars.iter().zip(&record.bars) {
+            match (*bar, *granted) {
+                (Some(Bar::Io { port, size }), _) => {
+                    kernel("io_grant", sys::io_grant(task, port, u32::from(size)))?;
+                }
+                (Some(Bar::Memory { base, size, .. }), Some(Bar::Memory { base: at, .. })) => {
+                    let pages = size / PAGE;
+                    let mut done = 0;
+                    while done < pages {
+                        let n = (pages - done).min(MAP_MAX_PAGES);
+                        let (from, to) = (base + done * PAGE, at + done * PAGE);
+                        kernel(
+                            "map_device",
+                            sys::map_device(Some(task), from, to, n, PageRights::WRITE),
+                        )?;
+                        done += n;
+                    }
+                }
+                _ => {}
+            }
+        }
+        if let Some(line) = record.interrupt_line {
+            kernel("irq_grant", sys::irq_grant(task, u64::from(line)))?;
+        }
+    }
+    Ok(())
+}
+
+/// One log line per function: what the partition got.
+pub fn log(partition: &str, devices: &Devices) {
+    use core::fmt::Write;
+    for (f, record) in devices.functions.iter().flatten() {
+        let mut line = user_rt::print::LineBuffer::default();
+        let _ = write!(
+            line,
+            "syssw: partition {partition}: PCI device {} [{:04x}:{:04x}]",
+            f.address, f.vendor, f.device
+        );
+        for (bar, granted) in f.bars.iter().zip(&record.bars) {
+            let _ = match (*bar, *granted) {
+                (Some(Bar::Io { port, size }), _) => write!(line, ", I/O {port:#x}+{size}"),
+                (Some(Bar::Memory { base, size, .. }), Some(Bar::Memory { base: at, .. })) => {
+                    write!(line, ", memory {base:#x}+{size:#x} at {at:#x}")
+                }
+                _ => Ok(()),
+            };
+        }
+        let _ = match record.interrupt_line {
+            Some(line_no) => write!(line, ", interrupt line {line_no} (level)"),
+            None => write!(line, ", no interrupt"),
+        };
+        let _ = sys::debug_write(line.as_bytes());
+    }
+}
