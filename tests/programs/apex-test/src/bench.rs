@@ -1,7 +1,14 @@
-//! `bench queuing_port_roundtrip`: one process sends a 64-byte message on a queuing port
-//! whose channel leads back into the same partition and receives it, [`SAMPLES`] times;
-//! each sample is the cycles for that pair of APEX calls (two requests served by syssw).
-//! Prints the `cargo xtask bench` line, then ends the run (an APPLICATION_ERROR the bench
+//! The APEX communication benchmarks, [`SAMPLES`] samples each, in cycles:
+//! - `queuing_port_roundtrip`: one process sends a 64-byte message on a queuing port whose
+//!   channel leads back into the same partition and receives it (two requests served by
+//!   syssw);
+//! - `apex_blackboard_display_read`: DISPLAY_BLACKBOARD then READ_BLACKBOARD of 64 bytes;
+//! - `apex_buffer_send_receive`: SEND_BUFFER then RECEIVE_BUFFER of 64 bytes (time-out 0);
+//! - `apex_semaphore_pingpong`: between two processes: the measuring one signals `ping` and
+//!   waits on `pong`; `echo`, of higher priority, waits on `ping` and signals `pong` (two
+//!   process switches inside the partition a sample).
+//!
+//! Prints the `cargo xtask bench` lines, then ends the run (an APPLICATION_ERROR the bench
 //! system maps to `shutdown_success`).
 
 extern crate alloc;
@@ -9,7 +16,11 @@ extern crate alloc;
 use crate::{name, process, raise};
 use alloc::vec::Vec;
 use apex::Warden;
+use apex::a653rs::bindings::{
+    self as b, ApexBlackboardP1, ApexBufferP1, ApexProcessP4, ApexSemaphoreP1,
+};
 use apex::a653rs::prelude::*;
+use apex::codes::apex_name;
 use apex::user_rt::println;
 use apex::user_rt::sys::rdtsc;
 use core::time::Duration;
@@ -22,7 +33,77 @@ pub fn create(ctx: &mut StartContext<Warden>) {
         .expect("CREATE_QUEUING_PORT out");
     ctx.create_queuing_port_receiver(name("in"), 64, 4, QueuingDiscipline::Fifo)
         .expect("CREATE_QUEUING_PORT in");
+    let qd = QueuingDiscipline::Fifo;
+    <Warden as ApexBlackboardP1>::create_blackboard(apex_name("board"), 64).expect("board");
+    <Warden as ApexBufferP1>::create_buffer(apex_name("buffer"), 64, 2, qd).expect("buffer");
+    for s in ["ping", "pong"] {
+        <Warden as ApexSemaphoreP1>::create_semaphore(apex_name(s), 0, 1, qd).expect("semaphore");
+    }
     process(ctx, "roundtrip", roundtrip, None, None);
+    // Above `roundtrip` (priority 10): it runs as soon as `ping` is signalled.
+    let echo = b::ApexProcessAttribute {
+        period: b::INFINITE_TIME_VALUE,
+        time_capacity: b::INFINITE_TIME_VALUE,
+        entry_point: echo,
+        stack_size: 16 * 1024,
+        base_priority: 20,
+        deadline: Deadline::Soft,
+        name: apex_name("echo"),
+    };
+    let id = <Warden as ApexProcessP4>::create_process(&echo).expect("CREATE_PROCESS echo");
+    <Warden as ApexProcessP4>::start(id).expect("START echo");
+}
+
+fn semaphore(s: &str) -> b::SemaphoreId {
+    <Warden as ApexSemaphoreP1>::get_semaphore_id(apex_name(s)).expect("semaphore")
+}
+
+extern "C" fn echo() {
+    let (ping, pong) = (semaphore("ping"), semaphore("pong"));
+    loop {
+        <Warden as ApexSemaphoreP1>::wait_semaphore(ping, b::INFINITE_TIME_VALUE).expect("ping");
+        <Warden as ApexSemaphoreP1>::signal_semaphore(pong).expect("pong");
+    }
+}
+
+/// Runs `pair` [`SAMPLES`] times and prints its `bench` line.
+fn measure(metric: &str, mut pair: impl FnMut()) {
+    let mut samples = Vec::with_capacity(SAMPLES);
+    for _ in 0..SAMPLES {
+        let t0 = rdtsc();
+        pair();
+        samples.push(rdtsc() - t0);
+    }
+    samples.sort_unstable();
+    println!(
+        "bench {metric} median={} min={} max={} unit=cycles samples={SAMPLES}",
+        samples[SAMPLES / 2],
+        samples[0],
+        samples[SAMPLES - 1]
+    );
+}
+
+/// The intra-partition objects' benchmarks.
+fn intra() {
+    let message = [0xa5u8; 64];
+    let mut buf = [0u8; 64];
+    let board = <Warden as ApexBlackboardP1>::get_blackboard_id(apex_name("board")).expect("board");
+    measure("apex_blackboard_display_read", || {
+        <Warden as ApexBlackboardP1>::display_blackboard(board, &message).expect("DISPLAY");
+        let got = crate::intra::read(board, 0, &mut buf);
+        assert_eq!(got.expect("READ_BLACKBOARD"), 64);
+    });
+    let buffer = <Warden as ApexBufferP1>::get_buffer_id(apex_name("buffer")).expect("buffer");
+    measure("apex_buffer_send_receive", || {
+        <Warden as ApexBufferP1>::send_buffer(buffer, &message, 0).expect("SEND_BUFFER");
+        let got = crate::intra::receive(buffer, 0, &mut buf);
+        assert_eq!(got.expect("RECEIVE_BUFFER"), 64);
+    });
+    let (ping, pong) = (semaphore("ping"), semaphore("pong"));
+    measure("apex_semaphore_pingpong", || {
+        <Warden as ApexSemaphoreP1>::signal_semaphore(ping).expect("SIGNAL ping");
+        <Warden as ApexSemaphoreP1>::wait_semaphore(pong, b::INFINITE_TIME_VALUE).expect("pong");
+    });
 }
 
 extern "C" fn roundtrip() {
@@ -49,5 +130,6 @@ extern "C" fn roundtrip() {
         samples[0],
         samples[SAMPLES - 1]
     );
+    intra();
     raise(b"bench done");
 }

@@ -86,7 +86,11 @@ fn process_id(name: &str) -> b::ProcessId {
     <Warden as ApexProcessP1>::get_process_id(apex_name(name)).expect("process")
 }
 /// RECEIVE_BUFFER into `out`.
-fn receive(id: b::BufferId, timeout: i64, out: &mut [u8]) -> Result<u32, ErrorReturnCode> {
+pub(crate) fn receive(
+    id: b::BufferId,
+    timeout: i64,
+    out: &mut [u8],
+) -> Result<u32, ErrorReturnCode> {
     #[allow(unsafe_code)]
     // SAFETY: a653rs's contract only asks for a writable slice, which `out` is; every
     // caller passes at least the buffer's message size.
@@ -96,7 +100,11 @@ fn receive(id: b::BufferId, timeout: i64, out: &mut [u8]) -> Result<u32, ErrorRe
 }
 
 /// READ_BLACKBOARD into `out`.
-fn read(id: b::BlackboardId, timeout: i64, out: &mut [u8]) -> Result<u32, ErrorReturnCode> {
+pub(crate) fn read(
+    id: b::BlackboardId,
+    timeout: i64,
+    out: &mut [u8],
+) -> Result<u32, ErrorReturnCode> {
     #[allow(unsafe_code)]
     // SAFETY: as for `receive`.
     unsafe {
