@@ -2,13 +2,17 @@
 //!
 //! Compilation checks first and emits second. [`sema`](crate::sema) checks the declarations
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
-//! l-values, calls, references, the recursion rule — reporting every diagnostic and recording
-//! the type of each expression it infers ([`ExprTypes`]). Only a program without diagnostics
-//! reaches [`emit`], which starts from those types and reports nothing itself: a diagnostic
-//! raised while emitting is a compiler bug (an internal error).
+//! l-values, calls, references — reporting every diagnostic and recording what it learns
+//! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]) and the calls between
+//! user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule. Only a
+//! program without diagnostics reaches [`emit`], which starts from those records and reports
+//! nothing itself: a diagnostic raised while emitting is a compiler bug (an internal error).
 //!
-//! Today both passes run the same body walker ([`crate::codegen::Gen`]), the checking one with
-//! emission and allocation switched off.
+//! The separation is not complete: the body walk itself is still the code generator's
+//! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
+//! once more to emit. The second walk finds the expression types in the table but re-resolves
+//! names, calls and conversions and passes the same check branches again (none can fail on a
+//! checked program); only the recursion rule lives outside the walk.
 
 use std::collections::HashMap;
 
@@ -17,6 +21,7 @@ use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::Program;
+use crate::sema::body::{self, CallEdge};
 use crate::types::Type;
 
 /// The type of each expression of the bodies, keyed by the expression (its address in the
@@ -50,18 +55,33 @@ impl ExprTypes {
     }
 }
 
-/// Checks every body of `prog`: reports the diagnostics into `diags` and returns the types of
-/// the expressions. Allocates nothing: `prog` is left as `sema` laid it out.
+/// What checking the bodies records for emission.
+#[derive(Debug, Default, Clone)]
+pub struct Checked {
+    /// The type of every expression the checker inferred.
+    pub types: ExprTypes,
+    /// The calls between user POUs (the call graph the recursion rule is judged on).
+    pub calls: Vec<CallEdge>,
+}
+
+/// Checks every body of `prog`: reports the diagnostics into `diags` and returns what it
+/// recorded. Allocates nothing: `prog` is left as `sema` laid it out.
 pub fn check(
     prog: &mut Program,
     unit: &Unit,
     sources: &SourceMap,
     diags: &mut Diagnostics,
-) -> ExprTypes {
+) -> Checked {
     let mut checker = Gen::new(prog, unit, sources, diags);
     checker.check_only = true;
     checker.generate();
-    std::mem::take(&mut checker.types)
+    let checked = Checked {
+        types: std::mem::take(&mut checker.types),
+        calls: std::mem::take(&mut checker.calls),
+    };
+    drop(checker);
+    body::check_recursion(prog, &checked.calls, diags);
+    checked
 }
 
 /// What the emission pass produces: the image builder with every POU, the initial data and
@@ -80,11 +100,11 @@ pub fn emit(
     prog: &mut Program,
     unit: &Unit,
     sources: &SourceMap,
-    types: ExprTypes,
+    checked: Checked,
 ) -> Result<Emitted, Diagnostics> {
     let mut missed = Diagnostics::default();
     let mut generator = Gen::new(prog, unit, sources, &mut missed);
-    generator.types = types;
+    generator.types = checked.types;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),

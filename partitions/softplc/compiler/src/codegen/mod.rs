@@ -139,8 +139,9 @@ pub(crate) struct Gen<'a> {
     /// checking pass's (see [`crate::typed`]).
     pub(crate) types: ExprTypes,
     str_lits: HashMap<String, u32>,
-    /// Call graph edges between user POUs (for the recursion check).
-    pub calls: Vec<(usize, usize, Span)>,
+    /// Call graph edges between user POUs, recorded for the recursion rule
+    /// ([`crate::sema::body`]).
+    pub calls: Vec<crate::sema::body::CallEdge>,
     /// Static frame address of each FUNCTION and the pristine copy of each POU frame.
     pub frames: Vec<(Option<u32>, Option<u32>)>,
     /// What code generation learns about references (for the object table).
@@ -403,7 +404,6 @@ impl<'a> Gen<'a> {
                 .filter(|_| self.prog.pous[i].reinit_start < self.prog.pous[i].frame_size);
             self.gen_pou(i, pristine);
         }
-        self.check_recursion();
         self.build_objects();
         self.build_classes();
     }
@@ -455,52 +455,6 @@ impl<'a> Gen<'a> {
         self.emit(|b| b.ret());
         if !self.check_only {
             self.b.end_pou(id);
-        }
-    }
-
-    fn check_recursion(&mut self) {
-        let n = self.prog.pous.len();
-        let mut adj = vec![Vec::new(); n];
-        for &(a, b, span) in &self.calls {
-            adj[a].push((b, span));
-        }
-        // Depth-first search for a cycle; report the call that closes it.
-        let mut state = vec![0u8; n];
-        fn dfs(
-            v: usize,
-            adj: &[Vec<(usize, Span)>],
-            state: &mut [u8],
-            found: &mut Option<(usize, Span)>,
-        ) {
-            state[v] = 1;
-            for &(w, span) in &adj[v] {
-                if found.is_some() {
-                    return;
-                }
-                if state[w] == 1 {
-                    *found = Some((w, span));
-                    return;
-                }
-                if state[w] == 0 {
-                    dfs(w, adj, state, found);
-                }
-            }
-            state[v] = 2;
-        }
-        for v in 0..n {
-            if state[v] == 0 {
-                let mut found = None;
-                dfs(v, &adj, &mut state, &mut found);
-                if let Some((w, span)) = found {
-                    let name = self.prog.pous[w].text.clone();
-                    self.diags.error(
-                        codes::RECURSION,
-                        span,
-                        format!("recursive call of `{name}` (IEC 61131-3 forbids recursion)"),
-                    );
-                    return;
-                }
-            }
         }
     }
 }
