@@ -10,8 +10,9 @@
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
-//! once more to emit. The second walk finds the expression types in the table but re-resolves
-//! names, calls and conversions and passes the same check branches again (none can fail on a
+//! once more to emit. The second walk takes every type it asks for from the table (it never
+//! infers: a missing record is an internal error) but re-resolves names, calls and
+//! conversions while it emits and passes the same check branches again (none can fail on a
 //! checked program); only the recursion rule lives outside the walk.
 
 use std::collections::HashMap;
@@ -118,6 +119,10 @@ pub fn emit(
     }
     let mut internal = Diagnostics::default();
     for d in missed.list {
+        if d.code == codes::INTERNAL_ERROR {
+            internal.push(d);
+            continue;
+        }
         internal.error(
             codes::INTERNAL_ERROR,
             d.span,
