@@ -36,7 +36,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::ExprTypes;
+use crate::typed::{CaseLabels, ExprTypes};
 use crate::types::*;
 
 /// Where a value lives.
@@ -138,6 +138,8 @@ pub(crate) struct Gen<'a> {
     /// The type of each expression inferred so far; the emission pass starts with the
     /// checking pass's (see [`crate::typed`]).
     pub(crate) types: ExprTypes,
+    /// The value of each CASE label: resolved by the checking pass, read by emission.
+    pub(crate) case_labels: CaseLabels,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -189,6 +191,7 @@ impl<'a> Gen<'a> {
             dry: false,
             check_only: false,
             types: ExprTypes::default(),
+            case_labels: CaseLabels::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),

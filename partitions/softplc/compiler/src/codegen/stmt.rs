@@ -208,21 +208,14 @@ impl Gen<'_> {
 
     pub(super) fn case(&mut self, selector: &Expr, arms: &[CaseArm], else_body: Option<&[Stmt]>) {
         let st = self.expr(selector, None);
-        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error)
-            || st.elem().is_some_and(|e| e.is_integral());
-        if !ok {
-            let msg = format!(
-                "CASE selector must be an integer or enumeration, found {}",
-                self.tname(&st)
-            );
-            self.error(codes::CASE_SELECTOR, selector.span, msg);
+        if self.check_only {
+            self.check_case(selector, &st, arms);
         }
         let signed = st
             .elem()
             .is_none_or(|e| e.signed_storage() || !e.is_integral() || e.size() < 8);
         let end = self.label();
         let mut arm_labels = Vec::new();
-        let mut seen: Vec<(i128, i128, Span)> = Vec::new();
         for arm in arms {
             let l = self.label();
             arm_labels.push(l);
@@ -231,27 +224,10 @@ impl Gen<'_> {
                     CaseLabel::Value(v) => (v, v),
                     CaseLabel::Range(a, b) => (a, b),
                 };
-                let lo = self.case_label_value(lo_e, &st);
-                let hi = self.case_label_value(hi_e, &st);
-                let (Some(lo), Some(hi)) = (lo, hi) else {
+                let (Some(lo), Some(hi)) = (self.checked_label(lo_e), self.checked_label(hi_e))
+                else {
                     continue;
                 };
-                if lo > hi {
-                    self.error(
-                        codes::CASE_LABEL,
-                        lo_e.span.to(hi_e.span),
-                        "empty CASE range (lower bound exceeds upper bound)",
-                    );
-                }
-                if let Some(prev) = seen.iter().find(|(a, b, _)| lo <= *b && *a <= hi) {
-                    let _ = prev;
-                    self.error(
-                        codes::CASE_LABEL,
-                        lo_e.span,
-                        "CASE label overlaps an earlier label",
-                    );
-                }
-                seen.push((lo, hi, lo_e.span));
                 if lo == hi {
                     self.emit(|b| {
                         b.dup();
@@ -290,6 +266,63 @@ impl Gen<'_> {
             self.emit(|b| b.jmp(end));
         }
         self.bind(end);
+    }
+
+    /// The checking pass's rules for a CASE: the selector's type, each label's value (recorded
+    /// for emission), no empty range, no overlap.
+    fn check_case(&mut self, selector: &Expr, st: &Type, arms: &[CaseArm]) {
+        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error)
+            || st.elem().is_some_and(|e| e.is_integral());
+        if !ok {
+            let msg = format!(
+                "CASE selector must be an integer or enumeration, found {}",
+                self.tname(st)
+            );
+            self.error(codes::CASE_SELECTOR, selector.span, msg);
+        }
+        let mut seen: Vec<(i128, i128)> = Vec::new();
+        for lab in arms.iter().flat_map(|arm| &arm.labels) {
+            let (lo_e, hi_e) = match lab {
+                CaseLabel::Value(v) => (v, v),
+                CaseLabel::Range(a, b) => (a, b),
+            };
+            let lo = self.case_label_value(lo_e, st);
+            let hi = self.case_label_value(hi_e, st);
+            let (Some(lo), Some(hi)) = (lo, hi) else {
+                continue;
+            };
+            self.case_labels.record(lo_e, lo);
+            self.case_labels.record(hi_e, hi);
+            if lo > hi {
+                self.error(
+                    codes::CASE_LABEL,
+                    lo_e.span.to(hi_e.span),
+                    "empty CASE range (lower bound exceeds upper bound)",
+                );
+            }
+            if seen.iter().any(|(a, b)| lo <= *b && *a <= hi) {
+                self.error(
+                    codes::CASE_LABEL,
+                    lo_e.span,
+                    "CASE label overlaps an earlier label",
+                );
+            }
+            seen.push((lo, hi));
+        }
+    }
+
+    /// A CASE label's value as the checking pass recorded it (none for a label it rejected,
+    /// which only the checking pass can meet).
+    fn checked_label(&mut self, e: &Expr) -> Option<i128> {
+        let v = self.case_labels.of(e).copied();
+        if v.is_none() && !self.check_only {
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                e.span,
+                "internal error: the checker recorded no value for this CASE label",
+            );
+        }
+        v
     }
 
     pub(super) fn case_label_value(&mut self, e: &Expr, sel: &Type) -> Option<i128> {
