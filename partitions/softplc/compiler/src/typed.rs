@@ -14,9 +14,11 @@
 //! once more to emit. The second walk takes every type it asks for from the table (it never
 //! infers: a missing record is an internal error) but re-resolves names, calls and
 //! conversions while it emits and passes the same check branches again (none can fail on a
-//! checked program). Outside that: the recursion rule lives in `sema::body`, and the CASE
-//! rules (selector type, label values, empty and overlapping ranges) run in the checking
-//! pass only, emission reading the label values from the table.
+//! checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
+//! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
+//! pass only, emission reading the label values from the table; the BOOL condition of IF,
+//! WHILE and REPEAT, EXIT outside a loop and a zero FOR step are checked by the checking pass
+//! only (for emission an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 

@@ -96,7 +96,14 @@ impl Gen<'_> {
                     }
                     self.emit(|b| b.jmp(exit));
                 }
-                None => self.error(codes::EXIT_OUTSIDE_LOOP, s.span, "EXIT outside of a loop"),
+                None if self.check_only => {
+                    self.error(codes::EXIT_OUTSIDE_LOOP, s.span, "EXIT outside of a loop")
+                }
+                None => self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    s.span,
+                    "internal error: EXIT outside of a loop passed the checker",
+                ),
             },
             StmtKind::Return => {
                 for _ in 0..self.try_depth {
@@ -198,9 +205,10 @@ impl Gen<'_> {
         }
     }
 
+    /// A condition's value; the checking pass requires it to be BOOL.
     pub(super) fn condition(&mut self, e: &Expr) {
         let t = self.expr(e, Some(&Type::BOOL));
-        if !t.is_error() && t != Type::BOOL {
+        if self.check_only && !t.is_error() && t != Type::BOOL {
             let msg = format!("condition must be BOOL, found {}", self.tname(&t));
             self.error(codes::TYPE_MISMATCH, e.span, msg);
         }
@@ -406,7 +414,7 @@ impl Gen<'_> {
                 _ => None,
             },
         };
-        if step_const == Some(0) {
+        if self.check_only && step_const == Some(0) {
             self.error(
                 codes::FOR_STEP_ZERO,
                 by.map_or(var.span, |e| e.span),
