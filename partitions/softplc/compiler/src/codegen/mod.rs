@@ -1,5 +1,7 @@
-//! Code generation: checks statement bodies (types, names, l-values) and emits plc-vm
-//! bytecode through [`ImageBuilder`].
+//! Code generation: the body walk that emits plc-vm bytecode through [`ImageBuilder`]. The
+//! checking pass ([`crate::typed::check`]) runs the same walk with emission off
+//! (`check_only`), which is where the bodies' rules (types, names, l-values) are checked;
+//! emission reads the checker's records ([`crate::typed::Checked`]).
 //!
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
