@@ -535,7 +535,7 @@ impl Gen<'_> {
             self.infer(value);
             return;
         };
-        if !p.writable {
+        if self.check_only && !p.writable {
             self.error(
                 codes::ASSIGN_TO_READ_ONLY,
                 target.span,
@@ -558,7 +558,7 @@ impl Gen<'_> {
             return;
         };
         let Type::Reference(t) = p.ty.clone() else {
-            if !p.ty.is_error() {
+            if self.check_only && !p.ty.is_error() {
                 let msg = format!(
                     "`REF=` binds a REFERENCE TO variable, not {}",
                     self.tname(&p.ty)
@@ -619,7 +619,7 @@ impl Gen<'_> {
                 let t = self.expr(value, Some(&p.ty));
                 let wide = p.ty.is_wstring();
                 let text = t.is_string() || t.is_wstring();
-                if (t.is_wstring() != wide || !text) && !t.is_error() {
+                if self.check_only && (t.is_wstring() != wide || !text) && !t.is_error() {
                     let hint = match (wide, text) {
                         (true, true) => " (use STRING_TO_WSTRING)",
                         (false, true) => " (use WSTRING_TO_STRING)",
@@ -643,11 +643,11 @@ impl Gen<'_> {
             Type::Array(_) | Type::Struct(_) | Type::Fb(_) => {
                 self.addr_of(p);
                 let t = self.expr(value, Some(&p.ty));
-                if t != p.ty && !t.is_error() {
+                if self.check_only && t != p.ty && !t.is_error() {
                     let msg = format!("cannot assign {} to {}", self.tname(&t), self.tname(&p.ty));
                     self.error(codes::ASSIGN_TYPE, value.span, msg);
                 }
-                if matches!(p.ty, Type::Fb(_)) {
+                if self.check_only && matches!(p.ty, Type::Fb(_)) {
                     self.error(
                         codes::ASSIGN_FB_INSTANCE,
                         span,
