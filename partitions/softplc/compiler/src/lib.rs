@@ -118,7 +118,7 @@ pub fn compile(
         );
     }
     // Check every body (all diagnostics, the type of every expression), then emit.
-    let types = typed::check(&mut prog, &unit, &sources, &mut diags);
+    let checked = typed::check(&mut prog, &unit, &sources, &mut diags);
     let task_records: usize = prog.tasks.iter().map(|t| t.programs.len()).sum();
     if task_records > plc_vm::verify::MAX_TASKS {
         let span = unit
@@ -136,7 +136,7 @@ pub fn compile(
         );
     }
     let emitted = if diags.is_empty() {
-        match typed::emit(&mut prog, &unit, &sources, types) {
+        match typed::emit(&mut prog, &unit, &sources, checked) {
             Ok(emitted) => Some(emitted),
             Err(internal) => {
                 internal.list.into_iter().for_each(|d| diags.push(d));

@@ -3,10 +3,20 @@
 use super::*;
 
 impl Gen<'_> {
-    /// Type of an expression without emitting code or reporting errors (memoised).
+    /// Type of an expression without emitting code or reporting errors. The checking pass
+    /// infers it (a walk of the expression with nothing emitted nor reported) and records
+    /// it; the emission pass only reads the record: a missing one is an internal error.
     pub(crate) fn infer(&mut self, e: &Expr) -> Type {
         if let Some(t) = self.types.of(e) {
             return t.clone();
+        }
+        if !self.check_only {
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                e.span,
+                "internal error: the checker recorded no type for this expression",
+            );
+            return Type::Error;
         }
         let saved = self.dry;
         self.dry = true;

@@ -1,5 +1,7 @@
-//! Code generation: checks statement bodies (types, names, l-values) and emits plc-vm
-//! bytecode through [`ImageBuilder`].
+//! Code generation: the body walk that emits plc-vm bytecode through [`ImageBuilder`]. The
+//! checking pass ([`crate::typed::check`]) runs the same walk with emission off
+//! (`check_only`), which is where the bodies' rules (types, names, l-values) are checked;
+//! emission reads the checker's records ([`crate::typed::Checked`]).
 //!
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
@@ -36,7 +38,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::ExprTypes;
+use crate::typed::{CaseLabels, ExprTypes};
 use crate::types::*;
 
 /// Where a value lives.
@@ -138,9 +140,12 @@ pub(crate) struct Gen<'a> {
     /// The type of each expression inferred so far; the emission pass starts with the
     /// checking pass's (see [`crate::typed`]).
     pub(crate) types: ExprTypes,
+    /// The value of each CASE label: resolved by the checking pass, read by emission.
+    pub(crate) case_labels: CaseLabels,
     str_lits: HashMap<String, u32>,
-    /// Call graph edges between user POUs (for the recursion check).
-    pub calls: Vec<(usize, usize, Span)>,
+    /// Call graph edges between user POUs, recorded for the recursion rule
+    /// ([`crate::sema::body`]).
+    pub calls: Vec<crate::sema::body::CallEdge>,
     /// Static frame address of each FUNCTION and the pristine copy of each POU frame.
     pub frames: Vec<(Option<u32>, Option<u32>)>,
     /// What code generation learns about references (for the object table).
@@ -188,6 +193,7 @@ impl<'a> Gen<'a> {
             dry: false,
             check_only: false,
             types: ExprTypes::default(),
+            case_labels: CaseLabels::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
@@ -403,7 +409,6 @@ impl<'a> Gen<'a> {
                 .filter(|_| self.prog.pous[i].reinit_start < self.prog.pous[i].frame_size);
             self.gen_pou(i, pristine);
         }
-        self.check_recursion();
         self.build_objects();
         self.build_classes();
     }
@@ -455,52 +460,6 @@ impl<'a> Gen<'a> {
         self.emit(|b| b.ret());
         if !self.check_only {
             self.b.end_pou(id);
-        }
-    }
-
-    fn check_recursion(&mut self) {
-        let n = self.prog.pous.len();
-        let mut adj = vec![Vec::new(); n];
-        for &(a, b, span) in &self.calls {
-            adj[a].push((b, span));
-        }
-        // Depth-first search for a cycle; report the call that closes it.
-        let mut state = vec![0u8; n];
-        fn dfs(
-            v: usize,
-            adj: &[Vec<(usize, Span)>],
-            state: &mut [u8],
-            found: &mut Option<(usize, Span)>,
-        ) {
-            state[v] = 1;
-            for &(w, span) in &adj[v] {
-                if found.is_some() {
-                    return;
-                }
-                if state[w] == 1 {
-                    *found = Some((w, span));
-                    return;
-                }
-                if state[w] == 0 {
-                    dfs(w, adj, state, found);
-                }
-            }
-            state[v] = 2;
-        }
-        for v in 0..n {
-            if state[v] == 0 {
-                let mut found = None;
-                dfs(v, &adj, &mut state, &mut found);
-                if let Some((w, span)) = found {
-                    let name = self.prog.pous[w].text.clone();
-                    self.diags.error(
-                        codes::RECURSION,
-                        span,
-                        format!("recursive call of `{name}` (IEC 61131-3 forbids recursion)"),
-                    );
-                    return;
-                }
-            }
         }
     }
 }

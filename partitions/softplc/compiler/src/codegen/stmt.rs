@@ -96,7 +96,14 @@ impl Gen<'_> {
                     }
                     self.emit(|b| b.jmp(exit));
                 }
-                None => self.error(codes::EXIT_OUTSIDE_LOOP, s.span, "EXIT outside of a loop"),
+                None if self.check_only => {
+                    self.error(codes::EXIT_OUTSIDE_LOOP, s.span, "EXIT outside of a loop")
+                }
+                None => self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    s.span,
+                    "internal error: EXIT outside of a loop passed the checker",
+                ),
             },
             StmtKind::Return => {
                 for _ in 0..self.try_depth {
@@ -198,9 +205,10 @@ impl Gen<'_> {
         }
     }
 
+    /// A condition's value; the checking pass requires it to be BOOL.
     pub(super) fn condition(&mut self, e: &Expr) {
         let t = self.expr(e, Some(&Type::BOOL));
-        if !t.is_error() && t != Type::BOOL {
+        if self.check_only && !t.is_error() && t != Type::BOOL {
             let msg = format!("condition must be BOOL, found {}", self.tname(&t));
             self.error(codes::TYPE_MISMATCH, e.span, msg);
         }
@@ -208,21 +216,14 @@ impl Gen<'_> {
 
     pub(super) fn case(&mut self, selector: &Expr, arms: &[CaseArm], else_body: Option<&[Stmt]>) {
         let st = self.expr(selector, None);
-        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error)
-            || st.elem().is_some_and(|e| e.is_integral());
-        if !ok {
-            let msg = format!(
-                "CASE selector must be an integer or enumeration, found {}",
-                self.tname(&st)
-            );
-            self.error(codes::CASE_SELECTOR, selector.span, msg);
+        if self.check_only {
+            self.check_case(selector, &st, arms);
         }
         let signed = st
             .elem()
             .is_none_or(|e| e.signed_storage() || !e.is_integral() || e.size() < 8);
         let end = self.label();
         let mut arm_labels = Vec::new();
-        let mut seen: Vec<(i128, i128, Span)> = Vec::new();
         for arm in arms {
             let l = self.label();
             arm_labels.push(l);
@@ -231,27 +232,10 @@ impl Gen<'_> {
                     CaseLabel::Value(v) => (v, v),
                     CaseLabel::Range(a, b) => (a, b),
                 };
-                let lo = self.case_label_value(lo_e, &st);
-                let hi = self.case_label_value(hi_e, &st);
-                let (Some(lo), Some(hi)) = (lo, hi) else {
+                let (Some(lo), Some(hi)) = (self.checked_label(lo_e), self.checked_label(hi_e))
+                else {
                     continue;
                 };
-                if lo > hi {
-                    self.error(
-                        codes::CASE_LABEL,
-                        lo_e.span.to(hi_e.span),
-                        "empty CASE range (lower bound exceeds upper bound)",
-                    );
-                }
-                if let Some(prev) = seen.iter().find(|(a, b, _)| lo <= *b && *a <= hi) {
-                    let _ = prev;
-                    self.error(
-                        codes::CASE_LABEL,
-                        lo_e.span,
-                        "CASE label overlaps an earlier label",
-                    );
-                }
-                seen.push((lo, hi, lo_e.span));
                 if lo == hi {
                     self.emit(|b| {
                         b.dup();
@@ -290,6 +274,63 @@ impl Gen<'_> {
             self.emit(|b| b.jmp(end));
         }
         self.bind(end);
+    }
+
+    /// The checking pass's rules for a CASE: the selector's type, each label's value (recorded
+    /// for emission), no empty range, no overlap.
+    fn check_case(&mut self, selector: &Expr, st: &Type, arms: &[CaseArm]) {
+        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error)
+            || st.elem().is_some_and(|e| e.is_integral());
+        if !ok {
+            let msg = format!(
+                "CASE selector must be an integer or enumeration, found {}",
+                self.tname(st)
+            );
+            self.error(codes::CASE_SELECTOR, selector.span, msg);
+        }
+        let mut seen: Vec<(i128, i128)> = Vec::new();
+        for lab in arms.iter().flat_map(|arm| &arm.labels) {
+            let (lo_e, hi_e) = match lab {
+                CaseLabel::Value(v) => (v, v),
+                CaseLabel::Range(a, b) => (a, b),
+            };
+            let lo = self.case_label_value(lo_e, st);
+            let hi = self.case_label_value(hi_e, st);
+            let (Some(lo), Some(hi)) = (lo, hi) else {
+                continue;
+            };
+            self.case_labels.record(lo_e, lo);
+            self.case_labels.record(hi_e, hi);
+            if lo > hi {
+                self.error(
+                    codes::CASE_LABEL,
+                    lo_e.span.to(hi_e.span),
+                    "empty CASE range (lower bound exceeds upper bound)",
+                );
+            }
+            if seen.iter().any(|(a, b)| lo <= *b && *a <= hi) {
+                self.error(
+                    codes::CASE_LABEL,
+                    lo_e.span,
+                    "CASE label overlaps an earlier label",
+                );
+            }
+            seen.push((lo, hi));
+        }
+    }
+
+    /// A CASE label's value as the checking pass recorded it (none for a label it rejected,
+    /// which only the checking pass can meet).
+    fn checked_label(&mut self, e: &Expr) -> Option<i128> {
+        let v = self.case_labels.of(e).copied();
+        if v.is_none() && !self.check_only {
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                e.span,
+                "internal error: the checker recorded no value for this CASE label",
+            );
+        }
+        v
     }
 
     pub(super) fn case_label_value(&mut self, e: &Expr, sel: &Type) -> Option<i128> {
@@ -373,7 +414,7 @@ impl Gen<'_> {
                 _ => None,
             },
         };
-        if step_const == Some(0) {
+        if self.check_only && step_const == Some(0) {
             self.error(
                 codes::FOR_STEP_ZERO,
                 by.map_or(var.span, |e| e.span),
@@ -494,7 +535,7 @@ impl Gen<'_> {
             self.infer(value);
             return;
         };
-        if !p.writable {
+        if self.check_only && !p.writable {
             self.error(
                 codes::ASSIGN_TO_READ_ONLY,
                 target.span,
@@ -517,7 +558,7 @@ impl Gen<'_> {
             return;
         };
         let Type::Reference(t) = p.ty.clone() else {
-            if !p.ty.is_error() {
+            if self.check_only && !p.ty.is_error() {
                 let msg = format!(
                     "`REF=` binds a REFERENCE TO variable, not {}",
                     self.tname(&p.ty)
@@ -578,7 +619,7 @@ impl Gen<'_> {
                 let t = self.expr(value, Some(&p.ty));
                 let wide = p.ty.is_wstring();
                 let text = t.is_string() || t.is_wstring();
-                if (t.is_wstring() != wide || !text) && !t.is_error() {
+                if self.check_only && (t.is_wstring() != wide || !text) && !t.is_error() {
                     let hint = match (wide, text) {
                         (true, true) => " (use STRING_TO_WSTRING)",
                         (false, true) => " (use WSTRING_TO_STRING)",
@@ -602,11 +643,11 @@ impl Gen<'_> {
             Type::Array(_) | Type::Struct(_) | Type::Fb(_) => {
                 self.addr_of(p);
                 let t = self.expr(value, Some(&p.ty));
-                if t != p.ty && !t.is_error() {
+                if self.check_only && t != p.ty && !t.is_error() {
                     let msg = format!("cannot assign {} to {}", self.tname(&t), self.tname(&p.ty));
                     self.error(codes::ASSIGN_TYPE, value.span, msg);
                 }
-                if matches!(p.ty, Type::Fb(_)) {
+                if self.check_only && matches!(p.ty, Type::Fb(_)) {
                     self.error(
                         codes::ASSIGN_FB_INSTANCE,
                         span,

@@ -1,13 +1,15 @@
 //! Semantic analysis of declarations: resolves TYPE declarations, lays out the variables of
 //! every POU (frames) and of the globals, evaluates constant expressions (array bounds,
 //! subrange limits, string lengths, CASE labels, task properties) and checks the
-//! CONFIGURATION. Statement bodies are checked while generating code (`codegen`).
+//! CONFIGURATION. Statement bodies are checked by the checking walk of [`crate::typed`];
+//! [`body`] judges what that walk records (the call graph: the recursion rule).
 //!
 //! Memory model: every variable has a static home. Globals and program instances live at
 //! fixed addresses; an FB instance is a region inside its owner; a FUNCTION has one static
 //! frame (IEC forbids recursion, which is checked). A POU body addresses its own variables
 //! relative to the frame base register.
 
+pub mod body;
 mod config;
 
 use crate::codes;
