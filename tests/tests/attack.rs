@@ -331,7 +331,7 @@ fn attack_root_paths() {
     );
     check(
         &o,
-        o.line("paths: 20 rounds: schedule of 32 windows, 64512 ports granted, a task with 200 threads and 760 page tables killed")
+        o.line("paths: 20 rounds: schedule of 32 windows, 62208 ports granted, a task with 200 threads and 760 page tables killed")
             .is_some()
             && o.line(" failed: ").is_none(),
         "the root task did not make each longest call again and again",

@@ -207,8 +207,9 @@ extern "C" fn root_attacker(_: u64) -> ! {
             partition: 1 + i as u64 % 15,
         };
     }
-    // Every port above the kernel's last range (0xf4..=0xf7, COM1 at 0x3f8..=0x3ff).
-    const FIRST: u16 = 0x400;
+    // Every port above the kernel's last range (`KERNEL_PORTS`: the PCI configuration
+    // ports 0xcf8..=0xcff).
+    const FIRST: u16 = 0xd00;
     let count = 0x1_0000 - u32::from(FIRST);
     let mut rounds: u64 = 0;
     loop {
