@@ -145,11 +145,7 @@ impl Gen<'_> {
                 ..n.clone()
             },
             Err(candidates) => {
-                let msg = format!(
-                    "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
-                    n.text,
-                    candidates.join(", ")
-                );
+                let msg = crate::sema::ambiguous(&n.text, &candidates);
                 self.error(codes::AMBIGUOUS_NAME, n.span, msg);
                 n.clone()
             }

@@ -319,12 +319,22 @@ pub fn qualified<'a>(
         return qualified(rest, declared);
     }
     let suffix = format!(".{name}");
-    let found: Vec<String> = declared.filter(|d| d.ends_with(&suffix)).cloned().collect();
+    let mut found: Vec<String> = declared.filter(|d| d.ends_with(&suffix)).cloned().collect();
+    // Sorted: the declarations come from hash maps, a diagnostic must not depend on their order.
+    found.sort();
     match found.len() {
         0 => Ok(None),
         1 => Ok(found.into_iter().next()),
         _ => Err(found),
     }
+}
+
+/// The diagnostic for a plain `name` that [`qualified`] found in several namespaces.
+pub(crate) fn ambiguous(name: &str, candidates: &[String]) -> String {
+    format!(
+        "`{name}` is ambiguous: it is declared in several namespaces ({}); qualify it",
+        candidates.join(", ")
+    )
 }
 
 /// Gives `vars` their frame offsets from `first_offset` on and returns the frame size and
@@ -923,11 +933,7 @@ impl Sema<'_> {
                 self.diags.error(
                     codes::AMBIGUOUS_NAME,
                     id.span,
-                    format!(
-                        "`{}` is ambiguous: it is declared in several namespaces ({}); qualify it",
-                        id.text,
-                        candidates.join(", ")
-                    ),
+                    ambiguous(&id.text, &candidates),
                 );
                 return Type::Error;
             }
