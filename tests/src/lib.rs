@@ -65,3 +65,18 @@ pub fn passes(name: &str, mode: &str, checks: &[&str]) -> Outcome {
     check(&o, o.line(&last).is_some(), &format!("missing {last:?}"));
     o
 }
+
+/// What the processes of the guest partition `linux` wrote (its `guest: process <pid>
+/// stdout: ...` and `stderr: ...` log lines), in order.
+pub fn guest_output(o: &Outcome) -> Vec<String> {
+    o.lines
+        .iter()
+        .filter_map(|l| l.split_once("[linux] guest: process "))
+        .filter_map(|(_, text)| {
+            let (_, rest) = text.split_once(' ')?;
+            rest.strip_prefix("stdout: ")
+                .or_else(|| rest.strip_prefix("stderr: "))
+                .map(str::to_string)
+        })
+        .collect()
+}

@@ -76,20 +76,6 @@ fn iec61499_trap() {
     );
 }
 
-/// The guest's output lines (stdout and stderr of its processes).
-fn output(o: &Outcome) -> Vec<String> {
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once("[linux] guest: process "))
-        .filter_map(|(_, text)| {
-            let (_, rest) = text.split_once(' ')?;
-            rest.strip_prefix("stdout: ")
-                .or_else(|| rest.strip_prefix("stderr: "))
-                .map(str::to_string)
-        })
-        .collect()
-}
-
 #[test]
 fn iec61499_deploy() {
     let o = boot("iec61499_deploy");
@@ -110,7 +96,7 @@ fn iec61499_deploy() {
             .is_some(),
         "the partition serves its management ports",
     );
-    let out = output(&o);
+    let out = scenarios::guest_output(&o);
     let has = |text: &str| out.iter().any(|l| l.contains(text));
     let expected = [
         // The type compiled in the guest and added.

@@ -15,21 +15,6 @@
 
 use scenarios::{boot, check};
 
-/// The lines partition `linux`'s processes wrote to stdout and stderr (the console is
-/// the log), in log order.
-fn output(o: &xtask::qemu::Outcome) -> Vec<String> {
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once("[linux] guest: process "))
-        .filter_map(|(_, text)| {
-            let (_, rest) = text.split_once(' ')?;
-            rest.strip_prefix("stdout: ")
-                .or_else(|| rest.strip_prefix("stderr: "))
-                .map(str::to_string)
-        })
-        .collect()
-}
-
 /// The lines of `out` from the first that starts with `prefix` on, at most `n` of them.
 fn from<'o>(out: &'o [String], prefix: &str, n: usize) -> &'o [String] {
     let start = out
@@ -70,7 +55,7 @@ fn system_devices() {
             &format!("unexpected {needle:?}"),
         );
     }
-    let out = output(&o);
+    let out = scenarios::guest_output(&o);
     // The C program: every check, in order, and its exit status.
     let expected: Vec<&str> = ARINC_EXPECTED.lines().collect();
     let got: Vec<&str> = out
@@ -164,7 +149,7 @@ fn system_plcctl() {
         o.line("[linux] guest: init exited with status 0").is_some(),
         "the script ended with status 0",
     );
-    let out = output(&o);
+    let out = scenarios::guest_output(&o);
     let level = out
         .iter()
         .find_map(|l| l.strip_prefix("level "))

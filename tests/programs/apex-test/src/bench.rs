@@ -16,9 +16,7 @@ extern crate alloc;
 use crate::{name, process, raise};
 use alloc::vec::Vec;
 use apex::Warden;
-use apex::a653rs::bindings::{
-    self as b, ApexBlackboardP1, ApexBufferP1, ApexProcessP4, ApexSemaphoreP1,
-};
+use apex::a653rs::bindings::{self as b, ApexBlackboardP1, ApexBufferP1, ApexSemaphoreP1};
 use apex::a653rs::prelude::*;
 use apex::codes::apex_name;
 use apex::user_rt::println;
@@ -41,17 +39,7 @@ pub fn create(ctx: &mut StartContext<Warden>) {
     }
     process(ctx, "roundtrip", roundtrip, None, None);
     // Above `roundtrip` (priority 10): it runs as soon as `ping` is signalled.
-    let echo = b::ApexProcessAttribute {
-        period: b::INFINITE_TIME_VALUE,
-        time_capacity: b::INFINITE_TIME_VALUE,
-        entry_point: echo,
-        stack_size: 16 * 1024,
-        base_priority: 20,
-        deadline: Deadline::Soft,
-        name: apex_name("echo"),
-    };
-    let id = <Warden as ApexProcessP4>::create_process(&echo).expect("CREATE_PROCESS echo");
-    <Warden as ApexProcessP4>::start(id).expect("START echo");
+    crate::start_aperiodic("echo", echo, 20);
 }
 
 fn semaphore(s: &str) -> b::SemaphoreId {

@@ -11,10 +11,9 @@
 use apex::Warden;
 use apex::a653rs::bindings::{
     self as b, ApexBlackboardP1, ApexBufferP1, ApexErrorP4, ApexEventP1, ApexMutexP1,
-    ApexProcessP1, ApexProcessP4, ApexSemaphoreP1, ApexTimeP1, ApexTimeP4, ErrorReturnCode,
-    QueuingDiscipline,
+    ApexProcessP1, ApexSemaphoreP1, ApexTimeP1, ApexTimeP4, ErrorReturnCode, QueuingDiscipline,
 };
-use apex::a653rs::prelude::{Deadline, StartContext};
+use apex::a653rs::prelude::StartContext;
 use apex::codes::apex_name;
 use apex::user_rt::println;
 use core::sync::atomic::{AtomicU8, AtomicU32, AtomicUsize, Ordering};
@@ -122,21 +121,6 @@ fn sleep(ms: i64) {
     let _ = <Warden as ApexTimeP1>::timed_wait(ms * MS);
 }
 
-fn create_process(name: &str, entry: extern "C" fn(), priority: i32) {
-    let attributes = b::ApexProcessAttribute {
-        period: INFINITE,
-        time_capacity: INFINITE,
-        entry_point: entry,
-        stack_size: 16 * 1024,
-        base_priority: priority,
-        deadline: Deadline::Soft,
-        name: apex_name(name),
-    };
-    let id = <Warden as ApexProcessP4>::create_process(&attributes)
-        .unwrap_or_else(|e| panic!("CREATE_PROCESS {name}: {e:?}"));
-    <Warden as ApexProcessP4>::start(id).unwrap_or_else(|e| panic!("START {name}: {e:?}"));
-}
-
 /// Initialisation: the objects, the INIT-mode return codes, the processes.
 pub fn create(_ctx: &mut StartContext<Warden>) {
     use QueuingDiscipline::{Fifo, Priority};
@@ -187,9 +171,9 @@ pub fn create(_ctx: &mut StartContext<Warden>) {
             5 * MS
         ))
     );
-    create_process("driver", driver, DRIVER_PRIORITY);
+    crate::start_aperiodic("driver", driver, DRIVER_PRIORITY);
     for (name, priority) in WORKERS {
-        create_process(name, worker, priority);
+        crate::start_aperiodic(name, worker, priority);
     }
 }
 

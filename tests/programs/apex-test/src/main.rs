@@ -80,6 +80,34 @@ fn spin_until(until: Duration) {
     }
 }
 
+/// Creates the aperiodic process `process_name` at `priority` (16 KiB of stack, soft
+/// deadline) through the APEX bindings, for a caller that starts it as it needs.
+pub(crate) fn aperiodic(
+    process_name: &str,
+    entry: extern "C" fn(),
+    priority: i32,
+) -> apex::a653rs::bindings::ProcessId {
+    use apex::a653rs::bindings::{self as b, ApexProcessP4};
+    let attributes = b::ApexProcessAttribute {
+        period: b::INFINITE_TIME_VALUE,
+        time_capacity: b::INFINITE_TIME_VALUE,
+        entry_point: entry,
+        stack_size: 16 * 1024,
+        base_priority: priority,
+        deadline: Deadline::Soft,
+        name: apex::codes::apex_name(process_name),
+    };
+    <Warden as ApexProcessP4>::create_process(&attributes)
+        .unwrap_or_else(|e| panic!("CREATE_PROCESS {process_name}: {e:?}"))
+}
+
+/// [`aperiodic`], started at once.
+pub(crate) fn start_aperiodic(process_name: &str, entry: extern "C" fn(), priority: i32) {
+    use apex::a653rs::bindings::ApexProcessP4;
+    let id = aperiodic(process_name, entry, priority);
+    <Warden as ApexProcessP4>::start(id).unwrap_or_else(|e| panic!("START {process_name}: {e:?}"));
+}
+
 /// Creates and starts a process (`period` None = aperiodic).
 fn process(
     ctx: &mut StartContext<Warden>,

@@ -9,10 +9,10 @@
 
 use apex::Warden;
 use apex::a653rs::bindings::{
-    self as b, ApexErrorP4, ApexProcessP1, ApexProcessP4, ApexQueuingPortP1, ApexQueuingPortP4,
-    ErrorReturnCode, PortDirection, QueuingDiscipline,
+    self as b, ApexErrorP4, ApexProcessP1, ApexQueuingPortP1, ApexQueuingPortP4, ErrorReturnCode,
+    PortDirection, QueuingDiscipline,
 };
-use apex::a653rs::prelude::{Deadline, StartContext};
+use apex::a653rs::prelude::StartContext;
 use apex::codes::apex_name;
 use apex::user_rt::println;
 use core::sync::atomic::{AtomicU8, AtomicU32, Ordering};
@@ -67,17 +67,7 @@ fn receive(id: b::QueuingPortId, timeout: i64, out: &mut [u8]) -> Result<u32, Er
 
 /// Creates `name` at `priority` and starts it after `delay` ns.
 fn start(name: &str, entry: extern "C" fn(), priority: i32, delay: i64) {
-    let attributes = b::ApexProcessAttribute {
-        period: INFINITE,
-        time_capacity: INFINITE,
-        entry_point: entry,
-        stack_size: 16 * 1024,
-        base_priority: priority,
-        deadline: Deadline::Soft,
-        name: apex_name(name),
-    };
-    let id = <Warden as ApexProcessP4>::create_process(&attributes)
-        .unwrap_or_else(|e| panic!("CREATE_PROCESS {name}: {e:?}"));
+    let id = crate::aperiodic(name, entry, priority);
     <Warden as ApexProcessP1>::delayed_start(id, delay)
         .unwrap_or_else(|e| panic!("DELAYED_START {name}: {e:?}"));
 }

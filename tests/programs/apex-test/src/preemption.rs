@@ -9,10 +9,10 @@
 
 use apex::Warden;
 use apex::a653rs::bindings::{
-    self as b, ApexErrorP4, ApexMutexP1, ApexPartitionP4, ApexProcessP1, ApexProcessP4,
-    ApexSemaphoreP1, ApexTimeP1, ApexTimeP4, ErrorReturnCode, QueuingDiscipline,
+    self as b, ApexErrorP4, ApexMutexP1, ApexPartitionP4, ApexProcessP1, ApexSemaphoreP1,
+    ApexTimeP1, ApexTimeP4, ErrorReturnCode, QueuingDiscipline,
 };
-use apex::a653rs::prelude::{Deadline, StartContext};
+use apex::a653rs::prelude::StartContext;
 use apex::codes::apex_name;
 use apex::user_rt::println;
 use core::sync::atomic::{AtomicU32, Ordering};
@@ -50,21 +50,6 @@ fn current_priority() -> i32 {
     <Warden as ApexProcessP1>::get_process_status(me).map_or(-1, |s| s.current_priority)
 }
 
-fn create_process(name: &str, entry: extern "C" fn(), priority: i32) {
-    let attributes = b::ApexProcessAttribute {
-        period: INFINITE,
-        time_capacity: INFINITE,
-        entry_point: entry,
-        stack_size: 16 * 1024,
-        base_priority: priority,
-        deadline: Deadline::Soft,
-        name: apex_name(name),
-    };
-    let id = <Warden as ApexProcessP4>::create_process(&attributes)
-        .unwrap_or_else(|e| panic!("CREATE_PROCESS {name}: {e:?}"));
-    <Warden as ApexProcessP4>::start(id).unwrap_or_else(|e| panic!("START {name}: {e:?}"));
-}
-
 /// Initialisation: LOCK_PREEMPTION outside NORMAL mode, the objects, the processes.
 pub fn create(_ctx: &mut StartContext<Warden>) {
     println!("preempt: init LOCK_PREEMPTION: {:?}", code(lock()));
@@ -80,8 +65,8 @@ pub fn create(_ctx: &mut StartContext<Warden>) {
     s("never").expect("never");
     <Warden as ApexMutexP1>::create_mutex(apex_name("mtx"), 60, QueuingDiscipline::Fifo)
         .expect("mtx");
-    create_process("rival", rival, RIVAL_PRIORITY);
-    create_process("holder", holder, HOLDER_PRIORITY);
+    crate::start_aperiodic("rival", rival, RIVAL_PRIORITY);
+    crate::start_aperiodic("holder", holder, HOLDER_PRIORITY);
 }
 
 extern "C" fn rival() {

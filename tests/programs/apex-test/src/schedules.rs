@@ -9,14 +9,13 @@
 
 use apex::Warden;
 use apex::a653rs::bindings::{
-    self as b, ApexErrorP4, ApexProcessP4, ApexScheduleP2, ApexTimeP1, ApexTimeP4, ErrorReturnCode,
+    self as b, ApexErrorP4, ApexScheduleP2, ApexTimeP1, ApexTimeP4, ErrorReturnCode,
 };
-use apex::a653rs::prelude::{Deadline, StartContext};
+use apex::a653rs::prelude::StartContext;
 use apex::codes::apex_name;
 use apex::user_rt::{println, sys};
 
 const MS: i64 = 1_000_000;
-const INFINITE: i64 = b::INFINITE_TIME_VALUE;
 
 fn code<T>(result: Result<T, ErrorReturnCode>) -> Option<ErrorReturnCode> {
     result.err()
@@ -45,27 +44,12 @@ fn window_start() -> u64 {
     sys::partition_info(tp).map_or(0, |i| i.next_window_start)
 }
 
-fn start(name: &str, entry: extern "C" fn()) {
-    let attributes = b::ApexProcessAttribute {
-        period: INFINITE,
-        time_capacity: INFINITE,
-        entry_point: entry,
-        stack_size: 16 * 1024,
-        base_priority: 10,
-        deadline: Deadline::Soft,
-        name: apex_name(name),
-    };
-    let id = <Warden as ApexProcessP4>::create_process(&attributes)
-        .unwrap_or_else(|e| panic!("CREATE_PROCESS {name}: {e:?}"));
-    <Warden as ApexProcessP4>::start(id).unwrap_or_else(|e| panic!("START {name}: {e:?}"));
-}
-
 pub fn create_sched(_ctx: &mut StartContext<Warden>) {
-    start("switcher", switcher);
+    crate::start_aperiodic("switcher", switcher, 10);
 }
 
 pub fn create_plain(_ctx: &mut StartContext<Warden>) {
-    start("asker", asker);
+    crate::start_aperiodic("asker", asker, 10);
 }
 
 fn print_status(who: &str, s: &b::ApexScheduleStatus) {
