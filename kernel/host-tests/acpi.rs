@@ -1,0 +1,168 @@
+//! Host tests of the ACPI table parsing (`kernel/src/acpi.rs`); kept outside `src` so that
+//! the ring-0 code budget counts only what runs in ring 0.
+
+use super::*;
+use std::collections::BTreeMap;
+
+/// Physical memory made of placed byte blobs.
+#[derive(Default)]
+struct Fake(BTreeMap<u64, Vec<u8>>);
+
+impl PhysMemory for Fake {
+    fn bytes(&self, phys: u64, len: usize) -> Option<&[u8]> {
+        let (base, blob) = self.0.range(..=phys).next_back()?;
+        let off = (phys - base) as usize;
+        blob.get(off..off + len)
+    }
+}
+
+fn seal(mut t: Vec<u8>) -> Vec<u8> {
+    let sum = t.iter().fold(0u8, |s, b| s.wrapping_add(*b));
+    t[9] = t[9].wrapping_sub(sum);
+    t
+}
+
+fn sdt(signature: &[u8; 4], body: &[u8]) -> Vec<u8> {
+    let mut t = vec![0u8; HEADER_LEN];
+    t[0..4].copy_from_slice(signature);
+    t[4..8].copy_from_slice(&((HEADER_LEN + body.len()) as u32).to_le_bytes());
+    t.extend_from_slice(body);
+    seal(t)
+}
+
+fn rsdp_v2(xsdt: u64) -> Vec<u8> {
+    let mut r = vec![0u8; 36];
+    r[0..8].copy_from_slice(b"RSD PTR ");
+    r[15] = 2;
+    r[24..32].copy_from_slice(&xsdt.to_le_bytes());
+    let s1 = r[..20].iter().fold(0u8, |s, b| s.wrapping_add(*b));
+    r[8] = r[8].wrapping_sub(s1);
+    let s2 = r.iter().fold(0u8, |s, b| s.wrapping_add(*b));
+    r[32] = r[32].wrapping_sub(s2);
+    r
+}
+
+fn madt() -> Vec<u8> {
+    let mut body = vec![0u8; 8];
+    body[0..4].copy_from_slice(&0xfee0_0000u32.to_le_bytes());
+    body.extend_from_slice(&[0, 8, 0, 0, 1, 0, 0, 0]); // CPU 0, enabled
+    body.extend_from_slice(&[0, 8, 1, 1, 0, 0, 0, 0]); // CPU 1, disabled
+    body.extend_from_slice(&[1, 12, 7, 0, 0, 0, 0xc0, 0xfe, 0, 0, 0, 0]); // IOAPIC 7
+    body.extend_from_slice(&[2, 10, 0, 0, 2, 0, 0, 0, 0, 0]); // IRQ0 -> GSI2
+    sdt(b"APIC", &body)
+}
+
+fn hpet() -> Vec<u8> {
+    let mut body = vec![0u8; 20];
+    body[4] = 0; // system memory
+    body[8..16].copy_from_slice(&0xfed0_0000u64.to_le_bytes());
+    sdt(b"HPET", &body)
+}
+
+fn system(tables: Vec<Vec<u8>>) -> Fake {
+    let mut mem = Fake::default();
+    let mut xsdt_body = Vec::new();
+    for (i, t) in tables.into_iter().enumerate() {
+        let at = 0x10_0000 + i as u64 * 0x1000;
+        xsdt_body.extend_from_slice(&at.to_le_bytes());
+        mem.0.insert(at, t);
+    }
+    mem.0.insert(0x9000, sdt(b"XSDT", &xsdt_body));
+    mem.0.insert(0xe0000, rsdp_v2(0x9000));
+    mem
+}
+
+#[test]
+fn finds_interrupt_controllers_and_hpet() {
+    let mem = system(vec![madt(), hpet()]);
+    let info = parse(0xe0000, &mem).unwrap();
+    assert_eq!(info.local_apic_address, 0xfee0_0000);
+    assert_eq!(info.cpu_apic_ids, vec![0]);
+    assert_eq!(
+        info.io_apics,
+        vec![IoApicInfo {
+            id: 7,
+            address: 0xfec0_0000,
+            gsi_base: 0
+        }]
+    );
+    assert_eq!(
+        info.overrides,
+        vec![InterruptOverride {
+            isa_irq: 0,
+            gsi: 2,
+            flags: 0
+        }]
+    );
+    assert_eq!(info.hpet_address, Some(0xfed0_0000));
+}
+
+#[test]
+fn rejects_bad_checksums_and_missing_tables() {
+    assert_eq!(parse(0, &Fake::default()), Err(AcpiError::NoRsdp));
+    let mut mem = system(vec![madt()]);
+    mem.0.get_mut(&0x10_0000).unwrap()[40] ^= 0xff;
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadTable(*b"APIC", "checksum mismatch"))
+    );
+    let mem = system(vec![hpet()]);
+    assert_eq!(parse(0xe0000, &mem), Err(AcpiError::NoMadt));
+    let mut mem = system(vec![madt()]);
+    mem.0.get_mut(&0xe0000).unwrap()[0] = b'X';
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadRsdp("bad signature"))
+    );
+}
+
+#[test]
+fn truncated_madt_entry_is_an_error_not_a_panic() {
+    let mut body = vec![0u8; 8];
+    body.extend_from_slice(&[1, 40, 0, 0]); // claims 40 bytes, has 4
+    let mem = system(vec![sdt(b"APIC", &body)]);
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadTable(
+            *b"APIC",
+            "entry length runs past the table"
+        ))
+    );
+}
+
+#[test]
+fn signal_follows_overrides_and_bus_defaults() {
+    use super::{InterruptOverride, Signal, signal_of};
+    let overrides = [
+        InterruptOverride {
+            isa_irq: 0,
+            gsi: 2,
+            flags: 0,
+        },
+        InterruptOverride {
+            isa_irq: 9,
+            gsi: 9,
+            flags: 0b1101,
+        },
+    ];
+    let edge_high = Signal {
+        active_low: false,
+        level_triggered: false,
+    };
+    assert_eq!(signal_of(3, &overrides), edge_high);
+    assert_eq!(signal_of(2, &overrides), edge_high);
+    assert_eq!(
+        signal_of(9, &overrides),
+        Signal {
+            active_low: false,
+            level_triggered: true
+        }
+    );
+    assert_eq!(
+        signal_of(18, &[]),
+        Signal {
+            active_low: true,
+            level_triggered: true
+        }
+    );
+}
