@@ -234,16 +234,7 @@ impl Failure {
     }
 }
 
-/// The two message devices: one message a call each way.
-pub trait Transport {
-    /// Sends one request message.
-    fn send(&mut self, message: &[u8]) -> Result<(), String>;
-    /// One response message, if one is there now (never waits).
-    fn try_receive(&mut self, buf: &mut [u8; MAX_MESSAGE]) -> Result<Option<usize>, String>;
-    /// Waits a little before the next [`Transport::try_receive`] (or before the next
-    /// round of `watch`).
-    fn pause(&mut self, time: Duration);
-}
+pub use port_devices::Transport;
 
 /// Requests and their answers, matched by sequence number (answers to earlier requests,
 /// which timed out, are dropped).

@@ -139,7 +139,7 @@ impl Transport for Plc {
         Ok(())
     }
 
-    fn try_receive(&mut self, buf: &mut [u8; MAX_MESSAGE]) -> Result<Option<usize>, String> {
+    fn try_receive(&mut self, buf: &mut [u8]) -> Result<Option<usize>, String> {
         Ok(self.answers.pop_front().map(|a| {
             buf[..a.len()].copy_from_slice(&a);
             a.len()
@@ -385,7 +385,7 @@ fn no_answer_times_out_and_stale_answers_are_dropped() {
         fn send(&mut self, _: &[u8]) -> Result<(), String> {
             Ok(())
         }
-        fn try_receive(&mut self, _: &mut [u8; MAX_MESSAGE]) -> Result<Option<usize>, String> {
+        fn try_receive(&mut self, _: &mut [u8]) -> Result<Option<usize>, String> {
             Ok(None)
         }
         fn pause(&mut self, time: Duration) {

@@ -115,13 +115,7 @@ impl Command {
     }
 }
 
-/// The two port devices.
-pub trait Transport {
-    fn send(&mut self, message: &[u8]) -> Result<(), String>;
-    /// A waiting response, if any (never blocks).
-    fn try_receive(&mut self, buf: &mut [u8]) -> Result<Option<usize>, String>;
-    fn pause(&mut self, time: Duration);
-}
+pub use port_devices::Transport;
 
 /// How often a missing response is looked for.
 const POLL: Duration = Duration::from_millis(2);

@@ -1,46 +1,12 @@
-//! `fbctl`'s program: opens the request device for writing and the response device for
-//! reading without waiting (`O_NONBLOCK`), reads the command's file, then runs the command
-//! ([`fbctl`] says what each one does and prints). Glue only.
+//! `fbctl`'s program: reads the command's file, opens the request and response devices
+//! ([`port_devices`]), then runs the command ([`fbctl`] says what each one does and
+//! prints). Glue only.
 
 use fbctl::{Action, Command, Failure, Link, Transport, USAGE};
-use std::fs::{File, OpenOptions};
-use std::io::{ErrorKind, Read, Write};
-use std::os::unix::fs::OpenOptionsExt;
+use port_devices::Devices;
+use std::io::Write;
 use std::process::ExitCode;
 use std::time::Duration;
-
-/// Linux's `O_NONBLOCK`.
-const O_NONBLOCK: i32 = 0o4000;
-
-struct Devices {
-    request: File,
-    response: File,
-}
-
-impl Transport for Devices {
-    fn send(&mut self, message: &[u8]) -> Result<(), String> {
-        match self.request.write(message) {
-            Ok(n) if n == message.len() => Ok(()),
-            Ok(n) => Err(format!(
-                "the request device took {n} of {} bytes",
-                message.len()
-            )),
-            Err(e) => Err(format!("cannot send the request: {e}")),
-        }
-    }
-
-    fn try_receive(&mut self, buf: &mut [u8]) -> Result<Option<usize>, String> {
-        match self.response.read(buf) {
-            Ok(n) => Ok(Some(n)),
-            Err(e) if e.kind() == ErrorKind::WouldBlock => Ok(None),
-            Err(e) => Err(format!("cannot read the response device: {e}")),
-        }
-    }
-
-    fn pause(&mut self, time: Duration) {
-        std::thread::sleep(time);
-    }
-}
 
 fn run(command: &Command) -> Result<(), Failure> {
     let file = match &command.action {
@@ -69,21 +35,10 @@ fn run(command: &Command) -> Result<(), Failure> {
             status: 2,
         });
     }
-    let fail = |path: &str, e: std::io::Error| Failure {
-        message: format!("cannot open {path}: {e}"),
-        status: 3,
-    };
-    let request = OpenOptions::new()
-        .write(true)
-        .open(&command.request)
-        .map_err(|e| fail(&command.request, e))?;
-    let response = OpenOptions::new()
-        .read(true)
-        .custom_flags(O_NONBLOCK)
-        .open(&command.response)
-        .map_err(|e| fail(&command.response, e))?;
+    let devices = Devices::open(&command.request, &command.response)
+        .map_err(|message| Failure { message, status: 3 })?;
     let mut link = Link {
-        transport: Devices { request, response },
+        transport: devices,
         timeout: command.timeout,
     };
     link.run(&command.action, &file, &mut print).map(drop)
