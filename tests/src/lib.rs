@@ -2,6 +2,8 @@
 //! (from `tests/scenarios/NAME.toml`) and hands the outcome to the test's assertions.
 //! Run the scenarios through `cargo xtask test [FILTER]`, which builds the images first.
 
+pub mod tank;
+
 use std::time::Duration;
 use xtask::qemu::{self, Outcome, RunOptions};
 use xtask::scenario;

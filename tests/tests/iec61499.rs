@@ -1,7 +1,7 @@
 //! IEC 61499 scenarios: the function-block runtime partition (`partitions/iec61499/partition`)
 //! booted from its configured boot file.
 
-use plant::Status;
+use scenarios::tank::{self, DISTURBANCE_MS, SETTLED_MS};
 use scenarios::{boot, check};
 use xtask::qemu::{Ending, Outcome};
 
@@ -143,12 +143,6 @@ fn iec61499_deploy() {
     );
 }
 
-/// The band around the 1 m setpoint (as `plc_tank`), when the level must be in it, and the
-/// plant's first disturbance.
-const BAND: f64 = 0.1;
-const SETTLED_MS: u64 = 8_000;
-const DISTURBANCE_MS: (u64, u64) = (20_000, 25_000);
-
 /// The `watch` values of the fb partition: `(t in ms, name, value)`.
 fn watches(o: &Outcome) -> Vec<(u64, String, String)> {
     let mut out = Vec::new();
@@ -183,42 +177,20 @@ fn iec61499_tank() {
         o.line("[fb] iec61499: booted: 2 type(s), ").is_some(),
         "the device booted with its two FB types",
     );
-    let status: Vec<Status> = o
-        .lines
-        .iter()
-        .filter(|l| l.contains("plant: t="))
-        .filter_map(|l| Status::parse(l))
-        .collect();
-    check(
-        &o,
-        status.len() >= 60,
-        &format!("{} plant status lines", status.len()),
-    );
-    let settled = status
-        .iter()
-        .find(|s| (s.level - 1.0).abs() <= BAND)
-        .map(|s| s.t_ms);
-    check(
-        &o,
-        settled.is_some_and(|t| t <= SETTLED_MS),
-        &format!("level in the band at {settled:?} ms, not by {SETTLED_MS} ms"),
-    );
+    let status = tank::status(&o);
+    tank::settles(&o, &status);
     // The plant counts the releases that found no fresh valve command; those before the
     // device's first cycle (while it boots) are the only ones.
     let stale_at_start = status
         .iter()
         .find(|s| s.t_ms >= 1_000)
         .map_or(0, |s| s.stale);
-    for s in status
-        .iter()
-        .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms))
-    {
-        check(
-            &o,
-            (s.level - 1.0).abs() <= BAND && s.setpoint == Some(1.0) && s.stale == stale_at_start,
-            &format!("{s}: out of the band, without the setpoint, or a stale valve"),
-        );
-    }
+    tank::holds(
+        &o,
+        &status,
+        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t),
+        stale_at_start,
+    );
     let alarm: Vec<(u64, bool)> = watches(&o)
         .into_iter()
         .filter(|(_, name, _)| name == "TANK.ALARM.ALARM")
@@ -274,12 +246,7 @@ fn iec61499_system() {
     );
     // Both tanks get their controller's setpoint: each controller runs and reaches its plant.
     for plant in ["plant", "plant2"] {
-        let status: Vec<Status> = o
-            .lines
-            .iter()
-            .filter(|l| l.contains(&format!("[{plant}] plant: t=")))
-            .filter_map(|l| Status::parse(l))
-            .collect();
+        let status = tank::status_of_partition(&o, plant);
         check(
             &o,
             status

@@ -3,15 +3,8 @@
 //! the native execution tier `tests/configs/plc_native.toml`), and its traps, watchdogs,
 //! online services and shared globals.
 
-use plant::Status;
+use scenarios::tank::{self, DISTURBANCE_MS, SETTLED_MS};
 use scenarios::{boot, check};
-
-/// The band around the 1 m setpoint the level must reach and hold (± 10 %).
-const BAND: f64 = 0.1;
-/// Simulated time by which the level is in the band (from an empty tank).
-const SETTLED_MS: u64 = 8_000;
-/// The plant's first disturbance (partitions/plant: extra inflow from 20 s to 25 s).
-const DISTURBANCE_MS: (u64, u64) = (20_000, 25_000);
 
 #[test]
 fn plc_tank() {
@@ -147,36 +140,14 @@ fn tank_controls_the_plant(o: &xtask::qemu::Outcome, partition: &str) {
         o.line(&format!("{plc}program verified:")).is_some(),
         "the runtime did not verify the program",
     );
-    let status: Vec<Status> = o
-        .lines
-        .iter()
-        .filter(|l| l.contains("plant: t="))
-        .filter_map(|l| Status::parse(l))
-        .collect();
-    check(
+    let status = tank::status(o);
+    tank::settles(o, &status);
+    tank::holds(
         o,
-        status.len() >= 60,
-        &format!("{} plant status lines", status.len()),
+        &status,
+        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t),
+        0,
     );
-    let settled = status
-        .iter()
-        .find(|s| (s.level - 1.0).abs() <= BAND)
-        .map(|s| s.t_ms);
-    check(
-        o,
-        settled.is_some_and(|t| t <= SETTLED_MS),
-        &format!("level in the band at {settled:?} ms, not by {SETTLED_MS} ms"),
-    );
-    for s in status
-        .iter()
-        .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms))
-    {
-        check(
-            o,
-            (s.level - 1.0).abs() <= BAND && s.setpoint == Some(1.0) && s.stale == 0,
-            &format!("{s}: out of the band, without the PLC's setpoint, or a stale valve"),
-        );
-    }
     // The PLC logs its watched variables once a second: the alarm is raised during the
     // disturbance and was not before it.
     let watch: Vec<(u64, bool)> = watch_lines(&o.lines, partition)
@@ -455,12 +426,7 @@ fn plc_online() {
         "LIST returned no variables",
     );
     // The forced valve reaches the plant, and the controller takes over again after it.
-    let status: Vec<Status> = o
-        .lines
-        .iter()
-        .filter(|l| l.contains("plant: t="))
-        .filter_map(|l| Status::parse(l))
-        .collect();
+    let status = tank::status(&o);
     let forced = status.iter().filter(|s| s.valve == 0.25).count();
     check(
         &o,
@@ -717,11 +683,8 @@ fn plc_watchdog() {
     }
     // The plant kept its windows: a status line every 500 ms simulated, none missing, and
     // the tank PLC's valve command never went stale after the start.
-    let status: Vec<Status> = o
-        .lines
-        .iter()
-        .filter(|l| l.contains("plant: t="))
-        .filter_map(|l| Status::parse(l))
+    let status: Vec<_> = tank::status(&o)
+        .into_iter()
         .filter(|s| s.t_ms >= 500)
         .collect();
     check(

@@ -5,17 +5,12 @@
 //! `tests/configs/guest/hostile.sh`); and the guest gets the time the windows leave
 //! (`system_leftover`, `tests/configs/system_leftover.toml`).
 
-use plant::Status;
+use scenarios::tank::{self, BAND, DISTURBANCE_MS, SETTLED_MS};
 use scenarios::{boot, check};
 use xtask::qemu::Ending;
 
-/// The band around the 1 m setpoint the level must reach and hold (± 10 %).
-const BAND: f64 = 0.1;
-/// Simulated time by which the level is in the band (from an empty tank).
-const SETTLED_MS: u64 = 8_000;
-/// The plant's first disturbance (partitions/plant: extra inflow from 20 s to 25 s), and
-/// when the level is back in the band after it.
-const DISTURBANCE_MS: (u64, u64) = (20_000, 26_000);
+/// When the level is back in the band after the plant's first disturbance.
+const RECOVERED_MS: u64 = DISTURBANCE_MS.1 + 1_000;
 /// The PLC's release lateness (cycle start minus window start) the guest must not push
 /// beyond. Without a guest a cycle starts 27 us after its window (virtual time, scenario
 /// `plc_tank`); in this run at most 63 us. A variant of the script (other moments of its
@@ -134,27 +129,14 @@ fn system_hostile_guest() {
     // The plant: in the band from SETTLED_MS to the disturbance and from the end of it to
     // the end of the run (the guest's crash and restart included), with the PLC's setpoint
     // and a fresh valve command in every status line.
-    let status: Vec<Status> = o
-        .lines
-        .iter()
-        .filter(|l| l.contains("plant: t="))
-        .filter_map(|l| Status::parse(l))
-        .collect();
-    check(
+    let status = tank::status(&o);
+    tank::settles(&o, &status);
+    tank::holds(
         &o,
-        status.len() >= 60,
-        &format!("{} plant status lines", status.len()),
+        &status,
+        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= RECOVERED_MS,
+        0,
     );
-    for s in status
-        .iter()
-        .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms) || s.t_ms >= DISTURBANCE_MS.1)
-    {
-        check(
-            &o,
-            (s.level - 1.0).abs() <= BAND && s.setpoint == Some(1.0) && s.stale == 0,
-            &format!("{s}: out of the band, without the PLC's setpoint, or a stale valve"),
-        );
-    }
 
     // The PLC's release lateness with an idle guest (the `period` lines whose second lies
     // in the 3 s after a boot of the guest) and under attack (whose second lies after the
@@ -412,11 +394,8 @@ fn system_default() {
     );
     // The loop settled: from SETTLED_MS to the disturbance the level is in the setpoint
     // band, with the PLC's setpoint in every status line.
-    let settled: Vec<Status> = o
-        .lines
-        .iter()
-        .filter(|l| l.contains("plant: t="))
-        .filter_map(|l| Status::parse(l))
+    let settled: Vec<_> = tank::status(&o)
+        .into_iter()
         .filter(|s| (SETTLED_MS..DISTURBANCE_MS.0).contains(&s.t_ms))
         .collect();
     check(
