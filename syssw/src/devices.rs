@@ -126,6 +126,9 @@ pub fn prepare(
             for (i, (_, record)) in functions.iter().flatten().enumerate() {
                 let at = RECORDS_AT + i * RECORD_SIZE;
                 chunk[at..at + RECORD_SIZE].copy_from_slice(&record.encode());
+                let caps = pci::read_capabilities(&mut KernelConfigSpace, record.address);
+                let at = pci::CAPABILITIES_AT + i * pci::CAPABILITIES_SIZE;
+                chunk[at..at + pci::CAPABILITIES_SIZE].copy_from_slice(&caps.encode());
             }
         })
         .map_err(DeviceProblem::Spawn)?;

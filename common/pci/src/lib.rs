@@ -23,6 +23,15 @@ pub const CLASS: u8 = 0x08;
 pub const HEADER: u8 = 0x0c;
 pub const BAR0: u8 = 0x10;
 pub const INTERRUPT: u8 = 0x3c;
+/// The first capability's offset (low byte), valid when the status register says
+/// [`STATUS_CAPABILITIES`].
+pub const CAPABILITIES_POINTER: u8 = 0x34;
+/// The status register's (high half of [`COMMAND`]) "capabilities list" bit.
+pub const STATUS_CAPABILITIES: u32 = 1 << 20;
+/// Where a type-0 header ends and the device-specific area (capabilities) begins.
+pub const DEVICE_AREA: u8 = 0x40;
+/// Bytes of the device-specific area (0x40..0x100) copied into a [`Record`].
+pub const DEVICE_AREA_SIZE: usize = 256 - DEVICE_AREA as usize;
 
 /// Command-register bits.
 pub const COMMAND_IO: u32 = 1 << 0;
@@ -160,6 +169,64 @@ pub struct Function {
     pub bars: [Option<Bar>; BARS],
 }
 
+/// A read-only copy of a function's capability list: the first capability's offset (0:
+/// none) and configuration space 0x40..0x100, where the list lives. A driver needs it to
+/// find its registers (a virtio device's structures are located by vendor capabilities)
+/// without ever reaching configuration space; syssw puts it in the device page
+/// ([`capabilities`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capabilities {
+    pub first: u8,
+    pub area: [u8; DEVICE_AREA_SIZE],
+}
+
+impl Default for Capabilities {
+    fn default() -> Self {
+        Capabilities {
+            first: 0,
+            area: [0; DEVICE_AREA_SIZE],
+        }
+    }
+}
+
+/// One capability: its id and its bytes from its header to the end of configuration space
+/// (its own length is capability-specific).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capability<'a> {
+    pub id: u8,
+    /// Its offset in configuration space.
+    pub offset: u8,
+    pub bytes: &'a [u8],
+}
+
+/// Most capabilities a list can hold (each at least 4 bytes in 0x40..0x100); bounds the walk
+/// of a damaged, cyclic list.
+const MAX_CAPABILITIES: usize = DEVICE_AREA_SIZE / 4;
+
+impl Capabilities {
+    /// The capabilities in list order; the walk stops at a pointer outside 0x40..0xfc, and
+    /// after [`MAX_CAPABILITIES`] entries (a list that loops).
+    pub fn iter(&self) -> impl Iterator<Item = Capability<'_>> + '_ {
+        let mut next = self.first;
+        let mut seen = 0;
+        core::iter::from_fn(move || {
+            if seen >= MAX_CAPABILITIES || !(DEVICE_AREA..=0xfc).contains(&next) {
+                return None;
+            }
+            seen += 1;
+            let offset = next & !3;
+            let at = usize::from(offset - DEVICE_AREA);
+            let bytes = &self.area[at..];
+            next = bytes[1];
+            Some(Capability {
+                id: bytes[0],
+                offset,
+                bytes,
+            })
+        })
+    }
+}
+
 /// Why a function cannot be given to a partition.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DeviceError {
@@ -197,6 +264,19 @@ impl core::fmt::Display for DeviceError {
             ),
         }
     }
+}
+
+/// Copies function `at`'s capability list (none when its status register says it has no
+/// list).
+pub fn read_capabilities(cs: &mut impl ConfigSpace, at: Address) -> Capabilities {
+    let mut capabilities = Capabilities::default();
+    if cs.read(at, COMMAND) & STATUS_CAPABILITIES != 0 {
+        capabilities.first = cs.read(at, CAPABILITIES_POINTER) as u8;
+        for (i, word) in capabilities.area.chunks_exact_mut(4).enumerate() {
+            word.copy_from_slice(&cs.read(at, DEVICE_AREA + 4 * i as u8).to_le_bytes());
+        }
+    }
+    capabilities
 }
 
 /// Reads function `at`'s header and sizes its BARs (decoding is off meanwhile and the
@@ -342,6 +422,10 @@ pub fn enable(cs: &mut impl ConfigSpace, f: &Function) {
 /// | 16 + 16·i | 8 | BAR i: the first port (I/O) or the address it is mapped at (memory) |
 /// | 24 + 16·i | 4 | BAR i: size in bytes |
 /// | 28 + 16·i | 4 | BAR i: kind (0 none, 1 I/O, 2 memory) |
+///
+/// From [`CAPABILITIES_AT`], one [`CAPABILITIES_SIZE`]-byte copy of each function's
+/// capability list in the same order: the first capability's offset (0: none), then
+/// configuration space 0x40..0x100 ([`capabilities`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Record {
     pub address: Address,
@@ -355,6 +439,9 @@ pub struct Record {
 }
 
 pub const RECORD_SIZE: usize = 112;
+/// Where the capability lists start in the device page, and the size of each.
+pub const CAPABILITIES_AT: usize = 2048;
+pub const CAPABILITIES_SIZE: usize = 1 + DEVICE_AREA_SIZE;
 /// Functions one partition may own (the records fit in one page).
 pub const MAX_PARTITION_DEVICES: usize = 8;
 /// Where the first record starts in the device page.
@@ -430,6 +517,30 @@ pub fn records(page: &[u8]) -> impl Iterator<Item = Record> + '_ {
         page.get(at..at + RECORD_SIZE)
             .and_then(|b| Record::decode(b.try_into().unwrap()))
     })
+}
+
+impl Capabilities {
+    /// Its bytes in the device page.
+    pub fn encode(&self) -> [u8; CAPABILITIES_SIZE] {
+        let mut out = [0u8; CAPABILITIES_SIZE];
+        out[0] = self.first;
+        out[1..].copy_from_slice(&self.area);
+        out
+    }
+}
+
+/// The capability list of the device page's function `index` (an empty list past the
+/// page's functions or its end).
+pub fn capabilities(page: &[u8], index: usize) -> Capabilities {
+    let at = CAPABILITIES_AT + index * CAPABILITIES_SIZE;
+    let mut c = Capabilities::default();
+    if index < MAX_PARTITION_DEVICES
+        && let Some(bytes) = page.get(at..at + CAPABILITIES_SIZE)
+    {
+        c.first = bytes[0];
+        c.area.copy_from_slice(&bytes[1..]);
+    }
+    c
 }
 
 #[cfg(test)]

@@ -261,3 +261,67 @@ fn records_round_trip_through_the_device_page() {
     page[..8].copy_from_slice(&u64::MAX.to_le_bytes());
     assert!(records(&page).count() <= MAX_PARTITION_DEVICES);
 }
+
+#[test]
+fn the_capability_list_is_copied_and_walked_without_configuration_space() {
+    let mut cs = Fake::default();
+    let at = addr("00:03.0");
+    cs.function(at, 0x1af4, 0x1041, 1);
+    cs.registers.insert((at, CAPABILITIES_POINTER), 0x84);
+    // 0x84: vendor (9) -> 0x70: vendor -> 0x40: MSI-X (0x11) -> end.
+    cs.registers.insert((at, 0x84), 0x1009_7009);
+    cs.registers.insert((at, 0x70), 0x1002_4009);
+    cs.registers.insert((at, 0x40), 0x0000_0011);
+    let caps = read_capabilities(&mut cs, at);
+    // Through the device page, as the partition sees it (after one function's).
+    let mut page = [0u8; 4096];
+    let slot = CAPABILITIES_AT + CAPABILITIES_SIZE;
+    page[slot..slot + CAPABILITIES_SIZE].copy_from_slice(&caps.encode());
+    let seen = capabilities(&page, 1);
+    assert_eq!(seen, caps);
+    let list: std::vec::Vec<(u8, u8)> = seen.iter().map(|c| (c.id, c.offset)).collect();
+    assert_eq!(list, [(9, 0x84), (9, 0x70), (0x11, 0x40)]);
+    let first = seen.iter().next().unwrap();
+    assert_eq!(
+        first.bytes[2..4],
+        [0x09, 0x10],
+        "length and the virtio cfg_type byte"
+    );
+    assert_eq!(capabilities(&page, 0).iter().count(), 0);
+    assert_eq!(capabilities(&page, 99).iter().count(), 0, "past the page");
+    const {
+        assert!(CAPABILITIES_AT >= RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE);
+        assert!(CAPABILITIES_AT + MAX_PARTITION_DEVICES * CAPABILITIES_SIZE <= 4096);
+    }
+    // Without the status bit there is no list.
+    cs.registers.insert((at, COMMAND), 0);
+    assert_eq!(read_capabilities(&mut cs, at).iter().count(), 0);
+}
+
+#[test]
+fn a_damaged_capability_list_ends_the_walk_never_panics() {
+    // A list pointing at itself, and pointers below 0x40 or past 0xfc.
+    let mut looped = Capabilities {
+        first: 0x40,
+        ..Capabilities::default()
+    };
+    looped.area[1] = 0x40;
+    assert_eq!(looped.iter().count(), DEVICE_AREA_SIZE / 4);
+    for first in [0, 0x3f, 0xfd, 0xff] {
+        let c = Capabilities {
+            first,
+            ..Capabilities::default()
+        };
+        assert_eq!(c.iter().count(), 0, "pointer {first:#x}");
+    }
+    for seed in 0..200u32 {
+        let mut c = Capabilities {
+            first: (seed * 37) as u8,
+            ..Capabilities::default()
+        };
+        for (i, b) in c.area.iter_mut().enumerate() {
+            *b = (seed.wrapping_mul(2_654_435_761).rotate_left(i as u32 % 31) >> 7) as u8;
+        }
+        assert!(c.iter().count() <= DEVICE_AREA_SIZE / 4);
+    }
+}
