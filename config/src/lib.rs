@@ -81,6 +81,7 @@
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
 //! guest.console = "com2"                           # optional: a terminal on COM2
 //! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
+//! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx" }  # NIC partitions only: see "NIC"
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -250,6 +251,18 @@
 //! records of `pci::Record`). A function that is absent at boot, a bridge, or one whose
 //! BARs or interrupt line cannot be granted alone stops only its partition: syssw logs
 //! `syssw: partition NAME not started: PCI device BB:DD.F: WHY` and starts the others.
+//!
+//! **NIC.** The NIC partition (`image = "nic"`, `partitions/nic/partition`) drives the
+//! virtio-net function it owns (`devices`) and switches Ethernet frames between the wire
+//! and its tenants. `nic.tenants.<partition>` attaches another partition with a MAC
+//! address (six hex octets separated by colons; unicast, not all zero, unique among the
+//! tenants) over two queuing ports of the NIC partition: `from`, an `in` port carrying the
+//! tenant's frames, and `to`, an `out` port to the tenant, each of `size` at least 1514
+//! (one Ethernet frame without FCS a message), each used by one tenant, and each joined by
+//! its channel to a port of that tenant (the validator names the partition a channel
+//! reaches instead). At most 15 tenants; the NIC partition has no `plc`, `guest`,
+//! `iec61499` or `data` keys (`cargo xtask` writes the tenant table as its data entry,
+//! `nic_core::tenants`). The frame link and the switch's rules: docs/interfaces.md.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7, PCI configuration 0xcf8-0xcff) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -88,6 +88,22 @@ pub struct Partition {
     pub data: Option<Spanned<Data>>,
     pub guest: Option<Spanned<Guest>>,
     pub iec61499: Option<Spanned<Iec61499>>,
+    pub nic: Option<Spanned<Nic>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Nic {
+    #[serde(default)]
+    pub tenants: Named<NicTenant>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NicTenant {
+    pub mac: Spanned<String>,
+    pub from: Spanned<String>,
+    pub to: Spanned<String>,
 }
 
 #[derive(Debug, Deserialize)]

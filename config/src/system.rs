@@ -70,6 +70,27 @@ pub struct Partition {
     pub guest: Option<Guest>,
     /// Its boot file and FB types (`iec61499.*`), if it runs the IEC 61499 runtime.
     pub iec61499: Option<Iec61499>,
+    /// The tenants of its switch (`nic.tenants`), if it is the NIC partition.
+    pub nic: Option<Nic>,
+}
+
+/// The NIC partition's tenants, in the order of the description.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Nic {
+    pub tenants: Vec<NicTenant>,
+}
+
+/// A tenant attached to the NIC partition's switch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NicTenant {
+    /// Index into [`System::partitions`].
+    pub partition: usize,
+    /// A unicast MAC address, unique among the tenants.
+    pub mac: [u8; 6],
+    /// The NIC partition's queuing input carrying the tenant's frames, and its queuing
+    /// output to the tenant (indices into its ports).
+    pub from: usize,
+    pub to: usize,
 }
 
 /// An IEC 61499 partition's boot file and the basic FB types (`.fbt`) it needs beyond the
@@ -324,6 +345,7 @@ impl System {
                     data: None,
                     guest: None,
                     iec61499: None,
+                    nic: None,
                 })
                 .collect(),
             segments: view

@@ -35,6 +35,20 @@ pub struct Mac(pub [u8; 6]);
 impl Mac {
     pub const BROADCAST: Mac = Mac([0xFF; 6]);
 
+    /// `text` as six two-digit hex octets separated by colons (`52:54:00:12:34:56`).
+    pub fn parse(text: &str) -> Option<Mac> {
+        let mut mac = [0u8; 6];
+        let mut parts = text.split(':');
+        for octet in mac.iter_mut() {
+            let part = parts.next()?;
+            if part.len() != 2 || !part.bytes().all(|b| b.is_ascii_hexdigit()) {
+                return None;
+            }
+            *octet = u8::from_str_radix(part, 16).ok()?;
+        }
+        parts.next().is_none().then_some(Mac(mac))
+    }
+
     /// Broadcast or multicast (the group bit of the first octet).
     pub fn is_group(self) -> bool {
         self.0[0] & 1 != 0

@@ -29,6 +29,29 @@ fn ports(s: Ports) -> Vec<Port> {
 }
 
 #[test]
+fn macs_parse_as_colon_separated_hex() {
+    assert_eq!(
+        Mac::parse("52:54:00:12:34:5f"),
+        Some(Mac([0x52, 0x54, 0, 0x12, 0x34, 0x5f]))
+    );
+    assert_eq!(
+        std::format!("{}", Mac::parse("52:54:00:AB:34:56").unwrap()),
+        "52:54:00:ab:34:56"
+    );
+    for bad in [
+        "",
+        "52:54:00:12:34",
+        "52:54:00:12:34:56:78",
+        "52-54-00-12-34-56",
+        "5:54:00:12:34:567",
+        "+5:54:00:12:34:56",
+        "zz:54:00:12:34:56",
+    ] {
+        assert_eq!(Mac::parse(bad), None, "{bad}");
+    }
+}
+
+#[test]
 fn forwarding_rules() {
     let mut s = switch();
     let (plc, guest) = (Port::Tenant(0), Port::Tenant(1));
