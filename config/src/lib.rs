@@ -59,6 +59,8 @@
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
 //! devices = ["00:03.0"]          # PCI functions it owns (bus:device.function); needs "irq"
+//! dma = "512KiB"                  # optional: the memory its devices may DMA to, see "PCI devices"
+//! dma_unconfined = false          # optional: may DMA without an IOMMU (a warning)
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
 //! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
@@ -243,7 +245,7 @@
 //! partition and none named twice in the system; the partition needs the `irq` ability.
 //! At boot syssw reads each function's configuration header through the kernel (no
 //! partition ever reaches configuration space: the kernel keeps ports 0xcf8-0xcff and never
-//! maps ECAM), turns its decoding on (bus mastering stays off until an IOMMU confines DMA)
+//! maps ECAM), turns its decoding on (bus mastering only with `dma`, below)
 //! and grants exactly its BARs: I/O BARs as I/O-port grants, memory BARs (whole pages)
 //! mapped uncached at `protocol::layout::DEVICES_BASE` and after, and its INTx interrupt
 //! line (q35: IOAPIC inputs 20..23, level-triggered, masked from when it fires until the
@@ -251,6 +253,18 @@
 //! records of `pci::Record`). A function that is absent at boot, a bridge, or one whose
 //! BARs or interrupt line cannot be granted alone stops only its partition: syssw logs
 //! `syssw: partition NAME not started: PCI device BB:DD.F: WHY` and starts the others.
+//!
+//! **DMA.** `dma` (a size, whole pages, part of the partition's `memory` like its stack;
+//! only with `devices`) gives the partition a physically contiguous DMA region, the only
+//! memory its devices may reach: syssw allocates it at boot (zeroed, and again at every
+//! cold restart), maps it read-write into the partition and turns bus mastering on for the
+//! partition's devices; without `dma` bus mastering stays off. The partition learns the
+//! region's address, length and *bus address* (what a device must be given for its first
+//! byte) from its device page (`pci::dma_region`; docs/interfaces.md). When the machine
+//! has an IOMMU the kernel confines each device of the partition to the region; when it
+//! has none, syssw does not start the partition (`syssw: partition NAME not started: ...
+//! no IOMMU confines its DMA`, the others run) unless it says `dma_unconfined = true`
+//! (the tools print a warning; syssw logs one and starts it with DMA unconfined).
 //!
 //! **NIC.** The NIC partition (`image = "nic"`, `partitions/nic/partition`) drives the
 //! virtio-net function it owns (`devices`) and switches Ethernet frames between the wire

@@ -78,6 +78,8 @@ pub struct Partition {
     pub irqs: Vec<Spanned<i64>>,
     #[serde(default)]
     pub devices: Vec<Spanned<String>>,
+    pub dma: Option<Spanned<Scalar>>,
+    pub dma_unconfined: Option<Spanned<bool>>,
     #[serde(default)]
     pub shared: Named<String>,
     #[serde(default)]

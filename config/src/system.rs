@@ -58,6 +58,10 @@ pub struct Partition {
     pub irqs: IrqMask,
     /// PCI functions it owns (`devices`), in the order given.
     pub devices: Vec<pci::Address>,
+    /// Bytes of its DMA region (`dma`; 0: none), part of `memory`.
+    pub dma: u64,
+    /// Its devices may DMA without an IOMMU (`dma_unconfined`).
+    pub dma_unconfined: bool,
     pub shared: Vec<Attachment>,
     pub ports: Vec<Port>,
     pub health: HealthTable,
@@ -323,6 +327,8 @@ impl System {
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,
                     devices: p.devices().collect(),
+                    dma: p.dma,
+                    dma_unconfined: p.dma_unconfined,
                     shared: p.shared().collect(),
                     ports: p
                         .ports()

@@ -422,6 +422,7 @@ impl Validator<'_, '_> {
 
             let irqs = self.irqs(doc, raw, &path, index, &mut irq_seen, abilities);
             let devices = self.devices(doc, raw, &path, index, &mut devices_seen, abilities);
+            let (dma, dma_unconfined) = self.dma(raw, &path, memory, stack, &devices);
 
             let shared = self.attachments(raw, &path, segments, &mut attachment_total);
 
@@ -486,6 +487,8 @@ impl Validator<'_, '_> {
                 io_ports,
                 irqs,
                 devices,
+                dma,
+                dma_unconfined,
                 shared,
                 ports: own_ports,
                 health,
@@ -1582,6 +1585,71 @@ impl Validator<'_, '_> {
             );
         }
         devices
+    }
+
+    /// A partition's DMA region (`dma`, bytes; 0: none) and `dma_unconfined`: whole pages,
+    /// only for a partition that owns PCI devices, within its memory beside the stack;
+    /// `dma_unconfined` only with a region, and a warning (its devices' DMA is then
+    /// confined by nothing when the machine has no IOMMU).
+    fn dma(
+        &mut self,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        memory: Option<u64>,
+        stack: u64,
+        devices: &[pci::Address],
+    ) -> (u64, bool) {
+        let dma_path = path.key("dma");
+        let dma = match &raw.dma {
+            None => 0,
+            Some(value) => {
+                let bytes = self.page_size(value, &dma_path).unwrap_or(0);
+                if raw.devices.is_empty() {
+                    self.error(
+                        start(value),
+                        &dma_path,
+                        "a DMA region is for the partition's PCI devices, but it owns none (add `devices` or remove `dma`)",
+                    );
+                }
+                if let Some(memory) = memory
+                    && bytes > 0
+                    && bytes.saturating_add(stack) > memory
+                {
+                    self.error(
+                        start(value),
+                        &dma_path,
+                        format!(
+                            "the DMA region of {} and the stack of {} do not fit in the partition's memory of {} (the region is part of `memory`)",
+                            Size(bytes),
+                            Size(stack),
+                            Size(memory)
+                        ),
+                    );
+                }
+                bytes
+            }
+        };
+        let unconfined_path = path.key("dma_unconfined");
+        let unconfined = match &raw.dma_unconfined {
+            Some(flag) if *flag.get_ref() => {
+                if raw.dma.is_none() {
+                    self.error(
+                        start(flag),
+                        &unconfined_path,
+                        "dma_unconfined = true without a DMA region: give the partition `dma` (the size of the memory its devices may reach)",
+                    );
+                } else if !devices.is_empty() {
+                    self.r.warning(
+                        start(flag),
+                        &unconfined_path,
+                        "dma_unconfined = true: on a machine without an IOMMU the partition's devices start with bus mastering on and nothing confines their DMA to its DMA region",
+                    );
+                }
+                true
+            }
+            _ => false,
+        };
+        (dma, unconfined)
     }
 
     /// A partition's shared-memory attachments (`attachment_total` counts the system's).

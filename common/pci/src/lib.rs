@@ -391,10 +391,9 @@ pub fn q35_interrupt_line(at: Address, pin: u8) -> Option<u8> {
     Some(16 + (at.device + pin - 1) % 4 + 4)
 }
 
-/// Turns decoding on for the kinds of BARs `f` has and lets it raise INTx. Bus mastering
-/// (DMA) stays off: a partition's DMA needs the IOMMU to confine it to memory the
-/// partition owns, which is not there yet.
-pub fn enable(cs: &mut impl ConfigSpace, f: &Function) {
+/// Turns decoding on for the kinds of BARs `f` has and lets it raise INTx; bus mastering
+/// (DMA) only with `bus_master` (a partition with a DMA region).
+pub fn enable(cs: &mut impl ConfigSpace, f: &Function, bus_master: bool) {
     let mut command = cs.read(f.address, COMMAND) & 0xffff;
     for bar in f.bars.iter().flatten() {
         command |= match bar {
@@ -403,6 +402,9 @@ pub fn enable(cs: &mut impl ConfigSpace, f: &Function) {
         };
     }
     command &= !(COMMAND_INTX_DISABLE | COMMAND_BUS_MASTER);
+    if bus_master {
+        command |= COMMAND_BUS_MASTER;
+    }
     // The status half is write-one-to-clear: writing zeros there changes nothing.
     cs.write(f.address, COMMAND, command);
 }
@@ -503,6 +505,53 @@ impl Record {
             bars,
         })
     }
+}
+
+/// Where the device page describes the partition's DMA region (after the records).
+pub const DMA_AT: usize = RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE;
+/// Bytes of that description.
+pub const DMA_SIZE: usize = 24;
+
+/// The partition's DMA region (`dma`): physically contiguous memory of the partition that
+/// its devices may reach, mapped read-write at `address` in the partition for `length`
+/// bytes. A device must be given `bus_address + offset` for the byte at `address +
+/// offset` (with an IOMMU the kernel translates exactly this range to the region and
+/// nothing else; see docs/isolation.md). In the device page at [`DMA_AT`]: the address,
+/// the length and the bus address as little-endian `u64`s, a length of 0 for none.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DmaRegion {
+    pub address: u64,
+    pub length: u64,
+    pub bus_address: u64,
+}
+
+impl DmaRegion {
+    pub fn encode(&self) -> [u8; DMA_SIZE] {
+        let mut out = [0u8; DMA_SIZE];
+        out[0..8].copy_from_slice(&self.address.to_le_bytes());
+        out[8..16].copy_from_slice(&self.length.to_le_bytes());
+        out[16..24].copy_from_slice(&self.bus_address.to_le_bytes());
+        out
+    }
+
+    /// The bus address of the byte at partition address `at`, if `at` lies in the region.
+    pub fn bus_address_of(&self, at: u64) -> Option<u64> {
+        let offset = at.checked_sub(self.address)?;
+        (offset < self.length).then(|| self.bus_address + offset)
+    }
+}
+
+/// The DMA region a device page describes; `None` for a partition without `dma` (or a page
+/// too short to hold the description).
+pub fn dma_region(page: &[u8]) -> Option<DmaRegion> {
+    let bytes = page.get(DMA_AT..DMA_AT + DMA_SIZE)?;
+    let at = |i: usize| u64::from_le_bytes(bytes[i..i + 8].try_into().unwrap());
+    let region = DmaRegion {
+        address: at(0),
+        length: at(8),
+        bus_address: at(16),
+    };
+    (region.length != 0).then_some(region)
 }
 
 /// The records of a device page (as many as its count says, at most

@@ -196,7 +196,7 @@ fn memory_bars_smaller_than_a_page_and_bars_over_config_ports_are_refused() {
 }
 
 #[test]
-fn enabling_turns_on_decoding_and_intx_never_bus_mastering() {
+fn enabling_turns_on_decoding_and_intx_and_bus_mastering_only_when_asked() {
     let mut cs = Fake::default();
     let at = addr("00:03.0");
     cs.function(at, 0x1af4, 0x1000, 1);
@@ -206,11 +206,17 @@ fn enabling_turns_on_decoding_and_intx_never_bus_mastering() {
     );
     cs.io_bar(at, 0, 0xc040, 32);
     let f = probe(&mut cs, at).unwrap();
-    enable(&mut cs, &f);
+    enable(&mut cs, &f, false);
     assert_eq!(
         cs.registers[&(at, COMMAND)],
         0xffff_0000 | COMMAND_IO,
         "I/O on, memory, bus master and INTx-disable off, status untouched"
+    );
+    enable(&mut cs, &f, true);
+    assert_eq!(
+        cs.registers[&(at, COMMAND)],
+        0xffff_0000 | COMMAND_IO | COMMAND_BUS_MASTER,
+        "a partition with a DMA region gets bus mastering"
     );
 }
 
@@ -324,4 +330,26 @@ fn a_damaged_capability_list_ends_the_walk_never_panics() {
         }
         assert!(c.iter().count() <= DEVICE_AREA_SIZE / 4);
     }
+}
+
+#[test]
+fn the_dma_region_round_trips_through_the_device_page_and_translates_addresses() {
+    let mut page = [0u8; 4096];
+    assert_eq!(dma_region(&page), None, "no region: length 0");
+    let region = DmaRegion {
+        address: 0x6c00_0000_0000,
+        length: 0x8_0000,
+        bus_address: 0x0123_4000,
+    };
+    page[DMA_AT..DMA_AT + DMA_SIZE].copy_from_slice(&region.encode());
+    assert_eq!(dma_region(&page), Some(region));
+    assert_eq!(dma_region(&page[..DMA_AT + 8]), None, "a short page");
+    const { assert!(DMA_AT >= RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE) };
+    assert_eq!(region.bus_address_of(0x6c00_0000_0010), Some(0x0123_4010));
+    assert_eq!(
+        region.bus_address_of(0x6c00_0008_0000),
+        None,
+        "one past the end"
+    );
+    assert_eq!(region.bus_address_of(0x6bff_ffff_ffff), None);
 }
