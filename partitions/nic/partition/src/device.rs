@@ -7,15 +7,7 @@ use nic_core::switch::Mac;
 use nic_core::virtio::{
     self, DmaLayout, Layout, Memory, Queue, RECEIVE_QUEUE, Region, TRANSMIT_QUEUE, common, status,
 };
-use pci::{Bar, Capabilities, Record};
-
-/// The DMA region: `len` bytes at `virt` in this partition, at `bus` for the device.
-#[derive(Clone, Copy, Debug)]
-pub struct DmaRegion {
-    pub virt: u64,
-    pub bus: u64,
-    pub len: u64,
-}
+use pci::{Bar, Capabilities, DmaRegion, Record};
 
 /// The DMA region through volatile accesses (the device reads and writes it meanwhile).
 pub struct Dma {
@@ -30,8 +22,8 @@ impl Dma {
     #[allow(unsafe_code)]
     pub unsafe fn new(region: DmaRegion) -> Dma {
         Dma {
-            base: region.virt as *mut u8,
-            len: region.len as usize,
+            base: region.address as *mut u8,
+            len: region.length as usize,
         }
     }
 
@@ -240,8 +232,8 @@ impl Net {
             cfg.write16(common::QUEUE_SELECT, q);
             let max = cfg.read16(common::QUEUE_SIZE);
             let dl =
-                DmaLayout::new(max, dma.len as usize).ok_or_else(|| fail(BringUp::Queue(q)))?;
-            let queue = Queue::new(&mut mem, q, dl, dma.bus);
+                DmaLayout::new(max, dma.length as usize).ok_or_else(|| fail(BringUp::Queue(q)))?;
+            let queue = Queue::new(&mut mem, q, dl, dma.bus_address);
             let (desc, driver, device) = queue.bus_rings();
             cfg.write16(common::QUEUE_SIZE, dl.size);
             cfg.write16(common::QUEUE_MSIX_VECTOR, 0xffff);

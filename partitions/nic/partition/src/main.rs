@@ -33,7 +33,6 @@
 extern crate alloc;
 
 mod device;
-mod dma;
 
 use alloc::vec::Vec;
 use apex::Warden;
@@ -250,7 +249,7 @@ extern "C" fn run() {
         ));
         return;
     };
-    let Some(region) = dma::region() else {
+    let Some(region) = pci::dma_region(page) else {
         refuse(format_args!(
             "no DMA region (the partition needs `dma`, and `dma_unconfined = true` without an IOMMU)"
         ));

@@ -11,7 +11,8 @@
 //! * `flood*`: MAC 52:54:00:12:34:57, sends full-size frames of a local experimental
 //!   EtherType (0x88b5, which the wire ignores) to QEMU's gateway as fast as its port takes
 //!   them, for ever; logs `flood: t=<ms>ms sent=<n> refused=<n>` each second (refused: its
-//!   port was full).
+//!   port was full);
+//! * `idle*`: sends nothing and takes whatever comes (the quiet case to compare with).
 //!
 //! A hand-made minimal responder, not a TCP/IP stack. A test program: it must never be
 //! needed by anything but its scenario.
@@ -188,6 +189,14 @@ extern "C" fn flood() {
     }
 }
 
+extern "C" fn idle() {
+    let rx = QueuingPortReceiver::<Warden>::from_name(name("rx")).expect("rx");
+    let mut frame = [0u8; FRAME];
+    loop {
+        let _ = rx.receive(&mut frame, SystemTime::Infinite);
+    }
+}
+
 struct Tenant;
 
 impl Partition<Warden> for Tenant {
@@ -197,11 +206,18 @@ impl Partition<Warden> for Tenant {
             .expect("CREATE_QUEUING_PORT tx");
         ctx.create_queuing_port_receiver(name("rx"), FRAME as u32, 16, fifo)
             .expect("CREATE_QUEUING_PORT rx");
-        let flooding = apex::runtime::start_info().name().starts_with("flood");
+        let me = apex::runtime::start_info();
+        let entry_point: extern "C" fn() = if me.name().starts_with("flood") {
+            flood
+        } else if me.name().starts_with("idle") {
+            idle
+        } else {
+            echo
+        };
         let attributes = ProcessAttribute {
             period: SystemTime::Infinite,
             time_capacity: SystemTime::Infinite,
-            entry_point: if flooding { flood } else { echo },
+            entry_point,
             stack_size: 16 * 1024,
             base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
             deadline: Deadline::Soft,
