@@ -192,4 +192,9 @@ fn echoes(name: &str, other: &str) {
         field(flooded, "in").is_some_and(|n| n > 1000),
         "the switch took few of the flood's frames",
     );
+    check(
+        &o,
+        field(flooded, "limited").is_some_and(|n| n > 0),
+        "the flood's broadcasts were never limited",
+    );
 }

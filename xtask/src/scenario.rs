@@ -177,3 +177,47 @@ pub fn all(filter: Option<&str>) -> Result<Vec<Scenario>> {
     out.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(out)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn host_port_placeholders_are_filled_in_order() {
+        let args = vec![
+            "-netdev".to_string(),
+            "user,id=n0,hostfwd=udp:127.0.0.1:{host_port0}-:7,hostfwd=tcp:127.0.0.1:{host_port1}-:80"
+                .to_string(),
+        ];
+        assert_eq!(
+            with_host_ports(&args, &[4000, 4001])[1],
+            "user,id=n0,hostfwd=udp:127.0.0.1:4000-:7,hostfwd=tcp:127.0.0.1:4001-:80"
+        );
+    }
+
+    #[test]
+    fn free_host_ports_are_distinct_and_bindable_for_both_protocols() {
+        let ports = free_host_ports(3).unwrap();
+        assert_eq!(ports.len(), 3);
+        assert!(ports[0] != ports[1] && ports[1] != ports[2] && ports[0] != ports[2]);
+        for port in ports {
+            let _tcp = std::net::TcpListener::bind(("127.0.0.1", port)).unwrap();
+            let _udp = std::net::UdpSocket::bind(("127.0.0.1", port)).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_placeholder_beyond_host_ports_is_refused() {
+        let dir = std::env::temp_dir().join(format!("warden-scenario-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("net_x.toml");
+        std::fs::write(
+            &path,
+            "description = \"x\"\nhost_ports = 1\nqemu_args = [\"hostfwd=udp:127.0.0.1:{host_port1}-:7\"]\n",
+        )
+        .unwrap();
+        let e = load(&path).unwrap_err().to_string();
+        assert!(e.contains("names a host port beyond host_ports = 1"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -6,7 +6,8 @@
 //!
 //! One APEX process, the switch, does everything in a loop: frames the device received go
 //! where the switch routes them (to one tenant, to all for broadcast and multicast; unknown
-//! unicast from the wire is dropped); then frames from the tenants' ports, round-robin, at
+//! unicast from the wire is dropped; a tenant's broadcasts and multicasts are bounded,
+//! `nic_core::switch::GROUP_RATE`); then frames from the tenants' ports, round-robin, at
 //! most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
 //! tenant that floods its port only fills its own port and loses its own frames (its
 //! sends fail when the port is full) while every other tenant keeps its turn. A tenant's
@@ -24,9 +25,10 @@
 //!   frames sent to it, frames for it dropped because its transmit queue was full, unicast
 //!   from the wire for no tenant, runts from the device, used entries the device should
 //!   not have written) and for each tenant `nic: t=<ms>ms tenant <partition> in=<n> out=<n>
-//!   overflow=<n> spoofed=<n> malformed=<n>` (frames taken from its port, frames delivered
-//!   to it, frames for it dropped because its port was full, frames refused for a source
-//!   MAC not its own, frames of a bad length). Counters count since start.
+//!   overflow=<n> spoofed=<n> malformed=<n> limited=<n>` (frames taken from its port,
+//!   frames delivered to it, frames for it dropped because its port was full, frames
+//!   refused for a source MAC not its own, frames of a bad length, broadcasts and
+//!   multicasts beyond its rate). Counters count since start.
 #![no_std]
 #![no_main]
 
@@ -219,8 +221,8 @@ impl Nic {
         for (n, link) in self.links.iter().enumerate() {
             let c = self.switch.counters(Port::Tenant(n));
             println!(
-                "nic: t={now_ms}ms tenant {} in={} out={} overflow={} spoofed={} malformed={}",
-                link.name, c.received, c.delivered, c.overflow, c.spoofed, c.malformed
+                "nic: t={now_ms}ms tenant {} in={} out={} overflow={} spoofed={} malformed={} limited={}",
+                link.name, c.received, c.delivered, c.overflow, c.spoofed, c.malformed, c.limited
             );
         }
     }
@@ -317,6 +319,7 @@ extern "C" fn run() {
     let start = sys::clock();
     let mut next_log = STATS_EVERY_MS;
     loop {
+        nic.switch.set_time(sys::clock());
         nic.serve_wire(&mut frame);
         nic.reclaim();
         nic.serve_tenants(&mut rounds, &mut frame);

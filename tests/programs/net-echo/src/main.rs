@@ -9,8 +9,8 @@
 //!   answered, datagrams echoed, frames ignored), and `echo: the host is done` for a
 //!   datagram saying `done` (the scenario's end);
 //! * `flood*`: MAC 52:54:00:12:34:57, sends full-size frames of a local experimental
-//!   EtherType (0x88b5, which the wire ignores) to QEMU's gateway as fast as its port takes
-//!   them, for ever; logs `flood: t=<ms>ms sent=<n> refused=<n>` each second (refused: its
+//!   EtherType (0x88b5, which the wire and the other tenants ignore), three to QEMU's
+//!   gateway and one broadcast in turn, as fast as its port takes them, for ever; logs `flood: t=<ms>ms sent=<n> refused=<n>` each second (refused: its
 //!   port was full);
 //! * `idle*`: sends nothing and takes whatever comes (the quiet case to compare with).
 //!
@@ -177,6 +177,12 @@ extern "C" fn flood() {
     let (mut sent, mut refused) = (0u64, 0u64);
     let mut next_log = now_ms() + 1000;
     loop {
+        let to = if (sent + refused) % 4 == 3 {
+            [0xff; 6]
+        } else {
+            GATEWAY_MAC
+        };
+        frame[..6].copy_from_slice(&to);
         match tx.send(&frame, SystemTime::Normal(Duration::ZERO)) {
             Ok(()) => sent += 1,
             Err(_) => refused += 1,

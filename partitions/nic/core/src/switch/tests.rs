@@ -126,6 +126,39 @@ fn tenants_cannot_spoof_or_send_garbage() {
 }
 
 #[test]
+fn a_tenants_broadcast_storm_is_bounded_and_costs_only_it() {
+    let mut s = switch();
+    let (plc, guest) = (Port::Tenant(0), Port::Tenant(1));
+    s.set_time(5_000_000_000);
+    let storm = frame(Mac::BROADCAST, GUEST, 60);
+    let passed = (0..1000).filter(|_| s.route(guest, &storm).is_ok()).count();
+    assert_eq!(
+        passed, GROUP_BURST as usize,
+        "the burst, then nothing at one instant"
+    );
+    assert_eq!(s.route(guest, &storm), Err(Drop::Limited));
+    assert_eq!(s.counters(guest).limited, 1000 - u64::from(GROUP_BURST) + 1);
+    // The other tenant's broadcasts and everyone's unicast are untouched.
+    assert!(s.route(plc, &frame(Mac::BROADCAST, PLC, 60)).is_ok());
+    assert!(s.route(guest, &frame(HOST, GUEST, 60)).is_ok());
+    // Tokens come back at GROUP_RATE: 100 ms later, a tenth of a second's worth.
+    s.set_time(5_100_000_000);
+    let passed = (0..100).filter(|_| s.route(guest, &storm).is_ok()).count();
+    assert_eq!(passed, (GROUP_RATE / 10) as usize);
+    // A clock going back refills nothing; a long pause refills only the burst.
+    s.set_time(1);
+    assert_eq!(s.route(guest, &storm), Err(Drop::Limited));
+    s.set_time(u64::MAX);
+    let passed = (0..1000).filter(|_| s.route(guest, &storm).is_ok()).count();
+    assert_eq!(passed, GROUP_BURST as usize);
+    // The wire's broadcasts are not a tenant's.
+    assert!((0..1000).all(|_| {
+        s.route(Port::Uplink, &frame(Mac::BROADCAST, HOST, 60))
+            .is_ok()
+    }));
+}
+
+#[test]
 fn configuration_is_checked() {
     assert_eq!(
         Switch::new(&[PLC, PLC]).err(),
