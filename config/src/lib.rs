@@ -267,8 +267,8 @@
 //! (the tools print a warning; syssw logs one and starts it with DMA unconfined).
 //!
 //! **NIC.** The NIC partition (`image = "nic"`, `partitions/nic/partition`) drives the
-//! virtio-net function it owns (`devices`) and switches Ethernet frames between the wire
-//! and its tenants. `nic.tenants.<partition>` attaches another partition with a MAC
+//! virtio-net function it owns (`devices`, with a `dma` region, which it needs) and
+//! switches Ethernet frames between the wire and its tenants. `nic.tenants.<partition>` attaches another partition with a MAC
 //! address (six hex octets separated by colons; unicast, not all zero, unique among the
 //! tenants) over two queuing ports of the NIC partition: `from`, an `in` port carrying the
 //! tenant's frames, and `to`, an `out` port to the tenant, each of `size` at least 1514

@@ -798,6 +798,13 @@ impl Validator<'_, '_> {
                     ),
                 );
             }
+            if partitions[me].devices.is_empty() || r.dma.is_none() {
+                self.error(
+                    start(nic),
+                    &path,
+                    "the NIC partition needs `devices` (its virtio-net function) and `dma` (the region the device reads and writes frames in)",
+                );
+            }
             let table = &nic.get_ref().tenants;
             let tenants_path = path.key("tenants");
             if table.is_empty() {

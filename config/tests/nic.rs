@@ -21,6 +21,10 @@ image = "nic"
 memory = "2MiB"
 kernel_memory = "128KiB"
 max_priority = 100
+abilities = ["debug_log", "irq"]
+devices = ["00:03.0"]
+dma = "512KiB"
+dma_unconfined = true
 ports.echo-tx = { kind = "queuing", direction = "in", size = 1514, depth = 16 }
 ports.echo-rx = { kind = "queuing", direction = "out", size = 1514, depth = 16 }
 ports.flood-tx = { kind = "queuing", direction = "in", size = 1514, depth = 16 }
@@ -214,6 +218,18 @@ fn tenants_must_be_other_partitions() {
         0,
         "partitions.nic.nic.tenants.nic",
         "the NIC partition cannot be its own tenant",
+    );
+}
+
+#[test]
+fn the_nic_partition_needs_its_device_and_a_dma_region() {
+    let without = edited(&[("dma = \"512KiB\"\ndma_unconfined = true\n", "")]);
+    expect_one(
+        &without,
+        "nic.tenants.echo",
+        0,
+        "partitions.nic.nic",
+        "the NIC partition needs `devices` (its virtio-net function) and `dma`",
     );
 }
 
