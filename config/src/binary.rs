@@ -49,7 +49,7 @@
 //! 0      32   name
 //! 32     8    size in bytes (> 0, multiple of 4096)
 //!
-//! Partition (136 bytes) x P
+//! Partition (160 bytes) x P
 //! 0      32   name (<= 15 bytes: it names the partition's task)
 //! 32     32   image: system.img holds the ELF as entry "partition/<image>"
 //! 64     8    memory in bytes (> 0, multiple of 4096; includes the stack)
@@ -62,12 +62,18 @@
 //! 108    1    MCP (1..=199)
 //! 109    1    priority of the first thread (<= MCP)
 //! 110    1    time partition (0 = background, else 1..=15)
-//! 111    1    flags: bit 0 = may switch the module schedule (`schedule_control`); others 0
+//! 111    1    flags: bit 0 = may switch the module schedule (`schedule_control`); bit 1 =
+//!             its devices may DMA without an IOMMU (`dma_unconfined`, only with a DMA
+//!             region); others 0
 //! 112    8    partition health table (as the module's)
 //! 120    2    first I/O range,  122  2  I/O range count
 //! 124    2    first attachment, 126  2  attachment count
 //! 128    2    first port,       130  2  port count
-//! 132    4    reserved
+//! 132    1    PCI device count (<= pci::MAX_PARTITION_DEVICES)
+//! 133    3    reserved
+//! 136    16   PCI devices: routing ids (u16), the unused slots zero; none owned twice
+//! 152    8    DMA region in bytes (`dma`; 0 = none; multiple of 4096, <= memory, only
+//!             with PCI devices)
 //!              (the partitions' I/O-range, attachment and port ranges each tile their table
 //!              in partition order)
 //!
@@ -123,7 +129,7 @@ pub use abi::layout::Field;
 use abi::syscall::Abilities;
 
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
-pub const VERSION: u32 = 2;
+pub const VERSION: u32 = 3;
 pub const NAME_SIZE: usize = 32;
 pub const HEADER_SIZE: usize = header::SIZE;
 pub const SCHEDULE_SIZE: usize = schedule::SIZE;
@@ -229,8 +235,10 @@ pub mod partition {
     /// The PCI functions it owns: `DEVICE_COUNT` routing ids (`pci::Address::id`, u16 LE),
     /// the unused ones zero.
     pub const DEVICES: Field = Field::new(136, 16);
-    pub const SIZE: usize = 152;
-    pub const FIELDS: [Field; 23] = [
+    /// Bytes of its DMA region (`dma`; 0: none).
+    pub const DMA: Field = Field::new(152, 8);
+    pub const SIZE: usize = 160;
+    pub const FIELDS: [Field; 24] = [
         NAME,
         IMAGE,
         MEMORY,
@@ -254,6 +262,7 @@ pub mod partition {
         DEVICE_COUNT,
         RESERVED_B,
         DEVICES,
+        DMA,
     ];
 }
 
@@ -304,6 +313,9 @@ pub mod port {
 
 /// Partition flag: the partition may switch the module schedule.
 pub const FLAG_SCHEDULE_CONTROL: u8 = 1;
+/// Partition flag: its devices may DMA into its DMA region without an IOMMU confining them
+/// (`dma_unconfined`; only with a DMA region).
+pub const FLAG_DMA_UNCONFINED: u8 = 2;
 
 /// Channel record fields.
 pub mod channel {
@@ -778,8 +790,22 @@ impl<'a> SystemView<'a> {
             if !P::RESERVED_B.is_zero(r) {
                 return Err(fail("reserved bytes are not zero"));
             }
-            if P::FLAGS.u8(r) & !FLAG_SCHEDULE_CONTROL != 0 {
+            let flags = P::FLAGS.u8(r);
+            if flags & !(FLAG_SCHEDULE_CONTROL | FLAG_DMA_UNCONFINED) != 0 {
                 return Err(fail("unknown flags"));
+            }
+            let dma = P::DMA.get(r);
+            if !dma.is_multiple_of(PAGE_SIZE) || dma > memory {
+                return Err(fail(
+                    "DMA region not a multiple of 4 KiB or larger than the partition's memory",
+                ));
+            }
+            if (dma != 0 && P::DEVICE_COUNT.u8(r) == 0)
+                || (dma == 0 && flags & FLAG_DMA_UNCONFINED != 0)
+            {
+                return Err(fail(
+                    "a DMA region without PCI devices, or dma_unconfined without a DMA region",
+                ));
             }
             let devices = usize::from(P::DEVICE_COUNT.u8(r));
             if devices > pci::MAX_PARTITION_DEVICES
@@ -1078,6 +1104,8 @@ impl<'a> SystemView<'a> {
             priority: P::PRIORITY.u8(r),
             time_partition: P::TIME_PARTITION.u8(r),
             schedule_control: P::FLAGS.u8(r) & FLAG_SCHEDULE_CONTROL != 0,
+            dma: P::DMA.get(r),
+            dma_unconfined: P::FLAGS.u8(r) & FLAG_DMA_UNCONFINED != 0,
             health: HealthTable::from_bytes(P::HEALTH.bytes(r)).unwrap_or_default(),
             io: self.sub_range(i, P::FIRST_IO, P::IO_COUNT),
             attachments: self.sub_range(i, P::FIRST_ATTACHMENT, P::ATTACHMENT_COUNT),
@@ -1244,6 +1272,10 @@ pub struct PartitionView<'a> {
     pub time_partition: u8,
     /// May switch the module schedule (ARINC SET_MODULE_SCHEDULE).
     pub schedule_control: bool,
+    /// Bytes of its DMA region (`dma`; 0: none): physically contiguous, part of `memory`.
+    pub dma: u64,
+    /// Its devices may DMA without an IOMMU confining them (`dma_unconfined`).
+    pub dma_unconfined: bool,
     pub health: HealthTable,
     io: (usize, usize),
     attachments: (usize, usize),
@@ -1466,12 +1498,19 @@ mod encode {
                 .set(P::TIME_PARTITION, u64::from(p.time_partition))
                 .set(
                     P::FLAGS,
-                    u64::from(if p.schedule_control {
-                        FLAG_SCHEDULE_CONTROL
-                    } else {
-                        0
-                    }),
+                    u64::from(
+                        if p.schedule_control {
+                            FLAG_SCHEDULE_CONTROL
+                        } else {
+                            0
+                        } | if p.dma_unconfined {
+                            FLAG_DMA_UNCONFINED
+                        } else {
+                            0
+                        },
+                    ),
                 )
+                .set(P::DMA, p.dma)
                 .set(P::DEVICE_COUNT, p.devices.len() as u64)
                 .raw(P::DEVICES, &device_ids(&p.devices))
                 .raw(P::HEALTH, &p.health.to_bytes())

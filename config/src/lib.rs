@@ -59,6 +59,8 @@
 //! io_ports = ["0x2f8-0x2ff", "0x60", 0x61]   # inclusive ranges, hex or decimal
 //! irqs = [3]                      # ISA lines 0..=23 except 0, 2, 4; needs ability "irq"
 //! devices = ["00:03.0"]          # PCI functions it owns (bus:device.function); needs "irq"
+//! dma = "512KiB"                  # optional: the memory its devices may DMA to, see "PCI devices"
+//! dma_unconfined = false          # optional: may DMA without an IOMMU (a warning)
 //! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
 //! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
@@ -81,6 +83,7 @@
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
 //! guest.console = "com2"                           # optional: a terminal on COM2
 //! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
+//! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx" }  # NIC partitions only: see "NIC"
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -242,7 +245,7 @@
 //! partition and none named twice in the system; the partition needs the `irq` ability.
 //! At boot syssw reads each function's configuration header through the kernel (no
 //! partition ever reaches configuration space: the kernel keeps ports 0xcf8-0xcff and never
-//! maps ECAM), turns its decoding on (bus mastering stays off until an IOMMU confines DMA)
+//! maps ECAM), turns its decoding on (bus mastering only with `dma`, below)
 //! and grants exactly its BARs: I/O BARs as I/O-port grants, memory BARs (whole pages)
 //! mapped uncached at `protocol::layout::DEVICES_BASE` and after, and its INTx interrupt
 //! line (q35: IOAPIC inputs 20..23, level-triggered, masked from when it fires until the
@@ -250,6 +253,30 @@
 //! records of `pci::Record`). A function that is absent at boot, a bridge, or one whose
 //! BARs or interrupt line cannot be granted alone stops only its partition: syssw logs
 //! `syssw: partition NAME not started: PCI device BB:DD.F: WHY` and starts the others.
+//!
+//! **DMA.** `dma` (a size, whole pages, part of the partition's `memory` like its stack;
+//! only with `devices`) gives the partition a physically contiguous DMA region, the only
+//! memory its devices may reach: syssw allocates it at boot (zeroed, and again at every
+//! cold restart), maps it read-write into the partition and turns bus mastering on for the
+//! partition's devices; without `dma` bus mastering stays off. The partition learns the
+//! region's address, length and *bus address* (what a device must be given for its first
+//! byte) from its device page (`pci::dma_region`; docs/interfaces.md). When the machine
+//! has an IOMMU the kernel confines each device of the partition to the region; when it
+//! has none, syssw does not start the partition (`syssw: partition NAME not started: ...
+//! no IOMMU confines its DMA`, the others run) unless it says `dma_unconfined = true`
+//! (the tools print a warning; syssw logs one and starts it with DMA unconfined).
+//!
+//! **NIC.** The NIC partition (`image = "nic"`, `partitions/nic/partition`) drives the
+//! virtio-net function it owns (`devices`, with a `dma` region, which it needs) and
+//! switches Ethernet frames between the wire and its tenants. `nic.tenants.<partition>` attaches another partition with a MAC
+//! address (six hex octets separated by colons; unicast, not all zero, unique among the
+//! tenants) over two queuing ports of the NIC partition: `from`, an `in` port carrying the
+//! tenant's frames, and `to`, an `out` port to the tenant, each of `size` at least 1514
+//! (one Ethernet frame without FCS a message), each used by one tenant, and each joined by
+//! its channel to a port of that tenant (the validator names the partition a channel
+//! reaches instead). At most 15 tenants; the NIC partition has no `plc`, `guest`,
+//! `iec61499` or `data` keys (`cargo xtask` writes the tenant table as its data entry,
+//! `nic_core::tenants`). The frame link and the switch's rules: docs/interfaces.md.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7, PCI configuration 0xcf8-0xcff) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -78,6 +78,8 @@ pub struct Partition {
     pub irqs: Vec<Spanned<i64>>,
     #[serde(default)]
     pub devices: Vec<Spanned<String>>,
+    pub dma: Option<Spanned<Scalar>>,
+    pub dma_unconfined: Option<Spanned<bool>>,
     #[serde(default)]
     pub shared: Named<String>,
     #[serde(default)]
@@ -88,6 +90,22 @@ pub struct Partition {
     pub data: Option<Spanned<Data>>,
     pub guest: Option<Spanned<Guest>>,
     pub iec61499: Option<Spanned<Iec61499>>,
+    pub nic: Option<Spanned<Nic>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Nic {
+    #[serde(default)]
+    pub tenants: Named<NicTenant>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NicTenant {
+    pub mac: Spanned<String>,
+    pub from: Spanned<String>,
+    pub to: Spanned<String>,
 }
 
 #[derive(Debug, Deserialize)]

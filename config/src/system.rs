@@ -58,6 +58,10 @@ pub struct Partition {
     pub irqs: IrqMask,
     /// PCI functions it owns (`devices`), in the order given.
     pub devices: Vec<pci::Address>,
+    /// Bytes of its DMA region (`dma`; 0: none), part of `memory`.
+    pub dma: u64,
+    /// Its devices may DMA without an IOMMU (`dma_unconfined`).
+    pub dma_unconfined: bool,
     pub shared: Vec<Attachment>,
     pub ports: Vec<Port>,
     pub health: HealthTable,
@@ -70,6 +74,27 @@ pub struct Partition {
     pub guest: Option<Guest>,
     /// Its boot file and FB types (`iec61499.*`), if it runs the IEC 61499 runtime.
     pub iec61499: Option<Iec61499>,
+    /// The tenants of its switch (`nic.tenants`), if it is the NIC partition.
+    pub nic: Option<Nic>,
+}
+
+/// The NIC partition's tenants, in the order of the description.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Nic {
+    pub tenants: Vec<NicTenant>,
+}
+
+/// A tenant attached to the NIC partition's switch.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NicTenant {
+    /// Index into [`System::partitions`].
+    pub partition: usize,
+    /// A unicast MAC address, unique among the tenants.
+    pub mac: [u8; 6],
+    /// The NIC partition's queuing input carrying the tenant's frames, and its queuing
+    /// output to the tenant (indices into its ports).
+    pub from: usize,
+    pub to: usize,
 }
 
 /// An IEC 61499 partition's boot file and the basic FB types (`.fbt`) it needs beyond the
@@ -302,6 +327,8 @@ impl System {
                     io_ports: p.io_ports().collect(),
                     irqs: p.irqs,
                     devices: p.devices().collect(),
+                    dma: p.dma,
+                    dma_unconfined: p.dma_unconfined,
                     shared: p.shared().collect(),
                     ports: p
                         .ports()
@@ -324,6 +351,7 @@ impl System {
                     data: None,
                     guest: None,
                     iec61499: None,
+                    nic: None,
                 })
                 .collect(),
             segments: view

@@ -289,6 +289,7 @@ impl Validator<'_, '_> {
         let schedules = self.schedules(doc, &mut partitions, &times);
         self.background_priorities(doc, &partitions);
         let channels = self.channels(doc, &mut partitions, &mut ports);
+        self.nic(doc, &mut partitions, &channels);
         let health = self.health(&doc.health, &root.key("health"));
 
         if let Some(memory) = memory {
@@ -421,6 +422,7 @@ impl Validator<'_, '_> {
 
             let irqs = self.irqs(doc, raw, &path, index, &mut irq_seen, abilities);
             let devices = self.devices(doc, raw, &path, index, &mut devices_seen, abilities);
+            let (dma, dma_unconfined) = self.dma(raw, &path, memory, stack, &devices);
 
             let shared = self.attachments(raw, &path, segments, &mut attachment_total);
 
@@ -485,6 +487,8 @@ impl Validator<'_, '_> {
                 io_ports,
                 irqs,
                 devices,
+                dma,
+                dma_unconfined,
                 shared,
                 ports: own_ports,
                 health,
@@ -492,6 +496,7 @@ impl Validator<'_, '_> {
                 data,
                 guest,
                 iec61499,
+                nic: None,
             });
         }
         (partitions, times, ports)
@@ -763,6 +768,207 @@ impl Validator<'_, '_> {
             types,
             mgmt,
         })
+    }
+
+    /// `nic.tenants`: the partitions attached to a NIC partition's switch (see the crate
+    /// documentation). After the channels, since it checks where the ports lead.
+    fn nic(&mut self, doc: &schema::Document, partitions: &mut [Partition], channels: &[Channel]) {
+        let base = KeyPath::root().key("partitions");
+        for (key, raw) in in_source_order(&doc.partitions) {
+            let Some(nic) = &raw.get_ref().nic else {
+                continue;
+            };
+            let Some(me) = partitions.iter().position(|p| &p.name == key.get_ref()) else {
+                continue;
+            };
+            let path = base.key(key.get_ref()).key("nic");
+            let r = raw.get_ref();
+            let others = [
+                (r.plc.is_some(), "the soft-PLC (`plc`)"),
+                (r.guest.is_some(), "the guest (`guest`)"),
+                (r.iec61499.is_some(), "the IEC 61499 runtime (`iec61499`)"),
+                (r.data.is_some(), "a `data` entry"),
+            ];
+            for (_, what) in others.iter().filter(|(has, _)| *has) {
+                self.error(
+                    start(nic),
+                    &path,
+                    format!(
+                        "a partition is the NIC partition (`nic`) or runs {what}, not both: its data entry is its tenant table"
+                    ),
+                );
+            }
+            if partitions[me].devices.is_empty() || r.dma.is_none() {
+                self.error(
+                    start(nic),
+                    &path,
+                    "the NIC partition needs `devices` (its virtio-net function) and `dma` (the region the device reads and writes frames in)",
+                );
+            }
+            let table = &nic.get_ref().tenants;
+            let tenants_path = path.key("tenants");
+            if table.is_empty() {
+                self.error(
+                    start(nic),
+                    &tenants_path,
+                    "a NIC partition needs at least one tenant (`nic.tenants.<partition> = { mac, from, to }`)",
+                );
+            }
+            let max = nic_core::switch::MAX_TENANTS;
+            if table.len() > max {
+                self.error(
+                    start(nic),
+                    &tenants_path,
+                    format!(
+                        "{} tenants, at most {max} (the switch's ports)",
+                        table.len()
+                    ),
+                );
+            }
+            let mut tenants: Vec<NicTenant> = Vec::new();
+            let mut ok = true;
+            for (name, tenant) in in_source_order(table) {
+                let at = tenants_path.key(name.get_ref());
+                let t = tenant.get_ref();
+                let partition = partitions.iter().position(|p| &p.name == name.get_ref());
+                match partition {
+                    None => self.error(
+                        start(name),
+                        &at,
+                        format!("no partition `{}` to attach", name.get_ref()),
+                    ),
+                    Some(p) if p == me => self.error(
+                        start(name),
+                        &at,
+                        "the NIC partition cannot be its own tenant",
+                    ),
+                    Some(_) => {}
+                }
+                let mac = self.nic_mac(&t.mac, &at.key("mac"), &tenants);
+                let from = self.nic_port(&t.from, &at.key("from"), &partitions[me], Direction::In);
+                let to = self.nic_port(&t.to, &at.key("to"), &partitions[me], Direction::Out);
+                for (port, key, text) in [(from, "from", &t.from), (to, "to", &t.to)] {
+                    let Some(port) = port else { continue };
+                    if tenants.iter().any(|o| o.from == port || o.to == port) {
+                        self.error(
+                            start(text),
+                            &at.key(key),
+                            format!(
+                                "port `{}` already carries another tenant's frames",
+                                text.get_ref()
+                            ),
+                        );
+                    }
+                    // Where the port's channel leads: the tenant's end must be the tenant's.
+                    let (Some(partition), Some(channel)) =
+                        (partition, channels.get(partitions[me].ports[port].channel))
+                    else {
+                        continue;
+                    };
+                    let other = if key == "from" {
+                        Some(channel.source)
+                    } else {
+                        channel.destinations.first().copied()
+                    };
+                    if let Some(other) = other.filter(|o| o.partition != partition) {
+                        self.error(
+                            start(text),
+                            &at.key(key),
+                            format!(
+                                "port `{}` is connected {} `{}.{}`, not to the tenant `{}` (channel `{}`)",
+                                text.get_ref(),
+                                if key == "from" { "from" } else { "to" },
+                                partitions[other.partition].name,
+                                partitions[other.partition].ports[other.port].name,
+                                name.get_ref(),
+                                channel.name
+                            ),
+                        );
+                    }
+                }
+                match (partition, mac, from, to) {
+                    (Some(partition), Some(mac), Some(from), Some(to)) if partition != me => {
+                        tenants.push(NicTenant {
+                            partition,
+                            mac,
+                            from,
+                            to,
+                        });
+                    }
+                    _ => ok = false,
+                }
+            }
+            if ok && !tenants.is_empty() && tenants.len() <= max {
+                partitions[me].nic = Some(Nic { tenants });
+            }
+        }
+    }
+
+    /// A tenant's MAC: six hex octets, unicast, not all zero, unique among `so_far`.
+    fn nic_mac(
+        &mut self,
+        text: &Spanned<String>,
+        path: &KeyPath,
+        so_far: &[NicTenant],
+    ) -> Option<[u8; 6]> {
+        let Some(mac) = nic_core::switch::Mac::parse(text.get_ref()) else {
+            self.error(
+                start(text),
+                path,
+                format!(
+                    "`{}` is not a MAC address: six two-digit hex octets separated by colons, like \"52:54:00:12:34:56\"",
+                    text.get_ref()
+                ),
+            );
+            return None;
+        };
+        let why = if mac.is_group() {
+            Some("a multicast (group) address: the first octet's lowest bit is set")
+        } else if mac.0 == [0; 6] {
+            Some("the all-zero address")
+        } else if so_far.iter().any(|t| t.mac == mac.0) {
+            Some("another tenant has it")
+        } else {
+            None
+        };
+        if let Some(why) = why {
+            self.error(
+                start(text),
+                path,
+                format!("MAC {mac} cannot be a tenant's: {why}"),
+            );
+            return None;
+        }
+        Some(mac.0)
+    }
+
+    /// A port of the NIC partition carrying one tenant's frames one way: queuing, of
+    /// `direction`, messages of at least a whole Ethernet frame.
+    fn nic_port(
+        &mut self,
+        text: &Spanned<String>,
+        path: &KeyPath,
+        nic: &Partition,
+        direction: Direction,
+    ) -> Option<usize> {
+        let frame = nic_core::switch::MAX_FRAME as u32;
+        let found = nic.ports.iter().position(|p| &p.name == text.get_ref());
+        let ok = found.is_some_and(|i| {
+            let p = &nic.ports[i];
+            p.kind == PortKind::Queuing && p.direction == direction && p.size >= frame
+        });
+        if !ok {
+            self.error(
+                start(text),
+                path,
+                format!(
+                    "`{}` must be a queuing `{}` port of this partition with size >= {frame} (one Ethernet frame without FCS a message)",
+                    text.get_ref(),
+                    direction.name()
+                ),
+            );
+        }
+        found.filter(|_| ok)
     }
 
     /// `data`: what `cargo xtask` puts into the partition's data entry (see the crate
@@ -1386,6 +1592,71 @@ impl Validator<'_, '_> {
             );
         }
         devices
+    }
+
+    /// A partition's DMA region (`dma`, bytes; 0: none) and `dma_unconfined`: whole pages,
+    /// only for a partition that owns PCI devices, within its memory beside the stack;
+    /// `dma_unconfined` only with a region, and a warning (its devices' DMA is then
+    /// confined by nothing when the machine has no IOMMU).
+    fn dma(
+        &mut self,
+        raw: &schema::Partition,
+        path: &KeyPath,
+        memory: Option<u64>,
+        stack: u64,
+        devices: &[pci::Address],
+    ) -> (u64, bool) {
+        let dma_path = path.key("dma");
+        let dma = match &raw.dma {
+            None => 0,
+            Some(value) => {
+                let bytes = self.page_size(value, &dma_path).unwrap_or(0);
+                if raw.devices.is_empty() {
+                    self.error(
+                        start(value),
+                        &dma_path,
+                        "a DMA region is for the partition's PCI devices, but it owns none (add `devices` or remove `dma`)",
+                    );
+                }
+                if let Some(memory) = memory
+                    && bytes > 0
+                    && bytes.saturating_add(stack) > memory
+                {
+                    self.error(
+                        start(value),
+                        &dma_path,
+                        format!(
+                            "the DMA region of {} and the stack of {} do not fit in the partition's memory of {} (the region is part of `memory`)",
+                            Size(bytes),
+                            Size(stack),
+                            Size(memory)
+                        ),
+                    );
+                }
+                bytes
+            }
+        };
+        let unconfined_path = path.key("dma_unconfined");
+        let unconfined = match &raw.dma_unconfined {
+            Some(flag) if *flag.get_ref() => {
+                if raw.dma.is_none() {
+                    self.error(
+                        start(flag),
+                        &unconfined_path,
+                        "dma_unconfined = true without a DMA region: give the partition `dma` (the size of the memory its devices may reach)",
+                    );
+                } else if !devices.is_empty() {
+                    self.r.warning(
+                        start(flag),
+                        &unconfined_path,
+                        "dma_unconfined = true: on a machine without an IOMMU the partition's devices start with bus mastering on and nothing confines their DMA to its DMA region",
+                    );
+                }
+                true
+            }
+            _ => false,
+        };
+        (dma, unconfined)
     }
 
     /// A partition's shared-memory attachments (`attachment_total` counts the system's).

@@ -75,6 +75,8 @@ abilities = ["io_ports", "irq"]
 io_ports = ["0x60", "0x2f8-0x2ff", 0x378]
 irqs = [3, 7]
 devices = ["00:03.0", "00:04.0"]
+dma = "64KiB"
+dma_unconfined = true
 shared = { frame = "r" }
 ports.level = { kind = "sampling", direction = "out", size = 8 }
 ports.cmd = { kind = "queuing", direction = "in", size = 128, depth = 4 }
@@ -326,8 +328,8 @@ fn header_damage() {
     header::MAGIC.bytes_mut(&mut b)[0] = b'X';
     assert_eq!(decode(&b).unwrap_err(), DecodeError::BadMagic);
     let mut b = blob.clone();
-    header::VERSION.set(&mut b, 1);
-    assert_eq!(decode(&b).unwrap_err(), DecodeError::UnsupportedVersion(1));
+    header::VERSION.set(&mut b, 2);
+    assert_eq!(decode(&b).unwrap_err(), DecodeError::UnsupportedVersion(2));
     let mut b = blob.clone();
     let last = b.len() - 1;
     b[last] ^= 0x40;
@@ -421,7 +423,7 @@ fn partition_damage() {
     }));
     invalid(Table::Partition, 0, "unknown flags")(damaged(|b| {
         let at = p(b, 0);
-        partition::FLAGS.set(&mut b[at..], 2);
+        partition::FLAGS.set(&mut b[at..], 4);
     }));
     invalid(Table::Partition, 0, "priority above the MCP")(damaged(|b| {
         let at = p(b, 0);
@@ -471,6 +473,22 @@ fn partition_damage() {
     invalid(Table::Partition, 1, "unused device slots not zero")(damaged(|b| {
         let at = p(b, 1);
         partition::DEVICES.bytes_mut(&mut b[at..])[15] = 1;
+    }));
+    invalid(Table::Partition, 1, "DMA region not a multiple of 4 KiB")(damaged(|b| {
+        let at = p(b, 1);
+        partition::DMA.set(&mut b[at..], 4097);
+    }));
+    invalid(Table::Partition, 1, "larger than the partition's memory")(damaged(|b| {
+        let at = p(b, 1);
+        partition::DMA.set(&mut b[at..], 1 << 40);
+    }));
+    invalid(Table::Partition, 2, "a DMA region without PCI devices")(damaged(|b| {
+        let at = p(b, 2);
+        partition::DMA.set(&mut b[at..], 4096);
+    }));
+    invalid(Table::Partition, 1, "dma_unconfined without a DMA region")(damaged(|b| {
+        let at = p(b, 1);
+        partition::DMA.set(&mut b[at..], 0);
     }));
     invalid(Table::Header, 0, "exceed the budget")(damaged(|b| {
         let at = p(b, 2);

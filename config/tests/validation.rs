@@ -877,6 +877,73 @@ fn pci_devices_need_the_irq_ability() {
 }
 
 #[test]
+fn a_dma_region_is_kept_with_its_flag() {
+    let src = doc(&[(
+        "# a",
+        "abilities = [\"irq\"]\ndevices = [\"00:03.0\"]\ndma = \"512KiB\"",
+    )]);
+    let s = load_ok(&src);
+    assert_eq!(s.partitions[0].dma, 512 * 1024);
+    assert!(!s.partitions[0].dma_unconfined);
+    assert_eq!(s.partitions[1].dma, 0);
+}
+
+#[test]
+fn dma_needs_devices_whole_pages_and_room_in_memory() {
+    let src = doc(&[("# a", "dma = \"64KiB\"")]);
+    expect_one(
+        &src,
+        "dma = ^\"64KiB\"",
+        0,
+        "partitions.a.dma",
+        "it owns none (add `devices` or remove `dma`)",
+    );
+    let devices = "abilities = [\"irq\"]\ndevices = [\"00:03.0\"]\n";
+    let src = doc(&[("# a", &format!("{devices}dma = 5000"))]);
+    expect_one(
+        &src,
+        "dma = ^5000",
+        0,
+        "partitions.a.dma",
+        "is not a multiple of 4 KiB",
+    );
+    let src = doc(&[("# a", &format!("{devices}dma = 0"))]);
+    expect_one(&src, "dma = ^0", 0, "partitions.a.dma", "must not be zero");
+    let src = doc(&[("# a", &format!("{devices}dma = \"1MiB\""))]);
+    expect_one(
+        &src,
+        "dma = ^\"1MiB\"",
+        0,
+        "partitions.a.dma",
+        "the DMA region of 1MiB and the stack of 64KiB do not fit in the partition's memory of 1MiB",
+    );
+}
+
+#[test]
+fn dma_unconfined_needs_a_region_and_is_a_warning() {
+    let src = doc(&[("# a", "dma_unconfined = true")]);
+    expect_one(
+        &src,
+        "dma_unconfined = ^true",
+        0,
+        "partitions.a.dma_unconfined",
+        "without a DMA region",
+    );
+    let region = "abilities = [\"irq\"]\ndevices = [\"00:03.0\"]\ndma = \"64KiB\"\n";
+    let src = doc(&[("# a", &format!("{region}dma_unconfined = true"))]);
+    let (s, warnings) = config::load_with_warnings("test.toml", &src, &any_image).unwrap();
+    assert!(s.partitions[0].dma_unconfined);
+    assert_eq!(warnings.len(), 1, "{warnings:?}");
+    let (line, column) = position(&src, "dma_unconfined = ^true", 0);
+    assert_eq!((warnings[0].line, warnings[0].column), (line, column));
+    assert_eq!(warnings[0].key_path, "partitions.a.dma_unconfined");
+    assert!(warnings[0].message.contains("nothing confines their DMA"));
+    let src = doc(&[("# a", &format!("{region}dma_unconfined = false"))]);
+    let (s, warnings) = config::load_with_warnings("test.toml", &src, &any_image).unwrap();
+    assert!(!s.partitions[0].dma_unconfined && warnings.is_empty());
+}
+
+#[test]
 fn pci_configuration_ports_are_never_granted() {
     for ports in [
         "\"0xcf8-0xcff\"",

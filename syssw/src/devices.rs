@@ -1,15 +1,26 @@
 //! The PCI functions a partition owns (`devices`): probed, checked and enabled once at
 //! boot ([`prepare`], with `pci`'s logic over the kernel's `pci_config`), granted to every
 //! instance of the partition ([`grant`]): its I/O BARs as I/O-port grants, its memory BARs
-//! mapped uncached from `DEVICES_BASE` on, its INTx line, and the read-only page of records
-//! that tells the partition what it got. A function that cannot be granted alone (absent,
-//! a bridge, a BAR that shares its page, an interrupt line another partition holds) stops
-//! only its partition.
+//! mapped uncached from `DEVICES_BASE` on, its INTx line, its DMA region (`dma`) at
+//! `DMA_BASE`, and the read-only page of records that tells the partition what it got. A
+//! function that cannot be granted alone (absent, a bridge, a BAR that shares its page, an
+//! interrupt line another partition holds, DMA that nothing confines) stops only its
+//! partition.
+//!
+//! DMA: a partition with a DMA region gets physically contiguous frames of its memory and
+//! bus mastering for its functions; each function is confined to the region by the IOMMU
+//! ([`confine`]) before bus mastering goes on. Without an IOMMU the partition is not
+//! started, unless it says `dma_unconfined` (then a warning, and the bus address of the
+//! region is its physical address).
 
-use pci::{Address, Bar, ConfigSpace, DeviceError, Function, RECORD_SIZE, RECORDS_AT, Record};
+use config::binary::PartitionView;
+use pci::{
+    Address, Bar, ConfigSpace, DMA_AT, DMA_SIZE, DeviceError, DmaRegion, Function, RECORD_SIZE,
+    RECORDS_AT, Record,
+};
 use root_task::spawn::{SpawnError, Spawner};
 use user_rt::abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TaskId};
-use user_rt::protocol::layout::DEVICES_BASE;
+use user_rt::protocol::layout::{DEVICES_BASE, DMA_BASE};
 use user_rt::sys;
 
 const PAGE: u64 = 4096;
@@ -40,6 +51,8 @@ pub enum DeviceProblem {
     SharedLine(Address, u8),
     Spawn(SpawnError),
     Kernel(&'static str, Error),
+    /// It has a DMA region, the machine no IOMMU, and it does not say `dma_unconfined`.
+    Unconfined(Address),
 }
 
 impl core::fmt::Display for DeviceProblem {
@@ -52,6 +65,10 @@ impl core::fmt::Display for DeviceProblem {
             ),
             Self::Spawn(e) => write!(f, "PCI devices: out of memory or addresses: {e:?}"),
             Self::Kernel(call, e) => write!(f, "PCI devices: {call} failed: {e:?}"),
+            Self::Unconfined(a) => write!(
+                f,
+                "PCI device {a}: no IOMMU confines its DMA to the partition's DMA region (a machine with an IOMMU, e.g. QEMU's intel-iommu, or `dma_unconfined = true`)"
+            ),
         }
     }
 }
@@ -61,16 +78,22 @@ pub struct Devices {
     /// The frame of the records page.
     page: u64,
     functions: [Option<(Function, Record)>; pci::MAX_PARTITION_DEVICES],
+    /// Its DMA region: first frame, and the region as the partition sees it.
+    dma: Option<(u64, DmaRegion)>,
+    /// Whether the IOMMU confines its DMA (false: `dma_unconfined` on a machine without).
+    confined: bool,
 }
 
-/// Probes, checks and enables the functions `addresses`, lays out their memory BARs from
-/// `DEVICES_BASE` and writes the records page; `lines` holds the interrupt lines taken so
-/// far (gets the new ones). `None` for a partition without devices.
+/// Probes, checks and enables partition `p`'s functions, lays out their memory BARs from
+/// `DEVICES_BASE`, allocates its DMA region and confines the functions to it, and writes
+/// the records page; `lines` holds the interrupt lines taken so far (gets the new ones).
+/// `None` for a partition without devices.
 pub fn prepare(
     spawner: &mut Spawner,
-    addresses: impl Iterator<Item = Address>,
+    p: &PartitionView,
     lines: &mut u32,
 ) -> Result<Option<Devices>, DeviceProblem> {
+    let addresses = p.devices();
     let mut cs = KernelConfigSpace;
     let mut functions = [None; pci::MAX_PARTITION_DEVICES];
     let mut next = DEVICES_BASE + 2 * PAGE;
@@ -117,6 +140,26 @@ pub fn prepare(
     if count == 0 {
         return Ok(None);
     }
+    let (dma, confined) = match p.dma / PAGE {
+        0 => (None, true),
+        pages => {
+            let frames = spawner.frames(pages).map_err(DeviceProblem::Spawn)?;
+            let mut bus_address = None;
+            for (f, _) in functions.iter().flatten() {
+                bus_address = confine(f.address, frames, pages)?;
+                if bus_address.is_none() && !p.dma_unconfined {
+                    return Err(DeviceProblem::Unconfined(f.address));
+                }
+            }
+            let region = DmaRegion {
+                address: DMA_BASE,
+                length: p.dma,
+                // Unconfined, a device reaches physical memory as it is.
+                bus_address: bus_address.unwrap_or(frames),
+            };
+            (Some((frames, region)), bus_address.is_some())
+        }
+    };
     let page = spawner
         .filled_frames(1, |chunk, offset| {
             if offset != 0 {
@@ -126,14 +169,41 @@ pub fn prepare(
             for (i, (_, record)) in functions.iter().flatten().enumerate() {
                 let at = RECORDS_AT + i * RECORD_SIZE;
                 chunk[at..at + RECORD_SIZE].copy_from_slice(&record.encode());
+                let caps = pci::read_capabilities(&mut KernelConfigSpace, record.address);
+                let at = pci::CAPABILITIES_AT + i * pci::CAPABILITIES_SIZE;
+                chunk[at..at + pci::CAPABILITIES_SIZE].copy_from_slice(&caps.encode());
+            }
+            if let Some((_, region)) = dma {
+                chunk[DMA_AT..DMA_AT + DMA_SIZE].copy_from_slice(&region.encode());
             }
         })
         .map_err(DeviceProblem::Spawn)?;
     for (f, _) in functions.iter().flatten() {
-        pci::enable(&mut cs, f);
+        pci::enable(&mut cs, f, dma.is_some());
     }
     *lines = taken;
-    Ok(Some(Devices { page, functions }))
+    Ok(Some(Devices {
+        page,
+        functions,
+        dma,
+        confined,
+    }))
+}
+
+/// Confines function `at`'s DMA to the `pages` frames from `frames` through the IOMMU:
+/// the bus address of the first frame, or `None` when the machine has no IOMMU.
+fn confine(_at: Address, _frames: u64, _pages: u64) -> Result<Option<u64>, DeviceProblem> {
+    Ok(None)
+}
+
+/// Zeroes the DMA region (a cold restart must not see the last instance's data).
+pub fn clear_dma(spawner: &mut Spawner, devices: &Devices) -> Result<(), DeviceProblem> {
+    match devices.dma {
+        Some((frames, region)) => spawner
+            .refill_frames(frames, region.length / PAGE, |_, _| ())
+            .map_err(DeviceProblem::Spawn),
+        None => Ok(()),
+    }
 }
 
 /// Grants `devices` to a new instance's `task`.
@@ -175,6 +245,16 @@ pub fn grant(devices: &Devices, task: TaskId) -> Result<(), DeviceProblem> {
             kernel("irq_grant", sys::irq_grant(task, u64::from(line)))?;
         }
     }
+    if let Some((frames, region)) = devices.dma {
+        root_task::spawn::map_physical_chunked(
+            Some(task),
+            frames,
+            region.address,
+            region.length / PAGE,
+            PageRights::WRITE,
+        )
+        .map_err(DeviceProblem::Spawn)?;
+    }
     Ok(())
 }
 
@@ -200,6 +280,25 @@ pub fn log(partition: &str, devices: &Devices) {
         let _ = match record.interrupt_line {
             Some(line_no) => write!(line, ", interrupt line {line_no} (level)"),
             None => write!(line, ", no interrupt"),
+        };
+        let _ = sys::debug_write(line.as_bytes());
+    }
+    if let Some((frames, region)) = devices.dma {
+        let mut line = user_rt::print::LineBuffer::default();
+        let _ = write!(
+            line,
+            "syssw: partition {partition}: DMA region {} KiB at {:#x} (physical {frames:#x}, bus address {:#x}), ",
+            region.length / 1024,
+            region.address,
+            region.bus_address
+        );
+        let _ = if devices.confined {
+            write!(line, "its devices confined to it by the IOMMU")
+        } else {
+            write!(
+                line,
+                "WARNING: no IOMMU, its devices' DMA is not confined (dma_unconfined)"
+            )
         };
         let _ = sys::debug_write(line.as_bytes());
     }

@@ -155,7 +155,7 @@ impl Loader {
         elf: &'static [u8],
         data: &'static [u8],
     ) -> Result<&Placement, LoadError> {
-        let devices = crate::devices::prepare(&mut self.spawner, p.devices(), &mut self.lines)
+        let devices = crate::devices::prepare(&mut self.spawner, p, &mut self.lines)
             .map_err(LoadError::Devices)?;
         let placement = place(&mut self.spawner, &self.system, p, elf, data)?;
         Ok(self.placed[p.index].insert(Placement {
@@ -404,6 +404,9 @@ fn instantiate(
         kernel("irq_grant", sys::irq_grant(task, line as u64))?;
     }
     if let Some(devices) = &placed.devices {
+        if start == Start::Cold {
+            crate::devices::clear_dma(spawner, devices).map_err(LoadError::Devices)?;
+        }
         crate::devices::grant(devices, task).map_err(LoadError::Devices)?;
     }
     for a in p.shared() {

@@ -4,12 +4,24 @@
 
 pub mod tank;
 
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use xtask::qemu::{self, Outcome, RunOptions};
 use xtask::scenario;
 
 /// Boots scenario `name` and returns what happened.
 pub fn boot(name: &str) -> Outcome {
+    boot_beside(name, |_, _| ()).0
+}
+
+/// Boots scenario `name` with `host` running on this machine meanwhile (a client of what
+/// the system serves through QEMU's `hostfwd`): it gets the ports the scenario's
+/// `host_ports` chose (in `{host_port<i>}` order) and a flag set once QEMU has ended, and
+/// should return soon after.
+pub fn boot_beside<R: Send>(
+    name: &str,
+    host: impl FnOnce(&[u16], &AtomicBool) -> R + Send,
+) -> (Outcome, R) {
     let manifest = scenario::scenarios_dir().join(format!("{name}.toml"));
     let s = scenario::load(&manifest).unwrap_or_else(|e| panic!("{e:#}"));
     let dir = scenario::output_dir().join(name);
@@ -19,8 +31,30 @@ pub fn boot(name: &str) -> Outcome {
         "no image for scenario {name}: run `cargo xtask test {name}`"
     );
     let tools = xtask::tools::ensure_qemu().unwrap_or_else(|e| panic!("{e:#}"));
+    let ports = scenario::free_host_ports(s.manifest.host_ports)
+        .unwrap_or_else(|e| panic!("scenario {name}: {e:#}"));
+    let ended = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let client = scope.spawn(|| host(&ports, &ended));
+        // The flag is set whatever happened, so the host side ends before a panic here.
+        let outcome = run(&s, &dir, esp, &tools, &ports);
+        ended.store(true, Ordering::SeqCst);
+        let result = client.join();
+        let outcome = outcome.unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"));
+        let result = result.unwrap_or_else(|_| panic!("the host side of {name} panicked"));
+        (outcome, result)
+    })
+}
+
+fn run(
+    s: &scenario::Scenario,
+    dir: &std::path::Path,
+    esp: std::path::PathBuf,
+    tools: &xtask::tools::Qemu,
+    ports: &[u16],
+) -> anyhow::Result<Outcome> {
     qemu::run(
-        &tools,
+        tools,
         &RunOptions {
             esp,
             timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
@@ -28,7 +62,7 @@ pub fn boot(name: &str) -> Outcome {
             work_dir: dir.join("state"),
             deterministic_time: s.manifest.deterministic_time,
             done_when: s.manifest.done_when.clone(),
-            extra_args: s.manifest.qemu_args.clone(),
+            extra_args: scenario::with_host_ports(&s.manifest.qemu_args, ports),
             com2: if s.manifest.console_input.is_empty() {
                 qemu::Com2::Unconnected
             } else {
@@ -39,7 +73,6 @@ pub fn boot(name: &str) -> Outcome {
             },
         },
     )
-    .unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"))
 }
 
 /// Panics with the full transcript unless `cond` holds.

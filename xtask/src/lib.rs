@@ -19,6 +19,7 @@ pub mod iec61499;
 pub mod lint;
 pub mod linux;
 pub mod native;
+pub mod nic;
 pub mod oscat;
 pub mod plc;
 pub mod plot;

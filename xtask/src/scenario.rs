@@ -22,7 +22,13 @@
 //!                               # `qemu::QUIET` (a prompt came); the test reads COM2's
 //!                               # output as `Outcome::console`
 //! qemu_args = ["-device", "virtio-net-pci,addr=03.0,netdev=n", "-netdev", "user,id=n,restrict=on"]
-//!                               # optional: more QEMU arguments (devices a partition owns)
+//!                               # optional: more QEMU arguments (devices a partition owns);
+//!                               # `{host_port0}`, `{host_port1}`, ... in them become the
+//!                               # ports `host_ports` chose
+//! host_ports = 1                # optional, default 0: this many ports on 127.0.0.1, free
+//!                               # for both TCP and UDP when the scenario boots (scenarios
+//!                               # run in parallel, so none is fixed), for `hostfwd`; the
+//!                               # test gets them (`scenarios::boot_beside`)
 //! console_start = "built-in shell"   # with console_input: typing starts once the
 //!                               # output shows this (the firmware and the loader write
 //!                               # to COM2 first); default "": at the first quiet output
@@ -60,6 +66,8 @@ pub struct Manifest {
     pub console_start: String,
     #[serde(default)]
     pub qemu_args: Vec<String>,
+    #[serde(default)]
+    pub host_ports: usize,
 }
 
 impl Manifest {
@@ -78,6 +86,40 @@ impl Manifest {
         }
         Ok(())
     }
+}
+
+/// `{host_port<i>}` in `args` replaced by `ports[i]`.
+pub fn with_host_ports(args: &[String], ports: &[u16]) -> Vec<String> {
+    args.iter()
+        .map(|arg| {
+            let mut arg = arg.clone();
+            for (i, port) in ports.iter().enumerate() {
+                arg = arg.replace(&format!("{{host_port{i}}}"), &port.to_string());
+            }
+            arg
+        })
+        .collect()
+}
+
+/// `n` distinct ports on 127.0.0.1 that are free for both TCP and UDP now (each bound to
+/// both until all are found, so they differ; QEMU binds them moments later).
+pub fn free_host_ports(n: usize) -> Result<Vec<u16>> {
+    let mut held = Vec::new();
+    for _ in 0..n * 20 {
+        if held.len() == n {
+            break;
+        }
+        let tcp =
+            std::net::TcpListener::bind(("127.0.0.1", 0)).context("cannot bind a TCP port")?;
+        let port = tcp.local_addr()?.port();
+        if let Ok(udp) = std::net::UdpSocket::bind(("127.0.0.1", port)) {
+            held.push((port, tcp, udp));
+        }
+    }
+    if held.len() < n {
+        anyhow::bail!("cannot find {n} ports free for both TCP and UDP on 127.0.0.1");
+    }
+    Ok(held.into_iter().map(|(port, _, _)| port).collect())
 }
 
 fn default_timeout() -> u64 {
@@ -104,6 +146,14 @@ pub fn load(path: &Path) -> Result<Scenario> {
         std::fs::read_to_string(path).with_context(|| format!("cannot read {}", path.display()))?;
     let manifest: Manifest = toml::from_str(&text)
         .with_context(|| format!("invalid scenario manifest {}", path.display()))?;
+    let placeholders = with_host_ports(&manifest.qemu_args, &vec![0; manifest.host_ports]);
+    if let Some(arg) = placeholders.iter().find(|a| a.contains("{host_port")) {
+        anyhow::bail!(
+            "scenario manifest {}: `{arg}` names a host port beyond host_ports = {}",
+            path.display(),
+            manifest.host_ports
+        );
+    }
     let name = path
         .file_stem()
         .context("scenario file without a name")?
@@ -126,4 +176,48 @@ pub fn all(filter: Option<&str>) -> Result<Vec<Scenario>> {
     }
     out.sort_by(|a, b| a.name.cmp(&b.name));
     Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn host_port_placeholders_are_filled_in_order() {
+        let args = vec![
+            "-netdev".to_string(),
+            "user,id=n0,hostfwd=udp:127.0.0.1:{host_port0}-:7,hostfwd=tcp:127.0.0.1:{host_port1}-:80"
+                .to_string(),
+        ];
+        assert_eq!(
+            with_host_ports(&args, &[4000, 4001])[1],
+            "user,id=n0,hostfwd=udp:127.0.0.1:4000-:7,hostfwd=tcp:127.0.0.1:4001-:80"
+        );
+    }
+
+    #[test]
+    fn free_host_ports_are_distinct_and_bindable_for_both_protocols() {
+        let ports = free_host_ports(3).unwrap();
+        assert_eq!(ports.len(), 3);
+        assert!(ports[0] != ports[1] && ports[1] != ports[2] && ports[0] != ports[2]);
+        for port in ports {
+            let _tcp = std::net::TcpListener::bind(("127.0.0.1", port)).unwrap();
+            let _udp = std::net::UdpSocket::bind(("127.0.0.1", port)).unwrap();
+        }
+    }
+
+    #[test]
+    fn a_placeholder_beyond_host_ports_is_refused() {
+        let dir = std::env::temp_dir().join(format!("warden-scenario-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("net_x.toml");
+        std::fs::write(
+            &path,
+            "description = \"x\"\nhost_ports = 1\nqemu_args = [\"hostfwd=udp:127.0.0.1:{host_port1}-:7\"]\n",
+        )
+        .unwrap();
+        let e = load(&path).unwrap_err().to_string();
+        assert!(e.contains("names a host port beyond host_ports = 1"), "{e}");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -23,6 +23,15 @@ pub const CLASS: u8 = 0x08;
 pub const HEADER: u8 = 0x0c;
 pub const BAR0: u8 = 0x10;
 pub const INTERRUPT: u8 = 0x3c;
+/// The first capability's offset (low byte), valid when the status register says
+/// [`STATUS_CAPABILITIES`].
+pub const CAPABILITIES_POINTER: u8 = 0x34;
+/// The status register's (high half of [`COMMAND`]) "capabilities list" bit.
+pub const STATUS_CAPABILITIES: u32 = 1 << 20;
+/// Where a type-0 header ends and the device-specific area (capabilities) begins.
+pub const DEVICE_AREA: u8 = 0x40;
+/// Bytes of the device-specific area (0x40..0x100) copied into a [`Record`].
+pub const DEVICE_AREA_SIZE: usize = 256 - DEVICE_AREA as usize;
 
 /// Command-register bits.
 pub const COMMAND_IO: u32 = 1 << 0;
@@ -160,6 +169,64 @@ pub struct Function {
     pub bars: [Option<Bar>; BARS],
 }
 
+/// A read-only copy of a function's capability list: the first capability's offset (0:
+/// none) and configuration space 0x40..0x100, where the list lives. A driver needs it to
+/// find its registers (a virtio device's structures are located by vendor capabilities)
+/// without ever reaching configuration space; syssw puts it in the device page
+/// ([`capabilities`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capabilities {
+    pub first: u8,
+    pub area: [u8; DEVICE_AREA_SIZE],
+}
+
+impl Default for Capabilities {
+    fn default() -> Self {
+        Capabilities {
+            first: 0,
+            area: [0; DEVICE_AREA_SIZE],
+        }
+    }
+}
+
+/// One capability: its id and its bytes from its header to the end of configuration space
+/// (its own length is capability-specific).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Capability<'a> {
+    pub id: u8,
+    /// Its offset in configuration space.
+    pub offset: u8,
+    pub bytes: &'a [u8],
+}
+
+/// Most capabilities a list can hold (each at least 4 bytes in 0x40..0x100); bounds the walk
+/// of a damaged, cyclic list.
+const MAX_CAPABILITIES: usize = DEVICE_AREA_SIZE / 4;
+
+impl Capabilities {
+    /// The capabilities in list order; the walk stops at a pointer outside 0x40..0xfc, and
+    /// after [`MAX_CAPABILITIES`] entries (a list that loops).
+    pub fn iter(&self) -> impl Iterator<Item = Capability<'_>> + '_ {
+        let mut next = self.first;
+        let mut seen = 0;
+        core::iter::from_fn(move || {
+            if seen >= MAX_CAPABILITIES || !(DEVICE_AREA..=0xfc).contains(&next) {
+                return None;
+            }
+            seen += 1;
+            let offset = next & !3;
+            let at = usize::from(offset - DEVICE_AREA);
+            let bytes = &self.area[at..];
+            next = bytes[1];
+            Some(Capability {
+                id: bytes[0],
+                offset,
+                bytes,
+            })
+        })
+    }
+}
+
 /// Why a function cannot be given to a partition.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum DeviceError {
@@ -197,6 +264,19 @@ impl core::fmt::Display for DeviceError {
             ),
         }
     }
+}
+
+/// Copies function `at`'s capability list (none when its status register says it has no
+/// list).
+pub fn read_capabilities(cs: &mut impl ConfigSpace, at: Address) -> Capabilities {
+    let mut capabilities = Capabilities::default();
+    if cs.read(at, COMMAND) & STATUS_CAPABILITIES != 0 {
+        capabilities.first = cs.read(at, CAPABILITIES_POINTER) as u8;
+        for (i, word) in capabilities.area.chunks_exact_mut(4).enumerate() {
+            word.copy_from_slice(&cs.read(at, DEVICE_AREA + 4 * i as u8).to_le_bytes());
+        }
+    }
+    capabilities
 }
 
 /// Reads function `at`'s header and sizes its BARs (decoding is off meanwhile and the
@@ -311,10 +391,9 @@ pub fn q35_interrupt_line(at: Address, pin: u8) -> Option<u8> {
     Some(16 + (at.device + pin - 1) % 4 + 4)
 }
 
-/// Turns decoding on for the kinds of BARs `f` has and lets it raise INTx. Bus mastering
-/// (DMA) stays off: a partition's DMA needs the IOMMU to confine it to memory the
-/// partition owns, which is not there yet.
-pub fn enable(cs: &mut impl ConfigSpace, f: &Function) {
+/// Turns decoding on for the kinds of BARs `f` has and lets it raise INTx; bus mastering
+/// (DMA) only with `bus_master` (a partition with a DMA region).
+pub fn enable(cs: &mut impl ConfigSpace, f: &Function, bus_master: bool) {
     let mut command = cs.read(f.address, COMMAND) & 0xffff;
     for bar in f.bars.iter().flatten() {
         command |= match bar {
@@ -323,6 +402,9 @@ pub fn enable(cs: &mut impl ConfigSpace, f: &Function) {
         };
     }
     command &= !(COMMAND_INTX_DISABLE | COMMAND_BUS_MASTER);
+    if bus_master {
+        command |= COMMAND_BUS_MASTER;
+    }
     // The status half is write-one-to-clear: writing zeros there changes nothing.
     cs.write(f.address, COMMAND, command);
 }
@@ -342,6 +424,10 @@ pub fn enable(cs: &mut impl ConfigSpace, f: &Function) {
 /// | 16 + 16·i | 8 | BAR i: the first port (I/O) or the address it is mapped at (memory) |
 /// | 24 + 16·i | 4 | BAR i: size in bytes |
 /// | 28 + 16·i | 4 | BAR i: kind (0 none, 1 I/O, 2 memory) |
+///
+/// From [`CAPABILITIES_AT`], one [`CAPABILITIES_SIZE`]-byte copy of each function's
+/// capability list in the same order: the first capability's offset (0: none), then
+/// configuration space 0x40..0x100 ([`capabilities`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Record {
     pub address: Address,
@@ -355,6 +441,9 @@ pub struct Record {
 }
 
 pub const RECORD_SIZE: usize = 112;
+/// Where the capability lists start in the device page, and the size of each.
+pub const CAPABILITIES_AT: usize = 2048;
+pub const CAPABILITIES_SIZE: usize = 1 + DEVICE_AREA_SIZE;
 /// Functions one partition may own (the records fit in one page).
 pub const MAX_PARTITION_DEVICES: usize = 8;
 /// Where the first record starts in the device page.
@@ -418,6 +507,53 @@ impl Record {
     }
 }
 
+/// Where the device page describes the partition's DMA region (after the records).
+pub const DMA_AT: usize = RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE;
+/// Bytes of that description.
+pub const DMA_SIZE: usize = 24;
+
+/// The partition's DMA region (`dma`): physically contiguous memory of the partition that
+/// its devices may reach, mapped read-write at `address` in the partition for `length`
+/// bytes. A device must be given `bus_address + offset` for the byte at `address +
+/// offset` (with an IOMMU the kernel translates exactly this range to the region and
+/// nothing else; see docs/isolation.md). In the device page at [`DMA_AT`]: the address,
+/// the length and the bus address as little-endian `u64`s, a length of 0 for none.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DmaRegion {
+    pub address: u64,
+    pub length: u64,
+    pub bus_address: u64,
+}
+
+impl DmaRegion {
+    pub fn encode(&self) -> [u8; DMA_SIZE] {
+        let mut out = [0u8; DMA_SIZE];
+        out[0..8].copy_from_slice(&self.address.to_le_bytes());
+        out[8..16].copy_from_slice(&self.length.to_le_bytes());
+        out[16..24].copy_from_slice(&self.bus_address.to_le_bytes());
+        out
+    }
+
+    /// The bus address of the byte at partition address `at`, if `at` lies in the region.
+    pub fn bus_address_of(&self, at: u64) -> Option<u64> {
+        let offset = at.checked_sub(self.address)?;
+        (offset < self.length).then(|| self.bus_address + offset)
+    }
+}
+
+/// The DMA region a device page describes; `None` for a partition without `dma` (or a page
+/// too short to hold the description).
+pub fn dma_region(page: &[u8]) -> Option<DmaRegion> {
+    let bytes = page.get(DMA_AT..DMA_AT + DMA_SIZE)?;
+    let at = |i: usize| u64::from_le_bytes(bytes[i..i + 8].try_into().unwrap());
+    let region = DmaRegion {
+        address: at(0),
+        length: at(8),
+        bus_address: at(16),
+    };
+    (region.length != 0).then_some(region)
+}
+
 /// The records of a device page (as many as its count says, at most
 /// [`MAX_PARTITION_DEVICES`]).
 pub fn records(page: &[u8]) -> impl Iterator<Item = Record> + '_ {
@@ -430,6 +566,30 @@ pub fn records(page: &[u8]) -> impl Iterator<Item = Record> + '_ {
         page.get(at..at + RECORD_SIZE)
             .and_then(|b| Record::decode(b.try_into().unwrap()))
     })
+}
+
+impl Capabilities {
+    /// Its bytes in the device page.
+    pub fn encode(&self) -> [u8; CAPABILITIES_SIZE] {
+        let mut out = [0u8; CAPABILITIES_SIZE];
+        out[0] = self.first;
+        out[1..].copy_from_slice(&self.area);
+        out
+    }
+}
+
+/// The capability list of the device page's function `index` (an empty list past the
+/// page's functions or its end).
+pub fn capabilities(page: &[u8], index: usize) -> Capabilities {
+    let at = CAPABILITIES_AT + index * CAPABILITIES_SIZE;
+    let mut c = Capabilities::default();
+    if index < MAX_PARTITION_DEVICES
+        && let Some(bytes) = page.get(at..at + CAPABILITIES_SIZE)
+    {
+        c.first = bytes[0];
+        c.area.copy_from_slice(&bytes[1..]);
+    }
+    c
 }
 
 #[cfg(test)]

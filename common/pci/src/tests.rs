@@ -196,7 +196,7 @@ fn memory_bars_smaller_than_a_page_and_bars_over_config_ports_are_refused() {
 }
 
 #[test]
-fn enabling_turns_on_decoding_and_intx_never_bus_mastering() {
+fn enabling_turns_on_decoding_and_intx_and_bus_mastering_only_when_asked() {
     let mut cs = Fake::default();
     let at = addr("00:03.0");
     cs.function(at, 0x1af4, 0x1000, 1);
@@ -206,11 +206,17 @@ fn enabling_turns_on_decoding_and_intx_never_bus_mastering() {
     );
     cs.io_bar(at, 0, 0xc040, 32);
     let f = probe(&mut cs, at).unwrap();
-    enable(&mut cs, &f);
+    enable(&mut cs, &f, false);
     assert_eq!(
         cs.registers[&(at, COMMAND)],
         0xffff_0000 | COMMAND_IO,
         "I/O on, memory, bus master and INTx-disable off, status untouched"
+    );
+    enable(&mut cs, &f, true);
+    assert_eq!(
+        cs.registers[&(at, COMMAND)],
+        0xffff_0000 | COMMAND_IO | COMMAND_BUS_MASTER,
+        "a partition with a DMA region gets bus mastering"
     );
 }
 
@@ -260,4 +266,90 @@ fn records_round_trip_through_the_device_page() {
     assert_eq!(records(&page).count(), 0);
     page[..8].copy_from_slice(&u64::MAX.to_le_bytes());
     assert!(records(&page).count() <= MAX_PARTITION_DEVICES);
+}
+
+#[test]
+fn the_capability_list_is_copied_and_walked_without_configuration_space() {
+    let mut cs = Fake::default();
+    let at = addr("00:03.0");
+    cs.function(at, 0x1af4, 0x1041, 1);
+    cs.registers.insert((at, CAPABILITIES_POINTER), 0x84);
+    // 0x84: vendor (9) -> 0x70: vendor -> 0x40: MSI-X (0x11) -> end.
+    cs.registers.insert((at, 0x84), 0x1009_7009);
+    cs.registers.insert((at, 0x70), 0x1002_4009);
+    cs.registers.insert((at, 0x40), 0x0000_0011);
+    let caps = read_capabilities(&mut cs, at);
+    // Through the device page, as the partition sees it (after one function's).
+    let mut page = [0u8; 4096];
+    let slot = CAPABILITIES_AT + CAPABILITIES_SIZE;
+    page[slot..slot + CAPABILITIES_SIZE].copy_from_slice(&caps.encode());
+    let seen = capabilities(&page, 1);
+    assert_eq!(seen, caps);
+    let list: std::vec::Vec<(u8, u8)> = seen.iter().map(|c| (c.id, c.offset)).collect();
+    assert_eq!(list, [(9, 0x84), (9, 0x70), (0x11, 0x40)]);
+    let first = seen.iter().next().unwrap();
+    assert_eq!(
+        first.bytes[2..4],
+        [0x09, 0x10],
+        "length and the virtio cfg_type byte"
+    );
+    assert_eq!(capabilities(&page, 0).iter().count(), 0);
+    assert_eq!(capabilities(&page, 99).iter().count(), 0, "past the page");
+    const {
+        assert!(CAPABILITIES_AT >= RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE);
+        assert!(CAPABILITIES_AT + MAX_PARTITION_DEVICES * CAPABILITIES_SIZE <= 4096);
+    }
+    // Without the status bit there is no list.
+    cs.registers.insert((at, COMMAND), 0);
+    assert_eq!(read_capabilities(&mut cs, at).iter().count(), 0);
+}
+
+#[test]
+fn a_damaged_capability_list_ends_the_walk_never_panics() {
+    // A list pointing at itself, and pointers below 0x40 or past 0xfc.
+    let mut looped = Capabilities {
+        first: 0x40,
+        ..Capabilities::default()
+    };
+    looped.area[1] = 0x40;
+    assert_eq!(looped.iter().count(), DEVICE_AREA_SIZE / 4);
+    for first in [0, 0x3f, 0xfd, 0xff] {
+        let c = Capabilities {
+            first,
+            ..Capabilities::default()
+        };
+        assert_eq!(c.iter().count(), 0, "pointer {first:#x}");
+    }
+    for seed in 0..200u32 {
+        let mut c = Capabilities {
+            first: (seed * 37) as u8,
+            ..Capabilities::default()
+        };
+        for (i, b) in c.area.iter_mut().enumerate() {
+            *b = (seed.wrapping_mul(2_654_435_761).rotate_left(i as u32 % 31) >> 7) as u8;
+        }
+        assert!(c.iter().count() <= DEVICE_AREA_SIZE / 4);
+    }
+}
+
+#[test]
+fn the_dma_region_round_trips_through_the_device_page_and_translates_addresses() {
+    let mut page = [0u8; 4096];
+    assert_eq!(dma_region(&page), None, "no region: length 0");
+    let region = DmaRegion {
+        address: 0x6c00_0000_0000,
+        length: 0x8_0000,
+        bus_address: 0x0123_4000,
+    };
+    page[DMA_AT..DMA_AT + DMA_SIZE].copy_from_slice(&region.encode());
+    assert_eq!(dma_region(&page), Some(region));
+    assert_eq!(dma_region(&page[..DMA_AT + 8]), None, "a short page");
+    const { assert!(DMA_AT >= RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE) };
+    assert_eq!(region.bus_address_of(0x6c00_0000_0010), Some(0x0123_4010));
+    assert_eq!(
+        region.bus_address_of(0x6c00_0008_0000),
+        None,
+        "one past the end"
+    );
+    assert_eq!(region.bus_address_of(0x6bff_ffff_ffff), None);
 }

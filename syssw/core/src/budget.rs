@@ -1,4 +1,4 @@
-//! What a partition needs to start: bytes of its memory (image, data entry, stack) and bytes
+//! What a partition needs to start: bytes of its memory (image, data entry, stack, DMA region) and bytes
 //! of its kernel-memory quota (the page tables of everything syssw maps for it, its top-level
 //! table and, with I/O ports, its I/O permission bitmap), and the memory pool a partition
 //! with the `map` ability gets (the rest of its `memory`, `protocol::layout::POOL_BASE`). One computation for both users:
@@ -15,14 +15,15 @@ use abi::elf::{ElfError, load_segments};
 use abi::syscall::{Abilities, USER_MIN};
 use config::binary::{PartitionView, SystemView};
 use protocol::layout::{
-    DATA_BASE, DEVICES_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address,
+    DATA_BASE, DEVICES_BASE, DMA_BASE, POOL_BASE, POOL_EXEC_BASE, STACK_TOP, shared_address,
 };
 
 const PAGE: u64 = 4096;
 /// Loadable segments an image may have (syssw's limit).
 pub const MAX_IMAGE_SEGMENTS: usize = 16;
-/// Regions mapped at start: image segments, stack, data entry, device page, shared segments.
-const MAX_REGIONS: usize = MAX_IMAGE_SEGMENTS + 3 + config::model::MAX_SEGMENTS;
+/// Regions mapped at start: image segments, stack, data entry, device page, DMA region,
+/// shared segments.
+const MAX_REGIONS: usize = MAX_IMAGE_SEGMENTS + 4 + config::model::MAX_SEGMENTS;
 /// Pages of the top-level table (charged by `task_create`) and of the I/O bitmap.
 const TOP_TABLE_PAGES: u64 = 1;
 const IO_BITMAP_PAGES: u64 = 2;
@@ -30,7 +31,7 @@ const IO_BITMAP_PAGES: u64 = 2;
 /// A partition's needs at start, in bytes.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct StartBudget {
-    /// Of its `memory`: image pages, data-entry pages and the stack.
+    /// Of its `memory`: image pages, data-entry pages, the stack and the DMA region.
     pub memory: u64,
     /// Of its `kernel_memory` quota (including the page tables of the pool).
     pub kernel_memory: u64,
@@ -69,7 +70,9 @@ pub fn start_budget(
         let address = shared_address(system.segments().take(a.segment).map(|s| s.size));
         regions.add(address, system.segment(a.segment).size / PAGE);
     }
-    let used = image_pages + data_pages + stack_pages;
+    let dma_pages = p.dma / PAGE;
+    regions.add(DMA_BASE, dma_pages);
+    let used = image_pages + data_pages + stack_pages + dma_pages;
     let pool_pages = if p.abilities.contains(Abilities::MAP) {
         (p.memory / PAGE).saturating_sub(used)
     } else {
@@ -234,6 +237,22 @@ mod tests {
             with.memory, without.memory,
             "syssw's page, not the partition's memory"
         );
+    }
+
+    #[test]
+    fn the_dma_region_is_partition_memory_and_costs_its_page_tables() {
+        let budget = |edit: &str| {
+            let blob = crate::testsys::blob(&crate::testsys::with(&[("# a", edit)]));
+            let system = config::decode(&blob).unwrap();
+            let a = system.partition(0);
+            start_budget(&system, &a, &elf(0x20_0000, 3 * PAGE), 0).unwrap()
+        };
+        let devices = "abilities = [\"irq\"]\ndevices = [\"00:03.0\"]";
+        let without = budget(devices);
+        let with = budget(&std::format!("{devices}\ndma = \"8KiB\""));
+        assert_eq!(with.memory, without.memory + 2 * PAGE);
+        // DMA_BASE has a 512 GiB span of its own: one table per level.
+        assert_eq!(with.kernel_memory, without.kernel_memory + 3 * PAGE);
     }
 
     #[test]

@@ -10,6 +10,7 @@
 //! | shared-memory segments it is attached to | [`shared_address`] | as configured |
 //! | its PCI functions' records (`pci::records`), if it owns any (`devices`) | [`DEVICES_BASE`] | read-only |
 //! | their memory BARs, uncached, each after an unmapped page | from [`DEVICES_BASE`] + 8 KiB, in the records | read-write |
+//! | its DMA region (`dma`), physically contiguous, part of its `memory` | [`DMA_BASE`] (`pci::dma_region`) | read-write |
 //! | the stack, the start record at its very top | below [`STACK_TOP`], one unmapped guard page under it | read-write |
 
 /// Where syssw maps a partition's shared-memory segments: the first configured segment
@@ -37,9 +38,13 @@ pub const POOL_EXEC_BASE: u64 = 0x0000_5c00_0000_0000;
 /// Where syssw maps the page that tells a partition which PCI functions it owns and what
 /// of them it got (`pci::records`: I/O ports, the addresses of the memory BARs, the
 /// interrupt line); the memory BARs follow, in record order, each after an unmapped page.
-/// Memory a partition's devices may reach by DMA would be declared and mapped beside them
-/// once an IOMMU confines the devices to it (until then bus mastering stays off).
+/// The memory a partition's devices may reach by DMA is at [`DMA_BASE`].
 pub const DEVICES_BASE: u64 = 0x0000_6800_0000_0000;
+
+/// Where syssw maps a partition's DMA region (`dma`): physically contiguous frames of its
+/// memory, zeroed at boot and at every cold restart, read-write; the device page says where
+/// it is and which bus address a device must use for it (`pci::dma_region`).
+pub const DMA_BASE: u64 = 0x0000_6c00_0000_0000;
 
 /// Top of a partition's stack (its start record is at the very top).
 pub const STACK_TOP: u64 = 0x0000_7ff0_0000_0000;
@@ -73,7 +78,8 @@ mod tests {
                     && POOL_BASE < POOL_EXEC_BASE
                     && POOL_EXEC_BASE < SHARED_BASE
                     && SHARED_BASE < DEVICES_BASE
-                    && DEVICES_BASE < STACK_TOP
+                    && DEVICES_BASE < DMA_BASE
+                    && DMA_BASE < STACK_TOP
             )
         };
     }

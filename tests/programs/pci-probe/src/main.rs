@@ -13,6 +13,8 @@
 //!   called `irq_ack` although the device still asserts it; after `irq_ack` the still
 //!   asserted level fires again (level-triggered); once the device is served and the line
 //!   acknowledged, nothing more comes. Logs `edu: done`.
+//! * `dma*`: owns an `edu` function and a DMA region (`dma`): the positive control of
+//!   [`dma::check_own_region`], then logs `dma: done` (scenario `dma_regions`).
 //! * `cfg*`: reads CONFIG_ADDRESS (port 0xcf8), which no partition is ever granted: the #GP
 //!   reaches the health monitor (`illegal_request`).
 //! * anything else: logs `<name>: started` (a partition that must never start).
@@ -20,6 +22,8 @@
 //! A test program: it must never be needed by anything but its scenarios.
 #![no_std]
 #![no_main]
+
+mod dma;
 
 use pci::Bar;
 use user_rt::partition::StartInfo;
@@ -61,6 +65,18 @@ fn main(start: u64, _: u64) {
         nic();
     } else if name.starts_with("edu") {
         edu();
+    } else if name.starts_with("dma") {
+        if let Some(edu) = dma::Edu::find("dma") {
+            println!(
+                "dma: device {}, DMA region at {:#x}, {} KiB, bus address {:#x}",
+                edu.record.address,
+                edu.region.address,
+                edu.region.length / 1024,
+                edu.region.bus_address
+            );
+            dma::check_own_region("dma", &edu);
+        }
+        println!("dma: done");
     } else if name.starts_with("cfg") {
         println!("cfg: reading port 0xcf8 (PCI CONFIG_ADDRESS)");
         let value = inl(0xcf8);

@@ -29,6 +29,29 @@ fn ports(s: Ports) -> Vec<Port> {
 }
 
 #[test]
+fn macs_parse_as_colon_separated_hex() {
+    assert_eq!(
+        Mac::parse("52:54:00:12:34:5f"),
+        Some(Mac([0x52, 0x54, 0, 0x12, 0x34, 0x5f]))
+    );
+    assert_eq!(
+        std::format!("{}", Mac::parse("52:54:00:AB:34:56").unwrap()),
+        "52:54:00:ab:34:56"
+    );
+    for bad in [
+        "",
+        "52:54:00:12:34",
+        "52:54:00:12:34:56:78",
+        "52-54-00-12-34-56",
+        "5:54:00:12:34:567",
+        "+5:54:00:12:34:56",
+        "zz:54:00:12:34:56",
+    ] {
+        assert_eq!(Mac::parse(bad), None, "{bad}");
+    }
+}
+
+#[test]
 fn forwarding_rules() {
     let mut s = switch();
     let (plc, guest) = (Port::Tenant(0), Port::Tenant(1));
@@ -100,6 +123,39 @@ fn tenants_cannot_spoof_or_send_garbage() {
     s.delivered(Port::Tenant(0), true);
     let c = s.counters(Port::Tenant(0));
     assert_eq!((c.delivered, c.overflow), (1, 1));
+}
+
+#[test]
+fn a_tenants_broadcast_storm_is_bounded_and_costs_only_it() {
+    let mut s = switch();
+    let (plc, guest) = (Port::Tenant(0), Port::Tenant(1));
+    s.set_time(5_000_000_000);
+    let storm = frame(Mac::BROADCAST, GUEST, 60);
+    let passed = (0..1000).filter(|_| s.route(guest, &storm).is_ok()).count();
+    assert_eq!(
+        passed, GROUP_BURST as usize,
+        "the burst, then nothing at one instant"
+    );
+    assert_eq!(s.route(guest, &storm), Err(Drop::Limited));
+    assert_eq!(s.counters(guest).limited, 1000 - u64::from(GROUP_BURST) + 1);
+    // The other tenant's broadcasts and everyone's unicast are untouched.
+    assert!(s.route(plc, &frame(Mac::BROADCAST, PLC, 60)).is_ok());
+    assert!(s.route(guest, &frame(HOST, GUEST, 60)).is_ok());
+    // Tokens come back at GROUP_RATE: 100 ms later, a tenth of a second's worth.
+    s.set_time(5_100_000_000);
+    let passed = (0..100).filter(|_| s.route(guest, &storm).is_ok()).count();
+    assert_eq!(passed, (GROUP_RATE / 10) as usize);
+    // A clock going back refills nothing; a long pause refills only the burst.
+    s.set_time(1);
+    assert_eq!(s.route(guest, &storm), Err(Drop::Limited));
+    s.set_time(u64::MAX);
+    let passed = (0..1000).filter(|_| s.route(guest, &storm).is_ok()).count();
+    assert_eq!(passed, GROUP_BURST as usize);
+    // The wire's broadcasts are not a tenant's.
+    assert!((0..1000).all(|_| {
+        s.route(Port::Uplink, &frame(Mac::BROADCAST, HOST, 60))
+            .is_ok()
+    }));
 }
 
 #[test]

@@ -8,7 +8,10 @@
 //! - A tenant may only send with its own MAC as the source: any other source, or a group
 //!   address as the source, is dropped ([`Drop::Spoofed`]), so no tenant can pose as another
 //!   or poison a peer's view of the network.
-//! - Broadcast and multicast go to every port but the one they came from.
+//! - Broadcast and multicast go to every port but the one they came from. A tenant may
+//!   send at most [`GROUP_BURST`] of them at once and [`GROUP_RATE`] a second
+//!   ([`Drop::Limited`] beyond): every other tenant must take them, so without a bound a
+//!   tenant's broadcast storm would fill the other tenants' ports and cost them frames.
 //! - Unicast to a tenant's MAC goes to that tenant only (tenant to tenant stays inside the
 //!   machine); from a tenant, unicast to any other MAC goes to the uplink; from the uplink,
 //!   unicast to no tenant's MAC is dropped ([`Drop::Unknown`]) rather than flooded, since
@@ -27,6 +30,9 @@ pub const MAX_FRAME: usize = 1514;
 pub const MIN_FRAME: usize = 14;
 /// Most tenants.
 pub const MAX_TENANTS: usize = 15;
+/// Broadcast and multicast frames a tenant may send at once, and a second after that.
+pub const GROUP_BURST: u32 = 32;
+pub const GROUP_RATE: u32 = 100;
 
 /// A MAC address.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -34,6 +40,20 @@ pub struct Mac(pub [u8; 6]);
 
 impl Mac {
     pub const BROADCAST: Mac = Mac([0xFF; 6]);
+
+    /// `text` as six two-digit hex octets separated by colons (`52:54:00:12:34:56`).
+    pub fn parse(text: &str) -> Option<Mac> {
+        let mut mac = [0u8; 6];
+        let mut parts = text.split(':');
+        for octet in mac.iter_mut() {
+            let part = parts.next()?;
+            if part.len() != 2 || !part.bytes().all(|b| b.is_ascii_hexdigit()) {
+                return None;
+            }
+            *octet = u8::from_str_radix(part, 16).ok()?;
+        }
+        parts.next().is_none().then_some(Mac(mac))
+    }
 
     /// Broadcast or multicast (the group bit of the first octet).
     pub fn is_group(self) -> bool {
@@ -102,6 +122,8 @@ pub enum Drop {
     Unknown,
     /// The port is not attached.
     NoSuchPort,
+    /// A tenant's broadcast or multicast beyond its rate.
+    Limited,
 }
 
 /// Per-port counters.
@@ -116,6 +138,8 @@ pub struct Counters {
     pub unknown: u64,
     /// Frames for the port dropped because its receive ring was full.
     pub overflow: u64,
+    /// The tenant's broadcast and multicast frames beyond [`GROUP_RATE`].
+    pub limited: u64,
 }
 
 /// The switch: the tenants' MACs and every port's counters.
@@ -124,6 +148,10 @@ pub struct Switch {
     macs: [Mac; MAX_TENANTS],
     tenants: usize,
     counters: [Counters; MAX_TENANTS + 1],
+    /// Each tenant's group frames left (a token bucket), and when it was last refilled.
+    group_tokens: [u32; MAX_TENANTS],
+    refilled_ns: u64,
+    now_ns: u64,
 }
 
 /// A configuration error.
@@ -156,7 +184,25 @@ impl Switch {
             macs: table,
             tenants: macs.len(),
             counters: [Counters::default(); MAX_TENANTS + 1],
+            group_tokens: [GROUP_BURST; MAX_TENANTS],
+            refilled_ns: 0,
+            now_ns: 0,
         })
+    }
+
+    /// The time (ns, any monotonic clock) for the tenants' group-frame rates; a clock that
+    /// goes back is taken as standing still.
+    pub fn set_time(&mut self, now_ns: u64) {
+        self.now_ns = self.now_ns.max(now_ns);
+        let per_token = 1_000_000_000 / u64::from(GROUP_RATE);
+        let earned = (self.now_ns - self.refilled_ns) / per_token;
+        if earned > 0 {
+            let earned = earned.min(u64::from(GROUP_BURST)) as u32;
+            for tokens in &mut self.group_tokens {
+                *tokens = (*tokens + earned).min(GROUP_BURST);
+            }
+            self.refilled_ns = self.now_ns;
+        }
     }
 
     pub fn tenants(&self) -> usize {
@@ -203,6 +249,13 @@ impl Switch {
         }
         let all = (1u32 | ((1u32 << self.tenants) - 1) << 1) & !from.bit();
         if destination.is_group() {
+            if let Port::Tenant(n) = from {
+                if self.group_tokens[n] == 0 {
+                    counters.limited += 1;
+                    return Err(Drop::Limited);
+                }
+                self.group_tokens[n] -= 1;
+            }
             return Ok(Ports(all));
         }
         if let Some(n) = self.macs[..self.tenants]

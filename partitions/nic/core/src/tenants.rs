@@ -1,0 +1,249 @@
+//! The NIC partition's tenant table: which partitions are attached to the switch, with
+//! which MAC, over which of the NIC partition's queuing ports (`nic.tenants.<partition>`,
+//! validated by the configuration tools). `cargo xtask` writes it as the partition's data
+//! entry ([`encode`]); the partition reads it at start ([`decode`]).
+//!
+//! Format (little-endian): `NIC1`, a tenant count (1 byte, at most
+//! [`crate::switch::MAX_TENANTS`]), then per tenant: its MAC (6 bytes), the partition's
+//! name, the `from` port (the NIC's queuing input carrying the tenant's frames) and the
+//! `to` port (the NIC's queuing output to the tenant), a port being its name, its message
+//! size (4 bytes) and depth (4 bytes); a name is a length byte and that many UTF-8 bytes.
+
+use crate::switch::{MAX_TENANTS, Mac};
+
+const MAGIC: &[u8; 4] = b"NIC1";
+
+/// One of the NIC partition's queuing ports.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PortSpec<'a> {
+    pub name: &'a str,
+    pub size: u32,
+    pub depth: u32,
+}
+
+/// An attached tenant.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tenant<'a> {
+    pub partition: &'a str,
+    pub mac: Mac,
+    pub from: PortSpec<'a>,
+    pub to: PortSpec<'a>,
+}
+
+/// The decoded table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Table<'a> {
+    tenants: [Option<Tenant<'a>>; MAX_TENANTS],
+    count: usize,
+}
+
+impl<'a> Table<'a> {
+    pub fn tenants(&self) -> impl Iterator<Item = &Tenant<'a>> {
+        self.tenants[..self.count].iter().flatten()
+    }
+
+    pub fn len(&self) -> usize {
+        self.count
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.count == 0
+    }
+}
+
+/// Why a data entry is not a tenant table.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DecodeError {
+    NoMagic,
+    TooMany(usize),
+    /// Ends inside tenant `n`.
+    Truncated(usize),
+    /// A name of tenant `n` is not UTF-8.
+    BadName(usize),
+    /// Bytes after the last tenant.
+    Trailing,
+}
+
+impl core::fmt::Display for DecodeError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoMagic => write!(f, "not a tenant table (no NIC1 header)"),
+            Self::TooMany(n) => write!(f, "{n} tenants, at most {MAX_TENANTS}"),
+            Self::Truncated(n) => write!(f, "truncated in tenant {n}"),
+            Self::BadName(n) => write!(f, "a name of tenant {n} is not UTF-8"),
+            Self::Trailing => write!(f, "bytes after the last tenant"),
+        }
+    }
+}
+
+/// Appends the table of `tenants` to `out` (names longer than 255 bytes are cut; the
+/// configuration's names are far shorter).
+pub fn encode(tenants: &[Tenant<'_>], out: &mut impl Extend<u8>) {
+    out.extend(MAGIC.iter().copied());
+    out.extend([tenants.len().min(MAX_TENANTS) as u8]);
+    let name = |out: &mut dyn FnMut(&[u8]), text: &str| {
+        let bytes = &text.as_bytes()[..text.len().min(255)];
+        out(&[bytes.len() as u8]);
+        out(bytes);
+    };
+    for t in tenants.iter().take(MAX_TENANTS) {
+        let mut put = |b: &[u8]| out.extend(b.iter().copied());
+        put(&t.mac.0);
+        name(&mut put, t.partition);
+        for port in [t.from, t.to] {
+            name(&mut put, port.name);
+            put(&port.size.to_le_bytes());
+            put(&port.depth.to_le_bytes());
+        }
+    }
+}
+
+/// The table in `bytes`.
+pub fn decode(bytes: &[u8]) -> Result<Table<'_>, DecodeError> {
+    let rest = bytes.strip_prefix(MAGIC).ok_or(DecodeError::NoMagic)?;
+    let (&count, mut rest) = rest.split_first().ok_or(DecodeError::NoMagic)?;
+    let count = usize::from(count);
+    if count > MAX_TENANTS {
+        return Err(DecodeError::TooMany(count));
+    }
+    let mut table = Table {
+        tenants: [None; MAX_TENANTS],
+        count,
+    };
+    for (n, slot) in table.tenants.iter_mut().take(count).enumerate() {
+        let mut r = Reader { rest, n };
+        let mut mac = [0u8; 6];
+        mac.copy_from_slice(r.take(6)?);
+        let partition = r.name()?;
+        let from = r.port()?;
+        let to = r.port()?;
+        *slot = Some(Tenant {
+            partition,
+            mac: Mac(mac),
+            from,
+            to,
+        });
+        rest = r.rest;
+    }
+    if !rest.is_empty() {
+        return Err(DecodeError::Trailing);
+    }
+    Ok(table)
+}
+
+struct Reader<'a> {
+    rest: &'a [u8],
+    n: usize,
+}
+
+impl<'a> Reader<'a> {
+    fn take(&mut self, len: usize) -> Result<&'a [u8], DecodeError> {
+        if self.rest.len() < len {
+            return Err(DecodeError::Truncated(self.n));
+        }
+        let (head, rest) = self.rest.split_at(len);
+        self.rest = rest;
+        Ok(head)
+    }
+
+    fn u32(&mut self) -> Result<u32, DecodeError> {
+        let b = self.take(4)?;
+        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
+    }
+
+    fn name(&mut self) -> Result<&'a str, DecodeError> {
+        let len = usize::from(self.take(1)?[0]);
+        core::str::from_utf8(self.take(len)?).map_err(|_| DecodeError::BadName(self.n))
+    }
+
+    fn port(&mut self) -> Result<PortSpec<'a>, DecodeError> {
+        Ok(PortSpec {
+            name: self.name()?,
+            size: self.u32()?,
+            depth: self.u32()?,
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    extern crate std;
+
+    use super::*;
+    use proptest::prelude::*;
+    use std::vec::Vec;
+
+    fn sample() -> Vec<u8> {
+        let port = |name, depth| PortSpec {
+            name,
+            size: 1514,
+            depth,
+        };
+        let mut out = Vec::new();
+        encode(
+            &[
+                Tenant {
+                    partition: "linux",
+                    mac: Mac([0x52, 0x54, 0, 0x12, 0x34, 0x56]),
+                    from: port("linux-tx", 32),
+                    to: port("linux-rx", 32),
+                },
+                Tenant {
+                    partition: "plc",
+                    mac: Mac([2, 0, 0, 0, 0, 1]),
+                    from: port("plc-tx", 8),
+                    to: port("plc-rx", 16),
+                },
+            ],
+            &mut out,
+        );
+        out
+    }
+
+    #[test]
+    fn the_table_round_trips() {
+        let bytes = sample();
+        let table = decode(&bytes).unwrap();
+        assert_eq!(table.len(), 2);
+        let names: Vec<(&str, &str, &str, u32)> = table
+            .tenants()
+            .map(|t| (t.partition, t.from.name, t.to.name, t.to.depth))
+            .collect();
+        assert_eq!(
+            names,
+            [
+                ("linux", "linux-tx", "linux-rx", 32),
+                ("plc", "plc-tx", "plc-rx", 16)
+            ]
+        );
+        assert_eq!(table.tenants().nth(1).unwrap().mac, Mac([2, 0, 0, 0, 0, 1]));
+    }
+
+    #[test]
+    fn damaged_tables_are_refused_with_the_reason() {
+        let bytes = sample();
+        assert_eq!(decode(b"NIC2\x00"), Err(DecodeError::NoMagic));
+        assert_eq!(decode(b"NIC1\x10"), Err(DecodeError::TooMany(16)));
+        assert_eq!(decode(&bytes[..20]), Err(DecodeError::Truncated(0)));
+        assert_eq!(
+            decode(&bytes[..bytes.len() - 1]),
+            Err(DecodeError::Truncated(1))
+        );
+        let mut long = bytes.clone();
+        long.push(0);
+        assert_eq!(decode(&long), Err(DecodeError::Trailing));
+        let mut bad = bytes.clone();
+        bad[12] = 0xff;
+        assert_eq!(decode(&bad), Err(DecodeError::BadName(0)));
+    }
+
+    proptest! {
+        #[test]
+        fn random_entries_never_panic(bytes in proptest::collection::vec(any::<u8>(), 0..300)) {
+            let mut with_magic = MAGIC.to_vec();
+            with_magic.extend_from_slice(&bytes);
+            let _ = decode(&bytes);
+            let _ = decode(&with_magic);
+        }
+    }
+}

@@ -1,0 +1,398 @@
+//! The NIC partition program (`image = "nic"`): drives the virtio-net function the
+//! partition owns (`devices`, modern PCI transport, `device.rs`) and is the Ethernet switch
+//! (`nic_core::switch`) between the wire and its tenants, each attached by a pair of
+//! queuing ports (`nic.tenants`, the data entry `nic_core::tenants`): one frame a message,
+//! destination MAC first, no FCS, 14..=1514 bytes.
+//!
+//! One APEX process, the switch, does everything in a loop: frames the device received go
+//! where the switch routes them (to one tenant, to all for broadcast and multicast; unknown
+//! unicast from the wire is dropped; a tenant's broadcasts and multicasts are bounded,
+//! `nic_core::switch::GROUP_RATE`); then frames from the tenants' ports, round-robin, at
+//! most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
+//! tenant that floods its port only fills its own port and loses its own frames (its
+//! sends fail when the port is full) while every other tenant keeps its turn. A tenant's
+//! frame with another source MAC is dropped. Then it waits for the device's interrupt,
+//! at most [`POLL`] (the tenants' ports have no interrupt).
+//!
+//! Log lines (on the serial log as `[<partition>] nic: ...`; an interface):
+//! - `nic: virtio-net <BB:DD.F> MAC <mac>, <n> descriptors a queue, line <irq>, <k> tenant(s)`
+//!   once up, then `nic: tenant <partition> MAC <mac> from <port> to <port>` for each;
+//! - `nic: not started: <reason>` when the tenant table, the device or the DMA region is
+//!   unusable (also reported to the health monitor as APPLICATION_ERROR; the partition then
+//!   idles);
+//! - every [`STATS_EVERY_MS`] of the partition's clock, `nic: t=<ms>ms uplink in=<n>
+//!   out=<n> overflow=<n> unknown=<n> malformed=<n> bogus=<n>` (frames from the wire,
+//!   frames sent to it, frames for it dropped because its transmit queue was full, unicast
+//!   from the wire for no tenant, runts from the device, used entries the device should
+//!   not have written) and for each tenant `nic: t=<ms>ms tenant <partition> in=<n> out=<n>
+//!   overflow=<n> spoofed=<n> malformed=<n> limited=<n>` (frames taken from its port,
+//!   frames delivered to it, frames for it dropped because its port was full, frames
+//!   refused for a source MAC not its own, frames of a bad length, broadcasts and
+//!   multicasts beyond its rate). Counters count since start.
+#![no_std]
+#![no_main]
+
+extern crate alloc;
+
+mod device;
+
+use alloc::vec::Vec;
+use apex::Warden;
+use apex::a653rs::prelude::*;
+use apex::user_rt::println;
+use apex::user_rt::protocol::layout::DEVICES_BASE;
+use apex::user_rt::sys;
+use core::str::FromStr;
+use core::time::Duration;
+use device::Net;
+use nic_core::switch::{MAX_FRAME, Port, Rounds, Switch};
+use nic_core::tenants::Table;
+use nic_core::virtio::{self, Memory, RECEIVE_QUEUE, TRANSMIT_QUEUE, Used};
+
+/// Frames a tenant may have taken from its port per round of the switch.
+const BUDGET: u32 = 8;
+/// Longest wait for the device's interrupt before the tenants' ports are looked at again.
+const POLL: Duration = Duration::from_micros(500);
+/// How often the counters are logged.
+const STATS_EVERY_MS: u64 = 1000;
+/// The message buffer: the largest port message (config: 4096 bytes).
+const MESSAGE: usize = 4096;
+/// virtio's PCI vendor and its network device ids (transitional, modern).
+const VIRTIO_VENDOR: u16 = 0x1af4;
+const VIRTIO_NET: [u16; 2] = [0x1000, 0x1041];
+
+fn name(text: &str) -> Option<Name> {
+    Name::from_str(text).ok()
+}
+
+/// Logs why the partition cannot work and reports it to the health monitor.
+fn refuse(text: core::fmt::Arguments<'_>) {
+    let line = alloc::format!("{text}");
+    println!("nic: not started: {line}");
+    let _ = <Warden as ApexErrorP4Ext>::raise_application_error(line.as_bytes());
+}
+
+fn table() -> Option<Table<'static>> {
+    match nic_core::tenants::decode(apex::runtime::start_info().data()) {
+        Ok(t) => Some(t),
+        Err(e) => {
+            refuse(format_args!("the tenant table (data entry): {e}"));
+            None
+        }
+    }
+}
+
+/// A tenant's two ports.
+struct Link {
+    name: &'static str,
+    from: QueuingPortReceiver<Warden>,
+    to: QueuingPortSender<Warden>,
+}
+
+struct Counts {
+    /// Used entries the device should not have written (either queue).
+    bogus: u64,
+    /// Frames shorter than the virtio-net header from the device.
+    runts: u64,
+}
+
+/// Everything the switch process owns.
+struct Nic {
+    net: Net,
+    switch: Switch,
+    links: Vec<Link>,
+    counts: Counts,
+    /// The transmit queue got frames since it was last rung.
+    tx_pending: bool,
+}
+
+impl Nic {
+    /// Sends `frame`, which came from `from`, wherever the switch routes it.
+    fn forward(&mut self, from: Port, frame: &[u8]) {
+        let Ok(to) = self.switch.route(from, frame) else {
+            return;
+        };
+        for port in to.iter(self.links.len()) {
+            let fitted = match port {
+                Port::Uplink => self.transmit(frame),
+                Port::Tenant(n) => self.links[n]
+                    .to
+                    .send(frame, SystemTime::Normal(Duration::ZERO))
+                    .is_ok(),
+            };
+            self.switch.delivered(port, fitted);
+        }
+    }
+
+    /// Puts `frame` on the transmit queue; `false` when it is full.
+    fn transmit(&mut self, frame: &[u8]) -> bool {
+        let Some(id) = self.net.tx.free() else {
+            return false;
+        };
+        let at = self.net.tx.buffer(id);
+        self.net.mem.write(at, &[0; virtio::NET_HEADER]);
+        self.net.mem.write(at + virtio::NET_HEADER, frame);
+        let len = (virtio::NET_HEADER + frame.len()) as u32;
+        let given = self.net.tx.give(&mut self.net.mem, id, len, false);
+        self.tx_pending |= given;
+        given
+    }
+
+    /// Frames the device received, to where they go; the buffers back to the device.
+    fn serve_wire(&mut self, frame: &mut [u8; MESSAGE]) {
+        let mut refilled = false;
+        for _ in 0..self.net.rx.size() {
+            let Some(used) = self.net.rx.take(&self.net.mem) else {
+                break;
+            };
+            let (id, len) = match used {
+                Used::Buffer { id, len } => (id, len),
+                Used::Bogus { .. } => {
+                    self.counts.bogus += 1;
+                    continue;
+                }
+            };
+            match virtio::received_frame(len) {
+                Some(range) => {
+                    let n = range.len().min(MESSAGE);
+                    let at = self.net.rx.buffer(id) + range.start;
+                    self.net.mem.read(at, &mut frame[..n]);
+                    self.forward(Port::Uplink, &frame[..n]);
+                }
+                None => self.counts.runts += 1,
+            }
+            let size = virtio::BUFFER_SIZE as u32;
+            refilled |= self.net.rx.give(&mut self.net.mem, id, size, true);
+        }
+        if refilled {
+            self.net.kick(RECEIVE_QUEUE);
+        }
+    }
+
+    /// Descriptors the device has sent, free again.
+    fn reclaim(&mut self) {
+        for _ in 0..self.net.tx.size() {
+            match self.net.tx.take(&self.net.mem) {
+                None => break,
+                Some(Used::Bogus { .. }) => self.counts.bogus += 1,
+                Some(Used::Buffer { .. }) => {}
+            }
+        }
+    }
+
+    /// Frames from the tenants' ports, round-robin within their budgets, while the
+    /// transmit queue has room (what stays in a port waits there, or the tenant's next
+    /// send fails: only that tenant loses frames).
+    fn serve_tenants(&mut self, rounds: &mut Rounds, frame: &mut [u8; MESSAGE]) {
+        let mut pending = [true; nic_core::switch::MAX_TENANTS];
+        let most = usize::from(self.net.tx.size()) + self.links.len();
+        for _ in 0..most {
+            if self.net.tx.free().is_none() {
+                break;
+            }
+            let Some(n) = rounds.pick(|n| pending[n]) else {
+                break;
+            };
+            let received = self.links[n]
+                .from
+                .receive(frame, SystemTime::Normal(Duration::ZERO));
+            match received {
+                Ok((message, _)) if !message.is_empty() => {
+                    rounds.took();
+                    let len = message.len();
+                    self.forward(Port::Tenant(n), &frame[..len]);
+                }
+                _ => pending[n] = false,
+            }
+        }
+    }
+
+    fn log(&self, now_ms: u64) {
+        let up = self.switch.counters(Port::Uplink);
+        println!(
+            "nic: t={now_ms}ms uplink in={} out={} overflow={} unknown={} malformed={} bogus={}",
+            up.received,
+            up.delivered,
+            up.overflow,
+            up.unknown,
+            up.malformed + self.counts.runts,
+            self.counts.bogus
+        );
+        for (n, link) in self.links.iter().enumerate() {
+            let c = self.switch.counters(Port::Tenant(n));
+            println!(
+                "nic: t={now_ms}ms tenant {} in={} out={} overflow={} spoofed={} malformed={} limited={}",
+                link.name, c.received, c.delivered, c.overflow, c.spoofed, c.malformed, c.limited
+            );
+        }
+    }
+}
+
+extern "C" fn run() {
+    let Some(table) = table() else { return };
+    let page_len = 4096;
+    // SAFETY: syssw maps the records page read-only at DEVICES_BASE before a partition
+    // with devices starts, for the life of its task.
+    #[allow(unsafe_code)]
+    let page = unsafe { core::slice::from_raw_parts(DEVICES_BASE as *const u8, page_len) };
+    let Some((index, record)) = pci::records(page)
+        .enumerate()
+        .find(|(_, r)| r.vendor == VIRTIO_VENDOR && VIRTIO_NET.contains(&r.device))
+    else {
+        refuse(format_args!(
+            "no virtio-net function among the partition's devices"
+        ));
+        return;
+    };
+    let Some(line) = record.interrupt_line else {
+        refuse(format_args!(
+            "virtio-net {} has no interrupt line",
+            record.address
+        ));
+        return;
+    };
+    let Some(region) = pci::dma_region(page) else {
+        refuse(format_args!(
+            "no DMA region (the partition needs `dma`, and `dma_unconfined = true` without an IOMMU)"
+        ));
+        return;
+    };
+    let net = match Net::bring_up(&record, &pci::capabilities(page, index), region) {
+        Ok(net) => net,
+        Err(e) => {
+            refuse(format_args!("virtio-net {}: {e}", record.address));
+            return;
+        }
+    };
+    let macs: Vec<_> = table.tenants().map(|t| t.mac).collect();
+    let switch = match Switch::new(&macs) {
+        Ok(s) => s,
+        Err(e) => {
+            refuse(format_args!("the tenant table: {e:?}"));
+            return;
+        }
+    };
+    let mut links = Vec::new();
+    for t in table.tenants() {
+        let ports = name(t.from.name)
+            .and_then(|n| QueuingPortReceiver::<Warden>::from_name(n).ok())
+            .zip(name(t.to.name).and_then(|n| QueuingPortSender::<Warden>::from_name(n).ok()));
+        let Some((from, to)) = ports else {
+            refuse(format_args!(
+                "tenant {}: its ports were not created",
+                t.partition
+            ));
+            return;
+        };
+        links.push(Link {
+            name: t.partition,
+            from,
+            to,
+        });
+    }
+    if let Err(e) = sys::irq_attach(u64::from(line), 0) {
+        refuse(format_args!("interrupt line {line}: {e:?}"));
+        return;
+    }
+    println!(
+        "nic: virtio-net {} MAC {}, {} descriptors a queue, line {line}, {} tenant(s)",
+        record.address,
+        net.mac,
+        net.rx.size(),
+        links.len()
+    );
+    for t in table.tenants() {
+        println!(
+            "nic: tenant {} MAC {} from {} to {}",
+            t.partition, t.mac, t.from.name, t.to.name
+        );
+    }
+    let mut rounds = Rounds::new(links.len(), BUDGET);
+    let mut nic = Nic {
+        net,
+        switch,
+        links,
+        counts: Counts { bogus: 0, runts: 0 },
+        tx_pending: false,
+    };
+    let mut frame = [0u8; MESSAGE];
+    let start = sys::clock();
+    let mut next_log = STATS_EVERY_MS;
+    loop {
+        nic.switch.set_time(sys::clock());
+        nic.serve_wire(&mut frame);
+        nic.reclaim();
+        nic.serve_tenants(&mut rounds, &mut frame);
+        if core::mem::take(&mut nic.tx_pending) {
+            nic.net.kick(TRANSMIT_QUEUE);
+        }
+        let now_ms = (sys::clock() - start) / 1_000_000;
+        if now_ms >= next_log {
+            nic.log(now_ms);
+            next_log = now_ms - now_ms % STATS_EVERY_MS + STATS_EVERY_MS;
+        }
+        if sys::irq_wait(u64::from(line), POLL.as_nanos() as u64).is_ok() {
+            nic.net.interrupt_status();
+            let _ = sys::irq_ack(u64::from(line));
+        }
+    }
+}
+
+struct NicPartition;
+
+impl Partition<Warden> for NicPartition {
+    fn cold_start(&self, ctx: &mut StartContext<Warden>) {
+        let Some(table) = table() else { return };
+        for t in table.tenants() {
+            let (Some(from), Some(to)) = (name(t.from.name), name(t.to.name)) else {
+                refuse(format_args!(
+                    "tenant {}: a port name is too long",
+                    t.partition
+                ));
+                return;
+            };
+            let fifo = QueuingDiscipline::Fifo;
+            let created = ctx
+                .create_queuing_port_receiver(from, t.from.size, t.from.depth, fifo)
+                .is_ok()
+                && ctx
+                    .create_queuing_port_sender(to, t.to.size, t.to.depth, fifo)
+                    .is_ok();
+            if !created {
+                refuse(format_args!(
+                    "tenant {}: cannot create ports {}/{}",
+                    t.partition, t.from.name, t.to.name
+                ));
+                return;
+            }
+        }
+        const { assert!(MAX_FRAME <= MESSAGE) };
+        let attributes = ProcessAttribute {
+            period: SystemTime::Infinite,
+            time_capacity: SystemTime::Infinite,
+            entry_point: run,
+            stack_size: 32 * 1024,
+            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
+            deadline: Deadline::Soft,
+            name: name("switch").expect("a short name"),
+        };
+        match ctx.create_process(attributes) {
+            Ok(process) => {
+                if process.start().is_err() {
+                    refuse(format_args!("cannot start the switch process"));
+                }
+            }
+            Err(e) => refuse(format_args!("cannot create the switch process: {e:?}")),
+        }
+    }
+
+    fn warm_start(&self, ctx: &mut StartContext<Warden>) {
+        self.cold_start(ctx)
+    }
+}
+
+fn main() {
+    NicPartition.run()
+}
+
+apex::partition_entry!(main);
