@@ -83,7 +83,19 @@ impl ApexPartitionP4 for Warden {
 
 impl ApexProcessP4 for Warden {
     fn create_process(attributes: &ApexProcessAttribute) -> Result<ProcessId> {
-        Critical::enter().table().create(attributes)
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        match time::a653rs_linux_period(
+            attributes.period,
+            table.partition_period,
+            runtime::zero_period_is_partition_period(),
+        ) {
+            Some(period) => table.create(&ApexProcessAttribute {
+                period,
+                ..attributes.clone()
+            }),
+            None => table.create(attributes),
+        }
     }
 
     fn start(process_id: ProcessId) -> Result<()> {
