@@ -125,6 +125,10 @@ enum Cmd {
         /// Rename a partition (a name longer than Warden's 15 bytes, say): OLD=NEW; repeatable.
         #[arg(long, value_name = "OLD=NEW")]
         rename: Vec<String>,
+        /// The refresh period of a sampling destination port (the program's, which the YAML
+        /// does not carry): PARTITION.PORT=DURATION; repeatable.
+        #[arg(long, value_name = "PARTITION.PORT=DURATION")]
+        refresh: Vec<String>,
     },
     /// Validate a system description and print its diagnostics (exit 1 if any).
     CheckConfig {
@@ -182,7 +186,8 @@ fn main() -> ExitCode {
             file,
             output,
             rename,
-        } => xtask::a653rs::run(&file, output.as_deref(), &rename),
+            refresh,
+        } => xtask::a653rs::run(&file, output.as_deref(), &rename, &refresh),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
@@ -313,6 +318,7 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
             & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "guest", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "user-rt", "--lib"])?
+            & cargo_test(&["-p", "a653rs-compat", "--no-default-features", "--lib"])?
             & xtask::linux::host_check()?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
@@ -336,14 +342,29 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
         if let Some(program) = &s.manifest.root_task {
             artifacts.syssw = xtask::target_dir().join("user").join(program);
         }
-        let mut entries = esp::standard_entries(
-            &artifacts,
-            s.manifest
-                .config
-                .as_ref()
-                .map(|c| xtask::workspace_root().join(c))
-                .as_deref(),
-        )?;
+        let mut config = s
+            .manifest
+            .config
+            .as_ref()
+            .map(|c| xtask::workspace_root().join(c));
+        if let Some(name) = &s.manifest.a653rs_example {
+            let esp_dir = scenario::output_dir().join(&s.name).join("esp");
+            let _ = std::fs::remove_dir_all(&esp_dir);
+            let Some(root) = xtask::a653rs_examples::sources() else {
+                eprintln!(
+                    "xtask: scenario {}: no a653rs-linux checkout ($A653RS_LINUX, target/a653rs-linux); {}; skipped",
+                    s.name,
+                    xtask::a653rs_examples::HOW_TO_GET
+                );
+                continue;
+            };
+            let example = xtask::a653rs_examples::EXAMPLES
+                .iter()
+                .find(|e| e.name == name)
+                .with_context(|| format!("scenario {}: no a653rs example {name}", s.name))?;
+            config = Some(xtask::a653rs_examples::prepare(&root, example)?);
+        }
+        let mut entries = esp::standard_entries(&artifacts, config.as_deref())?;
         if let Some(hook) = &s.manifest.hook {
             entries.push(esp::ImageEntry::Bytes {
                 name: "test/hook".into(),

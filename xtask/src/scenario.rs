@@ -23,6 +23,10 @@
 //!                               # output as `Outcome::console`
 //! qemu_args = ["-device", "virtio-net-pci,addr=03.0,netdev=n", "-netdev", "user,id=n,restrict=on"]
 //!                               # optional: more QEMU arguments (devices a partition owns)
+//! a653rs_example = "ping"       # optional: the system is that example of DLR's
+//!                               # a653rs-linux, its YAML imported and its programs built
+//!                               # for Warden (`a653rs_examples`); without their sources
+//!                               # the scenario is skipped
 //! console_start = "built-in shell"   # with console_input: typing starts once the
 //!                               # output shows this (the firmware and the loader write
 //!                               # to COM2 first); default "": at the first quiet output
@@ -60,6 +64,8 @@ pub struct Manifest {
     pub console_start: String,
     #[serde(default)]
     pub qemu_args: Vec<String>,
+    #[serde(default)]
+    pub a653rs_example: Option<String>,
 }
 
 impl Manifest {
