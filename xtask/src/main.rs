@@ -82,6 +82,12 @@ enum Cmd {
         /// (`plc_ironplc_*`, `plc_vm_*_vs_ironplc`); writes target/bench/plc.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native"])]
         plc: bool,
+        /// Run only the module-schedule switch bench (tests/configs/bench_schedules.toml,
+        /// virtual time; also part of the full bench): `schedule_switch_latency`,
+        /// `schedule_switch_window_lateness` and `schedule_steady_window_lateness`; writes
+        /// target/bench/schedules.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc"])]
+        schedules: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -161,6 +167,9 @@ fn main() -> ExitCode {
         } => soak(frames),
         Cmd::Bench { hostile: true, .. } => hostile(),
         Cmd::Bench { plc: true, .. } => plc_bench(),
+        Cmd::Bench {
+            schedules: true, ..
+        } => schedules_bench(),
         Cmd::Bench {
             guest: true,
             deterministic_time,
@@ -552,6 +561,38 @@ fn hostile_lateness(
 /// release lateness is the kernel's and the runtime's, not the host's) and reads the PLC's
 /// last statistics line (`plc_release_jitter`, `plc_cycle_overhead` over all its releases)
 /// and the client's `plc_online_read`.
+/// The module-schedule switch bench (`tests/configs/bench_schedules.toml`), always on
+/// virtual time: its figures are the schedule's and the kernel's, not QEMU's.
+fn schedule_switch_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+) -> Result<Vec<xtask::bench::Metric>> {
+    let config = xtask::workspace_root().join("tests/configs/bench_schedules.toml");
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir.join("schedules"),
+        "module-schedule benchmark system",
+        true,
+        Duration::from_secs(1800),
+    )?;
+    let metrics: Vec<_> = outcome
+        .lines
+        .iter()
+        .filter_map(|l| xtask::bench::parse_line(l))
+        .collect();
+    if metrics.len() != 3 {
+        bail!(
+            "the module-schedule benchmark system printed {} bench lines, not 3\n{}",
+            metrics.len(),
+            outcome.transcript()
+        );
+    }
+    Ok(metrics)
+}
+
 fn plc_metrics(
     qemu: &tools::Qemu,
     system: &artifacts::Artifacts,
@@ -718,6 +759,20 @@ fn plc_bench() -> Result<bool> {
     Ok(true)
 }
 
+/// `bench --schedules`: only the module-schedule switch bench.
+fn schedules_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let dir = xtask::target_dir().join("bench");
+    let metrics = schedule_switch_metrics(&qemu, &system, &dir)?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "schedules.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
 fn hostile() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
@@ -828,6 +883,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
                 .filter_map(|l| xtask::bench::parse_line(l)),
         );
     }
+    metrics.extend(schedule_switch_metrics(&qemu, &system, &dir)?);
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
