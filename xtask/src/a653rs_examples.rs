@@ -50,6 +50,32 @@ pub const EXAMPLES: &[Example] = &[
     },
 ];
 
+/// Example programs built for Warden that do not run on it, and why: they show that the
+/// compatibility layer serves what they use (`std::thread::sleep`, `humantime`, `String`,
+/// `format!`, `once_cell`, postcard over sampling ports).
+pub const BUILT_ONLY: &[(&str, &str)] = &[
+    ("hello_part", HELLO_WHY),
+    ("hello_part_no_macros", HELLO_WHY),
+];
+
+const HELLO_WHY: &str = "its sampling port is 10 KB, Warden's port messages are at most 4,096 bytes (one IPC message), and its processes ask 100 KB stacks, above the runtime's 32 KiB; its YAML gives partition Bar a POSIX socket";
+
+/// The examples that neither run nor build here, and why.
+pub const NOT_PORTED: &[(&str, &str)] = &[
+    (
+        "fuel_tank",
+        "the simulation's sampling ports are 10 KB (Warden: 4,096 bytes at most) and both programs ask 100 KB stacks (runtime: 32 KiB)",
+    ),
+    (
+        "dev_random",
+        "it reads /dev/random through std::fs and a mount: a partition has no file system",
+    ),
+    (
+        "redirect_stdio",
+        "it replaces stdin/stdout/stderr with mounted files (std::fs, nix's dup2): no file system, no file descriptors",
+    ),
+];
+
 /// The a653rs-linux checkout: `$A653RS_LINUX`, else `target/a653rs-linux`, if it has the
 /// examples.
 pub fn sources() -> Option<PathBuf> {
@@ -210,13 +236,71 @@ apex::partition_entry!(entry);
 /// Generates the crate of each program of `example` from the checkout `root`, builds them
 /// and imports the YAML; returns the system description's path.
 pub fn prepare(root: &Path, example: &Example) -> Result<PathBuf> {
+    let work = work_dir();
+    let examples = root.join("examples");
+    let programs = generate_and_build(root, example.programs)?;
+
+    // The system: their YAML through the importer.
+    let yaml_path = examples.join(example.yaml);
+    let yaml = std::fs::read_to_string(&yaml_path)
+        .with_context(|| format!("cannot read {}", yaml_path.display()))?;
+    let renames: Vec<(String, String)> = example
+        .renames
+        .iter()
+        .map(|(a, b)| (a.to_string(), b.to_string()))
+        .collect();
+    let refreshes = refreshes_by_partition(&yaml, &renames, &programs);
+    let toml = crate::a653rs::convert(
+        &yaml_path.display().to_string(),
+        &yaml,
+        &renames,
+        &refreshes,
+    )
+    .map_err(|problems| anyhow::anyhow!("{}", problems.join("\n")))?;
+    let system = work.join(format!("{}.toml", example.name));
+    std::fs::write(&system, toml)?;
+    Ok(system)
+}
+
+/// The extra dependency lines of a program whose manifest (`theirs`) names these crates:
+/// their no_std forms, or ours.
+fn extra_dependencies(theirs: &str, path: &dyn Fn(&str) -> String) -> String {
+    let mut out = String::new();
+    let names = |dep: &str| theirs.lines().any(|l| l.trim_start().starts_with(dep));
+    if names("a653rs-postcard") {
+        out.push_str("a653rs-postcard = { version = \"0.4\", default-features = false, features = [\"alloc\"] }\n");
+    }
+    if names("serde") {
+        out.push_str("serde = { version = \"1\", default-features = false, features = [\"derive\", \"alloc\"] }\n");
+    }
+    if names("humantime") {
+        let _ = writeln!(
+            out,
+            "humantime = {{ path = \"{}\", package = \"humantime-alloc\" }}",
+            path("partitions/a653rs-compat/humantime")
+        );
+    }
+    if names("once_cell") {
+        let _ = writeln!(
+            out,
+            "once_cell = {{ path = \"{}\", package = \"once-cell-spin\" }}",
+            path("partitions/a653rs-compat/once_cell")
+        );
+    }
+    out
+}
+
+/// Generates and builds the crates of `dirs` (program directories under `examples/`);
+/// returns each one's package (image) name and the refresh periods it declares.
+#[allow(clippy::type_complexity)]
+fn generate_and_build(root: &Path, dirs: &[&str]) -> Result<Vec<(String, Vec<(String, String)>)>> {
     let repo = crate::workspace_root();
     let work = work_dir();
     let examples = root.join("examples");
     let mut members = Vec::new();
     // (partition image name, declared refreshes)
     let mut programs = Vec::new();
-    for program in example.programs {
+    for program in dirs {
         let dir = examples.join(program);
         let manifest = std::fs::read_to_string(dir.join("Cargo.toml"))
             .with_context(|| format!("cannot read {}/Cargo.toml", dir.display()))?;
@@ -249,14 +333,13 @@ bench = false
 a653rs = {{ version = \"0.6.1\", default-features = false, features = [\"bindings\", \"macros\"] }}
 apex = {{ path = \"{}\" }}
 a653rs-compat = {{ path = \"{}\" }}
-humantime = {{ path = \"{}\", package = \"humantime-alloc\" }}
 log = {{ version = \"0.4\", default-features = false }}
-",
+{}",
                 dir.display(),
                 path("user/link.rs"),
                 path("partitions/apex"),
                 path("partitions/a653rs-compat"),
-                path("partitions/a653rs-compat/humantime"),
+                extra_dependencies(&manifest, &path),
             ),
         )?;
         std::fs::write(out.join("src").join("upstream.rs"), &patched)?;
@@ -267,27 +350,41 @@ log = {{ version = \"0.4\", default-features = false }}
     }
     write_workspace(&work)?;
     build(&work, &members)?;
+    Ok(programs)
+}
 
-    // The system: their YAML through the importer.
-    let yaml_path = examples.join(example.yaml);
-    let yaml = std::fs::read_to_string(&yaml_path)
-        .with_context(|| format!("cannot read {}", yaml_path.display()))?;
-    let renames: Vec<(String, String)> = example
-        .renames
-        .iter()
-        .map(|(a, b)| (a.to_string(), b.to_string()))
-        .collect();
-    let refreshes = refreshes_by_partition(&yaml, &renames, &programs);
-    let toml = crate::a653rs::convert(
-        &yaml_path.display().to_string(),
-        &yaml,
-        &renames,
-        &refreshes,
-    )
-    .map_err(|problems| anyhow::anyhow!("{}", problems.join("\n")))?;
-    let system = work.join(format!("{}.toml", example.name));
-    std::fs::write(&system, toml)?;
-    Ok(system)
+/// `cargo xtask a653rs-examples`: builds every example program that can be built for
+/// Warden, imports the YAML of those that run, and reports what ports (exit 0; "skipped"
+/// without a checkout).
+pub fn run() -> Result<bool> {
+    let Some(root) = sources() else {
+        println!("a653rs-examples: no a653rs-linux checkout ($A653RS_LINUX, target/a653rs-linux)");
+        println!("a653rs-examples: {HOW_TO_GET}");
+        println!("a653rs-examples: skipped");
+        return Ok(true);
+    };
+    println!("a653rs-examples: sources {}", root.display());
+    for example in EXAMPLES {
+        let system = prepare(&root, example)?;
+        println!(
+            "a653rs-examples: {}: runs (scenario a653rs_examples_{}; system {})",
+            example.name,
+            example.name,
+            system.display()
+        );
+    }
+    for (program, why) in BUILT_ONLY {
+        generate_and_build(&root, &[program])?;
+        println!("a653rs-examples: {program}: builds for Warden, does not run: {why}");
+    }
+    for (example, why) in NOT_PORTED {
+        println!("a653rs-examples: {example}: not ported: {why}");
+    }
+    println!(
+        "a653rs-examples: generated crates and their patches (upstream.diff) in {}",
+        work_dir().display()
+    );
+    Ok(true)
 }
 
 /// `PARTITION.PORT = period` for each sampling input a program declares, by the partitions

@@ -136,6 +136,10 @@ enum Cmd {
         #[arg(long, value_name = "PARTITION.PORT=DURATION")]
         refresh: Vec<String>,
     },
+    /// Build DLR's a653rs-linux example partitions for Warden from a checkout
+    /// ($A653RS_LINUX or target/a653rs-linux), import the YAML of those that run, and report
+    /// what ports and why the rest does not.
+    A653rsExamples,
     /// Validate a system description and print its diagnostics (exit 1 if any).
     CheckConfig {
         file: PathBuf,
@@ -191,6 +195,7 @@ fn main() -> ExitCode {
         Cmd::Oscat { file, write_status } => xtask::oscat::run(file.as_deref(), write_status),
         Cmd::Plot { log, output, plc } => xtask::plot::run(&log, output.as_deref(), plc.as_deref()),
         Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
+        Cmd::A653rsExamples => xtask::a653rs_examples::run(),
         Cmd::ImportA653rs {
             file,
             output,
