@@ -18,13 +18,25 @@ fn have_sources(scenario: &str) -> bool {
     false
 }
 
-/// Prints the patch of each program (what was changed in their source).
+/// Prints the patch of each program (what was changed in their source) and checks that it
+/// touches only the glue: each removed line names a653rs-linux's hypervisor or logger or is
+/// their `fn main`, each added line is its Warden counterpart or the prelude import.
 fn show_patches(programs: &[&str]) {
     for p in programs {
         let path = a653rs_examples::work_dir().join(p).join("upstream.diff");
         let diff = std::fs::read_to_string(&path)
             .unwrap_or_else(|e| panic!("cannot read {}: {e}", path.display()));
         println!("patch of {p}/src/main.rs:\n{diff}");
+        for line in diff.lines() {
+            let glue = if line.starts_with('-') {
+                line.contains("a653rs_linux::partition::") || line.ends_with(" fn main() {")
+            } else {
+                line.contains("apex::Warden")
+                    || line.contains("a653rs_compat::")
+                    || line.ends_with(" pub fn main() {")
+            };
+            assert!(glue, "{p}: the patch changes more than the glue: {line}");
+        }
     }
 }
 
