@@ -7,9 +7,10 @@
 //! every period in the major frame, as a653rs-linux schedules them; an APEX partition's
 //! budget (memory, kernel memory, priorities, abilities) from [`PARTITION_DEFAULTS`];
 //! each channel its source and destination ports with the channel's `msg_size` (and, for
-//! queuing, `msg_num` as the depth); a sampling input's refresh period is the destination
-//! partition's period (the YAML does not carry it: a653rs-linux takes it from the
-//! program). What has no equivalent is an error naming its place: POSIX `sockets`,
+//! queuing, `msg_num` as the depth); a sampling input's refresh period is the one given
+//! with `--refresh PARTITION.PORT=DURATION`, else the destination partition's period (the
+//! YAML does not carry it: a653rs-linux takes it from the program, and Warden's
+//! CREATE_SAMPLING_PORT wants the configured one). What has no equivalent is an error naming its place: POSIX `sockets`,
 //! `mounts`, health tables, messages above Warden's 4096 bytes, names Warden does not take.
 
 use anyhow::{Context, Result, bail};
@@ -163,6 +164,7 @@ pub fn convert(
     file: &str,
     source: &str,
     renames: &[(String, String)],
+    refreshes: &[(String, String)],
 ) -> Result<String, Vec<String>> {
     let at = |p: Problem| format!("{file}:{}:{}: {}", p.line, p.column, p.message);
     let config: Config = serde_yaml_ng::from_str(source).map_err(|e| {
@@ -201,6 +203,24 @@ pub fn convert(
         if !source.contains(&format!("name: {old}")) {
             problems.push(format!(
                 "{file}: --rename {old}=...: no partition is named {old}"
+            ));
+        }
+    }
+    for (port, period) in refreshes {
+        let known = config.channel.iter().any(|c| match c {
+            Channel::Sampling(s) => s
+                .destination
+                .iter()
+                .any(|d| format!("{}.{}", d.partition, d.port) == *port),
+            Channel::Queuing(_) => false,
+        });
+        if !known {
+            problems.push(format!(
+                "{file}: --refresh {port}=...: no sampling destination port is named {port}"
+            ));
+        } else if nanos(period).is_none_or(|n| n == 0) {
+            problems.push(format!(
+                "{file}: --refresh {port}={period}: not a positive duration"
             ));
         }
     }
@@ -384,10 +404,16 @@ pub fn convert(
         let depth_text = depth.map_or(String::new(), |d| format!(", depth = {d}"));
         ports.push((source.partition.clone(), format!("ports.{} = {{ kind = \"{kind}\", direction = \"out\", size = {size}{depth_text} }}", source.port)));
         for d in &destinations {
+            let given = refreshes
+                .iter()
+                .find(|(port, _)| *port == format!("{}.{}", d.partition, d.port))
+                .and_then(|(_, period)| nanos(period));
             let refresh = if kind == "sampling" {
                 format!(
                     ", refresh = \"{}\"",
-                    duration(period_of(&d.partition).unwrap_or(frame.unwrap_or(0)))
+                    duration(given.unwrap_or_else(|| {
+                        period_of(&d.partition).unwrap_or(frame.unwrap_or(0))
+                    }))
                 )
             } else {
                 String::new()
@@ -434,19 +460,27 @@ pub fn convert(
 
 /// The command: converts `file`, validates the result (any image name accepted: the
 /// images are the a653rs programs built for Warden), writes it to `output` or prints it.
-pub fn run(file: &Path, output: Option<&Path>, renames: &[String]) -> Result<bool> {
-    let renames: Vec<(String, String)> = renames
-        .iter()
-        .map(|r| {
-            r.split_once('=')
-                .map(|(o, n)| (o.to_string(), n.to_string()))
-                .with_context(|| format!("--rename {r}: expected OLD=NEW"))
-        })
-        .collect::<Result<_>>()?;
+pub fn run(
+    file: &Path,
+    output: Option<&Path>,
+    renames: &[String],
+    refreshes: &[String],
+) -> Result<bool> {
+    let pairs = |list: &[String], flag: &str, form: &str| -> Result<Vec<(String, String)>> {
+        list.iter()
+            .map(|r| {
+                r.split_once('=')
+                    .map(|(o, n)| (o.to_string(), n.to_string()))
+                    .with_context(|| format!("--{flag} {r}: expected {form}"))
+            })
+            .collect()
+    };
+    let renames = pairs(renames, "rename", "OLD=NEW")?;
+    let refreshes = pairs(refreshes, "refresh", "PARTITION.PORT=DURATION")?;
     let source =
         std::fs::read_to_string(file).with_context(|| format!("cannot read {}", file.display()))?;
     let name = file.display().to_string();
-    let toml = match convert(&name, &source, &renames) {
+    let toml = match convert(&name, &source, &renames, &refreshes) {
         Ok(toml) => toml,
         Err(problems) => {
             for p in &problems {
@@ -518,7 +552,7 @@ channel:
 
     #[test]
     fn a_configuration_imports_and_validates() {
-        let toml = convert("ping.yaml", PING, &[]).unwrap();
+        let toml = convert("ping.yaml", PING, &[], &[]).unwrap();
         let (system, _) = config::load_with_warnings("ping.toml", &toml, &|_| true).unwrap();
         assert_eq!(system.partitions.len(), 2);
         assert!(
@@ -536,11 +570,39 @@ channel:
     }
 
     #[test]
+    fn a_refresh_period_comes_from_the_program_when_given() {
+        let given = [("ping_server.ping_request".to_string(), "10s".to_string())];
+        let toml = convert("ping.yaml", PING, &[], &given).unwrap();
+        assert!(toml.contains("ports.ping_request = { kind = \"sampling\", direction = \"in\", size = 16, refresh = \"10000ms\" }"), "{toml}");
+        for (port, period, message) in [
+            (
+                "ping_server.nope",
+                "10s",
+                "no sampling destination port is named",
+            ),
+            (
+                "ping_client.PingRes",
+                "10s",
+                "no sampling destination port is named",
+            ),
+            (
+                "ping_server.ping_request",
+                "soon",
+                "not a positive duration",
+            ),
+        ] {
+            let given = [(port.to_string(), period.to_string())];
+            let problems = convert("p.yaml", PING, &[], &given).unwrap_err();
+            assert!(problems[0].contains(message), "{problems:?}");
+        }
+    }
+
+    #[test]
     fn long_names_import_renamed() {
         let yaml = PING.replace("ping_server", "ping_queue_server");
-        assert!(convert("p.yaml", &yaml, &[]).is_err());
+        assert!(convert("p.yaml", &yaml, &[], &[]).is_err());
         let renames = [("ping_queue_server".to_string(), "pq_server".to_string())];
-        let toml = convert("p.yaml", &yaml, &renames).unwrap();
+        let toml = convert("p.yaml", &yaml, &renames, &[]).unwrap();
         assert!(
             toml.contains("[partitions.pq_server]")
                 && toml.contains("to = [\"pq_server.ping_request\"]"),
@@ -548,7 +610,7 @@ channel:
         );
         let wrong = [("nobody".to_string(), "x".to_string())];
         assert!(
-            convert("p.yaml", PING, &wrong).unwrap_err()[0]
+            convert("p.yaml", PING, &wrong, &[]).unwrap_err()[0]
                 .contains("no partition is named nobody")
         );
     }
@@ -571,7 +633,7 @@ channel:
             ),
         ];
         for (yaml, line, message) in cases {
-            let problems = convert("p.yaml", &yaml, &[]).unwrap_err();
+            let problems = convert("p.yaml", &yaml, &[], &[]).unwrap_err();
             assert!(
                 problems
                     .iter()
@@ -579,8 +641,13 @@ channel:
                 "{problems:?}"
             );
         }
-        let problems =
-            convert("p.yaml", "major_frame: 1s\npartitions:\n  - id: x\n", &[]).unwrap_err();
+        let problems = convert(
+            "p.yaml",
+            "major_frame: 1s\npartitions:\n  - id: x\n",
+            &[],
+            &[],
+        )
+        .unwrap_err();
         assert!(
             problems[0].starts_with("p.yaml:3:") && problems[0].contains("not an a653rs-linux"),
             "{problems:?}"

@@ -76,7 +76,11 @@ pub fn load(path: &Path) -> Result<config::System> {
         Ok(source) => source,
         Err(d) => bail!("configuration {name} is invalid:\n{d}"),
     };
-    match config::load_with_warnings(&name, source, &|image| images.iter().any(|i| i == image)) {
+    // Known: the workspace's user programs and the a653rs-linux example programs built.
+    let known = |image: &str| {
+        images.iter().any(|i| i == image) || crate::a653rs_examples::image(image).is_some()
+    };
+    match config::load_with_warnings(&name, source, &known) {
         Ok((system, warnings)) => {
             print_warnings(&warnings);
             Ok(system)
@@ -112,8 +116,17 @@ pub fn partition_files(
     let (native_images, plain): (Vec<String>, Vec<String>) = images
         .into_iter()
         .partition(|image| native.is_some() && image == crate::plc::SOFTPLC_IMAGE);
+    // The a653rs-linux example programs are built by `a653rs_examples::prepare`.
+    let (examples, plain): (Vec<String>, Vec<String>) = plain
+        .into_iter()
+        .partition(|image| crate::a653rs_examples::image(image).is_some());
     let paths = crate::artifacts::build_user_programs(&plain)?;
     let mut built: Vec<(String, PathBuf)> = plain.into_iter().zip(paths).collect();
+    built.extend(
+        examples
+            .into_iter()
+            .filter_map(|i| crate::a653rs_examples::image(&i).map(|path| (i, path))),
+    );
     if let (Some(programs), Some(image)) = (&native, native_images.first()) {
         built.push((
             image.clone(),

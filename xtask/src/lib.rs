@@ -10,6 +10,7 @@
 //! the importer of a653rs-linux system descriptions ([`a653rs`]).
 
 pub mod a653rs;
+pub mod a653rs_examples;
 pub mod artifacts;
 pub mod bench;
 pub mod check_config;

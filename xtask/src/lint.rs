@@ -18,7 +18,8 @@ pub const KERNEL_CODE_LINES: usize = 6_000;
 /// returns whether all passed.
 pub fn run() -> Result<bool> {
     crate::tools::ensure_rust_targets()?;
-    let mut user: Vec<String> = vec!["syssw".into()];
+    // syssw, the user programs, and the libraries only the a653rs-linux examples link.
+    let mut user: Vec<String> = vec!["syssw".into(), "a653rs-compat".into()];
     user.extend(crate::check_config::known_images()?);
     let user_args: Vec<&str> = user.iter().flat_map(|p| ["-p", p.as_str()]).collect();
 
@@ -62,6 +63,14 @@ pub fn run() -> Result<bool> {
             "--tests",
         ],
         vec!["clippy", "-p", "user-rt", "--lib", "--tests"],
+        vec![
+            "clippy",
+            "-p",
+            "a653rs-compat",
+            "--no-default-features",
+            "--lib",
+            "--tests",
+        ],
         // The targets that run under QEMU.
         vec!["clippy", "-p", "kernel", "--target", "x86_64-unknown-none"],
         vec!["clippy", "-p", "loader", "--target", "x86_64-unknown-uefi"],

@@ -82,6 +82,12 @@ enum Cmd {
         /// (`plc_ironplc_*`, `plc_vm_*_vs_ironplc`); writes target/bench/plc.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native"])]
         plc: bool,
+        /// Run only the module-schedule switch bench (tests/configs/bench_schedules.toml,
+        /// virtual time; also part of the full bench): `schedule_switch_latency`,
+        /// `schedule_switch_window_lateness` and `schedule_steady_window_lateness`; writes
+        /// target/bench/schedules.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc"])]
+        schedules: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -125,7 +131,15 @@ enum Cmd {
         /// Rename a partition (a name longer than Warden's 15 bytes, say): OLD=NEW; repeatable.
         #[arg(long, value_name = "OLD=NEW")]
         rename: Vec<String>,
+        /// The refresh period of a sampling destination port (the program's, which the YAML
+        /// does not carry): PARTITION.PORT=DURATION; repeatable.
+        #[arg(long, value_name = "PARTITION.PORT=DURATION")]
+        refresh: Vec<String>,
     },
+    /// Build DLR's a653rs-linux example partitions for Warden from a checkout
+    /// ($A653RS_LINUX or target/a653rs-linux), import the YAML of those that run, and report
+    /// what ports and why the rest does not.
+    A653rsExamples,
     /// Validate a system description and print its diagnostics (exit 1 if any).
     CheckConfig {
         file: PathBuf,
@@ -158,6 +172,9 @@ fn main() -> ExitCode {
         Cmd::Bench { hostile: true, .. } => hostile(),
         Cmd::Bench { plc: true, .. } => plc_bench(),
         Cmd::Bench {
+            schedules: true, ..
+        } => schedules_bench(),
+        Cmd::Bench {
             guest: true,
             deterministic_time,
             ..
@@ -178,11 +195,13 @@ fn main() -> ExitCode {
         Cmd::Oscat { file, write_status } => xtask::oscat::run(file.as_deref(), write_status),
         Cmd::Plot { log, output, plc } => xtask::plot::run(&log, output.as_deref(), plc.as_deref()),
         Cmd::CheckConfig { file, any_image } => xtask::check_config::run(&file, any_image),
+        Cmd::A653rsExamples => xtask::a653rs_examples::run(),
         Cmd::ImportA653rs {
             file,
             output,
             rename,
-        } => xtask::a653rs::run(&file, output.as_deref(), &rename),
+            refresh,
+        } => xtask::a653rs::run(&file, output.as_deref(), &rename, &refresh),
     };
     match result {
         Ok(true) => ExitCode::SUCCESS,
@@ -313,6 +332,7 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
             & cargo_test(&["-p", "softplc", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "guest", "--no-default-features", "--lib"])?
             & cargo_test(&["-p", "user-rt", "--lib"])?
+            & cargo_test(&["-p", "a653rs-compat", "--no-default-features", "--lib"])?
             & xtask::linux::host_check()?);
     if !host_ok {
         eprintln!("xtask: host tests failed; QEMU scenarios not run");
@@ -336,14 +356,29 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
         if let Some(program) = &s.manifest.root_task {
             artifacts.syssw = xtask::target_dir().join("user").join(program);
         }
-        let mut entries = esp::standard_entries(
-            &artifacts,
-            s.manifest
-                .config
-                .as_ref()
-                .map(|c| xtask::workspace_root().join(c))
-                .as_deref(),
-        )?;
+        let mut config = s
+            .manifest
+            .config
+            .as_ref()
+            .map(|c| xtask::workspace_root().join(c));
+        if let Some(name) = &s.manifest.a653rs_example {
+            let esp_dir = scenario::output_dir().join(&s.name).join("esp");
+            let _ = std::fs::remove_dir_all(&esp_dir);
+            let Some(root) = xtask::a653rs_examples::sources() else {
+                eprintln!(
+                    "xtask: scenario {}: no a653rs-linux checkout ($A653RS_LINUX, target/a653rs-linux); {}; skipped",
+                    s.name,
+                    xtask::a653rs_examples::HOW_TO_GET
+                );
+                continue;
+            };
+            let example = xtask::a653rs_examples::EXAMPLES
+                .iter()
+                .find(|e| e.name == name)
+                .with_context(|| format!("scenario {}: no a653rs example {name}", s.name))?;
+            config = Some(xtask::a653rs_examples::prepare(&root, example)?);
+        }
+        let mut entries = esp::standard_entries(&artifacts, config.as_deref())?;
         if let Some(hook) = &s.manifest.hook {
             entries.push(esp::ImageEntry::Bytes {
                 name: "test/hook".into(),
@@ -531,6 +566,38 @@ fn hostile_lateness(
 /// release lateness is the kernel's and the runtime's, not the host's) and reads the PLC's
 /// last statistics line (`plc_release_jitter`, `plc_cycle_overhead` over all its releases)
 /// and the client's `plc_online_read`.
+/// The module-schedule switch bench (`tests/configs/bench_schedules.toml`), always on
+/// virtual time: its figures are the schedule's and the kernel's, not QEMU's.
+fn schedule_switch_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+) -> Result<Vec<xtask::bench::Metric>> {
+    let config = xtask::workspace_root().join("tests/configs/bench_schedules.toml");
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir.join("schedules"),
+        "module-schedule benchmark system",
+        true,
+        Duration::from_secs(1800),
+    )?;
+    let metrics: Vec<_> = outcome
+        .lines
+        .iter()
+        .filter_map(|l| xtask::bench::parse_line(l))
+        .collect();
+    if metrics.len() != 3 {
+        bail!(
+            "the module-schedule benchmark system printed {} bench lines, not 3\n{}",
+            metrics.len(),
+            outcome.transcript()
+        );
+    }
+    Ok(metrics)
+}
+
 fn plc_metrics(
     qemu: &tools::Qemu,
     system: &artifacts::Artifacts,
@@ -697,6 +764,20 @@ fn plc_bench() -> Result<bool> {
     Ok(true)
 }
 
+/// `bench --schedules`: only the module-schedule switch bench.
+fn schedules_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let dir = xtask::target_dir().join("bench");
+    let metrics = schedule_switch_metrics(&qemu, &system, &dir)?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "schedules.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
 fn hostile() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
@@ -807,6 +888,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
                 .filter_map(|l| xtask::bench::parse_line(l)),
         );
     }
+    metrics.extend(schedule_switch_metrics(&qemu, &system, &dir)?);
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);

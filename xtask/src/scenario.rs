@@ -29,6 +29,10 @@
 //!                               # for both TCP and UDP when the scenario boots (scenarios
 //!                               # run in parallel, so none is fixed), for `hostfwd`; the
 //!                               # test gets them (`scenarios::boot_beside`)
+//! a653rs_example = "ping"       # optional: the system is that example of DLR's
+//!                               # a653rs-linux, its YAML imported and its programs built
+//!                               # for Warden (`a653rs_examples`); without their sources
+//!                               # the scenario is skipped
 //! console_start = "built-in shell"   # with console_input: typing starts once the
 //!                               # output shows this (the firmware and the loader write
 //!                               # to COM2 first); default "": at the first quiet output
@@ -68,6 +72,8 @@ pub struct Manifest {
     pub qemu_args: Vec<String>,
     #[serde(default)]
     pub host_ports: usize,
+    #[serde(default)]
+    pub a653rs_example: Option<String>,
 }
 
 impl Manifest {

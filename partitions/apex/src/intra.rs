@@ -953,14 +953,16 @@ impl Intra {
 
     // ------------------------------------------------------------ preemption (3.3.2.7-8)
 
-    /// Whether `slot` owns a mutex or the preemption lock.
-    fn owns_a_mutex(&self, slot: usize) -> bool {
-        self.owned_by(slot).is_some() || self.holds_lock(slot)
-    }
-
     /// Whether `slot` holds the preemption lock (lock level above 0).
     pub fn holds_lock(&self, slot: usize) -> bool {
         self.preemption.is_some_and(|l| l.owner == slot)
+    }
+
+    /// Whether `slot` owns a mutex or the preemption lock. ARINC 653 (Supplement 5) lets
+    /// such a process not wait: its TIMED_WAIT, PERIODIC_WAIT, SUSPEND_SELF and its waits
+    /// with a time-out on objects and ports are INVALID_MODE, and so is a SUSPEND of it.
+    pub fn owns_a_mutex(&self, slot: usize) -> bool {
+        self.holds_lock(slot) || self.owned_by(slot).is_some()
     }
 
     /// The partition's lock level (GET_PARTITION_STATUS).

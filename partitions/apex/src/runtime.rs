@@ -24,7 +24,7 @@ use crate::time;
 use a653rs::bindings::{ErrorCode, ErrorReturnCode, ProcessId};
 use core::alloc::{GlobalAlloc, Layout};
 use core::ptr::NonNull;
-use core::sync::atomic::{AtomicU8, AtomicU64, Ordering};
+use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
 use linked_list_allocator::Heap;
 use protocol::{PartitionStatus, ReplyWords, Request};
 use spin::mutex::{SpinMutex, SpinMutexGuard};
@@ -87,6 +87,24 @@ static THREAD_IDS: [AtomicU64; THREADS] = [const { AtomicU64::new(0) }; THREADS]
 static MCP: AtomicU8 = AtomicU8::new(0);
 static TIME_PARTITION: AtomicU64 = AtomicU64::new(0);
 static PARTITION_INDEX: AtomicU64 = AtomicU64::new(0);
+
+/// Whether CREATE_PROCESS reads a period of 0 as a653rs-linux does (see
+/// [`read_zero_period_as_partition_period`]).
+static ZERO_PERIOD_IS_PARTITION_PERIOD: AtomicBool = AtomicBool::new(false);
+
+/// For programs written for DLR's a653rs-linux (`a653rs-compat` calls it before their
+/// `main`): from now on CREATE_PROCESS takes a period of 0 as the partition's period
+/// (a653rs-linux releases every process with a finite period once per partition period;
+/// its examples say `period = "0ms"`), where ARINC 653 answers INVALID_PARAM
+/// ([`time::a653rs_linux_period`]).
+pub fn read_zero_period_as_partition_period() {
+    ZERO_PERIOD_IS_PARTITION_PERIOD.store(true, Ordering::Relaxed);
+}
+
+/// See [`read_zero_period_as_partition_period`].
+pub fn zero_period_is_partition_period() -> bool {
+    ZERO_PERIOD_IS_PARTITION_PERIOD.load(Ordering::Relaxed)
+}
 
 /// The start record of the current run (a copy).
 static START_INFO: SpinMutex<Option<StartInfo>> = SpinMutex::new(None);

@@ -68,6 +68,22 @@ pub fn check_process_timing(
     Ok(())
 }
 
+/// The period a process gets instead of `period` when the program asked for a653rs-linux's
+/// reading ([`crate::runtime::read_zero_period_as_partition_period`]): there a period of
+/// 0 means "released once per partition period", the partition's own period; ARINC 653
+/// (and this runtime otherwise) refuses a zero period with INVALID_PARAM. `None`: keep
+/// `period`.
+pub fn a653rs_linux_period(
+    period: ApexSystemTime,
+    partition_period: u64,
+    linux_reading: bool,
+) -> Option<ApexSystemTime> {
+    if period != 0 || !linux_reading || partition_period == 0 {
+        return None;
+    }
+    ApexSystemTime::try_from(partition_period).ok()
+}
+
 /// When a process started with `delay` is first released: a periodic one at the next
 /// release point of the partition plus the delay, an aperiodic one `delay` after `now`.
 pub fn first_release(periodic: bool, now: u64, release_point: u64, delay: u64) -> u64 {
@@ -78,6 +94,18 @@ pub fn first_release(periodic: bool, now: u64, release_point: u64, delay: u64) -
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_zero_period_reads_as_the_partition_period_only_when_asked() {
+        assert_eq!(
+            a653rs_linux_period(0, 1_000_000_000, true),
+            Some(1_000_000_000)
+        );
+        assert_eq!(a653rs_linux_period(0, 1_000_000_000, false), None);
+        assert_eq!(a653rs_linux_period(5, 1_000_000_000, true), None);
+        // Without a partition period (no window) the standard's answer stays.
+        assert_eq!(a653rs_linux_period(0, 0, true), None);
+    }
 
     #[test]
     fn time_outs_encode_infinite_as_max() {

@@ -83,7 +83,19 @@ impl ApexPartitionP4 for Warden {
 
 impl ApexProcessP4 for Warden {
     fn create_process(attributes: &ApexProcessAttribute) -> Result<ProcessId> {
-        Critical::enter().table().create(attributes)
+        let mut critical = Critical::enter();
+        let table = critical.table();
+        match time::a653rs_linux_period(
+            attributes.period,
+            table.partition_period,
+            runtime::zero_period_is_partition_period(),
+        ) {
+            Some(period) => table.create(&ApexProcessAttribute {
+                period,
+                ..attributes.clone()
+            }),
+            None => table.create(attributes),
+        }
     }
 
     fn start(process_id: ProcessId) -> Result<()> {
@@ -123,7 +135,7 @@ impl ApexProcessP1 for Warden {
         {
             let mut critical = Critical::enter();
             let (table, intra) = critical.parts();
-            if intra.holds_lock(slot) {
+            if intra.owns_a_mutex(slot) {
                 return Err(ErrorReturnCode::InvalidMode);
             }
             if !table.suspend_self(slot, time_out)? {
@@ -141,8 +153,13 @@ impl ApexProcessP1 for Warden {
     fn suspend(process_id: ProcessId) -> Result<()> {
         let caller = own_slot();
         let mut critical = Critical::enter();
-        let table = critical.table();
+        let (table, intra) = critical.parts();
         let slot = table.slot(process_id)?;
+        // The owner of a mutex (or of the preemption lock) may not be suspended; asking it
+        // of itself or of the error handler stays INVALID_PARAM (`Table::suspend`).
+        if Some(slot) != caller && slot != ERROR_HANDLER_SLOT && intra.owns_a_mutex(slot) {
+            return Err(ErrorReturnCode::InvalidMode);
+        }
         let thread = table.suspend(slot, caller)?;
         let _ = sys::thread_suspend(ThreadId(thread));
         Ok(())
@@ -271,7 +288,7 @@ impl ApexTimeP4 for Warden {
         let release = {
             let mut critical = Critical::enter();
             let (table, intra) = critical.parts();
-            if intra.holds_lock(slot) {
+            if intra.owns_a_mutex(slot) {
                 return Err(ErrorReturnCode::InvalidMode);
             }
             let release = table.periodic_wait(slot)?;
@@ -315,11 +332,11 @@ impl ApexTimeP1 for Warden {
     }
 }
 
-/// ARINC's "the current process is the error handler, or preemption is locked": a caller
-/// that may not wait (INVALID_MODE). Takes the runtime lock.
+/// ARINC's "the current process is the error handler, or preemption is locked, or it owns
+/// a mutex": a caller that may not wait (INVALID_MODE). Takes the runtime lock.
 fn may_not_wait(slot: Option<usize>) -> bool {
     slot == Some(ERROR_HANDLER_SLOT)
-        || slot.is_some_and(|slot| Critical::enter().parts().1.holds_lock(slot))
+        || slot.is_some_and(|slot| Critical::enter().parts().1.owns_a_mutex(slot))
 }
 
 /// Runs `wait` with the calling process marked as waiting (ARINC state WAITING).

@@ -674,6 +674,13 @@ fn a_mutex_owner_may_only_poll_other_objects() {
     );
     // Nothing was queued.
     assert!(!i.is_waiting(0));
+    // The owner may not wait at all (the runtime refuses its TIMED_WAIT, PERIODIC_WAIT,
+    // SUSPEND_SELF, and a SUSPEND of it), until it releases the mutex.
+    assert!(i.owns_a_mutex(0) && !i.owns_a_mutex(1));
+    assert_eq!(i.release_mutex(owner, m), Ok(()));
+    assert!(!i.owns_a_mutex(0));
+    i.lock_preemption(p(1, 10), true, MCP).expect("locked");
+    assert!(i.owns_a_mutex(1));
 }
 
 // ---------------------------------------------------------------- preemption lock

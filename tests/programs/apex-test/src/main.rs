@@ -28,6 +28,8 @@
 //! * `handled` (scenario `apex_error_handler`): the error handler with GET_ERROR_STATUS,
 //!   RAISE_APPLICATION_ERROR's codes, and what a handler may not do (see `errors.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
+//! * `bench-s` / `idle` (`cargo xtask bench`): times module-schedule switches (see
+//!   `schedules.rs`);
 //! * `forger` / `bystander` (scenario `forged_fault_report`): the forger sends syssw a
 //!   message with the kernel's fault-report label, which the kernel refuses, so syssw never
 //!   stops the bystander, which counts its frames and ends the run successfully.
@@ -173,6 +175,9 @@ impl Partition<Warden> for Test {
             "sched" => schedules::create_sched(ctx),
             "handled" => errors::create(ctx),
             "plain" => schedules::create_plain(ctx),
+            "bench-s" => schedules::create_bench(ctx),
+            // Only fills windows (the schedule-switch bench).
+            "idle" => {}
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),
             "bystander" => process(ctx, "tick", tick, Some(FRAME), None),
             other => println!("{other}: no role for this partition name"),

@@ -5,6 +5,18 @@
 //! its first window; the switch must land exactly on the end of that major frame, and its
 //! next window must start 20 ms after it. `plain` may not switch.
 //!
+//! Partition `bench-s` (`cargo xtask bench`, `tests/configs/bench_schedules.toml`, virtual
+//! time) times [`SWITCHES`] switches between schedules `a` (its window at 0 ms of 10) and
+//! `b` (at 4 ms of 10): each asked early in its window, then a TIMED_WAIT past the window's
+//! end, so the process next runs in the first window of the new schedule.
+//! `schedule_switch_latency`: from SET_MODULE_SCHEDULE (`a` to `b`) to the process running
+//! in `b`'s first window, which the schedules put 14 ms after the start of the window the
+//! request came in (the frame's end, then `b`'s 4 ms offset);
+//! `schedule_switch_window_lateness`: from the start of the new schedule's first window to
+//! the process running in it (both directions): what the switch costs beyond the schedule;
+//! `schedule_steady_window_lateness`: the same after the same wait one frame later, with no
+//! switch (the comparison).
+//!
 //! Every line starts with the partition's name.
 
 use apex::Warden;
@@ -14,6 +26,9 @@ use apex::a653rs::bindings::{
 use apex::a653rs::prelude::StartContext;
 use apex::codes::apex_name;
 use apex::user_rt::{println, sys};
+
+extern crate alloc;
+use alloc::vec::Vec;
 
 const MS: i64 = 1_000_000;
 
@@ -110,4 +125,60 @@ extern "C" fn asker() {
         code(set(0))
     );
     print_status("plain", &status());
+}
+
+/// Switches timed by `bench-s` (half of them `a` to `b`).
+const SWITCHES: usize = 200;
+
+pub fn create_bench(_ctx: &mut StartContext<Warden>) {
+    crate::start_aperiodic("switches", switches, 10);
+}
+
+/// Prints a `bench` line of `samples` (ns).
+fn bench_line(metric: &str, samples: &mut [u64]) {
+    samples.sort_unstable();
+    println!(
+        "bench {metric} median={} min={} max={} unit=ns samples={}",
+        samples[samples.len() / 2],
+        samples[0],
+        samples[samples.len() - 1],
+        samples.len()
+    );
+}
+
+extern "C" fn switches() {
+    let ids = [
+        schedule_id("a").expect("schedule a"),
+        schedule_id("b").expect("schedule b"),
+    ];
+    let mut latency = Vec::with_capacity(SWITCHES / 2);
+    let mut lateness = Vec::with_capacity(SWITCHES);
+    let mut steady = Vec::with_capacity(SWITCHES);
+    // Begin at the start of a window of `a`.
+    let _ = <Warden as ApexTimeP1>::timed_wait(3 * MS);
+    for i in 0..SWITCHES {
+        let target = ids[(i + 1) % 2];
+        let asked = now();
+        set(target).expect("SET_MODULE_SCHEDULE");
+        // Past this window's end (2 ms long): the next run is in the new schedule.
+        let _ = <Warden as ApexTimeP1>::timed_wait(3 * MS);
+        let ran = now();
+        let s = status();
+        assert_eq!(s.current_schedule, target, "the switch happened");
+        let start = window_start();
+        if target == ids[1] {
+            latency.push(ran - asked);
+        }
+        lateness.push(ran.wrapping_sub(start));
+        // The same wait and window entry without a switch, for comparison.
+        let _ = <Warden as ApexTimeP1>::timed_wait(3 * MS);
+        steady.push(now().wrapping_sub(window_start()));
+    }
+    bench_line("schedule_switch_latency", &mut latency);
+    bench_line("schedule_switch_window_lateness", &mut lateness);
+    bench_line("schedule_steady_window_lateness", &mut steady);
+    let _ = <Warden as ApexErrorP4>::raise_application_error(
+        b::ErrorCode::ApplicationError,
+        b"bench done",
+    );
 }
