@@ -36,9 +36,9 @@ mod queues;
 mod stack;
 
 pub use error::Error;
-pub use queues::Queues;
+pub use queues::{Counters, MTU, Queues};
 pub use smoltcp::wire::Ipv4Address;
-pub use stack::{Config, Limits, Readiness, SocketId, SocketKind, Stack};
+pub use stack::{Config, Limits, Readiness, SocketId, SocketKind, Stack, linux};
 
 /// An IPv4 socket address.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

@@ -291,6 +291,39 @@ fn loopback_inside_one_stack() {
     assert_eq!(net.frames, 0, "nothing left the machine");
 }
 
+/// A partition without `eth0`: the loopback works, every other address is unreachable,
+/// and the stack never makes a frame.
+#[test]
+fn a_loopback_only_stack() {
+    let mut s = Stack::new(Config::loopback_only(Limits::default()), 0);
+    assert!(!s.config().has_eth());
+    let l = listener(&mut s, 7, 1);
+    let c = tcp(&mut s);
+    assert_eq!(
+        s.connect(c, SocketAddr::new(LOCAL, 7)),
+        Err(Error::WouldBlock)
+    );
+    s.poll(1_000);
+    assert_eq!(s.connect_result(c), Ok(()));
+    assert!(s.accept(l).is_ok());
+    let far = tcp(&mut s);
+    assert_eq!(
+        s.connect(far, SocketAddr::new(PEER, 80)),
+        Err(Error::NetworkUnreachable)
+    );
+    let u = s.socket(AF_INET, SOCK_DGRAM, 0).unwrap();
+    assert_eq!(
+        s.send(u, b"x", Some(SocketAddr::new(PEER, 9))),
+        Err(Error::NetworkUnreachable)
+    );
+    assert_eq!(
+        s.bind(far, SocketAddr::new(Ipv4Address::UNSPECIFIED, 0)),
+        Ok(())
+    );
+    s.poll(2_000);
+    assert!(s.device.take().is_none(), "no frame without eth0");
+}
+
 #[test]
 fn retransmission_over_a_lossy_wire() {
     for nth in 1..=6 {
