@@ -2784,6 +2784,14 @@ fn directories_names_and_the_working_directory() {
         (S_IFDIR | 0o755).to_le_bytes(),
         "umask 022"
     );
+    // `mkdir -p` asks for each existing parent with its slash.
+    let slashed = g.text(1, SCRATCH + 0x800, "/tmp/");
+    assert_eq!(
+        call(&mut g, nr::mkdir, [slashed, 0o777, 0, 0, 0, 0]),
+        err(Errno::EEXIST)
+    );
+    assert_eq!(call(&mut g, nr::stat, [slashed, buf, 0, 0, 0, 0]), 0);
+    let d = g.text(1, SCRATCH + 0x800, "/tmp/d");
     assert_eq!(call(&mut g, nr::chdir, [d, 0, 0, 0, 0, 0]), 0);
     assert_eq!(call(&mut g, nr::getcwd, [buf, 100, 0, 0, 0, 0]), 7);
     assert_eq!(g.get(1, buf, 7), b"/tmp/d\0");
