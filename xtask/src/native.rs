@@ -308,6 +308,7 @@ mod tests {
             files: Vec::new(),
             console_com2: false,
             programs: Vec::new(),
+            net: None,
         };
         let script = init_script(&guest.init, &guest.env);
         assert!(

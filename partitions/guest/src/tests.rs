@@ -262,6 +262,7 @@ struct World<'a> {
     fs: Fs<'a>,
     p: Process,
     pipes: crate::pipe::Pipes,
+    net: crate::net::Net,
     reported: crate::syscall::Reported,
     host: Model,
     fs_base: u64,
@@ -287,6 +288,7 @@ impl<'a> World<'a> {
             fs,
             p: loaded.process,
             pipes: crate::pipe::Pipes::new(),
+            net: crate::net::Net::default(),
             reported: Default::default(),
             host,
             fs_base: 0,
@@ -311,15 +313,13 @@ impl<'a> World<'a> {
 
     /// Serves message `m` of the process.
     fn handle(&mut self, m: &mut ExceptionMessage) -> Outcome {
-        handle(
-            &mut self.p,
-            &mut self.pipes,
-            &mut self.fs,
-            &(),
-            &mut self.reported,
-            &mut self.host,
-            m,
-        )
+        let files = crate::syscall::Files {
+            pipes: &mut self.pipes,
+            net: &mut self.net,
+            fs: &mut self.fs,
+            others: &(),
+        };
+        handle(&mut self.p, files, &mut self.reported, &mut self.host, m)
     }
 
     /// A page fault of the process at `address` with `error` (the CPU's error code).
@@ -1348,18 +1348,18 @@ fn dispatch_table() {
 fn unsupported_calls_logged_once_per_guest() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::socket, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::mount, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
     for pid in 2..50 {
         let mut next = crate::process::Process::new(pid, 1, w.p.exe);
         next.areas = w.p.areas.clone();
         w.p = next;
-        assert_eq!(w.call(nr::socket, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+        assert_eq!(w.call(nr::mount, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
         assert_eq!(w.call(nr::io_uring_setup, [0; 6]), err(Errno::ENOSYS));
     }
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 41 (socket), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 165 (mount), returning ENOSYS",
             "guest: process 2 (busybox): unsupported system call 425 (io_uring_setup), returning ENOSYS",
         ]
     );
@@ -1407,9 +1407,12 @@ fn unsupported_calls_and_faults() {
     assert_eq!(
         handle(
             &mut w.p,
-            &mut w.pipes,
-            &mut w.fs,
-            &(),
+            crate::syscall::Files {
+                pipes: &mut w.pipes,
+                net: &mut w.net,
+                fs: &mut w.fs,
+                others: &(),
+            },
             &mut w.reported,
             &mut w.host,
             &mut m,
@@ -2903,6 +2906,7 @@ fn proc_files_of_the_processes() {
             "meminfo",
             "uptime",
             "mounts",
+            "net",
             "1",
             child_name.as_str()
         ]
@@ -3169,4 +3173,63 @@ fn the_arinc_port_table_is_read_line_by_line_and_bad_lines_are_named() {
     ] {
         assert_eq!(parse(text).unwrap_err().line, line, "{text:?}");
     }
+}
+
+/// Sockets through the system calls, on the loopback: a listener on 127.0.0.1, a
+/// non-blocking connect to it (EINPROGRESS), `accept4` with the peer's address, bytes
+/// across, EAGAIN and a blocking read that waits, and the errors of another family and of
+/// a file that is no socket; closing every descriptor closes the sockets.
+#[test]
+fn sockets_on_the_loopback_through_the_calls() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let (addr, len, data) = (SCRATCH + 0x100, SCRATCH + 0x200, SCRATCH + 0x300);
+    let l = w.call(nr::socket, [2, 1, 0, 0, 0, 0]);
+    w.put(
+        addr,
+        &[2, 0, 0x1f, 0x90, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert_eq!(w.call(nr::bind, [l, addr, 16, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::listen, [l, 2, 0, 0, 0, 0]), 0);
+    let c = w.call(nr::socket, [2, 1 | 0o4000, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::connect, [c, addr, 16, 0, 0, 0]), err(Errno(115)));
+    let now = w.host.now_ns();
+    w.net.poll(now);
+    w.put(len, &16u32.to_le_bytes());
+    let s = w.call(nr::accept4, [l, addr, len, 0o4000, 0, 0]);
+    assert!(s < 1024, "accept4: {s:#x}");
+    assert_eq!(&w.get(addr, 8)[4..8], &[127, 0, 0, 1], "the peer's address");
+    w.put(data, b"hello");
+    assert_eq!(w.call(nr::write, [c, data, 5, 0, 0, 0]), 5);
+    let now = w.host.now_ns();
+    w.net.poll(now);
+    assert_eq!(w.call(nr::read, [s, data + 64, 64, 0, 0, 0]), 5);
+    assert_eq!(w.get(data + 64, 5), b"hello");
+    assert_eq!(w.call(nr::read, [s, data, 64, 0, 0, 0]), err(Errno::EAGAIN));
+    assert_eq!(
+        w.call(nr::fcntl, [s, 4, 0, 0, 0, 0]),
+        0,
+        "F_SETFL: blocking"
+    );
+    assert_eq!(w.run(nr::read, [s, data, 64, 0, 0, 0]).0, Outcome::Block);
+    assert_eq!(
+        w.call(nr::socket, [10, 1, 0, 0, 0, 0]),
+        err(Errno::EAFNOSUPPORT)
+    );
+    assert_eq!(
+        w.call(nr::socket, [1, 1, 0, 0, 0, 0]),
+        err(Errno::EAFNOSUPPORT)
+    );
+    assert_eq!(
+        w.call(nr::bind, [0, addr, 16, 0, 0, 0]),
+        err(Errno::ENOTSOCK)
+    );
+    assert_eq!(
+        w.call(nr::bind, [l, addr, 200, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    for fd in [s, c, l] {
+        assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
+    }
+    assert_eq!(w.net.open_count(), 0);
 }
