@@ -81,6 +81,8 @@ pub fn init_script(init: &[String], env: &[String]) -> String {
 mount -t proc proc /proc
 mount -t sysfs sysfs /sys
 mount -t devtmpfs devtmpfs /dev
+# The loopback (the TCP metrics), up as in the guest.
+ifconfig lo 127.0.0.1 up
 cd /
 env -i {command}
 status=$?
