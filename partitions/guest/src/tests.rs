@@ -3305,5 +3305,8 @@ fn two_guests_talk_through_their_frame_ports() {
     let mut buf = [0u8; 16];
     assert_eq!(a.0.stack(0).recv(c, &mut buf).map(|r| r.0), Ok(6));
     let eth = a.0.interfaces()[1];
-    assert!(eth.counters.tx_frames > 10 && eth.counters.rx_frames > 5, "{eth:?}");
+    assert!(
+        eth.counters.tx_frames > 10 && eth.counters.rx_frames > 5,
+        "{eth:?}"
+    );
 }

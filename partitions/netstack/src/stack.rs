@@ -255,8 +255,23 @@ impl Stack {
         self.eth_set.iter().count() + self.lo_set.iter().count()
     }
 
-    fn room(&self, more: usize) -> Result<(), Error> {
-        if self.in_use() + more > self.config.limits.sockets {
+    /// Whether `more` sockets fit; closed connections waiting in TIME-WAIT give their
+    /// places first, oldest first (as Linux recycles them beyond `tcp_max_tw_buckets`):
+    /// a server closing many short connections must not run out of sockets for the
+    /// TIME-WAIT's 10 s.
+    fn room(&mut self, more: usize) -> Result<(), Error> {
+        let limit = self.config.limits.sockets;
+        let mut i = 0;
+        while self.in_use() + more > limit && i < self.lingering.len() {
+            let (side, handle) = self.lingering[i];
+            if self.tcp(side, handle).state() == tcp::State::TimeWait {
+                self.lingering.remove(i);
+                self.set(side).remove(handle);
+            } else {
+                i += 1;
+            }
+        }
+        if self.in_use() + more > limit {
             return Err(Error::NoBuffers);
         }
         Ok(())
