@@ -83,6 +83,7 @@
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
 //! guest.console = "com2"                           # optional: a terminal on COM2
 //! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
+//! guest.net = { mac = "52:54:00:12:34:56", address = "10.0.2.15/24", gateway = "10.0.2.2", rx = "eth0-rx", tx = "eth0-tx" }  # optional: eth0
 //! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx" }  # NIC partitions only: see "NIC"
 //!
 //! [[channels]]
@@ -238,7 +239,14 @@
 //! `io_ports = ["0x2f8-0x2ff"]`, `irqs = [3]`, the ability `irq` and one more kernel
 //! thread (the console's reader); `cargo xtask run` connects COM2 to the terminal and
 //! scenarios feed it from `console_input`. Without it, the processes' output lines go to
-//! the log and reading the console gives end of file.
+//! the log and reading the console gives end of file. A guest always has the loopback
+//! `lo` (127.0.0.1/8); `guest.net` gives it `eth0` too: `mac` (unicast, six hex octets),
+//! `address` (IPv4 with a prefix length of 1 to 30), `gateway` (optional: the default
+//! route, an address of that subnet other than the guest's), and two of the partition's
+//! queuing ports of at least 1514 bytes, `rx` (`in`: the frames it receives) and `tx`
+//! (`out`: the frames it sends), one Ethernet frame (destination MAC first, no FCS) a
+//! message; `[[channels]]` join them to the NIC partition's ports for this tenant
+//! (`/etc/guest/net` in the initramfs; the stack is `partitions/guest/src/net.rs`).
 //!
 //! **PCI devices.** `devices` names the PCI functions a partition owns by bus address
 //! (`BB:DD.F` in hex, as `lspci` prints it; an optional `0000:` in front), at most 8 a

@@ -127,6 +127,18 @@ pub struct Guest {
     pub console: Option<Spanned<String>>,
     #[serde(default)]
     pub programs: Vec<Spanned<String>>,
+    pub net: Option<Spanned<GuestNet>>,
+}
+
+/// `guest.net`: the guest's `eth0`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GuestNet {
+    pub mac: Spanned<String>,
+    pub address: Spanned<String>,
+    pub gateway: Option<Spanned<String>>,
+    pub rx: Spanned<String>,
+    pub tx: Spanned<String>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -5,6 +5,7 @@
 use crate::binary::SystemView;
 use crate::model::*;
 use abi::syscall::Abilities;
+use std::format;
 use std::string::{String, ToString};
 use std::vec::Vec;
 
@@ -121,6 +122,42 @@ pub struct Guest {
     /// Linux programs `cargo xtask` builds (one of [`GUEST_PROGRAMS`]) and adds as
     /// `/bin/<name>`, in the order given.
     pub programs: Vec<String>,
+    /// `eth0` (`guest.net`); without it the guest has only the loopback.
+    pub net: Option<GuestNet>,
+}
+
+/// A guest's `eth0`: its MAC and IPv4 address, the default route, and the queuing ports
+/// its Ethernet frames go through (one frame a message, to and from the NIC partition).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GuestNet {
+    pub mac: [u8; 6],
+    pub address: [u8; 4],
+    pub prefix: u8,
+    pub gateway: Option<[u8; 4]>,
+    /// The guest's queuing input port of received frames, and output port of frames to send.
+    pub rx: String,
+    pub tx: String,
+}
+
+/// The largest Ethernet frame without its FCS: the size `guest.net`'s ports need.
+pub const ETHERNET_FRAME_MAX: u32 = 1514;
+
+impl GuestNet {
+    /// The file the guest reads it from (`/etc/guest/net`, `guest::net::NET_PATH`):
+    /// `key=value` lines.
+    pub fn file(&self) -> String {
+        let m = self.mac;
+        let a = self.address;
+        let mut text = format!(
+            "mac={:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}\naddress={}.{}.{}.{}/{}\n",
+            m[0], m[1], m[2], m[3], m[4], m[5], a[0], a[1], a[2], a[3], self.prefix
+        );
+        if let Some(g) = self.gateway {
+            text += &format!("gateway={}.{}.{}.{}\n", g[0], g[1], g[2], g[3]);
+        }
+        text += &format!("rx={}\ntx={}\n", self.rx, self.tx);
+        text
+    }
 }
 
 /// COM2's ports and interrupt line, which `guest.console = "com2"` needs.
@@ -158,6 +195,7 @@ pub const GUEST_RESERVED_PATHS: &[&str] = &[
     "/etc/guest/init",
     "/etc/guest/env",
     "/etc/guest/console",
+    "/etc/guest/net",
     "/init",
 ];
 

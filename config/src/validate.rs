@@ -446,6 +446,12 @@ impl Validator<'_, '_> {
                 let stack = (stack, &path.key("stack"));
                 let device = (io_ports.as_slice(), irqs);
                 self.guest(raw, guest, &path.key("guest"), abilities, stack, device)
+                    .map(|g| Guest {
+                        net: guest.get_ref().net.as_ref().and_then(|net| {
+                            self.guest_net(net, &path.key("guest").key("net"), &own_ports)
+                        }),
+                        ..g
+                    })
             });
             if raw.guest.is_some() {
                 for (port_key, port) in in_source_order(&raw.ports) {
@@ -692,12 +698,118 @@ impl Validator<'_, '_> {
         (self.r.diagnostics.len() == before).then(|| Guest {
             console_com2,
             programs,
+            net: None,
             files,
             init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
             env: match &g.env {
                 Some(env) => env.iter().map(|s| s.get_ref().clone()).collect(),
                 None => GUEST_DEFAULT_ENV.iter().map(|s| s.to_string()).collect(),
             },
+        })
+    }
+
+    /// `guest.net`: a unicast MAC, an address with its prefix, a gateway inside that
+    /// subnet, and two queuing ports of the partition (a frame a message: 1514 bytes).
+    fn guest_net(
+        &mut self,
+        net: &Spanned<schema::GuestNet>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> Option<GuestNet> {
+        let before = self.r.diagnostics.len();
+        let n = net.get_ref();
+        let mac = parse_mac(n.mac.get_ref()).filter(|m| m[0] & 1 == 0);
+        if mac.is_none() {
+            self.error(
+                start(&n.mac),
+                &path.key("mac"),
+                format!(
+                    "`{}` is no unicast MAC address (six hex octets, e.g. \"52:54:00:12:34:56\", the first even)",
+                    n.mac.get_ref()
+                ),
+            );
+        }
+        let address = n
+            .address
+            .get_ref()
+            .split_once('/')
+            .and_then(|(ip, prefix)| {
+                Some((
+                    parse_ipv4(ip)?,
+                    prefix.parse::<u8>().ok().filter(|p| (1..=30).contains(p))?,
+                ))
+            });
+        if address.is_none() {
+            self.error(
+                start(&n.address),
+                &path.key("address"),
+                format!(
+                    "`{}` is no IPv4 address with a prefix length of 1 to 30 (e.g. \"10.0.2.15/24\")",
+                    n.address.get_ref()
+                ),
+            );
+        }
+        let gateway = n.gateway.as_ref().and_then(|g| {
+            let ip = parse_ipv4(g.get_ref());
+            let inside = match (ip, address) {
+                (Some(ip), Some((own, prefix))) => {
+                    let mask = u32::MAX << (32 - u32::from(prefix));
+                    u32::from_be_bytes(ip) & mask == u32::from_be_bytes(own) & mask
+                        && ip != own
+                }
+                _ => false,
+            };
+            if !inside {
+                self.error(
+                    start(g),
+                    &path.key("gateway"),
+                    format!(
+                        "`{}` is no IPv4 address of the guest's subnet other than its own (`address`)",
+                        g.get_ref()
+                    ),
+                );
+            }
+            ip
+        });
+        for (key, name, direction) in [("rx", &n.rx, Direction::In), ("tx", &n.tx, Direction::Out)]
+        {
+            let port = ports.iter().find(|p| p.name == *name.get_ref());
+            let fits = port.is_some_and(|p| {
+                p.kind == PortKind::Queuing
+                    && p.direction == direction
+                    && p.size >= ETHERNET_FRAME_MAX
+            });
+            if !fits {
+                let way = if direction == Direction::In {
+                    "in"
+                } else {
+                    "out"
+                };
+                self.error(
+                    start(name),
+                    &path.key(key),
+                    format!(
+                        "`{}` is no queuing `{way}` port of this partition with `size` of at least {ETHERNET_FRAME_MAX} (one Ethernet frame a message)",
+                        name.get_ref()
+                    ),
+                );
+            }
+        }
+        if n.rx.get_ref() == n.tx.get_ref() {
+            self.error(
+                start(&n.tx),
+                &path.key("tx"),
+                "`rx` and `tx` must be two ports",
+            );
+        }
+        let (address, prefix) = address?;
+        (self.r.diagnostics.len() == before).then(|| GuestNet {
+            mac: mac.unwrap_or_default(),
+            address,
+            prefix,
+            gateway,
+            rx: n.rx.get_ref().clone(),
+            tx: n.tx.get_ref().clone(),
         })
     }
 
@@ -2855,4 +2967,32 @@ fn partition_key_at(doc: &schema::Document, name: &str) -> usize {
         .keys()
         .find(|k| k.get_ref() == name)
         .map_or(0, |k| k.span().start)
+}
+
+/// `a.b.c.d`.
+fn parse_ipv4(text: &str) -> Option<[u8; 4]> {
+    let mut octets = [0u8; 4];
+    let mut parts = text.split('.');
+    for o in &mut octets {
+        let part = parts.next()?;
+        if part.is_empty() || part.len() > 3 || !part.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        *o = part.parse().ok()?;
+    }
+    parts.next().is_none().then_some(octets)
+}
+
+/// `52:54:00:12:34:56`.
+fn parse_mac(text: &str) -> Option<[u8; 6]> {
+    let mut mac = [0u8; 6];
+    let mut parts = text.split(':');
+    for b in &mut mac {
+        let part = parts.next()?;
+        if part.len() != 2 {
+            return None;
+        }
+        *b = u8::from_str_radix(part, 16).ok()?;
+    }
+    parts.next().is_none().then_some(mac)
 }

@@ -277,3 +277,87 @@ fn programs_are_known_once_and_not_also_files() {
         "{errors:?}"
     );
 }
+
+/// A guest with `eth0` through ports `rx`/`tx` (queuing, 1514 bytes) and `net` as given.
+fn with_net(net: &str, rx_size: u32) -> String {
+    guest(&format!(
+        "guest.init = [\"/bin/sh\"]\nports.rx = {{ kind = \"queuing\", direction = \"in\", size = {rx_size}, depth = 8 }}\nports.tx = {{ kind = \"queuing\", direction = \"out\", size = 1514, depth = 8 }}\nguest.net = {net}"
+    )) + "\n[[channels]]\nkind = \"queuing\"\nfrom = \"b.tx\"\nto = \"b.rx\"\n"
+}
+
+#[test]
+fn a_guest_network_interface() {
+    let system = load_ok(&with_net(
+        "{ mac = \"52:54:00:12:34:56\", address = \"10.0.2.15/24\", gateway = \"10.0.2.2\", rx = \"rx\", tx = \"tx\" }",
+        1514,
+    ));
+    let net = system.partitions[1]
+        .guest
+        .as_ref()
+        .unwrap()
+        .net
+        .clone()
+        .unwrap();
+    assert_eq!(net.mac, [0x52, 0x54, 0, 0x12, 0x34, 0x56]);
+    assert_eq!((net.address, net.prefix), ([10, 0, 2, 15], 24));
+    assert_eq!(net.gateway, Some([10, 0, 2, 2]));
+    assert_eq!(
+        net.file(),
+        "mac=52:54:00:12:34:56\naddress=10.0.2.15/24\ngateway=10.0.2.2\nrx=rx\ntx=tx\n"
+    );
+    let system = load_ok(&guest("guest.init = [\"/bin/sh\"]"));
+    assert!(
+        system.partitions[1].guest.as_ref().unwrap().net.is_none(),
+        "lo alone"
+    );
+}
+
+#[test]
+fn a_guest_network_interface_is_checked() {
+    let good = "{ mac = \"52:54:00:12:34:56\", address = \"10.0.2.15/24\", gateway = \"10.0.2.2\", rx = \"rx\", tx = \"tx\" }";
+    expect_some(
+        &with_net(
+            &good.replace("52:54:00:12:34:56", "01:00:5e:00:00:01"),
+            1514,
+        ),
+        "\"01:00:5e:00:00:01\"",
+        0,
+        "partitions.b.guest.net.mac",
+        "no unicast MAC address",
+    );
+    expect_some(
+        &with_net(&good.replace("10.0.2.15/24", "10.0.2.15"), 1514),
+        "\"10.0.2.15\"",
+        0,
+        "partitions.b.guest.net.address",
+        "prefix length of 1 to 30",
+    );
+    expect_some(
+        &with_net(&good.replace("10.0.2.2\"", "192.168.1.1\""), 1514),
+        "\"192.168.1.1\"",
+        0,
+        "partitions.b.guest.net.gateway",
+        "of the guest's subnet",
+    );
+    expect_some(
+        &with_net(good, 1500),
+        "\"rx\"",
+        0,
+        "partitions.b.guest.net.rx",
+        "size` of at least 1514",
+    );
+    expect_some(
+        &with_net(&good.replace("tx = \"tx\"", "tx = \"rx\""), 1514),
+        "\"rx\"",
+        1,
+        "partitions.b.guest.net.tx",
+        "no queuing `out` port",
+    );
+    expect_some(
+        &with_net(&good.replace("rx = \"rx\"", "rx = \"nowhere\""), 1514),
+        "\"nowhere\"",
+        0,
+        "partitions.b.guest.net.rx",
+        "no queuing `in` port",
+    );
+}

@@ -20,6 +20,10 @@
  *                     program drains when there is no /dev/null; a `note` line says so)
  *   gzip_4mib         (per run) `busybox gzip -c` of 4 MiB of text fed through a pipe, its
  *                     output drained through another
+ *   tcp_roundtrip     one byte to a child process and back over a TCP connection on the
+ *                     loopback (127.0.0.1)
+ *   tcp_4mib          (per run) 4 MiB from a child process over a loopback TCP
+ *                     connection, in 64 KiB writes
  *
  *     linux-bench [--loops N] [--fork-loops N] [--rounds N] [--prefix P] [METRIC...]
  *
@@ -32,6 +36,10 @@
 #include <stdio.h>
 #include <stdlib.h>
 #include <string.h>
+#include <arpa/inet.h>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
 #include <unistd.h>
@@ -309,6 +317,100 @@ static int gzip_round(long n)
 	return compressed < 0 ? -1 : 0;
 }
 
+/* A loopback TCP connection to a child: this process's end, the child's pid in *child,
+ * which runs `serve` on its end and exits. -1 on failure. */
+static int tcp_child(int *child, void (*serve)(int fd))
+{
+	struct sockaddr_in a = { .sin_family = AF_INET, .sin_addr.s_addr = htonl(INADDR_LOOPBACK) };
+	socklen_t len = sizeof a;
+	int one = 1;
+	int l = socket(AF_INET, SOCK_STREAM, 0);
+	if (l < 0 || bind(l, (struct sockaddr *)&a, sizeof a) || listen(l, 1) ||
+	    getsockname(l, (struct sockaddr *)&a, &len)) {
+		fail("listen on 127.0.0.1");
+		return -1;
+	}
+	*child = fork();
+	if (*child == 0) {
+		int fd = socket(AF_INET, SOCK_STREAM, 0);
+		if (fd < 0 || connect(fd, (struct sockaddr *)&a, sizeof a))
+			_exit(1);
+		setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+		serve(fd);
+		_exit(0);
+	}
+	int fd = accept(l, NULL, NULL);
+	close(l);
+	if (fd < 0) {
+		fail("accept");
+		return -1;
+	}
+	setsockopt(fd, IPPROTO_TCP, TCP_NODELAY, &one, sizeof one);
+	return fd;
+}
+
+static void tcp_echo(int fd)
+{
+	char c;
+	while (read(fd, &c, 1) == 1)
+		if (write(fd, &c, 1) != 1)
+			_exit(1);
+}
+
+static int tcp_fd = -1, tcp_pid;
+
+static int tcp_roundtrip_round(long n)
+{
+	if (tcp_fd < 0 && (tcp_fd = tcp_child(&tcp_pid, tcp_echo)) < 0)
+		return -1;
+	char c = 'x';
+	for (long i = 0; i < n; i++)
+		if (write(tcp_fd, &c, 1) != 1 || read(tcp_fd, &c, 1) != 1) {
+			fail("TCP round trip");
+			return -1;
+		}
+	return 0;
+}
+
+static void end_tcp_child(void)
+{
+	if (tcp_fd >= 0) {
+		close(tcp_fd);
+		wait_child(tcp_pid);
+		tcp_fd = -1;
+	}
+}
+
+#define TCP_BYTES (4L << 20)
+
+static void tcp_send_4mib(int fd)
+{
+	static char buf[65536];
+	memset(buf, 'z', sizeof buf);
+	for (long sent = 0; sent < TCP_BYTES; sent += sizeof buf)
+		write_all(fd, buf, sizeof buf);
+}
+
+static int tcp_4mib_round(long n)
+{
+	(void)n;
+	int pid;
+	int fd = tcp_child(&pid, tcp_send_4mib);
+	if (fd < 0)
+		return -1;
+	static char buf[65536];
+	long got = 0, r;
+	while ((r = read(fd, buf, sizeof buf)) > 0)
+		got += r;
+	close(fd);
+	if (wait_child(pid) != 0 || got != TCP_BYTES) {
+		printf("bench-error tcp_4mib received %ld bytes\n", got);
+		broken = 1;
+		return -1;
+	}
+	return 0;
+}
+
 static const struct {
 	const char *name;
 	int (*round)(long n);
@@ -323,6 +425,8 @@ static const struct {
 	{ "pipe_roundtrip", pipe_roundtrip_round, 0, 0 },
 	{ "shell_echo_cat", shell_round, 0, 1 },
 	{ "gzip_4mib", gzip_round, 0, 1 },
+	{ "tcp_roundtrip", tcp_roundtrip_round, 0, 0 },
+	{ "tcp_4mib", tcp_4mib_round, 0, 1 },
 };
 #define METRICS (sizeof metrics / sizeof metrics[0])
 
@@ -345,6 +449,7 @@ static void measure(size_t m)
 		values[r] = (now() - start) / n;
 	}
 	end_echo_child();
+	end_tcp_child();
 	report(metrics[m].name, values, rounds);
 }
 

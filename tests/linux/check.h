@@ -49,6 +49,7 @@ void area_pipes(void);
 void area_signals(void);
 void area_time(void);
 void area_misc(void);
+void area_sockets(void);
 
 /* Entry points of the program when it executes itself (`linux-tests --<mode> ...`). */
 int exec_mode(int argc, char **argv);

@@ -8,6 +8,8 @@
 //! | `/bin/*`, `/sbin/*`, `/usr/bin/*`, `/usr/sbin/*` | symbolic links to `busybox`, one per applet, where Debian's `busybox --install` puts them (the list is `busybox --list-full` of the host's binary; [`APPLETS`] if it cannot run) |
 //! | `/etc/passwd`, `/etc/group` | root (0) only |
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
+//! | `/etc/guest/net` | `guest.net` as `key=value` lines (`guest::net::NET_PATH`): the guest's `eth0` and its frames' ports |
+//! | `/etc/hosts`, `/etc/resolv.conf`, `/etc/nsswitch.conf` | `localhost` (and with `guest.net` the guest as `guest`, its gateway as `gateway`), QEMU's name server 10.0.2.3 with `guest.net`, `hosts: files dns`; a `guest.files` path replaces them |
 //! | `/etc/guest/console` | `com2` with `guest.console = "com2"` (`guest::CONSOLE_PATH`): the console is a terminal on COM2 |
 //! | `/etc/guest/ports` | the partition's `ports.*`, one a line: `<name> <sampling\|queuing> <in\|out> <size> <refresh ns\|depth>` (`guest::arinc::PORTS_PATH`): the guest's devices `/dev/arinc/<name>` |
 //! | `/init` | a shell script that `exec`s the same command (for a reader; the guest runs `/etc/guest/init`) |
@@ -23,6 +25,36 @@ use config::System;
 use config::system::{Guest, Port};
 use std::io::Cursor;
 use std::path::Path;
+
+/// `/etc/hosts`, `/etc/resolv.conf`, `/etc/nsswitch.conf` (where the added files may
+/// replace them): `localhost` and, with `guest.net`, the guest's own address as `guest`
+/// and the gateway as `gateway`; QEMU's DNS (10.0.2.3) for other names.
+fn name_files(guest: &Guest) -> Vec<(String, u32, Vec<u8>)> {
+    let given = |path: &str| guest.files.iter().any(|(p, _)| p == path);
+    let mut hosts = String::from("127.0.0.1\tlocalhost\n");
+    let mut resolv = String::from("# The guest has only its loopback: no name server.\n");
+    if let Some(net) = &guest.net {
+        let [a, b, c, d] = net.address;
+        hosts += &format!("{a}.{b}.{c}.{d}\tguest\n");
+        if let Some([a, b, c, d]) = net.gateway {
+            hosts += &format!("{a}.{b}.{c}.{d}\tgateway\n");
+        }
+        resolv = "nameserver 10.0.2.3\n".into();
+    }
+    let mut out = Vec::new();
+    for (path, text) in [
+        ("/etc/hosts", hosts),
+        ("/etc/resolv.conf", resolv),
+        ("/etc/nsswitch.conf", "hosts: files dns\n".into()),
+    ] {
+        if !given(path) {
+            out.push((path, text));
+        }
+    }
+    out.into_iter()
+        .map(|(path, text)| (path[1..].to_string(), S_IFREG | 0o644, text.into_bytes()))
+        .collect()
+}
 
 /// The applets linked in `/bin` when the host cannot run busybox to list them.
 pub const APPLETS: &[&str] = &["sh", "echo", "cat", "ls", "wc", "true"];
@@ -199,6 +231,10 @@ pub fn entries(
     if guest.console_com2 {
         entries.push(file("etc/guest/console", 0o644, b"com2\n".to_vec()));
     }
+    if let Some(net) = &guest.net {
+        entries.push(file("etc/guest/net", 0o644, net.file().into_bytes()));
+    }
+    entries.extend(name_files(guest));
     if !ports.is_empty() {
         entries.push(file("etc/guest/ports", 0o644, port_table(ports)));
     }
@@ -288,6 +324,7 @@ mod tests {
             files: Vec::new(),
             console_com2: false,
             programs: Vec::new(),
+            net: None,
         }
     }
 

@@ -81,6 +81,8 @@ pub fn init_script(init: &[String], env: &[String]) -> String {
 mount -t proc proc /proc
 mount -t sysfs sysfs /sys
 mount -t devtmpfs devtmpfs /dev
+# The loopback (the TCP metrics), up as in the guest.
+ifconfig lo 127.0.0.1 up
 cd /
 env -i {command}
 status=$?
@@ -308,6 +310,7 @@ mod tests {
             files: Vec::new(),
             console_com2: false,
             programs: Vec::new(),
+            net: None,
         };
         let script = init_script(&guest.init, &guest.env);
         assert!(

@@ -80,6 +80,7 @@ pub mod frames;
 pub mod info;
 pub mod linux;
 pub mod memory;
+pub mod net;
 pub mod pipe;
 pub mod poll;
 pub mod pool;

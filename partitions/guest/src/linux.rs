@@ -41,6 +41,11 @@ impl Errno {
     pub const ENOTEMPTY: Self = Self(39);
     pub const EMSGSIZE: Self = Self(90);
     pub const ETIMEDOUT: Self = Self(110);
+    pub const ENOTSOCK: Self = Self(88);
+    pub const ENOPROTOOPT: Self = Self(92);
+    pub const EOPNOTSUPP: Self = Self(95);
+    pub const EAFNOSUPPORT: Self = Self(97);
+    pub const ENOTCONN: Self = Self(107);
     pub const ELOOP: Self = Self(40);
 
     /// Its symbolic name and meaning, for messages.

@@ -204,6 +204,7 @@ fn main(start: u64, _: u64) {
             alloc::vec::Vec::new()
         }
     };
+    let net = network(&archive, &port_table);
     let ports = ports::Ports::create(ThreadId(info.server), ipc, &port_table);
     if let Err(e) = fs.set_ports(port_table) {
         println!("guest: no room for the port devices: {}", e.describe());
@@ -285,6 +286,7 @@ fn main(start: u64, _: u64) {
     }
 
     let mut system = System::new(loaded.process, hwcap());
+    system.net = net;
     let outcome = loop {
         // The scheduling policy ([`guest::sched`]) makes the decisions due, and the
         // processes' threads get the priorities of their levels.
@@ -350,6 +352,40 @@ fn main(start: u64, _: u64) {
     println!("guest: init ended with {left} other processes left");
     system.release_all(&mut fs, &mut host);
     report(ipc, outcome);
+}
+
+/// The guest's network: `lo`, and `eth0` when the initramfs has its configuration
+/// ([`guest::net::NET_PATH`], from `guest.net`) with ports of the port table.
+fn network(archive: &Archive, ports: &[guest::arinc::Port]) -> guest::net::Net {
+    use guest::net::{NET_PATH, Net, parse_net_file};
+    let Some(entry) = archive.get(NET_PATH) else {
+        return Net::new(None);
+    };
+    let text = core::str::from_utf8(entry.data).unwrap_or("");
+    let file = match parse_net_file(text) {
+        Ok(file) => file,
+        Err((line, why)) => {
+            println!("guest: {NET_PATH} line {line}: {why}; no eth0");
+            return Net::new(None);
+        }
+    };
+    let index = |name: &str| ports.iter().position(|p| p.name == name);
+    let (Some(rx), Some(tx)) = (index(file.rx), index(file.tx)) else {
+        println!(
+            "guest: {NET_PATH}: no port {} or {}; no eth0",
+            file.rx, file.tx
+        );
+        return Net::new(None);
+    };
+    let c = file.config;
+    let (m, a) = (c.mac, c.address.octets());
+    println!(
+        "guest: eth0 {:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x} {}.{}.{}.{}/{} through ports {} and {}",
+        m[0], m[1], m[2], m[3], m[4], m[5], a[0], a[1], a[2], a[3], c.prefix, file.rx, file.tx
+    );
+    let mut net = Net::new(Some(c));
+    net.link(rx, tx);
+    net
 }
 
 /// Input from the console: through the line discipline (echo to COM2, signals of the

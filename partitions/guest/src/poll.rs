@@ -24,10 +24,11 @@ pub const POLLWRNORM: u16 = 0x100;
 /// The events descriptor `fd` of `p` has now (`POLLNVAL` for a closed one), the console's
 /// being `console` ([`console_events`]). `POLLERR` and `POLLHUP` are reported whether
 /// asked for or not.
-pub fn events(p: &Process, f: &Files, host: &mut impl Host, console: u16, fd: u64) -> u16 {
+pub fn events(p: &Process, f: &mut Files, host: &mut impl Host, console: u16, fd: u64) -> u16 {
     let ready = match p.file(fd) {
         None => return POLLNVAL,
         Some(File::Pipe { pipe, write, .. }) => f.pipes.poll(pipe, write),
+        Some(File::Socket(id)) => crate::syscall::socket::events(f.net, host.now_ns(), id),
         Some(File::Console(_)) => console,
         Some(File::Open(_)) if let Some((index, port)) = port_at(p, f.fs, fd) => {
             arinc::events(port, index, host)

@@ -85,6 +85,9 @@ pub enum File {
         write: bool,
         nonblock: bool,
     },
+    /// A socket of the guest's stack ([`crate::net`], by its `netstack::SocketId`); its
+    /// `O_NONBLOCK` is the socket's, shared by every descriptor of it.
+    Socket(usize),
 }
 
 /// One Linux process.
@@ -135,6 +138,9 @@ pub struct Process {
     /// Bytes a blocking pipe `write` moved before it had to wait (it goes on from there
     /// when served again, and returns the whole count, as Linux's blocking writes do).
     pub pipe_written: u64,
+    /// The socket whose blocking `connect` the process waits in (served again, the call
+    /// asks how the connect went instead of starting another).
+    pub connecting: Option<usize>,
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
@@ -184,6 +190,7 @@ impl Process {
             alarm_interval: 0,
             limits: default_limits(),
             pipe_written: 0,
+            connecting: None,
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,

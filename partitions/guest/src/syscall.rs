@@ -40,12 +40,9 @@
 use crate::arinc;
 use crate::linux::{self, Errno};
 use crate::memory::{Fault, PAGE, Rights, USER_TOP, classify_fault};
-use crate::pipe::Pipes;
 use crate::process::{Process, Stream};
 use crate::signal::{self, Info};
 use crate::tty::{self, Termios, Tty, Winsize};
-use crate::vfs::Fs;
-use crate::vfs::proc::ProcessTable;
 use abi::ipc::{ExceptionMessage, VECTOR_INTERRUPT, VECTOR_SYSCALL};
 pub use file::{Files, Target, close_files, share_files};
 use table::{Args, Ctx};
@@ -53,6 +50,7 @@ use table::{Args, Ctx};
 pub mod file;
 mod handlers;
 mod memory;
+pub mod socket;
 pub mod table;
 
 /// Lowest address `mmap` places mappings at without a hint.
@@ -243,19 +241,17 @@ impl Reported {
 /// Internal results that are no error number: the call would block, or wrote to a pipe
 /// without readers.
 pub(crate) const WOULD_BLOCK: Errno = Errno(0xfff0);
-const BROKEN_PIPE: Errno = Errno(0xfff1);
+pub(crate) const BROKEN_PIPE: Errno = Errno(0xfff1);
 /// `O_CLOEXEC` (`open`, `pipe2`, `dup3`).
 pub const O_CLOEXEC: u64 = 0o2000000;
 
-/// Serves one exception message of process `p`, whose files live in `fs` and whose pipes
-/// are in `pipes`; `others` are the other processes (`/proc`). A system call goes to its
+/// Serves one exception message of process `p`, whose files (the file system, pipes,
+/// sockets, and the other processes for `/proc`) are `f`. A system call goes to its
 /// handler in [`table`]; a number without one answers `ENOSYS`, logged once per number and
 /// guest (`reported`).
 pub fn handle(
     p: &mut Process,
-    pipes: &mut Pipes,
-    fs: &mut Fs,
-    others: &dyn ProcessTable,
+    f: Files<'_, '_>,
     reported: &mut Reported,
     host: &mut impl Host,
     m: &mut ExceptionMessage,
@@ -273,7 +269,7 @@ pub fn handle(
         let e = unsupported(p, reported, host, number);
         return reply(p, m, Err(e));
     };
-    let mut ctx = Ctx::new(p, pipes, fs, others, reported, host, m);
+    let mut ctx = Ctx::new(p, f, reported, host, m);
     let result = (entry.handler)(&mut ctx, args);
     if let Some(outcome) = ctx.outcome {
         return outcome;

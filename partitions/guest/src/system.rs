@@ -29,6 +29,7 @@
 use crate::exec::{self, ARG_MAX, ExecError};
 use crate::linux::Errno;
 use crate::memory::{Areas, PAGE};
+use crate::net::Net;
 use crate::pipe::Pipes;
 use crate::process::Process;
 use crate::sigcalls;
@@ -211,6 +212,8 @@ pub const fn exit_status(code: u8) -> u32 {
 pub struct System {
     slots: [Option<Slot>; MAX_PROCESSES],
     pub pipes: Pipes,
+    /// The sockets and their stack.
+    pub net: Net,
     /// The unsupported calls logged so far.
     reported: syscall::Reported,
     next_pid: u32,
@@ -234,6 +237,7 @@ impl System {
         Self {
             slots,
             pipes: Pipes::new(),
+            net: Net::new(None),
             reported: syscall::Reported::default(),
             next_pid,
             ended: None,
@@ -299,8 +303,10 @@ impl System {
             .any(|s| matches!(s.state, State::Blocked(_)))
     }
 
-    /// The time the next sleeping call or alarm is due (the guest's clock), if any.
-    pub fn next_timer(&self) -> Option<u64> {
+    /// The time the next sleeping call, alarm or timer of the network stack is due (the
+    /// guest's clock), if any.
+    pub fn next_timer(&mut self) -> Option<u64> {
+        let net = self.net.poll_at_ns();
         self.slots
             .iter()
             .flatten()
@@ -310,6 +316,7 @@ impl System {
                 [sleeping.flatten(), s.process.alarm_at]
             })
             .flatten()
+            .chain(net)
             .min()
     }
 
@@ -335,6 +342,8 @@ impl System {
     /// process with a signal to act on is interrupted instead.
     fn wake(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         loop {
+            // Frames and timers first: what the calls just sent reaches its sockets.
+            self.net.run(k);
             let mut progress = false;
             for i in 0..MAX_PROCESSES {
                 let Some(Slot {
@@ -756,15 +765,13 @@ impl System {
         let pid = slot.process.pid;
         k.select(pid);
         let kept = m;
-        match syscall::handle(
-            &mut slot.process,
-            &mut self.pipes,
+        let files = syscall::Files {
+            pipes: &mut self.pipes,
+            net: &mut self.net,
             fs,
-            &others,
-            &mut self.reported,
-            k,
-            &mut m,
-        ) {
+            others: &others,
+        };
+        match syscall::handle(&mut slot.process, files, &mut self.reported, k, &mut m) {
             Outcome::Resume => self.resume(i, fs, k, m, None),
             Outcome::Block => {
                 slot.state = State::Blocked(kept);
@@ -965,7 +972,7 @@ impl System {
             k.fork(pid, &parent.areas)?
         };
         let took = k.now_ns().saturating_sub(started);
-        share_files(&child, &mut self.pipes, fs);
+        share_files(&child, &mut self.pipes, &mut self.net, fs);
         k.log(format_args!(
             "guest: process {pid} ({}) forked from {}: {pages} pages shared in {} us",
             child.name(),
@@ -1165,7 +1172,7 @@ impl System {
                 k.unmap(area.start, (area.end - area.start) / PAGE);
             }
         }
-        close_files(old, &mut self.pipes, fs, true);
+        close_files(old, &mut self.pipes, &mut self.net, fs, true);
         let ids = (old.pid, old.ppid);
         match exec::load_file(fs, k, ids, cwd, file, argv, env, self.hwcap) {
             Ok(loaded) => {
@@ -1221,7 +1228,7 @@ impl System {
             return Some(ended);
         }
         let slot = self.slots[i].as_mut()?;
-        close_files(&mut slot.process, &mut self.pipes, fs, false);
+        close_files(&mut slot.process, &mut self.pipes, &mut self.net, fs, false);
         k.release(pid);
         let slot = self.slots[i].as_mut()?;
         slot.state = State::Zombie(word);
@@ -1268,7 +1275,7 @@ impl System {
                 && !matches!(s.state, State::Zombie(_))
             {
                 let mut process = s.process;
-                close_files(&mut process, &mut self.pipes, fs, false);
+                close_files(&mut process, &mut self.pipes, &mut self.net, fs, false);
                 k.release(process.pid);
             }
         }

@@ -262,6 +262,7 @@ struct World<'a> {
     fs: Fs<'a>,
     p: Process,
     pipes: crate::pipe::Pipes,
+    net: crate::net::Net,
     reported: crate::syscall::Reported,
     host: Model,
     fs_base: u64,
@@ -287,6 +288,7 @@ impl<'a> World<'a> {
             fs,
             p: loaded.process,
             pipes: crate::pipe::Pipes::new(),
+            net: crate::net::Net::default(),
             reported: Default::default(),
             host,
             fs_base: 0,
@@ -311,15 +313,13 @@ impl<'a> World<'a> {
 
     /// Serves message `m` of the process.
     fn handle(&mut self, m: &mut ExceptionMessage) -> Outcome {
-        handle(
-            &mut self.p,
-            &mut self.pipes,
-            &mut self.fs,
-            &(),
-            &mut self.reported,
-            &mut self.host,
-            m,
-        )
+        let files = crate::syscall::Files {
+            pipes: &mut self.pipes,
+            net: &mut self.net,
+            fs: &mut self.fs,
+            others: &(),
+        };
+        handle(&mut self.p, files, &mut self.reported, &mut self.host, m)
     }
 
     /// A page fault of the process at `address` with `error` (the CPU's error code).
@@ -1348,18 +1348,18 @@ fn dispatch_table() {
 fn unsupported_calls_logged_once_per_guest() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::socket, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::mount, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
     for pid in 2..50 {
         let mut next = crate::process::Process::new(pid, 1, w.p.exe);
         next.areas = w.p.areas.clone();
         w.p = next;
-        assert_eq!(w.call(nr::socket, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+        assert_eq!(w.call(nr::mount, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
         assert_eq!(w.call(nr::io_uring_setup, [0; 6]), err(Errno::ENOSYS));
     }
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 41 (socket), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 165 (mount), returning ENOSYS",
             "guest: process 2 (busybox): unsupported system call 425 (io_uring_setup), returning ENOSYS",
         ]
     );
@@ -1407,9 +1407,12 @@ fn unsupported_calls_and_faults() {
     assert_eq!(
         handle(
             &mut w.p,
-            &mut w.pipes,
-            &mut w.fs,
-            &(),
+            crate::syscall::Files {
+                pipes: &mut w.pipes,
+                net: &mut w.net,
+                fs: &mut w.fs,
+                others: &(),
+            },
             &mut w.reported,
             &mut w.host,
             &mut m,
@@ -2784,6 +2787,14 @@ fn directories_names_and_the_working_directory() {
         (S_IFDIR | 0o755).to_le_bytes(),
         "umask 022"
     );
+    // `mkdir -p` asks for each existing parent with its slash.
+    let slashed = g.text(1, SCRATCH + 0x800, "/tmp/");
+    assert_eq!(
+        call(&mut g, nr::mkdir, [slashed, 0o777, 0, 0, 0, 0]),
+        err(Errno::EEXIST)
+    );
+    assert_eq!(call(&mut g, nr::stat, [slashed, buf, 0, 0, 0, 0]), 0);
+    let d = g.text(1, SCRATCH + 0x800, "/tmp/d");
     assert_eq!(call(&mut g, nr::chdir, [d, 0, 0, 0, 0, 0]), 0);
     assert_eq!(call(&mut g, nr::getcwd, [buf, 100, 0, 0, 0, 0]), 7);
     assert_eq!(g.get(1, buf, 7), b"/tmp/d\0");
@@ -2895,6 +2906,7 @@ fn proc_files_of_the_processes() {
             "meminfo",
             "uptime",
             "mounts",
+            "net",
             "1",
             child_name.as_str()
         ]
@@ -3161,4 +3173,140 @@ fn the_arinc_port_table_is_read_line_by_line_and_bad_lines_are_named() {
     ] {
         assert_eq!(parse(text).unwrap_err().line, line, "{text:?}");
     }
+}
+
+/// Sockets through the system calls, on the loopback: a listener on 127.0.0.1, a
+/// non-blocking connect to it (EINPROGRESS), `accept4` with the peer's address, bytes
+/// across, EAGAIN and a blocking read that waits, and the errors of another family and of
+/// a file that is no socket; closing every descriptor closes the sockets.
+#[test]
+fn sockets_on_the_loopback_through_the_calls() {
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let (addr, len, data) = (SCRATCH + 0x100, SCRATCH + 0x200, SCRATCH + 0x300);
+    let l = w.call(nr::socket, [2, 1, 0, 0, 0, 0]);
+    w.put(
+        addr,
+        &[2, 0, 0x1f, 0x90, 127, 0, 0, 1, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert_eq!(w.call(nr::bind, [l, addr, 16, 0, 0, 0]), 0);
+    assert_eq!(w.call(nr::listen, [l, 2, 0, 0, 0, 0]), 0);
+    let c = w.call(nr::socket, [2, 1 | 0o4000, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::connect, [c, addr, 16, 0, 0, 0]), err(Errno(115)));
+    let now = w.host.now_ns();
+    w.net.poll(now);
+    w.put(len, &16u32.to_le_bytes());
+    let s = w.call(nr::accept4, [l, addr, len, 0o4000, 0, 0]);
+    assert!(s < 1024, "accept4: {s:#x}");
+    assert_eq!(&w.get(addr, 8)[4..8], &[127, 0, 0, 1], "the peer's address");
+    w.put(data, b"hello");
+    assert_eq!(w.call(nr::write, [c, data, 5, 0, 0, 0]), 5);
+    let now = w.host.now_ns();
+    w.net.poll(now);
+    assert_eq!(w.call(nr::read, [s, data + 64, 64, 0, 0, 0]), 5);
+    assert_eq!(w.get(data + 64, 5), b"hello");
+    assert_eq!(w.call(nr::read, [s, data, 64, 0, 0, 0]), err(Errno::EAGAIN));
+    assert_eq!(
+        w.call(nr::fcntl, [s, 4, 0, 0, 0, 0]),
+        0,
+        "F_SETFL: blocking"
+    );
+    assert_eq!(w.run(nr::read, [s, data, 64, 0, 0, 0]).0, Outcome::Block);
+    assert_eq!(
+        w.call(nr::socket, [10, 1, 0, 0, 0, 0]),
+        err(Errno::EAFNOSUPPORT)
+    );
+    assert_eq!(
+        w.call(nr::socket, [1, 1, 0, 0, 0, 0]),
+        err(Errno::EAFNOSUPPORT)
+    );
+    assert_eq!(
+        w.call(nr::bind, [0, addr, 16, 0, 0, 0]),
+        err(Errno::ENOTSOCK)
+    );
+    assert_eq!(
+        w.call(nr::bind, [l, addr, 200, 0, 0, 0]),
+        err(Errno::EINVAL)
+    );
+    for fd in [s, c, l] {
+        assert_eq!(w.call(nr::close, [fd, 0, 0, 0, 0, 0]), 0);
+    }
+    assert_eq!(w.net.open_count(), 0);
+}
+
+/// Two guests' `eth0` joined through their frame ports, as two tenants of the NIC
+/// partition's switch would be: each guest's stack sends and receives frames only through
+/// the port calls (a port holds 2 frames: what does not fit is lost and sent again);
+/// ARP, a TCP connection from one to the other, bytes both ways.
+#[test]
+fn two_guests_talk_through_their_frame_ports() {
+    use crate::net::{Net, NetConfig};
+    use netstack::{Error, Ipv4Address, SocketAddr};
+    let config = |mac: u8, ip: u8| NetConfig {
+        mac: [2, 0, 0, 0, 0, mac],
+        address: Ipv4Address::new(10, 0, 2, ip),
+        prefix: 24,
+        gateway: None,
+    };
+    let (rx, tx) = (0, 1);
+    let mut a = (Net::new(Some(config(1, 15))), Model::new(0));
+    let mut b = (Net::new(Some(config(2, 16))), Model::new(0));
+    a.0.link(rx, tx);
+    b.0.link(rx, tx);
+    // Both run, then the wire carries what each sent to the other's rx port.
+    let carry = |from: &mut Model, to: &mut Model| {
+        for frame in from.port_sent.remove(&tx).unwrap_or_default() {
+            let queue = to.port_messages.entry(rx).or_default();
+            queue.push_back((frame, true));
+        }
+    };
+    let step = |a: &mut (Net, Model), b: &mut (Net, Model)| {
+        a.0.run(&mut a.1);
+        b.0.run(&mut b.1);
+        carry(&mut a.1, &mut b.1);
+        carry(&mut b.1, &mut a.1);
+    };
+    let l = b.0.stack(0).socket(2, 1, 0).unwrap();
+    let any = SocketAddr::new(Ipv4Address::UNSPECIFIED, 80);
+    b.0.stack(0).bind(l, any).unwrap();
+    b.0.stack(0).listen(l, 1).unwrap();
+    let c = a.0.stack(0).socket(2, 1, 0).unwrap();
+    let server = SocketAddr::new(Ipv4Address::new(10, 0, 2, 16), 80);
+    assert_eq!(a.0.stack(0).connect(c, server), Err(Error::WouldBlock));
+    for _ in 0..20 {
+        step(&mut a, &mut b);
+    }
+    assert_eq!(a.0.stack(0).connect_result(c), Ok(()), "connected");
+    let (s, peer) = b.0.stack(0).accept(l).unwrap();
+    assert_eq!(peer.ip, Ipv4Address::new(10, 0, 2, 15));
+    let data: Vec<u8> = (0..20_000u32).map(|i| (i * 7) as u8).collect();
+    let (mut sent, mut got) = (0, Vec::new());
+    for _ in 0..400 {
+        if sent < data.len() {
+            sent += a.0.stack(0).send(c, &data[sent..], None).unwrap_or(0);
+        }
+        step(&mut a, &mut b);
+        let mut buf = [0u8; 4096];
+        while let Ok((n, _)) = b.0.stack(0).recv(s, &mut buf) {
+            if n == 0 {
+                break;
+            }
+            got.extend_from_slice(&buf[..n]);
+        }
+        if got.len() == data.len() {
+            break;
+        }
+    }
+    assert_eq!(got, data, "20,000 bytes across, in order");
+    assert_eq!(b.0.stack(0).send(s, b"thanks", None), Ok(6));
+    for _ in 0..5 {
+        step(&mut a, &mut b);
+    }
+    let mut buf = [0u8; 16];
+    assert_eq!(a.0.stack(0).recv(c, &mut buf).map(|r| r.0), Ok(6));
+    let eth = a.0.interfaces()[1];
+    assert!(
+        eth.counters.tx_frames > 10 && eth.counters.rx_frames > 5,
+        "{eth:?}"
+    );
 }

@@ -23,7 +23,8 @@
 //!   [`Stack::connect_result`] (SO_ERROR).
 //! - `close` of a connected TCP socket sends FIN and lets the connection finish in the
 //!   background (bounded: at most [`Limits::sockets`] sockets in all, lingering ones
-//!   included); closing a listener resets the connections nobody accepted.
+//!   included; when none is left, connections waiting in TIME-WAIT give their places,
+//!   oldest first); closing a listener resets the connections nobody accepted.
 //! - Not there: IPv6 (`socket(AF_INET6)` is EAFNOSUPPORT, so programs fall back to IPv4),
 //!   raw sockets, urgent data, `SO_LINGER` with a timeout (accepted, not honoured).
 
@@ -36,9 +37,9 @@ mod queues;
 mod stack;
 
 pub use error::Error;
-pub use queues::Queues;
+pub use queues::{Counters, MTU, Queues};
 pub use smoltcp::wire::Ipv4Address;
-pub use stack::{Config, Limits, Readiness, SocketId, SocketKind, Stack};
+pub use stack::{Config, Limits, Readiness, SocketId, SocketKind, Stack, linux};
 
 /// An IPv4 socket address.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

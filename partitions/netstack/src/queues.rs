@@ -19,6 +19,17 @@ pub struct Queues {
     capacity: usize,
     /// Frames dropped: `rx` was full, or the frame was longer than [`MTU`].
     pub dropped: u64,
+    /// What went each way (`/proc/net/dev`).
+    pub counters: Counters,
+}
+
+/// Frames and bytes an interface received and sent.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Counters {
+    pub rx_frames: u64,
+    pub rx_bytes: u64,
+    pub tx_frames: u64,
+    pub tx_bytes: u64,
 }
 
 impl Queues {
@@ -36,12 +47,17 @@ impl Queues {
             self.dropped += 1;
             return;
         }
+        self.counters.rx_frames += 1;
+        self.counters.rx_bytes += frame.len() as u64;
         self.rx.push_back(frame.to_vec());
     }
 
     /// The next frame to put on the wire.
     pub fn take(&mut self) -> Option<Vec<u8>> {
-        self.tx.pop_front()
+        let frame = self.tx.pop_front()?;
+        self.counters.tx_frames += 1;
+        self.counters.tx_bytes += frame.len() as u64;
+        Some(frame)
     }
 }
 

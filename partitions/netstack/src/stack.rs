@@ -69,7 +69,8 @@ impl Default for Limits {
     }
 }
 
-/// The interface's address, from the configuration.
+/// The interface's address, from the configuration; an unspecified `address` (as
+/// [`Config::loopback_only`] makes) means the partition has no `eth0`, only `lo`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Config {
     pub mac: [u8; 6],
@@ -77,6 +78,24 @@ pub struct Config {
     pub prefix: u8,
     pub gateway: Option<Ipv4Address>,
     pub limits: Limits,
+}
+
+impl Config {
+    /// A stack with `lo` alone (a partition without a network interface).
+    pub const fn loopback_only(limits: Limits) -> Self {
+        Config {
+            mac: [0; 6],
+            address: Ipv4Address::UNSPECIFIED,
+            prefix: 0,
+            gateway: None,
+            limits,
+        }
+    }
+
+    /// Whether the partition has `eth0`.
+    pub fn has_eth(&self) -> bool {
+        !self.address.is_unspecified()
+    }
 }
 
 /// A socket of the table.
@@ -181,9 +200,11 @@ impl Stack {
             &mut device,
             now,
         );
-        eth.update_ip_addrs(|addrs| {
-            let _ = addrs.push(IpCidr::Ipv4(Ipv4Cidr::new(config.address, config.prefix)));
-        });
+        if config.has_eth() {
+            eth.update_ip_addrs(|addrs| {
+                let _ = addrs.push(IpCidr::Ipv4(Ipv4Cidr::new(config.address, config.prefix)));
+            });
+        }
         if let Some(gateway) = config.gateway {
             let _ = eth.routes_mut().add_default_ipv4_route(gateway);
         }
@@ -234,8 +255,23 @@ impl Stack {
         self.eth_set.iter().count() + self.lo_set.iter().count()
     }
 
-    fn room(&self, more: usize) -> Result<(), Error> {
-        if self.in_use() + more > self.config.limits.sockets {
+    /// Whether `more` sockets fit; closed connections waiting in TIME-WAIT give their
+    /// places first, oldest first (as Linux recycles them beyond `tcp_max_tw_buckets`):
+    /// a server closing many short connections must not run out of sockets for the
+    /// TIME-WAIT's 10 s.
+    fn room(&mut self, more: usize) -> Result<(), Error> {
+        let limit = self.config.limits.sockets;
+        let mut i = 0;
+        while self.in_use() + more > limit && i < self.lingering.len() {
+            let (side, handle) = self.lingering[i];
+            if self.tcp(side, handle).state() == tcp::State::TimeWait {
+                self.lingering.remove(i);
+                self.set(side).remove(handle);
+            } else {
+                i += 1;
+            }
+        }
+        if self.in_use() + more > limit {
             return Err(Error::NoBuffers);
         }
         Ok(())
@@ -248,6 +284,10 @@ impl Stack {
             tcp::SocketBuffer::new(vec![0; size]),
         );
         socket.set_timeout(None);
+        if side == Side::Lo {
+            // Nothing to save on the loopback: an ACK costs no wire time.
+            socket.set_ack_delay(None);
+        }
         self.set(side).add(socket)
     }
 
@@ -288,7 +328,9 @@ impl Stack {
     }
 
     fn is_local(&self, ip: Ipv4Address) -> bool {
-        ip.is_unspecified() || ip.octets()[0] == 127 || ip == self.config.address
+        ip.is_unspecified()
+            || ip.octets()[0] == 127
+            || (self.config.has_eth() && ip == self.config.address)
     }
 
     /// `socket(domain, type, protocol)`.
@@ -611,6 +653,9 @@ impl Stack {
 
     /// Whether `eth0` has a route to `ip`.
     fn reachable(&self, ip: Ipv4Address) -> bool {
+        if !self.config.has_eth() {
+            return false;
+        }
         let cidr = Ipv4Cidr::new(self.config.address, self.config.prefix);
         cidr.contains_addr(&ip) || self.config.gateway.is_some() || ip.is_broadcast()
     }
@@ -743,6 +788,9 @@ impl Stack {
             self.ensure_bound(id, to.ip)?;
             self.ensure_udp(id)?;
             let want = Self::side_of(to.ip);
+            if want == Side::Eth && !self.reachable(to.ip) {
+                return Err(Error::NetworkUnreachable);
+            }
             let Some(&(side, handle)) = self.sock(id)?.udp.iter().find(|(s, _)| *s == want) else {
                 return Err(Error::NetworkUnreachable);
             };

@@ -291,6 +291,71 @@ fn loopback_inside_one_stack() {
     assert_eq!(net.frames, 0, "nothing left the machine");
 }
 
+/// A partition without `eth0`: the loopback works, every other address is unreachable,
+/// and the stack never makes a frame.
+#[test]
+fn a_loopback_only_stack() {
+    let mut s = Stack::new(Config::loopback_only(Limits::default()), 0);
+    assert!(!s.config().has_eth());
+    let l = listener(&mut s, 7, 1);
+    let c = tcp(&mut s);
+    assert_eq!(
+        s.connect(c, SocketAddr::new(LOCAL, 7)),
+        Err(Error::WouldBlock)
+    );
+    s.poll(1_000);
+    assert_eq!(s.connect_result(c), Ok(()));
+    assert!(s.accept(l).is_ok());
+    let far = tcp(&mut s);
+    assert_eq!(
+        s.connect(far, SocketAddr::new(PEER, 80)),
+        Err(Error::NetworkUnreachable)
+    );
+    let u = s.socket(AF_INET, SOCK_DGRAM, 0).unwrap();
+    assert_eq!(
+        s.send(u, b"x", Some(SocketAddr::new(PEER, 9))),
+        Err(Error::NetworkUnreachable)
+    );
+    assert_eq!(
+        s.bind(far, SocketAddr::new(Ipv4Address::UNSPECIFIED, 0)),
+        Ok(())
+    );
+    s.poll(2_000);
+    assert!(s.device.take().is_none(), "no frame without eth0");
+}
+
+/// A server that closes first leaves its side in TIME-WAIT for 10 s; with every socket
+/// in use, those give their places to new connections instead of refusing them.
+#[test]
+fn time_wait_gives_way_to_new_connections() {
+    let limits = Limits {
+        sockets: 6,
+        backlog: 1,
+        ..Limits::default()
+    };
+    let mut s = Stack::new(Config::loopback_only(limits), 0);
+    let l = tcp(&mut s);
+    s.bind(l, SocketAddr::new(LOCAL, 80)).unwrap();
+    s.listen(l, 1).unwrap();
+    let mut now = 0;
+    for round in 0..10 {
+        let c = tcp(&mut s);
+        let to = SocketAddr::new(LOCAL, 80);
+        assert_eq!(s.connect(c, to), Err(Error::WouldBlock), "round {round}");
+        now += 1_000;
+        s.poll(now);
+        let (a, _) = s.accept(l).unwrap();
+        s.close(a).unwrap();
+        now += 1_000;
+        s.poll(now);
+        let mut buf = [0u8; 4];
+        assert_eq!(s.recv(c, &mut buf), Ok((0, None)), "round {round}");
+        s.close(c).unwrap();
+        now += 1_000;
+        s.poll(now);
+    }
+}
+
 #[test]
 fn retransmission_over_a_lossy_wire() {
     for nth in 1..=6 {

@@ -17,6 +17,7 @@ use super::{
 use crate::arinc;
 use crate::linux::{self, Errno};
 use crate::memory::Rights;
+use crate::net::Net;
 use crate::pipe::{Pipes, Transfer};
 use crate::process::{File, Process, Stream};
 use crate::signal::{self, Info};
@@ -25,10 +26,11 @@ use crate::vfs::dev::Device;
 use crate::vfs::proc::{self, ProcInfo, ProcessTable, Procs};
 use crate::vfs::{self, Fs, Ino, Node, PATH_MAX, Remove, Stat};
 
-/// What the file calls act on besides the process: the pipes, the file system and the
-/// other processes (`/proc`).
+/// What the file calls act on besides the process: the pipes, the sockets, the file
+/// system and the other processes (`/proc`).
 pub struct Files<'f, 'a> {
     pub pipes: &'f mut Pipes,
+    pub net: &'f mut Net,
     pub fs: &'f mut Fs<'a>,
     pub others: &'f dyn ProcessTable,
 }
@@ -37,6 +39,8 @@ pub struct Files<'f, 'a> {
 const CHUNK: usize = crate::pipe::PIPE_SIZE;
 /// `S_IFIFO` (a pipe's `st_mode`).
 const S_IFIFO: u32 = 0o010000;
+/// `S_IFSOCK` (a socket's).
+const S_IFSOCK: u32 = 0o140000;
 /// `struct statfs`'s `f_type` of a tmpfs.
 const TMPFS_MAGIC: u64 = 0x0102_1994;
 
@@ -48,6 +52,8 @@ fn procs<'s>(p: &'s Process, f: &'s Files) -> Procs<'s> {
         now_ns: 0,
         memory: f.fs.memory(),
         fs_used: f.fs.usage().0 as u64,
+        interfaces: f.net.interfaces(),
+        gateway: f.net.gateway(),
     }
 }
 
@@ -60,9 +66,10 @@ fn seconds(host: &mut impl Host) -> u64 {
 
 /// Closes descriptor `fd` if open (a pipe end or open file description counts one
 /// descriptor less).
-pub fn close(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, fd: usize) {
+pub fn close(p: &mut Process, pipes: &mut Pipes, net: &mut Net, fs: &mut Fs, fd: usize) {
     match p.take_fd(fd) {
         Some(File::Pipe { pipe, write, .. }) => pipes.close_end(pipe, write),
+        Some(File::Socket(id)) => net.release(id),
         Some(File::Open(id)) => fs.release(id),
         _ => {}
     }
@@ -70,10 +77,16 @@ pub fn close(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, fd: usize) {
 
 /// Closes every descriptor of `p` and lets its working directory go (it ends), or closes
 /// only the close-on-exec ones (`execve`).
-pub fn close_files(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, only_cloexec: bool) {
+pub fn close_files(
+    p: &mut Process,
+    pipes: &mut Pipes,
+    net: &mut Net,
+    fs: &mut Fs,
+    only_cloexec: bool,
+) {
     for fd in (0..p.files.len()).rev() {
         if !only_cloexec || p.is_cloexec(fd) {
-            close(p, pipes, fs, fd);
+            close(p, pipes, net, fs, fd);
         }
     }
     if !only_cloexec {
@@ -83,11 +96,12 @@ pub fn close_files(p: &mut Process, pipes: &mut Pipes, fs: &mut Fs, only_cloexec
 
 /// Another descriptor of everything `p` has open, and its working directory once more (a
 /// forked child's copies).
-pub fn share_files(p: &Process, pipes: &mut Pipes, fs: &mut Fs) {
+pub fn share_files(p: &Process, pipes: &mut Pipes, net: &mut Net, fs: &mut Fs) {
     fs.hold(p.cwd);
     for file in p.files.iter().flatten() {
         match *file {
             File::Pipe { pipe, write, .. } => pipes.add_end(pipe, write),
+            File::Socket(id) => net.share(id),
             File::Open(id) => fs.share(id),
             File::Console(_) => {}
         }
@@ -98,6 +112,7 @@ pub fn share_files(p: &Process, pipes: &mut Pipes, fs: &mut Fs) {
 fn duplicate(p: &mut Process, f: &mut Files, file: File, fd: usize, cloexec: bool) {
     match file {
         File::Pipe { pipe, write, .. } => f.pipes.add_end(pipe, write),
+        File::Socket(id) => f.net.share(id),
         File::Open(id) => f.fs.share(id),
         File::Console(_) => {}
     }
@@ -107,7 +122,7 @@ fn duplicate(p: &mut Process, f: &mut Files, file: File, fd: usize, cloexec: boo
 pub fn close_fd(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
     let (p, f, _) = c.parts();
     p.file(fd).ok_or(Errno::EBADF)?;
-    close(p, f.pipes, f.fs, fd as usize);
+    close(p, f.pipes, f.net, f.fs, fd as usize);
     Ok(0)
 }
 
@@ -136,7 +151,7 @@ pub fn close_range(
         if flags & CLOSE_RANGE_CLOEXEC != 0 {
             p.set_cloexec(fd, true);
         } else {
-            close(p, f.pipes, f.fs, fd);
+            close(p, f.pipes, f.net, f.fs, fd);
         }
     }
     Ok(0)
@@ -168,7 +183,7 @@ pub fn dup3(
         .filter(|&fd| fd < p.max_fd())
         .ok_or(Errno::EBADF)?;
     if old != new {
-        close(p, f.pipes, f.fs, fd);
+        close(p, f.pipes, f.net, f.fs, fd);
         duplicate(p, f, file, fd, bits & O_CLOEXEC != 0);
     }
     Ok(fd as u64)
@@ -244,12 +259,28 @@ pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> Sys
                         o.flags = (o.flags & !CHANGEABLE) | (arg & CHANGEABLE);
                     }
                 }
+                File::Socket(id) => {
+                    let nonblock = arg & linux::O_NONBLOCK != 0;
+                    let _ = f
+                        .net
+                        .stack(0)
+                        .set_nonblocking(netstack::SocketId(id), nonblock);
+                }
                 File::Console(_) => {}
             }
             Ok(0)
         }
         F_GETFL => Ok(match file {
             File::Console(_) => linux::O_RDWR,
+            File::Socket(id) => {
+                let nonblock = f.net.stack(0).is_nonblocking(netstack::SocketId(id));
+                linux::O_RDWR
+                    | if nonblock == Ok(true) {
+                        linux::O_NONBLOCK
+                    } else {
+                        0
+                    }
+            }
             File::Open(id) => f.fs.description(id).map_or(0, |o| o.flags),
             File::Pipe {
                 write, nonblock, ..
@@ -276,7 +307,8 @@ fn read_kernel(
 ) -> SysResult<usize> {
     match p.file(fd).ok_or(Errno::EBADF)? {
         File::Console(_) if at.is_some() => Err(Errno::ESPIPE),
-        File::Console(_) => Ok(0), // served by `console_read`
+        File::Console(_) => Ok(0),             // served by `console_read`
+        File::Socket(_) => Err(Errno::EINVAL), // `read` serves sockets itself
         File::Pipe { write: true, .. } => Err(Errno::EBADF),
         File::Pipe { .. } if at.is_some() => Err(Errno::ESPIPE),
         File::Pipe { pipe, nonblock, .. } => match f.pipes.read(pipe, buf) {
@@ -347,6 +379,21 @@ fn write_kernel(
             host.console_write(p.pid, stream, data);
             Ok(data.len())
         }
+        File::Socket(_) if at.is_some() => Err(Errno::ESPIPE),
+        // One step (`sendfile`): what the connection takes now, or the wait.
+        File::Socket(id) => {
+            let now = host.now_ns();
+            let stack = f.net.stack(now);
+            let id = netstack::SocketId(id);
+            let nonblock = stack.is_nonblocking(id).unwrap_or(false);
+            match stack.send(id, data, None) {
+                Ok(n) => Ok(n),
+                Err(netstack::Error::WouldBlock) if nonblock => Err(Errno::EAGAIN),
+                Err(netstack::Error::WouldBlock) => Err(WOULD_BLOCK),
+                Err(netstack::Error::BrokenPipe) => Err(BROKEN_PIPE),
+                Err(e) => Err(crate::net::errno(e)),
+            }
+        }
         File::Pipe { write: false, .. } => Err(Errno::EBADF),
         File::Pipe { .. } if at.is_some() => Err(Errno::ESPIPE),
         File::Pipe { pipe, nonblock, .. } => match f.pipes.write(pipe, data) {
@@ -393,7 +440,7 @@ fn write_kernel(
 /// port one message).
 fn streams(p: &Process, f: &Files, fd: u64) -> bool {
     match p.file(fd) {
-        Some(File::Pipe { .. }) => false,
+        Some(File::Pipe { .. } | File::Socket(_)) => false,
         Some(File::Open(id)) => {
             f.fs.description(id)
                 .is_none_or(|o| f.fs.port(o.node).is_none())
@@ -465,6 +512,12 @@ pub fn read(
     if at.is_none() && matches!(p.file(fd), Some(File::Console(_))) {
         return console_read(p, host, buf, count);
     }
+    if let Some(File::Socket(_)) = p.file(fd) {
+        if at.is_some() {
+            return Err(Errno::ESPIPE);
+        }
+        return super::socket::recv(c, fd, buf, count.min(MAX_TRANSFER as u64), 0);
+    }
     let total = (count as usize).min(MAX_TRANSFER);
     check_user(p, buf, total, Rights::WRITE)?;
     let mut chunk = [0u8; CHUNK];
@@ -501,6 +554,12 @@ pub fn write(
     at: Option<u64>,
 ) -> SysResult<u64> {
     let (p, f, host) = c.parts();
+    if let Some(File::Socket(_)) = p.file(fd) {
+        if at.is_some() {
+            return Err(Errno::ESPIPE);
+        }
+        return super::socket::send(c, fd, buf, count, 0, None);
+    }
     if let Some((_, port)) = port_at(p, f.fs, fd)
         && arinc::too_long(port, count)
     {
@@ -616,7 +675,7 @@ pub fn sendfile(
 ) -> SysResult<u64> {
     let (p, f, host) = c.parts();
     let writable = match p.file(out_fd).ok_or(Errno::EBADF)? {
-        File::Console(_) | File::Pipe { write: true, .. } => true,
+        File::Console(_) | File::Pipe { write: true, .. } | File::Socket(_) => true,
         File::Pipe { .. } => false,
         File::Open(id) => {
             f.fs.description(id)
@@ -833,6 +892,8 @@ pub fn openat(
                 }
             }
             File::Console(_) => File::Console(Stream::Stdout),
+            // Linux refuses to open a socket through its link.
+            File::Socket(_) => return Err(Errno::ENXIO),
             File::Open(_) => return Err(Errno::ENOENT),
         };
         duplicate(p, f, file, fd, flags & O_CLOEXEC != 0);
@@ -1022,6 +1083,12 @@ fn stat_fd(p: &Process, f: &Files, fd: u64) -> SysResult<Stat> {
             ino: 0x2000_0000 + pipe as u64,
             nlink: 1,
             mode: S_IFIFO | 0o600,
+            ..Stat::default()
+        },
+        File::Socket(id) => Stat {
+            ino: crate::vfs::proc::SOCKET_INO + id as u64,
+            nlink: 1,
+            mode: S_IFSOCK | 0o777,
             ..Stat::default()
         },
     })

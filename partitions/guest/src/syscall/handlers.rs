@@ -88,6 +88,7 @@ pub fn fcntl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match c.p.file(a.fd(0)).ok_or(Errno::EBADF)? {
         File::Console(_) => super::tty_ioctl(c, a.flags(1), a.raw(2)),
+        File::Socket(_) => super::socket::socket_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
         _ => file::port_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
     }
 }

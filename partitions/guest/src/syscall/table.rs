@@ -7,9 +7,9 @@
 //! match it replaced) that yields the handler, and to [`NUMBERS`], the numbers it serves.
 
 use super::handlers::*;
+use super::socket::*;
 use super::{Host, Reported, SysResult};
 use crate::linux::nr;
-use crate::pipe::Pipes;
 use crate::process::Process;
 use crate::syscall::Outcome;
 use crate::syscall::file::Files;
@@ -33,16 +33,14 @@ pub struct Ctx<'c, 'a, H> {
 impl<'c, 'a, H: Host> Ctx<'c, 'a, H> {
     pub fn new(
         p: &'c mut Process,
-        pipes: &'c mut Pipes,
-        fs: &'c mut crate::vfs::Fs<'a>,
-        others: &'c dyn crate::vfs::proc::ProcessTable,
+        f: Files<'c, 'a>,
         reported: &'c mut Reported,
         host: &'c mut H,
         m: &'c mut ExceptionMessage,
     ) -> Ctx<'c, 'a, H> {
         Ctx {
             p,
-            f: Files { pipes, fs, others },
+            f,
             host,
             m,
             reported,
@@ -255,6 +253,23 @@ table! {
     alarm => alarm,
     getitimer => getitimer,
     setitimer => setitimer,
+    // Sockets ([`super::socket`]).
+    socket => socket,
+    socketpair => socketpair,
+    bind => bind,
+    listen => listen,
+    accept => accept,
+    accept4 => accept4,
+    connect => connect,
+    sendto => sendto,
+    recvfrom => recvfrom,
+    sendmsg => sendmsg,
+    recvmsg => recvmsg,
+    shutdown => shutdown,
+    getsockname => getsockname,
+    getpeername => getpeername,
+    setsockopt => setsockopt,
+    getsockopt => getsockopt,
     // Waiting for descriptors ([`crate::poll`]).
     poll => poll,
     ppoll => ppoll,

@@ -895,7 +895,8 @@ impl<'a> Fs<'a> {
         if !self.is_dir(Node::Inode(dir)) {
             return Err(Errno::ENOTDIR);
         }
-        if self.inode(dir).is_some_and(|d| d.nlink == 0) {
+        // The root has no entry naming it (no link), and is never removed.
+        if dir != ROOT && self.inode(dir).is_some_and(|d| d.nlink == 0) {
             return Err(Errno::ENOENT); // removed, still someone's working directory
         }
         if self.entry(dir, name).is_some() {

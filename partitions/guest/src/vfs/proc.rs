@@ -6,7 +6,8 @@
 //! NUL-terminated) and `fd/` (a link per open descriptor: to the file's path,
 //! `/dev/console` or `pipe:[<n>]`; opening one opens what the descriptor has, even a pipe,
 //! as Linux's magic links do: `/dev/fd` links here), `/proc/meminfo`, `/proc/uptime` and
-//! `/proc/mounts`. Nothing here can be written, created or removed.
+//! `/proc/mounts`, `/proc/net/dev` and `/proc/net/route` (the interfaces and routes of
+//! [`crate::net`]). Nothing here can be written, created or removed.
 //!
 //! The process table belongs to [`crate::system`]; the system calls see it through
 //! [`ProcessTable`], read-only, as [`Procs`]: the caller and the others.
@@ -34,6 +35,10 @@ pub enum Node {
     Fds(u32),
     /// `/proc/<pid>/fd/<n>`: a link to what descriptor `n` has open.
     Fd(u32, u32),
+    /// `/proc/net`, and its `dev` and `route`.
+    Net,
+    NetDev,
+    NetRoute,
 }
 
 /// A file of `/proc/<pid>/`.
@@ -51,12 +56,14 @@ const PROCESS_FILES: [(&str, File); 4] = [
     ("status", File::Status),
     ("cmdline", File::Cmdline),
 ];
-const SYSTEM_FILES: [(&str, Node); 4] = [
+const SYSTEM_FILES: [(&str, Node); 5] = [
     ("self", Node::SelfLink),
     ("meminfo", Node::Meminfo),
     ("uptime", Node::Uptime),
     ("mounts", Node::Mounts),
+    ("net", Node::Net),
 ];
+const NET_FILES: [(&str, Node); 2] = [("dev", Node::NetDev), ("route", Node::NetRoute)];
 
 /// What `/proc` shows of one process.
 #[derive(Clone, Copy, Debug)]
@@ -117,6 +124,9 @@ pub struct Procs<'s> {
     /// (`meminfo`).
     pub memory: u64,
     pub fs_used: u64,
+    /// The network interfaces and the default route (`net/dev`, `net/route`).
+    pub interfaces: Vec<crate::net::Interface>,
+    pub gateway: Option<crate::net::Ipv4Address>,
 }
 
 impl<'s> Procs<'s> {
@@ -138,6 +148,8 @@ impl<'s> Procs<'s> {
             now_ns: 0,
             memory: 0,
             fs_used: 0,
+            interfaces: Vec::new(),
+            gateway: None,
         }
     }
 
@@ -193,6 +205,10 @@ pub fn child(dir: Node, name: &[u8], procs: &Procs) -> Option<Node> {
                 let pid = parse_pid(name)?;
                 procs.find(pid).map(|_| Node::Process(pid))
             }),
+        Node::Net => NET_FILES
+            .iter()
+            .find(|(n, _)| n.as_bytes() == name)
+            .map(|&(_, node)| node),
         Node::Process(pid) if name == b"fd" => Some(Node::Fds(pid)),
         Node::Process(pid) => PROCESS_FILES
             .iter()
@@ -212,12 +228,16 @@ pub fn parent(node: Node) -> Option<Node> {
         Node::Root => None,
         Node::File(pid, _) | Node::Fds(pid) => Some(Node::Process(pid)),
         Node::Fd(pid, _) => Some(Node::Fds(pid)),
+        Node::NetDev | Node::NetRoute => Some(Node::Net),
         _ => Some(Node::Root),
     }
 }
 
 pub fn is_dir(node: Node) -> bool {
-    matches!(node, Node::Root | Node::Process(_) | Node::Fds(_))
+    matches!(
+        node,
+        Node::Root | Node::Process(_) | Node::Fds(_) | Node::Net
+    )
 }
 
 pub fn is_link(node: Node) -> bool {
@@ -239,6 +259,9 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
             crate::process::File::Pipe { pipe, .. } => {
                 write!(w, "pipe:[{}]", PIPE_INO + pipe as u64).ok()?
             }
+            crate::process::File::Socket(id) => {
+                write!(w, "socket:[{}]", SOCKET_INO + id as u64).ok()?
+            }
             crate::process::File::Open(_) => return None,
         },
         _ => return None,
@@ -249,6 +272,8 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
 
 /// The inode number `pipe:[<n>]` gives pipe 0 (a range of its own).
 const PIPE_INO: u64 = 0x3000_0000;
+/// The inode number of socket 0 (`socket:[<n>]`, `fstat`).
+pub const SOCKET_INO: u64 = 0x3800_0000;
 
 /// Its inode number (in a range of its own, apart from the file system's).
 fn ino(node: Node) -> u64 {
@@ -260,6 +285,9 @@ fn ino(node: Node) -> u64 {
         Node::Meminfo => BASE + 2,
         Node::Uptime => BASE + 3,
         Node::Mounts => BASE + 4,
+        Node::Net => BASE + 5,
+        Node::NetDev => BASE + 6,
+        Node::NetRoute => BASE + 7,
         Node::Process(pid) => BASE + 16 * (pid as u64 + 1),
         Node::File(pid, f) => BASE + 16 * (pid as u64 + 1) + 1 + f as u64,
         Node::Fds(pid) => BASE + 16 * (pid as u64 + 1) + 8,
@@ -298,6 +326,11 @@ pub fn entries(dir: Node, procs: &Procs) -> Vec<(Vec<u8>, Node)> {
                 let mut name = Vec::new();
                 let _ = write!(VecWriter(&mut name), "{pid}");
                 out.push((name, Node::Process(pid)));
+            }
+        }
+        Node::Net => {
+            for (name, node) in NET_FILES {
+                out.push((name.as_bytes().to_vec(), node));
             }
         }
         Node::Process(pid) => {
@@ -354,6 +387,8 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
         Node::Mounts => {
             let _ = write!(w, "rootfs / rootfs rw 0 0\nproc /proc proc rw 0 0\n");
         }
+        Node::NetDev => crate::net::proc_net_dev(&procs.interfaces, &mut w),
+        Node::NetRoute => crate::net::proc_net_route(&procs.interfaces, procs.gateway, &mut w),
         Node::File(pid, File::Stat) => {
             let p = procs.find(pid)?;
             // pid (comm) state ppid pgrp session tty_nr tpgid flags minflt cminflt majflt

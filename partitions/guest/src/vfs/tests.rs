@@ -232,7 +232,10 @@ fn proc_shows_the_processes() {
         .into_iter()
         .map(|(n, _)| String::from_utf8(n).unwrap())
         .collect();
-    assert_eq!(listing, ["self", "meminfo", "uptime", "mounts", "1", "7"]);
+    assert_eq!(
+        listing,
+        ["self", "meminfo", "uptime", "mounts", "net", "1", "7"]
+    );
     assert_eq!(read("/proc/7/cmdline"), "sleep\x0010\x00");
     let status = read("/proc/7/status");
     assert!(

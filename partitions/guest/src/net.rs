@@ -1,0 +1,527 @@
+//! The guest's network: the TCP/IP stack its processes' sockets live in ([`netstack`]:
+//! smoltcp with Linux's socket semantics), how many descriptors share each socket (a
+//! socket closes when the last one does: `dup`, `fork`), the socket addresses as the
+//! calls pass them (`struct sockaddr_in`), and the interfaces as `ifconfig`, `route` and
+//! `/proc/net` show them.
+//!
+//! The stack runs on the guest's clock: [`crate::system`] polls it before it serves the
+//! waiting calls again, so a byte one process writes reaches the process waiting to read
+//! it, and the partition program wakes at [`Net::poll_at_ns`] for smoltcp's timers
+//! (retransmissions, delayed ACKs, keep-alives, `TIME-WAIT`). `lo` (127.0.0.1/8) is always
+//! there; `eth0` only with `guest.net` in the configuration ([`NetConfig`]), its frames
+//! carried by the partition program between [`Net::frames`] and the partition's ports.
+
+use crate::linux::Errno;
+use alloc::vec::Vec;
+pub use netstack::Ipv4Address;
+use netstack::{Config, Counters, Limits, SocketAddr, SocketId, Stack};
+
+/// `AF_INET` and the length of its `struct sockaddr_in`.
+pub const AF_INET: u16 = 2;
+pub const SOCKADDR_IN_LEN: usize = 16;
+
+/// What the guest's stack may take of its heap: sockets (each backlog's listeners
+/// count), and their buffers.
+pub const LIMITS: Limits = Limits {
+    sockets: 48,
+    tcp_buffer: 32 * 1024,
+    udp_packets: 32,
+    udp_buffer: 32 * 1024,
+    backlog: 8,
+    frames: 64,
+};
+
+/// The shortest time between two runs of the stack for its timers.
+pub const MIN_POLL_GAP_NS: u64 = 200_000;
+/// How often the guest looks for frames on `eth0`'s port when nothing else wakes it.
+pub const RX_POLL_NS: u64 = 2_000_000;
+
+/// `eth0` as the configuration gives it (`guest.net`, written by `cargo xtask` to
+/// [`NET_PATH`] in the initramfs).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetConfig {
+    pub mac: [u8; 6],
+    pub address: Ipv4Address,
+    pub prefix: u8,
+    pub gateway: Option<Ipv4Address>,
+}
+
+/// Where the guest finds `eth0`'s configuration: `key=value` lines (`mac`, `address`
+/// as `a.b.c.d/prefix`, `gateway`, `rx`, `tx`: the ports of the frames).
+pub const NET_PATH: &str = "/etc/guest/net";
+
+/// `eth0`'s configuration and its ports' names, from the file at [`NET_PATH`].
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NetFile<'a> {
+    pub config: NetConfig,
+    pub rx: &'a str,
+    pub tx: &'a str,
+}
+
+/// Parses the file at [`NET_PATH`]; the error names the line and what is wrong.
+pub fn parse_net_file(text: &str) -> Result<NetFile<'_>, (usize, &'static str)> {
+    let (mut mac, mut address, mut gateway, mut rx, mut tx) = (None, None, None, None, None);
+    for (n, line) in text.lines().enumerate() {
+        let line = line.trim();
+        if line.is_empty() {
+            continue;
+        }
+        let at = n + 1;
+        let (key, value) = line.split_once('=').ok_or((at, "expected key=value"))?;
+        match key {
+            "mac" => mac = Some(parse_mac(value).ok_or((at, "bad MAC address"))?),
+            "address" => {
+                let (ip, prefix) = value.split_once('/').ok_or((at, "expected a.b.c.d/n"))?;
+                let ip = parse_ipv4(ip).ok_or((at, "bad IPv4 address"))?;
+                let prefix = prefix
+                    .parse::<u8>()
+                    .ok()
+                    .filter(|&p| (1..=32).contains(&p))
+                    .ok_or((at, "bad prefix length"))?;
+                address = Some((ip, prefix));
+            }
+            "gateway" => gateway = Some(parse_ipv4(value).ok_or((at, "bad gateway address"))?),
+            "rx" => rx = Some(value),
+            "tx" => tx = Some(value),
+            _ => return Err((at, "unknown key")),
+        }
+    }
+    let last = text.lines().count();
+    let (address, prefix) = address.ok_or((last, "no address"))?;
+    Ok(NetFile {
+        config: NetConfig {
+            mac: mac.ok_or((last, "no mac"))?,
+            address,
+            prefix,
+            gateway,
+        },
+        rx: rx.ok_or((last, "no rx port"))?,
+        tx: tx.ok_or((last, "no tx port"))?,
+    })
+}
+
+/// `a.b.c.d`.
+pub fn parse_ipv4(text: &str) -> Option<Ipv4Address> {
+    let mut octets = [0u8; 4];
+    let mut parts = text.split('.');
+    for o in &mut octets {
+        *o = parts.next()?.parse().ok()?;
+    }
+    parts
+        .next()
+        .is_none()
+        .then(|| Ipv4Address::from_octets(octets))
+}
+
+/// `52:54:00:12:34:56`.
+pub fn parse_mac(text: &str) -> Option<[u8; 6]> {
+    let mut mac = [0u8; 6];
+    let mut parts = text.split(':');
+    for b in &mut mac {
+        let part = parts.next()?;
+        if part.len() != 2 {
+            return None;
+        }
+        *b = u8::from_str_radix(part, 16).ok()?;
+    }
+    parts.next().is_none().then_some(mac)
+}
+
+/// A `struct sockaddr_in` (family, port in network order, address): `EINVAL` when
+/// shorter, `EAFNOSUPPORT` for another family.
+pub fn parse_sockaddr(bytes: &[u8]) -> Result<SocketAddr, Errno> {
+    if bytes.len() < 2 {
+        return Err(Errno::EINVAL);
+    }
+    if u16::from_le_bytes([bytes[0], bytes[1]]) != AF_INET {
+        return Err(Errno::EAFNOSUPPORT);
+    }
+    if bytes.len() < SOCKADDR_IN_LEN {
+        return Err(Errno::EINVAL);
+    }
+    Ok(SocketAddr::new(
+        Ipv4Address::new(bytes[4], bytes[5], bytes[6], bytes[7]),
+        u16::from_be_bytes([bytes[2], bytes[3]]),
+    ))
+}
+
+/// The `struct sockaddr_in` of `addr`.
+pub fn sockaddr_bytes(addr: SocketAddr) -> [u8; SOCKADDR_IN_LEN] {
+    let mut b = [0u8; SOCKADDR_IN_LEN];
+    b[..2].copy_from_slice(&AF_INET.to_le_bytes());
+    b[2..4].copy_from_slice(&addr.port.to_be_bytes());
+    b[4..8].copy_from_slice(&addr.ip.octets());
+    b
+}
+
+/// A socket call's error as Linux's errno.
+pub fn errno(e: netstack::Error) -> Errno {
+    Errno(e.errno() as u16)
+}
+
+/// An interface as `ifconfig` and `/proc/net/dev` show it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Interface {
+    pub name: &'static str,
+    pub index: u32,
+    pub mac: [u8; 6],
+    pub address: Ipv4Address,
+    pub prefix: u8,
+    /// `IFF_*`.
+    pub flags: u16,
+    pub mtu: u32,
+    pub counters: Counters,
+}
+
+pub const IFF_UP: u16 = 0x1;
+pub const IFF_BROADCAST: u16 = 0x2;
+pub const IFF_LOOPBACK: u16 = 0x8;
+pub const IFF_RUNNING: u16 = 0x40;
+pub const IFF_MULTICAST: u16 = 0x1000;
+
+impl Interface {
+    pub fn netmask(&self) -> Ipv4Address {
+        let bits = u32::MAX
+            .checked_shl(32 - u32::from(self.prefix))
+            .unwrap_or(0);
+        Ipv4Address::from_octets(bits.to_be_bytes())
+    }
+
+    pub fn broadcast(&self) -> Ipv4Address {
+        let mask = u32::from_be_bytes(self.netmask().octets());
+        let ip = u32::from_be_bytes(self.address.octets());
+        Ipv4Address::from_octets((ip | !mask).to_be_bytes())
+    }
+}
+
+/// The guest's network.
+pub struct Net {
+    /// Made on the first socket (or frame), at that instant.
+    stack: Option<Stack>,
+    eth: Option<NetConfig>,
+    /// Descriptors of each socket, by [`SocketId`].
+    refs: Vec<u32>,
+    /// When it last ran.
+    polled_ns: u64,
+    /// `eth0`'s ports (indices into the port table, [`crate::arinc`]): received frames,
+    /// frames to send.
+    link: Option<(usize, usize)>,
+    /// Frames the `tx` port had no room for (lost, as on a full ring; TCP sends again).
+    pub tx_dropped: u64,
+}
+
+impl Default for Net {
+    fn default() -> Self {
+        Self::new(None)
+    }
+}
+
+impl Net {
+    /// The network with `lo`, and `eth0` when configured.
+    pub const fn new(eth: Option<NetConfig>) -> Self {
+        Net {
+            stack: None,
+            eth,
+            refs: Vec::new(),
+            polled_ns: 0,
+            link: None,
+            tx_dropped: 0,
+        }
+    }
+
+    /// `eth0`'s frames go through ports `rx` and `tx` (indices of the port table).
+    pub fn link(&mut self, rx: usize, tx: usize) {
+        self.link = Some((rx, tx));
+    }
+
+    /// Runs the stack at the host's time: `eth0`'s received frames in from the `rx`
+    /// port, timers, then the frames to send out to the `tx` port.
+    pub fn run(&mut self, host: &mut impl crate::syscall::Host) {
+        let Some((rx, tx)) = self.link else {
+            if self.stack.is_some() {
+                self.poll(host.now_ns());
+            }
+            return;
+        };
+        let now = host.now_ns();
+        let mut frame = [0u8; netstack::MTU];
+        for _ in 0..LIMITS.frames {
+            let Ok(got) = host.port_receive(rx, &mut frame) else {
+                break;
+            };
+            self.stack(now)
+                .device
+                .deliver(&frame[..got.len.min(frame.len())]);
+        }
+        self.poll(now);
+        let mut dropped = 0;
+        let stack = self.stack(now);
+        while let Some(out) = stack.device.take() {
+            if host.port_send(tx, &out).is_err() {
+                dropped += 1;
+            }
+        }
+        self.tx_dropped += dropped;
+    }
+
+    /// The stack at `now_ns` (made on first use).
+    pub fn stack(&mut self, now_ns: u64) -> &mut Stack {
+        let eth = self.eth;
+        self.stack.get_or_insert_with(|| {
+            let config = match eth {
+                Some(e) => Config {
+                    mac: e.mac,
+                    address: e.address,
+                    prefix: e.prefix,
+                    gateway: e.gateway,
+                    limits: LIMITS,
+                },
+                None => Config::loopback_only(LIMITS),
+            };
+            Stack::new(config, (now_ns / 1000) as i64)
+        })
+    }
+
+    /// The stack if a socket was ever made.
+    pub fn existing(&mut self) -> Option<&mut Stack> {
+        self.stack.as_mut()
+    }
+
+    /// A new socket's first descriptor.
+    pub fn opened(&mut self, id: SocketId) {
+        if self.refs.len() <= id.0 {
+            self.refs.resize(id.0 + 1, 0);
+        }
+        self.refs[id.0] = 1;
+    }
+
+    /// One more descriptor of socket `id` (`dup`, `fork`).
+    pub fn share(&mut self, id: usize) {
+        if let Some(r) = self.refs.get_mut(id) {
+            *r += 1;
+        }
+    }
+
+    /// A descriptor of socket `id` closed: the socket closes with its last.
+    pub fn release(&mut self, id: usize) {
+        let Some(r) = self.refs.get_mut(id) else {
+            return;
+        };
+        *r = r.saturating_sub(1);
+        if *r == 0
+            && let Some(stack) = self.stack.as_mut()
+        {
+            let _ = stack.close(SocketId(id));
+        }
+    }
+
+    /// Sockets open (descriptors' sockets).
+    pub fn open_count(&self) -> usize {
+        self.refs.iter().filter(|&&r| r > 0).count()
+    }
+
+    /// Runs the stack at `now_ns`: frames in and out, timers.
+    pub fn poll(&mut self, now_ns: u64) {
+        self.polled_ns = now_ns;
+        if let Some(stack) = self.stack.as_mut() {
+            stack.poll((now_ns / 1000) as i64);
+        }
+    }
+
+    /// When the stack must run next (the guest's clock, ns): never sooner than
+    /// [`MIN_POLL_GAP_NS`] after it last ran (a stack that wants to run at once, e.g.
+    /// with frames the ports have no room for yet, must not keep the guest from serving
+    /// its processes).
+    pub fn poll_at_ns(&mut self) -> Option<u64> {
+        // Frames arrive on `eth0`'s port without a word to the guest: look every
+        // [`RX_POLL_NS`].
+        let rx = self.link.map(|_| self.polled_ns + RX_POLL_NS);
+        let at = self.stack.as_mut().and_then(|s| s.poll_at());
+        let at = at.map(|at| (at.max(0) as u64).saturating_mul(1000));
+        let at = match (at, rx) {
+            (Some(a), Some(r)) => Some(a.min(r)),
+            (a, r) => a.or(r),
+        }?;
+        Some(at.max(self.polled_ns + MIN_POLL_GAP_NS))
+    }
+
+    /// `eth0`'s frames: those to send, and room for those received.
+    pub fn frames(&mut self, now_ns: u64) -> Option<&mut netstack::Queues> {
+        self.eth?;
+        Some(&mut self.stack(now_ns).device)
+    }
+
+    /// The interfaces, `lo` first.
+    pub fn interfaces(&self) -> Vec<Interface> {
+        let mut out = Vec::new();
+        out.push(Interface {
+            name: "lo",
+            index: 1,
+            mac: [0; 6],
+            address: Ipv4Address::new(127, 0, 0, 1),
+            prefix: 8,
+            flags: IFF_UP | IFF_LOOPBACK | IFF_RUNNING,
+            mtu: 65536,
+            counters: Counters::default(),
+        });
+        if let Some(e) = self.eth {
+            out.push(Interface {
+                name: "eth0",
+                index: 2,
+                mac: e.mac,
+                address: e.address,
+                prefix: e.prefix,
+                flags: IFF_UP | IFF_BROADCAST | IFF_RUNNING | IFF_MULTICAST,
+                mtu: 1500,
+                counters: self
+                    .stack
+                    .as_ref()
+                    .map_or(Counters::default(), |s| s.device.counters),
+            });
+        }
+        out
+    }
+
+    /// `eth0`'s default route, if configured.
+    pub fn gateway(&self) -> Option<Ipv4Address> {
+        self.eth?.gateway
+    }
+}
+
+/// `/proc/net/dev`.
+pub fn proc_net_dev(interfaces: &[Interface], out: &mut impl core::fmt::Write) {
+    let _ = out.write_str(
+        "Inter-|   Receive                                                |  Transmit\n face |bytes    packets errs drop fifo frame compressed multicast|bytes    packets errs drop fifo colls carrier compressed\n",
+    );
+    for i in interfaces {
+        let c = i.counters;
+        let _ = writeln!(
+            out,
+            "{:>6}: {:>7} {:>7}    0    0    0     0          0         0 {:>8} {:>7}    0    0    0     0       0          0",
+            i.name, c.rx_bytes, c.rx_frames, c.tx_bytes, c.tx_frames
+        );
+    }
+}
+
+/// `/proc/net/route`: `eth0`'s subnet and its default route (addresses in the host's
+/// byte order, as Linux writes them).
+pub fn proc_net_route(
+    interfaces: &[Interface],
+    gateway: Option<Ipv4Address>,
+    out: &mut impl core::fmt::Write,
+) {
+    let hex = |ip: Ipv4Address| u32::from_le_bytes(ip.octets());
+    let _ = out.write_str(
+        "Iface\tDestination\tGateway \tFlags\tRefCnt\tUse\tMetric\tMask\t\tMTU\tWindow\tIRTT\n",
+    );
+    for i in interfaces.iter().filter(|i| i.flags & IFF_LOOPBACK == 0) {
+        if let Some(g) = gateway {
+            let _ = writeln!(
+                out,
+                "{}\t00000000\t{:08X}\t0003\t0\t0\t0\t00000000\t0\t0\t0",
+                i.name,
+                hex(g)
+            );
+        }
+        let mask = i.netmask();
+        let net = Ipv4Address::from_octets(
+            (u32::from_be_bytes(i.address.octets()) & u32::from_be_bytes(mask.octets()))
+                .to_be_bytes(),
+        );
+        let _ = writeln!(
+            out,
+            "{}\t{:08X}\t00000000\t0001\t0\t0\t0\t{:08X}\t0\t0\t0",
+            i.name,
+            hex(net),
+            hex(mask)
+        );
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use alloc::string::String;
+    use alloc::vec::Vec;
+
+    #[test]
+    fn socket_addresses_both_ways() {
+        let addr = SocketAddr::new(Ipv4Address::new(127, 0, 0, 1), 8080);
+        let bytes = sockaddr_bytes(addr);
+        assert_eq!(&bytes[..8], &[2, 0, 0x1f, 0x90, 127, 0, 0, 1]);
+        assert_eq!(parse_sockaddr(&bytes), Ok(addr));
+        assert_eq!(parse_sockaddr(&bytes[..8]), Err(Errno::EINVAL));
+        let mut v6 = [0u8; 28];
+        v6[0] = 10;
+        assert_eq!(parse_sockaddr(&v6), Err(Errno::EAFNOSUPPORT));
+        assert_eq!(parse_sockaddr(&[]), Err(Errno::EINVAL));
+    }
+
+    #[test]
+    fn net_file_and_its_errors() {
+        let text = "mac=52:54:00:12:34:56\naddress=10.0.2.15/24\ngateway=10.0.2.2\nrx=net_in\ntx=net_out\n";
+        let f = parse_net_file(text).unwrap();
+        assert_eq!(f.config.mac, [0x52, 0x54, 0, 0x12, 0x34, 0x56]);
+        assert_eq!(f.config.address, Ipv4Address::new(10, 0, 2, 15));
+        assert_eq!(f.config.prefix, 24);
+        assert_eq!(f.config.gateway, Some(Ipv4Address::new(10, 0, 2, 2)));
+        assert_eq!((f.rx, f.tx), ("net_in", "net_out"));
+        assert_eq!(
+            parse_net_file("mac=52:54:00:12:34\n").unwrap_err(),
+            (1, "bad MAC address")
+        );
+        assert_eq!(
+            parse_net_file("mac=52:54:00:12:34:56\naddress=10.0.2.15/33\n").unwrap_err(),
+            (2, "bad prefix length")
+        );
+        assert_eq!(
+            parse_net_file("colour=red").unwrap_err(),
+            (1, "unknown key")
+        );
+        assert!(parse_ipv4("1.2.3").is_none() && parse_ipv4("1.2.3.4.5").is_none());
+    }
+
+    #[test]
+    fn proc_files_name_the_interfaces_and_routes() {
+        let net = Net::new(Some(NetConfig {
+            mac: [2, 0, 0, 0, 0, 1],
+            address: Ipv4Address::new(10, 0, 2, 15),
+            prefix: 24,
+            gateway: Some(Ipv4Address::new(10, 0, 2, 2)),
+        }));
+        let interfaces = net.interfaces();
+        assert_eq!(interfaces[1].netmask(), Ipv4Address::new(255, 255, 255, 0));
+        assert_eq!(interfaces[1].broadcast(), Ipv4Address::new(10, 0, 2, 255));
+        let mut dev = String::new();
+        proc_net_dev(&interfaces, &mut dev);
+        assert!(dev.lines().nth(2).unwrap().starts_with("    lo:"));
+        assert!(dev.lines().nth(3).unwrap().starts_with("  eth0:"));
+        let mut route = String::new();
+        proc_net_route(&interfaces, net.gateway(), &mut route);
+        let lines: Vec<&str> = route.lines().collect();
+        assert_eq!(
+            lines[1],
+            "eth0\t00000000\t0202000A\t0003\t0\t0\t0\t00000000\t0\t0\t0"
+        );
+        assert_eq!(
+            lines[2],
+            "eth0\t0002000A\t00000000\t0001\t0\t0\t0\t00FFFFFF\t0\t0\t0"
+        );
+        assert_eq!(Net::default().interfaces().len(), 1, "lo alone");
+    }
+
+    #[test]
+    fn a_socket_closes_with_its_last_descriptor() {
+        let mut net = Net::default();
+        let stack = net.stack(0);
+        let id = stack.socket(2, 1, 0).unwrap();
+        net.opened(id);
+        net.share(id.0);
+        net.release(id.0);
+        assert_eq!(net.open_count(), 1);
+        assert!(net.stack(0).kind(id).is_ok(), "one descriptor left");
+        net.release(id.0);
+        assert_eq!(net.open_count(), 0);
+        assert!(net.stack(0).kind(id).is_err(), "closed with the last");
+    }
+}
