@@ -17,7 +17,8 @@
 //! ([`pipe`]), the process table with fork, exec, wait, signal delivery, process groups,
 //! timers and the deferred replies of waiting calls ([`system`]), the scheduling policy
 //! that says at which of three priorities each process's thread runs ([`sched`]), the
-//! console's terminal line discipline ([`tty`]) and the partition's ARINC ports as the devices
+//! console's terminal line discipline ([`tty`]), the sockets and their TCP/IP stack
+//! ([`net`], the calls in [`syscall::socket`]) and the partition's ARINC ports as the devices
 //! `/dev/arinc/<port>` ([`arinc`]: their table, messages, `EMSGSIZE`, validity ioctl); the
 //! partition program (`main.rs`) only moves messages, creates tasks, maps pages, drives
 //! COM2 (`com2.rs`), moves port messages through syssw (`ports.rs`), writes the log and
@@ -59,6 +60,9 @@
 //! - `guest: process <pid> (<name>): unsupported system call <n> (<name>), returning
 //!   ENOSYS` (the call's Linux name, `unknown` beyond the 64-bit ABI), once per call number
 //!   and guest (a loop starting processes that make it adds no line);
+//! - `guest: eth0 <mac> <address>/<prefix> through ports <rx> and <tx>` at start with
+//!   `guest.net` ([`net`]), or `guest: /etc/guest/net line <n>: <why>; no eth0`,
+//!   `guest: /etc/guest/net: no port <rx> or <tx>; no eth0` (the guest then has `lo` only);
 //! - `guest: port <name>: cannot create it: <ARINC code, or no answer>` (its device
 //!   answers `ENXIO`),
 //!   `guest: /etc/guest/ports line <n>: <why>; no ports`, `guest: no room for the port

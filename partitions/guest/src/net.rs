@@ -35,6 +35,9 @@ pub const LIMITS: Limits = Limits {
 pub const MIN_POLL_GAP_NS: u64 = 200_000;
 /// How often the guest looks for frames on `eth0`'s port when nothing else wakes it.
 pub const RX_POLL_NS: u64 = 2_000_000;
+/// How often it looks while serving calls (each look is a call to syssw), unless the
+/// last look found frames.
+pub const RX_LOOK_NS: u64 = 500_000;
 
 /// `eth0` as the configuration gives it (`guest.net`, written by `cargo xtask` to
 /// [`NET_PATH`] in the initramfs).
@@ -208,6 +211,9 @@ pub struct Net {
     link: Option<(usize, usize)>,
     /// Frames the `tx` port had no room for (lost, as on a full ring; TCP sends again).
     pub tx_dropped: u64,
+    /// When the `rx` port was last looked at, and whether frames came then.
+    rx_looked_ns: u64,
+    rx_busy: bool,
 }
 
 impl Default for Net {
@@ -226,6 +232,8 @@ impl Net {
             polled_ns: 0,
             link: None,
             tx_dropped: 0,
+            rx_looked_ns: 0,
+            rx_busy: false,
         }
     }
 
@@ -244,14 +252,21 @@ impl Net {
             return;
         };
         let now = host.now_ns();
-        let mut frame = [0u8; netstack::MTU];
-        for _ in 0..LIMITS.frames {
-            let Ok(got) = host.port_receive(rx, &mut frame) else {
-                break;
-            };
-            self.stack(now)
-                .device
-                .deliver(&frame[..got.len.min(frame.len())]);
+        // A look at the port is a call to syssw: after every served call only while
+        // frames come, else every RX_LOOK_NS.
+        if self.rx_busy || now >= self.rx_looked_ns.saturating_add(RX_LOOK_NS) {
+            self.rx_looked_ns = now;
+            let mut frame = [0u8; netstack::MTU];
+            let mut got = 0;
+            while got < LIMITS.frames {
+                let Ok(r) = host.port_receive(rx, &mut frame) else {
+                    break;
+                };
+                let len = r.len.min(frame.len());
+                self.stack(now).device.deliver(&frame[..len]);
+                got += 1;
+            }
+            self.rx_busy = got > 0;
         }
         self.poll(now);
         let mut dropped = 0;
@@ -335,7 +350,7 @@ impl Net {
     pub fn poll_at_ns(&mut self) -> Option<u64> {
         // Frames arrive on `eth0`'s port without a word to the guest: look every
         // [`RX_POLL_NS`].
-        let rx = self.link.map(|_| self.polled_ns + RX_POLL_NS);
+        let rx = self.link.map(|_| self.rx_looked_ns + RX_POLL_NS);
         let at = self.stack.as_mut().and_then(|s| s.poll_at());
         let at = at.map(|at| (at.max(0) as u64).saturating_mul(1000));
         let at = match (at, rx) {

@@ -15,7 +15,10 @@
 //! `set_robust_list`, the signal and timer calls of [`crate::sigcalls`] (`rt_sigaction`,
 //! `rt_sigprocmask`, `rt_sigpending`, `rt_sigreturn`, `rt_sigsuspend`, `pause`,
 //! `sigaltstack`, `nanosleep`, `clock_nanosleep`, `alarm`, `getitimer`, `setitimer`), the
-//! waits of [`crate::poll`] (`poll`, `ppoll`, `select`, `pselect6`), `prlimit64`, `getrlimit`,
+//! waits of [`crate::poll`] (`poll`, `ppoll`, `select`, `pselect6`), the socket calls of
+//! [`socket`] (`socket`, `socketpair`, `bind`, `listen`, `accept`, `accept4`, `connect`,
+//! `sendto`, `recvfrom`, `sendmsg`, `recvmsg`, `shutdown`, `getsockname`, `getpeername`,
+//! `setsockopt`, `getsockopt`; `read`, `write`, `ioctl` and `fcntl` of a socket), `prlimit64`, `getrlimit`,
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity and resource calls of [`crate::info`] (the uid/gid calls, `getrusage`,
