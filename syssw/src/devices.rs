@@ -189,8 +189,21 @@ pub fn prepare(
 
 /// Confines function `at`'s DMA to the `pages` frames from `frames` through the IOMMU:
 /// the bus address of the first frame, or `None` when the machine has no IOMMU.
-fn confine(_at: Address, _frames: u64, _pages: u64) -> Result<Option<u64>, DeviceProblem> {
-    Ok(None)
+fn confine(at: Address, frames: u64, pages: u64) -> Result<Option<u64>, DeviceProblem> {
+    let mut bus_address = None;
+    let mut done = 0;
+    while done < pages {
+        let n = (pages - done).min(MAP_MAX_PAGES);
+        match sys::dma_map(at.id(), frames + done * PAGE, n) {
+            Ok(bus) => {
+                bus_address.get_or_insert(bus);
+            }
+            Err(Error::NoSuchObject) => return Ok(None),
+            Err(e) => return Err(DeviceProblem::Kernel("dma_map", e)),
+        }
+        done += n;
+    }
+    Ok(bus_address)
 }
 
 /// Zeroes the DMA region (a cold restart must not see the last instance's data).
