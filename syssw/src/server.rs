@@ -140,10 +140,12 @@ impl<'a> Server<'a> {
                 timeout
             };
             let received = sys::receive(None, timeout);
-            self.since_dma_poll += 1;
-            if self.dma && (received.is_err() || self.since_dma_poll >= DMA_POLL_MESSAGES) {
-                self.since_dma_poll = 0;
-                self.dma_faults();
+            if self.dma {
+                self.since_dma_poll += 1;
+                if received.is_err() || self.since_dma_poll >= DMA_POLL_MESSAGES {
+                    self.since_dma_poll = 0;
+                    self.dma_faults();
+                }
             }
             if let Ok(m) = received {
                 if m.sender == self.worker {
