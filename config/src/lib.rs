@@ -269,8 +269,11 @@
 //! partition's devices; without `dma` bus mastering stays off. The partition learns the
 //! region's address, length and *bus address* (what a device must be given for its first
 //! byte) from its device page (`pci::dma_region`; docs/interfaces.md). When the machine
-//! has an IOMMU the kernel confines each device of the partition to the region; when it
-//! has none, syssw does not start the partition (`syssw: partition NAME not started: ...
+//! has an IOMMU (VT-d, found through the ACPI DMAR table; QEMU's `-device intel-iommu`)
+//! the kernel confines each device of the partition to the region (bus address = physical
+//! address; any other DMA of the device is blocked and reported to the health monitor as
+//! the partition's `memory_violation`); when it has none, or its DMAR does not list the
+//! device, syssw does not start the partition (`syssw: partition NAME not started: ...
 //! no IOMMU confines its DMA`, the others run) unless it says `dma_unconfined = true`
 //! (the tools print a warning; syssw logs one and starts it with DMA unconfined).
 //!

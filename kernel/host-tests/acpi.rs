@@ -166,3 +166,97 @@ fn signal_follows_overrides_and_bus_defaults() {
         }
     );
 }
+
+/// A DMAR table (host address width 39 bits) with one DRHD per `(flags, segment, base)`,
+/// each listing an IOAPIC and the endpoints 00:03.0 and 00:1f.2 and a function behind a
+/// bridge (two path entries), as QEMU's `intel-iommu` lists the functions it translates.
+fn dmar(units: &[(u8, u16, u64)]) -> Vec<u8> {
+    let mut body = vec![0u8; 12];
+    body[0] = 38; // host address width - 1
+    for &(flags, segment, base) in units {
+        let mut drhd = vec![0u8; 16];
+        drhd[2..4].copy_from_slice(&50u16.to_le_bytes());
+        drhd[4] = flags;
+        drhd[6..8].copy_from_slice(&segment.to_le_bytes());
+        drhd[8..16].copy_from_slice(&base.to_le_bytes());
+        drhd.extend_from_slice(&[3, 8, 0, 0, 0, 0xff, 0, 0]); // IOAPIC
+        drhd.extend_from_slice(&[1, 8, 0, 0, 0, 0, 3, 0]); // endpoint 00:03.0
+        drhd.extend_from_slice(&[1, 8, 0, 0, 0, 0, 0x1f, 2]); // endpoint 00:1f.2
+        drhd.extend_from_slice(&[1, 10, 0, 0, 0, 0, 1, 0, 0, 0]); // behind the bridge 00:01.0
+        body.extend_from_slice(&drhd);
+    }
+    // A reserved-memory structure (type 1), which the kernel skips.
+    body.extend_from_slice(&[1, 0, 8, 0, 0, 0, 0, 0]);
+    sdt(b"DMAR", &body)
+}
+
+#[test]
+fn finds_the_one_dma_remapping_unit_and_the_functions_it_translates() {
+    let info = parse(0xe0000, &system(vec![madt()])).unwrap();
+    assert_eq!(info.dma_remapping, None, "no DMAR: no IOMMU");
+    let mem = system(vec![madt(), dmar(&[(0, 0, 0xfed9_0000)])]);
+    assert_eq!(
+        parse(0xe0000, &mem).unwrap().dma_remapping,
+        Some(DmaRemapping {
+            base: 0xfed9_0000,
+            all: false,
+            endpoints: vec![3 << 3, 0x1f << 3 | 2],
+        })
+    );
+    let mem = system(vec![madt(), dmar(&[(1, 0, 0xfed9_0000)])]);
+    assert!(parse(0xe0000, &mem).unwrap().dma_remapping.unwrap().all);
+    // Layouts the kernel does not program mean no usable IOMMU, never a wrong one.
+    for units in [
+        &[(1, 1, 0xfed9_0000)][..],                  // another PCI segment
+        &[(1, 0, 0xfed9_0000), (0, 0, 0xfed9_1000)], // two units
+    ] {
+        let mem = system(vec![madt(), dmar(units)]);
+        assert_eq!(
+            parse(0xe0000, &mem).unwrap().dma_remapping,
+            None,
+            "{units:?}"
+        );
+    }
+}
+
+#[test]
+fn damaged_dmar_structures_are_errors_not_panics() {
+    let mut body = vec![0u8; 12];
+    body.extend_from_slice(&[0, 0, 40, 0]); // claims 40 bytes, has 4
+    let mem = system(vec![madt(), sdt(b"DMAR", &body)]);
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadTable(
+            *b"DMAR",
+            "structure length runs past the table"
+        ))
+    );
+    let mut body = vec![0u8; 12];
+    body.extend_from_slice(&[0, 0, 8, 0, 1, 0, 0, 0]); // a DRHD of 8 bytes
+    let mem = system(vec![madt(), sdt(b"DMAR", &body)]);
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadTable(*b"DMAR", "DRHD shorter than 16 bytes"))
+    );
+    // A device scope claiming more bytes than its DRHD has, and one of length 0.
+    for scope in [[1u8, 40, 0, 0, 0, 0, 3, 0], [1, 0, 0, 0, 0, 0, 3, 0]] {
+        let mut body = vec![0u8; 12];
+        body.extend_from_slice(&[0, 0, 24, 0, 0, 0, 0, 0]);
+        body.extend_from_slice(&0xfed9_0000u64.to_le_bytes());
+        body.extend_from_slice(&scope);
+        let mem = system(vec![madt(), sdt(b"DMAR", &body)]);
+        assert_eq!(
+            parse(0xe0000, &mem),
+            Err(AcpiError::BadTable(
+                *b"DMAR",
+                "device scope shorter than 6 bytes or past its DRHD"
+            )),
+            "{scope:?}"
+        );
+    }
+    let mem = system(vec![madt(), sdt(b"DMAR", &[0u8; 4])]);
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadTable(*b"DMAR", "too short"))
+    );
+}

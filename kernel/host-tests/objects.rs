@@ -1477,5 +1477,11 @@ fn device_registers_are_mapped_uncached_and_never_touched_by_the_kernel() {
         "unaligned"
     );
     assert_eq!(f.sys(root, Call::PciConfig, [0x1800, 0, 0, 0, 0, 0]), OK);
+    // So does the IOMMU; host tests have none (the kernel found no DMAR).
+    for call in [Call::DmaMap, Call::DmaFault] {
+        let a = [4 << 3, 0x10_0000, 1, 0, 0, 0];
+        assert_eq!(f.sys(c, call, a), err(Error::NotPermitted), "{call:?}");
+        assert_eq!(f.sys(root, call, a), err(Error::NoSuchObject), "{call:?}");
+    }
     f.k.destroy_task(child, u64::MAX);
 }

@@ -1,5 +1,5 @@
 //! ACPI table discovery: RSDP -> XSDT/RSDT -> MADT (local APIC, IOAPICs, interrupt source
-//! overrides, CPUs) and HPET. Pure parsing over a [`PhysMemory`] view, so it is host-tested
+//! overrides, CPUs), HPET and DMAR (the VT-d DMA remapping unit). Pure parsing over a [`PhysMemory`] view, so it is host-tested
 //! with synthetic tables; every table is length- and checksum-checked before use.
 
 extern crate alloc;
@@ -67,6 +67,21 @@ pub struct AcpiInfo {
     pub io_apics: Vec<IoApicInfo>,
     pub overrides: Vec<InterruptOverride>,
     pub hpet_address: Option<u64>,
+    /// The DMA remapping unit (DMAR), when there is exactly one, on PCI segment 0: the
+    /// only layout the kernel programs (QEMU's `intel-iommu`); any other means no usable
+    /// IOMMU.
+    pub dma_remapping: Option<DmaRemapping>,
+}
+
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct DmaRemapping {
+    /// Its register base.
+    pub base: u64,
+    /// Whether it translates every PCI function (INCLUDE_PCI_ALL); else only `endpoints`:
+    /// the routing ids (bus << 8 | device << 3 | function) of its device scopes that name
+    /// a function on the scope's bus (functions behind bridges count as not covered).
+    pub all: bool,
+    pub endpoints: Vec<u16>,
 }
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -184,6 +199,7 @@ pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
                 parse_madt(body, &mut info)?;
                 found_madt = true;
             }
+            b"DMAR" => info.dma_remapping = parse_dmar(body)?,
             b"HPET" => {
                 if body.len() < 52 {
                     return Err(AcpiError::BadTable(signature, "too short"));
@@ -200,6 +216,55 @@ pub fn parse(rsdp: u64, mem: &impl PhysMemory) -> Result<AcpiInfo, AcpiError> {
         return Err(AcpiError::NoMadt);
     }
     Ok(info)
+}
+
+/// The DMAR table's single remapping unit (see [`AcpiInfo::dma_remapping`]). Remapping
+/// structures start at 48: type (u16), length (u16); type 0 (DRHD) has flags at 4 (bit 0
+/// INCLUDE_PCI_ALL), the segment at 6, the register base at 8 and device scopes from 16:
+/// type (1 = endpoint), length, 2 reserved, enumeration id, start bus, then (device,
+/// function) path entries.
+fn parse_dmar(dmar: &[u8]) -> Result<Option<DmaRemapping>, AcpiError> {
+    const SIG: [u8; 4] = *b"DMAR";
+    let bad = |why| Err(AcpiError::BadTable(SIG, why));
+    if dmar.len() < 48 {
+        return bad("too short");
+    }
+    let (mut units, mut found) = (0, None);
+    let mut at = 48;
+    while at + 4 <= dmar.len() {
+        let (kind, len) = (u16_at(dmar, at), usize::from(u16_at(dmar, at + 2)));
+        if len < 4 || at + len > dmar.len() {
+            return bad("structure length runs past the table");
+        }
+        if kind == 0 {
+            if len < 16 {
+                return bad("DRHD shorter than 16 bytes");
+            }
+            units += 1;
+            let mut unit = DmaRemapping {
+                base: u64_at(dmar, at + 8),
+                all: dmar[at + 4] & 1 != 0,
+                endpoints: Vec::new(),
+            };
+            let mut scope = at + 16;
+            while scope + 2 <= at + len {
+                let end = scope + usize::from(dmar[scope + 1]);
+                if end < scope + 6 || end > at + len {
+                    return bad("device scope shorter than 6 bytes or past its DRHD");
+                }
+                let s = &dmar[scope..end];
+                if s[0] == 1 && s.len() == 8 {
+                    let id =
+                        u16::from(s[5]) << 8 | u16::from(s[6] & 0x1f) << 3 | u16::from(s[7] & 7);
+                    unit.endpoints.push(id);
+                }
+                scope += s.len();
+            }
+            found = (u16_at(dmar, at + 6) == 0).then_some(unit);
+        }
+        at += len;
+    }
+    Ok(if units == 1 { found } else { None })
 }
 
 fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {

@@ -189,6 +189,35 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
         kprintln!("sysimg:   {:<24} {:>8} bytes", entry.name, entry.data.len());
     }
 
+    let dma = acpi.dma_remapping.as_ref().and_then(|found| {
+        let base = found.base;
+        // SAFETY: the address comes from the ACPI DMAR table's one remapping unit.
+        let unit = unsafe { crate::arch::vtd::Vtd::new(base) }?;
+        let tables = crate::mem::iommu::DmaTables::new(unit.levels, unit.domains)?;
+        if !unit.enable(tables.root()) {
+            kprintln!("iommu: the DMA remapping unit at {base:#x} did not answer; not used");
+            return None;
+        }
+        let mut endpoints = [None; crate::state::DMA_ENDPOINTS];
+        for (slot, &id) in endpoints.iter_mut().zip(&found.endpoints) {
+            *slot = Some(id);
+        }
+        kprintln!(
+            "iommu: DMA remapping on (VT-d at {base:#x}, {}-level tables, bus address = physical, {}): a device reaches only the DMA region syssw confines it to",
+            unit.levels,
+            if found.all { "every PCI function" } else { "the functions the DMAR lists" }
+        );
+        Some(crate::state::Dma {
+            unit,
+            tables,
+            all: found.all,
+            endpoints,
+        })
+    });
+    if dma.is_none() {
+        kprintln!("iommu: none (no usable ACPI DMAR): devices' DMA is not confined");
+    }
+
     let Some(syssw) = image.find("syssw") else {
         panic!("system.img has no 'syssw' entry (the root task)")
     };
@@ -196,6 +225,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     crate::arch::syscall::init();
     {
         let mut k = crate::arch::entry::KERNEL.lock();
+        k.dma = dma;
         let entry = crate::task::create_root(
             &mut k,
             syssw.data,

@@ -89,6 +89,26 @@ pub struct Kernel {
     pub(crate) io_loaded: TaskId,
     /// Interrupt lines attached to threads.
     pub(crate) irqs: crate::irq::Irqs,
+    /// The IOMMU, when the machine has one the kernel programs (translation on).
+    pub(crate) dma: Option<Dma>,
+}
+
+/// Functions a remapping unit's device scopes may name (more count as not covered).
+pub const DMA_ENDPOINTS: usize = 32;
+
+/// The DMA remapping unit and its tables.
+pub struct Dma {
+    pub unit: crate::arch::vtd::Vtd,
+    pub tables: crate::mem::iommu::DmaTables,
+    /// The functions the unit translates: all, or those of `endpoints` (routing ids).
+    pub all: bool,
+    pub endpoints: [Option<u16>; DMA_ENDPOINTS],
+}
+
+impl Dma {
+    pub fn covers(&self, source: u16) -> bool {
+        self.all || self.endpoints.contains(&Some(source))
+    }
 }
 
 impl Default for Kernel {
@@ -120,6 +140,7 @@ impl Kernel {
             last_account: 0,
             io_loaded: TaskId::OWN,
             irqs: crate::irq::Irqs::new(),
+            dma: None,
         }
     }
 

@@ -77,7 +77,8 @@ handlers! {
     SetHealthMonitor => set_health_monitor, ScheduleSet => schedule_set,
     ScheduleSwitch => schedule_switch, PartitionInfo => partition_info, IoGrant => io_grant,
     IrqGrant => irq_grant, IrqAttach => irq_attach, IrqWait => irq_wait, IrqAck => irq_ack,
-    IrqDetach => irq_detach, PciConfig => pci_config,
+    IrqDetach => irq_detach, PciConfig => pci_config, DmaMap => dma_map,
+    DmaFault => dma_fault,
 }
 
 /// A `syscall` of thread `t` (its registers are in its context); `clock` gives the time in
@@ -417,6 +418,52 @@ fn pci_config(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let value = crate::arch::pci::config(a.address as u32, a.value as u32, a.write == 1);
     let result = results::PciConfig {
         value: u64::from(value),
+    };
+    k.threads[t].set_results(|r| result.encode_into(r));
+    Ok(Next::Return)
+}
+
+/// The IOMMU, for the root task only.
+fn root_dma(k: &mut Kernel, t: ThreadIdx) -> Result<&mut crate::state::Dma, Error> {
+    let task = task_of(k, t);
+    k.require(task, Abilities::PHYSICAL_MEMORY)?;
+    if task != TaskIdx::ROOT {
+        return Err(Error::NotPermitted);
+    }
+    k.dma.as_mut().ok_or(Error::NoSuchObject)
+}
+
+fn dma_map(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
+    let a = args::DmaMap::decode(r);
+    root_dma(k, t)?;
+    if a.source >> 16 != 0 {
+        return Err(Error::InvalidArgument);
+    }
+    if !k.is_user_memory(a.physical, a.pages) {
+        return Err(Error::BadAddress);
+    }
+    let dma = root_dma(k, t)?;
+    if !dma.covers(a.source as u16) {
+        return Err(Error::NoSuchObject);
+    }
+    dma.tables.confine(a.source as u16, a.physical, a.pages)?;
+    if !dma.unit.invalidate() {
+        return Err(Error::OutOfResources);
+    }
+    let result = results::DmaMap {
+        bus_address: a.physical,
+    };
+    k.threads[t].set_results(|r| result.encode_into(r));
+    Ok(Next::Return)
+}
+
+fn dma_fault(k: &mut Kernel, t: ThreadIdx, _: &ArgRegs, _: Clock) -> Handled {
+    let fault = root_dma(k, t)?.unit.take_fault().ok_or(Error::TimedOut)?;
+    let result = results::DmaFault {
+        source: u64::from(fault.source),
+        address: fault.address,
+        reason: u64::from(fault.reason),
+        write: u64::from(fault.write),
     };
     k.threads[t].set_results(|r| result.encode_into(r));
     Ok(Next::Return)

@@ -51,7 +51,9 @@ pub enum DeviceProblem {
     SharedLine(Address, u8),
     Spawn(SpawnError),
     Kernel(&'static str, Error),
-    /// It has a DMA region, the machine no IOMMU, and it does not say `dma_unconfined`.
+    /// It has a DMA region, no IOMMU confines the function (none, the DMAR does not list
+    /// it, or its DMA passes the IOMMU by: `pci::dma_bypasses_iommu`), and it does not say
+    /// `dma_unconfined`.
     Unconfined(Address),
 }
 
@@ -67,7 +69,7 @@ impl core::fmt::Display for DeviceProblem {
             Self::Kernel(call, e) => write!(f, "PCI devices: {call} failed: {e:?}"),
             Self::Unconfined(a) => write!(
                 f,
-                "PCI device {a}: no IOMMU confines its DMA to the partition's DMA region (a machine with an IOMMU, e.g. QEMU's intel-iommu, or `dma_unconfined = true`)"
+                "PCI device {a}: no IOMMU confines its DMA to the partition's DMA region (none, or the ACPI DMAR does not list the device, or it is a transitional virtio device, whose DMA passes an IOMMU by; needs an IOMMU, e.g. QEMU's intel-iommu, or `dma_unconfined = true`)"
             ),
         }
     }
@@ -146,7 +148,11 @@ pub fn prepare(
             let frames = spawner.frames(pages).map_err(DeviceProblem::Spawn)?;
             let mut bus_address = None;
             for (f, _) in functions.iter().flatten() {
-                bus_address = confine(f.address, frames, pages)?;
+                bus_address = if pci::dma_bypasses_iommu(f.vendor, f.device) {
+                    None
+                } else {
+                    confine(f.address, frames, pages)?
+                };
                 if bus_address.is_none() && !p.dma_unconfined {
                     return Err(DeviceProblem::Unconfined(f.address));
                 }
@@ -192,8 +198,21 @@ pub fn prepare(
 
 /// Confines function `at`'s DMA to the `pages` frames from `frames` through the IOMMU:
 /// the bus address of the first frame, or `None` when the machine has no IOMMU.
-fn confine(_at: Address, _frames: u64, _pages: u64) -> Result<Option<u64>, DeviceProblem> {
-    Ok(None)
+fn confine(at: Address, frames: u64, pages: u64) -> Result<Option<u64>, DeviceProblem> {
+    let mut bus_address = None;
+    let mut done = 0;
+    while done < pages {
+        let n = (pages - done).min(MAP_MAX_PAGES);
+        match sys::dma_map(at.id(), frames + done * PAGE, n) {
+            Ok(bus) => {
+                bus_address.get_or_insert(bus);
+            }
+            Err(Error::NoSuchObject) => return Ok(None),
+            Err(e) => return Err(DeviceProblem::Kernel("dma_map", e)),
+        }
+        done += n;
+    }
+    Ok(bus_address)
 }
 
 /// Zeroes the DMA region (a cold restart must not see the last instance's data).

@@ -136,6 +136,8 @@ fn main(image_base: u64, image_len: u64) {
         restarts: syssw_core::restart::Restarts::new(),
         worker_place: None,
         schedule: syssw_core::schedule::ModuleSchedule::new(system.schedule_count()),
+        dma: system.partitions().any(|p| p.dma > 0),
+        since_dma_poll: 0,
     };
     for s in system.schedules() {
         let mut windows = [user_rt::abi::syscall::WindowSpec::default(); 32];

@@ -16,6 +16,11 @@
 //! worker's; the receive time-out is the earliest waiter's deadline, so time-outs are
 //! answered on time.
 //!
+//! DMA faults: when a partition has a DMA region, this thread also takes the DMA requests
+//! the IOMMU blocked (`dma_fault`) at least every [`DMA_POLL_NS`] and every
+//! [`DMA_POLL_MESSAGES`] messages, and reports each as a `memory_violation` of the
+//! partition owning the device.
+//!
 //! Log lines (an interface, besides the health monitor's `health: ...` line of
 //! `syssw_core::health`): `syssw: partition NAME: MODE (START_CONDITION, restart N)` on
 //! every mode change and `message: t=<ms>.<us>ms partition=NAME text="..."` for
@@ -25,7 +30,7 @@ use crate::partitions::Instance;
 use config::binary::SystemView;
 use config::model::{Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind};
 use syssw_core::health::{
-    Detail, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
+    Detail, DmaFault, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
@@ -65,7 +70,19 @@ pub struct Server<'a> {
     pub worker_place: Option<(u8, u8)>,
     /// Which schedule runs and comes next, as SET/GET_MODULE_SCHEDULE_* see it.
     pub schedule: ModuleSchedule,
+    /// Whether some partition's devices may DMA (then blocked DMA is polled for), and
+    /// the messages since the last poll.
+    pub dma: bool,
+    pub since_dma_poll: u32,
 }
+
+/// How often the IOMMU's blocked DMA requests are taken at least: every so many ns, and
+/// every so many messages when requests keep the receive from timing out.
+pub const DMA_POLL_NS: u64 = 10_000_000;
+pub const DMA_POLL_MESSAGES: u32 = 64;
+/// Blocked requests taken per poll (the IOMMU keeps a few records; a flood of faults
+/// overflows them, which loses records, never the partition's error).
+const DMA_FAULTS_PER_POLL: usize = 8;
 
 /// A request's data (name, message, text), copied out of the IPC buffer before anything
 /// else uses it; a read or receive copies its message here on the way back.
@@ -117,7 +134,20 @@ impl<'a> Server<'a> {
                     }
                 }
             };
-            if let Ok(m) = sys::receive(None, timeout) {
+            let timeout = if self.dma {
+                timeout.min(DMA_POLL_NS)
+            } else {
+                timeout
+            };
+            let received = sys::receive(None, timeout);
+            if self.dma {
+                self.since_dma_poll += 1;
+                if received.is_err() || self.since_dma_poll >= DMA_POLL_MESSAGES {
+                    self.since_dma_poll = 0;
+                    self.dma_faults();
+                }
+            }
+            if let Ok(m) = received {
                 if m.sender == self.worker {
                     self.worker_call(m);
                 } else if m.message.tag.label() == LABEL_FAULT_REPORT {
@@ -460,6 +490,37 @@ impl<'a> Server<'a> {
         if self.error(index, error, Detail::Fault(fault)) {
             // "ignore": the partition goes on, but the faulting thread cannot.
             kill_faulted(m.sender);
+        }
+    }
+
+    /// Reports the DMA requests the IOMMU blocked, each as a memory violation of the
+    /// partition that owns the device (a device nobody owns: logged only).
+    fn dma_faults(&mut self) {
+        for _ in 0..DMA_FAULTS_PER_POLL {
+            let Ok(f) = sys::dma_fault() else {
+                return;
+            };
+            let fault = DmaFault {
+                source: f.source,
+                address: f.address,
+                write: f.write,
+                reason: f.reason,
+            };
+            let device = pci::Address::from_id(f.source);
+            let owner = self
+                .system
+                .partitions()
+                .find(|p| p.devices().any(|d| d == device))
+                .map(|p| p.index);
+            match owner {
+                Some(index) if self.partitions[index].is_some() => {
+                    self.error(index, ErrorCode::MemoryViolation, Detail::Dma(fault));
+                }
+                _ => println!(
+                    "health: blocked DMA of a device no running partition owns: {}",
+                    Detail::Dma(fault)
+                ),
+            }
         }
     }
 

@@ -274,7 +274,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
                 qemu::Com2::Unconnected
             },
             done_when: Vec::new(),
-            extra_args: qemu::nic(qemu::RUN_FORWARDS),
+            extra_args: [qemu::iommu(), qemu::nic(qemu::RUN_FORWARDS)].concat(),
         },
     )?;
     let crashed = outcome

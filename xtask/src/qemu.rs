@@ -42,7 +42,10 @@ pub struct RunOptions {
 }
 
 /// The NIC of `cargo xtask run`: a virtio-net function at PCI address 00:03.0 (its INTA
-/// reaches IOAPIC input 23 on q35) on QEMU's user-mode network, each of `forwards`
+/// reaches IOAPIC input 23 on q35), modern transport only and with `iommu_platform=on`:
+/// QEMU lets a virtio device DMA past the IOMMU unless it offers VIRTIO_F_ACCESS_PLATFORM
+/// (which a transitional device cannot), so only then does [`iommu`] confine it. On
+/// QEMU's user-mode network, each of `forwards`
 /// (host port, guest port) a TCP forward that listens on 127.0.0.1 only, never on
 /// another interface of the host.
 pub fn nic(forwards: &[(u16, u16)]) -> Vec<String> {
@@ -54,8 +57,15 @@ pub fn nic(forwards: &[(u16, u16)]) -> Vec<String> {
         "-netdev".into(),
         netdev,
         "-device".into(),
-        "virtio-net-pci,netdev=net0,addr=03.0".into(),
+        "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on".into(),
     ]
+}
+
+/// The IOMMU of `cargo xtask run` (and of scenarios that give partitions DMA regions): QEMU's
+/// VT-d, which the kernel programs so that a partition's devices reach only its DMA region
+/// (`dma`). QEMU wants it before every PCI device on the command line.
+pub fn iommu() -> Vec<String> {
+    vec!["-device".into(), "intel-iommu".into()]
 }
 
 /// What `cargo xtask run` forwards to the NIC (host port on 127.0.0.1, guest port): the
@@ -567,6 +577,9 @@ mod tests {
                 .all(|f| f.starts_with("hostfwd=tcp:127.0.0.1:"))
         );
         assert!(args[1].contains("hostfwd=tcp:127.0.0.1:10502-:502"));
-        assert_eq!(args[3], "virtio-net-pci,netdev=net0,addr=03.0");
+        assert_eq!(
+            args[3],
+            "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on"
+        );
     }
 }

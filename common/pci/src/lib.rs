@@ -507,6 +507,15 @@ impl Record {
     }
 }
 
+/// Whether the function's DMA would pass an IOMMU by: a transitional virtio device (vendor
+/// 0x1af4, device 0x1000..=0x103f) cannot offer VIRTIO_F_ACCESS_PLATFORM, and without it
+/// QEMU gives a virtio device physical memory directly. (A modern one, 0x1040.., is
+/// translated only with QEMU's `iommu_platform=on`, which configuration space does not
+/// show.)
+pub fn dma_bypasses_iommu(vendor: u16, device: u16) -> bool {
+    vendor == 0x1af4 && (0x1000..=0x103f).contains(&device)
+}
+
 /// Where the device page describes the partition's DMA region (after the records).
 pub const DMA_AT: usize = RECORDS_AT + MAX_PARTITION_DEVICES * RECORD_SIZE;
 /// Bytes of that description.

@@ -353,3 +353,13 @@ fn the_dma_region_round_trips_through_the_device_page_and_translates_addresses()
     );
     assert_eq!(region.bus_address_of(0x6bff_ffff_ffff), None);
 }
+
+#[test]
+fn transitional_virtio_devices_pass_the_iommu_by() {
+    assert!(
+        dma_bypasses_iommu(0x1af4, 0x1000),
+        "transitional virtio-net"
+    );
+    assert!(!dma_bypasses_iommu(0x1af4, 0x1041), "modern virtio-net");
+    assert!(!dma_bypasses_iommu(0x1234, 0x11e8), "edu");
+}

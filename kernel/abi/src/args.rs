@@ -210,6 +210,8 @@ call_args! {
     IrqLine { line: u64 = rdi }
     /// `pci_config`.
     PciConfig { address: u64 = rdi, value: u64 = rsi, write: u64 = rdx }
+    /// `dma_map`.
+    DmaMap { source: u64 = rdi, physical: u64 = rsi, pages: u64 = rdx }
 }
 
 /// Thread and task counts of a resource partition, 16 bits each in one register.
@@ -267,6 +269,10 @@ call_results! {
     PartitionInfo { active: u64 = rdi, window_start: u64 = rsi, window_length: u64 = rdx, cpu_ns: u64 = r10, idle_ns: u64 = r8, frames: u64 = r9 }
     /// `pci_config`: the dword read (0 after a write).
     PciConfig { value: u64 = rdi }
+    /// `dma_map`: the bus address of the first frame.
+    DmaMap { bus_address: u64 = rdi }
+    /// `dma_fault`: see [`Call::DmaFault`](crate::syscall::Call::DmaFault).
+    DmaFault { source: u64 = rdi, address: u64 = rsi, reason: u64 = rdx, write: u64 = r10 }
 }
 
 #[cfg(test)]

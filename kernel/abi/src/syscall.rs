@@ -307,6 +307,27 @@ codes::code_enum! {
         /// the root task. Errors: `NotPermitted` (not the root task), `InvalidArgument`
         /// (address beyond 24 bits or unaligned, `write` > 1, `value` beyond 32 bits).
         PciConfig = 86 => "pci_config",
+        /// `dma_map(source, physical, pages) -> rdi = bus address`: lets PCI function
+        /// `source` (bus << 8 | device << 3 | function) reach the `pages` (1..=
+        /// [`MAP_MAX_PAGES`]) frames of user memory from `physical` by DMA, at bus
+        /// addresses equal to their physical addresses (returned: `physical`), through the
+        /// IOMMU; what it reached before stays, nothing else is reachable (a function never
+        /// given frames reaches nothing). For syssw, which confines a partition's devices to
+        /// its DMA region before turning their bus mastering on. Ability: `PHYSICAL_MEMORY`,
+        /// caller in the root task. Errors: `NotPermitted` (not the root task),
+        /// `NoSuchObject` (the machine has no IOMMU the kernel programs, or its DMAR does not
+        /// list the function), `InvalidArgument`
+        /// (source beyond 16 bits, unaligned, page count, beyond the unit's bus addresses),
+        /// `BadAddress` (not user memory), `OutOfResources` (the remapping tables' frames,
+        /// reserved at boot, or domain ids are used up; or the unit did not answer).
+        DmaMap = 87 => "dma_map",
+        /// `dma_fault() -> rdi = source, rsi = address, rdx = reason, r10 = write`: the
+        /// oldest DMA request the IOMMU blocked that nobody took yet (requester as in
+        /// `dma_map`, the page of the bus address, the VT-d fault reason, 1 for a write),
+        /// taken from its fault records (a bounded look at them). For syssw's health
+        /// monitor, which polls it. Ability: `PHYSICAL_MEMORY`, caller in the root task.
+        /// Errors: `NotPermitted`, `NoSuchObject` (no IOMMU), `TimedOut` (none pending).
+        DmaFault = 88 => "dma_fault",
     }
 }
 

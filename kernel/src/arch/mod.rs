@@ -15,3 +15,4 @@ pub mod pit;
 pub mod serial;
 pub mod stack;
 pub mod syscall;
+pub mod vtd;

@@ -5,6 +5,7 @@
 //! tables, address spaces and the object logic built on them run unchanged on the host.
 
 pub mod frames;
+pub mod iommu;
 pub mod paging;
 
 #[cfg(not(test))]

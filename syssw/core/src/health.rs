@@ -22,6 +22,10 @@
 //! ring 3 are instructions the partition may not execute (`in`/`out` on a port it was not
 //! granted, `cli`, `hlt`, ...); a bad pointer shows up as #PF.
 //!
+//! A DMA request of a partition's PCI device outside the partition's DMA region, which the
+//! IOMMU blocked (the kernel's `dma_fault`), is a `memory_violation` of the partition that
+//! owns the device ([`DmaFault`]).
+//!
 //! # Log line (an interface: scenario tests match it)
 //!
 //! ```text
@@ -37,6 +41,8 @@
 //!   exception `<#XX>,error=0x<hex>,address=0x<hex>,rip=0x<hex>` where `<#XX>` is the
 //!   mnemonic of [`vector_name`] (`#PF`, `NMI`, ...) or `vector=<decimal>` for a vector
 //!   without one; for a forwarded system call `syscall,number=<decimal rax>,rip=0x<hex>`;
+//!   for a blocked DMA request `dma,device=<BB:DD.F>,<read|write>,address=0x<hex>,reason=<decimal>`
+//!   (the device, the page of the bus address, the VT-d fault reason);
 //!   for a text `"<text>"` with `"` and `\` escaped by a backslash and every byte outside
 //!   printable ASCII (and the space) written as `\xNN`.
 //!
@@ -178,6 +184,20 @@ pub enum Detail {
     Fault(Fault),
     /// A message (e.g. RAISE_APPLICATION_ERROR's).
     Text(Text),
+    /// A DMA request the IOMMU blocked.
+    Dma(DmaFault),
+}
+
+/// A DMA request of a device outside its partition's DMA region, blocked by the IOMMU.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DmaFault {
+    /// The device's routing id: bus << 8 | device << 3 | function.
+    pub source: u16,
+    /// The page of the bus address it asked for.
+    pub address: u64,
+    pub write: bool,
+    /// The VT-d fault reason.
+    pub reason: u8,
 }
 
 impl fmt::Display for Detail {
@@ -200,6 +220,16 @@ impl fmt::Display for Detail {
                     fault.error_code, fault.address, fault.rip
                 )
             }
+            Detail::Dma(d) => write!(
+                f,
+                "dma,device={:02x}:{:02x}.{},{},address={:#x},reason={}",
+                d.source >> 8,
+                (d.source >> 3) & 0x1f,
+                d.source & 7,
+                if d.write { "write" } else { "read" },
+                d.address,
+                d.reason
+            ),
             Detail::Text(text) => {
                 f.write_char('"')?;
                 for &b in text.as_bytes() {

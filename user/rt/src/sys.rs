@@ -486,6 +486,41 @@ pub fn pci_config(address: u32, write: Option<u32>) -> Result<u32, Error> {
     call(Call::PciConfig, a.encode()).map(|r| results::PciConfig::decode(&r).value as u32)
 }
 
+/// Lets PCI function `source` (its routing id) reach `pages` frames from `physical` by DMA
+/// through the IOMMU (root task only): the bus address of the first frame; see
+/// `Call::DmaMap`.
+pub fn dma_map(source: u16, physical: u64, pages: u64) -> Result<u64, Error> {
+    let a = args::DmaMap {
+        source: u64::from(source),
+        physical,
+        pages,
+    };
+    call(Call::DmaMap, a.encode()).map(|r| results::DmaMap::decode(&r).bus_address)
+}
+
+/// A DMA request the IOMMU blocked (see `Call::DmaFault`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DmaFault {
+    pub source: u16,
+    pub address: u64,
+    pub reason: u8,
+    pub write: bool,
+}
+
+/// The oldest blocked DMA request nobody took yet (root task only); `Err(TimedOut)` when
+/// there is none.
+pub fn dma_fault() -> Result<DmaFault, Error> {
+    call(Call::DmaFault, args::ArgRegs::default()).map(|r| {
+        let f = results::DmaFault::decode(&r);
+        DmaFault {
+            source: f.source as u16,
+            address: f.address,
+            reason: f.reason as u8,
+            write: f.write != 0,
+        }
+    })
+}
+
 /// Lets a descendant task attach interrupt line `line`.
 pub fn irq_grant(task: TaskId, line: u64) -> Result<(), Error> {
     let a = args::IrqGrant { task, line };

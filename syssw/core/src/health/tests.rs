@@ -236,6 +236,19 @@ fn log_line_format() {
         ..r
     };
     assert!(line(&system, &r).contains(r#" detail="tank\x20\"low\"\\\x0a\xff" "#));
+    let r = Record {
+        detail: Detail::Dma(DmaFault {
+            source: 4 << 3,
+            address: 0x7f_0000_0000,
+            write: true,
+            reason: 5,
+        }),
+        ..r
+    };
+    assert!(
+        line(&system, &r)
+            .contains(" detail=dma,device=00:04.0,write,address=0x7f00000000,reason=5 ")
+    );
     // A record naming a partition the system does not have prints `-`.
     let r = Record {
         partition: Some(14),

@@ -5,6 +5,11 @@
 //! * [`check_own_region`]: the positive control: a pattern written into the partition's DMA
 //!   region is read by the device and written back at another offset of the region,
 //!   where the partition finds it.
+//! * [`attack`] (partition `dma-attack*`, scenario `attack_dma`, with the IOMMU): the
+//!   positive control, then the device writes to [`TARGETS`] outside the region, each of
+//!   which the IOMMU must block (syssw reports each as the partition's memory violation),
+//!   a read of the other partition's start record (the device must not get its name), then the
+//!   positive control once more; logs `dma-attack: done`.
 
 use pci::{Bar, DmaRegion, Record};
 use user_rt::println;
@@ -105,6 +110,19 @@ impl Edu {
             )
         }
     }
+
+    /// Fills edu's buffer with `byte` (via a transfer from the region's last bytes).
+    pub fn fill_buffer(&self, byte: u8) -> bool {
+        let region = self.region_bytes();
+        let at = region.len() - LENGTH;
+        region[at..].fill(byte);
+        self.transfer(
+            self.region.bus_address + at as u64,
+            EDU_BUFFER,
+            LENGTH as u64,
+            false,
+        )
+    }
 }
 
 fn pattern(i: usize) -> u8 {
@@ -131,4 +149,81 @@ pub fn check_own_region(who: &str, edu: &Edu) -> bool {
         if ok { "ok" } else { "FAILED" }
     );
     ok
+}
+
+/// What a target is, and its bus address given the region's.
+pub type Target = (&'static str, fn(u64) -> u64);
+
+/// Where [`attack`] has the device write, outside its DMA region: what, and the bus
+/// address, relative to the region's own (bus address = physical address, so the region's
+/// bus address is its physical address). syssw allocates partitions' memory in configuration
+/// order from one ascending pool, the DMA region first, so the page below the region is the
+/// last page of the partition configured just before (its stack, holding its start record).
+/// The kernel keeps the lowest frames above 1 MiB for itself (its page tables and
+/// objects).
+pub const TARGETS: [Target; 3] = [
+    ("the kernel's memory (its first frame above 1 MiB)", |_| {
+        0x10_0000
+    }),
+    (
+        "another partition's memory (the top of the stack of the partition placed before)",
+        |own| own - 4096,
+    ),
+    ("an address no memory is at", |_| 0x7f_ffff_f000),
+];
+
+/// The attack; see the module documentation.
+pub fn attack(who: &str) {
+    let Some(edu) = Edu::find(who) else {
+        return;
+    };
+    let own = edu.region.bus_address;
+    println!(
+        "{who}: device {}, DMA region at bus address {own:#x}, {} KiB",
+        edu.record.address,
+        edu.region.length / 1024
+    );
+    check_own_region(who, &edu);
+    for (what, target) in TARGETS {
+        let target = target(own);
+        let filled = edu.fill_buffer(0xa5);
+        println!("{who}: edu writes {LENGTH} bytes to {what} at bus address {target:#x}");
+        let finished = edu.transfer(EDU_BUFFER, target, LENGTH as u64, true);
+        println!(
+            "{who}: check {}: edu finished the write (the IOMMU, not the device, stops it)",
+            if filled && finished { "ok" } else { "FAILED" }
+        );
+    }
+    // A read of the top of the other partition's stack, where its start record (with its
+    // name) lies: the device must not get those bytes (a blocked read gives it zeros).
+    let filled = edu.fill_buffer(0x5a);
+    let target = own - LENGTH as u64;
+    println!(
+        "{who}: edu reads {LENGTH} bytes of another partition's memory at bus address {target:#x}"
+    );
+    let finished = edu.transfer(target, EDU_BUFFER, LENGTH as u64, false);
+    let region = edu.region_bytes();
+    region[..LENGTH].fill(0xff);
+    let shown = edu.transfer(EDU_BUFFER, own, LENGTH as u64, true);
+    let got = &region[..LENGTH];
+    let leaked = got.windows(6).any(|w| w == b"victim");
+    println!(
+        "{who}: check {}: the device got none of that partition's bytes (its buffer holds {})",
+        if filled && finished && shown && !leaked {
+            "ok"
+        } else {
+            "FAILED"
+        },
+        if got.iter().all(|&b| b == 0) {
+            "zeros"
+        } else if got.iter().all(|&b| b == 0x5a) {
+            "its own bytes"
+        } else {
+            "other bytes"
+        }
+    );
+    if check_own_region(who, &edu) {
+        println!("{who}: its own region still works after the blocked writes");
+    }
+    println!("{who}: done");
 }

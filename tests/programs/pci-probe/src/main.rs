@@ -13,6 +13,7 @@
 //!   called `irq_ack` although the device still asserts it; after `irq_ack` the still
 //!   asserted level fires again (level-triggered); once the device is served and the line
 //!   acknowledged, nothing more comes. Logs `edu: done`.
+//! * `dma-attack*`: [`dma::attack`] (scenario `attack_dma`).
 //! * `dma*`: owns an `edu` function and a DMA region (`dma`): the positive control of
 //!   [`dma::check_own_region`], then logs `dma: done` (scenario `dma_regions`).
 //! * `cfg*`: reads CONFIG_ADDRESS (port 0xcf8), which no partition is ever granted: the #GP
@@ -65,6 +66,8 @@ fn main(start: u64, _: u64) {
         nic();
     } else if name.starts_with("edu") {
         edu();
+    } else if name.starts_with("dma-attack") {
+        dma::attack("dma-attack");
     } else if name.starts_with("dma") {
         if let Some(edu) = dma::Edu::find("dma") {
             println!(
