@@ -77,7 +77,7 @@ fn read(what: &str, file: &SourceFile) -> Result<String> {
 
 fn compile_type(what: &str, file: &SourceFile) -> Result<Vec<u8>> {
     let text = read(what, file)?;
-    match iec61499_build::compile(&file.name, &text) {
+    match iec61499_build::compile_any(&file.name, &text) {
         Ok(t) => Ok(t.package()),
         Err(errors) => {
             for e in &errors {

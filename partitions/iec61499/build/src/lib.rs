@@ -10,6 +10,7 @@
 //! returns to START.
 
 use iec61499_runtime::basic::{Action, BasicFb, Ecc, State, Transition};
+use iec61499_runtime::composite::{Component, CompositeType, End, Link};
 use iec61499_runtime::fb::{EventDecl, Interface, VarDecl, VarSpec};
 use iec61499_runtime::vmcode::{GUARD_BASE, INSTANCE, VmCode};
 use iec61499_runtime::{FunctionBlock, type_named};
@@ -299,6 +300,108 @@ fn program_of(
         "END_CASE\nEND_PROGRAM\nCONFIGURATION C\n  TASK T (INTERVAL := T#1s, PRIORITY := 1);\n  PROGRAM {INSTANCE} WITH T : FB_TYPE;\nEND_CONFIGURATION\n"
     );
     (program, places)
+}
+
+/// A compiled type of either kind.
+#[derive(Clone, Debug)]
+pub enum Compiled {
+    Basic(BasicType),
+    Composite(CompositeType),
+}
+
+impl Compiled {
+    pub fn name(&self) -> &str {
+        match self {
+            Compiled::Basic(t) => &t.name,
+            Compiled::Composite(t) => &t.name,
+        }
+    }
+
+    /// The package a device is sent.
+    pub fn package(&self) -> Vec<u8> {
+        match self {
+            Compiled::Basic(t) => t.package(),
+            Compiled::Composite(t) => t.encode(),
+        }
+    }
+}
+
+/// Reads and compiles the basic, simple or composite FB type in the `.fbt` text of `file`.
+pub fn compile_any(file: &str, text: &str) -> Result<Compiled, Vec<String>> {
+    let fb = read_fbt(file, text).map_err(|e| vec![e.to_string()])?;
+    match &fb.body {
+        Body::Composite(_) => composite_of(file, &fb).map(Compiled::Composite),
+        _ => compile_type(file, &fb).map(Compiled::Basic),
+    }
+}
+
+/// The composite type of `fb` (its network as the device flattens it; the component types
+/// are checked when the device creates an instance, against the types it has).
+pub fn composite_of(file: &str, fb: &FbType) -> Result<CompositeType, Vec<String>> {
+    let Body::Composite(net) = &fb.body else {
+        return Err(vec![format!("{file}: {} is not a composite FB", fb.name)]);
+    };
+    let ifc = &fb.interface;
+    if let Some(a) = ifc.plugs.iter().chain(&ifc.sockets).next() {
+        return Err(vec![format!(
+            "{file}:{}:{}: adapter {}: adapters are not supported",
+            a.pos.line, a.pos.col, a.name
+        )]);
+    }
+    let names = |events: &[iec61499_xml::Event]| events.iter().map(|e| e.name.clone()).collect();
+    let vars = |vars: &[Var]| vars.iter().map(|v| v.name.clone()).collect();
+    let end = |e: &iec61499_xml::Endpoint| End {
+        component: e.instance.clone(),
+        port: e.port.clone(),
+    };
+    let links = |list: &[iec61499_xml::Connection], event: bool| {
+        list.iter()
+            .map(|c| Link {
+                event,
+                source: end(&c.source),
+                destination: end(&c.destination),
+                line: c.pos.line,
+                col: c.pos.col,
+            })
+            .collect::<Vec<_>>()
+    };
+    for c in net.event_connections.iter().chain(&net.data_connections) {
+        for e in [&c.source, &c.destination] {
+            if let Some(i) = &e.instance
+                && !net.instances.iter().any(|x| x.name == *i)
+            {
+                return Err(vec![format!(
+                    "{file}:{}:{}: connection through adapter {i}: adapters are not supported",
+                    c.pos.line, c.pos.col
+                )]);
+            }
+        }
+    }
+    let t = CompositeType {
+        name: fb.name.clone(),
+        file: file.into(),
+        event_inputs: names(&ifc.event_inputs),
+        event_outputs: names(&ifc.event_outputs),
+        inputs: vars(&ifc.inputs),
+        outputs: vars(&ifc.outputs),
+        components: net
+            .instances
+            .iter()
+            .map(|i| Component {
+                name: i.name.clone(),
+                ty: i.ty.clone(),
+                parameters: i.parameters.clone(),
+                line: i.pos.line,
+                col: i.pos.col,
+            })
+            .collect(),
+        links: links(&net.event_connections, true)
+            .into_iter()
+            .chain(links(&net.data_connections, false))
+            .collect(),
+    };
+    // What the device checks when it takes the package, here with the file's name.
+    CompositeType::decode(&t.encode()).map_err(|e| vec![format!("{file}: {e}")])
 }
 
 /// Reads and compiles the basic or simple FB type in the `.fbt` text of `file`.

@@ -39,6 +39,7 @@ extern crate alloc;
 
 pub mod device;
 pub mod fboot;
+pub mod flat;
 pub mod literal;
 pub mod package;
 pub mod request;

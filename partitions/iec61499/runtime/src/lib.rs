@@ -36,6 +36,7 @@
 extern crate alloc;
 
 pub mod basic;
+pub mod composite;
 pub mod fb;
 pub mod package;
 pub mod resource;

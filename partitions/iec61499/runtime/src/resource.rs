@@ -160,9 +160,11 @@ impl Resource {
         }
     }
 
-    /// Creates instance `name` of `fb`; returns its index.
+    /// Creates instance `name` of `fb`; returns its index. A name may have several parts
+    /// joined by `.` (a composite's component is `COMPOSITE.COMPONENT`); a port is then
+    /// `COMPOSITE.COMPONENT.PORT`.
     pub fn create(&mut self, name: &str, fb: Box<dyn FunctionBlock>) -> Result<usize, DeployError> {
-        if name.is_empty() || name.contains('.') {
+        if name.split('.').any(str::is_empty) {
             return Err(DeployError::NotFound(name.into()));
         }
         if self.instance(name).is_some() {
@@ -319,10 +321,11 @@ impl Resource {
         }
     }
 
-    /// `FB.PORT` → (instance, name of the port).
+    /// `FB.PORT` → (instance, name of the port; the last part, as instance names may have
+    /// several).
     fn split<'p>(&self, path: &'p str) -> Result<(usize, &'p str), DeployError> {
         let (fb, port) = path
-            .split_once('.')
+            .rsplit_once('.')
             .ok_or_else(|| DeployError::NotFound(path.into()))?;
         let i = self
             .instance(fb)
