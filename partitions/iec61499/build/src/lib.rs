@@ -84,6 +84,11 @@ fn specs<'f>(file: &str, vars: &'f [Var]) -> Result<Vec<(VarSpec, &'f Var)>, Vec
         .collect()
 }
 
+/// The runtime's interface of the type `fb` read from `file`.
+pub fn interface_of_xml(file: &str, fb: &FbType) -> Result<Interface, Vec<String>> {
+    interface_of(file, fb)
+}
+
 /// The runtime's interface of `fb`.
 fn interface_of(file: &str, fb: &FbType) -> Result<Interface, Vec<String>> {
     let ifc = &fb.interface;
