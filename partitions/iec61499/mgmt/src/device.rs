@@ -81,6 +81,13 @@ impl Res {
                 .ok_or(Reason::NoSuchObject)?
         };
         for end in ends {
+            if self.resource.is_unbound(&end) {
+                // A generic port takes the type the literal names.
+                let ty = literal::type_of(text).ok_or(Reason::InvalidObject)?;
+                self.resource
+                    .bind(&end, ty)
+                    .map_err(|e| deploy_reason(&e))?;
+            }
             let spec = port_spec(&self.resource, &end).ok_or(Reason::NoSuchObject)?;
             let value = literal::parse(text, &spec).map_err(|_| Reason::InvalidObject)?;
             let done = if force {
@@ -561,10 +568,25 @@ impl Device {
         ty: &str,
         depth: usize,
     ) -> Result<(), Reason> {
+        // An unknown type before a taken name, as FORTE answers.
+        let composite = self.composites.iter().find(|t| t.name == ty).cloned();
+        let resource = self.resources[index].name.clone();
+        let fb = match composite {
+            Some(_) => None,
+            None => Some(
+                self.types
+                    .iter()
+                    .find(|t| t.name == ty)
+                    .map(TypePackage::instantiate)
+                    .or_else(|| types::create(ty, &resource, name, &self.report))
+                    .or_else(|| sifb::create(ty, &self.io))
+                    .ok_or(Reason::UnsupportedType)?,
+            ),
+        };
         if self.resources[index].has(name) {
             return Err(Reason::InvalidState);
         }
-        if let Some(t) = self.composites.iter().find(|t| t.name == ty).cloned() {
+        if let Some(t) = composite {
             if depth >= MAX_NESTING {
                 self.log(format!(
                     "{name}: composites nested more than {MAX_NESTING} deep (does {ty} contain itself?)"
@@ -596,15 +618,9 @@ impl Device {
             }
             return built;
         }
-        let resource = self.resources[index].name.clone();
-        let fb = self
-            .types
-            .iter()
-            .find(|t| t.name == ty)
-            .map(TypePackage::instantiate)
-            .or_else(|| types::create(ty, &resource, name, &self.report))
-            .or_else(|| sifb::create(ty, &self.io))
-            .ok_or(Reason::UnsupportedType)?;
+        let Some(fb) = fb else {
+            return Err(Reason::UnsupportedType);
+        };
         self.resources[index]
             .resource
             .create(name, fb)

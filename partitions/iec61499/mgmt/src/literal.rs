@@ -34,6 +34,23 @@ pub fn parse(text: &str, spec: &VarSpec) -> Result<Value, String> {
     }
 }
 
+/// The type a literal names itself (`DINT#26`, `T#1s`, `TRUE`, a quoted string), for a
+/// generic port without a type yet; `None` for an untyped number.
+pub fn type_of(text: &str) -> Option<DataType> {
+    let text = text.trim();
+    if text.eq_ignore_ascii_case("TRUE") || text.eq_ignore_ascii_case("FALSE") {
+        return Some(DataType::Bool);
+    }
+    if text.starts_with('\'') {
+        return Some(DataType::String);
+    }
+    let (prefix, _) = text.split_once('#')?;
+    if prefix.eq_ignore_ascii_case("T") || prefix.eq_ignore_ascii_case("TIME") {
+        return Some(DataType::Time);
+    }
+    type_named(prefix)
+}
+
 /// `inner` split at the commas outside quotes.
 fn split_top(inner: &str) -> Vec<&str> {
     if inner.trim().is_empty() {

@@ -200,4 +200,16 @@ pub trait FunctionBlock {
 
     /// Back to the state of a new instance (the resource's reset).
     fn reset(&mut self);
+
+    /// Whether input (or, with `output`, output) `index` is generic and has no type yet
+    /// (`crate::functions`).
+    fn untyped(&self, _output: bool, _index: usize) -> bool {
+        false
+    }
+
+    /// Gives the unbound generic variable `index` (and its group) the type `ty`; false when
+    /// it is not unbound or `ty` is outside its class.
+    fn bind_generic(&mut self, _output: bool, _index: usize, _ty: DataType) -> bool {
+        false
+    }
 }

@@ -38,6 +38,7 @@ extern crate alloc;
 pub mod basic;
 pub mod composite;
 pub mod fb;
+pub mod functions;
 pub mod package;
 pub mod resource;
 pub mod stdlib;

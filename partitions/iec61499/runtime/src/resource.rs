@@ -364,6 +364,31 @@ impl Resource {
     pub fn connect_data(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
         let source = self.port(from, |i, p| i.output(p))?;
         let destination = self.port(to, |i, p| i.input(p))?;
+        // A generic end without a type takes the other end's.
+        let generic = (
+            self.instances[source.0].fb.untyped(true, source.1),
+            self.instances[destination.0]
+                .fb
+                .untyped(false, destination.1),
+        );
+        match generic {
+            (true, true) => {
+                return Err(DeployError::Mismatch(format!(
+                    "{from} and {to} are both generic without a type yet (write a typed literal, e.g. DINT#0, to one first)"
+                )));
+            }
+            (true, false) => {
+                let input = &self.instances[destination.0].fb.interface().inputs[destination.1];
+                let ty = input.ty;
+                self.bind_end(source, true, ty, from)?;
+            }
+            (false, true) => {
+                let out = &self.instances[source.0].fb.interface().outputs[source.1];
+                let ty = out.ty;
+                self.bind_end(destination, false, ty, to)?;
+            }
+            (false, false) => {}
+        }
         let out = &self.instances[source.0].fb.interface().outputs[source.1];
         let input = &self.instances[destination.0].fb.interface().inputs[destination.1];
         if (out.ty, out.array) != (input.ty, input.array) {
@@ -379,6 +404,61 @@ impl Resource {
             return Err(DeployError::Limit("connections"));
         }
         self.data_connections.push((source, destination));
+        Ok(())
+    }
+
+    /// Whether `FB.PORT` (an input, else an output) is generic without a type yet.
+    pub fn is_unbound(&self, path: &str) -> bool {
+        self.generic_end(path)
+            .is_some_and(|(end, output)| self.instances[end.0].fb.untyped(output, end.1))
+    }
+
+    /// Gives the generic `FB.PORT` (an input, else an output) and its group the type `ty`.
+    pub fn bind(&mut self, path: &str, ty: crate::DataType) -> Result<(), DeployError> {
+        let (end, output) = self
+            .generic_end(path)
+            .ok_or_else(|| DeployError::NotFound(path.into()))?;
+        self.bind_end(end, output, ty, path)
+    }
+
+    fn generic_end(&self, path: &str) -> Option<(End, bool)> {
+        let (i, port) = self.split(path).ok()?;
+        let interface = self.instances[i].fb.interface();
+        match (interface.input(port), interface.output(port)) {
+            (Some(n), _) => Some(((i, n), false)),
+            (None, Some(n)) => Some(((i, n), true)),
+            (None, None) => None,
+        }
+    }
+
+    /// Binds a generic end; the instance's variables that got their type start from its
+    /// initial value.
+    fn bind_end(
+        &mut self,
+        end: End,
+        output: bool,
+        ty: crate::DataType,
+        path: &str,
+    ) -> Result<(), DeployError> {
+        let inst = &mut self.instances[end.0];
+        let before = inst.fb.interface().clone();
+        if !inst.fb.bind_generic(output, end.1, ty) {
+            return Err(DeployError::Mismatch(format!(
+                "{path} cannot be {}",
+                ty.name()
+            )));
+        }
+        let after = inst.fb.interface();
+        for (values, old, new) in [
+            (&mut inst.inputs, &before.inputs, &after.inputs),
+            (&mut inst.outputs, &before.outputs, &after.outputs),
+        ] {
+            for (k, (o, n)) in old.iter().zip(new).enumerate() {
+                if o.ty != n.ty {
+                    values[k] = n.initial();
+                }
+            }
+        }
         Ok(())
     }
 
