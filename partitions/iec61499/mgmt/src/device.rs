@@ -580,6 +580,7 @@ impl Device {
                     .map(TypePackage::instantiate)
                     .or_else(|| types::create(ty, &resource, name, &self.report))
                     .or_else(|| sifb::create(ty, &self.io))
+                    .or_else(|| crate::pubsub::create(ty, &self.io))
                     .ok_or(Reason::UnsupportedType)?,
             ),
         };
@@ -724,6 +725,22 @@ impl Device {
             .filter(|r| r.running)
             .filter_map(|r| r.resource.next_deadline())
             .min()
+    }
+
+    /// Whether a running resource takes events from outside (a SUBSCRIBE): the partition
+    /// then polls it ([`Device::poll`]) however far the next timer is.
+    pub fn polls(&self) -> bool {
+        self.resources
+            .iter()
+            .any(|r| r.running && r.resource.polls())
+    }
+
+    /// Lets the running resources take what arrived on their ports (SUBSCRIBE's messages).
+    pub fn poll(&mut self, now: i64) {
+        for r in self.resources.iter_mut().filter(|r| r.running) {
+            let _ = r.resource.poll(now);
+        }
+        self.note_faults();
     }
 
     /// Fires the due timers of every running resource.

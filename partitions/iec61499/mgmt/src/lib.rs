@@ -42,6 +42,7 @@ pub mod fboot;
 pub mod flat;
 pub mod literal;
 pub mod package;
+pub mod pubsub;
 pub mod request;
 pub mod serve;
 pub mod sifb;

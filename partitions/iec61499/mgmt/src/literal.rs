@@ -141,7 +141,7 @@ fn scalar(text: &str, ty: DataType) -> Result<Value, String> {
             Value::Real(cleaned.parse::<f64>().map_err(|_| bad())?)
         }
         DataType::Time => Value::Time(duration(body).ok_or_else(bad)?),
-        DataType::String => Value::String(string(body).ok_or_else(bad)?),
+        DataType::String | DataType::WString => Value::String(string(body).ok_or_else(bad)?),
         _ => {
             let v = integer(body).ok_or_else(bad)?;
             let (lo, hi) = range(ty).ok_or_else(bad)?;

@@ -697,6 +697,26 @@ impl Resource {
         })
     }
 
+    /// Whether some instance takes events from outside ([`FunctionBlock::polls`]).
+    pub fn polls(&self) -> bool {
+        self.instances
+            .iter()
+            .any(|i| !i.name.is_empty() && i.fb.polls())
+    }
+
+    /// Lets every instance that takes events from outside take them, in creation order,
+    /// each as its own chain at instant `now`.
+    pub fn poll(&mut self, now: i64) -> Result<(), Fault> {
+        for i in 0..self.instances.len() {
+            if !self.instances[i].name.is_empty() && self.instances[i].fb.polls() {
+                self.chain(now, |r| {
+                    r.react(i, now, |fb, inputs, ctx| fb.poll(inputs, ctx))
+                })?;
+            }
+        }
+        Ok(())
+    }
+
     /// The earliest armed timer's deadline.
     pub fn next_deadline(&self) -> Option<i64> {
         self.timers.iter().map(|t| t.at).min()
