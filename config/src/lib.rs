@@ -197,7 +197,9 @@
 //! requests, one a message (`iec61499_mgmt::serve`), and what their client may do:
 //! `"monitor"` (READ, QUERY, watches), `"force"` (also WRITE: parameters, forcing, event
 //! triggers) or `"download"` (also resources, FBs, connections, START/STOP/KILL/RESET and
-//! FB types); a request beyond it is answered ACCESS_DENIED.
+//! FB types); a request beyond it is answered ACCESS_DENIED. The partition's other queuing
+//! ports are its PUBLISH_n/SUBSCRIBE_n's: one whose `ID` names an output port sends on it,
+//! one whose `ID` names an input port receives from it (`iec61499_mgmt::pubsub`).
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,
