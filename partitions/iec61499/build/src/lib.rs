@@ -6,8 +6,9 @@
 //! file, line and column, also for ST errors inside an algorithm or guard.
 //!
 //! A simple FB (one algorithm per input event) becomes an ECC of its own: from START, each
-//! input event enters the state of its name, which runs the algorithm of that name, and
-//! returns to START.
+//! input event enters the state of its name, which runs the algorithm of that name, sends
+//! the output event of the same index (as FORTE does; none if there are fewer outputs)
+//! and returns to START.
 
 use iec61499_runtime::basic::{Action, BasicFb, Ecc, State, Transition};
 use iec61499_runtime::composite::{Component, CompositeType, End, Link};
@@ -187,7 +188,11 @@ fn parts_of<'f>(
                 .collect();
             Ok(Parts {
                 internals: specs(file, &b.internals)?,
-                algorithms: b.algorithms.iter().map(|a| (a.st.clone(), a.pos)).collect(),
+                algorithms: b
+                    .algorithms
+                    .iter()
+                    .map(|a| (statements(&a.st), a.pos))
+                    .collect(),
                 guards,
                 ecc: Ecc {
                     states,
@@ -203,11 +208,13 @@ fn parts_of<'f>(
             let mut transitions = Vec::new();
             for (i, event) in interface.event_inputs.iter().enumerate() {
                 let algorithm = s.algorithms.iter().position(|a| a.name == event.name);
+                // As FORTE's simple FBs: the output event of the input event's index
+                // follows the algorithm.
                 states.push(State {
                     name: event.name.clone(),
                     actions: vec![Action {
                         algorithm,
-                        output: None,
+                        output: (i < interface.event_outputs.len()).then_some(i),
                     }],
                 });
                 transitions.push(Transition {
@@ -225,7 +232,11 @@ fn parts_of<'f>(
             }
             Ok(Parts {
                 internals: specs(file, &s.internals)?,
-                algorithms: s.algorithms.iter().map(|a| (a.st.clone(), a.pos)).collect(),
+                algorithms: s
+                    .algorithms
+                    .iter()
+                    .map(|a| (statements(&a.st), a.pos))
+                    .collect(),
                 guards: Vec::new(),
                 ecc: Ecc {
                     states,
@@ -238,6 +249,42 @@ fn parts_of<'f>(
             fb.name
         )]),
     }
+}
+
+/// The statements of an algorithm's text: 4diac IDE 3 wraps them in `ALGORITHM NAME` ...
+/// `END_ALGORITHM`, older files do not. The wrapper's words become blanks, so every
+/// statement keeps its line and column for the messages.
+fn statements(st: &str) -> String {
+    let lead = st.len() - st.trim_start().len();
+    let rest = &st[lead..];
+    let Some(after) = rest
+        .get(..9)
+        .filter(|w| w.eq_ignore_ascii_case("ALGORITHM"))
+        .and_then(|_| rest.get(9..))
+        .filter(|a| a.starts_with(char::is_whitespace))
+    else {
+        return st.to_string();
+    };
+    // `ALGORITHM` and the name after it.
+    let name_start = after.len() - after.trim_start().len();
+    let name_len = after[name_start..]
+        .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+        .unwrap_or(after.len() - name_start);
+    let header = lead + 9 + name_start + name_len;
+    let mut out: String = st[..header]
+        .chars()
+        .map(|c| if c == '\n' { c } else { ' ' })
+        .collect();
+    let body = &st[header..];
+    match body.to_ascii_uppercase().rfind("END_ALGORITHM") {
+        Some(end) => {
+            out.push_str(&body[..end]);
+            out.push_str(&" ".repeat(13));
+            out.push_str(&body[end + 13..]);
+        }
+        None => out.push_str(body),
+    }
+    out
 }
 
 fn st_type(spec: &VarSpec) -> String {
