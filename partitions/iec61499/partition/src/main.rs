@@ -7,7 +7,10 @@
 //! E_DELAY, ...), fires every timer due, and waits again. Timers are absolute instants
 //! (`Device::advance`), so a late wake-up delays one firing but never shifts the ones
 //! after it. The partition's sampling ports (created at start) are the process image of
-//! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`). With management ports (`iec61499.mgmt`, created at start), the wait is a
+//! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`); its queuing ports
+//! other than the management pair (created at start) those of its PUBLISH_n/SUBSCRIBE_n
+//! (`iec61499_mgmt::pubsub`): while a running resource has a subscriber, the process wakes
+//! at least every `pubsub::POLL_NS` and lets it take what arrived. With management ports (`iec61499.mgmt`, created at start), the wait is a
 //! RECEIVE_QUEUING_MESSAGE on the request port: a request is answered on the response port
 //! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
 //! one.
