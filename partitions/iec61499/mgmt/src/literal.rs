@@ -92,7 +92,8 @@ fn untyped(text: &str, ty: DataType) -> Result<&str, String> {
     match text.split_once('#') {
         Some((prefix, rest)) if type_named(prefix).is_some() => {
             let named = type_named(prefix).unwrap_or(ty);
-            if named != ty && !(named == DataType::Time && ty == DataType::Time) {
+            // A literal of a narrower type is taken as of the port's (USINT#5 for an INT).
+            if !iec61499_runtime::widens(named, ty) {
                 return Err(format!("`{text}` is a {prefix}, not a {ty:?}"));
             }
             Ok(rest)

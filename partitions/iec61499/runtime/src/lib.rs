@@ -47,4 +47,4 @@ pub mod vmcode;
 
 pub use fb::{Context, EventSpec, FunctionBlock, Interface, VarSpec};
 pub use resource::{Fault, Limits, Resource};
-pub use value::{DataType, Value, type_named, zero};
+pub use value::{DataType, Value, type_named, widen, widens, zero};

@@ -360,7 +360,8 @@ impl Resource {
     }
 
     /// Connects data output `from` (`FB.OUT`) to data input `to` (`FB.IN`; an input has at
-    /// most one source).
+    /// most one source) of the same type or one the output's widens to
+    /// ([`crate::value::widens`]).
     pub fn connect_data(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
         let source = self.port(from, |i, p| i.output(p))?;
         let destination = self.port(to, |i, p| i.input(p))?;
@@ -391,7 +392,7 @@ impl Resource {
         }
         let out = &self.instances[source.0].fb.interface().outputs[source.1];
         let input = &self.instances[destination.0].fb.interface().inputs[destination.1];
-        if (out.ty, out.array) != (input.ty, input.array) {
+        if out.array != input.array || !crate::value::widens(out.ty, input.ty) {
             return Err(DeployError::Mismatch(format!(
                 "{from} is {:?}, {to} is {:?}",
                 out.ty, input.ty
@@ -515,6 +516,14 @@ impl Resource {
                 let value = match sender {
                     Some((s, outputs)) if s == *si => outputs[*so].clone(),
                     _ => self.instances[*si].outputs[*so].clone(),
+                };
+                // A connection may widen (UINT to DINT, ...): the value takes the input's type.
+                let from = self.instances[*si].fb.interface().outputs[*so].ty;
+                let to = interface.inputs[*var].ty;
+                let value = if from == to {
+                    value
+                } else {
+                    crate::value::widen(value, to)
                 };
                 (*var, value)
             })

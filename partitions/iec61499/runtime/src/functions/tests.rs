@@ -243,3 +243,50 @@ fn a_connection_types_a_generic_end_and_a_class_refuses_a_type() {
     r.trigger("A.REQ", 0).unwrap();
     assert_eq!(r.read("C.CV"), Some(&Value::UInt(1)));
 }
+
+#[test]
+fn a_connection_widens_without_loss_and_refuses_the_rest() {
+    use crate::value::widens;
+    use DataType::*;
+    for (from, to) in [
+        (SInt, LInt),
+        (USInt, Int),
+        (UInt, UDInt),
+        (UDInt, LInt),
+        (Byte, LWord),
+        (Real, LReal),
+        (UInt, Real),
+        (DInt, LReal),
+    ] {
+        assert!(widens(from, to), "{from:?} to {to:?}");
+    }
+    for (from, to) in [
+        (UInt, Int),
+        (Int, UInt),
+        (DInt, Real),
+        (LReal, Real),
+        (Word, UInt),
+        (Bool, Byte),
+        (Time, LInt),
+    ] {
+        assert!(!widens(from, to), "{from:?} to {to:?}");
+    }
+    // E_CTU's CV (UINT) into an LREAL and a DINT input: the values arrive converted.
+    let mut r = resource(&[("C", "E_CTU"), ("X", "F_MOVE"), ("Y", "F_MOVE")]);
+    r.bind("X.IN", LReal).unwrap();
+    r.bind("Y.IN", DInt).unwrap();
+    r.connect_data("C.CV", "X.IN").unwrap();
+    r.connect_data("C.CV", "Y.IN").unwrap();
+    r.connect_event("C.CUO", "X.REQ").unwrap();
+    r.connect_event("C.CUO", "Y.REQ").unwrap();
+    r.trigger("C.CU", 0).unwrap();
+    assert_eq!(r.read("X.OUT"), Some(&Value::Real(1.0)));
+    assert_eq!(r.read("Y.OUT"), Some(&Value::Int(1)));
+    // A narrowing connection is refused.
+    let mut r = resource(&[("C", "E_CTU"), ("Z", "F_MOVE")]);
+    r.bind("Z.IN", SInt).unwrap();
+    assert!(matches!(
+        r.connect_data("C.CV", "Z.IN"),
+        Err(DeployError::Mismatch(_))
+    ));
+}
