@@ -191,17 +191,21 @@
 //!
 //! **IEC 61499.** A partition running the IEC 61499 runtime (`image = "iec61499"`,
 //! `partitions/iec61499/partition`) names its boot file, `iec61499.boot` (a 4diac `.fboot`
-//! file: one management request a line, carried out at every start), and the basic FB
-//! types (`.fbt`) it uses beyond the standard library, `iec61499.types` (paths as for
-//! `plc.program`). `cargo xtask` compiles each type (algorithms and guards by the ST
-//! compiler; an error names the `.fbt` file, line and column) and writes the types and the
+//! file: one management request a line, carried out at every start), and the basic,
+//! simple and composite FB types (`.fbt`) it uses beyond the standard library,
+//! `iec61499.types` (paths as for `plc.program`). `cargo xtask` compiles each type
+//! (algorithms and guards by the ST compiler; an error names the `.fbt` file, line and
+//! column; a composite's network is checked when the boot file creates an instance, a
+//! refusal naming its place in the `.fbt`) and writes the types and the
 //! boot file as the partition's data entry (`iec61499_mgmt::package`); such a partition
 //! has no `plc`, `guest` or `data` keys. `iec61499.mgmt` names a queuing input and a
 //! queuing output of the partition (both `size = 4096`) that carry 4diac's management
 //! requests, one a message (`iec61499_mgmt::serve`), and what their client may do:
 //! `"monitor"` (READ, QUERY, watches), `"force"` (also WRITE: parameters, forcing, event
 //! triggers) or `"download"` (also resources, FBs, connections, START/STOP/KILL/RESET and
-//! FB types); a request beyond it is answered ACCESS_DENIED.
+//! FB types); a request beyond it is answered ACCESS_DENIED. The partition's other queuing
+//! ports are its PUBLISH_n/SUBSCRIBE_n's: one whose `ID` names an output port sends on it,
+//! one whose `ID` names an input port receives from it (`iec61499_mgmt::pubsub`).
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,

@@ -277,3 +277,44 @@ fn iec61499_system() {
         "console: a monitor client's type download was not refused",
     );
 }
+
+/// The value of `NAME=` in a watch line.
+fn watched<'l>(line: &'l str, name: &str) -> Option<&'l str> {
+    line.split(' ')
+        .find_map(|part| part.strip_prefix(name)?.strip_prefix('='))
+}
+
+#[test]
+fn iec61499_pubsub() {
+    let o = boot("iec61499_pubsub");
+    check(
+        &o,
+        o.ending == Ending::Done,
+        "expected the run to reach its done_when lines",
+    );
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    let Some(sub) = o.line("iec61499: t=3000ms watch SUB.") else {
+        return check(&o, false, "no subscriber watch line at 3 s");
+    };
+    eprintln!("{sub}");
+    let count = |name| watched(sub, name).and_then(|v| v.parse::<u64>().ok());
+    let (received, last) = (count("SUB.N.CV"), count("SUB.V.OUT"));
+    // A message every 100 ms from the publisher's start: about 30 by 3 s, none lost (each
+    // IND carries the publisher's count, which equals the number received).
+    check(
+        &o,
+        received.is_some_and(|n| (25..=31).contains(&n)) && last == received,
+        &format!("subscriber at 3 s: {received:?} INDs, last value {last:?}"),
+    );
+    check(
+        &o,
+        watched(sub, "SUB.X.OUT") == Some("1.5") && watched(sub, "SUB.S.STATUS") == Some("'OK'"),
+        &format!("subscriber's LREAL and status: {sub}"),
+    );
+    let publisher = o.line("watch PUB.TICK.CV=");
+    check(
+        &o,
+        publisher.is_some_and(|l| watched(l, "PUB.P.STATUS") == Some("'OK'")),
+        &format!("publisher's status: {publisher:?}"),
+    );
+}

@@ -9,7 +9,7 @@ use anyhow::{Context, Result, bail};
 use config::System;
 use config::model::{Direction, PortKind};
 use config::system::SourceFile;
-use iec61499_mgmt::package::{DevicePackage, MgmtPorts, QueuingPort, SamplingPort};
+use iec61499_mgmt::package::{DataQueue, DevicePackage, MgmtPorts, QueuingPort, SamplingPort};
 use iec61499_mgmt::serve::Access;
 use iec61499_mgmt::sifb::NoPorts;
 use iec61499_runtime::Limits;
@@ -30,18 +30,10 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             .collect::<Result<Vec<_>>>()?;
         let boot = read(&what, &fb.boot)?;
         let limits = Limits::default();
-        let port = |index: usize| {
-            let port = &p.ports[index];
-            QueuingPort {
-                name: &port.name,
-                size: port.size,
-                depth: port.depth,
-            }
-        };
         let mgmt = fb.mgmt.map(|m| MgmtPorts {
             access: Access::from_code(m.access as u8).expect("the same codes"),
-            request: port(m.request),
-            response: port(m.response),
+            request: port(p, m.request),
+            response: port(p, m.response),
         });
         let ports = p
             .ports
@@ -54,6 +46,18 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
                 refresh_ns: port.refresh,
             })
             .collect();
+        // The queuing ports other than the management pair: PUBLISH/SUBSCRIBE's.
+        let mgmt_ports = fb.mgmt.map_or(Vec::new(), |m| vec![m.request, m.response]);
+        let queues = p
+            .ports
+            .iter()
+            .enumerate()
+            .filter(|(i, port)| port.kind == PortKind::Queuing && !mgmt_ports.contains(i))
+            .map(|(i, port)| DataQueue {
+                port: self::port(p, i),
+                input: port.direction == Direction::In,
+            })
+            .collect();
         let package = iec61499_mgmt::package::encode(&DevicePackage {
             types: types.iter().map(Vec::as_slice).collect(),
             boot: &boot,
@@ -61,6 +65,7 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             chain_events: limits.chain_events,
             mgmt,
             ports,
+            queues,
         });
         if let Err(reason) = iec61499_mgmt::package::boot(&package, Box::new(NoPorts), 0) {
             bail!("{what}: {}: {reason}", fb.boot.name);
@@ -70,6 +75,16 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     Ok(out)
 }
 
+/// Queuing port `index` of partition `p` as the partition creates it.
+fn port(p: &config::system::Partition, index: usize) -> QueuingPort<'_> {
+    let port = &p.ports[index];
+    QueuingPort {
+        name: &port.name,
+        size: port.size,
+        depth: port.depth,
+    }
+}
+
 fn read(what: &str, file: &SourceFile) -> Result<String> {
     std::fs::read_to_string(&file.path)
         .with_context(|| format!("{what}: cannot read {}", file.path))
@@ -77,7 +92,7 @@ fn read(what: &str, file: &SourceFile) -> Result<String> {
 
 fn compile_type(what: &str, file: &SourceFile) -> Result<Vec<u8>> {
     let text = read(what, file)?;
-    match iec61499_build::compile(&file.name, &text) {
+    match iec61499_build::compile_any(&file.name, &text) {
         Ok(t) => Ok(t.package()),
         Err(errors) => {
             for e in &errors {

@@ -6,10 +6,12 @@
 //! file, line and column, also for ST errors inside an algorithm or guard.
 //!
 //! A simple FB (one algorithm per input event) becomes an ECC of its own: from START, each
-//! input event enters the state of its name, which runs the algorithm of that name, and
-//! returns to START.
+//! input event enters the state of its name, which runs the algorithm of that name, sends
+//! the output event of the same index (as FORTE does; none if there are fewer outputs)
+//! and returns to START.
 
 use iec61499_runtime::basic::{Action, BasicFb, Ecc, State, Transition};
+use iec61499_runtime::composite::{Component, CompositeType, End, Link};
 use iec61499_runtime::fb::{EventDecl, Interface, VarDecl, VarSpec};
 use iec61499_runtime::vmcode::{GUARD_BASE, INSTANCE, VmCode};
 use iec61499_runtime::{FunctionBlock, type_named};
@@ -81,6 +83,11 @@ fn specs<'f>(file: &str, vars: &'f [Var]) -> Result<Vec<(VarSpec, &'f Var)>, Vec
     vars.iter()
         .map(|v| spec(file, v).map(|s| (s, v)).map_err(|e| vec![e]))
         .collect()
+}
+
+/// The runtime's interface of the type `fb` read from `file`.
+pub fn interface_of_xml(file: &str, fb: &FbType) -> Result<Interface, Vec<String>> {
+    interface_of(file, fb)
 }
 
 /// The runtime's interface of `fb`.
@@ -181,7 +188,11 @@ fn parts_of<'f>(
                 .collect();
             Ok(Parts {
                 internals: specs(file, &b.internals)?,
-                algorithms: b.algorithms.iter().map(|a| (a.st.clone(), a.pos)).collect(),
+                algorithms: b
+                    .algorithms
+                    .iter()
+                    .map(|a| (statements(&a.st), a.pos))
+                    .collect(),
                 guards,
                 ecc: Ecc {
                     states,
@@ -197,11 +208,13 @@ fn parts_of<'f>(
             let mut transitions = Vec::new();
             for (i, event) in interface.event_inputs.iter().enumerate() {
                 let algorithm = s.algorithms.iter().position(|a| a.name == event.name);
+                // As FORTE's simple FBs: the output event of the input event's index
+                // follows the algorithm.
                 states.push(State {
                     name: event.name.clone(),
                     actions: vec![Action {
                         algorithm,
-                        output: None,
+                        output: (i < interface.event_outputs.len()).then_some(i),
                     }],
                 });
                 transitions.push(Transition {
@@ -219,7 +232,11 @@ fn parts_of<'f>(
             }
             Ok(Parts {
                 internals: specs(file, &s.internals)?,
-                algorithms: s.algorithms.iter().map(|a| (a.st.clone(), a.pos)).collect(),
+                algorithms: s
+                    .algorithms
+                    .iter()
+                    .map(|a| (statements(&a.st), a.pos))
+                    .collect(),
                 guards: Vec::new(),
                 ecc: Ecc {
                     states,
@@ -232,6 +249,42 @@ fn parts_of<'f>(
             fb.name
         )]),
     }
+}
+
+/// The statements of an algorithm's text: 4diac IDE 3 wraps them in `ALGORITHM NAME` ...
+/// `END_ALGORITHM`, older files do not. The wrapper's words become blanks, so every
+/// statement keeps its line and column for the messages.
+fn statements(st: &str) -> String {
+    let lead = st.len() - st.trim_start().len();
+    let rest = &st[lead..];
+    let Some(after) = rest
+        .get(..9)
+        .filter(|w| w.eq_ignore_ascii_case("ALGORITHM"))
+        .and_then(|_| rest.get(9..))
+        .filter(|a| a.starts_with(char::is_whitespace))
+    else {
+        return st.to_string();
+    };
+    // `ALGORITHM` and the name after it.
+    let name_start = after.len() - after.trim_start().len();
+    let name_len = after[name_start..]
+        .find(|c: char| !(c.is_alphanumeric() || c == '_'))
+        .unwrap_or(after.len() - name_start);
+    let header = lead + 9 + name_start + name_len;
+    let mut out: String = st[..header]
+        .chars()
+        .map(|c| if c == '\n' { c } else { ' ' })
+        .collect();
+    let body = &st[header..];
+    match body.to_ascii_uppercase().rfind("END_ALGORITHM") {
+        Some(end) => {
+            out.push_str(&body[..end]);
+            out.push_str(&" ".repeat(13));
+            out.push_str(&body[end + 13..]);
+        }
+        None => out.push_str(body),
+    }
+    out
 }
 
 fn st_type(spec: &VarSpec) -> String {
@@ -299,6 +352,108 @@ fn program_of(
         "END_CASE\nEND_PROGRAM\nCONFIGURATION C\n  TASK T (INTERVAL := T#1s, PRIORITY := 1);\n  PROGRAM {INSTANCE} WITH T : FB_TYPE;\nEND_CONFIGURATION\n"
     );
     (program, places)
+}
+
+/// A compiled type of either kind.
+#[derive(Clone, Debug)]
+pub enum Compiled {
+    Basic(BasicType),
+    Composite(CompositeType),
+}
+
+impl Compiled {
+    pub fn name(&self) -> &str {
+        match self {
+            Compiled::Basic(t) => &t.name,
+            Compiled::Composite(t) => &t.name,
+        }
+    }
+
+    /// The package a device is sent.
+    pub fn package(&self) -> Vec<u8> {
+        match self {
+            Compiled::Basic(t) => t.package(),
+            Compiled::Composite(t) => t.encode(),
+        }
+    }
+}
+
+/// Reads and compiles the basic, simple or composite FB type in the `.fbt` text of `file`.
+pub fn compile_any(file: &str, text: &str) -> Result<Compiled, Vec<String>> {
+    let fb = read_fbt(file, text).map_err(|e| vec![e.to_string()])?;
+    match &fb.body {
+        Body::Composite(_) => composite_of(file, &fb).map(Compiled::Composite),
+        _ => compile_type(file, &fb).map(Compiled::Basic),
+    }
+}
+
+/// The composite type of `fb` (its network as the device flattens it; the component types
+/// are checked when the device creates an instance, against the types it has).
+pub fn composite_of(file: &str, fb: &FbType) -> Result<CompositeType, Vec<String>> {
+    let Body::Composite(net) = &fb.body else {
+        return Err(vec![format!("{file}: {} is not a composite FB", fb.name)]);
+    };
+    let ifc = &fb.interface;
+    if let Some(a) = ifc.plugs.iter().chain(&ifc.sockets).next() {
+        return Err(vec![format!(
+            "{file}:{}:{}: adapter {}: adapters are not supported",
+            a.pos.line, a.pos.col, a.name
+        )]);
+    }
+    let names = |events: &[iec61499_xml::Event]| events.iter().map(|e| e.name.clone()).collect();
+    let vars = |vars: &[Var]| vars.iter().map(|v| v.name.clone()).collect();
+    let end = |e: &iec61499_xml::Endpoint| End {
+        component: e.instance.clone(),
+        port: e.port.clone(),
+    };
+    let links = |list: &[iec61499_xml::Connection], event: bool| {
+        list.iter()
+            .map(|c| Link {
+                event,
+                source: end(&c.source),
+                destination: end(&c.destination),
+                line: c.pos.line,
+                col: c.pos.col,
+            })
+            .collect::<Vec<_>>()
+    };
+    for c in net.event_connections.iter().chain(&net.data_connections) {
+        for e in [&c.source, &c.destination] {
+            if let Some(i) = &e.instance
+                && !net.instances.iter().any(|x| x.name == *i)
+            {
+                return Err(vec![format!(
+                    "{file}:{}:{}: connection through adapter {i}: adapters are not supported",
+                    c.pos.line, c.pos.col
+                )]);
+            }
+        }
+    }
+    let t = CompositeType {
+        name: fb.name.clone(),
+        file: file.into(),
+        event_inputs: names(&ifc.event_inputs),
+        event_outputs: names(&ifc.event_outputs),
+        inputs: vars(&ifc.inputs),
+        outputs: vars(&ifc.outputs),
+        components: net
+            .instances
+            .iter()
+            .map(|i| Component {
+                name: i.name.clone(),
+                ty: i.ty.clone(),
+                parameters: i.parameters.clone(),
+                line: i.pos.line,
+                col: i.pos.col,
+            })
+            .collect(),
+        links: links(&net.event_connections, true)
+            .into_iter()
+            .chain(links(&net.data_connections, false))
+            .collect(),
+    };
+    // What the device checks when it takes the package, here with the file's name.
+    CompositeType::decode(&t.encode()).map_err(|e| vec![format!("{file}: {e}")])
 }
 
 /// Reads and compiles the basic or simple FB type in the `.fbt` text of `file`.

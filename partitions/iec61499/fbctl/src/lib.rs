@@ -7,7 +7,7 @@
 //!   send DEST REQUEST   one request (DEST empty for the device); prints the response
 //!   boot FILE           every line of a boot file (.fboot); prints each response, stops
 //!                       at the first refusal
-//!   type FILE           sends a basic FB type in parts: a `.fbt` is compiled here
+//!   type FILE           sends a basic or composite FB type in parts: a `.fbt` is compiled here
 //!                       (outside the real-time partition), any other file is taken as a
 //!                       compiled package (`compile`'s output) and sent as it is; the
 //!                       device checks it whole and refuses it with the reason in its log
@@ -256,20 +256,25 @@ fn text_of<'a>(name: &str, file: &'a [u8]) -> Result<&'a str, Failure> {
 
 /// Compiles the `.fbt` text `file`: the type's name and package.
 fn compile(name: &str, file: &[u8]) -> Result<(String, Vec<u8>), Failure> {
-    let t = iec61499_build::compile(name, text_of(name, file)?)
+    let t = iec61499_build::compile_any(name, text_of(name, file)?)
         .map_err(|errors| Failure::usage(errors.join("\n")))?;
-    let package = t.package();
-    Ok((t.name, package))
+    Ok((t.name().to_string(), t.package()))
 }
 
 /// The type name a package says it holds (its name record; nothing else is checked here:
 /// the device checks the package whole).
 pub fn package_name(package: &[u8]) -> Option<String> {
-    if package.get(..4)? != b"W61T" {
-        return None;
-    }
-    let len = usize::from(*package.get(14)?);
-    let name = std::str::from_utf8(package.get(15..15 + len)?).ok()?;
+    // A basic type's name is a u8-counted record after a u16 count, a composite's a
+    // u16-counted text (`iec61499_runtime::package`, `::composite`).
+    let (start, len) = match package.get(..4)? {
+        b"W61T" => (15, usize::from(*package.get(14)?)),
+        b"W61N" => (
+            14,
+            usize::from(u16::from_le_bytes([*package.get(12)?, *package.get(13)?])),
+        ),
+        _ => return None,
+    };
+    let name = std::str::from_utf8(package.get(start..start + len)?).ok()?;
     Some(name.to_string())
 }
 

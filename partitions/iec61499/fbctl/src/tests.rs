@@ -203,3 +203,15 @@ fn a_monitor_client_cannot_deploy_and_a_silent_device_times_out() {
         3
     );
 }
+
+#[test]
+fn a_composite_type_package_names_its_type() {
+    let t = iec61499_runtime::composite::CompositeType {
+        name: "TICKER".into(),
+        file: "TICKER.fbt".into(),
+        ..Default::default()
+    };
+    assert_eq!(package_name(&t.encode()).as_deref(), Some("TICKER"));
+    assert_eq!(package_name(b"W61N\x01"), None);
+    assert_eq!(package_name(b"XXXX"), None);
+}

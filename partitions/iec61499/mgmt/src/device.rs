@@ -1,6 +1,7 @@
 //! A device: its resources, the requests carried out on them, watches, and the boot file.
 
 use crate::fboot;
+use crate::flat::{Composites, Flat, FlatPort, PortKind, within};
 use crate::literal;
 use crate::request::{Action, Object, Reason, Request, escape, response};
 use crate::sifb;
@@ -9,6 +10,7 @@ use alloc::format;
 use alloc::string::String;
 use alloc::vec::Vec;
 use core::cell::Ref;
+use iec61499_runtime::composite::{self, CompositeType};
 use iec61499_runtime::fb::Restart;
 use iec61499_runtime::package::{self, PackageError, TypePackage};
 use iec61499_runtime::resource::DeployError;
@@ -25,13 +27,90 @@ struct Res {
     types: Vec<(String, String)>,
     /// Watched ports (`FB.PORT`), in creation order.
     watches: Vec<String>,
+    /// The composite instances, flattened ([`crate::flat`]).
+    composites: Composites,
 }
+
+impl Res {
+    /// Whether an instance or composite instance named `name` exists.
+    fn has(&self, name: &str) -> bool {
+        self.composites.contains(name) || self.resource.instances().any(|(n, _)| n == name)
+    }
+
+    /// Deletes instance `name`, or composite instance `name` with all its components.
+    fn delete_tree(&mut self, name: &str) -> Result<(), DeployError> {
+        if !self.composites.contains(name) {
+            return self.resource.delete(name);
+        }
+        let inside: Vec<String> = self
+            .resource
+            .instances()
+            .map(|(n, _)| String::from(n))
+            .filter(|n| within(n, name))
+            .collect();
+        for n in inside {
+            self.resource.delete(&n)?;
+        }
+        self.composites.remove_tree(name);
+        Ok(())
+    }
+
+    /// The value of `FB.PORT` (through a composite's port).
+    fn read(&self, path: &str) -> Option<&iec61499_runtime::Value> {
+        self.resource.read(&self.composites.data_port(path)?)
+    }
+
+    /// The ports `path` stands for as a data input, else as a data output (what a force
+    /// is about).
+    fn data_ends(&self, path: &str) -> Result<Vec<String>, DeployError> {
+        self.composites
+            .resolve(path, PortKind::DataIn)
+            .filter(|ends| !ends.is_empty())
+            .or_else(|| self.composites.resolve(path, PortKind::DataOut))
+            .ok_or_else(|| DeployError::NotFound(path.into()))
+    }
+
+    /// Writes the literal `text` to input `to` (through a composite's port), as a
+    /// parameter or, with `force`, as a force.
+    fn write_literal(&mut self, text: &str, to: &str, force: bool) -> Result<(), Reason> {
+        let ends = if force {
+            self.data_ends(to).map_err(|e| deploy_reason(&e))?
+        } else {
+            self.composites
+                .resolve(to, PortKind::DataIn)
+                .ok_or(Reason::NoSuchObject)?
+        };
+        for end in ends {
+            if self.resource.is_unbound(&end) {
+                // A generic port takes the type the literal names.
+                let ty = literal::type_of(text).ok_or(Reason::InvalidObject)?;
+                self.resource
+                    .bind(&end, ty)
+                    .map_err(|e| deploy_reason(&e))?;
+            }
+            let spec = port_spec(&self.resource, &end).ok_or(Reason::NoSuchObject)?;
+            let value = literal::parse(text, &spec).map_err(|_| Reason::InvalidObject)?;
+            let done = if force {
+                self.resource.force(&end, value)
+            } else {
+                self.resource.write(&end, value)
+            };
+            done.map_err(|e| deploy_reason(&e))?;
+        }
+        Ok(())
+    }
+}
+
+/// How deep composites may nest (a composite that contains itself stops here).
+pub const MAX_NESTING: usize = 8;
 
 /// An IEC 61499 device.
 pub struct Device {
     limits: Limits,
     /// Basic FB types added at run time ([`Device::add_type`]), by name.
     types: Vec<TypePackage>,
+    /// Composite FB types added the same way.
+    composites: Vec<CompositeType>,
     max_resources: usize,
     resources: Vec<Res>,
     report: SharedReport,
@@ -61,6 +140,7 @@ impl Device {
         Device {
             limits,
             types: Vec::new(),
+            composites: Vec::new(),
             max_resources,
             resources: Vec::new(),
             report: SharedReport::default(),
@@ -131,16 +211,7 @@ impl Device {
         let Some((_, bytes)) = self.staged.take() else {
             return Some(Reason::InvalidState);
         };
-        let checked = package::decode(&bytes).and_then(|p| {
-            if p.name == name {
-                self.install(p)
-            } else {
-                Err(PackageError::Rejected(format!(
-                    "the package holds type {}",
-                    p.name
-                )))
-            }
-        });
+        let checked = self.install_bytes(&bytes, Some(name));
         let line = match checked {
             Ok(_) => {
                 self.report
@@ -187,6 +258,7 @@ impl Device {
                     running: false,
                     types: alloc::vec![("START".into(), "E_RESTART".into())],
                     watches: Vec::new(),
+                    composites: Composites::default(),
                 });
                 None
             }
@@ -247,24 +319,15 @@ impl Device {
             .iter()
             .position(|r| r.name == destination)
             .ok_or(Reason::InvalidDst)?;
-        let report = self.report.clone();
-        let io = self.io.clone();
         let r = &mut self.resources[index];
         let deploy = |e: DeployError| deploy_reason(&e);
         match (request.action, &request.object) {
             (Action::Create, Object::Fb { name, ty }) => {
-                let added = self
-                    .types
-                    .iter()
-                    .find(|t| t.name == *ty)
-                    .map(TypePackage::instantiate);
-                let r = &mut self.resources[index];
-                let fb = added
-                    .or_else(|| types::create(ty, destination, name, &report))
-                    .or_else(|| sifb::create(ty, &io))
-                    .ok_or(Reason::UnsupportedType)?;
-                r.resource.create(name, fb).map_err(deploy)?;
-                r.types.push((name.clone(), ty.clone()));
+                if name.contains('.') {
+                    return Err(Reason::InvalidObject);
+                }
+                self.create_instance(index, name, ty, 0)?;
+                self.resources[index].types.push((name.clone(), ty.clone()));
             }
             (
                 Action::Create,
@@ -273,19 +336,12 @@ impl Device {
                     destination,
                     ..
                 },
-            ) => {
-                // An event connection, else (its ports are no events) a data connection.
-                match r.resource.connect_event(source, destination) {
-                    Ok(()) => {}
-                    Err(DeployError::NotFound(_)) => r
-                        .resource
-                        .connect_data(source, destination)
-                        .map_err(deploy)?,
-                    Err(other) => return Err(deploy(other)),
-                }
-            }
+            ) => r
+                .composites
+                .connect(&mut r.resource, source, destination)
+                .map_err(deploy)?,
             (Action::Create, Object::Watch { source, .. }) => {
-                r.resource.read(source).ok_or(Reason::NoSuchObject)?;
+                r.read(source).ok_or(Reason::NoSuchObject)?;
                 if !r.watches.contains(source) {
                     r.watches.push(source.clone());
                 }
@@ -294,7 +350,7 @@ impl Device {
                 if r.running {
                     return Err(Reason::InvalidState);
                 }
-                r.resource.delete(name).map_err(deploy)?;
+                r.delete_tree(name).map_err(deploy)?;
                 r.types.retain(|(n, _)| n != name);
                 r.watches
                     .retain(|w| w.split('.').next() != Some(name.as_str()));
@@ -306,13 +362,10 @@ impl Device {
                     destination,
                     ..
                 },
-            ) => {
-                if r.resource.disconnect_event(source, destination).is_err() {
-                    r.resource
-                        .disconnect_data(source, destination)
-                        .map_err(deploy)?;
-                }
-            }
+            ) => r
+                .composites
+                .disconnect(&mut r.resource, source, destination)
+                .map_err(deploy)?,
             (Action::Delete, Object::Watch { source, .. }) => {
                 let before = r.watches.len();
                 r.watches.retain(|w| w != source);
@@ -332,20 +385,22 @@ impl Device {
                     if !r.running {
                         return Err(Reason::InvalidState);
                     }
-                    r.resource.trigger(destination, now).map_err(deploy)?;
+                    let ends = r
+                        .composites
+                        .resolve(destination, PortKind::EventIn)
+                        .ok_or(Reason::NoSuchObject)?;
+                    for end in ends {
+                        r.resource.trigger(&end, now).map_err(deploy)?;
+                    }
                     return Ok(None);
                 }
                 if *force == Some(false) {
-                    r.resource.unforce(destination).map_err(deploy)?;
+                    for end in r.data_ends(destination).map_err(deploy)? {
+                        r.resource.unforce(&end).map_err(deploy)?;
+                    }
                     return Ok(None);
                 }
-                let spec = port_spec(&r.resource, destination).ok_or(Reason::NoSuchObject)?;
-                let value = literal::parse(source, &spec).map_err(|_| Reason::InvalidObject)?;
-                if *force == Some(true) {
-                    r.resource.force(destination, value).map_err(deploy)?;
-                } else {
-                    r.resource.write(destination, value).map_err(deploy)?;
-                }
+                r.write_literal(source, destination, *force == Some(true))?;
             }
             (Action::Read, Object::Watch { .. }) => return Ok(Some(self.watches())),
             (
@@ -356,7 +411,7 @@ impl Device {
                     ..
                 },
             ) => {
-                let value = r.resource.read(source).ok_or(Reason::NoSuchObject)?;
+                let value = r.read(source).ok_or(Reason::NoSuchObject)?;
                 return Ok(Some(format!(
                     "<Connection Source=\"{}\" Destination=\"{}\" />",
                     escape(&literal::show(value)),
@@ -396,7 +451,7 @@ impl Device {
         let mut out = Vec::new();
         for r in &self.resources {
             for w in &r.watches {
-                let value = r.resource.read(w).map_or(String::from("?"), literal::show);
+                let value = r.read(w).map_or(String::from("?"), literal::show);
                 out.push((format!("{}.{w}", r.name), value));
             }
         }
@@ -418,12 +473,16 @@ impl Device {
                 out.push_str(&format!("<FB name=\"{}\">", escape(fb)));
                 for w in r.watches.iter().filter(|w| w.split('.').next() == Some(fb)) {
                     let port = w.split_once('.').map_or("", |(_, p)| p);
-                    let value = r.resource.read(w).map_or(String::from("?"), literal::show);
+                    let value = r.read(w).map_or(String::from("?"), literal::show);
+                    let forced = r
+                        .composites
+                        .data_port(w)
+                        .is_some_and(|p| r.resource.is_forced(&p));
                     out.push_str(&format!(
                         "<Port name=\"{}\"><Data value=\"{}\" forced=\"{}\"/></Port>",
                         escape(port),
                         escape(&value),
-                        r.resource.is_forced(w)
+                        forced
                     ));
                 }
                 out.push_str("</FB>");
@@ -452,21 +511,211 @@ impl Device {
     /// Adds (or replaces) a basic FB type from its package (compiled outside the real-time
     /// partition; checked whole here: structure, ECC, bytecode verification). New instances
     /// of the name are of this type; existing ones keep theirs. Returns the type's name.
+    /// A composite type's package ([`iec61499_runtime::composite`]) is checked for its
+    /// structure here and for its components when an instance is created.
     pub fn add_type(&mut self, bytes: &[u8]) -> Result<String, PackageError> {
-        self.install(package::decode(bytes)?)
+        self.install_bytes(bytes, None)
     }
 
-    /// Adds (or replaces) a decoded, checked type.
-    fn install(&mut self, package: TypePackage) -> Result<String, PackageError> {
-        let name = package.name.clone();
+    /// Decodes, checks and adds (or replaces) a basic or composite type; with `expected`,
+    /// only a type of that name.
+    fn install_bytes(
+        &mut self,
+        bytes: &[u8],
+        expected: Option<&str>,
+    ) -> Result<String, PackageError> {
+        let (name, kind) = if bytes.starts_with(composite::MAGIC) {
+            let t = CompositeType::decode(bytes)?;
+            (t.name.clone(), Err(t))
+        } else {
+            let p = package::decode(bytes)?;
+            (p.name.clone(), Ok(p))
+        };
+        if let Some(expected) = expected
+            && name != expected
+        {
+            return Err(PackageError::Rejected(format!(
+                "the package holds type {name}"
+            )));
+        }
         if stdlib::create(&name).is_some() {
             return Err(PackageError::Rejected(format!(
                 "{name} is a standard type and cannot be replaced"
             )));
         }
         self.types.retain(|t| t.name != name);
-        self.types.push(package);
+        self.composites.retain(|t| t.name != name);
+        match kind {
+            Ok(basic) => self.types.push(basic),
+            Err(composite) => self.composites.push(composite),
+        }
         Ok(name)
+    }
+
+    /// Logs `line` (a refusal's details).
+    fn log(&self, line: String) {
+        self.report.borrow_mut().log.push(line);
+    }
+
+    /// Creates instance `name` of type `ty` in resource `index`: a composite flattened into
+    /// its components ([`crate::flat`]), `depth` composites deep. A refusal inside a
+    /// composite is logged with its place in the composite's `.fbt`, and leaves nothing of
+    /// the instance behind.
+    fn create_instance(
+        &mut self,
+        index: usize,
+        name: &str,
+        ty: &str,
+        depth: usize,
+    ) -> Result<(), Reason> {
+        // An unknown type before a taken name, as FORTE answers.
+        let composite = self.composites.iter().find(|t| t.name == ty).cloned();
+        let resource = self.resources[index].name.clone();
+        let fb = match composite {
+            Some(_) => None,
+            None => Some(
+                self.types
+                    .iter()
+                    .find(|t| t.name == ty)
+                    .map(TypePackage::instantiate)
+                    .or_else(|| types::create(ty, &resource, name, &self.report))
+                    .or_else(|| sifb::create(ty, &self.io))
+                    .or_else(|| crate::pubsub::create(ty, &self.io))
+                    .ok_or(Reason::UnsupportedType)?,
+            ),
+        };
+        if self.resources[index].has(name) {
+            return Err(Reason::InvalidState);
+        }
+        if let Some(t) = composite {
+            if depth >= MAX_NESTING {
+                self.log(format!(
+                    "{name}: composites nested more than {MAX_NESTING} deep (does {ty} contain itself?)"
+                ));
+                return Err(Reason::Overflow);
+            }
+            let ports = [
+                (PortKind::EventIn, &t.event_inputs),
+                (PortKind::EventOut, &t.event_outputs),
+                (PortKind::DataIn, &t.inputs),
+                (PortKind::DataOut, &t.outputs),
+            ]
+            .into_iter()
+            .flat_map(|(kind, names)| {
+                names.iter().map(move |n| FlatPort {
+                    name: n.clone(),
+                    kind,
+                    ends: Vec::new(),
+                })
+            })
+            .collect();
+            self.resources[index].composites.0.push(Flat {
+                name: name.into(),
+                ports,
+            });
+            let built = self.flatten(index, name, &t, depth);
+            if built.is_err() {
+                let _ = self.resources[index].delete_tree(name);
+            }
+            return built;
+        }
+        let Some(fb) = fb else {
+            return Err(Reason::UnsupportedType);
+        };
+        self.resources[index]
+            .resource
+            .create(name, fb)
+            .map_err(|e| deploy_reason(&e))?;
+        Ok(())
+    }
+
+    /// Creates the components of composite instance `name` of type `t`, their parameters
+    /// and connections, and fills in what its ports stand for.
+    fn flatten(
+        &mut self,
+        index: usize,
+        name: &str,
+        t: &CompositeType,
+        depth: usize,
+    ) -> Result<(), Reason> {
+        for c in &t.components {
+            let path = format!("{name}.{}", c.name);
+            let place = t.place(c.line, c.col);
+            self.create_instance(index, &path, &c.ty, depth + 1)
+                .inspect_err(|reason| {
+                    self.log(format!(
+                        "{place}: component {} of type {} refused: {}",
+                        c.name,
+                        c.ty,
+                        reason.name()
+                    ))
+                })?;
+            for (input, text) in &c.parameters {
+                self.resources[index]
+                    .write_literal(text, &format!("{path}.{input}"), false)
+                    .inspect_err(|reason| {
+                        self.log(format!(
+                            "{place}: parameter {}.{input} = {text} refused: {}",
+                            c.name,
+                            reason.name()
+                        ))
+                    })?;
+            }
+        }
+        for l in &t.links {
+            let place = t.place(l.line, l.col);
+            let end = |e: &composite::End| {
+                e.component
+                    .as_ref()
+                    .map(|c| format!("{name}.{c}.{}", e.port))
+            };
+            let (input, output) = if l.event {
+                (PortKind::EventIn, PortKind::EventOut)
+            } else {
+                (PortKind::DataIn, PortKind::DataOut)
+            };
+            let r = &mut self.resources[index];
+            let refused = match (end(&l.source), end(&l.destination)) {
+                (None, None) => Some(String::from(
+                    "a connection from the interface straight to the interface is not supported",
+                )),
+                (None, Some(to)) => match r.composites.resolve(&to, input) {
+                    Some(ends) if ends.iter().all(|e| port_exists(&r.resource, e, input)) => {
+                        if let Some(p) = r.composites.port_mut(name, &l.source.port, input) {
+                            p.ends.extend(ends);
+                        }
+                        None
+                    }
+                    _ => Some(format!("no such input: {}", l.destination.port)),
+                },
+                (Some(from), None) => match r.composites.resolve(&from, output) {
+                    Some(ends) if ends.iter().all(|e| port_exists(&r.resource, e, output)) => {
+                        match r.composites.port_mut(name, &l.destination.port, output) {
+                            Some(p) if !l.event && p.ends.len() + ends.len() > 1 => Some(format!(
+                                "data output {} has two sources",
+                                l.destination.port
+                            )),
+                            Some(p) => {
+                                p.ends.extend(ends);
+                                None
+                            }
+                            None => None,
+                        }
+                    }
+                    _ => Some(format!("no such output: {}", l.source.port)),
+                },
+                (Some(from), Some(to)) => r
+                    .composites
+                    .connect(&mut r.resource, &from, &to)
+                    .err()
+                    .map(|e| format!("{e}")),
+            };
+            if let Some(why) = refused {
+                self.log(format!("{place}: connection refused: {why}"));
+                return Err(Reason::InvalidObject);
+            }
+        }
+        Ok(())
     }
 
     /// The earliest timer of a running resource.
@@ -476,6 +725,22 @@ impl Device {
             .filter(|r| r.running)
             .filter_map(|r| r.resource.next_deadline())
             .min()
+    }
+
+    /// Whether a running resource takes events from outside (a SUBSCRIBE): the partition
+    /// then polls it ([`Device::poll`]) however far the next timer is.
+    pub fn polls(&self) -> bool {
+        self.resources
+            .iter()
+            .any(|r| r.running && r.resource.polls())
+    }
+
+    /// Lets the running resources take what arrived on their ports (SUBSCRIBE's messages).
+    pub fn poll(&mut self, now: i64) {
+        for r in self.resources.iter_mut().filter(|r| r.running) {
+            let _ = r.resource.poll(now);
+        }
+        self.note_faults();
     }
 
     /// Fires the due timers of every running resource.
@@ -491,10 +756,17 @@ impl Device {
     pub fn boot(&mut self, text: &str, now: i64) -> Result<usize, String> {
         let lines = fboot::lines(text)?;
         for line in &lines {
+            let logged = self.report.borrow().log.len();
             let answer = self.execute(line.destination, line.request, now);
             if answer.contains("Reason=\"") {
+                let details: Vec<String> = self.report.borrow().log[logged..].to_vec();
+                let details = if details.is_empty() {
+                    String::new()
+                } else {
+                    format!(" ({})", details.join("; "))
+                };
                 return Err(format!(
-                    "boot file line {}: {} refused: {answer}",
+                    "boot file line {}: {} refused: {answer}{details}",
                     line.number, line.request
                 ));
             }
@@ -503,9 +775,25 @@ impl Device {
     }
 }
 
+/// Whether `FB.PORT` is a port of `kind` of an instance of `resource`.
+fn port_exists(resource: &Resource, path: &str, kind: PortKind) -> bool {
+    let Some((fb, port)) = path.rsplit_once('.') else {
+        return false;
+    };
+    resource.instances().any(|(n, i)| {
+        n == fb
+            && match kind {
+                PortKind::EventIn => i.event_input(port).is_some(),
+                PortKind::EventOut => i.event_output(port).is_some(),
+                PortKind::DataIn => i.input(port).is_some(),
+                PortKind::DataOut => i.output(port).is_some(),
+            }
+    })
+}
+
 /// The declaration of `FB.PORT` (an input, else an output).
 fn port_spec(resource: &Resource, path: &str) -> Option<iec61499_runtime::VarSpec> {
-    let (fb, port) = path.split_once('.')?;
+    let (fb, port) = path.rsplit_once('.')?;
     let (_, interface) = resource.instances().find(|(n, _)| *n == fb)?;
     interface
         .inputs

@@ -39,8 +39,10 @@ extern crate alloc;
 
 pub mod device;
 pub mod fboot;
+pub mod flat;
 pub mod literal;
 pub mod package;
+pub mod pubsub;
 pub mod request;
 pub mod serve;
 pub mod sifb;

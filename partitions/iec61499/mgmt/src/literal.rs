@@ -34,6 +34,23 @@ pub fn parse(text: &str, spec: &VarSpec) -> Result<Value, String> {
     }
 }
 
+/// The type a literal names itself (`DINT#26`, `T#1s`, `TRUE`, a quoted string), for a
+/// generic port without a type yet; `None` for an untyped number.
+pub fn type_of(text: &str) -> Option<DataType> {
+    let text = text.trim();
+    if text.eq_ignore_ascii_case("TRUE") || text.eq_ignore_ascii_case("FALSE") {
+        return Some(DataType::Bool);
+    }
+    if text.starts_with('\'') {
+        return Some(DataType::String);
+    }
+    let (prefix, _) = text.split_once('#')?;
+    if prefix.eq_ignore_ascii_case("T") || prefix.eq_ignore_ascii_case("TIME") {
+        return Some(DataType::Time);
+    }
+    type_named(prefix)
+}
+
 /// `inner` split at the commas outside quotes.
 fn split_top(inner: &str) -> Vec<&str> {
     if inner.trim().is_empty() {
@@ -75,7 +92,8 @@ fn untyped(text: &str, ty: DataType) -> Result<&str, String> {
     match text.split_once('#') {
         Some((prefix, rest)) if type_named(prefix).is_some() => {
             let named = type_named(prefix).unwrap_or(ty);
-            if named != ty && !(named == DataType::Time && ty == DataType::Time) {
+            // A literal of a narrower type is taken as of the port's (USINT#5 for an INT).
+            if !iec61499_runtime::widens(named, ty) {
                 return Err(format!("`{text}` is a {prefix}, not a {ty:?}"));
             }
             Ok(rest)
@@ -124,7 +142,7 @@ fn scalar(text: &str, ty: DataType) -> Result<Value, String> {
             Value::Real(cleaned.parse::<f64>().map_err(|_| bad())?)
         }
         DataType::Time => Value::Time(duration(body).ok_or_else(bad)?),
-        DataType::String => Value::String(string(body).ok_or_else(bad)?),
+        DataType::String | DataType::WString => Value::String(string(body).ok_or_else(bad)?),
         _ => {
             let v = integer(body).ok_or_else(bad)?;
             let (lo, hi) = range(ty).ok_or_else(bad)?;

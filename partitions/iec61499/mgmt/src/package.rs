@@ -14,6 +14,8 @@
 //!    name (UTF-8), message size u32, depth u32]
 //! .. sampling ports (for the process-image FBs, `crate::sifb`): count u16, per port: name
 //!    length u8, name, direction u8 (1 in, 0 out), message size u32, refresh period u64 (ns)
+//! .. queuing ports (for PUBLISH/SUBSCRIBE, `crate::pubsub`): count u16, per port: name
+//!    length u8, name, direction u8 (1 in, 0 out), message size u32, depth u32
 //! .. per type: length u32, the type package; then the boot file (UTF-8)
 //! ```
 //!
@@ -28,7 +30,7 @@ use alloc::vec::Vec;
 use iec61499_runtime::Limits;
 
 const MAGIC: &[u8; 4] = b"W61D";
-const VERSION: u16 = 1;
+const VERSION: u16 = 2;
 /// The most types one package may carry.
 pub const MAX_TYPES: usize = 256;
 /// The most sampling ports a package names (a partition has fewer).
@@ -53,6 +55,16 @@ pub struct DevicePackage<'a> {
     pub mgmt: Option<MgmtPorts<'a>>,
     /// The partition's sampling ports.
     pub ports: Vec<SamplingPort<'a>>,
+    /// The partition's queuing ports other than the management ones.
+    pub queues: Vec<DataQueue<'a>>,
+}
+
+/// A queuing port for PUBLISH/SUBSCRIBE as the partition creates it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DataQueue<'a> {
+    pub port: QueuingPort<'a>,
+    /// The partition receives on it.
+    pub input: bool,
 }
 
 /// A sampling port as the partition creates it.
@@ -101,7 +113,7 @@ pub enum DevicePackageError {
     Limit(&'static str, usize),
     /// The management-ports field at this offset is not valid.
     Mgmt(usize),
-    /// The sampling-ports field at this offset is not valid.
+    /// The sampling- or queuing-ports field at this offset is not valid.
     Ports(usize),
 }
 
@@ -122,7 +134,7 @@ impl core::fmt::Display for DevicePackageError {
             Self::Trailing(at) => write!(f, "bytes after the boot file at offset {at}"),
             Self::Limit(what, n) => write!(f, "{what} {n} is out of range"),
             Self::Mgmt(at) => write!(f, "invalid management ports at offset {at}"),
-            Self::Ports(at) => write!(f, "invalid sampling ports at offset {at}"),
+            Self::Ports(at) => write!(f, "invalid sampling or queuing ports at offset {at}"),
         }
     }
 }
@@ -161,6 +173,13 @@ pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
         body.push(u8::from(port.input));
         body.extend_from_slice(&port.size.to_le_bytes());
         body.extend_from_slice(&port.refresh_ns.to_le_bytes());
+    }
+    body.extend_from_slice(&(package.queues.len() as u16).to_le_bytes());
+    for q in &package.queues {
+        push_name(&mut body, q.port.name);
+        body.push(u8::from(q.input));
+        body.extend_from_slice(&q.port.size.to_le_bytes());
+        body.extend_from_slice(&q.port.depth.to_le_bytes());
     }
     for t in &package.types {
         body.extend_from_slice(&(t.len() as u32).to_le_bytes());
@@ -276,6 +295,28 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
             refresh_ns: u64::from_le_bytes(raw),
         });
     }
+    let field = at;
+    let queue_count = take(bytes, &mut at, 2)?;
+    let queue_count = usize::from(u16::from_le_bytes([queue_count[0], queue_count[1]]));
+    if queue_count > MAX_PORTS {
+        return Err(DevicePackageError::Ports(field));
+    }
+    let mut queues = Vec::with_capacity(queue_count);
+    for _ in 0..queue_count {
+        let name = name_at(bytes, &mut at)?;
+        let field = at;
+        let input = match take(bytes, &mut at, 1)?[0] {
+            0 => false,
+            1 => true,
+            _ => return Err(DevicePackageError::Ports(field)),
+        };
+        let size = u32_at(bytes, &mut at)? as u32;
+        let depth = u32_at(bytes, &mut at)? as u32;
+        queues.push(DataQueue {
+            port: QueuingPort { name, size, depth },
+            input,
+        });
+    }
     let mut types = Vec::with_capacity(count);
     for _ in 0..count {
         let len = u32_at(bytes, &mut at)?;
@@ -293,6 +334,7 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         chain_events,
         mgmt,
         ports,
+        queues,
     })
 }
 
@@ -354,6 +396,7 @@ mod tests {
             chain_events: chain,
             mgmt: None,
             ports: Vec::new(),
+            queues: Vec::new(),
         }
     }
 
@@ -388,6 +431,16 @@ mod tests {
                     refresh_ns: 0,
                 },
             ],
+            queues: vec![
+                DataQueue {
+                    port: port("counts", 8),
+                    input: false,
+                },
+                DataQueue {
+                    port: port("counts-in", 4),
+                    input: true,
+                },
+            ],
         };
         assert_eq!(decode(&encode(&original)).unwrap(), original);
         let plain = package(&[], "", 1, 1);
@@ -403,9 +456,10 @@ mod tests {
         );
         assert_eq!(decode(b"W61"), Err(DevicePackageError::Truncated(0)));
         assert_eq!(decode(b"W61TXXXXXXXXXXXX"), Err(DevicePackageError::Magic));
-        let mut v2 = bytes.clone();
-        v2[4] = 2;
-        assert_eq!(decode(&v2), Err(DevicePackageError::Version(2)));
+        // Version 1 had no queuing ports for PUBLISH/SUBSCRIBE.
+        let mut v1 = bytes.clone();
+        v1[4] = 1;
+        assert_eq!(decode(&v1), Err(DevicePackageError::Version(1)));
         for i in 12..bytes.len() {
             let mut flipped = bytes.clone();
             flipped[i] ^= 0x40;

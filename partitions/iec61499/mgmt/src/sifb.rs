@@ -40,6 +40,22 @@ pub trait ProcessIo {
     fn read(&mut self, port: &str, buf: &mut [u8]) -> Option<bool>;
     /// Sends `message` on output port `port`.
     fn write(&mut self, port: &str, message: &[u8]) -> bool;
+
+    /// The message size of queuing port `port` in direction `input` (true: the partition
+    /// receives on it), if the partition has it (for PUBLISH/SUBSCRIBE, `crate::pubsub`).
+    fn queue_size(&self, _port: &str, _input: bool) -> Option<usize> {
+        None
+    }
+    /// The next message of input queuing port `port` into `buf` without waiting: its
+    /// length, or `None` when none is queued.
+    fn receive(&mut self, _port: &str, _buf: &mut [u8]) -> Option<usize> {
+        None
+    }
+    /// Queues `message` on output queuing port `port` without waiting; false when the
+    /// port is full or missing.
+    fn send(&mut self, _port: &str, _message: &[u8]) -> bool {
+        false
+    }
 }
 
 /// A device without ports (the host's boot check): every INIT says which port is missing.
@@ -60,7 +76,7 @@ impl ProcessIo for NoPorts {
 /// The ports, shared by a device's process-image FBs, with each output port's message as
 /// last written (so FBs writing different offsets of one message keep each other's bytes).
 pub struct SharedIo {
-    io: Box<dyn ProcessIo>,
+    pub(crate) io: Box<dyn ProcessIo>,
     outputs: Vec<(String, Vec<u8>)>,
 }
 

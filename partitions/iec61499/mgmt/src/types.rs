@@ -1,4 +1,5 @@
-//! The FB types a device can create: the standard event FBs, the same-type conversion FBs
+//! The FB types a device can create: the standard event FBs, the generic function FBs
+//! (`iec61499_runtime::functions`), the same-type conversion FBs
 //! of 4diac's library (`BOOL2BOOL`, `DINT2DINT`, ...), and the test FBs FORTE's system
 //! tests report with: `TEST_CONDITION` (REQ with `check`: counts a passed or failed test,
 //! logs it, CNF) and `STEST_END` (REQ: the test is over).
@@ -10,7 +11,7 @@ use alloc::string::String;
 use alloc::vec::Vec;
 use core::cell::RefCell;
 use iec61499_runtime::fb::EventDecl;
-use iec61499_runtime::{Context, DataType, FunctionBlock, Interface, Value, stdlib};
+use iec61499_runtime::{Context, DataType, FunctionBlock, Interface, Value, functions, stdlib};
 
 /// What the test FBs tell the device.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -41,7 +42,7 @@ pub fn create(
     name: &str,
     report: &SharedReport,
 ) -> Option<Box<dyn FunctionBlock>> {
-    if let Some(fb) = stdlib::create(ty) {
+    if let Some(fb) = stdlib::create(ty).or_else(|| functions::create(ty)) {
         return Some(fb);
     }
     match ty {

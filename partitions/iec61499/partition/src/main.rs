@@ -7,7 +7,10 @@
 //! E_DELAY, ...), fires every timer due, and waits again. Timers are absolute instants
 //! (`Device::advance`), so a late wake-up delays one firing but never shifts the ones
 //! after it. The partition's sampling ports (created at start) are the process image of
-//! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`). With management ports (`iec61499.mgmt`, created at start), the wait is a
+//! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`); its queuing ports
+//! other than the management pair (created at start) those of its PUBLISH_n/SUBSCRIBE_n
+//! (`iec61499_mgmt::pubsub`): while a running resource has a subscriber, the process wakes
+//! at least every `pubsub::POLL_NS` and lets it take what arrived. With management ports (`iec61499.mgmt`, created at start), the wait is a
 //! RECEIVE_QUEUING_MESSAGE on the request port: a request is answered on the response port
 //! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
 //! one.
@@ -42,7 +45,7 @@ use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
 use iec61499_mgmt::Device;
-use iec61499_mgmt::package::{MgmtPorts, QueuingPort, SamplingPort};
+use iec61499_mgmt::package::{DataQueue, MgmtPorts, QueuingPort, SamplingPort};
 use iec61499_mgmt::serve::{Access, serve};
 use iec61499_mgmt::sifb::ProcessIo;
 
@@ -137,6 +140,13 @@ impl Mgmt {
 /// The partition's sampling ports (created at start) for the process-image FBs.
 struct ApexIo {
     ports: Vec<(String, usize, Sampling)>,
+    /// PUBLISH/SUBSCRIBE's queuing ports.
+    queues: Vec<(String, usize, Queuing)>,
+}
+
+enum Queuing {
+    In(QueuingPortReceiver<Warden>),
+    Out(QueuingPortSender<Warden>),
 }
 
 enum Sampling {
@@ -145,7 +155,19 @@ enum Sampling {
 }
 
 impl ApexIo {
-    fn open(ports: &[SamplingPort<'_>]) -> Self {
+    fn open(ports: &[SamplingPort<'_>], queues: &[DataQueue<'_>]) -> Self {
+        let queues = queues
+            .iter()
+            .filter_map(|q| {
+                let name = Name::from_str(q.port.name).ok()?;
+                let port = if q.input {
+                    Queuing::In(QueuingPortReceiver::from_name(name).ok()?)
+                } else {
+                    Queuing::Out(QueuingPortSender::from_name(name).ok()?)
+                };
+                Some((q.port.name.into(), q.port.size as usize, port))
+            })
+            .collect();
         let ports = ports
             .iter()
             .filter_map(|p| {
@@ -158,7 +180,7 @@ impl ApexIo {
                 Some((p.name.into(), p.size as usize, port))
             })
             .collect();
-        ApexIo { ports }
+        ApexIo { ports, queues }
     }
 
     fn find(&self, port: &str) -> Option<&(String, usize, Sampling)> {
@@ -189,6 +211,33 @@ impl ProcessIo for ApexIo {
     fn write(&mut self, port: &str, message: &[u8]) -> bool {
         match self.find(port) {
             Some((_, _, Sampling::Out(p))) => p.send(message).is_ok(),
+            _ => false,
+        }
+    }
+
+    fn queue_size(&self, port: &str, input: bool) -> Option<usize> {
+        match self.queues.iter().find(|(name, _, _)| name == port)? {
+            (_, size, Queuing::In(_)) if input => Some(*size),
+            (_, size, Queuing::Out(_)) if !input => Some(*size),
+            _ => None,
+        }
+    }
+
+    fn receive(&mut self, port: &str, buf: &mut [u8]) -> Option<usize> {
+        match self.queues.iter().find(|(name, _, _)| name == port)? {
+            (_, _, Queuing::In(p)) => p
+                .receive(buf, SystemTime::Normal(Duration::ZERO))
+                .ok()
+                .map(|(message, _)| message.len()),
+            _ => None,
+        }
+    }
+
+    fn send(&mut self, port: &str, message: &[u8]) -> bool {
+        match self.queues.iter().find(|(name, _, _)| name == port) {
+            Some((_, _, Queuing::Out(p))) => {
+                p.send(message, SystemTime::Normal(Duration::ZERO)).is_ok()
+            }
             _ => false,
         }
     }
@@ -232,7 +281,7 @@ extern "C" fn device_process() {
             return;
         }
     };
-    let io = Box::new(ApexIo::open(&package.ports));
+    let io = Box::new(ApexIo::open(&package.ports, &package.queues));
     let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), io, now_ns()) {
         Ok(booted) => booted,
         Err(reason) => {
@@ -284,11 +333,21 @@ extern "C" fn device_process() {
             print_watches(&device, next_stats);
             next_stats = (now / every + 1) * every;
         }
+        if device.polls() {
+            device.poll(now_ns());
+            drain(&mut device, &mut faults_seen);
+        }
         let now = now_ns();
+        // A subscriber's messages wait at most one poll period.
+        let idle = if device.polls() {
+            Duration::from_nanos(iec61499_mgmt::pubsub::POLL_NS as u64)
+        } else {
+            IDLE
+        };
         let sleep = match device.next_deadline() {
             Some(due) if due <= now => continue,
-            Some(due) => Duration::from_nanos((due - now) as u64).min(IDLE),
-            None => IDLE,
+            Some(due) => Duration::from_nanos((due - now) as u64).min(idle),
+            None => idle,
         };
         if !wait(&mut device, mgmt.as_ref(), sleep, &mut buf) {
             return;
@@ -321,6 +380,35 @@ impl Iec61499Partition {
                 report(&alloc::format!(
                     "creating sampling port {} failed: {e:?}",
                     p.name
+                ));
+            }
+        }
+        for q in &package.queues {
+            let created = Name::from_str(q.port.name)
+                .map_err(|_| Error::InvalidParam)
+                .and_then(|n| {
+                    if q.input {
+                        ctx.create_queuing_port_receiver(
+                            n,
+                            q.port.size,
+                            q.port.depth,
+                            QueuingDiscipline::Fifo,
+                        )
+                        .map(drop)
+                    } else {
+                        ctx.create_queuing_port_sender(
+                            n,
+                            q.port.size,
+                            q.port.depth,
+                            QueuingDiscipline::Fifo,
+                        )
+                        .map(drop)
+                    }
+                });
+            if let Err(e) = created {
+                report(&alloc::format!(
+                    "creating queuing port {} failed: {e:?}",
+                    q.port.name
                 ));
             }
         }

@@ -200,4 +200,26 @@ pub trait FunctionBlock {
 
     /// Back to the state of a new instance (the resource's reset).
     fn reset(&mut self);
+
+    /// Whether the FB takes events from outside (a SUBSCRIBE's messages): the resource
+    /// then calls [`FunctionBlock::poll`] when it is polled.
+    fn polls(&self) -> bool {
+        false
+    }
+
+    /// Takes what arrived from outside and sends the events it makes (each its own chain
+    /// of the resource's poll).
+    fn poll(&mut self, _inputs: &[Value], _ctx: &mut Context<'_>) {}
+
+    /// Whether input (or, with `output`, output) `index` is generic and has no type yet
+    /// (`crate::functions`).
+    fn untyped(&self, _output: bool, _index: usize) -> bool {
+        false
+    }
+
+    /// Gives the unbound generic variable `index` (and its group) the type `ty`; false when
+    /// it is not unbound or `ty` is outside its class.
+    fn bind_generic(&mut self, _output: bool, _index: usize, _ty: DataType) -> bool {
+        false
+    }
 }

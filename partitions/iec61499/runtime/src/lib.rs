@@ -36,7 +36,9 @@
 extern crate alloc;
 
 pub mod basic;
+pub mod composite;
 pub mod fb;
+pub mod functions;
 pub mod package;
 pub mod resource;
 pub mod stdlib;
@@ -45,4 +47,4 @@ pub mod vmcode;
 
 pub use fb::{Context, EventSpec, FunctionBlock, Interface, VarSpec};
 pub use resource::{Fault, Limits, Resource};
-pub use value::{DataType, Value, type_named, zero};
+pub use value::{DataType, Value, type_named, widen, widens, zero};

@@ -81,7 +81,7 @@ impl core::fmt::Display for PackageError {
     }
 }
 
-fn crc(bytes: &[u8]) -> u32 {
+pub(crate) fn crc(bytes: &[u8]) -> u32 {
     let mut c = abi::crc32::Crc32::new();
     c.update(bytes);
     c.finish()
@@ -151,13 +151,13 @@ pub fn encode(
     out
 }
 
-struct Reader<'a> {
-    b: &'a [u8],
-    at: usize,
+pub(crate) struct Reader<'a> {
+    pub(crate) b: &'a [u8],
+    pub(crate) at: usize,
 }
 
 impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], PackageError> {
+    pub(crate) fn take(&mut self, n: usize) -> Result<&'a [u8], PackageError> {
         let s = self
             .b
             .get(self.at..self.at + n)
@@ -165,18 +165,18 @@ impl<'a> Reader<'a> {
         self.at += n;
         Ok(s)
     }
-    fn u8(&mut self) -> Result<u8, PackageError> {
+    pub(crate) fn u8(&mut self) -> Result<u8, PackageError> {
         Ok(self.take(1)?[0])
     }
-    fn u16(&mut self) -> Result<u16, PackageError> {
+    pub(crate) fn u16(&mut self) -> Result<u16, PackageError> {
         let s = self.take(2)?;
         Ok(u16::from_le_bytes([s[0], s[1]]))
     }
-    fn u32(&mut self) -> Result<u32, PackageError> {
+    pub(crate) fn u32(&mut self) -> Result<u32, PackageError> {
         let s = self.take(4)?;
         Ok(u32::from_le_bytes([s[0], s[1], s[2], s[3]]))
     }
-    fn name(&mut self) -> Result<String, PackageError> {
+    pub(crate) fn name(&mut self) -> Result<String, PackageError> {
         let at = self.at;
         let n = self.u8()? as usize;
         let s = self.take(n)?;
@@ -184,13 +184,22 @@ impl<'a> Reader<'a> {
             .map(ToString::to_string)
             .map_err(|_| PackageError::Invalid(at, "name is not UTF-8"))
     }
-    fn count(&mut self, expected: Option<u16>) -> Result<usize, PackageError> {
+    pub(crate) fn count(&mut self, expected: Option<u16>) -> Result<usize, PackageError> {
         let at = self.at;
         let n = self.u16()?;
         if expected.is_some_and(|e| e != n) {
             return Err(PackageError::Invalid(at, "section count"));
         }
         Ok(n as usize)
+    }
+    /// A text of up to 65,535 bytes: length u16 then UTF-8.
+    pub(crate) fn text(&mut self) -> Result<String, PackageError> {
+        let at = self.at;
+        let n = self.u16()? as usize;
+        let s = self.take(n)?;
+        core::str::from_utf8(s)
+            .map(ToString::to_string)
+            .map_err(|_| PackageError::Invalid(at, "text is not UTF-8"))
     }
     fn optional(&mut self) -> Result<Option<usize>, PackageError> {
         Ok(match self.u8()? {

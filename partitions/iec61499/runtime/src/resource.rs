@@ -160,9 +160,11 @@ impl Resource {
         }
     }
 
-    /// Creates instance `name` of `fb`; returns its index.
+    /// Creates instance `name` of `fb`; returns its index. A name may have several parts
+    /// joined by `.` (a composite's component is `COMPOSITE.COMPONENT`); a port is then
+    /// `COMPOSITE.COMPONENT.PORT`.
     pub fn create(&mut self, name: &str, fb: Box<dyn FunctionBlock>) -> Result<usize, DeployError> {
-        if name.is_empty() || name.contains('.') {
+        if name.split('.').any(str::is_empty) {
             return Err(DeployError::NotFound(name.into()));
         }
         if self.instance(name).is_some() {
@@ -319,10 +321,11 @@ impl Resource {
         }
     }
 
-    /// `FB.PORT` → (instance, name of the port).
+    /// `FB.PORT` → (instance, name of the port; the last part, as instance names may have
+    /// several).
     fn split<'p>(&self, path: &'p str) -> Result<(usize, &'p str), DeployError> {
         let (fb, port) = path
-            .split_once('.')
+            .rsplit_once('.')
             .ok_or_else(|| DeployError::NotFound(path.into()))?;
         let i = self
             .instance(fb)
@@ -357,13 +360,39 @@ impl Resource {
     }
 
     /// Connects data output `from` (`FB.OUT`) to data input `to` (`FB.IN`; an input has at
-    /// most one source).
+    /// most one source) of the same type or one the output's widens to
+    /// ([`crate::value::widens`]).
     pub fn connect_data(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
         let source = self.port(from, |i, p| i.output(p))?;
         let destination = self.port(to, |i, p| i.input(p))?;
+        // A generic end without a type takes the other end's.
+        let generic = (
+            self.instances[source.0].fb.untyped(true, source.1),
+            self.instances[destination.0]
+                .fb
+                .untyped(false, destination.1),
+        );
+        match generic {
+            (true, true) => {
+                return Err(DeployError::Mismatch(format!(
+                    "{from} and {to} are both generic without a type yet (write a typed literal, e.g. DINT#0, to one first)"
+                )));
+            }
+            (true, false) => {
+                let input = &self.instances[destination.0].fb.interface().inputs[destination.1];
+                let ty = input.ty;
+                self.bind_end(source, true, ty, from)?;
+            }
+            (false, true) => {
+                let out = &self.instances[source.0].fb.interface().outputs[source.1];
+                let ty = out.ty;
+                self.bind_end(destination, false, ty, to)?;
+            }
+            (false, false) => {}
+        }
         let out = &self.instances[source.0].fb.interface().outputs[source.1];
         let input = &self.instances[destination.0].fb.interface().inputs[destination.1];
-        if (out.ty, out.array) != (input.ty, input.array) {
+        if out.array != input.array || !crate::value::widens(out.ty, input.ty) {
             return Err(DeployError::Mismatch(format!(
                 "{from} is {:?}, {to} is {:?}",
                 out.ty, input.ty
@@ -376,6 +405,61 @@ impl Resource {
             return Err(DeployError::Limit("connections"));
         }
         self.data_connections.push((source, destination));
+        Ok(())
+    }
+
+    /// Whether `FB.PORT` (an input, else an output) is generic without a type yet.
+    pub fn is_unbound(&self, path: &str) -> bool {
+        self.generic_end(path)
+            .is_some_and(|(end, output)| self.instances[end.0].fb.untyped(output, end.1))
+    }
+
+    /// Gives the generic `FB.PORT` (an input, else an output) and its group the type `ty`.
+    pub fn bind(&mut self, path: &str, ty: crate::DataType) -> Result<(), DeployError> {
+        let (end, output) = self
+            .generic_end(path)
+            .ok_or_else(|| DeployError::NotFound(path.into()))?;
+        self.bind_end(end, output, ty, path)
+    }
+
+    fn generic_end(&self, path: &str) -> Option<(End, bool)> {
+        let (i, port) = self.split(path).ok()?;
+        let interface = self.instances[i].fb.interface();
+        match (interface.input(port), interface.output(port)) {
+            (Some(n), _) => Some(((i, n), false)),
+            (None, Some(n)) => Some(((i, n), true)),
+            (None, None) => None,
+        }
+    }
+
+    /// Binds a generic end; the instance's variables that got their type start from its
+    /// initial value.
+    fn bind_end(
+        &mut self,
+        end: End,
+        output: bool,
+        ty: crate::DataType,
+        path: &str,
+    ) -> Result<(), DeployError> {
+        let inst = &mut self.instances[end.0];
+        let before = inst.fb.interface().clone();
+        if !inst.fb.bind_generic(output, end.1, ty) {
+            return Err(DeployError::Mismatch(format!(
+                "{path} cannot be {}",
+                ty.name()
+            )));
+        }
+        let after = inst.fb.interface();
+        for (values, old, new) in [
+            (&mut inst.inputs, &before.inputs, &after.inputs),
+            (&mut inst.outputs, &before.outputs, &after.outputs),
+        ] {
+            for (k, (o, n)) in old.iter().zip(new).enumerate() {
+                if o.ty != n.ty {
+                    values[k] = n.initial();
+                }
+            }
+        }
         Ok(())
     }
 
@@ -432,6 +516,14 @@ impl Resource {
                 let value = match sender {
                     Some((s, outputs)) if s == *si => outputs[*so].clone(),
                     _ => self.instances[*si].outputs[*so].clone(),
+                };
+                // A connection may widen (UINT to DINT, ...): the value takes the input's type.
+                let from = self.instances[*si].fb.interface().outputs[*so].ty;
+                let to = interface.inputs[*var].ty;
+                let value = if from == to {
+                    value
+                } else {
+                    crate::value::widen(value, to)
                 };
                 (*var, value)
             })
@@ -612,6 +704,26 @@ impl Resource {
             }
             Ok(())
         })
+    }
+
+    /// Whether some instance takes events from outside ([`FunctionBlock::polls`]).
+    pub fn polls(&self) -> bool {
+        self.instances
+            .iter()
+            .any(|i| !i.name.is_empty() && i.fb.polls())
+    }
+
+    /// Lets every instance that takes events from outside take them, in creation order,
+    /// each as its own chain at instant `now`.
+    pub fn poll(&mut self, now: i64) -> Result<(), Fault> {
+        for i in 0..self.instances.len() {
+            if !self.instances[i].name.is_empty() && self.instances[i].fb.polls() {
+                self.chain(now, |r| {
+                    r.react(i, now, |fb, inputs, ctx| fb.poll(inputs, ctx))
+                })?;
+            }
+        }
+        Ok(())
     }
 
     /// The earliest armed timer's deadline.

@@ -5,7 +5,12 @@
 //! Where the standard leaves a choice: a START of E_DELAY, E_CYCLE or E_TRAIN while it runs
 //! is ignored (E_RDELAY restarts); E_CYCLE with DT ≤ 0 sends nothing (a zero period would
 //! be an endless chain at one instant); E_TABLE and E_N_TABLE take at most the 4 entries of
-//! DT, and a START while they run starts the table anew.
+//! DT. Where the standard defines an FB by a network (E_TRAIN, E_TABLE), ours do what the
+//! network does, checked against 4diac's networks flattened on our device
+//! (`iec61499-build`'s test `composite`): CV counts an event once it went out (the event
+//! carries the count before it); a START of E_TABLE while it runs starts again at entry 0
+//! but keeps the pending entry's time. Except for N = 0: there the network of E_TRAIN sends
+//! one event (its counter's reset clears Q whatever N) and ours none.
 
 use crate::fb::{Context, EventDecl, FunctionBlock, Interface, Restart, VarDecl};
 use crate::value::{DataType, Value};
@@ -423,8 +428,15 @@ impl FunctionBlock for Standard {
                 0 => {
                     s.step = 0;
                     s.steps = inputs[1].as_u64().min(4);
+                    if self.kind == Kind::Table {
+                        ctx.set(0, Value::UInt(0));
+                    }
+                    let restart = s.active && s.steps > 0;
                     s.active = s.steps > 0;
-                    if s.active {
+                    if restart {
+                        // As the standard's network: its E_DELAY ignores the START, so the
+                        // pending entry's time stands and the table goes on from entry 0.
+                    } else if s.active {
                         s.deadline = ctx.now().saturating_add(table_entry(inputs, 0).max(0));
                         ctx.arm(TIMER, s.deadline);
                     } else {
@@ -480,6 +492,11 @@ impl FunctionBlock for Standard {
                 }
                 s.step += 1;
                 if s.step < s.steps {
+                    if self.kind == Kind::Table {
+                        // As the standard's network (E_TABLE_CTRL steps CV after EO went
+                        // out): the event carries this entry, CV then names the next.
+                        ctx.set(0, Value::UInt(s.step));
+                    }
                     s.deadline = s
                         .deadline
                         .saturating_add(table_entry(inputs, s.step).max(0));
@@ -492,6 +509,9 @@ impl FunctionBlock for Standard {
                 ctx.set(0, Value::UInt(s.step));
                 ctx.send(0);
                 s.step += 1;
+                // As the standard's network (its E_CTU counts EO after EO went out): the
+                // event carries the events sent before it, CV then counts it too.
+                ctx.set(0, Value::UInt(s.step));
                 if s.step < inputs[1].as_u64() {
                     s.deadline = s.deadline.saturating_add(inputs[0].as_time().max(0));
                     ctx.arm(TIMER, s.deadline);

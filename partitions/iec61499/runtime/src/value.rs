@@ -25,6 +25,58 @@ pub fn zero(ty: DataType) -> Value {
     }
 }
 
+/// Whether a value of type `from` converts to type `to` without loss, so a data connection
+/// or a typed literal may carry it there (IEC 61131-3's implicit conversions): a wider
+/// integer of the same signedness, an unsigned to a wider signed one, a wider bit string,
+/// REAL to LREAL, and integers to a REAL (up to 16 bits) or LREAL (up to 32 bits).
+pub fn widens(from: DataType, to: DataType) -> bool {
+    use DataType::*;
+    let signed = |t| match t {
+        SInt => Some(8),
+        Int => Some(16),
+        DInt => Some(32),
+        LInt => Some(64),
+        _ => None,
+    };
+    let unsigned = |t| match t {
+        USInt => Some(8),
+        UInt => Some(16),
+        UDInt => Some(32),
+        ULInt => Some(64),
+        _ => None,
+    };
+    let bits = |t| match t {
+        Byte => Some(8),
+        Word => Some(16),
+        DWord => Some(32),
+        LWord => Some(64),
+        _ => None,
+    };
+    let int = |t| signed(t).or(unsigned(t));
+    match (from, to) {
+        _ if from == to => true,
+        (Real, LReal) => true,
+        (f, Real) => int(f).is_some_and(|b| b <= 16),
+        (f, LReal) => int(f).is_some_and(|b| b <= 32),
+        (f, t) if signed(f).is_some() => signed(f) < signed(t),
+        (f, t) if unsigned(f).is_some() => {
+            unsigned(f) < unsigned(t) || signed(t).is_some_and(|b| Some(b) > unsigned(f))
+        }
+        (f, t) => bits(f).is_some() && bits(f) < bits(t),
+    }
+}
+
+/// `v`, a value of a type that [`widens`] to `to`, as a value of `to`.
+pub fn widen(v: Value, to: DataType) -> Value {
+    use DataType::*;
+    match (v, to) {
+        (Value::Int(i), Real | LReal) => Value::Real(i as f64),
+        (Value::UInt(u), Real | LReal) => Value::Real(u as f64),
+        (Value::UInt(u), SInt | Int | DInt | LInt) => Value::Int(u as i64),
+        (v, _) => v,
+    }
+}
+
 /// A value.
 #[derive(Clone, Debug, PartialEq)]
 pub enum Value {

@@ -360,3 +360,41 @@ proptest! {
         }
     }
 }
+
+#[test]
+fn a_generic_function_fb_takes_its_type_from_a_typed_literal_or_a_connection() {
+    let mut d = device();
+    assert_eq!(send(&mut d, "", "CREATE", &fb("R", "EMB_RES")), "");
+    for (name, ty) in [("EQ", "F_EQ"), ("ADD", "F_ADD"), ("CNV", "DINT2DINT")] {
+        assert_eq!(send(&mut d, "R", "CREATE", &fb(name, ty)), "");
+    }
+    // An untyped number gives a generic port no type.
+    assert_eq!(
+        send(&mut d, "R", "WRITE", &conn("5", "ADD.IN1")),
+        "INVALID_OBJECT"
+    );
+    // As in FORTE's system tests: the literal types IN2 (and with it IN1), the connection
+    // from a DINT fits.
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("DINT#26", "EQ.IN2")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("CNV.OUT", "EQ.IN1")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("CNV.CNF", "EQ.REQ")), "");
+    // ADD takes DINT from the connection to its output.
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("ADD.OUT", "CNV.IN")), "");
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("20", "ADD.IN1")), "");
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("6", "ADD.IN2")), "");
+    assert_eq!(send(&mut d, "R", "CREATE", &conn("ADD.CNF", "CNV.REQ")), "");
+    assert_eq!(send(&mut d, "R", "START", ""), "");
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("$e", "ADD.REQ")), "");
+    let answer = d.execute(
+        "R",
+        "<Request ID=\"7\" Action=\"READ\"><Connection Source=\"EQ.OUT\" Destination=\"\"/></Request>",
+        0,
+    );
+    assert!(answer.contains("Source=\"TRUE\""), "{answer}");
+    // A type outside the class: F_ADD takes no STRING.
+    assert_eq!(send(&mut d, "R", "CREATE", &fb("ADD2", "F_ADD")), "");
+    assert_eq!(
+        send(&mut d, "R", "WRITE", &conn("'text'", "ADD2.IN1")),
+        "INVALID_OPERATION"
+    );
+}

@@ -1,0 +1,417 @@
+//! PUBLISH_n and SUBSCRIBE_n (n = 0 to [`MAX_DATA`]), 4diac's interfaces, between
+//! partitions on one machine over ARINC 653 queuing ports (the network comes later): `ID`
+//! names the queuing port, an output port of the publisher's partition, an input port of
+//! the subscriber's, joined by a channel of the configuration. A message is the FBDK ASN.1
+//! encoding of the data (`fbdk`, the encoding FORTE puts on UDP), so it will go onto the
+//! network unchanged.
+//!
+//! | type | events in | events out | data |
+//! |---|---|---|---|
+//! | `PUBLISH_n` | INIT (QI, ID), REQ (QI, SD_1..SD_n) | INITO (QO, STATUS), CNF (QO, STATUS) | inputs QI, ID, SD_1..SD_n |
+//! | `SUBSCRIBE_n` | INIT (QI, ID), RSP (QI) | INITO (QO, STATUS), IND (QO, STATUS, RD_1..RD_n) | outputs QO, STATUS, RD_1..RD_n |
+//!
+//! SD_i and RD_i are generic: each takes the type of its first typed connection or literal
+//! (`iec61499_runtime::functions` explains how). INIT with QI opens the port named by ID
+//! (QO TRUE, STATUS `OK`; else QO FALSE and STATUS why); INIT without QI closes it (QO
+//! FALSE). REQ with QI sends SD_1..SD_n as one message without waiting: CNF with QO TRUE,
+//! or QO FALSE and STATUS why (`port full`, a value without a type, not initialised). A
+//! subscriber is polled by its resource (the partition polls at least every
+//! [`POLL_NS`] while it has one): each message queued is one IND, its RD values decoded;
+//! a message that does not decode as the RD types gives IND with QO FALSE and STATUS why,
+//! RD unchanged. RSP does nothing (publish/subscribe has no reply).
+
+use crate::sifb::{Io, ProcessIo};
+use alloc::boxed::Box;
+use alloc::collections::VecDeque;
+use alloc::format;
+use alloc::rc::Rc;
+use alloc::string::{String, ToString};
+use alloc::vec::Vec;
+use core::cell::RefCell;
+use iec61499_runtime::fb::{Context, EventSpec, Interface, VarSpec};
+use iec61499_runtime::{DataType, FunctionBlock, Value};
+
+/// The most data a PUBLISH or SUBSCRIBE carries.
+pub const MAX_DATA: usize = 8;
+/// The longest a subscriber's message waits to be taken, as the partition polls.
+pub const POLL_NS: i64 = 10_000_000;
+/// The most messages one poll takes from a port.
+const PER_POLL: usize = 16;
+
+// Fixed variables, before the data: inputs QI, ID; outputs QO, STATUS.
+const QI: usize = 0;
+const ID: usize = 1;
+const QO: usize = 0;
+const STATUS: usize = 1;
+const DATA: usize = 2;
+const INIT: usize = 0;
+
+/// The placeholder type of data without a type yet.
+const UNTYPED: DataType = DataType::LWord;
+
+/// A new PUBLISH_n or SUBSCRIBE_n, or `None` for another name.
+pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
+    let (publish, n) = match ty.strip_prefix("PUBLISH_") {
+        Some(n) => (true, n),
+        None => (false, ty.strip_prefix("SUBSCRIBE_")?),
+    };
+    let n: usize = n.parse().ok().filter(|n| *n <= MAX_DATA)?;
+    let var = |name: String, ty| VarSpec {
+        name,
+        ty,
+        array: None,
+    };
+    let fixed_in = [
+        var("QI".into(), DataType::Bool),
+        var("ID".into(), DataType::WString),
+    ];
+    let fixed_out = [
+        var("QO".into(), DataType::Bool),
+        var("STATUS".into(), DataType::WString),
+    ];
+    let data = (1..=n).map(|i| {
+        var(
+            format!("{}_{i}", if publish { "SD" } else { "RD" }),
+            UNTYPED,
+        )
+    });
+    let event = |name: &str, with: Vec<usize>| EventSpec {
+        name: name.into(),
+        with,
+    };
+    let with_data = |fixed: Vec<usize>| fixed.into_iter().chain(DATA..DATA + n).collect();
+    let interface = if publish {
+        Interface {
+            event_inputs: alloc::vec![
+                event("INIT", alloc::vec![QI, ID]),
+                event("REQ", with_data(alloc::vec![QI])),
+            ],
+            event_outputs: alloc::vec![
+                event("INITO", alloc::vec![QO, STATUS]),
+                event("CNF", alloc::vec![QO, STATUS]),
+            ],
+            inputs: fixed_in.into_iter().chain(data).collect(),
+            outputs: fixed_out.into(),
+        }
+    } else {
+        Interface {
+            event_inputs: alloc::vec![
+                event("INIT", alloc::vec![QI, ID]),
+                event("RSP", alloc::vec![QI]),
+            ],
+            event_outputs: alloc::vec![
+                event("INITO", alloc::vec![QO, STATUS]),
+                event("IND", with_data(alloc::vec![QO, STATUS])),
+            ],
+            inputs: fixed_in.into(),
+            outputs: fixed_out.into_iter().chain(data).collect(),
+        }
+    };
+    Some(Box::new(PubSub {
+        interface,
+        publish,
+        types: alloc::vec![None; n],
+        io: io.clone(),
+        port: None,
+    }))
+}
+
+struct PubSub {
+    interface: Interface,
+    publish: bool,
+    /// Each datum's type once known.
+    types: Vec<Option<DataType>>,
+    io: Io,
+    /// The open port: its name and message size.
+    port: Option<(String, usize)>,
+}
+
+/// The wire type of `ty`, if the encoding has it.
+fn wire_type(ty: DataType) -> Option<fbdk::Type> {
+    fbdk::Type::from_name(ty.name())
+}
+
+/// `v` of type `ty` as the encoding's value.
+fn to_wire(ty: DataType, v: &Value) -> Option<fbdk::Value<'_>> {
+    let wire = wire_type(ty)?;
+    Some(match v {
+        Value::String(s) => match wire {
+            fbdk::Type::String => fbdk::Value::String(s.as_bytes()),
+            _ => return None,
+        },
+        Value::Bool(b) => fbdk::Value::bool(*b),
+        Value::Int(i) => fbdk::Value::Fixed(wire, *i as u64),
+        Value::UInt(u) => fbdk::Value::Fixed(wire, *u),
+        Value::Time(t) => fbdk::Value::Fixed(wire, *t as u64),
+        Value::Real(r) if ty == DataType::Real => {
+            fbdk::Value::Fixed(wire, u64::from((*r as f32).to_bits()))
+        }
+        Value::Real(r) => fbdk::Value::Fixed(wire, r.to_bits()),
+        Value::Array(_) => return None,
+    })
+}
+
+/// The encoding's value `v` as ours of type `ty`.
+fn from_wire(ty: DataType, v: fbdk::Value<'_>) -> Value {
+    use DataType::*;
+    match v {
+        fbdk::Value::String(bytes) | fbdk::Value::WString(bytes) => {
+            Value::String(alloc::string::String::from_utf8_lossy(bytes).into_owned())
+        }
+        fbdk::Value::Fixed(_, bits) => match ty {
+            Bool => Value::Bool(bits != 0),
+            SInt | Int | DInt | LInt => Value::Int(bits as i64),
+            Real => Value::Real(f64::from(f32::from_bits(bits as u32))),
+            LReal => Value::Real(f64::from_bits(bits)),
+            Time => Value::Time(bits as i64),
+            _ => Value::UInt(bits),
+        },
+    }
+}
+
+impl PubSub {
+    fn init(&mut self, inputs: &[Value]) -> (bool, String) {
+        self.port = None;
+        if !inputs[QI].as_bool() {
+            return (false, "OK".into());
+        }
+        let id = match &inputs[ID] {
+            Value::String(s) => s.trim().to_string(),
+            _ => String::new(),
+        };
+        let (what, input) = if self.publish {
+            ("output", false)
+        } else {
+            ("input", true)
+        };
+        match self.io.borrow().io.queue_size(&id, input) {
+            Some(size) => {
+                self.port = Some((id, size));
+                (true, "OK".into())
+            }
+            None => (false, format!("no queuing {what} port {id}")),
+        }
+    }
+
+    fn publish(&mut self, inputs: &[Value]) -> (bool, String) {
+        let Some((port, size)) = self.port.clone().filter(|_| inputs[QI].as_bool()) else {
+            return (false, "not initialised".into());
+        };
+        let mut buf = alloc::vec![0u8; size];
+        let mut w = fbdk::Writer::new(&mut buf);
+        let written = if self.types.is_empty() {
+            w.null().map_err(|_| "port messages too small".to_string())
+        } else {
+            self.types.iter().enumerate().try_for_each(|(k, ty)| {
+                let value = ty
+                    .and_then(|ty| to_wire(ty, &inputs[DATA + k]))
+                    .ok_or_else(|| format!("SD_{} has no type the encoding has", k + 1))?;
+                w.value(&value)
+                    .map_err(|_| format!("the message is longer than {size} bytes"))
+            })
+        };
+        if let Err(why) = written {
+            return (false, why);
+        }
+        let len = w.len();
+        if self.io.borrow_mut().io.send(&port, &buf[..len]) {
+            (true, "OK".into())
+        } else {
+            (false, "port full".into())
+        }
+    }
+
+    /// Decodes a message into the RD outputs.
+    fn take(&self, message: &[u8], ctx: &mut Context<'_>) -> Result<(), String> {
+        let mut r = fbdk::Reader::new(message);
+        if self.types.is_empty() {
+            return if message == [fbdk::NULL] {
+                Ok(())
+            } else {
+                Err("not an empty message".into())
+            };
+        }
+        let mut values = Vec::new();
+        for (k, ty) in self.types.iter().enumerate() {
+            let ty = ty.ok_or_else(|| format!("RD_{} has no type", k + 1))?;
+            let wire = wire_type(ty).ok_or_else(|| format!("RD_{} is not encodable", k + 1))?;
+            let v = r.value(wire).map_err(|e| format!("RD_{}: {e:?}", k + 1))?;
+            values.push(from_wire(ty, v));
+        }
+        r.finish().map_err(|e| format!("{e:?}"))?;
+        for (k, v) in values.into_iter().enumerate() {
+            ctx.set(DATA + k, v);
+        }
+        Ok(())
+    }
+}
+
+impl FunctionBlock for PubSub {
+    fn interface(&self) -> &Interface {
+        &self.interface
+    }
+
+    fn event(&mut self, event: usize, inputs: &[Value], ctx: &mut Context<'_>) {
+        let (qo, status) = match (event, self.publish) {
+            (INIT, _) => self.init(inputs),
+            (_, true) => self.publish(inputs),
+            // RSP: nothing to answer.
+            (_, false) => return,
+        };
+        ctx.set(QO, Value::Bool(qo));
+        ctx.set(STATUS, Value::String(status));
+        ctx.send(event);
+    }
+
+    fn polls(&self) -> bool {
+        !self.publish && self.port.is_some()
+    }
+
+    fn poll(&mut self, _inputs: &[Value], ctx: &mut Context<'_>) {
+        let Some((port, size)) = self.port.clone() else {
+            return;
+        };
+        let mut buf = alloc::vec![0u8; size];
+        for _ in 0..PER_POLL {
+            let Some(len) = self.io.borrow_mut().io.receive(&port, &mut buf) else {
+                break;
+            };
+            let (qo, status) = match self.take(&buf[..len.min(size)], ctx) {
+                Ok(()) => (true, String::from("OK")),
+                Err(why) => (false, format!("bad message: {why}")),
+            };
+            ctx.set(QO, Value::Bool(qo));
+            ctx.set(STATUS, Value::String(status));
+            ctx.send(1);
+        }
+    }
+
+    fn reset(&mut self) {
+        self.port = None;
+    }
+
+    fn untyped(&self, output: bool, index: usize) -> bool {
+        output != self.publish
+            && index >= DATA
+            && self.types.get(index - DATA).is_some_and(Option::is_none)
+    }
+
+    fn bind_generic(&mut self, output: bool, index: usize, ty: DataType) -> bool {
+        if !self.untyped(output, index) || wire_type(ty).is_none() {
+            return false;
+        }
+        self.types[index - DATA] = Some(ty);
+        let var = if output {
+            &mut self.interface.outputs[index]
+        } else {
+            &mut self.interface.inputs[index]
+        };
+        var.ty = ty;
+        true
+    }
+}
+
+/// Ports on the host, by name, for running devices that publish and subscribe without
+/// partitions (tests, FORTE's multi-device system tests): a message sent on `NAME` reaches
+/// every subscriber that opened `NAME`, as UDP multicast does (a channel of the
+/// configuration has one). Each subscriber's queue holds [`Loopback::DEPTH`] messages of up
+/// to [`Loopback::SIZE`] bytes, a send that finds one full is refused; no sampling ports.
+/// Clones share the ports and are one subscriber; [`Loopback::end`] is another.
+#[derive(Clone, Default)]
+pub struct Loopback {
+    bus: Rc<RefCell<Bus>>,
+    /// Which subscriber this end is.
+    end: usize,
+    /// The ports that exist; every name when empty.
+    ports: Vec<String>,
+}
+
+#[derive(Default)]
+struct Bus {
+    ends: usize,
+    /// `(end, port, queue)` of every opened input port.
+    queues: Vec<(usize, String, VecDeque<Vec<u8>>)>,
+}
+
+impl Loopback {
+    pub const DEPTH: usize = 4;
+    pub const SIZE: usize = 256;
+
+    /// A loopback with only the ports `names`.
+    pub fn with_ports(names: &[&str]) -> Self {
+        Loopback {
+            ports: names.iter().map(|n| String::from(*n)).collect(),
+            ..Loopback::default()
+        }
+    }
+
+    /// Another subscriber on the same ports (another device).
+    pub fn end(&self) -> Self {
+        let mut bus = self.bus.borrow_mut();
+        bus.ends += 1;
+        Loopback {
+            bus: self.bus.clone(),
+            end: bus.ends,
+            ports: self.ports.clone(),
+        }
+    }
+
+    fn has(&self, port: &str) -> bool {
+        self.ports.is_empty() || self.ports.iter().any(|p| p == port)
+    }
+}
+
+impl ProcessIo for Loopback {
+    fn size(&self, _: &str, _: bool) -> Option<usize> {
+        None
+    }
+    fn read(&mut self, _: &str, _: &mut [u8]) -> Option<bool> {
+        None
+    }
+    fn write(&mut self, _: &str, _: &[u8]) -> bool {
+        false
+    }
+    fn queue_size(&self, port: &str, input: bool) -> Option<usize> {
+        if !self.has(port) {
+            return None;
+        }
+        let mut bus = self.bus.borrow_mut();
+        if input
+            && !bus
+                .queues
+                .iter()
+                .any(|(e, p, _)| *e == self.end && p == port)
+        {
+            bus.queues.push((self.end, port.into(), VecDeque::new()));
+        }
+        Some(Self::SIZE)
+    }
+    fn receive(&mut self, port: &str, buf: &mut [u8]) -> Option<usize> {
+        let mut bus = self.bus.borrow_mut();
+        let (_, _, queue) = bus
+            .queues
+            .iter_mut()
+            .find(|(e, p, _)| *e == self.end && p == port)?;
+        let message = queue.pop_front()?;
+        let len = message.len().min(buf.len());
+        buf[..len].copy_from_slice(&message[..len]);
+        Some(len)
+    }
+    fn send(&mut self, port: &str, message: &[u8]) -> bool {
+        if !self.has(port) || message.len() > Self::SIZE {
+            return false;
+        }
+        let mut bus = self.bus.borrow_mut();
+        let mut queues = bus.queues.iter_mut().filter(|(_, p, _)| p == port);
+        if queues.any(|(_, _, q)| q.len() >= Self::DEPTH) {
+            return false;
+        }
+        for (_, _, q) in bus.queues.iter_mut().filter(|(_, p, _)| p == port) {
+            q.push_back(message.to_vec());
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests;
