@@ -843,6 +843,15 @@ fn fuzz(calls: u64, root: bool) {
         scratch().start
     );
     let mut rng = Rng(SEED);
+    // The calls drawn by name: those of the ABI before `dma_map`, in whose sequence of
+    // this seed docs/isolation.md reports the victim's lateness. The calls added since
+    // (`dma_map`, `dma_fault`, the last of `Call::ALL`) are reached through the numbers
+    // below 128; drawing them by name too would reshuffle the sequence with every call the
+    // ABI gains.
+    let named_calls = Call::ALL
+        .iter()
+        .position(|c| *c == Call::DmaMap)
+        .unwrap_or(Call::COUNT);
     let mut pool = Pool::new(task.0, thread.0);
     let mut histogram = Histogram([[0; 16]; Call::COUNT + 1]);
     let (mut done, mut skipped) = (0u64, 0u64);
@@ -850,7 +859,7 @@ fn fuzz(calls: u64, root: bool) {
         let call = match rng.below(20) {
             0 => rng.next(),
             1 => rng.below(128),
-            _ => Call::ALL[rng.below(Call::COUNT as u64) as usize].code(),
+            _ => Call::ALL[rng.below(named_calls as u64) as usize].code(),
         };
         let mut a = [0u64; 6];
         for slot in &mut a {
