@@ -137,10 +137,17 @@ pub mod status {
 /// configuration, and virtio 1.x itself (required: without it the device is legacy).
 pub const FEATURE_MAC: u64 = 1 << 5;
 pub const FEATURE_VERSION_1: u64 = 1 << 32;
+/// VIRTIO_F_ACCESS_PLATFORM: the device's DMA goes through the platform's IOMMU. The
+/// driver gives the device bus addresses of its DMA region (`pci::DmaRegion`), which is
+/// what this feature asks for, so it accepts it; a device that offers it (QEMU's
+/// `iommu_platform=on`, without which QEMU lets virtio DMA bypass VT-d) refuses a driver
+/// that does not.
+pub const FEATURE_ACCESS_PLATFORM: u64 = 1 << 33;
 
 /// The features to accept of `offered`; `None` when the device is not a virtio 1.x device.
 pub fn negotiate(offered: u64) -> Option<u64> {
-    (offered & FEATURE_VERSION_1 != 0).then_some(offered & (FEATURE_MAC | FEATURE_VERSION_1))
+    (offered & FEATURE_VERSION_1 != 0)
+        .then_some(offered & (FEATURE_MAC | FEATURE_VERSION_1 | FEATURE_ACCESS_PLATFORM))
 }
 
 /// The virtio-net header in front of every frame (VIRTIO_F_VERSION_1: with `num_buffers`).

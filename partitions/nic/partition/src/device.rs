@@ -187,7 +187,7 @@ fn structure(
 }
 
 impl Net {
-    /// Resets the device (its structures found through `caps`, its capability list), negotiates VERSION_1 (+ MAC), sets up both queues in `dma`
+    /// Resets the device (its structures found through `caps`, its capability list), negotiates VERSION_1 (+ MAC, + ACCESS_PLATFORM behind an IOMMU), sets up both queues in `dma`
     /// (bus mastering is syssw's, with the partition's `dma`), fills the receive queue and
     /// sets DRIVER_OK. The device interrupts through INTx.
     pub fn bring_up(record: &Record, caps: &Capabilities, dma: DmaRegion) -> Result<Net, BringUp> {

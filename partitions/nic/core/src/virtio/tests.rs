@@ -155,7 +155,15 @@ fn a_device_without_the_modern_structures_is_refused_with_the_reason() {
 #[test]
 fn features_are_version_1_and_the_mac_only() {
     assert_eq!(negotiate(FEATURE_MAC), None, "a legacy device");
-    assert_eq!(negotiate(u64::MAX), Some(FEATURE_MAC | FEATURE_VERSION_1));
+    assert_eq!(
+        negotiate(u64::MAX),
+        Some(FEATURE_MAC | FEATURE_VERSION_1 | FEATURE_ACCESS_PLATFORM)
+    );
+    assert_eq!(
+        negotiate(FEATURE_VERSION_1 | FEATURE_ACCESS_PLATFORM),
+        Some(FEATURE_VERSION_1 | FEATURE_ACCESS_PLATFORM),
+        "behind an IOMMU"
+    );
     assert_eq!(negotiate(FEATURE_VERSION_1), Some(FEATURE_VERSION_1));
 }
 
