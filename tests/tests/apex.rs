@@ -447,9 +447,14 @@ fn apex_schedule_actions() {
         &o,
         &[
             "switcher: SET_MODULE_SCHEDULE second None",
-            "reborn: start mode=ColdStart condition=NormalStart",
-            "reborn: start mode=ColdStart condition=PartitionRestart",
+            "reborn: start 1 mode=ColdStart condition=NormalStart",
+            // Reloaded: its count of starts begins again.
+            "reborn: start 1 mode=ColdStart condition=PartitionRestart",
             "syssw: partition reborn: COLD_START (PARTITION_RESTART, restart 1)",
+            "warm: start 1 mode=ColdStart condition=NormalStart",
+            // Its memory kept: the count goes on.
+            "warm: start 2 mode=WarmStart condition=PartitionRestart",
+            "syssw: partition warm: WARM_START (PARTITION_RESTART, restart 1)",
             "syssw: partition stopped: IDLE",
             "switcher: current 1 last switch",
         ],
@@ -465,6 +470,11 @@ fn apex_schedule_actions() {
     };
     let reborn = why("reborn", "cold_start").expect("syssw's line for reborn");
     let stopped = why("stopped", "idle").expect("syssw's line for stopped");
+    check(
+        &o,
+        why("warm", "warm_start").is_some(),
+        "syssw's line for warm",
+    );
     check(
         &o,
         o.lines
@@ -492,6 +502,13 @@ fn apex_schedule_actions() {
         &o,
         starts.len() == 2 && (switch + 10..switch + 15).contains(&starts[1]),
         &format!("reborn's starts {starts:?}, switch at {switch} ms"),
+    );
+    // warm in its first window under second (5-10 ms into the frame).
+    let warm_starts = times(&o, "warm: start ");
+    check(
+        &o,
+        warm_starts.len() == 2 && (switch + 5..switch + 10).contains(&warm_starts[1]),
+        &format!("warm's starts {warm_starts:?}, switch at {switch} ms"),
     );
     let reborn_ticks = times(&o, "reborn: tick ");
     check(

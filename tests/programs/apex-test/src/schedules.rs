@@ -17,13 +17,15 @@
 //! `schedule_steady_window_lateness`: the same after the same wait one frame later, with no
 //! switch (the comparison).
 //!
-//! Partitions `switcher`, `reborn`, `stopped` and `keeper` (scenario
+//! Partitions `switcher`, `warm`, `reborn`, `stopped` and `keeper` (scenario
 //! `apex_schedule_actions`): schedule change actions. Schedules `first` and `second` have
-//! the same windows (40 ms frame: 0, 10, 20, 30 ms, 5 ms each, in that order); `second`'s
-//! `change_actions` cold-start `reborn` and stop `stopped` (idle), `keeper` is left alone.
-//! `switcher` switches to `second` in the third frame; the others say how they started and
-//! tick once per frame, so the log shows `reborn` starting again with PARTITION_RESTART
-//! in its first window under `second`, `stopped` ticking no more and `keeper` ticking on.
+//! the same windows (40 ms frame: 0, 5, 10, 20, 30 ms, 5 ms each, in that order);
+//! `second`'s `change_actions` warm-start `warm`, cold-start `reborn` and stop `stopped`
+//! (idle), `keeper` is left alone. `switcher` switches to `second` in the third frame; the
+//! others say how they started (with a count of starts in their memory: a warm start keeps
+//! it, a cold one reloads it) and tick once per frame, so the log shows `warm` and `reborn`
+//! starting again with PARTITION_RESTART in their first windows under `second`, `stopped`
+//! ticking no more and `keeper` ticking on.
 //!
 //! Every line starts with the partition's name.
 
@@ -38,6 +40,7 @@ use apex::user_rt::{println, sys};
 
 extern crate alloc;
 use alloc::vec::Vec;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 const MS: i64 = 1_000_000;
 
@@ -195,12 +198,16 @@ extern "C" fn switches() {
 /// Frames `keeper` and `stopped` tick for (the run ends in the seventh).
 const TICKS: u32 = 8;
 
+/// Starts of this partition's program while its memory was kept.
+static STARTS: AtomicU32 = AtomicU32::new(0);
+
 pub fn create_actions(_ctx: &mut StartContext<Warden>) {
     let info = apex::runtime::start_info();
     let name = info.name();
     let status = <Warden as ApexPartitionP4>::get_partition_status();
     println!(
-        "{name}: start mode={:?} condition={:?} at t={} ms",
+        "{name}: start {} mode={:?} condition={:?} at t={} ms",
+        STARTS.fetch_add(1, Ordering::Relaxed) + 1,
         status.operating_mode,
         status.start_condition,
         now() / MS as u64
