@@ -2,7 +2,7 @@
 //! syssw decodes at boot. This layout is an interface contract between the host tools and
 //! syssw; any change bumps [`VERSION`].
 //!
-//! # Layout, version 1
+//! # Layout, version 4
 //!
 //! All integers are little-endian; no field is aligned (read them with `from_le_bytes`).
 //! Names are fixed 32-byte fields of UTF-8, NUL-padded: non-empty, no NUL inside, only NULs
@@ -12,7 +12,7 @@
 //! Header (96 bytes)
 //! offset size field
 //! 0      8    magic "WRDNCONF"
-//! 8      4    version (1)
+//! 8      4    version (4)
 //! 12     4    CRC-32 (IEEE, abi::crc32) of bytes [16, total size)
 //! 16     4    total size in bytes = 96 + the sizes of all tables below
 //! 20     4    reserved
@@ -36,7 +36,9 @@
 //! 32     8    major frame (ns, MIN_WINDOW..=MAX_MAJOR_FRAME: 10 us to one hour)
 //! 40     2    first window (index into the window table)
 //! 42     2    window count (<= 32); the schedules' window ranges tile the window table in order
-//! 44     4    reserved
+//! 44     4    change actions (`change_actions`, ARINC SCHEDULE_CHANGE_ACTION): 2 bits per
+//!             partition, bits 2i..2i+2 for partition i: 0 ignore, 1 idle, 2 cold_start,
+//!             3 warm_start; the bits above the last partition's are zero
 //!
 //! Window (24 bytes) x W; per schedule sorted by offset, disjoint, duration > 0,
 //! offset + duration <= major frame
@@ -129,7 +131,7 @@ pub use abi::layout::Field;
 use abi::syscall::Abilities;
 
 pub const MAGIC: [u8; 8] = *b"WRDNCONF";
-pub const VERSION: u32 = 3;
+pub const VERSION: u32 = 4;
 pub const NAME_SIZE: usize = 32;
 pub const HEADER_SIZE: usize = header::SIZE;
 pub const SCHEDULE_SIZE: usize = schedule::SIZE;
@@ -181,9 +183,15 @@ pub mod schedule {
     pub const MAJOR_FRAME: Field = Field::new(32, 8);
     pub const FIRST_WINDOW: Field = Field::new(40, 2);
     pub const WINDOW_COUNT: Field = Field::new(42, 2);
-    pub const RESERVED: Field = Field::new(44, 4);
+    pub const CHANGE_ACTIONS: Field = Field::new(44, 4);
     pub const SIZE: usize = 48;
-    pub const FIELDS: [Field; 5] = [NAME, MAJOR_FRAME, FIRST_WINDOW, WINDOW_COUNT, RESERVED];
+    pub const FIELDS: [Field; 5] = [
+        NAME,
+        MAJOR_FRAME,
+        FIRST_WINDOW,
+        WINDOW_COUNT,
+        CHANGE_ACTIONS,
+    ];
 }
 
 /// Window record fields.
@@ -645,8 +653,8 @@ impl<'a> SystemView<'a> {
             if self.duplicate_name(Table::Schedule, s, S::NAME) {
                 return fail("duplicate name");
             }
-            if !S::RESERVED.is_zero(r) {
-                return fail("reserved bytes are not zero");
+            if !ChangeActions(S::CHANGE_ACTIONS.u32(r)).within(self.count(Table::Partition)) {
+                return fail("a change action for a partition that does not exist");
             }
             let frame = S::MAJOR_FRAME.get(r);
             if !(MIN_WINDOW..=MAX_MAJOR_FRAME).contains(&frame) {
@@ -1053,6 +1061,7 @@ impl<'a> SystemView<'a> {
             major_frame: schedule::MAJOR_FRAME.get(r),
             first_window: schedule::FIRST_WINDOW.u16(r),
             window_count: schedule::WINDOW_COUNT.u16(r),
+            change_actions: ChangeActions(schedule::CHANGE_ACTIONS.u32(r)),
             sys: *self,
         }
     }
@@ -1214,6 +1223,8 @@ pub struct ScheduleView<'a> {
     pub name: &'a str,
     /// Major frame (ns).
     pub major_frame: u64,
+    /// What a switch to this schedule does to each partition.
+    pub change_actions: ChangeActions,
     first_window: usize,
     window_count: usize,
     sys: SystemView<'a>,
@@ -1464,6 +1475,7 @@ mod encode {
                 .set(S::MAJOR_FRAME, s.major_frame)
                 .index(S::FIRST_WINDOW, first)
                 .index(S::WINDOW_COUNT, s.windows.len())
+                .set(S::CHANGE_ACTIONS, u64::from(s.change_actions.0))
                 .write(&mut out);
             first += s.windows.len();
         }

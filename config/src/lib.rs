@@ -32,6 +32,7 @@
 //! [[schedules]]                   # up to 4; the first is the initial schedule
 //! name = "normal"                 # optional for the first (default "default")
 //! major_frame = "10ms"            # optional: default = end of the last window
+//! change_actions = { io = "cold_start" }  # optional: per partition, see "Time"
 //! [[schedules.windows]]           # up to 32 per schedule; inside the frame, disjoint
 //! partition = "plc"               # a partition that is not background
 //! offset = "0ms"
@@ -109,7 +110,13 @@
 //! warning instead of refusing the file. A partition with `schedule_control = true` may
 //! switch the module to another of the `[[schedules]]` (ARINC SET_MODULE_SCHEDULE; the
 //! switch takes effect at the end of the running major frame); every partition may ask
-//! which schedule runs.
+//! which schedule runs. A schedule's `change_actions` (ARINC 653 Part 2 schedule change
+//! actions) maps partition names to what happens to each when a switch to that schedule
+//! takes effect: `ignore` (the default for every partition not named), `idle` (ARINC STOP:
+//! the partition is stopped for good, as by SET_PARTITION_MODE(IDLE)), `cold_start` or
+//! `warm_start` (it restarts in that mode with start condition PARTITION_RESTART; a warm
+//! start of a partition still in COLD_START is a cold one). They are not applied at boot,
+//! to an IDLE partition, or to a partition being restarted at the time.
 //!
 //! **Abilities.** Every partition has `native_syscalls` unless `native_syscalls = false`;
 //! `abilities` adds any of `create_task`, `create_thread`, `map`, `irq`, `io_ports`,

@@ -150,6 +150,50 @@ codes::code_enum! {
     }
 }
 
+codes::code_enum! {
+    /// ARINC 653 Part 2 SCHEDULE_CHANGE_ACTION: what a switch to a module schedule does to a
+    /// partition when it takes effect (at the major-frame boundary). The binary code is the
+    /// partition's 2 bits in [`ChangeActions`].
+    pub enum ChangeAction: u8 {
+        /// Nothing (ARINC IGNORE): the partition runs on in its new windows.
+        Ignore = 0 => "ignore",
+        /// Stop the partition for good (ARINC STOP), as SET_PARTITION_MODE(IDLE).
+        Idle = 1 => "idle",
+        /// Restart it from its image (ARINC COLD_START).
+        ColdStart = 2 => "cold_start",
+        /// Restart it keeping its memory (ARINC WARM_START).
+        WarmStart = 3 => "warm_start",
+    }
+}
+
+/// A schedule's change actions, 2 bits per partition index (bits 2i..2i+2: partition i's
+/// [`ChangeAction`] code); every partition not named is `ignore` (0).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct ChangeActions(pub u32);
+
+impl ChangeActions {
+    /// Partition `partition`'s action (`ignore` beyond [`MAX_PARTITIONS`]).
+    pub fn get(self, partition: usize) -> ChangeAction {
+        if partition >= MAX_PARTITIONS {
+            return ChangeAction::Ignore;
+        }
+        let code = (self.0 >> (2 * partition)) & 0b11;
+        ChangeAction::from_code(code as u8).unwrap_or(ChangeAction::Ignore)
+    }
+
+    /// Sets partition `partition`'s action (`partition` < [`MAX_PARTITIONS`]).
+    pub fn set(&mut self, partition: usize, action: ChangeAction) {
+        debug_assert!(partition < MAX_PARTITIONS);
+        let shift = 2 * partition as u32;
+        self.0 = (self.0 & !(0b11 << shift)) | (u32::from(action.code()) << shift);
+    }
+
+    /// Whether only the first `partitions` partitions have an action other than `ignore`.
+    pub fn within(self, partitions: usize) -> bool {
+        partitions >= 16 || self.0 >> (2 * partitions) == 0
+    }
+}
+
 /// One health-monitoring table: an optional action per error kind.
 ///
 /// Resolution rule (syssw applies it, [`HealthTable::resolve`] implements it): an error of a

@@ -45,6 +45,9 @@ pub struct Schedule {
     pub major_frame: Option<Spanned<Scalar>>,
     #[serde(default)]
     pub windows: Vec<Spanned<Window>>,
+    /// Partition name -> ARINC schedule change action.
+    #[serde(default)]
+    pub change_actions: Named<String>,
 }
 
 #[derive(Debug, Deserialize)]

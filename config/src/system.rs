@@ -31,6 +31,8 @@ pub struct Schedule {
     pub major_frame: u64,
     /// Sorted by offset, disjoint, inside the frame.
     pub windows: Vec<Window>,
+    /// What a switch to this schedule does to each partition (`change_actions`).
+    pub change_actions: ChangeActions,
 }
 
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -345,6 +347,7 @@ impl System {
                     name: s.name.to_string(),
                     major_frame: s.major_frame,
                     windows: s.windows().collect(),
+                    change_actions: s.change_actions,
                 })
                 .collect(),
             partitions: view

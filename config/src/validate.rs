@@ -2214,6 +2214,7 @@ impl Validator<'_, '_> {
             windows.sort_by_key(|w| (w.0, w.3));
             self.window_overlaps(path, raw, &windows);
             window_owners.push(windows.iter().map(|w| w.2).collect());
+            let change_actions = self.change_actions(path, raw, partitions);
             schedules.push(Schedule {
                 name,
                 major_frame: major_frame.unwrap_or(0),
@@ -2225,6 +2226,7 @@ impl Validator<'_, '_> {
                         time_partition: 0,
                     })
                     .collect(),
+                change_actions,
             });
         }
 
@@ -2235,6 +2237,49 @@ impl Validator<'_, '_> {
             }
         }
         schedules
+    }
+
+    /// A schedule's `change_actions`: partition name -> ARINC schedule change action.
+    fn change_actions(
+        &mut self,
+        path: &KeyPath,
+        raw: &schema::Schedule,
+        partitions: &[Partition],
+    ) -> ChangeActions {
+        let mut out = ChangeActions::default();
+        let base = path.key("change_actions");
+        for (partition, action) in in_source_order(&raw.change_actions) {
+            let here = base.key(partition.get_ref());
+            let index = partitions
+                .iter()
+                .position(|p| p.name == *partition.get_ref());
+            if index.is_none() {
+                self.error(
+                    start(partition),
+                    &here,
+                    format!(
+                        "unknown partition `{}`; a change action names a partition of [partitions]",
+                        partition.get_ref()
+                    ),
+                );
+            }
+            let a = ChangeAction::from_name(action.get_ref());
+            if a.is_none() {
+                self.error(
+                    start(action),
+                    &here,
+                    format!(
+                        "unknown schedule change action `{}`; known actions: {}",
+                        action.get_ref(),
+                        list(&ChangeAction::ALL, ChangeAction::name)
+                    ),
+                );
+            }
+            if let (Some(i), Some(a)) = (index, a) {
+                out.set(i, a);
+            }
+        }
+        out
     }
 
     /// The schedules of the file in order: the single `[schedule]` or the `[[schedules]]`

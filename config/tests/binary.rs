@@ -8,7 +8,9 @@ use config::binary::{
     self, DecodeError, Table, attachment, channel, header, io_range, partition, port, schedule,
     window,
 };
-use config::model::{Direction, Discipline, ErrorCode, HealthAction, PortKind, Rights};
+use config::model::{
+    ChangeAction, ChangeActions, Direction, Discipline, ErrorCode, HealthAction, PortKind, Rights,
+};
 use config::{System, decode};
 use proptest::prelude::*;
 
@@ -36,6 +38,7 @@ duration = "1ms"
 [[schedules]]
 name = "safe"
 major_frame = "20ms"
+change_actions = { ctl = "cold_start", guest = "idle" }
 [[schedules.windows]]
 partition = "io"
 offset = "0ms"
@@ -156,6 +159,19 @@ fn round_trip() {
     assert_eq!(
         (windows[1].offset, windows[1].duration, windows[1].partition),
         (3_000_000, 500_000, 2)
+    );
+    assert_eq!(normal.change_actions, ChangeActions::default());
+    let safe = view.schedule(1).change_actions;
+    let actions: Vec<_> = (0..4).map(|p| safe.get(p)).collect();
+    assert_eq!(
+        actions,
+        [
+            ChangeAction::ColdStart,
+            ChangeAction::Ignore,
+            ChangeAction::Idle,
+            ChangeAction::Ignore
+        ],
+        "ctl, io, guest and no partition"
     );
     let ctl = view.find_partition("ctl").unwrap();
     assert_eq!((ctl.mcp, ctl.priority, ctl.time_partition), (150, 120, 1));
@@ -372,6 +388,11 @@ fn schedule_damage() {
     )(damaged(|b| {
         let at = record(b, Table::Schedule, 0);
         schedule::MAJOR_FRAME.set(&mut b[at..], 16);
+    }));
+    // A change action for a fourth partition of a system of three.
+    invalid(Table::Schedule, 1, "partition that does not exist")(damaged(|b| {
+        let at = record(b, Table::Schedule, 1);
+        schedule::CHANGE_ACTIONS.set(&mut b[at..], 0b10 << 6);
     }));
 }
 

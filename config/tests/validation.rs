@@ -3,7 +3,7 @@
 
 mod common;
 use common::*;
-use config::model::{ErrorCode, HealthAction, PortKind};
+use config::model::{ChangeAction, ErrorCode, HealthAction, PortKind};
 
 #[test]
 fn base_is_valid() {
@@ -464,6 +464,49 @@ fn window_for_unknown_partition() {
         0,
         "schedules[0].windows[0].partition",
         "unknown partition `nope`",
+    );
+}
+
+#[test]
+fn change_actions_per_partition() {
+    let s = load_ok(&doc(&[(
+        "major_frame = \"10ms\"",
+        "major_frame = \"10ms\"\nchange_actions = { b = \"cold_start\", a = \"warm_start\" }",
+    )]));
+    let actions = s.schedules[0].change_actions;
+    assert_eq!(actions.get(0), ChangeAction::WarmStart);
+    assert_eq!(actions.get(1), ChangeAction::ColdStart);
+    let s = load_ok(BASE);
+    assert_eq!(s.schedules[0].change_actions.get(0), ChangeAction::Ignore);
+}
+
+#[test]
+fn change_action_for_unknown_partition() {
+    let src = doc(&[(
+        "major_frame = \"10ms\"",
+        "major_frame = \"10ms\"\nchange_actions = { nope = \"idle\" }",
+    )]);
+    expect_one(
+        &src,
+        "nope",
+        0,
+        "schedules[0].change_actions.nope",
+        "unknown partition `nope`",
+    );
+}
+
+#[test]
+fn unknown_change_action() {
+    let src = doc(&[(
+        "major_frame = \"10ms\"",
+        "major_frame = \"10ms\"\nchange_actions = { a = \"stop\" }",
+    )]);
+    expect_one(
+        &src,
+        "\"stop\"",
+        0,
+        "schedules[0].change_actions.a",
+        "unknown schedule change action `stop`; known actions: ignore, idle, cold_start, warm_start",
     );
 }
 

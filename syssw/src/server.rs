@@ -23,12 +23,16 @@
 //!
 //! Log lines (an interface, besides the health monitor's `health: ...` line of
 //! `syssw_core::health`): `syssw: partition NAME: MODE (START_CONDITION, restart N)` on
-//! every mode change and `message: t=<ms>.<us>ms partition=NAME text="..."` for
+//! every mode change, `schedule: t=<ms>.<us>ms partition=NAME change action ACTION of
+//! schedule NAME (switch at t=<ms>.<us>ms)` before a module schedule switch's change action
+//! is carried out (the mode-change line follows), and `message: t=<ms>.<us>ms partition=NAME text="..."` for
 //! REPORT_APPLICATION_MESSAGE.
 
 use crate::partitions::Instance;
 use config::binary::SystemView;
-use config::model::{Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind};
+use config::model::{
+    ChangeAction, Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind,
+};
 use syssw_core::health::{
     Detail, DmaFault, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
 };
@@ -121,6 +125,8 @@ impl<'a> Server<'a> {
     pub fn run(mut self) -> ! {
         let mut buffer: Buffer = [0; MAX_MESSAGE_SIZE as usize];
         loop {
+            // A module schedule switch that has taken effect: its change actions first.
+            let switch_in = self.schedule_changes();
             // Without a waiter that can time out nothing expires (and the clock is not read:
             // one system call less on the path of every fault report and request).
             let timeout = match self.ports.next_deadline() {
@@ -134,6 +140,8 @@ impl<'a> Server<'a> {
                     }
                 }
             };
+            // Wake at the pending switch to carry out its change actions on time.
+            let timeout = switch_in.map_or(timeout, |t| t.min(timeout));
             let timeout = if self.dma {
                 timeout.min(DMA_POLL_NS)
             } else {
@@ -397,6 +405,50 @@ impl<'a> Server<'a> {
             // Every configured schedule is installed: the kernel has no reason to refuse.
             Err(_) => ReturnCode::InvalidParam,
         }
+    }
+
+    /// Carries out the change actions of the module schedule a switch made current, if one
+    /// has taken effect; else, while a switch is pending, how long until it does (a
+    /// receive time-out, >= 1). Reads the clock only while a switch is pending.
+    fn schedule_changes(&mut self) -> Option<u64> {
+        self.schedule.pending_at()?;
+        let now = sys::clock();
+        let Some(id) = self.schedule.take_switch(now) else {
+            return self
+                .schedule
+                .pending_at()
+                .map(|at| at.saturating_sub(now).max(1));
+        };
+        let schedule = self.system.schedule(id as usize);
+        let at = self.schedule.status(now).last_switch;
+        for index in 0..self.system.partition_count() {
+            let action = schedule.change_actions.get(index);
+            // A partition being restarted (no task, not IDLE) is already starting again.
+            let restarting = self.partitions[index]
+                .as_ref()
+                .is_none_or(|p| p.instance.is_none() && p.mode.mode() != OperatingMode::Idle);
+            if action == ChangeAction::Ignore || restarting {
+                continue;
+            }
+            let change = self.running(index).mode.apply_schedule_change(action);
+            if change == ModeChange::None {
+                continue;
+            }
+            println!(
+                "schedule: t={}.{:03}ms partition={} change action {} of schedule {} (switch at t={}.{:03}ms)",
+                now / 1_000_000,
+                now / 1000 % 1000,
+                self.system.partition(index).name,
+                action.name(),
+                schedule.name,
+                at / 1_000_000,
+                at / 1000 % 1000,
+            );
+            self.carry_out(index, change);
+        }
+        self.schedule
+            .pending_at()
+            .map(|at| at.saturating_sub(now).max(1))
     }
 
     /// A port request's port id names a port this partition has created.

@@ -416,6 +416,124 @@ fn apex_schedule_switch() {
     );
 }
 
+/// The number after `key` in `line` (up to the next space or `ms`/`.`).
+fn number_after(line: &str, key: &str) -> Option<u64> {
+    let rest = &line[line.find(key)? + key.len()..];
+    let end = rest
+        .find(|c: char| !c.is_ascii_digit())
+        .unwrap_or(rest.len());
+    rest[..end].parse().ok()
+}
+
+/// The `at t=N ms` times of the lines that contain `prefix`.
+fn times(o: &Outcome, prefix: &str) -> Vec<u64> {
+    o.lines
+        .iter()
+        .filter(|l| l.contains(prefix))
+        .filter_map(|l| number_after(l, "at t="))
+        .collect()
+}
+
+#[test]
+fn apex_schedule_actions() {
+    let o = boot("apex_schedule_actions");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): switcher's end is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "switcher: SET_MODULE_SCHEDULE second None",
+            "reborn: start 1 mode=ColdStart condition=NormalStart",
+            // Reloaded: its count of starts begins again.
+            "reborn: start 1 mode=ColdStart condition=PartitionRestart",
+            "syssw: partition reborn: COLD_START (PARTITION_RESTART, restart 1)",
+            "warm: start 1 mode=ColdStart condition=NormalStart",
+            // Its memory kept: the count goes on.
+            "warm: start 2 mode=WarmStart condition=PartitionRestart",
+            "syssw: partition warm: WARM_START (PARTITION_RESTART, restart 1)",
+            "syssw: partition stopped: IDLE",
+            "switcher: current 1 last switch",
+        ],
+    );
+    // syssw says why, with the time of the switch: one line per partition acted on.
+    let why = |partition: &str, action: &str| {
+        o.lines.iter().find(|l| {
+            l.contains("schedule: t=")
+                && l.contains(&format!(
+                    "partition={partition} change action {action} of schedule second"
+                ))
+        })
+    };
+    let reborn = why("reborn", "cold_start").expect("syssw's line for reborn");
+    let stopped = why("stopped", "idle").expect("syssw's line for stopped");
+    check(
+        &o,
+        why("warm", "warm_start").is_some(),
+        "syssw's line for warm",
+    );
+    check(
+        &o,
+        o.lines
+            .iter()
+            .all(|l| !l.contains("partition=keeper change action")),
+        "keeper (ignore) is left alone",
+    );
+    let switch = number_after(reborn, "(switch at t=").expect("the switch's time");
+    check(
+        &o,
+        number_after(stopped, "(switch at t=") == Some(switch),
+        "one switch",
+    );
+    let done = o
+        .line("switcher: current 1 last switch at t=")
+        .unwrap_or("");
+    check(
+        &o,
+        number_after(done, "last switch at t=") == Some(switch),
+        &format!("GET_MODULE_SCHEDULE_STATUS names the switch at {switch} ms: {done}"),
+    );
+    // reborn starts again in its first window under second (10-15 ms into the frame).
+    let starts = times(&o, "reborn: start ");
+    check(
+        &o,
+        starts.len() == 2 && (switch + 10..switch + 15).contains(&starts[1]),
+        &format!("reborn's starts {starts:?}, switch at {switch} ms"),
+    );
+    // warm in its first window under second (5-10 ms into the frame).
+    let warm_starts = times(&o, "warm: start ");
+    check(
+        &o,
+        warm_starts.len() == 2 && (switch + 5..switch + 10).contains(&warm_starts[1]),
+        &format!("warm's starts {warm_starts:?}, switch at {switch} ms"),
+    );
+    let reborn_ticks = times(&o, "reborn: tick ");
+    check(
+        &o,
+        reborn_ticks.iter().any(|&t| t > switch) && reborn_ticks.iter().any(|&t| t < switch),
+        &format!("reborn ticks before and after its restart: {reborn_ticks:?}"),
+    );
+    // stopped ticks only before the switch; keeper in every frame on both sides of it.
+    let stopped_ticks = times(&o, "stopped: tick ");
+    check(
+        &o,
+        !stopped_ticks.is_empty() && stopped_ticks.iter().all(|&t| t < switch),
+        &format!("stopped ticks {stopped_ticks:?}, switch at {switch} ms"),
+    );
+    let keeper_ticks = times(&o, "keeper: tick ");
+    check(
+        &o,
+        keeper_ticks.iter().filter(|&&t| t > switch).count() >= 3
+            && keeper_ticks
+                .windows(2)
+                .all(|w| (39..=41).contains(&(w[1] - w[0]))),
+        &format!("keeper ticks once per frame throughout: {keeper_ticks:?}"),
+    );
+}
+
 #[test]
 fn apex_error_handler() {
     let o = boot("apex_error_handler");

@@ -31,6 +31,17 @@
 //! action for an IDLE partition restarts or stops nothing (the report is stale: a stopped
 //! partition runs no thread).
 //!
+//! # Schedule change actions ([`PartitionMode::apply_schedule_change`])
+//!
+//! When a switch to a module schedule takes effect, its `change_actions` entry for the
+//! partition (ARINC 653 Part 2 SCHEDULE_CHANGE_ACTION): `ignore` → nothing; `idle` (ARINC
+//! STOP) → `Stop`; `cold_start` / `warm_start` → `Restart` with start condition
+//! [`StartCondition::PartitionRestart`] (ARINC 653 and a653rs have no start condition for a
+//! schedule change; the restart is the module's configured one, not the health monitor's,
+//! so it is not HM_PARTITION_RESTART). As for the health monitor, a warm start of a
+//! partition still in COLD_START is a cold one, and an IDLE partition stays IDLE (IDLE is
+//! for good until the module restarts).
+//!
 //! # Cold vs warm restart (what the glue does for `Restart`)
 //!
 //! Both stop every thread of the partition, reset its ports
@@ -41,7 +52,7 @@
 //! its start condition and decides what to re-initialise. This module only decides; the
 //! glue reloads.
 
-use config::model::HealthAction;
+use config::model::{ChangeAction, HealthAction};
 pub use protocol::{OperatingMode, ReturnCode, StartCondition};
 
 /// What the glue must do after a transition.
@@ -158,6 +169,26 @@ impl PartitionMode {
             A::WarmRestart => {
                 let warm = self.mode != OperatingMode::ColdStart;
                 self.restart(warm, StartCondition::HmPartitionRestart)
+            }
+        }
+    }
+}
+
+impl PartitionMode {
+    /// A switch to a module schedule whose change action for this partition is `action`
+    /// took effect (see the module documentation).
+    pub fn apply_schedule_change(&mut self, action: ChangeAction) -> ModeChange {
+        match action {
+            _ if self.mode == OperatingMode::Idle => ModeChange::None,
+            ChangeAction::Ignore => ModeChange::None,
+            ChangeAction::Idle => {
+                self.mode = OperatingMode::Idle;
+                ModeChange::Stop
+            }
+            ChangeAction::ColdStart => self.restart(false, StartCondition::PartitionRestart),
+            ChangeAction::WarmStart => {
+                let warm = self.mode != OperatingMode::ColdStart;
+                self.restart(warm, StartCondition::PartitionRestart)
             }
         }
     }
@@ -351,6 +382,43 @@ mod tests {
         assert_eq!(q.apply_health(A::WarmRestart), C::Restart { warm: true });
         assert_eq!(q.apply_health(A::Shutdown), C::Halt { success: false });
         assert_eq!(q.mode(), M::WarmStart);
+    }
+
+    #[test]
+    fn schedule_change_actions() {
+        use ChangeAction as A;
+        use ModeChange as C;
+        let mut p = in_mode(M::Normal);
+        assert_eq!(p.apply_schedule_change(A::Ignore), C::None);
+        assert_eq!(p.mode(), M::Normal);
+        assert_eq!(
+            p.apply_schedule_change(A::WarmStart),
+            C::Restart { warm: true }
+        );
+        assert_eq!(
+            (p.mode(), p.start_condition(), p.restarts()),
+            (M::WarmStart, StartCondition::PartitionRestart, 1)
+        );
+        assert_eq!(
+            p.apply_schedule_change(A::ColdStart),
+            C::Restart { warm: false }
+        );
+        assert_eq!(
+            (p.mode(), p.start_condition()),
+            (M::ColdStart, StartCondition::PartitionRestart)
+        );
+        // Warm start during cold start: cold.
+        assert_eq!(
+            p.apply_schedule_change(A::WarmStart),
+            C::Restart { warm: false }
+        );
+        assert_eq!(p.apply_schedule_change(A::Idle), C::Stop);
+        assert_eq!(p.mode(), M::Idle);
+        // IDLE is for good.
+        for a in A::ALL {
+            assert_eq!(p.apply_schedule_change(a), C::None);
+            assert_eq!(p.mode(), M::Idle);
+        }
     }
 
     #[test]

@@ -12,6 +12,13 @@
 //! "switching" to the running schedule changes nothing and is not a switch).
 //!
 //! Schedule ids are the schedules' indexes in the configuration; the first runs from boot.
+//!
+//! Schedule change actions (ARINC 653 Part 2, `change_actions` of a schedule in the
+//! configuration): the glue wakes at the time of a pending switch ([`ModuleSchedule::pending_at`])
+//! and takes the switch that has taken effect ([`ModuleSchedule::take_switch`]) to carry out
+//! the new schedule's action for each partition
+//! ([`crate::mode::PartitionMode::apply_schedule_change`]). A switch settled by a status
+//! request in between is kept until the glue takes it, so no switch's actions are lost.
 
 use crate::ReturnCode;
 use protocol::ScheduleStatus;
@@ -23,6 +30,8 @@ pub struct ModuleSchedule {
     /// The requested schedule and when the kernel switches to it.
     pending: Option<(u64, u64)>,
     last_switch: u64,
+    /// A switch that took effect and whose change actions are not carried out yet.
+    untaken: Option<u64>,
 }
 
 impl ModuleSchedule {
@@ -33,6 +42,7 @@ impl ModuleSchedule {
             current: 0,
             pending: None,
             last_switch: 0,
+            untaken: None,
         }
     }
 
@@ -65,6 +75,23 @@ impl ModuleSchedule {
         }
     }
 
+    /// When the pending switch takes effect (`None`: no switch pending). A switch that took
+    /// effect but is not taken yet is due at once (its time, in the past).
+    pub fn pending_at(&self) -> Option<u64> {
+        match (self.untaken, self.pending) {
+            (Some(_), _) => Some(self.last_switch),
+            (None, Some((_, at))) => Some(at),
+            (None, None) => None,
+        }
+    }
+
+    /// The schedule a switch made current since the last call, if one has taken effect by
+    /// `now`: its change actions are to be carried out (once).
+    pub fn take_switch(&mut self, now: u64) -> Option<u64> {
+        self.settle(now);
+        self.untaken.take()
+    }
+
     /// A pending switch whose time has come is done.
     fn settle(&mut self, now: u64) {
         if let Some((id, at)) = self.pending
@@ -73,6 +100,7 @@ impl ModuleSchedule {
             if id != self.current {
                 self.current = id;
                 self.last_switch = at;
+                self.untaken = Some(id);
             }
             self.pending = None;
         }
@@ -136,5 +164,29 @@ mod tests {
                 next: 0
             }
         );
+    }
+
+    #[test]
+    fn each_switch_is_taken_once_for_its_change_actions() {
+        let mut s = ModuleSchedule::new(3);
+        assert_eq!(s.pending_at(), None, "nothing to wake for");
+        assert_eq!(s.take_switch(10 * MS), None);
+        s.requested(1, 50 * MS, 10 * MS);
+        assert_eq!(s.pending_at(), Some(50 * MS));
+        assert_eq!(s.take_switch(50 * MS - 1), None, "not before the boundary");
+        assert_eq!(s.take_switch(50 * MS), Some(1));
+        assert_eq!(s.take_switch(60 * MS), None, "once");
+        assert_eq!(s.pending_at(), None);
+        // Settled by a status request first: still taken once, and due at once.
+        s.requested(2, 100 * MS, 60 * MS);
+        assert_eq!(s.status(100 * MS).current, 2);
+        assert_eq!(s.pending_at(), Some(100 * MS));
+        assert_eq!(s.take_switch(101 * MS), Some(2));
+        assert_eq!(s.take_switch(101 * MS), None);
+        // A cancelled switch or one to the running schedule has no actions.
+        s.requested(0, 150 * MS, 110 * MS);
+        s.requested(2, 150 * MS, 120 * MS);
+        assert_eq!(s.take_switch(200 * MS), None);
+        assert_eq!(s.pending_at(), None);
     }
 }

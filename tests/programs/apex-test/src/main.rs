@@ -25,6 +25,10 @@
 //! * `sched` / `plain` (scenario `apex_schedule_switch`): module schedules: a switch
 //!   that lands on the major-frame boundary, and a partition that may not switch (see
 //!   `schedules.rs`);
+//! * `switcher` / `warm` / `reborn` / `stopped` / `keeper` (scenario
+//!   `apex_schedule_actions`): schedule change actions: a switch warm-starts one
+//!   partition, cold-starts one and stops another (see
+//!   `schedules.rs`);
 //! * `handled` (scenario `apex_error_handler`): the error handler with GET_ERROR_STATUS,
 //!   RAISE_APPLICATION_ERROR's codes, and what a handler may not do (see `errors.rs`);
 //! * `bench-q` (`cargo xtask bench`): times queuing-port send + receive through syssw;
@@ -176,6 +180,7 @@ impl Partition<Warden> for Test {
             "handled" => errors::create(ctx),
             "plain" => schedules::create_plain(ctx),
             "bench-s" => schedules::create_bench(ctx),
+            "switcher" | "warm" | "reborn" | "stopped" | "keeper" => schedules::create_actions(ctx),
             // Only fills windows (the schedule-switch bench).
             "idle" => {}
             "forger" => process(ctx, "forge", forge, Some(FRAME), None),

@@ -17,11 +17,22 @@
 //! `schedule_steady_window_lateness`: the same after the same wait one frame later, with no
 //! switch (the comparison).
 //!
+//! Partitions `switcher`, `warm`, `reborn`, `stopped` and `keeper` (scenario
+//! `apex_schedule_actions`): schedule change actions. Schedules `first` and `second` have
+//! the same windows (40 ms frame: 0, 5, 10, 20, 30 ms, 5 ms each, in that order);
+//! `second`'s `change_actions` warm-start `warm`, cold-start `reborn` and stop `stopped`
+//! (idle), `keeper` is left alone. `switcher` switches to `second` in the third frame; the
+//! others say how they started (with a count of starts in their memory: a warm start keeps
+//! it, a cold one reloads it) and tick once per frame, so the log shows `warm` and `reborn`
+//! starting again with PARTITION_RESTART in their first windows under `second`, `stopped`
+//! ticking no more and `keeper` ticking on.
+//!
 //! Every line starts with the partition's name.
 
 use apex::Warden;
 use apex::a653rs::bindings::{
-    self as b, ApexErrorP4, ApexScheduleP2, ApexTimeP1, ApexTimeP4, ErrorReturnCode,
+    self as b, ApexErrorP4, ApexPartitionP4, ApexScheduleP2, ApexTimeP1, ApexTimeP4,
+    ErrorReturnCode,
 };
 use apex::a653rs::prelude::StartContext;
 use apex::codes::apex_name;
@@ -29,6 +40,7 @@ use apex::user_rt::{println, sys};
 
 extern crate alloc;
 use alloc::vec::Vec;
+use core::sync::atomic::{AtomicU32, Ordering};
 
 const MS: i64 = 1_000_000;
 
@@ -181,4 +193,58 @@ extern "C" fn switches() {
         b::ErrorCode::ApplicationError,
         b"bench done",
     );
+}
+
+/// Frames `keeper` and `stopped` tick for (the run ends in the seventh).
+const TICKS: u32 = 8;
+
+/// Starts of this partition's program while its memory was kept.
+static STARTS: AtomicU32 = AtomicU32::new(0);
+
+pub fn create_actions(_ctx: &mut StartContext<Warden>) {
+    let info = apex::runtime::start_info();
+    let name = info.name();
+    let status = <Warden as ApexPartitionP4>::get_partition_status();
+    println!(
+        "{name}: start {} mode={:?} condition={:?} at t={} ms",
+        STARTS.fetch_add(1, Ordering::Relaxed) + 1,
+        status.operating_mode,
+        status.start_condition,
+        now() / MS as u64
+    );
+    match name {
+        "switcher" => crate::start_aperiodic("switch", switch_in_third_frame, 10),
+        _ => crate::start_aperiodic("tick", tick_each_frame, 10),
+    }
+}
+
+extern "C" fn switch_in_third_frame() {
+    let _ = <Warden as ApexTimeP1>::timed_wait(80 * MS);
+    let second = schedule_id("second").expect("schedule second");
+    println!(
+        "switcher: SET_MODULE_SCHEDULE second {:?} at t={} ms",
+        code(set(second)),
+        now() / MS as u64
+    );
+    // Four frames of `second`.
+    let _ = <Warden as ApexTimeP1>::timed_wait(190 * MS);
+    let s = status();
+    println!(
+        "switcher: current {} last switch at t={} ms; done",
+        s.current_schedule,
+        s.time_of_last_schedule_switch / MS
+    );
+    let _ = <Warden as ApexErrorP4>::raise_application_error(
+        b::ErrorCode::ApplicationError,
+        b"schedule actions done",
+    );
+}
+
+extern "C" fn tick_each_frame() {
+    let info = apex::runtime::start_info();
+    let name = info.name();
+    for _ in 0..TICKS {
+        println!("{name}: tick at t={} ms", now() / MS as u64);
+        let _ = <Warden as ApexTimeP1>::timed_wait(40 * MS);
+    }
 }
