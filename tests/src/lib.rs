@@ -4,6 +4,8 @@
 
 pub mod tank;
 
+use std::io::{Read, Write};
+use std::net::TcpStream;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 use xtask::qemu::{self, Outcome, RunOptions};
@@ -114,4 +116,31 @@ pub fn guest_output(o: &Outcome) -> Vec<String> {
                 .map(str::to_string)
         })
         .collect()
+}
+
+/// One HTTP/1.0 GET of `path` from 127.0.0.1:`port` (a port QEMU forwards to a guest):
+/// the status line and the body, or `None` when the connection failed or was closed
+/// without an answer (QEMU accepts on the forwarded port before the guest listens, then
+/// closes).
+pub fn http_get(port: u16, path: &str) -> Option<(String, String)> {
+    let mut stream =
+        TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(5)).ok()?;
+    stream
+        .set_read_timeout(Some(Duration::from_secs(10)))
+        .ok()?;
+    stream
+        .set_write_timeout(Some(Duration::from_secs(10)))
+        .ok()?;
+    write!(stream, "GET {path} HTTP/1.0\r\nHost: guest\r\n\r\n").ok()?;
+    let mut answer = Vec::new();
+    stream.read_to_end(&mut answer).ok()?;
+    let answer = String::from_utf8_lossy(&answer).into_owned();
+    // The head ends at the first empty line (a CGI script's own header lines end in a
+    // bare "\n", which busybox httpd passes on).
+    let end = ["\r\n\r\n", "\n\n", "\r\n\n"]
+        .iter()
+        .filter_map(|sep| answer.find(sep).map(|at| (at, at + sep.len())))
+        .min()?;
+    let (head, body) = (&answer[..end.0], &answer[end.1..]);
+    Some((head.lines().next()?.to_string(), body.to_string()))
 }

@@ -1,12 +1,13 @@
 //! The whole system: the default system as `cargo xtask run` boots it, with commands
-//! typed into its console (`system_default`, `config/systems/plc-guest.toml`); the soft-PLC
+//! typed into its console and its httpd's page fetched from the host (`system_default`,
+//! `config/systems/plc-guest.toml`); the soft-PLC
 //! controls the plant while a hostile guest runs in the background (`system_hostile_guest`,
 //! configuration `tests/configs/system_hostile_guest.toml`, the guest's init
 //! `tests/configs/guest/hostile.sh`); and the guest gets the time the windows leave
 //! (`system_leftover`, `tests/configs/system_leftover.toml`).
 
 use scenarios::tank::{self, BAND, DISTURBANCE_MS, SETTLED_MS};
-use scenarios::{boot, check};
+use scenarios::{boot, boot_beside, check, http_get};
 use xtask::qemu::Ending;
 
 /// When the level is back in the band after the plant's first disturbance.
@@ -320,8 +321,24 @@ fn system_leftover() {
 
 #[test]
 fn system_default() {
-    let o = boot("system_default");
+    // The host side: the guest's page through the forwarded port, asked for until it
+    // comes (the system boots meanwhile).
+    let (o, page) = boot_beside("system_default", |ports, ended| {
+        while !ended.load(std::sync::atomic::Ordering::SeqCst) {
+            if let Some(page) = http_get(ports[0], "/") {
+                return Some(page);
+            }
+            std::thread::sleep(std::time::Duration::from_millis(500));
+        }
+        None
+    });
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    let (status, body) = page.unwrap_or_default();
+    check(
+        &o,
+        status.contains(" 200") && body.contains("<h1>Warden: the Linux guest</h1>"),
+        &format!("the guest's page from the host: {status:?} {body:?}"),
+    );
     check(
         &o,
         matches!(o.ending, Ending::TimedOut),

@@ -1,0 +1,182 @@
+//! A network storm beside the PLC (scenario `net_storm`, the default system
+//! `config/systems/plc-guest.toml` on virtual time): the host floods the NIC with 64-byte
+//! UDP datagrams and TCP connection attempts to the guest's httpd while the PLC controls
+//! the plant in its window and the NIC partition works in its own.
+
+use scenarios::tank::{self, DISTURBANCE_MS, SETTLED_MS};
+use scenarios::{boot_beside, check, http_get};
+use std::net::{TcpStream, UdpSocket};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use xtask::qemu::Ending;
+
+/// The storm's bounds: how long (real time) and how many of each.
+const STORM: Duration = Duration::from_secs(20);
+const DATAGRAMS: u64 = 2_000_000;
+const CONNECTIONS: u64 = 5_000;
+/// How much later than in the quiet seconds a release may be in the storm's.
+const STORM_BOUND_NS: u64 = 50_000;
+/// Frames a second from the wire that make a second stormy, or at most quiet.
+const STORMY: u64 = 500;
+const QUIET: u64 = 20;
+
+/// What the host sent.
+#[derive(Debug, Default)]
+struct Storm {
+    reached: bool,
+    datagrams: u64,
+    connections: u64,
+    connected: u64,
+}
+
+/// Waits until the guest's httpd answers, lets the system run quietly for 5 s, then
+/// storms for [`STORM`]: one thread sending datagrams to the forwarded UDP port, one
+/// opening and dropping connections to the forwarded TCP port.
+fn storm(udp: u16, tcp: u16, ended: &AtomicBool) -> Storm {
+    let mut s = Storm::default();
+    while !ended.load(Ordering::SeqCst) && !s.reached {
+        s.reached = http_get(tcp, "/").is_some();
+        if !s.reached {
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    }
+    if !s.reached {
+        return s;
+    }
+    std::thread::sleep(Duration::from_secs(5));
+    let until = Instant::now() + STORM;
+    let going = || Instant::now() < until && !ended.load(Ordering::SeqCst);
+    std::thread::scope(|scope| {
+        let flood = scope.spawn(|| {
+            let socket = UdpSocket::bind(("127.0.0.1", 0)).expect("a UDP socket");
+            let payload = [0x5au8; 64];
+            let mut sent = 0;
+            while sent < DATAGRAMS && going() {
+                for _ in 0..64 {
+                    let _ = socket.send_to(&payload, ("127.0.0.1", udp));
+                    sent += 1;
+                }
+            }
+            sent
+        });
+        let (mut tried, mut connected) = (0, 0);
+        while tried < CONNECTIONS && going() {
+            tried += 1;
+            if TcpStream::connect_timeout(&([127, 0, 0, 1], tcp).into(), Duration::from_secs(1))
+                .is_ok()
+            {
+                connected += 1;
+            }
+        }
+        s.connections = tried;
+        s.connected = connected;
+        s.datagrams = flood.join().unwrap_or(0);
+    });
+    s
+}
+
+/// The kernel's time stamp of a log line, `[SSSS.UUUUUU] ...`, in seconds.
+fn kernel_seconds(line: &str) -> Option<f64> {
+    line.strip_prefix('[')?
+        .split_once(']')?
+        .0
+        .trim()
+        .parse()
+        .ok()
+}
+
+/// The number after ` in=` in the NIC's uplink counter line.
+fn uplink_in(line: &str) -> Option<u64> {
+    let at = line.find(" uplink in=")? + " uplink in=".len();
+    line[at..].split(' ').next()?.parse().ok()
+}
+
+#[test]
+fn net_storm() {
+    let (o, s) = boot_beside("net_storm", |ports, ended| storm(ports[0], ports[1], ended));
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        matches!(o.ending, Ending::TimedOut),
+        "expected the system to run until the timeout",
+    );
+    check(&o, s.reached, "the guest's httpd never answered the host");
+    // The frames the NIC took from the wire each second (kernel time of its line).
+    let mut rates = Vec::new();
+    let mut last = 0;
+    for line in &o.lines {
+        if let (Some(at), Some(n)) = (kernel_seconds(line), uplink_in(line)) {
+            rates.push((at, n - last.min(n)));
+            last = n;
+        }
+    }
+    // Each PLC period line (covering the second before it) goes with the NIC's line
+    // nearest in time: stormy, quiet, or neither (the storm's edges).
+    let (mut quiet, mut stormy) = (Vec::new(), Vec::new());
+    for line in &o.lines {
+        let (Some(at), Some(("plc", period))) =
+            (kernel_seconds(line), xtask::plot::period_line(line))
+        else {
+            continue;
+        };
+        let Some(&(_, rate)) = rates
+            .iter()
+            .min_by(|a, b| (a.0 - at).abs().total_cmp(&(b.0 - at).abs()))
+        else {
+            continue;
+        };
+        if rate >= STORMY {
+            stormy.push(period.lateness_ns.2);
+        } else if rate <= QUIET && period.t_ms >= SETTLED_MS {
+            quiet.push(period.lateness_ns.2);
+        }
+    }
+    let peak = rates.iter().map(|r| r.1).max().unwrap_or(0);
+    let (quiet_max, storm_max) = (
+        quiet.iter().copied().max().unwrap_or(0),
+        stormy.iter().copied().max().unwrap_or(0),
+    );
+    println!(
+        "net_storm: the host sent {} datagrams and tried {} connections ({} connected) in {STORM:?}; the NIC took up to {peak} frames a second from the wire; PLC release lateness (virtual time): max {quiet_max} ns over {} quiet seconds, max {storm_max} ns over {} stormy seconds",
+        s.datagrams,
+        s.connections,
+        s.connected,
+        quiet.len(),
+        stormy.len()
+    );
+    check(
+        &o,
+        stormy.len() >= 3 && quiet.len() >= 3,
+        &format!(
+            "{} stormy and {} quiet seconds of PLC period lines",
+            stormy.len(),
+            quiet.len()
+        ),
+    );
+    check(
+        &o,
+        storm_max <= quiet_max + STORM_BOUND_NS,
+        "a release in the storm later than 50 us beyond the quiet seconds' latest",
+    );
+    // Every cycle: one per 10 ms frame in each period line.
+    for line in &o.lines {
+        if let Some(("plc", period)) = xtask::plot::period_line(line)
+            && period.t_ms > 1_000
+        {
+            check(
+                &o,
+                period.releases >= 99,
+                &format!("{line}: a cycle was missed (one per 10 ms frame)"),
+            );
+        }
+    }
+    let status = tank::status(&o);
+    tank::settles(&o, &status);
+    // In the band from SETTLED_MS, except in the plant's disturbance and the second after.
+    tank::holds(
+        &o,
+        &status,
+        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= DISTURBANCE_MS.1 + 1_000,
+        0,
+    );
+}
