@@ -35,15 +35,16 @@ fn every_system_validates_and_round_trips() {
         let blob = config::binary::encode(&system);
         let view = config::decode(&blob)
             .unwrap_or_else(|e| panic!("{}: the encoded form is rejected: {e}", path.display()));
-        // The PLC mapping, other data entries, the guest's init and the IEC 61499 boot file
-        // travel in the partitions' data entries (PLC package, compiled image, initramfs,
-        // device package), not in the binary form.
+        // The PLC mapping, other data entries, the guest's init, the IEC 61499 boot file and
+        // the NIC's tenants travel in the partitions' data entries (PLC package, compiled
+        // image, initramfs, device package, tenant table), not in the binary form.
         let mut without_data = system.clone();
         for p in &mut without_data.partitions {
             p.plc = None;
             p.data = None;
             p.guest = None;
             p.iec61499 = None;
+            p.nic = None;
         }
         assert_eq!(System::from_view(&view), without_data, "{}", path.display());
         count += 1;
@@ -55,12 +56,15 @@ fn every_system_validates_and_round_trips() {
 fn plc_guest_system() {
     let s = load_file(&systems_dir().join("plc-guest.toml"));
     let names: Vec<&str> = s.partitions.iter().map(|p| p.name.as_str()).collect();
-    assert_eq!(names, ["plc", "plant", "linux"]);
-    let [plc, plant, guest] = &s.partitions[..] else {
+    assert_eq!(names, ["plc", "plant", "nic", "linux"]);
+    let [plc, plant, nic, guest] = &s.partitions[..] else {
         unreachable!()
     };
     assert_eq!((plc.image.as_str(), plc.time_partition), ("softplc", 1));
     assert_eq!((plant.image.as_str(), plant.time_partition), ("plant", 2));
+    assert_eq!((nic.image.as_str(), nic.time_partition), ("nic", 3));
+    assert_eq!(nic.devices, [pci::Address::parse("00:03.0").unwrap()]);
+    assert_eq!((nic.dma, nic.dma_unconfined), (512 * 1024, false));
     assert_eq!((guest.image.as_str(), guest.time_partition), ("guest", 0));
     assert_eq!(
         guest.io_ports,
@@ -81,7 +85,8 @@ fn plc_guest_system() {
         (0, 3_000_000, 1)
     );
     // The PLC's valve and setpoint to the plant, the plant's level to the PLC; the guest
-    // sees the level and the valve and reaches the PLC's online service.
+    // sees the level and the valve and reaches the PLC's online service; its eth0 is the
+    // NIC partition's tenant.
     let links: Vec<(PortKind, String, Vec<String>)> = s
         .channels
         .iter()
@@ -117,6 +122,8 @@ fn plc_guest_system() {
             ),
             link(PortKind::Queuing, "linux.plc-request", &["plc.cmd"]),
             link(PortKind::Queuing, "plc.reply", &["linux.plc-response"]),
+            link(PortKind::Queuing, "linux.eth0-tx", &["nic.linux-tx"]),
+            link(PortKind::Queuing, "nic.linux-rx", &["linux.eth0-rx"]),
         ]
     );
     let g = guest.guest.as_ref().expect("the guest's keys");
