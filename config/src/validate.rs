@@ -718,7 +718,9 @@ impl Validator<'_, '_> {
     ) -> Option<GuestNet> {
         let before = self.r.diagnostics.len();
         let n = net.get_ref();
-        let mac = parse_mac(n.mac.get_ref()).filter(|m| m[0] & 1 == 0);
+        let mac = nic_core::switch::Mac::parse(n.mac.get_ref())
+            .map(|m| m.0)
+            .filter(|m| m[0] & 1 == 0);
         if mac.is_none() {
             self.error(
                 start(&n.mac),
@@ -3026,18 +3028,4 @@ fn parse_ipv4(text: &str) -> Option<[u8; 4]> {
         *o = part.parse().ok()?;
     }
     parts.next().is_none().then_some(octets)
-}
-
-/// `52:54:00:12:34:56`.
-fn parse_mac(text: &str) -> Option<[u8; 6]> {
-    let mut mac = [0u8; 6];
-    let mut parts = text.split(':');
-    for b in &mut mac {
-        let part = parts.next()?;
-        if part.len() != 2 {
-            return None;
-        }
-        *b = u8::from_str_radix(part, 16).ok()?;
-    }
-    parts.next().is_none().then_some(mac)
 }

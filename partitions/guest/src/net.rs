@@ -15,6 +15,7 @@ use crate::linux::Errno;
 use alloc::vec::Vec;
 pub use netstack::Ipv4Address;
 use netstack::{Config, Counters, Limits, SocketAddr, SocketId, Stack};
+use nic_core::switch::Mac;
 
 /// `AF_INET` and the length of its `struct sockaddr_in`.
 pub const AF_INET: u16 = 2;
@@ -72,7 +73,7 @@ pub fn parse_net_file(text: &str) -> Result<NetFile<'_>, (usize, &'static str)> 
         let at = n + 1;
         let (key, value) = line.split_once('=').ok_or((at, "expected key=value"))?;
         match key {
-            "mac" => mac = Some(parse_mac(value).ok_or((at, "bad MAC address"))?),
+            "mac" => mac = Some(Mac::parse(value).ok_or((at, "bad MAC address"))?.0),
             "address" => {
                 let (ip, prefix) = value.split_once('/').ok_or((at, "expected a.b.c.d/n"))?;
                 let ip = parse_ipv4(ip).ok_or((at, "bad IPv4 address"))?;
@@ -114,20 +115,6 @@ pub fn parse_ipv4(text: &str) -> Option<Ipv4Address> {
         .next()
         .is_none()
         .then(|| Ipv4Address::from_octets(octets))
-}
-
-/// `52:54:00:12:34:56`.
-pub fn parse_mac(text: &str) -> Option<[u8; 6]> {
-    let mut mac = [0u8; 6];
-    let mut parts = text.split(':');
-    for b in &mut mac {
-        let part = parts.next()?;
-        if part.len() != 2 {
-            return None;
-        }
-        *b = u8::from_str_radix(part, 16).ok()?;
-    }
-    parts.next().is_none().then_some(mac)
 }
 
 /// A `struct sockaddr_in` (family, port in network order, address): `EINVAL` when

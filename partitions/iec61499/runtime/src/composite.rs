@@ -20,7 +20,7 @@
 //! a name or text is length u16 then UTF-8 bytes
 //! ```
 
-use crate::package::{PackageError, Reader, crc};
+use crate::package::{self, PackageError, crc};
 use alloc::string::String;
 use alloc::vec::Vec;
 
@@ -135,25 +135,7 @@ impl CompositeType {
     /// connection end names a component or a port of the interface of the right direction
     /// (what the component types make of it is checked when an instance is created).
     pub fn decode(bytes: &[u8]) -> Result<CompositeType, PackageError> {
-        if bytes.get(..4) != Some(&MAGIC[..]) {
-            return Err(if bytes.len() < 4 {
-                PackageError::Truncated(0)
-            } else {
-                PackageError::Magic
-            });
-        }
-        let mut r = Reader { b: bytes, at: 4 };
-        let version = r.u16()?;
-        if version != VERSION {
-            return Err(PackageError::Version(version));
-        }
-        if r.u16()? != 0 {
-            return Err(PackageError::Invalid(6, "reserved bytes are not 0"));
-        }
-        let sum = r.u32()?;
-        if crc(&bytes[12..]) != sum {
-            return Err(PackageError::Checksum);
-        }
+        let mut r = package::open(bytes, MAGIC, VERSION)?;
         let mut t = CompositeType {
             name: r.text()?,
             file: r.text()?,

@@ -209,9 +209,14 @@ impl<'a> Reader<'a> {
     }
 }
 
-/// Reads and checks a package.
-pub fn decode(bytes: &[u8]) -> Result<TypePackage, PackageError> {
-    if bytes.get(..4) != Some(&MAGIC[..]) {
+/// Checks the 12-byte header every package kind shares (`magic`, `version`, two reserved
+/// zero bytes, the CRC-32 of what follows) and returns a reader at the body.
+pub(crate) fn open<'a>(
+    bytes: &'a [u8],
+    magic: &[u8; 4],
+    version: u16,
+) -> Result<Reader<'a>, PackageError> {
+    if bytes.get(..4) != Some(&magic[..]) {
         return Err(if bytes.len() < 4 {
             PackageError::Truncated(0)
         } else {
@@ -219,9 +224,9 @@ pub fn decode(bytes: &[u8]) -> Result<TypePackage, PackageError> {
         });
     }
     let mut r = Reader { b: bytes, at: 4 };
-    let version = r.u16()?;
-    if version != VERSION {
-        return Err(PackageError::Version(version));
+    let found = r.u16()?;
+    if found != version {
+        return Err(PackageError::Version(found));
     }
     if r.u16()? != 0 {
         return Err(PackageError::Invalid(6, "reserved bytes are not 0"));
@@ -230,6 +235,12 @@ pub fn decode(bytes: &[u8]) -> Result<TypePackage, PackageError> {
     if crc(&bytes[12..]) != sum {
         return Err(PackageError::Checksum);
     }
+    Ok(r)
+}
+
+/// Reads and checks a package.
+pub fn decode(bytes: &[u8]) -> Result<TypePackage, PackageError> {
+    let mut r = open(bytes, MAGIC, VERSION)?;
     r.count(Some(1))?;
     let name = r.name()?;
     let mut event_sets = Vec::new();
