@@ -163,8 +163,8 @@ int main(int argc, char **argv) {
     else if (strcmp(what, "cli") == 0)
         __asm__ volatile("cli");
     else if (strcmp(what, "enosys") == 0) {
-        /* A call the guest does not serve (socket): ENOSYS, logged once per guest. */
-        long r = syscall(SYS_socket, 2, 1, 0);
+        /* A call the guest does not serve (io_uring_setup): ENOSYS, logged once per guest. */
+        long r = syscall(SYS_io_uring_setup, 1, 0);
         printf("enosys: %s\n", r == -1 && errno == ENOSYS ? "ENOSYS" : "served");
         return 0;
     } else {

@@ -126,8 +126,9 @@ fn guest_faults() {
     check(
         &o,
         unsupported.len() == 1
-            && unsupported[0]
-                .ends_with("(linux-probe): unsupported system call 41 (socket), returning ENOSYS"),
+            && unsupported[0].ends_with(
+                "(linux-probe): unsupported system call 425 (io_uring_setup), returning ENOSYS",
+            ),
         &format!("faults: calls the guest lacks: {unsupported:?}"),
     );
     let enosys = printed.iter().filter(|l| *l == "enosys: ENOSYS").count();
