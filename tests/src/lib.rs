@@ -103,6 +103,28 @@ pub fn passes(name: &str, mode: &str, checks: &[&str]) -> Outcome {
     o
 }
 
+/// The text of partition `partition`'s log lines that contain `needle`, without the
+/// kernel's time stamp and the partition prefix, in log order.
+pub fn partition_lines(o: &Outcome, partition: &str, needle: &str) -> Vec<String> {
+    let prefix = format!("[{partition}] ");
+    o.lines
+        .iter()
+        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text.to_string()))
+        .filter(|text| text.contains(needle))
+        .collect()
+}
+
+/// What the processes of guest partition `partition` wrote to standard output (their
+/// `guest: process <pid> stdout: ...` log lines), line by line in log order.
+pub fn guest_stdout(o: &Outcome, partition: &str) -> Vec<String> {
+    let prefix = format!("[{partition}] guest: process ");
+    o.lines
+        .iter()
+        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text))
+        .filter_map(|text| text.split_once(" stdout: ").map(|(_, t)| t.to_string()))
+        .collect()
+}
+
 /// What the processes of the guest partition `linux` wrote (its `guest: process <pid>
 /// stdout: ...` and `stderr: ...` log lines), in order.
 pub fn guest_output(o: &Outcome) -> Vec<String> {

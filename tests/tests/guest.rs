@@ -7,18 +7,7 @@
 //! `/bin/sh -c 'echo hello; echo world'`, partition `pipes` runs shell pipelines, a
 //! subshell's exit status and a loop of 50 processes.
 
-use scenarios::{boot, check};
-
-/// The text of the guest log lines of partition `partition` that contain `needle`, without
-/// the kernel's time stamp and the partition prefix (in log order).
-fn guest_lines(o: &xtask::qemu::Outcome, partition: &str, needle: &str) -> Vec<String> {
-    let prefix = format!("[{partition}] ");
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text.to_string()))
-        .filter(|text| text.contains(needle))
-        .collect()
-}
+use scenarios::{boot, check, guest_stdout, partition_lines};
 
 #[test]
 fn guest_hello() {
@@ -53,13 +42,13 @@ fn guest_hello() {
             &["hello", "world"][..],
         ),
     ] {
-        let started = guest_lines(&o, partition, "started: ");
+        let started = partition_lines(&o, partition, "started: ");
         check(
             &o,
             started == [format!("guest: process 1 (busybox) started: {command}")],
             &format!("{partition}: start line {started:?}"),
         );
-        let printed = guest_lines(&o, partition, "guest: process 1 std");
+        let printed = partition_lines(&o, partition, "guest: process 1 std");
         let expected: Vec<String> = output
             .iter()
             .map(|line| format!("guest: process 1 stdout: {line}"))
@@ -69,13 +58,13 @@ fn guest_hello() {
             printed == expected,
             &format!("{partition}: printed {printed:?}, expected {expected:?}"),
         );
-        let exits = guest_lines(&o, partition, "guest: process 1 exited");
+        let exits = partition_lines(&o, partition, "guest: process 1 exited");
         check(
             &o,
             exits == ["guest: process 1 exited with status 0"],
             &format!("{partition}: exit lines {exits:?}"),
         );
-        let unsupported = guest_lines(&o, partition, "unsupported system call");
+        let unsupported = partition_lines(&o, partition, "unsupported system call");
         check(
             &o,
             unsupported.is_empty(),
@@ -83,14 +72,14 @@ fn guest_hello() {
         );
         check(
             &o,
-            guest_lines(&o, partition, "killed by signal").is_empty(),
+            partition_lines(&o, partition, "killed by signal").is_empty(),
             &format!("{partition}: a process was killed"),
         );
     }
     // Processes and pipes: each line comes out of the pipeline's last process, in order;
     // the subshell's exit status reaches `$?`; the loop ran 50 processes, each forked and
     // executing /bin/true; no process is left (every one was reaped).
-    let printed: Vec<String> = guest_lines(&o, "pipes", " stdout: ")
+    let printed: Vec<String> = partition_lines(&o, "pipes", " stdout: ")
         .iter()
         .map(|l| {
             l.split_once(" stdout: ")
@@ -103,19 +92,19 @@ fn guest_hello() {
         printed == ["one", "two", "9", "status 3", "ran 50"],
         &format!("pipes: printed {printed:?}"),
     );
-    let trues = guest_lines(&o, "pipes", "(busybox) started: /bin/true");
+    let trues = partition_lines(&o, "pipes", "(busybox) started: /bin/true");
     check(
         &o,
         trues.len() == 50,
         &format!("pipes: {} /bin/true processes", trues.len()),
     );
-    let forks = guest_lines(&o, "pipes", " forked from 1: ");
+    let forks = partition_lines(&o, "pipes", " forked from 1: ");
     check(
         &o,
         forks.len() >= 50 + 5,
         &format!("pipes: {} forks", forks.len()),
     );
-    let subshell = guest_lines(&o, "pipes", "exited with status 3");
+    let subshell = partition_lines(&o, "pipes", "exited with status 3");
     check(
         &o,
         subshell.len() == 1 && !subshell[0].starts_with("guest: process 1 "),
@@ -128,22 +117,22 @@ fn guest_hello() {
         ),
         ("guest: init exited", "guest: init exited with status 0"),
     ] {
-        let lines = guest_lines(&o, "pipes", needle);
+        let lines = partition_lines(&o, "pipes", needle);
         check(&o, lines == [expected], &format!("pipes: {lines:?}"));
     }
     for needle in ["unsupported system call", "killed by signal", "cannot"] {
-        let lines = guest_lines(&o, "pipes", needle);
+        let lines = partition_lines(&o, "pipes", needle);
         check(&o, lines.is_empty(), &format!("pipes: {lines:?}"));
     }
     // The overflowing stack: the page fault just below the process's stack kills it with
     // SIGSEGV (memory::STACK_TOP - STACK_SIZE = 0x7fff_ffec_0000), nothing else.
-    let started = guest_lines(&o, "segv", "started: ");
+    let started = partition_lines(&o, "segv", "started: ");
     check(
         &o,
         started == ["guest: process 1 (busybox) started: /bin/sh -c f() { f; }; f"],
         &format!("segv: start line {started:?}"),
     );
-    let killed = guest_lines(&o, "segv", "guest: process 1 (busybox) killed by signal");
+    let killed = partition_lines(&o, "segv", "guest: process 1 (busybox) killed by signal");
     check(
         &o,
         killed.len() == 1
@@ -154,7 +143,7 @@ fn guest_hello() {
     );
     check(
         &o,
-        guest_lines(&o, "segv", "guest: process 1 exited").is_empty(),
+        partition_lines(&o, "segv", "guest: process 1 exited").is_empty(),
         "segv: a killed process has no exit status line",
     );
     check(
@@ -175,14 +164,6 @@ fn guest_hello() {
     }
 }
 
-/// What the processes of `partition` wrote to standard output, line by line in log order.
-fn stdout_lines(o: &xtask::qemu::Outcome, partition: &str) -> Vec<String> {
-    guest_lines(o, partition, " stdout: ")
-        .iter()
-        .filter_map(|l| l.split_once(" stdout: ").map(|(_, t)| t.to_string()))
-        .collect()
-}
-
 /// Checks what every guest scenario script must show: success, no panic, no call the guest
 /// lacks, init exited with status 0 leaving no process.
 fn script_ran(o: &xtask::qemu::Outcome, partition: &str) {
@@ -192,7 +173,7 @@ fn script_ran(o: &xtask::qemu::Outcome, partition: &str) {
         o.succeeded(),
         "expected success exit (33): the script's end ends the run",
     );
-    let unsupported = guest_lines(o, partition, "unsupported system call");
+    let unsupported = partition_lines(o, partition, "unsupported system call");
     check(
         o,
         unsupported.is_empty(),
@@ -205,7 +186,7 @@ fn script_ran(o: &xtask::qemu::Outcome, partition: &str) {
         ),
         ("guest: init exited", "guest: init exited with status 0"),
     ] {
-        let lines = guest_lines(o, partition, needle);
+        let lines = partition_lines(o, partition, needle);
         check(o, lines == [expected], &format!("{partition}: {lines:?}"));
     }
 }
@@ -214,7 +195,7 @@ fn script_ran(o: &xtask::qemu::Outcome, partition: &str) {
 fn guest_signals() {
     let o = boot("guest_signals");
     script_ran(&o, "signals");
-    let printed = stdout_lines(&o, "signals");
+    let printed = guest_stdout(&o, "signals");
     let expected = [
         "caught USR1",
         "after trap",
@@ -235,7 +216,7 @@ fn guest_signals() {
     ];
     check(&o, printed == expected, &format!("printed {printed:?}"));
     for (signal, count) in [("15 (SIGTERM)", 2), ("9 (SIGKILL)", 1), ("13 (SIGPIPE)", 1)] {
-        let killed = guest_lines(&o, "signals", &format!("killed by signal {signal}"));
+        let killed = partition_lines(&o, "signals", &format!("killed by signal {signal}"));
         check(&o, killed.len() == count, &format!("{signal}: {killed:?}"));
     }
 }
@@ -244,7 +225,7 @@ fn guest_signals() {
 fn guest_processes() {
     let o = boot("guest_processes");
     script_ran(&o, "processes");
-    let printed = stdout_lines(&o, "processes");
+    let printed = guest_stdout(&o, "processes");
     let expected = [
         "ran 200 processes",
         "ten in parallel reaped",
@@ -255,13 +236,13 @@ fn guest_processes() {
         "done",
     ];
     check(&o, printed == expected, &format!("printed {printed:?}"));
-    let trues = guest_lines(&o, "processes", "(busybox) started: /bin/true");
+    let trues = partition_lines(&o, "processes", "(busybox) started: /bin/true");
     check(
         &o,
         trues.len() == 221,
         &format!("{} /bin/true processes", trues.len()),
     );
-    let killed = guest_lines(&o, "processes", "killed by signal");
+    let killed = partition_lines(&o, "processes", "killed by signal");
     check(
         &o,
         killed.len() == 1 && killed[0].ends_with("killed by signal 15 (SIGTERM)"),
@@ -304,7 +285,7 @@ fn guest_console() {
     // The Ctrl-C: the shell had made the second `cat` the foreground process group.
     check(
         &o,
-        guest_lines(&o, "linux", "killed by signal")
+        partition_lines(&o, "linux", "killed by signal")
             == ["guest: process 3 (busybox) killed by signal 2 (SIGINT)"],
         "the Ctrl-C killed the second cat",
     );
@@ -324,7 +305,7 @@ fn guest_console() {
     );
     check(
         &o,
-        guest_lines(&o, "linux", "guest: process 4 exited with status 0").len() == 1,
+        partition_lines(&o, "linux", "guest: process 4 exited with status 0").len() == 1,
         "the continued cat ended",
     );
     // `cat &` read the terminal in the background: SIGTTIN stopped it (the shell's job
@@ -343,17 +324,17 @@ fn guest_console() {
     );
     check(
         &o,
-        guest_lines(&o, "linux", "guest: process 5 exited with status 0").len() == 1,
+        partition_lines(&o, "linux", "guest: process 5 exited with status 0").len() == 1,
         "the background cat ended",
     );
     check(
         &o,
-        guest_lines(&o, "linux", "guest: init exited with status 0").len() == 1,
+        partition_lines(&o, "linux", "guest: init exited with status 0").len() == 1,
         "the shell ended at the Ctrl-D",
     );
     check(
         &o,
-        guest_lines(&o, "linux", "guest: process 1 stdout").is_empty(),
+        partition_lines(&o, "linux", "guest: process 1 stdout").is_empty(),
         "the console's output went to COM2, not the log",
     );
 }
@@ -369,13 +350,13 @@ fn guest_restart() {
         o.succeeded(),
         "expected success exit (33): guest `timer` ends the run",
     );
-    let boots = stdout_lines(&o, "reboot");
+    let boots = guest_stdout(&o, "reboot");
     check(
         &o,
         boots.len() >= 3 && boots.iter().all(|l| l == "booted"),
         &format!("reboot: {boots:?}"),
     );
-    let exits = guest_lines(&o, "reboot", "guest: init exited with status 1");
+    let exits = partition_lines(&o, "reboot", "guest: init exited with status 1");
     check(&o, exits.len() >= 3, &format!("reboot: {exits:?}"));
     let restarts: Vec<&String> = o
         .lines
@@ -389,7 +370,7 @@ fn guest_restart() {
     );
     check(
         &o,
-        stdout_lines(&o, "timer") == ["time is up"],
+        guest_stdout(&o, "timer") == ["time is up"],
         "the other guest ran on",
     );
     check(

@@ -3,7 +3,7 @@
 //! `tests/configs/guest/busybox.sh`): every line the script prints, in order, from
 //! whichever process printed it, then its exit status.
 
-use scenarios::{boot, check};
+use scenarios::{boot, check, guest_stdout, partition_lines};
 
 /// What the script prints, line by line.
 const EXPECTED: &[&str] = &[
@@ -55,23 +55,12 @@ const EXPECTED: &[&str] = &[
     "sh 3",
 ];
 
-/// The guest log lines of the `shell` partition, without time stamp and prefix.
-fn guest_lines(o: &xtask::qemu::Outcome) -> Vec<String> {
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once("[shell] ").map(|(_, text)| text.to_string()))
-        .collect()
-}
-
 #[test]
 fn guest_busybox() {
     let o = boot("guest_busybox");
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
-    let lines = guest_lines(&o);
-    let printed: Vec<&str> = lines
-        .iter()
-        .filter_map(|l| l.split_once(" stdout: ").map(|(_, text)| text))
-        .collect();
+    let lines = partition_lines(&o, "shell", "");
+    let printed = guest_stdout(&o, "shell");
     check(
         &o,
         printed == EXPECTED,

@@ -5,19 +5,9 @@
 //! (`cargo xtask test` checks that on the host first). The areas the configuration runs
 //! are those the guest passes; the others are listed there with what they wait for.
 
-use scenarios::{boot, check};
+use scenarios::{boot, check, guest_stdout};
 
 const CONFIG: &str = "tests/configs/guest_linux.toml";
-
-/// The text the processes of guest partition `partition` printed on stdout, a line each.
-fn printed(o: &xtask::qemu::Outcome, partition: &str) -> Vec<String> {
-    let prefix = format!("[{partition}] guest: process ");
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text))
-        .filter_map(|text| text.split_once(" stdout: ").map(|(_, t)| t.to_string()))
-        .collect()
-}
 
 #[test]
 fn guest_linux() {
@@ -44,7 +34,7 @@ fn guest_linux() {
         for area in areas {
             expected.extend(xtask::linux::expected(area).unwrap_or_else(|e| panic!("{e:#}")));
         }
-        let got = printed(&o, partition);
+        let got = guest_stdout(&o, partition);
         let diff = xtask::linux::differences(&expected, &got);
         check(
             &o,

@@ -2,34 +2,15 @@
 //! `tests/configs/guest_faults.toml`) and `guest_isolation` (`guest_isolation.toml`), both
 //! running the static C program `linux-probe` (`tests/linux/probe.c`) as Linux processes.
 
-use scenarios::{boot, check};
+use scenarios::{boot, check, guest_stdout, partition_lines};
 use xtask::qemu::Outcome;
-
-/// The text of the guest log lines of partition `partition` that contain `needle`, without
-/// the kernel's time stamp and the partition prefix (in log order).
-fn guest_lines(o: &Outcome, partition: &str, needle: &str) -> Vec<String> {
-    let prefix = format!("[{partition}] ");
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text.to_string()))
-        .filter(|text| text.contains(needle))
-        .collect()
-}
-
-/// What partition `partition`'s processes printed, in order.
-fn printed(o: &Outcome, partition: &str) -> Vec<String> {
-    guest_lines(o, partition, " stdout: ")
-        .iter()
-        .filter_map(|l| l.split_once(" stdout: ").map(|(_, t)| t.to_string()))
-        .collect()
-}
 
 /// Each probe (`linux-probe <name>`, one process each) was killed by its signal in the CPU
 /// exception `vector`, and the shell saw `128 + signal`, in `partition`.
 fn killed(o: &Outcome, partition: &str, probes: &[(&str, u32, &str, u64)]) {
-    let printed = printed(o, partition);
+    let printed = guest_stdout(o, partition);
     for (probe, signal, name, vector) in probes {
-        let started = guest_lines(o, partition, &format!("started: /bin/linux-probe {probe}"));
+        let started = partition_lines(o, partition, &format!("started: /bin/linux-probe {probe}"));
         let pid = started.first().and_then(|l| {
             l.strip_prefix("guest: process ")
                 .and_then(|rest| rest.split_once(' '))
@@ -40,7 +21,7 @@ fn killed(o: &Outcome, partition: &str, probes: &[(&str, u32, &str, u64)]) {
             pid.is_some(),
             &format!("{partition}: probe {probe} did not start"),
         );
-        let kills = guest_lines(
+        let kills = partition_lines(
             o,
             partition,
             &format!(
@@ -84,7 +65,7 @@ fn guest_faults() {
             ("stack", 11, "SIGSEGV", 14),
         ],
     );
-    let printed = printed(&o, "faults");
+    let printed = guest_stdout(&o, "faults");
     check(
         &o,
         printed
@@ -118,11 +99,11 @@ fn guest_faults() {
         ),
         ("guest: init exited", "guest: init exited with status 0"),
     ] {
-        let lines = guest_lines(&o, "faults", needle);
+        let lines = partition_lines(&o, "faults", needle);
         check(&o, lines == [expected], &format!("faults: {lines:?}"));
     }
     // Six processes made the call the guest lacks: one line names it.
-    let unsupported = guest_lines(&o, "faults", "unsupported system call");
+    let unsupported = partition_lines(&o, "faults", "unsupported system call");
     check(
         &o,
         unsupported.len() == 1
@@ -140,7 +121,7 @@ fn guest_faults() {
     // The next guest ran after it.
     check(
         &o,
-        guest_lines(&o, "after", "guest: process 1 stdout: after").len() == 1,
+        partition_lines(&o, "after", "guest: process 1 stdout: after").len() == 1,
         "after: did not run",
     );
 }
@@ -176,7 +157,7 @@ fn guest_isolation() {
     );
     check(
         &o,
-        guest_lines(&o, "probes", "guest: init exited with status 0").len() == 1,
+        partition_lines(&o, "probes", "guest: init exited with status 0").len() == 1,
         "probes: the shell did not finish",
     );
     // The victim logged its windows: none missed, none off the ideal sequence.

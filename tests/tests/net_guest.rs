@@ -3,22 +3,12 @@
 //! the tenant of the NIC partition, which drives QEMU's virtio-net on its user network.
 //! The host side of each scenario is plain std networking on 127.0.0.1.
 
-use scenarios::{boot_beside, check, http_get};
+use scenarios::{boot_beside, check, guest_stdout, http_get};
 use sha2::{Digest, Sha256};
 use std::io::{Read, Write};
 use std::net::TcpListener;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-
-/// The stdout lines of guest `partition`.
-fn printed(o: &xtask::qemu::Outcome, partition: &str) -> Vec<String> {
-    let prefix = format!("[{partition}] guest: process ");
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text))
-        .filter_map(|text| text.split_once(" stdout: ").map(|(_, t)| t.to_string()))
-        .collect()
-}
 
 /// What the host saw of the guest's httpd.
 #[derive(Debug, Default)]
@@ -98,7 +88,7 @@ fn net_guest_httpd() {
         &format!("only {} of {TIMED} timed pages came", f.timed_ok),
     );
     check(&o, f.finished, "the finishing request got no answer");
-    let lines = printed(&o, "linux");
+    let lines = guest_stdout(&o, "linux");
     check(
         &o,
         lines == ["serving", "eth0 received frames", "finished"],
@@ -221,7 +211,7 @@ fn net_guest_wget() {
             .any(|r| r.starts_with("GET /payload HTTP/1.")),
         "the guest never asked for /payload",
     );
-    let lines = printed(&o, "linux");
+    let lines = guest_stdout(&o, "linux");
     let expected = [
         format!("{digest}  /tmp/fetched"),
         body.len().to_string(),

@@ -3,7 +3,7 @@
 //! ways, `httpd` with a CGI script and `wget`, a refused connection, `ifconfig` and
 //! `route -n`; every line the script prints, in order.
 
-use scenarios::{boot, check};
+use scenarios::{boot, check, guest_stdout, partition_lines};
 
 /// What the script prints, line by line.
 const EXPECTED: &[&str] = &[
@@ -37,15 +37,8 @@ const EXPECTED: &[&str] = &[
 fn net_sockets() {
     let o = boot("net_sockets");
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
-    let lines: Vec<String> = o
-        .lines
-        .iter()
-        .filter_map(|l| l.split_once("[net] ").map(|(_, text)| text.to_string()))
-        .collect();
-    let printed: Vec<&str> = lines
-        .iter()
-        .filter_map(|l| l.split_once(" stdout: ").map(|(_, text)| text))
-        .collect();
+    let lines = partition_lines(&o, "net", "");
+    let printed = guest_stdout(&o, "net");
     check(
         &o,
         printed == EXPECTED,

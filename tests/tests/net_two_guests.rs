@@ -1,7 +1,7 @@
 //! Two guests on one Ethernet segment of queuing ports (configuration
 //! `tests/configs/net_two_guests.toml`): httpd on guest `one`, wget on guest `two`.
 
-use scenarios::{boot, check};
+use scenarios::{boot, check, guest_stdout};
 
 /// What guest `two` prints, line by line.
 const EXPECTED: &[&str] = &[
@@ -13,26 +13,16 @@ const EXPECTED: &[&str] = &[
     "done",
 ];
 
-/// The stdout lines of guest `partition`.
-fn printed(o: &xtask::qemu::Outcome, partition: &str) -> Vec<String> {
-    let prefix = format!("[{partition}] guest: process ");
-    o.lines
-        .iter()
-        .filter_map(|l| l.split_once(&prefix).map(|(_, text)| text))
-        .filter_map(|text| text.split_once(" stdout: ").map(|(_, t)| t.to_string()))
-        .collect()
-}
-
 #[test]
 fn net_two_guests() {
     let o = boot("net_two_guests");
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,
-        printed(&o, "one") == ["serving"],
-        &format!("guest one printed {:?}", printed(&o, "one")),
+        guest_stdout(&o, "one") == ["serving"],
+        &format!("guest one printed {:?}", guest_stdout(&o, "one")),
     );
-    let two = printed(&o, "two");
+    let two = guest_stdout(&o, "two");
     check(
         &o,
         two == EXPECTED,
