@@ -219,6 +219,33 @@ fn u32_at(bytes: &[u8], at: &mut usize) -> Result<usize, DevicePackageError> {
     Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
 }
 
+/// A list of ports: count u16 (at most [`MAX_PORTS`]), per port its name, its direction
+/// (u8: 1 in, 0 out) and what `rest` reads after them.
+fn port_list<'a, T>(
+    bytes: &'a [u8],
+    at: &mut usize,
+    mut rest: impl FnMut(&'a [u8], &mut usize, &'a str, bool) -> Result<T, DevicePackageError>,
+) -> Result<Vec<T>, DevicePackageError> {
+    let field = *at;
+    let count = take(bytes, at, 2)?;
+    let count = usize::from(u16::from_le_bytes([count[0], count[1]]));
+    if count > MAX_PORTS {
+        return Err(DevicePackageError::Ports(field));
+    }
+    let mut ports = Vec::with_capacity(count);
+    for _ in 0..count {
+        let name = name_at(bytes, at)?;
+        let field = *at;
+        let input = match take(bytes, at, 1)?[0] {
+            0 => false,
+            1 => true,
+            _ => return Err(DevicePackageError::Ports(field)),
+        };
+        ports.push(rest(bytes, at, name, input)?);
+    }
+    Ok(ports)
+}
+
 /// Reads a device package.
 pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
     let mut at = 0;
@@ -269,54 +296,26 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         }
         _ => return Err(DevicePackageError::Mgmt(at - 1)),
     };
-    let field = at;
-    let port_count = take(bytes, &mut at, 2)?;
-    let port_count = usize::from(u16::from_le_bytes([port_count[0], port_count[1]]));
-    if port_count > MAX_PORTS {
-        return Err(DevicePackageError::Ports(field));
-    }
-    let mut ports = Vec::with_capacity(port_count);
-    for _ in 0..port_count {
-        let name = name_at(bytes, &mut at)?;
-        let field = at;
-        let input = match take(bytes, &mut at, 1)?[0] {
-            0 => false,
-            1 => true,
-            _ => return Err(DevicePackageError::Ports(field)),
-        };
-        let size = u32_at(bytes, &mut at)? as u32;
-        let refresh = take(bytes, &mut at, 8)?;
+    let ports = port_list(bytes, &mut at, |bytes, at, name, input| {
+        let size = u32_at(bytes, at)? as u32;
+        let refresh = take(bytes, at, 8)?;
         let mut raw = [0u8; 8];
         raw.copy_from_slice(refresh);
-        ports.push(SamplingPort {
+        Ok(SamplingPort {
             name,
             input,
             size,
             refresh_ns: u64::from_le_bytes(raw),
-        });
-    }
-    let field = at;
-    let queue_count = take(bytes, &mut at, 2)?;
-    let queue_count = usize::from(u16::from_le_bytes([queue_count[0], queue_count[1]]));
-    if queue_count > MAX_PORTS {
-        return Err(DevicePackageError::Ports(field));
-    }
-    let mut queues = Vec::with_capacity(queue_count);
-    for _ in 0..queue_count {
-        let name = name_at(bytes, &mut at)?;
-        let field = at;
-        let input = match take(bytes, &mut at, 1)?[0] {
-            0 => false,
-            1 => true,
-            _ => return Err(DevicePackageError::Ports(field)),
-        };
-        let size = u32_at(bytes, &mut at)? as u32;
-        let depth = u32_at(bytes, &mut at)? as u32;
-        queues.push(DataQueue {
+        })
+    })?;
+    let queues = port_list(bytes, &mut at, |bytes, at, name, input| {
+        let size = u32_at(bytes, at)? as u32;
+        let depth = u32_at(bytes, at)? as u32;
+        Ok(DataQueue {
             port: QueuingPort { name, size, depth },
             input,
-        });
-    }
+        })
+    })?;
     let mut types = Vec::with_capacity(count);
     for _ in 0..count {
         let len = u32_at(bytes, &mut at)?;
