@@ -362,15 +362,6 @@ impl Loopback {
 }
 
 impl ProcessIo for Loopback {
-    fn size(&self, _: &str, _: bool) -> Option<usize> {
-        None
-    }
-    fn read(&mut self, _: &str, _: &mut [u8]) -> Option<bool> {
-        None
-    }
-    fn write(&mut self, _: &str, _: &[u8]) -> bool {
-        false
-    }
     fn queue_size(&self, port: &str, input: bool) -> Option<usize> {
         if !self.has(port) {
             return None;

@@ -30,16 +30,23 @@ use core::cell::RefCell;
 use iec61499_runtime::fb::{Context, EventDecl, Interface};
 use iec61499_runtime::{DataType, FunctionBlock, Value};
 
-/// The partition's ports as the process-image FBs use them.
+/// The partition's ports as the process-image FBs use them. Every method's default answers
+/// as a partition without that port.
 pub trait ProcessIo {
     /// The message size of sampling port `port` in direction `input` (true: the partition
     /// receives on it), if the partition has it.
-    fn size(&self, port: &str, input: bool) -> Option<usize>;
+    fn size(&self, _port: &str, _input: bool) -> Option<usize> {
+        None
+    }
     /// The latest message of input port `port` into `buf` (its message size): `Some(fresh)`,
     /// or `None` when none has arrived.
-    fn read(&mut self, port: &str, buf: &mut [u8]) -> Option<bool>;
+    fn read(&mut self, _port: &str, _buf: &mut [u8]) -> Option<bool> {
+        None
+    }
     /// Sends `message` on output port `port`.
-    fn write(&mut self, port: &str, message: &[u8]) -> bool;
+    fn write(&mut self, _port: &str, _message: &[u8]) -> bool {
+        false
+    }
 
     /// The message size of queuing port `port` in direction `input` (true: the partition
     /// receives on it), if the partition has it (for PUBLISH/SUBSCRIBE, `crate::pubsub`).
@@ -61,17 +68,7 @@ pub trait ProcessIo {
 /// A device without ports (the host's boot check): every INIT says which port is missing.
 pub struct NoPorts;
 
-impl ProcessIo for NoPorts {
-    fn size(&self, _: &str, _: bool) -> Option<usize> {
-        None
-    }
-    fn read(&mut self, _: &str, _: &mut [u8]) -> Option<bool> {
-        None
-    }
-    fn write(&mut self, _: &str, _: &[u8]) -> bool {
-        false
-    }
-}
+impl ProcessIo for NoPorts {}
 
 /// The ports, shared by a device's process-image FBs, with each output port's message as
 /// last written (so FBs writing different offsets of one message keep each other's bytes).
