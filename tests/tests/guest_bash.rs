@@ -2,17 +2,13 @@
 //! the guest, and prints line for line what the same script prints on this machine.
 
 use scenarios::{boot, check, guest_stdout, partition_lines};
-use std::path::Path;
 use std::process::Command;
 
 const BASH: &str = "/bin/bash-static";
 
 #[test]
 fn guest_bash() {
-    if !Path::new(BASH).is_file() {
-        xtask::tools::install_packages(&["bash-static"], "bash (Debian package bash-static) is")
-            .unwrap_or_else(|e| panic!("{e:#}"));
-    }
+    // `cargo xtask test` installed it (the manifest's `debian_packages`).
     let script = xtask::workspace_root().join("tests/configs/guest/bash.sh");
     let host = Command::new(BASH)
         .arg(&script)

@@ -378,6 +378,7 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
                 .with_context(|| format!("scenario {}: no a653rs example {name}", s.name))?;
             config = Some(xtask::a653rs_examples::prepare(&root, example)?);
         }
+        s.manifest.prepare(&s.name)?;
         let mut entries = esp::standard_entries(&artifacts, config.as_deref())?;
         if let Some(hook) = &s.manifest.hook {
             entries.push(esp::ImageEntry::Bytes {

@@ -36,6 +36,12 @@
 //! console_start = "built-in shell"   # with console_input: typing starts once the
 //!                               # output shows this (the firmware and the loader write
 //!                               # to COM2 first); default "": at the first quiet output
+//! debian_packages = ["bash-static"]   # optional: Debian packages the image or the test
+//!                               # takes files from, installed first when missing
+//!                               # (`tools::install_packages`: as root, else the command)
+//! prepare = ["sh", "tests/configs/guest/e2fsck-images.sh"]   # optional: a host command
+//!                               # run in the workspace root before the image is
+//!                               # assembled (files the configuration adds); it must succeed
 //! ```
 
 use anyhow::{Context, Result};
@@ -74,9 +80,47 @@ pub struct Manifest {
     pub host_ports: usize,
     #[serde(default)]
     pub a653rs_example: Option<String>,
+    #[serde(default)]
+    pub debian_packages: Vec<String>,
+    #[serde(default)]
+    pub prepare: Vec<String>,
 }
 
 impl Manifest {
+    /// Installs the Debian packages the scenario needs and runs its `prepare` command.
+    pub fn prepare(&self, name: &str) -> Result<()> {
+        let missing: Vec<&str> = self
+            .debian_packages
+            .iter()
+            .map(String::as_str)
+            .filter(|p| {
+                !std::process::Command::new("dpkg")
+                    .args(["-s", p])
+                    .output()
+                    .is_ok_and(|o| o.status.success())
+            })
+            .collect();
+        if !missing.is_empty() {
+            crate::tools::install_packages(
+                &missing,
+                &format!("scenario {name}: the Debian package(s) {missing:?} are"),
+            )?;
+        }
+        if let Some((program, args)) = self.prepare.split_first() {
+            let status = std::process::Command::new(program)
+                .args(args)
+                .current_dir(crate::workspace_root())
+                .status()
+                .with_context(|| format!("scenario {name}: cannot run {:?}", self.prepare))?;
+            anyhow::ensure!(
+                status.success(),
+                "scenario {name}: {:?} failed ({status})",
+                self.prepare
+            );
+        }
+        Ok(())
+    }
+
     /// Applies the deliberate damage the manifest asks for to an assembled ESP.
     pub fn damage(&self, esp: &Path) -> Result<()> {
         for file in &self.remove_files {
