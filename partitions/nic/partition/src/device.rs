@@ -233,7 +233,9 @@ impl Net {
             let max = cfg.read16(common::QUEUE_SIZE);
             let dl =
                 DmaLayout::new(max, dma.length as usize).ok_or_else(|| fail(BringUp::Queue(q)))?;
-            let queue = Queue::new(&mut mem, q, dl, dma.bus_address);
+            let queue = dl
+                .queue(&mut mem, q, dma.bus_address)
+                .ok_or_else(|| fail(BringUp::Queue(q)))?;
             let (desc, driver, device) = queue.bus_rings();
             cfg.write16(common::QUEUE_SIZE, dl.size);
             cfg.write16(common::QUEUE_MSIX_VECTOR, 0xffff);
