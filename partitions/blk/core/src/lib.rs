@@ -3,11 +3,14 @@
 //! request and response), the tenants' virtual disks (fixed sector ranges of the disk,
 //! [`disk`]: every request checked against its tenant's range), the tenant table the
 //! partition gets from its configuration ([`tenants`]), and virtio-blk's request header
-//! and status ([`virtio_blk`]). no_std, no allocation, host-tested; nothing a tenant or
+//! and status ([`virtio_blk`]); the driver's answer to a request ([`driver::serve`]) and
+//! a tenant's virtual disk as a `slots::BlockDevice` over the link ([`client`]). no_std, no allocation, host-tested; nothing a tenant or
 //! the device sends can panic it.
 #![no_std]
 
+pub mod client;
 pub mod disk;
+pub mod driver;
 pub mod link;
 pub mod tenants;
 pub mod virtio_blk;
