@@ -5,9 +5,11 @@
 //! DMA region. Pure logic over [`Memory`]: a partition runs it on its DMA region, the tests
 //! on a plain buffer with a model of the device, which may be hostile (used entries naming
 //! descriptors it was never given, lengths beyond the buffer): that is counted and
-//! skipped, never a panic. no_std, no allocation.
+//! skipped, never a panic. [`hw`] is the thin glue to the hardware (registers, the DMA
+//! region, the bring-up). no_std, no allocation.
 #![no_std]
 
+pub mod hw;
 pub mod queue;
 #[cfg(any(test, feature = "testing"))]
 pub mod testing;
