@@ -63,6 +63,11 @@ impl<T: Transport> Client<T> {
         }
     }
 
+    /// The transport (to send what the client would not, in tests).
+    pub fn transport_mut(&mut self) -> &mut T {
+        &mut self.transport
+    }
+
     /// One request; the response's data (a read's) is copied into `out`.
     fn exchange(
         &mut self,
