@@ -26,10 +26,18 @@ fn blk_tenants() {
             "sector 20 written, flushed and read back",
             "sector 64 is beyond its virtual disk",
             "a damaged request is refused and not written",
+            "32 sectors written, flushed and read back",
         ] {
             let line = format!("check ok: {who}: {what}");
             check(&o, o.line(&line).is_some(), &format!("missing {line:?}"));
         }
+    }
+    for line in o
+        .lines
+        .iter()
+        .filter(|l| l.contains("single-sector writes"))
+    {
+        println!("blk_tenants: {line}");
     }
     // On the disk image: each tenant's sector 20 at its range, the slot header at its
     // first sector, nothing between the ranges.
