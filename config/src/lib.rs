@@ -86,6 +86,7 @@
 //! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
 //! guest.net = { mac = "52:54:00:12:34:56", address = "10.0.2.15/24", gateway = "10.0.2.2", rx = "eth0-rx", tx = "eth0-tx" }  # optional: eth0
 //! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx" }  # NIC partitions only: see "NIC"
+//! blk.tenants.plc = { from = "plc-req", to = "plc-resp", first_sector = 2048, sectors = 2048 }  # block-device partitions only: see "Block device"
 //!
 //! [[channels]]
 //! name = "level"                  # optional, default = the `from` text
@@ -299,6 +300,19 @@
 //! reaches instead). At most 15 tenants; the NIC partition has no `plc`, `guest`,
 //! `iec61499` or `data` keys (`cargo xtask` writes the tenant table as its data entry,
 //! `nic_core::tenants`). The frame link and the switch's rules: docs/interfaces.md.
+//!
+//! **Block device.** A block-device partition (`image = "blk"`, `partitions/blk/partition`)
+//! drives the virtio-blk function it owns (`devices`, with a `dma` region of at least
+//! 12 KiB, which it needs) and gives each tenant a virtual disk: `blk.tenants.<partition>`
+//! names another partition, its `sectors` sectors of 512 bytes from `first_sector` of the
+//! disk (at least one; no two tenants' ranges overlap; whether the range fits the disk the
+//! partition checks against the device's capacity at start, and refuses to serve
+//! otherwise), and two queuing ports of the block-device partition: `from`, an `in` port
+//! of `size` at least 2072 carrying the tenant's requests, and `to`, an `out` port of
+//! `size` at least 2064 to the tenant, each used by one tenant. At most 8 tenants; the
+//! partition has no `plc`, `guest`, `iec61499`, `nic` or `data` keys (`cargo xtask` writes
+//! the tenant table as its data entry, `blk_core::tenants`). The request link:
+//! docs/interfaces.md.
 //!
 //! **Reserved resources.** I/O ports the kernel keeps (PICs 0x20-0x21 and 0xa0-0xa1, PIT
 //! 0x40-0x43, COM1 0x3f8-0x3ff, isa-debug-exit 0xf4-0xf7, PCI configuration 0xcf8-0xcff) and IRQs 0 (PIT), 2 (cascade) and 4 (COM1)

@@ -94,6 +94,23 @@ pub struct Partition {
     pub guest: Option<Spanned<Guest>>,
     pub iec61499: Option<Spanned<Iec61499>>,
     pub nic: Option<Spanned<Nic>>,
+    pub blk: Option<Spanned<Blk>>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Blk {
+    #[serde(default)]
+    pub tenants: Named<BlkTenant>,
+}
+
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct BlkTenant {
+    pub from: Spanned<String>,
+    pub to: Spanned<String>,
+    pub first_sector: Spanned<u64>,
+    pub sectors: Spanned<u64>,
 }
 
 #[derive(Debug, Deserialize)]

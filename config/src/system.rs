@@ -79,6 +79,28 @@ pub struct Partition {
     pub iec61499: Option<Iec61499>,
     /// The tenants of its switch (`nic.tenants`), if it is the NIC partition.
     pub nic: Option<Nic>,
+    /// Its tenants' virtual disks (`blk.tenants`), if it is a block-device partition.
+    pub blk: Option<Blk>,
+}
+
+/// A block-device partition's tenants, in the order of the description.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Blk {
+    pub tenants: Vec<BlkTenant>,
+}
+
+/// A tenant's virtual disk: `sectors` sectors of 512 bytes of the disk from
+/// `first_sector`, no two tenants' overlapping.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct BlkTenant {
+    /// Index into [`System::partitions`].
+    pub partition: usize,
+    /// The block-device partition's queuing input carrying the tenant's requests, and
+    /// its queuing output to the tenant (indices into its ports).
+    pub from: usize,
+    pub to: usize,
+    pub first_sector: u64,
+    pub sectors: u64,
 }
 
 /// The NIC partition's tenants, in the order of the description.
@@ -393,6 +415,7 @@ impl System {
                     guest: None,
                     iec61499: None,
                     nic: None,
+                    blk: None,
                 })
                 .collect(),
             segments: view

@@ -290,6 +290,7 @@ impl Validator<'_, '_> {
         self.background_priorities(doc, &partitions);
         let channels = self.channels(doc, &mut partitions, &mut ports);
         self.nic(doc, &mut partitions, &channels);
+        self.blk(doc, &mut partitions);
         let health = self.health(&doc.health, &root.key("health"));
 
         if let Some(memory) = memory {
@@ -503,6 +504,7 @@ impl Validator<'_, '_> {
                 guest,
                 iec61499,
                 nic: None,
+                blk: None,
             });
         }
         (partitions, times, ports)
@@ -901,6 +903,7 @@ impl Validator<'_, '_> {
                 (r.plc.is_some(), "the soft-PLC (`plc`)"),
                 (r.guest.is_some(), "the guest (`guest`)"),
                 (r.iec61499.is_some(), "the IEC 61499 runtime (`iec61499`)"),
+                (r.blk.is_some(), "a block device (`blk`)"),
                 (r.data.is_some(), "a `data` entry"),
             ];
             for (_, what) in others.iter().filter(|(has, _)| *has) {
@@ -1014,6 +1017,172 @@ impl Validator<'_, '_> {
             }
             if ok && !tenants.is_empty() && tenants.len() <= max {
                 partitions[me].nic = Some(Nic { tenants });
+            }
+        }
+    }
+
+    /// `blk.tenants`: the virtual disks of a block-device partition (see the crate
+    /// documentation).
+    fn blk(&mut self, doc: &schema::Document, partitions: &mut [Partition]) {
+        let base = KeyPath::root().key("partitions");
+        for (key, raw) in in_source_order(&doc.partitions) {
+            let Some(blk) = &raw.get_ref().blk else {
+                continue;
+            };
+            let Some(me) = partitions.iter().position(|p| &p.name == key.get_ref()) else {
+                continue;
+            };
+            let path = base.key(key.get_ref()).key("blk");
+            let r = raw.get_ref();
+            let others = [
+                (r.plc.is_some(), "the soft-PLC (`plc`)"),
+                (r.guest.is_some(), "the guest (`guest`)"),
+                (r.iec61499.is_some(), "the IEC 61499 runtime (`iec61499`)"),
+                (r.nic.is_some(), "the NIC (`nic`)"),
+                (r.data.is_some(), "a `data` entry"),
+            ];
+            for (_, what) in others.iter().filter(|(has, _)| *has) {
+                self.error(
+                    start(blk),
+                    &path,
+                    format!(
+                        "a partition is a block-device partition (`blk`) or runs {what}, not both: its data entry is its tenant table"
+                    ),
+                );
+            }
+            if partitions[me].devices.is_empty() || r.dma.is_none() {
+                self.error(
+                    start(blk),
+                    &path,
+                    "a block-device partition needs `devices` (its virtio-blk function) and `dma` (the region the device reads and writes sectors in)",
+                );
+            }
+            let table = &blk.get_ref().tenants;
+            let tenants_path = path.key("tenants");
+            let max = blk_core::tenants::MAX_TENANTS;
+            if table.is_empty() || table.len() > max {
+                self.error(
+                    start(blk),
+                    &tenants_path,
+                    format!(
+                        "{} tenants: a block-device partition has 1 to {max} (`blk.tenants.<partition> = {{ from, to, first_sector, sectors }}`)",
+                        table.len()
+                    ),
+                );
+            }
+            let mut tenants: Vec<BlkTenant> = Vec::new();
+            let mut ok = true;
+            for (name, tenant) in in_source_order(table) {
+                let at = tenants_path.key(name.get_ref());
+                let t = tenant.get_ref();
+                let partition = partitions.iter().position(|p| &p.name == name.get_ref());
+                match partition {
+                    None => self.error(
+                        start(name),
+                        &at,
+                        format!("no partition `{}` to give a virtual disk", name.get_ref()),
+                    ),
+                    Some(p) if p == me => self.error(
+                        start(name),
+                        &at,
+                        "the block-device partition cannot be its own tenant",
+                    ),
+                    Some(_) => {}
+                }
+                let sizes = [
+                    blk_core::link::MAX_REQUEST as u32,
+                    blk_core::link::MAX_RESPONSE as u32,
+                ];
+                let mut ends = [None, None];
+                for (i, (text, key, direction)) in [
+                    (&t.from, "from", Direction::In),
+                    (&t.to, "to", Direction::Out),
+                ]
+                .into_iter()
+                .enumerate()
+                {
+                    let found = partitions[me]
+                        .ports
+                        .iter()
+                        .position(|p| &p.name == text.get_ref());
+                    let fits = found.is_some_and(|i2| {
+                        let p = &partitions[me].ports[i2];
+                        p.kind == PortKind::Queuing
+                            && p.direction == direction
+                            && p.size >= sizes[i]
+                    });
+                    if !fits {
+                        self.error(
+                            start(text),
+                            &at.key(key),
+                            format!(
+                                "`{}` must be a queuing `{}` port of this partition with size >= {} (the largest {})",
+                                text.get_ref(),
+                                direction.name(),
+                                sizes[i],
+                                if i == 0 { "request" } else { "response" }
+                            ),
+                        );
+                    } else if let Some(port) = found {
+                        if tenants.iter().any(|o| o.from == port || o.to == port) {
+                            self.error(
+                                start(text),
+                                &at.key(key),
+                                format!(
+                                    "port `{}` already carries another tenant's requests",
+                                    text.get_ref()
+                                ),
+                            );
+                        } else {
+                            ends[i] = Some(port);
+                        }
+                    }
+                }
+                let disk = blk_core::disk::VirtualDisk {
+                    first_sector: *t.first_sector.get_ref(),
+                    sectors: *t.sectors.get_ref(),
+                };
+                let so_far = tenants.iter().map(|o| blk_core::disk::VirtualDisk {
+                    first_sector: o.first_sector,
+                    sectors: o.sectors,
+                });
+                let mut range_ok = true;
+                if let Err(e) =
+                    blk_core::tenants::check_disks(so_far.chain(core::iter::once(disk)), u64::MAX)
+                {
+                    range_ok = false;
+                    let why = match e {
+                        blk_core::tenants::TableError::Empty(_) => "has no sectors".to_string(),
+                        blk_core::tenants::TableError::Overlap(j, _) => format!(
+                            "overlaps the virtual disk of `{}`",
+                            partitions[tenants[j].partition].name
+                        ),
+                        _ => "ends past the last sector a disk can have".to_string(),
+                    };
+                    self.error(
+                        start(&t.sectors),
+                        &at.key("sectors"),
+                        format!(
+                            "the virtual disk of sectors {}+{} {why}",
+                            disk.first_sector, disk.sectors
+                        ),
+                    );
+                }
+                match (partition, ends) {
+                    (Some(partition), [Some(from), Some(to)]) if partition != me && range_ok => {
+                        tenants.push(BlkTenant {
+                            partition,
+                            from,
+                            to,
+                            first_sector: disk.first_sector,
+                            sectors: disk.sectors,
+                        });
+                    }
+                    _ => ok = false,
+                }
+            }
+            if ok && !tenants.is_empty() && tenants.len() <= max {
+                partitions[me].blk = Some(Blk { tenants });
             }
         }
     }

@@ -45,6 +45,7 @@ fn every_system_validates_and_round_trips() {
             p.guest = None;
             p.iec61499 = None;
             p.nic = None;
+            p.blk = None;
         }
         assert_eq!(System::from_view(&view), without_data, "{}", path.display());
         count += 1;

@@ -11,9 +11,22 @@ use std::time::Duration;
 use xtask::qemu::{self, Outcome, RunOptions};
 use xtask::scenario;
 
-/// Boots scenario `name` and returns what happened.
+/// Boots scenario `name` and returns what happened (its disk image, if it has
+/// `disk_sectors`, zeroed first).
 pub fn boot(name: &str) -> Outcome {
     boot_beside(name, |_, _| ()).0
+}
+
+/// Boots scenario `name` again on the disk image the last boot left (a reset of the
+/// machine with the same disk).
+pub fn boot_again(name: &str) -> Outcome {
+    boot_with(name, false, |_, _| ()).0
+}
+
+/// Scenario `name`'s disk image (`disk_sectors`), for a test to read or damage between
+/// boots.
+pub fn disk_image(name: &str) -> std::path::PathBuf {
+    scenario::output_dir().join(name).join("disk.img")
 }
 
 /// Boots scenario `name` with `host` running on this machine meanwhile (a client of what
@@ -22,6 +35,14 @@ pub fn boot(name: &str) -> Outcome {
 /// should return soon after.
 pub fn boot_beside<R: Send>(
     name: &str,
+    host: impl FnOnce(&[u16], &AtomicBool) -> R + Send,
+) -> (Outcome, R) {
+    boot_with(name, true, host)
+}
+
+fn boot_with<R: Send>(
+    name: &str,
+    fresh_disk: bool,
     host: impl FnOnce(&[u16], &AtomicBool) -> R + Send,
 ) -> (Outcome, R) {
     let manifest = scenario::scenarios_dir().join(format!("{name}.toml"));
@@ -35,6 +56,15 @@ pub fn boot_beside<R: Send>(
     let tools = xtask::tools::ensure_qemu().unwrap_or_else(|e| panic!("{e:#}"));
     let ports = scenario::free_host_ports(s.manifest.host_ports)
         .unwrap_or_else(|e| panic!("scenario {name}: {e:#}"));
+    if let Some(sectors) = s.manifest.disk_sectors {
+        let image = disk_image(name);
+        if fresh_disk || !image.is_file() {
+            let file = std::fs::File::create(&image)
+                .unwrap_or_else(|e| panic!("cannot create {}: {e}", image.display()));
+            file.set_len(sectors * 512)
+                .unwrap_or_else(|e| panic!("cannot size {}: {e}", image.display()));
+        }
+    }
     let ended = AtomicBool::new(false);
     std::thread::scope(|scope| {
         let client = scope.spawn(|| host(&ports, &ended));
@@ -64,7 +94,10 @@ fn run(
             work_dir: dir.join("state"),
             deterministic_time: s.manifest.deterministic_time,
             done_when: s.manifest.done_when.clone(),
-            extra_args: scenario::with_host_ports(&s.manifest.qemu_args, ports),
+            extra_args: scenario::with_disk(
+                &scenario::with_host_ports(&s.manifest.qemu_args, ports),
+                &dir.join("disk.img"),
+            ),
             com2: if s.manifest.console_input.is_empty() {
                 qemu::Com2::Unconnected
             } else {

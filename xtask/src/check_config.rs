@@ -136,6 +136,7 @@ pub fn partition_files(
     packages.extend(crate::guest::initramfs_images(described)?);
     packages.extend(crate::iec61499::data_entries(described)?);
     packages.extend(crate::nic::data_entries(described));
+    packages.extend(crate::blk::data_entries(described));
     check_budgets(path, system, &built, &packages)?;
     Ok((built, packages))
 }

@@ -13,6 +13,7 @@ pub mod a653rs;
 pub mod a653rs_examples;
 pub mod artifacts;
 pub mod bench;
+pub mod blk;
 pub mod check_config;
 pub mod esp;
 pub mod guest;

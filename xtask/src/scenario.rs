@@ -33,6 +33,11 @@
 //!                               # a653rs-linux, its YAML imported and its programs built
 //!                               # for Warden (`a653rs_examples`); without their sources
 //!                               # the scenario is skipped
+//! disk_sectors = 8192           # optional: a raw disk image of this many 512-byte sectors,
+//!                               # `target/scenarios/NAME/disk.img`, zeroed when a test
+//!                               # boots the scenario with `scenarios::boot`, kept as it is
+//!                               # by `scenarios::boot_again` (a reset with the same disk);
+//!                               # `{disk}` in `qemu_args` is its path
 //! console_start = "built-in shell"   # with console_input: typing starts once the
 //!                               # output shows this (the firmware and the loader write
 //!                               # to COM2 first); default "": at the first quiet output
@@ -84,6 +89,8 @@ pub struct Manifest {
     pub debian_packages: Vec<String>,
     #[serde(default)]
     pub prepare: Vec<String>,
+    #[serde(default)]
+    pub disk_sectors: Option<u64>,
 }
 
 impl Manifest {
@@ -136,6 +143,14 @@ impl Manifest {
         }
         Ok(())
     }
+}
+
+/// `{disk}` in `args` replaced by `disk`, the scenario's disk image.
+pub fn with_disk(args: &[String], disk: &Path) -> Vec<String> {
+    let disk = disk.display().to_string();
+    args.iter()
+        .map(|arg| arg.replace("{disk}", &disk))
+        .collect()
 }
 
 /// `{host_port<i>}` in `args` replaced by `ports[i]`.
@@ -202,6 +217,12 @@ pub fn load(path: &Path) -> Result<Scenario> {
             "scenario manifest {}: `{arg}` names a host port beyond host_ports = {}",
             path.display(),
             manifest.host_ports
+        );
+    }
+    if manifest.disk_sectors.is_none() && manifest.qemu_args.iter().any(|a| a.contains("{disk}")) {
+        anyhow::bail!(
+            "scenario manifest {}: `{{disk}}` in qemu_args needs disk_sectors",
+            path.display()
         );
     }
     let name = path

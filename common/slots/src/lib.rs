@@ -139,6 +139,17 @@ pub struct Scan {
 }
 
 impl Scan {
+    /// The region's state once `record`, just returned by [`write`] for this scan, is on
+    /// the disk (so the next write needs no new scan).
+    pub fn after(&self, record: Record) -> Scan {
+        let mut next = *self;
+        if let Some(slot) = next.slots.get_mut(record.slot) {
+            *slot = SlotState::Valid(record);
+        }
+        next.highest = next.highest.max(record.sequence);
+        next
+    }
+
     /// The newest valid record.
     pub fn newest(&self) -> Option<Record> {
         self.slots

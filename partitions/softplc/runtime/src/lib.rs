@@ -8,7 +8,8 @@
 //! the online services ([`online`]) and online download ([`download`]: chunk assembly,
 //! checks, takeover by name), the globals shared with another project ([`shared`]) and
 //! which execution tier runs the program ([`tier`]: the interpreter or native code) and the
-//! records kept across a power cut ([`store`]: boot project, RETAIN snapshots) and the
+//! records kept across a power cut ([`store`]: boot project, RETAIN snapshots; [`persist`]:
+//! where they live on the PLC's virtual disk, start and saves) and the
 //! variables published to and subscribed from other controllers ([`pubsub`]).
 //! The partition program (`main.rs`) only re-verifies the program, creates the ports and
 //! the processes (one per IEC task and a control process) and moves bytes between them and
@@ -23,6 +24,7 @@ pub mod download;
 pub use histogram;
 pub mod online;
 pub mod package;
+pub mod persist;
 pub mod pubsub;
 pub mod scan;
 pub mod shared;

@@ -1,155 +1,23 @@
-//! The transport's layout from capabilities, and the split queues against a model of the
-//! device, honest and hostile.
+//! The virtio-net queues in the NIC's DMA layout against a model of the device, honest
+//! and hostile.
 
 extern crate std;
 
 use super::*;
+use ::virtio::queue::DESC_WRITE;
+use ::virtio::testing::{Descriptor, DeviceModel, Ram};
 use proptest::prelude::*;
 use std::vec;
 use std::vec::Vec;
 
-/// A DMA region in plain memory.
-struct Ram(Vec<u8>);
-
-impl Memory for Ram {
-    fn load16(&self, at: usize) -> u16 {
-        u16::from_le_bytes(self.0[at..at + 2].try_into().unwrap())
-    }
-    fn load32(&self, at: usize) -> u32 {
-        u32::from_le_bytes(self.0[at..at + 4].try_into().unwrap())
-    }
-    fn store16(&mut self, at: usize, value: u16) {
-        self.0[at..at + 2].copy_from_slice(&value.to_le_bytes());
-    }
-    fn store32(&mut self, at: usize, value: u32) {
-        self.0[at..at + 4].copy_from_slice(&value.to_le_bytes());
-    }
-    fn store64(&mut self, at: usize, value: u64) {
-        self.0[at..at + 8].copy_from_slice(&value.to_le_bytes());
-    }
-    fn write(&mut self, at: usize, bytes: &[u8]) {
-        self.0[at..at + bytes.len()].copy_from_slice(bytes);
-    }
-    fn read(&self, at: usize, out: &mut [u8]) {
-        out.copy_from_slice(&self.0[at..at + out.len()]);
-    }
-    fn fence(&self) {}
-}
-
 const BUS: u64 = 0x1234_0000;
 
-/// The device's side of one queue: reads the avail ring, writes the used ring, as the
-/// specification says (or as told, when hostile).
-struct Device {
-    desc: usize,
-    avail: usize,
-    used: usize,
-    size: u16,
-    seen: u16,
-    used_idx: u16,
-}
-
-impl Device {
-    fn of(q: &Queue) -> Device {
-        let (desc, avail, used) = q.rings();
-        Device {
-            desc,
-            avail,
-            used,
-            size: q.size(),
-            seen: 0,
-            used_idx: 0,
-        }
-    }
-
-    /// The next available descriptor: (id, bus address, len, flags).
-    fn next(&mut self, mem: &Ram) -> Option<(u16, u64, u32, u16)> {
-        if mem.load16(self.avail + 2) == self.seen {
-            return None;
-        }
-        let id = mem.load16(self.avail + 4 + 2 * usize::from(self.seen % self.size));
-        self.seen = self.seen.wrapping_add(1);
-        let d = self.desc + 16 * usize::from(id);
-        let addr = u64::from(mem.load32(d)) | u64::from(mem.load32(d + 4)) << 32;
-        Some((id, addr, mem.load32(d + 8), mem.load16(d + 12)))
-    }
-
-    fn complete(&mut self, mem: &mut Ram, id: u32, len: u32) {
-        let slot = usize::from(self.used_idx % self.size);
-        mem.store32(self.used + 4 + 8 * slot, id);
-        mem.store32(self.used + 8 + 8 * slot, len);
-        self.used_idx = self.used_idx.wrapping_add(1);
-        mem.store16(self.used + 2, self.used_idx);
-    }
-}
-
-fn setup(q: u16) -> (Ram, Queue, Device) {
+fn setup(q: u16) -> (Ram, Queue, DeviceModel) {
     let layout = DmaLayout::new(256, 512 * 1024).unwrap();
     let mut mem = Ram(vec![0xAA; layout.bytes()]);
-    let queue = Queue::new(&mut mem, q, layout, BUS);
-    let device = Device::of(&queue);
+    let queue = layout.queue(&mut mem, q, BUS).unwrap();
+    let device = DeviceModel::of(&queue);
     (mem, queue, device)
-}
-
-/// QEMU's virtio-net-pci capability list (vendor capabilities for common, ISR, device,
-/// notify in BAR 4, plus an MSI-X capability).
-fn qemu_capabilities() -> Capabilities {
-    let mut c = Capabilities {
-        first: 0x98,
-        ..Capabilities::default()
-    };
-    let mut put = |at: usize, bytes: &[u8]| {
-        c.area[at - 0x40..at - 0x40 + bytes.len()].copy_from_slice(bytes);
-    };
-    let vendor = |next: u8, len: u8, kind: u8, offset: u32, length: u32| {
-        let mut v = vec![0x09, next, len, kind, 4, 0, 0, 0];
-        v.extend_from_slice(&offset.to_le_bytes());
-        v.extend_from_slice(&length.to_le_bytes());
-        v
-    };
-    put(0x98, &[0x11, 0x84, 0, 0]);
-    put(0x84, &vendor(0x70, 20, 2, 0x3000, 0x1000));
-    put(0x94, &4u32.to_le_bytes());
-    put(0x70, &vendor(0x60, 16, 4, 0x2000, 0x1000));
-    put(0x60, &vendor(0x50, 16, 3, 0x1000, 0x1000));
-    put(0x50, &vendor(0x40, 16, 1, 0, 0x1000));
-    // A PCI-config-access capability (type 5) is ignored.
-    put(0x40, &vendor(0, 20, 5, 0, 0));
-    c
-}
-
-#[test]
-fn the_structures_are_found_through_the_capabilities() {
-    let layout = Layout::find(&qemu_capabilities()).unwrap();
-    let region = |offset, length| Region {
-        bar: 4,
-        offset,
-        length,
-    };
-    assert_eq!(layout.common, region(0, 0x1000));
-    assert_eq!(layout.isr, region(0x1000, 0x1000));
-    assert_eq!(layout.device, region(0x2000, 0x1000));
-    assert_eq!(layout.notify, region(0x3000, 0x1000));
-    assert_eq!(layout.notify_multiplier, 4);
-}
-
-#[test]
-fn a_device_without_the_modern_structures_is_refused_with_the_reason() {
-    assert_eq!(
-        Layout::find(&Capabilities::default()),
-        Err(LayoutError::Missing("common configuration"))
-    );
-    let mut c = qemu_capabilities();
-    // Unlink the notify capability: 0x98 -> 0x70.
-    c.area[0x98 - 0x40 + 1] = 0x70;
-    let e = Layout::find(&c).unwrap_err();
-    assert_eq!(e, LayoutError::Missing("notification"));
-    assert!(std::format!("{e}").contains("not a modern virtio device"));
-    // A notify capability at the end of configuration space has no room for its fields.
-    let mut c = qemu_capabilities();
-    c.area[0x98 - 0x40 + 1] = 0xf8;
-    c.area[0xf8 - 0x40..].copy_from_slice(&[0x09, 0, 20, 2, 4, 0, 0, 0]);
-    assert_eq!(Layout::find(&c), Err(LayoutError::Short("notification")));
 }
 
 #[test]
@@ -191,7 +59,12 @@ fn receive_buffers_go_round_through_the_device() {
     assert!(!q.give(&mut mem, 3, 100, true), "already the device's");
     // Many times round the rings, past the 16-bit index wrap.
     for round in 0..70_000u32 {
-        let (id, addr, len, flags) = dev.next(&mem).expect("a buffer");
+        let Descriptor {
+            id,
+            addr,
+            len,
+            flags,
+        } = dev.next(&mem).expect("a buffer");
         assert_eq!(addr, BUS + q.buffer(id) as u64);
         assert_eq!((len, flags), (BUFFER_SIZE as u32, DESC_WRITE));
         let frame_len = 60 + round % 1400;
@@ -218,7 +91,12 @@ fn transmit_descriptors_are_free_until_given_and_again_when_used() {
     mem.write(q.buffer(id), &[0; NET_HEADER]);
     assert!(q.give(&mut mem, id, 74, false));
     assert_ne!(q.free(), Some(id));
-    let (got, addr, len, flags) = dev.next(&mem).unwrap();
+    let Descriptor {
+        id: got,
+        addr,
+        len,
+        flags,
+    } = dev.next(&mem).unwrap();
     assert_eq!((got, len, flags), (id, 74, 0));
     assert_eq!(addr, BUS + q.buffer(id) as u64);
     assert!(q.buffer(id) >= DmaLayout::new(256, 1 << 20).unwrap().buffer(1, 0));
@@ -307,7 +185,7 @@ proptest! {
         }
         let mut switch = Switch::new(&[Mac([0x52, 0x54, 0, 0x12, 0x34, 0x56])]).unwrap();
         for (len, bytes) in frames {
-            let (id, _, _, _) = dev.next(&mem).expect("a buffer");
+            let id = dev.next(&mem).expect("a buffer").id;
             mem.write(q.buffer(id), &bytes);
             dev.complete(&mut mem, u32::from(id), len % (2 * BUFFER_SIZE as u32));
             let Some(Used::Buffer { id, len }) = q.take(&mem) else {

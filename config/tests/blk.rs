@@ -1,0 +1,193 @@
+//! Validation of a block-device partition's tenants (`blk.tenants.<partition>`).
+
+mod common;
+use common::*;
+
+/// A block-device partition `disk` with two tenants, `plc` and `linux`, each joined to it
+/// by a pair of queuing channels.
+const BLK: &str = r#"[system]
+memory = "512MiB"
+
+[[schedules]]
+major_frame = "10ms"
+
+[[schedules.windows]]
+partition = "disk"
+offset = "0ms"
+duration = "4ms"
+
+[partitions.disk]
+image = "blk"
+memory = "1MiB"
+kernel_memory = "128KiB"
+max_priority = 100
+abilities = ["debug_log", "irq"]
+devices = ["00:04.0"]
+dma = "64KiB"
+dma_unconfined = true
+ports.plc-req = { kind = "queuing", direction = "in", size = 2072, depth = 2 }
+ports.plc-resp = { kind = "queuing", direction = "out", size = 2064, depth = 2 }
+ports.linux-req = { kind = "queuing", direction = "in", size = 2072, depth = 2 }
+ports.linux-resp = { kind = "queuing", direction = "out", size = 2064, depth = 2 }
+blk.tenants.plc = { from = "plc-req", to = "plc-resp", first_sector = 2048, sectors = 2048 }
+blk.tenants.linux = { from = "linux-req", to = "linux-resp", first_sector = 4096, sectors = 65536 }
+
+[partitions.plc]
+image = "app"
+memory = "1MiB"
+kernel_memory = "64KiB"
+max_priority = 50
+time = "background"
+ports.req = { kind = "queuing", direction = "out", size = 2072, depth = 2 }
+ports.resp = { kind = "queuing", direction = "in", size = 2064, depth = 2 }
+
+[partitions.linux]
+image = "app"
+memory = "1MiB"
+kernel_memory = "64KiB"
+max_priority = 50
+time = "background"
+ports.req = { kind = "queuing", direction = "out", size = 2072, depth = 2 }
+ports.resp = { kind = "queuing", direction = "in", size = 2064, depth = 2 }
+
+[[channels]]
+kind = "queuing"
+from = "plc.req"
+to = "disk.plc-req"
+
+[[channels]]
+kind = "queuing"
+from = "disk.plc-resp"
+to = "plc.resp"
+
+[[channels]]
+kind = "queuing"
+from = "linux.req"
+to = "disk.linux-req"
+
+[[channels]]
+kind = "queuing"
+from = "disk.linux-resp"
+to = "linux.resp"
+"#;
+
+fn edited(edits: &[(&str, &str)]) -> String {
+    let mut text = BLK.to_string();
+    for (pattern, replacement) in edits {
+        assert!(text.contains(pattern), "test bug: {pattern:?}");
+        text = text.replacen(pattern, replacement, 1);
+    }
+    text
+}
+
+#[test]
+fn tenants_are_kept_in_order_with_their_ports_and_ranges() {
+    let s = load_ok(BLK);
+    let blk = s.partitions[0].blk.as_ref().expect("blk keys");
+    let got: Vec<(&str, &str, &str, u64, u64)> = blk
+        .tenants
+        .iter()
+        .map(|t| {
+            let ports = &s.partitions[0].ports;
+            (
+                s.partitions[t.partition].name.as_str(),
+                ports[t.from].name.as_str(),
+                ports[t.to].name.as_str(),
+                t.first_sector,
+                t.sectors,
+            )
+        })
+        .collect();
+    assert_eq!(
+        got,
+        [
+            ("plc", "plc-req", "plc-resp", 2048, 2048),
+            ("linux", "linux-req", "linux-resp", 4096, 65536)
+        ]
+    );
+    assert!(s.partitions[1].blk.is_none());
+}
+
+#[test]
+fn virtual_disks_must_not_overlap_or_be_empty() {
+    expect_one(
+        &edited(&[("first_sector = 4096", "first_sector = 4095")]),
+        "65536",
+        0,
+        "partitions.disk.blk.tenants.linux.sectors",
+        "the virtual disk of sectors 4095+65536 overlaps the virtual disk of `plc`",
+    );
+    expect_one(
+        &edited(&[("sectors = 2048 }", "sectors = 0 }")]),
+        "sectors = ^0",
+        0,
+        "partitions.disk.blk.tenants.plc.sectors",
+        "has no sectors",
+    );
+    expect_one(
+        &edited(&[("first_sector = 4096", "first_sector = 18446744073709551000")]),
+        "65536",
+        0,
+        "partitions.disk.blk.tenants.linux.sectors",
+        "ends past the last sector a disk can have",
+    );
+}
+
+#[test]
+fn ports_must_carry_a_whole_request_and_one_tenant() {
+    expect_one(
+        &edited(&[
+            (
+                "ports.plc-req = { kind = \"queuing\", direction = \"in\", size = 2072",
+                "ports.plc-req = { kind = \"queuing\", direction = \"in\", size = 2071",
+            ),
+            (
+                "direction = \"out\", size = 2072",
+                "direction = \"out\", size = 2071",
+            ),
+        ]),
+        "\"plc-req\", to",
+        0,
+        "partitions.disk.blk.tenants.plc.from",
+        "size >= 2072 (the largest request)",
+    );
+    expect_one(
+        &edited(&[("from = \"linux-req\"", "from = \"plc-req\"")]),
+        "\"plc-req\", to",
+        1,
+        "partitions.disk.blk.tenants.linux.from",
+        "already carries another tenant's requests",
+    );
+    expect_one(
+        &edited(&[("to = \"plc-resp\"", "to = \"plc-req\"")]),
+        "\"plc-req\", first",
+        0,
+        "partitions.disk.blk.tenants.plc.to",
+        "must be a queuing `out` port",
+    );
+}
+
+#[test]
+fn a_tenant_must_be_another_partition_and_the_partition_needs_its_device() {
+    expect_one(
+        &edited(&[("blk.tenants.linux", "blk.tenants.ghost")]),
+        "ghost",
+        0,
+        "partitions.disk.blk.tenants.ghost",
+        "no partition `ghost`",
+    );
+    expect_one(
+        &edited(&[("blk.tenants.linux", "blk.tenants.disk")]),
+        "disk = {",
+        0,
+        "partitions.disk.blk.tenants.disk",
+        "cannot be its own tenant",
+    );
+    expect_some(
+        &edited(&[("dma = \"64KiB\"\n", "")]),
+        "blk.tenants.plc",
+        0,
+        "partitions.disk.blk",
+        "needs `devices` (its virtio-blk function) and `dma`",
+    );
+}
