@@ -30,62 +30,32 @@ core::arch::global_asm!(
 ap_trampoline_start:
     jmp .Lap16
     .balign 8
-    .quad 0                      /* 8: low PML4 (identity-maps this page, kernel half) */
-    .quad 0                      /* 16: initial RSP */
-    .quad 0                      /* 24: 64-bit entry */
-    .quad 0                      /* 32: its argument (RDI) */
-    .quad 0                      /* 40: GDT: null, 32-bit code, data, 64-bit code */
-    .quad 0x00cf9a000000ffff
-    .quad 0x00cf92000000ffff
-    .quad 0x00af9a000000ffff
-    .word 31                     /* 72: GDT pointer (base filled in) */
+    /* 8: low PML4 (identity-maps this page, kernel half); 16: RSP; 24: entry; 32: RDI */
+    .quad 0, 0, 0, 0
+    /* 40: GDT: null, 32-bit code, data, 64-bit code; 72: its pointer (base filled in) */
+    .quad 0, 0x00cf9a000000ffff, 0x00cf92000000ffff, 0x00af9a000000ffff
+    .word 31
     .long 0
 .Lap16:
-    cli
-    cld
-    mov %cs, %ax
-    mov %ax, %ds
-    mov %ax, %ss
-    mov $0x1000, %sp             /* the stack: the top of this page */
-    movzwl %ax, %ebx
-    shl $4, %ebx
+    cli; cld
+    mov %cs, %ax; mov %ax, %ds; mov %ax, %ss; mov $0x1000, %sp
+    movzwl %ax, %ebx; shl $4, %ebx
     lgdtl 72
-    mov %cr0, %eax
-    or $1, %eax
-    mov %eax, %cr0
+    mov %cr0, %eax; or $1, %eax; mov %eax, %cr0               /* protected mode */
     lea (.Lap32 - ap_trampoline_start)(%ebx), %eax
-    pushl $8
-    pushl %eax
-    lretl
+    pushl $8; pushl %eax; lretl
     .code32
 .Lap32:
-    mov $16, %ax
-    mov %ax, %ds
-    mov %ax, %es
-    mov %ax, %ss
-    lea 0x1000(%ebx), %esp
-    mov %cr4, %eax
-    or $0x20, %eax               /* PAE */
-    mov %eax, %cr4
-    mov 8(%ebx), %eax
-    mov %eax, %cr3
-    mov $0xc0000080, %ecx        /* EFER: long mode, no-execute */
-    rdmsr
-    or $0x900, %eax
-    wrmsr
-    mov %cr0, %eax
-    or $0x80000001, %eax         /* paging */
-    mov %eax, %cr0
+    mov $16, %ax; mov %ax, %ds; mov %ax, %es; mov %ax, %ss; lea 0x1000(%ebx), %esp
+    mov %cr4, %eax; or $0x20, %eax; mov %eax, %cr4            /* PAE */
+    mov 8(%ebx), %eax; mov %eax, %cr3
+    mov $0xc0000080, %ecx; rdmsr; or $0x900, %eax; wrmsr      /* EFER.LME, NXE */
+    mov %cr0, %eax; or $0x80000001, %eax; mov %eax, %cr0      /* paging */
     lea (.Lap64 - ap_trampoline_start)(%ebx), %eax
-    pushl $24
-    pushl %eax
-    lret
+    pushl $24; pushl %eax; lret
     .code64
 .Lap64:
-    mov %ebx, %ebx
-    mov 16(%rbx), %rsp
-    mov 32(%rbx), %rdi
-    jmp *24(%rbx)
+    mov %ebx, %ebx; mov 16(%rbx), %rsp; mov 32(%rbx), %rdi; jmp *24(%rbx)
     .global ap_trampoline_end
 ap_trampoline_end:
     .text
@@ -155,7 +125,7 @@ pub fn start_application_processors(
     let aps = || {
         acpi.cpu_apic_ids
             .iter()
-            .filter(|&&id| u32::from(id) != boot_apic)
+            .filter(|&&a| u32::from(a) != boot_apic)
     };
     if aps().next().is_none() {
         return 1;
@@ -212,13 +182,11 @@ pub fn start_application_processors(
             && wait_ns(200_000)
             && lapic::send_ipi(apic, 0x4600 | vector);
         let until = crate::time::since_boot_ns() + 500_000_000;
-        while sent
-            && ONLINE.load(Ordering::Acquire) as u64 == number
-            && crate::time::since_boot_ns() < until
-        {
+        let waiting = || ONLINE.load(Ordering::Acquire) as u64 == number;
+        while sent && waiting() && crate::time::since_boot_ns() < until {
             core::hint::spin_loop();
         }
-        if ONLINE.load(Ordering::Acquire) as u64 == number {
+        if waiting() {
             // A late AP would find the next AP's stack in the trampoline: start no more.
             kprintln!("smp: cpu {number} (apic {apic}) did not come online; no more started");
             break;
@@ -275,11 +243,9 @@ extern "sysv64" fn ap_entry(block: *mut CpuBlock) -> ! {
         );
     }
     let (number, lapic_phys) = (b.number, b.lapic);
-    for (slot, ist) in [gdt::DOUBLE_FAULT_IST, gdt::NMI_IST, gdt::MACHINE_CHECK_IST]
-        .into_iter()
-        .enumerate()
-    {
-        let top = b.ist[slot].0.as_ptr() as u64 + IST_SIZE as u64;
+    let ists = [gdt::DOUBLE_FAULT_IST, gdt::NMI_IST, gdt::MACHINE_CHECK_IST];
+    for (stack, ist) in b.ist.iter().zip(ists) {
+        let top = stack.0.as_ptr() as u64 + IST_SIZE as u64;
         b.tss.interrupt_stack_table[ist as usize - 1] = VirtAddr::new(top);
     }
     let stack_top = b.stack.0.as_ptr() as u64 + STACK_SIZE as u64;
