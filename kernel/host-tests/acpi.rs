@@ -296,13 +296,14 @@ fn repeated_x2apic_only_and_wrong_length_processors_are_ignored() {
         local_apic(0, 1),                    // the same APIC ID again
         local_apic(2, 2),                    // online capable
         local_apic(3, 0),                    // disabled: neither kept nor ignored
+        local_apic(0xff, 1),                 // the broadcast ID: an IPI would reach every CPU
         vec![0, 6, 4, 4, 1, 0],              // too short for a local APIC
         vec![0, 10, 5, 5, 1, 0, 0, 0, 0, 0], // too long
         x2apic,
     ];
     let info = parse(0xe0000, &madt_with(&entries)).unwrap();
     assert_eq!(info.cpu_apic_ids, vec![0, 2]);
-    assert_eq!(info.cpus_ignored, 4);
+    assert_eq!(info.cpus_ignored, 5);
 }
 
 #[test]

@@ -65,7 +65,7 @@ pub struct AcpiInfo {
     /// APIC IDs of enabled (or online-capable) processors, at most [`MAX_CPUS`], each once.
     pub cpu_apic_ids: Vec<u8>,
     /// Processor entries left out: beyond [`MAX_CPUS`], a repeated APIC ID, x2APIC-only
-    /// (ID above 254) or of the wrong length. Boot logs the count.
+    /// (ID above 254, or 255, the broadcast ID) or of the wrong length. Boot logs the count.
     pub cpus_ignored: usize,
     pub io_apics: Vec<IoApicInfo>,
     pub overrides: Vec<InterruptOverride>,
@@ -289,10 +289,12 @@ fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
         match (kind, len) {
             // Processor local APIC: enabled (bit 0) or online capable (bit 1).
             (0, 8) if u32_at(e, 4) & 0b11 != 0 => {
-                if info.cpu_apic_ids.len() == MAX_CPUS || info.cpu_apic_ids.contains(&e[3]) {
+                // 0xff is the xAPIC broadcast destination: an IPI to it would reach every CPU.
+                let (id, ids) = (e[3], &info.cpu_apic_ids);
+                if ids.len() == MAX_CPUS || ids.contains(&id) || id == 0xff {
                     info.cpus_ignored += 1;
                 } else {
-                    info.cpu_apic_ids.push(e[3]);
+                    info.cpu_apic_ids.push(id);
                 }
             }
             // A processor local x2APIC (enabled or online capable): its ID needs x2APIC mode.
