@@ -260,3 +260,66 @@ fn damaged_dmar_structures_are_errors_not_panics() {
         Err(AcpiError::BadTable(*b"DMAR", "too short"))
     );
 }
+
+/// A MADT with the given processor entries (type, length, bytes after the 2-byte header).
+fn madt_with(entries: &[Vec<u8>]) -> Fake {
+    let mut body = vec![0u8; 8];
+    body[0..4].copy_from_slice(&0xfee0_0000u32.to_le_bytes());
+    for e in entries {
+        body.extend_from_slice(e);
+    }
+    system(vec![sdt(b"APIC", &body)])
+}
+
+fn local_apic(id: u8, flags: u32) -> Vec<u8> {
+    let mut e = vec![0, 8, id, id];
+    e.extend_from_slice(&flags.to_le_bytes());
+    e
+}
+
+#[test]
+fn processors_beyond_the_supported_count_are_counted_not_kept() {
+    let entries: Vec<_> = (0..20).map(|id| local_apic(id, 1)).collect();
+    let info = parse(0xe0000, &madt_with(&entries)).unwrap();
+    assert_eq!(info.cpu_apic_ids, (0..MAX_CPUS as u8).collect::<Vec<_>>());
+    assert_eq!(info.cpus_ignored, 20 - MAX_CPUS);
+}
+
+#[test]
+fn repeated_x2apic_only_and_wrong_length_processors_are_ignored() {
+    let mut x2apic = vec![9, 16, 0, 0];
+    x2apic.extend_from_slice(&300u32.to_le_bytes());
+    x2apic.extend_from_slice(&1u32.to_le_bytes());
+    x2apic.extend_from_slice(&300u32.to_le_bytes());
+    let entries = vec![
+        local_apic(0, 1),
+        local_apic(0, 1),                    // the same APIC ID again
+        local_apic(2, 2),                    // online capable
+        local_apic(3, 0),                    // disabled: neither kept nor ignored
+        local_apic(0xff, 1),                 // the broadcast ID: an IPI would reach every CPU
+        vec![0, 6, 4, 4, 1, 0],              // too short for a local APIC
+        vec![0, 10, 5, 5, 1, 0, 0, 0, 0, 0], // too long
+        x2apic,
+    ];
+    let info = parse(0xe0000, &madt_with(&entries)).unwrap();
+    assert_eq!(info.cpu_apic_ids, vec![0, 2]);
+    assert_eq!(info.cpus_ignored, 5);
+}
+
+#[test]
+fn a_processor_entry_running_past_the_madt_is_an_error() {
+    let mut body = vec![0u8; 8];
+    body.extend_from_slice(&[0, 8, 1, 1, 1]); // 8 claimed, 5 present
+    let mem = system(vec![sdt(b"APIC", &body)]);
+    assert_eq!(
+        parse(0xe0000, &mem),
+        Err(AcpiError::BadTable(
+            *b"APIC",
+            "entry length runs past the table"
+        ))
+    );
+    let mut body = vec![0u8; 8];
+    body.extend_from_slice(&[0, 0, 1, 1]); // zero length would loop for ever
+    let mem = system(vec![sdt(b"APIC", &body)]);
+    assert!(parse(0xe0000, &mem).is_err());
+}

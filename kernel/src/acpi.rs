@@ -62,8 +62,11 @@ pub fn signal_of(gsi: u32, overrides: &[InterruptOverride]) -> Signal {
 pub struct AcpiInfo {
     pub revision: u8,
     pub local_apic_address: u64,
-    /// APIC IDs of enabled (or online-capable) processors.
+    /// APIC IDs of enabled (or online-capable) processors, at most [`MAX_CPUS`], each once.
     pub cpu_apic_ids: Vec<u8>,
+    /// Processor entries left out: beyond [`MAX_CPUS`], a repeated APIC ID, x2APIC-only
+    /// (ID above 254, or 255, the broadcast ID) or of the wrong length. Boot logs the count.
+    pub cpus_ignored: usize,
     pub io_apics: Vec<IoApicInfo>,
     pub overrides: Vec<InterruptOverride>,
     pub hpet_address: Option<u64>,
@@ -113,6 +116,9 @@ impl core::fmt::Display for AcpiError {
         }
     }
 }
+
+/// CPUs the kernel brings up (the boot CPU included); the machines have up to 4.
+pub const MAX_CPUS: usize = 8;
 
 fn checksum_ok(bytes: &[u8]) -> bool {
     bytes.iter().fold(0u8, |sum, b| sum.wrapping_add(*b)) == 0
@@ -282,7 +288,19 @@ fn parse_madt(madt: &[u8], info: &mut AcpiInfo) -> Result<(), AcpiError> {
         let e = &madt[at..at + len];
         match (kind, len) {
             // Processor local APIC: enabled (bit 0) or online capable (bit 1).
-            (0, 8) if u32_at(e, 4) & 0b11 != 0 => info.cpu_apic_ids.push(e[3]),
+            (0, 8) if u32_at(e, 4) & 0b11 != 0 => {
+                // 0xff is the xAPIC broadcast destination: an IPI to it would reach every CPU.
+                let (id, ids) = (e[3], &info.cpu_apic_ids);
+                if ids.len() == MAX_CPUS || ids.contains(&id) || id == 0xff {
+                    info.cpus_ignored += 1;
+                } else {
+                    info.cpu_apic_ids.push(id);
+                }
+            }
+            // A processor local x2APIC (enabled or online capable): its ID needs x2APIC mode.
+            (9, 16) if u32_at(e, 8) & 0b11 != 0 => info.cpus_ignored += 1,
+            // A processor entry of the wrong length.
+            (0, _) | (9, _) if len != [8, 16][usize::from(kind == 9)] => info.cpus_ignored += 1,
             (1, 12) => info.io_apics.push(IoApicInfo {
                 id: e[2],
                 address: u32_at(e, 4) as u64,

@@ -223,6 +223,7 @@ pub fn start(boot_info: u64, heap: &'static BootHeap) -> ! {
     };
     crate::arch::cpu::enable_sse_for_user();
     crate::arch::syscall::init();
+    crate::arch::smp::start_application_processors(&acpi, apic_id, regions);
     {
         let mut k = crate::arch::entry::KERNEL.lock();
         k.dma = dma;

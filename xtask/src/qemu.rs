@@ -197,6 +197,10 @@ pub fn command(
 ) -> Command {
     let mut cmd = Command::new(&qemu.binary);
     cmd.args(MACHINE);
+    // `WARDEN_SMP=N`: N CPUs (a scenario's own `-smp` in `qemu_args` comes later and wins).
+    if let Some(cpus) = std::env::var_os("WARDEN_SMP") {
+        cmd.arg("-smp").arg(cpus);
+    }
     cmd.arg("-drive").arg(format!(
         "if=pflash,format=raw,readonly=on,file={}",
         qemu.ovmf_code.display()

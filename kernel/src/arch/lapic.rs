@@ -13,6 +13,8 @@ const VERSION: usize = 0x30;
 const TASK_PRIORITY: usize = 0x80;
 const EOI: usize = 0xb0;
 const SPURIOUS: usize = 0xf0;
+const INTERRUPT_COMMAND_LOW: usize = 0x300;
+const INTERRUPT_COMMAND_HIGH: usize = 0x310;
 const LVT_TIMER: usize = 0x320;
 const LVT_LINT0: usize = 0x350;
 const LVT_LINT1: usize = 0x360;
@@ -71,6 +73,22 @@ pub fn init(phys: u64) -> (u32, u32) {
 
 pub fn end_of_interrupt() {
     write(EOI, 0);
+}
+
+/// Sends the inter-processor interrupt `command` (the command register's low word) to the
+/// CPU with `apic_id`; false if the APIC still shows it pending after 1 ms.
+pub fn send_ipi(apic_id: u8, command: u32) -> bool {
+    const PENDING: u32 = 1 << 12;
+    write(INTERRUPT_COMMAND_HIGH, u32::from(apic_id) << 24);
+    write(INTERRUPT_COMMAND_LOW, command);
+    let until = crate::time::since_boot_ns() + 1_000_000;
+    while read(INTERRUPT_COMMAND_LOW) & PENDING != 0 {
+        if crate::time::since_boot_ns() > until {
+            return false;
+        }
+        core::hint::spin_loop();
+    }
+    true
 }
 
 /// Starts a masked one-shot count from the maximum; used for calibration.

@@ -13,6 +13,7 @@ pub mod pci;
 pub mod pic;
 pub mod pit;
 pub mod serial;
+pub mod smp;
 pub mod stack;
 pub mod syscall;
 pub mod vtd;
