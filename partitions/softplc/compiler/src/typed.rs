@@ -3,18 +3,21 @@
 //! Compilation checks first and emits second. [`sema`](crate::sema) checks the declarations
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
-//! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), the value of each
-//! CASE label ([`CaseLabels`]) and the calls between user POUs, on which
-//! [`sema::body`](crate::sema::body) judges the recursion rule. Only a
-//! program without diagnostics reaches [`emit`], which starts from those records and reports
-//! nothing itself: a diagnostic raised while emitting is a compiler bug (an internal error).
+//! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
+//! each call is ([`Callees`]), the value of each CASE label ([`CaseLabels`]) and the calls
+//! between user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule.
+//! Only a program without diagnostics reaches [`emit`], which starts from those records and
+//! reports nothing itself: a diagnostic raised while emitting is a compiler bug (an internal
+//! error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
 //! once more to emit. The second walk takes every type it asks for from the table (it never
-//! infers: a missing record is an internal error) but re-resolves names, calls and
-//! conversions while it emits and passes the same check branches again (none can fail on a
-//! checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
+//! infers: a missing record is an internal error) and every callee from [`Callees`] (a user
+//! FUNCTION, a standard function, `REF`/`ADR`, an FB instance or a method: it never looks a
+//! called name up again), but re-resolves variable names, methods and conversions while it
+//! emits and passes the same check branches again (none can fail on a checked program). The
+//! exceptions so far: the recursion rule lives in `sema::body`; the
 //! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
 //! pass only, emission reading the label values from the table; the BOOL condition of IF,
 //! WHILE and REPEAT, EXIT outside a loop, a zero FOR step and the assignment rules (read-only
@@ -23,7 +26,7 @@
 
 use std::collections::HashMap;
 
-use crate::ast::{Expr, Unit};
+use crate::ast::{Expr, Ident, Unit};
 use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
@@ -77,11 +80,33 @@ pub type ExprTypes = ExprTable<Type>;
 /// selector's type or an exception name), as the checker resolved it.
 pub type CaseLabels = ExprTable<i128>;
 
+/// What the callee of a call resolved to: which kind of call it is and, for functions, which
+/// POU or standard function it calls. Keyed by the callee expression.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Callee {
+    /// `REF`, `ADR` or `__ISVALIDREF` (no user POU of that name).
+    RefFunction(Ident),
+    /// A METHOD or action: of the enclosing class, of an instance or of an interface value.
+    Member,
+    /// A user FUNCTION (its POU index).
+    Function(usize),
+    /// A standard function, by its name without namespace.
+    Standard(Ident),
+    /// The body of a function block instance: the callee expression itself, or the
+    /// namespace-qualified name it stands for.
+    Instance(Option<Ident>),
+}
+
+/// The callee of each call.
+pub type Callees = ExprTable<Callee>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
     /// The type of every expression the checker inferred.
     pub types: ExprTypes,
+    /// What the callee of every call resolved to.
+    pub callees: Callees,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -103,6 +128,7 @@ pub fn check(
         types: std::mem::take(&mut checker.types),
         calls: std::mem::take(&mut checker.calls),
         case_labels: std::mem::take(&mut checker.case_labels),
+        callees: std::mem::take(&mut checker.callees),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -131,6 +157,7 @@ pub fn emit(
     let mut generator = Gen::new(prog, unit, sources, &mut missed);
     generator.types = checked.types;
     generator.case_labels = checked.case_labels;
+    generator.callees = checked.callees;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -158,4 +185,53 @@ pub fn emit(
         );
     }
     Err(internal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Options, lexer, parser, sema};
+
+    const PROGRAM: &str = "
+FUNCTION Twice : INT VAR_INPUT x : INT; END_VAR Twice := x * 2; END_FUNCTION
+FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR n := n + step; END_FUNCTION_BLOCK
+PROGRAM Main
+VAR c : Count; r : INT; p : REF_TO INT; END_VAR
+r := Twice(ABS(-3));
+c(step := r);
+p := REF(r);
+END_PROGRAM
+";
+
+    /// Checks [`PROGRAM`], lets `forget` drop part of the record, then emits.
+    fn check_then_emit(forget: impl FnOnce(&mut Checked)) -> Result<Emitted, Diagnostics> {
+        let mut sources = SourceMap::default();
+        sources.add("main.st", PROGRAM);
+        let mut raw = Vec::new();
+        let unit = parser::parse(lexer::lex(0, PROGRAM, &mut raw), &mut raw);
+        assert!(raw.is_empty(), "{raw:?}");
+        let mut diags = Diagnostics::default();
+        let mut prog = sema::analyse(&unit, 0, &Options::default(), &mut diags);
+        let mut checked = check(&mut prog, &unit, &sources, &mut diags);
+        assert!(diags.is_empty(), "{:?}", diags.list);
+        forget(&mut checked);
+        emit(&mut prog, &unit, &sources, checked)
+    }
+
+    fn internal_errors(result: Result<Emitted, Diagnostics>) -> Vec<String> {
+        match result {
+            Ok(_) => Vec::new(),
+            Err(d) => d.list.into_iter().map(|d| d.message).collect(),
+        }
+    }
+
+    #[test]
+    fn emission_resolves_no_callee_itself() {
+        assert!(check_then_emit(|_| {}).is_ok());
+        let errors = internal_errors(check_then_emit(|c| c.callees = Callees::default()));
+        // Twice(...), c(...) and REF(...): each is taken from the checker's record (ABS(...)
+        // too, but it is an argument of Twice, which is not walked once Twice has no callee).
+        assert_eq!(errors.len(), 3, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("resolved no callee")));
+    }
 }
