@@ -4,8 +4,9 @@
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
-//! each call is ([`Callees`]), the value of each CASE label ([`CaseLabels`]) and the calls
-//! between user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule.
+//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the value of
+//! each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
+//! [`sema::body`](crate::sema::body) judges the recursion rule.
 //! Only a program without diagnostics reaches [`emit`], which starts from those records and
 //! reports nothing itself: a diagnostic raised while emitting is a compiler bug (an internal
 //! error).
@@ -13,16 +14,17 @@
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
 //! once more to emit. The second walk takes every type it asks for from the table (it never
-//! infers: a missing record is an internal error) and every callee from [`Callees`] (a user
+//! infers: a missing record is an internal error), every callee from [`Callees`] (a user
 //! FUNCTION, a standard function, `REF`/`ADR`, an FB instance or a method: it never looks a
-//! called name up again), but re-resolves variable names, methods and conversions while it
-//! emits and passes the same check branches again (none can fail on a checked program). The
-//! exceptions so far: the recursion rule lives in `sema::body`; the
-//! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
-//! pass only, emission reading the label values from the table; the BOOL condition of IF,
-//! WHILE and REPEAT, EXIT outside a loop, a zero FOR step and the assignment rules (read-only
-//! target, assignable types, FB instances, the `REF=` target) are checked by the checking
-//! pass only (for emission an EXIT outside a loop is an internal error).
+//! called name up again) and the variable of every name from [`Variables`] (the POU's own,
+//! its owner's, a global), but re-resolves members, methods and conversions while it emits
+//! and passes the same check branches again (none can fail on a checked program). The
+//! exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
+//! type, label values, empty and overlapping ranges) run in the checking pass only, emission
+//! reading the label values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT
+//! outside a loop, a zero FOR step and the assignment rules (read-only target, assignable
+//! types, FB instances, the `REF=` target) are checked by the checking pass only (for
+//! emission an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 
@@ -30,8 +32,8 @@ use crate::ast::{Expr, Ident, Unit};
 use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
-use crate::sema::Program;
 use crate::sema::body::{self, CallEdge};
+use crate::sema::{Program, VarDef};
 use crate::types::Type;
 
 /// A value per expression of the bodies, keyed by the expression (its address in the syntax
@@ -100,6 +102,46 @@ pub enum Callee {
 /// The callee of each call.
 pub type Callees = ExprTable<Callee>;
 
+/// The variable a name denotes, as the checker resolved it.
+#[derive(Debug, Clone)]
+pub enum Variable {
+    /// A variable of the frame the POU runs on: declared by the POU itself (`own`; a
+    /// METHOD's own variables are in its static frame) or by the block that owns the METHOD
+    /// or action.
+    Frame { var: VarDef, own: bool },
+    /// Global `index` of the program, named directly or through a VAR_EXTERNAL (not
+    /// writable when either declaration is CONSTANT).
+    Global { index: usize, writable: bool },
+}
+
+/// The variable each name in the bodies denotes, keyed by the POU whose body it is in, the
+/// name's span and the name (a name copied into an expression the walk builds, such as the
+/// argument of an implicit `REF`, is the same name).
+#[derive(Debug, Default, Clone)]
+pub struct Variables {
+    map: HashMap<(usize, Span, String), Variable>,
+}
+
+impl Variables {
+    /// The variable `name` denotes in the body of POU `pou`, if recorded.
+    pub fn of(&self, pou: usize, name: &Ident) -> Option<&Variable> {
+        self.map.get(&(pou, name.span, name.name.clone()))
+    }
+
+    pub(crate) fn record(&mut self, pou: usize, name: &Ident, v: Variable) {
+        self.map.insert((pou, name.span, name.name.clone()), v);
+    }
+
+    /// How many names have a record.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -107,6 +149,8 @@ pub struct Checked {
     pub types: ExprTypes,
     /// What the callee of every call resolved to.
     pub callees: Callees,
+    /// The variable every name denotes.
+    pub variables: Variables,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -129,6 +173,7 @@ pub fn check(
         calls: std::mem::take(&mut checker.calls),
         case_labels: std::mem::take(&mut checker.case_labels),
         callees: std::mem::take(&mut checker.callees),
+        variables: std::mem::take(&mut checker.variables),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -158,6 +203,7 @@ pub fn emit(
     generator.types = checked.types;
     generator.case_labels = checked.case_labels;
     generator.callees = checked.callees;
+    generator.variables = checked.variables;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -233,5 +279,18 @@ END_PROGRAM
         // too, but it is an argument of Twice, which is not walked once Twice has no callee).
         assert_eq!(errors.len(), 3, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("resolved no callee")));
+    }
+
+    #[test]
+    fn emission_resolves_no_variable_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.variables = Variables::default()));
+        // Each name fails first; the expressions built on it then have no type either.
+        assert!(errors[0].contains("resolved no variable"), "{errors:?}");
+        assert!(
+            errors
+                .iter()
+                .all(|e| e.contains("resolved no variable") || e.contains("recorded no type")),
+            "{errors:?}"
+        );
     }
 }

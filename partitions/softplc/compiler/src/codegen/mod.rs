@@ -38,7 +38,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::{Callees, CaseLabels, ExprTypes};
+use crate::typed::{Callees, CaseLabels, ExprTypes, Variables};
 use crate::types::*;
 
 /// Where a value lives.
@@ -145,6 +145,8 @@ pub(crate) struct Gen<'a> {
     /// What the callee of each call resolved to: recorded by the checking pass, read by
     /// emission.
     pub(crate) callees: Callees,
+    /// The variable each name denotes: recorded by the checking pass, read by emission.
+    pub(crate) variables: Variables,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -198,6 +200,7 @@ impl<'a> Gen<'a> {
             types: ExprTypes::default(),
             case_labels: CaseLabels::default(),
             callees: Callees::default(),
+            variables: Variables::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
