@@ -4,8 +4,8 @@
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
-//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the value of
-//! each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
+//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
+//! each `base.m` denotes ([`Members`]), the value of each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
 //! [`sema::body`](crate::sema::body) judges the recursion rule.
 //! Only a program without diagnostics reaches [`emit`], which starts from those records and
 //! reports nothing itself: a diagnostic raised while emitting is a compiler bug (an internal
@@ -16,8 +16,9 @@
 //! once more to emit. The second walk takes every type it asks for from the table (it never
 //! infers: a missing record is an internal error), every callee from [`Callees`] (a user
 //! FUNCTION, a standard function, `REF`/`ADR`, an FB instance or a method: it never looks a
-//! called name up again) and the variable of every name from [`Variables`] (the POU's own,
-//! its owner's, a global), but re-resolves members, methods and conversions while it emits
+//! called name up again), the variable of every name from [`Variables`] (the POU's own, its
+//! owner's, a global) and the member of every `base.m` from [`Members`] (a structure's field,
+//! a block's variable), but re-resolves methods and conversions while it emits
 //! and passes the same check branches again (none can fail on a checked program). The
 //! exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
 //! type, label values, empty and overlapping ranges) run in the checking pass only, emission
@@ -114,21 +115,29 @@ pub enum Variable {
     Global { index: usize, writable: bool },
 }
 
-/// The variable each name in the bodies denotes, keyed by the POU whose body it is in, the
-/// name's span and the name (a name copied into an expression the walk builds, such as the
-/// argument of an implicit `REF`, is the same name).
-#[derive(Debug, Default, Clone)]
-pub struct Variables {
-    map: HashMap<(usize, Span, String), Variable>,
+/// What the checker resolved for each name of a kind in the bodies, keyed by the POU whose
+/// body it is in, the name's span and the name (a name copied into an expression the walk
+/// builds, such as the argument of an implicit `REF`, is the same name).
+#[derive(Debug, Clone)]
+pub struct NameTable<T> {
+    map: HashMap<(usize, Span, String), T>,
 }
 
-impl Variables {
-    /// The variable `name` denotes in the body of POU `pou`, if recorded.
-    pub fn of(&self, pou: usize, name: &Ident) -> Option<&Variable> {
+impl<T> Default for NameTable<T> {
+    fn default() -> Self {
+        NameTable {
+            map: HashMap::new(),
+        }
+    }
+}
+
+impl<T> NameTable<T> {
+    /// What `name` resolved to in the body of POU `pou`, if recorded.
+    pub fn of(&self, pou: usize, name: &Ident) -> Option<&T> {
         self.map.get(&(pou, name.span, name.name.clone()))
     }
 
-    pub(crate) fn record(&mut self, pou: usize, name: &Ident, v: Variable) {
+    pub(crate) fn record(&mut self, pou: usize, name: &Ident, v: T) {
         self.map.insert((pou, name.span, name.name.clone()), v);
     }
 
@@ -142,6 +151,28 @@ impl Variables {
     }
 }
 
+/// The variable each name denotes.
+pub type Variables = NameTable<Variable>;
+
+/// What the member name of `base.m` denotes, as the checker resolved it.
+#[derive(Debug, Clone)]
+pub enum Member {
+    /// A member of a structure, `offset` bytes into it.
+    Field { offset: u32, ty: Type },
+    /// A variable of a function block instance, `offset` bytes into it; `writable` when it
+    /// may be written through this access (a writable instance given).
+    Var {
+        offset: u32,
+        ty: Type,
+        writable: bool,
+    },
+    /// A VAR_IN_OUT of the block itself (`THIS^.x`): the variable the name denotes.
+    OwnInOut,
+}
+
+/// The member each member name (`m` of `base.m`) denotes.
+pub type Members = NameTable<Member>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -151,6 +182,8 @@ pub struct Checked {
     pub callees: Callees,
     /// The variable every name denotes.
     pub variables: Variables,
+    /// The member every member name denotes.
+    pub members: Members,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -174,6 +207,7 @@ pub fn check(
         case_labels: std::mem::take(&mut checker.case_labels),
         callees: std::mem::take(&mut checker.callees),
         variables: std::mem::take(&mut checker.variables),
+        members: std::mem::take(&mut checker.members),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -204,6 +238,7 @@ pub fn emit(
     generator.case_labels = checked.case_labels;
     generator.callees = checked.callees;
     generator.variables = checked.variables;
+    generator.members = checked.members;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -245,6 +280,7 @@ PROGRAM Main
 VAR c : Count; r : INT; p : REF_TO INT; END_VAR
 r := Twice(ABS(-3));
 c(step := r);
+r := c.n;
 p := REF(r);
 END_PROGRAM
 ";
@@ -279,6 +315,13 @@ END_PROGRAM
         // too, but it is an argument of Twice, which is not walked once Twice has no callee).
         assert_eq!(errors.len(), 3, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("resolved no callee")));
+    }
+
+    #[test]
+    fn emission_resolves_no_member_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.members = Members::default()));
+        // `c.n`.
+        assert!(errors[0].contains("resolved no member"), "{errors:?}");
     }
 
     #[test]

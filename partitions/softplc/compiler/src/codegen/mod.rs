@@ -38,7 +38,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::{Callees, CaseLabels, ExprTypes, Variables};
+use crate::typed::{Callees, CaseLabels, ExprTypes, Members, Variables};
 use crate::types::*;
 
 /// Where a value lives.
@@ -147,6 +147,8 @@ pub(crate) struct Gen<'a> {
     pub(crate) callees: Callees,
     /// The variable each name denotes: recorded by the checking pass, read by emission.
     pub(crate) variables: Variables,
+    /// The member each `base.m` denotes: recorded by the checking pass, read by emission.
+    pub(crate) members: Members,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -201,6 +203,7 @@ impl<'a> Gen<'a> {
             case_labels: CaseLabels::default(),
             callees: Callees::default(),
             variables: Variables::default(),
+            members: Members::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),

@@ -1,7 +1,7 @@
 //! Places: variables, members, array elements and partial accesses as addressable locations.
 
 use super::*;
-use crate::typed::Variable;
+use crate::typed::{Member, Variable};
 
 impl Gen<'_> {
     /// Resolves an l-value; for dynamic places the base address is pushed (a place reached
@@ -37,9 +37,58 @@ impl Gen<'_> {
     }
 
     /// `base.m`: a member of a structure or an input or output of a function block instance.
+    /// The checking pass resolves the member (reporting a wrong one) and records it
+    /// ([`Member`]); emission reads the record.
     fn member_place(&mut self, base: &Expr, m: &Ident) -> Option<Place> {
         let bp = self.place_inner(base)?;
-        match &bp.ty {
+        let member = if self.check_only {
+            let member = self.resolve_member(base, &bp.ty, m);
+            if let Some(member) = &member {
+                self.members.record(self.cur, m, member.clone());
+            }
+            member
+        } else {
+            let member = self.members.of(self.cur, m).cloned();
+            if member.is_none() {
+                self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    m.span,
+                    "internal error: the checker resolved no member for this name",
+                );
+            }
+            member
+        };
+        match member {
+            Some(Member::Field { offset, ty }) => Some(Place {
+                loc: offset_loc(bp.loc, offset),
+                ty,
+                writable: bp.writable,
+                window: None,
+            }),
+            Some(Member::Var {
+                offset,
+                ty,
+                writable,
+            }) => Some(Place {
+                loc: offset_loc(bp.loc, offset),
+                ty,
+                writable: bp.writable && writable,
+                window: None,
+            }),
+            Some(Member::OwnInOut) => {
+                self.drop_place(&bp);
+                self.name_place(m)
+            }
+            None => {
+                self.drop_place(&bp);
+                None
+            }
+        }
+    }
+
+    /// What `m` of `base.m` denotes, `base` being of type `base_ty` (reports a wrong member).
+    fn resolve_member(&mut self, base: &Expr, base_ty: &Type, m: &Ident) -> Option<Member> {
+        match base_ty {
             Type::Struct(si) => {
                 let Some(mem) = self.prog.structs[*si]
                     .members
@@ -47,16 +96,13 @@ impl Gen<'_> {
                     .find(|x| x.name == m.name)
                     .cloned()
                 else {
-                    let msg = format!("{} has no member `{}`", self.tname(&bp.ty), m.text);
+                    let msg = format!("{} has no member `{}`", self.tname(base_ty), m.text);
                     self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                    self.drop_place(&bp);
                     return None;
                 };
-                Some(Place {
-                    loc: offset_loc(bp.loc, mem.offset),
+                Some(Member::Field {
+                    offset: mem.offset,
                     ty: mem.ty,
-                    writable: bp.writable,
-                    window: None,
                 })
             }
             Type::Fb(pi) => {
@@ -67,24 +113,20 @@ impl Gen<'_> {
                 match v {
                     Some(v) if own && !matches!(v.kind, VarKind::External | VarKind::Global) => {
                         if v.kind == VarKind::InOut {
-                            self.drop_place(&bp);
-                            return self.name_place(m);
+                            return Some(Member::OwnInOut);
                         }
-                        Some(Place {
-                            loc: offset_loc(bp.loc, v.offset),
+                        Some(Member::Var {
+                            offset: v.offset,
                             ty: v.ty,
-                            writable: bp.writable && !v.constant,
-                            window: None,
+                            writable: !v.constant,
                         })
                     }
+                    // Outputs are read-only from outside; inputs may be set before a call.
                     Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
-                        // Outputs are read-only from outside; inputs may be set before a call.
-                        let writable = bp.writable && v.kind == VarKind::Input;
-                        Some(Place {
-                            loc: offset_loc(bp.loc, v.offset),
+                        Some(Member::Var {
+                            offset: v.offset,
                             ty: v.ty,
-                            writable,
-                            window: None,
+                            writable: v.kind == VarKind::Input,
                         })
                     }
                     Some(_) => {
@@ -93,7 +135,6 @@ impl Gen<'_> {
                             m.text, self.prog.pous[pi].text
                         );
                         self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                        self.drop_place(&bp);
                         None
                     }
                     None => {
@@ -102,19 +143,14 @@ impl Gen<'_> {
                             self.prog.pous[pi].text, m.text
                         );
                         self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                        self.drop_place(&bp);
                         None
                     }
                 }
             }
-            Type::Error => {
-                self.drop_place(&bp);
-                None
-            }
+            Type::Error => None,
             other => {
                 let msg = format!("{} has no members (`.{}`)", self.tname(other), m.text);
                 self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                self.drop_place(&bp);
                 None
             }
         }
