@@ -15,17 +15,18 @@
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
 //! once more to emit. The second walk takes every type it asks for from the table (it never
 //! infers: a missing record is an internal error), every callee from [`Callees`] (a user
-//! FUNCTION, a standard function, `REF`/`ADR`, an FB instance or a method: it never looks a
-//! called name up again), the variable of every name from [`Variables`] (the POU's own, its
-//! owner's, a global) and the member of every `base.m` from [`Members`] (a structure's field,
-//! a block's variable), but re-resolves methods and conversions while it emits
-//! and passes the same check branches again (none can fail on a checked program). The
-//! exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
-//! type, label values, empty and overlapping ranges) run in the checking pass only, emission
-//! reading the label values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT
-//! outside a loop, a zero FOR step and the assignment rules (read-only target, assignable
-//! types, FB instances, the `REF=` target) are checked by the checking pass only (for
-//! emission an EXIT outside a loop is an internal error).
+//! FUNCTION, a standard function, `REF`/`ADR`, an FB instance, a method or action: it never
+//! looks a called name up again), the variable of every name from [`Variables`] (the POU's
+//! own, its owner's, a global) and the member of every `base.m` from [`Members`] (a
+//! structure's field, a block's variable), but still decides what the rest means while it
+//! emits (enumeration values and properties in expressions, standard-function overloads,
+//! conversions, argument binding) and passes the same check branches again (none can fail on
+//! a checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
+//! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
+//! pass only, emission reading the label values from the table; the BOOL condition of IF,
+//! WHILE and REPEAT, EXIT outside a loop, a zero FOR step and the assignment rules (read-only
+//! target, assignable types, FB instances, the `REF=` target) are checked by the checking
+//! pass only (for emission an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 
@@ -34,7 +35,7 @@ use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::body::{self, CallEdge};
-use crate::sema::{Program, VarDef};
+use crate::sema::{InterfaceMember, Program, VarDef};
 use crate::types::Type;
 
 /// A value per expression of the bodies, keyed by the expression (its address in the syntax
@@ -85,12 +86,12 @@ pub type CaseLabels = ExprTable<i128>;
 
 /// What the callee of a call resolved to: which kind of call it is and, for functions, which
 /// POU or standard function it calls. Keyed by the callee expression.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone)]
 pub enum Callee {
     /// `REF`, `ADR` or `__ISVALIDREF` (no user POU of that name).
     RefFunction(Ident),
-    /// A METHOD or action: of the enclosing class, of an instance or of an interface value.
-    Member,
+    /// A METHOD or action.
+    Method(Method),
     /// A user FUNCTION (its POU index).
     Function(usize),
     /// A standard function, by its name without namespace.
@@ -98,6 +99,18 @@ pub enum Callee {
     /// The body of a function block instance: the callee expression itself, or the
     /// namespace-qualified name it stands for.
     Instance(Option<Ident>),
+}
+
+/// The METHOD or action a call calls.
+#[derive(Debug, Clone)]
+pub enum Method {
+    /// One of the class whose body is walked (`m(...)`): its POU.
+    Own(usize),
+    /// One of an instance (`base.m(...)`): its POU, as the instance's static type finds it
+    /// (the call may still be dispatched to an override).
+    OfInstance(usize),
+    /// One of interface `.0`, as that interface (or one it extends) declares it.
+    OfInterface(usize, Box<InterfaceMember>),
 }
 
 /// The callee of each call.
@@ -275,12 +288,16 @@ mod tests {
 
     const PROGRAM: &str = "
 FUNCTION Twice : INT VAR_INPUT x : INT; END_VAR Twice := x * 2; END_FUNCTION
-FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR n := n + step; END_FUNCTION_BLOCK
+FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR
+METHOD Reset n := 0; END_METHOD
+n := n + step;
+END_FUNCTION_BLOCK
 PROGRAM Main
 VAR c : Count; r : INT; p : REF_TO INT; END_VAR
 r := Twice(ABS(-3));
 c(step := r);
 r := c.n;
+c.Reset();
 p := REF(r);
 END_PROGRAM
 ";
@@ -311,9 +328,9 @@ END_PROGRAM
     fn emission_resolves_no_callee_itself() {
         assert!(check_then_emit(|_| {}).is_ok());
         let errors = internal_errors(check_then_emit(|c| c.callees = Callees::default()));
-        // Twice(...), c(...) and REF(...): each is taken from the checker's record (ABS(...)
-        // too, but it is an argument of Twice, which is not walked once Twice has no callee).
-        assert_eq!(errors.len(), 3, "{errors:?}");
+        // Twice(...), c(...), c.Reset() and REF(...): each is taken from the checker's record
+        // (ABS(...) too, but it is an argument of Twice, not walked once Twice has no callee).
+        assert_eq!(errors.len(), 4, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("resolved no callee")));
     }
 

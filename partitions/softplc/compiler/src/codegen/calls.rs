@@ -40,7 +40,7 @@ impl Gen<'_> {
         span: Span,
     ) -> Type {
         let target = if self.check_only {
-            match self.resolve_callee(callee, args, span) {
+            match self.resolve_callee(callee, args) {
                 Ok(target) => target,
                 Err(ty) => return ty,
             }
@@ -60,25 +60,23 @@ impl Gen<'_> {
         self.call_resolved(&target, callee, args, expected, span)
     }
 
-    /// What `callee` calls, recorded for emission. `Err` is the call's type when nothing is
-    /// left to call: the callee is wrong (reported), or it is a METHOD or action, whose
-    /// resolution and call are still one walk (made here).
-    fn resolve_callee(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Result<Callee, Type> {
-        let target = self.callee_of(callee, args, span)?;
+    /// What `callee` calls, recorded for emission. `Err` is the call's type when the callee
+    /// is wrong (reported).
+    fn resolve_callee(&mut self, callee: &Expr, args: &[Arg]) -> Result<Callee, Type> {
+        let target = self.callee_of(callee, args)?;
         self.callees.record(callee, target.clone());
         Ok(target)
     }
 
-    fn callee_of(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Result<Callee, Type> {
+    fn callee_of(&mut self, callee: &Expr, args: &[Arg]) -> Result<Callee, Type> {
         if let ExprKind::Name(n) = &callee.kind
             && Self::is_ref_function(&n.name)
             && !self.prog.pou_by_name.contains_key(&n.name)
         {
             return Ok(Callee::RefFunction(n.clone()));
         }
-        if let Some(t) = self.member_call(callee, args, span) {
-            self.callees.record(callee, Callee::Member);
-            return Err(t);
+        if let Some(method) = self.resolve_method(callee, args)? {
+            return Ok(Callee::Method(method));
         }
         // `Lib.F(...)`: a function qualified by a namespace (ours or a library's).
         let name = match &callee.kind {
@@ -140,17 +138,7 @@ impl Gen<'_> {
     ) -> Type {
         match target {
             Callee::RefFunction(n) => self.ref_function(n, args, expected, span),
-            Callee::Member => match self.member_call(callee, args, span) {
-                Some(t) => t,
-                None => {
-                    self.diags.error(
-                        codes::INTERNAL_ERROR,
-                        callee.span,
-                        "internal error: the checker's method call has no method",
-                    );
-                    Type::Error
-                }
-            },
+            Callee::Method(method) => self.call_method(method, callee, args, span),
             Callee::Function(pi) => self.call_function(*pi, args, span),
             Callee::Standard(n) => {
                 if let Some(t) = self.std_call(&n.name, n, args, expected, span) {
