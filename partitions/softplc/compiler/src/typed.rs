@@ -5,11 +5,11 @@
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
 //! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
-//! each `base.m` denotes ([`Members`]), the value of each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
-//! [`sema::body`](crate::sema::body) judges the recursion rule.
-//! Only a program without diagnostics reaches [`emit`], which starts from those records and
-//! reports nothing itself: a diagnostic raised while emitting is a compiler bug (an internal
-//! error).
+//! each `base.m` denotes ([`Members`]), the value of each CASE label ([`CaseLabels`]) and
+//! the calls between user POUs, on which [`sema::body`](crate::sema::body) judges the
+//! recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
+//! those records and reports nothing itself: a diagnostic raised while emitting is a
+//! compiler bug (an internal error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
