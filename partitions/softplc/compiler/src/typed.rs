@@ -3,18 +3,25 @@
 //! Compilation checks first and emits second. [`sema`](crate::sema) checks the declarations
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
-//! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), the value of each
-//! CASE label ([`CaseLabels`]) and the calls between user POUs, on which
-//! [`sema::body`](crate::sema::body) judges the recursion rule. Only a
-//! program without diagnostics reaches [`emit`], which starts from those records and reports
-//! nothing itself: a diagnostic raised while emitting is a compiler bug (an internal error).
+//! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
+//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
+//! each `base.m` denotes ([`Members`]), the value of each CASE label ([`CaseLabels`]) and
+//! the calls between user POUs, on which [`sema::body`](crate::sema::body) judges the
+//! recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
+//! those records and reports nothing itself: a diagnostic raised while emitting is a
+//! compiler bug (an internal error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
 //! once more to emit. The second walk takes every type it asks for from the table (it never
-//! infers: a missing record is an internal error) but re-resolves names, calls and
-//! conversions while it emits and passes the same check branches again (none can fail on a
-//! checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
+//! infers: a missing record is an internal error), every callee from [`Callees`] (a user
+//! FUNCTION, a standard function, `REF`/`ADR`, an FB instance, a method or action: it never
+//! looks a called name up again), the variable of every name from [`Variables`] (the POU's
+//! own, its owner's, a global) and the member of every `base.m` from [`Members`] (a
+//! structure's field, a block's variable), but still decides what the rest means while it
+//! emits (enumeration values and properties in expressions, standard-function overloads,
+//! conversions, argument binding) and passes the same check branches again (none can fail on
+//! a checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
 //! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
 //! pass only, emission reading the label values from the table; the BOOL condition of IF,
 //! WHILE and REPEAT, EXIT outside a loop, a zero FOR step and the assignment rules (read-only
@@ -23,12 +30,12 @@
 
 use std::collections::HashMap;
 
-use crate::ast::{Expr, Unit};
+use crate::ast::{Expr, Ident, Unit};
 use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
-use crate::sema::Program;
 use crate::sema::body::{self, CallEdge};
+use crate::sema::{InterfaceMember, Program, VarDef};
 use crate::types::Type;
 
 /// A value per expression of the bodies, keyed by the expression (its address in the syntax
@@ -77,11 +84,119 @@ pub type ExprTypes = ExprTable<Type>;
 /// selector's type or an exception name), as the checker resolved it.
 pub type CaseLabels = ExprTable<i128>;
 
+/// What the callee of a call resolved to: which kind of call it is and, for functions, which
+/// POU or standard function it calls. Keyed by the callee expression.
+#[derive(Debug, Clone)]
+pub enum Callee {
+    /// `REF`, `ADR` or `__ISVALIDREF` (no user POU of that name).
+    RefFunction(Ident),
+    /// A METHOD or action.
+    Method(Method),
+    /// A user FUNCTION (its POU index).
+    Function(usize),
+    /// A standard function, by its name without namespace.
+    Standard(Ident),
+    /// The body of a function block instance: the callee expression itself, or the
+    /// namespace-qualified name it stands for.
+    Instance(Option<Ident>),
+}
+
+/// The METHOD or action a call calls.
+#[derive(Debug, Clone)]
+pub enum Method {
+    /// One of the class whose body is walked (`m(...)`): its POU.
+    Own(usize),
+    /// One of an instance (`base.m(...)`): its POU, as the instance's static type finds it
+    /// (the call may still be dispatched to an override).
+    OfInstance(usize),
+    /// One of interface `.0`, as that interface (or one it extends) declares it.
+    OfInterface(usize, Box<InterfaceMember>),
+}
+
+/// The callee of each call.
+pub type Callees = ExprTable<Callee>;
+
+/// The variable a name denotes, as the checker resolved it.
+#[derive(Debug, Clone)]
+pub enum Variable {
+    /// A variable of the frame the POU runs on: declared by the POU itself (`own`; a
+    /// METHOD's own variables are in its static frame) or by the block that owns the METHOD
+    /// or action.
+    Frame { var: VarDef, own: bool },
+    /// Global `index` of the program, named directly or through a VAR_EXTERNAL (not
+    /// writable when either declaration is CONSTANT).
+    Global { index: usize, writable: bool },
+}
+
+/// What the checker resolved for each name of a kind in the bodies, keyed by the POU whose
+/// body it is in, the name's span and the name (a name copied into an expression the walk
+/// builds, such as the argument of an implicit `REF`, is the same name).
+#[derive(Debug, Clone)]
+pub struct NameTable<T> {
+    map: HashMap<(usize, Span, String), T>,
+}
+
+impl<T> Default for NameTable<T> {
+    fn default() -> Self {
+        NameTable {
+            map: HashMap::new(),
+        }
+    }
+}
+
+impl<T> NameTable<T> {
+    /// What `name` resolved to in the body of POU `pou`, if recorded.
+    pub fn of(&self, pou: usize, name: &Ident) -> Option<&T> {
+        self.map.get(&(pou, name.span, name.name.clone()))
+    }
+
+    pub(crate) fn record(&mut self, pou: usize, name: &Ident, v: T) {
+        self.map.insert((pou, name.span, name.name.clone()), v);
+    }
+
+    /// How many names have a record.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+/// The variable each name denotes.
+pub type Variables = NameTable<Variable>;
+
+/// What the member name of `base.m` denotes, as the checker resolved it.
+#[derive(Debug, Clone)]
+pub enum Member {
+    /// A member of a structure, `offset` bytes into it.
+    Field { offset: u32, ty: Type },
+    /// A variable of a function block instance, `offset` bytes into it; `writable` when it
+    /// may be written through this access (a writable instance given).
+    Var {
+        offset: u32,
+        ty: Type,
+        writable: bool,
+    },
+    /// A VAR_IN_OUT of the block itself (`THIS^.x`): the variable the name denotes.
+    OwnInOut,
+}
+
+/// The member each member name (`m` of `base.m`) denotes.
+pub type Members = NameTable<Member>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
     /// The type of every expression the checker inferred.
     pub types: ExprTypes,
+    /// What the callee of every call resolved to.
+    pub callees: Callees,
+    /// The variable every name denotes.
+    pub variables: Variables,
+    /// The member every member name denotes.
+    pub members: Members,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -103,6 +218,9 @@ pub fn check(
         types: std::mem::take(&mut checker.types),
         calls: std::mem::take(&mut checker.calls),
         case_labels: std::mem::take(&mut checker.case_labels),
+        callees: std::mem::take(&mut checker.callees),
+        variables: std::mem::take(&mut checker.variables),
+        members: std::mem::take(&mut checker.members),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -131,6 +249,9 @@ pub fn emit(
     let mut generator = Gen::new(prog, unit, sources, &mut missed);
     generator.types = checked.types;
     generator.case_labels = checked.case_labels;
+    generator.callees = checked.callees;
+    generator.variables = checked.variables;
+    generator.members = checked.members;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -158,4 +279,78 @@ pub fn emit(
         );
     }
     Err(internal)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{Options, lexer, parser, sema};
+
+    const PROGRAM: &str = "
+FUNCTION Twice : INT VAR_INPUT x : INT; END_VAR Twice := x * 2; END_FUNCTION
+FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR
+METHOD Reset n := 0; END_METHOD
+n := n + step;
+END_FUNCTION_BLOCK
+PROGRAM Main
+VAR c : Count; r : INT; p : REF_TO INT; END_VAR
+r := Twice(ABS(-3));
+c(step := r);
+r := c.n;
+c.Reset();
+p := REF(r);
+END_PROGRAM
+";
+
+    /// Checks [`PROGRAM`], lets `forget` drop part of the record, then emits.
+    fn check_then_emit(forget: impl FnOnce(&mut Checked)) -> Result<Emitted, Diagnostics> {
+        let mut sources = SourceMap::default();
+        sources.add("main.st", PROGRAM);
+        let mut raw = Vec::new();
+        let unit = parser::parse(lexer::lex(0, PROGRAM, &mut raw), &mut raw);
+        assert!(raw.is_empty(), "{raw:?}");
+        let mut diags = Diagnostics::default();
+        let mut prog = sema::analyse(&unit, 0, &Options::default(), &mut diags);
+        let mut checked = check(&mut prog, &unit, &sources, &mut diags);
+        assert!(diags.is_empty(), "{:?}", diags.list);
+        forget(&mut checked);
+        emit(&mut prog, &unit, &sources, checked)
+    }
+
+    fn internal_errors(result: Result<Emitted, Diagnostics>) -> Vec<String> {
+        match result {
+            Ok(_) => Vec::new(),
+            Err(d) => d.list.into_iter().map(|d| d.message).collect(),
+        }
+    }
+
+    #[test]
+    fn emission_resolves_no_callee_itself() {
+        assert!(check_then_emit(|_| {}).is_ok());
+        let errors = internal_errors(check_then_emit(|c| c.callees = Callees::default()));
+        // Twice(...), c(...), c.Reset() and REF(...): each is taken from the checker's record
+        // (ABS(...) too, but it is an argument of Twice, not walked once Twice has no callee).
+        assert_eq!(errors.len(), 4, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("resolved no callee")));
+    }
+
+    #[test]
+    fn emission_resolves_no_member_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.members = Members::default()));
+        // `c.n`.
+        assert!(errors[0].contains("resolved no member"), "{errors:?}");
+    }
+
+    #[test]
+    fn emission_resolves_no_variable_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.variables = Variables::default()));
+        // Each name fails first; the expressions built on it then have no type either.
+        assert!(errors[0].contains("resolved no variable"), "{errors:?}");
+        assert!(
+            errors
+                .iter()
+                .all(|e| e.contains("resolved no variable") || e.contains("recorded no type")),
+            "{errors:?}"
+        );
+    }
 }

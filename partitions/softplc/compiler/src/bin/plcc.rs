@@ -44,6 +44,9 @@ enum Command {
         output: PathBuf,
         #[arg(long)]
         program: Option<String>,
+        /// Build a library: every POU is compiled, no PROGRAM is needed.
+        #[arg(long, conflicts_with = "program")]
+        library: bool,
     },
     /// Compile and run on the host with a simulated clock.
     Run {
@@ -165,10 +168,14 @@ fn main() -> ExitCode {
             files,
             program,
             library,
-        } => (files, program, *library),
-        Command::Build { files, program, .. } | Command::Run { files, program, .. } => {
-            (files, program, false)
         }
+        | Command::Build {
+            files,
+            program,
+            library,
+            ..
+        } => (files, program, *library),
+        Command::Run { files, program, .. } => (files, program, false),
         Command::Explain { code, markdown } => return explain(code.as_deref(), *markdown),
     };
     let sources = match read_files(files) {

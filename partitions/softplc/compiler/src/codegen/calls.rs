@@ -8,6 +8,7 @@ use crate::ast::*;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::VarDef;
+use crate::typed::Callee;
 use crate::types::*;
 
 /// One argument bound to a parameter.
@@ -29,6 +30,8 @@ pub(crate) enum CallBase {
 }
 
 impl Gen<'_> {
+    /// A call. The checking pass resolves the callee (reporting what is wrong with it) and
+    /// records it ([`Callee`]); emission reads the record and resolves nothing.
     pub(crate) fn call(
         &mut self,
         callee: &Expr,
@@ -36,65 +39,108 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
+        let target = if self.check_only {
+            match self.resolve_callee(callee, args) {
+                Ok(target) => target,
+                Err(ty) => return ty,
+            }
+        } else {
+            match self.callees.of(callee) {
+                Some(target) => target.clone(),
+                None => {
+                    self.diags.error(
+                        codes::INTERNAL_ERROR,
+                        callee.span,
+                        "internal error: the checker resolved no callee for this call",
+                    );
+                    return Type::Error;
+                }
+            }
+        };
+        self.call_resolved(&target, callee, args, expected, span)
+    }
+
+    /// What `callee` calls, recorded for emission. `Err` is the call's type when the callee
+    /// is wrong (reported).
+    fn resolve_callee(&mut self, callee: &Expr, args: &[Arg]) -> Result<Callee, Type> {
+        let target = self.callee_of(callee, args)?;
+        self.callees.record(callee, target.clone());
+        Ok(target)
+    }
+
+    fn callee_of(&mut self, callee: &Expr, args: &[Arg]) -> Result<Callee, Type> {
         if let ExprKind::Name(n) = &callee.kind
             && Self::is_ref_function(&n.name)
             && !self.prog.pou_by_name.contains_key(&n.name)
         {
-            return self.ref_function(n, args, expected, span);
+            return Ok(Callee::RefFunction(n.clone()));
         }
-        if let Some(t) = self.member_call(callee, args, span) {
-            return t;
+        if let Some(method) = self.resolve_method(callee, args)? {
+            return Ok(Callee::Method(method));
         }
         // `Lib.F(...)`: a function qualified by a namespace (ours or a library's).
-        if let ExprKind::Member(base, f) = &callee.kind
-            && let ExprKind::Name(ns) = &base.kind
-            && !self.is_visible_var(&ns.name)
-        {
-            let q = Ident {
-                name: format!("{}.{}", ns.name, f.name),
-                text: format!("{}.{}", ns.text, f.text),
-                span: callee.span,
-            };
-            let e = Expr {
-                kind: ExprKind::Name(q),
-                span: callee.span,
-            };
-            return self.call(&e, args, expected, span);
-        }
-        let resolved;
-        let callee = match &callee.kind {
-            ExprKind::Name(n) if !self.is_visible_var(&n.name) => {
-                resolved = Expr {
-                    kind: ExprKind::Name(self.function_name(n)),
+        let name = match &callee.kind {
+            ExprKind::Member(base, f)
+                if let ExprKind::Name(ns) = &base.kind
+                    && !self.is_visible_var(&ns.name) =>
+            {
+                Ident {
+                    name: format!("{}.{}", ns.name, f.name),
+                    text: format!("{}.{}", ns.text, f.text),
                     span: callee.span,
-                };
-                &resolved
-            }
-            _ => callee,
-        };
-        if let ExprKind::Name(n) = &callee.kind {
-            // A variable is only callable when it is an FB instance; otherwise the name refers
-            // to a function even if a variable happens to have the same name.
-            let var_ty = match self.prog.pous[self.cur].var(&n.name) {
-                Some(v) => Some(v.ty.clone()),
-                None => self
-                    .owner_var_type(&n.name)
-                    .or_else(|| self.prog.global(&n.name).map(|g| g.ty.clone())),
-            };
-            let is_fb_var = matches!(var_ty, Some(Type::Fb(_)));
-            let is_function =
-                self.prog.pou_by_name.contains_key(&n.name) || Self::is_std_function(&n.name);
-            if !is_fb_var && (var_ty.is_none() || is_function) {
-                if let Some(&pi) = self.prog.pou_by_name.get(&n.name) {
-                    return match self.prog.pous[pi].kind {
-                        PouKind::Function => self.call_function(pi, args, span),
-                        _ => {
-                            let msg = format!("`{}` is a type; call an instance of it", n.text);
-                            self.error(codes::NOT_CALLABLE, n.span, msg);
-                            Type::Error
-                        }
-                    };
                 }
+            }
+            ExprKind::Name(n) => n.clone(),
+            _ => return Ok(Callee::Instance(None)),
+        };
+        let n = if self.is_visible_var(&name.name) {
+            name
+        } else {
+            self.function_name(&name)
+        };
+        // A variable is only callable when it is an FB instance; otherwise the name refers
+        // to a function even if a variable happens to have the same name.
+        let var_ty = match self.prog.pous[self.cur].var(&n.name) {
+            Some(v) => Some(v.ty.clone()),
+            None => self
+                .owner_var_type(&n.name)
+                .or_else(|| self.prog.global(&n.name).map(|g| g.ty.clone())),
+        };
+        let is_fb_var = matches!(var_ty, Some(Type::Fb(_)));
+        let is_function =
+            self.prog.pou_by_name.contains_key(&n.name) || Self::is_std_function(&n.name);
+        if !is_fb_var && (var_ty.is_none() || is_function) {
+            if let Some(&pi) = self.prog.pou_by_name.get(&n.name) {
+                return match self.prog.pous[pi].kind {
+                    PouKind::Function => Ok(Callee::Function(pi)),
+                    _ => {
+                        let msg = format!("`{}` is a type; call an instance of it", n.text);
+                        self.error(codes::NOT_CALLABLE, n.span, msg);
+                        Err(Type::Error)
+                    }
+                };
+            }
+            return Ok(Callee::Standard(n));
+        }
+        // A qualified or completed name stands for the instance instead of the callee.
+        let renamed = !matches!(&callee.kind, ExprKind::Name(m) if m.name == n.name);
+        Ok(Callee::Instance(renamed.then_some(n)))
+    }
+
+    /// Makes a call whose callee is resolved.
+    fn call_resolved(
+        &mut self,
+        target: &Callee,
+        callee: &Expr,
+        args: &[Arg],
+        expected: Option<&Type>,
+        span: Span,
+    ) -> Type {
+        match target {
+            Callee::RefFunction(n) => self.ref_function(n, args, expected, span),
+            Callee::Method(method) => self.call_method(method, callee, args, span),
+            Callee::Function(pi) => self.call_function(*pi, args, span),
+            Callee::Standard(n) => {
                 if let Some(t) = self.std_call(&n.name, n, args, expected, span) {
                     return t;
                 }
@@ -103,9 +149,28 @@ impl Gen<'_> {
                 for a in args {
                     self.infer(&a.value);
                 }
-                return Type::Error;
+                Type::Error
+            }
+            Callee::Instance(name) => {
+                let named;
+                let instance = match name {
+                    Some(n) => {
+                        named = Expr {
+                            kind: ExprKind::Name(n.clone()),
+                            span: callee.span,
+                        };
+                        &named
+                    }
+                    None => callee,
+                };
+                self.call_instance(instance, args, span)
             }
         }
+    }
+
+    /// Calls the body of the function block instance `callee` (reports a callee that is no
+    /// instance).
+    fn call_instance(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Type {
         let Some(p) = self.place(callee) else {
             return Type::Error;
         };

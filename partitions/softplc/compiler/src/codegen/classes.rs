@@ -19,6 +19,7 @@ use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::{MemberKind, VarDef};
+use crate::typed::Method;
 use crate::types::*;
 
 /// What a method is called on.
@@ -266,60 +267,95 @@ impl Gen<'_> {
 
     // ----- calls -------------------------------------------------------------------------
 
-    /// A call of a method or action: `m(...)` inside a block, `inst.m(...)`, `p^.m(...)`,
-    /// `itf.m(...)`, `SUPER^.m(...)`; `None` when `callee` is no such call.
-    pub(crate) fn member_call(&mut self, callee: &Expr, args: &[Arg], span: Span) -> Option<Type> {
+    /// The method or action `callee` calls: `m(...)` inside a block, `inst.m(...)`,
+    /// `p^.m(...)`, `itf.m(...)`, `SUPER^.m(...)`; `Ok(None)` when `callee` is no such call,
+    /// `Err` with the call's type when the method is unknown (reported).
+    pub(crate) fn resolve_method(
+        &mut self,
+        callee: &Expr,
+        args: &[Arg],
+    ) -> Result<Option<Method>, Type> {
         match &callee.kind {
             ExprKind::Name(n) => {
                 if self.is_visible_var(&n.name) {
-                    return None;
+                    return Ok(None);
                 }
-                let ctx = self.context_class()?;
-                let member = self
+                let Some(ctx) = self.context_class() else {
+                    return Ok(None);
+                };
+                Ok(self
                     .prog
                     .find_member(ctx, &n.name, MemberKind::Method)
-                    .or_else(|| self.prog.find_member(ctx, &n.name, MemberKind::Action))?;
+                    .or_else(|| self.prog.find_member(ctx, &n.name, MemberKind::Action))
+                    .map(Method::Own))
+            }
+            ExprKind::Member(base, m) => match self.receiver(base) {
+                Some(Receiver::Interface(i)) => {
+                    let Some(im) = self
+                        .prog
+                        .interface_member(i, &m.name, MemberKind::Method)
+                        .cloned()
+                    else {
+                        let msg = format!(
+                            "interface `{}` has no method `{}`",
+                            self.prog.interfaces[i].text, m.text
+                        );
+                        self.error(codes::UNKNOWN_METHOD, m.span, msg);
+                        for a in args {
+                            self.infer(&a.value);
+                        }
+                        return Err(Type::Error);
+                    };
+                    Ok(Some(Method::OfInterface(i, Box::new(im))))
+                }
+                Some(Receiver::Instance { class, .. }) => Ok(self
+                    .prog
+                    .find_member(class, &m.name, MemberKind::Method)
+                    .or_else(|| self.prog.find_member(class, &m.name, MemberKind::Action))
+                    .map(Method::OfInstance)),
+                None => Ok(None),
+            },
+            _ => Ok(None),
+        }
+    }
+
+    /// Calls the resolved method or action `method` of `callee`.
+    pub(crate) fn call_method(
+        &mut self,
+        method: &Method,
+        callee: &Expr,
+        args: &[Arg],
+        span: Span,
+    ) -> Type {
+        let base = match &callee.kind {
+            ExprKind::Member(base, _) => Some(&**base),
+            _ => None,
+        };
+        match (method, base) {
+            (Method::Own(member), _) => {
+                let ctx = self.context_class().unwrap_or(self.cur);
                 let recv = Receiver::Instance {
                     class: ctx,
                     exact: self.prog.pous[ctx].kind == PouKind::Program,
                     superclass: false,
                 };
-                Some(self.call_member(None, recv, member, args, span))
+                self.call_member(None, recv, *member, args, span)
             }
-            ExprKind::Member(base, m) => {
-                let recv = self.receiver(base)?;
-                match recv {
-                    Receiver::Interface(i) => {
-                        let Some(im) = self
-                            .prog
-                            .interface_member(i, &m.name, MemberKind::Method)
-                            .cloned()
-                        else {
-                            let msg = format!(
-                                "interface `{}` has no method `{}`",
-                                self.prog.interfaces[i].text, m.text
-                            );
-                            self.error(codes::UNKNOWN_METHOD, m.span, msg);
-                            for a in args {
-                                self.infer(&a.value);
-                            }
-                            return Some(Type::Error);
-                        };
-                        let dynamic = self.interface_dynamic(i, &im);
-                        Some(self.call_dynamic(Some(base), dynamic, args, span))
-                    }
-                    Receiver::Instance { class, .. } => {
-                        let member = self
-                            .prog
-                            .find_member(class, &m.name, MemberKind::Method)
-                            .or_else(|| {
-                                self.prog.find_member(class, &m.name, MemberKind::Action)
-                            })?;
-                        Some(self.call_member(Some(base), recv, member, args, span))
-                    }
-                }
+            (Method::OfInterface(i, im), Some(base)) => {
+                let dynamic = self.interface_dynamic(*i, im);
+                self.call_dynamic(Some(base), dynamic, args, span)
             }
-            _ => None,
+            (Method::OfInstance(member), Some(base)) if let Some(recv) = self.receiver(base) => {
+                self.call_member(Some(base), recv, *member, args, span)
+            }
+            _ => {
+                self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    callee.span,
+                    "internal error: the checker's method has no receiver here",
+                );
+                Type::Error
+            }
         }
     }
 

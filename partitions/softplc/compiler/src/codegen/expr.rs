@@ -92,8 +92,18 @@ impl Gen<'_> {
                 self.push_int(0);
                 return;
             }
-            let r = crate::codegen::refs::reference_to(e);
-            let t = self.expr(&r, Some(&as_ref));
+            let id = Ident {
+                name: "REF".into(),
+                text: "REF".into(),
+                span: e.span,
+            };
+            let args = [Arg {
+                name: None,
+                output: false,
+                value: e.clone(),
+                span: e.span,
+            }];
+            let t = self.ref_function(&id, &args, Some(&as_ref), e.span);
             self.coerce(&t, &as_ref, e.span);
             return;
         }

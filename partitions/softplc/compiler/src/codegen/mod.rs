@@ -38,7 +38,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::{CaseLabels, ExprTypes};
+use crate::typed::{Callees, CaseLabels, ExprTypes, Members, Variables};
 use crate::types::*;
 
 /// Where a value lives.
@@ -142,6 +142,13 @@ pub(crate) struct Gen<'a> {
     pub(crate) types: ExprTypes,
     /// The value of each CASE label: resolved by the checking pass, read by emission.
     pub(crate) case_labels: CaseLabels,
+    /// What the callee of each call resolved to: recorded by the checking pass, read by
+    /// emission.
+    pub(crate) callees: Callees,
+    /// The variable each name denotes: recorded by the checking pass, read by emission.
+    pub(crate) variables: Variables,
+    /// The member each `base.m` denotes: recorded by the checking pass, read by emission.
+    pub(crate) members: Members,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -194,6 +201,9 @@ impl<'a> Gen<'a> {
             check_only: false,
             types: ExprTypes::default(),
             case_labels: CaseLabels::default(),
+            callees: Callees::default(),
+            variables: Variables::default(),
+            members: Members::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),

@@ -1,6 +1,7 @@
 //! Places: variables, members, array elements and partial accesses as addressable locations.
 
 use super::*;
+use crate::typed::{Member, Variable};
 
 impl Gen<'_> {
     /// Resolves an l-value; for dynamic places the base address is pushed (a place reached
@@ -36,9 +37,58 @@ impl Gen<'_> {
     }
 
     /// `base.m`: a member of a structure or an input or output of a function block instance.
+    /// The checking pass resolves the member (reporting a wrong one) and records it
+    /// ([`Member`]); emission reads the record.
     fn member_place(&mut self, base: &Expr, m: &Ident) -> Option<Place> {
         let bp = self.place_inner(base)?;
-        match &bp.ty {
+        let member = if self.check_only {
+            let member = self.resolve_member(base, &bp.ty, m);
+            if let Some(member) = &member {
+                self.members.record(self.cur, m, member.clone());
+            }
+            member
+        } else {
+            let member = self.members.of(self.cur, m).cloned();
+            if member.is_none() {
+                self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    m.span,
+                    "internal error: the checker resolved no member for this name",
+                );
+            }
+            member
+        };
+        match member {
+            Some(Member::Field { offset, ty }) => Some(Place {
+                loc: offset_loc(bp.loc, offset),
+                ty,
+                writable: bp.writable,
+                window: None,
+            }),
+            Some(Member::Var {
+                offset,
+                ty,
+                writable,
+            }) => Some(Place {
+                loc: offset_loc(bp.loc, offset),
+                ty,
+                writable: bp.writable && writable,
+                window: None,
+            }),
+            Some(Member::OwnInOut) => {
+                self.drop_place(&bp);
+                self.name_place(m)
+            }
+            None => {
+                self.drop_place(&bp);
+                None
+            }
+        }
+    }
+
+    /// What `m` of `base.m` denotes, `base` being of type `base_ty` (reports a wrong member).
+    fn resolve_member(&mut self, base: &Expr, base_ty: &Type, m: &Ident) -> Option<Member> {
+        match base_ty {
             Type::Struct(si) => {
                 let Some(mem) = self.prog.structs[*si]
                     .members
@@ -46,16 +96,13 @@ impl Gen<'_> {
                     .find(|x| x.name == m.name)
                     .cloned()
                 else {
-                    let msg = format!("{} has no member `{}`", self.tname(&bp.ty), m.text);
+                    let msg = format!("{} has no member `{}`", self.tname(base_ty), m.text);
                     self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                    self.drop_place(&bp);
                     return None;
                 };
-                Some(Place {
-                    loc: offset_loc(bp.loc, mem.offset),
+                Some(Member::Field {
+                    offset: mem.offset,
                     ty: mem.ty,
-                    writable: bp.writable,
-                    window: None,
                 })
             }
             Type::Fb(pi) => {
@@ -66,24 +113,20 @@ impl Gen<'_> {
                 match v {
                     Some(v) if own && !matches!(v.kind, VarKind::External | VarKind::Global) => {
                         if v.kind == VarKind::InOut {
-                            self.drop_place(&bp);
-                            return self.name_place(m);
+                            return Some(Member::OwnInOut);
                         }
-                        Some(Place {
-                            loc: offset_loc(bp.loc, v.offset),
+                        Some(Member::Var {
+                            offset: v.offset,
                             ty: v.ty,
-                            writable: bp.writable && !v.constant,
-                            window: None,
+                            writable: !v.constant,
                         })
                     }
+                    // Outputs are read-only from outside; inputs may be set before a call.
                     Some(v) if matches!(v.kind, VarKind::Input | VarKind::Output) => {
-                        // Outputs are read-only from outside; inputs may be set before a call.
-                        let writable = bp.writable && v.kind == VarKind::Input;
-                        Some(Place {
-                            loc: offset_loc(bp.loc, v.offset),
+                        Some(Member::Var {
+                            offset: v.offset,
                             ty: v.ty,
-                            writable,
-                            window: None,
+                            writable: v.kind == VarKind::Input,
                         })
                     }
                     Some(_) => {
@@ -92,7 +135,6 @@ impl Gen<'_> {
                             m.text, self.prog.pous[pi].text
                         );
                         self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                        self.drop_place(&bp);
                         None
                     }
                     None => {
@@ -101,19 +143,14 @@ impl Gen<'_> {
                             self.prog.pous[pi].text, m.text
                         );
                         self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                        self.drop_place(&bp);
                         None
                     }
                 }
             }
-            Type::Error => {
-                self.drop_place(&bp);
-                None
-            }
+            Type::Error => None,
             other => {
                 let msg = format!("{} has no members (`.{}`)", self.tname(other), m.text);
                 self.error(codes::NO_SUCH_MEMBER, m.span, msg);
-                self.drop_place(&bp);
                 None
             }
         }
@@ -295,77 +332,114 @@ impl Gen<'_> {
         }
     }
 
+    /// The place of a variable's name. The checking pass resolves the name (reporting an
+    /// unknown one) and records the variable ([`Variable`]); emission reads the record.
     pub(super) fn name_place(&mut self, n: &Ident) -> Option<Place> {
+        let var = if self.check_only {
+            let var = self.resolve_variable(n)?;
+            self.variables.record(self.cur, n, var.clone());
+            var
+        } else {
+            match self.variables.of(self.cur, n) {
+                Some(var) => var.clone(),
+                None => {
+                    self.diags.error(
+                        codes::INTERNAL_ERROR,
+                        n.span,
+                        "internal error: the checker resolved no variable for this name",
+                    );
+                    return None;
+                }
+            }
+        };
+        Some(self.variable_place(&var))
+    }
+
+    /// The variable `n` denotes in the current POU: its own, its owner's (for a METHOD or
+    /// action) or a global (directly or through VAR_EXTERNAL).
+    fn resolve_variable(&mut self, n: &Ident) -> Option<Variable> {
         let pou = &self.prog.pous[self.cur];
-        // A method's own variables are in its static frame; the instance's are frame-relative.
-        let (v, frame) = match pou.var(&n.name).cloned() {
-            Some(v) => (Some(v), self.method_frame()),
+        let (v, own) = match pou.var(&n.name).cloned() {
+            Some(v) => (Some(v), true),
             None => (
                 self.var_owner(&n.name)
                     .and_then(|o| self.prog.pous[o].var(&n.name).cloned()),
-                None,
+                false,
             ),
         };
-        if let Some(v) = v {
-            return match v.kind {
-                VarKind::External => match self.prog.global(&n.name).cloned() {
-                    Some(g) => {
-                        if g.ty != v.ty && !v.ty.is_error() && !g.ty.is_error() {
-                            let msg = format!(
-                                "VAR_EXTERNAL `{}` declared as {} but the global is {}",
-                                v.text,
-                                self.tname(&v.ty),
-                                self.tname(&g.ty)
-                            );
-                            self.error(codes::VAR_EXTERNAL, v.span, msg);
-                        }
-                        Some(Place {
-                            loc: Loc::Abs(g.offset),
-                            ty: g.ty.clone(),
-                            writable: !g.constant && !v.constant,
-                            window: None,
-                        })
-                    }
-                    None => {
-                        let msg = format!("VAR_EXTERNAL `{}` has no matching VAR_GLOBAL", v.text);
-                        self.error(codes::VAR_EXTERNAL, n.span, msg);
-                        None
-                    }
-                },
-                VarKind::InOut => {
+        let global = self.prog.globals.iter().position(|g| g.name == n.name);
+        match (v, global) {
+            (Some(v), _) if v.kind != VarKind::External => Some(Variable::Frame { var: v, own }),
+            (Some(v), Some(index)) => {
+                let g = &self.prog.globals[index];
+                if g.ty != v.ty && !v.ty.is_error() && !g.ty.is_error() {
+                    let msg = format!(
+                        "VAR_EXTERNAL `{}` declared as {} but the global is {}",
+                        v.text,
+                        self.tname(&v.ty),
+                        self.tname(&g.ty)
+                    );
+                    self.error(codes::VAR_EXTERNAL, v.span, msg);
+                }
+                let writable = !self.prog.globals[index].constant && !v.constant;
+                Some(Variable::Global { index, writable })
+            }
+            (Some(v), None) => {
+                let msg = format!("VAR_EXTERNAL `{}` has no matching VAR_GLOBAL", v.text);
+                self.error(codes::VAR_EXTERNAL, n.span, msg);
+                None
+            }
+            (None, Some(index)) => Some(Variable::Global {
+                index,
+                writable: !self.prog.globals[index].constant,
+            }),
+            (None, None) => {
+                let msg = format!("unknown variable `{}`", n.text);
+                self.error(codes::UNKNOWN_VARIABLE, n.span, msg);
+                None
+            }
+        }
+    }
+
+    /// The place of a resolved variable (a VAR_IN_OUT's address is loaded).
+    fn variable_place(&mut self, var: &Variable) -> Place {
+        match var {
+            Variable::Global { index, writable } => {
+                let g = &self.prog.globals[*index];
+                Place {
+                    loc: Loc::Abs(g.offset),
+                    ty: g.ty.clone(),
+                    writable: *writable,
+                    window: None,
+                }
+            }
+            Variable::Frame { var: v, own } => {
+                // A method's own variables are in its static frame; the instance's are
+                // frame-relative.
+                let frame = if *own { self.method_frame() } else { None };
+                if v.kind == VarKind::InOut {
                     match frame {
                         Some(f) => self.emit(|b| b.ld_abs(MemType::U32, f + v.offset)),
                         None => self.emit(|b| b.ld_rel(MemType::U32, v.offset)),
                     }
-                    Some(Place {
+                    return Place {
                         loc: Loc::Ind(0),
-                        ty: v.ty,
+                        ty: v.ty.clone(),
                         writable: true,
                         window: None,
-                    })
+                    };
                 }
-                _ => Some(Place {
+                Place {
                     loc: match frame {
                         Some(f) => Loc::Abs(f + v.offset),
                         None => Loc::Rel(v.offset),
                     },
-                    ty: v.ty,
+                    ty: v.ty.clone(),
                     writable: !v.constant,
                     window: None,
-                }),
-            };
+                }
+            }
         }
-        if let Some(g) = self.prog.global(&n.name) {
-            return Some(Place {
-                loc: Loc::Abs(g.offset),
-                ty: g.ty.clone(),
-                writable: !g.constant,
-                window: None,
-            });
-        }
-        let msg = format!("unknown variable `{}`", n.text);
-        self.error(codes::UNKNOWN_VARIABLE, n.span, msg);
-        None
     }
 
     /// Pushes the address of an aggregate place.
