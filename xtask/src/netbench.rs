@@ -6,7 +6,7 @@
 //!   `linux-netserve`, `tests/linux/netserve.c`, on port [`SERVE_PORT`]).
 //! - **The native leg** boots Debian's stock kernel ([`crate::native`]) with the same
 //!   guest partition's initramfs, the virtio-net driver's modules from
-//!   `/lib/modules/<version>` ([`MODULES`]) loaded by `/init`, `eth0` at the guest's
+//!   `/lib/modules/<version>` ([`DRIVERS`] and what they need) loaded by `/init`, `eth0` at the guest's
 //!   address and default route, and the same script.
 //! - Both legs get the same QEMU network ([`qemu_args`]): VT-d, QEMU's virtio-net with the
 //!   modern PCI transport only and `iommu_platform=on` at 00:03.0, on QEMU's user network
@@ -47,18 +47,9 @@ pub const HTTP_PORT: u16 = 80;
 pub const GUEST_ADDRESS: &str = "10.0.2.15";
 /// QEMU's user-network gateway.
 pub const GATEWAY: &str = "10.0.2.2";
-/// The stock kernel's modules the virtio-net driver needs, in load order (paths below
-/// `/lib/modules/<version>`; Debian builds virtio and virtio-net as modules).
-pub const MODULES: &[&str] = &[
-    "kernel/net/core/failover.ko",
-    "kernel/drivers/net/net_failover.ko",
-    "kernel/drivers/virtio/virtio_ring.ko",
-    "kernel/drivers/virtio/virtio.ko",
-    "kernel/drivers/virtio/virtio_pci_modern_dev.ko",
-    "kernel/drivers/virtio/virtio_pci_legacy_dev.ko",
-    "kernel/drivers/virtio/virtio_pci.ko",
-    "kernel/drivers/net/virtio_net.ko",
-];
+/// The stock kernel's modules that drive QEMU's virtio-net (Debian builds them as
+/// modules); [`load_order`] adds what they depend on from the kernel's `modules.dep`.
+pub const DRIVERS: &[&str] = &["virtio_pci", "virtio_net"];
 
 /// The size of every bulk write (and of the guest's).
 const BLOCK: usize = 64 * 1024;
@@ -103,11 +94,12 @@ pub fn qemu_args(ports: [u16; 2]) -> Vec<String> {
 }
 
 /// The shell lines of the native `/init` that bring up `eth0` as the guest's: the
-/// modules (in `/modules`, [`MODULES`] order), the address and the default route.
-pub fn native_setup() -> String {
+/// modules `modules` (file names in `/modules`, in load order), the address and the
+/// default route.
+pub fn native_setup(modules: &[String]) -> String {
     let mut lines = String::from("# eth0: the virtio-net driver and the guest's address.\n");
-    for module in MODULES {
-        lines.push_str(&format!("insmod /modules/{}\n", module_name(module)));
+    for module in modules {
+        lines.push_str(&format!("insmod /modules/{module}\n"));
     }
     lines.push_str(&format!(
         "ifconfig eth0 {GUEST_ADDRESS} netmask 255.255.255.0 up\nroute add default gw {GATEWAY}\n"
@@ -115,12 +107,50 @@ pub fn native_setup() -> String {
     lines
 }
 
+/// A module's name from its path in `modules.dep` (`kernel/drivers/net/virtio_net.ko.xz`:
+/// `virtio_net`).
 fn module_name(path: &str) -> &str {
-    path.rsplit('/').next().unwrap_or(path)
+    let file = path.rsplit('/').next().unwrap_or(path);
+    file.split_once(".ko").map_or(file, |(name, _)| name)
 }
 
-/// The modules of `kernel` (`/boot/vmlinuz-<version>`) as initramfs entries under `modules/`.
-fn module_files(kernel: &Path) -> Result<Vec<(String, u32, Vec<u8>)>> {
+/// The paths of `modules_dep` (the text of a kernel's `modules.dep`) that `drivers` need,
+/// each after the modules it depends on, each once. A driver `modules.dep` does not name
+/// is left out (built into that kernel).
+pub fn load_order(modules_dep: &str, drivers: &[&str]) -> Vec<String> {
+    let table: Vec<(&str, Vec<&str>)> = modules_dep
+        .lines()
+        .filter_map(|line| {
+            let (path, deps) = line.split_once(':')?;
+            Some((path.trim(), deps.split_whitespace().collect()))
+        })
+        .collect();
+    let find = |name: &str| table.iter().find(|(path, _)| module_name(path) == name);
+    let mut order: Vec<String> = Vec::new();
+    for driver in drivers {
+        let Some((path, deps)) = find(driver) else {
+            continue;
+        };
+        // modules.dep lists every module a module needs, directly or not; each of them
+        // after its own dependencies.
+        let mut needed: Vec<&str> = deps.iter().rev().copied().collect();
+        needed.push(path);
+        for path in needed {
+            if !order.iter().any(|p| p == path) {
+                order.push(path.to_string());
+            }
+        }
+    }
+    order
+}
+
+/// An initramfs entry: path without the leading `/`, mode, contents.
+type InitramfsFile = (String, u32, Vec<u8>);
+
+/// The modules of `kernel` (`/boot/vmlinuz-<version>`) that [`DRIVERS`] need, as
+/// initramfs entries under `modules/` (`.ko`, uncompressed; an `.xz` one through `xz -dc`),
+/// and their file names in load order.
+fn module_files(kernel: &Path) -> Result<(Vec<InitramfsFile>, Vec<String>)> {
     let name = kernel
         .file_name()
         .and_then(|n| n.to_str())
@@ -129,26 +159,48 @@ fn module_files(kernel: &Path) -> Result<Vec<(String, u32, Vec<u8>)>> {
         .strip_prefix("vmlinuz-")
         .with_context(|| format!("{}: not a vmlinuz-<version>", kernel.display()))?;
     let dir = PathBuf::from("/lib/modules").join(version);
+    let dep = dir.join("modules.dep");
+    let dep = std::fs::read_to_string(&dep).with_context(|| {
+        format!(
+            "cannot read {} (the native network leg loads the stock kernel's virtio-net modules)",
+            dep.display()
+        )
+    })?;
     let mut files = vec![(
         "modules".to_string(),
         crate::guest::S_IFDIR | 0o755,
         Vec::new(),
     )];
-    for module in MODULES {
-        let path = dir.join(module);
-        let bytes = std::fs::read(&path).with_context(|| {
-            format!(
-                "cannot read {} (the native network leg loads the stock kernel's virtio-net modules)",
+    let mut names = Vec::new();
+    for module in load_order(&dep, DRIVERS) {
+        let path = dir.join(&module);
+        let bytes = if module.ends_with(".ko") {
+            std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?
+        } else if module.ends_with(".ko.xz") {
+            let out = std::process::Command::new("xz")
+                .arg("-dc")
+                .arg(&path)
+                .output()
+                .with_context(|| format!("cannot run xz -dc {}", path.display()))?;
+            if !out.status.success() {
+                bail!("xz -dc {} failed", path.display());
+            }
+            out.stdout
+        } else {
+            bail!(
+                "{}: a compressed module busybox insmod cannot load (only .ko and .ko.xz are read)",
                 path.display()
-            )
-        })?;
+            );
+        };
+        let file = format!("{}.ko", module_name(&module));
         files.push((
-            format!("modules/{}", module_name(module)),
+            format!("modules/{file}"),
             crate::guest::S_IFREG | 0o644,
             bytes,
         ));
+        names.push(file);
     }
-    Ok(files)
+    Ok((files, names))
 }
 
 /// Runs both legs and returns their metrics and the ratios. `system` is the Warden build
@@ -181,9 +233,10 @@ pub fn run(
     metrics.extend(leg("native", |ports| {
         let kernel = crate::native::ensure_kernel()?;
         let guest = crate::native::guest_of(&config)?;
+        let (extra_files, modules) = module_files(&kernel)?;
         let native = Native {
-            init: crate::native::script(&guest.init, &guest.env, &native_setup(), &[]),
-            extra_files: module_files(&kernel)?,
+            init: crate::native::script(&guest.init, &guest.env, &native_setup(&modules), &[]),
+            extra_files,
             qemu_args: qemu_args(ports),
             timeout: LEG_TIMEOUT,
         };
@@ -533,22 +586,62 @@ mod tests {
 
     #[test]
     fn the_native_setup_loads_the_driver_then_configures_eth0() {
-        let setup = native_setup();
+        let modules = ["virtio.ko".to_string(), "virtio_net.ko".to_string()];
+        let setup = native_setup(&modules);
         let lines: Vec<&str> = setup.lines().skip(1).collect();
-        assert_eq!(lines.len(), MODULES.len() + 2);
-        assert_eq!(lines[0], "insmod /modules/failover.ko");
-        assert_eq!(lines[MODULES.len() - 1], "insmod /modules/virtio_net.ko");
         assert_eq!(
-            lines[MODULES.len()],
-            "ifconfig eth0 10.0.2.15 netmask 255.255.255.0 up"
+            lines,
+            [
+                "insmod /modules/virtio.ko",
+                "insmod /modules/virtio_net.ko",
+                "ifconfig eth0 10.0.2.15 netmask 255.255.255.0 up",
+                "route add default gw 10.0.2.2"
+            ]
         );
-        assert_eq!(lines[MODULES.len() + 1], "route add default gw 10.0.2.2");
         let script = crate::native::script(&["/bin/sh".into()], &[], &setup, &[]);
         assert!(
             script.contains("ifconfig lo 127.0.0.1 up\n# eth0:"),
             "{script}"
         );
         assert!(script.contains("\nenv -i '/bin/sh'\n"), "{script}");
+    }
+
+    #[test]
+    fn modules_load_after_what_they_need() {
+        // Debian 6.1's modules.dep, its lines for the virtio-net driver.
+        let dep = "\
+kernel/drivers/virtio/virtio_pci.ko: kernel/drivers/virtio/virtio_pci_legacy_dev.ko kernel/drivers/virtio/virtio_pci_modern_dev.ko kernel/drivers/virtio/virtio.ko kernel/drivers/virtio/virtio_ring.ko
+kernel/drivers/virtio/virtio_ring.ko:
+kernel/drivers/net/virtio_net.ko: kernel/drivers/net/net_failover.ko kernel/net/core/failover.ko kernel/drivers/virtio/virtio.ko kernel/drivers/virtio/virtio_ring.ko
+kernel/drivers/virtio/virtio.ko: kernel/drivers/virtio/virtio_ring.ko
+kernel/net/core/failover.ko:
+";
+        let order = load_order(dep, DRIVERS);
+        let names: Vec<&str> = order.iter().map(|p| module_name(p)).collect();
+        assert_eq!(
+            names,
+            [
+                "virtio_ring",
+                "virtio",
+                "virtio_pci_modern_dev",
+                "virtio_pci_legacy_dev",
+                "virtio_pci",
+                "failover",
+                "net_failover",
+                "virtio_net"
+            ]
+        );
+        // Compressed names, and a driver built into the kernel (not in modules.dep).
+        let xz = "kernel/drivers/net/virtio_net.ko.xz: kernel/drivers/virtio/virtio.ko.xz\n";
+        assert_eq!(
+            load_order(xz, DRIVERS),
+            [
+                "kernel/drivers/virtio/virtio.ko.xz",
+                "kernel/drivers/net/virtio_net.ko.xz"
+            ]
+        );
+        assert_eq!(module_name("a/b/virtio_net.ko.xz"), "virtio_net");
+        assert!(load_order("", DRIVERS).is_empty());
     }
 
     #[test]
