@@ -229,8 +229,9 @@
 //! static Linux programs `cargo xtask` builds from `tests/linux` with `gcc -static`
 //! ([`system::GUEST_PROGRAMS`]: `linux-tests`, the system-call checks, `linux-bench`, the
 //! guest benchmark, `linux-probe`, the faults and forbidden accesses of the memory and
-//! isolation scenarios, and `linux-arinc`, the checks of the ARINC port devices and the
-//! hostile guest's port flood), or the Rust programs `plcctl` (the PLC online tool) and `plcc` (the
+//! isolation scenarios, `linux-arinc`, the checks of the ARINC port devices and the
+//! hostile guest's port flood, and `linux-netserve`, the guest side of the network
+//! benchmark), or the Rust programs `plcctl` (the PLC online tool) and `plcc` (the
 //! Structured Text compiler), built for `x86_64-unknown-linux-musl`, and adds as `/bin/<name>` (not also a `guest.files` path,
 //! each once). The partition's `ports.*` reach the guest as the devices
 //! `/dev/arinc/<name>` (the initramfs's `/etc/guest/ports`, see `guest::arinc`). `cargo xtask` builds the

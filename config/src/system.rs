@@ -201,6 +201,7 @@ pub const GUEST_PROGRAMS: &[&str] = &[
     "linux-bench",
     "linux-probe",
     "linux-arinc",
+    "linux-netserve",
     "plcctl",
     "plcc",
     "fbctl",

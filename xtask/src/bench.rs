@@ -10,7 +10,11 @@
 //! [`crate::native`]; alone with `--guest`), runs the host benchmarks, prints one line per
 //! metric and writes `target/bench/report.json`.
 //!
-//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|ratio|count> samples=<n>`.
+//! The network benchmark (`tests/configs/bench_net.toml`, guest and native, timed from the
+//! host: `guest_net_*`, `native_net_*`, `net_ratio_*`; alone with `--net`) is
+//! [`crate::netbench`].
+//!
+//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|us|ratio|count|MB/s|requests/s> samples=<n>`.
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;

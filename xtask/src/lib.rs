@@ -5,7 +5,7 @@
 //! ([`esp`]), finding or installing QEMU and OVMF ([`tools`]), booting QEMU with a timeout
 //! and capturing the serial log ([`qemu`]), reading scenario manifests ([`scenario`]), the
 //! lint gate ([`lint`]), the Linux-side test programs ([`linux`]), the native Linux
-//! reference of the guest benchmark ([`native`]), the pictures of a run's serial log
+//! reference of the guest benchmark ([`native`]), the network benchmark ([`netbench`]), the pictures of a run's serial log
 //! ([`plot`], whose parser the scenarios use too), the OSCAT library check ([`oscat`]) and
 //! the importer of a653rs-linux system descriptions ([`a653rs`]).
 
@@ -21,6 +21,7 @@ pub mod iec61499;
 pub mod lint;
 pub mod linux;
 pub mod native;
+pub mod netbench;
 pub mod nic;
 pub mod oscat;
 pub mod plc;

@@ -12,6 +12,8 @@
 //! - `linux-arinc` (`tests/linux/arinc.c`, with the checks' common part `check.c`): the
 //!   ARINC port devices `/dev/arinc/<port>` (scenario `system_devices`) and the port
 //!   flood of the hostile guest (scenario `system_hostile_guest`).
+//! - `linux-netserve` (`tests/linux/netserve.c`): the guest side of the network benchmark
+//!   (`cargo xtask bench --net`, [`crate::netbench`]).
 //! - `plcctl` (`partitions/guest/plcctl`): the PLC online tool, a Rust program built with
 //!   cargo for [`MUSL_TARGET`] (static, profile `linux`) into
 //!   `target/x86_64-unknown-linux-musl/linux/plcctl`.
@@ -46,6 +48,7 @@ const OWN_MAIN: &[(&str, &str, &[&str])] = &[
     ("linux-bench", "bench.c", &[]),
     ("linux-probe", "probe.c", &[]),
     ("linux-arinc", "arinc.c", &["check.c"]),
+    ("linux-netserve", "netserve.c", &[]),
 ];
 /// How every program is compiled.
 const CFLAGS: &[&str] = &["-static", "-O2", "-Wall", "-Werror"];

@@ -41,8 +41,8 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
-    /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak and guest systems under
-    /// QEMU, the guest benchmark's native reference, the soft-PLC suite on the host: VM,
+    /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak, guest and network systems
+    /// under QEMU, the guest and network benchmarks' native references, the soft-PLC suite on the host: VM,
     /// native tier, IronPLC with IRONPLC set); writes target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
@@ -88,6 +88,19 @@ enum Cmd {
         /// target/bench/schedules.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc"])]
         schedules: bool,
+        /// Run only the network benchmark (tests/configs/bench_net.toml: TCP, UDP and busybox
+        /// httpd of the guest through the NIC partition, timed from the host on real time,
+        /// and the same on Debian's stock kernel with the same virtio-net: `guest_net_*`,
+        /// `native_net_*`, `net_ratio_*`; also part of the full bench); writes
+        /// target/bench/net.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules"])]
+        net: bool,
+        /// Run only the port benchmark system (tests/configs/bench_ports.toml; also part of
+        /// the full bench): the queuing-port round trips (64 bytes, a 1514-byte frame), the
+        /// frame through a shared-memory ring, the APEX intra-partition objects; writes
+        /// target/bench/ports.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net"])]
+        ports: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -174,6 +187,12 @@ fn main() -> ExitCode {
         Cmd::Bench {
             schedules: true, ..
         } => schedules_bench(),
+        Cmd::Bench { net: true, .. } => net_bench(),
+        Cmd::Bench {
+            ports: true,
+            deterministic_time,
+            ..
+        } => ports_bench(deterministic_time),
         Cmd::Bench {
             guest: true,
             deterministic_time,
@@ -650,6 +669,66 @@ fn guest_bench(deterministic_time: bool) -> Result<bool> {
     Ok(true)
 }
 
+/// `cargo xtask bench --ports`: only the port benchmark system; writes
+/// `target/bench/ports.json`.
+fn ports_bench(deterministic_time: bool) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let dir = xtask::target_dir().join("bench");
+    let metrics = ports_metrics(&qemu, &system, &dir, deterministic_time)?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "ports.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
+/// The port benchmark system (`tests/configs/bench_ports.toml`, an APEX partition under
+/// the real syssw): its `bench` lines.
+fn ports_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+    deterministic_time: bool,
+) -> Result<Vec<xtask::bench::Metric>> {
+    let config = xtask::workspace_root().join("tests/configs/bench_ports.toml");
+    let outcome = boot_bench_system(
+        qemu,
+        system,
+        Some(&config),
+        &dir.join("ports"),
+        "ports benchmark system",
+        deterministic_time,
+        bench_timeout(deterministic_time),
+    )?;
+    Ok(outcome
+        .lines
+        .iter()
+        .filter_map(|l| xtask::bench::parse_line(l))
+        .collect())
+}
+
+/// How long the kernel and port benchmark systems may run: virtual time runs slower than
+/// real time under TCG, so 10 s of window measurements take minutes.
+fn bench_timeout(deterministic_time: bool) -> Duration {
+    Duration::from_secs(if deterministic_time { 1800 } else { 300 })
+}
+
+/// `cargo xtask bench --net`: only the network benchmark ([`xtask::netbench`], always on
+/// real time); writes `target/bench/net.json`.
+fn net_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = xtask::netbench::run(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    for m in &metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(&metrics, "net.json")?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
 /// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
 fn native_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
@@ -866,34 +945,29 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     let mut metrics = Vec::new();
     // The kernel benchmarks run as the root task; the port benchmark is an APEX partition
     // under the real syssw (`tests/configs/bench_ports.toml`).
-    let ports_config = xtask::workspace_root().join("tests/configs/bench_ports.toml");
-    for (name, artifacts, config) in [
-        ("kernel", &kernel_bench, None),
-        ("ports", &system, Some(ports_config.as_path())),
-    ] {
-        let outcome = boot_bench_system(
-            &qemu,
-            artifacts,
-            config,
-            &dir.join(name),
-            &format!("{name} benchmark system"),
-            deterministic_time,
-            // Virtual time runs slower than real time under TCG: 10 s of window
-            // measurements take minutes.
-            Duration::from_secs(if deterministic_time { 1800 } else { 300 }),
-        )?;
-        metrics.extend(
-            outcome
-                .lines
-                .iter()
-                .filter_map(|l| xtask::bench::parse_line(l)),
-        );
-    }
+    let outcome = boot_bench_system(
+        &qemu,
+        &kernel_bench,
+        None,
+        &dir.join("kernel"),
+        "kernel benchmark system",
+        deterministic_time,
+        bench_timeout(deterministic_time),
+    )?;
+    metrics.extend(
+        outcome
+            .lines
+            .iter()
+            .filter_map(|l| xtask::bench::parse_line(l)),
+    );
+    metrics.extend(ports_metrics(&qemu, &system, &dir, deterministic_time)?);
     metrics.extend(schedule_switch_metrics(&qemu, &system, &dir)?);
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
     metrics.extend(guest_metrics(&qemu, &system, &dir, deterministic_time)?);
+    // Timed from the host: always real time.
+    metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {

@@ -69,11 +69,19 @@ pub fn ensure_kernel() -> Result<PathBuf> {
 /// The native `/init`: runs `init` (the guest's command and arguments) in the environment
 /// `env` only, from `/`, with `--prefix native_`, then ends QEMU with its status.
 pub fn init_script(init: &[String], env: &[String]) -> String {
+    let args = ["--prefix".to_string(), PREFIX.to_string()];
+    script(init, env, "", &args)
+}
+
+/// A native `/init`: mounts proc, sysfs and devtmpfs, brings up `lo`, runs the shell lines
+/// `setup`, then `init` with `args` appended in the environment `env` only, from `/`, and
+/// ends QEMU with its status.
+pub fn script(init: &[String], env: &[String], setup: &str, args: &[String]) -> String {
     let command: Vec<String> = env
         .iter()
         .chain(init)
         .map(|s| crate::guest::quote(s))
-        .chain(["--prefix".to_string(), PREFIX.to_string()])
+        .chain(args.iter().cloned())
         .collect();
     format!(
         "#!/bin/sh
@@ -83,7 +91,7 @@ mount -t sysfs sysfs /sys
 mount -t devtmpfs devtmpfs /dev
 # The loopback (the TCP metrics), up as in the guest.
 ifconfig lo 127.0.0.1 up
-cd /
+{setup}cd /
 env -i {command}
 status=$?
 echo \"{EXIT_LINE}$status\"
@@ -96,18 +104,20 @@ poweroff -f
     )
 }
 
-/// The initramfs of the native run: the guest's (`guest`) with the native `/init` and a
-/// `/sys` to mount.
+/// The initramfs of the native run: the guest's (`guest`) with `init` as `/init`, a
+/// `/sys` to mount, and `extra` (path without the leading `/`, mode, contents) added.
 pub fn initramfs(
     busybox: &[u8],
     applets: &[String],
     guest: &config::system::Guest,
+    init: &str,
+    extra: Vec<(String, u32, Vec<u8>)>,
 ) -> Result<Vec<u8>> {
     let mut entries = crate::guest::entries(busybox, applets, guest, &[])?;
     let init = (
         "init".to_string(),
         crate::guest::S_IFREG | 0o755,
-        init_script(&guest.init, &guest.env).into_bytes(),
+        init.as_bytes().to_vec(),
     );
     match entries.iter_mut().find(|e| e.0 == "init") {
         Some(existing) => *existing = init,
@@ -116,6 +126,7 @@ pub fn initramfs(
     if !entries.iter().any(|e| e.0 == "sys") {
         entries.push(("sys".to_string(), crate::guest::S_IFDIR | 0o755, Vec::new()));
     }
+    entries.extend(extra);
     crate::guest::archive(entries)
 }
 
@@ -128,15 +139,25 @@ pub fn guest_of(config: &Path) -> Result<config::system::Guest> {
         .with_context(|| format!("{} has no guest partition", config.display()))
 }
 
-/// Boots the stock kernel with the native initramfs of the guest partition of `config` under
-/// `dir` (on virtual time with `deterministic_time`, as the guest leg) and returns the
-/// `native_*` metrics it printed; an error unless the benchmark ended with status 0.
-pub fn metrics(
+/// How a native run boots besides the kernel: its `/init`, more initramfs files, more
+/// QEMU arguments, and how long it may take.
+pub struct Native {
+    pub init: String,
+    pub extra_files: Vec<(String, u32, Vec<u8>)>,
+    pub qemu_args: Vec<String>,
+    pub timeout: Duration,
+}
+
+/// Boots the stock kernel with the guest partition of `config`'s initramfs made native by
+/// `native` under `dir` (on virtual time with `deterministic_time`) and returns what it
+/// printed with its `/init`'s exit status (`None`: not printed).
+pub fn boot(
     qemu: &crate::tools::Qemu,
     config: &Path,
     dir: &Path,
     deterministic_time: bool,
-) -> Result<Vec<Metric>> {
+    native: Native,
+) -> Result<(qemu::Outcome, Option<String>)> {
     let kernel = ensure_kernel()?;
     // QEMU only says it cannot load it; some distributions keep /boot root-only.
     std::fs::File::open(&kernel).with_context(|| format!("cannot read {}", kernel.display()))?;
@@ -144,7 +165,8 @@ pub fn metrics(
     let (busybox, applets) = crate::guest::busybox()?;
     std::fs::create_dir_all(dir)?;
     let initrd = dir.join("initramfs.cpio");
-    std::fs::write(&initrd, initramfs(&busybox, &applets, &guest)?)
+    let archive = initramfs(&busybox, &applets, &guest, &native.init, native.extra_files)?;
+    std::fs::write(&initrd, archive)
         .with_context(|| format!("cannot write {}", initrd.display()))?;
     eprintln!(
         "xtask: booting {} with the native benchmark initramfs",
@@ -159,19 +181,45 @@ pub fn metrics(
         },
         &RunOptions {
             esp: PathBuf::new(),
-            timeout: Some(TIMEOUT),
+            timeout: Some(native.timeout),
             echo: false,
             work_dir: dir.join("state"),
             deterministic_time,
             com2: qemu::Com2::Unconnected,
             done_when: Vec::new(),
-            extra_args: Vec::new(),
+            extra_args: native.qemu_args,
         },
     )?;
     let status = outcome
         .lines
         .iter()
         .find_map(|l| Some(l[l.find(EXIT_LINE)? + EXIT_LINE.len()..].trim().to_string()));
+    if status.is_some() && !outcome.succeeded() {
+        eprintln!(
+            "xtask: note: the native run ended with {:?}, not through isa-debug-exit",
+            outcome.ending
+        );
+    }
+    Ok((outcome, status))
+}
+
+/// Boots the stock kernel with the native initramfs of the guest partition of `config` under
+/// `dir` (on virtual time with `deterministic_time`, as the guest leg) and returns the
+/// `native_*` metrics it printed; an error unless the benchmark ended with status 0.
+pub fn metrics(
+    qemu: &crate::tools::Qemu,
+    config: &Path,
+    dir: &Path,
+    deterministic_time: bool,
+) -> Result<Vec<Metric>> {
+    let guest = guest_of(config)?;
+    let native = Native {
+        init: init_script(&guest.init, &guest.env),
+        extra_files: Vec::new(),
+        qemu_args: Vec::new(),
+        timeout: TIMEOUT,
+    };
+    let (outcome, status) = boot(qemu, config, dir, deterministic_time, native)?;
     let metrics: Vec<Metric> = outcome
         .lines
         .iter()
@@ -183,12 +231,6 @@ pub fn metrics(
             "the native benchmark failed (exit status {})\n{}",
             status.as_deref().unwrap_or("not printed"),
             outcome.transcript()
-        );
-    }
-    if !outcome.succeeded() {
-        eprintln!(
-            "xtask: note: the native run ended with {:?}, not through isa-debug-exit",
-            outcome.ending
         );
     }
     Ok(metrics)
@@ -322,7 +364,7 @@ mod tests {
         assert!(script.contains("mount -t devtmpfs devtmpfs /dev\n"));
         assert!(script.contains("dd of=/dev/port bs=1 seek=244"));
         let applets = vec!["bin/sh".to_string()];
-        let bytes = initramfs(b"\x7fELF-busybox", &applets, &guest).unwrap();
+        let bytes = initramfs(b"\x7fELF-busybox", &applets, &guest, &script, Vec::new()).unwrap();
         let fs = Archive::new(&bytes).unwrap();
         let init = fs.get("/init").unwrap();
         assert_eq!(init.data, script.as_bytes());
