@@ -179,10 +179,22 @@ pub enum Outcome {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ProcessCall {
     /// `clone`, `fork` (`SIGCHLD`), `vfork` (`CLONE_VM | CLONE_VFORK | SIGCHLD`): `args`
-    /// are `clone`'s stack, parent and child tid addresses.
+    /// are `clone`'s stack, parent and child tid addresses and TLS base.
     Clone {
         flags: u64,
-        args: [u64; 3],
+        args: [u64; 4],
+    },
+    /// `exit` of a thread that is not its process's first.
+    ExitThread,
+    /// `futex` with its six arguments.
+    Futex {
+        args: [u64; 6],
+    },
+    /// `tkill`, `tgkill`: a signal to one thread.
+    KillThread {
+        tgid: Option<u32>,
+        tid: u32,
+        signal: u64,
     },
     Execve {
         path: u64,
