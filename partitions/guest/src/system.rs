@@ -22,7 +22,9 @@
 //! A parent that ignores `SIGCHLD` (or set `SA_NOCLDWAIT`) leaves no zombies: its
 //! children are reaped when they end, and its `wait4` waits until none is left (`ECHILD`).
 //!
-//! **Limits.** At most [`MAX_PROCESSES`] processes, zombies included, and at most as many
+//! **Threads** of a process are slots of their own ([`threads`]).
+//!
+//! **Limits.** At most [`MAX_PROCESSES`] processes and threads, zombies included, and at most as many
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
 //! beyond either, `fork` fails with `EAGAIN`.
 
@@ -69,7 +71,8 @@ const WUNTRACED: u64 = 2;
 const WEXITED: u64 = 4;
 const WCONTINUED: u64 = 8;
 const WNOWAIT: u64 = 0x0100_0000;
-/// `__WNOTHREAD`, `__WALL`, `__WCLONE`: accepted, meaningless with one thread per process.
+/// `__WNOTHREAD`, `__WALL`, `__WCLONE`: accepted; every thread of a process waits for
+/// its children, and no child ends with another signal than `SIGCHLD`.
 const WTHREAD_FLAGS: u64 = 0xe000_0000;
 /// Bytes of `struct rusage` (`wait4` fills it with zeros: no accounting yet).
 const RUSAGE_SIZE: usize = 144;
