@@ -50,6 +50,7 @@ void area_signals(void);
 void area_time(void);
 void area_misc(void);
 void area_sockets(void);
+void area_threads(void);
 
 /* Entry points of the program when it executes itself (`linux-tests --<mode> ...`). */
 int exec_mode(int argc, char **argv);

@@ -2,10 +2,13 @@
  * with `gcc -static`, see xtask/src/guest_programs.rs). `probe <what>` does one thing that
  * must kill it with a signal (it prints "<what>: not contained" and exits 1 if it lives
  * on); `probe memory` checks demand paging, copy-on-write fork, mprotect, munmap,
- * madvise, mremap and mmap and prints "memory: <check> ok" for each (exit 0 when all passed). */
+ * madvise, mremap and mmap and prints "memory: <check> ok" for each (exit 0 when all passed);
+ * `probe threads` is a thread bomb: it creates threads that sleep until pthread_create
+ * fails, prints "threads: <n> created, then <error>" and exits (ending them all). */
 #define _GNU_SOURCE
 #include <errno.h>
 #include <fcntl.h>
+#include <pthread.h>
 #include <signal.h>
 #include <stdint.h>
 #include <stdio.h>
@@ -133,10 +136,38 @@ static int memory(void) {
     return failures ? 1 : 0;
 }
 
+static void *sleeper(void *arg) {
+    (void)arg;
+    for (;;)
+        pause();
+    return NULL;
+}
+
+/* The thread bomb: threads until the system refuses one (at most 100,000). */
+static int thread_bomb(void) {
+    pthread_attr_t attr;
+    pthread_attr_init(&attr);
+    pthread_attr_setstacksize(&attr, 64 * 1024);
+    int n = 0, error = 0;
+    while (n < 100000) {
+        pthread_t t;
+        error = pthread_create(&t, &attr, sleeper, NULL);
+        if (error != 0)
+            break;
+        n++;
+    }
+    printf("threads: %d created, then %s\n", n,
+           error == EAGAIN ? "EAGAIN" : error == 0 ? "none refused" : strerror(error));
+    fflush(stdout);
+    exit(0);
+}
+
 int main(int argc, char **argv) {
     const char *what = argc > 1 ? argv[1] : "";
     if (strcmp(what, "memory") == 0)
         return memory();
+    if (strcmp(what, "threads") == 0)
+        return thread_bomb();
     if (strcmp(what, "segv") == 0)
         read_at(16);
     else if (strcmp(what, "ill") == 0)
@@ -168,7 +199,7 @@ int main(int argc, char **argv) {
         printf("enosys: %s\n", r == -1 && errno == ENOSYS ? "ENOSYS" : "served");
         return 0;
     } else {
-        printf("usage: probe memory|segv|ill|div|stack|kernel|pool|data|port|console|exit|cli|enosys\n");
+        printf("usage: probe memory|threads|segv|ill|div|stack|kernel|pool|data|port|console|exit|cli|enosys\n");
         return 2;
     }
     printf("%s: not contained\n", what);

@@ -5,13 +5,25 @@
 //! (`cargo xtask test` checks that on the host first). The areas the configuration runs
 //! are those the guest passes; the others are listed there with what they wait for.
 
-use scenarios::{boot, check, guest_stdout};
+//! Scenario `guest_threads` runs the `threads` area the same way (configuration
+//! `tests/configs/guest_threads.toml`).
 
-const CONFIG: &str = "tests/configs/guest_linux.toml";
+use scenarios::{boot, check, guest_stdout};
 
 #[test]
 fn guest_linux() {
-    let system = xtask::check_config::load(&xtask::workspace_root().join(CONFIG))
+    linux_tests("guest_linux", "tests/configs/guest_linux.toml");
+}
+
+#[test]
+fn guest_threads() {
+    linux_tests("guest_threads", "tests/configs/guest_threads.toml");
+}
+
+/// Boots scenario `scenario` (configuration `config`) and expects each guest partition
+/// that runs `/bin/linux-tests AREA...` to print exactly its areas' expected files.
+fn linux_tests(scenario: &str, config: &str) {
+    let system = xtask::check_config::load(&xtask::workspace_root().join(config))
         .unwrap_or_else(|e| panic!("{e:#}"));
     let runs: Vec<(String, Vec<String>)> = system
         .partitions
@@ -21,8 +33,8 @@ fn guest_linux() {
             (init.first()? == "/bin/linux-tests").then(|| (p.name.clone(), init[1..].to_vec()))
         })
         .collect();
-    assert!(!runs.is_empty(), "{CONFIG} runs no linux-tests");
-    let o = boot("guest_linux");
+    assert!(!runs.is_empty(), "{config} runs no linux-tests");
+    let o = boot(scenario);
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,

@@ -1,58 +1,14 @@
 //! The calls that report on or set a process's identity and resources, where the guest
 //! has one user (root), one CPU and no accounting: the user and group ids, `getrusage`,
-//! `times`, the scheduling affinity and priority, and `futex` (one thread per process: a
-//! wait can only end by its timeout or a signal, a wake finds nobody), plus `sysinfo`'s
-//! record ([`sysinfo_record`]).
+//! `times`, the scheduling affinity and priority, plus `sysinfo`'s record
+//! ([`sysinfo_record`]). `futex` is the process table's ([`crate::system`]).
 
 use crate::linux::Errno;
 use crate::syscall::table::Ctx;
-use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
+use crate::syscall::{Host, SysResult, read_user, write_user};
 
 /// Clock ticks per second (`sysconf(_SC_CLK_TCK)`, `times`).
 pub(crate) const TICKS_PER_S: u64 = 100;
-const FUTEX_WAIT: u64 = 0;
-const FUTEX_WAKE: u64 = 1;
-const FUTEX_WAIT_BITSET: u64 = 9;
-const FUTEX_WAKE_BITSET: u64 = 10;
-const FUTEX_PRIVATE: u64 = 128;
-const FUTEX_CLOCK_REALTIME: u64 = 256;
-
-/// `futex`: one thread per process, so a wait ends by its timeout or a signal only and a
-/// wake finds nobody.
-pub(crate) fn futex(c: &mut Ctx<'_, '_, impl Host>, a: [u64; 6]) -> SysResult<u64> {
-    let (p, _, host) = c.parts();
-    let op = a[1] & !(FUTEX_PRIVATE | FUTEX_CLOCK_REALTIME);
-    match op {
-        FUTEX_WAKE | FUTEX_WAKE_BITSET => Ok(0),
-        FUTEX_WAIT | FUTEX_WAIT_BITSET => {
-            if p.wake_at.is_none() {
-                let mut word = [0u8; 4];
-                read_user(p, host, a[0], &mut word)?;
-                if u32::from_le_bytes(word) != a[2] as u32 {
-                    return Err(Errno::EAGAIN);
-                }
-                if a[3] == 0 {
-                    return Err(WOULD_BLOCK); // until a signal
-                }
-                let ns = crate::sigcalls::read_timespec(p, host, a[3])?;
-                // FUTEX_WAIT's timeout is relative, the bitset form's absolute.
-                let now = host.now_ns();
-                p.wake_at = Some(if op == FUTEX_WAIT {
-                    now.saturating_add(ns)
-                } else {
-                    ns
-                });
-            }
-            if p.wake_at.is_some_and(|at| host.now_ns() >= at) {
-                p.wake_at = None;
-                return Err(Errno::ETIMEDOUT);
-            }
-            Err(WOULD_BLOCK)
-        }
-        _ => Err(Errno::ENOSYS),
-    }
-}
-
 /// `struct sysinfo` for a guest up `uptime_ns`, with `total`/`free` bytes of memory and
 /// `processes` processes.
 pub fn sysinfo_record(uptime_ns: u64, total: u64, free: u64, processes: u16) -> [u8; 112] {

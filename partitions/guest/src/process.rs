@@ -90,10 +90,24 @@ pub enum File {
     Socket(usize),
 }
 
-/// One Linux process.
+/// A `futex` wait of a thread: the word's address (in its process's memory), the
+/// `FUTEX_WAIT_BITSET` mask, and whether a wake chose it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FutexWait {
+    pub address: u64,
+    pub bitset: u32,
+    pub woken: bool,
+}
+
+/// One Linux thread: a process's first thread (the process's state) or one of its other
+/// threads ([`Process::thread`]).
 #[derive(Clone, Debug)]
 pub struct Process {
+    /// Its thread id: the pid of a process's first thread, another id for each thread
+    /// `clone(CLONE_THREAD)` adds ([`Process::thread`]).
     pub pid: u32,
+    /// The thread group (the process's pid, `getpid`): `pid` for a process's first thread.
+    pub tgid: u32,
     pub ppid: u32,
     name: [u8; NAME_LEN],
     name_len: usize,
@@ -144,6 +158,8 @@ pub struct Process {
     pub umask: u32,
     pub clear_child_tid: u64,
     pub robust_list: u64,
+    /// The futex its thread waits on (a `futex` wait kept as a blocked call).
+    pub futex: Option<FutexWait>,
     /// Its ranges locked in memory (`mlock`; not inherited by `fork`, gone with `execve`).
     pub locks: crate::memory::Locks,
     /// `mlockall(MCL_FUTURE)` is in force (recorded; new mappings are not counted).
@@ -165,6 +181,7 @@ impl Process {
         ];
         Self {
             pid,
+            tgid: pid,
             ppid,
             name,
             name_len,
@@ -194,9 +211,72 @@ impl Process {
             umask: 0o022,
             clear_child_tid: 0,
             robust_list: 0,
+            futex: None,
             locks: Default::default(),
             lock_future: false,
         }
+    }
+
+    /// Whether it is a thread `clone(CLONE_THREAD)` added (not a process's first thread).
+    pub fn is_thread(&self) -> bool {
+        self.pid != self.tgid
+    }
+
+    /// Thread `tid` of this process (`clone(CLONE_THREAD)`): the caller's signal mask,
+    /// nothing pending, and none of the process's shared state. That state (memory,
+    /// descriptors, dispositions, ...: [`Process::swap_shared`]) stays with the process's
+    /// first thread and is lent to a thread while one of its calls is served.
+    pub fn thread(&self, tid: u32) -> Self {
+        Self {
+            ppid: self.ppid,
+            pgid: self.pgid,
+            sid: self.sid,
+            sigmask: self.sigmask,
+            sigactions: self.sigactions,
+            tgid: self.tgid,
+            ..Self::new(tid, self.ppid, self.exe)
+        }
+    }
+
+    /// Exchanges with `other` everything the threads of a process share (Linux's
+    /// `CLONE_VM | CLONE_FILES | CLONE_FS | CLONE_SIGHAND` and the process's own state):
+    /// memory areas and heap, descriptors, working directory, name, dispositions,
+    /// limits, umask, memory locks, the alarm, the identity. What is each thread's own
+    /// stays: its id, signal mask and pending thread-directed signals, alternate stack,
+    /// sleep, futex wait, tid addresses and robust list.
+    pub fn swap_shared(&mut self, other: &mut Self) {
+        use core::mem::swap;
+        swap(&mut self.ppid, &mut other.ppid);
+        swap(&mut self.name, &mut other.name);
+        swap(&mut self.name_len, &mut other.name_len);
+        swap(&mut self.exe, &mut other.exe);
+        swap(&mut self.cmdline, &mut other.cmdline);
+        swap(&mut self.cwd, &mut other.cwd);
+        swap(&mut self.areas, &mut other.areas);
+        swap(&mut self.brk_start, &mut other.brk_start);
+        swap(&mut self.brk, &mut other.brk);
+        swap(&mut self.files, &mut other.files);
+        swap(&mut self.cloexec, &mut other.cloexec);
+        swap(&mut self.pgid, &mut other.pgid);
+        swap(&mut self.sid, &mut other.sid);
+        swap(&mut self.executed, &mut other.executed);
+        swap(&mut self.sigactions, &mut other.sigactions);
+        swap(&mut self.alarm_at, &mut other.alarm_at);
+        swap(&mut self.alarm_interval, &mut other.alarm_interval);
+        swap(&mut self.limits, &mut other.limits);
+        swap(&mut self.umask, &mut other.umask);
+        swap(&mut self.locks, &mut other.locks);
+        swap(&mut self.lock_future, &mut other.lock_future);
+    }
+
+    /// Copies from the process's first thread what a thread answers about its process
+    /// without a call of its own being served (who is its parent, its group, how it takes
+    /// a signal): after the process's state changed.
+    pub fn share_from(&mut self, first: &Self) {
+        self.ppid = first.ppid;
+        self.pgid = first.pgid;
+        self.sid = first.sid;
+        self.sigactions = first.sigactions;
     }
 
     /// Records its arguments (`/proc/<pid>/cmdline`), cut at [`CMDLINE_MAX`] bytes; with

@@ -22,10 +22,9 @@
 //! `getrandom`, `clock_gettime`, `gettimeofday`, `time`, `uname`, `umask`, `sched_yield`,
 //! `prctl` (`PR_SET_NAME`, `PR_GET_NAME`; other options `EINVAL`, logged once),
 //! the identity and resource calls of [`crate::info`] (the uid/gid calls, `getrusage`,
-//! `times`, `sched_getaffinity`, `sched_setaffinity`, `getpriority`, `setpriority`,
-//! `futex`), `sysinfo` (the process table's), the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
+//! `times`, `sched_getaffinity`, `sched_setaffinity`, `getpriority`, `setpriority`), `sysinfo` (the process table's), the identity calls (`getpid`, `getppid`, `gettid`, `getpgrp`, `getuid`, `geteuid`,
 //! `getgid`, `getegid`), `exit`, `exit_group`; `clone`, `fork`, `vfork`, `execve`,
-//! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `setpgid`, `getpgid`, `setsid` and
+//! `wait4`, `waitid`, `kill`, `tkill`, `tgkill`, `futex`, `setpgid`, `getpgid`, `setsid` and
 //! `getsid` are the process table's ([`crate::system`]). On the console, `read`
 //! takes the terminal's input (waiting for it) and `ioctl` serves the terminal requests
 //! of [`crate::tty::ioctl`] when the guest has a terminal ([`Host::tty`]); without one,
@@ -179,10 +178,22 @@ pub enum Outcome {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ProcessCall {
     /// `clone`, `fork` (`SIGCHLD`), `vfork` (`CLONE_VM | CLONE_VFORK | SIGCHLD`): `args`
-    /// are `clone`'s stack, parent and child tid addresses.
+    /// are `clone`'s stack, parent and child tid addresses and TLS base.
     Clone {
         flags: u64,
-        args: [u64; 3],
+        args: [u64; 4],
+    },
+    /// `exit` of a thread that is not its process's first.
+    ExitThread,
+    /// `futex` with its six arguments.
+    Futex {
+        args: [u64; 6],
+    },
+    /// `tkill`, `tgkill`: a signal to one thread.
+    KillThread {
+        tgid: Option<u32>,
+        tid: u32,
+        signal: u64,
     },
     Execve {
         path: u64,

@@ -22,7 +22,9 @@
 //! A parent that ignores `SIGCHLD` (or set `SA_NOCLDWAIT`) leaves no zombies: its
 //! children are reaped when they end, and its `wait4` waits until none is left (`ECHILD`).
 //!
-//! **Limits.** At most [`MAX_PROCESSES`] processes, zombies included, and at most as many
+//! **Threads** of a process are slots of their own ([`threads`]).
+//!
+//! **Limits.** At most [`MAX_PROCESSES`] processes and threads, zombies included, and at most as many
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
 //! beyond either, `fork` fails with `EAGAIN`.
 
@@ -39,6 +41,8 @@ use crate::syscall::{self, Host, Outcome, ProcessCall, SysResult, close_files, s
 use crate::vfs::Fs;
 use crate::vfs::proc::{ProcInfo, ProcessTable};
 use abi::ipc::{ExceptionMessage, Registers};
+
+mod threads;
 
 /// Most processes of a guest (the default and the ceiling of its process limit).
 pub const MAX_PROCESSES: usize = 16;
@@ -67,7 +71,8 @@ const WUNTRACED: u64 = 2;
 const WEXITED: u64 = 4;
 const WCONTINUED: u64 = 8;
 const WNOWAIT: u64 = 0x0100_0000;
-/// `__WNOTHREAD`, `__WALL`, `__WCLONE`: accepted, meaningless with one thread per process.
+/// `__WNOTHREAD`, `__WALL`, `__WCLONE`: accepted; every thread of a process waits for
+/// its children, and no child ends with another signal than `SIGCHLD`.
 const WTHREAD_FLAGS: u64 = 0xe000_0000;
 /// Bytes of `struct rusage` (`wait4` fills it with zeros: no accounting yet).
 const RUSAGE_SIZE: usize = 144;
@@ -221,6 +226,9 @@ pub struct System {
     ended: Option<Outcome>,
     /// `AT_HWCAP` for the programs `execve` starts.
     hwcap: u64,
+    /// The slots (a process's first thread, another of its threads) whose shared state is
+    /// lent to the second while its call is served ([`System::lend`]).
+    lent: Option<(usize, usize)>,
 }
 
 impl System {
@@ -242,6 +250,7 @@ impl System {
             next_pid,
             ended: None,
             hwcap,
+            lent: None,
         }
     }
 
@@ -275,6 +284,8 @@ impl System {
         mut m: ExceptionMessage,
     ) -> Option<Outcome> {
         let i = self.index(pid)?;
+        let tgid = self.slots[i].as_ref()?.process.tgid;
+        self.lend(i);
         let slot = self.slots[i].as_mut()?;
         let ended = match slot.state {
             State::Starting(registers) => {
@@ -286,6 +297,8 @@ impl System {
             // A blocked or ended process has no thread that could send.
             State::Blocked(_) | State::Vforked { .. } | State::Zombie(_) => None,
         };
+        self.give_back();
+        self.share_group(tgid);
         ended.or_else(|| self.wake(fs, k))
     }
 
@@ -354,18 +367,24 @@ impl System {
                 else {
                     continue;
                 };
-                if let Some(slot) = self.slots[i].as_mut() {
-                    slot.state = State::Running;
-                }
+                let Some(slot) = self.slots[i].as_mut() else {
+                    continue;
+                };
+                slot.state = State::Running;
+                let tgid = slot.process.tgid;
+                self.lend(i);
                 let ended = match self.interrupting(i) {
                     Some(restart) => {
                         let p = &mut self.slots[i].as_mut()?.process;
                         k.select(p.pid);
+                        p.futex = None;
                         let m = sigcalls::interrupted(p, k, m, restart);
                         self.resume(i, fs, k, m, None)
                     }
                     None => self.run(i, fs, k, m),
                 };
+                self.give_back();
+                self.share_group(tgid);
                 if ended.is_some() {
                     return ended;
                 }
@@ -437,7 +456,8 @@ impl System {
                     }
                     Default::Terminate | Default::Core => {
                         k.log(format_args!(
-                            "guest: process {pid} ({}) killed by signal {sig} ({})",
+                            "guest: process {} ({}) killed by signal {sig} ({})",
+                            p.tgid,
                             p.name(),
                             signal::name(sig)
                         ));
@@ -610,7 +630,7 @@ impl System {
                 slot.process.pending &= !signal::bit(sig);
                 k.log(format_args!(
                     "guest: process {} ({}) killed by signal {sig} ({})",
-                    slot.process.pid,
+                    slot.process.tgid,
                     slot.process.name(),
                     signal::name(sig)
                 ));
@@ -662,8 +682,10 @@ impl System {
             return Err(Errno::EINVAL);
         }
         let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
-        let (me, my_group) = (caller.pid, caller.pgid);
+        let (me, my_group) = (caller.tgid, caller.pgid);
+        // A process is its first thread's slot; `kill` of another thread's id signals it.
         let hits = |s: &Slot| match target {
+            _ if s.process.is_thread() => target > 0 && target == s.process.pid as i64,
             -1 => s.process.pid != INIT_PID && s.process.pid != me,
             0 => s.process.pgid == my_group,
             t if t < 0 => t.checked_neg() == Some(s.process.pgid as i64),
@@ -679,6 +701,7 @@ impl System {
         }
         for (j, _) in targets.iter().enumerate().filter(|(_, t)| **t) {
             // The caller's own end, if it killed itself, comes when its call returns.
+            let j = self.receiver(j, sig as u32);
             if let Some(ended) = self.send(j, Some(i), Info::user(sig as u32, me), fs, k) {
                 self.ended = Some(ended);
             }
@@ -788,10 +811,24 @@ impl System {
                 let vfork =
                     matches!(call, ProcessCall::Clone { flags, .. } if flags & CLONE_VFORK != 0);
                 let result = match call {
+                    ProcessCall::Clone { flags, args } if threads::is_thread_clone(flags) => {
+                        self.spawn_thread(i, k, flags, args, &m.registers)
+                    }
                     ProcessCall::Clone { flags, args } => {
                         self.fork(i, fs, k, flags, args, &m.registers)
                     }
+                    ProcessCall::ExitThread => {
+                        self.exit_thread(i, k);
+                        return None;
+                    }
+                    ProcessCall::Futex { args } => match self.futex(i, k, args) {
+                        Ok(None) => return self.block(i, kept),
+                        result => result.map(|n| n.unwrap_or(0)),
+                    },
                     ProcessCall::Kill { target, signal } => self.kill(i, fs, k, target, signal),
+                    ProcessCall::KillThread { tgid, tid, signal } => {
+                        self.kill_thread(i, fs, k, (tgid, tid), signal)
+                    }
                     ProcessCall::SetPgid { pid, pgid } => self.setpgid(i, pid, pgid),
                     ProcessCall::GroupOf { pid, session } => self.group_of(i, pid, session),
                     ProcessCall::SetSid => self.setsid(i),
@@ -904,7 +941,16 @@ impl System {
                 && c == child
             {
                 slot.state = State::Running;
-                if let Some(ended) = self.resume(i, fs, k, reply, None) {
+                // A thread that vforked resumes with its process's state.
+                let lend = self.lent.is_none();
+                if lend {
+                    self.lend(i);
+                }
+                let ended = self.resume(i, fs, k, reply, None);
+                if lend {
+                    self.give_back();
+                }
+                if let Some(ended) = ended {
                     return Some(ended);
                 }
             }
@@ -920,7 +966,7 @@ impl System {
         fs: &mut Fs,
         k: &mut impl Tasks,
         flags: u64,
-        [stack, parent_tid, child_tid]: [u64; 3],
+        [stack, parent_tid, child_tid, _]: [u64; 4],
         registers: &Registers,
     ) -> SysResult<u64> {
         const KNOWN: u64 = CLONE_VM
@@ -948,7 +994,9 @@ impl System {
         let parent = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
         let mut child = parent.clone();
         child.pid = pid;
-        child.ppid = parent.pid;
+        child.tgid = pid;
+        child.ppid = parent.tgid;
+        child.futex = None;
         // Linux: no pending signals, alarms or sleeps are inherited.
         child.pending = 0;
         child.alarm_at = None;
@@ -1016,7 +1064,8 @@ impl System {
         rusage: u64,
     ) -> SysResult<Option<u64>> {
         let caller = &self.slots[i].as_ref().ok_or(Errno::ESRCH)?.process;
-        let (me, my_group) = (caller.pid, caller.pgid);
+        // The children of any of its process's threads.
+        let (me, my_group) = (caller.tgid, caller.pgid);
         let matches = |s: &Slot| {
             s.process.ppid == me
                 && match w.which {
@@ -1162,6 +1211,12 @@ impl System {
             return Err(Errno::E2BIG);
         }
 
+        // Its other threads end (Linux: before the new image loads).
+        if p.is_thread() {
+            return Err(Errno::EINVAL); // only a process's first thread may execute
+        }
+        self.end_threads(pid, k);
+        let slot = self.slots[i].as_mut().ok_or(Errno::ESRCH)?;
         // A vfork child gets memory of its own first (the old image is its parent's).
         k.select(pid);
         let borrowed = k.own(pid)?;
@@ -1215,6 +1270,10 @@ impl System {
     /// Process in slot `i` ended with wait status `word`: its files close, its task and
     /// memory go, its children become init's, and it stays a zombie for its parent.
     fn end(&mut self, i: usize, word: u32, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
+        // A thread's end by a signal or `exit_group` is its process's: all its threads.
+        let tgid = self.slots[i].as_ref()?.process.tgid;
+        self.end_threads(tgid, k);
+        let i = self.index(tgid)?;
         let slot = self.slots[i].as_mut()?;
         let pid = slot.process.pid;
         // A vfork child runs in this process's memory, which goes now: it goes too.

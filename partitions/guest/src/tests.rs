@@ -1303,7 +1303,7 @@ fn dispatch_table() {
         let process_table = matches!(outcome, Outcome::Process(_));
         let handler_is_process_tables = [
             "exit", "clone", "fork", "vfork", "execve", "wait4", "waitid", "kill", "tkill",
-            "tgkill", "setpgid", "getpgid", "setsid", "getsid", "sysinfo",
+            "tgkill", "setpgid", "getpgid", "setsid", "getsid", "sysinfo", "futex",
         ]
         .contains(&entry.handler_name);
         // The process table's calls reach it (kill and exit whatever their arguments;
@@ -1694,9 +1694,9 @@ fn fork_copies_the_process_and_wait_reaps_it() {
         b"shared",
         "the parent's memory stays"
     );
-    // Threads: not yet.
+    // A thread shares memory, descriptors and dispositions, or is refused.
     assert_eq!(
-        g.call(1, nr::clone, [0x50f00, 0, 0, 0, 0, 0]),
+        g.call(1, nr::clone, [0x10100, 0, 0, 0, 0, 0]),
         Some(err(Errno::EINVAL))
     );
     // A child's exit before anyone waits left a zombie, reaped by pid.
@@ -3308,5 +3308,66 @@ fn two_guests_talk_through_their_frame_ports() {
     assert!(
         eth.counters.tx_frames > 10 && eth.counters.rx_frames > 5,
         "{eth:?}"
+    );
+}
+
+#[test]
+fn threads_share_their_process_and_futexes_wake_them() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    // pthread_create's clone: shares all, TLS, parent tid word, child tid cleared at exit.
+    let flags = 0x3d0f00;
+    let (stack, parent_tid, child_tid) = (SCRATCH + 0x800, SCRATCH + 0x10, SCRATCH + 0x14);
+    let tid = g.call(
+        1,
+        nr::clone,
+        [flags, stack, parent_tid, child_tid, 0x7000, 0],
+    );
+    assert_eq!(tid, Some(2));
+    assert_eq!(g.word(1, parent_tid), 2);
+    let fault = ExceptionMessage::default();
+    g.host.resumed.clear();
+    let _ = g.system.serve(2, &mut g.fs, &mut g.host, fault);
+    let (pid, m) = g.host.resumed[0];
+    assert_eq!(pid, 2);
+    assert_eq!((m.registers.rax, m.registers.rsp), (0, stack));
+    assert_eq!(m.registers.fs_base, 0x7000, "CLONE_SETTLS");
+    assert_eq!(g.call(2, nr::getpid, [0; 6]), Some(1));
+    assert_eq!(g.call(2, nr::gettid, [0; 6]), Some(2));
+    assert_eq!(g.call(1, nr::gettid, [0; 6]), Some(1));
+    // One memory: what the thread maps and writes, the process has.
+    let mapped = g
+        .call(2, nr::mmap, [0, PAGE, 3, 0x22, u64::MAX, 0])
+        .unwrap();
+    assert!(g.system.process(1).unwrap().areas.find(mapped).is_some());
+    g.put(2, SCRATCH + 0x20, b"thread");
+    assert_eq!(g.get(1, SCRATCH + 0x20, 6), b"thread");
+    // A futex wait blocks until a wake of the same word; the wake counts it.
+    let word = SCRATCH + 0x30;
+    assert_eq!(
+        g.call(1, nr::futex, [word, 128, 1, 0, 0, 0]),
+        Some(err(Errno::EAGAIN)),
+        "the word is 0"
+    );
+    assert_eq!(g.call(1, nr::futex, [word, 128, 0, 0, 0, 0]), None);
+    assert_eq!(g.call(2, nr::futex, [word + 4, 129, 1, 0, 0, 0]), Some(0));
+    assert!(matches!(g.system.state(1), Some(State::Blocked(_))));
+    let replies = g.serve(2, World::message(nr::futex, [word, 129, 5, 0, 0, 0], 0));
+    assert!(
+        replies.contains(&(2, 1)) && replies.contains(&(1, 0)),
+        "{replies:?}"
+    );
+    // The thread's exit clears its tid word and wakes the joiner; the process goes on.
+    g.put(1, child_tid, &2u32.to_le_bytes());
+    assert_eq!(g.call(1, nr::futex, [child_tid, 128, 2, 0, 0, 0]), None);
+    let replies = g.serve(2, World::message(nr::exit, [0; 6], 0));
+    assert_eq!(replies, [(1, 0)]);
+    assert_eq!(g.word(1, child_tid), 0);
+    assert_eq!(g.pids(), [1]);
+    assert!(g.host.released.contains(&2));
+    // A thread that does not share everything is refused.
+    assert_eq!(
+        g.call(1, nr::clone, [0x10900, stack, 0, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
     );
 }

@@ -1,8 +1,8 @@
 #!/bin/sh
 # The hostile guest of scenario system_hostile_guest: after 3 s of an idle guest (the
 # PLC's lateness then is the baseline), one attack after the other: a port flood, then a
-# CPU hog through all the others (memory hogs, a pipe flood), then a crash of init in the
-# middle of a fork bomb; every step logs a `hostile:` line. A new Linux process, and one
+# CPU hog through all the others (memory hogs, a pipe flood, a thread bomb), then a crash
+# of init in the middle of a fork bomb; every step logs a `hostile:` line. A new Linux process, and one
 # that waits (the floods' and the fork bomb's), runs at the highest priority the guest
 # gives its processes (its scheduling policy, partitions/guest/src/sched.rs): the hog
 # starts there, at the guest's maximum, and returns there for a slice whenever it has
@@ -62,6 +62,11 @@ done
 sleep 1
 kill $readers
 echo "hostile: pipe flood done"
+
+# A thread bomb: one process creates threads until the guest refuses one (its process
+# table or the partition's kernel thread quota is full), then ends with all of them.
+linux-probe threads
+echo "hostile: thread bomb done"
 
 # A fork bomb: every copy starts two more until the guest's process table is full, then
 # its forks fail (EAGAIN) while the copies that ended make room for new ones; a copy whose

@@ -293,7 +293,7 @@ pub fn arch_prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 pub fn set_tid_address<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     c.p.clear_child_tid = a.ptr(0);
-    Ok(c.p.pid as u64)
+    Ok(c.p.pid as u64) // the caller's thread id
 }
 pub fn set_robust_list<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     // Its one valid length: sizeof(struct robust_list_head).
@@ -342,8 +342,9 @@ pub fn prctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
         }
     }
 }
+/// `futex`: the process table's, as a wake acts on other threads' waits.
 pub fn futex<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    info::futex(c, a.0)
+    to_process_table(c, ProcessCall::Futex { args: a.0 })
 }
 
 // Signals and timers.
@@ -544,8 +545,10 @@ fn einval_unless(valid: bool, value: u64) -> Result {
 
 // Identity: one user, root, and one thread per process.
 
-/// `getpid`, `gettid`.
 pub fn getpid<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
+    Ok(c.p.tgid as u64)
+}
+pub fn gettid<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
     Ok(c.p.pid as u64)
 }
 pub fn getppid<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
@@ -604,22 +607,31 @@ fn to_process_table<H: Host>(c: &mut Ctx<H>, call: ProcessCall) -> Result {
     c.finish(Outcome::Process(call))
 }
 
-/// `exit`, `exit_group` (one thread per process: both end it).
-pub fn exit<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+/// `exit_group`: the process ends, all its threads.
+pub fn exit_group<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let status = a.raw(0) as u8;
     c.host.log(format_args!(
         "guest: process {} exited with status {status}",
-        c.p.pid
+        c.p.tgid
     ));
     c.finish(Outcome::Exit(status))
 }
+/// `exit`: the calling thread ends; a process's first thread ends the process (Linux
+/// would keep it a zombie thread until the others end: the guest ends them with it).
+pub fn exit<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    if c.p.is_thread() {
+        return to_process_table(c, ProcessCall::ExitThread);
+    }
+    exit_group(c, a)
+}
 pub fn clone<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    let (flags, stack, parent_tid, child_tid) = (a.flags(0), a.ptr(1), a.ptr(2), a.ptr(3));
+    let (flags, stack, parent_tid, child_tid, tls) =
+        (a.flags(0), a.ptr(1), a.ptr(2), a.ptr(3), a.ptr(4));
     to_process_table(
         c,
         ProcessCall::Clone {
             flags,
-            args: [stack, parent_tid, child_tid],
+            args: [stack, parent_tid, child_tid, tls],
         },
     )
 }
@@ -629,7 +641,7 @@ pub fn fork<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
         c,
         ProcessCall::Clone {
             flags,
-            args: [0; 3],
+            args: [0; 4],
         },
     )
 }
@@ -640,7 +652,7 @@ pub fn vfork<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
         c,
         ProcessCall::Clone {
             flags,
-            args: [0; 3],
+            args: [0; 4],
         },
     )
 }
@@ -679,18 +691,23 @@ fn send<H: Host>(c: &mut Ctx<H>, target: i64, signal: u64) -> Result {
 pub fn kill<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     send(c, a.i32(0) as i64, a.raw(1))
 }
+/// Sends `signal` to thread `tid` (of process `tgid`, when given).
+fn send_thread<H: Host>(c: &mut Ctx<H>, tgid: Option<u32>, tid: i32, signal: u64) -> Result {
+    let tid = u32::try_from(tid)
+        .ok()
+        .filter(|&t| t > 0)
+        .ok_or(Errno::EINVAL)?;
+    to_process_table(c, ProcessCall::KillThread { tgid, tid, signal })
+}
 pub fn tkill<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    match a.i32(0) {
-        t if t <= 0 => Err(Errno::EINVAL),
-        t => send(c, t as i64, a.raw(1)),
-    }
+    send_thread(c, None, a.i32(0), a.raw(1))
 }
 pub fn tgkill<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    match (a.i32(0), a.i32(1)) {
-        (g, t) if g <= 0 || t <= 0 => Err(Errno::EINVAL),
-        (g, t) if g != t => Err(Errno::ESRCH),
-        (_, t) => send(c, t as i64, a.raw(2)),
-    }
+    let tgid = u32::try_from(a.i32(0))
+        .ok()
+        .filter(|&g| g > 0)
+        .ok_or(Errno::EINVAL)?;
+    send_thread(c, Some(tgid), a.i32(1), a.raw(2))
 }
 pub fn setpgid<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (pid, pgid) = (a.raw(0), a.raw(1));

@@ -295,7 +295,7 @@ table! {
     setpriority => setpriority,
     // Identity: one user (root).
     getpid => getpid,
-    gettid => getpid,
+    gettid => gettid,
     getppid => getppid,
     getpgrp => getpgrp,
     getuid => root_id,
@@ -314,7 +314,7 @@ table! {
     setgroups => setgroups,
     // The process table's ([`crate::system`]).
     exit => exit,
-    exit_group => exit,
+    exit_group => exit_group,
     clone => clone,
     fork => fork,
     vfork => vfork,
