@@ -86,6 +86,8 @@ pub struct Server<'a> {
     pub since_dma_poll: u32,
     /// Error reports waiting for their partition's next window.
     pub deferred: Deferred,
+    /// Each partition's window the kernel last named (start, length; see `window_of`).
+    pub windows: [(u64, u64); MAX_PARTITIONS],
 }
 
 /// How often the IOMMU's blocked DMA requests are taken at least: every so many ns, and
@@ -617,12 +619,21 @@ impl<'a> Server<'a> {
     /// left to handle it (or reports before it wait): true if it did. An action that stops
     /// the partition stops its task now, so nothing of it runs before the report is handled
     /// (first thing in its next window, above every thread of it). Handled at once: a
-    /// background partition's reports, a module shutdown, a report the full queue refuses.
+    /// background partition's reports, a module shutdown, a restart the worker can start at
+    /// once (the server only forgets the task and queues the job), a report the full queue
+    /// refuses.
     fn defer(&mut self, report: deferred::Report) -> bool {
         let index = report.partition;
         let tp = self.system.partition(index).time_partition;
         let action = decide(&self.system, Some(index), report.error);
+        // A restart the worker takes at once costs the server less than a stop: its slow
+        // part, the health line included, runs in the partition's windows anyway.
+        let quick_restart = matches!(
+            action,
+            HealthAction::ColdRestart | HealthAction::WarmRestart
+        ) && self.restarts.worker_idle();
         if tp == 0
+            || quick_restart
             || matches!(
                 action,
                 HealthAction::Shutdown | HealthAction::ShutdownSuccess
@@ -630,10 +641,9 @@ impl<'a> Server<'a> {
         {
             return false;
         }
-        let Ok(info) = sys::partition_info(tp as u64) else {
+        let Some((start, length)) = self.window_of(index, tp, report.time) else {
             return false;
         };
-        let (start, length) = (info.next_window_start, info.window_length);
         if !self.deferred.waiting(index) && deferred::fits(start, length, report.time) {
             return false;
         }
@@ -645,6 +655,21 @@ impl<'a> Server<'a> {
             let _ = sys::task_stop(TaskId(report.task));
         }
         true
+    }
+
+    /// Partition `index`'s window (time partition `tp`) running at `now`, or its next one:
+    /// start and length. The kernel's answer (`partition_info`) is kept while its window
+    /// runs, so a report at the end of a window the server has already asked about (at its
+    /// start, for a waiting report) costs no system call.
+    fn window_of(&mut self, index: usize, tp: u8, now: u64) -> Option<(u64, u64)> {
+        let (start, length) = self.windows[index];
+        if start <= now && now < start.saturating_add(length) {
+            return Some((start, length));
+        }
+        let info = sys::partition_info(tp as u64).ok()?;
+        let window = (info.next_window_start, info.window_length);
+        self.windows[index] = window;
+        Some(window)
     }
 
     /// The start of time partition `tp`'s next window when its window (from the kernel's
@@ -680,10 +705,9 @@ impl<'a> Server<'a> {
                 continue;
             }
             let tp = self.system.partition(index).time_partition;
-            let Ok(info) = sys::partition_info(tp as u64) else {
+            let Some((start, length)) = self.window_of(index, tp, now) else {
                 continue;
             };
-            let (start, length) = (info.next_window_start, info.window_length);
             while deferred::fits(start, length, now) {
                 let Some(report) = self.deferred.take(index) else {
                     break;

@@ -13,7 +13,10 @@
 //! What is not deferred: an action that stops the partition (IDLE, a restart) stops its
 //! task at once (`task_stop`, a bounded kernel call), so nothing of it runs on before its
 //! bookkeeping; a module shutdown is carried out at once; a background partition's reports
-//! (it has no window) are handled at once. The reporting thread waits for its answer
+//! (it has no window) are handled at once; so is a restart the restart worker can start at
+//! once (`crate::restart`: the server's share is forgetting the task and queueing the job,
+//! less than stopping the task; the worker kills it and prints the health line in the
+//! partition's windows, above every thread of it). The reporting thread waits for its answer
 //! (killed, or REPORT_ERROR answered) until the report is handled; no other thread of the
 //! partition waits. When the queue is full ([`DEFERRED_MAX`] reports, one per waiting
 //! thread) a report is handled at once as before.
