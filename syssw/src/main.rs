@@ -138,6 +138,8 @@ fn main(image_base: u64, image_len: u64) {
         schedule: syssw_core::schedule::ModuleSchedule::new(system.schedule_count()),
         dma: system.partitions().any(|p| p.dma > 0),
         since_dma_poll: 0,
+        deferred: syssw_core::deferred::Deferred::new(),
+        windows: [(0, 0); config::model::MAX_PARTITIONS],
     };
     for s in system.schedules() {
         let mut windows = [user_rt::abi::syscall::WindowSpec::default(); 32];

@@ -5,7 +5,10 @@
 //!
 //! It runs in time partition 0 above every other thread (`crate::restart::SERVER_PRIORITY`),
 //! so a request is served at once, inside the caller's window, and it never does anything
-//! slow: a restart's quick part (forget the old task, reset its ports) is done here at once,
+//! slow. A windowed partition's fault report or REPORT_ERROR that comes too near the end of
+//! its window is handled at the start of its next window instead (`syssw_core::deferred`;
+//! an action that stops the partition stops its task at once), so that the handling never
+//! runs into the next partition's window. Restarts: a restart's quick part (forget the old task, reset its ports) is done here at once,
 //! the rest (kill the old task, print the health line, reload, zero and map the memory,
 //! create the task and its first thread) by the restart worker (`crate::restart`) in the
 //! restarted partition's own windows, while this thread goes on serving (who kills and
@@ -30,11 +33,14 @@
 
 use crate::partitions::Instance;
 use config::binary::SystemView;
+use config::model::HealthAction;
 use config::model::{
     ChangeAction, Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind,
 };
+use syssw_core::deferred::{self, Answer, Deferred};
 use syssw_core::health::{
-    Detail, DmaFault, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, write_log_line,
+    Detail, DmaFault, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, decide,
+    write_log_line,
 };
 use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition};
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
@@ -78,6 +84,10 @@ pub struct Server<'a> {
     /// the messages since the last poll.
     pub dma: bool,
     pub since_dma_poll: u32,
+    /// Error reports waiting for their partition's next window.
+    pub deferred: Deferred,
+    /// Each partition's window the kernel last named (start, length; see `window_of`).
+    pub windows: [(u64, u64); MAX_PARTITIONS],
 }
 
 /// How often the IOMMU's blocked DMA requests are taken at least: every so many ns, and
@@ -127,6 +137,8 @@ impl<'a> Server<'a> {
         loop {
             // A module schedule switch that has taken effect: its change actions first.
             let switch_in = self.schedule_changes();
+            // Error reports whose partition's window has come.
+            let deferred_in = self.deferred_reports();
             // Without a waiter that can time out nothing expires (and the clock is not read:
             // one system call less on the path of every fault report and request).
             let timeout = match self.ports.next_deadline() {
@@ -142,6 +154,7 @@ impl<'a> Server<'a> {
             };
             // Wake at the pending switch to carry out its change actions on time.
             let timeout = switch_in.map_or(timeout, |t| t.min(timeout));
+            let timeout = deferred_in.map_or(timeout, |t| t.min(timeout));
             let timeout = if self.dma {
                 timeout.min(DMA_POLL_NS)
             } else {
@@ -343,8 +356,20 @@ impl<'a> Server<'a> {
                     [] => Detail::None,
                     text => Detail::Text(Text::new(text)),
                 };
+                let report = deferred::Report {
+                    partition: index,
+                    task: m.sender_task.0,
+                    thread: m.sender.0,
+                    answer: Answer::NoError,
+                    error,
+                    detail,
+                    time: now,
+                };
+                if self.defer(report) {
+                    return;
+                }
                 // The reply goes out first when the caller lives on (ignore).
-                if self.error(index, error, detail) {
+                if self.error(index, error, detail, now) {
                     reply(ReturnCode::NoError, [0; 3]);
                 }
             }
@@ -539,7 +564,20 @@ impl<'a> Server<'a> {
         let fault = Fault::from_message(&e);
         let guard = self.running(index).stack_guard.clone();
         let error = classify(&fault, guard);
-        if self.error(index, error, Detail::Fault(fault)) {
+        let now = sys::clock();
+        let report = deferred::Report {
+            partition: index,
+            task: e.task,
+            thread: m.sender.0,
+            answer: Answer::Kill,
+            error,
+            detail: Detail::Fault(fault),
+            time: now,
+        };
+        if self.defer(report) {
+            return;
+        }
+        if self.error(index, error, Detail::Fault(fault), now) {
             // "ignore": the partition goes on, but the faulting thread cannot.
             kill_faulted(m.sender);
         }
@@ -566,7 +604,8 @@ impl<'a> Server<'a> {
                 .map(|p| p.index);
             match owner {
                 Some(index) if self.partitions[index].is_some() => {
-                    self.error(index, ErrorCode::MemoryViolation, Detail::Dma(fault));
+                    let now = sys::clock();
+                    self.error(index, ErrorCode::MemoryViolation, Detail::Dma(fault), now);
                 }
                 _ => println!(
                     "health: blocked DMA of a device no running partition owns: {}",
@@ -576,10 +615,135 @@ impl<'a> Server<'a> {
         }
     }
 
-    /// Records and logs an error of partition `index` and carries out the configured
-    /// action. True if the partition is still running as before (the caller may answer).
-    fn error(&mut self, index: usize, error: ErrorCode, detail: Detail) -> bool {
-        let now = sys::clock();
+    /// Leaves `report` for its partition's next window if too little of the current one is
+    /// left to handle it (or reports before it wait): true if it did. An action that stops
+    /// the partition stops its task now, so nothing of it runs before the report is handled
+    /// (first thing in its next window, above every thread of it). Handled at once: a
+    /// background partition's reports, a module shutdown, a restart the worker can start at
+    /// once (the server only forgets the task and queues the job), a report the full queue
+    /// refuses.
+    fn defer(&mut self, report: deferred::Report) -> bool {
+        let index = report.partition;
+        let tp = self.system.partition(index).time_partition;
+        let action = decide(&self.system, Some(index), report.error);
+        // A restart the worker takes at once costs the server less than a stop: its slow
+        // part, the health line included, runs in the partition's windows anyway.
+        let quick_restart = matches!(
+            action,
+            HealthAction::ColdRestart | HealthAction::WarmRestart
+        ) && self.restarts.worker_idle();
+        if tp == 0
+            || quick_restart
+            || matches!(
+                action,
+                HealthAction::Shutdown | HealthAction::ShutdownSuccess
+            )
+        {
+            return false;
+        }
+        let Some((start, length)) = self.window_of(index, tp, report.time) else {
+            return false;
+        };
+        if !self.deferred.waiting(index) && deferred::fits(start, length, report.time) {
+            return false;
+        }
+        let window = self.window_after(tp, start, length, report.time);
+        if self.deferred.push(report, window).is_err() {
+            return false;
+        }
+        if action != HealthAction::Ignore {
+            let _ = sys::task_stop(TaskId(report.task));
+        }
+        true
+    }
+
+    /// Partition `index`'s window (time partition `tp`) running at `now`, or its next one:
+    /// start and length. The kernel's answer (`partition_info`) is kept while its window
+    /// runs, so a report at the end of a window the server has already asked about (at its
+    /// start, for a waiting report) costs no system call.
+    fn window_of(&mut self, index: usize, tp: u8, now: u64) -> Option<(u64, u64)> {
+        let (start, length) = self.windows[index];
+        if start <= now && now < start.saturating_add(length) {
+            return Some((start, length));
+        }
+        let info = sys::partition_info(tp as u64).ok()?;
+        let window = (info.next_window_start, info.window_length);
+        self.windows[index] = window;
+        Some(window)
+    }
+
+    /// The start of time partition `tp`'s next window when its window (from the kernel's
+    /// `partition_info`) is `start..start + length` at `now`: that one if it has not begun,
+    /// else the one after it in the running schedule.
+    fn window_after(&mut self, tp: u8, start: u64, length: u64, now: u64) -> u64 {
+        if start > now {
+            return start;
+        }
+        let s = self
+            .system
+            .schedule(self.schedule.status(now).current as usize);
+        let mut windows = [config::model::Window {
+            offset: 0,
+            duration: 0,
+            time_partition: 0,
+        }; config::model::MAX_WINDOWS];
+        let n = s.window_count();
+        for (w, window) in windows.iter_mut().zip(s.windows()) {
+            *w = window;
+        }
+        deferred::next_window_after(&windows[..n], s.major_frame, tp, start, length)
+    }
+
+    /// Handles the waiting error reports whose partition's window has come and has room for
+    /// them, oldest first; the others wait on. Returns how long until the next one is due
+    /// (a receive time-out, >= 1), or `None` if none waits.
+    fn deferred_reports(&mut self) -> Option<u64> {
+        self.deferred.next_wake()?;
+        let mut now = sys::clock();
+        for index in 0..self.system.partition_count() {
+            if !self.deferred.due(index, now) {
+                continue;
+            }
+            let tp = self.system.partition(index).time_partition;
+            let Some((start, length)) = self.window_of(index, tp, now) else {
+                continue;
+            };
+            while deferred::fits(start, length, now) {
+                let Some(report) = self.deferred.take(index) else {
+                    break;
+                };
+                self.handle_deferred(report);
+                now = sys::clock();
+            }
+            if self.deferred.waiting(index) {
+                let window = self.window_after(tp, start, length, now);
+                self.deferred.wait_until(index, window);
+            }
+        }
+        let next = self.deferred.next_wake()?;
+        Some(next.saturating_sub(now).max(1))
+    }
+
+    /// A report that waited for its partition's window: handled as if it came now, timed
+    /// when it came. An instance that is gone meanwhile (restarted) took its thread along.
+    fn handle_deferred(&mut self, r: deferred::Report) {
+        let thread = ThreadId(r.thread);
+        if self.partition_of(TaskId(r.task)) != Some(r.partition) {
+            kill_faulted(thread);
+            return;
+        }
+        if self.error(r.partition, r.error, r.detail, r.time) {
+            match r.answer {
+                Answer::Kill => kill_faulted(thread),
+                Answer::NoError => answer(self.ipc, thread, ReturnCode::NoError, [0; 3], &[]),
+            }
+        }
+    }
+
+    /// Records and logs an error of partition `index` reported at `now` and carries out the
+    /// configured action. True if the partition is still running as before (the caller may
+    /// answer).
+    fn error(&mut self, index: usize, error: ErrorCode, detail: Detail, now: u64) -> bool {
         let event = ErrorEvent {
             partition: Some(index),
             error,

@@ -454,3 +454,42 @@ fn attack_restart() {
     );
     victim_kept_its_windows(&o, 200, LATENESS_BOUND_NS);
 }
+
+#[test]
+fn attack_late_faults() {
+    let o = boot("attack_late_faults");
+    kernel_held(&o);
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): a victim ends the run",
+    );
+    let health = |partition: &str, error: &str, action: &str| {
+        o.lines
+            .iter()
+            .filter(|l| {
+                l.contains("health: ")
+                    && l.contains(&format!("partition={partition} error={error} "))
+                    && l.contains(&format!("action={action}"))
+            })
+            .count()
+    };
+    // A fault at the end of nearly every window of each: 300 frames.
+    let (ud2, reads) = (
+        health("late-fault", "illegal_request", "ignore"),
+        health("late-fault", "memory_violation", "ignore"),
+    );
+    check(
+        &o,
+        ud2 >= 140 && reads >= 140 && o.line("late-fault: 200 faults").is_some(),
+        &format!("{ud2} ud2 and {reads} kernel reads of late-fault reported"),
+    );
+    let restarts = health("late-restart", "illegal_request", "cold_restart");
+    check(
+        &o,
+        restarts >= 250,
+        &format!("{restarts} restarts of late-restart in 300 frames"),
+    );
+    victim_kept_its_windows(&o, 300, LATENESS_BOUND_NS);
+}

@@ -2,8 +2,9 @@
 //! inter-partition ports ([`ports`]), the health monitor's decisions and its event log
 //! ([`health`]), the partitions' operating modes ([`mode`]) and what a partition needs of
 //! its memory and kernel-memory quota to start ([`budget`]), the queue of partition
-//! restarts its restart worker carries out ([`restart`]) and the module schedule the
-//! partitions see ([`schedule`]); the codes they answer with
+//! restarts its restart worker carries out ([`restart`]), the error reports left for their
+//! partition's next window ([`deferred`]) and the module schedule the partitions see
+//! ([`schedule`]); the codes they answer with
 //! and the requests they serve are the service protocol's (`syssw/protocol`).
 //!
 //! syssw itself (`syssw/src`) is thin glue: it receives the partitions' requests and the
@@ -24,6 +25,7 @@
 #![cfg_attr(not(test), no_std)]
 
 pub mod budget;
+pub mod deferred;
 pub mod health;
 pub mod mode;
 pub mod ports;

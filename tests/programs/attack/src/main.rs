@@ -27,6 +27,12 @@
 //!   another that executes `ud2` at once (the scenario maps that illegal request to
 //!   `ignore`, so syssw kills only the faulting thread), as fast as it can, and prints
 //!   `fault-ignore: <n> threads faulted` every [`FAULTS_REPORT_EVERY`] faults;
+//! * `late-fault*`: faults at the very end of each of its windows, [`late_lead`] before
+//!   it ends (1 to 30 us, varying): it spins until then, starts a thread that executes
+//!   `ud2` or reads kernel memory (alternately; the scenario maps both to `ignore`, so
+//!   syssw kills only that thread) and sleeps until its next window;
+//!   `late-restart*`: at every start spins until the end of its window is as near, then
+//!   executes `ud2` (the scenario cold-restarts it);
 //! * `overflow*`: recurses until its stack overflows into the guard page;
 //! * `forge*`: sends syssw service requests for ports it does not own (every port id
 //!   0..64, read, status, receive, clear) and unknown labels, as fast as it can, and
@@ -145,6 +151,11 @@ fn main(start: u64, image_len: u64) {
         };
     } else if name.starts_with("fault-ignore") {
         fault_ignore(info.priority as u8);
+    } else if name.starts_with("late-fault") {
+        late_fault(info.time_partition, info.priority as u8);
+    } else if name.starts_with("late-restart") {
+        fault_at_window_end(info.time_partition);
+        faulty(0);
     } else if name.starts_with("overflow") {
         println!("overflow: recursing");
         let depth = recurse(0);
@@ -189,6 +200,59 @@ extern "C" fn faulty(_: u64) -> ! {
     // SAFETY: ud2 only raises #UD.
     unsafe {
         core::arch::asm!("ud2", options(noreturn))
+    }
+}
+
+/// A thread of `late-fault` that reads the kernel's memory (a memory violation).
+extern "C" fn faulty_read(_: u64) -> ! {
+    #[allow(unsafe_code)]
+    // SAFETY: a read of a kernel address from ring 3 only raises #PF.
+    let _ = unsafe { core::ptr::read_volatile(KERNEL_BASE as *const u64) };
+    faulty(0)
+}
+
+/// How long before the end of its window in major frame `frame` `late-fault` and
+/// `late-restart` fault: 1 to 30 us, another lead each frame (7 apart, modulo 30), so that
+/// the faults fall on every offset the health monitor's handling could straddle the
+/// window's end from.
+fn late_lead(frame: u64) -> u64 {
+    1_000 + frame.wrapping_mul(7) % 30 * 1_000
+}
+
+/// Spins until [`late_lead`] before the end of the current window of time partition `tp`.
+fn fault_at_window_end(tp: u64) -> u64 {
+    let Ok(info) = sys::partition_info(tp) else {
+        println!("late: partition_info failed");
+        return 0;
+    };
+    let end = info.next_window_start + info.window_length;
+    let at = end.saturating_sub(late_lead(info.frames));
+    while sys::clock() < at {}
+    end
+}
+
+fn late_fault(tp: u64, priority: u8) -> ! {
+    let stack_top = (&raw mut FAULTY_STACK) as u64 + core::mem::size_of::<[u64; 64]>() as u64;
+    let mut faults = 0u64;
+    loop {
+        let end = fault_at_window_end(tp);
+        let entry = match faults % 2 {
+            0 => faulty as *const () as u64,
+            _ => faulty_read as *const () as u64,
+        };
+        // At its own priority, FIFO behind this thread: it faults when this one yields.
+        match sys::thread_create(None, entry, stack_top, priority, 0)
+            .and_then(|t| sys::thread_start(t).map(|()| t))
+        {
+            Ok(_) => faults += 1,
+            Err(e) => println!("late-fault: thread_create or start refused: {e:?}"),
+        }
+        sys::yield_now();
+        if faults.is_multiple_of(100) {
+            println!("late-fault: {faults} faults at the end of a window");
+        }
+        // Its next window (a thread of it runs only there).
+        sys::sleep_until(end);
     }
 }
 
@@ -843,15 +907,9 @@ fn fuzz(calls: u64, root: bool) {
         scratch().start
     );
     let mut rng = Rng(SEED);
-    // The calls drawn by name: those of the ABI before `dma_map`, in whose sequence of
-    // this seed docs/isolation.md reports the victim's lateness. The calls added since
-    // (`dma_map`, `dma_fault`, the last of `Call::ALL`) are reached through the numbers
-    // below 128; drawing them by name too would reshuffle the sequence with every call the
-    // ABI gains.
-    let named_calls = Call::ALL
-        .iter()
-        .position(|c| *c == Call::DmaMap)
-        .unwrap_or(Call::COUNT);
+    // Every call of the ABI is drawn by name (a call the ABI gains reshuffles the sequence
+    // of this seed: docs/isolation.md reports the victim's lateness for the current one).
+    let named_calls = Call::COUNT;
     let mut pool = Pool::new(task.0, thread.0);
     let mut histogram = Histogram([[0; 16]; Call::COUNT + 1]);
     let (mut done, mut skipped) = (0u64, 0u64);
