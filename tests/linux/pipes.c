@@ -1,11 +1,12 @@
 /* Area `pipes`: pipe and pipe2, data order across processes, end of file, O_NONBLOCK's
  * EAGAIN on both ends, EPIPE with SIGPIPE ignored and the SIGPIPE status otherwise, the
- * wrong end's EBADF, fstat and lseek of a pipe, F_GETFL/F_SETFL. */
+ * wrong end's EBADF, fstat and lseek of a pipe, F_GETFL/F_SETFL, FIONBIO and FIOCLEX. */
 #include "check.h"
 
 #include <fcntl.h>
 #include <signal.h>
 #include <stdlib.h>
+#include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
@@ -59,6 +60,17 @@ void area_pipes(void)
 	check_eq("reading the full pipe gives what was written", filled, drained);
 	check_eq("F_SETFL clears O_NONBLOCK", 0, fcntl(p[0], F_SETFL, 0));
 	check_eq("F_GETFL after F_SETFL", 0, fcntl(p[0], F_GETFL) & O_NONBLOCK);
+	/* The ioctls every descriptor takes (Rust's std sets its pipes non-blocking so). */
+	int on = 1;
+	check_eq("FIONBIO sets O_NONBLOCK", 0, ioctl(p[0], FIONBIO, &on));
+	check_errno("read after FIONBIO EAGAIN", read(p[0], buf, 1), EAGAIN);
+	on = 0;
+	check_eq("FIONBIO clears O_NONBLOCK", 0, ioctl(p[0], FIONBIO, &on));
+	check_eq("F_GETFL after FIONBIO", 0, fcntl(p[0], F_GETFL) & O_NONBLOCK);
+	check_eq("FIOCLEX", 0, ioctl(p[1], FIOCLEX));
+	check_eq("F_GETFD after FIOCLEX", FD_CLOEXEC, fcntl(p[1], F_GETFD));
+	check_eq("FIONCLEX", 0, ioctl(p[1], FIONCLEX));
+	check_eq("F_GETFD after FIONCLEX", 0, fcntl(p[1], F_GETFD));
 	close(p[0]);
 	close(p[1]);
 

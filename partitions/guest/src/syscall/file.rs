@@ -214,13 +214,44 @@ pub fn pipe(c: &mut Ctx<'_, '_, impl Host>, fds: u64, flags: u64) -> SysResult<u
     Ok(0)
 }
 
+/// The `ioctl` requests every kind of descriptor takes (Linux serves them above the
+/// driver): `FIONBIO` sets or clears `O_NONBLOCK` as `F_SETFL` does, `FIOCLEX`/`FIONCLEX`
+/// the close-on-exec flag as `F_SETFD`; `None` for any other request.
+pub fn generic_ioctl(
+    c: &mut Ctx<'_, '_, impl Host>,
+    fd: u64,
+    request: u64,
+    arg: u64,
+) -> Option<SysResult<u64>> {
+    const FIONBIO: u64 = 0x5421;
+    const FIONCLEX: u64 = 0x5450;
+    const FIOCLEX: u64 = 0x5451;
+    match request & 0xffff_ffff {
+        FIOCLEX => Some(fcntl(c, fd, F_SETFD, 1)),
+        FIONCLEX => Some(fcntl(c, fd, F_SETFD, 0)),
+        FIONBIO => Some((|| {
+            let mut on = [0u8; 4];
+            c.read_user(arg, &mut on)?;
+            let flags = fcntl(c, fd, F_GETFL, 0)?;
+            let flags = if i32::from_le_bytes(on) != 0 {
+                flags | linux::O_NONBLOCK
+            } else {
+                flags & !linux::O_NONBLOCK
+            };
+            fcntl(c, fd, F_SETFL, flags)
+        })()),
+        _ => None,
+    }
+}
+
+const F_GETFD: u64 = 1;
+const F_SETFD: u64 = 2;
+const F_GETFL: u64 = 3;
+const F_SETFL: u64 = 4;
+
 pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> SysResult<u64> {
     let (p, f, _) = c.parts();
     const F_DUPFD: u64 = 0;
-    const F_GETFD: u64 = 1;
-    const F_SETFD: u64 = 2;
-    const F_GETFL: u64 = 3;
-    const F_SETFL: u64 = 4;
     const F_DUPFD_CLOEXEC: u64 = 1030;
     const FD_CLOEXEC: u64 = 1;
     let file = p.file(fd).ok_or(Errno::EBADF)?;

@@ -84,9 +84,14 @@ pub fn getdents64<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn fcntl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::fcntl(c, a.fd(0), a.flags(1), a.raw(2))
 }
-/// The terminal requests on the console ([`tty_ioctl`]), the port requests on a port.
+/// The requests of every descriptor ([`file::generic_ioctl`]), the terminal requests on
+/// the console ([`tty_ioctl`]), the socket requests on a socket, the port requests on a port.
 pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    match c.p.file(a.fd(0)).ok_or(Errno::EBADF)? {
+    let file = c.p.file(a.fd(0)).ok_or(Errno::EBADF)?;
+    if let Some(done) = file::generic_ioctl(c, a.fd(0), a.flags(1), a.raw(2)) {
+        return done;
+    }
+    match file {
         File::Console(_) => super::tty_ioctl(c, a.flags(1), a.raw(2)),
         File::Socket(_) => super::socket::socket_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
         _ => file::port_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),

@@ -3,7 +3,7 @@
 //! `connect` (blocking, or non-blocking with `EINPROGRESS`), `sendto`, `recvfrom`,
 //! `sendmsg`, `recvmsg` (and `read`/`write` of a socket, [`send`]/[`recv`]), `shutdown`,
 //! `getsockname`, `getpeername`, `setsockopt`, `getsockopt`, and the interface requests of
-//! `ioctl` (`SIOCGIF*`, `FIONBIO`). A call that cannot finish now waits (its reply
+//! `ioctl` (`SIOCGIF*`; `FIONBIO` through `file::generic_ioctl`). A call that cannot finish now waits (its reply
 //! deferred, see [`crate::system`]) unless the socket is non-blocking or the call says
 //! `MSG_DONTWAIT`: then `EAGAIN`. Only `AF_INET` exists: `AF_INET6`, `AF_UNIX`,
 //! `AF_NETLINK` and others are `EAFNOSUPPORT`, so programs fall back to IPv4.
@@ -501,7 +501,6 @@ pub fn events(net: &mut net::Net, now_ns: u64, id: usize) -> u16 {
 
 // ---- ioctl: the interface requests ----
 
-const FIONBIO: u64 = 0x5421;
 const SIOCGIFNAME: u64 = 0x8910;
 const SIOCGIFCONF: u64 = 0x8912;
 const SIOCGIFFLAGS: u64 = 0x8913;
@@ -556,20 +555,11 @@ pub fn ifreq_answer(request: u64, i: &Interface) -> Option<[u8; 24]> {
     Some(u)
 }
 
-/// `ioctl` on a socket: `FIONBIO` and the interface requests; others `ENOTTY`.
+/// `ioctl` on a socket: the interface requests; others `ENOTTY` (`FIONBIO` is every
+/// descriptor's, `file::generic_ioctl`).
 pub fn socket_ioctl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, request: u64, arg: u64) -> Result {
-    let id = SocketId(socket_at(c.p, fd)?);
+    socket_at(c.p, fd)?;
     let request = request & 0xffff_ffff;
-    if request == FIONBIO {
-        let mut on = [0u8; 4];
-        c.read_user(arg, &mut on)?;
-        let now = c.host.now_ns();
-        let stack = c.f.net.stack(now);
-        stack
-            .set_nonblocking(id, i32::from_le_bytes(on) != 0)
-            .map_err(errno)?;
-        return Ok(0);
-    }
     let interfaces = c.f.net.interfaces();
     if request == SIOCGIFCONF {
         // struct ifconf: the buffer's length, then its address.
