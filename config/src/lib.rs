@@ -231,8 +231,10 @@
 //! guest benchmark, `linux-probe`, the faults and forbidden accesses of the memory and
 //! isolation scenarios, `linux-arinc`, the checks of the ARINC port devices and the
 //! hostile guest's port flood, and `linux-netserve`, the guest side of the network
-//! benchmark), or the Rust programs `plcctl` (the PLC online tool) and `plcc` (the
-//! Structured Text compiler), built for `x86_64-unknown-linux-musl`, and adds as `/bin/<name>` (not also a `guest.files` path,
+//! benchmark), or the Rust programs `plcctl` (the PLC online tool), `plcc` (the
+//! Structured Text compiler), `fbctl` (the IEC 61499 management tool) and `linux-rust-std`
+//! (the Rust std checks of scenario `guest_rust_std`), built for
+//! `x86_64-unknown-linux-musl`, and adds as `/bin/<name>` (not also a `guest.files` path,
 //! each once). The partition's `ports.*` reach the guest as the devices
 //! `/dev/arinc/<name>` (the initramfs's `/etc/guest/ports`, see `guest::arinc`). `cargo xtask` builds the
 //! partition's initramfs (a cpio "newc" archive: Debian's `busybox-static` as

@@ -205,6 +205,7 @@ pub const GUEST_PROGRAMS: &[&str] = &[
     "plcctl",
     "plcc",
     "fbctl",
+    "linux-rust-std",
 ];
 
 /// Paths of the initramfs `guest.files` may not replace: what the guest needs to run

@@ -257,7 +257,7 @@ fn programs_are_known_once_and_not_also_files() {
         "\"gcc\"",
         0,
         "partitions.b.guest.programs[0]",
-        "`gcc` is no program cargo xtask builds (known: linux-tests, linux-bench, linux-probe, linux-arinc, linux-netserve, plcctl, plcc, fbctl)",
+        "`gcc` is no program cargo xtask builds (known: linux-tests, linux-bench, linux-probe, linux-arinc, linux-netserve, plcctl, plcc, fbctl, linux-rust-std)",
     );
     expect_some(
         &guest("guest.init = [\"/bin/sh\"]\nguest.programs = [\"linux-tests\", \"linux-tests\"]"),

@@ -22,6 +22,9 @@
 //!   PLC program from the guest's shell.
 //! - `fbctl` (`partitions/iec61499/fbctl`): the IEC 61499 management tool (deploy, monitor,
 //!   force, compile and add FB types), built as `plcctl` is.
+//! - `linux-rust-std` (`tests/linux/rust-std`): a Rust std program (threads, locks,
+//!   channels, files, a child process) whose output in the guest must be its output on the
+//!   host (scenario `guest_rust_std`), built as `plcctl` is.
 //!
 //! They are built into `target/linux/<name>` (only when a source is newer) and reach a
 //! guest's initramfs as `/bin/<name>` through the partition key `guest.programs`
@@ -41,6 +44,7 @@ const RUST_PROGRAMS: &[(&str, &str)] = &[
     ("plcctl", "plcctl"),
     ("plcc", "plc-compiler"),
     ("fbctl", "fbctl"),
+    ("linux-rust-std", "linux-rust-std"),
 ];
 /// The programs built from a main source file of their own (and the shared sources they
 /// also need); `linux-tests` is every source that is no such main file.
