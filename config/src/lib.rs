@@ -75,6 +75,8 @@
 //! plc.deadline = { control = "5ms" }  # per IEC TASK; default: none
 //! plc.shared = "frame"            # the segment its shared globals go through
 //! plc.native = true               # optional, default false: the native execution tier
+//! plc.net = { mac = "52:54:00:12:34:57", address = "10.0.2.16/24", gateway = "10.0.2.2", rx = "eth-rx", tx = "eth-tx", connections = 8, buffer = 2048, requests_per_second = 200 }
+//! plc.modbus = { port = 502, unit = 1, writable = ["markers"] }  # needs plc.net
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
 //! iec61499.types = ["PID.fbt"]     # optional
@@ -186,7 +188,18 @@
 //! compiled into the PLC partition's binary, which runs it natively when its package holds
 //! exactly that image (a translation error stops the build); the semantics, traps, watchdogs
 //! and monitoring are the interpreter's. A program downloaded online runs on the
-//! interpreter until the next build.
+//! interpreter until the next build. `plc.net` gives the PLC its own network interface, a
+//! tenant of the NIC partition (`nic.tenants.<plc>` with the same MAC): `mac`, `address`,
+//! `gateway`, `rx` and `tx` as `guest.net` has them (two queuing ports of at least 1514
+//! bytes, joined to the NIC's by channels), and the limits of its communication process:
+//! `connections` TCP connections at once (1..=32, default 8; one more is closed at once),
+//! `buffer` bytes of each connection's receive and send buffer (512..=65536, default
+//! 2048), `requests_per_second` requests taken from each connection (1..=100000, default
+//! 200; more wait in the connection's buffer). `plc.modbus` (needs `plc.net`) serves
+//! Modbus/TCP on the process image: `port` (default 502), `unit` (the unit id it answers
+//! besides 0xFF; default 1), and `writable`, the areas a client may write: `"outputs"`
+//! (coils and holding registers of `%QX`/`%QW`) and `"markers"` (`%MX`/`%MW`); default
+//! none. The map and what the PLC does with requests: docs/plc.md.
 //!
 //! **Data entries.** `cargo xtask` can give a partition a read-only data entry
 //! (`data/<partition>` in `system.img`, which syssw maps at `DATA_BASE`; see

@@ -184,6 +184,32 @@ pub struct Plc {
     pub deadline: Named<Scalar>,
     pub shared: Option<Spanned<String>>,
     pub native: Option<Spanned<bool>>,
+    pub net: Option<Spanned<PlcNet>>,
+    pub modbus: Option<Spanned<PlcModbus>>,
+}
+
+/// `plc.net`: the PLC's own interface (as `guest.net`) and its communication limits.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcNet {
+    pub mac: Spanned<String>,
+    pub address: Spanned<String>,
+    pub gateway: Option<Spanned<String>>,
+    pub rx: Spanned<String>,
+    pub tx: Spanned<String>,
+    pub connections: Option<Spanned<i64>>,
+    pub buffer: Option<Spanned<i64>>,
+    pub requests_per_second: Option<Spanned<i64>>,
+}
+
+/// `plc.modbus`: the Modbus/TCP server on the process image.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcModbus {
+    pub port: Option<Spanned<i64>>,
+    pub unit: Option<Spanned<i64>>,
+    #[serde(default)]
+    pub writable: Vec<Spanned<String>>,
 }
 
 /// A value written in the description (`plc.safe`).

@@ -163,6 +163,37 @@ pub struct GuestNet {
     pub tx: String,
 }
 
+/// A PLC's interface on the NIC partition's switch (`plc.net`): the link as a guest's
+/// `eth0`, and what its communication process allows.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlcNet {
+    pub link: GuestNet,
+    /// TCP connections open at once (all services together).
+    pub connections: u8,
+    /// Bytes of each connection's receive and of its send buffer.
+    pub buffer: u32,
+    /// Requests served per second per connection (more wait in its buffer).
+    pub requests_per_second: u32,
+}
+
+impl PlcNet {
+    pub const DEFAULT_CONNECTIONS: u8 = 8;
+    pub const MAX_CONNECTIONS: u8 = 32;
+    pub const DEFAULT_BUFFER: u32 = 2048;
+    pub const DEFAULT_REQUESTS_PER_SECOND: u32 = 200;
+}
+
+/// The PLC's Modbus/TCP server (`plc.modbus`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlcModbus {
+    pub port: u16,
+    pub unit: u8,
+    /// Coils/holding registers of `%QX`/`%QW` writable from the network.
+    pub write_outputs: bool,
+    /// Coils/holding registers of `%MX`/`%MW` writable from the network.
+    pub write_markers: bool,
+}
+
 /// The largest Ethernet frame without its FCS: the size `guest.net`'s ports need.
 pub const ETHERNET_FRAME_MAX: u32 = 1514;
 
@@ -261,6 +292,10 @@ pub struct Plc {
     /// Safe values of `%Q` variables by name (checked against the program when it is
     /// compiled); the others go to zero/FALSE.
     pub safe: Vec<(String, PlcValue)>,
+    /// The PLC's own network interface and its communication limits (`plc.net`).
+    pub net: Option<PlcNet>,
+    /// The Modbus/TCP server on the process image (`plc.modbus`; needs `plc.net`).
+    pub modbus: Option<PlcModbus>,
     /// Task deadlines by IEC TASK name (ns from the task's release; checked against the
     /// program when it is compiled); the other tasks have none.
     pub deadlines: Vec<(String, u64)>,

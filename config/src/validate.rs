@@ -1344,6 +1344,25 @@ impl Validator<'_, '_> {
             mapped[online.response] = true;
             Some(online)
         });
+        let net = raw.net.as_ref().and_then(|n| {
+            let net = self.plc_net(n, &path.key("net"), ports)?;
+            for name in [&net.link.rx, &net.link.tx] {
+                if let Some(i) = ports.iter().position(|p| &p.name == name) {
+                    mapped[i] = true;
+                }
+            }
+            Some(net)
+        });
+        let modbus = raw.modbus.as_ref().and_then(|m| {
+            if raw.net.is_none() {
+                self.error(
+                    start(m),
+                    &path.key("modbus"),
+                    "a Modbus/TCP server needs the PLC's network interface (`plc.net`)",
+                );
+            }
+            self.plc_modbus(m, &path.key("modbus"))
+        });
         // (byte, source offset, port) of every validity bit.
         let mut valid_bits: Vec<(u32, usize, usize)> = Vec::new();
         let links = raw
@@ -1520,7 +1539,121 @@ impl Validator<'_, '_> {
             deadlines,
             shared: None,
             native: raw.native.as_ref().is_some_and(|n| *n.get_ref()),
+            net,
+            modbus,
         })
+    }
+
+    /// An optional integer of `range` at `key` of `path` (`default` when absent).
+    fn int_in(
+        &mut self,
+        value: Option<&Spanned<i64>>,
+        path: &KeyPath,
+        key: &str,
+        range: core::ops::RangeInclusive<i64>,
+        default: i64,
+    ) -> Option<i64> {
+        let Some(v) = value else {
+            return Some(default);
+        };
+        if range.contains(v.get_ref()) {
+            return Some(*v.get_ref());
+        }
+        self.error(
+            start(v),
+            &path.key(key),
+            format!(
+                "{} is outside {}..={}",
+                v.get_ref(),
+                range.start(),
+                range.end()
+            ),
+        );
+        None
+    }
+
+    /// `plc.net`: the link as `guest.net` checks it, and the communication limits.
+    fn plc_net(
+        &mut self,
+        net: &Spanned<schema::PlcNet>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> Option<PlcNet> {
+        let n = net.get_ref();
+        let link = Spanned::new(
+            net.span(),
+            schema::GuestNet {
+                mac: n.mac.clone(),
+                address: n.address.clone(),
+                gateway: n.gateway.clone(),
+                rx: n.rx.clone(),
+                tx: n.tx.clone(),
+            },
+        );
+        let link = self.guest_net(&link, path, ports);
+        let connections = self.int_in(
+            n.connections.as_ref(),
+            path,
+            "connections",
+            1..=i64::from(PlcNet::MAX_CONNECTIONS),
+            i64::from(PlcNet::DEFAULT_CONNECTIONS),
+        );
+        let buffer = self.int_in(
+            n.buffer.as_ref(),
+            path,
+            "buffer",
+            512..=65_536,
+            i64::from(PlcNet::DEFAULT_BUFFER),
+        );
+        let rate = self.int_in(
+            n.requests_per_second.as_ref(),
+            path,
+            "requests_per_second",
+            1..=100_000,
+            i64::from(PlcNet::DEFAULT_REQUESTS_PER_SECOND),
+        );
+        Some(PlcNet {
+            link: link?,
+            connections: connections? as u8,
+            buffer: buffer? as u32,
+            requests_per_second: rate? as u32,
+        })
+    }
+
+    /// `plc.modbus`: a TCP port, a unit id and the writable areas.
+    fn plc_modbus(
+        &mut self,
+        modbus: &Spanned<schema::PlcModbus>,
+        path: &KeyPath,
+    ) -> Option<PlcModbus> {
+        let m = modbus.get_ref();
+        let port = self.int_in(m.port.as_ref(), path, "port", 1..=65_535, 502);
+        let unit = self.int_in(m.unit.as_ref(), path, "unit", 0..=255, 1);
+        let (mut write_outputs, mut write_markers) = (false, false);
+        let mut ok = true;
+        for w in &m.writable {
+            match w.get_ref().as_str() {
+                "outputs" => write_outputs = true,
+                "markers" => write_markers = true,
+                other => {
+                    ok = false;
+                    self.error(
+                        start(w),
+                        &path.key("writable"),
+                        format!(
+                            "`{other}` is no writable area: \"outputs\" (%QX, %QW) or \"markers\" (%MX, %MW)"
+                        ),
+                    );
+                }
+            }
+        }
+        Some(PlcModbus {
+            port: port? as u16,
+            unit: unit? as u8,
+            write_outputs,
+            write_markers,
+        })
+        .filter(|_| ok)
     }
 
     /// `plc.shared`: a segment the partition maps read-write, named by at most two PLC

@@ -476,3 +476,91 @@ fn plc_native_selects_the_native_tier() {
         "",
     );
 }
+
+#[test]
+fn a_plc_network_interface_and_modbus_server_are_checked() {
+    let net = "ports.rx = { kind = \"queuing\", direction = \"in\", size = 1514, depth = 8 }
+ports.tx = { kind = \"queuing\", direction = \"out\", size = 1514, depth = 8 }
+plc.net = { mac = \"52:54:00:12:34:57\", address = \"10.0.2.16/24\", gateway = \"10.0.2.2\", rx = \"rx\", tx = \"tx\", connections = 4, buffer = 1024, requests_per_second = 50 }
+plc.modbus = { port = 1502, unit = 3, writable = [\"markers\", \"outputs\"] }
+# b";
+    let base = (
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    );
+    // The frame ports need no process-image mapping (their channels are left out here, so
+    // only the plc diagnostics matter).
+    let src = plc(&[base, ("# b", net)]);
+    let diags = load(&src).unwrap_err();
+    assert!(
+        diags
+            .iter()
+            .all(|d| !d.key_path.starts_with("partitions.b.plc")),
+        "{diags:?}"
+    );
+    for (from, to, needle, key, message) in [
+        (
+            "52:54:00:12:34:57",
+            "01:00:5e:00:00:01",
+            "\"01:00:5e:00:00:01\"",
+            "partitions.b.plc.net.mac",
+            "no unicast MAC address",
+        ),
+        (
+            "rx = \"rx\"",
+            "rx = \"in\"",
+            "rx = ^\"in\"",
+            "partitions.b.plc.net.rx",
+            "size` of at least 1514",
+        ),
+        (
+            "connections = 4",
+            "connections = 33",
+            "connections = ^33",
+            "partitions.b.plc.net.connections",
+            "33 is outside 1..=32",
+        ),
+        (
+            "buffer = 1024",
+            "buffer = 100",
+            "buffer = ^100",
+            "partitions.b.plc.net.buffer",
+            "outside 512..=65536",
+        ),
+        (
+            "requests_per_second = 50",
+            "requests_per_second = 0",
+            "requests_per_second = ^0",
+            "partitions.b.plc.net.requests_per_second",
+            "outside 1..=100000",
+        ),
+        (
+            "port = 1502",
+            "port = 70000",
+            "port = ^70000",
+            "partitions.b.plc.modbus.port",
+            "outside 1..=65535",
+        ),
+        (
+            "\"markers\", \"outputs\"",
+            "\"inputs\"",
+            "[^\"inputs\"",
+            "partitions.b.plc.modbus.writable",
+            "no writable area",
+        ),
+    ] {
+        let src = plc(&[base, ("# b", net), (from, to)]);
+        expect_some(&src, needle, 0, key, message);
+    }
+    let src = plc(&[base, ("# b", net), ("plc.net = {", "plc.other = {")]);
+    assert!(load(&src).is_err(), "an unknown key");
+    let no_net = "plc.modbus = { port = 502 }\n# b";
+    let src = plc(&[base, ("# b", no_net)]);
+    expect_some(
+        &src,
+        "{ port",
+        0,
+        "partitions.b.plc.modbus",
+        "needs the PLC's network interface",
+    );
+}

@@ -86,8 +86,8 @@ fn plc_guest_system() {
         (0, 3_000_000, 1)
     );
     // The PLC's valve and setpoint to the plant, the plant's level to the PLC; the guest
-    // sees the level and the valve and reaches the PLC's online service; its eth0 is the
-    // NIC partition's tenant.
+    // sees the level and the valve and reaches the PLC's online service; its eth0 and the
+    // PLC's interface are the NIC partition's tenants.
     let links: Vec<(PortKind, String, Vec<String>)> = s
         .channels
         .iter()
@@ -125,7 +125,18 @@ fn plc_guest_system() {
             link(PortKind::Queuing, "plc.reply", &["linux.plc-response"]),
             link(PortKind::Queuing, "linux.eth0-tx", &["nic.linux-tx"]),
             link(PortKind::Queuing, "nic.linux-rx", &["linux.eth0-rx"]),
+            link(PortKind::Queuing, "plc.eth-tx", &["nic.plc-tx"]),
+            link(PortKind::Queuing, "nic.plc-rx", &["plc.eth-rx"]),
         ]
+    );
+    // The PLC's own interface (10.0.2.16) with its read-only Modbus/TCP server.
+    let p = plc.plc.as_ref().expect("the PLC's keys");
+    let net = p.net.as_ref().expect("plc.net");
+    assert_eq!((net.link.address, net.link.prefix), ([10, 0, 2, 16], 24));
+    let modbus = p.modbus.expect("plc.modbus");
+    assert_eq!(
+        (modbus.port, modbus.write_outputs, modbus.write_markers),
+        (502, false, false)
     );
     let g = guest.guest.as_ref().expect("the guest's keys");
     assert_eq!(g.programs, ["plcctl", "plcc"]);

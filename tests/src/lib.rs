@@ -199,3 +199,31 @@ pub fn http_get(port: u16, path: &str) -> Option<(String, String)> {
     let (head, body) = (&answer[..end.0], &answer[end.1..]);
     Some((head.lines().next()?.to_string(), body.to_string()))
 }
+
+/// One Modbus/TCP request ADU to 127.0.0.1:`port` (a port QEMU forwards to the PLC) on a
+/// new connection: the response's bytes (empty when the PLC closed the connection).
+pub fn modbus_exchange(port: u16, adu: &[u8]) -> std::io::Result<Vec<u8>> {
+    let mut s = TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(5))?;
+    s.set_read_timeout(Some(Duration::from_secs(10)))?;
+    s.write_all(adu)?;
+    let mut out = vec![0u8; 260];
+    let n = s.read(&mut out)?;
+    out.truncate(n);
+    Ok(out)
+}
+
+/// The tank's level (`%IL0`: input registers 0..3, unit 1) read over Modbus/TCP with our
+/// own frame, or `None` without an answer.
+pub fn modbus_level(port: u16) -> Option<f64> {
+    let r = modbus_exchange(port, &[0, 1, 0, 0, 0, 6, 1, 4, 0, 0, 0, 4]).ok()?;
+    if r.len() != 9 + 8 || r[7] != 4 || r[8] != 8 {
+        return None;
+    }
+    let mut bytes = [0u8; 8];
+    for i in 0..4 {
+        // Each register big-endian on the wire, the image's words little-endian.
+        bytes[2 * i] = r[9 + 2 * i + 1];
+        bytes[2 * i + 1] = r[9 + 2 * i];
+    }
+    Some(f64::from_le_bytes(bytes))
+}

@@ -326,15 +326,22 @@ fn system_leftover() {
 fn system_default() {
     // The host side: the guest's page through the forwarded port, asked for until it
     // comes (the system boots meanwhile).
-    let (o, page) = boot_beside("system_default", |ports, ended| {
-        while !ended.load(std::sync::atomic::Ordering::SeqCst) {
-            if let Some(page) = http_get(ports[0], "/") {
-                return Some(page);
-            }
+    let (o, (page, level)) = boot_beside("system_default", |ports, ended| {
+        let (mut page, mut level) = (None, None);
+        while !ended.load(std::sync::atomic::Ordering::SeqCst)
+            && (page.is_none() || level.is_none())
+        {
+            page = page.or_else(|| http_get(ports[0], "/"));
+            level = level.or_else(|| scenarios::modbus_level(ports[1]));
             std::thread::sleep(std::time::Duration::from_millis(500));
         }
-        None
+        (page, level)
     });
+    check(
+        &o,
+        level.is_some_and(|l| (0.0..2.0).contains(&l)),
+        &format!("the level from the PLC's Modbus/TCP server: {level:?}"),
+    );
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     let (status, body) = page.unwrap_or_default();
     check(

@@ -267,7 +267,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
     );
     let forwards: Vec<String> = qemu::RUN_FORWARDS
         .iter()
-        .map(|(host, guest)| format!("127.0.0.1:{host} -> {guest}"))
+        .map(|(host, address, port)| format!("127.0.0.1:{host} -> {address}:{port}"))
         .collect();
     eprintln!(
         "xtask: NIC: virtio-net at PCI 00:03.0 on QEMU's user network, TCP forwarded (host only): {}",

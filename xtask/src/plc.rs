@@ -198,6 +198,40 @@ fn package(
             access: o.access,
         }
     });
+    // The frame ports of `plc.net` follow (no bytes of the image either).
+    let net = plc.net.as_ref().map(|n| {
+        let at = ports.len();
+        for port in [&n.link.rx, &n.link.tx] {
+            let index = p
+                .ports
+                .iter()
+                .position(|q| &q.name == port)
+                .expect("validated: plc.net names ports of the partition");
+            let link = PlcLink {
+                port: index,
+                at: 0,
+                valid: None,
+            };
+            ports.push(port_map(p, &link));
+        }
+        package::Net {
+            mac: n.link.mac,
+            address: n.link.address,
+            prefix: n.link.prefix,
+            gateway: n.link.gateway,
+            rx: at,
+            tx: at + 1,
+            connections: n.connections,
+            buffer: n.buffer,
+            requests_per_second: n.requests_per_second,
+            modbus: plc.modbus.map(|m| package::Modbus {
+                port: m.port,
+                unit: m.unit,
+                write_outputs: m.write_outputs,
+                write_markers: m.write_markers,
+            }),
+        }
+    });
     let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
     let configured = plc
         .safe
@@ -241,6 +275,9 @@ fn package(
     );
     if plc.native {
         package::request_native(&mut bytes);
+    }
+    if let Some(net) = &net {
+        package::attach_net(&mut bytes, net);
     }
     Ok(bytes)
 }

@@ -48,10 +48,10 @@ pub struct RunOptions {
 /// QEMU's user-mode network, each of `forwards`
 /// (host port, guest port) a TCP forward that listens on 127.0.0.1 only, never on
 /// another interface of the host.
-pub fn nic(forwards: &[(u16, u16)]) -> Vec<String> {
+pub fn nic(forwards: &[(u16, &str, u16)]) -> Vec<String> {
     let mut netdev = String::from("user,id=net0");
-    for (host, guest) in forwards {
-        netdev.push_str(&format!(",hostfwd=tcp:127.0.0.1:{host}-:{guest}"));
+    for (host, address, port) in forwards {
+        netdev.push_str(&format!(",hostfwd=tcp:127.0.0.1:{host}-{address}:{port}"));
     }
     vec![
         "-netdev".into(),
@@ -68,9 +68,12 @@ pub fn iommu() -> Vec<String> {
     vec!["-device".into(), "intel-iommu".into()]
 }
 
-/// What `cargo xtask run` forwards to the NIC (host port on 127.0.0.1, guest port): the
-/// soft-PLC's Modbus/TCP server and an HTTP port, documented in docs/commands.md.
-pub const RUN_FORWARDS: &[(u16, u16)] = &[(10502, 502), (10080, 80)];
+/// What `cargo xtask run` forwards to the NIC (host port on 127.0.0.1, address and port
+/// behind the NIC): the soft-PLC's Modbus/TCP server (its `plc.net` address in
+/// config/systems/plc-guest.toml) and the guest's HTTP port, documented in
+/// docs/commands.md.
+pub const RUN_FORWARDS: &[(u16, &str, u16)] =
+    &[(10502, "10.0.2.16", 502), (10080, "10.0.2.15", 80)];
 
 /// Where COM2 goes.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -580,7 +583,7 @@ mod tests {
                 .iter()
                 .all(|f| f.starts_with("hostfwd=tcp:127.0.0.1:"))
         );
-        assert!(args[1].contains("hostfwd=tcp:127.0.0.1:10502-:502"));
+        assert!(args[1].contains("hostfwd=tcp:127.0.0.1:10502-10.0.2.16:502"));
         assert_eq!(
             args[3],
             "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on"

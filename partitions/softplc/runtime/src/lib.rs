@@ -9,16 +9,20 @@
 //! checks, takeover by name), the globals shared with another project ([`shared`]) and
 //! which execution tier runs the program ([`tier`]: the interpreter or native code) and the
 //! records kept across a power cut ([`store`]: boot project, RETAIN snapshots; [`persist`]:
-//! where they live on the PLC's virtual disk, start and saves) and the
-//! variables published to and subscribed from other controllers ([`pubsub`]).
+//! where they live on the PLC's virtual disk, start and saves), the variables published to
+//! and subscribed from other controllers ([`pubsub`]), and the communication process's
+//! network services ([`comm`]: its TCP/IP stack, Modbus/TCP).
 //! The partition program (`main.rs`) only re-verifies the program, creates the ports and
 //! the processes (one per IEC task and a control process) and moves bytes between them and
 //! this library. It must never trust the package: every structure is checked and
 //! the bytecode re-verified before anything runs.
 #![cfg_attr(not(test), no_std)]
 
-#[cfg(any(feature = "alloc", test))]
+#[cfg(any(feature = "alloc", feature = "net", test))]
 extern crate alloc;
+
+#[cfg(any(feature = "net", test))]
+pub mod comm;
 
 pub mod download;
 pub use histogram;

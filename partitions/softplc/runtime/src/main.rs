@@ -18,6 +18,12 @@
 //! lower-priority cycle outlasts its window starts when that cycle ends (its deadline or
 //! instruction budget bounds it).
 //!
+//! - the communication process ([`comm`]), below the control process, once per period,
+//!   when the configuration gives the PLC a network interface (`plc.net`): its own TCP/IP
+//!   stack on the interface's frame ports and the Modbus/TCP server (`softplc::comm`); it
+//!   never takes the life's lock: requests and answers pass through [`EXCHANGE`], which the
+//!   control process serves between cycles when it finds it free (it never waits for it).
+//!
 //! Online download: the chunks are assembled in whichever of the two static image buffers
 //! the running program does not use; a committed (verified) program then runs from the
 //! next release over the other of the two static data buffers, which the running program
@@ -74,6 +80,11 @@
 //!   partition's start, 0 = the first);
 //! - `plc: download refused: <reason>` when a committed download fails a check (the
 //!   running program goes on);
+//! - `plc: net <address>/<prefix> mac <mac> connections=<n> buffer=<bytes>
+//!   requests_per_second=<n>` and `plc: modbus on port <p> unit <u> writable=<areas>` at
+//!   start (with `plc.net`, `plc.modbus`); `plc: t=<ms>ms net open=<n> accepted=<n>
+//!   refused=<n> malformed=<n> requests=<n> responses=<n> frames_in=<n> frames_out=<n>`
+//!   every [`STATS_EVERY_MS`] while connections were seen;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
 //!
@@ -152,6 +163,10 @@ static AREAS: spin::Mutex<Areas> = spin::Mutex::new(Areas::new());
 /// The running program's runtime state and the VM's stack, call and try frames and the
 /// shared-globals scratch: kept out of the control process's 32 KiB stack.
 static RUNTIME: spin::Mutex<Runtime> = spin::Mutex::new(Runtime::idle());
+/// The Modbus requests the communication process took and the control process's answers
+/// (the control process only ever tries this lock).
+static EXCHANGE: spin::Mutex<softplc::comm::Exchange> =
+    spin::Mutex::new(softplc::comm::Exchange::new());
 static WORKSPACE: spin::Mutex<Workspace> = spin::Mutex::new(Workspace {
     stack: [0; 256],
     calls: [CallFrame::EMPTY; 32],
@@ -649,6 +664,14 @@ extern "C" fn control() {
                 if let Some(reason) = loader.refusal.take() {
                     println!("plc: download refused: {reason}");
                 }
+                if let Some(modbus) = life.package.net().and_then(|n| n.modbus)
+                    && let Some(mut exchange) = EXCHANGE.try_lock()
+                {
+                    let running = life.rt.schedule.order[..life.rt.schedule.count]
+                        .iter()
+                        .any(|&t| life.rt.stopped[t].is_none());
+                    softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
+                }
                 let now = now_ns();
                 if now >= next_stats {
                     next_stats += STATS_EVERY_MS * 1_000_000;
@@ -684,6 +707,80 @@ extern "C" fn control() {
         }
         // Withdrawn before the life's values go: the task processes wait for the next one.
         drop(published);
+    }
+}
+
+/// The communication process: frames in from the NIC partition, the stack and its
+/// services ([`softplc::comm::Comm`]), frames out, once per period (at most
+/// [`softplc::comm::FRAMES_PER_RUN`] frames each way).
+extern "C" fn comm() {
+    use softplc::comm::{Comm, FRAMES_PER_RUN};
+    let info = apex::runtime::start_info();
+    let Some(net) = Package::parse(info.data()).ok().and_then(|p| {
+        let net = p.net()?;
+        Some((net, p.port(net.rx)?.name, p.port(net.tx)?.name))
+    }) else {
+        return;
+    };
+    let (net, rx_name, tx_name) = net;
+    let (Some(rx), Some(tx)) = (
+        name(rx_name).and_then(|n| QueuingPortReceiver::<Warden>::from_name(n).ok()),
+        name(tx_name).and_then(|n| QueuingPortSender::<Warden>::from_name(n).ok()),
+    ) else {
+        report("net: the frame ports cannot be opened");
+        return;
+    };
+    let started = now_ns();
+    let mut comm = match Comm::new(&net, started) {
+        Ok(comm) => comm,
+        Err(e) => {
+            report(text!("net: the services cannot listen: {e:?}").as_str());
+            return;
+        }
+    };
+    let mut frame = [0u8; netstack::MTU];
+    let (mut frames_in, mut frames_out) = (0u64, 0u64);
+    let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
+    let mut logged = softplc::comm::CommStats::default();
+    loop {
+        for _ in 0..FRAMES_PER_RUN {
+            let Ok((message, _)) = rx.receive(&mut frame, SystemTime::Normal(Duration::ZERO))
+            else {
+                break;
+            };
+            comm.stack.device.deliver(message);
+            frames_in += 1;
+        }
+        let now = now_ns();
+        comm.run(now, &mut EXCHANGE.lock());
+        for _ in 0..FRAMES_PER_RUN {
+            let Some(out) = comm.stack.device.take() else {
+                break;
+            };
+            let _ = tx.send(&out, SystemTime::Normal(Duration::ZERO));
+            frames_out += 1;
+        }
+        if now >= next_stats {
+            next_stats += STATS_EVERY_MS * 1_000_000;
+            let s = comm.stats;
+            if s != logged {
+                logged = s;
+                println!(
+                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} frames_in={frames_in} frames_out={frames_out}",
+                    (now - started) / 1_000_000,
+                    comm.open(),
+                    s.accepted,
+                    s.refused,
+                    s.malformed,
+                    s.requests,
+                    s.responses
+                );
+            }
+        }
+        if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
+            println!("plc: net: PERIODIC_WAIT failed; stopping");
+            return;
+        }
     }
 }
 
@@ -800,6 +897,8 @@ fn release_previous_locks() {
     force_open(&SCRATCH);
     force_open(&RUNTIME);
     force_open(&WORKSPACE);
+    force_open(&EXCHANGE);
+    *EXCHANGE.lock() = softplc::comm::Exchange::new();
     force_open(&LIFE);
     // The previous life's control process is gone with its frame.
     LIFE.lock().0 = None;
@@ -886,6 +985,38 @@ impl PlcPartition {
         }
         // The VM's stack and call frames, the online buffers and the life live in its stack.
         spawn(ctx, "control", control, period(), control_priority);
+        if let Some(net) = package.net() {
+            let [a, b, c, d] = net.address;
+            let m = net.mac;
+            println!(
+                "plc: net {a}.{b}.{c}.{d}/{} mac {:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x} connections={} buffer={} requests_per_second={}",
+                net.prefix,
+                m[0],
+                m[1],
+                m[2],
+                m[3],
+                m[4],
+                m[5],
+                net.connections,
+                net.buffer,
+                net.requests_per_second
+            );
+            if let Some(modbus) = net.modbus {
+                let writable = match (modbus.write_outputs, modbus.write_markers) {
+                    (true, true) => "outputs,markers",
+                    (true, false) => "outputs",
+                    (false, true) => "markers",
+                    (false, false) => "none",
+                };
+                println!(
+                    "plc: modbus on port {} unit {} writable={writable}",
+                    modbus.port, modbus.unit
+                );
+            }
+            // Below everything else of the PLC: it takes only the window's idle time.
+            let priority = control_priority.saturating_sub(1).max(1);
+            spawn(ctx, "comm", comm, period(), priority);
+        }
     }
 }
 
@@ -936,4 +1067,5 @@ fn main() {
     PlcPartition.run()
 }
 
-apex::partition_entry!(main);
+// The communication process's stack and its connections' buffers live in the heap.
+apex::partition_entry!(main, heap = 512 * 1024);

@@ -18,7 +18,8 @@
 //! 27     1    flags: bit 0 (FLAG_NATIVE) run the program on the native execution tier
 //!             (`plc.native`), when this partition's binary holds its translation; the
 //!             other bits 0
-//! 28     4    reserved (0)
+//! 28     4    network block offset (0: the PLC has no network interface); the block
+//!             runs to the end of the package
 //! 32     4    safe-value list offset
 //! 36     4    safe-value list length
 //! 40     4    shared-globals block offset
@@ -63,6 +64,21 @@
 //! ...         the task deadlines: 40-byte records `task name` (32 bytes, UTF-8, zero
 //!             padded: an IEC TASK of the program, or `TASK.instance`), `deadline u64` (ns
 //!             from the task's release, at least 1); tasks without one have no deadline
+//! ...         the network block (`plc.net`, `plc.modbus`), [`NET_BLOCK`] bytes:
+//!   0    6    MAC address
+//!   6    4    IPv4 address
+//!   10   1    prefix length (1..=30)
+//!   11   1    flags: bit 0 a gateway, bit 1 a Modbus/TCP server, bit 2 Modbus may write
+//!             the outputs (%QX, %QW), bit 3 the markers (%MX, %MW)
+//!   12   4    gateway (0 without)
+//!   16   1    frames-in port (index of a queuing input of at least 1514 bytes)
+//!   17   1    frames-out port (index of a queuing output of at least 1514 bytes)
+//!   18   1    TCP connections at once (1..=32)
+//!   19   1    Modbus unit id
+//!   20   4    bytes of each connection's receive and of its send buffer (512..=65536)
+//!   24   4    requests served per second and connection (at least 1)
+//!   28   2    Modbus TCP port (0 without the server)
+//!   30   2    reserved (0)
 //! ```
 //!
 //! The online ports carry the online protocol (`plc-online`) instead of process-image
@@ -156,6 +172,9 @@ pub enum PackageError {
     /// The task-deadline list lies outside the package, is ragged, or has a record with a
     /// malformed name or a zero deadline.
     BadDeadlines,
+    /// The network block is cut short, names ports that are not a queuing input and output
+    /// of a frame's size, or has a field out of range.
+    BadNet,
 }
 
 impl core::fmt::Display for PackageError {
@@ -176,6 +195,7 @@ impl core::fmt::Display for PackageError {
             Self::BadPort(n) => write!(f, "port record {n} is malformed"),
             Self::BadShared => write!(f, "the shared-globals block is malformed"),
             Self::BadDeadlines => write!(f, "the task-deadline list is malformed"),
+            Self::BadNet => write!(f, "the network block is malformed"),
             Self::BadFlags(flags) => write!(f, "unknown flags 0x{flags:02x}"),
         }
     }
@@ -204,6 +224,118 @@ pub struct Package<'a> {
     safe: &'a [u8],
     shared: Option<SharedLayout<'a>>,
     deadlines: &'a [u8],
+    net: Option<Net>,
+}
+
+/// Bytes of the network block.
+pub const NET_BLOCK: usize = 32;
+/// Largest Ethernet frame without FCS: the least size of the frame ports.
+pub const FRAME_MAX: u32 = 1514;
+/// Most TCP connections a PLC keeps.
+pub const MAX_CONNECTIONS: u8 = 32;
+
+/// The PLC's network interface and services (the network block).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Net {
+    pub mac: [u8; 6],
+    pub address: [u8; 4],
+    pub prefix: u8,
+    pub gateway: Option<[u8; 4]>,
+    /// Package port indices: the frames in and out.
+    pub rx: usize,
+    pub tx: usize,
+    pub connections: u8,
+    pub buffer: u32,
+    pub requests_per_second: u32,
+    pub modbus: Option<Modbus>,
+}
+
+/// The Modbus/TCP server's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Modbus {
+    pub port: u16,
+    pub unit: u8,
+    pub write_outputs: bool,
+    pub write_markers: bool,
+}
+
+const NET_GATEWAY: u8 = 1;
+const NET_MODBUS: u8 = 2;
+const NET_WRITE_OUTPUTS: u8 = 4;
+const NET_WRITE_MARKERS: u8 = 8;
+
+impl Net {
+    /// The block's fields (its ports are checked by [`Package::parse`]).
+    fn parse(b: &[u8]) -> Option<Net> {
+        if b.len() != NET_BLOCK || b[11] & !0xF != 0 || b[30..32] != [0, 0] {
+            return None;
+        }
+        let flags = b[11];
+        let modbus = if flags & NET_MODBUS != 0 {
+            let port = u16_at(b, 28);
+            if port == 0 {
+                return None;
+            }
+            Some(Modbus {
+                port,
+                unit: b[19],
+                write_outputs: flags & NET_WRITE_OUTPUTS != 0,
+                write_markers: flags & NET_WRITE_MARKERS != 0,
+            })
+        } else {
+            None
+        };
+        let net = Net {
+            mac: core::array::from_fn(|i| b[i]),
+            address: [b[6], b[7], b[8], b[9]],
+            prefix: b[10],
+            gateway: (flags & NET_GATEWAY != 0).then(|| [b[12], b[13], b[14], b[15]]),
+            rx: b[16] as usize,
+            tx: b[17] as usize,
+            connections: b[18],
+            buffer: u32_at(b, 20),
+            requests_per_second: u32_at(b, 24),
+            modbus,
+        };
+        let fits = (1..=30).contains(&net.prefix)
+            && net.mac[0] & 1 == 0
+            && (1..=MAX_CONNECTIONS).contains(&net.connections)
+            && (512..=65_536).contains(&net.buffer)
+            && net.requests_per_second > 0;
+        fits.then_some(net)
+    }
+
+    /// The block (for the image builder).
+    #[cfg(any(feature = "alloc", test))]
+    pub fn encode(&self) -> [u8; NET_BLOCK] {
+        let mut b = [0u8; NET_BLOCK];
+        b[..6].copy_from_slice(&self.mac);
+        b[6..10].copy_from_slice(&self.address);
+        b[10] = self.prefix;
+        let mut flags = 0;
+        if let Some(g) = self.gateway {
+            flags |= NET_GATEWAY;
+            b[12..16].copy_from_slice(&g);
+        }
+        if let Some(m) = self.modbus {
+            flags |= NET_MODBUS;
+            if m.write_outputs {
+                flags |= NET_WRITE_OUTPUTS;
+            }
+            if m.write_markers {
+                flags |= NET_WRITE_MARKERS;
+            }
+            b[19] = m.unit;
+            b[28..30].copy_from_slice(&m.port.to_le_bytes());
+        }
+        b[11] = flags;
+        b[16] = self.rx as u8;
+        b[17] = self.tx as u8;
+        b[18] = self.connections;
+        b[20..24].copy_from_slice(&self.buffer.to_le_bytes());
+        b[24..28].copy_from_slice(&self.requests_per_second.to_le_bytes());
+        b
+    }
 }
 
 /// A configured task deadline.
@@ -423,9 +555,26 @@ impl<'a> Package<'a> {
             safe,
             shared,
             deadlines,
+            net: None,
         };
         for i in 0..package.ports {
             package.decode_port(i).ok_or(PackageError::BadPort(i))?;
+        }
+        let net_at = u32_at(bytes, 28) as usize;
+        if net_at != 0 {
+            let net = bytes
+                .get(net_at..)
+                .and_then(Net::parse)
+                .ok_or(PackageError::BadNet)?;
+            let frame_port = |i: usize, direction| {
+                package.port(i).is_some_and(|p| {
+                    p.kind == PortKind::Queuing && p.direction == direction && p.size >= FRAME_MAX
+                })
+            };
+            if !frame_port(net.rx, Direction::In) || !frame_port(net.tx, Direction::Out) {
+                return Err(PackageError::BadNet);
+            }
+            package.net = Some(net);
         }
         if bytes[24] != NO_ONLINE {
             let port = |i: u8, direction| {
@@ -464,10 +613,16 @@ impl<'a> Package<'a> {
         self.online
     }
 
-    /// Whether port `i` moves process-image bytes (all but the online ports).
+    /// The PLC's network interface and services, if the configuration gives it any.
+    pub fn net(&self) -> Option<Net> {
+        self.net
+    }
+
+    /// Whether port `i` moves process-image bytes (all but the online and frame ports).
     pub fn is_image_port(&self, i: usize) -> bool {
         self.online
             .is_none_or(|o| i != o.request && i != o.response)
+            && self.net.is_none_or(|n| i != n.rx && i != n.tx)
     }
 
     /// The configured task deadlines (tasks without one have none).
@@ -620,6 +775,14 @@ pub fn encode(
         out.extend_from_slice(&d.deadline_ns.to_le_bytes());
     }
     out
+}
+
+/// Appends the network block to an [`encode`]d package (`plc.net`).
+#[cfg(any(feature = "alloc", test))]
+pub fn attach_net(package: &mut alloc::vec::Vec<u8>, net: &Net) {
+    let at = package.len() as u32;
+    package[28..32].copy_from_slice(&at.to_le_bytes());
+    package.extend_from_slice(&net.encode());
 }
 
 /// Marks an [`encode`]d package as asking for the native execution tier (`plc.native`).
@@ -980,6 +1143,99 @@ mod tests {
         // Every truncation and every single-byte change parses or is refused.
         for n in 0..good.len() {
             let _ = Package::parse(&good[..n]);
+            for v in [0u8, 1, 0x7f, 0xff] {
+                let mut bad = good.clone();
+                bad[n] = v;
+                let _ = Package::parse(&bad);
+            }
+        }
+    }
+
+    fn frame_port(name: &'static str, direction: Direction) -> PortMap<'static> {
+        PortMap {
+            name,
+            kind: PortKind::Queuing,
+            direction,
+            size: FRAME_MAX,
+            refresh_ns: 0,
+            depth: 32,
+            area_offset: 0,
+            valid: None,
+        }
+    }
+
+    fn network() -> Net {
+        Net {
+            mac: [0x52, 0x54, 0, 0x12, 0x34, 0x56],
+            address: [10, 0, 2, 16],
+            prefix: 24,
+            gateway: Some([10, 0, 2, 2]),
+            rx: 1,
+            tx: 2,
+            connections: 8,
+            buffer: 2048,
+            requests_per_second: 200,
+            modbus: Some(Modbus {
+                port: 502,
+                unit: 1,
+                write_outputs: false,
+                write_markers: true,
+            }),
+        }
+    }
+
+    #[test]
+    fn the_network_block_round_trips_and_hostile_ones_are_refused() {
+        let ports = [
+            level(),
+            frame_port("eth-rx", Direction::In),
+            frame_port("eth-tx", Direction::Out),
+        ];
+        let plain = encode(&ports, b"P", &[], None, &[], None, &[]);
+        assert_eq!(Package::parse(&plain).unwrap().net(), None);
+        let mut good = plain.clone();
+        attach_net(&mut good, &network());
+        let package = Package::parse(&good).unwrap();
+        assert_eq!(package.net(), Some(network()));
+        assert!(package.is_image_port(0));
+        assert!(!package.is_image_port(1) && !package.is_image_port(2));
+        let block = plain.len();
+        // A frame port of the wrong direction, a multicast MAC, a prefix of 0, no
+        // connections, a tiny buffer, no rate, an unknown flag, a Modbus port 0, a cut block.
+        for (at, value) in [
+            (16, 2),
+            (16, 9),
+            (0, 1),
+            (10, 0),
+            (18, 0),
+            (18, 33),
+            (21, 0),
+            (24, 0),
+            (11, 0x13),
+            (28, 0),
+        ] {
+            let mut bad = good.clone();
+            bad[block + at] = value;
+            if at == 28 {
+                bad[block + 29] = 0;
+            }
+            if at == 24 {
+                bad[block + 25..block + 28].fill(0);
+            }
+            if at == 21 {
+                bad[block + 20] = 0;
+            }
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadNet,
+                "byte {at} = {value}"
+            );
+        }
+        assert_eq!(
+            Package::parse(&good[..good.len() - 1]).unwrap_err(),
+            PackageError::BadNet
+        );
+        for n in block..good.len() {
             for v in [0u8, 1, 0x7f, 0xff] {
                 let mut bad = good.clone();
                 bad[n] = v;

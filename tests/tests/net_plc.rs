@@ -1,0 +1,343 @@
+//! The PLC on the network (`tests/scenarios/net_modbus.toml`, `net_plc_flood.toml`): the soft-PLC's own
+//! interface on the NIC partition's switch and its Modbus/TCP server, reached from the host
+//! through QEMU's `hostfwd`. The client is pymodbus (tests/scripts/modbus_client.py) in the
+//! venv `target/pymodbus-venv` (`.ci/run` makes it); without it that part is skipped with
+//! a message, and only our own raw frames below are sent.
+
+use scenarios::tank::{self, DISTURBANCE_MS, SETTLED_MS};
+use scenarios::{boot_beside, check, modbus_exchange, modbus_level};
+use std::io::{Read, Write};
+use std::net::TcpStream;
+use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+use xtask::qemu::Ending;
+
+/// The venv's python with pymodbus, if there is one.
+fn pymodbus_python() -> Option<PathBuf> {
+    let python = xtask::target_dir()
+        .join("pymodbus-venv")
+        .join("bin")
+        .join("python");
+    python.is_file().then_some(python)
+}
+
+#[derive(Debug, Default)]
+struct Client {
+    level: Option<f64>,
+    /// pymodbus's output and whether it passed; `None` when skipped.
+    pymodbus: Option<(String, bool)>,
+    /// The connection after a malformed frame was closed without an answer.
+    malformed_closed: bool,
+}
+
+fn client(port: u16, ended: &AtomicBool) -> Client {
+    let mut c = Client::default();
+    while !ended.load(Ordering::SeqCst) && c.level.is_none() {
+        c.level = modbus_level(port);
+        if c.level.is_none() {
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    }
+    if c.level.is_none() {
+        return c;
+    }
+    match pymodbus_python() {
+        Some(python) => {
+            let script = xtask::workspace_root().join("tests/scripts/modbus_client.py");
+            match std::process::Command::new(python)
+                .arg(script)
+                .arg(port.to_string())
+                .output()
+            {
+                Ok(out) => {
+                    let text = String::from_utf8_lossy(&out.stdout).to_string()
+                        + &String::from_utf8_lossy(&out.stderr);
+                    c.pymodbus = Some((text, out.status.success()));
+                }
+                Err(e) => c.pymodbus = Some((format!("cannot run pymodbus: {e}"), false)),
+            }
+        }
+        None => println!(
+            "net_modbus: pymodbus skipped: no venv at {} (.ci/run makes it: python3 -m venv target/pymodbus-venv && target/pymodbus-venv/bin/pip install 'pymodbus>=3,<4')",
+            xtask::target_dir().join("pymodbus-venv").display()
+        ),
+    }
+    // A protocol id other than 0: not Modbus/TCP, the connection closes (and the PLC's
+    // counter of such connections, which ends the run, goes to 1).
+    c.malformed_closed = modbus_exchange(port, &[0, 2, 0, 1, 0, 6, 1, 3, 0, 0, 0, 1])
+        .map(|r| r.is_empty())
+        .unwrap_or(true);
+    c
+}
+
+#[test]
+fn net_modbus() {
+    let (o, c) = boot_beside("net_modbus", |ports, ended| client(ports[0], ended));
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.line("plc: net 10.0.2.15/24 mac 52:54:00:12:34:56 connections=4")
+            .is_some()
+            && o.line("plc: modbus on port 502 unit 1 writable=markers")
+                .is_some(),
+        "the PLC did not report its interface and Modbus server",
+    );
+    check(
+        &o,
+        c.level.is_some_and(|l| (0.0..2.0).contains(&l)),
+        &format!("the level read over Modbus/TCP: {:?}", c.level),
+    );
+    if let Some((text, passed)) = &c.pymodbus {
+        println!("net_modbus: pymodbus said:\n{text}");
+        check(&o, *passed, "pymodbus's checks failed (its lines above)");
+    }
+    check(
+        &o,
+        c.malformed_closed,
+        "a malformed frame was answered, not closed",
+    );
+    check(
+        &o,
+        o.line(" malformed=1 ").is_some(),
+        "the PLC did not count the malformed connection",
+    );
+}
+
+/// The flood's bounds (scenario `net_plc_flood`): how long (real time) and how many of each.
+const FLOOD: Duration = Duration::from_secs(20);
+const HELD: usize = 100;
+const CHURN: u64 = 2_000;
+const MALFORMED: u64 = 2_000;
+const READS: u64 = 100_000;
+/// How much later than in the quiet seconds a release may be in the flood's.
+const FLOOD_BOUND_NS: u64 = 50_000;
+/// Frames a second from the wire that make a second part of the flood, or at most quiet.
+const FLOODED: u64 = 100;
+const QUIET: u64 = 10;
+
+#[derive(Debug, Default)]
+struct Flood {
+    reached: bool,
+    held: usize,
+    churned: u64,
+    malformed: u64,
+    reads: u64,
+    answered: u64,
+    after: Option<f64>,
+}
+
+/// The malformed frame number `i`: a protocol id other than 0, an MBAP length of 0 or
+/// beyond 254, a request cut short, or bytes that are no frame at all.
+fn malformed(i: u64) -> Vec<u8> {
+    match i % 4 {
+        0 => vec![0, 1, 0, 7, 0, 6, 1, 3, 0, 0, 0, 1],
+        1 => vec![0, 1, 0, 0, 0, 0, 1],
+        2 => vec![0, 1, 0, 0, 0x01, 0x2c, 1, 3, 0, 0],
+        _ => (0..40).map(|b| (b * 37 + i) as u8).collect(),
+    }
+}
+
+/// Waits until the PLC answers, lets the system run quietly for 5 s, then floods for
+/// [`FLOOD`]; then reads the level once more.
+fn flood(port: u16, ended: &AtomicBool) -> Flood {
+    let mut f = Flood::default();
+    while !ended.load(Ordering::SeqCst) && !f.reached {
+        f.reached = modbus_level(port).is_some();
+        if !f.reached {
+            std::thread::sleep(Duration::from_millis(500));
+        }
+    }
+    if !f.reached {
+        return f;
+    }
+    std::thread::sleep(Duration::from_secs(5));
+    let until = Instant::now() + FLOOD;
+    let going = || Instant::now() < until && !ended.load(Ordering::SeqCst);
+    let connect =
+        || TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(1)).ok();
+    std::thread::scope(|scope| {
+        let churn = scope.spawn(|| {
+            let mut held = Vec::new();
+            while held.len() < HELD && going() {
+                if let Some(s) = connect() {
+                    held.push(s);
+                }
+            }
+            let mut churned = 0;
+            while churned < CHURN && going() {
+                churned += 1;
+                drop(connect());
+            }
+            (held.len(), churned)
+        });
+        let bad = scope.spawn(|| {
+            let mut sent = 0;
+            while sent < MALFORMED && going() {
+                if let Some(mut s) = connect() {
+                    let _ = s.write_all(&malformed(sent));
+                }
+                sent += 1;
+            }
+            sent
+        });
+        let (mut reads, mut answered) = (0, 0);
+        let mut stream = None;
+        while reads < READS && going() {
+            if stream.is_none() {
+                stream = connect();
+            }
+            let Some(s) = stream.as_mut() else {
+                continue;
+            };
+            let _ = s.set_read_timeout(Some(Duration::from_secs(2)));
+            reads += 1;
+            let t = (reads as u16).to_be_bytes();
+            let mut answer = [0u8; 17];
+            let ok = s
+                .write_all(&[t[0], t[1], 0, 0, 0, 6, 1, 4, 0, 0, 0, 4])
+                .and_then(|()| s.read_exact(&mut answer))
+                .is_ok();
+            if ok && answer[..2] == t {
+                answered += 1;
+            } else {
+                stream = None;
+            }
+        }
+        f.reads = reads;
+        f.answered = answered;
+        f.malformed = bad.join().unwrap_or(0);
+        (f.held, f.churned) = churn.join().unwrap_or((0, 0));
+    });
+    for _ in 0..20 {
+        f.after = modbus_level(port);
+        if f.after.is_some() || ended.load(Ordering::SeqCst) {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(500));
+    }
+    f
+}
+
+/// The kernel's time stamp of a log line, `[SSSS.UUUUUU] ...`, in seconds.
+fn kernel_seconds(line: &str) -> Option<f64> {
+    line.strip_prefix('[')?
+        .split_once(']')?
+        .0
+        .trim()
+        .parse()
+        .ok()
+}
+
+/// The number after ` in=` in the NIC's uplink counter line.
+fn uplink_in(line: &str) -> Option<u64> {
+    let at = line.find(" uplink in=")? + " uplink in=".len();
+    line[at..].split(' ').next()?.parse().ok()
+}
+
+#[test]
+fn net_plc_flood() {
+    let (o, f) = boot_beside("net_plc_flood", |ports, ended| flood(ports[0], ended));
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        matches!(o.ending, Ending::TimedOut),
+        "expected the system to run until the timeout",
+    );
+    check(
+        &o,
+        f.reached,
+        "the PLC's Modbus server never answered the host",
+    );
+    // The frames the NIC took from the wire each second (kernel time of its line).
+    let mut rates = Vec::new();
+    let mut last = 0;
+    for line in &o.lines {
+        if let (Some(at), Some(n)) = (kernel_seconds(line), uplink_in(line)) {
+            rates.push((at, n - last.min(n)));
+            last = n;
+        }
+    }
+    let (mut quiet, mut flooded) = (Vec::new(), Vec::new());
+    for line in &o.lines {
+        let (Some(at), Some(("plc", period))) =
+            (kernel_seconds(line), xtask::plot::period_line(line))
+        else {
+            continue;
+        };
+        let Some(&(_, rate)) = rates
+            .iter()
+            .min_by(|a, b| (a.0 - at).abs().total_cmp(&(b.0 - at).abs()))
+        else {
+            continue;
+        };
+        if rate >= FLOODED {
+            flooded.push(period.lateness_ns.2);
+        } else if rate <= QUIET && period.t_ms >= SETTLED_MS {
+            quiet.push(period.lateness_ns.2);
+        }
+    }
+    let peak = rates.iter().map(|r| r.1).max().unwrap_or(0);
+    let (quiet_max, flood_max) = (
+        quiet.iter().copied().max().unwrap_or(0),
+        flooded.iter().copied().max().unwrap_or(0),
+    );
+    println!(
+        "net_plc_flood: the host held {} connections, opened and dropped {}, sent {} malformed frames, {} reads ({} answered) in {FLOOD:?}; the NIC took up to {peak} frames a second from the wire; PLC release lateness (virtual time): max {quiet_max} ns over {} quiet seconds, max {flood_max} ns over {} flooded seconds; level afterwards {:?}",
+        f.held,
+        f.churned,
+        f.malformed,
+        f.reads,
+        f.answered,
+        quiet.len(),
+        flooded.len(),
+        f.after
+    );
+    let last_net = o
+        .lines
+        .iter()
+        .rev()
+        .find(|l| l.contains(" net open="))
+        .cloned()
+        .unwrap_or_default();
+    println!("net_plc_flood: the PLC's last counters: {last_net}");
+    check(
+        &o,
+        flooded.len() >= 3 && quiet.len() >= 3,
+        &format!(
+            "{} flooded and {} quiet seconds of PLC period lines",
+            flooded.len(),
+            quiet.len()
+        ),
+    );
+    check(
+        &o,
+        flood_max <= quiet_max + FLOOD_BOUND_NS,
+        "a release in the flood later than 50 us beyond the quiet seconds' latest",
+    );
+    check(
+        &o,
+        f.answered > 0 && f.after.is_some(),
+        "the server stopped answering valid reads",
+    );
+    // Every cycle: one per 10 ms frame in each period line.
+    for line in &o.lines {
+        if let Some(("plc", period)) = xtask::plot::period_line(line)
+            && period.t_ms > 1_000
+        {
+            check(
+                &o,
+                period.releases >= 99,
+                &format!("{line}: a cycle was missed (one per 10 ms frame)"),
+            );
+        }
+    }
+    let status = tank::status(&o);
+    tank::settles(&o, &status);
+    tank::holds(
+        &o,
+        &status,
+        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= DISTURBANCE_MS.1 + 1_000,
+        0,
+    );
+}
