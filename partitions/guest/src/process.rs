@@ -234,21 +234,22 @@ impl Process {
             sigmask: self.sigmask,
             sigactions: self.sigactions,
             tgid: self.tgid,
+            name: self.name,
+            name_len: self.name_len,
             ..Self::new(tid, self.ppid, self.exe)
         }
     }
 
     /// Exchanges with `other` everything the threads of a process share (Linux's
     /// `CLONE_VM | CLONE_FILES | CLONE_FS | CLONE_SIGHAND` and the process's own state):
-    /// memory areas and heap, descriptors, working directory, name, dispositions,
-    /// limits, umask, memory locks, the alarm, the identity. What is each thread's own
-    /// stays: its id, signal mask and pending thread-directed signals, alternate stack,
-    /// sleep, futex wait, tid addresses and robust list.
+    /// memory areas and heap, descriptors, working directory, dispositions, limits,
+    /// umask, memory locks, the alarm, the identity. What is each thread's own stays: its
+    /// id, name (`comm`: a thread starts with its creator's, `PR_SET_NAME` renames only
+    /// itself, as on Linux), signal mask and pending thread-directed signals, alternate
+    /// stack, sleep, futex wait, tid addresses and robust list.
     pub fn swap_shared(&mut self, other: &mut Self) {
         use core::mem::swap;
         swap(&mut self.ppid, &mut other.ppid);
-        swap(&mut self.name, &mut other.name);
-        swap(&mut self.name_len, &mut other.name_len);
         swap(&mut self.exe, &mut other.exe);
         swap(&mut self.cmdline, &mut other.cmdline);
         swap(&mut self.cwd, &mut other.cwd);

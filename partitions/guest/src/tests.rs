@@ -3335,6 +3335,15 @@ fn threads_share_their_process_and_futexes_wake_them() {
     assert_eq!(g.call(2, nr::getpid, [0; 6]), Some(1));
     assert_eq!(g.call(2, nr::gettid, [0; 6]), Some(2));
     assert_eq!(g.call(1, nr::gettid, [0; 6]), Some(1));
+    // PR_SET_NAME names only the calling thread (Linux's per-thread comm).
+    let first = g.system.process(1).unwrap().name().to_string();
+    g.put(2, SCRATCH + 0x40, b"worker\0");
+    assert_eq!(
+        g.call(2, nr::prctl, [15, SCRATCH + 0x40, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(g.system.process(2).unwrap().name(), "worker");
+    assert_eq!(g.system.process(1).unwrap().name(), first);
     // One memory: what the thread maps and writes, the process has.
     let mapped = g
         .call(2, nr::mmap, [0, PAGE, 3, 0x22, u64::MAX, 0])
