@@ -3,7 +3,7 @@
 //! `cargo xtask run` give QEMU's virtio-blk.
 
 use blk_core::disk::VirtualDisk;
-use blk_core::tenants::{PortSpec, Tenant};
+use blk_core::tenants::Tenant;
 use config::System;
 
 /// `(partition name, tenant table)` for every block-device partition.
@@ -11,14 +11,7 @@ pub fn data_entries(system: &System) -> Vec<(String, Vec<u8>)> {
     let mut out = Vec::new();
     for p in &system.partitions {
         let Some(blk) = &p.blk else { continue };
-        let port = |index: usize| {
-            let port = &p.ports[index];
-            PortSpec {
-                name: &port.name,
-                size: port.size,
-                depth: port.depth,
-            }
-        };
+        let port = |index: usize| crate::nic::port_spec(p, index);
         let tenants: Vec<Tenant<'_>> = blk
             .tenants
             .iter()

@@ -5,19 +5,23 @@ use config::System;
 use nic_core::switch::Mac;
 use nic_core::tenants::{PortSpec, Tenant};
 
+/// Port `index` of driver partition `p` as its tenant table names it (`driver_table`; the
+/// block-device partition's table too).
+pub fn port_spec(p: &config::system::Partition, index: usize) -> PortSpec<'_> {
+    let port = &p.ports[index];
+    PortSpec {
+        name: &port.name,
+        size: port.size,
+        depth: port.depth,
+    }
+}
+
 /// `(partition name, tenant table)` for every NIC partition.
 pub fn data_entries(system: &System) -> Vec<(String, Vec<u8>)> {
     let mut out = Vec::new();
     for p in &system.partitions {
         let Some(nic) = &p.nic else { continue };
-        let port = |index: usize| {
-            let port = &p.ports[index];
-            PortSpec {
-                name: &port.name,
-                size: port.size,
-                depth: port.depth,
-            }
-        };
+        let port = |index: usize| port_spec(p, index);
         let tenants: Vec<Tenant<'_>> = nic
             .tenants
             .iter()

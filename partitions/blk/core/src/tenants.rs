@@ -9,21 +9,15 @@
 //! carrying the tenant's requests), the `to` port (its queuing output to the tenant), a
 //! port being its name, its message size (4 bytes) and depth (4 bytes), then the first
 //! sector (8 bytes) and the sectors (8 bytes) of the virtual disk; a name is a length
-//! byte and that many UTF-8 bytes.
+//! byte and that many UTF-8 bytes (the fields of `driver_table`).
 
 use crate::disk::VirtualDisk;
+pub use driver_table::PortSpec;
+use driver_table::{FieldError, Reader};
 
 const MAGIC: &[u8; 4] = b"BLK1";
 /// Most tenants a block-device partition serves.
 pub const MAX_TENANTS: usize = 8;
-
-/// One of the partition's queuing ports.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PortSpec<'a> {
-    pub name: &'a str,
-    pub size: u32,
-    pub depth: u32,
-}
 
 /// A tenant and its virtual disk.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -81,6 +75,15 @@ impl core::fmt::Display for TableError {
     }
 }
 
+impl From<FieldError> for TableError {
+    fn from(e: FieldError) -> Self {
+        match e {
+            FieldError::Truncated(n) => Self::Truncated(n),
+            FieldError::BadName(n) => Self::BadName(n),
+        }
+    }
+}
+
 impl<'a> Table<'a> {
     pub fn tenants(&self) -> impl Iterator<Item = &Tenant<'a>> + Clone {
         self.tenants[..self.count].iter().flatten()
@@ -128,20 +131,12 @@ pub fn check_disks(
 /// configuration's names are far shorter).
 #[cfg(any(test, feature = "host"))]
 pub fn encode(tenants: &[Tenant<'_>], out: &mut impl Extend<u8>) {
-    fn name(s: &str, out: &mut impl Extend<u8>) {
-        let b = &s.as_bytes()[..s.len().min(255)];
-        out.extend([b.len() as u8]);
-        out.extend(b.iter().copied());
-    }
     out.extend(MAGIC.iter().copied());
     out.extend([tenants.len().min(255) as u8]);
     for t in tenants {
-        name(t.partition, out);
-        for p in [t.from, t.to] {
-            name(p.name, out);
-            out.extend(p.size.to_le_bytes());
-            out.extend(p.depth.to_le_bytes());
-        }
+        driver_table::put_name(out, t.partition);
+        driver_table::put_port(out, t.from);
+        driver_table::put_port(out, t.to);
         out.extend(t.disk.first_sector.to_le_bytes());
         out.extend(t.disk.sectors.to_le_bytes());
     }
@@ -180,46 +175,6 @@ pub fn decode(entry: &[u8]) -> Result<Table<'_>, TableError> {
         return Err(TableError::Trailing);
     }
     Ok(table)
-}
-
-struct Reader<'a> {
-    rest: &'a [u8],
-    tenant: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, n: usize) -> Result<&'a [u8], TableError> {
-        if self.rest.len() < n {
-            return Err(TableError::Truncated(self.tenant));
-        }
-        let (b, rest) = self.rest.split_at(n);
-        self.rest = rest;
-        Ok(b)
-    }
-
-    fn name(&mut self) -> Result<&'a str, TableError> {
-        let len = self.take(1)?[0];
-        core::str::from_utf8(self.take(usize::from(len))?)
-            .map_err(|_| TableError::BadName(self.tenant))
-    }
-
-    fn u32(&mut self) -> Result<u32, TableError> {
-        let b = self.take(4)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn u64(&mut self) -> Result<u64, TableError> {
-        let (lo, hi) = (self.u32()?, self.u32()?);
-        Ok(u64::from(lo) | u64::from(hi) << 32)
-    }
-
-    fn port(&mut self) -> Result<PortSpec<'a>, TableError> {
-        Ok(PortSpec {
-            name: self.name()?,
-            size: self.u32()?,
-            depth: self.u32()?,
-        })
-    }
 }
 
 #[cfg(test)]

@@ -7,19 +7,14 @@
 //! [`crate::switch::MAX_TENANTS`]), then per tenant: its MAC (6 bytes), the partition's
 //! name, the `from` port (the NIC's queuing input carrying the tenant's frames) and the
 //! `to` port (the NIC's queuing output to the tenant), a port being its name, its message
-//! size (4 bytes) and depth (4 bytes); a name is a length byte and that many UTF-8 bytes.
+//! size (4 bytes) and depth (4 bytes); a name is a length byte and that many UTF-8 bytes
+//! (the fields of `driver_table`).
 
 use crate::switch::{MAX_TENANTS, Mac};
+pub use driver_table::PortSpec;
+use driver_table::{FieldError, Reader};
 
 const MAGIC: &[u8; 4] = b"NIC1";
-
-/// One of the NIC partition's queuing ports.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct PortSpec<'a> {
-    pub name: &'a str,
-    pub size: u32,
-    pub depth: u32,
-}
 
 /// An attached tenant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -81,19 +76,19 @@ impl core::fmt::Display for DecodeError {
 pub fn encode(tenants: &[Tenant<'_>], out: &mut impl Extend<u8>) {
     out.extend(MAGIC.iter().copied());
     out.extend([tenants.len().min(MAX_TENANTS) as u8]);
-    let name = |out: &mut dyn FnMut(&[u8]), text: &str| {
-        let bytes = &text.as_bytes()[..text.len().min(255)];
-        out(&[bytes.len() as u8]);
-        out(bytes);
-    };
     for t in tenants.iter().take(MAX_TENANTS) {
-        let mut put = |b: &[u8]| out.extend(b.iter().copied());
-        put(&t.mac.0);
-        name(&mut put, t.partition);
-        for port in [t.from, t.to] {
-            name(&mut put, port.name);
-            put(&port.size.to_le_bytes());
-            put(&port.depth.to_le_bytes());
+        out.extend(t.mac.0);
+        driver_table::put_name(out, t.partition);
+        driver_table::put_port(out, t.from);
+        driver_table::put_port(out, t.to);
+    }
+}
+
+impl From<FieldError> for DecodeError {
+    fn from(e: FieldError) -> Self {
+        match e {
+            FieldError::Truncated(n) => Self::Truncated(n),
+            FieldError::BadName(n) => Self::BadName(n),
         }
     }
 }
@@ -111,7 +106,7 @@ pub fn decode(bytes: &[u8]) -> Result<Table<'_>, DecodeError> {
         count,
     };
     for (n, slot) in table.tenants.iter_mut().take(count).enumerate() {
-        let mut r = Reader { rest, n };
+        let mut r = Reader { rest, tenant: n };
         let mut mac = [0u8; 6];
         mac.copy_from_slice(r.take(6)?);
         let partition = r.name()?;
@@ -129,40 +124,6 @@ pub fn decode(bytes: &[u8]) -> Result<Table<'_>, DecodeError> {
         return Err(DecodeError::Trailing);
     }
     Ok(table)
-}
-
-struct Reader<'a> {
-    rest: &'a [u8],
-    n: usize,
-}
-
-impl<'a> Reader<'a> {
-    fn take(&mut self, len: usize) -> Result<&'a [u8], DecodeError> {
-        if self.rest.len() < len {
-            return Err(DecodeError::Truncated(self.n));
-        }
-        let (head, rest) = self.rest.split_at(len);
-        self.rest = rest;
-        Ok(head)
-    }
-
-    fn u32(&mut self) -> Result<u32, DecodeError> {
-        let b = self.take(4)?;
-        Ok(u32::from_le_bytes([b[0], b[1], b[2], b[3]]))
-    }
-
-    fn name(&mut self) -> Result<&'a str, DecodeError> {
-        let len = usize::from(self.take(1)?[0]);
-        core::str::from_utf8(self.take(len)?).map_err(|_| DecodeError::BadName(self.n))
-    }
-
-    fn port(&mut self) -> Result<PortSpec<'a>, DecodeError> {
-        Ok(PortSpec {
-            name: self.name()?,
-            size: self.u32()?,
-            depth: self.u32()?,
-        })
-    }
 }
 
 #[cfg(test)]
