@@ -43,6 +43,8 @@ pub mod table;
 pub mod time;
 
 #[cfg(feature = "runtime")]
+pub mod main_process;
+#[cfg(feature = "runtime")]
 pub mod runtime;
 #[cfg(feature = "runtime")]
 mod warden;

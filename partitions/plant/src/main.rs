@@ -20,6 +20,7 @@
 use apex::Warden;
 use apex::a653rs::bindings::ApexPartitionP4;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
@@ -83,21 +84,14 @@ impl Partition<Warden> for PlantPartition {
         if let Err(e) = ctx.create_sampling_port_destination(name("setpoint"), 8, REFRESH) {
             println!("plant: no setpoint port ({e:?}); status lines show setpoint=-");
         }
-        let attributes = ProcessAttribute {
-            period: SystemTime::Normal(period()),
-            time_capacity: SystemTime::Infinite,
-            entry_point: simulate,
-            stack_size: 16 * 1024,
-            // Just below the MCP (processes must stay under it): above any background partition
-            // whose MCP is lower, so nothing outside the plant's window can delay a release.
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("simulate"),
-        };
-        let process = ctx
-            .create_process(attributes)
-            .expect("CREATE_PROCESS simulate");
-        process.start().expect("START simulate");
+        main_process::start(
+            ctx,
+            "simulate",
+            simulate,
+            16 * 1024,
+            Release::Every(period()),
+        )
+        .unwrap_or_else(|e| panic!("{e}"));
     }
 
     fn warm_start(&self, ctx: &mut StartContext<Warden>) {

@@ -31,6 +31,7 @@ mod device;
 use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use apex::user_rt::protocol::layout::DEVICES_BASE;
 use apex::user_rt::sys;
@@ -275,22 +276,8 @@ impl Partition<Warden> for BlkPartition {
                 return;
             }
         }
-        let attributes = ProcessAttribute {
-            period: SystemTime::Infinite,
-            time_capacity: SystemTime::Infinite,
-            entry_point: run,
-            stack_size: 32 * 1024,
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("server").expect("a short name"),
-        };
-        match ctx.create_process(attributes) {
-            Ok(process) => {
-                if process.start().is_err() {
-                    refuse(format_args!("cannot start the server process"));
-                }
-            }
-            Err(e) => refuse(format_args!("cannot create the server process: {e:?}")),
+        if let Err(e) = main_process::start(ctx, "server", run, 32 * 1024, Release::Aperiodic) {
+            refuse(format_args!("{e}"));
         }
     }
 

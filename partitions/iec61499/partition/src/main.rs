@@ -41,6 +41,7 @@ use alloc::string::String;
 use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
@@ -446,25 +447,11 @@ impl Iec61499Partition {
 
     /// Creates and starts the device process.
     fn spawn(&self, ctx: &mut StartContext<Warden>) {
-        let Ok(name) = Name::from_str("device") else {
-            return;
-        };
-        let attributes = ProcessAttribute {
-            period: SystemTime::Infinite,
-            time_capacity: SystemTime::Infinite,
-            entry_point: device_process,
-            stack_size: apex::table::STACK_SIZE as u32,
-            base_priority: i32::from(apex::runtime::mcp().saturating_sub(1)),
-            deadline: Deadline::Soft,
-            name,
-        };
-        match ctx.create_process(attributes) {
-            Ok(process) => {
-                if let Err(e) = process.start() {
-                    report(&alloc::format!("START device failed: {e:?}"));
-                }
-            }
-            Err(e) => report(&alloc::format!("CREATE_PROCESS device failed: {e:?}")),
+        let stack = apex::table::STACK_SIZE as u32;
+        if let Err(e) =
+            main_process::start(ctx, "device", device_process, stack, Release::Aperiodic)
+        {
+            report(&alloc::format!("{e}"));
         }
     }
 }

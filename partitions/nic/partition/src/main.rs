@@ -39,6 +39,7 @@ mod device;
 use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use apex::user_rt::protocol::layout::DEVICES_BASE;
 use apex::user_rt::sys;
@@ -367,22 +368,8 @@ impl Partition<Warden> for NicPartition {
             }
         }
         const { assert!(MAX_FRAME <= MESSAGE) };
-        let attributes = ProcessAttribute {
-            period: SystemTime::Infinite,
-            time_capacity: SystemTime::Infinite,
-            entry_point: run,
-            stack_size: 32 * 1024,
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("switch").expect("a short name"),
-        };
-        match ctx.create_process(attributes) {
-            Ok(process) => {
-                if process.start().is_err() {
-                    refuse(format_args!("cannot start the switch process"));
-                }
-            }
-            Err(e) => refuse(format_args!("cannot create the switch process: {e:?}")),
+        if let Err(e) = main_process::start(ctx, "switch", run, 32 * 1024, Release::Aperiodic) {
+            refuse(format_args!("{e}"));
         }
     }
 

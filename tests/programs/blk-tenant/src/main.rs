@@ -12,6 +12,7 @@
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use blk_core::SECTOR;
 use blk_core::client::{Client, ClientError, Transport};
@@ -177,17 +178,8 @@ impl Partition<Warden> for Tenant {
             .expect("CREATE_QUEUING_PORT req");
         ctx.create_queuing_port_receiver(name("resp"), MAX_RESPONSE as u32, 2, fifo)
             .expect("CREATE_QUEUING_PORT resp");
-        let attributes = ProcessAttribute {
-            period: SystemTime::Infinite,
-            time_capacity: SystemTime::Infinite,
-            entry_point: run,
-            stack_size: 32 * 1024,
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("tenant"),
-        };
-        let process = ctx.create_process(attributes).expect("CREATE_PROCESS");
-        process.start().expect("START");
+        main_process::start(ctx, "tenant", run, 32 * 1024, Release::Aperiodic)
+            .unwrap_or_else(|e| panic!("{e}"));
     }
 
     fn warm_start(&self, ctx: &mut StartContext<Warden>) {

@@ -21,6 +21,7 @@
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
@@ -220,17 +221,8 @@ impl Partition<Warden> for Tenant {
         } else {
             echo
         };
-        let attributes = ProcessAttribute {
-            period: SystemTime::Infinite,
-            time_capacity: SystemTime::Infinite,
-            entry_point,
-            stack_size: 16 * 1024,
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("tenant"),
-        };
-        let process = ctx.create_process(attributes).expect("CREATE_PROCESS");
-        process.start().expect("START");
+        main_process::start(ctx, "tenant", entry_point, 16 * 1024, Release::Aperiodic)
+            .unwrap_or_else(|e| panic!("{e}"));
     }
 
     fn warm_start(&self, ctx: &mut StartContext<Warden>) {

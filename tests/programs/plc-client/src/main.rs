@@ -24,8 +24,8 @@
 #![no_main]
 
 use apex::Warden;
-use apex::a653rs::bindings::ApexPartitionP4;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use apex::user_rt::sys::rdtsc;
 use core::str::FromStr;
@@ -313,20 +313,8 @@ impl Partition<Warden> for Client {
             QueuingDiscipline::Fifo,
         )
         .expect("CREATE_QUEUING_PORT reply");
-        let period = <Warden as ApexPartitionP4>::get_partition_status().period;
-        let attributes = ProcessAttribute {
-            period: SystemTime::Normal(Duration::from_nanos(period.max(1) as u64)),
-            time_capacity: SystemTime::Infinite,
-            entry_point: run,
-            stack_size: 16 * 1024,
-            // Just below the MCP: above any background partition (a background hog with
-            // a lower MCP but a higher process priority would take this window).
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("run"),
-        };
-        let process = ctx.create_process(attributes).expect("CREATE_PROCESS");
-        process.start().expect("START");
+        main_process::start(ctx, "run", run, 16 * 1024, Release::PartitionPeriod)
+            .unwrap_or_else(|e| panic!("{e}"));
     }
 
     fn warm_start(&self, ctx: &mut StartContext<Warden>) {

@@ -9,18 +9,12 @@
 #![no_main]
 
 use apex::Warden;
-use apex::a653rs::bindings::ApexPartitionP4;
 use apex::a653rs::prelude::*;
+use apex::main_process::{self, Release};
 use apex::user_rt::println;
-use core::str::FromStr;
-use core::time::Duration;
 
 /// Releases before the run ends: 35 s at a 10 ms major frame.
 const FRAMES: u32 = 3_500;
-
-fn name(text: &str) -> Name {
-    Name::from_str(text).expect("names here are short")
-}
 
 extern "C" fn count() {
     for _ in 0..FRAMES {
@@ -34,19 +28,8 @@ struct Stopwatch;
 
 impl Partition<Warden> for Stopwatch {
     fn cold_start(&self, ctx: &mut StartContext<Warden>) {
-        let period = <Warden as ApexPartitionP4>::get_partition_status().period;
-        let attributes = ProcessAttribute {
-            period: SystemTime::Normal(Duration::from_nanos(period.max(1) as u64)),
-            time_capacity: SystemTime::Infinite,
-            entry_point: count,
-            stack_size: 16 * 1024,
-            // Just below the MCP: above any background hog of the scenario.
-            base_priority: i32::from(apex::runtime::mcp()).saturating_sub(1).max(1),
-            deadline: Deadline::Soft,
-            name: name("count"),
-        };
-        let process = ctx.create_process(attributes).expect("CREATE_PROCESS");
-        process.start().expect("START");
+        main_process::start(ctx, "count", count, 16 * 1024, Release::PartitionPeriod)
+            .unwrap_or_else(|e| panic!("{e}"));
     }
 
     fn warm_start(&self, ctx: &mut StartContext<Warden>) {
