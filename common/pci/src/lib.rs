@@ -601,5 +601,58 @@ pub fn capabilities(page: &[u8], index: usize) -> Capabilities {
     c
 }
 
+/// What a driver partition takes from its device page to drive one function: the record
+/// and capabilities of the first function with the vendor and one of the device ids, its
+/// interrupt line, and the partition's DMA region.
+#[derive(Clone, Debug)]
+pub struct Claim {
+    pub record: Record,
+    pub capabilities: Capabilities,
+    pub line: u8,
+    pub region: DmaRegion,
+}
+
+/// Why a driver partition cannot drive the function it looks for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ClaimError {
+    /// None of the partition's `devices` has the vendor and a device id.
+    NoFunction,
+    /// The function has no interrupt line (the configuration gives it none).
+    NoInterruptLine(Address),
+    /// The partition has no `dma` (or, without an IOMMU, no `dma_unconfined = true`).
+    NoDmaRegion,
+}
+
+impl core::fmt::Display for ClaimError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::NoFunction => f.write_str("no such function among the partition's devices"),
+            Self::NoInterruptLine(at) => write!(f, "{at} has no interrupt line"),
+            Self::NoDmaRegion => f.write_str(
+                "no DMA region (the partition needs `dma`, and `dma_unconfined = true` without an IOMMU)",
+            ),
+        }
+    }
+}
+
+/// The first function of the device page with `vendor` and one of `devices`, with what a
+/// driver needs besides (see [`Claim`]).
+pub fn claim(page: &[u8], vendor: u16, devices: &[u16]) -> Result<Claim, ClaimError> {
+    let (index, record) = records(page)
+        .enumerate()
+        .find(|(_, r)| r.vendor == vendor && devices.contains(&r.device))
+        .ok_or(ClaimError::NoFunction)?;
+    let line = record
+        .interrupt_line
+        .ok_or(ClaimError::NoInterruptLine(record.address))?;
+    let region = dma_region(page).ok_or(ClaimError::NoDmaRegion)?;
+    Ok(Claim {
+        capabilities: capabilities(page, index),
+        record,
+        line,
+        region,
+    })
+}
+
 #[cfg(test)]
 mod tests;

@@ -39,9 +39,9 @@ use blk_core::driver::{Outcome, serve};
 use blk_core::link::{MAX_REQUEST, MAX_RESPONSE, Operation, Status};
 use blk_core::tenants::Table;
 use blk_core::virtio_blk::{FEATURE_FLUSH, Refusal};
-use core::str::FromStr;
 use core::time::Duration;
 use device::Disk;
+use driver_link as link;
 
 /// Requests a tenant may have served per round.
 const BUDGET: u32 = 4;
@@ -52,10 +52,6 @@ const REFUSALS_LOGGED: u64 = 8;
 /// virtio's PCI vendor and its block device ids (transitional, modern).
 const VIRTIO_VENDOR: u16 = 0x1af4;
 const VIRTIO_BLK: [u16; 2] = [0x1001, 0x1042];
-
-fn name(text: &str) -> Option<Name> {
-    Name::from_str(text).ok()
-}
 
 fn refuse(text: core::fmt::Arguments<'_>) {
     let line = alloc::format!("{text}");
@@ -121,35 +117,20 @@ extern "C" fn run() {
     // with devices starts, for the life of its task.
     #[allow(unsafe_code)]
     let page = unsafe { core::slice::from_raw_parts(DEVICES_BASE as *const u8, page_len) };
-    let Some((index, record)) = pci::records(page)
-        .enumerate()
-        .find(|(_, r)| r.vendor == VIRTIO_VENDOR && VIRTIO_BLK.contains(&r.device))
-    else {
-        refuse(format_args!(
-            "no virtio-blk function among the partition's devices"
-        ));
-        return;
+    let claim = match pci::claim(page, VIRTIO_VENDOR, &VIRTIO_BLK) {
+        Ok(claim) => claim,
+        Err(e) => {
+            refuse(format_args!("virtio-blk: {e}"));
+            return;
+        }
     };
-    let Some(line) = record.interrupt_line else {
-        refuse(format_args!(
-            "virtio-blk {} has no interrupt line",
-            record.address
-        ));
-        return;
-    };
-    let Some(region) = pci::dma_region(page) else {
-        refuse(format_args!(
-            "no DMA region (the partition needs `dma` of at least {} bytes, and `dma_unconfined = true` without an IOMMU)",
-            device::DMA_BYTES
-        ));
-        return;
-    };
+    let (record, line) = (claim.record, claim.line);
     if let Err(e) = sys::irq_attach(u64::from(line), 0) {
         refuse(format_args!("interrupt line {line}: {e:?}"));
         return;
     }
-    let caps = pci::capabilities(page, index);
-    let mut disk = match Disk::bring_up(&record, &caps, region, u64::from(line)) {
+    let mut disk = match Disk::bring_up(&record, &claim.capabilities, claim.region, u64::from(line))
+    {
         Ok(d) => d,
         Err(e) => {
             refuse(format_args!("virtio-blk {}: {e}", record.address));
@@ -162,15 +143,12 @@ extern "C" fn run() {
     }
     let mut tenants = Vec::new();
     for t in table.tenants() {
-        let ports = name(t.from.name)
-            .and_then(|n| QueuingPortReceiver::<Warden>::from_name(n).ok())
-            .zip(name(t.to.name).and_then(|n| QueuingPortSender::<Warden>::from_name(n).ok()));
-        let Some((from, to)) = ports else {
-            refuse(format_args!(
-                "tenant {}: its ports were not created",
-                t.partition
-            ));
-            return;
+        let link::Link { from, to } = match link::open(&t.from, &t.to) {
+            Ok(link) => link,
+            Err(e) => {
+                refuse(format_args!("tenant {}: {e}", t.partition));
+                return;
+            }
         };
         tenants.push(Tenant {
             name: t.partition,
@@ -247,13 +225,6 @@ impl Partition<Warden> for BlkPartition {
     fn cold_start(&self, ctx: &mut StartContext<Warden>) {
         let Some(table) = table() else { return };
         for t in table.tenants() {
-            let (Some(from), Some(to)) = (name(t.from.name), name(t.to.name)) else {
-                refuse(format_args!(
-                    "tenant {}: a port name is too long",
-                    t.partition
-                ));
-                return;
-            };
             if (t.from.size as usize) < MAX_REQUEST || (t.to.size as usize) < MAX_RESPONSE {
                 refuse(format_args!(
                     "tenant {}: ports of {}/{} bytes, a request needs {MAX_REQUEST} and a response {MAX_RESPONSE}",
@@ -261,16 +232,9 @@ impl Partition<Warden> for BlkPartition {
                 ));
                 return;
             }
-            let fifo = QueuingDiscipline::Fifo;
-            let created = ctx
-                .create_queuing_port_receiver(from, t.from.size, t.from.depth, fifo)
-                .is_ok()
-                && ctx
-                    .create_queuing_port_sender(to, t.to.size, t.to.depth, fifo)
-                    .is_ok();
-            if !created {
+            if let Err(e) = link::create(ctx, &t.from, &t.to) {
                 refuse(format_args!(
-                    "tenant {}: cannot create ports {}/{}",
+                    "tenant {} (ports {}/{}): {e}",
                     t.partition, t.from.name, t.to.name
                 ));
                 return;

@@ -43,9 +43,9 @@ use apex::main_process::{self, Release};
 use apex::user_rt::println;
 use apex::user_rt::protocol::layout::DEVICES_BASE;
 use apex::user_rt::sys;
-use core::str::FromStr;
 use core::time::Duration;
 use device::Net;
+use driver_link as link;
 use nic_core::switch::{MAX_FRAME, Port, Rounds, Switch};
 use nic_core::tenants::Table;
 use nic_core::virtio::{self, Memory, RECEIVE_QUEUE, TRANSMIT_QUEUE, Used};
@@ -61,10 +61,6 @@ const MESSAGE: usize = 4096;
 /// virtio's PCI vendor and its network device ids (transitional, modern).
 const VIRTIO_VENDOR: u16 = 0x1af4;
 const VIRTIO_NET: [u16; 2] = [0x1000, 0x1041];
-
-fn name(text: &str) -> Option<Name> {
-    Name::from_str(text).ok()
-}
 
 /// Logs why the partition cannot work and reports it to the health monitor.
 fn refuse(text: core::fmt::Arguments<'_>) {
@@ -236,29 +232,15 @@ extern "C" fn run() {
     // with devices starts, for the life of its task.
     #[allow(unsafe_code)]
     let page = unsafe { core::slice::from_raw_parts(DEVICES_BASE as *const u8, page_len) };
-    let Some((index, record)) = pci::records(page)
-        .enumerate()
-        .find(|(_, r)| r.vendor == VIRTIO_VENDOR && VIRTIO_NET.contains(&r.device))
-    else {
-        refuse(format_args!(
-            "no virtio-net function among the partition's devices"
-        ));
-        return;
+    let claim = match pci::claim(page, VIRTIO_VENDOR, &VIRTIO_NET) {
+        Ok(claim) => claim,
+        Err(e) => {
+            refuse(format_args!("virtio-net: {e}"));
+            return;
+        }
     };
-    let Some(line) = record.interrupt_line else {
-        refuse(format_args!(
-            "virtio-net {} has no interrupt line",
-            record.address
-        ));
-        return;
-    };
-    let Some(region) = pci::dma_region(page) else {
-        refuse(format_args!(
-            "no DMA region (the partition needs `dma`, and `dma_unconfined = true` without an IOMMU)"
-        ));
-        return;
-    };
-    let net = match Net::bring_up(&record, &pci::capabilities(page, index), region) {
+    let (record, line) = (claim.record, claim.line);
+    let net = match Net::bring_up(&record, &claim.capabilities, claim.region) {
         Ok(net) => net,
         Err(e) => {
             refuse(format_args!("virtio-net {}: {e}", record.address));
@@ -275,15 +257,12 @@ extern "C" fn run() {
     };
     let mut links = Vec::new();
     for t in table.tenants() {
-        let ports = name(t.from.name)
-            .and_then(|n| QueuingPortReceiver::<Warden>::from_name(n).ok())
-            .zip(name(t.to.name).and_then(|n| QueuingPortSender::<Warden>::from_name(n).ok()));
-        let Some((from, to)) = ports else {
-            refuse(format_args!(
-                "tenant {}: its ports were not created",
-                t.partition
-            ));
-            return;
+        let link::Link { from, to } = match link::open(&t.from, &t.to) {
+            Ok(link) => link,
+            Err(e) => {
+                refuse(format_args!("tenant {}: {e}", t.partition));
+                return;
+            }
         };
         links.push(Link {
             name: t.partition,
@@ -345,23 +324,9 @@ impl Partition<Warden> for NicPartition {
     fn cold_start(&self, ctx: &mut StartContext<Warden>) {
         let Some(table) = table() else { return };
         for t in table.tenants() {
-            let (Some(from), Some(to)) = (name(t.from.name), name(t.to.name)) else {
+            if let Err(e) = link::create(ctx, &t.from, &t.to) {
                 refuse(format_args!(
-                    "tenant {}: a port name is too long",
-                    t.partition
-                ));
-                return;
-            };
-            let fifo = QueuingDiscipline::Fifo;
-            let created = ctx
-                .create_queuing_port_receiver(from, t.from.size, t.from.depth, fifo)
-                .is_ok()
-                && ctx
-                    .create_queuing_port_sender(to, t.to.size, t.to.depth, fifo)
-                    .is_ok();
-            if !created {
-                refuse(format_args!(
-                    "tenant {}: cannot create ports {}/{}",
+                    "tenant {} (ports {}/{}): {e}",
                     t.partition, t.from.name, t.to.name
                 ));
                 return;

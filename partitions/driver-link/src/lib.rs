@@ -1,0 +1,67 @@
+//! A tenant's pair of queuing ports on a driver partition's side (the NIC's, the block
+//! device's): created in the partition's start from the tenant table's [`PortSpec`]s,
+//! opened again by the driver's process.
+#![no_std]
+
+use apex::Warden;
+use apex::a653rs::prelude::*;
+use core::str::FromStr;
+use driver_table::PortSpec;
+
+/// The driver's ends of a tenant's link: the tenant's messages come in on `from`, the
+/// driver's go out on `to`.
+pub struct Link {
+    pub from: QueuingPortReceiver<Warden>,
+    pub to: QueuingPortSender<Warden>,
+}
+
+/// Why a tenant's ports are unusable.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum LinkError {
+    /// A port name is longer than an ARINC 653 name (32 bytes).
+    NameTooLong,
+    /// The APEX runtime refused to create the ports (the configuration has no such ports,
+    /// or other sizes).
+    NotCreated,
+    /// The ports were not created in the partition's start.
+    NotOpen,
+}
+
+impl core::fmt::Display for LinkError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::NameTooLong => "a port name is too long",
+            Self::NotCreated => "its ports cannot be created",
+            Self::NotOpen => "its ports were not created",
+        })
+    }
+}
+
+fn names(from: &PortSpec<'_>, to: &PortSpec<'_>) -> Result<(Name, Name), LinkError> {
+    let name = |n: &str| Name::from_str(n).map_err(|_| LinkError::NameTooLong);
+    Ok((name(from.name)?, name(to.name)?))
+}
+
+/// Creates the pair (in COLD_START or WARM_START), FIFO both.
+pub fn create(
+    ctx: &mut StartContext<Warden>,
+    from: &PortSpec<'_>,
+    to: &PortSpec<'_>,
+) -> Result<(), LinkError> {
+    let (from_name, to_name) = names(from, to)?;
+    let fifo = QueuingDiscipline::Fifo;
+    ctx.create_queuing_port_receiver(from_name, from.size, from.depth, fifo)
+        .map_err(|_| LinkError::NotCreated)?;
+    ctx.create_queuing_port_sender(to_name, to.size, to.depth, fifo)
+        .map_err(|_| LinkError::NotCreated)?;
+    Ok(())
+}
+
+/// Opens the pair [`create`] made (in a process).
+pub fn open(from: &PortSpec<'_>, to: &PortSpec<'_>) -> Result<Link, LinkError> {
+    let (from_name, to_name) = names(from, to)?;
+    Ok(Link {
+        from: QueuingPortReceiver::from_name(from_name).map_err(|_| LinkError::NotOpen)?,
+        to: QueuingPortSender::from_name(to_name).map_err(|_| LinkError::NotOpen)?,
+    })
+}
