@@ -325,7 +325,8 @@
 //! partition checks against the device's capacity at start, and refuses to serve
 //! otherwise), and two queuing ports of the block-device partition: `from`, an `in` port
 //! of `size` at least 2072 carrying the tenant's requests, and `to`, an `out` port of
-//! `size` at least 2064 to the tenant, each used by one tenant. At most 8 tenants; the
+//! `size` at least 2064 to the tenant, each used by one tenant and joined by its channel
+//! to a port of that tenant, as the NIC's. At most 8 tenants; the
 //! partition has no `plc`, `guest`, `iec61499`, `nic` or `data` keys (`cargo xtask` writes
 //! the tenant table as its data entry, `blk_core::tenants`). The request link:
 //! docs/interfaces.md.

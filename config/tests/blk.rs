@@ -72,12 +72,7 @@ to = "linux.resp"
 "#;
 
 fn edited(edits: &[(&str, &str)]) -> String {
-    let mut text = BLK.to_string();
-    for (pattern, replacement) in edits {
-        assert!(text.contains(pattern), "test bug: {pattern:?}");
-        text = text.replacen(pattern, replacement, 1);
-    }
-    text
+    edit(BLK, edits)
 }
 
 #[test]
@@ -164,6 +159,21 @@ fn ports_must_carry_a_whole_request_and_one_tenant() {
         0,
         "partitions.disk.blk.tenants.plc.to",
         "must be a queuing `out` port",
+    );
+}
+
+#[test]
+fn ports_must_lead_to_their_tenant() {
+    expect_some(
+        &edited(&[("from = \"linux.req\"", "from = \"plc.req\"")]).replacen(
+            "from = \"plc.req\"\nto = \"disk.plc-req\"",
+            "from = \"linux.req\"\nto = \"disk.plc-req\"",
+            1,
+        ),
+        "\"plc-req\", to",
+        0,
+        "partitions.disk.blk.tenants.plc.from",
+        "port `plc-req` is connected from `linux.req`, not to the tenant `plc`",
     );
 }
 

@@ -43,7 +43,12 @@ to = ["b.in"]
 
 /// `BASE` with each `(pattern, replacement)` applied once (the pattern must occur).
 pub fn doc(edits: &[(&str, &str)]) -> String {
-    let mut text = BASE.to_string();
+    edit(BASE, edits)
+}
+
+/// `base` with each `(pattern, replacement)` applied once (the pattern must occur).
+pub fn edit(base: &str, edits: &[(&str, &str)]) -> String {
+    let mut text = base.to_string();
     for (pattern, replacement) in edits {
         assert!(
             text.contains(pattern),
