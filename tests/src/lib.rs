@@ -227,3 +227,66 @@ pub fn modbus_level(port: u16) -> Option<f64> {
     }
     Some(f64::from_le_bytes(bytes))
 }
+
+/// The kernel's time stamp of a log line, `[SSSS.UUUUUU] ...`, in seconds.
+pub fn kernel_seconds(line: &str) -> Option<f64> {
+    line.strip_prefix('[')?
+        .split_once(']')?
+        .0
+        .trim()
+        .parse()
+        .ok()
+}
+
+/// The PLC's worst release lateness (ns) of each second, split by how many frames the NIC
+/// took from the wire then.
+#[derive(Debug, Default)]
+pub struct LatenessByLoad {
+    /// Seconds with at least `loud` frames.
+    pub loud: Vec<u64>,
+    /// Seconds with at most `quiet` frames, once the tank has settled.
+    pub quiet: Vec<u64>,
+    /// The most frames the NIC took in a second.
+    pub peak: u64,
+}
+
+/// Each PLC period line (covering the second before it) goes with the NIC's uplink counter
+/// line nearest in kernel time: loud (at least `loud` frames that second), quiet (at most
+/// `quiet`, after [`tank::SETTLED_MS`]), or neither (a storm's edges).
+pub fn plc_lateness_by_load(o: &Outcome, loud: u64, quiet: u64) -> LatenessByLoad {
+    let uplink_in = |line: &str| -> Option<u64> {
+        let at = line.find(" uplink in=")? + " uplink in=".len();
+        line[at..].split(' ').next()?.parse().ok()
+    };
+    let mut rates = Vec::new();
+    let mut last = 0;
+    for line in &o.lines {
+        if let (Some(at), Some(n)) = (kernel_seconds(line), uplink_in(line)) {
+            rates.push((at, n - last.min(n)));
+            last = n;
+        }
+    }
+    let mut split = LatenessByLoad {
+        peak: rates.iter().map(|r| r.1).max().unwrap_or(0),
+        ..LatenessByLoad::default()
+    };
+    for line in &o.lines {
+        let (Some(at), Some(("plc", period))) =
+            (kernel_seconds(line), xtask::plot::period_line(line))
+        else {
+            continue;
+        };
+        let Some(&(_, rate)) = rates
+            .iter()
+            .min_by(|a, b| (a.0 - at).abs().total_cmp(&(b.0 - at).abs()))
+        else {
+            continue;
+        };
+        if rate >= loud {
+            split.loud.push(period.lateness_ns.2);
+        } else if rate <= quiet && period.t_ms >= tank::SETTLED_MS {
+            split.quiet.push(period.lateness_ns.2);
+        }
+    }
+    split
+}

@@ -221,22 +221,6 @@ fn flood(port: u16, ended: &AtomicBool) -> Flood {
     f
 }
 
-/// The kernel's time stamp of a log line, `[SSSS.UUUUUU] ...`, in seconds.
-fn kernel_seconds(line: &str) -> Option<f64> {
-    line.strip_prefix('[')?
-        .split_once(']')?
-        .0
-        .trim()
-        .parse()
-        .ok()
-}
-
-/// The number after ` in=` in the NIC's uplink counter line.
-fn uplink_in(line: &str) -> Option<u64> {
-    let at = line.find(" uplink in=")? + " uplink in=".len();
-    line[at..].split(' ').next()?.parse().ok()
-}
-
 #[test]
 fn net_plc_flood() {
     let (o, f) = boot_beside("net_plc_flood", |ports, ended| flood(ports[0], ended));
@@ -251,35 +235,9 @@ fn net_plc_flood() {
         f.reached,
         "the PLC's Modbus server never answered the host",
     );
-    // The frames the NIC took from the wire each second (kernel time of its line).
-    let mut rates = Vec::new();
-    let mut last = 0;
-    for line in &o.lines {
-        if let (Some(at), Some(n)) = (kernel_seconds(line), uplink_in(line)) {
-            rates.push((at, n - last.min(n)));
-            last = n;
-        }
-    }
-    let (mut quiet, mut flooded) = (Vec::new(), Vec::new());
-    for line in &o.lines {
-        let (Some(at), Some(("plc", period))) =
-            (kernel_seconds(line), xtask::plot::period_line(line))
-        else {
-            continue;
-        };
-        let Some(&(_, rate)) = rates
-            .iter()
-            .min_by(|a, b| (a.0 - at).abs().total_cmp(&(b.0 - at).abs()))
-        else {
-            continue;
-        };
-        if rate > QUIET {
-            flooded.push(period.lateness_ns.2);
-        } else if rate <= QUIET && period.t_ms >= SETTLED_MS {
-            quiet.push(period.lateness_ns.2);
-        }
-    }
-    let peak = rates.iter().map(|r| r.1).max().unwrap_or(0);
+    // Any traffic from the wire makes a second part of the flood.
+    let split = scenarios::plc_lateness_by_load(&o, QUIET + 1, QUIET);
+    let (quiet, flooded, peak) = (split.quiet, split.loud, split.peak);
     let (quiet_max, flood_max) = (
         quiet.iter().copied().max().unwrap_or(0),
         flooded.iter().copied().max().unwrap_or(0),

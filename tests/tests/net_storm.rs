@@ -75,22 +75,6 @@ fn storm(udp: u16, tcp: u16, ended: &AtomicBool) -> Storm {
     s
 }
 
-/// The kernel's time stamp of a log line, `[SSSS.UUUUUU] ...`, in seconds.
-fn kernel_seconds(line: &str) -> Option<f64> {
-    line.strip_prefix('[')?
-        .split_once(']')?
-        .0
-        .trim()
-        .parse()
-        .ok()
-}
-
-/// The number after ` in=` in the NIC's uplink counter line.
-fn uplink_in(line: &str) -> Option<u64> {
-    let at = line.find(" uplink in=")? + " uplink in=".len();
-    line[at..].split(' ').next()?.parse().ok()
-}
-
 #[test]
 fn net_storm() {
     let (o, s) = boot_beside("net_storm", |ports, ended| storm(ports[0], ports[1], ended));
@@ -101,37 +85,8 @@ fn net_storm() {
         "expected the system to run until the timeout",
     );
     check(&o, s.reached, "the guest's httpd never answered the host");
-    // The frames the NIC took from the wire each second (kernel time of its line).
-    let mut rates = Vec::new();
-    let mut last = 0;
-    for line in &o.lines {
-        if let (Some(at), Some(n)) = (kernel_seconds(line), uplink_in(line)) {
-            rates.push((at, n - last.min(n)));
-            last = n;
-        }
-    }
-    // Each PLC period line (covering the second before it) goes with the NIC's line
-    // nearest in time: stormy, quiet, or neither (the storm's edges).
-    let (mut quiet, mut stormy) = (Vec::new(), Vec::new());
-    for line in &o.lines {
-        let (Some(at), Some(("plc", period))) =
-            (kernel_seconds(line), xtask::plot::period_line(line))
-        else {
-            continue;
-        };
-        let Some(&(_, rate)) = rates
-            .iter()
-            .min_by(|a, b| (a.0 - at).abs().total_cmp(&(b.0 - at).abs()))
-        else {
-            continue;
-        };
-        if rate >= STORMY {
-            stormy.push(period.lateness_ns.2);
-        } else if rate <= QUIET && period.t_ms >= SETTLED_MS {
-            quiet.push(period.lateness_ns.2);
-        }
-    }
-    let peak = rates.iter().map(|r| r.1).max().unwrap_or(0);
+    let split = scenarios::plc_lateness_by_load(&o, STORMY, QUIET);
+    let (quiet, stormy, peak) = (split.quiet, split.loud, split.peak);
     let (quiet_max, storm_max) = (
         quiet.iter().copied().max().unwrap_or(0),
         stormy.iter().copied().max().unwrap_or(0),

@@ -7,7 +7,7 @@
 //! (`system_leftover`, `tests/configs/system_leftover.toml`).
 
 use scenarios::tank::{self, BAND, DISTURBANCE_MS, SETTLED_MS};
-use scenarios::{boot, boot_beside, check, http_get};
+use scenarios::{boot, boot_beside, check, http_get, kernel_seconds};
 use xtask::qemu::Ending;
 
 /// When the level is back in the band after the plant's first disturbance.
@@ -25,16 +25,6 @@ fn field(line: &str, name: &str) -> Vec<u64> {
         .find_map(|w| w.strip_prefix(name))
         .map(|v| v.split('/').filter_map(|x| x.parse().ok()).collect())
         .unwrap_or_default()
-}
-
-/// The kernel's time stamp of a log line, `[SSSS.UUUUUU] ...`, in seconds.
-fn kernel_seconds(line: &str) -> Option<f64> {
-    line.strip_prefix('[')?
-        .split_once(']')?
-        .0
-        .trim()
-        .parse()
-        .ok()
 }
 
 /// The `t=<ms>ms` of a PLC line.
