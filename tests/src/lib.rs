@@ -290,3 +290,43 @@ pub fn plc_lateness_by_load(o: &Outcome, loud: u64, quiet: u64) -> LatenessByLoa
     }
     split
 }
+
+/// A real program in the guest against the same program on this machine: runs `host`
+/// (which must succeed), boots `scenario`, and checks that the guest partition `partition`
+/// printed the same lines on standard output and nothing on standard error, that no
+/// partition panicked, no system call was unsupported and no process was killed by a
+/// signal, that the guest's init exited with status 0 and the run ended with success.
+/// Returns the run and the host's lines.
+pub fn same_output_as_host(
+    scenario: &str,
+    partition: &str,
+    host: &mut std::process::Command,
+) -> (Outcome, Vec<String>) {
+    let ran = host
+        .output()
+        .unwrap_or_else(|e| panic!("running {host:?}: {e}"));
+    assert!(ran.status.success(), "on the host: {host:?}: {ran:?}");
+    let expected: Vec<String> = String::from_utf8_lossy(&ran.stdout)
+        .lines()
+        .map(str::to_string)
+        .collect();
+    let o = boot(scenario);
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    let printed = guest_stdout(&o, partition);
+    check(
+        &o,
+        printed == expected,
+        &format!("the guest printed {printed:#?}, the host {expected:#?}"),
+    );
+    for needle in ["unsupported system call", "killed by signal", " stderr: "] {
+        let found = partition_lines(&o, partition, needle);
+        check(&o, found.is_empty(), &format!("{needle:?}: {found:?}"));
+    }
+    check(
+        &o,
+        !partition_lines(&o, partition, "guest: init exited with status 0").is_empty(),
+        "the guest's init did not exit with status 0",
+    );
+    check(&o, o.succeeded(), "expected success exit (33)");
+    (o, expected)
+}
