@@ -2,6 +2,7 @@
 //! (from `tests/scenarios/NAME.toml`) and hands the outcome to the test's assertions.
 //! Run the scenarios through `cargo xtask test [FILTER]`, which builds the images first.
 
+pub mod browser;
 pub mod tank;
 
 use std::io::{Read, Write};

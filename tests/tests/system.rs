@@ -336,7 +336,7 @@ fn system_default() {
     let (status, body) = page.unwrap_or_default();
     check(
         &o,
-        status.contains(" 200") && body.contains("<h1>Warden: the Linux guest</h1>"),
+        status.contains(" 200") && body.contains("<h1>Warden: tank HMI</h1>"),
         &format!("the guest's page from the host: {status:?} {body:?}"),
     );
     check(

@@ -12,7 +12,8 @@
 //! | `plcctl list` | `<name> <TYPE>` per variable (`TYPE` as IEC names it: `BOOL`, `LREAL`, `TOD`, `WSTRING`, `REF_TO`, ...) |
 //! | `plcctl read NAME...` | `<name> = <value>` per name (IEC literal: `TRUE`, `42`, `0.5`, `T#20ms`, `D#2024-06-15`, `TOD#12:30:00`, `DT#2024-06-15-12:30:00`, `LT#1ms`, `'a'`, `"€"`, `'text'`, `"text"`, `REF(Main.x)`, `NULL`) |
 //! | `plcctl watch NAME... [--interval T] [--count N]` | `t=<ms> <name>=<value> ...` every `T` (default 1s; `500ms`, `2s` or a number of ms), `N` times (default: until stopped) |
-//! | `plcctl force NAME=VALUE` | `forced <name> = <value>` (the value is parsed as the variable's type, which a READ tells: an IEC literal as `read` shows it, with or without its prefix; a STRING or WSTRING also unquoted) |
+//! | `plcctl write NAME=VALUE` | `wrote <name> = <value>`: the variable takes the value once, between cycles, and the program may change it from then on (the value is parsed as the variable's type, which a READ tells: an IEC literal as `read` shows it, with or without its prefix; a STRING or WSTRING also unquoted) |
+//! | `plcctl force NAME=VALUE` | `forced <name> = <value>`: the variable keeps the value (the program's writes to it have no effect) until `unforce`; the value as for `write` |
 //! | `plcctl unforce NAME` | `unforced <name>` |
 //! | `plcctl stats` | `task <name> stopped=<bool> cycles=<n> last_us=.. min_us=.. mean_us=.. max_us=.. last_jitter_us=.. max_jitter_us=.. overruns=<n> faults=<n>` per task |
 //! | `plcctl download FILE.plcb` | `downloaded FILE: <n> bytes, running from release <r>` |
@@ -44,8 +45,8 @@ pub const DEFAULT_RESPONSE: &str = "/dev/arinc/plc-response";
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(2000);
 
 pub const USAGE: &str = "usage: plcctl [--request PATH] [--response PATH] [--timeout MS] \
-list | read NAME... | watch NAME... [--interval T] [--count N] | force NAME=VALUE | \
-unforce NAME | stats | download FILE.plcb | version";
+list | read NAME... | watch NAME... [--interval T] [--count N] | write NAME=VALUE | \
+force NAME=VALUE | unforce NAME | stats | download FILE.plcb | version";
 
 /// What the command line asks.
 #[derive(Clone, Debug, PartialEq)]
@@ -65,9 +66,11 @@ pub enum Action {
         interval: Duration,
         count: Option<u64>,
     },
-    Force {
+    /// WRITE (`force` false) or FORCE (`force` true).
+    Set {
         name: String,
         value: String,
+        force: bool,
     },
     Unforce(String),
     Stats,
@@ -147,15 +150,16 @@ impl Command {
                 interval,
                 count,
             },
-            "force" => {
+            "write" | "force" => {
                 let pair = one("NAME=VALUE")?;
                 let (name, value) = pair
                     .split_once('=')
                     .filter(|(n, v)| !n.is_empty() && !v.is_empty())
-                    .ok_or("force takes NAME=VALUE")?;
-                Action::Force {
+                    .ok_or(format!("{verb} takes NAME=VALUE"))?;
+                Action::Set {
                     name: name.into(),
                     value: value.into(),
+                    force: verb == "force",
                 }
             }
             "unforce" => Action::Unforce(one("NAME")?),
@@ -347,9 +351,9 @@ impl<T: Transport> Link<T> {
                 }
                 Ok(())
             }
-            Action::Force { name, value } => {
+            Action::Set { name, value, force } => {
                 let (ty, _) = self.read(name)?;
-                let what = format!("FORCE {name}");
+                let what = format!("{} {name}", if *force { "FORCE" } else { "WRITE" });
                 let mut buf = [0u8; MAX_TEXT];
                 let parsed = match parse_value(value, ty, &mut buf) {
                     Ok(parsed) => parsed,
@@ -363,12 +367,15 @@ impl<T: Transport> Link<T> {
                         });
                     }
                 };
-                let force = Request::Force {
-                    name,
-                    value: parsed,
+                let (request, done) = if *force {
+                    let value = parsed;
+                    (Request::Force { name, value }, "forced")
+                } else {
+                    let value = parsed;
+                    (Request::Write { name, value }, "wrote")
                 };
-                self.ok(&force, &what)?;
-                out(&format!("forced {name} = {parsed}"));
+                self.ok(&request, &what)?;
+                out(&format!("{done} {name} = {parsed}"));
                 Ok(())
             }
             Action::Unforce(name) => {

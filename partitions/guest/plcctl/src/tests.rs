@@ -113,6 +113,10 @@ impl Transport for Plc {
                 ("valve" | "start", _) => status = Status::TypeMismatch,
                 _ => status = Status::UnknownName,
             },
+            Request::Write { name, value: v } => match (name, v) {
+                ("valve", Value::LReal(x)) => self.valve = x,
+                _ => status = Status::UnknownName,
+            },
             Request::Version => w.put(&PROTOCOL_VERSION.to_le_bytes()).unwrap(),
             Request::Unforce { .. } => self.forced = None,
             Request::Stats { task: 0 } => put_stats(
@@ -325,6 +329,9 @@ fn list_read_watch_force_unforce_and_stats() {
     assert_eq!(plc.forced, Some(0.25));
     let (r, lines, _) = run(Plc::new(Access::Force), "unforce valve");
     assert_eq!((r, lines), (Ok(()), vec!["unforced valve".to_string()]));
+    let (r, lines, plc) = run(Plc::new(Access::Force), "write valve=0.75");
+    assert_eq!((r, lines), (Ok(()), vec!["wrote valve = 0.75".to_string()]));
+    assert_eq!((plc.valve, plc.forced), (0.75, None));
     let (r, lines, _) = run(Plc::new(Access::Monitor), "stats");
     assert_eq!(r, Ok(()));
     assert_eq!(
