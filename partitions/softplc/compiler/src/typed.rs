@@ -5,9 +5,10 @@
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
 //! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
-//! each `base.m` denotes ([`Members`]), the value of each CASE label ([`CaseLabels`]) and
-//! the calls between user POUs, on which [`sema::body`](crate::sema::body) judges the
-//! recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
+//! each `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a
+//! variable, a property, an enumeration value, an exception), the value of each CASE label
+//! ([`CaseLabels`]) and the calls between user POUs, on which
+//! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
 //! those records and reports nothing itself: a diagnostic raised while emitting is a
 //! compiler bug (an internal error).
 //!
@@ -17,10 +18,11 @@
 //! infers: a missing record is an internal error), every callee from [`Callees`] (a user
 //! FUNCTION, a standard function, `REF`/`ADR`, an FB instance, a method or action: it never
 //! looks a called name up again), the variable of every name from [`Variables`] (the POU's
-//! own, its owner's, a global) and the member of every `base.m` from [`Members`] (a
-//! structure's field, a block's variable), but still decides what the rest means while it
-//! emits (enumeration values and properties in expressions, standard-function overloads,
-//! conversions, argument binding) and passes the same check branches again (none can fail on
+//! own, its owner's, a global), the member of every `base.m` from [`Members`] (a
+//! structure's field, a block's variable) and the meaning of every bare name from
+//! [`BareNames`], but still decides what the rest means while it emits (properties read as
+//! `base.p`, enumeration values of typed literals, standard-function overloads, conversions,
+//! argument binding) and passes the same check branches again (none can fail on
 //! a checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
 //! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
 //! pass only, emission reading the label values from the table; the BOOL condition of IF,
@@ -186,6 +188,25 @@ pub enum Member {
 /// The member each member name (`m` of `base.m`) denotes.
 pub type Members = NameTable<Member>;
 
+/// What a bare name in an expression (one that is not called) denotes, as the checker
+/// decided: variables shadow properties, properties shadow enumeration values (of the
+/// expected enumeration first) and exception names.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Bare {
+    /// A variable (which one is in [`Variables`]), or nothing (reported as unknown).
+    Variable,
+    /// A property of `class`, the class whose body it is in, read through its GET
+    /// accessor `getter` (`None`: the property is write-only, reported).
+    Property { class: usize, getter: Option<usize> },
+    /// Value `value` of enumeration `ty`.
+    EnumValue { ty: usize, value: i64 },
+    /// An exception name (a trap): its code.
+    Exception(i64),
+}
+
+/// What each bare name denotes.
+pub type BareNames = NameTable<Bare>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -197,6 +218,8 @@ pub struct Checked {
     pub variables: Variables,
     /// The member every member name denotes.
     pub members: Members,
+    /// What every bare name in an expression denotes.
+    pub bare_names: BareNames,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -221,6 +244,7 @@ pub fn check(
         callees: std::mem::take(&mut checker.callees),
         variables: std::mem::take(&mut checker.variables),
         members: std::mem::take(&mut checker.members),
+        bare_names: std::mem::take(&mut checker.bare_names),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -252,6 +276,7 @@ pub fn emit(
     generator.callees = checked.callees;
     generator.variables = checked.variables;
     generator.members = checked.members;
+    generator.bare_names = checked.bare_names;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -339,6 +364,19 @@ END_PROGRAM
         let errors = internal_errors(check_then_emit(|c| c.members = Members::default()));
         // `c.n`.
         assert!(errors[0].contains("resolved no member"), "{errors:?}");
+    }
+
+    #[test]
+    fn emission_decides_no_bare_name_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.bare_names = BareNames::default()));
+        // `x`, `n` and `step` in the bodies, `r` in Main: none is looked up again.
+        assert!(!errors.is_empty());
+        assert!(
+            errors
+                .iter()
+                .all(|e| e.contains("resolved no meaning") || e.contains("recorded no type")),
+            "{errors:?}"
+        );
     }
 
     #[test]

@@ -19,7 +19,7 @@ use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::{MemberKind, VarDef};
-use crate::typed::Method;
+use crate::typed::{Bare, Method};
 use crate::types::*;
 
 /// What a method is called on.
@@ -712,24 +712,10 @@ impl Gen<'_> {
                 if self.is_visible_var(&n.name) {
                     return None;
                 }
-                let ctx = self.context_class()?;
-                let has = self
-                    .prog
-                    .find_member(ctx, &n.name, MemberKind::Getter)
-                    .is_some()
-                    || self
-                        .prog
-                        .find_member(ctx, &n.name, MemberKind::Setter)
-                        .is_some();
-                has.then_some((
-                    None,
-                    Receiver::Instance {
-                        class: ctx,
-                        exact: self.prog.pous[ctx].kind == PouKind::Program,
-                        superclass: false,
-                    },
-                    n,
-                ))
+                let Bare::Property { class, .. } = self.own_property(n)? else {
+                    return None;
+                };
+                Some((None, self.own_receiver(class), n))
             }
             ExprKind::Member(base, m) => {
                 let recv = self.receiver(base)?;
@@ -757,6 +743,49 @@ impl Gen<'_> {
             }
             _ => None,
         }
+    }
+
+    /// The property bare name `n` denotes in the class whose body is walked, if it names one
+    /// (a variable of that name shadows it: the caller asks first).
+    pub(crate) fn own_property(&self, n: &Ident) -> Option<Bare> {
+        let class = self.context_class()?;
+        let getter = self.prog.find_member(class, &n.name, MemberKind::Getter);
+        let setter = self.prog.find_member(class, &n.name, MemberKind::Setter);
+        (getter.is_some() || setter.is_some()).then_some(Bare::Property { class, getter })
+    }
+
+    /// The receiver of a member of `class` named bare in its own body.
+    fn own_receiver(&self, class: usize) -> Receiver {
+        Receiver::Instance {
+            class,
+            exact: self.prog.pous[class].kind == PouKind::Program,
+            superclass: false,
+        }
+    }
+
+    /// Reads property `e` (a bare name) of `class`, the class whose body is walked, through
+    /// its GET accessor `getter` (reported when it has none).
+    pub(crate) fn own_property_read(
+        &mut self,
+        class: usize,
+        getter: Option<usize>,
+        e: &Expr,
+    ) -> Type {
+        let ExprKind::Name(name) = &e.kind else {
+            return Type::Error;
+        };
+        let Some(getter) = getter else {
+            self.error(
+                codes::PROPERTY_ACCESS,
+                name.span,
+                format!(
+                    "property `{}` is write-only (it has no GET accessor)",
+                    name.text
+                ),
+            );
+            return Type::Error;
+        };
+        self.call_member(None, self.own_receiver(class), getter, &[], e.span)
     }
 
     /// Reads a property through its GET accessor; `None` when `e` is no property.

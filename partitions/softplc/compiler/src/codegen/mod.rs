@@ -38,7 +38,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::{Callees, CaseLabels, ExprTypes, Members, Variables};
+use crate::typed::{Bare, BareNames, Callees, CaseLabels, ExprTypes, Members, Variables};
 use crate::types::*;
 
 /// Where a value lives.
@@ -149,6 +149,9 @@ pub(crate) struct Gen<'a> {
     pub(crate) variables: Variables,
     /// The member each `base.m` denotes: recorded by the checking pass, read by emission.
     pub(crate) members: Members,
+    /// What each bare name in an expression denotes: decided by the checking pass, read by
+    /// emission.
+    pub(crate) bare_names: BareNames,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -204,6 +207,7 @@ impl<'a> Gen<'a> {
             callees: Callees::default(),
             variables: Variables::default(),
             members: Members::default(),
+            bare_names: BareNames::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
