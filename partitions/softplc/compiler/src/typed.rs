@@ -4,13 +4,14 @@
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
-//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
-//! each `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a
-//! variable, a property, an enumeration value, an exception), the value of each CASE label
-//! ([`CaseLabels`]) and the calls between user POUs, on which
-//! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
-//! those records and reports nothing itself: a diagnostic raised while emitting is a
-//! compiler bug (an internal error).
+//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member each
+//! `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a variable, a
+//! property, an enumeration value, an exception), which argument of each call binds which
+//! parameter ([`Bindings`]), the value of each CASE label ([`CaseLabels`]) and the calls
+//! between user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule.
+//! Only a program without diagnostics reaches [`emit`], which starts from those records and
+//! reports nothing itself: a diagnostic raised while emitting is a compiler bug (an internal
+//! error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
@@ -18,17 +19,18 @@
 //! infers: a missing record is an internal error), every callee from [`Callees`] (a user
 //! FUNCTION, a standard function, `REF`/`ADR`, an FB instance, a method or action: it never
 //! looks a called name up again), the variable of every name from [`Variables`] (the POU's
-//! own, its owner's, a global), the member of every `base.m` from [`Members`] (a
-//! structure's field, a block's variable) and the meaning of every bare name from
-//! [`BareNames`], but still decides what the rest means while it emits (properties read as
-//! `base.p`, enumeration values of typed literals, standard-function overloads, conversions,
-//! argument binding) and passes the same check branches again (none can fail on
-//! a checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
-//! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
-//! pass only, emission reading the label values from the table; the BOOL condition of IF,
-//! WHILE and REPEAT, EXIT outside a loop, a zero FOR step and the assignment rules (read-only
-//! target, assignable types, FB instances, the `REF=` target) are checked by the checking
-//! pass only (for emission an EXIT outside a loop is an internal error).
+//! own, its owner's, a global), the member of every `base.m` from [`Members`] (a structure's
+//! field, a block's variable), the meaning of every bare name from [`BareNames`] and the
+//! binding of every call's arguments to a user POU's or method's parameters from [`Bindings`],
+//! but still decides what the rest means while it emits (properties read as `base.p`,
+//! enumeration values of typed literals, standard-function overloads and their arguments,
+//! conversions) and passes the same check branches again (none can fail on a checked program).
+//! The exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
+//! type, label values, empty and overlapping ranges) run in the checking pass only, emission
+//! reading the label values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT
+//! outside a loop, a zero FOR step and the assignment rules (read-only target, assignable
+//! types, FB instances, the `REF=` target) are checked by the checking pass only (for emission
+//! an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 
@@ -207,6 +209,45 @@ pub enum Bare {
 /// What each bare name denotes.
 pub type BareNames = NameTable<Bare>;
 
+/// One argument of a call bound to a parameter of the callee.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Binding {
+    /// The parameter: its index among the variables the callee declares (in frame order).
+    pub param: usize,
+    /// The argument: its index in the call's argument list.
+    pub arg: usize,
+    /// An output (`param => target`).
+    pub output: bool,
+}
+
+/// How the arguments of each call with arguments are bound, as the checker bound them (in
+/// the order given, wrong arguments left out), keyed by the POU whose body it is in and the
+/// span of the call's first argument.
+#[derive(Debug, Default, Clone)]
+pub struct Bindings {
+    map: HashMap<(usize, Span), Vec<Binding>>,
+}
+
+impl Bindings {
+    /// The binding of the call whose first argument is at `first` in the body of POU `pou`.
+    pub fn of(&self, pou: usize, first: Span) -> Option<&[Binding]> {
+        self.map.get(&(pou, first)).map(Vec::as_slice)
+    }
+
+    pub(crate) fn record(&mut self, pou: usize, first: Span, binding: Vec<Binding>) {
+        self.map.insert((pou, first), binding);
+    }
+
+    /// How many calls have a record.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -220,6 +261,8 @@ pub struct Checked {
     pub members: Members,
     /// What every bare name in an expression denotes.
     pub bare_names: BareNames,
+    /// How the arguments of every call are bound to the callee's parameters.
+    pub bindings: Bindings,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -245,6 +288,7 @@ pub fn check(
         variables: std::mem::take(&mut checker.variables),
         members: std::mem::take(&mut checker.members),
         bare_names: std::mem::take(&mut checker.bare_names),
+        bindings: std::mem::take(&mut checker.bindings),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -277,6 +321,7 @@ pub fn emit(
     generator.variables = checked.variables;
     generator.members = checked.members;
     generator.bare_names = checked.bare_names;
+    generator.bindings = checked.bindings;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -377,6 +422,15 @@ END_PROGRAM
                 .all(|e| e.contains("resolved no meaning") || e.contains("recorded no type")),
             "{errors:?}"
         );
+    }
+
+    #[test]
+    fn emission_binds_no_argument_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.bindings = Bindings::default()));
+        // Twice(ABS(-3)) and c(step := r); ABS is a standard function, bound where it is
+        // emitted.
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("bound no arguments")));
     }
 
     #[test]

@@ -38,7 +38,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::{Bare, BareNames, Callees, CaseLabels, ExprTypes, Members, Variables};
+use crate::typed::{Bare, BareNames, Bindings, Callees, CaseLabels, ExprTypes, Members, Variables};
 use crate::types::*;
 
 /// Where a value lives.
@@ -152,6 +152,9 @@ pub(crate) struct Gen<'a> {
     /// What each bare name in an expression denotes: decided by the checking pass, read by
     /// emission.
     pub(crate) bare_names: BareNames,
+    /// How the arguments of each call are bound: recorded by the checking pass, read by
+    /// emission.
+    pub(crate) bindings: Bindings,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -208,6 +211,7 @@ impl<'a> Gen<'a> {
             variables: Variables::default(),
             members: Members::default(),
             bare_names: BareNames::default(),
+            bindings: Bindings::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
