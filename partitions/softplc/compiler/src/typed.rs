@@ -7,11 +7,12 @@
 //! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member each
 //! `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a variable, a
 //! property, an enumeration value, an exception), which argument of each call binds which
-//! parameter ([`Bindings`]), the value of each CASE label ([`CaseLabels`]) and the calls
-//! between user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule.
-//! Only a program without diagnostics reaches [`emit`], which starts from those records and
-//! reports nothing itself: a diagnostic raised while emitting is a compiler bug (an internal
-//! error).
+//! parameter ([`Bindings`]), the order of each standard-function call's arguments
+//! ([`StdArguments`]) and the type each generic selection function is called at
+//! ([`GenericTypes`]), the value of each CASE label ([`CaseLabels`]) and the calls between
+//! user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule. Only a
+//! program without diagnostics reaches [`emit`], which starts from those records and reports
+//! nothing itself: a diagnostic raised while emitting is a compiler bug (an internal error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
@@ -22,15 +23,17 @@
 //! own, its owner's, a global), the member of every `base.m` from [`Members`] (a structure's
 //! field, a block's variable), the meaning of every bare name from [`BareNames`] and the
 //! binding of every call's arguments to a user POU's or method's parameters from [`Bindings`],
-//! but still decides what the rest means while it emits (properties read as `base.p`,
-//! enumeration values of typed literals, standard-function overloads and their arguments,
-//! conversions) and passes the same check branches again (none can fail on a checked program).
-//! The exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
-//! type, label values, empty and overlapping ranges) run in the checking pass only, emission
-//! reading the label values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT
-//! outside a loop, a zero FOR step and the assignment rules (read-only target, assignable
-//! types, FB instances, the `REF=` target) are checked by the checking pass only (for emission
-//! an EXIT outside a loop is an internal error).
+//! the order of standard-function arguments from [`StdArguments`] and the type of SEL, MAX,
+//! MIN, LIMIT and MUX from [`GenericTypes`], but still decides what the rest means while it
+//! emits (properties read as `base.p`, enumeration values of typed literals, the operation of
+//! the other standard functions from their arguments' recorded types, conversions) and passes
+//! the same check branches again (none can fail on a checked program). The exceptions so far:
+//! the recursion rule lives in `sema::body`; the CASE rules (selector type, label values,
+//! empty and overlapping ranges) run in the checking pass only, emission reading the label
+//! values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a
+//! zero FOR step and the assignment rules (read-only target, assignable types, FB instances,
+//! the `REF=` target) are checked by the checking pass only (for emission an EXIT outside a
+//! loop is an internal error).
 
 use std::collections::HashMap;
 
@@ -248,6 +251,14 @@ impl Bindings {
     }
 }
 
+/// The arguments of each standard-function call in the order of the function's inputs (the
+/// index of each in the call's argument list), keyed by the called name.
+pub type StdArguments = NameTable<Vec<usize>>;
+
+/// The type each call of a generic selection function (SEL, MAX, MIN, LIMIT, MUX) without
+/// a typed form is called at, keyed by the called name.
+pub type GenericTypes = NameTable<Type>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -263,6 +274,10 @@ pub struct Checked {
     pub bare_names: BareNames,
     /// How the arguments of every call are bound to the callee's parameters.
     pub bindings: Bindings,
+    /// The order of every standard-function call's arguments.
+    pub std_arguments: StdArguments,
+    /// The type every generic selection function is called at.
+    pub generic_types: GenericTypes,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -289,6 +304,8 @@ pub fn check(
         members: std::mem::take(&mut checker.members),
         bare_names: std::mem::take(&mut checker.bare_names),
         bindings: std::mem::take(&mut checker.bindings),
+        std_arguments: std::mem::take(&mut checker.std_arguments),
+        generic_types: std::mem::take(&mut checker.generic_types),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -322,6 +339,8 @@ pub fn emit(
     generator.members = checked.members;
     generator.bare_names = checked.bare_names;
     generator.bindings = checked.bindings;
+    generator.std_arguments = checked.std_arguments;
+    generator.generic_types = checked.generic_types;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -365,6 +384,7 @@ END_FUNCTION_BLOCK
 PROGRAM Main
 VAR c : Count; r : INT; p : REF_TO INT; END_VAR
 r := Twice(ABS(-3));
+r := MAX(r, 1);
 c(step := r);
 r := c.n;
 c.Reset();
@@ -398,9 +418,10 @@ END_PROGRAM
     fn emission_resolves_no_callee_itself() {
         assert!(check_then_emit(|_| {}).is_ok());
         let errors = internal_errors(check_then_emit(|c| c.callees = Callees::default()));
-        // Twice(...), c(...), c.Reset() and REF(...): each is taken from the checker's record
-        // (ABS(...) too, but it is an argument of Twice, not walked once Twice has no callee).
-        assert_eq!(errors.len(), 4, "{errors:?}");
+        // Twice(...), MAX(...), c(...), c.Reset() and REF(...): each is taken from the
+        // checker's record (ABS(...) too, but it is an argument of Twice, not walked once
+        // Twice has no callee).
+        assert_eq!(errors.len(), 5, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("resolved no callee")));
     }
 
@@ -431,6 +452,26 @@ END_PROGRAM
         // emitted.
         assert_eq!(errors.len(), 2, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("bound no arguments")));
+    }
+
+    #[test]
+    fn emission_places_no_standard_argument_itself() {
+        let errors = internal_errors(check_then_emit(|c| {
+            c.std_arguments = StdArguments::default()
+        }));
+        // ABS(-3) and MAX(r, 1).
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("placed no arguments")));
+    }
+
+    #[test]
+    fn emission_decides_no_generic_type_itself() {
+        let errors = internal_errors(check_then_emit(|c| {
+            c.generic_types = GenericTypes::default()
+        }));
+        // MAX(r, 1).
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert!(errors[0].contains("decided no type"));
     }
 
     #[test]
