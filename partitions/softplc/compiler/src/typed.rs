@@ -9,10 +9,12 @@
 //! property, an enumeration value, an exception), which argument of each call binds which
 //! parameter ([`Bindings`]), the order of each standard-function call's arguments
 //! ([`StdArguments`]) and the type each generic selection function is called at
-//! ([`GenericTypes`]), the value of each CASE label ([`CaseLabels`]) and the calls between
-//! user POUs, on which [`sema::body`](crate::sema::body) judges the recursion rule. Only a
-//! program without diagnostics reaches [`emit`], which starts from those records and reports
-//! nothing itself: a diagnostic raised while emitting is a compiler bug (an internal error).
+//! ([`GenericTypes`]), the property (receiver and accessors) each member read and assignment
+//! target reaches, if any ([`Properties`]), the value of each CASE label ([`CaseLabels`]) and
+//! the calls between user POUs, on which [`sema::body`](crate::sema::body) judges the
+//! recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
+//! those records and reports nothing itself: a diagnostic raised while emitting is a compiler
+//! bug (an internal error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
@@ -24,16 +26,16 @@
 //! field, a block's variable), the meaning of every bare name from [`BareNames`] and the
 //! binding of every call's arguments to a user POU's or method's parameters from [`Bindings`],
 //! the order of standard-function arguments from [`StdArguments`] and the type of SEL, MAX,
-//! MIN, LIMIT and MUX from [`GenericTypes`], but still decides what the rest means while it
-//! emits (properties read as `base.p`, enumeration values of typed literals, the operation of
-//! the other standard functions from their arguments' recorded types, conversions) and passes
-//! the same check branches again (none can fail on a checked program). The exceptions so far:
-//! the recursion rule lives in `sema::body`; the CASE rules (selector type, label values,
-//! empty and overlapping ranges) run in the checking pass only, emission reading the label
-//! values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a
-//! zero FOR step and the assignment rules (read-only target, assignable types, FB instances,
-//! the `REF=` target) are checked by the checking pass only (for emission an EXIT outside a
-//! loop is an internal error).
+//! MIN, LIMIT and MUX from [`GenericTypes`], the property of every access from [`Properties`],
+//! but still decides what the rest means while it emits (enumeration values of typed literals, the
+//! operation of the other standard functions from their arguments' recorded types,
+//! conversions) and passes the same check branches again (none can fail on a checked program).
+//! The exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
+//! type, label values, empty and overlapping ranges) run in the checking pass only, emission
+//! reading the label values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT
+//! outside a loop, a zero FOR step and the assignment rules (read-only target, assignable
+//! types, FB instances, the `REF=` target) are checked by the checking pass only (for emission
+//! an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 
@@ -259,6 +261,43 @@ pub type StdArguments = NameTable<Vec<usize>>;
 /// a typed form is called at, keyed by the called name.
 pub type GenericTypes = NameTable<Type>;
 
+/// What a method or property is called on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Receiver {
+    /// A function-block instance of static type `class`; `exact` when it cannot be an
+    /// instance of a derived block; `superclass` for `SUPER^`.
+    Instance {
+        class: usize,
+        exact: bool,
+        superclass: bool,
+    },
+    /// An interface value.
+    Interface(usize),
+}
+
+/// A GET or SET accessor of a property.
+#[derive(Debug, Clone)]
+pub enum Accessor {
+    /// Of a block: its POU (the call may still be dispatched to an override).
+    Pou(usize),
+    /// Of an interface, as it (or one it extends) declares it.
+    Interface(Box<InterfaceMember>),
+}
+
+/// A property an access (`base.p`, or `p` in a block's own body) reaches.
+#[derive(Debug, Clone)]
+pub struct PropertyAccess {
+    pub recv: Receiver,
+    /// The GET accessor (`None`: write-only).
+    pub getter: Option<Accessor>,
+    /// The SET accessor (`None`: read-only).
+    pub setter: Option<Accessor>,
+}
+
+/// For each name read as `base.m` or written as `m` or `base.m`, the property it reaches or
+/// `None` when it is no property.
+pub type Properties = NameTable<Option<PropertyAccess>>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -278,6 +317,8 @@ pub struct Checked {
     pub std_arguments: StdArguments,
     /// The type every generic selection function is called at.
     pub generic_types: GenericTypes,
+    /// Whether each member read and each assignment target is a property, and which.
+    pub properties: Properties,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -306,6 +347,7 @@ pub fn check(
         bindings: std::mem::take(&mut checker.bindings),
         std_arguments: std::mem::take(&mut checker.std_arguments),
         generic_types: std::mem::take(&mut checker.generic_types),
+        properties: std::mem::take(&mut checker.properties),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -341,6 +383,7 @@ pub fn emit(
     generator.bindings = checked.bindings;
     generator.std_arguments = checked.std_arguments;
     generator.generic_types = checked.generic_types;
+    generator.properties = checked.properties;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -379,6 +422,7 @@ mod tests {
 FUNCTION Twice : INT VAR_INPUT x : INT; END_VAR Twice := x * 2; END_FUNCTION
 FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR
 METHOD Reset n := 0; END_METHOD
+PROPERTY Total : INT GET Total := n; END_GET END_PROPERTY
 n := n + step;
 END_FUNCTION_BLOCK
 PROGRAM Main
@@ -387,6 +431,7 @@ r := Twice(ABS(-3));
 r := MAX(r, 1);
 c(step := r);
 r := c.n;
+r := c.Total;
 c.Reset();
 p := REF(r);
 END_PROGRAM
@@ -472,6 +517,21 @@ END_PROGRAM
         // MAX(r, 1).
         assert_eq!(errors.len(), 1, "{errors:?}");
         assert!(errors[0].contains("decided no type"));
+    }
+
+    #[test]
+    fn emission_resolves_no_property_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.properties = Properties::default()));
+        // Every member read (`c.n`, `c.Total`) and every assignment target is asked about;
+        // `c.Total`, no longer a property, is then no member either.
+        assert!(errors.len() >= 2, "{errors:?}");
+        assert!(
+            errors
+                .iter()
+                .all(|e| e.contains("whether this is a property")
+                    || e.contains("resolved no member")),
+            "{errors:?}"
+        );
     }
 
     #[test]

@@ -39,8 +39,8 @@ use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
 use crate::typed::{
-    Bare, BareNames, Bindings, Callees, CaseLabels, ExprTypes, GenericTypes, Members, StdArguments,
-    Variables,
+    Bare, BareNames, Bindings, Callees, CaseLabels, ExprTypes, GenericTypes, Members, Properties,
+    StdArguments, Variables,
 };
 use crate::types::*;
 
@@ -164,6 +164,9 @@ pub(crate) struct Gen<'a> {
     /// The type each generic selection function is called at: decided by the checking
     /// pass, read by emission.
     pub(crate) generic_types: GenericTypes,
+    /// Which property each member read and assignment target reaches, if any: resolved by
+    /// the checking pass, read by emission.
+    pub(crate) properties: Properties,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -223,6 +226,7 @@ impl<'a> Gen<'a> {
             bindings: Bindings::default(),
             std_arguments: StdArguments::default(),
             generic_types: GenericTypes::default(),
+            properties: Properties::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),
