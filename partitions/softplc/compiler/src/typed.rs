@@ -6,15 +6,15 @@
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
 //! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member each
 //! `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a variable, a
-//! property, an enumeration value, an exception), which argument of each call binds which
-//! parameter ([`Bindings`]), the order of each standard-function call's arguments
-//! ([`StdArguments`]) and the type each generic selection function is called at
-//! ([`GenericTypes`]), the property (receiver and accessors) each member read and assignment
-//! target reaches, if any ([`Properties`]), the value of each CASE label ([`CaseLabels`]) and
-//! the calls between user POUs, on which [`sema::body`](crate::sema::body) judges the
-//! recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
-//! those records and reports nothing itself: a diagnostic raised while emitting is a compiler
-//! bug (an internal error).
+//! property, an enumeration value, an exception; also the value of each `Enum#value`), which
+//! argument of each call binds which parameter ([`Bindings`]), the order of each
+//! standard-function call's arguments ([`StdArguments`]) and the type each generic selection
+//! function is called at ([`GenericTypes`]), the property (receiver and accessors) each member
+//! read and assignment target reaches, if any ([`Properties`]), the value of each CASE label
+//! ([`CaseLabels`]) and the calls between user POUs, on which
+//! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without
+//! diagnostics reaches [`emit`], which starts from those records and reports nothing itself: a
+//! diagnostic raised while emitting is a compiler bug (an internal error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
@@ -27,15 +27,15 @@
 //! binding of every call's arguments to a user POU's or method's parameters from [`Bindings`],
 //! the order of standard-function arguments from [`StdArguments`] and the type of SEL, MAX,
 //! MIN, LIMIT and MUX from [`GenericTypes`], the property of every access from [`Properties`],
-//! but still decides what the rest means while it emits (enumeration values of typed literals, the
-//! operation of the other standard functions from their arguments' recorded types,
-//! conversions) and passes the same check branches again (none can fail on a checked program).
-//! The exceptions so far: the recursion rule lives in `sema::body`; the CASE rules (selector
-//! type, label values, empty and overlapping ranges) run in the checking pass only, emission
-//! reading the label values from the table; the BOOL condition of IF, WHILE and REPEAT, EXIT
-//! outside a loop, a zero FOR step and the assignment rules (read-only target, assignable
-//! types, FB instances, the `REF=` target) are checked by the checking pass only (for emission
-//! an EXIT outside a loop is an internal error).
+//! but still decides what the rest means while it emits (the operation of the other standard
+//! functions from their arguments' recorded types, conversions) and passes the same check
+//! branches again (none can fail on a checked program). The exceptions so far: the recursion
+//! rule lives in `sema::body`; the CASE rules (selector type, label values, empty and
+//! overlapping ranges) run in the checking pass only, emission reading the label values from
+//! the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a zero FOR step
+//! and the assignment rules (read-only target, assignable types, FB instances, the `REF=`
+//! target) are checked by the checking pass only (for emission an EXIT outside a loop is an
+//! internal error).
 
 use std::collections::HashMap;
 
@@ -419,6 +419,7 @@ mod tests {
     use crate::{Options, lexer, parser, sema};
 
     const PROGRAM: &str = "
+TYPE Color : (Red, Green); END_TYPE
 FUNCTION Twice : INT VAR_INPUT x : INT; END_VAR Twice := x * 2; END_FUNCTION
 FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR
 METHOD Reset n := 0; END_METHOD
@@ -426,7 +427,7 @@ PROPERTY Total : INT GET Total := n; END_GET END_PROPERTY
 n := n + step;
 END_FUNCTION_BLOCK
 PROGRAM Main
-VAR c : Count; r : INT; p : REF_TO INT; END_VAR
+VAR c : Count; r : INT; p : REF_TO INT; k : Color; END_VAR
 r := Twice(ABS(-3));
 r := MAX(r, 1);
 c(step := r);
@@ -434,6 +435,7 @@ r := c.n;
 r := c.Total;
 c.Reset();
 p := REF(r);
+k := Color#Green;
 END_PROGRAM
 ";
 
@@ -480,12 +482,16 @@ END_PROGRAM
     #[test]
     fn emission_decides_no_bare_name_itself() {
         let errors = internal_errors(check_then_emit(|c| c.bare_names = BareNames::default()));
-        // `x`, `n` and `step` in the bodies, `r` in Main: none is looked up again.
-        assert!(!errors.is_empty());
+        // `x`, `n` and `step` in the bodies, `r` in Main, `Green` of `Color#Green`: none is
+        // looked up again.
         assert!(
-            errors
-                .iter()
-                .all(|e| e.contains("resolved no meaning") || e.contains("recorded no type")),
+            errors.iter().any(|e| e.contains("no enumeration value")),
+            "{errors:?}"
+        );
+        assert!(
+            errors.iter().all(|e| e.contains("resolved no meaning")
+                || e.contains("recorded no type")
+                || e.contains("no enumeration value")),
             "{errors:?}"
         );
     }

@@ -564,6 +564,23 @@ impl Gen<'_> {
         if ty.name == "STRING" {
             return self.expr(inner, None);
         }
+        // `Enum#value`: the checking pass resolves it and records it ([`Bare`]); emission
+        // reads the record.
+        if !self.check_only {
+            if let ExprKind::Name(n) = &inner.kind
+                && let Some(Bare::EnumValue { ty, value }) = self.bare_names.of(self.cur, n)
+            {
+                let (ty, value) = (*ty, *value);
+                self.push_int(value);
+                return Type::Enum(ty);
+            }
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                inner.span,
+                "internal error: the checker resolved no enumeration value for this literal",
+            );
+            return Type::Error;
+        }
         if let (Some((Type::Enum(ei), _)), ExprKind::Name(n)) =
             (self.prog.aliases.get(&ty.name).cloned(), &inner.kind)
         {
@@ -572,8 +589,10 @@ impl Gen<'_> {
                 .iter()
                 .find(|(vn, _)| *vn == n.name)
             {
-                let v = *v;
-                self.push_int(v);
+                let value = *v;
+                self.bare_names
+                    .record(self.cur, n, Bare::EnumValue { ty: ei, value });
+                self.push_int(value);
                 return Type::Enum(ei);
             }
             let msg = format!("`{}` is not a value of {}", n.text, ty.text);
