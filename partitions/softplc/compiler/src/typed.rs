@@ -32,10 +32,11 @@
 //! branches again (none can fail on a checked program). The exceptions so far: the recursion
 //! rule lives in `sema::body`; the CASE rules (selector type, label values, empty and
 //! overlapping ranges) run in the checking pass only, emission reading the label values from
-//! the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a zero FOR step
-//! and the assignment rules (read-only target, assignable types, FB instances, the `REF=`
-//! target) are checked by the checking pass only (for emission an EXIT outside a loop is an
-//! internal error).
+//! the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a zero FOR
+//! step, the assignment rules (read-only target, assignable types, FB instances, the `REF=`
+//! target) and the argument rules (an unknown, misplaced, surplus or repeated argument of a
+//! user POU, a method or a standard function) are checked by the checking pass only (for
+//! emission an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 
