@@ -4,12 +4,17 @@
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
-//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
-//! each `base.m` denotes ([`Members`]), the value of each CASE label ([`CaseLabels`]) and
-//! the calls between user POUs, on which [`sema::body`](crate::sema::body) judges the
-//! recursion rule. Only a program without diagnostics reaches [`emit`], which starts from
-//! those records and reports nothing itself: a diagnostic raised while emitting is a
-//! compiler bug (an internal error).
+//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member each
+//! `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a variable, a
+//! property, an enumeration value, an exception; also the value of each `Enum#value`), which
+//! argument of each call binds which parameter ([`Bindings`]), the order of each
+//! standard-function call's arguments ([`StdArguments`]) and the type each generic selection
+//! function is called at ([`GenericTypes`]), the property (receiver and accessors) each member
+//! read and assignment target reaches, if any ([`Properties`]), the value of each CASE label
+//! ([`CaseLabels`]) and the calls between user POUs, on which
+//! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without
+//! diagnostics reaches [`emit`], which starts from those records and reports nothing itself: a
+//! diagnostic raised while emitting is a compiler bug (an internal error).
 //!
 //! The separation is not complete: the body walk itself is still the code generator's
 //! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
@@ -17,16 +22,21 @@
 //! infers: a missing record is an internal error), every callee from [`Callees`] (a user
 //! FUNCTION, a standard function, `REF`/`ADR`, an FB instance, a method or action: it never
 //! looks a called name up again), the variable of every name from [`Variables`] (the POU's
-//! own, its owner's, a global) and the member of every `base.m` from [`Members`] (a
-//! structure's field, a block's variable), but still decides what the rest means while it
-//! emits (enumeration values and properties in expressions, standard-function overloads,
-//! conversions, argument binding) and passes the same check branches again (none can fail on
-//! a checked program). The exceptions so far: the recursion rule lives in `sema::body`; the
-//! CASE rules (selector type, label values, empty and overlapping ranges) run in the checking
-//! pass only, emission reading the label values from the table; the BOOL condition of IF,
-//! WHILE and REPEAT, EXIT outside a loop, a zero FOR step and the assignment rules (read-only
-//! target, assignable types, FB instances, the `REF=` target) are checked by the checking
-//! pass only (for emission an EXIT outside a loop is an internal error).
+//! own, its owner's, a global), the member of every `base.m` from [`Members`] (a structure's
+//! field, a block's variable), the meaning of every bare name from [`BareNames`] and the
+//! binding of every call's arguments to a user POU's or method's parameters from [`Bindings`],
+//! the order of standard-function arguments from [`StdArguments`] and the type of SEL, MAX,
+//! MIN, LIMIT and MUX from [`GenericTypes`], the property of every access from [`Properties`],
+//! but still decides what the rest means while it emits (the operation of the other standard
+//! functions from their arguments' recorded types, conversions) and passes the same check
+//! branches again (none can fail on a checked program). The exceptions so far: the recursion
+//! rule lives in `sema::body`; the CASE rules (selector type, label values, empty and
+//! overlapping ranges) run in the checking pass only, emission reading the label values from
+//! the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a zero FOR
+//! step, the assignment rules (read-only target, assignable types, FB instances, the `REF=`
+//! target) and the argument rules (an unknown, misplaced, surplus or repeated argument of a
+//! user POU, a method or a standard function) are checked by the checking pass only (for
+//! emission an EXIT outside a loop is an internal error).
 
 use std::collections::HashMap;
 
@@ -186,6 +196,109 @@ pub enum Member {
 /// The member each member name (`m` of `base.m`) denotes.
 pub type Members = NameTable<Member>;
 
+/// What a bare name in an expression (one that is not called) denotes, as the checker
+/// decided: variables shadow properties, properties shadow enumeration values (of the
+/// expected enumeration first) and exception names.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Bare {
+    /// A variable (which one is in [`Variables`]), or nothing (reported as unknown).
+    Variable,
+    /// A property of `class`, the class whose body it is in, read through its GET
+    /// accessor `getter` (`None`: the property is write-only, reported).
+    Property { class: usize, getter: Option<usize> },
+    /// Value `value` of enumeration `ty`.
+    EnumValue { ty: usize, value: i64 },
+    /// An exception name (a trap): its code.
+    Exception(i64),
+}
+
+/// What each bare name denotes.
+pub type BareNames = NameTable<Bare>;
+
+/// One argument of a call bound to a parameter of the callee.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Binding {
+    /// The parameter: its index among the variables the callee declares (in frame order).
+    pub param: usize,
+    /// The argument: its index in the call's argument list.
+    pub arg: usize,
+    /// An output (`param => target`).
+    pub output: bool,
+}
+
+/// How the arguments of each call with arguments are bound, as the checker bound them (in
+/// the order given, wrong arguments left out), keyed by the POU whose body it is in and the
+/// span of the call's first argument.
+#[derive(Debug, Default, Clone)]
+pub struct Bindings {
+    map: HashMap<(usize, Span), Vec<Binding>>,
+}
+
+impl Bindings {
+    /// The binding of the call whose first argument is at `first` in the body of POU `pou`.
+    pub fn of(&self, pou: usize, first: Span) -> Option<&[Binding]> {
+        self.map.get(&(pou, first)).map(Vec::as_slice)
+    }
+
+    pub(crate) fn record(&mut self, pou: usize, first: Span, binding: Vec<Binding>) {
+        self.map.insert((pou, first), binding);
+    }
+
+    /// How many calls have a record.
+    pub fn len(&self) -> usize {
+        self.map.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.map.is_empty()
+    }
+}
+
+/// The arguments of each standard-function call in the order of the function's inputs (the
+/// index of each in the call's argument list), keyed by the called name.
+pub type StdArguments = NameTable<Vec<usize>>;
+
+/// The type each call of a generic selection function (SEL, MAX, MIN, LIMIT, MUX) without
+/// a typed form is called at, keyed by the called name.
+pub type GenericTypes = NameTable<Type>;
+
+/// What a method or property is called on.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Receiver {
+    /// A function-block instance of static type `class`; `exact` when it cannot be an
+    /// instance of a derived block; `superclass` for `SUPER^`.
+    Instance {
+        class: usize,
+        exact: bool,
+        superclass: bool,
+    },
+    /// An interface value.
+    Interface(usize),
+}
+
+/// A GET or SET accessor of a property.
+#[derive(Debug, Clone)]
+pub enum Accessor {
+    /// Of a block: its POU (the call may still be dispatched to an override).
+    Pou(usize),
+    /// Of an interface, as it (or one it extends) declares it.
+    Interface(Box<InterfaceMember>),
+}
+
+/// A property an access (`base.p`, or `p` in a block's own body) reaches.
+#[derive(Debug, Clone)]
+pub struct PropertyAccess {
+    pub recv: Receiver,
+    /// The GET accessor (`None`: write-only).
+    pub getter: Option<Accessor>,
+    /// The SET accessor (`None`: read-only).
+    pub setter: Option<Accessor>,
+}
+
+/// For each name read as `base.m` or written as `m` or `base.m`, the property it reaches or
+/// `None` when it is no property.
+pub type Properties = NameTable<Option<PropertyAccess>>;
+
 /// What checking the bodies records for emission.
 #[derive(Debug, Default, Clone)]
 pub struct Checked {
@@ -197,6 +310,16 @@ pub struct Checked {
     pub variables: Variables,
     /// The member every member name denotes.
     pub members: Members,
+    /// What every bare name in an expression denotes.
+    pub bare_names: BareNames,
+    /// How the arguments of every call are bound to the callee's parameters.
+    pub bindings: Bindings,
+    /// The order of every standard-function call's arguments.
+    pub std_arguments: StdArguments,
+    /// The type every generic selection function is called at.
+    pub generic_types: GenericTypes,
+    /// Whether each member read and each assignment target is a property, and which.
+    pub properties: Properties,
     /// The value of every CASE label.
     pub case_labels: CaseLabels,
     /// The calls between user POUs (the call graph the recursion rule is judged on).
@@ -221,6 +344,11 @@ pub fn check(
         callees: std::mem::take(&mut checker.callees),
         variables: std::mem::take(&mut checker.variables),
         members: std::mem::take(&mut checker.members),
+        bare_names: std::mem::take(&mut checker.bare_names),
+        bindings: std::mem::take(&mut checker.bindings),
+        std_arguments: std::mem::take(&mut checker.std_arguments),
+        generic_types: std::mem::take(&mut checker.generic_types),
+        properties: std::mem::take(&mut checker.properties),
     };
     drop(checker);
     body::check_recursion(prog, &checked.calls, diags);
@@ -252,6 +380,11 @@ pub fn emit(
     generator.callees = checked.callees;
     generator.variables = checked.variables;
     generator.members = checked.members;
+    generator.bare_names = checked.bare_names;
+    generator.bindings = checked.bindings;
+    generator.std_arguments = checked.std_arguments;
+    generator.generic_types = checked.generic_types;
+    generator.properties = checked.properties;
     generator.generate();
     let emitted = Emitted {
         builder: std::mem::take(&mut generator.b),
@@ -287,18 +420,23 @@ mod tests {
     use crate::{Options, lexer, parser, sema};
 
     const PROGRAM: &str = "
+TYPE Color : (Red, Green); END_TYPE
 FUNCTION Twice : INT VAR_INPUT x : INT; END_VAR Twice := x * 2; END_FUNCTION
 FUNCTION_BLOCK Count VAR_INPUT step : INT; END_VAR VAR_OUTPUT n : INT; END_VAR
 METHOD Reset n := 0; END_METHOD
+PROPERTY Total : INT GET Total := n; END_GET END_PROPERTY
 n := n + step;
 END_FUNCTION_BLOCK
 PROGRAM Main
-VAR c : Count; r : INT; p : REF_TO INT; END_VAR
+VAR c : Count; r : INT; p : REF_TO INT; k : Color; END_VAR
 r := Twice(ABS(-3));
+r := MAX(r, 1);
 c(step := r);
 r := c.n;
+r := c.Total;
 c.Reset();
 p := REF(r);
+k := Color#Green;
 END_PROGRAM
 ";
 
@@ -328,9 +466,10 @@ END_PROGRAM
     fn emission_resolves_no_callee_itself() {
         assert!(check_then_emit(|_| {}).is_ok());
         let errors = internal_errors(check_then_emit(|c| c.callees = Callees::default()));
-        // Twice(...), c(...), c.Reset() and REF(...): each is taken from the checker's record
-        // (ABS(...) too, but it is an argument of Twice, not walked once Twice has no callee).
-        assert_eq!(errors.len(), 4, "{errors:?}");
+        // Twice(...), MAX(...), c(...), c.Reset() and REF(...): each is taken from the
+        // checker's record (ABS(...) too, but it is an argument of Twice, not walked once
+        // Twice has no callee).
+        assert_eq!(errors.len(), 5, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("resolved no callee")));
     }
 
@@ -339,6 +478,67 @@ END_PROGRAM
         let errors = internal_errors(check_then_emit(|c| c.members = Members::default()));
         // `c.n`.
         assert!(errors[0].contains("resolved no member"), "{errors:?}");
+    }
+
+    #[test]
+    fn emission_decides_no_bare_name_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.bare_names = BareNames::default()));
+        // `x`, `n` and `step` in the bodies, `r` in Main, `Green` of `Color#Green`: none is
+        // looked up again.
+        assert!(
+            errors.iter().any(|e| e.contains("no enumeration value")),
+            "{errors:?}"
+        );
+        assert!(
+            errors.iter().all(|e| e.contains("resolved no meaning")
+                || e.contains("recorded no type")
+                || e.contains("no enumeration value")),
+            "{errors:?}"
+        );
+    }
+
+    #[test]
+    fn emission_binds_no_argument_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.bindings = Bindings::default()));
+        // Twice(ABS(-3)) and c(step := r); ABS is a standard function, bound where it is
+        // emitted.
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("bound no arguments")));
+    }
+
+    #[test]
+    fn emission_places_no_standard_argument_itself() {
+        let errors = internal_errors(check_then_emit(|c| {
+            c.std_arguments = StdArguments::default()
+        }));
+        // ABS(-3) and MAX(r, 1).
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("placed no arguments")));
+    }
+
+    #[test]
+    fn emission_decides_no_generic_type_itself() {
+        let errors = internal_errors(check_then_emit(|c| {
+            c.generic_types = GenericTypes::default()
+        }));
+        // MAX(r, 1).
+        assert_eq!(errors.len(), 1, "{errors:?}");
+        assert!(errors[0].contains("decided no type"));
+    }
+
+    #[test]
+    fn emission_resolves_no_property_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.properties = Properties::default()));
+        // Every member read (`c.n`, `c.Total`) and every assignment target is asked about;
+        // `c.Total`, no longer a property, is then no member either.
+        assert!(errors.len() >= 2, "{errors:?}");
+        assert!(
+            errors
+                .iter()
+                .all(|e| e.contains("whether this is a property")
+                    || e.contains("resolved no member")),
+            "{errors:?}"
+        );
     }
 
     #[test]

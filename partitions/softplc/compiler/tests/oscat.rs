@@ -207,7 +207,7 @@ END_PROGRAM
     assert_eq!(
         got.join(" "),
         "s1='10100101' s2='Hello Big World' s3='MIXED CASE' s4='mixed case' s5='fedcba' \
-         b=10 d=31 n=-123 list=',a,bc' pos=7 found=4 s6='HELLO' arr[0]=1 arr[4]=5 r=3 \
+         b=10 d=31 n=-123 list=',a,bc' pos=7 found=4 s6='HELLO' arr[0]=1.0 arr[4]=5.0 r=3.0 \
          dw=1065353216"
     );
 }

@@ -8,7 +8,7 @@ use crate::ast::*;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::VarDef;
-use crate::typed::Callee;
+use crate::typed::{Binding, Callee};
 use crate::types::*;
 
 /// One argument bound to a parameter.
@@ -242,7 +242,9 @@ impl Gen<'_> {
         self.bind_to(Some(pi), &pou_name, &vars, result.as_deref(), args)
     }
 
-    /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order).
+    /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order). The
+    /// checking pass binds (reporting what is wrong) and records the binding
+    /// ([`Binding`]); emission reads the record.
     pub(crate) fn bind_to<'e>(
         &mut self,
         pou: Option<usize>,
@@ -251,12 +253,52 @@ impl Gen<'_> {
         result: Option<&str>,
         args: &'e [Arg],
     ) -> Vec<Bound<'e>> {
+        let Some(first) = args.first() else {
+            return Vec::new();
+        };
+        let binding = if self.check_only {
+            let binding = self.resolve_binding(pou, pou_name, vars, result, args);
+            self.bindings.record(self.cur, first.span, binding.clone());
+            binding
+        } else {
+            match self.bindings.of(self.cur, first.span) {
+                Some(binding) => binding.to_vec(),
+                None => {
+                    self.diags.error(
+                        codes::INTERNAL_ERROR,
+                        first.span,
+                        "internal error: the checker bound no arguments for this call",
+                    );
+                    return Vec::new();
+                }
+            }
+        };
+        binding
+            .iter()
+            .map(|b| Bound {
+                param: vars[b.param].clone(),
+                value: &args[b.arg].value,
+                output: b.output,
+            })
+            .collect()
+    }
+
+    /// Which argument `args` binds to which of the parameters `vars` of `pou_name` (reported
+    /// when wrong; what is wrong is left out).
+    fn resolve_binding(
+        &mut self,
+        pou: Option<usize>,
+        pou_name: &str,
+        vars: &[VarDef],
+        result: Option<&str>,
+        args: &[Arg],
+    ) -> Vec<Binding> {
         let params: Vec<VarDef> = vars
             .iter()
             .filter(|v| matches!(v.kind, VarKind::Input | VarKind::InOut))
             .cloned()
             .collect();
-        let mut out: Vec<Bound<'e>> = Vec::new();
+        let mut out: Vec<Binding> = Vec::new();
         let mut named_seen = false;
         for (i, a) in args.iter().enumerate() {
             let param = match &a.name {
@@ -322,14 +364,17 @@ impl Gen<'_> {
                     }
                 }
             };
-            if out.iter().any(|b| b.param.name == param.name) {
+            let Some(index) = vars.iter().position(|v| v.name == param.name) else {
+                continue;
+            };
+            if out.iter().any(|b| b.param == index) {
                 let msg = format!("parameter `{}` given twice", param.text);
                 self.error(codes::DUPLICATE_ARGUMENT, a.span, msg);
                 continue;
             }
-            out.push(Bound {
-                param,
-                value: &a.value,
+            out.push(Binding {
+                param: index,
+                arg: i,
                 output: a.output,
             });
         }

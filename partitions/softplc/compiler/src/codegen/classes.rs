@@ -19,22 +19,8 @@ use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
 use crate::sema::{MemberKind, VarDef};
-use crate::typed::Method;
+use crate::typed::{Accessor, Bare, Method, PropertyAccess, Receiver};
 use crate::types::*;
-
-/// What a method is called on.
-#[derive(Debug, Clone, Copy)]
-enum Receiver {
-    /// A function-block instance of static type `class`; `exact` when it cannot be an
-    /// instance of a derived block; `superclass` for `SUPER^`.
-    Instance {
-        class: usize,
-        exact: bool,
-        superclass: bool,
-    },
-    /// An interface value.
-    Interface(usize),
-}
 
 /// A method as a call sees it: the slot and signature of a dynamic call, or the POU of a
 /// static one.
@@ -702,72 +688,132 @@ impl Gen<'_> {
     // ----- properties --------------------------------------------------------------------
 
     /// `e` as a property access: the instance expression (`None`: the current instance),
-    /// what it is and the property's name.
+    /// the property and its name. The checking pass resolves it and records it, or that `e`
+    /// is no property access ([`crate::typed::Properties`]); emission reads the record.
     fn property_target<'e>(
         &mut self,
         e: &'e Expr,
-    ) -> Option<(Option<&'e Expr>, Receiver, &'e Ident)> {
-        match &e.kind {
-            ExprKind::Name(n) => {
-                if self.is_visible_var(&n.name) {
-                    return None;
+    ) -> Option<(Option<&'e Expr>, PropertyAccess, &'e Ident)> {
+        let (base, name) = match &e.kind {
+            ExprKind::Name(n) => (None, n),
+            ExprKind::Member(base, m) => (Some(&**base), m),
+            _ => return None,
+        };
+        let property = if self.check_only {
+            let property = self.resolve_property(base, name);
+            self.properties.record(self.cur, name, property.clone());
+            property
+        } else {
+            match self.properties.of(self.cur, name) {
+                Some(property) => property.clone(),
+                None => {
+                    self.diags.error(
+                        codes::INTERNAL_ERROR,
+                        name.span,
+                        "internal error: the checker did not decide whether this is a property",
+                    );
+                    None
                 }
-                let ctx = self.context_class()?;
-                let has = self
-                    .prog
-                    .find_member(ctx, &n.name, MemberKind::Getter)
-                    .is_some()
-                    || self
-                        .prog
-                        .find_member(ctx, &n.name, MemberKind::Setter)
-                        .is_some();
-                has.then_some((
-                    None,
-                    Receiver::Instance {
-                        class: ctx,
-                        exact: self.prog.pous[ctx].kind == PouKind::Program,
-                        superclass: false,
-                    },
-                    n,
-                ))
             }
-            ExprKind::Member(base, m) => {
-                let recv = self.receiver(base)?;
-                let has = match recv {
-                    Receiver::Instance { class, .. } => {
-                        self.prog
-                            .find_member(class, &m.name, MemberKind::Getter)
-                            .is_some()
-                            || self
-                                .prog
-                                .find_member(class, &m.name, MemberKind::Setter)
-                                .is_some()
-                    }
-                    Receiver::Interface(i) => {
-                        self.prog
-                            .interface_member(i, &m.name, MemberKind::Getter)
-                            .is_some()
-                            || self
-                                .prog
-                                .interface_member(i, &m.name, MemberKind::Setter)
-                                .is_some()
-                    }
+        };
+        Some((base, property?, name))
+    }
+
+    /// The property `base.name` (`name` alone when `base` is `None`) denotes, if it is one: a
+    /// variable of that name shadows a property of the current instance.
+    fn resolve_property(&mut self, base: Option<&Expr>, name: &Ident) -> Option<PropertyAccess> {
+        let Some(base) = base else {
+            if self.is_visible_var(&name.name) {
+                return None;
+            }
+            let Bare::Property { class, getter } = self.own_property(name)? else {
+                return None;
+            };
+            let setter = self.prog.find_member(class, &name.name, MemberKind::Setter);
+            return Some(PropertyAccess {
+                recv: self.own_receiver(class),
+                getter: getter.map(Accessor::Pou),
+                setter: setter.map(Accessor::Pou),
+            });
+        };
+        let recv = self.receiver(base)?;
+        let (getter, setter) = match recv {
+            Receiver::Instance { class, .. } => {
+                let find = |kind| {
+                    self.prog
+                        .find_member(class, &name.name, kind)
+                        .map(Accessor::Pou)
                 };
-                has.then_some((Some(&**base), recv, m))
+                (find(MemberKind::Getter), find(MemberKind::Setter))
             }
-            _ => None,
+            Receiver::Interface(i) => {
+                let find = |kind| {
+                    self.prog
+                        .interface_member(i, &name.name, kind)
+                        .map(|im| Accessor::Interface(Box::new(im.clone())))
+                };
+                (find(MemberKind::Getter), find(MemberKind::Setter))
+            }
+        };
+        (getter.is_some() || setter.is_some()).then_some(PropertyAccess {
+            recv,
+            getter,
+            setter,
+        })
+    }
+
+    /// The property bare name `n` denotes in the class whose body is walked, if it names one
+    /// (a variable of that name shadows it: the caller asks first).
+    pub(crate) fn own_property(&self, n: &Ident) -> Option<Bare> {
+        let class = self.context_class()?;
+        let getter = self.prog.find_member(class, &n.name, MemberKind::Getter);
+        let setter = self.prog.find_member(class, &n.name, MemberKind::Setter);
+        (getter.is_some() || setter.is_some()).then_some(Bare::Property { class, getter })
+    }
+
+    /// The receiver of a member of `class` named bare in its own body.
+    fn own_receiver(&self, class: usize) -> Receiver {
+        Receiver::Instance {
+            class,
+            exact: self.prog.pous[class].kind == PouKind::Program,
+            superclass: false,
         }
+    }
+
+    /// Reads property `e` (a bare name) of `class`, the class whose body is walked, through
+    /// its GET accessor `getter` (reported when it has none).
+    pub(crate) fn own_property_read(
+        &mut self,
+        class: usize,
+        getter: Option<usize>,
+        e: &Expr,
+    ) -> Type {
+        let ExprKind::Name(name) = &e.kind else {
+            return Type::Error;
+        };
+        let Some(getter) = getter else {
+            self.error(
+                codes::PROPERTY_ACCESS,
+                name.span,
+                format!(
+                    "property `{}` is write-only (it has no GET accessor)",
+                    name.text
+                ),
+            );
+            return Type::Error;
+        };
+        self.call_member(None, self.own_receiver(class), getter, &[], e.span)
     }
 
     /// Reads a property through its GET accessor; `None` when `e` is no property.
     pub(crate) fn property_read(&mut self, e: &Expr) -> Option<Type> {
-        let (base, recv, name) = self.property_target(e)?;
-        Some(self.accessor_call(base, recv, name, MemberKind::Getter, &[], e.span))
+        let (base, property, name) = self.property_target(e)?;
+        Some(self.accessor_call(base, &property, name, MemberKind::Getter, &[], e.span))
     }
 
     /// Writes a property through its SET accessor; `false` when `target` is no property.
     pub(crate) fn property_write(&mut self, target: &Expr, value: &Expr) -> bool {
-        let Some((base, recv, name)) = self.property_target(target) else {
+        let Some((base, property, name)) = self.property_target(target) else {
             return false;
         };
         let args = [Arg {
@@ -776,14 +822,21 @@ impl Gen<'_> {
             value: value.clone(),
             span: value.span,
         }];
-        self.accessor_call(base, recv, name, MemberKind::Setter, &args, target.span);
+        self.accessor_call(
+            base,
+            &property,
+            name,
+            MemberKind::Setter,
+            &args,
+            target.span,
+        );
         true
     }
 
     fn accessor_call(
         &mut self,
         base: Option<&Expr>,
-        recv: Receiver,
+        property: &PropertyAccess,
         name: &Ident,
         kind: MemberKind,
         args: &[Arg],
@@ -805,22 +858,19 @@ impl Gen<'_> {
             }
             Type::Error
         };
-        match recv {
-            Receiver::Instance { class, .. } => {
-                match self.prog.find_member(class, &name.name, kind) {
-                    Some(m) => self.call_member(base, recv, m, args, span),
-                    None => missing(self),
-                }
+        let accessor = match kind {
+            MemberKind::Getter => &property.getter,
+            _ => &property.setter,
+        };
+        match (property.recv, accessor) {
+            (recv @ Receiver::Instance { .. }, Some(Accessor::Pou(m))) => {
+                self.call_member(base, recv, *m, args, span)
             }
-            Receiver::Interface(i) => {
-                match self.prog.interface_member(i, &name.name, kind).cloned() {
-                    Some(im) => {
-                        let d = self.interface_dynamic(i, &im);
-                        self.call_dynamic(base, d, args, span)
-                    }
-                    None => missing(self),
-                }
+            (Receiver::Interface(i), Some(Accessor::Interface(im))) => {
+                let d = self.interface_dynamic(i, im);
+                self.call_dynamic(base, d, args, span)
             }
+            _ => missing(self),
         }
     }
 

@@ -393,41 +393,28 @@ impl Gen<'_> {
                 Type::String(s.len().max(1) as u32)
             }
             ExprKind::Typed(ty, inner) => self.typed_literal(ty, inner, e.span),
-            ExprKind::Name(n) => {
-                // Variables shadow enumeration values.
-                let is_var = self.is_visible_var(&n.name);
-                if !is_var && let Some(t) = self.property_read(e) {
-                    return t;
+            ExprKind::Name(n) => match self.bare_name(n, expected) {
+                Some(Bare::Property { class, getter }) => self.own_property_read(class, getter, e),
+                Some(Bare::EnumValue { ty, value }) => {
+                    self.push_int(value);
+                    Type::Enum(ty)
                 }
-                if !is_var {
-                    if let Some(Type::Enum(ei)) = expected
-                        && let Some((_, v)) = self.prog.enums[*ei]
-                            .values
-                            .iter()
-                            .find(|(vn, _)| *vn == n.name)
-                    {
-                        let v = *v;
-                        self.push_int(v);
-                        return Type::Enum(*ei);
-                    }
-                    if let Some((ei, v)) = self.prog.enum_value(&n.name) {
-                        self.push_int(v);
-                        return Type::Enum(ei);
-                    }
-                    if let Some(t) = Trap::ALL.iter().find(|t| t.name() == n.name) {
-                        self.push_int(t.code() as i64);
-                        return Type::Exception;
+                Some(Bare::Exception(code)) => {
+                    self.push_int(code);
+                    Type::Exception
+                }
+                Some(Bare::Variable) => {
+                    self.sync_if_byte_viewed(e);
+                    match self.place(e) {
+                        Some(p) => {
+                            self.load(&p);
+                            p.ty
+                        }
+                        None => Type::Error,
                     }
                 }
-                self.sync_if_byte_viewed(e);
-                match self.place(e) {
-                    Some(p) => {
-                        self.load(&p);
-                        p.ty
-                    }
-                    None => Type::Error,
-                }
-            }
+                None => Type::Error,
+            },
             ExprKind::Null => {
                 self.push_int(0);
                 Type::Null
@@ -449,6 +436,54 @@ impl Gen<'_> {
             ExprKind::Unary(op, x) => self.unary(*op, x, expected, e.span),
             ExprKind::Binary(op, a, b) => self.binary(*op, a, b, expected, e.span),
         }
+    }
+
+    /// What bare name `n` denotes. The checking pass decides it and records it ([`Bare`]; a
+    /// walk for inference records only what no real walk has, as the expected type may
+    /// differ); emission reads the record.
+    fn bare_name(&mut self, n: &Ident, expected: Option<&Type>) -> Option<Bare> {
+        if !self.check_only {
+            let bare = self.bare_names.of(self.cur, n).cloned();
+            if bare.is_none() {
+                self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    n.span,
+                    "internal error: the checker resolved no meaning for this name",
+                );
+            }
+            return bare;
+        }
+        let bare = self.resolve_bare(n, expected);
+        if !self.dry || self.bare_names.of(self.cur, n).is_none() {
+            self.bare_names.record(self.cur, n, bare.clone());
+        }
+        Some(bare)
+    }
+
+    /// What bare name `n` denotes in the current POU, `expected` being the type its context
+    /// expects.
+    fn resolve_bare(&self, n: &Ident, expected: Option<&Type>) -> Bare {
+        if self.is_visible_var(&n.name) {
+            return Bare::Variable;
+        }
+        if let Some(property) = self.own_property(n) {
+            return property;
+        }
+        if let Some(Type::Enum(ei)) = expected
+            && let Some((_, v)) = self.prog.enums[*ei]
+                .values
+                .iter()
+                .find(|(vn, _)| *vn == n.name)
+        {
+            return Bare::EnumValue { ty: *ei, value: *v };
+        }
+        if let Some((ty, value)) = self.prog.enum_value(&n.name) {
+            return Bare::EnumValue { ty, value };
+        }
+        if let Some(t) = Trap::ALL.iter().find(|t| t.name() == n.name) {
+            return Bare::Exception(t.code() as i64);
+        }
+        Bare::Variable
     }
 
     pub(crate) fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
@@ -529,6 +564,23 @@ impl Gen<'_> {
         if ty.name == "STRING" {
             return self.expr(inner, None);
         }
+        // `Enum#value`: the checking pass resolves it and records it ([`Bare`]); emission
+        // reads the record.
+        if !self.check_only {
+            if let ExprKind::Name(n) = &inner.kind
+                && let Some(Bare::EnumValue { ty, value }) = self.bare_names.of(self.cur, n)
+            {
+                let (ty, value) = (*ty, *value);
+                self.push_int(value);
+                return Type::Enum(ty);
+            }
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                inner.span,
+                "internal error: the checker resolved no enumeration value for this literal",
+            );
+            return Type::Error;
+        }
         if let (Some((Type::Enum(ei), _)), ExprKind::Name(n)) =
             (self.prog.aliases.get(&ty.name).cloned(), &inner.kind)
         {
@@ -537,8 +589,10 @@ impl Gen<'_> {
                 .iter()
                 .find(|(vn, _)| *vn == n.name)
             {
-                let v = *v;
-                self.push_int(v);
+                let value = *v;
+                self.bare_names
+                    .record(self.cur, n, Bare::EnumValue { ty: ei, value });
+                self.push_int(value);
                 return Type::Enum(ei);
             }
             let msg = format!("`{}` is not a value of {}", n.text, ty.text);

@@ -38,7 +38,10 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode, Trap};
 use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
-use crate::typed::{Callees, CaseLabels, ExprTypes, Members, Variables};
+use crate::typed::{
+    Bare, BareNames, Bindings, Callees, CaseLabels, ExprTypes, GenericTypes, Members, Properties,
+    StdArguments, Variables,
+};
 use crate::types::*;
 
 /// Where a value lives.
@@ -149,6 +152,21 @@ pub(crate) struct Gen<'a> {
     pub(crate) variables: Variables,
     /// The member each `base.m` denotes: recorded by the checking pass, read by emission.
     pub(crate) members: Members,
+    /// What each bare name in an expression denotes: decided by the checking pass, read by
+    /// emission.
+    pub(crate) bare_names: BareNames,
+    /// How the arguments of each call are bound: recorded by the checking pass, read by
+    /// emission.
+    pub(crate) bindings: Bindings,
+    /// The order of each standard-function call's arguments: recorded by the checking pass,
+    /// read by emission.
+    pub(crate) std_arguments: StdArguments,
+    /// The type each generic selection function is called at: decided by the checking
+    /// pass, read by emission.
+    pub(crate) generic_types: GenericTypes,
+    /// Which property each member read and assignment target reaches, if any: resolved by
+    /// the checking pass, read by emission.
+    pub(crate) properties: Properties,
     str_lits: HashMap<String, u32>,
     /// Call graph edges between user POUs, recorded for the recursion rule
     /// ([`crate::sema::body`]).
@@ -204,6 +222,11 @@ impl<'a> Gen<'a> {
             callees: Callees::default(),
             variables: Variables::default(),
             members: Members::default(),
+            bare_names: BareNames::default(),
+            bindings: Bindings::default(),
+            std_arguments: StdArguments::default(),
+            generic_types: GenericTypes::default(),
+            properties: Properties::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),
             frames: Vec::new(),

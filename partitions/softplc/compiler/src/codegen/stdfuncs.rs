@@ -285,21 +285,45 @@ impl Gen<'_> {
     /// The argument expressions of a standard function in the order of its inputs: the
     /// positional ones first, the formal ones (`IN2 := x`) put in their place. `None` after
     /// reporting a misplaced, unknown, repeated or missing one.
+    /// The checking pass places them (reporting what is wrong) and records the order
+    /// ([`crate::typed::StdArguments`]); emission reads the record.
     pub(super) fn std_arguments<'e>(
         &mut self,
         name: &str,
         id: &Ident,
         args: &'e [Arg],
     ) -> Option<Vec<&'e Expr>> {
-        let inputs: Vec<&Arg> = args.iter().filter(|a| !a.output).collect();
-        if inputs.iter().all(|a| a.name.is_none()) {
-            return Some(inputs.iter().map(|a| &a.value).collect());
+        let order = if self.check_only {
+            let order = self.place_std_arguments(name, id, args)?;
+            self.std_arguments.record(self.cur, id, order.clone());
+            order
+        } else {
+            let Some(order) = self.std_arguments.of(self.cur, id) else {
+                self.diags.error(
+                    codes::INTERNAL_ERROR,
+                    id.span,
+                    "internal error: the checker placed no arguments for this call",
+                );
+                return None;
+            };
+            order.clone()
+        };
+        Some(order.into_iter().map(|i| &args[i].value).collect())
+    }
+
+    /// The index in `args` of each argument of standard function `name` in the order of its
+    /// inputs (see [`Gen::std_arguments`]).
+    fn place_std_arguments(&mut self, name: &str, id: &Ident, args: &[Arg]) -> Option<Vec<usize>> {
+        let inputs: Vec<(usize, &Arg)> =
+            args.iter().enumerate().filter(|(_, a)| !a.output).collect();
+        if inputs.iter().all(|(_, a)| a.name.is_none()) {
+            return Some(inputs.iter().map(|(i, _)| *i).collect());
         }
         let formals = Self::std_formals(name, inputs.len());
-        let mut slots: Vec<Option<&'e Expr>> = vec![None; formals.len().max(inputs.len())];
+        let mut slots: Vec<Option<usize>> = vec![None; formals.len().max(inputs.len())];
         let mut ok = true;
         let mut named_seen = false;
-        for (i, a) in inputs.iter().enumerate() {
+        for (i, &(index, a)) in inputs.iter().enumerate() {
             let slot = match &a.name {
                 None if named_seen => {
                     self.error(
@@ -338,7 +362,7 @@ impl Gen<'_> {
                 ok = false;
                 continue;
             }
-            slots[slot] = Some(&a.value);
+            slots[slot] = Some(index);
         }
         let given = slots
             .iter()
@@ -941,7 +965,7 @@ impl Gen<'_> {
                 self.value_to(c.exprs[0], &Type::BOOL);
                 let t = match c.typed {
                     Some(forced) => Type::Elem(forced),
-                    None => self.common_of(&c.exprs[1..], c.ctx.as_ref()),
+                    None => self.generic_type(c, 1),
                 };
                 if t.is_error() {
                     return Some(t);
@@ -965,7 +989,7 @@ impl Gen<'_> {
                 }
                 let t = match c.typed {
                     Some(forced) => Type::Elem(forced),
-                    None => self.common_of(&c.exprs, c.ctx.as_ref()),
+                    None => self.generic_type(c, 0),
                 };
                 let Some(e) = t.elem() else {
                     if !t.is_error() {
@@ -993,7 +1017,7 @@ impl Gen<'_> {
                 }
                 let t = match c.typed {
                     Some(forced) => Type::Elem(forced),
-                    None => self.common_of(&c.exprs, c.ctx.as_ref()),
+                    None => self.generic_type(c, 0),
                 };
                 let Some(e) = t.elem() else {
                     return Some(Type::Error);
@@ -1030,7 +1054,7 @@ impl Gen<'_> {
                 });
                 let t = match c.typed {
                     Some(forced) => Type::Elem(forced),
-                    None => self.common_of(&c.exprs[1..], c.ctx.as_ref()),
+                    None => self.generic_type(c, 1),
                 };
                 let end = self.label();
                 for (i, x) in c.exprs[1..].iter().enumerate() {
@@ -1152,6 +1176,30 @@ impl Gen<'_> {
                 None
             }
         }
+    }
+
+    /// The type a generic selection function (SEL, MAX, MIN, LIMIT, MUX) is called at: the
+    /// common type of its arguments from the `from`th. The checking pass decides it
+    /// ([`Gen::common_of`]) and records it ([`crate::typed::GenericTypes`]; a walk for
+    /// inference records only what no real walk has, as the expected type may differ);
+    /// emission reads the record.
+    fn generic_type(&mut self, c: &StdArgs, from: usize) -> Type {
+        if !self.check_only {
+            if let Some(t) = self.generic_types.of(self.cur, c.id) {
+                return t.clone();
+            }
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                c.id.span,
+                "internal error: the checker decided no type for this call",
+            );
+            return Type::Error;
+        }
+        let t = self.common_of(&c.exprs[from..], c.ctx.as_ref());
+        if !self.dry || self.generic_types.of(self.cur, c.id).is_none() {
+            self.generic_types.record(self.cur, c.id, t.clone());
+        }
+        t
     }
 
     /// Common type of several arguments (for SEL/MAX/MIN/LIMIT/MUX).
