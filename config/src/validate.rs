@@ -1633,7 +1633,12 @@ impl Validator<'_, '_> {
     fn plc_stores(&mut self, doc: &schema::Document, partitions: &[Partition]) {
         let base = KeyPath::root().key("partitions");
         for (key, raw) in in_source_order(&doc.partitions) {
-            let Some(store) = raw.get_ref().plc.as_ref().and_then(|p| p.get_ref().store.as_ref()) else {
+            let Some(store) = raw
+                .get_ref()
+                .plc
+                .as_ref()
+                .and_then(|p| p.get_ref().store.as_ref())
+            else {
                 continue;
             };
             let Some(me) = partitions.iter().position(|p| &p.name == key.get_ref()) else {

@@ -195,7 +195,10 @@ fn a_tenant_must_be_another_partition_and_the_partition_needs_its_device() {
 /// `plc` as a soft-PLC keeping its store on its virtual disk (`plc.store`).
 fn with_store(store: &str) -> String {
     edited(&[
-        ("[partitions.plc]\nimage = \"app\"", "[partitions.plc]\nimage = \"softplc\""),
+        (
+            "[partitions.plc]\nimage = \"app\"",
+            "[partitions.plc]\nimage = \"softplc\"",
+        ),
         (
             "ports.resp = { kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }\n",
             &format!(
@@ -223,7 +226,11 @@ fn a_plc_store_names_its_ports_and_needs_a_virtual_disk() {
         "plc.store = { request = \"req\", response = \"resp\" }",
     ));
     assert_eq!(
-        default.partitions[1].plc.as_ref().and_then(|p| p.store).map(|s| s.retain_every_ns),
+        default.partitions[1]
+            .plc
+            .as_ref()
+            .and_then(|p| p.store)
+            .map(|s| s.retain_every_ns),
         Some(1_000_000_000)
     );
     expect_some(

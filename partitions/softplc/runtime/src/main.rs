@@ -147,6 +147,8 @@ macro_rules! text {
     ($($arg:tt)*) => { LineBuffer::format(format_args!($($arg)*)) };
 }
 
+mod disk;
+
 /// Two data memories: the running program's and the one the next program (after a
 /// download or a warm restart) starts in, taking RETAIN values from the other.
 static DATA: spin::Mutex<[[u8; MAX_DATA]; 2]> = spin::Mutex::new([[0; MAX_DATA]; 2]);
@@ -530,6 +532,15 @@ extern "C" fn control() {
         .then(|| *RUNNING.lock())
         .map(|was| (was, None::<Takeover>));
     let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
+    // A cold start runs the boot project if the store holds a valid one (`plc.store`).
+    if previous.is_none()
+        && let Some(len) = disk::load(&package, period, &mut images[0], |program| {
+            let (verified, schedule) = check_program(program, &mut scratch[..], MAX_DATA, period)?;
+            fit_configuration(verified.image(), schedule, &package).map(drop)
+        })
+    {
+        running = running.downloaded(0, len);
+    }
     let shared = package.shared().map(|layout| (layout, segment(&layout)));
     let mut shared_stats = SharedStats::default();
     let started = now_ns();
@@ -612,6 +623,12 @@ extern "C" fn control() {
                 }
             }
         }
+        disk::start(
+            program,
+            &image,
+            machine.data_mut(),
+            swapped.then_some(first_release),
+        );
         let mut loader = Loader::new(
             &mut staging[..],
             &mut scratch[..],
@@ -653,14 +670,27 @@ extern "C" fn control() {
                     life.rt,
                     &mut loader,
                 );
+                let mut stopped_now = false;
                 for &task in &life.rt.schedule.order[..life.rt.schedule.count] {
                     let name = life.image.task(task).map_or("?", |t| t.name);
                     match (stopped_before[task], life.rt.stopped[task].is_some()) {
-                        (false, true) => println!("plc: task {name} stopped online; outputs safe"),
+                        (false, true) => {
+                            stopped_now = true;
+                            println!("plc: task {name} stopped online; outputs safe")
+                        }
                         (true, false) => println!("plc: task {name} started online"),
                         _ => {}
                     }
                 }
+                let (data, release) = (life.machine.data(), life.rt.releases);
+                disk::after_release(
+                    &life.package,
+                    program,
+                    &life.image,
+                    data,
+                    release,
+                    stopped_now,
+                );
                 if let Some(reason) = loader.refusal.take() {
                     println!("plc: download refused: {reason}");
                 }
@@ -902,6 +932,7 @@ fn release_previous_locks() {
     force_open(&LIFE);
     // The previous life's control process is gone with its frame.
     LIFE.lock().0 = None;
+    disk::release_locks();
 }
 
 struct PlcPartition;
@@ -985,6 +1016,16 @@ impl PlcPartition {
         }
         // The VM's stack and call frames, the online buffers and the life live in its stack.
         spawn(ctx, "control", control, period(), control_priority);
+        if package.store().is_some() {
+            // Below the control process: it writes while the PLC runs.
+            spawn(
+                ctx,
+                "store",
+                disk::store_process,
+                period(),
+                control_priority.saturating_sub(1).max(1),
+            );
+        }
         if let Some(net) = package.net() {
             let [a, b, c, d] = net.address;
             let m = net.mac;

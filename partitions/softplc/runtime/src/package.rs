@@ -625,9 +625,7 @@ impl<'a> Package<'a> {
         };
         let mut end = bytes.len();
         if bytes[27] & FLAG_STORE != 0 {
-            end = end
-                .checked_sub(STORE_BLOCK)
-                .ok_or(PackageError::BadStore)?;
+            end = end.checked_sub(STORE_BLOCK).ok_or(PackageError::BadStore)?;
             let store = Store::parse(&bytes[end..]).ok_or(PackageError::BadStore)?;
             if !queuing(&package, store.request, Direction::Out, STORE_REQUEST_MIN)
                 || !queuing(&package, store.response, Direction::In, STORE_RESPONSE_MIN)
