@@ -120,6 +120,48 @@ pub fn load(
     image: &mut [u8],
     accept: impl FnOnce(&[u8]) -> Result<(), softplc::download::Refusal>,
 ) -> Option<usize> {
+    // The checks run on the control process's stack after the reading's frame is gone.
+    let record = read(package, period_ns)?;
+    let outbox = OUTBOX.lock();
+    let mut boot_len = None;
+    let payload = &outbox.boot_bytes[..record.len];
+    let refused = |why: core::fmt::Arguments<'_>| {
+        report(
+            text!(
+                "store: boot project #{} refused: {why}; the configured program runs",
+                record.sequence
+            )
+            .as_str(),
+        )
+    };
+    match store::decode_boot(payload) {
+        Err(e) => refused(format_args!("{e}")),
+        Ok(b) if b.program.len() > image.len() => refused(format_args!(
+            "{} bytes, the most is {}",
+            b.program.len(),
+            image.len()
+        )),
+        Ok(b) => match accept(b.program) {
+            Err(e) => refused(format_args!("{e}")),
+            Ok(()) => {
+                image[..b.program.len()].copy_from_slice(b.program);
+                boot_len = Some(b.program.len());
+                println!(
+                    "plc: store: boot project #{} loaded: {} bytes, downloaded at release {}",
+                    record.sequence,
+                    b.program.len(),
+                    b.release
+                );
+            }
+        },
+    }
+    boot_len
+}
+
+/// The reading part of [`load`]: the boot project's record (its payload in the outbox), if
+/// one is valid; the RETAIN snapshot kept for [`restore`].
+#[inline(never)]
+fn read(package: &Package, period_ns: u64) -> Option<slots::Record> {
     let config = package.store()?;
     let port = |i: usize| package.port(i).and_then(|p| name(p.name));
     let ports = (|| {
@@ -146,7 +188,7 @@ pub fn load(
         restore: None,
         boot_due: None,
     };
-    let mut boot_len = None;
+    let mut boot_record = None;
     match persist::load(
         &mut disk,
         layout,
@@ -163,39 +205,7 @@ pub fn load(
             skipped("RETAIN", &retain);
             match boot.loaded {
                 None => println!("plc: store: no boot project; the configured program runs"),
-                Some(record) => {
-                    let payload = &outbox.boot_bytes[..record.len];
-                    let refused = |why: core::fmt::Arguments<'_>| {
-                        report(
-                            text!(
-                                "store: boot project #{} refused: {why}; the configured program runs",
-                                record.sequence
-                            )
-                            .as_str(),
-                        )
-                    };
-                    match store::decode_boot(payload) {
-                        Err(e) => refused(format_args!("{e}")),
-                        Ok(b) if b.program.len() > image.len() => refused(format_args!(
-                            "{} bytes, the most is {}",
-                            b.program.len(),
-                            image.len()
-                        )),
-                        Ok(b) => match accept(b.program) {
-                            Err(e) => refused(format_args!("{e}")),
-                            Ok(()) => {
-                                image[..b.program.len()].copy_from_slice(b.program);
-                                boot_len = Some(b.program.len());
-                                println!(
-                                    "plc: store: boot project #{} loaded: {} bytes, downloaded at release {}",
-                                    record.sequence,
-                                    b.program.len(),
-                                    b.release
-                                );
-                            }
-                        },
-                    }
-                }
+                Some(record) => boot_record = Some(record),
             }
             match retain.loaded {
                 None => println!("plc: store: no RETAIN snapshot; initial values"),
@@ -220,7 +230,7 @@ pub fn load(
         }
     }
     *CONTROL.lock() = Some(control);
-    boot_len
+    boot_record
 }
 
 /// Logs and reports the slots of `region` that start skipped.

@@ -23,6 +23,10 @@
 //!   stack on the interface's frame ports and the Modbus/TCP server (`softplc::comm`); it
 //!   never takes the life's lock: requests and answers pass through [`EXCHANGE`], which the
 //!   control process serves between cycles when it finds it free (it never waits for it).
+//! - the store process ([`disk::store_process`]), below the control process, once per
+//!   period, when the configuration gives the PLC a persistent store (`plc.store`): it
+//!   writes the boot project and RETAIN snapshots the control process copied between
+//!   releases to the virtual disk; the control process never waits for it.
 //!
 //! Online download: the chunks are assembled in whichever of the two static image buffers
 //! the running program does not use; a committed (verified) program then runs from the
@@ -85,6 +89,17 @@
 //!   start (with `plc.net`, `plc.modbus`); `plc: t=<ms>ms net open=<n> accepted=<n>
 //!   refused=<n> malformed=<n> requests=<n> responses=<n> frames_in=<n> frames_out=<n>`
 //!   every [`STATS_EVERY_MS`] while connections were seen;
+//! - with `plc.store` (the store process and the load: [`disk`]), at a cold start
+//!   `plc: store: boot project #<seq> loaded: <n> bytes, downloaded at release <r>` or
+//!   `plc: store: no boot project; the configured program runs`, `plc: store: RETAIN
+//!   snapshot #<seq> loaded: <n> variable(s) of release <r>` or `plc: store: no RETAIN
+//!   snapshot; initial values`, then `plc: store: <n> RETAIN variable(s) restored`;
+//!   `plc: store: <boot project|RETAIN> slot <i> skipped: <why>` for a torn or corrupt
+//!   slot and `plc: store: boot project #<seq> refused: <why>; the configured program
+//!   runs` (both reported to the health monitor); `plc: store: boot project #<seq> saved
+//!   (<n> bytes)` and `plc: store: RETAIN snapshot #<seq> saved (release <r>, <n> bytes)`
+//!   when a save is on the disk (`<seq>`: the record's sequence number), `plc: store:
+//!   <what> not saved: <why>` when not;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
 //!
