@@ -102,6 +102,14 @@ fn first_boot(name: &str) -> Outcome {
     ] {
         check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
     }
+    // The control process's cost of a save: the copy between releases.
+    for line in o
+        .lines
+        .iter()
+        .filter(|l| l.contains("plc: store: RETAIN snapshot #"))
+    {
+        println!("{name}: {line}");
+    }
     o
 }
 

@@ -12,6 +12,7 @@ use apex::a653rs::prelude::*;
 use apex::user_rt::print::LineBuffer;
 use apex::user_rt::println;
 use blk_core::client::{Client, Transport};
+use core::sync::atomic::{AtomicU8, Ordering};
 use core::time::Duration;
 use plc_vm::image::Image;
 use softplc::package::Package;
@@ -52,12 +53,24 @@ impl Transport for Ports {
 /// The disk and what start found on it (the store process's after the load).
 static DISK: spin::Mutex<Option<(Client<Ports>, Store)>> = spin::Mutex::new(None);
 
+/// The reading at the start ([`load`]): asked by the control process, done by the store
+/// process.
+static LOAD: AtomicU8 = AtomicU8::new(LOAD_NONE);
+const LOAD_NONE: u8 = 0;
+const LOAD_COLD: u8 = 1;
+const LOAD_WARM: u8 = 2;
+const LOAD_DONE: u8 = 3;
+/// The boot project's record the reading found (its payload in the outbox).
+static LOADED: spin::Mutex<Option<slots::Record>> = spin::Mutex::new(None);
+
 /// What the control process copied for the store process.
 struct Outbox {
     /// An encoded boot project waiting (its length).
     boot: Option<usize>,
     /// An encoded RETAIN snapshot waiting (its length and release).
     retain: Option<(usize, u64)>,
+    /// How long the control process took to copy the waiting snapshot (ns).
+    copy_ns: u64,
     boot_bytes: [u8; BOOT_MAX],
     retain_bytes: [u8; RETAIN_MAX],
 }
@@ -65,9 +78,22 @@ struct Outbox {
 static OUTBOX: spin::Mutex<Outbox> = spin::Mutex::new(Outbox {
     boot: None,
     retain: None,
+    copy_ns: 0,
     boot_bytes: [0; BOOT_MAX],
     retain_bytes: [0; RETAIN_MAX],
 });
+
+/// The outbox for the control process at a program's start, when nothing is pending: the
+/// store process holds it at most for a look. The control process sleeps while it does
+/// (spinning, above the store process, it would never let it finish).
+fn outbox_waiting() -> spin::MutexGuard<'static, Outbox> {
+    loop {
+        if let Some(outbox) = OUTBOX.try_lock() {
+            return outbox;
+        }
+        apex::user_rt::sys::sleep_until(crate::now_ns() + 20_000);
+    }
+}
 
 /// The control process's side: when RETAIN is due, the running program's CRC and the
 /// snapshot start loaded to restore into the first program.
@@ -85,9 +111,11 @@ static CONTROL: spin::Mutex<Option<Control>> = spin::Mutex::new(None);
 /// After a partition restart: the previous life's processes may have died holding the
 /// locks; its ports are created again.
 pub fn release_locks() {
-    for lock in [&DISK as &dyn Forced, &OUTBOX, &CONTROL] {
+    for lock in [&DISK as &dyn Forced, &OUTBOX, &CONTROL, &LOADED] {
         lock.open();
     }
+    LOAD.store(LOAD_NONE, Ordering::Release);
+    *LOADED.lock() = None;
     *DISK.lock() = None;
     let mut outbox = OUTBOX.lock();
     outbox.boot = None;
@@ -110,19 +138,26 @@ impl<T> Forced for spin::Mutex<T> {
     }
 }
 
-/// Cold start, by the control process before the first program runs: reads the store;
-/// the boot project, if one is valid and `accept` takes it, is copied into `image` (its
-/// length returned); a valid RETAIN snapshot is kept for [`restore`]. Logs what was
-/// loaded and reports skipped slots.
+/// A partition start, by the control process before the first program runs: reads the
+/// store (reporting skipped slots); at a `cold` start the boot project, if one is valid
+/// and `accept` takes it, is copied into `image` (its length returned) and a valid RETAIN
+/// snapshot is kept for [`start`]. Logs what was loaded. A warm start only reads (the
+/// store's state for the saves): it keeps RAM's RETAIN values and the configured program.
 pub fn load(
     package: &Package,
-    period_ns: u64,
+    cold: bool,
     image: &mut [u8],
     accept: impl FnOnce(&[u8]) -> Result<(), softplc::download::Refusal>,
 ) -> Option<usize> {
-    // The checks run on the control process's stack after the reading's frame is gone.
-    let record = read(package, period_ns)?;
-    let outbox = OUTBOX.lock();
+    package.store()?;
+    // The store process reads (on its own stack: the control process's holds the online
+    // buffers); the checks run here.
+    LOAD.store(if cold { LOAD_COLD } else { LOAD_WARM }, Ordering::Release);
+    while LOAD.load(Ordering::Acquire) != LOAD_DONE {
+        apex::user_rt::sys::sleep_until(crate::now_ns() + 1_000_000);
+    }
+    let record = LOADED.lock().take()?;
+    let outbox = outbox_waiting();
     let mut boot_len = None;
     let payload = &outbox.boot_bytes[..record.len];
     let refused = |why: core::fmt::Arguments<'_>| {
@@ -159,9 +194,9 @@ pub fn load(
 }
 
 /// The reading part of [`load`]: the boot project's record (its payload in the outbox), if
-/// one is valid; the RETAIN snapshot kept for [`restore`].
+/// one is valid; the RETAIN snapshot kept for [`start`].
 #[inline(never)]
-fn read(package: &Package, period_ns: u64) -> Option<slots::Record> {
+fn read(package: &Package, period_ns: u64, cold: bool) -> Option<slots::Record> {
     let config = package.store()?;
     let port = |i: usize| package.port(i).and_then(|p| name(p.name));
     let ports = (|| {
@@ -203,6 +238,12 @@ fn read(package: &Package, period_ns: u64) -> Option<slots::Record> {
         Ok((found_store, boot, retain)) => {
             skipped("boot project", &boot);
             skipped("RETAIN", &retain);
+            if !cold {
+                // A warm restart keeps RAM's RETAIN values and runs the configured program.
+                *DISK.lock() = Some((disk, found_store));
+                *CONTROL.lock() = Some(control);
+                return None;
+            }
             match boot.loaded {
                 None => println!("plc: store: no boot project; the configured program runs"),
                 Some(record) => boot_record = Some(record),
@@ -255,14 +296,7 @@ pub fn start(program: &[u8], image: &Image, data: &mut [u8], downloaded_at: Opti
         control.schedule.force();
     }
     if let Some(len) = control.restore.take() {
-        // The store process only looks at the outbox now (nothing is pending): it lets go
-        // within its run.
-        let outbox = loop {
-            if let Some(outbox) = OUTBOX.try_lock() {
-                break outbox;
-            }
-            apex::user_rt::sys::sleep_until(crate::now_ns() + 20_000);
-        };
+        let outbox = outbox_waiting();
         if let Ok(snapshot) = store::decode_retain(&outbox.retain_bytes[..len]) {
             let n = store::restore_retain(&snapshot, image, control.program_crc, data);
             println!("plc: store: {n} RETAIN variable(s) restored");
@@ -311,6 +345,7 @@ pub fn after_release(
     if !control.schedule.due(release) {
         return;
     }
+    let copy_start = crate::now_ns();
     match store::encode_retain(
         image,
         control.program_crc,
@@ -318,7 +353,10 @@ pub fn after_release(
         release,
         &mut outbox.retain_bytes,
     ) {
-        Ok(n) => outbox.retain = Some((n, release)),
+        Ok(n) => {
+            outbox.retain = Some((n, release));
+            outbox.copy_ns = crate::now_ns() - copy_start;
+        }
         Err(e) => report(text!("store: RETAIN not saved: {e}").as_str()),
     }
     control.schedule.saved(release);
@@ -326,6 +364,18 @@ pub fn after_release(
 
 /// The store process: writes what the control process copied, once per period.
 pub extern "C" fn store_process() {
+    // The control process asks for the reading at its start.
+    let cold = loop {
+        match LOAD.load(Ordering::Acquire) {
+            LOAD_COLD => break true,
+            LOAD_WARM => break false,
+            _ => apex::user_rt::sys::sleep_until(crate::now_ns() + 1_000_000),
+        }
+    };
+    if let Ok(package) = Package::parse(apex::runtime::start_info().data()) {
+        *LOADED.lock() = read(&package, crate::period().as_nanos() as u64, cold);
+    }
+    LOAD.store(LOAD_DONE, Ordering::Release);
     loop {
         write_pending();
         if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
@@ -352,8 +402,9 @@ fn write_pending() {
     if let Some((n, release)) = outbox.retain.take() {
         match found.write_retain(client, &outbox.retain_bytes[..n]) {
             Ok(r) => println!(
-                "plc: store: RETAIN snapshot #{} saved (release {release}, {n} bytes)",
-                r.sequence
+                "plc: store: RETAIN snapshot #{} saved (release {release}, {n} bytes, copied in {} us)",
+                r.sequence,
+                outbox.copy_ns / 1_000
             ),
             Err(e) => report(text!("store: RETAIN not saved: {e}").as_str()),
         }

@@ -97,8 +97,10 @@
 //!   `plc: store: <boot project|RETAIN> slot <i> skipped: <why>` for a torn or corrupt
 //!   slot and `plc: store: boot project #<seq> refused: <why>; the configured program
 //!   runs` (both reported to the health monitor); `plc: store: boot project #<seq> saved
-//!   (<n> bytes)` and `plc: store: RETAIN snapshot #<seq> saved (release <r>, <n> bytes)`
-//!   when a save is on the disk (`<seq>`: the record's sequence number), `plc: store:
+//!   (<n> bytes)` and `plc: store: RETAIN snapshot #<seq> saved (release <r>, <n> bytes, copied in <us>
+//!   us)`
+//!   when a save is on the disk (`<seq>`: the record's sequence number; the copy is the
+//!   control process's time for the snapshot between releases), `plc: store:
 //!   <what> not saved: <why>` when not;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
@@ -548,12 +550,10 @@ extern "C" fn control() {
         .map(|was| (was, None::<Takeover>));
     let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
     // A cold start runs the boot project if the store holds a valid one (`plc.store`).
-    if previous.is_none()
-        && let Some(len) = disk::load(&package, period, &mut images[0], |program| {
-            let (verified, schedule) = check_program(program, &mut scratch[..], MAX_DATA, period)?;
-            fit_configuration(verified.image(), schedule, &package).map(drop)
-        })
-    {
+    if let Some(len) = disk::load(&package, previous.is_none(), &mut images[0], |program| {
+        let (verified, schedule) = check_program(program, &mut scratch[..], MAX_DATA, period)?;
+        fit_configuration(verified.image(), schedule, &package).map(drop)
+    }) {
         running = running.downloaded(0, len);
     }
     let shared = package.shared().map(|layout| (layout, segment(&layout)));
