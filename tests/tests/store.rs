@@ -9,7 +9,8 @@
 //!
 //! `store_corrupt`: as above, but the newest RETAIN slot's header is damaged on the disk
 //! image between the boots: the PLC skips it (logged, reported to the health monitor) and
-//! restores the older snapshot.
+//! restores the older snapshot. When the end of the first run tore a save (QEMU stops
+//! while the store process writes), that torn slot is the one skipped.
 
 use scenarios::{boot, boot_again, check, disk_image};
 use slots::{BlockDevice, SECTOR, SlotState};
