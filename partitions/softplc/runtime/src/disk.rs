@@ -236,8 +236,8 @@ fn read(package: &Package, period_ns: u64, cold: bool) -> Option<slots::Record> 
             return None;
         }
         Ok((found_store, boot, retain)) => {
-            skipped("boot project", &boot);
-            skipped("RETAIN", &retain);
+            skipped("boot project", &boot, cold);
+            skipped("RETAIN", &retain, cold);
             if !cold {
                 // A warm restart keeps RAM's RETAIN values and runs the configured program.
                 *DISK.lock() = Some((disk, found_store));
@@ -274,10 +274,16 @@ fn read(package: &Package, period_ns: u64, cold: bool) -> Option<slots::Record> 
     boot_record
 }
 
-/// Logs and reports the slots of `region` that start skipped.
-fn skipped(region: &str, found: &Found) {
+/// Logs the slots of `region` that start skipped, and at a `cold` start reports them (a
+/// warm restart the report caused must not report them again).
+fn skipped(region: &str, found: &Found, cold: bool) {
     for (slot, corruption) in found.skipped.iter().flatten() {
-        report(text!("store: {region} slot {slot} skipped: {corruption}").as_str());
+        let text = text!("store: {region} slot {slot} skipped: {corruption}");
+        if cold {
+            report(text.as_str());
+        } else {
+            println!("plc: {}", text.as_str());
+        }
     }
 }
 
