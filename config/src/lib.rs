@@ -77,6 +77,7 @@
 //! plc.native = true               # optional, default false: the native execution tier
 //! plc.net = { mac = "52:54:00:12:34:57", address = "10.0.2.16/24", gateway = "10.0.2.2", rx = "eth-rx", tx = "eth-tx", connections = 8, buffer = 2048, requests_per_second = 200 }
 //! plc.modbus = { port = 502, unit = 1, writable = ["markers"] }  # needs plc.net
+//! plc.store = { request = "disk-req", response = "disk-resp", retain_every = "1s" }  # needs a virtual disk
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
 //! iec61499.types = ["PID.fbt"]     # optional
@@ -199,7 +200,14 @@
 //! Modbus/TCP on the process image: `port` (default 502), `unit` (the unit id it answers
 //! besides 0xFF; default 1), and `writable`, the areas a client may write: `"outputs"`
 //! (coils and holding registers of `%QX`/`%QW`) and `"markers"` (`%MX`/`%MW`); default
-//! none. The map and what the PLC does with requests: docs/plc.md.
+//! none. The map and what the PLC does with requests: docs/plc.md. `plc.store` keeps the
+//! boot project (the last committed online download) and RETAIN snapshots on the
+//! partition's virtual disk, which a block-device partition gives it
+//! (`blk.tenants.<plc>`, required): `request` is its queuing output of at least 2072
+//! bytes to the tenant's `from` port, `response` its queuing input of at least 2064 bytes
+//! from the tenant's `to` port (joined by channels), `retain_every` how often RETAIN is
+//! saved besides at every STOP and download (100 ms to 1 h, default 1 s). The disk
+//! layout and what start loads: docs/plc.md.
 //!
 //! **Data entries.** `cargo xtask` can give a partition a read-only data entry
 //! (`data/<partition>` in `system.img`, which syssw maps at `DATA_BASE`; see

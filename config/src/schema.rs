@@ -186,6 +186,16 @@ pub struct Plc {
     pub native: Option<Spanned<bool>>,
     pub net: Option<Spanned<PlcNet>>,
     pub modbus: Option<Spanned<PlcModbus>>,
+    pub store: Option<Spanned<PlcStore>>,
+}
+
+/// `plc.store`: the PLC's persistent store on its virtual disk of a block-device partition.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcStore {
+    pub request: Spanned<String>,
+    pub response: Spanned<String>,
+    pub retain_every: Option<Spanned<Scalar>>,
 }
 
 /// `plc.net`: the PLC's own interface (as `guest.net`) and its communication limits.

@@ -305,6 +305,31 @@ pub struct Plc {
     /// Run the program on the native execution tier (`plc.native`): the build translates it
     /// and compiles it into the partition's binary.
     pub native: bool,
+    /// The persistent store (`plc.store`): boot project and RETAIN snapshots on the
+    /// partition's virtual disk of a block-device partition.
+    pub store: Option<PlcStore>,
+}
+
+/// `plc.store`: the ports to the block-device partition (indices into the partition's
+/// `ports`) and how often RETAIN is saved. The virtual disk is the partition's entry in a
+/// block-device partition's `blk.tenants` (checked to exist).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PlcStore {
+    /// Queuing output carrying the requests (size >= `blk_core::link::MAX_REQUEST`).
+    pub request: usize,
+    /// Queuing input carrying the responses (size >= `blk_core::link::MAX_RESPONSE`).
+    pub response: usize,
+    /// RETAIN is saved this often (ns; besides at every STOP and download).
+    pub retain_every_ns: u64,
+}
+
+impl PlcStore {
+    /// `retain_every` when absent.
+    pub const DEFAULT_RETAIN_EVERY_NS: u64 = 1_000_000_000;
+    /// The least `retain_every`: a save takes several windows of the block-device partition.
+    pub const MIN_RETAIN_EVERY_NS: u64 = 100_000_000;
+    /// The longest `retain_every`: an hour.
+    pub const MAX_RETAIN_EVERY_NS: u64 = 3_600_000_000_000;
 }
 
 /// A value written in the description.

@@ -293,6 +293,7 @@ impl Validator<'_, '_> {
         let channels = self.channels(doc, &mut partitions, &mut ports);
         self.nic(doc, &mut partitions, &channels);
         self.blk(doc, &mut partitions, &channels);
+        self.plc_stores(doc, &partitions);
         let health = self.health(&doc.health, &root.key("health"));
 
         if let Some(memory) = memory {
@@ -987,6 +988,15 @@ impl Validator<'_, '_> {
             }
             Some(net)
         });
+        let store = raw.store.as_ref().and_then(|st| {
+            let names = [&st.get_ref().request, &st.get_ref().response];
+            for name in names {
+                if let Some(i) = ports.iter().position(|p| &p.name == name.get_ref()) {
+                    mapped[i] = true;
+                }
+            }
+            self.plc_store(st, &path.key("store"), ports)
+        });
         let modbus = raw.modbus.as_ref().and_then(|m| {
             if raw.net.is_none() {
                 self.error(
@@ -1175,7 +1185,115 @@ impl Validator<'_, '_> {
             native: raw.native.as_ref().is_some_and(|n| *n.get_ref()),
             net,
             modbus,
+            store,
         })
+    }
+
+    /// `plc.store`: the request and response ports to the block-device partition and the
+    /// RETAIN interval.
+    fn plc_store(
+        &mut self,
+        store: &Spanned<schema::PlcStore>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> Option<PlcStore> {
+        let st = store.get_ref();
+        let mut port = |key: &str, name: &Spanned<String>, direction: Direction, size: usize| {
+            let found = ports.iter().position(|p| {
+                &p.name == name.get_ref()
+                    && p.kind == PortKind::Queuing
+                    && p.direction == direction
+                    && p.size >= size as u32
+            });
+            if found.is_none() {
+                self.error(
+                    start(name),
+                    &path.key(key),
+                    format!(
+                        "`{}` must be a queuing `{}` port of this partition with size >= {size} (the largest {} of the block-device link)",
+                        name.get_ref(),
+                        direction.name(),
+                        if direction == Direction::Out { "request" } else { "response" }
+                    ),
+                );
+            }
+            found
+        };
+        let request = port(
+            "request",
+            &st.request,
+            Direction::Out,
+            blk_core::link::MAX_REQUEST,
+        );
+        let response = port(
+            "response",
+            &st.response,
+            Direction::In,
+            blk_core::link::MAX_RESPONSE,
+        );
+        let every = match &st.retain_every {
+            None => Some(PlcStore::DEFAULT_RETAIN_EVERY_NS),
+            Some(v) => {
+                let here = path.key("retain_every");
+                self.duration(v, &here).and_then(|ns| {
+                    let range = PlcStore::MIN_RETAIN_EVERY_NS..=PlcStore::MAX_RETAIN_EVERY_NS;
+                    if range.contains(&ns) {
+                        Some(ns)
+                    } else {
+                        self.error(
+                            start(v),
+                            &here,
+                            format!(
+                                "RETAIN is saved every {} to {} (a save takes several windows of the block-device partition), not every {}",
+                                Duration(*range.start()),
+                                Duration(*range.end()),
+                                Duration(ns)
+                            ),
+                        );
+                        None
+                    }
+                })
+            }
+        };
+        Some(PlcStore {
+            request: request?,
+            response: response?,
+            retain_every_ns: every?,
+        })
+    }
+
+    /// A PLC with `plc.store` must have a virtual disk: be a tenant of a block-device
+    /// partition (`blk.tenants`).
+    fn plc_stores(&mut self, doc: &schema::Document, partitions: &[Partition]) {
+        let base = KeyPath::root().key("partitions");
+        for (key, raw) in in_source_order(&doc.partitions) {
+            let Some(store) = raw
+                .get_ref()
+                .plc
+                .as_ref()
+                .and_then(|p| p.get_ref().store.as_ref())
+            else {
+                continue;
+            };
+            let Some(me) = partitions.iter().position(|p| &p.name == key.get_ref()) else {
+                continue;
+            };
+            let tenant = partitions
+                .iter()
+                .filter_map(|p| p.blk.as_ref())
+                .any(|b| b.tenants.iter().any(|t| t.partition == me));
+            if !tenant {
+                self.error(
+                    start(store),
+                    &base.key(key.get_ref()).key("plc").key("store"),
+                    format!(
+                        "partition `{}` has no virtual disk: give it one in a block-device partition's `blk.tenants.{}`",
+                        key.get_ref(),
+                        key.get_ref()
+                    ),
+                );
+            }
+        }
     }
 
     /// An optional integer of `range` at `key` of `path` (`default` when absent).

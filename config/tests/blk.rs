@@ -201,3 +201,74 @@ fn a_tenant_must_be_another_partition_and_the_partition_needs_its_device() {
         "needs `devices` (its virtio-blk function) and `dma`",
     );
 }
+
+/// `plc` as a soft-PLC keeping its store on its virtual disk (`plc.store`).
+fn with_store(store: &str) -> String {
+    edited(&[
+        (
+            "[partitions.plc]\nimage = \"app\"",
+            "[partitions.plc]\nimage = \"softplc\"",
+        ),
+        (
+            "ports.resp = { kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }\n",
+            &format!(
+                "ports.resp = {{ kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }}\nplc.program = [\"tests/data/counter.st\"]\n{store}\n"
+            ),
+        ),
+    ])
+}
+
+#[test]
+fn a_plc_store_names_its_ports_and_needs_a_virtual_disk() {
+    let s = load_ok(&with_store(
+        "plc.store = { request = \"req\", response = \"resp\", retain_every = \"2s\" }",
+    ));
+    let store = s.partitions[1]
+        .plc
+        .as_ref()
+        .and_then(|p| p.store)
+        .expect("plc.store");
+    let ports = &s.partitions[1].ports;
+    assert_eq!(ports[store.request].name, "req");
+    assert_eq!(ports[store.response].name, "resp");
+    assert_eq!(store.retain_every_ns, 2_000_000_000);
+    let default = load_ok(&with_store(
+        "plc.store = { request = \"req\", response = \"resp\" }",
+    ));
+    assert_eq!(
+        default.partitions[1]
+            .plc
+            .as_ref()
+            .and_then(|p| p.store)
+            .map(|s| s.retain_every_ns),
+        Some(1_000_000_000)
+    );
+    expect_some(
+        &with_store("plc.store = { request = \"resp\", response = \"resp\" }"),
+        "request = ^\"resp\"",
+        0,
+        "partitions.plc.plc.store.request",
+        "`resp` must be a queuing `out` port of this partition with size >= 2072",
+    );
+    expect_one(
+        &with_store(
+            "plc.store = { request = \"req\", response = \"resp\", retain_every = \"10ms\" }",
+        ),
+        "retain_every = ^\"10ms\"",
+        0,
+        "partitions.plc.plc.store.retain_every",
+        "RETAIN is saved every 100ms to 3600s",
+    );
+    let no_disk = with_store("plc.store = { request = \"req\", response = \"resp\" }").replacen(
+        "blk.tenants.plc = { from = \"plc-req\", to = \"plc-resp\", first_sector = 2048, sectors = 2048 }\n",
+        "",
+        1,
+    );
+    let diags = load(&no_disk).expect_err("no virtual disk");
+    assert!(
+        diags.iter().any(|d| d.key_path == "partitions.plc.plc.store"
+            && d.to_string()
+                .contains("partition `plc` has no virtual disk: give it one in a block-device partition's `blk.tenants.plc`")),
+        "{diags:?}"
+    );
+}

@@ -86,7 +86,8 @@ fn plc_guest_system() {
         (0, 3_000_000, 1)
     );
     // The PLC's valve and setpoint to the plant, the plant's level to the PLC; the guest
-    // sees the level and the valve and reaches the PLC's online service; its eth0 and the
+    // sees the level, the valve, the setpoint and the alarm (its HMI) and reaches the PLC's
+    // online service; its eth0 and the
     // PLC's interface are the NIC partition's tenants.
     let links: Vec<(PortKind, String, Vec<String>)> = s
         .channels
@@ -115,7 +116,12 @@ fn plc_guest_system() {
                 "plc.valve",
                 &["plant.valve", "linux.valve"]
             ),
-            link(PortKind::Sampling, "plc.setpoint", &["plant.setpoint"]),
+            link(
+                PortKind::Sampling,
+                "plc.setpoint",
+                &["plant.setpoint", "linux.setpoint"]
+            ),
+            link(PortKind::Sampling, "plc.alarm", &["linux.alarm"]),
             link(
                 PortKind::Sampling,
                 "plant.level",

@@ -35,9 +35,23 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     for (index, compiled) in &programs {
         let p = &system.partitions[*index];
         let plc = p.plc.as_ref().expect("a PLC partition");
+        // Its virtual disk's size (`plc.store`: validated to be a tenant).
+        let disk_sectors = system
+            .partitions
+            .iter()
+            .filter_map(|b| b.blk.as_ref())
+            .flat_map(|b| &b.tenants)
+            .find(|t| t.partition == *index)
+            .map(|t| t.sectors);
         out.push((
             p.name.clone(),
-            package(p, plc, compiled, shared.remove(index).as_ref())?,
+            package(
+                p,
+                plc,
+                compiled,
+                shared.remove(index).as_ref(),
+                disk_sectors,
+            )?,
         ));
     }
     Ok(out)
@@ -165,13 +179,14 @@ fn compile_sources(what: &str, files: &[SourceFile]) -> Result<plc_compiler::Com
     }
 }
 
-/// A PLC partition's package: its ports, program, watch list, safe values and shared
-/// globals.
+/// A PLC partition's package: its ports, program, watch list, safe values, shared
+/// globals, network interface and store (on a virtual disk of `disk_sectors`).
 fn package(
     p: &Partition,
     plc: &config::system::Plc,
     compiled: &plc_compiler::Compiled,
     shared: Option<&package::SharedPlan>,
+    disk_sectors: Option<u64>,
 ) -> Result<Vec<u8>> {
     let image = plc_vm::image::Image::parse(&compiled.image)
         .map_err(|e| anyhow::anyhow!("partition {}: {e}", p.name))?;
@@ -232,6 +247,32 @@ fn package(
             }),
         }
     });
+    // Then the store's ports (`plc.store`).
+    let store = match (plc.store, disk_sectors) {
+        (Some(st), Some(sectors)) => {
+            let at = ports.len();
+            for port in [st.request, st.response] {
+                let link = PlcLink {
+                    port,
+                    at: 0,
+                    valid: None,
+                };
+                ports.push(port_map(p, &link));
+            }
+            Some(package::Store {
+                request: at,
+                response: at + 1,
+                sectors,
+                retain_every_ns: st.retain_every_ns,
+            })
+        }
+        (Some(_), None) => bail!(
+            "partition {}: plc.store needs a virtual disk (`blk.tenants.{}`)",
+            p.name,
+            p.name
+        ),
+        (None, _) => None,
+    };
     let watch: Vec<&str> = plc.watch.iter().map(String::as_str).collect();
     let configured = plc
         .safe
@@ -278,6 +319,9 @@ fn package(
     }
     if let Some(net) = &net {
         package::attach_net(&mut bytes, net);
+    }
+    if let Some(store) = &store {
+        package::attach_store(&mut bytes, store);
     }
     Ok(bytes)
 }

@@ -23,6 +23,10 @@
 //!   stack on the interface's frame ports and the Modbus/TCP server (`softplc::comm`); it
 //!   never takes the life's lock: requests and answers pass through [`EXCHANGE`], which the
 //!   control process serves between cycles when it finds it free (it never waits for it).
+//! - the store process ([`disk::store_process`]), below the control process, once per
+//!   period, when the configuration gives the PLC a persistent store (`plc.store`): it
+//!   writes the boot project and RETAIN snapshots the control process copied between
+//!   releases to the virtual disk; the control process never waits for it.
 //!
 //! Online download: the chunks are assembled in whichever of the two static image buffers
 //! the running program does not use; a committed (verified) program then runs from the
@@ -85,6 +89,19 @@
 //!   start (with `plc.net`, `plc.modbus`); `plc: t=<ms>ms net open=<n> accepted=<n>
 //!   refused=<n> malformed=<n> requests=<n> responses=<n> frames_in=<n> frames_out=<n>`
 //!   every [`STATS_EVERY_MS`] while connections were seen;
+//! - with `plc.store` (the store process and the load: [`disk`]), at a cold start
+//!   `plc: store: boot project #<seq> loaded: <n> bytes, downloaded at release <r>` or
+//!   `plc: store: no boot project; the configured program runs`, `plc: store: RETAIN
+//!   snapshot #<seq> loaded: <n> variable(s) of release <r>` or `plc: store: no RETAIN
+//!   snapshot; initial values`, then `plc: store: <n> RETAIN variable(s) restored`;
+//!   `plc: store: <boot project|RETAIN> slot <i> skipped: <why>` for a torn or corrupt
+//!   slot and `plc: store: boot project #<seq> refused: <why>; the configured program
+//!   runs` (both reported to the health monitor); `plc: store: boot project #<seq> saved
+//!   (<n> bytes)` and `plc: store: RETAIN snapshot #<seq> saved (release <r>, <n> bytes, copied in <us>
+//!   us)`
+//!   when a save is on the disk (`<seq>`: the record's sequence number; the copy is the
+//!   control process's time for the snapshot between releases), `plc: store:
+//!   <what> not saved: <why>` when not;
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
 //!
@@ -146,6 +163,8 @@ const DEFAULT_PERIOD: Duration = Duration::from_millis(10);
 macro_rules! text {
     ($($arg:tt)*) => { LineBuffer::format(format_args!($($arg)*)) };
 }
+
+mod disk;
 
 /// Two data memories: the running program's and the one the next program (after a
 /// download or a warm restart) starts in, taking RETAIN values from the other.
@@ -530,6 +549,13 @@ extern "C" fn control() {
         .then(|| *RUNNING.lock())
         .map(|was| (was, None::<Takeover>));
     let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
+    // A cold start runs the boot project if the store holds a valid one (`plc.store`).
+    if let Some(len) = disk::load(&package, previous.is_none(), &mut images[0], |program| {
+        let (verified, schedule) = check_program(program, &mut scratch[..], MAX_DATA, period)?;
+        fit_configuration(verified.image(), schedule, &package).map(drop)
+    }) {
+        running = running.downloaded(0, len);
+    }
     let shared = package.shared().map(|layout| (layout, segment(&layout)));
     let mut shared_stats = SharedStats::default();
     let started = now_ns();
@@ -612,6 +638,12 @@ extern "C" fn control() {
                 }
             }
         }
+        disk::start(
+            program,
+            &image,
+            machine.data_mut(),
+            swapped.then_some(first_release),
+        );
         let mut loader = Loader::new(
             &mut staging[..],
             &mut scratch[..],
@@ -653,14 +685,27 @@ extern "C" fn control() {
                     life.rt,
                     &mut loader,
                 );
+                let mut stopped_now = false;
                 for &task in &life.rt.schedule.order[..life.rt.schedule.count] {
                     let name = life.image.task(task).map_or("?", |t| t.name);
                     match (stopped_before[task], life.rt.stopped[task].is_some()) {
-                        (false, true) => println!("plc: task {name} stopped online; outputs safe"),
+                        (false, true) => {
+                            stopped_now = true;
+                            println!("plc: task {name} stopped online; outputs safe")
+                        }
                         (true, false) => println!("plc: task {name} started online"),
                         _ => {}
                     }
                 }
+                let (data, release) = (life.machine.data(), life.rt.releases);
+                disk::after_release(
+                    &life.package,
+                    program,
+                    &life.image,
+                    data,
+                    release,
+                    stopped_now,
+                );
                 if let Some(reason) = loader.refusal.take() {
                     println!("plc: download refused: {reason}");
                 }
@@ -902,6 +947,7 @@ fn release_previous_locks() {
     force_open(&LIFE);
     // The previous life's control process is gone with its frame.
     LIFE.lock().0 = None;
+    disk::release_locks();
 }
 
 struct PlcPartition;
@@ -985,6 +1031,16 @@ impl PlcPartition {
         }
         // The VM's stack and call frames, the online buffers and the life live in its stack.
         spawn(ctx, "control", control, period(), control_priority);
+        if package.store().is_some() {
+            // Below the control process: it writes while the PLC runs.
+            spawn(
+                ctx,
+                "store",
+                disk::store_process,
+                period(),
+                control_priority.saturating_sub(1).max(1),
+            );
+        }
         if let Some(net) = package.net() {
             let [a, b, c, d] = net.address;
             let m = net.mac;

@@ -16,10 +16,10 @@
 //! 25     1    online response port (index of a queuing output)
 //! 26     1    online access (plc_online::Access code)
 //! 27     1    flags: bit 0 (FLAG_NATIVE) run the program on the native execution tier
-//!             (`plc.native`), when this partition's binary holds its translation; the
-//!             other bits 0
+//!             (`plc.native`), when this partition's binary holds its translation; bit 1
+//!             (FLAG_STORE) the package ends with the store block; the other bits 0
 //! 28     4    network block offset (0: the PLC has no network interface); the block
-//!             runs to the end of the package
+//!             runs to the end of the package or to the store block
 //! 32     4    safe-value list offset
 //! 36     4    safe-value list length
 //! 40     4    shared-globals block offset
@@ -79,6 +79,14 @@
 //!   24   4    requests served per second and connection (at least 1)
 //!   28   2    Modbus TCP port (0 without the server)
 //!   30   2    reserved (0)
+//! ...         the store block (`plc.store`), the package's last [`STORE_BLOCK`] bytes:
+//!   0    1    request port (index of a queuing output of at least
+//!             `blk_core::link::MAX_REQUEST` bytes)
+//!   1    1    response port (index of a queuing input of at least
+//!             `blk_core::link::MAX_RESPONSE` bytes)
+//!   2    6    reserved (0)
+//!   8    8    sectors of the partition's virtual disk (at least 1)
+//!   16   8    RETAIN saved every that many ns (at least 1)
 //! ```
 //!
 //! The online ports carry the online protocol (`plc-online`) instead of process-image
@@ -113,6 +121,14 @@ pub const NO_AREA: u32 = u32::MAX;
 pub const SAFE_RECORD: usize = 16;
 /// Flags bit: the configuration asks for the native execution tier (`plc.native`).
 pub const FLAG_NATIVE: u8 = 1;
+/// Flags bit: the package ends with the store block (`plc.store`).
+pub const FLAG_STORE: u8 = 2;
+/// Bytes of the store block.
+pub const STORE_BLOCK: usize = 24;
+/// The least request and response port sizes of the store (`blk_core::link`'s largest
+/// request and response, which this crate does not depend on).
+pub const STORE_REQUEST_MIN: u32 = 2072;
+pub const STORE_RESPONSE_MIN: u32 = 2064;
 
 /// Online port fields without online access.
 pub const NO_ONLINE: u8 = u8::MAX;
@@ -175,6 +191,9 @@ pub enum PackageError {
     /// The network block is cut short, names ports that are not a queuing input and output
     /// of a frame's size, or has a field out of range.
     BadNet,
+    /// The store block is cut short, names ports that are not a queuing output and input
+    /// of a block request's and response's size, or has a zero field.
+    BadStore,
 }
 
 impl core::fmt::Display for PackageError {
@@ -196,6 +215,7 @@ impl core::fmt::Display for PackageError {
             Self::BadShared => write!(f, "the shared-globals block is malformed"),
             Self::BadDeadlines => write!(f, "the task-deadline list is malformed"),
             Self::BadNet => write!(f, "the network block is malformed"),
+            Self::BadStore => write!(f, "the store block is malformed"),
             Self::BadFlags(flags) => write!(f, "unknown flags 0x{flags:02x}"),
         }
     }
@@ -225,6 +245,43 @@ pub struct Package<'a> {
     shared: Option<SharedLayout<'a>>,
     deadlines: &'a [u8],
     net: Option<Net>,
+    store: Option<Store>,
+}
+
+/// The PLC's persistent store on its virtual disk (the store block, `plc.store`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Store {
+    /// Package port indices: the requests out, the responses in.
+    pub request: usize,
+    pub response: usize,
+    pub sectors: u64,
+    pub retain_every_ns: u64,
+}
+
+impl Store {
+    fn parse(b: &[u8]) -> Option<Store> {
+        if b.len() != STORE_BLOCK || b[2..8].iter().any(|&x| x != 0) {
+            return None;
+        }
+        let store = Store {
+            request: b[0] as usize,
+            response: b[1] as usize,
+            sectors: u64_at(b, 8),
+            retain_every_ns: u64_at(b, 16),
+        };
+        (store.sectors > 0 && store.retain_every_ns > 0).then_some(store)
+    }
+
+    /// The block (for the image builder).
+    #[cfg(any(feature = "alloc", test))]
+    pub fn encode(&self) -> [u8; STORE_BLOCK] {
+        let mut b = [0u8; STORE_BLOCK];
+        b[0] = self.request as u8;
+        b[1] = self.response as u8;
+        b[8..16].copy_from_slice(&self.sectors.to_le_bytes());
+        b[16..24].copy_from_slice(&self.retain_every_ns.to_le_bytes());
+        b
+    }
 }
 
 /// Bytes of the network block.
@@ -501,7 +558,7 @@ impl<'a> Package<'a> {
         if version != VERSION {
             return Err(PackageError::UnsupportedVersion(version));
         }
-        if bytes[27] & !FLAG_NATIVE != 0 {
+        if bytes[27] & !(FLAG_NATIVE | FLAG_STORE) != 0 {
             return Err(PackageError::BadFlags(bytes[27]));
         }
         let count = u16_at(bytes, 6);
@@ -556,14 +613,31 @@ impl<'a> Package<'a> {
             shared,
             deadlines,
             net: None,
+            store: None,
         };
         for i in 0..package.ports {
             package.decode_port(i).ok_or(PackageError::BadPort(i))?;
         }
+        let queuing = |package: &Package, i: usize, direction, size: u32| {
+            package.port(i).is_some_and(|p| {
+                p.kind == PortKind::Queuing && p.direction == direction && p.size >= size
+            })
+        };
+        let mut end = bytes.len();
+        if bytes[27] & FLAG_STORE != 0 {
+            end = end.checked_sub(STORE_BLOCK).ok_or(PackageError::BadStore)?;
+            let store = Store::parse(&bytes[end..]).ok_or(PackageError::BadStore)?;
+            if !queuing(&package, store.request, Direction::Out, STORE_REQUEST_MIN)
+                || !queuing(&package, store.response, Direction::In, STORE_RESPONSE_MIN)
+            {
+                return Err(PackageError::BadStore);
+            }
+            package.store = Some(store);
+        }
         let net_at = u32_at(bytes, 28) as usize;
         if net_at != 0 {
             let net = bytes
-                .get(net_at..)
+                .get(net_at..end)
                 .and_then(Net::parse)
                 .ok_or(PackageError::BadNet)?;
             let frame_port = |i: usize, direction| {
@@ -618,11 +692,17 @@ impl<'a> Package<'a> {
         self.net
     }
 
+    /// The PLC's persistent store, if the configuration gives it one.
+    pub fn store(&self) -> Option<Store> {
+        self.store
+    }
+
     /// Whether port `i` moves process-image bytes (all but the online and frame ports).
     pub fn is_image_port(&self, i: usize) -> bool {
         self.online
             .is_none_or(|o| i != o.request && i != o.response)
             && self.net.is_none_or(|n| i != n.rx && i != n.tx)
+            && self.store.is_none_or(|s| i != s.request && i != s.response)
     }
 
     /// The configured task deadlines (tasks without one have none).
@@ -783,6 +863,16 @@ pub fn attach_net(package: &mut alloc::vec::Vec<u8>, net: &Net) {
     let at = package.len() as u32;
     package[28..32].copy_from_slice(&at.to_le_bytes());
     package.extend_from_slice(&net.encode());
+}
+
+/// Appends the store block to an [`encode`]d package (`plc.store`), after any network
+/// block.
+#[cfg(any(feature = "alloc", test))]
+pub fn attach_store(package: &mut alloc::vec::Vec<u8>, store: &Store) {
+    if let Some(flags) = package.get_mut(27) {
+        *flags |= FLAG_STORE;
+    }
+    package.extend_from_slice(&store.encode());
 }
 
 /// Marks an [`encode`]d package as asking for the native execution tier (`plc.native`).
@@ -1182,6 +1272,56 @@ mod tests {
                 write_markers: true,
             }),
         }
+    }
+
+    #[test]
+    fn the_store_block_round_trips_after_a_network_block_and_hostile_ones_are_refused() {
+        let store_port = |name, direction, size| PortMap {
+            size,
+            ..frame_port(name, direction)
+        };
+        let ports = [
+            level(),
+            frame_port("eth-rx", Direction::In),
+            frame_port("eth-tx", Direction::Out),
+            store_port("disk-req", Direction::Out, STORE_REQUEST_MIN),
+            store_port("disk-resp", Direction::In, STORE_RESPONSE_MIN),
+        ];
+        let store = Store {
+            request: 3,
+            response: 4,
+            sectors: 2048,
+            retain_every_ns: 1_000_000_000,
+        };
+        let plain = encode(&ports, b"P", &[], None, &[], None, &[]);
+        assert_eq!(Package::parse(&plain).unwrap().store(), None);
+        let mut good = plain.clone();
+        attach_net(&mut good, &network());
+        attach_store(&mut good, &store);
+        let package = Package::parse(&good).unwrap();
+        assert_eq!(package.store(), Some(store));
+        assert_eq!(package.net(), Some(network()));
+        assert!(!package.is_image_port(3) && !package.is_image_port(4));
+        let mut alone = plain.clone();
+        attach_store(&mut alone, &store);
+        assert_eq!(Package::parse(&alone).unwrap().store(), Some(store));
+        let block = good.len() - STORE_BLOCK;
+        // Ports swapped (wrong directions), a frame port (too small a response port is
+        // not: it is big enough), a reserved byte, no sectors, no interval, a cut block.
+        for (at, value) in [(0, 4), (1, 3), (0, 0), (2, 1), (8, 0), (16, 0)] {
+            let mut bad = good.clone();
+            if at == 8 || at == 16 {
+                bad[block + at..block + at + 8].fill(value);
+            } else {
+                bad[block + at] = value;
+            }
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadStore,
+                "byte {at} = {value}"
+            );
+        }
+        assert!(Package::parse(&good[..good.len() - 1]).is_err());
     }
 
     #[test]

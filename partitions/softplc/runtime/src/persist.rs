@@ -184,9 +184,31 @@ impl Store {
         buf: &mut [u8],
     ) -> Result<Record, PersistError<D::Error>> {
         let n = store::encode_boot(release, program, watch, buf).map_err(PersistError::Encode)?;
-        let record = slots::write(dev, &self.layout.boot, &self.boot, &buf[..n])
+        self.write_boot(dev, &buf[..n])
+    }
+
+    /// Writes an encoded boot project ([`store::encode_boot`]: the partition's control
+    /// process encodes, its store process writes).
+    pub fn write_boot<D: BlockDevice>(
+        &mut self,
+        dev: &mut D,
+        payload: &[u8],
+    ) -> Result<Record, PersistError<D::Error>> {
+        let record = slots::write(dev, &self.layout.boot, &self.boot, payload)
             .map_err(PersistError::Disk)?;
         self.boot = self.boot.after(record);
+        Ok(record)
+    }
+
+    /// Writes an encoded RETAIN snapshot ([`store::encode_retain`]).
+    pub fn write_retain<D: BlockDevice>(
+        &mut self,
+        dev: &mut D,
+        payload: &[u8],
+    ) -> Result<Record, PersistError<D::Error>> {
+        let record = slots::write(dev, &self.layout.retain, &self.retain, payload)
+            .map_err(PersistError::Disk)?;
+        self.retain = self.retain.after(record);
         Ok(record)
     }
 
@@ -203,11 +225,14 @@ impl Store {
     ) -> Result<Record, PersistError<D::Error>> {
         let n = store::encode_retain(image, program_crc, data, release, buf)
             .map_err(PersistError::Encode)?;
-        let record = slots::write(dev, &self.layout.retain, &self.retain, &buf[..n])
-            .map_err(PersistError::Disk)?;
-        self.retain = self.retain.after(record);
-        Ok(record)
+        self.write_retain(dev, &buf[..n])
     }
+}
+
+/// The releases between two RETAIN saves: `every_ns` (`plc.store`'s `retain_every`) in
+/// partition periods of `period_ns`, at least 1.
+pub fn retain_every_releases(every_ns: u64, period_ns: u64) -> u64 {
+    every_ns.div_ceil(period_ns.max(1)).max(1)
 }
 
 #[cfg(test)]

@@ -158,3 +158,11 @@ fn a_save_too_large_for_its_buffer_or_region_is_an_error_not_a_torn_record() {
     let (_, boot, _) = load(&mut disk, layout, &mut a, &mut b).unwrap();
     assert_eq!(boot.loaded, None);
 }
+
+#[test]
+fn the_retain_interval_is_whole_periods_rounded_up() {
+    assert_eq!(retain_every_releases(1_000_000_000, 10_000_000), 100);
+    assert_eq!(retain_every_releases(1_000_000_001, 10_000_000), 101);
+    assert_eq!(retain_every_releases(1, 10_000_000), 1);
+    assert_eq!(retain_every_releases(5, 0), 5);
+}

@@ -1,0 +1,206 @@
+//! The PLC's persistent store on a virtual disk of the block-device partition
+//! (configuration `tests/configs/store.toml`), across a reset of the machine with the same
+//! disk image.
+//!
+//! `store_boot_project`: the first boot downloads a changed program (revision 2) with
+//! plcctl; it becomes the boot project and RETAIN snapshots are saved. The second boot
+//! (same disk) starts the boot project, restores the newest snapshot (the RETAIN counter
+//! goes on from its value) and the guest finds revision 2 running without a download.
+//!
+//! `store_corrupt`: as above, but the newest RETAIN slot's header is damaged on the disk
+//! image between the boots: the PLC skips it (logged, reported to the health monitor) and
+//! restores the older snapshot. When the end of the first run tore a save (QEMU stops
+//! while the store process writes), that torn slot is the one skipped.
+
+use scenarios::{boot, boot_again, check, disk_image};
+use slots::{BlockDevice, SECTOR, SlotState};
+use softplc::persist::Layout;
+use xtask::qemu::Outcome;
+
+/// The PLC's virtual disk in the configuration: sectors 2048..4096 of the disk.
+const FIRST_SECTOR: u64 = 2048;
+const SECTORS: u64 = 2048;
+
+/// The PLC's virtual disk inside the disk image file.
+struct Image(Vec<u8>);
+
+impl BlockDevice for Image {
+    type Error = ();
+    fn read(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), ()> {
+        let at = ((FIRST_SECTOR + sector) as usize) * SECTOR;
+        buf.copy_from_slice(self.0.get(at..at + SECTOR).ok_or(())?);
+        Ok(())
+    }
+    fn write(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), ()> {
+        let at = ((FIRST_SECTOR + sector) as usize) * SECTOR;
+        self.0
+            .get_mut(at..at + SECTOR)
+            .ok_or(())?
+            .copy_from_slice(data);
+        Ok(())
+    }
+    fn flush(&mut self) -> Result<(), ()> {
+        Ok(())
+    }
+}
+
+/// The RETAIN slots on the disk image: (slot, sequence, `Keep.cycles`) of each valid one.
+fn retain_records(disk: &mut Image) -> Vec<(usize, u64, u32)> {
+    let region = Layout::of(SECTORS).expect("a store").retain;
+    let scan = slots::scan(disk, &region).expect("the RETAIN region reads");
+    let mut out = Vec::new();
+    for state in scan.slots {
+        if let SlotState::Valid(record) = state {
+            let mut payload = vec![0u8; record.len];
+            let read = slots::read(disk, &region, &record, &mut payload);
+            assert_eq!(read, Ok(Some(record.len)), "slot {} reads", record.slot);
+            let snapshot = softplc::store::decode_retain(&payload).expect("a RETAIN snapshot");
+            let cycles = snapshot
+                .values()
+                .find(|v| v.name == "Keep.cycles")
+                .and_then(|v| v.bytes.try_into().ok())
+                .map(u32::from_le_bytes)
+                .expect("Keep.cycles in the snapshot");
+            out.push((record.slot, record.sequence, cycles));
+        }
+    }
+    out.sort_by_key(|r| r.1);
+    out
+}
+
+/// The value of `Keep.cycles` in the first watch line of `o`.
+fn first_cycles(o: &Outcome) -> Option<u64> {
+    o.lines
+        .iter()
+        .filter(|l| l.contains("[plc] plc: t=") && l.contains(" watch "))
+        .find_map(|l| {
+            let (_, v) = l.split_once("Keep.cycles=")?;
+            let v = v.split_whitespace().next()?;
+            v.rsplit('#').next()?.parse().ok()
+        })
+}
+
+/// The first boot (a fresh disk): the download and the saves.
+fn first_boot(name: &str) -> Outcome {
+    let o = boot(name);
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit: the guest's script ends the run",
+    );
+    let out = scenarios::guest_output(&o);
+    check(
+        &o,
+        out.iter().any(|l| l == "Keep.revision = 2"),
+        &format!("the downloaded program runs: {out:?}"),
+    );
+    for line in [
+        "[plc] plc: store: no boot project; the configured program runs",
+        "[plc] plc: store: no RETAIN snapshot; initial values",
+        "[plc] plc: store: boot project #1 saved",
+        "[plc] plc: store: RETAIN snapshot #2 saved",
+    ] {
+        check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
+    }
+    // The control process's cost of a save: the copy between releases.
+    for line in o
+        .lines
+        .iter()
+        .filter(|l| l.contains("plc: store: RETAIN snapshot #"))
+    {
+        println!("{name}: {line}");
+    }
+    o
+}
+
+/// The second boot's common checks: the boot project runs, no download.
+fn second_boot_runs_the_boot_project(o: &Outcome) {
+    check(o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        o,
+        o.succeeded(),
+        "expected success exit: the guest's script ends the run",
+    );
+    let out = scenarios::guest_output(o);
+    check(
+        o,
+        out.iter().any(|l| l == "boot project runs")
+            && out.iter().any(|l| l == "Keep.revision = 2"),
+        &format!("the boot project runs after the reset: {out:?}"),
+    );
+    for line in [
+        "[plc] plc: store: boot project #1 loaded: ",
+        "[plc] plc: store: 1 RETAIN variable(s) restored",
+    ] {
+        check(o, o.line(line).is_some(), &format!("missing {line:?}"));
+    }
+}
+
+#[test]
+fn store_boot_project() {
+    let first = first_boot("store_boot_project");
+    let mut disk = Image(std::fs::read(disk_image("store_boot_project")).expect("the disk image"));
+    let records = retain_records(&mut disk);
+    let &(_, newest, cycles) = records.last().expect("a RETAIN snapshot on the disk");
+    println!("store_boot_project: RETAIN snapshot #{newest} on the disk, Keep.cycles = {cycles}");
+    let o = boot_again("store_boot_project");
+    second_boot_runs_the_boot_project(&o);
+    let line = format!("[plc] plc: store: RETAIN snapshot #{newest} loaded: 1 variable(s)");
+    check(&o, o.line(&line).is_some(), &format!("missing {line:?}"));
+    // The counter goes on from the snapshot (a fresh one would be near 100 after a second).
+    let after = first_cycles(&o);
+    check(
+        &o,
+        after.is_some_and(|c| c > u64::from(cycles)),
+        &format!("Keep.cycles at the first watch line {after:?} > the snapshot's {cycles}"),
+    );
+    drop(first);
+}
+
+#[test]
+fn store_corrupt() {
+    let _first = first_boot("store_corrupt");
+    let path = disk_image("store_corrupt");
+    let mut disk = Image(std::fs::read(&path).expect("the disk image"));
+    let records = retain_records(&mut disk);
+    let (slot, older, older_cycles) = match records[..] {
+        [(_, older, older_cycles), (slot, newest, _)] => {
+            // Damage the newest slot's header (its sequence number): its CRC fails.
+            let region = Layout::of(SECTORS).expect("a store").retain;
+            let header = region.first + slot as u64 * (region.sectors / 2);
+            let mut sector = [0u8; SECTOR];
+            disk.read(header, &mut sector).expect("the header");
+            sector[8] ^= 0xff;
+            disk.write(header, &sector).expect("the header");
+            std::fs::write(&path, &disk.0).expect("the damaged disk image");
+            println!("store_corrupt: RETAIN slot {slot} (#{newest}) damaged, #{older} below it");
+            (slot, older, older_cycles)
+        }
+        // The machine stopped in the middle of a save: the other slot is torn already.
+        [(valid, older, older_cycles)] => {
+            println!(
+                "store_corrupt: RETAIN slot {} torn by the end of the run, #{older} in the other",
+                1 - valid
+            );
+            (1 - valid, older, older_cycles)
+        }
+        _ => panic!("RETAIN snapshots on the disk: {records:?}"),
+    };
+    let o = boot_again("store_corrupt");
+    second_boot_runs_the_boot_project(&o);
+    for line in [
+        format!("[plc] plc: store: RETAIN slot {slot} skipped: "),
+        format!("[plc] plc: store: RETAIN snapshot #{older} loaded: 1 variable(s)"),
+    ] {
+        check(&o, o.line(&line).is_some(), &format!("missing {line:?}"));
+    }
+    let after = first_cycles(&o);
+    check(
+        &o,
+        after.is_some_and(|c| c > u64::from(older_cycles)),
+        &format!(
+            "Keep.cycles at the first watch line {after:?} > the older snapshot's {older_cycles}"
+        ),
+    );
+}
