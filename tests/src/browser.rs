@@ -7,6 +7,7 @@ use base64::Engine;
 use serde_json::{Value, json};
 use std::io::{BufRead, BufReader, Read, Write};
 use std::net::TcpStream;
+use std::os::unix::process::CommandExt;
 use std::path::PathBuf;
 use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
@@ -16,7 +17,8 @@ use tungstenite::{Message, WebSocket};
 /// Debian's package `chromium` (a scenario's `debian_packages` installs it).
 pub const CHROMIUM: &str = "chromium";
 
-/// One headless Chromium with one page; killed when dropped.
+/// One headless Chromium with one page; closed when dropped (with every process it
+/// started: they share its process group).
 pub struct Browser {
     child: Child,
     page: WebSocket<MaybeTlsStream<TcpStream>>,
@@ -43,6 +45,7 @@ impl Browser {
             .arg("about:blank")
             .stdout(Stdio::null())
             .stderr(Stdio::piped())
+            .process_group(0)
             .spawn()
             .map_err(|e| format!("cannot start {CHROMIUM}: {e}"))?;
         // "DevTools listening on ws://127.0.0.1:<port>/devtools/browser/<id>" on stderr.
@@ -154,7 +157,16 @@ impl Browser {
 
 impl Drop for Browser {
     fn drop(&mut self) {
-        let _ = self.child.kill();
+        let _ = self.call("Browser.close", json!({}));
+        let deadline = Instant::now() + Duration::from_secs(5);
+        while Instant::now() < deadline && matches!(self.child.try_wait(), Ok(None)) {
+            std::thread::sleep(Duration::from_millis(100));
+        }
+        // Whatever is left of it (renderers, zygotes, the crash handler).
+        let _ = Command::new("kill")
+            .arg("-KILL")
+            .arg(format!("-{}", self.child.id()))
+            .status();
         let _ = self.child.wait();
         let _ = std::fs::remove_dir_all(&self.profile);
     }
