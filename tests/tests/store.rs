@@ -95,6 +95,16 @@ fn first_boot(name: &str) -> Outcome {
         out.iter().any(|l| l == "Keep.revision = 2"),
         &format!("the downloaded program runs: {out:?}"),
     );
+    // plcctl tells what the store loaded (nothing on a fresh disk) and saved.
+    check(
+        &o,
+        out.iter()
+            .any(|l| l == "store: loaded boot project none, RETAIN snapshot none")
+            && out
+                .iter()
+                .any(|l| l.starts_with("store: saved boot project #1, RETAIN snapshot #")),
+        &format!("plcctl store after the first boot: {out:?}"),
+    );
     for line in [
         "[plc] plc: store: no boot project; the configured program runs",
         "[plc] plc: store: no RETAIN snapshot; initial values",
@@ -128,6 +138,14 @@ fn second_boot_runs_the_boot_project(o: &Outcome) {
         out.iter().any(|l| l == "boot project runs")
             && out.iter().any(|l| l == "Keep.revision = 2"),
         &format!("the boot project runs after the reset: {out:?}"),
+    );
+    check(
+        o,
+        out.iter().any(|l| {
+            l.starts_with("store: loaded boot project #1, RETAIN snapshot #")
+                && !l.ends_with("none")
+        }),
+        &format!("plcctl store after the reset: {out:?}"),
     );
     for line in [
         "[plc] plc: store: boot project #1 loaded: ",

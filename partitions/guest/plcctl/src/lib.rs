@@ -17,6 +17,7 @@
 //! | `plcctl unforce NAME` | `unforced <name>` |
 //! | `plcctl stats` | `task <name> stopped=<bool> cycles=<n> last_us=.. min_us=.. mean_us=.. max_us=.. last_jitter_us=.. max_jitter_us=.. overruns=<n> faults=<n>` per task |
 //! | `plcctl download FILE.plcb` | `downloaded FILE: <n> bytes, running from release <r>` |
+//! | `plcctl store` | `store: loaded boot project #<n>, RETAIN snapshot #<m>` (what the PLC's persistent store, `plc.store`, loaded at its last cold start; `none` for the configured program or initial values) and `store: saved boot project #<n>, RETAIN snapshot #<m>` (the last saves), or `store: none (the PLC has no plc.store)` |
 //! | `plcctl version` | `protocol: plcctl <n>, PLC <m>`: the online protocol versions plcctl and the PLC speak (a PLC of version 1 does not know the question: `PLC 1`) |
 //!
 //! Options before or after the command: `--request PATH`, `--response PATH` (the devices;
@@ -31,7 +32,7 @@
 
 use plc_online::{
     MAX_CHUNK, MAX_MESSAGE, PROTOCOL_VERSION, Reader, Request, Status, crc32, decode_response,
-    encode_request, read_stats,
+    encode_request, read_stats, read_store_status,
 };
 use plc_vm::image::VarType;
 use plc_vm::literal::{self, LiteralError};
@@ -46,7 +47,7 @@ pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(2000);
 
 pub const USAGE: &str = "usage: plcctl [--request PATH] [--response PATH] [--timeout MS] \
 list | read NAME... | watch NAME... [--interval T] [--count N] | write NAME=VALUE | \
-force NAME=VALUE | unforce NAME | stats | download FILE.plcb | version";
+force NAME=VALUE | unforce NAME | stats | store | download FILE.plcb | version";
 
 /// What the command line asks.
 #[derive(Clone, Debug, PartialEq)]
@@ -74,6 +75,7 @@ pub enum Action {
     },
     Unforce(String),
     Stats,
+    Store,
     Download(String),
     Version,
 }
@@ -143,6 +145,7 @@ impl Command {
         let action = match verb.as_str() {
             "list" if rest.is_empty() => Action::List,
             "stats" if rest.is_empty() => Action::Stats,
+            "store" if rest.is_empty() => Action::Store,
             "version" if rest.is_empty() => Action::Version,
             "read" => Action::Read(some(rest)?),
             "watch" => Action::Watch {
@@ -164,7 +167,9 @@ impl Command {
             }
             "unforce" => Action::Unforce(one("NAME")?),
             "download" => Action::Download(one("FILE")?),
-            "list" | "stats" | "version" => return Err(format!("{verb} takes no arguments")),
+            "list" | "stats" | "store" | "version" => {
+                return Err(format!("{verb} takes no arguments"));
+            }
             other => return Err(format!("unknown command {other}")),
         };
         Ok(Command {
@@ -384,6 +389,42 @@ impl<T: Transport> Link<T> {
                 Ok(())
             }
             Action::Stats => self.stats(out),
+            Action::Store => {
+                let s = match self.ask(&Request::Store)? {
+                    (Status::Ok, message) => result(&message)
+                        .and_then(|mut r| read_store_status(&mut r))
+                        .ok_or_else(|| Failure::device("STORE: a malformed answer".into()))?,
+                    // A PLC of protocol version 2 or older does not know the question.
+                    (Status::Malformed, _) => {
+                        return Err(Failure::device(
+                            "STORE: the PLC's online protocol is older than version 3".into(),
+                        ));
+                    }
+                    (status, _) => return Err(Failure::refused("STORE", status)),
+                };
+                if !s.configured {
+                    out("store: none (the PLC has no plc.store)");
+                    return Ok(());
+                }
+                let n = |seq: u64| {
+                    if seq == 0 {
+                        "none".to_string()
+                    } else {
+                        format!("#{seq}")
+                    }
+                };
+                out(&format!(
+                    "store: loaded boot project {}, RETAIN snapshot {}",
+                    n(s.boot_loaded),
+                    n(s.retain_loaded)
+                ));
+                out(&format!(
+                    "store: saved boot project {}, RETAIN snapshot {}",
+                    n(s.boot_saved),
+                    n(s.retain_saved)
+                ));
+                Ok(())
+            }
             Action::Version => {
                 let plc = match self.ask(&Request::Version)? {
                     (Status::Ok, message) => result(&message)

@@ -118,6 +118,17 @@ impl Transport for Plc {
                 _ => status = Status::UnknownName,
             },
             Request::Version => w.put(&PROTOCOL_VERSION.to_le_bytes()).unwrap(),
+            Request::Store => plc_online::put_store_status(
+                &mut w,
+                &plc_online::StoreStatus {
+                    configured: true,
+                    boot_loaded: 2,
+                    retain_loaded: 0,
+                    boot_saved: 3,
+                    retain_saved: 19,
+                },
+            )
+            .unwrap(),
             Request::Unforce { .. } => self.forced = None,
             Request::Stats { task: 0 } => put_stats(
                 &mut w,
@@ -290,14 +301,14 @@ fn version_tells_both_protocols() {
     let (r, lines, _) = run(Plc::new(Access::Monitor), "version");
     assert_eq!(
         (r, lines),
-        (Ok(()), vec!["protocol: plcctl 2, PLC 2".to_string()])
+        (Ok(()), vec!["protocol: plcctl 3, PLC 3".to_string()])
     );
     let mut old = Plc::new(Access::Monitor);
     old.version_1 = true;
     let (r, lines, _) = run(old, "version");
     assert_eq!(
         (r, lines),
-        (Ok(()), vec!["protocol: plcctl 2, PLC 1".to_string()])
+        (Ok(()), vec!["protocol: plcctl 3, PLC 1".to_string()])
     );
     assert!(Command::parse(&args("version x")).is_err());
 }
@@ -329,6 +340,15 @@ fn list_read_watch_force_unforce_and_stats() {
     assert_eq!(plc.forced, Some(0.25));
     let (r, lines, _) = run(Plc::new(Access::Force), "unforce valve");
     assert_eq!((r, lines), (Ok(()), vec!["unforced valve".to_string()]));
+    let (r, lines, _) = run(Plc::new(Access::Monitor), "store");
+    assert_eq!(r, Ok(()));
+    assert_eq!(
+        lines,
+        [
+            "store: loaded boot project #2, RETAIN snapshot none",
+            "store: saved boot project #3, RETAIN snapshot #19"
+        ]
+    );
     let (r, lines, plc) = run(Plc::new(Access::Force), "write valve=0.75");
     assert_eq!((r, lines), (Ok(()), vec!["wrote valve = 0.75".to_string()]));
     assert_eq!((plc.valve, plc.forced), (0.75, None));

@@ -7,7 +7,8 @@
 //!
 //! # Versions
 //!
-//! This is version [`PROTOCOL_VERSION`] (2). Version 2 only adds to version 1, whose
+//! This is version [`PROTOCOL_VERSION`] (3). Version 3 only adds the operation STORE to
+//! version 2 (a version 2 PLC answers it MALFORMED). Version 2 only adds to version 1, whose
 //! messages keep their bytes and meaning: the value types 17 to 27 (the date/time types,
 //! CHAR, WCHAR, WSTRING, references), the status READ_ONLY, the operation VERSION, and a
 //! READ answer names the variable's own type (SINT, UDINT, ...; version 1 said LINT for
@@ -36,9 +37,10 @@
 //! | 10 DOWNLOAD_CHUNK | `offset u32`, then 1..=[`MAX_CHUNK`] bytes (the rest of the message) | none |
 //! | 11 DOWNLOAD_COMMIT | none | `release u64` |
 //! | 12 VERSION (v2) | none | `version u16` |
+//! | 13 STORE (v3) | none | `configured u8`, then the sequence numbers (u64, 0 for none) of the boot project and the RETAIN snapshot loaded at the last cold start and of the last ones saved ([`StoreStatus`]) |
 //!
 //! Which access level ([`Access`], the configuration's `plc.online.access`) each operation
-//! needs is [`Op::needs`]: LIST, READ, STATS, VERSION `monitor`; WRITE, FORCE, UNFORCE,
+//! needs is [`Op::needs`]: LIST, READ, STATS, VERSION, STORE `monitor`; WRITE, FORCE, UNFORCE,
 //! STOP, START `force`; the DOWNLOAD operations `download`. Below it the answer is FORBIDDEN.
 //!
 //! # Values
@@ -113,7 +115,7 @@ use plc_vm::isa::TimeKind;
 use plc_vm::vm::Value;
 
 /// The protocol version this crate speaks (see "Versions").
-pub const PROTOCOL_VERSION: u16 = 2;
+pub const PROTOCOL_VERSION: u16 = 3;
 
 /// Largest message either way (a queuing port of the PLC must hold it).
 pub const MAX_MESSAGE: usize = 256;
@@ -137,6 +139,8 @@ codes::code_enum! {
         DownloadCommit = 11 => "DOWNLOAD_COMMIT",
         /// The PLC's protocol version (version 2).
         Version = 12 => "VERSION",
+        /// What the persistent store loaded and saved (version 3).
+        Store = 13 => "STORE",
     }
 }
 
@@ -196,7 +200,7 @@ impl Op {
     /// The access level this operation needs.
     pub fn needs(self) -> Access {
         match self {
-            Op::List | Op::Read | Op::Stats | Op::Version => Access::Monitor,
+            Op::List | Op::Read | Op::Stats | Op::Version | Op::Store => Access::Monitor,
             Op::Write | Op::Force | Op::Unforce | Op::Stop | Op::Start => Access::Force,
             Op::DownloadBegin | Op::DownloadChunk | Op::DownloadCommit => Access::Download,
         }
@@ -218,6 +222,7 @@ pub enum Request<'a> {
     DownloadChunk { offset: u32, bytes: &'a [u8] },
     DownloadCommit,
     Version,
+    Store,
 }
 
 impl Request<'_> {
@@ -235,6 +240,7 @@ impl Request<'_> {
             Request::DownloadChunk { .. } => Op::DownloadChunk,
             Request::DownloadCommit => Op::DownloadCommit,
             Request::Version => Op::Version,
+            Request::Store => Op::Store,
         }
     }
 }
@@ -512,7 +518,7 @@ pub fn encode_request(r: &Request, seq: u8, buf: &mut [u8]) -> Option<usize> {
             w.put(&offset.to_le_bytes())?;
             w.put(bytes)?
         }
-        Request::DownloadCommit | Request::Version => {}
+        Request::DownloadCommit | Request::Version | Request::Store => {}
     }
     Some(w.len())
 }
@@ -579,6 +585,7 @@ pub fn decode_request(bytes: &[u8]) -> Result<(u8, Request<'_>), (u8, u8)> {
             .then_some(Request::DownloadCommit)
             .ok_or(fail)?,
         Op::Version => r.is_empty().then_some(Request::Version).ok_or(fail)?,
+        Op::Store => r.is_empty().then_some(Request::Store).ok_or(fail)?,
     };
     Ok((seq, request))
 }
@@ -609,6 +616,40 @@ pub fn put_stats(w: &mut Writer, s: &TaskStats) -> Option<()> {
         w.put(&f.to_le_bytes())?;
     }
     Some(())
+}
+
+/// What the PLC's persistent store (`plc.store`) loaded at the last cold start and saved
+/// since, as STORE returns it: sequence numbers of the store's records, 0 for none.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct StoreStatus {
+    /// The PLC has a store (without one every number is 0).
+    pub configured: bool,
+    /// The boot project that runs instead of the configured program (0: the configured one).
+    pub boot_loaded: u64,
+    /// The RETAIN snapshot the program started with (0: initial values).
+    pub retain_loaded: u64,
+    pub boot_saved: u64,
+    pub retain_saved: u64,
+}
+
+/// Appends a STORE result.
+pub fn put_store_status(w: &mut Writer, s: &StoreStatus) -> Option<()> {
+    w.put(&[s.configured as u8])?;
+    for n in [s.boot_loaded, s.retain_loaded, s.boot_saved, s.retain_saved] {
+        w.put(&n.to_le_bytes())?;
+    }
+    Some(())
+}
+
+/// Reads a STORE result.
+pub fn read_store_status(r: &mut Reader) -> Option<StoreStatus> {
+    Some(StoreStatus {
+        configured: r.u8()? != 0,
+        boot_loaded: r.u64()?,
+        retain_loaded: r.u64()?,
+        boot_saved: r.u64()?,
+        retain_saved: r.u64()?,
+    })
 }
 
 /// Reads a STATS result.
@@ -983,6 +1024,25 @@ mod tests {
     #[test]
     fn version_is_asked_without_a_payload() {
         let mut buf = [0u8; MAX_MESSAGE];
+        let n = encode_request(&Request::Store, 9, &mut buf).unwrap();
+        assert_eq!(decode_request(&buf[..n]), Ok((9, Request::Store)));
+        assert_eq!(Op::Store.needs(), Access::Monitor);
+        let status = StoreStatus {
+            configured: true,
+            boot_loaded: 3,
+            retain_loaded: 41,
+            boot_saved: 4,
+            retain_saved: 1 << 40,
+        };
+        let mut w = begin_response(Op::Store.code(), 9, Status::Ok, &mut buf);
+        put_store_status(&mut w, &status).unwrap();
+        let n = w.len();
+        let (_, _, _, mut r) = decode_response(&buf[..n]).unwrap();
+        assert_eq!(read_store_status(&mut r), Some(status));
+        assert_eq!(
+            read_store_status(&mut decode_response(&buf[..n - 1]).unwrap().3),
+            None
+        );
         let n = encode_request(&Request::Version, 9, &mut buf).unwrap();
         assert_eq!(&buf[..n], &[12, 9]);
         assert_eq!(decode_request(&buf[..n]), Ok((9, Request::Version)));

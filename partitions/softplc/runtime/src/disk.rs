@@ -181,6 +181,7 @@ pub fn load(
             Ok(()) => {
                 image[..b.program.len()].copy_from_slice(b.program);
                 boot_len = Some(b.program.len());
+                persist::STATUS.boot_loaded(record.sequence);
                 println!(
                     "plc: store: boot project #{} loaded: {} bytes, downloaded at release {}",
                     record.sequence,
@@ -238,6 +239,9 @@ fn read(package: &Package, period_ns: u64, cold: bool) -> Option<slots::Record> 
         Ok((found_store, boot, retain)) => {
             skipped("boot project", &boot, cold);
             skipped("RETAIN", &retain, cold);
+            if cold {
+                persist::STATUS.cold_start();
+            }
             if !cold {
                 // A warm restart keeps RAM's RETAIN values and runs the configured program.
                 *DISK.lock() = Some((disk, found_store));
@@ -257,6 +261,7 @@ fn read(package: &Package, period_ns: u64, cold: bool) -> Option<slots::Record> 
                             record.sequence, snapshot.count, snapshot.release
                         );
                         control.restore = Some(record.len);
+                        persist::STATUS.retain_loaded(record.sequence);
                     }
                     Err(e) => report(
                         text!(
@@ -401,17 +406,23 @@ fn write_pending() {
     let outbox = &mut *outbox;
     if let Some(n) = outbox.boot.take() {
         match found.write_boot(client, &outbox.boot_bytes[..n]) {
-            Ok(r) => println!("plc: store: boot project #{} saved ({n} bytes)", r.sequence),
+            Ok(r) => {
+                persist::STATUS.boot_saved(r.sequence);
+                println!("plc: store: boot project #{} saved ({n} bytes)", r.sequence)
+            }
             Err(e) => report(text!("store: boot project not saved: {e}").as_str()),
         }
     }
     if let Some((n, release)) = outbox.retain.take() {
         match found.write_retain(client, &outbox.retain_bytes[..n]) {
-            Ok(r) => println!(
-                "plc: store: RETAIN snapshot #{} saved (release {release}, {n} bytes, copied in {} us)",
-                r.sequence,
-                outbox.copy_ns / 1_000
-            ),
+            Ok(r) => {
+                persist::STATUS.retain_saved(r.sequence);
+                println!(
+                    "plc: store: RETAIN snapshot #{} saved (release {release}, {n} bytes, copied in {} us)",
+                    r.sequence,
+                    outbox.copy_ns / 1_000
+                )
+            }
             Err(e) => report(text!("store: RETAIN not saved: {e}").as_str()),
         }
     }

@@ -10,7 +10,7 @@ use crate::package::Package;
 use crate::scan::{MAX_TASKS, PortIo, Runtime};
 use plc_online::{
     Access, MAX_CHUNK, MAX_MESSAGE, Op, PROTOCOL_VERSION, Request, Status, TaskStats,
-    begin_response, decode_request, put_stats,
+    begin_response, decode_request, put_stats, put_store_status,
 };
 use plc_vm::image::{Image, VarType};
 use plc_vm::vm::{Machine, VarError};
@@ -264,6 +264,11 @@ pub fn serve(
         Request::Version => {
             let mut w = begin_response(op.code(), seq, Status::Ok, out);
             let _ = w.put(&PROTOCOL_VERSION.to_le_bytes());
+            w.len()
+        }
+        Request::Store => {
+            let mut w = begin_response(op.code(), seq, Status::Ok, out);
+            let _ = put_store_status(&mut w, &crate::persist::STATUS.get());
             w.len()
         }
         Request::DownloadCommit => match loader.commit(package, machine, rt) {

@@ -14,8 +14,71 @@
 //! both: the PLC then starts its configured program with initial values.
 
 use crate::store::{self, StoreError};
+use core::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use plc_online::StoreStatus;
 use plc_vm::image::Image;
 use slots::{BlockDevice, Corruption, Record, Region, Scan, SlotState};
+
+/// What the store loaded at the last cold start and saved since (the online service's
+/// STORE answers it): the partition's store glue sets it, sequence numbers, 0 for none.
+pub static STATUS: StatusCell = StatusCell::new();
+
+/// [`StoreStatus`] shared between the store process and the control process.
+pub struct StatusCell {
+    configured: AtomicBool,
+    /// boot loaded, RETAIN loaded, boot saved, RETAIN saved.
+    numbers: [AtomicU64; 4],
+}
+
+impl StatusCell {
+    pub const fn new() -> Self {
+        StatusCell {
+            configured: AtomicBool::new(false),
+            numbers: [const { AtomicU64::new(0) }; 4],
+        }
+    }
+
+    /// A cold start with a store: nothing loaded or saved yet.
+    pub fn cold_start(&self) {
+        self.configured.store(true, Ordering::Release);
+        for n in &self.numbers {
+            n.store(0, Ordering::Release);
+        }
+    }
+
+    pub fn boot_loaded(&self, sequence: u64) {
+        self.numbers[0].store(sequence, Ordering::Release);
+    }
+
+    pub fn retain_loaded(&self, sequence: u64) {
+        self.numbers[1].store(sequence, Ordering::Release);
+    }
+
+    pub fn boot_saved(&self, sequence: u64) {
+        self.numbers[2].store(sequence, Ordering::Release);
+    }
+
+    pub fn retain_saved(&self, sequence: u64) {
+        self.numbers[3].store(sequence, Ordering::Release);
+    }
+
+    pub fn get(&self) -> StoreStatus {
+        let n = |i: usize| self.numbers[i].load(Ordering::Acquire);
+        StoreStatus {
+            configured: self.configured.load(Ordering::Acquire),
+            boot_loaded: n(0),
+            retain_loaded: n(1),
+            boot_saved: n(2),
+            retain_saved: n(3),
+        }
+    }
+}
+
+impl Default for StatusCell {
+    fn default() -> Self {
+        Self::new()
+    }
+}
 
 /// The kinds in the slots' headers.
 pub const BOOT_KIND: u16 = 1;

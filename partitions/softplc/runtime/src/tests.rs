@@ -985,6 +985,24 @@ fn online_monitor_of_dates_characters_wide_strings_and_references() {
         (Op::Version, Status::Ok, Some(PROTOCOL_VERSION))
     );
 
+    // STORE: what the persistent store loaded and saved (the store glue sets it).
+    crate::persist::STATUS.cold_start();
+    crate::persist::STATUS.boot_loaded(3);
+    crate::persist::STATUS.retain_saved(17);
+    let reply = ask(&mut machine, &mut rt, Request::Store);
+    let (op, _, status, mut r) = decode_response(&reply).unwrap();
+    assert_eq!((op, status), (Op::Store, Status::Ok));
+    assert_eq!(
+        plc_online::read_store_status(&mut r),
+        Some(plc_online::StoreStatus {
+            configured: true,
+            boot_loaded: 3,
+            retain_loaded: 0,
+            boot_saved: 0,
+            retain_saved: 17
+        })
+    );
+
     // LIST names every variable with its own type.
     let reply = ask(&mut machine, &mut rt, Request::List { from: 0 });
     let (_, _, _, mut r) = decode_response(&reply).unwrap();
