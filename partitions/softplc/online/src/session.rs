@@ -64,6 +64,56 @@ const CLIENT_LABEL: &[u8] = b"warden-online client";
 const SERVER_LABEL: &[u8] = b"warden-online server";
 const SESSION_LABEL: &[u8] = b"warden-online session";
 
+/// Fewest and most bytes of a pre-shared key.
+pub const MIN_KEY: usize = 16;
+pub const MAX_KEY: usize = 64;
+
+/// Why a key file's text is no key.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum KeyFileError {
+    NotHex(char),
+    OddDigits(usize),
+    Length(usize),
+}
+
+impl core::fmt::Display for KeyFileError {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            KeyFileError::NotHex(c) => write!(f, "holds {c:?}, which is no hex digit"),
+            KeyFileError::OddDigits(n) => write!(f, "holds {n} hex digits, an odd count"),
+            KeyFileError::Length(n) => {
+                write!(f, "holds {n} bytes, outside {MIN_KEY}..={MAX_KEY}")
+            }
+        }
+    }
+}
+
+/// The key in a key file's text: the key as hex digits, whitespace around them ignored
+/// ([`MIN_KEY`]..=[`MAX_KEY`] bytes). The configuration (`plc.online_tcp`) and `plcctl
+/// --key` read the same files. Returns the key's length in `out`.
+pub fn parse_key_file(text: &str, out: &mut [u8; MAX_KEY]) -> Result<usize, KeyFileError> {
+    let hex = text.trim().as_bytes();
+    if let Some(&bad) = hex.iter().find(|b| !b.is_ascii_hexdigit()) {
+        return Err(KeyFileError::NotHex(char::from(bad)));
+    }
+    if !hex.len().is_multiple_of(2) {
+        return Err(KeyFileError::OddDigits(hex.len()));
+    }
+    let len = hex.len() / 2;
+    if !(MIN_KEY..=MAX_KEY).contains(&len) {
+        return Err(KeyFileError::Length(len));
+    }
+    let digit = |b: u8| match b {
+        b'0'..=b'9' => b - b'0',
+        b'a'..=b'f' => b - b'a' + 10,
+        _ => b - b'A' + 10,
+    };
+    for (i, pair) in hex.chunks_exact(2).enumerate() {
+        out[i] = digit(pair[0]) << 4 | digit(pair[1]);
+    }
+    Ok(len)
+}
+
 /// A client's pre-shared key as the server holds it.
 #[derive(Clone, Copy, Debug)]
 pub struct ClientKey<'a> {
@@ -115,6 +165,10 @@ impl core::fmt::Display for RecordError {
         }
     }
 }
+
+impl core::error::Error for KeyFileError {}
+impl core::error::Error for HandshakeError {}
+impl core::error::Error for RecordError {}
 
 fn mac(key: &[u8], parts: &[&[u8]]) -> HmacSha256 {
     // HMAC takes keys of any length; new_from_slice cannot fail for it.
@@ -302,6 +356,44 @@ pub fn accept(
         out,
         Session::new(key.secret, server_nonce, client_nonce, 1),
     ))
+}
+
+/// The server's nonces: HMAC(key, counter ‖ time), the key an HMAC of every client's
+/// secret and a seed. A client cannot predict the next one without a key, and the counter
+/// makes each one new within a run; across runs their freshness rests on the seed and the
+/// time (the time-stamp counter on the PLC: there is no entropy device yet).
+#[derive(Clone, Debug)]
+pub struct NonceSource {
+    key: [u8; TAG_LEN],
+    counter: u64,
+}
+
+const NONCE_LABEL: &[u8] = b"warden-online nonce";
+
+impl NonceSource {
+    pub fn new(keys: &[ClientKey<'_>], seed: u64) -> Self {
+        let mut m = mac(&seed.to_be_bytes(), &[NONCE_LABEL]);
+        for k in keys {
+            m.update(&[k.secret.len() as u8]);
+            m.update(k.secret);
+        }
+        NonceSource {
+            key: m.finalize().into_bytes().into(),
+            counter: 0,
+        }
+    }
+
+    /// The next nonce, at `now` (any clock).
+    pub fn next(&mut self, now: u64) -> [u8; NONCE_LEN] {
+        self.counter += 1;
+        let t = tag(
+            &self.key,
+            &[&self.counter.to_be_bytes(), &now.to_be_bytes()],
+        );
+        let mut nonce = [0u8; NONCE_LEN];
+        nonce.copy_from_slice(&t[..NONCE_LEN]);
+        nonce
+    }
 }
 
 /// The server's refusal.

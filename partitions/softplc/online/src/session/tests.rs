@@ -160,3 +160,39 @@ proptest! {
         let _: Vec<u8> = Vec::new();
     }
 }
+
+#[test]
+fn key_files_hold_hex() {
+    let mut key = [0u8; MAX_KEY];
+    let text = " 000102030405060708090a0B0c0D0e0F\n";
+    assert_eq!(parse_key_file(text, &mut key), Ok(16));
+    assert_eq!(key[..16], core::array::from_fn::<u8, 16, _>(|i| i as u8));
+    assert_eq!(
+        parse_key_file("00112233445566778899aabbccddeeffg0", &mut key),
+        Err(KeyFileError::NotHex('g'))
+    );
+    assert_eq!(
+        parse_key_file("00112233445566778899aabbccddeef", &mut key),
+        Err(KeyFileError::OddDigits(31))
+    );
+    assert_eq!(
+        parse_key_file("0011", &mut key),
+        Err(KeyFileError::Length(2))
+    );
+    assert_eq!(
+        parse_key_file(&"ab".repeat(65), &mut key),
+        Err(KeyFileError::Length(65))
+    );
+}
+
+#[test]
+fn nonces_differ_by_call_seed_and_keys() {
+    let mut a = NonceSource::new(&KEYS, 1);
+    let mut b = NonceSource::new(&KEYS, 2);
+    let mut c = NonceSource::new(&KEYS[..1], 1);
+    let first = a.next(0);
+    assert_ne!(first, a.next(0), "the counter");
+    assert_ne!(first, b.next(0), "the seed");
+    assert_ne!(first, c.next(0), "the keys");
+    assert_eq!(first, NonceSource::new(&KEYS, 1).next(0));
+}
