@@ -77,6 +77,7 @@
 //! plc.native = true               # optional, default false: the native execution tier
 //! plc.net = { mac = "52:54:00:12:34:57", address = "10.0.2.16/24", gateway = "10.0.2.2", rx = "eth-rx", tx = "eth-tx", connections = 8, buffer = 2048, requests_per_second = 200 }
 //! plc.modbus = { port = 502, unit = 1, writable = ["markers"] }  # needs plc.net
+//! plc.online_tcp = { port = 1202, clients.eng = { key = "keys/eng.key", access = "download" } }  # needs plc.net
 //! plc.store = { request = "disk-req", response = "disk-resp", retain_every = "1s" }  # needs a virtual disk
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
@@ -200,7 +201,13 @@
 //! Modbus/TCP on the process image: `port` (default 502), `unit` (the unit id it answers
 //! besides 0xFF; default 1), and `writable`, the areas a client may write: `"outputs"`
 //! (coils and holding registers of `%QX`/`%QW`) and `"markers"` (`%MX`/`%MW`); default
-//! none. The map and what the PLC does with requests: docs/plc.md. `plc.store` keeps the
+//! none. The map and what the PLC does with requests: docs/plc.md. `plc.online_tcp`
+//! (needs `plc.net`) serves the online protocol on TCP (`port`, default 1202, not the
+//! Modbus port) to the clients of `clients.<name>` (1..=8; a name is 1..=32 printable ASCII
+//! characters without spaces), each authenticating with the pre-shared key in its `key`
+//! file (relative to this description's directory; the key as hex text, 32..=128 digits,
+//! read when the system is built) and allowed what its `access` says (`"monitor"`,
+//! `"force"` or `"download"`, as `plc.online.access`). `plc.store` keeps the
 //! boot project (the last committed online download) and RETAIN snapshots on the
 //! partition's virtual disk, which a block-device partition gives it
 //! (`blk.tenants.<plc>`, required): `request` is its queuing output of at least 2072

@@ -186,7 +186,25 @@ pub struct Plc {
     pub native: Option<Spanned<bool>>,
     pub net: Option<Spanned<PlcNet>>,
     pub modbus: Option<Spanned<PlcModbus>>,
+    pub online_tcp: Option<Spanned<PlcOnlineTcp>>,
     pub store: Option<Spanned<PlcStore>>,
+}
+
+/// `plc.online_tcp`: the online protocol on a TCP port, each client with its key.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcOnlineTcp {
+    pub port: Option<Spanned<i64>>,
+    #[serde(default)]
+    pub clients: Named<OnlineClient>,
+}
+
+/// One client of `plc.online_tcp`.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OnlineClient {
+    pub key: Spanned<String>,
+    pub access: Spanned<String>,
 }
 
 /// `plc.store`: the PLC's persistent store on its virtual disk of a block-device partition.

@@ -194,6 +194,29 @@ pub struct PlcModbus {
     pub write_markers: bool,
 }
 
+/// The online protocol on TCP (`plc.online_tcp`; needs `plc.net`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlcOnlineTcp {
+    pub port: u16,
+    /// At least one, at most [`PlcOnlineTcp::MAX_CLIENTS`], names unique.
+    pub clients: Vec<OnlineClient>,
+}
+
+impl PlcOnlineTcp {
+    pub const DEFAULT_PORT: u16 = 1202;
+    pub const MAX_CLIENTS: usize = 8;
+}
+
+/// A client of the online protocol on TCP: its name, its pre-shared key (read from the
+/// key file) and what it may do.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct OnlineClient {
+    /// 1..=32 printable ASCII characters, no spaces (it appears in log lines).
+    pub name: String,
+    pub key: Vec<u8>,
+    pub access: plc_online::Access,
+}
+
 /// The largest Ethernet frame without its FCS: the size `guest.net`'s ports need.
 pub const ETHERNET_FRAME_MAX: u32 = 1514;
 
@@ -296,6 +319,8 @@ pub struct Plc {
     pub net: Option<PlcNet>,
     /// The Modbus/TCP server on the process image (`plc.modbus`; needs `plc.net`).
     pub modbus: Option<PlcModbus>,
+    /// The online protocol on TCP, authenticated (`plc.online_tcp`; needs `plc.net`).
+    pub online_tcp: Option<PlcOnlineTcp>,
     /// Task deadlines by IEC TASK name (ns from the task's release; checked against the
     /// program when it is compiled); the other tasks have none.
     pub deadlines: Vec<(String, u64)>,

@@ -1007,6 +1007,30 @@ impl Validator<'_, '_> {
             }
             self.plc_modbus(m, &path.key("modbus"))
         });
+        let online_tcp = raw.online_tcp.as_ref().and_then(|o| {
+            if raw.net.is_none() {
+                self.error(
+                    start(o),
+                    &path.key("online_tcp"),
+                    "the online protocol on TCP needs the PLC's network interface (`plc.net`)",
+                );
+            }
+            let online = self.plc_online_tcp(o, &path.key("online_tcp"))?;
+            if let Some(m) = &modbus
+                && m.port == online.port
+            {
+                self.error(
+                    start(o),
+                    &path.key("online_tcp").key("port"),
+                    format!(
+                        "port {} is the Modbus/TCP server's (`plc.modbus.port`)",
+                        m.port
+                    ),
+                );
+                return None;
+            }
+            Some(online)
+        });
         // (byte, source offset, port) of every validity bit.
         let mut valid_bits: Vec<(u32, usize, usize)> = Vec::new();
         let links = raw
@@ -1185,7 +1209,99 @@ impl Validator<'_, '_> {
             native: raw.native.as_ref().is_some_and(|n| *n.get_ref()),
             net,
             modbus,
+            online_tcp,
             store,
+        })
+    }
+
+    /// `plc.online_tcp`: a TCP port and the clients, each with its key file (hex, read
+    /// now) and its access.
+    fn plc_online_tcp(
+        &mut self,
+        online: &Spanned<schema::PlcOnlineTcp>,
+        path: &KeyPath,
+    ) -> Option<PlcOnlineTcp> {
+        let o = online.get_ref();
+        let port = self.int_in(
+            o.port.as_ref(),
+            path,
+            "port",
+            1..=65_535,
+            i64::from(PlcOnlineTcp::DEFAULT_PORT),
+        );
+        if o.clients.is_empty() || o.clients.len() > PlcOnlineTcp::MAX_CLIENTS {
+            self.error(
+                start(online),
+                &path.key("clients"),
+                format!(
+                    "{} clients: a PLC serves 1..={} (each `clients.<name> = {{ key = \"FILE\", access = \"monitor\" }}`)",
+                    o.clients.len(),
+                    PlcOnlineTcp::MAX_CLIENTS
+                ),
+            );
+            return None;
+        }
+        let base = std::path::Path::new(self.r.file())
+            .parent()
+            .unwrap_or(std::path::Path::new(""))
+            .to_path_buf();
+        let mut clients = Vec::new();
+        for (name, client) in &o.clients {
+            let at = path.key("clients").key(name.get_ref());
+            let c = client.get_ref();
+            let n = name.get_ref();
+            if n.is_empty() || n.len() > 32 || !n.bytes().all(|b| b.is_ascii_graphic()) {
+                self.error(
+                    start(name),
+                    &at,
+                    format!(
+                        "client name {n:?}: 1..=32 printable ASCII characters without spaces (it is sent in the handshake and logged)"
+                    ),
+                );
+                continue;
+            }
+            let access = plc_online::Access::from_name(c.access.get_ref());
+            if access.is_none() {
+                self.error(
+                    start(&c.access),
+                    &at.key("access"),
+                    format!(
+                        "unknown access {:?}: expected \"monitor\", \"force\" or \"download\"",
+                        c.access.get_ref()
+                    ),
+                );
+            }
+            let file = base.join(c.key.get_ref());
+            let key = match std::fs::read_to_string(&file) {
+                Ok(text) => parse_key(&text),
+                Err(e) => Err(format!("cannot be read ({e})")),
+            };
+            let key = match key {
+                Ok(key) => Some(key),
+                Err(why) => {
+                    self.error(
+                        start(&c.key),
+                        &at.key("key"),
+                        format!(
+                            "key file `{}` ({}) {why}; a key file holds 16..=64 bytes as hex text, e.g. from `head -c 32 /dev/urandom | od -An -tx1 | tr -d ' \\n'`",
+                            c.key.get_ref(),
+                            file.display()
+                        ),
+                    );
+                    None
+                }
+            };
+            if let (Some(key), Some(access)) = (key, access) {
+                clients.push(OnlineClient {
+                    name: n.clone(),
+                    key,
+                    access,
+                });
+            }
+        }
+        (clients.len() == o.clients.len()).then_some(PlcOnlineTcp {
+            port: port? as u16,
+            clients,
         })
     }
 
@@ -3082,4 +3198,12 @@ fn parse_ipv4(text: &str) -> Option<[u8; 4]> {
         *o = part.parse().ok()?;
     }
     parts.next().is_none().then_some(octets)
+}
+
+/// A key file's key ([`plc_online::session::parse_key_file`]).
+fn parse_key(text: &str) -> Result<Vec<u8>, String> {
+    let mut key = [0u8; plc_online::session::MAX_KEY];
+    plc_online::session::parse_key_file(text, &mut key)
+        .map(|len| key[..len].to_vec())
+        .map_err(|e| e.to_string())
 }

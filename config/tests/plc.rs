@@ -564,3 +564,74 @@ plc.modbus = { port = 1502, unit = 3, writable = [\"markers\", \"outputs\"] }
         "needs the PLC's network interface",
     );
 }
+
+#[test]
+fn the_online_protocol_on_tcp_is_checked() {
+    let net = "ports.rx = { kind = \"queuing\", direction = \"in\", size = 1514, depth = 8 }
+ports.tx = { kind = \"queuing\", direction = \"out\", size = 1514, depth = 8 }
+plc.net = { mac = \"52:54:00:12:34:57\", address = \"10.0.2.16/24\", rx = \"rx\", tx = \"tx\" }
+plc.modbus = { port = 502 }
+plc.online_tcp = { port = 1202, clients.eng = { key = \"tests/data/engineering.key\", access = \"download\" }, clients.hmi = { key = \"tests/data/engineering.key\", access = \"monitor\" } }
+# b";
+    let base = (
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    );
+    let src = plc(&[base, ("# b", net)]);
+    let diags = load(&src).unwrap_err();
+    assert!(
+        diags
+            .iter()
+            .all(|d| !d.key_path.starts_with("partitions.b.plc")),
+        "{diags:?}"
+    );
+    for (from, to, needle, key, message) in [
+        (
+            "port = 1202",
+            "port = 502",
+            "{ port = 502, clients",
+            "partitions.b.plc.online_tcp.port",
+            "the Modbus/TCP server's",
+        ),
+        (
+            "access = \"monitor\"",
+            "access = \"admin\"",
+            "\"admin\"",
+            "partitions.b.plc.online_tcp.clients.hmi.access",
+            "unknown access \"admin\"",
+        ),
+        (
+            "clients.hmi = { key = \"tests/data/engineering.key\"",
+            "clients.hmi = { key = \"tests/data/bad.key\"",
+            "\"tests/data/bad.key\"",
+            "partitions.b.plc.online_tcp.clients.hmi.key",
+            "holds 'n', which is no hex digit",
+        ),
+        (
+            "clients.hmi = { key = \"tests/data/engineering.key\"",
+            "clients.hmi = { key = \"tests/data/none.key\"",
+            "\"tests/data/none.key\"",
+            "partitions.b.plc.online_tcp.clients.hmi.key",
+            "cannot be read",
+        ),
+        (
+            "clients.hmi",
+            "clients.\"h m i\"",
+            "\"h m i\"",
+            "partitions.b.plc.online_tcp.clients.\"h m i\"",
+            "without spaces",
+        ),
+    ] {
+        let src = plc(&[base, ("# b", net), (from, to)]);
+        expect_some(&src, needle, 0, key, message);
+    }
+    let no_net = "plc.online_tcp = { clients.eng = { key = \"tests/data/engineering.key\", access = \"force\" } }\n# b";
+    let src = plc(&[base, ("# b", no_net)]);
+    expect_some(
+        &src,
+        "{ clients",
+        0,
+        "partitions.b.plc.online_tcp",
+        "needs the PLC's network interface",
+    );
+}
