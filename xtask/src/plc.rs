@@ -213,6 +213,19 @@ fn package(
             access: o.access,
         }
     });
+    // The client records of `plc.online_tcp` (validated: names and keys within limits).
+    let online_records = plc.online_tcp.as_ref().map(|o| {
+        let clients: Vec<_> = o
+            .clients
+            .iter()
+            .map(|c| package::ClientKey {
+                name: c.name.as_bytes(),
+                secret: &c.key,
+                access: c.access,
+            })
+            .collect();
+        (o.port, package::OnlineTcp::records(&clients))
+    });
     // The frame ports of `plc.net` follow (no bytes of the image either).
     let net = plc.net.as_ref().map(|n| {
         let at = ports.len();
@@ -245,6 +258,9 @@ fn package(
                 write_outputs: m.write_outputs,
                 write_markers: m.write_markers,
             }),
+            online: online_records
+                .as_ref()
+                .and_then(|(port, records)| package::OnlineTcp::new(*port, records)),
         }
     });
     // Then the store's ports (`plc.store`).

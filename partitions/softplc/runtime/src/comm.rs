@@ -1,33 +1,57 @@
 //! The PLC's communication process: its own TCP/IP stack ([`netstack`]) on its interface
 //! of the NIC partition's switch (`plc.net`), and the network services on it — the
-//! Modbus/TCP server (`plc.modbus`, [`plc_modbus`]). It runs below every IEC task and the
-//! control process and never touches the process image: a complete request goes into the
-//! [`Exchange`], which the control process serves between cycles ([`serve_modbus`]) and
-//! whose answers this process then sends. So the scan never waits for the network, and a
-//! flood of connections or requests costs only this process's time.
+//! Modbus/TCP server (`plc.modbus`, [`plc_modbus`]) and the online protocol on TCP
+//! (`plc.online_tcp`, authenticated sessions of [`plc_online::session`]). It runs below
+//! every IEC task and the control process and never touches the process image or the
+//! program: a complete request goes into the [`Exchange`], which the control process
+//! serves between cycles ([`serve_modbus`], [`crate::online::serve_exchange`]) and whose
+//! answers this process then sends. So the scan never waits for the network, and a flood
+//! of connections or requests costs only this process's time.
 //!
 //! Limits (the network block, [`crate::package::Net`]): `connections` TCP connections at
-//! once (one more is accepted and closed at once), `buffer` bytes of each connection's
-//! receive and send buffer, `requests_per_second` requests taken from each connection
-//! (more wait in its TCP buffer, which then closes the client's window), at most one
-//! request of a connection in the exchange at a time (answers come in order), and at
-//! most [`EXCHANGE_SLOTS`] requests served per cycle.
+//! once over both services (one more is accepted and closed at once), `buffer` bytes of
+//! each connection's receive and send buffer, `requests_per_second` requests taken from
+//! each connection (more wait in its TCP buffer, which then closes the client's window;
+//! an online handshake's response counts as one), at most one request of a connection in
+//! the exchange at a time (answers come in order), and at most [`EXCHANGE_SLOTS`]
+//! requests served per cycle. An online client has [`HANDSHAKE_NS`] to authenticate.
 //!
 //! A byte stream that is not Modbus/TCP (a bad MBAP protocol id or length) closes its
 //! connection ([`plc_modbus::FrameError`]); everything else gets a response or an
-//! exception response.
+//! exception response. On the online port, a failed handshake gets the refusal and is
+//! closed, and a record that does not open (bad length, sequence or tag) closes the
+//! session; each is an [`Event`] the process logs.
 
 use crate::package::{Modbus, Net};
 use crate::scan::Areas;
 use alloc::vec::Vec;
 use netstack::{Config, Error, Ipv4Address, Limits, SocketAddr, SocketId, Stack, linux};
 use plc_modbus::{Frame, MAX_ADU, ProcessImage, Server, Writable, respond, split_frame};
+use plc_online::session::{
+    self, ClientKey, HandshakeError, MAX_RECORD, MAX_RESPONSE_LEN, NONCE_LEN, NonceSource,
+    RecordError, Session,
+};
+use plc_online::{Access, MAX_MESSAGE};
 use plc_vm::located::Area;
 
 /// Requests waiting for, or answered by, the control process at once.
 pub const EXCHANGE_SLOTS: usize = 8;
 /// Frames taken from or given to the link per run, each way.
 pub const FRAMES_PER_RUN: usize = 32;
+/// How long an online client has from its connection to a complete handshake (ns).
+pub const HANDSHAKE_NS: u64 = 5_000_000_000;
+/// Events kept for the log between two [`Comm::take_events`] (more are counted only).
+pub const MAX_EVENTS: usize = 16;
+
+/// Bytes of a slot: a Modbus ADU or an online message.
+pub const SLOT_BYTES: usize = max(MAX_ADU, MAX_MESSAGE);
+/// Bytes of a connection's receive and send buffer: a whole ADU, handshake message or
+/// record.
+const UNIT_BYTES: usize = max(max(MAX_ADU, MAX_RECORD), MAX_RESPONSE_LEN);
+
+const fn max(a: usize, b: usize) -> usize {
+    if a > b { a } else { b }
+}
 
 /// A slot of the exchange.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -39,14 +63,24 @@ pub enum SlotState {
     Response,
 }
 
+/// Which service a request is for.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Service {
+    /// A Modbus/TCP ADU.
+    Modbus,
+    /// An online-protocol message of a client authenticated with this access.
+    Online(Access),
+}
+
 /// One request/response in the exchange, tagged with the connection it came from.
 #[derive(Clone, Copy)]
 pub struct Slot {
     pub state: SlotState,
+    pub service: Service,
     /// The connection: its index and its generation (a reused index is a new connection).
     pub connection: (usize, u32),
     pub len: usize,
-    pub bytes: [u8; MAX_ADU],
+    pub bytes: [u8; SLOT_BYTES],
 }
 
 /// What passes between the communication and the control process (under a lock the
@@ -60,9 +94,10 @@ impl Exchange {
         Exchange {
             slots: [Slot {
                 state: SlotState::Free,
+                service: Service::Modbus,
                 connection: (0, 0),
                 len: 0,
-                bytes: [0; MAX_ADU],
+                bytes: [0; SLOT_BYTES],
             }; EXCHANGE_SLOTS],
         }
     }
@@ -111,19 +146,19 @@ pub fn serve_modbus(
     };
     let mut served = 0;
     for slot in exchange.slots.iter_mut() {
-        if slot.state != SlotState::Request {
+        if slot.state != SlotState::Request || slot.service != Service::Modbus {
             continue;
         }
         let mut out = [0u8; MAX_ADU];
         // The communication process put a whole ADU here; anything else is answered as
         // a closed connection would be (nothing sent).
-        let len = match split_frame(&slot.bytes[..slot.len]) {
+        let len = match split_frame(&slot.bytes[..slot.len.min(SLOT_BYTES)]) {
             Ok(Frame::Complete { header, pdu, .. }) => {
                 respond(&server, header, pdu, areas, &mut out)
             }
             _ => 0,
         };
-        slot.bytes = out;
+        slot.bytes[..MAX_ADU].copy_from_slice(&out);
         slot.len = len;
         slot.state = SlotState::Response;
         served += 1;
@@ -141,18 +176,63 @@ pub struct CommStats {
     pub malformed: u64,
     pub requests: u64,
     pub responses: u64,
+    /// Online handshakes refused (unknown name, wrong key, malformed, too slow).
+    pub denied: u64,
+    /// Online sessions ended by a record that did not open (tampered, replayed, bad
+    /// length).
+    pub rejected: u64,
+}
+
+/// Something the communication process logs.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Event {
+    /// An online client authenticated: the index of its key in the configuration.
+    Authenticated {
+        client: usize,
+        access: Access,
+        peer: SocketAddr,
+    },
+    /// An online handshake was refused (`None`: not completed in [`HANDSHAKE_NS`]).
+    Denied {
+        peer: SocketAddr,
+        why: Option<HandshakeError>,
+    },
+    /// An online session's record did not open; the connection closed.
+    Rejected {
+        client: usize,
+        peer: SocketAddr,
+        why: RecordError,
+    },
+}
+
+/// Where a connection is in its service's protocol.
+enum Phase {
+    Modbus,
+    /// The CHALLENGE is sent; its RESPONSE is due by `deadline_ns`.
+    Handshake {
+        nonce: [u8; NONCE_LEN],
+        deadline_ns: u64,
+    },
+    /// Authenticated: the key's index and access, and the session.
+    Online {
+        client: usize,
+        access: Access,
+        session: Session,
+    },
 }
 
 /// An open connection.
 struct Connection {
     socket: SocketId,
+    peer: SocketAddr,
     generation: u32,
-    received: [u8; MAX_ADU],
+    phase: Phase,
+    received: [u8; UNIT_BYTES],
     filled: usize,
     /// A request of this connection is in the exchange.
     in_flight: bool,
     /// A response not yet (wholly) taken by the socket.
-    sending: [u8; MAX_ADU],
+    sending: [u8; UNIT_BYTES],
     to_send: usize,
     sent: usize,
     /// The earliest time (ns) its next request is taken (the rate limit).
@@ -161,24 +241,74 @@ struct Connection {
     closing: bool,
 }
 
-/// The communication process's state: the stack, the listener and the connections.
-pub struct Comm {
+/// How much of a connection's received bytes its next unit needs.
+enum Unit {
+    /// This many bytes in all (more than it has).
+    Need(usize),
+    /// A whole unit of this many bytes.
+    Complete(usize),
+}
+
+impl Connection {
+    /// The next unit of its protocol in `received`, or why the stream is broken.
+    fn unit(&self) -> Result<Unit, Broken> {
+        let bytes = &self.received[..self.filled];
+        let whole = |len: usize| {
+            if self.filled >= len {
+                Unit::Complete(len)
+            } else {
+                Unit::Need(len)
+            }
+        };
+        match &self.phase {
+            Phase::Modbus => match split_frame(bytes) {
+                Ok(Frame::Incomplete { need }) => Ok(Unit::Need(need)),
+                Ok(Frame::Complete { len, .. }) => Ok(Unit::Complete(len)),
+                Err(_) => Err(Broken::NotModbus),
+            },
+            Phase::Handshake { .. } => Ok(match session::response_len(bytes) {
+                Some(len) => whole(len),
+                None => Unit::Need(NONCE_LEN + 1),
+            }),
+            Phase::Online { .. } => match Session::record_len(bytes) {
+                Ok(Some(len)) => Ok(whole(len)),
+                Ok(None) => Ok(Unit::Need(2)),
+                Err(e) => Err(Broken::Record(e)),
+            },
+        }
+    }
+}
+
+/// Why a connection's stream cannot go on.
+enum Broken {
+    NotModbus,
+    Record(RecordError),
+}
+
+/// The communication process's state: the stack, the listeners and the connections.
+pub struct Comm<'k> {
     pub stack: Stack,
     modbus: Option<(Modbus, SocketId)>,
+    online: Option<SocketId>,
+    keys: Vec<ClientKey<'k>>,
+    nonces: NonceSource,
     connections: Vec<Option<Connection>>,
     generation: u32,
     request_gap_ns: u64,
+    log: EventLog,
     pub stats: CommStats,
 }
 
-impl Comm {
-    /// The stack on the configured interface, listening on the services' ports.
-    pub fn new(net: &Net, now_ns: u64) -> Result<Self, Error> {
+impl<'k> Comm<'k> {
+    /// The stack on the configured interface, listening on the services' ports; `seed`
+    /// feeds the online handshake's nonces ([`NonceSource`]).
+    pub fn new(net: &Net<'k>, now_ns: u64, seed: u64) -> Result<Self, Error> {
         let connections = usize::from(net.connections);
+        let listeners = usize::from(net.modbus.is_some()) + usize::from(net.online.is_some());
         let limits = Limits {
-            // The listeners' backlog (on eth0 and lo), the connections, and as many
+            // The listeners' backlogs (on eth0 and lo), the connections, and as many
             // closing in the background.
-            sockets: 4 * connections + 4,
+            sockets: 2 * listeners * connections + 2 * connections + 4,
             tcp_buffer: net.buffer as usize,
             udp_packets: 1,
             udp_buffer: 512,
@@ -201,14 +331,28 @@ impl Comm {
             }
             None => None,
         };
+        let (online, keys) = match net.online {
+            Some(o) => (
+                Some(listen(&mut stack, o.port, connections)?),
+                o.clients().collect(),
+            ),
+            None => (None, Vec::new()),
+        };
         let mut slots = Vec::new();
         slots.resize_with(connections, || None);
         Ok(Comm {
             stack,
             modbus,
+            online,
+            nonces: NonceSource::new(&keys, seed),
+            keys,
             connections: slots,
             generation: 0,
             request_gap_ns: 1_000_000_000 / u64::from(net.requests_per_second.max(1)),
+            log: EventLog {
+                events: Vec::with_capacity(MAX_EVENTS),
+                dropped: 0,
+            },
             stats: CommStats::default(),
         })
     }
@@ -219,7 +363,12 @@ impl Comm {
     pub fn run(&mut self, now_ns: u64, exchange: &mut Exchange) {
         let now_us = (now_ns / 1000) as i64;
         self.stack.poll(now_us);
-        self.accept();
+        if let Some((_, listener)) = self.modbus {
+            self.accept(listener, now_ns, false);
+        }
+        if let Some(listener) = self.online {
+            self.accept(listener, now_ns, true);
+        }
         self.collect_responses(exchange);
         for i in 0..self.connections.len() {
             self.service(i, now_ns, exchange);
@@ -227,39 +376,62 @@ impl Comm {
         self.stack.poll(now_us);
     }
 
-    /// Takes the completed connections: into free places, else closed at once.
-    fn accept(&mut self) {
-        let Some((_, listener)) = self.modbus else {
-            return;
-        };
+    /// The events since the last call, oldest first.
+    pub fn take_events(&mut self) -> impl Iterator<Item = Event> + '_ {
+        self.log.events.drain(..)
+    }
+
+    /// Events not kept because [`MAX_EVENTS`] were waiting.
+    pub fn events_dropped(&self) -> u64 {
+        self.log.dropped
+    }
+
+    /// The name of the configured client `client` (as its key has it).
+    pub fn client_name(&self, client: usize) -> &'k [u8] {
+        self.keys.get(client).map_or(b"?", |k| k.name)
+    }
+
+    /// Takes the completed connections of `listener`: into free places, else closed at
+    /// once. An online one gets its CHALLENGE.
+    fn accept(&mut self, listener: SocketId, now_ns: u64, online: bool) {
         // Bounded: the backlog holds at most `connections` completed connections.
         for _ in 0..=self.connections.len() {
-            let Ok((socket, _peer)) = self.stack.accept(listener) else {
+            let Ok((socket, peer)) = self.stack.accept(listener) else {
                 return;
             };
             let _ = self.stack.set_nonblocking(socket, true);
-            match self.connections.iter().position(Option::is_none) {
-                Some(i) => {
-                    self.generation = self.generation.wrapping_add(1);
-                    self.connections[i] = Some(Connection {
-                        socket,
-                        generation: self.generation,
-                        received: [0; MAX_ADU],
-                        filled: 0,
-                        in_flight: false,
-                        sending: [0; MAX_ADU],
-                        to_send: 0,
-                        sent: 0,
-                        next_request_ns: 0,
-                        closing: false,
-                    });
-                    self.stats.accepted += 1;
-                }
-                None => {
-                    let _ = self.stack.close(socket);
-                    self.stats.refused += 1;
-                }
+            let Some(i) = self.connections.iter().position(Option::is_none) else {
+                let _ = self.stack.close(socket);
+                self.stats.refused += 1;
+                continue;
+            };
+            self.generation = self.generation.wrapping_add(1);
+            let mut c = Connection {
+                socket,
+                peer,
+                generation: self.generation,
+                phase: Phase::Modbus,
+                received: [0; UNIT_BYTES],
+                filled: 0,
+                in_flight: false,
+                sending: [0; UNIT_BYTES],
+                to_send: 0,
+                sent: 0,
+                next_request_ns: 0,
+                closing: false,
+            };
+            if online {
+                let nonce = self.nonces.next(now_ns);
+                c.phase = Phase::Handshake {
+                    nonce,
+                    deadline_ns: now_ns.saturating_add(HANDSHAKE_NS),
+                };
+                let challenge = session::challenge(&nonce);
+                c.sending[..challenge.len()].copy_from_slice(&challenge);
+                c.to_send = challenge.len();
             }
+            self.connections[i] = Some(c);
+            self.stats.accepted += 1;
         }
     }
 
@@ -278,15 +450,26 @@ impl Comm {
                 continue;
             }
             c.in_flight = false;
-            c.sending[..slot.len].copy_from_slice(&slot.bytes[..slot.len]);
-            c.to_send = slot.len;
+            let body = &slot.bytes[..slot.len.min(SLOT_BYTES)];
+            c.to_send = match &mut c.phase {
+                Phase::Online { session, .. } => {
+                    let mut record = [0u8; MAX_RECORD];
+                    let len = session.seal(body, &mut record).unwrap_or(0);
+                    c.sending[..len].copy_from_slice(&record[..len]);
+                    len
+                }
+                _ => {
+                    c.sending[..body.len()].copy_from_slice(body);
+                    body.len()
+                }
+            };
             c.sent = 0;
             self.stats.responses += 1;
         }
     }
 
-    /// Sends what connection `i` has to send, reads its bytes, hands a whole request to
-    /// the exchange, closes it when it is done.
+    /// Sends what connection `i` has to send, reads its bytes, takes a whole unit (a
+    /// request into the exchange, or a handshake's response), closes it when it is done.
     fn service(&mut self, i: usize, now_ns: u64, exchange: &mut Exchange) {
         let Some(c) = self.connections[i].as_mut() else {
             return;
@@ -309,37 +492,52 @@ impl Comm {
             c.to_send = 0;
             c.sent = 0;
         }
-        // Read only what completes the next request: the rest stays in the socket (its
+        if let Phase::Handshake { deadline_ns, .. } = c.phase
+            && now_ns >= deadline_ns
+            && !c.closing
+        {
+            c.closing = true;
+            let peer = c.peer;
+            self.stats.denied += 1;
+            self.log.push(Event::Denied { peer, why: None });
+            return self.close_if_done(i);
+        }
+        // Read only what completes the next unit: the rest stays in the socket (its
         // window closes), so a fast client waits for its answers.
         while !c.closing && !c.in_flight && c.to_send == 0 {
-            let need = match split_frame(&c.received[..c.filled]) {
-                Ok(Frame::Incomplete { need }) => need,
-                Ok(Frame::Complete { len, .. }) => {
+            let need = match c.unit() {
+                Ok(Unit::Need(need)) => need.min(UNIT_BYTES),
+                Ok(Unit::Complete(len)) => {
                     if now_ns < c.next_request_ns {
                         break;
                     }
-                    let Some(slot) = exchange
-                        .slots
-                        .iter_mut()
-                        .find(|s| s.state == SlotState::Free)
-                    else {
-                        break;
-                    };
-                    slot.bytes[..len].copy_from_slice(&c.received[..len]);
-                    slot.len = len;
-                    slot.connection = (i, c.generation);
-                    slot.state = SlotState::Request;
-                    c.received.copy_within(len..c.filled, 0);
-                    c.filled -= len;
-                    c.in_flight = true;
-                    c.next_request_ns = now_ns.max(c.next_request_ns) + self.request_gap_ns;
-                    self.stats.requests += 1;
+                    let taken = take(
+                        c,
+                        i,
+                        len,
+                        exchange,
+                        &self.keys,
+                        &mut self.stats,
+                        &mut self.log,
+                    );
+                    if taken {
+                        c.received.copy_within(len..c.filled, 0);
+                        c.filled -= len;
+                        c.next_request_ns = now_ns.max(c.next_request_ns) + self.request_gap_ns;
+                    }
                     break;
                 }
-                Err(_) => {
-                    self.stats.malformed += 1;
+                Err(broken) => {
                     c.closing = true;
                     c.filled = 0;
+                    match (broken, &c.phase) {
+                        (Broken::Record(why), Phase::Online { client, .. }) => {
+                            let (client, peer) = (*client, c.peer);
+                            self.stats.rejected += 1;
+                            self.log.push(Event::Rejected { client, peer, why });
+                        }
+                        _ => self.stats.malformed += 1,
+                    }
                     break;
                 }
             };
@@ -350,7 +548,16 @@ impl Comm {
                 Err(_) => c.closing = true,
             }
         }
-        if c.closing && c.to_send == 0 && !c.in_flight {
+        self.close_if_done(i);
+    }
+
+    /// Closes connection `i` if it is closing and nothing is left to send or answer.
+    fn close_if_done(&mut self, i: usize) {
+        if let Some(c) = &self.connections[i]
+            && c.closing
+            && c.to_send == 0
+            && !c.in_flight
+        {
             let _ = self.stack.close(c.socket);
             self.connections[i] = None;
         }
@@ -369,6 +576,103 @@ impl Comm {
     }
 }
 
+/// Takes connection `c`'s (index `i`) whole unit of `len` bytes: a request into a free
+/// slot of the exchange (false when there is none: it waits, unopened), or a handshake's
+/// response answered at once (the ACCEPT, or the refusal and the connection closing). A
+/// record that does not open closes the connection. Returns whether the unit was consumed.
+fn take(
+    c: &mut Connection,
+    i: usize,
+    len: usize,
+    exchange: &mut Exchange,
+    keys: &[ClientKey<'_>],
+    stats: &mut CommStats,
+    log: &mut EventLog,
+) -> bool {
+    let peer = c.peer;
+    let free = exchange
+        .slots
+        .iter()
+        .position(|s| s.state == SlotState::Free);
+    let (service, body) = match &mut c.phase {
+        Phase::Handshake { nonce, .. } => {
+            match session::accept(keys, nonce, &c.received[..len]) {
+                Ok((client, accept, session)) => {
+                    let access = keys[client].access;
+                    c.sending[..accept.len()].copy_from_slice(&accept);
+                    c.to_send = accept.len();
+                    c.phase = Phase::Online {
+                        client,
+                        access,
+                        session,
+                    };
+                    log.push(Event::Authenticated {
+                        client,
+                        access,
+                        peer,
+                    });
+                }
+                Err(why) => {
+                    c.sending[..session::REFUSE.len()].copy_from_slice(&session::REFUSE);
+                    c.to_send = session::REFUSE.len();
+                    c.closing = true;
+                    stats.denied += 1;
+                    log.push(Event::Denied {
+                        peer,
+                        why: Some(why),
+                    });
+                }
+            }
+            return true;
+        }
+        // A record is opened only when its request has a slot: opening takes its
+        // sequence number.
+        _ if free.is_none() => return false,
+        Phase::Modbus => (Service::Modbus, &c.received[..len]),
+        Phase::Online {
+            client,
+            access,
+            session,
+        } => match session.open(&c.received[..len]) {
+            Ok(body) => (Service::Online(*access), body),
+            Err(why) => {
+                let client = *client;
+                c.closing = true;
+                stats.rejected += 1;
+                log.push(Event::Rejected { client, peer, why });
+                return true;
+            }
+        },
+    };
+    let Some(slot) = free.and_then(|f| exchange.slots.get_mut(f)) else {
+        return false;
+    };
+    slot.bytes[..body.len()].copy_from_slice(body);
+    slot.len = body.len();
+    slot.service = service;
+    slot.connection = (i, c.generation);
+    slot.state = SlotState::Request;
+    c.in_flight = true;
+    stats.requests += 1;
+    true
+}
+
+/// The events kept for the log, and how many were not.
+struct EventLog {
+    events: Vec<Event>,
+    dropped: u64,
+}
+
+impl EventLog {
+    fn push(&mut self, event: Event) {
+        if self.events.len() < MAX_EVENTS {
+            self.events.push(event);
+        } else {
+            self.dropped += 1;
+        }
+    }
+}
+
 /// A non-blocking listener on `port` of every address with `backlog`.
 fn listen(stack: &mut Stack, port: u16, backlog: usize) -> Result<SocketId, Error> {
     let s = stack.socket(linux::AF_INET, linux::SOCK_STREAM | linux::SOCK_NONBLOCK, 0)?;
@@ -381,9 +685,29 @@ fn listen(stack: &mut Stack, port: u16, backlog: usize) -> Result<SocketId, Erro
 mod tests {
     use super::*;
 
-    const PLC_IP: [u8; 4] = [10, 0, 2, 15];
+    use plc_online::session::{CHALLENGE_LEN, read_accept, read_challenge, response};
 
-    fn net(connections: u8, requests_per_second: u32) -> Net {
+    const PLC_IP: [u8; 4] = [10, 0, 2, 15];
+    const ONLINE_PORT: u16 = 1202;
+    const SECRET: &[u8] = b"engineering secret, 32 bytes....";
+
+    fn records() -> &'static [u8] {
+        let clients = [
+            ClientKey {
+                name: b"engineering",
+                secret: SECRET,
+                access: Access::Download,
+            },
+            ClientKey {
+                name: b"hmi",
+                secret: b"hmi secret of 16",
+                access: Access::Monitor,
+            },
+        ];
+        alloc::vec::Vec::leak(crate::package::OnlineTcp::records(&clients))
+    }
+
+    fn net(connections: u8, requests_per_second: u32) -> Net<'static> {
         Net {
             mac: [0x52, 0x54, 0, 0x12, 0x34, 0x56],
             address: PLC_IP,
@@ -400,12 +724,13 @@ mod tests {
                 write_outputs: false,
                 write_markers: true,
             }),
+            online: crate::package::OnlineTcp::new(ONLINE_PORT, records()),
         }
     }
 
     /// The PLC and a client on one wire, the PLC's control process serving between runs.
     struct Wire {
-        plc: Comm,
+        plc: Comm<'static>,
         client: Stack,
         exchange: Exchange,
         areas: Areas,
@@ -426,7 +751,7 @@ mod tests {
             );
             let net = net(connections, requests_per_second);
             Wire {
-                plc: Comm::new(&net, 0).unwrap(),
+                plc: Comm::new(&net, 0, 0).unwrap(),
                 client,
                 exchange: Exchange::new(),
                 areas: Areas::new(),
@@ -444,6 +769,14 @@ mod tests {
             self.plc.run(self.now_ns, &mut self.exchange);
             let modbus = net(1, 1).modbus.unwrap();
             serve_modbus(&mut self.exchange, &modbus, true, &mut self.areas);
+            // The online requests, answered by an echo that says the access it saw.
+            for slot in self.exchange.slots.iter_mut() {
+                if let (SlotState::Request, Service::Online(access)) = (slot.state, slot.service) {
+                    slot.bytes[slot.len] = access.code();
+                    slot.len += 1;
+                    slot.state = SlotState::Response;
+                }
+            }
             while let Some(f) = self.plc.stack.device.take() {
                 self.client.device.deliver(&f);
             }
@@ -451,6 +784,10 @@ mod tests {
         }
 
         fn connect(&mut self) -> SocketId {
+            self.connect_to(502)
+        }
+
+        fn connect_to(&mut self, port: u16) -> SocketId {
             let s = self
                 .client
                 .socket(linux::AF_INET, linux::SOCK_STREAM | linux::SOCK_NONBLOCK, 0)
@@ -458,7 +795,7 @@ mod tests {
             let [a, b, c, d] = PLC_IP;
             let _ = self
                 .client
-                .connect(s, SocketAddr::new(Ipv4Address::new(a, b, c, d), 502));
+                .connect(s, SocketAddr::new(Ipv4Address::new(a, b, c, d), port));
             for _ in 0..50 {
                 self.step();
                 if self.client.readiness(s).unwrap().writable {
@@ -590,5 +927,145 @@ mod tests {
         assert_eq!(serve_modbus(&mut exchange, &modbus, true, &mut areas), 1);
         assert_eq!(exchange.slots[0].state, SlotState::Response);
         assert_eq!(exchange.slots[0].len, 0);
+    }
+
+    /// An online client's connection after a handshake as `name` with `secret`: the
+    /// session, or the server's answer to a refused handshake.
+    fn handshake(w: &mut Wire, name: &[u8], secret: &[u8]) -> (SocketId, Result<Session, Vec<u8>>) {
+        let s = w.connect_to(ONLINE_PORT);
+        let (challenge, _) = w.ask(s, &[], 5);
+        assert_eq!(challenge.len(), CHALLENGE_LEN);
+        let server_nonce = read_challenge(&challenge).unwrap();
+        let client_nonce = [0x5a; NONCE_LEN];
+        let mut out = [0u8; MAX_RESPONSE_LEN];
+        let n = response(name, secret, &server_nonce, &client_nonce, &mut out).unwrap();
+        let (answer, _) = w.ask(s, &out[..n], 10);
+        match read_accept(secret, &server_nonce, &client_nonce, &answer) {
+            Ok((access, session)) => {
+                assert_eq!(access, Access::Download);
+                (s, Ok(session))
+            }
+            Err(_) => (s, Err(answer)),
+        }
+    }
+
+    #[test]
+    fn an_authenticated_client_gets_answers_with_its_access() {
+        let mut w = Wire::new(4, 1000);
+        let (s, session) = handshake(&mut w, b"engineering", SECRET);
+        let mut session = session.expect("accepted");
+        for body in [&b"first"[..], b"second"] {
+            let mut record = [0u8; MAX_RECORD];
+            let n = session.seal(body, &mut record).unwrap();
+            let (answer, closed) = w.ask(s, &record[..n], 10);
+            assert!(!closed);
+            let mut expected = body.to_vec();
+            expected.push(Access::Download.code());
+            assert_eq!(session.open(&answer).unwrap(), &expected[..]);
+        }
+        let events: Vec<_> = w.plc.take_events().collect();
+        assert!(matches!(
+            events[..],
+            [Event::Authenticated {
+                client: 0,
+                access: Access::Download,
+                ..
+            }]
+        ));
+        assert_eq!(w.plc.client_name(0), b"engineering");
+        assert_eq!((w.plc.stats.requests, w.plc.stats.denied), (2, 0));
+        // Modbus still answers beside it.
+        let m = w.connect();
+        let (r, _) = w.ask(m, &[0, 7, 0, 0, 0, 6, 1, 4, 0, 0, 0, 1], 10);
+        assert_eq!(r.len(), 11);
+    }
+
+    #[test]
+    fn a_wrong_key_or_an_unknown_name_gets_the_refusal_and_a_log_event() {
+        let mut w = Wire::new(4, 1000);
+        for (name, secret) in [
+            (&b"engineering"[..], &b"a guessed secret"[..]),
+            (b"nobody", SECRET),
+        ] {
+            let (s, session) = handshake(&mut w, name, secret);
+            assert_eq!(session.unwrap_err(), session::REFUSE);
+            let (_, closed) = w.ask(s, &[], 5);
+            assert!(closed);
+        }
+        assert_eq!(w.plc.stats.denied, 2);
+        assert_eq!(w.plc.stats.requests, 0);
+        let events: Vec<_> = w.plc.take_events().collect();
+        assert!(
+            events.iter().all(|e| matches!(
+                e,
+                Event::Denied {
+                    why: Some(HandshakeError::Refused),
+                    ..
+                }
+            )) && events.len() == 2,
+            "{events:?}"
+        );
+        assert_eq!(w.plc.open(), 0);
+    }
+
+    #[test]
+    fn a_replayed_or_tampered_record_ends_the_session_unanswered() {
+        let mut w = Wire::new(4, 1000);
+        for tamper in [false, true] {
+            let (s, session) = handshake(&mut w, b"engineering", SECRET);
+            let mut session = session.unwrap();
+            let mut record = [0u8; MAX_RECORD];
+            let n = session.seal(b"read", &mut record).unwrap();
+            let (answer, _) = w.ask(s, &record[..n], 10);
+            assert!(session.open(&answer).is_ok());
+            if tamper {
+                let n = session.seal(b"force", &mut record).unwrap();
+                record[11] ^= 1;
+                let (answer, closed) = w.ask(s, &record[..n], 10);
+                assert!(answer.is_empty() && closed);
+            } else {
+                // The same record again.
+                let (answer, closed) = w.ask(s, &record[..n], 10);
+                assert!(answer.is_empty() && closed);
+            }
+        }
+        assert_eq!((w.plc.stats.rejected, w.plc.stats.requests), (2, 2));
+        let why: Vec<_> = w
+            .plc
+            .take_events()
+            .filter_map(|e| match e {
+                Event::Rejected { why, .. } => Some(why),
+                _ => None,
+            })
+            .collect();
+        assert_eq!(
+            why,
+            [
+                RecordError::Sequence {
+                    expected: 2,
+                    got: 1
+                },
+                RecordError::Tag
+            ]
+        );
+    }
+
+    #[test]
+    fn a_silent_online_client_is_closed_after_the_handshake_time() {
+        let mut w = Wire::new(1, 1000);
+        let s = w.connect_to(ONLINE_PORT);
+        let (challenge, _) = w.ask(s, &[], 5);
+        assert_eq!(challenge.len(), CHALLENGE_LEN);
+        w.now_ns += HANDSHAKE_NS;
+        let (_, closed) = w.ask(s, &[], 5);
+        assert!(closed);
+        assert_eq!(w.plc.open(), 0);
+        assert!(matches!(
+            w.plc.take_events().last(),
+            Some(Event::Denied { why: None, .. })
+        ));
+        // Its place is free again.
+        let (_, session) = handshake(&mut w, b"engineering", SECRET);
+        assert!(session.is_ok());
     }
 }

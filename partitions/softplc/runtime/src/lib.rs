@@ -11,7 +11,7 @@
 //! records kept across a power cut ([`store`]: boot project, RETAIN snapshots; [`persist`]:
 //! where they live on the PLC's virtual disk, start and saves), the variables published to
 //! and subscribed from other controllers ([`pubsub`]), and the communication process's
-//! network services ([`comm`]: its TCP/IP stack, Modbus/TCP).
+//! network services ([`comm`]: its TCP/IP stack, Modbus/TCP, the online protocol on TCP).
 //! The partition program (`main.rs`) only re-verifies the program, creates the ports and
 //! the processes (one per IEC task and a control process) and moves bytes between them and
 //! this library. It must never trust the package: every structure is checked and

@@ -86,9 +86,17 @@
 //!   running program goes on);
 //! - `plc: net <address>/<prefix> mac <mac> connections=<n> buffer=<bytes>
 //!   requests_per_second=<n>` and `plc: modbus on port <p> unit <u> writable=<areas>` at
-//!   start (with `plc.net`, `plc.modbus`); `plc: t=<ms>ms net open=<n> accepted=<n>
-//!   refused=<n> malformed=<n> requests=<n> responses=<n> frames_in=<n> frames_out=<n>`
-//!   every [`STATS_EVERY_MS`] while connections were seen;
+//!   start (with `plc.net`, `plc.modbus`), and `plc: online on port <p>
+//!   clients=<name>:<access>,...` (with `plc.online_tcp`); `plc: t=<ms>ms net open=<n>
+//!   accepted=<n> refused=<n> malformed=<n> requests=<n> responses=<n> denied=<n>
+//!   rejected=<n> frames_in=<n> frames_out=<n>` every [`STATS_EVERY_MS`] while connections
+//!   were seen (`denied`: online handshakes refused, `rejected`: online sessions ended by
+//!   a record that did not open);
+//! - `plc: online: <client> authenticated from <ip>:<port> (<access>)`, `plc: online:
+//!   refused <ip>:<port>: <unknown name or wrong key|malformed handshake|no complete
+//!   handshake in time>` and `plc: online: session of <client> from <ip>:<port> ended:
+//!   <why>` (a tampered, replayed or oversized record), at most [`EVENT_LINES`] per
+//!   statistics interval;
 //! - with `plc.store` (the store process and the load: [`disk`]), at a cold start
 //!   `plc: store: boot project #<seq> loaded: <n> bytes, downloaded at release <r>` or
 //!   `plc: store: no boot project; the configured program runs`, `plc: store: RETAIN
@@ -709,13 +717,25 @@ extern "C" fn control() {
                 if let Some(reason) = loader.refusal.take() {
                     println!("plc: download refused: {reason}");
                 }
-                if let Some(modbus) = life.package.net().and_then(|n| n.modbus)
+                if let Some(net) = life.package.net()
                     && let Some(mut exchange) = EXCHANGE.try_lock()
                 {
-                    let running = life.rt.schedule.order[..life.rt.schedule.count]
-                        .iter()
-                        .any(|&t| life.rt.stopped[t].is_none());
-                    softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
+                    if let Some(modbus) = net.modbus {
+                        let running = life.rt.schedule.order[..life.rt.schedule.count]
+                            .iter()
+                            .any(|&t| life.rt.stopped[t].is_none());
+                        softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
+                    }
+                    if net.online.is_some() {
+                        softplc::online::serve_exchange(
+                            &mut exchange,
+                            &life.package,
+                            &mut life.machine,
+                            &life.image,
+                            life.rt,
+                            &mut loader,
+                        );
+                    }
                 }
                 let now = now_ns();
                 if now >= next_stats {
@@ -776,7 +796,10 @@ extern "C" fn comm() {
         return;
     };
     let started = now_ns();
-    let mut comm = match Comm::new(&net, started) {
+    // The online handshake's nonces are seeded from the time-stamp counter (there is no
+    // entropy device): see plc_online::session::NonceSource.
+    let seed = apex::user_rt::sys::rdtsc();
+    let mut comm = match Comm::new(&net, started, seed) {
         Ok(comm) => comm,
         Err(e) => {
             report(text!("net: the services cannot listen: {e:?}").as_str());
@@ -787,6 +810,7 @@ extern "C" fn comm() {
     let (mut frames_in, mut frames_out) = (0u64, 0u64);
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
     let mut logged = softplc::comm::CommStats::default();
+    let mut event_lines = EVENT_LINES;
     loop {
         for _ in 0..FRAMES_PER_RUN {
             let Ok((message, _)) = rx.receive(&mut frame, SystemTime::Normal(Duration::ZERO))
@@ -798,6 +822,7 @@ extern "C" fn comm() {
         }
         let now = now_ns();
         comm.run(now, &mut EXCHANGE.lock());
+        log_events(&mut comm, &mut event_lines);
         for _ in 0..FRAMES_PER_RUN {
             let Some(out) = comm.stack.device.take() else {
                 break;
@@ -807,24 +832,80 @@ extern "C" fn comm() {
         }
         if now >= next_stats {
             next_stats += STATS_EVERY_MS * 1_000_000;
+            event_lines = EVENT_LINES;
             let s = comm.stats;
             if s != logged {
                 logged = s;
                 println!(
-                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} frames_in={frames_in} frames_out={frames_out}",
+                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} denied={} rejected={} frames_in={frames_in} frames_out={frames_out}",
                     (now - started) / 1_000_000,
                     comm.open(),
                     s.accepted,
                     s.refused,
                     s.malformed,
                     s.requests,
-                    s.responses
+                    s.responses,
+                    s.denied,
+                    s.rejected
                 );
             }
         }
         if <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
             println!("plc: net: PERIODIC_WAIT failed; stopping");
             return;
+        }
+    }
+}
+
+/// Event lines the communication process writes per statistics interval at most (a flood
+/// of refused clients must not keep it writing to the console); the statistics line counts
+/// them all (`denied=`, `rejected=`).
+const EVENT_LINES: u32 = 10;
+
+/// The communication process's events as log lines (`plc: online: ...`), while `budget`
+/// lasts. Log lines only: a client on the network must not be able to raise a
+/// health-monitor error (whose configured action could restart the PLC).
+fn log_events(comm: &mut softplc::comm::Comm, budget: &mut u32) {
+    use plc_online::session::HandshakeError;
+    use softplc::comm::Event;
+    let mut events = [None; softplc::comm::MAX_EVENTS];
+    for (slot, event) in events.iter_mut().zip(comm.take_events()) {
+        *slot = Some(event);
+    }
+    for event in events.into_iter().flatten() {
+        if *budget == 0 {
+            return;
+        }
+        *budget -= 1;
+        let name = |client| core::str::from_utf8(comm.client_name(client)).unwrap_or("?");
+        match event {
+            Event::Authenticated {
+                client,
+                access,
+                peer,
+            } => println!(
+                "plc: online: {} authenticated from {}:{} ({})",
+                name(client),
+                peer.ip,
+                peer.port,
+                access.name()
+            ),
+            Event::Denied { peer, why } => println!(
+                "plc: online: refused {}:{}: {}",
+                peer.ip,
+                peer.port,
+                match why {
+                    None => "no complete handshake in time",
+                    Some(HandshakeError::Malformed) => "malformed handshake",
+                    Some(HandshakeError::Refused) => "unknown name or wrong key",
+                }
+            ),
+            Event::Rejected { client, peer, why } => println!(
+                "plc: online: session of {} from {}:{} ended: {why}",
+                name(client),
+                peer.ip,
+                peer.port
+            ),
         }
     }
 }
@@ -1068,6 +1149,15 @@ impl PlcPartition {
                     "plc: modbus on port {} unit {} writable={writable}",
                     modbus.port, modbus.unit
                 );
+            }
+            if let Some(online) = net.online {
+                let mut line = text!("plc: online on port {} clients=", online.port);
+                for (i, c) in online.clients().enumerate() {
+                    let name = core::str::from_utf8(c.name).unwrap_or("?");
+                    let comma = if i == 0 { "" } else { "," };
+                    let _ = write!(line, "{comma}{name}:{}", c.access.name());
+                }
+                println!("{}", line.as_str());
             }
             // Below everything else of the PLC: it takes only the window's idle time.
             let priority = control_priority.saturating_sub(1).max(1);

@@ -5,6 +5,8 @@
 //! A DOWNLOAD_COMMIT that passes every check ends the batch: the caller swaps the new
 //! program in before the next release ([`Loader::committed`]).
 
+#[cfg(any(feature = "net", test))]
+use crate::comm::{Exchange, Service, SlotState};
 use crate::download::{Download, Refusal, Takeover, check_program, fit_configuration, take_over};
 use crate::package::Package;
 use crate::scan::{MAX_TASKS, PortIo, Runtime};
@@ -137,6 +139,46 @@ pub fn serve_pending(
             &mut response,
         );
         io.send(online.response, &response[..n]);
+        served += 1;
+    }
+    served
+}
+
+/// Answers the online requests waiting in the communication process's exchange (the online
+/// protocol on TCP, [`crate::comm`]), each for the access of the client that sent it: at
+/// most [`REQUESTS_PER_CYCLE`], none once a download is committed. Returns how many.
+#[cfg(any(feature = "net", test))]
+pub fn serve_exchange(
+    exchange: &mut Exchange,
+    package: &Package,
+    machine: &mut Machine,
+    image: &Image,
+    rt: &mut Runtime,
+    loader: &mut Loader,
+) -> usize {
+    let mut served = 0;
+    for slot in exchange.slots.iter_mut() {
+        if served >= REQUESTS_PER_CYCLE || loader.committed.is_some() {
+            break;
+        }
+        let (SlotState::Request, Service::Online(access)) = (slot.state, slot.service) else {
+            continue;
+        };
+        let mut response = [0u8; MAX_MESSAGE];
+        let request = &slot.bytes[..slot.len.min(MAX_MESSAGE)];
+        let n = serve(
+            request,
+            access,
+            package,
+            machine,
+            image,
+            rt,
+            loader,
+            &mut response,
+        );
+        slot.bytes[..n].copy_from_slice(&response[..n]);
+        slot.len = n;
+        slot.state = SlotState::Response;
         served += 1;
     }
     served

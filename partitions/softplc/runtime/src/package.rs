@@ -69,7 +69,8 @@
 //!   6    4    IPv4 address
 //!   10   1    prefix length (1..=30)
 //!   11   1    flags: bit 0 a gateway, bit 1 a Modbus/TCP server, bit 2 Modbus may write
-//!             the outputs (%QX, %QW), bit 3 the markers (%MX, %MW)
+//!             the outputs (%QX, %QW), bit 3 the markers (%MX, %MW), bit 4 the online
+//!             protocol on TCP (`plc.online_tcp`)
 //!   12   4    gateway (0 without)
 //!   16   1    frames-in port (index of a queuing input of at least 1514 bytes)
 //!   17   1    frames-out port (index of a queuing output of at least 1514 bytes)
@@ -78,7 +79,11 @@
 //!   20   4    bytes of each connection's receive and of its send buffer (512..=65536)
 //!   24   4    requests served per second and connection (at least 1)
 //!   28   2    Modbus TCP port (0 without the server)
-//!   30   2    reserved (0)
+//!   30   2    online TCP port (0 without it)
+//!   32   ...  with the online protocol on TCP: 1..=[`MAX_CLIENTS`] client records of
+//!             [`CLIENT_RECORD`] bytes: `name_len u8` (1..=32), `access u8`
+//!             (plc_online::Access code), `key_len u8` (16..=64), reserved (0), `name`
+//!             (32 bytes, zero padded), `key` (64 bytes, zero padded)
 //! ...         the store block (`plc.store`), the package's last [`STORE_BLOCK`] bytes:
 //!   0    1    request port (index of a queuing output of at least
 //!             `blk_core::link::MAX_REQUEST` bytes)
@@ -98,6 +103,9 @@
 //! themselves stay as last received, so a program must look at the bit (a stale level is
 //! never silently fresh).
 
+use plc_online::Access;
+use plc_online::session;
+pub use plc_online::session::ClientKey;
 use plc_vm::located::MAX_AREA;
 use protocol::{Direction, PortKind};
 
@@ -244,7 +252,7 @@ pub struct Package<'a> {
     safe: &'a [u8],
     shared: Option<SharedLayout<'a>>,
     deadlines: &'a [u8],
-    net: Option<Net>,
+    net: Option<Net<'a>>,
     store: Option<Store>,
 }
 
@@ -284,8 +292,12 @@ impl Store {
     }
 }
 
-/// Bytes of the network block.
+/// Bytes of the network block before its client records.
 pub const NET_BLOCK: usize = 32;
+/// Bytes of a client record of the online protocol on TCP.
+pub const CLIENT_RECORD: usize = 4 + 32 + plc_online::session::MAX_KEY;
+/// Most clients of the online protocol on TCP.
+pub const MAX_CLIENTS: usize = 8;
 /// Largest Ethernet frame without FCS: the least size of the frame ports.
 pub const FRAME_MAX: u32 = 1514;
 /// Most TCP connections a PLC keeps.
@@ -293,7 +305,7 @@ pub const MAX_CONNECTIONS: u8 = 32;
 
 /// The PLC's network interface and services (the network block).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Net {
+pub struct Net<'a> {
     pub mac: [u8; 6],
     pub address: [u8; 4],
     pub prefix: u8,
@@ -305,6 +317,63 @@ pub struct Net {
     pub buffer: u32,
     pub requests_per_second: u32,
     pub modbus: Option<Modbus>,
+    pub online: Option<OnlineTcp<'a>>,
+}
+
+/// The online protocol on TCP: its port and its clients' keys.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct OnlineTcp<'a> {
+    pub port: u16,
+    /// The client records (checked).
+    records: &'a [u8],
+}
+
+impl<'a> OnlineTcp<'a> {
+    /// The clients, in configuration order.
+    pub fn clients(&self) -> impl Iterator<Item = ClientKey<'a>> + 'a {
+        self.records.chunks_exact(CLIENT_RECORD).map(|r| ClientKey {
+            name: &r[4..4 + usize::from(r[0])],
+            secret: &r[36..36 + usize::from(r[2])],
+            access: Access::from_code(r[1]).unwrap_or(Access::Monitor),
+        })
+    }
+
+    /// The client records of `clients` (for the image builder; each name and key within
+    /// its limits).
+    #[cfg(any(feature = "alloc", test))]
+    pub fn records(clients: &[ClientKey<'_>]) -> alloc::vec::Vec<u8> {
+        let mut out = alloc::vec::Vec::new();
+        for c in clients {
+            let mut r = [0u8; CLIENT_RECORD];
+            r[0] = c.name.len() as u8;
+            r[1] = c.access.code();
+            r[2] = c.secret.len() as u8;
+            r[4..4 + c.name.len()].copy_from_slice(c.name);
+            r[36..36 + c.secret.len()].copy_from_slice(c.secret);
+            out.extend_from_slice(&r);
+        }
+        out
+    }
+
+    /// The online protocol on `port` for the client records `records`
+    /// ([`OnlineTcp::records`]), if they are well formed.
+    pub fn new(port: u16, records: &'a [u8]) -> Option<Self> {
+        let count = records.len() / CLIENT_RECORD;
+        let well_formed = |r: &[u8]| {
+            let (name_len, key_len) = (usize::from(r[0]), usize::from(r[2]));
+            (1..=session::MAX_NAME).contains(&name_len)
+                && (session::MIN_KEY..=session::MAX_KEY).contains(&key_len)
+                && Access::from_code(r[1]).is_some()
+                && r[3] == 0
+                && r[4 + name_len..36].iter().all(|&b| b == 0)
+                && r[36 + key_len..].iter().all(|&b| b == 0)
+        };
+        let ok = port != 0
+            && records.len().is_multiple_of(CLIENT_RECORD)
+            && (1..=MAX_CLIENTS).contains(&count)
+            && records.chunks_exact(CLIENT_RECORD).all(well_formed);
+        ok.then_some(OnlineTcp { port, records })
+    }
 }
 
 /// The Modbus/TCP server's settings.
@@ -320,14 +389,22 @@ const NET_GATEWAY: u8 = 1;
 const NET_MODBUS: u8 = 2;
 const NET_WRITE_OUTPUTS: u8 = 4;
 const NET_WRITE_MARKERS: u8 = 8;
+const NET_ONLINE: u8 = 16;
 
-impl Net {
+impl<'a> Net<'a> {
     /// The block's fields (its ports are checked by [`Package::parse`]).
-    fn parse(b: &[u8]) -> Option<Net> {
-        if b.len() != NET_BLOCK || b[11] & !0xF != 0 || b[30..32] != [0, 0] {
+    fn parse(b: &'a [u8]) -> Option<Net<'a>> {
+        if b.len() < NET_BLOCK || b[11] & !0x1F != 0 {
             return None;
         }
         let flags = b[11];
+        let online = if flags & NET_ONLINE != 0 {
+            Some(OnlineTcp::new(u16_at(b, 30), &b[NET_BLOCK..])?)
+        } else if b.len() != NET_BLOCK || u16_at(b, 30) != 0 {
+            return None;
+        } else {
+            None
+        };
         let modbus = if flags & NET_MODBUS != 0 {
             let port = u16_at(b, 28);
             if port == 0 {
@@ -353,6 +430,7 @@ impl Net {
             buffer: u32_at(b, 20),
             requests_per_second: u32_at(b, 24),
             modbus,
+            online,
         };
         let fits = (1..=30).contains(&net.prefix)
             && net.mac[0] & 1 == 0
@@ -364,8 +442,8 @@ impl Net {
 
     /// The block (for the image builder).
     #[cfg(any(feature = "alloc", test))]
-    pub fn encode(&self) -> [u8; NET_BLOCK] {
-        let mut b = [0u8; NET_BLOCK];
+    pub fn encode(&self) -> alloc::vec::Vec<u8> {
+        let mut b = alloc::vec![0u8; NET_BLOCK];
         b[..6].copy_from_slice(&self.mac);
         b[6..10].copy_from_slice(&self.address);
         b[10] = self.prefix;
@@ -384,6 +462,11 @@ impl Net {
             }
             b[19] = m.unit;
             b[28..30].copy_from_slice(&m.port.to_le_bytes());
+        }
+        if let Some(o) = self.online {
+            flags |= NET_ONLINE;
+            b[30..32].copy_from_slice(&o.port.to_le_bytes());
+            b.extend_from_slice(o.records);
         }
         b[11] = flags;
         b[16] = self.rx as u8;
@@ -688,7 +771,7 @@ impl<'a> Package<'a> {
     }
 
     /// The PLC's network interface and services, if the configuration gives it any.
-    pub fn net(&self) -> Option<Net> {
+    pub fn net(&self) -> Option<Net<'a>> {
         self.net
     }
 
@@ -859,7 +942,7 @@ pub fn encode(
 
 /// Appends the network block to an [`encode`]d package (`plc.net`).
 #[cfg(any(feature = "alloc", test))]
-pub fn attach_net(package: &mut alloc::vec::Vec<u8>, net: &Net) {
+pub fn attach_net(package: &mut alloc::vec::Vec<u8>, net: &Net<'_>) {
     let at = package.len() as u32;
     package[28..32].copy_from_slice(&at.to_le_bytes());
     package.extend_from_slice(&net.encode());
@@ -1254,7 +1337,7 @@ mod tests {
         }
     }
 
-    fn network() -> Net {
+    fn network() -> Net<'static> {
         Net {
             mac: [0x52, 0x54, 0, 0x12, 0x34, 0x56],
             address: [10, 0, 2, 16],
@@ -1271,6 +1354,7 @@ mod tests {
                 write_outputs: false,
                 write_markers: true,
             }),
+            online: None,
         }
     }
 
@@ -1325,6 +1409,82 @@ mod tests {
     }
 
     #[test]
+    fn the_online_clients_round_trip_and_hostile_records_are_refused() {
+        let ports = [
+            level(),
+            frame_port("eth-rx", Direction::In),
+            frame_port("eth-tx", Direction::Out),
+        ];
+        let clients = [
+            ClientKey {
+                name: b"engineering",
+                secret: &[7; 32],
+                access: Access::Download,
+            },
+            ClientKey {
+                name: b"hmi",
+                secret: &[9; 16],
+                access: Access::Monitor,
+            },
+        ];
+        let records = OnlineTcp::records(&clients);
+        let net = Net {
+            online: OnlineTcp::new(1202, &records),
+            ..network()
+        };
+        assert!(net.online.is_some());
+        let mut good = encode(&ports, b"P", &[], None, &[], None, &[]);
+        let block = good.len();
+        attach_net(&mut good, &net);
+        let package = Package::parse(&good).unwrap();
+        let online = package.net().unwrap().online.unwrap();
+        assert_eq!(online.port, 1202);
+        let got: Vec<_> = online
+            .clients()
+            .map(|c| (c.name, c.secret, c.access))
+            .collect();
+        assert_eq!(
+            got,
+            [
+                (&b"engineering"[..], &[7u8; 32][..], Access::Download),
+                (&b"hmi"[..], &[9u8; 16][..], Access::Monitor)
+            ]
+        );
+        // Port 0, a name of 0 or 33 bytes, a key of 15 or 65 bytes, an unknown access, a
+        // reserved byte, bytes past a name or a key, a cut record, no records.
+        let first = block + NET_BLOCK;
+        for (at, value) in [
+            (block + 30, 0),
+            (first, 0),
+            (first, 33),
+            (first + 2, 15),
+            (first + 2, 65),
+            (first + 1, 9),
+            (first + 3, 1),
+            (first + 4 + 11, b'x'),
+            (first + 36 + 32, 1),
+        ] {
+            let mut bad = good.clone();
+            bad[at] = value;
+            if at == block + 30 {
+                bad[at + 1] = 0;
+            }
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadNet,
+                "byte {at} = {value}"
+            );
+        }
+        assert!(Package::parse(&good[..good.len() - 1]).is_err());
+        let mut none = good[..first].to_vec();
+        assert!(Package::parse(&none).is_err());
+        none[block + 11] &= !NET_ONLINE;
+        assert!(Package::parse(&none).is_err(), "a port without the flag");
+        none[block + 30..block + 32].fill(0);
+        assert!(Package::parse(&none).is_ok());
+    }
+
+    #[test]
     fn the_network_block_round_trips_and_hostile_ones_are_refused() {
         let ports = [
             level(),
@@ -1351,7 +1511,8 @@ mod tests {
             (18, 33),
             (21, 0),
             (24, 0),
-            (11, 0x13),
+            (11, 0x23),
+            (30, 1),
             (28, 0),
         ] {
             let mut bad = good.clone();
