@@ -221,11 +221,11 @@ fn system_plcctl() {
             "download status 1",
         ),
         (
-            "plcctl: FORCE Count.n: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)",
+            "plcctl: FORCE Count.n: FORBIDDEN (the client's access in the PLC's configuration does not allow it)",
             "force status 1",
         ),
         (
-            "plcctl: DOWNLOAD_BEGIN: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)",
+            "plcctl: DOWNLOAD_BEGIN: FORBIDDEN (the client's access in the PLC's configuration does not allow it)",
             "counter download status 1",
         ),
         (

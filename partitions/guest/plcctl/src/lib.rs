@@ -1,9 +1,14 @@
 //! `plcctl`: the soft-PLC's online protocol ([`plc_online`]) from a Linux process, over a
 //! pair of message devices (in the guest partition the ARINC queuing ports
 //! `/dev/arinc/plc-request` and `/dev/arinc/plc-response`, connected by channels to the
-//! PLC's `plc.online` ports). This library is the tool without its files: the command
-//! line ([`Command::parse`]), values typed as text ([`parse_value`]), the exchanges of each
-//! command over a [`Link`] and the lines it prints; `main.rs` only opens the devices.
+//! PLC's `plc.online` ports), or over TCP to the PLC's authenticated online service
+//! (`--connect`, [`tcp::TcpSession`]). This library is the tool without its files: the
+//! command line ([`Command::parse`]), values typed as text ([`parse_value`]), the exchanges
+//! of each command over a [`Link`] and the lines it prints, the TCP session and its key file
+//! ([`tcp`]); `main.rs` only opens the devices or the connection.
+//!
+//! plcctl builds for the host too, where it reaches a PLC over TCP:
+//! `cargo run -p plcctl -- --connect 127.0.0.1:PORT --key FILE list`.
 //!
 //! # Commands and output (stdout; errors on stderr as `plcctl: <what>`)
 //!
@@ -22,14 +27,40 @@
 //!
 //! Options before or after the command: `--request PATH`, `--response PATH` (the devices;
 //! defaults [`DEFAULT_REQUEST`], [`DEFAULT_RESPONSE`]), `--timeout MS` (how long to wait
-//! for each answer, default 2000). A PLC that refuses prints
-//! `plcctl: <OP> <name>: <STATUS> (<reason>)`, e.g. `plcctl: FORCE valve: FORBIDDEN (the
-//! PLC's configuration, plc.online.access, does not allow it)`; a reference is never forced
+//! for each answer, and over TCP for the connection and each step of the handshake; default
+//! 2000).
+//!
+//! # Over TCP
+//!
+//! `--connect HOST:PORT` talks to the PLC's online service on TCP instead of the devices
+//! (`--request` and `--response` are then unused), authenticated with a pre-shared key
+//! ([`plc_online::session`]: a challenge and response with HMAC-SHA-256, the PLC's proof
+//! that it holds the key too, then every message in a record under a tag and a sequence
+//! number). `--key FILE` is required with it: the key as hex text, 32 to 128 hex digits (an
+//! even count: 16 to 64 bytes), whitespace and newlines around them ignored, e.g. made by
+//! `od -An -tx1 -N32 /dev/urandom | tr -d ' \n' > engineering.key`; the PLC's configuration
+//! holds the same file under the same name. `--name NAME` (1 to 32 bytes) is the name the
+//! key is known by, by default the key file's name without its extension
+//! (`keys/engineering.key`: `engineering`). `--key` and `--name` without `--connect` are
+//! usage errors. The commands and their output are the same as over the devices; what the
+//! key's access (`monitor`, `force`, `download`) does not allow, the PLC answers FORBIDDEN.
+//! A refused authentication prints `plcctl: authentication refused by 127.0.0.1:1202
+//! (unknown name or wrong key for "engineering")` (status 1); a bad key file, `plcctl: key
+//! file <FILE>: <why>` (status 2); no connection, `plcctl: cannot connect to <HOST:PORT>:
+//! <why>` (status 3); a tampered or replayed record from the PLC, or the connection closed,
+//! ends the session (status 3).
+//!
+//! # Refusals and exit status
+//!
+//! A PLC that refuses prints `plcctl: <OP> <name>: <STATUS> (<reason>)`, e.g. `plcctl: FORCE valve: FORBIDDEN (the
+//! client's access in the PLC's configuration does not allow it)`; a reference is never forced
 //! (`plcctl: FORCE p: READ_ONLY (...)`, without asking). A value that is none of the
 //! variable's type prints ``plcctl: FORCE <name>: `<text>` is not a TOD literal (expected
 //! ...)`` or ``... is out of the range of INT (-32768 to 32767)``. Exit status: 0 done, 1 the
-//! PLC refused, 2 a usage error (also a malformed value), 3 no answer or a device error.
+//! PLC refused (a request or the authentication), 2 a usage error (also a malformed value
+//! or key file), 3 no answer, a device error or a connection error.
 
+use plc_online::session::MAX_NAME;
 use plc_online::{
     MAX_CHUNK, MAX_MESSAGE, PROTOCOL_VERSION, Reader, Request, Status, crc32, decode_response,
     encode_request, read_stats, read_store_status,
@@ -38,7 +69,10 @@ use plc_vm::image::VarType;
 use plc_vm::literal::{self, LiteralError};
 use plc_vm::vm::Value;
 use std::fmt::Write as _;
+use std::path::Path;
 use std::time::Duration;
+
+pub mod tcp;
 
 pub const DEFAULT_REQUEST: &str = "/dev/arinc/plc-request";
 pub const DEFAULT_RESPONSE: &str = "/dev/arinc/plc-response";
@@ -46,7 +80,7 @@ pub const DEFAULT_RESPONSE: &str = "/dev/arinc/plc-response";
 pub const DEFAULT_TIMEOUT: Duration = Duration::from_millis(2000);
 
 pub const USAGE: &str = "usage: plcctl [--request PATH] [--response PATH] [--timeout MS] \
-list | read NAME... | watch NAME... [--interval T] [--count N] | write NAME=VALUE | \
+[--connect HOST:PORT --key FILE [--name NAME]] list | read NAME... | watch NAME... [--interval T] [--count N] | write NAME=VALUE | \
 force NAME=VALUE | unforce NAME | stats | store | download FILE.plcb | version";
 
 /// What the command line asks.
@@ -55,7 +89,22 @@ pub struct Command {
     pub request: String,
     pub response: String,
     pub timeout: Duration,
+    /// `--connect`: over TCP instead of the devices.
+    pub connect: Option<Connect>,
     pub action: Action,
+}
+
+/// The PLC's online service on TCP and the key to authenticate with (`--connect`, `--key`,
+/// `--name`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Connect {
+    /// `HOST:PORT`.
+    pub address: String,
+    /// The key file's path ([`tcp::read_key`] reads it).
+    pub key_file: String,
+    /// The name the key is known by: `--name`, or the key file's name without its
+    /// extension.
+    pub name: String,
 }
 
 #[derive(Clone, Debug, PartialEq)]
@@ -99,6 +148,7 @@ impl Command {
         let mut timeout = DEFAULT_TIMEOUT;
         let mut interval = Duration::from_secs(1);
         let mut count = None;
+        let (mut connect, mut key, mut name) = (None, None, None);
         let mut words = Vec::new();
         let mut it = args.iter();
         while let Some(arg) = it.next() {
@@ -109,6 +159,9 @@ impl Command {
             };
             match arg.as_str() {
                 "--request" => request = value("a path")?,
+                "--connect" => connect = Some(value("HOST:PORT")?),
+                "--key" => key = Some(value("a key file")?),
+                "--name" => name = Some(value("a name")?),
                 "--response" => response = value("a path")?,
                 "--timeout" => {
                     timeout = parse_duration(&value("a time")?)
@@ -130,6 +183,33 @@ impl Command {
                 word => words.push(word.to_string()),
             }
         }
+        let connect = match (connect, key) {
+            (Some(address), Some(key_file)) => {
+                if !address
+                    .rsplit_once(':')
+                    .is_some_and(|(host, port)| !host.is_empty() && port.parse::<u16>().is_ok())
+                {
+                    return Err(format!("--connect {address}: not HOST:PORT"));
+                }
+                let name = name.unwrap_or_else(|| default_name(&key_file));
+                if name.is_empty() || name.len() > MAX_NAME {
+                    return Err(format!(
+                        "the name {name:?} is no client name (1 to {MAX_NAME} bytes; --name NAME)"
+                    ));
+                }
+                Some(Connect {
+                    address,
+                    key_file,
+                    name,
+                })
+            }
+            (Some(_), None) => return Err("--connect needs --key FILE".into()),
+            (None, Some(_)) => return Err("--key goes with --connect HOST:PORT".into()),
+            (None, None) if name.is_some() => {
+                return Err("--name goes with --connect HOST:PORT".into());
+            }
+            (None, None) => None,
+        };
         let (verb, rest) = words.split_first().ok_or("no command")?;
         let one = |what: &str| match rest {
             [one] => Ok(one.clone()),
@@ -176,9 +256,19 @@ impl Command {
             request,
             response,
             timeout,
+            connect,
             action,
         })
     }
+}
+
+/// The name a key file's key is known by unless `--name` says: the file's name without its
+/// extension (`keys/engineering.key`: `engineering`).
+pub fn default_name(key_file: &str) -> String {
+    Path::new(key_file)
+        .file_stem()
+        .map(|stem| stem.to_string_lossy().into_owned())
+        .unwrap_or_default()
 }
 
 /// Most bytes a typed STRING or WSTRING may take: what a FORCE or WRITE message carries
@@ -207,7 +297,7 @@ pub fn reason(status: Status) -> &'static str {
         Status::UnknownName => "no variable of that name",
         Status::TypeMismatch => "the value does not fit the variable's type",
         Status::Constant => "the variable is CONSTANT",
-        Status::Forbidden => "the PLC's configuration, plc.online.access, does not allow it",
+        Status::Forbidden => "the client's access in the PLC's configuration does not allow it",
         Status::TooManyForces => "every force slot is in use",
         Status::NoSuchTask => "no task of that number",
         Status::Unsupported => "not supported for this variable",
@@ -544,3 +634,42 @@ fn result(message: &[u8]) -> Option<Reader<'_>> {
 
 #[cfg(test)]
 mod tests;
+
+/// Runs `command` as the `plcctl` program does: over the request and response devices, or
+/// with `--connect` after reading the key file and authenticating over TCP ([`tcp`]); each
+/// line of output to `out`.
+pub fn execute(command: &Command, out: &mut dyn FnMut(&str)) -> Result<(), Failure> {
+    let image = match &command.action {
+        Action::Download(file) => Some(std::fs::read(file).map_err(|e| Failure {
+            message: format!("cannot read {file}: {e}"),
+            status: 2,
+        })?),
+        _ => None,
+    };
+    match &command.connect {
+        Some(c) => {
+            let key = tcp::read_key(&c.key_file)?;
+            let session = tcp::TcpSession::connect(&c.address, &c.name, &key, command.timeout)?;
+            run_over(command, session, image, out)
+        }
+        None => {
+            let devices = port_devices::Devices::open(&command.request, &command.response)
+                .map_err(|message| Failure { message, status: 3 })?;
+            run_over(command, devices, image, out)
+        }
+    }
+}
+
+/// Runs `command`'s action over `transport`, `image` the file to download.
+fn run_over<T: Transport>(
+    command: &Command,
+    transport: T,
+    image: Option<Vec<u8>>,
+    out: &mut dyn FnMut(&str),
+) -> Result<(), Failure> {
+    let mut link = Link::new(transport, command.timeout);
+    match (&command.action, image) {
+        (Action::Download(file), Some(image)) => link.download(file, &image, out),
+        (action, _) => link.run(action, out),
+    }
+}

@@ -370,7 +370,7 @@ fn refusals_say_why() {
     assert_eq!(f.status, 1);
     assert_eq!(
         f.message,
-        "FORCE valve: FORBIDDEN (the PLC's configuration, plc.online.access, does not allow it)"
+        "FORCE valve: FORBIDDEN (the client's access in the PLC's configuration does not allow it)"
     );
     let (r, _, _) = run(Plc::new(Access::Monitor), "read nothing");
     assert_eq!(
@@ -428,4 +428,73 @@ fn no_answer_times_out_and_stale_answers_are_dropped() {
     plc.answers.push_back(vec![2, 9, 0]);
     let (r, lines, _) = run(plc, "read valve");
     assert_eq!((r, lines), (Ok(()), vec!["valve = 0.5".to_string()]));
+}
+
+#[test]
+fn the_tcp_options() {
+    let c = Command::parse(&args(
+        "--connect 127.0.0.1:1202 --key keys/engineering.key list",
+    ))
+    .unwrap();
+    assert_eq!(
+        c.connect,
+        Some(Connect {
+            address: "127.0.0.1:1202".into(),
+            key_file: "keys/engineering.key".into(),
+            name: "engineering".into(),
+        })
+    );
+    assert_eq!(c.action, Action::List);
+    let c = Command::parse(&args(
+        "read x --name operator --connect plc.local:1202 --key /etc/k --timeout 500",
+    ))
+    .unwrap();
+    let connect = c.connect.unwrap();
+    assert_eq!(connect.name, "operator");
+    assert_eq!(connect.address, "plc.local:1202");
+    assert_eq!(connect.key_file, "/etc/k");
+    assert_eq!(c.timeout, Duration::from_millis(500));
+    assert_eq!(
+        Command::parse(&args("--connect [::1]:1202 --key a.b.key version"))
+            .unwrap()
+            .connect
+            .unwrap()
+            .name,
+        "a.b"
+    );
+    assert_eq!(Command::parse(&args("list")).unwrap().connect, None);
+    assert_eq!(default_name("engineering"), "engineering");
+    assert_eq!(default_name("keys/engineering.key"), "engineering");
+
+    for (bad, why) in [
+        (
+            "--connect 127.0.0.1:1202 list",
+            "--connect needs --key FILE",
+        ),
+        ("--key k.key list", "--key goes with --connect HOST:PORT"),
+        ("--name n list", "--name goes with --connect HOST:PORT"),
+        (
+            "--key k.key --name n list",
+            "--key goes with --connect HOST:PORT",
+        ),
+        (
+            "--connect plc --key k.key list",
+            "--connect plc: not HOST:PORT",
+        ),
+        (
+            "--connect plc:http --key k.key list",
+            "--connect plc:http: not HOST:PORT",
+        ),
+        ("list --connect", "--connect needs HOST:PORT"),
+        ("list --connect x:1 --key", "--key needs a key file"),
+    ] {
+        assert_eq!(Command::parse(&args(bad)), Err(why.to_string()), "{bad}");
+    }
+    let long = format!("--connect x:1 --key k --name {} list", "n".repeat(33));
+    assert!(
+        Command::parse(&args(&long))
+            .unwrap_err()
+            .contains("is no client name")
+    );
+    assert!(Command::parse(&args("--connect x:1 --key k list extra")).is_err());
 }
