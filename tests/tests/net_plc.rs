@@ -2,7 +2,9 @@
 //! interface on the NIC partition's switch and its Modbus/TCP server, reached from the host
 //! through QEMU's `hostfwd`. The client is pymodbus (tests/scripts/modbus_client.py) in the
 //! venv `target/pymodbus-venv` (`.ci/run` makes it); without it that part is skipped with
-//! a message, and only our own raw frames below are sent.
+//! a message, and only our own raw frames below are sent. The online protocol on TCP
+//! (`plc.online_tcp`) is driven by plcctl's own code ([`plcctl::execute`]) with the keys
+//! in tests/configs/keys, and by raw sessions of [`plc_online::session`] to replay a record.
 
 use scenarios::tank::{self, DISTURBANCE_MS, SETTLED_MS};
 use scenarios::{boot_beside, check, modbus_exchange, modbus_level};
@@ -29,9 +31,111 @@ struct Client {
     pymodbus: Option<(String, bool)>,
     /// The connection after a malformed frame was closed without an answer.
     malformed_closed: bool,
+    /// What each plcctl command over TCP printed, or its failure.
+    online: Vec<(String, Said)>,
+    /// A replayed record: (the first got its answer, the replay closed the connection).
+    replay: Option<(bool, bool)>,
 }
 
-fn client(port: u16, ended: &AtomicBool) -> Client {
+/// A plcctl command's lines, or its failure (exit status, message).
+type Said = Result<Vec<String>, (i32, String)>;
+
+/// `plcctl --connect 127.0.0.1:PORT --key tests/configs/keys/KEY.key --name NAME ARGS...`.
+fn plcctl(port: u16, key: &str, name: &str, args: &str) -> Said {
+    let key = xtask::workspace_root().join(format!("tests/configs/keys/{key}.key"));
+    let mut words: Vec<String> = vec![
+        "--connect".into(),
+        format!("127.0.0.1:{port}"),
+        "--key".into(),
+        key.display().to_string(),
+        "--name".into(),
+        name.into(),
+        "--timeout".into(),
+        "10000".into(),
+    ];
+    words.extend(args.split(' ').map(String::from));
+    let command = plcctl::Command::parse(&words).map_err(|e| (2, e))?;
+    let mut lines = Vec::new();
+    plcctl::execute(&command, &mut |line| lines.push(line.to_string()))
+        .map(|()| lines)
+        .map_err(|f| (f.status, f.message))
+}
+
+/// A raw session as `engineering`: one VERSION request answered, then the same record
+/// again. Returns (answered, then closed without an answer).
+fn replay(port: u16) -> std::io::Result<(bool, bool)> {
+    use plc_online::session::{self, MAX_RECORD, MAX_RESPONSE_LEN, Session};
+    let text = std::fs::read_to_string(
+        xtask::workspace_root().join("tests/configs/keys/engineering.key"),
+    )?;
+    let mut key = [0u8; session::MAX_KEY];
+    let len = session::parse_key_file(&text, &mut key).map_err(std::io::Error::other)?;
+    let key = &key[..len];
+    let mut s = TcpStream::connect(("127.0.0.1", port))?;
+    s.set_read_timeout(Some(Duration::from_secs(10)))?;
+    let mut challenge = [0u8; session::CHALLENGE_LEN];
+    s.read_exact(&mut challenge)?;
+    let server_nonce = session::read_challenge(&challenge).map_err(std::io::Error::other)?;
+    let client_nonce = [0x42; session::NONCE_LEN];
+    let mut response = [0u8; MAX_RESPONSE_LEN];
+    let n = session::response(
+        b"engineering",
+        key,
+        &server_nonce,
+        &client_nonce,
+        &mut response,
+    )
+    .map_err(std::io::Error::other)?;
+    s.write_all(&response[..n])?;
+    let mut accept = [0u8; session::ACCEPT_LEN];
+    s.read_exact(&mut accept)?;
+    let (_, mut session): (_, Session) =
+        session::read_accept(key, &server_nonce, &client_nonce, &accept)
+            .map_err(std::io::Error::other)?;
+    let mut request = [0u8; plc_online::MAX_MESSAGE];
+    let n = plc_online::encode_request(&plc_online::Request::Version, 1, &mut request)
+        .ok_or_else(|| std::io::Error::other("VERSION does not encode"))?;
+    let mut record = [0u8; MAX_RECORD];
+    let len = session.seal(&request[..n], &mut record).unwrap_or(0);
+    let mut answer = [0u8; MAX_RECORD];
+    let mut read_record = |s: &mut TcpStream| -> std::io::Result<usize> {
+        s.read_exact(&mut answer[..2])?;
+        let total = Session::record_len(&answer[..2])
+            .ok()
+            .flatten()
+            .ok_or_else(|| std::io::Error::other("bad record length"))?;
+        s.read_exact(&mut answer[2..total])?;
+        Ok(total)
+    };
+    s.write_all(&record[..len])?;
+    let answered = read_record(&mut s).is_ok_and(|total| total > 0);
+    s.write_all(&record[..len])?;
+    let mut rest = [0u8; 64];
+    let closed = matches!(s.read(&mut rest), Ok(0) | Err(_)) && rest == [0u8; 64];
+    Ok((answered, closed))
+}
+
+/// The online protocol on TCP through `port`: each key's rights, a wrong key, a replay.
+fn online(port: u16, c: &mut Client) {
+    for (key, name, args) in [
+        ("engineering", "engineering", "version"),
+        ("engineering", "engineering", "read level setpoint_mm"),
+        ("engineering", "engineering", "force alarm=TRUE"),
+        ("engineering", "engineering", "read alarm"),
+        ("engineering", "engineering", "unforce alarm"),
+        ("hmi", "hmi", "read level"),
+        ("hmi", "hmi", "force alarm=TRUE"),
+        ("wrong", "engineering", "read level"),
+        ("hmi", "nobody", "read level"),
+    ] {
+        let what = format!("{name} ({key}.key): {args}");
+        c.online.push((what, plcctl(port, key, name, args)));
+    }
+    c.replay = replay(port).ok();
+}
+
+fn client(ports: &[u16], ended: &AtomicBool) -> Client {
+    let port = ports[0];
     let mut c = Client::default();
     while !ended.load(Ordering::SeqCst) && c.level.is_none() {
         c.level = modbus_level(port);
@@ -63,6 +167,7 @@ fn client(port: u16, ended: &AtomicBool) -> Client {
             xtask::target_dir().join("pymodbus-venv").display()
         ),
     }
+    online(ports[1], &mut c);
     // A protocol id other than 0: not Modbus/TCP, the connection closes (and the PLC's
     // counter of such connections, which ends the run, goes to 1).
     c.malformed_closed = modbus_exchange(port, &[0, 2, 0, 1, 0, 6, 1, 3, 0, 0, 0, 1])
@@ -73,7 +178,7 @@ fn client(port: u16, ended: &AtomicBool) -> Client {
 
 #[test]
 fn net_modbus() {
-    let (o, c) = boot_beside("net_modbus", |ports, ended| client(ports[0], ended));
+    let (o, c) = boot_beside("net_modbus", client);
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,
@@ -96,6 +201,55 @@ fn net_modbus() {
         &o,
         c.malformed_closed,
         "a malformed frame was answered, not closed",
+    );
+    for (what, result) in &c.online {
+        println!("net_modbus: plcctl {what} -> {result:?}");
+    }
+    let said = |i: usize| c.online.get(i).map(|(_, r)| r.clone());
+    let ok_line = |i: usize, start: &str| {
+        said(i).is_some_and(|r| r.is_ok_and(|lines| lines.iter().any(|l| l.starts_with(start))))
+    };
+    let failed = |i: usize, status: i32, text: &str| {
+        said(i).is_some_and(|r| r.is_err_and(|(s, m)| s == status && m.contains(text)))
+    };
+    check(
+        &o,
+        ok_line(0, "protocol: plcctl ")
+            && ok_line(1, "level = ")
+            && ok_line(1, "setpoint_mm = ")
+            && ok_line(2, "forced alarm = TRUE")
+            && ok_line(3, "alarm = TRUE")
+            && ok_line(4, "unforced alarm")
+            && ok_line(5, "level = "),
+        "plcctl over TCP with the engineering and hmi keys (its lines above)",
+    );
+    check(
+        &o,
+        failed(6, 1, "FORBIDDEN"),
+        "FORCE with the monitor key was not refused FORBIDDEN",
+    );
+    check(
+        &o,
+        failed(7, 1, "authentication refused") && failed(8, 1, "authentication refused"),
+        "a wrong key or an unknown name was not refused",
+    );
+    check(
+        &o,
+        c.replay == Some((true, true)),
+        &format!("a replayed record: {:?} (answered, then closed)", c.replay),
+    );
+    check(
+        &o,
+        o.line("plc: online on port 1202 clients=engineering:download,hmi:monitor")
+            .is_some()
+            && o.line("plc: online: engineering authenticated from 10.0.2.2:")
+                .is_some()
+            && o.line("plc: online: hmi authenticated from 10.0.2.2:")
+                .is_some()
+            && o.line("plc: online: refused 10.0.2.2:").is_some()
+            && o.line("ended: record sequence 1, expected 2 (replayed or reordered)")
+                .is_some(),
+        "the PLC's log lines of the online sessions",
     );
     check(
         &o,
