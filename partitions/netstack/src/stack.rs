@@ -130,6 +130,9 @@ enum TcpState {
     Fresh,
     Listening {
         listeners: Vec<(Side, SocketHandle)>,
+        /// Backlog places of these sides not listening: an accepted connection's place
+        /// is taken by a new listener only when the socket limit allows it ([`Stack::room`]).
+        missing: Vec<Side>,
     },
     Connecting {
         side: Side,
@@ -248,6 +251,12 @@ impl Stack {
 
     fn udp_socket(&mut self, side: Side, handle: SocketHandle) -> &mut udp::Socket<'static> {
         self.set(side).get_mut::<udp::Socket>(handle)
+    }
+
+    /// smoltcp sockets in use (each listener of a backlog, lingering closes included), at
+    /// most [`Limits::sockets`].
+    pub fn sockets_in_use(&self) -> usize {
+        self.in_use()
     }
 
     /// smoltcp sockets in use (each listener of a backlog, lingering closes included).
@@ -518,7 +527,10 @@ impl Stack {
                 listeners.push((side, self.listen_on(side, bound)?));
             }
         }
-        self.sock_mut(id)?.tcp = TcpState::Listening { listeners };
+        self.sock_mut(id)?.tcp = TcpState::Listening {
+            listeners,
+            missing: Vec::new(),
+        };
         Ok(())
     }
 
@@ -531,11 +543,20 @@ impl Stack {
     /// `accept`: a connection that completed, with its peer.
     pub fn accept(&mut self, id: SocketId) -> Result<(SocketId, SocketAddr), Error> {
         let sock = self.sock(id)?;
-        let TcpState::Listening { listeners, .. } = &sock.tcp else {
+        let TcpState::Listening { listeners, missing } = &sock.tcp else {
             return Err(Error::Invalid);
         };
         let (keep_alive, no_delay, bound) = (sock.keep_alive, sock.no_delay, sock.bound);
-        let mut listeners = listeners.clone();
+        let (mut listeners, mut missing) = (listeners.clone(), missing.clone());
+        let bound = bound.ok_or(Error::Invalid)?;
+        // Places left empty by earlier accepts listen again where the limit now allows.
+        while let Some(&side) = missing.last() {
+            if self.room(1).is_err() {
+                break;
+            }
+            listeners.push((side, self.listen_on(side, bound)?));
+            missing.pop();
+        }
         let ready = listeners.iter().position(|&(side, h)| {
             let s = self.tcp(side, h);
             !matches!(
@@ -544,16 +565,32 @@ impl Stack {
             )
         });
         let Some(index) = ready else {
+            if let TcpState::Listening {
+                listeners: l,
+                missing: m,
+            } = &mut self.sock_mut(id)?.tcp
+            {
+                (*l, *m) = (listeners, missing);
+            }
             return Err(Error::WouldBlock);
         };
         let (side, handle) = listeners[index];
         let peer = self.tcp(side, handle).remote_endpoint().map(endpoint_addr);
         let local = self.tcp(side, handle).local_endpoint().map(endpoint_addr);
-        // The backlog keeps its size: a new listener takes the accepted one's place.
-        let bound = bound.ok_or(Error::Invalid)?;
-        listeners[index] = (side, self.listen_on(side, bound)?);
-        if let TcpState::Listening { listeners: l, .. } = &mut self.sock_mut(id)?.tcp {
-            *l = listeners;
+        // A new listener takes the accepted one's place if the socket limit allows it
+        // (closed connections in TIME-WAIT give theirs first); else the place waits.
+        if self.room(1).is_ok() {
+            listeners[index] = (side, self.listen_on(side, bound)?);
+        } else {
+            listeners.swap_remove(index);
+            missing.push(side);
+        }
+        if let TcpState::Listening {
+            listeners: l,
+            missing: m,
+        } = &mut self.sock_mut(id)?.tcp
+        {
+            (*l, *m) = (listeners, missing);
         }
         self.configure(side, handle, keep_alive, no_delay);
         let peer = peer.ok_or(Error::ConnectionReset)?;
