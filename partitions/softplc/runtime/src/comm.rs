@@ -686,25 +686,29 @@ mod tests {
     use super::*;
 
     use plc_online::session::{CHALLENGE_LEN, read_accept, read_challenge, response};
+    extern crate std;
 
     const PLC_IP: [u8; 4] = [10, 0, 2, 15];
     const ONLINE_PORT: u16 = 1202;
     const SECRET: &[u8] = b"engineering secret, 32 bytes....";
 
     fn records() -> &'static [u8] {
-        let clients = [
-            ClientKey {
-                name: b"engineering",
-                secret: SECRET,
-                access: Access::Download,
-            },
-            ClientKey {
-                name: b"hmi",
-                secret: b"hmi secret of 16",
-                access: Access::Monitor,
-            },
-        ];
-        alloc::vec::Vec::leak(crate::package::OnlineTcp::records(&clients))
+        static RECORDS: std::sync::OnceLock<Vec<u8>> = std::sync::OnceLock::new();
+        RECORDS.get_or_init(|| {
+            let clients = [
+                ClientKey {
+                    name: b"engineering",
+                    secret: SECRET,
+                    access: Access::Download,
+                },
+                ClientKey {
+                    name: b"hmi",
+                    secret: b"hmi secret of 16",
+                    access: Access::Monitor,
+                },
+            ];
+            crate::package::OnlineTcp::records(&clients)
+        })
     }
 
     fn net(connections: u8, requests_per_second: u32) -> Net<'static> {
@@ -1067,5 +1071,34 @@ mod tests {
         // Its place is free again.
         let (_, session) = handshake(&mut w, b"engineering", SECRET);
         assert!(session.is_ok());
+    }
+
+    #[test]
+    fn many_short_connections_keep_the_sockets_within_the_limit() {
+        // Each refused client leaves a closed connection in TIME-WAIT for 10 s; accepting
+        // the next must recycle those rather than add sockets (the partition's heap is
+        // fixed).
+        let mut w = Wire::new(4, 1000);
+        let limit = w.plc.stack.config().limits.sockets;
+        for _ in 0..200 {
+            let (s, session) = handshake(&mut w, b"engineering", b"a guessed secret");
+            assert!(session.is_err());
+            let _ = w.ask(s, &[], 3);
+            let _ = w.client.close(s);
+            assert!(w.plc.stack.sockets_in_use() <= limit);
+        }
+        for _ in 0..200 {
+            let s = w.connect();
+            let _ = w.ask(s, &[0, 1, 0, 1, 0, 6, 1, 4, 0, 0, 0, 1], 3);
+            let _ = w.client.close(s);
+            assert!(w.plc.stack.sockets_in_use() <= limit);
+        }
+        assert_eq!(w.plc.stats.denied, 200);
+        // And both services still answer.
+        let (_, session) = handshake(&mut w, b"engineering", SECRET);
+        assert!(session.is_ok());
+        let m = w.connect();
+        let (r, _) = w.ask(m, &[0, 7, 0, 0, 0, 6, 1, 4, 0, 0, 0, 1], 10);
+        assert_eq!(r.len(), 11);
     }
 }

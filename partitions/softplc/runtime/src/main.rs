@@ -95,8 +95,8 @@
 //! - `plc: online: <client> authenticated from <ip>:<port> (<access>)`, `plc: online:
 //!   refused <ip>:<port>: <unknown name or wrong key|malformed handshake|no complete
 //!   handshake in time>` and `plc: online: session of <client> from <ip>:<port> ended:
-//!   <why>` (a tampered, replayed or oversized record), at most [`EVENT_LINES`] per
-//!   statistics interval;
+//!   <why>` (a tampered, replayed or oversized record), the last two at most
+//!   [`EVENT_LINES`] per statistics interval;
 //! - with `plc.store` (the store process and the load: [`disk`]), at a cold start
 //!   `plc: store: boot project #<seq> loaded: <n> bytes, downloaded at release <r>` or
 //!   `plc: store: no boot project; the configured program runs`, `plc: store: RETAIN
@@ -857,9 +857,9 @@ extern "C" fn comm() {
     }
 }
 
-/// Event lines the communication process writes per statistics interval at most (a flood
-/// of refused clients must not keep it writing to the console); the statistics line counts
-/// them all (`denied=`, `rejected=`).
+/// Refusal lines (`refused`, `ended`) the communication process writes per statistics
+/// interval at most (a flood of refused clients must not keep it writing to the console);
+/// the statistics line counts them all (`denied=`, `rejected=`).
 const EVENT_LINES: u32 = 10;
 
 /// The communication process's events as log lines (`plc: online: ...`), while `budget`
@@ -873,10 +873,13 @@ fn log_events(comm: &mut softplc::comm::Comm, budget: &mut u32) {
         *slot = Some(event);
     }
     for event in events.into_iter().flatten() {
-        if *budget == 0 {
-            return;
+        // Only a client that holds a key can authenticate: the budget is for the others.
+        if !matches!(event, Event::Authenticated { .. }) {
+            if *budget == 0 {
+                continue;
+            }
+            *budget -= 1;
         }
-        *budget -= 1;
         let name = |client| core::str::from_utf8(comm.client_name(client)).unwrap_or("?");
         match event {
             Event::Authenticated {
