@@ -29,6 +29,41 @@ pub struct Metric {
     pub samples: u64,
 }
 
+/// `name` over `samples` (median, minimum, maximum), to three significant places.
+pub fn summary(name: &str, unit: &str, samples: &[f64]) -> Metric {
+    let mut sorted = samples.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let at = |i: usize| sorted.get(i).copied().map_or(f64::NAN, significant);
+    Metric {
+        name: name.to_string(),
+        median: at(sorted.len() / 2),
+        min: at(0),
+        max: at(sorted.len().saturating_sub(1)),
+        unit: unit.to_string(),
+        samples: samples.len() as u64,
+    }
+}
+
+/// The `p`th percentile of `samples` (nearest rank), to three significant places.
+pub fn percentile(samples: &[f64], p: f64) -> f64 {
+    let mut sorted = samples.to_vec();
+    sorted.sort_by(f64::total_cmp);
+    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
+    sorted
+        .get(rank.clamp(1, sorted.len().max(1)) - 1)
+        .copied()
+        .map_or(f64::NAN, significant)
+}
+
+/// `x` to three significant places.
+fn significant(x: f64) -> f64 {
+    if x == 0.0 || !x.is_finite() {
+        return x;
+    }
+    let scale = 10f64.powi(2 - x.abs().log10().floor() as i32);
+    (x * scale).round() / scale
+}
+
 /// Parses the `bench ...` part of a line (anything before `bench ` is ignored, so kernel-log
 /// prefixes do not matter). `None` for lines that are not metrics.
 pub fn parse_line(line: &str) -> Option<Metric> {
@@ -240,6 +275,19 @@ pub fn write_report_as(metrics: &[Metric], file: &str) -> Result<std::path::Path
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn summaries_and_percentiles_round_to_three_places() {
+        let samples: Vec<f64> = (1..=1000).map(f64::from).collect();
+        let m = summary("x", "us", &samples);
+        assert_eq!(
+            (m.median, m.min, m.max, m.samples),
+            (501.0, 1.0, 1000.0, 1000)
+        );
+        assert_eq!(percentile(&samples, 99.0), 990.0);
+        assert_eq!(percentile(&[1234.5], 99.0), 1230.0);
+        assert!(percentile(&[], 99.0).is_nan());
+    }
 
     #[test]
     fn parses_metric_lines_with_any_prefix() {

@@ -25,6 +25,7 @@ pub mod netbench;
 pub mod nic;
 pub mod oscat;
 pub mod plc;
+pub mod plcnetbench;
 pub mod plot;
 pub mod qemu;
 pub mod scenario;

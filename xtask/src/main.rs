@@ -88,11 +88,12 @@ enum Cmd {
         /// target/bench/schedules.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc"])]
         schedules: bool,
-        /// Run only the network benchmark (tests/configs/bench_net.toml: TCP, UDP and busybox
-        /// httpd of the guest through the NIC partition, timed from the host on real time,
-        /// and the same on Debian's stock kernel with the same virtio-net: `guest_net_*`,
-        /// `native_net_*`, `net_ratio_*`; also part of the full bench); writes
-        /// target/bench/net.json.
+        /// Run only the network benchmarks, timed from the host on real time (also part of
+        /// the full bench): the PLC's Modbus/TCP poll, online READ over TCP and release
+        /// lateness quiet and polled (tests/configs/net_modbus.toml: `plc_net_*`), then TCP,
+        /// UDP and busybox httpd of the guest through the NIC partition and the same on
+        /// Debian's stock kernel with the same virtio-net (tests/configs/bench_net.toml:
+        /// `guest_net_*`, `native_net_*`, `net_ratio_*`); writes target/bench/net.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules"])]
         net: bool,
         /// Run only the port benchmark system (tests/configs/bench_ports.toml; also part of
@@ -715,12 +716,15 @@ fn bench_timeout(deterministic_time: bool) -> Duration {
     Duration::from_secs(if deterministic_time { 1800 } else { 300 })
 }
 
-/// `cargo xtask bench --net`: only the network benchmark ([`xtask::netbench`], always on
-/// real time); writes `target/bench/net.json`.
+/// `cargo xtask bench --net`: only the network benchmarks (the guest's,
+/// [`xtask::netbench`], and the PLC's, [`xtask::plcnetbench`], always on real time); writes
+/// `target/bench/net.json`.
 fn net_bench() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
-    let metrics = xtask::netbench::run(&qemu, &system, &xtask::target_dir().join("bench"))?;
+    let dir = xtask::target_dir().join("bench");
+    let mut metrics = xtask::plcnetbench::run(&qemu, &system, &dir)?;
+    metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     for m in &metrics {
         println!("{}", xtask::bench::format_line(m));
     }
@@ -968,6 +972,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     metrics.extend(guest_metrics(&qemu, &system, &dir, deterministic_time)?);
     // Timed from the host: always real time.
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
+    metrics.extend(xtask::plcnetbench::run(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {

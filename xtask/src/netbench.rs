@@ -367,25 +367,9 @@ fn rounds(n: usize, mut f: impl FnMut() -> Result<f64>) -> Result<Vec<f64>> {
     (0..n).map(|_| f()).collect()
 }
 
-/// `prefix<name>` over `samples` (median, minimum, maximum), to three significant places.
+/// `prefix<name>` over `samples` ([`crate::bench::summary`]).
 fn metric(prefix: &str, name: &str, unit: &str, samples: &[f64]) -> Metric {
-    let mut sorted = samples.to_vec();
-    sorted.sort_by(f64::total_cmp);
-    let round = |x: f64| {
-        if x == 0.0 || !x.is_finite() {
-            return x;
-        }
-        let scale = 10f64.powi(2 - x.abs().log10().floor() as i32);
-        (x * scale).round() / scale
-    };
-    Metric {
-        name: format!("{prefix}{name}"),
-        median: round(sorted[sorted.len() / 2]),
-        min: round(sorted[0]),
-        max: round(sorted[sorted.len() - 1]),
-        unit: unit.to_string(),
-        samples: samples.len() as u64,
-    }
+    crate::bench::summary(&format!("{prefix}{name}"), unit, samples)
 }
 
 fn connect(port: u16) -> Result<TcpStream> {
