@@ -33,6 +33,8 @@ struct Client {
     malformed_closed: bool,
     /// What each plcctl command over TCP printed, or its failure.
     online: Vec<(String, Said)>,
+    /// The same for the download: list, read, refused and done download, read.
+    download: Vec<(String, Said)>,
     /// A replayed record: (the first got its answer, the replay closed the connection).
     replay: Option<(bool, bool)>,
 }
@@ -61,25 +63,29 @@ fn plcctl(port: u16, key: &str, name: &str, args: &str) -> Said {
         .map_err(|f| (f.status, f.message))
 }
 
-/// A raw session as `engineering`: one VERSION request answered, then the same record
-/// again. Returns (answered, then closed without an answer).
-fn replay(port: u16) -> std::io::Result<(bool, bool)> {
-    use plc_online::session::{self, MAX_RECORD, MAX_RESPONSE_LEN, Session};
+/// A connection to the online port authenticated as `name` with tests/configs/keys/KEY.key:
+/// the stream and the session, or no session when the PLC refused.
+fn authenticate(
+    port: u16,
+    key: &str,
+    name: &str,
+) -> std::io::Result<(TcpStream, Option<plc_online::session::Session>)> {
+    use plc_online::session;
     let text = std::fs::read_to_string(
-        xtask::workspace_root().join("tests/configs/keys/engineering.key"),
+        xtask::workspace_root().join(format!("tests/configs/keys/{key}.key")),
     )?;
     let mut key = [0u8; session::MAX_KEY];
     let len = session::parse_key_file(&text, &mut key).map_err(std::io::Error::other)?;
     let key = &key[..len];
-    let mut s = TcpStream::connect(("127.0.0.1", port))?;
+    let mut s = TcpStream::connect_timeout(&([127, 0, 0, 1], port).into(), Duration::from_secs(5))?;
     s.set_read_timeout(Some(Duration::from_secs(10)))?;
     let mut challenge = [0u8; session::CHALLENGE_LEN];
     s.read_exact(&mut challenge)?;
     let server_nonce = session::read_challenge(&challenge).map_err(std::io::Error::other)?;
     let client_nonce = [0x42; session::NONCE_LEN];
-    let mut response = [0u8; MAX_RESPONSE_LEN];
+    let mut response = [0u8; session::MAX_RESPONSE_LEN];
     let n = session::response(
-        b"engineering",
+        name.as_bytes(),
         key,
         &server_nonce,
         &client_nonce,
@@ -87,11 +93,23 @@ fn replay(port: u16) -> std::io::Result<(bool, bool)> {
     )
     .map_err(std::io::Error::other)?;
     s.write_all(&response[..n])?;
-    let mut accept = [0u8; session::ACCEPT_LEN];
-    s.read_exact(&mut accept)?;
-    let (_, mut session): (_, Session) =
-        session::read_accept(key, &server_nonce, &client_nonce, &accept)
-            .map_err(std::io::Error::other)?;
+    let mut answer = [0u8; session::ACCEPT_LEN];
+    s.read_exact(&mut answer[..1])?;
+    if answer[..1] == session::REFUSE {
+        return Ok((s, None));
+    }
+    s.read_exact(&mut answer[1..])?;
+    let (_, session) = session::read_accept(key, &server_nonce, &client_nonce, &answer)
+        .map_err(std::io::Error::other)?;
+    Ok((s, Some(session)))
+}
+
+/// A raw session as `engineering`: one VERSION request answered, then the same record
+/// again. Returns (answered, then closed without an answer).
+fn replay(port: u16) -> std::io::Result<(bool, bool)> {
+    use plc_online::session::{MAX_RECORD, Session};
+    let (mut s, session) = authenticate(port, "engineering", "engineering")?;
+    let mut session = session.ok_or_else(|| std::io::Error::other("refused"))?;
     let mut request = [0u8; plc_online::MAX_MESSAGE];
     let n = plc_online::encode_request(&plc_online::Request::Version, 1, &mut request)
         .ok_or_else(|| std::io::Error::other("VERSION does not encode"))?;
@@ -115,8 +133,49 @@ fn replay(port: u16) -> std::io::Result<(bool, bool)> {
     Ok((answered, closed))
 }
 
-/// The online protocol on TCP through `port`: each key's rights, a wrong key, a replay.
+/// The changed controller `online` downloads: a new variable, and the alarm limit lower.
+fn changed_program() -> anyhow::Result<std::path::PathBuf> {
+    let root = xtask::workspace_root();
+    let source = std::fs::read_to_string(root.join("tests/configs/plc/tank_modbus.st"))?
+        .replace(
+            "  setpoint : LREAL;\n",
+            "  setpoint : LREAL;\n  generation : INT := 2;\n",
+        )
+        .replace("level > 1.3;", "level > 1.25;");
+    let dir = xtask::target_dir().join("net_modbus");
+    std::fs::create_dir_all(&dir)?;
+    let st = dir.join("tank_changed.st");
+    std::fs::write(&st, source)?;
+    let file = config::system::SourceFile {
+        name: "tank_changed.st".into(),
+        path: st.display().to_string(),
+    };
+    let plcb = dir.join("tank_changed.plcb");
+    std::fs::write(&plcb, xtask::plc::image_of("net_modbus", &file)?)?;
+    Ok(plcb)
+}
+
+/// The online protocol on TCP through `port`: each key's rights, a download with RETAIN
+/// kept, a wrong key, a replay.
 fn online(port: u16, c: &mut Client) {
+    let plcb = match changed_program() {
+        Ok(path) => path.display().to_string(),
+        Err(e) => format!("(not built: {e})"),
+    };
+    for (key, name, args) in [
+        ("engineering", "engineering", "list".to_string()),
+        ("engineering", "engineering", "read tank.cycles".into()),
+        ("hmi", "hmi", format!("download {plcb}")),
+        ("engineering", "engineering", format!("download {plcb}")),
+        (
+            "engineering",
+            "engineering",
+            "read tank.cycles tank.generation".into(),
+        ),
+    ] {
+        let what = format!("{name} ({key}.key): {args}");
+        c.download.push((what, plcctl(port, key, name, &args)));
+    }
     for (key, name, args) in [
         ("engineering", "engineering", "version"),
         ("engineering", "engineering", "read level setpoint_mm"),
@@ -233,6 +292,41 @@ fn net_modbus() {
         failed(7, 1, "authentication refused") && failed(8, 1, "authentication refused"),
         "a wrong key or an unknown name was not refused",
     );
+    for (what, result) in &c.download {
+        println!("net_modbus: plcctl {what} -> {result:?}");
+    }
+    let said = |i: usize| c.download.get(i).map(|(_, r)| r.clone());
+    let cycles = |i: usize| {
+        said(i)
+            .and_then(|r| r.ok())
+            .and_then(|lines| lines.first().cloned())
+            .and_then(|l| l.strip_prefix("tank.cycles = ")?.parse::<u64>().ok())
+    };
+    check(
+        &o,
+        said(0).is_some_and(|r| {
+            r.is_ok_and(|l| l.iter().any(|l| l == "tank.cycles UDINT") && l.len() > 5)
+        }),
+        "LIST over TCP did not show tank.cycles",
+    );
+    check(
+        &o,
+        said(2).is_some_and(|r| r.is_err_and(|(s, m)| s == 1 && m.contains("FORBIDDEN"))),
+        "a download with the monitor key was not refused FORBIDDEN",
+    );
+    check(
+        &o,
+        said(3).is_some_and(|r| r.is_ok_and(|l| l.iter().any(|l| l.starts_with("downloaded ")))),
+        "the download with the engineering key failed",
+    );
+    check(
+        &o,
+        cycles(1).is_some_and(|before| cycles(4).is_some_and(|after| after >= before))
+            && said(4)
+                .is_some_and(|r| r.is_ok_and(|l| l.iter().any(|l| l == "tank.generation = 2")))
+            && o.line("plc: download: ").is_some(),
+        "the downloaded program does not run with RETAIN cycles kept",
+    );
     check(
         &o,
         c.replay == Some((true, true)),
@@ -264,6 +358,9 @@ const HELD: usize = 100;
 const CHURN: u64 = 2_000;
 const MALFORMED: u64 = 2_000;
 const READS: u64 = 100_000;
+/// The online port's part after the Modbus flood: how long and how many attempts at most.
+const ONLINE_FLOOD: Duration = Duration::from_secs(10);
+const ONLINE_ATTEMPTS: u64 = 1_000;
 /// How much later than in the quiet seconds a release may be in the flood's.
 const FLOOD_BOUND_NS: u64 = 50_000;
 /// Frames a second from the wire above which a second is part of the flood, at most which
@@ -281,6 +378,12 @@ struct Flood {
     reads: u64,
     answered: u64,
     after: Option<f64>,
+    /// Online handshakes with a wrong key, how many the PLC refused, replayed records.
+    wrong_keys: u64,
+    refused: u64,
+    replays: u64,
+    /// An authenticated read after it all.
+    online_after: Option<Vec<String>>,
 }
 
 /// The malformed frame number `i`: a protocol id other than 0, an MBAP length of 0 or
@@ -296,7 +399,8 @@ fn malformed(i: u64) -> Vec<u8> {
 
 /// Waits until the PLC answers, lets the system run quietly for 5 s, then floods for
 /// [`FLOOD`]; then reads the level once more.
-fn flood(port: u16, ended: &AtomicBool) -> Flood {
+fn flood(ports: &[u16], ended: &AtomicBool) -> Flood {
+    let (port, online_port) = (ports[0], ports[1]);
     let mut f = Flood::default();
     while !ended.load(Ordering::SeqCst) && !f.reached {
         f.reached = modbus_level(port).is_some();
@@ -365,6 +469,22 @@ fn flood(port: u16, ended: &AtomicBool) -> Flood {
         f.malformed = bad.join().unwrap_or(0);
         (f.held, f.churned) = churn.join().unwrap_or((0, 0));
     });
+    // Then the online port: wrong keys and replayed records (bounded in count and time).
+    let until = Instant::now() + ONLINE_FLOOD;
+    while f.wrong_keys + f.replays < ONLINE_ATTEMPTS
+        && Instant::now() < until
+        && !ended.load(Ordering::SeqCst)
+    {
+        if f.wrong_keys % 10 == 9 {
+            f.replays += 1;
+            let _ = replay(online_port);
+        }
+        f.wrong_keys += 1;
+        if let Ok((_, None)) = authenticate(online_port, "wrong", "engineering") {
+            f.refused += 1;
+        }
+    }
+    f.online_after = plcctl(online_port, "engineering", "engineering", "read level").ok();
     for _ in 0..20 {
         f.after = modbus_level(port);
         if f.after.is_some() || ended.load(Ordering::SeqCst) {
@@ -377,7 +497,7 @@ fn flood(port: u16, ended: &AtomicBool) -> Flood {
 
 #[test]
 fn net_plc_flood() {
-    let (o, f) = boot_beside("net_plc_flood", |ports, ended| flood(ports[0], ended));
+    let (o, f) = boot_beside("net_plc_flood", flood);
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,
@@ -415,6 +535,26 @@ fn net_plc_flood() {
         .cloned()
         .unwrap_or_default();
     println!("net_plc_flood: the PLC's last counters: {last_net}");
+    println!(
+        "net_plc_flood: online port: {} handshakes with a wrong key ({} refused), {} replayed records; an authenticated read afterwards: {:?}",
+        f.wrong_keys, f.refused, f.replays, f.online_after
+    );
+    let counter = |name: &str| {
+        last_net
+            .split(' ')
+            .find_map(|w| w.strip_prefix(name)?.parse::<u64>().ok())
+            .unwrap_or(0)
+    };
+    check(
+        &o,
+        f.refused > 0
+            && counter("denied=") >= f.refused
+            && counter("rejected=") > 0
+            && f.online_after
+                .as_ref()
+                .is_some_and(|l| l.iter().any(|l| l.starts_with("level = "))),
+        "the online port's wrong keys and replays were not all refused, or it stopped serving",
+    );
     check(
         &o,
         flooded.len() >= 3 && quiet.len() >= 3,
