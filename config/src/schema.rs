@@ -187,7 +187,27 @@ pub struct Plc {
     pub net: Option<Spanned<PlcNet>>,
     pub modbus: Option<Spanned<PlcModbus>>,
     pub online_tcp: Option<Spanned<PlcOnlineTcp>>,
+    pub publish: Option<Spanned<PlcPublish>>,
+    pub subscribe: Option<Spanned<PlcSubscribe>>,
     pub store: Option<Spanned<PlcStore>>,
+}
+
+/// `plc.publish`: variables sent over UDP after every release.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcPublish {
+    pub to: Spanned<String>,
+    pub vars: Vec<Spanned<String>>,
+}
+
+/// `plc.subscribe`: variables received over UDP, with a validity.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlcSubscribe {
+    pub port: Spanned<i64>,
+    pub vars: Vec<Spanned<String>>,
+    pub valid: Option<Spanned<String>>,
+    pub timeout: Option<Spanned<Scalar>>,
 }
 
 /// `plc.online_tcp`: the online protocol on a TCP port, each client with its key.

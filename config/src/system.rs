@@ -217,6 +217,32 @@ pub struct OnlineClient {
     pub access: plc_online::Access,
 }
 
+/// PLC-to-PLC publication (`plc.publish`; needs `plc.net`): the variables' values in the
+/// FBDK encoding, one UDP datagram to `to` after every release.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlcPublish {
+    pub to: ([u8; 4], u16),
+    /// Names of the program's variables (checked when it is compiled), 1..=16.
+    pub vars: Vec<String>,
+}
+
+/// PLC-to-PLC subscription (`plc.subscribe`; needs `plc.net`): datagrams on `port` written
+/// into the variables between releases; valid while the last good one is younger than
+/// `timeout_ns`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlcSubscribe {
+    pub port: u16,
+    pub vars: Vec<String>,
+    /// A BOOL variable the runtime keeps TRUE while the subscription is valid.
+    pub valid: Option<String>,
+    pub timeout_ns: u64,
+}
+
+impl PlcSubscribe {
+    pub const DEFAULT_TIMEOUT_NS: u64 = 100_000_000;
+    pub const MAX_VARS: usize = 16;
+}
+
 /// The largest Ethernet frame without its FCS: the size `guest.net`'s ports need.
 pub const ETHERNET_FRAME_MAX: u32 = 1514;
 
@@ -321,6 +347,9 @@ pub struct Plc {
     pub modbus: Option<PlcModbus>,
     /// The online protocol on TCP, authenticated (`plc.online_tcp`; needs `plc.net`).
     pub online_tcp: Option<PlcOnlineTcp>,
+    /// PLC-to-PLC publication and subscription over UDP (`plc.publish`, `plc.subscribe`).
+    pub publish: Option<PlcPublish>,
+    pub subscribe: Option<PlcSubscribe>,
     /// Task deadlines by IEC TASK name (ns from the task's release; checked against the
     /// program when it is compiled); the other tasks have none.
     pub deadlines: Vec<(String, u64)>,

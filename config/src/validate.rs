@@ -1031,6 +1031,26 @@ impl Validator<'_, '_> {
             }
             Some(online)
         });
+        let publish = raw.publish.as_ref().and_then(|p| {
+            self.needs_net(raw, start(p), &path.key("publish"));
+            self.plc_publish(p, &path.key("publish"))
+        });
+        let subscribe = raw.subscribe.as_ref().and_then(|s| {
+            self.needs_net(raw, start(s), &path.key("subscribe"));
+            let sub = self.plc_subscribe(s, &path.key("subscribe"))?;
+            let taken = [
+                modbus.as_ref().map(|m| m.port),
+                online_tcp.as_ref().map(|o| o.port),
+            ];
+            if taken.contains(&Some(sub.port)) {
+                self.error(
+                    start(s),
+                    &path.key("subscribe").key("port"),
+                    format!("UDP port {} is also a TCP service's port here; give the subscription its own", sub.port),
+                );
+            }
+            Some(sub)
+        });
         // (byte, source offset, port) of every validity bit.
         let mut valid_bits: Vec<(u32, usize, usize)> = Vec::new();
         let links = raw
@@ -1210,7 +1230,121 @@ impl Validator<'_, '_> {
             net,
             modbus,
             online_tcp,
+            publish,
+            subscribe,
             store,
+        })
+    }
+
+    /// Reports `what` (a PLC network service at `at`) when the PLC has no `plc.net`.
+    fn needs_net(&mut self, raw: &schema::Plc, at: usize, path: &KeyPath) {
+        if raw.net.is_none() {
+            self.error(
+                at,
+                path,
+                "publish/subscribe needs the PLC's network interface (`plc.net`)",
+            );
+        }
+    }
+
+    /// The variable names of a publication or subscription: 1..=16, no name twice.
+    fn pubsub_vars(
+        &mut self,
+        vars: &[Spanned<String>],
+        at: usize,
+        path: &KeyPath,
+    ) -> Option<Vec<String>> {
+        let names: Vec<String> = vars.iter().map(|v| v.get_ref().clone()).collect();
+        if names.is_empty() || names.len() > PlcSubscribe::MAX_VARS {
+            self.error(
+                at,
+                &path.key("vars"),
+                format!(
+                    "{} variables: 1..={} (what fits one datagram)",
+                    names.len(),
+                    PlcSubscribe::MAX_VARS
+                ),
+            );
+            return None;
+        }
+        for (i, v) in vars.iter().enumerate() {
+            if names[..i].contains(v.get_ref()) {
+                self.error(
+                    start(v),
+                    &path.key("vars"),
+                    format!("`{}` is named twice", v.get_ref()),
+                );
+                return None;
+            }
+        }
+        Some(names)
+    }
+
+    /// `plc.publish`: `to` an IPv4 address and UDP port, and the variables.
+    fn plc_publish(
+        &mut self,
+        publish: &Spanned<schema::PlcPublish>,
+        path: &KeyPath,
+    ) -> Option<PlcPublish> {
+        let p = publish.get_ref();
+        let to = p.to.get_ref().rsplit_once(':').and_then(|(ip, port)| {
+            Some((
+                parse_ipv4(ip)?,
+                port.parse::<u16>().ok().filter(|&p| p != 0)?,
+            ))
+        });
+        if to.is_none() {
+            self.error(
+                start(&p.to),
+                &path.key("to"),
+                format!(
+                    "`{}` is no IPv4 address and UDP port (e.g. \"10.0.2.16:61499\")",
+                    p.to.get_ref()
+                ),
+            );
+        }
+        let vars = self.pubsub_vars(&p.vars, start(publish), path);
+        Some(PlcPublish {
+            to: to?,
+            vars: vars?,
+        })
+    }
+
+    /// `plc.subscribe`: a UDP port, the variables, the validity variable and timeout.
+    fn plc_subscribe(
+        &mut self,
+        subscribe: &Spanned<schema::PlcSubscribe>,
+        path: &KeyPath,
+    ) -> Option<PlcSubscribe> {
+        let s = subscribe.get_ref();
+        let port = self.int_in(Some(&s.port), path, "port", 1..=65_535, 0);
+        let vars = self.pubsub_vars(&s.vars, start(subscribe), path);
+        let timeout = match &s.timeout {
+            None => Some(PlcSubscribe::DEFAULT_TIMEOUT_NS),
+            Some(v) => {
+                let here = path.key("timeout");
+                self.duration(v, &here).and_then(|ns| {
+                    if (1_000_000..=3_600_000_000_000).contains(&ns) {
+                        Some(ns)
+                    } else {
+                        self.error(
+                            start(v),
+                            &here,
+                            format!(
+                                "a subscription times out after 1 ms to 3600 s, not {}",
+                                Duration(ns)
+                            ),
+                        );
+                        None
+                    }
+                })
+            }
+        };
+        Some(PlcSubscribe {
+            port: port? as u16,
+            vars: vars?,
+            valid: s.valid.as_ref().map(|v| v.get_ref().clone()),
+            timeout_ns: timeout?,
         })
     }
 

@@ -635,3 +635,75 @@ plc.online_tcp = { port = 1202, clients.eng = { key = \"tests/data/engineering.k
         "needs the PLC's network interface",
     );
 }
+
+#[test]
+fn publish_and_subscribe_are_checked() {
+    let net = "ports.rx = { kind = \"queuing\", direction = \"in\", size = 1514, depth = 8 }
+ports.tx = { kind = \"queuing\", direction = \"out\", size = 1514, depth = 8 }
+plc.net = { mac = \"52:54:00:12:34:57\", address = \"10.0.2.16/24\", rx = \"rx\", tx = \"tx\" }
+plc.modbus = { port = 502 }
+plc.publish = { to = \"10.0.2.17:61499\", vars = [\"a\", \"b\"] }
+plc.subscribe = { port = 61499, vars = [\"c\"], valid = \"ok\", timeout = \"50ms\" }
+# b";
+    let base = (
+        "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
+        "",
+    );
+    let src = plc(&[base, ("# b", net)]);
+    let diags = load(&src).unwrap_err();
+    assert!(
+        diags
+            .iter()
+            .all(|d| !d.key_path.starts_with("partitions.b.plc")),
+        "{diags:?}"
+    );
+    for (from, to, needle, key, message) in [
+        (
+            "10.0.2.17:61499",
+            "10.0.2.17",
+            "\"10.0.2.17\"",
+            "partitions.b.plc.publish.to",
+            "no IPv4 address and UDP port",
+        ),
+        (
+            "vars = [\"a\", \"b\"]",
+            "vars = [\"a\", \"a\"]",
+            "\"a\"]",
+            "partitions.b.plc.publish.vars",
+            "`a` is named twice",
+        ),
+        (
+            "vars = [\"c\"]",
+            "vars = []",
+            "{ port = 61499",
+            "partitions.b.plc.subscribe.vars",
+            "0 variables: 1..=16",
+        ),
+        (
+            "timeout = \"50ms\"",
+            "timeout = \"4000s\"",
+            "\"4000s\"",
+            "partitions.b.plc.subscribe.timeout",
+            "1 ms to 3600 s",
+        ),
+        (
+            "port = 61499, vars = [\"c\"]",
+            "port = 502, vars = [\"c\"]",
+            "{ port = 502, vars",
+            "partitions.b.plc.subscribe.port",
+            "also a TCP service's port",
+        ),
+    ] {
+        let src = plc(&[base, ("# b", net), (from, to)]);
+        expect_some(&src, needle, 0, key, message);
+    }
+    let no_net = "plc.publish = { to = \"10.0.2.17:61499\", vars = [\"a\"] }\n# b";
+    let src = plc(&[base, ("# b", no_net)]);
+    expect_some(
+        &src,
+        "{ to",
+        0,
+        "partitions.b.plc.publish",
+        "needs the PLC's network interface",
+    );
+}

@@ -70,7 +70,8 @@
 //!   10   1    prefix length (1..=30)
 //!   11   1    flags: bit 0 a gateway, bit 1 a Modbus/TCP server, bit 2 Modbus may write
 //!             the outputs (%QX, %QW), bit 3 the markers (%MX, %MW), bit 4 the online
-//!             protocol on TCP (`plc.online_tcp`)
+//!             protocol on TCP (`plc.online_tcp`), bit 5 publish/subscribe
+//!             (`plc.publish`, `plc.subscribe`)
 //!   12   4    gateway (0 without)
 //!   16   1    frames-in port (index of a queuing input of at least 1514 bytes)
 //!   17   1    frames-out port (index of a queuing output of at least 1514 bytes)
@@ -80,7 +81,19 @@
 //!   24   4    requests served per second and connection (at least 1)
 //!   28   2    Modbus TCP port (0 without the server)
 //!   30   2    online TCP port (0 without it)
-//!   32   ...  with the online protocol on TCP: 1..=[`MAX_CLIENTS`] client records of
+//!   32   ...  with publish/subscribe, its part ([`PUBSUB_HEAD`] bytes and the names):
+//!   +0   4    publication's destination IPv4 address (0.0.0.0: no publication)
+//!   +4   2    its UDP port
+//!   +6   2    subscription's UDP port (0: no subscription)
+//!   +8   8    subscription timeout in ns (at least 1 with a subscription)
+//!   +16  2    bytes P of the published names
+//!   +18  2    bytes S of the subscribed names
+//!   +20  1    bytes V of the validity variable's name (0: none)
+//!   +21  3    reserved (0)
+//!   +24  P    published variable names, UTF-8, separated by `\n` (1..=16 names)
+//!   ...  S    subscribed variable names, the same
+//!   ...  V    the validity variable's name (a BOOL of the program)
+//!   ...  ...  with the online protocol on TCP: 1..=[`MAX_CLIENTS`] client records of
 //!             [`CLIENT_RECORD`] bytes: `name_len u8` (1..=32), `access u8`
 //!             (plc_online::Access code), `key_len u8` (16..=64), reserved (0), `name`
 //!             (32 bytes, zero padded), `key` (64 bytes, zero padded)
@@ -298,6 +311,100 @@ pub const NET_BLOCK: usize = 32;
 pub const CLIENT_RECORD: usize = 4 + 32 + plc_online::session::MAX_KEY;
 /// Most clients of the online protocol on TCP.
 pub const MAX_CLIENTS: usize = 8;
+/// Bytes of the publish/subscribe part's head.
+pub const PUBSUB_HEAD: usize = 24;
+/// Most variables a publication or subscription carries.
+pub const MAX_PUBSUB_VARS: usize = 16;
+
+/// PLC-to-PLC publication and subscription over UDP (the network block's part).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct PubSub<'a> {
+    /// Destination address and port, and the published names.
+    pub publish: Option<([u8; 4], u16, &'a str)>,
+    pub subscribe: Option<Subscription<'a>>,
+}
+
+/// A subscription's settings.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Subscription<'a> {
+    pub port: u16,
+    pub timeout_ns: u64,
+    /// The subscribed names, separated by `\n`.
+    pub names: &'a str,
+    /// The BOOL variable kept TRUE while the subscription is valid.
+    pub valid: Option<&'a str>,
+}
+
+/// The `\n`-separated names of `text` if there are 1..=[`MAX_PUBSUB_VARS`], none empty.
+fn names_ok(text: &str) -> bool {
+    let count = text.split('\n').count();
+    (1..=MAX_PUBSUB_VARS).contains(&count) && text.split('\n').all(|n| !n.is_empty())
+}
+
+impl<'a> PubSub<'a> {
+    /// The part at the start of `b`, and its length.
+    fn parse(b: &'a [u8]) -> Option<(PubSub<'a>, usize)> {
+        let head = b.get(..PUBSUB_HEAD)?;
+        if head[21..24] != [0, 0, 0] {
+            return None;
+        }
+        let (p, sl, v) = (
+            usize::from(u16_at(head, 16)),
+            usize::from(u16_at(head, 18)),
+            usize::from(head[20]),
+        );
+        let len = PUBSUB_HEAD + p + sl + v;
+        let text = core::str::from_utf8(b.get(PUBSUB_HEAD..len)?).ok()?;
+        let (published, rest) = text.split_at_checked(p)?;
+        let (subscribed, valid) = rest.split_at_checked(sl)?;
+        let ip = [head[0], head[1], head[2], head[3]];
+        let publish = if ip == [0; 4] {
+            (p == 0 && u16_at(head, 4) == 0).then_some(None)?
+        } else {
+            let port = u16_at(head, 4);
+            (port != 0 && names_ok(published)).then_some(Some((ip, port, published)))?
+        };
+        let port = u16_at(head, 6);
+        let subscribe = if port == 0 {
+            (sl == 0 && v == 0 && u64_at(head, 8) == 0).then_some(None)?
+        } else {
+            let timeout_ns = u64_at(head, 8);
+            let ok = timeout_ns > 0 && names_ok(subscribed);
+            ok.then_some(Some(Subscription {
+                port,
+                timeout_ns,
+                names: subscribed,
+                valid: (v > 0).then_some(valid),
+            }))?
+        };
+        (publish.is_some() || subscribe.is_some()).then_some((PubSub { publish, subscribe }, len))
+    }
+
+    /// The part (for the image builder).
+    #[cfg(any(feature = "alloc", test))]
+    pub fn encode(&self) -> alloc::vec::Vec<u8> {
+        let mut b = alloc::vec![0u8; PUBSUB_HEAD];
+        let mut text = alloc::vec::Vec::new();
+        if let Some((ip, port, names)) = self.publish {
+            b[..4].copy_from_slice(&ip);
+            b[4..6].copy_from_slice(&port.to_le_bytes());
+            b[16..18].copy_from_slice(&(names.len() as u16).to_le_bytes());
+            text.extend_from_slice(names.as_bytes());
+        }
+        if let Some(s) = self.subscribe {
+            b[6..8].copy_from_slice(&s.port.to_le_bytes());
+            b[8..16].copy_from_slice(&s.timeout_ns.to_le_bytes());
+            b[18..20].copy_from_slice(&(s.names.len() as u16).to_le_bytes());
+            text.extend_from_slice(s.names.as_bytes());
+            if let Some(v) = s.valid {
+                b[20] = v.len() as u8;
+                text.extend_from_slice(v.as_bytes());
+            }
+        }
+        b.extend_from_slice(&text);
+        b
+    }
+}
 /// Largest Ethernet frame without FCS: the least size of the frame ports.
 pub const FRAME_MAX: u32 = 1514;
 /// Most TCP connections a PLC keeps.
@@ -318,6 +425,7 @@ pub struct Net<'a> {
     pub requests_per_second: u32,
     pub modbus: Option<Modbus>,
     pub online: Option<OnlineTcp<'a>>,
+    pub pubsub: Option<PubSub<'a>>,
 }
 
 /// The online protocol on TCP: its port and its clients' keys.
@@ -390,17 +498,24 @@ const NET_MODBUS: u8 = 2;
 const NET_WRITE_OUTPUTS: u8 = 4;
 const NET_WRITE_MARKERS: u8 = 8;
 const NET_ONLINE: u8 = 16;
+const NET_PUBSUB: u8 = 32;
 
 impl<'a> Net<'a> {
     /// The block's fields (its ports are checked by [`Package::parse`]).
     fn parse(b: &'a [u8]) -> Option<Net<'a>> {
-        if b.len() < NET_BLOCK || b[11] & !0x1F != 0 {
+        if b.len() < NET_BLOCK || b[11] & !0x3F != 0 {
             return None;
         }
         let flags = b[11];
+        let (pubsub, records_at) = if flags & NET_PUBSUB != 0 {
+            let (pubsub, len) = PubSub::parse(&b[NET_BLOCK..])?;
+            (Some(pubsub), NET_BLOCK + len)
+        } else {
+            (None, NET_BLOCK)
+        };
         let online = if flags & NET_ONLINE != 0 {
-            Some(OnlineTcp::new(u16_at(b, 30), &b[NET_BLOCK..])?)
-        } else if b.len() != NET_BLOCK || u16_at(b, 30) != 0 {
+            Some(OnlineTcp::new(u16_at(b, 30), &b[records_at..])?)
+        } else if b.len() != records_at || u16_at(b, 30) != 0 {
             return None;
         } else {
             None
@@ -431,6 +546,7 @@ impl<'a> Net<'a> {
             requests_per_second: u32_at(b, 24),
             modbus,
             online,
+            pubsub,
         };
         let fits = (1..=30).contains(&net.prefix)
             && net.mac[0] & 1 == 0
@@ -462,6 +578,10 @@ impl<'a> Net<'a> {
             }
             b[19] = m.unit;
             b[28..30].copy_from_slice(&m.port.to_le_bytes());
+        }
+        if let Some(p) = self.pubsub {
+            flags |= NET_PUBSUB;
+            b.extend_from_slice(&p.encode());
         }
         if let Some(o) = self.online {
             flags |= NET_ONLINE;
@@ -1355,6 +1475,7 @@ mod tests {
                 write_markers: true,
             }),
             online: None,
+            pubsub: None,
         }
     }
 
@@ -1482,6 +1603,90 @@ mod tests {
         assert!(Package::parse(&none).is_err(), "a port without the flag");
         none[block + 30..block + 32].fill(0);
         assert!(Package::parse(&none).is_ok());
+    }
+
+    #[test]
+    fn the_pubsub_part_round_trips_beside_the_clients_and_hostile_ones_are_refused() {
+        let ports = [
+            level(),
+            frame_port("eth-rx", Direction::In),
+            frame_port("eth-tx", Direction::Out),
+        ];
+        let pubsub = PubSub {
+            publish: Some(([10, 0, 2, 16], 61499, "level\nlevel_ok")),
+            subscribe: Some(Subscription {
+                port: 61500,
+                timeout_ns: 100_000_000,
+                names: "valve",
+                valid: Some("valve_ok"),
+            }),
+        };
+        let clients = [ClientKey {
+            name: b"eng",
+            secret: &[1; 16],
+            access: Access::Force,
+        }];
+        let records = OnlineTcp::records(&clients);
+        let net = Net {
+            pubsub: Some(pubsub),
+            online: OnlineTcp::new(1202, &records),
+            ..network()
+        };
+        let mut good = encode(&ports, b"P", &[], None, &[], None, &[]);
+        let block = good.len();
+        attach_net(&mut good, &net);
+        let parsed = Package::parse(&good).unwrap().net().unwrap();
+        assert_eq!(parsed.pubsub, Some(pubsub));
+        assert_eq!(parsed.online.unwrap().clients().count(), 1);
+        // Alone, each half.
+        for half in [
+            PubSub {
+                subscribe: None,
+                ..pubsub
+            },
+            PubSub {
+                publish: None,
+                ..pubsub
+            },
+        ] {
+            let mut one = encode(&ports, b"P", &[], None, &[], None, &[]);
+            attach_net(
+                &mut one,
+                &Net {
+                    pubsub: Some(half),
+                    ..network()
+                },
+            );
+            assert_eq!(
+                Package::parse(&one).unwrap().net().unwrap().pubsub,
+                Some(half)
+            );
+        }
+        // A publication without a port, a subscription timeout of 0, a reserved byte,
+        // names longer than the part, an empty name, text that is not UTF-8.
+        let part = block + NET_BLOCK;
+        for (at, value) in [
+            (part + 4, 0u8),
+            (part + 8, 0),
+            (part + 21, 1),
+            (part + 16, 200),
+            (part + PUBSUB_HEAD, b'\n'),
+            (part + PUBSUB_HEAD + 1, 0xff),
+        ] {
+            let mut bad = good.clone();
+            bad[at] = value;
+            if at == part + 4 {
+                bad[at + 1] = 0;
+            }
+            if at == part + 8 {
+                bad[at + 1..at + 8].fill(0);
+            }
+            assert_eq!(
+                Package::parse(&bad).unwrap_err(),
+                PackageError::BadNet,
+                "byte {at} = {value}"
+            );
+        }
     }
 
     #[test]
