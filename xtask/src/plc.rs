@@ -226,6 +226,35 @@ fn package(
             .collect();
         (o.port, package::OnlineTcp::records(&clients))
     });
+    // Publish/subscribe (`plc.publish`, `plc.subscribe`): names checked against the program.
+    let published = plc.publish.as_ref().map(|p| p.vars.join("\n"));
+    let subscribed = plc.subscribe.as_ref().map(|s| s.vars.join("\n"));
+    let pubsub = (plc.publish.is_some() || plc.subscribe.is_some()).then(|| package::PubSub {
+        publish: plc
+            .publish
+            .as_ref()
+            .zip(published.as_deref())
+            .map(|(p, names)| (p.to.0, p.to.1, names)),
+        subscribe: plc
+            .subscribe
+            .as_ref()
+            .zip(subscribed.as_deref())
+            .map(|(s, names)| package::Subscription {
+                port: s.port,
+                timeout_ns: s.timeout_ns,
+                names,
+                valid: s.valid.as_deref(),
+            }),
+    });
+    if let Some(pubsub) = &pubsub
+        && let Err(e) = softplc::pubsub::Endpoint::new(&image, pubsub)
+    {
+        bail!(
+            "partition {}: plc.publish/plc.subscribe: {}",
+            p.name,
+            pubsub_error(&e)
+        );
+    }
     // The frame ports of `plc.net` follow (no bytes of the image either).
     let net = plc.net.as_ref().map(|n| {
         let at = ports.len();
@@ -261,6 +290,7 @@ fn package(
             online: online_records
                 .as_ref()
                 .and_then(|(port, records)| package::OnlineTcp::new(*port, records)),
+            pubsub,
         }
     });
     // Then the store's ports (`plc.store`).
@@ -535,6 +565,19 @@ fn check_tasks(system: &System, index: usize, p: &Partition, image: &[u8]) -> Re
         }
     }
     Ok(())
+}
+
+/// What is wrong with a publication's or subscription's variable, for the build's error.
+fn pubsub_error(e: &softplc::pubsub::PubSubError<'_>) -> String {
+    use softplc::pubsub::PubSubError;
+    match e {
+        PubSubError::Unknown(name) => format!("`{name}` is no variable of the program"),
+        PubSubError::Type(name) => format!(
+            "`{name}` has a type the FBDK encoding does not carry, or is the validity variable and no BOOL"
+        ),
+        PubSubError::Message(e) => format!("{e:?}"),
+        PubSubError::TooLong => "too long for one datagram".to_string(),
+    }
 }
 
 #[cfg(test)]

@@ -1,7 +1,9 @@
 //! The PLC's communication process: its own TCP/IP stack ([`netstack`]) on its interface
 //! of the NIC partition's switch (`plc.net`), and the network services on it — the
-//! Modbus/TCP server (`plc.modbus`, [`plc_modbus`]) and the online protocol on TCP
-//! (`plc.online_tcp`, authenticated sessions of [`plc_online::session`]). It runs below
+//! Modbus/TCP server (`plc.modbus`, [`plc_modbus`]), the online protocol on TCP
+//! (`plc.online_tcp`, authenticated sessions of [`plc_online::session`]) and PLC-to-PLC
+//! publish/subscribe over UDP (`plc.publish`, `plc.subscribe`: the datagrams only; what
+//! they carry is [`crate::pubsub`]'s). It runs below
 //! every IEC task and the control process and never touches the process image or the
 //! program: a complete request goes into the [`Exchange`], which the control process
 //! serves between cycles ([`serve_modbus`], [`crate::online::serve_exchange`]) and whose
@@ -83,15 +85,39 @@ pub struct Slot {
     pub bytes: [u8; SLOT_BYTES],
 }
 
+/// Bytes of a publish/subscribe datagram at most.
+pub const MAX_DATAGRAM: usize = 512;
+
+/// One datagram waiting in the exchange (`len` 0: none).
+#[derive(Clone, Copy)]
+pub struct Datagram {
+    pub len: usize,
+    pub bytes: [u8; MAX_DATAGRAM],
+}
+
+impl Datagram {
+    const EMPTY: Datagram = Datagram {
+        len: 0,
+        bytes: [0; MAX_DATAGRAM],
+    };
+}
+
 /// What passes between the communication and the control process (under a lock the
 /// control process only ever tries: it never waits for it).
 pub struct Exchange {
     pub slots: [Slot; EXCHANGE_SLOTS],
+    /// The control process's latest publication, for the communication process to send.
+    pub publication: Datagram,
+    /// The latest datagram received on the subscription's port, not yet taken (a newer
+    /// one replaces it: subscribers want the latest values).
+    pub subscription: Datagram,
 }
 
 impl Exchange {
     pub const fn new() -> Self {
         Exchange {
+            publication: Datagram::EMPTY,
+            subscription: Datagram::EMPTY,
             slots: [Slot {
                 state: SlotState::Free,
                 service: Service::Modbus,
@@ -181,6 +207,9 @@ pub struct CommStats {
     /// Online sessions ended by a record that did not open (tampered, replayed, bad
     /// length).
     pub rejected: u64,
+    /// Publications sent, and datagrams received on the subscription's port.
+    pub published: u64,
+    pub received: u64,
 }
 
 /// Something the communication process logs.
@@ -290,6 +319,9 @@ pub struct Comm<'k> {
     pub stack: Stack,
     modbus: Option<(Modbus, SocketId)>,
     online: Option<SocketId>,
+    /// The publication's socket and destination; the subscription's socket.
+    publish: Option<(SocketId, SocketAddr)>,
+    subscribe: Option<SocketId>,
     keys: Vec<ClientKey<'k>>,
     nonces: NonceSource,
     connections: Vec<Option<Connection>>,
@@ -310,8 +342,8 @@ impl<'k> Comm<'k> {
             // closing in the background.
             sockets: 2 * listeners * connections + 2 * connections + 4,
             tcp_buffer: net.buffer as usize,
-            udp_packets: 1,
-            udp_buffer: 512,
+            udp_packets: 4,
+            udp_buffer: 4 * MAX_DATAGRAM,
             backlog: connections,
             frames: 2 * FRAMES_PER_RUN,
         };
@@ -338,12 +370,29 @@ impl<'k> Comm<'k> {
             ),
             None => (None, Vec::new()),
         };
+        let pubsub = net.pubsub.unwrap_or(crate::package::PubSub {
+            publish: None,
+            subscribe: None,
+        });
+        let publish = match pubsub.publish {
+            Some(([a, b, c, d], port, _)) => {
+                let s = udp(&mut stack, 0)?;
+                Some((s, SocketAddr::new(Ipv4Address::new(a, b, c, d), port)))
+            }
+            None => None,
+        };
+        let subscribe = match pubsub.subscribe {
+            Some(sub) => Some(udp(&mut stack, sub.port)?),
+            None => None,
+        };
         let mut slots = Vec::new();
         slots.resize_with(connections, || None);
         Ok(Comm {
             stack,
             modbus,
             online,
+            publish,
+            subscribe,
             nonces: NonceSource::new(&keys, seed),
             keys,
             connections: slots,
@@ -373,7 +422,34 @@ impl<'k> Comm<'k> {
         for i in 0..self.connections.len() {
             self.service(i, now_ns, exchange);
         }
+        self.datagrams(exchange);
         self.stack.poll(now_us);
+    }
+
+    /// Sends the waiting publication; takes the datagrams received for the subscription,
+    /// the latest into the exchange (bounded: what the socket holds).
+    fn datagrams(&mut self, exchange: &mut Exchange) {
+        if let Some((socket, to)) = self.publish
+            && exchange.publication.len > 0
+        {
+            let p = &exchange.publication;
+            if self.stack.send(socket, &p.bytes[..p.len], Some(to)).is_ok() {
+                self.stats.published += 1;
+            }
+            exchange.publication.len = 0;
+        }
+        if let Some(socket) = self.subscribe {
+            let mut buf = [0u8; MAX_DATAGRAM];
+            for _ in 0..FRAMES_PER_RUN {
+                let Ok((n, _)) = self.stack.recv(socket, &mut buf) else {
+                    break;
+                };
+                self.stats.received += 1;
+                let d = &mut exchange.subscription;
+                d.bytes[..n].copy_from_slice(&buf[..n]);
+                d.len = n;
+            }
+        }
     }
 
     /// The events since the last call, oldest first.
@@ -673,6 +749,13 @@ impl EventLog {
     }
 }
 
+/// A non-blocking UDP socket on `port` of every address (0: any free port).
+fn udp(stack: &mut Stack, port: u16) -> Result<SocketId, Error> {
+    let s = stack.socket(linux::AF_INET, linux::SOCK_DGRAM | linux::SOCK_NONBLOCK, 0)?;
+    stack.bind(s, SocketAddr::new(Ipv4Address::UNSPECIFIED, port))?;
+    Ok(s)
+}
+
 /// A non-blocking listener on `port` of every address with `backlog`.
 fn listen(stack: &mut Stack, port: u16, backlog: usize) -> Result<SocketId, Error> {
     let s = stack.socket(linux::AF_INET, linux::SOCK_STREAM | linux::SOCK_NONBLOCK, 0)?;
@@ -729,6 +812,7 @@ mod tests {
                 write_markers: true,
             }),
             online: crate::package::OnlineTcp::new(ONLINE_PORT, records()),
+            pubsub: None,
         }
     }
 
@@ -1100,5 +1184,65 @@ mod tests {
         let m = w.connect();
         let (r, _) = w.ask(m, &[0, 7, 0, 0, 0, 6, 1, 4, 0, 0, 0, 1], 10);
         assert_eq!(r.len(), 11);
+    }
+
+    #[test]
+    fn a_publication_reaches_the_subscriber_and_the_latest_datagram_wins() {
+        use crate::package::{PubSub, Subscription};
+        let plc = |ip: [u8; 4], mac: u8, pubsub: PubSub<'static>| {
+            let net = Net {
+                address: ip,
+                mac: [0x52, 0x54, 0, 0, 0, mac],
+                modbus: None,
+                online: None,
+                pubsub: Some(pubsub),
+                ..net(1, 100)
+            };
+            Comm::new(&net, 0, 0).unwrap()
+        };
+        let mut a = plc(
+            [10, 0, 0, 1],
+            1,
+            PubSub {
+                publish: Some(([10, 0, 0, 2], 61499, "x")),
+                subscribe: None,
+            },
+        );
+        let mut b = plc(
+            [10, 0, 0, 2],
+            2,
+            PubSub {
+                publish: None,
+                subscribe: Some(Subscription {
+                    port: 61499,
+                    timeout_ns: 1,
+                    names: "x",
+                    valid: None,
+                }),
+            },
+        );
+        let (mut xa, mut xb) = (Exchange::new(), Exchange::new());
+        let mut now = 0;
+        let mut run = |a: &mut Comm, b: &mut Comm, xa: &mut Exchange, xb: &mut Exchange| {
+            now += 1_000_000;
+            a.run(now, xa);
+            while let Some(f) = a.stack.device.take() {
+                b.stack.device.deliver(&f);
+            }
+            b.run(now, xb);
+            while let Some(f) = b.stack.device.take() {
+                a.stack.device.deliver(&f);
+            }
+        };
+        // Until ARP is resolved a publication may wait in the socket; then each arrives.
+        for i in 0..20u8 {
+            xa.publication.bytes[0] = i;
+            xa.publication.len = 1;
+            run(&mut a, &mut b, &mut xa, &mut xb);
+        }
+        assert_eq!(xa.publication.len, 0);
+        assert!(a.stats.published >= 19 && b.stats.received >= 1);
+        assert_eq!(xb.subscription.len, 1);
+        assert_eq!(xb.subscription.bytes[0], 19, "the latest datagram");
     }
 }

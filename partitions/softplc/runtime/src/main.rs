@@ -89,9 +89,15 @@
 //!   start (with `plc.net`, `plc.modbus`), and `plc: online on port <p>
 //!   clients=<name>:<access>,...` (with `plc.online_tcp`); `plc: t=<ms>ms net open=<n>
 //!   accepted=<n> refused=<n> malformed=<n> requests=<n> responses=<n> denied=<n>
-//!   rejected=<n> frames_in=<n> frames_out=<n>` every [`STATS_EVERY_MS`] while connections
-//!   were seen (`denied`: online handshakes refused, `rejected`: online sessions ended by
-//!   a record that did not open);
+//!   rejected=<n> published=<n> received=<n> frames_in=<n> frames_out=<n>` every
+//!   [`STATS_EVERY_MS`] while something changed (`denied`: online handshakes refused,
+//!   `rejected`: online sessions ended by a record that did not open, `published` and
+//!   `received`: publish/subscribe datagrams);
+//! - with `plc.publish` / `plc.subscribe`, at start `plc: publish to <ip>:<port>
+//!   vars=<a>,<b>` and `plc: subscribe on port <p> vars=<a>,<b> valid=<variable|-> timeout_ms=<n>`,
+//!   then `plc: subscription valid` and `plc: subscription lapsed: ...` when its validity
+//!   changes, and `plc: t=<ms>ms subscription good=<n> bad=<n>` (messages taken, refused)
+//!   every [`STATS_EVERY_MS`];
 //! - `plc: online: <client> authenticated from <ip>:<port> (<access>)`, `plc: online:
 //!   refused <ip>:<port>: <unknown name or wrong key|malformed handshake|no complete
 //!   handshake in time>` and `plc: online: session of <client> from <ip>:<port> ended:
@@ -674,6 +680,17 @@ extern "C" fn control() {
             shared_stats: &mut shared_stats,
             shared_scratch,
         };
+        // Publish/subscribe with this program's variables (a downloaded program may lack
+        // them: then it is off until the next one).
+        let mut endpoint = package.net().and_then(|n| n.pubsub).and_then(|pubsub| {
+            match softplc::pubsub::Endpoint::new(&image, &pubsub) {
+                Ok(endpoint) => Some(endpoint),
+                Err(e) => {
+                    println!("plc: publish/subscribe off: {e:?} in this program");
+                    None
+                }
+            }
+        });
         let published = Published::new(&mut life);
         // A new program starts at a release, never in the middle of one.
         if swapped && <Warden as ApexTimeP4Ext>::periodic_wait().is_err() {
@@ -737,10 +754,16 @@ extern "C" fn control() {
                         );
                     }
                 }
+                if let Some(endpoint) = endpoint.as_mut() {
+                    pubsub_between_releases(endpoint, life);
+                }
                 let now = now_ns();
                 if now >= next_stats {
                     next_stats += STATS_EVERY_MS * 1_000_000;
                     let ms = (now - started) / 1_000_000;
+                    if let Some(e) = &endpoint {
+                        println!("plc: t={ms}ms subscription good={} bad={}", e.good, e.bad);
+                    }
                     log_stats(life.rt, &life.image, &life.package, &life.machine, ms);
                     log_period(life.rt, ms);
                     if life
@@ -837,7 +860,7 @@ extern "C" fn comm() {
             if s != logged {
                 logged = s;
                 println!(
-                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} denied={} rejected={} frames_in={frames_in} frames_out={frames_out}",
+                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} denied={} rejected={} published={} received={} frames_in={frames_in} frames_out={frames_out}",
                     (now - started) / 1_000_000,
                     comm.open(),
                     s.accepted,
@@ -846,7 +869,9 @@ extern "C" fn comm() {
                     s.requests,
                     s.responses,
                     s.denied,
-                    s.rejected
+                    s.rejected,
+                    s.published,
+                    s.received
                 );
             }
         }
@@ -854,6 +879,49 @@ extern "C" fn comm() {
             println!("plc: net: PERIODIC_WAIT failed; stopping");
             return;
         }
+    }
+}
+
+/// Publish/subscribe between releases ([`softplc::pubsub::Endpoint`]): the latest received
+/// datagram taken from the exchange into the program, the publication put there, and a
+/// change of the subscription's validity logged. Without the exchange's lock (the
+/// communication process holds it) the release publishes nothing and the datagram waits.
+fn pubsub_between_releases(endpoint: &mut softplc::pubsub::Endpoint, life: &mut Life) {
+    use softplc::comm::MAX_DATAGRAM;
+    use softplc::pubsub::Change;
+    let running = life.rt.schedule.order[..life.rt.schedule.count]
+        .iter()
+        .any(|&t| life.rt.stopped[t].is_none());
+    let mut exchange = EXCHANGE.try_lock();
+    let message = exchange.as_mut().and_then(|x| {
+        let d = x.subscription;
+        x.subscription.len = 0;
+        (d.len > 0).then_some(d)
+    });
+    let mut out = [0u8; MAX_DATAGRAM];
+    let (n, change) = endpoint.between_releases(
+        &life.image,
+        life.machine.data_mut(),
+        now_ns() as i64,
+        running && exchange.is_some(),
+        message.as_ref().map(|d| &d.bytes[..d.len]),
+        &mut out,
+    );
+    if let Some(x) = exchange.as_mut()
+        && n > 0
+    {
+        x.publication.bytes[..n].copy_from_slice(&out[..n]);
+        x.publication.len = n;
+    }
+    drop(exchange);
+    match change {
+        Some(Change::Valid) => println!("plc: subscription valid"),
+        Some(Change::Lapsed) => {
+            println!(
+                "plc: subscription lapsed: no good message within its timeout; its variables are zero"
+            )
+        }
+        None => {}
     }
 }
 
@@ -1152,6 +1220,28 @@ impl PlcPartition {
                     "plc: modbus on port {} unit {} writable={writable}",
                     modbus.port, modbus.unit
                 );
+            }
+            if let Some(pubsub) = net.pubsub {
+                if let Some(([a, b, c, d], port, names)) = pubsub.publish {
+                    let mut line = text!("plc: publish to {a}.{b}.{c}.{d}:{port} vars=");
+                    for (i, name) in names.split('\n').enumerate() {
+                        let _ = write!(line, "{}{name}", if i == 0 { "" } else { "," });
+                    }
+                    println!("{}", line.as_str());
+                }
+                if let Some(sub) = pubsub.subscribe {
+                    let mut line = text!("plc: subscribe on port {} vars=", sub.port);
+                    for (i, name) in sub.names.split('\n').enumerate() {
+                        let _ = write!(line, "{}{name}", if i == 0 { "" } else { "," });
+                    }
+                    let _ = write!(
+                        line,
+                        " valid={} timeout_ms={}",
+                        sub.valid.unwrap_or("-"),
+                        sub.timeout_ns / 1_000_000
+                    );
+                    println!("{}", line.as_str());
+                }
             }
             if let Some(online) = net.online {
                 let mut line = text!("plc: online on port {} clients=", online.port);

@@ -7,8 +7,13 @@
 //! release. A received message is taken whole or not at all: every value must decode as
 //! its variable's type, else nothing is written and the message counts as bad. The
 //! subscription is valid while the last good message is younger than its timeout; when it
-//! lapses the runtime writes the subscribed variables' safe values (the configuration's),
-//! as it does for a stale sampling port.
+//! lapses the subscribed variables go to zero (FALSE, 0, 0.0, '') and the validity
+//! variable, if configured, to FALSE, so the program sees the loss as it sees a stale
+//! sampling port's validity bit. A PLC none of whose tasks runs publishes nothing: its
+//! subscribers see it stop.
+//!
+//! [`Endpoint`] is the control process's part between releases; the datagrams themselves
+//! are the communication process's ([`crate::comm`]).
 
 use fbdk::{DecodeError, Reader, Type, Value as Wire, Writer};
 use plc_vm::image::{Image, VarType};
@@ -177,6 +182,134 @@ impl Validity {
     pub fn valid(&self, now: i64) -> bool {
         self.last_good
             .is_some_and(|t| now.saturating_sub(t) < self.timeout_ns)
+    }
+}
+
+/// Splits `\n`-separated names into `out`; returns how many (at most `out.len()`).
+pub fn split_names<'n>(text: &'n str, out: &mut [&'n str]) -> usize {
+    let mut n = 0;
+    for (slot, name) in out.iter_mut().zip(text.split('\n')) {
+        *slot = name;
+        n += 1;
+    }
+    n
+}
+
+/// What changed in a subscription's validity at a release.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Change {
+    /// The first good message, or the first after a lapse.
+    Valid,
+    /// No good message within the timeout: the variables went to zero.
+    Lapsed,
+}
+
+/// The control process's publish/subscribe between releases: the publication of the
+/// values the release left, the subscription's message written into the program and its
+/// validity.
+#[derive(Clone, Copy, Debug)]
+pub struct Endpoint<'n> {
+    publish: Option<([&'n str; MAX_VARS], usize)>,
+    subscribe: Option<([&'n str; MAX_VARS], usize)>,
+    valid_var: Option<&'n str>,
+    validity: Validity,
+    was_valid: bool,
+    /// Good and refused messages taken.
+    pub good: u64,
+    pub bad: u64,
+}
+
+/// Most variables a publication or subscription carries (the package's limit).
+pub const MAX_VARS: usize = crate::package::MAX_PUBSUB_VARS;
+
+impl<'n> Endpoint<'n> {
+    /// The endpoint of `pubsub`, its names checked against `image` (and the validity
+    /// variable a BOOL).
+    pub fn new(
+        image: &Image,
+        pubsub: &crate::package::PubSub<'n>,
+    ) -> Result<Self, PubSubError<'n>> {
+        let names = |text: &'n str| {
+            let mut out = [""; MAX_VARS];
+            let n = split_names(text, &mut out);
+            (out, n)
+        };
+        let publish = pubsub.publish.map(|(_, _, text)| names(text));
+        let subscribe = pubsub.subscribe.map(|s| names(s.names));
+        for (list, n) in publish.iter().chain(subscribe.iter()) {
+            check(image, &list[..*n])?;
+        }
+        let valid_var = pubsub.subscribe.and_then(|s| s.valid);
+        if let Some(v) = valid_var {
+            let var = image.find_var(v).ok_or(PubSubError::Unknown(v))?;
+            if VarType::from_code(var.ty) != Some(VarType::Bool) {
+                return Err(PubSubError::Type(v));
+            }
+        }
+        Ok(Endpoint {
+            publish,
+            subscribe,
+            valid_var,
+            validity: Validity::new(pubsub.subscribe.map_or(0, |s| s.timeout_ns) as i64),
+            was_valid: false,
+            good: 0,
+            bad: 0,
+        })
+    }
+
+    /// Between releases at `now` (ns): the publication into `publication` (when `running`,
+    /// whether a task of the program runs), a waiting `message` (taken) written into
+    /// `data`, the validity variable set and, on a lapse, the subscribed variables zeroed.
+    /// `publication`'s first byte count is returned (0: none).
+    pub fn between_releases(
+        &mut self,
+        image: &Image,
+        data: &mut [u8],
+        now: i64,
+        running: bool,
+        message: Option<&[u8]>,
+        publication: &mut [u8],
+    ) -> (usize, Option<Change>) {
+        let mut published = 0;
+        if let Some((names, n)) = &self.publish
+            && running
+        {
+            published = publish(image, data, &names[..*n], publication).unwrap_or(0);
+        }
+        let Some((names, n)) = &self.subscribe else {
+            return (published, None);
+        };
+        if let Some(m) = message {
+            match subscribe(image, data, &names[..*n], m) {
+                Ok(()) => {
+                    self.good += 1;
+                    self.validity.received(now);
+                }
+                Err(_) => self.bad += 1,
+            }
+        }
+        let valid = self.validity.valid(now);
+        if let Some(v) = self.valid_var.and_then(|v| image.find_var(v))
+            && let Some(bytes) = data.get_mut(v.addr as usize..(v.addr + v.size) as usize)
+        {
+            let _ = Value::Bool(valid).store(VarType::Bool, bytes);
+        }
+        let change = match (self.was_valid, valid) {
+            (false, true) => Some(Change::Valid),
+            (true, false) => {
+                for var in names[..*n].iter().filter_map(|name| image.find_var(name)) {
+                    if let Some(bytes) =
+                        data.get_mut(var.addr as usize..(var.addr + var.size) as usize)
+                    {
+                        bytes.fill(0);
+                    }
+                }
+                Some(Change::Lapsed)
+            }
+            _ => None,
+        };
+        self.was_valid = valid;
+        (published, change)
     }
 }
 

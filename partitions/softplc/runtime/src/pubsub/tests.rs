@@ -129,3 +129,78 @@ fn setup_errors_and_validity() {
     v.received(10);
     assert!(v.valid(109) && !v.valid(110));
 }
+
+#[test]
+fn an_endpoint_publishes_while_running_and_its_subscription_lapses_to_zero() {
+    use crate::package::{PubSub, Subscription};
+    let (image, data, initial) = setup();
+    let parsed = Image::parse(&image).unwrap();
+    let publisher = PubSub {
+        publish: Some(([10, 0, 0, 2], 61499, "Main.level\nMain.count")),
+        subscribe: None,
+    };
+    let subscriber = PubSub {
+        publish: None,
+        subscribe: Some(Subscription {
+            port: 61499,
+            timeout_ns: 100,
+            names: "Main.level\nMain.count",
+            valid: Some("Main.alarm"),
+        }),
+    };
+    let mut a = Endpoint::new(&parsed, &publisher).unwrap();
+    let mut b = Endpoint::new(&parsed, &subscriber).unwrap();
+    let mut a_data = data.clone();
+    let mut b_data = initial.clone();
+    let mut message = [0u8; 64];
+    let (n, change) = a.between_releases(&parsed, &mut a_data, 0, true, None, &mut message);
+    assert!(n > 0 && change.is_none());
+    assert_eq!(
+        a.between_releases(&parsed, &mut a_data, 0, false, None, &mut [0u8; 64]),
+        (0, None),
+        "a stopped PLC publishes nothing"
+    );
+    let got = |d: &[u8], name: &str| {
+        let v = parsed.find_var(name).unwrap();
+        d[v.addr as usize..(v.addr + v.size) as usize].to_vec()
+    };
+    assert_eq!(
+        b.between_releases(&parsed, &mut b_data, 10, true, Some(&message[..n]), &mut []),
+        (0, Some(Change::Valid))
+    );
+    assert_eq!(got(&b_data, "Main.level"), got(&data, "Main.level"));
+    assert_eq!(got(&b_data, "Main.alarm"), [1]);
+    // A bad message is refused whole; the subscription stays valid until its timeout.
+    assert_eq!(
+        b.between_releases(&parsed, &mut b_data, 50, true, Some(&[0x43]), &mut []),
+        (0, None)
+    );
+    assert_eq!((b.good, b.bad), (1, 1));
+    assert_eq!(
+        b.between_releases(&parsed, &mut b_data, 110, true, None, &mut []),
+        (0, Some(Change::Lapsed))
+    );
+    assert_eq!(got(&b_data, "Main.level"), [0; 8]);
+    assert_eq!(got(&b_data, "Main.count"), [0; 4]);
+    assert_eq!(got(&b_data, "Main.alarm"), [0]);
+    // Names the program does not have, a validity variable that is no BOOL.
+    let unknown = PubSub {
+        publish: Some(([10, 0, 0, 2], 1, "Main.nothing")),
+        subscribe: None,
+    };
+    assert_eq!(
+        Endpoint::new(&parsed, &unknown).unwrap_err(),
+        PubSubError::Unknown("Main.nothing")
+    );
+    let not_bool = PubSub {
+        publish: None,
+        subscribe: Some(Subscription {
+            valid: Some("Main.count"),
+            ..subscriber.subscribe.unwrap()
+        }),
+    };
+    assert_eq!(
+        Endpoint::new(&parsed, &not_bool).unwrap_err(),
+        PubSubError::Type("Main.count")
+    );
+}
