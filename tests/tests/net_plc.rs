@@ -1,4 +1,5 @@
-//! The PLC on the network (`tests/scenarios/net_modbus.toml`, `net_plc_flood.toml`): the soft-PLC's own
+//! The PLC on the network (`tests/scenarios/net_modbus.toml`, `net_plc_flood.toml`,
+//! `net_pubsub.toml`): the soft-PLC's own
 //! interface on the NIC partition's switch and its Modbus/TCP server, reached from the host
 //! through QEMU's `hostfwd`. The client is pymodbus (tests/scripts/modbus_client.py) in the
 //! venv `target/pymodbus-venv` (`.ci/run` makes it); without it that part is skipped with
@@ -594,4 +595,110 @@ fn net_plc_flood() {
         |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= DISTURBANCE_MS.1 + 1_000,
         0,
     );
+}
+
+/// When the controller PLC of net_pubsub stops publishing (its task traps after 3,000
+/// cycles of 10 ms).
+const CONTROLLER_STOPS_MS: u64 = 30_000;
+
+#[test]
+fn net_pubsub() {
+    let o = scenarios::boot("net_pubsub");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.line("[field] plc: publish to 10.0.0.2:61499 vars=level,level_ok,stamp")
+            .is_some()
+            && o.line("[field] plc: subscribe on port 61499 vars=valve,echo valid=valve_ok timeout_ms=100")
+                .is_some()
+            && o.line("[ctl] plc: publish to 10.0.0.1:61499 vars=valve,echo").is_some()
+            && o.line("[ctl] plc: subscribe on port 61499 vars=level,level_ok,stamp valid=link_ok timeout_ms=100")
+                .is_some(),
+        "the PLCs did not report their publications and subscriptions",
+    );
+    check(
+        &o,
+        o.line("[field] plc: subscription valid").is_some()
+            && o.line("[ctl] plc: subscription valid").is_some(),
+        "a subscription never became valid",
+    );
+    // The loop closed over the network: settled, and held through the disturbance.
+    let status = tank::status(&o);
+    tank::settles(&o, &status);
+    tank::holds(
+        &o,
+        &status,
+        |t| {
+            (SETTLED_MS..DISTURBANCE_MS.0).contains(&t)
+                || (DISTURBANCE_MS.1 + 1_000..CONTROLLER_STOPS_MS).contains(&t)
+        },
+        0,
+    );
+    // Then the controller stops; the field PLC's subscription lapses and the valve closes.
+    check(
+        &o,
+        o.lines
+            .iter()
+            .any(|l| l.contains("[ctl] plc: task ") && l.contains(" stopped: ")),
+        "the controller's task did not stop",
+    );
+    let lapsed = o.line("[field] plc: subscription lapsed");
+    check(
+        &o,
+        lapsed.is_some(),
+        "the field PLC's subscription did not lapse",
+    );
+    let closed = status
+        .iter()
+        .filter(|s| s.t_ms >= CONTROLLER_STOPS_MS + 1_000)
+        .collect::<Vec<_>>();
+    check(
+        &o,
+        !closed.is_empty() && closed.iter().all(|s| s.valve == 0.0),
+        &format!(
+            "the valve did not close after the controller stopped: {:?}",
+            closed.first()
+        ),
+    );
+    let counts = o
+        .lines
+        .iter()
+        .rev()
+        .find(|l| l.contains("[field] plc: t=") && l.contains(" subscription good="))
+        .cloned()
+        .unwrap_or_default();
+    println!("net_pubsub: {counts}");
+    // The loop's round trip (field → controller → field), from the field PLC's watch lines
+    // while both run.
+    let loops: Vec<i64> = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("[field] plc: t=") && l.contains(" loop_ms="))
+        .filter_map(|l| {
+            let t: u64 = l
+                .split("plc: t=")
+                .nth(1)?
+                .split("ms")
+                .next()?
+                .parse()
+                .ok()?;
+            let ms: i64 = l
+                .split(" loop_ms=")
+                .nth(1)?
+                .split(' ')
+                .next()?
+                .parse()
+                .ok()?;
+            (SETTLED_MS..CONTROLLER_STOPS_MS).contains(&t).then_some(ms)
+        })
+        .collect();
+    println!(
+        "net_pubsub: loop round trip (virtual time, field → controller → field, in the field PLC's 10 ms cycles): {loops:?} ms"
+    );
+    check(
+        &o,
+        !loops.is_empty() && loops.iter().all(|&ms| (10..=50).contains(&ms)),
+        "the loop's round trip is not 10..=50 ms",
+    );
+    println!("net_pubsub: {}", lapsed.unwrap_or_default());
 }
