@@ -7,7 +7,9 @@
 //! 1. waits [`QUIET`] with no traffic (the quiet seconds);
 //! 2. polls as a SCADA system does: pymodbus (tests/scripts/modbus_bench.py, from the venv
 //!    target/pymodbus-venv, made here when missing) reads 10 holding registers
-//!    [`MODBUS_READS`] times at [`POLL_HZ`] Hz on one connection;
+//!    [`MODBUS_READS`] times at [`POLL_HZ`] Hz over [`POLL_CONNECTIONS`] connections (a
+//!    round trip takes about two PLC periods, so one connection cannot ask 100 times a
+//!    second);
 //! 3. reads the level [`ONLINE_READS`] times over an authenticated online session
 //!    (plcctl's [`plcctl::tcp::TcpSession`], key tests/configs/keys/engineering.key).
 //!
@@ -36,6 +38,7 @@ const QUIET: Duration = Duration::from_secs(10);
 /// The SCADA poll: requests and their rate.
 const MODBUS_READS: usize = 1_000;
 const POLL_HZ: u32 = 100;
+const POLL_CONNECTIONS: usize = 4;
 /// Online READs, one after another.
 const ONLINE_READS: usize = 300;
 /// How long the PLC may take to answer its first Modbus request (boot under TCG).
@@ -162,7 +165,7 @@ fn measure(python: &Path, modbus: u16, online: u16, ended: &AtomicBool) -> Resul
         if ended.load(Ordering::SeqCst) {
             bail!("QEMU ended before the PLC answered");
         }
-        if poll(python, modbus, 1)?.is_some() {
+        if poll(python, modbus, 1, 1)?.is_some() {
             break;
         }
         if Instant::now() > ready_by {
@@ -171,8 +174,8 @@ fn measure(python: &Path, modbus: u16, online: u16, ended: &AtomicBool) -> Resul
         std::thread::sleep(Duration::from_secs(1));
     }
     std::thread::sleep(QUIET);
-    let modbus_trips =
-        poll(python, modbus, MODBUS_READS)?.context("pymodbus's poll failed (its output above)")?;
+    let modbus_trips = poll(python, modbus, MODBUS_READS, POLL_CONNECTIONS)?
+        .context("pymodbus's poll failed (its output above)")?;
     let key = crate::workspace_root().join("tests/configs/keys/engineering.key");
     let key = plcctl::tcp::read_key(&key.display().to_string())
         .map_err(|f| anyhow::anyhow!(f.message))?;
@@ -220,13 +223,18 @@ fn measure(python: &Path, modbus: u16, online: u16, ended: &AtomicBool) -> Resul
     Ok(metrics)
 }
 
-/// `count` Modbus reads of 10 holding registers by pymodbus at [`POLL_HZ`]: each round
-/// trip (us), or `None` when pymodbus failed.
-fn poll(python: &Path, port: u16, count: usize) -> Result<Option<Vec<f64>>> {
+/// `count` Modbus reads of 10 holding registers by pymodbus at [`POLL_HZ`] over
+/// `connections`: each round trip (us), or `None` when pymodbus failed.
+fn poll(python: &Path, port: u16, count: usize, connections: usize) -> Result<Option<Vec<f64>>> {
     let script = crate::workspace_root().join("tests/scripts/modbus_bench.py");
     let out = std::process::Command::new(python)
         .arg(script)
-        .args([port.to_string(), count.to_string(), POLL_HZ.to_string()])
+        .args([
+            port.to_string(),
+            count.to_string(),
+            POLL_HZ.to_string(),
+            connections.to_string(),
+        ])
         .output()
         .context("cannot run pymodbus")?;
     if !out.status.success() {
