@@ -41,6 +41,37 @@ pub fn boot_beside<R: Send>(
     boot_with(name, true, host)
 }
 
+/// Boots scenarios `a` and `b` at once, as two machines: both get the same free host
+/// ports (as many as the larger `host_ports`), so that `-netdev dgram` in their manifests
+/// can join them on 127.0.0.1 (`{host_port0}` local on one, remote on the other).
+pub fn boot_pair(a: &str, b: &str) -> (Outcome, Outcome) {
+    let load = |name: &str| {
+        let manifest = scenario::scenarios_dir().join(format!("{name}.toml"));
+        let s = scenario::load(&manifest).unwrap_or_else(|e| panic!("{e:#}"));
+        let dir = scenario::output_dir().join(name);
+        assert!(
+            dir.join("esp").join("system.img").is_file(),
+            "no image for scenario {name}: run `cargo xtask test {name}`"
+        );
+        (s, dir)
+    };
+    let ((sa, dir_a), (sb, dir_b)) = (load(a), load(b));
+    let tools = xtask::tools::ensure_qemu().unwrap_or_else(|e| panic!("{e:#}"));
+    let ports = scenario::free_host_ports(sa.manifest.host_ports.max(sb.manifest.host_ports))
+        .unwrap_or_else(|e| panic!("scenarios {a}, {b}: {e:#}"));
+    std::thread::scope(|scope| {
+        let other = scope.spawn(|| run(&sb, &dir_b, dir_b.join("esp"), &tools, &ports));
+        let first = run(&sa, &dir_a, dir_a.join("esp"), &tools, &ports);
+        let second = other
+            .join()
+            .unwrap_or_else(|_| panic!("booting {b} panicked"));
+        (
+            first.unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}")),
+            second.unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}")),
+        )
+    })
+}
+
 fn boot_with<R: Send>(
     name: &str,
     fresh_disk: bool,

@@ -1,5 +1,5 @@
 //! The PLC on the network (`tests/scenarios/net_modbus.toml`, `net_plc_flood.toml`,
-//! `net_pubsub.toml`): the soft-PLC's own
+//! `net_pubsub.toml`, `net_pubsub_machines_{a,b}.toml`): the soft-PLC's own
 //! interface on the NIC partition's switch and its Modbus/TCP server, reached from the host
 //! through QEMU's `hostfwd`. The client is pymodbus (tests/scripts/modbus_client.py) in the
 //! venv `target/pymodbus-venv` (`.ci/run` makes it); without it that part is skipped with
@@ -14,7 +14,7 @@ use std::net::TcpStream;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
-use xtask::qemu::Ending;
+use xtask::qemu::{Ending, Outcome};
 
 /// The venv's python with pymodbus, if there is one.
 fn pymodbus_python() -> Option<PathBuf> {
@@ -670,8 +670,22 @@ fn net_pubsub() {
     println!("net_pubsub: {counts}");
     // The loop's round trip (field → controller → field), from the field PLC's watch lines
     // while both run.
-    let loops: Vec<i64> = o
-        .lines
+    let loops = loop_round_trips(&o, SETTLED_MS, CONTROLLER_STOPS_MS);
+    println!(
+        "net_pubsub: loop round trip (virtual time, field → controller → field, in the field PLC's 10 ms cycles): {loops:?} ms"
+    );
+    check(
+        &o,
+        !loops.is_empty() && loops.iter().all(|&ms| (10..=50).contains(&ms)),
+        "the loop's round trip is not 10..=50 ms",
+    );
+    println!("net_pubsub: {}", lapsed.unwrap_or_default());
+}
+
+/// The loop's round trips (ms) in the field PLC's watch lines from `from_ms` to `to_ms` of
+/// its time.
+fn loop_round_trips(o: &Outcome, from_ms: u64, to_ms: u64) -> Vec<i64> {
+    o.lines
         .iter()
         .filter(|l| l.contains("[field] plc: t=") && l.contains(" loop_ms="))
         .filter_map(|l| {
@@ -689,16 +703,80 @@ fn net_pubsub() {
                 .next()?
                 .parse()
                 .ok()?;
-            (SETTLED_MS..CONTROLLER_STOPS_MS).contains(&t).then_some(ms)
+            (from_ms..to_ms).contains(&t).then_some(ms)
         })
-        .collect();
-    println!(
-        "net_pubsub: loop round trip (virtual time, field → controller → field, in the field PLC's 10 ms cycles): {loops:?} ms"
+        .collect()
+}
+
+#[test]
+fn net_pubsub_machines() {
+    let (a, b) = scenarios::boot_pair("net_pubsub_machines_a", "net_pubsub_machines_b");
+    for o in [&a, &b] {
+        check(o, o.line("panic at ").is_none(), "a partition panicked");
+    }
+    check(
+        &a,
+        a.line("[field] plc: subscription valid").is_some(),
+        "machine A's subscription never became valid",
     );
     check(
-        &o,
-        !loops.is_empty() && loops.iter().all(|&ms| (10..=50).contains(&ms)),
-        "the loop's round trip is not 10..=50 ms",
+        &b,
+        b.line("[ctl] plc: subscription valid").is_some(),
+        "machine B's subscription never became valid",
     );
-    println!("net_pubsub: {}", lapsed.unwrap_or_default());
+    // The loop closed across the machines: the level settles.
+    let status = tank::status(&a);
+    tank::settles(&a, &status);
+    let loops = loop_round_trips(&a, SETTLED_MS, CONTROLLER_STOPS_MS);
+    println!(
+        "net_pubsub_machines: loop round trip (real time, machine A → B → A, in the field PLC's 10 ms cycles): {loops:?} ms"
+    );
+    check(
+        &a,
+        !loops.is_empty(),
+        "no loop round trip in machine A's watch lines",
+    );
+    // Machine B's controller stops; machine A's subscription lapses and the valve closes.
+    check(
+        &b,
+        b.lines
+            .iter()
+            .any(|l| l.contains("[ctl] plc: task ") && l.contains(" stopped: ")),
+        "the controller's task did not stop",
+    );
+    check(
+        &a,
+        a.line("[field] plc: subscription lapsed").is_some(),
+        "machine A's subscription did not lapse",
+    );
+    let last = status.last();
+    check(
+        &a,
+        last.is_some_and(|s| s.valve == 0.0),
+        &format!("the valve did not close: {last:?}"),
+    );
+    println!("net_pubsub_machines: A {:?}, B {:?}", a.ending, b.ending);
+    for l in b
+        .lines
+        .iter()
+        .rev()
+        .filter(|l| l.contains("[ctl] plc: t="))
+        .take(2)
+    {
+        println!("net_pubsub_machines: B: {l}");
+    }
+    for line in netbench_counters(&a)
+        .iter()
+        .chain(netbench_counters(&b).iter())
+    {
+        println!("net_pubsub_machines: {line}");
+    }
+}
+
+/// A machine's NIC partition's last counters.
+fn netbench_counters(o: &Outcome) -> Vec<String> {
+    xtask::netbench::last_nic_counters(&o.lines)
+        .into_iter()
+        .map(String::from)
+        .collect()
 }
