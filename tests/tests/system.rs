@@ -316,21 +316,48 @@ fn system_leftover() {
     }
 }
 
+/// `plcctl --connect 127.0.0.1:PORT --key config/systems/plc-guest/keys/engineering.key
+/// read NAME`'s line, once the PLC answers.
+fn online_read(port: u16, name: &str) -> Option<String> {
+    let key = xtask::workspace_root().join("config/systems/plc-guest/keys/engineering.key");
+    let args: Vec<String> = [
+        "--connect",
+        &format!("127.0.0.1:{port}"),
+        "--key",
+        &key.display().to_string(),
+        "read",
+        name,
+    ]
+    .iter()
+    .map(|s| s.to_string())
+    .collect();
+    let command = plcctl::Command::parse(&args).ok()?;
+    let mut lines = Vec::new();
+    plcctl::execute(&command, &mut |l| lines.push(l.to_string())).ok()?;
+    lines.into_iter().next()
+}
+
 #[test]
 fn system_default() {
     // The host side: the guest's page through the forwarded port, asked for until it
     // comes (the system boots meanwhile).
-    let (o, (page, level)) = boot_beside("system_default", |ports, ended| {
-        let (mut page, mut level) = (None, None);
+    let (o, (page, level, online)) = boot_beside("system_default", |ports, ended| {
+        let (mut page, mut level, mut online) = (None, None, None);
         while !ended.load(std::sync::atomic::Ordering::SeqCst)
-            && (page.is_none() || level.is_none())
+            && (page.is_none() || level.is_none() || online.is_none())
         {
             page = page.or_else(|| http_get(ports[0], "/"));
             level = level.or_else(|| scenarios::modbus_level(ports[1]));
+            online = online.or_else(|| online_read(ports[2], "level"));
             std::thread::sleep(std::time::Duration::from_millis(500));
         }
-        (page, level)
+        (page, level, online)
     });
+    check(
+        &o,
+        online.as_deref().is_some_and(|l| l.starts_with("level = ")),
+        &format!("plcctl over TCP with the engineering key: {online:?}"),
+    );
     check(
         &o,
         level.is_some_and(|l| (0.0..2.0).contains(&l)),

@@ -69,11 +69,14 @@ pub fn iommu() -> Vec<String> {
 }
 
 /// What `cargo xtask run` forwards to the NIC (host port on 127.0.0.1, address and port
-/// behind the NIC): the soft-PLC's Modbus/TCP server (its `plc.net` address in
-/// config/systems/plc-guest.toml) and the guest's HTTP port, documented in
-/// docs/commands.md.
-pub const RUN_FORWARDS: &[(u16, &str, u16)] =
-    &[(10502, "10.0.2.16", 502), (10080, "10.0.2.15", 80)];
+/// behind the NIC): the soft-PLC's Modbus/TCP server and online service on TCP (its
+/// `plc.net` address in config/systems/plc-guest.toml) and the guest's HTTP port,
+/// documented in docs/commands.md.
+pub const RUN_FORWARDS: &[(u16, &str, u16)] = &[
+    (10502, "10.0.2.16", 502),
+    (11202, "10.0.2.16", 1202),
+    (10080, "10.0.2.15", 80),
+];
 
 /// Where COM2 goes.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
