@@ -79,7 +79,7 @@
 //! plc.modbus = { port = 502, unit = 1, writable = ["markers"] }  # needs plc.net
 //! plc.online_tcp = { port = 1202, clients.eng = { key = "keys/eng.key", access = "download" } }  # needs plc.net
 //! plc.publish = { to = "10.0.0.2:61499", vars = ["level", "level_ok"] }  # needs plc.net
-//! plc.subscribe = { port = 61499, vars = ["valve"], valid = "valve_ok", timeout = "100ms" }  # needs plc.net
+//! plc.subscribe = { port = 61499, group = "239.0.0.1", vars = ["valve"], valid = "valve_ok", timeout = "100ms" }  # needs plc.net
 //! plc.store = { request = "disk-req", response = "disk-resp", retain_every = "1s" }  # needs a virtual disk
 //! data.plc_image = ["../plc/tank.st"]  # other partitions only: see "Data entries"
 //! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
@@ -212,8 +212,9 @@
 //! `"force"` or `"download"`, as `plc.online.access`). `plc.publish` (needs `plc.net`)
 //! sends the values of `vars` (1..=16 variables of the program, no name twice, of types the
 //! FBDK encoding carries) after every release in which a task runs, as one UDP datagram
-//! to `to` (`"<IPv4>:<port>"`); `plc.subscribe` (needs `plc.net`) takes datagrams on UDP
-//! `port` (not a TCP service's port here) into `vars` between releases, valid while the
+//! to `to` (`"<IPv4>:<port>"`, unicast or a multicast group); `plc.subscribe` (needs
+//! `plc.net`) takes datagrams on UDP `port` (not a TCP service's port here), also those
+//! to the multicast `group` it joins if one is given, into `vars` between releases, valid while the
 //! last good one is younger than `timeout` (1 ms to 3600 s, default 100 ms), with `valid`
 //! an optional BOOL variable the runtime keeps TRUE while it is; on a lapse the variables
 //! go to zero. The encoding and the runtime's part: docs/plc.md. `plc.store` keeps the

@@ -205,6 +205,7 @@ pub struct PlcPublish {
 #[serde(deny_unknown_fields)]
 pub struct PlcSubscribe {
     pub port: Spanned<i64>,
+    pub group: Option<Spanned<String>>,
     pub vars: Vec<Spanned<String>>,
     pub valid: Option<Spanned<String>>,
     pub timeout: Option<Spanned<Scalar>>,

@@ -232,6 +232,8 @@ pub struct PlcPublish {
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct PlcSubscribe {
     pub port: u16,
+    /// An IPv4 multicast group joined to receive its datagrams too.
+    pub group: Option<[u8; 4]>,
     pub vars: Vec<String>,
     /// A BOOL variable the runtime keeps TRUE while the subscription is valid.
     pub valid: Option<String>,

@@ -1340,8 +1340,26 @@ impl Validator<'_, '_> {
                 })
             }
         };
+        let group = match &s.group {
+            None => Some(None),
+            Some(g) => match parse_ipv4(g.get_ref()).filter(|ip| (224..=239).contains(&ip[0])) {
+                Some(ip) => Some(Some(ip)),
+                None => {
+                    self.error(
+                        start(g),
+                        &path.key("group"),
+                        format!(
+                            "`{}` is no IPv4 multicast group (224.0.0.0 to 239.255.255.255, e.g. \"239.0.0.1\")",
+                            g.get_ref()
+                        ),
+                    );
+                    None
+                }
+            },
+        };
         Some(PlcSubscribe {
             port: port? as u16,
+            group: group?,
             vars: vars?,
             valid: s.valid.as_ref().map(|v| v.get_ref().clone()),
             timeout_ns: timeout?,

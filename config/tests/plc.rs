@@ -643,7 +643,7 @@ ports.tx = { kind = \"queuing\", direction = \"out\", size = 1514, depth = 8 }
 plc.net = { mac = \"52:54:00:12:34:57\", address = \"10.0.2.16/24\", rx = \"rx\", tx = \"tx\" }
 plc.modbus = { port = 502 }
 plc.publish = { to = \"10.0.2.17:61499\", vars = [\"a\", \"b\"] }
-plc.subscribe = { port = 61499, vars = [\"c\"], valid = \"ok\", timeout = \"50ms\" }
+plc.subscribe = { port = 61499, group = \"239.0.0.1\", vars = [\"c\"], valid = \"ok\", timeout = \"50ms\" }
 # b";
     let base = (
         "ports.in = { kind = \"sampling\", direction = \"in\", size = 8 }\n",
@@ -687,11 +687,18 @@ plc.subscribe = { port = 61499, vars = [\"c\"], valid = \"ok\", timeout = \"50ms
             "1 ms to 3600 s",
         ),
         (
-            "port = 61499, vars = [\"c\"]",
-            "port = 502, vars = [\"c\"]",
-            "{ port = 502, vars",
+            "port = 61499, group",
+            "port = 502, group",
+            "{ port = 502, group",
             "partitions.b.plc.subscribe.port",
             "also a TCP service's port",
+        ),
+        (
+            "group = \"239.0.0.1\"",
+            "group = \"10.0.0.1\"",
+            "\"10.0.0.1\"",
+            "partitions.b.plc.subscribe.group",
+            "no IPv4 multicast group",
         ),
     ] {
         let src = plc(&[base, ("# b", net), (from, to)]);

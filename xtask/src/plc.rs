@@ -241,6 +241,7 @@ fn package(
             .zip(subscribed.as_deref())
             .map(|(s, names)| package::Subscription {
                 port: s.port,
+                group: s.group,
                 timeout_ns: s.timeout_ns,
                 names,
                 valid: s.valid.as_deref(),

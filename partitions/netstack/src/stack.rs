@@ -694,7 +694,10 @@ impl Stack {
             return false;
         }
         let cidr = Ipv4Cidr::new(self.config.address, self.config.prefix);
-        cidr.contains_addr(&ip) || self.config.gateway.is_some() || ip.is_broadcast()
+        cidr.contains_addr(&ip)
+            || self.config.gateway.is_some()
+            || ip.is_broadcast()
+            || ip.is_multicast()
     }
 
     /// The outcome of a connect under way: `Ok` once connected, its error once failed
@@ -949,6 +952,17 @@ impl Stack {
             }
         }
         Ok(())
+    }
+
+    /// Joins the IPv4 multicast `group` on the Ethernet interface: datagrams to it are
+    /// received from then on (and IGMP reports tell routers so).
+    pub fn join_multicast(&mut self, group: Ipv4Address) -> Result<(), Error> {
+        if !group.is_multicast() {
+            return Err(Error::Invalid);
+        }
+        self.eth
+            .join_multicast_group(IpAddress::Ipv4(group))
+            .map_err(|_| Error::NoBuffers)
     }
 
     /// `close`: the socket is gone; a connection finishes in the background, the

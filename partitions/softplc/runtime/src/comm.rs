@@ -382,7 +382,12 @@ impl<'k> Comm<'k> {
             None => None,
         };
         let subscribe = match pubsub.subscribe {
-            Some(sub) => Some(udp(&mut stack, sub.port)?),
+            Some(sub) => {
+                if let Some([a, b, c, d]) = sub.group {
+                    stack.join_multicast(Ipv4Address::new(a, b, c, d))?;
+                }
+                Some(udp(&mut stack, sub.port)?)
+            }
             None => None,
         };
         let mut slots = Vec::new();
@@ -1188,6 +1193,17 @@ mod tests {
 
     #[test]
     fn a_publication_reaches_the_subscriber_and_the_latest_datagram_wins() {
+        // Unicast, and to a multicast group the subscriber joined; not to another group.
+        for (to, group, arrives) in [
+            ([10, 0, 0, 2], None, true),
+            ([239, 0, 0, 7], Some([239, 0, 0, 7]), true),
+            ([239, 0, 0, 8], Some([239, 0, 0, 7]), false),
+        ] {
+            publication_reaches_the_subscriber(to, group, arrives);
+        }
+    }
+
+    fn publication_reaches_the_subscriber(to: [u8; 4], group: Option<[u8; 4]>, arrives: bool) {
         use crate::package::{PubSub, Subscription};
         let plc = |ip: [u8; 4], mac: u8, pubsub: PubSub<'static>| {
             let net = Net {
@@ -1204,7 +1220,7 @@ mod tests {
             [10, 0, 0, 1],
             1,
             PubSub {
-                publish: Some(([10, 0, 0, 2], 61499, "x")),
+                publish: Some((to, 61499, "x")),
                 subscribe: None,
             },
         );
@@ -1215,6 +1231,7 @@ mod tests {
                 publish: None,
                 subscribe: Some(Subscription {
                     port: 61499,
+                    group,
                     timeout_ns: 1,
                     names: "x",
                     valid: None,
@@ -1241,8 +1258,17 @@ mod tests {
             run(&mut a, &mut b, &mut xa, &mut xb);
         }
         assert_eq!(xa.publication.len, 0);
-        assert!(a.stats.published >= 19 && b.stats.received >= 1);
+        if !arrives {
+            assert_eq!((b.stats.received, xb.subscription.len), (0, 0), "{to:?}");
+            return;
+        }
+        assert!(
+            a.stats.published >= 19 && b.stats.received >= 1,
+            "{to:?}: {:?} {:?}",
+            a.stats,
+            b.stats
+        );
         assert_eq!(xb.subscription.len, 1);
-        assert_eq!(xb.subscription.bytes[0], 19, "the latest datagram");
+        assert_eq!(xb.subscription.bytes[0], 19, "the latest datagram: {to:?}");
     }
 }

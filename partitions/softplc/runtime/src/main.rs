@@ -94,7 +94,8 @@
 //!   `rejected`: online sessions ended by a record that did not open, `published` and
 //!   `received`: publish/subscribe datagrams);
 //! - with `plc.publish` / `plc.subscribe`, at start `plc: publish to <ip>:<port>
-//!   vars=<a>,<b>` and `plc: subscribe on port <p> vars=<a>,<b> valid=<variable|-> timeout_ms=<n>`,
+//!   vars=<a>,<b>` and `plc: subscribe on port <p> [group=<ip>] vars=<a>,<b>
+//!   valid=<variable|-> timeout_ms=<n>`,
 //!   then `plc: subscription valid` and `plc: subscription lapsed: ...` when its validity
 //!   changes, and `plc: t=<ms>ms subscription good=<n> bad=<n>` (messages taken, refused)
 //!   every [`STATS_EVERY_MS`];
@@ -1230,7 +1231,11 @@ impl PlcPartition {
                     println!("{}", line.as_str());
                 }
                 if let Some(sub) = pubsub.subscribe {
-                    let mut line = text!("plc: subscribe on port {} vars=", sub.port);
+                    let mut line = text!("plc: subscribe on port {}", sub.port);
+                    if let Some([a, b, c, d]) = sub.group {
+                        let _ = write!(line, " group={a}.{b}.{c}.{d}");
+                    }
+                    let _ = write!(line, " vars=");
                     for (i, name) in sub.names.split('\n').enumerate() {
                         let _ = write!(line, "{}{name}", if i == 0 { "" } else { "," });
                     }

@@ -90,7 +90,8 @@
 //!   +18  2    bytes S of the subscribed names
 //!   +20  1    bytes V of the validity variable's name (0: none)
 //!   +21  3    reserved (0)
-//!   +24  P    published variable names, UTF-8, separated by `\n` (1..=16 names)
+//!   +24  4    the IPv4 multicast group the subscription joins (0.0.0.0: none)
+//!   +28  P    published variable names, UTF-8, separated by `\n` (1..=16 names)
 //!   ...  S    subscribed variable names, the same
 //!   ...  V    the validity variable's name (a BOOL of the program)
 //!   ...  ...  with the online protocol on TCP: 1..=[`MAX_CLIENTS`] client records of
@@ -312,7 +313,7 @@ pub const CLIENT_RECORD: usize = 4 + 32 + plc_online::session::MAX_KEY;
 /// Most clients of the online protocol on TCP.
 pub const MAX_CLIENTS: usize = 8;
 /// Bytes of the publish/subscribe part's head.
-pub const PUBSUB_HEAD: usize = 24;
+pub const PUBSUB_HEAD: usize = 28;
 /// Most variables a publication or subscription carries.
 pub const MAX_PUBSUB_VARS: usize = 16;
 
@@ -328,6 +329,8 @@ pub struct PubSub<'a> {
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Subscription<'a> {
     pub port: u16,
+    /// An IPv4 multicast group joined to receive its datagrams too.
+    pub group: Option<[u8; 4]>,
     pub timeout_ns: u64,
     /// The subscribed names, separated by `\n`.
     pub names: &'a str,
@@ -365,13 +368,16 @@ impl<'a> PubSub<'a> {
             (port != 0 && names_ok(published)).then_some(Some((ip, port, published)))?
         };
         let port = u16_at(head, 6);
+        let group = [head[24], head[25], head[26], head[27]];
         let subscribe = if port == 0 {
-            (sl == 0 && v == 0 && u64_at(head, 8) == 0).then_some(None)?
+            (sl == 0 && v == 0 && u64_at(head, 8) == 0 && group == [0; 4]).then_some(None)?
         } else {
             let timeout_ns = u64_at(head, 8);
-            let ok = timeout_ns > 0 && names_ok(subscribed);
+            let group_ok = group == [0; 4] || (224..=239).contains(&group[0]);
+            let ok = timeout_ns > 0 && names_ok(subscribed) && group_ok;
             ok.then_some(Some(Subscription {
                 port,
+                group: (group != [0; 4]).then_some(group),
                 timeout_ns,
                 names: subscribed,
                 valid: (v > 0).then_some(valid),
@@ -393,6 +399,9 @@ impl<'a> PubSub<'a> {
         }
         if let Some(s) = self.subscribe {
             b[6..8].copy_from_slice(&s.port.to_le_bytes());
+            if let Some(g) = s.group {
+                b[24..28].copy_from_slice(&g);
+            }
             b[8..16].copy_from_slice(&s.timeout_ns.to_le_bytes());
             b[18..20].copy_from_slice(&(s.names.len() as u16).to_le_bytes());
             text.extend_from_slice(s.names.as_bytes());
@@ -1616,6 +1625,7 @@ mod tests {
             publish: Some(([10, 0, 2, 16], 61499, "level\nlevel_ok")),
             subscribe: Some(Subscription {
                 port: 61500,
+                group: Some([239, 0, 0, 1]),
                 timeout_ns: 100_000_000,
                 names: "valve",
                 valid: Some("valve_ok"),
@@ -1663,7 +1673,8 @@ mod tests {
             );
         }
         // A publication without a port, a subscription timeout of 0, a reserved byte,
-        // names longer than the part, an empty name, text that is not UTF-8.
+        // names longer than the part, an empty name, text that is not UTF-8, a group that
+        // is no multicast address.
         let part = block + NET_BLOCK;
         for (at, value) in [
             (part + 4, 0u8),
@@ -1672,6 +1683,7 @@ mod tests {
             (part + 16, 200),
             (part + PUBSUB_HEAD, b'\n'),
             (part + PUBSUB_HEAD + 1, 0xff),
+            (part + 24, 10),
         ] {
             let mut bad = good.clone();
             bad[at] = value;

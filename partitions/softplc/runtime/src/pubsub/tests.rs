@@ -143,6 +143,7 @@ fn an_endpoint_publishes_while_running_and_its_subscription_lapses_to_zero() {
         publish: None,
         subscribe: Some(Subscription {
             port: 61499,
+            group: None,
             timeout_ns: 100,
             names: "Main.level\nMain.count",
             valid: Some("Main.alarm"),
