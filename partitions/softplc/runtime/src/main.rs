@@ -739,9 +739,7 @@ extern "C" fn control() {
                     && let Some(mut exchange) = EXCHANGE.try_lock()
                 {
                     if let Some(modbus) = net.modbus {
-                        let running = life.rt.schedule.order[..life.rt.schedule.count]
-                            .iter()
-                            .any(|&t| life.rt.stopped[t].is_none());
+                        let running = life.rt.any_task_running();
                         softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
                     }
                     if net.online.is_some() {
@@ -890,9 +888,7 @@ extern "C" fn comm() {
 fn pubsub_between_releases(endpoint: &mut softplc::pubsub::Endpoint, life: &mut Life) {
     use softplc::comm::MAX_DATAGRAM;
     use softplc::pubsub::Change;
-    let running = life.rt.schedule.order[..life.rt.schedule.count]
-        .iter()
-        .any(|&t| life.rt.stopped[t].is_none());
+    let running = life.rt.any_task_running();
     let mut exchange = EXCHANGE.try_lock();
     let message = exchange.as_mut().and_then(|x| {
         let d = x.subscription;
@@ -1225,9 +1221,7 @@ impl PlcPartition {
             if let Some(pubsub) = net.pubsub {
                 if let Some(([a, b, c, d], port, names)) = pubsub.publish {
                     let mut line = text!("plc: publish to {a}.{b}.{c}.{d}:{port} vars=");
-                    for (i, name) in names.split('\n').enumerate() {
-                        let _ = write!(line, "{}{name}", if i == 0 { "" } else { "," });
-                    }
+                    write_names(&mut line, names);
                     println!("{}", line.as_str());
                 }
                 if let Some(sub) = pubsub.subscribe {
@@ -1236,9 +1230,7 @@ impl PlcPartition {
                         let _ = write!(line, " group={a}.{b}.{c}.{d}");
                     }
                     let _ = write!(line, " vars=");
-                    for (i, name) in sub.names.split('\n').enumerate() {
-                        let _ = write!(line, "{}{name}", if i == 0 { "" } else { "," });
-                    }
+                    write_names(&mut line, sub.names);
                     let _ = write!(
                         line,
                         " valid={} timeout_ms={}",
@@ -1261,6 +1253,13 @@ impl PlcPartition {
             let priority = control_priority.saturating_sub(1).max(1);
             spawn(ctx, "comm", comm, period(), priority);
         }
+    }
+}
+
+/// Writes the package's newline-separated `names` comma-separated (the start lines' lists).
+fn write_names(line: &mut impl Write, names: &str) {
+    for (i, name) in names.split('\n').enumerate() {
+        let _ = write!(line, "{}{name}", if i == 0 { "" } else { "," });
     }
 }
 

@@ -655,6 +655,15 @@ impl Runtime {
         }
     }
 
+    /// Whether some task runs (is not stopped): the PLC is in RUN for its network
+    /// services (Modbus answers exception 4 when none does; a publication goes out only
+    /// while one does).
+    pub fn any_task_running(&self) -> bool {
+        self.stopped[..self.schedule.count]
+            .iter()
+            .any(|stop| stop.is_none())
+    }
+
     /// Online STOP: `task` runs no more and its outputs go to their safe values now (the
     /// process image takes them at the end of the next release, as after a fault). `false`
     /// when there is no such task. Stopping a stopped task keeps why it stopped.
