@@ -702,27 +702,7 @@ fn net_pubsub() {
 /// The loop's round trips (ms) in the field PLC's watch lines from `from_ms` to `to_ms` of
 /// its time.
 fn loop_round_trips(o: &Outcome, from_ms: u64, to_ms: u64) -> Vec<i64> {
-    o.lines
-        .iter()
-        .filter(|l| l.contains("[field] plc: t=") && l.contains(" loop_ms="))
-        .filter_map(|l| {
-            let t: u64 = l
-                .split("plc: t=")
-                .nth(1)?
-                .split("ms")
-                .next()?
-                .parse()
-                .ok()?;
-            let ms: i64 = l
-                .split(" loop_ms=")
-                .nth(1)?
-                .split(' ')
-                .next()?
-                .parse()
-                .ok()?;
-            (from_ms..to_ms).contains(&t).then_some(ms)
-        })
-        .collect()
+    xtask::pubsubbench::loop_round_trips(&o.lines, from_ms, to_ms)
 }
 
 #[test]

@@ -27,6 +27,7 @@ pub mod oscat;
 pub mod plc;
 pub mod plcnetbench;
 pub mod plot;
+pub mod pubsubbench;
 pub mod qemu;
 pub mod scenario;
 pub mod tools;

@@ -717,13 +717,15 @@ fn bench_timeout(deterministic_time: bool) -> Duration {
 }
 
 /// `cargo xtask bench --net`: only the network benchmarks (the guest's,
-/// [`xtask::netbench`], and the PLC's, [`xtask::plcnetbench`], always on real time); writes
+/// [`xtask::netbench`], and the PLC's, [`xtask::plcnetbench`] and
+/// [`xtask::pubsubbench`], always on real time); writes
 /// `target/bench/net.json`.
 fn net_bench() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let mut metrics = xtask::plcnetbench::run(&qemu, &system, &dir)?;
+    metrics.extend(xtask::pubsubbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     for m in &metrics {
         println!("{}", xtask::bench::format_line(m));
@@ -973,6 +975,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     // Timed from the host: always real time.
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::plcnetbench::run(&qemu, &system, &dir)?);
+    metrics.extend(xtask::pubsubbench::run(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {
