@@ -21,6 +21,8 @@
 //! | `plcctl force NAME=VALUE` | `forced <name> = <value>`: the variable keeps the value (the program's writes to it have no effect) until `unforce`; the value as for `write` |
 //! | `plcctl unforce NAME` | `unforced <name>` |
 //! | `plcctl stats` | `task <name> stopped=<bool> cycles=<n> last_us=.. min_us=.. mean_us=.. max_us=.. last_jitter_us=.. max_jitter_us=.. overruns=<n> faults=<n>` per task |
+//! | `plcctl stop [TASK...]` | `stopped task <name>` per task: it runs no more and its outputs take their safe values (every task without a name: the PLC goes to STOP, and a Modbus write is answered with exception 4) |
+//! | `plcctl start [TASK...]` | `started task <name>` per task: a stopped task (by `stop`, a trap or its watchdog) runs again from its next release, its data kept (every task without a name) |
 //! | `plcctl download FILE.plcb` | `downloaded FILE: <n> bytes, running from release <r>` |
 //! | `plcctl store` | `store: loaded boot project #<n>, RETAIN snapshot #<m>` (what the PLC's persistent store, `plc.store`, loaded at its last cold start; `none` for the configured program or initial values) and `store: saved boot project #<n>, RETAIN snapshot #<m>` (the last saves), or `store: none (the PLC has no plc.store)` |
 //! | `plcctl version` | `protocol: plcctl <n>, PLC <m>`: the online protocol versions plcctl and the PLC speak (a PLC of version 1 does not know the question: `PLC 1`) |
@@ -124,6 +126,11 @@ pub enum Action {
     },
     Unforce(String),
     Stats,
+    /// STOP (`run` false) or START (`run` true) of the named tasks, or of every task.
+    Run {
+        tasks: Vec<String>,
+        run: bool,
+    },
     Store,
     Download(String),
     Version,
@@ -246,6 +253,10 @@ impl Command {
                 }
             }
             "unforce" => Action::Unforce(one("NAME")?),
+            "stop" | "start" => Action::Run {
+                tasks: rest.to_vec(),
+                run: verb == "start",
+            },
             "download" => Action::Download(one("FILE")?),
             "list" | "stats" | "store" | "version" => {
                 return Err(format!("{verb} takes no arguments"));
@@ -479,6 +490,7 @@ impl<T: Transport> Link<T> {
                 Ok(())
             }
             Action::Stats => self.stats(out),
+            Action::Run { tasks, run } => self.stop_or_start(tasks, *run, out),
             Action::Store => {
                 let s = match self.ask(&Request::Store)? {
                     (Status::Ok, message) => result(&message)
@@ -590,6 +602,70 @@ impl<T: Transport> Link<T> {
                 last_jitter / 1000,
                 max_jitter / 1000
             ));
+        }
+        Ok(())
+    }
+
+    /// The PLC's tasks by number: their names, as STATS tells them.
+    fn task_names(&mut self) -> Result<Vec<String>, Failure> {
+        let mut names = Vec::new();
+        for task in 0..=u8::MAX {
+            let message = match self.ask(&Request::Stats { task })? {
+                (Status::Ok, message) => message,
+                (Status::NoSuchTask, _) if task > 0 => break,
+                (status, _) => return Err(Failure::refused("STATS", status)),
+            };
+            let s = result(&message)
+                .and_then(|mut r| read_stats(&mut r))
+                .ok_or_else(|| Failure::device("STATS: a malformed answer".into()))?;
+            names.push(s.name.to_string());
+        }
+        Ok(names)
+    }
+
+    /// STOP or START of the tasks named (every task when none is), each name checked
+    /// before any task is touched.
+    fn stop_or_start(
+        &mut self,
+        tasks: &[String],
+        run: bool,
+        out: &mut dyn FnMut(&str),
+    ) -> Result<(), Failure> {
+        let names = self.task_names()?;
+        let chosen = if tasks.is_empty() {
+            (0..names.len()).collect::<Vec<_>>()
+        } else {
+            let mut chosen = Vec::new();
+            for task in tasks {
+                let i = names
+                    .iter()
+                    .position(|n| n.eq_ignore_ascii_case(task))
+                    .ok_or_else(|| Failure {
+                        message: format!(
+                            "no task {task} in the PLC (its tasks: {})",
+                            names.join(", ")
+                        ),
+                        status: 1,
+                    })?;
+                chosen.push(i);
+            }
+            chosen
+        };
+        let (what, done) = if run {
+            ("START", "started")
+        } else {
+            ("STOP", "stopped")
+        };
+        for i in chosen {
+            // At most 256 tasks: STATS numbers them with a byte.
+            let task = i as u8;
+            let request = if run {
+                Request::Start { task }
+            } else {
+                Request::Stop { task }
+            };
+            self.ok(&request, &format!("{what} {}", names[i]))?;
+            out(&format!("{done} task {}", names[i]));
         }
         Ok(())
     }

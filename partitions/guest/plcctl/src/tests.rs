@@ -18,6 +18,8 @@ struct Plc {
     forced: Option<f64>,
     /// The forced TOD's nanoseconds.
     start: Option<i64>,
+    /// Its task is stopped (STOP, START).
+    stopped: bool,
     /// Answers VERSION as protocol version 1 did (MALFORMED).
     version_1: bool,
     answers: VecDeque<Vec<u8>>,
@@ -33,6 +35,7 @@ impl Plc {
             valve: 0.5,
             forced: None,
             start: None,
+            stopped: false,
             version_1: false,
             answers: VecDeque::new(),
             paused: Duration::ZERO,
@@ -134,16 +137,18 @@ impl Transport for Plc {
                 &mut w,
                 &TaskStats {
                     name: "CYCLE.tank",
-                    stopped: false,
+                    stopped: self.stopped,
                     figures: [10, 12_000, 9_000, 11_000, 86_000, 1_000, 99_000, 0, 0],
                 },
             )
             .unwrap(),
             Request::Stats { .. } => status = Status::NoSuchTask,
+            Request::Stop { task: 0 } => self.stopped = true,
+            Request::Start { task: 0 } => self.stopped = false,
+            Request::Stop { .. } | Request::Start { .. } => status = Status::NoSuchTask,
             Request::DownloadBegin { .. } => self.image.clear(),
             Request::DownloadChunk { bytes, .. } => self.image.extend_from_slice(bytes),
             Request::DownloadCommit => w.put(&42u64.to_le_bytes()).unwrap(),
-            _ => status = Status::Unsupported,
         }
         let n = if status == Status::Ok {
             w.len()
@@ -359,6 +364,44 @@ fn list_read_watch_force_unforce_and_stats() {
         [
             "task CYCLE.tank stopped=false cycles=10 last_us=12 min_us=9 mean_us=11 max_us=86 last_jitter_us=1 max_jitter_us=99 overruns=0 faults=0"
         ]
+    );
+}
+
+#[test]
+fn stop_and_start_name_tasks_or_take_them_all() {
+    let (r, lines, plc) = run(Plc::new(Access::Force), "stop");
+    assert_eq!(
+        (r, lines),
+        (Ok(()), vec!["stopped task CYCLE.tank".to_string()])
+    );
+    assert!(plc.stopped);
+    let mut plc = Plc::new(Access::Force);
+    plc.stopped = true;
+    let (r, lines, plc) = run(plc, "start cycle.tank");
+    assert_eq!(
+        (r, lines),
+        (Ok(()), vec!["started task CYCLE.tank".to_string()])
+    );
+    assert!(!plc.stopped);
+    // An unknown name touches no task.
+    let (r, lines, plc) = run(Plc::new(Access::Force), "stop CYCLE.tank fast");
+    assert!(lines.is_empty() && !plc.stopped);
+    assert_eq!(
+        r.unwrap_err().message,
+        "no task fast in the PLC (its tasks: CYCLE.tank)"
+    );
+    let (r, _, plc) = run(Plc::new(Access::Monitor), "stop");
+    assert!(!plc.stopped);
+    assert_eq!(
+        r.unwrap_err().message,
+        "STOP CYCLE.tank: FORBIDDEN (the client's access in the PLC's configuration does not allow it)"
+    );
+    assert_eq!(
+        Command::parse(&args("start a b")).unwrap().action,
+        Action::Run {
+            tasks: vec!["a".into(), "b".into()],
+            run: true
+        }
     );
 }
 
