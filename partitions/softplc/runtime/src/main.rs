@@ -703,6 +703,8 @@ extern "C" fn control() {
                 life.begin();
                 life.end();
                 let stopped_before = life.rt.stopped.map(|s| s.is_some());
+                // Online requests from the ports and from TCP, then Modbus (which answers
+                // exception 4 to a write once every task is stopped, this release too).
                 softplc::online::serve_pending(
                     &life.package,
                     &mut *life.io,
@@ -711,6 +713,24 @@ extern "C" fn control() {
                     life.rt,
                     &mut loader,
                 );
+                if let Some(net) = life.package.net()
+                    && let Some(mut exchange) = EXCHANGE.try_lock()
+                {
+                    if net.online.is_some() {
+                        softplc::online::serve_exchange(
+                            &mut exchange,
+                            &life.package,
+                            &mut life.machine,
+                            &life.image,
+                            life.rt,
+                            &mut loader,
+                        );
+                    }
+                    if let Some(modbus) = net.modbus {
+                        let running = life.rt.any_task_running();
+                        softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
+                    }
+                }
                 let mut stopped_now = false;
                 for &task in &life.rt.schedule.order[..life.rt.schedule.count] {
                     let name = life.image.task(task).map_or("?", |t| t.name);
@@ -734,24 +754,6 @@ extern "C" fn control() {
                 );
                 if let Some(reason) = loader.refusal.take() {
                     println!("plc: download refused: {reason}");
-                }
-                if let Some(net) = life.package.net()
-                    && let Some(mut exchange) = EXCHANGE.try_lock()
-                {
-                    if let Some(modbus) = net.modbus {
-                        let running = life.rt.any_task_running();
-                        softplc::comm::serve_modbus(&mut exchange, &modbus, running, life.areas);
-                    }
-                    if net.online.is_some() {
-                        softplc::online::serve_exchange(
-                            &mut exchange,
-                            &life.package,
-                            &mut life.machine,
-                            &life.image,
-                            life.rt,
-                            &mut loader,
-                        );
-                    }
                 }
                 if let Some(endpoint) = endpoint.as_mut() {
                     pubsub_between_releases(endpoint, life);
