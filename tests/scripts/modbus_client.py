@@ -1,9 +1,10 @@
 #!/usr/bin/env python3
 """The host's Modbus/TCP client of scenario net_modbus: pymodbus 3.x (from PyPI, in the
-venv `.ci/run` makes), not ours. Usage: modbus_client.py PORT. Reads the tank's level,
-writes the setpoint marker and provokes each exception the PLC can give while it runs;
-prints one `check <name> ok|FAIL <detail>` line per check and `level <m>` lines, and exits
-0 when every check passed."""
+venv `.ci/run` makes), not ours. Usage: modbus_client.py PORT [stopped]. Reads the tank's
+level, writes the setpoint marker and provokes each exception the PLC can give while it
+runs; with `stopped` (every task of the PLC stopped over its online service), checks that a
+write gets exception 4 and a read still its answer. Prints one `check <name> ok|FAIL
+<detail>` line per check and `level <m>` lines, and exits 0 when every check passed."""
 
 import struct
 import sys
@@ -13,6 +14,7 @@ import pymodbus
 from pymodbus.client import ModbusTcpClient
 
 PORT = int(sys.argv[1])
+STOPPED = sys.argv[2:] == ["stopped"]
 UNIT = 1
 MARKERS = 0x3000  # holding register of %MW0 (the setpoint in mm)
 failed = []
@@ -51,6 +53,16 @@ while not client.connect() or level(client) is None:
     time.sleep(1)
 print(f"pymodbus {pymodbus.__version__}", flush=True)
 
+if STOPPED:
+    rr = client.write_register(MARKERS, 600, **unit_kw(UNIT))
+    check("exception_4_stopped", exception_of(rr) == 4, f"{rr}")
+    rr = client.write_coil(MARKERS * 1 + 8 * 40, True, **unit_kw(UNIT))
+    check("exception_4_stopped_coil", exception_of(rr) == 4, f"{rr}")
+    rr = client.read_holding_registers(MARKERS, count=1, **unit_kw(UNIT))
+    check("read_while_stopped", not rr.isError(), f"{getattr(rr, 'registers', rr)}")
+    client.close()
+    sys.exit(1 if failed else 0)
+
 first = level(client)
 check("read_input_registers", first is not None and 0.0 < first < 2.0, f"level={first}")
 rr = client.read_discrete_inputs(64, count=1, **unit_kw(UNIT))
@@ -74,8 +86,8 @@ rr = client.read_coils(MARKERS + 8 * 40, count=11, **unit_kw(UNIT))
 check("read_back_coils", not rr.isError() and rr.bits[0] and rr.bits[8:11] == [True, False, True], f"{getattr(rr, 'bits', rr)}")
 
 # Exceptions: 1 an unsupported function, 2 outside the image and a read-only area,
-# 3 a quantity out of range, 0x0A another unit id. (4, a write while the PLC is stopped,
-# needs the online service's STOP: the codec's host tests cover it.)
+# 3 a quantity out of range, 0x0A another unit id. (4, a write while the PLC is stopped:
+# with `stopped`, above.)
 unsupported = getattr(client, "read_exception_status", None) or getattr(client, "report_device_id")
 rr = unsupported(**unit_kw(UNIT))
 check("exception_1", exception_of(rr) == 1, f"{rr}")

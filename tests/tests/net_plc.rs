@@ -30,6 +30,9 @@ struct Client {
     level: Option<f64>,
     /// pymodbus's output and whether it passed; `None` when skipped.
     pymodbus: Option<(String, bool)>,
+    /// plcctl's STOP over the online port, pymodbus's checks while stopped (as above),
+    /// plcctl's START; `None` when pymodbus was skipped.
+    stopped: Option<(Said, (String, bool), Said)>,
     /// The connection after a malformed frame was closed without an answer.
     malformed_closed: bool,
 }
@@ -221,18 +224,26 @@ fn client(ports: &[u16], ended: &AtomicBool) -> Client {
     match pymodbus_python() {
         Some(python) => {
             let script = xtask::workspace_root().join("tests/scripts/modbus_client.py");
-            match std::process::Command::new(python)
-                .arg(script)
+            let pymodbus = |mode: &[&str]| match std::process::Command::new(&python)
+                .arg(&script)
                 .arg(port.to_string())
+                .args(mode)
                 .output()
             {
                 Ok(out) => {
                     let text = String::from_utf8_lossy(&out.stdout).to_string()
                         + &String::from_utf8_lossy(&out.stderr);
-                    c.pymodbus = Some((text, out.status.success()));
+                    (text, out.status.success())
                 }
-                Err(e) => c.pymodbus = Some((format!("cannot run pymodbus: {e}"), false)),
-            }
+                Err(e) => (format!("cannot run pymodbus: {e}"), false),
+            };
+            c.pymodbus = Some(pymodbus(&[]));
+            // Every task stopped over the online service (engineering key): a write gets
+            // exception 4; then the PLC runs again.
+            let stop = plcctl(ports[1], "engineering", "engineering", "stop");
+            let stopped = pymodbus(&["stopped"]);
+            let start = plcctl(ports[1], "engineering", "engineering", "start");
+            c.stopped = Some((stop, stopped, start));
         }
         None => println!(
             "net_modbus: pymodbus skipped: no venv at {} (.ci/run makes it: python3 -m venv target/pymodbus-venv && target/pymodbus-venv/bin/pip install 'pymodbus>=3,<4')",
@@ -267,6 +278,35 @@ fn net_modbus() {
     if let Some((text, passed)) = &c.pymodbus {
         println!("net_modbus: pymodbus said:\n{text}");
         check(&o, *passed, "pymodbus's checks failed (its lines above)");
+    }
+    if let Some((stop, (text, passed), start)) = &c.stopped {
+        println!(
+            "net_modbus: plcctl stop: {stop:?}; pymodbus said:\n{text}plcctl start: {start:?}"
+        );
+        check(
+            &o,
+            stop.as_ref()
+                .is_ok_and(|l| !l.is_empty() && l.iter().all(|l| l.starts_with("stopped task "))),
+            &format!("plcctl stop over the online port: {stop:?}"),
+        );
+        check(
+            &o,
+            *passed,
+            &format!("pymodbus's checks with the PLC stopped failed:\n{text}"),
+        );
+        check(
+            &o,
+            start
+                .as_ref()
+                .is_ok_and(|l| !l.is_empty() && l.iter().all(|l| l.starts_with("started task "))),
+            &format!("plcctl start over the online port: {start:?}"),
+        );
+        check(
+            &o,
+            o.line(" stopped online; outputs safe").is_some()
+                && o.line(" started online").is_some(),
+            "the PLC did not log the task's stop and start",
+        );
     }
     check(
         &o,
