@@ -82,14 +82,9 @@ const LEG_TIMEOUT: Duration = Duration::from_secs(600);
 pub fn qemu_args(ports: [u16; 2]) -> Vec<String> {
     let [serve, http] = ports;
     let mut args = qemu::iommu();
-    args.extend([
-        "-netdev".to_string(),
-        format!(
-            "user,id=n0,hostfwd=tcp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=udp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=tcp:127.0.0.1:{http}-{GUEST_ADDRESS}:{HTTP_PORT}"
-        ),
-        "-device".to_string(),
-        "virtio-net-pci,netdev=n0,addr=03.0,disable-legacy=on,iommu_platform=on".to_string(),
-    ]);
+    args.extend(qemu::nic_on(&format!(
+        "user,hostfwd=tcp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=udp:127.0.0.1:{serve}-{GUEST_ADDRESS}:{SERVE_PORT},hostfwd=tcp:127.0.0.1:{http}-{GUEST_ADDRESS}:{HTTP_PORT}"
+    )));
     args
 }
 
@@ -564,7 +559,7 @@ mod tests {
         );
         assert_eq!(
             args[5],
-            "virtio-net-pci,netdev=n0,addr=03.0,disable-legacy=on,iommu_platform=on"
+            "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on"
         );
     }
 

@@ -110,16 +110,11 @@ pub fn run(
                 deterministic_time: false,
                 com2: qemu::Com2::Unconnected,
                 done_when: vec![" malformed=1 ".into()],
-                extra_args: vec![
-                    "-device".into(),
-                    "intel-iommu".into(),
-                    "-netdev".into(),
-                    format!(
-                        "user,id=n0,hostfwd=tcp:127.0.0.1:{modbus}-{PLC}:{MODBUS_PORT},hostfwd=tcp:127.0.0.1:{online}-{PLC}:{ONLINE_PORT}"
-                    ),
-                    "-device".into(),
-                    "virtio-net-pci,netdev=n0,addr=03.0,disable-legacy=on,iommu_platform=on".into(),
-                ],
+                extra_args: [
+                    qemu::iommu(),
+                    qemu::nic(&[(modbus, PLC, MODBUS_PORT), (online, PLC, ONLINE_PORT)]),
+                ]
+                .concat(),
             },
         );
         ended.store(true, Ordering::SeqCst);

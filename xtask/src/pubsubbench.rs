@@ -57,17 +57,12 @@ pub fn loop_round_trips(lines: &[String], from_ms: u64, to_ms: u64) -> Vec<i64> 
 /// The `-netdev dgram` link between the machines: this machine's port, the other's.
 fn link(local: u16, remote: u16) -> Vec<String> {
     [
-        "-device",
-        "intel-iommu",
-        "-netdev",
-        &format!(
-            "dgram,id=n0,local.type=inet,local.host=127.0.0.1,local.port={local},remote.type=inet,remote.host=127.0.0.1,remote.port={remote}"
-        ),
-        "-device",
-        "virtio-net-pci,netdev=n0,addr=03.0,disable-legacy=on,iommu_platform=on",
+        qemu::iommu(),
+        qemu::nic_on(&format!(
+            "dgram,local.type=inet,local.host=127.0.0.1,local.port={local},remote.type=inet,remote.host=127.0.0.1,remote.port={remote}"
+        )),
     ]
-    .map(String::from)
-    .to_vec()
+    .concat()
 }
 
 /// Boots both machines and measures; the metrics, or an error with the transcripts.

@@ -49,13 +49,20 @@ pub struct RunOptions {
 /// (host port, guest port) a TCP forward that listens on 127.0.0.1 only, never on
 /// another interface of the host.
 pub fn nic(forwards: &[(u16, &str, u16)]) -> Vec<String> {
-    let mut netdev = String::from("user,id=net0");
+    let mut backend = String::from("user");
     for (host, address, port) in forwards {
-        netdev.push_str(&format!(",hostfwd=tcp:127.0.0.1:{host}-{address}:{port}"));
+        backend.push_str(&format!(",hostfwd=tcp:127.0.0.1:{host}-{address}:{port}"));
     }
+    nic_on(&backend)
+}
+
+/// The NIC of [`nic`] on QEMU network backend `backend` (`-netdev`'s value without its id:
+/// `user,hostfwd=...` or `dgram,local...,remote...` for a link between two machines); with
+/// [`iommu`] before it.
+pub fn nic_on(backend: &str) -> Vec<String> {
     vec![
         "-netdev".into(),
-        netdev,
+        format!("{backend},id=net0"),
         "-device".into(),
         "virtio-net-pci,netdev=net0,addr=03.0,disable-legacy=on,iommu_platform=on".into(),
     ]
