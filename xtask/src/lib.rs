@@ -16,6 +16,7 @@ pub mod bench;
 pub mod blk;
 pub mod check_config;
 pub mod esp;
+pub mod forte;
 pub mod guest;
 pub mod iec61499;
 pub mod lint;
