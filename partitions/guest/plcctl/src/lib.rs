@@ -570,16 +570,27 @@ impl<T: Transport> Link<T> {
         }
     }
 
-    fn stats(&mut self, out: &mut dyn FnMut(&str)) -> Result<(), Failure> {
+    /// Each task's statistics, task 0 first, as STATS tells them.
+    fn each_task(
+        &mut self,
+        mut each: impl FnMut(&plc_online::TaskStats<'_>),
+    ) -> Result<(), Failure> {
         for task in 0..=u8::MAX {
             let message = match self.ask(&Request::Stats { task })? {
                 (Status::Ok, message) => message,
-                (Status::NoSuchTask, _) if task > 0 => return Ok(()),
+                (Status::NoSuchTask, _) if task > 0 => break,
                 (status, _) => return Err(Failure::refused("STATS", status)),
             };
             let s = result(&message)
                 .and_then(|mut r| read_stats(&mut r))
                 .ok_or_else(|| Failure::device("STATS: a malformed answer".into()))?;
+            each(&s);
+        }
+        Ok(())
+    }
+
+    fn stats(&mut self, out: &mut dyn FnMut(&str)) -> Result<(), Failure> {
+        self.each_task(|s| {
             let [
                 count,
                 last,
@@ -602,24 +613,13 @@ impl<T: Transport> Link<T> {
                 last_jitter / 1000,
                 max_jitter / 1000
             ));
-        }
-        Ok(())
+        })
     }
 
     /// The PLC's tasks by number: their names, as STATS tells them.
     fn task_names(&mut self) -> Result<Vec<String>, Failure> {
         let mut names = Vec::new();
-        for task in 0..=u8::MAX {
-            let message = match self.ask(&Request::Stats { task })? {
-                (Status::Ok, message) => message,
-                (Status::NoSuchTask, _) if task > 0 => break,
-                (status, _) => return Err(Failure::refused("STATS", status)),
-            };
-            let s = result(&message)
-                .and_then(|mut r| read_stats(&mut r))
-                .ok_or_else(|| Failure::device("STATS: a malformed answer".into()))?;
-            names.push(s.name.to_string());
-        }
+        self.each_task(|s| names.push(s.name.to_string()))?;
         Ok(names)
     }
 
