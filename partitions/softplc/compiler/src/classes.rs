@@ -404,6 +404,7 @@ impl Sema<'_> {
             reinit_start: 0,
             builtin: self.prog.pous[owner].builtin,
             state: LayoutState::NotStarted,
+            recursive: false,
             member: Some(Member {
                 owner,
                 kind,

@@ -352,3 +352,24 @@ fn deep_nesting_is_an_error_not_a_crash() {
     );
     assert!(compile(&[("d.st".into(), ifs)], &Options::default()).is_err());
 }
+
+/// Definitions in terms of themselves are refused with an error (E0020 or a constant's),
+/// never followed forever: a named type that is itself, a function block holding an
+/// instance of itself, global and local constants defined through each other.
+#[test]
+fn self_referencing_definitions_are_errors_not_crashes() {
+    for src in [
+        "TYPE T : T; END_TYPE PROGRAM Main VAR x : T; END_VAR END_PROGRAM",
+        "TYPE T : U; END_TYPE TYPE U : T; END_TYPE PROGRAM Main VAR x : T; END_VAR END_PROGRAM",
+        "FUNCTION_BLOCK A VAR x : A; END_VAR END_FUNCTION_BLOCK PROGRAM Main VAR x : A; END_VAR END_PROGRAM",
+        "FUNCTION_BLOCK A VAR b : B; END_VAR END_FUNCTION_BLOCK FUNCTION_BLOCK B VAR a : A; END_VAR END_FUNCTION_BLOCK PROGRAM Main VAR x : A; END_VAR END_PROGRAM",
+        "VAR_GLOBAL CONSTANT c : INT := d; d : INT := c; END_VAR PROGRAM Main VAR x : ARRAY[1..c] OF INT; END_VAR END_PROGRAM",
+        "PROGRAM Main VAR CONSTANT a : INT := b + 1; b : INT := a; END_VAR VAR x : ARRAY[1..a] OF INT; END_VAR END_PROGRAM",
+    ] {
+        assert!(
+            compile(&[("r.st".into(), src.into())], &Options::default()).is_err(),
+            "{src}"
+        );
+        check(src);
+    }
+}

@@ -243,6 +243,9 @@ impl Gen<'_> {
     /// `write_init` of a function block instance.
     fn write_fb_init(&mut self, addr: u32, ty: &Type, init: Option<&Init>) {
         let Type::Fb(pi) = ty else { return };
+        if self.prog.pous[*pi].recursive {
+            return;
+        }
         let fields: Vec<(Ident, Init)> = match init {
             Some(Init::Struct(f, _)) => f.clone(),
             Some(other) => {

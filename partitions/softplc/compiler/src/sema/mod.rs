@@ -81,6 +81,9 @@ pub struct PouDef {
     /// Whether this POU comes from the built-in prelude.
     pub builtin: bool,
     pub(crate) state: LayoutState,
+    /// It contains an instance of itself, directly or through other function blocks (E0020
+    /// reported): nothing walks into its instances, which would never end.
+    pub(crate) recursive: bool,
     /// A method, property accessor or action: what it belongs to.
     pub member: Option<Member>,
     /// A function block's base (`EXTENDS`).
@@ -535,6 +538,26 @@ impl ConstScope for () {
 
 /// Evaluates a constant expression; `None` (without a diagnostic) when it is not constant.
 pub fn const_eval(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<ConstVal> {
+    // Constants defined in terms of each other (`c := d; d := c`) would recurse forever:
+    // past this nesting the value is not a constant (their use then gets its own error).
+    const MAX_NESTING: u32 = 512;
+    thread_local! {
+        static NESTING: std::cell::Cell<u32> = const { std::cell::Cell::new(0) };
+    }
+    let depth = NESTING.with(|n| {
+        n.set(n.get() + 1);
+        n.get()
+    });
+    let value = if depth > MAX_NESTING {
+        None
+    } else {
+        const_eval_nested(prog, scope, e)
+    };
+    NESTING.with(|n| n.set(n.get() - 1));
+    value
+}
+
+fn const_eval_nested(prog: &Program, scope: &dyn ConstScope, e: &Expr) -> Option<ConstVal> {
     use ConstVal::*;
     Some(match &e.kind {
         ExprKind::Int(v) => Int(*v as i128),
@@ -671,13 +694,20 @@ impl Sema<'_> {
         if init.is_some() {
             return init.clone();
         }
-        match ty {
-            TypeRef::Named(id) => {
-                let decl = self.unit.types.iter().find(|d| d.name.name == id.name)?;
-                self.init_of(&decl.ty, &decl.init)
+        // Along a chain of named types, at most one step per type: a cycle (E0020,
+        // reported by the type's layout) ends the walk.
+        let mut ty = ty;
+        for _ in 0..=self.unit.types.len() {
+            let TypeRef::Named(id) = ty else {
+                return None;
+            };
+            let decl = self.unit.types.iter().find(|d| d.name.name == id.name)?;
+            if decl.init.is_some() {
+                return decl.init.clone();
             }
-            _ => None,
+            ty = &decl.ty;
         }
+        None
     }
 
     fn declare_types(&mut self) {
@@ -727,6 +757,7 @@ impl Sema<'_> {
                 reinit_start: 0,
                 builtin: i < prelude_pous,
                 state: LayoutState::NotStarted,
+                recursive: false,
                 member: None,
                 base: None,
                 class: None,
@@ -1183,6 +1214,7 @@ impl Sema<'_> {
         match self.prog.pous[i].state {
             LayoutState::Done => return,
             LayoutState::InProgress => {
+                self.prog.pous[i].recursive = true;
                 let span = self.prog.pous[i].span;
                 let name = self.prog.pous[i].text.clone();
                 let what = if self.prog.pous[i].base.is_some() {
