@@ -90,7 +90,7 @@
 //!
 //! Port (56 bytes) x T; names unique within their partition
 //! 0      32   name
-//! 32     4    message size in bytes (1..=4096)
+//! 32     4    message size in bytes (1..=65536, `MAX_MESSAGE_SIZE`)
 //! 36     4    depth: queuing 1..=256 messages; sampling 0
 //! 40     8    refresh period (ns) of a sampling input, 0 = none; 0 for every other port
 //! 48     2    channel index
@@ -924,7 +924,7 @@ impl<'a> SystemView<'a> {
                 return Err(fail("reserved bytes are not zero"));
             }
             if size == 0 || size > MAX_MESSAGE_SIZE {
-                return Err(fail("message size not in 1..=4096"));
+                return Err(fail("message size not in 1..=MAX_MESSAGE_SIZE"));
             }
             let depth_ok = match kind {
                 PortKind::Sampling => depth == 0,

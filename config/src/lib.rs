@@ -133,7 +133,9 @@
 //! handler; a guest kernel keeps it and creates its processes' tasks without it.
 //!
 //! **Ports and channels.** Ports have `kind` (`sampling` | `queuing`), `direction` (`in` |
-//! `out`), `size` (largest message, 1..=4096 bytes), `depth` (queuing only, 1..=256) and
+//! `out`), `size` (largest message, 1..=65536 bytes; beyond 4096, one IPC message, it
+//! travels in parts, see the service protocol's "long messages"), `depth` (queuing only,
+//! 1..=256) and
 //! `refresh` (sampling inputs only: how long a message stays valid), and queuing ports
 //! `discipline` (`fifo`, the default, | `priority`: the order in which processes waiting on
 //! the port are served, ARINC's QUEUING_DISCIPLINE; an APEX partition must create the port

@@ -37,8 +37,12 @@ pub const PARTITION_NAME_MAX: usize = syscall::TASK_NAME_MAX as usize;
 /// Longest name of anything else (system, schedule, image, port, channel, segment).
 pub const NAME_MAX: usize = 31;
 
-/// Largest message of a port: one IPC message copies at most 4 KiB.
-pub const MAX_MESSAGE_SIZE: u32 = 4096;
+/// Largest message of a port (the service protocol's limit; a message longer than one IPC
+/// message travels in parts).
+pub const MAX_MESSAGE_SIZE: u32 = protocol::MAX_MESSAGE_SIZE;
+/// The message size of an IEC 61499 runtime's management ports (`iec61499.mgmt`): one
+/// request or answer of the management protocol, as `fbctl` and the runtime use it.
+pub const MGMT_MESSAGE_SIZE: u32 = 4096;
 /// Deepest queuing port (messages).
 pub const MAX_QUEUE_DEPTH: u32 = 256;
 

@@ -307,6 +307,10 @@ pub const GUEST_RESERVED_PATHS: &[&str] = &[
     "/init",
 ];
 
+/// The longest message of a guest partition's port (`guest::arinc::MAX_MESSAGE`: what its
+/// port devices move in one `read` or `write`).
+pub const GUEST_MAX_MESSAGE: u64 = 4096;
+
 /// The smallest `stack` of a guest partition: the guest keeps its process table there.
 pub const GUEST_MIN_STACK: u64 = 1 << 20;
 

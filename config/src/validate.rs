@@ -459,6 +459,20 @@ impl Validator<'_, '_> {
             });
             if raw.guest.is_some() {
                 for (port_key, port) in in_source_order(&raw.ports) {
+                    // (An invalid size is the port check's to report.)
+                    let size = match port.get_ref().size.get_ref() {
+                        Scalar::Int(i) => units::size_from_integer(*i),
+                        Scalar::Str(s) => units::parse_size(s),
+                    };
+                    if size.is_ok_and(|s| s > GUEST_MAX_MESSAGE) {
+                        self.error(
+                            start(&port.get_ref().size),
+                            &path.key("ports").key(port_key.get_ref()).key("size"),
+                            format!(
+                                "a guest's port devices move at most {GUEST_MAX_MESSAGE} bytes a message (one `read` or `write`); longer messages are for APEX partitions"
+                            ),
+                        );
+                    }
                     let discipline = port.get_ref().discipline.as_ref();
                     if let Some(d) = discipline.filter(|d| d.get_ref() == "priority") {
                         self.error(
@@ -878,7 +892,7 @@ impl Validator<'_, '_> {
         let mgmt = f
             .mgmt
             .as_ref()
-            .and_then(|m| self.online_ports(m, &path.key("mgmt"), ports, MAX_MESSAGE_SIZE));
+            .and_then(|m| self.online_ports(m, &path.key("mgmt"), ports, MGMT_MESSAGE_SIZE));
         if self.r.diagnostics.len() != before {
             return None;
         }
@@ -2393,7 +2407,7 @@ impl Validator<'_, '_> {
                     start(&raw.size),
                     &size_path,
                     format!(
-                        "message size {} is not in 1..={MAX_MESSAGE_SIZE} bytes (one IPC message)",
+                        "message size {} is not in 1..={MAX_MESSAGE_SIZE} bytes (64 KiB)",
                         s
                     ),
                 );

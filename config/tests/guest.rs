@@ -173,6 +173,19 @@ fn a_guest_has_no_other_data_entry() {
 }
 
 #[test]
+fn a_guest_port_message_fits_one_read() {
+    expect_some(
+        &guest(
+            "guest.init = [\"/bin/sh\"]\nports.q = { kind = \"queuing\", direction = \"in\", size = \"8KiB\", depth = 2 }",
+        ),
+        "\"8KiB\"",
+        0,
+        "partitions.b.ports.q.size",
+        "a guest's port devices move at most 4096 bytes a message",
+    );
+}
+
+#[test]
 fn a_guest_port_is_fifo() {
     expect_some(
         &guest(

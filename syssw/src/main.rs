@@ -74,6 +74,20 @@ fn main(image_base: u64, image_len: u64) {
         .unwrap_or_else(|e| reject(format_args!("no memory for port buffers: {e:?}")));
     let ports = syssw_core::ports::Ports::new(&system, arena)
         .unwrap_or_else(|e| reject(format_args!("ports: {e}")));
+    // And the staging buffers of messages longer than one IPC message.
+    let arena = spawner
+        .own_memory(syssw_core::staging::arena_size(&system))
+        .unwrap_or_else(|e| reject(format_args!("no memory for staging buffers: {e:?}")));
+    let staging = syssw_core::staging::Staging::new(&system, arena)
+        .unwrap_or_else(|e| reject(format_args!("staging: {e}")));
+    let scratch = spawner
+        .own_memory(
+            (0..config::model::MAX_PARTITIONS)
+                .map(|p| staging.size(p))
+                .max()
+                .unwrap_or(0),
+        )
+        .unwrap_or_else(|e| reject(format_args!("no memory for staging buffers: {e:?}")));
     let mut loader = partitions::Loader::new(spawner, system, me)
         .unwrap_or_else(|e| reject(format_args!("shared memory: {e}")));
     let mut placed = [const { None }; config::model::MAX_PARTITIONS];
@@ -129,6 +143,8 @@ fn main(image_base: u64, image_len: u64) {
         system,
         partitions: placed,
         ports,
+        staging,
+        scratch,
         created: [false; config::model::MAX_PORTS],
         health: syssw_core::health::HealthMonitor::new(),
         ipc,

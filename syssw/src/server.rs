@@ -34,9 +34,7 @@
 use crate::partitions::Instance;
 use config::binary::SystemView;
 use config::model::HealthAction;
-use config::model::{
-    ChangeAction, Direction, ErrorCode, MAX_MESSAGE_SIZE, MAX_PARTITIONS, MAX_PORTS, PortKind,
-};
+use config::model::{ChangeAction, Direction, ErrorCode, MAX_PARTITIONS, MAX_PORTS, PortKind};
 use syssw_core::deferred::{self, Answer, Deferred};
 use syssw_core::health::{
     Detail, DmaFault, ErrorEvent, Fault, HealthMonitor, Record, Text, classify, decide,
@@ -46,13 +44,14 @@ use syssw_core::mode::{ModeChange, OperatingMode, PartitionMode, StartCondition}
 use syssw_core::ports::{Completion, NEVER, Outcome, Ports, Waiter};
 use syssw_core::restart::{Job, Kind, Report, Restarts};
 use syssw_core::schedule::ModuleSchedule;
+use syssw_core::staging::Staging;
 use user_rt::abi::ipc::{LABEL_FAULT_REPORT, MessageTag, REPLY_KILL};
 use user_rt::abi::syscall::{TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::println;
 use user_rt::protocol::{
-    PartitionStatus, PortIdReply, QueuingMessage, ReplyWords, Request, ReturnCode, SamplingMessage,
-    ScheduleIdReply, Wire,
+    FetchReply, PART_MAX, PartitionStatus, PortIdReply, QueuingMessage, ReplyWords, Request,
+    ReturnCode, SamplingMessage, ScheduleIdReply, Wire,
 };
 use user_rt::sys::{self, Message, Received};
 
@@ -69,6 +68,10 @@ pub struct Server<'a> {
     pub system: SystemView<'a>,
     pub partitions: [Option<Partition>; MAX_PARTITIONS],
     pub ports: Ports<'a>,
+    /// The staging buffers of messages longer than one request, and a message's worth of
+    /// room in which such a message is put together or received.
+    pub staging: Staging<'a>,
+    pub scratch: &'a mut [u8],
     /// Ports their partition has created since it last (re)started.
     pub created: [bool; MAX_PORTS],
     pub health: HealthMonitor,
@@ -98,9 +101,10 @@ pub const DMA_POLL_MESSAGES: u32 = 64;
 /// overflows them, which loses records, never the partition's error).
 const DMA_FAULTS_PER_POLL: usize = 8;
 
-/// A request's data (name, message, text), copied out of the IPC buffer before anything
-/// else uses it; a read or receive copies its message here on the way back.
-type Buffer = [u8; MAX_MESSAGE_SIZE as usize];
+/// A request's data (name, message or its last part, text), copied out of the IPC buffer
+/// before anything else uses it; a read or receive copies its message (or its first part)
+/// here on the way back.
+type Buffer = [u8; PART_MAX];
 
 /// Replies `code` with `words` and `data` (through syssw's IPC buffer) to `to`. A caller
 /// that is gone (killed while waiting) is no error.
@@ -113,13 +117,40 @@ fn answer(ipc: IpcBufferRef, to: ThreadId, code: ReturnCode, words: [u64; 3], da
     let _ = sys::reply(to, &m);
 }
 
-/// Answers a parked queuing request that finished (sent, received or timed out).
-fn complete(ipc: IpcBufferRef, c: Completion<'_>) {
+/// Answers a parked queuing request that finished (sent, received or timed out). A
+/// received message longer than one reply goes into the receiver's staging buffer, and the
+/// reply carries its first part.
+fn complete(ipc: IpcBufferRef, staging: &mut Staging<'_>, c: Completion<'_>) {
     let words = QueuingMessage {
         len: c.message.len() as u64,
     }
     .to_words();
-    answer(ipc, ThreadId(c.token), c.code, words, c.message);
+    let first = c.message.len().min(PART_MAX);
+    if !staging.deliver(c.token, c.message) {
+        staging.release_token(c.token);
+    }
+    answer(ipc, ThreadId(c.token), c.code, words, &c.message[..first]);
+}
+
+/// The message of a WRITE_SAMPLING or SEND_QUEUING by `token` of partition `index` whose
+/// data is `tail`: the data alone, or after the `staged` bytes it staged before, put
+/// together in `scratch` (the staging buffer is free again either way).
+fn whole_message<'m>(
+    (staging, scratch): (&mut Staging<'_>, &'m mut [u8]),
+    index: usize,
+    token: u64,
+    staged: u64,
+    tail: &'m [u8],
+) -> Result<&'m [u8], ReturnCode> {
+    if staged == 0 {
+        return Ok(tail);
+    }
+    let whole = staging.assemble(index, token, staged, tail).map(|whole| {
+        scratch[..whole.len()].copy_from_slice(whole);
+        whole.len()
+    });
+    staging.release(index, token);
+    Ok(&scratch[..whole?])
 }
 
 /// A health record as the core's formatter writes it.
@@ -133,7 +164,7 @@ impl core::fmt::Display for LogLine<'_, '_> {
 
 impl<'a> Server<'a> {
     pub fn run(mut self) -> ! {
-        let mut buffer: Buffer = [0; MAX_MESSAGE_SIZE as usize];
+        let mut buffer: Buffer = [0; PART_MAX];
         loop {
             // A module schedule switch that has taken effect: its change actions first.
             let switch_in = self.schedule_changes();
@@ -146,7 +177,8 @@ impl<'a> Server<'a> {
                 Some(_) => {
                     let now = sys::clock();
                     let ipc = self.ipc;
-                    match self.ports.expire(now, |c| complete(ipc, c)) {
+                    let staging = &mut self.staging;
+                    match self.ports.expire(now, |c| complete(ipc, staging, c)) {
                         Some(deadline) if deadline != NEVER => deadline.saturating_sub(now).max(1),
                         _ => TIMEOUT_INFINITE,
                     }
@@ -202,7 +234,7 @@ impl<'a> Server<'a> {
         };
         let tag = m.message.tag;
         if tag.len() > buffer.len() {
-            // Longer than any port's message (the configuration's limit).
+            // More than one request carries (the kernel never delivers that).
             answer(ipc, m.sender, ReturnCode::InvalidConfig, [0; 3], &[]);
             return;
         }
@@ -274,20 +306,43 @@ impl<'a> Server<'a> {
                 let (code, port) = self.port_id(index, name, kind);
                 reply(code, PortIdReply { port }.to_words());
             }
-            Request::WriteSampling { port, message } => {
-                let code = self
-                    .ports
-                    .write_sampling(index, port as usize, message, now);
+            Request::WriteSampling {
+                port,
+                staged,
+                message,
+            } => {
+                let token = m.sender.0;
+                let whole = (&mut self.staging, &mut *self.scratch);
+                let code = match whole_message(whole, index, token, staged, message) {
+                    Ok(message) => self
+                        .ports
+                        .write_sampling(index, port as usize, message, now),
+                    Err(code) => code,
+                };
                 reply(code, [0; 3]);
             }
             Request::ReadSampling { port } => {
-                let s = self.ports.read_sampling(index, port as usize, now, buffer);
+                let token = m.sender.0;
+                let s = if self.long_port(port) {
+                    if let Err(code) = self.staging.reserve(index, token) {
+                        return reply(code, [0; 3]);
+                    }
+                    let s = self
+                        .ports
+                        .read_sampling(index, port as usize, now, self.scratch);
+                    let first = s.len.min(PART_MAX);
+                    buffer[..first].copy_from_slice(&self.scratch[..first]);
+                    self.staging.deliver(token, &self.scratch[..s.len]);
+                    s
+                } else {
+                    self.ports.read_sampling(index, port as usize, now, buffer)
+                };
                 let words = SamplingMessage {
                     len: s.len as u64,
                     validity: s.validity,
                 }
                 .to_words();
-                answer(ipc, m.sender, s.code, words, &buffer[..s.len]);
+                answer(ipc, m.sender, s.code, words, &buffer[..s.len.min(PART_MAX)]);
             }
             Request::SamplingStatus { port } => {
                 match self.ports.sampling_status(index, port as usize) {
@@ -299,20 +354,26 @@ impl<'a> Server<'a> {
                 port,
                 timeout,
                 priority,
+                staged,
                 message,
             } => {
-                let outcome = self.ports.send_queuing(
-                    index,
-                    port as usize,
-                    message,
-                    now,
-                    timeout,
-                    Waiter {
-                        token: m.sender.0,
-                        priority,
-                    },
-                    |c| complete(ipc, c),
-                );
+                let token = m.sender.0;
+                let whole = (&mut self.staging, &mut *self.scratch);
+                let outcome = match whole_message(whole, index, token, staged, message) {
+                    Ok(message) => {
+                        let staging = &mut self.staging;
+                        self.ports.send_queuing(
+                            index,
+                            port as usize,
+                            message,
+                            now,
+                            timeout,
+                            Waiter { token, priority },
+                            |c| complete(ipc, staging, c),
+                        )
+                    }
+                    Err(code) => Outcome::Done { code, len: 0 },
+                };
                 if let Outcome::Done { code, .. } = outcome {
                     reply(code, [0; 3]);
                 }
@@ -322,21 +383,47 @@ impl<'a> Server<'a> {
                 timeout,
                 priority,
             } => {
-                let outcome = self.ports.receive_queuing(
-                    index,
-                    port as usize,
-                    now,
-                    timeout,
-                    Waiter {
-                        token: m.sender.0,
-                        priority,
-                    },
-                    buffer,
-                    |c| complete(ipc, c),
-                );
+                let token = m.sender.0;
+                let waiter = Waiter { token, priority };
+                let long = self.long_port(port);
+                let staging = &mut self.staging;
+                let outcome = if long {
+                    // Its buffer is claimed first: a message never leaves the port without
+                    // a place to go, now or when it completes a parked receive.
+                    match staging.reserve(index, token) {
+                        Ok(()) => {
+                            let outcome = self.ports.receive_queuing(
+                                index,
+                                port as usize,
+                                now,
+                                timeout,
+                                waiter,
+                                self.scratch,
+                                |c| complete(ipc, staging, c),
+                            );
+                            if let Outcome::Done { len, .. } = outcome {
+                                let first = len.min(PART_MAX);
+                                buffer[..first].copy_from_slice(&self.scratch[..first]);
+                                staging.deliver(token, &self.scratch[..len]);
+                            }
+                            outcome
+                        }
+                        Err(code) => Outcome::Done { code, len: 0 },
+                    }
+                } else {
+                    self.ports.receive_queuing(
+                        index,
+                        port as usize,
+                        now,
+                        timeout,
+                        waiter,
+                        buffer,
+                        |c| complete(ipc, staging, c),
+                    )
+                };
                 if let Outcome::Done { code, len } = outcome {
                     let words = QueuingMessage { len: len as u64 }.to_words();
-                    answer(ipc, m.sender, code, words, &buffer[..len]);
+                    answer(ipc, m.sender, code, words, &buffer[..len.min(PART_MAX)]);
                 }
             }
             Request::QueuingStatus { port } => {
@@ -346,9 +433,10 @@ impl<'a> Server<'a> {
                 }
             }
             Request::ClearQueuing { port } => {
+                let staging = &mut self.staging;
                 let code = self
                     .ports
-                    .clear_queuing(index, port as usize, now, |c| complete(ipc, c));
+                    .clear_queuing(index, port as usize, now, |c| complete(ipc, staging, c));
                 reply(code, [0; 3]);
             }
             Request::ReportError { error, detail } => {
@@ -389,6 +477,18 @@ impl<'a> Server<'a> {
             }
             Request::ModuleScheduleStatus => {
                 reply(ReturnCode::NoError, self.schedule.status(now).to_words());
+            }
+            Request::StageMessage { offset, part } => {
+                reply(self.staging.stage(index, m.sender.0, offset, part), [0; 3]);
+            }
+            Request::FetchMessage { offset } => {
+                match self.staging.fetch(index, m.sender.0, offset, buffer) {
+                    Ok((n, left)) => {
+                        let words = FetchReply { left }.to_words();
+                        answer(ipc, m.sender, ReturnCode::NoError, words, &buffer[..n]);
+                    }
+                    Err(code) => reply(code, [0; 3]),
+                }
             }
             Request::ModuleScheduleId { name } => {
                 let found = self.system.schedules().find(|s| s.name.as_bytes() == name);
@@ -477,6 +577,11 @@ impl<'a> Server<'a> {
     }
 
     /// A port request's port id names a port this partition has created.
+    /// Whether port `id` (a valid index) takes messages longer than one part.
+    fn long_port(&self, id: u64) -> bool {
+        self.system.port(id as usize).size as usize > PART_MAX
+    }
+
     fn port_ready(&self, index: usize, id: u64) -> bool {
         (id as usize) < self.system.port_count()
             && self.created[id as usize]
@@ -837,7 +942,10 @@ impl<'a> Server<'a> {
             self.created[p.index] = false;
         }
         let ipc = self.ipc;
-        self.ports.reset_partition(index, |c| complete(ipc, c));
+        let staging = &mut self.staging;
+        self.ports
+            .reset_partition(index, |c| complete(ipc, staging, c));
+        self.staging.reset_partition(index);
         instance.map(|i| i.task)
     }
 

@@ -51,6 +51,19 @@ fn apex_ports() {
             "receiver: frame 1 got [0, 1, 2, 3, 4, 5], then NotAvailable",
             "receiver: receive with 2 ms time-out: Some(TimedOut)",
             "receiver: waited across windows for message 100",
+            // Long messages, several IPC messages each, arrive whole: sampling ...
+            "receiver: frame 1 image of 10000 bytes, intact true Valid",
+            "receiver: frame 2 image of 10000 bytes, intact true Valid",
+            "receiver: frame 3 image of 10000 bytes, intact true Valid",
+            // ... and queuing, in order; one longer than the port is refused.
+            "receiver: bulk message 1 of 20000 bytes, intact true",
+            "receiver: bulk message 2 of 5000 bytes, intact true",
+            "sender: a 20,001-byte message: Some(InvalidConfig)",
+            // A receive that waited gets its long message when the sender sends it.
+            "receiver: waited for bulk message 4 of 20000 bytes, intact true",
+            // Stacks as large as asked, from the runtime's arena, as long as it has room.
+            "sender: deep stack used 180000 bytes, sum 22946416",
+            "sender: a 1 MiB stack: Some(InvalidConfig)",
         ],
     );
     check(

@@ -21,7 +21,7 @@
 //!
 //! The runtime ([`runtime`]) takes the start record syssw passes to the first thread, runs
 //! initialisation on that thread, and maps APEX processes onto threads of the partition's
-//! own task (fixed table, static stacks and IPC buffers). Partition modes, ports and error
+//! own task (fixed table, stacks from a static arena, static IPC buffers). Partition modes, ports and error
 //! reports go to syssw through the request protocol of `user_rt::service`; time comes from
 //! the kernel clock; deadlines are watched by one thread at the task's MCP. A bounded heap
 //! (a static arena of the program, [`runtime::HEAP_SIZE`] bytes unless [`partition_entry!`]
@@ -65,7 +65,11 @@ static HEAP: runtime::BoundedHeap = runtime::BoundedHeap;
 /// usually runs `Partition::run`) on the initialisation thread. The thread ends when the
 /// partition enters NORMAL mode, or when `$main` returns. The heap is a static arena of
 /// [`runtime::HEAP_SIZE`] bytes, or of `heap = BYTES` (`partition_entry!(main, heap = 1 << 20)`)
-/// for a program that allocates more.
+/// for a program that allocates more. The processes' stacks come from a static arena of
+/// [`table::STACK_ARENA_SIZE`] bytes, or of `stacks = BYTES`
+/// (`partition_entry!(main, heap = 1 << 20, stacks = 1 << 20)`) for a program whose
+/// processes' stacks add up to more: each process gets the stack size it asks at creation,
+/// at least [`table::MIN_STACK`].
 #[cfg(feature = "runtime")]
 #[macro_export]
 macro_rules! partition_entry {
@@ -73,14 +77,27 @@ macro_rules! partition_entry {
         $crate::partition_entry!($main, heap = $crate::runtime::HEAP_SIZE);
     };
     ($main:path, heap = $size:expr) => {
+        $crate::partition_entry!(
+            $main,
+            heap = $size,
+            stacks = $crate::table::STACK_ARENA_SIZE
+        );
+    };
+    ($main:path, heap = $size:expr, stacks = $stacks:expr) => {
         // SAFETY: `_start` is the ELF entry symbol; no C start files define it.
         #[allow(unsafe_code)]
         #[unsafe(no_mangle)]
         pub extern "C" fn _start(start_record: u64) -> ! {
             const SIZE: usize = $size;
+            const STACKS: usize = $stacks;
             static mut ARENA: $crate::runtime::Arena<SIZE> = $crate::runtime::Arena([0; SIZE]);
-            // SAFETY: `ARENA` is this function's own static, used by nothing but the heap.
-            unsafe { $crate::runtime::start(start_record, $main, &raw mut ARENA) }
+            static mut STACK_ARENA: $crate::runtime::Arena<STACKS> =
+                $crate::runtime::Arena([0; STACKS]);
+            // SAFETY: `ARENA` and `STACK_ARENA` are this function's own statics, used by
+            // nothing but the heap and the processes' stacks.
+            unsafe {
+                $crate::runtime::start(start_record, $main, &raw mut ARENA, &raw mut STACK_ARENA)
+            }
         }
     };
 }

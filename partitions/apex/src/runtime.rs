@@ -19,7 +19,7 @@
 
 use crate::codes;
 use crate::intra::Intra;
-use crate::table::{self, Delivery, ERROR_HANDLER_SLOT, PendingError, SLOTS, STACK_SIZE, Table};
+use crate::table::{self, Delivery, ERROR_HANDLER_SLOT, MIN_STACK, PendingError, SLOTS, Table};
 use crate::time;
 use a653rs::bindings::{ErrorCode, ErrorReturnCode, ProcessId};
 use core::alloc::{GlobalAlloc, Layout};
@@ -32,7 +32,7 @@ use user_rt::abi::ipc::IpcBuffer;
 use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::StartInfo;
-use user_rt::service::{self, Reply};
+use user_rt::service::{self, ReceiveError, Reply};
 use user_rt::sys;
 
 /// Bytes of the heap arena [`crate::partition_entry!`] gives a program that names none.
@@ -49,23 +49,25 @@ pub const WAKE_BIT: u64 = 1;
 /// is decided in [`Intra`] by the waker).
 pub const OBJECT_BIT: u64 = 2;
 
-/// One thread stack (16-byte aligned as the SysV ABI wants).
+/// The watchdog's stack (16-byte aligned as the SysV ABI wants).
 #[repr(C, align(16))]
-struct Stack([u8; STACK_SIZE]);
+struct Stack([u8; MIN_STACK]);
 
 // Stacks and IPC buffers are used only through their addresses (by the threads running on
 // them and by the kernel), never through Rust references, so `static mut` with raw
 // addresses is all they need.
-static mut PROCESS_STACKS: [Stack; SLOTS + 1] = [const { Stack([0; STACK_SIZE]) }; SLOTS + 1];
+static mut WATCHDOG_STACK: Stack = Stack([0; MIN_STACK]);
 static mut IPC_BUFFERS: [IpcBuffer; THREADS] = [const { IpcBuffer::new() }; THREADS];
 
-/// A heap arena: static memory of the partition program, `N` bytes, used by nothing but
-/// the runtime's heap ([`crate::partition_entry!`] defines one and passes it to [`start`]).
+/// A heap or stack arena: static memory of the partition program, `N` bytes, used by
+/// nothing but the runtime's heap or its processes' stacks ([`crate::partition_entry!`]
+/// defines one of each and passes them to [`start`]).
 #[repr(C, align(16))]
 pub struct Arena<const N: usize>(pub [u8; N]);
 
-/// The arena [`start`] was given: its address and size.
+/// The arenas [`start`] was given: their addresses and sizes.
 static HEAP_ARENA: SpinMutex<(usize, usize)> = SpinMutex::new((0, 0));
+static STACK_ARENA: SpinMutex<(usize, usize)> = SpinMutex::new((0, 0));
 
 struct State {
     table: Table,
@@ -138,11 +140,21 @@ fn ipc_address(index: usize) -> u64 {
         .wrapping_add(index) as u64
 }
 
-fn stack_top(index: usize) -> u64 {
-    let slot = if index == WATCHDOG { SLOTS } else { index };
-    let base = (&raw mut PROCESS_STACKS).cast::<Stack>().wrapping_add(slot) as u64;
-    // As if called: the SysV ABI expects rsp + 8 to be 16-byte aligned at entry.
-    base + STACK_SIZE as u64 - 8
+/// The initial stack pointer of a stack of `size` bytes at `base` (16-byte aligned): as if
+/// called, since the SysV ABI expects rsp + 8 to be 16-byte aligned at entry.
+fn stack_top(base: u64, size: usize) -> u64 {
+    base + size as u64 - 8
+}
+
+/// The initial stack pointer of process `slot`, on its stack in the stack arena.
+fn process_stack_top(table: &Table, slot: usize) -> Result<u64, ErrorReturnCode> {
+    let place = table.get(slot).ok_or(ErrorReturnCode::InvalidParam)?.stack;
+    let (arena, size) = *STACK_ARENA.lock();
+    // The table never places a stack beyond the arena it was given; checked all the same.
+    if place.offset + place.size > size {
+        return Err(ErrorReturnCode::InvalidConfig);
+    }
+    Ok(stack_top((arena + place.offset) as u64, place.size))
 }
 
 /// A critical section on the runtime state (see the module documentation).
@@ -199,13 +211,20 @@ impl Drop for Critical {
 }
 
 /// Starts the runtime on the partition's first thread and runs `main` on it (what
-/// [`crate::partition_entry!`] expands to), `arena` serving as the heap. Ends the thread
-/// when `main` returns.
+/// [`crate::partition_entry!`] expands to), `heap` serving as the heap and `stacks` as the
+/// processes' stacks. Ends the thread when `main` returns.
 ///
 /// # Safety
-/// `arena` is a static of the program that nothing else ever uses (the macro's own).
-pub unsafe fn start<const N: usize>(start_record: u64, main: fn(), arena: *mut Arena<N>) -> ! {
-    *HEAP_ARENA.lock() = (arena as usize, N);
+/// `heap` and `stacks` are statics of the program that nothing else ever uses (the
+/// macro's own).
+pub unsafe fn start<const N: usize, const S: usize>(
+    start_record: u64,
+    main: fn(),
+    heap: *mut Arena<N>,
+    stacks: *mut Arena<S>,
+) -> ! {
+    *HEAP_ARENA.lock() = (heap as usize, N);
+    *STACK_ARENA.lock() = (stacks as usize, S);
     // SAFETY: syssw starts every partition's first thread with the address of its start
     // record in rdi (`user_rt::partition`), which `_start` passes on unchanged.
     let Some(info) = (unsafe { StartInfo::from_start(start_record) }) else {
@@ -231,6 +250,7 @@ pub unsafe fn start<const N: usize>(start_record: u64, main: fn(), arena: *mut A
         partition_period,
         me.0,
         info.priority.min(255) as u8,
+        S,
     ));
     main();
     sys::thread_exit()
@@ -288,16 +308,60 @@ unsafe impl GlobalAlloc for BoundedHeap {
     }
 }
 
-/// Sends a protocol request from the calling thread's IPC buffer; reply data stays there.
-pub fn request(request: &Request) -> Result<(Reply, IpcBufferRef), ErrorReturnCode> {
+/// syssw's server and the calling thread's IPC buffer.
+fn channel() -> Result<(ThreadId, IpcBufferRef), ErrorReturnCode> {
     let index = own_index().ok_or(ErrorReturnCode::InvalidMode)?;
     let server = service::server().ok_or(ErrorReturnCode::NotAvailable)?;
     // SAFETY: `ipc_address(index)` is the static IPC buffer registered for this thread
     // (IPC_BUFFER_SIZE bytes, 8-aligned, writable) and nothing takes references to it.
     let ipc = unsafe { IpcBufferRef::new(ipc_address(index)) };
+    Ok((server, ipc))
+}
+
+/// Sends a protocol request from the calling thread's IPC buffer; reply data stays there.
+pub fn request(request: &Request) -> Result<(Reply, IpcBufferRef), ErrorReturnCode> {
+    let (server, ipc) = channel()?;
     let reply =
         service::request(server, ipc, request).map_err(|_| ErrorReturnCode::NotAvailable)?;
     Ok((reply, ipc))
+}
+
+/// Sends the request `build(staged, last part)` makes for a port message of any length
+/// (`user_rt::service::request_with_message`).
+pub fn request_message<'m>(
+    message: &'m [u8],
+    build: impl FnOnce(u64, &'m [u8]) -> Request<'m>,
+) -> Result<Reply, ErrorReturnCode> {
+    let (server, ipc) = channel()?;
+    service::request_with_message(server, ipc, message, build)
+        .map_err(|_| ErrorReturnCode::NotAvailable)
+}
+
+/// Copies the message of `len` bytes a reply announced into `out`, fetching what did not
+/// fit the reply: INVALID_PARAM if `out` is shorter (the message is dropped),
+/// NOT_AVAILABLE if the service failed.
+pub fn receive_message(len: usize, out: &mut [u8]) -> Result<(), ErrorReturnCode> {
+    let (server, ipc) = channel()?;
+    service::receive_message(server, ipc, len, out).map_err(|e| match e {
+        ReceiveError::TooLong => ErrorReturnCode::InvalidParam,
+        ReceiveError::Failed => ErrorReturnCode::NotAvailable,
+    })
+}
+
+/// Runs `f`, the transfer of a message longer than one request (`long`), at the
+/// partition's MCP: no process of the partition but one at the MCP (the error handler)
+/// runs in the middle of it, which bounds the staging buffers the partition's transfers
+/// hold in syssw at once (`protocol::STAGING_RUNNERS`). A receive that waits, waits at the
+/// MCP and fetches its message as soon as it comes.
+pub fn long_transfer<R>(long: bool, f: impl FnOnce() -> R) -> R {
+    if !long || mcp() == 0 {
+        return f();
+    }
+    let _ = sys::thread_set(None, ThreadAttribute::Priority, u64::from(mcp()));
+    let result = f();
+    // Leaving a critical section drops the thread back to its own priority.
+    drop(Critical::enter());
+    result
 }
 
 /// A request whose reply carries only a code.
@@ -332,20 +396,16 @@ pub fn release_point(now: u64, partition_period: u64) -> u64 {
     time::next_release_point(now, window, partition_period)
 }
 
-/// Creates the (inactive) thread of thread index `index` running `entry(index)`.
+/// Creates the (inactive) thread of thread index `index` running `entry(index)` on the
+/// stack whose initial pointer is `stack`.
 pub fn create_thread(
     index: usize,
     entry: extern "C" fn(u64) -> !,
+    stack: u64,
     priority: u8,
 ) -> Result<u64, ErrorReturnCode> {
-    let thread = sys::thread_create(
-        None,
-        entry as usize as u64,
-        stack_top(index),
-        priority,
-        index as u64,
-    )
-    .map_err(|_| ErrorReturnCode::InvalidConfig)?;
+    let thread = sys::thread_create(None, entry as usize as u64, stack, priority, index as u64)
+        .map_err(|_| ErrorReturnCode::InvalidConfig)?;
     if sys::thread_set(Some(thread), ThreadAttribute::IpcBuffer, ipc_address(index)).is_err() {
         let _ = sys::thread_kill(thread);
         return Err(ErrorReturnCode::InvalidConfig);
@@ -373,7 +433,8 @@ pub fn ensure_watchdog(table: &mut Table) -> Result<(), ErrorReturnCode> {
     if table.watchdog_thread.is_some() || !table.needs_watchdog() {
         return Ok(());
     }
-    let thread = create_thread(WATCHDOG, watchdog_main, table.mcp)?;
+    let stack = stack_top((&raw mut WATCHDOG_STACK) as u64, MIN_STACK);
+    let thread = create_thread(WATCHDOG, watchdog_main, stack, table.mcp)?;
     table.watchdog_thread = Some(thread);
     let _ = sys::thread_start(ThreadId(thread));
     Ok(())
@@ -403,7 +464,8 @@ pub fn launch(table: &mut Table, slot: usize, release: u64) -> Result<(), ErrorR
             .get(slot)
             .map_or(1, |p| p.attributes.base_priority as u8)
     };
-    let thread = create_thread(slot, process_main, priority)?;
+    let stack = process_stack_top(table, slot)?;
+    let thread = create_thread(slot, process_main, stack, priority)?;
     if slot == ERROR_HANDLER_SLOT {
         table.activate_error_handler(release, thread)?;
     } else {
@@ -419,7 +481,8 @@ pub fn prepare(table: &mut Table, slot: usize, delay: u64) -> Result<(), ErrorRe
     let priority = table
         .get(slot)
         .map_or(1, |p| p.attributes.base_priority as u8);
-    let thread = create_thread(slot, process_main, priority)?;
+    let stack = process_stack_top(table, slot)?;
+    let thread = create_thread(slot, process_main, stack, priority)?;
     table.make_pending(slot, delay, thread)
 }
 

@@ -25,8 +25,13 @@ pub const MAX_PROCESSES: usize = 16;
 pub const ERROR_HANDLER_SLOT: usize = MAX_PROCESSES;
 /// Process slots, error handler included.
 pub const SLOTS: usize = MAX_PROCESSES + 1;
-/// Each process's (fixed, static) stack; CREATE_PROCESS refuses larger stack sizes.
-pub const STACK_SIZE: usize = 32 * 1024;
+/// The least stack a process gets, whatever smaller size it asks (Rust code that formats
+/// text needs about that much).
+pub const MIN_STACK: usize = 32 * 1024;
+/// The stack arena a program gets unless [`crate::partition_entry!`] names another size:
+/// [`MIN_STACK`] for every slot. Processes with larger stacks fit as long as the stacks of
+/// all processes created add up to no more (CREATE_PROCESS answers INVALID_CONFIG beyond).
+pub const STACK_ARENA_SIZE: usize = SLOTS * MIN_STACK;
 /// Errors waiting for the error handler; when full, further errors go to syssw's health
 /// monitor directly.
 pub const ERROR_QUEUE: usize = 8;
@@ -91,12 +96,22 @@ pub struct Process {
     pub deadline: Option<u64>,
     /// Raw id of its kernel thread (created at START, gone when it stops).
     pub thread: Option<u64>,
+    /// Its stack in the runtime's stack arena (every START of it uses the same).
+    pub stack: StackPlace,
+}
+
+/// A process's stack: `size` bytes (a multiple of 16) at `offset` in the stack arena.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct StackPlace {
+    pub offset: usize,
+    pub size: usize,
 }
 
 impl Process {
     /// A created process that has not been started.
-    fn dormant(attributes: ApexProcessAttribute, priority: u8) -> Self {
+    fn dormant(attributes: ApexProcessAttribute, priority: u8, stack: StackPlace) -> Self {
         Process {
+            stack,
             attributes,
             priority,
             life: Life::Dormant,
@@ -179,6 +194,11 @@ pub struct Table {
     /// The time the watchdog sleeps until (`u64::MAX`: no deadline pending).
     pub watchdog_armed: u64,
     slots: [Option<Process>; SLOTS],
+    /// Bytes of the stack arena, and how many of them created processes hold (processes
+    /// are created only during initialisation and never deleted: a bump allocation, reset
+    /// with the table at every start).
+    stack_arena: usize,
+    stack_used: usize,
     errors: [Option<PendingError>; ERROR_QUEUE],
     /// Index of the oldest queued error.
     error_head: usize,
@@ -194,19 +214,51 @@ impl Table {
         watchdog_thread: None,
         watchdog_armed: u64::MAX,
         slots: [const { None }; SLOTS],
+        stack_arena: 0,
+        stack_used: 0,
         errors: [None; ERROR_QUEUE],
         error_head: 0,
     };
 
-    /// The table of a partition that starts its initialisation.
-    pub fn new(mcp: u8, partition_period: u64, main_thread: u64, main_priority: u8) -> Self {
+    /// The table of a partition that starts its initialisation, its processes' stacks to
+    /// come from an arena of `stack_arena` bytes.
+    pub fn new(
+        mcp: u8,
+        partition_period: u64,
+        main_thread: u64,
+        main_priority: u8,
+        stack_arena: usize,
+    ) -> Self {
         Self {
             mcp,
             partition_period,
             main_thread,
             main_priority,
+            stack_arena,
             ..Self::EMPTY
         }
+    }
+
+    /// Where a new process's stack of (at least) `asked` bytes would go: INVALID_CONFIG
+    /// when the arena has no room left (ARINC: insufficient storage capacity).
+    fn place_stack(&self, asked: StackSize) -> Result<StackPlace> {
+        let size = (asked as usize)
+            .max(MIN_STACK)
+            .checked_next_multiple_of(16)
+            .ok_or(ErrorReturnCode::InvalidConfig)?;
+        match self.stack_used.checked_add(size) {
+            Some(end) if end <= self.stack_arena => Ok(StackPlace {
+                offset: self.stack_used,
+                size,
+            }),
+            _ => Err(ErrorReturnCode::InvalidConfig),
+        }
+    }
+
+    /// Records a process created in `slot` with its stack at `stack`.
+    fn occupy(&mut self, slot: usize, process: Process) {
+        self.stack_used = process.stack.offset + process.stack.size;
+        self.slots[slot] = Some(process);
     }
 
     pub fn get(&self, slot: usize) -> Option<&Process> {
@@ -269,9 +321,7 @@ impl Table {
         let slot = (0..MAX_PROCESSES)
             .find(|&slot| self.slots[slot].is_none())
             .ok_or(ErrorReturnCode::InvalidConfig)?;
-        if attributes.stack_size as usize > STACK_SIZE {
-            return Err(ErrorReturnCode::InvalidConfig);
-        }
+        let stack = self.place_stack(attributes.stack_size)?;
         let priority = attributes.base_priority;
         if !(MIN_PRIORITY_VALUE..=MAX_PRIORITY_VALUE).contains(&priority) {
             return Err(ErrorReturnCode::InvalidParam);
@@ -284,7 +334,10 @@ impl Table {
             attributes.time_capacity,
             self.partition_period,
         )?;
-        self.slots[slot] = Some(Process::dormant(attributes.clone(), priority as u8));
+        self.occupy(
+            slot,
+            Process::dormant(attributes.clone(), priority as u8, stack),
+        );
         Ok(id_of(slot))
     }
 
@@ -296,9 +349,7 @@ impl Table {
         if self.slots[ERROR_HANDLER_SLOT].is_some() {
             return Err(ErrorReturnCode::NoAction);
         }
-        if stack as usize > STACK_SIZE {
-            return Err(ErrorReturnCode::InvalidConfig);
-        }
+        let place = self.place_stack(stack)?;
         let attributes = ApexProcessAttribute {
             period: INFINITE_TIME_VALUE,
             time_capacity: INFINITE_TIME_VALUE,
@@ -308,7 +359,10 @@ impl Table {
             deadline: Deadline::Soft,
             name: crate::codes::apex_name(ERROR_HANDLER_NAME),
         };
-        self.slots[ERROR_HANDLER_SLOT] = Some(Process::dormant(attributes, self.mcp));
+        self.occupy(
+            ERROR_HANDLER_SLOT,
+            Process::dormant(attributes, self.mcp, place),
+        );
         Ok(())
     }
 
@@ -679,7 +733,7 @@ mod tests {
     }
 
     fn table() -> Table {
-        Table::new(MCP, 10 * MS as u64, 1, 90)
+        Table::new(MCP, 10 * MS as u64, 1, 90, STACK_ARENA_SIZE)
     }
 
     #[test]
@@ -706,7 +760,7 @@ mod tests {
             Err(ErrorReturnCode::InvalidConfig)
         );
         let mut big = attributes("big", -1, -1, 10);
-        big.stack_size = STACK_SIZE as u32 + 1;
+        big.stack_size = STACK_ARENA_SIZE as u32;
         assert_eq!(t.create(&big), Err(ErrorReturnCode::InvalidConfig));
         for i in 1..MAX_PROCESSES {
             let name = [b'p', b'0' + (i / 10) as u8, b'0' + (i % 10) as u8];
@@ -721,6 +775,46 @@ mod tests {
         assert_eq!(
             t.create(&attributes("late", -1, -1, 10)),
             Err(ErrorReturnCode::InvalidMode)
+        );
+    }
+
+    #[test]
+    fn stacks_come_from_the_arena_as_asked() {
+        let mut t = table();
+        let mut big = attributes("big", -1, -1, 10);
+        big.stack_size = 100_000;
+        let first = t.create(&big).unwrap();
+        let small = t.create(&attributes("small", -1, -1, 10)).unwrap();
+        let at = |t: &Table, id| t.get(t.slot(id).unwrap()).unwrap().stack;
+        // The size asked, rounded up to 16; a smaller ask still gets MIN_STACK.
+        assert_eq!(
+            at(&t, first),
+            StackPlace {
+                offset: 0,
+                size: 100_000
+            }
+        );
+        assert_eq!(
+            at(&t, small),
+            StackPlace {
+                offset: 100_000,
+                size: MIN_STACK
+            }
+        );
+        big.stack_size = 1;
+        big.name = apex_name("odd");
+        assert_eq!(t.create(&big).map(|id| at(&t, id).size), Ok(MIN_STACK));
+        // A stack beyond what is left is INVALID_CONFIG and takes nothing.
+        let left = STACK_ARENA_SIZE - 100_000 - 2 * MIN_STACK;
+        big.name = apex_name("huge");
+        big.stack_size = left as u32 + 1;
+        assert_eq!(t.create(&big), Err(ErrorReturnCode::InvalidConfig));
+        big.stack_size = left as u32;
+        let last = t.create(&big).unwrap();
+        assert_eq!(at(&t, last).offset + at(&t, last).size, STACK_ARENA_SIZE);
+        assert_eq!(
+            t.create_error_handler(body, 0),
+            Err(ErrorReturnCode::InvalidConfig)
         );
     }
 

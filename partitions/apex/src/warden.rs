@@ -10,9 +10,9 @@ use crate::table::{self, ERROR_HANDLER_SLOT, MAX_PROCESSES, Wait};
 use crate::time::{self, finite, protocol_timeout};
 use a653rs::bindings::*;
 use protocol::{
-    Discipline, PortIdReply, PortKind, QueuingMessage, ReplyWords, Request, SamplingMessage,
+    Discipline, MAX_MESSAGE_SIZE, PART_MAX, PortIdReply, PortKind, QueuingMessage, ReplyWords,
+    Request, SamplingMessage,
 };
-use user_rt::abi::ipc::IPC_DATA_MAX;
 use user_rt::abi::syscall::{ThreadAttribute, ThreadId};
 use user_rt::sys;
 
@@ -25,7 +25,7 @@ type Result<T> = core::result::Result<T, ErrorReturnCode>;
 
 impl ApexLimits for Warden {
     const SYSTEM_LIMIT_NUMBER_OF_PROCESSES: ApexUnsigned = MAX_PROCESSES as ApexUnsigned;
-    const SYSTEM_LIMIT_MESSAGE_SIZE: MessageSize = IPC_DATA_MAX as MessageSize;
+    const SYSTEM_LIMIT_MESSAGE_SIZE: MessageSize = MAX_MESSAGE_SIZE as MessageSize;
     const SYSTEM_LIMIT_NUMBER_OF_MESSAGES: MessageRange = 256;
 }
 
@@ -353,9 +353,9 @@ fn with_wait<R>(slot: Option<usize>, wait: Wait, f: impl FnOnce() -> R) -> R {
 
 // ---------------------------------------------------------------- ports (3.6.2)
 
-/// A message the IPC buffer can carry (longer ones exceed every port: INVALID_CONFIG).
+/// A message a port can carry (longer ones exceed every port: INVALID_CONFIG).
 fn check_message(message: &[ApexByte]) -> Result<()> {
-    if message.len() > IPC_DATA_MAX {
+    if message.len() > MAX_MESSAGE_SIZE as usize {
         return Err(ErrorReturnCode::InvalidConfig);
     }
     Ok(())
@@ -391,10 +391,15 @@ impl ApexSamplingPortP4 for Warden {
         message: &[ApexByte],
     ) -> Result<()> {
         check_message(message)?;
-        request_code(&Request::WriteSampling {
-            port: id_word(sampling_port_id)?,
-            message,
+        let port = id_word(sampling_port_id)?;
+        let reply = runtime::long_transfer(message.len() > PART_MAX, || {
+            runtime::request_message(message, |staged, message| Request::WriteSampling {
+                port,
+                staged,
+                message,
+            })
         })?;
+        codes::from_reply(reply.label)?;
         Ok(())
     }
 
@@ -406,18 +411,16 @@ impl ApexSamplingPortP4 for Warden {
         sampling_port_id: SamplingPortId,
         message: &mut [ApexByte],
     ) -> Result<(Validity, MessageSize)> {
-        let (reply, ipc) = request(&Request::ReadSampling {
-            port: id_word(sampling_port_id)?,
-        })?;
-        codes::from_reply(reply.label)?;
-        let sample =
-            SamplingMessage::from_words(reply.words).map_err(|_| ErrorReturnCode::NotAvailable)?;
-        let length = sample.len as usize;
-        if length > message.len() || length > IPC_DATA_MAX {
-            return Err(ErrorReturnCode::InvalidParam);
-        }
-        ipc.read_data(0, &mut message[..length]);
-        Ok((codes::validity(sample.validity), length as MessageSize))
+        let port = id_word(sampling_port_id)?;
+        runtime::long_transfer(message.len() > PART_MAX, || {
+            let (reply, _) = request(&Request::ReadSampling { port })?;
+            codes::from_reply(reply.label)?;
+            let sample = SamplingMessage::from_words(reply.words)
+                .map_err(|_| ErrorReturnCode::NotAvailable)?;
+            let length = sample.len as usize;
+            runtime::receive_message(length, message)?;
+            Ok((codes::validity(sample.validity), length as MessageSize))
+        })
     }
 }
 
@@ -493,14 +496,18 @@ impl ApexQueuingPortP4 for Warden {
         check_message(message)?;
         let id = id_word(queuing_port_id)?;
         let priority = own_priority();
-        blocking_port_call(time_out, || {
-            request_code(&Request::SendQueuing {
-                port: id,
-                timeout: protocol_timeout(time_out),
-                priority,
-                message,
+        let reply = blocking_port_call(time_out, || {
+            runtime::long_transfer(message.len() > PART_MAX, || {
+                runtime::request_message(message, |staged, message| Request::SendQueuing {
+                    port: id,
+                    timeout: protocol_timeout(time_out),
+                    priority,
+                    staged,
+                    message,
+                })
             })
         })??;
+        codes::from_reply(reply.label)?;
         Ok(())
     }
 
@@ -516,21 +523,21 @@ impl ApexQueuingPortP4 for Warden {
     ) -> Result<(MessageSize, QueueOverflow)> {
         let id = id_word(queuing_port_id)?;
         let priority = own_priority();
-        let (reply, ipc) = blocking_port_call(time_out, || {
-            request(&Request::ReceiveQueuing {
-                port: id,
-                timeout: protocol_timeout(time_out),
-                priority,
+        let length = blocking_port_call(time_out, || {
+            runtime::long_transfer(message.len() > PART_MAX, || {
+                let (reply, _) = request(&Request::ReceiveQueuing {
+                    port: id,
+                    timeout: protocol_timeout(time_out),
+                    priority,
+                })?;
+                codes::from_reply(reply.label)?;
+                let received = QueuingMessage::from_words(reply.words)
+                    .map_err(|_| ErrorReturnCode::NotAvailable)?;
+                let length = received.len as usize;
+                runtime::receive_message(length, message)?;
+                Ok(length)
             })
         })??;
-        codes::from_reply(reply.label)?;
-        let received =
-            QueuingMessage::from_words(reply.words).map_err(|_| ErrorReturnCode::NotAvailable)?;
-        let length = received.len as usize;
-        if length > message.len() || length > IPC_DATA_MAX {
-            return Err(ErrorReturnCode::InvalidParam);
-        }
-        ipc.read_data(0, &mut message[..length]);
         Ok((length as MessageSize, false))
     }
 

@@ -99,14 +99,17 @@ impl Ports {
     pub fn send(&mut self, index: usize, message: &[u8]) -> Result<(), Errno> {
         let p = self.port(index)?;
         let request = match p.kind {
+            // Its messages fit one request (the configuration keeps them at 4096 bytes).
             Kind::Sampling => Request::WriteSampling {
                 port: p.id,
+                staged: 0,
                 message,
             },
             Kind::Queuing => Request::SendQueuing {
                 port: p.id,
                 timeout: 0,
                 priority: 0,
+                staged: 0,
                 message,
             },
         };

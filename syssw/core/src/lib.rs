@@ -1,5 +1,6 @@
 //! The pure logic of Warden's system software (syssw, the root task): ARINC 653
-//! inter-partition ports ([`ports`]), the health monitor's decisions and its event log
+//! inter-partition ports ([`ports`]) and the staging buffers of their long messages
+//! ([`staging`]), the health monitor's decisions and its event log
 //! ([`health`]), the partitions' operating modes ([`mode`]) and what a partition needs of
 //! its memory and kernel-memory quota to start ([`budget`]), the queue of partition
 //! restarts its restart worker carries out ([`restart`]), the error reports left for their
@@ -31,6 +32,7 @@ pub mod mode;
 pub mod ports;
 pub mod restart;
 pub mod schedule;
+pub mod staging;
 
 #[cfg(test)]
 mod generated_systems;

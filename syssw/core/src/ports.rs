@@ -11,8 +11,8 @@
 //!
 //! - sampling: one message of the source port's size (its length and write time live in
 //!   the table);
-//! - queuing: a ring of `source depth + destination depth` slots of `2 + size` bytes (a
-//!   little-endian `u16` length, then the message), then [`MAX_WAITERS`] waiter records of
+//! - queuing: a ring of `source depth + destination depth` slots of `4 + size` bytes (a
+//!   little-endian `u32` length, then the message), then [`MAX_WAITERS`] waiter records of
 //!   `24 + size` bytes (caller token `u64`, deadline `u64`, message length `u32`, the
 //!   caller's priority `u8`, 3 reserved bytes, then the message of a parked sender).
 //!
@@ -111,7 +111,7 @@ pub const MAX_WAITERS: usize = 8;
 pub const NEVER: u64 = u64::MAX;
 
 /// Bytes of the length prefix of a queue slot.
-const LEN_BYTES: usize = 2;
+const LEN_BYTES: usize = 4;
 /// Bytes of a waiter record's header (token, deadline, length, reserved).
 const WAITER_HEADER: usize = 24;
 
@@ -324,6 +324,12 @@ fn get_u64(bytes: &[u8], at: usize) -> u64 {
     u64::from_le_bytes(word)
 }
 
+fn get_u32(bytes: &[u8], at: usize) -> u32 {
+    let mut word = [0u8; 4];
+    word.copy_from_slice(&bytes[at..at + 4]);
+    u32::from_le_bytes(word)
+}
+
 fn put_u64(bytes: &mut [u8], at: usize, value: u64) {
     bytes[at..at + 8].copy_from_slice(&value.to_le_bytes());
 }
@@ -341,13 +347,13 @@ impl Queue<'_> {
     }
 
     fn slot_len(&self, at: usize) -> usize {
-        u16::from_le_bytes([self.arena[at], self.arena[at + 1]]) as usize
+        get_u32(self.arena, at) as usize
     }
 
     /// Appends `msg` (the caller checked that there is room and it fits).
     fn push(&mut self, msg: &[u8]) {
         let at = self.slot(self.ch.count);
-        self.arena[at..at + LEN_BYTES].copy_from_slice(&(msg.len() as u16).to_le_bytes());
+        self.arena[at..at + LEN_BYTES].copy_from_slice(&(msg.len() as u32).to_le_bytes());
         self.arena[at + LEN_BYTES..at + LEN_BYTES + msg.len()].copy_from_slice(msg);
         self.ch.count += 1;
     }
@@ -444,14 +450,9 @@ impl Queue<'_> {
             let token = self.token(0);
             let record = self.unpark(0);
             let at = self.record(record);
-            let len = u32::from_le_bytes([
-                self.arena[at + 16],
-                self.arena[at + 17],
-                self.arena[at + 18],
-                self.arena[at + 19],
-            ]) as usize;
+            let len = get_u32(self.arena, at + 16) as usize;
             let to = self.slot(self.ch.count);
-            self.arena[to..to + LEN_BYTES].copy_from_slice(&(len as u16).to_le_bytes());
+            self.arena[to..to + LEN_BYTES].copy_from_slice(&(len as u32).to_le_bytes());
             let from = at + WAITER_HEADER;
             self.arena.copy_within(from..from + len, to + LEN_BYTES);
             self.ch.count += 1;

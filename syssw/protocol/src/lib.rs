@@ -19,11 +19,11 @@
 //! | `SET_PARTITION_MODE` = 2 | w0 = mode ([`OperatingMode`]) | – (no reply for IDLE/restarts: the caller's thread is gone) |
 //! | `CREATE_PORT` = 10 | w0 = kind \| direction << 8 \| queuing discipline << 16 (FIFO for sampling), w1 = max message size, w2 = refresh ns (sampling) or depth (queuing); data = name | w0 = port id ([`PortIdReply`]) |
 //! | `PORT_ID` = 11 | w0 = kind; data = name | w0 = port id ([`PortIdReply`]) |
-//! | `WRITE_SAMPLING` = 12 | w0 = port id; data = message | – |
-//! | `READ_SAMPLING` = 13 | w0 = port id | w0 = length, w1 = validity; data = message ([`SamplingMessage`]) |
+//! | `WRITE_SAMPLING` = 12 | w0 = port id, w1 = staged bytes (0 = none); data = message (its end, after the staged bytes) | – |
+//! | `READ_SAMPLING` = 13 | w0 = port id | w0 = length, w1 = validity; data = message (its first [`PART_MAX`] bytes) ([`SamplingMessage`]) |
 //! | `SAMPLING_STATUS` = 14 | w0 = port id | w0 = max size \| direction << 32, w1 = refresh ns, w2 = last validity ([`SamplingStatus`]) |
-//! | `SEND_QUEUING` = 15 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255); data = message | – |
-//! | `RECEIVE_QUEUING` = 16 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255) | w0 = length; data = message ([`QueuingMessage`]) |
+//! | `SEND_QUEUING` = 15 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255) \| staged bytes << 8; data = message (its end, after the staged bytes) | – |
+//! | `RECEIVE_QUEUING` = 16 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255) | w0 = length; data = message (its first [`PART_MAX`] bytes) ([`QueuingMessage`]) |
 //! | `QUEUING_STATUS` = 17 | w0 = port id | w0 = messages \| max messages << 32, w1 = max size \| direction << 32, w2 = waiting processes ([`QueuingStatus`]) |
 //! | `CLEAR_QUEUING` = 18 | w0 = port id | – |
 //! | `REPORT_ERROR` = 20 | w0 = error ([`ErrorCode`]); data = detail text | – (or no reply: the action stopped the caller) |
@@ -31,6 +31,29 @@
 //! | `SET_MODULE_SCHEDULE` = 30 | w0 = schedule id | – |
 //! | `MODULE_SCHEDULE_STATUS` = 31 | – | w0 = time of the last switch (ns since boot, 0 = none), w1 = current schedule id, w2 = next schedule id ([`ScheduleStatus`]) |
 //! | `MODULE_SCHEDULE_ID` = 32 | data = name | w0 = schedule id ([`ScheduleIdReply`]) |
+//! | `STAGE_MESSAGE` = 40 | w0 = offset; data = the next part of a long message | – |
+//! | `FETCH_MESSAGE` = 41 | w0 = offset | w0 = bytes after this part ([`FetchReply`]); data = the part of the received message from offset |
+//!
+//! **Long messages.** A request or reply carries at most [`PART_MAX`] data bytes (one IPC
+//! message); a port message may be up to [`MAX_MESSAGE_SIZE`]. A longer one travels in
+//! parts through the caller's *staging buffer* in syssw:
+//! - Sending: STAGE_MESSAGE its first parts in order (offset 0 starts a new message and
+//!   drops whatever the caller had staged; every other offset must be the number of bytes
+//!   staged so far), then WRITE_SAMPLING or SEND_QUEUING with the number of staged bytes
+//!   and the last part as data. syssw sends the staged bytes followed by the data, and the
+//!   buffer is free again. A staged count that is not what the caller staged is
+//!   INVALID_PARAM; more bytes than the partition's longest port message, INVALID_CONFIG.
+//! - Receiving: READ_SAMPLING and RECEIVE_QUEUING answer with the whole length and the
+//!   first [`PART_MAX`] bytes; the rest waits in the caller's staging buffer, read with
+//!   FETCH_MESSAGE at offsets `PART_MAX`, `2 * PART_MAX`, ... A fetch at the message's
+//!   length (or one that reaches it) frees the buffer; a caller that does not want the rest
+//!   fetches at the length. FETCH_MESSAGE without a message waiting is INVALID_PARAM.
+//! - Each partition that has a port longer than [`PART_MAX`] has staging buffers of its
+//!   longest port's size in syssw: [`STAGING_RUNNERS`] for threads in the middle of a
+//!   transfer, and `MAX_WAITERS` more for each such queuing input port (receivers parked
+//!   on it get theirs when their message comes). A transfer that finds none free is
+//!   INVALID_CONFIG, and the port is left as it was. A partition's buffers are emptied
+//!   when it restarts.
 //!
 //! Codes travel as their numbers ([`PortKind`], [`Direction`], [`Validity`], ...; each table
 //! is written once below). Port ids are the ports' global indexes in the configuration; a
@@ -46,6 +69,17 @@
 #![no_std]
 
 pub mod layout;
+
+/// Most data bytes one request or reply carries: one IPC message.
+pub const PART_MAX: usize = abi::ipc::IPC_DATA_MAX;
+/// Longest port message (the configuration's `size` limit); longer than [`PART_MAX`], it
+/// travels in parts (see the module documentation).
+pub const MAX_MESSAGE_SIZE: u32 = 64 * 1024;
+/// Staging buffers of a partition with long ports, besides those for its parked receivers:
+/// threads that are in the middle of staging or fetching a message at the same time. The
+/// APEX runtime moves a long message with its priority at the partition's MCP, so only
+/// a thread running at the MCP (the error handler) can interrupt another's transfer.
+pub const STAGING_RUNNERS: usize = 4;
 
 codes::code_enum! {
     /// A request's IPC label.
@@ -66,6 +100,8 @@ codes::code_enum! {
         SetModuleSchedule = 30 => "SET_MODULE_SCHEDULE",
         ModuleScheduleStatus = 31 => "MODULE_SCHEDULE_STATUS",
         ModuleScheduleId = 32 => "MODULE_SCHEDULE_ID",
+        StageMessage = 40 => "STAGE_MESSAGE",
+        FetchMessage = 41 => "FETCH_MESSAGE",
     }
 }
 
@@ -236,6 +272,8 @@ pub enum Request<'a> {
     },
     WriteSampling {
         port: PortId,
+        /// Bytes of the message staged before (STAGE_MESSAGE); `message` follows them.
+        staged: u64,
         message: &'a [u8],
     },
     ReadSampling {
@@ -249,6 +287,8 @@ pub enum Request<'a> {
         timeout: u64,
         /// The caller's current priority (its place among PRIORITY waiters).
         priority: u8,
+        /// Bytes of the message staged before (STAGE_MESSAGE); `message` follows them.
+        staged: u64,
         message: &'a [u8],
     },
     ReceiveQueuing {
@@ -275,6 +315,13 @@ pub enum Request<'a> {
     ModuleScheduleStatus,
     ModuleScheduleId {
         name: &'a [u8],
+    },
+    StageMessage {
+        offset: u64,
+        part: &'a [u8],
+    },
+    FetchMessage {
+        offset: u64,
     },
 }
 
@@ -306,6 +353,8 @@ impl<'a> Request<'a> {
             Self::SetModuleSchedule { .. } => Label::SetModuleSchedule,
             Self::ModuleScheduleStatus => Label::ModuleScheduleStatus,
             Self::ModuleScheduleId { .. } => Label::ModuleScheduleId,
+            Self::StageMessage { .. } => Label::StageMessage,
+            Self::FetchMessage { .. } => Label::FetchMessage,
         }
     }
 
@@ -346,7 +395,11 @@ impl<'a> Request<'a> {
                 name,
             ),
             Self::PortId { kind, name } => ([u64::from(kind.code()), 0, 0], name),
-            Self::WriteSampling { port, message } => ([port, 0, 0], message),
+            Self::WriteSampling {
+                port,
+                staged,
+                message,
+            } => ([port, staged, 0], message),
             Self::ReadSampling { port }
             | Self::SamplingStatus { port }
             | Self::QueuingStatus { port }
@@ -355,8 +408,9 @@ impl<'a> Request<'a> {
                 port,
                 timeout,
                 priority,
+                staged,
                 message,
-            } => ([port, timeout, u64::from(priority)], message),
+            } => ([port, timeout, u64::from(priority) | staged << 8], message),
             Self::ReceiveQueuing {
                 port,
                 timeout,
@@ -367,6 +421,8 @@ impl<'a> Request<'a> {
             Self::SetModuleSchedule { schedule } => ([schedule, 0, 0], &[]),
             Self::ModuleScheduleStatus => ([0; 3], &[]),
             Self::ModuleScheduleId { name } => ([0; 3], name),
+            Self::StageMessage { offset, part } => ([offset, 0, 0], part),
+            Self::FetchMessage { offset } => ([offset, 0, 0], &[]),
         };
         Wire {
             label: self.label().code(),
@@ -402,6 +458,7 @@ impl<'a> Request<'a> {
             },
             Label::WriteSampling => Self::WriteSampling {
                 port: w0,
+                staged: w1,
                 message: wire.data,
             },
             Label::ReadSampling => Self::ReadSampling { port: w0 },
@@ -409,7 +466,8 @@ impl<'a> Request<'a> {
             Label::SendQueuing => Self::SendQueuing {
                 port: w0,
                 timeout: w1,
-                priority: priority(w2)?,
+                priority: (w2 & 0xff) as u8,
+                staged: w2 >> 8,
                 message: wire.data,
             },
             Label::ReceiveQueuing => Self::ReceiveQueuing {
@@ -427,6 +485,11 @@ impl<'a> Request<'a> {
             Label::SetModuleSchedule => Self::SetModuleSchedule { schedule: w0 },
             Label::ModuleScheduleStatus => Self::ModuleScheduleStatus,
             Label::ModuleScheduleId => Self::ModuleScheduleId { name: wire.data },
+            Label::StageMessage => Self::StageMessage {
+                offset: w0,
+                part: wire.data,
+            },
+            Label::FetchMessage => Self::FetchMessage { offset: w0 },
         })
     }
 }
@@ -609,6 +672,23 @@ impl ReplyWords for QueuingMessage {
 
     fn from_words([len, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
         Ok(Self { len })
+    }
+}
+
+/// Reply to FETCH_MESSAGE (the part is the reply's data).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FetchReply {
+    /// Bytes of the message after this part (0: the staging buffer is free again).
+    pub left: u64,
+}
+
+impl ReplyWords for FetchReply {
+    fn to_words(&self) -> [u64; 3] {
+        [self.left, 0, 0]
+    }
+
+    fn from_words([left, _, _]: [u64; 3]) -> Result<Self, DecodeError> {
+        Ok(Self { left })
     }
 }
 

@@ -25,6 +25,7 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
         },
         Request::WriteSampling {
             port: 7,
+            staged: 8192,
             message: MESSAGE,
         },
         Request::ReadSampling { port: 1 },
@@ -33,6 +34,7 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
             port: 3,
             timeout: 1_000_000,
             priority: 200,
+            staged: 4096,
             message: MESSAGE,
         },
         Request::ReceiveQueuing {
@@ -50,6 +52,11 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
         Request::SetModuleSchedule { schedule: 2 },
         Request::ModuleScheduleStatus,
         Request::ModuleScheduleId { name: NAME },
+        Request::StageMessage {
+            offset: 4096,
+            part: MESSAGE,
+        },
+        Request::FetchMessage { offset: 8192 },
     ]
 }
 
@@ -152,7 +159,7 @@ fn bad_codes_are_errors_with_the_answer_syssw_gives() {
             ReturnCode::InvalidConfig,
         ),
         (
-            wire(15, [0, 0, 256]),
+            wire(16, [0, 0, 256]),
             DecodeError::BadPriority(256),
             ReturnCode::InvalidParam,
         ),

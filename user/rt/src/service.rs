@@ -8,7 +8,7 @@ use crate::sys::{self, Message};
 use abi::ipc::{IPC_DATA_MAX, MessageTag};
 use abi::syscall::{Error, TIMEOUT_INFINITE, ThreadId};
 use core::sync::atomic::{AtomicU64, Ordering};
-use protocol::{ErrorCode, Request, Wire};
+use protocol::{ErrorCode, FetchReply, PART_MAX, ReplyWords, Request, ReturnCode, Wire};
 
 /// A reply as it arrived: the label (an ARINC return code, see
 /// [`protocol::reply_result`]) and the three words (decoded with the request's
@@ -34,6 +34,76 @@ pub fn request(server: ThreadId, ipc: IpcBufferRef, request: &Request) -> Result
         label: r.message.tag.label(),
         words: r.message.words,
     })
+}
+
+/// Sends a port request that carries a message of any length (the protocol's "long
+/// messages"): every part but the last is staged first (STAGE_MESSAGE), then the request
+/// `build(staged, last part)` makes is sent. A refused part ends the transfer with its reply.
+pub fn request_with_message<'m>(
+    server: ThreadId,
+    ipc: IpcBufferRef,
+    message: &'m [u8],
+    build: impl FnOnce(u64, &'m [u8]) -> Request<'m>,
+) -> Result<Reply, Error> {
+    let last = message.len().saturating_sub(1) / PART_MAX * PART_MAX;
+    for offset in (0..last).step_by(PART_MAX) {
+        let part = &message[offset..offset + PART_MAX];
+        let stage = Request::StageMessage {
+            offset: offset as u64,
+            part,
+        };
+        let reply = request(server, ipc, &stage)?;
+        if reply.label != ReturnCode::NoError.code() {
+            return Ok(reply);
+        }
+    }
+    request(server, ipc, &build(last as u64, &message[last..]))
+}
+
+/// Why [`receive_message`] has no message.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ReceiveError {
+    /// Longer than the caller's buffer (the rest was dropped in syssw).
+    TooLong,
+    /// syssw refused a fetch, or its answer does not fit the message: the service failed.
+    Failed,
+}
+
+/// The message of `len` bytes a READ_SAMPLING or RECEIVE_QUEUING reply announced, into
+/// `out`: its first part from the IPC buffer, the rest fetched (FETCH_MESSAGE).
+pub fn receive_message(
+    server: ThreadId,
+    ipc: IpcBufferRef,
+    len: usize,
+    out: &mut [u8],
+) -> Result<(), ReceiveError> {
+    if len > out.len() {
+        drop_message(server, ipc, len);
+        return Err(ReceiveError::TooLong);
+    }
+    let first = len.min(PART_MAX);
+    ipc.read_data(0, &mut out[..first]);
+    for offset in (PART_MAX..len).step_by(PART_MAX) {
+        let n = (len - offset).min(PART_MAX);
+        let fetch = Request::FetchMessage {
+            offset: offset as u64,
+        };
+        let reply = request(server, ipc, &fetch).map_err(|_| ReceiveError::Failed)?;
+        let left = FetchReply::from_words(reply.words).map_err(|_| ReceiveError::Failed)?;
+        if reply.label != ReturnCode::NoError.code() || left.left != (len - offset - n) as u64 {
+            return Err(ReceiveError::Failed);
+        }
+        ipc.read_data(0, &mut out[offset..offset + n]);
+    }
+    Ok(())
+}
+
+/// Drops the rest of an announced message of `len` bytes that the caller does not read
+/// (syssw holds it until fetched).
+pub fn drop_message(server: ThreadId, ipc: IpcBufferRef, len: usize) {
+    if len > PART_MAX {
+        let _ = request(server, ipc, &Request::FetchMessage { offset: len as u64 });
+    }
 }
 
 /// The IPC message of a request (its data already in the IPC buffer).

@@ -447,7 +447,7 @@ impl Iec61499Partition {
 
     /// Creates and starts the device process.
     fn spawn(&self, ctx: &mut StartContext<Warden>) {
-        let stack = apex::table::STACK_SIZE as u32;
+        let stack = apex::table::MIN_STACK as u32;
         if let Err(e) =
             main_process::start(ctx, "device", device_process, stack, Release::Aperiodic)
         {

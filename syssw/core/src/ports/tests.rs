@@ -84,8 +84,8 @@ fn with_ports(f: impl FnOnce(&mut Ports<'_>, [usize; 7])) {
 fn arena_size_is_exact() {
     let bytes = blob(&system_text());
     let system = decode(&bytes).unwrap();
-    // sampling: 8; queuing: (2 + 3) slots of 2 + 16, plus 8 waiter records of 24 + 16.
-    let expected = 8 + 5 * 18 + MAX_WAITERS * 40;
+    // sampling: 8; queuing: (2 + 3) slots of 4 + 16, plus 8 waiter records of 24 + 16.
+    let expected = 8 + 5 * 20 + MAX_WAITERS * 40;
     assert_eq!(arena_size(&system), expected);
     let mut short = vec![0u8; expected - 1];
     assert_eq!(
@@ -1250,4 +1250,52 @@ fn a_priority_waiter_times_out_and_a_cancel_keeps_the_order() {
         let tokens: Vec<u64> = done.iter().map(|(token, ..)| *token).collect();
         assert_eq!(tokens, [3, 1]);
     });
+}
+
+#[test]
+fn the_longest_messages_keep_their_length() {
+    // 64 KiB does not fit a 16-bit length: each queued message keeps its 32-bit one.
+    let text = with(&[
+        (
+            "# a",
+            r#"ports.tx = { kind = "queuing", direction = "out", size = "64KiB", depth = 1 }"#,
+        ),
+        (
+            "# b",
+            r#"ports.rx = { kind = "queuing", direction = "in", size = "64KiB", depth = 2 }"#,
+        ),
+        (
+            "# tail",
+            r#"[[channels]]
+kind = "queuing"
+from = "a.tx"
+to = "b.rx""#,
+        ),
+    ]);
+    let bytes = blob(&text);
+    let system = decode(&bytes).unwrap();
+    let mut arena = vec![0u8; arena_size(&system)];
+    let mut ports = Ports::new(&system, &mut arena).unwrap();
+    let (a, tx) = port(&system, "a", "tx");
+    let (b, rx) = port(&system, "b", "rx");
+    let longest: Vec<u8> = (0..65_536).map(|i| (i % 251) as u8).collect();
+    for len in [65_536, 65_535, 4097] {
+        let out = ports.send_queuing(a, tx, &longest[..len], 0, 0, 1, no_completion);
+        assert_eq!(out, sent(), "{len}");
+        let mut buf = vec![0u8; 65_536];
+        let got = ports.receive_queuing(b, rx, 0, 0, 2, &mut buf, no_completion);
+        assert_eq!(
+            got,
+            Outcome::Done {
+                code: ReturnCode::NoError,
+                len
+            }
+        );
+        assert_eq!(&buf[..len], &longest[..len]);
+    }
+    let too_long = vec![0u8; 65_537];
+    assert_eq!(
+        ports.send_queuing(a, tx, &too_long, 0, 0, 1, no_completion),
+        failed(ReturnCode::InvalidConfig)
+    );
 }

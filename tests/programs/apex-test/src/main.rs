@@ -5,7 +5,9 @@
 //! * `sender` / `receiver` (scenario `apex_ports`): sampling and queuing messages across
 //!   their windows: validity flips after the refresh period, a full queue refuses
 //!   (NOT_AVAILABLE) or times out, an empty one times out, a blocking receive waits across
-//!   windows; the receiver ends the run with an application error the configuration maps
+//!   windows; long messages (10,000 and 20,000 bytes, several IPC messages each) arrive
+//!   whole, also to a receive that waited for them; a process runs on a 200,000-byte
+//!   stack; the receiver ends the run with an application error the configuration maps
 //!   to `shutdown_success`;
 //! * `victim` / `intruder` / `restarter` / `overrun` (scenario `apex_health`): the intruder
 //!   writes the victim's shared memory it may only read (MEMORY_VIOLATION) while the victim
@@ -122,11 +124,23 @@ fn process(
     period: Option<Duration>,
     capacity: Option<Duration>,
 ) {
+    process_with_stack(ctx, process_name, entry, period, capacity, 16 * 1024);
+}
+
+/// [`process`] with a stack of `stack_size` bytes.
+fn process_with_stack(
+    ctx: &mut StartContext<Warden>,
+    process_name: &str,
+    entry: extern "C" fn(),
+    period: Option<Duration>,
+    capacity: Option<Duration>,
+    stack_size: u32,
+) {
     let attributes = ProcessAttribute {
         period: period.map_or(SystemTime::Infinite, SystemTime::Normal),
         time_capacity: capacity.map_or(SystemTime::Infinite, SystemTime::Normal),
         entry_point: entry,
-        stack_size: 16 * 1024,
+        stack_size,
         base_priority: 10,
         deadline: Deadline::Soft,
         name: name(process_name),
@@ -149,17 +163,53 @@ impl Partition<Warden> for Test {
                     .expect("CREATE_SAMPLING_PORT level");
                 ctx.create_queuing_port_sender(name("cmd"), 32, 2, QueuingDiscipline::Fifo)
                     .expect("CREATE_QUEUING_PORT cmd");
+                ctx.create_sampling_port_source(name("image"), IMAGE as u32)
+                    .expect("CREATE_SAMPLING_PORT image");
+                ctx.create_queuing_port_sender(
+                    name("bulk"),
+                    BULK as u32,
+                    1,
+                    QueuingDiscipline::Fifo,
+                )
+                .expect("CREATE_QUEUING_PORT bulk");
                 // A port the configuration does not have is refused.
                 let unknown = ctx.create_sampling_port_source(name("nonesuch"), 16);
                 println!("sender: unknown port: {:?}", unknown.err());
-                process(ctx, "produce", produce, Some(PORTS_FRAME), None);
+                process_with_stack(ctx, "produce", produce, Some(PORTS_FRAME), None, 64 * 1024);
+                // Stacks come from the runtime's arena as asked: a large one fits, one
+                // beyond what is left does not.
+                process_with_stack(ctx, "deep", deep, None, None, DEEP_STACK);
+                let attributes = ProcessAttribute {
+                    period: SystemTime::Infinite,
+                    time_capacity: SystemTime::Infinite,
+                    entry_point: deep,
+                    stack_size: 1 << 20,
+                    base_priority: 10,
+                    deadline: Deadline::Soft,
+                    name: name("huge"),
+                };
+                let huge = ctx.create_process(attributes);
+                println!("sender: a 1 MiB stack: {:?}", huge.err());
             }
             "receiver" => {
                 ctx.create_sampling_port_destination(name("level"), 16, Duration::from_millis(125))
                     .expect("CREATE_SAMPLING_PORT level");
                 ctx.create_queuing_port_receiver(name("cmd"), 32, 4, QueuingDiscipline::Fifo)
                     .expect("CREATE_QUEUING_PORT cmd");
-                process(ctx, "consume", consume, Some(PORTS_FRAME), None);
+                ctx.create_sampling_port_destination(
+                    name("image"),
+                    IMAGE as u32,
+                    Duration::from_millis(125),
+                )
+                .expect("CREATE_SAMPLING_PORT image");
+                ctx.create_queuing_port_receiver(
+                    name("bulk"),
+                    BULK as u32,
+                    2,
+                    QueuingDiscipline::Fifo,
+                )
+                .expect("CREATE_QUEUING_PORT bulk");
+                process_with_stack(ctx, "consume", consume, Some(PORTS_FRAME), None, 64 * 1024);
             }
             "victim" => process(ctx, "count", count, Some(FRAME), None),
             "intruder" => process(ctx, "poke", poke, Some(FRAME), None),
@@ -255,9 +305,45 @@ fn frame_of(first: Duration, period: Duration) -> u32 {
     ((elapsed + period / 2) / period) as u32 + 1
 }
 
+/// The long ports' sizes (several IPC messages each) and the deep process's stack.
+const IMAGE: usize = 10_000;
+const BULK: usize = 20_000;
+const DEEP_STACK: u32 = 200_000;
+
+/// Byte `i` of long message `k`: every part of a message differs from the others.
+fn pattern(k: u8, i: usize) -> u8 {
+    (i as u8).wrapping_mul(7) ^ (i >> 8) as u8 ^ k
+}
+
+fn long_message(k: u8, buf: &mut [u8]) -> &[u8] {
+    for (i, b) in buf.iter_mut().enumerate() {
+        *b = pattern(k, i);
+    }
+    buf
+}
+
+/// Whether `msg` is long message `k` of `len` bytes.
+fn intact(k: u8, msg: &[u8], len: usize) -> bool {
+    msg.len() == len && msg.iter().enumerate().all(|(i, &b)| b == pattern(k, i))
+}
+
+/// Uses most of its 200,000-byte stack (a 180,000-byte array the optimiser cannot drop).
+extern "C" fn deep() {
+    let mut array = [0u8; 180_000];
+    for (i, b) in array.iter_mut().enumerate() {
+        *b = i as u8;
+    }
+    let array = core::hint::black_box(&mut array);
+    let sum: u32 = array.iter().map(|&b| u32::from(b)).sum();
+    println!("sender: deep stack used 180000 bytes, sum {sum}");
+}
+
 extern "C" fn produce() {
     let level = SamplingPortSource::<Warden>::from_name(name("level")).expect("level");
     let cmd = QueuingPortSender::<Warden>::from_name(name("cmd")).expect("cmd");
+    let image = SamplingPortSource::<Warden>::from_name(name("image")).expect("image");
+    let bulk = QueuingPortSender::<Warden>::from_name(name("bulk")).expect("bulk");
+    let mut buf = [0u8; BULK];
     let first = time();
     loop {
         let frame = frame_of(first, PORTS_FRAME);
@@ -265,6 +351,28 @@ extern "C" fn produce() {
             level
                 .send(&frame.to_le_bytes())
                 .expect("WRITE_SAMPLING_MESSAGE");
+            image
+                .send(long_message(frame as u8, &mut buf[..IMAGE]))
+                .expect("WRITE_SAMPLING_MESSAGE of 10,000 bytes");
+        }
+        if frame == 1 {
+            // A full message, a short one, and one the port is too small for.
+            let zero = || SystemTime::Normal(Duration::ZERO);
+            bulk.send(long_message(1, &mut buf), zero())
+                .expect("SEND_QUEUING_MESSAGE of 20,000 bytes");
+            bulk.send(long_message(2, &mut buf[..5000]), zero())
+                .expect("SEND_QUEUING_MESSAGE of 5,000 bytes");
+            let mut more = [0u8; BULK + 1];
+            let refused = bulk.send(long_message(3, &mut more), zero());
+            println!("sender: a 20,001-byte message: {:?}", refused.err());
+        }
+        if frame == 3 {
+            // The receiver waits for it since its last window.
+            bulk.send(
+                long_message(4, &mut buf),
+                SystemTime::Normal(Duration::ZERO),
+            )
+            .expect("SEND_QUEUING_MESSAGE to a waiting receiver");
         }
         if frame == 1 {
             // Fill the channel (2 in the source port + 4 in the destination) without waiting.
@@ -290,6 +398,9 @@ extern "C" fn produce() {
 extern "C" fn consume() {
     let level = SamplingPortDestination::<Warden>::from_name(name("level")).expect("level");
     let cmd = QueuingPortReceiver::<Warden>::from_name(name("cmd")).expect("cmd");
+    let image = SamplingPortDestination::<Warden>::from_name(name("image")).expect("image");
+    let bulk = QueuingPortReceiver::<Warden>::from_name(name("bulk")).expect("bulk");
+    let mut long = [0u8; BULK];
     let mut buf = [0u8; 32];
     // Frames count from the first sampling message (the receiver may start a frame before
     // the sender has written anything).
@@ -312,6 +423,40 @@ extern "C" fn consume() {
                 );
             }
             Err(e) => println!("receiver: frame {frame} level {e:?}"),
+        }
+        if frame <= 3 {
+            match image.receive(&mut long) {
+                Ok((validity, msg)) => println!(
+                    "receiver: frame {frame} image of {} bytes, intact {} {validity:?}",
+                    msg.len(),
+                    intact(frame as u8, msg, IMAGE)
+                ),
+                Err(e) => println!("receiver: frame {frame} image {e:?}"),
+            }
+        }
+        if frame == 1 {
+            let zero = || SystemTime::Normal(Duration::ZERO);
+            for (k, len) in [(1, BULK), (2, 5000)] {
+                match bulk.receive(&mut long, zero()) {
+                    Ok((msg, _)) => println!(
+                        "receiver: bulk message {k} of {} bytes, intact {}",
+                        msg.len(),
+                        intact(k, msg, len)
+                    ),
+                    Err(e) => println!("receiver: bulk message {k}: {e:?}"),
+                }
+            }
+        }
+        if frame == 2 {
+            // Nothing is queued; the sender sends 20,000 bytes in its next window.
+            match bulk.receive(&mut long, SystemTime::Normal(Duration::from_millis(150))) {
+                Ok((msg, _)) => println!(
+                    "receiver: waited for bulk message 4 of {} bytes, intact {}",
+                    msg.len(),
+                    intact(4, msg, BULK)
+                ),
+                Err(e) => println!("receiver: wait for bulk message 4 failed: {e:?}"),
+            }
         }
         if frame == 1 {
             let mut got = [0u8; 8];

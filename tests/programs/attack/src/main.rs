@@ -495,6 +495,7 @@ fn port_victim(info: &StartInfo, rounds: u64) {
             port: ports[0],
             timeout: 0,
             priority: 0,
+            staged: 0,
             message: &message,
         });
         let (receive, received) = call(&Request::ReceiveQueuing {
