@@ -11,7 +11,7 @@
 //! with `--refresh PARTITION.PORT=DURATION`, else the destination partition's period (the
 //! YAML does not carry it: a653rs-linux takes it from the program, and Warden's
 //! CREATE_SAMPLING_PORT wants the configured one). What has no equivalent is an error naming its place: POSIX `sockets`,
-//! `mounts`, health tables, messages above Warden's 4096 bytes, names Warden does not take.
+//! `mounts`, health tables, messages above Warden's 64 KiB, names Warden does not take.
 
 use anyhow::{Context, Result, bail};
 use serde::Deserialize;
@@ -155,7 +155,25 @@ fn duration(ns: u64) -> String {
 }
 
 /// The largest port message Warden takes.
-const MAX_MESSAGE: u64 = 4096;
+const MAX_MESSAGE: u64 = config::model::MAX_MESSAGE_SIZE as u64;
+
+/// The sampling destination ports of the YAML `source`, as `partition.port` (before any
+/// rename); empty if it does not parse (the conversion then says why).
+pub fn sampling_destinations(source: &str) -> Vec<String> {
+    let Ok(config) = serde_yaml_ng::from_str::<Config>(source) else {
+        return Vec::new();
+    };
+    config
+        .channel
+        .iter()
+        .filter_map(|c| match c {
+            Channel::Sampling(s) => Some(&s.destination),
+            Channel::Queuing(_) => None,
+        })
+        .flatten()
+        .map(|d| format!("{}.{}", d.partition, d.port))
+        .collect()
+}
 
 /// Converts the YAML `source` (named `file` in messages) to a Warden description, with the
 /// partitions renamed by `renames` (`(old, new)`: a name Warden does not take gets one it
@@ -618,7 +636,7 @@ channel:
     #[test]
     fn what_has_no_equivalent_is_refused_with_its_place() {
         let cases = [
-            (PING.replace("msg_size: 16B", "msg_size: 10KB"), 17, "10KB is not 1..=4096"),
+            (PING.replace("msg_size: 16B", "msg_size: 70KB"), 17, "70KB is not 1..=65536"),
             (PING.replace("name: ping_server", "name: a_name_much_too_long"), 10, "1..=15 letters"),
             (
                 PING.replace("    image: ping_client\n", "    image: ping_client\n    sockets:\n      - type: udp\n        address: 127.0.0.1:34256\n"),

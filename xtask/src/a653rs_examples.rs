@@ -23,13 +23,26 @@ use std::path::{Path, PathBuf};
 pub const HOW_TO_GET: &str = "get them with: git clone https://github.com/DLR-FT/a653rs-linux target/a653rs-linux (or point A653RS_LINUX at a checkout)";
 
 /// An example: its directory under `examples/`, its YAML, its programs (directories with a
-/// `Cargo.toml` and `src/main.rs`) and the partition renames Warden's names need.
+/// `Cargo.toml` and `src/main.rs`), the partition renames Warden's names need, what is
+/// left out of its YAML before the import (the text, and why), and the refresh periods
+/// (`PARTITION.PORT`, duration) its code passes to CREATE_SAMPLING_PORT where no
+/// `#[sampling_in]` declares them.
 pub struct Example {
     pub name: &'static str,
     pub yaml: &'static str,
     pub programs: &'static [&'static str],
     pub renames: &'static [(&'static str, &'static str)],
+    pub yaml_cuts: &'static [(&'static str, &'static str)],
+    pub refreshes: &'static [(&'static str, &'static str)],
 }
+
+/// hello_part's partition Bar has a UDP socket in its YAML that its program never opens;
+/// a partition reaches the network only through the NIC partition, so the importer refuses
+/// sockets, and this one is left out.
+const UNUSED_SOCKET: (&str, &str) = (
+    "    sockets:\n      - type: udp\n        address: 127.0.0.1:34256\n",
+    "partition Bar's UDP socket, which the program never opens (POSIX sockets have no equivalent: a partition reaches the network through the NIC partition)",
+);
 
 /// The examples that run on Warden (what does not, and why: docs/apex-conformance.md).
 pub const EXAMPLES: &[Example] = &[
@@ -38,6 +51,8 @@ pub const EXAMPLES: &[Example] = &[
         yaml: "ping/ping.yaml",
         programs: &["ping/client", "ping/server"],
         renames: &[],
+        yaml_cuts: &[],
+        refreshes: &[],
     },
     Example {
         name: "ping_queue",
@@ -47,25 +62,43 @@ pub const EXAMPLES: &[Example] = &[
             ("ping_queue_client", "pq_client"),
             ("ping_queue_server", "pq_server"),
         ],
+        yaml_cuts: &[],
+        refreshes: &[],
+    },
+    // 10 KB sampling messages (in parts: longer than one IPC message), 100 KB stacks,
+    // `std::thread::sleep`, `humantime`, `String`, `format!`, postcard.
+    Example {
+        name: "hello_part",
+        yaml: "hello_part/hello_part.yaml",
+        programs: &["hello_part"],
+        renames: &[],
+        yaml_cuts: &[UNUSED_SOCKET],
+        refreshes: &[],
+    },
+    Example {
+        name: "hello_part_no_macros",
+        yaml: "hello_part_no_macros/hello_part_no_macros.yaml",
+        programs: &["hello_part_no_macros"],
+        renames: &[],
+        yaml_cuts: &[UNUSED_SOCKET],
+        // `create_sampling_port_destination(port_name, 10_000, Duration::from_secs(1_000))`
+        refreshes: &[("Bar.Hello", "1000s")],
+    },
+    Example {
+        name: "fuel_tank",
+        yaml: "fuel_tank/fuel_tank.yaml",
+        programs: &["fuel_tank/controller", "fuel_tank/simulation"],
+        renames: &[
+            ("fuel_tank_simulation", "ft_simulation"),
+            ("fuel_tank_controller", "ft_controller"),
+        ],
+        yaml_cuts: &[],
+        refreshes: &[],
     },
 ];
 
-/// Example programs built for Warden that do not run on it, and why: they show that the
-/// compatibility layer serves what they use (`std::thread::sleep`, `humantime`, `String`,
-/// `format!`, `once_cell`, postcard over sampling ports).
-pub const BUILT_ONLY: &[(&str, &str)] = &[
-    ("hello_part", HELLO_WHY),
-    ("hello_part_no_macros", HELLO_WHY),
-];
-
-const HELLO_WHY: &str = "its sampling port is 10 KB, Warden's port messages are at most 4,096 bytes (one IPC message), and its processes ask 100 KB stacks, above the runtime's 32 KiB; its YAML gives partition Bar a POSIX socket";
-
 /// The examples that neither run nor build here, and why.
 pub const NOT_PORTED: &[(&str, &str)] = &[
-    (
-        "fuel_tank",
-        "the simulation's sampling ports are 10 KB (Warden: 4,096 bytes at most) and both programs ask 100 KB stacks (runtime: 32 KiB)",
-    ),
     (
         "dev_random",
         "it reads /dev/random through std::fs and a mount: a partition has no file system",
@@ -242,14 +275,29 @@ pub fn prepare(root: &Path, example: &Example) -> Result<PathBuf> {
 
     // The system: their YAML through the importer.
     let yaml_path = examples.join(example.yaml);
-    let yaml = std::fs::read_to_string(&yaml_path)
+    let mut yaml = std::fs::read_to_string(&yaml_path)
         .with_context(|| format!("cannot read {}", yaml_path.display()))?;
+    for (cut, why) in example.yaml_cuts {
+        if !yaml.contains(cut) {
+            bail!(
+                "{} has no {cut:?} any more: a653rs-linux changed, the cut ({why}) needs a look",
+                yaml_path.display()
+            );
+        }
+        yaml = yaml.replace(cut, "");
+    }
     let renames: Vec<(String, String)> = example
         .renames
         .iter()
         .map(|(a, b)| (a.to_string(), b.to_string()))
         .collect();
-    let refreshes = refreshes_by_partition(&yaml, &renames, &programs);
+    let mut refreshes = refreshes_by_partition(&yaml, &renames, &programs);
+    refreshes.extend(
+        example
+            .refreshes
+            .iter()
+            .map(|(port, period)| (port.to_string(), period.to_string())),
+    );
     let toml = crate::a653rs::convert(
         &yaml_path.display().to_string(),
         &yaml,
@@ -372,10 +420,12 @@ pub fn run() -> Result<bool> {
             example.name,
             system.display()
         );
-    }
-    for (program, why) in BUILT_ONLY {
-        generate_and_build(&root, &[program])?;
-        println!("a653rs-examples: {program}: builds for Warden, does not run: {why}");
+        for (_, why) in example.yaml_cuts {
+            println!(
+                "a653rs-examples: {}: left out of its YAML: {why}",
+                example.name
+            );
+        }
     }
     for (example, why) in NOT_PORTED {
         println!("a653rs-examples: {example}: not ported: {why}");
@@ -388,7 +438,8 @@ pub fn run() -> Result<bool> {
 }
 
 /// `PARTITION.PORT = period` for each sampling input a program declares, by the partitions
-/// whose YAML `image` is that program.
+/// whose YAML `image` is that program and whose YAML makes that port a sampling
+/// destination (partitions running one program may use different ports of it).
 fn refreshes_by_partition(
     yaml: &str,
     renames: &[(String, String)],
@@ -406,13 +457,16 @@ fn refreshes_by_partition(
                 .file_name()
                 .map(|f| f.to_string_lossy().replace('_', "-"))
                 .unwrap_or_default();
-            let partition = renames
+            let destinations = crate::a653rs::sampling_destinations(yaml);
+            let renamed = renames
                 .iter()
                 .find(|(old, _)| old == partition)
                 .map_or(partition.clone(), |(_, new)| new.clone());
             for (_, declared) in programs.iter().filter(|(p, _)| *p == image) {
                 for (port, period) in declared {
-                    out.push((format!("{partition}.{port}"), period.clone()));
+                    if destinations.contains(&format!("{partition}.{port}")) {
+                        out.push((format!("{renamed}.{port}"), period.clone()));
+                    }
                 }
             }
         }
@@ -520,7 +574,7 @@ mod ping_server {
             declared_refreshes(SOURCE),
             [("ping_request".to_string(), "10s".to_string())]
         );
-        let yaml = "partitions:\n  - id: 1\n    name: ping_queue_server\n    image: ping_server\n";
+        let yaml = "major_frame: 1s\npartitions:\n  - id: 1\n    name: ping_queue_server\n    duration: 10ms\n    offset: 0ms\n    period: 1s\n    image: ping_server\nchannel:\n  - !Sampling\n    msg_size: 16B\n    source:\n      partition: ping_queue_client\n      port: ping_request\n    destination:\n      - partition: ping_queue_server\n        port: ping_request\n";
         let renames = [("ping_queue_server".to_string(), "pq".to_string())];
         let programs = [("ping-server".to_string(), declared_refreshes(SOURCE))];
         assert_eq!(
