@@ -50,6 +50,14 @@ pub fn settles(o: &Outcome, status: &[Status]) {
     );
 }
 
+/// Whether the level reached the band while the valve was open: the loop closed under a
+/// remote controller (checked by the event, not by a time, where machines boot apart).
+pub fn reaches_band(status: &[Status]) -> bool {
+    status
+        .iter()
+        .any(|s| (s.level - 1.0).abs() <= BAND && s.valve > 0.0)
+}
+
 /// Checks every status line at a time `during` accepts: the level in the band, the
 /// controller's 1 m setpoint there, and `stale` releases without a fresh valve command
 /// (those before the controller's first cycle).

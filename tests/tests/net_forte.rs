@@ -121,9 +121,7 @@ fn net_pubsub_forte() {
     let status = tank::status(&o);
     check(
         &o,
-        status
-            .iter()
-            .any(|s| (s.level - 1.0).abs() <= tank::BAND && s.valve > 0.0),
+        tank::reaches_band(&status),
         "the level never reached the band under FORTE's control",
     );
     let loops = xtask::pubsubbench::loop_round_trips(&o.lines, 0, u64::MAX);

@@ -14,6 +14,7 @@ use std::net::TcpStream;
 use std::path::PathBuf;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
+use xtask::pubsubbench::loop_round_trips;
 use xtask::qemu::{Ending, Outcome};
 
 /// The venv's python with pymodbus, if there is one.
@@ -727,7 +728,7 @@ fn net_pubsub() {
     println!("net_pubsub: {counts}");
     // The loop's round trip (field → controller → field), from the field PLC's watch lines
     // while both run.
-    let loops = loop_round_trips(&o, SETTLED_MS, CONTROLLER_STOPS_MS);
+    let loops = loop_round_trips(&o.lines, SETTLED_MS, CONTROLLER_STOPS_MS);
     println!(
         "net_pubsub: loop round trip (virtual time, field → controller → field, in the field PLC's 10 ms cycles): {loops:?} ms"
     );
@@ -737,12 +738,6 @@ fn net_pubsub() {
         "the loop's round trip is not 10..=50 ms",
     );
     println!("net_pubsub: {}", lapsed.unwrap_or_default());
-}
-
-/// The loop's round trips (ms) in the field PLC's watch lines from `from_ms` to `to_ms` of
-/// its time.
-fn loop_round_trips(o: &Outcome, from_ms: u64, to_ms: u64) -> Vec<i64> {
-    xtask::pubsubbench::loop_round_trips(&o.lines, from_ms, to_ms)
 }
 
 #[test]
@@ -770,12 +765,10 @@ fn net_pubsub_machines() {
         .position(|l| l.contains("[field] plc: subscription lapsed"));
     check(
         &a,
-        status
-            .iter()
-            .any(|s| (s.level - 1.0).abs() <= tank::BAND && s.valve > 0.0),
+        tank::reaches_band(&status),
         "the level never reached the band under the remote controller",
     );
-    let loops = loop_round_trips(&a, SETTLED_MS, CONTROLLER_STOPS_MS);
+    let loops = loop_round_trips(&a.lines, SETTLED_MS, CONTROLLER_STOPS_MS);
     println!(
         "net_pubsub_machines: loop round trip (real time, machine A → B → A, in the field PLC's 10 ms cycles): {loops:?} ms"
     );
