@@ -4,6 +4,8 @@
 //!   syssw);
 //! - `queuing_port_frame_roundtrip`: the same with a 1514-byte message, a full Ethernet
 //!   frame as the NIC partition and the guest exchange them (`frame-out` to `frame-in`);
+//! - `queuing_port_long_roundtrip`: the same with a 20,000-byte message, longer than one
+//!   request (five parts each way through the partition's staging buffer in syssw);
 //! - `shared_ring_frame_roundtrip`: the same frame through a single-producer,
 //!   single-consumer ring in the shared-memory segment `ring` (copied into a slot, the
 //!   head index published, then the slot copied out and the tail index advanced), what a
@@ -19,7 +21,7 @@
 
 extern crate alloc;
 
-use crate::{name, process, raise};
+use crate::{name, process_with_stack, raise};
 use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::bindings::{self as b, ApexBlackboardP1, ApexBufferP1, ApexSemaphoreP1};
@@ -34,6 +36,8 @@ use core::time::Duration;
 const SAMPLES: usize = 4_000;
 /// The largest Ethernet frame without its FCS (the NIC partition's port messages).
 const FRAME: u32 = 1514;
+/// A long message: five requests' worth.
+const LONG: usize = 20_000;
 /// The `ring` segment: the first (and only) shared segment of the port benchmark system.
 const RING: u64 = apex::user_rt::partition::SHARED_BASE;
 /// The ring's slots (a power of two) and their stride; the head and tail indices (u32)
@@ -50,13 +54,18 @@ pub fn create(ctx: &mut StartContext<Warden>) {
         .expect("CREATE_QUEUING_PORT frame-out");
     ctx.create_queuing_port_receiver(name("frame-in"), FRAME, 4, QueuingDiscipline::Fifo)
         .expect("CREATE_QUEUING_PORT frame-in");
+    ctx.create_queuing_port_sender(name("long-out"), LONG as u32, 1, QueuingDiscipline::Fifo)
+        .expect("CREATE_QUEUING_PORT long-out");
+    ctx.create_queuing_port_receiver(name("long-in"), LONG as u32, 1, QueuingDiscipline::Fifo)
+        .expect("CREATE_QUEUING_PORT long-in");
     let qd = QueuingDiscipline::Fifo;
     <Warden as ApexBlackboardP1>::create_blackboard(apex_name("board"), 64).expect("board");
     <Warden as ApexBufferP1>::create_buffer(apex_name("buffer"), 64, 2, qd).expect("buffer");
     for s in ["ping", "pong"] {
         <Warden as ApexSemaphoreP1>::create_semaphore(apex_name(s), 0, 1, qd).expect("semaphore");
     }
-    process(ctx, "roundtrip", roundtrip, None, None);
+    // Room for the long message and its copy on the stack.
+    process_with_stack(ctx, "roundtrip", roundtrip, None, None, 96 * 1024);
     // Above `roundtrip` (priority 10): it runs as soon as `ping` is signalled.
     crate::start_aperiodic("echo", echo, 20);
 }
@@ -127,6 +136,17 @@ fn frames() {
             .receive(&mut buf, poll())
             .expect("RECEIVE_QUEUING_MESSAGE");
         assert_eq!(got.len(), frame.len(), "the frame comes back whole");
+    });
+    let out = QueuingPortSender::<Warden>::from_name(name("long-out")).expect("long-out");
+    let inp = QueuingPortReceiver::<Warden>::from_name(name("long-in")).expect("long-in");
+    let long = [0xa5u8; LONG];
+    let mut back = [0u8; LONG];
+    measure("queuing_port_long_roundtrip", || {
+        out.send(&long, poll()).expect("SEND_QUEUING_MESSAGE");
+        let (got, _) = inp
+            .receive(&mut back, poll())
+            .expect("RECEIVE_QUEUING_MESSAGE");
+        assert_eq!(got.len(), LONG, "the message comes back whole");
     });
     let head = RING as *const AtomicU32;
     let tail = (RING + 4) as *const AtomicU32;

@@ -128,7 +128,7 @@ fn process(
 }
 
 /// [`process`] with a stack of `stack_size` bytes.
-fn process_with_stack(
+pub(crate) fn process_with_stack(
     ctx: &mut StartContext<Warden>,
     process_name: &str,
     entry: extern "C" fn(),
