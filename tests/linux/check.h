@@ -51,6 +51,7 @@ void area_time(void);
 void area_misc(void);
 void area_sockets(void);
 void area_threads(void);
+void area_events(void);
 
 /* Entry points of the program when it executes itself (`linux-tests --<mode> ...`). */
 int exec_mode(int argc, char **argv);

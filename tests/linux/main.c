@@ -2,7 +2,7 @@
  * the host Linux and in the Warden guest, whose outputs must be the same.
  *
  *     linux-tests AREA...     run the areas in order (process memory files writes pipes
- *                             signals time misc sockets threads); no argument: all of them
+ *                             signals time misc sockets threads events); no argument: all of them
  *
  * Each area prints `ok <check>` or `FAIL <check>: expected X got Y` lines and then
  * `area <name>: all checks passed` or `area <name>: <n> checks failed`; the program exits
@@ -21,7 +21,7 @@ static const struct {
 	{ "process", area_process }, { "memory", area_memory }, { "files", area_files },
 	{ "writes", area_writes },   { "pipes", area_pipes },   { "signals", area_signals },
 	{ "time", area_time },	     { "misc", area_misc },	    { "sockets", area_sockets },
-	{ "threads", area_threads },
+	{ "threads", area_threads }, { "events", area_events },
 };
 #define AREAS (sizeof areas / sizeof areas[0])
 

@@ -79,6 +79,7 @@ pub mod backing;
 pub mod console;
 pub mod cpio;
 pub mod elf;
+pub mod events;
 pub mod exec;
 pub mod frames;
 pub mod info;

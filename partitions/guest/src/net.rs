@@ -304,6 +304,11 @@ impl Net {
         }
     }
 
+    /// Whether socket `id` still has a descriptor.
+    pub fn is_open(&self, id: usize) -> bool {
+        self.refs.get(id).is_some_and(|&r| r > 0)
+    }
+
     /// A descriptor of socket `id` closed: the socket closes with its last.
     pub fn release(&mut self, id: usize) {
         let Some(r) = self.refs.get_mut(id) else {

@@ -98,6 +98,14 @@ impl Pipes {
         }
     }
 
+    /// Whether pipe `index`'s read or write end still has a descriptor.
+    pub fn end_open(&self, index: usize, write: bool) -> bool {
+        self.pipes
+            .get(index)
+            .and_then(Option::as_ref)
+            .is_some_and(|p| if write { p.writers > 0 } else { p.readers > 0 })
+    }
+
     /// One more descriptor for an end (`dup`, `fork`).
     pub fn add_end(&mut self, index: usize, write: bool) {
         if let Some(Some(p)) = self.pipes.get_mut(index) {

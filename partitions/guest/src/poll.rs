@@ -8,7 +8,7 @@
 use crate::arinc;
 use crate::linux::Errno;
 use crate::process::{File, Process};
-use crate::syscall::file::{Files, port_at};
+use crate::syscall::file::Files;
 use crate::syscall::table::Ctx;
 use crate::syscall::{Host, SysResult, WOULD_BLOCK, read_user, write_user};
 
@@ -25,20 +25,39 @@ pub const POLLWRNORM: u16 = 0x100;
 /// being `console` ([`console_events`]). `POLLERR` and `POLLHUP` are reported whether
 /// asked for or not.
 pub fn events(p: &Process, f: &mut Files, host: &mut impl Host, console: u16, fd: u64) -> u16 {
-    let ready = match p.file(fd) {
-        None => return POLLNVAL,
-        Some(File::Pipe { pipe, write, .. }) => f.pipes.poll(pipe, write),
-        Some(File::Socket(id)) => crate::syscall::socket::events(f.net, host.now_ns(), id),
-        Some(File::Console(_)) => console,
-        Some(File::Open(_)) if let Some((index, port)) = port_at(p, f.fs, fd) => {
+    match p.file(fd) {
+        None => POLLNVAL,
+        Some(file) => file_events(f, host, console, file),
+    }
+}
+
+/// The events of what a descriptor refers to ([`events`]; an epoll interest list keeps
+/// the file, not the descriptor).
+pub fn file_events(f: &mut Files, host: &mut impl Host, console: u16, file: File) -> u16 {
+    let ready = match file {
+        File::Pipe { pipe, write, .. } => f.pipes.poll(pipe, write),
+        File::Socket(id) => crate::syscall::socket::events(f.net, host.now_ns(), id),
+        File::Console(_) => console,
+        File::Open(id) if let Some((index, port)) = port_of(f.fs, id) => {
             arinc::events(port, index, host)
         }
+        File::Event(i) => f.events.counter(i).map_or(POLLERR, |c| c.poll()),
+        File::Timer(i) => {
+            let now = host.now_ns();
+            f.events.timer(i).map_or(POLLERR, |t| t.poll(now))
+        }
+        File::Epoll(i) => crate::syscall::events::epoll_events(f, host, console, i),
         // Regular files never wait.
-        Some(_) => POLLIN | POLLOUT,
+        File::Open(_) => POLLIN | POLLOUT,
     };
     let normal = if ready & POLLIN != 0 { POLLRDNORM } else { 0 }
         | if ready & POLLOUT != 0 { POLLWRNORM } else { 0 };
     ready | normal
+}
+
+/// The ARINC port open file description `id` is of, with its index.
+fn port_of<'f>(fs: &'f crate::vfs::Fs, id: crate::vfs::OpenId) -> Option<(usize, &'f arinc::Port)> {
+    fs.port(fs.description(id)?.node)
 }
 
 /// The console's events: its terminal's input readiness ([`crate::tty::Tty::readable`]),
@@ -50,7 +69,11 @@ pub fn console_events(host: &mut impl Host) -> u16 {
 
 /// The deadline of a wait: `None` (forever), `Some(0)` (do not wait), or when it ends on
 /// the guest's clock. Set on the first serve of the call, kept in `p.wake_at` after.
-fn deadline(p: &mut Process, host: &mut impl Host, timeout_ns: Option<u64>) -> Option<u64> {
+pub(crate) fn deadline(
+    p: &mut Process,
+    host: &mut impl Host,
+    timeout_ns: Option<u64>,
+) -> Option<u64> {
     match timeout_ns {
         None => None,
         Some(0) => Some(0),
@@ -62,7 +85,7 @@ fn deadline(p: &mut Process, host: &mut impl Host, timeout_ns: Option<u64>) -> O
 }
 
 /// Whether the wait is over without anything ready: its deadline passed.
-fn timed_out(host: &mut impl Host, deadline: Option<u64>) -> bool {
+pub(crate) fn timed_out(host: &mut impl Host, deadline: Option<u64>) -> bool {
     match deadline {
         None => false,
         Some(0) => true,
@@ -71,7 +94,7 @@ fn timed_out(host: &mut impl Host, deadline: Option<u64>) -> bool {
 }
 
 /// Ends a wait: the process's timer and temporary mask go.
-fn finish(p: &mut Process) {
+pub(crate) fn finish(p: &mut Process) {
     p.wake_at = None;
     if let Some(mask) = p.saved_mask.take() {
         p.sigmask = mask;
@@ -79,7 +102,12 @@ fn finish(p: &mut Process) {
 }
 
 /// Installs the mask `ppoll`/`pselect6` wait with, if they were given one.
-fn wait_mask(p: &mut Process, host: &mut impl Host, set: u64, size: u64) -> SysResult<()> {
+pub(crate) fn wait_mask(
+    p: &mut Process,
+    host: &mut impl Host,
+    set: u64,
+    size: u64,
+) -> SysResult<()> {
     if set == 0 {
         return Ok(());
     }

@@ -88,6 +88,13 @@ pub enum File {
     /// A socket of the guest's stack ([`crate::net`], by its `netstack::SocketId`); its
     /// `O_NONBLOCK` is the socket's, shared by every descriptor of it.
     Socket(usize),
+    /// An `eventfd` counter ([`crate::events::Events`], by index); its `O_NONBLOCK` is the
+    /// counter's, shared by every descriptor of it.
+    Event(usize),
+    /// A `timerfd` timer ([`crate::events::Events`]), `O_NONBLOCK` as for `Event`.
+    Timer(usize),
+    /// An epoll instance ([`crate::events::Events`]).
+    Epoll(usize),
 }
 
 /// A `futex` wait of a thread: the word's address (in its process's memory), the

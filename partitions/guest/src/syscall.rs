@@ -49,6 +49,7 @@ use abi::ipc::{ExceptionMessage, VECTOR_INTERRUPT, VECTOR_SYSCALL};
 pub use file::{Files, Target, close_files, share_files};
 use table::{Args, Ctx};
 
+pub mod events;
 pub mod file;
 mod handlers;
 mod memory;

@@ -28,6 +28,7 @@
 //! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
 //! beyond either, `fork` fails with `EAGAIN`.
 
+use crate::events::Events;
 use crate::exec::{self, ARG_MAX, ExecError};
 use crate::linux::Errno;
 use crate::memory::{Areas, PAGE};
@@ -217,6 +218,8 @@ pub const fn exit_status(code: u8) -> u32 {
 pub struct System {
     slots: [Option<Slot>; MAX_PROCESSES],
     pub pipes: Pipes,
+    /// The `eventfd` counters, `timerfd` timers and epoll instances.
+    pub events: Events,
     /// The sockets and their stack.
     pub net: Net,
     /// The unsupported calls logged so far.
@@ -245,6 +248,7 @@ impl System {
         Self {
             slots,
             pipes: Pipes::new(),
+            events: Events::new(),
             net: Net::new(None),
             reported: syscall::Reported::default(),
             next_pid,
@@ -320,6 +324,9 @@ impl System {
     /// guest's clock), if any.
     pub fn next_timer(&mut self) -> Option<u64> {
         let net = self.net.poll_at_ns();
+        // A timerfd's expiry matters only to a waiting call (a read, poll or epoll_wait of
+        // it); an unwatched interval timer does not wake the guest.
+        let timerfd = self.events.next_expiry().filter(|_| self.any_blocked());
         self.slots
             .iter()
             .flatten()
@@ -330,6 +337,7 @@ impl System {
             })
             .flatten()
             .chain(net)
+            .chain(timerfd)
             .min()
     }
 
@@ -337,6 +345,9 @@ impl System {
     /// time [`System::next_timer`] named has come).
     pub fn tick(&mut self, fs: &mut Fs, k: &mut impl Tasks) -> Option<Outcome> {
         let now = k.now_ns();
+        // Expired timers are counted now, so that none stays due (the calls served
+        // again below read them).
+        self.events.advance_timers(now);
         for j in 0..MAX_PROCESSES {
             let due = match self.slots[j].as_mut() {
                 Some(s) if !matches!(s.state, State::Zombie(_)) => {
@@ -790,6 +801,7 @@ impl System {
         let kept = m;
         let files = syscall::Files {
             pipes: &mut self.pipes,
+            events: &mut self.events,
             net: &mut self.net,
             fs,
             others: &others,
@@ -1020,7 +1032,7 @@ impl System {
             k.fork(pid, &parent.areas)?
         };
         let took = k.now_ns().saturating_sub(started);
-        share_files(&child, &mut self.pipes, &mut self.net, fs);
+        share_files(&child, &mut self.pipes, &mut self.events, &mut self.net, fs);
         k.log(format_args!(
             "guest: process {pid} ({}) forked from {}: {pages} pages shared in {} us",
             child.name(),
@@ -1227,7 +1239,14 @@ impl System {
                 k.unmap(area.start, (area.end - area.start) / PAGE);
             }
         }
-        close_files(old, &mut self.pipes, &mut self.net, fs, true);
+        close_files(
+            old,
+            &mut self.pipes,
+            &mut self.events,
+            &mut self.net,
+            fs,
+            true,
+        );
         let ids = (old.pid, old.ppid);
         match exec::load_file(fs, k, ids, cwd, file, argv, env, self.hwcap) {
             Ok(loaded) => {
@@ -1287,7 +1306,14 @@ impl System {
             return Some(ended);
         }
         let slot = self.slots[i].as_mut()?;
-        close_files(&mut slot.process, &mut self.pipes, &mut self.net, fs, false);
+        close_files(
+            &mut slot.process,
+            &mut self.pipes,
+            &mut self.events,
+            &mut self.net,
+            fs,
+            false,
+        );
         k.release(pid);
         let slot = self.slots[i].as_mut()?;
         slot.state = State::Zombie(word);
@@ -1334,7 +1360,14 @@ impl System {
                 && !matches!(s.state, State::Zombie(_))
             {
                 let mut process = s.process;
-                close_files(&mut process, &mut self.pipes, &mut self.net, fs, false);
+                close_files(
+                    &mut process,
+                    &mut self.pipes,
+                    &mut self.events,
+                    &mut self.net,
+                    fs,
+                    false,
+                );
                 k.release(process.pid);
             }
         }

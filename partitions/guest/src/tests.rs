@@ -262,6 +262,7 @@ struct World<'a> {
     fs: Fs<'a>,
     p: Process,
     pipes: crate::pipe::Pipes,
+    events: crate::events::Events,
     net: crate::net::Net,
     reported: crate::syscall::Reported,
     host: Model,
@@ -288,6 +289,7 @@ impl<'a> World<'a> {
             fs,
             p: loaded.process,
             pipes: crate::pipe::Pipes::new(),
+            events: crate::events::Events::new(),
             net: crate::net::Net::default(),
             reported: Default::default(),
             host,
@@ -315,6 +317,7 @@ impl<'a> World<'a> {
     fn handle(&mut self, m: &mut ExceptionMessage) -> Outcome {
         let files = crate::syscall::Files {
             pipes: &mut self.pipes,
+            events: &mut self.events,
             net: &mut self.net,
             fs: &mut self.fs,
             others: &(),
@@ -1409,6 +1412,7 @@ fn unsupported_calls_and_faults() {
             &mut w.p,
             crate::syscall::Files {
                 pipes: &mut w.pipes,
+                events: &mut w.events,
                 net: &mut w.net,
                 fs: &mut w.fs,
                 others: &(),
@@ -1762,6 +1766,109 @@ fn orphans_go_to_init_killed_children_report_their_signal_and_the_table_is_bound
     g.host.budget = 0;
     assert_eq!(g.call(1, nr::fork, [0; 6]), Some(err(Errno::ENOMEM)));
     assert_eq!(g.pids(), [1]);
+}
+
+#[test]
+fn event_descriptors_wake_waiters_are_shared_by_fork_and_go_with_their_last_descriptor() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let efd = g.call(1, nr::eventfd2, [0, 0, 0, 0, 0, 0]).unwrap();
+    let ep = g.call(1, nr::epoll_create1, [0, 0, 0, 0, 0, 0]).unwrap();
+    assert_eq!((efd, ep), (3, 4));
+    assert_eq!(
+        g.call(1, nr::epoll_create1, [1, 0, 0, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
+    );
+    // struct epoll_event, packed: EPOLLIN and the data word.
+    let mut event = [0u8; 12];
+    event[..4].copy_from_slice(&1u32.to_le_bytes());
+    event[4..].copy_from_slice(&0xfeed_u64.to_le_bytes());
+    g.put(1, SCRATCH, &event);
+    assert_eq!(
+        g.call(1, nr::epoll_ctl, [ep, 1, efd, SCRATCH, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(
+        g.call(1, nr::epoll_ctl, [ep, 1, efd, SCRATCH, 0, 0]),
+        Some(err(Errno::EEXIST))
+    );
+    assert_eq!(
+        g.call(1, nr::epoll_wait, [ep, SCRATCH + 0x100, 0, 0, 0, 0]),
+        Some(err(Errno::EINVAL)),
+        "maxevents 0"
+    );
+    let child = g.fork(1);
+    // The parent waits forever; the child's write (to the counter fork shared) ends it.
+    let out = SCRATCH + 0x100;
+    assert_eq!(
+        g.call(1, nr::epoll_wait, [ep, out, 8, u64::MAX, 0, 0]),
+        None
+    );
+    g.put(child, SCRATCH + 0x200, &5u64.to_le_bytes());
+    let replies = g.serve(
+        child,
+        World::message(nr::write, [efd, SCRATCH + 0x200, 8, 0, 0, 0], 0),
+    );
+    assert_eq!(replies, [(child, 8), (1, 1)]);
+    assert_eq!(g.get(1, out, 12), event);
+    // A short read is EINVAL; a read takes the count.
+    assert_eq!(
+        g.call(1, nr::read, [efd, SCRATCH + 0x300, 4, 0, 0, 0]),
+        Some(err(Errno::EINVAL))
+    );
+    assert_eq!(
+        g.call(1, nr::read, [efd, SCRATCH + 0x300, 8, 0, 0, 0]),
+        Some(8)
+    );
+    assert_eq!(g.word(1, SCRATCH + 0x300), 5);
+    // A blocked read of an empty counter waits for the write.
+    assert_eq!(
+        g.call(1, nr::read, [efd, SCRATCH + 0x300, 8, 0, 0, 0]),
+        None
+    );
+    let replies = g.serve(
+        child,
+        World::message(nr::write, [efd, SCRATCH + 0x200, 8, 0, 0, 0], 0),
+    );
+    assert_eq!(replies, [(child, 8), (1, 8)]);
+    // A timer: the guest's next timer is its expiry while a read of it waits.
+    let tfd = g.call(1, nr::timerfd_create, [1, 0, 0, 0, 0, 0]).unwrap();
+    let mut spec = [0u8; 32];
+    spec[16..24].copy_from_slice(&1000u64.to_le_bytes()); // it_value: 1000 s
+    g.put(1, SCRATCH + 0x400, &spec);
+    assert_eq!(
+        g.call(1, nr::timerfd_settime, [tfd, 0, SCRATCH + 0x400, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(
+        g.call(1, nr::read, [tfd, SCRATCH + 0x300, 8, 0, 0, 0]),
+        None
+    );
+    let due = g.system.next_timer().expect("the timer wakes the guest");
+    g.host.now = due;
+    g.host.resumed.clear();
+    assert_eq!(g.system.tick(&mut g.fs, &mut g.host), None);
+    assert!(
+        g.host
+            .resumed
+            .iter()
+            .any(|(pid, m)| *pid == 1 && m.registers.rax == 8)
+    );
+    assert_eq!(g.word(1, SCRATCH + 0x300), 1, "one expiration");
+    // The child's copies go when it ends; the parent's close frees them and the counter
+    // leaves the interest list.
+    g.serve(child, World::message(nr::exit_group, [0; 6], 0));
+    assert_eq!(g.system.events.open_count(), 3);
+    assert_eq!(g.call(1, nr::close, [efd, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::close, [tfd, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.system.events.open_count(), 1);
+    assert_eq!(
+        g.call(1, nr::epoll_wait, [ep, out, 8, 0, 0, 0]),
+        Some(0),
+        "the closed counter left the list"
+    );
+    assert_eq!(g.call(1, nr::close, [ep, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.system.events.open_count(), 0);
 }
 
 #[test]

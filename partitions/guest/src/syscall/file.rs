@@ -15,6 +15,7 @@ use super::{
     read_cstr, read_u64, write_user,
 };
 use crate::arinc;
+use crate::events::Events;
 use crate::linux::{self, Errno};
 use crate::memory::Rights;
 use crate::net::Net;
@@ -30,6 +31,8 @@ use crate::vfs::{self, Fs, Ino, Node, PATH_MAX, Remove, Stat};
 /// system and the other processes (`/proc`).
 pub struct Files<'f, 'a> {
     pub pipes: &'f mut Pipes,
+    /// The `eventfd` counters, `timerfd` timers and epoll instances.
+    pub events: &'f mut Events,
     pub net: &'f mut Net,
     pub fs: &'f mut Fs<'a>,
     pub others: &'f dyn ProcessTable,
@@ -64,14 +67,42 @@ fn seconds(host: &mut impl Host) -> u64 {
 
 // ---- descriptors ----
 
-/// Closes descriptor `fd` if open (a pipe end or open file description counts one
-/// descriptor less).
-pub fn close(p: &mut Process, pipes: &mut Pipes, net: &mut Net, fs: &mut Fs, fd: usize) {
-    match p.take_fd(fd) {
-        Some(File::Pipe { pipe, write, .. }) => pipes.close_end(pipe, write),
-        Some(File::Socket(id)) => net.release(id),
-        Some(File::Open(id)) => fs.release(id),
-        _ => {}
+/// Closes descriptor `fd` if open (a pipe end, socket, open file description or event
+/// object counts one descriptor less); what it referred to leaves the epoll interest lists
+/// when this was its last descriptor, as on Linux.
+pub fn close(
+    p: &mut Process,
+    pipes: &mut Pipes,
+    events: &mut Events,
+    net: &mut Net,
+    fs: &mut Fs,
+    fd: usize,
+) {
+    let Some(file) = p.take_fd(fd) else {
+        return;
+    };
+    let gone = match file {
+        File::Pipe { pipe, write, .. } => {
+            pipes.close_end(pipe, write);
+            !pipes.end_open(pipe, write)
+        }
+        File::Socket(id) => {
+            net.release(id);
+            !net.is_open(id)
+        }
+        File::Open(id) => {
+            fs.release(id);
+            fs.description(id).is_none()
+        }
+        // `release` forgets them itself.
+        File::Event(_) | File::Timer(_) | File::Epoll(_) => {
+            events.release(file);
+            false
+        }
+        File::Console(_) => false,
+    };
+    if gone {
+        events.forget(file);
     }
 }
 
@@ -80,13 +111,14 @@ pub fn close(p: &mut Process, pipes: &mut Pipes, net: &mut Net, fs: &mut Fs, fd:
 pub fn close_files(
     p: &mut Process,
     pipes: &mut Pipes,
+    events: &mut Events,
     net: &mut Net,
     fs: &mut Fs,
     only_cloexec: bool,
 ) {
     for fd in (0..p.files.len()).rev() {
         if !only_cloexec || p.is_cloexec(fd) {
-            close(p, pipes, net, fs, fd);
+            close(p, pipes, events, net, fs, fd);
         }
     }
     if !only_cloexec {
@@ -96,33 +128,40 @@ pub fn close_files(
 
 /// Another descriptor of everything `p` has open, and its working directory once more (a
 /// forked child's copies).
-pub fn share_files(p: &Process, pipes: &mut Pipes, net: &mut Net, fs: &mut Fs) {
+pub fn share_files(
+    p: &Process,
+    pipes: &mut Pipes,
+    events: &mut Events,
+    net: &mut Net,
+    fs: &mut Fs,
+) {
     fs.hold(p.cwd);
-    for file in p.files.iter().flatten() {
-        match *file {
-            File::Pipe { pipe, write, .. } => pipes.add_end(pipe, write),
-            File::Socket(id) => net.share(id),
-            File::Open(id) => fs.share(id),
-            File::Console(_) => {}
-        }
+    for &file in p.files.iter().flatten() {
+        share(pipes, events, net, fs, file);
+    }
+}
+
+/// One more descriptor refers to `file`.
+fn share(pipes: &mut Pipes, events: &mut Events, net: &mut Net, fs: &mut Fs, file: File) {
+    match file {
+        File::Pipe { pipe, write, .. } => pipes.add_end(pipe, write),
+        File::Socket(id) => net.share(id),
+        File::Open(id) => fs.share(id),
+        File::Event(_) | File::Timer(_) | File::Epoll(_) => events.share(file),
+        File::Console(_) => {}
     }
 }
 
 /// Puts a copy of `file` at the free descriptor `fd`.
 fn duplicate(p: &mut Process, f: &mut Files, file: File, fd: usize, cloexec: bool) {
-    match file {
-        File::Pipe { pipe, write, .. } => f.pipes.add_end(pipe, write),
-        File::Socket(id) => f.net.share(id),
-        File::Open(id) => f.fs.share(id),
-        File::Console(_) => {}
-    }
+    share(f.pipes, f.events, f.net, f.fs, file);
     p.install(fd, file, cloexec);
 }
 
 pub fn close_fd(c: &mut Ctx<'_, '_, impl Host>, fd: u64) -> SysResult<u64> {
     let (p, f, _) = c.parts();
     p.file(fd).ok_or(Errno::EBADF)?;
-    close(p, f.pipes, f.net, f.fs, fd as usize);
+    close(p, f.pipes, f.events, f.net, f.fs, fd as usize);
     Ok(0)
 }
 
@@ -151,7 +190,7 @@ pub fn close_range(
         if flags & CLOSE_RANGE_CLOEXEC != 0 {
             p.set_cloexec(fd, true);
         } else {
-            close(p, f.pipes, f.net, f.fs, fd);
+            close(p, f.pipes, f.events, f.net, f.fs, fd);
         }
     }
     Ok(0)
@@ -183,7 +222,7 @@ pub fn dup3(
         .filter(|&fd| fd < p.max_fd())
         .ok_or(Errno::EBADF)?;
     if old != new {
-        close(p, f.pipes, f.net, f.fs, fd);
+        close(p, f.pipes, f.events, f.net, f.fs, fd);
         duplicate(p, f, file, fd, bits & O_CLOEXEC != 0);
     }
     Ok(fd as u64)
@@ -297,7 +336,17 @@ pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> Sys
                         .stack(0)
                         .set_nonblocking(netstack::SocketId(id), nonblock);
                 }
-                File::Console(_) => {}
+                File::Event(i) => {
+                    if let Some(c) = f.events.counter(i) {
+                        c.nonblock = arg & linux::O_NONBLOCK != 0;
+                    }
+                }
+                File::Timer(i) => {
+                    if let Some(t) = f.events.timer(i) {
+                        t.nonblock = arg & linux::O_NONBLOCK != 0;
+                    }
+                }
+                File::Console(_) | File::Epoll(_) => {}
             }
             Ok(0)
         }
@@ -319,6 +368,15 @@ pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> Sys
                 let access = if write { linux::O_WRONLY } else { 0 };
                 access | if nonblock { linux::O_NONBLOCK } else { 0 }
             }
+            File::Event(i) => {
+                let nonblock = f.events.counter(i).is_some_and(|c| c.nonblock);
+                linux::O_RDWR | if nonblock { linux::O_NONBLOCK } else { 0 }
+            }
+            File::Timer(i) => {
+                let nonblock = f.events.timer(i).is_some_and(|t| t.nonblock);
+                linux::O_RDWR | if nonblock { linux::O_NONBLOCK } else { 0 }
+            }
+            File::Epoll(_) => linux::O_RDWR,
         }),
         _ => Err(Errno::EINVAL),
     }
@@ -348,6 +406,10 @@ fn read_kernel(
             Transfer::WouldBlock => Err(WOULD_BLOCK),
             Transfer::Broken => Err(Errno::EBADF),
         },
+        File::Event(_) | File::Timer(_) if at.is_some() => Err(Errno::ESPIPE),
+        File::Event(i) => super::events::read_counter(f, i, buf),
+        File::Timer(i) => super::events::read_timer(f, host, i, buf),
+        File::Epoll(_) => Err(Errno::EINVAL),
         File::Open(id) => {
             let o = f.fs.description(id).ok_or(Errno::EBADF)?;
             if o.flags & linux::O_ACCMODE == linux::O_WRONLY {
@@ -433,6 +495,9 @@ fn write_kernel(
             Transfer::WouldBlock => Err(WOULD_BLOCK),
             Transfer::Broken => Err(BROKEN_PIPE),
         },
+        File::Event(_) if at.is_some() => Err(Errno::ESPIPE),
+        File::Event(i) => super::events::write_counter(f, i, data),
+        File::Timer(_) | File::Epoll(_) => Err(Errno::EINVAL),
         File::Open(id) => {
             let o = f.fs.description(id).ok_or(Errno::EBADF)?;
             if o.flags & linux::O_ACCMODE == 0 {
@@ -466,12 +531,23 @@ fn write_kernel(
     }
 }
 
+/// A read (`write`: a write) of `fd` failed with `e`: when it had to wait, the file's
+/// readiness was used up, and an edge-triggered epoll reports its return
+/// ([`crate::events::Epoll::consumed`]).
+fn used_up(p: &Process, f: &mut Files, fd: u64, e: Errno, write: bool) {
+    if matches!(e, Errno::EAGAIN | WOULD_BLOCK)
+        && let Some(file) = p.file(fd)
+    {
+        super::events::consumed(f, file, write);
+    }
+}
+
 /// Whether reading or writing `fd` may go on after a full step (files, devices and the
 /// console; a pipe moves at most one step per call, what it holds or has room for, and a
 /// port one message).
 fn streams(p: &Process, f: &Files, fd: u64) -> bool {
     match p.file(fd) {
-        Some(File::Pipe { .. } | File::Socket(_)) => false,
+        Some(File::Pipe { .. } | File::Socket(_) | File::Event(_) | File::Timer(_)) => false,
         Some(File::Open(id)) => {
             f.fs.description(id)
                 .is_none_or(|o| f.fs.port(o.node).is_none())
@@ -547,7 +623,12 @@ pub fn read(
         if at.is_some() {
             return Err(Errno::ESPIPE);
         }
-        return super::socket::recv(c, fd, buf, count.min(MAX_TRANSFER as u64), 0);
+        let got = super::socket::recv(c, fd, buf, count.min(MAX_TRANSFER as u64), 0);
+        if let Err(e) = got {
+            let (p, f, _) = c.parts();
+            used_up(p, f, fd, e, false);
+        }
+        return got;
     }
     let total = (count as usize).min(MAX_TRANSFER);
     check_user(p, buf, total, Rights::WRITE)?;
@@ -565,7 +646,10 @@ pub fn read(
         ) {
             Ok(n) => n,
             Err(WOULD_BLOCK | BROKEN_PIPE) if done > 0 => break,
-            Err(e) => return Err(e),
+            Err(e) => {
+                used_up(p, f, fd, e, false);
+                return Err(e);
+            }
         };
         host.write_user(buf + done as u64, &chunk[..n])?;
         done += n;
@@ -589,7 +673,12 @@ pub fn write(
         if at.is_some() {
             return Err(Errno::ESPIPE);
         }
-        return super::socket::send(c, fd, buf, count, 0, None);
+        let sent = super::socket::send(c, fd, buf, count, 0, None);
+        if let Err(e) = sent {
+            let (p, f, _) = c.parts();
+            used_up(p, f, fd, e, true);
+        }
+        return sent;
     }
     if let Some((_, port)) = port_at(p, f.fs, fd)
         && arinc::too_long(port, count)
@@ -616,7 +705,10 @@ pub fn write(
             Ok(n) => n,
             // What moved already counts.
             Err(_) if done > 0 => break,
-            Err(e) => return Err(e),
+            Err(e) => {
+                used_up(p, f, fd, e, true);
+                return Err(e);
+            }
         };
         done += n;
         if n < want || !streams(p, f, fd) {
@@ -706,8 +798,10 @@ pub fn sendfile(
 ) -> SysResult<u64> {
     let (p, f, host) = c.parts();
     let writable = match p.file(out_fd).ok_or(Errno::EBADF)? {
-        File::Console(_) | File::Pipe { write: true, .. } | File::Socket(_) => true,
-        File::Pipe { .. } => false,
+        File::Console(_) | File::Pipe { write: true, .. } | File::Socket(_) | File::Event(_) => {
+            true
+        }
+        File::Pipe { .. } | File::Timer(_) | File::Epoll(_) => false,
         File::Open(id) => {
             f.fs.description(id)
                 .is_some_and(|o| o.flags & linux::O_ACCMODE != 0)
@@ -924,7 +1018,10 @@ pub fn openat(
             }
             File::Console(_) => File::Console(Stream::Stdout),
             // Linux refuses to open a socket through its link.
-            File::Socket(_) => return Err(Errno::ENXIO),
+            // Nor is an event descriptor reopened through it here.
+            File::Socket(_) | File::Event(_) | File::Timer(_) | File::Epoll(_) => {
+                return Err(Errno::ENXIO);
+            }
             File::Open(_) => return Err(Errno::ENOENT),
         };
         duplicate(p, f, file, fd, flags & O_CLOEXEC != 0);
@@ -1120,6 +1217,13 @@ fn stat_fd(p: &Process, f: &Files, fd: u64) -> SysResult<Stat> {
             ino: crate::vfs::proc::SOCKET_INO + id as u64,
             nlink: 1,
             mode: S_IFSOCK | 0o777,
+            ..Stat::default()
+        },
+        // Linux's anonymous inodes: no file type bits, owner read and write.
+        File::Event(_) | File::Timer(_) | File::Epoll(_) => Stat {
+            ino: crate::vfs::proc::ANON_INO,
+            nlink: 1,
+            mode: 0o600,
             ..Stat::default()
         },
     })

@@ -2,7 +2,7 @@
 //! serves it, mostly through the modules that own the state it acts on.
 
 use super::table::{Args, Ctx};
-use super::{Host, Outcome, ProcessCall, SysResult, Target, WOULD_BLOCK, file, memory};
+use super::{Host, Outcome, ProcessCall, SysResult, Target, WOULD_BLOCK, events, file, memory};
 use crate::linux::{self, Errno, nr};
 use crate::process::File;
 use crate::signal::SIGSEGV;
@@ -419,6 +419,47 @@ pub fn select<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 pub fn pselect6<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     poll::select(c, a.0, true)
+}
+
+// Event descriptors ([`super::events`]).
+
+pub fn eventfd<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::eventfd(c, a.raw(0), 0)
+}
+pub fn eventfd2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::eventfd(c, a.raw(0), a.flags(1))
+}
+pub fn timerfd_create<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::timerfd_create(c, a.raw(0), a.flags(1))
+}
+pub fn timerfd_settime<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::timerfd_settime(c, a.fd(0), a.flags(1), a.ptr(2), a.ptr(3))
+}
+pub fn timerfd_gettime<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::timerfd_gettime(c, a.fd(0), a.ptr(1))
+}
+pub fn epoll_create<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::epoll_create(c, a.i32(0))
+}
+pub fn epoll_create1<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::epoll_create1(c, a.flags(0))
+}
+pub fn epoll_ctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    events::epoll_ctl(c, a.fd(0), a.raw(1) as u32 as u64, a.fd(2), a.ptr(3))
+}
+pub fn epoll_wait<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    let timeout = poll::poll_timeout(a.raw(3));
+    events::epoll_wait(c, a.fd(0), a.ptr(1), a.i32(2), timeout, 0, 0)
+}
+pub fn epoll_pwait<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    let timeout = poll::poll_timeout(a.raw(3));
+    let (mask, size) = (a.ptr(4), a.usize(5));
+    events::epoll_wait(c, a.fd(0), a.ptr(1), a.i32(2), timeout, mask, size)
+}
+pub fn epoll_pwait2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    let timeout = events::pwait2_timeout(c, a.ptr(3))?;
+    let (mask, size) = (a.ptr(4), a.usize(5));
+    events::epoll_wait(c, a.fd(0), a.ptr(1), a.i32(2), timeout, mask, size)
 }
 
 // Time, randomness, the system.

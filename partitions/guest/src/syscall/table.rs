@@ -275,6 +275,18 @@ table! {
     ppoll => ppoll,
     select => select,
     pselect6 => pselect6,
+    // Event descriptors ([`super::events`]).
+    eventfd => eventfd,
+    eventfd2 => eventfd2,
+    timerfd_create => timerfd_create,
+    timerfd_settime => timerfd_settime,
+    timerfd_gettime => timerfd_gettime,
+    epoll_create => epoll_create,
+    epoll_create1 => epoll_create1,
+    epoll_ctl => epoll_ctl,
+    epoll_wait => epoll_wait,
+    epoll_pwait => epoll_pwait,
+    epoll_pwait2 => epoll_pwait2,
     // Time, randomness, the system.
     clock_gettime => clock_gettime,
     clock_getres => clock_getres,

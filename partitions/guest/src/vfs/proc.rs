@@ -262,6 +262,9 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
             crate::process::File::Socket(id) => {
                 write!(w, "socket:[{}]", SOCKET_INO + id as u64).ok()?
             }
+            crate::process::File::Event(_) => write!(w, "anon_inode:[eventfd]").ok()?,
+            crate::process::File::Timer(_) => write!(w, "anon_inode:[timerfd]").ok()?,
+            crate::process::File::Epoll(_) => write!(w, "anon_inode:[eventpoll]").ok()?,
             crate::process::File::Open(_) => return None,
         },
         _ => return None,
@@ -274,6 +277,8 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
 const PIPE_INO: u64 = 0x3000_0000;
 /// The inode number of socket 0 (`socket:[<n>]`, `fstat`).
 pub const SOCKET_INO: u64 = 0x3800_0000;
+/// The inode number of Linux's one anonymous inode (`eventfd`, `timerfd`, epoll).
+pub const ANON_INO: u64 = 0x3c00_0000;
 
 /// Its inode number (in a range of its own, apart from the file system's).
 fn ino(node: Node) -> u64 {
