@@ -3442,6 +3442,31 @@ fn threads_share_their_process_and_futexes_wake_them() {
     assert_eq!(g.call(2, nr::getpid, [0; 6]), Some(1));
     assert_eq!(g.call(2, nr::gettid, [0; 6]), Some(2));
     assert_eq!(g.call(1, nr::gettid, [0; 6]), Some(1));
+    // /proc/self is the process (the thread group), not the thread, as on Linux.
+    let path = g.text(2, SCRATCH + 0x800, "/proc/self");
+    assert_eq!(
+        g.call(2, nr::readlink, [path, SCRATCH + 0x400, 16, 0, 0, 0]),
+        Some(1)
+    );
+    assert_eq!(g.get(2, SCRATCH + 0x400, 1), b"1");
+    let path = g.text(2, SCRATCH + 0x800, "/proc/self/stat");
+    let fd = g.call(2, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    // Read below the stack and clear of the words the checks below use.
+    let n = g
+        .call(2, nr::read, [fd, SCRATCH + 0x400, 0x300, 0, 0, 0])
+        .unwrap();
+    let stat = String::from_utf8(g.get(2, SCRATCH + 0x400, n as usize)).unwrap();
+    assert!(stat.starts_with("1 ("), "{stat}");
+    assert_eq!(g.call(2, nr::close, [fd, 0, 0, 0, 0, 0]), Some(0));
+    // Its own /proc/<tid> is there too (Linux's unlisted thread entry).
+    let path = g.text(2, SCRATCH + 0x800, "/proc/2/stat");
+    let fd = g.call(2, nr::open, [path, 0, 0, 0, 0, 0]).unwrap();
+    let n = g
+        .call(2, nr::read, [fd, SCRATCH + 0x400, 0x300, 0, 0, 0])
+        .unwrap();
+    let stat = String::from_utf8(g.get(2, SCRATCH + 0x400, n as usize)).unwrap();
+    assert!(stat.starts_with("2 ("), "{stat}");
+    assert_eq!(g.call(2, nr::close, [fd, 0, 0, 0, 0, 0]), Some(0));
     // PR_SET_NAME names only the calling thread (Linux's per-thread comm).
     let first = g.system.process(1).unwrap().name().to_string();
     g.put(2, SCRATCH + 0x40, b"worker\0");

@@ -47,10 +47,17 @@ const S_IFSOCK: u32 = 0o140000;
 /// `struct statfs`'s `f_type` of a tmpfs.
 const TMPFS_MAGIC: u64 = 0x0102_1994;
 
-/// The processes as the calls of `p` see them.
+/// The processes as the calls of `p` see them. A thread sees itself as its process, as on
+/// Linux, where `/proc/self` names the thread group (`getpid`), not the thread: the Go
+/// runtime and others compare `/proc/self/stat`'s pid with `getpid`. The calling thread
+/// holds its process's shared state (descriptors, areas) while its call is served.
 fn procs<'s>(p: &'s Process, f: &'s Files) -> Procs<'s> {
     Procs {
-        me: ProcInfo::of(p, b'R'),
+        me: ProcInfo {
+            pid: p.tgid,
+            ..ProcInfo::of(p, b'R')
+        },
+        tid: p.pid,
         others: f.others,
         now_ns: 0,
         memory: f.fs.memory(),

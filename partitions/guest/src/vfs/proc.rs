@@ -116,7 +116,12 @@ impl ProcessTable for () {
 
 /// The processes a call sees: its caller and the others.
 pub struct Procs<'s> {
+    /// The caller's process: `me.pid` is its thread group (`/proc/self`).
     pub me: ProcInfo<'s>,
+    /// The calling thread's id: `/proc/<tid>` is the caller too (Linux keeps such an
+    /// entry for each thread, unlisted), though the caller's own slot is not among
+    /// `others`.
+    pub tid: u32,
     pub others: &'s dyn ProcessTable,
     /// Nanoseconds since the guest started (`uptime`).
     pub now_ns: u64,
@@ -144,6 +149,7 @@ impl<'s> Procs<'s> {
                 size: 0,
                 files: &[],
             },
+            tid: pid,
             others: &(),
             now_ns: 0,
             memory: 0,
@@ -156,6 +162,8 @@ impl<'s> Procs<'s> {
     pub fn find(&self, pid: u32) -> Option<ProcInfo<'_>> {
         if pid == self.me.pid {
             Some(self.me)
+        } else if pid == self.tid {
+            Some(ProcInfo { pid, ..self.me })
         } else {
             self.others.find(pid)
         }
