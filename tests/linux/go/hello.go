@@ -1,7 +1,8 @@
 // Command go-hello exercises what a Go service asks of Linux: goroutines spread over
 // threads, channels, sync.WaitGroup and sync.Mutex, timers (time.Sleep, time.After,
 // time.Ticker), a select with a timeout, os.Getpid, files written and read back in a
-// directory, /proc/self, the garbage collector and asynchronous preemption. Scenario
+// directory, /proc/self, a child process through os/exec, the garbage collector and
+// asynchronous preemption. Scenario
 // guest_go runs it in the guest and on the host and compares the output, so it prints no
 // time, pid or address.
 package main
@@ -9,6 +10,7 @@ package main
 import (
 	"fmt"
 	"os"
+	"os/exec"
 	"path/filepath"
 	"runtime"
 	"sort"
@@ -162,6 +164,17 @@ func main() {
 	}
 	_, err = os.Stat(path)
 	fmt.Println("removed:", os.IsNotExist(err))
+
+	// A child process through os/exec (fork, execve, pipes, wait): its output and its
+	// exit status.
+	said, err := exec.Command("busybox", "echo", "from", "a", "child").Output()
+	if err != nil {
+		fail("exec busybox echo", err)
+	}
+	fmt.Print("child said: ", string(said))
+	err = exec.Command("busybox", "false").Run()
+	exit, ok := err.(*exec.ExitError)
+	fmt.Println("child false exits 1:", ok && exit.ExitCode() == 1)
 
 	// The garbage collector with goroutines allocating.
 	var allocs sync.WaitGroup
