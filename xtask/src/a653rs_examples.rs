@@ -445,6 +445,7 @@ fn refreshes_by_partition(
     renames: &[(String, String)],
     programs: &[(String, Vec<(String, String)>)],
 ) -> Vec<(String, String)> {
+    let destinations = crate::a653rs::sampling_destinations(yaml);
     let mut out = Vec::new();
     let mut name = None;
     for line in yaml.lines() {
@@ -457,7 +458,6 @@ fn refreshes_by_partition(
                 .file_name()
                 .map(|f| f.to_string_lossy().replace('_', "-"))
                 .unwrap_or_default();
-            let destinations = crate::a653rs::sampling_destinations(yaml);
             let renamed = renames
                 .iter()
                 .find(|(old, _)| old == partition)

@@ -177,7 +177,7 @@ pub fn poll_timeout(ms: u64) -> Option<u64> {
     (ms >= 0).then(|| ms as u64 * 1_000_000)
 }
 
-/// `ppoll`'s timeout.
+/// `ppoll`'s (and `epoll_pwait2`'s) timeout: a `struct timespec` (null: forever).
 pub fn ppoll_timeout(c: &mut Ctx<'_, '_, impl Host>, at: u64) -> SysResult<Option<u64>> {
     let (p, _, host) = c.parts();
     read_timeout(p, host, at, false)

@@ -370,15 +370,6 @@ pub fn epoll_wait(
     Ok(reports.len() as u64)
 }
 
-/// `epoll_pwait2`'s timeout: a `struct timespec` (null: forever).
-pub fn pwait2_timeout(c: &mut Ctx<'_, '_, impl Host>, at: u64) -> SysResult<Option<u64>> {
-    if at == 0 {
-        return Ok(None);
-    }
-    let (p, _, host) = c.parts();
-    crate::sigcalls::read_time(p, host, at, false).map(Some)
-}
-
 /// `EPOLLET`: a read (`write`: a write) of `file` had to wait, so its readiness was used
 /// up and comes back as a new edge.
 pub fn consumed(f: &mut Files, file: File, write: bool) {

@@ -457,7 +457,7 @@ pub fn epoll_pwait<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     events::epoll_wait(c, a.fd(0), a.ptr(1), a.i32(2), timeout, mask, size)
 }
 pub fn epoll_pwait2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    let timeout = events::pwait2_timeout(c, a.ptr(3))?;
+    let timeout = poll::ppoll_timeout(c, a.ptr(3))?;
     let (mask, size) = (a.ptr(4), a.usize(5));
     events::epoll_wait(c, a.fd(0), a.ptr(1), a.i32(2), timeout, mask, size)
 }
