@@ -90,7 +90,8 @@ impl Fixture {
         [c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9] = a;
         loop {
             let rip = self.k.threads[t].context().rip;
-            assert_eq!(on_syscall(&mut self.k, t, || 0), Outcome::Continue);
+            let outcome = on_syscall(&mut self.k, t, || 0);
+            assert!(matches!(outcome, Outcome::Continue | Outcome::SwitchTo(_)));
             if self.k.threads[t].is_free() || self.k.threads[t].context().rip != rip.wrapping_sub(2)
             {
                 return self.k.threads[t].context().rax;
@@ -415,6 +416,64 @@ fn call_reply_with_data_and_words() {
         f.sys(client, Call::Reply, [sid, 0, 0, 0, 0, 0]),
         err(Error::NotWaiting)
     );
+}
+
+#[test]
+fn register_only_round_trips_take_the_fast_path() {
+    let mut f = Fixture::new();
+    let client = f.thread(ROOT, 100);
+    let server_task = f.task(ROOT, Abilities::all(), 200);
+    let (server, low_server) = (f.thread(server_task, 150), f.thread(server_task, 50));
+    for s in [server, low_server] {
+        f.sys(s, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    }
+    let (cid, sid, low_sid) = (f.id(client), f.id(server), f.id(low_server));
+    let call = |f: &mut Fixture, to: u64| {
+        let c = f.k.threads[client].context_mut();
+        (c.rax, c.rdi, c.rsi, c.rdx) = (Call::Call as u64, to, TIMEOUT_INFINITE, 7);
+        (c.r10, c.r8, c.r9) = (1, 2, 3);
+        on_syscall(&mut f.k, client, || 0)
+    };
+    // A server above the caller runs next, directly, with the general path's results.
+    assert_eq!(call(&mut f, sid), Outcome::SwitchTo(server));
+    assert_eq!(
+        f.k.threads[client].state(),
+        State::WaitingReply { from: server }
+    );
+    let c = f.k.threads[server].context();
+    let client_task = f.k.task_id(f.k.threads[client].task()).0;
+    assert_eq!(
+        (c.rax, c.rdi, c.rsi, c.rdx, c.r10, c.r8, c.r9),
+        (OK, cid, client_task, 7, 1, 2, 3)
+    );
+    f.sys(server, Call::ReplyWait, [cid, TIMEOUT_INFINITE, 9, 4, 5, 6]);
+    assert_eq!(f.k.threads[server].state(), State::Receiving { from: None });
+    let c = f.k.threads[client].context();
+    assert_eq!(
+        (c.rax, c.rdi, c.rdx, c.r10, c.r8, c.r9),
+        (OK, sid, 9, 4, 5, 6)
+    );
+    assert_eq!(f.k.threads[client].state(), State::Ready);
+    // One below it: the scheduler decides.
+    assert_eq!(call(&mut f, low_sid), Outcome::Continue);
+    assert_eq!(f.k.threads[low_server].context().r8, 2);
+    // A kernel label, a finite time-out: the general path, with its answers.
+    f.sys(
+        low_server,
+        Call::ReplyWait,
+        [cid, TIMEOUT_INFINITE, 0, 0, 0, 0],
+    );
+    let kernel_label = MessageTag::new(abi::ipc::KERNEL_LABELS, 0, 0).0;
+    assert_eq!(
+        f.sys(
+            client,
+            Call::Call,
+            [sid, TIMEOUT_INFINITE, kernel_label, 0, 0, 0]
+        ),
+        err(Error::InvalidArgument)
+    );
+    f.sys(client, Call::Call, [sid, 1_000, 0, 0, 0, 0]);
+    assert_eq!(f.k.threads[client].deadline(), 1_000);
 }
 
 #[test]

@@ -9,6 +9,7 @@
 use crate::mem::PAGE_SIZE;
 use crate::mem::paging::is_user_range;
 use crate::state::{Kernel, MAX_THREADS};
+use crate::syscall::Outcome;
 use crate::table::ThreadIdx;
 use crate::thread::{Fault, NEVER, State};
 use abi::args::results;
@@ -17,7 +18,7 @@ use abi::ipc::{
     LABEL_FAULT_REPORT, MAP_ITEM_GRANT, MapItem, MessageTag, REPLY_KILL, REPLY_RESUME,
     ReceiveWindow, Registers,
 };
-use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE};
+use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, ThreadId};
 
 /// Which side of a transfer could not take part.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -108,6 +109,12 @@ impl Kernel {
             }
             self.transfer_payload(from, to, tag)?;
         }
+        self.hand_over(from, to, tag, words);
+        Ok(())
+    }
+
+    /// Puts the sender, the tag and the three words of a message in `to`'s result registers.
+    fn hand_over(&mut self, from: ThreadIdx, to: ThreadIdx, tag: MessageTag, words: [u64; 3]) {
         let received = results::Ipc {
             sender: self.thread_id(from),
             sender_task: self.task_id(self.threads[from].task()),
@@ -117,7 +124,54 @@ impl Kernel {
             word2: words[2],
         };
         self.threads[to].set_results(|r| received.encode_into(r));
-        Ok(())
+    }
+
+    /// The fast path of a client and its server: `call` (`reply_wait` if not `call`) with a
+    /// register-only message and no time-out, to a peer that already waits for it. It makes
+    /// the general path's transitions ([`Kernel::send`]; [`Kernel::reply`], then
+    /// [`Kernel::receive`]) with only the checks this case needs. `None`, with nothing
+    /// changed, whenever the general path has more to decide: an error to report, a
+    /// receiver not yet waiting, a fault to answer, queued senders, a time-out to arm.
+    ///
+    /// A call to a server of higher priority in the caller's time partition (or the
+    /// background) switches to it directly: the caller was the scheduler's choice, so every
+    /// other eligible thread is below the server, which the scheduler would choose too.
+    pub fn fast_ipc(&mut self, t: ThreadIdx, call: bool) -> Option<Outcome> {
+        let c = self.threads[t].context();
+        let (peer, tag, timeout) = (ThreadId(c.rdi), MessageTag(c.rdx), c.rsi);
+        let words = [c.r10, c.r8, c.r9];
+        if !tag.is_registers_only() || timeout != TIMEOUT_INFINITE {
+            return None;
+        }
+        let peer = self.thread(peer.named()?).ok()?;
+        let (me, them) = (&self.threads[t], &self.threads[peer]);
+        let (next, outcome) = if call {
+            let waiting = matches!(them.state(),
+                State::Receiving { from } if from.is_none_or(|f| f == t));
+            if !waiting || !self.may_send(me.task(), them.task()) {
+                return None;
+            }
+            let direct = them.priority() > me.priority()
+                && (them.time_partition() == me.time_partition() || them.time_partition() == 0);
+            let outcome = if direct {
+                Outcome::SwitchTo(peer)
+            } else {
+                Outcome::Continue
+            };
+            (State::WaitingReply { from: peer }, outcome)
+        } else {
+            if them.state() != (State::WaitingReply { from: t })
+                || them.fault().is_some()
+                || self.first_sender(t, None).is_some()
+            {
+                return None;
+            }
+            (State::Receiving { from: None }, Outcome::Continue)
+        };
+        self.hand_over(t, peer, tag, words);
+        self.wake(peer, Error::Ok);
+        self.block(t, next, NEVER);
+        Some(outcome)
     }
 
     /// Copies the data bytes and maps the items of a message, all checks first.

@@ -19,14 +19,12 @@ static HEAP: heap::BootHeap = heap::BootHeap::new();
 #[unsafe(naked)]
 pub unsafe extern "sysv64" fn _start(boot_info: u64) -> ! {
     core::arch::naked_asm!(
-        // Below the user-frame area at the top (see arch::entry).
-        "lea rsp, [rip + {stack} + {size} - {frame}]",
+        "lea rsp, [rip + {stack} + {size}]",
         "xor ebp, ebp",
         "call {main}",
         "ud2",
         stack = sym KERNEL_STACK,
         size = const KERNEL_STACK_SIZE,
-        frame = const kernel::arch::entry::FRAME_SIZE,
         main = sym kernel_entry,
     )
 }

@@ -25,6 +25,9 @@ use abi::syscall::{
 pub enum Outcome {
     /// Schedule and return to user mode.
     Continue,
+    /// Return to user mode in this thread, which the scheduler would choose (the IPC fast
+    /// path knows it without asking).
+    SwitchTo(ThreadIdx),
     /// Stop the machine (system_halt, or a fault nobody can handle).
     Halt { success: bool },
 }
@@ -98,6 +101,12 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
         return crate::fault::deliver_or_report(k, t, fault);
     }
     let raw = k.threads[t].context().rax;
+    let call = raw == Call::Call.code();
+    if (call || raw == Call::ReplyWait.code())
+        && let Some(outcome) = k.fast_ipc(t, call)
+    {
+        return outcome;
+    }
     let result = match Call::from_code(raw) {
         None => Err(Error::InvalidCall),
         Some(call) => dispatch(call, k, t, &k.threads[t].arg_regs(), clock),

@@ -241,8 +241,9 @@ impl Thread {
 
     /// Saves the registers of the entry frame when it leaves user mode.
     #[inline(always)]
-    pub fn save_context(&mut self, frame: &TrapFrame) {
-        self.context = *frame;
+    /// Where its registers are saved: the frame the entry stubs use while it runs.
+    pub fn context_ptr(&mut self) -> *mut TrapFrame {
+        &mut self.context
     }
 
     /// Where the processor saves its FPU state when it stops running.

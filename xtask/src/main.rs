@@ -102,6 +102,11 @@ enum Cmd {
         /// target/bench/ports.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net"])]
         ports: bool,
+        /// Run only the kernel micro-benchmarks (tests/programs/bench as the root task; also
+        /// part of the full bench): `null_syscall`, `ipc_roundtrip`, `exception_roundtrip`,
+        /// `window_switch`, `window_jitter`; writes target/bench/kernel.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports"])]
+        kernel: bool,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -204,6 +209,11 @@ fn main() -> ExitCode {
             deterministic_time,
             ..
         } => native_bench(deterministic_time),
+        Cmd::Bench {
+            kernel: true,
+            deterministic_time,
+            ..
+        } => kernel_bench(deterministic_time),
         Cmd::Bench {
             deterministic_time, ..
         } => bench(deterministic_time),
@@ -662,12 +672,7 @@ fn guest_bench(deterministic_time: bool) -> Result<bool> {
         &xtask::target_dir().join("bench"),
         deterministic_time,
     )?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "guest.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "guest.json")
 }
 
 /// `cargo xtask bench --ports`: only the port benchmark system; writes
@@ -677,12 +682,7 @@ fn ports_bench(deterministic_time: bool) -> Result<bool> {
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let metrics = ports_metrics(&qemu, &system, &dir, deterministic_time)?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "ports.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "ports.json")
 }
 
 /// The port benchmark system (`tests/configs/bench_ports.toml`, an APEX partition under
@@ -727,12 +727,7 @@ fn net_bench() -> Result<bool> {
     let mut metrics = xtask::plcnetbench::run(&qemu, &system, &dir)?;
     metrics.extend(xtask::pubsubbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "net.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "net.json")
 }
 
 /// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
@@ -745,12 +740,7 @@ fn native_bench(deterministic_time: bool) -> Result<bool> {
         &xtask::target_dir().join("bench/native"),
         deterministic_time,
     )?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "native.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "native.json")
 }
 
 /// The guest benchmark: `linux-bench` (tests/linux/bench.c) on the host Linux (`host_*`,
@@ -842,12 +832,7 @@ const SOAK_FRAMES: u64 = 1_000_000;
 /// `bench --plc`: only the host soft-PLC benchmarks (`xtask::bench::host_metrics`).
 fn plc_bench() -> Result<bool> {
     let metrics = xtask::bench::host_metrics()?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "plc.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "plc.json")
 }
 
 /// `bench --schedules`: only the module-schedule switch bench.
@@ -856,12 +841,7 @@ fn schedules_bench() -> Result<bool> {
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
     let metrics = schedule_switch_metrics(&qemu, &system, &dir)?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "schedules.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "schedules.json")
 }
 
 /// `bench --hostile`: only the attack systems (see [`hostile_lateness`]).
@@ -869,12 +849,7 @@ fn hostile() -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = hostile_lateness(&qemu, &system, &xtask::target_dir().join("bench"))?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "hostile.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "hostile.json")
 }
 
 /// `cargo xtask bench --soak`: only the soak; writes `target/bench/soak.json`.
@@ -882,12 +857,7 @@ fn soak(frames: u64) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let metrics = soak_metrics(&qemu, &system, &xtask::target_dir().join("bench"), frames)?;
-    for m in &metrics {
-        println!("{}", xtask::bench::format_line(m));
-    }
-    let report = xtask::bench::write_report_as(&metrics, "soak.json")?;
-    eprintln!("xtask: wrote {}", report.display());
-    Ok(true)
+    print_and_write(&metrics, "soak.json")
 }
 
 /// Boots the soak system (tests/configs/soak.toml, its victim renamed to log `frames`
@@ -942,17 +912,42 @@ fn soak_metrics(
     }
 }
 
-fn bench(deterministic_time: bool) -> Result<bool> {
+/// Prints the `bench` lines of a part of the bench and writes them to
+/// `target/bench/<file>`.
+fn print_and_write(metrics: &[xtask::bench::Metric], file: &str) -> Result<bool> {
+    for m in metrics {
+        println!("{}", xtask::bench::format_line(m));
+    }
+    let report = xtask::bench::write_report_as(metrics, file)?;
+    eprintln!("xtask: wrote {}", report.display());
+    Ok(true)
+}
+
+/// `cargo xtask bench --kernel`: only the kernel micro-benchmarks; writes
+/// `target/bench/kernel.json`.
+fn kernel_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
+    let metrics = kernel_metrics(
+        &qemu,
+        &system,
+        &xtask::target_dir().join("bench"),
+        deterministic_time,
+    )?;
+    print_and_write(&metrics, "kernel.json")
+}
+
+/// The kernel micro-benchmarks: `tests/programs/bench` as the root task, no syssw.
+fn kernel_metrics(
+    qemu: &tools::Qemu,
+    system: &artifacts::Artifacts,
+    dir: &std::path::Path,
+    deterministic_time: bool,
+) -> Result<Vec<xtask::bench::Metric>> {
     let mut kernel_bench = system.clone();
     kernel_bench.syssw = artifacts::build_user_programs(&["bench-kernel".to_string()])?.remove(0);
-    let dir = xtask::target_dir().join("bench");
-    let mut metrics = Vec::new();
-    // The kernel benchmarks run as the root task; the port benchmark is an APEX partition
-    // under the real syssw (`tests/configs/bench_ports.toml`).
     let outcome = boot_bench_system(
-        &qemu,
+        qemu,
         &kernel_bench,
         None,
         &dir.join("kernel"),
@@ -960,12 +955,20 @@ fn bench(deterministic_time: bool) -> Result<bool> {
         deterministic_time,
         bench_timeout(deterministic_time),
     )?;
-    metrics.extend(
-        outcome
-            .lines
-            .iter()
-            .filter_map(|l| xtask::bench::parse_line(l)),
-    );
+    Ok(outcome
+        .lines
+        .iter()
+        .filter_map(|l| xtask::bench::parse_line(l))
+        .collect())
+}
+
+fn bench(deterministic_time: bool) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let dir = xtask::target_dir().join("bench");
+    // The kernel benchmarks run as the root task; the port benchmark is an APEX partition
+    // under the real syssw (`tests/configs/bench_ports.toml`).
+    let mut metrics = kernel_metrics(&qemu, &system, &dir, deterministic_time)?;
     metrics.extend(ports_metrics(&qemu, &system, &dir, deterministic_time)?);
     metrics.extend(schedule_switch_metrics(&qemu, &system, &dir)?);
     metrics.extend(plc_metrics(&qemu, &system, &dir)?);

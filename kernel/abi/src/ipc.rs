@@ -65,6 +65,11 @@ impl MessageTag {
     pub const fn items(self) -> usize {
         ((self.0 >> 48) & 0x7) as usize
     }
+    /// A tag user space may send ([`Self::is_valid`]) that carries no data bytes and no map
+    /// items: the message is its label and three words, all in registers.
+    pub const fn is_registers_only(self) -> bool {
+        self.0 < KERNEL_LABELS as u64
+    }
     /// The tag is one user space may send: no stray bits, length and item count within the
     /// limits, and not a label of the kernel's ([`KERNEL_LABELS`]).
     pub const fn is_valid(self) -> bool {
@@ -280,6 +285,10 @@ mod tests {
             assert!(!MessageTag::new(label, 0, 0).is_valid(), "{label:#x}");
         }
         assert!(MessageTag::new(KERNEL_LABELS - 1, 0, 0).is_valid());
+        assert!(MessageTag::new(KERNEL_LABELS - 1, 0, 0).is_registers_only());
+        assert!(!MessageTag::new(KERNEL_LABELS, 0, 0).is_registers_only());
+        assert!(!MessageTag::new(7, 1, 0).is_registers_only());
+        assert!(!MessageTag::new(7, 0, 1).is_registers_only());
     }
 
     #[test]

@@ -1,11 +1,13 @@
 //! Kernel entry and exit for user threads.
 //!
 //! Every entry from ring 3 (`syscall`, interrupt, exception) leaves the same [`TrapFrame`]
-//! at the same place: the top of the one kernel stack ([`frame`]). The glue copies it into
-//! the running thread's control block, lets the portable code decide, then copies the
-//! chosen thread's registers back into the frame and returns through it. A `syscall` entry
-//! returns with `sysret` when the frame allows it (`rcx` = `rip`, `r11` = `rflags`, as for
-//! any thread that entered by `syscall`), else with `iretq`, which restores every register.
+//! in the same place: the running thread's own saved context, which [`ACTIVE_FRAME`]
+//! points to (and the TSS's ring-0 stack pointer just past it, so the CPU pushes an
+//! interrupt's part of the frame there too). The stubs then switch to the one kernel stack
+//! for the portable code, which decides, and return through the frame `ACTIVE_FRAME` then
+//! points to: switching threads copies no registers. A `syscall` entry returns with
+//! `sysret` when the frame allows it (`rcx` = `rip`, `r11` = `rflags`, as for any thread
+//! that entered by `syscall`), else with `iretq`, which restores every register.
 //!
 //! With nothing to run the CPU halts with interrupts enabled *inside* the exit path; an
 //! interrupt then arrives in ring 0 below the frame, updates the kernel state and returns
@@ -32,25 +34,26 @@ static RUNNING: AtomicBool = AtomicBool::new(false);
 
 static mut USER_RSP: u64 = 0;
 
-/// Where the user frame lives: the top `FRAME_SIZE` bytes of the kernel stack.
-fn frame_address() -> u64 {
-    super::stack::top() - FRAME_SIZE as u64
-}
+/// Address of the running thread's saved context: where the entry stubs save a user
+/// frame and what they return through. Written only by [`switch_to`] (interrupts off).
+#[unsafe(no_mangle)]
+pub(super) static mut ACTIVE_FRAME: u64 = 0;
 
-/// The user frame of the current entry.
-fn frame() -> &'static mut TrapFrame {
-    let at = frame_address();
-    // SAFETY: the top FRAME_SIZE bytes of the kernel stack are reserved for the frame (boot
-    // runs below them) and only the entry paths, serialised by the non-preemptible kernel,
-    // use it.
-    unsafe { &mut *(at as *mut TrapFrame) }
+/// Makes `context` (a thread's, in the kernel's thread table, which never moves) the frame
+/// the next user entry saves into and the next exit restores.
+fn activate_frame(context: *mut TrapFrame) {
+    let at = context as u64;
+    // SAFETY: only the entry stubs read it, with interrupts off, on this CPU.
+    unsafe { ACTIVE_FRAME = at };
+    super::gdt::set_user_entry_stack(at + FRAME_SIZE as u64);
 }
 
 #[unsafe(naked)]
 pub(super) unsafe extern "sysv64" fn syscall_entry() {
     naked_asm!(
         "mov [rip + {user_rsp}], rsp",
-        "lea rsp, [rip + {stack} + {size}]",
+        "mov rsp, [rip + {active}]",
+        "add rsp, {frame}",
         // The same layout an interrupt from ring 3 leaves (see TrapFrame).
         "push {user_ss}",
         "push qword ptr [rip + {user_rsp}]",
@@ -62,7 +65,9 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
         "push rax", "push rbx", "push rcx", "push rdx", "push rsi", "push rdi", "push rbp",
         "push r8", "push r9", "push r10", "push r11", "push r12", "push r13", "push r14", "push r15",
         "cld",
+        "lea rsp, [rip + {stack} + {size}]",
         "call {handler}",
+        "mov rsp, [rip + {active}]",
         "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
         "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
         "add rsp, 16",
@@ -76,6 +81,8 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
         "2:",
         "iretq",
         user_rsp = sym USER_RSP,
+        active = sym ACTIVE_FRAME,
+        frame = const FRAME_SIZE,
         stack = sym KERNEL_STACK,
         size = const KERNEL_STACK_SIZE,
         user_ss = const crate::state::USER_SS,
@@ -88,18 +95,16 @@ pub(super) unsafe extern "sysv64" fn syscall_entry() {
 extern "sysv64" fn on_syscall() {
     let mut k = KERNEL.lock();
     let t = k.current.expect("syscall without a current thread");
-    k.threads[t].save_context(frame());
     k.account(super::cpu::rdtsc());
     let outcome = crate::syscall::on_syscall(&mut k, t, time::since_boot_ns);
     finish(k, outcome);
 }
 
-/// A CPU exception in ring 3 (frame at the top of the stack).
+/// A CPU exception in ring 3 (its frame saved in the thread's context).
 pub fn on_user_exception(vector: u64, error_code: u64) {
     let cr2 = x86_64::registers::control::Cr2::read_raw();
     let mut k = KERNEL.lock();
     let t = k.current.expect("user exception without a current thread");
-    k.threads[t].save_context(frame());
     k.account(super::cpu::rdtsc());
     let outcome = fault::on_exception(&mut k, t, vector, error_code, cr2);
     finish(k, outcome);
@@ -115,18 +120,14 @@ pub fn on_line_interrupt(line: usize, from_user: bool) {
     on_interrupt(from_user, |k| k.irq_fired(line));
 }
 
-/// An interrupt: saves the interrupted thread (from ring 3), lets `event` update the
-/// kernel, then returns to a thread chosen again (from ring 0: to the idle loop in `finish`,
+/// An interrupt: lets `event` update the kernel (an interrupted thread's registers are
+/// already in its context), then returns to a thread chosen again (from ring 0: to the idle loop in `finish`,
 /// which chooses).
 fn on_interrupt(from_user: bool, event: impl FnOnce(&mut Kernel)) {
     if !RUNNING.load(Ordering::Relaxed) {
         return;
     }
     let mut k = KERNEL.lock();
-    if from_user {
-        let t = k.current.expect("user interrupt without a current thread");
-        k.threads[t].save_context(frame());
-    }
     k.account(super::cpu::rdtsc());
     event(&mut k);
     if from_user {
@@ -156,21 +157,29 @@ fn apply_line_masks(k: &mut Kernel) {
     }
 }
 
-/// Picks the next thread and loads it into the frame, halting until one is ready.
+/// Picks the next thread (unless the outcome names it) and makes its frame the one the
+/// exit restores, halting until one is ready.
 fn finish(mut k: MutexGuard<'static, Kernel>, outcome: Outcome) {
-    if let Outcome::Halt { success } = outcome {
-        qemu::exit(if success {
+    let mut chosen = match outcome {
+        Outcome::Halt { success } => qemu::exit(if success {
             qemu::ExitCode::Success
         } else {
             qemu::ExitCode::Failure
-        });
-    }
-    apply_line_masks(&mut k);
+        }),
+        Outcome::SwitchTo(next) => Some(next),
+        Outcome::Continue => {
+            apply_line_masks(&mut k);
+            None
+        }
+    };
     loop {
-        // What the log holds goes out as far as the UART takes it without waiting.
-        crate::log::drain();
-        program_timer(&mut k);
-        if let Some(next) = k.choose() {
+        if chosen.is_none() {
+            // What the log holds goes out as far as the UART takes it without waiting.
+            crate::log::drain();
+            program_timer(&mut k);
+            chosen = k.choose();
+        }
+        if let Some(next) = chosen {
             switch_to(&mut k, next);
             k.running_partition = Some(k.threads[next].time_partition());
             return;
@@ -207,7 +216,7 @@ fn switch_to(k: &mut Kernel, next: ThreadIdx) {
         super::fpu::set_bases(fs, gs);
         k.reload_bases = false;
     }
-    *frame() = *k.threads[next].context();
+    activate_frame(k.threads[next].context_ptr());
 }
 
 /// Puts `task`'s I/O bitmap into the TSS, copying 8 KiB only if another task's is there.
@@ -238,15 +247,15 @@ pub fn enter_user_mode() -> ! {
     let mut k = KERNEL.lock();
     k.last_account = super::cpu::rdtsc();
     finish(k, Outcome::Continue);
-    // SAFETY: the frame holds a complete user context (just loaded by `finish`); the boot
-    // stack below it is abandoned for good.
-    unsafe { restore_frame(frame_address()) }
+    // SAFETY: the active frame is a complete user context (chosen by `finish`); the boot
+    // stack is abandoned for good.
+    unsafe { restore_frame() }
 }
 
 #[unsafe(naked)]
-unsafe extern "sysv64" fn restore_frame(frame: u64) -> ! {
+unsafe extern "sysv64" fn restore_frame() -> ! {
     naked_asm!(
-        "mov rsp, rdi",
+        "mov rsp, [rip + {active}]",
         "pop r15",
         "pop r14",
         "pop r13",
@@ -264,5 +273,6 @@ unsafe extern "sysv64" fn restore_frame(frame: u64) -> ! {
         "pop rax",
         "add rsp, 16",
         "iretq",
+        active = sym ACTIVE_FRAME,
     )
 }

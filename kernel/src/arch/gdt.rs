@@ -65,9 +65,17 @@ fn init_tss() {
         let base = unsafe { core::ptr::addr_of!(IST_STACKS[slot]) } as u64;
         tss.interrupt_stack_table[ist as usize - 1] = VirtAddr::new(base + IST_STACK_SIZE as u64);
     }
-    // Interrupts and exceptions from ring 3 start on the (one) kernel stack.
+    // Until the first thread runs; then just past the running thread's context (entry.rs).
     tss.privilege_stack_table[0] = VirtAddr::new(super::stack::top());
     tss.iomap_base = IOMAP_DISABLED;
+}
+
+/// Where the CPU puts the frame of an interrupt or exception from ring 3: just past the
+/// running thread's saved context (arch::entry).
+pub fn set_user_entry_stack(top: u64) {
+    // SAFETY: the CPU reads the TSS only on entries from ring 3, never while the kernel
+    // (interrupts off) updates it; no reference to the block lives across this write.
+    unsafe { (*tss_block()).tss.privilege_stack_table[0] = VirtAddr::new_truncate(top) };
 }
 
 /// Loads the running task's I/O permission bitmap, given as its two 4 KiB halves (`None`:

@@ -19,8 +19,10 @@ pub const TIMER_VECTOR: u8 = 0x30;
 /// Vector the local APIC uses for spurious interrupts (must end in 0xf on old CPUs).
 pub const SPURIOUS_VECTOR: u8 = 0xff;
 
-/// Register state saved by the entry stubs, lowest address first.
-#[repr(C)]
+/// Register state saved by the entry stubs, lowest address first. A thread's saved context
+/// is one, and the CPU pushes the last five words of an interrupt from ring 3 right into
+/// it, at the 16-byte-aligned stack top it is given (hence the alignment).
+#[repr(C, align(16))]
 #[derive(Clone, Copy, Debug)]
 pub struct TrapFrame {
     pub r15: u64,
@@ -97,12 +99,26 @@ unsafe extern "sysv64" fn common_entry() {
         "push r8", "push r9", "push r10", "push r11", "push r12", "push r13", "push r14", "push r15",
         "mov rdi, rsp",
         "cld",
+        // From ring 3 the frame is the running thread's context (entry.rs): the code runs
+        // on the kernel stack and returns through the thread then active. From ring 0
+        // (the halt loop) or an IST stack it stays where it is.
+        "cmp rsp, [rip + {active}]",
+        "jne 2f",
+        "lea rsp, [rip + {stack} + {size}]",
         "call {dispatch}",
+        "mov rsp, [rip + {active}]",
+        "jmp 3f",
+        "2:",
+        "call {dispatch}",
+        "3:",
         "pop r15", "pop r14", "pop r13", "pop r12", "pop r11", "pop r10", "pop r9", "pop r8",
         "pop rbp", "pop rdi", "pop rsi", "pop rdx", "pop rcx", "pop rbx", "pop rax",
         "add rsp, 16",
         "iretq",
         dispatch = sym dispatch,
+        active = sym super::entry::ACTIVE_FRAME,
+        stack = sym super::stack::KERNEL_STACK,
+        size = const super::stack::KERNEL_STACK_SIZE,
     )
 }
 

@@ -1,7 +1,8 @@
 //! The kernel stack. The kernel is non-preemptible and runs with interrupts off, so one
-//! stack per CPU suffices (docs/architecture.md, kernel model): every entry from user mode
-//! (syscall, interrupt, exception) starts at its top, and the boot path that first used it
-//! never returns. No per-thread kernel stacks means no kernel memory per thread for stacks.
+//! stack per CPU suffices (docs/architecture.md, kernel model): the code of every entry from
+//! user mode (syscall, interrupt, exception) starts at its top, once the entry stub saved the
+//! user registers in the thread's context (arch::entry), and the boot path that first used
+//! it never returns. No per-thread kernel stacks means no kernel memory per thread for stacks.
 
 pub const KERNEL_STACK_SIZE: usize = 64 * 1024;
 
