@@ -219,6 +219,7 @@ fn main(start: u64, _: u64) {
         mcp,
         handler: me,
         ipc,
+        clock: sys::TscBase::get(),
         started: sys::clock(),
         wall_clock_at_boot: sys::wall_clock_at_boot(),
         seed: sys::rdtsc() | 1,
@@ -602,6 +603,9 @@ struct GuestHost<'p> {
     /// This thread: the exception handler of the processes' threads.
     handler: ThreadId,
     ipc: IpcBufferRef,
+    /// The kernel's clock, read without a system call (the guest reads it for every
+    /// message it serves).
+    clock: sys::TscBase,
     started: u64,
     /// Unix time in ns at boot (the firmware's clock), if the machine has one.
     wall_clock_at_boot: Option<u64>,
@@ -755,12 +759,12 @@ impl Host for GuestHost<'_> {
     }
 
     fn now_ns(&mut self) -> u64 {
-        sys::clock().saturating_sub(self.started)
+        self.clock.now_ns().saturating_sub(self.started)
     }
 
     fn wall_clock_ns(&mut self) -> u64 {
         match self.wall_clock_at_boot {
-            Some(at_boot) => at_boot.saturating_add(sys::clock()),
+            Some(at_boot) => at_boot.saturating_add(self.clock.now_ns()),
             None => self.now_ns(),
         }
     }

@@ -581,6 +581,11 @@ impl TscBase {
     pub fn ns(&self, ticks: u64) -> u64 {
         (ticks as u128 * 1_000_000_000 / self.hz.max(1) as u128) as u64
     }
+
+    /// What [`clock`] returns now, computed as the kernel does, without a system call.
+    pub fn now_ns(&self) -> u64 {
+        self.ns(rdtsc().wrapping_sub(self.at_boot))
+    }
 }
 
 /// Reads the time-stamp counter (allowed in ring 3).

@@ -20,7 +20,7 @@ use root_task::spawn::words_at;
 use test_support::window::measure_window_starts;
 use user_rt::abi::syscall::{Error, ThreadAttribute, ThreadId, WindowSpec};
 use user_rt::println;
-use user_rt::sys::{self, TscBase, rdtsc};
+use user_rt::sys::{self, TscBase};
 
 const US: u64 = 1000;
 const MAJOR: u64 = 4 * MS;
@@ -70,22 +70,18 @@ const R_MISSED_GAP: usize = 4;
 const R_OUTSIDE_MAX: usize = 5;
 const R_FIRST_RUN: usize = 0; // late: first time it ran
 
-fn now_from(base: &TscBase) -> u64 {
-    base.ns(rdtsc() - base.at_boot)
-}
-
 worker!(
     fn spinner(b, ipc) {
         let base = TscBase::get();
         loop {
-            let now = now_from(&base);
+            let now = base.now_ns();
             b.set_result(R_LAST_RUN, now);
             if b.arg(A_MODE) == 2 {
                 // BUSY of CPU time from when it runs, however late its window started; the
                 // time it ran is recorded, so the root knows what TP1 used.
                 let start = sys::partition_info(1).map_or(now, |i| i.next_window_start);
-                while now_from(&base) < now + BUSY {}
-                b.add_result(R_WORKED, now_from(&base) - now);
+                while base.now_ns() < now + BUSY {}
+                b.add_result(R_WORKED, base.now_ns() - now);
                 sys::sleep_until(start + MAJOR);
             }
         }
@@ -117,7 +113,7 @@ worker!(
         let inside = |phase: u64, (from, to): (u64, u64)| phase >= from + EDGE && phase + EDGE < to;
         let mut last_violation = u64::MAX;
         loop {
-            let now = now_from(&base);
+            let now = base.now_ns();
             let frame0 = b.arg(A_FRAME0);
             if frame0 != 0 && now > frame0 {
                 let phase = (now - frame0) % MAJOR;
@@ -137,7 +133,7 @@ worker!(
 
 worker!(
     fn late(b, ipc) {
-        b.set_result(R_FIRST_RUN, now_from(&TscBase::get()));
+        b.set_result(R_FIRST_RUN, TscBase::get().now_ns());
         loop {
             let _ = sys::notify_wait(0, user_rt::abi::syscall::TIMEOUT_INFINITE);
         }
