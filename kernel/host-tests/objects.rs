@@ -689,6 +689,41 @@ fn exception_round_trip_with_edited_registers() {
 }
 
 #[test]
+fn an_exception_message_across_a_page_boundary_goes_both_ways() {
+    let mut f = Fixture::new();
+    let handler = f.thread(ROOT, 200);
+    let t = f.thread(ROOT, 50);
+    // The buffer's message starts 64 bytes before the end of its first page.
+    let buffer = BUFFER_AT + handler.position() as u64 * 0x4000 + 0x1000 - 64;
+    f.k.threads[handler].set_ipc_buffer(buffer);
+    let handler_id = ThreadId(f.id(handler));
+    f.k.threads[t].set_exception_handler(handler_id);
+    f.k.threads[t].context_mut().rip = 0x40_1000;
+    f.sys(handler, Call::Receive, [0, TIMEOUT_INFINITE, 0, 0, 0, 0]);
+    let fault = Fault {
+        label: LABEL_EXCEPTION,
+        vector: 13,
+        error_code: 8,
+        address: 0,
+    };
+    assert!(f.k.raise_fault(t, fault));
+    let bytes = f.read(handler, buffer, EXCEPTION_MESSAGE_SIZE);
+    let mut m = ExceptionMessage::from_bytes(&bytes).unwrap();
+    assert_eq!(
+        (m.vector, m.error_code, m.registers.rip, m.thread),
+        (13, 8, 0x40_1000, f.id(t))
+    );
+    m.registers.rip += 2;
+    m.registers.r15 = 0x5678;
+    f.write(handler, buffer, &m.to_bytes());
+    let tag = MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0).0;
+    let tid = f.id(t);
+    assert_eq!(f.sys(handler, Call::Reply, [tid, 0, tag, 0, 0, 0]), OK);
+    let c = f.k.threads[t].context();
+    assert_eq!((c.rip, c.r15), (0x40_1002, 0x5678));
+}
+
+#[test]
 fn thread_interrupt_stops_a_running_thread_with_an_exception_message() {
     let mut f = Fixture::new();
     let handler = f.thread(ROOT, 200);

@@ -14,9 +14,9 @@ use crate::table::ThreadIdx;
 use crate::thread::{Fault, NEVER, State};
 use abi::args::results;
 use abi::ipc::{
-    EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET,
-    LABEL_FAULT_REPORT, MAP_ITEM_GRANT, MapItem, MessageTag, REPLY_KILL, REPLY_RESUME,
-    ReceiveWindow, Registers,
+    EXCEPTION_MESSAGE_SIZE, EXCEPTION_MESSAGE_WORDS, ExceptionMessage, IPC_ITEMS_OFFSET,
+    IPC_MAX_ITEMS, IPC_WINDOW_OFFSET, LABEL_FAULT_REPORT, MAP_ITEM_GRANT, MapItem, MessageTag,
+    REPLY_KILL, REPLY_RESUME, ReceiveWindow,
 };
 use abi::syscall::{Error, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, ThreadId};
 
@@ -43,59 +43,31 @@ fn read_struct<const N: usize>(k: &Kernel, t: ThreadIdx, at: u64) -> Option<[u8;
     (th.ipc_buffer() != 0 && k.tasks[th.task()].space().copy_from_user(at, &mut out)).then_some(out)
 }
 
-fn item_from(bytes: &[u8]) -> MapItem {
-    MapItem {
-        source: u64::from_ne_bytes(bytes[0..8].try_into().unwrap()),
-        pages: u32::from_ne_bytes(bytes[8..12].try_into().unwrap()),
-        flags: u32::from_ne_bytes(bytes[12..16].try_into().unwrap()),
-    }
-}
-
 impl Kernel {
-    /// The registers of an exception message for thread `t`.
-    pub fn exception_message(&self, t: ThreadIdx, fault: Fault) -> ExceptionMessage {
+    /// The exception message for thread `t` as its words (`ExceptionMessage::words`).
+    pub fn exception_words(&self, t: ThreadIdx, fault: Fault) -> [u64; EXCEPTION_MESSAGE_WORDS] {
         let th = &self.threads[t];
-        let c = th.context();
-        let (fs_base, gs_base) = th.bases();
-        ExceptionMessage {
-            vector: fault.vector,
-            error_code: fault.error_code,
-            fault_address: fault.address,
-            thread: self.thread_id(t).0,
-            task: self.task_id(th.task()).0,
-            registers: Registers {
-                rax: c.rax,
-                rbx: c.rbx,
-                rcx: c.rcx,
-                rdx: c.rdx,
-                rsi: c.rsi,
-                rdi: c.rdi,
-                rbp: c.rbp,
-                rsp: c.rsp,
-                r8: c.r8,
-                r9: c.r9,
-                r10: c.r10,
-                r11: c.r11,
-                r12: c.r12,
-                r13: c.r13,
-                r14: c.r14,
-                r15: c.r15,
-                rip: c.rip,
-                rflags: c.rflags,
-                fs_base,
-                gs_base,
-            },
-        }
+        let (c, (fs, gs)) = (th.context(), th.bases());
+        let (thread, task) = (self.thread_id(t).0, self.task_id(th.task()).0);
+        let (vector, error, address) = (fault.vector, fault.error_code, fault.address);
+        [
+            vector, error, address, thread, task, c.rax, c.rbx, c.rcx, c.rdx, c.rsi, c.rdi, c.rbp,
+            c.rsp, c.r8, c.r9, c.r10, c.r11, c.r12, c.r13, c.r14, c.r15, c.rip, c.rflags, fs, gs,
+        ]
     }
 
     /// Moves the message of `from` (its registers, or its fault) to `to`.
     pub fn deliver(&mut self, from: ThreadIdx, to: ThreadIdx) -> Result<(), Blame> {
         let (tag, words);
         if let Some(fault) = self.threads[from].fault() {
-            let bytes = self.exception_message(from, fault).to_bytes();
-            let receiver = &self.threads[to];
-            let space = self.tasks[receiver.task()].space();
-            if receiver.ipc_buffer() == 0 || !space.copy_to_user(receiver.ipc_buffer(), &bytes) {
+            let message = self.exception_words(from, fault);
+            let (buffer, receiver_task) = (self.threads[to].ipc_buffer(), self.threads[to].task());
+            if buffer == 0
+                || self.tasks[receiver_task]
+                    .space()
+                    .words(buffer, Some(&message))
+                    .is_none()
+            {
                 return Err(Blame::Receiver(Error::BadAddress));
             }
             tag = MessageTag::new(fault.label, EXCEPTION_MESSAGE_SIZE, 0);
@@ -207,7 +179,7 @@ impl Kernel {
                 pages: u64::from_ne_bytes(window[8..16].try_into().unwrap()),
             };
             for (i, item) in items.iter_mut().take(tag.items()).enumerate() {
-                *item = item_from(&raw[i * 16..i * 16 + 16]);
+                *item = MapItem::from_bytes(raw[i * 16..i * 16 + 16].try_into().unwrap());
                 let rights_bits = (item.flags & !MAP_ITEM_GRANT) as u64;
                 if item.pages == 0
                     || !is_user_range(item.source, item.pages as u64)
@@ -364,10 +336,10 @@ impl Kernel {
             }
             REPLY_RESUME => {
                 if tag.len() >= EXCEPTION_MESSAGE_SIZE {
-                    let bytes: [u8; EXCEPTION_MESSAGE_SIZE] =
-                        read_struct(self, t, self.threads[t].ipc_buffer())
-                            .ok_or(Error::BadAddress)?;
-                    let m = ExceptionMessage::from_bytes(&bytes).ok_or(Error::BadAddress)?;
+                    let (buffer, task) = (self.threads[t].ipc_buffer(), self.threads[t].task());
+                    let space = self.tasks[task].space();
+                    let words = space.words(buffer, None).filter(|_| buffer != 0);
+                    let m = ExceptionMessage::from_words(&words.ok_or(Error::BadAddress)?);
                     self.threads[faulted].load_registers(&m.registers)?;
                 }
                 self.resume(faulted);

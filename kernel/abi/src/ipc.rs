@@ -94,6 +94,20 @@ pub struct MapItem {
     pub flags: u32,
 }
 
+impl MapItem {
+    /// The item in its in-buffer layout (16 bytes, native-endian).
+    pub fn from_bytes(b: &[u8; 16]) -> Self {
+        let u32_at = |at: usize| u32::from_ne_bytes([b[at], b[at + 1], b[at + 2], b[at + 3]]);
+        let mut source = [0; 8];
+        source.copy_from_slice(&b[..8]);
+        Self {
+            source: u64::from_ne_bytes(source),
+            pages: u32_at(8),
+            flags: u32_at(12),
+        }
+    }
+}
+
 /// Where a receiver accepts mapped pages.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -182,6 +196,8 @@ pub struct ExceptionMessage {
 }
 
 pub const EXCEPTION_MESSAGE_SIZE: usize = core::mem::size_of::<ExceptionMessage>();
+/// The message as words, in the order of its fields (vector first, `gs_base` last).
+pub const EXCEPTION_MESSAGE_WORDS: usize = EXCEPTION_MESSAGE_SIZE / 8;
 
 /// RFLAGS bits a handler may change: CF, PF, AF, ZF, SF, TF, DF, OF, AC.
 pub const USER_RFLAGS_MASK: u64 = 0x0004_0dd5;
@@ -200,10 +216,15 @@ impl ExceptionMessage {
         if bytes.len() < EXCEPTION_MESSAGE_SIZE {
             return None;
         }
-        let mut w = [0u64; EXCEPTION_MESSAGE_SIZE / 8];
+        let mut w = [0u64; EXCEPTION_MESSAGE_WORDS];
         for (i, word) in w.iter_mut().enumerate() {
             *word = u64::from_ne_bytes(bytes[i * 8..i * 8 + 8].try_into().ok()?);
         }
+        Some(Self::from_words(&w))
+    }
+
+    /// The message whose words ([`Self::words`]) are `w`.
+    pub fn from_words(w: &[u64; EXCEPTION_MESSAGE_WORDS]) -> Self {
         let r = Registers {
             rax: w[5],
             rbx: w[6],
@@ -226,17 +247,18 @@ impl ExceptionMessage {
             fs_base: w[23],
             gs_base: w[24],
         };
-        Some(Self {
+        Self {
             vector: w[0],
             error_code: w[1],
             fault_address: w[2],
             thread: w[3],
             task: w[4],
             registers: r,
-        })
+        }
     }
 
-    fn words(&self) -> [u64; EXCEPTION_MESSAGE_SIZE / 8] {
+    /// The message as words, its in-buffer layout.
+    pub fn words(&self) -> [u64; EXCEPTION_MESSAGE_WORDS] {
         let r = &self.registers;
         [
             self.vector,
@@ -286,6 +308,18 @@ mod tests {
         }
         assert!(MessageTag::new(KERNEL_LABELS - 1, 0, 0).is_valid());
         assert!(MessageTag::new(KERNEL_LABELS - 1, 0, 0).is_registers_only());
+        let mut item = [0u8; 16];
+        item[..8].copy_from_slice(&0x1234_5000u64.to_ne_bytes());
+        item[8..12].copy_from_slice(&3u32.to_ne_bytes());
+        item[12..].copy_from_slice(&(MAP_ITEM_GRANT | 2).to_ne_bytes());
+        assert_eq!(
+            MapItem::from_bytes(&item),
+            MapItem {
+                source: 0x1234_5000,
+                pages: 3,
+                flags: MAP_ITEM_GRANT | 2
+            }
+        );
         assert!(!MessageTag::new(KERNEL_LABELS, 0, 0).is_registers_only());
         assert!(!MessageTag::new(7, 1, 0).is_registers_only());
         assert!(!MessageTag::new(7, 0, 1).is_registers_only());
