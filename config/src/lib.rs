@@ -91,6 +91,7 @@
 //! guest.console = "com2"                           # optional: a terminal on COM2
 //! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
 //! guest.net = { mac = "52:54:00:12:34:56", address = "10.0.2.15/24", gateway = "10.0.2.2", rx = "eth0-rx", tx = "eth0-tx" }  # optional: eth0
+//! guest.disk = { request = "vda-req", response = "vda-resp" }  # optional: /dev/vda, needs a virtual disk
 //! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx" }  # NIC partitions only: see "NIC"
 //! blk.tenants.plc = { from = "plc-req", to = "plc-resp", first_sector = 2048, sectors = 2048 }  # block-device partitions only: see "Block device"
 //!
@@ -302,6 +303,12 @@
 //! (`out`: the frames it sends), one Ethernet frame (destination MAC first, no FCS) a
 //! message; `[[channels]]` join them to the NIC partition's ports for this tenant
 //! (`/etc/guest/net` in the initramfs; the stack is `partitions/guest/src/net.rs`).
+//! `guest.disk` gives it the block device `/dev/vda`, its virtual disk of a block-device
+//! partition (`blk.tenants.<guest>`, required): `request` is its queuing output of at least
+//! 2072 bytes to the tenant's `from` port, `response` its queuing input of at least 2064
+//! bytes from the tenant's `to` port (joined by channels), as `plc.store`'s
+//! (`/etc/guest/disk` in the initramfs, with the tenant's `sectors`; what the device does:
+//! docs/guest.md).
 //!
 //! **PCI devices.** `devices` names the PCI functions a partition owns by bus address
 //! (`BB:DD.F` in hex, as `lspci` prints it; an optional `0000:` in front), at most 8 a

@@ -148,6 +148,16 @@ pub struct Guest {
     #[serde(default)]
     pub programs: Vec<Spanned<String>>,
     pub net: Option<Spanned<GuestNet>>,
+    pub disk: Option<Spanned<GuestDisk>>,
+}
+
+/// `guest.disk`: the guest's block device `/dev/vda`, a virtual disk of a block-device
+/// partition.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct GuestDisk {
+    pub request: Spanned<String>,
+    pub response: Spanned<String>,
 }
 
 /// `guest.net`: the guest's `eth0`.

@@ -148,6 +148,32 @@ pub struct Guest {
     pub programs: Vec<String>,
     /// `eth0` (`guest.net`); without it the guest has only the loopback.
     pub net: Option<GuestNet>,
+    /// `/dev/vda` (`guest.disk`); without it the guest has no block device.
+    pub disk: Option<GuestDisk>,
+}
+
+/// A guest's block device `/dev/vda` (`guest.disk`): the queuing ports of its link to a
+/// block-device partition, whose `blk.tenants.<guest>` is the virtual disk (checked to
+/// exist and to be joined to these ports by channels).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct GuestDisk {
+    /// Queuing output carrying the requests (size >= `blk_core::link::MAX_REQUEST`).
+    pub request: String,
+    /// Queuing input carrying the responses (size >= `blk_core::link::MAX_RESPONSE`).
+    pub response: String,
+    /// The virtual disk's size in sectors of 512 bytes (its `blk.tenants.<guest>.sectors`).
+    pub sectors: u64,
+}
+
+impl GuestDisk {
+    /// The file the guest reads it from (`/etc/guest/disk`, `guest::disk::DISK_PATH`):
+    /// `key=value` lines.
+    pub fn file(&self) -> String {
+        format!(
+            "request={}\nresponse={}\nsectors={}\n",
+            self.request, self.response, self.sectors
+        )
+    }
 }
 
 /// A guest's `eth0`: its MAC and IPv4 address, the default route, and the queuing ports
@@ -304,6 +330,7 @@ pub const GUEST_RESERVED_PATHS: &[&str] = &[
     "/etc/guest/env",
     "/etc/guest/console",
     "/etc/guest/net",
+    "/etc/guest/disk",
     "/init",
 ];
 

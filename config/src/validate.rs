@@ -294,6 +294,7 @@ impl Validator<'_, '_> {
         self.nic(doc, &mut partitions, &channels);
         self.blk(doc, &mut partitions, &channels);
         self.plc_stores(doc, &partitions);
+        self.guest_disks(doc, &mut partitions, &channels);
         let health = self.health(&doc.health, &root.key("health"));
 
         if let Some(memory) = memory {
@@ -453,6 +454,9 @@ impl Validator<'_, '_> {
                     .map(|g| Guest {
                         net: guest.get_ref().net.as_ref().and_then(|net| {
                             self.guest_net(net, &path.key("guest").key("net"), &own_ports)
+                        }),
+                        disk: guest.get_ref().disk.as_ref().and_then(|disk| {
+                            self.guest_disk(disk, &path.key("guest").key("disk"), &own_ports)
                         }),
                         ..g
                     })
@@ -718,6 +722,7 @@ impl Validator<'_, '_> {
             console_com2,
             programs,
             net: None,
+            disk: None,
             files,
             init: g.init.iter().map(|s| s.get_ref().clone()).collect(),
             env: match &g.env {
@@ -1480,39 +1485,7 @@ impl Validator<'_, '_> {
         ports: &[Port],
     ) -> Option<PlcStore> {
         let st = store.get_ref();
-        let mut port = |key: &str, name: &Spanned<String>, direction: Direction, size: usize| {
-            let found = ports.iter().position(|p| {
-                &p.name == name.get_ref()
-                    && p.kind == PortKind::Queuing
-                    && p.direction == direction
-                    && p.size >= size as u32
-            });
-            if found.is_none() {
-                self.error(
-                    start(name),
-                    &path.key(key),
-                    format!(
-                        "`{}` must be a queuing `{}` port of this partition with size >= {size} (the largest {} of the block-device link)",
-                        name.get_ref(),
-                        direction.name(),
-                        if direction == Direction::Out { "request" } else { "response" }
-                    ),
-                );
-            }
-            found
-        };
-        let request = port(
-            "request",
-            &st.request,
-            Direction::Out,
-            blk_core::link::MAX_REQUEST,
-        );
-        let response = port(
-            "response",
-            &st.response,
-            Direction::In,
-            blk_core::link::MAX_RESPONSE,
-        );
+        let (request, response) = self.blk_link_ports(&st.request, &st.response, path, ports);
         let every = match &st.retain_every {
             None => Some(PlcStore::DEFAULT_RETAIN_EVERY_NS),
             Some(v) => {
@@ -1542,6 +1515,169 @@ impl Validator<'_, '_> {
             response: response?,
             retain_every_ns: every?,
         })
+    }
+
+    /// The two queuing ports of a tenant's link to a block-device partition (`plc.store`,
+    /// `guest.disk`): `request` an output of at least `blk_core::link::MAX_REQUEST`
+    /// bytes, `response` an input of at least `MAX_RESPONSE`; their indices.
+    fn blk_link_ports(
+        &mut self,
+        request: &Spanned<String>,
+        response: &Spanned<String>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> (Option<usize>, Option<usize>) {
+        let mut port = |key: &str, name: &Spanned<String>, direction: Direction, size: usize| {
+            let found = ports.iter().position(|p| {
+                &p.name == name.get_ref()
+                    && p.kind == PortKind::Queuing
+                    && p.direction == direction
+                    && p.size >= size as u32
+            });
+            if found.is_none() {
+                self.error(
+                    start(name),
+                    &path.key(key),
+                    format!(
+                        "`{}` must be a queuing `{}` port of this partition with size >= {size} (the largest {} of the block-device link)",
+                        name.get_ref(),
+                        direction.name(),
+                        if direction == Direction::Out { "request" } else { "response" }
+                    ),
+                );
+            }
+            found
+        };
+        let request = port(
+            "request",
+            request,
+            Direction::Out,
+            blk_core::link::MAX_REQUEST,
+        );
+        let response = port(
+            "response",
+            response,
+            Direction::In,
+            blk_core::link::MAX_RESPONSE,
+        );
+        (request, response)
+    }
+
+    /// `guest.disk`: the request and response ports of `/dev/vda`'s link (the virtual
+    /// disk itself is checked by [`Validator::guest_disks`]).
+    fn guest_disk(
+        &mut self,
+        disk: &Spanned<schema::GuestDisk>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> Option<GuestDisk> {
+        let d = disk.get_ref();
+        let (request, response) = self.blk_link_ports(&d.request, &d.response, path, ports);
+        request?;
+        response?;
+        Some(GuestDisk {
+            request: d.request.get_ref().clone(),
+            response: d.response.get_ref().clone(),
+            // Its tenant's, once the tenants are known (`guest_disks`).
+            sectors: 0,
+        })
+    }
+
+    /// A guest with `guest.disk` must have a virtual disk: be a tenant of a block-device
+    /// partition (`blk.tenants`) whose `from` port is fed by the guest's `request` port
+    /// and whose `to` port feeds its `response` port. Gives `guest.disk` the tenant's size.
+    fn guest_disks(
+        &mut self,
+        doc: &schema::Document,
+        partitions: &mut [Partition],
+        channels: &[Channel],
+    ) {
+        let base = KeyPath::root().key("partitions");
+        for (key, raw) in in_source_order(&doc.partitions) {
+            let Some(disk) = raw
+                .get_ref()
+                .guest
+                .as_ref()
+                .and_then(|g| g.get_ref().disk.as_ref())
+            else {
+                continue;
+            };
+            let Some(me) = partitions.iter().position(|p| &p.name == key.get_ref()) else {
+                continue;
+            };
+            let at = base.key(key.get_ref()).key("guest").key("disk");
+            let Some((driver, tenant)) = partitions.iter().enumerate().find_map(|(i, p)| {
+                let t = p.blk.as_ref()?.tenants.iter().find(|t| t.partition == me)?;
+                Some((i, *t))
+            }) else {
+                self.error(
+                    start(disk),
+                    &at,
+                    format!(
+                        "partition `{}` has no virtual disk: give it one in a block-device partition's `blk.tenants.{}`",
+                        key.get_ref(),
+                        key.get_ref()
+                    ),
+                );
+                continue;
+            };
+            // (Ports the port check refused have no index here: reported already.)
+            let own = &partitions[me].ports;
+            let d = disk.get_ref();
+            let drv = &partitions[driver];
+            for (port_key, name, theirs, to_driver) in [
+                ("request", &d.request, tenant.from, true),
+                ("response", &d.response, tenant.to, false),
+            ] {
+                let direction = if to_driver {
+                    Direction::Out
+                } else {
+                    Direction::In
+                };
+                let Some(mine) = own
+                    .iter()
+                    .position(|p| &p.name == name.get_ref() && p.direction == direction)
+                else {
+                    continue;
+                };
+                let Some(channel) = channels.get(drv.ports[theirs].channel) else {
+                    continue;
+                };
+                let joined = if to_driver {
+                    channel.source
+                        == PortRef {
+                            partition: me,
+                            port: mine,
+                        }
+                } else {
+                    channel.destinations.contains(&PortRef {
+                        partition: me,
+                        port: mine,
+                    })
+                };
+                if !joined {
+                    let (way, what) = if to_driver {
+                        ("feed", "from")
+                    } else {
+                        ("be fed by", "to")
+                    };
+                    self.error(
+                        start(name),
+                        &at.key(port_key),
+                        format!(
+                            "`{}` must {way} port `{}.{}`, the `{what}` port of this guest's virtual disk (`blk.tenants.{}`), through a channel",
+                            name.get_ref(),
+                            drv.name,
+                            drv.ports[theirs].name,
+                            key.get_ref()
+                        ),
+                    );
+                }
+            }
+            if let Some(d) = partitions[me].guest.as_mut().and_then(|g| g.disk.as_mut()) {
+                d.sectors = tenant.sectors;
+            }
+        }
     }
 
     /// A PLC with `plc.store` must have a virtual disk: be a tenant of a block-device

@@ -272,3 +272,87 @@ fn a_plc_store_names_its_ports_and_needs_a_virtual_disk() {
         "{diags:?}"
     );
 }
+
+/// The document with `linux` as a guest partition with these `guest.*` lines.
+fn with_guest_disk(lines: &str) -> String {
+    edited(&[
+        (
+            "[partitions.linux]\nimage = \"app\"\nmemory = \"1MiB\"",
+            "[partitions.linux]\nimage = \"guest\"\nmemory = \"8MiB\"\nstack = \"1MiB\"\nabilities = [\"create_task\", \"create_thread\", \"map\"]",
+        ),
+        (
+            "ports.req = { kind = \"queuing\", direction = \"out\", size = 2072, depth = 2 }\nports.resp = { kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }\n\n[[channels]]",
+            &format!(
+                "ports.req = {{ kind = \"queuing\", direction = \"out\", size = 2072, depth = 2 }}\nports.resp = {{ kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }}\nports.other = {{ kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }}\nguest.init = [\"/bin/sh\"]\n{lines}\n\n[[channels]]"
+            ),
+        ),
+        (
+            "ports.resp = { kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }\n\n[partitions.linux]",
+            "ports.resp = { kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }\nports.spare = { kind = \"queuing\", direction = \"out\", size = 2064, depth = 2 }\n\n[partitions.linux]",
+        ),
+    ]) + "\n[[channels]]\nkind = \"queuing\"\nfrom = \"plc.spare\"\nto = \"linux.other\"\n"
+}
+
+#[test]
+fn a_guest_disk_names_its_ports_and_needs_a_virtual_disk_joined_to_them() {
+    let s = load_ok(&with_guest_disk(
+        "guest.disk = { request = \"req\", response = \"resp\" }",
+    ));
+    let disk = s.partitions[2]
+        .guest
+        .as_ref()
+        .and_then(|g| g.disk.clone())
+        .expect("guest.disk");
+    assert_eq!(
+        (disk.request.as_str(), disk.response.as_str()),
+        ("req", "resp")
+    );
+    assert_eq!(disk.sectors, 65536);
+    assert_eq!(disk.file(), "request=req\nresponse=resp\nsectors=65536\n");
+    expect_one(
+        &with_guest_disk("guest.disk = { request = \"resp\", response = \"resp\" }"),
+        "request = ^\"resp\"",
+        0,
+        "partitions.linux.guest.disk.request",
+        "`resp` must be a queuing `out` port of this partition with size >= 2072 (the largest request of the block-device link)",
+    );
+    expect_some(
+        &with_guest_disk("guest.disk = { request = \"req\", response = \"nothing\" }"),
+        "\"nothing\"",
+        0,
+        "partitions.linux.guest.disk.response",
+        "`nothing` must be a queuing `in` port of this partition with size >= 2064 (the largest response of the block-device link)",
+    );
+    // A port too small for a response (the channel from the driver's port is refused too).
+    expect_some(
+        &with_guest_disk("guest.disk = { request = \"req\", response = \"resp\" }").replace(
+            "ports.resp = { kind = \"queuing\", direction = \"in\", size = 2064, depth = 2 }\nports.other",
+            "ports.resp = { kind = \"queuing\", direction = \"in\", size = 2063, depth = 2 }\nports.other",
+        ),
+        "response = ^\"resp\"",
+        0,
+        "partitions.linux.guest.disk.response",
+        "size >= 2064",
+    );
+    // A port of the guest that is not the one the tenant's channel reaches.
+    expect_one(
+        &with_guest_disk("guest.disk = { request = \"req\", response = \"other\" }"),
+        "response = ^\"other\"",
+        0,
+        "partitions.linux.guest.disk.response",
+        "`other` must be fed by port `disk.linux-resp`, the `to` port of this guest's virtual disk (`blk.tenants.linux`), through a channel",
+    );
+    let no_disk = with_guest_disk("guest.disk = { request = \"req\", response = \"resp\" }")
+        .replacen(
+            "blk.tenants.linux = { from = \"linux-req\", to = \"linux-resp\", first_sector = 4096, sectors = 65536 }\n",
+            "",
+            1,
+        );
+    let diags = load(&no_disk).expect_err("no virtual disk");
+    assert!(
+        diags.iter().any(|d| d.key_path == "partitions.linux.guest.disk"
+            && d.to_string()
+                .contains("partition `linux` has no virtual disk: give it one in a block-device partition's `blk.tenants.linux`")),
+        "{diags:?}"
+    );
+}

@@ -11,6 +11,12 @@
 //! image between the boots: the PLC skips it (logged, reported to the health monitor) and
 //! restores the older snapshot. When the end of the first run tore a save (QEMU stops
 //! while the store process writes), that torn slot is the one skipped.
+//!
+//! `store_guest_disk` (configuration `tests/configs/store_guest.toml`): the guest's block
+//! device `/dev/vda` on its virtual disk. The first boot makes an ext2 file system with
+//! busybox mke2fs and writes bytes at an offset of the raw device with dd; the second
+//! (same disk) reads them back. After each, Debian's e2fsck.static in the guest and the
+//! host's e2fsck on the guest's range of the disk image find the file system clean.
 
 use scenarios::{boot, boot_again, check, disk_image};
 use slots::{BlockDevice, SECTOR, SlotState};
@@ -220,5 +226,104 @@ fn store_corrupt() {
         &format!(
             "Keep.cycles at the first watch line {after:?} > the older snapshot's {older_cycles}"
         ),
+    );
+}
+
+/// The guest's virtual disk in `tests/configs/store_guest.toml`: sectors 2048..6144.
+const GUEST_FIRST_SECTOR: usize = 2048;
+const GUEST_SECTORS: usize = 4096;
+
+/// The host's `e2fsck -fn` on the guest's range of scenario `name`'s disk image: its exit
+/// status and output.
+fn host_e2fsck(name: &str) -> (Option<i32>, String) {
+    let image = std::fs::read(disk_image(name)).expect("the disk image");
+    let range = image
+        .get(GUEST_FIRST_SECTOR * SECTOR..(GUEST_FIRST_SECTOR + GUEST_SECTORS) * SECTOR)
+        .expect("the guest's range in the disk image");
+    let path = disk_image(name).with_file_name("vda.img");
+    std::fs::write(&path, range).expect("the guest's disk as a file");
+    let e2fsck = ["/sbin/e2fsck", "/usr/sbin/e2fsck"]
+        .into_iter()
+        .find(|p| std::path::Path::new(p).is_file())
+        .unwrap_or("e2fsck");
+    let ran = std::process::Command::new(e2fsck)
+        .arg("-fn")
+        .arg(&path)
+        .output()
+        .expect("the host's e2fsck (e2fsprogs) runs");
+    let text = format!(
+        "{}{}",
+        String::from_utf8_lossy(&ran.stdout),
+        String::from_utf8_lossy(&ran.stderr)
+    );
+    (ran.status.code(), text)
+}
+
+/// The checks of both boots: the device as the guest sees it, e2fsck clean in the guest
+/// and on the host, no failed request.
+fn guest_disk_boot(o: &Outcome, name: &str, expected: &[&str]) -> Vec<String> {
+    check(o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        o,
+        o.succeeded(),
+        "expected success exit: the guest's script ends the run",
+    );
+    let line = "[linux] guest: /dev/vda 4096 sectors through ports vda-req and vda-resp";
+    check(o, o.line(line).is_some(), &format!("missing {line:?}"));
+    check(
+        o,
+        o.line("guest: /dev/vda: ").is_none(),
+        "a request of /dev/vda failed",
+    );
+    let out = scenarios::guest_output(o);
+    for want in [
+        "vda: block special file fe:0 size 0",
+        "blockdev: 2097152 bytes, 4096 sectors of 512",
+        "ports: 0 in /dev/arinc",
+        "past the end: 0 bytes read",
+        "past the end: No space left on device",
+    ]
+    .iter()
+    .chain(expected)
+    {
+        check(
+            o,
+            out.iter()
+                .any(|l| l == want || l.starts_with(&format!("{want} in "))),
+            &format!("no {want:?} in the guest's output: {out:#?}"),
+        );
+    }
+    for l in out.iter().filter(|l| l.contains(" status ")) {
+        println!("{name}: {l}");
+    }
+    let (status, text) = host_e2fsck(name);
+    assert_eq!(
+        status,
+        Some(0),
+        "the host's e2fsck -fn on the guest's range:\n{text}"
+    );
+    out
+}
+
+#[test]
+fn store_guest_disk() {
+    let name = "store_guest_disk";
+    let first = boot(name);
+    guest_disk_boot(
+        &first,
+        name,
+        &[
+            "first boot",
+            "mke2fs status 0",
+            "dd status 0",
+            "synced",
+            "e2fsck status 0",
+        ],
+    );
+    let second = boot_again(name);
+    guest_disk_boot(
+        &second,
+        name,
+        &["second boot: marker read back", "e2fsck status 0"],
     );
 }

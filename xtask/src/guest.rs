@@ -9,6 +9,7 @@
 //! | `/etc/passwd`, `/etc/group` | root (0) only |
 //! | `/etc/guest/init`, `/etc/guest/env` | `guest.init` and `guest.env`, each string NUL-terminated: what the guest starts (`guest::INIT_ARGS_PATH`) |
 //! | `/etc/guest/net` | `guest.net` as `key=value` lines (`guest::net::NET_PATH`): the guest's `eth0` and its frames' ports |
+//! | `/etc/guest/disk` | `guest.disk` as `key=value` lines (`guest::disk::DISK_PATH`): `request` and `response`, the ports of `/dev/vda`'s link, and `sectors`, its virtual disk's size (the tenant's in `blk.tenants`) |
 //! | `/etc/hosts`, `/etc/resolv.conf`, `/etc/nsswitch.conf` | `localhost` (and with `guest.net` the guest as `guest`, its gateway as `gateway`), QEMU's name server 10.0.2.3 with `guest.net`, `hosts: files dns`; a `guest.files` path replaces them |
 //! | `/etc/guest/console` | `com2` with `guest.console = "com2"` (`guest::CONSOLE_PATH`): the console is a terminal on COM2 |
 //! | `/etc/guest/ports` | the partition's `ports.*`, one a line: `<name> <sampling\|queuing> <in\|out> <size> <refresh ns\|depth>` (`guest::arinc::PORTS_PATH`): the guest's devices `/dev/arinc/<name>` |
@@ -234,6 +235,9 @@ pub fn entries(
     if let Some(net) = &guest.net {
         entries.push(file("etc/guest/net", 0o644, net.file().into_bytes()));
     }
+    if let Some(disk) = &guest.disk {
+        entries.push(file("etc/guest/disk", 0o644, disk.file().into_bytes()));
+    }
     entries.extend(name_files(guest));
     if !ports.is_empty() {
         entries.push(file("etc/guest/ports", 0o644, port_table(ports)));
@@ -325,6 +329,7 @@ mod tests {
             console_com2: false,
             programs: Vec::new(),
             net: None,
+            disk: None,
         }
     }
 
@@ -485,6 +490,32 @@ mod tests {
             Archive::new(&none)
                 .unwrap()
                 .get(guest::arinc::PORTS_PATH)
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn the_disk_file_is_what_the_guest_reads() {
+        let mut g = hello();
+        g.disk = Some(config::system::GuestDisk {
+            request: "vda-req".into(),
+            response: "vda-resp".into(),
+            sectors: 4096,
+        });
+        let bytes = initramfs(b"ELF", &applets(), &g, &[]).unwrap();
+        let fs = Archive::new(&bytes).unwrap();
+        let text = fs.get(guest::disk::DISK_PATH).unwrap().data;
+        assert_eq!(text, b"request=vda-req\nresponse=vda-resp\nsectors=4096\n");
+        let read = guest::disk::parse_disk_file(std::str::from_utf8(text).unwrap()).unwrap();
+        assert_eq!(
+            (read.request, read.response, read.sectors),
+            ("vda-req", "vda-resp", 4096)
+        );
+        let none = initramfs(b"ELF", &applets(), &hello(), &[]).unwrap();
+        assert!(
+            Archive::new(&none)
+                .unwrap()
+                .get(guest::disk::DISK_PATH)
                 .is_none()
         );
     }

@@ -353,6 +353,7 @@ mod tests {
             console_com2: false,
             programs: Vec::new(),
             net: None,
+            disk: None,
         };
         let script = init_script(&guest.init, &guest.env);
         assert!(

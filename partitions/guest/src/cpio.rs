@@ -22,6 +22,7 @@ pub const S_IFREG: u32 = 0o100000;
 pub const S_IFDIR: u32 = 0o040000;
 pub const S_IFLNK: u32 = 0o120000;
 pub const S_IFCHR: u32 = 0o020000;
+pub const S_IFBLK: u32 = 0o060000;
 
 /// Why an archive cannot be read, and at which byte offset.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

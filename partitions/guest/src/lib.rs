@@ -19,7 +19,9 @@
 //! that says at which of three priorities each process's thread runs ([`sched`]), the
 //! console's terminal line discipline ([`tty`]), the sockets and their TCP/IP stack
 //! ([`net`], the calls in [`syscall::socket`]) and the partition's ARINC ports as the devices
-//! `/dev/arinc/<port>` ([`arinc`]: their table, messages, `EMSGSIZE`, validity ioctl); the
+//! `/dev/arinc/<port>` ([`arinc`]: their table, messages, `EMSGSIZE`, validity ioctl), the
+//! block device `/dev/vda` on the partition's virtual disk ([`disk`]: offsets onto sectors,
+//! the sector cache, the block ioctls); the
 //! partition program (`main.rs`) only moves messages, creates tasks, maps pages, drives
 //! COM2 (`com2.rs`), moves port messages through syssw (`ports.rs`), writes the log and
 //! gives the library its heap (a part of the memory pool: the file system's data and tables
@@ -63,6 +65,11 @@
 //! - `guest: eth0 <mac> <address>/<prefix> through ports <rx> and <tx>` at start with
 //!   `guest.net` ([`net`]), or `guest: /etc/guest/net line <n>: <why>; no eth0`,
 //!   `guest: /etc/guest/net: no port <rx> or <tx>; no eth0` (the guest then has `lo` only);
+//! - `guest: /dev/vda <n> sectors through ports <request> and <response>` at start with
+//!   `guest.disk` ([`disk`]), or `guest: /etc/guest/disk line <n>: <why>; no /dev/vda`,
+//!   `guest: /etc/guest/disk: no port <request> or <response>; no /dev/vda`;
+//!   `guest: /dev/vda: <read|write|flush> of sector <n> failed: <why>` for a failed request
+//!   (the call fails with `EIO`; at most [`disk::MAX_LOGGED`] lines);
 //! - `guest: port <name>: cannot create it: <ARINC code, or no answer>` (its device
 //!   answers `ENXIO`),
 //!   `guest: /etc/guest/ports line <n>: <why>; no ports`, `guest: no room for the port
@@ -78,6 +85,7 @@ pub mod arinc;
 pub mod backing;
 pub mod console;
 pub mod cpio;
+pub mod disk;
 pub mod elf;
 pub mod events;
 pub mod exec;
@@ -120,6 +128,21 @@ pub fn split_nul<'a>(bytes: &'a [u8], out: &mut [&'a [u8]]) -> usize {
         n += 1;
     }
     n
+}
+
+/// The `key=value` lines of a settings file under `/etc/guest` (`net`, `disk`): each with
+/// its line number, blank lines skipped; a line without `=` is an error naming its line.
+pub fn settings(
+    text: &str,
+) -> impl Iterator<Item = Result<(usize, &str, &str), (usize, &'static str)>> {
+    text.lines()
+        .enumerate()
+        .map(|(n, line)| (n + 1, line.trim()))
+        .filter(|(_, line)| !line.is_empty())
+        .map(|(at, line)| match line.split_once('=') {
+            Some((key, value)) => Ok((at, key, value)),
+            None => Err((at, "expected key=value")),
+        })
 }
 
 #[cfg(test)]

@@ -32,6 +32,11 @@
 //! through syssw before the first process starts. Their messages arrive without a word
 //! to the guest, so while a call waits for a port, the calls that wait are served again
 //! every [`PORT_POLL_NS`].
+//!
+//! The block device: with `guest.disk` (the initramfs's `/etc/guest/disk`) the guest has
+//! `/dev/vda` ([`guest::disk`]) over the link's client (`blk_core::client`) on two of its
+//! ports ([`ports::DiskLink`]: one request at a time, the guest waiting for its response,
+//! at most 2 s); those two ports have no device in `/dev/arinc`.
 #![no_std]
 #![no_main]
 
@@ -206,9 +211,22 @@ fn main(start: u64, _: u64) {
     };
     let net = network(&archive, &port_table);
     let ports = ports::Ports::create(ThreadId(info.server), ipc, &port_table);
+    let disk = disk(&archive, &port_table, &ports);
     if let Err(e) = fs.set_ports(port_table) {
         println!("guest: no room for the port devices: {}", e.describe());
     }
+    if let Some((_, request, response)) = &disk {
+        // Its link is the guest's own: no process reaches the driver but through /dev/vda.
+        fs.hide_port(request);
+        fs.hide_port(response);
+    }
+    let disk = disk.and_then(|(disk, _, _)| match fs.add_disk() {
+        Ok(()) => Some(disk),
+        Err(e) => {
+            println!("guest: no room for /dev/vda: {}", e.describe());
+            None
+        }
+    });
 
     let mcp = (info.priority as u8).saturating_sub(1).max(1);
     let mut host = GuestHost {
@@ -225,6 +243,7 @@ fn main(start: u64, _: u64) {
         seed: sys::rdtsc() | 1,
         tty: None,
         ports,
+        disk,
         port_waiting: false,
         sched: Scheduler::new(0),
         levels_set: 0,
@@ -387,6 +406,55 @@ fn network(archive: &Archive, ports: &[guest::arinc::Port]) -> guest::net::Net {
     let mut net = Net::new(Some(c));
     net.link(rx, tx);
     net
+}
+
+/// `/dev/vda`'s disk over its client, when the initramfs has its configuration
+/// ([`guest::disk::DISK_PATH`], from `guest.disk`) with ports syssw created; with the names
+/// of its two ports.
+fn disk(
+    archive: &Archive,
+    table: &[guest::arinc::Port],
+    ports: &ports::Ports,
+) -> Option<(Disk, alloc::string::String, alloc::string::String)> {
+    use guest::disk::{DISK_PATH, parse_disk_file};
+    let entry = archive.get(DISK_PATH)?;
+    let text = core::str::from_utf8(entry.data).unwrap_or("");
+    let file = match parse_disk_file(text) {
+        Ok(file) => file,
+        Err((line, why)) => {
+            println!("guest: {DISK_PATH} line {line}: {why}; no /dev/vda");
+            return None;
+        }
+    };
+    let index = |name: &str| table.iter().position(|p| p.name == name);
+    let link = index(file.request)
+        .zip(index(file.response))
+        .and_then(|(request, response)| ports.disk_link(request, response));
+    let Some(link) = link else {
+        println!(
+            "guest: {DISK_PATH}: no port {} or {}; no /dev/vda",
+            file.request, file.response
+        );
+        return None;
+    };
+    println!(
+        "guest: /dev/vda {} sectors through ports {} and {}",
+        file.sectors, file.request, file.response
+    );
+    let client = blk_core::client::Client::new(link);
+    Some((
+        guest::disk::Disk::new(client, file.sectors, log_line),
+        file.request.into(),
+        file.response.into(),
+    ))
+}
+
+/// `/dev/vda`'s disk: the link's client under the sector cache.
+type Disk = guest::disk::Disk<blk_core::client::Client<ports::DiskLink>>;
+
+/// A line of the log.
+fn log_line(line: core::fmt::Arguments) {
+    println!("{line}");
 }
 
 /// Input from the console: through the line discipline (echo to COM2, signals of the
@@ -614,6 +682,8 @@ struct GuestHost<'p> {
     tty: Option<Tty>,
     /// The ARINC ports of `/dev/arinc`.
     ports: ports::Ports,
+    /// `/dev/vda` (`guest.disk`), if the guest has it.
+    disk: Option<Disk>,
     /// A call waited for a port when it was last served ([`Host::port_wait`]).
     port_waiting: bool,
     /// The scheduling policy: the level of each process's thread.
@@ -819,6 +889,12 @@ impl Host for GuestHost<'_> {
 
     fn port_readiness(&mut self, port: usize) -> guest::arinc::Readiness {
         self.ports.readiness(port)
+    }
+
+    fn disk(&mut self) -> Option<&mut dyn guest::disk::BlockFile> {
+        self.disk
+            .as_mut()
+            .map(|d| d as &mut dyn guest::disk::BlockFile)
     }
 }
 

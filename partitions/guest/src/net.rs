@@ -65,13 +65,8 @@ pub struct NetFile<'a> {
 /// Parses the file at [`NET_PATH`]; the error names the line and what is wrong.
 pub fn parse_net_file(text: &str) -> Result<NetFile<'_>, (usize, &'static str)> {
     let (mut mac, mut address, mut gateway, mut rx, mut tx) = (None, None, None, None, None);
-    for (n, line) in text.lines().enumerate() {
-        let line = line.trim();
-        if line.is_empty() {
-            continue;
-        }
-        let at = n + 1;
-        let (key, value) = line.split_once('=').ok_or((at, "expected key=value"))?;
+    for setting in crate::settings(text) {
+        let (at, key, value) = setting?;
         match key {
             "mac" => mac = Some(Mac::parse(value).ok_or((at, "bad MAC address"))?.0),
             "address" => {

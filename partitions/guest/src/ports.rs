@@ -191,3 +191,100 @@ impl Ports {
         now
     }
 }
+
+impl Ports {
+    /// `/dev/vda`'s link over ports `request` (a queuing source) and `response` (a queuing
+    /// destination) of the table (`None` when syssw refused either).
+    pub fn disk_link(&self, request: usize, response: usize) -> Option<DiskLink> {
+        let (req, resp) = (self.port(request).ok()?, self.port(response).ok()?);
+        let queuing = req.kind == Kind::Queuing && resp.kind == Kind::Queuing;
+        let ways = req.direction == Direction::Out && resp.direction == Direction::In;
+        (queuing && ways).then_some(DiskLink {
+            server: self.server,
+            ipc: self.ipc,
+            request: req.id,
+            response: resp.id,
+        })
+    }
+}
+
+/// How long a request may wait for room in its port (ns).
+const DISK_SEND_TIMEOUT_NS: u64 = 1_000_000_000;
+/// How long the guest waits for a response (ns): the block-device partition answers in
+/// its next window; meanwhile the guest serves no other call.
+const DISK_RESPONSE_TIMEOUT_NS: u64 = 2_000_000_000;
+/// Most stale responses dropped before a request (more than a port holds).
+const DISK_STALE_MAX: usize = 16;
+
+/// The transport of `/dev/vda`'s client (`blk_core::client`): one request and its
+/// response through syssw, waiting for each within a bound.
+pub struct DiskLink {
+    server: ThreadId,
+    ipc: IpcBufferRef,
+    request: u64,
+    response: u64,
+}
+
+impl DiskLink {
+    fn call(&self, request: &Request) -> Result<(Result<(), ReturnCode>, [u64; 3]), ()> {
+        let reply = user_rt::service::request(self.server, self.ipc, request).map_err(|_| ())?;
+        let code = protocol::reply_result(reply.label).map_err(|_| ())?;
+        Ok((code, reply.words))
+    }
+
+    /// One message of the response port into `buf` within `timeout` ns: its length, or
+    /// `None` when none came.
+    fn receive(&self, timeout: u64, buf: &mut [u8]) -> Result<Option<usize>, &'static str> {
+        let request = Request::ReceiveQueuing {
+            port: self.response,
+            timeout,
+            priority: 0,
+        };
+        let (code, words) = self.call(&request).map_err(|()| "syssw did not answer")?;
+        let len = QueuingMessage::from_words(words)
+            .map_err(|_| "syssw's answer is malformed")?
+            .len as usize;
+        match code {
+            // A message (with INVALID_CONFIG: a queue that overflowed before it).
+            _ if len > 0 && len <= buf.len() => {
+                self.ipc.read_data(0, &mut buf[..len]);
+                Ok(Some(len))
+            }
+            Ok(()) if len > buf.len() => Err("a response longer than the link's"),
+            Ok(())
+            | Err(ReturnCode::NoAction | ReturnCode::NotAvailable | ReturnCode::TimedOut) => {
+                Ok(None)
+            }
+            Err(_) => Err("the response port refused the receive"),
+        }
+    }
+}
+
+impl blk_core::client::Transport for DiskLink {
+    type Error = &'static str;
+
+    fn exchange(&mut self, request: &[u8], response: &mut [u8]) -> Result<usize, &'static str> {
+        // Responses to requests given up on (a time-out) are stale: dropped first.
+        for _ in 0..DISK_STALE_MAX {
+            if self.receive(0, response)?.is_none() {
+                break;
+            }
+        }
+        let send = Request::SendQueuing {
+            port: self.request,
+            timeout: DISK_SEND_TIMEOUT_NS,
+            priority: 0,
+            staged: 0,
+            message: request,
+        };
+        match self.call(&send).map_err(|()| "syssw did not answer")?.0 {
+            Ok(()) => {}
+            Err(ReturnCode::NotAvailable | ReturnCode::TimedOut) => {
+                return Err("the request port stayed full for 1 s");
+            }
+            Err(_) => return Err("the request port refused the send"),
+        }
+        self.receive(DISK_RESPONSE_TIMEOUT_NS, response)?
+            .ok_or("no response within 2 s")
+    }
+}

@@ -46,6 +46,34 @@ struct Model {
     port_sent: HashMap<usize, Vec<Vec<u8>>>,
     /// Calls that said they wait for a port ([`Host::port_wait`]).
     port_waits: usize,
+    /// `/dev/vda` ([`Host::disk`]), on sectors in memory.
+    disk: Option<crate::disk::Disk<Sectors>>,
+}
+
+/// A disk in memory that counts its flushes.
+#[derive(Default)]
+struct Sectors {
+    sectors: Vec<[u8; 512]>,
+    flushes: u32,
+}
+
+impl slots::BlockDevice for Sectors {
+    type Error = &'static str;
+    fn read(&mut self, sector: u64, buf: &mut [u8; 512]) -> Result<(), &'static str> {
+        *buf = *self.sectors.get(sector as usize).ok_or("out of range")?;
+        Ok(())
+    }
+    fn write(&mut self, sector: u64, data: &[u8; 512]) -> Result<(), &'static str> {
+        *self
+            .sectors
+            .get_mut(sector as usize)
+            .ok_or("out of range")? = *data;
+        Ok(())
+    }
+    fn flush(&mut self) -> Result<(), &'static str> {
+        self.flushes += 1;
+        Ok(())
+    }
 }
 
 const PORT_ROOM: usize = 2;
@@ -110,6 +138,12 @@ impl Host for Model {
 
     fn port_wait(&mut self) {
         self.port_waits += 1;
+    }
+
+    fn disk(&mut self) -> Option<&mut dyn crate::disk::BlockFile> {
+        self.disk
+            .as_mut()
+            .map(|d| d as &mut dyn crate::disk::BlockFile)
     }
 
     fn port_readiness(&mut self, port: usize) -> crate::arinc::Readiness {
@@ -3132,6 +3166,128 @@ fn listing_while_removing_copying_and_status() {
     assert_eq!(call(&mut g, nr::stat, [c, SCRATCH, 0, 0, 0, 0]), 0);
     assert_eq!(g.get(1, SCRATCH + 24, 4), (S_IFREG | 0o600).to_le_bytes());
     assert_eq!(g.get(1, SCRATCH + 88, 8), 1234u64.to_le_bytes(), "st_mtime");
+}
+
+#[test]
+fn the_block_device_reads_writes_seeks_and_syncs_as_linux_s() {
+    use crate::disk;
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let open = |g: &mut Guest, path: &str, flags: u64| {
+        let at = g.text(1, SCRATCH + 0x800, path);
+        g.call(1, nr::openat, [AT_FDCWD, at, flags, 0, 0, 0])
+            .unwrap()
+    };
+    // Without `guest.disk` there is no /dev/vda.
+    assert_eq!(open(&mut g, "/dev/vda", 2), err(Errno::ENOENT));
+    // Its link's ports have no devices.
+    let table = b"vda-req queuing out 2072 2\nvda-resp queuing in 2064 2\nother queuing in 16 2\n";
+    g.fs.set_ports(crate::arinc::parse(table).unwrap()).unwrap();
+    g.fs.hide_port("vda-req");
+    g.fs.hide_port("vda-resp");
+    assert_eq!(open(&mut g, "/dev/arinc/vda-req", 1), err(Errno::ENOENT));
+    assert_eq!(open(&mut g, "/dev/arinc/vda-resp", 0), err(Errno::ENOENT));
+    assert!((open(&mut g, "/dev/arinc/other", 0) as i64) >= 0);
+    g.fs.add_disk().unwrap();
+    let device = Sectors {
+        sectors: vec![[0; 512]; 8],
+        flushes: 0,
+    };
+    g.host.disk = Some(disk::Disk::new(device, 8, |_| ()));
+    let vda = open(&mut g, "/dev/vda", 2); // O_RDWR
+    // A block device of size 0 (as stat shows one on Linux), 254:0.
+    assert_eq!(
+        g.call(1, nr::fstat, [vda, SCRATCH + 0x100, 0, 0, 0, 0]),
+        Some(0)
+    );
+    let st = g.get(1, SCRATCH + 0x100, 144);
+    assert_eq!(st[24..28], (crate::cpio::S_IFBLK | 0o660).to_le_bytes());
+    assert_eq!(st[40..48], (254u64 << 8).to_le_bytes(), "st_rdev");
+    assert_eq!(st[48..56], 0u64.to_le_bytes(), "st_size");
+    // lseek: the end is the disk's size, past it EINVAL.
+    let seek = |g: &mut Guest, at: i64, whence: u64| {
+        g.call(1, nr::lseek, [vda, at as u64, whence, 0, 0, 0])
+            .unwrap()
+    };
+    assert_eq!(seek(&mut g, 0, 2), 4096);
+    assert_eq!(seek(&mut g, 1, 2), err(Errno::EINVAL));
+    assert_eq!(seek(&mut g, 4097, 0), err(Errno::EINVAL));
+    // pwrite across a sector boundary, pread around it.
+    g.put(1, SCRATCH, b"hello");
+    let pwrite = |g: &mut Guest, n: u64, at: u64| {
+        g.call(1, nr::pwrite64, [vda, SCRATCH, n, at, 0, 0])
+            .unwrap()
+    };
+    assert_eq!(pwrite(&mut g, 5, 510), 5);
+    assert_eq!(
+        g.call(1, nr::pread64, [vda, SCRATCH + 0x200, 9, 508, 0, 0]),
+        Some(9)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x200, 9), b"\0\0hello\0\0");
+    {
+        let d = g.host.disk.as_mut().unwrap().device_mut();
+        assert_eq!(&d.sectors[0][510..], b"he");
+        assert_eq!(&d.sectors[1][..3], b"llo");
+    }
+    // write at the offset: across the end short, at the end ENOSPC; read there 0.
+    assert_eq!(seek(&mut g, 4094, 0), 4094);
+    assert_eq!(g.call(1, nr::write, [vda, SCRATCH, 5, 0, 0, 0]), Some(2));
+    assert_eq!(
+        g.call(1, nr::write, [vda, SCRATCH, 5, 0, 0, 0]),
+        Some(err(Errno::ENOSPC))
+    );
+    assert_eq!(g.call(1, nr::read, [vda, SCRATCH, 5, 0, 0, 0]), Some(0));
+    assert_eq!(seek(&mut g, -2, 2), 4094);
+    assert_eq!(
+        g.call(1, nr::read, [vda, SCRATCH + 0x200, 5, 0, 0, 0]),
+        Some(2)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x200, 2), b"he");
+    // The ioctls mke2fs and e2fsck use.
+    let ioctl = |g: &mut Guest, request: u64| {
+        let r = g
+            .call(1, nr::ioctl, [vda, request, SCRATCH + 0x300, 0, 0, 0])
+            .unwrap();
+        let v = g.get(1, SCRATCH + 0x300, 8);
+        (r, u64::from_le_bytes(v.try_into().unwrap()))
+    };
+    g.put(1, SCRATCH + 0x300, &[0xff; 8]);
+    assert_eq!(ioctl(&mut g, disk::BLKGETSIZE64), (0, 4096));
+    assert_eq!(ioctl(&mut g, disk::BLKGETSIZE), (0, 8));
+    g.put(1, SCRATCH + 0x300, &[0; 8]);
+    assert_eq!(ioctl(&mut g, disk::BLKSSZGET), (0, 512));
+    assert_eq!(ioctl(&mut g, 0x5401).0, err(Errno::ENOTTY)); // TCGETS
+    // fsync, fdatasync, syncfs and sync flush the device; fsync of another file does not.
+    let flushes = |g: &mut Guest| g.host.disk.as_mut().unwrap().device_mut().flushes;
+    assert_eq!(g.call(1, nr::fsync, [vda, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::fdatasync, [vda, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(flushes(&mut g), 2);
+    let file = open(&mut g, "/tmp/f", 0o100 | 2); // O_CREAT | O_RDWR
+    assert_eq!(g.call(1, nr::fsync, [file, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(flushes(&mut g), 2);
+    assert_eq!(g.call(1, nr::syncfs, [file, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::sync, [0; 6]), Some(0));
+    assert_eq!(ioctl(&mut g, disk::BLKFLSBUF).0, 0);
+    assert_eq!(flushes(&mut g), 5);
+    // One call moves at most disk::MAX_TRANSFER bytes.
+    let big = 16 * 1024 * 1024 / 512;
+    g.host.disk = Some(disk::Disk::new(
+        Sectors {
+            sectors: vec![[1; 512]; big],
+            flushes: 0,
+        },
+        big as u64,
+        |_| (),
+    ));
+    let area = 0x7100_0000;
+    assert_eq!(
+        g.call(1, nr::mmap, [area, 1 << 20, 3, 0x32, u64::MAX, 0]),
+        Some(area)
+    );
+    assert_eq!(
+        g.call(1, nr::pread64, [vda, area, 1 << 20, 0, 0, 0]),
+        Some(disk::MAX_TRANSFER as u64)
+    );
 }
 
 #[test]

@@ -434,6 +434,16 @@ fn read_kernel(
                 return arinc::read(port, index, host, buf, nonblock);
             }
             match f.fs.device(node) {
+                Some(Device::Disk) => {
+                    let offset = at.unwrap_or(o.offset);
+                    let n = host.disk().ok_or(Errno::ENXIO)?.read(offset, buf)?;
+                    if at.is_none()
+                        && let Some(o) = f.fs.description_mut(id)
+                    {
+                        o.offset = offset + n as u64;
+                    }
+                    return Ok(n);
+                }
                 Some(Device::Null) => return Ok(0),
                 Some(Device::Zero) => {
                     buf.fill(0);
@@ -518,6 +528,22 @@ fn write_kernel(
                 let nonblock = o.flags & linux::O_NONBLOCK != 0;
                 return arinc::write(port, index, host, data, nonblock);
             }
+            if f.fs.device(node) == Some(Device::Disk) {
+                let disk = host.disk().ok_or(Errno::ENXIO)?;
+                // O_APPEND writes at the end: ENOSPC, as on Linux.
+                let offset = if o.flags & linux::O_APPEND != 0 {
+                    disk.size()
+                } else {
+                    at.unwrap_or(o.offset)
+                };
+                let n = disk.write(offset, data)?;
+                if at.is_none()
+                    && let Some(o) = f.fs.description_mut(id)
+                {
+                    o.offset = offset + n as u64;
+                }
+                return Ok(n);
+            }
             if f.fs.device(node).is_some() {
                 return Ok(data.len()); // null, zero, random: swallowed
             }
@@ -560,6 +586,66 @@ fn streams(p: &Process, f: &Files, fd: u64) -> bool {
                 .is_none_or(|o| f.fs.port(o.node).is_none())
         }
         _ => true,
+    }
+}
+
+/// Whether `fd` is open on the block device `/dev/vda` ([`crate::disk`]).
+pub fn is_disk(p: &Process, fs: &Fs, fd: u64) -> bool {
+    match p.file(fd) {
+        Some(File::Open(id)) => fs
+            .description(id)
+            .is_some_and(|o| fs.device(o.node) == Some(Device::Disk)),
+        _ => false,
+    }
+}
+
+/// Most bytes one `read` or `write` of `fd` moves: [`crate::disk::MAX_TRANSFER`] on the
+/// block device (each of its sectors is a request the guest waits for), else
+/// [`MAX_TRANSFER`].
+fn transfer_max(p: &Process, fs: &Fs, fd: u64) -> usize {
+    if is_disk(p, fs, fd) {
+        crate::disk::MAX_TRANSFER
+    } else {
+        MAX_TRANSFER
+    }
+}
+
+/// `ioctl` on the block device: the requests of [`crate::disk::ioctl`]; `ENOTTY` for the
+/// others.
+pub fn disk_ioctl(
+    c: &mut Ctx<'_, '_, impl Host>,
+    fd: u64,
+    request: u64,
+    arg: u64,
+) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
+    if !is_disk(p, f.fs, fd) {
+        return Err(Errno::ENOTTY);
+    }
+    let disk = host.disk().ok_or(Errno::ENXIO)?;
+    match crate::disk::ioctl(request, disk.size())? {
+        crate::disk::Answer::U64(v) => write_user(p, host, arg, &v.to_le_bytes())?,
+        crate::disk::Answer::U32(v) => write_user(p, host, arg, &v.to_le_bytes())?,
+        crate::disk::Answer::FlushBuffers => disk.flush_buffers()?,
+    }
+    Ok(0)
+}
+
+/// `fsync`, `fdatasync` of `fd`, and `syncfs` (`all`) and `sync`: the block device's
+/// flush ([`crate::disk`]) when `fd` is open on it (any descriptor for `all`); nothing
+/// else needs one (the files live in memory).
+pub fn sync(c: &mut Ctx<'_, '_, impl Host>, fd: Option<u64>, all: bool) -> SysResult<u64> {
+    let (p, f, host) = c.parts();
+    let disk = match fd {
+        Some(fd) => {
+            p.file(fd).ok_or(Errno::EBADF)?;
+            all || is_disk(p, f.fs, fd)
+        }
+        None => true,
+    };
+    match host.disk() {
+        Some(d) if disk => d.sync().map(|()| 0),
+        _ => Ok(0),
     }
 }
 
@@ -637,7 +723,7 @@ pub fn read(
         }
         return got;
     }
-    let total = (count as usize).min(MAX_TRANSFER);
+    let total = (count as usize).min(transfer_max(p, f.fs, fd));
     check_user(p, buf, total, Rights::WRITE)?;
     let mut chunk = [0u8; CHUNK];
     let mut done = 0;
@@ -652,7 +738,8 @@ pub fn read(
             at.map(|a| a + done as u64),
         ) {
             Ok(n) => n,
-            Err(WOULD_BLOCK | BROKEN_PIPE) if done > 0 => break,
+            // What moved already counts (the block device's EIO after some sectors).
+            Err(_) if done > 0 => break,
             Err(e) => {
                 used_up(p, f, fd, e, false);
                 return Err(e);
@@ -692,7 +779,7 @@ pub fn write(
     {
         return Err(Errno::EMSGSIZE); // not cut into pieces the size of a step
     }
-    let total = (count as usize).min(MAX_TRANSFER);
+    let total = (count as usize).min(transfer_max(p, f.fs, fd));
     check_user(p, buf, total, Rights::READ)?;
     let file = p.file(fd).ok_or(Errno::EBADF)?;
     if let File::Pipe {
@@ -769,13 +856,23 @@ pub fn vectored(
         return Err(Errno::EINVAL);
     }
     c.p.file(fd).ok_or(Errno::EBADF)?;
+    // The block device's bound holds for the whole call.
+    let most = if is_disk(c.p, c.f.fs, fd) {
+        crate::disk::MAX_TRANSFER as u64
+    } else {
+        u64::MAX
+    };
     let mut total = 0u64;
     for i in 0..count {
+        if total >= most {
+            break;
+        }
         let base = read_u64(c.p, c.host, iov + i * 16)?;
         let len = read_u64(c.p, c.host, iov + i * 16 + 8)?;
         if len == 0 {
             continue;
         }
+        let len = len.min(most - total);
         let n = match if is_write {
             write(c, fd, base, len, None)
         } else {
@@ -847,11 +944,19 @@ pub fn sendfile(
 }
 
 pub fn lseek(c: &mut Ctx<'_, '_, impl Host>, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
-    let (p, f, _) = c.parts();
+    let (p, f, host) = c.parts();
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::ESPIPE);
     };
     let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+    if f.fs.device(o.node) == Some(Device::Disk) {
+        let size = host.disk().ok_or(Errno::ENXIO)?.size();
+        let new = crate::disk::seek(o.offset, offset, whence, size)?;
+        if let Some(o) = f.fs.description_mut(id) {
+            o.offset = new;
+        }
+        return Ok(new);
+    }
     let size = match &o.snapshot {
         Some(s) => s.len() as u64,
         None => f.fs.stat(o.node).size,

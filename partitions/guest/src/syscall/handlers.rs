@@ -94,14 +94,31 @@ pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     match file {
         File::Console(_) => super::tty_ioctl(c, a.flags(1), a.raw(2)),
         File::Socket(_) => super::socket::socket_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
+        _ if file::is_disk(c.p, c.f.fs, a.fd(0)) => {
+            file::disk_ioctl(c, a.fd(0), a.flags(1), a.raw(2))
+        }
         _ => file::port_ioctl(c, a.fd(0), a.flags(1), a.raw(2)),
     }
 }
-/// `fsync`, `fdatasync`, `syncfs`, `fadvise64`: the files live in memory.
+/// `fadvise64`: the files live in memory.
 pub fn sync_fd<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::nothing(c, a.fd(0))
 }
-/// Calls with nothing to do (`sync`, `sched_yield`).
+/// `fsync`, `fdatasync`: the block device's flush on `/dev/vda`, nothing for the others
+/// (the files live in memory).
+pub fn fsync<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    file::sync(c, Some(a.fd(0)), false)
+}
+/// `syncfs`: the block device's flush.
+pub fn syncfs<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    file::sync(c, Some(a.fd(0)), true)
+}
+/// `sync`: the block device's flush (an error is not reported: `sync` returns nothing).
+pub fn sync<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
+    let _ = file::sync(c, None, true);
+    Ok(0)
+}
+/// Calls with nothing to do (`sched_yield`).
 pub fn nothing<H: Host>(_: &mut Ctx<H>, _: Args) -> Result {
     Ok(0)
 }

@@ -2,7 +2,9 @@
 //! them is the system calls' ([`crate::syscall`]): the console and `tty` are the guest's
 //! console, `null` reads end of file and swallows writes, `zero` reads zeros, `urandom` and
 //! `random` read the host's random bytes, and `arinc/<name>` are the partition's ARINC 653
-//! ports ([`crate::arinc`]). A device never holds data in the file system.
+//! ports ([`crate::arinc`]), and `vda` the block device on the partition's virtual disk
+//! ([`crate::disk`]), there only with `guest.disk`. A device never holds data in the file
+//! system.
 
 /// A device file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -15,6 +17,8 @@ pub enum Device {
     Random,
     /// Port `n` of the port table ([`crate::vfs::Fs::ports`]).
     Port(u16),
+    /// The block device `/dev/vda` ([`crate::disk`]).
+    Disk,
 }
 
 impl Device {
@@ -38,6 +42,7 @@ impl Device {
             Device::Urandom => (1, 9),
             Device::Random => (1, 8),
             Device::Port(n) => (crate::arinc::MAJOR, n as u64),
+            Device::Disk => (crate::disk::MAJOR, crate::disk::MINOR),
         };
         major << 8 | minor
     }

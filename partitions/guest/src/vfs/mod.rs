@@ -28,7 +28,7 @@
 pub mod dev;
 pub mod proc;
 
-use crate::cpio::{Archive, S_IFCHR, S_IFDIR, S_IFLNK, S_IFMT, S_IFREG};
+use crate::cpio::{Archive, S_IFBLK, S_IFCHR, S_IFDIR, S_IFLNK, S_IFMT, S_IFREG};
 use crate::linux::Errno;
 use crate::process::File;
 use alloc::boxed::Box;
@@ -310,6 +310,33 @@ impl<'a> Fs<'a> {
         }
         self.ports = ports;
         Ok(())
+    }
+
+    /// Gives the guest its block device, `/dev/vda` ([`Device::Disk`], [`crate::disk`]).
+    pub fn add_disk(&mut self) -> Result<(), Errno> {
+        let dev = self.mkdir_all("dev")?;
+        if self.entry(dev, b"vda").is_none() {
+            let ino = self.add(S_IFBLK | 0o660, Body::Device(Device::Disk), 0)?;
+            self.link_entry(dev, b"vda", ino)?;
+        }
+        Ok(())
+    }
+
+    /// Removes `/dev/arinc/<name>`: a port the guest itself uses (`/dev/vda`'s link), which
+    /// no process may reach (the port stays in the table, its index unchanged).
+    pub fn hide_port(&mut self, name: &str) {
+        let Some(dir) = self
+            .mkdir_all(crate::arinc::DEVICE_DIR)
+            .ok()
+            .filter(|_| self.ports.iter().any(|p| p.name == name))
+        else {
+            return;
+        };
+        if let Some(ino) = self.entry(dir, name.as_bytes())
+            && self.device(Node::Inode(ino)).is_some()
+        {
+            self.unlink_entry(dir, name.as_bytes());
+        }
     }
 
     /// The ARINC ports ([`Fs::set_ports`]).

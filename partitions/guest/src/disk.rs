@@ -1,0 +1,416 @@
+//! The guest's block device `/dev/vda` ([`crate::vfs::dev::Device::Disk`], device number
+//! [`MAJOR`]:[`MINOR`]): the guest partition's virtual disk of a block-device partition
+//! (`guest.disk` in the configuration; its `blk.tenants.<guest>` range), reached over the
+//! block-device link (`blk_core::client::Client`: one sector a request, CRC-checked).
+//!
+//! The configuration reaches the guest in its initramfs, [`DISK_PATH`] (written by
+//! `cargo xtask` from `guest.disk` and the tenant's `sectors`): `key=value` lines,
+//! `request` and `response` (the guest's queuing ports of the link) and `sectors` (the
+//! disk's size in sectors of 512 bytes). Without the file there is no `/dev/vda`
+//! (`ENOENT`, as on a Linux without the disk).
+//!
+//! What a Linux call on the device means, as for a Linux block device file (the calls in
+//! [`crate::syscall::file`], the device itself, [`Disk`], here):
+//!
+//! - `read`, `pread64`, `readv` at any offset and length: up to the disk's end (0 at or
+//!   past it); `write`, `pwrite64`, `writev` too, a part of a sector read, changed and
+//!   written back; a write that starts at or past the end fails with `ENOSPC`, one that
+//!   crosses it writes up to it. At most [`MAX_TRANSFER`] bytes a call (a short count: a
+//!   request waits for the block-device partition, and the guest serves nobody else
+//!   meanwhile).
+//! - `lseek`: `SEEK_END` is the disk's size; an offset past it is `EINVAL`, as Linux's
+//!   fixed-size seek has it. `stat` shows a block device (`S_IFBLK`, size 0 as on Linux).
+//! - `fsync`, `fdatasync`, `syncfs`, `sync` and the ioctl `BLKFLSBUF` send the link's
+//!   flush: every write before it is on the disk's stable storage.
+//! - ioctls ([`ioctl`]): `BLKGETSIZE64` (bytes), `BLKGETSIZE` (sectors), `BLKSSZGET` and
+//!   `BLKPBSZGET` (512), `BLKROGET` (0), `BLKDISCARDZEROES` (0), `BLKFLSBUF`; others
+//!   `ENOTTY`.
+//!
+//! Writes go through to the disk at once (a `write` returns when the driver has it);
+//! [`Disk`] keeps the last [`CACHE_SECTORS`] sectors read or written, so reading them again
+//! and the read half of a partial-sector write cost no request. A request that fails (the
+//! link's CRC, tag or status, no answer) makes the call fail with `EIO` and is logged
+//! (`guest: /dev/vda: <read|write|flush> of sector <n> failed: <why>`, at most
+//! [`MAX_LOGGED`] lines, then one saying the rest are not); the failed sector leaves the
+//! cache. No sector outside the disk is ever asked for (and the driver refuses requests
+//! outside the tenant's range itself).
+
+use crate::linux::Errno;
+use alloc::boxed::Box;
+use alloc::vec::Vec;
+
+/// Where the guest finds `/dev/vda`'s configuration in the initramfs.
+pub const DISK_PATH: &str = "/etc/guest/disk";
+/// The device's path.
+pub const DEVICE_PATH: &str = "/dev/vda";
+/// Its device number: Linux's virtio-blk (the first dynamic block major), disk 0.
+pub const MAJOR: u64 = 254;
+pub const MINOR: u64 = 0;
+/// Bytes of a sector.
+pub const SECTOR: usize = 512;
+/// Sectors kept in the cache.
+pub const CACHE_SECTORS: usize = 64;
+/// Most bytes one `read` or `write` call moves.
+pub const MAX_TRANSFER: usize = 64 * 1024;
+/// Most error lines logged.
+pub const MAX_LOGGED: u32 = 16;
+
+/// `ioctl` requests (x86-64 numbers).
+pub const BLKROGET: u64 = 0x125e;
+pub const BLKGETSIZE: u64 = 0x1260;
+pub const BLKFLSBUF: u64 = 0x1261;
+pub const BLKSSZGET: u64 = 0x1268;
+pub const BLKGETSIZE64: u64 = 0x8008_1272;
+pub const BLKPBSZGET: u64 = 0x127b;
+pub const BLKDISCARDZEROES: u64 = 0x127c;
+
+/// `/dev/vda`'s configuration, from the file at [`DISK_PATH`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct DiskFile<'a> {
+    pub request: &'a str,
+    pub response: &'a str,
+    pub sectors: u64,
+}
+
+/// Parses the file at [`DISK_PATH`]; the error names the line and what is wrong.
+pub fn parse_disk_file(text: &str) -> Result<DiskFile<'_>, (usize, &'static str)> {
+    let (mut request, mut response, mut sectors) = (None, None, None);
+    for setting in crate::settings(text) {
+        let (at, key, value) = setting?;
+        match key {
+            "request" => request = Some(value),
+            "response" => response = Some(value),
+            "sectors" => {
+                let s = value
+                    .parse::<u64>()
+                    .ok()
+                    // Its size in bytes fits an `i64` (`lseek`).
+                    .filter(|&s| s > 0 && s <= (i64::MAX as u64) / SECTOR as u64)
+                    .ok_or((at, "sectors is no number of sectors"))?;
+                sectors = Some(s);
+            }
+            _ => return Err((at, "unknown key")),
+        }
+    }
+    let last = text.lines().count();
+    Ok(DiskFile {
+        request: request.ok_or((last, "no request port"))?,
+        response: response.ok_or((last, "no response port"))?,
+        sectors: sectors.ok_or((last, "no sectors"))?,
+    })
+}
+
+/// What a request of the device is, for the log.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Op {
+    Read,
+    Write,
+    Flush,
+}
+
+impl Op {
+    fn name(self) -> &'static str {
+        match self {
+            Op::Read => "read",
+            Op::Write => "write",
+            Op::Flush => "flush",
+        }
+    }
+}
+
+/// A cached sector.
+struct Slot {
+    /// [`EMPTY`] for a slot that holds none.
+    sector: u64,
+    /// When it was last used ([`Disk::clock`]).
+    used: u64,
+    data: Box<[u8; SECTOR]>,
+}
+
+/// A cache slot's sector when it holds none (no disk has that many sectors).
+const EMPTY: u64 = u64::MAX;
+
+/// The virtual disk as a file: byte offsets and lengths onto whole sectors of `device`
+/// (`sectors` of them), with a write-through cache of [`CACHE_SECTORS`] sectors (allocated
+/// at once: serving a call allocates nothing).
+pub struct Disk<D> {
+    device: D,
+    sectors: u64,
+    cache: Vec<Slot>,
+    clock: u64,
+    /// Error lines logged so far.
+    logged: u32,
+    log: fn(core::fmt::Arguments),
+}
+
+impl<D: slots::BlockDevice> Disk<D>
+where
+    D::Error: core::fmt::Display,
+{
+    /// The disk of `sectors` sectors on `device`; `log` writes a log line.
+    pub fn new(device: D, sectors: u64, log: fn(core::fmt::Arguments)) -> Self {
+        Disk {
+            device,
+            sectors,
+            cache: (0..CACHE_SECTORS)
+                .map(|_| Slot {
+                    sector: EMPTY,
+                    used: 0,
+                    data: Box::new([0; SECTOR]),
+                })
+                .collect(),
+            clock: 0,
+            logged: 0,
+            log,
+        }
+    }
+
+    /// Its size in bytes.
+    pub fn size(&self) -> u64 {
+        self.sectors * SECTOR as u64
+    }
+
+    /// The device (tests).
+    pub fn device_mut(&mut self) -> &mut D {
+        &mut self.device
+    }
+
+    /// A failed request: logged (within [`MAX_LOGGED`]) and `EIO`.
+    fn failed(&mut self, op: Op, sector: u64, why: &D::Error) -> Errno {
+        if self.logged < MAX_LOGGED {
+            (self.log)(format_args!(
+                "guest: {DEVICE_PATH}: {} of sector {sector} failed: {why}",
+                op.name()
+            ));
+        } else if self.logged == MAX_LOGGED {
+            (self.log)(format_args!(
+                "guest: {DEVICE_PATH}: more requests failed, not logged"
+            ));
+        }
+        self.logged = self.logged.saturating_add(1);
+        Errno::EIO
+    }
+
+    fn cached(&mut self, sector: u64) -> Option<usize> {
+        let i = self.cache.iter().position(|s| s.sector == sector)?;
+        self.clock += 1;
+        self.cache[i].used = self.clock;
+        Some(i)
+    }
+
+    /// Keeps `data` as sector `sector`'s (in its slot, else in an empty one, else in the
+    /// least recently used).
+    fn keep(&mut self, sector: u64, data: &[u8; SECTOR]) {
+        self.clock += 1;
+        let used = self.clock;
+        let slot = match self.cache.iter().position(|s| s.sector == sector) {
+            Some(i) => self.cache.get_mut(i),
+            // Empty slots were last used at 0: the least recently used.
+            None => self.cache.iter_mut().min_by_key(|s| s.used),
+        };
+        if let Some(slot) = slot {
+            slot.sector = sector;
+            slot.used = used;
+            *slot.data = *data;
+        }
+    }
+
+    fn forget(&mut self, sector: u64) {
+        for slot in self.cache.iter_mut().filter(|s| s.sector == sector) {
+            (slot.sector, slot.used) = (EMPTY, 0);
+        }
+    }
+
+    /// Sectors in the cache (tests).
+    pub fn cached_sectors(&self) -> usize {
+        self.cache.iter().filter(|s| s.sector != EMPTY).count()
+    }
+
+    /// Sector `sector` (inside the disk) into `buf`, from the cache or the device.
+    fn read_sector(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno> {
+        debug_assert!(sector < self.sectors);
+        if let Some(i) = self.cached(sector) {
+            *buf = *self.cache[i].data;
+            return Ok(());
+        }
+        match self.device.read(sector, buf) {
+            Ok(()) => {
+                self.keep(sector, buf);
+                Ok(())
+            }
+            Err(e) => Err(self.failed(Op::Read, sector, &e)),
+        }
+    }
+
+    /// Writes sector `sector` (inside the disk) through to the device.
+    fn write_sector(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno> {
+        debug_assert!(sector < self.sectors);
+        match self.device.write(sector, data) {
+            Ok(()) => {
+                self.keep(sector, data);
+                Ok(())
+            }
+            Err(e) => {
+                // What the disk holds there is unknown now.
+                self.forget(sector);
+                Err(self.failed(Op::Write, sector, &e))
+            }
+        }
+    }
+
+    /// `read` at byte `offset`: the bytes up to the disk's end (0 at or past it; at most
+    /// [`MAX_TRANSFER`]). A failure after some bytes were read returns those.
+    pub fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno> {
+        let size = self.size();
+        if offset >= size {
+            return Ok(0);
+        }
+        let len = (buf.len() as u64)
+            .min(size - offset)
+            .min(MAX_TRANSFER as u64) as usize;
+        let mut done = 0;
+        let mut sector_buf = [0u8; SECTOR];
+        while done < len {
+            let at = offset + done as u64;
+            let sector = at / SECTOR as u64;
+            let within = (at % SECTOR as u64) as usize;
+            let n = (SECTOR - within).min(len - done);
+            if let Err(e) = self.read_sector(sector, &mut sector_buf) {
+                return if done > 0 { Ok(done) } else { Err(e) };
+            }
+            buf[done..done + n].copy_from_slice(&sector_buf[within..within + n]);
+            done += n;
+        }
+        Ok(done)
+    }
+
+    /// `write` at byte `offset`: up to the disk's end (`ENOSPC` at or past it; at most
+    /// [`MAX_TRANSFER`]); a partial sector is read, changed and written. A failure after
+    /// some bytes were written returns those.
+    pub fn write(&mut self, offset: u64, data: &[u8]) -> Result<usize, Errno> {
+        let size = self.size();
+        if data.is_empty() {
+            return Ok(0);
+        }
+        if offset >= size {
+            return Err(Errno::ENOSPC);
+        }
+        let len = (data.len() as u64)
+            .min(size - offset)
+            .min(MAX_TRANSFER as u64) as usize;
+        let mut done = 0;
+        let mut sector_buf = [0u8; SECTOR];
+        while done < len {
+            let at = offset + done as u64;
+            let sector = at / SECTOR as u64;
+            let within = (at % SECTOR as u64) as usize;
+            let n = (SECTOR - within).min(len - done);
+            let step = (|| {
+                if n < SECTOR {
+                    self.read_sector(sector, &mut sector_buf)?;
+                }
+                sector_buf[within..within + n].copy_from_slice(&data[done..done + n]);
+                self.write_sector(sector, &sector_buf)
+            })();
+            if let Err(e) = step {
+                return if done > 0 { Ok(done) } else { Err(e) };
+            }
+            done += n;
+        }
+        Ok(done)
+    }
+
+    /// `fsync` and the other syncs: the link's flush (the writes are on the device
+    /// already: the cache is write-through).
+    pub fn sync(&mut self) -> Result<(), Errno> {
+        self.device
+            .flush()
+            .map_err(|e| self.failed(Op::Flush, 0, &e))
+    }
+
+    /// `BLKFLSBUF`: the flush, then the cache is dropped (the next reads ask the device).
+    pub fn flush_buffers(&mut self) -> Result<(), Errno> {
+        self.sync()?;
+        for slot in &mut self.cache {
+            (slot.sector, slot.used) = (EMPTY, 0);
+        }
+        Ok(())
+    }
+}
+
+/// The disk as the system calls use it ([`crate::syscall::Host::disk`]).
+pub trait BlockFile {
+    /// Its size in bytes.
+    fn size(&self) -> u64;
+    /// [`Disk::read`].
+    fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno>;
+    /// [`Disk::write`].
+    fn write(&mut self, offset: u64, data: &[u8]) -> Result<usize, Errno>;
+    /// [`Disk::sync`].
+    fn sync(&mut self) -> Result<(), Errno>;
+    /// [`Disk::flush_buffers`].
+    fn flush_buffers(&mut self) -> Result<(), Errno>;
+}
+
+impl<D: slots::BlockDevice> BlockFile for Disk<D>
+where
+    D::Error: core::fmt::Display,
+{
+    fn size(&self) -> u64 {
+        Disk::size(self)
+    }
+    fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno> {
+        Disk::read(self, offset, buf)
+    }
+    fn write(&mut self, offset: u64, data: &[u8]) -> Result<usize, Errno> {
+        Disk::write(self, offset, data)
+    }
+    fn sync(&mut self) -> Result<(), Errno> {
+        Disk::sync(self)
+    }
+    fn flush_buffers(&mut self) -> Result<(), Errno> {
+        Disk::flush_buffers(self)
+    }
+}
+
+/// What an `ioctl` of the device answers.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Answer {
+    /// Store this 8-byte value at the argument.
+    U64(u64),
+    /// Store this 4-byte value at the argument.
+    U32(u32),
+    /// `BLKFLSBUF`: flush, then drop the cache ([`Disk::flush_buffers`]).
+    FlushBuffers,
+}
+
+/// The answer to `ioctl(request)` on a disk of `size` bytes (`ENOTTY` for requests a
+/// block device does not know here).
+pub fn ioctl(request: u64, size: u64) -> Result<Answer, Errno> {
+    match request & 0xffff_ffff {
+        BLKGETSIZE64 => Ok(Answer::U64(size)),
+        BLKGETSIZE => Ok(Answer::U64(size / SECTOR as u64)),
+        BLKSSZGET | BLKPBSZGET => Ok(Answer::U32(SECTOR as u32)),
+        BLKROGET | BLKDISCARDZEROES => Ok(Answer::U32(0)),
+        BLKFLSBUF => Ok(Answer::FlushBuffers),
+        _ => Err(Errno::ENOTTY),
+    }
+}
+
+/// The offset `lseek(offset, whence)` gives on a disk of `size` bytes whose description is
+/// at `current`: `EINVAL` before 0 or past the end (Linux's fixed-size seek).
+pub fn seek(current: u64, offset: i64, whence: u64, size: u64) -> Result<u64, Errno> {
+    let base = match whence {
+        0 => 0,
+        1 => current as i64,
+        2 => size as i64,
+        _ => return Err(Errno::EINVAL),
+    };
+    base.checked_add(offset)
+        .filter(|&n| n >= 0 && n as u64 <= size)
+        .map(|n| n as u64)
+        .ok_or(Errno::EINVAL)
+}
+
+#[cfg(test)]
+mod tests;
