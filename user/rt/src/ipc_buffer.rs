@@ -7,8 +7,8 @@
 #![allow(unsafe_code)]
 
 use abi::ipc::{
-    EXCEPTION_MESSAGE_SIZE, ExceptionMessage, IPC_DATA_MAX, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS,
-    IPC_WINDOW_OFFSET, MapItem, ReceiveWindow,
+    ExceptionMessage, IPC_DATA_MAX, IPC_ITEMS_OFFSET, IPC_MAX_ITEMS, IPC_WINDOW_OFFSET, MapItem,
+    ReceiveWindow,
 };
 
 /// The IPC buffer of the calling thread (or of another thread of the same task), by address.
@@ -134,15 +134,15 @@ impl IpcBufferRef {
     /// The [`ExceptionMessage`] at the start of the data area (of a received exception,
     /// syscall or fault-report message).
     pub fn exception(self) -> ExceptionMessage {
-        let mut bytes = [0u8; EXCEPTION_MESSAGE_SIZE];
-        self.read_data(0, &mut bytes);
-        ExceptionMessage::from_bytes(&bytes).expect("EXCEPTION_MESSAGE_SIZE bytes")
+        ExceptionMessage::from_words(&core::array::from_fn(|i| self.read_u64(i * 8)))
     }
 
     /// Writes `message` to the start of the data area (for a `REPLY_RESUME` with edited
     /// registers, tag length `EXCEPTION_MESSAGE_SIZE`).
     pub fn set_exception(self, message: &ExceptionMessage) {
-        self.write_data(0, &message.to_bytes());
+        for (i, word) in message.words().into_iter().enumerate() {
+            self.write_u64(i * 8, word);
+        }
     }
 }
 
