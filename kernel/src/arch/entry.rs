@@ -10,8 +10,8 @@
 //! that entered by `syscall`), else with `iretq`, which restores every register.
 //!
 //! With nothing to run the CPU halts with interrupts enabled *inside* the exit path; an
-//! interrupt then arrives in ring 0 below the frame, updates the kernel state and returns
-//! to the halt loop, which looks again.
+//! interrupt then arrives in ring 0 on the kernel stack, updates the kernel state and
+//! returns to the halt loop, which looks again.
 
 use super::idt::TrapFrame;
 use super::stack::{KERNEL_STACK, KERNEL_STACK_SIZE};
@@ -36,7 +36,6 @@ static mut USER_RSP: u64 = 0;
 
 /// Address of the running thread's saved context: where the entry stubs save a user
 /// frame and what they return through. Written only by [`switch_to`] (interrupts off).
-#[unsafe(no_mangle)]
 pub(super) static mut ACTIVE_FRAME: u64 = 0;
 
 /// Makes `context` (a thread's, in the kernel's thread table, which never moves) the frame
@@ -121,8 +120,8 @@ pub fn on_line_interrupt(line: usize, from_user: bool) {
 }
 
 /// An interrupt: lets `event` update the kernel (an interrupted thread's registers are
-/// already in its context), then returns to a thread chosen again (from ring 0: to the idle loop in `finish`,
-/// which chooses).
+/// already in its context), then returns to a thread chosen again (from ring 0: to the idle
+/// loop in `finish`, which chooses).
 fn on_interrupt(from_user: bool, event: impl FnOnce(&mut Kernel)) {
     if !RUNNING.load(Ordering::Relaxed) {
         return;

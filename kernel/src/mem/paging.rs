@@ -324,7 +324,9 @@ impl AddressSpace {
                 // kernel runs alone and holds no other reference into it.
                 let words =
                     unsafe { &mut *((phys_to_virt(frame) + ptr % PAGE_SIZE) as *mut [u64; N]) };
-                *words = *write.unwrap_or(words);
+                if let Some(w) = write {
+                    *words = *w;
+                }
                 Some(*words)
             }
             _ => {
