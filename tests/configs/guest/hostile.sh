@@ -33,11 +33,11 @@ wait $flooders
 kill $waiters
 echo "hostile: port flood done"
 
-# A CPU hog, alone for 3 s, then beside everything that follows (the guest's scheduling
+# A CPU hog, alone for 4 s, then beside everything that follows (the guest's scheduling
 # policy keeps the shell and the other attacks as quick as without it).
 while :; do :; done &
 echo "hostile: cpu hog started"
-sleep 3
+sleep 4
 
 # Memory hogs: a buffer larger than the guest's memory, a string doubled until the
 # memory is gone (stopped after 1 s), a file larger than the file system.
@@ -53,13 +53,13 @@ dd if=/dev/zero of=/tmp/fill bs=1M count=64 2>/dev/null
 echo "hostile: 64 MiB into the file system, dd ended with status $?"
 rm /tmp/fill
 
-# A pipe flood: writers as fast as they can, each into a reader, for 1 s.
+# A pipe flood: writers as fast as they can, each into a reader, for 2 s.
 readers=
 for i in 1 2 3; do
     yes flood | cat >/dev/null &
     readers="$readers $!"
 done
-sleep 1
+sleep 2
 kill $readers
 echo "hostile: pipe flood done"
 
