@@ -220,6 +220,23 @@ pub fn list<D: BlockDevice>(fs: &mut Ext2<D>, dir: u32) -> Vec<(String, u32)> {
 }
 
 /// Checks the crate reads the same tree as the model: every path, and no extra names.
+/// The names directly in directory `path` ("" for the root) of `tree`, sorted.
+fn children(tree: &Tree, path: &str) -> Vec<String> {
+    let prefix = if path.is_empty() {
+        String::new()
+    } else {
+        format!("{path}/")
+    };
+    let mut names: Vec<String> = tree
+        .keys()
+        .filter_map(|p| p.strip_prefix(&prefix))
+        .filter(|rest| !rest.is_empty() && !rest.contains('/'))
+        .map(str::to_string)
+        .collect();
+    names.sort();
+    names
+}
+
 pub fn verify_with_crate<D: BlockDevice>(fs: &mut Ext2<D>, tree: &Tree) {
     for (path, node) in tree {
         let ino = resolve(fs, path).unwrap_or_else(|e| panic!("{path}: {e:?}"));
@@ -233,18 +250,7 @@ pub fn verify_with_crate<D: BlockDevice>(fs: &mut Ext2<D>, tree: &Tree) {
                     .filter(|n| n != "." && n != ".." && n != "lost+found")
                     .collect();
                 names.sort();
-                let prefix = if path.is_empty() {
-                    String::new()
-                } else {
-                    format!("{path}/")
-                };
-                let mut expected: Vec<String> = tree
-                    .keys()
-                    .filter_map(|p| p.strip_prefix(&prefix))
-                    .filter(|rest| !rest.is_empty() && !rest.contains('/'))
-                    .map(str::to_string)
-                    .collect();
-                expected.sort();
+                let expected = children(tree, path);
                 assert_same_names(&names, &expected, &format!("readdir /{path}"));
             }
         }
@@ -291,18 +297,7 @@ pub fn verify_with_debugfs(image: &[u8], tree: &Tree) {
                     .filter(|n| !n.is_empty() && n != "." && n != ".." && n != "lost+found")
                     .collect();
                 names.sort();
-                let prefix = if path.is_empty() {
-                    String::new()
-                } else {
-                    format!("{path}/")
-                };
-                let mut expected: Vec<String> = tree
-                    .keys()
-                    .filter_map(|p| p.strip_prefix(&prefix))
-                    .filter(|rest| !rest.is_empty() && !rest.contains('/'))
-                    .map(str::to_string)
-                    .collect();
-                expected.sort();
+                let expected = children(tree, path);
                 assert_same_names(&names, &expected, &format!("debugfs ls /{path}"));
             }
         }
