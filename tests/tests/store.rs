@@ -12,11 +12,14 @@
 //! restores the older snapshot. When the end of the first run tore a save (QEMU stops
 //! while the store process writes), that torn slot is the one skipped.
 //!
-//! `store_guest_disk` (configuration `tests/configs/store_guest.toml`): the guest's block
-//! device `/dev/vda` on its virtual disk. The first boot makes an ext2 file system with
-//! busybox mke2fs and writes bytes at an offset of the raw device with dd; the second
-//! (same disk) reads them back. After each, Debian's e2fsck.static in the guest and the
-//! host's e2fsck on the guest's range of the disk image find the file system clean.
+//! `store_guest_fs` (configuration `tests/configs/store_guest.toml`): the guest's block
+//! device `/dev/vda` on its virtual disk and the ext2 file system on it at `/data`. The
+//! first boot makes the file system with busybox mke2fs and writes bytes at an offset of
+//! the raw device with dd, mounts it, replaces a file 20 times by write, fsync and rename,
+//! writes 300 KiB with its checksum, changes a directory and unmounts it; the second (same
+//! disk) reads the bytes and the files back. After each, Debian's e2fsck.static in the
+//! guest and the host's e2fsck on the guest's range of the disk image find the file system
+//! clean.
 
 use scenarios::{boot, boot_again, check, disk_image};
 use slots::{BlockDevice, SECTOR, SlotState};
@@ -293,7 +296,10 @@ fn guest_disk_boot(o: &Outcome, name: &str, expected: &[&str]) -> Vec<String> {
             &format!("no {want:?} in the guest's output: {out:#?}"),
         );
     }
-    for l in out.iter().filter(|l| l.contains(" status ")) {
+    for l in out
+        .iter()
+        .filter(|l| l.contains(" status ") || l.contains(" in ") || l.starts_with("df: "))
+    {
         println!("{name}: {l}");
     }
     let (status, text) = host_e2fsck(name);
@@ -306,24 +312,52 @@ fn guest_disk_boot(o: &Outcome, name: &str, expected: &[&str]) -> Vec<String> {
 }
 
 #[test]
-fn store_guest_disk() {
-    let name = "store_guest_disk";
+fn store_guest_fs() {
+    let name = "store_guest_fs";
+    // Both boots: mounted at /data (listed in /proc/mounts), busy while the shell is in
+    // it, unmounted, clean.
+    let mounted = [
+        "mount status 0",
+        "/dev/vda /data ext2 rw,relatime 0 0",
+        "umount while in /data: refused",
+        "umount status 0",
+        "e2fsck status 0",
+    ];
     let first = boot(name);
-    guest_disk_boot(
+    let out = guest_disk_boot(
         &first,
         name,
         &[
-            "first boot",
-            "mke2fs status 0",
-            "dd status 0",
-            "synced",
-            "e2fsck status 0",
-        ],
+            &[
+                "first boot",
+                "mke2fs status 0",
+                "dd status 0",
+                "synced",
+                "state: version 19",
+                "dir: changed",
+            ][..],
+            &mounted[..],
+        ]
+        .concat(),
+    );
+    check(
+        &first,
+        !out.iter().any(|l| l.ends_with(" failed")),
+        &format!("a replace failed: {out:#?}"),
     );
     let second = boot_again(name);
     guest_disk_boot(
         &second,
         name,
-        &["second boot: marker read back", "e2fsck status 0"],
+        &[
+            &[
+                "second boot: marker read back",
+                "state: version 19",
+                "big: intact",
+                "dir: a c a",
+            ][..],
+            &mounted[..],
+        ]
+        .concat(),
     );
 }

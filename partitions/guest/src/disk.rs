@@ -338,10 +338,15 @@ where
     }
 }
 
-/// The disk as the system calls use it ([`crate::syscall::Host::disk`]).
+/// The disk as the system calls use it (the file system holds it: [`crate::vfs::Fs::disk`]),
+/// and, whole sectors at a time, as the file system mounted on it does ([`Volume`]).
 pub trait BlockFile {
     /// Its size in bytes.
     fn size(&self) -> u64;
+    /// Sector `sector` into `buf` (`EIO` past the end).
+    fn read_sector(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno>;
+    /// Writes sector `sector` through to the device (`EIO` past the end).
+    fn write_sector(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno>;
     /// [`Disk::read`].
     fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno>;
     /// [`Disk::write`].
@@ -359,6 +364,18 @@ where
     fn size(&self) -> u64 {
         Disk::size(self)
     }
+    fn read_sector(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno> {
+        if sector >= self.sectors {
+            return Err(Errno::EIO);
+        }
+        Disk::read_sector(self, sector, buf)
+    }
+    fn write_sector(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno> {
+        if sector >= self.sectors {
+            return Err(Errno::EIO);
+        }
+        Disk::write_sector(self, sector, data)
+    }
     fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno> {
         Disk::read(self, offset, buf)
     }
@@ -370,6 +387,30 @@ where
     }
     fn flush_buffers(&mut self) -> Result<(), Errno> {
         Disk::flush_buffers(self)
+    }
+}
+
+/// The disk under a mounted file system ([`crate::vfs::mounted`]): its sectors as a
+/// [`slots::BlockDevice`] (through the disk's sector cache; failures are logged by the
+/// disk and come back as `EIO`).
+pub struct Volume(pub Box<dyn BlockFile>);
+
+impl core::fmt::Debug for Volume {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        write!(f, "Volume({} bytes)", self.0.size())
+    }
+}
+
+impl slots::BlockDevice for Volume {
+    type Error = Errno;
+    fn read(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno> {
+        self.0.read_sector(sector, buf)
+    }
+    fn write(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno> {
+        self.0.write_sector(sector, data)
+    }
+    fn flush(&mut self) -> Result<(), Errno> {
+        self.0.sync()
     }
 }
 

@@ -20,6 +20,7 @@ impl Errno {
     pub const ENOMEM: Self = Self(12);
     pub const EACCES: Self = Self(13);
     pub const EFAULT: Self = Self(14);
+    pub const ENOTBLK: Self = Self(15);
     pub const EBUSY: Self = Self(16);
     pub const EEXIST: Self = Self(17);
     pub const EXDEV: Self = Self(18);

@@ -220,13 +220,11 @@ fn main(start: u64, _: u64) {
         fs.hide_port(request);
         fs.hide_port(response);
     }
-    let disk = disk.and_then(|(disk, _, _)| match fs.add_disk() {
-        Ok(()) => Some(disk),
-        Err(e) => {
-            println!("guest: no room for /dev/vda: {}", e.describe());
-            None
-        }
-    });
+    if let Some((disk, _, _)) = disk
+        && let Err(e) = fs.set_disk(alloc::boxed::Box::new(disk))
+    {
+        println!("guest: no room for /dev/vda: {}", e.describe());
+    }
 
     let mcp = (info.priority as u8).saturating_sub(1).max(1);
     let mut host = GuestHost {
@@ -243,7 +241,6 @@ fn main(start: u64, _: u64) {
         seed: sys::rdtsc() | 1,
         tty: None,
         ports,
-        disk,
         port_waiting: false,
         sched: Scheduler::new(0),
         levels_set: 0,
@@ -682,8 +679,6 @@ struct GuestHost<'p> {
     tty: Option<Tty>,
     /// The ARINC ports of `/dev/arinc`.
     ports: ports::Ports,
-    /// `/dev/vda` (`guest.disk`), if the guest has it.
-    disk: Option<Disk>,
     /// A call waited for a port when it was last served ([`Host::port_wait`]).
     port_waiting: bool,
     /// The scheduling policy: the level of each process's thread.
@@ -889,12 +884,6 @@ impl Host for GuestHost<'_> {
 
     fn port_readiness(&mut self, port: usize) -> guest::arinc::Readiness {
         self.ports.readiness(port)
-    }
-
-    fn disk(&mut self) -> Option<&mut dyn guest::disk::BlockFile> {
-        self.disk
-            .as_mut()
-            .map(|d| d as &mut dyn guest::disk::BlockFile)
     }
 }
 

@@ -144,11 +144,6 @@ pub trait Host {
     /// A call waits for a port (to read or to write, or in `poll`): its messages arrive
     /// without a word to the guest, so the host serves the waiting calls again soon.
     fn port_wait(&mut self) {}
-    /// The block device `/dev/vda` (`guest.disk`, [`crate::disk`]), when the guest has
-    /// one.
-    fn disk(&mut self) -> Option<&mut dyn crate::disk::BlockFile> {
-        None
-    }
     /// What port `port` could do now.
     fn port_readiness(&mut self, port: usize) -> arinc::Readiness {
         let _ = port;

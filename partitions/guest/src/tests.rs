@@ -46,32 +46,61 @@ struct Model {
     port_sent: HashMap<usize, Vec<Vec<u8>>>,
     /// Calls that said they wait for a port ([`Host::port_wait`]).
     port_waits: usize,
-    /// `/dev/vda` ([`Host::disk`]), on sectors in memory.
-    disk: Option<crate::disk::Disk<Sectors>>,
 }
 
-/// A disk in memory that counts its flushes.
+/// A disk in memory that counts its flushes; clones share it (the test keeps one while
+/// the file system holds another).
+#[derive(Clone, Default)]
+struct Sectors(std::rc::Rc<std::cell::RefCell<SectorData>>);
+
 #[derive(Default)]
-struct Sectors {
+struct SectorData {
     sectors: Vec<[u8; 512]>,
     flushes: u32,
+}
+
+impl Sectors {
+    fn new(count: usize, fill: u8) -> Self {
+        Sectors(std::rc::Rc::new(std::cell::RefCell::new(SectorData {
+            sectors: vec![[fill; 512]; count],
+            flushes: 0,
+        })))
+    }
+    fn flushes(&self) -> u32 {
+        self.0.borrow().flushes
+    }
+    fn sector(&self, i: usize) -> [u8; 512] {
+        self.0.borrow().sectors[i]
+    }
+    /// `/dev/vda` over it, for [`crate::vfs::Fs::set_disk`].
+    fn disk(&self) -> Box<dyn crate::disk::BlockFile> {
+        let count = self.0.borrow().sectors.len() as u64;
+        Box::new(crate::disk::Disk::new(self.clone(), count, |_| ()))
+    }
 }
 
 impl slots::BlockDevice for Sectors {
     type Error = &'static str;
     fn read(&mut self, sector: u64, buf: &mut [u8; 512]) -> Result<(), &'static str> {
-        *buf = *self.sectors.get(sector as usize).ok_or("out of range")?;
+        *buf = *self
+            .0
+            .borrow()
+            .sectors
+            .get(sector as usize)
+            .ok_or("out of range")?;
         Ok(())
     }
     fn write(&mut self, sector: u64, data: &[u8; 512]) -> Result<(), &'static str> {
         *self
+            .0
+            .borrow_mut()
             .sectors
             .get_mut(sector as usize)
             .ok_or("out of range")? = *data;
         Ok(())
     }
     fn flush(&mut self) -> Result<(), &'static str> {
-        self.flushes += 1;
+        self.0.borrow_mut().flushes += 1;
         Ok(())
     }
 }
@@ -138,12 +167,6 @@ impl Host for Model {
 
     fn port_wait(&mut self) {
         self.port_waits += 1;
-    }
-
-    fn disk(&mut self) -> Option<&mut dyn crate::disk::BlockFile> {
-        self.disk
-            .as_mut()
-            .map(|d| d as &mut dyn crate::disk::BlockFile)
     }
 
     fn port_readiness(&mut self, port: usize) -> crate::arinc::Readiness {
@@ -1385,18 +1408,18 @@ fn dispatch_table() {
 fn unsupported_calls_logged_once_per_guest() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::mount, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::swapon, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
     for pid in 2..50 {
         let mut next = crate::process::Process::new(pid, 1, w.p.exe);
         next.areas = w.p.areas.clone();
         w.p = next;
-        assert_eq!(w.call(nr::mount, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
+        assert_eq!(w.call(nr::swapon, [2, 1, 0, 0, 0, 0]), err(Errno::ENOSYS));
         assert_eq!(w.call(nr::io_uring_setup, [0; 6]), err(Errno::ENOSYS));
     }
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 165 (mount), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 167 (swapon), returning ENOSYS",
             "guest: process 2 (busybox): unsupported system call 425 (io_uring_setup), returning ENOSYS",
         ]
     );
@@ -1416,14 +1439,14 @@ fn unsupported_calls_logged_once_per_guest() {
 fn unsupported_calls_and_faults() {
     let bytes = initramfs();
     let mut w = World::new(&bytes);
-    assert_eq!(w.call(nr::mount, [0; 6]), err(Errno::ENOSYS));
-    assert_eq!(w.call(nr::mount, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::swapon, [0; 6]), err(Errno::ENOSYS));
+    assert_eq!(w.call(nr::swapon, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(5000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(w.call(6000, [0; 6]), err(Errno::ENOSYS));
     assert_eq!(
         w.host.log,
         [
-            "guest: process 1 (busybox): unsupported system call 165 (mount), returning ENOSYS",
+            "guest: process 1 (busybox): unsupported system call 167 (swapon), returning ENOSYS",
             "guest: process 1 (busybox): unsupported system call 5000 (unknown), returning ENOSYS",
         ]
     );
@@ -3047,6 +3070,7 @@ fn proc_files_of_the_processes() {
             "meminfo",
             "uptime",
             "mounts",
+            "filesystems",
             "net",
             "1",
             child_name.as_str()
@@ -3188,12 +3212,8 @@ fn the_block_device_reads_writes_seeks_and_syncs_as_linux_s() {
     assert_eq!(open(&mut g, "/dev/arinc/vda-req", 1), err(Errno::ENOENT));
     assert_eq!(open(&mut g, "/dev/arinc/vda-resp", 0), err(Errno::ENOENT));
     assert!((open(&mut g, "/dev/arinc/other", 0) as i64) >= 0);
-    g.fs.add_disk().unwrap();
-    let device = Sectors {
-        sectors: vec![[0; 512]; 8],
-        flushes: 0,
-    };
-    g.host.disk = Some(disk::Disk::new(device, 8, |_| ()));
+    let device = Sectors::new(8, 0);
+    g.fs.set_disk(device.disk()).unwrap();
     let vda = open(&mut g, "/dev/vda", 2); // O_RDWR
     // A block device of size 0 (as stat shows one on Linux), 254:0.
     assert_eq!(
@@ -3224,11 +3244,8 @@ fn the_block_device_reads_writes_seeks_and_syncs_as_linux_s() {
         Some(9)
     );
     assert_eq!(g.get(1, SCRATCH + 0x200, 9), b"\0\0hello\0\0");
-    {
-        let d = g.host.disk.as_mut().unwrap().device_mut();
-        assert_eq!(&d.sectors[0][510..], b"he");
-        assert_eq!(&d.sectors[1][..3], b"llo");
-    }
+    assert_eq!(&device.sector(0)[510..], b"he");
+    assert_eq!(&device.sector(1)[..3], b"llo");
     // write at the offset: across the end short, at the end ENOSPC; read there 0.
     assert_eq!(seek(&mut g, 4094, 0), 4094);
     assert_eq!(g.call(1, nr::write, [vda, SCRATCH, 5, 0, 0, 0]), Some(2));
@@ -3258,7 +3275,7 @@ fn the_block_device_reads_writes_seeks_and_syncs_as_linux_s() {
     assert_eq!(ioctl(&mut g, disk::BLKSSZGET), (0, 512));
     assert_eq!(ioctl(&mut g, 0x5401).0, err(Errno::ENOTTY)); // TCGETS
     // fsync, fdatasync, syncfs and sync flush the device; fsync of another file does not.
-    let flushes = |g: &mut Guest| g.host.disk.as_mut().unwrap().device_mut().flushes;
+    let flushes = |_: &mut Guest| device.flushes();
     assert_eq!(g.call(1, nr::fsync, [vda, 0, 0, 0, 0, 0]), Some(0));
     assert_eq!(g.call(1, nr::fdatasync, [vda, 0, 0, 0, 0, 0]), Some(0));
     assert_eq!(flushes(&mut g), 2);
@@ -3271,14 +3288,7 @@ fn the_block_device_reads_writes_seeks_and_syncs_as_linux_s() {
     assert_eq!(flushes(&mut g), 5);
     // One call moves at most disk::MAX_TRANSFER bytes.
     let big = 16 * 1024 * 1024 / 512;
-    g.host.disk = Some(disk::Disk::new(
-        Sectors {
-            sectors: vec![[1; 512]; big],
-            flushes: 0,
-        },
-        big as u64,
-        |_| (),
-    ));
+    g.fs.set_disk(Sectors::new(big, 1).disk()).unwrap();
     let area = 0x7100_0000;
     assert_eq!(
         g.call(1, nr::mmap, [area, 1 << 20, 3, 0x32, u64::MAX, 0]),
@@ -3288,6 +3298,213 @@ fn the_block_device_reads_writes_seeks_and_syncs_as_linux_s() {
         g.call(1, nr::pread64, [vda, area, 1 << 20, 0, 0, 0]),
         Some(disk::MAX_TRANSFER as u64)
     );
+}
+
+/// `mount`: the disk's ext2 at /data serves the file calls (create, write, fsync, rename,
+/// list, stat, statfs, unlink of an open file, getcwd), covers the directory, keeps
+/// `/dev/vda` busy, refuses to leave while used, and what it wrote is there at the next
+/// mount and on the disk, marked clean.
+#[test]
+fn the_disk_s_ext2_mounts_at_data_and_serves_the_file_calls() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let device = Sectors::new(4096, 0);
+    let options = ext2::FormatOptions {
+        block_size: 1024,
+        inode_size: 128,
+        ..Default::default()
+    };
+    ext2::format(&mut device.clone(), 4096, &options).unwrap();
+    g.fs.set_disk(device.disk()).unwrap();
+    let path = |g: &mut Guest, at: u64, p: &str| g.text(1, SCRATCH + at, p);
+    let open = |g: &mut Guest, p: &str, flags: u64| {
+        let at = path(g, 0x800, p);
+        g.call(1, nr::openat, [AT_FDCWD, at, flags, 0o644, 0, 0])
+            .unwrap()
+    };
+    let mount = |g: &mut Guest, source: &str, target: &str, kind: &str, flags: u64| {
+        let (s, t, k) = (
+            path(g, 0x900, source),
+            path(g, 0xa00, target),
+            path(g, 0xb00, kind),
+        );
+        g.call(1, nr::mount, [s, t, k, flags, 0, 0]).unwrap()
+    };
+    let umount = |g: &mut Guest, target: &str| {
+        let t = path(g, 0xa00, target);
+        g.call(1, nr::umount2, [t, 0, 0, 0, 0, 0]).unwrap()
+    };
+    let d = path(&mut g, 0x800, "/data");
+    assert_eq!(g.call(1, nr::mkdir, [d, 0o755, 0, 0, 0, 0]), Some(0));
+    // Refusals: another type, no block device, no directory, flags not supported.
+    assert_eq!(
+        mount(&mut g, "/dev/vda", "/data", "xfs", 0),
+        err(Errno::ENODEV)
+    );
+    assert_eq!(
+        mount(&mut g, "/tmp", "/data", "ext2", 0),
+        err(Errno::ENOTBLK)
+    );
+    assert_eq!(mount(&mut g, "/dev/vda", "/", "ext2", 0), err(Errno::EBUSY));
+    assert_eq!(
+        mount(&mut g, "/dev/vda", "/data", "ext2", 32),
+        err(Errno::EINVAL)
+    ); // MS_REMOUNT
+    assert_eq!(umount(&mut g, "/data"), err(Errno::EINVAL));
+    assert_eq!(mount(&mut g, "/dev/vda", "/data", "ext2", 0xc0ed_0000), 0);
+    assert_eq!(
+        mount(&mut g, "/dev/vda", "/tmp", "ext2", 0),
+        err(Errno::EBUSY)
+    );
+    // The raw device is the file system's now; its size still answers.
+    let vda = open(&mut g, "/dev/vda", 0);
+    assert_eq!(
+        g.call(1, nr::read, [vda, SCRATCH, 512, 0, 0, 0]),
+        Some(err(Errno::EBUSY))
+    );
+    assert_eq!(g.call(1, nr::lseek, [vda, 0, 2, 0, 0, 0]), Some(4096 * 512));
+    assert_eq!(g.call(1, nr::close, [vda, 0, 0, 0, 0, 0]), Some(0));
+    // A file written, synced and renamed.
+    let f = open(&mut g, "/data/new", 0o100 | 2); // O_CREAT | O_RDWR
+    g.put(1, SCRATCH, b"hello, disk");
+    assert_eq!(g.call(1, nr::write, [f, SCRATCH, 11, 0, 0, 0]), Some(11));
+    let flushes = device.flushes();
+    assert_eq!(g.call(1, nr::fsync, [f, 0, 0, 0, 0, 0]), Some(0));
+    assert!(device.flushes() > flushes, "fsync flushes the disk");
+    let (from, to) = (
+        path(&mut g, 0x900, "/data/new"),
+        path(&mut g, 0xa00, "/data/kept"),
+    );
+    assert_eq!(g.call(1, nr::rename, [from, to, 0, 0, 0, 0]), Some(0));
+    assert_eq!(
+        g.call(1, nr::pread64, [f, SCRATCH + 0x100, 64, 7, 0, 0]),
+        Some(4)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x100, 4), b"disk");
+    // stat: ext2's inode, the disk's device number; statfs: ext2's figures.
+    let kept = path(&mut g, 0x900, "/data/kept");
+    assert_eq!(
+        g.call(1, nr::stat, [kept, SCRATCH + 0x100, 0, 0, 0, 0]),
+        Some(0)
+    );
+    let st = g.get(1, SCRATCH + 0x100, 144);
+    assert_eq!(st[0..8], (254u64 << 8).to_le_bytes(), "st_dev");
+    assert_eq!(st[48..56], 11u64.to_le_bytes(), "st_size");
+    assert_eq!(st[64..72], 2u64.to_le_bytes(), "st_blocks: one 1 KiB block");
+    assert_eq!(
+        g.call(1, nr::statfs, [kept, SCRATCH + 0x200, 0, 0, 0, 0]),
+        Some(0)
+    );
+    assert_eq!(
+        g.get(1, SCRATCH + 0x200, 16),
+        [0xef53u64.to_le_bytes(), 1024u64.to_le_bytes()].concat()
+    );
+    // Across file systems: EXDEV.
+    let tmp = open(&mut g, "/tmp/t", 0o100 | 2);
+    assert_eq!(g.call(1, nr::close, [tmp, 0, 0, 0, 0, 0]), Some(0));
+    let (from, to) = (
+        path(&mut g, 0x900, "/tmp/t"),
+        path(&mut g, 0xa00, "/data/t"),
+    );
+    assert_eq!(
+        g.call(1, nr::rename, [from, to, 0, 0, 0, 0]),
+        Some(err(Errno::EXDEV))
+    );
+    assert_eq!(
+        g.call(1, nr::link, [from, to, 0, 0, 0, 0]),
+        Some(err(Errno::EXDEV))
+    );
+    // The listing: what ext2 stores, `.`, `..` and lost+found among it.
+    let dir = open(&mut g, "/data", 0o200000); // O_DIRECTORY
+    let n = g
+        .call(1, nr::getdents64, [dir, SCRATCH + 0xc00, 0x300, 0, 0, 0])
+        .unwrap() as usize;
+    assert!((n as i64) > 0, "getdents64: {}", n as i64);
+    let listing = g.get(1, SCRATCH + 0xc00, n);
+    let mut names = Vec::new();
+    let mut at = 0;
+    while at < n {
+        let len = u16::from_le_bytes([listing[at + 16], listing[at + 17]]) as usize;
+        let name = &listing[at + 19..at + len];
+        let end = name.iter().position(|&b| b == 0).unwrap();
+        names.push(String::from_utf8(name[..end].to_vec()).unwrap());
+        at += len;
+    }
+    names.sort();
+    assert_eq!(names, [".", "..", "kept", "lost+found"]);
+    assert_eq!(
+        g.call(1, nr::getdents64, [dir, SCRATCH + 0xc00, 0x300, 0, 0, 0]),
+        Some(0)
+    );
+    // A working directory below it, named by getcwd; `..` leaves it at its root.
+    let sub = path(&mut g, 0x900, "/data/sub");
+    assert_eq!(g.call(1, nr::mkdir, [sub, 0o755, 0, 0, 0, 0]), Some(0));
+    assert_eq!(g.call(1, nr::chdir, [sub, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(
+        g.call(1, nr::getcwd, [SCRATCH + 0x300, 64, 0, 0, 0, 0]),
+        Some(10)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x300, 10), b"/data/sub\0");
+    let up = path(&mut g, 0x900, "../../tmp/t");
+    assert_eq!(
+        g.call(1, nr::stat, [up, SCRATCH + 0x100, 0, 0, 0, 0]),
+        Some(0)
+    );
+    // Busy while used: the working directory, then open descriptors.
+    assert_eq!(umount(&mut g, "/data"), err(Errno::EBUSY));
+    let root = path(&mut g, 0x900, "/");
+    assert_eq!(g.call(1, nr::chdir, [root, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(umount(&mut g, "/data"), err(Errno::EBUSY));
+    assert_eq!(g.call(1, nr::close, [dir, 0, 0, 0, 0, 0]), Some(0));
+    // The covered directory cannot go; /proc/mounts shows the mount.
+    let data = path(&mut g, 0x900, "/data");
+    assert_eq!(
+        g.call(1, nr::rmdir, [data, 0, 0, 0, 0, 0]),
+        Some(err(Errno::EBUSY))
+    );
+    let mounts = open(&mut g, "/proc/mounts", 0);
+    let n = g
+        .call(1, nr::read, [mounts, SCRATCH + 0xc00, 512, 0, 0, 0])
+        .unwrap() as usize;
+    let text = String::from_utf8(g.get(1, SCRATCH + 0xc00, n)).unwrap();
+    assert!(text.contains("/dev/vda /data ext2 rw"), "{text}");
+    assert_eq!(g.call(1, nr::close, [mounts, 0, 0, 0, 0, 0]), Some(0));
+    // An unlinked open file stays readable; its inode goes at the close.
+    let free_inodes = |g: &mut Guest| {
+        let kept = path(g, 0x900, "/data");
+        g.call(1, nr::statfs, [kept, SCRATCH + 0x200, 0, 0, 0, 0]);
+        u64::from_le_bytes(g.get(1, SCRATCH + 0x200 + 48, 8).try_into().unwrap())
+    };
+    let before = free_inodes(&mut g);
+    let kept = path(&mut g, 0x900, "/data/kept");
+    assert_eq!(g.call(1, nr::unlink, [kept, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(
+        g.call(1, nr::pread64, [f, SCRATCH + 0x100, 5, 0, 0, 0]),
+        Some(5)
+    );
+    assert_eq!(g.get(1, SCRATCH + 0x100, 5), b"hello");
+    assert_eq!(free_inodes(&mut g), before);
+    assert_eq!(g.call(1, nr::close, [f, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(free_inodes(&mut g), before + 1);
+    // A last file, then umount: the directory is the in-memory one again.
+    let f = open(&mut g, "/data/last", 0o100 | 1);
+    g.put(1, SCRATCH, b"bye");
+    assert_eq!(g.call(1, nr::write, [f, SCRATCH, 3, 0, 0, 0]), Some(3));
+    assert_eq!(g.call(1, nr::close, [f, 0, 0, 0, 0, 0]), Some(0));
+    assert_eq!(umount(&mut g, "/data"), 0);
+    assert_eq!(open(&mut g, "/data/last", 0), err(Errno::ENOENT));
+    // On the disk: clean, with the file.
+    let mut fs = ext2::Ext2::mount_read_only(device.clone()).unwrap();
+    let ino = fs.lookup(ext2::ROOT_INO, b"last").unwrap().unwrap();
+    let mut buf = [0u8; 8];
+    assert_eq!(fs.read(ino, 0, &mut buf), Ok(3));
+    assert_eq!(&buf[..3], b"bye");
+    assert_eq!(fs.lookup(ext2::ROOT_INO, b"kept"), Ok(None));
+    // Mounted again (read-only): there, and no change allowed.
+    assert_eq!(mount(&mut g, "/dev/vda", "/data", "ext2", 1), 0);
+    let f = open(&mut g, "/data/last", 0);
+    assert_eq!(g.call(1, nr::read, [f, SCRATCH, 8, 0, 0, 0]), Some(3));
+    assert_eq!(open(&mut g, "/data/x", 0o100 | 1), err(Errno::EROFS));
 }
 
 #[test]

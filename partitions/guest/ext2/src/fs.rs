@@ -53,21 +53,52 @@ impl<D: BlockDevice> Ext2<D> {
     /// Mounts read-write: validates the superblock and group descriptors and marks the file
     /// system not clean on disk (flushed) until [`Ext2::sync`] or [`Ext2::unmount`].
     pub fn mount(dev: D) -> Result<Self, Error> {
-        let mut fs = Self::open(dev, false)?;
-        let count = get16(&fs.sb, SB_MNT_COUNT).wrapping_add(1);
-        put16(&mut fs.sb, SB_MNT_COUNT, count);
-        fs.clean_on_disk = true;
-        fs.begin_change()?;
-        Ok(fs)
+        Self::mount_with(dev, false).map_err(|(error, _)| error)
     }
 
     /// Mounts read-only: nothing is ever written; every change gives [`Error::ReadOnly`].
     pub fn mount_read_only(dev: D) -> Result<Self, Error> {
-        Self::open(dev, true)
+        Self::mount_with(dev, true).map_err(|(error, _)| error)
     }
 
-    fn open(dev: D, read_only: bool) -> Result<Self, Error> {
+    /// [`Ext2::mount`] or [`Ext2::mount_read_only`]; a failure hands the device back with
+    /// the error (a caller that owns one disk keeps it).
+    pub fn mount_with(dev: D, read_only: bool) -> Result<Self, (Error, D)> {
         let mut disk = Disk::new(dev, 1024);
+        let opened = Self::open(&mut disk);
+        let (geo, sb, gdt, groups) = match opened {
+            Ok(parts) => parts,
+            Err(error) => return Err((error, disk.into_device())),
+        };
+        let mounted_clean = get16(&sb, SB_STATE) & STATE_VALID != 0;
+        let mut fs = Ext2 {
+            disk,
+            geo,
+            sb,
+            gdt,
+            groups,
+            now: 0,
+            read_only,
+            mounted_clean,
+            clean_on_disk: mounted_clean,
+            mtime_written: false,
+            orphans: BTreeSet::new(),
+        };
+        if read_only {
+            return Ok(fs);
+        }
+        let count = get16(&fs.sb, SB_MNT_COUNT).wrapping_add(1);
+        put16(&mut fs.sb, SB_MNT_COUNT, count);
+        fs.clean_on_disk = true;
+        match fs.begin_change() {
+            Ok(()) => Ok(fs),
+            Err(error) => Err((error, fs.abandon())),
+        }
+    }
+
+    /// Reads and checks the superblock and the group descriptors.
+    #[allow(clippy::type_complexity)] // the parts of a mounted file system, once
+    fn open(disk: &mut Disk<D>) -> Result<(Geometry, Vec<u8>, Vec<u8>, Vec<Group>), Error> {
         let mut sb = vec![0u8; SUPERBLOCK_LEN];
         disk.read_sectors((SUPERBLOCK_OFFSET / 512) as u64, &mut sb)?;
         let geo = Geometry::parse(&sb)?;
@@ -80,20 +111,7 @@ impl<D: BlockDevice> Ext2<D> {
         let first = disk.first_sector(geo.first_data_block + 1);
         disk.read_sectors(first, &mut gdt)?;
         let groups = layout::parse_groups(&geo, &gdt)?;
-        let mounted_clean = get16(&sb, SB_STATE) & STATE_VALID != 0;
-        Ok(Ext2 {
-            disk,
-            geo,
-            sb,
-            gdt,
-            groups,
-            now: 0,
-            read_only,
-            mounted_clean,
-            clean_on_disk: mounted_clean,
-            mtime_written: false,
-            orphans: BTreeSet::new(),
-        })
+        Ok((geo, sb, gdt, groups))
     }
 
     /// Sets the time (seconds since the epoch) stamped on changed inodes and the superblock.

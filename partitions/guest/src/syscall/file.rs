@@ -25,7 +25,7 @@ use crate::signal::{self, Info};
 use crate::tty;
 use crate::vfs::dev::Device;
 use crate::vfs::proc::{self, ProcInfo, ProcessTable, Procs};
-use crate::vfs::{self, Fs, Ino, Node, PATH_MAX, Remove, Stat};
+use crate::vfs::{self, Fs, Node, PATH_MAX, Remove, Stat};
 
 /// What the file calls act on besides the process: the pipes, the sockets, the file
 /// system and the other processes (`/proc`).
@@ -64,6 +64,7 @@ fn procs<'s>(p: &'s Process, f: &'s Files) -> Procs<'s> {
         fs_used: f.fs.usage().0 as u64,
         interfaces: f.net.interfaces(),
         gateway: f.net.gateway(),
+        mount: f.fs.mount_info(),
     }
 }
 
@@ -436,7 +437,7 @@ fn read_kernel(
             match f.fs.device(node) {
                 Some(Device::Disk) => {
                     let offset = at.unwrap_or(o.offset);
-                    let n = host.disk().ok_or(Errno::ENXIO)?.read(offset, buf)?;
+                    let n = f.fs.disk()?.read(offset, buf)?;
                     if at.is_none()
                         && let Some(o) = f.fs.description_mut(id)
                     {
@@ -456,6 +457,15 @@ fn read_kernel(
                 Some(Device::Console | Device::Tty | Device::Port(_)) | None => {}
             }
             let offset = at.unwrap_or(o.offset);
+            if let Node::Mounted(_) = node {
+                let n = f.fs.read_mounted(node, offset, buf)?;
+                if at.is_none()
+                    && let Some(o) = f.fs.description_mut(id)
+                {
+                    o.offset = offset + n as u64;
+                }
+                return Ok(n);
+            }
             let bytes = match &o.snapshot {
                 Some(s) => &s[..],
                 None => f.fs.file_bytes(node).ok_or(Errno::EINVAL)?,
@@ -529,12 +539,13 @@ fn write_kernel(
                 return arinc::write(port, index, host, data, nonblock);
             }
             if f.fs.device(node) == Some(Device::Disk) {
-                let disk = host.disk().ok_or(Errno::ENXIO)?;
+                let (flags, current) = (o.flags, o.offset);
+                let disk = f.fs.disk()?;
                 // O_APPEND writes at the end: ENOSPC, as on Linux.
-                let offset = if o.flags & linux::O_APPEND != 0 {
+                let offset = if flags & linux::O_APPEND != 0 {
                     disk.size()
                 } else {
-                    at.unwrap_or(o.offset)
+                    at.unwrap_or(current)
                 };
                 let n = disk.write(offset, data)?;
                 if at.is_none()
@@ -622,31 +633,102 @@ pub fn disk_ioctl(
     if !is_disk(p, f.fs, fd) {
         return Err(Errno::ENOTTY);
     }
-    let disk = host.disk().ok_or(Errno::ENXIO)?;
-    match crate::disk::ioctl(request, disk.size())? {
+    match crate::disk::ioctl(request, f.fs.disk_size()?)? {
         crate::disk::Answer::U64(v) => write_user(p, host, arg, &v.to_le_bytes())?,
         crate::disk::Answer::U32(v) => write_user(p, host, arg, &v.to_le_bytes())?,
-        crate::disk::Answer::FlushBuffers => disk.flush_buffers()?,
+        crate::disk::Answer::FlushBuffers => f.fs.disk()?.flush_buffers()?,
     }
     Ok(0)
 }
 
 /// `fsync`, `fdatasync` of `fd`, and `syncfs` (`all`) and `sync`: the block device's
-/// flush ([`crate::disk`]) when `fd` is open on it (any descriptor for `all`); nothing
-/// else needs one (the files live in memory).
+/// flush ([`crate::disk`]) when `fd` is open on it, the mounted file system's write-back
+/// and flush when `fd` is on it ([`crate::vfs::mounted`]), both for `all`; nothing else
+/// needs one (the other files live in memory).
 pub fn sync(c: &mut Ctx<'_, '_, impl Host>, fd: Option<u64>, all: bool) -> SysResult<u64> {
-    let (p, f, host) = c.parts();
-    let disk = match fd {
+    let (p, f, _) = c.parts();
+    let node = match fd {
         Some(fd) => {
-            p.file(fd).ok_or(Errno::EBADF)?;
-            all || is_disk(p, f.fs, fd)
+            let file = p.file(fd).ok_or(Errno::EBADF)?;
+            match file {
+                _ if all => None,
+                File::Open(id) => Some(f.fs.description(id).ok_or(Errno::EBADF)?.node),
+                _ => return Ok(0),
+            }
         }
-        None => true,
+        None => None,
     };
-    match host.disk() {
-        Some(d) if disk => d.sync().map(|()| 0),
-        _ => Ok(0),
+    f.fs.sync(node).map(|()| 0)
+}
+
+/// `mount(source, target, type, flags)`: the ext2 file system of `/dev/vda` on directory
+/// `target` ([`vfs::mounted`]); `MS_RDONLY` mounts it read-only, the flags that only
+/// restrict (`nosuid`, `nodev`, `noexec`, `noatime`, `relatime`, `silent`) are accepted;
+/// remounts, binds, moves and propagation changes are `EINVAL`. A source that is no block
+/// device is `ENOTBLK`, an unknown type `ENODEV`.
+pub fn mount(
+    c: &mut Ctx<'_, '_, impl Host>,
+    source: u64,
+    target: u64,
+    fstype: u64,
+    flags: u64,
+) -> SysResult<u64> {
+    const MS_RDONLY: u64 = 1;
+    // nosuid, nodev, noexec, synchronous, noatime, nodiratime, silent, relatime,
+    // strictatime, lazytime, and the old magic number in the high half.
+    const HARMLESS: u64 =
+        2 | 4 | 8 | 16 | 1024 | 2048 | (1 << 15) | (1 << 21) | (1 << 24) | (1 << 25);
+    const MAGIC_MASK: u64 = 0xffff_0000;
+    const MAGIC: u64 = 0xc0ed_0000;
+    let (p, f, host) = c.parts();
+    let flags = if flags & MAGIC_MASK == MAGIC {
+        flags & !MAGIC_MASK
+    } else {
+        flags
+    };
+    if flags & !(MS_RDONLY | HARMLESS) != 0 {
+        return Err(Errno::EINVAL);
     }
+    let mut kind = [0u8; 16];
+    let kind = read_cstr(p, host, fstype, &mut kind).map_err(|_| Errno::ENODEV)?;
+    if !vfs::mounted::TYPES.contains(&kind) {
+        return Err(Errno::ENODEV);
+    }
+    let device = resolve(p, f, host, linux::AT_FDCWD as u64, source, true)?;
+    if f.fs.device(device) != Some(Device::Disk) {
+        return Err(Errno::ENOTBLK);
+    }
+    let at = resolve(p, f, host, linux::AT_FDCWD as u64, target, true)?;
+    let now = seconds(host);
+    match f.fs.mount(at, flags & MS_RDONLY != 0, now) {
+        Ok(()) => Ok(0),
+        Err((e, why)) => {
+            if let Some(why) = why {
+                host.log(format_args!(
+                    "guest: mount {}: {why}",
+                    crate::disk::DEVICE_PATH
+                ));
+            }
+            Err(e)
+        }
+    }
+}
+
+/// `umount2(target, flags)` (busybox's `umount`): `UMOUNT_NOFOLLOW` honoured, the
+/// force and lazy flags accepted (a busy file system still answers `EBUSY`).
+pub fn umount(c: &mut Ctx<'_, '_, impl Host>, target: u64, flags: u64) -> SysResult<u64> {
+    const MNT_FORCE: u64 = 1;
+    const MNT_DETACH: u64 = 2;
+    const MNT_EXPIRE: u64 = 4;
+    const UMOUNT_NOFOLLOW: u64 = 8;
+    let (p, f, host) = c.parts();
+    if flags & !(MNT_FORCE | MNT_DETACH | MNT_EXPIRE | UMOUNT_NOFOLLOW) != 0 {
+        return Err(Errno::EINVAL);
+    }
+    let follow = flags & UMOUNT_NOFOLLOW == 0;
+    let at = resolve(p, f, host, linux::AT_FDCWD as u64, target, follow)?;
+    f.fs.umount(at)?;
+    Ok(0)
 }
 
 /// The ARINC port open at `fd`, with its index ([`crate::arinc`]).
@@ -944,13 +1026,13 @@ pub fn sendfile(
 }
 
 pub fn lseek(c: &mut Ctx<'_, '_, impl Host>, fd: u64, offset: i64, whence: u64) -> SysResult<u64> {
-    let (p, f, host) = c.parts();
+    let (p, f, _) = c.parts();
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::ESPIPE);
     };
     let o = f.fs.description(id).ok_or(Errno::EBADF)?;
     if f.fs.device(o.node) == Some(Device::Disk) {
-        let size = host.disk().ok_or(Errno::ENXIO)?.size();
+        let size = f.fs.disk_size()?;
         let new = crate::disk::seek(o.offset, offset, whence, size)?;
         if let Some(o) = f.fs.description_mut(id) {
             o.offset = new;
@@ -972,7 +1054,7 @@ pub fn lseek(c: &mut Ctx<'_, '_, impl Host>, fd: u64, offset: i64, whence: u64) 
         .checked_add(offset)
         .filter(|&n| n >= 0)
         .ok_or(Errno::EINVAL)?;
-    if is_dir && new != o.offset as i64 {
+    if is_dir && new != o.offset as i64 && !matches!(o.node, Node::Mounted(_)) {
         // A directory's offset counts entries: only its start can be sought (and where it
         // is, told).
         if new != 0 {
@@ -1062,7 +1144,7 @@ fn resolve_parent<'b>(
     dirfd: u64,
     path: u64,
     buf: &'b mut [u8; PATH_MAX],
-) -> SysResult<(Ino, &'b [u8])> {
+) -> SysResult<(Node, &'b [u8])> {
     let text = read_cstr(p, host, path, buf)?;
     let start = base(p, f, dirfd, text)?;
     f.fs.lookup_parent(&procs(p, f), start, text)
@@ -1104,7 +1186,7 @@ pub fn openat(
             }
             let now = seconds(host);
             let mode = mode as u32 & !p.umask & 0o7777;
-            Node::Inode(f.fs.create(dir, name, mode, now)?)
+            f.fs.create(dir, name, mode, now)?
         }
         Err(e) => return Err(e),
     };
@@ -1169,9 +1251,9 @@ pub fn openat(
                 Some(proc::contents(n, &procs).ok_or(Errno::ENOENT)?)
             }
         }
-        Node::Inode(_) => None,
+        Node::Inode(_) | Node::Mounted(_) => None,
     };
-    if flags & linux::O_TRUNC != 0 && access != 0 && f.fs.file_bytes(node).is_some() {
+    if flags & linux::O_TRUNC != 0 && access != 0 && f.fs.is_file(node) {
         let now = seconds(host);
         f.fs.truncate(node, 0, now)?;
     }
@@ -1407,7 +1489,8 @@ pub fn statx(
     Ok(0)
 }
 
-/// `statfs` (`fd: None`) and `fstatfs`: one tmpfs, its blocks the byte limit.
+/// `statfs` (`fd: None`) and `fstatfs`: the mounted ext2's figures for its files, else
+/// one tmpfs, its blocks the byte limit.
 pub fn statfs(
     c: &mut Ctx<'_, '_, impl Host>,
     path: u64,
@@ -1415,29 +1498,42 @@ pub fn statfs(
     buf: u64,
 ) -> SysResult<u64> {
     let (p, f, host) = c.parts();
-    match fd {
+    let node = match fd {
         Some(fd) => {
             stat_fd(p, f, fd)?;
+            match p.file(fd) {
+                Some(File::Open(id)) => f.fs.description(id).map(|o| o.node),
+                _ => None,
+            }
         }
-        None => {
-            resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?;
-        }
-    }
-    let (used, limit) = f.fs.usage();
-    let blocks = (limit / 4096) as u64;
-    let free = (limit.saturating_sub(used) / 4096) as u64;
+        None => Some(resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?),
+    };
+    let [kind, block, blocks, free, available, files, free_files] =
+        match node.and_then(|n| f.fs.statfs(n)) {
+            Some(figures) => figures,
+            None => {
+                let (used, limit) = f.fs.usage();
+                let free = (limit.saturating_sub(used) / 4096) as u64;
+                [TMPFS_MAGIC, 4096, (limit / 4096) as u64, free, free, 0, 0]
+            }
+        };
+    // f_fsid: the file system's device number.
+    let fsid = match node {
+        Some(Node::Mounted(_)) => vfs::mounted::DEV,
+        _ => vfs::MEMORY_DEV,
+    };
     let mut b = [0u8; 120];
     for (i, v) in [
-        TMPFS_MAGIC,
-        4096,
+        kind,
+        block,
         blocks,
         free,
-        free,
-        0,
-        0,
-        0,
+        available,
+        files,
+        free_files,
+        fsid,
         vfs::NAME_MAX as u64,
-        4096,
+        block,
     ]
     .into_iter()
     .enumerate()
@@ -1471,7 +1567,6 @@ pub fn access(c: &mut Ctx<'_, '_, impl Host>, dirfd: u64, path: u64, mode: u64) 
 /// in name order) as `struct linux_dirent64` records, as many as fit in `count` bytes.
 pub fn getdents64(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64, count: u64) -> SysResult<u64> {
     let (p, f, host) = c.parts();
-    const HEADER: usize = 19; // d_ino, d_off, d_reclen, d_type
     let File::Open(id) = p.file(fd).ok_or(Errno::EBADF)? else {
         return Err(Errno::ENOTDIR);
     };
@@ -1479,6 +1574,9 @@ pub fn getdents64(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64, count: u64)
     let dir = o.node;
     if !f.fs.is_dir(dir) {
         return Err(Errno::ENOTDIR);
+    }
+    if let Node::Mounted(_) = dir {
+        return getdents_mounted(p, f, host, id, buf, count);
     }
     let mut index = o.offset;
     let mut last = [0u8; vfs::NAME_MAX];
@@ -1489,10 +1587,10 @@ pub fn getdents64(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64, count: u64)
     }
     let listing = match dir {
         Node::Proc(n) => proc::entries(n, &procs(p, f)),
-        Node::Inode(_) => alloc::vec::Vec::new(),
+        Node::Inode(_) | Node::Mounted(_) => alloc::vec::Vec::new(),
     };
     let mut written = 0usize;
-    let mut record = [0u8; HEADER + vfs::NAME_MAX + 1 + 8];
+    let mut record = [0u8; DIRENT_HEADER + vfs::NAME_MAX + 1 + 8];
     loop {
         let (name, node): (&[u8], Node) = match (index, dir) {
             (0, _) => (b".", dir),
@@ -1505,23 +1603,19 @@ pub fn getdents64(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64, count: u64)
                 Some(e) => e,
                 None => break,
             },
+            (_, Node::Mounted(_)) => break, // `getdents_mounted`
         };
         let st = f.fs.stat(node);
         // DT_* is the file type's top four bits.
         let kind = (st.mode >> 12) as u8;
-        let length = (HEADER + name.len() + 1).next_multiple_of(8);
+        let length = (DIRENT_HEADER + name.len() + 1).next_multiple_of(8);
         if written + length > count as usize {
             if written == 0 {
                 return Err(Errno::EINVAL); // the buffer cannot hold one record
             }
             break;
         }
-        record[..length].fill(0);
-        record[..8].copy_from_slice(&st.ino.to_le_bytes());
-        record[8..16].copy_from_slice(&(index + 1).to_le_bytes());
-        record[16..18].copy_from_slice(&(length as u16).to_le_bytes());
-        record[18] = kind;
-        record[HEADER..HEADER + name.len()].copy_from_slice(name);
+        dirent(&mut record, st.ino, index + 1, kind, name);
         if index >= 2 && matches!(dir, Node::Inode(_)) {
             let n = name.len().min(last.len());
             last[..n].copy_from_slice(&name[..n]);
@@ -1534,6 +1628,61 @@ pub fn getdents64(c: &mut Ctx<'_, '_, impl Host>, fd: u64, buf: u64, count: u64)
     f.fs.set_cursor(id, last_len.map(|l| &last[..l]))?;
     if let Some(o) = f.fs.description_mut(id) {
         o.offset = index;
+    }
+    Ok(written as u64)
+}
+
+/// The `linux_dirent64` record of an entry into `record`: its length.
+fn dirent(record: &mut [u8], ino: u64, next: u64, kind: u8, name: &[u8]) -> usize {
+    let length = (DIRENT_HEADER + name.len() + 1).next_multiple_of(8);
+    record[..length].fill(0);
+    record[..8].copy_from_slice(&ino.to_le_bytes());
+    record[8..16].copy_from_slice(&next.to_le_bytes());
+    record[16..18].copy_from_slice(&(length as u16).to_le_bytes());
+    record[18] = kind;
+    record[DIRENT_HEADER..DIRENT_HEADER + name.len()].copy_from_slice(name);
+    length
+}
+
+/// `linux_dirent64`'s fixed part: d_ino, d_off, d_reclen, d_type.
+const DIRENT_HEADER: usize = 19;
+
+/// `getdents64` of a directory of the mounted file system: its entries as stored (`.`
+/// and `..` among them), the description's offset the file system's cookie, as on Linux
+/// (so `telldir`/`seekdir` work).
+fn getdents_mounted(
+    p: &Process,
+    f: &mut Files,
+    host: &mut impl Host,
+    id: vfs::OpenId,
+    buf: u64,
+    count: u64,
+) -> SysResult<u64> {
+    let o = f.fs.description(id).ok_or(Errno::EBADF)?;
+    let (dir, mut cookie) = (o.node, o.offset);
+    let mut written = 0usize;
+    let mut record = [0u8; DIRENT_HEADER + vfs::NAME_MAX + 1 + 8];
+    while let Some(entry) = f.fs.mounted_entry(dir, cookie)? {
+        let vfs::MountedEntry {
+            name,
+            ino,
+            kind,
+            next,
+        } = entry;
+        let length = (DIRENT_HEADER + name.len() + 1).next_multiple_of(8);
+        if written + length > count as usize {
+            if written == 0 {
+                return Err(Errno::EINVAL); // the buffer cannot hold one record
+            }
+            break;
+        }
+        let length = dirent(&mut record, ino as u64, next, kind, &name);
+        write_user(p, host, buf + written as u64, &record[..length])?;
+        written += length;
+        cookie = next;
+    }
+    if let Some(o) = f.fs.description_mut(id) {
+        o.offset = cookie;
     }
     Ok(written as u64)
 }
@@ -1588,7 +1737,8 @@ pub fn getcwd(c: &mut Ctx<'_, '_, impl Host>, buf: u64, size: u64) -> SysResult<
 pub fn chmod(c: &mut Ctx<'_, '_, impl Host>, target: Target, mode: u64) -> SysResult<u64> {
     let (p, f, host) = c.parts();
     let node = target.node(p, f, host)?;
-    f.fs.chmod(node, mode as u32)?;
+    let now = seconds(host);
+    f.fs.chmod(node, mode as u32, now)?;
     Ok(0)
 }
 
@@ -1610,7 +1760,8 @@ pub fn utimensat(c: &mut Ctx<'_, '_, impl Host>, target: Target, times: u64) -> 
         }
     };
     if let Some(t) = mtime {
-        f.fs.set_mtime(node, t);
+        let now = seconds(host);
+        f.fs.set_mtime(node, t, now)?;
     }
     Ok(0)
 }

@@ -104,19 +104,28 @@ pub fn ioctl<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn sync_fd<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::nothing(c, a.fd(0))
 }
-/// `fsync`, `fdatasync`: the block device's flush on `/dev/vda`, nothing for the others
-/// (the files live in memory).
+/// `fsync`, `fdatasync`: the block device's flush on `/dev/vda`, the write-back of the
+/// file system mounted from it for its files, nothing for the others (in memory).
 pub fn fsync<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::sync(c, Some(a.fd(0)), false)
 }
-/// `syncfs`: the block device's flush.
+/// `syncfs`: the mounted file system's write-back and the block device's flush.
 pub fn syncfs<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     file::sync(c, Some(a.fd(0)), true)
 }
-/// `sync`: the block device's flush (an error is not reported: `sync` returns nothing).
+/// `sync`: the mounted file system's write-back and the block device's flush (an error is
+/// not reported: `sync` returns nothing).
 pub fn sync<H: Host>(c: &mut Ctx<H>, _: Args) -> Result {
     let _ = file::sync(c, None, true);
     Ok(0)
+}
+/// `mount`: the disk's ext2 on a directory.
+pub fn mount<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    file::mount(c, a.raw(0), a.raw(1), a.raw(2), a.flags(3))
+}
+/// `umount2`.
+pub fn umount2<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    file::umount(c, a.raw(0), a.flags(1))
 }
 /// Calls with nothing to do (`sched_yield`).
 pub fn nothing<H: Host>(_: &mut Ctx<H>, _: Args) -> Result {

@@ -182,6 +182,8 @@ table! {
     syncfs => syncfs,
     fadvise64 => sync_fd,
     sync => sync,
+    mount => mount,
+    umount2 => umount2,
     // Names and status.
     stat => stat,
     lstat => lstat,

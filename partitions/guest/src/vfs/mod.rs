@@ -26,6 +26,7 @@
 //! process memory: the system calls copy the paths in ([`crate::syscall`]).
 
 pub mod dev;
+pub mod mounted;
 pub mod proc;
 
 use crate::cpio::{Archive, S_IFBLK, S_IFCHR, S_IFDIR, S_IFLNK, S_IFMT, S_IFREG};
@@ -35,6 +36,7 @@ use alloc::boxed::Box;
 use alloc::collections::BTreeMap;
 use alloc::vec::Vec;
 use dev::Device;
+use mounted::Mount;
 use proc::Procs;
 
 /// Longest path (Linux's `PATH_MAX`).
@@ -62,12 +64,17 @@ pub type Ino = u32;
 /// The root directory.
 pub const ROOT: Ino = 0;
 
-/// A node a path names: an inode of the file system or a node of `/proc`.
+/// A node a path names: an inode of the file system, a node of `/proc`, or an inode of
+/// the file system mounted from the disk ([`mounted`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Node {
     Inode(Ino),
     Proc(proc::Node),
+    Mounted(u32),
 }
+
+/// `st_dev` of the in-memory file system's files.
+pub const MEMORY_DEV: u64 = 1;
 
 /// A file's bytes: borrowed from the initramfs until first changed.
 #[derive(Debug)]
@@ -118,6 +125,8 @@ struct Inode<'a> {
 /// Linux's `struct stat` fields the guest fills.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct Stat {
+    /// The file system's device number ([`MEMORY_DEV`], [`mounted::DEV`]).
+    pub dev: u64,
     pub ino: u64,
     pub nlink: u64,
     pub mode: u32,
@@ -125,6 +134,8 @@ pub struct Stat {
     pub gid: u32,
     pub rdev: u64,
     pub size: u64,
+    /// Space allocated, in 512-byte units.
+    pub blocks: u64,
     pub mtime: u64,
 }
 
@@ -132,7 +143,7 @@ impl Stat {
     /// The 144-byte `struct stat` (x86-64).
     pub fn to_bytes(&self) -> [u8; 144] {
         let mut b = [0u8; 144];
-        b[0..8].copy_from_slice(&1u64.to_le_bytes()); // st_dev: the one file system
+        b[0..8].copy_from_slice(&self.dev.to_le_bytes());
         b[8..16].copy_from_slice(&self.ino.to_le_bytes());
         b[16..24].copy_from_slice(&self.nlink.to_le_bytes());
         b[24..28].copy_from_slice(&self.mode.to_le_bytes());
@@ -141,7 +152,7 @@ impl Stat {
         b[40..48].copy_from_slice(&self.rdev.to_le_bytes());
         b[48..56].copy_from_slice(&self.size.to_le_bytes());
         b[56..64].copy_from_slice(&4096u64.to_le_bytes()); // st_blksize
-        b[64..72].copy_from_slice(&self.size.div_ceil(512).to_le_bytes()); // st_blocks
+        b[64..72].copy_from_slice(&self.blocks.to_le_bytes());
         for at in [72, 88, 104] {
             b[at..at + 8].copy_from_slice(&self.mtime.to_le_bytes());
         }
@@ -160,14 +171,15 @@ impl Stat {
         b[28..30].copy_from_slice(&(self.mode as u16).to_le_bytes());
         b[32..40].copy_from_slice(&self.ino.to_le_bytes());
         b[40..48].copy_from_slice(&self.size.to_le_bytes());
-        b[48..56].copy_from_slice(&self.size.div_ceil(512).to_le_bytes());
+        b[48..56].copy_from_slice(&self.blocks.to_le_bytes());
         for at in [64, 80, 96, 112] {
             // atime, btime, ctime, mtime: seconds (nanoseconds stay 0)
             b[at..at + 8].copy_from_slice(&self.mtime.to_le_bytes());
         }
         b[128..132].copy_from_slice(&((self.rdev >> 8) as u32).to_le_bytes());
         b[132..136].copy_from_slice(&((self.rdev & 0xff) as u32).to_le_bytes());
-        b[140..144].copy_from_slice(&1u32.to_le_bytes()); // stx_dev_minor
+        b[136..140].copy_from_slice(&((self.dev >> 8) as u32).to_le_bytes());
+        b[140..144].copy_from_slice(&((self.dev & 0xff) as u32).to_le_bytes());
         b
     }
 
@@ -210,6 +222,26 @@ pub struct Fs<'a> {
     memory: u64,
     /// The partition's ARINC ports, `/dev/arinc/<name>` ([`crate::arinc`]).
     ports: Vec<crate::arinc::Port>,
+    /// `/dev/vda`'s disk ([`crate::disk`]), while it is not mounted.
+    disk: Option<crate::disk::Volume>,
+    /// The file system mounted from it.
+    mount: Option<Mount>,
+}
+
+/// An entry of a mounted directory ([`Fs::mounted_entry`]).
+pub struct MountedEntry {
+    pub name: Vec<u8>,
+    pub ino: u32,
+    /// Its `d_type`.
+    pub kind: u8,
+    /// The cookie of the entry after it.
+    pub next: u64,
+}
+
+/// A directory of one of the two file systems.
+enum Dir {
+    Memory(Ino),
+    Mounted(u32),
 }
 
 /// What the removal of a directory entry removes.
@@ -235,6 +267,8 @@ impl<'a> Fs<'a> {
             opens: Vec::new(),
             memory: 0,
             ports: Vec::new(),
+            disk: None,
+            mount: None,
         };
         fs.add(
             S_IFDIR | 0o755,
@@ -313,13 +347,133 @@ impl<'a> Fs<'a> {
     }
 
     /// Gives the guest its block device, `/dev/vda` ([`Device::Disk`], [`crate::disk`]).
-    pub fn add_disk(&mut self) -> Result<(), Errno> {
+    pub fn set_disk(&mut self, disk: Box<dyn crate::disk::BlockFile>) -> Result<(), Errno> {
         let dev = self.mkdir_all("dev")?;
         if self.entry(dev, b"vda").is_none() {
             let ino = self.add(S_IFBLK | 0o660, Body::Device(Device::Disk), 0)?;
             self.link_entry(dev, b"vda", ino)?;
         }
+        self.disk = Some(crate::disk::Volume(disk));
         Ok(())
+    }
+
+    /// `/dev/vda`'s disk for reading and writing it as a file: `ENXIO` without one, `EBUSY`
+    /// while a file system is mounted from it.
+    pub fn disk(&mut self) -> Result<&mut dyn crate::disk::BlockFile, Errno> {
+        match (&mut self.disk, &self.mount) {
+            (Some(volume), _) => Ok(&mut *volume.0),
+            (None, Some(_)) => Err(Errno::EBUSY),
+            (None, None) => Err(Errno::ENXIO),
+        }
+    }
+
+    /// `/dev/vda`'s size in bytes, mounted or not (`ENXIO` without a disk).
+    pub fn disk_size(&self) -> Result<u64, Errno> {
+        match (&self.disk, &self.mount) {
+            (Some(volume), _) => Ok(volume.0.size()),
+            (None, Some(m)) => Ok(m.disk_size()),
+            (None, None) => Err(Errno::ENXIO),
+        }
+    }
+
+    /// Mounts the disk's ext2 file system on directory `at` ([`mounted`]); the error says
+    /// why a file system was refused (for the log).
+    pub fn mount(
+        &mut self,
+        at: Node,
+        read_only: bool,
+        now: u64,
+    ) -> Result<(), (Errno, Option<ext2::Error>)> {
+        let Node::Inode(dir) = at else {
+            // Only a directory of the in-memory file system takes a mount.
+            return Err((Errno::EBUSY, None));
+        };
+        if !self.is_dir(at) {
+            return Err((Errno::ENOTDIR, None));
+        }
+        if dir == ROOT || Some(dir) == self.proc_dir || self.mount.is_some() {
+            return Err((Errno::EBUSY, None));
+        }
+        let path = self.path_of(at).map_err(|e| (e, None))?;
+        let Some(volume) = self.disk.take() else {
+            return Err((Errno::ENXIO, None));
+        };
+        match Mount::new(dir, path, volume, read_only, now) {
+            Ok(mount) => {
+                // The covered directory stays while the mount is on it.
+                self.hold(at);
+                self.mount = Some(mount);
+                Ok(())
+            }
+            Err((error, volume)) => {
+                self.disk = Some(volume);
+                Err((mounted::errno(&error), Some(error)))
+            }
+        }
+    }
+
+    /// Unmounts the file system whose root is `at` (or the directory it covers): written
+    /// back, marked clean, the disk free again. `EINVAL` if nothing is mounted there,
+    /// `EBUSY` while a descriptor or working directory is on it.
+    pub fn umount(&mut self, at: Node) -> Result<(), Errno> {
+        let mount = self.mount.as_ref().ok_or(Errno::EINVAL)?;
+        let root = Node::Mounted(ext2::ROOT_INO);
+        if at != root && at != Node::Inode(mount.at) {
+            return Err(Errno::EINVAL);
+        }
+        if mount.busy() {
+            return Err(Errno::EBUSY);
+        }
+        let mount = self.mount.take().ok_or(Errno::EINVAL)?;
+        let covered = Node::Inode(mount.at);
+        match mount.unmount() {
+            Ok(volume) => {
+                self.disk = Some(volume);
+                self.unhold(covered);
+                Ok(())
+            }
+            Err((e, mount)) => {
+                self.mount = Some(*mount);
+                Err(e)
+            }
+        }
+    }
+
+    /// The mounted file system (`ENOENT` when a node of one that is gone is asked for).
+    fn mounted(&self) -> Result<&Mount, Errno> {
+        self.mount.as_ref().ok_or(Errno::ENOENT)
+    }
+
+    fn mounted_mut(&mut self) -> Result<&mut Mount, Errno> {
+        self.mount.as_mut().ok_or(Errno::ENOENT)
+    }
+
+    /// The file system mounted from the disk, if any (`/proc/mounts`).
+    pub fn mount_info(&self) -> Option<&Mount> {
+        self.mount.as_ref()
+    }
+
+    /// `fsync` and `fdatasync` of `node`, `syncfs` and `sync` (`node: None`): the mounted
+    /// file system's changes written back and flushed, or the raw disk flushed.
+    pub fn sync(&mut self, node: Option<Node>) -> Result<(), Errno> {
+        let disk = node.is_none() || node.is_some_and(|n| self.device(n) == Some(Device::Disk));
+        let mounted = node.is_none() || matches!(node, Some(Node::Mounted(_)));
+        if mounted && let Some(m) = &mut self.mount {
+            m.sync()?;
+        }
+        if disk && let Some(v) = &mut self.disk {
+            v.0.sync()?;
+        }
+        Ok(())
+    }
+
+    /// `statfs` of the file system `node` is on: the mounted one's figures, or `None` for
+    /// the in-memory one.
+    pub fn statfs(&self, node: Node) -> Option<[u64; 7]> {
+        match node {
+            Node::Mounted(_) => self.mount.as_ref().map(Mount::statfs),
+            _ => None,
+        }
     }
 
     /// Removes `/dev/arinc/<name>`: a port the guest itself uses (`/dev/vda`'s link), which
@@ -505,6 +659,15 @@ impl<'a> Fs<'a> {
                 .inode(ino)
                 .is_some_and(|i| matches!(i.body, Body::Dir { .. })),
             Node::Proc(n) => proc::is_dir(n),
+            Node::Mounted(i) => self.mount.as_ref().is_some_and(|m| m.is_dir(i)),
+        }
+    }
+
+    /// Whether `node` is a regular file (of either file system).
+    pub fn is_file(&self, node: Node) -> bool {
+        match node {
+            Node::Mounted(i) => self.mount.as_ref().is_some_and(|m| m.is_file(i)),
+            _ => self.file_bytes(node).is_some(),
         }
     }
 
@@ -514,6 +677,7 @@ impl<'a> Fs<'a> {
                 .inode(ino)
                 .is_some_and(|i| matches!(i.body, Body::Symlink(_))),
             Node::Proc(n) => proc::is_link(n),
+            Node::Mounted(i) => self.mount.as_ref().is_some_and(|m| m.is_symlink(i)),
         }
     }
 
@@ -528,7 +692,7 @@ impl<'a> Fs<'a> {
     fn ino(&self, node: Node) -> Option<Ino> {
         match node {
             Node::Inode(ino) => Some(ino),
-            Node::Proc(_) => None,
+            Node::Proc(_) | Node::Mounted(_) => None,
         }
     }
 
@@ -559,6 +723,9 @@ impl<'a> Fs<'a> {
         let ino = match node {
             Node::Inode(ino) => ino,
             Node::Proc(n) => return proc::stat(n),
+            Node::Mounted(i) => {
+                return self.mount.as_ref().map(|m| m.stat(i)).unwrap_or_default();
+            }
         };
         let Some(i) = self.inode(ino) else {
             return Stat::default();
@@ -575,6 +742,7 @@ impl<'a> Fs<'a> {
             Body::Device(d) => (0, i.nlink, d.rdev()),
         };
         Stat {
+            dev: MEMORY_DEV,
             ino: ino as u64 + 1,
             nlink: nlink as u64,
             mode: i.mode,
@@ -582,6 +750,7 @@ impl<'a> Fs<'a> {
             gid: 0,
             rdev,
             size,
+            blocks: size.div_ceil(512),
             mtime: i.mtime,
         }
     }
@@ -589,6 +758,8 @@ impl<'a> Fs<'a> {
     fn node_of(&self, ino: Ino) -> Node {
         if Some(ino) == self.proc_dir {
             Node::Proc(proc::Node::Root)
+        } else if self.mount.as_ref().is_some_and(|m| m.at == ino) {
+            Node::Mounted(ext2::ROOT_INO)
         } else {
             Node::Inode(ino)
         }
@@ -604,6 +775,12 @@ impl<'a> Fs<'a> {
             Node::Proc(n) => match proc::parent(n) {
                 Some(up) => Node::Proc(up),
                 None => self.parent(Node::Inode(self.proc_dir.unwrap_or(ROOT))),
+            },
+            Node::Mounted(i) => match &self.mount {
+                // Out of the mounted file system at its root.
+                Some(m) if i == ext2::ROOT_INO => self.parent(Node::Inode(m.at)),
+                Some(m) => m.lookup(i, b"..").map_or(Node::Inode(ROOT), Node::Mounted),
+                None => Node::Inode(ROOT),
             },
         }
     }
@@ -698,6 +875,7 @@ impl<'a> Fs<'a> {
         match dir {
             Node::Inode(ino) => self.entry(ino, name).map(|c| self.node_of(c)),
             Node::Proc(n) => proc::child(n, name, procs).map(Node::Proc),
+            Node::Mounted(i) => self.mount.as_ref()?.lookup(i, name).map(Node::Mounted),
         }
     }
 
@@ -726,6 +904,8 @@ impl<'a> Fs<'a> {
             },
             Node::Proc(n) if proc::is_link(n) => proc::link(n, procs, buf).ok_or(Errno::ENOENT),
             Node::Proc(_) => Err(Errno::EINVAL),
+            Node::Mounted(i) if self.is_symlink(node) => self.mounted()?.readlink(i, buf),
+            Node::Mounted(_) => Err(Errno::EINVAL),
         }
     }
 
@@ -737,7 +917,7 @@ impl<'a> Fs<'a> {
         procs: &Procs,
         start: Node,
         path: &'p [u8],
-    ) -> Result<(Ino, &'p [u8]), Errno> {
+    ) -> Result<(Node, &'p [u8]), Errno> {
         if path.len() >= PATH_MAX {
             return Err(Errno::ENAMETOOLONG);
         }
@@ -761,20 +941,32 @@ impl<'a> Fs<'a> {
             return Err(Errno::ENAMETOOLONG);
         }
         match self.lookup(procs, start, dir_path, true)? {
-            Node::Inode(ino) if self.is_dir(Node::Inode(ino)) => Ok((ino, name)),
-            Node::Inode(_) => Err(Errno::ENOTDIR),
             Node::Proc(_) => Err(Errno::EACCES),
+            dir if self.is_dir(dir) => Ok((dir, name)),
+            _ => Err(Errno::ENOTDIR),
         }
     }
 
     /// The node entry `name` of `dir` names (links not followed).
-    pub fn get(&self, dir: Ino, name: &[u8]) -> Option<Node> {
-        self.entry(dir, name).map(|c| self.node_of(c))
+    pub fn get(&self, dir: Node, name: &[u8]) -> Option<Node> {
+        match dir {
+            Node::Inode(d) => self.entry(d, name).map(|c| self.node_of(c)),
+            Node::Mounted(d) => self.mount.as_ref()?.lookup(d, name).map(Node::Mounted),
+            Node::Proc(_) => None,
+        }
     }
 
     /// `node`'s absolute path (`ENOENT` for an unlinked node; `ENAMETOOLONG` past
     /// [`MAX_PATH`] bytes). A file linked more than once has one of its paths.
     pub fn path_of(&self, node: Node) -> Result<PathBuf, Errno> {
+        if let Node::Mounted(i) = node {
+            let m = self.mounted()?;
+            let mut out = self.path_of(Node::Inode(m.at))?;
+            for part in m.path_parts(i)?.iter().rev() {
+                out.push(part)?;
+            }
+            return Ok(out);
+        }
         let mut parts: Vec<&[u8]> = Vec::new();
         let mut proc_tail = [0u8; 32];
         let mut tail_len = 0;
@@ -798,6 +990,7 @@ impl<'a> Fs<'a> {
                 self.proc_dir.ok_or(Errno::ENOENT)?
             }
             Node::Inode(ino) => ino,
+            Node::Mounted(_) => return Err(Errno::ENOENT), // handled above
         };
         let mut file_name: Option<&[u8]> = None;
         if !self.is_dir(Node::Inode(at)) {
@@ -852,8 +1045,26 @@ impl<'a> Fs<'a> {
 
     // ---- changes ----
 
+    /// Which file system directory `dir` is in (`EACCES` in `/proc`).
+    fn directory(dir: Node) -> Result<Dir, Errno> {
+        match dir {
+            Node::Inode(d) => Ok(Dir::Memory(d)),
+            Node::Mounted(d) => Ok(Dir::Mounted(d)),
+            Node::Proc(_) => Err(Errno::EACCES),
+        }
+    }
+
     /// Creates a regular file `name` in `dir` with permission bits `mode`.
-    pub fn create(&mut self, dir: Ino, name: &[u8], mode: u32, now: u64) -> Result<Ino, Errno> {
+    pub fn create(&mut self, dir: Node, name: &[u8], mode: u32, now: u64) -> Result<Node, Errno> {
+        let dir = match Self::directory(dir)? {
+            Dir::Memory(d) => d,
+            Dir::Mounted(d) => {
+                return self
+                    .mounted_mut()?
+                    .create(d, name, mode & 0o7777, now)
+                    .map(Node::Mounted);
+            }
+        };
         self.new_entry(
             dir,
             name,
@@ -861,9 +1072,19 @@ impl<'a> Fs<'a> {
             Body::File(Data::Owned(Vec::new())),
             now,
         )
+        .map(Node::Inode)
     }
 
-    pub fn mkdir(&mut self, dir: Ino, name: &[u8], mode: u32, now: u64) -> Result<Ino, Errno> {
+    pub fn mkdir(&mut self, dir: Node, name: &[u8], mode: u32, now: u64) -> Result<Node, Errno> {
+        let dir = match Self::directory(dir)? {
+            Dir::Memory(d) => d,
+            Dir::Mounted(d) => {
+                return self
+                    .mounted_mut()?
+                    .mkdir(d, name, mode & 0o7777, now)
+                    .map(Node::Mounted);
+            }
+        };
         self.new_entry(
             dir,
             name,
@@ -874,21 +1095,31 @@ impl<'a> Fs<'a> {
             },
             now,
         )
+        .map(Node::Inode)
     }
 
     pub fn symlink(
         &mut self,
-        dir: Ino,
+        dir: Node,
         name: &[u8],
         target: &[u8],
         now: u64,
-    ) -> Result<Ino, Errno> {
+    ) -> Result<Node, Errno> {
         if target.is_empty() {
             return Err(Errno::ENOENT);
         }
         if target.len() >= PATH_MAX {
             return Err(Errno::ENAMETOOLONG);
         }
+        let dir = match Self::directory(dir)? {
+            Dir::Memory(d) => d,
+            Dir::Mounted(d) => {
+                return self
+                    .mounted_mut()?
+                    .symlink(d, name, target, now)
+                    .map(Node::Mounted);
+            }
+        };
         self.charge(target.len())?;
         let mut data = Vec::new();
         if data.try_reserve_exact(target.len()).is_err() {
@@ -908,7 +1139,7 @@ impl<'a> Fs<'a> {
         if made.is_err() {
             self.refund(target.len() + extra);
         }
-        made
+        made.map(Node::Inode)
     }
 
     fn new_entry(
@@ -945,7 +1176,14 @@ impl<'a> Fs<'a> {
     }
 
     /// Another entry `name` in `dir` for the non-directory `node` (`link`).
-    pub fn link(&mut self, node: Node, dir: Ino, name: &[u8], now: u64) -> Result<(), Errno> {
+    pub fn link(&mut self, node: Node, dir: Node, name: &[u8], now: u64) -> Result<(), Errno> {
+        let dir = match (Self::directory(dir)?, node) {
+            (Dir::Memory(d), _) => d,
+            (Dir::Mounted(d), Node::Mounted(i)) => {
+                return self.mounted_mut()?.link(i, d, name, now);
+            }
+            (Dir::Mounted(_), _) => return Err(Errno::EXDEV),
+        };
         let ino = self.ino(node).ok_or(Errno::EXDEV)?;
         if self.is_dir(node) {
             return Err(Errno::EPERM);
@@ -960,14 +1198,22 @@ impl<'a> Fs<'a> {
 
     /// Removes entry `name` of `dir`: a non-directory or an empty directory, as `what`
     /// says.
-    pub fn remove(&mut self, dir: Ino, name: &[u8], what: Remove, now: u64) -> Result<(), Errno> {
+    pub fn remove(&mut self, dir: Node, name: &[u8], what: Remove, now: u64) -> Result<(), Errno> {
+        let dir = match Self::directory(dir)? {
+            Dir::Memory(d) => d,
+            Dir::Mounted(d) => {
+                return self
+                    .mounted_mut()?
+                    .remove(d, name, what == Remove::Dir, now);
+            }
+        };
         let ino = self.entry(dir, name).ok_or(Errno::ENOENT)?;
         let is_dir = self.is_dir(Node::Inode(ino));
         match what {
             Remove::File if is_dir => return Err(Errno::EISDIR),
             Remove::Dir if !is_dir => return Err(Errno::ENOTDIR),
             Remove::Dir => {
-                if Some(ino) == self.proc_dir {
+                if self.covered(ino) {
                     return Err(Errno::EBUSY);
                 }
                 if let Some(Body::Dir { entries, .. }) = self.inode(ino).map(|i| &i.body)
@@ -988,19 +1234,26 @@ impl<'a> Fs<'a> {
     /// `no_replace`.
     pub fn rename(
         &mut self,
-        from_dir: Ino,
+        from_dir: Node,
         from: &[u8],
-        to_dir: Ino,
+        to_dir: Node,
         to: &[u8],
         no_replace: bool,
         now: u64,
     ) -> Result<(), Errno> {
+        let (from_dir, to_dir) = match (Self::directory(from_dir)?, Self::directory(to_dir)?) {
+            (Dir::Memory(a), Dir::Memory(b)) => (a, b),
+            (Dir::Mounted(a), Dir::Mounted(b)) => {
+                return self.mounted_mut()?.rename(a, from, b, to, no_replace, now);
+            }
+            _ => return Err(Errno::EXDEV),
+        };
         let ino = self.entry(from_dir, from).ok_or(Errno::ENOENT)?;
         if !self.is_dir(Node::Inode(to_dir)) {
             return Err(Errno::ENOTDIR);
         }
         let moving_dir = self.is_dir(Node::Inode(ino));
-        if Some(ino) == self.proc_dir {
+        if self.covered(ino) {
             return Err(Errno::EBUSY);
         }
         if moving_dir {
@@ -1027,11 +1280,12 @@ impl<'a> Fs<'a> {
                 return Err(Errno::EEXIST);
             }
             let old_is_dir = self.is_dir(Node::Inode(old));
+            let to_node = Node::Inode(to_dir);
             match (moving_dir, old_is_dir) {
                 (true, false) => return Err(Errno::ENOTDIR),
                 (false, true) => return Err(Errno::EISDIR),
-                (true, true) => self.remove(to_dir, to, Remove::Dir, now)?,
-                (false, false) => self.remove(to_dir, to, Remove::File, now)?,
+                (true, true) => self.remove(to_node, to, Remove::Dir, now)?,
+                (false, false) => self.remove(to_node, to, Remove::File, now)?,
             }
         }
         // The new entry first (it may fail for the limit), then the old one goes.
@@ -1051,18 +1305,31 @@ impl<'a> Fs<'a> {
         Ok(())
     }
 
+    /// Whether in-memory directory `ino` stands under something else (`/proc`, a
+    /// mount): it cannot be removed or renamed.
+    fn covered(&self, ino: Ino) -> bool {
+        Some(ino) == self.proc_dir || self.mount.as_ref().is_some_and(|m| m.at == ino)
+    }
+
     /// Sets the permission bits.
-    pub fn chmod(&mut self, node: Node, mode: u32) -> Result<(), Errno> {
+    pub fn chmod(&mut self, node: Node, mode: u32, now: u64) -> Result<(), Errno> {
+        if let Node::Mounted(i) = node {
+            return self.mounted_mut()?.chmod(i, mode, now);
+        }
         let ino = self.ino(node).ok_or(Errno::EPERM)?;
         let i = self.inode_mut(ino).ok_or(Errno::ENOENT)?;
         i.mode = (i.mode & S_IFMT) | (mode & 0o7777);
         Ok(())
     }
 
-    pub fn set_mtime(&mut self, node: Node, mtime: u64) {
+    pub fn set_mtime(&mut self, node: Node, mtime: u64, now: u64) -> Result<(), Errno> {
+        if let Node::Mounted(i) = node {
+            return self.mounted_mut()?.set_mtime(i, mtime, now);
+        }
         if let Some(ino) = self.ino(node) {
             self.touch(ino, mtime);
         }
+        Ok(())
     }
 
     /// The file's data as owned bytes (copied from the initramfs on the first change).
@@ -1126,6 +1393,9 @@ impl<'a> Fs<'a> {
         data: &[u8],
         now: u64,
     ) -> Result<usize, Errno> {
+        if let Node::Mounted(i) = node {
+            return self.mounted_mut()?.write(i, offset, data, now);
+        }
         let ino = self.ino(node).ok_or(Errno::EINVAL)?;
         let end = offset
             .checked_add(data.len() as u64)
@@ -1149,6 +1419,9 @@ impl<'a> Fs<'a> {
 
     /// Sets regular file `node`'s length (cut, or zeros added).
     pub fn truncate(&mut self, node: Node, len: u64, now: u64) -> Result<(), Errno> {
+        if let Node::Mounted(i) = node {
+            return self.mounted_mut()?.truncate(i, len, now);
+        }
         let ino = self.ino(node).ok_or(Errno::EINVAL)?;
         if len > MAX_FILE {
             return Err(Errno::EFBIG);
@@ -1176,6 +1449,31 @@ impl<'a> Fs<'a> {
         v.resize(len, 0);
         self.touch(ino, now);
         Ok(())
+    }
+
+    /// Reads mounted file `node` at `offset` (in-memory files are read from
+    /// [`Fs::file_bytes`]).
+    pub fn read_mounted(&self, node: Node, offset: u64, buf: &mut [u8]) -> Result<usize, Errno> {
+        match node {
+            Node::Mounted(i) => self.mounted()?.read(i, offset, buf),
+            _ => Err(Errno::EINVAL),
+        }
+    }
+
+    /// Mounted directory `dir`'s entry at or after `cookie` (`.` and `..` as stored).
+    pub fn mounted_entry(&self, dir: Node, cookie: u64) -> Result<Option<MountedEntry>, Errno> {
+        let Node::Mounted(d) = dir else {
+            return Err(Errno::ENOTDIR);
+        };
+        Ok(self
+            .mounted()?
+            .readdir(d, cookie)?
+            .map(|(e, next)| MountedEntry {
+                kind: mounted::dirent_type(e.file_type),
+                ino: e.ino,
+                name: e.name,
+                next,
+            }))
     }
 
     /// Directory `dir`'s first entry after `after` (in name order; `None`: from the start).
@@ -1220,9 +1518,7 @@ impl<'a> Fs<'a> {
             None => return Err(Errno::ENFILE),
         };
         self.opens[id] = Some(description);
-        if let Some(i) = self.ino(node).and_then(|ino| self.inode_mut(ino)) {
-            i.opened += 1;
-        }
+        self.hold(node);
         Ok(id)
     }
 
@@ -1252,6 +1548,9 @@ impl<'a> Fs<'a> {
         }
         let node = o.node;
         self.opens[id] = None;
+        if let (Node::Mounted(i), Some(m)) = (node, &mut self.mount) {
+            m.closed(i);
+        }
         if let Some(ino) = self.ino(node) {
             if let Some(i) = self.inode_mut(ino) {
                 i.opened = i.opened.saturating_sub(1);
@@ -1263,6 +1562,9 @@ impl<'a> Fs<'a> {
     /// `node` is in use beyond its directory entries (a working directory): it lives while
     /// held, as while open.
     pub fn hold(&mut self, node: Node) {
+        if let (Node::Mounted(i), Some(m)) = (node, &mut self.mount) {
+            m.opened(i);
+        }
         if let Some(i) = self.ino(node).and_then(|ino| self.inode_mut(ino)) {
             i.opened += 1;
         }
@@ -1270,6 +1572,9 @@ impl<'a> Fs<'a> {
 
     /// The end of a [`Fs::hold`].
     pub fn unhold(&mut self, node: Node) {
+        if let (Node::Mounted(i), Some(m)) = (node, &mut self.mount) {
+            m.closed(i);
+        }
         if let Some(ino) = self.ino(node) {
             if let Some(i) = self.inode_mut(ino) {
                 i.opened = i.opened.saturating_sub(1);

@@ -6,7 +6,7 @@
 //! NUL-terminated) and `fd/` (a link per open descriptor: to the file's path,
 //! `/dev/console` or `pipe:[<n>]`; opening one opens what the descriptor has, even a pipe,
 //! as Linux's magic links do: `/dev/fd` links here), `/proc/meminfo`, `/proc/uptime` and
-//! `/proc/mounts`, `/proc/net/dev` and `/proc/net/route` (the interfaces and routes of
+//! `/proc/mounts`, `/proc/filesystems` (what `mount` without `-t` tries), `/proc/net/dev` and `/proc/net/route` (the interfaces and routes of
 //! [`crate::net`]). Nothing here can be written, created or removed.
 //!
 //! The process table belongs to [`crate::system`]; the system calls see it through
@@ -27,6 +27,7 @@ pub enum Node {
     Meminfo,
     Uptime,
     Mounts,
+    Filesystems,
     /// `/proc/<pid>`.
     Process(u32),
     /// `/proc/<pid>/<file>`.
@@ -56,11 +57,12 @@ const PROCESS_FILES: [(&str, File); 4] = [
     ("status", File::Status),
     ("cmdline", File::Cmdline),
 ];
-const SYSTEM_FILES: [(&str, Node); 5] = [
+const SYSTEM_FILES: [(&str, Node); 6] = [
     ("self", Node::SelfLink),
     ("meminfo", Node::Meminfo),
     ("uptime", Node::Uptime),
     ("mounts", Node::Mounts),
+    ("filesystems", Node::Filesystems),
     ("net", Node::Net),
 ];
 const NET_FILES: [(&str, Node); 2] = [("dev", Node::NetDev), ("route", Node::NetRoute)];
@@ -132,6 +134,8 @@ pub struct Procs<'s> {
     /// The network interfaces and the default route (`net/dev`, `net/route`).
     pub interfaces: Vec<crate::net::Interface>,
     pub gateway: Option<crate::net::Ipv4Address>,
+    /// The file system mounted from the disk (`mounts`).
+    pub mount: Option<&'s super::mounted::Mount>,
 }
 
 impl<'s> Procs<'s> {
@@ -156,6 +160,7 @@ impl<'s> Procs<'s> {
             fs_used: 0,
             interfaces: Vec::new(),
             gateway: None,
+            mount: None,
         }
     }
 
@@ -301,6 +306,7 @@ fn ino(node: Node) -> u64 {
         Node::Net => BASE + 5,
         Node::NetDev => BASE + 6,
         Node::NetRoute => BASE + 7,
+        Node::Filesystems => BASE + 8,
         Node::Process(pid) => BASE + 16 * (pid as u64 + 1),
         Node::File(pid, f) => BASE + 16 * (pid as u64 + 1) + 1 + f as u64,
         Node::Fds(pid) => BASE + 16 * (pid as u64 + 1) + 8,
@@ -399,6 +405,12 @@ pub fn contents(node: Node, procs: &Procs) -> Option<Vec<u8>> {
         }
         Node::Mounts => {
             let _ = write!(w, "rootfs / rootfs rw 0 0\nproc /proc proc rw 0 0\n");
+            if let Some(m) = procs.mount {
+                let _ = m.describe(&mut w);
+            }
+        }
+        Node::Filesystems => {
+            let _ = write!(w, "nodev\trootfs\nnodev\tproc\n\text2\n");
         }
         Node::NetDev => crate::net::proc_net_dev(&procs.interfaces, &mut w),
         Node::NetRoute => crate::net::proc_net_route(&procs.interfaces, procs.gateway, &mut w),

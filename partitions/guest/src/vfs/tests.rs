@@ -49,7 +49,10 @@ fn resolves_paths_and_links() {
     assert_eq!(name(b"/proc/2", true), Err(Errno::ENOENT));
 }
 
-fn names(fs: &Fs, dir: Ino) -> Vec<String> {
+fn names(fs: &Fs, dir: Node) -> Vec<String> {
+    let Node::Inode(dir) = dir else {
+        panic!("{dir:?} is not in memory")
+    };
     let mut out = Vec::new();
     let mut after: Option<Vec<u8>> = None;
     while let Some((name, _)) = fs.next_entry(dir, after.as_deref()) {
@@ -63,11 +66,10 @@ fn lookup(fs: &Fs, path: &str) -> Result<Node, Errno> {
     fs.lookup(&Procs::alone(1), ROOT_NODE, path.as_bytes(), false)
 }
 
-fn dir(fs: &Fs, path: &str) -> Ino {
-    match lookup(fs, path).unwrap() {
-        Node::Inode(ino) => ino,
-        n => panic!("{path}: {n:?}"),
-    }
+fn dir(fs: &Fs, path: &str) -> Node {
+    let node = lookup(fs, path).unwrap();
+    assert!(fs.is_dir(node), "{path}: {node:?}");
+    node
 }
 
 #[test]
@@ -75,7 +77,7 @@ fn files_are_created_written_renamed_and_removed() {
     let bytes = bytes();
     let mut fs = Fs::new(&Archive::new(&bytes).unwrap(), 1 << 16).unwrap();
     assert_eq!(
-        names(&fs, ROOT),
+        names(&fs, ROOT_NODE),
         ["bin", "dev", "etc", "proc", "sbin", "tmp"]
     );
     assert_eq!(
@@ -83,7 +85,7 @@ fn files_are_created_written_renamed_and_removed() {
         ["console", "fd", "null", "random", "tty", "urandom", "zero"]
     );
     let tmp = dir(&fs, "/tmp");
-    let f = Node::Inode(fs.create(tmp, b"f", 0o644, 7).unwrap());
+    let f = fs.create(tmp, b"f", 0o644, 7).unwrap();
     assert_eq!(fs.create(tmp, b"f", 0o644, 7), Err(Errno::EEXIST));
     assert_eq!(fs.write(f, 0, b"hello", 8), Ok(5));
     assert_eq!(fs.write(f, 8, b"!", 8), Ok(1));
@@ -99,11 +101,7 @@ fn files_are_created_written_renamed_and_removed() {
     assert_eq!(fs.file_bytes(f).unwrap(), b"he\0\0");
     // Directories: made, renamed (not into themselves), removed when empty.
     let d = fs.mkdir(tmp, b"d", 0o755, 0).unwrap();
-    assert_eq!(
-        fs.stat(Node::Inode(tmp)).nlink,
-        3,
-        "tmp, its entry and d's .."
-    );
+    assert_eq!(fs.stat(tmp).nlink, 3, "tmp, its entry and d's ..");
     fs.rename(tmp, b"f", d, b"g", false, 10).unwrap();
     assert_eq!(lookup(&fs, "/tmp/d/g"), Ok(f));
     assert_eq!(lookup(&fs, "/tmp/f"), Err(Errno::ENOENT));
@@ -112,7 +110,7 @@ fn files_are_created_written_renamed_and_removed() {
     assert_eq!(fs.remove(tmp, b"d", Remove::File, 0), Err(Errno::EISDIR));
     assert_eq!(fs.remove(d, b"g", Remove::Dir, 0), Err(Errno::ENOTDIR));
     // Replacing: a file by a file, an empty directory by a directory.
-    let h = Node::Inode(fs.create(d, b"h", 0o600, 0).unwrap());
+    let h = fs.create(d, b"h", 0o600, 0).unwrap();
     assert_eq!(fs.rename(d, b"g", d, b"h", true, 0), Err(Errno::EEXIST));
     fs.rename(d, b"g", d, b"h", false, 0).unwrap();
     assert_eq!(lookup(&fs, "/tmp/d/h"), Ok(f));
@@ -123,7 +121,7 @@ fn files_are_created_written_renamed_and_removed() {
     assert_eq!(fs.rename(tmp, b"d", tmp, b"d2", false, 0), Ok(()));
     assert_eq!(names(&fs, tmp), ["d2"]);
     let d2 = dir(&fs, "/tmp/d2");
-    assert_eq!(fs.parent(Node::Inode(d2)), Node::Inode(tmp));
+    assert_eq!(fs.parent(d2), tmp);
     assert_eq!(path(&fs, f), "/tmp/d2/h");
     // Links: symbolic and hard.
     fs.symlink(tmp, b"s", b"d2/h", 0).unwrap();
@@ -133,7 +131,7 @@ fn files_are_created_written_renamed_and_removed() {
     );
     fs.link(f, tmp, b"hard", 0).unwrap();
     assert_eq!(fs.stat(f).nlink, 2);
-    assert_eq!(fs.link(Node::Inode(d2), tmp, b"x", 0), Err(Errno::EPERM));
+    assert_eq!(fs.link(d2, tmp, b"x", 0), Err(Errno::EPERM));
     fs.remove(d2, b"h", Remove::File, 0).unwrap();
     assert_eq!(fs.file_bytes(f).unwrap(), b"he\0\0", "still linked");
     assert_eq!(
@@ -143,7 +141,10 @@ fn files_are_created_written_renamed_and_removed() {
     fs.remove(tmp, b"d2", Remove::Dir, 0).unwrap();
     assert_eq!(names(&fs, tmp), ["hard", "s"]);
     // /proc cannot go.
-    assert_eq!(fs.remove(ROOT, b"proc", Remove::Dir, 0), Err(Errno::EBUSY));
+    assert_eq!(
+        fs.remove(ROOT_NODE, b"proc", Remove::Dir, 0),
+        Err(Errno::EBUSY)
+    );
 }
 
 #[test]
@@ -152,7 +153,7 @@ fn unlinked_files_live_while_open_and_the_limit_holds() {
     let mut fs = Fs::new(&Archive::new(&bytes).unwrap(), 1 << 16).unwrap();
     let base = fs.usage().0;
     let tmp = dir(&fs, "/tmp");
-    let f = Node::Inode(fs.create(tmp, b"f", 0o644, 0).unwrap());
+    let f = fs.create(tmp, b"f", 0o644, 0).unwrap();
     fs.write(f, 0, b"data", 0).unwrap();
     let id = fs.open(f, 0, None).unwrap();
     fs.share(id);
@@ -165,7 +166,7 @@ fn unlinked_files_live_while_open_and_the_limit_holds() {
     assert_eq!(fs.open_count(), 0);
     assert_eq!(fs.usage().0, base, "everything given back");
     // The byte limit: ENOSPC, never more than the limit, and the space comes back.
-    let g = Node::Inode(fs.create(tmp, b"g", 0o644, 0).unwrap());
+    let g = fs.create(tmp, b"g", 0o644, 0).unwrap();
     let big = vec![7u8; 1 << 16];
     assert_eq!(fs.write(g, 0, &big, 0), Err(Errno::ENOSPC));
     let mut written = 0;
@@ -234,7 +235,16 @@ fn proc_shows_the_processes() {
         .collect();
     assert_eq!(
         listing,
-        ["self", "meminfo", "uptime", "mounts", "net", "1", "7"]
+        [
+            "self",
+            "meminfo",
+            "uptime",
+            "mounts",
+            "filesystems",
+            "net",
+            "1",
+            "7"
+        ]
     );
     assert_eq!(read("/proc/7/cmdline"), "sleep\x0010\x00");
     let status = read("/proc/7/status");
