@@ -46,6 +46,8 @@ pub const SECTOR: usize = 512;
 const MAGIC: &[u8; 4] = b"WSLT";
 const VERSION: u16 = 1;
 const HEADER_LEN: usize = 28;
+/// Sectors a scan reads at once.
+const RUN_SECTORS: usize = 4;
 
 /// The sector-addressed disk the records live on.
 pub trait BlockDevice {
@@ -54,6 +56,26 @@ pub trait BlockDevice {
     fn write(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Self::Error>;
     /// Returns once every write before it is on stable storage.
     fn flush(&mut self) -> Result<(), Self::Error>;
+
+    /// Reads the sectors from `first` on into `buf` (whole sectors: a length that is no
+    /// multiple of [`SECTOR`] reads nothing past the last whole one). A device that moves
+    /// several sectors in one request says so here; by default, one at a time.
+    fn read_sectors(&mut self, first: u64, buf: &mut [u8]) -> Result<(), Self::Error> {
+        for (i, chunk) in buf.as_chunks_mut::<SECTOR>().0.iter_mut().enumerate() {
+            self.read(first + i as u64, chunk)?;
+        }
+        Ok(())
+    }
+
+    /// Writes `data` to the sectors from `first` on (whole sectors, as
+    /// [`BlockDevice::read_sectors`]). As with single writes, a cut may leave any of them
+    /// written or not, and a sector torn.
+    fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Self::Error> {
+        for (i, chunk) in data.as_chunks::<SECTOR>().0.iter().enumerate() {
+            self.write(first + i as u64, chunk)?;
+        }
+        Ok(())
+    }
 }
 
 /// Where a kind of record lives on the disk.
@@ -226,12 +248,15 @@ pub fn scan<D: BlockDevice>(dev: &mut D, region: &Region) -> Result<Scan, Error<
         let mut c = Crc32::new();
         let mut left = len as usize;
         let mut sector = header + 1;
+        let mut run = [0u8; RUN_SECTORS * SECTOR];
         while left > 0 {
-            dev.read(sector, &mut buf).map_err(device)?;
-            let n = left.min(SECTOR);
-            c.update(&buf[..n]);
+            let sectors = left.div_ceil(SECTOR).min(RUN_SECTORS);
+            let run = &mut run[..sectors * SECTOR];
+            dev.read_sectors(sector, run).map_err(device)?;
+            let n = left.min(run.len());
+            c.update(&run[..n]);
             left -= n;
-            sector += 1;
+            sector += sectors as u64;
         }
         *state = if c.finish() == payload_crc {
             SlotState::Valid(Record {
@@ -261,11 +286,15 @@ pub fn read<D: BlockDevice>(
             capacity: out.len(),
         });
     };
-    let mut buf = [0u8; SECTOR];
     let first = region.header_sector(record.slot) + 1;
-    for (i, chunk) in out.chunks_mut(SECTOR).enumerate() {
-        dev.read(first + i as u64, &mut buf).map_err(device)?;
-        chunk.copy_from_slice(&buf[..chunk.len()]);
+    let whole = out.len() / SECTOR * SECTOR;
+    dev.read_sectors(first, &mut out[..whole]).map_err(device)?;
+    if whole < out.len() {
+        let mut buf = [0u8; SECTOR];
+        dev.read(first + (whole / SECTOR) as u64, &mut buf)
+            .map_err(device)?;
+        let rest = out.len() - whole;
+        out[whole..].copy_from_slice(&buf[..rest]);
     }
     Ok((crc(out) == record.crc).then_some(record.len))
 }
@@ -289,10 +318,16 @@ pub fn write<D: BlockDevice>(
     }
     let slot = scan.newest().map_or(0, |r| 1 - r.slot);
     let header = region.header_sector(slot);
-    for (i, chunk) in payload.chunks(SECTOR).enumerate() {
+    // The whole sectors as one run (a device may move several a request), then the last,
+    // zero-padded.
+    let whole = payload.len() / SECTOR * SECTOR;
+    dev.write_sectors(header + 1, &payload[..whole])
+        .map_err(device)?;
+    if whole < payload.len() {
         let mut buf = [0u8; SECTOR];
-        buf[..chunk.len()].copy_from_slice(chunk);
-        dev.write(header + 1 + i as u64, &buf).map_err(device)?;
+        buf[..payload.len() - whole].copy_from_slice(&payload[whole..]);
+        dev.write(header + 1 + (whole / SECTOR) as u64, &buf)
+            .map_err(device)?;
     }
     dev.flush().map_err(device)?;
     let record = Record {

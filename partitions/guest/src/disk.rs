@@ -1,7 +1,7 @@
 //! The guest's block device `/dev/vda` ([`crate::vfs::dev::Device::Disk`], device number
 //! [`MAJOR`]:[`MINOR`]): the guest partition's virtual disk of a block-device partition
 //! (`guest.disk` in the configuration; its `blk.tenants.<guest>` range), reached over the
-//! block-device link (`blk_core::client::Client`: one sector a request, CRC-checked).
+//! block-device link (`blk_core::client::Client`: up to four sectors a request, CRC-checked).
 //!
 //! The configuration reaches the guest in its initramfs, [`DISK_PATH`] (written by
 //! `cargo xtask` from `guest.disk` and the tenant's `sectors`): `key=value` lines,
@@ -226,36 +226,57 @@ where
         self.cache.iter().filter(|s| s.sector != EMPTY).count()
     }
 
-    /// Sector `sector` (inside the disk) into `buf`, from the cache or the device.
-    fn read_sector(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno> {
-        debug_assert!(sector < self.sectors);
-        if let Some(i) = self.cached(sector) {
-            *buf = *self.cache[i].data;
+    /// Sectors from `first` on (inside the disk) into `buf` (whole sectors): from the cache
+    /// when it holds them all, else as one run from the device (then kept). When the run
+    /// fails, its sectors are read one at a time to find the one that does: the error
+    /// comes with the bytes read before it (logged for that sector).
+    fn read_run(&mut self, first: u64, buf: &mut [u8]) -> Result<(), (usize, Errno)> {
+        let count = (buf.len() / SECTOR) as u64;
+        debug_assert!(first + count <= self.sectors);
+        let all_cached = (first..first + count).all(|s| self.cache.iter().any(|c| c.sector == s));
+        if all_cached {
+            for (i, chunk) in buf.as_chunks_mut::<SECTOR>().0.iter_mut().enumerate() {
+                if let Some(slot) = self.cached(first + i as u64) {
+                    *chunk = *self.cache[slot].data;
+                }
+            }
             return Ok(());
         }
-        match self.device.read(sector, buf) {
-            Ok(()) => {
-                self.keep(sector, buf);
-                Ok(())
+        let whole = self.device.read_sectors(first, buf).is_ok();
+        for (i, chunk) in buf.as_chunks_mut::<SECTOR>().0.iter_mut().enumerate() {
+            let sector = first + i as u64;
+            if !whole && let Err(e) = self.device.read(sector, chunk) {
+                return Err((i * SECTOR, self.failed(Op::Read, sector, &e)));
             }
-            Err(e) => Err(self.failed(Op::Read, sector, &e)),
+            self.keep(sector, chunk);
         }
+        Ok(())
     }
 
-    /// Writes sector `sector` (inside the disk) through to the device.
-    fn write_sector(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno> {
-        debug_assert!(sector < self.sectors);
-        match self.device.write(sector, data) {
-            Ok(()) => {
-                self.keep(sector, data);
-                Ok(())
+    /// Writes the sectors from `first` on (inside the disk) through to the device, as one
+    /// run; when it fails, one at a time (writing a sector again is harmless) to find the
+    /// one that does: the error comes with the bytes written before it.
+    fn write_run(&mut self, first: u64, data: &[u8]) -> Result<(), (usize, Errno)> {
+        let whole = self.device.write_sectors(first, data).is_ok();
+        for (i, chunk) in data.as_chunks::<SECTOR>().0.iter().enumerate() {
+            let sector = first + i as u64;
+            if !whole && let Err(e) = self.device.write(sector, chunk) {
+                // What the disk holds from there on is unknown now.
+                for later in sector..first + (data.len() / SECTOR) as u64 {
+                    self.forget(later);
+                }
+                return Err((i * SECTOR, self.failed(Op::Write, sector, &e)));
             }
-            Err(e) => {
-                // What the disk holds there is unknown now.
-                self.forget(sector);
-                Err(self.failed(Op::Write, sector, &e))
-            }
+            self.keep(sector, chunk);
         }
+        Ok(())
+    }
+
+    /// Whether sectors `first..first + count` lie inside the disk.
+    fn inside(&self, first: u64, count: u64) -> bool {
+        first
+            .checked_add(count)
+            .is_some_and(|end| end <= self.sectors)
     }
 
     /// `read` at byte `offset`: the bytes up to the disk's end (0 at or past it; at most
@@ -274,11 +295,25 @@ where
             let at = offset + done as u64;
             let sector = at / SECTOR as u64;
             let within = (at % SECTOR as u64) as usize;
-            let n = (SECTOR - within).min(len - done);
-            if let Err(e) = self.read_sector(sector, &mut sector_buf) {
+            let whole = if within == 0 {
+                (len - done) / SECTOR * SECTOR
+            } else {
+                0
+            };
+            let (n, step) = if whole > 0 {
+                (whole, self.read_run(sector, &mut buf[done..done + whole]))
+            } else {
+                let n = (SECTOR - within).min(len - done);
+                let step = self.read_run(sector, &mut sector_buf);
+                if step.is_ok() {
+                    buf[done..done + n].copy_from_slice(&sector_buf[within..within + n]);
+                }
+                (n, step.map_err(|(_, e)| (0, e)))
+            };
+            if let Err((part, e)) = step {
+                done += part;
                 return if done > 0 { Ok(done) } else { Err(e) };
             }
-            buf[done..done + n].copy_from_slice(&sector_buf[within..within + n]);
             done += n;
         }
         Ok(done)
@@ -304,15 +339,26 @@ where
             let at = offset + done as u64;
             let sector = at / SECTOR as u64;
             let within = (at % SECTOR as u64) as usize;
-            let n = (SECTOR - within).min(len - done);
-            let step = (|| {
-                if n < SECTOR {
-                    self.read_sector(sector, &mut sector_buf)?;
-                }
-                sector_buf[within..within + n].copy_from_slice(&data[done..done + n]);
-                self.write_sector(sector, &sector_buf)
-            })();
-            if let Err(e) = step {
+            let whole = if within == 0 {
+                (len - done) / SECTOR * SECTOR
+            } else {
+                0
+            };
+            let (n, step) = if whole > 0 {
+                (whole, self.write_run(sector, &data[done..done + whole]))
+            } else {
+                let n = (SECTOR - within).min(len - done);
+                let step = (|| {
+                    if n < SECTOR {
+                        self.read_run(sector, &mut sector_buf)?;
+                    }
+                    sector_buf[within..within + n].copy_from_slice(&data[done..done + n]);
+                    self.write_run(sector, &sector_buf)
+                })();
+                (n, step.map_err(|(_, e)| (0, e)))
+            };
+            if let Err((part, e)) = step {
+                done += part;
                 return if done > 0 { Ok(done) } else { Err(e) };
             }
             done += n;
@@ -343,10 +389,11 @@ where
 pub trait BlockFile {
     /// Its size in bytes.
     fn size(&self) -> u64;
-    /// Sector `sector` into `buf` (`EIO` past the end).
-    fn read_sector(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno>;
-    /// Writes sector `sector` through to the device (`EIO` past the end).
-    fn write_sector(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno>;
+    /// The sectors from `first` on into `buf`, whole sectors (`EIO` past the end).
+    fn read_sectors(&mut self, first: u64, buf: &mut [u8]) -> Result<(), Errno>;
+    /// Writes the sectors from `first` on through to the device, whole sectors (`EIO` past
+    /// the end).
+    fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Errno>;
     /// [`Disk::read`].
     fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno>;
     /// [`Disk::write`].
@@ -364,17 +411,19 @@ where
     fn size(&self) -> u64 {
         Disk::size(self)
     }
-    fn read_sector(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno> {
-        if sector >= self.sectors {
+    fn read_sectors(&mut self, first: u64, buf: &mut [u8]) -> Result<(), Errno> {
+        let whole = buf.len() / SECTOR * SECTOR;
+        if !self.inside(first, (whole / SECTOR) as u64) {
             return Err(Errno::EIO);
         }
-        Disk::read_sector(self, sector, buf)
+        self.read_run(first, &mut buf[..whole]).map_err(|(_, e)| e)
     }
-    fn write_sector(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno> {
-        if sector >= self.sectors {
+    fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Errno> {
+        let whole = data.len() / SECTOR * SECTOR;
+        if !self.inside(first, (whole / SECTOR) as u64) {
             return Err(Errno::EIO);
         }
-        Disk::write_sector(self, sector, data)
+        self.write_run(first, &data[..whole]).map_err(|(_, e)| e)
     }
     fn read(&mut self, offset: u64, buf: &mut [u8]) -> Result<usize, Errno> {
         Disk::read(self, offset, buf)
@@ -391,8 +440,8 @@ where
 }
 
 /// The disk under a mounted file system ([`crate::vfs::mounted`]): its sectors as a
-/// [`slots::BlockDevice`] (through the disk's sector cache; failures are logged by the
-/// disk and come back as `EIO`).
+/// [`slots::BlockDevice`] (through the disk's sector cache, runs of sectors as runs of
+/// requests; failures are logged by the disk and come back as `EIO`).
 pub struct Volume(pub Box<dyn BlockFile>);
 
 impl core::fmt::Debug for Volume {
@@ -404,13 +453,19 @@ impl core::fmt::Debug for Volume {
 impl slots::BlockDevice for Volume {
     type Error = Errno;
     fn read(&mut self, sector: u64, buf: &mut [u8; SECTOR]) -> Result<(), Errno> {
-        self.0.read_sector(sector, buf)
+        self.0.read_sectors(sector, buf)
     }
     fn write(&mut self, sector: u64, data: &[u8; SECTOR]) -> Result<(), Errno> {
-        self.0.write_sector(sector, data)
+        self.0.write_sectors(sector, data)
     }
     fn flush(&mut self) -> Result<(), Errno> {
         self.0.sync()
+    }
+    fn read_sectors(&mut self, first: u64, buf: &mut [u8]) -> Result<(), Errno> {
+        self.0.read_sectors(first, buf)
+    }
+    fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Errno> {
+        self.0.write_sectors(first, data)
     }
 }
 

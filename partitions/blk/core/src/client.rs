@@ -1,10 +1,11 @@
 //! A tenant's side of the link: its virtual disk as a `slots::BlockDevice` (the PLC's
 //! persistent store writes its records through it), one request and its response at a
-//! time over a [`Transport`] (a pair of queuing ports in a partition). Every response is
+//! time over a [`Transport`] (a pair of queuing ports in a partition); a run of sectors
+//! goes [`MAX_SECTORS`] to a request. Every response is
 //! checked (CRC, tag, status) before its data is used.
 
 use crate::SECTOR;
-use crate::link::{self, LinkError, MAX_REQUEST, MAX_RESPONSE, Operation, Status};
+use crate::link::{self, LinkError, MAX_REQUEST, MAX_RESPONSE, MAX_SECTORS, Operation, Status};
 
 /// Carries one request to the driver and its response back.
 pub trait Transport {
@@ -130,7 +131,32 @@ impl<T: Transport> slots::BlockDevice for Client<T> {
     fn flush(&mut self) -> Result<(), Self::Error> {
         self.exchange(Operation::Flush, 0, 0, &[], &mut [])
     }
+
+    /// [`MAX_SECTORS`] sectors a request.
+    fn read_sectors(&mut self, first: u64, buf: &mut [u8]) -> Result<(), Self::Error> {
+        let whole = buf.len() / SECTOR * SECTOR;
+        for (i, chunk) in buf[..whole].chunks_mut(REQUEST_BYTES).enumerate() {
+            let sector = first + (i * MAX_SECTORS as usize) as u64;
+            let sectors = (chunk.len() / SECTOR) as u32;
+            self.exchange(Operation::Read, sector, sectors, &[], chunk)?;
+        }
+        Ok(())
+    }
+
+    /// [`MAX_SECTORS`] sectors a request, in order.
+    fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Self::Error> {
+        let whole = data.len() / SECTOR * SECTOR;
+        for (i, chunk) in data[..whole].chunks(REQUEST_BYTES).enumerate() {
+            let sector = first + (i * MAX_SECTORS as usize) as u64;
+            let sectors = (chunk.len() / SECTOR) as u32;
+            self.exchange(Operation::Write, sector, sectors, chunk, &mut [])?;
+        }
+        Ok(())
+    }
 }
+
+/// Bytes one read or write request moves at most.
+const REQUEST_BYTES: usize = MAX_SECTORS as usize * SECTOR;
 
 #[cfg(test)]
 mod tests;

@@ -38,6 +38,9 @@ struct Entry {
     last_use: u64,
 }
 
+/// Most bytes one write-back run moves.
+const MAX_RUN_BYTES: usize = 64 * 1024;
+
 pub(crate) struct Disk<D> {
     dev: D,
     block_size: usize,
@@ -75,12 +78,19 @@ impl<D: BlockDevice> Disk<D> {
     /// Reads sectors from `first` into `out` (a multiple of [`SECTOR`] bytes, or less for
     /// the last one), bypassing the cache.
     pub(crate) fn read_sectors(&mut self, first: u64, out: &mut [u8]) -> Result<(), Error> {
-        let mut sector = [0u8; SECTOR];
-        for (i, chunk) in out.chunks_mut(SECTOR).enumerate() {
+        // The whole sectors as one run (a device may move several a request), then the
+        // part of the last one.
+        let whole = out.len() / SECTOR * SECTOR;
+        self.dev
+            .read_sectors(first, &mut out[..whole])
+            .map_err(device_error)?;
+        if whole < out.len() {
+            let mut sector = [0u8; SECTOR];
             self.dev
-                .read(first + i as u64, &mut sector)
+                .read(first + (whole / SECTOR) as u64, &mut sector)
                 .map_err(device_error)?;
-            chunk.copy_from_slice(&sector[..chunk.len()]);
+            let rest = out.len() - whole;
+            out[whole..].copy_from_slice(&sector[..rest]);
         }
         Ok(())
     }
@@ -88,12 +98,16 @@ impl<D: BlockDevice> Disk<D> {
     /// Writes `data` (a multiple of [`SECTOR`] bytes) from sector `first`, bypassing the
     /// cache (the formatter and the write-back use it).
     pub(crate) fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Error> {
-        let mut sector = [0u8; SECTOR];
-        for (i, chunk) in data.chunks(SECTOR).enumerate() {
-            sector.fill(0);
-            sector[..chunk.len()].copy_from_slice(chunk);
+        let whole = data.len() / SECTOR * SECTOR;
+        self.dev
+            .write_sectors(first, &data[..whole])
+            .map_err(device_error)?;
+        if whole < data.len() {
+            // A last partial sector: zero-padded.
+            let mut sector = [0u8; SECTOR];
+            sector[..data.len() - whole].copy_from_slice(&data[whole..]);
             self.dev
-                .write(first + i as u64, &sector)
+                .write(first + (whole / SECTOR) as u64, &sector)
                 .map_err(device_error)?;
         }
         Ok(())
@@ -205,8 +219,45 @@ impl<D: BlockDevice> Disk<D> {
             .map(|(block, e)| (e.kind, *block))
             .collect();
         dirty.sort_unstable();
-        for (_, block) in dirty {
-            self.write_now(block)?;
+        // Runs of consecutive blocks of one kind leave in one call (a device may move
+        // several sectors a request); the order stays that of `dirty`.
+        let mut at = 0;
+        while at < dirty.len() {
+            let (kind, first) = dirty[at];
+            let most = (MAX_RUN_BYTES / self.block_size).max(1);
+            let mut len = 1;
+            while at + len < dirty.len()
+                && len < most
+                && dirty[at + len] == (kind, first + len as u32)
+            {
+                len += 1;
+            }
+            if len == 1 {
+                self.write_now(first)?;
+            } else {
+                self.write_run(first, len)?;
+            }
+            at += len;
+        }
+        Ok(())
+    }
+
+    /// Writes the `len` dirty cached blocks from `first` on as one run.
+    fn write_run(&mut self, first: u32, len: usize) -> Result<(), Error> {
+        let mut run = Vec::new();
+        run.try_reserve_exact(len * self.block_size)
+            .map_err(|_| Error::Io("no memory for a write-back run".into()))?;
+        for block in first..first + len as u32 {
+            match self.entries.get(&block) {
+                Some(entry) => run.extend_from_slice(&entry.data),
+                None => return Err(Error::Corrupt("a dirty block left the cache")),
+            }
+        }
+        self.write_sectors(self.first_sector(first), &run)?;
+        for block in first..first + len as u32 {
+            if let Some(entry) = self.entries.get_mut(&block) {
+                entry.dirty = false;
+            }
         }
         Ok(())
     }
@@ -241,6 +292,8 @@ mod tests {
     struct Recorder {
         data: Vec<u8>,
         writes: Vec<u64>,
+        /// (first sector, sectors) of each `write_sectors`.
+        runs: Vec<(u64, usize)>,
     }
 
     impl BlockDevice for Recorder {
@@ -262,12 +315,20 @@ mod tests {
         fn flush(&mut self) -> Result<(), ()> {
             Ok(())
         }
+        fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), ()> {
+            self.runs.push((first, data.len() / SECTOR));
+            for (i, sector) in data.as_chunks::<SECTOR>().0.iter().enumerate() {
+                self.write(first + i as u64, sector)?;
+            }
+            Ok(())
+        }
     }
 
     fn disk(blocks: usize) -> Disk<Recorder> {
         let recorder = Recorder {
             data: vec![0; blocks * 1024],
             writes: Vec::new(),
+            runs: Vec::new(),
         };
         Disk::new(recorder, 1024)
     }
@@ -298,6 +359,25 @@ mod tests {
         // Nothing is written twice.
         disk.write_back().unwrap();
         assert_eq!(disk.dev.writes.len(), 10);
+    }
+
+    /// Consecutive dirty blocks of one kind leave as one run, in order; a gap or another
+    /// kind starts a new one.
+    #[test]
+    fn consecutive_blocks_leave_as_runs() {
+        let mut disk = disk(16);
+        for block in [3, 4, 5, 7] {
+            disk.modify(block, Kind::Data).unwrap()[0] = block as u8;
+        }
+        disk.modify(6, Kind::InodeTable).unwrap()[0] = 6;
+        disk.write_back().unwrap();
+        assert_eq!(disk.dev.runs, [(6, 6), (14, 2), (12, 2)]);
+        let device = disk.into_device();
+        assert!(
+            [3, 4, 5, 6, 7]
+                .iter()
+                .all(|&b| device.data[b * 1024] == b as u8)
+        );
     }
 
     #[test]

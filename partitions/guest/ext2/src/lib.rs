@@ -41,8 +41,10 @@
 //! blocks leave it through one function that first writes the file data and then the
 //! metadata, ordered: indirect (block-map) blocks, superblock, group descriptors and bitmaps,
 //! inode tables, directory blocks (a journal can later be placed in front of that
-//! function). This happens on [`Ext2::sync`], [`Ext2::fsync`] (which syncs everything, as
-//! ext2 has no per-file metadata tracking), [`Ext2::unmount`], and whenever the cache is
+//! function); consecutive blocks of one kind go to the device as one run of sectors
+//! ([`slots::BlockDevice::write_sectors`]), a block read as one too. This happens on
+//! [`Ext2::sync`], [`Ext2::fsync`] (which syncs everything, as ext2 has no per-file
+//! metadata tracking), [`Ext2::unmount`], and whenever the cache is
 //! full of dirty blocks.
 //!
 //! * Mounting read-write clears `EXT2_VALID_FS` on disk at once (and flushes), so a cut

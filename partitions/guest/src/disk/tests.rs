@@ -7,6 +7,8 @@ struct Memory {
     reads: u32,
     writes: u32,
     flushes: u32,
+    /// Runs of sectors asked for in one call.
+    runs: u32,
     /// Requests of this sector fail.
     bad: Option<u64>,
     /// Every request fails.
@@ -29,6 +31,7 @@ impl Memory {
             reads: 0,
             writes: 0,
             flushes: 0,
+            runs: 0,
             bad: None,
             dead: false,
         };
@@ -66,6 +69,20 @@ impl slots::BlockDevice for Memory {
         self.flushes += 1;
         if self.dead {
             return Err(Failed);
+        }
+        Ok(())
+    }
+    fn read_sectors(&mut self, first: u64, buf: &mut [u8]) -> Result<(), Failed> {
+        self.runs += 1;
+        for (i, chunk) in buf.as_chunks_mut::<SECTOR>().0.iter_mut().enumerate() {
+            self.read(first + i as u64, chunk)?;
+        }
+        Ok(())
+    }
+    fn write_sectors(&mut self, first: u64, data: &[u8]) -> Result<(), Failed> {
+        self.runs += 1;
+        for (i, chunk) in data.as_chunks::<SECTOR>().0.iter().enumerate() {
+            self.write(first + i as u64, chunk)?;
         }
         Ok(())
     }
@@ -280,4 +297,37 @@ fn seeking_stays_inside_the_disk() {
     assert_eq!(seek(0, -1, 0, 4096), Err(Errno::EINVAL));
     assert_eq!(seek(10, i64::MAX, 1, 4096), Err(Errno::EINVAL));
     assert_eq!(seek(0, 0, 3, 4096), Err(Errno::EINVAL));
+}
+
+/// Whole sectors of a call go to the device as one run (the link moves several a request);
+/// only a partial first or last sector goes alone, read and written back.
+#[test]
+fn whole_sectors_go_as_one_run() {
+    let mut d = disk(32);
+    let data = vec![7u8; 8 * SECTOR];
+    assert_eq!(d.write(0, &data), Ok(8 * SECTOR));
+    assert_eq!((d.device_mut().runs, d.device_mut().writes), (1, 8));
+    // 100 bytes into sector 8, through sector 11, ending 100 bytes into sector 12.
+    let data = vec![9u8; 4 * SECTOR];
+    assert_eq!(d.write(8 * SECTOR as u64 + 100, &data), Ok(4 * SECTOR));
+    let m = d.device_mut();
+    // A partial sector is a run of one read and one written; the 3 whole ones one run.
+    assert_eq!(
+        (m.runs, m.writes, m.reads),
+        (6, 13, 2),
+        "partial, run of 3, partial"
+    );
+    assert_eq!(m.sectors[8][..100], [8; 100]);
+    assert_eq!(m.sectors[8][100..], [9; 412]);
+    assert_eq!(m.sectors[12][..100], [9; 100]);
+    assert_eq!(m.sectors[12][100..], [12; 412]);
+    // Reading sectors 16..24 (not cached): one run.
+    let mut back = vec![0u8; 8 * SECTOR];
+    assert_eq!(d.read(16 * SECTOR as u64, &mut back), Ok(8 * SECTOR));
+    assert_eq!(d.device_mut().runs, 7);
+    assert!(
+        back.chunks(SECTOR)
+            .enumerate()
+            .all(|(i, s)| s == [16 + i as u8; SECTOR])
+    );
 }

@@ -112,6 +112,41 @@ fn records_go_through_the_link_into_the_tenants_range_and_survive_a_power_cut() 
     assert_eq!(back, payload);
 }
 
+/// A run of sectors goes four to a request (the last request shorter), lands where single
+/// writes would, and reads back the same way; a length that is no multiple of a sector
+/// moves its whole sectors only.
+#[test]
+fn runs_of_sectors_go_four_to_a_request() {
+    use slots::BlockDevice;
+    let mut disk = CachedDisk::default();
+    let data: Vec<u8> = (0..11 * SECTOR).map(|i| (i * 13 % 251) as u8).collect();
+    let mut c = Client::new(Loopback {
+        disk: &mut disk,
+        range: PLC,
+        damage: None,
+        outcomes: Vec::new(),
+    });
+    c.write_sectors(5, &data).unwrap();
+    assert_eq!(c.transport.outcomes.len(), 3, "4 + 4 + 3 sectors");
+    let mut back = vec![0u8; 11 * SECTOR + 100];
+    c.read_sectors(5, &mut back).unwrap();
+    assert_eq!(c.transport.outcomes.len(), 6);
+    assert_eq!(back[..11 * SECTOR], data[..]);
+    assert!(
+        back[11 * SECTOR..].iter().all(|&b| b == 0),
+        "the partial sector untouched"
+    );
+    for sector in 0..11 {
+        let mut one = [0u8; SECTOR];
+        c.read(5 + sector, &mut one).unwrap();
+        let at = sector as usize * SECTOR;
+        assert_eq!(one[..], data[at..at + SECTOR]);
+    }
+    // A run reaching past the range: the driver refuses the request that does.
+    let e = c.write_sectors(28, &data[..8 * SECTOR]).unwrap_err();
+    assert_eq!(e, ClientError::Status(Status::OutOfRange));
+}
+
 #[test]
 fn a_damaged_response_is_an_error_not_data() {
     let mut disk = CachedDisk::default();
