@@ -368,6 +368,13 @@ fn main(start: u64, _: u64) {
     let left = system.pids().filter(|&pid| pid != INIT_PID).count();
     println!("guest: init ended with {left} other processes left");
     system.release_all(&mut fs, &mut host);
+    // As a shutdown: the mounted file system written back and marked clean.
+    if let Some(path) = fs.mount_info().map(|m| m.path()) {
+        match fs.umount(guest::vfs::Node::Mounted(ext2::ROOT_INO)) {
+            Ok(()) => println!("guest: {path:?} unmounted"),
+            Err(e) => println!("guest: {path:?} not unmounted: {}", e.describe()),
+        }
+    }
     report(ipc, outcome);
 }
 

@@ -20,7 +20,9 @@
 //! - **Limits.** Symbolic-link targets longer than 279 bytes cannot be followed
 //!   (`ENAMETOOLONG`); `getcwd` and `/proc/<pid>/fd` name directories, not files
 //!   (`ENOENT`); its files cannot be executed (`EACCES`) or mapped (`ENODEV`): they are
-//!   not in memory as the initramfs's are; owners are stored, every process is root.
+//!   not in memory as the initramfs's are; new files are root's (`chown` is accepted and
+//!   not stored: every process is root). When the guest ends (its init exits), the file
+//!   system is unmounted as at a shutdown.
 
 use super::{Ino, PathBuf, Stat};
 use crate::disk::Volume;
@@ -122,6 +124,11 @@ impl Mount {
             crate::disk::DEVICE_PATH,
             self.path.as_str()
         )
+    }
+
+    /// The directory it is mounted on.
+    pub fn path(&self) -> PathBuf {
+        self.path
     }
 
     /// The disk's size in bytes.
