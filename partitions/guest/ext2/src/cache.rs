@@ -171,6 +171,11 @@ impl<D: BlockDevice> Disk<D> {
         Ok(())
     }
 
+    /// Whether `block` is in the cache (its contents there may be newer than the disk's).
+    pub(crate) fn holds(&self, block: u32) -> bool {
+        self.entries.contains_key(&block)
+    }
+
     /// The contents of `block`.
     pub(crate) fn read(&mut self, block: u32) -> Result<&[u8], Error> {
         Ok(&self.entry(block, true)?.data)

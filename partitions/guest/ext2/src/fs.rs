@@ -17,6 +17,9 @@ use crate::layout::{
 };
 use crate::{Error, FsStat, Stat};
 
+/// Most whole blocks one direct read of a file moves ([`Ext2::read`]).
+const MAX_DIRECT_BLOCKS: usize = 64;
+
 /// A mounted ext2 file system over the device `D`.
 pub struct Ext2<D: BlockDevice> {
     pub(crate) disk: Disk<D>,
@@ -322,8 +325,37 @@ impl<D: BlockDevice> Ext2<D> {
             let pos = offset + done as u64;
             let within = (pos % block_size) as usize;
             let chunk = (block_size as usize - within).min(len - done);
+            let logical = pos / block_size;
+            let mapped = self.map_block(&inode, logical)?;
+            if let Some(first) = mapped
+                && within == 0
+                && chunk == block_size as usize
+                && !self.disk.holds(first)
+            {
+                // Whole blocks on consecutive disk blocks that the cache does not hold go
+                // straight from the disk into `buf`, as one run (a device may move several
+                // sectors a request); the cache keeps what was read before.
+                let most = ((len - done) / chunk).min(MAX_DIRECT_BLOCKS);
+                let mut count = 1;
+                while count < most {
+                    let next = first.checked_add(count as u32);
+                    if next.is_none()
+                        || self.map_block(&inode, logical + count as u64)? != next
+                        || next.is_some_and(|b| self.disk.holds(b))
+                    {
+                        break;
+                    }
+                    count += 1;
+                }
+                let bytes = count * chunk;
+                let sector = self.disk.first_sector(first);
+                self.disk
+                    .read_sectors(sector, &mut buf[done..done + bytes])?;
+                done += bytes;
+                continue;
+            }
             let out = &mut buf[done..done + chunk];
-            match self.map_block(&inode, pos / block_size)? {
+            match mapped {
                 None => out.fill(0),
                 Some(block) => out.copy_from_slice(&self.disk.read(block)?[within..within + chunk]),
             }
