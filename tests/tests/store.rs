@@ -5,7 +5,9 @@
 //! `store_boot_project`: the first boot downloads a changed program (revision 2) with
 //! plcctl; it becomes the boot project and RETAIN snapshots are saved. The second boot
 //! (same disk) starts the boot project, restores the newest snapshot (the RETAIN counter
-//! goes on from its value) and the guest finds revision 2 running without a download.
+//! goes on from its value) and the guest finds revision 2 running without a download;
+//! the guest then makes it trap, and after the health monitor's warm restart revision 2
+//! runs again, its counter going on from RAM's value.
 //!
 //! `store_corrupt`: as above, but the newest RETAIN slot's header is damaged on the disk
 //! image between the boots: the PLC skips it (logged, reported to the health monitor) and
@@ -133,7 +135,8 @@ fn first_boot(name: &str) -> Outcome {
     o
 }
 
-/// The second boot's common checks: the boot project runs, no download.
+/// The second boot's common checks: the boot project runs, no download; after the warm
+/// restart the guest's trap caused, it runs again with RAM's RETAIN values.
 fn second_boot_runs_the_boot_project(o: &Outcome) {
     check(o, o.line("panic at ").is_none(), "a partition panicked");
     check(
@@ -159,9 +162,31 @@ fn second_boot_runs_the_boot_project(o: &Outcome) {
     for line in [
         "[plc] plc: store: boot project #1 loaded: ",
         "[plc] plc: store: 1 RETAIN variable(s) restored",
+        "[plc] plc: warm restart: 1 RETAIN variable(s) kept",
     ] {
         check(o, o.line(line).is_some(), &format!("missing {line:?}"));
     }
+    // The trap's warm restart runs the boot project again (revision 2 read after it, above)
+    // with RAM's RETAIN counter: it never goes back.
+    let loads = o
+        .lines
+        .iter()
+        .filter(|l| l.contains("[plc] plc: store: boot project #1 loaded: "))
+        .count();
+    check(
+        o,
+        loads == 2,
+        &format!("the boot project loaded {loads} times, not 2 (cold, warm)"),
+    );
+    let counts: Vec<u64> = out
+        .iter()
+        .filter_map(|l| l.strip_prefix("Keep.cycles = ")?.trim().parse().ok())
+        .collect();
+    check(
+        o,
+        counts.len() == 3 && counts.windows(2).all(|w| w[0] < w[1]),
+        &format!("Keep.cycles before the trap, after the warm restart and later: {counts:?}"),
+    );
 }
 
 #[test]

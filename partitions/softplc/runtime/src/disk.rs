@@ -12,6 +12,7 @@ use apex::a653rs::prelude::*;
 use apex::user_rt::print::LineBuffer;
 use apex::user_rt::println;
 use blk_core::client::{Client, Transport};
+use core::fmt::Write;
 use core::sync::atomic::{AtomicU8, Ordering};
 use core::time::Duration;
 use plc_vm::image::Image;
@@ -21,8 +22,8 @@ use softplc::store::{self, RetainSchedule};
 
 /// The largest encoded boot project (a program of the largest download and a watch list).
 const BOOT_MAX: usize = crate::MAX_IMAGE + 4 * 1024;
-/// The largest encoded RETAIN snapshot.
-const RETAIN_MAX: usize = 64 * 1024;
+/// The largest encoded RETAIN snapshot: 64 KiB of values with their names and headers.
+const RETAIN_MAX: usize = 68 * 1024;
 
 /// The store's ports as the client's transport.
 pub struct Ports {
@@ -139,10 +140,10 @@ impl<T> Forced for spin::Mutex<T> {
 }
 
 /// A partition start, by the control process before the first program runs: reads the
-/// store (reporting skipped slots); at a `cold` start the boot project, if one is valid
-/// and `accept` takes it, is copied into `image` (its length returned) and a valid RETAIN
-/// snapshot is kept for [`start`]. Logs what was loaded. A warm start only reads (the
-/// store's state for the saves): it keeps RAM's RETAIN values and the configured program.
+/// store (reporting skipped slots); the boot project, if one is valid and `accept` takes
+/// it, is copied into `image` (its length returned); at a `cold` start a valid RETAIN
+/// snapshot is kept for [`start`] (a warm start keeps RAM's RETAIN values). Logs what was
+/// loaded.
 pub fn load(
     package: &Package,
     cold: bool,
@@ -181,13 +182,29 @@ pub fn load(
             Ok(()) => {
                 image[..b.program.len()].copy_from_slice(b.program);
                 boot_len = Some(b.program.len());
-                persist::STATUS.boot_loaded(record.sequence);
+                if cold {
+                    persist::STATUS.boot_loaded(record.sequence);
+                }
                 println!(
                     "plc: store: boot project #{} loaded: {} bytes, downloaded at release {}",
                     record.sequence,
                     b.program.len(),
                     b.release
                 );
+                // The configuration's watch list wins (it names variables of the program:
+                // `accept` checked); say so when the one saved with it differs.
+                let saved = b.watch.lines();
+                if !saved.clone().eq(package.watch()) {
+                    let mut line = text!(
+                        "plc: store: boot project #{} was saved watching",
+                        record.sequence
+                    );
+                    for name in saved {
+                        let _ = write!(line, " {name}");
+                    }
+                    let _ = write!(line, "; the configured watch list is used");
+                    println!("{}", line.as_str());
+                }
             }
         },
     }
@@ -243,10 +260,10 @@ fn read(package: &Package, period_ns: u64, cold: bool) -> Option<slots::Record> 
                 persist::STATUS.cold_start();
             }
             if !cold {
-                // A warm restart keeps RAM's RETAIN values and runs the configured program.
+                // A warm restart runs the boot project too, with RAM's RETAIN values.
                 *DISK.lock() = Some((disk, found_store));
                 *CONTROL.lock() = Some(control);
-                return None;
+                return boot.loaded;
             }
             match boot.loaded {
                 None => println!("plc: store: no boot project; the configured program runs"),
@@ -414,13 +431,17 @@ fn write_pending() {
         }
     }
     if let Some((n, release)) = outbox.retain.take() {
+        // The store process's time for the save: its sector writes and both flushes.
+        let write_start = crate::now_ns();
         match found.write_retain(client, &outbox.retain_bytes[..n]) {
             Ok(r) => {
+                let written_ns = crate::now_ns() - write_start;
                 persist::STATUS.retain_saved(r.sequence);
                 println!(
-                    "plc: store: RETAIN snapshot #{} saved (release {release}, {n} bytes, copied in {} us)",
+                    "plc: store: RETAIN snapshot #{} saved (release {release}, {n} bytes, copied in {} us, written in {} us)",
                     r.sequence,
-                    outbox.copy_ns / 1_000
+                    outbox.copy_ns / 1_000,
+                    written_ns / 1_000
                 )
             }
             Err(e) => report(text!("store: RETAIN not saved: {e}").as_str()),

@@ -291,7 +291,7 @@ pub fn take_over<'f, 'w>(
     new: &Image,
     safe: &SafeValues,
     forced: impl Iterator<Item = (u32, &'f [u8])>,
-    mut watch: impl Iterator<Item = &'w str>,
+    watch: impl Iterator<Item = &'w str>,
 ) -> Result<Takeover, Refusal> {
     for i in 0..old.task_count().max(new.task_count()) {
         let same = match (old.task(i), new.task(i)) {
@@ -351,10 +351,20 @@ pub fn take_over<'f, 'w>(
             len: len as u8,
         });
     }
-    if let Some(missing) = watch.find(|name| new.find_var(name).is_none()) {
-        return Err(Refusal::Watch(VarName::of(missing)));
-    }
+    check_watch(new, watch)?;
     Ok(takeover)
+}
+
+/// Refuses program `new` if a name on `watch` (the configured watch list) is not one of
+/// its variables: a download, and a boot project saved with another configuration.
+pub fn check_watch<'w>(
+    new: &Image,
+    mut watch: impl Iterator<Item = &'w str>,
+) -> Result<(), Refusal> {
+    match watch.find(|name| new.find_var(name).is_none()) {
+        Some(missing) => Err(Refusal::Watch(VarName::of(missing))),
+        None => Ok(()),
+    }
 }
 
 /// Starts the new program's machine `new` (just created, its data initialised) from the
@@ -416,6 +426,34 @@ impl Running {
             (Program::Downloaded { buffer, .. }, _) => 1 - buffer.min(1),
             (Program::Configured, Some(Program::Downloaded { buffer, .. })) => buffer.min(1),
             (Program::Configured, _) => 0,
+        }
+    }
+
+    /// The image buffer a start loads the boot project into, `was` having run before a warm
+    /// start (`None`: a cold start): never the one holding `was`'s program, whose RETAIN
+    /// values are carried over from it.
+    pub fn boot_buffer(was: Option<Running>) -> usize {
+        match was.map(|w| w.program) {
+            Some(Program::Downloaded { buffer, .. }) => 1 - buffer.min(1),
+            _ => 0,
+        }
+    }
+
+    /// What runs when this start (cold: [`Running::COLD`], warm: [`Running::warm_start`])
+    /// found a boot project of `len` bytes in image buffer `buffer`
+    /// ([`Running::boot_buffer`]): at a cold start it takes the configured program's place
+    /// as a download would; at a warm start it runs in this start's data memory, the
+    /// values of what ran carried over to it as they would be to the configured program.
+    pub fn boot_project(self, warm: bool, buffer: usize, len: usize) -> Running {
+        if !warm {
+            return self.downloaded(buffer, len);
+        }
+        Running {
+            program: Program::Downloaded {
+                buffer: buffer.min(1),
+                len,
+            },
+            data: self.data,
         }
     }
 
@@ -484,6 +522,40 @@ mod tests {
                 len: 103
             },
             "assembled in the buffer the warm restart left alone"
+        );
+    }
+
+    /// A warm start with a boot project: it loads where the program that ran is not, runs
+    /// in the other data memory than that program's, and the next download is assembled
+    /// where the old program was (after the handover).
+    #[test]
+    fn a_warm_start_runs_the_boot_project_beside_what_ran() {
+        for was in [
+            Running::COLD,
+            Running {
+                program: Program::Downloaded { buffer: 0, len: 9 },
+                data: 1,
+            },
+            Running {
+                program: Program::Downloaded { buffer: 1, len: 9 },
+                data: 0,
+            },
+        ] {
+            let buffer = Running::boot_buffer(Some(was));
+            if let Program::Downloaded { buffer: old, .. } = was.program {
+                assert_ne!(buffer, old, "{was:?}: loaded over the program that ran");
+            }
+            let next = Running::warm_start(was).boot_project(true, buffer, 50);
+            assert_eq!(next.program, Program::Downloaded { buffer, len: 50 });
+            assert_ne!(next.data, was.data, "{was:?}: data memory reused");
+            let staging = next.staging(Some(was));
+            assert_ne!(staging, buffer, "{was:?}: staging over the boot project");
+        }
+        // A cold start: as a download of the boot project.
+        let buffer = Running::boot_buffer(None);
+        assert_eq!(
+            Running::COLD.boot_project(false, buffer, 50),
+            Running::COLD.downloaded(0, 50)
         );
     }
 

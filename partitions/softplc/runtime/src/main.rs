@@ -104,8 +104,11 @@
 //!   handshake in time>` and `plc: online: session of <client> from <ip>:<port> ended:
 //!   <why>` (a tampered, replayed or oversized record), the last two at most
 //!   [`EVENT_LINES`] per statistics interval;
-//! - with `plc.store` (the store process and the load: [`disk`]), at a cold start
-//!   `plc: store: boot project #<seq> loaded: <n> bytes, downloaded at release <r>` or
+//! - with `plc.store` (the store process and the load: [`disk`]), at a cold start (and
+//!   the first line at a warm one too)
+//!   `plc: store: boot project #<seq> loaded: <n> bytes, downloaded at release <r>`
+//!   (followed by `plc: store: boot project #<seq> was saved watching <names>; the
+//!   configured watch list is used` when the configuration's list changed since) or
 //!   `plc: store: no boot project; the configured program runs`, `plc: store: RETAIN
 //!   snapshot #<seq> loaded: <n> variable(s) of release <r>` or `plc: store: no RETAIN
 //!   snapshot; initial values`, then `plc: store: <n> RETAIN variable(s) restored`;
@@ -113,10 +116,14 @@
 //!   slot and `plc: store: boot project #<seq> refused: <why>; the configured program
 //!   runs` (both reported to the health monitor); `plc: store: boot project #<seq> saved
 //!   (<n> bytes)` and `plc: store: RETAIN snapshot #<seq> saved (release <r>, <n> bytes, copied in <us>
-//!   us)`
+//!   us, written in <us> us)`
 //!   when a save is on the disk (`<seq>`: the record's sequence number; the copy is the
-//!   control process's time for the snapshot between releases), `plc: store:
+//!   control process's time for the snapshot between releases, the write the store
+//!   process's from its first sector write to its last flush), `plc: store:
 //!   <what> not saved: <why>` when not;
+//! - `plc: first cycle done (release <r>)` once after the partition's start, when the
+//!   control process first finds a task's cycle done (at the end of that release; the
+//!   line's kernel timestamp is the boot time `cargo xtask bench --disk` reports);
 //! - `plc: refusing the program: <reason>` when the package or bytecode is bad (the
 //!   partition reports it and creates no process: it idles).
 //!
@@ -141,7 +148,7 @@ use plc_vm::verify::VerifiedImage;
 use plc_vm::vm::{CallFrame, Fault, Machine, Memory, TryFrame};
 use protocol::{Direction, PortKind};
 use softplc::download::{
-    Program, Refusal, Running, Takeover, check_program, fit_configuration, hand_over,
+    Program, Refusal, Running, Takeover, check_program, check_watch, fit_configuration, hand_over,
 };
 use softplc::online::Loader;
 use softplc::package::{Package, PortMap, SharedLayout};
@@ -558,24 +565,34 @@ extern "C" fn control() {
         tries,
         shared_scratch,
     } = &mut *workspace;
-    // A warm start carries the RETAIN values of what ran before it to the configured program.
+    // A warm start carries the RETAIN values of what ran before it to the program it starts
+    // (the boot project if the store holds one, else the configured program).
     let mut previous = WARM
         .load(Ordering::Acquire)
         .then(|| *RUNNING.lock())
         .map(|was| (was, None::<Takeover>));
     let mut running = previous.map_or(Running::COLD, |(was, _)| Running::warm_start(was));
-    // A cold start runs the boot project if the store holds a valid one (`plc.store`).
-    if let Some(len) = disk::load(&package, previous.is_none(), &mut images[0], |program| {
+    // A start runs the boot project if the store holds a valid one (`plc.store`): a cold
+    // start with the newest RETAIN snapshot, a warm one with RAM's values of what ran.
+    let was = previous.map(|(was, _)| was);
+    let boot_buffer = Running::boot_buffer(was);
+    let cold = was.is_none();
+    if let Some(len) = disk::load(&package, cold, &mut images[boot_buffer], |program| {
         let (verified, schedule) = check_program(program, &mut scratch[..], MAX_DATA, period)?;
+        // Saved with the watch list of its download, which was the configured one; a
+        // changed configuration's list must name its variables, as for a download.
+        check_watch(verified.image(), package.watch())?;
         fit_configuration(verified.image(), schedule, &package).map(drop)
     }) {
-        running = running.downloaded(0, len);
+        running = running.boot_project(!cold, boot_buffer, len);
     }
     let shared = package.shared().map(|layout| (layout, segment(&layout)));
     let mut shared_stats = SharedStats::default();
     let started = now_ns();
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
     let mut first_release = 0u64;
+    // The first cycle after the partition's start is logged once.
+    let mut first_cycle_logged = false;
     loop {
         *RUNNING.lock() = running;
         let staging_index = running.staging(previous.map(|(was, _)| was));
@@ -702,6 +719,14 @@ extern "C" fn control() {
             let committed = with_life(|life| {
                 life.begin();
                 life.end();
+                if !first_cycle_logged
+                    && life.rt.stats[..life.rt.schedule.count]
+                        .iter()
+                        .any(|s| s.count > 0)
+                {
+                    first_cycle_logged = true;
+                    println!("plc: first cycle done (release {})", life.rt.releases);
+                }
                 let stopped_before = life.rt.stopped.map(|s| s.is_some());
                 // Online requests from the ports and from TCP, then Modbus (which answers
                 // exception 4 to a write once every task is stopped, this release too).
