@@ -25,7 +25,22 @@
  *   tcp_4mib          (per run) 4 MiB from a child process over a loopback TCP
  *                     connection, in 64 KiB writes
  *
- *     linux-bench [--loops N] [--fork-loops N] [--rounds N] [--prefix P] [METRIC...]
+ * and, only when named (they need a file system to write to, `--dir`), the disk metrics,
+ * timed with CLOCK_MONOTONIC instead of the TSC, each line in its own unit:
+ *
+ *   disk_write_seq    (MB/s = 10^6 bytes a second; per run) a file of `--disk-kib` KiB
+ *                     (default 1024) created in DIR, written in 64 KiB writes and
+ *                     fsync'd: from the open to the end of the fsync
+ *   disk_read_seq     (MB/s; per run) the same file read back in 64 KiB reads after the
+ *                     caches were dropped (untimed): with `--remount DEV`, DIR unmounted
+ *                     and DEV mounted there again as ext2 (both the guest and Linux then
+ *                     read from the disk); without it, 3 written to
+ *                     /proc/sys/vm/drop_caches (a `note` line says which)
+ *   disk_fsync        (us per call) 4 KiB written at the start of a file of DIR and
+ *                     fsync'd, `--fsync-loops` calls a round (default 50)
+ *
+ *     linux-bench [--loops N] [--fork-loops N] [--rounds N] [--prefix P]
+ *                 [--dir DIR] [--remount DEV] [--disk-kib N] [--fsync-loops N] [METRIC...]
  *
  * `--fork-loops` sets the loop length of the four process metrics on their own (they cost
  * milliseconds per call where fork copies the address space). Must be started with an
@@ -39,9 +54,12 @@
 #include <arpa/inet.h>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <sys/mount.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/syscall.h>
 #include <sys/wait.h>
+#include <time.h>
 #include <unistd.h>
 #include <x86intrin.h>
 
@@ -411,6 +429,190 @@ static int tcp_4mib_round(long n)
 	return 0;
 }
 
+/* The disk metrics: their directory, the device to mount there again before a read. */
+static const char *disk_dir;
+static const char *remount_dev;
+static long disk_kib = 1024, fsync_loops = 50;
+#define DISK_BLOCK 65536L
+#define FSYNC_BYTES 4096
+
+static double seconds(void)
+{
+	struct timespec t;
+	clock_gettime(CLOCK_MONOTONIC, &t);
+	return t.tv_sec + t.tv_nsec / 1e9;
+}
+
+static const char *disk_path(const char *name)
+{
+	static char path[4096];
+	snprintf(path, sizeof path, "%s/%s", disk_dir, name);
+	return path;
+}
+
+static char disk_buf[DISK_BLOCK];
+
+/* Writes the sequential file (`--disk-kib` KiB in 64 KiB writes) and fsyncs it; -1 on
+ * failure. */
+static int write_seq_file(void)
+{
+	for (long i = 0; i < DISK_BLOCK; i++)
+		disk_buf[i] = (char)(i * 7 + (i >> 9));
+	int fd = open(disk_path("seq"), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+	if (fd < 0) {
+		fail("open the sequential file for writing");
+		return -1;
+	}
+	long bytes = disk_kib * 1024;
+	for (long done = 0; done < bytes; done += DISK_BLOCK) {
+		long len = bytes - done < DISK_BLOCK ? bytes - done : DISK_BLOCK;
+		if (write(fd, disk_buf, len) != len) {
+			fail("write the sequential file");
+			close(fd);
+			return -1;
+		}
+	}
+	if (fsync(fd)) {
+		fail("fsync the sequential file");
+		close(fd);
+		return -1;
+	}
+	return close(fd);
+}
+
+/* MB/s of one write of the sequential file, -1 on failure. */
+static double disk_write_seq_round(void)
+{
+	double start = seconds();
+	if (write_seq_file() < 0)
+		return -1;
+	return disk_kib * 1024 / (seconds() - start) / 1e6;
+}
+
+/* Drops the caches between a write and a read (see the header). */
+static int drop_caches(void)
+{
+	if (remount_dev) {
+		if (umount(disk_dir)) {
+			fail("umount the disk directory");
+			return -1;
+		}
+		if (mount(remount_dev, disk_dir, "ext2", 0, NULL)) {
+			fail("mount the disk again");
+			return -1;
+		}
+		return 0;
+	}
+	sync();
+	int fd = open("/proc/sys/vm/drop_caches", O_WRONLY);
+	if (fd < 0 || write(fd, "3\n", 2) != 2) {
+		fail("write /proc/sys/vm/drop_caches");
+		if (fd >= 0)
+			close(fd);
+		return -1;
+	}
+	return close(fd);
+}
+
+/* MB/s of one read of the sequential file after the caches were dropped. */
+static double disk_read_seq_round(void)
+{
+	struct stat st;
+	if ((stat(disk_path("seq"), &st) || st.st_size != disk_kib * 1024) &&
+	    write_seq_file() < 0)
+		return -1;
+	if (drop_caches() < 0)
+		return -1;
+	double start = seconds();
+	int fd = open(disk_path("seq"), O_RDONLY);
+	if (fd < 0) {
+		fail("open the sequential file for reading");
+		return -1;
+	}
+	long got = 0, n;
+	while ((n = read(fd, disk_buf, DISK_BLOCK)) > 0)
+		got += n;
+	close(fd);
+	double elapsed = seconds() - start;
+	if (n < 0 || got != disk_kib * 1024) {
+		printf("bench-error disk_read_seq read %ld bytes of %ld\n", got, disk_kib * 1024);
+		broken = 1;
+		return -1;
+	}
+	return got / elapsed / 1e6;
+}
+
+/* us per call of `--fsync-loops` writes of 4 KiB at the start of a file, each fsync'd. */
+static double disk_fsync_round(void)
+{
+	int fd = open(disk_path("fsync"), O_WRONLY | O_CREAT, 0644);
+	if (fd < 0) {
+		fail("open the fsync file");
+		return -1;
+	}
+	double start = seconds();
+	for (long i = 0; i < fsync_loops; i++) {
+		disk_buf[0] = (char)i;
+		if (pwrite(fd, disk_buf, FSYNC_BYTES, 0) != FSYNC_BYTES || fsync(fd)) {
+			fail("write and fsync 4 KiB");
+			close(fd);
+			return -1;
+		}
+	}
+	double elapsed = seconds() - start;
+	close(fd);
+	return elapsed / fsync_loops * 1e6;
+}
+
+static const struct {
+	const char *name;
+	const char *unit;
+	double (*round)(void);
+	int warm_up; /* one untimed round first */
+} disk_metrics[] = {
+	{ "disk_write_seq", "MB/s", disk_write_seq_round, 0 },
+	{ "disk_read_seq", "MB/s", disk_read_seq_round, 0 },
+	{ "disk_fsync", "us", disk_fsync_round, 1 },
+};
+#define DISK_METRICS (sizeof disk_metrics / sizeof disk_metrics[0])
+
+static int by_double(const void *a, const void *b)
+{
+	double x = *(const double *)a, y = *(const double *)b;
+	return x < y ? -1 : x > y;
+}
+
+static void measure_disk(size_t m)
+{
+	double values[MAX_ROUNDS];
+	if (!disk_dir) {
+		printf("bench-error %s needs --dir\n", disk_metrics[m].name);
+		broken = 1;
+		return;
+	}
+	if (strcmp(disk_metrics[m].name, "disk_read_seq") == 0) {
+		if (remount_dev)
+			printf("note %s%s: caches dropped by umount and mount of %s on %s\n", prefix,
+			       disk_metrics[m].name, remount_dev, disk_dir);
+		else
+			printf("note %s%s: caches dropped through /proc/sys/vm/drop_caches\n", prefix,
+			       disk_metrics[m].name);
+		fflush(stdout);
+	}
+	if (disk_metrics[m].warm_up && disk_metrics[m].round() < 0)
+		return;
+	for (int r = 0; r < rounds; r++)
+		if ((values[r] = disk_metrics[m].round()) < 0)
+			return;
+	qsort(values, rounds, sizeof values[0], by_double);
+	double median = rounds % 2 ? values[rounds / 2]
+				   : (values[rounds / 2 - 1] + values[rounds / 2]) / 2;
+	printf("bench %s%s median=%.3f min=%.3f max=%.3f unit=%s samples=%d\n", prefix,
+	       disk_metrics[m].name, median, values[0], values[rounds - 1], disk_metrics[m].unit,
+	       rounds);
+	fflush(stdout);
+}
+
 static const struct {
 	const char *name;
 	int (*round)(long n);
@@ -470,7 +672,7 @@ int main(int argc, char **argv)
 	if (argc == 3 && strcmp(argv[1], "--exit") == 0)
 		return atoi(argv[2]);
 	int chosen = 0;
-	int selected[METRICS] = { 0 };
+	int selected[METRICS] = { 0 }, disk_selected[DISK_METRICS] = { 0 };
 	for (int i = 1; i < argc; i++) {
 		if (strcmp(argv[i], "--loops") == 0 && i + 1 < argc)
 			loops = number(argv[++i], 1000000);
@@ -480,20 +682,37 @@ int main(int argc, char **argv)
 			rounds = number(argv[++i], MAX_ROUNDS);
 		else if (strcmp(argv[i], "--prefix") == 0 && i + 1 < argc)
 			prefix = argv[++i];
+		else if (strcmp(argv[i], "--dir") == 0 && i + 1 < argc)
+			disk_dir = argv[++i];
+		else if (strcmp(argv[i], "--remount") == 0 && i + 1 < argc)
+			remount_dev = argv[++i];
+		else if (strcmp(argv[i], "--disk-kib") == 0 && i + 1 < argc)
+			disk_kib = number(argv[++i], 1 << 20);
+		else if (strcmp(argv[i], "--fsync-loops") == 0 && i + 1 < argc)
+			fsync_loops = number(argv[++i], 1000000);
 		else {
-			size_t m = 0;
+			size_t m = 0, d = 0;
 			while (m < METRICS && strcmp(metrics[m].name, argv[i]) != 0)
 				m++;
-			if (m == METRICS) {
+			while (d < DISK_METRICS && strcmp(disk_metrics[d].name, argv[i]) != 0)
+				d++;
+			if (m == METRICS && d == DISK_METRICS) {
 				fprintf(stderr, "linux-bench: unknown metric or option %s\n", argv[i]);
 				return 2;
 			}
-			selected[m] = 1;
+			if (m < METRICS)
+				selected[m] = 1;
+			else
+				disk_selected[d] = 1;
 			chosen = 1;
 		}
 	}
 	for (size_t m = 0; m < METRICS; m++)
 		if (!chosen || selected[m])
 			measure(m);
+	/* The disk metrics only when named. */
+	for (size_t d = 0; d < DISK_METRICS; d++)
+		if (disk_selected[d])
+			measure_disk(d);
 	return broken;
 }

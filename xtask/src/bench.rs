@@ -14,7 +14,11 @@
 //! host: `guest_net_*`, `native_net_*`, `net_ratio_*`; alone with `--net`) is
 //! [`crate::netbench`].
 //!
-//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|us|ratio|count|MB/s|requests/s> samples=<n>`.
+//! The disk benchmark (`tests/configs/bench_disk.toml` and the PLC's store: `guest_disk_*`,
+//! `native_disk_*`, `disk_ratio_*`, `plc_retain_*`, `plc_boot_*`; alone with `--disk`) is
+//! [`crate::diskbench`].
+//!
+//! Line format (an interface): `bench <name> median=<n> min=<n> max=<n> unit=<cycles|ns|us|ms|ratio|count|MB/s|requests/s> samples=<n>`.
 
 use anyhow::{Context, Result, bail};
 use serde::Serialize;

@@ -15,6 +15,7 @@ pub mod artifacts;
 pub mod bench;
 pub mod blk;
 pub mod check_config;
+pub mod diskbench;
 pub mod esp;
 pub mod forte;
 pub mod guest;

@@ -140,12 +140,20 @@ pub fn load_order(modules_dep: &str, drivers: &[&str]) -> Vec<String> {
 }
 
 /// An initramfs entry: path without the leading `/`, mode, contents.
-type InitramfsFile = (String, u32, Vec<u8>);
+pub type InitramfsFile = (String, u32, Vec<u8>);
 
 /// The modules of `kernel` (`/boot/vmlinuz-<version>`) that [`DRIVERS`] need, as
 /// initramfs entries under `modules/` (`.ko`, uncompressed; an `.xz` one through `xz -dc`),
 /// and their file names in load order.
 fn module_files(kernel: &Path) -> Result<(Vec<InitramfsFile>, Vec<String>)> {
+    module_files_for(kernel, DRIVERS)
+}
+
+/// [`module_files`] for the modules `drivers` (and what they need).
+pub fn module_files_for(
+    kernel: &Path,
+    drivers: &[&str],
+) -> Result<(Vec<InitramfsFile>, Vec<String>)> {
     let name = kernel
         .file_name()
         .and_then(|n| n.to_str())
@@ -157,7 +165,7 @@ fn module_files(kernel: &Path) -> Result<(Vec<InitramfsFile>, Vec<String>)> {
     let dep = dir.join("modules.dep");
     let dep = std::fs::read_to_string(&dep).with_context(|| {
         format!(
-            "cannot read {} (the native network leg loads the stock kernel's virtio-net modules)",
+            "cannot read {} (the native legs load the stock kernel's virtio modules)",
             dep.display()
         )
     })?;
@@ -167,7 +175,7 @@ fn module_files(kernel: &Path) -> Result<(Vec<InitramfsFile>, Vec<String>)> {
         Vec::new(),
     )];
     let mut names = Vec::new();
-    for module in load_order(&dep, DRIVERS) {
+    for module in load_order(&dep, drivers) {
         let path = dir.join(&module);
         let bytes = if module.ends_with(".ko") {
             std::fs::read(&path).with_context(|| format!("cannot read {}", path.display()))?
