@@ -26,8 +26,9 @@ use std::string::{String, ToString};
 use std::vec::Vec;
 use std::{format, vec};
 
-/// A small deterministic generator (splitmix64): the same seed, the same numbers.
-struct Rng(u64);
+/// A small deterministic generator (splitmix64): the same seed, the same numbers (also the
+/// power-cut test's delays).
+pub struct Rng(pub u64);
 
 impl Rng {
     fn next(&mut self) -> u64 {
@@ -39,7 +40,7 @@ impl Rng {
     }
 
     /// A number in `lo..=hi`.
-    fn range(&mut self, lo: u64, hi: u64) -> u64 {
+    pub fn range(&mut self, lo: u64, hi: u64) -> u64 {
         lo + self.next() % (hi - lo + 1)
     }
 

@@ -41,8 +41,9 @@ enum Cmd {
         #[arg(long)]
         release: bool,
     },
-    /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak, guest and network systems
-    /// under QEMU, the guest and network benchmarks' native references, the soft-PLC suite on the host: VM,
+    /// Run the benchmarks (kernel, ports, soft-PLC, attack, soak, guest, disk and network
+    /// systems under QEMU, the guest, disk and network benchmarks' native references, the
+    /// soft-PLC suite on the host: VM,
     /// native tier, IronPLC with IRONPLC set); writes target/bench/report.json.
     Bench {
         /// Boot the QEMU benchmarks on deterministic virtual time (-icount): their cycle
@@ -107,6 +108,30 @@ enum Cmd {
         /// `window_switch`, `window_jitter`; writes target/bench/kernel.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports"])]
         kernel: bool,
+        /// Run only the disk benchmark (also part of the full bench): linux-bench's disk
+        /// metrics on an ext2 file system of the guest's /dev/vda over the block-device
+        /// partition (tests/configs/bench_disk.toml, `guest_disk_*`) and on Debian's stock
+        /// kernel with the same virtio-blk (`native_disk_*`, `disk_ratio_*`), the PLC's
+        /// RETAIN save times (4 KiB, 64 KiB) and boot time to its first cycle with a boot
+        /// project (`plc_retain_*`, `plc_boot_*`; the disk legs always on real time, the
+        /// PLC's boots on virtual time with --deterministic-time); writes
+        /// target/bench/disk.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel"])]
+        disk: bool,
+        /// Run only the long power-cut test (not part of the full bench): scenario
+        /// `store_power_cut` with CUTS random power cuts instead of the ordinary run's 20
+        /// (`cargo xtask test store_power_cut --scenarios-only` with WARDEN_POWER_CUTS=CUTS;
+        /// WARDEN_POWER_CUT_SEED replays a seed); prints each cut and the seed.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time"])]
+        power_cut: bool,
+        /// Power cuts of `--power-cut`.
+        #[arg(
+            long,
+            value_name = "CUTS",
+            default_value_t = 200,
+            requires = "power_cut"
+        )]
+        cuts: u32,
     },
     /// Run all host unit tests, then the QEMU scenarios whose name contains FILTER.
     Test {
@@ -189,6 +214,11 @@ fn main() -> ExitCode {
             soak: true, frames, ..
         } => soak(frames),
         Cmd::Bench { hostile: true, .. } => hostile(),
+        Cmd::Bench {
+            power_cut: true,
+            cuts,
+            ..
+        } => power_cut_bench(cuts),
         Cmd::Bench { plc: true, .. } => plc_bench(),
         Cmd::Bench {
             schedules: true, ..
@@ -209,6 +239,11 @@ fn main() -> ExitCode {
             deterministic_time,
             ..
         } => native_bench(deterministic_time),
+        Cmd::Bench {
+            disk: true,
+            deterministic_time,
+            ..
+        } => disk_bench(deterministic_time),
         Cmd::Bench {
             kernel: true,
             deterministic_time,
@@ -329,6 +364,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
         )),
         Ending::Killed => Err("QEMU was killed".to_string()),
         Ending::Done => unreachable!("`run` waits for no text"),
+        Ending::Cut => unreachable!("`run` cuts no power"),
     };
     match verdict {
         Ok(msg) => {
@@ -434,6 +470,23 @@ fn test(filter: Option<&str>, scenarios_only: bool) -> Result<bool> {
         args.push(f);
     }
     cargo_test(&args)
+}
+
+/// `cargo xtask bench --power-cut`: scenario `store_power_cut` with `cuts` power cuts, run
+/// as `cargo xtask test store_power_cut --scenarios-only` by this program with
+/// `WARDEN_POWER_CUTS` set (the test reads it).
+fn power_cut_bench(cuts: u32) -> Result<bool> {
+    if cuts == 0 {
+        bail!("--cuts must be at least 1");
+    }
+    let me = std::env::current_exe().context("cannot find this program to run the test")?;
+    eprintln!("xtask: scenario store_power_cut with {cuts} power cuts");
+    let status = std::process::Command::new(me)
+        .args(["test", "store_power_cut", "--scenarios-only"])
+        .env("WARDEN_POWER_CUTS", cuts.to_string())
+        .status()
+        .context("cannot run `cargo xtask test store_power_cut`")?;
+    Ok(status.success())
 }
 
 /// Assembles the ESP of a benchmark system under `dir` (the root task of `artifacts`, with
@@ -923,6 +976,16 @@ fn print_and_write(metrics: &[xtask::bench::Metric], file: &str) -> Result<bool>
     Ok(true)
 }
 
+/// `cargo xtask bench --disk`: only the disk benchmark ([`xtask::diskbench`]); writes
+/// `target/bench/disk.json`.
+fn disk_bench(deterministic_time: bool) -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let dir = xtask::target_dir().join("bench");
+    let metrics = xtask::diskbench::run(&qemu, &system, &dir, deterministic_time)?;
+    print_and_write(&metrics, "disk.json")
+}
+
 /// `cargo xtask bench --kernel`: only the kernel micro-benchmarks; writes
 /// `target/bench/kernel.json`.
 fn kernel_bench(deterministic_time: bool) -> Result<bool> {
@@ -975,6 +1038,12 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     metrics.extend(hostile_lateness(&qemu, &system, &dir)?);
     metrics.extend(soak_metrics(&qemu, &system, &dir, SOAK_FRAMES)?);
     metrics.extend(guest_metrics(&qemu, &system, &dir, deterministic_time)?);
+    metrics.extend(xtask::diskbench::run(
+        &qemu,
+        &system,
+        &dir,
+        deterministic_time,
+    )?);
     // Timed from the host: always real time.
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::plcnetbench::run(&qemu, &system, &dir)?);

@@ -6,6 +6,10 @@
 //! Exit convention (kernel `qemu::exit`): 0x10 written to isa-debug-exit at port 0xf4 makes
 //! QEMU exit with 33 (success), 0x11 with 35 (failure). Anything else, or a timeout, is a
 //! failure unless the caller expected the system to keep running.
+//!
+//! A power cut ([`run_cut`], scenario `store_power_cut`): QEMU is killed with SIGKILL a
+//! chosen delay after a chosen COM1 line, without a shutdown, and the run ends as
+//! [`Ending::Cut`] (killed by us, not a crash).
 
 use crate::tools::Qemu;
 use anyhow::{Context, Result};
@@ -118,6 +122,22 @@ pub enum Ending {
     Aborted(String),
     /// Every text of [`RunOptions::done_when`] appeared; QEMU was stopped.
     Done,
+    /// The power cut of [`run_cut`]: we killed QEMU with SIGKILL (not a crash, not a
+    /// timeout); [`Outcome::lines`] hold every COM1 line QEMU wrote before it died.
+    Cut,
+}
+
+/// When [`run_cut`] cuts the power: `delay` after the first COM1 line that contains
+/// `after` (a point of the workload, such as its first line: TCG boot times vary with the
+/// host's load, a delay from QEMU's start would not). The cut is SIGKILL: QEMU neither
+/// shuts down nor writes anything more, so a disk image keeps exactly what QEMU had
+/// written to it by then (with `cache=writeback`, what a guest's flush had made durable
+/// and whatever else had left QEMU; the host's page cache survives a killed process), the
+/// way a machine losing power keeps what reached its disk.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PowerCut {
+    pub after: String,
+    pub delay: Duration,
 }
 
 #[derive(Clone, Debug)]
@@ -401,7 +421,23 @@ fn follow(path: PathBuf, tx: mpsc::Sender<String>, done: Arc<Mutex<bool>>) {
 
 /// Boots `options.esp`.
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
-    launch(qemu, Media::Esp(&options.esp), options)
+    launch(qemu, Media::Esp(&options.esp), options, None)
+}
+
+/// Boots `options.esp` and cuts its power as `cut` says: the outcome ends with
+/// [`Ending::Cut`], or as [`run`]'s would when the system ended first (its line never came,
+/// it exited, the timeout). Not with [`Com2::Terminal`] (a killed QEMU leaves the terminal
+/// raw).
+pub fn run_cut(qemu: &Qemu, options: &RunOptions, cut: &PowerCut) -> Result<Outcome> {
+    anyhow::ensure!(
+        options.com2 != Com2::Terminal,
+        "a power cut kills QEMU, which would leave this terminal raw: not with Com2::Terminal"
+    );
+    anyhow::ensure!(
+        !cut.after.is_empty(),
+        "a power cut needs a line to count from"
+    );
+    launch(qemu, Media::Esp(&options.esp), options, Some(cut))
 }
 
 /// Boots the Linux kernel `linux` on the same machine and firmware as [`run`], with COM1
@@ -413,10 +449,15 @@ pub fn run_linux(qemu: &Qemu, linux: &LinuxBoot, options: &RunOptions) -> Result
         done_when: Vec::new(),
         ..options.clone()
     };
-    launch(qemu, Media::Linux(linux), &options)
+    launch(qemu, Media::Linux(linux), &options, None)
 }
 
-fn launch(qemu: &Qemu, media: Media, options: &RunOptions) -> Result<Outcome> {
+fn launch(
+    qemu: &Qemu,
+    media: Media,
+    options: &RunOptions,
+    cut: Option<&PowerCut>,
+) -> Result<Outcome> {
     std::fs::create_dir_all(&options.work_dir)?;
     let vars = options.work_dir.join("OVMF_VARS.fd");
     std::fs::copy(&qemu.ovmf_vars, &vars)
@@ -478,15 +519,41 @@ fn launch(qemu: &Qemu, media: Media, options: &RunOptions) -> Result<Outcome> {
     let mut lines = Vec::new();
     let mut awaited: Vec<&str> = options.done_when.iter().map(String::as_str).collect();
     let deadline = options.timeout.map(|t| started + t);
+    // When the power cut is due (once its line came).
+    let mut cut_at: Option<Instant> = None;
     let ending = loop {
+        if cut_at.is_some_and(|at| Instant::now() >= at) {
+            // SIGKILL (`Child::kill` on Unix): no shutdown.
+            let _ = child.kill();
+            let _ = child.wait();
+            // The lines QEMU wrote before it died, still in the pipe: the reader ends at
+            // its end of file (bounded, should something else hold the pipe open).
+            let until = Instant::now() + Duration::from_secs(5);
+            while let Ok(line) = rx.recv_timeout(until.saturating_duration_since(Instant::now())) {
+                if options.echo {
+                    println!("{line}");
+                }
+                lines.push(line);
+            }
+            break Ending::Cut;
+        }
         let wait = deadline
             .map(|d| d.saturating_duration_since(Instant::now()))
             .unwrap_or(Duration::from_secs(3600))
-            .min(Duration::from_millis(200));
+            .min(Duration::from_millis(200))
+            .min(cut_at.map_or(Duration::MAX, |at| {
+                at.saturating_duration_since(Instant::now())
+            }));
         match rx.recv_timeout(wait) {
             Ok(line) => {
                 if options.echo && !terminal {
                     println!("{line}");
+                }
+                if let Some(cut) = cut
+                    && cut_at.is_none()
+                    && line.contains(&cut.after)
+                {
+                    cut_at = Some(Instant::now() + cut.delay);
                 }
                 let fatal = FATAL_MARKERS.iter().any(|m| line.contains(m));
                 let was_awaited = !awaited.is_empty();
@@ -578,6 +645,61 @@ fn spawn_line_reader(stdout: std::process::ChildStdout, tx: mpsc::Sender<String>
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_power_cut_kills_qemu_its_delay_after_its_line() {
+        let dir = std::env::temp_dir().join(format!("warden-power-cut-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        // A stand-in for QEMU that never ends by itself (a tick every 10 ms, for 30 s).
+        // `install` writes it in its own process: no thread of this one holds it open for
+        // writing when it is started (ETXTBSY).
+        let script = dir.join("fake-qemu.sh");
+        std::fs::write(
+            &script,
+            "#!/bin/sh\necho booting\necho workload starts\ni=0\nwhile [ $i -lt 3000 ]; do echo tick $i; i=$((i + 1)); sleep 0.01; done\n",
+        )
+        .unwrap();
+        let fake = dir.join("fake-qemu");
+        let installed = Command::new("install")
+            .args(["-m", "755"])
+            .arg(&script)
+            .arg(&fake)
+            .status()
+            .unwrap();
+        assert!(installed.success());
+        let vars = dir.join("vars.fd");
+        std::fs::write(&vars, b"").unwrap();
+        let tools = Qemu {
+            binary: fake,
+            ovmf_code: vars.clone(),
+            ovmf_vars: vars,
+        };
+        let options = RunOptions {
+            esp: dir.clone(),
+            timeout: Some(Duration::from_secs(20)),
+            echo: false,
+            work_dir: dir.join("state"),
+            deterministic_time: false,
+            com2: Com2::Unconnected,
+            done_when: Vec::new(),
+            extra_args: Vec::new(),
+        };
+        let cut = PowerCut {
+            after: "workload starts".into(),
+            delay: Duration::from_millis(300),
+        };
+        let o = run_cut(&tools, &options, &cut).unwrap();
+        assert_eq!(o.ending, Ending::Cut, "{}", o.transcript());
+        assert_eq!(o.lines[..2], ["booting", "workload starts"]);
+        assert!(o.lines.iter().any(|l| l.starts_with("tick ")));
+        assert!(o.elapsed < Duration::from_secs(15), "{:?}", o.elapsed);
+        let terminal = RunOptions {
+            com2: Com2::Terminal,
+            ..options
+        };
+        assert!(run_cut(&tools, &terminal, &cut).is_err());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn the_nic_forwards_listen_on_the_loopback_address_only() {
