@@ -28,7 +28,7 @@ use super::{Ino, PathBuf, Stat};
 use crate::disk::Volume;
 use crate::linux::Errno;
 use alloc::boxed::Box;
-use alloc::collections::BTreeMap;
+use alloc::collections::{BTreeMap, BTreeSet};
 use alloc::vec::Vec;
 use core::cell::RefCell;
 use ext2::Ext2;
@@ -57,6 +57,8 @@ pub struct Mount {
     disk_size: u64,
     /// Open file descriptions and working directories on each inode.
     users: BTreeMap<u32, u32>,
+    /// Inodes whose last link went while they were open: freed at their last close.
+    orphans: BTreeSet<u32>,
 }
 
 impl core::fmt::Debug for Mount {
@@ -88,6 +90,7 @@ impl Mount {
             read_only,
             disk_size,
             users: BTreeMap::new(),
+            orphans: BTreeSet::new(),
         })
     }
 
@@ -101,6 +104,7 @@ impl Mount {
             read_only,
             disk_size,
             users,
+            orphans,
         } = self;
         fs.into_inner().unmount().map_err(|(e, fs)| {
             let mount = Box::new(Mount {
@@ -110,6 +114,7 @@ impl Mount {
                 read_only,
                 disk_size,
                 users,
+                orphans,
             });
             (errno(&e), mount)
         })
@@ -276,11 +281,16 @@ impl Mount {
         self.released(gone)
     }
 
-    /// Frees inode `gone` (whose last link went) if nobody has it open.
+    /// Frees inode `gone` (whose last link went) if nobody has it open, else at its last
+    /// close.
     fn released(&mut self, gone: Option<u32>) -> Result<(), Errno> {
         match gone {
-            Some(ino) if !self.users.contains_key(&ino) => self.with(|fs| fs.release(ino)),
-            _ => Ok(()),
+            Some(ino) if self.users.contains_key(&ino) => {
+                self.orphans.insert(ino);
+                Ok(())
+            }
+            Some(ino) => self.with(|fs| fs.release(ino)),
+            None => Ok(()),
         }
     }
 
@@ -312,7 +322,7 @@ impl Mount {
         *count -= 1;
         if *count == 0 {
             self.users.remove(&ino);
-            if !self.read_only {
+            if self.orphans.remove(&ino) {
                 // A failure leaves an unattached inode that e2fsck frees.
                 let _ = self.with(|fs| fs.release(ino));
             }
