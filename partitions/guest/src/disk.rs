@@ -233,13 +233,18 @@ where
     fn read_run(&mut self, first: u64, buf: &mut [u8]) -> Result<(), (usize, Errno)> {
         let count = (buf.len() / SECTOR) as u64;
         debug_assert!(first + count <= self.sectors);
-        let all_cached = (first..first + count).all(|s| self.cache.iter().any(|c| c.sector == s));
-        if all_cached {
-            for (i, chunk) in buf.as_chunks_mut::<SECTOR>().0.iter_mut().enumerate() {
-                if let Some(slot) = self.cached(first + i as u64) {
-                    *chunk = *self.cache[slot].data;
+        // One look-up per sector: a miss stops the copying and the device reads the run.
+        let mut all_cached = true;
+        for (i, chunk) in buf.as_chunks_mut::<SECTOR>().0.iter_mut().enumerate() {
+            match self.cached(first + i as u64) {
+                Some(slot) => *chunk = *self.cache[slot].data,
+                None => {
+                    all_cached = false;
+                    break;
                 }
             }
+        }
+        if all_cached {
             return Ok(());
         }
         let whole = self.device.read_sectors(first, buf).is_ok();

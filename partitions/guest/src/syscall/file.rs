@@ -438,12 +438,7 @@ fn read_kernel(
                 Some(Device::Disk) => {
                     let offset = at.unwrap_or(o.offset);
                     let n = f.fs.disk()?.read(offset, buf)?;
-                    if at.is_none()
-                        && let Some(o) = f.fs.description_mut(id)
-                    {
-                        o.offset = offset + n as u64;
-                    }
-                    return Ok(n);
+                    return Ok(moved(f, id, at, offset, n));
                 }
                 Some(Device::Null) => return Ok(0),
                 Some(Device::Zero) => {
@@ -459,12 +454,7 @@ fn read_kernel(
             let offset = at.unwrap_or(o.offset);
             if let Node::Mounted(_) = node {
                 let n = f.fs.read_mounted(node, offset, buf)?;
-                if at.is_none()
-                    && let Some(o) = f.fs.description_mut(id)
-                {
-                    o.offset = offset + n as u64;
-                }
-                return Ok(n);
+                return Ok(moved(f, id, at, offset, n));
             }
             let bytes = match &o.snapshot {
                 Some(s) => &s[..],
@@ -473,12 +463,7 @@ fn read_kernel(
             let start = offset.min(bytes.len() as u64) as usize;
             let n = buf.len().min(bytes.len() - start);
             buf[..n].copy_from_slice(&bytes[start..start + n]);
-            if at.is_none()
-                && let Some(o) = f.fs.description_mut(id)
-            {
-                o.offset = offset + n as u64;
-            }
-            Ok(n)
+            Ok(moved(f, id, at, offset, n))
         }
     }
 }
@@ -548,12 +533,7 @@ fn write_kernel(
                     at.unwrap_or(current)
                 };
                 let n = disk.write(offset, data)?;
-                if at.is_none()
-                    && let Some(o) = f.fs.description_mut(id)
-                {
-                    o.offset = offset + n as u64;
-                }
-                return Ok(n);
+                return Ok(moved(f, id, at, offset, n));
             }
             if f.fs.device(node).is_some() {
                 return Ok(data.len()); // null, zero, random: swallowed
@@ -565,14 +545,20 @@ fn write_kernel(
             };
             let now = seconds(host);
             let n = f.fs.write(node, offset, data, now)?;
-            if at.is_none()
-                && let Some(o) = f.fs.description_mut(id)
-            {
-                o.offset = offset + n as u64;
-            }
-            Ok(n)
+            Ok(moved(f, id, at, offset, n))
         }
     }
+}
+
+/// `n` bytes moved at `offset` through the open file description `id`: unless the call
+/// named its offset (`at`, pread/pwrite), the description's offset now follows them.
+fn moved(f: &mut Files, id: crate::vfs::OpenId, at: Option<u64>, offset: u64, n: usize) -> usize {
+    if at.is_none()
+        && let Some(o) = f.fs.description_mut(id)
+    {
+        o.offset = offset + n as u64;
+    }
+    n
 }
 
 /// A read (`write`: a write) of `fd` failed with `e`: when it had to wait, the file's
@@ -1508,32 +1494,38 @@ pub fn statfs(
         }
         None => Some(resolve(p, f, host, linux::AT_FDCWD as u64, path, true)?),
     };
-    let [kind, block, blocks, free, available, files, free_files] =
-        match node.and_then(|n| f.fs.statfs(n)) {
-            Some(figures) => figures,
-            None => {
-                let (used, limit) = f.fs.usage();
-                let free = (limit.saturating_sub(used) / 4096) as u64;
-                [TMPFS_MAGIC, 4096, (limit / 4096) as u64, free, free, 0, 0]
-            }
-        };
+    let figures = node.and_then(|n| f.fs.statfs(n)).unwrap_or_else(|| {
+        let (used, limit) = f.fs.usage();
+        let free = (limit.saturating_sub(used) / 4096) as u64;
+        vfs::FsFigures {
+            magic: TMPFS_MAGIC,
+            block_size: 4096,
+            blocks: (limit / 4096) as u64,
+            free_blocks: free,
+            available_blocks: free,
+            files: 0,
+            free_files: 0,
+        }
+    });
     // f_fsid: the file system's device number.
     let fsid = match node {
         Some(Node::Mounted(_)) => vfs::mounted::DEV,
         _ => vfs::MEMORY_DEV,
     };
     let mut b = [0u8; 120];
+    // struct statfs: f_type, f_bsize, f_blocks, f_bfree, f_bavail, f_files, f_ffree,
+    // f_fsid, f_namelen, f_frsize (the rest, f_flags and spare, zero).
     for (i, v) in [
-        kind,
-        block,
-        blocks,
-        free,
-        available,
-        files,
-        free_files,
+        figures.magic,
+        figures.block_size,
+        figures.blocks,
+        figures.free_blocks,
+        figures.available_blocks,
+        figures.files,
+        figures.free_files,
         fsid,
         vfs::NAME_MAX as u64,
-        block,
+        figures.block_size,
     ]
     .into_iter()
     .enumerate()

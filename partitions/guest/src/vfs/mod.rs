@@ -206,6 +206,30 @@ pub struct Open {
 /// An open file description's index ([`Fs::open`]).
 pub type OpenId = usize;
 
+/// A file system's `statfs` figures (`struct statfs`'s first fields, blocks counted in
+/// `block_size`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FsFigures {
+    /// `f_type`: the file system's magic number.
+    pub magic: u64,
+    pub block_size: u64,
+    pub blocks: u64,
+    pub free_blocks: u64,
+    /// Free blocks an unprivileged process may use.
+    pub available_blocks: u64,
+    /// Inodes, and free inodes (0 where the file system has no fixed number).
+    pub files: u64,
+    pub free_files: u64,
+}
+
+/// What a node is, for a path walk ([`Fs::kind`]).
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Kind {
+    Dir,
+    Symlink,
+    Other,
+}
+
 /// The file system.
 #[derive(Debug)]
 pub struct Fs<'a> {
@@ -469,7 +493,7 @@ impl<'a> Fs<'a> {
 
     /// `statfs` of the file system `node` is on: the mounted one's figures, or `None` for
     /// the in-memory one.
-    pub fn statfs(&self, node: Node) -> Option<[u64; 7]> {
+    pub fn statfs(&self, node: Node) -> Option<FsFigures> {
         match node {
             Node::Mounted(_) => self.mount.as_ref().map(Mount::statfs),
             _ => None,
@@ -671,6 +695,22 @@ impl<'a> Fs<'a> {
         }
     }
 
+    /// What `node` is, as far as a path walk needs to know: one look at a mounted inode
+    /// where `is_dir` and `is_symlink` would take two.
+    fn kind(&self, node: Node) -> Kind {
+        let mounted = |i| self.mount.as_ref().map(|m| m.mode(i) & crate::cpio::S_IFMT);
+        match node {
+            Node::Mounted(i) => match mounted(i) {
+                Some(crate::cpio::S_IFDIR) => Kind::Dir,
+                Some(crate::cpio::S_IFLNK) => Kind::Symlink,
+                _ => Kind::Other,
+            },
+            _ if self.is_dir(node) => Kind::Dir,
+            _ if self.is_symlink(node) => Kind::Symlink,
+            _ => Kind::Other,
+        }
+    }
+
     pub fn is_symlink(&self, node: Node) -> bool {
         match node {
             Node::Inode(ino) => self
@@ -824,8 +864,10 @@ impl<'a> Fs<'a> {
             .split(|&b| b == b'/')
             .filter(|p| !p.is_empty())
             .peekable();
+        // What `at` is, looked at once per node (a mounted node's is an inode read).
+        let mut at_kind = self.kind(at);
         while let Some(part) = parts.next() {
-            if !self.is_dir(at) {
+            if at_kind != Kind::Dir {
                 return Err(Errno::ENOTDIR);
             }
             if part.len() > NAME_MAX {
@@ -835,6 +877,7 @@ impl<'a> Fs<'a> {
                 b"." => continue,
                 b".." => {
                     at = self.parent(at);
+                    at_kind = Kind::Dir;
                     continue;
                 }
                 _ => self.child(procs, at, part).ok_or(Errno::ENOENT)?,
@@ -851,9 +894,11 @@ impl<'a> Fs<'a> {
                     Some(_) => return Err(Errno::ENOTDIR),
                     None => return Err(Errno::ENOENT),
                 };
+                at_kind = self.kind(at);
                 continue;
             }
-            if self.is_symlink(next) && (!last || follow_last || trailing_slash) {
+            let next_kind = self.kind(next);
+            if next_kind == Kind::Symlink && (!last || follow_last || trailing_slash) {
                 *links += 1;
                 if *links > MAX_LINKS {
                     return Err(Errno::ELOOP);
@@ -861,11 +906,12 @@ impl<'a> Fs<'a> {
                 let mut buf = [0u8; 280];
                 let target = self.link_target(procs, next, &mut buf)?;
                 at = self.walk(procs, at, target, true, links)?;
+                at_kind = self.kind(at);
             } else {
-                at = next;
+                (at, at_kind) = (next, next_kind);
             }
         }
-        if trailing_slash && !self.is_dir(at) {
+        if trailing_slash && at_kind != Kind::Dir {
             return Err(Errno::ENOTDIR);
         }
         Ok(at)

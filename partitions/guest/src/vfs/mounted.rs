@@ -182,7 +182,8 @@ impl Mount {
         }
     }
 
-    fn mode(&self, ino: u32) -> u32 {
+    /// The inode's mode (type and permission bits; 0 when it cannot be read).
+    pub fn mode(&self, ino: u32) -> u32 {
         self.stat(ino).mode
     }
 
@@ -337,18 +338,18 @@ impl Mount {
         self.with(|fs| fs.sync())
     }
 
-    /// The `statfs` figures: type, block size, blocks, free, available, inodes, free inodes.
-    pub fn statfs(&self) -> [u64; 7] {
+    /// The `statfs` figures of the file system.
+    pub fn statfs(&self) -> super::FsFigures {
         let s = self.fs.borrow().statfs();
-        [
-            EXT2_SUPER_MAGIC,
-            s.block_size as u64,
-            s.blocks,
-            s.free_blocks,
-            s.free_blocks.saturating_sub(s.reserved_blocks),
-            s.inodes,
-            s.free_inodes,
-        ]
+        super::FsFigures {
+            magic: EXT2_SUPER_MAGIC,
+            block_size: s.block_size as u64,
+            blocks: s.blocks,
+            free_blocks: s.free_blocks,
+            available_blocks: s.free_blocks.saturating_sub(s.reserved_blocks),
+            files: s.inodes,
+            free_files: s.free_inodes,
+        }
     }
 
     /// The directory names from `dir` up to the root (its path within the file system,
