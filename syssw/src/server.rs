@@ -208,6 +208,12 @@ impl<'a> Server<'a> {
                 } else {
                     self.request(m, &mut buffer);
                 }
+                // Doorbells the message rang (a send, a receive or a restart that admitted
+                // a parked sender, a doorbell set on a port that holds messages). A thread
+                // that is gone is no error.
+                self.ports.take_rung(|bell| {
+                    let _ = sys::notify_signal(ThreadId(bell.token), bell.bits);
+                });
             }
         }
     }
@@ -438,6 +444,13 @@ impl<'a> Server<'a> {
                     .ports
                     .clear_queuing(index, port as usize, now, |c| complete(ipc, staging, c));
                 reply(code, [0; 3]);
+            }
+            Request::PortDoorbell { port, bits } => {
+                reply(
+                    self.ports
+                        .set_doorbell(index, port as usize, m.sender.0, bits),
+                    [0; 3],
+                );
             }
             Request::ReportError { error, detail } => {
                 let detail = match detail {

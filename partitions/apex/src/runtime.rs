@@ -48,6 +48,25 @@ pub const WAKE_BIT: u64 = 1;
 /// Notification bit that ends a process's wait on an intra-partition object (its outcome
 /// is decided in [`Intra`] by the waker).
 pub const OBJECT_BIT: u64 = 2;
+/// The notification bits the runtime uses; a program's own (interrupt lines, port
+/// doorbells) must be others.
+pub const RUNTIME_BITS: u64 = WAKE_BIT | OBJECT_BIT;
+
+/// Warden's extension of queuing ports (not in ARINC 653): the calling process's thread is
+/// notified with `bits` (`sys::notify_wait`) whenever messages arrive at the partition's
+/// queuing destination port `port`; 0 ends it (syssw's PORT_DOORBELL). For a process that
+/// waits for several ports and a device at once instead of polling them. Bits of
+/// [`RUNTIME_BITS`] are INVALID_PARAM.
+pub fn port_doorbell(
+    port: a653rs::bindings::QueuingPortId,
+    bits: u64,
+) -> Result<(), ErrorReturnCode> {
+    if bits & RUNTIME_BITS != 0 {
+        return Err(ErrorReturnCode::InvalidParam);
+    }
+    let port = codes::id_word(port)?;
+    request_code(&Request::PortDoorbell { port, bits }).map(drop)
+}
 
 /// The watchdog's stack (16-byte aligned as the SysV ABI wants).
 #[repr(C, align(16))]

@@ -15,6 +15,18 @@ pub struct Link {
     pub to: QueuingPortSender<Warden>,
 }
 
+impl Link {
+    /// Asks syssw to notify the calling process's thread with `bits` whenever the tenant's
+    /// messages arrive ([`apex::runtime::port_doorbell`]), so that the driver waits for
+    /// them with its device's interrupt instead of polling.
+    pub fn ring_on_arrival(
+        &self,
+        bits: u64,
+    ) -> Result<(), apex::a653rs::bindings::ErrorReturnCode> {
+        apex::runtime::port_doorbell(self.from.id(), bits)
+    }
+}
+
 /// Why a tenant's ports are unusable.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LinkError {

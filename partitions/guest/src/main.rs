@@ -29,9 +29,10 @@
 //!
 //! The ARINC ports: the initramfs's port table (`/etc/guest/ports`, from the partition's
 //! `ports.*`) becomes `/dev/arinc/<port>` ([`guest::arinc`]); [`ports`] creates the ports
-//! through syssw before the first process starts. Their messages arrive without a word
-//! to the guest, so while a call waits for a port, the calls that wait are served again
-//! every [`PORT_POLL_NS`].
+//! through syssw before the first process starts. The doorbell thread ([`doorbell`])
+//! tells the guest when messages arrive at its queuing destination ports, and the calls
+//! that wait are served again then; a call waiting for a sampling port (or any port,
+//! should the doorbell be refused) is served again every [`PORT_POLL_NS`].
 //!
 //! The block device: with `guest.disk` (the initramfs's `/etc/guest/disk`) the guest has
 //! `/dev/vda` ([`guest::disk`]) over the link's client (`blk_core::client`) on two of its
@@ -43,6 +44,7 @@
 extern crate alloc;
 
 mod com2;
+mod doorbell;
 mod ports;
 
 use guest::backing::ENTRY;
@@ -73,8 +75,8 @@ use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
 
-/// How often calls that wait are served again while the guest has destination ports
-/// (an arriving message does not notify the guest).
+/// How often calls that wait are served again while one waits for a port (a sampling
+/// port's message rings no doorbell).
 const PORT_POLL_NS: u64 = 1_000_000;
 /// Pages of the pool the IPC buffer takes (at its start).
 const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
@@ -212,6 +214,22 @@ fn main(start: u64, _: u64) {
     let net = network(&archive, &port_table);
     let ports = ports::Ports::create(ThreadId(info.server), ipc, &port_table);
     let disk = disk(&archive, &port_table, &ports);
+    // The doorbell watches the queuing ports the guest polls; the disk's response port is
+    // waited on by the guest itself.
+    let disk_response = disk
+        .as_ref()
+        .and_then(|(_, _, response)| port_table.iter().position(|p| p.name == *response));
+    let watched = ports.queuing_destinations(disk_response);
+    let bell = match watched.is_empty() {
+        true => None,
+        false => match doorbell::start(me, ThreadId(info.server), info.priority as u8, &watched) {
+            Ok(thread) => Some(thread),
+            Err(e) => {
+                println!("guest: cannot start the ports' doorbell: {e:?}; they are polled");
+                None
+            }
+        },
+    };
     if let Err(e) = fs.set_ports(port_table) {
         println!("guest: no room for the port devices: {}", e.describe());
     }
@@ -323,8 +341,8 @@ fn main(start: u64, _: u64) {
             Some(at) => at - now,
             None => TIMEOUT_INFINITE,
         };
-        // A call waiting for a port (its messages arrive without a word to the guest) is
-        // served again at least every PORT_POLL_NS.
+        // A call waiting for a port is served again at least every PORT_POLL_NS (a
+        // sampling port has no doorbell).
         let timeout = if host.port_waiting && system.any_blocked() {
             timeout.min(PORT_POLL_NS)
         } else {
@@ -351,6 +369,15 @@ fn main(start: u64, _: u64) {
         let tag = received.message.tag;
         if reader == Some(received.sender) && tag.label() == com2::LABEL_INPUT {
             if let Some(ended) = console_input(&mut system, &mut fs, &mut host, &received.message) {
+                break ended;
+            }
+            continue;
+        }
+        if bell == Some(received.sender) && tag.label() == doorbell::LABEL_RUNG {
+            // Messages came to a port: eth0's frames and the calls waiting for a port now.
+            system.net.messages_came();
+            host.port_waiting = false; // the calls served again say it anew
+            if let Some(ended) = system.tick(&mut fs, &mut host) {
                 break ended;
             }
             continue;

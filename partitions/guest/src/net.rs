@@ -34,7 +34,8 @@ pub const LIMITS: Limits = Limits {
 
 /// The shortest time between two runs of the stack for its timers.
 pub const MIN_POLL_GAP_NS: u64 = 200_000;
-/// How often the guest looks for frames on `eth0`'s port when nothing else wakes it.
+/// How often the guest looks for frames on `eth0`'s port when nothing else wakes it (the
+/// port's doorbell does, when frames come).
 pub const RX_POLL_NS: u64 = 2_000_000;
 /// How often it looks while serving calls (each look is a call to syssw), unless the
 /// last look found frames.
@@ -219,6 +220,12 @@ impl Net {
         }
     }
 
+    /// Messages arrived at a port (the partition's doorbell): the next run looks at
+    /// `eth0`'s `rx` port whenever it last did.
+    pub fn messages_came(&mut self) {
+        self.rx_busy = true;
+    }
+
     /// `eth0`'s frames go through ports `rx` and `tx` (indices of the port table).
     pub fn link(&mut self, rx: usize, tx: usize) {
         self.link = Some((rx, tx));
@@ -335,8 +342,8 @@ impl Net {
     /// with frames the ports have no room for yet, must not keep the guest from serving
     /// its processes).
     pub fn poll_at_ns(&mut self) -> Option<u64> {
-        // Frames arrive on `eth0`'s port without a word to the guest: look every
-        // [`RX_POLL_NS`].
+        // The port's doorbell tells of frames ([`Net::messages_came`]); look every
+        // [`RX_POLL_NS`] too, in case it could not be set.
         let rx = self.link.map(|_| self.rx_looked_ns + RX_POLL_NS);
         let at = self.stack.as_mut().and_then(|s| s.poll_at());
         let at = at.map(|at| (at.max(0) as u64).saturating_mul(1000));

@@ -195,6 +195,19 @@ impl Ports {
 impl Ports {
     /// `/dev/vda`'s link over ports `request` (a queuing source) and `response` (a queuing
     /// destination) of the table (`None` when syssw refused either).
+    /// syssw's ids of the created queuing destination ports, but for the port table's
+    /// index `skip`.
+    pub fn queuing_destinations(&self, skip: Option<usize>) -> Vec<u64> {
+        self.created
+            .iter()
+            .enumerate()
+            .filter(|&(i, _)| Some(i) != skip)
+            .filter_map(|(_, c)| *c)
+            .filter(|c| c.kind == Kind::Queuing && c.direction == Direction::In)
+            .map(|c| c.id)
+            .collect()
+    }
+
     pub fn disk_link(&self, request: usize, response: usize) -> Option<DiskLink> {
         let (req, resp) = (self.port(request).ok()?, self.port(response).ok()?);
         let queuing = req.kind == Kind::Queuing && resp.kind == Kind::Queuing;

@@ -78,6 +78,17 @@
 //! [`Ports::clear_queuing`] is ARINC's CLEAR_QUEUING_PORT (destination only).
 //! [`Ports::cancel`] forgets one waiter (a thread that was stopped while waiting).
 //!
+//! # Doorbells
+//!
+//! A partition may ask to be told when a message arrives at one of its queuing
+//! destination ports ([`Ports::set_doorbell`]: a thread token and notification bits), so
+//! that a thread watching several ports and devices waits for a notification instead of
+//! polling. Every message that enters the channel's FIFO (a send, or a parked sender
+//! admitted) rings it; a message handed straight to a waiting receiver does not (the
+//! receiver's reply is the news). [`Ports::take_rung`] reports each doorbell rung since
+//! it was last called, once however many messages came; the glue then signals the thread.
+//! A partition's doorbells end when it stops or restarts (its threads are gone).
+//!
 //! # Return codes (ARINC 653 Part 1 order of checks)
 //!
 //! Unknown port index, a port of another partition, or a port of the other kind →
@@ -249,6 +260,24 @@ struct Channel {
     /// Waiter record numbers in serving order (`order[..waiting]`).
     order: [u8; MAX_WAITERS],
     waiting: usize,
+    /// Queuing: the destination partition's doorbell (its index in [`Ports::bells`]), or
+    /// [`NO_BELL`].
+    bell: u8,
+    /// A message entered the FIFO since the doorbell was last reported.
+    rung: bool,
+}
+
+/// A channel without a doorbell.
+const NO_BELL: u8 = u8::MAX;
+/// Most doorbells set at a time in a system (a partition watches a few ports).
+pub const MAX_DOORBELLS: usize = 32;
+
+/// Whom a queuing destination port's doorbell notifies: a thread (the glue's token) with
+/// notification bits (never 0).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Doorbell {
+    pub token: u64,
+    pub bits: u64,
 }
 
 const NO_CHANNEL: Channel = Channel {
@@ -269,6 +298,8 @@ const NO_CHANNEL: Channel = Channel {
     senders: false,
     order: [0; MAX_WAITERS],
     waiting: 0,
+    bell: NO_BELL,
+    rung: false,
 };
 
 impl Channel {
@@ -338,6 +369,8 @@ fn put_u64(bytes: &mut [u8], at: usize, value: u64) {
 struct Queue<'x> {
     arena: &'x mut [u8],
     ch: &'x mut Channel,
+    /// [`Ports::rung`].
+    rung: &'x mut bool,
 }
 
 impl Queue<'_> {
@@ -355,7 +388,15 @@ impl Queue<'_> {
         let at = self.slot(self.ch.count);
         self.arena[at..at + LEN_BYTES].copy_from_slice(&(msg.len() as u32).to_le_bytes());
         self.arena[at + LEN_BYTES..at + LEN_BYTES + msg.len()].copy_from_slice(msg);
+        self.entered();
+    }
+
+    /// A message entered the FIFO at its end: it counts, and it rings the doorbell.
+    fn entered(&mut self) {
         self.ch.count += 1;
+        if self.ch.bell != NO_BELL {
+            (self.ch.rung, *self.rung) = (true, true);
+        }
     }
 
     /// Removes the oldest message into `buf` (which holds `size` bytes); its length.
@@ -455,7 +496,7 @@ impl Queue<'_> {
             self.arena[to..to + LEN_BYTES].copy_from_slice(&(len as u32).to_le_bytes());
             let from = at + WAITER_HEADER;
             self.arena.copy_within(from..from + len, to + LEN_BYTES);
-            self.ch.count += 1;
+            self.entered();
             done(Completion {
                 token,
                 port: self.ch.source,
@@ -500,6 +541,10 @@ pub struct Ports<'a> {
     port_count: usize,
     channels: [Channel; MAX_CHANNELS],
     channel_count: usize,
+    /// Some channel's doorbell rang since [`Ports::take_rung`] last looked.
+    rung: bool,
+    /// The doorbells set; a free one has no bits.
+    bells: [Doorbell; MAX_DOORBELLS],
 }
 
 impl<'a> Ports<'a> {
@@ -544,6 +589,8 @@ impl<'a> Ports<'a> {
             port_count,
             channels,
             channel_count,
+            rung: false,
+            bells: [Doorbell { token: 0, bits: 0 }; MAX_DOORBELLS],
         })
     }
 
@@ -560,10 +607,20 @@ impl<'a> Ports<'a> {
         }
     }
 
+    /// Port `port` if it is a queuing destination port of `partition`.
+    fn queuing_destination(&self, partition: usize, port: usize) -> Result<Port, ReturnCode> {
+        let p = self.lookup(partition, port, PortKind::Queuing)?;
+        if p.direction != Direction::In {
+            return Err(ReturnCode::InvalidMode);
+        }
+        Ok(p)
+    }
+
     fn queue(&mut self, channel: usize) -> Queue<'_> {
         Queue {
             arena: self.arena,
             ch: &mut self.channels[channel],
+            rung: &mut self.rung,
         }
     }
 
@@ -724,13 +781,10 @@ impl<'a> Ports<'a> {
         buf: &mut [u8],
         mut done: impl FnMut(Completion<'_>),
     ) -> Outcome {
-        let p = match self.lookup(partition, port, PortKind::Queuing) {
+        let p = match self.queuing_destination(partition, port) {
             Ok(p) => p,
             Err(code) => return Outcome::reply(code),
         };
-        if p.direction != Direction::In {
-            return Outcome::reply(ReturnCode::InvalidMode);
-        }
         if buf.len() < p.size {
             return Outcome::reply(ReturnCode::InvalidParam);
         }
@@ -764,13 +818,10 @@ impl<'a> Ports<'a> {
         now: u64,
         mut done: impl FnMut(Completion<'_>),
     ) -> ReturnCode {
-        let p = match self.lookup(partition, port, PortKind::Queuing) {
+        let p = match self.queuing_destination(partition, port) {
             Ok(p) => p,
             Err(code) => return code,
         };
-        if p.direction != Direction::In {
-            return ReturnCode::InvalidMode;
-        }
         let mut q = self.queue(p.channel);
         q.expire(now, &mut done);
         let n = q.ch.count.min(q.ch.dest_depth);
@@ -859,6 +910,51 @@ impl<'a> Ports<'a> {
         found
     }
 
+    /// Sets (`bits` not 0) or removes the doorbell of `partition`'s queuing destination
+    /// port `port`: thread `token` is to be signalled `bits` when a message arrives (see
+    /// the module documentation). A message already waiting rings it at once. More than
+    /// [`MAX_DOORBELLS`] in the system at a time are INVALID_CONFIG.
+    pub fn set_doorbell(
+        &mut self,
+        partition: usize,
+        port: usize,
+        token: u64,
+        bits: u64,
+    ) -> ReturnCode {
+        let p = match self.queuing_destination(partition, port) {
+            Ok(p) => p,
+            Err(code) => return code,
+        };
+        let ch = &mut self.channels[p.channel];
+        if ch.bell != NO_BELL {
+            self.bells[ch.bell as usize].bits = 0;
+            (ch.bell, ch.rung) = (NO_BELL, false);
+        }
+        if bits == 0 {
+            return ReturnCode::NoError;
+        }
+        let Some(free) = self.bells.iter().position(|b| b.bits == 0) else {
+            return ReturnCode::InvalidConfig;
+        };
+        self.bells[free] = Doorbell { token, bits };
+        (ch.bell, ch.rung) = (free as u8, ch.count > 0);
+        self.rung |= ch.rung;
+        ReturnCode::NoError
+    }
+
+    /// Reports to `ring` each doorbell rung since the last call (see the module
+    /// documentation).
+    pub fn take_rung(&mut self, mut ring: impl FnMut(Doorbell)) {
+        if !core::mem::take(&mut self.rung) {
+            return;
+        }
+        for ch in &mut self.channels[..self.channel_count] {
+            if core::mem::take(&mut ch.rung) && ch.bell != NO_BELL {
+                ring(self.bells[ch.bell as usize]);
+            }
+        }
+    }
+
     /// Resets every port of `partition` for a stop or restart (see the module
     /// documentation); senders of other partitions this admits are reported to `done`.
     pub fn reset_partition(&mut self, partition: usize, mut done: impl FnMut(Completion<'_>)) {
@@ -888,6 +984,11 @@ impl<'a> Ports<'a> {
                 q.drop_front(n);
             }
             q.admit(&mut done);
+            let ch = &mut self.channels[c];
+            if destination && ch.bell != NO_BELL {
+                self.bells[ch.bell as usize].bits = 0;
+                (ch.bell, ch.rung) = (NO_BELL, false);
+            }
         }
     }
 

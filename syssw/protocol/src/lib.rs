@@ -26,6 +26,7 @@
 //! | `RECEIVE_QUEUING` = 16 | w0 = port id, w1 = time-out ns, w2 = the caller's priority (0..=255) | w0 = length; data = message (its first [`PART_MAX`] bytes) ([`QueuingMessage`]) |
 //! | `QUEUING_STATUS` = 17 | w0 = port id | w0 = messages \| max messages << 32, w1 = max size \| direction << 32, w2 = waiting processes ([`QueuingStatus`]) |
 //! | `CLEAR_QUEUING` = 18 | w0 = port id | – |
+//! | `PORT_DOORBELL` = 19 | w0 = port id (a queuing destination port), w1 = notification bits (0 = none) | – (from then on the calling thread is sent `notify_signal` with the bits whenever a message enters the port's FIFO and was not handed to a waiting receiver; once for several messages; a message already waiting rings at once; ends when the partition stops or restarts) |
 //! | `REPORT_ERROR` = 20 | w0 = error ([`ErrorCode`]); data = detail text | – (or no reply: the action stopped the caller) |
 //! | `APPLICATION_MESSAGE` = 21 | data = text | – |
 //! | `SET_MODULE_SCHEDULE` = 30 | w0 = schedule id | – |
@@ -95,6 +96,7 @@ codes::code_enum! {
         ReceiveQueuing = 16 => "RECEIVE_QUEUING",
         QueuingStatus = 17 => "QUEUING_STATUS",
         ClearQueuing = 18 => "CLEAR_QUEUING",
+        PortDoorbell = 19 => "PORT_DOORBELL",
         ReportError = 20 => "REPORT_ERROR",
         ApplicationMessage = 21 => "APPLICATION_MESSAGE",
         SetModuleSchedule = 30 => "SET_MODULE_SCHEDULE",
@@ -302,6 +304,11 @@ pub enum Request<'a> {
     ClearQueuing {
         port: PortId,
     },
+    /// Notify the calling thread with `bits` (0: no more) when messages arrive at `port`.
+    PortDoorbell {
+        port: PortId,
+        bits: u64,
+    },
     ReportError {
         error: ErrorCode,
         detail: &'a [u8],
@@ -348,6 +355,7 @@ impl<'a> Request<'a> {
             Self::ReceiveQueuing { .. } => Label::ReceiveQueuing,
             Self::QueuingStatus { .. } => Label::QueuingStatus,
             Self::ClearQueuing { .. } => Label::ClearQueuing,
+            Self::PortDoorbell { .. } => Label::PortDoorbell,
             Self::ReportError { .. } => Label::ReportError,
             Self::ApplicationMessage { .. } => Label::ApplicationMessage,
             Self::SetModuleSchedule { .. } => Label::SetModuleSchedule,
@@ -367,7 +375,8 @@ impl<'a> Request<'a> {
             | Self::SendQueuing { port, .. }
             | Self::ReceiveQueuing { port, .. }
             | Self::QueuingStatus { port }
-            | Self::ClearQueuing { port } => Some(port),
+            | Self::ClearQueuing { port }
+            | Self::PortDoorbell { port, .. } => Some(port),
             _ => None,
         }
     }
@@ -416,6 +425,7 @@ impl<'a> Request<'a> {
                 timeout,
                 priority,
             } => ([port, timeout, u64::from(priority)], &[]),
+            Self::PortDoorbell { port, bits } => ([port, bits, 0], &[]),
             Self::ReportError { error, detail } => ([u64::from(error.code()), 0, 0], detail),
             Self::ApplicationMessage { text } => ([0; 3], text),
             Self::SetModuleSchedule { schedule } => ([schedule, 0, 0], &[]),
@@ -477,6 +487,7 @@ impl<'a> Request<'a> {
             },
             Label::QueuingStatus => Self::QueuingStatus { port: w0 },
             Label::ClearQueuing => Self::ClearQueuing { port: w0 },
+            Label::PortDoorbell => Self::PortDoorbell { port: w0, bits: w1 },
             Label::ReportError => Self::ReportError {
                 error: ErrorCode::from_u64(w0).ok_or(DecodeError::UnknownError(w0))?,
                 detail: wire.data,

@@ -44,6 +44,10 @@ fn every_request() -> [Request<'static>; Label::COUNT] {
         },
         Request::QueuingStatus { port: 5 },
         Request::ClearQueuing { port: 6 },
+        Request::PortDoorbell {
+            port: 6,
+            bits: 1 << 9,
+        },
         Request::ReportError {
             error: ErrorCode::PowerFail,
             detail: b"detail",

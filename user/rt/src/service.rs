@@ -36,6 +36,20 @@ pub fn request(server: ThreadId, ipc: IpcBufferRef, request: &Request) -> Result
     })
 }
 
+/// [`request`] for a thread without an IPC buffer: a request without data bytes (its
+/// reply's data, if any, is lost). A request with data is `InvalidArgument`.
+pub fn request_without_buffer(server: ThreadId, request: &Request) -> Result<Reply, Error> {
+    let wire = request.encode();
+    if !wire.data.is_empty() {
+        return Err(Error::InvalidArgument);
+    }
+    let r = sys::ipc_call(server, TIMEOUT_INFINITE, &message(&wire))?;
+    Ok(Reply {
+        label: r.message.tag.label(),
+        words: r.message.words,
+    })
+}
+
 /// Sends a port request that carries a message of any length (the protocol's "long
 /// messages"): every part but the last is staged first (STAGE_MESSAGE), then the request
 /// `build(staged, last part)` makes is sent. A refused part ends the transfer with its reply.

@@ -8,7 +8,8 @@
 //! (`blk_core::driver::serve`); a flush reaches the device (QEMU `cache=writeback`).
 //!
 //! One APEX process serves the tenants round-robin, one request at a time, at most
-//! [`BUDGET`] requests a tenant and round; with nothing to do it waits [`POLL`].
+//! [`BUDGET`] requests a tenant and round; with nothing to do it waits for a tenant's
+//! doorbell (syssw notifies it when a request arrives), at most [`POLL`].
 //!
 //! Log lines (on the serial log as `[<partition>] blk: ...`; an interface):
 //! - `blk: virtio-blk <BB:DD.F> <n> sectors, flush <yes|no>, line <irq>, <k> tenant(s)`
@@ -45,8 +46,14 @@ use driver_link as link;
 
 /// Requests a tenant may have served per round.
 const BUDGET: u32 = 4;
-/// The wait when no tenant has a request.
+/// The longest wait when no tenant has a request (a tenant without a doorbell is found
+/// then).
 const POLL: Duration = Duration::from_micros(500);
+/// The notification bit the device's interrupt line fires as (an index; the APEX
+/// runtime's bits are 0 and 1).
+const IRQ_BIT: u64 = 8;
+/// The notification bit of the tenants' doorbells.
+const DOORBELL_BIT: u64 = 1 << 9;
 const STATS_EVERY_MS: u64 = 1000;
 const REFUSALS_LOGGED: u64 = 8;
 /// virtio's PCI vendor and its block device ids (transitional, modern).
@@ -125,7 +132,7 @@ extern "C" fn run() {
         }
     };
     let (record, line) = (claim.record, claim.line);
-    if let Err(e) = sys::irq_attach(u64::from(line), 0) {
+    if let Err(e) = sys::irq_attach(u64::from(line), IRQ_BIT) {
         refuse(format_args!("interrupt line {line}: {e:?}"));
         return;
     }
@@ -143,13 +150,20 @@ extern "C" fn run() {
     }
     let mut tenants = Vec::new();
     for t in table.tenants() {
-        let link::Link { from, to } = match link::open(&t.from, &t.to) {
+        let link = match link::open(&t.from, &t.to) {
             Ok(link) => link,
             Err(e) => {
                 refuse(format_args!("tenant {}: {e}", t.partition));
                 return;
             }
         };
+        if let Err(e) = link.ring_on_arrival(DOORBELL_BIT) {
+            println!(
+                "blk: tenant {}: no doorbell ({e:?}); its port is polled",
+                t.partition
+            );
+        }
+        let link::Link { from, to } = link;
         tenants.push(Tenant {
             name: t.partition,
             disk: t.disk,
@@ -214,7 +228,7 @@ extern "C" fn run() {
             next_log = now_ms - now_ms % STATS_EVERY_MS + STATS_EVERY_MS;
         }
         if !served {
-            let _ = <Warden as ApexTimeP1Ext>::timed_wait(POLL);
+            let _ = sys::notify_wait(DOORBELL_BIT, POLL.as_nanos() as u64);
         }
     }
 }

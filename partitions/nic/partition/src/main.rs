@@ -11,8 +11,8 @@
 //! most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
 //! tenant that floods its port only fills its own port and loses its own frames (its
 //! sends fail when the port is full) while every other tenant keeps its turn. A tenant's
-//! frame with another source MAC is dropped. Then it waits for the device's interrupt,
-//! at most [`POLL`] (the tenants' ports have no interrupt).
+//! frame with another source MAC is dropped. Then it waits for the device's interrupt or
+//! a tenant's doorbell (syssw notifies it when a tenant's frames arrive), at most [`POLL`].
 //!
 //! Log lines (on the serial log as `[<partition>] nic: ...`; an interface):
 //! - `nic: virtio-net <BB:DD.F> MAC <mac>, <n> descriptors a queue, line <irq>, <k> tenant(s)`
@@ -52,8 +52,14 @@ use nic_core::virtio::{self, Memory, RECEIVE_QUEUE, TRANSMIT_QUEUE, Used};
 
 /// Frames a tenant may have taken from its port per round of the switch.
 const BUDGET: u32 = 8;
-/// Longest wait for the device's interrupt before the tenants' ports are looked at again.
+/// Longest wait for the device's interrupt or a tenant's doorbell before the tenants'
+/// ports are looked at again (a tenant without a doorbell is found then).
 const POLL: Duration = Duration::from_micros(500);
+/// The notification bit the device's interrupt line fires as (an index).
+const IRQ_BIT: u64 = 8;
+/// The notification bit of the tenants' doorbells (syssw rings it when a tenant's frames
+/// arrive).
+const DOORBELL_BIT: u64 = 1 << 9;
 /// How often the counters are logged.
 const STATS_EVERY_MS: u64 = 1000;
 /// The message buffer: the largest port message (config: 4096 bytes).
@@ -257,20 +263,27 @@ extern "C" fn run() {
     };
     let mut links = Vec::new();
     for t in table.tenants() {
-        let link::Link { from, to } = match link::open(&t.from, &t.to) {
+        let link = match link::open(&t.from, &t.to) {
             Ok(link) => link,
             Err(e) => {
                 refuse(format_args!("tenant {}: {e}", t.partition));
                 return;
             }
         };
+        if let Err(e) = link.ring_on_arrival(DOORBELL_BIT) {
+            println!(
+                "nic: tenant {}: no doorbell ({e:?}); its port is polled",
+                t.partition
+            );
+        }
+        let link::Link { from, to } = link;
         links.push(Link {
             name: t.partition,
             from,
             to,
         });
     }
-    if let Err(e) = sys::irq_attach(u64::from(line), 0) {
+    if let Err(e) = sys::irq_attach(u64::from(line), IRQ_BIT) {
         refuse(format_args!("interrupt line {line}: {e:?}"));
         return;
     }
@@ -311,7 +324,8 @@ extern "C" fn run() {
             nic.log(now_ms);
             next_log = now_ms - now_ms % STATS_EVERY_MS + STATS_EVERY_MS;
         }
-        if sys::irq_wait(u64::from(line), POLL.as_nanos() as u64).is_ok() {
+        let wait = sys::notify_wait(1 << IRQ_BIT | DOORBELL_BIT, POLL.as_nanos() as u64);
+        if wait.is_ok_and(|bits| bits & 1 << IRQ_BIT != 0) {
             nic.net.interrupt_status();
             let _ = sys::irq_ack(u64::from(line));
         }

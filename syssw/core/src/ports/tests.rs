@@ -1299,3 +1299,71 @@ to = "b.rx""#,
         failed(ReturnCode::InvalidConfig)
     );
 }
+
+#[test]
+fn a_doorbell_rings_once_for_the_messages_that_entered_the_fifo() {
+    with_ports(|ports, [a, out, tx, b, inp, _, rx]| {
+        let rung = |ports: &mut Ports<'_>| {
+            let mut bells = Vec::new();
+            ports.take_rung(|bell| bells.push(bell));
+            bells
+        };
+        let bell = Doorbell {
+            token: 42,
+            bits: 1 << 9,
+        };
+        // Only the partition's own queuing destination port has one.
+        assert_eq!(ports.set_doorbell(a, rx, 42, 1), ReturnCode::InvalidParam);
+        assert_eq!(ports.set_doorbell(a, tx, 42, 1), ReturnCode::InvalidMode);
+        assert_eq!(ports.set_doorbell(a, out, 42, 1), ReturnCode::InvalidParam);
+        assert_eq!(ports.set_doorbell(b, inp, 42, 1), ReturnCode::InvalidParam);
+        assert_eq!(ports.set_doorbell(b, 999, 42, 1), ReturnCode::InvalidParam);
+        assert_eq!(
+            ports.set_doorbell(b, rx, 42, bell.bits),
+            ReturnCode::NoError
+        );
+        assert!(rung(ports).is_empty(), "an empty port does not ring");
+        for m in [&b"one"[..], b"two"] {
+            assert_eq!(ports.send_queuing(a, tx, m, 0, 0, 1, no_completion), sent());
+        }
+        assert_eq!(rung(ports), vec![bell], "once for two messages");
+        assert!(rung(ports).is_empty());
+        // A message handed to a waiting receiver does not ring.
+        let mut buf = [0u8; 32];
+        for _ in 0..2 {
+            ports.receive_queuing(b, rx, 0, 0, 7, &mut buf, no_completion);
+        }
+        assert_eq!(
+            ports.receive_queuing(b, rx, 0, TIMEOUT_INFINITE, 7, &mut buf, no_completion),
+            Outcome::Parked
+        );
+        let mut done = Done::new();
+        ports.send_queuing(a, tx, b"handed", 0, 0, 1, collect(&mut done));
+        assert_eq!(done.len(), 1);
+        assert!(rung(ports).is_empty());
+        // Setting it on a port that holds messages rings at once.
+        ports.send_queuing(a, tx, b"queued", 0, 0, 1, no_completion);
+        assert_eq!(ports.set_doorbell(b, rx, 42, 0), ReturnCode::NoError);
+        assert!(rung(ports).is_empty(), "removed");
+        ports.send_queuing(a, tx, b"unheard", 0, 0, 1, no_completion);
+        assert!(rung(ports).is_empty());
+        let other = Doorbell { token: 43, bits: 1 };
+        assert_eq!(ports.set_doorbell(b, rx, 43, 1), ReturnCode::NoError);
+        assert_eq!(rung(ports), vec![other]);
+        // Fill the FIFO and park a sender: a receive admits it, which rings.
+        while ports.send_queuing(a, tx, b"x", 0, 0, 1, no_completion) == sent() {}
+        assert_eq!(
+            ports.send_queuing(a, tx, b"parked", 0, TIMEOUT_INFINITE, 5, no_completion),
+            Outcome::Parked
+        );
+        rung(ports);
+        let mut done = Done::new();
+        ports.receive_queuing(b, rx, 0, 0, 7, &mut buf, collect(&mut done));
+        assert_eq!(done.len(), 1);
+        assert_eq!(rung(ports), vec![other]);
+        // A restart of the destination ends it.
+        ports.reset_partition(b, |_| {});
+        ports.send_queuing(a, tx, b"after", 0, 0, 1, |_| {});
+        assert!(rung(ports).is_empty());
+    });
+}
