@@ -20,6 +20,12 @@
  *                     program drains when there is no /dev/null; a `note` line says so)
  *   gzip_4mib         (per run) `busybox gzip -c` of 4 MiB of text fed through a pipe, its
  *                     output drained through another
+ *   bash_script       (per run) `/bin/bash -c` running a loop of 100 rounds with arithmetic,
+ *                     string operations, a `[[ =~ ]]` match and a `$(...)` subshell each,
+ *                     its result checked by the script (skipped with a `note` line when
+ *                     there is no /bin/bash)
+ *   bash_no_subshell  (per run) the same script with `printf -v` in place of the subshell:
+ *                     what bash_script costs besides its 100 forks
  *   tcp_roundtrip     one byte to a child process and back over a TCP connection on the
  *                     loopback (127.0.0.1)
  *   tcp_4mib          (per run) 4 MiB from a child process over a loopback TCP
@@ -335,6 +341,39 @@ static int gzip_round(long n)
 	return compressed < 0 ? -1 : 0;
 }
 
+/* The bash macro: each round forks a subshell for `$(...)` (printf is a builtin: no
+ * execve), the rest is bash's own work, which `bash_no_subshell` measures alone with
+ * `printf -v`. The script exits 1 if its result is not the one bash computes on the host. */
+static int bash_run(const char *format)
+{
+	char script[512];
+	snprintf(script, sizeof script,
+		 "s= n=0\n"
+		 "for ((i = 0; i < 100; i++)); do\n"
+		 "\t%s\n"
+		 "\ts+=${w:1:2}\n"
+		 "\t((n += ${#w} + i %% 3))\n"
+		 "\t[[ $w =~ ^0 ]] && ((n++))\n"
+		 "done\n"
+		 "u=${s//0/o}\n"
+		 "[[ \"${#u} $n ${u:0:12}\" == '200 408 oo3774114885' ]]\n",
+		 format);
+	char *argv[] = { "/bin/bash", "-c", script, NULL };
+	return run_drained(argv, NULL) < 0 ? -1 : 0;
+}
+
+static int bash_round(long n)
+{
+	(void)n;
+	return bash_run("w=$(printf '%03d' $((i * 37 % 1000)))");
+}
+
+static int bash_no_subshell_round(long n)
+{
+	(void)n;
+	return bash_run("printf -v w '%03d' $((i * 37 % 1000))");
+}
+
 /* A loopback TCP connection to a child: this process's end, the child's pid in *child,
  * which runs `serve` on its end and exits. -1 on failure. */
 static int tcp_child(int *child, void (*serve)(int fd))
@@ -627,6 +666,8 @@ static const struct {
 	{ "pipe_roundtrip", pipe_roundtrip_round, 0, 0 },
 	{ "shell_echo_cat", shell_round, 0, 1 },
 	{ "gzip_4mib", gzip_round, 0, 1 },
+	{ "bash_script", bash_round, 0, 1 },
+	{ "bash_no_subshell", bash_no_subshell_round, 0, 1 },
 	{ "tcp_roundtrip", tcp_roundtrip_round, 0, 0 },
 	{ "tcp_4mib", tcp_4mib_round, 0, 1 },
 };
@@ -640,6 +681,12 @@ static void measure(size_t m)
 	    !have_dev_null()) {
 		printf("note %s%s: no /dev/null, cat writes into a pipe\n", prefix, metrics[m].name);
 		fflush(stdout);
+	}
+	if ((metrics[m].round == bash_round || metrics[m].round == bash_no_subshell_round) &&
+	    access("/bin/bash", X_OK) != 0) {
+		printf("note %s%s: no /bin/bash, skipped\n", prefix, metrics[m].name);
+		fflush(stdout);
+		return;
 	}
 	/* A short warm-up round for the per-call metrics (page faults, the echo child). */
 	if (!metrics[m].per_run && metrics[m].round(n < 10 ? n : 10) < 0)

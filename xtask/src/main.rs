@@ -786,6 +786,7 @@ fn net_bench() -> Result<bool> {
 /// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
 fn native_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
+    tools::ensure_bash_static()?;
     let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
     let metrics = xtask::native::metrics(
         &qemu,
@@ -818,8 +819,10 @@ fn guest_metrics(
         .map(|g| g.init.iter().skip(1).cloned().collect())
         .unwrap_or_default();
     let program = xtask::linux::build("linux-bench")?;
-    // The macro workloads run `/bin/busybox` (gzip, sh) on the host leg as in the guest.
+    // The macro workloads run `/bin/busybox` (gzip, sh) on the host leg as in the guest;
+    // bash's is the host's bash there, Debian's bash-static in the guest and natively.
     tools::ensure_busybox()?;
+    tools::ensure_bash_static()?;
     eprintln!("xtask: running linux-bench on the host");
     let out = std::process::Command::new(&program)
         .args(&args)

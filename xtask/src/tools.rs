@@ -96,6 +96,17 @@ pub fn install_packages(packages: &[&str], what: &str) -> Result<()> {
     Ok(())
 }
 
+/// Debian's static bash, which the guest benchmark system puts at the guest's `/bin/bash`
+/// (installing `bash-static` first if it is missing).
+pub fn ensure_bash_static() -> Result<PathBuf> {
+    let path = Path::new("/bin/bash-static");
+    if !path.is_file() {
+        install_packages(&["bash-static"], "bash (Debian package bash-static)")?;
+    }
+    anyhow::ensure!(path.is_file(), "{} still not found", path.display());
+    Ok(path.to_path_buf())
+}
+
 /// The static busybox for guest initramfs images (installing `busybox-static` first if
 /// it is missing, as for QEMU).
 pub fn ensure_busybox() -> Result<PathBuf> {
