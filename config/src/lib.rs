@@ -85,6 +85,7 @@
 //! iec61499.boot = "app.fboot"      # IEC 61499 partitions only: see "IEC 61499"
 //! iec61499.types = ["PID.fbt"]     # optional
 //! iec61499.mgmt = { request = "fb-req", response = "fb-resp", access = "download" }  # optional
+//! iec61499.net = { mac = "52:54:00:12:34:58", address = "10.0.2.17/24", gateway = "10.0.2.2", rx = "eth-rx", tx = "eth-tx", port = 61499, connections = 4, access = "monitor" }  # optional
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
@@ -252,9 +253,16 @@
 //! requests, one a message (`iec61499_mgmt::serve`), and what their client may do:
 //! `"monitor"` (READ, QUERY, watches), `"force"` (also WRITE: parameters, forcing, event
 //! triggers) or `"download"` (also resources, FBs, connections, START/STOP/KILL/RESET and
-//! FB types); a request beyond it is answered ACCESS_DENIED. The partition's other queuing
-//! ports are its PUBLISH_n/SUBSCRIBE_n's: one whose `ID` names an output port sends on it,
-//! one whose `ID` names an input port receives from it (`iec61499_mgmt::pubsub`).
+//! FB types); a request beyond it is answered ACCESS_DENIED. `iec61499.net` gives the
+//! partition its own network interface, a tenant of the NIC partition (`nic.tenants.<fb>`
+//! with the same MAC; `mac`, `address`, `gateway`, `rx` and `tx` as `guest.net` has them),
+//! on which it serves the same management requests on TCP `port` (default 61499) to
+//! `connections` clients at once (1..=8, default 4; one more is closed at once), each
+//! allowed what `access` says (as `iec61499.mgmt.access`; default `"monitor"`); the
+//! protocol on TCP and why one access for every client: docs/iec61499.md. The partition's
+//! other queuing ports are its PUBLISH_n/SUBSCRIBE_n's: one whose `ID` names an output
+//! port sends on it, one whose `ID` names an input port receives from it
+//! (`iec61499_mgmt::pubsub`).
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,

@@ -135,6 +135,22 @@ pub struct Iec61499 {
     #[serde(default)]
     pub types: Vec<Spanned<String>>,
     pub mgmt: Option<Spanned<OnlinePorts>>,
+    pub net: Option<Spanned<Iec61499Net>>,
+}
+
+/// `iec61499.net`: the IEC 61499 partition's own interface (as `guest.net`) and the
+/// management protocol on TCP.
+#[derive(Debug, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Iec61499Net {
+    pub mac: Spanned<String>,
+    pub address: Spanned<String>,
+    pub gateway: Option<Spanned<String>>,
+    pub rx: Spanned<String>,
+    pub tx: Spanned<String>,
+    pub port: Option<Spanned<i64>>,
+    pub connections: Option<Spanned<i64>>,
+    pub access: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -130,6 +130,28 @@ pub struct Iec61499 {
     pub types: Vec<SourceFile>,
     /// The management protocol's ports and the client's access (`iec61499.mgmt`).
     pub mgmt: Option<OnlinePorts>,
+    /// Its interface and the management protocol on TCP (`iec61499.net`).
+    pub net: Option<Iec61499Net>,
+}
+
+/// An IEC 61499 partition's interface on the NIC partition's switch (`iec61499.net`): the
+/// link as a guest's `eth0`, and the management protocol's TCP server on it.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Iec61499Net {
+    pub link: GuestNet,
+    /// The TCP port of the management protocol.
+    pub port: u16,
+    /// TCP connections open at once.
+    pub connections: u8,
+    /// What every client on the port may do (4diac's protocol carries no identity).
+    pub access: plc_online::Access,
+}
+
+impl Iec61499Net {
+    /// 4diac FORTE's management port, which 4diac IDE deploys to.
+    pub const DEFAULT_PORT: u16 = 61499;
+    pub const DEFAULT_CONNECTIONS: u8 = 4;
+    pub const MAX_CONNECTIONS: u8 = 8;
 }
 
 /// What a guest partition starts: `argv` and the environment of its first process, and the

@@ -898,6 +898,23 @@ impl Validator<'_, '_> {
             .mgmt
             .as_ref()
             .and_then(|m| self.online_ports(m, &path.key("mgmt"), ports, MGMT_MESSAGE_SIZE));
+        let net = f
+            .net
+            .as_ref()
+            .and_then(|n| self.iec61499_net(n, &path.key("net"), ports));
+        if let (Some(m), Some(n), Some(raw)) = (&mgmt, &net, &f.net) {
+            let frame_ports = [n.link.rx.as_str(), n.link.tx.as_str()];
+            if [m.request, m.response]
+                .iter()
+                .any(|&i| frame_ports.contains(&ports[i].name.as_str()))
+            {
+                self.error(
+                    start(raw),
+                    &path.key("net"),
+                    "`rx` and `tx` carry frames: they cannot be the management ports of `iec61499.mgmt`",
+                );
+            }
+        }
         if self.r.diagnostics.len() != before {
             return None;
         }
@@ -905,6 +922,66 @@ impl Validator<'_, '_> {
             boot: boot.into_iter().next()?,
             types,
             mgmt,
+            net,
+        })
+    }
+
+    /// `iec61499.net`: the link as `guest.net` checks it, the TCP port, the connections
+    /// and the access of every client.
+    fn iec61499_net(
+        &mut self,
+        net: &Spanned<schema::Iec61499Net>,
+        path: &KeyPath,
+        ports: &[Port],
+    ) -> Option<Iec61499Net> {
+        let n = net.get_ref();
+        let link = Spanned::new(
+            net.span(),
+            schema::GuestNet {
+                mac: n.mac.clone(),
+                address: n.address.clone(),
+                gateway: n.gateway.clone(),
+                rx: n.rx.clone(),
+                tx: n.tx.clone(),
+            },
+        );
+        let link = self.guest_net(&link, path, ports);
+        let port = self.int_in(
+            n.port.as_ref(),
+            path,
+            "port",
+            1..=65_535,
+            i64::from(Iec61499Net::DEFAULT_PORT),
+        );
+        let connections = self.int_in(
+            n.connections.as_ref(),
+            path,
+            "connections",
+            1..=i64::from(Iec61499Net::MAX_CONNECTIONS),
+            i64::from(Iec61499Net::DEFAULT_CONNECTIONS),
+        );
+        let access = match &n.access {
+            None => Some(plc_online::Access::Monitor),
+            Some(a) => {
+                let access = plc_online::Access::from_name(a.get_ref());
+                if access.is_none() {
+                    self.error(
+                        start(a),
+                        &path.key("access"),
+                        format!(
+                            "unknown access {:?}: expected \"monitor\", \"force\" or \"download\" (what each allows: the \"IEC 61499\" section of the format)",
+                            a.get_ref()
+                        ),
+                    );
+                }
+                access
+            }
+        };
+        Some(Iec61499Net {
+            link: link?,
+            port: port? as u16,
+            connections: connections? as u8,
+            access: access?,
         })
     }
 

@@ -98,3 +98,104 @@ fn management_ports() {
         "`resp` must be a queuing `out` port of this partition with size = 4096",
     );
 }
+
+/// Partition `b` with frame ports `rx`/`tx` (queuing, 1514 bytes, looped back so their
+/// channel is valid) and `iec61499.net = net`.
+fn with_net(net: &str) -> String {
+    with(&format!(
+        "iec61499.boot = \"tests/data/app.fboot\"\nports.rx = {{ kind = \"queuing\", direction = \"in\", size = 1514, depth = 8 }}\nports.tx = {{ kind = \"queuing\", direction = \"out\", size = 1514, depth = 8 }}\niec61499.net = {net}"
+    )) + "\n[[channels]]\nkind = \"queuing\"\nfrom = \"b.tx\"\nto = \"b.rx\"\n"
+}
+
+const NET: &str = "{ mac = \"52:54:00:12:34:58\", address = \"10.0.2.17/24\", gateway = \"10.0.2.2\", rx = \"rx\", tx = \"tx\" }";
+
+#[test]
+fn a_network_interface_with_the_management_port() {
+    let system = load_ok(&with_net(NET));
+    let net = system.partitions[1]
+        .iec61499
+        .as_ref()
+        .and_then(|f| f.net.clone())
+        .expect("iec61499.net");
+    assert_eq!(net.link.mac, [0x52, 0x54, 0, 0x12, 0x34, 0x58]);
+    assert_eq!((net.link.address, net.link.prefix), ([10, 0, 2, 17], 24));
+    assert_eq!((net.link.rx.as_str(), net.link.tx.as_str()), ("rx", "tx"));
+    // 4diac's port, four clients, read-only unless the configuration says otherwise.
+    assert_eq!((net.port, net.connections), (61499, 4));
+    assert_eq!(net.access, plc_online::Access::Monitor);
+    let given = NET.replace(
+        " }",
+        ", port = 4444, connections = 8, access = \"download\" }",
+    );
+    let net = load_ok(&with_net(&given)).partitions[1]
+        .iec61499
+        .as_ref()
+        .and_then(|f| f.net.clone())
+        .unwrap();
+    assert_eq!((net.port, net.connections), (4444, 8));
+    assert_eq!(net.access, plc_online::Access::Download);
+}
+
+#[test]
+fn a_network_interface_is_checked() {
+    let bad = |from: &str, to: &str| with_net(&NET.replace(from, to));
+    expect_some(
+        &bad("52:54:00:12:34:58", "01:00:5e:00:00:01"),
+        "\"01:00:5e:00:00:01\"",
+        0,
+        "partitions.b.iec61499.net.mac",
+        "no unicast MAC address",
+    );
+    expect_some(
+        &bad("rx = \"rx\"", "rx = \"nowhere\""),
+        "\"nowhere\"",
+        0,
+        "partitions.b.iec61499.net.rx",
+        "no queuing `in` port",
+    );
+    expect_some(
+        &bad(" }", ", port = 0 }"),
+        "0 }",
+        0,
+        "partitions.b.iec61499.net.port",
+        "0 is outside 1..=65535",
+    );
+    expect_some(
+        &bad(" }", ", connections = 9 }"),
+        "9 }",
+        0,
+        "partitions.b.iec61499.net.connections",
+        "9 is outside 1..=8",
+    );
+    expect_some(
+        &bad(" }", ", access = \"root\" }"),
+        "\"root\"",
+        0,
+        "partitions.b.iec61499.net.access",
+        "unknown access \"root\"",
+    );
+    expect_some(
+        &bad(" }", ", speed = 1 }"),
+        "speed",
+        0,
+        "partitions.b.iec61499.net.speed",
+        "unknown field `speed`",
+    );
+}
+
+#[test]
+fn the_frame_ports_are_not_the_management_ports() {
+    // Ports of the management protocol's size, which frames fit too.
+    let source = with_net(NET).replace("size = 1514", "size = 4096").replace(
+        "iec61499.net",
+        "iec61499.mgmt = { request = \"rx\", response = \"tx\", access = \"monitor\" }\niec61499.net",
+    );
+    let diags = load(&source).expect_err("frame ports as management ports");
+    assert!(
+        diags
+            .iter()
+            .any(|d| d.key_path == "partitions.b.iec61499.net"
+                && d.message.contains("cannot be the management ports")),
+        "{diags:?}"
+    );
+}

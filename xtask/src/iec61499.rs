@@ -9,7 +9,9 @@ use anyhow::{Context, Result, bail};
 use config::System;
 use config::model::{Direction, PortKind};
 use config::system::SourceFile;
-use iec61499_mgmt::package::{DataQueue, DevicePackage, MgmtPorts, QueuingPort, SamplingPort};
+use iec61499_mgmt::package::{
+    DataQueue, DevicePackage, MgmtPorts, NetPorts, QueuingPort, SamplingPort,
+};
 use iec61499_mgmt::serve::Access;
 use iec61499_mgmt::sifb::NoPorts;
 use iec61499_runtime::Limits;
@@ -35,6 +37,17 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             request: port(p, m.request),
             response: port(p, m.response),
         });
+        let net = fb.net.as_ref().map(|n| NetPorts {
+            mac: n.link.mac,
+            address: n.link.address,
+            prefix: n.link.prefix,
+            gateway: n.link.gateway,
+            port: n.port,
+            connections: n.connections,
+            access: Access::from_code(n.access as u8).expect("the same codes"),
+            rx: named_port(p, &n.link.rx),
+            tx: named_port(p, &n.link.tx),
+        });
         let ports = p
             .ports
             .iter()
@@ -46,13 +59,22 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
                 refresh_ns: port.refresh,
             })
             .collect();
-        // The queuing ports other than the management pair: PUBLISH/SUBSCRIBE's.
+        // The queuing ports other than the management pair and the frame ports:
+        // PUBLISH/SUBSCRIBE's.
         let mgmt_ports = fb.mgmt.map_or(Vec::new(), |m| vec![m.request, m.response]);
+        let frame_ports = fb
+            .net
+            .as_ref()
+            .map_or(Vec::new(), |n| vec![n.link.rx.as_str(), n.link.tx.as_str()]);
         let queues = p
             .ports
             .iter()
             .enumerate()
-            .filter(|(i, port)| port.kind == PortKind::Queuing && !mgmt_ports.contains(i))
+            .filter(|(i, port)| {
+                port.kind == PortKind::Queuing
+                    && !mgmt_ports.contains(i)
+                    && !frame_ports.contains(&port.name.as_str())
+            })
             .map(|(i, port)| DataQueue {
                 port: self::port(p, i),
                 input: port.direction == Direction::In,
@@ -64,6 +86,7 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             queue: limits.queue,
             chain_events: limits.chain_events,
             mgmt,
+            net,
             ports,
             queues,
         });
@@ -83,6 +106,16 @@ fn port(p: &config::system::Partition, index: usize) -> QueuingPort<'_> {
         size: port.size,
         depth: port.depth,
     }
+}
+
+/// Queuing port `name` of partition `p` (the configuration checked it exists).
+fn named_port<'a>(p: &'a config::system::Partition, name: &str) -> QueuingPort<'a> {
+    let index = p
+        .ports
+        .iter()
+        .position(|port| port.name == name)
+        .expect("a port the configuration checked");
+    port(p, index)
 }
 
 fn read(what: &str, file: &SourceFile) -> Result<String> {

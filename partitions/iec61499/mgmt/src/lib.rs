@@ -32,6 +32,11 @@
 //! # Boot files
 //!
 //! One request a line, `destination;request`, as FORTE reads them ([`fboot`]).
+//!
+//! # Transports
+//!
+//! The same requests come over message ports (one a message, [`serve`]) and over TCP in
+//! 4diac's framing (two ASN.1 STRINGs, [`tcp`]); [`serve::serve_parts`] answers both.
 
 #![no_std]
 
@@ -46,6 +51,7 @@ pub mod pubsub;
 pub mod request;
 pub mod serve;
 pub mod sifb;
+pub mod tcp;
 pub mod types;
 
 pub use device::Device;

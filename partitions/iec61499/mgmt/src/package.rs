@@ -12,6 +12,10 @@
 //! 24 1 management ports: 0 none, 1 the ports follow
 //!   [1 access (`serve::Access` code), then request and response port: name length u8,
 //!    name (UTF-8), message size u32, depth u32]
+//! .. 1 network interface and the management protocol on TCP (`crate::tcp`): 0 none, 1 it
+//!   follows [6 MAC, 4 IPv4 address, 1 prefix length, 1 gateway (0 none, 1 the 4 bytes
+//!   follow), TCP port u16, connections u8, access u8, then the frame ports rx (in) and
+//!   tx (out) as the management ports]
 //! .. sampling ports (for the process-image FBs, `crate::sifb`): count u16, per port: name
 //!    length u8, name, direction u8 (1 in, 0 out), message size u32, refresh period u64 (ns)
 //! .. queuing ports (for PUBLISH/SUBSCRIBE, `crate::pubsub`): count u16, per port: name
@@ -30,7 +34,7 @@ use alloc::vec::Vec;
 use iec61499_runtime::Limits;
 
 const MAGIC: &[u8; 4] = b"W61D";
-const VERSION: u16 = 2;
+const VERSION: u16 = 3;
 /// The most types one package may carry.
 pub const MAX_TYPES: usize = 256;
 /// The most sampling ports a package names (a partition has fewer).
@@ -53,6 +57,8 @@ pub struct DevicePackage<'a> {
     pub chain_events: usize,
     /// The queuing ports of the management protocol, if it has a client.
     pub mgmt: Option<MgmtPorts<'a>>,
+    /// The network interface and the management protocol's TCP port, if it has one.
+    pub net: Option<NetPorts<'a>>,
     /// The partition's sampling ports.
     pub ports: Vec<SamplingPort<'a>>,
     /// The partition's queuing ports other than the management ones.
@@ -84,6 +90,25 @@ pub struct MgmtPorts<'a> {
     pub response: QueuingPort<'a>,
 }
 
+/// The partition's interface on the NIC partition's switch (its frames on two queuing
+/// ports) and the management protocol's TCP server on it ([`crate::tcp`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct NetPorts<'a> {
+    pub mac: [u8; 6],
+    pub address: [u8; 4],
+    pub prefix: u8,
+    pub gateway: Option<[u8; 4]>,
+    /// The TCP port of the management protocol.
+    pub port: u16,
+    /// Connections at once (1..=`tcp::server::MAX_CONNECTIONS`).
+    pub connections: u8,
+    /// What every client on TCP may do.
+    pub access: Access,
+    /// The queuing input of received frames and output of frames to send.
+    pub rx: QueuingPort<'a>,
+    pub tx: QueuingPort<'a>,
+}
+
 /// A queuing port as the partition creates it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct QueuingPort<'a> {
@@ -113,6 +138,8 @@ pub enum DevicePackageError {
     Limit(&'static str, usize),
     /// The management-ports field at this offset is not valid.
     Mgmt(usize),
+    /// The network field at this offset is not valid.
+    Net(usize),
     /// The sampling- or queuing-ports field at this offset is not valid.
     Ports(usize),
 }
@@ -134,6 +161,7 @@ impl core::fmt::Display for DevicePackageError {
             Self::Trailing(at) => write!(f, "bytes after the boot file at offset {at}"),
             Self::Limit(what, n) => write!(f, "{what} {n} is out of range"),
             Self::Mgmt(at) => write!(f, "invalid management ports at offset {at}"),
+            Self::Net(at) => write!(f, "invalid network interface at offset {at}"),
             Self::Ports(at) => write!(f, "invalid sampling or queuing ports at offset {at}"),
         }
     }
@@ -161,6 +189,30 @@ pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
             body.push(1);
             body.push(m.access as u8);
             for port in [m.request, m.response] {
+                push_name(&mut body, port.name);
+                body.extend_from_slice(&port.size.to_le_bytes());
+                body.extend_from_slice(&port.depth.to_le_bytes());
+            }
+        }
+    }
+    match &package.net {
+        None => body.push(0),
+        Some(n) => {
+            body.push(1);
+            body.extend_from_slice(&n.mac);
+            body.extend_from_slice(&n.address);
+            body.push(n.prefix);
+            match n.gateway {
+                None => body.push(0),
+                Some(g) => {
+                    body.push(1);
+                    body.extend_from_slice(&g);
+                }
+            }
+            body.extend_from_slice(&n.port.to_le_bytes());
+            body.push(n.connections);
+            body.push(n.access as u8);
+            for port in [n.rx, n.tx] {
                 push_name(&mut body, port.name);
                 body.extend_from_slice(&port.size.to_le_bytes());
                 body.extend_from_slice(&port.depth.to_le_bytes());
@@ -296,6 +348,7 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         }
         _ => return Err(DevicePackageError::Mgmt(at - 1)),
     };
+    let net = net_at(bytes, &mut at)?;
     let ports = port_list(bytes, &mut at, |bytes, at, name, input| {
         let size = u32_at(bytes, at)? as u32;
         let refresh = take(bytes, at, 8)?;
@@ -332,9 +385,62 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         queue,
         chain_events,
         mgmt,
+        net,
         ports,
         queues,
     })
+}
+
+/// The network field at `at`.
+fn net_at<'a>(bytes: &'a [u8], at: &mut usize) -> Result<Option<NetPorts<'a>>, DevicePackageError> {
+    let field = *at;
+    let bad = DevicePackageError::Net(field);
+    match take(bytes, at, 1)?[0] {
+        0 => return Ok(None),
+        1 => {}
+        _ => return Err(bad),
+    }
+    let array = |at: &mut usize, len: usize| take(bytes, at, len);
+    let mut mac = [0u8; 6];
+    mac.copy_from_slice(array(at, 6)?);
+    let mut address = [0u8; 4];
+    address.copy_from_slice(array(at, 4)?);
+    let prefix = array(at, 1)?[0];
+    let gateway = match array(at, 1)?[0] {
+        0 => None,
+        1 => {
+            let mut g = [0u8; 4];
+            g.copy_from_slice(array(at, 4)?);
+            Some(g)
+        }
+        _ => return Err(bad),
+    };
+    let port = array(at, 2)?;
+    let port = u16::from_le_bytes([port[0], port[1]]);
+    let connections = array(at, 1)?[0];
+    let access = Access::from_code(array(at, 1)?[0]).ok_or(bad)?;
+    if !(1..=32).contains(&prefix) || connections == 0 {
+        return Err(bad);
+    }
+    let mut queuing = || -> Result<QueuingPort<'a>, DevicePackageError> {
+        let name = name_at(bytes, at)?;
+        let size = u32_at(bytes, at)? as u32;
+        let depth = u32_at(bytes, at)? as u32;
+        Ok(QueuingPort { name, size, depth })
+    };
+    let rx = queuing()?;
+    let tx = queuing()?;
+    Ok(Some(NetPorts {
+        mac,
+        address,
+        prefix,
+        gateway,
+        port,
+        connections,
+        access,
+        rx,
+        tx,
+    }))
 }
 
 /// What [`boot`] did.
@@ -394,6 +500,7 @@ mod tests {
             queue,
             chain_events: chain,
             mgmt: None,
+            net: None,
             ports: Vec::new(),
             queues: Vec::new(),
         }
@@ -415,6 +522,17 @@ mod tests {
                 access: Access::Force,
                 request: port("fb-req", 4),
                 response: port("fb-resp", 2),
+            }),
+            net: Some(NetPorts {
+                mac: [0x52, 0x54, 0, 0x12, 0x34, 0x58],
+                address: [10, 0, 2, 17],
+                prefix: 24,
+                gateway: Some([10, 0, 2, 2]),
+                port: 61499,
+                connections: 4,
+                access: Access::Download,
+                rx: port("eth-rx", 32),
+                tx: port("eth-tx", 32),
             }),
             ports: vec![
                 SamplingPort {
@@ -442,6 +560,11 @@ mod tests {
             ],
         };
         assert_eq!(decode(&encode(&original)).unwrap(), original);
+        let without_gateway = DevicePackage {
+            net: original.net.map(|n| NetPorts { gateway: None, ..n }),
+            ..original
+        };
+        assert_eq!(decode(&encode(&without_gateway)).unwrap(), without_gateway);
         let plain = package(&[], "", 1, 1);
         assert_eq!(decode(&encode(&plain)).unwrap(), plain);
     }
@@ -455,10 +578,12 @@ mod tests {
         );
         assert_eq!(decode(b"W61"), Err(DevicePackageError::Truncated(0)));
         assert_eq!(decode(b"W61TXXXXXXXXXXXX"), Err(DevicePackageError::Magic));
-        // Version 1 had no queuing ports for PUBLISH/SUBSCRIBE.
-        let mut v1 = bytes.clone();
-        v1[4] = 1;
-        assert_eq!(decode(&v1), Err(DevicePackageError::Version(1)));
+        // Version 1 had no queuing ports for PUBLISH/SUBSCRIBE, version 2 no network.
+        for old in [1, 2] {
+            let mut v = bytes.clone();
+            v[4] = old;
+            assert_eq!(decode(&v), Err(DevicePackageError::Version(u16::from(old))));
+        }
         for i in 12..bytes.len() {
             let mut flipped = bytes.clone();
             flipped[i] ^= 0x40;

@@ -1,7 +1,8 @@
 //! The management protocol on a pair of message ports (an ARINC 653 queuing port pair from
-//! a client in the Linux guest today; a TCP connection carries the same requests later):
-//! one request a message, `destination;request` as a boot-file line holds it (UTF-8, the
-//! destination empty for the device), answered by one message, the response. A response
+//! a client in the Linux guest; a TCP connection carries the same requests in 4diac's
+//! framing, [`crate::tcp`], answered by the same [`serve_parts`]): one request a message,
+//! `destination;request` as a boot-file line holds it (UTF-8, the destination empty for
+//! the device), answered by one message, the response. A response
 //! longer than the port's messages is replaced by the request's refusal with OVERFLOW.
 //! What a client may do depends on its configured [`Access`]; a request beyond it is
 //! refused with ACCESS_DENIED and changes nothing.
@@ -50,23 +51,47 @@ pub fn serve(
     max_response: usize,
     now: i64,
 ) -> String {
-    let refuse = |id: &str, reason| response(id, Some(reason), None);
-    let Some((destination, text)) = core::str::from_utf8(message)
-        .ok()
-        .and_then(|m| m.trim_end_matches(['\r', '\n']).split_once(';'))
-    else {
-        return refuse("", Reason::BadParams);
+    match message.iter().position(|&b| b == b';') {
+        Some(at) => serve_parts(
+            device,
+            &message[..at],
+            &message[at + 1..],
+            access,
+            max_response,
+            now,
+        ),
+        None => refusal(Reason::BadParams),
+    }
+}
+
+/// Answers one request, its `destination` (empty: the device) and its XML `request` apart
+/// (as the TCP framing carries them, [`crate::tcp`]; [`serve`] splits a message into
+/// them): the one place a client's request is read, checked against its `access` and
+/// carried out. The response fits in `max_response` bytes.
+pub fn serve_parts(
+    device: &mut Device,
+    destination: &[u8],
+    request: &[u8],
+    access: Access,
+    max_response: usize,
+    now: i64,
+) -> String {
+    let (Ok(destination), Ok(text)) = (
+        core::str::from_utf8(destination),
+        core::str::from_utf8(request),
+    ) else {
+        return refusal(Reason::BadParams);
     };
     let (destination, text) = (destination.trim(), text.trim());
     let answer = match Request::parse(text) {
-        Err((id, reason)) => refuse(&id, reason),
+        Err((id, reason)) => response(&id, Some(reason), None),
         Ok(request) if Access::needed(&request) > access => {
-            refuse(&request.id, Reason::AccessDenied)
+            response(&request.id, Some(Reason::AccessDenied), None)
         }
         Ok(request) => {
             let answer = device.execute(destination, text, now);
             if answer.len() > max_response {
-                refuse(&request.id, Reason::Overflow)
+                response(&request.id, Some(Reason::Overflow), None)
             } else {
                 answer
             }
@@ -74,9 +99,15 @@ pub fn serve(
     };
     if answer.len() > max_response {
         // Only an absurd ID can make a refusal too long.
-        return refuse("", Reason::Overflow);
+        return refusal(Reason::Overflow);
     }
     answer
+}
+
+/// The refusal of a request whose ID could not be read (`<Response ID="" Reason=... />`,
+/// 40 bytes at most).
+pub fn refusal(reason: Reason) -> String {
+    response("", Some(reason), None)
 }
 
 /// The request messages that send type `name`'s `package` in parts (each at most

@@ -13,11 +13,25 @@
 //! at least every `pubsub::POLL_NS` and lets it take what arrived. With management ports (`iec61499.mgmt`, created at start), the wait is a
 //! RECEIVE_QUEUING_MESSAGE on the request port: a request is answered on the response port
 //! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
-//! one.
+//! one. With a network interface (`iec61499.net`), the same process drives its TCP/IP
+//! stack and the management protocol's TCP server (`iec61499_mgmt::tcp::server`): at
+//! every pass of its loop, and at least every [`NET_POLL`] then, it takes the frames the
+//! NIC partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one
+//! whole request of each connection on the device (between event chains, as above; an
+//! incomplete request just waits in its connection's buffer), and sends the frames out.
 //!
 //! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
 //! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted, then
-//!   `iec61499: management on <request>/<response>, access <level>` with management ports;
+//!   `iec61499: management on <request>/<response>, access <level>` with management ports
+//!   and `iec61499: net <address>/<prefix> mac <mac>: management on tcp port <port>,
+//!   connections <n>, access <level>` with a network interface;
+//! - with a network interface, per TCP client (at most [`EVENT_LINES`] a second; the
+//!   statistics line counts them all): `iec61499: tcp: connection from <ip>:<port>`,
+//!   `iec61499: tcp: refused <ip>:<port>: all connections in use`, `iec61499: tcp: closed
+//!   <ip>:<port>: <why>` (a stream that is not requests, answered with a refusal first,
+//!   or no progress for 10 s with an incomplete request or an unsent response), and once a
+//!   second when they changed `iec61499: t=<ms>ms net open=<n> accepted=<n> refused=<n>
+//!   requests=<n> malformed=<n> timed_out=<n> frames_in=<n> frames_out=<n>`;
 //! - `iec61499: refusing the boot package: <reason>` when it did not (reported to the
 //!   health monitor as APPLICATION_ERROR; the process stops, the partition idles);
 //! - every line the device logs (`iec61499_mgmt::Device::take_log`): the test FBs'
@@ -46,16 +60,23 @@ use apex::user_rt::println;
 use core::str::FromStr;
 use core::time::Duration;
 use iec61499_mgmt::Device;
-use iec61499_mgmt::package::{DataQueue, MgmtPorts, QueuingPort, SamplingPort};
+use iec61499_mgmt::package::{DataQueue, MgmtPorts, NetPorts, QueuingPort, SamplingPort};
 use iec61499_mgmt::serve::{Access, serve};
 use iec61499_mgmt::sifb::ProcessIo;
+use iec61499_mgmt::tcp::server::{self, Event, Server, Settings, Stats};
 
 /// How often the statistics line is printed.
 const STATS_EVERY_MS: i64 = 1000;
 /// How long the device process sleeps when no resource has a timer.
 const IDLE: Duration = Duration::from_millis(100);
-/// The heap: the device's resources, FB instances, types and event queues.
-const HEAP: usize = 1024 * 1024;
+/// The heap: the device's resources, FB instances, types and event queues; the TCP/IP
+/// stack's sockets and the TCP connections' buffers.
+const HEAP: usize = 2 * 1024 * 1024;
+/// How often the device process looks at its network interface at least (with one).
+const NET_POLL: Duration = Duration::from_millis(2);
+/// Lines about TCP clients per second at most (a flood of clients must not keep the
+/// partition writing to the log); the statistics line counts them all.
+const EVENT_LINES: u32 = 10;
 
 fn now_ns() -> i64 {
     <Warden as ApexTimeP4Ext>::get_time()
@@ -244,6 +265,153 @@ impl ProcessIo for ApexIo {
     }
 }
 
+/// The network interface and the management protocol's TCP server (`iec61499.net`).
+struct Net {
+    server: Server,
+    rx: QueuingPortReceiver<Warden>,
+    tx: QueuingPortSender<Warden>,
+    frame: Vec<u8>,
+    frames_in: u64,
+    frames_out: u64,
+    logged: Stats,
+    event_lines: u32,
+    next_stats: i64,
+}
+
+impl Net {
+    /// Opens the frame ports (created at start) and listens; why not, else.
+    fn open(n: &NetPorts<'_>, now: i64) -> Result<Self, String> {
+        let rx = Name::from_str(n.rx.name)
+            .ok()
+            .and_then(|name| QueuingPortReceiver::<Warden>::from_name(name).ok());
+        let tx = Name::from_str(n.tx.name)
+            .ok()
+            .and_then(|name| QueuingPortSender::<Warden>::from_name(name).ok());
+        let (Some(rx), Some(tx)) = (rx, tx) else {
+            return Err(alloc::format!(
+                "cannot open the frame ports {}/{}",
+                n.rx.name,
+                n.tx.name
+            ));
+        };
+        let settings = Settings {
+            mac: n.mac,
+            address: n.address,
+            prefix: n.prefix,
+            gateway: n.gateway,
+            port: n.port,
+            connections: usize::from(n.connections),
+            access: n.access,
+        };
+        let server = Server::new(&settings, now.max(0) as u64)
+            .map_err(|e| alloc::format!("cannot listen on tcp port {}: {e:?}", n.port))?;
+        Ok(Net {
+            server,
+            rx,
+            tx,
+            frame: alloc::vec![0; netstack::MTU],
+            frames_in: 0,
+            frames_out: 0,
+            logged: Stats::default(),
+            event_lines: EVENT_LINES,
+            next_stats: now,
+        })
+    }
+
+    /// The frames in, the server's run (requests answered on `device`), the frames out,
+    /// the log lines.
+    fn pass(&mut self, device: &mut Device, now: i64) {
+        for _ in 0..server::FRAMES_PER_RUN {
+            let Ok((message, _)) = self
+                .rx
+                .receive(&mut self.frame, SystemTime::Normal(Duration::ZERO))
+            else {
+                break;
+            };
+            self.server.stack.device.deliver(message);
+            self.frames_in += 1;
+        }
+        self.server.run(now.max(0) as u64, device);
+        for _ in 0..server::FRAMES_PER_RUN {
+            let Some(out) = self.server.stack.device.take() else {
+                break;
+            };
+            let _ = self.tx.send(&out, SystemTime::Normal(Duration::ZERO));
+            self.frames_out += 1;
+        }
+        self.log(now);
+    }
+
+    fn log(&mut self, now: i64) {
+        let mut events = [None; server::MAX_EVENTS];
+        for (slot, event) in events.iter_mut().zip(self.server.take_events()) {
+            *slot = Some(event);
+        }
+        for event in events.into_iter().flatten() {
+            if self.event_lines == 0 {
+                continue;
+            }
+            self.event_lines -= 1;
+            match event {
+                Event::Accepted(p) => {
+                    println!("iec61499: tcp: connection from {}:{}", p.ip, p.port)
+                }
+                Event::Refused(p) => println!(
+                    "iec61499: tcp: refused {}:{}: all connections in use",
+                    p.ip, p.port
+                ),
+                Event::Malformed(p, why) => println!(
+                    "iec61499: tcp: closed {}:{}: {why} (answered with a refusal)",
+                    p.ip, p.port
+                ),
+                Event::TimedOut {
+                    peer: p,
+                    received,
+                    unsent,
+                } => println!(
+                    "iec61499: tcp: closed {}:{}: no progress for {} s ({received} bytes of a request received, {unsent} bytes of a response unsent)",
+                    p.ip,
+                    p.port,
+                    server::REQUEST_TIMEOUT_NS / 1_000_000_000
+                ),
+            }
+        }
+        if now >= self.next_stats {
+            let every = STATS_EVERY_MS * 1_000_000;
+            self.next_stats = (now / every + 1) * every;
+            self.event_lines = EVENT_LINES;
+            let s = self.server.stats;
+            if s != self.logged {
+                self.logged = s;
+                println!(
+                    "iec61499: t={}ms net open={} accepted={} refused={} requests={} malformed={} timed_out={} frames_in={} frames_out={}",
+                    now / 1_000_000,
+                    self.server.open(),
+                    s.accepted,
+                    s.refused,
+                    s.requests,
+                    s.malformed,
+                    s.timed_out,
+                    self.frames_in,
+                    self.frames_out
+                );
+            }
+        }
+    }
+
+    /// How long the device process may wait before the next pass.
+    fn wait_at_most(&mut self, now: i64) -> Duration {
+        let poll_at = self
+            .server
+            .poll_at_ns()
+            .map(|at| (at as i64).saturating_sub(now).max(0) as u64);
+        match poll_at {
+            Some(ns) => Duration::from_nanos(ns).min(NET_POLL),
+            None => NET_POLL,
+        }
+    }
+}
+
 /// Waits `timeout` for a request and answers it; false when the wait failed.
 fn wait(device: &mut Device, mgmt: Option<&Mgmt>, timeout: Duration, buf: &mut [u8]) -> bool {
     let Some(m) = mgmt else {
@@ -307,6 +475,33 @@ extern "C" fn device_process() {
         )),
         (None, _) => {}
     }
+    let mut net = package.net.as_ref().and_then(|n| match Net::open(n, now_ns()) {
+        Ok(net) => {
+            let (a, m) = (n.address, n.mac);
+            println!(
+                "iec61499: net {}.{}.{}.{}/{} mac {:02x}:{:02x}:{:02x}:{:02x}:{:02x}:{:02x}: management on tcp port {}, connections {}, access {:?}",
+                a[0],
+                a[1],
+                a[2],
+                a[3],
+                n.prefix,
+                m[0],
+                m[1],
+                m[2],
+                m[3],
+                m[4],
+                m[5],
+                n.port,
+                n.connections,
+                n.access
+            );
+            Some(net)
+        }
+        Err(why) => {
+            report(&why);
+            None
+        }
+    });
     let mut buf = alloc::vec![0u8; package.mgmt.map_or(0, |p| p.request.size as usize)];
     let mut faults_seen = 0;
     drain(&mut device, &mut faults_seen);
@@ -338,12 +533,20 @@ extern "C" fn device_process() {
             device.poll(now_ns());
             drain(&mut device, &mut faults_seen);
         }
+        if let Some(net) = net.as_mut() {
+            net.pass(&mut device, now_ns());
+            drain(&mut device, &mut faults_seen);
+        }
         let now = now_ns();
         // A subscriber's messages wait at most one poll period.
         let idle = if device.polls() {
             Duration::from_nanos(iec61499_mgmt::pubsub::POLL_NS as u64)
         } else {
             IDLE
+        };
+        let idle = match net.as_mut() {
+            Some(net) => idle.min(net.wait_at_most(now)),
+            None => idle,
         };
         let sleep = match device.next_deadline() {
             Some(due) if due <= now => continue,
@@ -411,6 +614,32 @@ impl Iec61499Partition {
                     "creating queuing port {} failed: {e:?}",
                     q.port.name
                 ));
+            }
+        }
+        if let Some(n) = package.net {
+            let created = Name::from_str(n.rx.name)
+                .map_err(|_| Error::InvalidParam)
+                .and_then(|name| {
+                    ctx.create_queuing_port_receiver(
+                        name,
+                        n.rx.size,
+                        n.rx.depth,
+                        QueuingDiscipline::Fifo,
+                    )
+                    .map(drop)
+                })
+                .and_then(|()| Name::from_str(n.tx.name).map_err(|_| Error::InvalidParam))
+                .and_then(|name| {
+                    ctx.create_queuing_port_sender(
+                        name,
+                        n.tx.size,
+                        n.tx.depth,
+                        QueuingDiscipline::Fifo,
+                    )
+                    .map(drop)
+                });
+            if let Err(e) = created {
+                report(&alloc::format!("creating the frame ports failed: {e:?}"));
             }
         }
         if let Some(m) = package.mgmt {
