@@ -15,8 +15,9 @@
 //! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
 //! one. With a network interface (`iec61499.net`), the same process drives its TCP/IP
 //! stack and the management protocol's TCP server (`iec61499_mgmt::tcp::server`): at
-//! every pass of its loop, and at least every [`NET_POLL`] then, it takes the frames the
-//! NIC partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one
+//! every pass of its loop, and at least every [`NET_POLL`] then (sooner: the frame port's
+//! and the management request port's doorbell, which syssw rings when messages arrive
+//! there, end its wait), it takes the frames the NIC partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one
 //! whole request of each connection on the device (between event chains, as above; an
 //! incomplete request just waits in its connection's buffer), and sends the frames out.
 //!
@@ -74,6 +75,9 @@ const IDLE: Duration = Duration::from_millis(100);
 const HEAP: usize = 2 * 1024 * 1024;
 /// How often the device process looks at its network interface at least (with one).
 const NET_POLL: Duration = Duration::from_millis(2);
+/// The notification bit of the doorbells of the frame port and the management request
+/// port (syssw rings it when messages arrive there; the APEX runtime's bits are 0 and 1).
+const DOORBELL_BIT: u64 = 1 << 9;
 /// Lines about TCP clients per second at most (a flood of clients must not keep the
 /// partition writing to the log); the statistics line counts them all.
 const EVENT_LINES: u32 = 10;
@@ -268,6 +272,8 @@ impl ProcessIo for ApexIo {
 /// The network interface and the management protocol's TCP server (`iec61499.net`).
 struct Net {
     server: Server,
+    /// The frame port's doorbell is set: the device process waits for it.
+    doorbell: bool,
     rx: QueuingPortReceiver<Warden>,
     tx: QueuingPortSender<Warden>,
     frame: Vec<u8>,
@@ -305,8 +311,16 @@ impl Net {
         };
         let server = Server::new(&settings, now.max(0) as u64)
             .map_err(|e| alloc::format!("cannot listen on tcp port {}: {e:?}", n.port))?;
+        let doorbell = apex::runtime::port_doorbell(rx.id(), DOORBELL_BIT);
+        if let Err(e) = doorbell {
+            println!(
+                "iec61499: net: no doorbell on {} ({e:?}); it is polled",
+                n.rx.name
+            );
+        }
         Ok(Net {
             server,
+            doorbell: doorbell.is_ok(),
             rx,
             tx,
             frame: alloc::vec![0; netstack::MTU],
@@ -502,6 +516,14 @@ extern "C" fn device_process() {
             None
         }
     });
+    let doorbell = net.as_ref().is_some_and(|n| n.doorbell);
+    if doorbell
+        && let Some(m) = &mgmt
+        && let Err(e) = apex::runtime::port_doorbell(m.request.id(), DOORBELL_BIT)
+    {
+        // Its requests then wait for the next pass (at most NET_POLL).
+        println!("iec61499: no doorbell on the management request port ({e:?})");
+    }
     let mut buf = alloc::vec![0u8; package.mgmt.map_or(0, |p| p.request.size as usize)];
     let mut faults_seen = 0;
     drain(&mut device, &mut faults_seen);
@@ -553,7 +575,15 @@ extern "C" fn device_process() {
             Some(due) => Duration::from_nanos((due - now) as u64).min(idle),
             None => idle,
         };
-        if !wait(&mut device, mgmt.as_ref(), sleep, &mut buf) {
+        // With the frame port's doorbell, a notification ends the wait: frames, or a
+        // management request (its port rings too), then served without waiting.
+        let waited = if doorbell {
+            let _ = apex::user_rt::sys::notify_wait(DOORBELL_BIT, sleep.as_nanos() as u64);
+            mgmt.is_none() || wait(&mut device, mgmt.as_ref(), Duration::ZERO, &mut buf)
+        } else {
+            wait(&mut device, mgmt.as_ref(), sleep, &mut buf)
+        };
+        if !waited {
             return;
         }
         drain(&mut device, &mut faults_seen);
