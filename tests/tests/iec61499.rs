@@ -317,4 +317,31 @@ fn iec61499_pubsub() {
         publisher.is_some_and(|l| watched(l, "PUB.P.STATUS") == Some("'OK'")),
         &format!("publisher's status: {publisher:?}"),
     );
+    // CLIENT/SERVER: each count the client sent came back from the server's echo, in
+    // order and none lost (the responses counted equal the last count echoed), at most
+    // the last request still on its way.
+    let Some(client) = o.line("iec61499: t=3000ms watch PUB.") else {
+        return check(&o, false, "no publisher watch line at 3 s");
+    };
+    let number = |name| watched(client, name).and_then(|v| v.parse::<u64>().ok());
+    let (sent, responses, echoed) = (
+        number("PUB.TICK.CV"),
+        number("PUB.RC.CV"),
+        number("PUB.Q.OUT"),
+    );
+    check(
+        &o,
+        sent.is_some_and(|n| (20..=31).contains(&n))
+            && responses
+                .zip(sent)
+                .is_some_and(|(r, s)| r + 1 >= s && r <= s)
+            && echoed == responses,
+        &format!("client at 3 s: {sent:?} requests, {responses:?} responses, last echo {echoed:?}"),
+    );
+    check(
+        &o,
+        watched(client, "PUB.C.STATUS") == Some("'OK'")
+            && watched(sub, "SUB.SV.STATUS") == Some("'OK'"),
+        &format!("client's and server's status: {client} / {sub}"),
+    );
 }

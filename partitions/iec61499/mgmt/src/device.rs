@@ -581,6 +581,7 @@ impl Device {
                     .or_else(|| types::create(ty, &resource, name, &self.report))
                     .or_else(|| sifb::create(ty, &self.io))
                     .or_else(|| crate::pubsub::create(ty, &self.io))
+                    .or_else(|| crate::clientserver::create(ty, &self.io))
                     .ok_or(Reason::UnsupportedType)?,
             ),
         };

@@ -42,6 +42,7 @@
 
 extern crate alloc;
 
+pub mod clientserver;
 pub mod device;
 pub mod fboot;
 pub mod flat;

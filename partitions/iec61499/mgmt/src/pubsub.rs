@@ -31,23 +31,24 @@ use core::cell::RefCell;
 use iec61499_runtime::fb::{Context, EventSpec, Interface, VarSpec};
 use iec61499_runtime::{DataType, FunctionBlock, Value};
 
-/// The most data a PUBLISH or SUBSCRIBE carries.
+/// The most data a PUBLISH or SUBSCRIBE (or a CLIENT or SERVER each way) carries.
 pub const MAX_DATA: usize = 8;
 /// The longest a subscriber's message waits to be taken, as the partition polls.
 pub const POLL_NS: i64 = 10_000_000;
 /// The most messages one poll takes from a port.
-const PER_POLL: usize = 16;
+pub(crate) const PER_POLL: usize = 16;
 
-// Fixed variables, before the data: inputs QI, ID; outputs QO, STATUS.
-const QI: usize = 0;
-const ID: usize = 1;
-const QO: usize = 0;
-const STATUS: usize = 1;
-const DATA: usize = 2;
-const INIT: usize = 0;
+// Fixed variables of the communication FBs (here and `crate::clientserver`), before the
+// data: inputs QI, ID; outputs QO, STATUS; event INIT in, INITO out.
+pub(crate) const QI: usize = 0;
+pub(crate) const ID: usize = 1;
+pub(crate) const QO: usize = 0;
+pub(crate) const STATUS: usize = 1;
+pub(crate) const DATA: usize = 2;
+pub(crate) const INIT: usize = 0;
 
 /// The placeholder type of data without a type yet.
-const UNTYPED: DataType = DataType::LWord;
+pub(crate) const UNTYPED: DataType = DataType::LWord;
 
 /// A new PUBLISH_n or SUBSCRIBE_n, or `None` for another name.
 pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
@@ -127,7 +128,7 @@ struct PubSub {
 }
 
 /// The wire type of `ty`, if the encoding has it.
-fn wire_type(ty: DataType) -> Option<fbdk::Type> {
+pub(crate) fn wire_type(ty: DataType) -> Option<fbdk::Type> {
     fbdk::Type::from_name(ty.name())
 }
 
@@ -197,24 +198,11 @@ impl PubSub {
         let Some((port, size)) = self.port.clone().filter(|_| inputs[QI].as_bool()) else {
             return (false, "not initialised".into());
         };
-        let mut buf = alloc::vec![0u8; size];
-        let mut w = fbdk::Writer::new(&mut buf);
-        let written = if self.types.is_empty() {
-            w.null().map_err(|_| "port messages too small".to_string())
-        } else {
-            self.types.iter().enumerate().try_for_each(|(k, ty)| {
-                let value = ty
-                    .and_then(|ty| to_wire(ty, &inputs[DATA + k]))
-                    .ok_or_else(|| format!("SD_{} has no type the encoding has", k + 1))?;
-                w.value(&value)
-                    .map_err(|_| format!("the message is longer than {size} bytes"))
-            })
+        let message = match encode(&self.types, &inputs[DATA..], size) {
+            Ok(m) => m,
+            Err(why) => return (false, why),
         };
-        if let Err(why) = written {
-            return (false, why);
-        }
-        let len = w.len();
-        if self.io.borrow_mut().io.send(&port, &buf[..len]) {
+        if self.io.borrow_mut().io.send(&port, &message) {
             (true, "OK".into())
         } else {
             (false, "port full".into())
@@ -223,27 +211,59 @@ impl PubSub {
 
     /// Decodes a message into the RD outputs.
     fn take(&self, message: &[u8], ctx: &mut Context<'_>) -> Result<(), String> {
-        let mut r = fbdk::Reader::new(message);
-        if self.types.is_empty() {
-            return if message == [fbdk::NULL] {
-                Ok(())
-            } else {
-                Err("not an empty message".into())
-            };
-        }
-        let mut values = Vec::new();
-        for (k, ty) in self.types.iter().enumerate() {
-            let ty = ty.ok_or_else(|| format!("RD_{} has no type", k + 1))?;
-            let wire = wire_type(ty).ok_or_else(|| format!("RD_{} is not encodable", k + 1))?;
-            let v = r.value(wire).map_err(|e| format!("RD_{}: {e:?}", k + 1))?;
-            values.push(from_wire(ty, v));
-        }
-        r.finish().map_err(|e| format!("{e:?}"))?;
-        for (k, v) in values.into_iter().enumerate() {
+        for (k, v) in decode(&self.types, message)?.into_iter().enumerate() {
             ctx.set(DATA + k, v);
         }
         Ok(())
     }
+}
+
+/// The message carrying `values` (SD_1.., typed `types`) in at most `size` bytes: the FBDK
+/// encoding of each value in turn, or a NULL when there are none; else why not.
+pub(crate) fn encode(
+    types: &[Option<DataType>],
+    values: &[Value],
+    size: usize,
+) -> Result<Vec<u8>, String> {
+    let mut buf = alloc::vec![0u8; size];
+    let mut w = fbdk::Writer::new(&mut buf);
+    if types.is_empty() {
+        w.null()
+            .map_err(|_| "port messages too small".to_string())?;
+    } else {
+        for (k, ty) in types.iter().enumerate() {
+            let value = ty
+                .zip(values.get(k))
+                .and_then(|(ty, v)| to_wire(ty, v))
+                .ok_or_else(|| format!("SD_{} has no type the encoding has", k + 1))?;
+            w.value(&value)
+                .map_err(|_| format!("the message is longer than {size} bytes"))?;
+        }
+    }
+    let len = w.len();
+    buf.truncate(len);
+    Ok(buf)
+}
+
+/// The values RD_1.. (typed `types`) that `message` carries, or why it does not decode.
+pub(crate) fn decode(types: &[Option<DataType>], message: &[u8]) -> Result<Vec<Value>, String> {
+    if types.is_empty() {
+        return if message == [fbdk::NULL] {
+            Ok(Vec::new())
+        } else {
+            Err("not an empty message".into())
+        };
+    }
+    let mut r = fbdk::Reader::new(message);
+    let mut values = Vec::new();
+    for (k, ty) in types.iter().enumerate() {
+        let ty = ty.ok_or_else(|| format!("RD_{} has no type", k + 1))?;
+        let wire = wire_type(ty).ok_or_else(|| format!("RD_{} is not encodable", k + 1))?;
+        let v = r.value(wire).map_err(|e| format!("RD_{}: {e:?}", k + 1))?;
+        values.push(from_wire(ty, v));
+    }
+    r.finish().map_err(|e| format!("{e:?}"))?;
+    Ok(values)
 }
 
 impl FunctionBlock for PubSub {
