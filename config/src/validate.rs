@@ -148,6 +148,20 @@ fn shown(value: &Scalar) -> String {
     }
 }
 
+/// The link fields of a `plc.net` or `iec61499.net` (those of `guest.net`, which checks
+/// them) as a `schema::GuestNet`.
+macro_rules! link_fields {
+    ($net:expr) => {
+        schema::GuestNet {
+            mac: $net.mac.clone(),
+            address: $net.address.clone(),
+            gateway: $net.gateway.clone(),
+            rx: $net.rx.clone(),
+            tx: $net.tx.clone(),
+        }
+    };
+}
+
 impl Validator<'_, '_> {
     fn error(&mut self, at: usize, path: &KeyPath, message: impl core::fmt::Display) {
         self.r.error(at, path, message);
@@ -935,17 +949,7 @@ impl Validator<'_, '_> {
         ports: &[Port],
     ) -> Option<Iec61499Net> {
         let n = net.get_ref();
-        let link = Spanned::new(
-            net.span(),
-            schema::GuestNet {
-                mac: n.mac.clone(),
-                address: n.address.clone(),
-                gateway: n.gateway.clone(),
-                rx: n.rx.clone(),
-                tx: n.tx.clone(),
-            },
-        );
-        let link = self.guest_net(&link, path, ports);
+        let link = self.guest_net(&Spanned::new(net.span(), link_fields!(n)), path, ports);
         let port = self.int_in(
             n.port.as_ref(),
             path,
@@ -1827,17 +1831,7 @@ impl Validator<'_, '_> {
         ports: &[Port],
     ) -> Option<PlcNet> {
         let n = net.get_ref();
-        let link = Spanned::new(
-            net.span(),
-            schema::GuestNet {
-                mac: n.mac.clone(),
-                address: n.address.clone(),
-                gateway: n.gateway.clone(),
-                rx: n.rx.clone(),
-                tx: n.tx.clone(),
-            },
-        );
-        let link = self.guest_net(&link, path, ports);
+        let link = self.guest_net(&Spanned::new(net.span(), link_fields!(n)), path, ports);
         let connections = self.int_in(
             n.connections.as_ref(),
             path,
