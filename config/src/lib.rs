@@ -262,7 +262,9 @@
 //! protocol on TCP and why one access for every client: docs/iec61499.md. The partition's
 //! other queuing ports are its PUBLISH_n/SUBSCRIBE_n's: one whose `ID` names an output
 //! port sends on it, one whose `ID` names an input port receives from it
-//! (`iec61499_mgmt::pubsub`).
+//! (`iec61499_mgmt::pubsub`); with `iec61499.net`, an `ID` that is a UDP address
+//! (`a.b.c.d:port`, `fbdk[].ip[a.b.c.d:port]`) publishes or subscribes over UDP on the
+//! partition's interface instead (`iec61499_mgmt::udp`).
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,

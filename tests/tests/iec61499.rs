@@ -345,3 +345,100 @@ fn iec61499_pubsub() {
         &format!("client's and server's status: {client} / {sub}"),
     );
 }
+
+/// Every `NAME=value` of the watch lines of partition `partition` at `t` (a device's
+/// watches may take several lines).
+fn watch_at(o: &Outcome, partition: &str, t: &str) -> String {
+    let prefix = format!("[{partition}] iec61499: t={t} watch");
+    o.lines
+        .iter()
+        .filter_map(|l| l.split(&prefix).nth(1))
+        .collect::<Vec<_>>()
+        .join("")
+}
+
+#[test]
+fn iec61499_udp() {
+    let o = boot("iec61499_udp");
+    check(
+        &o,
+        o.ending == Ending::Done,
+        "expected the run to reach its done_when lines",
+    );
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    let sub = watch_at(&o, "sub", "5000ms");
+    let publisher = watch_at(&o, "pub", "5000ms");
+    eprintln!("sub:{sub}\npub:{publisher}");
+    let number = |line: &str, name| watched(line, name).and_then(|v| v.parse::<u64>().ok());
+    let sent = number(&publisher, "PUB.COUNT.CV");
+    // A count every 100 ms from about 1 s after the boot: about 30 by 5 s.
+    check(
+        &o,
+        sent.is_some_and(|n| (20..=45).contains(&n)),
+        &format!("publisher at 5 s: {sent:?} counts"),
+    );
+    check(
+        &o,
+        watched(&publisher, "PUB.M.STATUS") == Some("'OK'")
+            && watched(&publisher, "PUB.U.STATUS") == Some("'OK'"),
+        &format!("publisher's statuses: {publisher}"),
+    );
+    // Multicast and unicast: each IND carries the publisher's count, which equals the
+    // number received (none lost). (The two devices' watch lines at "5000ms" are of
+    // their own clocks, printed at their first timer after it: not the same instant.)
+    let mut counts = Vec::new();
+    for (what, received, last) in [
+        ("multicast", "SUB.N.CV", "SUB.V.OUT"),
+        ("unicast", "SUB.NU.CV", "SUB.VU.OUT"),
+    ] {
+        let (received, last) = (number(&sub, received), number(&sub, last));
+        check(
+            &o,
+            received.is_some_and(|n| (20..=45).contains(&n)) && last == received,
+            &format!("{what} at 5 s: {received:?} INDs, last count {last:?}"),
+        );
+        counts.extend(received);
+    }
+    check(
+        &o,
+        counts.len() == 2 && counts[0].abs_diff(counts[1]) <= 1,
+        &format!("multicast and unicast INDs differ: {counts:?}"),
+    );
+    check(
+        &o,
+        watched(&sub, "SUB.X.OUT") == Some("1.5")
+            && watched(&sub, "SUB.S.STATUS") == Some("'OK'")
+            && watched(&sub, "SUB.T.STATUS") == Some("'OK'"),
+        &format!("subscriber's LREAL and statuses: {sub}"),
+    );
+    // Nothing dropped or failed on either side; what the publisher sent arrived (its
+    // statistics line and the subscriber's come 3 ms apart, in the same major frame).
+    let udp = |partition: &str| {
+        let needle = format!("[{partition}] iec61499: t=");
+        o.lines
+            .iter()
+            .rfind(|l| l.contains(&needle) && l.contains(" udp "))
+            .map(String::as_str)
+    };
+    let stat = |line: Option<&str>, name: &str| {
+        line.and_then(|l| watched(l.trim_end(), name))
+            .and_then(|v| v.parse::<u64>().ok())
+    };
+    let (p, s) = (udp("pub"), udp("sub"));
+    for line in [p, s] {
+        check(
+            &o,
+            stat(line, "dropped") == Some(0)
+                && stat(line, "send_failed") == Some(0)
+                && stat(line, "errors") == Some(0),
+            &format!("udp statistics: {line:?}"),
+        );
+    }
+    let (sent, received) = (stat(p, "sent"), stat(s, "received"));
+    check(
+        &o,
+        sent.zip(received)
+            .is_some_and(|(sent, received)| sent >= 40 && received <= sent && received + 2 >= sent),
+        &format!("datagrams sent {sent:?}, received {received:?}"),
+    );
+}

@@ -37,6 +37,8 @@
 //!
 //! The same requests come over message ports (one a message, [`serve`]) and over TCP in
 //! 4diac's framing (two ASN.1 STRINGs, [`tcp`]); [`serve::serve_parts`] answers both.
+//! PUBLISH/SUBSCRIBE go over queuing ports or, with a UDP ID, over UDP ([`pubsub`]; the
+//! partition's endpoints on its TCP/IP stack: `udp`, feature `net`).
 
 #![no_std]
 
@@ -54,6 +56,8 @@ pub mod serve;
 pub mod sifb;
 pub mod tcp;
 pub mod types;
+#[cfg(any(feature = "net", test))]
+pub mod udp;
 
 pub use device::Device;
 pub use request::{Action, Object, Reason, Request};

@@ -1,24 +1,43 @@
 //! PUBLISH_n and SUBSCRIBE_n (n = 0 to [`MAX_DATA`]), 4diac's interfaces, between
-//! partitions on one machine over ARINC 653 queuing ports (the network comes later): `ID`
-//! names the queuing port, an output port of the publisher's partition, an input port of
-//! the subscriber's, joined by a channel of the configuration. A message is the FBDK ASN.1
-//! encoding of the data (`fbdk`, the encoding FORTE puts on UDP), so it will go onto the
-//! network unchanged.
+//! partitions on one machine over ARINC 653 queuing ports, or over UDP as 4diac FORTE's
+//! when the partition has a network interface. A message is the FBDK ASN.1 encoding of the
+//! data (`fbdk`, the encoding FORTE puts on UDP), the same bytes on a port and in a
+//! datagram (`encode`, `decode` below).
 //!
 //! | type | events in | events out | data |
 //! |---|---|---|---|
 //! | `PUBLISH_n` | INIT (QI, ID), REQ (QI, SD_1..SD_n) | INITO (QO, STATUS), CNF (QO, STATUS) | inputs QI, ID, SD_1..SD_n |
 //! | `SUBSCRIBE_n` | INIT (QI, ID), RSP (QI) | INITO (QO, STATUS), IND (QO, STATUS, RD_1..RD_n) | outputs QO, STATUS, RD_1..RD_n |
 //!
+//! # ID
+//!
+//! - A UDP address ([`udp_id`]), FORTE's forms: `a.b.c.d:port` or `fbdk[].ip[a.b.c.d:port]`
+//!   (FORTE reads an ID without `]` as `fbdk[].ip[ID]`; its `ip` layer is what these do).
+//!   PUBLISH sends each REQ's message as one datagram to that address, a multicast group
+//!   (224.0.0.0/4) or a unicast address; SUBSCRIBE binds the port on every address of the
+//!   partition's interface and, for a multicast address, joins the group (FORTE binds
+//!   `INADDR_ANY:port` and tries `IP_ADD_MEMBERSHIP` the same way), and each datagram that
+//!   arrives is one IND. Datagrams of at most [`MAX_DATAGRAM`] bytes; [`UDP_DEPTH`] queued
+//!   per subscriber, more dropped and counted (nothing waits: a publisher's CNF says only
+//!   that the datagram is on its way). The endpoints are the partition's
+//!   (`sifb::ProcessIo::udp_open` and the rest; on its stack: `crate::udp`); without a
+//!   network interface INIT gives QO FALSE and STATUS `no network interface`.
+//! - Any other ID names a queuing port: an output port of the publisher's partition, an
+//!   input port of the subscriber's, joined by a channel of the configuration.
+//!
+//! # Events
+//!
 //! SD_i and RD_i are generic: each takes the type of its first typed connection or literal
-//! (`iec61499_runtime::functions` explains how). INIT with QI opens the port named by ID
-//! (QO TRUE, STATUS `OK`; else QO FALSE and STATUS why); INIT without QI closes it (QO
-//! FALSE). REQ with QI sends SD_1..SD_n as one message without waiting: CNF with QO TRUE,
-//! or QO FALSE and STATUS why (`port full`, a value without a type, not initialised). A
-//! subscriber is polled by its resource (the partition polls at least every
-//! [`POLL_NS`] while it has one): each message queued is one IND, its RD values decoded;
-//! a message that does not decode as the RD types gives IND with QO FALSE and STATUS why,
-//! RD unchanged. RSP does nothing (publish/subscribe has no reply).
+//! (`iec61499_runtime::functions` explains how). INIT with QI opens what ID names (QO
+//! TRUE, STATUS `OK`; else QO FALSE and STATUS why: no such port, a UDP address that does
+//! not parse, no network interface, too many endpoints); INIT without QI closes it (QO
+//! FALSE), as does a reset or the FB's deletion. REQ with QI sends SD_1..SD_n as one
+//! message without waiting: CNF with QO TRUE, or QO FALSE and STATUS why (`port full`,
+//! `send queue full`, a value without a type, not initialised). A subscriber is polled by
+//! its resource (the partition polls at least every [`POLL_NS`] while it has one): each
+//! message queued is one IND, its RD values decoded; a message that does not decode as
+//! the RD types gives IND with QO FALSE and STATUS why (`bad message: ...`), RD unchanged.
+//! RSP does nothing (publish/subscribe has no reply).
 
 use crate::sifb::{Io, ProcessIo};
 use alloc::boxed::Box;
@@ -37,6 +56,11 @@ pub const MAX_DATA: usize = 8;
 pub const POLL_NS: i64 = 10_000_000;
 /// The most messages one poll takes from a port.
 pub(crate) const PER_POLL: usize = 16;
+/// The longest datagram a UDP PUBLISH sends or a UDP SUBSCRIBE takes (longer ones are cut,
+/// so they do not decode): one Ethernet frame's UDP payload holds it unfragmented.
+pub const MAX_DATAGRAM: usize = 1024;
+/// The datagrams queued for one UDP subscriber at most; more are dropped and counted.
+pub const UDP_DEPTH: usize = 4;
 
 // Fixed variables of the communication FBs (here and `crate::clientserver`), before the
 // data: inputs QI, ID; outputs QO, STATUS; event INIT in, INITO out.
@@ -113,7 +137,7 @@ pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
         publish,
         types: alloc::vec![None; n],
         io: io.clone(),
-        port: None,
+        link: None,
     }))
 }
 
@@ -123,8 +147,87 @@ struct PubSub {
     /// Each datum's type once known.
     types: Vec<Option<DataType>>,
     io: Io,
-    /// The open port: its name and message size.
-    port: Option<(String, usize)>,
+    /// What INIT opened.
+    link: Option<Link>,
+}
+
+/// What a PUBLISH or SUBSCRIBE sends or receives on.
+#[derive(Clone, Debug, PartialEq, Eq)]
+enum Link {
+    /// A queuing port: its name and message size.
+    Queue(String, usize),
+    /// A UDP endpoint of the partition's network interface (`ProcessIo::udp_open`).
+    Udp(usize),
+}
+
+/// A UDP address of an ID: IPv4 address and port.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UdpAddr {
+    pub ip: [u8; 4],
+    pub port: u16,
+}
+
+impl UdpAddr {
+    /// A multicast group (224.0.0.0/4).
+    pub fn is_multicast(&self) -> bool {
+        self.ip[0] & 0xF0 == 0xE0
+    }
+}
+
+impl core::fmt::Display for UdpAddr {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let [a, b, c, d] = self.ip;
+        write!(f, "{a}.{b}.{c}.{d}:{}", self.port)
+    }
+}
+
+/// Whether `id` (trimmed) selects UDP, and its address: FORTE's layered ID
+/// `fbdk[].ip[a.b.c.d:port]` (FBDK encoding over its `ip` layer) or its short form
+/// `a.b.c.d:port` (FORTE reads an ID without `]` as `fbdk[].ip[ID]`), `Some(Err(why))` when
+/// such an ID's address does not parse (four decimal octets, a port 1..=65535); `None` for
+/// any other ID, the name of a queuing port.
+pub fn udp_id(id: &str) -> Option<Result<UdpAddr, String>> {
+    let id = id.trim();
+    let address = match id.strip_prefix("fbdk[].ip[") {
+        Some(rest) => match rest.strip_suffix(']') {
+            Some(address) => address.trim(),
+            None => return Some(Err(format!("no ']' closing the ip layer of ID {id}"))),
+        },
+        None => {
+            let (host, port) = id.rsplit_once(':')?;
+            let shaped = host.contains('.')
+                && host.bytes().all(|b| b.is_ascii_digit() || b == b'.')
+                && !port.is_empty()
+                && port.bytes().all(|b| b.is_ascii_digit());
+            if !shaped {
+                return None;
+            }
+            id
+        }
+    };
+    Some(
+        parse_udp(address).ok_or_else(|| {
+            format!("bad UDP address {address}: not a.b.c.d:port with a port 1..65535")
+        }),
+    )
+}
+
+fn parse_udp(text: &str) -> Option<UdpAddr> {
+    let (host, port) = text.rsplit_once(':')?;
+    let mut ip = [0u8; 4];
+    let mut octets = host.split('.');
+    for octet in ip.iter_mut() {
+        let part = octets.next()?;
+        if part.is_empty() || part.len() > 3 || !part.bytes().all(|b| b.is_ascii_digit()) {
+            return None;
+        }
+        *octet = part.parse().ok()?;
+    }
+    if octets.next().is_some() || port.is_empty() || !port.bytes().all(|b| b.is_ascii_digit()) {
+        return None;
+    }
+    let port: u16 = port.parse().ok().filter(|p| *p != 0)?;
+    Some(UdpAddr { ip, port })
 }
 
 /// The wire type of `ty`, if the encoding has it.
@@ -172,7 +275,7 @@ fn from_wire(ty: DataType, v: fbdk::Value<'_>) -> Value {
 
 impl PubSub {
     fn init(&mut self, inputs: &[Value]) -> (bool, String) {
-        self.port = None;
+        self.close();
         if !inputs[QI].as_bool() {
             return (false, "OK".into());
         }
@@ -180,6 +283,21 @@ impl PubSub {
             Value::String(s) => s.trim().to_string(),
             _ => String::new(),
         };
+        if let Some(at) = udp_id(&id) {
+            let opened = at.and_then(|at| {
+                if self.publish && (at.ip == [0; 4]) {
+                    return Err(format!("{at} is no destination"));
+                }
+                self.io.borrow_mut().io.udp_open(at, !self.publish)
+            });
+            return match opened {
+                Ok(endpoint) => {
+                    self.link = Some(Link::Udp(endpoint));
+                    (true, "OK".into())
+                }
+                Err(why) => (false, why),
+            };
+        }
         let (what, input) = if self.publish {
             ("output", false)
         } else {
@@ -187,25 +305,42 @@ impl PubSub {
         };
         match self.io.borrow().io.queue_size(&id, input) {
             Some(size) => {
-                self.port = Some((id, size));
+                self.link = Some(Link::Queue(id, size));
                 (true, "OK".into())
             }
             None => (false, format!("no queuing {what} port {id}")),
         }
     }
 
+    /// Closes the UDP endpoint, if one is open; forgets the link.
+    fn close(&mut self) {
+        if let Some(Link::Udp(endpoint)) = self.link.take()
+            && let Ok(mut io) = self.io.try_borrow_mut()
+        {
+            io.io.udp_close(endpoint);
+        }
+    }
+
     fn publish(&mut self, inputs: &[Value]) -> (bool, String) {
-        let Some((port, size)) = self.port.clone().filter(|_| inputs[QI].as_bool()) else {
+        let Some(link) = self.link.clone().filter(|_| inputs[QI].as_bool()) else {
             return (false, "not initialised".into());
+        };
+        let size = match &link {
+            Link::Queue(_, size) => *size,
+            Link::Udp(_) => MAX_DATAGRAM,
         };
         let message = match encode(&self.types, &inputs[DATA..], size) {
             Ok(m) => m,
             Err(why) => return (false, why),
         };
-        if self.io.borrow_mut().io.send(&port, &message) {
-            (true, "OK".into())
-        } else {
-            (false, "port full".into())
+        let mut io = self.io.borrow_mut();
+        match link {
+            Link::Queue(port, _) if io.io.send(&port, &message) => (true, "OK".into()),
+            Link::Queue(..) => (false, "port full".into()),
+            Link::Udp(endpoint) => match io.io.udp_send(endpoint, &message) {
+                Ok(()) => (true, "OK".into()),
+                Err(why) => (false, why),
+            },
         }
     }
 
@@ -284,16 +419,27 @@ impl FunctionBlock for PubSub {
     }
 
     fn polls(&self) -> bool {
-        !self.publish && self.port.is_some()
+        !self.publish && self.link.is_some()
     }
 
     fn poll(&mut self, _inputs: &[Value], ctx: &mut Context<'_>) {
-        let Some((port, size)) = self.port.clone() else {
+        let Some(link) = self.link.clone() else {
             return;
+        };
+        let size = match &link {
+            Link::Queue(_, size) => *size,
+            Link::Udp(_) => MAX_DATAGRAM,
         };
         let mut buf = alloc::vec![0u8; size];
         for _ in 0..PER_POLL {
-            let Some(len) = self.io.borrow_mut().io.receive(&port, &mut buf) else {
+            let received = {
+                let mut io = self.io.borrow_mut();
+                match &link {
+                    Link::Queue(port, _) => io.io.receive(port, &mut buf),
+                    Link::Udp(endpoint) => io.io.udp_receive(*endpoint, &mut buf),
+                }
+            };
+            let Some(len) = received else {
                 break;
             };
             let (qo, status) = match self.take(&buf[..len.min(size)], ctx) {
@@ -307,7 +453,7 @@ impl FunctionBlock for PubSub {
     }
 
     fn reset(&mut self) {
-        self.port = None;
+        self.close();
     }
 
     fn untyped(&self, output: bool, index: usize) -> bool {
@@ -331,12 +477,26 @@ impl FunctionBlock for PubSub {
     }
 }
 
+impl Drop for PubSub {
+    fn drop(&mut self) {
+        self.close();
+    }
+}
+
 /// Ports on the host, by name, for running devices that publish and subscribe without
 /// partitions (tests, FORTE's multi-device system tests): a message sent on `NAME` reaches
 /// every subscriber that opened `NAME`, as UDP multicast does (a channel of the
 /// configuration has one). Each subscriber's queue holds [`Loopback::DEPTH`] messages of up
 /// to [`Loopback::SIZE`] bytes, a send that finds one full is refused; no sampling ports.
 /// Clones share the ports and are one subscriber; [`Loopback::end`] is another.
+///
+/// It is also a simulated UDP network for UDP IDs ([`udp_id`]), as the partition's
+/// interface is (`crate::udp`): a datagram to a multicast group reaches every subscriber
+/// (of any end, the sender's too, as Linux loops multicast back by default) of that group
+/// and port; one to a unicast address the subscribers of that port on the ends with that
+/// address ([`Loopback::end_at`]; an end without one takes unicast to every address).
+/// Each subscriber queues [`UDP_DEPTH`] datagrams, more are dropped and counted
+/// ([`Loopback::udp_dropped`]), and the send succeeds, as UDP's does.
 #[derive(Clone, Default)]
 pub struct Loopback {
     bus: Rc<RefCell<Bus>>,
@@ -351,6 +511,18 @@ struct Bus {
     ends: usize,
     /// `(end, port, queue)` of every opened input port.
     queues: Vec<(usize, String, VecDeque<Vec<u8>>)>,
+    /// Each end's UDP address, if it has one.
+    addresses: Vec<(usize, [u8; 4])>,
+    /// The UDP endpoints by number.
+    udp: Vec<Option<UdpEnd>>,
+    udp_dropped: u64,
+}
+
+/// A UDP endpoint of end `end`: a publisher to `at` (no queue) or a subscriber of it.
+struct UdpEnd {
+    end: usize,
+    at: UdpAddr,
+    queue: Option<VecDeque<Vec<u8>>>,
 }
 
 impl Loopback {
@@ -376,8 +548,52 @@ impl Loopback {
         }
     }
 
+    /// Another end (another device) whose UDP address is `ip`.
+    pub fn end_at(&self, ip: [u8; 4]) -> Self {
+        let end = self.end();
+        end.bus.borrow_mut().addresses.push((end.end, ip));
+        end
+    }
+
+    /// UDP datagrams dropped because a subscriber's queue was full.
+    pub fn udp_dropped(&self) -> u64 {
+        self.bus.borrow().udp_dropped
+    }
+
+    /// Sends `datagram` to `to` as from another machine (tests: what arrives off the net).
+    pub fn udp_inject(&self, to: UdpAddr, datagram: &[u8]) {
+        self.bus.borrow_mut().deliver(to, datagram);
+    }
+
     fn has(&self, port: &str) -> bool {
         self.ports.is_empty() || self.ports.iter().any(|p| p == port)
+    }
+}
+
+impl Bus {
+    fn deliver(&mut self, to: UdpAddr, datagram: &[u8]) {
+        let Bus {
+            addresses,
+            udp,
+            udp_dropped,
+            ..
+        } = self;
+        for e in udp.iter_mut().flatten() {
+            let reaches = e.at.port == to.port
+                && if to.is_multicast() {
+                    e.at.ip == to.ip
+                } else {
+                    addresses
+                        .iter()
+                        .find(|(end, _)| *end == e.end)
+                        .is_none_or(|(_, ip)| *ip == to.ip)
+                };
+            match e.queue.as_mut() {
+                Some(q) if reaches && q.len() < UDP_DEPTH => q.push_back(datagram.to_vec()),
+                Some(_) if reaches => *udp_dropped += 1,
+                _ => {}
+            }
+        }
     }
 }
 
@@ -422,7 +638,60 @@ impl ProcessIo for Loopback {
         }
         true
     }
+
+    fn udp_open(&mut self, at: UdpAddr, subscribe: bool) -> Result<usize, String> {
+        let mut bus = self.bus.borrow_mut();
+        let end = UdpEnd {
+            end: self.end,
+            at,
+            queue: subscribe.then(VecDeque::new),
+        };
+        match bus.udp.iter().position(Option::is_none) {
+            Some(free) => {
+                bus.udp[free] = Some(end);
+                Ok(free)
+            }
+            None => {
+                bus.udp.push(Some(end));
+                Ok(bus.udp.len() - 1)
+            }
+        }
+    }
+
+    fn udp_send(&mut self, endpoint: usize, datagram: &[u8]) -> Result<(), String> {
+        let mut bus = self.bus.borrow_mut();
+        let to = match bus.udp.get(endpoint) {
+            Some(Some(e)) if e.end == self.end && e.queue.is_none() => e.at,
+            _ => return Err("no such UDP endpoint".into()),
+        };
+        if datagram.len() > MAX_DATAGRAM {
+            return Err(format!("the datagram is longer than {MAX_DATAGRAM} bytes"));
+        }
+        bus.deliver(to, datagram);
+        Ok(())
+    }
+
+    fn udp_receive(&mut self, endpoint: usize, buf: &mut [u8]) -> Option<usize> {
+        let mut bus = self.bus.borrow_mut();
+        let e = bus.udp.get_mut(endpoint)?.as_mut()?;
+        if e.end != self.end {
+            return None;
+        }
+        let datagram = e.queue.as_mut()?.pop_front()?;
+        let len = datagram.len().min(buf.len());
+        buf[..len].copy_from_slice(&datagram[..len]);
+        Some(len)
+    }
+
+    fn udp_close(&mut self, endpoint: usize) {
+        let mut bus = self.bus.borrow_mut();
+        if let Some(slot) = bus.udp.get_mut(endpoint)
+            && slot.as_ref().is_some_and(|e| e.end == self.end)
+        {
+            *slot = None;
+        }
+    }
 }
 
 #[cfg(test)]
-mod tests;
+pub(crate) mod tests;

@@ -21,6 +21,7 @@
 //! other bytes as last written) and sends it. A REQ before a good INIT, or without QI, gives
 //! QO FALSE and STATUS `'not initialised'` and touches no port.
 
+use crate::pubsub::UdpAddr;
 use alloc::boxed::Box;
 use alloc::format;
 use alloc::rc::Rc;
@@ -30,8 +31,9 @@ use core::cell::RefCell;
 use iec61499_runtime::fb::{Context, EventDecl, Interface};
 use iec61499_runtime::{DataType, FunctionBlock, Value};
 
-/// The partition's ports as the process-image FBs use them. Every method's default answers
-/// as a partition without that port.
+/// The partition's ports as the process-image FBs use them, and the UDP endpoints of
+/// PUBLISH/SUBSCRIBE when it has a network interface. Every method's default answers as a
+/// partition without that port (or without a network interface).
 pub trait ProcessIo {
     /// The message size of sampling port `port` in direction `input` (true: the partition
     /// receives on it), if the partition has it.
@@ -63,7 +65,29 @@ pub trait ProcessIo {
     fn send(&mut self, _port: &str, _message: &[u8]) -> bool {
         false
     }
+
+    /// Opens a UDP endpoint (for PUBLISH/SUBSCRIBE with a UDP ID, `crate::pubsub`): with
+    /// `subscribe`, one that receives the datagrams to `at`'s port (and joins `at`'s group
+    /// when it is a multicast address); without, one that sends to `at`. Its number, or why
+    /// not; the default: the partition has no network interface.
+    fn udp_open(&mut self, _at: UdpAddr, _subscribe: bool) -> Result<usize, String> {
+        Err(NO_NETWORK.into())
+    }
+    /// Sends `datagram` from publishing endpoint `endpoint` without waiting, or why not.
+    fn udp_send(&mut self, _endpoint: usize, _datagram: &[u8]) -> Result<(), String> {
+        Err(NO_NETWORK.into())
+    }
+    /// The next datagram subscribing endpoint `endpoint` received, into `buf` (cut to its
+    /// length): its length, or `None` when none is queued.
+    fn udp_receive(&mut self, _endpoint: usize, _buf: &mut [u8]) -> Option<usize> {
+        None
+    }
+    /// Closes `endpoint` (what it had queued is dropped).
+    fn udp_close(&mut self, _endpoint: usize) {}
 }
+
+/// Why a UDP ID cannot open on a partition without a network interface.
+pub const NO_NETWORK: &str = "no network interface";
 
 /// A device without ports (the host's boot check): every INIT says which port is missing.
 pub struct NoPorts;

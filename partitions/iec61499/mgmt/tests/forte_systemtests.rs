@@ -26,7 +26,7 @@ enum Outcome {
 type Stated = (&'static str, fn(&Outcome) -> bool);
 
 /// Boots `texts` as devices sharing one loopback of ports (FORTE's multi-device tests
-/// publish and subscribe to each other over UDP multicast; here each ID is a port name) and
+/// publish and subscribe to each other over UDP multicast, which the loopback simulates) and
 /// runs them together, 1 ms steps of their own time, until each has its STEST_END or 5 s
 /// passed; the outcome of each.
 fn run(texts: &[String]) -> Vec<Outcome> {

@@ -19,7 +19,13 @@
 //! and the management request port's doorbell, which syssw rings when messages arrive
 //! there, end its wait), it takes the frames the NIC partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one
 //! whole request of each connection on the device (between event chains, as above; an
-//! incomplete request just waits in its connection's buffer), and sends the frames out.
+//! incomplete request just waits in its connection's buffer), pumps the UDP endpoints of
+//! PUBLISH/SUBSCRIBE with a UDP ID (`iec61499_mgmt::udp`: the datagrams the FBs queued go
+//! out, those received go to their subscribers' queues, which the device's poll right
+//! after the pass takes), and sends the frames out. The endpoints exist before the boot
+//! (a boot file's PUBLISH/SUBSCRIBE open theirs at START); the FBs reach them through the
+//! partition's `ProcessIo` (`udp_open`/`udp_send`/`udp_receive`/`udp_close`), never the
+//! stack itself. Without `iec61499.net` a UDP ID's INIT answers `no network interface`.
 //!
 //! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
 //! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted, then
@@ -33,6 +39,11 @@
 //!   or no progress for 10 s with an incomplete request or an unsent response), and once a
 //!   second when they changed `iec61499: t=<ms>ms net open=<n> accepted=<n> refused=<n>
 //!   requests=<n> malformed=<n> timed_out=<n> frames_in=<n> frames_out=<n>`;
+//! - with a network interface, once a second when they changed, `iec61499: t=<ms>ms udp
+//!   endpoints=<n> sent=<n> received=<n> dropped=<n> send_failed=<n> errors=<n>` (the UDP
+//!   endpoints open and their datagrams: `dropped` found their subscriber's queue full),
+//!   and `iec61499: udp: <why>` for a failure of the stack (a socket, a bind, a group
+//!   join, a send; within the [`EVENT_LINES`] a second);
 //! - `iec61499: refusing the boot package: <reason>` when it did not (reported to the
 //!   health monitor as APPLICATION_ERROR; the process stops, the partition idles);
 //! - every line the device logs (`iec61499_mgmt::Device::take_log`): the test FBs'
@@ -52,19 +63,23 @@
 extern crate alloc;
 
 use alloc::boxed::Box;
+use alloc::rc::Rc;
 use alloc::string::String;
 use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
 use apex::main_process::{self, Release};
 use apex::user_rt::println;
+use core::cell::RefCell;
 use core::str::FromStr;
 use core::time::Duration;
 use iec61499_mgmt::Device;
 use iec61499_mgmt::package::{DataQueue, MgmtPorts, NetPorts, QueuingPort, SamplingPort};
+use iec61499_mgmt::pubsub::UdpAddr;
 use iec61499_mgmt::serve::{Access, serve};
-use iec61499_mgmt::sifb::ProcessIo;
+use iec61499_mgmt::sifb::{NO_NETWORK, ProcessIo};
 use iec61499_mgmt::tcp::server::{self, Event, Server, Settings, Stats};
+use iec61499_mgmt::udp::{Endpoints, UdpStats};
 
 /// How often the statistics line is printed.
 const STATS_EVERY_MS: i64 = 1000;
@@ -168,6 +183,9 @@ struct ApexIo {
     ports: Vec<(String, usize, Sampling)>,
     /// PUBLISH/SUBSCRIBE's queuing ports.
     queues: Vec<(String, usize, Queuing)>,
+    /// PUBLISH/SUBSCRIBE's UDP endpoints, with a network interface: [`Net`] pumps them on
+    /// its stack.
+    udp: Option<Rc<RefCell<Endpoints>>>,
 }
 
 enum Queuing {
@@ -181,7 +199,11 @@ enum Sampling {
 }
 
 impl ApexIo {
-    fn open(ports: &[SamplingPort<'_>], queues: &[DataQueue<'_>]) -> Self {
+    fn open(
+        ports: &[SamplingPort<'_>],
+        queues: &[DataQueue<'_>],
+        udp: Option<Rc<RefCell<Endpoints>>>,
+    ) -> Self {
         let queues = queues
             .iter()
             .filter_map(|q| {
@@ -206,7 +228,15 @@ impl ApexIo {
                 Some((p.name.into(), p.size as usize, port))
             })
             .collect();
-        ApexIo { ports, queues }
+        ApexIo { ports, queues, udp }
+    }
+
+    /// The UDP endpoints, or why not (never borrowed twice: [`Net::pass`] pumps them
+    /// between event chains).
+    fn endpoints(&self) -> Result<core::cell::RefMut<'_, Endpoints>, String> {
+        let udp = self.udp.as_ref().ok_or(NO_NETWORK)?;
+        udp.try_borrow_mut()
+            .map_err(|_| String::from("the network interface is busy"))
     }
 
     fn find(&self, port: &str) -> Option<&(String, usize, Sampling)> {
@@ -267,11 +297,32 @@ impl ProcessIo for ApexIo {
             _ => false,
         }
     }
+
+    fn udp_open(&mut self, at: UdpAddr, subscribe: bool) -> Result<usize, String> {
+        self.endpoints()?.open(at, subscribe)
+    }
+
+    fn udp_send(&mut self, endpoint: usize, datagram: &[u8]) -> Result<(), String> {
+        self.endpoints()?.send(endpoint, datagram)
+    }
+
+    fn udp_receive(&mut self, endpoint: usize, buf: &mut [u8]) -> Option<usize> {
+        self.endpoints().ok()?.receive(endpoint, buf)
+    }
+
+    fn udp_close(&mut self, endpoint: usize) {
+        if let Ok(mut e) = self.endpoints() {
+            e.close(endpoint);
+        }
+    }
 }
 
-/// The network interface and the management protocol's TCP server (`iec61499.net`).
+/// The network interface, the management protocol's TCP server (`iec61499.net`) and
+/// PUBLISH/SUBSCRIBE's UDP endpoints on its stack.
 struct Net {
     server: Server,
+    udp: Rc<RefCell<Endpoints>>,
+    logged_udp: UdpStats,
     /// The frame port's doorbell is set: the device process waits for it.
     doorbell: bool,
     rx: QueuingPortReceiver<Warden>,
@@ -285,7 +336,8 @@ struct Net {
 }
 
 impl Net {
-    /// Opens the frame ports (created at start) and listens; why not, else.
+    /// Opens the frame ports (created at start), listens, and has no UDP endpoints yet;
+    /// why not, else.
     fn open(n: &NetPorts<'_>, now: i64) -> Result<Self, String> {
         let rx = Name::from_str(n.rx.name)
             .ok()
@@ -320,6 +372,8 @@ impl Net {
         }
         Ok(Net {
             server,
+            udp: Rc::new(RefCell::new(Endpoints::new())),
+            logged_udp: UdpStats::default(),
             doorbell: doorbell.is_ok(),
             rx,
             tx,
@@ -332,8 +386,8 @@ impl Net {
         })
     }
 
-    /// The frames in, the server's run (requests answered on `device`), the frames out,
-    /// the log lines.
+    /// The frames in, the server's run (requests answered on `device`), the UDP endpoints'
+    /// pump (datagrams sent and received), the frames out, the log lines.
     fn pass(&mut self, device: &mut Device, now: i64) {
         for _ in 0..server::FRAMES_PER_RUN {
             let Ok((message, _)) = self
@@ -346,6 +400,10 @@ impl Net {
             self.frames_in += 1;
         }
         self.server.run(now.max(0) as u64, device);
+        if let Ok(mut udp) = self.udp.try_borrow_mut() {
+            udp.pump(&mut self.server.stack);
+            self.server.stack.poll(now.max(0) / 1000);
+        }
         for _ in 0..server::FRAMES_PER_RUN {
             let Some(out) = self.server.stack.device.take() else {
                 break;
@@ -360,6 +418,18 @@ impl Net {
         let mut events = [None; server::MAX_EVENTS];
         for (slot, event) in events.iter_mut().zip(self.server.take_events()) {
             *slot = Some(event);
+        }
+        let mut udp_errors: [Option<String>; iec61499_mgmt::udp::MAX_ERRORS] = Default::default();
+        if let Ok(mut udp) = self.udp.try_borrow_mut() {
+            for (slot, error) in udp_errors.iter_mut().zip(udp.take_errors()) {
+                *slot = Some(error);
+            }
+        }
+        for error in udp_errors.into_iter().flatten() {
+            if self.event_lines > 0 {
+                self.event_lines -= 1;
+                println!("iec61499: udp: {error}");
+            }
         }
         for event in events.into_iter().flatten() {
             if self.event_lines == 0 {
@@ -408,6 +478,22 @@ impl Net {
                     s.timed_out,
                     self.frames_in,
                     self.frames_out
+                );
+            }
+            let (open, u) = match self.udp.try_borrow() {
+                Ok(udp) => (udp.open_count(), udp.stats),
+                Err(_) => return,
+            };
+            if u != self.logged_udp {
+                self.logged_udp = u;
+                println!(
+                    "iec61499: t={}ms udp endpoints={open} sent={} received={} dropped={} send_failed={} errors={}",
+                    now / 1_000_000,
+                    u.sent,
+                    u.received,
+                    u.dropped,
+                    u.send_failed,
+                    u.errors
                 );
             }
         }
@@ -464,7 +550,14 @@ extern "C" fn device_process() {
             return;
         }
     };
-    let io = Box::new(ApexIo::open(&package.ports, &package.queues));
+    // The network before the boot: a boot file's PUBLISH/SUBSCRIBE open their UDP
+    // endpoints at START (without an interface that opened, they say so).
+    let opened = package.net.as_ref().map(|n| (n, Net::open(n, now_ns())));
+    let udp = match &opened {
+        Some((_, Ok(net))) => Some(net.udp.clone()),
+        _ => None,
+    };
+    let io = Box::new(ApexIo::open(&package.ports, &package.queues, udp));
     let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), io, now_ns()) {
         Ok(booted) => booted,
         Err(reason) => {
@@ -489,7 +582,7 @@ extern "C" fn device_process() {
         )),
         (None, _) => {}
     }
-    let mut net = package.net.as_ref().and_then(|n| match Net::open(n, now_ns()) {
+    let mut net = opened.and_then(|(n, opened)| match opened {
         Ok(net) => {
             let (a, m) = (n.address, n.mac);
             println!(
@@ -551,12 +644,14 @@ extern "C" fn device_process() {
             print_watches(&device, next_stats);
             next_stats = (now / every + 1) * every;
         }
-        if device.polls() {
-            device.poll(now_ns());
-            drain(&mut device, &mut faults_seen);
-        }
+        // The network pass first: what the timers published goes out, the datagrams that
+        // arrived are the subscribers' in the poll right after.
         if let Some(net) = net.as_mut() {
             net.pass(&mut device, now_ns());
+            drain(&mut device, &mut faults_seen);
+        }
+        if device.polls() {
+            device.poll(now_ns());
             drain(&mut device, &mut faults_seen);
         }
         let now = now_ns();

@@ -6,6 +6,7 @@ extern crate std;
 use super::*;
 use crate::Device;
 use crate::pubsub::Loopback;
+use crate::pubsub::tests::read;
 use crate::sifb::ProcessIo;
 use iec61499_runtime::Limits;
 
@@ -52,20 +53,6 @@ fn boot(io: Loopback, lines: &[String]) -> Device {
         .collect();
     d.boot(&text, 0).unwrap();
     d
-}
-
-fn read(d: &mut Device, path: &str) -> String {
-    let answer = d.execute(
-        "R",
-        &format!("<Request ID=\"1\" Action=\"READ\"><Connection Source=\"{path}\" Destination=\"\"/></Request>"),
-        0,
-    );
-    answer
-        .split("Source=\"")
-        .nth(1)
-        .and_then(|s| s.split('"').next())
-        .unwrap_or(&answer)
-        .replace("&apos;", "'")
 }
 
 /// Sets `destination` to the literal `value` (a WRITE request while running).

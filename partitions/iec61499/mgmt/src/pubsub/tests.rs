@@ -18,7 +18,9 @@ fn line(dst: &str, action: &str, object: &str) -> String {
     format!("{dst};<Request ID=\"1\" Action=\"{action}\">{object}</Request>\n")
 }
 
-fn read(d: &mut Device, path: &str) -> String {
+/// The value of `path` as a READ of the device answers it (the tests of
+/// `crate::clientserver` and `crate::udp` read with it too).
+pub(crate) fn read(d: &mut Device, path: &str) -> String {
     let answer = d.execute(
         "R",
         &format!("<Request ID=\"1\" Action=\"READ\"><Connection Source=\"{path}\" Destination=\"\"/></Request>"),
@@ -229,5 +231,215 @@ fn values_cross_the_encoding_unchanged() {
         let mut r = fbdk::Reader::new(&buf[..len]);
         let back = from_wire(ty, r.value(wire_type(ty).unwrap()).unwrap());
         assert_eq!(back, v, "{ty:?}");
+    }
+}
+
+#[test]
+fn udp_ids_are_forte_s_and_other_ids_name_ports() {
+    let at = |ip, port| Some(Ok(UdpAddr { ip, port }));
+    assert_eq!(udp_id("239.0.0.1:61500"), at([239, 0, 0, 1], 61500));
+    assert_eq!(udp_id(" 10.0.2.16:5000 "), at([10, 0, 2, 16], 5000));
+    assert_eq!(
+        udp_id("fbdk[].ip[239.192.0.2:61499]"),
+        at([239, 192, 0, 2], 61499)
+    );
+    assert!(udp_id("239.0.0.1:61500").unwrap().unwrap().is_multicast());
+    assert!(!udp_id("10.0.0.1:1").unwrap().unwrap().is_multicast());
+    assert_eq!(
+        udp_id("fbdk[].ip[239.0.0.1:61500]")
+            .unwrap()
+            .unwrap()
+            .to_string(),
+        "239.0.0.1:61500"
+    );
+    // Shaped as an address but not one: why, not a port name.
+    for bad in [
+        "256.0.0.1:1",
+        "1.2.3:5",
+        "1.2.3.4.5:5",
+        "1.2.3.4:0",
+        "1.2.3.4:65536",
+        "1..3.4:5",
+        "fbdk[].ip[host:5]",
+        "fbdk[].ip[1.2.3.4]",
+        "fbdk[].ip[1.2.3.4:5",
+    ] {
+        assert!(matches!(udp_id(bad), Some(Err(_))), "{bad}");
+    }
+    // Queuing ports' names, as before.
+    for name in ["counts", "rpc", "a:b", "", "eth-rx", "WSTRIGN#x", "1234"] {
+        assert_eq!(udp_id(name), None, "{name}");
+    }
+}
+
+/// A device whose resource has `P` (PUBLISH_1) and `S` (SUBSCRIBE_1) on `id`.
+fn pub_and_sub(io: Box<dyn ProcessIo>, id: &str) -> Device {
+    let mut d = Device::new(Limits::default(), 2);
+    d.set_io(io);
+    let boot: String = [
+        line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>"),
+        line("R", "CREATE", "<FB Name=\"P\" Type=\"PUBLISH_1\"/>"),
+        line("R", "CREATE", "<FB Name=\"S\" Type=\"SUBSCRIBE_1\"/>"),
+        line("R", "CREATE", "<FB Name=\"N\" Type=\"E_CTU\"/>"),
+        line(
+            "R",
+            "WRITE",
+            "<Connection Source=\"1\" Destination=\"P.QI\"/>",
+        ),
+        line(
+            "R",
+            "WRITE",
+            "<Connection Source=\"1\" Destination=\"S.QI\"/>",
+        ),
+        line(
+            "R",
+            "WRITE",
+            "<Connection Source=\"DINT#-3\" Destination=\"P.SD_1\"/>",
+        ),
+        line(
+            "R",
+            "WRITE",
+            &format!("<Connection Source=\"{id}\" Destination=\"P.ID\"/>"),
+        ),
+        line(
+            "R",
+            "WRITE",
+            &format!("<Connection Source=\"{id}\" Destination=\"S.ID\"/>"),
+        ),
+        line("R", "CREATE", "<FB Name=\"V\" Type=\"DINT2DINT\"/>"),
+        line(
+            "R",
+            "CREATE",
+            "<Connection Source=\"START.COLD\" Destination=\"P.INIT\"/>",
+        ),
+        line(
+            "R",
+            "CREATE",
+            "<Connection Source=\"P.INITO\" Destination=\"S.INIT\"/>",
+        ),
+        line(
+            "R",
+            "CREATE",
+            "<Connection Source=\"S.IND\" Destination=\"N.CU\"/>",
+        ),
+        line(
+            "R",
+            "CREATE",
+            "<Connection Source=\"S.IND\" Destination=\"V.REQ\"/>",
+        ),
+        line(
+            "R",
+            "CREATE",
+            "<Connection Source=\"S.RD_1\" Destination=\"V.IN\"/>",
+        ),
+        line("R", "START", ""),
+    ]
+    .concat();
+    d.boot(&boot, 0).unwrap();
+    d
+}
+
+fn publish(d: &mut Device) {
+    d.execute(
+        "R",
+        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"P.REQ\"/></Request>",
+        0,
+    );
+}
+
+#[test]
+fn without_a_network_interface_a_udp_id_does_not_open() {
+    let mut d = pub_and_sub(Box::new(crate::sifb::NoPorts), "fbdk[].ip[239.0.0.1:61500]");
+    for fb in ["P", "S"] {
+        assert_eq!(read(&mut d, &format!("{fb}.QO")), "FALSE");
+        assert_eq!(
+            read(&mut d, &format!("{fb}.STATUS")),
+            "'no network interface'"
+        );
+    }
+    assert!(!d.polls());
+    publish(&mut d);
+    assert_eq!(read(&mut d, "P.STATUS"), "'not initialised'");
+    // A bad address says why, before the interface matters.
+    let mut d = pub_and_sub(Box::new(crate::sifb::NoPorts), "1.2.3.4:99999");
+    assert!(read(&mut d, "P.STATUS").starts_with("'bad UDP address 1.2.3.4:99999"));
+}
+
+#[test]
+fn the_loopback_carries_udp_as_a_network_multicast_and_unicast() {
+    let bus = Loopback::default();
+    // Two devices on a group: each gets the other's and its own datagrams.
+    let mut a = pub_and_sub(Box::new(bus.end_at([10, 0, 0, 1])), "239.1.1.1:7000");
+    let mut b = pub_and_sub(Box::new(bus.end_at([10, 0, 0, 2])), "239.1.1.1:7000");
+    assert_eq!(read(&mut a, "S.STATUS"), "'OK'");
+    publish(&mut a);
+    publish(&mut b);
+    a.poll(0);
+    b.poll(0);
+    assert_eq!(read(&mut a, "N.CV"), "2");
+    assert_eq!(read(&mut b, "N.CV"), "2");
+    assert_eq!(read(&mut b, "V.OUT"), "-3");
+    // Unicast to 10.0.0.2's port: only b's subscriber of that port.
+    let mut c = pub_and_sub(Box::new(bus.end_at([10, 0, 0, 1])), "10.0.0.2:7001");
+    let mut d = pub_and_sub(Box::new(bus.end_at([10, 0, 0, 2])), "10.0.0.2:7001");
+    publish(&mut c);
+    c.poll(0);
+    d.poll(0);
+    assert_eq!(read(&mut c, "N.CV"), "0");
+    assert_eq!(read(&mut d, "N.CV"), "1");
+    // A datagram that does not decode: IND, QO FALSE, why.
+    bus.udp_inject(
+        UdpAddr {
+            ip: [10, 0, 0, 2],
+            port: 7001,
+        },
+        &[0xFF, 0x00],
+    );
+    d.poll(0);
+    assert_eq!(read(&mut d, "N.CV"), "2");
+    assert_eq!(read(&mut d, "S.QO"), "FALSE");
+    assert!(read(&mut d, "S.STATUS").starts_with("'bad message: "));
+    // Never waiting: more than a queue's worth is dropped and counted; the sends succeed.
+    for _ in 0..UDP_DEPTH + 3 {
+        publish(&mut c);
+        assert_eq!(read(&mut c, "P.STATUS"), "'OK'");
+    }
+    assert_eq!(bus.udp_dropped(), 3);
+    d.poll(0);
+    assert_eq!(read(&mut d, "N.CV"), (2 + UDP_DEPTH).to_string());
+    // INIT without QI closes: nothing more arrives.
+    d.execute(
+        "R",
+        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"0\" Destination=\"S.QI\"/></Request>",
+        0,
+    );
+    d.execute(
+        "R",
+        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"S.INIT\"/></Request>",
+        0,
+    );
+    assert!(!d.polls());
+    publish(&mut c);
+    assert_eq!(bus.udp_dropped(), 3);
+}
+
+proptest::proptest! {
+    /// Any ID parses to an address, a reason or a port name; any datagram decodes or says
+    /// why: never a panic.
+    #[test]
+    fn any_id_or_datagram_is_an_answer(
+        id in ".{0,40}",
+        digits in "[0-9.:]{0,24}",
+        bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..64),
+    ) {
+        let _ = udp_id(&id);
+        let _ = udp_id(&digits);
+        let _ = udp_id(&format!("fbdk[].ip[{digits}]"));
+        use iec61499_runtime::DataType as T;
+        let _ = decode(&[Some(T::UInt), Some(T::String), Some(T::LReal)], &bytes);
+        let bus = Loopback::default();
+        let mut d = pub_and_sub(Box::new(bus.end()), "239.1.1.1:7000");
+        bus.udp_inject(UdpAddr { ip: [239, 1, 1, 1], port: 7000 }, &bytes);
+        d.poll(0);
     }
 }

@@ -6,6 +6,9 @@
 //! incomplete keeps its bytes until the rest comes (or [`REQUEST_TIMEOUT_NS`] passes) and
 //! the event chains go on meanwhile.
 //!
+//! The stack also carries PUBLISH/SUBSCRIBE's UDP endpoints ([`crate::udp`]): its limits
+//! leave room for their sockets, and the partition pumps them beside [`Server::run`].
+//!
 //! Bounds: `connections` connections at once (one more is accepted and closed at once),
 //! each with a request buffer of [`MAX_REQUEST`] bytes and a response buffer of
 //! [`MAX_RESPONSE`] + 3, allocated once; per [`Server::run`] at most one request of each
@@ -116,11 +119,14 @@ impl Server {
         let connections = settings.connections.clamp(1, MAX_CONNECTIONS);
         let limits = Limits {
             // The listener's backlogs (on eth0 and lo), the connections, and as many
-            // closing in the background.
-            sockets: 4 * connections + 4,
+            // closing in the background; PUBLISH/SUBSCRIBE's UDP sockets (`crate::udp`,
+            // each on eth0 and lo).
+            sockets: 4 * connections + 4 + 2 * crate::udp::SOCKETS,
             tcp_buffer: TCP_BUFFER,
-            udp_packets: 1,
-            udp_buffer: 512,
+            // A subscriber's port holds as many datagrams as its queue until the next
+            // pump takes them.
+            udp_packets: crate::pubsub::UDP_DEPTH,
+            udp_buffer: crate::pubsub::UDP_DEPTH * crate::pubsub::MAX_DATAGRAM,
             backlog: connections,
             frames: 2 * FRAMES_PER_RUN,
         };
