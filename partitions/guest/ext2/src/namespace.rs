@@ -224,6 +224,9 @@ impl<D: BlockDevice> Ext2<D> {
     fn drop_link(&mut self, ino: u32) -> Result<bool, Error> {
         let mut inode = self.live_inode(ino)?;
         let links = inode.links().saturating_sub(1);
+        if links == 0 {
+            self.entry_gone_first()?;
+        }
         inode.set_links(links);
         inode.set_ctime(self.now);
         self.store_inode(&inode)?;
@@ -251,8 +254,19 @@ impl<D: BlockDevice> Ext2<D> {
         Ok(inode.ino)
     }
 
+    /// Writes back what is dirty (the directory block that no longer names an inode among
+    /// it) before the inode's last link and its blocks go: one write-back pass orders what
+    /// a block points to before the pointer ([`crate::cache::Kind`]), right for a new
+    /// inode but wrong for a freed one, whose entry must leave the disk first. Without
+    /// this, a power cut between the two could leave an entry (a file replaced by `rename`)
+    /// naming a freed inode, which `e2fsck` then removes.
+    fn entry_gone_first(&mut self) -> Result<(), Error> {
+        self.disk.write_back()
+    }
+
     /// A directory whose entry went: no links, no blocks, an orphan.
     fn empty_removed_dir(&mut self, ino: u32) -> Result<(), Error> {
+        self.entry_gone_first()?;
         let mut inode = self.live_inode(ino)?;
         inode.set_links(0);
         inode.set_ctime(self.now);

@@ -131,3 +131,76 @@ proptest! {
         crash_case(4096, writes, seed);
     }
 }
+
+/// A file replaced as applications do it (write a new file, fsync it, rename it over the
+/// old one, sync), cut after every number of sector writes of the rename and its sync:
+/// after e2fsck -fy the name holds the old or the new contents whole, never nothing (the
+/// directory entry leaves the disk before the replaced inode is freed).
+#[test]
+fn a_file_replaced_by_rename_survives_a_cut_anywhere() {
+    let Some(e2fsck) = tool("e2fsck") else {
+        return;
+    };
+    let (old, new) = (pattern(3000, 1), pattern(2000, 2));
+    let mut writes = 0;
+    loop {
+        let mut disk = MemDisk::zeroed(1 << 20);
+        let sectors = disk.sectors();
+        let options = FormatOptions {
+            block_size: 1024,
+            inode_size: 128,
+            now: now(),
+            ..FormatOptions::default()
+        };
+        ext2::format(&mut disk, sectors, &options).unwrap();
+        let mut fs = Ext2::mount(CutDisk {
+            disk,
+            writes_left: u32::MAX,
+        })
+        .unwrap();
+        let f = fs.create(ROOT_INO, b"f", 0o644).unwrap();
+        fs.write(f, 0, &old).unwrap();
+        fs.sync().unwrap();
+        let tmp = fs.create(ROOT_INO, b"f.tmp", 0o644).unwrap();
+        fs.write(tmp, 0, &new).unwrap();
+        fs.fsync(tmp).unwrap();
+        // From here on, only `writes` more sector writes reach the disk.
+        let mut fs = {
+            let mut dev = fs.abandon();
+            dev.writes_left = writes;
+            Ext2::mount(dev).unwrap()
+        };
+        fs.set_now(now());
+        let replaced = fs.rename(ROOT_INO, b"f.tmp", ROOT_INO, b"f");
+        if let Ok(Some(ino)) = replaced {
+            let _ = fs.release(ino);
+        }
+        let _ = fs.sync();
+        let cut = fs.abandon();
+        let finished = cut.writes_left > 0;
+        let file = TempFile::new("replace");
+        std::fs::write(&file.0, &cut.disk.data).unwrap();
+        let repair = Command::new(&e2fsck)
+            .arg("-fy")
+            .arg(&file.0)
+            .output()
+            .unwrap();
+        assert!(repair.status.code().unwrap_or(99) <= 2, "{repair:?}");
+        let mut fs = Ext2::mount(MemDisk::new(std::fs::read(&file.0).unwrap())).unwrap();
+        let ino = fs
+            .lookup(ROOT_INO, b"f")
+            .unwrap()
+            .unwrap_or_else(|| panic!("f is gone after a cut at write {writes}"));
+        let got = read_all(&mut fs, ino);
+        assert!(
+            got == old || got == new,
+            "f is neither version after a cut at write {writes} ({} bytes)",
+            got.len()
+        );
+        if finished {
+            assert!(got == new, "the whole rename and sync ran: f must be new");
+            break;
+        }
+        writes += 1;
+    }
+}
