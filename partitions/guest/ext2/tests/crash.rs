@@ -60,11 +60,9 @@ fn churn(fs: &mut Ext2<CutDisk>, seed: u32) {
     })();
 }
 
-fn crash_case(block_size: u32, writes: u32, seed: u32) {
-    let Some(e2fsck) = tool("e2fsck") else {
-        return;
-    };
-    let mut disk = MemDisk::zeroed(4 << 20);
+/// A fresh ext2 of `bytes` with `block_size` blocks on a disk that keeps every write.
+fn formatted(bytes: usize, block_size: u32) -> Ext2<CutDisk> {
+    let mut disk = MemDisk::zeroed(bytes);
     let sectors = disk.sectors();
     let options = FormatOptions {
         block_size,
@@ -73,22 +71,32 @@ fn crash_case(block_size: u32, writes: u32, seed: u32) {
         ..FormatOptions::default()
     };
     ext2::format(&mut disk, sectors, &options).unwrap();
-    let mut fs = Ext2::mount(CutDisk {
+    Ext2::mount(CutDisk {
         disk,
         writes_left: u32::MAX,
     })
-    .unwrap();
+    .unwrap()
+}
+
+/// `fs` mounted again on its disk, which from here on keeps only `writes` more sector
+/// writes.
+fn cut_after(fs: Ext2<CutDisk>, writes: u32) -> Ext2<CutDisk> {
+    let mut dev = fs.abandon();
+    dev.writes_left = writes;
+    Ext2::mount(dev).unwrap()
+}
+
+fn crash_case(block_size: u32, writes: u32, seed: u32) {
+    let Some(e2fsck) = tool("e2fsck") else {
+        return;
+    };
+    let mut fs = formatted(4 << 20, block_size);
     fs.set_now(now());
     let keep_data = pattern(50_000, seed);
     let keep = fs.create(ROOT_INO, b"keep", 0o644).unwrap();
     fs.write(keep, 0, &keep_data).unwrap();
     fs.fsync(keep).unwrap();
-    // From here on, only `writes` more sector writes reach the disk.
-    let mut fs = {
-        let mut dev = fs.abandon();
-        dev.writes_left = writes;
-        Ext2::mount(dev).unwrap()
-    };
+    let mut fs = cut_after(fs, writes);
     fs.set_now(now());
     churn(&mut fs, seed);
     let crashed = fs.abandon().disk;
@@ -144,32 +152,14 @@ fn a_file_replaced_by_rename_survives_a_cut_anywhere() {
     let (old, new) = (pattern(3000, 1), pattern(2000, 2));
     let mut writes = 0;
     loop {
-        let mut disk = MemDisk::zeroed(1 << 20);
-        let sectors = disk.sectors();
-        let options = FormatOptions {
-            block_size: 1024,
-            inode_size: 128,
-            now: now(),
-            ..FormatOptions::default()
-        };
-        ext2::format(&mut disk, sectors, &options).unwrap();
-        let mut fs = Ext2::mount(CutDisk {
-            disk,
-            writes_left: u32::MAX,
-        })
-        .unwrap();
+        let mut fs = formatted(1 << 20, 1024);
         let f = fs.create(ROOT_INO, b"f", 0o644).unwrap();
         fs.write(f, 0, &old).unwrap();
         fs.sync().unwrap();
         let tmp = fs.create(ROOT_INO, b"f.tmp", 0o644).unwrap();
         fs.write(tmp, 0, &new).unwrap();
         fs.fsync(tmp).unwrap();
-        // From here on, only `writes` more sector writes reach the disk.
-        let mut fs = {
-            let mut dev = fs.abandon();
-            dev.writes_left = writes;
-            Ext2::mount(dev).unwrap()
-        };
+        let mut fs = cut_after(fs, writes);
         fs.set_now(now());
         let replaced = fs.rename(ROOT_INO, b"f.tmp", ROOT_INO, b"f");
         if let Ok(Some(ino)) = replaced {
