@@ -21,7 +21,7 @@ pub fn boot(name: &str) -> Outcome {
 /// Boots scenario `name` again on the disk image the last boot left (a reset of the
 /// machine with the same disk).
 pub fn boot_again(name: &str) -> Outcome {
-    boot_with(name, false, |_, _| ()).0
+    boot_with(name, false, false, |_, _| ()).0
 }
 
 /// Scenario `name`'s disk image (`disk_sectors`), for a test to read or damage between
@@ -38,7 +38,18 @@ pub fn boot_beside<R: Send>(
     name: &str,
     host: impl FnOnce(&[u16], &AtomicBool) -> R + Send,
 ) -> (Outcome, R) {
-    boot_with(name, true, host)
+    boot_with(name, true, false, host)
+}
+
+/// Boots scenario `name` with `host` beside it as [`boot_beside`] does, and stops the
+/// system ([`xtask::qemu::Ending::Stopped`]) once `host` has returned and the log has shown
+/// the manifest's `done_when` texts: the run lasts as long as the host's part and the
+/// virtual time the checks need (bounded by the scenario's timeout), not a fixed time.
+pub fn boot_while<R: Send>(
+    name: &str,
+    host: impl FnOnce(&[u16], &AtomicBool) -> R + Send,
+) -> (Outcome, R) {
+    boot_with(name, true, true, host)
 }
 
 /// Boots scenarios `a` and `b` at once, as two machines: both get the same free host
@@ -60,8 +71,8 @@ pub fn boot_pair(a: &str, b: &str) -> (Outcome, Outcome) {
     let ports = scenario::free_host_ports(sa.manifest.host_ports.max(sb.manifest.host_ports))
         .unwrap_or_else(|e| panic!("scenarios {a}, {b}: {e:#}"));
     std::thread::scope(|scope| {
-        let other = scope.spawn(|| run(&sb, &dir_b, dir_b.join("esp"), &tools, &ports));
-        let first = run(&sa, &dir_a, dir_a.join("esp"), &tools, &ports);
+        let other = scope.spawn(|| run(&sb, &dir_b, dir_b.join("esp"), &tools, &ports, None));
+        let first = run(&sa, &dir_a, dir_a.join("esp"), &tools, &ports, None);
         let second = other
             .join()
             .unwrap_or_else(|_| panic!("booting {b} panicked"));
@@ -75,6 +86,7 @@ pub fn boot_pair(a: &str, b: &str) -> (Outcome, Outcome) {
 fn boot_with<R: Send>(
     name: &str,
     fresh_disk: bool,
+    stop_with_host: bool,
     host: impl FnOnce(&[u16], &AtomicBool) -> R + Send,
 ) -> (Outcome, R) {
     let manifest = scenario::scenarios_dir().join(format!("{name}.toml"));
@@ -98,10 +110,22 @@ fn boot_with<R: Send>(
         }
     }
     let ended = AtomicBool::new(false);
+    let host_returned = AtomicBool::new(false);
     std::thread::scope(|scope| {
-        let client = scope.spawn(|| host(&ports, &ended));
+        let client = scope.spawn(|| {
+            let result = host(&ports, &ended);
+            host_returned.store(true, Ordering::SeqCst);
+            result
+        });
         // The flag is set whatever happened, so the host side ends before a panic here.
-        let outcome = run(&s, &dir, esp, &tools, &ports);
+        let outcome = run(
+            &s,
+            &dir,
+            esp,
+            &tools,
+            &ports,
+            stop_with_host.then_some(&host_returned),
+        );
         ended.store(true, Ordering::SeqCst);
         let result = client.join();
         let outcome = outcome.unwrap_or_else(|e| panic!("cannot run QEMU: {e:#}"));
@@ -116,30 +140,32 @@ fn run(
     esp: std::path::PathBuf,
     tools: &xtask::tools::Qemu,
     ports: &[u16],
+    stop: Option<&AtomicBool>,
 ) -> anyhow::Result<Outcome> {
-    qemu::run(
-        tools,
-        &RunOptions {
-            esp,
-            timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
-            echo: false,
-            work_dir: dir.join("state"),
-            deterministic_time: s.manifest.deterministic_time,
-            done_when: s.manifest.done_when.clone(),
-            extra_args: scenario::with_disk(
-                &scenario::with_host_ports(&s.manifest.qemu_args, ports),
-                &dir.join("disk.img"),
-            ),
-            com2: if s.manifest.console_input.is_empty() {
-                qemu::Com2::Unconnected
-            } else {
-                qemu::Com2::Scripted {
-                    start: s.manifest.console_start.clone(),
-                    input: s.manifest.console_input.clone(),
-                }
-            },
+    let options = RunOptions {
+        esp,
+        timeout: Some(Duration::from_secs(s.manifest.timeout_secs)),
+        echo: false,
+        work_dir: dir.join("state"),
+        deterministic_time: s.manifest.deterministic_time,
+        done_when: s.manifest.done_when.clone(),
+        extra_args: scenario::with_disk(
+            &scenario::with_host_ports(&s.manifest.qemu_args, ports),
+            &dir.join("disk.img"),
+        ),
+        com2: if s.manifest.console_input.is_empty() {
+            qemu::Com2::Unconnected
+        } else {
+            qemu::Com2::Scripted {
+                start: s.manifest.console_start.clone(),
+                input: s.manifest.console_input.clone(),
+            }
         },
-    )
+    };
+    match stop {
+        Some(flag) => qemu::run_until(tools, &options, flag),
+        None => qemu::run(tools, &options),
+    }
 }
 
 /// Panics with the full transcript unless `cond` holds.

@@ -41,7 +41,7 @@
 //!
 //! Each cut prints a line: its delay, what it hit (a download, a boot-project or RETAIN
 //! save torn or done but not yet logged, or the time between saves) and what the disk held;
-//! the end prints the tally. Cuts: 20 (`cargo xtask test store_power_cut`), or
+//! the end prints the tally. Cuts: 10 (`cargo xtask test store_power_cut`), or
 //! `WARDEN_POWER_CUTS=N` (`cargo xtask bench --power-cut` runs 200). The seed is printed
 //! first; `WARDEN_POWER_CUT_SEED=<seed>` replays its delays (the same cuts relative to the
 //! line; what they hit also depends on TCG's timing, so a replay hits similar, not always
@@ -54,7 +54,6 @@
 //! boot set to repair, ext2 having no journal) and hold the newest version the guest
 //! reported durable, intact.
 
-#[path = "power_cut/guest_fs.rs"]
 mod guest_fs;
 
 use slots::{BlockDevice, Corruption, SECTOR, SlotState};
@@ -67,7 +66,7 @@ use xtask::scenario::{self, Scenario};
 
 const NAME: &str = "store_power_cut";
 /// Cuts of the ordinary run.
-const CUTS: u32 = 20;
+const CUTS: u32 = 10;
 const CUTS_VAR: &str = "WARDEN_POWER_CUTS";
 const SEED_VAR: &str = "WARDEN_POWER_CUT_SEED";
 /// The most cuts `WARDEN_POWER_CUTS` may ask for.

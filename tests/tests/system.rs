@@ -9,7 +9,7 @@
 
 use scenarios::browser::Browser;
 use scenarios::tank::{self, BAND, DISTURBANCE_MS, SETTLED_MS};
-use scenarios::{boot, boot_beside, check, http_get, kernel_seconds};
+use scenarios::{boot, boot_beside, boot_while, check, http_get, kernel_seconds};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 use xtask::qemu::Ending;
@@ -562,7 +562,7 @@ fn watch(port: u16, ended: &AtomicBool, session: &mut Session) -> Result<(), Str
 
 #[test]
 fn net_hmi() {
-    let (o, s) = boot_beside("net_hmi", |ports, ended| drive(ports[0], ended));
+    let (o, s) = boot_while("net_hmi", |ports, ended| drive(ports[0], ended));
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,

@@ -365,6 +365,7 @@ fn run(config: PathBuf, timeout: Option<u64>, release: bool) -> Result<bool> {
         Ending::Killed => Err("QEMU was killed".to_string()),
         Ending::Done => unreachable!("`run` waits for no text"),
         Ending::Cut => unreachable!("`run` cuts no power"),
+        Ending::Stopped => unreachable!("`run` has no stop flag"),
     };
     match verdict {
         Ok(msg) => {

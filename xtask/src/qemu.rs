@@ -16,6 +16,7 @@ use anyhow::{Context, Result};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, mpsc};
 use std::time::{Duration, Instant};
 
@@ -125,6 +126,8 @@ pub enum Ending {
     /// The power cut of [`run_cut`]: we killed QEMU with SIGKILL (not a crash, not a
     /// timeout); [`Outcome::lines`] hold every COM1 line QEMU wrote before it died.
     Cut,
+    /// The caller's flag of [`run_until`] was set; QEMU was stopped.
+    Stopped,
 }
 
 /// When [`run_cut`] cuts the power: `delay` after the first COM1 line that contains
@@ -421,7 +424,15 @@ fn follow(path: PathBuf, tx: mpsc::Sender<String>, done: Arc<Mutex<bool>>) {
 
 /// Boots `options.esp`.
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
-    launch(qemu, Media::Esp(&options.esp), options, None)
+    launch(qemu, Media::Esp(&options.esp), options, None, None)
+}
+
+/// Boots `options.esp` as [`run`] does, and stops QEMU ([`Ending::Stopped`]) once `stop`
+/// is set (within 200 ms) and every text of `options.done_when` has appeared, unless the
+/// system ended first: for a run that lasts as long as something beside it (a client on
+/// the host) and at least until the log says enough has happened.
+pub fn run_until(qemu: &Qemu, options: &RunOptions, stop: &AtomicBool) -> Result<Outcome> {
+    launch(qemu, Media::Esp(&options.esp), options, None, Some(stop))
 }
 
 /// Boots `options.esp` and cuts its power as `cut` says: the outcome ends with
@@ -437,7 +448,7 @@ pub fn run_cut(qemu: &Qemu, options: &RunOptions, cut: &PowerCut) -> Result<Outc
         !cut.after.is_empty(),
         "a power cut needs a line to count from"
     );
-    launch(qemu, Media::Esp(&options.esp), options, Some(cut))
+    launch(qemu, Media::Esp(&options.esp), options, Some(cut), None)
 }
 
 /// Boots the Linux kernel `linux` on the same machine and firmware as [`run`], with COM1
@@ -449,7 +460,7 @@ pub fn run_linux(qemu: &Qemu, linux: &LinuxBoot, options: &RunOptions) -> Result
         done_when: Vec::new(),
         ..options.clone()
     };
-    launch(qemu, Media::Linux(linux), &options, None)
+    launch(qemu, Media::Linux(linux), &options, None, None)
 }
 
 fn launch(
@@ -457,6 +468,7 @@ fn launch(
     media: Media,
     options: &RunOptions,
     cut: Option<&PowerCut>,
+    stop_when: Option<&AtomicBool>,
 ) -> Result<Outcome> {
     std::fs::create_dir_all(&options.work_dir)?;
     let vars = options.work_dir.join("OVMF_VARS.fd");
@@ -537,6 +549,10 @@ fn launch(
             }
             break Ending::Cut;
         }
+        if awaited.is_empty() && stop_when.is_some_and(|flag| flag.load(Ordering::SeqCst)) {
+            stop(&mut child);
+            break Ending::Stopped;
+        }
         let wait = deadline
             .map(|d| d.saturating_duration_since(Instant::now()))
             .unwrap_or(Duration::from_secs(3600))
@@ -563,7 +579,7 @@ fn launch(
                     stop(&mut child);
                     break Ending::Aborted(line);
                 }
-                if was_awaited && awaited.is_empty() {
+                if was_awaited && awaited.is_empty() && stop_when.is_none() {
                     stop(&mut child);
                     break Ending::Done;
                 }
@@ -608,6 +624,12 @@ fn launch(
     };
     // Kept for reading after a passing run too (scenario logs hold measurements).
     let _ = std::fs::write(options.work_dir.join("serial.log"), lines.join("\n") + "\n");
+    // How it ended and how long it took (real time), to find a suite's slow runs.
+    let elapsed = started.elapsed();
+    let _ = std::fs::write(
+        options.work_dir.join("ending.txt"),
+        format!("{ending:?} after {:.1} s\n", elapsed.as_secs_f64()),
+    );
     if !console.is_empty() {
         let _ = std::fs::write(options.work_dir.join("console.log"), &console);
     }
@@ -616,7 +638,7 @@ fn launch(
         lines,
         console,
         stderr,
-        elapsed: started.elapsed(),
+        elapsed,
     })
 }
 

@@ -15,7 +15,9 @@
 //!                               # that assert kernel timing, not measure QEMU's
 //! done_when = ["p0: alive at "] # optional: stop QEMU as soon as the log has shown each of
 //!                               # these texts (for systems that run for ever; the
-//!                               # timeout then only bounds a run that never gets there)
+//!                               # timeout then only bounds a run that never gets there;
+//!                               # with a host part run by `boot_while`, QEMU stops when
+//!                               # that part has returned and these texts have appeared)
 //! console_input = ["echo hi\r", "\u0004"]   # optional: typed into COM2 (a guest's
 //!                               # console) once its output shows `console_start`, each
 //!                               # piece once the output grew and then stayed quiet for
