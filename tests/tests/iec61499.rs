@@ -358,8 +358,8 @@ fn watch_at(o: &Outcome, partition: &str, t: &str) -> String {
 }
 
 #[test]
-fn iec61499_udp() {
-    let o = boot("iec61499_udp");
+fn iec61499_ip() {
+    let o = boot("iec61499_ip");
     check(
         &o,
         o.ending == Ending::Done,
@@ -413,13 +413,15 @@ fn iec61499_udp() {
     );
     // Nothing dropped or failed on either side; what the publisher sent arrived (its
     // statistics line and the subscriber's come 3 ms apart, in the same major frame).
-    let udp = |partition: &str| {
+    // A partition's last statistics line of a kind (` udp `, ` tcp `).
+    let last_stats = |partition: &str, kind: &str| {
         let needle = format!("[{partition}] iec61499: t=");
         o.lines
             .iter()
-            .rfind(|l| l.contains(&needle) && l.contains(" udp "))
+            .rfind(|l| l.contains(&needle) && l.contains(kind))
             .map(String::as_str)
     };
+    let udp = |partition: &str| last_stats(partition, " udp ");
     let stat = |line: Option<&str>, name: &str| {
         line.and_then(|l| watched(l.trim_end(), name))
             .and_then(|v| v.parse::<u64>().ok())
@@ -441,4 +443,42 @@ fn iec61499_udp() {
             .is_some_and(|(sent, received)| sent >= 40 && received <= sent && received + 2 >= sent),
         &format!("datagrams sent {sent:?}, received {received:?}"),
     );
+    // CLIENT/SERVER over TCP: the client's requests (a count every 100 ms from about 1 s)
+    // all reached the server and came back in order (the last answer's count is the
+    // number of answers), on one connection each side, none refused or ended.
+    let (client, server) = (watch_at(&o, "pub", "5000ms"), watch_at(&o, "sub", "5000ms"));
+    let (requests, answers, last) = (
+        number(&client, "CLI.C.CV"),
+        number(&client, "CLI.N.CV"),
+        number(&client, "CLI.V.OUT"),
+    );
+    check(
+        &o,
+        requests.is_some_and(|n| (20..=45).contains(&n))
+            && answers
+                .zip(requests)
+                .is_some_and(|(a, r)| a <= r && a + 2 >= r)
+            && last == answers
+            && watched(&client, "CLI.CL.STATUS") == Some("'OK'"),
+        &format!(
+            "client at 5 s: {requests:?} requests, {answers:?} answers, last {last:?}: {client}"
+        ),
+    );
+    let served = number(&server, "SRV.M.CV");
+    check(
+        &o,
+        served.is_some_and(|n| (20..=45).contains(&n))
+            && watched(&server, "SRV.S.STATUS") == Some("'OK'"),
+        &format!("server at 5 s: {served:?} requests: {server}"),
+    );
+    for line in [last_stats("pub", " tcp "), last_stats("sub", " tcp ")] {
+        check(
+            &o,
+            stat(line, "connected") == Some(1)
+                && stat(line, "refused") == Some(0)
+                && stat(line, "ended") == Some(0)
+                && stat(line, "bytes_in").is_some_and(|n| n >= 60),
+            &format!("tcp statistics: {line:?}"),
+        );
+    }
 }

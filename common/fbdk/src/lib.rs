@@ -377,6 +377,11 @@ impl<'a> Reader<'a> {
         self.bytes == [NULL]
     }
 
+    /// The bytes read so far (where the next value starts).
+    pub fn position(&self) -> usize {
+        self.at
+    }
+
     /// Ends the message: no bytes may be left.
     pub fn finish(self) -> Result<(), DecodeError> {
         if self.at == self.bytes.len() {

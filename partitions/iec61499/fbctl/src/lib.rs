@@ -1,9 +1,11 @@
 //! `fbctl`: 4diac's management requests to the IEC 61499 partition from Linux, over the
 //! partition's management ports (`iec61499.mgmt`, devices `/dev/arinc/<port>` in the
-//! guest), one request a message as `iec61499_mgmt::serve` defines them.
+//! guest), one request a message as `iec61499_mgmt::serve` defines them, or with `--tcp
+//! ADDRESS:PORT` over TCP as 4diac IDE speaks the protocol (`iec61499_mgmt::tcp`'s
+//! framing): to a partition's port 61499 (`iec61499.net`) or to a FORTE device.
 //!
 //! ```text
-//! fbctl [--request PATH] [--response PATH] [--timeout MS] COMMAND
+//! fbctl [--request PATH] [--response PATH] [--tcp ADDRESS:PORT] [--timeout MS] COMMAND
 //!   send DEST REQUEST   one request (DEST empty for the device); prints the response
 //!   boot FILE           every line of a boot file (.fboot); prints each response, stops
 //!                       at the first refusal
@@ -18,16 +20,21 @@
 //! `<line>: <response>` per line; `type` prints `type <NAME>: <n> bytes in <k> part(s),
 //! added` or the refusal; `compile` prints `type <NAME>: <n> bytes written to <OUT>`. Exit status: 0 done, 1 refused by the device (the response
 //! names the reason), 2 bad usage or file (compile errors as `file:line:col`), 3 no
-//! answer or a port device error.
+//! answer, a port device error or a connection that failed.
 
 use iec61499_mgmt::serve::type_messages;
+use iec61499_mgmt::tcp::{encode_request, read_response};
+use std::io::{Read, Write};
+use std::net::{TcpStream, ToSocketAddrs};
 use std::time::{Duration, Instant};
 
 /// The ports' message size (`iec61499.mgmt` ports have `size = 4096`).
 pub const MAX_MESSAGE: usize = 4096;
 pub const DEFAULT_REQUEST: &str = "/dev/arinc/fb-request";
 pub const DEFAULT_RESPONSE: &str = "/dev/arinc/fb-response";
-pub const USAGE: &str = "usage: fbctl [--request PATH] [--response PATH] [--timeout MS] (send DEST REQUEST | boot FILE.fboot | type FILE | compile FILE.fbt OUT)";
+pub const USAGE: &str = "usage: fbctl [--request PATH] [--response PATH] [--tcp ADDRESS:PORT] [--timeout MS] (send DEST REQUEST | boot FILE.fboot | type FILE | compile FILE.fbt OUT)";
+/// The longest response read (a TCP response may be longer than a port's message).
+const MAX_RESPONSE: usize = iec61499_mgmt::tcp::MAX_RESPONSE;
 
 /// How a command ended badly: the message and the exit status.
 #[derive(Debug, PartialEq, Eq)]
@@ -68,6 +75,8 @@ pub enum Action {
 pub struct Command {
     pub request: String,
     pub response: String,
+    /// `--tcp`: the device's management address instead of the ports.
+    pub tcp: Option<String>,
     pub timeout: Duration,
     pub action: Action,
 }
@@ -76,12 +85,15 @@ impl Command {
     pub fn parse(args: &[String]) -> Result<Command, String> {
         let mut request = DEFAULT_REQUEST.to_string();
         let mut response = DEFAULT_RESPONSE.to_string();
+        let mut tcp = None;
+        let mut ports_named = false;
         let mut timeout = Duration::from_secs(2);
         let mut rest = args;
         while let [flag, value, tail @ ..] = rest {
             match flag.as_str() {
-                "--request" => request = value.clone(),
-                "--response" => response = value.clone(),
+                "--request" => (request, ports_named) = (value.clone(), true),
+                "--response" => (response, ports_named) = (value.clone(), true),
+                "--tcp" => tcp = Some(value.clone()),
                 "--timeout" => {
                     let ms: u64 = value
                         .parse()
@@ -106,9 +118,13 @@ impl Command {
             [] => return Err("no command".into()),
             [c, ..] => return Err(format!("unknown command or arguments: {c}")),
         };
+        if tcp.is_some() && ports_named {
+            return Err("--tcp and --request/--response name two ways to the device".into());
+        }
         Ok(Command {
             request,
             response,
+            tcp,
             timeout,
             action,
         })
@@ -116,6 +132,84 @@ impl Command {
 }
 
 pub use port_devices::Transport;
+
+/// The management protocol on a TCP connection (`--tcp`): each message `DEST;REQUEST` goes
+/// as 4diac IDE frames it, each response comes as one STRING.
+pub struct TcpTransport {
+    stream: TcpStream,
+    /// Bytes of responses not yet whole.
+    received: Vec<u8>,
+}
+
+impl TcpTransport {
+    /// Connects to `address` (`host:port`), waiting at most `timeout`.
+    pub fn connect(address: &str, timeout: Duration) -> Result<Self, String> {
+        let peer = address
+            .to_socket_addrs()
+            .map_err(|e| format!("--tcp {address}: {e}"))?
+            .next()
+            .ok_or_else(|| format!("--tcp {address}: no address"))?;
+        let stream = TcpStream::connect_timeout(&peer, timeout)
+            .map_err(|e| format!("cannot connect to {address}: {e}"))?;
+        stream
+            .set_nonblocking(true)
+            .and_then(|()| stream.set_nodelay(true))
+            .map_err(|e| format!("{address}: {e}"))?;
+        Ok(TcpTransport {
+            stream,
+            received: Vec::new(),
+        })
+    }
+}
+
+impl Transport for TcpTransport {
+    fn send(&mut self, message: &[u8]) -> Result<(), String> {
+        let text = std::str::from_utf8(message).map_err(|_| "a request that is not UTF-8")?;
+        let (destination, request) = text.split_once(';').unwrap_or(("", text));
+        let frame = encode_request(destination, request);
+        // The socket does not block: a full send buffer is waited out (bounded by the
+        // stream's progress; the device reads its requests whole).
+        let mut sent = 0;
+        while sent < frame.len() {
+            match self.stream.write(&frame[sent..]) {
+                Ok(0) => return Err("the device closed the connection".into()),
+                Ok(n) => sent += n,
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => std::thread::sleep(POLL),
+                Err(e) => return Err(format!("sending: {e}")),
+            }
+        }
+        Ok(())
+    }
+
+    fn try_receive(&mut self, buf: &mut [u8]) -> Result<Option<usize>, String> {
+        let mut chunk = [0u8; 4096];
+        while self.received.len() < MAX_RESPONSE + 3 {
+            match self.stream.read(&mut chunk) {
+                Ok(0) if self.received.is_empty() => {
+                    return Err("the device closed the connection".into());
+                }
+                Ok(0) => break,
+                Ok(n) => self.received.extend_from_slice(&chunk[..n]),
+                Err(e) if e.kind() == std::io::ErrorKind::WouldBlock => break,
+                Err(e) => return Err(format!("receiving: {e}")),
+            }
+        }
+        match read_response(&self.received) {
+            Ok(Some((xml, used))) => {
+                let n = xml.len().min(buf.len());
+                buf[..n].copy_from_slice(&xml[..n]);
+                self.received.drain(..used);
+                Ok(Some(n))
+            }
+            Ok(None) => Ok(None),
+            Err(e) => Err(format!("not a response of the management protocol: {e}")),
+        }
+    }
+
+    fn pause(&mut self, time: Duration) {
+        std::thread::sleep(time);
+    }
+}
 
 /// How often a missing response is looked for.
 const POLL: Duration = Duration::from_millis(2);
@@ -142,7 +236,7 @@ impl<T: Transport> Link<T> {
                 message.len()
             )));
         }
-        let mut buf = vec![0u8; MAX_MESSAGE];
+        let mut buf = vec![0u8; MAX_RESPONSE];
         while self
             .transport
             .try_receive(&mut buf)

@@ -1,8 +1,8 @@
 //! `fbctl`'s program: reads the command's file, opens the request and response devices
-//! ([`port_devices`]), then runs the command ([`fbctl`] says what each one does and
+//! ([`port_devices`]) or the TCP connection (`--tcp`), then runs the command ([`fbctl`] says what each one does and
 //! prints). Glue only.
 
-use fbctl::{Action, Command, Failure, Link, Transport, USAGE};
+use fbctl::{Action, Command, Failure, Link, TcpTransport, Transport, USAGE};
 use port_devices::Devices;
 use std::io::Write;
 use std::process::ExitCode;
@@ -34,6 +34,15 @@ fn run(command: &Command) -> Result<(), Failure> {
             message: format!("cannot write {out}: {e}"),
             status: 2,
         });
+    }
+    if let Some(address) = &command.tcp {
+        let tcp = TcpTransport::connect(address, command.timeout)
+            .map_err(|message| Failure { message, status: 3 })?;
+        let mut link = Link {
+            transport: tcp,
+            timeout: command.timeout,
+        };
+        return link.run(&command.action, &file, &mut print).map(drop);
     }
     let devices = Devices::open(&command.request, &command.response)
         .map_err(|message| Failure { message, status: 3 })?;

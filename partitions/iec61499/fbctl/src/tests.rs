@@ -215,3 +215,136 @@ fn a_composite_type_package_names_its_type() {
     assert_eq!(package_name(b"W61N\x01"), None);
     assert_eq!(package_name(b"XXXX"), None);
 }
+
+/// A device served on a TCP port of 127.0.0.1 as the partition serves its port 61499
+/// (`iec61499_mgmt::tcp`'s framing, `serve_parts`), to one connection, until it closes;
+/// the thread returns how many requests it answered.
+fn tcp_device() -> (String, std::thread::JoinHandle<usize>) {
+    use iec61499_mgmt::serve::serve_parts;
+    use iec61499_mgmt::tcp::{MAX_REQUEST, MAX_RESPONSE, Next, next_request, push_string};
+    use std::io::{Read, Write};
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = listener.local_addr().unwrap().to_string();
+    let server = std::thread::spawn(move || {
+        let mut device = Device::new(Limits::default(), 4);
+        let mut answered = 0;
+        let (mut stream, _) = listener.accept().unwrap();
+        let mut received = Vec::new();
+        let mut chunk = [0u8; 4096];
+        loop {
+            while let Ok(Next::Request {
+                destination,
+                request,
+                len,
+            }) = next_request(&received, MAX_REQUEST)
+            {
+                let answer = serve_parts(
+                    &mut device,
+                    &received[destination],
+                    &received[request],
+                    Access::Download,
+                    MAX_RESPONSE,
+                    0,
+                );
+                let mut frame = Vec::new();
+                push_string(&mut frame, answer.as_bytes());
+                stream.write_all(&frame).unwrap();
+                received.drain(..len);
+                answered += 1;
+            }
+            match stream.read(&mut chunk) {
+                Ok(0) | Err(_) => return answered,
+                Ok(n) => received.extend_from_slice(&chunk[..n]),
+            }
+        }
+    });
+    (address, server)
+}
+
+#[test]
+fn over_tcp_fbctl_deploys_types_and_reads_as_4diac_ide_does() {
+    let (address, server) = tcp_device();
+    let c = Command::parse(&args(&format!("--tcp {address} send R x"))).unwrap();
+    assert_eq!(c.tcp.as_deref(), Some(address.as_str()));
+    let timeout = Duration::from_secs(5);
+    let mut l = Link {
+        transport: TcpTransport::connect(&address, timeout).unwrap(),
+        timeout,
+    };
+    let mut lines = Vec::new();
+    l.run(
+        &Action::Type("COUNTDOWN.fbt".into()),
+        COUNTDOWN.as_bytes(),
+        &mut |s| lines.push(s.to_string()),
+    )
+    .unwrap();
+    assert!(lines[0].ends_with(" part(s), added"), "{lines:?}");
+    let boot = ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"EMB_RES\"/></Request>\nR;<Request ID=\"2\" Action=\"CREATE\"><FB Name=\"D\" Type=\"COUNTDOWN\"/></Request>\nR;<Request ID=\"3\" Action=\"START\"/>\n";
+    l.run(
+        &Action::Boot("app.fboot".into()),
+        boot.as_bytes(),
+        &mut |s| lines.push(s.to_string()),
+    )
+    .unwrap();
+    assert_eq!(
+        lines[1..],
+        [
+            "1: <Response ID=\"1\" />",
+            "2: <Response ID=\"2\" />",
+            "3: <Response ID=\"3\" />"
+        ]
+    );
+    let mut out = Vec::new();
+    l.run(
+        &Action::Send {
+            destination: "R".into(),
+            request: "<Request ID=\"4\" Action=\"READ\"><Connection Source=\"D.Q\" Destination=\"\"/></Request>".into(),
+        },
+        b"",
+        &mut |s| out.push(s.to_string()),
+    )
+    .unwrap();
+    assert!(out[0].contains("Response ID=\"4\""), "{out:?}");
+    drop(l);
+    // The type's parts, the boot file's 3 lines and the read.
+    assert!(server.join().unwrap() >= 5);
+}
+
+#[test]
+fn over_tcp_a_refused_connection_and_a_stream_of_other_bytes_are_errors() {
+    // Nobody listens on a port just closed.
+    let port = std::net::TcpListener::bind("127.0.0.1:0")
+        .unwrap()
+        .local_addr()
+        .unwrap()
+        .port();
+    let e = TcpTransport::connect(&format!("127.0.0.1:{port}"), Duration::from_secs(1));
+    assert!(e.is_err_and(|e| e.starts_with("cannot connect to 127.0.0.1:")));
+    // A peer that answers with something else than STRINGs.
+    let listener = std::net::TcpListener::bind("127.0.0.1:0").unwrap();
+    let address = listener.local_addr().unwrap().to_string();
+    let peer = std::thread::spawn(move || {
+        use std::io::Write;
+        let (mut s, _) = listener.accept().unwrap();
+        s.write_all(b"HTTP/1.0 400 Bad Request\r\n\r\n").unwrap();
+        std::thread::sleep(Duration::from_millis(300));
+    });
+    let mut l = Link {
+        transport: TcpTransport::connect(&address, Duration::from_secs(1)).unwrap(),
+        timeout: Duration::from_secs(2),
+    };
+    let e = l.ask(
+        "",
+        "<Request ID=\"1\" Action=\"QUERY\"><FB Name=\"*\" Type=\"*\"/></Request>",
+    );
+    let e = e.unwrap_err();
+    assert_eq!(e.status, 3);
+    assert!(
+        e.message
+            .starts_with("not a response of the management protocol"),
+        "{e:?}"
+    );
+    peer.join().unwrap();
+    // --tcp with the ports' flags is a usage error.
+    assert!(Command::parse(&args("--tcp 10.0.2.15:61499 --request /dev/x send R x")).is_err());
+}

@@ -1,6 +1,7 @@
-//! CLIENT and SERVER, 4diac's interfaces, between partitions on one machine over a pair of
-//! ARINC 653 queuing ports (the network comes later), as [`crate::pubsub`] does for
-//! PUBLISH/SUBSCRIBE: a message is the FBDK ASN.1 encoding of the data (`fbdk`).
+//! CLIENT and SERVER, 4diac's interfaces, over TCP on the partition's network interface
+//! (FORTE's `ip` layer) or between partitions on one machine over a pair of ARINC 653
+//! queuing ports, as [`crate::pubsub`] does for PUBLISH/SUBSCRIBE: a message is the FBDK
+//! ASN.1 encoding of the data (`fbdk`).
 //!
 //! | type | events in | events out | data |
 //! |---|---|---|---|
@@ -13,7 +14,26 @@
 //! `CLIENT_n_n` and `SERVER_n_n`. SD_i and RD_i are generic, typed by their first typed
 //! connection or literal, as PUBLISH/SUBSCRIBE's.
 //!
-//! **ID** names the two queuing ports, requests first: `'requests,responses'` (port names
+//! **ID** with an IP address, FORTE's `a.b.c.d:port` or `fbdk[].ip[a.b.c.d:port]`
+//! ([`crate::pubsub::ip_id`]), is a TCP connection (`ProcessIo::tcp_open`, on the stack:
+//! `crate::tcplink`): a client connects to the address, a server listens on the port (of
+//! every address; the address part is not checked) and talks to one client at a time, as
+//! FORTE's: a second client is accepted and closed at once; when its client goes the
+//! server listens again and the next client starts afresh. INIT with QI answers INITO when
+//! the network has: QO TRUE and STATUS `OK` once the server listens or the client is
+//! connected, QO FALSE and why (`cannot connect to ...: ConnectionRefused`, `cannot listen
+//! on port ...`) else. The stream carries the messages one after the other, nothing
+//! between them (as FORTE's): the FB takes each whole message from it as it arrives, in
+//! any pieces; a message that cannot decode gives the event with QO FALSE and STATUS `bad
+//! message: ...` and drops what the stream held (it cannot be followed past it); a message
+//! may be [`TCP_BUFFER`] bytes long. A client whose connection ends (the server closed it,
+//! or it failed) gets, after the messages that came before the end, INITO with QO FALSE
+//! and STATUS why; it is no longer initialised. A REQ before the connection is up, or an
+//! RSP while the server has no client, gives CNF/IND with QO FALSE (`not initialised`, `no
+//! client connected`); a send that does not fit what waits to go: `send buffer full`.
+//! Without a network interface such an INIT answers `no network interface`.
+//!
+//! **ID** otherwise names the two queuing ports, requests first: `'requests,responses'` (port names
 //! have no comma). The client sends on its output port `requests` and receives on its
 //! input port `responses`; the server receives on its input port `requests` and sends on
 //! its output port `responses`; two channels of the configuration join them. Both sides
@@ -40,9 +60,10 @@
 //! hazard).
 
 use crate::pubsub::{
-    DATA, ID, INIT, MAX_DATA, PER_POLL, QI, QO, STATUS, UNTYPED, decode, encode, wire_type,
+    DATA, ID, INIT, MAX_DATA, NetAddr, PER_POLL, QI, QO, STATUS, UNTYPED, decode, decode_first,
+    encode, ip_id, wire_type,
 };
-use crate::sifb::Io;
+use crate::sifb::{Io, TCP_BUFFER, TcpState};
 use alloc::boxed::Box;
 use alloc::format;
 use alloc::string::{String, ToString};
@@ -141,7 +162,7 @@ pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
         sd: alloc::vec![None; sd],
         rd: alloc::vec![None; rd],
         io: io.clone(),
-        ports: None,
+        link: None,
     }))
 }
 
@@ -152,6 +173,24 @@ struct Ports {
     input: (String, usize),
 }
 
+/// A TCP link of the partition's network interface (`ProcessIo::tcp_open`) as the FB sees
+/// it.
+struct Tcp {
+    link: usize,
+    /// INITO was sent (the link listens or connected).
+    up: bool,
+    /// A server's client of the moment: a new one starts a new stream.
+    peer: Option<NetAddr>,
+    /// Received bytes not yet a whole message (at most [`TCP_BUFFER`]).
+    stream: Vec<u8>,
+}
+
+/// What INIT opened.
+enum Link {
+    Ports(Ports),
+    Tcp(Tcp),
+}
+
 struct ClientServer {
     interface: Interface,
     client: bool,
@@ -159,22 +198,38 @@ struct ClientServer {
     sd: Vec<Option<DataType>>,
     rd: Vec<Option<DataType>>,
     io: Io,
-    ports: Option<Ports>,
+    link: Option<Link>,
 }
 
 impl ClientServer {
-    fn init(&mut self, inputs: &[Value]) -> (bool, String) {
-        self.ports = None;
+    /// INIT: QO and STATUS, or `None` when INITO comes later (a TCP link being opened).
+    fn init(&mut self, inputs: &[Value]) -> Option<(bool, String)> {
+        self.close();
         if !inputs[QI].as_bool() {
-            return (false, "OK".into());
+            return Some((false, "OK".into()));
         }
         let id = match &inputs[ID] {
             Value::String(s) => s.as_str(),
             _ => "",
         };
+        if let Some(at) = ip_id(id) {
+            let opened = at.and_then(|at| self.io.borrow_mut().io.tcp_open(at, !self.client));
+            return match opened {
+                Ok(link) => {
+                    self.link = Some(Link::Tcp(Tcp {
+                        link,
+                        up: false,
+                        peer: None,
+                        stream: Vec::new(),
+                    }));
+                    None
+                }
+                Err(why) => Some((false, why)),
+            };
+        }
         let (requests, responses) = match parse_id(id) {
             Ok(ports) => ports,
-            Err(why) => return (false, why),
+            Err(why) => return Some((false, why)),
         };
         let (output, input) = if self.client {
             (requests, responses)
@@ -183,27 +238,34 @@ impl ClientServer {
         };
         let io = self.io.borrow();
         let Some(output_size) = io.io.queue_size(&output, false) else {
-            return (false, format!("no queuing output port {output}"));
+            return Some((false, format!("no queuing output port {output}")));
         };
         let Some(input_size) = io.io.queue_size(&input, true) else {
-            return (false, format!("no queuing input port {input}"));
+            return Some((false, format!("no queuing input port {input}")));
         };
         drop(io);
-        self.ports = Some(Ports {
+        self.link = Some(Link::Ports(Ports {
             output: (output, output_size),
             input: (input, input_size),
-        });
-        (true, "OK".into())
+        }));
+        Some((true, "OK".into()))
+    }
+
+    /// Closes the TCP link, if one is open; forgets the link.
+    fn close(&mut self) {
+        if let Some(Link::Tcp(tcp)) = self.link.take()
+            && let Ok(mut io) = self.io.try_borrow_mut()
+        {
+            io.io.tcp_close(tcp.link);
+        }
     }
 
     /// Sends SD_1..SD_m: `None` when sent, else why not.
     fn send(&mut self, inputs: &[Value]) -> Option<String> {
-        let Some(Ports {
-            output: (port, size),
-            ..
-        }) = self.ports.clone()
-        else {
-            return Some("not initialised".into());
+        let (link, size) = match &self.link {
+            Some(Link::Ports(p)) => (None, p.output.1),
+            Some(Link::Tcp(t)) if t.up => (Some(t.link), TCP_BUFFER),
+            _ => return Some("not initialised".into()),
         };
         if !inputs[QI].as_bool() {
             return Some("QI is FALSE".into());
@@ -212,11 +274,124 @@ impl ClientServer {
             Ok(m) => m,
             Err(why) => return Some(why),
         };
-        if self.io.borrow_mut().io.send(&port, &message) {
-            None
-        } else {
-            Some("port full".into())
+        let mut io = self.io.borrow_mut();
+        match (link, &self.link) {
+            (Some(link), _) => io.io.tcp_send(link, &message).err(),
+            (None, Some(Link::Ports(p))) => {
+                (!io.io.send(&p.output.0, &message)).then(|| "port full".into())
+            }
+            (None, _) => Some("not initialised".into()),
         }
+    }
+
+    /// One CNF (client) or IND (server) with QO, STATUS and (when QO) the RD values.
+    fn deliver(ctx: &mut Context<'_>, received: Result<Vec<Value>, String>) {
+        let (qo, status) = match received {
+            Ok(values) => {
+                for (k, v) in values.into_iter().enumerate() {
+                    ctx.set(DATA + k, v);
+                }
+                (true, String::from("OK"))
+            }
+            Err(why) => (false, format!("bad message: {why}")),
+        };
+        ctx.set(QO, Value::Bool(qo));
+        ctx.set(STATUS, Value::String(status));
+        ctx.send(DATA_EVENT);
+    }
+
+    fn poll_ports(&mut self, ports: &Ports, ctx: &mut Context<'_>) {
+        let (port, size) = (&ports.input.0, ports.input.1);
+        let mut buf = alloc::vec![0u8; size];
+        for _ in 0..PER_POLL {
+            let Some(len) = self.io.borrow_mut().io.receive(port, &mut buf) else {
+                break;
+            };
+            Self::deliver(ctx, decode(&self.rd, &buf[..len.min(size)]));
+        }
+    }
+
+    /// A TCP link: INITO once it listens or connected (or failed), then each whole message
+    /// of the stream one CNF/IND; a client whose connection ended gets INITO with QO FALSE
+    /// after the messages that came before the end.
+    fn poll_tcp(&mut self, ctx: &mut Context<'_>) {
+        let Some(Link::Tcp(mut tcp)) = self.link.take() else {
+            return;
+        };
+        let state = self.io.borrow().io.tcp_state(tcp.link);
+        if !tcp.up {
+            match &state {
+                TcpState::Opening => {
+                    self.link = Some(Link::Tcp(tcp));
+                    return;
+                }
+                TcpState::Down(why) => {
+                    self.io.borrow_mut().io.tcp_close(tcp.link);
+                    return Self::init_answer(ctx, false, why.clone());
+                }
+                TcpState::Listening | TcpState::Connected { .. } => {
+                    tcp.up = true;
+                    Self::init_answer(ctx, true, "OK".into());
+                }
+            }
+        }
+        let peer = match &state {
+            TcpState::Connected { peer } => Some(*peer),
+            _ => None,
+        };
+        if !self.client && peer != tcp.peer {
+            // A server's client left or another came: what the last one left is dropped.
+            tcp.stream.clear();
+            tcp.peer = peer;
+        }
+        let mut buf = [0u8; 512];
+        while tcp.stream.len() < TCP_BUFFER {
+            let room = (TCP_BUFFER - tcp.stream.len()).min(buf.len());
+            let n = self
+                .io
+                .borrow_mut()
+                .io
+                .tcp_receive(tcp.link, &mut buf[..room]);
+            if n == 0 {
+                break;
+            }
+            tcp.stream.extend_from_slice(&buf[..n]);
+        }
+        for _ in 0..PER_POLL {
+            match decode_first(&self.rd, &tcp.stream) {
+                Ok(Some((values, used))) => {
+                    tcp.stream.drain(..used);
+                    Self::deliver(ctx, Ok(values));
+                }
+                Ok(None) if tcp.stream.len() >= TCP_BUFFER => {
+                    tcp.stream.clear();
+                    let why = format!("a message longer than {} bytes", TCP_BUFFER);
+                    Self::deliver(ctx, Err(why));
+                    break;
+                }
+                Ok(None) => break,
+                Err(why) => {
+                    // The stream cannot be followed past it: what came with it is dropped.
+                    tcp.stream.clear();
+                    Self::deliver(ctx, Err(why));
+                    break;
+                }
+            }
+        }
+        if let TcpState::Down(why) = state
+            && self.io.borrow().io.tcp_state(tcp.link) == TcpState::Down(why.clone())
+            && decode_first(&self.rd, &tcp.stream).ok().flatten().is_none()
+        {
+            self.io.borrow_mut().io.tcp_close(tcp.link);
+            return Self::init_answer(ctx, false, why);
+        }
+        self.link = Some(Link::Tcp(tcp));
+    }
+
+    fn init_answer(ctx: &mut Context<'_>, qo: bool, status: String) {
+        ctx.set(QO, Value::Bool(qo));
+        ctx.set(STATUS, Value::String(status));
+        ctx.send(INIT);
     }
 }
 
@@ -226,54 +401,37 @@ impl FunctionBlock for ClientServer {
     }
 
     fn event(&mut self, event: usize, inputs: &[Value], ctx: &mut Context<'_>) {
-        let (qo, status) = if event == INIT {
-            self.init(inputs)
-        } else {
-            match self.send(inputs) {
-                // Sent: the answer is the other side's message, polled.
-                None => return,
-                Some(why) => (false, why),
+        if event == INIT {
+            if let Some((qo, status)) = self.init(inputs) {
+                Self::init_answer(ctx, qo, status);
             }
-        };
-        ctx.set(QO, Value::Bool(qo));
-        ctx.set(STATUS, Value::String(status));
-        ctx.send(if event == INIT { INIT } else { DATA_EVENT });
-    }
-
-    fn polls(&self) -> bool {
-        self.ports.is_some()
-    }
-
-    fn poll(&mut self, _inputs: &[Value], ctx: &mut Context<'_>) {
-        let Some(Ports {
-            input: (port, size),
-            ..
-        }) = self.ports.clone()
-        else {
             return;
-        };
-        let mut buf = alloc::vec![0u8; size];
-        for _ in 0..PER_POLL {
-            let Some(len) = self.io.borrow_mut().io.receive(&port, &mut buf) else {
-                break;
-            };
-            let (qo, status) = match decode(&self.rd, &buf[..len.min(size)]) {
-                Ok(values) => {
-                    for (k, v) in values.into_iter().enumerate() {
-                        ctx.set(DATA + k, v);
-                    }
-                    (true, String::from("OK"))
-                }
-                Err(why) => (false, format!("bad message: {why}")),
-            };
-            ctx.set(QO, Value::Bool(qo));
-            ctx.set(STATUS, Value::String(status));
+        }
+        // Sent: the answer is the other side's message, polled.
+        if let Some(why) = self.send(inputs) {
+            ctx.set(QO, Value::Bool(false));
+            ctx.set(STATUS, Value::String(why));
             ctx.send(DATA_EVENT);
         }
     }
 
+    fn polls(&self) -> bool {
+        self.link.is_some()
+    }
+
+    fn poll(&mut self, _inputs: &[Value], ctx: &mut Context<'_>) {
+        match &self.link {
+            Some(Link::Ports(ports)) => {
+                let ports = ports.clone();
+                self.poll_ports(&ports, ctx);
+            }
+            Some(Link::Tcp(_)) => self.poll_tcp(ctx),
+            None => {}
+        }
+    }
+
     fn reset(&mut self) {
-        self.ports = None;
+        self.close();
     }
 
     fn untyped(&self, output: bool, index: usize) -> bool {
@@ -293,6 +451,12 @@ impl FunctionBlock for ClientServer {
         types[index - DATA] = Some(ty);
         vars[index].ty = ty;
         true
+    }
+}
+
+impl Drop for ClientServer {
+    fn drop(&mut self) {
+        self.close();
     }
 }
 

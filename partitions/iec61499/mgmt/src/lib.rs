@@ -52,9 +52,13 @@ pub mod literal;
 pub mod package;
 pub mod pubsub;
 pub mod request;
+#[cfg(test)]
+mod segment;
 pub mod serve;
 pub mod sifb;
 pub mod tcp;
+#[cfg(any(feature = "net", test))]
+pub mod tcplink;
 pub mod types;
 #[cfg(any(feature = "net", test))]
 pub mod udp;

@@ -11,7 +11,7 @@
 //!
 //! # ID
 //!
-//! - A UDP address ([`udp_id`]), FORTE's forms: `a.b.c.d:port` or `fbdk[].ip[a.b.c.d:port]`
+//! - A UDP address ([`ip_id`]), FORTE's forms: `a.b.c.d:port` or `fbdk[].ip[a.b.c.d:port]`
 //!   (FORTE reads an ID without `]` as `fbdk[].ip[ID]`; its `ip` layer is what these do).
 //!   PUBLISH sends each REQ's message as one datagram to that address, a multicast group
 //!   (224.0.0.0/4) or a unicast address; SUBSCRIBE binds the port on every address of the
@@ -160,33 +160,35 @@ enum Link {
     Udp(usize),
 }
 
-/// A UDP address of an ID: IPv4 address and port.
+/// The address of an IP ID (UDP for PUBLISH/SUBSCRIBE, TCP for CLIENT/SERVER): IPv4
+/// address and port.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct UdpAddr {
+pub struct NetAddr {
     pub ip: [u8; 4],
     pub port: u16,
 }
 
-impl UdpAddr {
+impl NetAddr {
     /// A multicast group (224.0.0.0/4).
     pub fn is_multicast(&self) -> bool {
         self.ip[0] & 0xF0 == 0xE0
     }
 }
 
-impl core::fmt::Display for UdpAddr {
+impl core::fmt::Display for NetAddr {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         let [a, b, c, d] = self.ip;
         write!(f, "{a}.{b}.{c}.{d}:{}", self.port)
     }
 }
 
-/// Whether `id` (trimmed) selects UDP, and its address: FORTE's layered ID
+/// Whether `id` (trimmed) selects the network (UDP for PUBLISH/SUBSCRIBE, TCP for
+/// CLIENT/SERVER), and its address: FORTE's layered ID
 /// `fbdk[].ip[a.b.c.d:port]` (FBDK encoding over its `ip` layer) or its short form
 /// `a.b.c.d:port` (FORTE reads an ID without `]` as `fbdk[].ip[ID]`), `Some(Err(why))` when
 /// such an ID's address does not parse (four decimal octets, a port 1..=65535); `None` for
 /// any other ID, the name of a queuing port.
-pub fn udp_id(id: &str) -> Option<Result<UdpAddr, String>> {
+pub fn ip_id(id: &str) -> Option<Result<NetAddr, String>> {
     let id = id.trim();
     let address = match id.strip_prefix("fbdk[].ip[") {
         Some(rest) => match rest.strip_suffix(']') {
@@ -206,13 +208,13 @@ pub fn udp_id(id: &str) -> Option<Result<UdpAddr, String>> {
         }
     };
     Some(
-        parse_udp(address).ok_or_else(|| {
-            format!("bad UDP address {address}: not a.b.c.d:port with a port 1..65535")
+        parse_addr(address).ok_or_else(|| {
+            format!("bad IP address {address}: not a.b.c.d:port with a port 1..65535")
         }),
     )
 }
 
-fn parse_udp(text: &str) -> Option<UdpAddr> {
+fn parse_addr(text: &str) -> Option<NetAddr> {
     let (host, port) = text.rsplit_once(':')?;
     let mut ip = [0u8; 4];
     let mut octets = host.split('.');
@@ -227,7 +229,7 @@ fn parse_udp(text: &str) -> Option<UdpAddr> {
         return None;
     }
     let port: u16 = port.parse().ok().filter(|p| *p != 0)?;
-    Some(UdpAddr { ip, port })
+    Some(NetAddr { ip, port })
 }
 
 /// The wire type of `ty`, if the encoding has it.
@@ -283,7 +285,7 @@ impl PubSub {
             Value::String(s) => s.trim().to_string(),
             _ => String::new(),
         };
-        if let Some(at) = udp_id(&id) {
+        if let Some(at) = ip_id(&id) {
             let opened = at.and_then(|at| {
                 if self.publish && (at.ip == [0; 4]) {
                     return Err(format!("{at} is no destination"));
@@ -390,15 +392,51 @@ pub(crate) fn decode(types: &[Option<DataType>], message: &[u8]) -> Result<Vec<V
         };
     }
     let mut r = fbdk::Reader::new(message);
-    let mut values = Vec::new();
-    for (k, ty) in types.iter().enumerate() {
-        let ty = ty.ok_or_else(|| format!("RD_{} has no type", k + 1))?;
-        let wire = wire_type(ty).ok_or_else(|| format!("RD_{} is not encodable", k + 1))?;
-        let v = r.value(wire).map_err(|e| format!("RD_{}: {e:?}", k + 1))?;
-        values.push(from_wire(ty, v));
-    }
+    let values = read_values(types, &mut r).map_err(|(_, why)| why)?;
     r.finish().map_err(|e| format!("{e:?}"))?;
     Ok(values)
+}
+
+/// The values of `types` from `r`, or whether the bytes ended inside one and why not.
+fn read_values(
+    types: &[Option<DataType>],
+    r: &mut fbdk::Reader<'_>,
+) -> Result<Vec<Value>, (bool, String)> {
+    let mut values = Vec::new();
+    for (k, ty) in types.iter().enumerate() {
+        let ty = ty.ok_or_else(|| (false, format!("RD_{} has no type", k + 1)))?;
+        let wire =
+            wire_type(ty).ok_or_else(|| (false, format!("RD_{} is not encodable", k + 1)))?;
+        let v = r.value(wire).map_err(|e| {
+            let truncated = matches!(e, fbdk::DecodeError::Truncated { .. });
+            (truncated, format!("RD_{}: {e:?}", k + 1))
+        })?;
+        values.push(from_wire(ty, v));
+    }
+    Ok(values)
+}
+
+/// The first message of a stream of messages (a TCP connection's, FORTE sends them one
+/// after the other): its values and its length, or `None` when `stream` ends inside it
+/// (more bytes are needed); an error when it cannot be one (a wrong tag, a value out of
+/// range). With no types a message is one NULL.
+pub(crate) fn decode_first(
+    types: &[Option<DataType>],
+    stream: &[u8],
+) -> Result<Option<(Vec<Value>, usize)>, String> {
+    if types.is_empty() {
+        return match stream.first() {
+            None => Ok(None),
+            Some(&fbdk::NULL) => Ok(Some((Vec::new(), 1))),
+            Some(_) => Err("not an empty message".into()),
+        };
+    }
+    let mut r = fbdk::Reader::new(stream);
+    match read_values(types, &mut r) {
+        Ok(values) => Ok(Some((values, r.position()))),
+        Err((true, _)) => Ok(None),
+        Err((false, why)) => Err(why),
+    }
 }
 
 impl FunctionBlock for PubSub {
@@ -490,7 +528,7 @@ impl Drop for PubSub {
 /// to [`Loopback::SIZE`] bytes, a send that finds one full is refused; no sampling ports.
 /// Clones share the ports and are one subscriber; [`Loopback::end`] is another.
 ///
-/// It is also a simulated UDP network for UDP IDs ([`udp_id`]), as the partition's
+/// It is also a simulated UDP network for UDP IDs ([`ip_id`]), as the partition's
 /// interface is (`crate::udp`): a datagram to a multicast group reaches every subscriber
 /// (of any end, the sender's too, as Linux loops multicast back by default) of that group
 /// and port; one to a unicast address the subscribers of that port on the ends with that
@@ -521,7 +559,7 @@ struct Bus {
 /// A UDP endpoint of end `end`: a publisher to `at` (no queue) or a subscriber of it.
 struct UdpEnd {
     end: usize,
-    at: UdpAddr,
+    at: NetAddr,
     queue: Option<VecDeque<Vec<u8>>>,
 }
 
@@ -561,7 +599,7 @@ impl Loopback {
     }
 
     /// Sends `datagram` to `to` as from another machine (tests: what arrives off the net).
-    pub fn udp_inject(&self, to: UdpAddr, datagram: &[u8]) {
+    pub fn udp_inject(&self, to: NetAddr, datagram: &[u8]) {
         self.bus.borrow_mut().deliver(to, datagram);
     }
 
@@ -571,7 +609,7 @@ impl Loopback {
 }
 
 impl Bus {
-    fn deliver(&mut self, to: UdpAddr, datagram: &[u8]) {
+    fn deliver(&mut self, to: NetAddr, datagram: &[u8]) {
         let Bus {
             addresses,
             udp,
@@ -639,7 +677,7 @@ impl ProcessIo for Loopback {
         true
     }
 
-    fn udp_open(&mut self, at: UdpAddr, subscribe: bool) -> Result<usize, String> {
+    fn udp_open(&mut self, at: NetAddr, subscribe: bool) -> Result<usize, String> {
         let mut bus = self.bus.borrow_mut();
         let end = UdpEnd {
             end: self.end,

@@ -21,7 +21,7 @@
 //! other bytes as last written) and sends it. A REQ before a good INIT, or without QI, gives
 //! QO FALSE and STATUS `'not initialised'` and touches no port.
 
-use crate::pubsub::UdpAddr;
+use crate::pubsub::NetAddr;
 use alloc::boxed::Box;
 use alloc::format;
 use alloc::rc::Rc;
@@ -70,7 +70,7 @@ pub trait ProcessIo {
     /// `subscribe`, one that receives the datagrams to `at`'s port (and joins `at`'s group
     /// when it is a multicast address); without, one that sends to `at`. Its number, or why
     /// not; the default: the partition has no network interface.
-    fn udp_open(&mut self, _at: UdpAddr, _subscribe: bool) -> Result<usize, String> {
+    fn udp_open(&mut self, _at: NetAddr, _subscribe: bool) -> Result<usize, String> {
         Err(NO_NETWORK.into())
     }
     /// Sends `datagram` from publishing endpoint `endpoint` without waiting, or why not.
@@ -84,9 +84,50 @@ pub trait ProcessIo {
     }
     /// Closes `endpoint` (what it had queued is dropped).
     fn udp_close(&mut self, _endpoint: usize) {}
+
+    /// Opens a TCP link (for CLIENT/SERVER with an IP ID, `crate::clientserver`): with
+    /// `server`, one that listens on `at`'s port for a client; without, one that connects
+    /// to `at`. Its number, or why not; the default: the partition has no network
+    /// interface. The connection is made later (`tcp_state` says when).
+    fn tcp_open(&mut self, _at: NetAddr, _server: bool) -> Result<usize, String> {
+        Err(NO_NETWORK.into())
+    }
+    /// What link `link` is doing.
+    fn tcp_state(&self, _link: usize) -> TcpState {
+        TcpState::Down(NO_NETWORK.into())
+    }
+    /// Queues `bytes` to send on `link` without waiting, or why not.
+    fn tcp_send(&mut self, _link: usize, _bytes: &[u8]) -> Result<(), String> {
+        Err(NO_NETWORK.into())
+    }
+    /// Bytes `link` received (a stream), into `buf`: how many (0 when none wait).
+    fn tcp_receive(&mut self, _link: usize, _buf: &mut [u8]) -> usize {
+        0
+    }
+    /// Closes `link` (what waited either way is dropped).
+    fn tcp_close(&mut self, _link: usize) {}
 }
 
-/// Why a UDP ID cannot open on a partition without a network interface.
+/// What a TCP link (`ProcessIo::tcp_open`) is doing, for its FB.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum TcpState {
+    /// A client whose connection is not up yet, or a server not listening yet.
+    Opening,
+    /// A server listening, without a client.
+    Listening,
+    /// Connected to `peer` (a server: to its client of the moment).
+    Connected { peer: NetAddr },
+    /// A client whose connection failed or ended, or a server that cannot listen: why.
+    /// Nothing more happens on the link but the bytes that came before the end; the FB
+    /// closes it.
+    Down(String),
+}
+
+/// Bytes that may wait each way on a TCP link: the longest message a CLIENT or SERVER
+/// sends or receives over TCP.
+pub const TCP_BUFFER: usize = 4096;
+
+/// Why an IP ID cannot open on a partition without a network interface.
 pub const NO_NETWORK: &str = "no network interface";
 
 /// A device without ports (the host's boot check): every INIT says which port is missing.

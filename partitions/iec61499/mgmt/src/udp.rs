@@ -25,7 +25,7 @@
 //! [`PER_PUMP`] datagrams taken from each port a pump; datagrams of at most
 //! [`crate::pubsub::MAX_DATAGRAM`] bytes (longer ones arrive cut, so they do not decode).
 
-use crate::pubsub::{MAX_DATAGRAM, UDP_DEPTH, UdpAddr};
+use crate::pubsub::{MAX_DATAGRAM, NetAddr, UDP_DEPTH};
 use alloc::collections::VecDeque;
 use alloc::format;
 use alloc::string::String;
@@ -63,7 +63,7 @@ pub struct UdpStats {
 }
 
 struct Endpoint {
-    at: UdpAddr,
+    at: NetAddr,
     /// A subscriber's datagrams; `None` for a publisher.
     queue: Option<VecDeque<Vec<u8>>>,
 }
@@ -84,7 +84,7 @@ pub struct Endpoints {
     /// Groups to join or joined, and whether the join was tried.
     groups: Vec<([u8; 4], bool)>,
     sender: Option<SocketId>,
-    out: VecDeque<(UdpAddr, Vec<u8>)>,
+    out: VecDeque<(NetAddr, Vec<u8>)>,
     errors: Vec<String>,
     errors_dropped: u64,
     pub stats: UdpStats,
@@ -97,7 +97,7 @@ impl Endpoints {
 
     /// `ProcessIo::udp_open`: a publisher to `at`, or a subscriber of `at`'s port (and
     /// group); its number, or why not.
-    pub fn open(&mut self, at: UdpAddr, subscribe: bool) -> Result<usize, String> {
+    pub fn open(&mut self, at: NetAddr, subscribe: bool) -> Result<usize, String> {
         let free = self.endpoints.iter().position(Option::is_none);
         if free.is_none() && self.endpoints.len() >= MAX_ENDPOINTS {
             return Err(format!("too many UDP endpoints (at most {MAX_ENDPOINTS})"));

@@ -19,13 +19,16 @@
 //! and the management request port's doorbell, which syssw rings when messages arrive
 //! there, end its wait), it takes the frames the NIC partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one
 //! whole request of each connection on the device (between event chains, as above; an
-//! incomplete request just waits in its connection's buffer), pumps the UDP endpoints of
+//! incomplete request just waits in its connection's buffer), pumps the TCP links of
+//! CLIENT/SERVER with an IP ID (`iec61499_mgmt::tcplink`: connections made and accepted,
+//! their bytes moved between the links' buffers and the sockets) and the UDP endpoints of
 //! PUBLISH/SUBSCRIBE with a UDP ID (`iec61499_mgmt::udp`: the datagrams the FBs queued go
 //! out, those received go to their subscribers' queues, which the device's poll right
-//! after the pass takes), and sends the frames out. The endpoints exist before the boot
-//! (a boot file's PUBLISH/SUBSCRIBE open theirs at START); the FBs reach them through the
-//! partition's `ProcessIo` (`udp_open`/`udp_send`/`udp_receive`/`udp_close`), never the
-//! stack itself. Without `iec61499.net` a UDP ID's INIT answers `no network interface`.
+//! after the pass takes), and sends the frames out. The links and endpoints exist before
+//! the boot (a boot file's FBs open theirs at START); the FBs reach them through the
+//! partition's `ProcessIo` (`tcp_open`/.../`tcp_close`, `udp_open`/.../`udp_close`), never
+//! the stack itself. Without `iec61499.net` an IP ID's INIT answers `no network
+//! interface`.
 //!
 //! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
 //! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted, then
@@ -44,6 +47,10 @@
 //!   endpoints open and their datagrams: `dropped` found their subscriber's queue full),
 //!   and `iec61499: udp: <why>` for a failure of the stack (a socket, a bind, a group
 //!   join, a send; within the [`EVENT_LINES`] a second);
+//! - with a network interface, once a second when they changed, `iec61499: t=<ms>ms tcp
+//!   links=<n> connected=<n> refused=<n> ended=<n> bytes_out=<n> bytes_in=<n>` (the TCP
+//!   links of CLIENT/SERVER open, the connections they made or accepted, those a busy
+//!   server refused, those that ended, and the bytes of their streams);
 //! - `iec61499: refusing the boot package: <reason>` when it did not (reported to the
 //!   health monitor as APPLICATION_ERROR; the process stops, the partition idles);
 //! - every line the device logs (`iec61499_mgmt::Device::take_log`): the test FBs'
@@ -75,10 +82,11 @@ use core::str::FromStr;
 use core::time::Duration;
 use iec61499_mgmt::Device;
 use iec61499_mgmt::package::{DataQueue, MgmtPorts, NetPorts, QueuingPort, SamplingPort};
-use iec61499_mgmt::pubsub::UdpAddr;
+use iec61499_mgmt::pubsub::NetAddr;
 use iec61499_mgmt::serve::{Access, serve};
-use iec61499_mgmt::sifb::{NO_NETWORK, ProcessIo};
+use iec61499_mgmt::sifb::{NO_NETWORK, ProcessIo, TcpState};
 use iec61499_mgmt::tcp::server::{self, Event, Server, Settings, Stats};
+use iec61499_mgmt::tcplink::{TcpLinkStats, TcpLinks};
 use iec61499_mgmt::udp::{Endpoints, UdpStats};
 
 /// How often the statistics line is printed.
@@ -183,9 +191,15 @@ struct ApexIo {
     ports: Vec<(String, usize, Sampling)>,
     /// PUBLISH/SUBSCRIBE's queuing ports.
     queues: Vec<(String, usize, Queuing)>,
-    /// PUBLISH/SUBSCRIBE's UDP endpoints, with a network interface: [`Net`] pumps them on
-    /// its stack.
-    udp: Option<Rc<RefCell<Endpoints>>>,
+    /// PUBLISH/SUBSCRIBE's UDP endpoints and CLIENT/SERVER's TCP links, with a network
+    /// interface: [`Net`] pumps them on its stack.
+    net: Option<NetTables>,
+}
+
+/// The tables between the FBs and the stack, shared by [`ApexIo`] and [`Net`].
+struct NetTables {
+    udp: Rc<RefCell<Endpoints>>,
+    tcp: Rc<RefCell<TcpLinks>>,
 }
 
 enum Queuing {
@@ -199,11 +213,7 @@ enum Sampling {
 }
 
 impl ApexIo {
-    fn open(
-        ports: &[SamplingPort<'_>],
-        queues: &[DataQueue<'_>],
-        udp: Option<Rc<RefCell<Endpoints>>>,
-    ) -> Self {
+    fn open(ports: &[SamplingPort<'_>], queues: &[DataQueue<'_>], net: Option<NetTables>) -> Self {
         let queues = queues
             .iter()
             .filter_map(|q| {
@@ -228,14 +238,23 @@ impl ApexIo {
                 Some((p.name.into(), p.size as usize, port))
             })
             .collect();
-        ApexIo { ports, queues, udp }
+        ApexIo { ports, queues, net }
     }
 
     /// The UDP endpoints, or why not (never borrowed twice: [`Net::pass`] pumps them
     /// between event chains).
     fn endpoints(&self) -> Result<core::cell::RefMut<'_, Endpoints>, String> {
-        let udp = self.udp.as_ref().ok_or(NO_NETWORK)?;
-        udp.try_borrow_mut()
+        let net = self.net.as_ref().ok_or(NO_NETWORK)?;
+        net.udp
+            .try_borrow_mut()
+            .map_err(|_| String::from("the network interface is busy"))
+    }
+
+    /// The TCP links, or why not (as [`ApexIo::endpoints`]).
+    fn links(&self) -> Result<core::cell::RefMut<'_, TcpLinks>, String> {
+        let net = self.net.as_ref().ok_or(NO_NETWORK)?;
+        net.tcp
+            .try_borrow_mut()
             .map_err(|_| String::from("the network interface is busy"))
     }
 
@@ -298,7 +317,7 @@ impl ProcessIo for ApexIo {
         }
     }
 
-    fn udp_open(&mut self, at: UdpAddr, subscribe: bool) -> Result<usize, String> {
+    fn udp_open(&mut self, at: NetAddr, subscribe: bool) -> Result<usize, String> {
         self.endpoints()?.open(at, subscribe)
     }
 
@@ -315,14 +334,41 @@ impl ProcessIo for ApexIo {
             e.close(endpoint);
         }
     }
+
+    fn tcp_open(&mut self, at: NetAddr, server: bool) -> Result<usize, String> {
+        self.links()?.open(at, server)
+    }
+
+    fn tcp_state(&self, link: usize) -> TcpState {
+        match self.links() {
+            Ok(links) => links.state(link),
+            Err(why) => TcpState::Down(why),
+        }
+    }
+
+    fn tcp_send(&mut self, link: usize, bytes: &[u8]) -> Result<(), String> {
+        self.links()?.send(link, bytes)
+    }
+
+    fn tcp_receive(&mut self, link: usize, buf: &mut [u8]) -> usize {
+        self.links().map_or(0, |mut links| links.receive(link, buf))
+    }
+
+    fn tcp_close(&mut self, link: usize) {
+        if let Ok(mut links) = self.links() {
+            links.close(link);
+        }
+    }
 }
 
-/// The network interface, the management protocol's TCP server (`iec61499.net`) and
-/// PUBLISH/SUBSCRIBE's UDP endpoints on its stack.
+/// The network interface, the management protocol's TCP server (`iec61499.net`),
+/// PUBLISH/SUBSCRIBE's UDP endpoints and CLIENT/SERVER's TCP links on its stack.
 struct Net {
     server: Server,
     udp: Rc<RefCell<Endpoints>>,
     logged_udp: UdpStats,
+    tcp: Rc<RefCell<TcpLinks>>,
+    logged_tcp: TcpLinkStats,
     /// The frame port's doorbell is set: the device process waits for it.
     doorbell: bool,
     rx: QueuingPortReceiver<Warden>,
@@ -374,6 +420,8 @@ impl Net {
             server,
             udp: Rc::new(RefCell::new(Endpoints::new())),
             logged_udp: UdpStats::default(),
+            tcp: Rc::new(RefCell::new(TcpLinks::new())),
+            logged_tcp: TcpLinkStats::default(),
             doorbell: doorbell.is_ok(),
             rx,
             tx,
@@ -387,7 +435,8 @@ impl Net {
     }
 
     /// The frames in, the server's run (requests answered on `device`), the UDP endpoints'
-    /// pump (datagrams sent and received), the frames out, the log lines.
+    /// pump (datagrams sent and received) and the TCP links' (connections made, bytes
+    /// moved), the frames out, the log lines.
     fn pass(&mut self, device: &mut Device, now: i64) {
         for _ in 0..server::FRAMES_PER_RUN {
             let Ok((message, _)) = self
@@ -400,8 +449,9 @@ impl Net {
             self.frames_in += 1;
         }
         self.server.run(now.max(0) as u64, device);
-        if let Ok(mut udp) = self.udp.try_borrow_mut() {
+        if let (Ok(mut udp), Ok(mut tcp)) = (self.udp.try_borrow_mut(), self.tcp.try_borrow_mut()) {
             udp.pump(&mut self.server.stack);
+            tcp.pump(&mut self.server.stack);
             self.server.stack.poll(now.max(0) / 1000);
         }
         for _ in 0..server::FRAMES_PER_RUN {
@@ -480,6 +530,22 @@ impl Net {
                     self.frames_out
                 );
             }
+            if let Ok(tcp) = self.tcp.try_borrow()
+                && tcp.stats != self.logged_tcp
+            {
+                let t = tcp.stats;
+                self.logged_tcp = t;
+                println!(
+                    "iec61499: t={}ms tcp links={} connected={} refused={} ended={} bytes_out={} bytes_in={}",
+                    now / 1_000_000,
+                    tcp.open_count(),
+                    t.connected,
+                    t.refused,
+                    t.ended,
+                    t.bytes_out,
+                    t.bytes_in
+                );
+            }
             let (open, u) = match self.udp.try_borrow() {
                 Ok(udp) => (udp.open_count(), udp.stats),
                 Err(_) => return,
@@ -553,11 +619,14 @@ extern "C" fn device_process() {
     // The network before the boot: a boot file's PUBLISH/SUBSCRIBE open their UDP
     // endpoints at START (without an interface that opened, they say so).
     let opened = package.net.as_ref().map(|n| (n, Net::open(n, now_ns())));
-    let udp = match &opened {
-        Some((_, Ok(net))) => Some(net.udp.clone()),
+    let links = match &opened {
+        Some((_, Ok(net))) => Some(NetTables {
+            udp: net.udp.clone(),
+            tcp: net.tcp.clone(),
+        }),
         _ => None,
     };
-    let io = Box::new(ApexIo::open(&package.ports, &package.queues, udp));
+    let io = Box::new(ApexIo::open(&package.ports, &package.queues, links));
     let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), io, now_ns()) {
         Ok(booted) => booted,
         Err(reason) => {

@@ -235,18 +235,18 @@ fn values_cross_the_encoding_unchanged() {
 }
 
 #[test]
-fn udp_ids_are_forte_s_and_other_ids_name_ports() {
-    let at = |ip, port| Some(Ok(UdpAddr { ip, port }));
-    assert_eq!(udp_id("239.0.0.1:61500"), at([239, 0, 0, 1], 61500));
-    assert_eq!(udp_id(" 10.0.2.16:5000 "), at([10, 0, 2, 16], 5000));
+fn ip_ids_are_forte_s_and_other_ids_name_ports() {
+    let at = |ip, port| Some(Ok(NetAddr { ip, port }));
+    assert_eq!(ip_id("239.0.0.1:61500"), at([239, 0, 0, 1], 61500));
+    assert_eq!(ip_id(" 10.0.2.16:5000 "), at([10, 0, 2, 16], 5000));
     assert_eq!(
-        udp_id("fbdk[].ip[239.192.0.2:61499]"),
+        ip_id("fbdk[].ip[239.192.0.2:61499]"),
         at([239, 192, 0, 2], 61499)
     );
-    assert!(udp_id("239.0.0.1:61500").unwrap().unwrap().is_multicast());
-    assert!(!udp_id("10.0.0.1:1").unwrap().unwrap().is_multicast());
+    assert!(ip_id("239.0.0.1:61500").unwrap().unwrap().is_multicast());
+    assert!(!ip_id("10.0.0.1:1").unwrap().unwrap().is_multicast());
     assert_eq!(
-        udp_id("fbdk[].ip[239.0.0.1:61500]")
+        ip_id("fbdk[].ip[239.0.0.1:61500]")
             .unwrap()
             .unwrap()
             .to_string(),
@@ -264,11 +264,11 @@ fn udp_ids_are_forte_s_and_other_ids_name_ports() {
         "fbdk[].ip[1.2.3.4]",
         "fbdk[].ip[1.2.3.4:5",
     ] {
-        assert!(matches!(udp_id(bad), Some(Err(_))), "{bad}");
+        assert!(matches!(ip_id(bad), Some(Err(_))), "{bad}");
     }
     // Queuing ports' names, as before.
     for name in ["counts", "rpc", "a:b", "", "eth-rx", "WSTRIGN#x", "1234"] {
-        assert_eq!(udp_id(name), None, "{name}");
+        assert_eq!(ip_id(name), None, "{name}");
     }
 }
 
@@ -348,7 +348,7 @@ fn publish(d: &mut Device) {
 }
 
 #[test]
-fn without_a_network_interface_a_udp_id_does_not_open() {
+fn without_a_network_interface_an_ip_id_does_not_open() {
     let mut d = pub_and_sub(Box::new(crate::sifb::NoPorts), "fbdk[].ip[239.0.0.1:61500]");
     for fb in ["P", "S"] {
         assert_eq!(read(&mut d, &format!("{fb}.QO")), "FALSE");
@@ -362,7 +362,7 @@ fn without_a_network_interface_a_udp_id_does_not_open() {
     assert_eq!(read(&mut d, "P.STATUS"), "'not initialised'");
     // A bad address says why, before the interface matters.
     let mut d = pub_and_sub(Box::new(crate::sifb::NoPorts), "1.2.3.4:99999");
-    assert!(read(&mut d, "P.STATUS").starts_with("'bad UDP address 1.2.3.4:99999"));
+    assert!(read(&mut d, "P.STATUS").starts_with("'bad IP address 1.2.3.4:99999"));
 }
 
 #[test]
@@ -389,7 +389,7 @@ fn the_loopback_carries_udp_as_a_network_multicast_and_unicast() {
     assert_eq!(read(&mut d, "N.CV"), "1");
     // A datagram that does not decode: IND, QO FALSE, why.
     bus.udp_inject(
-        UdpAddr {
+        NetAddr {
             ip: [10, 0, 0, 2],
             port: 7001,
         },
@@ -432,14 +432,55 @@ proptest::proptest! {
         digits in "[0-9.:]{0,24}",
         bytes in proptest::collection::vec(proptest::prelude::any::<u8>(), 0..64),
     ) {
-        let _ = udp_id(&id);
-        let _ = udp_id(&digits);
-        let _ = udp_id(&format!("fbdk[].ip[{digits}]"));
+        let _ = ip_id(&id);
+        let _ = ip_id(&digits);
+        let _ = ip_id(&format!("fbdk[].ip[{digits}]"));
         use iec61499_runtime::DataType as T;
         let _ = decode(&[Some(T::UInt), Some(T::String), Some(T::LReal)], &bytes);
         let bus = Loopback::default();
         let mut d = pub_and_sub(Box::new(bus.end()), "239.1.1.1:7000");
-        bus.udp_inject(UdpAddr { ip: [239, 1, 1, 1], port: 7000 }, &bytes);
+        bus.udp_inject(NetAddr { ip: [239, 1, 1, 1], port: 7000 }, &bytes);
         d.poll(0);
     }
+}
+
+#[test]
+fn a_stream_of_messages_cut_anywhere_decodes_into_the_same_messages() {
+    let types = [
+        Some(DataType::UInt),
+        Some(DataType::String),
+        Some(DataType::LReal),
+    ];
+    let messages: Vec<Vec<Value>> = (0..3u16)
+        .map(|k| {
+            alloc::vec![
+                Value::UInt(u64::from(k)),
+                Value::String("x".repeat(usize::from(k) * 7)),
+                Value::Real(f64::from(k) / 3.0),
+            ]
+        })
+        .collect();
+    let stream: Vec<u8> = messages
+        .iter()
+        .flat_map(|m| encode(&types, m, 256).unwrap())
+        .collect();
+    // Each prefix gives the whole messages it holds, then asks for more.
+    for cut in 0..=stream.len() {
+        let mut rest = &stream[..cut];
+        let mut got = Vec::new();
+        while let Some((values, used)) = decode_first(&types, rest).unwrap() {
+            got.push(values);
+            rest = &rest[used..];
+        }
+        assert!(messages.starts_with(&got), "cut {cut}");
+        assert_eq!(got.len() == 3, cut == stream.len(), "cut {cut}");
+    }
+    // A wrong tag is an error, not a wait; no types: a message is one NULL.
+    assert!(decode_first(&types, &[0xff]).is_err());
+    assert_eq!(
+        decode_first(&[], &[fbdk::NULL, fbdk::NULL]),
+        Ok(Some((Vec::new(), 1)))
+    );
+    assert_eq!(decode_first(&[], &[]), Ok(None));
+    assert!(decode_first(&[], &[1]).is_err());
 }

@@ -120,14 +120,16 @@ impl Server {
         let limits = Limits {
             // The listener's backlogs (on eth0 and lo), the connections, and as many
             // closing in the background; PUBLISH/SUBSCRIBE's UDP sockets (`crate::udp`,
-            // each on eth0 and lo).
-            sockets: 4 * connections + 4 + 2 * crate::udp::SOCKETS,
+            // each on eth0 and lo); CLIENT/SERVER's TCP links (`crate::tcplink`).
+            sockets: 4 * connections + 4 + 2 * crate::udp::SOCKETS + crate::tcplink::SOCKETS,
             tcp_buffer: TCP_BUFFER,
             // A subscriber's port holds as many datagrams as its queue until the next
             // pump takes them.
             udp_packets: crate::pubsub::UDP_DEPTH,
             udp_buffer: crate::pubsub::UDP_DEPTH * crate::pubsub::MAX_DATAGRAM,
-            backlog: connections,
+            // The management listener asks for `connections`; a CLIENT/SERVER server for
+            // its own.
+            backlog: connections.max(crate::tcplink::BACKLOG),
             frames: 2 * FRAMES_PER_RUN,
         };
         let [a, b, c, d] = settings.address;

@@ -1,148 +1,15 @@
-//! PUBLISH/SUBSCRIBE over UDP between devices, each with its own stack (the management
-//! server's, as the partition has it) and endpoints, their interfaces on one simulated
-//! Ethernet segment (every frame reaches every other stack, which takes what is its own).
+//! PUBLISH/SUBSCRIBE over UDP between devices on one simulated Ethernet segment
+//! ([`crate::segment`]).
 
 extern crate std;
 
 use super::*;
-use crate::Device;
-use crate::serve::Access;
-use crate::sifb::ProcessIo;
-use crate::tcp::server::{Server, Settings};
-use alloc::boxed::Box;
-use alloc::rc::Rc;
+use crate::segment::{Node, Segment, boot, connect, fb, read, write};
 use alloc::string::ToString;
-use core::cell::RefCell;
 use std::format;
 use std::string::String;
 
-/// The partition's side of the endpoints, as its `ProcessIo` hands them over.
-struct NetIo(Rc<RefCell<Endpoints>>);
-
-impl ProcessIo for NetIo {
-    fn udp_open(&mut self, at: UdpAddr, subscribe: bool) -> Result<usize, String> {
-        self.0.borrow_mut().open(at, subscribe)
-    }
-    fn udp_send(&mut self, endpoint: usize, datagram: &[u8]) -> Result<(), String> {
-        self.0.borrow_mut().send(endpoint, datagram)
-    }
-    fn udp_receive(&mut self, endpoint: usize, buf: &mut [u8]) -> Option<usize> {
-        self.0.borrow_mut().receive(endpoint, buf)
-    }
-    fn udp_close(&mut self, endpoint: usize) {
-        self.0.borrow_mut().close(endpoint)
-    }
-}
-
-struct Node {
-    device: Device,
-    server: Server,
-    udp: Rc<RefCell<Endpoints>>,
-    /// Whether the device takes its datagrams at each step.
-    polling: bool,
-}
-
-struct Segment {
-    nodes: std::vec::Vec<Node>,
-    now_ns: u64,
-}
-
 const GROUP: &str = "239.0.0.1:61500";
-
-fn ip(last: u8) -> [u8; 4] {
-    [10, 0, 2, last]
-}
-
-impl Segment {
-    /// Devices at 10.0.2.<last> for each of `lasts`.
-    fn new(lasts: &[u8]) -> Self {
-        let nodes = lasts
-            .iter()
-            .map(|&last| {
-                let settings = Settings {
-                    mac: [0x52, 0x54, 0, 0x12, 0x34, last],
-                    address: ip(last),
-                    prefix: 24,
-                    gateway: None,
-                    port: crate::tcp::PORT,
-                    connections: 1,
-                    access: Access::Monitor,
-                };
-                let udp = Rc::new(RefCell::new(Endpoints::new()));
-                let mut device = Device::new(iec61499_runtime::Limits::default(), 4);
-                device.set_io(Box::new(NetIo(udp.clone())));
-                Node {
-                    device,
-                    server: Server::new(&settings, 0).unwrap(),
-                    udp,
-                    polling: true,
-                }
-            })
-            .collect();
-        Segment { nodes, now_ns: 0 }
-    }
-
-    /// One millisecond: each node's timers, network pass (server, endpoints) and
-    /// subscribers, then every frame to every other node.
-    fn step(&mut self) {
-        self.now_ns += 1_000_000;
-        let now = self.now_ns;
-        let mut frames = std::vec::Vec::new();
-        for (i, n) in self.nodes.iter_mut().enumerate() {
-            n.device.advance(now as i64);
-            n.server.run(now, &mut n.device);
-            n.udp.borrow_mut().pump(&mut n.server.stack);
-            n.server.stack.poll((now / 1000) as i64);
-            if n.polling {
-                n.device.poll(now as i64);
-            }
-            while let Some(f) = n.server.stack.device.take() {
-                frames.push((i, f));
-            }
-        }
-        for (from, f) in frames {
-            for (i, n) in self.nodes.iter_mut().enumerate() {
-                if i != from {
-                    n.server.stack.device.deliver(&f);
-                }
-            }
-        }
-    }
-
-    fn steps(&mut self, n: usize) {
-        for _ in 0..n {
-            self.step();
-        }
-    }
-}
-
-fn line(dst: &str, action: &str, object: &str) -> String {
-    format!("{dst};<Request ID=\"1\" Action=\"{action}\">{object}</Request>\n")
-}
-
-fn write(value: &str, to: &str) -> String {
-    line(
-        "R",
-        "WRITE",
-        &format!("<Connection Source=\"{value}\" Destination=\"{to}\"/>"),
-    )
-}
-
-fn connect(from: &str, to: &str) -> String {
-    line(
-        "R",
-        "CREATE",
-        &format!("<Connection Source=\"{from}\" Destination=\"{to}\"/>"),
-    )
-}
-
-fn fb(name: &str, ty: &str) -> String {
-    line(
-        "R",
-        "CREATE",
-        &format!("<FB Name=\"{name}\" Type=\"{ty}\"/>"),
-    )
-}
 
 /// A publisher `P` of an E_CTU's count `C.CV` and LREAL 2.5 to `id`.
 fn publisher(id: &str) -> String {
@@ -177,19 +44,6 @@ fn subscriber(k: usize, id: &str) -> String {
         connect(&format!("S{k}.RD_2"), &format!("X{k}.IN")),
     ]
     .concat()
-}
-
-fn boot(n: &mut Node, parts: &[String]) {
-    let text = [line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>")]
-        .into_iter()
-        .chain(parts.iter().cloned())
-        .chain([line("R", "START", "")])
-        .collect::<String>();
-    n.device.boot(&text, 0).unwrap();
-}
-
-fn read(n: &mut Node, path: &str) -> String {
-    crate::pubsub::tests::read(&mut n.device, path)
 }
 
 fn count(n: &mut Node) {
@@ -322,7 +176,7 @@ fn a_subscriber_queues_a_few_datagrams_and_counts_the_rest() {
 #[test]
 fn the_send_queue_is_bounded_and_endpoints_are_limited() {
     let mut e = Endpoints::new();
-    let at = |ip: [u8; 4], port| UdpAddr { ip, port };
+    let at = |ip: [u8; 4], port| NetAddr { ip, port };
     let p = e.open(at([239, 0, 0, 1], 1000), false).unwrap();
     for _ in 0..OUT_DEPTH {
         e.send(p, b"x").unwrap();
