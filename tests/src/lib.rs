@@ -308,6 +308,22 @@ pub struct LatenessByLoad {
     pub peak: u64,
 }
 
+/// The PLC (partition `plc`, a 10 ms task) kept every cycle: each of its period lines
+/// after the first second counts a release per 10 ms frame.
+pub fn plc_kept_every_cycle(o: &Outcome) {
+    for line in &o.lines {
+        if let Some(("plc", period)) = xtask::plot::period_line(line)
+            && period.t_ms > 1_000
+        {
+            check(
+                o,
+                period.releases >= 99,
+                &format!("{line}: a cycle was missed (one per 10 ms frame)"),
+            );
+        }
+    }
+}
+
 /// Each PLC period line (covering the second before it) goes with the NIC's uplink counter
 /// line nearest in kernel time: loud (at least `loud` frames that second), quiet (at most
 /// `quiet`, after [`tank::SETTLED_MS`]), or neither (a storm's edges).

@@ -70,3 +70,17 @@ pub fn holds(o: &Outcome, status: &[Status], during: impl Fn(u64) -> bool, stale
         );
     }
 }
+
+/// The loop under load: the level settles by [`SETTLED_MS`] and stays in the band with the
+/// controller's setpoint from then on, except in the plant's disturbance and the second
+/// after it.
+pub fn settles_and_holds(o: &Outcome) {
+    let status = status(o);
+    settles(o, &status);
+    holds(
+        o,
+        &status,
+        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= DISTURBANCE_MS.1 + 1_000,
+        0,
+    );
+}

@@ -286,3 +286,37 @@ fn iec61499_tcp() {
         &format!("the resources' timers fire on: {timers:?}"),
     );
 }
+
+/// Scenario `iec61499_fbctl`: `fbctl --tcp` in the guest against the device's port 61499.
+#[test]
+fn iec61499_fbctl() {
+    let o = scenarios::boot("iec61499_fbctl");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected the guest's script to end the run",
+    );
+    let out = scenarios::guest_output(&o).join("\n");
+    let has = |text: &str| out.contains(text);
+    check(
+        &o,
+        has("<Response ID=\"1\"") && has("read status 0"),
+        &format!("fbctl read the counter over TCP: {out}"),
+    );
+    check(
+        &o,
+        has("<Response ID=\"2\"") && has("COUNT") && has("query status 0"),
+        &format!("fbctl queried the FBs: {out}"),
+    );
+    check(
+        &o,
+        has("ACCESS_DENIED") && has("create status 1"),
+        &format!("the monitor access refused the CREATE: {out}"),
+    );
+    check(
+        &o,
+        has("fbctl: cannot connect to 10.0.2.15:61498") && has("closed port status 3"),
+        &format!("a port nobody listens on: {out}"),
+    );
+}

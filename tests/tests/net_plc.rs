@@ -638,26 +638,8 @@ fn net_plc_flood() {
         f.answered > 0 && f.after.is_some(),
         "the server stopped answering valid reads",
     );
-    // Every cycle: one per 10 ms frame in each period line.
-    for line in &o.lines {
-        if let Some(("plc", period)) = xtask::plot::period_line(line)
-            && period.t_ms > 1_000
-        {
-            check(
-                &o,
-                period.releases >= 99,
-                &format!("{line}: a cycle was missed (one per 10 ms frame)"),
-            );
-        }
-    }
-    let status = tank::status(&o);
-    tank::settles(&o, &status);
-    tank::holds(
-        &o,
-        &status,
-        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= DISTURBANCE_MS.1 + 1_000,
-        0,
-    );
+    scenarios::plc_kept_every_cycle(&o);
+    tank::settles_and_holds(&o);
 }
 
 /// When the controller PLC of net_pubsub stops publishing (its task traps after 3,000

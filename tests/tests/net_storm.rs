@@ -3,7 +3,7 @@
 //! UDP datagrams and TCP connection attempts to the guest's httpd while the PLC controls
 //! the plant in its window and the NIC partition works in its own.
 
-use scenarios::tank::{self, DISTURBANCE_MS, SETTLED_MS};
+use scenarios::tank;
 use scenarios::{boot_while, check, http_get};
 use std::net::{TcpStream, UdpSocket};
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -120,25 +120,6 @@ fn net_storm() {
         storm_max <= quiet_max + STORM_BOUND_NS,
         "a release in the storm later than 50 us beyond the quiet seconds' latest",
     );
-    // Every cycle: one per 10 ms frame in each period line.
-    for line in &o.lines {
-        if let Some(("plc", period)) = xtask::plot::period_line(line)
-            && period.t_ms > 1_000
-        {
-            check(
-                &o,
-                period.releases >= 99,
-                &format!("{line}: a cycle was missed (one per 10 ms frame)"),
-            );
-        }
-    }
-    let status = tank::status(&o);
-    tank::settles(&o, &status);
-    // In the band from SETTLED_MS, except in the plant's disturbance and the second after.
-    tank::holds(
-        &o,
-        &status,
-        |t| (SETTLED_MS..DISTURBANCE_MS.0).contains(&t) || t >= DISTURBANCE_MS.1 + 1_000,
-        0,
-    );
+    scenarios::plc_kept_every_cycle(&o);
+    tank::settles_and_holds(&o);
 }

@@ -378,8 +378,9 @@ impl ClientServer {
                 }
             }
         }
+        // Down once every whole message before the end was delivered (the rest of an
+        // incomplete one is dropped).
         if let TcpState::Down(why) = state
-            && self.io.borrow().io.tcp_state(tcp.link) == TcpState::Down(why.clone())
             && decode_first(&self.rd, &tcp.stream).ok().flatten().is_none()
         {
             self.io.borrow_mut().io.tcp_close(tcp.link);
