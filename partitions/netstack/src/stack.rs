@@ -965,6 +965,17 @@ impl Stack {
             .map_err(|_| Error::NoBuffers)
     }
 
+    /// Leaves the IPv4 multicast `group` on the Ethernet interface (IGMP tells routers so):
+    /// datagrams to it are no longer received. Leaving a group not joined does nothing.
+    pub fn leave_multicast(&mut self, group: Ipv4Address) -> Result<(), Error> {
+        if !group.is_multicast() {
+            return Err(Error::Invalid);
+        }
+        self.eth
+            .leave_multicast_group(IpAddress::Ipv4(group))
+            .map_err(|_| Error::NoBuffers)
+    }
+
     /// `close`: the socket is gone; a connection finishes in the background, the
     /// connections a listener did not accept are reset.
     pub fn close(&mut self, id: SocketId) -> Result<(), Error> {

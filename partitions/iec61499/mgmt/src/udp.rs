@@ -15,8 +15,9 @@
 //! As with Linux sockets bound to `0.0.0.0:port` (FORTE's `SO_REUSEADDR` receive ports),
 //! every subscriber of a port gets every datagram that reaches the port: one socket a port,
 //! shared. A multicast datagram sent to a group this partition joined is also delivered to
-//! its own subscribers of that port (Linux's default `IP_MULTICAST_LOOP`). A group stays
-//! joined until the partition restarts (the stack cannot leave one).
+//! its own subscribers of that port (Linux's default `IP_MULTICAST_LOOP`). A group is left
+//! at the pump after its last subscriber closed (as Linux leaves when the last socket that
+//! joined it closes).
 //!
 //! Bounds: [`MAX_ENDPOINTS`] endpoints, [`MAX_PORTS`] subscribed ports and [`MAX_GROUPS`]
 //! groups (the stack's) at once, refused at `open` with the reason; [`OUT_DEPTH`] datagrams
@@ -81,7 +82,8 @@ struct Port {
 pub struct Endpoints {
     endpoints: Vec<Option<Endpoint>>,
     ports: Vec<Port>,
-    /// Groups to join or joined, and whether the join was tried.
+    /// Groups to join or joined, and whether the join was tried (a group no subscriber has
+    /// any more is left and forgotten at the next pump).
     groups: Vec<([u8; 4], bool)>,
     sender: Option<SocketId>,
     out: VecDeque<(NetAddr, Vec<u8>)>,
@@ -224,6 +226,24 @@ impl Endpoints {
     }
 
     fn ports_and_groups(&mut self, stack: &mut Stack) {
+        let mut g = 0;
+        while g < self.groups.len() {
+            let (group, tried) = self.groups[g];
+            let member = self
+                .endpoints
+                .iter()
+                .flatten()
+                .any(|e| e.queue.is_some() && e.at.ip == group);
+            if member {
+                g += 1;
+                continue;
+            }
+            self.groups.remove(g);
+            let [a, b, c, d] = group;
+            if tried && let Err(e) = stack.leave_multicast(Ipv4Address::new(a, b, c, d)) {
+                self.error(format!("cannot leave {a}.{b}.{c}.{d}: {e:?}"));
+            }
+        }
         let mut i = 0;
         while i < self.ports.len() {
             if self.subscribed(self.ports[i].port) {

@@ -206,3 +206,26 @@ fn the_send_queue_is_bounded_and_endpoints_are_limited() {
     assert!(e.receive(last, &mut [0; 8]).is_none());
     assert!(e.send(last, b"x").is_err());
 }
+
+#[test]
+fn a_group_is_left_when_its_last_subscriber_goes_and_its_place_serves_another() {
+    let mut seg = Segment::new(&[15]);
+    let at = |k: u8| NetAddr {
+        ip: [239, 0, 0, k],
+        port: 2000,
+    };
+    let subscribers: std::vec::Vec<usize> = (1..=MAX_GROUPS as u8)
+        .map(|k| seg.nodes[0].udp.borrow_mut().open(at(k), true).unwrap())
+        .collect();
+    seg.steps(2);
+    // The stack's group table is full: a group it was not asked to leave stays.
+    assert_eq!(seg.nodes[0].udp.borrow().stats.errors, 0);
+    seg.nodes[0].udp.borrow_mut().close(subscribers[0]);
+    seg.steps(2);
+    seg.nodes[0].udp.borrow_mut().open(at(9), true).unwrap();
+    seg.steps(2);
+    let udp = seg.nodes[0].udp.borrow();
+    assert_eq!(udp.stats.errors, 0, "{:?}", udp.errors);
+    assert_eq!(udp.groups.len(), MAX_GROUPS);
+    assert!(!udp.groups.iter().any(|(g, _)| *g == at(1).ip));
+}
