@@ -175,11 +175,6 @@ impl TcpLinks {
         self.links.iter().flatten().count()
     }
 
-    /// Whether bytes wait to be sent.
-    pub fn sending(&self) -> bool {
-        self.links.iter().flatten().any(|l| !l.outbound.is_empty())
-    }
-
     /// Does on `stack` what the links need (see the module). The caller polls the stack
     /// before (frames in) and after (frames out).
     pub fn pump(&mut self, stack: &mut Stack) {
