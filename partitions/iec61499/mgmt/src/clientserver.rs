@@ -31,7 +31,11 @@
 //! and STATUS why; it is no longer initialised. A REQ before the connection is up, or an
 //! RSP while the server has no client, gives CNF/IND with QO FALSE (`not initialised`, `no
 //! client connected`); a send that does not fit what waits to go: `send buffer full`.
-//! Without a network interface such an INIT answers `no network interface`.
+//! Without a network interface such an INIT answers `no network interface`. With
+//! `raw[].ip[a.b.c.d:port]` (FORTE's raw layer, for a peer that speaks no IEC 61499
+//! encoding) a client's one STRING SD goes as its bytes and what arrives between two polls
+//! is one message, the bytes of the one STRING RD; a raw client must send one STRING, a
+//! raw server receive one (INIT refuses other data with why), as FORTE's.
 //!
 //! **ID** otherwise names the two queuing ports, requests first: `'requests,responses'` (port names
 //! have no comma). The client sends on its output port `requests` and receives on its
@@ -60,8 +64,8 @@
 //! hazard).
 
 use crate::pubsub::{
-    DATA, ID, INIT, MAX_DATA, NetAddr, PER_POLL, QI, QO, STATUS, UNTYPED, decode, decode_first,
-    encode, ip_id, wire_type,
+    DATA, ID, INIT, IpId, Layer, MAX_DATA, NetAddr, PER_POLL, QI, QO, STATUS, UNTYPED, decode,
+    decode_as, decode_first, encode_as, ip_id, raw_fits, wire_type,
 };
 use crate::sifb::{Io, TCP_BUFFER, TcpState};
 use alloc::boxed::Box;
@@ -177,6 +181,7 @@ struct Ports {
 /// it.
 struct Tcp {
     link: usize,
+    layer: Layer,
     /// INITO was sent (the link listens or connected).
     up: bool,
     /// A server's client of the moment: a new one starts a new stream.
@@ -212,12 +217,22 @@ impl ClientServer {
             Value::String(s) => s.as_str(),
             _ => "",
         };
-        if let Some(at) = ip_id(id) {
-            let opened = at.and_then(|at| self.io.borrow_mut().io.tcp_open(at, !self.client));
+        if let Some(ip) = ip_id(id) {
+            let opened = ip.and_then(|IpId { layer, at }| {
+                // As FORTE's raw layer: what a client sends, what a server receives.
+                if self.client {
+                    raw_fits(layer, &self.sd, "SD")?;
+                } else {
+                    raw_fits(layer, &self.rd, "RD")?;
+                }
+                let link = self.io.borrow_mut().io.tcp_open(at, !self.client)?;
+                Ok((link, layer))
+            });
             return match opened {
-                Ok(link) => {
+                Ok((link, layer)) => {
                     self.link = Some(Link::Tcp(Tcp {
                         link,
+                        layer,
                         up: false,
                         peer: None,
                         stream: Vec::new(),
@@ -262,15 +277,15 @@ impl ClientServer {
 
     /// Sends SD_1..SD_m: `None` when sent, else why not.
     fn send(&mut self, inputs: &[Value]) -> Option<String> {
-        let (link, size) = match &self.link {
-            Some(Link::Ports(p)) => (None, p.output.1),
-            Some(Link::Tcp(t)) if t.up => (Some(t.link), TCP_BUFFER),
+        let (link, size, layer) = match &self.link {
+            Some(Link::Ports(p)) => (None, p.output.1, Layer::Fbdk),
+            Some(Link::Tcp(t)) if t.up => (Some(t.link), TCP_BUFFER, t.layer),
             _ => return Some("not initialised".into()),
         };
         if !inputs[QI].as_bool() {
             return Some("QI is FALSE".into());
         }
-        let message = match encode(&self.sd, &inputs[DATA..], size) {
+        let message = match encode_as(layer, &self.sd, &inputs[DATA..], size) {
             Ok(m) => m,
             Err(why) => return Some(why),
         };
@@ -357,7 +372,16 @@ impl ClientServer {
             }
             tcp.stream.extend_from_slice(&buf[..n]);
         }
+        if tcp.layer == Layer::Raw && !tcp.stream.is_empty() {
+            // Raw: what arrived since the last poll is one message, as FORTE's raw layer
+            // takes each read of the socket.
+            let bytes = core::mem::take(&mut tcp.stream);
+            Self::deliver(ctx, decode_as(Layer::Raw, &self.rd, &bytes));
+        }
         for _ in 0..PER_POLL {
+            if tcp.layer == Layer::Raw {
+                break;
+            }
             match decode_first(&self.rd, &tcp.stream) {
                 Ok(Some((values, used))) => {
                     tcp.stream.drain(..used);
@@ -381,7 +405,8 @@ impl ClientServer {
         // Down once every whole message before the end was delivered (the rest of an
         // incomplete one is dropped).
         if let TcpState::Down(why) = state
-            && decode_first(&self.rd, &tcp.stream).ok().flatten().is_none()
+            && (tcp.layer == Layer::Raw
+                || decode_first(&self.rd, &tcp.stream).ok().flatten().is_none())
         {
             self.io.borrow_mut().io.tcp_close(tcp.link);
             return Self::init_answer(ctx, false, why);

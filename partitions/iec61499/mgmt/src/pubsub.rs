@@ -12,7 +12,10 @@
 //! # ID
 //!
 //! - A UDP address ([`ip_id`]), FORTE's forms: `a.b.c.d:port` or `fbdk[].ip[a.b.c.d:port]`
-//!   (FORTE reads an ID without `]` as `fbdk[].ip[ID]`; its `ip` layer is what these do).
+//!   (FORTE reads an ID without `]` as `fbdk[].ip[ID]`; its `ip` layer is what these do),
+//!   or `raw[].ip[a.b.c.d:port]`: FORTE's raw layer, for a peer that speaks no IEC 61499
+//!   encoding, where a PUBLISH_1's one STRING SD goes as its bytes and a SUBSCRIBE_1's one
+//!   STRING RD is a datagram's bytes (other data: INIT refuses with why; [`Layer`]).
 //!   PUBLISH sends each REQ's message as one datagram to that address, a multicast group
 //!   (224.0.0.0/4) or a unicast address; SUBSCRIBE binds the port on every address of the
 //!   partition's interface and, for a multicast address, joins the group (FORTE binds
@@ -156,8 +159,27 @@ struct PubSub {
 enum Link {
     /// A queuing port: its name and message size.
     Queue(String, usize),
-    /// A UDP endpoint of the partition's network interface (`ProcessIo::udp_open`).
-    Udp(usize),
+    /// A UDP endpoint of the partition's network interface (`ProcessIo::udp_open`) and
+    /// the layer above it.
+    Udp(usize, Layer),
+}
+
+/// FORTE's layer above `ip` in an IP ID: how the data becomes the bytes of a datagram or of
+/// a TCP stream.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Layer {
+    /// `fbdk[]`: the FBDK ASN.1 encoding of every SD/RD (FORTE's default).
+    Fbdk,
+    /// `raw[]`: the bytes of the one STRING SD (or into the one STRING RD) as they are,
+    /// for a peer that speaks no IEC 61499 encoding.
+    Raw,
+}
+
+/// What an IP ID says: the layer and the address.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct IpId {
+    pub layer: Layer,
+    pub at: NetAddr,
 }
 
 /// The address of an IP ID (UDP for PUBLISH/SUBSCRIBE, TCP for CLIENT/SERVER): IPv4
@@ -183,16 +205,19 @@ impl core::fmt::Display for NetAddr {
 }
 
 /// Whether `id` (trimmed) selects the network (UDP for PUBLISH/SUBSCRIBE, TCP for
-/// CLIENT/SERVER), and its address: FORTE's layered ID
-/// `fbdk[].ip[a.b.c.d:port]` (FBDK encoding over its `ip` layer) or its short form
-/// `a.b.c.d:port` (FORTE reads an ID without `]` as `fbdk[].ip[ID]`), `Some(Err(why))` when
-/// such an ID's address does not parse (four decimal octets, a port 1..=65535); `None` for
-/// any other ID, the name of a queuing port.
-pub fn ip_id(id: &str) -> Option<Result<NetAddr, String>> {
+/// CLIENT/SERVER), its layer and its address: FORTE's layered IDs `fbdk[].ip[a.b.c.d:port]`
+/// (the FBDK encoding over its `ip` layer) and `raw[].ip[a.b.c.d:port]` (the bytes of one
+/// STRING as they are), or the short form `a.b.c.d:port` (FORTE reads an ID without `]` as
+/// `fbdk[].ip[ID]`); `Some(Err(why))` when such an ID's address does not parse (four
+/// decimal octets, a port 1..=65535); `None` for any other ID, the name of a queuing port.
+pub fn ip_id(id: &str) -> Option<Result<IpId, String>> {
     let id = id.trim();
-    let address = match id.strip_prefix("fbdk[].ip[") {
-        Some(rest) => match rest.strip_suffix(']') {
-            Some(address) => address.trim(),
+    let layered = [("fbdk[].ip[", Layer::Fbdk), ("raw[].ip[", Layer::Raw)]
+        .into_iter()
+        .find_map(|(prefix, layer)| Some((id.strip_prefix(prefix)?, layer)));
+    let (address, layer) = match layered {
+        Some((rest, layer)) => match rest.strip_suffix(']') {
+            Some(address) => (address.trim(), layer),
             None => return Some(Err(format!("no ']' closing the ip layer of ID {id}"))),
         },
         None => {
@@ -204,13 +229,15 @@ pub fn ip_id(id: &str) -> Option<Result<NetAddr, String>> {
             if !shaped {
                 return None;
             }
-            id
+            (id, Layer::Fbdk)
         }
     };
     Some(
-        parse_addr(address).ok_or_else(|| {
-            format!("bad IP address {address}: not a.b.c.d:port with a port 1..65535")
-        }),
+        parse_addr(address)
+            .map(|at| IpId { layer, at })
+            .ok_or_else(|| {
+                format!("bad IP address {address}: not a.b.c.d:port with a port 1..65535")
+            }),
     )
 }
 
@@ -285,16 +312,19 @@ impl PubSub {
             Value::String(s) => s.trim().to_string(),
             _ => String::new(),
         };
-        if let Some(at) = ip_id(&id) {
-            let opened = at.and_then(|at| {
+        if let Some(ip) = ip_id(&id) {
+            let opened = ip.and_then(|IpId { layer, at }| {
                 if self.publish && (at.ip == [0; 4]) {
                     return Err(format!("{at} is no destination"));
                 }
-                self.io.borrow_mut().io.udp_open(at, !self.publish)
+                let side = if self.publish { "SD" } else { "RD" };
+                raw_fits(layer, &self.types, side)?;
+                let endpoint = self.io.borrow_mut().io.udp_open(at, !self.publish)?;
+                Ok((endpoint, layer))
             });
             return match opened {
-                Ok(endpoint) => {
-                    self.link = Some(Link::Udp(endpoint));
+                Ok((endpoint, layer)) => {
+                    self.link = Some(Link::Udp(endpoint, layer));
                     (true, "OK".into())
                 }
                 Err(why) => (false, why),
@@ -316,7 +346,7 @@ impl PubSub {
 
     /// Closes the UDP endpoint, if one is open; forgets the link.
     fn close(&mut self) {
-        if let Some(Link::Udp(endpoint)) = self.link.take()
+        if let Some(Link::Udp(endpoint, _)) = self.link.take()
             && let Ok(mut io) = self.io.try_borrow_mut()
         {
             io.io.udp_close(endpoint);
@@ -327,11 +357,11 @@ impl PubSub {
         let Some(link) = self.link.clone().filter(|_| inputs[QI].as_bool()) else {
             return (false, "not initialised".into());
         };
-        let size = match &link {
-            Link::Queue(_, size) => *size,
-            Link::Udp(_) => MAX_DATAGRAM,
+        let (size, layer) = match &link {
+            Link::Queue(_, size) => (*size, Layer::Fbdk),
+            Link::Udp(_, layer) => (MAX_DATAGRAM, *layer),
         };
-        let message = match encode(&self.types, &inputs[DATA..], size) {
+        let message = match encode_as(layer, &self.types, &inputs[DATA..], size) {
             Ok(m) => m,
             Err(why) => return (false, why),
         };
@@ -339,7 +369,7 @@ impl PubSub {
         match link {
             Link::Queue(port, _) if io.io.send(&port, &message) => (true, "OK".into()),
             Link::Queue(..) => (false, "port full".into()),
-            Link::Udp(endpoint) => match io.io.udp_send(endpoint, &message) {
+            Link::Udp(endpoint, _) => match io.io.udp_send(endpoint, &message) {
                 Ok(()) => (true, "OK".into()),
                 Err(why) => (false, why),
             },
@@ -347,8 +377,11 @@ impl PubSub {
     }
 
     /// Decodes a message into the RD outputs.
-    fn take(&self, message: &[u8], ctx: &mut Context<'_>) -> Result<(), String> {
-        for (k, v) in decode(&self.types, message)?.into_iter().enumerate() {
+    fn take(&self, layer: Layer, message: &[u8], ctx: &mut Context<'_>) -> Result<(), String> {
+        for (k, v) in decode_as(layer, &self.types, message)?
+            .into_iter()
+            .enumerate()
+        {
             ctx.set(DATA + k, v);
         }
         Ok(())
@@ -439,6 +472,52 @@ pub(crate) fn decode_first(
     }
 }
 
+/// Whether data typed `types` (the SDs or RDs, `side`) can go over `layer`: the raw layer
+/// carries exactly one STRING.
+pub(crate) fn raw_fits(layer: Layer, types: &[Option<DataType>], side: &str) -> Result<(), String> {
+    if layer == Layer::Raw && types != [Some(DataType::String)] {
+        return Err(format!(
+            "the raw layer carries one STRING: {side}_1 only, a STRING"
+        ));
+    }
+    Ok(())
+}
+
+/// The message of `values` for `layer`: [`encode`], or the one STRING's bytes as they are.
+pub(crate) fn encode_as(
+    layer: Layer,
+    types: &[Option<DataType>],
+    values: &[Value],
+    size: usize,
+) -> Result<Vec<u8>, String> {
+    match (layer, values) {
+        (Layer::Fbdk, _) => encode(types, values, size),
+        (Layer::Raw, [Value::String(s), ..]) if s.len() <= size => Ok(s.as_bytes().to_vec()),
+        (Layer::Raw, [Value::String(_), ..]) => {
+            Err(format!("the message is longer than {size} bytes"))
+        }
+        (Layer::Raw, _) => Err("the raw layer carries one STRING".into()),
+    }
+}
+
+/// The values `message` carries for `layer`: [`decode`], or its bytes as the one STRING
+/// (bytes that are not UTF-8 replaced, as the FBDK decoding does; without RDs, none, as
+/// FORTE's raw layer drops them).
+pub(crate) fn decode_as(
+    layer: Layer,
+    types: &[Option<DataType>],
+    message: &[u8],
+) -> Result<Vec<Value>, String> {
+    match (layer, types) {
+        (Layer::Fbdk, _) => decode(types, message),
+        (Layer::Raw, []) => Ok(Vec::new()),
+        (Layer::Raw, [Some(DataType::String)]) => Ok(alloc::vec![Value::String(
+            String::from_utf8_lossy(message).into_owned()
+        )]),
+        (Layer::Raw, _) => Err("the raw layer carries one STRING: RD_1 only, a STRING".into()),
+    }
+}
+
 impl FunctionBlock for PubSub {
     fn interface(&self) -> &Interface {
         &self.interface
@@ -464,9 +543,9 @@ impl FunctionBlock for PubSub {
         let Some(link) = self.link.clone() else {
             return;
         };
-        let size = match &link {
-            Link::Queue(_, size) => *size,
-            Link::Udp(_) => MAX_DATAGRAM,
+        let (size, layer) = match &link {
+            Link::Queue(_, size) => (*size, Layer::Fbdk),
+            Link::Udp(_, layer) => (MAX_DATAGRAM, *layer),
         };
         let mut buf = alloc::vec![0u8; size];
         for _ in 0..PER_POLL {
@@ -474,13 +553,13 @@ impl FunctionBlock for PubSub {
                 let mut io = self.io.borrow_mut();
                 match &link {
                     Link::Queue(port, _) => io.io.receive(port, &mut buf),
-                    Link::Udp(endpoint) => io.io.udp_receive(*endpoint, &mut buf),
+                    Link::Udp(endpoint, _) => io.io.udp_receive(*endpoint, &mut buf),
                 }
             };
             let Some(len) = received else {
                 break;
             };
-            let (qo, status) = match self.take(&buf[..len.min(size)], ctx) {
+            let (qo, status) = match self.take(layer, &buf[..len.min(size)], ctx) {
                 Ok(()) => (true, String::from("OK")),
                 Err(why) => (false, format!("bad message: {why}")),
             };

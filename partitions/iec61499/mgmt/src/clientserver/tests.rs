@@ -5,8 +5,8 @@ extern crate std;
 
 use super::*;
 use crate::Device;
-use crate::pubsub::Loopback;
 use crate::pubsub::tests::read;
+use crate::pubsub::{Loopback, encode};
 use crate::sifb::ProcessIo;
 use iec61499_runtime::Limits;
 

@@ -236,19 +236,35 @@ fn values_cross_the_encoding_unchanged() {
 
 #[test]
 fn ip_ids_are_forte_s_and_other_ids_name_ports() {
-    let at = |ip, port| Some(Ok(NetAddr { ip, port }));
+    let at = |ip, port| {
+        Some(Ok(IpId {
+            layer: Layer::Fbdk,
+            at: NetAddr { ip, port },
+        }))
+    };
     assert_eq!(ip_id("239.0.0.1:61500"), at([239, 0, 0, 1], 61500));
     assert_eq!(ip_id(" 10.0.2.16:5000 "), at([10, 0, 2, 16], 5000));
     assert_eq!(
         ip_id("fbdk[].ip[239.192.0.2:61499]"),
         at([239, 192, 0, 2], 61499)
     );
-    assert!(ip_id("239.0.0.1:61500").unwrap().unwrap().is_multicast());
-    assert!(!ip_id("10.0.0.1:1").unwrap().unwrap().is_multicast());
+    assert_eq!(
+        ip_id("raw[].ip[10.0.2.2:7]"),
+        Some(Ok(IpId {
+            layer: Layer::Raw,
+            at: NetAddr {
+                ip: [10, 0, 2, 2],
+                port: 7
+            }
+        }))
+    );
+    assert!(ip_id("239.0.0.1:61500").unwrap().unwrap().at.is_multicast());
+    assert!(!ip_id("10.0.0.1:1").unwrap().unwrap().at.is_multicast());
     assert_eq!(
         ip_id("fbdk[].ip[239.0.0.1:61500]")
             .unwrap()
             .unwrap()
+            .at
             .to_string(),
         "239.0.0.1:61500"
     );
@@ -263,6 +279,7 @@ fn ip_ids_are_forte_s_and_other_ids_name_ports() {
         "fbdk[].ip[host:5]",
         "fbdk[].ip[1.2.3.4]",
         "fbdk[].ip[1.2.3.4:5",
+        "raw[].ip[1.2.3.4]",
     ] {
         assert!(matches!(ip_id(bad), Some(Err(_))), "{bad}");
     }

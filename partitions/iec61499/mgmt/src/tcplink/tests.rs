@@ -306,3 +306,45 @@ proptest! {
         prop_assert_eq!(read(&mut seg.nodes[2], "V.OUT"), "1");
     }
 }
+
+#[test]
+fn the_raw_layer_carries_a_string_s_bytes_over_tcp_both_ways() {
+    let mut seg = Segment::new(&[15, 16]);
+    let id = "raw[].ip[10.0.2.15:61601]";
+    // An echo server of raw strings, and a client of them.
+    boot(
+        &mut seg.nodes[0],
+        &[
+            fb("S", "SERVER_1_1"),
+            fb("T", "STRING2STRING"),
+            write("1", "S.QI"),
+            write(id, "S.ID"),
+            connect("START.COLD", "S.INIT"),
+            connect("S.IND", "T.REQ"),
+            connect("S.RD_1", "T.IN"),
+            connect("T.CNF", "S.RSP"),
+            connect("T.OUT", "S.SD_1"),
+        ],
+    );
+    boot(
+        &mut seg.nodes[1],
+        &[
+            fb("CL", "CLIENT_1_1"),
+            fb("V", "STRING2STRING"),
+            write("1", "CL.QI"),
+            write(id, "CL.ID"),
+            write("'GET level'", "CL.SD_1"),
+            connect("START.COLD", "CL.INIT"),
+            connect("CL.CNF", "V.REQ"),
+            connect("CL.RD_1", "V.IN"),
+        ],
+    );
+    seg.steps(20);
+    assert_eq!(read(&mut seg.nodes[1], "CL.QO"), "TRUE");
+    trigger(&mut seg.nodes[1], "CL.REQ");
+    seg.steps(20);
+    assert_eq!(read(&mut seg.nodes[0], "T.OUT"), "'GET level'");
+    assert_eq!(read(&mut seg.nodes[1], "V.OUT"), "'GET level'");
+    // The bytes on the wire are the string's, nothing else.
+    assert_eq!(seg.nodes[1].tcp.borrow().stats.bytes_out, 9);
+}

@@ -229,3 +229,68 @@ fn a_group_is_left_when_its_last_subscriber_goes_and_its_place_serves_another() 
     assert_eq!(udp.groups.len(), MAX_GROUPS);
     assert!(!udp.groups.iter().any(|(g, _)| *g == at(1).ip));
 }
+
+#[test]
+fn the_raw_layer_sends_and_receives_a_string_s_bytes_as_they_are() {
+    let mut seg = Segment::new(&[15, 16]);
+    let id = "raw[].ip[10.0.2.16:61700]";
+    boot(
+        &mut seg.nodes[0],
+        &[
+            fb("P", "PUBLISH_1"),
+            write("1", "P.QI"),
+            write(id, "P.ID"),
+            write("'hello, plain peer'", "P.SD_1"),
+            connect("START.COLD", "P.INIT"),
+            // A raw publisher of a DINT: refused at INIT, with the reason.
+            fb("Q", "PUBLISH_1"),
+            write("1", "Q.QI"),
+            write(id, "Q.ID"),
+            write("DINT#5", "Q.SD_1"),
+            connect("START.COLD", "Q.INIT"),
+        ],
+    );
+    boot(
+        &mut seg.nodes[1],
+        &[
+            fb("S", "SUBSCRIBE_1"),
+            fb("T", "STRING2STRING"),
+            write("1", "S.QI"),
+            write(id, "S.ID"),
+            connect("START.COLD", "S.INIT"),
+            connect("S.IND", "T.REQ"),
+            connect("S.RD_1", "T.IN"),
+        ],
+    );
+    assert_eq!(read(&mut seg.nodes[0], "P.QO"), "TRUE");
+    assert_eq!(read(&mut seg.nodes[0], "Q.QO"), "FALSE");
+    assert!(read(&mut seg.nodes[0], "Q.STATUS").contains("the raw layer carries one STRING"));
+    seg.steps(5);
+    seg.nodes[0].device.execute(
+        "R",
+        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"P.REQ\"/></Request>",
+        0,
+    );
+    seg.steps(5);
+    assert_eq!(read(&mut seg.nodes[1], "T.OUT"), "'hello, plain peer'");
+    // A datagram from a peer that speaks no IEC 61499 encoding: its bytes are the STRING.
+    let plain = seg.nodes[0]
+        .udp
+        .borrow_mut()
+        .open(
+            NetAddr {
+                ip: [10, 0, 2, 16],
+                port: 61700,
+            },
+            false,
+        )
+        .unwrap();
+    seg.nodes[0]
+        .udp
+        .borrow_mut()
+        .send(plain, b"T=21.5C")
+        .unwrap();
+    seg.steps(5);
+    assert_eq!(read(&mut seg.nodes[1], "T.OUT"), "'T=21.5C'");
+    assert_eq!(read(&mut seg.nodes[1], "S.STATUS"), "'OK'");
+}
