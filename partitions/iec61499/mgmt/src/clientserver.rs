@@ -360,6 +360,8 @@ impl ClientServer {
             tcp.peer = peer;
         }
         let mut buf = [0u8; 512];
+        // Whether the link has nothing more to give now (not stopped by a full stream).
+        let mut drained = false;
         while tcp.stream.len() < TCP_BUFFER {
             let room = (TCP_BUFFER - tcp.stream.len()).min(buf.len());
             let n = self
@@ -368,6 +370,7 @@ impl ClientServer {
                 .io
                 .tcp_receive(tcp.link, &mut buf[..room]);
             if n == 0 {
+                drained = true;
                 break;
             }
             tcp.stream.extend_from_slice(&buf[..n]);
@@ -402,9 +405,10 @@ impl ClientServer {
                 }
             }
         }
-        // Down once every whole message before the end was delivered (the rest of an
-        // incomplete one is dropped).
+        // Down once every byte before the end was taken and every whole message in them
+        // delivered (the rest of an incomplete one is dropped).
         if let TcpState::Down(why) = state
+            && drained
             && (tcp.layer == Layer::Raw
                 || decode_first(&self.rd, &tcp.stream).ok().flatten().is_none())
         {
