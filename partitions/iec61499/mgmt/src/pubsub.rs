@@ -164,6 +164,16 @@ enum Link {
     Udp(usize, Layer),
 }
 
+impl Link {
+    /// The largest message the link carries, and how data becomes its bytes.
+    fn framing(&self) -> (usize, Layer) {
+        match self {
+            Link::Queue(_, size) => (*size, Layer::Fbdk),
+            Link::Udp(_, layer) => (MAX_DATAGRAM, *layer),
+        }
+    }
+}
+
 /// FORTE's layer above `ip` in an IP ID: how the data becomes the bytes of a datagram or of
 /// a TCP stream.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -357,10 +367,7 @@ impl PubSub {
         let Some(link) = self.link.clone().filter(|_| inputs[QI].as_bool()) else {
             return (false, "not initialised".into());
         };
-        let (size, layer) = match &link {
-            Link::Queue(_, size) => (*size, Layer::Fbdk),
-            Link::Udp(_, layer) => (MAX_DATAGRAM, *layer),
-        };
+        let (size, layer) = link.framing();
         let message = match encode_as(layer, &self.types, &inputs[DATA..], size) {
             Ok(m) => m,
             Err(why) => return (false, why),
@@ -543,10 +550,7 @@ impl FunctionBlock for PubSub {
         let Some(link) = self.link.clone() else {
             return;
         };
-        let (size, layer) = match &link {
-            Link::Queue(_, size) => (*size, Layer::Fbdk),
-            Link::Udp(_, layer) => (MAX_DATAGRAM, *layer),
-        };
+        let (size, layer) = link.framing();
         let mut buf = alloc::vec![0u8; size];
         for _ in 0..PER_POLL {
             let received = {

@@ -2,7 +2,7 @@
 //! management server's, as the partition has it), UDP endpoints ([`crate::udp`]) and TCP
 //! links ([`crate::tcplink`]) handed to it through a `ProcessIo` as the partition program
 //! hands them; every frame reaches every other stack, which takes what is its own. And the
-//! boot-file lines the tests build their devices from.
+//! boot-file lines the tests build their devices from, and the requests they send them.
 
 extern crate std;
 
@@ -180,17 +180,56 @@ pub fn fb(name: &str, ty: &str) -> String {
     )
 }
 
-/// Boots `n` with resource R (an EMB_RES) made of `parts`, started.
-pub fn boot(n: &mut Node, parts: &[String]) {
+/// Boots `d` with resource R (an EMB_RES) made of `parts`, started.
+pub fn boot(d: &mut impl AsMut<Device>, parts: &[String]) {
     let text = [line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>")]
         .into_iter()
         .chain(parts.iter().cloned())
         .chain([line("R", "START", "")])
         .collect::<String>();
-    n.device.boot(&text, 0).unwrap();
+    d.as_mut().boot(&text, 0).unwrap();
 }
 
-/// The value of `path` (`FB.PORT`) in resource R of `n`, as an IEC literal.
-pub fn read(n: &mut Node, path: &str) -> String {
-    crate::pubsub::tests::read(&mut n.device, path)
+/// A device or a node's device: what the requests below go to.
+impl AsMut<Device> for Device {
+    fn as_mut(&mut self) -> &mut Device {
+        self
+    }
+}
+
+impl AsMut<Device> for Node {
+    fn as_mut(&mut self) -> &mut Device {
+        &mut self.device
+    }
+}
+
+/// The value of `path` (`FB.PORT`) in resource R as a READ request answers it: an IEC
+/// literal.
+pub fn read(d: &mut impl AsMut<Device>, path: &str) -> String {
+    let answer = d.as_mut().execute(
+        "R",
+        &format!("<Request ID=\"1\" Action=\"READ\"><Connection Source=\"{path}\" Destination=\"\"/></Request>"),
+        0,
+    );
+    answer
+        .split("Source=\"")
+        .nth(1)
+        .and_then(|s| s.split('"').next())
+        .unwrap_or(&answer)
+        .replace("&apos;", "'")
+}
+
+/// Sets `to` in resource R to the literal `value` while it runs (a WRITE request); the
+/// device's answer.
+pub fn set(d: &mut impl AsMut<Device>, value: &str, to: &str) -> String {
+    d.as_mut().execute(
+        "R",
+        &format!("<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"{value}\" Destination=\"{to}\"/></Request>"),
+        0,
+    )
+}
+
+/// Triggers event input `to` (`FB.EVENT`) in resource R: a WRITE of `$e`.
+pub fn trigger(d: &mut impl AsMut<Device>, to: &str) -> String {
+    set(d, "$e", to)
 }

@@ -5,8 +5,8 @@ extern crate std;
 
 use super::*;
 use crate::Device;
-use crate::pubsub::tests::read;
 use crate::pubsub::{Loopback, encode};
+use crate::segment::{connect, fb, read, set, trigger, write};
 use crate::sifb::ProcessIo;
 use iec61499_runtime::Limits;
 
@@ -16,56 +16,10 @@ fn device(io: Loopback) -> Device {
     d
 }
 
-fn line(action: &str, object: &str) -> String {
-    let dst = if object.starts_with("<FB Name=\"R\"") {
-        ""
-    } else {
-        "R"
-    };
-    format!("{dst};<Request ID=\"1\" Action=\"{action}\">{object}</Request>\n")
-}
-
-fn fb(name: &str, ty: &str) -> String {
-    line("CREATE", &format!("<FB Name=\"{name}\" Type=\"{ty}\"/>"))
-}
-
-fn connect(source: &str, destination: &str) -> String {
-    line(
-        "CREATE",
-        &format!("<Connection Source=\"{source}\" Destination=\"{destination}\"/>"),
-    )
-}
-
-fn write(source: &str, destination: &str) -> String {
-    line(
-        "WRITE",
-        &format!("<Connection Source=\"{source}\" Destination=\"{destination}\"/>"),
-    )
-}
-
-fn boot(io: Loopback, lines: &[String]) -> Device {
+fn boot(io: Loopback, parts: &[String]) -> Device {
     let mut d = device(io);
-    let text: String = [fb("R", "EMB_RES")]
-        .iter()
-        .chain(lines)
-        .chain(&[line("START", "")])
-        .cloned()
-        .collect();
-    d.boot(&text, 0).unwrap();
+    crate::segment::boot(&mut d, parts);
     d
-}
-
-/// Sets `destination` to the literal `value` (a WRITE request while running).
-fn set(d: &mut Device, value: &str, destination: &str) -> String {
-    d.execute(
-        "R",
-        &format!("<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"{value}\" Destination=\"{destination}\"/></Request>"),
-        0,
-    )
-}
-
-fn trigger(d: &mut Device, event: &str) -> String {
-    set(d, "$e", event)
 }
 
 /// A client that sends a DINT and a STRING and receives a DINT, a STRING and an LREAL, each

@@ -5,6 +5,7 @@ extern crate std;
 
 use super::*;
 use crate::Device;
+use crate::segment::{boot, connect, fb, read, set, trigger, write};
 use crate::sifb::ProcessIo;
 use iec61499_runtime::Limits;
 
@@ -14,127 +15,45 @@ fn device(bus: &Loopback) -> Device {
     d
 }
 
-fn line(dst: &str, action: &str, object: &str) -> String {
-    format!("{dst};<Request ID=\"1\" Action=\"{action}\">{object}</Request>\n")
-}
-
-/// The value of `path` as a READ of the device answers it (the tests of
-/// `crate::clientserver` and `crate::udp` read with it too).
-pub(crate) fn read(d: &mut Device, path: &str) -> String {
-    let answer = d.execute(
-        "R",
-        &format!("<Request ID=\"1\" Action=\"READ\"><Connection Source=\"{path}\" Destination=\"\"/></Request>"),
-        0,
-    );
-    answer
-        .split("Source=\"")
-        .nth(1)
-        .and_then(|s| s.split('"').next())
-        .unwrap_or(&answer)
-        .replace("&apos;", "'")
-}
-
 /// A publisher of an E_CTU's count and a LREAL on port `counts`, a subscriber of them.
 fn pair(bus: &Loopback) -> (Device, Device) {
     let mut publisher = device(bus);
-    let boot: String = [
-        line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>"),
-        line("R", "CREATE", "<FB Name=\"C\" Type=\"E_CTU\"/>"),
-        line("R", "CREATE", "<FB Name=\"P\" Type=\"PUBLISH_2\"/>"),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"1\" Destination=\"P.QI\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"counts\" Destination=\"P.ID\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"LREAL#2.5\" Destination=\"P.SD_2\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"START.COLD\" Destination=\"P.INIT\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"C.CUO\" Destination=\"P.REQ\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"C.CV\" Destination=\"P.SD_1\"/>",
-        ),
-        line("R", "START", ""),
-    ]
-    .concat();
-    publisher.boot(&boot, 0).unwrap();
+    boot(
+        &mut publisher,
+        &[
+            fb("C", "E_CTU"),
+            fb("P", "PUBLISH_2"),
+            write("1", "P.QI"),
+            write("counts", "P.ID"),
+            write("LREAL#2.5", "P.SD_2"),
+            connect("START.COLD", "P.INIT"),
+            connect("C.CUO", "P.REQ"),
+            connect("C.CV", "P.SD_1"),
+        ],
+    );
     let mut subscriber = device(bus);
-    let boot: String = [
-        line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>"),
-        line("R", "CREATE", "<FB Name=\"S\" Type=\"SUBSCRIBE_2\"/>"),
-        line("R", "CREATE", "<FB Name=\"N\" Type=\"E_CTU\"/>"),
-        line("R", "CREATE", "<FB Name=\"V\" Type=\"UINT2UINT\"/>"),
-        line("R", "CREATE", "<FB Name=\"X\" Type=\"LREAL2LREAL\"/>"),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"1\" Destination=\"S.QI\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"counts\" Destination=\"S.ID\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"START.COLD\" Destination=\"S.INIT\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.IND\" Destination=\"N.CU\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.IND\" Destination=\"V.REQ\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.IND\" Destination=\"X.REQ\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.RD_1\" Destination=\"V.IN\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.RD_2\" Destination=\"X.IN\"/>",
-        ),
-        line("R", "START", ""),
-    ]
-    .concat();
-    subscriber.boot(&boot, 0).unwrap();
+    boot(
+        &mut subscriber,
+        &[
+            fb("S", "SUBSCRIBE_2"),
+            fb("N", "E_CTU"),
+            fb("V", "UINT2UINT"),
+            fb("X", "LREAL2LREAL"),
+            write("1", "S.QI"),
+            write("counts", "S.ID"),
+            connect("START.COLD", "S.INIT"),
+            connect("S.IND", "N.CU"),
+            connect("S.IND", "V.REQ"),
+            connect("S.IND", "X.REQ"),
+            connect("S.RD_1", "V.IN"),
+            connect("S.RD_2", "X.IN"),
+        ],
+    );
     (publisher, subscriber)
 }
 
 fn count(publisher: &mut Device) -> String {
-    publisher.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"C.CU\"/></Request>",
-        0,
-    )
+    trigger(publisher, "C.CU")
 }
 
 #[test]
@@ -176,36 +95,19 @@ fn a_bad_message_or_a_missing_port_is_reported() {
     assert_eq!(read(&mut subscriber, "N.CV"), "1");
     // INIT on a port the partition does not have.
     let mut d = device(&bus);
-    let boot: String = [
-        line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>"),
-        line("R", "CREATE", "<FB Name=\"P\" Type=\"PUBLISH_0\"/>"),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"1\" Destination=\"P.QI\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"nowhere\" Destination=\"P.ID\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"START.COLD\" Destination=\"P.INIT\"/>",
-        ),
-        line("R", "START", ""),
-    ]
-    .concat();
-    d.boot(&boot, 0).unwrap();
+    boot(
+        &mut d,
+        &[
+            fb("P", "PUBLISH_0"),
+            write("1", "P.QI"),
+            write("nowhere", "P.ID"),
+            connect("START.COLD", "P.INIT"),
+        ],
+    );
     assert_eq!(read(&mut d, "P.QO"), "FALSE");
     assert_eq!(read(&mut d, "P.STATUS"), "'no queuing output port nowhere'");
     // A REQ before a good INIT sends nothing.
-    d.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"P.REQ\"/></Request>",
-        0,
-    );
+    trigger(&mut d, "P.REQ");
     assert_eq!(read(&mut d, "P.STATUS"), "'not initialised'");
     assert!(bus.clone().receive("nowhere", &mut [0; 64]).is_none());
 }
@@ -293,75 +195,30 @@ fn ip_ids_are_forte_s_and_other_ids_name_ports() {
 fn pub_and_sub(io: Box<dyn ProcessIo>, id: &str) -> Device {
     let mut d = Device::new(Limits::default(), 2);
     d.set_io(io);
-    let boot: String = [
-        line("", "CREATE", "<FB Name=\"R\" Type=\"EMB_RES\"/>"),
-        line("R", "CREATE", "<FB Name=\"P\" Type=\"PUBLISH_1\"/>"),
-        line("R", "CREATE", "<FB Name=\"S\" Type=\"SUBSCRIBE_1\"/>"),
-        line("R", "CREATE", "<FB Name=\"N\" Type=\"E_CTU\"/>"),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"1\" Destination=\"P.QI\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"1\" Destination=\"S.QI\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            "<Connection Source=\"DINT#-3\" Destination=\"P.SD_1\"/>",
-        ),
-        line(
-            "R",
-            "WRITE",
-            &format!("<Connection Source=\"{id}\" Destination=\"P.ID\"/>"),
-        ),
-        line(
-            "R",
-            "WRITE",
-            &format!("<Connection Source=\"{id}\" Destination=\"S.ID\"/>"),
-        ),
-        line("R", "CREATE", "<FB Name=\"V\" Type=\"DINT2DINT\"/>"),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"START.COLD\" Destination=\"P.INIT\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"P.INITO\" Destination=\"S.INIT\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.IND\" Destination=\"N.CU\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.IND\" Destination=\"V.REQ\"/>",
-        ),
-        line(
-            "R",
-            "CREATE",
-            "<Connection Source=\"S.RD_1\" Destination=\"V.IN\"/>",
-        ),
-        line("R", "START", ""),
-    ]
-    .concat();
-    d.boot(&boot, 0).unwrap();
+    boot(
+        &mut d,
+        &[
+            fb("P", "PUBLISH_1"),
+            fb("S", "SUBSCRIBE_1"),
+            fb("N", "E_CTU"),
+            write("1", "P.QI"),
+            write("1", "S.QI"),
+            write("DINT#-3", "P.SD_1"),
+            write(id, "P.ID"),
+            write(id, "S.ID"),
+            fb("V", "DINT2DINT"),
+            connect("START.COLD", "P.INIT"),
+            connect("P.INITO", "S.INIT"),
+            connect("S.IND", "N.CU"),
+            connect("S.IND", "V.REQ"),
+            connect("S.RD_1", "V.IN"),
+        ],
+    );
     d
 }
 
 fn publish(d: &mut Device) {
-    d.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"P.REQ\"/></Request>",
-        0,
-    );
+    trigger(d, "P.REQ");
 }
 
 #[test]
@@ -425,16 +282,8 @@ fn the_loopback_carries_udp_as_a_network_multicast_and_unicast() {
     d.poll(0);
     assert_eq!(read(&mut d, "N.CV"), (2 + UDP_DEPTH).to_string());
     // INIT without QI closes: nothing more arrives.
-    d.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"0\" Destination=\"S.QI\"/></Request>",
-        0,
-    );
-    d.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"S.INIT\"/></Request>",
-        0,
-    );
+    set(&mut d, "0", "S.QI");
+    trigger(&mut d, "S.INIT");
     assert!(!d.polls());
     publish(&mut c);
     assert_eq!(bus.udp_dropped(), 3);

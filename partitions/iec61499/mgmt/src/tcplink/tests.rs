@@ -4,7 +4,7 @@
 extern crate std;
 
 use super::*;
-use crate::segment::{Node, Segment, boot, connect, fb, read, write};
+use crate::segment::{Segment, boot, connect, fb, read, set, trigger, write};
 use proptest::prelude::*;
 use std::string::String;
 use std::vec::Vec;
@@ -46,17 +46,6 @@ fn counting_client(id: &str) -> Vec<String> {
         connect("CL.CNF", "V.REQ"),
         connect("CL.RD_1", "V.IN"),
     ]
-}
-
-/// Triggers event input `to` (`FB.EVENT`) in resource R of `n`.
-fn trigger(n: &mut Node, to: &str) {
-    n.device.execute(
-        "R",
-        &alloc::format!(
-            "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"{to}\"/></Request>"
-        ),
-        0,
-    );
 }
 
 /// A server node (10.0.2.15) and client nodes (10.0.2.16, ...), connected.
@@ -141,11 +130,7 @@ fn when_its_client_goes_the_server_listens_for_the_next() {
     trigger(&mut seg.nodes[kept], "C.CU");
     seg.steps(10);
     // The kept client closes (INIT with QI FALSE); the other connects again.
-    seg.nodes[kept].device.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"FALSE\" Destination=\"CL.QI\"/></Request>",
-        0,
-    );
+    set(&mut seg.nodes[kept], "FALSE", "CL.QI");
     trigger(&mut seg.nodes[kept], "CL.INIT");
     assert_eq!(read(&mut seg.nodes[kept], "CL.QO"), "FALSE");
     assert_eq!(read(&mut seg.nodes[kept], "CL.STATUS"), "'OK'");
@@ -178,11 +163,7 @@ fn a_client_learns_why_it_has_no_connection() {
     assert_eq!(seg.nodes[1].tcp.borrow().open_count(), 0);
     // A server that goes away ends its client's link: INITO with QO FALSE.
     let mut seg = served(1);
-    seg.nodes[0].device.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"FALSE\" Destination=\"S.QI\"/></Request>",
-        0,
-    );
+    set(&mut seg.nodes[0], "FALSE", "S.QI");
     trigger(&mut seg.nodes[0], "S.INIT");
     seg.steps(20);
     assert_eq!(read(&mut seg.nodes[1], "CL.QO"), "FALSE");

@@ -4,7 +4,7 @@
 extern crate std;
 
 use super::*;
-use crate::segment::{Node, Segment, boot, connect, fb, read, write};
+use crate::segment::{Node, Segment, boot, connect, fb, read, trigger, write};
 use alloc::string::ToString;
 use std::format;
 use std::string::String;
@@ -47,11 +47,7 @@ fn subscriber(k: usize, id: &str) -> String {
 }
 
 fn count(n: &mut Node) {
-    n.device.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"C.CU\"/></Request>",
-        0,
-    );
+    trigger(n, "C.CU");
 }
 
 #[test]
@@ -266,11 +262,7 @@ fn the_raw_layer_sends_and_receives_a_string_s_bytes_as_they_are() {
     assert_eq!(read(&mut seg.nodes[0], "Q.QO"), "FALSE");
     assert!(read(&mut seg.nodes[0], "Q.STATUS").contains("the raw layer carries one STRING"));
     seg.steps(5);
-    seg.nodes[0].device.execute(
-        "R",
-        "<Request ID=\"1\" Action=\"WRITE\"><Connection Source=\"$e\" Destination=\"P.REQ\"/></Request>",
-        0,
-    );
+    trigger(&mut seg.nodes[0], "P.REQ");
     seg.steps(5);
     assert_eq!(read(&mut seg.nodes[1], "T.OUT"), "'hello, plain peer'");
     // A datagram from a peer that speaks no IEC 61499 encoding: its bytes are the STRING.
