@@ -60,9 +60,9 @@ fn commands_parse() {
     assert!(Command::parse(&args("--timeout soon boot x")).is_err());
 }
 
-#[test]
-fn boot_type_and_send_against_a_device() {
-    let mut l = link(Access::Download);
+/// Deploys type COUNTDOWN and a boot file creating resource R with a COUNTDOWN `D`, as the
+/// 4diac IDE does, checking what each step prints.
+fn deploy<T: Transport>(l: &mut Link<T>) {
     let mut lines = Vec::new();
     l.run(
         &Action::Type("COUNTDOWN.fbt".into()),
@@ -81,19 +81,38 @@ fn boot_type_and_send_against_a_device() {
         &mut |s| lines.push(s.to_string()),
     )
     .unwrap();
-    assert_eq!(lines[1], "1: <Response ID=\"1\" />");
-    let send = |l: &mut Link<Loopback>, dest: &str, request: &str| {
-        let mut out = Vec::new();
-        let r = l.run(
-            &Action::Send {
-                destination: dest.into(),
-                request: request.into(),
-            },
-            b"",
-            &mut |s| out.push(s.to_string()),
-        );
-        (r.map(drop), out.join("\n"))
-    };
+    assert_eq!(
+        lines[1..],
+        [
+            "1: <Response ID=\"1\" />",
+            "2: <Response ID=\"2\" />",
+            "3: <Response ID=\"3\" />"
+        ]
+    );
+}
+
+/// Sends `request` to `destination`: how the run ended and what it printed.
+fn send<T: Transport>(
+    l: &mut Link<T>,
+    destination: &str,
+    request: &str,
+) -> (Result<(), Failure>, String) {
+    let mut out = Vec::new();
+    let r = l.run(
+        &Action::Send {
+            destination: destination.into(),
+            request: request.into(),
+        },
+        b"",
+        &mut |s| out.push(s.to_string()),
+    );
+    (r.map(drop), out.join("\n"))
+}
+
+#[test]
+fn boot_type_and_send_against_a_device() {
+    let mut l = link(Access::Download);
+    deploy(&mut l);
     let (r, _) = send(
         &mut l,
         "R",
@@ -271,40 +290,14 @@ fn over_tcp_fbctl_deploys_types_and_reads_as_4diac_ide_does() {
         transport: TcpTransport::connect(&address, timeout).unwrap(),
         timeout,
     };
-    let mut lines = Vec::new();
-    l.run(
-        &Action::Type("COUNTDOWN.fbt".into()),
-        COUNTDOWN.as_bytes(),
-        &mut |s| lines.push(s.to_string()),
-    )
-    .unwrap();
-    assert!(lines[0].ends_with(" part(s), added"), "{lines:?}");
-    let boot = ";<Request ID=\"1\" Action=\"CREATE\"><FB Name=\"R\" Type=\"EMB_RES\"/></Request>\nR;<Request ID=\"2\" Action=\"CREATE\"><FB Name=\"D\" Type=\"COUNTDOWN\"/></Request>\nR;<Request ID=\"3\" Action=\"START\"/>\n";
-    l.run(
-        &Action::Boot("app.fboot".into()),
-        boot.as_bytes(),
-        &mut |s| lines.push(s.to_string()),
-    )
-    .unwrap();
-    assert_eq!(
-        lines[1..],
-        [
-            "1: <Response ID=\"1\" />",
-            "2: <Response ID=\"2\" />",
-            "3: <Response ID=\"3\" />"
-        ]
+    deploy(&mut l);
+    let (r, out) = send(
+        &mut l,
+        "R",
+        "<Request ID=\"4\" Action=\"READ\"><Connection Source=\"D.Q\" Destination=\"\"/></Request>",
     );
-    let mut out = Vec::new();
-    l.run(
-        &Action::Send {
-            destination: "R".into(),
-            request: "<Request ID=\"4\" Action=\"READ\"><Connection Source=\"D.Q\" Destination=\"\"/></Request>".into(),
-        },
-        b"",
-        &mut |s| out.push(s.to_string()),
-    )
-    .unwrap();
-    assert!(out[0].contains("Response ID=\"4\""), "{out:?}");
+    assert_eq!(r, Ok(()));
+    assert!(out.contains("Response ID=\"4\""), "{out}");
     drop(l);
     // The type's parts, the boot file's 3 lines and the read.
     assert!(server.join().unwrap() >= 5);
