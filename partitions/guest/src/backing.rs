@@ -88,6 +88,49 @@ impl<'b> Backing<'b> {
         Ok(())
     }
 
+    /// The entry at position `i` (below [`Backing::len`]): its page and pool page.
+    pub fn at(&self, i: usize) -> (u64, usize) {
+        self.entry(i)
+    }
+
+    /// The positions of the entries with pages in `from..to`.
+    pub fn positions(&self, from: u64, to: u64) -> core::ops::Range<usize> {
+        let start = self.search(from).unwrap_or_else(|i| i);
+        start..self.search(to).unwrap_or_else(|i| i).max(start)
+    }
+
+    /// Copies the entries with pages in `from..to` to the same pages moved to `onto`
+    /// (`onto + (page - from)`), backed by the same pool pages, in one move of the entries
+    /// after them; the range they go to must hold no entry and not overlap `from..to`.
+    /// Returns how many were copied; nothing is copied when they do not all fit.
+    pub fn copy_range(&mut self, from: u64, to: u64, onto: u64) -> Result<usize, Full> {
+        let source = self.positions(from, to);
+        let n = source.len();
+        let at = self.search(onto).unwrap_or_else(|i| i);
+        debug_assert_eq!(
+            self.positions(onto, onto + (to - from)).len(),
+            0,
+            "copy onto backed pages"
+        );
+        if self.len + n > self.capacity() {
+            return Err(Full);
+        }
+        self.bytes
+            .copy_within(at * ENTRY..self.len * ENTRY, (at + n) * ENTRY);
+        // The source moved along when it lay after the gap.
+        let first = if source.start >= at {
+            source.start + n
+        } else {
+            source.start
+        };
+        for i in 0..n {
+            let (page, index) = self.entry(first + i);
+            self.set(at + i, page - from + onto, index);
+        }
+        self.len += n;
+        Ok(n)
+    }
+
     /// Forgets `page`; returns the pool page that backed it.
     pub fn remove(&mut self, page: u64) -> Option<usize> {
         let i = self.search(page).ok()?;
@@ -161,5 +204,37 @@ mod tests {
         b.drain(|i| freed.push(i));
         assert_eq!(freed, [5, 7, 1]);
         assert!(b.is_empty());
+    }
+
+    #[test]
+    fn a_range_is_copied_in_one_move_before_or_after_its_source() {
+        let mut bytes = [0u8; 8 * ENTRY];
+        let mut b = Backing::new(&mut bytes);
+        for (page, index) in [(0x1_1000, 1), (0x1_2000, 2), (0x2_0000, 3), (0x3_5000, 4)] {
+            b.insert(page, index).unwrap();
+        }
+        // After the source, between other entries.
+        assert_eq!(b.copy_range(0x1_0000, 0x1_8000, 0x2_8000), Ok(2));
+        let all = |b: &Backing| (0..b.len()).map(|i| b.at(i)).collect::<Vec<_>>();
+        assert_eq!(
+            all(&b),
+            [
+                (0x1_1000, 1),
+                (0x1_2000, 2),
+                (0x2_0000, 3),
+                (0x2_9000, 1),
+                (0x2_a000, 2),
+                (0x3_5000, 4)
+            ]
+        );
+        // Before the source.
+        assert_eq!(b.copy_range(0x3_0000, 0x4_0000, 0x0), Ok(1));
+        assert_eq!(b.at(0), (0x5000, 4));
+        assert_eq!(b.positions(0x2_8000, 0x3_0000), 4..6);
+        assert_eq!(b.get(0x3_5000), Some(4), "the source stays");
+        // Nothing is copied when the entries do not all fit.
+        assert_eq!(b.copy_range(0x0, 0x3_0000, 0x4_0000), Err(Full));
+        assert_eq!(b.len(), 7);
+        assert_eq!(b.copy_range(0x9_0000, 0xa_0000, 0x4_0000), Ok(0));
     }
 }

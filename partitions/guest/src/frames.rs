@@ -437,33 +437,38 @@ impl<'p> Frames<'p> {
         child: u32,
         rights: impl Fn(u64) -> Option<Rights>,
     ) -> Result<u64, Errno> {
-        let mut shared = 0;
-        let mut at = key(parent, 0);
-        while let Some((k, first)) = self.backing.first_from(at)
-            && k < key(parent + 1, 0)
+        let (from, to) = (key(parent, 0), key(parent + 1, 0));
+        // Every frame takes one more reference, or none does.
+        let positions = self.backing.positions(from, to);
+        if positions
+            .clone()
+            .any(|i| !self.pool.can_share(self.backing.at(i).1))
         {
-            let start = k - key(parent, 0);
+            return Err(Errno::EAGAIN);
+        }
+        // The child's entries in one move: the table's order is the parent's (the pid
+        // changes, the pages keep their order).
+        let shared = self
+            .backing
+            .copy_range(from, to, key(child, 0))
+            .map_err(|_| Errno::ENOMEM)?;
+        // The parent's entries moved if the child's went before them.
+        let positions = self.backing.positions(from, to);
+        for i in positions.clone() {
+            self.pool.share(self.backing.at(i).1);
+        }
+        // Map each run: consecutive pages on consecutive frames with the same rights.
+        let mut i = positions.start;
+        while i < positions.end {
+            let (k, first) = self.backing.at(i);
+            let start = k - from;
             let area_rights = rights(start);
-            // A run: consecutive pages on consecutive frames with the same rights.
             let mut pages = 1;
-            while self.backing.get(k + pages * PAGE) == Some(first + pages as usize)
+            while i + (pages as usize) < positions.end
+                && self.backing.at(i + pages as usize) == (k + pages * PAGE, first + pages as usize)
                 && rights(start + pages * PAGE) == area_rights
             {
                 pages += 1;
-            }
-            for i in 0..pages {
-                let frame = first + i as usize;
-                if !self.pool.share(frame) {
-                    return Err(Errno::EAGAIN);
-                }
-                if self
-                    .backing
-                    .insert(key(child, start + i * PAGE), frame)
-                    .is_err()
-                {
-                    self.pool.free(frame);
-                    return Err(Errno::ENOMEM);
-                }
             }
             if let Some(r) = area_rights.filter(|r| r.accessible()) {
                 if r.contains(Rights::WRITE) {
@@ -471,10 +476,9 @@ impl<'p> Frames<'p> {
                 }
                 m.map(child, first, start, pages, r.without(Rights::WRITE))?;
             }
-            shared += pages;
-            at = k + pages * PAGE;
+            i += pages as usize;
         }
-        Ok(shared)
+        Ok(shared as u64)
     }
 }
 
