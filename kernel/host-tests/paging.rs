@@ -16,13 +16,22 @@ fn precount_matches_what_map_allocates() {
         (0x7f_ffe0_0000, 4),                 // another 1 GiB and 512 GiB region
         (0x0000_7fff_ffff_f000 - 0x1000, 1), // top of user space
     ] {
-        let needed = space.tables_needed(virt, pages);
+        let needed = space.tables_needed(virt, pages).unwrap();
         let before = crate::mem::free_frames();
         for p in 0..pages {
             space.map(virt + p * PAGE_SIZE, 0x1000, RW).unwrap();
         }
         assert_eq!(before - crate::mem::free_frames(), needed, "at {virt:#x}");
-        assert_eq!(space.tables_needed(virt, pages), 0);
+        assert_eq!(space.tables_needed(virt, pages), None, "mapped already");
+        // Beside the mapped pages, in the same tables: nothing to allocate.
+        if virt == 0x40_0000 {
+            assert_eq!(space.tables_needed(virt + 3 * PAGE_SIZE, 1), Some(0));
+            assert_eq!(
+                space.tables_needed(virt - PAGE_SIZE, 2),
+                None,
+                "one page mapped"
+            );
+        }
     }
     let freed = space.destroy_some(&mut { u64::MAX });
     assert!(freed > 5);

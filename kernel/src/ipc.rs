@@ -195,7 +195,6 @@ impl Kernel {
             {
                 return Err(Blame::Sender(Error::InvalidArgument));
             }
-            let mut dest = window.base;
             for item in &items[..tag.items()] {
                 let rights = PageRights::from_bits_truncate(item.flags as u64);
                 for p in 0..item.pages as u64 {
@@ -203,10 +202,6 @@ impl Kernel {
                         Some((_, have)) if have.contains(rights) => {}
                         _ => return Err(Blame::Sender(Error::BadAddress)),
                     }
-                    if r_space.is_mapped(dest) {
-                        return Err(Blame::Sender(Error::AlreadyMapped));
-                    }
-                    dest += PAGE_SIZE;
                 }
             }
             self.charge_tables(r.task(), window.base, total)

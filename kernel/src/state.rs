@@ -194,12 +194,8 @@ impl Kernel {
             }
             _ => {}
         }
-        let space = self.tasks[target].space();
         for i in 0..pages {
             frame_of(self, i)?;
-            if space.is_mapped(destination + i * PAGE_SIZE) {
-                return Err(Error::AlreadyMapped);
-            }
         }
         self.charge_tables(target, destination, pages)?;
         for i in 0..pages {
@@ -214,9 +210,11 @@ impl Kernel {
         Ok(())
     }
 
-    /// Charges the page tables a map of `pages` at `at` in `task` will need.
+    /// Charges the page tables a map of `pages` at `at` in `task` will need (`AlreadyMapped`
+    /// if one of the pages is).
     pub fn charge_tables(&mut self, task: TaskIdx, at: u64, pages: u64) -> Result<(), Error> {
-        let needed = self.tasks[task].space().tables_needed(at, pages);
+        let space = self.tasks[task].space();
+        let needed = space.tables_needed(at, pages).ok_or(Error::AlreadyMapped)?;
         if needed > crate::mem::free_frames() {
             // Cannot happen while quotas stay within the reserved pool; refuse anyway.
             return Err(Error::OutOfResources);

@@ -134,23 +134,42 @@ impl AddressSpace {
         Ok(Some(&mut unsafe { table(t) }[index(virt, 0)]))
     }
 
-    /// Page-table frames a map of `pages` pages at `virt` would allocate.
-    pub fn tables_needed(&self, virt: u64, pages: u64) -> u64 {
+    /// The leaf table of `virt` (its frame), or the level of the first entry missing on
+    /// the way there.
+    fn leaf_table(&self, virt: u64) -> Result<u64, u32> {
+        let mut t = self.root;
+        for level in (1..4).rev() {
+            if t == 0 {
+                return Err(level);
+            }
+            // SAFETY: the root or a present non-leaf entry's frame.
+            let entry = unsafe { table(t) }[index(virt, level)];
+            if entry & PRESENT == 0 {
+                return Err(level);
+            }
+            t = entry & ADDRESS;
+        }
+        Ok(t)
+    }
+
+    /// Page-table frames a map of `pages` pages at `virt` would allocate, or `None` if one
+    /// of those pages is mapped already. One walk per 2 MiB, not per page.
+    pub fn tables_needed(&self, virt: u64, pages: u64) -> Option<u64> {
         let mut needed = 0;
         // The last table (by level and covering range) counted as "to be created".
         let mut counted = [u64::MAX; 4];
+        let mut walked = (u64::MAX, Err(0));
         for page in 0..pages {
             let at = virt + page * PAGE_SIZE;
-            let mut t = self.root;
-            for level in (1..4).rev() {
-                let entry = if t == 0 {
-                    0
-                } else {
-                    // SAFETY: the root or a present non-leaf entry's frame.
-                    (unsafe { table(t) })[index(at, level)]
-                };
-                if entry & PRESENT == 0 {
-                    // Each missing level below this one is missing too.
+            if walked.0 != at >> 21 {
+                walked = (at >> 21, self.leaf_table(at));
+            }
+            match walked.1 {
+                // SAFETY: a present non-leaf entry's frame (the walk above).
+                Ok(leaf) if unsafe { table(leaf) }[index(at, 0)] & PRESENT != 0 => return None,
+                Ok(_) => {}
+                // Each missing level below the first missing one is missing too.
+                Err(level) => {
                     for l in (1..=level).rev() {
                         let span = at >> (12 + 9 * l);
                         if counted[l as usize] != span {
@@ -158,12 +177,10 @@ impl AddressSpace {
                             needed += 1;
                         }
                     }
-                    break;
                 }
-                t = entry & ADDRESS;
             }
         }
-        needed
+        Some(needed)
     }
 
     /// Maps the user page `virt` to frame `phys`.
@@ -223,11 +240,6 @@ impl AddressSpace {
         rights.set(PageRights::WRITE, entry & WRITABLE != 0);
         rights.set(PageRights::EXECUTE, entry & NO_EXECUTE == 0);
         Some((entry & ADDRESS, rights))
-    }
-
-    /// True if user address `virt` is mapped, to memory or to device registers.
-    pub fn is_mapped(&self, virt: u64) -> bool {
-        self.user_leaf(virt).is_some()
     }
 
     /// The present user leaf entry of `virt`.
