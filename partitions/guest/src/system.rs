@@ -25,8 +25,9 @@
 //! **Threads** of a process are slots of their own ([`threads`]).
 //!
 //! **Limits.** At most [`MAX_PROCESSES`] processes and threads, zombies included, and at most as many
-//! as the partition's task quota (`kernel_tasks` minus the guest's own task) lets it create:
-//! beyond either, `fork` fails with `EAGAIN`.
+//! as the partition's task quota (`kernel_tasks` minus the guest's own task) and thread quota
+//! (`kernel_threads`) let it create: beyond either, `fork` and `clone` fail with `EAGAIN`. The
+//! table grows as they come (on the heap), so a guest pays for the processes it runs.
 
 use crate::events::Events;
 use crate::exec::{self, ARG_MAX, ExecError};
@@ -42,11 +43,12 @@ use crate::syscall::{self, Host, Outcome, ProcessCall, SysResult, close_files, s
 use crate::vfs::Fs;
 use crate::vfs::proc::{ProcInfo, ProcessTable};
 use abi::ipc::{ExceptionMessage, Registers};
+use alloc::vec::Vec;
 
 mod threads;
 
-/// Most processes of a guest (the default and the ceiling of its process limit).
-pub const MAX_PROCESSES: usize = 16;
+/// Most processes and threads of a guest (the configuration's quotas may allow fewer).
+pub const MAX_PROCESSES: usize = 64;
 /// The pid of the first process; orphans become its children.
 pub const INIT_PID: u32 = 1;
 /// Pids are below this (Linux's default `pid_max`); then they start again above init's.
@@ -216,7 +218,9 @@ pub const fn exit_status(code: u8) -> u32 {
 
 /// The process table of a guest.
 pub struct System {
-    slots: [Option<Slot>; MAX_PROCESSES],
+    /// Grown as processes and threads come, up to [`MAX_PROCESSES`]; a slot's index stays
+    /// its own while it is used.
+    slots: Vec<Option<Slot>>,
     pub pipes: Pipes,
     /// The `eventfd` counters, `timerfd` timers and epoll instances.
     pub events: Events,
@@ -237,14 +241,13 @@ pub struct System {
 impl System {
     /// A table holding `init`, already loaded and running.
     pub fn new(init: Process, hwcap: u64) -> Self {
-        let mut slots = [const { None }; MAX_PROCESSES];
         let next_pid = init.pid + 1;
-        slots[0] = Some(Slot {
+        let slots = alloc::vec![Some(Slot {
             process: init,
             state: State::Running,
             stopped: false,
             report: None,
-        });
+        })];
         Self {
             slots,
             pipes: Pipes::new(),
@@ -256,6 +259,19 @@ impl System {
             hwcap,
             lent: None,
         }
+    }
+
+    /// A slot for a new process or thread: a free one, or one more while there are fewer
+    /// than [`MAX_PROCESSES`] and the heap has room for it.
+    fn free_slot(&mut self) -> Result<usize, Errno> {
+        if let Some(free) = self.slots.iter().position(Option::is_none) {
+            return Ok(free);
+        }
+        if self.slots.len() == MAX_PROCESSES || self.slots.try_reserve(1).is_err() {
+            return Err(Errno::EAGAIN);
+        }
+        self.slots.push(None);
+        Ok(self.slots.len() - 1)
     }
 
     fn index(&self, pid: u32) -> Option<usize> {
@@ -348,7 +364,7 @@ impl System {
         // Expired timers are counted now, so that none stays due (the calls served
         // again below read them).
         self.events.advance_timers(now);
-        for j in 0..MAX_PROCESSES {
+        for j in 0..self.slots.len() {
             let due = match self.slots[j].as_mut() {
                 Some(s) if !matches!(s.state, State::Zombie(_)) => {
                     sigcalls::alarm_due(&mut s.process, now)
@@ -369,7 +385,7 @@ impl System {
             // Frames and timers first: what the calls just sent reaches its sockets.
             self.net.run(k);
             let mut progress = false;
-            for i in 0..MAX_PROCESSES {
+            for i in 0..self.slots.len() {
                 let Some(Slot {
                     state: State::Blocked(m),
                     stopped: false,
@@ -668,7 +684,7 @@ impl System {
         fs: &mut Fs,
         k: &mut impl Tasks,
     ) -> Option<Outcome> {
-        for j in 0..MAX_PROCESSES {
+        for j in 0..self.slots.len() {
             let member = self.slots[j]
                 .as_ref()
                 .is_some_and(|s| s.process.pgid == pgid && !matches!(s.state, State::Zombie(_)));
@@ -703,7 +719,7 @@ impl System {
             t => t == s.process.pid as i64,
         };
         let targets: [bool; MAX_PROCESSES] =
-            core::array::from_fn(|j| self.slots[j].as_ref().is_some_and(hits));
+            core::array::from_fn(|j| self.slots.get(j).and_then(Option::as_ref).is_some_and(hits));
         if !targets.contains(&true) {
             return Err(Errno::ESRCH);
         }
@@ -947,7 +963,7 @@ impl System {
         fs: &mut Fs,
         k: &mut impl Tasks,
     ) -> Option<Outcome> {
-        for i in 0..MAX_PROCESSES {
+        for i in 0..self.slots.len() {
             if let Some(slot) = self.slots[i].as_mut()
                 && let State::Vforked { child: c, reply } = slot.state
                 && c == child
@@ -994,11 +1010,7 @@ impl System {
         if flags & CLONE_VM != 0 && flags & CLONE_VFORK == 0 {
             return Err(Errno::EINVAL); // shared memory without vfork: threads
         }
-        let free = self
-            .slots
-            .iter()
-            .position(Option::is_none)
-            .ok_or(Errno::EAGAIN)?;
+        let free = self.free_slot()?;
         let mut pid = self.next_pid;
         while self.index(pid).is_some() || pid == 0 {
             pid = next_pid(pid);
@@ -1101,7 +1113,7 @@ impl System {
                 _ => None,
             },
         };
-        let found = (0..MAX_PROCESSES).find_map(|z| {
+        let found = (0..self.slots.len()).find_map(|z| {
             let s = self.slots[z].as_ref()?;
             matches(s).then(|| event(s)).flatten().map(|e| (z, e))
         });

@@ -2181,9 +2181,10 @@ fn random_process_calls(bytes: &[u8], mut seed: u64) {
         if g.system.serve(pid, &mut g.fs, &mut g.host, m).is_some() {
             return; // init died (SIGPIPE, a failed execve): the guest ends
         }
-        for p in g.pids() {
+        let pids = g.pids();
+        for &p in &pids {
             let ppid = g.system.process(p).unwrap().ppid;
-            assert!(p == 1 || g.pids().contains(&ppid), "{p}'s parent {ppid}");
+            assert!(p == 1 || pids.contains(&ppid), "{p}'s parent {ppid}");
         }
     }
     let mut end = g.host.released.len();

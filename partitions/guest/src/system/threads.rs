@@ -128,11 +128,7 @@ impl System {
         if flags & !KNOWN != 0 || flags & THREAD_SHARES != THREAD_SHARES {
             return Err(Errno::EINVAL);
         }
-        let free = self
-            .slots
-            .iter()
-            .position(Option::is_none)
-            .ok_or(Errno::EAGAIN)?;
+        let free = self.free_slot()?;
         let mut tid = self.next_pid;
         while self.index(tid).is_some() || tid == 0 {
             tid = next_pid(tid);
@@ -209,7 +205,7 @@ impl System {
         {
             self.give_back();
         }
-        for j in 0..MAX_PROCESSES {
+        for j in 0..self.slots.len() {
             let thread = self.slots[j]
                 .as_ref()
                 .is_some_and(|s| s.process.tgid == tgid && s.process.is_thread());
@@ -261,7 +257,7 @@ impl System {
         if !blocks(first) {
             return j;
         }
-        (0..MAX_PROCESSES)
+        (0..self.slots.len())
             .find(|&t| {
                 self.slots[t].as_ref().is_some_and(|s| {
                     s.process.tgid == first.pid
