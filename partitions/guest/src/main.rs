@@ -321,6 +321,8 @@ fn main(start: u64, _: u64) {
     }
 
     let mut system = System::new(loaded.process, hwcap());
+    // The pipes' rings may take an eighth of the heap (the file system takes at most half).
+    system.pipes = guest::pipe::Pipes::with_budget(heap_size / 8);
     system.net = net;
     let outcome = loop {
         // The scheduling policy ([`guest::sched`]) makes the decisions due, and the

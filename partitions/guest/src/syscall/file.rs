@@ -38,8 +38,8 @@ pub struct Files<'f, 'a> {
     pub others: &'f dyn ProcessTable,
 }
 
-/// Bytes moved through the guest per step (a pipe's size: one pipe transfer).
-const CHUNK: usize = crate::pipe::PIPE_SIZE;
+/// Bytes moved through the guest per step (a pipe's atomic write: one pipe transfer).
+const CHUNK: usize = crate::pipe::PIPE_BUF;
 /// `S_IFIFO` (a pipe's `st_mode`).
 const S_IFIFO: u32 = 0o010000;
 /// `S_IFSOCK` (a socket's).
