@@ -438,14 +438,6 @@ impl<'p> Frames<'p> {
         rights: impl Fn(u64) -> Option<Rights>,
     ) -> Result<u64, Errno> {
         let (from, to) = (key(parent, 0), key(parent + 1, 0));
-        // Every frame takes one more reference, or none does.
-        let positions = self.backing.positions(from, to);
-        if positions
-            .clone()
-            .any(|i| !self.pool.can_share(self.backing.at(i).1))
-        {
-            return Err(Errno::EAGAIN);
-        }
         // The child's entries in one move: the table's order is the parent's (the pid
         // changes, the pages keep their order).
         let shared = self
@@ -455,7 +447,15 @@ impl<'p> Frames<'p> {
         // The parent's entries moved if the child's went before them.
         let positions = self.backing.positions(from, to);
         for i in positions.clone() {
-            self.pool.share(self.backing.at(i).1);
+            if !self.pool.share(self.backing.at(i).1) {
+                // Every frame takes one more reference, or none does.
+                for j in positions.start..i {
+                    self.pool.free(self.backing.at(j).1);
+                }
+                self.backing
+                    .remove_range(key(child, 0), key(child + 1, 0), |_, _| {});
+                return Err(Errno::EAGAIN);
+            }
         }
         // Map each run: consecutive pages on consecutive frames with the same rights.
         let mut i = positions.start;
@@ -630,6 +630,29 @@ mod tests {
         assert_eq!(f.frame_of(1, 0x40_0000).unwrap().1, 1);
         f.release_all(1);
         assert_eq!(f.free_frames(), 16);
+    }
+
+    #[test]
+    fn a_fork_past_a_frames_last_reference_changes_nothing() {
+        let (mut mem, mut table) = setup(4);
+        let mut f = Frames::new(&mut mem, &mut table);
+        let mut t = Tables::default();
+        f.fault_in(&mut t, 1, 0x1000, RW, true).unwrap();
+        f.fault_in(&mut t, 1, 0x2000, RW, true).unwrap();
+        let (full, _) = f.frame_of(1, 0x2000).unwrap();
+        while f.pool.share(full) {}
+        let rw = |_| Some(RW);
+        assert_eq!(f.share(&mut t, 1, 2, rw), Err(Errno::EAGAIN));
+        assert_eq!(
+            f.frame_of(1, 0x1000).unwrap().1,
+            1,
+            "its reference given back"
+        );
+        assert_eq!(f.frame_of(2, 0x1000), None, "no entry of the child left");
+        assert_eq!(
+            f.frame_of(1, 0x2000).unwrap().1,
+            crate::pool::MAX_REFERENCES
+        );
     }
 
     #[test]

@@ -98,15 +98,10 @@ impl PagePool {
         }
     }
 
-    /// Whether page `page` can take one more reference ([`PagePool::share`]).
-    pub fn can_share(&self, page: usize) -> bool {
-        self.is_used(page) && self.references[page] < MAX_REFERENCES
-    }
-
     /// Adds a reference to page `page` (in use); false if it is free or has
     /// [`MAX_REFERENCES`] already (then nothing changed).
     pub fn share(&mut self, page: usize) -> bool {
-        if !self.can_share(page) {
+        if !self.is_used(page) || self.references[page] == MAX_REFERENCES {
             return false;
         }
         self.references[page] += 1;
