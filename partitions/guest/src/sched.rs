@@ -157,6 +157,9 @@ struct View {
 #[derive(Clone, Debug)]
 pub struct Scheduler {
     entries: [Option<Entry>; MAX_PROCESSES],
+    /// The entries at or past this index have never been used: the passes over the table
+    /// stop here (a guest with two processes looks at two).
+    reached: usize,
     /// The next `order`: every join of a queue's tail takes one.
     next_order: u64,
     /// When the guest last looked ([`Scheduler::decide`]).
@@ -183,6 +186,7 @@ impl Scheduler {
     pub fn new(now: u64) -> Self {
         Self {
             entries: [None; MAX_PROCESSES],
+            reached: 0,
             next_order: 0,
             last: now,
             sender: None,
@@ -196,17 +200,23 @@ impl Scheduler {
     }
 
     fn index(&self, pid: u32) -> Option<usize> {
-        self.entries
+        self.entries[..self.reached]
             .iter()
             .position(|e| e.is_some_and(|e| e.pid == pid))
     }
 
     fn get(&self, pid: u32) -> Option<&Entry> {
-        self.entries.iter().flatten().find(|e| e.pid == pid)
+        self.entries[..self.reached]
+            .iter()
+            .flatten()
+            .find(|e| e.pid == pid)
     }
 
     fn get_mut(&mut self, pid: u32) -> Option<&mut Entry> {
-        self.entries.iter_mut().flatten().find(|e| e.pid == pid)
+        self.entries[..self.reached]
+            .iter_mut()
+            .flatten()
+            .find(|e| e.pid == pid)
     }
 
     /// The next place at a queue's tail.
@@ -279,20 +289,25 @@ impl Scheduler {
     /// Adds `pid`: interactive, runnable, no debt, at the tail of the interactive queue.
     fn insert(&mut self, pid: u32, order: u64) {
         let now = self.last;
-        if let Some(slot) = self.entries.iter_mut().find(|e| e.is_none()) {
-            *slot = Some(Entry {
-                pid,
-                cpu_bound: false,
-                in_call: false,
-                stopped: false,
-                waiting_since: None,
-                woken: false,
-                used: 0,
-                order,
-                since: now,
-            });
-            self.dirty = true;
-        }
+        let free = self.entries[..self.reached]
+            .iter()
+            .position(Option::is_none);
+        let Some(i) = free.or((self.reached < MAX_PROCESSES).then_some(self.reached)) else {
+            return;
+        };
+        self.reached = self.reached.max(i + 1);
+        self.entries[i] = Some(Entry {
+            pid,
+            cpu_bound: false,
+            in_call: false,
+            stopped: false,
+            waiting_since: None,
+            woken: false,
+            used: 0,
+            order,
+            since: now,
+        });
+        self.dirty = true;
     }
 
     /// Process `pid` ended.
@@ -309,7 +324,7 @@ impl Scheduler {
     /// The runnable processes at a glance (one pass over the table).
     fn view(&self) -> View {
         let mut v = View::default();
-        for (i, e) in self.entries.iter().enumerate() {
+        for (i, e) in self.entries[..self.reached].iter().enumerate() {
             let Some(e) = e.filter(Entry::runnable) else {
                 continue;
             };
@@ -371,7 +386,7 @@ impl Scheduler {
         if !self.dirty && self.due.is_none_or(|at| now < at) {
             return self.due;
         }
-        for i in 0..MAX_PROCESSES {
+        for i in 0..self.reached {
             if self.entries[i].is_some_and(|e| e.woken) {
                 self.wake(i, now);
             }
@@ -386,7 +401,7 @@ impl Scheduler {
     fn remake(&mut self, now: u64) -> Option<u64> {
         let mut v = self.view();
         if v.spent {
-            for i in 0..MAX_PROCESSES {
+            for i in 0..self.reached {
                 if self.entries[i].is_some_and(|e| e.runnable() && !e.cpu_bound && e.spent()) {
                     let order = self.tail();
                     if let Some(e) = self.entries[i].as_mut() {
