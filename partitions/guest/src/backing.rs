@@ -60,6 +60,11 @@ impl<'b> Backing<'b> {
         Err(lo)
     }
 
+    /// Position of the first entry at or after `page`.
+    fn first_at(&self, page: u64) -> usize {
+        self.search(page).unwrap_or_else(|i| i)
+    }
+
     /// The pool page backing the process page at `page` (page-aligned).
     pub fn get(&self, page: u64) -> Option<usize> {
         self.search(page).ok().map(|i| self.entry(i).1)
@@ -67,7 +72,7 @@ impl<'b> Backing<'b> {
 
     /// The first entry at or after `page`: its page and pool page.
     pub fn first_from(&self, page: u64) -> Option<(u64, usize)> {
-        let i = self.search(page).unwrap_or_else(|i| i);
+        let i = self.first_at(page);
         (i < self.len).then(|| self.entry(i))
     }
 
@@ -95,8 +100,8 @@ impl<'b> Backing<'b> {
 
     /// The positions of the entries with pages in `from..to`.
     pub fn positions(&self, from: u64, to: u64) -> core::ops::Range<usize> {
-        let start = self.search(from).unwrap_or_else(|i| i);
-        start..self.search(to).unwrap_or_else(|i| i).max(start)
+        let start = self.first_at(from);
+        start..self.first_at(to).max(start)
     }
 
     /// Copies the entries with pages in `from..to` to the same pages moved to `onto`
@@ -106,7 +111,7 @@ impl<'b> Backing<'b> {
     pub fn copy_range(&mut self, from: u64, to: u64, onto: u64) -> Result<usize, Full> {
         let source = self.positions(from, to);
         let n = source.len();
-        let at = self.search(onto).unwrap_or_else(|i| i);
+        let at = self.first_at(onto);
         debug_assert_eq!(
             self.positions(onto, onto + (to - from)).len(),
             0,
@@ -144,8 +149,7 @@ impl<'b> Backing<'b> {
     /// Forgets every page in `from..to`, handing each page and pool page to `removed` (the
     /// entries after them move once).
     pub fn remove_range(&mut self, from: u64, to: u64, mut removed: impl FnMut(u64, usize)) {
-        let start = self.search(from).unwrap_or_else(|i| i);
-        let end = self.search(to).unwrap_or_else(|i| i).max(start);
+        let core::ops::Range { start, end } = self.positions(from, to);
         for i in start..end {
             let (page, index) = self.entry(i);
             removed(page, index);
