@@ -93,7 +93,7 @@
 //! guest.programs = ["linux-tests"]                # optional: Linux programs cargo xtask builds
 //! guest.net = { mac = "52:54:00:12:34:56", address = "10.0.2.15/24", gateway = "10.0.2.2", rx = "eth0-rx", tx = "eth0-tx" }  # optional: eth0
 //! guest.disk = { request = "vda-req", response = "vda-resp" }  # optional: /dev/vda, needs a virtual disk
-//! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx" }  # NIC partitions only: see "NIC"
+//! nic.tenants.linux = { mac = "52:54:00:12:34:56", from = "linux-tx", to = "linux-rx", ring = "frames" }  # NIC partitions only: see "NIC"; `ring` optional
 //! blk.tenants.plc = { from = "plc-req", to = "plc-resp", first_sector = 2048, sectors = 2048 }  # block-device partitions only: see "Block device"
 //!
 //! [[channels]]
@@ -357,7 +357,12 @@
 //! tenant's frames, and `to`, an `out` port to the tenant, each of `size` at least 1514
 //! (one Ethernet frame without FCS a message), each used by one tenant, and each joined by
 //! its channel to a port of that tenant (the validator names the partition a channel
-//! reaches instead). At most 15 tenants; the NIC partition has no `plc`, `guest`,
+//! reaches instead). A tenant with an interface (`guest.net`, `plc.net`, `iec61499.net`)
+//! may name a frame ring, `ring = "<segment>"`: a `[[shared_memory]]` segment of at least
+//! 16 KiB (`frame_ring::MIN_SEGMENT`) that the NIC partition and the tenant both map
+//! `"rw"` and no other partition maps; its frames then go through the segment (a ring
+//! each way, `common/frame-ring`) and the ports carry only wake-ups (the ports' rules
+//! stay). At most 15 tenants; the NIC partition has no `plc`, `guest`,
 //! `iec61499` or `data` keys (`cargo xtask` writes the tenant table as its data entry,
 //! `nic_core::tenants`). The frame link and the switch's rules: docs/interfaces.md.
 //!

@@ -126,6 +126,7 @@ pub struct NicTenant {
     pub mac: Spanned<String>,
     pub from: Spanned<String>,
     pub to: Spanned<String>,
+    pub ring: Option<Spanned<String>>,
 }
 
 #[derive(Debug, Deserialize)]

@@ -120,6 +120,19 @@ pub struct NicTenant {
     /// output to the tenant (indices into its ports).
     pub from: usize,
     pub to: usize,
+    /// The shared-memory segment the frames go through instead of the ports, which then
+    /// carry only the wake-ups (`frame_ring`).
+    pub ring: Option<FrameRing>,
+}
+
+/// A frame ring's segment (`nic.tenants.<p>.ring`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameRing {
+    /// Index into [`System::segments`].
+    pub segment: usize,
+    /// Where syssw maps it, the same in every partition.
+    pub address: u64,
+    pub size: u64,
 }
 
 /// An IEC 61499 partition's boot file and the basic FB types (`.fbt`) it needs beyond the
@@ -209,6 +222,10 @@ pub struct GuestNet {
     /// The guest's queuing input port of received frames, and output port of frames to send.
     pub rx: String,
     pub tx: String,
+    /// Where the frames go instead when the NIC partition's tenant entry names a frame ring
+    /// (`nic.tenants.<p>.ring`): the segment's address and size; the ports then carry only
+    /// the wake-ups (`frame_ring`).
+    pub ring: Option<FrameRing>,
 }
 
 /// A PLC's interface on the NIC partition's switch (`plc.net`): the link as a guest's
@@ -310,6 +327,9 @@ impl GuestNet {
             text += &format!("gateway={}.{}.{}.{}\n", g[0], g[1], g[2], g[3]);
         }
         text += &format!("rx={}\ntx={}\n", self.rx, self.tx);
+        if let Some(ring) = self.ring {
+            text += &format!("ring={:#x},{}\n", ring.address, ring.size);
+        }
         text
     }
 }

@@ -305,7 +305,7 @@ impl Validator<'_, '_> {
         let schedules = self.schedules(doc, &mut partitions, &times);
         self.background_priorities(doc, &partitions);
         let channels = self.channels(doc, &mut partitions, &mut ports);
-        self.nic(doc, &mut partitions, &channels);
+        self.nic(doc, &mut partitions, &channels, &segments);
         self.blk(doc, &mut partitions, &channels);
         self.plc_stores(doc, &partitions);
         self.guest_disks(doc, &mut partitions, &channels);
@@ -850,6 +850,7 @@ impl Validator<'_, '_> {
             gateway,
             rx: n.rx.get_ref().clone(),
             tx: n.tx.get_ref().clone(),
+            ring: None,
         })
     }
 

@@ -242,3 +242,75 @@ fn the_nic_partition_runs_nothing_else() {
         "a partition is the NIC partition (`nic`) or runs a `data` entry, not both",
     );
 }
+
+#[test]
+fn a_frame_ring_is_a_segment_only_the_nic_and_its_guest_tenant_map_read_write() {
+    let ring = |size: &str, nic: &str, echo: &str, flood: &str| {
+        let mut doc = edited(&[
+            (
+                "to = \"echo-rx\" }",
+                "to = \"echo-rx\", ring = \"frames\" }",
+            ),
+            (
+                "[partitions.nic]",
+                "[[shared_memory]]\nname = \"frames\"\nsize = \"SIZE\"\n\n[partitions.nic]",
+            ),
+            ("dma_unconfined = true", "dma_unconfined = true\nNIC"),
+        ]);
+        doc = doc.replace("SIZE", size).replace("NIC", nic);
+        let mut parts = doc.splitn(3, "time = \"background\"");
+        let (head, echo_part, rest) = (
+            parts.next().unwrap(),
+            parts.next().unwrap(),
+            parts.next().unwrap(),
+        );
+        format!(
+            "{head}time = \"background\"\n{echo}{echo_part}time = \"background\"\n{flood}{rest}"
+        )
+    };
+    let at = "partitions.nic.nic.tenants.echo.ring";
+    let rw = "shared = { frames = \"rw\" }";
+    // The tenant here is a plain partition: a ring serves a guest.
+    expect_some(
+        &ring("64KiB", rw, rw, ""),
+        "\"frames\" }",
+        0,
+        at,
+        "`echo` has no interface whose frames a ring could carry",
+    );
+    expect_some(
+        &ring("8KiB", rw, rw, ""),
+        "\"frames\" }",
+        0,
+        at,
+        "segment `frames` (8192 bytes) is too small for a frame ring: it needs at least 16384 bytes",
+    );
+    expect_some(
+        &ring("64KiB", "shared = { frames = \"r\" }", rw, ""),
+        "\"frames\" }",
+        0,
+        at,
+        "frame ring `frames`: partition `nic` must map it read-write (`shared = { frames = \"rw\" }`)",
+    );
+    expect_some(
+        &ring("64KiB", rw, "", ""),
+        "\"frames\" }",
+        0,
+        at,
+        "frame ring `frames`: partition `echo` must map it read-write",
+    );
+    expect_some(
+        &ring("64KiB", rw, rw, rw),
+        "\"frames\" }",
+        0,
+        at,
+        "frame ring `frames`: partition `flood` maps it too, and only the NIC partition and the tenant may",
+    );
+    expect_some(
+        &edited(&[("to = \"echo-rx\" }", "to = \"echo-rx\", ring = \"nope\" }")]),
+        "\"nope\" }",
+        0,
+        at,
+        "unknown shared memory segment `nope` (define it in [[shared_memory]])",
+    );
+}

@@ -146,6 +146,30 @@ fn plc_guest_system() {
     );
     let g = guest.guest.as_ref().expect("the guest's keys");
     assert_eq!(g.programs, ["plcctl", "plcc"]);
+    // The guest's frames and the PLC's go through rings, each in a segment only it and the
+    // NIC partition map.
+    let tenants = &nic.nic.as_ref().expect("the tenant table").tenants;
+    let ring = tenants[0].ring.expect("the guest's frame ring");
+    assert_eq!(s.segments[ring.segment].name, "linux-frames");
+    assert_eq!(
+        (ring.address, ring.size),
+        (protocol::layout::shared_address(std::iter::empty()), 65536)
+    );
+    let net = g.net.as_ref().expect("guest.net");
+    assert_eq!(net.ring, Some(ring));
+    let plc_ring = tenants[1].ring.expect("the PLC's frame ring");
+    assert_eq!(s.segments[plc_ring.segment].name, "plc-frames");
+    assert_eq!(
+        plc_ring.address,
+        protocol::layout::shared_address([65536].into_iter())
+    );
+    let plc_net = plc.plc.as_ref().and_then(|p| p.net.as_ref());
+    assert_eq!(plc_net.expect("plc.net").link.ring, Some(plc_ring));
+    assert!(
+        net.file().ends_with("ring=0x600000000000,65536\n"),
+        "{}",
+        net.file()
+    );
     assert!(g.console_com2);
     assert_eq!(
         plc.health.get(ErrorCode::DeadlineMissed),

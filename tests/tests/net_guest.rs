@@ -1,6 +1,8 @@
 //! The outside and the guest through the NIC partition (configurations
 //! `tests/configs/net_guest_httpd.toml` and `net_guest_wget.toml`): the guest's `eth0` is
-//! the tenant of the NIC partition, which drives QEMU's virtio-net on its user network.
+//! the tenant of the NIC partition, which drives QEMU's virtio-net on its user network;
+//! its frames go through a frame ring in shared memory in the first, through the ports in
+//! the second.
 //! The host side of each scenario is plain std networking on 127.0.0.1.
 
 use scenarios::{boot_beside, check, guest_stdout, http_get};
@@ -60,9 +62,15 @@ fn net_guest_httpd() {
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
     check(
         &o,
-        o.line("nic: tenant linux MAC 52:54:00:12:34:56 from linux-tx to linux-rx")
+        o.line("nic: tenant linux MAC 52:54:00:12:34:56 from linux-tx to linux-rx, frames in a ring of 16 slots each way at 0x600000000000")
             .is_some(),
-        "the NIC partition did not attach the guest",
+        "the NIC partition did not attach the guest through its frame ring",
+    );
+    check(
+        &o,
+        o.line("guest: eth0 frames in a ring of 16 slots each way at 0x600000000000")
+            .is_some(),
+        "the guest's eth0 does not use its frame ring",
     );
     let (status, body) = f.page.clone().unwrap_or_default();
     check(
@@ -197,6 +205,11 @@ fn net_guest_wget() {
         serve(ports[0], &body, ended)
     });
     check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.line("frames in a ring").is_none(),
+        "this guest's frames go through its ports, not a ring",
+    );
     println!(
         "net_guest_wget: the server saw {:?}; the payload's {} bytes written in {:?} (real time)",
         served.requests,

@@ -47,6 +47,7 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             access: Access::from_code(n.access as u8).expect("the same codes"),
             rx: named_port(p, &n.link.rx),
             tx: named_port(p, &n.link.tx),
+            ring: n.link.ring.map(|r| (r.address, r.size)),
         });
         let ports = p
             .ports

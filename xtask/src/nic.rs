@@ -3,7 +3,7 @@
 
 use config::System;
 use nic_core::switch::Mac;
-use nic_core::tenants::{PortSpec, Tenant};
+use nic_core::tenants::{PortSpec, RingSpec, Tenant};
 
 /// Port `index` of driver partition `p` as its tenant table names it (`driver_table`; the
 /// block-device partition's table too).
@@ -30,6 +30,10 @@ pub fn data_entries(system: &System) -> Vec<(String, Vec<u8>)> {
                 mac: Mac(t.mac),
                 from: port(t.from),
                 to: port(t.to),
+                ring: t.ring.map(|r| RingSpec {
+                    address: r.address,
+                    size: r.size,
+                }),
             })
             .collect();
         let mut table = Vec::new();

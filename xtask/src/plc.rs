@@ -292,6 +292,7 @@ fn package(
                 .as_ref()
                 .and_then(|(port, records)| package::OnlineTcp::new(*port, records)),
             pubsub,
+            ring: n.link.ring.map(|r| (r.address, r.size)),
         }
     });
     // Then the store's ports (`plc.store`).

@@ -76,6 +76,38 @@ struct TenantEnds {
     ports: Option<(usize, usize)>,
 }
 
+/// The interface of a partition whose frames a NIC tenant entry carries: a guest's `eth0`,
+/// a soft-PLC's or an IEC 61499 device's interface.
+fn frame_link(p: &Partition) -> Option<&GuestNet> {
+    let guest = p.guest.as_ref().and_then(|g| g.net.as_ref());
+    let plc = || {
+        p.plc
+            .as_ref()
+            .and_then(|plc| plc.net.as_ref())
+            .map(|n| &n.link)
+    };
+    let fb = || {
+        p.iec61499
+            .as_ref()
+            .and_then(|f| f.net.as_ref())
+            .map(|n| &n.link)
+    };
+    guest.or_else(plc).or_else(fb)
+}
+
+fn frame_link_mut(p: &mut Partition) -> Option<&mut GuestNet> {
+    if let Some(net) = p.guest.as_mut().and_then(|g| g.net.as_mut()) {
+        return Some(net);
+    }
+    if let Some(net) = p.plc.as_mut().and_then(|plc| plc.net.as_mut()) {
+        return Some(&mut net.link);
+    }
+    p.iec61499
+        .as_mut()
+        .and_then(|f| f.net.as_mut())
+        .map(|n| &mut n.link)
+}
+
 impl Validator<'_, '_> {
     /// `nic.tenants` (see the crate documentation).
     pub(super) fn nic(
@@ -83,6 +115,7 @@ impl Validator<'_, '_> {
         doc: &schema::Document,
         partitions: &mut [Partition],
         channels: &[Channel],
+        segments: &[(Segment, usize)],
     ) {
         for (key, raw) in in_source_order(&doc.partitions) {
             let Some(nic) = &raw.get_ref().nic else {
@@ -113,17 +146,32 @@ impl Validator<'_, '_> {
                     &taken,
                 );
                 let mac = self.nic_mac(&t.mac, &at.key("mac"), &tenants);
-                match (ends.partition, mac, ends.ports) {
-                    (Some(partition), Some(mac), Some((from, to))) => tenants.push(NicTenant {
-                        partition,
-                        mac,
-                        from,
-                        to,
-                    }),
+                let ring = match (&t.ring, ends.partition) {
+                    (None, _) => Some(None),
+                    (Some(ring), Some(tenant)) => self
+                        .nic_ring(ring, &at.key("ring"), [me, tenant], partitions, segments)
+                        .map(Some),
+                    (Some(_), None) => None,
+                };
+                match (ends.partition, mac, ends.ports, ring) {
+                    (Some(partition), Some(mac), Some((from, to)), Some(ring)) => {
+                        tenants.push(NicTenant {
+                            partition,
+                            mac,
+                            from,
+                            to,
+                            ring,
+                        })
+                    }
                     _ => ok = false,
                 }
             }
             if ok && !tenants.is_empty() && tenants.len() <= NIC.max_tenants {
+                for t in &tenants {
+                    if let Some(link) = frame_link_mut(&mut partitions[t.partition]) {
+                        link.ring = t.ring;
+                    }
+                }
                 partitions[me].nic = Some(Nic { tenants });
             }
         }
@@ -367,6 +415,81 @@ impl Validator<'_, '_> {
             ),
         );
         false
+    }
+
+    /// A tenant's frame ring: a segment of at least `frame_ring::MIN_SEGMENT` bytes that
+    /// the NIC partition and its tenant (`ends`: a guest, a soft-PLC or an IEC 61499 device
+    /// with its interface) both map read-write and no other partition maps.
+    fn nic_ring(
+        &mut self,
+        text: &Spanned<String>,
+        path: &KeyPath,
+        ends: [usize; 2],
+        partitions: &[Partition],
+        segments: &[(Segment, usize)],
+    ) -> Option<FrameRing> {
+        let name = text.get_ref();
+        let Some(index) = segments.iter().position(|(s, _)| &s.name == name) else {
+            self.error(
+                start(text),
+                path,
+                format!("unknown shared memory segment `{name}` (define it in [[shared_memory]])"),
+            );
+            return None;
+        };
+        let mut ok = true;
+        let size = segments[index].0.size;
+        if size < frame_ring::MIN_SEGMENT as u64 {
+            self.error(
+                start(text),
+                path,
+                format!(
+                    "segment `{name}` ({size} bytes) is too small for a frame ring: it needs at least {} bytes (4 frames each way)",
+                    frame_ring::MIN_SEGMENT
+                ),
+            );
+            ok = false;
+        }
+        let tenant = &partitions[ends[1]];
+        if frame_link(tenant).is_none() {
+            self.error(
+                start(text),
+                path,
+                format!(
+                    "`{}` has no interface whose frames a ring could carry: a frame ring serves a guest (`guest.net`), a soft-PLC (`plc.net`) or an IEC 61499 device (`iec61499.net`)",
+                    tenant.name
+                ),
+            );
+            ok = false;
+        }
+        for (n, p) in partitions.iter().enumerate() {
+            let rights = p
+                .shared
+                .iter()
+                .find(|a| a.segment == index)
+                .map(|a| a.rights);
+            let why = match (ends.contains(&n), rights) {
+                (true, Some(Rights::ReadWrite)) | (false, None) => continue,
+                (true, _) => "must map it read-write (`shared = { NAME = \"rw\" }`)",
+                (false, Some(_)) => "maps it too, and only the NIC partition and the tenant may",
+            };
+            self.error(
+                start(text),
+                path,
+                format!(
+                    "frame ring `{name}`: partition `{}` {}",
+                    p.name,
+                    why.replace("NAME", name)
+                ),
+            );
+            ok = false;
+        }
+        let sizes = segments[..index].iter().map(|(s, _)| s.size);
+        ok.then(|| FrameRing {
+            segment: index,
+            address: protocol::layout::shared_address(sizes),
+            size,
+        })
     }
 
     /// A tenant's MAC: six hex octets, unicast, not all zero, unique among `so_far`.

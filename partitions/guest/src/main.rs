@@ -438,6 +438,24 @@ fn network(archive: &Archive, ports: &[guest::arinc::Port]) -> guest::net::Net {
     );
     let mut net = Net::new(Some(c));
     net.link(rx, tx);
+    if let Some((address, size)) = file.ring {
+        // SAFETY: the configuration tools gave this segment to this partition and its NIC
+        // partition only, both read-write, and syssw maps it at `address` for the
+        // partition's life; this is its one attach on the tenant's side.
+        #[allow(unsafe_code)]
+        let ring =
+            unsafe { frame_ring::attach(address as *mut u8, size, frame_ring::Side::Tenant) };
+        match ring {
+            Ok(ring) => {
+                println!(
+                    "guest: eth0 frames in a ring of {} slots each way at {address:#x}",
+                    ring.0.slots()
+                );
+                net.link_ring(ring);
+            }
+            Err(e) => println!("guest: {NET_PATH}: {e}; eth0's frames go through its ports"),
+        }
+    }
     net
 }
 

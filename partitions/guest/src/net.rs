@@ -9,7 +9,9 @@
 //! it, and the partition program wakes at [`Net::poll_at_ns`] for smoltcp's timers
 //! (retransmissions, delayed ACKs, keep-alives, `TIME-WAIT`). `lo` (127.0.0.1/8) is always
 //! there; `eth0` only with `guest.net` in the configuration ([`NetConfig`]), its frames
-//! carried by the partition program between [`Net::frames`] and the partition's ports.
+//! carried between the stack and the partition's ports, or, when the NIC partition's
+//! tenant entry names one, a frame ring in shared memory (`frame_ring`), the ports then
+//! carrying only its wake-ups.
 
 use crate::linux::Errno;
 use alloc::vec::Vec;
@@ -52,7 +54,8 @@ pub struct NetConfig {
 }
 
 /// Where the guest finds `eth0`'s configuration: `key=value` lines (`mac`, `address`
-/// as `a.b.c.d/prefix`, `gateway`, `rx`, `tx`: the ports of the frames).
+/// as `a.b.c.d/prefix`, `gateway`, `rx`, `tx`: the ports of the frames; `ring` as
+/// `address,size`: the frame ring's segment, if any).
 pub const NET_PATH: &str = "/etc/guest/net";
 
 /// `eth0`'s configuration and its ports' names, from the file at [`NET_PATH`].
@@ -61,11 +64,14 @@ pub struct NetFile<'a> {
     pub config: NetConfig,
     pub rx: &'a str,
     pub tx: &'a str,
+    /// The frame ring's segment: address and size.
+    pub ring: Option<(u64, usize)>,
 }
 
 /// Parses the file at [`NET_PATH`]; the error names the line and what is wrong.
 pub fn parse_net_file(text: &str) -> Result<NetFile<'_>, (usize, &'static str)> {
     let (mut mac, mut address, mut gateway, mut rx, mut tx) = (None, None, None, None, None);
+    let mut ring = None;
     for setting in crate::settings(text) {
         let (at, key, value) = setting?;
         match key {
@@ -83,6 +89,13 @@ pub fn parse_net_file(text: &str) -> Result<NetFile<'_>, (usize, &'static str)> 
             "gateway" => gateway = Some(parse_ipv4(value).ok_or((at, "bad gateway address"))?),
             "rx" => rx = Some(value),
             "tx" => tx = Some(value),
+            "ring" => {
+                let bad = (at, "expected the ring as 0xADDRESS,SIZE");
+                let (address, size) = value.split_once(',').ok_or(bad)?;
+                let address = address.strip_prefix("0x").ok_or(bad)?;
+                let address = u64::from_str_radix(address, 16).map_err(|_| bad)?;
+                ring = Some((address, size.parse().map_err(|_| bad)?));
+            }
             _ => return Err((at, "unknown key")),
         }
     }
@@ -97,6 +110,7 @@ pub fn parse_net_file(text: &str) -> Result<NetFile<'_>, (usize, &'static str)> 
         },
         rx: rx.ok_or((last, "no rx port"))?,
         tx: tx.ok_or((last, "no tx port"))?,
+        ring,
     })
 }
 
@@ -190,10 +204,15 @@ pub struct Net {
     /// When it last ran.
     polled_ns: u64,
     /// `eth0`'s ports (indices into the port table, [`crate::arinc`]): received frames,
-    /// frames to send.
+    /// frames to send (with a ring: its wake-ups each way).
     link: Option<(usize, usize)>,
-    /// Frames the `tx` port had no room for (lost, as on a full ring; TCP sends again).
+    /// `eth0`'s frame ring: frames to send, received frames.
+    ring: Option<(frame_ring::Producer, frame_ring::Consumer)>,
+    /// Frames the `tx` port or ring had no room for (lost, as on a full ring; TCP sends
+    /// again).
     pub tx_dropped: u64,
+    /// Ring slots with no frame in them (a bogus length or index the NIC partition wrote).
+    pub rx_bad: u64,
     /// When the `rx` port was last looked at, and whether frames came then.
     rx_looked_ns: u64,
     rx_busy: bool,
@@ -214,7 +233,9 @@ impl Net {
             refs: Vec::new(),
             polled_ns: 0,
             link: None,
+            ring: None,
             tx_dropped: 0,
+            rx_bad: 0,
             rx_looked_ns: 0,
             rx_busy: false,
         }
@@ -231,8 +252,13 @@ impl Net {
         self.link = Some((rx, tx));
     }
 
+    /// `eth0`'s frames go through `ring` instead, its ports carrying the wake-ups.
+    pub fn link_ring(&mut self, ring: (frame_ring::Producer, frame_ring::Consumer)) {
+        self.ring = Some(ring);
+    }
+
     /// Runs the stack at the host's time: `eth0`'s received frames in from the `rx`
-    /// port, timers, then the frames to send out to the `tx` port.
+    /// port (or ring), timers, then the frames to send out to the `tx` port (or ring).
     pub fn run(&mut self, host: &mut impl crate::syscall::Host) {
         let Some((rx, tx)) = self.link else {
             if self.stack.is_some() {
@@ -241,6 +267,9 @@ impl Net {
             return;
         };
         let now = host.now_ns();
+        if self.ring.is_some() {
+            return self.run_ring(host, now, rx, tx);
+        }
         // A look at the port is a call to syssw: after every served call only while
         // frames come, else every RX_LOOK_NS.
         if self.rx_busy || now >= self.rx_looked_ns.saturating_add(RX_LOOK_NS) {
@@ -264,6 +293,52 @@ impl Net {
             if host.port_send(tx, &out).is_err() {
                 dropped += 1;
             }
+        }
+        self.tx_dropped += dropped;
+    }
+
+    /// [`Net::run`] with a frame ring: a look at it costs no call to syssw, so it is
+    /// looked at on every run; the `rx` port's wake-ups are drained (before the ring is
+    /// read: one that comes after is left for the next run) when the doorbell rang, and
+    /// the NIC partition is woken through `tx` when a frame goes into an empty ring.
+    fn run_ring(&mut self, host: &mut impl crate::syscall::Host, now: u64, rx: usize, tx: usize) {
+        if core::mem::take(&mut self.rx_busy) {
+            let mut kick = [0u8; 1];
+            for _ in 0..LIMITS.frames {
+                if host.port_receive(rx, &mut kick).is_err() {
+                    break;
+                }
+            }
+            self.rx_looked_ns = now;
+        }
+        let mut frame = [0u8; frame_ring::MTU];
+        for _ in 0..LIMITS.frames {
+            let Some((_, from)) = self.ring.as_mut() else {
+                return;
+            };
+            match from.pop(&mut frame) {
+                None => break,
+                Some(Ok(len)) => self.stack(now).device.deliver(&frame[..len]),
+                Some(Err(_)) => self.rx_bad += 1,
+            }
+        }
+        self.poll(now);
+        let (mut dropped, mut kick) = (0, false);
+        let Some(stack) = self.stack.as_mut() else {
+            return;
+        };
+        let Some((to, _)) = self.ring.as_mut() else {
+            return;
+        };
+        while let Some(out) = stack.device.take() {
+            match to.push(&out) {
+                Ok(pushed) => kick |= pushed.first,
+                Err(_) => dropped += 1,
+            }
+        }
+        // A full port means wake-ups are already waiting there.
+        if kick {
+            let _ = host.port_send(tx, &[0]);
         }
         self.tx_dropped += dropped;
     }

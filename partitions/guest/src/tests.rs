@@ -3792,6 +3792,115 @@ fn two_guests_talk_through_their_frame_ports() {
     );
 }
 
+/// A guest's `eth0` through a frame ring, the test playing the NIC partition's side of
+/// the ring and carrying frames to and from a second guest on ports: a TCP connection and
+/// 20,000 bytes each way; the guest's `tx` port carries only one-byte wake-ups, fewer than
+/// the frames, and it drains the wake-ups the "NIC" sends when its doorbell rang.
+#[test]
+#[allow(unsafe_code)]
+fn a_guest_talks_through_its_frame_ring() {
+    use crate::net::{Net, NetConfig};
+    use netstack::{Error, Ipv4Address, SocketAddr};
+    #[repr(C, align(64))]
+    #[derive(Clone, Copy)]
+    struct Line([u8; 64]);
+    let config = |mac: u8, ip: u8| NetConfig {
+        mac: [2, 0, 0, 0, 0, mac],
+        address: Ipv4Address::new(10, 0, 2, ip),
+        prefix: 24,
+        gateway: None,
+    };
+    let size = 64 * 1024;
+    let mut segment = vec![Line([0; 64]); size / 64];
+    let at = segment.as_mut_ptr() as *mut u8;
+    // SAFETY: the segment outlives both ends (dropped at the end of the test), and only
+    // they write it.
+    let tenant = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) }.unwrap();
+    // SAFETY: as above.
+    let (mut nic_to, mut nic_from) =
+        unsafe { frame_ring::attach(at, size, frame_ring::Side::Driver) }.unwrap();
+    let (rx, tx) = (0, 1);
+    let mut a = (Net::new(Some(config(1, 15))), Model::new(0));
+    let mut b = (Net::new(Some(config(2, 16))), Model::new(0));
+    a.0.link(rx, tx);
+    a.0.link_ring(tenant);
+    b.0.link(rx, tx);
+    let (mut frames_up, mut wakeups_up) = (0, 0);
+    let mut buf = [0u8; frame_ring::MTU];
+    let mut step = |a: &mut (Net, Model), b: &mut (Net, Model)| {
+        a.0.run(&mut a.1);
+        b.0.run(&mut b.1);
+        // The NIC's side: the wake-ups from `a`, its frames to `b`, `b`'s frames into the
+        // ring (a wake-up for `a` when one goes into an empty ring: its doorbell).
+        for kick in a.1.port_sent.remove(&tx).unwrap_or_default() {
+            assert_eq!(kick, [0], "only wake-ups on the tx port");
+            wakeups_up += 1;
+        }
+        while let Some(frame) = nic_from.pop(&mut buf) {
+            let len = frame.unwrap();
+            frames_up += 1;
+            let queue = b.1.port_messages.entry(rx).or_default();
+            queue.push_back((buf[..len].to_vec(), true));
+        }
+        for frame in b.1.port_sent.remove(&tx).unwrap_or_default() {
+            if nic_to.push(&frame).unwrap().first {
+                a.1.port_messages
+                    .entry(rx)
+                    .or_default()
+                    .push_back((vec![0], true));
+                a.0.messages_came();
+            }
+        }
+    };
+    let l = b.0.stack(0).socket(2, 1, 0).unwrap();
+    let any = SocketAddr::new(Ipv4Address::UNSPECIFIED, 80);
+    b.0.stack(0).bind(l, any).unwrap();
+    b.0.stack(0).listen(l, 1).unwrap();
+    let c = a.0.stack(0).socket(2, 1, 0).unwrap();
+    let server = SocketAddr::new(Ipv4Address::new(10, 0, 2, 16), 80);
+    assert_eq!(a.0.stack(0).connect(c, server), Err(Error::WouldBlock));
+    for _ in 0..20 {
+        step(&mut a, &mut b);
+    }
+    assert_eq!(a.0.stack(0).connect_result(c), Ok(()), "connected");
+    let (s, _) = b.0.stack(0).accept(l).unwrap();
+    let data: Vec<u8> = (0..20_000u32).map(|i| (i * 7) as u8).collect();
+    let (mut sent, mut back, mut got, mut got_back) = (0, 0, Vec::new(), Vec::new());
+    let mut chunk = [0u8; 4096];
+    for _ in 0..600 {
+        if sent < data.len() {
+            sent += a.0.stack(0).send(c, &data[sent..], None).unwrap_or(0);
+        }
+        if back < data.len() {
+            back += b.0.stack(0).send(s, &data[back..], None).unwrap_or(0);
+        }
+        step(&mut a, &mut b);
+        while let Ok((n @ 1.., _)) = b.0.stack(0).recv(s, &mut chunk) {
+            got.extend_from_slice(&chunk[..n]);
+        }
+        while let Ok((n @ 1.., _)) = a.0.stack(0).recv(c, &mut chunk) {
+            got_back.extend_from_slice(&chunk[..n]);
+        }
+        if got.len() == data.len() && got_back.len() == data.len() {
+            break;
+        }
+    }
+    assert_eq!(got, data, "20,000 bytes up through the ring, in order");
+    assert_eq!(
+        got_back, data,
+        "20,000 bytes down through the ring, in order"
+    );
+    assert!(
+        wakeups_up > 0 && wakeups_up < frames_up,
+        "{wakeups_up} wake-ups for {frames_up} frames"
+    );
+    assert!(
+        a.1.port_messages.get(&rx).is_none_or(|q| q.len() <= 1),
+        "the wake-ups are drained"
+    );
+    assert_eq!((a.0.tx_dropped, a.0.rx_bad), (0, 0));
+}
+
 #[test]
 fn threads_share_their_process_and_futexes_wake_them() {
     let bytes = initramfs();

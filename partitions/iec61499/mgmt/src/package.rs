@@ -15,7 +15,9 @@
 //! .. 1 network interface and the management protocol on TCP (`crate::tcp`): 0 none, 1 it
 //!   follows [6 MAC, 4 IPv4 address, 1 prefix length, 1 gateway (0 none, 1 the 4 bytes
 //!   follow), TCP port u16, connections u8, access u8, then the frame ports rx (in) and
-//!   tx (out) as the management ports]
+//!   tx (out) as the management ports, then the frame ring: 0 none, 1 its segment's
+//!   address u64 and size u64 (not 0) follow (`frame_ring`; the ports then carry the
+//!   wake-ups)]
 //! .. sampling ports (for the process-image FBs, `crate::sifb`): count u16, per port: name
 //!    length u8, name, direction u8 (1 in, 0 out), message size u32, refresh period u64 (ns)
 //! .. queuing ports (for PUBLISH/SUBSCRIBE, `crate::pubsub`): count u16, per port: name
@@ -104,9 +106,12 @@ pub struct NetPorts<'a> {
     pub connections: u8,
     /// What every client on TCP may do.
     pub access: Access,
-    /// The queuing input of received frames and output of frames to send.
+    /// The queuing input of received frames and output of frames to send (with a ring:
+    /// of its wake-ups).
     pub rx: QueuingPort<'a>,
     pub tx: QueuingPort<'a>,
+    /// The frame ring's segment (address, size) when the frames go through one.
+    pub ring: Option<(u64, u64)>,
 }
 
 /// A queuing port as the partition creates it.
@@ -216,6 +221,14 @@ pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
                 push_name(&mut body, port.name);
                 body.extend_from_slice(&port.size.to_le_bytes());
                 body.extend_from_slice(&port.depth.to_le_bytes());
+            }
+            match n.ring {
+                None => body.push(0),
+                Some((address, size)) => {
+                    body.push(1);
+                    body.extend_from_slice(&address.to_le_bytes());
+                    body.extend_from_slice(&size.to_le_bytes());
+                }
             }
         }
     }
@@ -430,6 +443,21 @@ fn net_at<'a>(bytes: &'a [u8], at: &mut usize) -> Result<Option<NetPorts<'a>>, D
     };
     let rx = queuing()?;
     let tx = queuing()?;
+    let ring = match array(at, 1)?[0] {
+        0 => None,
+        1 => {
+            let word = |at: &mut usize| -> Result<u64, DevicePackageError> {
+                let b = array(at, 8)?;
+                Ok(u64::from_le_bytes(core::array::from_fn(|i| b[i])))
+            };
+            let (address, size) = (word(at)?, word(at)?);
+            if size == 0 {
+                return Err(bad);
+            }
+            Some((address, size))
+        }
+        _ => return Err(bad),
+    };
     Ok(Some(NetPorts {
         mac,
         address,
@@ -440,6 +468,7 @@ fn net_at<'a>(bytes: &'a [u8], at: &mut usize) -> Result<Option<NetPorts<'a>>, D
         access,
         rx,
         tx,
+        ring,
     }))
 }
 
@@ -533,6 +562,7 @@ mod tests {
                 access: Access::Download,
                 rx: port("eth-rx", 32),
                 tx: port("eth-tx", 32),
+                ring: Some((0x6000_0000_0000, 65536)),
             }),
             ports: vec![
                 SamplingPort {
@@ -561,7 +591,11 @@ mod tests {
         };
         assert_eq!(decode(&encode(&original)).unwrap(), original);
         let without_gateway = DevicePackage {
-            net: original.net.map(|n| NetPorts { gateway: None, ..n }),
+            net: original.net.map(|n| NetPorts {
+                gateway: None,
+                ring: None,
+                ..n
+            }),
             ..original
         };
         assert_eq!(decode(&encode(&without_gateway)).unwrap(), without_gateway);

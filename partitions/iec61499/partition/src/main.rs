@@ -373,6 +373,8 @@ struct Net {
     doorbell: bool,
     rx: QueuingPortReceiver<Warden>,
     tx: QueuingPortSender<Warden>,
+    /// The frame ring, when the package names one: the ports then carry its wake-ups.
+    ring: Option<(frame_ring::Producer, frame_ring::Consumer)>,
     frame: Vec<u8>,
     frames_in: u64,
     frames_out: u64,
@@ -407,6 +409,19 @@ impl Net {
             connections: usize::from(n.connections),
             access: n.access,
         };
+        let ring = match n.ring {
+            None => None,
+            // SAFETY: the configuration tools gave this segment to this partition and its
+            // NIC partition only, both read-write, and syssw maps it at `address` for the
+            // partition's life; this is its one attach on the tenant's side.
+            #[allow(unsafe_code)]
+            Some((address, size)) => Some(
+                unsafe {
+                    frame_ring::attach(address as *mut u8, size as usize, frame_ring::Side::Tenant)
+                }
+                .map_err(|e| alloc::format!("{e}"))?,
+            ),
+        };
         let server = Server::new(&settings, now.max(0) as u64)
             .map_err(|e| alloc::format!("cannot listen on tcp port {}: {e:?}", n.port))?;
         let doorbell = apex::runtime::port_doorbell(rx.id(), DOORBELL_BIT);
@@ -425,6 +440,7 @@ impl Net {
             doorbell: doorbell.is_ok(),
             rx,
             tx,
+            ring,
             frame: alloc::vec![0; netstack::MTU],
             frames_in: 0,
             frames_out: 0,
@@ -438,15 +454,33 @@ impl Net {
     /// pump (datagrams sent and received) and the TCP links' (connections made, bytes
     /// moved), the frames out, the log lines.
     fn pass(&mut self, device: &mut Device, now: i64) {
-        for _ in 0..server::FRAMES_PER_RUN {
-            let Ok((message, _)) = self
-                .rx
-                .receive(&mut self.frame, SystemTime::Normal(Duration::ZERO))
-            else {
-                break;
-            };
-            self.server.stack.device.deliver(message);
-            self.frames_in += 1;
+        let poll = || SystemTime::Normal(Duration::ZERO);
+        if let Some((_, from)) = self.ring.as_mut() {
+            // The wake-ups first, then the ring (one that comes after is kept for the next
+            // pass, its doorbell not lost).
+            for _ in 0..server::FRAMES_PER_RUN {
+                if self.rx.receive(&mut self.frame, poll()).is_err() {
+                    break;
+                }
+            }
+            let mut frame = [0u8; frame_ring::MTU];
+            for _ in 0..server::FRAMES_PER_RUN {
+                match from.pop(&mut frame) {
+                    None => break,
+                    Some(Ok(len)) => self.server.stack.device.deliver(&frame[..len]),
+                    // A bogus slot the NIC partition wrote: no frame.
+                    Some(Err(_)) => continue,
+                }
+                self.frames_in += 1;
+            }
+        } else {
+            for _ in 0..server::FRAMES_PER_RUN {
+                let Ok((message, _)) = self.rx.receive(&mut self.frame, poll()) else {
+                    break;
+                };
+                self.server.stack.device.deliver(message);
+                self.frames_in += 1;
+            }
         }
         self.server.run(now.max(0) as u64, device);
         if let (Ok(mut udp), Ok(mut tcp)) = (self.udp.try_borrow_mut(), self.tcp.try_borrow_mut()) {
@@ -454,12 +488,22 @@ impl Net {
             tcp.pump(&mut self.server.stack);
             self.server.stack.poll(now.max(0) / 1000);
         }
+        let mut wake = false;
         for _ in 0..server::FRAMES_PER_RUN {
             let Some(out) = self.server.stack.device.take() else {
                 break;
             };
-            let _ = self.tx.send(&out, SystemTime::Normal(Duration::ZERO));
+            match self.ring.as_mut() {
+                Some((to, _)) => wake |= to.push(&out).is_ok_and(|p| p.first),
+                None => {
+                    let _ = self.tx.send(&out, poll());
+                }
+            }
             self.frames_out += 1;
+        }
+        // A full port means wake-ups are already waiting there.
+        if wake {
+            let _ = self.tx.send(&[0], poll());
         }
         self.log(now);
     }

@@ -3,18 +3,20 @@
 //! validated by the configuration tools). `cargo xtask` writes it as the partition's data
 //! entry ([`encode`]); the partition reads it at start ([`decode`]).
 //!
-//! Format (little-endian): `NIC1`, a tenant count (1 byte, at most
+//! Format (little-endian): `NIC2`, a tenant count (1 byte, at most
 //! [`crate::switch::MAX_TENANTS`]), then per tenant: its MAC (6 bytes), the partition's
 //! name, the `from` port (the NIC's queuing input carrying the tenant's frames) and the
 //! `to` port (the NIC's queuing output to the tenant), a port being its name, its message
 //! size (4 bytes) and depth (4 bytes); a name is a length byte and that many UTF-8 bytes
-//! (the fields of `driver_table`).
+//! (the fields of `driver_table`); then its frame ring's segment, address and size (8
+//! bytes each, both 0 without one: `nic.tenants.<p>.ring`; the ports then carry only the
+//! wake-ups of `frame_ring`).
 
 use crate::switch::{MAX_TENANTS, Mac};
 pub use driver_table::PortSpec;
 use driver_table::{FieldError, Reader};
 
-const MAGIC: &[u8; 4] = b"NIC1";
+const MAGIC: &[u8; 4] = b"NIC2";
 
 /// An attached tenant.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -23,6 +25,15 @@ pub struct Tenant<'a> {
     pub mac: Mac,
     pub from: PortSpec<'a>,
     pub to: PortSpec<'a>,
+    /// The frame ring's segment in the partitions' address spaces, if any.
+    pub ring: Option<RingSpec>,
+}
+
+/// Where a tenant's frame ring is: the same address in both partitions.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct RingSpec {
+    pub address: u64,
+    pub size: u64,
 }
 
 /// The decoded table.
@@ -81,6 +92,8 @@ pub fn encode(tenants: &[Tenant<'_>], out: &mut impl Extend<u8>) {
         driver_table::put_name(out, t.partition);
         driver_table::put_port(out, t.from);
         driver_table::put_port(out, t.to);
+        let ring = t.ring.map_or([0, 0], |r| [r.address, r.size]);
+        out.extend(ring.iter().flat_map(|v| v.to_le_bytes()));
     }
 }
 
@@ -112,11 +125,13 @@ pub fn decode(bytes: &[u8]) -> Result<Table<'_>, DecodeError> {
         let partition = r.name()?;
         let from = r.port()?;
         let to = r.port()?;
+        let (address, size) = (r.u64()?, r.u64()?);
         *slot = Some(Tenant {
             partition,
             mac: Mac(mac),
             from,
             to,
+            ring: (size != 0).then_some(RingSpec { address, size }),
         });
         rest = r.rest;
     }
@@ -148,12 +163,17 @@ mod tests {
                     mac: Mac([0x52, 0x54, 0, 0x12, 0x34, 0x56]),
                     from: port("linux-tx", 32),
                     to: port("linux-rx", 32),
+                    ring: Some(RingSpec {
+                        address: 0x6000_0000_0000,
+                        size: 65536,
+                    }),
                 },
                 Tenant {
                     partition: "plc",
                     mac: Mac([2, 0, 0, 0, 0, 1]),
                     from: port("plc-tx", 8),
                     to: port("plc-rx", 16),
+                    ring: None,
                 },
             ],
             &mut out,
@@ -178,13 +198,15 @@ mod tests {
             ]
         );
         assert_eq!(table.tenants().nth(1).unwrap().mac, Mac([2, 0, 0, 0, 0, 1]));
+        let rings: Vec<_> = table.tenants().map(|t| t.ring.map(|r| r.size)).collect();
+        assert_eq!(rings, [Some(65536), None]);
     }
 
     #[test]
     fn damaged_tables_are_refused_with_the_reason() {
         let bytes = sample();
-        assert_eq!(decode(b"NIC2\x00"), Err(DecodeError::NoMagic));
-        assert_eq!(decode(b"NIC1\x10"), Err(DecodeError::TooMany(16)));
+        assert_eq!(decode(b"NIC1\x00"), Err(DecodeError::NoMagic));
+        assert_eq!(decode(b"NIC2\x10"), Err(DecodeError::TooMany(16)));
         assert_eq!(decode(&bytes[..20]), Err(DecodeError::Truncated(0)));
         assert_eq!(
             decode(&bytes[..bytes.len() - 1]),

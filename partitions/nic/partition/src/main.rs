@@ -2,21 +2,26 @@
 //! partition owns (`devices`, modern PCI transport, `device.rs`) and is the Ethernet switch
 //! (`nic_core::switch`) between the wire and its tenants, each attached by a pair of
 //! queuing ports (`nic.tenants`, the data entry `nic_core::tenants`): one frame a message,
-//! destination MAC first, no FCS, 14..=1514 bytes.
+//! destination MAC first, no FCS, 14..=1514 bytes; or, for a tenant whose entry names a
+//! frame ring, the same frames through the ring in the segment it shares with the tenant
+//! (`frame_ring`), the ports carrying only the wake-ups: a one-byte message when a frame
+//! goes into an empty ring.
 //!
 //! One APEX process, the switch, does everything in a loop: frames the device received go
 //! where the switch routes them (to one tenant, to all for broadcast and multicast; unknown
 //! unicast from the wire is dropped; a tenant's broadcasts and multicasts are bounded,
-//! `nic_core::switch::GROUP_RATE`); then frames from the tenants' ports, round-robin, at
-//! most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
+//! `nic_core::switch::GROUP_RATE`); then frames from the tenants' ports (or rings),
+//! round-robin, at most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
 //! tenant that floods its port only fills its own port and loses its own frames (its
 //! sends fail when the port is full) while every other tenant keeps its turn. A tenant's
 //! frame with another source MAC is dropped. Then it waits for the device's interrupt or
-//! a tenant's doorbell (syssw notifies it when a tenant's frames arrive), at most [`POLL`].
+//! a tenant's doorbell (syssw notifies it when a tenant's frames or wake-ups arrive), at
+//! most [`POLL`].
 //!
 //! Log lines (on the serial log as `[<partition>] nic: ...`; an interface):
 //! - `nic: virtio-net <BB:DD.F> MAC <mac>, <n> descriptors a queue, line <irq>, <k> tenant(s)`
-//!   once up, then `nic: tenant <partition> MAC <mac> from <port> to <port>` for each;
+//!   once up, then `nic: tenant <partition> MAC <mac> from <port> to <port>` for each
+//!   (followed by `, frames in a ring of <n> slots each way at <address>` for a ring);
 //! - `nic: not started: <reason>` when the tenant table, the device or the DMA region is
 //!   unusable (also reported to the health monitor as APPLICATION_ERROR; the partition then
 //!   idles);
@@ -25,10 +30,11 @@
 //!   frames sent to it, frames for it dropped because its transmit queue was full, unicast
 //!   from the wire for no tenant, runts from the device, used entries the device should
 //!   not have written) and for each tenant `nic: t=<ms>ms tenant <partition> in=<n> out=<n>
-//!   overflow=<n> spoofed=<n> malformed=<n> limited=<n>` (frames taken from its port,
-//!   frames delivered to it, frames for it dropped because its port was full, frames
-//!   refused for a source MAC not its own, frames of a bad length, broadcasts and
-//!   multicasts beyond its rate). Counters count since start.
+//!   overflow=<n> spoofed=<n> malformed=<n> limited=<n>` (frames taken from its port or
+//!   ring, frames delivered to it, frames for it dropped because its port or ring was
+//!   full, frames refused for a source MAC not its own, frames of a bad length and ring
+//!   slots with a bogus length or index, broadcasts and multicasts beyond its rate).
+//!   Counters count since start.
 #![no_std]
 #![no_main]
 
@@ -57,9 +63,9 @@ const BUDGET: u32 = 8;
 const POLL: Duration = Duration::from_micros(500);
 /// The notification bit the device's interrupt line fires as (an index).
 const IRQ_BIT: u64 = 8;
-/// The notification bit of the tenants' doorbells (syssw rings it when a tenant's frames
-/// arrive).
-const DOORBELL_BIT: u64 = 1 << 9;
+/// The notification bit of tenant 0's doorbell (syssw rings it when the tenant's frames or
+/// wake-ups arrive at its `from` port); tenant `n` has the bit `n` above it.
+const DOORBELL_BIT: u64 = 9;
 /// How often the counters are logged.
 const STATS_EVERY_MS: u64 = 1000;
 /// The message buffer: the largest port message (config: 4096 bytes).
@@ -85,11 +91,71 @@ fn table() -> Option<Table<'static>> {
     }
 }
 
-/// A tenant's two ports.
+/// A tenant's two ports, and its frame ring if it has one.
 struct Link {
     name: &'static str,
     from: QueuingPortReceiver<Warden>,
     to: QueuingPortSender<Warden>,
+    ring: Option<(frame_ring::Producer, frame_ring::Consumer)>,
+    /// Ring slots with no frame in them (a bogus index or length the tenant wrote).
+    bad: u64,
+}
+
+impl Link {
+    /// The tenant's wake-ups, drained before its ring is read (one that comes after is
+    /// left for the next pass, so its doorbell is not lost).
+    fn drain_wakeups(&mut self, buf: &mut [u8; MESSAGE]) {
+        for _ in 0..MESSAGE {
+            if self
+                .from
+                .receive(buf, SystemTime::Normal(Duration::ZERO))
+                .is_err()
+            {
+                break;
+            }
+        }
+    }
+
+    /// Sends `frame` to the tenant; `false` when its port or ring is full.
+    fn deliver(&mut self, frame: &[u8]) -> bool {
+        let poll = SystemTime::Normal(Duration::ZERO);
+        let Some((to, _)) = self.ring.as_mut() else {
+            return self.to.send(frame, poll).is_ok();
+        };
+        match to.push(frame) {
+            Ok(pushed) => {
+                // A full port means wake-ups are already waiting there.
+                if pushed.first {
+                    let _ = self.to.send(&[0], poll);
+                }
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    /// The tenant's next frame into `frame` (its length), if any.
+    fn take(&mut self, frame: &mut [u8; MESSAGE]) -> Option<usize> {
+        let Some((_, from)) = self.ring.as_mut() else {
+            let poll = SystemTime::Normal(Duration::ZERO);
+            return match self.from.receive(frame, poll) {
+                Ok((message, _)) if !message.is_empty() => Some(message.len()),
+                _ => None,
+            };
+        };
+        let mut buf = [0u8; frame_ring::MTU];
+        // Bogus slots are skipped, at most a ring's worth (the tenant may write more).
+        for _ in 0..=from.slots() {
+            match from.pop(&mut buf)? {
+                Ok(len) => {
+                    frame[..len].copy_from_slice(&buf[..len]);
+                    return Some(len);
+                }
+                Err(_) => self.bad += 1,
+            }
+        }
+        None
+    }
 }
 
 struct Counts {
@@ -118,10 +184,7 @@ impl Nic {
         for port in to.iter(self.links.len()) {
             let fitted = match port {
                 Port::Uplink => self.transmit(frame),
-                Port::Tenant(n) => self.links[n]
-                    .to
-                    .send(frame, SystemTime::Normal(Duration::ZERO))
-                    .is_ok(),
+                Port::Tenant(n) => self.links[n].deliver(frame),
             };
             self.switch.delivered(port, fitted);
         }
@@ -183,9 +246,9 @@ impl Nic {
         }
     }
 
-    /// Frames from the tenants' ports, round-robin within their budgets, while the
-    /// transmit queue has room (what stays in a port waits there, or the tenant's next
-    /// send fails: only that tenant loses frames).
+    /// Frames from the tenants' ports or rings, round-robin within their budgets, while
+    /// the transmit queue has room (what stays in a port or ring waits there, or the
+    /// tenant's next send fails: only that tenant loses frames).
     fn serve_tenants(&mut self, rounds: &mut Rounds, frame: &mut [u8; MESSAGE]) {
         let mut pending = [true; nic_core::switch::MAX_TENANTS];
         let most = usize::from(self.net.tx.size()) + self.links.len();
@@ -196,16 +259,12 @@ impl Nic {
             let Some(n) = rounds.pick(|n| pending[n]) else {
                 break;
             };
-            let received = self.links[n]
-                .from
-                .receive(frame, SystemTime::Normal(Duration::ZERO));
-            match received {
-                Ok((message, _)) if !message.is_empty() => {
+            match self.links[n].take(frame) {
+                Some(len) => {
                     rounds.took();
-                    let len = message.len();
                     self.forward(Port::Tenant(n), &frame[..len]);
                 }
-                _ => pending[n] = false,
+                None => pending[n] = false,
             }
         }
     }
@@ -225,7 +284,13 @@ impl Nic {
             let c = self.switch.counters(Port::Tenant(n));
             println!(
                 "nic: t={now_ms}ms tenant {} in={} out={} overflow={} spoofed={} malformed={} limited={}",
-                link.name, c.received, c.delivered, c.overflow, c.spoofed, c.malformed, c.limited
+                link.name,
+                c.received,
+                c.delivered,
+                c.overflow,
+                c.spoofed,
+                c.malformed + link.bad,
+                c.limited
             );
         }
     }
@@ -262,7 +327,7 @@ extern "C" fn run() {
         }
     };
     let mut links = Vec::new();
-    for t in table.tenants() {
+    for (n, t) in table.tenants().enumerate() {
         let link = match link::open(&t.from, &t.to) {
             Ok(link) => link,
             Err(e) => {
@@ -270,17 +335,39 @@ extern "C" fn run() {
                 return;
             }
         };
-        if let Err(e) = link.ring_on_arrival(DOORBELL_BIT) {
+        if let Err(e) = link.ring_on_arrival(1 << (DOORBELL_BIT + n as u64)) {
             println!(
                 "nic: tenant {}: no doorbell ({e:?}); its port is polled",
                 t.partition
             );
         }
+        let ring = match t.ring {
+            None => None,
+            // SAFETY: the configuration tools gave this segment to this partition and the
+            // tenant only, both read-write, and syssw maps it at `address` for the
+            // partition's life; this is its one attach on the NIC's side.
+            #[allow(unsafe_code)]
+            Some(r) => match unsafe {
+                frame_ring::attach(
+                    r.address as *mut u8,
+                    r.size as usize,
+                    frame_ring::Side::Driver,
+                )
+            } {
+                Ok(ring) => Some(ring),
+                Err(e) => {
+                    refuse(format_args!("tenant {}: {e}", t.partition));
+                    return;
+                }
+            },
+        };
         let link::Link { from, to } = link;
         links.push(Link {
             name: t.partition,
             from,
             to,
+            ring,
+            bad: 0,
         });
     }
     if let Err(e) = sys::irq_attach(u64::from(line), IRQ_BIT) {
@@ -294,9 +381,17 @@ extern "C" fn run() {
         net.rx.size(),
         links.len()
     );
-    for t in table.tenants() {
+    for (t, link) in table.tenants().zip(&links) {
+        let slots = link.ring.as_ref().map_or(0, |(to, _)| to.slots());
+        let ring = match t.ring {
+            Some(r) => alloc::format!(
+                ", frames in a ring of {slots} slots each way at {:#x}",
+                r.address
+            ),
+            None => alloc::string::String::new(),
+        };
         println!(
-            "nic: tenant {} MAC {} from {} to {}",
+            "nic: tenant {} MAC {} from {} to {}{ring}",
             t.partition, t.mac, t.from.name, t.to.name
         );
     }
@@ -324,10 +419,17 @@ extern "C" fn run() {
             nic.log(now_ms);
             next_log = now_ms - now_ms % STATS_EVERY_MS + STATS_EVERY_MS;
         }
-        let wait = sys::notify_wait(1 << IRQ_BIT | DOORBELL_BIT, POLL.as_nanos() as u64);
-        if wait.is_ok_and(|bits| bits & 1 << IRQ_BIT != 0) {
+        let doorbells = ((1u64 << nic.links.len()) - 1) << DOORBELL_BIT;
+        let wait = sys::notify_wait(1 << IRQ_BIT | doorbells, POLL.as_nanos() as u64);
+        let bits = wait.unwrap_or(0);
+        if bits & 1 << IRQ_BIT != 0 {
             nic.net.interrupt_status();
             let _ = sys::irq_ack(u64::from(line));
+        }
+        for (n, link) in nic.links.iter_mut().enumerate() {
+            if link.ring.is_some() && bits & 1 << (DOORBELL_BIT + n as u64) != 0 {
+                link.drain_wakeups(&mut frame);
+            }
         }
     }
 }

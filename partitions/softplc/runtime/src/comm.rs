@@ -818,6 +818,7 @@ mod tests {
             }),
             online: crate::package::OnlineTcp::new(ONLINE_PORT, records()),
             pubsub: None,
+            ring: None,
         }
     }
 

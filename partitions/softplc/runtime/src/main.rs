@@ -826,7 +826,10 @@ extern "C" fn control() {
 
 /// The communication process: frames in from the NIC partition, the stack and its
 /// services ([`softplc::comm::Comm`]), frames out, once per period (at most
-/// [`softplc::comm::FRAMES_PER_RUN`] frames each way).
+/// [`softplc::comm::FRAMES_PER_RUN`] frames each way), through the frame ports or, when
+/// the package names one, the frame ring (`frame_ring`; the ports then carry the
+/// wake-ups: this process drains the NIC partition's once a period, before it reads the
+/// ring, and sends one when a frame goes into an empty ring).
 extern "C" fn comm() {
     use softplc::comm::{Comm, FRAMES_PER_RUN};
     let info = apex::runtime::start_info();
@@ -855,29 +858,72 @@ extern "C" fn comm() {
             return;
         }
     };
+    let mut ring = match net.ring {
+        None => None,
+        // SAFETY: the configuration tools gave this segment to this partition and its NIC
+        // partition only, both read-write, and syssw maps it at `address` for the
+        // partition's life; this process is its one attach on the tenant's side.
+        #[allow(unsafe_code)]
+        Some((address, size)) => match unsafe {
+            frame_ring::attach(address as *mut u8, size as usize, frame_ring::Side::Tenant)
+        } {
+            Ok(ring) => Some(ring),
+            Err(e) => {
+                report(text!("net: {e}").as_str());
+                return;
+            }
+        },
+    };
+    let poll = || SystemTime::Normal(Duration::ZERO);
     let mut frame = [0u8; netstack::MTU];
     let (mut frames_in, mut frames_out) = (0u64, 0u64);
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
     let mut logged = softplc::comm::CommStats::default();
     let mut event_lines = EVENT_LINES;
     loop {
-        for _ in 0..FRAMES_PER_RUN {
-            let Ok((message, _)) = rx.receive(&mut frame, SystemTime::Normal(Duration::ZERO))
-            else {
-                break;
-            };
-            comm.stack.device.deliver(message);
-            frames_in += 1;
+        if let Some((_, from)) = ring.as_mut() {
+            for _ in 0..FRAMES_PER_RUN {
+                if rx.receive(&mut frame, poll()).is_err() {
+                    break;
+                }
+            }
+            for _ in 0..FRAMES_PER_RUN {
+                match from.pop(&mut frame) {
+                    None => break,
+                    Some(Ok(len)) => comm.stack.device.deliver(&frame[..len]),
+                    // A bogus slot the NIC partition wrote: no frame.
+                    Some(Err(_)) => continue,
+                }
+                frames_in += 1;
+            }
+        } else {
+            for _ in 0..FRAMES_PER_RUN {
+                let Ok((message, _)) = rx.receive(&mut frame, poll()) else {
+                    break;
+                };
+                comm.stack.device.deliver(message);
+                frames_in += 1;
+            }
         }
         let now = now_ns();
         comm.run(now, &mut EXCHANGE.lock());
         log_events(&mut comm, &mut event_lines);
+        let mut wake = false;
         for _ in 0..FRAMES_PER_RUN {
             let Some(out) = comm.stack.device.take() else {
                 break;
             };
-            let _ = tx.send(&out, SystemTime::Normal(Duration::ZERO));
+            match ring.as_mut() {
+                Some((to, _)) => wake |= to.push(&out).is_ok_and(|p| p.first),
+                None => {
+                    let _ = tx.send(&out, poll());
+                }
+            }
             frames_out += 1;
+        }
+        // A full port means wake-ups are already waiting there.
+        if wake {
+            let _ = tx.send(&[0], poll());
         }
         if now >= next_stats {
             next_stats += STATS_EVERY_MS * 1_000_000;

@@ -71,7 +71,8 @@
 //!   11   1    flags: bit 0 a gateway, bit 1 a Modbus/TCP server, bit 2 Modbus may write
 //!             the outputs (%QX, %QW), bit 3 the markers (%MX, %MW), bit 4 the online
 //!             protocol on TCP (`plc.online_tcp`), bit 5 publish/subscribe
-//!             (`plc.publish`, `plc.subscribe`)
+//!             (`plc.publish`, `plc.subscribe`), bit 6 a frame ring
+//!             (`nic.tenants.<plc>.ring`)
 //!   12   4    gateway (0 without)
 //!   16   1    frames-in port (index of a queuing input of at least 1514 bytes)
 //!   17   1    frames-out port (index of a queuing output of at least 1514 bytes)
@@ -81,7 +82,10 @@
 //!   24   4    requests served per second and connection (at least 1)
 //!   28   2    Modbus TCP port (0 without the server)
 //!   30   2    online TCP port (0 without it)
-//!   32   ...  with publish/subscribe, its part ([`PUBSUB_HEAD`] bytes and the names):
+//!   32   16   with a frame ring, its part: the segment's address u64 and size u64 (not 0);
+//!             the frames then go through it (`frame_ring`) and the ports carry the
+//!             wake-ups
+//!   ...  ...  with publish/subscribe, its part ([`PUBSUB_HEAD`] bytes and the names):
 //!   +0   4    publication's destination IPv4 address (0.0.0.0: no publication)
 //!   +4   2    its UDP port
 //!   +6   2    subscription's UDP port (0: no subscription)
@@ -435,6 +439,8 @@ pub struct Net<'a> {
     pub modbus: Option<Modbus>,
     pub online: Option<OnlineTcp<'a>>,
     pub pubsub: Option<PubSub<'a>>,
+    /// The frame ring's segment (address, size) when the frames go through one.
+    pub ring: Option<(u64, u64)>,
 }
 
 /// The online protocol on TCP: its port and its clients' keys.
@@ -508,19 +514,30 @@ const NET_WRITE_OUTPUTS: u8 = 4;
 const NET_WRITE_MARKERS: u8 = 8;
 const NET_ONLINE: u8 = 16;
 const NET_PUBSUB: u8 = 32;
+const NET_RING: u8 = 64;
+/// Bytes of the frame ring's part.
+const RING_PART: usize = 16;
 
 impl<'a> Net<'a> {
     /// The block's fields (its ports are checked by [`Package::parse`]).
     fn parse(b: &'a [u8]) -> Option<Net<'a>> {
-        if b.len() < NET_BLOCK || b[11] & !0x3F != 0 {
+        if b.len() < NET_BLOCK || b[11] & !0x7F != 0 {
             return None;
         }
         let flags = b[11];
-        let (pubsub, records_at) = if flags & NET_PUBSUB != 0 {
-            let (pubsub, len) = PubSub::parse(&b[NET_BLOCK..])?;
-            (Some(pubsub), NET_BLOCK + len)
+        let (ring, part_at) = if flags & NET_RING != 0 {
+            let part = b.get(NET_BLOCK..NET_BLOCK + RING_PART)?;
+            let ring = (u64_at(part, 0), u64_at(part, 8));
+            (ring.1 != 0).then_some(())?;
+            (Some(ring), NET_BLOCK + RING_PART)
         } else {
             (None, NET_BLOCK)
+        };
+        let (pubsub, records_at) = if flags & NET_PUBSUB != 0 {
+            let (pubsub, len) = PubSub::parse(&b[part_at..])?;
+            (Some(pubsub), part_at + len)
+        } else {
+            (None, part_at)
         };
         let online = if flags & NET_ONLINE != 0 {
             Some(OnlineTcp::new(u16_at(b, 30), &b[records_at..])?)
@@ -556,6 +573,7 @@ impl<'a> Net<'a> {
             modbus,
             online,
             pubsub,
+            ring,
         };
         let fits = (1..=30).contains(&net.prefix)
             && net.mac[0] & 1 == 0
@@ -587,6 +605,11 @@ impl<'a> Net<'a> {
             }
             b[19] = m.unit;
             b[28..30].copy_from_slice(&m.port.to_le_bytes());
+        }
+        if let Some((address, size)) = self.ring {
+            flags |= NET_RING;
+            b.extend_from_slice(&address.to_le_bytes());
+            b.extend_from_slice(&size.to_le_bytes());
         }
         if let Some(p) = self.pubsub {
             flags |= NET_PUBSUB;
@@ -1485,6 +1508,7 @@ mod tests {
             }),
             online: None,
             pubsub: None,
+            ring: None,
         }
     }
 
@@ -1648,6 +1672,23 @@ mod tests {
         let parsed = Package::parse(&good).unwrap().net().unwrap();
         assert_eq!(parsed.pubsub, Some(pubsub));
         assert_eq!(parsed.online.unwrap().clients().count(), 1);
+        assert_eq!(parsed.ring, None);
+        // With a frame ring too (its part first), and a ring of size 0 refused.
+        let ring = Some((0x6000_0000_0000, 65536));
+        let mut with_ring = encode(&ports, b"P", &[], None, &[], None, &[]);
+        attach_net(&mut with_ring, &Net { ring, ..net });
+        let parsed = Package::parse(&with_ring).unwrap().net().unwrap();
+        assert_eq!((parsed.ring, parsed.pubsub), (ring, Some(pubsub)));
+        assert_eq!(parsed.online.unwrap().clients().count(), 1);
+        let mut empty = encode(&ports, b"P", &[], None, &[], None, &[]);
+        attach_net(
+            &mut empty,
+            &Net {
+                ring: Some((0x6000_0000_0000, 0)),
+                ..net
+            },
+        );
+        assert!(Package::parse(&empty).is_err());
         // Alone, each half.
         for half in [
             PubSub {
