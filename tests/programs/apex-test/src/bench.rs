@@ -6,10 +6,11 @@
 //!   frame as the NIC partition and the guest exchange them (`frame-out` to `frame-in`);
 //! - `queuing_port_long_roundtrip`: the same with a 20,000-byte message, longer than one
 //!   request (five parts each way through the partition's staging buffer in syssw);
-//! - `shared_ring_frame_roundtrip`: the same frame through a single-producer,
-//!   single-consumer ring in the shared-memory segment `ring` (copied into a slot, the
-//!   head index published, then the slot copied out and the tail index advanced), what a
-//!   frame link over shared memory costs without its notification;
+//! - `shared_ring_frame_roundtrip`: the same frame through a frame ring (`frame_ring`, the
+//!   NIC partition's link to its tenants) in the shared-memory segment `ring`, pushed by
+//!   the tenant's side and popped by the NIC's (copied into a slot, the index published,
+//!   then the slot copied out and the other index advanced): what a frame costs the link
+//!   over shared memory without its wake-up;
 //! - `apex_blackboard_display_read`: DISPLAY_BLACKBOARD then READ_BLACKBOARD of 64 bytes;
 //! - `apex_buffer_send_receive`: SEND_BUFFER then RECEIVE_BUFFER of 64 bytes (time-out 0);
 //! - `apex_semaphore_pingpong`: between two processes: the measuring one signals `ping` and
@@ -29,7 +30,6 @@ use apex::a653rs::prelude::*;
 use apex::codes::apex_name;
 use apex::user_rt::println;
 use apex::user_rt::sys::rdtsc;
-use core::sync::atomic::{AtomicU32, Ordering};
 use core::time::Duration;
 
 /// Samples (kept on the runtime's bounded heap: 8 bytes each).
@@ -38,12 +38,10 @@ const SAMPLES: usize = 4_000;
 const FRAME: u32 = 1514;
 /// A long message: five requests' worth.
 const LONG: usize = 20_000;
-/// The `ring` segment: the first (and only) shared segment of the port benchmark system.
+/// The `ring` segment: the first (and only) shared segment of the port benchmark system,
+/// and its size.
 const RING: u64 = apex::user_rt::partition::SHARED_BASE;
-/// The ring's slots (a power of two) and their stride; the head and tail indices (u32)
-/// sit in the segment's first 64 bytes, the slots after them.
-const RING_SLOTS: u32 = 4;
-const SLOT: u64 = 1536;
+const RING_SIZE: usize = 16 * 1024;
 
 pub fn create(ctx: &mut StartContext<Warden>) {
     ctx.create_queuing_port_sender(name("out"), 64, 4, QueuingDiscipline::Fifo)
@@ -148,26 +146,22 @@ fn frames() {
             .expect("RECEIVE_QUEUING_MESSAGE");
         assert_eq!(got.len(), LONG, "the message comes back whole");
     });
-    let head = RING as *const AtomicU32;
-    let tail = (RING + 4) as *const AtomicU32;
-    let slot = |index: u32| (RING + 64 + u64::from(index % RING_SLOTS) * SLOT) as *mut u8;
+    // SAFETY: the configuration maps `ring` (16 KiB) read-write at SHARED_BASE in this
+    // partition only, for its life; this process is both of the link's sides, one attach
+    // each.
+    let tenant =
+        unsafe { frame_ring::attach(RING as *mut u8, RING_SIZE, frame_ring::Side::Tenant) };
+    // SAFETY: as above.
+    let nic = unsafe { frame_ring::attach(RING as *mut u8, RING_SIZE, frame_ring::Side::Driver) };
+    let ((mut to_nic, _), (_, mut from_tenant)) = (tenant.expect("ring"), nic.expect("ring"));
+    let mut buf = [0u8; frame_ring::MTU];
     measure("shared_ring_frame_roundtrip", || {
-        // The producer: the frame into the slot at the head, then the head published.
-        // SAFETY: the configuration maps `ring` (8 KiB) read-write at SHARED_BASE in this
-        // partition: the indices and every slot (64 + 4 * 1536 bytes) lie inside it.
-        let head = unsafe { &*head };
-        // SAFETY: as above.
-        let tail = unsafe { &*tail };
-        let h = head.load(Ordering::Relaxed);
-        // SAFETY: as above; the slot is the producer's until the head passes it.
-        unsafe { core::ptr::copy_nonoverlapping(frame.as_ptr(), slot(h), frame.len()) };
-        head.store(h.wrapping_add(1), Ordering::Release);
-        // The consumer: the slot at the tail copied out, then the tail advanced.
-        let t = tail.load(Ordering::Relaxed);
-        assert_ne!(head.load(Ordering::Acquire), t, "the ring holds the frame");
-        // SAFETY: as above; the slot is the consumer's until the tail passes it.
-        unsafe { core::ptr::copy_nonoverlapping(slot(t), buf.as_mut_ptr(), buf.len()) };
-        tail.store(t.wrapping_add(1), Ordering::Release);
+        to_nic.push(&frame).expect("room in the ring");
+        let got = from_tenant
+            .pop(&mut buf)
+            .expect("the frame")
+            .expect("intact");
+        assert_eq!(got, frame.len(), "the frame comes back whole");
     });
     assert_eq!(buf, frame, "the ring's frame comes out unchanged");
 }
