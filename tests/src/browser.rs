@@ -162,10 +162,11 @@ impl Drop for Browser {
         while Instant::now() < deadline && matches!(self.child.try_wait(), Ok(None)) {
             std::thread::sleep(Duration::from_millis(100));
         }
-        // Whatever is left of it (renderers, zygotes, the crash handler).
+        // Whatever is left of it (renderers, zygotes, the crash handler): its process
+        // group. The `--` matters: procps-ng 4.0's kill reads `kill -KILL -<pgid>` as
+        // `kill(-1, SIGKILL)`, every process the user may signal.
         let _ = Command::new("kill")
-            .arg("-KILL")
-            .arg(format!("-{}", self.child.id()))
+            .args(["-KILL", "--", &format!("-{}", self.child.id())])
             .status();
         let _ = self.child.wait();
         let _ = std::fs::remove_dir_all(&self.profile);
