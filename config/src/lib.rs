@@ -357,12 +357,13 @@
 //! tenant's frames, and `to`, an `out` port to the tenant, each of `size` at least 1514
 //! (one Ethernet frame without FCS a message), each used by one tenant, and each joined by
 //! its channel to a port of that tenant (the validator names the partition a channel
-//! reaches instead). A tenant with an interface (`guest.net`, `plc.net`, `iec61499.net`)
-//! may name a frame ring, `ring = "<segment>"`: a `[[shared_memory]]` segment of at least
-//! 16 KiB (`frame_ring::MIN_SEGMENT`) that the NIC partition and the tenant both map
-//! `"rw"` and no other partition maps; its frames then go through the segment (a ring
-//! each way, `common/frame-ring`) and the ports carry only wake-ups (the ports' rules
-//! stay). At most 15 tenants; the NIC partition has no `plc`, `guest`,
+//! reaches instead). A tenant may name a frame ring, `ring = "<segment>"`: a
+//! `[[shared_memory]]` segment of at least 16 KiB (`frame_ring::MIN_SEGMENT`) that the NIC
+//! partition and the tenant both map `"rw"` and no other partition maps; its frames then
+//! go through the segment (a ring each way, `common/frame-ring`) and the ports carry only
+//! wake-ups (the ports' rules stay). A guest, a soft-PLC or an IEC 61499 device learns
+//! where its ring is with its interface (`guest.net`, `plc.net`, `iec61499.net`); another
+//! partition program finds it at the segment's address. At most 15 tenants; the NIC partition has no `plc`, `guest`,
 //! `iec61499` or `data` keys (`cargo xtask` writes the tenant table as its data entry,
 //! `nic_core::tenants`). The frame link and the switch's rules: docs/interfaces.md.
 //!

@@ -1,6 +1,6 @@
 //! The network: the NIC partition's virtio-net driver and switch (scenarios `net_nic`, with
-//! a flooding tenant, and `net_nic_quiet`, without; partitions of `partitions/nic/partition`
-//! and `tests/programs/net-echo`).
+//! a flooding tenant, `net_nic_quiet`, without, and `net_nic_ring`, with a hostile tenant
+//! on a frame ring; partitions of `partitions/nic/partition` and `tests/programs/net-echo`).
 
 use scenarios::{boot_beside, check};
 use std::net::UdpSocket;
@@ -117,6 +117,13 @@ fn net_nic_quiet() {
     echoes("net_nic_quiet", "idle");
 }
 
+/// The second tenant floods its frame ring and writes random bytes over its segment:
+/// the switch counts its bogus slots and goes on, the echo tenant keeps every round trip.
+#[test]
+fn net_nic_ring() {
+    echoes("net_nic_ring", "scribble");
+}
+
 /// Scenario `name`: every datagram timed one at a time comes back, beside the second
 /// tenant `other` (flooding or idle).
 fn echoes(name: &str, other: &str) {
@@ -174,6 +181,22 @@ fn echoes(name: &str, other: &str) {
         field(uplink, "bogus") == Some(0) && field(uplink, "malformed") == Some(0),
         "the device wrote nothing bogus",
     );
+    if other == "scribble" {
+        let scribble = last("scribble: t=").unwrap_or("");
+        let scribbled = last(" tenant scribble ").unwrap_or("");
+        println!("{name}: {scribble}\n{name}: {scribbled}");
+        check(
+            &o,
+            field(scribble, "scribbled").is_some_and(|n| n > 1000),
+            "the hostile tenant wrote little over its segment",
+        );
+        check(
+            &o,
+            field(scribbled, "in").is_some_and(|n| n > 100)
+                && field(scribbled, "malformed").is_some_and(|n| n > 0),
+            "the switch took few of the hostile ring's frames or found nothing bogus in it",
+        );
+    }
     if other != "flood" {
         return;
     }

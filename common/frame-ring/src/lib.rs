@@ -22,7 +22,9 @@
 //! moment the consumer has taken its last frame (`consumed` passed it) until it publishes
 //! the next (`produced` passes it); the consumer owns it in between. The producer writes
 //! the slot, then `produced`; the consumer reads `produced`, then the slot, then writes
-//! `consumed`.
+//! `consumed`. Each side writes its index again whenever it looks at the ring (the
+//! producer on every push, the consumer whenever it finds the ring empty), so an index the
+//! other side overwrote costs that side its frames only until then.
 //!
 //! # Waking the consumer
 //!
@@ -233,6 +235,9 @@ impl Producer {
             return Err(PushError::Length(frame.len()));
         }
         let before = self.produced;
+        // Written again each time: a consumer that found a bogus `produced` (the other side
+        // wrote it) resynchronises on the true one.
+        self.ring.index(PRODUCED).store(before, Ordering::Release);
         if before.wrapping_sub(self.ring.index(CONSUMED).load(Ordering::Acquire)) >= self.ring.slots
         {
             return Err(PushError::Full);
@@ -288,6 +293,11 @@ impl Consumer {
         let produced = self.ring.index(PRODUCED).load(Ordering::Acquire);
         let available = produced.wrapping_sub(self.consumed);
         if available == 0 {
+            // Written again while empty: a producer that found a bogus `consumed` (the
+            // other side wrote it) and took its ring for full sees the true one.
+            self.ring
+                .index(CONSUMED)
+                .store(self.consumed, Ordering::Release);
             return None;
         }
         if available > self.ring.slots {

@@ -179,13 +179,39 @@ fn a_bogus_producer_index_or_length_costs_its_frames_only() {
 }
 
 #[test]
-fn a_bogus_consumer_index_reads_as_a_full_ring() {
+fn a_bogus_consumer_index_reads_as_a_full_ring_until_the_consumer_looks_again() {
     let size = MIN_SEGMENT;
     let mut s = Segment::new(size);
-    let ((mut tx, _), _) = s.ends(size);
+    let ((mut tx, _), (_, mut rx)) = s.ends(size);
     s.scribble(CONSUMED, &77u32.to_le_bytes());
     assert_eq!(tx.push(&[1; 60]), Err(PushError::Full));
     assert_eq!(tx.pending(), tx.slots());
+    let mut buf = [0u8; MTU];
+    assert_eq!(rx.pop(&mut buf), None, "empty: it writes its index again");
+    assert_eq!(tx.pending(), 0);
+    assert!(tx.push(&[1; 60]).unwrap().first);
+    assert_eq!(rx.pop(&mut buf), Some(Ok(60)));
+}
+
+#[test]
+fn a_bogus_producer_index_is_written_again_by_the_next_push() {
+    let size = MIN_SEGMENT;
+    let mut s = Segment::new(size);
+    let ((mut tx, _), (_, mut rx)) = s.ends(size);
+    tx.push(&[1; 20]).unwrap();
+    let mut buf = [0u8; MTU];
+    assert_eq!(rx.pop(&mut buf), Some(Ok(20)));
+    // Overwritten with a value far behind the consumer: the consumer skips to it.
+    s.scribble(PRODUCED, &0x8000_0000u32.to_le_bytes());
+    assert_eq!(rx.pop(&mut buf), Some(Err(Bad::Index)));
+    // The next push writes the true index: the consumer resynchronises once more, and
+    // the frame after that arrives.
+    let _ = tx.push(&[2; 20]);
+    let _ = rx.pop(&mut buf);
+    assert_eq!(rx.pop(&mut buf), None);
+    tx.push(&[3; 20]).unwrap();
+    assert_eq!(rx.pop(&mut buf), Some(Ok(20)));
+    assert_eq!(buf[0], 3);
 }
 
 proptest! {

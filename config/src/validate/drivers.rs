@@ -76,25 +76,9 @@ struct TenantEnds {
     ports: Option<(usize, usize)>,
 }
 
-/// The interface of a partition whose frames a NIC tenant entry carries: a guest's `eth0`,
-/// a soft-PLC's or an IEC 61499 device's interface.
-fn frame_link(p: &Partition) -> Option<&GuestNet> {
-    let guest = p.guest.as_ref().and_then(|g| g.net.as_ref());
-    let plc = || {
-        p.plc
-            .as_ref()
-            .and_then(|plc| plc.net.as_ref())
-            .map(|n| &n.link)
-    };
-    let fb = || {
-        p.iec61499
-            .as_ref()
-            .and_then(|f| f.net.as_ref())
-            .map(|n| &n.link)
-    };
-    guest.or_else(plc).or_else(fb)
-}
-
+/// The interface of a partition whose frames a NIC tenant entry carries, where its frame
+/// ring is written down for it: a guest's `eth0`, a soft-PLC's or an IEC 61499 device's
+/// interface (a partition program of its own finds the ring at its segment's address).
 fn frame_link_mut(p: &mut Partition) -> Option<&mut GuestNet> {
     if let Some(net) = p.guest.as_mut().and_then(|g| g.net.as_mut()) {
         return Some(net);
@@ -418,8 +402,8 @@ impl Validator<'_, '_> {
     }
 
     /// A tenant's frame ring: a segment of at least `frame_ring::MIN_SEGMENT` bytes that
-    /// the NIC partition and its tenant (`ends`: a guest, a soft-PLC or an IEC 61499 device
-    /// with its interface) both map read-write and no other partition maps.
+    /// the NIC partition and its tenant (`ends`) both map read-write and no other
+    /// partition maps.
     fn nic_ring(
         &mut self,
         text: &Spanned<String>,
@@ -446,18 +430,6 @@ impl Validator<'_, '_> {
                 format!(
                     "segment `{name}` ({size} bytes) is too small for a frame ring: it needs at least {} bytes (4 frames each way)",
                     frame_ring::MIN_SEGMENT
-                ),
-            );
-            ok = false;
-        }
-        let tenant = &partitions[ends[1]];
-        if frame_link(tenant).is_none() {
-            self.error(
-                start(text),
-                path,
-                format!(
-                    "`{}` has no interface whose frames a ring could carry: a frame ring serves a guest (`guest.net`), a soft-PLC (`plc.net`) or an IEC 61499 device (`iec61499.net`)",
-                    tenant.name
                 ),
             );
             ok = false;

@@ -12,6 +12,11 @@
 //!   EtherType (0x88b5, which the wire and the other tenants ignore), three to QEMU's
 //!   gateway and one broadcast in turn, as fast as its port takes them, for ever; logs `flood: t=<ms>ms sent=<n> refused=<n>` each second (refused: its
 //!   port was full);
+//! * `scribble*`: a hostile tenant on a frame ring (its configuration's first shared
+//!   segment, [`RING_SIZE`] bytes): pushes the flood's frames into its ring as fast as it
+//!   takes them and, after every frame, writes four random bytes at a random offset of the
+//!   segment (indices, lengths, frames, the NIC partition's half too); logs `scribble:
+//!   t=<ms>ms pushed=<n> full=<n> scribbled=<n>` each second;
 //! * `idle*`: sends nothing and takes whatever comes (the quiet case to compare with).
 //!
 //! A hand-made minimal responder, not a TCP/IP stack. A test program: it must never be
@@ -37,6 +42,8 @@ const ETHERTYPE_IPV4: u16 = 0x0800;
 const ETHERTYPE_EXPERIMENTAL: u16 = 0x88b5;
 const UDP: u8 = 17;
 const ECHO_PORT: u16 = 7;
+/// The `scribble` tenant's frame ring: the first shared segment, of this size.
+const RING_SIZE: usize = 64 * 1024;
 
 fn name(text: &str) -> Name {
     Name::from_str(text).expect("names here are short")
@@ -178,12 +185,7 @@ extern "C" fn flood() {
     let (mut sent, mut refused) = (0u64, 0u64);
     let mut next_log = now_ms() + 1000;
     loop {
-        let to = if (sent + refused) % 4 == 3 {
-            [0xff; 6]
-        } else {
-            GATEWAY_MAC
-        };
-        frame[..6].copy_from_slice(&to);
+        flood_frame(sent + refused, &mut frame);
         match tx.send(&frame, SystemTime::Normal(Duration::ZERO)) {
             Ok(()) => sent += 1,
             Err(_) => refused += 1,
@@ -191,6 +193,56 @@ extern "C" fn flood() {
         let now = now_ms();
         if now >= next_log {
             println!("flood: t={now}ms sent={sent} refused={refused}");
+            next_log = now + 1000;
+        }
+    }
+}
+
+/// The flood's frame to the gateway or, every fourth, to everyone.
+fn flood_frame(n: u64, frame: &mut [u8; FRAME]) {
+    frame[..6].copy_from_slice(if n % 4 == 3 { &[0xff; 6] } else { &GATEWAY_MAC });
+}
+
+extern "C" fn scribble() {
+    let tx = QueuingPortSender::<Warden>::from_name(name("tx")).expect("tx");
+    let segment = apex::user_rt::partition::SHARED_BASE as *mut u8;
+    // SAFETY: the configuration maps the first shared segment (RING_SIZE bytes) read-write
+    // at SHARED_BASE in this partition and the NIC partition only; this is the tenant's
+    // one attach.
+    #[allow(unsafe_code)]
+    let ring = unsafe { frame_ring::attach(segment, RING_SIZE, frame_ring::Side::Tenant) };
+    let (mut to_nic, _) = ring.expect("the frame ring");
+    let mut frame = [0xa5u8; FRAME];
+    frame[6..12].copy_from_slice(&FLOOD_MAC);
+    frame[12..14].copy_from_slice(&ETHERTYPE_EXPERIMENTAL.to_be_bytes());
+    let (mut pushed, mut full, mut scribbled) = (0u64, 0u64, 0u64);
+    let mut x: u64 = 0x2545_f491_4f6c_dd1d;
+    let mut next_log = now_ms() + 1000;
+    loop {
+        flood_frame(pushed + full, &mut frame);
+        match to_nic.push(&frame) {
+            Ok(p) => {
+                pushed += 1;
+                if p.first {
+                    let _ = tx.send(&[0], SystemTime::Normal(Duration::ZERO));
+                }
+            }
+            Err(_) => full += 1,
+        }
+        x ^= x << 13;
+        x ^= x >> 7;
+        x ^= x << 17;
+        let at = (x % (RING_SIZE as u64 - 4)) as usize;
+        // SAFETY: `at + 4 <= RING_SIZE`: inside the segment mapped read-write above (what
+        // the bytes break is the ring's business, which trusts none of them).
+        #[allow(unsafe_code)]
+        unsafe {
+            core::ptr::write_unaligned(segment.wrapping_add(at) as *mut u32, (x >> 32) as u32)
+        };
+        scribbled += 1;
+        let now = now_ms();
+        if now >= next_log {
+            println!("scribble: t={now}ms pushed={pushed} full={full} scribbled={scribbled}");
             next_log = now + 1000;
         }
     }
@@ -216,6 +268,8 @@ impl Partition<Warden> for Tenant {
         let me = apex::runtime::start_info();
         let entry_point: extern "C" fn() = if me.name().starts_with("flood") {
             flood
+        } else if me.name().starts_with("scribble") {
+            scribble
         } else if me.name().starts_with("idle") {
             idle
         } else {
