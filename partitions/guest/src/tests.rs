@@ -3715,25 +3715,56 @@ fn sockets_on_the_loopback_through_the_calls() {
     assert_eq!(w.net.open_count(), 0);
 }
 
+/// Guest `a` (10.0.2.15) and guest `b` (10.0.2.16), each with `eth0` linked to ports 0
+/// (received frames) and 1 (frames to send) of its model.
+fn two_eth0s() -> ((crate::net::Net, Model), (crate::net::Net, Model)) {
+    use crate::net::{Net, NetConfig};
+    let eth0 = |mac: u8, ip: u8| {
+        let mut net = Net::new(Some(NetConfig {
+            mac: [2, 0, 0, 0, 0, mac],
+            address: netstack::Ipv4Address::new(10, 0, 2, ip),
+            prefix: 24,
+            gateway: None,
+        }));
+        net.link(0, 1);
+        (net, Model::new(0))
+    };
+    (eth0(1, 15), eth0(2, 16))
+}
+
+/// `a` connects to port 80 of `b`, `step` carrying the frames between them: the client's
+/// socket and the one `b` accepted.
+fn connect_to_b(
+    a: &mut (crate::net::Net, Model),
+    b: &mut (crate::net::Net, Model),
+    mut step: impl FnMut(&mut (crate::net::Net, Model), &mut (crate::net::Net, Model)),
+) -> (netstack::SocketId, netstack::SocketId) {
+    use netstack::{Error, Ipv4Address, SocketAddr};
+    let l = b.0.stack(0).socket(2, 1, 0).unwrap();
+    let any = SocketAddr::new(Ipv4Address::UNSPECIFIED, 80);
+    b.0.stack(0).bind(l, any).unwrap();
+    b.0.stack(0).listen(l, 1).unwrap();
+    let c = a.0.stack(0).socket(2, 1, 0).unwrap();
+    let server = SocketAddr::new(Ipv4Address::new(10, 0, 2, 16), 80);
+    assert_eq!(a.0.stack(0).connect(c, server), Err(Error::WouldBlock));
+    for _ in 0..20 {
+        step(a, b);
+    }
+    assert_eq!(a.0.stack(0).connect_result(c), Ok(()), "connected");
+    let (s, peer) = b.0.stack(0).accept(l).unwrap();
+    assert_eq!(peer.ip, Ipv4Address::new(10, 0, 2, 15));
+    (c, s)
+}
+
 /// Two guests' `eth0` joined through their frame ports, as two tenants of the NIC
 /// partition's switch would be: each guest's stack sends and receives frames only through
 /// the port calls (a port holds 2 frames: what does not fit is lost and sent again);
 /// ARP, a TCP connection from one to the other, bytes both ways.
 #[test]
 fn two_guests_talk_through_their_frame_ports() {
-    use crate::net::{Net, NetConfig};
-    use netstack::{Error, Ipv4Address, SocketAddr};
-    let config = |mac: u8, ip: u8| NetConfig {
-        mac: [2, 0, 0, 0, 0, mac],
-        address: Ipv4Address::new(10, 0, 2, ip),
-        prefix: 24,
-        gateway: None,
-    };
+    use crate::net::Net;
     let (rx, tx) = (0, 1);
-    let mut a = (Net::new(Some(config(1, 15))), Model::new(0));
-    let mut b = (Net::new(Some(config(2, 16))), Model::new(0));
-    a.0.link(rx, tx);
-    b.0.link(rx, tx);
+    let (mut a, mut b) = two_eth0s();
     // Both run, then the wire carries what each sent to the other's rx port.
     let carry = |from: &mut Model, to: &mut Model| {
         for frame in from.port_sent.remove(&tx).unwrap_or_default() {
@@ -3747,19 +3778,7 @@ fn two_guests_talk_through_their_frame_ports() {
         carry(&mut a.1, &mut b.1);
         carry(&mut b.1, &mut a.1);
     };
-    let l = b.0.stack(0).socket(2, 1, 0).unwrap();
-    let any = SocketAddr::new(Ipv4Address::UNSPECIFIED, 80);
-    b.0.stack(0).bind(l, any).unwrap();
-    b.0.stack(0).listen(l, 1).unwrap();
-    let c = a.0.stack(0).socket(2, 1, 0).unwrap();
-    let server = SocketAddr::new(Ipv4Address::new(10, 0, 2, 16), 80);
-    assert_eq!(a.0.stack(0).connect(c, server), Err(Error::WouldBlock));
-    for _ in 0..20 {
-        step(&mut a, &mut b);
-    }
-    assert_eq!(a.0.stack(0).connect_result(c), Ok(()), "connected");
-    let (s, peer) = b.0.stack(0).accept(l).unwrap();
-    assert_eq!(peer.ip, Ipv4Address::new(10, 0, 2, 15));
+    let (c, s) = connect_to_b(&mut a, &mut b, step);
     let data: Vec<u8> = (0..20_000u32).map(|i| (i * 7) as u8).collect();
     let (mut sent, mut got) = (0, Vec::new());
     for _ in 0..400 {
@@ -3799,17 +3818,10 @@ fn two_guests_talk_through_their_frame_ports() {
 #[test]
 #[allow(unsafe_code)]
 fn a_guest_talks_through_its_frame_ring() {
-    use crate::net::{Net, NetConfig};
-    use netstack::{Error, Ipv4Address, SocketAddr};
+    use crate::net::Net;
     #[repr(C, align(64))]
     #[derive(Clone, Copy)]
     struct Line([u8; 64]);
-    let config = |mac: u8, ip: u8| NetConfig {
-        mac: [2, 0, 0, 0, 0, mac],
-        address: Ipv4Address::new(10, 0, 2, ip),
-        prefix: 24,
-        gateway: None,
-    };
     let size = 64 * 1024;
     let mut segment = vec![Line([0; 64]); size / 64];
     let at = segment.as_mut_ptr() as *mut u8;
@@ -3820,11 +3832,8 @@ fn a_guest_talks_through_its_frame_ring() {
     let (mut nic_to, mut nic_from) =
         unsafe { frame_ring::attach(at, size, frame_ring::Side::Driver) }.unwrap();
     let (rx, tx) = (0, 1);
-    let mut a = (Net::new(Some(config(1, 15))), Model::new(0));
-    let mut b = (Net::new(Some(config(2, 16))), Model::new(0));
-    a.0.link(rx, tx);
+    let (mut a, mut b) = two_eth0s();
     a.0.link_ring(tenant);
-    b.0.link(rx, tx);
     let (mut frames_up, mut wakeups_up) = (0, 0);
     let mut buf = [0u8; frame_ring::MTU];
     let mut step = |a: &mut (Net, Model), b: &mut (Net, Model)| {
@@ -3852,18 +3861,7 @@ fn a_guest_talks_through_its_frame_ring() {
             }
         }
     };
-    let l = b.0.stack(0).socket(2, 1, 0).unwrap();
-    let any = SocketAddr::new(Ipv4Address::UNSPECIFIED, 80);
-    b.0.stack(0).bind(l, any).unwrap();
-    b.0.stack(0).listen(l, 1).unwrap();
-    let c = a.0.stack(0).socket(2, 1, 0).unwrap();
-    let server = SocketAddr::new(Ipv4Address::new(10, 0, 2, 16), 80);
-    assert_eq!(a.0.stack(0).connect(c, server), Err(Error::WouldBlock));
-    for _ in 0..20 {
-        step(&mut a, &mut b);
-    }
-    assert_eq!(a.0.stack(0).connect_result(c), Ok(()), "connected");
-    let (s, _) = b.0.stack(0).accept(l).unwrap();
+    let (c, s) = connect_to_b(&mut a, &mut b, &mut step);
     let data: Vec<u8> = (0..20_000u32).map(|i| (i * 7) as u8).collect();
     let (mut sent, mut back, mut got, mut got_back) = (0, 0, Vec::new(), Vec::new());
     let mut chunk = [0u8; 4096];
