@@ -110,10 +110,10 @@ struct Ring {
     slots: u32,
 }
 
-// SAFETY: a ring is a view of shared memory that stays mapped for the life of the
-// partition ([`attach`]'s contract); every access goes through atomics or copies that
-// tolerate a concurrent writer, so moving the view to another thread is sound.
+// Every access goes through atomics or copies that tolerate a concurrent writer.
 #[allow(unsafe_code)]
+// SAFETY: a view of shared memory mapped for the partition's life (`attach`'s contract):
+// moving it to another thread is sound.
 unsafe impl Send for Ring {}
 
 #[allow(unsafe_code)]
@@ -306,10 +306,10 @@ impl Consumer {
         }
         let slot = self.ring.slot(self.consumed);
         let mut len = [0u8; 2];
-        // SAFETY: the slot is inside the ring and the producer published it (`produced`
-        // passed it): it is this side's until `consumed` does. A producer that writes it
-        // anyway only changes the bytes copied out (any bytes are a valid `u8`), and the
-        // length is checked after it is copied, so it is read once.
+        // A producer that writes the slot anyway only changes the bytes copied out (any
+        // bytes are a valid `u8`); the length is checked after it is copied (read once).
+        // SAFETY: the slot is inside the ring and published (`produced` passed it): it is
+        // this side's until `consumed` does.
         unsafe { core::ptr::copy_nonoverlapping(slot, len.as_mut_ptr(), 2) };
         let len = usize::from(u16::from_le_bytes(len));
         let result = if len == 0 || len > MTU {

@@ -439,12 +439,11 @@ fn network(archive: &Archive, ports: &[guest::arinc::Port]) -> guest::net::Net {
     let mut net = Net::new(Some(c));
     net.link(rx, tx);
     if let Some((address, size)) = file.ring {
-        // SAFETY: the configuration tools gave this segment to this partition and its NIC
-        // partition only, both read-write, and syssw maps it at `address` for the
-        // partition's life; this is its one attach on the tenant's side.
+        let at = address as *mut u8;
         #[allow(unsafe_code)]
-        let ring =
-            unsafe { frame_ring::attach(address as *mut u8, size, frame_ring::Side::Tenant) };
+        // SAFETY: a segment of this partition and its NIC partition only (the configuration
+        // tools' check), mapped read-write for its life; the tenant side's one attach.
+        let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) };
         match ring {
             Ok(ring) => {
                 println!(

@@ -411,16 +411,14 @@ impl Net {
         };
         let ring = match n.ring {
             None => None,
-            // SAFETY: the configuration tools gave this segment to this partition and its
-            // NIC partition only, both read-write, and syssw maps it at `address` for the
-            // partition's life; this is its one attach on the tenant's side.
-            #[allow(unsafe_code)]
-            Some((address, size)) => Some(
-                unsafe {
-                    frame_ring::attach(address as *mut u8, size as usize, frame_ring::Side::Tenant)
-                }
-                .map_err(|e| alloc::format!("{e}"))?,
-            ),
+            Some((address, size)) => {
+                let (at, size) = (address as *mut u8, size as usize);
+                #[allow(unsafe_code)]
+                // SAFETY: a segment of this partition and its NIC partition only (the
+                // configuration tools' check), mapped read-write for its life; one attach.
+                let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) };
+                Some(ring.map_err(|e| alloc::format!("{e}"))?)
+            }
         };
         let server = Server::new(&settings, now.max(0) as u64)
             .map_err(|e| alloc::format!("cannot listen on tcp port {}: {e:?}", n.port))?;

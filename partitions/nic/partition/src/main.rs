@@ -343,23 +343,20 @@ extern "C" fn run() {
         }
         let ring = match t.ring {
             None => None,
-            // SAFETY: the configuration tools gave this segment to this partition and the
-            // tenant only, both read-write, and syssw maps it at `address` for the
-            // partition's life; this is its one attach on the NIC's side.
-            #[allow(unsafe_code)]
-            Some(r) => match unsafe {
-                frame_ring::attach(
-                    r.address as *mut u8,
-                    r.size as usize,
-                    frame_ring::Side::Driver,
-                )
-            } {
-                Ok(ring) => Some(ring),
-                Err(e) => {
-                    refuse(format_args!("tenant {}: {e}", t.partition));
-                    return;
+            Some(r) => {
+                let (at, size) = (r.address as *mut u8, r.size as usize);
+                #[allow(unsafe_code)]
+                // SAFETY: a segment of this partition and the tenant only (the configuration
+                // tools' check), mapped read-write for its life; the NIC side's one attach.
+                let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Driver) };
+                match ring {
+                    Ok(ring) => Some(ring),
+                    Err(e) => {
+                        refuse(format_args!("tenant {}: {e}", t.partition));
+                        return;
+                    }
                 }
-            },
+            }
         };
         let link::Link { from, to } = link;
         links.push(Link {

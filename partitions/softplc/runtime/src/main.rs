@@ -860,19 +860,20 @@ extern "C" fn comm() {
     };
     let mut ring = match net.ring {
         None => None,
-        // SAFETY: the configuration tools gave this segment to this partition and its NIC
-        // partition only, both read-write, and syssw maps it at `address` for the
-        // partition's life; this process is its one attach on the tenant's side.
-        #[allow(unsafe_code)]
-        Some((address, size)) => match unsafe {
-            frame_ring::attach(address as *mut u8, size as usize, frame_ring::Side::Tenant)
-        } {
-            Ok(ring) => Some(ring),
-            Err(e) => {
-                report(text!("net: {e}").as_str());
-                return;
+        Some((address, size)) => {
+            let (at, size) = (address as *mut u8, size as usize);
+            #[allow(unsafe_code)]
+            // SAFETY: a segment of this partition and its NIC partition only (the
+            // configuration tools' check), mapped read-write for its life; one attach.
+            let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) };
+            match ring {
+                Ok(ring) => Some(ring),
+                Err(e) => {
+                    report(text!("net: {e}").as_str());
+                    return;
+                }
             }
-        },
+        }
     };
     let poll = || SystemTime::Normal(Duration::ZERO);
     let mut frame = [0u8; netstack::MTU];

@@ -146,13 +146,13 @@ fn frames() {
             .expect("RECEIVE_QUEUING_MESSAGE");
         assert_eq!(got.len(), LONG, "the message comes back whole");
     });
+    // This process is both of the link's sides, one attach each.
+    let at = RING as *mut u8;
     // SAFETY: the configuration maps `ring` (16 KiB) read-write at SHARED_BASE in this
-    // partition only, for its life; this process is both of the link's sides, one attach
-    // each.
-    let tenant =
-        unsafe { frame_ring::attach(RING as *mut u8, RING_SIZE, frame_ring::Side::Tenant) };
+    // partition only, for its life.
+    let tenant = unsafe { frame_ring::attach(at, RING_SIZE, frame_ring::Side::Tenant) };
     // SAFETY: as above.
-    let nic = unsafe { frame_ring::attach(RING as *mut u8, RING_SIZE, frame_ring::Side::Driver) };
+    let nic = unsafe { frame_ring::attach(at, RING_SIZE, frame_ring::Side::Driver) };
     let ((mut to_nic, _), (_, mut from_tenant)) = (tenant.expect("ring"), nic.expect("ring"));
     let mut buf = [0u8; frame_ring::MTU];
     measure("shared_ring_frame_roundtrip", || {

@@ -206,10 +206,9 @@ fn flood_frame(n: u64, frame: &mut [u8; FRAME]) {
 extern "C" fn scribble() {
     let tx = QueuingPortSender::<Warden>::from_name(name("tx")).expect("tx");
     let segment = apex::user_rt::partition::SHARED_BASE as *mut u8;
-    // SAFETY: the configuration maps the first shared segment (RING_SIZE bytes) read-write
-    // at SHARED_BASE in this partition and the NIC partition only; this is the tenant's
-    // one attach.
     #[allow(unsafe_code)]
+    // SAFETY: the first shared segment (RING_SIZE bytes), read-write at SHARED_BASE in this
+    // partition and the NIC partition only; the tenant's one attach.
     let ring = unsafe { frame_ring::attach(segment, RING_SIZE, frame_ring::Side::Tenant) };
     let (mut to_nic, _) = ring.expect("the frame ring");
     let mut frame = [0xa5u8; FRAME];
