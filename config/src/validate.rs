@@ -1910,17 +1910,7 @@ impl Validator<'_, '_> {
     ) -> Option<usize> {
         let name = plc.get_ref().shared.as_ref()?;
         let here = path.key("shared");
-        let Some(index) = segments.iter().position(|(s, _)| s.name == *name.get_ref()) else {
-            self.error(
-                start(name),
-                &here,
-                format!(
-                    "unknown shared memory segment `{}` (define it in [[shared_memory]])",
-                    name.get_ref()
-                ),
-            );
-            return None;
-        };
+        let index = self.segment_named(name, &here, segments)?;
         let writable = attachments
             .iter()
             .any(|a| a.segment == index && a.rights == Rights::ReadWrite);
@@ -2317,6 +2307,27 @@ impl Validator<'_, '_> {
         (dma, unconfined)
     }
 
+    /// The index of the segment `name` names, or an error at `path`.
+    pub(super) fn segment_named(
+        &mut self,
+        name: &Spanned<String>,
+        path: &KeyPath,
+        segments: &[(Segment, usize)],
+    ) -> Option<usize> {
+        let found = segments.iter().position(|(s, _)| s.name == *name.get_ref());
+        if found.is_none() {
+            self.error(
+                start(name),
+                path,
+                format!(
+                    "unknown shared memory segment `{}` (define it in [[shared_memory]])",
+                    name.get_ref()
+                ),
+            );
+        }
+        found
+    }
+
     /// A partition's shared-memory attachments (`attachment_total` counts the system's).
     fn attachments(
         &mut self,
@@ -2328,19 +2339,7 @@ impl Validator<'_, '_> {
         let mut shared = Vec::new();
         for (segment, rights) in in_source_order(&raw.shared) {
             let here = path.key("shared").key(segment.get_ref());
-            let found = segments
-                .iter()
-                .position(|(s, _)| s.name == *segment.get_ref());
-            if found.is_none() {
-                self.error(
-                    start(segment),
-                    &here,
-                    format!(
-                        "unknown shared memory segment `{}` (define it in [[shared_memory]])",
-                        segment.get_ref()
-                    ),
-                );
-            }
+            let found = self.segment_named(segment, &here, segments);
             let r = Rights::from_name(rights.get_ref());
             if r.is_none() {
                 let why = if matches!(rights.get_ref().as_str(), "rwx" | "wx" | "xw") {

@@ -413,14 +413,7 @@ impl Validator<'_, '_> {
         segments: &[(Segment, usize)],
     ) -> Option<FrameRing> {
         let name = text.get_ref();
-        let Some(index) = segments.iter().position(|(s, _)| &s.name == name) else {
-            self.error(
-                start(text),
-                path,
-                format!("unknown shared memory segment `{name}` (define it in [[shared_memory]])"),
-            );
-            return None;
-        };
+        let index = self.segment_named(text, path, segments)?;
         let mut ok = true;
         let size = segments[index].0.size;
         if size < frame_ring::MIN_SEGMENT as u64 {
