@@ -1,7 +1,9 @@
 //! A tenant's pair of queuing ports on a driver partition's side (the NIC's, the block
 //! device's): created in the partition's start from the tenant table's [`PortSpec`]s,
-//! opened again by the driver's process.
+//! opened again by the driver's process. The tenant's side of a NIC link is [`tenant`].
 #![no_std]
+
+pub mod tenant;
 
 use apex::Warden;
 use apex::a653rs::prelude::*;
@@ -37,6 +39,8 @@ pub enum LinkError {
     NotCreated,
     /// The ports were not created in the partition's start.
     NotOpen,
+    /// The frame ring's segment cannot hold a ring.
+    Ring(frame_ring::SegmentError),
 }
 
 impl core::fmt::Display for LinkError {
@@ -45,6 +49,7 @@ impl core::fmt::Display for LinkError {
             Self::NameTooLong => "a port name is too long",
             Self::NotCreated => "its ports cannot be created",
             Self::NotOpen => "its ports were not created",
+            Self::Ring(e) => return write!(f, "{e}"),
         })
     }
 }

@@ -80,6 +80,7 @@ use apex::user_rt::println;
 use core::cell::RefCell;
 use core::str::FromStr;
 use core::time::Duration;
+use driver_link::tenant::TenantLink;
 use iec61499_mgmt::Device;
 use iec61499_mgmt::package::{DataQueue, MgmtPorts, NetPorts, QueuingPort, SamplingPort};
 use iec61499_mgmt::pubsub::NetAddr;
@@ -371,13 +372,7 @@ struct Net {
     logged_tcp: TcpLinkStats,
     /// The frame port's doorbell is set: the device process waits for it.
     doorbell: bool,
-    rx: QueuingPortReceiver<Warden>,
-    tx: QueuingPortSender<Warden>,
-    /// The frame ring, when the package names one: the ports then carry its wake-ups.
-    ring: Option<(frame_ring::Producer, frame_ring::Consumer)>,
-    frame: Vec<u8>,
-    frames_in: u64,
-    frames_out: u64,
+    link: TenantLink,
     logged: Stats,
     event_lines: u32,
     next_stats: i64,
@@ -387,19 +382,13 @@ impl Net {
     /// Opens the frame ports (created at start), listens, and has no UDP endpoints yet;
     /// why not, else.
     fn open(n: &NetPorts<'_>, now: i64) -> Result<Self, String> {
-        let rx = Name::from_str(n.rx.name)
-            .ok()
-            .and_then(|name| QueuingPortReceiver::<Warden>::from_name(name).ok());
-        let tx = Name::from_str(n.tx.name)
-            .ok()
-            .and_then(|name| QueuingPortSender::<Warden>::from_name(name).ok());
-        let (Some(rx), Some(tx)) = (rx, tx) else {
-            return Err(alloc::format!(
-                "cannot open the frame ports {}/{}",
-                n.rx.name,
-                n.tx.name
-            ));
-        };
+        #[allow(unsafe_code)]
+        // SAFETY: the ring's segment is this partition's and its NIC partition's only (the
+        // configuration tools' check), mapped read-write for its life; this device alone
+        // attaches it, once.
+        let link = unsafe { TenantLink::open(n.rx.name, n.tx.name, n.ring) };
+        let link =
+            link.map_err(|e| alloc::format!("the frame link {}/{}: {e}", n.rx.name, n.tx.name))?;
         let settings = Settings {
             mac: n.mac,
             address: n.address,
@@ -409,20 +398,9 @@ impl Net {
             connections: usize::from(n.connections),
             access: n.access,
         };
-        let ring = match n.ring {
-            None => None,
-            Some((address, size)) => {
-                let (at, size) = (address as *mut u8, size as usize);
-                #[allow(unsafe_code)]
-                // SAFETY: a segment of this partition and its NIC partition only (the
-                // configuration tools' check), mapped read-write for its life; one attach.
-                let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) };
-                Some(ring.map_err(|e| alloc::format!("{e}"))?)
-            }
-        };
         let server = Server::new(&settings, now.max(0) as u64)
             .map_err(|e| alloc::format!("cannot listen on tcp port {}: {e:?}", n.port))?;
-        let doorbell = apex::runtime::port_doorbell(rx.id(), DOORBELL_BIT);
+        let doorbell = link.ring_on_arrival(DOORBELL_BIT);
         if let Err(e) = doorbell {
             println!(
                 "iec61499: net: no doorbell on {} ({e:?}); it is polled",
@@ -436,12 +414,7 @@ impl Net {
             tcp: Rc::new(RefCell::new(TcpLinks::new())),
             logged_tcp: TcpLinkStats::default(),
             doorbell: doorbell.is_ok(),
-            rx,
-            tx,
-            ring,
-            frame: alloc::vec![0; netstack::MTU],
-            frames_in: 0,
-            frames_out: 0,
+            link,
             logged: Stats::default(),
             event_lines: EVENT_LINES,
             next_stats: now,
@@ -452,57 +425,18 @@ impl Net {
     /// pump (datagrams sent and received) and the TCP links' (connections made, bytes
     /// moved), the frames out, the log lines.
     fn pass(&mut self, device: &mut Device, now: i64) {
-        let poll = || SystemTime::Normal(Duration::ZERO);
-        if let Some((_, from)) = self.ring.as_mut() {
-            // The wake-ups first, then the ring (one that comes after is kept for the next
-            // pass, its doorbell not lost).
-            for _ in 0..server::FRAMES_PER_RUN {
-                if self.rx.receive(&mut self.frame, poll()).is_err() {
-                    break;
-                }
-            }
-            let mut frame = [0u8; frame_ring::MTU];
-            for _ in 0..server::FRAMES_PER_RUN {
-                match from.pop(&mut frame) {
-                    None => break,
-                    Some(Ok(len)) => self.server.stack.device.deliver(&frame[..len]),
-                    // A bogus slot the NIC partition wrote: no frame.
-                    Some(Err(_)) => continue,
-                }
-                self.frames_in += 1;
-            }
-        } else {
-            for _ in 0..server::FRAMES_PER_RUN {
-                let Ok((message, _)) = self.rx.receive(&mut self.frame, poll()) else {
-                    break;
-                };
-                self.server.stack.device.deliver(message);
-                self.frames_in += 1;
-            }
-        }
+        let stack = &mut self.server.stack;
+        self.link
+            .receive(server::FRAMES_PER_RUN, |frame| stack.device.deliver(frame));
         self.server.run(now.max(0) as u64, device);
         if let (Ok(mut udp), Ok(mut tcp)) = (self.udp.try_borrow_mut(), self.tcp.try_borrow_mut()) {
             udp.pump(&mut self.server.stack);
             tcp.pump(&mut self.server.stack);
             self.server.stack.poll(now.max(0) / 1000);
         }
-        let mut wake = false;
-        for _ in 0..server::FRAMES_PER_RUN {
-            let Some(out) = self.server.stack.device.take() else {
-                break;
-            };
-            match self.ring.as_mut() {
-                Some((to, _)) => wake |= to.push(&out).is_ok_and(|p| p.first),
-                None => {
-                    let _ = self.tx.send(&out, poll());
-                }
-            }
-            self.frames_out += 1;
-        }
-        // A full port means wake-ups are already waiting there.
-        if wake {
-            let _ = self.tx.send(&[0], poll());
-        }
+        let stack = &mut self.server.stack;
+        self.link
+            .send(server::FRAMES_PER_RUN, || stack.device.take());
         self.log(now);
     }
 
@@ -568,8 +502,8 @@ impl Net {
                     s.requests,
                     s.malformed,
                     s.timed_out,
-                    self.frames_in,
-                    self.frames_out
+                    self.link.frames_in,
+                    self.link.frames_out
                 );
             }
             if let Ok(tcp) = self.tcp.try_borrow()

@@ -143,6 +143,7 @@ use core::fmt::Write;
 use core::str::FromStr;
 use core::sync::atomic::{AtomicBool, AtomicU32, Ordering};
 use core::time::Duration;
+use driver_link::tenant::TenantLink;
 use plc_vm::image::Image;
 use plc_vm::verify::VerifiedImage;
 use plc_vm::vm::{CallFrame, Fault, Machine, Memory, TryFrame};
@@ -827,9 +828,7 @@ extern "C" fn control() {
 /// The communication process: frames in from the NIC partition, the stack and its
 /// services ([`softplc::comm::Comm`]), frames out, once per period (at most
 /// [`softplc::comm::FRAMES_PER_RUN`] frames each way), through the frame ports or, when
-/// the package names one, the frame ring (`frame_ring`; the ports then carry the
-/// wake-ups: this process drains the NIC partition's once a period, before it reads the
-/// ring, and sends one when a frame goes into an empty ring).
+/// the package names one, the frame ring ([`TenantLink`]).
 extern "C" fn comm() {
     use softplc::comm::{Comm, FRAMES_PER_RUN};
     let info = apex::runtime::start_info();
@@ -840,12 +839,17 @@ extern "C" fn comm() {
         return;
     };
     let (net, rx_name, tx_name) = net;
-    let (Some(rx), Some(tx)) = (
-        name(rx_name).and_then(|n| QueuingPortReceiver::<Warden>::from_name(n).ok()),
-        name(tx_name).and_then(|n| QueuingPortSender::<Warden>::from_name(n).ok()),
-    ) else {
-        report("net: the frame ports cannot be opened");
-        return;
+    #[allow(unsafe_code)]
+    // SAFETY: the ring's segment is this partition's and its NIC partition's only (the
+    // configuration tools' check), mapped read-write for its life; this process alone
+    // attaches it.
+    let link = unsafe { TenantLink::open(rx_name, tx_name, net.ring) };
+    let mut link = match link {
+        Ok(link) => link,
+        Err(e) => {
+            report(text!("net: the frame link: {e}").as_str());
+            return;
+        }
     };
     let started = now_ns();
     // The online handshake's nonces are seeded from the time-stamp counter (there is no
@@ -858,74 +862,15 @@ extern "C" fn comm() {
             return;
         }
     };
-    let mut ring = match net.ring {
-        None => None,
-        Some((address, size)) => {
-            let (at, size) = (address as *mut u8, size as usize);
-            #[allow(unsafe_code)]
-            // SAFETY: a segment of this partition and its NIC partition only (the
-            // configuration tools' check), mapped read-write for its life; one attach.
-            let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Tenant) };
-            match ring {
-                Ok(ring) => Some(ring),
-                Err(e) => {
-                    report(text!("net: {e}").as_str());
-                    return;
-                }
-            }
-        }
-    };
-    let poll = || SystemTime::Normal(Duration::ZERO);
-    let mut frame = [0u8; netstack::MTU];
-    let (mut frames_in, mut frames_out) = (0u64, 0u64);
     let mut next_stats = started + STATS_EVERY_MS * 1_000_000;
     let mut logged = softplc::comm::CommStats::default();
     let mut event_lines = EVENT_LINES;
     loop {
-        if let Some((_, from)) = ring.as_mut() {
-            for _ in 0..FRAMES_PER_RUN {
-                if rx.receive(&mut frame, poll()).is_err() {
-                    break;
-                }
-            }
-            for _ in 0..FRAMES_PER_RUN {
-                match from.pop(&mut frame) {
-                    None => break,
-                    Some(Ok(len)) => comm.stack.device.deliver(&frame[..len]),
-                    // A bogus slot the NIC partition wrote: no frame.
-                    Some(Err(_)) => continue,
-                }
-                frames_in += 1;
-            }
-        } else {
-            for _ in 0..FRAMES_PER_RUN {
-                let Ok((message, _)) = rx.receive(&mut frame, poll()) else {
-                    break;
-                };
-                comm.stack.device.deliver(message);
-                frames_in += 1;
-            }
-        }
+        link.receive(FRAMES_PER_RUN, |frame| comm.stack.device.deliver(frame));
         let now = now_ns();
         comm.run(now, &mut EXCHANGE.lock());
         log_events(&mut comm, &mut event_lines);
-        let mut wake = false;
-        for _ in 0..FRAMES_PER_RUN {
-            let Some(out) = comm.stack.device.take() else {
-                break;
-            };
-            match ring.as_mut() {
-                Some((to, _)) => wake |= to.push(&out).is_ok_and(|p| p.first),
-                None => {
-                    let _ = tx.send(&out, poll());
-                }
-            }
-            frames_out += 1;
-        }
-        // A full port means wake-ups are already waiting there.
-        if wake {
-            let _ = tx.send(&[0], poll());
-        }
+        link.send(FRAMES_PER_RUN, || comm.stack.device.take());
         if now >= next_stats {
             next_stats += STATS_EVERY_MS * 1_000_000;
             event_lines = EVENT_LINES;
@@ -933,7 +878,7 @@ extern "C" fn comm() {
             if s != logged {
                 logged = s;
                 println!(
-                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} denied={} rejected={} published={} received={} frames_in={frames_in} frames_out={frames_out}",
+                    "plc: t={}ms net open={} accepted={} refused={} malformed={} requests={} responses={} denied={} rejected={} published={} received={} frames_in={} frames_out={}",
                     (now - started) / 1_000_000,
                     comm.open(),
                     s.accepted,
@@ -944,7 +889,9 @@ extern "C" fn comm() {
                     s.denied,
                     s.rejected,
                     s.published,
-                    s.received
+                    s.received,
+                    link.frames_in,
+                    link.frames_out
                 );
             }
         }
