@@ -4,7 +4,8 @@
 //! system calls and faults of it and of the processes it forks (each a task of its own)
 //! with the library's process table ([`guest::system::System`]): it receives the exception
 //! message of any process's thread and replies when the library says so, perhaps much
-//! later (a call that waits). When init ends, the other processes end too, and it reports `init exited with status <n>` (or `killed by signal <n>`) to the
+//! later (a call that waits), with its next receive in one kernel call where it can.
+//! When init ends, the other processes end too, and it reports `init exited with status <n>` (or `killed by signal <n>`) to the
 //! health monitor as an application error, as Linux panics when init ends: the
 //! configuration's health table decides (restart the guest, or end a test run).
 //!
@@ -78,6 +79,12 @@ user_rt::entry!(main);
 /// How often calls that wait are served again while one waits for a port (a sampling
 /// port's message rings no doorbell).
 const PORT_POLL_NS: u64 = 1_000_000;
+/// The reply that resumes a process with the registers of the exception message in the
+/// IPC buffer.
+const RESUME: Message = Message {
+    tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
+    words: [0; 3],
+};
 /// Pages of the pool the IPC buffer takes (at its start).
 const IPC_PAGES: u64 = (IPC_BUFFER_SIZE as u64).div_ceil(PAGE);
 /// The part of the pool that is the heap (1/4: the processes' pages keep the rest; a
@@ -263,6 +270,7 @@ fn main(start: u64, _: u64) {
         sched: Scheduler::new(0),
         levels_set: 0,
         new_thread: true,
+        deferred: None,
     };
     let wants_terminal = archive
         .get(guest::CONSOLE_PATH)
@@ -354,7 +362,7 @@ fn main(start: u64, _: u64) {
             Some(at) => timeout.min(at.saturating_sub(now).max(1)),
             None => timeout,
         };
-        let received = match sys::receive(None, timeout) {
+        let received = match host.receive(timeout) {
             Ok(r) => r,
             Err(user_rt::abi::syscall::Error::TimedOut) => {
                 host.port_waiting = false; // the calls served again say it anew
@@ -394,6 +402,7 @@ fn main(start: u64, _: u64) {
             break ended;
         }
     };
+    host.flush();
     let left = system.pids().filter(|&pid| pid != INIT_PID).count();
     println!("guest: init ended with {left} other processes left");
     system.release_all(&mut fs, &mut host);
@@ -740,6 +749,10 @@ struct GuestHost<'p> {
     levels_set: u64,
     /// A thread was created (at `mcp`) since the priorities were last set.
     new_thread: bool,
+    /// The reply [`Host::resume`] owes a process, sent with the next receive
+    /// ([`GuestHost::receive`]: one kernel call for both) or before anything else acts on
+    /// a process's thread ([`GuestHost::flush`]).
+    deferred: Option<(ThreadId, u32, ExceptionMessage)>,
 }
 
 impl<'p> GuestHost<'p> {
@@ -778,6 +791,35 @@ impl<'p> GuestHost<'p> {
             {
                 t.priority = priority;
             }
+        }
+    }
+
+    /// The next message, after the reply [`Host::resume`] deferred if there is one: the
+    /// reply and the receive in one kernel call (`reply_wait`). A reply that fails (its
+    /// process's thread is gone) is logged, and the message is then received alone.
+    fn receive(&mut self, timeout: u64) -> Result<sys::Received, user_rt::abi::syscall::Error> {
+        let Some((thread, pid, m)) = self.deferred.take() else {
+            return sys::receive(None, timeout);
+        };
+        self.ipc.set_exception(&m);
+        match sys::reply_wait(Some(thread), timeout, &RESUME) {
+            Err(e) if e != user_rt::abi::syscall::Error::TimedOut => {
+                println!("guest: cannot resume process {pid}: {e:?}");
+                sys::receive(None, timeout)
+            }
+            received => received,
+        }
+    }
+
+    /// Sends the deferred reply now: before the guest acts on a process's thread or task
+    /// otherwise, so that each sees its calls' replies in the order they were given.
+    fn flush(&mut self) {
+        let Some((thread, pid, m)) = self.deferred.take() else {
+            return;
+        };
+        self.ipc.set_exception(&m);
+        if let Err(e) = sys::reply(thread, &RESUME) {
+            println!("guest: cannot resume process {pid}: {e:?}");
         }
     }
 
@@ -1022,6 +1064,7 @@ impl Tasks for GuestHost<'_> {
     }
 
     fn release(&mut self, pid: u32) {
+        self.flush();
         let Some(slot) = self
             .tasks
             .iter()
@@ -1053,12 +1096,14 @@ impl Tasks for GuestHost<'_> {
     }
 
     fn interrupt(&mut self, pid: u32) {
+        self.flush();
         if let Some(thread) = self.task(pid).map(|t| t.thread) {
             let _ = sys::thread_interrupt(thread);
         }
     }
 
     fn suspend(&mut self, pid: u32, stop: bool) {
+        self.flush();
         let Some(thread) = self.task(pid).map(|t| t.thread) else {
             return;
         };
@@ -1070,18 +1115,14 @@ impl Tasks for GuestHost<'_> {
         self.sched.stopped(pid, stop);
     }
 
+    /// Deferred to the next receive ([`GuestHost::receive`]), which replies and waits in
+    /// one kernel call.
     fn resume(&mut self, pid: u32, m: &ExceptionMessage) {
+        self.flush();
         let Some(thread) = self.task(pid).map(|t| t.thread) else {
             return;
         };
-        self.ipc.set_exception(m);
-        let resume = Message {
-            tag: MessageTag::new(REPLY_RESUME, EXCEPTION_MESSAGE_SIZE, 0),
-            words: [0; 3],
-        };
-        match sys::reply(thread, &resume) {
-            Ok(()) => self.sched.replied(pid),
-            Err(e) => println!("guest: cannot resume process {pid}: {e:?}"),
-        }
+        self.deferred = Some((thread, pid, *m));
+        self.sched.replied(pid);
     }
 }
