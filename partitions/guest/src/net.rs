@@ -216,7 +216,13 @@ pub struct Net {
     /// When the `rx` port was last looked at, and whether frames came then.
     rx_looked_ns: u64,
     rx_busy: bool,
+    /// The IPv4 multicast groups each socket joined on `eth0` (`IP_ADD_MEMBERSHIP`, by
+    /// [`SocketId`]): the interface is in a group while a socket is.
+    memberships: Vec<(usize, Ipv4Address)>,
 }
+
+/// Groups one socket may join (Linux's `igmp_max_memberships`).
+pub const MAX_MEMBERSHIPS: usize = 20;
 
 impl Default for Net {
     fn default() -> Self {
@@ -238,6 +244,7 @@ impl Net {
             rx_bad: 0,
             rx_looked_ns: 0,
             rx_busy: false,
+            memberships: Vec::new(),
         }
     }
 
@@ -386,17 +393,59 @@ impl Net {
         self.refs.get(id).is_some_and(|&r| r > 0)
     }
 
-    /// A descriptor of socket `id` closed: the socket closes with its last.
+    /// A descriptor of socket `id` closed: the socket closes with its last, and leaves
+    /// its multicast groups.
     pub fn release(&mut self, id: usize) {
         let Some(r) = self.refs.get_mut(id) else {
             return;
         };
         *r = r.saturating_sub(1);
-        if *r == 0
-            && let Some(stack) = self.stack.as_mut()
-        {
+        if *r > 0 {
+            return;
+        }
+        while let Some(&(_, group)) = self.memberships.iter().find(|m| m.0 == id) {
+            let _ = self.leave(self.polled_ns, id, group);
+        }
+        if let Some(stack) = self.stack.as_mut() {
             let _ = stack.close(SocketId(id));
         }
+    }
+
+    /// `IP_ADD_MEMBERSHIP`: socket `id` joins the multicast `group` on `eth0`, whose
+    /// datagrams to the socket's port then reach it. `EINVAL` for an address that is no
+    /// group, `ENODEV` without `eth0`, `EADDRINUSE` when the socket is in the group
+    /// already, `ENOBUFS` beyond [`MAX_MEMBERSHIPS`] or the interface's table (4 groups).
+    pub fn join(&mut self, now_ns: u64, id: usize, group: Ipv4Address) -> Result<(), Errno> {
+        if !group.is_multicast() {
+            return Err(Errno::EINVAL);
+        }
+        if self.eth.is_none() {
+            return Err(Errno::ENODEV);
+        }
+        if self.memberships.contains(&(id, group)) {
+            return Err(Errno::EADDRINUSE);
+        }
+        if self.memberships.iter().filter(|m| m.0 == id).count() >= MAX_MEMBERSHIPS {
+            return Err(Errno::ENOBUFS);
+        }
+        if !self.memberships.iter().any(|m| m.1 == group) {
+            self.stack(now_ns).join_multicast(group).map_err(errno)?;
+        }
+        self.memberships.push((id, group));
+        Ok(())
+    }
+
+    /// `IP_DROP_MEMBERSHIP`: socket `id` leaves `group` (the interface with the last
+    /// socket in it); `EADDRNOTAVAIL` when it was not in the group.
+    pub fn leave(&mut self, now_ns: u64, id: usize, group: Ipv4Address) -> Result<(), Errno> {
+        let Some(at) = self.memberships.iter().position(|&m| m == (id, group)) else {
+            return Err(Errno::EADDRNOTAVAIL);
+        };
+        self.memberships.swap_remove(at);
+        if !self.memberships.iter().any(|m| m.1 == group) {
+            let _ = self.stack(now_ns).leave_multicast(group);
+        }
+        Ok(())
     }
 
     /// Sockets open (descriptors' sockets).

@@ -3756,6 +3756,96 @@ fn connect_to_b(
     (c, s)
 }
 
+/// IPv4 multicast through the calls: a process's UDP socket on guest `a` joins group
+/// 239.1.2.3 (`IP_ADD_MEMBERSHIP`) and receives what guest `b` sends to it; after
+/// `IP_DROP_MEMBERSHIP`, and after a second socket's membership ends with its close, the
+/// group's datagrams no longer arrive; the errors Linux gives for a bad request.
+#[test]
+fn a_socket_joins_and_leaves_a_multicast_group() {
+    use netstack::{Ipv4Address, SocketAddr};
+    let bytes = initramfs();
+    let mut w = World::new(&bytes);
+    let ((net, model), mut b) = two_eth0s();
+    (w.net, w.host.port_messages) = (net, model.port_messages);
+    let (rx, tx) = (0, 1);
+    let step = |w: &mut World, b: &mut (crate::net::Net, Model)| {
+        w.net.run(&mut w.host);
+        b.0.run(&mut b.1);
+        for frame in w.host.port_sent.remove(&tx).unwrap_or_default() {
+            b.1.port_messages
+                .entry(rx)
+                .or_default()
+                .push_back((frame, true));
+        }
+        for frame in b.1.port_sent.remove(&tx).unwrap_or_default() {
+            w.host
+                .port_messages
+                .entry(rx)
+                .or_default()
+                .push_back((frame, true));
+        }
+    };
+    let (addr, mreq, data) = (SCRATCH + 0x100, SCRATCH + 0x200, SCRATCH + 0x300);
+    let s = w.call(nr::socket, [2, 2 | 0o4000, 0, 0, 0, 0]);
+    w.put(
+        addr,
+        &[2, 0, 0x13, 0x88, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0],
+    );
+    assert_eq!(w.call(nr::bind, [s, addr, 16, 0, 0, 0]), 0);
+    let (join, drop) = (35, 36);
+    w.put(mreq, &[239, 1, 2, 3, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::setsockopt, [s, 0, join, mreq, 8, 0]), 0);
+    let sender = b.0.stack(0).socket(2, 2, 0).unwrap();
+    let group = SocketAddr::new(Ipv4Address::new(239, 1, 2, 3), 5000);
+    let send = |w: &mut World, b: &mut (crate::net::Net, Model), text: &[u8]| {
+        assert_eq!(b.0.stack(0).send(sender, text, Some(group)), Ok(text.len()));
+        for _ in 0..5 {
+            step(w, b);
+        }
+    };
+    send(&mut w, &mut b, b"first");
+    assert_eq!(w.call(nr::read, [s, data, 64, 0, 0, 0]), 5);
+    assert_eq!(w.get(data, 5), b"first");
+    // The errors: in the group already, an address that is no group, another interface,
+    // a short request, leaving a group it is not in.
+    assert_eq!(
+        w.call(nr::setsockopt, [s, 0, join, mreq, 8, 0]),
+        err(Errno::EADDRINUSE)
+    );
+    w.put(mreq + 16, &[10, 0, 2, 99, 0, 0, 0, 0]);
+    assert_eq!(
+        w.call(nr::setsockopt, [s, 0, join, mreq + 16, 8, 0]),
+        err(Errno::EINVAL)
+    );
+    w.put(mreq + 32, &[239, 9, 9, 9, 0, 0, 0, 0, 7, 0, 0, 0]);
+    assert_eq!(
+        w.call(nr::setsockopt, [s, 0, join, mreq + 32, 12, 0]),
+        err(Errno::ENODEV)
+    );
+    assert_eq!(
+        w.call(nr::setsockopt, [s, 0, join, mreq, 4, 0]),
+        err(Errno::EINVAL)
+    );
+    assert_eq!(
+        w.call(nr::setsockopt, [s, 0, drop, mreq + 32, 8, 0]),
+        err(Errno::EADDRNOTAVAIL)
+    );
+    // A second socket in the group keeps the interface in it when the first leaves.
+    let t = w.call(nr::socket, [2, 2, 0, 0, 0, 0]);
+    assert_eq!(w.call(nr::setsockopt, [t, 0, join, mreq, 8, 0]), 0);
+    assert_eq!(w.call(nr::setsockopt, [s, 0, drop, mreq, 8, 0]), 0);
+    send(&mut w, &mut b, b"second");
+    assert_eq!(w.call(nr::read, [s, data, 64, 0, 0, 0]), 6, "still joined");
+    // Its close ends the last membership: the group's datagrams stop there.
+    assert_eq!(w.call(nr::close, [t, 0, 0, 0, 0, 0]), 0);
+    send(&mut w, &mut b, b"third");
+    assert_eq!(
+        w.call(nr::read, [s, data, 64, 0, 0, 0]),
+        err(Errno::EAGAIN),
+        "no longer joined"
+    );
+}
+
 /// Two guests' `eth0` joined through their frame ports, as two tenants of the NIC
 /// partition's switch would be: each guest's stack sends and receives frames only through
 /// the port calls (a port holds 2 frames: what does not fit is lost and sent again);

@@ -2,11 +2,13 @@
 //! `socketpair` (refused: no `AF_UNIX`), `bind`, `listen`, `accept`, `accept4`,
 //! `connect` (blocking, or non-blocking with `EINPROGRESS`), `sendto`, `recvfrom`,
 //! `sendmsg`, `recvmsg` (and `read`/`write` of a socket, [`send`]/[`recv`]), `shutdown`,
-//! `getsockname`, `getpeername`, `setsockopt`, `getsockopt`, and the interface requests of
-//! `ioctl` (`SIOCGIF*`; `FIONBIO` through `file::generic_ioctl`). A call that cannot finish now waits (its reply
-//! deferred, see [`crate::system`]) unless the socket is non-blocking or the call says
-//! `MSG_DONTWAIT`: then `EAGAIN`. Only `AF_INET` exists: `AF_INET6`, `AF_UNIX`,
-//! `AF_NETLINK` and others are `EAFNOSUPPORT`, so programs fall back to IPv4.
+//! `getsockname`, `getpeername`, `setsockopt` (with `IP_ADD_MEMBERSHIP` and
+//! `IP_DROP_MEMBERSHIP`: IPv4 multicast groups on `eth0`), `getsockopt`, and the
+//! interface requests of `ioctl` (`SIOCGIF*`; `FIONBIO` through `file::generic_ioctl`). A
+//! call that cannot finish now waits (its reply deferred, see [`crate::system`]) unless
+//! the socket is non-blocking or the call says `MSG_DONTWAIT`: then `EAGAIN`. Only
+//! `AF_INET` exists: `AF_INET6`, `AF_UNIX`, `AF_NETLINK` and others are `EAFNOSUPPORT`,
+//! so programs fall back to IPv4.
 
 use super::table::{Args, Ctx};
 use super::{BROKEN_PIPE, Host, MAX_TRANSFER, SysResult, WOULD_BLOCK, read_u64};
@@ -23,6 +25,12 @@ const MSG_PEEK: u64 = 0x2;
 const MSG_DONTWAIT: u64 = 0x40;
 const MSG_NOSIGNAL: u64 = 0x4000;
 const SOL_IP: i32 = 0;
+const IP_ADD_MEMBERSHIP: i32 = 35;
+const IP_DROP_MEMBERSHIP: i32 = 36;
+/// `struct ip_mreq` (the group, the interface's address) and `struct ip_mreqn` (the
+/// group, the interface's address, its index).
+const IP_MREQ_LEN: usize = 8;
+const IP_MREQN_LEN: usize = 12;
 const SO_PRIORITY: i32 = 12;
 const SO_RCVTIMEO: i32 = 20;
 const SO_SNDTIMEO: i32 = 21;
@@ -438,6 +446,9 @@ pub fn getpeername<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 pub fn setsockopt<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let id = SocketId(socket_at(c.p, a.fd(0))?);
     let (level, name, at, len) = (a.i32(1), a.i32(2), a.ptr(3), a.usize(4));
+    if level == SOL_IP && matches!(name, IP_ADD_MEMBERSHIP | IP_DROP_MEMBERSHIP) {
+        return membership(c, id, name == IP_ADD_MEMBERSHIP, at, len);
+    }
     if (len as i32) < 4 && !(level == SOL_IP && len >= 1) {
         return Err(Errno::EINVAL);
     }
@@ -457,6 +468,35 @@ pub fn setsockopt<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
         .stack(now)
         .set_option(id, level, name, value)
         .map_err(errno)?;
+    Ok(0)
+}
+
+/// `IP_ADD_MEMBERSHIP` (`join`) or `IP_DROP_MEMBERSHIP` with an `ip_mreq` or `ip_mreqn`
+/// at `at`: the group on `eth0`, the only interface with multicast (its address, its
+/// index or "any" name it; another is `ENODEV`).
+fn membership<H: Host>(c: &mut Ctx<H>, id: SocketId, join: bool, at: u64, len: u64) -> Result {
+    if len < IP_MREQ_LEN as u64 {
+        return Err(Errno::EINVAL);
+    }
+    let mut mreq = [0u8; IP_MREQN_LEN];
+    let len = len.min(IP_MREQN_LEN as u64) as usize;
+    c.read_user(at, &mut mreq[..len])?;
+    let group = net::Ipv4Address::new(mreq[0], mreq[1], mreq[2], mreq[3]);
+    let address = net::Ipv4Address::new(mreq[4], mreq[5], mreq[6], mreq[7]);
+    let index = u32::from_le_bytes([mreq[8], mreq[9], mreq[10], mreq[11]]);
+    let eth0 = c.f.net.interfaces().into_iter().find(|i| i.name == "eth0");
+    let names_eth0 = eth0.is_some_and(|e| {
+        (address.is_unspecified() || address == e.address) && (index == 0 || index == e.index)
+    });
+    if !names_eth0 {
+        return Err(Errno::ENODEV);
+    }
+    let now = c.host.now_ns();
+    if join {
+        c.f.net.join(now, id.0, group)?;
+    } else {
+        c.f.net.leave(now, id.0, group)?;
+    }
     Ok(0)
 }
 
