@@ -4,7 +4,8 @@
  * send/recv, sendto/recvfrom, sendmsg/recvmsg, a 256 KiB transfer between two processes,
  * shutdown, getsockname/getpeername, setsockopt/getsockopt, O_NONBLOCK's EAGAIN, poll and
  * select, sendfile from a file, fstat, and the errors of calls on the wrong socket or on
- * no socket at all. Ports are the ones bind picks, so that it runs beside anything. */
+ * no socket at all; a connected AF_UNIX stream pair (socketpair) both ways, across a fork,
+ * shut down and closed. Ports are the ones bind picks, so that it runs beside anything. */
 #include "check.h"
 
 #include <arpa/inet.h>
@@ -19,6 +20,7 @@
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/uio.h>
+#include <sys/un.h>
 #include <sys/wait.h>
 
 #define BIG (256 * 1024)
@@ -418,6 +420,61 @@ static void sendfile_to_socket(void)
 	unlink(path);
 }
 
+static void socket_pair(void)
+{
+	int sv[2];
+	char buf[16];
+	check_ok("socketpair AF_UNIX SOCK_STREAM", socketpair(AF_UNIX, SOCK_STREAM, 0, sv));
+	check_eq("write at one end", 4, write(sv[0], "ping", 4));
+	check_eq("read at the other", 4, read(sv[1], buf, sizeof buf));
+	check("the bytes arrive", memcmp(buf, "ping", 4) == 0, "expected ping");
+	check_eq("send back", 4, send(sv[1], "pong", 4, 0));
+	check_eq("recv", 4, recv(sv[0], buf, sizeof buf, 0));
+	check("the bytes come back", memcmp(buf, "pong", 4) == 0, "expected pong");
+	int type = 0;
+	socklen_t len = sizeof type;
+	check_ok("getsockopt SO_TYPE of a pair's end", getsockopt(sv[0], SOL_SOCKET, SO_TYPE, &type, &len));
+	check_eq("it is SOCK_STREAM", SOCK_STREAM, type);
+	struct stat st;
+	check_ok("fstat of a pair's end", fstat(sv[0], &st));
+	check("it is a socket", S_ISSOCK(st.st_mode), "expected S_IFSOCK");
+	struct sockaddr_un a;
+	len = sizeof a;
+	check_ok("getsockname of a pair's end", getsockname(sv[0], (struct sockaddr *)&a, &len));
+	check_eq("an unnamed address: the family alone", sizeof(sa_family_t), len);
+	check_eq("AF_UNIX", AF_UNIX, a.sun_family);
+	check_errno("recv MSG_DONTWAIT of an empty end EAGAIN", recv(sv[0], buf, 1, MSG_DONTWAIT), EAGAIN);
+	struct pollfd pf = { .fd = sv[1], .events = POLLIN };
+	check_eq("poll of an empty end times out", 0, poll(&pf, 1, 0));
+	check_eq("write a byte", 1, write(sv[0], "x", 1));
+	check_eq("poll sees it", 1, poll(&pf, 1, 0));
+	check_eq("POLLIN", POLLIN, pf.revents & POLLIN);
+	check_eq("read it", 1, read(sv[1], buf, sizeof buf));
+	check_ok("shutdown SHUT_WR of a pair's end", shutdown(sv[0], SHUT_WR));
+	check_eq("the peer reads end of file", 0, read(sv[1], buf, sizeof buf));
+	check_errno("send after SHUT_WR EPIPE", send(sv[0], "x", 1, MSG_NOSIGNAL), EPIPE);
+	check_eq("the other way still carries bytes", 2, write(sv[1], "ok", 2));
+	check_eq("and they arrive", 2, read(sv[0], buf, sizeof buf));
+	close(sv[1]);
+	check_errno("send to a closed peer EPIPE", send(sv[0], "x", 1, MSG_NOSIGNAL), EPIPE);
+	close(sv[0]);
+	/* Across a fork: the child's end closes with the child. */
+	check_ok("socketpair SOCK_CLOEXEC", socketpair(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0, sv));
+	pid_t child = fork();
+	if (child == 0) {
+		close(sv[0]);
+		write(sv[1], "child", 5);
+		_exit(0);
+	}
+	close(sv[1]);
+	check_eq("the child's bytes through the pair", 5, read_full(sv[0], buf, 5));
+	int status;
+	waitpid(child, &status, 0);
+	check_eq("end of file once the child's end closed", 0, read(sv[0], buf, sizeof buf));
+	close(sv[0]);
+	check_errno("socketpair AF_INET EOPNOTSUPP", socketpair(AF_INET, SOCK_STREAM, 0, sv), EOPNOTSUPP);
+}
+
 void area_sockets(void)
 {
 	tcp();
@@ -425,4 +482,5 @@ void area_sockets(void)
 	udp();
 	options_and_errors();
 	sendfile_to_socket();
+	socket_pair();
 }

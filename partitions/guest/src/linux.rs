@@ -44,11 +44,13 @@ impl Errno {
     pub const ETIMEDOUT: Self = Self(110);
     pub const ENOTSOCK: Self = Self(88);
     pub const ENOPROTOOPT: Self = Self(92);
+    pub const EPROTONOSUPPORT: Self = Self(93);
     pub const EOPNOTSUPP: Self = Self(95);
     pub const EAFNOSUPPORT: Self = Self(97);
     pub const EADDRINUSE: Self = Self(98);
     pub const EADDRNOTAVAIL: Self = Self(99);
     pub const ENOBUFS: Self = Self(105);
+    pub const EISCONN: Self = Self(106);
     pub const ENOTCONN: Self = Self(107);
     pub const ELOOP: Self = Self(40);
 

@@ -8,6 +8,11 @@
 //! buffers stay within the table's byte budget (a share of the heap); beyond it a new pipe
 //! gets [`PIPE_BUF`] bytes, as Linux gives one page once a user's pipes exceed
 //! `pipe-user-pages-soft`, and with no budget left `pipe` fails (`ENFILE`).
+//!
+//! A connected pair of `AF_UNIX` stream sockets (`socketpair`) is two pipes, one each
+//! way ([`Pipes::pair`]), with each end's shut-down directions: the peer reads end of
+//! file (after the buffered bytes) once an end closed or shut down writing, and writes to
+//! an end that closed or shut down reading fail with `EPIPE`, as Linux's.
 
 use alloc::vec::Vec;
 
@@ -50,10 +55,32 @@ pub enum Transfer {
     Broken,
 }
 
+/// Most socket pairs open at once (two pipes each).
+pub const MAX_PAIRS: usize = MAX_PIPES / 2;
+
+/// A socket pair: `pipes[end]` carries what `end` writes to the other end.
+#[derive(Clone, Copy, Debug)]
+struct Pair {
+    pipes: [usize; 2],
+    /// Descriptors of each end.
+    refs: [u32; 2],
+    /// Each end's shut-down directions: it no longer reads, no longer writes.
+    shut_read: [bool; 2],
+    shut_write: [bool; 2],
+}
+
+/// How `shutdown` shuts an end down (`SHUT_RD`, `SHUT_WR`, `SHUT_RDWR`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Shut {
+    pub read: bool,
+    pub write: bool,
+}
+
 /// The pipes of a guest, by index.
 #[derive(Clone, Debug)]
 pub struct Pipes {
     pipes: [Option<Pipe>; MAX_PIPES],
+    pairs: [Option<Pair>; MAX_PAIRS],
     /// Bytes the pipes' rings may take together.
     budget: usize,
 }
@@ -74,6 +101,7 @@ impl Pipes {
     pub const fn with_budget(budget: usize) -> Self {
         Self {
             pipes: [const { None }; MAX_PIPES],
+            pairs: [None; MAX_PAIRS],
             budget,
         }
     }
@@ -236,9 +264,207 @@ impl Pipes {
     }
 }
 
+impl Pipes {
+    /// A new socket pair with one descriptor at each end (0 and 1); `None` when the pairs
+    /// or the pipes are all in use or the budget has no room.
+    pub fn pair(&mut self) -> Option<usize> {
+        let index = self.pairs.iter().position(Option::is_none)?;
+        let first = self.open()?;
+        let Some(second) = self.open() else {
+            self.pipes[first] = None;
+            return None;
+        };
+        self.pairs[index] = Some(Pair {
+            pipes: [first, second],
+            refs: [1, 1],
+            shut_read: [false; 2],
+            shut_write: [false; 2],
+        });
+        Some(index)
+    }
+
+    fn pair_at(&mut self, pair: usize) -> Option<&mut Pair> {
+        self.pairs.get_mut(pair).and_then(Option::as_mut)
+    }
+
+    /// One more descriptor of end `end` of `pair` (`dup`, `fork`).
+    pub fn share_pair(&mut self, pair: usize, end: usize) {
+        if let Some(p) = self.pair_at(pair) {
+            p.refs[end & 1] += 1;
+        }
+    }
+
+    /// A descriptor of end `end` closed: with its last the end has shut down both ways
+    /// and lets go of both pipes, and the pair goes with both ends.
+    pub fn close_pair(&mut self, pair: usize, end: usize) {
+        let end = end & 1;
+        let Some(p) = self.pair_at(pair) else {
+            return;
+        };
+        p.refs[end] = p.refs[end].saturating_sub(1);
+        if p.refs[end] > 0 {
+            return;
+        }
+        (p.shut_read[end], p.shut_write[end]) = (true, true);
+        let (mine, theirs, gone) = (p.pipes[end], p.pipes[end ^ 1], p.refs == [0, 0]);
+        self.close_end(mine, true);
+        self.close_end(theirs, false);
+        if gone {
+            self.pairs[pair] = None;
+        }
+    }
+
+    /// `shutdown` of end `end`, for every descriptor of it: after reading ends, it reads
+    /// what was buffered, then end of file, and the peer's writes fail; after writing
+    /// ends, its writes fail and the peer reads end of file after the buffered bytes.
+    pub fn shutdown(&mut self, pair: usize, end: usize, how: Shut) {
+        if let Some(p) = self.pair_at(pair) {
+            p.shut_read[end & 1] |= how.read;
+            p.shut_write[end & 1] |= how.write;
+        }
+    }
+
+    /// Reads at end `end` what the peer wrote; end of file, once the buffer is empty,
+    /// after the peer shut down writing or closed, or this end shut down reading.
+    pub fn read_pair(&mut self, pair: usize, end: usize, buf: &mut [u8]) -> Transfer {
+        let end = end & 1;
+        let Some(p) = self.pair_at(pair) else {
+            return Transfer::Done(0);
+        };
+        let (ended, theirs) = (p.shut_read[end] || p.shut_write[end ^ 1], p.pipes[end ^ 1]);
+        match self.read(theirs, buf) {
+            Transfer::WouldBlock if ended => Transfer::Done(0),
+            done => done,
+        }
+    }
+
+    /// Writes at end `end` for the peer to read; [`Transfer::Broken`] once this end shut
+    /// down writing or the peer shut down reading or closed.
+    pub fn write_pair(&mut self, pair: usize, end: usize, data: &[u8]) -> Transfer {
+        let end = end & 1;
+        let Some(p) = self.pair_at(pair) else {
+            return Transfer::Broken;
+        };
+        if p.shut_write[end] || p.shut_read[end ^ 1] {
+            return Transfer::Broken;
+        }
+        let mine = p.pipes[end];
+        self.write(mine, data)
+    }
+
+    /// The `poll` events of end `end`, as Linux's for a stream socket: readable with bytes
+    /// or once its receiving ended (the peer shut down writing or closed, or it shut down
+    /// reading), writable while its peer's buffer has room (even when a write would fail:
+    /// the write says so), hung up once both its directions ended.
+    pub fn poll_pair(&self, pair: usize, end: usize) -> u16 {
+        use crate::poll::{POLLERR, POLLHUP, POLLIN, POLLOUT};
+        let end = end & 1;
+        let Some(Some(p)) = self.pairs.get(pair) else {
+            return POLLERR;
+        };
+        let peer = end ^ 1;
+        let receiving_ended = p.shut_read[end] || p.shut_write[peer];
+        let sending_ended = p.shut_write[end] || p.shut_read[peer];
+        let data = self.buffered(p.pipes[peer]) > 0;
+        let full = self.poll(p.pipes[end], true) == 0;
+        (if data || receiving_ended { POLLIN } else { 0 })
+            | (if full { 0 } else { POLLOUT })
+            | (if receiving_ended && sending_ended {
+                POLLHUP
+            } else {
+                0
+            })
+    }
+
+    /// Whether end `end` of `pair` still has a descriptor.
+    pub fn pair_open(&self, pair: usize, end: usize) -> bool {
+        self.pairs
+            .get(pair)
+            .and_then(Option::as_ref)
+            .is_some_and(|p| p.refs[end & 1] > 0)
+    }
+
+    /// How many socket pairs are open.
+    pub fn pair_count(&self) -> usize {
+        self.pairs.iter().flatten().count()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A socket pair both ways; `shutdown` of writing gives the peer end of file after the
+    /// buffered bytes, of reading makes the peer's writes fail; `poll` as Linux's; the
+    /// last descriptor of an end closes it (end of file and `EPIPE` for the peer), and the
+    /// pair and its pipes go with both ends.
+    #[test]
+    fn a_socket_pair_talks_both_ways_and_shuts_down_as_linux() {
+        use crate::poll::{POLLHUP, POLLIN, POLLOUT};
+        let mut pipes = Pipes::new();
+        let s = pipes.pair().unwrap();
+        let mut buf = [0u8; 8];
+        assert_eq!(pipes.read_pair(s, 0, &mut buf), Transfer::WouldBlock);
+        assert_eq!(pipes.poll_pair(s, 0), POLLOUT);
+        assert_eq!(pipes.write_pair(s, 0, b"ping"), Transfer::Done(4));
+        assert_eq!(pipes.write_pair(s, 1, b"pong"), Transfer::Done(4));
+        assert_eq!(pipes.poll_pair(s, 1), POLLIN | POLLOUT);
+        assert_eq!(pipes.read_pair(s, 1, &mut buf), Transfer::Done(4));
+        assert_eq!(&buf[..4], b"ping");
+        assert_eq!(pipes.read_pair(s, 0, &mut buf), Transfer::Done(4));
+        assert_eq!(&buf[..4], b"pong");
+        // End 0 stops writing: end 1 reads what was left, then end of file.
+        assert_eq!(pipes.write_pair(s, 0, b"last"), Transfer::Done(4));
+        let write_only = Shut {
+            read: false,
+            write: true,
+        };
+        pipes.shutdown(s, 0, write_only);
+        assert_eq!(pipes.write_pair(s, 0, b"more"), Transfer::Broken);
+        assert_eq!(pipes.read_pair(s, 1, &mut buf), Transfer::Done(4));
+        assert_eq!(pipes.read_pair(s, 1, &mut buf), Transfer::Done(0));
+        assert_eq!(pipes.poll_pair(s, 1), POLLIN | POLLOUT);
+        // End 1 stops reading: end 0's writes fail from then on (they would anyway);
+        // end 1 is not hung up, it still writes.
+        let read_only = Shut {
+            read: true,
+            write: false,
+        };
+        pipes.shutdown(s, 1, read_only);
+        assert_eq!(pipes.poll_pair(s, 1), POLLIN | POLLOUT);
+        assert_eq!(pipes.poll_pair(s, 0), POLLOUT, "only its sending ended");
+        // End 1 still writes to end 0.
+        assert_eq!(pipes.write_pair(s, 1, b"bye"), Transfer::Done(3));
+        // A second descriptor of end 1: closing one keeps it open.
+        pipes.share_pair(s, 1);
+        pipes.close_pair(s, 1);
+        assert!(pipes.pair_open(s, 1));
+        pipes.close_pair(s, 1);
+        assert!(!pipes.pair_open(s, 1));
+        // End 0 reads what end 1 wrote before it closed, then end of file; its writes fail.
+        assert_eq!(pipes.read_pair(s, 0, &mut buf), Transfer::Done(3));
+        assert_eq!(pipes.read_pair(s, 0, &mut buf), Transfer::Done(0));
+        assert_eq!(pipes.poll_pair(s, 0) & (POLLIN | POLLHUP), POLLIN | POLLHUP);
+        pipes.close_pair(s, 0);
+        assert_eq!((pipes.pair_count(), pipes.open_count()), (0, 0));
+        // A peer that closed with nothing shut down: its peer's writes break.
+        let t = pipes.pair().unwrap();
+        pipes.close_pair(t, 0);
+        assert_eq!(pipes.write_pair(t, 1, b"x"), Transfer::Broken);
+        assert_eq!(pipes.read_pair(t, 1, &mut buf), Transfer::Done(0));
+    }
+
+    #[test]
+    fn socket_pairs_are_bounded_by_the_pipes() {
+        let mut pipes = Pipes::with_budget(MAX_PIPES * PIPE_CAPACITY);
+        let pairs: Vec<usize> = (0..MAX_PAIRS).map_while(|_| pipes.pair()).collect();
+        assert_eq!(pairs.len(), MAX_PAIRS);
+        assert_eq!(pipes.pair(), None);
+        assert_eq!(pipes.open(), None, "every pipe is a pair's");
+        pipes.close_pair(pairs[3], 0);
+        pipes.close_pair(pairs[3], 1);
+        assert!(pipes.pair().is_some(), "a freed pair is used again");
+    }
 
     #[test]
     fn reads_what_was_written_then_end_of_file_without_writers() {

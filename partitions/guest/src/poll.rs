@@ -36,6 +36,7 @@ pub fn events(p: &Process, f: &mut Files, host: &mut impl Host, console: u16, fd
 pub fn file_events(f: &mut Files, host: &mut impl Host, console: u16, file: File) -> u16 {
     let ready = match file {
         File::Pipe { pipe, write, .. } => f.pipes.poll(pipe, write),
+        File::UnixSocket { pair, end, .. } => f.pipes.poll_pair(pair, end),
         File::Socket(id) => crate::syscall::socket::events(f.net, host.now_ns(), id),
         File::Console(_) => console,
         File::Open(id) if let Some((index, port)) = port_of(f.fs, id) => {

@@ -85,6 +85,13 @@ pub enum File {
         write: bool,
         nonblock: bool,
     },
+    /// End `end` (0 or 1) of a connected pair of `AF_UNIX` stream sockets (`socketpair`,
+    /// [`crate::pipe::Pipes::pair`]); `nonblock` as for a pipe end.
+    UnixSocket {
+        pair: usize,
+        end: usize,
+        nonblock: bool,
+    },
     /// A socket of the guest's stack ([`crate::net`], by its `netstack::SocketId`); its
     /// `O_NONBLOCK` is the socket's, shared by every descriptor of it.
     Socket(usize),

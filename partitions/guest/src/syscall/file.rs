@@ -94,6 +94,10 @@ pub fn close(
             pipes.close_end(pipe, write);
             !pipes.end_open(pipe, write)
         }
+        File::UnixSocket { pair, end, .. } => {
+            pipes.close_pair(pair, end);
+            !pipes.pair_open(pair, end)
+        }
         File::Socket(id) => {
             net.release(id);
             !net.is_open(id)
@@ -153,6 +157,7 @@ pub fn share_files(
 fn share(pipes: &mut Pipes, events: &mut Events, net: &mut Net, fs: &mut Fs, file: File) {
     match file {
         File::Pipe { pipe, write, .. } => pipes.add_end(pipe, write),
+        File::UnixSocket { pair, end, .. } => pipes.share_pair(pair, end),
         File::Socket(id) => net.share(id),
         File::Open(id) => fs.share(id),
         File::Event(_) | File::Timer(_) | File::Epoll(_) => events.share(file),
@@ -331,6 +336,14 @@ pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> Sys
                         nonblock,
                     });
                 }
+                File::UnixSocket { pair, end, .. } => {
+                    let nonblock = arg & linux::O_NONBLOCK != 0;
+                    p.files[fd] = Some(File::UnixSocket {
+                        pair,
+                        end,
+                        nonblock,
+                    });
+                }
                 File::Open(id) => {
                     const CHANGEABLE: u64 = linux::O_APPEND | linux::O_NONBLOCK;
                     if let Some(o) = f.fs.description_mut(id) {
@@ -376,6 +389,9 @@ pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> Sys
                 let access = if write { linux::O_WRONLY } else { 0 };
                 access | if nonblock { linux::O_NONBLOCK } else { 0 }
             }
+            File::UnixSocket { nonblock, .. } => {
+                linux::O_RDWR | if nonblock { linux::O_NONBLOCK } else { 0 }
+            }
             File::Event(i) => {
                 let nonblock = f.events.counter(i).is_some_and(|c| c.nonblock);
                 linux::O_RDWR | if nonblock { linux::O_NONBLOCK } else { 0 }
@@ -408,12 +424,15 @@ fn read_kernel(
         File::Socket(_) => Err(Errno::EINVAL), // `read` serves sockets itself
         File::Pipe { write: true, .. } => Err(Errno::EBADF),
         File::Pipe { .. } if at.is_some() => Err(Errno::ESPIPE),
-        File::Pipe { pipe, nonblock, .. } => match f.pipes.read(pipe, buf) {
-            Transfer::Done(n) => Ok(n),
-            Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
-            Transfer::WouldBlock => Err(WOULD_BLOCK),
-            Transfer::Broken => Err(Errno::EBADF),
-        },
+        File::Pipe { pipe, nonblock, .. } => {
+            transferred(f.pipes.read(pipe, buf), nonblock, Errno::EBADF)
+        }
+        File::UnixSocket { .. } if at.is_some() => Err(Errno::ESPIPE),
+        File::UnixSocket {
+            pair,
+            end,
+            nonblock,
+        } => transferred(f.pipes.read_pair(pair, end, buf), nonblock, Errno::EBADF),
         File::Event(_) | File::Timer(_) if at.is_some() => Err(Errno::ESPIPE),
         File::Event(i) => super::events::read_counter(f, i, buf),
         File::Timer(i) => super::events::read_timer(f, host, i, buf),
@@ -501,12 +520,15 @@ fn write_kernel(
         }
         File::Pipe { write: false, .. } => Err(Errno::EBADF),
         File::Pipe { .. } if at.is_some() => Err(Errno::ESPIPE),
-        File::Pipe { pipe, nonblock, .. } => match f.pipes.write(pipe, data) {
-            Transfer::Done(n) => Ok(n),
-            Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
-            Transfer::WouldBlock => Err(WOULD_BLOCK),
-            Transfer::Broken => Err(BROKEN_PIPE),
-        },
+        File::Pipe { pipe, nonblock, .. } => {
+            transferred(f.pipes.write(pipe, data), nonblock, BROKEN_PIPE)
+        }
+        File::UnixSocket { .. } if at.is_some() => Err(Errno::ESPIPE),
+        File::UnixSocket {
+            pair,
+            end,
+            nonblock,
+        } => transferred(f.pipes.write_pair(pair, end, data), nonblock, BROKEN_PIPE),
         File::Event(_) if at.is_some() => Err(Errno::ESPIPE),
         File::Event(i) => super::events::write_counter(f, i, data),
         File::Timer(_) | File::Epoll(_) => Err(Errno::EINVAL),
@@ -550,6 +572,18 @@ fn write_kernel(
     }
 }
 
+/// What a pipe's or a socket pair's transfer gives the caller: the bytes moved, `EAGAIN`
+/// or a wait when it would block (`nonblock`: `O_NONBLOCK` or `MSG_DONTWAIT`), `broken`
+/// when nobody reads (`BROKEN_PIPE`: `EPIPE` and `SIGPIPE`).
+pub fn transferred(t: Transfer, nonblock: bool, broken: Errno) -> SysResult<usize> {
+    match t {
+        Transfer::Done(n) => Ok(n),
+        Transfer::WouldBlock if nonblock => Err(Errno::EAGAIN),
+        Transfer::WouldBlock => Err(WOULD_BLOCK),
+        Transfer::Broken => Err(broken),
+    }
+}
+
 /// `n` bytes moved at `offset` through the open file description `id`: unless the call
 /// named its offset (`at`, pread/pwrite), the description's offset now follows them.
 fn moved(f: &mut Files, id: crate::vfs::OpenId, at: Option<u64>, offset: u64, n: usize) -> usize {
@@ -577,7 +611,13 @@ fn used_up(p: &Process, f: &mut Files, fd: u64, e: Errno, write: bool) {
 /// port one message).
 fn streams(p: &Process, f: &Files, fd: u64) -> bool {
     match p.file(fd) {
-        Some(File::Pipe { .. } | File::Socket(_) | File::Event(_) | File::Timer(_)) => false,
+        Some(
+            File::Pipe { .. }
+            | File::UnixSocket { .. }
+            | File::Socket(_)
+            | File::Event(_)
+            | File::Timer(_),
+        ) => false,
         Some(File::Open(id)) => {
             f.fs.description(id)
                 .is_none_or(|o| f.fs.port(o.node).is_none())
@@ -970,9 +1010,11 @@ pub fn sendfile(
 ) -> SysResult<u64> {
     let (p, f, host) = c.parts();
     let writable = match p.file(out_fd).ok_or(Errno::EBADF)? {
-        File::Console(_) | File::Pipe { write: true, .. } | File::Socket(_) | File::Event(_) => {
-            true
-        }
+        File::Console(_)
+        | File::Pipe { write: true, .. }
+        | File::UnixSocket { .. }
+        | File::Socket(_)
+        | File::Event(_) => true,
         File::Pipe { .. } | File::Timer(_) | File::Epoll(_) => false,
         File::Open(id) => {
             f.fs.description(id)
@@ -1199,7 +1241,11 @@ pub fn openat(
             File::Console(_) => File::Console(Stream::Stdout),
             // Linux refuses to open a socket through its link.
             // Nor is an event descriptor reopened through it here.
-            File::Socket(_) | File::Event(_) | File::Timer(_) | File::Epoll(_) => {
+            File::Socket(_)
+            | File::UnixSocket { .. }
+            | File::Event(_)
+            | File::Timer(_)
+            | File::Epoll(_) => {
                 return Err(Errno::ENXIO);
             }
             File::Open(_) => return Err(Errno::ENOENT),
@@ -1391,6 +1437,12 @@ fn stat_fd(p: &Process, f: &Files, fd: u64) -> SysResult<Stat> {
             ino: 0x2000_0000 + pipe as u64,
             nlink: 1,
             mode: S_IFIFO | 0o600,
+            ..Stat::default()
+        },
+        File::UnixSocket { pair, end, .. } => Stat {
+            ino: crate::vfs::proc::unix_socket_ino(pair, end),
+            nlink: 1,
+            mode: S_IFSOCK | 0o777,
             ..Stat::default()
         },
         File::Socket(id) => Stat {

@@ -1,19 +1,22 @@
 //! The socket calls of a process ([`crate::net`]: the stack and its sockets): `socket`,
-//! `socketpair` (refused: no `AF_UNIX`), `bind`, `listen`, `accept`, `accept4`,
-//! `connect` (blocking, or non-blocking with `EINPROGRESS`), `sendto`, `recvfrom`,
-//! `sendmsg`, `recvmsg` (and `read`/`write` of a socket, [`send`]/[`recv`]), `shutdown`,
-//! `getsockname`, `getpeername`, `setsockopt` (with `IP_ADD_MEMBERSHIP` and
-//! `IP_DROP_MEMBERSHIP`: IPv4 multicast groups on `eth0`), `getsockopt`, and the
-//! interface requests of `ioctl` (`SIOCGIF*`; `FIONBIO` through `file::generic_ioctl`). A
-//! call that cannot finish now waits (its reply deferred, see [`crate::system`]) unless
-//! the socket is non-blocking or the call says `MSG_DONTWAIT`: then `EAGAIN`. Only
-//! `AF_INET` exists: `AF_INET6`, `AF_UNIX`, `AF_NETLINK` and others are `EAFNOSUPPORT`,
-//! so programs fall back to IPv4.
+//! `bind`, `listen`, `accept`, `accept4`, `connect` (blocking, or non-blocking with
+//! `EINPROGRESS`), `sendto`, `recvfrom`, `sendmsg`, `recvmsg` (and `read`/`write` of a
+//! socket, [`send`]/[`recv`]), `shutdown`, `getsockname`, `getpeername`, `setsockopt`
+//! (with `IP_ADD_MEMBERSHIP` and `IP_DROP_MEMBERSHIP`: IPv4 multicast groups on `eth0`),
+//! `getsockopt`, and the interface requests of `ioctl` (`SIOCGIF*`; `FIONBIO` through
+//! `file::generic_ioctl`). A call that cannot finish now waits (its reply deferred, see
+//! [`crate::system`]) unless the socket is non-blocking or the call says `MSG_DONTWAIT`:
+//! then `EAGAIN`. `socket` makes `AF_INET` sockets only: `AF_INET6`, `AF_UNIX`,
+//! `AF_NETLINK` and others are `EAFNOSUPPORT`, so programs fall back to IPv4.
+//! `socketpair` makes a connected pair of `AF_UNIX` stream sockets (two pipes,
+//! [`crate::pipe::Pipes::pair`]), whose ends the send, receive, `shutdown`, name and
+//! option calls serve too (an `AF_INET`-only call on one is `EOPNOTSUPP`).
 
 use super::table::{Args, Ctx};
 use super::{BROKEN_PIPE, Host, MAX_TRANSFER, SysResult, WOULD_BLOCK, read_u64};
 use crate::linux::Errno;
 use crate::net::{self, Interface, SOCKADDR_IN_LEN, errno, parse_sockaddr, sockaddr_bytes};
+use crate::pipe::{PIPE_CAPACITY, Shut, Transfer};
 use crate::process::{File, Process};
 use alloc::vec::Vec;
 use netstack::linux::*;
@@ -25,6 +28,9 @@ const MSG_PEEK: u64 = 0x2;
 const MSG_DONTWAIT: u64 = 0x40;
 const MSG_NOSIGNAL: u64 = 0x4000;
 const SOL_IP: i32 = 0;
+const AF_UNIX: i32 = 1;
+const SO_ACCEPTCONN: i32 = 30;
+const SO_DOMAIN: i32 = 39;
 const IP_ADD_MEMBERSHIP: i32 = 35;
 const IP_DROP_MEMBERSHIP: i32 = 36;
 /// `struct ip_mreq` (the group, the interface's address) and `struct ip_mreqn` (the
@@ -46,8 +52,33 @@ const TCP_STEP: usize = 16 * 1024;
 pub fn socket_at(p: &Process, fd: u64) -> SysResult<usize> {
     match p.file(fd).ok_or(Errno::EBADF)? {
         File::Socket(id) => Ok(id),
+        // What only an `AF_INET` socket does (bind, listen, connect, its options).
+        File::UnixSocket { .. } => Err(Errno::EOPNOTSUPP),
         _ => Err(Errno::ENOTSOCK),
     }
+}
+
+/// The socket pair end `fd` is (its pair, its end, its `O_NONBLOCK`), if it is one.
+fn pair_end(p: &Process, fd: u64) -> Option<(usize, usize, bool)> {
+    match p.file(fd)? {
+        File::UnixSocket {
+            pair,
+            end,
+            nonblock,
+        } => Some((pair, end, nonblock)),
+        _ => None,
+    }
+}
+
+/// What a pair's transfer gives the caller ([`super::file::transferred`]; `MSG_NOSIGNAL`:
+/// no `SIGPIPE`).
+fn pair_result(t: Transfer, nonblock: bool, flags: u64) -> Result {
+    let broken = if flags & MSG_NOSIGNAL != 0 {
+        Errno::EPIPE
+    } else {
+        BROKEN_PIPE
+    };
+    super::file::transferred(t, nonblock, broken).map(|n| n as u64)
 }
 
 /// A would-block answer as the caller gets it: `EAGAIN` when it must not wait.
@@ -120,13 +151,43 @@ pub fn socket<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     Ok(fd as u64)
 }
 
-/// `socketpair`: only `AF_UNIX` makes pairs on Linux, and the guest has no `AF_UNIX`.
-pub fn socketpair<H: Host>(_: &mut Ctx<H>, a: Args) -> Result {
-    Err(if a.i32(0) == AF_INET {
-        Errno::EOPNOTSUPP
-    } else {
-        Errno::EAFNOSUPPORT
-    })
+/// `socketpair`: a connected pair of `AF_UNIX` stream sockets ([`crate::pipe::Pipes::pair`]),
+/// with `SOCK_NONBLOCK` and `SOCK_CLOEXEC`. `AF_UNIX` datagram and sequenced-packet pairs
+/// are `EOPNOTSUPP`, as is an `AF_INET` pair (Linux's answer); other families
+/// `EAFNOSUPPORT`.
+pub fn socketpair<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    let (domain, ty, protocol, fds) = (a.i32(0), a.i32(1), a.i32(2), a.ptr(3));
+    match domain {
+        AF_UNIX => {}
+        AF_INET => return Err(Errno::EOPNOTSUPP),
+        _ => return Err(Errno::EAFNOSUPPORT),
+    }
+    if ty & !(0xf | SOCK_NONBLOCK | SOCK_CLOEXEC) != 0 {
+        return Err(Errno::EINVAL);
+    }
+    if protocol != 0 && protocol != AF_UNIX {
+        return Err(Errno::EPROTONOSUPPORT);
+    }
+    if ty & 0xf != SOCK_STREAM {
+        return Err(Errno::EOPNOTSUPP);
+    }
+    super::check_user(c.p, fds, 8, crate::memory::Rights::WRITE)?;
+    let first = c.p.free_fd().ok_or(Errno::EMFILE)?;
+    let second = c.p.free_fd_from(first + 1).ok_or(Errno::EMFILE)?;
+    let pair = c.f.pipes.pair().ok_or(Errno::ENFILE)?;
+    for (end, fd) in [first, second].into_iter().enumerate() {
+        let file = File::UnixSocket {
+            pair,
+            end,
+            nonblock: ty & SOCK_NONBLOCK != 0,
+        };
+        c.p.install(fd, file, ty & SOCK_CLOEXEC != 0);
+    }
+    let mut both = [0u8; 8];
+    both[..4].copy_from_slice(&(first as u32).to_le_bytes());
+    both[4..].copy_from_slice(&(second as u32).to_le_bytes());
+    c.write_user(fds, &both)?;
+    Ok(0)
 }
 
 pub fn bind<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
@@ -216,6 +277,15 @@ pub fn send(
     flags: u64,
     to: Option<SocketAddr>,
 ) -> Result {
+    if let Some((pair, end, nonblock)) = pair_end(c.p, fd) {
+        if to.is_some() {
+            return Err(Errno::EISCONN);
+        }
+        let mut data = zeroed((len as usize).min(MAX_TRANSFER).min(PIPE_CAPACITY))?;
+        c.read_user(buf, &mut data)?;
+        let sent = c.f.pipes.write_pair(pair, end, &data);
+        return pair_result(sent, nonblock || flags & MSG_DONTWAIT != 0, flags);
+    }
     let id = SocketId(socket_at(c.p, fd)?);
     let now = c.host.now_ns();
     let stack = c.f.net.stack(now);
@@ -282,6 +352,13 @@ fn receive(
 ) -> SysResult<(Vec<u8>, Option<SocketAddr>)> {
     if flags & MSG_PEEK != 0 {
         return Err(Errno::EOPNOTSUPP);
+    }
+    if let Some((pair, end, nonblock)) = pair_end(c.p, fd) {
+        let mut data = zeroed((len as usize).min(MAX_MESSAGE))?;
+        let got = c.f.pipes.read_pair(pair, end, &mut data);
+        let n = pair_result(got, nonblock || flags & MSG_DONTWAIT != 0, 0)?;
+        data.truncate(n as usize);
+        return Ok((data, None));
     }
     let id = SocketId(socket_at(c.p, fd)?);
     let now = c.host.now_ns();
@@ -360,7 +437,10 @@ fn iovecs(c: &mut Ctx<'_, '_, impl Host>, h: &MsgHdr) -> SysResult<Vec<(u64, u64
 
 pub fn sendmsg<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (fd, flags) = (a.fd(0), a.flags(2));
-    socket_at(c.p, fd)?;
+    let pair = pair_end(c.p, fd);
+    if pair.is_none() {
+        socket_at(c.p, fd)?;
+    }
     let h = read_msghdr(c, a.ptr(1))?;
     let to = match h.name {
         0 => None,
@@ -374,6 +454,13 @@ pub fn sendmsg<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
         data.try_reserve(len).map_err(|_| Errno::ENOMEM)?;
         data.resize(start + len, 0);
         c.read_user(base, &mut data[start..])?;
+    }
+    if let Some((pair, end, nonblock)) = pair {
+        if to.is_some() {
+            return Err(Errno::EISCONN);
+        }
+        let sent = c.f.pipes.write_pair(pair, end, &data);
+        return pair_result(sent, nonblock || flags & MSG_DONTWAIT != 0, flags);
     }
     let now = c.host.now_ns();
     let stack = c.f.net.stack(now);
@@ -392,7 +479,9 @@ pub fn sendmsg<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 
 pub fn recvmsg<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     let (fd, at, flags) = (a.fd(0), a.ptr(1), a.flags(2));
-    socket_at(c.p, fd)?;
+    if pair_end(c.p, fd).is_none() {
+        socket_at(c.p, fd)?;
+    }
     let h = read_msghdr(c, at)?;
     let pieces = iovecs(c, &h)?;
     let room: u64 = pieces.iter().map(|&(_, len)| len).sum();
@@ -419,6 +508,16 @@ pub fn recvmsg<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 
 pub fn shutdown<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    if let Some((pair, end, _)) = pair_end(c.p, a.fd(0)) {
+        let (read, write) = match a.i32(1) {
+            SHUT_RD => (true, false),
+            SHUT_WR => (false, true),
+            SHUT_RDWR => (true, true),
+            _ => return Err(Errno::EINVAL),
+        };
+        c.f.pipes.shutdown(pair, end, Shut { read, write });
+        return Ok(0);
+    }
     let id = SocketId(socket_at(c.p, a.fd(0))?);
     let now = c.host.now_ns();
     let stack = c.f.net.stack(now);
@@ -427,7 +526,25 @@ pub fn shutdown<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     Ok(0)
 }
 
+/// The address of a socket pair's end, as Linux's unnamed `AF_UNIX` socket: its family
+/// alone (2 bytes).
+fn unnamed_address(c: &mut Ctx<'_, '_, impl Host>, address: u64, len_at: u64) -> Result {
+    let mut room = [0u8; 4];
+    c.read_user(len_at, &mut room)?;
+    let room = i32::from_le_bytes(room);
+    if room < 0 {
+        return Err(Errno::EINVAL);
+    }
+    let family = (AF_UNIX as u16).to_le_bytes();
+    c.write_user(address, &family[..(room as usize).min(2)])?;
+    c.write_user(len_at, &2u32.to_le_bytes())?;
+    Ok(0)
+}
+
 pub fn getsockname<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    if pair_end(c.p, a.fd(0)).is_some() {
+        return unnamed_address(c, a.ptr(1), a.ptr(2));
+    }
     let id = SocketId(socket_at(c.p, a.fd(0))?);
     let now = c.host.now_ns();
     let addr = c.f.net.stack(now).local_addr(id).map_err(errno)?;
@@ -436,6 +553,9 @@ pub fn getsockname<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 
 pub fn getpeername<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    if pair_end(c.p, a.fd(0)).is_some() {
+        return unnamed_address(c, a.ptr(1), a.ptr(2));
+    }
     let id = SocketId(socket_at(c.p, a.fd(0))?);
     let now = c.host.now_ns();
     let addr = c.f.net.stack(now).peer_addr(id).map_err(errno)?;
@@ -444,6 +564,14 @@ pub fn getpeername<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
 }
 
 pub fn setsockopt<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
+    if pair_end(c.p, a.fd(0)).is_some() {
+        // A pair's socket-level options (buffer sizes, timeouts) are accepted, not
+        // honoured; it has no protocol options.
+        return match a.i32(1) {
+            SOL_SOCKET => Ok(0),
+            _ => Err(Errno::ENOPROTOOPT),
+        };
+    }
     let id = SocketId(socket_at(c.p, a.fd(0))?);
     let (level, name, at, len) = (a.i32(1), a.i32(2), a.ptr(3), a.usize(4));
     if level == SOL_IP && matches!(name, IP_ADD_MEMBERSHIP | IP_DROP_MEMBERSHIP) {
@@ -501,7 +629,7 @@ fn membership<H: Host>(c: &mut Ctx<H>, id: SocketId, join: bool, at: u64, len: u
 }
 
 pub fn getsockopt<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
-    let id = SocketId(socket_at(c.p, a.fd(0))?);
+    let fd = a.fd(0);
     let (level, name, at, len_at) = (a.i32(1), a.i32(2), a.ptr(3), a.ptr(4));
     let mut len = [0u8; 4];
     c.read_user(len_at, &mut len)?;
@@ -509,6 +637,19 @@ pub fn getsockopt<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
     if room < 0 {
         return Err(Errno::EINVAL);
     }
+    if pair_end(c.p, fd).is_some() {
+        let value: i32 = match (level, name) {
+            (SOL_SOCKET, SO_TYPE) => SOCK_STREAM,
+            (SOL_SOCKET, SO_DOMAIN) => AF_UNIX,
+            (SOL_SOCKET, SO_ERROR | SO_ACCEPTCONN) => 0,
+            _ => return Err(Errno::ENOPROTOOPT),
+        };
+        let n = (room as usize).min(4);
+        c.write_user(at, &value.to_le_bytes()[..n])?;
+        c.write_user(len_at, &(n as u32).to_le_bytes())?;
+        return Ok(0);
+    }
+    let id = SocketId(socket_at(c.p, fd)?);
     let now = c.host.now_ns();
     let stack = c.f.net.stack(now);
     let mut bytes = [0u8; 16];

@@ -275,6 +275,9 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
             crate::process::File::Socket(id) => {
                 write!(w, "socket:[{}]", SOCKET_INO + id as u64).ok()?
             }
+            crate::process::File::UnixSocket { pair, end, .. } => {
+                write!(w, "socket:[{}]", unix_socket_ino(pair, end)).ok()?
+            }
             crate::process::File::Event(_) => write!(w, "anon_inode:[eventfd]").ok()?,
             crate::process::File::Timer(_) => write!(w, "anon_inode:[timerfd]").ok()?,
             crate::process::File::Epoll(_) => write!(w, "anon_inode:[eventpoll]").ok()?,
@@ -290,6 +293,13 @@ pub fn link<'b>(node: Node, procs: &Procs, buf: &'b mut [u8; 280]) -> Option<&'b
 const PIPE_INO: u64 = 0x3000_0000;
 /// The inode number of socket 0 (`socket:[<n>]`, `fstat`).
 pub const SOCKET_INO: u64 = 0x3800_0000;
+/// The inode number of end 0 of socket pair 0 (end 1 is the next).
+const UNIX_SOCKET_INO: u64 = SOCKET_INO + 0x1_0000;
+
+/// The inode number of end `end` of socket pair `pair` (`socket:[<n>]`, `fstat`).
+pub fn unix_socket_ino(pair: usize, end: usize) -> u64 {
+    UNIX_SOCKET_INO + 2 * pair as u64 + (end & 1) as u64
+}
 /// The inode number of Linux's one anonymous inode (`eventfd`, `timerfd`, epoll).
 pub const ANON_INO: u64 = 0x3c00_0000;
 
