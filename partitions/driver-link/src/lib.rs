@@ -54,9 +54,9 @@ impl core::fmt::Display for LinkError {
     }
 }
 
-fn names(from: &PortSpec<'_>, to: &PortSpec<'_>) -> Result<(Name, Name), LinkError> {
+fn names(from: &str, to: &str) -> Result<(Name, Name), LinkError> {
     let name = |n: &str| Name::from_str(n).map_err(|_| LinkError::NameTooLong);
-    Ok((name(from.name)?, name(to.name)?))
+    Ok((name(from)?, name(to)?))
 }
 
 /// Creates the pair (in COLD_START or WARM_START), FIFO both.
@@ -65,7 +65,7 @@ pub fn create(
     from: &PortSpec<'_>,
     to: &PortSpec<'_>,
 ) -> Result<(), LinkError> {
-    let (from_name, to_name) = names(from, to)?;
+    let (from_name, to_name) = names(from.name, to.name)?;
     let fifo = QueuingDiscipline::Fifo;
     ctx.create_queuing_port_receiver(from_name, from.size, from.depth, fifo)
         .map_err(|_| LinkError::NotCreated)?;
@@ -76,6 +76,12 @@ pub fn create(
 
 /// Opens the pair [`create`] made (in a process).
 pub fn open(from: &PortSpec<'_>, to: &PortSpec<'_>) -> Result<Link, LinkError> {
+    open_named(from.name, to.name)
+}
+
+/// Opens the ports named `from` (a receiver) and `to` (a sender) that the partition
+/// created at its start.
+pub fn open_named(from: &str, to: &str) -> Result<Link, LinkError> {
     let (from_name, to_name) = names(from, to)?;
     Ok(Link {
         from: QueuingPortReceiver::from_name(from_name).map_err(|_| LinkError::NotOpen)?,

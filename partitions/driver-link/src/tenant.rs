@@ -4,20 +4,17 @@
 //! its wake-ups. The tenant moves frames between the link and its network stack once a
 //! pass, a bounded number each way.
 
-use crate::LinkError;
-use apex::Warden;
+use crate::{Link, LinkError};
 use apex::a653rs::prelude::*;
-use core::str::FromStr;
 use core::time::Duration;
 
 /// The longest frame either way (an Ethernet frame without its FCS).
 pub const MTU: usize = frame_ring::MTU;
 
-/// The tenant's ends of its frame ports (`rx` from the NIC partition, `tx` to it) and of
-/// its frame ring, if any.
+/// The tenant's ends of its frame ports (`from` the NIC partition, `to` it) and of its
+/// frame ring, if any.
 pub struct TenantLink {
-    rx: QueuingPortReceiver<Warden>,
-    tx: QueuingPortSender<Warden>,
+    ports: Link,
     ring: Option<(frame_ring::Producer, frame_ring::Consumer)>,
     frame: [u8; MTU],
     /// Frames received and sent since the link was opened.
@@ -35,8 +32,7 @@ impl TenantLink {
     /// be attached by no one else in this partition.
     #[allow(unsafe_code)]
     pub unsafe fn open(rx: &str, tx: &str, ring: Option<(u64, u64)>) -> Result<Self, LinkError> {
-        let name = |n: &str| Name::from_str(n).map_err(|_| LinkError::NameTooLong);
-        let (rx, tx) = (name(rx)?, name(tx)?);
+        let ports = crate::open_named(rx, tx)?;
         let ring = match ring {
             None => None,
             Some((address, size)) => {
@@ -47,8 +43,7 @@ impl TenantLink {
             }
         };
         Ok(TenantLink {
-            rx: QueuingPortReceiver::from_name(rx).map_err(|_| LinkError::NotOpen)?,
-            tx: QueuingPortSender::from_name(tx).map_err(|_| LinkError::NotOpen)?,
+            ports,
             ring,
             frame: [0; MTU],
             frames_in: 0,
@@ -57,12 +52,13 @@ impl TenantLink {
     }
 
     /// Asks syssw to notify the calling process's thread with `bits` whenever a message
-    /// (a frame, or the ring's wake-up) arrives from the NIC partition.
+    /// (a frame, or the ring's wake-up) arrives from the NIC partition
+    /// ([`Link::ring_on_arrival`]).
     pub fn ring_on_arrival(
         &self,
         bits: u64,
     ) -> Result<(), apex::a653rs::bindings::ErrorReturnCode> {
-        apex::runtime::port_doorbell(self.rx.id(), bits)
+        self.ports.ring_on_arrival(bits)
     }
 
     /// Hands up to `budget` frames from the NIC partition to `deliver`. With a ring, its
@@ -73,7 +69,7 @@ impl TenantLink {
         let poll = || SystemTime::Normal(Duration::ZERO);
         let Some((_, from)) = self.ring.as_mut() else {
             for _ in 0..budget {
-                let Ok((frame, _)) = self.rx.receive(&mut self.frame, poll()) else {
+                let Ok((frame, _)) = self.ports.from.receive(&mut self.frame, poll()) else {
                     break;
                 };
                 deliver(frame);
@@ -82,7 +78,7 @@ impl TenantLink {
             return;
         };
         for _ in 0..budget {
-            if self.rx.receive(&mut self.frame, poll()).is_err() {
+            if self.ports.from.receive(&mut self.frame, poll()).is_err() {
                 break;
             }
         }
@@ -109,13 +105,13 @@ impl TenantLink {
             match self.ring.as_mut() {
                 Some((to, _)) => wake |= to.push(frame.as_ref()).is_ok_and(|p| p.first),
                 None => {
-                    let _ = self.tx.send(frame.as_ref(), poll());
+                    let _ = self.ports.to.send(frame.as_ref(), poll());
                 }
             }
             self.frames_out += 1;
         }
         if wake {
-            let _ = self.tx.send(&[0], poll());
+            let _ = self.ports.to.send(&[0], poll());
         }
     }
 }
