@@ -325,19 +325,7 @@ impl Epoll {
 /// descriptor's own flags (a pipe end's or socket pair end's `O_NONBLOCK` is the
 /// descriptor's, and `F_SETFL` or a `dup` must not make it another file).
 pub fn identity(file: File) -> File {
-    match file {
-        File::Pipe { pipe, write, .. } => File::Pipe {
-            pipe,
-            write,
-            nonblock: false,
-        },
-        File::UnixSocket { pair, end, .. } => File::UnixSocket {
-            pair,
-            end,
-            nonblock: false,
-        },
-        other => other,
-    }
+    file.with_nonblock(false)
 }
 
 /// The bits of readiness `ready` an item asking for `events` reports (`EPOLLERR` and

@@ -104,6 +104,27 @@ pub enum File {
     Epoll(usize),
 }
 
+impl File {
+    /// The same file with this descriptor's own `O_NONBLOCK` (a pipe end's, a socket
+    /// pair end's); any other file keeps its flags where they live (its description, its
+    /// socket, its counter), so it comes back as it is.
+    pub fn with_nonblock(self, nonblock: bool) -> File {
+        match self {
+            File::Pipe { pipe, write, .. } => File::Pipe {
+                pipe,
+                write,
+                nonblock,
+            },
+            File::UnixSocket { pair, end, .. } => File::UnixSocket {
+                pair,
+                end,
+                nonblock,
+            },
+            other => other,
+        }
+    }
+}
+
 /// A `futex` wait of a thread: the word's address (in its process's memory), the
 /// `FUTEX_WAIT_BITSET` mask, and whether a wake chose it.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

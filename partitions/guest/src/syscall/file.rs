@@ -323,26 +323,13 @@ pub fn fcntl(c: &mut Ctx<'_, '_, impl Host>, fd: u64, cmd: u64, arg: u64) -> Sys
             p.set_cloexec(fd, arg & FD_CLOEXEC != 0);
             Ok(0)
         }
-        // O_NONBLOCK of a pipe end (this descriptor's: Linux shares it with the
-        // descriptors dup'ed from it); O_APPEND and O_NONBLOCK of an open file
+        // O_NONBLOCK of a pipe end or a socket pair's end (this descriptor's: Linux shares
+        // it with the descriptors dup'ed from it); O_APPEND and O_NONBLOCK of an open file
         // description (shared).
         F_SETFL => {
             match file {
-                File::Pipe { pipe, write, .. } => {
-                    let nonblock = arg & linux::O_NONBLOCK != 0;
-                    p.files[fd] = Some(File::Pipe {
-                        pipe,
-                        write,
-                        nonblock,
-                    });
-                }
-                File::UnixSocket { pair, end, .. } => {
-                    let nonblock = arg & linux::O_NONBLOCK != 0;
-                    p.files[fd] = Some(File::UnixSocket {
-                        pair,
-                        end,
-                        nonblock,
-                    });
+                File::Pipe { .. } | File::UnixSocket { .. } => {
+                    p.files[fd] = Some(file.with_nonblock(arg & linux::O_NONBLOCK != 0));
                 }
                 File::Open(id) => {
                     const CHANGEABLE: u64 = linux::O_APPEND | linux::O_NONBLOCK;
