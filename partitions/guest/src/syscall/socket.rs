@@ -70,6 +70,22 @@ fn pair_end(p: &Process, fd: u64) -> Option<(usize, usize, bool)> {
     }
 }
 
+/// Sends `data` at a socket pair's end (`send`, `sendto`, `sendmsg`): as much as the
+/// peer's buffer takes; `EISCONN` for an address (`to`), as a connected socket answers.
+fn send_on_pair(
+    c: &mut Ctx<'_, '_, impl Host>,
+    (pair, end, nonblock): (usize, usize, bool),
+    data: &[u8],
+    flags: u64,
+    to: Option<SocketAddr>,
+) -> Result {
+    if to.is_some() {
+        return Err(Errno::EISCONN);
+    }
+    let sent = c.f.pipes.write_pair(pair, end, data);
+    pair_result(sent, nonblock || flags & MSG_DONTWAIT != 0, flags)
+}
+
 /// What a pair's transfer gives the caller ([`super::file::transferred`]; `MSG_NOSIGNAL`:
 /// no `SIGPIPE`).
 fn pair_result(t: Transfer, nonblock: bool, flags: u64) -> Result {
@@ -277,14 +293,10 @@ pub fn send(
     flags: u64,
     to: Option<SocketAddr>,
 ) -> Result {
-    if let Some((pair, end, nonblock)) = pair_end(c.p, fd) {
-        if to.is_some() {
-            return Err(Errno::EISCONN);
-        }
+    if let Some(pair) = pair_end(c.p, fd) {
         let mut data = zeroed((len as usize).min(MAX_TRANSFER).min(PIPE_CAPACITY))?;
         c.read_user(buf, &mut data)?;
-        let sent = c.f.pipes.write_pair(pair, end, &data);
-        return pair_result(sent, nonblock || flags & MSG_DONTWAIT != 0, flags);
+        return send_on_pair(c, pair, &data, flags, to);
     }
     let id = SocketId(socket_at(c.p, fd)?);
     let now = c.host.now_ns();
@@ -455,12 +467,8 @@ pub fn sendmsg<H: Host>(c: &mut Ctx<H>, a: Args) -> Result {
         data.resize(start + len, 0);
         c.read_user(base, &mut data[start..])?;
     }
-    if let Some((pair, end, nonblock)) = pair {
-        if to.is_some() {
-            return Err(Errno::EISCONN);
-        }
-        let sent = c.f.pipes.write_pair(pair, end, &data);
-        return pair_result(sent, nonblock || flags & MSG_DONTWAIT != 0, flags);
+    if let Some(pair) = pair {
+        return send_on_pair(c, pair, &data, flags, to);
     }
     let now = c.host.now_ns();
     let stack = c.f.net.stack(now);
