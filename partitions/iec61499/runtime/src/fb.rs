@@ -106,11 +106,6 @@ impl Interface {
     pub fn output(&self, name: &str) -> Option<usize> {
         self.outputs.iter().position(|v| v.name == name)
     }
-
-    /// Whether some input event carries input `var`.
-    pub fn input_is_with(&self, var: usize) -> bool {
-        self.event_inputs.iter().any(|e| e.with.contains(&var))
-    }
 }
 
 /// A timer request of an FB: arm timer `id` for the absolute instant `at` (ns), or disarm it.

@@ -13,7 +13,9 @@
 //!   destination's WITH inputs are read from their connected sources at that moment and
 //!   queued with the event; the destination gets exactly those values when the event is
 //!   delivered. (FORTE reads them when the event is delivered, so a value changed by an
-//!   event run in between is seen instead of the one sent.)
+//!   event run in between is seen instead of the one sent.) An input that no input event
+//!   carries is never read from its connection (as in FORTE): it keeps its initial value
+//!   or parameter.
 //! - **Fan-out in a defined order.** An output event connected to several inputs is queued
 //!   for them in the order the connections were created (the order of the `.fboot`/XML).
 //!   (FORTE leaves it undefined.)

@@ -496,9 +496,9 @@ impl Resource {
         self.delivered
     }
 
-    /// The values a delivery of input event `event` to `instance` carries: its WITH inputs
-    /// and the inputs no event carries, each from its connected source now, or, for a
-    /// source that is the `sender`, from the sender's outputs as they were when it sent.
+    /// The values a delivery of input event `event` to `instance` carries: its WITH inputs,
+    /// each from its connected source now, or, for a source that is the `sender`, from the
+    /// sender's outputs as they were when it sent.
     fn sample(
         &self,
         instance: usize,
@@ -509,9 +509,7 @@ impl Resource {
         let with = &interface.event_inputs[event].with;
         self.data_connections
             .iter()
-            .filter(|(_, (i, var))| {
-                *i == instance && (with.contains(var) || !interface.input_is_with(*var))
-            })
+            .filter(|(_, (i, var))| *i == instance && with.contains(var))
             .map(|((si, so), (_, var))| {
                 let value = match sender {
                     Some((s, outputs)) if s == *si => outputs[*so].clone(),

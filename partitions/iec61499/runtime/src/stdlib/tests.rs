@@ -403,6 +403,38 @@ fn data_travels_with_its_event() {
 }
 
 #[test]
+fn an_input_no_event_carries_is_not_sampled() {
+    // REC's E0 carries V only; W, connected too, keeps its initial value (as in FORTE and
+    // the 4diac compliance examples' "WITH at the outputs").
+    let mut r = Resource::new(Limits::default());
+    r.create("C", create("E_CTU").unwrap()).unwrap();
+    let interface = Interface::build(
+        &[("E0", &["V"])],
+        &[],
+        &[("V", DataType::UInt, None), ("W", DataType::UInt, None)],
+        &[],
+    )
+    .unwrap();
+    let log: Log = Rc::default();
+    let rec = Recorder {
+        interface,
+        log: log.clone(),
+    };
+    r.create("REC", Box::new(rec)).unwrap();
+    r.connect_event("C.CUO", "REC.E0").unwrap();
+    r.connect_data("C.CV", "REC.V").unwrap();
+    r.connect_data("C.CV", "REC.W").unwrap();
+    r.trigger("C.CU", 0).unwrap();
+    r.trigger("C.CU", 0).unwrap();
+    let seen: Vec<Vec<u64>> = log
+        .borrow()
+        .iter()
+        .map(|(_, _, v)| v.iter().map(Value::as_u64).collect())
+        .collect();
+    assert_eq!(seen, [[1, 0], [2, 0]]);
+}
+
+#[test]
 fn a_full_queue_and_an_event_loop_are_faults() {
     let mut r = Resource::new(Limits {
         queue: 2,
