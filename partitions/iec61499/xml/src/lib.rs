@@ -3,9 +3,10 @@
 //! input, output and internal variables), and the body of a basic FB (the execution control
 //! chart: states, actions, transitions, and its algorithms in Structured Text), of a
 //! simple FB (one algorithm per input event), of a composite FB (its network: instances,
-//! parameters, event and data connections, adapters) or of a service-interface FB
-//! (interface only). A host library; every error names the file,
-//! line and column of the XML it comes from.
+//! parameters, event, data and adapter connections) or of a service-interface FB
+//! (interface only); and adapter types (`.adp`, [`read_adp`]), whose ports a plug or
+//! socket of an FB adds to its interface as `ADAPTER.PORT`. A host library; every error
+//! names the file, line and column of the XML it comes from.
 //!
 //! The reader checks what the document alone can tell: names unique within their
 //! namespace, WITH naming a variable of the same direction, ECC transitions between
@@ -79,6 +80,17 @@ pub struct Var {
 pub struct Adapter {
     pub name: String,
     pub ty: String,
+    pub pos: Pos,
+}
+
+/// An adapter type (`.adp`): the interface as its plug has it. The FB holding the plug
+/// receives the input events with the input variables and sends the output events with
+/// the output variables; the FB holding a socket has the mirror image (it sends the input
+/// events and receives the output events), as in 4diac and FORTE.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AdapterType {
+    pub name: String,
+    pub interface: Interface,
     pub pos: Pos,
 }
 
@@ -183,6 +195,8 @@ pub struct Network {
     pub instances: Vec<Instance>,
     pub event_connections: Vec<Connection>,
     pub data_connections: Vec<Connection>,
+    /// From a plug (`FB.PLUG`) to a socket (`FB.SOCKET`).
+    pub adapter_connections: Vec<Connection>,
 }
 
 /// A simple FB's body: one algorithm per input event, run when that event arrives.
@@ -213,11 +227,24 @@ pub struct FbType {
 
 /// Reads a type from the text of an `.fbt` file named `file` (for messages).
 pub fn read_fbt(file: &str, text: &str) -> Result<FbType, Error> {
+    let doc = document(file, text)?;
+    let r = Reader { file, doc: &doc };
+    r.fb_type(doc.root_element())
+}
+
+/// Reads an adapter type from the text of an `.adp` file named `file` (for messages).
+pub fn read_adp(file: &str, text: &str) -> Result<AdapterType, Error> {
+    let doc = document(file, text)?;
+    let r = Reader { file, doc: &doc };
+    r.adapter_type(doc.root_element())
+}
+
+fn document<'i>(file: &str, text: &'i str) -> Result<Document<'i>, Error> {
     let options = ParsingOptions {
         allow_dtd: true,
         ..ParsingOptions::default()
     };
-    let doc = Document::parse_with_options(text, options).map_err(|e| {
+    Document::parse_with_options(text, options).map_err(|e| {
         let p = e.pos();
         Error {
             file: file.into(),
@@ -227,9 +254,7 @@ pub fn read_fbt(file: &str, text: &str) -> Result<FbType, Error> {
             },
             message: format!("not well-formed XML: {e}"),
         }
-    })?;
-    let r = Reader { file, doc: &doc };
-    r.fb_type(doc.root_element())
+    })
 }
 
 struct Reader<'a, 'i> {
@@ -305,6 +330,38 @@ impl Reader<'_, '_> {
             comment: root.attribute("Comment").map(Into::into),
             interface,
             body,
+        })
+    }
+
+    fn adapter_type(&self, root: Node<'_, '_>) -> Result<AdapterType, Error> {
+        if root.tag_name().name() != "AdapterType" {
+            return Err(self.error(
+                root,
+                format!(
+                    "expected an <AdapterType> document, found <{}>",
+                    root.tag_name().name()
+                ),
+            ));
+        }
+        let name = self.attr(root, "Name")?;
+        let Some(list) = Self::child(root, "InterfaceList") else {
+            return Err(self.error(root, format!("adapter type {name} has no <InterfaceList>")));
+        };
+        let interface = self.interface(list)?;
+        if let Some(a) = interface.plugs.iter().chain(&interface.sockets).next() {
+            return Err(Error {
+                file: self.file.into(),
+                pos: a.pos,
+                message: format!(
+                    "adapter type {name} declares adapter {}: an adapter's interface has only events and variables",
+                    a.name
+                ),
+            });
+        }
+        Ok(AdapterType {
+            name,
+            interface,
+            pos: self.pos(root),
         })
     }
 
@@ -466,6 +523,7 @@ impl Reader<'_, '_> {
                 }
                 if let Some(out) = &action.output
                     && !interface.event_outputs.iter().any(|e| e.name == *out)
+                    && !through_adapter(interface, out)
                 {
                     return Err(
                         self.error(a, format!("action sends `{out}`, which is no output event"))
@@ -601,7 +659,9 @@ impl Reader<'_, '_> {
                     )),
                 )
             }
-            None if interface.event_inputs.iter().any(|e| e.name == text) => {
+            None if interface.event_inputs.iter().any(|e| e.name == text)
+                || through_adapter(interface, text) =>
+            {
                 (Some(text.to_string()), None)
             }
             None => {
@@ -620,6 +680,7 @@ impl Reader<'_, '_> {
         };
         if let Some(e) = &event
             && !interface.event_inputs.iter().any(|x| x.name == *e)
+            && !through_adapter(interface, e)
         {
             return Err(self.error(
                 t,
@@ -663,11 +724,12 @@ impl Reader<'_, '_> {
             Self::children(net, "FB").filter_map(|f| f.attribute("Name").map(|n| (n, f))),
             "FB instance",
         )?;
-        for (list, out) in [
+        for (tag, out) in [
             ("EventConnections", &mut network.event_connections),
             ("DataConnections", &mut network.data_connections),
+            ("AdapterConnections", &mut network.adapter_connections),
         ] {
-            let Some(list) = Self::child(net, list) else {
+            let Some(list) = Self::child(net, tag) else {
                 continue;
             };
             for c in Self::children(list, "Connection") {
@@ -678,6 +740,9 @@ impl Reader<'_, '_> {
                 };
                 for end in [&connection.source, &connection.destination] {
                     let known = match &end.instance {
+                        // An adapter connection's ends are `FB.ADAPTER`; which are plugs
+                        // and sockets is known with the instances' types.
+                        Some(_) if tag == "AdapterConnections" => true,
                         Some(fb) => {
                             network.instances.iter().any(|i| i.name == *fb)
                                 || interface
@@ -701,6 +766,19 @@ impl Reader<'_, '_> {
         }
         Ok(network)
     }
+}
+
+/// Whether `name` is `ADAPTER.PORT` of a plug or socket of `interface` (the port itself is
+/// checked against the adapter type where that is known: by the compiler).
+fn through_adapter(interface: &Interface, name: &str) -> bool {
+    name.split_once('.').is_some_and(|(adapter, port)| {
+        !port.is_empty()
+            && interface
+                .plugs
+                .iter()
+                .chain(&interface.sockets)
+                .any(|a| a.name == adapter)
+    })
 }
 
 fn interface_has(interface: &Interface, port: &str) -> bool {
