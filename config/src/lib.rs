@@ -242,8 +242,9 @@
 //! **IEC 61499.** A partition running the IEC 61499 runtime (`image = "iec61499"`,
 //! `partitions/iec61499/partition`) names its boot file, `iec61499.boot` (a 4diac `.fboot`
 //! file: one management request a line, carried out at every start), and the basic,
-//! simple and composite FB types (`.fbt`) it uses beyond the standard library,
-//! `iec61499.types` (paths as for `plc.program`). `cargo xtask` compiles each type
+//! simple and composite FB types (`.fbt`) it uses beyond the standard library, with the
+//! adapter types (`.adp`) their plugs and sockets are of, `iec61499.types` (paths as for
+//! `plc.program`). `cargo xtask` compiles each FB type
 //! (algorithms and guards by the ST compiler; an error names the `.fbt` file, line and
 //! column; a composite's network is checked when the boot file creates an instance, a
 //! refusal naming its place in the `.fbt`) and writes the types and the

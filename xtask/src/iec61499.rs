@@ -1,5 +1,5 @@
 //! The IEC 61499 build step of `system.img`: for each partition with `iec61499.*` keys,
-//! compile its basic FB types (`iec61499_build`: an error names the `.fbt` file, line and
+//! read its adapter types (`.adp`) and compile its basic FB types (`iec61499_build`: an error names the `.fbt` file, line and
 //! column and stops the build), pack them with the boot file into the partition's data
 //! entry (`iec61499_mgmt::package`), and boot that package once on the host, so a boot
 //! file the device would refuse stops the build with the line and the reason instead of
@@ -25,10 +25,22 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
     for p in &system.partitions {
         let Some(fb) = &p.iec61499 else { continue };
         let what = format!("partition {}", p.name);
+        // The adapter types (`.adp`) the FB types' plugs and sockets are of.
+        let is_adapter = |file: &&SourceFile| file.name.ends_with(".adp");
+        let adapters = fb
+            .types
+            .iter()
+            .filter(is_adapter)
+            .map(|file| {
+                iec61499_build::read_adp(&file.name, &read(&what, file)?)
+                    .map_err(|e| anyhow::anyhow!("{what}: {e}"))
+            })
+            .collect::<Result<Vec<_>>>()?;
         let types = fb
             .types
             .iter()
-            .map(|file| compile_type(&what, file))
+            .filter(|file| !is_adapter(file))
+            .map(|file| compile_type(&what, file, &adapters))
             .collect::<Result<Vec<_>>>()?;
         let boot = read(&what, &fb.boot)?;
         let limits = Limits::default();
@@ -124,9 +136,13 @@ fn read(what: &str, file: &SourceFile) -> Result<String> {
         .with_context(|| format!("{what}: cannot read {}", file.path))
 }
 
-fn compile_type(what: &str, file: &SourceFile) -> Result<Vec<u8>> {
+fn compile_type(
+    what: &str,
+    file: &SourceFile,
+    adapters: &[iec61499_build::AdapterType],
+) -> Result<Vec<u8>> {
     let text = read(what, file)?;
-    match iec61499_build::compile_any(&file.name, &text) {
+    match iec61499_build::compile_any(&file.name, &text, adapters) {
         Ok(t) => Ok(t.package()),
         Err(errors) => {
             for e in &errors {

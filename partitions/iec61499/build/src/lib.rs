@@ -12,10 +12,11 @@
 
 use iec61499_runtime::basic::{Action, BasicFb, Ecc, State, Transition};
 use iec61499_runtime::composite::{Component, CompositeType, End, Link};
-use iec61499_runtime::fb::{EventDecl, Interface, VarDecl, VarSpec};
+use iec61499_runtime::fb::{AdapterSpec, EventDecl, Interface, VarDecl, VarSpec};
 use iec61499_runtime::vmcode::{GUARD_BASE, INSTANCE, VmCode};
 use iec61499_runtime::{FunctionBlock, type_named};
-use iec61499_xml::{Body, Condition, FbType, Pos, Var, read_fbt};
+pub use iec61499_xml::{AdapterType, read_adp};
+use iec61499_xml::{Body, Condition, Event, FbType, Pos, Var, read_fbt};
 use std::fmt::Write as _;
 
 /// A compiled basic FB type: what its instances are made from.
@@ -135,7 +136,81 @@ fn interface_of(file: &str, fb: &FbType) -> Result<Interface, Vec<String>> {
         .iter()
         .map(|(n, s)| (n.as_str(), s.ty, s.array))
         .collect();
-    Interface::build(&ei, &eo, &ins, &outs).map_err(|e| vec![format!("{file}: {}: {e}", fb.name)])
+    let mut interface = Interface::build(&ei, &eo, &ins, &outs)
+        .map_err(|e| vec![format!("{file}: {}: {e}", fb.name)])?;
+    interface.adapters = adapter_specs(fb);
+    Ok(interface)
+}
+
+/// The plugs (`true`) and sockets (`false`) of `fb`.
+fn adapters_of(fb: &FbType) -> impl Iterator<Item = (&iec61499_xml::Adapter, bool)> {
+    let ifc = &fb.interface;
+    ifc.plugs
+        .iter()
+        .map(|a| (a, true))
+        .chain(ifc.sockets.iter().map(|a| (a, false)))
+}
+
+/// The plugs and sockets of `fb` as the runtime declares them.
+fn adapter_specs(fb: &FbType) -> Vec<AdapterSpec> {
+    adapters_of(fb)
+        .map(|(a, plug)| AdapterSpec {
+            name: a.name.clone(),
+            ty: a.ty.clone(),
+            plug,
+        })
+        .collect()
+}
+
+/// `fb` with the ports of its plugs and sockets added to its interface as events and
+/// variables named `ADAPTER.PORT`: a plug's as its adapter type declares them, a
+/// socket's mirrored (the adapter type's input events and variables are the socket's
+/// outputs). Each adapter's type is one of `adapters`.
+pub fn with_adapters(
+    file: &str,
+    fb: &FbType,
+    adapters: &[AdapterType],
+) -> Result<FbType, Vec<String>> {
+    let mut out = fb.clone();
+    for (a, plug) in adapters_of(fb) {
+        let Some(ty) = adapters.iter().find(|t| t.name == a.ty) else {
+            return Err(vec![format!(
+                "{file}:{}:{}: adapter {}: adapter type {} is unknown (give its .adp file)",
+                a.pos.line, a.pos.col, a.name, a.ty
+            )]);
+        };
+        let named = |n: &str| format!("{}.{n}", a.name);
+        let events = |list: &[Event]| -> Vec<Event> {
+            list.iter()
+                .map(|e| Event {
+                    name: named(&e.name),
+                    with: e.with.iter().map(|w| named(w)).collect(),
+                    pos: a.pos,
+                })
+                .collect()
+        };
+        let vars = |list: &[Var]| -> Vec<Var> {
+            list.iter()
+                .map(|v| Var {
+                    name: named(&v.name),
+                    pos: a.pos,
+                    ..v.clone()
+                })
+                .collect()
+        };
+        let t = &ty.interface;
+        let (ins, outs) = if plug {
+            ((&t.event_inputs, &t.inputs), (&t.event_outputs, &t.outputs))
+        } else {
+            ((&t.event_outputs, &t.outputs), (&t.event_inputs, &t.inputs))
+        };
+        let ifc = &mut out.interface;
+        ifc.event_inputs.extend(events(ins.0));
+        ifc.inputs.extend(vars(ins.1));
+        ifc.event_outputs.extend(events(outs.0));
+        ifc.outputs.extend(vars(outs.1));
+    }
+    Ok(out)
 }
 
 /// States, transitions, algorithms and guards of `fb`'s body.
@@ -151,18 +226,30 @@ fn parts_of<'f>(
             let states = b
                 .states
                 .iter()
-                .map(|s| State {
+                .map(|s| {
+                    Ok(State {
                     name: s.name.clone(),
                     actions: s
                         .actions
                         .iter()
-                        .map(|a| Action {
-                            algorithm: a.algorithm.as_deref().and_then(algorithm),
-                            output: a.output.as_deref().and_then(|o| interface.event_output(o)),
+                        .map(|a| {
+                            Ok(Action {
+                                algorithm: a.algorithm.as_deref().and_then(algorithm),
+                                output: match a.output.as_deref() {
+                                    Some(o) => Some(interface.event_output(o).ok_or_else(|| {
+                                        vec![format!(
+                                            "{file}:{}:{}: action sends `{o}`, which is no output event",
+                                            a.pos.line, a.pos.col
+                                        )]
+                                    })?),
+                                    None => None,
+                                },
+                            })
                         })
-                        .collect(),
+                        .collect::<Result<_, Vec<String>>>()?,
+                    })
                 })
-                .collect();
+                .collect::<Result<_, Vec<String>>>()?;
             let mut guards = Vec::new();
             let transitions = b
                 .transitions
@@ -171,21 +258,29 @@ fn parts_of<'f>(
                     let (event, guard) = match &t.condition {
                         Condition::Always => (None, None),
                         Condition::When { event, guard } => (
-                            event.as_deref().and_then(|e| interface.event_input(e)),
+                            match event.as_deref() {
+                                Some(e) => Some(interface.event_input(e).ok_or_else(|| {
+                                    vec![format!(
+                                        "{file}:{}:{}: condition names `{e}`, which is no input event",
+                                        t.pos.line, t.pos.col
+                                    )]
+                                })?),
+                                None => None,
+                            },
                             guard.as_ref().map(|g| {
                                 guards.push(g.clone());
                                 guards.len() - 1
                             }),
                         ),
                     };
-                    Transition {
+                    Ok(Transition {
                         source: state(&t.source),
                         destination: state(&t.destination),
                         event,
                         guard,
-                    }
+                    })
                 })
-                .collect();
+                .collect::<Result<_, Vec<String>>>()?;
             Ok(Parts {
                 internals: specs(file, &b.internals)?,
                 algorithms: b
@@ -287,6 +382,11 @@ fn statements(st: &str) -> String {
     out
 }
 
+/// `PORT` of a port named `ADAPTER.PORT` of adapter `adapter`.
+fn adapter_port<'n>(name: &'n str, adapter: &str) -> Option<&'n str> {
+    name.strip_prefix(adapter)?.strip_prefix('.')
+}
+
 fn st_type(spec: &VarSpec) -> String {
     match spec.array {
         Some(n) => format!("ARRAY[0..{}] OF {}", n.saturating_sub(1), spec.ty.name()),
@@ -301,20 +401,46 @@ fn program_of(
     interface: &Interface,
     parts: &Parts<'_>,
 ) -> (String, Vec<(usize, Pos)>) {
-    let mut program = String::from("PROGRAM FB_TYPE\nVAR\n");
     let declared = interface
         .inputs
         .iter()
         .zip(&fb.interface.inputs)
         .chain(interface.outputs.iter().zip(&fb.interface.outputs))
         .chain(parts.internals.iter().map(|(s, v)| (s, *v)));
-    for (spec, var) in declared {
+    let declaration = |name: &str, spec: &VarSpec, var: &Var| {
         let init = var
             .initial
             .as_ref()
             .map_or(String::new(), |i| format!(" := {i}"));
-        let _ = writeln!(program, "  {} : {}{init};", spec.name, st_type(spec));
+        format!("  {name} : {}{init};\n", st_type(spec))
+    };
+    // A plug's or socket's variables are the members of a structure of its name, so the
+    // algorithms write `ADAPTER.VAR` as 4diac's do.
+    let mut program = String::new();
+    let mut vars = String::new();
+    for (a, _) in adapters_of(fb) {
+        let members: String = declared
+            .clone()
+            .filter_map(|(spec, var)| {
+                Some(declaration(adapter_port(&spec.name, &a.name)?, spec, var))
+            })
+            .collect();
+        if !members.is_empty() {
+            let _ = write!(
+                program,
+                "TYPE __ADAPTER_{0} : STRUCT\n{members}END_STRUCT;\nEND_TYPE\n",
+                a.name
+            );
+            let _ = writeln!(vars, "  {0} : __ADAPTER_{0};", a.name);
+        }
     }
+    program.push_str("PROGRAM FB_TYPE\nVAR\n");
+    for (spec, var) in declared {
+        if !adapters_of(fb).any(|(a, _)| adapter_port(&spec.name, &a.name).is_some()) {
+            program.push_str(&declaration(&spec.name, spec, var));
+        }
+    }
+    program.push_str(&vars);
     program.push_str("  __SEL : LINT;\n  __GUARD : BOOL;\nEND_VAR\nCASE __SEL OF\n");
     let mut places = Vec::new();
     let labelled = parts
@@ -378,33 +504,50 @@ impl Compiled {
     }
 }
 
-/// Reads and compiles the basic, simple or composite FB type in the `.fbt` text of `file`.
-pub fn compile_any(file: &str, text: &str) -> Result<Compiled, Vec<String>> {
+/// Reads and compiles the basic, simple or composite FB type in the `.fbt` text of `file`;
+/// its plugs and sockets are of `adapters`.
+pub fn compile_any(
+    file: &str,
+    text: &str,
+    adapters: &[AdapterType],
+) -> Result<Compiled, Vec<String>> {
     let fb = read_fbt(file, text).map_err(|e| vec![e.to_string()])?;
     match &fb.body {
-        Body::Composite(_) => composite_of(file, &fb).map(Compiled::Composite),
-        _ => compile_type(file, &fb).map(Compiled::Basic),
+        Body::Composite(_) => composite_of(file, &fb, adapters).map(Compiled::Composite),
+        _ => compile_type(file, &fb, adapters).map(Compiled::Basic),
     }
 }
 
 /// The composite type of `fb` (its network as the device flattens it; the component types
-/// are checked when the device creates an instance, against the types it has).
-pub fn composite_of(file: &str, fb: &FbType) -> Result<CompositeType, Vec<String>> {
+/// are checked when the device creates an instance, against the types it has); its own
+/// plugs and sockets are of `adapters`, their ports ports of its interface.
+pub fn composite_of(
+    file: &str,
+    fb: &FbType,
+    adapters: &[AdapterType],
+) -> Result<CompositeType, Vec<String>> {
+    let fb = &with_adapters(file, fb, adapters)?;
     let Body::Composite(net) = &fb.body else {
         return Err(vec![format!("{file}: {} is not a composite FB", fb.name)]);
     };
     let ifc = &fb.interface;
-    if let Some(a) = ifc.plugs.iter().chain(&ifc.sockets).next() {
-        return Err(vec![format!(
-            "{file}:{}:{}: adapter {}: adapters are not supported",
-            a.pos.line, a.pos.col, a.name
-        )]);
+    fn own<'i>(fb: &FbType, instance: &'i Option<String>) -> Option<&'i String> {
+        instance
+            .as_ref()
+            .filter(|i| adapters_of(fb).any(|(a, _)| a.name == **i))
     }
     let names = |events: &[iec61499_xml::Event]| events.iter().map(|e| e.name.clone()).collect();
     let vars = |vars: &[Var]| vars.iter().map(|v| v.name.clone()).collect();
-    let end = |e: &iec61499_xml::Endpoint| End {
-        component: e.instance.clone(),
-        port: e.port.clone(),
+    // A port of an own plug or socket is a port of the interface.
+    let end = |e: &iec61499_xml::Endpoint| match own(fb, &e.instance) {
+        Some(a) => End {
+            component: None,
+            port: format!("{a}.{}", e.port),
+        },
+        None => End {
+            component: e.instance.clone(),
+            port: e.port.clone(),
+        },
     };
     let links = |list: &[iec61499_xml::Connection], event: bool| {
         list.iter()
@@ -417,13 +560,11 @@ pub fn composite_of(file: &str, fb: &FbType) -> Result<CompositeType, Vec<String
             })
             .collect::<Vec<_>>()
     };
-    for c in net.event_connections.iter().chain(&net.data_connections) {
+    for c in &net.adapter_connections {
         for e in [&c.source, &c.destination] {
-            if let Some(i) = &e.instance
-                && !net.instances.iter().any(|x| x.name == *i)
-            {
+            if let Some(a) = own(fb, &e.instance) {
                 return Err(vec![format!(
-                    "{file}:{}:{}: connection through adapter {i}: adapters are not supported",
+                    "{file}:{}:{}: adapter connection to {a}: an adapter connection to the composite's own plug or socket is not supported (connect its ports)",
                     c.pos.line, c.pos.col
                 )]);
             }
@@ -436,6 +577,7 @@ pub fn composite_of(file: &str, fb: &FbType) -> Result<CompositeType, Vec<String
         event_outputs: names(&ifc.event_outputs),
         inputs: vars(&ifc.inputs),
         outputs: vars(&ifc.outputs),
+        adapters: adapter_specs(fb),
         components: net
             .instances
             .iter()
@@ -447,23 +589,32 @@ pub fn composite_of(file: &str, fb: &FbType) -> Result<CompositeType, Vec<String
                 col: i.pos.col,
             })
             .collect(),
+        // An adapter connection between components is made as the device makes one
+        // between instances.
         links: links(&net.event_connections, true)
             .into_iter()
             .chain(links(&net.data_connections, false))
+            .chain(links(&net.adapter_connections, false))
             .collect(),
     };
     // What the device checks when it takes the package, here with the file's name.
     CompositeType::decode(&t.encode()).map_err(|e| vec![format!("{file}: {e}")])
 }
 
-/// Reads and compiles the basic or simple FB type in the `.fbt` text of `file`.
+/// Reads and compiles the basic or simple FB type in the `.fbt` text of `file` (without
+/// plugs or sockets).
 pub fn compile(file: &str, text: &str) -> Result<BasicType, Vec<String>> {
     let fb = read_fbt(file, text).map_err(|e| vec![e.to_string()])?;
-    compile_type(file, &fb)
+    compile_type(file, &fb, &[])
 }
 
-/// Compiles an FB type read from `file`.
-pub fn compile_type(file: &str, fb: &FbType) -> Result<BasicType, Vec<String>> {
+/// Compiles an FB type read from `file`; its plugs and sockets are of `adapters`.
+pub fn compile_type(
+    file: &str,
+    fb: &FbType,
+    adapters: &[AdapterType],
+) -> Result<BasicType, Vec<String>> {
+    let fb = &with_adapters(file, fb, adapters)?;
     let interface = interface_of(file, fb)?;
     let parts = parts_of(file, fb, &interface)?;
     let (program, places) = program_of(fb, &interface, &parts);

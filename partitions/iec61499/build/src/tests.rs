@@ -296,7 +296,7 @@ fn fourdiac_event_fbs_run_as_ours() {
         if !matches!(fb.body, Body::Basic(_) | Body::Simple(_)) {
             continue;
         }
-        match compile_type(&format!("{ty}.fbt"), &fb) {
+        match compile_type(&format!("{ty}.fbt"), &fb, &[]) {
             Err(e) => problems.push(format!("{ty}: does not compile: {}", e.join("; "))),
             Ok(compiled) => match random_sequences(ty, &compiled, 50) {
                 Ok(()) => same.push(ty),

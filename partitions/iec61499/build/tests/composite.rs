@@ -65,7 +65,7 @@ const TWO: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
 "#;
 
 fn package(file: &str, text: &str) -> Vec<u8> {
-    match compile_any(file, text) {
+    match compile_any(file, text, &[]) {
         Ok(Compiled::Composite(t)) => t.encode(),
         Ok(Compiled::Basic(t)) => panic!("{file}: {} is basic", t.name),
         Err(e) => panic!("{}", e.join("\n")),
@@ -258,7 +258,7 @@ fn refusals_name_the_place_in_the_fbt() {
     assert!(e.contains("nested more than 8 deep"), "{e}");
     // What the XML alone shows is refused when it is read, with the place.
     let bad = COUNT.replace("Destination=\"CTU.CU\"", "Destination=\"NOBODY.CU\"");
-    let e = compile_any("COUNT.fbt", &bad).unwrap_err().join("\n");
+    let e = compile_any("COUNT.fbt", &bad, &[]).unwrap_err().join("\n");
     assert!(e.starts_with("COUNT.fbt:15:7:"), "{e}");
     let straight = COUNT.replace("Destination=\"CTU.CU\"", "Destination=\"CNF\"");
     let e = refusal(&[("COUNT.fbt", &straight)], "COUNT");
@@ -426,6 +426,7 @@ fn fourdiac_composite_event_fbs_run_as_ours() {
                 match compile_any(
                     &format!("{}.fbt", i.ty),
                     &std::fs::read_to_string(f).unwrap(),
+                    &[],
                 ) {
                     Ok(t) => extra.push(t.package()),
                     Err(e) => problems.push(format!("{ty}: component {}: {}", i.ty, e.join("; "))),
@@ -434,7 +435,7 @@ fn fourdiac_composite_event_fbs_run_as_ours() {
         }
         let renamed = format!("FORDIAC_{ty}");
         fb.name = renamed.clone();
-        let t = match iec61499_build::composite_of(&format!("{ty}.fbt"), &fb) {
+        let t = match iec61499_build::composite_of(&format!("{ty}.fbt"), &fb, &[]) {
             Ok(t) => t,
             Err(e) => {
                 problems.push(format!("{ty}: {}", e.join("; ")));

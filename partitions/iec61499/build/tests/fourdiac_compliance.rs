@@ -7,7 +7,7 @@
 //! `FB.PORT := VALUE`, `PORT := VALUE`) checked. Prints the counts and every example that
 //! was not deployed, not run or differs, with the reason.
 
-use iec61499_build::compile_any;
+use iec61499_build::{compile_any, read_adp};
 use iec61499_mgmt::Device;
 use iec61499_runtime::Limits;
 use std::path::{Path, PathBuf};
@@ -402,22 +402,30 @@ fn fourdiac_compliance_examples() {
     }
     files.sort();
     let (mut types, mut refused_types) = (Vec::new(), Vec::new());
-    let fbts = files
-        .iter()
-        .filter(|p| p.extension().is_some_and(|e| e == "fbt"));
-    for file in fbts.clone() {
-        let name = file.file_name().unwrap().to_string_lossy().to_string();
-        match compile_any(&name, &std::fs::read_to_string(file).unwrap()) {
+    let named = |file: &PathBuf| file.file_name().unwrap().to_string_lossy().to_string();
+    let with_extension = |ext: &'static str| {
+        files
+            .iter()
+            .filter(move |p| p.extension().is_some_and(|e| e == ext))
+    };
+    let adapters: Vec<_> = with_extension("adp")
+        .map(|file| read_adp(&named(file), &std::fs::read_to_string(file).unwrap()))
+        .collect::<Result<_, _>>()
+        .expect("the adapter types read");
+    for file in with_extension("fbt") {
+        let name = named(file);
+        match compile_any(&name, &std::fs::read_to_string(file).unwrap(), &adapters) {
             Ok(t) => types.push(t.package()),
             Err(e) => refused_types.push(format!("{name}: {}", e.join("; "))),
         }
     }
-    let others = files.len() - fbts.count();
+    let others = files.len() - with_extension("fbt").count() - adapters.len();
     eprintln!(
-        "4diac compliance type library: {} .fbt, {} compiled, {} refused; {others} other files (.adp, .dtp) not read",
+        "4diac compliance type library: {} .fbt, {} compiled, {} refused, with {} adapter types (.adp); {others} other files (.dtp) not read",
         types.len() + refused_types.len(),
         types.len(),
-        refused_types.len()
+        refused_types.len(),
+        adapters.len()
     );
     for r in &refused_types {
         eprintln!("  refused {r}");

@@ -5,7 +5,8 @@
 //! framing): to a partition's port 61499 (`iec61499.net`) or to a FORTE device.
 //!
 //! ```text
-//! fbctl [--request PATH] [--response PATH] [--tcp ADDRESS:PORT] [--timeout MS] COMMAND
+//! fbctl [--request PATH] [--response PATH] [--tcp ADDRESS:PORT] [--timeout MS]
+//!       [--adapter FILE.adp]... COMMAND
 //!   send DEST REQUEST   one request (DEST empty for the device); prints the response
 //!   boot FILE           every line of a boot file (.fboot); prints each response, stops
 //!                       at the first refusal
@@ -14,6 +15,8 @@
 //!                       compiled package (`compile`'s output) and sent as it is; the
 //!                       device checks it whole and refuses it with the reason in its log
 //!   compile FILE.fbt OUT   writes the type's package to OUT
+//!   --adapter FILE.adp  an adapter type the compiled type's plugs and sockets may be of
+//!                       (once per type)
 //! ```
 //!
 //! Output (an interface): `send` prints the response as the device wrote it; `boot` prints
@@ -32,7 +35,7 @@ use std::time::{Duration, Instant};
 pub const MAX_MESSAGE: usize = 4096;
 pub const DEFAULT_REQUEST: &str = "/dev/arinc/fb-request";
 pub const DEFAULT_RESPONSE: &str = "/dev/arinc/fb-response";
-pub const USAGE: &str = "usage: fbctl [--request PATH] [--response PATH] [--tcp ADDRESS:PORT] [--timeout MS] (send DEST REQUEST | boot FILE.fboot | type FILE | compile FILE.fbt OUT)";
+pub const USAGE: &str = "usage: fbctl [--request PATH] [--response PATH] [--tcp ADDRESS:PORT] [--timeout MS] [--adapter FILE.adp]... (send DEST REQUEST | boot FILE.fboot | type FILE | compile FILE.fbt OUT)";
 /// The longest response read (a TCP response may be longer than a port's message).
 const MAX_RESPONSE: usize = iec61499_mgmt::tcp::MAX_RESPONSE;
 
@@ -78,6 +81,8 @@ pub struct Command {
     /// `--tcp`: the device's management address instead of the ports.
     pub tcp: Option<String>,
     pub timeout: Duration,
+    /// `--adapter`: adapter type files for `type` and `compile`.
+    pub adapters: Vec<String>,
     pub action: Action,
 }
 
@@ -88,12 +93,14 @@ impl Command {
         let mut tcp = None;
         let mut ports_named = false;
         let mut timeout = Duration::from_secs(2);
+        let mut adapters = Vec::new();
         let mut rest = args;
         while let [flag, value, tail @ ..] = rest {
             match flag.as_str() {
                 "--request" => (request, ports_named) = (value.clone(), true),
                 "--response" => (response, ports_named) = (value.clone(), true),
                 "--tcp" => tcp = Some(value.clone()),
+                "--adapter" => adapters.push(value.clone()),
                 "--timeout" => {
                     let ms: u64 = value
                         .parse()
@@ -126,6 +133,7 @@ impl Command {
             response,
             tcp,
             timeout,
+            adapters,
             action,
         })
     }
@@ -224,6 +232,8 @@ fn id_of(text: &str) -> Option<&str> {
 pub struct Link<T: Transport> {
     pub transport: T,
     pub timeout: Duration,
+    /// The adapter types a compiled type's plugs and sockets may be of.
+    pub adapters: Vec<iec61499_build::AdapterType>,
 }
 
 impl<T: Transport> Link<T> {
@@ -308,7 +318,7 @@ impl<T: Transport> Link<T> {
             }
             Action::Type(name) => {
                 let (ty, package) = if name.ends_with(".fbt") {
-                    compile(name, file)?
+                    compile(name, file, &self.adapters)?
                 } else {
                     let ty = package_name(file).ok_or_else(|| {
                         Failure::usage(format!("{name}: neither a .fbt file nor a type package"))
@@ -333,7 +343,7 @@ impl<T: Transport> Link<T> {
                 Ok(None)
             }
             Action::Compile { fbt, out: to } => {
-                let (ty, package) = compile(fbt, file)?;
+                let (ty, package) = compile(fbt, file, &self.adapters)?;
                 out(&format!(
                     "type {ty}: {} bytes written to {to}",
                     package.len()
@@ -349,10 +359,27 @@ fn text_of<'a>(name: &str, file: &'a [u8]) -> Result<&'a str, Failure> {
 }
 
 /// Compiles the `.fbt` text `file`: the type's name and package.
-fn compile(name: &str, file: &[u8]) -> Result<(String, Vec<u8>), Failure> {
-    let t = iec61499_build::compile_any(name, text_of(name, file)?)
+fn compile(
+    name: &str,
+    file: &[u8],
+    adapters: &[iec61499_build::AdapterType],
+) -> Result<(String, Vec<u8>), Failure> {
+    let t = iec61499_build::compile_any(name, text_of(name, file)?, adapters)
         .map_err(|errors| Failure::usage(errors.join("\n")))?;
     Ok((t.name().to_string(), t.package()))
+}
+
+/// Reads the adapter type files `paths` (`--adapter`).
+pub fn read_adapters(paths: &[String]) -> Result<Vec<iec61499_build::AdapterType>, Failure> {
+    paths
+        .iter()
+        .map(|path| {
+            let text = std::fs::read(path)
+                .map_err(|e| Failure::usage(format!("cannot read {path}: {e}")))?;
+            iec61499_build::read_adp(path, text_of(path, &text)?)
+                .map_err(|e| Failure::usage(e.to_string()))
+        })
+        .collect()
 }
 
 /// The type name a package says it holds (its name record; nothing else is checked here:

@@ -2,7 +2,7 @@
 //! ([`port_devices`]) or the TCP connection (`--tcp`), then runs the command ([`fbctl`] says what each one does and
 //! prints). Glue only.
 
-use fbctl::{Action, Command, Failure, Link, TcpTransport, Transport, USAGE};
+use fbctl::{Action, Command, Failure, Link, TcpTransport, Transport, USAGE, read_adapters};
 use port_devices::Devices;
 use std::io::Write;
 use std::process::ExitCode;
@@ -18,6 +18,7 @@ fn run(command: &Command) -> Result<(), Failure> {
         }
         Action::Send { .. } => Vec::new(),
     };
+    let adapters = read_adapters(&command.adapters)?;
     let mut stdout = std::io::stdout();
     let mut print = |line: &str| {
         let _ = writeln!(stdout, "{line}");
@@ -28,6 +29,7 @@ fn run(command: &Command) -> Result<(), Failure> {
         let mut offline = Link {
             transport: Offline,
             timeout: command.timeout,
+            adapters: adapters.clone(),
         };
         let package = offline.run(&command.action, &file, &mut print)?;
         return std::fs::write(out, package.unwrap_or_default()).map_err(|e| Failure {
@@ -41,6 +43,7 @@ fn run(command: &Command) -> Result<(), Failure> {
         let mut link = Link {
             transport: tcp,
             timeout: command.timeout,
+            adapters: adapters.clone(),
         };
         return link.run(&command.action, &file, &mut print).map(drop);
     }
@@ -49,6 +52,7 @@ fn run(command: &Command) -> Result<(), Failure> {
     let mut link = Link {
         transport: devices,
         timeout: command.timeout,
+        adapters,
     };
     link.run(&command.action, &file, &mut print).map(drop)
 }

@@ -36,6 +36,7 @@ fn link(access: Access) -> Link<Loopback> {
             responses: VecDeque::new(),
         },
         timeout: Duration::from_millis(50),
+        adapters: Vec::new(),
     }
 }
 
@@ -214,6 +215,7 @@ fn a_monitor_client_cannot_deploy_and_a_silent_device_times_out() {
     let mut l = Link {
         transport: Silent,
         timeout: Duration::from_millis(10),
+        adapters: Vec::new(),
     };
     assert_eq!(
         l.ask("", "<Request ID=\"1\" Action=\"QUERY\"/>")
@@ -289,6 +291,7 @@ fn over_tcp_fbctl_deploys_types_and_reads_as_4diac_ide_does() {
     let mut l = Link {
         transport: TcpTransport::connect(&address, timeout).unwrap(),
         timeout,
+        adapters: Vec::new(),
     };
     deploy(&mut l);
     let (r, out) = send(
@@ -325,6 +328,7 @@ fn over_tcp_a_refused_connection_and_a_stream_of_other_bytes_are_errors() {
     let mut l = Link {
         transport: TcpTransport::connect(&address, Duration::from_secs(1)).unwrap(),
         timeout: Duration::from_secs(2),
+        adapters: Vec::new(),
     };
     let e = l.ask(
         "",

@@ -159,6 +159,7 @@ pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
         .into_iter()
         .chain((1..=rd).map(|i| var(format!("RD_{i}"), UNTYPED)))
         .collect(),
+        adapters: Vec::new(),
     };
     Some(Box::new(ClientServer {
         interface,

@@ -13,7 +13,7 @@ use core::cell::Ref;
 use iec61499_runtime::composite::{self, CompositeType};
 use iec61499_runtime::fb::Restart;
 use iec61499_runtime::package::{self, PackageError, TypePackage};
-use iec61499_runtime::resource::DeployError;
+use iec61499_runtime::resource::{DeployError, split_port};
 use iec61499_runtime::{Limits, Resource, stdlib};
 
 /// The resource type of FORTE's embedded resource: a resource with an E_RESTART named START.
@@ -39,6 +39,7 @@ impl Res {
 
     /// Deletes instance `name`, or composite instance `name` with all its components.
     fn delete_tree(&mut self, name: &str) -> Result<(), DeployError> {
+        self.composites.forget_adapters(name);
         if !self.composites.contains(name) {
             return self.resource.delete(name);
         }
@@ -610,9 +611,10 @@ impl Device {
                 })
             })
             .collect();
-            self.resources[index].composites.0.push(Flat {
+            self.resources[index].composites.add(Flat {
                 name: name.into(),
                 ports,
+                adapters: t.adapters.clone(),
             });
             let built = self.flatten(index, name, &t, depth);
             if built.is_err() {
@@ -778,7 +780,7 @@ impl Device {
 
 /// Whether `FB.PORT` is a port of `kind` of an instance of `resource`.
 fn port_exists(resource: &Resource, path: &str, kind: PortKind) -> bool {
-    let Some((fb, port)) = path.rsplit_once('.') else {
+    let Some((fb, port)) = split_port(path, |fb| resource.instances().any(|(n, _)| n == fb)) else {
         return false;
     };
     resource.instances().any(|(n, i)| {
@@ -794,7 +796,7 @@ fn port_exists(resource: &Resource, path: &str, kind: PortKind) -> bool {
 
 /// The declaration of `FB.PORT` (an input, else an output).
 fn port_spec(resource: &Resource, path: &str) -> Option<iec61499_runtime::VarSpec> {
-    let (fb, port) = path.rsplit_once('.')?;
+    let (fb, port) = split_port(path, |fb| resource.instances().any(|(n, _)| n == fb))?;
     let (_, interface) = resource.instances().find(|(n, _)| *n == fb)?;
     interface
         .inputs

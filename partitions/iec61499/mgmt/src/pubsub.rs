@@ -120,6 +120,7 @@ pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
             ],
             inputs: fixed_in.into_iter().chain(data).collect(),
             outputs: fixed_out.into(),
+            adapters: Vec::new(),
         }
     } else {
         Interface {
@@ -133,6 +134,7 @@ pub fn create(ty: &str, io: &Io) -> Option<Box<dyn FunctionBlock>> {
             ],
             inputs: fixed_in.into(),
             outputs: fixed_out.into_iter().chain(data).collect(),
+            adapters: Vec::new(),
         }
     };
     Some(Box::new(PubSub {

@@ -8,10 +8,12 @@
 //! The bytes, an interface (integers little-endian, decoding never panics):
 //!
 //! ```text
-//! 0  4 magic "W61N"          4 2 version (1)            6 2 reserved (0)
+//! 0  4 magic "W61N"          4 2 version (2)            6 2 reserved (0)
 //! 8  4 CRC-32 of the bytes from offset 12 to the end
 //! 12 name, file (texts)
 //!    event inputs, event outputs, data inputs, data outputs: each a count u16 and names
+//!    (a port of the composite's own plug or socket is `ADAPTER.PORT`)
+//!    adapters: count u16, per plug or socket: name, adapter type, kind u8 (0 plug, 1 socket)
 //!    components: count u16, per component: name, type, line u32, col u32,
 //!                parameter count u16, per parameter: input name, literal
 //!    connections: count u16, per connection: kind u8 (1 event, 0 data), source component
@@ -20,12 +22,13 @@
 //! a name or text is length u16 then UTF-8 bytes
 //! ```
 
+use crate::fb::AdapterSpec;
 use crate::package::{self, PackageError, crc};
 use alloc::string::String;
 use alloc::vec::Vec;
 
 pub const MAGIC: &[u8; 4] = b"W61N";
-const VERSION: u16 = 1;
+const VERSION: u16 = 2;
 
 /// A component instance of the network.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -68,6 +71,8 @@ pub struct CompositeType {
     pub event_outputs: Vec<String>,
     pub inputs: Vec<String>,
     pub outputs: Vec<String>,
+    /// Its own plugs and sockets; their ports are among the interface's names.
+    pub adapters: Vec<AdapterSpec>,
     pub components: Vec<Component>,
     pub links: Vec<Link>,
 }
@@ -99,6 +104,12 @@ impl CompositeType {
             for n in names {
                 text(&mut w, n);
             }
+        }
+        count(&mut w, self.adapters.len());
+        for a in &self.adapters {
+            text(&mut w, &a.name);
+            text(&mut w, &a.ty);
+            w.push(u8::from(!a.plug));
         }
         count(&mut w, self.components.len());
         for c in &self.components {
@@ -153,6 +164,16 @@ impl CompositeType {
         }
         for _ in 0..r.count(None)? {
             let (name, ty) = (r.text()?, r.text()?);
+            let at = r.at;
+            let plug = match r.u8()? {
+                0 => true,
+                1 => false,
+                _ => return Err(PackageError::Invalid(at, "adapter kind")),
+            };
+            t.adapters.push(AdapterSpec { name, ty, plug });
+        }
+        for _ in 0..r.count(None)? {
+            let (name, ty) = (r.text()?, r.text()?);
             let (line, col) = (r.u32()?, r.u32()?);
             let mut parameters = Vec::new();
             for _ in 0..r.count(None)? {
@@ -202,7 +223,19 @@ impl CompositeType {
     /// Names valid and unique, connection ends declared with the right direction.
     fn check(&self) -> Result<(), String> {
         let valid = |n: &str| !n.is_empty() && !n.contains('.');
+        // A port of an own plug or socket is `ADAPTER.PORT`.
+        let port = |n: &str| {
+            valid(n)
+                || n.split_once('.')
+                    .is_some_and(|(a, p)| valid(p) && self.adapters.iter().any(|x| x.name == a))
+        };
         let mut seen: Vec<&str> = Vec::new();
+        for a in &self.adapters {
+            if !valid(&a.name) || seen.contains(&a.name.as_str()) {
+                return Err(alloc::format!("{}: adapter name `{}`", self.name, a.name));
+            }
+            seen.push(&a.name);
+        }
         for n in self
             .event_inputs
             .iter()
@@ -210,7 +243,7 @@ impl CompositeType {
             .chain(&self.inputs)
             .chain(&self.outputs)
         {
-            if !valid(n) || seen.contains(&n.as_str()) {
+            if !port(n) || seen.contains(&n.as_str()) {
                 return Err(alloc::format!("{}: interface name `{n}`", self.name));
             }
             seen.push(n);
@@ -266,7 +299,12 @@ mod tests {
             event_inputs: vec!["REQ".into()],
             event_outputs: vec!["CNF".into()],
             inputs: vec!["IN".into()],
-            outputs: vec!["OUT".into()],
+            outputs: vec!["OUT".into(), "S.DT".into()],
+            adapters: vec![AdapterSpec {
+                name: "S".into(),
+                ty: "ATimeOut".into(),
+                plug: false,
+            }],
             components: vec![Component {
                 name: "X".into(),
                 ty: "DINT2DINT".into(),
@@ -313,6 +351,13 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("C.fbt:3:5: component name `X`"), "{e}");
+        // A dotted port name needs an own adapter of that name.
+        let mut stray = sample();
+        stray.outputs.push("T.DT".into());
+        let e = CompositeType::decode(&stray.encode())
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("interface name `T.DT`"), "{e}");
     }
 
     proptest::proptest! {

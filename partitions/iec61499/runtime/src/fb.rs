@@ -32,6 +32,25 @@ impl VarSpec {
     }
 }
 
+/// A plug or socket of an interface. Its ports are events and variables of the interface
+/// named `NAME.PORT` (a plug's as the adapter type declares them, a socket's mirrored);
+/// an adapter connection from a plug to a socket of the same adapter type is the event
+/// and data connections between those ports, each way.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct AdapterSpec {
+    pub name: String,
+    /// The adapter type's name.
+    pub ty: String,
+    pub plug: bool,
+}
+
+impl AdapterSpec {
+    /// `plug` or `socket`, for messages.
+    pub fn kind(&self) -> &'static str {
+        if self.plug { "plug" } else { "socket" }
+    }
+}
+
 /// The interface of a function-block type.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
 pub struct Interface {
@@ -39,6 +58,7 @@ pub struct Interface {
     pub event_outputs: Vec<EventSpec>,
     pub inputs: Vec<VarSpec>,
     pub outputs: Vec<VarSpec>,
+    pub adapters: Vec<AdapterSpec>,
 }
 
 /// `(name, WITH names)` of an event, as [`Interface::build`] takes it.
@@ -88,6 +108,7 @@ impl Interface {
             event_outputs: events(event_outputs, &outputs)?,
             inputs,
             outputs,
+            adapters: Vec::new(),
         })
     }
 
@@ -105,6 +126,10 @@ impl Interface {
 
     pub fn output(&self, name: &str) -> Option<usize> {
         self.outputs.iter().position(|v| v.name == name)
+    }
+
+    pub fn adapter(&self, name: &str) -> Option<&AdapterSpec> {
+        self.adapters.iter().find(|a| a.name == name)
     }
 }
 

@@ -169,6 +169,7 @@ pub fn create(ty: &str) -> Option<Box<dyn FunctionBlock>> {
         }],
         inputs: inputs.iter().map(spec).collect(),
         outputs: outputs.iter().map(spec).collect(),
+        adapters: Vec::new(),
     };
     Some(Box::new(Function {
         op,

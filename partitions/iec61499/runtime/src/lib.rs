@@ -16,6 +16,10 @@
 //!   event run in between is seen instead of the one sent.) An input that no input event
 //!   carries is never read from its connection (as in FORTE): it keeps its initial value
 //!   or parameter.
+//! - **Adapters are connections.** A plug's or socket's ports are ports of its FB
+//!   ([`fb::AdapterSpec`]); an adapter connection is the event and data connections
+//!   between them (the device makes them: `iec61499_mgmt::flat`), so its events queue,
+//!   carry their WITH data and fan out as any other.
 //! - **Fan-out in a defined order.** An output event connected to several inputs is queued
 //!   for them in the order the connections were created (the order of the `.fboot`/XML).
 //!   (FORTE leaves it undefined.)

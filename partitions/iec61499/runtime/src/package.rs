@@ -5,13 +5,14 @@
 //! integers little-endian; decoding never panics.
 //!
 //! ```text
-//! 0  4 magic "W61T"          4 2 version (1)            6 2 reserved (0)
+//! 0  4 magic "W61T"          4 2 version (2)            6 2 reserved (0)
 //! 8  4 CRC-32 of the bytes from offset 12 to the end
 //! 12 .. sections, each a count u16 then its records:
 //!   name             1 record: name
 //!   event inputs     per event: name, WITH count u8, WITH input indices u8 each
 //!   event outputs    per event: name, WITH count u8, WITH output indices u8 each
 //!   inputs, outputs, internals   per variable: name, type u8 (VarType), array u16 (0: scalar)
+//!   adapters         per plug or socket: name, adapter type name, kind u8 (0 plug, 1 socket)
 //!   states           per state: name, action count u8, per action: algorithm u8, output u8 (255: none)
 //!   transitions      per transition: source u16, destination u16, event u8, guard u8 (255: none)
 //!   code             1 record: algorithms u16, guards u16, image length u32, the image
@@ -19,14 +20,14 @@
 //! ```
 
 use crate::basic::{Action, Ecc, State, Transition};
-use crate::fb::{EventSpec, Interface, VarSpec};
+use crate::fb::{AdapterSpec, EventSpec, Interface, VarSpec};
 use crate::value::DataType;
 use crate::vmcode::VmCode;
 use alloc::string::{String, ToString};
 use alloc::vec::Vec;
 
 const MAGIC: &[u8; 4] = b"W61T";
-const VERSION: u16 = 1;
+const VERSION: u16 = 2;
 const NONE: u8 = 255;
 
 /// A decoded, checked type.
@@ -72,7 +73,9 @@ impl core::fmt::Display for PackageError {
     fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
         match self {
             PackageError::Magic => f.write_str("not an FB type package"),
-            PackageError::Version(v) => write!(f, "package version {v}, this device reads 1"),
+            PackageError::Version(v) => {
+                write!(f, "package version {v}, this device reads {VERSION}")
+            }
             PackageError::Checksum => f.write_str("package checksum does not match (damaged)"),
             PackageError::Truncated(at) => write!(f, "package ends inside the field at byte {at}"),
             PackageError::Invalid(at, what) => write!(f, "package byte {at}: {what}"),
@@ -119,6 +122,12 @@ pub fn encode(
             w.push(v.ty.code());
             w.extend_from_slice(&(v.array.unwrap_or(0) as u16).to_le_bytes());
         }
+    }
+    count(&mut w, interface.adapters.len());
+    for a in &interface.adapters {
+        name_of(&mut w, &a.name);
+        name_of(&mut w, &a.ty);
+        w.push(u8::from(!a.plug));
     }
     count(&mut w, ecc.states.len());
     for s in &ecc.states {
@@ -272,6 +281,26 @@ pub fn decode(bytes: &[u8]) -> Result<TypePackage, PackageError> {
         }
         var_sets.push(vars);
     }
+    let mut adapters = Vec::new();
+    for _ in 0..r.count(None)? {
+        let name = r.name()?;
+        let ty = r.name()?;
+        let at = r.at;
+        let plug = match r.u8()? {
+            0 => true,
+            1 => false,
+            _ => {
+                return Err(PackageError::Invalid(
+                    at,
+                    "adapter kind is neither plug nor socket",
+                ));
+            }
+        };
+        if adapters.iter().any(|a: &AdapterSpec| a.name == name) {
+            return Err(PackageError::Invalid(at, "adapter declared twice"));
+        }
+        adapters.push(AdapterSpec { name, ty, plug });
+    }
     let mut states = Vec::new();
     for _ in 0..r.count(None)? {
         let name = r.name()?;
@@ -320,6 +349,7 @@ pub fn decode(bytes: &[u8]) -> Result<TypePackage, PackageError> {
         event_outputs,
         inputs,
         outputs,
+        adapters,
     };
     let ecc = Ecc {
         states,

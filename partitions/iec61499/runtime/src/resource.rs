@@ -321,16 +321,11 @@ impl Resource {
         }
     }
 
-    /// `FB.PORT` → (instance, name of the port; the last part, as instance names may have
-    /// several).
+    /// `FB.PORT` → (instance, name of the port).
     fn split<'p>(&self, path: &'p str) -> Result<(usize, &'p str), DeployError> {
-        let (fb, port) = path
-            .rsplit_once('.')
-            .ok_or_else(|| DeployError::NotFound(path.into()))?;
-        let i = self
-            .instance(fb)
-            .ok_or_else(|| DeployError::NotFound(path.into()))?;
-        Ok((i, port))
+        split_port(path, |fb| self.instance(fb).is_some())
+            .and_then(|(fb, port)| Some((self.instance(fb)?, port)))
+            .ok_or_else(|| DeployError::NotFound(path.into()))
     }
 
     fn port(
@@ -406,6 +401,12 @@ impl Resource {
         }
         self.data_connections.push((source, destination));
         Ok(())
+    }
+
+    /// The plug or socket `path` (`FB.NAME`) of an instance.
+    pub fn adapter(&self, path: &str) -> Option<&crate::fb::AdapterSpec> {
+        let (i, name) = self.split(path).ok()?;
+        self.instances[i].fb.interface().adapter(name)
     }
 
     /// Whether `FB.PORT` (an input, else an output) is generic without a type yet.
@@ -776,4 +777,13 @@ impl Resource {
             self.apply_forces(i, true);
         }
     }
+}
+
+/// `FB.PORT` → (`FB`, `PORT`), where `FB` is the longest leading part of `path` that
+/// `is_instance` knows: an instance's name may have several parts (a composite's component
+/// is `COMPOSITE.COMPONENT`) and so may a port (a plug's or socket's is `ADAPTER.PORT`).
+pub fn split_port(path: &str, is_instance: impl Fn(&str) -> bool) -> Option<(&str, &str)> {
+    path.rmatch_indices('.')
+        .map(|(at, _)| (&path[..at], &path[at + 1..]))
+        .find(|(fb, port)| !port.is_empty() && is_instance(fb))
 }
