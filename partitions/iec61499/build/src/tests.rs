@@ -195,6 +195,49 @@ fn internal_initial_values_hold_at_start_and_after_a_reset() {
 }
 
 #[test]
+fn interface_initial_values_hold_at_start_and_after_a_reset() {
+    // Inputs and outputs with an InitialValue start with it; a parameter overrides it
+    // (and stays over a reset); the others start with their type's default.
+    let text = r#"<FBType Name="START_VALUES"><InterfaceList>
+      <EventInputs><Event Name="REQ"><With Var="GAIN"/></Event></EventInputs>
+      <EventOutputs><Event Name="CNF"><With Var="OUT"/></Event></EventOutputs>
+      <InputVars>
+        <VarDeclaration Name="GAIN" Type="INT" InitialValue="5"/>
+        <VarDeclaration Name="BIAS" Type="INT" InitialValue="-2"/>
+        <VarDeclaration Name="PLAIN" Type="INT"/>
+      </InputVars>
+      <OutputVars>
+        <VarDeclaration Name="OUT" Type="INT" InitialValue="7"/>
+        <VarDeclaration Name="OK" Type="BOOL" InitialValue="TRUE"/>
+      </OutputVars>
+    </InterfaceList><SimpleFB>
+      <Algorithm Name="REQ"><ST Text="OUT := GAIN * 10 + BIAS + PLAIN; OK := FALSE;"/></Algorithm>
+    </SimpleFB></FBType>"#;
+    let t = compile("START_VALUES.fbt", text).unwrap();
+    let mut r = Resource::new(Limits::default());
+    r.create("S", t.instantiate()).unwrap();
+    let read = |r: &Resource, port: &str| r.read(&format!("S.{port}")).cloned();
+    assert_eq!(read(&r, "GAIN"), Some(Value::Int(5)));
+    assert_eq!(read(&r, "PLAIN"), Some(Value::Int(0)));
+    assert_eq!(read(&r, "OUT"), Some(Value::Int(7)));
+    assert_eq!(read(&r, "OK"), Some(Value::Bool(true)));
+    r.trigger("S.REQ", 0).unwrap();
+    assert_eq!(read(&r, "OUT"), Some(Value::Int(48)));
+    r.write("S.BIAS", Value::Int(1)).unwrap();
+    r.trigger("S.REQ", 0).unwrap();
+    assert_eq!(read(&r, "OUT"), Some(Value::Int(51)));
+    r.reset();
+    assert_eq!(read(&r, "OUT"), Some(Value::Int(7)));
+    assert_eq!(read(&r, "OK"), Some(Value::Bool(true)));
+    r.trigger("S.REQ", 0).unwrap();
+    assert_eq!(
+        read(&r, "OUT"),
+        Some(Value::Int(51)),
+        "the parameter BIAS stays"
+    );
+}
+
+#[test]
 fn types_download_in_parts_and_a_bad_one_leaves_the_old_type_running() {
     use iec61499_mgmt::serve::{Access, serve, type_messages};
     let text = include_str!("../../../../tests/configs/iec61499/COUNTDOWN.fbt");

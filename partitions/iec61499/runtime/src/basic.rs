@@ -127,6 +127,10 @@ pub trait Algorithms {
     fn initialise(&mut self, internals: &mut [Value]) {
         let _ = internals;
     }
+    /// The same for the interface's inputs and outputs.
+    fn initialise_interface(&mut self, inputs: &mut [Value], outputs: &mut [Value]) {
+        let _ = (inputs, outputs);
+    }
 }
 
 /// An instance of a basic FB type.
@@ -244,6 +248,10 @@ impl FunctionBlock for BasicFb {
     fn reset(&mut self) {
         self.state = 0;
         self.initialise();
+    }
+
+    fn initial(&mut self, inputs: &mut [Value], outputs: &mut [Value]) {
+        self.code.initialise_interface(inputs, outputs);
     }
 }
 

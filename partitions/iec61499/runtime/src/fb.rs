@@ -221,6 +221,11 @@ pub trait FunctionBlock {
     /// Back to the state of a new instance (the resource's reset).
     fn reset(&mut self);
 
+    /// Sets the inputs and outputs an instance starts with (when created and at a reset)
+    /// to the values its type declares (`InitialValue`); the others keep their type's
+    /// default, which they hold when this is called.
+    fn initial(&mut self, _inputs: &mut [Value], _outputs: &mut [Value]) {}
+
     /// Whether the FB takes events from outside (a SUBSCRIBE's messages): the resource
     /// then calls [`FunctionBlock::poll`] when it is polled.
     fn polls(&self) -> bool {

@@ -163,7 +163,11 @@ impl Resource {
     /// Creates instance `name` of `fb`; returns its index. A name may have several parts
     /// joined by `.` (a composite's component is `COMPOSITE.COMPONENT`); a port is then
     /// `COMPOSITE.COMPONENT.PORT`.
-    pub fn create(&mut self, name: &str, fb: Box<dyn FunctionBlock>) -> Result<usize, DeployError> {
+    pub fn create(
+        &mut self,
+        name: &str,
+        mut fb: Box<dyn FunctionBlock>,
+    ) -> Result<usize, DeployError> {
         if name.split('.').any(str::is_empty) {
             return Err(DeployError::NotFound(name.into()));
         }
@@ -175,8 +179,9 @@ impl Resource {
             return Err(DeployError::Limit("instances"));
         }
         let interface = fb.interface();
-        let inputs = interface.inputs.iter().map(|v| v.initial()).collect();
-        let outputs = interface.outputs.iter().map(|v| v.initial()).collect();
+        let mut inputs: Vec<Value> = interface.inputs.iter().map(|v| v.initial()).collect();
+        let mut outputs: Vec<Value> = interface.outputs.iter().map(|v| v.initial()).collect();
+        fb.initial(&mut inputs, &mut outputs);
         let instance = Instance {
             name: name.into(),
             fb,
@@ -768,6 +773,7 @@ impl Resource {
             let interface = inst.fb.interface();
             inst.inputs = interface.inputs.iter().map(|v| v.initial()).collect();
             inst.outputs = interface.outputs.iter().map(|v| v.initial()).collect();
+            inst.fb.initial(&mut inst.inputs, &mut inst.outputs);
         }
         for ((i, var), value) in &self.parameters {
             self.instances[*i].inputs[*var] = value.clone();

@@ -284,4 +284,12 @@ impl Algorithms for VmCode {
             Ok(())
         });
     }
+
+    fn initialise_interface(&mut self, inputs: &mut [Value], outputs: &mut [Value]) {
+        let _ = self.with_machine(|machine, image, code| {
+            load_into(machine, image, &code.inputs, inputs);
+            load_into(machine, image, &code.outputs, outputs);
+            Ok(())
+        });
+    }
 }
