@@ -105,17 +105,17 @@ fn iec61499_deploy() {
         "1: <Response ID=\"1\" />",
         "5: <Response ID=\"5\" />",
         // An event through the downloaded type: Q := 300 / 3; its CNF counted by C.
-        "<Connection Source=\"100\" Destination=\"\" />",
+        "<Connection Source=\"D.Q\" Destination=\"100\" />",
         "<Port name=\"CV\"><Data value=\"1\" forced=\"false\"/></Port>",
         // Forced, then released.
-        "<Connection Source=\"7\" Destination=\"\" />",
+        "<Connection Source=\"D.Q\" Destination=\"7\" />",
         // The damaged package: refused with the reason in the log; the old type runs on
         // (300 / 2).
         "fbctl: type COUNTDOWN: refused: INVALID_OBJECT",
         "damaged type status 1",
-        "<Connection Source=\"150\" Destination=\"\" />",
+        "<Connection Source=\"D.Q\" Destination=\"150\" />",
         // The changed type: a new instance computes 600 / 3.
-        "<Connection Source=\"200\" Destination=\"\" />",
+        "<Connection Source=\"D2.Q\" Destination=\"200\" />",
         "duplicate status 1",
         "bad resource status 1",
         "done",

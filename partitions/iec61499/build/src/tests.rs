@@ -453,7 +453,7 @@ fn a_device_takes_a_type_package_and_runs_it() {
         &req("READ", "<Connection Source=\"C.Q\" Destination=\"\"/>"),
         0,
     );
-    assert!(q.contains("Source=\"TRUE\""), "{q}");
+    assert!(q.contains("Destination=\"TRUE\""), "{q}");
     let mut damaged = bytes.clone();
     damaged[20] ^= 1;
     assert!(d.add_type(&damaged).is_err());

@@ -129,7 +129,7 @@ fn device() -> Device {
 fn read(d: &mut Device, port: &str) -> String {
     let answer = d.execute("R", &request("READ", &connection(port, "")), 0);
     answer
-        .split("Source=\"")
+        .split("Destination=\"")
         .nth(1)
         .and_then(|s| s.split('"').next())
         .unwrap_or_else(|| panic!("READ {port}: {answer}"))

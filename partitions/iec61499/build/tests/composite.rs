@@ -101,7 +101,7 @@ fn read(d: &mut Device, path: &str) -> String {
         0,
     );
     answer
-        .split("Source=\"")
+        .split("Destination=\"")
         .nth(1)
         .and_then(|s| s.split('"').next())
         .unwrap_or(&answer)
@@ -329,9 +329,14 @@ fn compare_on_device(
     }
     run("R", "START", "", 0)?;
     let mut now = 0i64;
+    // The value a READ answers (the whole answer when it is a refusal).
     let read = |d: &mut Device, path: &str| {
         let object = format!("<Connection Source=\"{path}\" Destination=\"\"/>");
-        d.execute("R", &request("READ", &object), 0)
+        let answer = d.execute("R", &request("READ", &object), 0);
+        match answer.split("Destination=\"").nth(1) {
+            Some(value) => value.split('"').next().unwrap_or("").to_string(),
+            None => answer,
+        }
     };
     for (n, &(kind, seed)) in steps.iter().enumerate() {
         let what = if kind % 4 == 0 {

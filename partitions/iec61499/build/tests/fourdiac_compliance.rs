@@ -223,7 +223,7 @@ fn read(d: &mut Device, path: &str) -> Option<String> {
     );
     refused(&answer).is_none().then(|| {
         answer
-            .split("Source=\"")
+            .split("Destination=\"")
             .nth(1)
             .and_then(|s| s.split('"').next())
             .unwrap_or("")

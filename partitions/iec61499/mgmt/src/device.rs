@@ -404,19 +404,14 @@ impl Device {
                 r.write_literal(source, destination, *force == Some(true))?;
             }
             (Action::Read, Object::Watch { .. }) => return Ok(Some(self.watches())),
-            (
-                Action::Read,
-                Object::Connection {
-                    source,
-                    destination,
-                    ..
-                },
-            ) => {
+            (Action::Read, Object::Connection { source, .. }) => {
+                // As FORTE's DEV_MGR answers: the port as the source, its value as the
+                // destination.
                 let value = r.read(source).ok_or(Reason::NoSuchObject)?;
                 return Ok(Some(format!(
                     "<Connection Source=\"{}\" Destination=\"{}\" />",
-                    escape(&literal::show(value)),
-                    escape(destination)
+                    escape(source),
+                    escape(&literal::show(value))
                 )));
             }
             (Action::Query, Object::Fb { .. }) => {

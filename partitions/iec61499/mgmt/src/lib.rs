@@ -22,7 +22,7 @@
 //! | WRITE | `... force="true"` / `force="false"` | forces a port to the literal / releases it |
 //! | WRITE | `Connection Source="$e" Destination=FB.EI` | triggers an input event |
 //! | READ | `Watch` | every watched port's value (below) |
-//! | READ | `Connection Source=FB.PORT` | one port's value |
+//! | READ | `Connection Source=FB.PORT` | one port's value, as FORTE answers: `<Connection Source="FB.PORT" Destination="VALUE" />` |
 //! | START, STOP, KILL, RESET | none (a resource) | starts (COLD), stops (STOP event), stops without it, resets |
 //! | QUERY | `FB Name="*" Type="*"` | the resource's FB list |
 //!

@@ -212,7 +212,7 @@ pub fn read(d: &mut impl AsMut<Device>, path: &str) -> String {
         0,
     );
     answer
-        .split("Source=\"")
+        .split("Destination=\"")
         .nth(1)
         .and_then(|s| s.split('"').next())
         .unwrap_or(&answer)

@@ -414,7 +414,7 @@ mod tests {
             0,
         );
         let raw = r
-            .split("Source=\"")
+            .split("Destination=\"")
             .nth(1)
             .unwrap()
             .split('"')

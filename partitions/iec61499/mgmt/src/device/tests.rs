@@ -106,7 +106,7 @@ fn deploy_run_watch_and_force() {
         ""
     );
     let read = d.execute("R", "<Request ID=\"10\" Action=\"READ\"><Connection Source=\"C.Q\" Destination=\"\"/></Request>", 0);
-    assert!(read.contains("Source=\"TRUE\""), "{read}");
+    assert!(read.contains("Destination=\"TRUE\""), "{read}");
     let list = d.execute(
         "R",
         "<Request ID=\"11\" Action=\"QUERY\"><FB Name=\"*\" Type=\"*\"/></Request>",
@@ -390,7 +390,7 @@ fn a_generic_function_fb_takes_its_type_from_a_typed_literal_or_a_connection() {
         "<Request ID=\"7\" Action=\"READ\"><Connection Source=\"EQ.OUT\" Destination=\"\"/></Request>",
         0,
     );
-    assert!(answer.contains("Source=\"TRUE\""), "{answer}");
+    assert!(answer.contains("Destination=\"TRUE\""), "{answer}");
     // A type outside the class: F_ADD takes no STRING.
     assert_eq!(send(&mut d, "R", "CREATE", &fb("ADD2", "F_ADD")), "");
     assert_eq!(

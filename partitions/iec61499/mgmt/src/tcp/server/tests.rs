@@ -160,7 +160,7 @@ const READ_CV: (&str, &str) = (
 /// The value in a READ's response.
 fn value(response: &str) -> u64 {
     response
-        .split("Source=\"")
+        .split("Destination=\"")
         .nth(1)
         .and_then(|r| r.split('"').next())
         .and_then(|v| v.parse().ok())
