@@ -146,8 +146,10 @@ pub enum TimerRequest {
 pub struct Context<'a> {
     pub(crate) now: i64,
     pub(crate) outputs: &'a mut [Value],
-    /// Output events sent, each with the outputs at the moment it was sent.
-    pub(crate) sent: &'a mut Vec<(usize, Vec<Value>)>,
+    /// Output events sent: each event and where the outputs as they were when it was sent
+    /// start in `sent_outputs` (all of them, one after the other).
+    pub(crate) sent: &'a mut Vec<(usize, usize)>,
+    pub(crate) sent_outputs: &'a mut Vec<Value>,
     pub(crate) timers: &'a mut Vec<TimerRequest>,
     /// Why the reaction failed (a trapping algorithm), if it did.
     pub(crate) failed: &'a mut Option<String>,
@@ -184,7 +186,8 @@ impl Context<'_> {
 
     /// Sends output event `output`; its receivers get the outputs as they are now.
     pub fn send(&mut self, output: usize) {
-        self.sent.push((output, self.outputs.to_vec()));
+        self.sent.push((output, self.sent_outputs.len()));
+        self.sent_outputs.extend(self.outputs.iter().cloned());
     }
 
     /// Arms timer `id` for the absolute instant `at` (re-arming replaces the deadline).

@@ -110,10 +110,48 @@ struct Force {
     value: Value,
 }
 
-struct Queued {
-    to: End,
-    /// The destination's inputs sampled when the event was sent.
-    data: Vec<(usize, Value)>,
+/// The event queue: each event's destination and how many of the values it carries, and
+/// the destination's inputs sampled when each event was sent, one event's after the
+/// other's; so queueing an event allocates nothing once both have grown.
+#[derive(Default)]
+struct EventQueue {
+    events: VecDeque<(End, usize)>,
+    values: VecDeque<(usize, Value)>,
+}
+
+impl EventQueue {
+    fn len(&self) -> usize {
+        self.events.len()
+    }
+
+    fn clear(&mut self) {
+        self.events.clear();
+        self.values.clear();
+    }
+
+    fn push(&mut self, to: End, values: impl Iterator<Item = (usize, Value)>) {
+        let before = self.values.len();
+        self.values.extend(values);
+        self.events.push_back((to, self.values.len() - before));
+    }
+
+    /// The next event's destination and the values it carries (input index, value).
+    fn pop(&mut self) -> Option<(End, impl Iterator<Item = (usize, Value)> + '_)> {
+        let (to, n) = self.events.pop_front()?;
+        Some((to, self.values.drain(..n)))
+    }
+
+    /// Drops the events to instance `i` with their values.
+    fn forget(&mut self, i: usize) {
+        let mut kept = EventQueue::default();
+        while let Some(((instance, event), values)) = self.pop() {
+            if instance != i {
+                let values: Vec<_> = values.collect();
+                kept.push((instance, event), values.into_iter());
+            }
+        }
+        *self = kept;
+    }
 }
 
 struct Timer {
@@ -135,12 +173,23 @@ pub struct Resource {
     /// Inputs set by [`Resource::write`], applied again by a reset.
     parameters: Vec<(End, Value)>,
     forces: Vec<Force>,
-    queue: VecDeque<Queued>,
+    queue: EventQueue,
     timers: Vec<Timer>,
     timer_seq: u64,
     fault: Option<Fault>,
     /// Events delivered since the resource was created (a statistic).
     delivered: u64,
+    /// What a reaction sends and asks, kept between reactions so that delivering an event
+    /// allocates nothing once they have grown (see [`Resource::react`]).
+    scratch: Scratch,
+}
+
+/// The buffers of [`Resource::react`].
+#[derive(Default)]
+struct Scratch {
+    sent: Vec<(usize, usize)>,
+    sent_outputs: Vec<Value>,
+    requests: Vec<TimerRequest>,
 }
 
 impl Resource {
@@ -152,11 +201,12 @@ impl Resource {
             data_connections: Vec::new(),
             parameters: Vec::new(),
             forces: Vec::new(),
-            queue: VecDeque::new(),
+            queue: EventQueue::default(),
             timers: Vec::new(),
             timer_seq: 0,
             fault: None,
             delivered: 0,
+            scratch: Scratch::default(),
         }
     }
 
@@ -225,7 +275,7 @@ impl Resource {
         self.parameters.retain(|((p, _), _)| *p != i);
         self.forces.retain(|f| f.end.0 != i);
         self.timers.retain(|t| t.instance != i);
-        self.queue.retain(|q| q.to.0 != i);
+        self.queue.forget(i);
         self.instances[i].name.clear();
         Ok(())
     }
@@ -502,57 +552,24 @@ impl Resource {
         self.delivered
     }
 
-    /// The values a delivery of input event `event` to `instance` carries: its WITH inputs,
-    /// each from its connected source now, or, for a source that is the `sender`, from the
-    /// sender's outputs as they were when it sent.
-    fn sample(
-        &self,
-        instance: usize,
-        event: usize,
-        sender: Option<(usize, &[Value])>,
-    ) -> Vec<(usize, Value)> {
-        let interface = self.instances[instance].fb.interface();
-        let with = &interface.event_inputs[event].with;
-        self.data_connections
-            .iter()
-            .filter(|(_, (i, var))| *i == instance && with.contains(var))
-            .map(|((si, so), (_, var))| {
-                let value = match sender {
-                    Some((s, outputs)) if s == *si => outputs[*so].clone(),
-                    _ => self.instances[*si].outputs[*so].clone(),
-                };
-                // A connection may widen (UINT to DINT, ...): the value takes the input's type.
-                let from = self.instances[*si].fb.interface().outputs[*so].ty;
-                let to = interface.inputs[*var].ty;
-                let value = if from == to {
-                    value
-                } else {
-                    crate::value::widen(value, to)
-                };
-                (*var, value)
-            })
-            .collect()
-    }
-
     fn enqueue(&mut self, to: End, sender: Option<(usize, &[Value])>) -> Result<(), ()> {
         if self.queue.len() >= self.limits.queue {
             return Err(());
         }
-        let data = self.sample(to.0, to.1, sender);
-        self.queue.push_back(Queued { to, data });
+        let values = sampled(&self.instances, &self.data_connections, to, sender);
+        self.queue.push(to, values);
         Ok(())
     }
 
     /// Queues the destinations of output `event` of `instance`, in connection order, with
     /// the outputs it had when it sent the event.
     fn send(&mut self, instance: usize, event: usize, outputs: &[Value]) -> Result<(), Fault> {
-        let destinations: Vec<End> = self
-            .event_connections
-            .iter()
-            .filter(|(s, _)| *s == (instance, event))
-            .map(|(_, d)| *d)
-            .collect();
-        for to in destinations {
+        // By index: enqueueing leaves the connections as they are.
+        for k in 0..self.event_connections.len() {
+            let (source, to) = self.event_connections[k];
+            if source != (instance, event) {
+                continue;
+            }
             if self.enqueue(to, Some((instance, outputs))).is_err() {
                 let inst = &self.instances[instance];
                 return Err(Fault::QueueOverflow {
@@ -572,20 +589,38 @@ impl Resource {
         now: i64,
         react: impl FnOnce(&mut dyn FunctionBlock, &[Value], &mut Context<'_>),
     ) -> Result<(), Fault> {
-        let mut sent = Vec::new();
-        let mut requests = Vec::new();
+        // The buffers are taken for the reaction and put back after it (a reaction does
+        // not react again), so their capacity is reused.
+        let mut scratch = core::mem::take(&mut self.scratch);
+        scratch.sent.clear();
+        scratch.sent_outputs.clear();
+        scratch.requests.clear();
+        let result = self.react_with(instance, now, react, &mut scratch);
+        self.scratch = scratch;
+        result
+    }
+
+    fn react_with(
+        &mut self,
+        instance: usize,
+        now: i64,
+        react: impl FnOnce(&mut dyn FunctionBlock, &[Value], &mut Context<'_>),
+        scratch: &mut Scratch,
+    ) -> Result<(), Fault> {
         let mut failed = None;
-        {
+        let outputs = {
             let inst = &mut self.instances[instance];
             let mut ctx = Context {
                 now,
                 outputs: &mut inst.outputs,
-                sent: &mut sent,
-                timers: &mut requests,
+                sent: &mut scratch.sent,
+                sent_outputs: &mut scratch.sent_outputs,
+                timers: &mut scratch.requests,
                 failed: &mut failed,
             };
             react(inst.fb.as_mut(), &inst.inputs, &mut ctx);
-        }
+            inst.outputs.len()
+        };
         if let Some(reason) = failed {
             return Err(Fault::Trap {
                 fb: self.instances[instance].name.clone(),
@@ -593,20 +628,24 @@ impl Resource {
             });
         }
         self.apply_forces(instance, true);
-        for (_, outputs) in &mut sent {
+        for &(_, start) in &scratch.sent {
             for f in self
                 .forces
                 .iter()
                 .filter(|f| f.end.0 == instance && f.output)
             {
-                outputs[f.end.1] = f.value.clone();
+                scratch.sent_outputs[start + f.end.1] = f.value.clone();
             }
         }
-        for request in requests {
+        for request in scratch.requests.drain(..) {
             self.timer_request(instance, request)?;
         }
-        for (event, outputs) in sent {
-            self.send(instance, event, &outputs)?;
+        for &(event, start) in &scratch.sent {
+            self.send(
+                instance,
+                event,
+                &scratch.sent_outputs[start..start + outputs],
+            )?;
         }
         Ok(())
     }
@@ -638,11 +677,10 @@ impl Resource {
     /// Delivers queued events until the queue is empty (one chain).
     fn run_chain(&mut self, now: i64) -> Result<(), Fault> {
         let mut delivered = 0usize;
-        while let Some(Queued {
-            to: (instance, event),
-            data,
-        }) = self.queue.pop_front()
-        {
+        loop {
+            let Some(((instance, event), values)) = self.queue.pop() else {
+                break;
+            };
             delivered += 1;
             if delivered > self.limits.chain_events {
                 let inst = &self.instances[instance];
@@ -651,11 +689,11 @@ impl Resource {
                     event: inst.fb.interface().event_inputs[event].name.clone(),
                 });
             }
-            self.delivered += 1;
-            let inst = &mut self.instances[instance];
-            for (var, value) in data {
-                inst.inputs[var] = value;
+            let inputs = &mut self.instances[instance].inputs;
+            for (var, value) in values {
+                inputs[var] = value;
             }
+            self.delivered += 1;
             self.apply_forces(instance, false);
             self.react(instance, now, |fb, i, ctx| fb.event(event, i, ctx))?;
         }
@@ -783,6 +821,37 @@ impl Resource {
             self.apply_forces(i, true);
         }
     }
+}
+
+/// The values a delivery of input event `event` to `instance` carries: its WITH inputs,
+/// each from its connected source now, or, for a source that is the `sender`, from the
+/// sender's outputs as they were when it sent.
+fn sampled<'r>(
+    instances: &'r [Instance],
+    data_connections: &'r [(End, End)],
+    (instance, event): End,
+    sender: Option<(usize, &'r [Value])>,
+) -> impl Iterator<Item = (usize, Value)> + 'r {
+    let interface = instances[instance].fb.interface();
+    let with = &interface.event_inputs[event].with;
+    data_connections
+        .iter()
+        .filter(move |(_, (i, var))| *i == instance && with.contains(var))
+        .map(move |((si, so), (_, var))| {
+            let value = match sender {
+                Some((s, outputs)) if s == *si => outputs[*so].clone(),
+                _ => instances[*si].outputs[*so].clone(),
+            };
+            // A connection may widen (UINT to DINT, ...): the value takes the input's type.
+            let from = instances[*si].fb.interface().outputs[*so].ty;
+            let to = interface.inputs[*var].ty;
+            let value = if from == to {
+                value
+            } else {
+                crate::value::widen(value, to)
+            };
+            (*var, value)
+        })
 }
 
 /// `FB.PORT` → (`FB`, `PORT`), where `FB` is the longest leading part of `path` that
