@@ -1,9 +1,11 @@
 //! 4diac FORTE, the IEC 61499 reference runtime of Eclipse 4diac, as a peer on the host for
 //! the tests that check the soft-PLC's publish/subscribe against the real thing (test
-//! `net_pubsub_forte`). Its sources are never committed: a checkout in
+//! `net_pubsub_forte`), and statically linked as the other leg of the IEC 61499 benchmark
+//! (`crate::fortebench`). Its sources are never committed: a checkout in
 //! `target/4diac-forte/src` (or the directory `FORTE_SRC` names) is built here once, with
 //! CMake and the host's C++ compiler, into `target/4diac-forte/build` (about two minutes
-//! on two cores); `FORTE` may name a built `forte` binary instead.
+//! on two cores; the static one into `build-static`); `FORTE` may name a built `forte`
+//! binary instead (for the tests).
 //!
 //! The build: the POSIX architecture with the Ethernet and FBDK communication layers (UDP
 //! PUBLISH_n/SUBSCRIBE_n in the FBDK ASN.1 encoding) and the IEC 61131-3, conversion and
@@ -41,8 +43,21 @@ pub fn binary() -> Result<Option<PathBuf>> {
         }
         return Ok(Some(path));
     }
+    build("build", &[])
+}
+
+/// A statically linked `forte` (the same options, into `target/4diac-forte/build-static`):
+/// what the IEC 61499 benchmark runs on Debian's stock kernel, whose initramfs has no C++
+/// library. `None` and an error as [`binary`].
+pub fn static_binary() -> Result<Option<PathBuf>> {
+    build("build-static", &["-DCMAKE_EXE_LINKER_FLAGS=-static"])
+}
+
+/// `forte` built from the sources into `target/4diac-forte/<dir>` with [`OPTIONS`] and
+/// `extra`, unless it is there already.
+fn build(dir: &str, extra: &[&str]) -> Result<Option<PathBuf>> {
     let root = crate::target_dir().join("4diac-forte");
-    let build = root.join("build");
+    let build = root.join(dir);
     let built = build.join("src").join("forte");
     if built.is_file() {
         return Ok(Some(built));
@@ -53,7 +68,11 @@ pub fn binary() -> Result<Option<PathBuf>> {
     if !src.join("CMakeLists.txt").is_file() {
         return Ok(None);
     }
-    eprintln!("xtask: building 4diac FORTE from {}", src.display());
+    eprintln!(
+        "xtask: building 4diac FORTE from {} into {}",
+        src.display(),
+        build.display()
+    );
     let run = |command: &mut Command, what: &str| -> Result<()> {
         let status = command
             .status()
@@ -72,7 +91,8 @@ pub fn binary() -> Result<Option<PathBuf>> {
             .arg(&src)
             .arg("-B")
             .arg(&build)
-            .args(OPTIONS),
+            .args(OPTIONS)
+            .args(extra),
         "cmake",
     )?;
     run(

@@ -18,6 +18,7 @@ pub mod check_config;
 pub mod diskbench;
 pub mod esp;
 pub mod forte;
+pub mod fortebench;
 pub mod guest;
 pub mod iec61499;
 pub mod lint;

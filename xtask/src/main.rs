@@ -118,11 +118,19 @@ enum Cmd {
         /// target/bench/disk.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel"])]
         disk: bool,
+        /// Run only the IEC 61499 benchmark, timed from the host on real time (also part of
+        /// the full bench): the event loop of tests/configs/iec61499/bench_loop.fboot on the
+        /// IEC 61499 partition (tests/configs/bench_iec61499.toml) and on 4diac FORTE on
+        /// Debian's stock kernel in the same QEMU (`iec61499_loop_events`,
+        /// `forte_loop_events`, `iec61499_ratio_loop_events`); writes
+        /// target/bench/iec61499.json.
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time"])]
+        iec61499: bool,
         /// Run only the long power-cut test (not part of the full bench): scenario
         /// `store_power_cut` with CUTS random power cuts instead of the ordinary run's 20
         /// (`cargo xtask test store_power_cut --scenarios-only` with WARDEN_POWER_CUTS=CUTS;
         /// WARDEN_POWER_CUT_SEED replays a seed); prints each cut and the seed.
-        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time"])]
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time", "iec61499"])]
         power_cut: bool,
         /// Power cuts of `--power-cut`.
         #[arg(
@@ -224,6 +232,7 @@ fn main() -> ExitCode {
             schedules: true, ..
         } => schedules_bench(),
         Cmd::Bench { net: true, .. } => net_bench(),
+        Cmd::Bench { iec61499: true, .. } => iec61499_bench(),
         Cmd::Bench {
             ports: true,
             deterministic_time,
@@ -784,6 +793,16 @@ fn net_bench() -> Result<bool> {
     print_and_write(&metrics, "net.json")
 }
 
+/// `cargo xtask bench --iec61499`: only the IEC 61499 benchmark ([`xtask::fortebench`],
+/// real time); writes `target/bench/iec61499.json`.
+fn iec61499_bench() -> Result<bool> {
+    let qemu = tools::ensure_qemu()?;
+    let system = artifacts::build(true, KernelVariant::Production)?;
+    let dir = xtask::target_dir().join("bench");
+    let metrics = xtask::fortebench::run(&qemu, &system, &dir)?;
+    print_and_write(&metrics, "iec61499.json")
+}
+
 /// `cargo xtask bench --native`: only the native leg; writes `target/bench/native.json`.
 fn native_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
@@ -1052,6 +1071,7 @@ fn bench(deterministic_time: bool) -> Result<bool> {
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::plcnetbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::pubsubbench::run(&qemu, &system, &dir)?);
+    metrics.extend(xtask::fortebench::run(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {
