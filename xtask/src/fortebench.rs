@@ -257,16 +257,7 @@ fn leg(
 ) -> Result<Vec<f64>> {
     let ports = crate::scenario::free_host_ports(2)?;
     let ports = [ports[0], ports[1]];
-    let ended = AtomicBool::new(false);
-    let (outcome, measured) = std::thread::scope(|scope| {
-        let host = scope.spawn(|| host(ports, &ended));
-        let outcome = boot(ports);
-        ended.store(true, Ordering::SeqCst);
-        let measured = host
-            .join()
-            .unwrap_or_else(|_| Err(anyhow::anyhow!("the host side panicked")));
-        (outcome, measured)
-    });
+    let (outcome, measured) = qemu::with_host(|| boot(ports), |ended| host(ports, ended));
     let outcome = outcome?;
     match measured {
         Ok(rates) => Ok(rates),

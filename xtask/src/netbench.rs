@@ -260,17 +260,9 @@ pub fn run(
 fn leg(name: &str, boot: impl FnOnce([u16; 2]) -> Result<Outcome>) -> Result<Vec<Metric>> {
     let ports = crate::scenario::free_host_ports(2)?;
     let ports = [ports[0], ports[1]];
-    let ended = AtomicBool::new(false);
     let prefix = format!("{name}_net_");
-    let (outcome, measured) = std::thread::scope(|scope| {
-        let host = scope.spawn(|| measure(ports, &prefix, &ended));
-        let outcome = boot(ports);
-        ended.store(true, Ordering::SeqCst);
-        let measured = host
-            .join()
-            .unwrap_or_else(|_| Err(anyhow::anyhow!("the host side panicked")));
-        (outcome, measured)
-    });
+    let (outcome, measured) =
+        qemu::with_host(|| boot(ports), |ended| measure(ports, &prefix, ended));
     let outcome = outcome?;
     for line in last_nic_counters(&outcome.lines) {
         eprintln!("xtask: {name}: {line}");

@@ -96,11 +96,9 @@ pub fn run(
     let (modbus, online) = (ports[0], ports[1]);
     let entries = crate::esp::standard_entries(system, Some(&config))?;
     let esp = crate::esp::assemble(&dir.join("esp"), system, &entries)?;
-    let ended = AtomicBool::new(false);
     eprintln!("xtask: booting the PLC network benchmark system (real time)");
-    let (outcome, measured) = std::thread::scope(|scope| {
-        let host = scope.spawn(|| measure(&python, modbus, online, &ended));
-        let outcome = qemu::run(
+    let boot = || {
+        qemu::run(
             qemu,
             &RunOptions {
                 esp,
@@ -116,13 +114,10 @@ pub fn run(
                 ]
                 .concat(),
             },
-        );
-        ended.store(true, Ordering::SeqCst);
-        let measured = host
-            .join()
-            .unwrap_or_else(|_| Err(anyhow::anyhow!("the host side panicked")));
-        (outcome, measured)
-    });
+        )
+    };
+    let (outcome, measured) =
+        qemu::with_host(boot, |ended| measure(&python, modbus, online, ended));
     let outcome = outcome?;
     let mut metrics = match measured {
         Ok(m) => m,

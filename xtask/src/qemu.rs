@@ -422,6 +422,25 @@ fn follow(path: PathBuf, tx: mpsc::Sender<String>, done: Arc<Mutex<bool>>) {
     });
 }
 
+/// Runs `boot` (a QEMU run) while `host` works beside it on another thread (a benchmark's
+/// host side, timing the system from here); `host` sees its flag set once QEMU has ended,
+/// to stop waiting for an answer. Both results.
+pub fn with_host<T: Send>(
+    boot: impl FnOnce() -> Result<Outcome>,
+    host: impl FnOnce(&AtomicBool) -> Result<T> + Send,
+) -> (Result<Outcome>, Result<T>) {
+    let ended = AtomicBool::new(false);
+    std::thread::scope(|scope| {
+        let host = scope.spawn(|| host(&ended));
+        let outcome = boot();
+        ended.store(true, Ordering::SeqCst);
+        let measured = host
+            .join()
+            .unwrap_or_else(|_| Err(anyhow::anyhow!("the host side panicked")));
+        (outcome, measured)
+    })
+}
+
 /// Boots `options.esp`.
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
     launch(qemu, Media::Esp(&options.esp), options, None, None)
