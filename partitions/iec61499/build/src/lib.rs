@@ -227,26 +227,19 @@ fn parts_of<'f>(
                 .states
                 .iter()
                 .map(|s| {
-                    Ok(State {
-                    name: s.name.clone(),
-                    actions: s
-                        .actions
-                        .iter()
-                        .map(|a| {
-                            Ok(Action {
-                                algorithm: a.algorithm.as_deref().and_then(algorithm),
-                                output: match a.output.as_deref() {
-                                    Some(o) => Some(interface.event_output(o).ok_or_else(|| {
-                                        vec![format!(
-                                            "{file}:{}:{}: action sends `{o}`, which is no output event",
-                                            a.pos.line, a.pos.col
-                                        )]
-                                    })?),
-                                    None => None,
-                                },
-                            })
+                    let actions = s.actions.iter().map(|a| {
+                        Ok(Action {
+                            algorithm: a.algorithm.as_deref().and_then(algorithm),
+                            output: a
+                                .output
+                                .as_deref()
+                                .map(|o| port(file, a.pos, o, interface.event_output(o), "output"))
+                                .transpose()?,
                         })
-                        .collect::<Result<_, Vec<String>>>()?,
+                    });
+                    Ok(State {
+                        name: s.name.clone(),
+                        actions: actions.collect::<Result<_, Vec<String>>>()?,
                     })
                 })
                 .collect::<Result<_, Vec<String>>>()?;
@@ -258,15 +251,10 @@ fn parts_of<'f>(
                     let (event, guard) = match &t.condition {
                         Condition::Always => (None, None),
                         Condition::When { event, guard } => (
-                            match event.as_deref() {
-                                Some(e) => Some(interface.event_input(e).ok_or_else(|| {
-                                    vec![format!(
-                                        "{file}:{}:{}: condition names `{e}`, which is no input event",
-                                        t.pos.line, t.pos.col
-                                    )]
-                                })?),
-                                None => None,
-                            },
+                            event
+                                .as_deref()
+                                .map(|e| port(file, t.pos, e, interface.event_input(e), "input"))
+                                .transpose()?,
                             guard.as_ref().map(|g| {
                                 guards.push(g.clone());
                                 guards.len() - 1
@@ -344,6 +332,24 @@ fn parts_of<'f>(
             fb.name
         )]),
     }
+}
+
+/// The index `found` of event `name` that an action sends or a transition waits for, or
+/// the error at `pos` that it is no event of that `direction` (an adapter's port the type
+/// does not have, or a misspelt name the reader let through as an adapter's).
+fn port(
+    file: &str,
+    pos: Pos,
+    name: &str,
+    found: Option<usize>,
+    direction: &str,
+) -> Result<usize, Vec<String>> {
+    found.ok_or_else(|| {
+        vec![format!(
+            "{file}:{}:{}: `{name}` is no {direction} event",
+            pos.line, pos.col
+        )]
+    })
 }
 
 /// The statements of an algorithm's text: 4diac IDE 3 wraps them in `ALGORITHM NAME` ...
