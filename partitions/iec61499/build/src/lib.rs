@@ -12,7 +12,7 @@
 
 use iec61499_runtime::basic::{Action, BasicFb, Ecc, State, Transition};
 use iec61499_runtime::composite::{Component, CompositeType, End, Link};
-use iec61499_runtime::fb::{AdapterSpec, EventDecl, Interface, VarDecl, VarSpec};
+use iec61499_runtime::fb::{AdapterSpec, EventDecl, Interface, VarDecl, VarSpec, adapter_port};
 use iec61499_runtime::vmcode::{GUARD_BASE, INSTANCE, VmCode};
 use iec61499_runtime::{FunctionBlock, type_named};
 pub use iec61499_xml::{AdapterType, read_adp};
@@ -386,11 +386,6 @@ fn statements(st: &str) -> String {
         None => out.push_str(body),
     }
     out
-}
-
-/// `PORT` of a port named `ADAPTER.PORT` of adapter `adapter`.
-fn adapter_port<'n>(name: &'n str, adapter: &str) -> Option<&'n str> {
-    name.strip_prefix(adapter)?.strip_prefix('.')
 }
 
 fn st_type(spec: &VarSpec) -> String {

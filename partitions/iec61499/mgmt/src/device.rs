@@ -13,7 +13,7 @@ use core::cell::Ref;
 use iec61499_runtime::composite::{self, CompositeType};
 use iec61499_runtime::fb::Restart;
 use iec61499_runtime::package::{self, PackageError, TypePackage};
-use iec61499_runtime::resource::{DeployError, split_port};
+use iec61499_runtime::resource::DeployError;
 use iec61499_runtime::{Limits, Resource, stdlib};
 
 /// The resource type of FORTE's embedded resource: a resource with an E_RESTART named START.
@@ -775,24 +775,19 @@ impl Device {
 
 /// Whether `FB.PORT` is a port of `kind` of an instance of `resource`.
 fn port_exists(resource: &Resource, path: &str, kind: PortKind) -> bool {
-    let Some((fb, port)) = split_port(path, |fb| resource.instances().any(|(n, _)| n == fb)) else {
-        return false;
-    };
-    resource.instances().any(|(n, i)| {
-        n == fb
-            && match kind {
-                PortKind::EventIn => i.event_input(port).is_some(),
-                PortKind::EventOut => i.event_output(port).is_some(),
-                PortKind::DataIn => i.input(port).is_some(),
-                PortKind::DataOut => i.output(port).is_some(),
-            }
-    })
+    resource
+        .port_interface(path)
+        .is_some_and(|(i, port)| match kind {
+            PortKind::EventIn => i.event_input(port).is_some(),
+            PortKind::EventOut => i.event_output(port).is_some(),
+            PortKind::DataIn => i.input(port).is_some(),
+            PortKind::DataOut => i.output(port).is_some(),
+        })
 }
 
 /// The declaration of `FB.PORT` (an input, else an output).
 fn port_spec(resource: &Resource, path: &str) -> Option<iec61499_runtime::VarSpec> {
-    let (fb, port) = split_port(path, |fb| resource.instances().any(|(n, _)| n == fb))?;
-    let (_, interface) = resource.instances().find(|(n, _)| *n == fb)?;
+    let (interface, port) = resource.port_interface(path)?;
     interface
         .inputs
         .iter()

@@ -23,7 +23,7 @@ use alloc::format;
 use alloc::string::String;
 use alloc::vec;
 use alloc::vec::Vec;
-use iec61499_runtime::fb::AdapterSpec;
+use iec61499_runtime::fb::{AdapterSpec, adapter_port};
 use iec61499_runtime::resource::DeployError;
 use iec61499_runtime::{EventSpec, Resource, VarSpec};
 
@@ -241,7 +241,7 @@ impl Composites {
         let Some((fb, name)) = path.rsplit_once('.') else {
             return Vec::new();
         };
-        let ours = |n: &str| Some(String::from(n.strip_prefix(name)?.strip_prefix('.')?));
+        let ours = |n: &str| adapter_port(n, name).map(String::from);
         if let Some(flat) = self.flats.iter().find(|c| c.name == fb) {
             return flat
                 .ports

@@ -44,6 +44,12 @@ pub struct AdapterSpec {
     pub plug: bool,
 }
 
+/// `PORT` of a port named `ADAPTER.PORT` of the plug or socket named `adapter`; `None` when
+/// the port is not one of that adapter's.
+pub fn adapter_port<'n>(name: &'n str, adapter: &str) -> Option<&'n str> {
+    name.strip_prefix(adapter)?.strip_prefix('.')
+}
+
 impl AdapterSpec {
     /// `plug` or `socket`, for messages.
     pub fn kind(&self) -> &'static str {

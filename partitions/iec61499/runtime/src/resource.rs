@@ -383,6 +383,12 @@ impl Resource {
             .ok_or_else(|| DeployError::NotFound(path.into()))
     }
 
+    /// The interface of the instance `FB.PORT` names, and `PORT` (not yet looked up in it).
+    pub fn port_interface<'p>(&self, path: &'p str) -> Option<(&crate::fb::Interface, &'p str)> {
+        let (i, port) = self.split(path).ok()?;
+        Some((self.instances[i].fb.interface(), port))
+    }
+
     fn port(
         &self,
         path: &str,
