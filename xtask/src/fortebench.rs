@@ -41,7 +41,7 @@ use anyhow::{Context, Result, bail};
 use std::io::{Read, Write};
 use std::net::TcpStream;
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 /// Our leg's system description (relative to the workspace).
@@ -63,7 +63,6 @@ pub const ROUNDS: usize = 5;
 /// The network benchmark's description, whose guest's busybox initramfs FORTE's leg boots.
 const INITRAMFS_OF: &str = "tests/configs/bench_net.toml";
 /// How long a leg may take to answer its first request (booting under TCG).
-const READY_WITHIN: Duration = Duration::from_secs(300);
 /// The pause between two reads of a loop not yet counted.
 const POLL_PAUSE: Duration = Duration::from_micros(200);
 /// Longest wait for one response.
@@ -188,21 +187,13 @@ impl Client {
 
 /// Waits until the device on `port` answers, stopping when `ended` (QEMU ended).
 fn connect_when_ready(port: u16, ended: &AtomicBool) -> Result<Client> {
-    let start = Instant::now();
-    loop {
-        if let Ok(mut c) = Client::connect(port)
-            && c.ask("", "QUERY", "<FB Name=\"*\" Type=\"*\"/>").is_ok()
-        {
-            return Ok(c);
-        }
-        if ended.load(Ordering::SeqCst) {
-            bail!("QEMU ended before the device answered");
-        }
-        if start.elapsed() > READY_WITHIN {
-            bail!("the device did not answer within {READY_WITHIN:?}");
-        }
-        std::thread::sleep(Duration::from_millis(500));
-    }
+    qemu::when_answering("the device", ended, || {
+        Ok(Client::connect(port).ok().and_then(|mut c| {
+            c.ask("", "QUERY", "<FB Name=\"*\" Type=\"*\"/>")
+                .is_ok()
+                .then_some(c)
+        }))
+    })
 }
 
 /// The host side of a leg: deploys `deploy` (a boot file's text) when given, runs a loop

@@ -33,7 +33,7 @@ use anyhow::{Context, Result, bail};
 use std::io::{Read, Write};
 use std::net::{Shutdown, TcpStream, UdpSocket};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 /// The benchmark's system description (relative to the workspace).
@@ -68,7 +68,6 @@ const REQUEST_ROUNDS: usize = 3;
 const PAGE: &str = "/page.html";
 const PAGE_BYTES: usize = 1024;
 /// How long a leg may take to answer its first probe (booting under TCG on a loaded host).
-const READY_WITHIN: Duration = Duration::from_secs(300);
 /// Longest wait for one socket operation.
 const IO_TIMEOUT: Duration = Duration::from_secs(60);
 /// Longest wait for a UDP echo before the datagram counts as lost.
@@ -304,23 +303,9 @@ pub fn last_nic_counters(lines: &[String]) -> Vec<&str> {
 /// then asks it to end. Stops waiting when `ended` (QEMU ended) is set.
 pub fn measure(ports: [u16; 2], prefix: &str, ended: &AtomicBool) -> Result<Vec<Metric>> {
     let [serve, http] = ports;
-    let start = Instant::now();
-    loop {
-        if ping(serve).is_ok() {
-            break;
-        }
-        if ended.load(Ordering::SeqCst) {
-            bail!("QEMU ended before linux-netserve answered");
-        }
-        if start.elapsed() > READY_WITHIN {
-            bail!("linux-netserve did not answer within {READY_WITHIN:?}");
-        }
-        std::thread::sleep(Duration::from_millis(500));
-    }
-    eprintln!(
-        "xtask: {prefix}: linux-netserve answered after {:.1} s",
-        start.elapsed().as_secs_f64()
-    );
+    qemu::when_answering(&format!("{prefix}: linux-netserve"), ended, || {
+        Ok(ping(serve).is_ok().then_some(()))
+    })?;
     let result = measure_all(serve, http, prefix);
     // Whatever happened: end the run (else QEMU runs until the leg's timeout).
     let quit = quit(serve);

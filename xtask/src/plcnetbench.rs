@@ -24,7 +24,7 @@ use crate::bench::Metric;
 use crate::qemu::{self, RunOptions};
 use anyhow::{Context, Result, bail};
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::AtomicBool;
 use std::time::{Duration, Instant};
 
 /// The benchmark's system description (relative to the workspace).
@@ -42,7 +42,6 @@ const POLL_CONNECTIONS: usize = 4;
 /// Online READs, one after another.
 const ONLINE_READS: usize = 300;
 /// How long the PLC may take to answer its first Modbus request (boot under TCG).
-const READY_WITHIN: Duration = Duration::from_secs(300);
 /// The longest run (QEMU is stopped then).
 const RUN_TIMEOUT: Duration = Duration::from_secs(600);
 /// What pymodbus the venv gets (as .ci/run installs it).
@@ -150,19 +149,9 @@ pub fn run(
 
 /// The host side: the quiet wait, the SCADA poll, the online READs.
 fn measure(python: &Path, modbus: u16, online: u16, ended: &AtomicBool) -> Result<Vec<Metric>> {
-    let ready_by = Instant::now() + READY_WITHIN;
-    loop {
-        if ended.load(Ordering::SeqCst) {
-            bail!("QEMU ended before the PLC answered");
-        }
-        if poll(python, modbus, 1, 1)?.is_some() {
-            break;
-        }
-        if Instant::now() > ready_by {
-            bail!("the PLC answered no Modbus request within {READY_WITHIN:?}");
-        }
-        std::thread::sleep(Duration::from_secs(1));
-    }
+    qemu::when_answering("the PLC's Modbus server", ended, || {
+        poll(python, modbus, 1, 1)
+    })?;
     std::thread::sleep(QUIET);
     let modbus_trips = poll(python, modbus, MODBUS_READS, POLL_CONNECTIONS)?
         .context("pymodbus's poll failed (its output above)")?;

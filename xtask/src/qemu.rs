@@ -441,6 +441,38 @@ pub fn with_host<T: Send>(
     })
 }
 
+/// How long a benchmark's host side waits for the system it measures to answer first.
+pub const READY_WITHIN: Duration = Duration::from_secs(300);
+
+/// Asks `probe` every half second until it answers (`Ok(Some)`), for a host side waiting
+/// for `what` in the booting system to answer; fails when the probe does, when QEMU has
+/// `ended`, or after [`READY_WITHIN`].
+pub fn when_answering<T>(
+    what: &str,
+    ended: &AtomicBool,
+    mut probe: impl FnMut() -> Result<Option<T>>,
+) -> Result<T> {
+    let start = Instant::now();
+    loop {
+        if let Some(answer) = probe()? {
+            eprintln!(
+                "xtask: {what} answered after {:.1} s",
+                start.elapsed().as_secs_f64()
+            );
+            return Ok(answer);
+        }
+        anyhow::ensure!(
+            !ended.load(Ordering::SeqCst),
+            "QEMU ended before {what} answered"
+        );
+        anyhow::ensure!(
+            start.elapsed() <= READY_WITHIN,
+            "{what} did not answer within {READY_WITHIN:?}"
+        );
+        std::thread::sleep(Duration::from_millis(500));
+    }
+}
+
 /// Boots `options.esp`.
 pub fn run(qemu: &Qemu, options: &RunOptions) -> Result<Outcome> {
     launch(qemu, Media::Esp(&options.esp), options, None, None)
