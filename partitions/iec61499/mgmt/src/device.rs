@@ -574,7 +574,7 @@ impl Device {
                     .iter()
                     .find(|t| t.name == ty)
                     .map(TypePackage::instantiate)
-                    .or_else(|| types::create(ty, &resource, name, &self.report))
+                    .or_else(|| types::create(ty, &resource, name, &self.report, &self.io))
                     .or_else(|| sifb::create(ty, &self.io))
                     .or_else(|| crate::pubsub::create(ty, &self.io))
                     .or_else(|| crate::clientserver::create(ty, &self.io))

@@ -106,6 +106,12 @@ pub trait ProcessIo {
     }
     /// Closes `link` (what waited either way is dropped).
     fn tcp_close(&mut self, _link: usize) {}
+    /// The partition's monotonic clock now (ns), for FBs that measure the time passing
+    /// inside an event chain (E_STOPWATCH); the default: no clock (they measure the chains'
+    /// instants instead, which is what a test on the host wants).
+    fn clock(&self) -> Option<i64> {
+        None
+    }
 }
 
 /// What a TCP link (`ProcessIo::tcp_open`) is doing, for its FB.

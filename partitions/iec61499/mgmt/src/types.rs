@@ -1,8 +1,16 @@
 //! The FB types a device can create: the standard event FBs, the generic function FBs
 //! (`iec61499_runtime::functions`), the same-type conversion FBs
-//! of 4diac's library (`BOOL2BOOL`, `DINT2DINT`, ...), and the test FBs FORTE's system
-//! tests report with: `TEST_CONDITION` (REQ with `check`: counts a passed or failed test,
-//! logs it, CNF) and `STEST_END` (REQ: the test is over).
+//! of 4diac's library (`BOOL2BOOL`, `DINT2DINT`, ...), 4diac's `E_STOPWATCH` (below), and
+//! the test FBs FORTE's system tests report with: `TEST_CONDITION` (REQ with `check`:
+//! counts a passed or failed test, logs it, CNF) and `STEST_END` (REQ: the test is over).
+//!
+//! `E_STOPWATCH` as 4diac's utility library defines it: START takes the time unless the
+//! watch runs already; STOP of a running watch sets TD to the time since its START and
+//! sends EO with it (a STOP of a stopped watch, a START of a running one: nothing). The time
+//! is the partition's clock as it runs ([`crate::sifb::ProcessIo::clock`]), where 4diac's
+//! reads `NOW_MONOTONIC()`: it measures what happens inside a chain, which the chain's own
+//! instant does not (it stays the same through the chain); without a clock, the chains'
+//! instants.
 
 use alloc::boxed::Box;
 use alloc::format;
@@ -41,6 +49,7 @@ pub fn create(
     resource: &str,
     name: &str,
     report: &SharedReport,
+    io: &crate::sifb::Io,
 ) -> Option<Box<dyn FunctionBlock>> {
     if let Some(fb) = stdlib::create(ty).or_else(|| functions::create(ty)) {
         return Some(fb);
@@ -59,6 +68,16 @@ pub fn create(
                 report: report.clone(),
             }))
         }
+        "E_STOPWATCH" => Some(Box::new(Stopwatch {
+            interface: build(
+                &[("START", &[]), ("STOP", &[])],
+                &[("EO", &["TD"])],
+                &[],
+                &[("TD", DataType::Time)],
+            ),
+            io: io.clone(),
+            started: None,
+        })),
         "STEST_END" => Some(Box::new(TestEnd {
             interface: build(&[("REQ", &[])], &[], &[], &[]),
             report: report.clone(),
@@ -117,6 +136,35 @@ impl FunctionBlock for TestCondition {
         ctx.send(0);
     }
     fn reset(&mut self) {}
+}
+
+struct Stopwatch {
+    interface: Interface,
+    io: crate::sifb::Io,
+    /// When the running watch started.
+    started: Option<i64>,
+}
+
+impl FunctionBlock for Stopwatch {
+    fn interface(&self) -> &Interface {
+        &self.interface
+    }
+    fn event(&mut self, event: usize, _: &[Value], ctx: &mut Context<'_>) {
+        const START: usize = 0;
+        let now = self.io.borrow().io.clock().unwrap_or_else(|| ctx.now());
+        match self.started {
+            None if event == START => self.started = Some(now),
+            Some(start) if event != START => {
+                self.started = None;
+                ctx.set(0, Value::Time(now.saturating_sub(start)));
+                ctx.send(0);
+            }
+            _ => {}
+        }
+    }
+    fn reset(&mut self) {
+        self.started = None;
+    }
 }
 
 struct TestEnd {

@@ -265,6 +265,9 @@ impl ApexIo {
 }
 
 impl ProcessIo for ApexIo {
+    fn clock(&self) -> Option<i64> {
+        Some(now_ns())
+    }
     fn size(&self, port: &str, input: bool) -> Option<usize> {
         match self.find(port)? {
             (_, size, Sampling::In(_)) if input => Some(*size),

@@ -398,3 +398,74 @@ fn a_generic_function_fb_takes_its_type_from_a_typed_literal_or_a_connection() {
         "INVALID_OPERATION"
     );
 }
+
+/// A partition whose clock advances 1 us at every reading.
+struct Ticking(core::cell::Cell<i64>);
+
+impl crate::sifb::ProcessIo for Ticking {
+    fn clock(&self) -> Option<i64> {
+        let now = self.0.get() + 1_000;
+        self.0.set(now);
+        Some(now)
+    }
+}
+
+/// Reads `path` of resource R as the READ answer's value text.
+fn read_value(d: &mut Device, path: &str) -> String {
+    let answer = d.execute(
+        "R",
+        &format!(
+            "<Request ID=\"7\" Action=\"READ\">{}</Request>",
+            conn(path, "")
+        ),
+        0,
+    );
+    answer
+        .split("Destination=\"")
+        .nth(1)
+        .and_then(|v| v.split('"').next())
+        .unwrap_or_else(|| panic!("no value: {answer}"))
+        .to_string()
+}
+
+#[test]
+fn a_stopwatch_measures_the_partition_clock_inside_a_chain_and_the_chain_instants_without_one() {
+    // S.EO1 starts the watch and S.EO2 stops it in the same chain; C counts its EO.
+    let deploy = |d: &mut Device| {
+        assert_eq!(send(d, "", "CREATE", &fb("R", "EMB_RES")), "");
+        for (name, ty) in [("S", "E_SPLIT"), ("W", "E_STOPWATCH"), ("C", "E_CTU")] {
+            assert_eq!(send(d, "R", "CREATE", &fb(name, ty)), "");
+        }
+        for (from, to) in [("S.EO1", "W.START"), ("S.EO2", "W.STOP"), ("W.EO", "C.CU")] {
+            assert_eq!(send(d, "R", "CREATE", &conn(from, to)), "");
+        }
+        assert_eq!(send(d, "R", "WRITE", &conn("100", "C.PV")), "");
+        assert_eq!(send(d, "R", "START", ""), "");
+    };
+    let mut d = device();
+    d.set_io(alloc::boxed::Box::new(Ticking(core::cell::Cell::new(0))));
+    deploy(&mut d);
+    assert_eq!(send(&mut d, "R", "WRITE", &conn("$e", "S.EI")), "");
+    // One reading at START, the next at STOP.
+    assert_eq!(read_value(&mut d, "W.TD"), "T#1000ns");
+    assert_eq!(read_value(&mut d, "C.CV"), "1");
+
+    // Without a clock: the chains' instants. A STOP of a stopped watch does nothing, nor
+    // does a START of a running one.
+    let mut d = device();
+    deploy(&mut d);
+    let at = |d: &mut Device, path: &str, now: i64| {
+        let text = format!(
+            "<Request ID=\"7\" Action=\"WRITE\">{}</Request>",
+            conn("$e", path)
+        );
+        assert!(!d.execute("R", &text, now).contains("Reason"));
+    };
+    at(&mut d, "W.STOP", 1_000);
+    assert_eq!(read_value(&mut d, "C.CV"), "0");
+    at(&mut d, "W.START", 5_000_000);
+    at(&mut d, "W.START", 6_000_000);
+    at(&mut d, "W.STOP", 12_000_000);
+    assert_eq!(read_value(&mut d, "W.TD"), "T#7ms");
+    assert_eq!(read_value(&mut d, "C.CV"), "1");
+}
