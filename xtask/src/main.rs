@@ -118,13 +118,16 @@ enum Cmd {
         /// target/bench/disk.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel"])]
         disk: bool,
-        /// Run only the IEC 61499 benchmark, timed from the host on real time (also part of
-        /// the full bench): the event loop of tests/configs/iec61499/bench_loop.fboot on the
-        /// IEC 61499 partition (tests/configs/bench_iec61499.toml) and on 4diac FORTE on
-        /// Debian's stock kernel in the same QEMU (`iec61499_loop_events`,
-        /// `forte_loop_events`, `iec61499_ratio_loop_events`); writes
+        /// Run only the IEC 61499 benchmark (also part of the full bench; virtual time with
+        /// --deterministic-time): three applications on the IEC 61499 partition
+        /// (tests/configs/bench_iec61499.toml) and on 4diac FORTE on Debian's stock kernel
+        /// in the same QEMU, each timed by the device's own E_STOPWATCH: the event loop of
+        /// tests/configs/iec61499/bench_loop.fboot (`iec61499_loop_events`), a chain of 10
+        /// FBs (bench_chain.fboot, `iec61499_chain_latency`) and E_CYCLE at 1 ms
+        /// (bench_cycle.fboot, `iec61499_cycle_jitter`, `iec61499_cycle_jitter_max`);
+        /// FORTE's as `forte_*`, the ratios as `iec61499_ratio_*`; writes
         /// target/bench/iec61499.json.
-        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk", "deterministic_time"])]
+        #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk"])]
         iec61499: bool,
         /// Run only the long power-cut test (not part of the full bench): scenario
         /// `store_power_cut` with CUTS random power cuts instead of the ordinary run's 20
@@ -232,7 +235,11 @@ fn main() -> ExitCode {
             schedules: true, ..
         } => schedules_bench(),
         Cmd::Bench { net: true, .. } => net_bench(),
-        Cmd::Bench { iec61499: true, .. } => iec61499_bench(),
+        Cmd::Bench {
+            iec61499: true,
+            deterministic_time,
+            ..
+        } => iec61499_bench(deterministic_time),
         Cmd::Bench {
             ports: true,
             deterministic_time,
@@ -793,13 +800,13 @@ fn net_bench() -> Result<bool> {
     print_and_write(&metrics, "net.json")
 }
 
-/// `cargo xtask bench --iec61499`: only the IEC 61499 benchmark ([`xtask::fortebench`],
-/// real time); writes `target/bench/iec61499.json`.
-fn iec61499_bench() -> Result<bool> {
+/// `cargo xtask bench --iec61499`: only the IEC 61499 benchmark ([`xtask::fortebench`]);
+/// writes `target/bench/iec61499.json`.
+fn iec61499_bench(deterministic_time: bool) -> Result<bool> {
     let qemu = tools::ensure_qemu()?;
     let system = artifacts::build(true, KernelVariant::Production)?;
     let dir = xtask::target_dir().join("bench");
-    let metrics = xtask::fortebench::run(&qemu, &system, &dir)?;
+    let metrics = xtask::fortebench::run(&qemu, &system, &dir, deterministic_time)?;
     print_and_write(&metrics, "iec61499.json")
 }
 
@@ -1067,11 +1074,16 @@ fn bench(deterministic_time: bool) -> Result<bool> {
         &dir,
         deterministic_time,
     )?);
+    metrics.extend(xtask::fortebench::run(
+        &qemu,
+        &system,
+        &dir,
+        deterministic_time,
+    )?);
     // Timed from the host: always real time.
     metrics.extend(xtask::netbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::plcnetbench::run(&qemu, &system, &dir)?);
     metrics.extend(xtask::pubsubbench::run(&qemu, &system, &dir)?);
-    metrics.extend(xtask::fortebench::run(&qemu, &system, &dir)?);
     eprintln!("xtask: running the host benchmarks");
     metrics.extend(xtask::bench::host_metrics()?);
     for m in &metrics {
