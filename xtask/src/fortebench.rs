@@ -35,16 +35,19 @@
 //! - **The host** ([`measure`]) triggers with 4diac's `WRITE $e` request and reads with
 //!   READ: a loop at a time until N.CV counts it, then W.TD, [`LOOPS`] loops a round,
 //!   [`ROUNDS`] rounds (a first loop to warm up); a chain at a time until C10.CV counts it,
-//!   then W.TD, [`CHAINS`] chains (and one to warm up); CY.START, then every
-//!   20 ms the last interval (W.TD) until N.CV counts [`CYCLES`] intervals, CY.STOP, and
-//!   HT.OUT and LT.OUT for the extremes. (Loops triggered back to back are no measure:
+//!   then W.TD, [`CHAINS`] chains (and one to warm up); CY.START, nothing for
+//!   [`CYCLE_QUIET`] (3 s on the host's clock), HT.OUT and LT.OUT for the quiet phase's
+//!   extremes, then every 20 ms the last interval (W.TD) until N.CV counts [`CYCLES`]
+//!   more, CY.STOP, and HT.OUT and LT.OUT again for the whole run's extremes. (Loops triggered back to back are no measure:
 //!   FORTE puts an event from outside into the chain that runs, so a second trigger would
 //!   restart the counting loop while it counts.)
 //!
 //! Metrics: `iec61499_loop_events` (events a second of each round: its loops' events over
 //! their watch's times), `iec61499_chain_latency` (us, each chain), `iec61499_cycle_jitter`
-//! (us, how far from 1 ms each interval the host sampled was) and
-//! `iec61499_cycle_jitter_max` (us, how far the farthest of all intervals was); FORTE's as
+//! (us, how far from 1 ms each interval the host sampled was), `iec61499_cycle_jitter_max`
+//! (us, how far the farthest interval of the quiet phase was) and
+//! `iec61499_cycle_jitter_max_polled` (the same over the whole run: a device that serves
+//! a management request between chains delays a timer due meanwhile); FORTE's as
 //! `forte_*`; `iec61499_ratio_loop_events` and `iec61499_ratio_chain_latency` (ours over
 //! FORTE's, [`crate::native::ratios`]'s arithmetic: above 1 ours has more events a second,
 //! below 1 ours is quicker through the chain). Without FORTE's sources (see
@@ -84,8 +87,12 @@ pub const LOOPS: u64 = 10;
 pub const ROUNDS: usize = 5;
 /// Chains timed.
 pub const CHAINS: u64 = 50;
-/// E_CYCLE intervals to run, and the pause between two of the host's samples of the last.
+/// How long E_CYCLE runs with the host quiet (on the host's clock), the intervals it runs
+/// then while the host samples, and the pause between two of the host's samples.
+const CYCLE_QUIET: Duration = Duration::from_secs(3);
 pub const CYCLES: u64 = 2_000;
+/// The fewest intervals a quiet phase must have to count.
+const MIN_QUIET_INTERVALS: u64 = 500;
 const CYCLE_SAMPLE_PAUSE: Duration = Duration::from_millis(20);
 /// The network benchmark's description, whose guest's busybox initramfs FORTE's leg boots.
 const INITRAMFS_OF: &str = "tests/configs/bench_net.toml";
@@ -287,8 +294,13 @@ pub struct Measured {
     /// How far from E_CYCLE's period the last interval was at each of the host's samples
     /// (us).
     pub cycle_jitter: Vec<f64>,
-    /// How far from the period the farthest of all [`CYCLES`] intervals was (us).
+    /// How far from the period the farthest interval of the quiet phase was (us), and how
+    /// many intervals it had.
     pub cycle_jitter_max: f64,
+    pub cycle_quiet_intervals: u64,
+    /// How far from the period the farthest interval of the whole run was (us): the quiet
+    /// phase and [`CYCLES`] more while the host read every [`CYCLE_SAMPLE_PAUSE`].
+    pub cycle_jitter_max_polled: f64,
 }
 
 /// The host side of a leg: deploys `deploy` (boot files' texts), then times the loop, the
@@ -329,28 +341,45 @@ pub fn measure(port: u16, deploy: &[String], ended: &AtomicBool) -> Result<Measu
                 .push(c.time(CHAIN, "W.TD")? as f64 / 1e3);
         }
     }
-    // The cycle: sampled while it runs, its extremes at the end.
-    let start = Instant::now();
+    // The cycle: first quiet (the host reads nothing, then the extremes), then sampled
+    // while it runs, the extremes again at the end (over both).
+    let farthest = |c: &mut Client| -> Result<f64> {
+        // HT.OUT is the longest interval, LT.OUT twice the period less the shortest; read
+        // first, before the reads that follow can delay an interval.
+        let far = c.time(CYCLE, "HT.OUT")?.max(c.time(CYCLE, "LT.OUT")?);
+        Ok((far - CYCLE_PERIOD_NS) as f64 / 1e3)
+    };
     c.trigger(CYCLE, "CY.START")?;
+    std::thread::sleep(CYCLE_QUIET);
+    measured.cycle_jitter_max = farthest(&mut c)?;
+    measured.cycle_quiet_intervals = c.count(CYCLE, "N.CV")?;
+    eprintln!(
+        "xtask: E_CYCLE with the host quiet for {CYCLE_QUIET:?}: {} intervals",
+        measured.cycle_quiet_intervals
+    );
+    if measured.cycle_quiet_intervals < MIN_QUIET_INTERVALS {
+        bail!(
+            "E_CYCLE ran {} intervals in {CYCLE_QUIET:?}, fewer than {MIN_QUIET_INTERVALS}",
+            measured.cycle_quiet_intervals
+        );
+    }
+    let start = Instant::now();
+    let until = measured.cycle_quiet_intervals + CYCLES;
     loop {
         std::thread::sleep(CYCLE_SAMPLE_PAUSE);
         let intervals = c.count(CYCLE, "N.CV")?;
-        if intervals > 0 {
-            let interval = c.time(CYCLE, "W.TD")?;
-            let off = (interval - CYCLE_PERIOD_NS).abs();
-            measured.cycle_jitter.push(off as f64 / 1e3);
-        }
-        if intervals >= CYCLES {
+        let interval = c.time(CYCLE, "W.TD")?;
+        let off = (interval - CYCLE_PERIOD_NS).abs();
+        measured.cycle_jitter.push(off as f64 / 1e3);
+        if intervals >= until {
             break;
         }
         if start.elapsed() > IO_TIMEOUT {
-            bail!("{intervals} of {CYCLES} cycles within {IO_TIMEOUT:?}");
+            bail!("{intervals} of {until} cycles within {IO_TIMEOUT:?}");
         }
     }
     c.trigger(CYCLE, "CY.STOP")?;
-    // HT.OUT is the longest interval, LT.OUT twice the period less the shortest.
-    let farthest = c.time(CYCLE, "HT.OUT")?.max(c.time(CYCLE, "LT.OUT")?);
-    measured.cycle_jitter_max = (farthest - CYCLE_PERIOD_NS) as f64 / 1e3;
+    measured.cycle_jitter_max_polled = farthest(&mut c)?;
     Ok(measured)
 }
 
@@ -396,6 +425,11 @@ fn metrics(prefix: &str, m: &Measured) -> Vec<Metric> {
         line("chain_latency", "us", &m.chain_latency),
         line("cycle_jitter", "us", &m.cycle_jitter),
         line("cycle_jitter_max", "us", &[m.cycle_jitter_max]),
+        line(
+            "cycle_jitter_max_polled",
+            "us",
+            &[m.cycle_jitter_max_polled],
+        ),
     ]
 }
 

@@ -124,7 +124,8 @@ enum Cmd {
         /// in the same QEMU, each timed by the device's own E_STOPWATCH: the event loop of
         /// tests/configs/iec61499/bench_loop.fboot (`iec61499_loop_events`), a chain of 10
         /// FBs (bench_chain.fboot, `iec61499_chain_latency`) and E_CYCLE at 1 ms
-        /// (bench_cycle.fboot, `iec61499_cycle_jitter`, `iec61499_cycle_jitter_max`);
+        /// (bench_cycle.fboot, `iec61499_cycle_jitter`, `iec61499_cycle_jitter_max`,
+        /// `iec61499_cycle_jitter_max_polled`);
         /// FORTE's as `forte_*`, the ratios as `iec61499_ratio_*`; writes
         /// target/bench/iec61499.json.
         #[arg(long, conflicts_with_all = ["soak", "guest", "hostile", "native", "plc", "schedules", "net", "ports", "kernel", "disk"])]
