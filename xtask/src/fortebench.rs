@@ -294,9 +294,9 @@ pub struct Measured {
     /// How far from E_CYCLE's period the last interval was at each of the host's samples
     /// (us).
     pub cycle_jitter: Vec<f64>,
-    /// How far from the period the farthest interval of the quiet phase was (us), and how
-    /// many intervals it had.
+    /// How far from the period the farthest interval of the quiet phase was (us).
     pub cycle_jitter_max: f64,
+    /// How many intervals the quiet phase had.
     pub cycle_quiet_intervals: u64,
     /// How far from the period the farthest interval of the whole run was (us): the quiet
     /// phase and [`CYCLES`] more while the host read every [`CYCLE_SAMPLE_PAUSE`].

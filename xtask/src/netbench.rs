@@ -67,7 +67,6 @@ const REQUEST_ROUNDS: usize = 3;
 /// The page busybox httpd serves (tests/configs/guest/net_bench.sh writes it).
 const PAGE: &str = "/page.html";
 const PAGE_BYTES: usize = 1024;
-/// How long a leg may take to answer its first probe (booting under TCG on a loaded host).
 /// Longest wait for one socket operation.
 const IO_TIMEOUT: Duration = Duration::from_secs(60);
 /// Longest wait for a UDP echo before the datagram counts as lost.

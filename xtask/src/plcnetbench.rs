@@ -41,7 +41,6 @@ const POLL_HZ: u32 = 100;
 const POLL_CONNECTIONS: usize = 4;
 /// Online READs, one after another.
 const ONLINE_READS: usize = 300;
-/// How long the PLC may take to answer its first Modbus request (boot under TCG).
 /// The longest run (QEMU is stopped then).
 const RUN_TIMEOUT: Duration = Duration::from_secs(600);
 /// What pymodbus the venv gets (as .ci/run installs it).
