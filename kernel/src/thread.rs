@@ -111,31 +111,6 @@ pub struct Thread {
     notify_bits: u64,
 }
 
-pub const EMPTY_CONTEXT: TrapFrame = TrapFrame {
-    r15: 0,
-    r14: 0,
-    r13: 0,
-    r12: 0,
-    r11: 0,
-    r10: 0,
-    r9: 0,
-    r8: 0,
-    rbp: 0,
-    rdi: 0,
-    rsi: 0,
-    rdx: 0,
-    rcx: 0,
-    rbx: 0,
-    rax: 0,
-    vector: 0,
-    error_code: 0,
-    rip: 0,
-    cs: 0,
-    rflags: 0,
-    rsp: 0,
-    ss: 0,
-};
-
 impl Thread {
     pub const FREE: Self = Self {
         state: State::Free,
@@ -144,7 +119,7 @@ impl Thread {
         priority: 0,
         time_partition: 0,
         suspended: false,
-        context: EMPTY_CONTEXT,
+        context: TrapFrame::ZERO,
         fs_base: 0,
         gs_base: 0,
         fpu: FpuState::initial(),
@@ -453,14 +428,14 @@ impl Kernel {
             task,
             priority,
             time_partition,
-            context: crate::arch::idt::TrapFrame {
+            context: TrapFrame {
                 rip: entry,
                 rsp: stack,
                 rdi: arg,
                 cs: USER_CS,
                 ss: USER_SS,
                 rflags: USER_RFLAGS,
-                ..EMPTY_CONTEXT
+                ..TrapFrame::ZERO
             },
             fpu: FpuState::initial(),
             ..Thread::FREE

@@ -19,35 +19,25 @@ pub const TIMER_VECTOR: u8 = 0x30;
 /// Vector the local APIC uses for spurious interrupts (must end in 0xf on old CPUs).
 pub const SPURIOUS_VECTOR: u8 = 0xff;
 
-/// Register state saved by the entry stubs, lowest address first. A thread's saved context
-/// is one, and the CPU pushes the last five words of an interrupt from ring 3 right into
-/// it, at the 16-byte-aligned stack top it is given (hence the alignment).
-#[repr(C, align(16))]
-#[derive(Clone, Copy, Debug)]
-pub struct TrapFrame {
-    pub r15: u64,
-    pub r14: u64,
-    pub r13: u64,
-    pub r12: u64,
-    pub r11: u64,
-    pub r10: u64,
-    pub r9: u64,
-    pub r8: u64,
-    pub rbp: u64,
-    pub rdi: u64,
-    pub rsi: u64,
-    pub rdx: u64,
-    pub rcx: u64,
-    pub rbx: u64,
-    pub rax: u64,
-    pub vector: u64,
-    pub error_code: u64,
-    // Pushed by the CPU.
-    pub rip: u64,
-    pub cs: u64,
-    pub rflags: u64,
-    pub rsp: u64,
-    pub ss: u64,
+/// Defines [`TrapFrame`] and its all-zero value from one list of its fields.
+macro_rules! trap_frame {
+    ($($field:ident)*) => {
+        /// Register state saved by the entry stubs, lowest address first (the last five
+        /// words, from `rip`, pushed by the CPU). A thread's saved context is one, and the
+        /// CPU pushes those five words of an interrupt from ring 3 right into it, at the
+        /// 16-byte-aligned stack top it is given (hence the alignment).
+        #[repr(C, align(16))]
+        #[derive(Clone, Copy, Debug)]
+        pub struct TrapFrame { $(pub $field: u64,)* }
+        impl TrapFrame {
+            /// Every register zero (a const, for the static thread table).
+            pub const ZERO: Self = Self { $($field: 0,)* };
+        }
+    };
+}
+trap_frame! {
+    r15 r14 r13 r12 r11 r10 r9 r8 rbp rdi rsi rdx rcx rbx rax vector error_code
+    rip cs rflags rsp ss
 }
 
 /// Short mnemonic and description of each architectural exception vector.
