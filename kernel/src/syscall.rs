@@ -92,6 +92,9 @@ pub fn on_syscall(k: &mut Kernel, t: ThreadIdx, clock: fn() -> u64) -> Outcome {
         .abilities()
         .contains(Abilities::NATIVE_SYSCALLS)
     {
+        if k.threads[t].answered() {
+            return Outcome::Continue;
+        }
         let fault = Fault {
             label: LABEL_SYSCALL,
             vector: VECTOR_SYSCALL,
@@ -783,6 +786,10 @@ fn set_attribute(
             let fs = attribute == ThreadAttribute::FsBase as u64;
             k.threads[target].set_base(fs, value);
             k.reload_bases |= k.current == Some(target);
+            Ok(())
+        }
+        ThreadAttribute::SyscallAnswer => {
+            k.threads[target].set_syscall_answer(value);
             Ok(())
         }
         ThreadAttribute::TimePartition => {

@@ -101,6 +101,8 @@ pub struct Thread {
     /// The exception handler ([`ThreadId::OWN`] = none), resolved at fault time.
     exception_handler: ThreadId,
     ipc_buffer: u64,
+    /// The forwarded system call it answers itself ([`abi::syscall::ThreadAttribute::SyscallAnswer`]).
+    syscall_answer: u64,
     /// Absolute time (ns since boot) at which a blocking call times out.
     deadline: u64,
     fault: Option<Fault>,
@@ -125,6 +127,7 @@ impl Thread {
         fpu: FpuState::initial(),
         exception_handler: ThreadId::OWN,
         ipc_buffer: 0,
+        syscall_answer: 0,
         deadline: NEVER,
         fault: None,
         senders: None,
@@ -265,6 +268,22 @@ impl Thread {
     /// The IPC buffer (checked by the caller: aligned and writable, or 0).
     pub fn set_ipc_buffer(&mut self, at: u64) {
         self.ipc_buffer = at;
+    }
+
+    /// The forwarded system call it answers itself (checked by the caller: any value).
+    pub fn set_syscall_answer(&mut self, answer: u64) {
+        self.syscall_answer = answer;
+    }
+
+    /// Answers its forwarded `syscall` itself if that is the call its
+    /// [`abi::syscall::ThreadAttribute::SyscallAnswer`] names; true if it did.
+    pub fn answered(&mut self) -> bool {
+        let answer = self.syscall_answer;
+        let named = answer != 0 && answer >> 32 == self.context.rax;
+        if named {
+            self.context.rax = answer & u64::from(u32::MAX);
+        }
+        named
     }
 
     /// The fault it reports (an exception message is sent for it next).

@@ -407,7 +407,20 @@ codes::code_enum! {
         GsBase = 5 => "gs_base",
         /// Time partition (0 = background). Needs `SCHEDULING`.
         TimePartition = 6 => "time_partition",
+        /// A forwarded system call (a `syscall` of a task without `NATIVE_SYSCALLS`) that
+        /// the kernel answers itself, without an exception message: the thread's `syscall`
+        /// with this number in `rax` returns at once with the result in `rax` (the other
+        /// registers as they were). For a call whose result is fixed for the thread, as a
+        /// guest's Linux `getpid`. Value: [`syscall_answer`]`(number, result)`, 0 = none;
+        /// one number per thread.
+        SyscallAnswer = 7 => "syscall_answer",
     }
+}
+
+/// The value of [`ThreadAttribute::SyscallAnswer`] that answers `number` with `result`
+/// (zero-extended to 64 bits): the number in the upper half, the result in the lower.
+pub const fn syscall_answer(number: u32, result: u32) -> u64 {
+    (number as u64) << 32 | result as u64
 }
 
 codes::code_enum! {

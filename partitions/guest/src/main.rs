@@ -67,6 +67,7 @@ use user_rt::abi::ipc::{
 };
 use user_rt::abi::syscall::{
     Abilities, MAP_MAX_PAGES, PageRights, TIMEOUT_INFINITE, TaskId, ThreadAttribute, ThreadId,
+    syscall_answer,
 };
 use user_rt::ipc_buffer::IpcBufferRef;
 use user_rt::partition::{POOL_BASE, POOL_EXEC_BASE, StartInfo};
@@ -943,6 +944,15 @@ impl Host for GuestHost<'_> {
         let thread = self.task(self.current).ok_or(Errno::ESRCH)?.thread;
         let mut copy = *image;
         sys::thread_fpu(thread, &mut copy, true).map_err(|_| Errno::EFAULT)
+    }
+
+    fn answer_always(&mut self, pid: u32, number: u64, result: u32) {
+        let (Some(task), Ok(number)) = (self.task(pid), u32::try_from(number)) else {
+            return;
+        };
+        // Should the kernel refuse, the guest goes on serving the call itself.
+        let answer = syscall_answer(number, result);
+        let _ = sys::thread_set(Some(task.thread), ThreadAttribute::SyscallAnswer, answer);
     }
 
     /// Not cryptographically strong yet: xorshift64* seeded from the time-stamp counter.

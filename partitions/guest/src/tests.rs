@@ -46,6 +46,8 @@ struct Model {
     port_sent: HashMap<usize, Vec<Vec<u8>>>,
     /// Calls that said they wait for a port ([`Host::port_wait`]).
     port_waits: usize,
+    /// The kernel's answers asked for ([`Host::answer_always`]): thread, number, result.
+    answers: Vec<(u32, u64, u32)>,
 }
 
 /// A disk in memory that counts its flushes; clones share it (the test keeps one while
@@ -286,6 +288,9 @@ impl Host for Model {
     fn set_fpu(&mut self, image: &[u8; 512]) -> Result<(), Errno> {
         self.fpu.insert(self.current, *image);
         Ok(())
+    }
+    fn answer_always(&mut self, pid: u32, number: u64, result: u32) {
+        self.answers.push((pid, number, result));
     }
     fn random(&mut self, buf: &mut [u8]) {
         buf.fill(0x5a);
@@ -4011,6 +4016,11 @@ fn threads_share_their_process_and_futexes_wake_them() {
     assert_eq!((m.registers.rax, m.registers.rsp), (0, stack));
     assert_eq!(m.registers.fs_base, 0x7000, "CLONE_SETTLS");
     assert_eq!(g.call(2, nr::getpid, [0; 6]), Some(1));
+    assert_eq!(
+        g.host.answers,
+        [(2, nr::getpid, 1)],
+        "the kernel answers the thread's next getpid with its process's id"
+    );
     assert_eq!(g.call(2, nr::gettid, [0; 6]), Some(2));
     assert_eq!(g.call(1, nr::gettid, [0; 6]), Some(1));
     // /proc/self is the process (the thread group), not the thread, as on Linux.
