@@ -838,6 +838,11 @@ fn guest_metrics(
     dir: &std::path::Path,
     deterministic_time: bool,
 ) -> Result<Vec<xtask::bench::Metric>> {
+    // The macro workloads run `/bin/busybox` (gzip, sh) on the host leg as in the guest;
+    // bash's is the host's bash there, Debian's bash-static in the guest and natively.
+    // Installed first: the configuration names them as the guest's files.
+    tools::ensure_busybox()?;
+    tools::ensure_bash_static()?;
     let config = xtask::workspace_root().join("tests/configs/bench_guest.toml");
     let described = xtask::check_config::load(&config)?;
     let args: Vec<String> = described
@@ -847,10 +852,6 @@ fn guest_metrics(
         .map(|g| g.init.iter().skip(1).cloned().collect())
         .unwrap_or_default();
     let program = xtask::linux::build("linux-bench")?;
-    // The macro workloads run `/bin/busybox` (gzip, sh) on the host leg as in the guest;
-    // bash's is the host's bash there, Debian's bash-static in the guest and natively.
-    tools::ensure_busybox()?;
-    tools::ensure_bash_static()?;
     eprintln!("xtask: running linux-bench on the host");
     let out = std::process::Command::new(&program)
         .args(&args)
