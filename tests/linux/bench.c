@@ -10,6 +10,8 @@
  * otherwise, e.g. `host_` for the same program on the host). Metrics:
  *
  *   getpid            one getpid system call
+ *   getppid           one getppid system call (in the guest a round trip through the guest
+ *                     partition, where the kernel answers a thread's later getpids itself)
  *   fork_exit         fork, the child _exits, the parent waits for it
  *   vfork_exit        the same with vfork
  *   fork_execve       fork, the child executes this program (`--exit 0`), the parent waits
@@ -119,6 +121,13 @@ static int getpid_round(long n)
 {
 	for (long i = 0; i < n; i++)
 		syscall(SYS_getpid);
+	return 0;
+}
+
+static int getppid_round(long n)
+{
+	for (long i = 0; i < n; i++)
+		syscall(SYS_getppid);
 	return 0;
 }
 
@@ -659,6 +668,7 @@ static const struct {
 	int per_run; /* one run per round, not per call */
 } metrics[] = {
 	{ "getpid", getpid_round, 0, 0 },
+	{ "getppid", getppid_round, 0, 0 },
 	{ "fork_exit", fork_exit_round, 1, 0 },
 	{ "vfork_exit", vfork_exit_round, 1, 0 },
 	{ "fork_execve", fork_execve_round, 1, 0 },
