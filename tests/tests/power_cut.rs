@@ -37,7 +37,10 @@
 //! releases after the previous one (or the program's first cycle), and no statistics line
 //! of the PLC shows more releases than that since the last save: with the durability check
 //! above, the snapshot a cut leaves is at most the configured interval (plus the slack of
-//! the writing) old. No partition panics, no save fails, no plcctl command fails.
+//! the writing) old. The bound is not applied from a download until the first snapshot
+//! after its boot project is saved: a snapshot waits for that write (tens of requests to
+//! the disk partition), which on real time takes as many releases as the host's load
+//! makes it. No partition panics, no save fails, no plcctl command fails.
 //!
 //! Each cut prints a line: its delay, what it hit (a download, a boot-project or RETAIN
 //! save torn or done but not yet logged, or the time between saves) and what the disk held;
@@ -717,6 +720,9 @@ impl Workload for PlcStore {
         // below the last save's is what tells the new program.
         let mut last_save = 0;
         let mut downloaded = false;
+        // From a download until the first snapshot after its boot project's save, which
+        // the snapshots wait for: the age bound is not applied (see the module's doc).
+        let (mut boot_writing, mut after_boot_write) = (false, false);
         let new_program =
             |release: u64, last_save: u64, downloaded: bool| downloaded && release < last_save;
         let since = |release: u64, last_save: u64, downloaded: bool| {
@@ -757,6 +763,7 @@ impl Workload for PlcStore {
                 let len = number_after(text, "plc: download: ").ok_or("a download line?")?;
                 committed_len = Some(len as usize);
                 downloaded = true;
+                boot_writing = true;
                 if let Some(p) = logged.pending.as_mut() {
                     p.committed = true;
                 }
@@ -773,6 +780,7 @@ impl Workload for PlcStore {
                 let len = committed_len.ok_or("a boot project saved before any download")?;
                 logged.boot = Some((sequence, len));
                 logged.boot_saves += 1;
+                (boot_writing, after_boot_write) = (false, true);
                 logged.pending = None;
                 logged.downloaded.clear();
             } else if let Some(rest) = text.strip_prefix("plc: store: RETAIN snapshot #")
@@ -787,7 +795,9 @@ impl Workload for PlcStore {
                     ));
                 }
                 let age = since(release, last_save, downloaded);
-                if age > RETAIN_EVERY + SAVE_SLACK {
+                let waited_for_boot_write = boot_writing || after_boot_write;
+                after_boot_write = false;
+                if age > RETAIN_EVERY + SAVE_SLACK && !waited_for_boot_write {
                     return Err(format!(
                         "RETAIN saved {age} releases after the last save (or the program's start), more than {RETAIN_EVERY} + {SAVE_SLACK}: {text}"
                     ));
@@ -805,7 +815,7 @@ impl Workload for PlcStore {
                 let releases = number_after(text, " scan releases=").ok_or("a scan line?")?;
                 let age = since(releases, last_save, downloaded);
                 logged.worst_age = logged.worst_age.max(age);
-                if age > RETAIN_EVERY + SAVE_SLACK {
+                if age > RETAIN_EVERY + SAVE_SLACK && !boot_writing && !after_boot_write {
                     return Err(format!(
                         "{age} releases since the last RETAIN save (or the program's start), more than {RETAIN_EVERY} + {SAVE_SLACK}: {text}"
                     ));
