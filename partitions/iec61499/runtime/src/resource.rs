@@ -7,6 +7,7 @@ use alloc::boxed::Box;
 use alloc::collections::VecDeque;
 use alloc::format;
 use alloc::string::String;
+use alloc::vec;
 use alloc::vec::Vec;
 
 /// The resource's limits, from the configuration.
@@ -98,6 +99,9 @@ struct Instance {
     fb: Box<dyn FunctionBlock>,
     inputs: Vec<Value>,
     outputs: Vec<Value>,
+    /// The event connections from each of its output events: their destinations in
+    /// creation order, the fan-out order.
+    fanout: Vec<Vec<End>>,
 }
 
 /// `(instance, port index)`.
@@ -130,24 +134,33 @@ impl EventQueue {
     }
 
     fn push(&mut self, to: End, values: impl Iterator<Item = (usize, Value)>) {
-        let before = self.values.len();
-        self.values.extend(values);
-        self.events.push_back((to, self.values.len() - before));
+        let mut n = 0;
+        for value in values {
+            self.values.push_back(value);
+            n += 1;
+        }
+        self.events.push_back((to, n));
     }
 
-    /// The next event's destination and the values it carries (input index, value).
-    fn pop(&mut self) -> Option<(End, impl Iterator<Item = (usize, Value)> + '_)> {
-        let (to, n) = self.events.pop_front()?;
-        Some((to, self.values.drain(..n)))
+    /// The next event's destination and how many values it carries, which the caller
+    /// takes with [`EventQueue::pop_value`] before the next `pop` (a counted loop: no
+    /// iterator to build and drop per event).
+    fn pop(&mut self) -> Option<(End, usize)> {
+        self.events.pop_front()
+    }
+
+    /// The next value of the event [`EventQueue::pop`] returned (input index, value).
+    fn pop_value(&mut self) -> Option<(usize, Value)> {
+        self.values.pop_front()
     }
 
     /// Drops the events to instance `i` with their values.
     fn forget(&mut self, i: usize) {
         let mut kept = EventQueue::default();
-        while let Some(((instance, event), values)) = self.pop() {
-            if instance != i {
-                let values: Vec<_> = values.collect();
-                kept.push((instance, event), values.into_iter());
+        while let Some((to, n)) = self.pop() {
+            let values: Vec<_> = (0..n).filter_map(|_| self.pop_value()).collect();
+            if to.0 != i {
+                kept.push(to, values.into_iter());
             }
         }
         *self = kept;
@@ -166,8 +179,6 @@ struct Timer {
 pub struct Resource {
     limits: Limits,
     instances: Vec<Instance>,
-    /// In creation order: the fan-out order.
-    event_connections: Vec<(End, End)>,
     /// `(source output, destination input)`.
     data_connections: Vec<(End, End)>,
     /// Inputs set by [`Resource::write`], applied again by a reset.
@@ -197,7 +208,6 @@ impl Resource {
         Resource {
             limits,
             instances: Vec::new(),
-            event_connections: Vec::new(),
             data_connections: Vec::new(),
             parameters: Vec::new(),
             forces: Vec::new(),
@@ -231,12 +241,14 @@ impl Resource {
         let interface = fb.interface();
         let mut inputs: Vec<Value> = interface.inputs.iter().map(|v| v.initial()).collect();
         let mut outputs: Vec<Value> = interface.outputs.iter().map(|v| v.initial()).collect();
+        let fanout = vec![Vec::new(); interface.event_outputs.len()];
         fb.initial(&mut inputs, &mut outputs);
         let instance = Instance {
             name: name.into(),
             fb,
             inputs,
             outputs,
+            fanout,
         };
         Ok(match free {
             Some(slot) => {
@@ -270,7 +282,10 @@ impl Resource {
         let i = self
             .instance(name)
             .ok_or_else(|| DeployError::NotFound(name.into()))?;
-        self.event_connections.retain(|(s, d)| s.0 != i && d.0 != i);
+        for list in self.instances.iter_mut().flat_map(|inst| &mut inst.fanout) {
+            list.retain(|d| d.0 != i);
+        }
+        self.instances[i].fanout.iter_mut().for_each(Vec::clear);
         self.data_connections.retain(|(s, d)| s.0 != i && d.0 != i);
         self.parameters.retain(|((p, _), _)| *p != i);
         self.forces.retain(|f| f.end.0 != i);
@@ -284,10 +299,10 @@ impl Resource {
     pub fn disconnect_event(&mut self, from: &str, to: &str) -> Result<(), DeployError> {
         let source = self.port(from, |i, p| i.event_output(p))?;
         let destination = self.port(to, |i, p| i.event_input(p))?;
-        let before = self.event_connections.len();
-        self.event_connections
-            .retain(|c| *c != (source, destination));
-        if before == self.event_connections.len() {
+        let list = &mut self.instances[source.0].fanout[source.1];
+        let before = list.len();
+        list.retain(|d| *d != destination);
+        if before == list.len() {
             return Err(DeployError::NotFound(format!("{from} -> {to}")));
         }
         Ok(())
@@ -361,8 +376,16 @@ impl Resource {
         })
     }
 
-    /// Puts the forced values of `instance` back (inputs, or outputs).
+    /// Puts the forced values of `instance` back (inputs, or outputs). Inlined, so the
+    /// usual case, nothing forced, costs a comparison per event and reaction.
+    #[inline(always)]
     fn apply_forces(&mut self, instance: usize, outputs: bool) {
+        if !self.forces.is_empty() {
+            self.apply_forced(instance, outputs);
+        }
+    }
+
+    fn apply_forced(&mut self, instance: usize, outputs: bool) {
         for f in &self.forces {
             if f.end.0 == instance && f.output == outputs {
                 let inst = &mut self.instances[instance];
@@ -401,7 +424,13 @@ impl Resource {
     }
 
     fn connections(&self) -> usize {
-        self.event_connections.len() + self.data_connections.len()
+        let event_connections: usize = self
+            .instances
+            .iter()
+            .flat_map(|inst| &inst.fanout)
+            .map(Vec::len)
+            .sum();
+        event_connections + self.data_connections.len()
     }
 
     /// Connects output event `from` (`FB.EO`) to input event `to` (`FB.EI`).
@@ -411,7 +440,7 @@ impl Resource {
         if self.connections() >= self.limits.connections {
             return Err(DeployError::Limit("connections"));
         }
-        self.event_connections.push((source, destination));
+        self.instances[source.0].fanout[source.1].push(destination);
         Ok(())
     }
 
@@ -571,11 +600,8 @@ impl Resource {
     /// the outputs it had when it sent the event.
     fn send(&mut self, instance: usize, event: usize, outputs: &[Value]) -> Result<(), Fault> {
         // By index: enqueueing leaves the connections as they are.
-        for k in 0..self.event_connections.len() {
-            let (source, to) = self.event_connections[k];
-            if source != (instance, event) {
-                continue;
-            }
+        for k in 0..self.instances[instance].fanout[event].len() {
+            let to = self.instances[instance].fanout[event][k];
             if self.enqueue(to, Some((instance, outputs))).is_err() {
                 let inst = &self.instances[instance];
                 return Err(Fault::QueueOverflow {
@@ -602,7 +628,9 @@ impl Resource {
         scratch.sent_outputs.clear();
         scratch.requests.clear();
         let result = self.react_with(instance, now, react, &mut scratch);
-        self.scratch = scratch;
+        // What `take` left in its place holds no memory: forgotten rather than dropped,
+        // which would cost a check of each of its buffers per reaction.
+        core::mem::forget(core::mem::replace(&mut self.scratch, scratch));
         result
     }
 
@@ -634,7 +662,7 @@ impl Resource {
             });
         }
         self.apply_forces(instance, true);
-        for &(_, start) in &scratch.sent {
+        for &(_, start) in scratch.sent.iter().filter(|_| !self.forces.is_empty()) {
             for f in self
                 .forces
                 .iter()
@@ -684,7 +712,7 @@ impl Resource {
     fn run_chain(&mut self, now: i64) -> Result<(), Fault> {
         let mut delivered = 0usize;
         loop {
-            let Some(((instance, event), values)) = self.queue.pop() else {
+            let Some(((instance, event), carried)) = self.queue.pop() else {
                 break;
             };
             delivered += 1;
@@ -695,9 +723,13 @@ impl Resource {
                     event: inst.fb.interface().event_inputs[event].name.clone(),
                 });
             }
+            // (A fault abandons the chain and clears the queue: the values left behind
+            // above go with it.)
             let inputs = &mut self.instances[instance].inputs;
-            for (var, value) in values {
-                inputs[var] = value;
+            for _ in 0..carried {
+                if let Some((var, value)) = self.queue.pop_value() {
+                    inputs[var] = value;
+                }
             }
             self.delivered += 1;
             self.apply_forces(instance, false);

@@ -627,6 +627,35 @@ fn delete_and_disconnect() {
 }
 
 #[test]
+fn deleting_a_destination_drops_the_connections_into_it() {
+    let mut r = Resource::new(Limits {
+        instances: 2,
+        connections: 2,
+        ..Limits::default()
+    });
+    r.create("S", create("E_SPLIT").unwrap()).unwrap();
+    let (rec, _) = recorder(&[]);
+    r.create("REC", rec).unwrap();
+    r.connect_event("S.EO1", "REC.E0").unwrap();
+    r.connect_event("S.EO2", "REC.E1").unwrap();
+    assert!(matches!(
+        r.connect_event("S.EO1", "REC.E1"),
+        Err(DeployError::Limit("connections"))
+    ));
+    r.delete("REC").unwrap();
+    // REC's slot is reused: nothing of S reaches the new instance, and both connections
+    // count no more.
+    let (rec, log) = recorder(&[]);
+    r.create("REC", rec).unwrap();
+    r.trigger("S.EI", 0).unwrap();
+    assert_eq!(seen(&log), []);
+    r.connect_event("S.EO2", "REC.E0").unwrap();
+    r.connect_event("S.EO1", "REC.E1").unwrap();
+    r.trigger("S.EI", 0).unwrap();
+    assert_eq!(seen(&log), [1, 0], "in the order S sends EO1 and EO2");
+}
+
+#[test]
 fn forced_inputs_and_outputs_hold() {
     let (mut r, log) = harness("E_CTU");
     r.write("FB.PV", Value::UInt(5)).unwrap();
