@@ -153,7 +153,8 @@ pub struct Context<'a> {
     pub(crate) now: i64,
     pub(crate) outputs: &'a mut [Value],
     /// Output events sent: each event and where the outputs as they were when it was sent
-    /// start in `sent_outputs` (all of them, one after the other).
+    /// start in `sent_outputs` (all of them, one after the other), or [`Context::CURRENT`]
+    /// while no output has changed since (the usual case: nothing is copied).
     pub(crate) sent: &'a mut Vec<(usize, usize)>,
     pub(crate) sent_outputs: &'a mut Vec<Value>,
     pub(crate) timers: &'a mut Vec<TimerRequest>,
@@ -162,6 +163,9 @@ pub struct Context<'a> {
 }
 
 impl Context<'_> {
+    /// In [`Context::sent`]: the event carries the outputs as they are at the reaction's end.
+    pub(crate) const CURRENT: usize = usize::MAX;
+
     /// The instant the chain runs for: the external event's time, or a timer's deadline.
     pub fn now(&self) -> i64 {
         self.now
@@ -173,12 +177,29 @@ impl Context<'_> {
     }
 
     pub fn set(&mut self, index: usize, value: Value) {
+        self.keep_sent();
         self.outputs[index] = value;
     }
 
     /// All outputs, for code that writes several.
     pub fn outputs_mut(&mut self) -> &mut [Value] {
+        self.keep_sent();
         self.outputs
+    }
+
+    /// Before an output changes: the events sent since the last change get a copy of the
+    /// outputs as they are (one copy for all of them).
+    fn keep_sent(&mut self) {
+        if self.sent.last().is_some_and(|&(_, at)| at == Self::CURRENT) {
+            let start = self.sent_outputs.len();
+            self.sent_outputs.extend(self.outputs.iter().cloned());
+            for (_, at) in self.sent.iter_mut().rev() {
+                if *at != Self::CURRENT {
+                    break;
+                }
+                *at = start;
+            }
+        }
     }
 
     /// The reaction failed (an algorithm trapped): the resource stops with
@@ -192,8 +213,7 @@ impl Context<'_> {
 
     /// Sends output event `output`; its receivers get the outputs as they are now.
     pub fn send(&mut self, output: usize) {
-        self.sent.push((output, self.sent_outputs.len()));
-        self.sent_outputs.extend(self.outputs.iter().cloned());
+        self.sent.push((output, Self::CURRENT));
     }
 
     /// Arms timer `id` for the absolute instant `at` (re-arming replaces the deadline).

@@ -102,6 +102,10 @@ struct Instance {
     /// The event connections from each of its output events: their destinations in
     /// creation order, the fan-out order.
     fanout: Vec<Vec<End>>,
+    /// What a delivery of each of its input events samples: each WITH input that has a
+    /// data connection, with the connection's source, in the connections' creation order
+    /// (kept by [`Resource::plan_samples`] from the resource's data connections).
+    samples: Vec<Vec<(usize, End)>>,
 }
 
 /// `(instance, port index)`.
@@ -242,6 +246,7 @@ impl Resource {
         let mut inputs: Vec<Value> = interface.inputs.iter().map(|v| v.initial()).collect();
         let mut outputs: Vec<Value> = interface.outputs.iter().map(|v| v.initial()).collect();
         let fanout = vec![Vec::new(); interface.event_outputs.len()];
+        let samples = vec![Vec::new(); interface.event_inputs.len()];
         fb.initial(&mut inputs, &mut outputs);
         let instance = Instance {
             name: name.into(),
@@ -249,6 +254,7 @@ impl Resource {
             inputs,
             outputs,
             fanout,
+            samples,
         };
         Ok(match free {
             Some(slot) => {
@@ -287,6 +293,9 @@ impl Resource {
         }
         self.instances[i].fanout.iter_mut().for_each(Vec::clear);
         self.data_connections.retain(|(s, d)| s.0 != i && d.0 != i);
+        for instance in 0..self.instances.len() {
+            self.plan_samples(instance);
+        }
         self.parameters.retain(|((p, _), _)| *p != i);
         self.forces.retain(|f| f.end.0 != i);
         self.timers.retain(|t| t.instance != i);
@@ -318,7 +327,24 @@ impl Resource {
         if before == self.data_connections.len() {
             return Err(DeployError::NotFound(format!("{from} -> {to}")));
         }
+        self.plan_samples(destination.0);
         Ok(())
+    }
+
+    /// Lists again what each input event of `instance` samples (after its data
+    /// connections changed).
+    fn plan_samples(&mut self, instance: usize) {
+        let inst = &mut self.instances[instance];
+        for (event, plan) in inst.samples.iter_mut().enumerate() {
+            let with = &inst.fb.interface().event_inputs[event].with;
+            plan.clear();
+            plan.extend(
+                self.data_connections
+                    .iter()
+                    .filter(|(_, (i, var))| *i == instance && with.contains(var))
+                    .map(|&(source, (_, var))| (var, source)),
+            );
+        }
     }
 
     /// Forces data input or output `path` (`FB.PORT`) to `value` until [`Resource::unforce`]:
@@ -490,6 +516,7 @@ impl Resource {
             return Err(DeployError::Limit("connections"));
         }
         self.data_connections.push((source, destination));
+        self.plan_samples(destination.0);
         Ok(())
     }
 
@@ -591,18 +618,22 @@ impl Resource {
         if self.queue.len() >= self.limits.queue {
             return Err(());
         }
-        let values = sampled(&self.instances, &self.data_connections, to, sender);
+        let values = sampled(&self.instances, to, sender);
         self.queue.push(to, values);
         Ok(())
     }
 
     /// Queues the destinations of output `event` of `instance`, in connection order, with
-    /// the outputs it had when it sent the event.
-    fn send(&mut self, instance: usize, event: usize, outputs: &[Value]) -> Result<(), Fault> {
+    /// the outputs it had when it sent the event: `copy`, or (none needed: no output
+    /// changed since) its outputs as they are.
+    fn send(&mut self, instance: usize, event: usize, copy: Option<&[Value]>) -> Result<(), Fault> {
         // By index: enqueueing leaves the connections as they are.
         for k in 0..self.instances[instance].fanout[event].len() {
             let to = self.instances[instance].fanout[event][k];
-            if self.enqueue(to, Some((instance, outputs))).is_err() {
+            if self
+                .enqueue(to, copy.map(|outputs| (instance, outputs)))
+                .is_err()
+            {
                 let inst = &self.instances[instance];
                 return Err(Fault::QueueOverflow {
                     fb: inst.name.clone(),
@@ -662,7 +693,12 @@ impl Resource {
             });
         }
         self.apply_forces(instance, true);
-        for &(_, start) in scratch.sent.iter().filter(|_| !self.forces.is_empty()) {
+        // (The events that carry the outputs as they are got the forced values just now.)
+        let copied = scratch
+            .sent
+            .iter()
+            .filter(|(_, start)| *start != Context::CURRENT);
+        for &(_, start) in copied.filter(|_| !self.forces.is_empty()) {
             for f in self
                 .forces
                 .iter()
@@ -675,11 +711,9 @@ impl Resource {
             self.timer_request(instance, request)?;
         }
         for &(event, start) in &scratch.sent {
-            self.send(
-                instance,
-                event,
-                &scratch.sent_outputs[start..start + outputs],
-            )?;
+            let copy =
+                (start != Context::CURRENT).then(|| &scratch.sent_outputs[start..][..outputs]);
+            self.send(instance, event, copy)?;
         }
         Ok(())
     }
@@ -866,29 +900,26 @@ impl Resource {
 /// sender's outputs as they were when it sent.
 fn sampled<'r>(
     instances: &'r [Instance],
-    data_connections: &'r [(End, End)],
     (instance, event): End,
     sender: Option<(usize, &'r [Value])>,
 ) -> impl Iterator<Item = (usize, Value)> + 'r {
-    let interface = instances[instance].fb.interface();
-    let with = &interface.event_inputs[event].with;
-    data_connections
+    let destination = &instances[instance];
+    destination.samples[event]
         .iter()
-        .filter(move |(_, (i, var))| *i == instance && with.contains(var))
-        .map(move |((si, so), (_, var))| {
+        .map(move |&(var, (si, so))| {
             let value = match sender {
-                Some((s, outputs)) if s == *si => outputs[*so].clone(),
-                _ => instances[*si].outputs[*so].clone(),
+                Some((s, outputs)) if s == si => outputs[so].clone(),
+                _ => instances[si].outputs[so].clone(),
             };
             // A connection may widen (UINT to DINT, ...): the value takes the input's type.
-            let from = instances[*si].fb.interface().outputs[*so].ty;
-            let to = interface.inputs[*var].ty;
+            let from = instances[si].fb.interface().outputs[so].ty;
+            let to = destination.fb.interface().inputs[var].ty;
             let value = if from == to {
                 value
             } else {
                 crate::value::widen(value, to)
             };
-            (*var, value)
+            (var, value)
         })
 }
 
