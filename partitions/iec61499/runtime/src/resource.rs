@@ -745,10 +745,7 @@ impl Resource {
     /// Delivers queued events until the queue is empty (one chain).
     fn run_chain(&mut self, now: i64) -> Result<(), Fault> {
         let mut delivered = 0usize;
-        loop {
-            let Some(((instance, event), carried)) = self.queue.pop() else {
-                break;
-            };
+        while let Some(((instance, event), carried)) = self.queue.pop() {
             delivered += 1;
             if delivered > self.limits.chain_events {
                 let inst = &self.instances[instance];
