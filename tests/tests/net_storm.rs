@@ -48,14 +48,23 @@ fn storm(udp: u16, tcp: u16, ended: &AtomicBool) -> Storm {
         return s;
     }
     std::thread::sleep(QUIET_SPELL);
-    let until = Instant::now() + STORM;
+    let start = Instant::now();
+    let until = start + STORM;
     let going = || Instant::now() < until && !ended.load(Ordering::SeqCst);
     std::thread::scope(|scope| {
+        // The flood is paced over the whole storm: sent as fast as the host can, the
+        // datagrams may all be gone in the storm's first seconds, before the system has
+        // run enough of them (on virtual time) to measure a stormy second.
         let flood = scope.spawn(|| {
             let socket = UdpSocket::bind(("127.0.0.1", 0)).expect("a UDP socket");
             let payload = [0x5au8; 64];
             let mut sent = 0;
             while sent < DATAGRAMS && going() {
+                let due = DATAGRAMS * start.elapsed().as_millis() as u64 / STORM.as_millis() as u64;
+                if sent >= due {
+                    std::thread::sleep(Duration::from_millis(1));
+                    continue;
+                }
                 for _ in 0..64 {
                     let _ = socket.send_to(&payload, ("127.0.0.1", udp));
                     sent += 1;
