@@ -2,7 +2,7 @@
 //! crate documentation says.
 
 use crate::fb::{Context, FunctionBlock, Restart, TimerRequest};
-use crate::value::Value;
+use crate::value::{DataType, Value};
 use alloc::boxed::Box;
 use alloc::collections::VecDeque;
 use alloc::format;
@@ -105,7 +105,16 @@ struct Instance {
     /// What a delivery of each of its input events samples: each WITH input that has a
     /// data connection, with the connection's source, in the connections' creation order
     /// (kept by [`Resource::plan_samples`] from the resource's data connections).
-    samples: Vec<Vec<(usize, End)>>,
+    samples: Vec<Vec<Sample>>,
+}
+
+/// One input an event samples: where from, and the type the value widens to on the way
+/// (a connection may widen, UINT to DINT, ...), found once when the plan is made.
+#[derive(Clone, Copy)]
+struct Sample {
+    input: usize,
+    source: End,
+    widen_to: Option<DataType>,
 }
 
 /// `(instance, port index)`.
@@ -135,6 +144,22 @@ impl EventQueue {
     fn clear(&mut self) {
         self.events.clear();
         self.values.clear();
+    }
+
+    /// Queues an event to `to` with the inputs it samples (see [`sampled`]), unless the
+    /// queue holds `limit` events already.
+    fn push_sampled(
+        &mut self,
+        limit: usize,
+        instances: &[Instance],
+        to: End,
+        sender: Option<(usize, &[Value])>,
+    ) -> Result<(), ()> {
+        if self.len() >= limit {
+            return Err(());
+        }
+        self.push(to, sampled(instances, to, sender));
+        Ok(())
     }
 
     fn push(&mut self, to: End, values: impl Iterator<Item = (usize, Value)>) {
@@ -195,8 +220,9 @@ pub struct Resource {
     /// Events delivered since the resource was created (a statistic).
     delivered: u64,
     /// What a reaction sends and asks, kept between reactions so that delivering an event
-    /// allocates nothing once they have grown (see [`Resource::react`]).
-    scratch: Scratch,
+    /// allocates nothing once they have grown (see [`Resource::react`]). Boxed, so that
+    /// taking it for a reaction moves a pointer, not the buffers.
+    scratch: Option<Box<Scratch>>,
 }
 
 /// The buffers of [`Resource::react`].
@@ -220,7 +246,7 @@ impl Resource {
             timer_seq: 0,
             fault: None,
             delivered: 0,
-            scratch: Scratch::default(),
+            scratch: Some(Box::default()),
         }
     }
 
@@ -334,17 +360,27 @@ impl Resource {
     /// Lists again what each input event of `instance` samples (after its data
     /// connections changed).
     fn plan_samples(&mut self, instance: usize) {
-        let inst = &mut self.instances[instance];
-        for (event, plan) in inst.samples.iter_mut().enumerate() {
-            let with = &inst.fb.interface().event_inputs[event].with;
+        let mut samples = core::mem::take(&mut self.instances[instance].samples);
+        let interface = self.instances[instance].fb.interface();
+        for (event, plan) in samples.iter_mut().enumerate() {
+            let with = &interface.event_inputs[event].with;
             plan.clear();
             plan.extend(
                 self.data_connections
                     .iter()
                     .filter(|(_, (i, var))| *i == instance && with.contains(var))
-                    .map(|&(source, (_, var))| (var, source)),
+                    .map(|&(source, (_, input))| {
+                        let from = self.instances[source.0].fb.interface().outputs[source.1].ty;
+                        let to = interface.inputs[input].ty;
+                        Sample {
+                            input,
+                            source,
+                            widen_to: (from != to).then_some(to),
+                        }
+                    }),
             );
         }
+        self.instances[instance].samples = samples;
     }
 
     /// Forces data input or output `path` (`FB.PORT`) to `value` until [`Resource::unforce`]:
@@ -615,26 +651,21 @@ impl Resource {
     }
 
     fn enqueue(&mut self, to: End, sender: Option<(usize, &[Value])>) -> Result<(), ()> {
-        if self.queue.len() >= self.limits.queue {
-            return Err(());
-        }
-        let values = sampled(&self.instances, to, sender);
-        self.queue.push(to, values);
-        Ok(())
+        self.queue
+            .push_sampled(self.limits.queue, &self.instances, to, sender)
     }
 
     /// Queues the destinations of output `event` of `instance`, in connection order, with
     /// the outputs it had when it sent the event: `copy`, or (none needed: no output
     /// changed since) its outputs as they are.
     fn send(&mut self, instance: usize, event: usize, copy: Option<&[Value]>) -> Result<(), Fault> {
-        // By index: enqueueing leaves the connections as they are.
-        for k in 0..self.instances[instance].fanout[event].len() {
-            let to = self.instances[instance].fanout[event][k];
-            if self
-                .enqueue(to, copy.map(|outputs| (instance, outputs)))
-                .is_err()
-            {
-                let inst = &self.instances[instance];
+        let sender = copy.map(|outputs| (instance, outputs));
+        let inst = &self.instances[instance];
+        for &to in &inst.fanout[event] {
+            let queued = self
+                .queue
+                .push_sampled(self.limits.queue, &self.instances, to, sender);
+            if queued.is_err() {
                 return Err(Fault::QueueOverflow {
                     fb: inst.name.clone(),
                     event: inst.fb.interface().event_outputs[event].name.clone(),
@@ -654,14 +685,12 @@ impl Resource {
     ) -> Result<(), Fault> {
         // The buffers are taken for the reaction and put back after it (a reaction does
         // not react again), so their capacity is reused.
-        let mut scratch = core::mem::take(&mut self.scratch);
+        let mut scratch = self.scratch.take().unwrap_or_default();
         scratch.sent.clear();
         scratch.sent_outputs.clear();
         scratch.requests.clear();
         let result = self.react_with(instance, now, react, &mut scratch);
-        // What `take` left in its place holds no memory: forgotten rather than dropped,
-        // which would cost a check of each of its buffers per reaction.
-        core::mem::forget(core::mem::replace(&mut self.scratch, scratch));
+        self.scratch = Some(scratch);
         result
     }
 
@@ -694,17 +723,19 @@ impl Resource {
         }
         self.apply_forces(instance, true);
         // (The events that carry the outputs as they are got the forced values just now.)
-        let copied = scratch
-            .sent
-            .iter()
-            .filter(|(_, start)| *start != Context::CURRENT);
-        for &(_, start) in copied.filter(|_| !self.forces.is_empty()) {
-            for f in self
-                .forces
+        if !self.forces.is_empty() {
+            let copied = scratch
+                .sent
                 .iter()
-                .filter(|f| f.end.0 == instance && f.output)
-            {
-                scratch.sent_outputs[start + f.end.1] = f.value.clone();
+                .filter(|(_, start)| *start != Context::CURRENT);
+            for &(_, start) in copied {
+                for f in self
+                    .forces
+                    .iter()
+                    .filter(|f| f.end.0 == instance && f.output)
+                {
+                    scratch.sent_outputs[start + f.end.1] = f.value.clone();
+                }
             }
         }
         for request in scratch.requests.drain(..) {
@@ -900,23 +931,19 @@ fn sampled<'r>(
     (instance, event): End,
     sender: Option<(usize, &'r [Value])>,
 ) -> impl Iterator<Item = (usize, Value)> + 'r {
-    let destination = &instances[instance];
-    destination.samples[event]
+    instances[instance].samples[event]
         .iter()
-        .map(move |&(var, (si, so))| {
+        .map(move |sample| {
+            let (si, so) = sample.source;
             let value = match sender {
                 Some((s, outputs)) if s == si => outputs[so].clone(),
                 _ => instances[si].outputs[so].clone(),
             };
-            // A connection may widen (UINT to DINT, ...): the value takes the input's type.
-            let from = instances[si].fb.interface().outputs[so].ty;
-            let to = destination.fb.interface().inputs[var].ty;
-            let value = if from == to {
-                value
-            } else {
-                crate::value::widen(value, to)
+            let value = match sample.widen_to {
+                None => value,
+                Some(to) => crate::value::widen(value, to),
             };
-            (var, value)
+            (sample.input, value)
         })
 }
 
