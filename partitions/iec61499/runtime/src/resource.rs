@@ -650,11 +650,6 @@ impl Resource {
         self.delivered
     }
 
-    fn enqueue(&mut self, to: End, sender: Option<(usize, &[Value])>) -> Result<(), ()> {
-        self.queue
-            .push_sampled(self.limits.queue, &self.instances, to, sender)
-    }
-
     /// Queues the destinations of output `event` of `instance`, in connection order, with
     /// the outputs it had when it sent the event: `copy`, or (none needed: no output
     /// changed since) its outputs as they are.
@@ -826,7 +821,8 @@ impl Resource {
             return Err(DeployError::Faulted(fault.clone()));
         }
         let _ = self.chain(now, |r| {
-            r.enqueue(destination, None)
+            r.queue
+                .push_sampled(r.limits.queue, &r.instances, destination, None)
                 .map_err(|()| Fault::QueueOverflow {
                     fb: String::from("(external)"),
                     event: to.into(),
