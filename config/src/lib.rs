@@ -86,6 +86,7 @@
 //! iec61499.types = ["PID.fbt"]     # optional
 //! iec61499.mgmt = { request = "fb-req", response = "fb-resp", access = "download" }  # optional
 //! iec61499.net = { mac = "52:54:00:12:34:58", address = "10.0.2.17/24", gateway = "10.0.2.2", rx = "eth-rx", tx = "eth-tx", port = 61499, connections = 4, access = "monitor" }  # optional
+//! iec61499.resources = { CYCLE = 90 }  # optional: resources with a process of their own
 //! guest.init = ["/bin/busybox", "echo", "hello"]   # guest partitions only: see "Guest"
 //! guest.env = ["PATH=/bin", "HOME=/"]              # optional
 //! guest.files = { "/etc/motd" = "motd.txt" }      # optional: host files to add
@@ -265,7 +266,13 @@
 //! port sends on it, one whose `ID` names an input port receives from it
 //! (`iec61499_mgmt::pubsub`); with `iec61499.net`, an `ID` that is a UDP address
 //! (`a.b.c.d:port`, `fbdk[].ip[a.b.c.d:port]`) publishes or subscribes over UDP on the
-//! partition's interface instead (`iec61499_mgmt::udp`).
+//! partition's interface instead (`iec61499_mgmt::udp`). `iec61499.resources` gives up to
+//! 4 resources (by name, IEC identifiers of at most 24 bytes, whether the boot file or a
+//! management client creates them) an APEX process of their own at the given priority
+//! (2 to `max_priority` − 1): it fires their timers and runs the chains those start, and
+//! preempts the device process, which serves the network and the management requests and
+//! runs the other resources just below the lowest of those priorities (how they share
+//! the device: the module doc of `partitions/iec61499/partition/src/main.rs`).
 //!
 //! **Guest.** A partition running the paravirtualized guest (`image = "guest"`,
 //! `partitions/guest`) says what its first Linux process runs: `guest.init` is its `argv`,

@@ -137,6 +137,9 @@ pub struct Iec61499 {
     pub types: Vec<Spanned<String>>,
     pub mgmt: Option<Spanned<OnlinePorts>>,
     pub net: Option<Spanned<Iec61499Net>>,
+    /// Resource name to the priority of its own process.
+    #[serde(default)]
+    pub resources: Named<i64>,
 }
 
 /// `iec61499.net`: the IEC 61499 partition's own interface (as `guest.net`) and the

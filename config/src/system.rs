@@ -145,6 +145,24 @@ pub struct Iec61499 {
     pub mgmt: Option<OnlinePorts>,
     /// Its interface and the management protocol on TCP (`iec61499.net`).
     pub net: Option<Iec61499Net>,
+    /// The resources with a process of their own (`iec61499.resources`), by name.
+    pub resources: Vec<ResourceProcess>,
+}
+
+/// A resource of an IEC 61499 device that runs in its own process (`iec61499.resources`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct ResourceProcess {
+    /// The resource's name, as the boot file or a management client creates it.
+    pub name: String,
+    /// The process's priority (below the partition's `max_priority`).
+    pub priority: u8,
+}
+
+impl ResourceProcess {
+    /// Resources of a device with a process of their own, at most (the device's resources).
+    pub const MAX: usize = 4;
+    /// The longest resource name (the process is named after it, in 32 bytes).
+    pub const MAX_NAME: usize = 24;
 }
 
 /// An IEC 61499 partition's interface on the NIC partition's switch (`iec61499.net`): the

@@ -930,6 +930,11 @@ impl Validator<'_, '_> {
                 );
             }
         }
+        let resources = self.resource_processes(
+            &f.resources,
+            &path.key("resources"),
+            *raw.max_priority.get_ref(),
+        );
         if self.r.diagnostics.len() != before {
             return None;
         }
@@ -938,7 +943,70 @@ impl Validator<'_, '_> {
             types,
             mgmt,
             net,
+            resources,
         })
+    }
+
+    /// `iec61499.resources`: resource names (IEC identifiers) and their processes'
+    /// priorities, each in 2..MCP: the device's own process runs just below the lowest.
+    fn resource_processes(
+        &mut self,
+        raw: &schema::Named<i64>,
+        path: &KeyPath,
+        mcp: i64,
+    ) -> Vec<ResourceProcess> {
+        let mut resources = Vec::new();
+        if raw.len() > ResourceProcess::MAX {
+            if let Some((name, _)) = raw.iter().nth(ResourceProcess::MAX) {
+                self.error(
+                    start(name),
+                    path,
+                    format!(
+                        "{} resources with their own process: a device has at most {} resources",
+                        raw.len(),
+                        ResourceProcess::MAX
+                    ),
+                );
+            }
+            return resources;
+        }
+        for (name, priority) in raw {
+            let key = path.key(name.get_ref());
+            let text = name.get_ref();
+            let identifier = text
+                .chars()
+                .next()
+                .is_some_and(|c| c.is_ascii_alphabetic() || c == '_')
+                && text.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+            if !identifier || text.len() > ResourceProcess::MAX_NAME {
+                self.error(
+                    start(name),
+                    &key,
+                    format!(
+                        "{text:?} is not a resource name: an IEC identifier (letters, digits, `_`, not starting with a digit) of at most {} bytes",
+                        ResourceProcess::MAX_NAME
+                    ),
+                );
+                continue;
+            }
+            let p = *priority.get_ref();
+            if !(2..mcp).contains(&p) {
+                self.error(
+                    start(priority),
+                    &key,
+                    format!(
+                        "priority {p} is not in 2..={}: a resource's process runs below the partition's max_priority ({mcp}) and above the device's own process (at least 1)",
+                        mcp - 1
+                    ),
+                );
+                continue;
+            }
+            resources.push(ResourceProcess {
+                name: text.clone(),
+                priority: p as u8,
+            });
+        }
+        resources
     }
 
     /// `iec61499.net`: the link as `guest.net` checks it, the TCP port, the connections

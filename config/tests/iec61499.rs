@@ -199,3 +199,47 @@ fn the_frame_ports_are_not_the_management_ports() {
         "{diags:?}"
     );
 }
+
+#[test]
+fn resources_with_their_own_process() {
+    let boot = "iec61499.boot = \"tests/data/app.fboot\"\n";
+    let system = load_ok(&with(&format!(
+        "{boot}iec61499.resources = {{ SLOW = 30, CYCLE = 40 }}"
+    )));
+    let fb = system.partitions[1].iec61499.as_ref().unwrap();
+    let named: Vec<(&str, u8)> = fb
+        .resources
+        .iter()
+        .map(|r| (r.name.as_str(), r.priority))
+        .collect();
+    assert_eq!(named, [("CYCLE", 40), ("SLOW", 30)]);
+    // Partition b's max_priority is 50: a resource process runs below it and above the
+    // device process (at least priority 1).
+    for priority in ["50", "1"] {
+        expect_some(
+            &with(&format!(
+                "{boot}iec61499.resources = {{ FAST = {priority} }}"
+            )),
+            &format!("{priority} }}"),
+            0,
+            "partitions.b.iec61499.resources.FAST",
+            &format!("priority {priority} is not in 2..=49"),
+        );
+    }
+    expect_some(
+        &with(&format!("{boot}iec61499.resources = {{ \"1X\" = 3 }}")),
+        "\"1X\"",
+        0,
+        "partitions.b.iec61499.resources.1X",
+        "\"1X\" is not a resource name",
+    );
+    expect_some(
+        &with(&format!(
+            "{boot}iec61499.resources = {{ A = 3, B = 3, C = 3, D = 3, E = 3 }}"
+        )),
+        "E =",
+        0,
+        "partitions.b.iec61499.resources",
+        "5 resources with their own process: a device has at most 4",
+    );
+}

@@ -30,9 +30,12 @@ fn timers_after(o: &Outcome, after: &str) -> Vec<u64> {
 }
 
 /// A fault stops the named resource, is reported once, and the other resource (an E_CYCLE
-/// of 10 ms: 100 timers a second) goes on.
-fn stops_one_resource(name: &str, fault: &str) {
+/// of 10 ms: 100 timers a second) goes on; the lines `expected` are in the log.
+fn stops_one_resource(name: &str, fault: &str, expected: &[&str]) {
     let o = boot(name);
+    for line in expected {
+        check(&o, o.line(line).is_some(), &format!("missing {line:?}"));
+    }
     check(
         &o,
         o.ending == Ending::Done,
@@ -65,6 +68,7 @@ fn iec61499_overflow() {
     stops_one_resource(
         "iec61499_overflow",
         "iec61499: resource FLOOD stopped: event queue full",
+        &[],
     );
 }
 
@@ -73,6 +77,9 @@ fn iec61499_trap() {
     stops_one_resource(
         "iec61499_trap",
         "iec61499: resource FAILING stopped: DIV trapped: ",
+        &[
+            "iec61499: resource STEADY runs in process r:STEADY at priority 50, the device process at 49",
+        ],
     );
 }
 

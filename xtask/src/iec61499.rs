@@ -10,7 +10,7 @@ use config::System;
 use config::model::{Direction, PortKind};
 use config::system::SourceFile;
 use iec61499_mgmt::package::{
-    DataQueue, DevicePackage, MgmtPorts, NetPorts, QueuingPort, SamplingPort,
+    DataQueue, DevicePackage, MgmtPorts, NetPorts, QueuingPort, ResourceProcess, SamplingPort,
 };
 use iec61499_mgmt::serve::Access;
 use iec61499_mgmt::sifb::NoPorts;
@@ -102,6 +102,14 @@ pub fn data_entries(system: &System) -> Result<Vec<(String, Vec<u8>)>> {
             net,
             ports,
             queues,
+            processes: fb
+                .resources
+                .iter()
+                .map(|r| ResourceProcess {
+                    resource: &r.name,
+                    priority: r.priority,
+                })
+                .collect(),
         });
         if let Err(reason) = iec61499_mgmt::package::boot(&package, Box::new(NoPorts), 0) {
             bail!("{what}: {}: {reason}", fb.boot.name);

@@ -51,6 +51,20 @@ pub fn start(
     stack_size: u32,
     release: Release,
 ) -> Result<(), StartError> {
+    let priority = crate::runtime::mcp().saturating_sub(1).max(1);
+    start_at(ctx, name, entry, stack_size, release, priority)
+}
+
+/// [`start`] at `priority` (below the partition's MCP), for a program whose other
+/// processes must be able to preempt this one.
+pub fn start_at(
+    ctx: &mut StartContext<Warden>,
+    name: &'static str,
+    entry: extern "C" fn(),
+    stack_size: u32,
+    release: Release,
+    priority: u8,
+) -> Result<(), StartError> {
     let process_name = Name::from_str(name).map_err(|_| StartError::Name(name))?;
     let period = match release {
         Release::Aperiodic => SystemTime::Infinite,
@@ -65,7 +79,7 @@ pub fn start(
         time_capacity: SystemTime::Infinite,
         entry_point: entry,
         stack_size,
-        base_priority: i32::from(crate::runtime::mcp()).saturating_sub(1).max(1),
+        base_priority: i32::from(priority),
         deadline: Deadline::Soft,
         name: process_name,
     };

@@ -718,9 +718,15 @@ impl Device {
 
     /// The earliest timer of a running resource.
     pub fn next_deadline(&self) -> Option<i64> {
+        self.next_deadline_of(|_| true)
+    }
+
+    /// The earliest timer of a running resource whose name `serves` accepts (a process
+    /// of the partition that runs those resources' timers).
+    pub fn next_deadline_of(&self, serves: impl Fn(&str) -> bool) -> Option<i64> {
         self.resources
             .iter()
-            .filter(|r| r.running)
+            .filter(|r| r.running && serves(&r.name))
             .filter_map(|r| r.resource.next_deadline())
             .min()
     }
@@ -743,7 +749,16 @@ impl Device {
 
     /// Fires the due timers of every running resource.
     pub fn advance(&mut self, now: i64) {
-        for r in self.resources.iter_mut().filter(|r| r.running) {
+        self.advance_of(now, |_| true)
+    }
+
+    /// Fires the due timers of every running resource whose name `serves` accepts.
+    pub fn advance_of(&mut self, now: i64, serves: impl Fn(&str) -> bool) {
+        for r in self
+            .resources
+            .iter_mut()
+            .filter(|r| r.running && serves(&r.name))
+        {
             let _ = r.resource.advance(now);
         }
         self.note_faults();

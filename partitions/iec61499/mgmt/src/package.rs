@@ -22,6 +22,8 @@
 //!    length u8, name, direction u8 (1 in, 0 out), message size u32, refresh period u64 (ns)
 //! .. queuing ports (for PUBLISH/SUBSCRIBE, `crate::pubsub`): count u16, per port: name
 //!    length u8, name, direction u8 (1 in, 0 out), message size u32, depth u32
+//! .. resources with a process of their own: count u8 (at most [`MAX_RESOURCES`]), per
+//!    resource: name length u8, name, the process's priority u8 (not 0)
 //! .. per type: length u32, the type package; then the boot file (UTF-8)
 //! ```
 //!
@@ -36,7 +38,7 @@ use alloc::vec::Vec;
 use iec61499_runtime::Limits;
 
 const MAGIC: &[u8; 4] = b"W61D";
-const VERSION: u16 = 3;
+const VERSION: u16 = 4;
 /// The most types one package may carry.
 pub const MAX_TYPES: usize = 256;
 /// The most sampling ports a package names (a partition has fewer).
@@ -48,7 +50,7 @@ pub const MAX_QUEUE: usize = 4096;
 pub const MAX_CHAIN_EVENTS: usize = 1_000_000;
 
 /// A device package: borrowed views of its parts.
-#[derive(Debug, PartialEq, Eq)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct DevicePackage<'a> {
     /// Each type package, in the order the configuration names them.
     pub types: Vec<&'a [u8]>,
@@ -65,6 +67,16 @@ pub struct DevicePackage<'a> {
     pub ports: Vec<SamplingPort<'a>>,
     /// The partition's queuing ports other than the management ones.
     pub queues: Vec<DataQueue<'a>>,
+    /// The resources that run in a process of their own, and its priority.
+    pub processes: Vec<ResourceProcess<'a>>,
+}
+
+/// A resource that runs in a process of its own (`iec61499.resources`): its timers and the
+/// chains they start run there, at the process's priority.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct ResourceProcess<'a> {
+    pub resource: &'a str,
+    pub priority: u8,
 }
 
 /// A queuing port for PUBLISH/SUBSCRIBE as the partition creates it.
@@ -147,6 +159,9 @@ pub enum DevicePackageError {
     Net(usize),
     /// The sampling- or queuing-ports field at this offset is not valid.
     Ports(usize),
+    /// The resource-processes field at this offset is not valid (too many, an empty name,
+    /// priority 0).
+    Processes(usize),
 }
 
 impl core::fmt::Display for DevicePackageError {
@@ -168,6 +183,7 @@ impl core::fmt::Display for DevicePackageError {
             Self::Mgmt(at) => write!(f, "invalid management ports at offset {at}"),
             Self::Net(at) => write!(f, "invalid network interface at offset {at}"),
             Self::Ports(at) => write!(f, "invalid sampling or queuing ports at offset {at}"),
+            Self::Processes(at) => write!(f, "invalid resource processes at offset {at}"),
         }
     }
 }
@@ -245,6 +261,11 @@ pub fn encode(package: &DevicePackage<'_>) -> Vec<u8> {
         body.push(u8::from(q.input));
         body.extend_from_slice(&q.port.size.to_le_bytes());
         body.extend_from_slice(&q.port.depth.to_le_bytes());
+    }
+    body.push(package.processes.len() as u8);
+    for p in &package.processes {
+        push_name(&mut body, p.resource);
+        body.push(p.priority);
     }
     for t in &package.types {
         body.extend_from_slice(&(t.len() as u32).to_le_bytes());
@@ -382,6 +403,21 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
             input,
         })
     })?;
+    let field = at;
+    let process_count = usize::from(take(bytes, &mut at, 1)?[0]);
+    if process_count > MAX_RESOURCES {
+        return Err(DevicePackageError::Processes(field));
+    }
+    let mut processes = Vec::with_capacity(process_count);
+    for _ in 0..process_count {
+        let field = at;
+        let resource = name_at(bytes, &mut at)?;
+        let priority = take(bytes, &mut at, 1)?[0];
+        if resource.is_empty() || priority == 0 {
+            return Err(DevicePackageError::Processes(field));
+        }
+        processes.push(ResourceProcess { resource, priority });
+    }
     let mut types = Vec::with_capacity(count);
     for _ in 0..count {
         let len = u32_at(bytes, &mut at)?;
@@ -401,6 +437,7 @@ pub fn decode(bytes: &[u8]) -> Result<DevicePackage<'_>, DevicePackageError> {
         net,
         ports,
         queues,
+        processes,
     })
 }
 
@@ -532,6 +569,7 @@ mod tests {
             net: None,
             ports: Vec::new(),
             queues: Vec::new(),
+            processes: Vec::new(),
         }
     }
 
@@ -588,8 +626,29 @@ mod tests {
                     input: true,
                 },
             ],
+            processes: vec![
+                ResourceProcess {
+                    resource: "CYCLE",
+                    priority: 40,
+                },
+                ResourceProcess {
+                    resource: "SLOW",
+                    priority: 30,
+                },
+            ],
         };
         assert_eq!(decode(&encode(&original)).unwrap(), original);
+        let mut bad = original.clone();
+        bad.processes[1].priority = 0;
+        assert!(matches!(
+            decode(&encode(&bad)),
+            Err(DevicePackageError::Processes(_))
+        ));
+        bad.processes = vec![original.processes[0]; MAX_RESOURCES + 1];
+        assert!(matches!(
+            decode(&encode(&bad)),
+            Err(DevicePackageError::Processes(_))
+        ));
         let without_gateway = DevicePackage {
             net: original.net.map(|n| NetPorts {
                 gateway: None,

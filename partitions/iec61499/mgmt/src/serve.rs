@@ -12,6 +12,20 @@ use crate::request::{Action, Object, Reason, Request, response};
 use alloc::string::String;
 use alloc::vec::Vec;
 
+/// How a request reaches the device: directly, or, in a partition whose processes share the
+/// device, under their lock, held only while the request is carried out (the request is
+/// read, checked against the client's access and its response sized outside it).
+pub trait DeviceAccess {
+    /// [`Device::execute`].
+    fn execute(&mut self, destination: &str, text: &str, now: i64) -> String;
+}
+
+impl DeviceAccess for Device {
+    fn execute(&mut self, destination: &str, text: &str, now: i64) -> String {
+        Device::execute(self, destination, text, now)
+    }
+}
+
 /// What a management client may do (the names and codes of the PLC's online access levels).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
 pub enum Access {
@@ -45,7 +59,7 @@ impl Access {
 /// Answers one request message from a client of level `access` at instant `now`; the
 /// response fits in `max_response` bytes.
 pub fn serve(
-    device: &mut Device,
+    device: &mut impl DeviceAccess,
     message: &[u8],
     access: Access,
     max_response: usize,
@@ -69,7 +83,7 @@ pub fn serve(
 /// them): the one place a client's request is read, checked against its `access` and
 /// carried out. The response fits in `max_response` bytes.
 pub fn serve_parts(
-    device: &mut Device,
+    device: &mut impl DeviceAccess,
     destination: &[u8],
     request: &[u8],
     access: Access,

@@ -2,11 +2,23 @@
 //! (`iec61499_mgmt::Device`) booted from the partition's data entry, the device package
 //! `cargo xtask` wrote from `iec61499.*` (`iec61499_mgmt::package`).
 //!
-//! One APEX process, the device process, owns the device: it boots the package at its
-//! first run, then waits until the earliest timer of a running resource (E_CYCLE,
-//! E_DELAY, ...), fires every timer due, and waits again. Timers are absolute instants
-//! (`Device::advance`), so a late wake-up delays one firing but never shifts the ones
-//! after it. The partition's sampling ports (created at start) are the process image of
+//! The device process boots the package at its first run, then waits until the earliest
+//! timer of a running resource (E_CYCLE, E_DELAY, ...), fires every timer due, and waits
+//! again. Timers are absolute instants (`Device::advance_of`), so a late wake-up delays
+//! one firing but never shifts the ones after it. A resource named in
+//! `iec61499.resources` has a process of its own (`r:<resource>`, at the configured
+//! priority; the device process runs just below the lowest of them) that fires that
+//! resource's timers and runs the chains they start, sleeping until its resource's
+//! earliest timer or until the device process wakes it (an APEX event set when a request
+//! or a subscription gave that resource an earlier timer). The processes share the device
+//! under one ARINC 653 mutex, the device mutex (its priority ceiling the highest resource
+//! process's), taken for a request's execution, a timer's chains, a poll and the pumps of
+//! the network tables, never while the network stack works or a request is read or
+//! answered: so a resource process preempts the device process anywhere else and waits
+//! at most for one request's execution or one chain of another resource. Events from
+//! outside (requests, subscriptions) run their chains in the device process, whichever
+//! resource they are for. Without `iec61499.resources` the device process is the only
+//! one and takes no mutex. The partition's sampling ports (created at start) are the process image of
 //! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`); its queuing ports
 //! other than the management pair (created at start) those of its PUBLISH_n/SUBSCRIBE_n
 //! (`iec61499_mgmt::pubsub`): while a running resource has a subscriber, the process wakes
@@ -31,6 +43,8 @@
 //! interface`.
 //!
 //! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
+//! - `iec61499: resource <name> runs in process r:<name> at priority <p>, the device process
+//!   at <q>` at start for each resource with a process of its own;
 //! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted, then
 //!   `iec61499: management on <request>/<response>, access <level>` with management ports
 //!   and `iec61499: net <address>/<prefix> mac <mac>: management on tcp port <port>,
@@ -59,7 +73,8 @@
 //!   the health monitor as APPLICATION_ERROR with that text (the other resources go on);
 //! - `iec61499: t=<ms>ms timers=<n> lateness_ns=<min>/<mean>/<max>` at every whole
 //!   [`STATS_EVERY_MS`] of the partition's clock (`t`) while timers fire: how many wake-ups
-//!   for timers there were since the line before and how late after its instant each ran
+//!   for timers there were since the line before (of every process) and how late after
+//!   its instant each ran
 //!   (an instant outside the partition's windows waits for the next one; inside them, on
 //!   virtual time, the lateness is the runtime's own cost), then
 //!   `iec61499: t=<ms>ms watch <RESOURCE>.<FB>.<PORT>=<value> ...` for the watched ports
@@ -74,22 +89,29 @@ use alloc::rc::Rc;
 use alloc::string::String;
 use alloc::vec::Vec;
 use apex::Warden;
+use apex::a653rs::bindings::{ApexEventP1, ApexMutexP1, EventId, INFINITE_TIME_VALUE};
 use apex::a653rs::prelude::*;
 use apex::main_process::{self, Release};
 use apex::user_rt::println;
-use core::cell::RefCell;
+use core::cell::{RefCell, UnsafeCell};
 use core::str::FromStr;
+use core::sync::atomic::{AtomicI64, Ordering};
 use core::time::Duration;
 use driver_link::tenant::TenantLink;
 use iec61499_mgmt::Device;
-use iec61499_mgmt::package::{DataQueue, MgmtPorts, NetPorts, QueuingPort, SamplingPort};
+use iec61499_mgmt::Reason;
+use iec61499_mgmt::package::{
+    DataQueue, MAX_RESOURCES, MgmtPorts, NetPorts, QueuingPort, ResourceProcess, SamplingPort,
+};
 use iec61499_mgmt::pubsub::NetAddr;
-use iec61499_mgmt::serve::{Access, serve};
+use iec61499_mgmt::serve::{Access, DeviceAccess, refusal, serve};
 use iec61499_mgmt::sifb::{NO_NETWORK, ProcessIo, TcpState};
 use iec61499_mgmt::tcp::server::{self, Event, Server, Settings, Stats};
 use iec61499_mgmt::tcplink::{TcpLinkStats, TcpLinks};
 use iec61499_mgmt::udp::{Endpoints, UdpStats};
 
+/// The name prefix of a resource's process and of the event that wakes it.
+const RESOURCE_PROCESS_PREFIX: &str = "r:";
 /// How often the statistics line is printed.
 const STATS_EVERY_MS: i64 = 1000;
 /// How long the device process sleeps when no resource has a timer.
@@ -119,15 +141,152 @@ fn report(text: &str) {
 }
 
 /// Prints the lines the device logged; a fault among them goes to the health monitor.
-fn drain(device: &mut Device, faults_seen: &mut u32) {
-    let faults = device.report().faults;
-    for line in device.take_log() {
+fn drain(shared: &mut Shared) {
+    let faults = shared.device.report().faults;
+    for line in shared.device.take_log() {
         println!("iec61499: {line}");
-        if faults != *faults_seen && line.starts_with("resource ") {
+        if faults != shared.faults_seen && line.starts_with("resource ") {
             let _ = <Warden as ApexErrorP4Ext>::raise_application_error(line.as_bytes());
         }
     }
-    *faults_seen = faults;
+    shared.faults_seen = faults;
+}
+
+/// What the partition's processes share: the device and its bookkeeping.
+struct Shared {
+    device: Device,
+    faults_seen: u32,
+    /// The timer wake-ups since the last statistics line (every process's).
+    lateness: Lateness,
+    /// The resources with a process of their own, in the package's order.
+    own: Vec<String>,
+    /// The event that wakes each one's process.
+    events: Vec<EventId>,
+    /// The instant each one's process sleeps until (`i64::MAX`: until woken).
+    sleeps_until: Vec<i64>,
+}
+
+impl Shared {
+    /// Whether `resource`'s timers are the device process's (it has no process of its own).
+    fn device_runs(own: &[String], resource: &str) -> bool {
+        !own.iter().any(|o| o == resource)
+    }
+
+    /// Fires the due timers of the resources `serves` accepts, counting the wake-up's
+    /// lateness; their earliest timer after.
+    fn fire(&mut self, now: i64, serves: impl Fn(&str) -> bool) -> Option<i64> {
+        if let Some(due) = self.device.next_deadline_of(&serves).filter(|&d| d <= now) {
+            self.lateness.add(now - due);
+            self.device.advance_of(now, &serves);
+            drain(self);
+        }
+        self.device.next_deadline_of(serves)
+    }
+}
+
+/// The shared state. With resource processes, every access holds the device mutex (an
+/// ARINC 653 mutex whose priority ceiling is the highest resource process's), so one
+/// process at a time carries out a request, an event chain or a network pump, and a
+/// resource process preempts the device process anywhere else (in its network stack,
+/// between requests). Without them only the device process uses it, unlocked.
+struct DeviceCell {
+    shared: UnsafeCell<Option<Shared>>,
+    /// The device mutex, or -1 (no resource processes).
+    mutex: AtomicI64,
+}
+
+#[allow(unsafe_code)]
+// SAFETY: `shared` is reached only inside `DeviceCell::lock` (never nested: nothing called
+// there reaches `DEVICE`), which holds the device mutex whenever resource processes exist;
+// without them only the device process calls it; `reset` runs in the partition's start,
+// when no process runs. The `Rc`s and `RefCell`s the device shares with `Net` (the network
+// tables) are touched only inside `with` too.
+unsafe impl Sync for DeviceCell {}
+
+static DEVICE: DeviceCell = DeviceCell {
+    shared: UnsafeCell::new(None),
+    mutex: AtomicI64::new(-1),
+};
+
+impl DeviceCell {
+    /// At the partition's start, before any process runs: no device yet, and `mutex` (-1:
+    /// none). A device of the run before is forgotten, not dropped: a restart may have
+    /// made a new heap under it.
+    fn reset(&self, mutex: i64) {
+        self.mutex.store(mutex, Ordering::Release);
+        #[allow(unsafe_code)]
+        // SAFETY: the partition's start runs alone (no process has started yet).
+        let old = unsafe { (*self.shared.get()).take() };
+        core::mem::forget(old);
+    }
+
+    /// Runs `f` on the cell's content, holding the device mutex if there is one; `None`
+    /// if it could not be taken (reported).
+    fn lock<R>(&self, f: impl FnOnce(&mut Option<Shared>) -> R) -> Option<R> {
+        let mutex = self.mutex.load(Ordering::Acquire);
+        if mutex >= 0
+            && let Err(e) = <Warden as ApexMutexP1>::acquire_mutex(mutex, INFINITE_TIME_VALUE)
+        {
+            report(&alloc::format!("ACQUIRE_MUTEX of the device failed: {e:?}"));
+            return None;
+        }
+        #[allow(unsafe_code)]
+        // SAFETY: see `impl Sync for DeviceCell`: the mutex is held, or no other process
+        // uses the cell.
+        let result = f(unsafe { &mut *self.shared.get() });
+        if mutex >= 0 {
+            let _ = <Warden as ApexMutexP1>::release_mutex(mutex);
+        }
+        Some(result)
+    }
+
+    /// Gives the cell the booted device; false if the mutex could not be taken.
+    fn install(&self, shared: Shared) -> bool {
+        self.lock(|cell| *cell = Some(shared)).is_some()
+    }
+
+    /// Runs `f` on the shared state (see [`DeviceCell::lock`]); `None` before the device
+    /// process has booted the device.
+    fn with<R>(&self, f: impl FnOnce(&mut Shared) -> R) -> Option<R> {
+        self.lock(|cell| cell.as_mut().map(f)).flatten()
+    }
+
+    /// The device process's [`DeviceCell::with`]: after `f` (a request, a poll: either may
+    /// start a timer), wakes each resource process whose resource now has a timer before
+    /// the instant it sleeps until.
+    fn with_wake<R>(&self, f: impl FnOnce(&mut Shared) -> R) -> Option<R> {
+        let mut wake: [Option<EventId>; MAX_RESOURCES] = [None; MAX_RESOURCES];
+        let result = self.with(|s| {
+            let result = f(s);
+            for (i, name) in s.own.iter().enumerate() {
+                let due = s.device.next_deadline_of(|r| r == name).unwrap_or(i64::MAX);
+                if due < s.sleeps_until[i] {
+                    s.sleeps_until[i] = due;
+                    wake[i] = Some(s.events[i]);
+                }
+            }
+            result
+        });
+        for event in wake.into_iter().flatten() {
+            let _ = <Warden as ApexEventP1>::set_event(event);
+        }
+        result
+    }
+}
+
+/// A management request carried out on the shared device (`DeviceCell::with_wake`).
+struct Locked;
+
+impl DeviceAccess for Locked {
+    fn execute(&mut self, destination: &str, text: &str, now: i64) -> String {
+        DEVICE
+            .with_wake(|s| {
+                let answer = s.device.execute(destination, text, now);
+                drain(s);
+                answer
+            })
+            .unwrap_or_else(|| refusal(Reason::InvalidState))
+    }
 }
 
 /// The watched ports' values (watches come from the boot file or a management client),
@@ -427,14 +586,21 @@ impl Net {
     /// The frames in, the server's run (requests answered on `device`), the UDP endpoints'
     /// pump (datagrams sent and received) and the TCP links' (connections made, bytes
     /// moved), the frames out, the log lines.
-    fn pass(&mut self, device: &mut Device, now: i64) {
+    /// The device is taken only to answer each request and for the pumps (the tables are
+    /// the FBs' too), never while the stack works.
+    fn pass(&mut self, now: i64) {
         let stack = &mut self.server.stack;
         self.link
             .receive(server::FRAMES_PER_RUN, |frame| stack.device.deliver(frame));
-        self.server.run(now.max(0) as u64, device);
-        if let (Ok(mut udp), Ok(mut tcp)) = (self.udp.try_borrow_mut(), self.tcp.try_borrow_mut()) {
-            udp.pump(&mut self.server.stack);
-            tcp.pump(&mut self.server.stack);
+        self.server.run(now.max(0) as u64, &mut Locked);
+        let (udp, tcp, stack) = (&self.udp, &self.tcp, &mut self.server.stack);
+        let pumped = DEVICE.with(|_| {
+            if let (Ok(mut udp), Ok(mut tcp)) = (udp.try_borrow_mut(), tcp.try_borrow_mut()) {
+                udp.pump(stack);
+                tcp.pump(stack);
+            }
+        });
+        if pumped.is_some() {
             self.server.stack.poll(now.max(0) / 1000);
         }
         let stack = &mut self.server.stack;
@@ -449,11 +615,18 @@ impl Net {
             *slot = Some(event);
         }
         let mut udp_errors: [Option<String>; iec61499_mgmt::udp::MAX_ERRORS] = Default::default();
-        if let Ok(mut udp) = self.udp.try_borrow_mut() {
-            for (slot, error) in udp_errors.iter_mut().zip(udp.take_errors()) {
-                *slot = Some(error);
+        let (udp, tcp) = (&self.udp, &self.tcp);
+        let tables = DEVICE.with(|_| {
+            if let Ok(mut udp) = udp.try_borrow_mut() {
+                for (slot, error) in udp_errors.iter_mut().zip(udp.take_errors()) {
+                    *slot = Some(error);
+                }
             }
-        }
+            let udp = udp.try_borrow().ok().map(|u| (u.open_count(), u.stats));
+            let tcp = tcp.try_borrow().ok().map(|t| (t.open_count(), t.stats));
+            (udp, tcp)
+        });
+        let (udp_now, tcp_now) = tables.unwrap_or((None, None));
         for error in udp_errors.into_iter().flatten() {
             if self.event_lines > 0 {
                 self.event_lines -= 1;
@@ -509,15 +682,14 @@ impl Net {
                     self.link.frames_out
                 );
             }
-            if let Ok(tcp) = self.tcp.try_borrow()
-                && tcp.stats != self.logged_tcp
+            if let Some((links, t)) = tcp_now
+                && t != self.logged_tcp
             {
-                let t = tcp.stats;
                 self.logged_tcp = t;
                 println!(
                     "iec61499: t={}ms tcp links={} connected={} refused={} ended={} bytes_out={} bytes_in={}",
                     now / 1_000_000,
-                    tcp.open_count(),
+                    links,
                     t.connected,
                     t.refused,
                     t.ended,
@@ -525,9 +697,8 @@ impl Net {
                     t.bytes_in
                 );
             }
-            let (open, u) = match self.udp.try_borrow() {
-                Ok(udp) => (udp.open_count(), udp.stats),
-                Err(_) => return,
+            let Some((open, u)) = udp_now else {
+                return;
             };
             if u != self.logged_udp {
                 self.logged_udp = u;
@@ -558,13 +729,13 @@ impl Net {
 }
 
 /// Waits `timeout` for a request and answers it; false when the wait failed.
-fn wait(device: &mut Device, mgmt: Option<&Mgmt>, timeout: Duration, buf: &mut [u8]) -> bool {
+fn wait(mgmt: Option<&Mgmt>, timeout: Duration, buf: &mut [u8]) -> bool {
     let Some(m) = mgmt else {
         return <Warden as ApexTimeP1Ext>::timed_wait(timeout).is_ok();
     };
     match m.request.receive(buf, SystemTime::Normal(timeout)) {
         Ok((message, _)) => {
-            let answer = serve(device, message, m.access, m.size, now_ns());
+            let answer = serve(&mut Locked, message, m.access, m.size, now_ns());
             if m.response
                 .send(answer.as_bytes(), SystemTime::Normal(Duration::ZERO))
                 .is_err()
@@ -606,13 +777,41 @@ extern "C" fn device_process() {
         _ => None,
     };
     let io = Box::new(ApexIo::open(&package.ports, &package.queues, links));
-    let (mut device, booted) = match iec61499_mgmt::package::boot(info.data(), io, now_ns()) {
+    let (device, booted) = match iec61499_mgmt::package::boot(info.data(), io, now_ns()) {
         Ok(booted) => booted,
         Err(reason) => {
             report(&alloc::format!("refusing the boot package: {reason}"));
             return;
         }
     };
+    let own: Vec<String> = package
+        .processes
+        .iter()
+        .map(|p| String::from(p.resource))
+        .collect();
+    let events = own
+        .iter()
+        .filter_map(|name| {
+            let event = Name::from_str(&process_name(name)).ok()?;
+            <Warden as ApexEventP1>::get_event_id(event.into()).ok()
+        })
+        .collect::<Vec<_>>();
+    if events.len() != own.len() {
+        report("the resource processes' events are missing");
+        return;
+    }
+    // From here on every process reaches the device through `DEVICE.with`.
+    let installed = DEVICE.install(Shared {
+        device,
+        faults_seen: 0,
+        lateness: Lateness::default(),
+        sleeps_until: alloc::vec![i64::MAX; own.len()],
+        own,
+        events,
+    });
+    if !installed {
+        return;
+    }
     println!(
         "iec61499: booted: {} type(s), {} boot request(s)",
         booted.types, booted.requests
@@ -666,45 +865,58 @@ extern "C" fn device_process() {
         println!("iec61499: no doorbell on the management request port ({e:?})");
     }
     let mut buf = alloc::vec![0u8; package.mgmt.map_or(0, |p| p.request.size as usize)];
-    let mut faults_seen = 0;
-    drain(&mut device, &mut faults_seen);
-    let mut lateness = Lateness::default();
+    // Wakes every resource process whose resource the boot file started a timer in.
+    DEVICE.with_wake(drain);
     // On the whole seconds of the partition's clock, so a log names them predictably.
     let every = STATS_EVERY_MS * 1_000_000;
     let mut next_stats = (now_ns() / every + 1) * every;
     loop {
         let now = now_ns();
-        if let Some(due) = device.next_deadline().filter(|&due| due <= now) {
-            lateness.add(now - due);
-            device.advance(now);
-            drain(&mut device, &mut faults_seen);
-        }
-        if now >= next_stats && lateness.count > 0 {
-            println!(
-                "iec61499: t={}ms timers={} lateness_ns={}/{}/{}",
-                next_stats / 1_000_000,
-                lateness.count,
-                lateness.min,
-                lateness.sum / lateness.count as i64,
-                lateness.max
-            );
-            lateness = Lateness::default();
-            print_watches(&device, next_stats);
+        // At the first pass after each whole second that follows a timer's wake-up.
+        let printed = DEVICE.with(|s| {
+            let own = core::mem::take(&mut s.own);
+            s.fire(now, |r| Shared::device_runs(&own, r));
+            s.own = own;
+            let print = now >= next_stats && s.lateness.count > 0;
+            if print {
+                let l = &s.lateness;
+                println!(
+                    "iec61499: t={}ms timers={} lateness_ns={}/{}/{}",
+                    next_stats / 1_000_000,
+                    l.count,
+                    l.min,
+                    l.sum / l.count as i64,
+                    l.max
+                );
+                s.lateness = Lateness::default();
+                print_watches(&s.device, next_stats);
+            }
+            print
+        });
+        if printed == Some(true) {
             next_stats = (now / every + 1) * every;
         }
         // The network pass first: what the timers published goes out, the datagrams that
         // arrived are the subscribers' in the poll right after.
         if let Some(net) = net.as_mut() {
-            net.pass(&mut device, now_ns());
-            drain(&mut device, &mut faults_seen);
-        }
-        if device.polls() {
-            device.poll(now_ns());
-            drain(&mut device, &mut faults_seen);
+            net.pass(now_ns());
         }
         let now = now_ns();
+        let (polls, due) = DEVICE
+            .with_wake(|s| {
+                let polls = s.device.polls();
+                if polls {
+                    s.device.poll(now);
+                    drain(s);
+                }
+                let own = &s.own;
+                let due = s.device.next_deadline_of(|r| Shared::device_runs(own, r));
+                (polls, due)
+            })
+            .unwrap_or((false, None));
+        let now = now_ns();
         // A subscriber's messages wait at most one poll period.
-        let idle = if device.polls() {
+        let idle = if polls {
             Duration::from_nanos(iec61499_mgmt::pubsub::POLL_NS as u64)
         } else {
             IDLE
@@ -713,7 +925,7 @@ extern "C" fn device_process() {
             Some(net) => idle.min(net.wait_at_most(now)),
             None => idle,
         };
-        let sleep = match device.next_deadline() {
+        let sleep = match due {
             Some(due) if due <= now => continue,
             Some(due) => Duration::from_nanos((due - now) as u64).min(idle),
             None => idle,
@@ -722,14 +934,82 @@ extern "C" fn device_process() {
         // management request (its port rings too), then served without waiting.
         let waited = if doorbell {
             let _ = apex::user_rt::sys::notify_wait(DOORBELL_BIT, sleep.as_nanos() as u64);
-            mgmt.is_none() || wait(&mut device, mgmt.as_ref(), Duration::ZERO, &mut buf)
+            mgmt.is_none() || wait(mgmt.as_ref(), Duration::ZERO, &mut buf)
         } else {
-            wait(&mut device, mgmt.as_ref(), sleep, &mut buf)
+            wait(mgmt.as_ref(), sleep, &mut buf)
         };
         if !waited {
             return;
         }
-        drain(&mut device, &mut faults_seen);
+    }
+}
+
+/// The name of `resource`'s process and of the event that wakes it.
+fn process_name(resource: &str) -> String {
+    alloc::format!("{RESOURCE_PROCESS_PREFIX}{resource}")
+}
+
+/// The process of a resource configured with one (`iec61499.resources`): it fires that
+/// resource's timers (E_CYCLE, E_DELAY, ...) and runs the chains they start, at its own
+/// priority, above the device process; it sleeps until the resource's earliest timer or
+/// until the device process wakes it (a request or a subscription started an earlier one,
+/// or the device booted). The resource need not exist: the process then sleeps until it
+/// does.
+extern "C" fn resource_process() {
+    let name = match Process::<Warden>::get_self() {
+        Ok(me) => {
+            let attributes = me.status().attributes;
+            let name = attributes.name;
+            let text = name.to_str().unwrap_or("");
+            String::from(text.strip_prefix(RESOURCE_PROCESS_PREFIX).unwrap_or(text))
+        }
+        Err(e) => {
+            report(&alloc::format!(
+                "a resource process does not know itself: {e:?}"
+            ));
+            return;
+        }
+    };
+    let Ok(event) = Name::from_str(&process_name(&name))
+        .map_err(|_| Error::InvalidParam)
+        .and_then(apex::a653rs::prelude::Event::<Warden>::from_name)
+    else {
+        report(&alloc::format!(
+            "the event of resource {name}'s process is missing"
+        ));
+        return;
+    };
+    loop {
+        // Reset before looking at the device: a wake-up after this is never lost.
+        event.reset();
+        let now = now_ns();
+        let due = DEVICE
+            .with(|s| {
+                let due = s.fire(now, |r| r == name);
+                if let Some(i) = s.own.iter().position(|o| *o == name) {
+                    s.sleeps_until[i] = due.unwrap_or(i64::MAX);
+                }
+                due
+            })
+            .flatten();
+        let timeout = match due {
+            Some(due) => {
+                let now = now_ns();
+                if due <= now {
+                    continue;
+                }
+                SystemTime::Normal(Duration::from_nanos((due - now) as u64))
+            }
+            None => SystemTime::Infinite,
+        };
+        if let Err(e) = event.wait(timeout)
+            && e != Error::TimedOut
+        {
+            report(&alloc::format!(
+                "WAIT_EVENT of resource {name}'s process failed: {e:?}"
+            ));
+            return;
+        }
     }
 }
 
@@ -737,9 +1017,10 @@ struct Iec61499Partition;
 
 impl Iec61499Partition {
     fn start(&self, ctx: &mut StartContext<Warden>) {
+        DEVICE.reset(-1);
         let Ok(package) = iec61499_mgmt::package::decode(apex::runtime::start_info().data()) else {
             // The device process reports it.
-            return self.spawn(ctx);
+            return self.spawn(ctx, &[]);
         };
         for p in &package.ports {
             let created = Name::from_str(p.name)
@@ -844,15 +1125,70 @@ impl Iec61499Partition {
                 ));
             }
         }
-        self.spawn(ctx);
+        self.spawn(ctx, &package.processes);
     }
 
-    /// Creates and starts the device process.
-    fn spawn(&self, ctx: &mut StartContext<Warden>) {
+    /// Creates and starts the device process and the resource processes, with the device
+    /// mutex and their events when there are resource processes.
+    fn spawn(&self, ctx: &mut StartContext<Warden>, processes: &[ResourceProcess<'_>]) {
         let stack = apex::table::MIN_STACK as u32;
-        if let Err(e) =
-            main_process::start(ctx, "device", device_process, stack, Release::Aperiodic)
-        {
+        let lowest = processes.iter().map(|p| p.priority).min();
+        let highest = processes.iter().map(|p| p.priority).max();
+        let device_priority = match lowest {
+            Some(lowest) => lowest.saturating_sub(1).max(1),
+            None => apex::runtime::mcp().saturating_sub(1).max(1),
+        };
+        if let Some(ceiling) = highest {
+            let mutex = Name::from_str("device")
+                .map_err(|_| Error::InvalidParam)
+                .and_then(|name| {
+                    ctx.create_mutex(name, Priority::from(ceiling), QueuingDiscipline::Priority)
+                });
+            match mutex {
+                Ok(mutex) => DEVICE.reset(mutex.id()),
+                Err(e) => {
+                    report(&alloc::format!("cannot create the device mutex: {e:?}"));
+                    return;
+                }
+            }
+        }
+        for p in processes {
+            let name = process_name(p.resource);
+            let created = Name::from_str(&name)
+                .map_err(|_| Error::InvalidParam)
+                .and_then(|n| ctx.create_event(n).map(drop))
+                .and_then(|()| Name::from_str(&name).map_err(|_| Error::InvalidParam))
+                .and_then(|n| {
+                    ctx.create_process(ProcessAttribute {
+                        period: SystemTime::Infinite,
+                        time_capacity: SystemTime::Infinite,
+                        entry_point: resource_process,
+                        stack_size: stack,
+                        base_priority: Priority::from(p.priority),
+                        deadline: Deadline::Soft,
+                        name: n,
+                    })
+                })
+                .and_then(|process| process.start());
+            match created {
+                Ok(()) => println!(
+                    "iec61499: resource {} runs in process {name} at priority {}, the device process at {device_priority}",
+                    p.resource, p.priority
+                ),
+                Err(e) => report(&alloc::format!(
+                    "cannot start the process of resource {}: {e:?}",
+                    p.resource
+                )),
+            }
+        }
+        if let Err(e) = main_process::start_at(
+            ctx,
+            "device",
+            device_process,
+            stack,
+            Release::Aperiodic,
+            device_priority,
+        ) {
             report(&alloc::format!("{e}"));
         }
     }

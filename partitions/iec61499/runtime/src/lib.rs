@@ -36,6 +36,12 @@
 //! - **A fault stops the resource**, its outputs stay as they were (the partition's
 //!   process-image service FBs then write their safe values); other resources and
 //!   partitions go on. A reset ([`Resource::reset`]) starts it anew.
+//! - **Resources and priorities.** In the partition a resource may have an APEX process
+//!   of its own at a configured priority, which runs its timers' chains and preempts the
+//!   process serving the network and the management requests; the resources share the
+//!   device under one mutex, so a chain is never interrupted by another resource's
+//!   (`partitions/iec61499/partition/src/main.rs`). (FORTE runs each resource in a thread
+//!   of its own, at one priority.)
 
 #![no_std]
 

@@ -469,3 +469,42 @@ fn a_stopwatch_measures_the_partition_clock_inside_a_chain_and_the_chain_instant
     assert_eq!(read_value(&mut d, "W.TD"), "T#7ms");
     assert_eq!(read_value(&mut d, "C.CV"), "1");
 }
+
+/// A process of the partition that runs some resources' timers sees and fires only theirs.
+#[test]
+fn timers_of_chosen_resources() {
+    let mut d = device();
+    for (res, dt) in [("FAST", "T#1ms"), ("SLOW", "T#5ms")] {
+        assert_eq!(send(&mut d, "", "CREATE", &fb(res, "EMB_RES")), "");
+        assert_eq!(send(&mut d, res, "CREATE", &fb("CY", "E_CYCLE")), "");
+        assert_eq!(send(&mut d, res, "CREATE", &fb("N", "E_CTU")), "");
+        assert_eq!(send(&mut d, res, "WRITE", &conn(dt, "CY.DT")), "");
+        assert_eq!(send(&mut d, res, "WRITE", &conn("UINT#1000", "N.PV")), "");
+        assert_eq!(
+            send(&mut d, res, "CREATE", &conn("START.COLD", "CY.START")),
+            ""
+        );
+        assert_eq!(send(&mut d, res, "CREATE", &conn("CY.EO", "N.CU")), "");
+        assert_eq!(send(&mut d, res, "START", ""), "");
+    }
+    let fast = |name: &str| name == "FAST";
+    let slow = |name: &str| name != "FAST";
+    assert_eq!(d.next_deadline_of(fast), Some(1_000_000));
+    assert_eq!(d.next_deadline_of(slow), Some(5_000_000));
+    assert_eq!(d.next_deadline(), Some(1_000_000));
+    for ms in 1..=5 {
+        d.advance_of(ms * 1_000_000, fast);
+    }
+    let count = |d: &Device, res: &str| {
+        d.resources
+            .iter()
+            .find(|r| r.name == res)
+            .and_then(|r| r.read("N.CV").cloned())
+    };
+    assert_eq!(count(&d, "FAST"), Some(Value::UInt(5)));
+    assert_eq!(count(&d, "SLOW"), Some(Value::UInt(0)));
+    assert_eq!(d.next_deadline_of(slow), Some(5_000_000));
+    d.advance_of(5_000_000, slow);
+    assert_eq!(count(&d, "SLOW"), Some(Value::UInt(1)));
+    assert_eq!(d.next_deadline_of(|_| false), None);
+}

@@ -20,9 +20,8 @@
 //! its place back.
 
 use super::{FrameError, MAX_REQUEST, MAX_RESPONSE, Next, next_request, push_string};
-use crate::Device;
 use crate::request::Reason;
-use crate::serve::{Access, refusal, serve_parts};
+use crate::serve::{Access, DeviceAccess, refusal, serve_parts};
 use alloc::vec;
 use alloc::vec::Vec;
 use netstack::{Config, Error, Ipv4Address, Limits, SocketAddr, SocketId, Stack, linux};
@@ -171,7 +170,7 @@ impl Server {
     /// One run at `now_ns`: the frames already delivered to [`Stack::device`] in, new
     /// connections, at most one request of each connection answered on `device`, the
     /// responses out; the frames to send are then in [`Stack::device`].
-    pub fn run(&mut self, now_ns: u64, device: &mut Device) {
+    pub fn run(&mut self, now_ns: u64, device: &mut impl DeviceAccess) {
         let now_us = (now_ns / 1000) as i64;
         self.stack.poll(now_us);
         self.accept(now_ns);
@@ -241,7 +240,7 @@ impl Server {
 
     /// Sends what slot `i`'s connection has to send; reads what completes its request and
     /// answers it; closes the connection when it is done.
-    fn service(&mut self, i: usize, now_ns: u64, device: &mut Device) {
+    fn service(&mut self, i: usize, now_ns: u64, device: &mut impl DeviceAccess) {
         self.send(i, now_ns);
         let mut event = None;
         let slot = &mut self.slots[i];

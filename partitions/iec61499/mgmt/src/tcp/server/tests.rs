@@ -1,6 +1,7 @@
 //! The server and a client on one wire, the device between them.
 
 use super::*;
+use crate::Device;
 use crate::tcp::{encode_request, read_response};
 use alloc::string::String;
 extern crate std;
