@@ -582,3 +582,20 @@ fn apex_error_handler() {
         &format!("unexpected health events: {health:?}"),
     );
 }
+
+#[test]
+fn apex_heap() {
+    let o = boot("apex_heap");
+    check(&o, o.line("panic at ").is_none(), "a partition panicked");
+    check(
+        &o,
+        o.succeeded(),
+        "expected success exit (33): burst's end is shutdown_success",
+    );
+    expect_lines(
+        &o,
+        &[
+            "heap: churn ran > 1000 allocations, burst woke > 1000 times, suspended churn > 50 times, stopped it: Ok(()); a block after: 4096 bytes; damaged 0; heap found taken more than once",
+        ],
+    );
+}

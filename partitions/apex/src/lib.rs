@@ -43,6 +43,8 @@ pub mod table;
 pub mod time;
 
 #[cfg(feature = "runtime")]
+pub mod heap;
+#[cfg(feature = "runtime")]
 pub mod main_process;
 #[cfg(feature = "runtime")]
 pub mod runtime;
@@ -58,7 +60,7 @@ pub use user_rt;
 
 #[cfg(feature = "runtime")]
 #[global_allocator]
-static HEAP: runtime::BoundedHeap = runtime::BoundedHeap;
+static HEAP: heap::BoundedHeap = heap::BoundedHeap;
 
 /// Defines the partition program's ELF entry `_start(start_record)`: sets up the runtime
 /// (IPC buffer, syssw's server, process table, heap), then calls `$main` (a `fn()`, which

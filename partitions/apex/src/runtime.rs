@@ -1,10 +1,10 @@
-//! The partition runtime: start-up, the runtime lock, process threads, the deadline
-//! watchdog and the bounded heap. Everything here talks to the kernel (`user_rt::sys`) or
+//! The partition runtime: start-up, the runtime lock, process threads and the deadline
+//! watchdog (the bounded heap and its own lock: [`crate::heap`]). Everything here talks to the kernel (`user_rt::sys`) or
 //! to syssw (`user_rt::service`); the decisions come from [`crate::table`].
 //!
 //! # The runtime lock (priority ceiling)
 //!
-//! All runtime state (process table and heap) lives behind one lock. Threads of a task
+//! All runtime state (process table and intra-partition objects) lives behind one lock. Threads of a task
 //! have fixed priorities without time slicing, so a spin lock held by a preempted
 //! low-priority thread would make a higher-priority one spin for ever. A thread therefore
 //! raises itself to the task's MCP before it takes the lock and drops back after: no
@@ -13,19 +13,17 @@
 //! it. On the single CPU the lock is thus never contended; finding it taken means its
 //! holder died inside (a bug), which panics instead of spinning.
 
-// The start record, the static thread stacks and IPC buffers, the heap arena and the global
-// allocator are raw memory: the reason for `unsafe` in this module.
+// The start record, the static thread stacks and IPC buffers and the threads' GS bases are
+// raw memory: the reason for `unsafe` in this module.
 #![allow(unsafe_code)]
 
 use crate::codes;
+use crate::heap;
 use crate::intra::Intra;
 use crate::table::{self, Delivery, ERROR_HANDLER_SLOT, MIN_STACK, PendingError, SLOTS, Table};
 use crate::time;
 use a653rs::bindings::{ErrorCode, ErrorReturnCode, ProcessId};
-use core::alloc::{GlobalAlloc, Layout};
-use core::ptr::NonNull;
 use core::sync::atomic::{AtomicBool, AtomicU8, AtomicU64, Ordering};
-use linked_list_allocator::Heap;
 use protocol::{PartitionStatus, ReplyWords, Request};
 use spin::mutex::{SpinMutex, SpinMutexGuard};
 use user_rt::abi::ipc::IpcBuffer;
@@ -91,20 +89,20 @@ static STACK_ARENA: SpinMutex<(usize, usize)> = SpinMutex::new((0, 0));
 struct State {
     table: Table,
     intra: Intra,
-    heap: Heap,
-    heap_ready: bool,
 }
 
 static STATE: SpinMutex<State> = SpinMutex::new(State {
     table: Table::EMPTY,
     intra: Intra::EMPTY,
-    heap: Heap::empty(),
-    heap_ready: false,
 });
 
 /// Raw thread ids by thread index (0 = none), readable without the lock: how a thread
-/// finds its own IPC buffer and slot.
+/// finds its own IPC buffer and slot. Each thread's GS base is the address of its entry
+/// ([`thread_id`]).
 static THREAD_IDS: [AtomicU64; THREADS] = [const { AtomicU64::new(0) }; THREADS];
+/// The priority the runtime last gave each thread (by thread index) outside its critical
+/// sections (the table's; [`own_priority`]).
+static OWN_PRIORITIES: [AtomicU8; THREADS] = [const { AtomicU8::new(0) }; THREADS];
 static MCP: AtomicU8 = AtomicU8::new(0);
 static TIME_PARTITION: AtomicU64 = AtomicU64::new(0);
 static PARTITION_INDEX: AtomicU64 = AtomicU64::new(0);
@@ -140,12 +138,49 @@ pub fn mcp() -> u8 {
     MCP.load(Ordering::Relaxed)
 }
 
+/// The calling thread's id, without a system call: every thread of the partition has its
+/// GS base at its entry of the thread ids (`start`, `create_thread`).
+pub fn thread_id() -> u64 {
+    let id: u64;
+    // SAFETY: the thread's GS base is the address of its `THREAD_IDS` entry, a static
+    // `AtomicU64` (8-aligned, so this load is one atomic read), set before the thread ran.
+    unsafe {
+        core::arch::asm!(
+            "mov {}, qword ptr gs:[0]",
+            out(reg) id,
+            options(nostack, readonly, preserves_flags)
+        )
+    };
+    id
+}
+
+/// Points the GS base of `thread` (None: the caller) at its entry of the thread ids.
+fn set_thread_id_base(thread: Option<ThreadId>, index: usize) -> Result<(), ErrorReturnCode> {
+    let entry = (&THREAD_IDS[index]) as *const AtomicU64 as u64;
+    sys::thread_set(thread, ThreadAttribute::GsBase, entry)
+        .map_err(|_| ErrorReturnCode::InvalidConfig)
+}
+
 /// The calling thread's index (MAIN, WATCHDOG or a process slot).
 pub fn own_index() -> Option<usize> {
-    let me = sys::thread_self().0.0;
+    index_of(thread_id())
+}
+
+fn index_of(thread: u64) -> Option<usize> {
     THREAD_IDS
         .iter()
-        .position(|t| t.load(Ordering::Relaxed) == me)
+        .position(|t| t.load(Ordering::Relaxed) == thread)
+}
+
+/// The priority the runtime last gave thread `index` to run at outside its critical
+/// sections: what a thread lent a higher one drops back to.
+pub fn own_priority(index: usize) -> u8 {
+    OWN_PRIORITIES[index].load(Ordering::Relaxed)
+}
+
+/// Notes the priority thread `index` runs at outside critical sections from now on.
+pub fn note_own_priority(index: usize, priority: u8) {
+    OWN_PRIORITIES[index].store(priority, Ordering::Relaxed);
 }
 
 /// The calling thread's process slot, if it is a process.
@@ -184,7 +219,7 @@ pub struct Critical {
 
 impl Critical {
     pub fn enter() -> Self {
-        let me = sys::thread_self().0.0;
+        let me = thread_id();
         // Before `start` has read the MCP (0) nothing else of the partition runs.
         if mcp() != 0 {
             let _ = sys::thread_set(None, ThreadAttribute::Priority, u64::from(mcp()));
@@ -222,6 +257,9 @@ impl Drop for Critical {
         if let Some(guard) = self.guard.take() {
             let priority = guard.table.priority_of_thread(self.me);
             drop(guard);
+            if let Some(index) = index_of(self.me) {
+                note_own_priority(index, priority);
+            }
             if mcp() != 0 && priority != mcp() {
                 let _ = sys::thread_set(None, ThreadAttribute::Priority, u64::from(priority));
             }
@@ -263,6 +301,10 @@ pub unsafe fn start<const N: usize, const S: usize>(
         id.store(0, Ordering::Relaxed);
     }
     THREAD_IDS[MAIN].store(me.0, Ordering::Relaxed);
+    if let Err(e) = set_thread_id_base(None, MAIN) {
+        panic!("apex: cannot set the GS base: {e:?}");
+    }
+    note_own_priority(MAIN, info.priority.min(255) as u8);
     let partition_period = partition_status().map_or(0, |s| s.period_ns);
     reset_state(Table::new(
         mcp(),
@@ -288,43 +330,9 @@ fn reset_state(table: Table) {
     let mut state = STATE.lock();
     state.table = table;
     state.intra.reset();
-    if !state.heap_ready || was_locked {
-        state.heap = Heap::empty();
-        let (arena, size) = *HEAP_ARENA.lock();
-        if size > 0 {
-            // SAFETY: the arena is a static of the program used by nothing but this heap
-            // (`start`'s contract); after a restart with the lock held, the old heap's
-            // blocks are abandoned with it (no thread that owned them exists any more).
-            unsafe { state.heap.init(arena as *mut u8, size) };
-        }
-        state.heap_ready = true;
-    }
-}
-
-/// The bounded heap: a fixed arena, first fit. An allocation that does not fit returns
-/// null, and the allocation-error handler panics (reported as APPLICATION_ERROR).
-pub struct BoundedHeap;
-
-// SAFETY: allocations come from the runtime's linked-list heap over the static arena,
-// under the runtime lock; it returns blocks of the requested layout or null.
-unsafe impl GlobalAlloc for BoundedHeap {
-    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
-        let mut critical = Critical::enter();
-        let state = critical.guard.as_mut().expect("held");
-        state
-            .heap
-            .allocate_first_fit(layout)
-            .map_or(core::ptr::null_mut(), |block| block.as_ptr())
-    }
-
-    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
-        let mut critical = Critical::enter();
-        let state = critical.guard.as_mut().expect("held");
-        if let Some(block) = NonNull::new(ptr) {
-            // SAFETY: the caller guarantees `ptr` came from `alloc` with this `layout`.
-            unsafe { state.heap.deallocate(block, layout) };
-        }
-    }
+    drop(state);
+    let (arena, size) = *HEAP_ARENA.lock();
+    heap::restart(arena, size);
 }
 
 /// syssw's server and the calling thread's IPC buffer.
@@ -425,11 +433,14 @@ pub fn create_thread(
 ) -> Result<u64, ErrorReturnCode> {
     let thread = sys::thread_create(None, entry as usize as u64, stack, priority, index as u64)
         .map_err(|_| ErrorReturnCode::InvalidConfig)?;
-    if sys::thread_set(Some(thread), ThreadAttribute::IpcBuffer, ipc_address(index)).is_err() {
+    if sys::thread_set(Some(thread), ThreadAttribute::IpcBuffer, ipc_address(index)).is_err()
+        || set_thread_id_base(Some(thread), index).is_err()
+    {
         let _ = sys::thread_kill(thread);
         return Err(ErrorReturnCode::InvalidConfig);
     }
     THREAD_IDS[index].store(thread.0, Ordering::Relaxed);
+    note_own_priority(index, priority);
     Ok(thread.0)
 }
 
@@ -547,6 +558,7 @@ pub fn apply_intra(table: &mut Table, intra: &mut Intra, caller: Option<usize>) 
             && let Some(thread) = table.set_current_priority(slot, priority)
             && Some(slot) != caller
         {
+            note_own_priority(slot, priority);
             let _ = sys::thread_set(
                 Some(ThreadId(thread)),
                 ThreadAttribute::Priority,

@@ -121,6 +121,7 @@ impl ApexProcessP1 for Warden {
         if let Some(thread) = thread
             && Some(slot) != caller
         {
+            runtime::note_own_priority(slot, priority as u8);
             let _ = sys::thread_set(
                 Some(ThreadId(thread)),
                 ThreadAttribute::Priority,
@@ -161,6 +162,8 @@ impl ApexProcessP1 for Warden {
             return Err(ErrorReturnCode::InvalidMode);
         }
         let thread = table.suspend(slot, caller)?;
+        // Not inside the heap, which the others would wait for.
+        crate::heap::leave(thread);
         let _ = sys::thread_suspend(ThreadId(thread));
         Ok(())
     }
@@ -193,6 +196,8 @@ impl ApexProcessP1 for Warden {
         }
         let (table, intra) = critical.parts();
         if let Some(thread) = table.stop(slot)? {
+            // Not inside the heap, which would stay taken.
+            crate::heap::leave(thread);
             let _ = sys::thread_kill(ThreadId(thread));
         }
         intra.forget(slot);

@@ -17,6 +17,8 @@
 //! * `intra` (scenario `apex_intra`): buffers, blackboards, semaphores, events and mutexes
 //!   between processes of different priorities: FIFO and PRIORITY wake order, time-outs,
 //!   the mutex priority ceiling and the return codes in both modes (see `intra.rs`);
+//! * `heap` (scenario `apex_heap`): the heap's lock under preemption, suspension and
+//!   STOP (`heap.rs`).
 //! * `preempt` (scenario `apex_preemption`): LOCK_PREEMPTION / UNLOCK_PREEMPTION: a
 //!   higher-priority process readied while the lock is held runs only at level 0, the
 //!   codes of the services a lock owner may not call, the lock level's bound (see
@@ -45,8 +47,11 @@
 #![no_std]
 #![no_main]
 
+extern crate alloc;
+
 mod bench;
 mod errors;
+mod heap;
 mod intra;
 mod port_priority;
 mod preemption;
@@ -224,6 +229,7 @@ impl Partition<Warden> for Test {
             "bench-q" => bench::create(ctx),
             "intra" => intra::create(ctx),
             "preempt" => preemption::create(ctx),
+            "heap" => heap::create(),
             "prio_tx" => port_priority::create_tx(ctx),
             "prio_rx" => port_priority::create_rx(ctx),
             "sched" => schedules::create_sched(ctx),
