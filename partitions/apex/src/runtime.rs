@@ -1,14 +1,15 @@
 //! The partition runtime: start-up, the runtime lock, process threads and the deadline
-//! watchdog (the bounded heap and its own lock: [`crate::heap`]). Everything here talks to the kernel (`user_rt::sys`) or
-//! to syssw (`user_rt::service`); the decisions come from [`crate::table`].
+//! watchdog (the bounded heap and its own lock: [`crate::heap`]). Everything here talks to
+//! the kernel (`user_rt::sys`) or to syssw (`user_rt::service`); the decisions come from
+//! [`crate::table`].
 //!
 //! # The runtime lock (priority ceiling)
 //!
-//! All runtime state (process table and intra-partition objects) lives behind one lock. Threads of a task
-//! have fixed priorities without time slicing, so a spin lock held by a preempted
-//! low-priority thread would make a higher-priority one spin for ever. A thread therefore
-//! raises itself to the task's MCP before it takes the lock and drops back after: no
-//! thread of the partition can preempt it meanwhile (the watchdog and error handler run
+//! All runtime state (process table and intra-partition objects) lives behind one lock.
+//! Threads of a task have fixed priorities without time slicing, so a spin lock held by a
+//! preempted low-priority thread would make a higher-priority one spin for ever. A thread
+//! therefore raises itself to the task's MCP before it takes the lock and drops back after:
+//! no thread of the partition can preempt it meanwhile (the watchdog and error handler run
 //! at the MCP too, and equal priorities do not preempt), and it never blocks while holding
 //! it. On the single CPU the lock is thus never contended; finding it taken means its
 //! holder died inside (a bug), which panics instead of spinning.

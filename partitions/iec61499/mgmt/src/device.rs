@@ -168,14 +168,18 @@ impl Device {
     /// Carries out the request `text` addressed to `destination` (empty: the device) at
     /// instant `now` and returns the response.
     pub fn execute(&mut self, destination: &str, text: &str, now: i64) -> String {
-        let request = match Request::parse(text) {
-            Ok(r) => r,
-            Err((id, reason)) => return response(&id, Some(reason), None),
-        };
+        match Request::parse(text) {
+            Ok(request) => self.carry_out(destination, &request, now),
+            Err((id, reason)) => response(&id, Some(reason), None),
+        }
+    }
+
+    /// [`Device::execute`] of a request already read.
+    pub fn carry_out(&mut self, destination: &str, request: &Request, now: i64) -> String {
         let (reason, body) = if destination.is_empty() {
-            (self.device_request(&request, now), None)
+            (self.device_request(request, now), None)
         } else {
-            match self.resource_request(destination, &request, now) {
+            match self.resource_request(destination, request, now) {
                 Ok(body) => (None, body),
                 Err(reason) => (Some(reason), None),
             }

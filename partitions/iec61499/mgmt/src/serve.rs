@@ -16,13 +16,13 @@ use alloc::vec::Vec;
 /// device, under their lock, held only while the request is carried out (the request is
 /// read, checked against the client's access and its response sized outside it).
 pub trait DeviceAccess {
-    /// [`Device::execute`].
-    fn execute(&mut self, destination: &str, text: &str, now: i64) -> String;
+    /// [`Device::carry_out`].
+    fn carry_out(&mut self, destination: &str, request: &Request, now: i64) -> String;
 }
 
 impl DeviceAccess for Device {
-    fn execute(&mut self, destination: &str, text: &str, now: i64) -> String {
-        Device::execute(self, destination, text, now)
+    fn carry_out(&mut self, destination: &str, request: &Request, now: i64) -> String {
+        Device::carry_out(self, destination, request, now)
     }
 }
 
@@ -103,7 +103,7 @@ pub fn serve_parts(
             response(&request.id, Some(Reason::AccessDenied), None)
         }
         Ok(request) => {
-            let answer = device.execute(destination, text, now);
+            let answer = device.carry_out(destination, &request, now);
             if answer.len() > max_response {
                 response(&request.id, Some(Reason::Overflow), None)
             } else {

@@ -18,33 +18,35 @@
 //! at most for one request's execution or one chain of another resource. Events from
 //! outside (requests, subscriptions) run their chains in the device process, whichever
 //! resource they are for. Without `iec61499.resources` the device process is the only
-//! one and takes no mutex. The partition's sampling ports (created at start) are the process image of
-//! the device's `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`); its queuing ports
-//! other than the management pair (created at start) those of its PUBLISH_n/SUBSCRIBE_n
+//! one and takes no mutex.
+//!
+//! The partition's sampling ports (created at start) are the process image of the device's
+//! `PORT_IN_*`/`PORT_OUT_*` FBs (`iec61499_mgmt::sifb`); its queuing ports other than the
+//! management pair (created at start) those of its PUBLISH_n/SUBSCRIBE_n
 //! (`iec61499_mgmt::pubsub`): while a running resource has a subscriber, the process wakes
-//! at least every `pubsub::POLL_NS` and lets it take what arrived. With management ports (`iec61499.mgmt`, created at start), the wait is a
-//! RECEIVE_QUEUING_MESSAGE on the request port: a request is answered on the response port
-//! (`iec61499_mgmt::serve`, with the configured access) between event chains, never inside
-//! one. With a network interface (`iec61499.net`), the same process drives its TCP/IP
-//! stack and the management protocol's TCP server (`iec61499_mgmt::tcp::server`): at
-//! every pass of its loop, and at least every [`NET_POLL`] then (sooner: the frame port's
-//! and the management request port's doorbell, which syssw rings when messages arrive
-//! there, end its wait), it takes the frames the NIC partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one
-//! whole request of each connection on the device (between event chains, as above; an
-//! incomplete request just waits in its connection's buffer), pumps the TCP links of
-//! CLIENT/SERVER with an IP ID (`iec61499_mgmt::tcplink`: connections made and accepted,
-//! their bytes moved between the links' buffers and the sockets) and the UDP endpoints of
+//! at least every `pubsub::POLL_NS` and lets it take what arrived. With management ports
+//! (`iec61499.mgmt`, created at start), the wait is a RECEIVE_QUEUING_MESSAGE on the
+//! request port: a request is answered on the response port (`iec61499_mgmt::serve`, with
+//! the configured access) between event chains, never inside one. With a network interface
+//! (`iec61499.net`), the same process drives its TCP/IP stack and the management protocol's
+//! TCP server (`iec61499_mgmt::tcp::server`): at every pass of its loop, and at least every
+//! [`NET_POLL`] then (sooner: the frame port's and the management request port's doorbell,
+//! which syssw rings when messages arrive there, end its wait), it takes the frames the NIC
+//! partition delivered (at most `FRAMES_PER_RUN`), lets the server answer at most one whole
+//! request of each connection on the device (between event chains, as above; an incomplete
+//! request just waits in its connection's buffer), pumps the TCP links of CLIENT/SERVER
+//! with an IP ID (`iec61499_mgmt::tcplink`: connections made and accepted, their bytes
+//! moved between the links' buffers and the sockets) and the UDP endpoints of
 //! PUBLISH/SUBSCRIBE with a UDP ID (`iec61499_mgmt::udp`: the datagrams the FBs queued go
-//! out, those received go to their subscribers' queues, which the device's poll right
-//! after the pass takes), and sends the frames out. The links and endpoints exist before
-//! the boot (a boot file's FBs open theirs at START); the FBs reach them through the
-//! partition's `ProcessIo` (`tcp_open`/.../`tcp_close`, `udp_open`/.../`udp_close`), never
-//! the stack itself. Without `iec61499.net` an IP ID's INIT answers `no network
-//! interface`.
+//! out, those received go to their subscribers' queues, which the device's poll right after
+//! the pass takes), and sends the frames out. The links and endpoints exist before the boot
+//! (a boot file's FBs open theirs at START); the FBs reach them through the partition's
+//! `ProcessIo` (`tcp_open`/.../`tcp_close`, `udp_open`/.../`udp_close`), never the stack
+//! itself. Without `iec61499.net` an IP ID's INIT answers `no network interface`.
 //!
 //! Log lines (on the serial log as `[<partition>] iec61499: ...`; an interface):
-//! - `iec61499: resource <name> runs in process r:<name> at priority <p>, the device process
-//!   at <q>` at start for each resource with a process of its own;
+//! - `iec61499: resource <name> runs in process r:<name> at priority <p>, the device
+//!   process at <q>` at start for each resource with a process of its own;
 //! - `iec61499: booted: <t> type(s), <n> boot request(s)` when the package booted, then
 //!   `iec61499: management on <request>/<response>, access <level>` with management ports
 //!   and `iec61499: net <address>/<prefix> mac <mac>: management on tcp port <port>,
@@ -89,7 +91,9 @@ use alloc::rc::Rc;
 use alloc::string::String;
 use alloc::vec::Vec;
 use apex::Warden;
-use apex::a653rs::bindings::{ApexEventP1, ApexMutexP1, EventId, INFINITE_TIME_VALUE};
+use apex::a653rs::bindings::{
+    ApexEventP1, ApexMutexP1, ApexProcessP1, EventId, INFINITE_TIME_VALUE,
+};
 use apex::a653rs::prelude::*;
 use apex::main_process::{self, Release};
 use apex::user_rt::println;
@@ -99,7 +103,6 @@ use core::sync::atomic::{AtomicI64, Ordering};
 use core::time::Duration;
 use driver_link::tenant::TenantLink;
 use iec61499_mgmt::Device;
-use iec61499_mgmt::Reason;
 use iec61499_mgmt::package::{
     DataQueue, MAX_RESOURCES, MgmtPorts, NetPorts, QueuingPort, ResourceProcess, SamplingPort,
 };
@@ -109,6 +112,7 @@ use iec61499_mgmt::sifb::{NO_NETWORK, ProcessIo, TcpState};
 use iec61499_mgmt::tcp::server::{self, Event, Server, Settings, Stats};
 use iec61499_mgmt::tcplink::{TcpLinkStats, TcpLinks};
 use iec61499_mgmt::udp::{Endpoints, UdpStats};
+use iec61499_mgmt::{Reason, Request};
 
 /// The name prefix of a resource's process and of the event that wakes it.
 const RESOURCE_PROCESS_PREFIX: &str = "r:";
@@ -278,10 +282,10 @@ impl DeviceCell {
 struct Locked;
 
 impl DeviceAccess for Locked {
-    fn execute(&mut self, destination: &str, text: &str, now: i64) -> String {
+    fn carry_out(&mut self, destination: &str, request: &Request, now: i64) -> String {
         DEVICE
             .with_wake(|s| {
-                let answer = s.device.execute(destination, text, now);
+                let answer = s.device.carry_out(destination, request, now);
                 drain(s);
                 answer
             })
@@ -585,39 +589,21 @@ impl Net {
 
     /// The frames in, the server's run (requests answered on `device`), the UDP endpoints'
     /// pump (datagrams sent and received) and the TCP links' (connections made, bytes
-    /// moved), the frames out, the log lines.
-    /// The device is taken only to answer each request and for the pumps (the tables are
-    /// the FBs' too), never while the stack works.
+    /// moved), the frames out, the log lines. The device is taken only to carry out each
+    /// request and for the pumps (the tables are the FBs' too), never while the stack
+    /// works.
     fn pass(&mut self, now: i64) {
         let stack = &mut self.server.stack;
         self.link
             .receive(server::FRAMES_PER_RUN, |frame| stack.device.deliver(frame));
         self.server.run(now.max(0) as u64, &mut Locked);
+        // One hold of the device for the pumps and what the log needs of the tables.
+        let mut udp_errors: [Option<String>; iec61499_mgmt::udp::MAX_ERRORS] = Default::default();
         let (udp, tcp, stack) = (&self.udp, &self.tcp, &mut self.server.stack);
-        let pumped = DEVICE.with(|_| {
+        let tables = DEVICE.with(|_| {
             if let (Ok(mut udp), Ok(mut tcp)) = (udp.try_borrow_mut(), tcp.try_borrow_mut()) {
                 udp.pump(stack);
                 tcp.pump(stack);
-            }
-        });
-        if pumped.is_some() {
-            self.server.stack.poll(now.max(0) / 1000);
-        }
-        let stack = &mut self.server.stack;
-        self.link
-            .send(server::FRAMES_PER_RUN, || stack.device.take());
-        self.log(now);
-    }
-
-    fn log(&mut self, now: i64) {
-        let mut events = [None; server::MAX_EVENTS];
-        for (slot, event) in events.iter_mut().zip(self.server.take_events()) {
-            *slot = Some(event);
-        }
-        let mut udp_errors: [Option<String>; iec61499_mgmt::udp::MAX_ERRORS] = Default::default();
-        let (udp, tcp) = (&self.udp, &self.tcp);
-        let tables = DEVICE.with(|_| {
-            if let Ok(mut udp) = udp.try_borrow_mut() {
                 for (slot, error) in udp_errors.iter_mut().zip(udp.take_errors()) {
                     *slot = Some(error);
                 }
@@ -626,7 +612,29 @@ impl Net {
             let tcp = tcp.try_borrow().ok().map(|t| (t.open_count(), t.stats));
             (udp, tcp)
         });
+        if tables.is_some() {
+            self.server.stack.poll(now.max(0) / 1000);
+        }
+        let stack = &mut self.server.stack;
+        self.link
+            .send(server::FRAMES_PER_RUN, || stack.device.take());
         let (udp_now, tcp_now) = tables.unwrap_or((None, None));
+        self.log(now, udp_errors, udp_now, tcp_now);
+    }
+
+    /// The log lines of a pass: the server's events, the stack's UDP errors, and once a
+    /// second the statistics (of the tables as the pass found them).
+    fn log(
+        &mut self,
+        now: i64,
+        udp_errors: [Option<String>; iec61499_mgmt::udp::MAX_ERRORS],
+        udp_now: Option<(usize, UdpStats)>,
+        tcp_now: Option<(usize, TcpLinkStats)>,
+    ) {
+        let mut events = [None; server::MAX_EVENTS];
+        for (slot, event) in events.iter_mut().zip(self.server.take_events()) {
+            *slot = Some(event);
+        }
         for error in udp_errors.into_iter().flatten() {
             if self.event_lines > 0 {
                 self.event_lines -= 1;
@@ -784,22 +792,18 @@ extern "C" fn device_process() {
             return;
         }
     };
-    let own: Vec<String> = package
+    // The resources whose process and event exist (the start reported any that could
+    // not be made): the device process runs the others' timers.
+    let (own, events): (Vec<String>, Vec<EventId>) = package
         .processes
         .iter()
-        .map(|p| String::from(p.resource))
-        .collect();
-    let events = own
-        .iter()
-        .filter_map(|name| {
-            let event = Name::from_str(&process_name(name)).ok()?;
-            <Warden as ApexEventP1>::get_event_id(event.into()).ok()
+        .filter_map(|p| {
+            let name = Name::from_str(&process_name(p.resource)).ok()?;
+            <Warden as ApexProcessP1>::get_process_id(name.clone().into()).ok()?;
+            let event = <Warden as ApexEventP1>::get_event_id(name.into()).ok()?;
+            Some((String::from(p.resource), event))
         })
-        .collect::<Vec<_>>();
-    if events.len() != own.len() {
-        report("the resource processes' events are missing");
-        return;
-    }
+        .unzip();
     // From here on every process reaches the device through `DEVICE.with`.
     let installed = DEVICE.install(Shared {
         device,
