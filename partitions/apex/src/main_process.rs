@@ -23,16 +23,16 @@ pub enum Release {
 
 /// Why the process does not run.
 #[derive(Debug)]
-pub enum StartError {
+pub enum StartError<'a> {
     /// The name is not an ARINC 653 name (at most 32 bytes).
-    Name(&'static str),
+    Name(&'a str),
     /// CREATE_PROCESS refused.
-    Create(&'static str, Error),
+    Create(&'a str, Error),
     /// START refused.
-    Start(&'static str, Error),
+    Start(&'a str, Error),
 }
 
-impl fmt::Display for StartError {
+impl fmt::Display for StartError<'_> {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Name(name) => write!(f, "{name:?} is not a process name"),
@@ -50,21 +50,25 @@ pub fn start(
     entry: extern "C" fn(),
     stack_size: u32,
     release: Release,
-) -> Result<(), StartError> {
-    let priority = crate::runtime::mcp().saturating_sub(1).max(1);
-    start_at(ctx, name, entry, stack_size, release, priority)
+) -> Result<(), StartError<'static>> {
+    start_at(ctx, name, entry, stack_size, release, priority_below_mcp())
+}
+
+/// The priority [`start`] gives its process: just below the partition's MCP.
+pub fn priority_below_mcp() -> u8 {
+    crate::runtime::mcp().saturating_sub(1).max(1)
 }
 
 /// [`start`] at `priority` (below the partition's MCP), for a program whose other
 /// processes must be able to preempt this one.
-pub fn start_at(
+pub fn start_at<'a>(
     ctx: &mut StartContext<Warden>,
-    name: &'static str,
+    name: &'a str,
     entry: extern "C" fn(),
     stack_size: u32,
     release: Release,
     priority: u8,
-) -> Result<(), StartError> {
+) -> Result<(), StartError<'a>> {
     let process_name = Name::from_str(name).map_err(|_| StartError::Name(name))?;
     let period = match release {
         Release::Aperiodic => SystemTime::Infinite,

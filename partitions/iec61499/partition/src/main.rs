@@ -1140,7 +1140,7 @@ impl Iec61499Partition {
         let highest = processes.iter().map(|p| p.priority).max();
         let device_priority = match lowest {
             Some(lowest) => lowest.saturating_sub(1).max(1),
-            None => apex::runtime::mcp().saturating_sub(1).max(1),
+            None => main_process::priority_below_mcp(),
         };
         if let Some(ceiling) = highest {
             let mutex = Name::from_str("device")
@@ -1158,31 +1158,30 @@ impl Iec61499Partition {
         }
         for p in processes {
             let name = process_name(p.resource);
-            let created = Name::from_str(&name)
+            let event = Name::from_str(&name)
                 .map_err(|_| Error::InvalidParam)
-                .and_then(|n| ctx.create_event(n).map(drop))
-                .and_then(|()| Name::from_str(&name).map_err(|_| Error::InvalidParam))
-                .and_then(|n| {
-                    ctx.create_process(ProcessAttribute {
-                        period: SystemTime::Infinite,
-                        time_capacity: SystemTime::Infinite,
-                        entry_point: resource_process,
-                        stack_size: stack,
-                        base_priority: Priority::from(p.priority),
-                        deadline: Deadline::Soft,
-                        name: n,
-                    })
-                })
-                .and_then(|process| process.start());
-            match created {
+                .and_then(|n| ctx.create_event(n));
+            if let Err(e) = event {
+                report(&alloc::format!(
+                    "cannot create the event of resource {}'s process: {e:?}",
+                    p.resource
+                ));
+                continue;
+            }
+            let started = main_process::start_at(
+                ctx,
+                &name,
+                resource_process,
+                stack,
+                Release::Aperiodic,
+                p.priority,
+            );
+            match started {
                 Ok(()) => println!(
                     "iec61499: resource {} runs in process {name} at priority {}, the device process at {device_priority}",
                     p.resource, p.priority
                 ),
-                Err(e) => report(&alloc::format!(
-                    "cannot start the process of resource {}: {e:?}",
-                    p.resource
-                )),
+                Err(e) => report(&alloc::format!("resource {}: {e}", p.resource)),
             }
         }
         if let Err(e) = main_process::start_at(
