@@ -150,25 +150,47 @@ pub enum TimerRequest {
 /// carries the outputs as they are when it is sent), arm and disarm its timers, read the
 /// time.
 pub struct Context<'a> {
-    pub(crate) now: i64,
     pub(crate) outputs: &'a mut [Value],
+    pub(crate) reaction: &'a mut Reaction,
+}
+
+/// What a reaction asked, for the resource to carry out after it: kept by the resource
+/// between reactions (cleared by [`Reaction::start`]), so that a reaction allocates
+/// nothing once its buffers have grown.
+#[derive(Default)]
+pub(crate) struct Reaction {
+    /// The instant the chain runs for.
+    pub(crate) now: i64,
     /// Output events sent: each event and where the outputs as they were when it was sent
     /// start in `sent_outputs` (all of them, one after the other), or [`Context::CURRENT`]
     /// while no output has changed since (the usual case: nothing is copied).
-    pub(crate) sent: &'a mut Vec<(usize, usize)>,
-    pub(crate) sent_outputs: &'a mut Vec<Value>,
-    pub(crate) timers: &'a mut Vec<TimerRequest>,
+    pub(crate) sent: Vec<(usize, usize)>,
+    pub(crate) sent_outputs: Vec<Value>,
+    pub(crate) timers: Vec<TimerRequest>,
     /// Why the reaction failed (a trapping algorithm), if it did.
-    pub(crate) failed: &'a mut Option<String>,
+    pub(crate) failed: Option<String>,
+}
+
+impl Reaction {
+    /// Empty, for a reaction at instant `now`.
+    #[inline(always)]
+    pub(crate) fn start(&mut self, now: i64) {
+        self.now = now;
+        self.sent.clear();
+        self.sent_outputs.clear();
+        self.timers.clear();
+        self.failed = None;
+    }
 }
 
 impl Context<'_> {
-    /// In [`Context::sent`]: the event carries the outputs as they are at the reaction's end.
+    /// In [`Reaction::sent`]: the event carries the outputs as they are at the reaction's
+    /// end.
     pub(crate) const CURRENT: usize = usize::MAX;
 
     /// The instant the chain runs for: the external event's time, or a timer's deadline.
     pub fn now(&self) -> i64 {
-        self.now
+        self.reaction.now
     }
 
     /// Output `index` as it is now.
@@ -176,9 +198,10 @@ impl Context<'_> {
         &self.outputs[index]
     }
 
+    #[inline(always)]
     pub fn set(&mut self, index: usize, value: Value) {
         self.keep_sent();
-        self.outputs[index] = value;
+        self.outputs[index].set(value);
     }
 
     /// All outputs, for code that writes several.
@@ -189,16 +212,28 @@ impl Context<'_> {
 
     /// Before an output changes: the events sent since the last change get a copy of the
     /// outputs as they are (one copy for all of them).
+    #[inline(always)]
     fn keep_sent(&mut self) {
-        if self.sent.last().is_some_and(|&(_, at)| at == Self::CURRENT) {
-            let start = self.sent_outputs.len();
-            self.sent_outputs.extend(self.outputs.iter().cloned());
-            for (_, at) in self.sent.iter_mut().rev() {
-                if *at != Self::CURRENT {
-                    break;
-                }
-                *at = start;
+        if self
+            .reaction
+            .sent
+            .last()
+            .is_some_and(|&(_, at)| at == Self::CURRENT)
+        {
+            self.copy_sent();
+        }
+    }
+
+    #[cold]
+    fn copy_sent(&mut self) {
+        let r = &mut *self.reaction;
+        let start = r.sent_outputs.len();
+        r.sent_outputs.extend(self.outputs.iter().cloned());
+        for (_, at) in r.sent.iter_mut().rev() {
+            if *at != Self::CURRENT {
+                break;
             }
+            *at = start;
         }
     }
 
@@ -206,23 +241,24 @@ impl Context<'_> {
     /// [`crate::Fault::Trap`] naming the FB and `reason`; the events this reaction sent
     /// before are not delivered.
     pub fn fail(&mut self, reason: String) {
-        if self.failed.is_none() {
-            *self.failed = Some(reason);
+        if self.reaction.failed.is_none() {
+            self.reaction.failed = Some(reason);
         }
     }
 
     /// Sends output event `output`; its receivers get the outputs as they are now.
+    #[inline]
     pub fn send(&mut self, output: usize) {
-        self.sent.push((output, Self::CURRENT));
+        self.reaction.sent.push((output, Self::CURRENT));
     }
 
     /// Arms timer `id` for the absolute instant `at` (re-arming replaces the deadline).
     pub fn arm(&mut self, id: u8, at: i64) {
-        self.timers.push(TimerRequest::Arm { id, at });
+        self.reaction.timers.push(TimerRequest::Arm { id, at });
     }
 
     pub fn disarm(&mut self, id: u8) {
-        self.timers.push(TimerRequest::Disarm { id });
+        self.reaction.timers.push(TimerRequest::Disarm { id });
     }
 }
 

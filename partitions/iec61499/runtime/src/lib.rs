@@ -52,6 +52,7 @@ pub mod composite;
 pub mod fb;
 pub mod functions;
 pub mod package;
+mod queue;
 pub mod resource;
 pub mod stdlib;
 pub mod value;

@@ -1,10 +1,10 @@
 //! A resource: FB instances, connections, the event queue and the timers, executed as the
 //! crate documentation says.
 
-use crate::fb::{Context, FunctionBlock, Restart, TimerRequest};
+use crate::fb::{Context, FunctionBlock, Reaction, Restart, TimerRequest};
+use crate::queue::{End, EventQueue};
 use crate::value::{DataType, Value};
 use alloc::boxed::Box;
-use alloc::collections::VecDeque;
 use alloc::format;
 use alloc::string::String;
 use alloc::vec;
@@ -117,83 +117,11 @@ struct Sample {
     widen_to: Option<DataType>,
 }
 
-/// `(instance, port index)`.
-type End = (usize, usize);
-
 /// A forced input or output.
 struct Force {
     end: End,
     output: bool,
     value: Value,
-}
-
-/// The event queue: each event's destination and how many of the values it carries, and
-/// the destination's inputs sampled when each event was sent, one event's after the
-/// other's; so queueing an event allocates nothing once both have grown.
-#[derive(Default)]
-struct EventQueue {
-    events: VecDeque<(End, usize)>,
-    values: VecDeque<(usize, Value)>,
-}
-
-impl EventQueue {
-    fn len(&self) -> usize {
-        self.events.len()
-    }
-
-    fn clear(&mut self) {
-        self.events.clear();
-        self.values.clear();
-    }
-
-    /// Queues an event to `to` with the inputs it samples (see [`sampled`]), unless the
-    /// queue holds `limit` events already.
-    fn push_sampled(
-        &mut self,
-        limit: usize,
-        instances: &[Instance],
-        to: End,
-        sender: Option<(usize, &[Value])>,
-    ) -> Result<(), ()> {
-        if self.len() >= limit {
-            return Err(());
-        }
-        self.push(to, sampled(instances, to, sender));
-        Ok(())
-    }
-
-    fn push(&mut self, to: End, values: impl Iterator<Item = (usize, Value)>) {
-        let mut n = 0;
-        for value in values {
-            self.values.push_back(value);
-            n += 1;
-        }
-        self.events.push_back((to, n));
-    }
-
-    /// The next event's destination and how many values it carries, which the caller
-    /// takes with [`EventQueue::pop_value`] before the next `pop` (a counted loop: no
-    /// iterator to build and drop per event).
-    fn pop(&mut self) -> Option<(End, usize)> {
-        self.events.pop_front()
-    }
-
-    /// The next value of the event [`EventQueue::pop`] returned (input index, value).
-    fn pop_value(&mut self) -> Option<(usize, Value)> {
-        self.values.pop_front()
-    }
-
-    /// Drops the events to instance `i` with their values.
-    fn forget(&mut self, i: usize) {
-        let mut kept = EventQueue::default();
-        while let Some((to, n)) = self.pop() {
-            let values: Vec<_> = (0..n).filter_map(|_| self.pop_value()).collect();
-            if to.0 != i {
-                kept.push(to, values.into_iter());
-            }
-        }
-        *self = kept;
-    }
 }
 
 struct Timer {
@@ -219,18 +147,8 @@ pub struct Resource {
     fault: Option<Fault>,
     /// Events delivered since the resource was created (a statistic).
     delivered: u64,
-    /// What a reaction sends and asks, kept between reactions so that delivering an event
-    /// allocates nothing once they have grown (see [`Resource::react`]). Boxed, so that
-    /// taking it for a reaction moves a pointer, not the buffers.
-    scratch: Option<Box<Scratch>>,
-}
-
-/// The buffers of [`Resource::react`].
-#[derive(Default)]
-struct Scratch {
-    sent: Vec<(usize, usize)>,
-    sent_outputs: Vec<Value>,
-    requests: Vec<TimerRequest>,
+    /// What the current reaction sends and asks (see [`Resource::react`]).
+    reaction: Reaction,
 }
 
 impl Resource {
@@ -246,7 +164,7 @@ impl Resource {
             timer_seq: 0,
             fault: None,
             delivered: 0,
-            scratch: Some(Box::default()),
+            reaction: Reaction::default(),
         }
     }
 
@@ -650,98 +568,72 @@ impl Resource {
         self.delivered
     }
 
-    /// Queues the destinations of output `event` of `instance`, in connection order, with
-    /// the outputs it had when it sent the event: `copy`, or (none needed: no output
-    /// changed since) its outputs as they are.
-    fn send(&mut self, instance: usize, event: usize, copy: Option<&[Value]>) -> Result<(), Fault> {
-        let sender = copy.map(|outputs| (instance, outputs));
-        let inst = &self.instances[instance];
-        for &to in &inst.fanout[event] {
-            let queued = self
-                .queue
-                .push_sampled(self.limits.queue, &self.instances, to, sender);
-            if queued.is_err() {
-                return Err(Fault::QueueOverflow {
-                    fb: inst.name.clone(),
-                    event: inst.fb.interface().event_outputs[event].name.clone(),
-                });
-            }
-        }
-        Ok(())
-    }
-
-    /// Runs `react` on `instance`, then carries out what it asked: its output events (in
-    /// order) and timer requests.
+    /// Runs `react` on `instance`, then carries out what it asked: its timer requests and
+    /// its output events, in order (see [`send`]).
     fn react(
         &mut self,
         instance: usize,
         now: i64,
         react: impl FnOnce(&mut dyn FunctionBlock, &[Value], &mut Context<'_>),
     ) -> Result<(), Fault> {
-        // The buffers are taken for the reaction and put back after it (a reaction does
-        // not react again), so their capacity is reused.
-        let mut scratch = self.scratch.take().unwrap_or_default();
-        scratch.sent.clear();
-        scratch.sent_outputs.clear();
-        scratch.requests.clear();
-        let result = self.react_with(instance, now, react, &mut scratch);
-        self.scratch = Some(scratch);
-        result
-    }
-
-    fn react_with(
-        &mut self,
-        instance: usize,
-        now: i64,
-        react: impl FnOnce(&mut dyn FunctionBlock, &[Value], &mut Context<'_>),
-        scratch: &mut Scratch,
-    ) -> Result<(), Fault> {
-        let mut failed = None;
-        let outputs = {
-            let inst = &mut self.instances[instance];
-            let mut ctx = Context {
-                now,
-                outputs: &mut inst.outputs,
-                sent: &mut scratch.sent,
-                sent_outputs: &mut scratch.sent_outputs,
-                timers: &mut scratch.requests,
-                failed: &mut failed,
-            };
-            react(inst.fb.as_mut(), &inst.inputs, &mut ctx);
-            inst.outputs.len()
+        // The reaction's buffers are kept between reactions (a reaction does not react
+        // again), so their capacity is reused.
+        self.reaction.start(now);
+        let inst = &mut self.instances[instance];
+        let mut ctx = Context {
+            outputs: &mut inst.outputs,
+            reaction: &mut self.reaction,
         };
-        if let Some(reason) = failed {
+        react(inst.fb.as_mut(), &inst.inputs, &mut ctx);
+        let outputs = inst.outputs.len();
+        if let Some(reason) = self.reaction.failed.take() {
             return Err(Fault::Trap {
                 fb: self.instances[instance].name.clone(),
                 reason,
             });
         }
-        self.apply_forces(instance, true);
-        // (The events that carry the outputs as they are got the forced values just now.)
         if !self.forces.is_empty() {
-            let copied = scratch
-                .sent
-                .iter()
-                .filter(|(_, start)| *start != Context::CURRENT);
-            for &(_, start) in copied {
-                for f in self
-                    .forces
-                    .iter()
-                    .filter(|f| f.end.0 == instance && f.output)
-                {
-                    scratch.sent_outputs[start + f.end.1] = f.value.clone();
-                }
-            }
+            self.force_sent(instance);
         }
-        for request in scratch.requests.drain(..) {
-            self.timer_request(instance, request)?;
+        for k in 0..self.reaction.timers.len() {
+            self.timer_request(instance, self.reaction.timers[k])?;
         }
-        for &(event, start) in &scratch.sent {
+        let reaction = &self.reaction;
+        for &(event, start) in &reaction.sent {
             let copy =
-                (start != Context::CURRENT).then(|| &scratch.sent_outputs[start..][..outputs]);
-            self.send(instance, event, copy)?;
+                (start != Context::CURRENT).then(|| &reaction.sent_outputs[start..][..outputs]);
+            send(
+                &mut self.queue,
+                self.limits.queue,
+                &self.instances,
+                instance,
+                event,
+                copy,
+            )?;
         }
         Ok(())
+    }
+
+    /// After a reaction of `instance`: its forced outputs put back, in its outputs and in
+    /// the copies its sent events carry.
+    #[cold]
+    fn force_sent(&mut self, instance: usize) {
+        self.apply_forced(instance, true);
+        // (The events that carry the outputs as they are got the forced values just now.)
+        let copied = self
+            .reaction
+            .sent
+            .iter()
+            .filter(|(_, start)| *start != Context::CURRENT);
+        for &(_, start) in copied {
+            for f in self
+                .forces
+                .iter()
+                .filter(|f| f.end.0 == instance && f.output)
+            {
+                self.reaction.sent_outputs[start + f.end.1] = f.value.clone();
+            }
+        }
     }
 
     fn timer_request(&mut self, instance: usize, request: TimerRequest) -> Result<(), Fault> {
@@ -785,7 +677,7 @@ impl Resource {
             let inputs = &mut self.instances[instance].inputs;
             for _ in 0..carried {
                 if let Some((var, value)) = self.queue.pop_value() {
-                    inputs[var] = value;
+                    inputs[var].set(value);
                 }
             }
             self.delivered += 1;
@@ -821,12 +713,17 @@ impl Resource {
             return Err(DeployError::Faulted(fault.clone()));
         }
         let _ = self.chain(now, |r| {
-            r.queue
-                .push_sampled(r.limits.queue, &r.instances, destination, None)
-                .map_err(|()| Fault::QueueOverflow {
-                    fb: String::from("(external)"),
-                    event: to.into(),
-                })
+            queue_sampled(
+                &mut r.queue,
+                r.limits.queue,
+                &r.instances,
+                destination,
+                None,
+            )
+            .map_err(|()| Fault::QueueOverflow {
+                fb: String::from("(external)"),
+                event: to.into(),
+            })
         });
         Ok(())
     }
@@ -919,28 +816,66 @@ impl Resource {
     }
 }
 
-/// The values a delivery of input event `event` to `instance` carries: its WITH inputs,
-/// each from its connected source now, or, for a source that is the `sender`, from the
-/// sender's outputs as they were when it sent.
-fn sampled<'r>(
-    instances: &'r [Instance],
-    (instance, event): End,
-    sender: Option<(usize, &'r [Value])>,
-) -> impl Iterator<Item = (usize, Value)> + 'r {
-    instances[instance].samples[event]
-        .iter()
-        .map(move |sample| {
-            let (si, so) = sample.source;
-            let value = match sender {
-                Some((s, outputs)) if s == si => outputs[so].clone(),
-                _ => instances[si].outputs[so].clone(),
-            };
-            let value = match sample.widen_to {
-                None => value,
-                Some(to) => crate::value::widen(value, to),
-            };
-            (sample.input, value)
-        })
+/// Queues the destinations of output `event` of `instance`, in connection order, with
+/// the outputs it had when it sent the event: `copy`, or (none needed: no output changed
+/// since) its outputs as they are.
+#[inline(always)]
+fn send(
+    queue: &mut EventQueue,
+    limit: usize,
+    instances: &[Instance],
+    instance: usize,
+    event: usize,
+    copy: Option<&[Value]>,
+) -> Result<(), Fault> {
+    let sender = copy.map(|outputs| (instance, outputs));
+    for &to in &instances[instance].fanout[event] {
+        if queue_sampled(queue, limit, instances, to, sender).is_err() {
+            return Err(overflow(&instances[instance], event));
+        }
+    }
+    Ok(())
+}
+
+/// The fault of a full queue when `inst` sent output event `event`.
+#[cold]
+#[inline(never)]
+fn overflow(inst: &Instance, event: usize) -> Fault {
+    Fault::QueueOverflow {
+        fb: inst.name.clone(),
+        event: inst.fb.interface().event_outputs[event].name.clone(),
+    }
+}
+
+/// Queues an event to `to` with the values its delivery carries, unless the queue holds
+/// `limit` events already: the destination's WITH inputs, each from its connected source
+/// now, or, for a source that is the `sender`, from the sender's outputs as they were
+/// when it sent.
+#[inline(always)]
+fn queue_sampled(
+    queue: &mut EventQueue,
+    limit: usize,
+    instances: &[Instance],
+    to: End,
+    sender: Option<(usize, &[Value])>,
+) -> Result<(), ()> {
+    if queue.len() >= limit {
+        return Err(());
+    }
+    let plan = &instances[to.0].samples[to.1];
+    for sample in plan {
+        let (si, so) = sample.source;
+        let value = match sender {
+            Some((s, outputs)) if s == si => &outputs[so],
+            _ => &instances[si].outputs[so],
+        };
+        let queued = queue.push_value(sample.input, value.clone());
+        if let Some(to) = sample.widen_to {
+            *queued = crate::value::widen(core::mem::take(queued), to);
+        }
+    }
+    queue.push_event(to, plan.len());
+    Ok(())
 }
 
 /// `FB.PORT` → (`FB`, `PORT`), where `FB` is the longest leading part of `path` that

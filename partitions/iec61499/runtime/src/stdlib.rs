@@ -45,13 +45,26 @@ pub const TYPES: [&str; 23] = [
 
 /// A new instance of standard type `name`.
 pub fn create(name: &str) -> Option<Box<dyn FunctionBlock>> {
-    let kind = Kind::from_name(name)?;
-    Some(Box::new(Standard {
-        kind,
-        interface: kind.interface(),
-        state: State::default(),
-    }))
+    let index = TYPES.iter().position(|t| *t == name)?;
+    Some(NEW[index]())
 }
+
+/// A new instance of `ALL[K]`: each type is its own monomorphic [`Standard`], so an event
+/// reaches its type's code through its own vtable, in a function holding only that code
+/// (the event loops' innermost call).
+fn new<const K: usize>() -> Box<dyn FunctionBlock> {
+    Box::new(Standard::<K> {
+        interface: Standard::<K>::KIND.interface(),
+        state: State::default(),
+    })
+}
+
+/// [`new`] of each of [`ALL`].
+const NEW: [fn() -> Box<dyn FunctionBlock>; 23] = [
+    new::<0>, new::<1>, new::<2>, new::<3>, new::<4>, new::<5>, new::<6>, new::<7>, new::<8>,
+    new::<9>, new::<10>, new::<11>, new::<12>, new::<13>, new::<14>, new::<15>, new::<16>,
+    new::<17>, new::<18>, new::<19>, new::<20>, new::<21>, new::<22>,
+];
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Kind {
@@ -109,10 +122,6 @@ const ALL: [Kind; 23] = [
 use DataType::{Bool, Time, UInt};
 
 impl Kind {
-    fn from_name(name: &str) -> Option<Kind> {
-        TYPES.iter().position(|t| *t == name).map(|i| ALL[i])
-    }
-
     fn interface(self) -> Interface {
         let (ei, eo, di, dout): (
             &[EventDecl<'_>],
@@ -262,10 +271,14 @@ struct State {
 const TIMER: u8 = 0;
 const MAX_COUNT: u64 = 65_535;
 
-struct Standard {
-    kind: Kind,
+/// An instance of standard type `ALL[K]`.
+struct Standard<const K: usize> {
     interface: Interface,
     state: State,
+}
+
+impl<const K: usize> Standard<K> {
+    const KIND: Kind = ALL[K];
 }
 
 fn table_entry(inputs: &[Value], step: u64) -> i64 {
@@ -282,7 +295,7 @@ fn counter_update(inputs: &[Value], ctx: &mut Context<'_>) {
     ctx.set(1, Value::Bool(cv == 0));
 }
 
-impl FunctionBlock for Standard {
+impl<const K: usize> FunctionBlock for Standard<K> {
     fn interface(&self) -> &Interface {
         &self.interface
     }
@@ -293,7 +306,7 @@ impl FunctionBlock for Standard {
 
     fn event(&mut self, event: usize, inputs: &[Value], ctx: &mut Context<'_>) {
         let s = &mut self.state;
-        match self.kind {
+        match Self::KIND {
             Kind::Split => {
                 ctx.send(0);
                 ctx.send(1);
@@ -322,7 +335,7 @@ impl FunctionBlock for Standard {
             Kind::Switch => ctx.send(usize::from(inputs[0].as_bool())),
             Kind::Sr | Kind::Rs => {
                 // Annex A's ECC: the initial state is RESET's (Q FALSE): R there does nothing.
-                let set = (event == 0) == (self.kind == Kind::Sr);
+                let set = (event == 0) == (Self::KIND == Kind::Sr);
                 if s.q.unwrap_or(false) != set {
                     s.q = Some(set);
                     ctx.set(0, Value::Bool(set));
@@ -390,7 +403,7 @@ impl FunctionBlock for Standard {
             Kind::RTrig | Kind::FTrig => {
                 let (qi, before) = (inputs[0].as_bool(), s.q.unwrap_or(false));
                 s.q = Some(qi);
-                if qi != before && qi == (self.kind == Kind::RTrig) {
+                if qi != before && qi == (Self::KIND == Kind::RTrig) {
                     ctx.send(0);
                 }
             }
@@ -401,7 +414,7 @@ impl FunctionBlock for Standard {
                 }
             }
             Kind::Delay | Kind::RDelay => match event {
-                0 if !s.active || self.kind == Kind::RDelay => {
+                0 if !s.active || Self::KIND == Kind::RDelay => {
                     s.active = true;
                     ctx.arm(TIMER, ctx.now().saturating_add(inputs[0].as_time().max(0)));
                 }
@@ -428,7 +441,7 @@ impl FunctionBlock for Standard {
                 0 => {
                     s.step = 0;
                     s.steps = inputs[1].as_u64().min(4);
-                    if self.kind == Kind::Table {
+                    if Self::KIND == Kind::Table {
                         ctx.set(0, Value::UInt(0));
                     }
                     let restart = s.active && s.steps > 0;
@@ -468,7 +481,7 @@ impl FunctionBlock for Standard {
 
     fn timer(&mut self, _id: u8, inputs: &[Value], ctx: &mut Context<'_>) {
         let s = &mut self.state;
-        match self.kind {
+        match Self::KIND {
             Kind::Delay | Kind::RDelay => {
                 s.active = false;
                 ctx.send(0);
@@ -484,7 +497,7 @@ impl FunctionBlock for Standard {
                 }
             }
             Kind::Table | Kind::NTable => {
-                if self.kind == Kind::Table {
+                if Self::KIND == Kind::Table {
                     ctx.set(0, Value::UInt(s.step));
                     ctx.send(0);
                 } else {
@@ -492,7 +505,7 @@ impl FunctionBlock for Standard {
                 }
                 s.step += 1;
                 if s.step < s.steps {
-                    if self.kind == Kind::Table {
+                    if Self::KIND == Kind::Table {
                         // As the standard's network (E_TABLE_CTRL steps CV after EO went
                         // out): the event carries this entry, CV then names the next.
                         ctx.set(0, Value::UInt(s.step));
@@ -524,7 +537,7 @@ impl FunctionBlock for Standard {
     }
 
     fn restart(&mut self, kind: Restart, ctx: &mut Context<'_>) {
-        if self.kind == Kind::Restart {
+        if Self::KIND == Kind::Restart {
             ctx.send(match kind {
                 Restart::Cold => 0,
                 Restart::Warm => 1,

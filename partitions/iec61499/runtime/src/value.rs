@@ -90,7 +90,26 @@ pub enum Value {
     Array(Vec<Value>),
 }
 
+/// FALSE: a value that owns nothing (the event queue's empty slots hold it).
+impl Default for Value {
+    fn default() -> Self {
+        Value::Bool(false)
+    }
+}
+
 impl Value {
+    /// Stores `value` here: `*self = value`, but without a drop to run when the value
+    /// replaced is a scalar (the usual case, and the resource's innermost loop).
+    #[inline(always)]
+    pub fn set(&mut self, value: Value) {
+        if matches!(self, Value::String(_) | Value::Array(_)) {
+            *self = value;
+        } else {
+            // A scalar owns nothing: forgetting it leaks nothing.
+            core::mem::forget(core::mem::replace(self, value));
+        }
+    }
+
     pub fn as_bool(&self) -> bool {
         match self {
             Value::Bool(b) => *b,
