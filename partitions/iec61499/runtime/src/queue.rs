@@ -70,6 +70,19 @@ impl<T: Default> Ring<T> {
         Some(item)
     }
 
+    /// Hands the next item to `take`, which must leave in its place something that owns
+    /// nothing (see [`Ring`]); false when the ring is empty.
+    #[inline(always)]
+    fn pop_in_place(&mut self, take: impl FnOnce(&mut T)) -> bool {
+        if self.len == 0 {
+            return false;
+        }
+        take(&mut self.slots[self.head]);
+        self.head = (self.head + 1) & (self.slots.len() - 1);
+        self.len -= 1;
+        true
+    }
+
     /// Twice the slots (16 at first), the queued items first, in order.
     #[cold]
     #[inline(never)]
@@ -152,6 +165,21 @@ impl EventQueue {
     #[inline(always)]
     pub(crate) fn pop_value(&mut self) -> Option<(usize, Value)> {
         self.values.pop()
+    }
+
+    /// Delivers the next value of the event [`EventQueue::pop`] returned into `inputs`
+    /// (an index out of `inputs` is dropped): a swap, the input's old value put in the
+    /// queue's slot and dropped there only if it owns something.
+    #[inline(always)]
+    pub(crate) fn deliver_value(&mut self, inputs: &mut [Value]) {
+        self.values.pop_in_place(|(input, value)| {
+            if let Some(target) = inputs.get_mut(*input) {
+                core::mem::swap(target, value);
+            }
+            if !value.is_scalar() {
+                *value = Value::default();
+            }
+        });
     }
 
     /// Drops the events to instance `i` with their values.

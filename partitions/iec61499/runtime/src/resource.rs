@@ -662,25 +662,18 @@ impl Resource {
 
     /// Delivers queued events until the queue is empty (one chain).
     fn run_chain(&mut self, now: i64) -> Result<(), Fault> {
-        let mut delivered = 0usize;
+        let last = self.delivered + self.limits.chain_events as u64;
         while let Some(((instance, event), carried)) = self.queue.pop() {
-            delivered += 1;
-            if delivered > self.limits.chain_events {
-                let inst = &self.instances[instance];
-                return Err(Fault::ChainTooLong {
-                    fb: inst.name.clone(),
-                    event: inst.fb.interface().event_inputs[event].name.clone(),
-                });
+            if self.delivered == last {
+                return Err(chain_too_long(&self.instances[instance], event));
             }
+            self.delivered += 1;
             // (A fault abandons the chain and clears the queue: the values left behind
             // above go with it.)
             let inputs = &mut self.instances[instance].inputs;
             for _ in 0..carried {
-                if let Some((var, value)) = self.queue.pop_value() {
-                    inputs[var].set(value);
-                }
+                self.queue.deliver_value(inputs);
             }
-            self.delivered += 1;
             self.apply_forces(instance, false);
             self.react(instance, now, |fb, i, ctx| fb.event(event, i, ctx))?;
         }
@@ -835,6 +828,17 @@ fn send(
         }
     }
     Ok(())
+}
+
+/// The fault of a chain that was to deliver one event more than the limit, to `inst`'s
+/// input event `event`.
+#[cold]
+#[inline(never)]
+fn chain_too_long(inst: &Instance, event: usize) -> Fault {
+    Fault::ChainTooLong {
+        fb: inst.name.clone(),
+        event: inst.fb.interface().event_inputs[event].name.clone(),
+    }
 }
 
 /// The fault of a full queue when `inst` sent output event `event`.

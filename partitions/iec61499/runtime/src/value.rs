@@ -98,15 +98,21 @@ impl Default for Value {
 }
 
 impl Value {
+    /// Whether the value is a scalar, which owns nothing.
+    #[inline(always)]
+    pub fn is_scalar(&self) -> bool {
+        !matches!(self, Value::String(_) | Value::Array(_))
+    }
+
     /// Stores `value` here: `*self = value`, but without a drop to run when the value
     /// replaced is a scalar (the usual case, and the resource's innermost loop).
     #[inline(always)]
     pub fn set(&mut self, value: Value) {
-        if matches!(self, Value::String(_) | Value::Array(_)) {
-            *self = value;
-        } else {
+        if self.is_scalar() {
             // A scalar owns nothing: forgetting it leaks nothing.
             core::mem::forget(core::mem::replace(self, value));
+        } else {
+            *self = value;
         }
     }
 
