@@ -265,6 +265,11 @@ fn leg(name: &str, boot: impl FnOnce([u16; 2]) -> Result<Outcome>) -> Result<Vec
     for line in last_nic_counters(&outcome.lines) {
         eprintln!("xtask: {name}: {line}");
     }
+    // The processes the guest's init left behind: one still waiting shows where.
+    for line in outcome.lines.iter().filter(|l| l.contains("guest: left: ")) {
+        let at = line.find("guest: left: ").unwrap_or(0);
+        eprintln!("xtask: {name}: {}", &line[at..]);
+    }
     match measured {
         Ok(metrics) => {
             // On stderr at once: a later leg's failure must not lose them.

@@ -74,7 +74,14 @@
 //!   answers `ENXIO`),
 //!   `guest: /etc/guest/ports line <n>: <why>; no ports`, `guest: no room for the port
 //!   devices: <errno>`;
-//! - `guest: init ended with <n> other processes left` (zombies included), then
+//! - `guest: fork by <pid> (<name>) refused: no task, thread or slot left (<n> processes
+//!   and threads)` when a `fork` fails with `EAGAIN` (the first
+//!   [`system::REFUSALS_LOGGED`]; the last of them adds `; further refusals are not
+//!   logged`);
+//! - `guest: init ended with <n> other processes left` (zombies included), the first 16
+//!   of them each as `guest: left: <pid> (<name>) <running | forked, never ran | waiting in
+//!   system call <number> | waiting on exception <vector> | vforked <pid> | zombie
+//!   <wait status>>`, then
 //!   `guest: init exited with status <n>` or `guest: init killed by signal <n>` (also the
 //!   detail of the health report).
 #![cfg_attr(not(test), no_std)]

@@ -77,6 +77,8 @@ use user_rt::sys::{self, Message};
 
 user_rt::entry!(main);
 
+/// Processes left when init ends that are listed, each with what it was doing.
+const LEFT_LINES: usize = 16;
 /// How often calls that wait are served again while one waits for a port (a sampling
 /// port's message rings no doorbell).
 const PORT_POLL_NS: u64 = 1_000_000;
@@ -387,6 +389,7 @@ fn main(start: u64, _: u64) {
         if bell == Some(received.sender) && tag.label() == doorbell::LABEL_RUNG {
             // Messages came to a port: eth0's frames and the calls waiting for a port now.
             system.net.messages_came();
+            host.sched.outside();
             host.port_waiting = false; // the calls served again say it anew
             if let Some(ended) = system.tick(&mut fs, &mut host) {
                 break ended;
@@ -406,6 +409,15 @@ fn main(start: u64, _: u64) {
     host.flush();
     let left = system.pids().filter(|&pid| pid != INIT_PID).count();
     println!("guest: init ended with {left} other processes left");
+    for pid in system
+        .pids()
+        .filter(|&pid| pid != INIT_PID)
+        .take(LEFT_LINES)
+    {
+        if let Some(process) = system.describe(pid) {
+            println!("guest: left: {process}");
+        }
+    }
     system.release_all(&mut fs, &mut host);
     // As a shutdown: the mounted file system written back and marked clean.
     if let Some(path) = fs.mount_info().map(|m| m.path()) {

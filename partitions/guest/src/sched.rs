@@ -64,7 +64,9 @@
 //! the guest last looked (the guest's thread is above all of them, so it sees every
 //! message at once); with no message (a time-out, console input), the model's choice ran:
 //! the first runnable interactive process in the kernel's FIFO order (the order of the
-//! guest's answers), else the turn holder. A process is runnable from its answer to its
+//! guest's answers), else the turn holder. When another partition woke the guest (a port's
+//! doorbell: the NIC partition's frames), nobody here is charged: that partition had the
+//! CPU at least in part ([`Scheduler::outside`]). A process is runnable from its answer to its
 //! next message; one still unanswered when the guest next looks waits. Times are the
 //! guest's clock: the time a process held the CPU includes other partitions' windows and
 //! the guest's work for it, so a slice is one of wall-clock time while the process was
@@ -166,6 +168,8 @@ pub struct Scheduler {
     last: u64,
     /// The process whose message arrived since then.
     sender: Option<u32>,
+    /// Since then another partition rang (frames came): the time is nobody's here.
+    outside: bool,
     /// The process the model said holds the CPU when the guest last looked.
     head: Option<u32>,
     /// The CPU-bound process whose turn it is (as of the last full decision).
@@ -190,6 +194,7 @@ impl Scheduler {
             next_order: 0,
             last: now,
             sender: None,
+            outside: false,
             head: None,
             turn: None,
             dirty: true,
@@ -232,6 +237,18 @@ impl Scheduler {
         if let Some(e) = self.get_mut(pid) {
             e.in_call = true;
         }
+    }
+
+    /// Another partition woke the guest (the NIC's frames rang a port's doorbell): the
+    /// time since the guest last looked went, at least in part, to that partition and to
+    /// the guest's work for it, not to the process the model says holds the CPU, so the
+    /// next look charges it to nobody. (Charged to that process, the NIC's work made
+    /// short-lived processes CPU-bound, and a stream of connections then starved them:
+    /// busybox httpd's children waited to exit until the task quota refused the next
+    /// `fork`.) A process that keeps the CPU is still charged at the looks the policy's
+    /// own time-outs make.
+    pub fn outside(&mut self) {
+        self.outside = true;
     }
 
     /// The guest answered `pid`'s message: its thread joined the tail of its priority's
@@ -370,7 +387,8 @@ impl Scheduler {
     pub fn decide(&mut self, now: u64) -> Option<u64> {
         let ns = now.saturating_sub(self.last);
         self.last = now;
-        let charged = self.sender.take().or(self.head);
+        let outside = core::mem::take(&mut self.outside);
+        let charged = self.sender.take().or(self.head.filter(|_| !outside));
         if let Some(e) = charged.and_then(|pid| self.get_mut(pid)) {
             e.used = e.used.saturating_add(ns);
             if !e.cpu_bound {
@@ -559,6 +577,27 @@ mod tests {
         call(&mut s, 1);
         s.decide(3 * SLICE_NS);
         assert_eq!((s.level(1), s.level(2)), (Level::Queued, Level::Turn));
+    }
+
+    #[test]
+    fn the_time_another_partition_woke_the_guest_is_nobodys() {
+        let mut s = Scheduler::new(0);
+        s.replied(1);
+        s.replied(2);
+        s.decide(0);
+        // Frames ring the guest's doorbell every 2 ms for a whole slice and more: process
+        // 1, the one the model says holds the CPU, is not charged for them.
+        for k in 1..=8 {
+            s.outside();
+            s.decide(k * 2 * MS);
+        }
+        assert_eq!(
+            (s.level(1), s.level(2)),
+            (Level::Interactive, Level::Interactive)
+        );
+        // The policy's own time-out at its slice's end charges it as before.
+        s.decide(16 * MS + SLICE_NS);
+        assert_eq!(s.level(1), Level::Turn, "it kept the CPU: CPU-bound");
     }
 
     #[test]

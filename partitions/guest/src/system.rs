@@ -131,6 +131,26 @@ pub enum State {
     Zombie(u32),
 }
 
+/// A process and its state, displayed as [`System::describe`] says.
+pub struct Described<'a>(&'a Process, State);
+
+impl core::fmt::Display for Described<'_> {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let Described(process, state) = self;
+        write!(f, "{} ({}) ", process.pid, process.name())?;
+        match state {
+            State::Running => f.write_str("running"),
+            State::Starting(_) => f.write_str("forked, never ran"),
+            State::Blocked(call) if call.vector == abi::ipc::VECTOR_SYSCALL => {
+                write!(f, "waiting in system call {}", call.registers.rax)
+            }
+            State::Blocked(call) => write!(f, "waiting on exception {}", call.vector),
+            State::Vforked { child, .. } => write!(f, "vforked {child}"),
+            State::Zombie(status) => write!(f, "zombie {status:#x}"),
+        }
+    }
+}
+
 #[derive(Clone, Debug)]
 struct Slot {
     process: Process,
@@ -236,7 +256,12 @@ pub struct System {
     /// The slots (a process's first thread, another of its threads) whose shared state is
     /// lent to the second while its call is served ([`System::lend`]).
     lent: Option<(usize, usize)>,
+    /// `fork`s refused with `EAGAIN` so far (the first are logged).
+    refusals: u32,
 }
+
+/// How many refused `fork`s [`System`] logs.
+pub const REFUSALS_LOGGED: u32 = 8;
 
 impl System {
     /// A table holding `init`, already loaded and running.
@@ -258,6 +283,29 @@ impl System {
             ended: None,
             hwcap,
             lent: None,
+            refusals: 0,
+        }
+    }
+
+    /// Logs that a `fork` of the process in slot `i` was refused for want of a task, a
+    /// thread or a slot (`EAGAIN`), the first [`REFUSALS_LOGGED`] times.
+    fn refused(&mut self, i: usize, k: &mut impl Host) {
+        self.refusals = self.refusals.saturating_add(1);
+        if self.refusals > REFUSALS_LOGGED {
+            return;
+        }
+        let processes = self.slots.iter().flatten().count();
+        let more = match self.refusals == REFUSALS_LOGGED {
+            true => "; further refusals are not logged",
+            false => "",
+        };
+        if let Some(slot) = self.slots[i].as_ref() {
+            k.log(format_args!(
+                "guest: fork by {} ({}) refused: no task, thread or slot left \
+                 ({processes} processes and threads){more}",
+                slot.process.pid,
+                slot.process.name(),
+            ));
         }
     }
 
@@ -286,6 +334,13 @@ impl System {
 
     pub fn state(&self, pid: u32) -> Option<State> {
         Some(self.slots[self.index(pid)?].as_ref()?.state)
+    }
+
+    /// Process `pid` as a log line says it: `<pid> (<name>) <what it does>` (see
+    /// `guest: left:` in the crate's log lines).
+    pub fn describe(&self, pid: u32) -> Option<Described<'_>> {
+        let slot = self.slots[self.index(pid)?].as_ref()?;
+        Some(Described(&slot.process, slot.state))
     }
 
     /// The pids in the table (zombies included), in slot order.
@@ -847,7 +902,11 @@ impl System {
                         self.spawn_thread(i, k, flags, args, &m.registers)
                     }
                     ProcessCall::Clone { flags, args } => {
-                        self.fork(i, fs, k, flags, args, &m.registers)
+                        let forked = self.fork(i, fs, k, flags, args, &m.registers);
+                        if forked == Err(Errno::EAGAIN) {
+                            self.refused(i, k);
+                        }
+                        forked
                     }
                     ProcessCall::ExitThread => {
                         self.exit_thread(i, k);

@@ -1793,7 +1793,18 @@ fn orphans_go_to_init_killed_children_report_their_signal_and_the_table_is_bound
     let child = g.fork(1);
     let grandchild = g.fork(child);
     assert_eq!(g.system.process(grandchild).unwrap().ppid, child);
+    // As the log's `guest: left:` lines say them.
+    let described = |g: &Guest, pid| g.system.describe(pid).map(|d| d.to_string());
+    assert_eq!(described(&g, 99), None);
+    assert_eq!(
+        described(&g, child).as_deref(),
+        Some(format!("{child} (busybox) running").as_str())
+    );
     let _ = g.serve(child, World::message(nr::exit_group, [0; 6], 0));
+    assert_eq!(
+        described(&g, child).as_deref(),
+        Some(format!("{child} (busybox) zombie 0x0").as_str())
+    );
     assert_eq!(g.system.process(grandchild).unwrap().ppid, 1, "re-parented");
     let status = SCRATCH + 0x100;
     assert_eq!(
@@ -1815,6 +1826,27 @@ fn orphans_go_to_init_killed_children_report_their_signal_and_the_table_is_bound
     }
     assert_eq!(g.call(1, nr::fork, [0; 6]), Some(err(Errno::EAGAIN)));
     assert_eq!(g.pids().len(), MAX_PROCESSES);
+    let refused = |g: &Guest| {
+        g.host
+            .log
+            .iter()
+            .filter(|l| l.starts_with("guest: fork by 1 (busybox) refused: no task"))
+            .count()
+    };
+    assert_eq!(
+        refused(&g),
+        1,
+        "the refusal is logged: {:?}",
+        g.host.log.last()
+    );
+    for _ in 0..2 * crate::system::REFUSALS_LOGGED {
+        assert_eq!(g.call(1, nr::fork, [0; 6]), Some(err(Errno::EAGAIN)));
+    }
+    assert_eq!(
+        refused(&g),
+        crate::system::REFUSALS_LOGGED as usize,
+        "the first few only"
+    );
     let budget = g.host.budget;
     for pid in g.pids().into_iter().skip(1) {
         let _ = g.serve(pid, World::message(nr::exit_group, [0; 6], 0));
