@@ -11,9 +11,9 @@ use alloc::vec::Vec;
 /// `(instance, port index)`.
 pub(crate) type End = (usize, usize);
 
-/// A first-in first-out ring that doubles when full. A slot outside the queue holds
-/// `T::default()` or a copy of an item that was `Copy`, either of which owns nothing, so a
-/// push overwrites it without a drop to run.
+/// A first-in first-out ring that doubles when full. A slot outside the queue owns nothing
+/// (it holds `T::default()`, a copy of an item that was `Copy`, or what the caller of
+/// [`Ring::pop_in_place`] left there), so a push overwrites it without a drop to run.
 struct Ring<T> {
     /// A power of two long, or empty.
     slots: Vec<T>,
@@ -39,7 +39,7 @@ impl<T: Default> Ring<T> {
         let at = (self.head + self.len) & (self.slots.len() - 1);
         self.len += 1;
         let slot = &mut self.slots[at];
-        // The slot holds a default, which owns nothing: forgetting it leaks nothing.
+        // The slot owns nothing (see `Ring`): forgetting what it holds leaks nothing.
         core::mem::forget(core::mem::replace(slot, item));
         slot
     }
