@@ -65,8 +65,9 @@
 //! message at once); with no message (a time-out, console input), the model's choice ran:
 //! the first runnable interactive process in the kernel's FIFO order (the order of the
 //! guest's answers), else the turn holder. When another partition woke the guest (a port's
-//! doorbell: the NIC partition's frames), nobody here is charged: that partition had the
-//! CPU at least in part ([`Scheduler::outside`]). A process is runnable from its answer to its
+//! doorbell: the NIC partition's frames), that partition had the CPU at least in part:
+//! the model's choice is charged only if it has made no call for [`STARVATION_NS`]
+//! ([`Scheduler::outside`]). A process is runnable from its answer to its
 //! next message; one still unanswered when the guest next looks waits. Times are the
 //! guest's clock: the time a process held the CPU includes other partitions' windows and
 //! the guest's work for it, so a slice is one of wall-clock time while the process was
@@ -129,6 +130,8 @@ struct Entry {
     order: u64,
     /// When it last ran or got the turn (for aging).
     since: u64,
+    /// When its last message was answered (as of the guest's last look).
+    answered: u64,
 }
 
 impl Entry {
@@ -241,12 +244,13 @@ impl Scheduler {
 
     /// Another partition woke the guest (the NIC's frames rang a port's doorbell): the
     /// time since the guest last looked went, at least in part, to that partition and to
-    /// the guest's work for it, not to the process the model says holds the CPU, so the
-    /// next look charges it to nobody. (Charged to that process, the NIC's work made
-    /// short-lived processes CPU-bound, and a stream of connections then starved them:
-    /// busybox httpd's children waited to exit until the task quota refused the next
-    /// `fork`.) A process that keeps the CPU is still charged at the looks the policy's
-    /// own time-outs make.
+    /// the guest's work for it, so the next look charges it to the process the model says
+    /// holds the CPU only if that one has made no call for [`STARVATION_NS`] (it spins:
+    /// frames coming every moment must not spare it its turns for longer than others
+    /// starve). (Charged to any, the NIC's work
+    /// made short-lived processes CPU-bound, and a stream of connections then starved
+    /// them: busybox httpd's children waited to exit until the task quota refused the
+    /// next `fork`.)
     pub fn outside(&mut self) {
         self.outside = true;
     }
@@ -255,11 +259,12 @@ impl Scheduler {
     /// queue. One the guest had seen waiting was woken (see [`Scheduler::decide`]). A
     /// process not seen before (a new child's first message) is added, interactive.
     pub fn replied(&mut self, pid: u32) {
-        let (order, contended) = (self.tail(), self.contended);
+        let (order, contended, now) = (self.tail(), self.contended, self.last);
         let Some(e) = self.get_mut(pid) else {
             return self.insert(pid, order);
         };
         e.in_call = false;
+        e.answered = now;
         e.woken |= e.waiting_since.is_some() && !e.stopped;
         let changed = e.woken || (!e.cpu_bound && contended);
         if !e.cpu_bound {
@@ -323,6 +328,7 @@ impl Scheduler {
             used: 0,
             order,
             since: now,
+            answered: now,
         });
         self.dirty = true;
     }
@@ -388,7 +394,11 @@ impl Scheduler {
         let ns = now.saturating_sub(self.last);
         self.last = now;
         let outside = core::mem::take(&mut self.outside);
-        let charged = self.sender.take().or(self.head.filter(|_| !outside));
+        let spins = |e: &Entry| now.saturating_sub(e.answered) >= STARVATION_NS;
+        let head = self
+            .head
+            .filter(|&pid| !outside || self.get(pid).is_some_and(spins));
+        let charged = self.sender.take().or(head);
         if let Some(e) = charged.and_then(|pid| self.get_mut(pid)) {
             e.used = e.used.saturating_add(ns);
             if !e.cpu_bound {
@@ -580,23 +590,31 @@ mod tests {
     }
 
     #[test]
-    fn the_time_another_partition_woke_the_guest_is_nobodys() {
+    fn the_time_another_partition_takes_is_charged_only_to_a_spinning_process() {
         let mut s = Scheduler::new(0);
         s.replied(1);
         s.replied(2);
         s.decide(0);
-        // Frames ring the guest's doorbell every 2 ms for a whole slice and more: process
-        // 1, the one the model says holds the CPU, is not charged for them.
+        // Frames ring the guest's doorbell every 2 ms for a whole slice and more, and
+        // process 1, the one the model says holds the CPU, makes a call after each: it
+        // is charged its calls' 100 us, not the frames' time.
         for k in 1..=8 {
             s.outside();
             s.decide(k * 2 * MS);
+            call(&mut s, 1);
+            s.decide(k * 2 * MS + 100 * US);
         }
         assert_eq!(
             (s.level(1), s.level(2)),
             (Level::Interactive, Level::Interactive)
         );
-        // The policy's own time-out at its slice's end charges it as before.
-        s.decide(16 * MS + SLICE_NS);
+        // Then it makes no call (and 2 waits in one): STARVATION_NS after its last, the
+        // frames no longer spare it.
+        s.received(2);
+        for k in 9..=70 {
+            s.outside();
+            s.decide(k * 2 * MS);
+        }
         assert_eq!(s.level(1), Level::Turn, "it kept the CPU: CPU-bound");
     }
 
