@@ -16,27 +16,27 @@
 //! diagnostics reaches [`emit`], which starts from those records and reports nothing itself: a
 //! diagnostic raised while emitting is a compiler bug (an internal error).
 //!
-//! The separation is not complete: the body walk itself is still the code generator's
-//! ([`crate::codegen::Gen`]), run once with emission and allocation switched off to check and
-//! once more to emit. The second walk takes every type it asks for from the table (it never
-//! infers: a missing record is an internal error), every callee from [`Callees`] (a user
-//! FUNCTION, a standard function, `REF`/`ADR`, an FB instance, a method or action: it never
-//! looks a called name up again), the variable of every name from [`Variables`] (the POU's
-//! own, its owner's, a global), the member of every `base.m` from [`Members`] (a structure's
-//! field, a block's variable), the meaning of every bare name from [`BareNames`] and the
-//! binding of every call's arguments to a user POU's or method's parameters from [`Bindings`],
-//! the order of standard-function arguments from [`StdArguments`] and the type of SEL, MAX,
-//! MIN, LIMIT and MUX from [`GenericTypes`], the property of every access from [`Properties`],
-//! but still decides what the rest means while it emits (the operation of the other standard
-//! functions from their arguments' recorded types, conversions) and passes the same check
-//! branches again (none can fail on a checked program). The exceptions so far: the recursion
-//! rule lives in `sema::body`; the CASE rules (selector type, label values, empty and
-//! overlapping ranges) run in the checking pass only, emission reading the label values from
-//! the table; the BOOL condition of IF, WHILE and REPEAT, EXIT outside a loop, a zero FOR
-//! step, the assignment rules (read-only target, assignable types, FB instances, the `REF=`
-//! target) and the argument rules (an unknown, misplaced, surplus or repeated argument of a
-//! user POU, a method or a standard function) are checked by the checking pass only (for
-//! emission an EXIT outside a loop is an internal error).
+//! The separation is not complete. Statements have a checker of their own
+//! ([`sema::stmt`](crate::sema::stmt): conditions, EXIT, CASE selectors and labels, FOR
+//! control variables and steps, the assignment and `REF=` rules, `__CATCH` variables), and the
+//! emitter's statement walk checks nothing. Expressions are still checked by the code
+//! generator's expression walk ([`crate::codegen::Gen`]), run once with emission and
+//! allocation switched off to check and once more to emit. The second walk takes every type
+//! it asks for from the table (it never infers: a missing record is an internal error), every
+//! callee from [`Callees`] (a user FUNCTION, a standard function, `REF`/`ADR`, an FB
+//! instance, a method or action: it never looks a called name up again), the variable of
+//! every name from [`Variables`] (the POU's own, its owner's, a global), the member of every
+//! `base.m` from [`Members`] (a structure's field, a block's variable), the meaning of every
+//! bare name from [`BareNames`] and the binding of every call's arguments to a user POU's or
+//! method's parameters from [`Bindings`], the order of standard-function arguments from
+//! [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT and MUX from [`GenericTypes`], the
+//! property of every access from [`Properties`], but still decides what the rest means while
+//! it emits (the operation of the other standard functions from their arguments' recorded
+//! types, conversions) and passes the expression walk's check branches again (none can fail
+//! on a checked program). Besides the statement checker, the rules checked by the checking
+//! pass only are the recursion rule (`sema::body`), the argument rules (an unknown,
+//! misplaced, surplus or repeated argument of a user POU, a method or a standard function)
+//! and a function block input's assignment rules (the statement checker's).
 
 use std::collections::HashMap;
 

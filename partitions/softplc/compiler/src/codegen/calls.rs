@@ -430,6 +430,10 @@ impl Gen<'_> {
                     writable: true,
                     window: None,
                 };
+                if !self.check_only {
+                    self.store_expr(&p, a.value);
+                    continue;
+                }
                 if p.ty.is_pointer_like() {
                     self.check_escape(None, a.value, "an input of a function block instance");
                 }
@@ -437,7 +441,7 @@ impl Gen<'_> {
                     let r = crate::codegen::refs::reference_to(a.value);
                     self.check_escape(None, &r, "an input of a function block instance");
                 }
-                self.store_expr(&p, a.value, a.value.span);
+                crate::sema::stmt::check_store(self, &p, a.value, a.value.span);
             }
         }
         let missing_inout = self.prog.pous[pi]

@@ -1,7 +1,8 @@
 //! Code generation: the body walk that emits plc-vm bytecode through [`ImageBuilder`]. The
-//! checking pass ([`crate::typed::check`]) runs the same walk with emission off
-//! (`check_only`), which is where the bodies' rules (types, names, l-values) are checked;
-//! emission reads the checker's records ([`crate::typed::Checked`]).
+//! checking pass ([`crate::typed::check`]) runs its expression walk with emission off
+//! (`check_only`), which is where the expressions' rules (types, names, l-values) are
+//! checked; a body's statements are checked by the statement checker
+//! ([`crate::sema::stmt`]); emission reads the checker's records ([`crate::typed::Checked`]).
 //!
 //! Every POU gets one POU-table entry with `arg_cells = ret_cells = 0`: parameters are passed
 //! through the callee's frame (FB instance or the function's static frame). Expression values
@@ -487,7 +488,11 @@ impl<'a> Gen<'a> {
         let body = source.body;
         self.scan_byte_views(body);
         self.scan_temporary_references(body);
-        self.stmts(body);
+        if self.check_only {
+            crate::sema::stmt::check_body(self, body);
+        } else {
+            self.stmts(body);
+        }
         self.bind(ret);
         self.sync_byte_views_on_return();
         self.emit(|b| b.ret());

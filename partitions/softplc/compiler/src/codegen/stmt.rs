@@ -1,4 +1,5 @@
-//! Statements: assignments, IF, CASE, loops, EXIT/RETURN and exception blocks.
+//! Statements: assignments, IF, CASE, loops, EXIT/RETURN and exception blocks. Their rules
+//! are the statement checker's ([`crate::sema::stmt`]): this walk emits a checked body.
 
 use super::*;
 
@@ -88,23 +89,16 @@ impl Gen<'_> {
                 self.emit(|b| b.jz(top));
                 self.bind(exit);
             }
-            StmtKind::Exit => match self.loops.last() {
-                Some(l) => {
+            StmtKind::Exit => {
+                // The checker let no EXIT outside a loop through.
+                if let Some(l) = self.loops.last() {
                     let exit = l.exit;
                     for _ in l.try_depth..self.try_depth {
                         self.emit(|b| b.try_end());
                     }
                     self.emit(|b| b.jmp(exit));
                 }
-                None if self.check_only => {
-                    self.error(codes::EXIT_OUTSIDE_LOOP, s.span, "EXIT outside of a loop")
-                }
-                None => self.diags.error(
-                    codes::INTERNAL_ERROR,
-                    s.span,
-                    "internal error: EXIT outside of a loop passed the checker",
-                ),
-            },
+            }
             StmtKind::Return => {
                 for _ in 0..self.try_depth {
                     self.emit(|b| b.try_end());
@@ -145,30 +139,14 @@ impl Gen<'_> {
         });
         // The trap code is on the stack here.
         if has_catch {
-            match catch_var {
-                Some(v) => {
-                    let e = Expr {
-                        kind: ExprKind::Name(v.clone()),
-                        span: v.span,
-                    };
-                    match self.place(&e) {
-                        Some(p)
-                            if matches!(p.ty, Type::Exception)
-                                || p.ty.elem().is_some_and(|e| e.is_integral()) =>
-                        {
-                            self.store_top(&p)
-                        }
-                        Some(p) => {
-                            let msg = format!(
-                                "exception variable must be declared `: __EXCEPTION`, not {}",
-                                self.tname(&p.ty)
-                            );
-                            self.error(codes::EXCEPTION_VARIABLE, v.span, msg);
-                            self.op(Opcode::Drop);
-                        }
-                        None => self.op(Opcode::Drop),
-                    }
-                }
+            let catch_place = catch_var.and_then(|v| {
+                self.place(&Expr {
+                    kind: ExprKind::Name(v.clone()),
+                    span: v.span,
+                })
+            });
+            match catch_place {
+                Some(p) => self.store_top(&p),
                 None => self.op(Opcode::Drop),
             }
             self.stmts(catch_body);
@@ -205,20 +183,13 @@ impl Gen<'_> {
         }
     }
 
-    /// A condition's value; the checking pass requires it to be BOOL.
+    /// A condition's value (BOOL).
     pub(super) fn condition(&mut self, e: &Expr) {
-        let t = self.expr(e, Some(&Type::BOOL));
-        if self.check_only && !t.is_error() && t != Type::BOOL {
-            let msg = format!("condition must be BOOL, found {}", self.tname(&t));
-            self.error(codes::TYPE_MISMATCH, e.span, msg);
-        }
+        self.expr(e, Some(&Type::BOOL));
     }
 
     pub(super) fn case(&mut self, selector: &Expr, arms: &[CaseArm], else_body: Option<&[Stmt]>) {
         let st = self.expr(selector, None);
-        if self.check_only {
-            self.check_case(selector, &st, arms);
-        }
         let signed = st
             .elem()
             .is_none_or(|e| e.signed_storage() || !e.is_integral() || e.size() < 8);
@@ -276,54 +247,10 @@ impl Gen<'_> {
         self.bind(end);
     }
 
-    /// The checking pass's rules for a CASE: the selector's type, each label's value (recorded
-    /// for emission), no empty range, no overlap.
-    fn check_case(&mut self, selector: &Expr, st: &Type, arms: &[CaseArm]) {
-        let ok = matches!(st, Type::Enum(_) | Type::Exception | Type::Error)
-            || st.elem().is_some_and(|e| e.is_integral());
-        if !ok {
-            let msg = format!(
-                "CASE selector must be an integer or enumeration, found {}",
-                self.tname(st)
-            );
-            self.error(codes::CASE_SELECTOR, selector.span, msg);
-        }
-        let mut seen: Vec<(i128, i128)> = Vec::new();
-        for lab in arms.iter().flat_map(|arm| &arm.labels) {
-            let (lo_e, hi_e) = match lab {
-                CaseLabel::Value(v) => (v, v),
-                CaseLabel::Range(a, b) => (a, b),
-            };
-            let lo = self.case_label_value(lo_e, st);
-            let hi = self.case_label_value(hi_e, st);
-            let (Some(lo), Some(hi)) = (lo, hi) else {
-                continue;
-            };
-            self.case_labels.record(lo_e, lo);
-            self.case_labels.record(hi_e, hi);
-            if lo > hi {
-                self.error(
-                    codes::CASE_LABEL,
-                    lo_e.span.to(hi_e.span),
-                    "empty CASE range (lower bound exceeds upper bound)",
-                );
-            }
-            if seen.iter().any(|(a, b)| lo <= *b && *a <= hi) {
-                self.error(
-                    codes::CASE_LABEL,
-                    lo_e.span,
-                    "CASE label overlaps an earlier label",
-                );
-            }
-            seen.push((lo, hi));
-        }
-    }
-
-    /// A CASE label's value as the checking pass recorded it (none for a label it rejected,
-    /// which only the checking pass can meet).
+    /// A CASE label's value as the checker recorded it.
     fn checked_label(&mut self, e: &Expr) -> Option<i128> {
         let v = self.case_labels.of(e).copied();
-        if v.is_none() && !self.check_only {
+        if v.is_none() {
             self.diags.error(
                 codes::INTERNAL_ERROR,
                 e.span,
@@ -331,65 +258,6 @@ impl Gen<'_> {
             );
         }
         v
-    }
-
-    pub(super) fn case_label_value(&mut self, e: &Expr, sel: &Type) -> Option<i128> {
-        // Enumeration labels may be bare value names of the selector's enumeration.
-        if let (Type::Enum(ei), ExprKind::Name(n)) = (sel, &e.kind)
-            && let Some((_, v)) = self.prog.enums[*ei]
-                .values
-                .iter()
-                .find(|(vn, _)| *vn == n.name)
-        {
-            return Some(*v as i128);
-        }
-        if let (Type::Exception, ExprKind::Name(n)) = (sel, &e.kind)
-            && let Some(t) = Trap::ALL.iter().find(|t| t.name() == n.name)
-        {
-            return Some(t.code() as i128);
-        }
-        match self.const_value(e) {
-            Some(ConstVal::Int(v)) => Some(v),
-            _ => {
-                self.error(
-                    codes::CASE_LABEL,
-                    e.span,
-                    "CASE label must be a constant integer or enumeration value",
-                );
-                None
-            }
-        }
-    }
-
-    /// The control variable of a FOR loop and its integer type; reported unless it is a plain
-    /// integer variable.
-    fn for_control_variable(&mut self, var: &Ident) -> Option<(Place, Elem)> {
-        let ve = Expr {
-            kind: ExprKind::Name(var.clone()),
-            span: var.span,
-        };
-        let vp = self.place(&ve)?;
-        let Some(elem) = vp
-            .ty
-            .elem()
-            .filter(|e| e.is_integral() && !matches!(vp.ty, Type::Enum(_)))
-        else {
-            let msg = format!(
-                "FOR control variable must be an integer, found {}",
-                self.tname(&vp.ty)
-            );
-            self.error(codes::FOR_VARIABLE, var.span, msg);
-            return None;
-        };
-        if !matches!(vp.loc, Loc::Abs(_) | Loc::Rel(_)) || vp.window.is_some() {
-            self.error(
-                codes::FOR_VARIABLE,
-                var.span,
-                "FOR control variable must be a plain variable",
-            );
-            return None;
-        }
-        Some((vp, elem))
     }
 
     pub(super) fn for_loop(
@@ -400,9 +268,13 @@ impl Gen<'_> {
         by: Option<&Expr>,
         body: &[Stmt],
     ) {
-        let Some((vp, elem)) = self.for_control_variable(var) else {
-            return;
+        let ve = Expr {
+            kind: ExprKind::Name(var.clone()),
+            span: var.span,
         };
+        // The checker passed only a plain integer variable.
+        let Some(vp) = self.place(&ve) else { return };
+        let Some(elem) = vp.ty.elem() else { return };
         let vty = vp.ty.clone();
         // i := from
         self.value_to(from, &vty);
@@ -414,13 +286,6 @@ impl Gen<'_> {
                 _ => None,
             },
         };
-        if self.check_only && step_const == Some(0) {
-            self.error(
-                codes::FOR_STEP_ZERO,
-                by.map_or(var.span, |e| e.span),
-                "FOR step must not be zero",
-            );
-        }
         // The end value is evaluated once into a hidden temporary; the loop tests compare
         // with the constant instead when `to` is one that fits the control variable's type.
         let end_const = match self.const_value(to) {
@@ -530,22 +395,9 @@ impl Gen<'_> {
         if self.property_write(target, value) {
             return;
         }
-        let Some(p) = self.place(target) else {
-            // Still check the value for errors.
-            self.infer(value);
-            return;
-        };
-        if self.check_only && !p.writable {
-            self.error(
-                codes::ASSIGN_TO_READ_ONLY,
-                target.span,
-                "cannot assign to a constant or an input of another POU",
-            );
+        if let Some(p) = self.place(target) {
+            self.store_expr(&p, value);
         }
-        if p.ty.is_pointer_like() {
-            self.check_escape(Some(target), value, "this variable");
-        }
-        self.store_expr(&p, value, target.span);
     }
 
     /// `r REF= x`: binds the `REFERENCE TO` variable `r` to `x` (or to NULL).
@@ -553,20 +405,8 @@ impl Gen<'_> {
         let saved = std::mem::replace(&mut self.refs.keep_reference, true);
         let p = self.place(target);
         self.refs.keep_reference = saved;
-        let Some(p) = p else {
-            self.infer(value);
-            return;
-        };
+        let Some(p) = p else { return };
         let Type::Reference(t) = p.ty.clone() else {
-            if self.check_only && !p.ty.is_error() {
-                let msg = format!(
-                    "`REF=` binds a REFERENCE TO variable, not {}",
-                    self.tname(&p.ty)
-                );
-                self.error(codes::REF_ASSIGN_TARGET, target.span, msg);
-            }
-            self.drop_place_value(&p);
-            self.infer(value);
             return;
         };
         let cell = Place {
@@ -576,28 +416,7 @@ impl Gen<'_> {
         match &value.kind {
             ExprKind::Null | ExprKind::Int(0) => self.push_int(0),
             _ => {
-                let args = [Arg {
-                    name: None,
-                    output: false,
-                    value: value.clone(),
-                    span: value.span,
-                }];
-                let id = Ident {
-                    name: "REF".into(),
-                    text: "REF".into(),
-                    span: value.span,
-                };
-                let as_ref = Expr {
-                    kind: ExprKind::Call {
-                        callee: Box::new(Expr {
-                            kind: ExprKind::Name(id.clone()),
-                            span: value.span,
-                        }),
-                        args: args.to_vec(),
-                    },
-                    span: value.span,
-                };
-                self.check_escape(Some(target), &as_ref, "this variable");
+                let (id, args, _) = crate::sema::stmt::ref_call(value);
                 let rt = self.ref_function(&id, &args, Some(&Type::Ref(t.clone())), value.span);
                 self.coerce(&rt, &Type::Ref(t), value.span);
             }
@@ -605,33 +424,14 @@ impl Gen<'_> {
         self.store_checked(&cell);
     }
 
-    pub(super) fn drop_place_value(&mut self, p: &Place) {
-        if matches!(p.loc, Loc::Ind(_) | Loc::Ref(_)) {
-            self.op(Opcode::Drop);
-        }
-    }
-
-    /// Evaluates `value` and stores it into `p` (whose address, for `Ind`, is already on the stack).
-    pub(crate) fn store_expr(&mut self, p: &Place, value: &Expr, span: Span) {
+    /// Evaluates `value` and stores it into `p` (whose address, for `Ind`, is already on the
+    /// stack); the checker's [`check_store`](crate::sema::stmt::check_store) passed it.
+    pub(crate) fn store_expr(&mut self, p: &Place, value: &Expr) {
         match &p.ty {
             Type::String(_) | Type::WString(_) => {
                 self.addr_of(p);
-                let t = self.expr(value, Some(&p.ty));
+                self.expr(value, Some(&p.ty));
                 let wide = p.ty.is_wstring();
-                let text = t.is_string() || t.is_wstring();
-                if self.check_only && (t.is_wstring() != wide || !text) && !t.is_error() {
-                    let hint = match (wide, text) {
-                        (true, true) => " (use STRING_TO_WSTRING)",
-                        (false, true) => " (use WSTRING_TO_STRING)",
-                        _ => "",
-                    };
-                    let msg = format!(
-                        "cannot assign {} to {}{hint}",
-                        self.tname(&t),
-                        self.tname(&p.ty)
-                    );
-                    self.error(codes::ASSIGN_TYPE, value.span, msg);
-                }
                 self.emit(|b| {
                     b.call_builtin(if wide {
                         Builtin::WStrAssign
@@ -642,18 +442,7 @@ impl Gen<'_> {
             }
             Type::Array(_) | Type::Struct(_) | Type::Fb(_) => {
                 self.addr_of(p);
-                let t = self.expr(value, Some(&p.ty));
-                if self.check_only && t != p.ty && !t.is_error() {
-                    let msg = format!("cannot assign {} to {}", self.tname(&t), self.tname(&p.ty));
-                    self.error(codes::ASSIGN_TYPE, value.span, msg);
-                }
-                if self.check_only && matches!(p.ty, Type::Fb(_)) {
-                    self.error(
-                        codes::ASSIGN_FB_INSTANCE,
-                        span,
-                        "function block instances cannot be assigned",
-                    );
-                }
+                self.expr(value, Some(&p.ty));
                 let (size, _) = self.prog.size_align(&p.ty);
                 self.emit(|b| b.copy(size));
             }

@@ -1,8 +1,9 @@
 //! Semantic analysis of declarations: resolves TYPE declarations, lays out the variables of
 //! every POU (frames) and of the globals, evaluates constant expressions (array bounds,
 //! subrange limits, string lengths, CASE labels, task properties) and checks the
-//! CONFIGURATION. Statement bodies are checked by the checking walk of [`crate::typed`];
-//! [`body`] judges what that walk records (the call graph: the recursion rule).
+//! CONFIGURATION. The statements of the bodies are checked by [`stmt`], their expressions by
+//! the checking walk of [`crate::typed`]; [`body`] judges what that walk records (the call
+//! graph: the recursion rule).
 //!
 //! Memory model: every variable has a static home. Globals and program instances live at
 //! fixed addresses; an FB instance is a region inside its owner; a FUNCTION has one static
@@ -11,6 +12,7 @@
 
 pub mod body;
 mod config;
+pub(crate) mod stmt;
 
 use crate::codes;
 use std::collections::HashMap;
