@@ -1138,6 +1138,17 @@ impl<'a> SystemView<'a> {
         (0..sys.partition_count()).map(move |i| sys.partition(i))
     }
 
+    /// Whether partitions `a` and `b` (distinct) map a shared-memory segment both: syssw
+    /// lets such partitions wake each other's threads (a notification, no message).
+    pub fn share_memory(&self, a: usize, b: usize) -> bool {
+        let theirs = self.partition(b);
+        a != b
+            && self
+                .partition(a)
+                .shared()
+                .any(|x| theirs.shared().any(|y| y.segment == x.segment))
+    }
+
     pub fn find_partition(&self, name: &str) -> Option<PartitionView<'a>> {
         self.partitions().find(|p| p.name == name)
     }

@@ -62,7 +62,7 @@
 //! devices = ["00:03.0"]          # PCI functions it owns (bus:device.function); needs "irq"
 //! dma = "512KiB"                  # optional: the memory its devices may DMA to, see "PCI devices"
 //! dma_unconfined = false          # optional: may DMA without an IOMMU (a warning)
-//! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"
+//! shared = { frame = "rw" }       # segment = "r" | "rw" | "rx"; partitions sharing one may notify each other's threads
 //! ports.level = { kind = "sampling", direction = "in", size = 8, refresh = "20ms" }
 //! ports.cmd = { kind = "queuing", direction = "out", size = 64, depth = 8, discipline = "priority" }
 //! health.deadline_missed = "warm_restart"

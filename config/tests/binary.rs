@@ -183,6 +183,10 @@ fn round_trip() {
     );
     assert!(ctl.is_image_entry("partition/ctl"));
     let shared: Vec<_> = ctl.shared().collect();
+    let (io, guest) = (1, view.find_partition("guest").unwrap().index);
+    assert!(view.share_memory(ctl.index, io) && view.share_memory(io, ctl.index));
+    assert!(!view.share_memory(ctl.index, guest) && !view.share_memory(io, guest));
+    assert!(!view.share_memory(ctl.index, ctl.index), "not with itself");
     assert_eq!(shared[0].rights, Rights::ReadWrite);
     assert_eq!(view.segment(shared[1].segment).name, "code");
     assert_eq!(

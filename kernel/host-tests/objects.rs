@@ -573,6 +573,41 @@ fn communication_rights_restrict_senders() {
 }
 
 #[test]
+fn a_notify_only_right_lets_notifications_through_and_no_message() {
+    let mut f = Fixture::new();
+    let root = f.thread(ROOT, 200);
+    let x = f.task(ROOT, Abilities::all(), 100);
+    let y = f.task(ROOT, Abilities::all(), 100);
+    let tx = f.thread(x, 50);
+    let ty = f.thread(y, 50);
+    let (xid, yid_task, yid) = (f.k.task_id(x).0, f.k.task_id(y).0, f.id(ty));
+    assert_eq!(
+        f.sys(root, Call::TaskAllowSend, [xid, yid_task, 2, 0, 0, 0]),
+        err(Error::InvalidArgument)
+    );
+    assert_eq!(
+        f.sys(root, Call::TaskAllowSend, [xid, yid_task, 1, 0, 0, 0]),
+        OK
+    );
+    assert_eq!(f.sys(tx, Call::NotifySignal, [yid, 0b10, 0, 0, 0, 0]), OK);
+    assert_eq!(f.sys(ty, Call::NotifyWait, [0b10, 0, 0, 0, 0, 0]), OK);
+    assert_eq!(f.k.threads[ty].context().rdi, 0b10);
+    for call in [Call::Send, Call::Call] {
+        assert_eq!(
+            f.sys(tx, call, [yid, 0, 0, 0, 0, 0]),
+            err(Error::NotPermitted),
+            "{call:?}: a notification is all it may send"
+        );
+    }
+    let xid_thread = f.id(tx);
+    assert_eq!(
+        f.sys(ty, Call::NotifySignal, [xid_thread, 1, 0, 0, 0, 0]),
+        err(Error::NotPermitted),
+        "one way only"
+    );
+}
+
+#[test]
 fn map_and_grant_items() {
     let mut f = Fixture::new();
     let sender = f.thread(ROOT, 10);

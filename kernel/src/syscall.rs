@@ -270,9 +270,12 @@ fn task_allow_send(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handl
     let task = task_of(k, t);
     k.require(task, Abilities::CREATE_TASK)?;
     let a = args::TaskAllowSend::decode(r);
+    if a.notify_only > 1 {
+        return Err(Error::InvalidArgument);
+    }
     let from = k.controlled_task(task, a.from)?;
     let to = k.controlled_task(task, a.to)?;
-    k.allow_send(from, to);
+    k.allow_send(from, to, a.notify_only == 1);
     Ok(Next::Return)
 }
 
@@ -570,7 +573,7 @@ fn reply(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
 fn notify_signal(k: &mut Kernel, t: ThreadIdx, r: &ArgRegs, _: Clock) -> Handled {
     let a = args::NotifySignal::decode(r);
     let target = k.thread(a.thread)?;
-    if !k.may_send(task_of(k, t), k.threads[target].task()) {
+    if !k.may_notify(task_of(k, t), k.threads[target].task()) {
         return Err(Error::NotPermitted);
     }
     k.signal(target, a.bits);

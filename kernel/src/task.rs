@@ -34,6 +34,8 @@ pub struct Task {
     space: AddressSpace,
     /// Bit i set: threads of this task may send to threads of task slot i.
     send_to: u64,
+    /// Bit i set: threads of this task may notify threads of task slot i (as sending may).
+    notify_to: u64,
     /// Page-table and I/O-bitmap frames charged to the resource partition (returned when
     /// it dies).
     pages_charged: u64,
@@ -59,6 +61,7 @@ impl Task {
         rp: RpIdx::ROOT,
         space: AddressSpace::NONE,
         send_to: 0,
+        notify_to: 0,
         pages_charged: 0,
         io_bitmap: [0; 2],
         irq_lines: 0,
@@ -367,9 +370,18 @@ impl Kernel {
         self.rps[self.tasks[task].rp].release(Amount::pages(pages));
     }
 
-    /// Lets threads of `from` send to threads of `to`.
-    pub fn allow_send(&mut self, from: TaskIdx, to: TaskIdx) {
-        self.tasks[from].send_to |= bit(to);
+    /// Lets threads of `from` send to threads of `to`, or only notify them.
+    pub fn allow_send(&mut self, from: TaskIdx, to: TaskIdx, notify_only: bool) {
+        let task = &mut self.tasks[from];
+        *if notify_only {
+            &mut task.notify_to
+        } else {
+            &mut task.send_to
+        } |= bit(to);
+    }
+
+    pub fn may_notify(&self, from_task: TaskIdx, to_task: TaskIdx) -> bool {
+        (self.tasks[from_task].send_to | self.tasks[from_task].notify_to) & bit(to_task) != 0
     }
 
     pub fn may_send(&self, from_task: TaskIdx, to_task: TaskIdx) -> bool {
@@ -514,6 +526,7 @@ impl Kernel {
         }
         for (_, other) in self.tasks.iter_mut() {
             other.send_to &= !set;
+            other.notify_to &= !set;
         }
         true
     }

@@ -117,6 +117,9 @@ pub struct Loader {
     server: ThreadId,
     /// Interrupt lines partitions hold: their `irqs` and their devices' lines so far.
     lines: u32,
+    /// The task of each partition's newest instance (a killed one's id stays until the
+    /// next: the kernel refuses a stale id).
+    tasks: [Option<TaskId>; MAX_PARTITIONS],
 }
 
 impl Loader {
@@ -140,6 +143,7 @@ impl Loader {
             shared,
             server,
             lines: system.partitions().fold(0, |m, p| m | p.irqs.0),
+            tasks: [None; MAX_PARTITIONS],
         })
     }
 
@@ -189,10 +193,30 @@ impl Loader {
             start,
             condition,
         );
-        if instance.is_err() {
-            let _ = sys::task_kill(task);
+        match &instance {
+            Ok(_) => self.let_sharers_notify(index, task),
+            Err(_) => {
+                let _ = sys::task_kill(task);
+            }
         }
         instance
+    }
+
+    /// Lets the new task of partition `index` and the tasks of the partitions it shares a
+    /// memory segment with notify each other's threads: the wake-up beside what they
+    /// exchange in the segment (a frame ring's consumer is woken by its producer), and no
+    /// more (no message: `task_allow_notify`).
+    fn let_sharers_notify(&mut self, index: usize, task: TaskId) {
+        self.tasks[index] = Some(task);
+        for (other, peer) in self.tasks.iter().enumerate() {
+            let Some(peer) = *peer else { continue };
+            if !self.system.share_memory(index, other) {
+                continue;
+            }
+            // A peer's stale id (its partition is stopped) is refused: nothing to grant.
+            let _ = sys::task_allow_notify(Some(task), Some(peer));
+            let _ = sys::task_allow_notify(Some(peer), Some(task));
+        }
     }
 }
 

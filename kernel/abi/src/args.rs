@@ -162,7 +162,7 @@ call_args! {
     /// `task_kill`, `task_stop`.
     TaskKill { task: TaskId = rdi }
     /// `task_allow_send`.
-    TaskAllowSend { from: TaskId = rdi, to: TaskId = rsi }
+    TaskAllowSend { from: TaskId = rdi, to: TaskId = rsi, notify_only: u64 = rdx }
     /// `thread_create`.
     ThreadCreate { task: TaskId = rdi, entry: u64 = rsi, stack: u64 = rdx, priority: u64 = r10, arg: u64 = r8 }
     /// `thread_start`, `thread_suspend`, `thread_resume`, `thread_kill`, `thread_interrupt`.

@@ -107,11 +107,12 @@ codes::code_enum! {
         /// place (syssw's server) and leaves the rest to a thread that may take its time.
         /// Ability: `CREATE_TASK`. Errors: as `task_kill`.
         TaskStop = 13 => "task_stop",
-        /// `task_allow_send(from, to)`: lets threads of task `from` send IPC and notifications
-        /// to threads of task `to` (0 = the caller's task, for either). Both must be the
-        /// caller's task or its descendants. By default a task may send to itself, its parent
-        /// and its children only. Ability: `CREATE_TASK`. Errors: `NoSuchObject`,
-        /// `NotPermitted`.
+        /// `task_allow_send(from, to, notify_only)`: lets threads of task `from` send IPC and
+        /// notifications to threads of task `to` (0 = the caller's task, for either), or only
+        /// notifications (`notify_only` = 1: a wake-up between partitions that must not
+        /// exchange messages). Both must be the caller's task or its descendants. By default a
+        /// task may send to itself, its parent and its children only. Ability: `CREATE_TASK`.
+        /// Errors: `NoSuchObject`, `NotPermitted`, `InvalidArgument` (`notify_only` above 1).
         TaskAllowSend = 12 => "task_allow_send",
 
         /// `thread_create(task, entry, stack, priority, arg) -> rdi = thread`: a new thread of

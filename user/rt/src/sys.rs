@@ -112,9 +112,19 @@ pub fn task_stop(task: TaskId) -> Result<(), Error> {
 
 /// Lets `from` send to `to` (`None` = the caller's task).
 pub fn task_allow_send(from: Option<TaskId>, to: Option<TaskId>) -> Result<(), Error> {
+    allow(from, to, 0)
+}
+
+/// Lets `from` notify `to`, and nothing else (`None` = the caller's task).
+pub fn task_allow_notify(from: Option<TaskId>, to: Option<TaskId>) -> Result<(), Error> {
+    allow(from, to, 1)
+}
+
+fn allow(from: Option<TaskId>, to: Option<TaskId>, notify_only: u64) -> Result<(), Error> {
     let a = args::TaskAllowSend {
         from: TaskId::or_own(from),
         to: TaskId::or_own(to),
+        notify_only,
     };
     call(Call::TaskAllowSend, a.encode()).map(drop)
 }
