@@ -15,6 +15,8 @@
 //! |---|---|---|
 //! | 0 | `produced` `u32`: frames published since the segment was zeroed (wrapping) | the producer |
 //! | 64 | `consumed` `u32`: frames taken (wrapping) | the consumer |
+//! | 72 | `waiter` `u64`: the kernel thread id the producer notifies (0: none, kick instead) | the consumer |
+//! | 80 | `wake_bits` `u64`: the notification bits it sends that thread | the consumer |
 //! | 128 | slot `i` at `128 + i * SLOT`: a length `u16` (1..=[`MTU`]), 2 bytes unused, the frame | the producer |
 //!
 //! There are as many slots as fit, rounded down to a power of two (at most
@@ -28,17 +30,20 @@
 //!
 //! # Waking the consumer
 //!
-//! A ring carries no notification: a side that waits needs a word from the other. The
-//! producer gives one (a "kick", a message on the queuing port beside the ring, which
-//! rings the waiting side's doorbell) when [`Pushed::first`] says the consumer had taken
-//! every earlier frame, so it may be waiting. The consumer, once woken, first drains its
-//! kicks, then takes frames until the ring is empty: a frame published after that was
-//! pushed into an empty ring and kicks again. Both sides order their index write before
-//! their read of the other's index ([`fence`]), so a frame is never left in a ring whose
-//! consumer waits without a kick.
+//! A side that waits needs a word from the other. The producer gives one when
+//! [`Pushed::first`] says the consumer had taken every earlier frame, so it may be waiting:
+//! a notification of the thread the consumer named in `waiter` with its `wake_bits`
+//! ([`Consumer::wake_me`], [`Producer::waiter`]; syssw lets partitions that share a
+//! segment notify each other), or, when it named none or the kernel refuses the
+//! notification, a "kick", a message on the queuing port beside the ring, which rings the
+//! waiting side's doorbell. The consumer, once woken, first drains its kicks (after a
+//! notification there are none), then takes frames until the ring is empty: a frame
+//! published after that was pushed into an empty ring and wakes it again. Both sides order
+//! their index write before their read of the other's index ([`fence`]), so a frame is
+//! never left in a ring whose consumer waits without a wake-up.
 #![no_std]
 
-use core::sync::atomic::{AtomicU32, Ordering, fence};
+use core::sync::atomic::{AtomicU32, AtomicU64, Ordering, fence};
 
 /// The longest frame: an Ethernet frame without its FCS.
 pub const MTU: usize = 1514;
@@ -55,6 +60,8 @@ pub const MIN_SEGMENT: usize = (2 * (HEADER + MIN_SLOTS as usize * SLOT)).div_ce
 
 const PRODUCED: usize = 0;
 const CONSUMED: usize = 64;
+const WAITER: usize = 72;
+const WAKE_BITS: usize = 80;
 
 /// Which end of the link a side is.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -125,6 +132,12 @@ impl Ring {
         unsafe { &*(self.base.wrapping_add(offset) as *const AtomicU32) }
     }
 
+    fn word(&self, offset: usize) -> &AtomicU64 {
+        // SAFETY: `offset` is WAITER or WAKE_BITS, inside the ring's header, 8-byte aligned
+        // (the ring is 64-byte aligned); as `index`.
+        unsafe { &*(self.base.wrapping_add(offset) as *const AtomicU64) }
+    }
+
     fn slot(&self, n: u32) -> *mut u8 {
         // `n % slots < slots`, and `slots` slots fit in the ring (`slots_in`).
         self.base
@@ -146,6 +159,9 @@ pub struct Consumer {
     ring: Ring,
     /// What this side took: the truth, whatever the shared word says now.
     consumed: u32,
+    /// The thread and bits the producer is to notify ([`Consumer::wake_me`]): the truth,
+    /// whatever the shared words say now.
+    waiter: (u64, u64),
 }
 
 /// Views `segment` (`size` bytes) as `side`'s end of a link: its producer and its
@@ -194,6 +210,7 @@ pub unsafe fn attach(
         Consumer {
             ring: theirs,
             consumed,
+            waiter: (0, 0),
         },
     ))
 }
@@ -227,6 +244,15 @@ impl Producer {
         let consumed = self.ring.index(CONSUMED).load(Ordering::Acquire);
         let used = self.produced.wrapping_sub(consumed);
         used.min(self.ring.slots)
+    }
+
+    /// The thread to notify, with its bits, when [`Pushed::first`]: as the consumer named
+    /// them ([`Consumer::wake_me`]); `None` when it named none (kick it instead). The
+    /// other side writes these words: the kernel refuses a thread it may not notify.
+    pub fn waiter(&self) -> Option<(u64, u64)> {
+        let bits = self.ring.word(WAKE_BITS).load(Ordering::Acquire);
+        let thread = self.ring.word(WAITER).load(Ordering::Acquire);
+        (thread != 0 && bits != 0).then_some((thread, bits))
     }
 
     /// Publishes `frame`.
@@ -281,6 +307,19 @@ impl Consumer {
         self.ring.slots
     }
 
+    /// Asks the producer to notify `thread` with `bits` when a frame goes into the empty
+    /// ring, instead of kicking this side through its port.
+    pub fn wake_me(&mut self, thread: u64, bits: u64) {
+        self.waiter = (thread, bits);
+        self.publish_waiter();
+    }
+
+    fn publish_waiter(&self) {
+        let (thread, bits) = self.waiter;
+        self.ring.word(WAKE_BITS).store(bits, Ordering::Release);
+        self.ring.word(WAITER).store(thread, Ordering::Release);
+    }
+
     /// Whether the ring holds no frame for this side.
     pub fn is_empty(&self) -> bool {
         fence(Ordering::SeqCst);
@@ -294,10 +333,14 @@ impl Consumer {
         let available = produced.wrapping_sub(self.consumed);
         if available == 0 {
             // Written again while empty: a producer that found a bogus `consumed` (the
-            // other side wrote it) and took its ring for full sees the true one.
+            // other side wrote it) and took its ring for full sees the true one, and
+            // whom to wake.
             self.ring
                 .index(CONSUMED)
                 .store(self.consumed, Ordering::Release);
+            if self.waiter != (0, 0) {
+                self.publish_waiter();
+            }
             return None;
         }
         if available > self.ring.slots {

@@ -118,6 +118,26 @@ fn frames_go_both_ways_in_order_and_the_first_asks_for_a_kick() {
 }
 
 #[test]
+fn the_consumer_names_whom_to_wake_and_a_scribbled_name_comes_back_when_it_looks() {
+    let size = 64 * 1024;
+    let mut s = Segment::new(size);
+    let ((tenant_tx, mut tenant_rx), (driver_tx, mut driver_rx)) = s.ends(size);
+    assert_eq!(tenant_tx.waiter(), None, "nobody named: kick");
+    driver_rx.wake_me(0x1_0042, 1 << 25);
+    tenant_rx.wake_me(0x2_0007, 1 << 2);
+    assert_eq!(tenant_tx.waiter(), Some((0x1_0042, 1 << 25)));
+    assert_eq!(driver_tx.waiter(), Some((0x2_0007, 1 << 2)));
+    // The tenant overwrites the driver's words: its producer reads what it wrote (the
+    // kernel refuses a thread it may not notify) until the driver finds its ring empty.
+    s.scribble(WAITER, &0xdead_u64.to_le_bytes());
+    s.scribble(WAKE_BITS, &0u64.to_le_bytes());
+    assert_eq!(tenant_tx.waiter(), None, "no bits: kick");
+    let mut buf = [0u8; MTU];
+    assert_eq!(driver_rx.pop(&mut buf), None);
+    assert_eq!(tenant_tx.waiter(), Some((0x1_0042, 1 << 25)));
+}
+
+#[test]
 fn a_full_ring_refuses_and_wraps_around() {
     let size = MIN_SEGMENT;
     let mut s = Segment::new(size);

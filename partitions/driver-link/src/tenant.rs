@@ -53,11 +53,15 @@ impl TenantLink {
 
     /// Asks syssw to notify the calling process's thread with `bits` whenever a message
     /// (a frame, or the ring's wake-up) arrives from the NIC partition
-    /// ([`Link::ring_on_arrival`]).
+    /// ([`Link::ring_on_arrival`]), and the NIC partition to notify it with the same bits
+    /// itself when a frame goes into the empty ring (the ring's waiter).
     pub fn ring_on_arrival(
-        &self,
+        &mut self,
         bits: u64,
     ) -> Result<(), apex::a653rs::bindings::ErrorReturnCode> {
+        if let Some((_, from)) = self.ring.as_mut() {
+            from.wake_me(apex::user_rt::sys::thread_self().0.0, bits);
+        }
         self.ports.ring_on_arrival(bits)
     }
 
@@ -93,8 +97,9 @@ impl TenantLink {
     }
 
     /// Sends up to `budget` frames `take` gives. With a ring, a frame pushed into an empty
-    /// ring sends one wake-up after them (none when the port is full: wake-ups are
-    /// waiting there already); a full ring drops the frame, as a full port does.
+    /// ring wakes the NIC partition after them: a notification of the thread the ring
+    /// names, else a wake-up on the port (none when the port is full: wake-ups are waiting
+    /// there already); a full ring drops the frame, as a full port does.
     pub fn send<F: AsRef<[u8]>>(&mut self, budget: usize, mut take: impl FnMut() -> Option<F>) {
         let poll = || SystemTime::Normal(Duration::ZERO);
         let mut wake = false;
@@ -110,7 +115,16 @@ impl TenantLink {
             }
             self.frames_out += 1;
         }
-        if wake {
+        let notified = wake
+            && self
+                .ring
+                .as_ref()
+                .and_then(|(to, _)| to.waiter())
+                .is_some_and(|(thread, bits)| {
+                    let thread = apex::user_rt::abi::syscall::ThreadId(thread);
+                    apex::user_rt::sys::notify_signal(thread, bits).is_ok()
+                });
+        if wake && !notified {
             let _ = self.ports.to.send(&[0], poll());
         }
     }

@@ -1,7 +1,9 @@
 //! The doorbell of the guest's ports: a thread of its own asks syssw to notify it when a
 //! message arrives at one of the guest's queuing destination ports (PORT_DOORBELL of the
-//! service protocol), waits for that notification and tells the main thread with an IPC
-//! message ([`LABEL_RUNG`]), as the COM2 reader does with input. The main thread waits in
+//! service protocol), waits for that notification, or for the NIC partition's when a frame
+//! goes into `eth0`'s empty ring ([`RING_BIT`]), and tells the main thread with an IPC
+//! message ([`LABEL_RUNG`], the bits that rang in its first word), as the COM2 reader does
+//! with input. The main thread waits in
 //! `receive` for its processes' exception messages, which a notification cannot end, so
 //! the news must come as a message. It then looks at `eth0`'s frames and serves the calls
 //! waiting for ports at once, where it would otherwise find them at its next poll.
@@ -17,8 +19,11 @@ use user_rt::sys::{self, Message};
 
 /// The label of the message to the main thread: messages arrived at a port.
 pub const LABEL_RUNG: u32 = 0x6265_6c6c; // "bell"
-/// The notification bit syssw rings (the thread waits for nothing else).
-const BIT: u64 = 1;
+/// The notification bit syssw rings.
+pub const PORT_BIT: u64 = 1;
+/// The notification bit the NIC partition rings when a frame goes into `eth0`'s empty
+/// ring (the ring's `waiter`).
+pub const RING_BIT: u64 = 2;
 /// Most ports it watches.
 pub const MAX_PORTS: usize = 16;
 
@@ -68,7 +73,10 @@ extern "C" fn doorbell(_: u64) -> ! {
         sys::thread_exit();
     };
     for &port in &setup.ports[..setup.count] {
-        let request = Request::PortDoorbell { port, bits: BIT };
+        let request = Request::PortDoorbell {
+            port,
+            bits: PORT_BIT,
+        };
         let answer = user_rt::service::request_without_buffer(setup.server, &request)
             .map(|reply| protocol::reply_result(reply.label));
         if !matches!(answer, Ok(Ok(Ok(())))) {
@@ -79,14 +87,15 @@ extern "C" fn doorbell(_: u64) -> ! {
             println!("guest: port {port}: no doorbell ({why}); it is polled");
         }
     }
-    let rung = Message {
-        tag: MessageTag::new(LABEL_RUNG, 0, 0),
-        words: [0; 3],
-    };
     loop {
-        if sys::notify_wait(BIT, TIMEOUT_INFINITE).is_ok()
-            && sys::send(setup.main, TIMEOUT_INFINITE, &rung).is_err()
-        {
+        let Ok(bits) = sys::notify_wait(PORT_BIT | RING_BIT, TIMEOUT_INFINITE) else {
+            continue;
+        };
+        let rung = Message {
+            tag: MessageTag::new(LABEL_RUNG, 0, 0),
+            words: [bits, 0, 0],
+        };
+        if sys::send(setup.main, TIMEOUT_INFINITE, &rung).is_err() {
             sys::thread_exit();
         }
     }

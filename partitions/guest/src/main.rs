@@ -221,7 +221,7 @@ fn main(start: u64, _: u64) {
             alloc::vec::Vec::new()
         }
     };
-    let net = network(&archive, &port_table);
+    let mut net = network(&archive, &port_table);
     let ports = ports::Ports::create(ThreadId(info.server), ipc, &port_table);
     let disk = disk(&archive, &port_table, &ports);
     // The doorbell watches the queuing ports the guest polls; the disk's response port is
@@ -240,6 +240,9 @@ fn main(start: u64, _: u64) {
             }
         },
     };
+    if let Some(bell) = bell {
+        net.wake_on_frames(bell.0, doorbell::RING_BIT);
+    }
     if let Err(e) = fs.set_ports(port_table) {
         println!("guest: no room for the port devices: {}", e.describe());
     }
@@ -387,8 +390,11 @@ fn main(start: u64, _: u64) {
             continue;
         }
         if bell == Some(received.sender) && tag.label() == doorbell::LABEL_RUNG {
-            // Messages came to a port: eth0's frames and the calls waiting for a port now.
-            system.net.messages_came();
+            // Messages came to a port (eth0's wake-ups are drained, the calls waiting for
+            // a port served), or only frames to eth0's ring: it is read on every run.
+            if received.message.words[0] & doorbell::PORT_BIT != 0 {
+                system.net.messages_came();
+            }
             host.sched.outside();
             host.port_waiting = false; // the calls served again say it anew
             if let Some(ended) = system.tick(&mut fs, &mut host) {
@@ -993,6 +999,10 @@ impl Host for GuestHost<'_> {
         buf: &mut [u8],
     ) -> Result<guest::arinc::Received, Errno> {
         self.ports.receive(port, buf)
+    }
+
+    fn notify(&mut self, thread: u64, bits: u64) -> bool {
+        sys::notify_signal(ThreadId(thread), bits).is_ok()
     }
 
     fn port_wait(&mut self) {

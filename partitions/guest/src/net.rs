@@ -264,6 +264,14 @@ impl Net {
         self.ring = Some(ring);
     }
 
+    /// The NIC partition is to wake kernel thread `thread` with `bits` when a frame goes
+    /// into `eth0`'s empty ring, rather than send a wake-up to its `rx` port.
+    pub fn wake_on_frames(&mut self, thread: u64, bits: u64) {
+        if let Some((_, from)) = self.ring.as_mut() {
+            from.wake_me(thread, bits);
+        }
+    }
+
     /// Runs the stack at the host's time: `eth0`'s received frames in from the `rx`
     /// port (or ring), timers, then the frames to send out to the `tx` port (or ring).
     pub fn run(&mut self, host: &mut impl crate::syscall::Host) {
@@ -307,7 +315,8 @@ impl Net {
     /// [`Net::run`] with a frame ring: a look at it costs no call to syssw, so it is
     /// looked at on every run; the `rx` port's wake-ups are drained (before the ring is
     /// read: one that comes after is left for the next run) when the doorbell rang, and
-    /// the NIC partition is woken through `tx` when a frame goes into an empty ring.
+    /// the NIC partition is woken when a frame goes into an empty ring: notified as the
+    /// ring names it, else through `tx`.
     fn run_ring(&mut self, host: &mut impl crate::syscall::Host, now: u64, rx: usize, tx: usize) {
         if core::mem::take(&mut self.rx_busy) {
             let mut kick = [0u8; 1];
@@ -343,8 +352,12 @@ impl Net {
                 Err(_) => dropped += 1,
             }
         }
+        let notified = kick
+            && to
+                .waiter()
+                .is_some_and(|(thread, bits)| host.notify(thread, bits));
         // A full port means wake-ups are already waiting there.
-        if kick {
+        if kick && !notified {
             let _ = host.port_send(tx, &[0]);
         }
         self.tx_dropped += dropped;

@@ -147,6 +147,12 @@ pub trait Host {
         let _ = (port, buf);
         Err(Errno::ENXIO)
     }
+    /// Notifies kernel thread `thread` (of a partition this one shares memory with) with
+    /// `bits`: `false` when the kernel refuses, or the host cannot.
+    fn notify(&mut self, thread: u64, bits: u64) -> bool {
+        let _ = (thread, bits);
+        false
+    }
     /// A call waits for a port (to read or to write, or in `poll`): its messages arrive
     /// without a word to the guest, so the host serves the waiting calls again soon.
     fn port_wait(&mut self) {}

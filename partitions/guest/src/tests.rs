@@ -44,6 +44,8 @@ struct Model {
     /// what the sources sent; a source holds at most [`PORT_ROOM`] messages.
     port_messages: HashMap<usize, std::collections::VecDeque<(Vec<u8>, bool)>>,
     port_sent: HashMap<usize, Vec<Vec<u8>>>,
+    /// The notifications sent (thread, bits); the thread [`REFUSED_THREAD`] is refused.
+    notified: Vec<(u64, u64)>,
     /// Calls that said they wait for a port ([`Host::port_wait`]).
     port_waits: usize,
     /// The kernel's answers asked for ([`Host::answer_always`]): thread, number, result.
@@ -140,7 +142,15 @@ impl Model {
     }
 }
 
+/// A thread the model's kernel refuses to notify.
+const REFUSED_THREAD: u64 = 0xdead;
+
 impl Host for Model {
+    fn notify(&mut self, thread: u64, bits: u64) -> bool {
+        self.notified.push((thread, bits));
+        thread != REFUSED_THREAD
+    }
+
     fn port_send(&mut self, port: usize, message: &[u8]) -> Result<(), Errno> {
         let sent = self.port_sent.entry(port).or_default();
         if sent.len() == PORT_ROOM {
@@ -3943,8 +3953,22 @@ fn two_guests_talk_through_their_frame_ports() {
 /// 20,000 bytes each way; the guest's `tx` port carries only one-byte wake-ups, fewer than
 /// the frames, and it drains the wake-ups the "NIC" sends when its doorbell rang.
 #[test]
-#[allow(unsafe_code)]
 fn a_guest_talks_through_its_frame_ring() {
+    talk_through_a_frame_ring(None);
+}
+
+/// As [`a_guest_talks_through_its_frame_ring`], each side having named a thread to
+/// notify in the ring: the guest notifies the "NIC" (no wake-up on its `tx` port) and is
+/// notified (no wake-up on its `rx` port, nothing to drain); a thread the kernel refuses
+/// to notify gets the port's wake-ups as before.
+#[test]
+fn a_guest_notifies_the_thread_its_ring_names_and_kicks_when_the_kernel_refuses() {
+    talk_through_a_frame_ring(Some(7));
+    talk_through_a_frame_ring(Some(REFUSED_THREAD));
+}
+
+#[allow(unsafe_code)]
+fn talk_through_a_frame_ring(nic_thread: Option<u64>) {
     use crate::net::Net;
     #[repr(C, align(64))]
     #[derive(Clone, Copy)]
@@ -3961,7 +3985,12 @@ fn a_guest_talks_through_its_frame_ring() {
     let (rx, tx) = (0, 1);
     let (mut a, mut b) = two_eth0s();
     a.0.link_ring(tenant);
-    let (mut frames_up, mut wakeups_up) = (0, 0);
+    const NIC_BITS: u64 = 1 << 24;
+    if let Some(thread) = nic_thread {
+        nic_from.wake_me(thread, NIC_BITS);
+        a.0.wake_on_frames(3, 2);
+    }
+    let (mut frames_up, mut wakeups_up, mut notified_down) = (0, 0, 0);
     let mut buf = [0u8; frame_ring::MTU];
     let mut step = |a: &mut (Net, Model), b: &mut (Net, Model)| {
         a.0.run(&mut a.1);
@@ -3979,12 +4008,21 @@ fn a_guest_talks_through_its_frame_ring() {
             queue.push_back((buf[..len].to_vec(), true));
         }
         for frame in b.1.port_sent.remove(&tx).unwrap_or_default() {
-            if nic_to.push(&frame).unwrap().first {
-                a.1.port_messages
-                    .entry(rx)
-                    .or_default()
-                    .push_back((vec![0], true));
-                a.0.messages_came();
+            if !nic_to.push(&frame).unwrap().first {
+                continue;
+            }
+            match nic_to.waiter() {
+                Some(waiter) => {
+                    assert_eq!(waiter, (3, 2), "the guest's doorbell thread and bit");
+                    notified_down += 1;
+                }
+                None => {
+                    a.1.port_messages
+                        .entry(rx)
+                        .or_default()
+                        .push_back((vec![0], true));
+                    a.0.messages_came();
+                }
             }
         }
     };
@@ -4015,10 +4053,19 @@ fn a_guest_talks_through_its_frame_ring() {
         got_back, data,
         "20,000 bytes down through the ring, in order"
     );
-    assert!(
-        wakeups_up > 0 && wakeups_up < frames_up,
-        "{wakeups_up} wake-ups for {frames_up} frames"
-    );
+    let notified_up = a.1.notified.len();
+    match nic_thread {
+        Some(7) => {
+            assert_eq!(wakeups_up, 0, "no wake-up on the port");
+            assert!(notified_up > 0 && notified_up < frames_up);
+            assert!(a.1.notified.iter().all(|&n| n == (7, NIC_BITS)));
+            assert!(notified_down > 0);
+        }
+        _ => assert!(
+            wakeups_up > 0 && wakeups_up < frames_up,
+            "{wakeups_up} wake-ups for {frames_up} frames"
+        ),
+    }
     assert!(
         a.1.port_messages.get(&rx).is_none_or(|q| q.len() <= 1),
         "the wake-ups are drained"

@@ -553,7 +553,7 @@ impl Net {
         // configuration tools' check), mapped read-write for its life; this device alone
         // attaches it, once.
         let link = unsafe { TenantLink::open(n.rx.name, n.tx.name, n.ring) };
-        let link =
+        let mut link =
             link.map_err(|e| alloc::format!("the frame link {}/{}: {e}", n.rx.name, n.tx.name))?;
         let settings = Settings {
             mac: n.mac,

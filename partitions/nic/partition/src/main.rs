@@ -5,7 +5,8 @@
 //! destination MAC first, no FCS, 14..=1514 bytes; or, for a tenant whose entry names a
 //! frame ring, the same frames through the ring in the segment it shares with the tenant
 //! (`frame_ring`), the ports carrying only the wake-ups: a one-byte message when a frame
-//! goes into an empty ring.
+//! goes into an empty ring, unless the other side named a thread to notify instead (the
+//! ring's `waiter`; both sides name theirs, the switch's process for its tenants' rings).
 //!
 //! One APEX process, the switch, does everything in a loop: frames the device received go
 //! where the switch routes them (to one tenant, to all for broadcast and multicast; unknown
@@ -14,9 +15,9 @@
 //! round-robin, at most [`BUDGET`] a tenant and round, and only while the transmit queue has room, so a
 //! tenant that floods its port only fills its own port and loses its own frames (its
 //! sends fail when the port is full) while every other tenant keeps its turn. A tenant's
-//! frame with another source MAC is dropped. Then it waits for the device's interrupt or
-//! a tenant's doorbell (syssw notifies it when a tenant's frames or wake-ups arrive), at
-//! most [`POLL`].
+//! frame with another source MAC is dropped. Then it waits for the device's interrupt, a
+//! tenant's doorbell (syssw notifies it when a tenant's frames or wake-ups arrive) or a
+//! tenant's notification that a frame went into its empty ring, at most [`POLL`].
 //!
 //! Log lines (on the serial log as `[<partition>] nic: ...`; an interface):
 //! - `nic: virtio-net <BB:DD.F> MAC <mac>, <n> descriptors a queue, line <irq>, <k> tenant(s)`
@@ -30,10 +31,12 @@
 //!   frames sent to it, frames for it dropped because its transmit queue was full, unicast
 //!   from the wire for no tenant, runts from the device, used entries the device should
 //!   not have written) and for each tenant `nic: t=<ms>ms tenant <partition> in=<n> out=<n>
-//!   overflow=<n> spoofed=<n> malformed=<n> limited=<n>` (frames taken from its port or
-//!   ring, frames delivered to it, frames for it dropped because its port or ring was
-//!   full, frames refused for a source MAC not its own, frames of a bad length and ring
-//!   slots with a bogus length or index, broadcasts and multicasts beyond its rate).
+//!   overflow=<n> spoofed=<n> malformed=<n> limited=<n> notified=<n> kicked=<n>` (frames
+//!   taken from its port or ring, frames delivered to it, frames for it dropped because
+//!   its port or ring was full, frames refused for a source MAC not its own, frames of a
+//!   bad length and ring slots with a bogus length or index, broadcasts and multicasts
+//!   beyond its rate, and the wake-ups of its ring: notifications of the thread it named,
+//!   messages on its port).
 //!   Counters count since start.
 #![no_std]
 #![no_main]
@@ -46,6 +49,7 @@ use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
 use apex::main_process::{self, Release};
+use apex::user_rt::abi::syscall::ThreadId;
 use apex::user_rt::println;
 use apex::user_rt::protocol::layout::DEVICES_BASE;
 use apex::user_rt::sys;
@@ -66,6 +70,10 @@ const IRQ_BIT: u64 = 8;
 /// The notification bit of tenant 0's doorbell (syssw rings it when the tenant's frames or
 /// wake-ups arrive at its `from` port); tenant `n` has the bit `n` above it.
 const DOORBELL_BIT: u64 = 9;
+/// The notification bit a tenant sends when a frame goes into its empty ring, for tenant
+/// 0; tenant `n` has the bit `n` above it.
+const RING_BIT: u64 = DOORBELL_BIT + nic_core::switch::MAX_TENANTS as u64;
+const _: () = assert!(RING_BIT + nic_core::switch::MAX_TENANTS as u64 <= 64);
 /// How often the counters are logged.
 const STATS_EVERY_MS: u64 = 1000;
 /// The message buffer: the largest port message (config: 4096 bytes).
@@ -99,6 +107,9 @@ struct Link {
     ring: Option<(frame_ring::Producer, frame_ring::Consumer)>,
     /// Ring slots with no frame in them (a bogus index or length the tenant wrote).
     bad: u64,
+    /// The tenant woken for its ring: by a notification, by a message on its port.
+    notified: u64,
+    kicked: u64,
 }
 
 impl Link {
@@ -124,8 +135,11 @@ impl Link {
         };
         match to.push(frame) {
             Ok(pushed) => {
-                // A full port means wake-ups are already waiting there.
-                if pushed.first {
+                if pushed.first && notify(to.waiter()) {
+                    self.notified += 1;
+                } else if pushed.first {
+                    // A full port means wake-ups are already waiting there.
+                    self.kicked += 1;
                     let _ = self.to.send(&[0], poll);
                 }
                 true
@@ -156,6 +170,12 @@ impl Link {
         }
         None
     }
+}
+
+/// Notifies the waiter a ring's consumer named; `false` when it named none or the kernel
+/// refused (kick it through the port then).
+fn notify(waiter: Option<(u64, u64)>) -> bool {
+    waiter.is_some_and(|(thread, bits)| sys::notify_signal(ThreadId(thread), bits).is_ok())
 }
 
 struct Counts {
@@ -283,14 +303,16 @@ impl Nic {
         for (n, link) in self.links.iter().enumerate() {
             let c = self.switch.counters(Port::Tenant(n));
             println!(
-                "nic: t={now_ms}ms tenant {} in={} out={} overflow={} spoofed={} malformed={} limited={}",
+                "nic: t={now_ms}ms tenant {} in={} out={} overflow={} spoofed={} malformed={} limited={} notified={} kicked={}",
                 link.name,
                 c.received,
                 c.delivered,
                 c.overflow,
                 c.spoofed,
                 c.malformed + link.bad,
-                c.limited
+                c.limited,
+                link.notified,
+                link.kicked
             );
         }
     }
@@ -350,7 +372,11 @@ extern "C" fn run() {
                 // tools' check), mapped read-write for its life; the NIC side's one attach.
                 let ring = unsafe { frame_ring::attach(at, size, frame_ring::Side::Driver) };
                 match ring {
-                    Ok(ring) => Some(ring),
+                    Ok(mut ring) => {
+                        let me = sys::thread_self().0.0;
+                        ring.1.wake_me(me, 1 << (RING_BIT + n as u64));
+                        Some(ring)
+                    }
                     Err(e) => {
                         refuse(format_args!("tenant {}: {e}", t.partition));
                         return;
@@ -365,6 +391,8 @@ extern "C" fn run() {
             to,
             ring,
             bad: 0,
+            notified: 0,
+            kicked: 0,
         });
     }
     if let Err(e) = sys::irq_attach(u64::from(line), IRQ_BIT) {
@@ -416,8 +444,9 @@ extern "C" fn run() {
             nic.log(now_ms);
             next_log = now_ms - now_ms % STATS_EVERY_MS + STATS_EVERY_MS;
         }
-        let doorbells = ((1u64 << nic.links.len()) - 1) << DOORBELL_BIT;
-        let wait = sys::notify_wait(1 << IRQ_BIT | doorbells, POLL.as_nanos() as u64);
+        let tenants = (1u64 << nic.links.len()) - 1;
+        let (doorbells, rings) = (tenants << DOORBELL_BIT, tenants << RING_BIT);
+        let wait = sys::notify_wait(1 << IRQ_BIT | doorbells | rings, POLL.as_nanos() as u64);
         let bits = wait.unwrap_or(0);
         if bits & 1 << IRQ_BIT != 0 {
             nic.net.interrupt_status();
