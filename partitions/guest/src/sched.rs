@@ -38,10 +38,13 @@
 //! CPU-bound processes share equally what the interactive ones leave.
 //!
 //! **Aging.** Interactive processes could keep the CPU busy between them for ever (a pipe
-//! whose two ends wake each other). A turn holder that has not run for [`STARVATION_NS`]
-//! is made interactive with no debt: it runs a slice at the top level, beside them, and is
-//! CPU-bound again. So the CPU-bound processes together get at least one slice in every
-//! `STARVATION_NS` plus a slice, each of n of them one in n such periods.
+//! whose two ends wake each other, a stream of connections each served by a new child).
+//! A CPU-bound process that has not run for [`STARVATION_NS`] is made interactive with no
+//! debt: it runs a slice at the top level, beside them, and is CPU-bound again. So each
+//! CPU-bound process gets a slice in every `STARVATION_NS` plus the slices of those aged
+//! with it. (Aging only the turn holder gave n of them one slice each in n such periods:
+//! busybox httpd's short-lived children, CPU-bound under TCG's costs, then waited to run
+//! their `_exit` for longer than connections came, until the task quota refused a `fork`.)
 //!
 //! **Why three priorities and not two.** With the CPU-bound processes at one priority,
 //! the kernel's FIFO would put one that makes a call behind the others: the bug above,
@@ -386,9 +389,9 @@ impl Scheduler {
     /// processes answered after a wait are woken now: interactive, with their debt (a
     /// CPU-bound one's: a slice) less the time they waited. Then the decisions due are
     /// made: interactive processes whose debt reached a slice become CPU-bound (at the
-    /// back of the turn order), the turn passes on after a slice, a starving turn holder
-    /// becomes interactive. Returns when the next decision is due (the slice of the
-    /// process that runs ends while another may run, or the turn holder starts to
+    /// back of the turn order), the turn passes on after a slice, starving CPU-bound
+    /// processes become interactive. Returns when the next decision is due (the slice of
+    /// the process that runs ends while another may run, or a CPU-bound process starts to
     /// starve), if any: the guest looks again then even if nothing else happens.
     pub fn decide(&mut self, now: u64) -> Option<u64> {
         let ns = now.saturating_sub(self.last);
@@ -427,6 +430,7 @@ impl Scheduler {
 
     /// The decisions of [`Scheduler::decide`], remade from the table.
     fn remake(&mut self, now: u64) -> Option<u64> {
+        let starves = |e: &Entry| now.saturating_sub(e.since) >= STARVATION_NS;
         let mut v = self.view();
         if v.spent {
             for i in 0..self.reached {
@@ -439,7 +443,7 @@ impl Scheduler {
             }
             v = self.view();
         }
-        self.pass_turn(&v, now);
+        self.pass_turn(&v);
         // The holder's slice is over: the next in turn order, if any, has the turn.
         if let Some((i, _)) = v.first_bound
             && self.entries[i].is_some_and(|e| e.spent())
@@ -452,19 +456,24 @@ impl Scheduler {
                 }
             }
             v = self.view();
-            self.pass_turn(&v, now);
+            self.pass_turn(&v);
         }
-        // The holder starves: a slice at the top.
-        if let Some((i, _)) = v.first_bound
-            && v.first_interactive.is_some()
-            && self.entries[i].is_some_and(|e| now.saturating_sub(e.since) >= STARVATION_NS)
-        {
-            let order = self.tail();
-            if let Some(e) = self.entries[i].as_mut() {
-                (e.cpu_bound, e.used, e.order, e.since) = (false, 0, order, now);
+        // The CPU-bound processes that starve: a slice at the top, each.
+        if v.first_interactive.is_some() {
+            let mut aged = false;
+            for i in 0..self.reached {
+                if self.entries[i].is_some_and(|e| e.cpu_bound && e.runnable() && starves(&e)) {
+                    let order = self.tail();
+                    if let Some(e) = self.entries[i].as_mut() {
+                        (e.cpu_bound, e.used, e.order, e.since) = (false, 0, order, now);
+                    }
+                    aged = true;
+                }
             }
-            v = self.view();
-            self.pass_turn(&v, now);
+            if aged {
+                v = self.view();
+                self.pass_turn(&v);
+            }
         }
 
         self.contended = v.runnable - v.cpu_bound > 1;
@@ -481,9 +490,14 @@ impl Scheduler {
             None => holder.filter(|_| v.cpu_bound > 1).map(|e| e.used),
         }
         .map(|used| now + SLICE_NS.saturating_sub(used));
-        let starving = holder
-            .filter(|_| v.first_interactive.is_some())
-            .map(|e| e.since + STARVATION_NS);
+        let starving = v.first_interactive.and_then(|_| {
+            self.entries[..self.reached]
+                .iter()
+                .flatten()
+                .filter(|e| e.cpu_bound && e.runnable())
+                .map(|e| e.since + STARVATION_NS)
+                .min()
+        });
         match (slice_end, starving) {
             (Some(a), Some(b)) => Some(a.min(b)),
             (a, b) => a.or(b),
@@ -491,8 +505,9 @@ impl Scheduler {
     }
 
     /// Gives the turn to the first runnable CPU-bound process in turn order (`v`), if it
-    /// is not the holder already (its turn starts now).
-    fn pass_turn(&mut self, v: &View, now: u64) {
+    /// is not the holder already (its slice starts now; how long it has not run, which
+    /// ages it, goes on).
+    fn pass_turn(&mut self, v: &View) {
         let next = v
             .first_bound
             .and_then(|(i, _)| self.entries[i])
@@ -502,7 +517,7 @@ impl Scheduler {
             if let Some((i, _)) = v.first_bound
                 && let Some(e) = self.entries[i].as_mut()
             {
-                (e.used, e.since) = (0, now);
+                e.used = 0;
             }
         }
     }
@@ -1078,14 +1093,15 @@ mod tests {
         sim.unqueue(2);
         sim.sched.received(2);
         sim.run(3_000 * MS);
-        // Each spinner gets a slice in every two periods of aging.
+        // Each spinner gets a slice in every period of aging.
         let period = STARVATION_NS + 2 * SLICE_NS;
         for from in (0..25).map(|k| k * period) {
-            let spun = sim.cpu_in(3, from, from + period) + sim.cpu_in(4, from, from + period);
-            assert!(
-                spun >= SLICE_NS / 2,
-                "no CPU for the spinners from {from} ns"
-            );
+            for spinner in [3, 4] {
+                assert!(
+                    sim.cpu_in(spinner, from, from + period) >= SLICE_NS / 2,
+                    "no CPU for spinner {spinner} from {from} ns"
+                );
+            }
         }
         for p in &sim.procs[2..] {
             assert!(p.cpu >= 3_000 * MS / period / 2 * SLICE_NS / 2, "{p:?}");
