@@ -558,29 +558,7 @@ fn communication_rights_restrict_senders() {
         err(Error::NotPermitted),
         "not its own to grant"
     );
-    assert_eq!(
-        f.sys(root, Call::TaskAllowSend, [xid, yid_task, 0, 0, 0, 0]),
-        OK
-    );
-    assert_eq!(
-        f.sys(tx, Call::Send, [yid, 0, 0, 0, 0, 0]),
-        err(Error::TimedOut),
-        "allowed now; nobody receives"
-    );
-    assert_eq!(f.sys(tx, Call::NotifySignal, [yid, 0b100, 0, 0, 0, 0]), OK);
-    assert_eq!(f.sys(ty, Call::NotifyWait, [0b110, 0, 0, 0, 0, 0]), OK);
-    assert_eq!(f.k.threads[ty].context().rdi, 0b100);
-}
-
-#[test]
-fn a_notify_only_right_lets_notifications_through_and_no_message() {
-    let mut f = Fixture::new();
-    let root = f.thread(ROOT, 200);
-    let x = f.task(ROOT, Abilities::all(), 100);
-    let y = f.task(ROOT, Abilities::all(), 100);
-    let tx = f.thread(x, 50);
-    let ty = f.thread(y, 50);
-    let (xid, yid_task, yid) = (f.k.task_id(x).0, f.k.task_id(y).0, f.id(ty));
+    // A notify-only right: notifications, no message, one way.
     assert_eq!(
         f.sys(root, Call::TaskAllowSend, [xid, yid_task, 2, 0, 0, 0]),
         err(Error::InvalidArgument)
@@ -605,6 +583,19 @@ fn a_notify_only_right_lets_notifications_through_and_no_message() {
         err(Error::NotPermitted),
         "one way only"
     );
+    // The full right.
+    assert_eq!(
+        f.sys(root, Call::TaskAllowSend, [xid, yid_task, 0, 0, 0, 0]),
+        OK
+    );
+    assert_eq!(
+        f.sys(tx, Call::Send, [yid, 0, 0, 0, 0, 0]),
+        err(Error::TimedOut),
+        "allowed now; nobody receives"
+    );
+    assert_eq!(f.sys(tx, Call::NotifySignal, [yid, 0b100, 0, 0, 0, 0]), OK);
+    assert_eq!(f.sys(ty, Call::NotifyWait, [0b110, 0, 0, 0, 0, 0]), OK);
+    assert_eq!(f.k.threads[ty].context().rdi, 0b100);
 }
 
 #[test]
