@@ -10,6 +10,15 @@ use apex::a653rs::prelude::*;
 use core::str::FromStr;
 use driver_table::PortSpec;
 
+/// Notifies the thread a frame ring's consumer named ([`frame_ring::Producer::waiter`]);
+/// `false` when it named none or the kernel refused (wake it through the port then).
+pub fn notify_waiter(waiter: Option<(u64, u64)>) -> bool {
+    waiter.is_some_and(|(thread, bits)| {
+        let thread = apex::user_rt::abi::syscall::ThreadId(thread);
+        apex::user_rt::sys::notify_signal(thread, bits).is_ok()
+    })
+}
+
 /// The driver's ends of a tenant's link: the tenant's messages come in on `from`, the
 /// driver's go out on `to`.
 pub struct Link {

@@ -115,15 +115,8 @@ impl TenantLink {
             }
             self.frames_out += 1;
         }
-        let notified = wake
-            && self
-                .ring
-                .as_ref()
-                .and_then(|(to, _)| to.waiter())
-                .is_some_and(|(thread, bits)| {
-                    let thread = apex::user_rt::abi::syscall::ThreadId(thread);
-                    apex::user_rt::sys::notify_signal(thread, bits).is_ok()
-                });
+        let notified =
+            wake && crate::notify_waiter(self.ring.as_ref().and_then(|(to, _)| to.waiter()));
         if wake && !notified {
             let _ = self.ports.to.send(&[0], poll());
         }

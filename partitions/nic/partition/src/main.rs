@@ -49,7 +49,6 @@ use alloc::vec::Vec;
 use apex::Warden;
 use apex::a653rs::prelude::*;
 use apex::main_process::{self, Release};
-use apex::user_rt::abi::syscall::ThreadId;
 use apex::user_rt::println;
 use apex::user_rt::protocol::layout::DEVICES_BASE;
 use apex::user_rt::sys;
@@ -135,7 +134,7 @@ impl Link {
         };
         match to.push(frame) {
             Ok(pushed) => {
-                if pushed.first && notify(to.waiter()) {
+                if pushed.first && link::notify_waiter(to.waiter()) {
                     self.notified += 1;
                 } else if pushed.first {
                     // A full port means wake-ups are already waiting there.
@@ -170,12 +169,6 @@ impl Link {
         }
         None
     }
-}
-
-/// Notifies the waiter a ring's consumer named; `false` when it named none or the kernel
-/// refused (kick it through the port then).
-fn notify(waiter: Option<(u64, u64)>) -> bool {
-    waiter.is_some_and(|(thread, bits)| sys::notify_signal(ThreadId(thread), bits).is_ok())
 }
 
 struct Counts {
