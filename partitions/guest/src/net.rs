@@ -24,7 +24,8 @@ pub const AF_INET: u16 = 2;
 pub const SOCKADDR_IN_LEN: usize = 16;
 
 /// What the guest's stack may take of its heap: sockets (each backlog's listeners
-/// count), and their buffers.
+/// count), and their buffers (a TCP socket's as [`ring_tcp_buffer`] says when `eth0` has a
+/// frame ring).
 pub const LIMITS: Limits = Limits {
     sockets: 48,
     tcp_buffer: 32 * 1024,
@@ -33,6 +34,25 @@ pub const LIMITS: Limits = Limits {
     backlog: 8,
     frames: 64,
 };
+
+/// The bytes of TCP data a full Ethernet frame carries (1500 bytes of IP, less the IPv4
+/// and TCP headers).
+pub const SEGMENT: usize = 1460;
+
+/// A TCP socket's buffers when `eth0`'s frames go through a ring of `slots` slots each way:
+/// as many full segments as the ring holds (a window the peer sends at once lands in the
+/// ring without loss; a larger one overflowed it and cost retransmissions), in whole KiB
+/// and within 16 to 64 KiB (64 KiB is the largest window without window scaling).
+pub const fn ring_tcp_buffer(slots: u32) -> usize {
+    let fits = slots as usize * SEGMENT / 1024 * 1024;
+    if fits < 16 * 1024 {
+        16 * 1024
+    } else if fits > 64 * 1024 {
+        64 * 1024
+    } else {
+        fits
+    }
+}
 
 /// The shortest time between two runs of the stack for its timers.
 pub const MIN_POLL_GAP_NS: u64 = 200_000;
@@ -366,6 +386,13 @@ impl Net {
     /// The stack at `now_ns` (made on first use).
     pub fn stack(&mut self, now_ns: u64) -> &mut Stack {
         let eth = self.eth;
+        let limits = match &self.ring {
+            Some((to, from)) => Limits {
+                tcp_buffer: ring_tcp_buffer(to.slots().min(from.slots())),
+                ..LIMITS
+            },
+            None => LIMITS,
+        };
         self.stack.get_or_insert_with(|| {
             let config = match eth {
                 Some(e) => Config {
@@ -373,9 +400,9 @@ impl Net {
                     address: e.address,
                     prefix: e.prefix,
                     gateway: e.gateway,
-                    limits: LIMITS,
+                    limits,
                 },
-                None => Config::loopback_only(LIMITS),
+                None => Config::loopback_only(limits),
             };
             Stack::new(config, (now_ns / 1000) as i64)
         })
@@ -601,6 +628,21 @@ mod tests {
         v6[0] = 10;
         assert_eq!(parse_sockaddr(&v6), Err(Errno::EAFNOSUPPORT));
         assert_eq!(parse_sockaddr(&[]), Err(Errno::EINVAL));
+    }
+
+    #[test]
+    fn tcp_buffers_follow_the_frame_ring() {
+        // The segments of the configurations: each half is one direction's ring.
+        let buffer = |segment: usize| ring_tcp_buffer(frame_ring::slots_in(segment / 2));
+        assert_eq!(buffer(frame_ring::MIN_SEGMENT), 16 * 1024);
+        assert_eq!(buffer(64 * 1024), 22 * 1024);
+        assert_eq!(buffer(128 * 1024), 45 * 1024);
+        assert_eq!(buffer(256 * 1024), 64 * 1024);
+        assert_eq!(buffer(1024 * 1024), 64 * 1024);
+        // Above the floor, a full window of full segments fits the ring.
+        for slots in [16, 32, 44, 64] {
+            assert!(ring_tcp_buffer(slots).div_ceil(SEGMENT) <= slots as usize);
+        }
     }
 
     #[test]

@@ -286,18 +286,25 @@ impl Stack {
         Ok(())
     }
 
-    fn new_tcp(&mut self, side: Side) -> SocketHandle {
+    /// A TCP socket with its two buffers; `NoBuffers` when the heap has no room for them
+    /// (an error for the call, never an abort of the partition).
+    fn new_tcp(&mut self, side: Side) -> Result<SocketHandle, Error> {
         let size = self.config.limits.tcp_buffer;
-        let mut socket = tcp::Socket::new(
-            tcp::SocketBuffer::new(vec![0; size]),
-            tcp::SocketBuffer::new(vec![0; size]),
-        );
+        let buffer = || {
+            let mut bytes = Vec::new();
+            bytes
+                .try_reserve_exact(size)
+                .map_err(|_| Error::NoBuffers)?;
+            bytes.resize(size, 0);
+            Ok::<_, Error>(tcp::SocketBuffer::new(bytes))
+        };
+        let mut socket = tcp::Socket::new(buffer()?, buffer()?);
         socket.set_timeout(None);
         if side == Side::Lo {
             // Nothing to save on the loopback: an ACK costs no wire time.
             socket.set_ack_delay(None);
         }
-        self.set(side).add(socket)
+        Ok(self.set(side).add(socket))
     }
 
     fn sock(&self, id: SocketId) -> Result<&Sock, Error> {
@@ -485,7 +492,7 @@ impl Stack {
     }
 
     fn listen_on(&mut self, side: Side, bound: SocketAddr) -> Result<SocketHandle, Error> {
-        let handle = self.new_tcp(side);
+        let handle = self.new_tcp(side)?;
         let addr = (!bound.ip.is_unspecified()).then_some(IpAddress::Ipv4(bound.ip));
         if self
             .tcp(side, handle)
@@ -524,7 +531,15 @@ impl Stack {
         let mut listeners = Vec::new();
         for _ in 0..backlog {
             for &side in &sides {
-                listeners.push((side, self.listen_on(side, bound)?));
+                match self.listen_on(side, bound) {
+                    Ok(handle) => listeners.push((side, handle)),
+                    Err(e) => {
+                        for (side, handle) in listeners {
+                            self.set(side).remove(handle);
+                        }
+                        return Err(e);
+                    }
+                }
             }
         }
         self.sock_mut(id)?.tcp = TcpState::Listening {
@@ -549,12 +564,13 @@ impl Stack {
         let (keep_alive, no_delay, bound) = (sock.keep_alive, sock.no_delay, sock.bound);
         let (mut listeners, mut missing) = (listeners.clone(), missing.clone());
         let bound = bound.ok_or(Error::Invalid)?;
-        // Places left empty by earlier accepts listen again where the limit now allows.
+        // Places left empty by earlier accepts listen again where the limit and the heap
+        // now allow.
         while let Some(&side) = missing.last() {
-            if self.room(1).is_err() {
+            let Ok(handle) = self.room(1).and_then(|()| self.listen_on(side, bound)) else {
                 break;
-            }
-            listeners.push((side, self.listen_on(side, bound)?));
+            };
+            listeners.push((side, handle));
             missing.pop();
         }
         let ready = listeners.iter().position(|&(side, h)| {
@@ -577,13 +593,15 @@ impl Stack {
         let (side, handle) = listeners[index];
         let peer = self.tcp(side, handle).remote_endpoint().map(endpoint_addr);
         let local = self.tcp(side, handle).local_endpoint().map(endpoint_addr);
-        // A new listener takes the accepted one's place if the socket limit allows it
-        // (closed connections in TIME-WAIT give theirs first); else the place waits.
-        if self.room(1).is_ok() {
-            listeners[index] = (side, self.listen_on(side, bound)?);
-        } else {
-            listeners.swap_remove(index);
-            missing.push(side);
+        // A new listener takes the accepted one's place if the socket limit and the heap
+        // allow it (closed connections in TIME-WAIT give theirs first); else the place
+        // waits.
+        match self.room(1).and_then(|()| self.listen_on(side, bound)) {
+            Ok(new) => listeners[index] = (side, new),
+            Err(_) => {
+                listeners.swap_remove(index);
+                missing.push(side);
+            }
         }
         if let TcpState::Listening {
             listeners: l,
@@ -647,7 +665,7 @@ impl Stack {
             (sock.keep_alive, sock.no_delay, sock.nonblocking);
         self.room(1)?;
         let local = self.ensure_bound(id, addr.ip)?;
-        let handle = self.new_tcp(side);
+        let handle = self.new_tcp(side)?;
         self.configure(side, handle, keep_alive, no_delay);
         let local_ip = (!local.ip.is_unspecified()).then_some(IpAddress::Ipv4(local.ip));
         let remote = IpEndpoint::new(IpAddress::Ipv4(addr.ip), addr.port);

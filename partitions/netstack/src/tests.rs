@@ -420,6 +420,37 @@ fn refusals() {
     assert_eq!(s.socket(AF_INET, SOCK_STREAM, 0), Err(Error::NoBuffers));
 }
 
+/// TCP buffers the heap cannot hold make the call fail with `ENOBUFS`; the partition goes
+/// on, the failed socket can try again, and nothing stays allocated for it.
+#[test]
+fn buffers_the_heap_cannot_hold_are_an_error() {
+    let mut s = Stack::new(
+        Config {
+            limits: Limits {
+                tcp_buffer: isize::MAX as usize,
+                ..Limits::default()
+            },
+            ..Config::loopback_only(Limits::default())
+        },
+        0,
+    );
+    let l = tcp(&mut s);
+    s.bind(l, SocketAddr::new(LOCAL, 80)).unwrap();
+    assert_eq!(s.listen(l, 4), Err(Error::NoBuffers));
+    assert_eq!(s.listen(l, 4), Err(Error::NoBuffers), "still fresh");
+    let c = tcp(&mut s);
+    assert_eq!(
+        s.connect(c, SocketAddr::new(LOCAL, 80)),
+        Err(Error::NoBuffers)
+    );
+    // Every failed attempt gave its sockets back: the limit still admits as many.
+    let mut open = 2;
+    while s.socket(AF_INET, SOCK_DGRAM, 0).is_ok() {
+        open += 1;
+    }
+    assert_eq!(open, Limits::default().sockets);
+}
+
 proptest! {
     #![proptest_config(ProptestConfig::with_cases(3_000))]
 
