@@ -304,6 +304,18 @@ pub fn handle(
     reply(p, m, result)
 }
 
+/// Whether serving `m` can change only its sender's state: an exception (a page fault
+/// maps the sender's memory; any other signals the sender) or a call of
+/// [`table::CALLER_ONLY`]. A signal's interruption (`VECTOR_INTERRUPT`) is not: the signal
+/// may stop or end the process.
+pub fn touches_only_caller(m: &ExceptionMessage) -> bool {
+    match m.vector {
+        VECTOR_SYSCALL => table::CALLER_ONLY.contains(&m.registers.rax),
+        VECTOR_INTERRUPT => false,
+        _ => true,
+    }
+}
+
 /// A call the guest does not serve: `ENOSYS`, logged, with its Linux name, the first time
 /// a process of the guest makes it.
 fn unsupported(p: &Process, reported: &mut Reported, host: &mut impl Host, number: u64) -> Errno {

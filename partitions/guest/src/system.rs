@@ -362,18 +362,38 @@ impl System {
         let tgid = self.slots[i].as_ref()?.process.tgid;
         self.lend(i);
         let slot = self.slots[i].as_mut()?;
+        let mut only_caller = false;
         let ended = match slot.state {
             State::Starting(registers) => {
                 slot.state = State::Running;
                 m.registers = registers;
                 self.resume(i, fs, k, m, None)
             }
-            State::Running => self.run(i, fs, k, m),
+            State::Running => {
+                only_caller = syscall::touches_only_caller(&m);
+                self.run(i, fs, k, m)
+            }
             // A blocked or ended process has no thread that could send.
             State::Blocked(_) | State::Vforked { .. } | State::Zombie(_) => None,
         };
         self.give_back();
         self.share_group(tgid);
+        // What changed only its sender, which runs on, ends nobody's wait: the blocked
+        // calls are not served again (each retry is a whole call: a `poll` of all its
+        // descriptors, an `accept`; most of a forked child's messages are its page faults
+        // and such calls).
+        let runs_on = self.index(pid) == Some(i)
+            && matches!(
+                self.slots[i],
+                Some(Slot {
+                    state: State::Running,
+                    stopped: false,
+                    ..
+                })
+            );
+        if ended.is_none() && only_caller && runs_on {
+            return None;
+        }
         ended.or_else(|| self.wake(fs, k))
     }
 

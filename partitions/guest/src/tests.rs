@@ -38,6 +38,8 @@ struct Model {
     fpu: HashMap<u32, [u8; 512]>,
     suspended: Vec<u32>,
     interrupted: Vec<u32>,
+    /// Every process whose message the guest served (or served again), in order.
+    selected: Vec<u32>,
     /// vfork children and the process whose memory they use.
     aliases: HashMap<u32, u32>,
     /// ARINC ports: the messages waiting at each destination (with their validity), and
@@ -1559,6 +1561,7 @@ fn split_nul_keeps_empty_arguments() {
 
 impl Tasks for Model {
     fn select(&mut self, pid: u32) {
+        self.selected.push(pid);
         // A vfork child's memory is its parent's.
         let pid = self.aliases.get(&pid).copied().unwrap_or(pid);
         if pid != self.current {
@@ -1702,6 +1705,58 @@ impl<'a> Guest<'a> {
         let mut pids: Vec<u32> = self.system.pids().collect();
         pids.sort();
         pids
+    }
+}
+
+/// A message that changes only its sender (a page fault, `getpid`, `mmap`) serves no
+/// blocked call again; any other does (each retry is a whole call), and a wait it ends
+/// ends.
+#[test]
+fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
+    let bytes = initramfs();
+    let mut g = Guest::new(&bytes);
+    let child = g.fork(1);
+    let status = SCRATCH + 0x100;
+    assert_eq!(g.call(1, nr::wait4, [u64::MAX, status, 0, 0, 0, 0]), None);
+    g.host.selected.clear();
+    assert_eq!(g.call(child, nr::getpid, [0; 6]), Some(u64::from(child)));
+    assert_eq!(
+        g.call(child, nr::mmap, [0, PAGE, 3, 0x22, u64::MAX, 0])
+            .map(|a| a > 0),
+        Some(true)
+    );
+    let write_fault = ExceptionMessage {
+        vector: crate::memory::VECTOR_PAGE_FAULT,
+        error_code: 0x7,
+        fault_address: SCRATCH,
+        ..Default::default()
+    };
+    assert_eq!(g.serve(child, write_fault), [(child, 0)]);
+    assert_eq!(
+        g.host.selected,
+        [child, child, child],
+        "init's wait4 stays as it was"
+    );
+    // A close may end a wait (a pipe's last writer): init's wait4 is served again.
+    assert_eq!(
+        g.call(child, nr::close, [99, 0, 0, 0, 0, 0]),
+        Some(err(Errno::EBADF))
+    );
+    assert_eq!(g.host.selected, [child, child, child, child, 1]);
+    assert!(matches!(g.system.state(1), Some(State::Blocked(_))));
+    assert_eq!(
+        g.serve(child, World::message(nr::exit_group, [0; 6], 0)),
+        [(1, u64::from(child))]
+    );
+    // Every call that changes only its caller is one the guest serves, none of the process
+    // table's.
+    for &number in crate::syscall::table::CALLER_ONLY {
+        assert!(crate::syscall::table::NUMBERS.contains(&number), "{number}");
+        let mut w = World::new(&bytes);
+        assert!(
+            !matches!(w.run(number, [0; 6]).0, Outcome::Process(_)),
+            "{number}"
+        );
     }
 }
 
