@@ -310,7 +310,7 @@ pub fn handle(
 /// may stop or end the process.
 pub fn touches_only_caller(m: &ExceptionMessage) -> bool {
     match m.vector {
-        VECTOR_SYSCALL => table::CALLER_ONLY.contains(&m.registers.rax),
+        VECTOR_SYSCALL => table::caller_only(m.registers.rax),
         VECTOR_INTERRUPT => false,
         _ => true,
     }

@@ -7,9 +7,13 @@
 //! reply at any later time. A call that has to wait (`wait4` for a running child, `read`
 //! from an empty pipe, `write` to a full one) changes nothing and leaves the process
 //! [`State::Blocked`] with its message kept; after every message the guest serves (and
-//! when console input arrives: [`System::retry_blocked`]), it serves the kept messages again, in table order, until none makes progress, and replies
-//! to each call that completes. So a waiting process never stops the guest from serving
-//! the others, and the order of events decides nothing but who runs first.
+//! when console input arrives: [`System::retry_blocked`]), it serves the kept messages
+//! again, in table order, until none makes progress, and replies to each call that
+//! completes. So a waiting process never stops the guest from serving the others, and the
+//! order of events decides nothing but who runs first. Not after a message that changed
+//! only its sender, which runs on (a page fault; a call of
+//! [`crate::syscall::table::CALLER_ONLY`]: `getpid`, `mmap`, `rt_sigaction`, `stat`, ...):
+//! that ends nobody's wait.
 //!
 //! **Fork.** The child is a new task sharing the parent's pages copy-on-write (the
 //! partition program maps them; [`Tasks::fork`]) and a thread started at address 0:
@@ -382,16 +386,12 @@ impl System {
         // calls are not served again (each retry is a whole call: a `poll` of all its
         // descriptors, an `accept`; most of a forked child's messages are its page faults
         // and such calls).
-        let runs_on = self.index(pid) == Some(i)
-            && matches!(
-                self.slots[i],
-                Some(Slot {
-                    state: State::Running,
-                    stopped: false,
-                    ..
-                })
-            );
-        if ended.is_none() && only_caller && runs_on {
+        let runs_on = |slot: &Option<Slot>| {
+            matches!(slot, Some(s) if s.process.pid == pid
+                && !s.stopped
+                && matches!(s.state, State::Running))
+        };
+        if ended.is_none() && only_caller && self.slots.get(i).is_some_and(runs_on) {
             return None;
         }
         ended.or_else(|| self.wake(fs, k))

@@ -1750,8 +1750,17 @@ fn only_what_may_end_a_wait_serves_the_blocked_calls_again() {
     );
     // Every call that changes only its caller is one the guest serves, none of the process
     // table's.
-    for &number in crate::syscall::table::CALLER_ONLY {
-        assert!(crate::syscall::table::NUMBERS.contains(&number), "{number}");
+    use crate::syscall::table::{CALLER_ONLY, NUMBERS, caller_only};
+    for number in 0..1024 {
+        assert_eq!(
+            caller_only(number),
+            CALLER_ONLY.contains(&number),
+            "{number}"
+        );
+    }
+    assert!(!caller_only(u64::MAX));
+    for &number in CALLER_ONLY {
+        assert!(NUMBERS.contains(&number), "{number}");
         let mut w = World::new(&bytes);
         assert!(
             !matches!(w.run(number, [0; 6]).0, Outcome::Process(_)),

@@ -403,3 +403,21 @@ pub const CALLER_ONLY: &[u64] = &[
     nr::umask,
     nr::lseek,
 ];
+
+/// [`CALLER_ONLY`] as one bit per number, for a lookup per message (every number is below
+/// 512: a larger one fails the build here).
+const CALLER_ONLY_BITS: [u64; 8] = {
+    let mut bits = [0u64; 8];
+    let mut i = 0;
+    while i < CALLER_ONLY.len() {
+        let number = CALLER_ONLY[i] as usize;
+        bits[number / 64] |= 1 << (number % 64);
+        i += 1;
+    }
+    bits
+};
+
+/// Whether `number` is one of [`CALLER_ONLY`].
+pub fn caller_only(number: u64) -> bool {
+    number < 512 && CALLER_ONLY_BITS[(number / 64) as usize] & (1 << (number % 64)) != 0
+}
