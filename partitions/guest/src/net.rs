@@ -42,7 +42,7 @@ pub const SEGMENT: usize = 1460;
 /// A TCP socket's buffers when `eth0`'s frames go through a ring of `slots` slots each way:
 /// as many full segments as the ring holds (a window the peer sends at once lands in the
 /// ring without loss; a larger one overflowed it and cost retransmissions), in whole KiB
-/// and within 16 to 64 KiB (64 KiB is the largest window without window scaling).
+/// and within 16 to 64 KiB (TCP's largest window without window scaling is a byte less).
 pub const fn ring_tcp_buffer(slots: u32) -> usize {
     let fits = slots as usize * SEGMENT / 1024 * 1024;
     if fits < 16 * 1024 {
