@@ -43,15 +43,8 @@ pub const SEGMENT: usize = 1460;
 /// as many full segments as the ring holds (a window the peer sends at once lands in the
 /// ring without loss; a larger one overflowed it and cost retransmissions), in whole KiB
 /// and within 16 to 64 KiB (TCP's largest window without window scaling is a byte less).
-pub const fn ring_tcp_buffer(slots: u32) -> usize {
-    let fits = slots as usize * SEGMENT / 1024 * 1024;
-    if fits < 16 * 1024 {
-        16 * 1024
-    } else if fits > 64 * 1024 {
-        64 * 1024
-    } else {
-        fits
-    }
+pub fn ring_tcp_buffer(slots: u32) -> usize {
+    (slots as usize * SEGMENT / 1024 * 1024).clamp(16 * 1024, 64 * 1024)
 }
 
 /// The shortest time between two runs of the stack for its timers.
@@ -386,14 +379,14 @@ impl Net {
     /// The stack at `now_ns` (made on first use).
     pub fn stack(&mut self, now_ns: u64) -> &mut Stack {
         let eth = self.eth;
-        let limits = match &self.ring {
-            Some((to, from)) => Limits {
-                tcp_buffer: ring_tcp_buffer(to.slots().min(from.slots())),
-                ..LIMITS
-            },
-            None => LIMITS,
-        };
         self.stack.get_or_insert_with(|| {
+            let limits = match &self.ring {
+                Some((to, from)) => Limits {
+                    tcp_buffer: ring_tcp_buffer(to.slots().min(from.slots())),
+                    ..LIMITS
+                },
+                None => LIMITS,
+            };
             let config = match eth {
                 Some(e) => Config {
                     mac: e.mac,

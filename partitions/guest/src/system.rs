@@ -366,17 +366,14 @@ impl System {
         let tgid = self.slots[i].as_ref()?.process.tgid;
         self.lend(i);
         let slot = self.slots[i].as_mut()?;
-        let mut only_caller = false;
+        let only_caller = matches!(slot.state, State::Running) && syscall::touches_only_caller(&m);
         let ended = match slot.state {
             State::Starting(registers) => {
                 slot.state = State::Running;
                 m.registers = registers;
                 self.resume(i, fs, k, m, None)
             }
-            State::Running => {
-                only_caller = syscall::touches_only_caller(&m);
-                self.run(i, fs, k, m)
-            }
+            State::Running => self.run(i, fs, k, m),
             // A blocked or ended process has no thread that could send.
             State::Blocked(_) | State::Vforked { .. } | State::Zombie(_) => None,
         };
