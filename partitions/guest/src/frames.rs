@@ -13,6 +13,12 @@
 //!   when the other side already let go of it. The guest's own writes into a process
 //!   ([`Frames::write`]) copy a shared frame first, so no write ever reaches a frame that
 //!   another process still sees.
+//! - **Writes a fork foresees.** A process's children of one program write the same pages
+//!   first (a forking server's children: their stack, libc's data); each such write is a
+//!   fault, a round trip to the guest. The pages a process and its children copied on
+//!   write ([`ForkWrites`], kept by the caller) are copied at its next fork instead
+//!   ([`Frames::share`]): the child gets them writable, and the parent keeps its frame
+//!   writable when no one else shares it.
 //! - **Image cache.** The pages of a program's image ([`Frames::back_image`]) are kept
 //!   after their first load, keyed by the image and address, and every process that runs
 //!   the program shares them copy-on-write: a later `execve` of it copies nothing. Pages
@@ -267,7 +273,8 @@ impl<'p> Frames<'p> {
     /// Makes `page` of `pid` accessible with `rights` after a page fault (`write`: the
     /// access was a write): backs it with a zeroed frame if nothing backs it yet, copies a
     /// frame it shares if it writes (or takes the frame over when the other references
-    /// are gone), and maps it; a frame it still shares is mapped read-only.
+    /// are gone), and maps it; a frame it still shares is mapped read-only. Returns
+    /// whether it copied a shared frame (a write [`ForkWrites`] learns from).
     pub fn fault_in(
         &mut self,
         m: &mut impl Mapper,
@@ -275,10 +282,12 @@ impl<'p> Frames<'p> {
         page: u64,
         rights: Rights,
         write: bool,
-    ) -> Result<(), Errno> {
+    ) -> Result<bool, Errno> {
+        let mut copied = false;
         let frame = match self.backing.get(key(pid, page)) {
             None => self.back_page(pid, page)?,
             Some(frame) if write && self.pool.references(frame) > 1 => {
+                copied = true;
                 self.copy_page(pid, page, frame)?
             }
             Some(frame) => frame,
@@ -290,7 +299,8 @@ impl<'p> Frames<'p> {
         };
         // It may be mapped already (a read-only copy-on-write page that is written).
         m.unmap(pid, page, 1);
-        m.map(pid, frame, page, 1, rights)
+        m.map(pid, frame, page, 1, rights)?;
+        Ok(copied)
     }
 
     /// Backs `page` of `pid` with a frame `fill` fills (zeroed before), unmapped, unless a
@@ -428,14 +438,18 @@ impl<'p> Frames<'p> {
 
     /// `fork`: `child` (a new task, nothing mapped) gets every page `parent` has backed,
     /// sharing its frame; `rights(page)` says what the page's area allows (`None`: no
-    /// area, or `PROT_NONE`: left unmapped). A writable page becomes read-only in both.
-    /// Returns how many pages are shared; on an error the caller releases the child.
+    /// area, or `PROT_NONE`: left unmapped). A writable page becomes read-only in both,
+    /// but for the pages of `foreseen` ([`ForkWrites::pages`]): the child gets a copy of
+    /// those, writable, and the parent its frame back writable unless someone else shares
+    /// it (when the pool has no frame for a copy, the page stays shared). Returns how many
+    /// pages are shared or copied; on an error the caller releases the child.
     pub fn share(
         &mut self,
         m: &mut impl Mapper,
         parent: u32,
         child: u32,
         rights: impl Fn(u64) -> Option<Rights>,
+        foreseen: &[u64],
     ) -> Result<u64, Errno> {
         let (from, to) = (key(parent, 0), key(parent + 1, 0));
         // The child's entries in one move: the table's order is the parent's (the pid
@@ -478,7 +492,70 @@ impl<'p> Frames<'p> {
             }
             i += pages as usize;
         }
+        // The writes both would fault on at once, made now: no round trip for them.
+        for &page in foreseen {
+            let Some(r) = rights(page).filter(|r| r.accessible() && r.contains(Rights::WRITE))
+            else {
+                continue;
+            };
+            if self.backing.get(key(child, page)).is_none()
+                || self.fault_in(m, child, page, r, true).is_err()
+            {
+                continue;
+            }
+            // When its mapping fails the page is left unmapped: the parent's next access
+            // faults and maps it again.
+            if self
+                .frame_of(parent, page)
+                .is_some_and(|(_, refs)| refs == 1)
+            {
+                let _ = self.fault_in(m, parent, page, r, true);
+            }
+        }
         Ok(shared as u64)
+    }
+}
+
+/// The pages a process and its children copied on write, the newest [`ForkWrites::MAX`],
+/// oldest first (what its next fork copies at once: [`Frames::share`]).
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ForkWrites {
+    pages: [u64; ForkWrites::MAX],
+    len: usize,
+}
+
+impl ForkWrites {
+    /// Pages kept: a busybox httpd child writes 9 (its stack and libc's data), and each
+    /// costs a copy at every fork.
+    pub const MAX: usize = 16;
+
+    /// A write of `page` (kept once; when full, the oldest gives way).
+    pub fn record(&mut self, page: u64) {
+        if self.pages().contains(&page) {
+            return;
+        }
+        if self.len == Self::MAX {
+            self.pages.copy_within(1.., 0);
+            self.len -= 1;
+        }
+        self.pages[self.len] = page;
+        self.len += 1;
+    }
+
+    /// The pages in `start..end` are gone (unmapped, or the program replaced).
+    pub fn forget(&mut self, start: u64, end: u64) {
+        let mut kept = 0;
+        for i in 0..self.len {
+            if !(start..end).contains(&self.pages[i]) {
+                self.pages[kept] = self.pages[i];
+                kept += 1;
+            }
+        }
+        self.len = kept;
+    }
+
+    pub fn pages(&self) -> &[u64] {
+        &self.pages[..self.len]
     }
 }
 
@@ -594,7 +671,7 @@ mod tests {
             _ => Some(RW),
         };
         t.calls = 0;
-        assert_eq!(f.share(&mut t, 1, 2, areas), Ok(5));
+        assert_eq!(f.share(&mut t, 1, 2, areas, &[]), Ok(5));
         assert!(t.calls <= 4, "one map per run: {}", t.calls);
         assert_eq!(f.free_frames(), 11, "nothing copied");
         for pid in [1, 2] {
@@ -633,6 +710,80 @@ mod tests {
     }
 
     #[test]
+    fn a_fork_copies_the_foreseen_writes_at_once() {
+        let (mut mem, mut table) = setup(16);
+        let mut f = Frames::new(&mut mem, &mut table);
+        let mut t = Tables::default();
+        f.back(&mut t, 1, 0x40_0000, 1, RX, |_, page| page.fill(7))
+            .unwrap();
+        for page in [0x80_0000, 0x80_1000, 0x80_2000] {
+            assert_eq!(
+                f.fault_in(&mut t, 1, page, RW, true),
+                Ok(false),
+                "zeroed, not copied"
+            );
+        }
+        f.write(&mut t, 1, 0x80_0000, b"parent").unwrap();
+        let areas = |page: u64| match page {
+            0x40_0000 => Some(RX),
+            0x80_2000 => None, // unmapped since (a PROT_NONE area)
+            _ => Some(RW),
+        };
+        // Foreseen: a written page, the image's (not writable), one not backed, one of no
+        // area: only the first is copied.
+        let foreseen = [0x80_0000, 0x40_0000, 0x90_0000, 0x80_2000];
+        assert_eq!(f.share(&mut t, 1, 2, areas, &foreseen), Ok(4));
+        assert_eq!(f.free_frames(), 11, "one copy");
+        for pid in [1, 2] {
+            assert_eq!(t.mapped[&(pid, 0x80_0000)].1, RW, "writable in both");
+            assert_eq!(f.frame_of(pid, 0x80_0000).unwrap().1, 1);
+            assert_eq!(t.mapped[&(pid, 0x80_1000)].1, Rights::READ, "shared");
+            assert_eq!(t.mapped[&(pid, 0x40_0000)].1, RX);
+        }
+        assert!(!t.mapped.contains_key(&(2, 0x90_0000)));
+        assert_eq!(byte(&f, 2, 0x80_0005), b't', "the child's copy");
+        f.write(&mut t, 2, 0x80_0000, b"child").unwrap();
+        assert_eq!(byte(&f, 1, 0x80_0000), b'p');
+        // A write of a page still shared is a copy: what the next fork foresees.
+        assert_eq!(f.fault_in(&mut t, 2, 0x80_1000, RW, true), Ok(true));
+        // A page another child still shares stays read-only in the parent.
+        assert_eq!(f.share(&mut t, 1, 3, areas, &[0x80_1000]), Ok(4));
+        assert_eq!(t.mapped[&(3, 0x80_1000)].1, RW);
+        assert_eq!(
+            t.mapped[&(1, 0x80_1000)].1,
+            RW,
+            "the parent's frame is its own again"
+        );
+        assert_eq!(
+            t.mapped[&(1, 0x80_0000)].1,
+            Rights::READ,
+            "shared with child 3"
+        );
+    }
+
+    #[test]
+    fn fork_writes_keep_the_newest_pages_once_each() {
+        let mut w = ForkWrites::default();
+        w.record(0x1000);
+        w.record(0x1000);
+        assert_eq!(w.pages(), [0x1000]);
+        for i in 1..=ForkWrites::MAX as u64 {
+            w.record(0x1000 * (i + 1));
+        }
+        assert_eq!(w.pages().len(), ForkWrites::MAX);
+        assert_eq!(w.pages()[0], 0x2000, "the oldest gave way");
+        assert_eq!(
+            w.pages()[ForkWrites::MAX - 1],
+            0x1000 * (ForkWrites::MAX as u64 + 1)
+        );
+        w.forget(0x3000, 0x5000);
+        assert_eq!(w.pages().len(), ForkWrites::MAX - 2);
+        assert_eq!(w.pages()[..2], [0x2000, 0x5000], "the order kept");
+        w.record(0x3000);
+        assert_eq!(w.pages().last(), Some(&0x3000));
+    }
+
+    #[test]
     fn a_fork_past_a_frames_last_reference_changes_nothing() {
         let (mut mem, mut table) = setup(4);
         let mut f = Frames::new(&mut mem, &mut table);
@@ -642,7 +793,7 @@ mod tests {
         let (full, _) = f.frame_of(1, 0x2000).unwrap();
         while f.pool.share(full) {}
         let rw = |_| Some(RW);
-        assert_eq!(f.share(&mut t, 1, 2, rw), Err(Errno::EAGAIN));
+        assert_eq!(f.share(&mut t, 1, 2, rw, &[]), Err(Errno::EAGAIN));
         assert_eq!(
             f.frame_of(1, 0x1000).unwrap().1,
             1,
@@ -665,14 +816,14 @@ mod tests {
         f.fault_in(&mut t, 1, 0x2000, RW, true).unwrap();
         f.fault_in(&mut t, 1, 0x9000, RW, true).unwrap();
         let none_at_2 = |page: u64| (page != 0x2000).then_some(RW);
-        assert_eq!(f.share(&mut t, 1, 2, none_at_2), Err(Errno::ENOMEM));
+        assert_eq!(f.share(&mut t, 1, 2, none_at_2, &[]), Err(Errno::ENOMEM));
         // The child's task goes, with its mappings.
         f.release_all(2);
         t.mapped.retain(|k, _| k.0 != 2);
         assert_eq!(f.frame_of(1, 0x1000).unwrap().1, 1, "references given back");
         assert_eq!(f.free_frames(), 1);
         f.release(&mut t, 1, 0x9000, 1);
-        assert_eq!(f.share(&mut t, 1, 2, none_at_2), Ok(2));
+        assert_eq!(f.share(&mut t, 1, 2, none_at_2, &[]), Ok(2));
         assert!(t.mapped.contains_key(&(2, 0x1000)));
         assert!(
             !t.mapped.contains_key(&(2, 0x2000)),

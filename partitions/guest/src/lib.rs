@@ -46,7 +46,8 @@
 //!   `guest: process <pid> cannot execute <path>: <why>` (an `execve` that failed after the
 //!   old image was dropped: the process dies with SIGSEGV);
 //! - `guest: process <pid> (<name>) forked from <ppid>: <n> pages shared in <t> us` (the
-//!   pages the child shares copy-on-write, and how long the `fork` took);
+//!   pages the child got, shared copy-on-write or the few a fork foresees copied
+//!   ([`frames::ForkWrites`]), and how long the `fork` took);
 //! - `guest: process <pid> <stdout|stderr>: <text>` for each line it writes ([`console`]),
 //!   when the console is the log;
 //! - `guest: process <pid> exited with status <n>` (`exit`, `exit_group`);

@@ -643,6 +643,10 @@ struct Task {
     /// The process whose memory (task and frames) it uses: itself, or for a vfork child
     /// its parent's until it executes.
     memory: u32,
+    /// The process that forked it (0: none).
+    parent: u32,
+    /// What it and its children copied on write: its next fork copies them at once.
+    fork_writes: guest::frames::ForkWrites,
     out: [LineBuffer; 2],
 }
 
@@ -654,6 +658,8 @@ impl Task {
             thread: ThreadId(0),
             priority: 0,
             memory: pid,
+            parent: 0,
+            fork_writes: guest::frames::ForkWrites::default(),
             out: [LineBuffer::new(), LineBuffer::new()],
         }
     }
@@ -887,6 +893,9 @@ impl Host for GuestHost<'_> {
     fn unmap(&mut self, start: u64, pages: u64) {
         let (frames, mut spaces, pid) = self.memory();
         frames.release(&mut spaces, pid, start, pages);
+        if let Some(t) = self.tasks.iter_mut().flatten().find(|t| t.pid == pid) {
+            t.fork_writes.forget(start, start + pages * PAGE);
+        }
     }
 
     fn protect(&mut self, start: u64, pages: u64, rights: Rights) -> Result<(), Errno> {
@@ -910,7 +919,41 @@ impl Host for GuestHost<'_> {
 
     fn fault_in(&mut self, page: u64, rights: Rights, write: bool) -> Result<(), Errno> {
         let (frames, mut spaces, pid) = self.memory();
-        frames.fault_in(&mut spaces, pid, page, rights, write)
+        let shared = write.then(|| frames.frame_of(pid, page)).flatten();
+        if !frames.fault_in(&mut spaces, pid, page, rights, write)? {
+            return Ok(());
+        }
+        // A copy of a frame shared across a fork (not one of the image cache, or of a
+        // process since executed): the next fork of the parent, or of the process itself
+        // when a child of its still has the frame, foresees it. One pass over the table
+        // (every copy-on-write fault takes it).
+        let Some((shared, _)) = shared else {
+            return Ok(());
+        };
+        let frames = &self.frames;
+        let shares = |other: u32| {
+            frames
+                .frame_of(other, page)
+                .is_some_and(|(f, _)| f == shared)
+        };
+        let (mut parent, mut to_itself) = (0, false);
+        for t in self.tasks.iter().flatten() {
+            if t.pid == pid {
+                parent = t.parent;
+            } else if !to_itself && t.parent == pid && t.memory == t.pid {
+                to_itself = shares(t.pid);
+            }
+        }
+        let to_parent = parent != 0 && shares(parent);
+        if !to_parent && !to_itself {
+            return Ok(());
+        }
+        for t in self.tasks.iter_mut().flatten() {
+            if (t.pid == parent && to_parent) || (t.pid == pid && to_itself) {
+                t.fork_writes.record(page);
+            }
+        }
+        Ok(())
     }
 
     fn console_write(&mut self, pid: u32, stream: Stream, bytes: &[u8]) {
@@ -1027,10 +1070,16 @@ impl Tasks for GuestHost<'_> {
             .ok_or(Errno::EAGAIN)?;
         let task = sys::task_create(Abilities::empty(), self.mcp, 0, "process")
             .map_err(|_| Errno::EAGAIN)?;
-        self.tasks[slot] = Some(Task::new(child, task));
+        let parent = self.memory_of(self.current);
+        let foreseen = self.task(parent).map(|t| t.fork_writes.clone());
+        self.tasks[slot] = Some(Task {
+            parent,
+            ..Task::new(child, task)
+        });
         let (frames, mut spaces, parent) = self.memory();
         let rights = |page| areas.find(page).map(|a| a.rights);
-        let copied = frames.share(&mut spaces, parent, child, rights);
+        let foreseen = foreseen.as_ref().map_or(&[][..], |w| w.pages());
+        let copied = frames.share(&mut spaces, parent, child, rights, foreseen);
         // The thread starts at address 0: its fetch fault asks the guest for the registers.
         let thread = copied.and_then(|_| {
             start_thread(task, 0, 0, self.mcp, self.handler).map_err(|_| Errno::EAGAIN)
