@@ -43,10 +43,10 @@
 //! [`SAVE_SLACK`]), the older one being the durable one until then; one the cut leaves
 //! without a next snapshot is left to the durability check. So the snapshot a cut leaves is
 //! at most the configured interval, or the time of a write, old. The bound is not applied
-//! from a download until the first snapshot
-//! after its boot project is saved: a snapshot waits for that write (tens of requests to
-//! the disk partition), which on real time takes as many releases as the host's load
-//! makes it. No partition panics, no save fails, no plcctl command fails.
+//! from a download until the first snapshot after its boot project is saved: a snapshot
+//! waits for that write (tens of requests to the disk partition), which on real time takes
+//! as many releases as the host's load makes it. No partition panics, no save fails, no
+//! plcctl command fails.
 //!
 //! Each cut prints a line: its delay, what it hit (a download, a boot-project or RETAIN
 //! save torn or done but not yet logged, or the time between saves) and what the disk held;
@@ -396,7 +396,7 @@ fn a_snapshot_may_be_as_late_as_the_write_before_it_took() {
     let mut ages = SaveAges::default();
     ages.saved(10 + SAVE_SLACK, 50_000, false).unwrap();
     assert!(ages.saved(11 + SAVE_SLACK, 50_000, false).is_err());
-    // A write of 28 releases (280 ms) makes the next snapshot as late.
+    // A write of just over 280 ms (29 releases, rounded up) makes the next one as late.
     ages.saved(10, 280_001, false).unwrap();
     ages.saved(29 + SAVE_SLACK, 10_000, false).unwrap();
     assert!(ages.saved(11 + SAVE_SLACK, 10_000, false).is_err());
