@@ -361,11 +361,12 @@ impl SaveAges {
     ) -> Result<(), String> {
         let write = written_us.div_ceil(PERIOD_US);
         let late = std::mem::take(&mut self.late);
+        let bound = self.bound();
         let previous_write = std::mem::replace(&mut self.last_write, write);
         if waited_for_boot_write {
             return Ok(());
         }
-        if age > RETAIN_EVERY.max(previous_write) + SAVE_SLACK {
+        if age > bound {
             return Err(format!(
                 "RETAIN saved {age} releases after the last save (or the program's start), more than {RETAIN_EVERY} (or the {previous_write} the write before took) + {SAVE_SLACK}"
             ));

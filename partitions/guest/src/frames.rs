@@ -273,8 +273,8 @@ impl<'p> Frames<'p> {
     /// Makes `page` of `pid` accessible with `rights` after a page fault (`write`: the
     /// access was a write): backs it with a zeroed frame if nothing backs it yet, copies a
     /// frame it shares if it writes (or takes the frame over when the other references
-    /// are gone), and maps it; a frame it still shares is mapped read-only. Returns
-    /// whether it copied a shared frame (a write [`ForkWrites`] learns from).
+    /// are gone), and maps it; a frame it still shares is mapped read-only. Returns the
+    /// shared frame it copied, if it did (a write [`Frames::foreseers`] learn from).
     pub fn fault_in(
         &mut self,
         m: &mut impl Mapper,
@@ -282,15 +282,32 @@ impl<'p> Frames<'p> {
         page: u64,
         rights: Rights,
         write: bool,
-    ) -> Result<bool, Errno> {
-        let mut copied = false;
-        let frame = match self.backing.get(key(pid, page)) {
-            None => self.back_page(pid, page)?,
-            Some(frame) if write && self.pool.references(frame) > 1 => {
-                copied = true;
-                self.copy_page(pid, page, frame)?
+    ) -> Result<Option<usize>, Errno> {
+        match self.backing.get(key(pid, page)) {
+            None => {
+                let frame = self.back_page(pid, page)?;
+                self.map_backed(m, pid, page, frame, rights, write)
             }
-            Some(frame) => frame,
+            Some(frame) => self.map_backed(m, pid, page, frame, rights, write),
+        }
+    }
+
+    /// [`Frames::fault_in`] of a page `frame` backs.
+    fn map_backed(
+        &mut self,
+        m: &mut impl Mapper,
+        pid: u32,
+        page: u64,
+        frame: usize,
+        rights: Rights,
+        write: bool,
+    ) -> Result<Option<usize>, Errno> {
+        let mut copied = None;
+        let frame = if write && self.pool.references(frame) > 1 {
+            copied = Some(frame);
+            self.copy_page(pid, page, frame)?
+        } else {
+            frame
         };
         let rights = if self.pool.references(frame) > 1 {
             rights.without(Rights::WRITE)
@@ -301,6 +318,23 @@ impl<'p> Frames<'p> {
         m.unmap(pid, page, 1);
         m.map(pid, frame, page, 1, rights)?;
         Ok(copied)
+    }
+
+    /// Whose [`ForkWrites`] learn of `pid`'s copy of `page` from the shared frame `copied`
+    /// ([`Frames::fault_in`]): its `parent`'s when the parent still has that frame (the
+    /// parent's next child will write the page too), and its own when one of its forked
+    /// `children` still has it (its own next child will). A frame of the image cache, or
+    /// of a parent that executed since, teaches no one.
+    pub fn foreseers(
+        &self,
+        pid: u32,
+        page: u64,
+        copied: usize,
+        parent: Option<u32>,
+        mut children: impl Iterator<Item = u32>,
+    ) -> [Option<u32>; 2] {
+        let has = |other: u32| self.backing.get(key(other, page)) == Some(copied);
+        [parent.filter(|&p| has(p)), children.any(has).then_some(pid)]
     }
 
     /// Backs `page` of `pid` with a frame `fill` fills (zeroed before), unmapped, unless a
@@ -498,18 +532,17 @@ impl<'p> Frames<'p> {
             else {
                 continue;
             };
-            if self.backing.get(key(child, page)).is_none()
-                || self.fault_in(m, child, page, r, true).is_err()
-            {
+            // Not backed: nothing to copy (the child's fault backs it).
+            let Some(frame) = self.backing.get(key(child, page)) else {
+                continue;
+            };
+            if self.map_backed(m, child, page, frame, r, true).is_err() {
                 continue;
             }
             // When its mapping fails the page is left unmapped: the parent's next access
             // faults and maps it again.
-            if self
-                .frame_of(parent, page)
-                .is_some_and(|(_, refs)| refs == 1)
-            {
-                let _ = self.fault_in(m, parent, page, r, true);
+            if let Some((frame, 1)) = self.frame_of(parent, page) {
+                let _ = self.map_backed(m, parent, page, frame, r, true);
             }
         }
         Ok(shared as u64)
@@ -719,7 +752,7 @@ mod tests {
         for page in [0x80_0000, 0x80_1000, 0x80_2000] {
             assert_eq!(
                 f.fault_in(&mut t, 1, page, RW, true),
-                Ok(false),
+                Ok(None),
                 "zeroed, not copied"
             );
         }
@@ -745,7 +778,8 @@ mod tests {
         f.write(&mut t, 2, 0x80_0000, b"child").unwrap();
         assert_eq!(byte(&f, 1, 0x80_0000), b'p');
         // A write of a page still shared is a copy: what the next fork foresees.
-        assert_eq!(f.fault_in(&mut t, 2, 0x80_1000, RW, true), Ok(true));
+        let (shared, _) = f.frame_of(2, 0x80_1000).unwrap();
+        assert_eq!(f.fault_in(&mut t, 2, 0x80_1000, RW, true), Ok(Some(shared)));
         // A page another child still shares stays read-only in the parent.
         assert_eq!(f.share(&mut t, 1, 3, areas, &[0x80_1000]), Ok(4));
         assert_eq!(t.mapped[&(3, 0x80_1000)].1, RW);
@@ -759,6 +793,39 @@ mod tests {
             Rights::READ,
             "shared with child 3"
         );
+    }
+
+    #[test]
+    fn a_copy_teaches_the_processes_whose_next_fork_writes_it() {
+        let (mut mem, mut table) = setup(8);
+        let mut f = Frames::new(&mut mem, &mut table);
+        let mut t = Tables::default();
+        let rw = |_| Some(RW);
+        let (a, b) = (0x80_0000, 0x80_1000);
+        for page in [a, b] {
+            f.fault_in(&mut t, 1, page, RW, true).unwrap();
+        }
+        f.share(&mut t, 1, 2, rw, &[]).unwrap();
+        // Child 2 writes a page its parent still has: the parent's next child will too.
+        let copied = f.fault_in(&mut t, 2, a, RW, true).unwrap().unwrap();
+        let none = std::iter::empty();
+        assert_eq!(f.foreseers(2, a, copied, Some(1), none), [Some(1), None]);
+        // 2 forks 3 and writes the page again: its parent has another frame now, its
+        // child this one.
+        f.share(&mut t, 2, 3, rw, &[]).unwrap();
+        let copied = f.fault_in(&mut t, 2, a, RW, true).unwrap().unwrap();
+        let children = [3].into_iter();
+        assert_eq!(
+            f.foreseers(2, a, copied, Some(1), children),
+            [None, Some(2)]
+        );
+        // The parent executed (its memory gone): the copy teaches no one.
+        f.release_all(1);
+        f.release_all(3);
+        f.share(&mut t, 2, 4, rw, &[]).unwrap();
+        let copied = f.fault_in(&mut t, 4, b, RW, true).unwrap().unwrap();
+        let none = std::iter::empty();
+        assert_eq!(f.foreseers(4, b, copied, Some(1), none), [None, None]);
     }
 
     #[test]

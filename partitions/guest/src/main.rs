@@ -919,37 +919,19 @@ impl Host for GuestHost<'_> {
 
     fn fault_in(&mut self, page: u64, rights: Rights, write: bool) -> Result<(), Errno> {
         let (frames, mut spaces, pid) = self.memory();
-        let shared = write.then(|| frames.frame_of(pid, page)).flatten();
-        if !frames.fault_in(&mut spaces, pid, page, rights, write)? {
-            return Ok(());
-        }
-        // A copy of a frame shared across a fork (not one of the image cache, or of a
-        // process since executed): the next fork of the parent, or of the process itself
-        // when a child of its still has the frame, foresees it. One pass over the table
-        // (every copy-on-write fault takes it).
-        let Some((shared, _)) = shared else {
+        let Some(copied) = frames.fault_in(&mut spaces, pid, page, rights, write)? else {
             return Ok(());
         };
-        let frames = &self.frames;
-        let shares = |other: u32| {
-            frames
-                .frame_of(other, page)
-                .is_some_and(|(f, _)| f == shared)
-        };
-        let (mut parent, mut to_itself) = (0, false);
-        for t in self.tasks.iter().flatten() {
-            if t.pid == pid {
-                parent = t.parent;
-            } else if !to_itself && t.parent == pid && t.memory == t.pid {
-                to_itself = shares(t.pid);
-            }
-        }
-        let to_parent = parent != 0 && shares(parent);
-        if !to_parent && !to_itself {
-            return Ok(());
-        }
+        let tasks = self.tasks.iter().flatten();
+        let parent = tasks.clone().find(|t| t.pid == pid).map(|t| t.parent);
+        let children = tasks
+            .filter(|t| t.parent == pid && t.memory == t.pid)
+            .map(|t| t.pid);
+        let foreseers =
+            self.frames
+                .foreseers(pid, page, copied, parent.filter(|&p| p != 0), children);
         for t in self.tasks.iter_mut().flatten() {
-            if (t.pid == parent && to_parent) || (t.pid == pid && to_itself) {
+            if foreseers.contains(&Some(t.pid)) {
                 t.fork_writes.record(page);
             }
         }
