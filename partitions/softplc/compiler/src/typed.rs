@@ -10,8 +10,9 @@
 //! argument of each call binds which parameter ([`Bindings`]), the order of each
 //! standard-function call's arguments ([`StdArguments`]) and the type each generic selection
 //! function is called at ([`GenericTypes`]), the property (receiver and accessors) each member
-//! read and assignment target reaches, if any ([`Properties`]), the value of each CASE label
-//! ([`CaseLabels`]) and the calls between user POUs, on which
+//! read and assignment target reaches, if any ([`Properties`]), what each operator
+//! does by the rules of [`sema::ops`](crate::sema::ops) ([`Operations`]), the value
+//! of each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
 //! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without
 //! diagnostics reaches [`emit`], which starts from those records and reports nothing itself: a
 //! diagnostic raised while emitting is a compiler bug (an internal error).
@@ -30,11 +31,13 @@
 //! bare name from [`BareNames`] and the binding of every call's arguments to a user POU's or
 //! method's parameters from [`Bindings`], the order of standard-function arguments from
 //! [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT and MUX from [`GenericTypes`], the
-//! property of every access from [`Properties`], but still decides what the rest means while
+//! property of every access from [`Properties`], what every operator does from
+//! [`Operations`] (it only picks the opcodes), but still decides what the rest means while
 //! it emits (the operation of the other standard functions from their arguments' recorded
 //! types, conversions) and passes the expression walk's check branches again (none can fail
 //! on a checked program). Besides the statement checker, the rules checked by the checking
-//! pass only are the recursion rule (`sema::body`), the argument rules (an unknown,
+//! pass only are the operator rules (`sema::ops`), the recursion rule (`sema::body`),
+//! the argument rules (an unknown,
 //! misplaced, surplus or repeated argument of a user POU, a method or a standard function)
 //! and a function block input's assignment rules (the statement checker's).
 
@@ -45,6 +48,7 @@ use crate::codegen::Gen;
 use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::body::{self, CallEdge};
+use crate::sema::ops::Operation;
 use crate::sema::{InterfaceMember, Program, VarDef};
 use crate::types::Type;
 
@@ -89,6 +93,11 @@ impl<T> ExprTable<T> {
 
 /// The type of each expression the checker inferred.
 pub type ExprTypes = ExprTable<Type>;
+
+/// What each operation does ([`crate::sema::ops`]), keyed by its first operand (an
+/// operator's, or a standard function's such as ADD: an expression is the first operand of
+/// at most one).
+pub type Operations = ExprTable<Operation>;
 
 /// The value of each CASE label expression (a constant, an enumeration value of the
 /// selector's type or an exception name), as the checker resolved it.
@@ -318,6 +327,8 @@ pub struct Checked {
     pub std_arguments: StdArguments,
     /// The type every generic selection function is called at.
     pub generic_types: GenericTypes,
+    /// What every operator does.
+    pub operations: Operations,
     /// Whether each member read and each assignment target is a property, and which.
     pub properties: Properties,
     /// The value of every CASE label.
@@ -348,6 +359,7 @@ pub fn check(
         bindings: std::mem::take(&mut checker.bindings),
         std_arguments: std::mem::take(&mut checker.std_arguments),
         generic_types: std::mem::take(&mut checker.generic_types),
+        operations: std::mem::take(&mut checker.operations),
         properties: std::mem::take(&mut checker.properties),
     };
     drop(checker);
@@ -384,6 +396,7 @@ pub fn emit(
     generator.bindings = checked.bindings;
     generator.std_arguments = checked.std_arguments;
     generator.generic_types = checked.generic_types;
+    generator.operations = checked.operations;
     generator.properties = checked.properties;
     generator.generate();
     let emitted = Emitted {
@@ -524,6 +537,14 @@ END_PROGRAM
         // MAX(r, 1).
         assert_eq!(errors.len(), 1, "{errors:?}");
         assert!(errors[0].contains("decided no type"));
+    }
+
+    #[test]
+    fn emission_decides_no_operation_itself() {
+        let errors = internal_errors(check_then_emit(|c| c.operations = Operations::default()));
+        // `x * 2` and `n + step`.
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("decided no operation")));
     }
 
     #[test]

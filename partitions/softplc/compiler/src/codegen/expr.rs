@@ -1,6 +1,7 @@
 //! Expressions: inference, implicit conversions, literals and unary operators.
 
 use super::*;
+use crate::sema::ops::UnaryRule;
 
 impl Gen<'_> {
     /// Type of an expression without emitting code or reporting errors. The checking pass
@@ -630,55 +631,32 @@ impl Gen<'_> {
             }
         }
         let t = self.expr(x, expected);
-        let Some(e) = t
-            .elem()
-            .filter(|_| !matches!(t, Type::Enum(_) | Type::Exception))
-        else {
-            if !t.is_error() {
-                let msg = format!(
-                    "operator {} cannot be applied to {}",
-                    if op == UnOp::Neg { "-" } else { "NOT" },
-                    self.tname(&t)
-                );
-                self.error(codes::OPERATOR_TYPES, span, msg);
-            }
+        if t.is_error() {
             return Type::Error;
-        };
-        match op {
-            UnOp::Neg => match e {
-                Elem::Real => self.op(Opcode::NegF32),
-                Elem::LReal => self.op(Opcode::NegF64),
-                e if e.is_signed_int() || e.is_duration() => {
-                    self.op(Opcode::Neg);
-                    self.wrap(e);
-                }
-                // `-step` of a BYTE (CODESYS): the negated value in a signed integer
-                // twice as wide (which holds it).
-                e if (e.is_unsigned_int() || e.is_bits()) && e.size() < 8 => {
-                    let signed = signed_of_size(e.size() * 2);
-                    self.op(Opcode::Neg);
-                    return Type::Elem(signed);
-                }
-                _ => {
-                    let msg = format!("operator - cannot be applied to {e}");
-                    self.error(codes::OPERATOR_TYPES, span, msg);
-                    return Type::Error;
-                }
-            },
-            UnOp::Not => match e {
-                Elem::Bool => self.op(Opcode::NotBool),
-                e if e.is_integral() => {
-                    self.op(Opcode::Not);
-                    self.wrap(e);
-                }
-                _ => {
-                    let msg = format!("operator NOT cannot be applied to {e}");
-                    self.error(codes::OPERATOR_TYPES, span, msg);
-                    return Type::Error;
-                }
-            },
         }
-        Type::Elem(e)
+        match self.unary_rule(op, x, &t, span) {
+            Some(UnaryRule::Same(e)) => {
+                match (op, e) {
+                    (UnOp::Neg, Elem::Real) => self.op(Opcode::NegF32),
+                    (UnOp::Neg, Elem::LReal) => self.op(Opcode::NegF64),
+                    (UnOp::Neg, e) => {
+                        self.op(Opcode::Neg);
+                        self.wrap(e);
+                    }
+                    (UnOp::Not, Elem::Bool) => self.op(Opcode::NotBool),
+                    (UnOp::Not, e) => {
+                        self.op(Opcode::Not);
+                        self.wrap(e);
+                    }
+                }
+                Type::Elem(e)
+            }
+            Some(UnaryRule::NegateWidened(signed)) => {
+                self.op(Opcode::Neg);
+                Type::Elem(signed)
+            }
+            None => Type::Error,
+        }
     }
 
     /// Type both operands are brought to.

@@ -40,8 +40,8 @@ use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
 use crate::typed::{
-    Bare, BareNames, Bindings, Callees, CaseLabels, ExprTypes, GenericTypes, Members, Properties,
-    StdArguments, Variables,
+    Bare, BareNames, Bindings, Callees, CaseLabels, ExprTypes, GenericTypes, Members, Operations,
+    Properties, StdArguments, Variables,
 };
 use crate::types::*;
 
@@ -165,6 +165,8 @@ pub(crate) struct Gen<'a> {
     /// The type each generic selection function is called at: decided by the checking
     /// pass, read by emission.
     pub(crate) generic_types: GenericTypes,
+    /// What each binary operation does: decided by the checking pass, read by emission.
+    pub(crate) operations: Operations,
     /// Which property each member read and assignment target reaches, if any: resolved by
     /// the checking pass, read by emission.
     pub(crate) properties: Properties,
@@ -227,6 +229,7 @@ impl<'a> Gen<'a> {
             bindings: Bindings::default(),
             std_arguments: StdArguments::default(),
             generic_types: GenericTypes::default(),
+            operations: Operations::default(),
             properties: Properties::default(),
             str_lits: HashMap::new(),
             calls: Vec::new(),

@@ -1,6 +1,7 @@
 //! Binary operators: arithmetic, comparisons, bit logic and the date/time arithmetic.
 
 use super::*;
+use crate::sema::ops::{self, BinaryRule, Operation, OperatorError, UnaryRule};
 
 impl Gen<'_> {
     pub(crate) fn binary(
@@ -20,353 +21,258 @@ impl Gen<'_> {
             self.expr(b, None);
             return Type::Error;
         }
-        let is_cmp = matches!(
-            op,
-            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
-        );
-        let mismatch = |g: &mut Self| {
-            let msg = format!(
-                "operator {} cannot be applied to {} and {}",
-                op.symbol(),
-                g.tname(&ta),
-                g.tname(&tb)
-            );
-            g.error(codes::OPERATOR_TYPES, span, msg);
-            Type::Error
-        };
-        // Strings: comparisons only (STRING with STRING, WSTRING with WSTRING).
-        if ta.is_string() || tb.is_string() || ta.is_wstring() || tb.is_wstring() {
-            return self
-                .string_compare(op, a, b, &ta, &tb)
-                .unwrap_or_else(|| mismatch(self));
+        match self.binary_rule(op, (a, &ta), (b, &tb), span) {
+            Some(rule) => self.emit_binary(op, &rule, (a, &ta), (b, &tb)),
+            None => Type::Error,
         }
-        // Enumerations (and exceptions): equality/ordering within the same type.
-        let enumish = |t: &Type| matches!(t, Type::Enum(_) | Type::Exception);
-        if enumish(&ta) || enumish(&tb) {
-            if ta != tb || !is_cmp {
-                return mismatch(self);
+    }
+
+    /// What `a op b` does: the checking pass decides it ([`ops::binary_rule`], reporting a
+    /// refusal) and records it ([`crate::typed::Operations`]; a walk for inference records
+    /// only what no real walk has, as the expected type may differ); emission reads the
+    /// record.
+    fn binary_rule(
+        &mut self,
+        op: BinOp,
+        (a, ta): (&Expr, &Type),
+        (b, tb): (&Expr, &Type),
+        span: Span,
+    ) -> Option<BinaryRule> {
+        if !self.check_only {
+            if let Some(Operation::Binary(rule)) = self.operations.of(a) {
+                return Some(rule.clone());
             }
-            self.expr(a, Some(&ta));
-            self.expr(b, Some(&tb));
-            self.op(cmp_op(op, true));
-            return Type::BOOL;
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                span,
+                "internal error: the checker decided no operation for this operator",
+            );
+            return None;
         }
-        let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else {
-            return mismatch(self);
+        let operand = |e: &Expr, ty| ops::Operand {
+            ty,
+            flexible: Self::is_flexible(e),
+            string_literal: matches!(e.kind, ExprKind::Str(_)),
+            real_literal: Self::has_real_literal(e),
         };
-        if ea.is_temporal() || eb.is_temporal() {
-            return self.temporal_binary(op, (a, &ta, ea), (b, &tb, eb), span);
+        let decided = ops::binary_rule(op, operand(a, ta), operand(b, tb));
+        match self.record_operation(a, decided.map(Operation::Binary), op.symbol(), span) {
+            Some(Operation::Binary(rule)) => Some(rule),
+            _ => None,
         }
-        // Characters: comparisons within CHAR/WCHAR.
-        if ea.is_char() || eb.is_char() {
-            if Self::is_flexible(a) || Self::is_flexible(b) {
-                self.error(codes::CHARACTER_IS_NO_NUMBER,
+    }
+
+    /// What `op x` does (`t`: the type of `x`, not the error type), as [`Gen::binary_rule`]
+    /// decides and records it.
+    pub(super) fn unary_rule(
+        &mut self,
+        op: UnOp,
+        x: &Expr,
+        t: &Type,
+        span: Span,
+    ) -> Option<UnaryRule> {
+        let symbol = if op == UnOp::Neg { "-" } else { "NOT" };
+        if !self.check_only {
+            if let Some(Operation::Unary(rule)) = self.operations.of(x) {
+                return Some(*rule);
+            }
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                span,
+                "internal error: the checker decided no operation for this operator",
+            );
+            return None;
+        }
+        let decided = ops::unary_rule(op, t).map(Operation::Unary);
+        match self.record_operation(x, decided, symbol, span) {
+            Some(Operation::Unary(rule)) => Some(rule),
+            _ => None,
+        }
+    }
+
+    /// Records the checker's decision on the operation whose first operand is `first`, or
+    /// reports why the operator `symbol` is refused.
+    fn record_operation(
+        &mut self,
+        first: &Expr,
+        decided: Result<Operation, OperatorError>,
+        symbol: &str,
+        span: Span,
+    ) -> Option<Operation> {
+        match decided {
+            Ok(operation) => {
+                if !self.dry || self.operations.of(first).is_none() {
+                    self.operations.record(first, operation.clone());
+                }
+                Some(operation)
+            }
+            Err(OperatorError::CharacterIsNoNumber) => {
+                self.error(
+                    codes::CHARACTER_IS_NO_NUMBER,
                     span,
                     "a character is no number: compare it with a character (CHAR#'a') or convert it (CHAR_TO_BYTE)",
                 );
-                return Type::Error;
+                None
             }
-            if !(is_cmp && ea.is_char() && eb.is_char()) {
-                return mismatch(self);
+            Err(OperatorError::Types { a, b, hint }) => {
+                let msg = format!(
+                    "operator {symbol} cannot be applied to {} and {}{hint}",
+                    self.tname(&a),
+                    self.tname(&b)
+                );
+                self.error(codes::OPERATOR_TYPES, span, msg);
+                None
             }
-            self.expr(a, Some(&ta));
-            self.expr(b, Some(&tb));
-            self.op(cmp_op(op, true));
-            return Type::BOOL;
-        }
-        // Booleans and bit strings: logic operators.
-        if matches!(op, BinOp::And | BinOp::Or | BinOp::Xor) {
-            let t = if ea == Elem::Bool && eb == Elem::Bool {
-                Elem::Bool
-            } else if ea.is_integral() && eb.is_integral() {
-                match common_numeric(ea, eb) {
-                    Some(t) => t,
-                    None => return mismatch(self),
-                }
-            } else {
-                return mismatch(self);
-            };
-            let tt = Type::Elem(t);
-            self.value_to_any(a, &ta, &tt);
-            self.value_to_any(b, &tb, &tt);
-            self.op(match op {
-                BinOp::And => Opcode::And,
-                BinOp::Or => Opcode::Or,
-                _ => Opcode::Xor,
-            });
-            return tt;
-        }
-        if ea == Elem::Bool || eb == Elem::Bool {
-            if ea == eb && matches!(op, BinOp::Eq | BinOp::Ne) {
-                self.expr(a, Some(&ta));
-                self.expr(b, Some(&tb));
-                self.op(cmp_op(op, true));
-                return Type::BOOL;
+            Err(OperatorError::Operand(t)) => {
+                let msg = format!("operator {symbol} cannot be applied to {}", self.tname(&t));
+                self.error(codes::OPERATOR_TYPES, span, msg);
+                None
             }
-            return mismatch(self);
         }
-        let Some(mut ct) = common_numeric(ea, eb) else {
-            return mismatch(self);
-        };
-        if op == BinOp::Pow && !ct.is_real() {
-            // Integer ** integer: computed in LREAL, rounded back.
-            let rt = Type::Elem(ct);
-            self.value_to_any(a, &ta, &Type::LREAL);
-            self.value_to_any(b, &tb, &Type::LREAL);
-            self.emit(|bb| {
-                bb.call_builtin(Builtin::ExptF64);
-                bb.float_to_int(Opcode::F64ToInt, mem_type(ct), RoundMode::NearestTiesAway);
-            });
-            return rt;
-        }
-        if op == BinOp::Pow {
-            ct = if ct == Elem::Real {
-                Elem::Real
-            } else {
-                Elem::LReal
-            };
-        }
-        let tt = Type::Elem(ct);
-        self.value_to_any(a, &ta, &tt);
-        self.value_to_any(b, &tb, &tt);
-        if is_cmp {
-            self.op(numeric_cmp_op(op, ct));
-            return Type::BOOL;
-        }
-        if !self.numeric_arithmetic(op, ct) {
-            return mismatch(self);
-        }
-        tt
     }
 
-    /// A comparison of two STRINGs or two WSTRINGs (a STRING literal adapts to a WSTRING);
-    /// `None` if the operator or the operand types do not allow it.
-    fn string_compare(
+    /// Emits `a op b` as `rule` says; returns its type.
+    fn emit_binary(
         &mut self,
         op: BinOp,
-        a: &Expr,
-        b: &Expr,
-        ta: &Type,
-        tb: &Type,
-    ) -> Option<Type> {
-        let is_cmp = matches!(
-            op,
-            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
-        );
-        let wide = ta.is_wstring() || tb.is_wstring();
-        let same_kind = (ta.is_string() && tb.is_string()) || (ta.is_wstring() && tb.is_wstring());
-        // A STRING literal compared with a WSTRING is a WSTRING literal.
-        let literal = |e: &Expr| matches!(e.kind, ExprKind::Str(_));
-        let adapts = wide && (literal(a) && tb.is_wstring() || literal(b) && ta.is_wstring());
-        if !((same_kind || adapts) && is_cmp) {
-            return None;
+        rule: &BinaryRule,
+        (a, ta): (&Expr, &Type),
+        (b, tb): (&Expr, &Type),
+    ) -> Type {
+        match *rule {
+            BinaryRule::StringCompare { wide } => {
+                let w = Type::WString(DEFAULT_STRING_LEN);
+                self.expr(a, wide.then_some(&w));
+                self.expr(b, wide.then_some(&w));
+                self.emit(|bb| {
+                    bb.call_builtin(if wide {
+                        Builtin::WStrCompare
+                    } else {
+                        Builtin::StrCompare
+                    });
+                    bb.push_i32(0);
+                });
+                self.op(cmp_op(op, true));
+                Type::BOOL
+            }
+            BinaryRule::Compare => {
+                self.expr(a, Some(ta));
+                self.expr(b, Some(tb));
+                self.op(cmp_op(op, true));
+                Type::BOOL
+            }
+            BinaryRule::Logic(t) => {
+                let tt = Type::Elem(t);
+                self.value_to_any(a, ta, &tt);
+                self.value_to_any(b, tb, &tt);
+                self.op(match op {
+                    BinOp::And => Opcode::And,
+                    BinOp::Or => Opcode::Or,
+                    _ => Opcode::Xor,
+                });
+                tt
+            }
+            BinaryRule::IntegerPower(ct) => {
+                self.value_to_any(a, ta, &Type::LREAL);
+                self.value_to_any(b, tb, &Type::LREAL);
+                self.emit(|bb| {
+                    bb.call_builtin(Builtin::ExptF64);
+                    bb.float_to_int(Opcode::F64ToInt, mem_type(ct), RoundMode::NearestTiesAway);
+                });
+                Type::Elem(ct)
+            }
+            BinaryRule::NumericCompare(ct) => {
+                let tt = Type::Elem(ct);
+                self.value_to_any(a, ta, &tt);
+                self.value_to_any(b, tb, &tt);
+                self.op(numeric_cmp_op(op, ct));
+                Type::BOOL
+            }
+            BinaryRule::Arithmetic(ct) => {
+                let tt = Type::Elem(ct);
+                self.value_to_any(a, ta, &tt);
+                self.value_to_any(b, tb, &tt);
+                self.numeric_arithmetic(op, ct);
+                tt
+            }
+            BinaryRule::Temporal { result, wraps } => {
+                // The operands keep their nanoseconds (TIME widens to LTIME implicitly).
+                self.value_to_any(a, ta, ta);
+                self.value_to_any(b, tb, tb);
+                self.op(match op {
+                    BinOp::Add => Opcode::Add,
+                    BinOp::Sub => Opcode::Sub,
+                    _ => cmp_op(op, true),
+                });
+                if wraps {
+                    self.emit(|bb| bb.call_builtin(Builtin::TodOf));
+                }
+                Type::Elem(result)
+            }
+            BinaryRule::Scale {
+                result,
+                duration_first,
+                ref number,
+            } => {
+                let (duration, factor) = if duration_first { (a, b) } else { (b, a) };
+                let duration_type = Type::Elem(result);
+                self.value_to_any(duration, &duration_type, &duration_type);
+                if number.elem().is_some_and(|e| e.is_real()) {
+                    // TIME * REAL: computed in LREAL nanoseconds, rounded.
+                    self.op(Opcode::IToF64S);
+                    self.value_to_any(factor, number, &Type::LREAL);
+                    self.op(if op == BinOp::Mul {
+                        Opcode::MulF64
+                    } else {
+                        Opcode::DivF64
+                    });
+                    self.emit(|bb| {
+                        bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
+                    });
+                } else {
+                    self.value_to_any(factor, number, &Type::LINT);
+                    self.op(if op == BinOp::Mul {
+                        Opcode::Mul
+                    } else {
+                        Opcode::DivS
+                    });
+                }
+                Type::Elem(result)
+            }
         }
-        let w = Type::WString(DEFAULT_STRING_LEN);
-        self.expr(a, wide.then_some(&w));
-        self.expr(b, wide.then_some(&w));
-        self.emit(|bb| {
-            bb.call_builtin(if wide {
-                Builtin::WStrCompare
-            } else {
-                Builtin::StrCompare
-            });
-            bb.push_i32(0);
-        });
-        self.op(cmp_op(op, true));
-        Some(Type::BOOL)
     }
 
     /// Emits the arithmetic operator `op` on two values of the numeric type `ct` (already on
-    /// the stack); `false` if `op` is not an arithmetic operator of `ct`.
-    fn numeric_arithmetic(&mut self, op: BinOp, ct: Elem) -> bool {
-        match ct {
-            Elem::Real => self.op(match op {
-                BinOp::Add => Opcode::AddF32,
-                BinOp::Sub => Opcode::SubF32,
-                BinOp::Mul => Opcode::MulF32,
-                BinOp::Div => Opcode::DivF32,
-                BinOp::Pow => {
-                    self.emit(|bb| bb.call_builtin(Builtin::ExptF32));
-                    return true;
-                }
-                _ => return false,
-            }),
-            Elem::LReal => self.op(match op {
-                BinOp::Add => Opcode::AddF64,
-                BinOp::Sub => Opcode::SubF64,
-                BinOp::Mul => Opcode::MulF64,
-                BinOp::Div => Opcode::DivF64,
-                BinOp::Pow => {
-                    self.emit(|bb| bb.call_builtin(Builtin::ExptF64));
-                    return true;
-                }
-                _ => return false,
-            }),
-            _ => {
+    /// the stack), as [`BinaryRule::Arithmetic`] allows it.
+    fn numeric_arithmetic(&mut self, op: BinOp, ct: Elem) {
+        let real = |f32_op, f64_op| if ct == Elem::Real { f32_op } else { f64_op };
+        match (op, ct.is_real()) {
+            (BinOp::Add, true) => self.op(real(Opcode::AddF32, Opcode::AddF64)),
+            (BinOp::Sub, true) => self.op(real(Opcode::SubF32, Opcode::SubF64)),
+            (BinOp::Mul, true) => self.op(real(Opcode::MulF32, Opcode::MulF64)),
+            (BinOp::Div, true) => self.op(real(Opcode::DivF32, Opcode::DivF64)),
+            (_, true) => {
+                let expt = if ct == Elem::Real {
+                    Builtin::ExptF32
+                } else {
+                    Builtin::ExptF64
+                };
+                self.emit(|bb| bb.call_builtin(expt));
+            }
+            (_, false) => {
                 let signed = ct.is_signed_int();
                 self.op(match op {
                     BinOp::Add => Opcode::Add,
                     BinOp::Sub => Opcode::Sub,
                     BinOp::Mul => Opcode::Mul,
-                    BinOp::Div => {
-                        if signed {
-                            Opcode::DivS
-                        } else {
-                            Opcode::DivU
-                        }
-                    }
-                    BinOp::Mod => {
-                        if signed {
-                            Opcode::ModS
-                        } else {
-                            Opcode::ModU
-                        }
-                    }
-                    _ => return false,
+                    BinOp::Div if signed => Opcode::DivS,
+                    BinOp::Div => Opcode::DivU,
+                    BinOp::Mod if signed => Opcode::ModS,
+                    _ => Opcode::ModU,
                 });
                 self.wrap(ct);
             }
         }
-        true
-    }
-
-    /// Date and time arithmetic (IEC 61131-3 table of time operations): TIME +/- TIME,
-    /// TOD +/- TIME (wrapping within the day), DT +/- TIME, DATE - DATE, TOD - TOD, DT - DT
-    /// (giving TIME), TIME * and / numbers, comparisons within one family. The long forms
-    /// follow the same rules; an operation with a long operand gives the long result.
-    pub(super) fn temporal_binary(
-        &mut self,
-        op: BinOp,
-        (a, ta, ea): (&Expr, &Type, Elem),
-        (b, tb, eb): (&Expr, &Type, Elem),
-        span: Span,
-    ) -> Type {
-        // A literal factor is a number, not a duration (`T#1s * 2`).
-        let literal_type = |e: &Expr| {
-            if Self::has_real_literal(e) {
-                Type::LREAL
-            } else {
-                Type::LINT
-            }
-        };
-        let (ta, ea) = if Self::is_flexible(a) && matches!(op, BinOp::Mul) {
-            let t = literal_type(a);
-            let e = t.elem().unwrap_or(Elem::LInt);
-            (&t.clone(), e)
-        } else {
-            (ta, ea)
-        };
-        let (tb, eb) = if Self::is_flexible(b) && matches!(op, BinOp::Mul | BinOp::Div) {
-            let t = literal_type(b);
-            let e = t.elem().unwrap_or(Elem::LInt);
-            (&t.clone(), e)
-        } else {
-            (tb, eb)
-        };
-        let fa = ea.temporal_family();
-        let fb = eb.temporal_family();
-        let long = ea.is_long_temporal() || eb.is_long_temporal();
-        let pick = |short: Elem| -> Elem {
-            match (short, long) {
-                (Elem::Time, true) => Elem::LTime,
-                (Elem::Tod, true) => Elem::LTod,
-                (Elem::Dt, true) => Elem::LDt,
-                (Elem::Date, true) => Elem::LDate,
-                (e, _) => e,
-            }
-        };
-        let is_cmp = matches!(
-            op,
-            BinOp::Eq | BinOp::Ne | BinOp::Lt | BinOp::Le | BinOp::Gt | BinOp::Ge
-        );
-        let time = Some(Elem::Time);
-        // (result, whether a TOD result wraps into its day)
-        let result = match op {
-            _ if is_cmp && fa == fb => Some((Elem::Bool, false)),
-            BinOp::Add if fa == time && fb == time => Some((pick(Elem::Time), false)),
-            BinOp::Add
-                if fa == Some(Elem::Tod) && fb == time || fa == time && fb == Some(Elem::Tod) =>
-            {
-                Some((pick(Elem::Tod), true))
-            }
-            BinOp::Add
-                if fa == Some(Elem::Dt) && fb == time || fa == time && fb == Some(Elem::Dt) =>
-            {
-                Some((pick(Elem::Dt), false))
-            }
-            BinOp::Sub if fa == fb && fa != Some(Elem::Dt) && fa != Some(Elem::Tod) => {
-                // TIME - TIME, DATE - DATE
-                Some((pick(Elem::Time), false))
-            }
-            BinOp::Sub if fa == fb => Some((pick(Elem::Time), false)),
-            BinOp::Sub if fa == Some(Elem::Tod) && fb == time => Some((pick(Elem::Tod), true)),
-            BinOp::Sub if fa == Some(Elem::Dt) && fb == time => Some((pick(Elem::Dt), false)),
-            BinOp::Mul | BinOp::Div
-                if fa == time && eb.is_numeric()
-                    || op == BinOp::Mul && fb == time && ea.is_numeric() =>
-            {
-                Some((if fa == time { ea } else { eb }, false))
-            }
-            _ => None,
-        };
-        let Some((result, wraps)) = result else {
-            let hint = match (op, fa, fb) {
-                (BinOp::Add | BinOp::Sub, Some(Elem::Date), Some(Elem::Time)) => {
-                    " (a DATE is a day: use DATE_TO_DT or CONCAT_DATE_TOD for a point in time)"
-                }
-                (BinOp::Add, Some(x), Some(y)) if x == y && x != Elem::Time => {
-                    " (two points in time cannot be added; subtract them for a TIME)"
-                }
-                _ => "",
-            };
-            let msg = format!(
-                "operator {} cannot be applied to {} and {}{hint}",
-                op.symbol(),
-                self.tname(ta),
-                self.tname(tb)
-            );
-            self.error(codes::OPERATOR_TYPES, span, msg);
-            return Type::Error;
-        };
-        if matches!(op, BinOp::Mul | BinOp::Div) {
-            let (duration, number, number_type) = if fa == time { (a, b, tb) } else { (b, a, ta) };
-            let duration_type = Type::Elem(result);
-            if number_type.elem().is_some_and(|e| e.is_real()) {
-                // TIME * REAL: computed in LREAL nanoseconds, rounded.
-                self.value_to_any(duration, &duration_type, &duration_type);
-                self.op(Opcode::IToF64S);
-                self.value_to_any(number, number_type, &Type::LREAL);
-                self.op(if op == BinOp::Mul {
-                    Opcode::MulF64
-                } else {
-                    Opcode::DivF64
-                });
-                self.emit(|bb| {
-                    bb.float_to_int(Opcode::F64ToInt, MemType::I64, RoundMode::NearestTiesAway)
-                });
-            } else {
-                self.value_to_any(duration, &duration_type, &duration_type);
-                self.value_to_any(number, number_type, &Type::LINT);
-                self.op(if op == BinOp::Mul {
-                    Opcode::Mul
-                } else {
-                    Opcode::DivS
-                });
-            }
-            return Type::Elem(result);
-        }
-        // The operands keep their nanoseconds (TIME widens to LTIME implicitly).
-        self.value_to_any(a, ta, ta);
-        self.value_to_any(b, tb, tb);
-        self.op(match op {
-            BinOp::Add => Opcode::Add,
-            BinOp::Sub => Opcode::Sub,
-            _ => cmp_op(op, true),
-        });
-        if wraps {
-            self.emit(|bb| bb.call_builtin(Builtin::TodOf));
-        }
-        Type::Elem(result)
     }
 
     /// Compiles `e` (whose type was inferred as `from`) and converts to `to` without the

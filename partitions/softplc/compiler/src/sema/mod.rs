@@ -12,6 +12,7 @@
 
 pub mod body;
 mod config;
+pub mod ops;
 pub(crate) mod stmt;
 
 use crate::codes;
