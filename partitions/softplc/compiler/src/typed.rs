@@ -8,7 +8,7 @@
 //! `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a variable, a
 //! property, an enumeration value, an exception; also the value of each `Enum#value`), which
 //! argument of each call binds which parameter ([`Bindings`]), the order of each
-//! standard-function call's arguments ([`StdArguments`]) and the type each generic selection
+//! standard-function call's arguments ([`StdArguments`]) and the type each generic standard
 //! function is called at ([`GenericTypes`]), the property (receiver and accessors) each member
 //! read and assignment target reaches, if any ([`Properties`]), what each operator
 //! does by the rules of [`sema::ops`](crate::sema::ops) ([`Operations`]), the value
@@ -30,7 +30,8 @@
 //! `base.m` from [`Members`] (a structure's field, a block's variable), the meaning of every
 //! bare name from [`BareNames`] and the binding of every call's arguments to a user POU's or
 //! method's parameters from [`Bindings`], the order of standard-function arguments from
-//! [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT and MUX from [`GenericTypes`], the
+//! [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT, MUX and the REAL functions from
+//! [`GenericTypes`], the
 //! property of every access from [`Properties`], what every operator does from
 //! [`Operations`] (it only picks the opcodes), but still decides what the rest means while
 //! it emits (the operation of the other standard functions from their arguments' recorded
@@ -267,8 +268,10 @@ impl Bindings {
 /// index of each in the call's argument list), keyed by the called name.
 pub type StdArguments = NameTable<Vec<usize>>;
 
-/// The type each call of a generic selection function (SEL, MAX, MIN, LIMIT, MUX) without
-/// a typed form is called at, keyed by the called name.
+/// The type each call of a generic standard function without a typed form is called at,
+/// keyed by the called name: a selection function's (SEL, MAX, MIN, LIMIT, MUX) the common
+/// type of its arguments, a REAL function's (SQRT, ..., EXPT, ATAN2, TRUNC) REAL or LREAL
+/// ([`crate::sema::ops::real_function_type`]).
 pub type GenericTypes = NameTable<Type>;
 
 /// What a method or property is called on.
@@ -325,7 +328,7 @@ pub struct Checked {
     pub bindings: Bindings,
     /// The order of every standard-function call's arguments.
     pub std_arguments: StdArguments,
-    /// The type every generic selection function is called at.
+    /// The type every generic standard function is called at.
     pub generic_types: GenericTypes,
     /// What every operator does.
     pub operations: Operations,
@@ -455,10 +458,18 @@ END_PROGRAM
 
     /// Checks [`PROGRAM`], lets `forget` drop part of the record, then emits.
     fn check_then_emit(forget: impl FnOnce(&mut Checked)) -> Result<Emitted, Diagnostics> {
+        check_then_emit_source(PROGRAM, forget)
+    }
+
+    /// Checks `source`, lets `forget` drop part of the record, then emits.
+    fn check_then_emit_source(
+        source: &str,
+        forget: impl FnOnce(&mut Checked),
+    ) -> Result<Emitted, Diagnostics> {
         let mut sources = SourceMap::default();
-        sources.add("main.st", PROGRAM);
+        sources.add("main.st", source);
         let mut raw = Vec::new();
-        let unit = parser::parse(lexer::lex(0, PROGRAM, &mut raw), &mut raw);
+        let unit = parser::parse(lexer::lex(0, source, &mut raw), &mut raw);
         assert!(raw.is_empty(), "{raw:?}");
         let mut diags = Diagnostics::default();
         let mut prog = sema::analyse(&unit, 0, &Options::default(), &mut diags);
@@ -537,6 +548,15 @@ END_PROGRAM
         // MAX(r, 1).
         assert_eq!(errors.len(), 1, "{errors:?}");
         assert!(errors[0].contains("decided no type"));
+        // The REAL functions' types are recorded too; a typed form needs none.
+        let real_functions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
+r := SQRT(i); l := EXPT(d, 2); d := TRUNC(l); r := SIN_REAL(r); END_PROGRAM";
+        assert!(check_then_emit_source(real_functions, |_| {}).is_ok());
+        let errors = internal_errors(check_then_emit_source(real_functions, |c| {
+            c.generic_types = GenericTypes::default()
+        }));
+        assert_eq!(errors.len(), 3, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("decided no type")));
     }
 
     #[test]

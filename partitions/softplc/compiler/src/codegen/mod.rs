@@ -162,7 +162,7 @@ pub(crate) struct Gen<'a> {
     /// The order of each standard-function call's arguments: recorded by the checking pass,
     /// read by emission.
     pub(crate) std_arguments: StdArguments,
-    /// The type each generic selection function is called at: decided by the checking
+    /// The type each generic standard function is called at: decided by the checking
     /// pass, read by emission.
     pub(crate) generic_types: GenericTypes,
     /// What each binary operation does: decided by the checking pass, read by emission.

@@ -11,6 +11,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 use crate::ast::*;
 use crate::codegen::Gen;
 use crate::diagnostics::Span;
+use crate::sema::ops;
 use crate::types::*;
 
 /// A date and time function: the typed form of an operator (`ADD_TOD_TIME` is TOD + TIME;
@@ -799,7 +800,7 @@ impl Gen<'_> {
                 if !self.arity(c, 1) {
                     return Some(Type::Error);
                 }
-                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
+                let rt = match self.real_operand(c) {
                     Some(t) => t,
                     None => return Some(Type::Error),
                 };
@@ -834,7 +835,7 @@ impl Gen<'_> {
                 if !self.arity(c, 2) {
                     return Some(Type::Error);
                 }
-                let rt = match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
+                let rt = match self.real_operand(c) {
                     Some(t) => t,
                     None => return Some(Type::Error),
                 };
@@ -911,7 +912,7 @@ impl Gen<'_> {
                         self.value_to(c.exprs[0], &Type::Elem(f));
                         f
                     }
-                    None => match self.real_operand(c.exprs[0], c.ctx.as_ref(), c.typed) {
+                    None => match self.real_operand(c) {
                         Some(t) => t,
                         None => return Some(Type::Error),
                     },
@@ -1142,40 +1143,49 @@ impl Gen<'_> {
         }
     }
 
-    /// Compiles a numeric argument of a REAL function: REAL stays REAL, an integer of up to
-    /// 16 bits becomes REAL (which holds it exactly), everything else LREAL.
-    pub(super) fn real_operand(
-        &mut self,
-        e: &Expr,
-        ctx: Option<&Type>,
-        typed: Option<Elem>,
-    ) -> Option<Elem> {
-        // A typed form (`SQRT_LREAL`): its type (the argument was checked).
-        if let Some(forced) = typed.filter(|t| t.is_real()) {
+    /// Compiles the (first) argument of a REAL function in the type the call computes in
+    /// and returns it: the typed form's (`SQRT_LREAL`: its argument was checked), else as
+    /// [`ops::real_function_type`] decides, which the checking pass records
+    /// ([`crate::typed::GenericTypes`]) and emission reads.
+    pub(super) fn real_operand(&mut self, c: &StdArgs) -> Option<Elem> {
+        let e = c.exprs[0];
+        if let Some(forced) = c.typed.filter(|t| t.is_real()) {
             self.value_to(e, &Type::Elem(forced));
             return Some(forced);
         }
         let t = self.infer(e);
-        let literal_in_real_context =
-            Self::is_flexible(e) && ctx.and_then(|c| c.elem()) == Some(Elem::Real);
-        let small_integer = !Self::is_flexible(e)
-            && !matches!(t, Type::Enum(_) | Type::Exception)
-            && t.elem().is_some_and(|x| x.is_integral() && x.size() <= 2);
-        let target = if t.elem() == Some(Elem::Real) || literal_in_real_context || small_integer {
-            Elem::Real
-        } else {
-            Elem::LReal
-        };
-        match t.elem() {
-            Some(x) if x.is_numeric() && !matches!(t, Type::Enum(_) | Type::Exception) => {
-                self.value_to_any(e, &t, &Type::Elem(target));
-                Some(target)
-            }
-            _ => {
+        let target = if self.check_only {
+            let arg = ops::Operand {
+                ty: &t,
+                flexible: Self::is_flexible(e),
+                string_literal: false,
+                real_literal: false,
+            };
+            let real_context = c.ctx.as_ref().and_then(|c| c.elem()) == Some(Elem::Real);
+            let Some(target) = ops::real_function_type(arg, real_context) else {
                 self.bad_inferred_arg(e, &t, "a number");
-                None
+                return None;
+            };
+            if !self.dry || self.generic_types.of(self.cur, c.id).is_none() {
+                self.generic_types
+                    .record(self.cur, c.id, Type::Elem(target));
             }
-        }
+            target
+        } else {
+            match self.generic_types.of(self.cur, c.id).and_then(|t| t.elem()) {
+                Some(target) => target,
+                None => {
+                    self.diags.error(
+                        codes::INTERNAL_ERROR,
+                        c.id.span,
+                        "internal error: the checker decided no type for this call",
+                    );
+                    return None;
+                }
+            }
+        };
+        self.value_to_any(e, &t, &Type::Elem(target));
+        Some(target)
     }
 
     /// The type a generic selection function (SEL, MAX, MIN, LIMIT, MUX) is called at: the
