@@ -19,28 +19,28 @@
 //!
 //! The separation is not complete. Statements have a checker of their own
 //! ([`sema::stmt`](crate::sema::stmt): conditions, EXIT, CASE selectors and labels, FOR
-//! control variables and steps, the assignment and `REF=` rules, `__CATCH` variables), and the
-//! emitter's statement walk checks nothing. Expressions are still checked by the code
+//! control variables and steps, the assignment and `REF=` rules, `__CATCH` variables), and
+//! the emitter's statement walk checks nothing. Expressions are still checked by the code
 //! generator's expression walk ([`crate::codegen::Gen`]), run once with emission and
 //! allocation switched off to check and once more to emit. The second walk takes every type
-//! it asks for from the table (it never infers: a missing record is an internal error), every
-//! callee from [`Callees`] (a user FUNCTION, a standard function, `REF`/`ADR`, an FB
+//! it asks for from the table (it never infers: a missing record is an internal error),
+//! every callee from [`Callees`] (a user FUNCTION, a standard function, `REF`/`ADR`, an FB
 //! instance, a method or action: it never looks a called name up again), the variable of
-//! every name from [`Variables`] (the POU's own, its owner's, a global), the member of every
-//! `base.m` from [`Members`] (a structure's field, a block's variable), the meaning of every
-//! bare name from [`BareNames`] and the binding of every call's arguments to a user POU's or
-//! method's parameters from [`Bindings`], the order of standard-function arguments from
-//! [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT, MUX and the REAL functions from
-//! [`GenericTypes`], the
-//! property of every access from [`Properties`], what every operator does from
-//! [`Operations`] (it only picks the opcodes), but still decides what the rest means while
-//! it emits (the operation of the other standard functions from their arguments' recorded
-//! types, conversions) and passes the expression walk's check branches again (none can fail
-//! on a checked program). Besides the statement checker, the rules checked by the checking
-//! pass only are the operator rules (`sema::ops`), the recursion rule (`sema::body`),
-//! the argument rules (an unknown,
-//! misplaced, surplus or repeated argument of a user POU, a method or a standard function)
-//! and a function block input's assignment rules (the statement checker's).
+//! every name from [`Variables`] (the POU's own, its owner's, a global), the member of
+//! every `base.m` from [`Members`] (a structure's field, a block's variable), the meaning
+//! of every bare name from [`BareNames`] and the binding of every call's arguments to a
+//! user POU's or method's parameters from [`Bindings`], the order of standard-function
+//! arguments from [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT, MUX, the REAL
+//! functions and the generic conversions from [`GenericTypes`], the property of every
+//! access from [`Properties`], what every operator does from [`Operations`] (it only picks
+//! the opcodes), but still decides what the rest means while it emits (the operation of the
+//! other standard functions from their arguments' recorded types, the conversions) and
+//! passes the expression walk's check branches again (none can fail on a checked program).
+//! Besides the statement checker, the rules checked by the checking pass only are the
+//! operator and standard-function type rules (`sema::ops`, `sema::stdfuncs`), the recursion
+//! rule (`sema::body`), the argument rules (an unknown, misplaced, surplus or repeated
+//! argument of a user POU, a method or a standard function) and a function block input's
+//! assignment rules (the statement checker's).
 
 use std::collections::HashMap;
 
@@ -271,7 +271,8 @@ pub type StdArguments = NameTable<Vec<usize>>;
 /// The type each call of a generic standard function without a typed form is called at,
 /// keyed by the called name: a selection function's (SEL, MAX, MIN, LIMIT, MUX) the common
 /// type of its arguments, a REAL function's (SQRT, ..., EXPT, ATAN2, TRUNC) REAL or LREAL
-/// ([`crate::sema::ops::real_function_type`]).
+/// ([`crate::sema::stdfuncs::real_function_type`]), a generic conversion's (`TO_INT`) the
+/// type it converts from ([`crate::sema::stdfuncs::conversion_source`]).
 pub type GenericTypes = NameTable<Type>;
 
 /// What a method or property is called on.
@@ -548,14 +549,16 @@ END_PROGRAM
         // MAX(r, 1).
         assert_eq!(errors.len(), 1, "{errors:?}");
         assert!(errors[0].contains("decided no type"));
-        // The REAL functions' types are recorded too; a typed form needs none.
+        // The REAL functions' types are recorded too (a typed form needs none), and
+        // the type a generic conversion converts from.
         let real_functions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
-r := SQRT(i); l := EXPT(d, 2); d := TRUNC(l); r := SIN_REAL(r); END_PROGRAM";
+r := SQRT(i); l := EXPT(d, 2); d := TRUNC(l); r := SIN_REAL(r); l := TO_LREAL(i);
+END_PROGRAM";
         assert!(check_then_emit_source(real_functions, |_| {}).is_ok());
         let errors = internal_errors(check_then_emit_source(real_functions, |c| {
             c.generic_types = GenericTypes::default()
         }));
-        assert_eq!(errors.len(), 3, "{errors:?}");
+        assert_eq!(errors.len(), 4, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("decided no type")));
     }
 

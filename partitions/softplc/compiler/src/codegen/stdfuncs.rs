@@ -11,7 +11,7 @@ use plc_vm::isa::{Builtin, MemType, Opcode, RoundMode};
 use crate::ast::*;
 use crate::codegen::Gen;
 use crate::diagnostics::Span;
-use crate::sema::ops;
+use crate::sema::{ops, stdfuncs as rules};
 use crate::types::*;
 
 /// A date and time function: the typed form of an operator (`ADD_TOD_TIME` is TOD + TIME;
@@ -411,23 +411,53 @@ impl Gen<'_> {
             }
             return Some(Type::Error);
         };
-        let source = match self.infer(arg) {
-            Type::Error => {
-                self.surface(arg);
-                return Some(Type::Error);
-            }
+        let Some(source) = self.conversion_source(id, arg) else {
+            return Some(Type::Error);
+        };
+        let source = match source {
             Type::String(_) => "STRING".to_string(),
-            Type::Subrange(e, ..) => e.name().to_string(),
-            t @ Type::Elem(_) if !Self::is_flexible(arg) => self.tname(&t),
-            _ if Self::is_flexible(arg) && Self::has_real_literal(arg) => "LREAL".into(),
-            _ if Self::is_flexible(arg) => "LINT".into(),
-            t => return Some(self.bad_inferred_arg(arg, &t, "an elementary value")),
+            t => self.tname(&t),
         };
         if source == target {
             let t = self.expr(arg, None);
             return Some(t);
         }
         self.conversion(&format!("{source}_TO_{target}"), id, &[arg], span)
+    }
+
+    /// The type `TO_...(arg)` converts from ([`rules::conversion_source`]): decided and
+    /// recorded by the checking pass ([`crate::typed::GenericTypes`]), read by emission.
+    fn conversion_source(&mut self, id: &Ident, arg: &Expr) -> Option<Type> {
+        if !self.check_only {
+            if let Some(t) = self.generic_types.of(self.cur, id) {
+                return Some(t.clone());
+            }
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                id.span,
+                "internal error: the checker decided no type for this call",
+            );
+            return None;
+        }
+        let t = self.infer(arg);
+        if t.is_error() {
+            self.surface(arg);
+            return None;
+        }
+        let operand = ops::Operand {
+            ty: &t,
+            flexible: Self::is_flexible(arg),
+            string_literal: false,
+            real_literal: Self::has_real_literal(arg),
+        };
+        let Some(source) = rules::conversion_source(operand) else {
+            self.bad_inferred_arg(arg, &t, "an elementary value");
+            return None;
+        };
+        if !self.dry || self.generic_types.of(self.cur, id).is_none() {
+            self.generic_types.record(self.cur, id, source.clone());
+        }
+        Some(source)
     }
 
     /// Date and time functions (see [`TimeFunction`]).
@@ -1145,7 +1175,7 @@ impl Gen<'_> {
 
     /// Compiles the (first) argument of a REAL function in the type the call computes in
     /// and returns it: the typed form's (`SQRT_LREAL`: its argument was checked), else as
-    /// [`ops::real_function_type`] decides, which the checking pass records
+    /// [`rules::real_function_type`] decides, which the checking pass records
     /// ([`crate::typed::GenericTypes`]) and emission reads.
     pub(super) fn real_operand(&mut self, c: &StdArgs) -> Option<Elem> {
         let e = c.exprs[0];
@@ -1162,7 +1192,7 @@ impl Gen<'_> {
                 real_literal: false,
             };
             let real_context = c.ctx.as_ref().and_then(|c| c.elem()) == Some(Elem::Real);
-            let Some(target) = ops::real_function_type(arg, real_context) else {
+            let Some(target) = rules::real_function_type(arg, real_context) else {
                 self.bad_inferred_arg(e, &t, "a number");
                 return None;
             };

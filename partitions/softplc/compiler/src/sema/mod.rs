@@ -13,6 +13,7 @@
 pub mod body;
 mod config;
 pub mod ops;
+pub mod stdfuncs;
 pub(crate) mod stmt;
 
 use crate::codes;

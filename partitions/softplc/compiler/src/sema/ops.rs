@@ -1,11 +1,8 @@
 //! The operators' typing rules: what an operator does with operands of given types
-//! (IEC 61131-3's tables of arithmetic, comparison, bit-string and time operations), and the
-//! type the REAL functions compute in.
+//! (IEC 61131-3's tables of arithmetic, comparison, bit-string and time operations).
 //!
 //! The checker decides each operation once ([`binary_rule`], [`unary_rule`]) and records it
-//! ([`crate::typed::Operations`]), and the type of each REAL function call
-//! ([`real_function_type`], recorded in [`crate::typed::GenericTypes`]); emission reads the
-//! records and only chooses opcodes.
+//! ([`crate::typed::Operations`]); emission reads the record and only chooses opcodes.
 //! References and pointers (`REF_TO` arithmetic, comparisons with `NULL`) are decided before
 //! these rules, by the reference checks.
 
@@ -182,24 +179,6 @@ pub fn binary_rule(op: BinOp, a: Operand, b: Operand) -> Result<BinaryRule, Oper
         }
         BinOp::Mod if !ct.is_real() => Ok(BinaryRule::Arithmetic(ct)),
         _ => Err(mismatch()),
-    }
-}
-
-/// The type a REAL function (SQRT, LN, LOG, EXP, SIN, COS, TAN, ASIN, ACOS, ATAN, EXPT,
-/// ATAN2, TRUNC) without a typed form computes in for its argument `arg`: REAL for a REAL,
-/// an integer of up to 16 bits (which REAL holds exactly) or an untyped literal where the
-/// context wants a REAL (`real_context`); LREAL for every other number; `None` for what is
-/// no number.
-pub fn real_function_type(arg: Operand, real_context: bool) -> Option<Elem> {
-    let t = arg.ty;
-    let number = t.elem().filter(|e| e.is_numeric());
-    if matches!(t, Type::Enum(_) | Type::Exception) || number.is_none() {
-        return None;
-    }
-    let small_integer = !arg.flexible && number.is_some_and(|e| e.is_integral() && e.size() <= 2);
-    match number == Some(Elem::Real) || arg.flexible && real_context || small_integer {
-        true => Some(Elem::Real),
-        false => Some(Elem::LReal),
     }
 }
 
@@ -395,29 +374,6 @@ mod tests {
         assert_eq!(not(&Type::DINT), Ok(UnaryRule::Same(Elem::DInt)));
         assert!(not(&Type::LREAL).is_err());
         assert!(not(&Type::Exception).is_err());
-    }
-
-    #[test]
-    fn real_functions_compute_in_real_only_where_it_holds_the_argument() {
-        let real = |t: &Type| real_function_type(operand(t), false);
-        assert_eq!(real(&Type::REAL), Some(Elem::Real));
-        assert_eq!(real(&Type::INT), Some(Elem::Real), "REAL holds every INT");
-        assert_eq!(real(&Type::Elem(Elem::Word)), Some(Elem::Real));
-        assert_eq!(real(&Type::DINT), Some(Elem::LReal));
-        assert_eq!(real(&Type::LREAL), Some(Elem::LReal));
-        assert_eq!(real(&Type::BOOL), None);
-        assert_eq!(real(&Type::TIME), None);
-        assert_eq!(real(&Type::Exception), None);
-        let literal = Operand {
-            flexible: true,
-            ..operand(&Type::LINT)
-        };
-        assert_eq!(real_function_type(literal, false), Some(Elem::LReal));
-        assert_eq!(
-            real_function_type(literal, true),
-            Some(Elem::Real),
-            "a literal where a REAL is wanted"
-        );
     }
 
     #[test]

@@ -1,0 +1,100 @@
+//! The standard functions' typing rules that depend on an argument's type: the type a REAL
+//! function computes in and the type a generic conversion (`TO_INT`) converts from.
+//!
+//! The checker applies them once and records the type it chose
+//! ([`crate::typed::GenericTypes`]); emission reads the record.
+
+use super::ops::Operand;
+use crate::types::{DEFAULT_STRING_LEN, Elem, Type};
+
+/// The type a REAL function (SQRT, LN, LOG, EXP, SIN, COS, TAN, ASIN, ACOS, ATAN, EXPT,
+/// ATAN2, TRUNC) without a typed form computes in for its argument `arg`: REAL for a REAL,
+/// an integer of up to 16 bits (which REAL holds exactly) or an untyped literal where the
+/// context wants a REAL (`real_context`); LREAL for every other number; `None` for what is
+/// no number.
+pub fn real_function_type(arg: Operand, real_context: bool) -> Option<Elem> {
+    let t = arg.ty;
+    let number = t.elem().filter(|e| e.is_numeric());
+    if matches!(t, Type::Enum(_) | Type::Exception) || number.is_none() {
+        return None;
+    }
+    let small_integer = !arg.flexible && number.is_some_and(|e| e.is_integral() && e.size() <= 2);
+    match number == Some(Elem::Real) || arg.flexible && real_context || small_integer {
+        true => Some(Elem::Real),
+        false => Some(Elem::LReal),
+    }
+}
+
+/// The type `TO_<target>(arg)` converts from (then as `<source>_TO_<target>`): a STRING, an
+/// elementary type (a subrange's base type), LREAL for an untyped literal with a REAL in it
+/// and LINT for another; `None` for what is no elementary value.
+pub fn conversion_source(arg: Operand) -> Option<Type> {
+    match arg.ty {
+        Type::String(_) => Some(Type::String(DEFAULT_STRING_LEN)),
+        Type::Subrange(e, ..) => Some(Type::Elem(*e)),
+        t @ Type::Elem(_) if !arg.flexible => Some(t.clone()),
+        _ if arg.flexible && arg.real_literal => Some(Type::LREAL),
+        _ if arg.flexible => Some(Type::LINT),
+        _ => None,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn operand(ty: &Type) -> Operand<'_> {
+        Operand {
+            ty,
+            flexible: false,
+            string_literal: false,
+            real_literal: false,
+        }
+    }
+
+    #[test]
+    fn real_functions_compute_in_real_only_where_it_holds_the_argument() {
+        let real = |t: &Type| real_function_type(operand(t), false);
+        assert_eq!(real(&Type::REAL), Some(Elem::Real));
+        assert_eq!(real(&Type::INT), Some(Elem::Real), "REAL holds every INT");
+        assert_eq!(real(&Type::Elem(Elem::Word)), Some(Elem::Real));
+        assert_eq!(real(&Type::DINT), Some(Elem::LReal));
+        assert_eq!(real(&Type::LREAL), Some(Elem::LReal));
+        assert_eq!(real(&Type::BOOL), None);
+        assert_eq!(real(&Type::TIME), None);
+        assert_eq!(real(&Type::Exception), None);
+        let literal = Operand {
+            flexible: true,
+            ..operand(&Type::LINT)
+        };
+        assert_eq!(real_function_type(literal, false), Some(Elem::LReal));
+        assert_eq!(
+            real_function_type(literal, true),
+            Some(Elem::Real),
+            "a literal where a REAL is wanted"
+        );
+    }
+
+    #[test]
+    fn a_generic_conversion_converts_from_the_arguments_type() {
+        let source = |t: &Type| conversion_source(operand(t));
+        assert_eq!(
+            source(&Type::String(10)),
+            Some(Type::String(DEFAULT_STRING_LEN))
+        );
+        assert_eq!(source(&Type::Subrange(Elem::Int, 0, 9)), Some(Type::INT));
+        assert_eq!(source(&Type::TIME), Some(Type::TIME));
+        assert_eq!(source(&Type::WString(10)), None);
+        assert_eq!(source(&Type::Exception), None);
+        let literal = Operand {
+            flexible: true,
+            ..operand(&Type::DINT)
+        };
+        assert_eq!(conversion_source(literal), Some(Type::LINT));
+        let real = Operand {
+            real_literal: true,
+            ..literal
+        };
+        assert_eq!(conversion_source(real), Some(Type::LREAL));
+    }
+}
