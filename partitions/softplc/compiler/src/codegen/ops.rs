@@ -39,15 +39,10 @@ impl Gen<'_> {
         span: Span,
     ) -> Option<BinaryRule> {
         if !self.check_only {
-            if let Some(Operation::Binary(rule)) = self.operations.of(a) {
-                return Some(rule.clone());
-            }
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                span,
-                "internal error: the checker decided no operation for this operator",
-            );
-            return None;
+            return match self.recorded_operation(a, span)? {
+                Operation::Binary(rule) => Some(rule),
+                Operation::Unary(_) => None,
+            };
         }
         let operand = |e: &Expr, ty| ops::Operand {
             ty,
@@ -73,21 +68,30 @@ impl Gen<'_> {
     ) -> Option<UnaryRule> {
         let symbol = if op == UnOp::Neg { "-" } else { "NOT" };
         if !self.check_only {
-            if let Some(Operation::Unary(rule)) = self.operations.of(x) {
-                return Some(*rule);
-            }
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                span,
-                "internal error: the checker decided no operation for this operator",
-            );
-            return None;
+            return match self.recorded_operation(x, span)? {
+                Operation::Unary(rule) => Some(rule),
+                Operation::Binary(_) => None,
+            };
         }
         let decided = ops::unary_rule(op, t).map(Operation::Unary);
         match self.record_operation(x, decided, symbol, span) {
             Some(Operation::Unary(rule)) => Some(rule),
             _ => None,
         }
+    }
+
+    /// The operation the checking pass recorded for the operand `first` (for emission: a
+    /// missing record is an internal error).
+    fn recorded_operation(&mut self, first: &Expr, span: Span) -> Option<Operation> {
+        let operation = self.operations.of(first).cloned();
+        if operation.is_none() {
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                span,
+                "internal error: the checker decided no operation for this operator",
+            );
+        }
+        operation
     }
 
     /// Records the checker's decision on the operation whose first operand is `first`, or

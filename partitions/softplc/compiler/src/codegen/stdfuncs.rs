@@ -429,15 +429,7 @@ impl Gen<'_> {
     /// recorded by the checking pass ([`crate::typed::GenericTypes`]), read by emission.
     fn conversion_source(&mut self, id: &Ident, arg: &Expr) -> Option<Type> {
         if !self.check_only {
-            if let Some(t) = self.generic_types.of(self.cur, id) {
-                return Some(t.clone());
-            }
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                id.span,
-                "internal error: the checker decided no type for this call",
-            );
-            return None;
+            return self.recorded_generic_type(id);
         }
         let t = self.infer(arg);
         if t.is_error() {
@@ -454,9 +446,7 @@ impl Gen<'_> {
             self.bad_inferred_arg(arg, &t, "an elementary value");
             return None;
         };
-        if !self.dry || self.generic_types.of(self.cur, id).is_none() {
-            self.generic_types.record(self.cur, id, source.clone());
-        }
+        self.record_generic_type(id, source.clone());
         Some(source)
     }
 
@@ -1196,26 +1186,35 @@ impl Gen<'_> {
                 self.bad_inferred_arg(e, &t, "a number");
                 return None;
             };
-            if !self.dry || self.generic_types.of(self.cur, c.id).is_none() {
-                self.generic_types
-                    .record(self.cur, c.id, Type::Elem(target));
-            }
+            self.record_generic_type(c.id, Type::Elem(target));
             target
         } else {
-            match self.generic_types.of(self.cur, c.id).and_then(|t| t.elem()) {
-                Some(target) => target,
-                None => {
-                    self.diags.error(
-                        codes::INTERNAL_ERROR,
-                        c.id.span,
-                        "internal error: the checker decided no type for this call",
-                    );
-                    return None;
-                }
-            }
+            self.recorded_generic_type(c.id)?.elem()?
         };
         self.value_to_any(e, &t, &Type::Elem(target));
         Some(target)
+    }
+
+    /// The type the checking pass recorded for the generic standard-function call `id` (for
+    /// emission: a missing record is an internal error).
+    fn recorded_generic_type(&mut self, id: &Ident) -> Option<Type> {
+        let t = self.generic_types.of(self.cur, id).cloned();
+        if t.is_none() {
+            self.diags.error(
+                codes::INTERNAL_ERROR,
+                id.span,
+                "internal error: the checker decided no type for this call",
+            );
+        }
+        t
+    }
+
+    /// Records the type the generic standard-function call `id` is called at (a walk for
+    /// inference records only what no real walk has, as the expected type may differ).
+    fn record_generic_type(&mut self, id: &Ident, t: Type) {
+        if !self.dry || self.generic_types.of(self.cur, id).is_none() {
+            self.generic_types.record(self.cur, id, t);
+        }
     }
 
     /// The type a generic selection function (SEL, MAX, MIN, LIMIT, MUX) is called at: the
@@ -1225,20 +1224,10 @@ impl Gen<'_> {
     /// emission reads the record.
     fn generic_type(&mut self, c: &StdArgs, from: usize) -> Type {
         if !self.check_only {
-            if let Some(t) = self.generic_types.of(self.cur, c.id) {
-                return t.clone();
-            }
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                c.id.span,
-                "internal error: the checker decided no type for this call",
-            );
-            return Type::Error;
+            return self.recorded_generic_type(c.id).unwrap_or(Type::Error);
         }
         let t = self.common_of(&c.exprs[from..], c.ctx.as_ref());
-        if !self.dry || self.generic_types.of(self.cur, c.id).is_none() {
-            self.generic_types.record(self.cur, c.id, t.clone());
-        }
+        self.record_generic_type(c.id, t.clone());
         t
     }
 

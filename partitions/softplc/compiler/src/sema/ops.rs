@@ -21,6 +21,18 @@ pub struct Operand<'t> {
     pub real_literal: bool,
 }
 
+impl<'t> Operand<'t> {
+    /// An operand of type `ty` that is no literal.
+    pub fn plain(ty: &'t Type) -> Self {
+        Operand {
+            ty,
+            flexible: false,
+            string_literal: false,
+            real_literal: false,
+        }
+    }
+}
+
 /// What an operation does, as the checker decided it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Operation {
@@ -257,17 +269,8 @@ fn temporal_rule(
 mod tests {
     use super::*;
 
-    fn operand(ty: &Type) -> Operand<'_> {
-        Operand {
-            ty,
-            flexible: false,
-            string_literal: false,
-            real_literal: false,
-        }
-    }
-
     fn rule(op: BinOp, a: &Type, b: &Type) -> Result<BinaryRule, OperatorError> {
-        binary_rule(op, operand(a), operand(b))
+        binary_rule(op, Operand::plain(a), Operand::plain(b))
     }
 
     const ARITHMETIC: [BinOp; 6] = [
@@ -333,10 +336,10 @@ mod tests {
         assert!(rule(BinOp::Eq, &s, &w).is_err(), "a STRING variable");
         let literal = Operand {
             string_literal: true,
-            ..operand(&s)
+            ..Operand::plain(&s)
         };
         assert_eq!(
-            binary_rule(BinOp::Eq, literal, operand(&w)),
+            binary_rule(BinOp::Eq, literal, Operand::plain(&w)),
             Ok(BinaryRule::StringCompare { wide: true }),
             "a STRING literal adapts"
         );
@@ -345,10 +348,10 @@ mod tests {
         assert!(rule(BinOp::Add, &c, &c).is_err());
         let number = Operand {
             flexible: true,
-            ..operand(&Type::LINT)
+            ..Operand::plain(&Type::LINT)
         };
         assert_eq!(
-            binary_rule(BinOp::Eq, operand(&c), number),
+            binary_rule(BinOp::Eq, Operand::plain(&c), number),
             Err(OperatorError::CharacterIsNoNumber)
         );
     }
@@ -404,10 +407,10 @@ mod tests {
         // A literal factor is a number: LREAL with a REAL literal in it, else LINT.
         let two = Operand {
             flexible: true,
-            ..operand(&time)
+            ..Operand::plain(&time)
         };
         assert_eq!(
-            binary_rule(BinOp::Mul, two, operand(&time)),
+            binary_rule(BinOp::Mul, two, Operand::plain(&time)),
             Ok(BinaryRule::Scale {
                 result: Elem::Time,
                 duration_first: false,
@@ -419,7 +422,7 @@ mod tests {
             ..two
         };
         assert_eq!(
-            binary_rule(BinOp::Div, operand(&ltime), half),
+            binary_rule(BinOp::Div, Operand::plain(&ltime), half),
             Ok(BinaryRule::Scale {
                 result: Elem::LTime,
                 duration_first: true,

@@ -43,18 +43,9 @@ pub fn conversion_source(arg: Operand) -> Option<Type> {
 mod tests {
     use super::*;
 
-    fn operand(ty: &Type) -> Operand<'_> {
-        Operand {
-            ty,
-            flexible: false,
-            string_literal: false,
-            real_literal: false,
-        }
-    }
-
     #[test]
     fn real_functions_compute_in_real_only_where_it_holds_the_argument() {
-        let real = |t: &Type| real_function_type(operand(t), false);
+        let real = |t: &Type| real_function_type(Operand::plain(t), false);
         assert_eq!(real(&Type::REAL), Some(Elem::Real));
         assert_eq!(real(&Type::INT), Some(Elem::Real), "REAL holds every INT");
         assert_eq!(real(&Type::Elem(Elem::Word)), Some(Elem::Real));
@@ -65,7 +56,7 @@ mod tests {
         assert_eq!(real(&Type::Exception), None);
         let literal = Operand {
             flexible: true,
-            ..operand(&Type::LINT)
+            ..Operand::plain(&Type::LINT)
         };
         assert_eq!(real_function_type(literal, false), Some(Elem::LReal));
         assert_eq!(
@@ -77,7 +68,7 @@ mod tests {
 
     #[test]
     fn a_generic_conversion_converts_from_the_arguments_type() {
-        let source = |t: &Type| conversion_source(operand(t));
+        let source = |t: &Type| conversion_source(Operand::plain(t));
         assert_eq!(
             source(&Type::String(10)),
             Some(Type::String(DEFAULT_STRING_LEN))
@@ -88,7 +79,7 @@ mod tests {
         assert_eq!(source(&Type::Exception), None);
         let literal = Operand {
             flexible: true,
-            ..operand(&Type::DINT)
+            ..Operand::plain(&Type::DINT)
         };
         assert_eq!(conversion_source(literal), Some(Type::LINT));
         let real = Operand {
