@@ -270,9 +270,9 @@ pub type StdArguments = NameTable<Vec<usize>>;
 
 /// The type each call of a generic standard function without a typed form is called at,
 /// keyed by the called name: a selection function's (SEL, MAX, MIN, LIMIT, MUX) the common
-/// type of its arguments, a REAL function's (SQRT, ..., EXPT, ATAN2, TRUNC) REAL or LREAL
-/// ([`crate::sema::stdfuncs::real_function_type`]), a generic conversion's (`TO_INT`) the
-/// type it converts from ([`crate::sema::stdfuncs::conversion_source`]).
+/// type of its arguments; by the rules of [`crate::sema::stdfuncs`], a REAL function's
+/// (SQRT, ..., EXPT, ATAN2, TRUNC) REAL or LREAL, the type ABS, SHL, SHR, ROL and ROR
+/// compute in, and the type a generic conversion (`TO_INT`) converts from.
 pub type GenericTypes = NameTable<Type>;
 
 /// What a method or property is called on.
@@ -546,19 +546,19 @@ END_PROGRAM
         let errors = internal_errors(check_then_emit(|c| {
             c.generic_types = GenericTypes::default()
         }));
-        // MAX(r, 1).
-        assert_eq!(errors.len(), 1, "{errors:?}");
-        assert!(errors[0].contains("decided no type"));
-        // The REAL functions' types are recorded too (a typed form needs none), and
-        // the type a generic conversion converts from.
+        // MAX(r, 1) and ABS(-3).
+        assert_eq!(errors.len(), 2, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("decided no type")));
+        // The REAL functions' types are recorded too (a typed form needs none), ABS's
+        // and SHL's, and the type a generic conversion converts from.
         let real_functions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
 r := SQRT(i); l := EXPT(d, 2); d := TRUNC(l); r := SIN_REAL(r); l := TO_LREAL(i);
-END_PROGRAM";
+i := ABS(i); d := SHL(d, 2); END_PROGRAM";
         assert!(check_then_emit_source(real_functions, |_| {}).is_ok());
         let errors = internal_errors(check_then_emit_source(real_functions, |c| {
             c.generic_types = GenericTypes::default()
         }));
-        assert_eq!(errors.len(), 4, "{errors:?}");
+        assert_eq!(errors.len(), 6, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("decided no type")));
     }
 

@@ -299,6 +299,16 @@ impl Type {
         }
     }
 
+    /// The elementary type a value of this type computes in: its own, or a subrange's base
+    /// type; `None` for enumerations and exceptions (held as DINT, but no numbers) and for
+    /// the types that are not elementary.
+    pub fn value_elem(&self) -> Option<Elem> {
+        match self {
+            Type::Elem(e) | Type::Subrange(e, ..) => Some(*e),
+            _ => None,
+        }
+    }
+
     pub fn is_error(&self) -> bool {
         matches!(self, Type::Error)
     }

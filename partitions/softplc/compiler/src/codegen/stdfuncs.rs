@@ -885,24 +885,19 @@ impl Gen<'_> {
                     }
                     None => self.expr(c.exprs[0], c.ctx.as_ref()),
                 };
-                match t.elem() {
-                    Some(Elem::Real) => self.emit(|b| b.call_builtin(Builtin::AbsF32)),
-                    Some(Elem::LReal) => self.emit(|b| b.call_builtin(Builtin::AbsF64)),
-                    Some(e)
-                        if (e.is_signed_int() || e.is_duration())
-                            && !matches!(t, Type::Enum(_) | Type::Exception) =>
-                    {
+                let Some(e) = self.argument_type(c, &t, rules::abs_type, "a number") else {
+                    return Some(Type::Error);
+                };
+                match e {
+                    Elem::Real => self.emit(|b| b.call_builtin(Builtin::AbsF32)),
+                    Elem::LReal => self.emit(|b| b.call_builtin(Builtin::AbsF64)),
+                    e if e.is_signed_int() || e.is_duration() => {
                         self.op(Opcode::AbsS);
                         self.wrap(e);
                     }
-                    Some(e) if e.is_integral() && !matches!(t, Type::Enum(_) | Type::Exception) => {
-                    }
-                    _ => return Some(self.bad_arg(c.exprs[0], &t, "a number")),
+                    _ => {}
                 }
-                match t {
-                    Type::Subrange(e, ..) => Type::Elem(e),
-                    t => t,
-                }
+                Type::Elem(e)
             }
             // TRUNC gives the integer type the context wants (IEC: ANY_INT), else DINT;
             // TRUNC_INT, REAL_TRUNC_INT, ... a fixed one. NUMERIC_ERROR when it does not fit.
@@ -1111,11 +1106,9 @@ impl Gen<'_> {
                     return Some(Type::Error);
                 }
                 let t = self.expr(c.exprs[0], None);
-                let Some(e) = t
-                    .elem()
-                    .filter(|e| e.is_integral() && !matches!(t, Type::Enum(_) | Type::Exception))
-                else {
-                    return Some(self.bad_arg(c.exprs[0], &t, "a bit string or integer"));
+                let what = "a bit string or integer";
+                let Some(e) = self.argument_type(c, &t, rules::shift_type, what) else {
+                    return Some(Type::Error);
                 };
                 // The count may be of any integer type (IEC: ANY_INT).
                 self.int_arg(c.exprs[1]);
@@ -1193,6 +1186,27 @@ impl Gen<'_> {
         };
         self.value_to_any(e, &t, &Type::Elem(target));
         Some(target)
+    }
+
+    /// The type the call `c` computes in for its first argument of type `t` (compiled): the
+    /// checking pass decides it by `rule` (reporting an argument that is not `what`) and
+    /// records it; emission reads the record.
+    fn argument_type(
+        &mut self,
+        c: &StdArgs,
+        t: &Type,
+        rule: fn(&Type) -> Option<Elem>,
+        what: &str,
+    ) -> Option<Elem> {
+        if !self.check_only {
+            return self.recorded_generic_type(c.id)?.elem();
+        }
+        let Some(e) = rule(t) else {
+            self.bad_arg(c.exprs[0], t, what);
+            return None;
+        };
+        self.record_generic_type(c.id, Type::Elem(e));
+        Some(e)
     }
 
     /// The type the checking pass recorded for the generic standard-function call `id` (for

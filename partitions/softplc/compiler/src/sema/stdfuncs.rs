@@ -1,5 +1,6 @@
 //! The standard functions' typing rules that depend on an argument's type: the type a REAL
-//! function computes in and the type a generic conversion (`TO_INT`) converts from.
+//! function, ABS or a shift or rotation computes in and the type a generic conversion
+//! (`TO_INT`) converts from.
 //!
 //! The checker applies them once and records the type it chose
 //! ([`crate::typed::GenericTypes`]); emission reads the record.
@@ -13,16 +14,25 @@ use crate::types::{DEFAULT_STRING_LEN, Elem, Type};
 /// context wants a REAL (`real_context`); LREAL for every other number; `None` for what is
 /// no number.
 pub fn real_function_type(arg: Operand, real_context: bool) -> Option<Elem> {
-    let t = arg.ty;
-    let number = t.elem().filter(|e| e.is_numeric());
-    if matches!(t, Type::Enum(_) | Type::Exception) || number.is_none() {
-        return None;
-    }
-    let small_integer = !arg.flexible && number.is_some_and(|e| e.is_integral() && e.size() <= 2);
-    match number == Some(Elem::Real) || arg.flexible && real_context || small_integer {
+    let number = arg.ty.value_elem().filter(|e| e.is_numeric())?;
+    let small_integer = !arg.flexible && number.is_integral() && number.size() <= 2;
+    match number == Elem::Real || arg.flexible && real_context || small_integer {
         true => Some(Elem::Real),
         false => Some(Elem::LReal),
     }
+}
+
+/// The type ABS computes in for an argument of type `t`: its elementary type if that is a
+/// number or a duration; `None` otherwise.
+pub fn abs_type(t: &Type) -> Option<Elem> {
+    t.value_elem()
+        .filter(|e| e.is_real() || e.is_integral() || e.is_signed_int() || e.is_duration())
+}
+
+/// The type SHL, SHR, ROL and ROR shift in for a value of type `t`: its elementary type if
+/// that is a bit string or an integer; `None` otherwise.
+pub fn shift_type(t: &Type) -> Option<Elem> {
+    t.value_elem().filter(|e| e.is_integral())
 }
 
 /// The type `TO_<target>(arg)` converts from (then as `<source>_TO_<target>`): a STRING, an
@@ -64,6 +74,19 @@ mod tests {
             Some(Elem::Real),
             "a literal where a REAL is wanted"
         );
+    }
+
+    #[test]
+    fn abs_takes_numbers_and_durations_shifts_bit_strings_and_integers() {
+        assert_eq!(abs_type(&Type::LREAL), Some(Elem::LReal));
+        assert_eq!(abs_type(&Type::Subrange(Elem::Int, -5, 5)), Some(Elem::Int));
+        assert_eq!(abs_type(&Type::LTIME), Some(Elem::LTime));
+        assert_eq!(abs_type(&Type::Exception), None, "held as DINT, no number");
+        assert_eq!(abs_type(&Type::Elem(Elem::Tod)), None);
+        assert_eq!(shift_type(&Type::Elem(Elem::Word)), Some(Elem::Word));
+        assert_eq!(shift_type(&Type::DINT), Some(Elem::DInt));
+        assert_eq!(shift_type(&Type::REAL), None);
+        assert_eq!(shift_type(&Type::String(8)), None);
     }
 
     #[test]
