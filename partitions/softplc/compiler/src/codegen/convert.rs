@@ -214,13 +214,7 @@ impl Gen<'_> {
             }
             (Type::Elem(f), Type::Elem(t)) => {
                 let (f, t) = (*f, *t);
-                let number = |e: Elem| e.is_numeric() || e == Elem::Bool;
-                let allowed = number(f) && number(t)
-                    || f.is_temporal() && (t.is_temporal() || number(t))
-                    || t.is_temporal() && number(f)
-                    || f.is_char() && (t.is_char() || t.is_integral())
-                    || t.is_char() && f.is_integral();
-                if !allowed {
+                if !crate::sema::stdfuncs::conversion_exists(f, t) {
                     self.error(
                         codes::NO_CONVERSION,
                         id.span,

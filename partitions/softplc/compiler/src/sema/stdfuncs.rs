@@ -1,6 +1,6 @@
-//! The standard functions' typing rules that depend on an argument's type: the type a REAL
-//! function, ABS or a shift or rotation computes in and the type a generic conversion
-//! (`TO_INT`) converts from.
+//! The standard functions' typing rules: the type a REAL function, ABS or a shift or
+//! rotation computes in, the type a generic conversion (`TO_INT`) converts from and which
+//! conversions between elementary types exist.
 //!
 //! The checker applies them once and records the type it chose
 //! ([`crate::typed::GenericTypes`]); emission reads the record.
@@ -49,6 +49,18 @@ pub fn conversion_source(arg: Operand) -> Option<Type> {
     }
 }
 
+/// Whether `<from>_TO_<to>` exists between two elementary types: among numbers and BOOL,
+/// from a date or time to a date or time or a number and back, and between characters and
+/// to and from integers and bit strings.
+pub fn conversion_exists(from: Elem, to: Elem) -> bool {
+    let number = |e: Elem| e.is_numeric() || e == Elem::Bool;
+    number(from) && number(to)
+        || from.is_temporal() && (to.is_temporal() || number(to))
+        || to.is_temporal() && number(from)
+        || from.is_char() && (to.is_char() || to.is_integral())
+        || to.is_char() && from.is_integral()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -87,6 +99,26 @@ mod tests {
         assert_eq!(shift_type(&Type::DINT), Some(Elem::DInt));
         assert_eq!(shift_type(&Type::REAL), None);
         assert_eq!(shift_type(&Type::String(8)), None);
+    }
+
+    #[test]
+    fn conversions_exist_within_numbers_times_and_characters() {
+        use Elem::*;
+        for (from, to) in [
+            (Bool, LReal),
+            (Real, Word),
+            (Time, LInt),
+            (DInt, Tod),
+            (Date, Dt),
+        ] {
+            assert!(conversion_exists(from, to), "{from}_TO_{to}");
+        }
+        for (from, to) in [(Char, WChar), (Byte, Char), (WChar, UInt)] {
+            assert!(conversion_exists(from, to), "{from}_TO_{to}");
+        }
+        for (from, to) in [(Char, Real), (LReal, WChar), (Char, Time), (Tod, Char)] {
+            assert!(!conversion_exists(from, to), "{from}_TO_{to}");
+        }
     }
 
     #[test]
