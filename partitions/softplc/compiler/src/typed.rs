@@ -272,7 +272,8 @@ pub type StdArguments = NameTable<Vec<usize>>;
 /// keyed by the called name: a selection function's (SEL, MAX, MIN, LIMIT, MUX) the common
 /// type of its arguments; by the rules of [`crate::sema::stdfuncs`], a REAL function's
 /// (SQRT, ..., EXPT, ATAN2, TRUNC) REAL or LREAL, the type ABS, SHL, SHR, ROL and ROR
-/// compute in, and the type a generic conversion (`TO_INT`) converts from.
+/// compute in, the kind of string a string function (LEN, ..., CONCAT) works on and the
+/// type a generic conversion (`TO_INT`) converts from.
 pub type GenericTypes = NameTable<Type>;
 
 /// What a method or property is called on.
@@ -549,16 +550,16 @@ END_PROGRAM
         // MAX(r, 1) and ABS(-3).
         assert_eq!(errors.len(), 2, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("decided no type")));
-        // The REAL functions' types are recorded too (a typed form needs none), ABS's
-        // and SHL's, and the type a generic conversion converts from.
+        // The REAL functions' types are recorded too (a typed form needs none), ABS's,
+        // SHL's, a string function's kind and the type a generic conversion converts from.
         let real_functions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
 r := SQRT(i); l := EXPT(d, 2); d := TRUNC(l); r := SIN_REAL(r); l := TO_LREAL(i);
-i := ABS(i); d := SHL(d, 2); END_PROGRAM";
+i := ABS(i); d := SHL(d, 2); i := LEN('abc'); END_PROGRAM";
         assert!(check_then_emit_source(real_functions, |_| {}).is_ok());
         let errors = internal_errors(check_then_emit_source(real_functions, |c| {
             c.generic_types = GenericTypes::default()
         }));
-        assert_eq!(errors.len(), 6, "{errors:?}");
+        assert_eq!(errors.len(), 7, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("decided no type")));
     }
 

@@ -1211,7 +1211,7 @@ impl Gen<'_> {
 
     /// The type the checking pass recorded for the generic standard-function call `id` (for
     /// emission: a missing record is an internal error).
-    fn recorded_generic_type(&mut self, id: &Ident) -> Option<Type> {
+    pub(super) fn recorded_generic_type(&mut self, id: &Ident) -> Option<Type> {
         let t = self.generic_types.of(self.cur, id).cloned();
         if t.is_none() {
             self.diags.error(
@@ -1225,7 +1225,7 @@ impl Gen<'_> {
 
     /// Records the type the generic standard-function call `id` is called at (a walk for
     /// inference records only what no real walk has, as the expected type may differ).
-    fn record_generic_type(&mut self, id: &Ident, t: Type) {
+    pub(super) fn record_generic_type(&mut self, id: &Ident, t: Type) {
         if !self.dry || self.generic_types.of(self.cur, id).is_none() {
             self.generic_types.record(self.cur, id, t);
         }

@@ -3,16 +3,16 @@
 
 use super::stdfuncs::*;
 use super::*;
+use crate::sema::stdfuncs as rules;
 
 impl Gen<'_> {
     /// String functions: LEN, LEFT/RIGHT, MID/DELETE, INSERT, REPLACE, FIND, CONCAT, on
     /// STRINGs or on WSTRINGs (the first string argument decides; STRING literals adapt).
     pub(super) fn std_string(&mut self, c: &StdArgs) -> Option<Type> {
-        let wide = c
-            .exprs
-            .iter()
-            .find(|e| !matches!(e.kind, ExprKind::Str(_)))
-            .is_some_and(|e| self.infer(e).is_wstring());
+        let Some(kind) = self.string_kind(c) else {
+            return Some(Type::Error);
+        };
+        let wide = kind.is_wstring();
         let kind = |len: u32| {
             if wide {
                 Type::WString(len)
@@ -153,6 +153,21 @@ impl Gen<'_> {
             _ => unreachable!("std_string called for {}", c.name),
         };
         Some(t)
+    }
+
+    /// The kind of string (a STRING or WSTRING of the default length) the string function
+    /// call `c` works on: the checking pass decides it by its first argument that is no
+    /// STRING literal ([`rules::string_kind`]) and records it
+    /// ([`crate::typed::GenericTypes`]); emission reads the record.
+    fn string_kind(&mut self, c: &StdArgs) -> Option<Type> {
+        if !self.check_only {
+            return self.recorded_generic_type(c.id);
+        }
+        let first = c.exprs.iter().find(|e| !matches!(e.kind, ExprKind::Str(_)));
+        let first = first.map(|e| self.infer(e));
+        let kind = rules::string_kind(first.as_ref());
+        self.record_generic_type(c.id, kind.clone());
+        Some(kind)
     }
 
     pub(super) fn string_arg(&mut self, e: &Expr) {

@@ -1,6 +1,6 @@
 //! The standard functions' typing rules: the type a REAL function, ABS or a shift or
-//! rotation computes in, the type a generic conversion (`TO_INT`) converts from and which
-//! conversions between elementary types exist.
+//! rotation computes in, the kind of string a string function works on, the type a generic
+//! conversion (`TO_INT`) converts from and which conversions between elementary types exist.
 //!
 //! The checker applies them once and records the type it chose
 //! ([`crate::typed::GenericTypes`]); emission reads the record.
@@ -33,6 +33,16 @@ pub fn abs_type(t: &Type) -> Option<Elem> {
 /// that is a bit string or an integer; `None` otherwise.
 pub fn shift_type(t: &Type) -> Option<Elem> {
     t.value_elem().filter(|e| e.is_integral())
+}
+
+/// The kind of string LEN, LEFT, RIGHT, MID, DELETE, INSERT, REPLACE, FIND and CONCAT work
+/// on (a STRING or WSTRING of the default length): a WSTRING's if the first argument that
+/// is no STRING literal (of type `first`) is one, else a STRING's (a STRING literal adapts).
+pub fn string_kind(first: Option<&Type>) -> Type {
+    match first {
+        Some(t) if t.is_wstring() => Type::WString(DEFAULT_STRING_LEN),
+        _ => Type::String(DEFAULT_STRING_LEN),
+    }
 }
 
 /// The type `TO_<target>(arg)` converts from (then as `<source>_TO_<target>`): a STRING, an
@@ -99,6 +109,15 @@ mod tests {
         assert_eq!(shift_type(&Type::DINT), Some(Elem::DInt));
         assert_eq!(shift_type(&Type::REAL), None);
         assert_eq!(shift_type(&Type::String(8)), None);
+    }
+
+    #[test]
+    fn a_string_function_works_on_wstrings_when_its_first_variable_argument_is_one() {
+        let wide = Type::WString(DEFAULT_STRING_LEN);
+        assert_eq!(string_kind(Some(&Type::WString(5))), wide);
+        assert!(string_kind(Some(&Type::String(5))).is_string());
+        assert!(string_kind(Some(&Type::INT)).is_string(), "refused later");
+        assert!(string_kind(None).is_string(), "literals only");
     }
 
     #[test]
