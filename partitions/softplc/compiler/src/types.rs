@@ -436,6 +436,52 @@ pub fn implicit_ok(from: Elem, to: Elem) -> bool {
     false
 }
 
+/// What assigning a value of a non-pointer type `from` where `to` is wanted takes
+/// ([`implicit_conversion`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Implicit {
+    /// Nothing: the same type, a string of the same kind, a subrange where its base type is
+    /// wanted (or an error type, already reported).
+    Nothing,
+    /// The conversion of one elementary type to another.
+    Convert(Elem, Elem),
+}
+
+/// Why a value of one type cannot stand where another is wanted.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum NotImplicit {
+    /// The types do not match at all.
+    Mismatch,
+    /// Both are elementary, but the conversion could lose a value (`numbers`: both are
+    /// numbers, so an explicit `<from>_TO_<to>` would do).
+    MayLose { numbers: bool },
+}
+
+/// The implicit conversion of a value of type `from` where `to` is wanted (pointers,
+/// references and interfaces aside): IEC 61131-3's widening that loses no value
+/// ([`implicit_ok`]); enumerations and exceptions only as themselves.
+pub fn implicit_conversion(from: &Type, to: &Type) -> Result<Implicit, NotImplicit> {
+    if from.is_error() || to.is_error() || from == to {
+        return Ok(Implicit::Nothing);
+    }
+    match (from, to) {
+        (Type::String(_), Type::String(_)) | (Type::WString(_), Type::WString(_)) => {
+            return Ok(Implicit::Nothing);
+        }
+        (Type::Subrange(a, ..), _) if to.value_elem() == Some(*a) => return Ok(Implicit::Nothing),
+        _ => {}
+    }
+    let (Some(f), Some(t)) = (from.value_elem(), to.value_elem()) else {
+        return Err(NotImplicit::Mismatch);
+    };
+    match implicit_ok(f, t) {
+        true => Ok(Implicit::Convert(f, t)),
+        false => Err(NotImplicit::MayLose {
+            numbers: f.is_numeric() && t.is_numeric(),
+        }),
+    }
+}
+
 impl fmt::Display for Elem {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         f.write_str(self.name())
@@ -455,5 +501,36 @@ mod tests {
         assert!(implicit_ok(Elem::Int, Elem::DInt));
         assert!(!implicit_ok(Elem::DInt, Elem::Int));
         assert!(implicit_ok(Elem::DInt, Elem::LReal));
+    }
+
+    #[test]
+    fn implicit_conversions_widen_and_keep_enumerations_apart() {
+        let sub = Type::Subrange(Elem::Int, 0, 9);
+        assert_eq!(implicit_conversion(&sub, &Type::INT), Ok(Implicit::Nothing));
+        assert_eq!(
+            implicit_conversion(&sub, &Type::DINT),
+            Ok(Implicit::Convert(Elem::Int, Elem::DInt))
+        );
+        assert_eq!(
+            implicit_conversion(&Type::String(8), &Type::String(80)),
+            Ok(Implicit::Nothing)
+        );
+        assert_eq!(
+            implicit_conversion(&Type::DINT, &Type::INT),
+            Err(NotImplicit::MayLose { numbers: true })
+        );
+        assert_eq!(
+            implicit_conversion(&Type::TIME, &Type::Elem(Elem::Tod)),
+            Err(NotImplicit::MayLose { numbers: false })
+        );
+        assert_eq!(
+            implicit_conversion(&Type::Exception, &Type::DINT),
+            Err(NotImplicit::Mismatch),
+            "held as DINT, but no number"
+        );
+        assert_eq!(
+            implicit_conversion(&Type::String(8), &Type::WString(8)),
+            Err(NotImplicit::Mismatch)
+        );
     }
 }

@@ -112,7 +112,8 @@ impl Gen<'_> {
         self.coerce(&t, to, e.span);
     }
 
-    /// Emits an implicit conversion from `from` to `to`, or reports a type mismatch.
+    /// Emits an implicit conversion from `from` to `to` ([`implicit_conversion`]), or
+    /// reports a type mismatch.
     pub(crate) fn coerce(&mut self, from: &Type, to: &Type, span: Span) {
         if from.is_error() || to.is_error() || from == to {
             return;
@@ -120,51 +121,29 @@ impl Gen<'_> {
         if self.coerce_pointer(from, to, span) {
             return;
         }
-        match (from, to) {
-            (Type::String(_), Type::String(_)) | (Type::WString(_), Type::WString(_)) => return,
-            (Type::Subrange(a, ..), _)
-                if to.elem() == Some(*a) && !matches!(to, Type::Enum(_) | Type::Exception) =>
-            {
-                return;
+        let (code, msg) = match implicit_conversion(from, to) {
+            Ok(Implicit::Nothing) => return,
+            Ok(Implicit::Convert(f, t)) => return self.convert(f, t),
+            Err(NotImplicit::MayLose { numbers: true }) => {
+                let (f, t) = (from.value_elem(), to.value_elem());
+                let (f, t) = (f.unwrap_or(Elem::DInt), t.unwrap_or(Elem::DInt));
+                let msg = format!("cannot convert {f} to {t} implicitly (use {f}_TO_{t})");
+                (codes::IMPLICIT_CONVERSION, msg)
             }
-            _ => {}
-        }
-        let (Some(f), Some(t)) = (from.elem(), to.elem()) else {
-            let msg = format!(
-                "type mismatch: expected {}, found {}",
-                self.tname(to),
-                self.tname(from)
-            );
-            self.error(codes::TYPE_MISMATCH, span, msg);
-            return;
+            Err(NotImplicit::MayLose { numbers: false }) => {
+                (codes::IMPLICIT_CONVERSION, self.mismatch_message(from, to))
+            }
+            Err(NotImplicit::Mismatch) => (codes::TYPE_MISMATCH, self.mismatch_message(from, to)),
         };
-        let enumish = |x: &Type| matches!(x, Type::Enum(_) | Type::Exception);
-        if enumish(from) || enumish(to) {
-            let msg = format!(
-                "type mismatch: expected {}, found {}",
-                self.tname(to),
-                self.tname(from)
-            );
-            self.error(codes::TYPE_MISMATCH, span, msg);
-            return;
-        }
-        if !implicit_ok(f, t) {
-            let msg = if f.is_numeric() && t.is_numeric() {
-                format!(
-                    "cannot convert {} to {} implicitly (use {}_TO_{})",
-                    f, t, f, t
-                )
-            } else {
-                format!(
-                    "type mismatch: expected {}, found {}",
-                    self.tname(to),
-                    self.tname(from)
-                )
-            };
-            self.error(codes::IMPLICIT_CONVERSION, span, msg);
-            return;
-        }
-        self.convert(f, t);
+        self.error(code, span, msg);
+    }
+
+    fn mismatch_message(&self, from: &Type, to: &Type) -> String {
+        format!(
+            "type mismatch: expected {}, found {}",
+            self.tname(to),
+            self.tname(from)
+        )
     }
 
     /// Emits the conversion of an elementary value (explicit conversions use this too).
