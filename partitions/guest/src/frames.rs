@@ -283,13 +283,11 @@ impl<'p> Frames<'p> {
         rights: Rights,
         write: bool,
     ) -> Result<Option<usize>, Errno> {
-        match self.backing.get(key(pid, page)) {
-            None => {
-                let frame = self.back_page(pid, page)?;
-                self.map_backed(m, pid, page, frame, rights, write)
-            }
-            Some(frame) => self.map_backed(m, pid, page, frame, rights, write),
-        }
+        let frame = match self.backing.get(key(pid, page)) {
+            Some(frame) => frame,
+            None => self.back_page(pid, page)?,
+        };
+        self.map_backed(m, pid, page, frame, rights, write)
     }
 
     /// [`Frames::fault_in`] of a page `frame` backs.

@@ -1,4 +1,6 @@
-//! Binary operators: arithmetic, comparisons, bit logic and the date/time arithmetic.
+//! Operators: the checking pass decides what each does by the rules of [`crate::sema::ops`]
+//! and records it; emission reads the record and emits the binary operations here
+//! (arithmetic, comparisons, bit logic, date/time arithmetic; the unary ones in `expr.rs`).
 
 use super::*;
 use crate::sema::ops::{self, BinaryRule, Operation, OperatorError, UnaryRule};
@@ -39,9 +41,9 @@ impl Gen<'_> {
         span: Span,
     ) -> Option<BinaryRule> {
         if !self.check_only {
-            return match self.recorded_operation(a, span)? {
-                Operation::Binary(rule) => Some(rule),
-                Operation::Unary(_) => None,
+            return match self.operations.of(a) {
+                Some(Operation::Binary(rule)) => Some(rule.clone()),
+                _ => self.no_operation(span),
             };
         }
         let operand = |e: &Expr, ty| ops::Operand {
@@ -68,9 +70,9 @@ impl Gen<'_> {
     ) -> Option<UnaryRule> {
         let symbol = if op == UnOp::Neg { "-" } else { "NOT" };
         if !self.check_only {
-            return match self.recorded_operation(x, span)? {
-                Operation::Unary(rule) => Some(rule),
-                Operation::Binary(_) => None,
+            return match self.operations.of(x) {
+                Some(Operation::Unary(rule)) => Some(*rule),
+                _ => self.no_operation(span),
             };
         }
         let decided = ops::unary_rule(op, t).map(Operation::Unary);
@@ -80,18 +82,15 @@ impl Gen<'_> {
         }
     }
 
-    /// The operation the checking pass recorded for the operand `first` (for emission: a
-    /// missing record is an internal error).
-    fn recorded_operation(&mut self, first: &Expr, span: Span) -> Option<Operation> {
-        let operation = self.operations.of(first).cloned();
-        if operation.is_none() {
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                span,
-                "internal error: the checker decided no operation for this operator",
-            );
-        }
-        operation
+    /// Reports that emission found no record of the operator at `span` (of its kind): the
+    /// checker missed it.
+    fn no_operation<T>(&mut self, span: Span) -> Option<T> {
+        self.diags.error(
+            codes::INTERNAL_ERROR,
+            span,
+            "internal error: the checker decided no operation for this operator",
+        );
+        None
     }
 
     /// Records the checker's decision on the operation whose first operand is `first`, or
