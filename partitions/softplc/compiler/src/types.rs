@@ -452,9 +452,8 @@ pub enum Implicit {
 pub enum NotImplicit {
     /// The types do not match at all.
     Mismatch,
-    /// Both are elementary, but the conversion could lose a value (`numbers`: both are
-    /// numbers, so an explicit `<from>_TO_<to>` would do).
-    MayLose { numbers: bool },
+    /// Both are elementary (of these types), but the conversion could lose a value.
+    MayLose(Elem, Elem),
 }
 
 /// The implicit conversion of a value of type `from` where `to` is wanted (pointers,
@@ -476,9 +475,7 @@ pub fn implicit_conversion(from: &Type, to: &Type) -> Result<Implicit, NotImplic
     };
     match implicit_ok(f, t) {
         true => Ok(Implicit::Convert(f, t)),
-        false => Err(NotImplicit::MayLose {
-            numbers: f.is_numeric() && t.is_numeric(),
-        }),
+        false => Err(NotImplicit::MayLose(f, t)),
     }
 }
 
@@ -517,11 +514,11 @@ mod tests {
         );
         assert_eq!(
             implicit_conversion(&Type::DINT, &Type::INT),
-            Err(NotImplicit::MayLose { numbers: true })
+            Err(NotImplicit::MayLose(Elem::DInt, Elem::Int))
         );
         assert_eq!(
             implicit_conversion(&Type::TIME, &Type::Elem(Elem::Tod)),
-            Err(NotImplicit::MayLose { numbers: false })
+            Err(NotImplicit::MayLose(Elem::Time, Elem::Tod))
         );
         assert_eq!(
             implicit_conversion(&Type::Exception, &Type::DINT),

@@ -124,13 +124,12 @@ impl Gen<'_> {
         let (code, msg) = match implicit_conversion(from, to) {
             Ok(Implicit::Nothing) => return,
             Ok(Implicit::Convert(f, t)) => return self.convert(f, t),
-            Err(NotImplicit::MayLose { numbers: true }) => {
-                let (f, t) = (from.value_elem(), to.value_elem());
-                let (f, t) = (f.unwrap_or(Elem::DInt), t.unwrap_or(Elem::DInt));
+            // Between numbers an explicit conversion would do.
+            Err(NotImplicit::MayLose(f, t)) if f.is_numeric() && t.is_numeric() => {
                 let msg = format!("cannot convert {f} to {t} implicitly (use {f}_TO_{t})");
                 (codes::IMPLICIT_CONVERSION, msg)
             }
-            Err(NotImplicit::MayLose { numbers: false }) => {
+            Err(NotImplicit::MayLose(..)) => {
                 (codes::IMPLICIT_CONVERSION, self.mismatch_message(from, to))
             }
             Err(NotImplicit::Mismatch) => (codes::TYPE_MISMATCH, self.mismatch_message(from, to)),
