@@ -2,8 +2,9 @@
 //! rotation computes in, the kind of string a string function works on, the type a generic
 //! conversion (`TO_INT`) converts from and which conversions between elementary types exist.
 //!
-//! The checker applies them once and records the type it chose
-//! ([`crate::typed::GenericTypes`]); emission reads the record.
+//! The checker applies the type rules once and records the type it chose
+//! ([`crate::typed::GenericTypes`]); emission reads the record. Whether a conversion exists
+//! is still asked where a named conversion (`INT_TO_REAL`) is compiled, in both passes.
 
 use super::ops::Operand;
 use crate::types::{DEFAULT_STRING_LEN, Elem, Type};
