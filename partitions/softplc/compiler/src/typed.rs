@@ -552,11 +552,11 @@ END_PROGRAM
         assert!(errors.iter().all(|e| e.contains("decided no type")));
         // The REAL functions' types are recorded too (a typed form needs none), ABS's,
         // SHL's, a string function's kind and the type a generic conversion converts from.
-        let real_functions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
+        let standard_functions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
 r := SQRT(i); l := EXPT(d, 2); d := TRUNC(l); r := SIN_REAL(r); l := TO_LREAL(i);
 i := ABS(i); d := SHL(d, 2); i := LEN('abc'); END_PROGRAM";
-        assert!(check_then_emit_source(real_functions, |_| {}).is_ok());
-        let errors = internal_errors(check_then_emit_source(real_functions, |c| {
+        assert!(check_then_emit_source(standard_functions, |_| {}).is_ok());
+        let errors = internal_errors(check_then_emit_source(standard_functions, |c| {
             c.generic_types = GenericTypes::default()
         }));
         assert_eq!(errors.len(), 7, "{errors:?}");

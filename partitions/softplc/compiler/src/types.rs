@@ -473,9 +473,10 @@ pub fn implicit_conversion(from: &Type, to: &Type) -> Result<Implicit, NotImplic
     let (Some(f), Some(t)) = (from.value_elem(), to.value_elem()) else {
         return Err(NotImplicit::Mismatch);
     };
-    match implicit_ok(f, t) {
-        true => Ok(Implicit::Convert(f, t)),
-        false => Err(NotImplicit::MayLose(f, t)),
+    if implicit_ok(f, t) {
+        Ok(Implicit::Convert(f, t))
+    } else {
+        Err(NotImplicit::MayLose(f, t))
     }
 }
 

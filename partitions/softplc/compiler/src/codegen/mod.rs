@@ -165,7 +165,7 @@ pub(crate) struct Gen<'a> {
     /// The type each generic standard function is called at: decided by the checking
     /// pass, read by emission.
     pub(crate) generic_types: GenericTypes,
-    /// What each binary operation does: decided by the checking pass, read by emission.
+    /// What each operator does: decided by the checking pass, read by emission.
     pub(crate) operations: Operations,
     /// Which property each member read and assignment target reaches, if any: resolved by
     /// the checking pass, read by emission.

@@ -97,10 +97,7 @@ pub enum OperatorError {
 /// What `op` does with an operand of type `t` (not the error type).
 pub fn unary_rule(op: UnOp, t: &Type) -> Result<UnaryRule, OperatorError> {
     let refused = || Err(OperatorError::Operand(t.clone()));
-    let Some(e) = t
-        .elem()
-        .filter(|_| !matches!(t, Type::Enum(_) | Type::Exception))
-    else {
+    let Some(e) = t.value_elem() else {
         return refused();
     };
     match op {
@@ -135,17 +132,19 @@ pub fn binary_rule(op: BinOp, a: Operand, b: Operand) -> Result<BinaryRule, Oper
         let same_kind = (ta.is_string() && tb.is_string()) || (ta.is_wstring() && tb.is_wstring());
         let adapts =
             wide && (a.string_literal && tb.is_wstring() || b.string_literal && ta.is_wstring());
-        return match (same_kind || adapts) && is_cmp {
-            true => Ok(BinaryRule::StringCompare { wide }),
-            false => Err(mismatch()),
+        return if (same_kind || adapts) && is_cmp {
+            Ok(BinaryRule::StringCompare { wide })
+        } else {
+            Err(mismatch())
         };
     }
     // Enumerations (and exceptions): equality and ordering within the same type.
     let enumish = |t: &Type| matches!(t, Type::Enum(_) | Type::Exception);
     if enumish(ta) || enumish(tb) {
-        return match ta == tb && is_cmp {
-            true => Ok(BinaryRule::Compare),
-            false => Err(mismatch()),
+        return if ta == tb && is_cmp {
+            Ok(BinaryRule::Compare)
+        } else {
+            Err(mismatch())
         };
     }
     let (Some(ea), Some(eb)) = (ta.elem(), tb.elem()) else {
@@ -159,9 +158,10 @@ pub fn binary_rule(op: BinOp, a: Operand, b: Operand) -> Result<BinaryRule, Oper
         if a.flexible || b.flexible {
             return Err(OperatorError::CharacterIsNoNumber);
         }
-        return match is_cmp && ea.is_char() && eb.is_char() {
-            true => Ok(BinaryRule::Compare),
-            false => Err(mismatch()),
+        return if is_cmp && ea.is_char() && eb.is_char() {
+            Ok(BinaryRule::Compare)
+        } else {
+            Err(mismatch())
         };
     }
     // Booleans and bit strings: logic operators.
@@ -169,17 +169,19 @@ pub fn binary_rule(op: BinOp, a: Operand, b: Operand) -> Result<BinaryRule, Oper
         if ea == Elem::Bool && eb == Elem::Bool {
             return Ok(BinaryRule::Logic(Elem::Bool));
         }
-        return match ea.is_integral() && eb.is_integral() {
-            true => common_numeric(ea, eb)
+        return if ea.is_integral() && eb.is_integral() {
+            common_numeric(ea, eb)
                 .map(BinaryRule::Logic)
-                .ok_or_else(mismatch),
-            false => Err(mismatch()),
+                .ok_or_else(mismatch)
+        } else {
+            Err(mismatch())
         };
     }
     if ea == Elem::Bool || eb == Elem::Bool {
-        return match ea == eb && matches!(op, BinOp::Eq | BinOp::Ne) {
-            true => Ok(BinaryRule::Compare),
-            false => Err(mismatch()),
+        return if ea == eb && matches!(op, BinOp::Eq | BinOp::Ne) {
+            Ok(BinaryRule::Compare)
+        } else {
+            Err(mismatch())
         };
     }
     let ct = common_numeric(ea, eb).ok_or_else(mismatch)?;

@@ -17,9 +17,10 @@ use crate::types::{DEFAULT_STRING_LEN, Elem, Type};
 pub fn real_function_type(arg: Operand, real_context: bool) -> Option<Elem> {
     let number = arg.ty.value_elem().filter(|e| e.is_numeric())?;
     let small_integer = !arg.flexible && number.is_integral() && number.size() <= 2;
-    match number == Elem::Real || arg.flexible && real_context || small_integer {
-        true => Some(Elem::Real),
-        false => Some(Elem::LReal),
+    if number == Elem::Real || arg.flexible && real_context || small_integer {
+        Some(Elem::Real)
+    } else {
+        Some(Elem::LReal)
     }
 }
 
