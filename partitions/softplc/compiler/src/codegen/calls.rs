@@ -48,11 +48,7 @@ impl Gen<'_> {
             match self.callees.of(callee) {
                 Some(target) => target.clone(),
                 None => {
-                    self.diags.error(
-                        codes::INTERNAL_ERROR,
-                        callee.span,
-                        "internal error: the checker resolved no callee for this call",
-                    );
+                    self.missing_record(callee.span, "resolved no callee for this call");
                     return Type::Error;
                 }
             }
@@ -264,11 +260,7 @@ impl Gen<'_> {
             match self.bindings.of(self.cur, first.span) {
                 Some(binding) => binding.to_vec(),
                 None => {
-                    self.diags.error(
-                        codes::INTERNAL_ERROR,
-                        first.span,
-                        "internal error: the checker bound no arguments for this call",
-                    );
+                    self.missing_record(first.span, "bound no arguments for this call");
                     return Vec::new();
                 }
             }

@@ -707,11 +707,7 @@ impl Gen<'_> {
             match self.properties.of(self.cur, name) {
                 Some(property) => property.clone(),
                 None => {
-                    self.diags.error(
-                        codes::INTERNAL_ERROR,
-                        name.span,
-                        "internal error: the checker did not decide whether this is a property",
-                    );
+                    self.missing_record(name.span, "did not decide whether this is a property");
                     None
                 }
             }

@@ -12,11 +12,7 @@ impl Gen<'_> {
             return t.clone();
         }
         if !self.check_only {
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                e.span,
-                "internal error: the checker recorded no type for this expression",
-            );
+            self.missing_record(e.span, "recorded no type for this expression");
             return Type::Error;
         }
         let saved = self.dry;
@@ -424,11 +420,7 @@ impl Gen<'_> {
         if !self.check_only {
             let bare = self.bare_names.of(self.cur, n).cloned();
             if bare.is_none() {
-                self.diags.error(
-                    codes::INTERNAL_ERROR,
-                    n.span,
-                    "internal error: the checker resolved no meaning for this name",
-                );
+                self.missing_record(n.span, "resolved no meaning for this name");
             }
             return bare;
         }
@@ -553,11 +545,7 @@ impl Gen<'_> {
                 self.push_int(value);
                 return Type::Enum(ty);
             }
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                inner.span,
-                "internal error: the checker resolved no enumeration value for this literal",
-            );
+            self.missing_record(inner.span, "resolved no enumeration value for this literal");
             return Type::Error;
         }
         if let (Some((Type::Enum(ei), _)), ExprKind::Name(n)) =

@@ -246,6 +246,16 @@ impl<'a> Gen<'a> {
         }
     }
 
+    /// Reports that emission found no record the checking pass should have left at `span`;
+    /// `what` completes "the checker …" (e.g. "recorded no type for this expression").
+    pub(crate) fn missing_record(&mut self, span: Span, what: &str) {
+        self.diags.error(
+            codes::INTERNAL_ERROR,
+            span,
+            format!("internal error: the checker {what}"),
+        );
+    }
+
     /// Whether nothing is emitted or allocated (inference, or the checking pass).
     fn silent(&self) -> bool {
         self.dry || self.check_only

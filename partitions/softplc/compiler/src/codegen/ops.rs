@@ -85,11 +85,7 @@ impl Gen<'_> {
     /// Reports that emission found no record of the operator at `span` (of its kind): the
     /// checker missed it.
     fn no_operation<T>(&mut self, span: Span) -> Option<T> {
-        self.diags.error(
-            codes::INTERNAL_ERROR,
-            span,
-            "internal error: the checker decided no operation for this operator",
-        );
+        self.missing_record(span, "decided no operation for this operator");
         None
     }
 
@@ -166,8 +162,7 @@ impl Gen<'_> {
             }
             BinaryRule::Logic(t) => {
                 let tt = Type::Elem(t);
-                self.value_to_any(a, ta, &tt);
-                self.value_to_any(b, tb, &tt);
+                self.operands_as(a, ta, b, tb, &tt);
                 self.op(match op {
                     BinOp::And => Opcode::And,
                     BinOp::Or => Opcode::Or,
@@ -176,8 +171,7 @@ impl Gen<'_> {
                 tt
             }
             BinaryRule::IntegerPower(ct) => {
-                self.value_to_any(a, ta, &Type::LREAL);
-                self.value_to_any(b, tb, &Type::LREAL);
+                self.operands_as(a, ta, b, tb, &Type::LREAL);
                 self.emit(|bb| {
                     bb.call_builtin(Builtin::ExptF64);
                     bb.float_to_int(Opcode::F64ToInt, mem_type(ct), RoundMode::NearestTiesAway);
@@ -186,15 +180,13 @@ impl Gen<'_> {
             }
             BinaryRule::NumericCompare(ct) => {
                 let tt = Type::Elem(ct);
-                self.value_to_any(a, ta, &tt);
-                self.value_to_any(b, tb, &tt);
+                self.operands_as(a, ta, b, tb, &tt);
                 self.op(numeric_cmp_op(op, ct));
                 Type::BOOL
             }
             BinaryRule::Arithmetic(ct) => {
                 let tt = Type::Elem(ct);
-                self.value_to_any(a, ta, &tt);
-                self.value_to_any(b, tb, &tt);
+                self.operands_as(a, ta, b, tb, &tt);
                 self.numeric_arithmetic(op, ct);
                 tt
             }
@@ -285,6 +277,13 @@ impl Gen<'_> {
         if let (Some(f), Some(t2)) = (t.elem(), to.elem()) {
             self.convert(f, t2);
         }
+    }
+
+    /// Compiles a binary operator's two operands, each converted to `to` (the type the rule
+    /// computes in).
+    fn operands_as(&mut self, a: &Expr, ta: &Type, b: &Expr, tb: &Type, to: &Type) {
+        self.value_to_any(a, ta, to);
+        self.value_to_any(b, tb, to);
     }
 }
 

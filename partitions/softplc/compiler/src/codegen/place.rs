@@ -50,11 +50,7 @@ impl Gen<'_> {
         } else {
             let member = self.members.of(self.cur, m).cloned();
             if member.is_none() {
-                self.diags.error(
-                    codes::INTERNAL_ERROR,
-                    m.span,
-                    "internal error: the checker resolved no member for this name",
-                );
+                self.missing_record(m.span, "resolved no member for this name");
             }
             member
         };
@@ -343,11 +339,7 @@ impl Gen<'_> {
             match self.variables.of(self.cur, n) {
                 Some(var) => var.clone(),
                 None => {
-                    self.diags.error(
-                        codes::INTERNAL_ERROR,
-                        n.span,
-                        "internal error: the checker resolved no variable for this name",
-                    );
+                    self.missing_record(n.span, "resolved no variable for this name");
                     return None;
                 }
             }

@@ -300,11 +300,7 @@ impl Gen<'_> {
             order
         } else {
             let Some(order) = self.std_arguments.of(self.cur, id) else {
-                self.diags.error(
-                    codes::INTERNAL_ERROR,
-                    id.span,
-                    "internal error: the checker placed no arguments for this call",
-                );
+                self.missing_record(id.span, "placed no arguments for this call");
                 return None;
             };
             order.clone()
@@ -1214,11 +1210,7 @@ impl Gen<'_> {
     pub(super) fn recorded_generic_type(&mut self, id: &Ident) -> Option<Type> {
         let t = self.generic_types.of(self.cur, id).cloned();
         if t.is_none() {
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                id.span,
-                "internal error: the checker decided no type for this call",
-            );
+            self.missing_record(id.span, "decided no type for this call");
         }
         t
     }

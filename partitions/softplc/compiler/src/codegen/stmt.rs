@@ -251,11 +251,7 @@ impl Gen<'_> {
     fn checked_label(&mut self, e: &Expr) -> Option<i128> {
         let v = self.case_labels.of(e).copied();
         if v.is_none() {
-            self.diags.error(
-                codes::INTERNAL_ERROR,
-                e.span,
-                "internal error: the checker recorded no value for this CASE label",
-            );
+            self.missing_record(e.span, "recorded no value for this CASE label");
         }
         v
     }
