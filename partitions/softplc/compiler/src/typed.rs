@@ -9,7 +9,8 @@
 //! property, an enumeration value, an exception; also the value of each `Enum#value`), which
 //! argument of each call binds which parameter ([`Bindings`]), the order of each
 //! standard-function call's arguments ([`StdArguments`]) and the type each generic standard
-//! function is called at ([`GenericTypes`]), the property (receiver and accessors) each member
+//! function is called at ([`GenericTypes`]), how each conversion's argument reaches its source
+//! type ([`ConversionArguments`]), the property (receiver and accessors) each member
 //! read and assignment target reaches, if any ([`Properties`]), what each operator
 //! does by the rules of [`sema::ops`](crate::sema::ops) ([`Operations`]), the value
 //! of each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
@@ -31,10 +32,11 @@
 //! of every bare name from [`BareNames`] and the binding of every call's arguments to a
 //! user POU's or method's parameters from [`Bindings`], the order of standard-function
 //! arguments from [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT, MUX, the REAL
-//! functions and the generic conversions from [`GenericTypes`], the property of every
-//! access from [`Properties`], what every operator does from [`Operations`] (it only picks
-//! the opcodes), but still decides what the rest means while it emits (the operation of the
-//! other standard functions from their arguments' recorded types, the conversions) and
+//! functions and the generic conversions from [`GenericTypes`], how a conversion takes its
+//! argument from [`ConversionArguments`], the property of every access from [`Properties`],
+//! what every operator does from [`Operations`] (it only picks the opcodes), but still
+//! decides what the rest means while it emits (the operation of the other standard
+//! functions from their arguments' recorded types, the implicit conversions) and
 //! passes the expression walk's check branches again (none can fail on a checked program).
 //! Besides the statement checker, the rules checked by the checking pass only are the
 //! operator and standard-function type rules (`sema::ops`, `sema::stdfuncs`), the recursion
@@ -50,6 +52,7 @@ use crate::codes;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::body::{self, CallEdge};
 use crate::sema::ops::Operation;
+use crate::sema::stdfuncs::ConversionArgument;
 use crate::sema::{InterfaceMember, Program, VarDef};
 use crate::types::Type;
 
@@ -276,6 +279,10 @@ pub type StdArguments = NameTable<Vec<usize>>;
 /// type a generic conversion (`TO_INT`) converts from.
 pub type GenericTypes = NameTable<Type>;
 
+/// How the argument of each conversion between elementary types (`INT_TO_REAL`, and
+/// `TO_REAL` of an INT) reaches the source type, keyed by the called name.
+pub type ConversionArguments = NameTable<ConversionArgument>;
+
 /// What a method or property is called on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Receiver {
@@ -332,6 +339,8 @@ pub struct Checked {
     pub std_arguments: StdArguments,
     /// The type every generic standard function is called at.
     pub generic_types: GenericTypes,
+    /// How the argument of every conversion between elementary types reaches its source.
+    pub conversion_arguments: ConversionArguments,
     /// What every operator does.
     pub operations: Operations,
     /// Whether each member read and each assignment target is a property, and which.
@@ -364,6 +373,7 @@ pub fn check(
         bindings: std::mem::take(&mut checker.bindings),
         std_arguments: std::mem::take(&mut checker.std_arguments),
         generic_types: std::mem::take(&mut checker.generic_types),
+        conversion_arguments: std::mem::take(&mut checker.conversion_arguments),
         operations: std::mem::take(&mut checker.operations),
         properties: std::mem::take(&mut checker.properties),
     };
@@ -401,6 +411,7 @@ pub fn emit(
     generator.bindings = checked.bindings;
     generator.std_arguments = checked.std_arguments;
     generator.generic_types = checked.generic_types;
+    generator.conversion_arguments = checked.conversion_arguments;
     generator.operations = checked.operations;
     generator.properties = checked.properties;
     generator.generate();
@@ -561,6 +572,19 @@ i := ABS(i); d := SHL(d, 2); i := LEN('abc'); END_PROGRAM";
         }));
         assert_eq!(errors.len(), 7, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("decided no type")));
+    }
+
+    #[test]
+    fn emission_decides_no_conversion_itself() {
+        let conversions = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; END_VAR
+r := INT_TO_REAL(i); i := DINT_TO_INT(l); l := TO_LREAL(d); d := TIME_TO_DINT(T#1s);
+END_PROGRAM";
+        assert!(check_then_emit_source(conversions, |_| {}).is_ok());
+        let errors = internal_errors(check_then_emit_source(conversions, |c| {
+            c.conversion_arguments = ConversionArguments::default()
+        }));
+        assert_eq!(errors.len(), 4, "{errors:?}");
+        assert!(errors.iter().all(|e| e.contains("decided no conversion")));
     }
 
     #[test]

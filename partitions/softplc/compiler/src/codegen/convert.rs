@@ -3,6 +3,8 @@
 
 use super::stdfuncs::*;
 use super::*;
+use crate::sema::ops::Operand;
+use crate::sema::stdfuncs::{self as rules, ConversionArgument};
 
 impl Gen<'_> {
     /// `A_TO_B` conversions (and `TO_B` is not supported). Between numbers and bit strings
@@ -214,41 +216,14 @@ impl Gen<'_> {
             }
             (Type::Elem(f), Type::Elem(t)) => {
                 let (f, t) = (*f, *t);
-                if !crate::sema::stdfuncs::conversion_exists(f, t) {
-                    self.error(
-                        codes::NO_CONVERSION,
-                        id.span,
-                        format!("there is no conversion from {f} to {t}"),
-                    );
-                    for e in exprs {
-                        self.infer(e);
-                    }
+                let Some(route) = self.conversion_argument(id, (f, t), exprs) else {
                     return Some(Type::Error);
-                }
-                let at = self.infer(arg);
-                if at.is_error() {
-                    self.surface(arg);
-                    return Some(Type::Error);
-                }
-                let plain = !matches!(at, Type::Enum(_) | Type::Exception);
-                match at.elem() {
-                    Some(ae) if plain && (ae == f || implicit_ok(ae, f)) => {
-                        self.value_to(arg, &ft);
-                    }
-                    _ if Self::is_flexible(arg) => self.value_to(arg, &ft),
-                    // Another number: converted to the declared source type first.
-                    Some(ae) if plain && ae.is_numeric() && f.is_numeric() => {
+                };
+                match route {
+                    ConversionArgument::Implicit => self.value_to(arg, &ft),
+                    ConversionArgument::FromNumber => {
+                        let at = self.infer(arg);
                         self.value_to_any(arg, &at, &ft);
-                    }
-                    _ => {
-                        let msg = format!(
-                            "{} expects a {} argument, found {}",
-                            id.text,
-                            f,
-                            self.tname(&at)
-                        );
-                        self.error(codes::TYPE_MISMATCH, arg.span, msg);
-                        return Some(Type::Error);
                     }
                 }
                 self.convert(f, t);
@@ -256,5 +231,62 @@ impl Gen<'_> {
             }
             _ => None,
         }
+    }
+
+    /// How the argument `exprs[0]` of the conversion `id` from `from` to `to` reaches
+    /// `from`: the checking pass decides it ([`rules::conversion_exists`],
+    /// [`rules::conversion_argument`]), reporting a conversion that does not exist or an
+    /// argument that does not fit, and records it ([`crate::typed::ConversionArguments`]);
+    /// emission reads the record. `None`: the call is in error.
+    fn conversion_argument(
+        &mut self,
+        id: &Ident,
+        (from, to): (Elem, Elem),
+        exprs: &[&Expr],
+    ) -> Option<ConversionArgument> {
+        if !self.check_only {
+            let route = self.conversion_arguments.of(self.cur, id).copied();
+            if route.is_none() {
+                self.missing_record(id.span, "decided no conversion for this argument");
+            }
+            return route;
+        }
+        if !rules::conversion_exists(from, to) {
+            self.error(
+                codes::NO_CONVERSION,
+                id.span,
+                format!("there is no conversion from {from} to {to}"),
+            );
+            for e in exprs {
+                self.infer(e);
+            }
+            return None;
+        }
+        let arg = exprs[0];
+        let at = self.infer(arg);
+        if at.is_error() {
+            self.surface(arg);
+            return None;
+        }
+        let operand = Operand {
+            ty: &at,
+            flexible: Self::is_flexible(arg),
+            string_literal: false,
+            real_literal: Self::has_real_literal(arg),
+        };
+        let Some(route) = rules::conversion_argument(from, operand) else {
+            let msg = format!(
+                "{} expects a {} argument, found {}",
+                id.text,
+                from,
+                self.tname(&at)
+            );
+            self.error(codes::TYPE_MISMATCH, arg.span, msg);
+            return None;
+        };
+        if !self.dry || self.conversion_arguments.of(self.cur, id).is_none() {
+            self.conversion_arguments.record(self.cur, id, route);
+        }
+        Some(route)
     }
 }

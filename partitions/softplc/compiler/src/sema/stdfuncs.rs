@@ -1,13 +1,14 @@
 //! The standard functions' typing rules: the type a REAL function, ABS or a shift or
 //! rotation computes in, the kind of string a string function works on, the type a generic
-//! conversion (`TO_INT`) converts from and which conversions between elementary types exist.
+//! conversion (`TO_INT`) converts from, which conversions between elementary types exist and
+//! how a conversion's argument reaches its source type.
 //!
-//! The checker applies the type rules once and records the type it chose
-//! ([`crate::typed::GenericTypes`]); emission reads the record. Whether a conversion exists
-//! is still asked where a named conversion (`INT_TO_REAL`) is compiled, in both passes.
+//! The checker applies the rules once and records what it chose
+//! ([`crate::typed::GenericTypes`], [`crate::typed::ConversionArguments`]); emission reads
+//! the record.
 
 use super::ops::Operand;
-use crate::types::{DEFAULT_STRING_LEN, Elem, Type};
+use crate::types::{DEFAULT_STRING_LEN, Elem, Type, implicit_ok};
 
 /// The type a REAL function (SQRT, LN, LOG, EXP, SIN, COS, TAN, ASIN, ACOS, ATAN, EXPT,
 /// ATAN2, TRUNC) without a typed form computes in for its argument `arg`: REAL for a REAL,
@@ -71,6 +72,27 @@ pub fn conversion_exists(from: Elem, to: Elem) -> bool {
         || to.is_temporal() && number(from)
         || from.is_char() && (to.is_char() || to.is_integral())
         || to.is_char() && from.is_integral()
+}
+
+/// How the argument of `<from>_TO_<to>` between elementary types reaches `from`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum ConversionArgument {
+    /// Implicitly: it is a `from` or converts to one implicitly, or is an untyped literal
+    /// (which takes the type `from`).
+    Implicit,
+    /// Explicitly, from another number (as CODESYS takes a DINT for `INT_TO_BYTE`).
+    FromNumber,
+}
+
+/// How the argument `arg` of `<from>_TO_<to>` reaches `from`; `None` when it cannot (an
+/// enumeration value or an exception never does, though each is held as an integer).
+pub fn conversion_argument(from: Elem, arg: Operand) -> Option<ConversionArgument> {
+    match arg.ty.value_elem() {
+        Some(a) if implicit_ok(a, from) => Some(ConversionArgument::Implicit),
+        _ if arg.flexible => Some(ConversionArgument::Implicit),
+        Some(a) if a.is_numeric() && from.is_numeric() => Some(ConversionArgument::FromNumber),
+        _ => None,
+    }
 }
 
 #[cfg(test)]
@@ -163,5 +185,30 @@ mod tests {
             ..literal
         };
         assert_eq!(conversion_source(real), Some(Type::LREAL));
+    }
+
+    #[test]
+    fn a_conversions_argument_is_taken_implicitly_or_from_another_number() {
+        use ConversionArgument::*;
+        let route = |from: Elem, t: &Type| conversion_argument(from, Operand::plain(t));
+        assert_eq!(route(Elem::DInt, &Type::INT), Some(Implicit));
+        assert_eq!(
+            route(Elem::Int, &Type::Subrange(Elem::Int, 0, 9)),
+            Some(Implicit)
+        );
+        assert_eq!(route(Elem::Int, &Type::DINT), Some(FromNumber));
+        assert_eq!(route(Elem::Byte, &Type::LREAL), Some(FromNumber));
+        assert_eq!(route(Elem::Int, &Type::TIME), None);
+        assert_eq!(
+            route(Elem::DInt, &Type::Exception),
+            None,
+            "held as DINT, no number"
+        );
+        assert_eq!(route(Elem::Int, &Type::String(4)), None);
+        let literal = Operand {
+            flexible: true,
+            ..Operand::plain(&Type::LINT)
+        };
+        assert_eq!(conversion_argument(Elem::Time, literal), Some(Implicit));
     }
 }
