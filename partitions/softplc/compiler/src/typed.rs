@@ -4,19 +4,20 @@
 //! and lays out the data ([`Program`]); [`check`] then checks every body — names, types,
 //! l-values, calls, references — reporting every diagnostic and recording what it learns
 //! ([`Checked`]): the type of each expression it infers ([`ExprTypes`]), what the callee of
-//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member each
-//! `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a variable, a
-//! property, an enumeration value, an exception; also the value of each `Enum#value`), which
-//! argument of each call binds which parameter ([`Bindings`]), the order of each
-//! standard-function call's arguments ([`StdArguments`]) and the type each generic standard
-//! function is called at ([`GenericTypes`]), how each conversion's argument reaches its source
-//! type ([`ConversionArguments`]), the property (receiver and accessors) each member
-//! read and assignment target reaches, if any ([`Properties`]), what each operator
-//! does by the rules of [`sema::ops`](crate::sema::ops) ([`Operations`]), the value
-//! of each CASE label ([`CaseLabels`]) and the calls between user POUs, on which
+//! each call is ([`Callees`]), the variable each name denotes ([`Variables`]), the member
+//! each `base.m` denotes ([`Members`]), what each bare name denotes ([`BareNames`]: a
+//! variable, a property, an enumeration value, an exception; also the value of each
+//! `Enum#value`), which argument of each call binds which parameter ([`Bindings`]), the
+//! order of each standard-function call's arguments ([`StdArguments`]) and the type each
+//! generic standard function is called at ([`GenericTypes`]), how each conversion's
+//! argument reaches its source type ([`ConversionArguments`]), what each implicit
+//! conversion takes ([`Coercions`]), the property (receiver and accessors) each member read
+//! and assignment target reaches, if any ([`Properties`]), what each operator does by the
+//! rules of [`sema::ops`](crate::sema::ops) ([`Operations`]), the value of each CASE label
+//! ([`CaseLabels`]) and the calls between user POUs, on which
 //! [`sema::body`](crate::sema::body) judges the recursion rule. Only a program without
-//! diagnostics reaches [`emit`], which starts from those records and reports nothing itself: a
-//! diagnostic raised while emitting is a compiler bug (an internal error).
+//! diagnostics reaches [`emit`], which starts from those records and reports nothing
+//! itself: a diagnostic raised while emitting is a compiler bug (an internal error).
 //!
 //! The separation is not complete. Statements have a checker of their own
 //! ([`sema::stmt`](crate::sema::stmt): conditions, EXIT, CASE selectors and labels, FOR
@@ -33,16 +34,17 @@
 //! user POU's or method's parameters from [`Bindings`], the order of standard-function
 //! arguments from [`StdArguments`] and the type of SEL, MAX, MIN, LIMIT, MUX, the REAL
 //! functions and the generic conversions from [`GenericTypes`], how a conversion takes its
-//! argument from [`ConversionArguments`], the property of every access from [`Properties`],
-//! what every operator does from [`Operations`] (it only picks the opcodes), but still
-//! decides what the rest means while it emits (the operation of the other standard
-//! functions from their arguments' recorded types, the implicit conversions) and
-//! passes the expression walk's check branches again (none can fail on a checked program).
-//! Besides the statement checker, the rules checked by the checking pass only are the
-//! operator and standard-function type rules (`sema::ops`, `sema::stdfuncs`), the recursion
-//! rule (`sema::body`), the argument rules (an unknown, misplaced, surplus or repeated
-//! argument of a user POU, a method or a standard function) and a function block input's
-//! assignment rules (the statement checker's).
+//! argument from [`ConversionArguments`] and every implicit conversion from [`Coercions`],
+//! the property of every access from [`Properties`], what every operator does from
+//! [`Operations`] (it only picks the opcodes), but still decides the operation of the other
+//! standard functions from their arguments' recorded types while it emits and passes the
+//! expression walk's check branches again (none can fail on a checked program). Besides the
+//! statement checker, the rules checked by the checking pass only are the operator and
+//! standard-function type rules (`sema::ops`, `sema::stdfuncs`), the implicit conversion
+//! rules (`types::implicit_conversion` and those of references), the recursion rule
+//! (`sema::body`), the argument rules (an unknown, misplaced, surplus or repeated argument
+//! of a user POU, a method or a standard function) and a function block input's assignment
+//! rules (the statement checker's).
 
 use std::collections::HashMap;
 
@@ -54,7 +56,7 @@ use crate::sema::body::{self, CallEdge};
 use crate::sema::ops::Operation;
 use crate::sema::stdfuncs::ConversionArgument;
 use crate::sema::{InterfaceMember, Program, VarDef};
-use crate::types::Type;
+use crate::types::{Implicit, Type};
 
 /// A value per expression of the bodies, keyed by the expression (its address in the syntax
 /// tree, which lives as long as the compilation, and its span).
@@ -279,6 +281,10 @@ pub type StdArguments = NameTable<Vec<usize>>;
 /// type a generic conversion (`TO_INT`) converts from.
 pub type GenericTypes = NameTable<Type>;
 
+/// What each value converted implicitly where another type is wanted takes (an argument, an
+/// assigned value, an output bound to a variable), keyed by the value.
+pub type Coercions = ExprTable<Implicit>;
+
 /// How the argument of each conversion between elementary types (`INT_TO_REAL`, and
 /// `TO_REAL` of an INT) reaches the source type, keyed by the called name.
 pub type ConversionArguments = NameTable<ConversionArgument>;
@@ -339,6 +345,8 @@ pub struct Checked {
     pub std_arguments: StdArguments,
     /// The type every generic standard function is called at.
     pub generic_types: GenericTypes,
+    /// What every implicit conversion takes.
+    pub coercions: Coercions,
     /// How the argument of every conversion between elementary types reaches its source.
     pub conversion_arguments: ConversionArguments,
     /// What every operator does.
@@ -373,6 +381,7 @@ pub fn check(
         bindings: std::mem::take(&mut checker.bindings),
         std_arguments: std::mem::take(&mut checker.std_arguments),
         generic_types: std::mem::take(&mut checker.generic_types),
+        coercions: std::mem::take(&mut checker.coercions),
         conversion_arguments: std::mem::take(&mut checker.conversion_arguments),
         operations: std::mem::take(&mut checker.operations),
         properties: std::mem::take(&mut checker.properties),
@@ -411,6 +420,7 @@ pub fn emit(
     generator.bindings = checked.bindings;
     generator.std_arguments = checked.std_arguments;
     generator.generic_types = checked.generic_types;
+    generator.coercions = checked.coercions;
     generator.conversion_arguments = checked.conversion_arguments;
     generator.operations = checked.operations;
     generator.properties = checked.properties;
@@ -572,6 +582,23 @@ i := ABS(i); d := SHL(d, 2); i := LEN('abc'); END_PROGRAM";
         }));
         assert_eq!(errors.len(), 7, "{errors:?}");
         assert!(errors.iter().all(|e| e.contains("decided no type")));
+    }
+
+    #[test]
+    fn emission_decides_no_implicit_conversion_itself() {
+        let widening = "PROGRAM Main VAR i : INT; d : DINT; r : REAL; l : LREAL; p : REF_TO INT;
+u : ULINT; END_VAR d := i; l := r; r := i; p := REF(i); u := p; END_PROGRAM";
+        assert!(check_then_emit_source(widening, |_| {}).is_ok());
+        let errors = internal_errors(check_then_emit_source(widening, |c| {
+            c.coercions = Coercions::default()
+        }));
+        // `i`, `r`, `i` and `p` (an address widened); `REF(i)` is a REF_TO INT already.
+        assert_eq!(errors.len(), 4, "{errors:?}");
+        assert!(
+            errors
+                .iter()
+                .all(|e| e.contains("decided no implicit conversion"))
+        );
     }
 
     #[test]

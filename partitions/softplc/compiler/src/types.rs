@@ -436,8 +436,8 @@ pub fn implicit_ok(from: Elem, to: Elem) -> bool {
     false
 }
 
-/// What assigning a value of a non-pointer type `from` where `to` is wanted takes
-/// ([`implicit_conversion`]).
+/// What assigning a value of type `from` where `to` is wanted takes ([`implicit_conversion`]
+/// between types that are no references; the code generator decides the references').
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Implicit {
     /// Nothing: the same type, a string of the same kind, a subrange where its base type is
@@ -445,6 +445,8 @@ pub enum Implicit {
     Nothing,
     /// The conversion of one elementary type to another.
     Convert(Elem, Elem),
+    /// A reference's address (32 bits) zero-extended to the wider integer wanted.
+    AddressToInteger,
 }
 
 /// Why a value of one type cannot stand where another is wanted.

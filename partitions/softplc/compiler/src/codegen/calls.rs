@@ -537,7 +537,7 @@ impl Gen<'_> {
             t if scalar_mem(t).is_some() => {
                 let st = src.ty.clone();
                 self.load(&src);
-                self.coerce(&st, &dst.ty.clone(), target.span);
+                self.coerce(&st, &dst.ty.clone(), target);
                 if let Loc::Ind(_) = src.loc {
                     // value computed from a dynamic source; target is static here.
                 }

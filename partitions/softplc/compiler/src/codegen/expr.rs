@@ -101,25 +101,51 @@ impl Gen<'_> {
                 span: e.span,
             }];
             let t = self.ref_function(&id, &args, Some(&as_ref), e.span);
-            self.coerce(&t, &as_ref, e.span);
+            self.coerce(&t, &as_ref, e);
             return;
         }
         let t = self.expr(e, Some(to));
-        self.coerce(&t, to, e.span);
+        self.coerce(&t, to, e);
     }
 
     /// Emits an implicit conversion from `from` to `to` ([`implicit_conversion`]), or
     /// reports a type mismatch.
-    pub(crate) fn coerce(&mut self, from: &Type, to: &Type, span: Span) {
+    pub(crate) fn coerce(&mut self, from: &Type, to: &Type, e: &Expr) {
         if from.is_error() || to.is_error() || from == to {
             return;
         }
-        if self.coerce_pointer(from, to, span) {
-            return;
+        let implicit = if self.check_only {
+            let Some(implicit) = self.implicit_conversion(from, to, e.span) else {
+                return;
+            };
+            if !self.dry || self.coercions.of(e).is_none() {
+                self.coercions.record(e, implicit);
+            }
+            implicit
+        } else {
+            match self.coercions.of(e) {
+                Some(implicit) => *implicit,
+                None => {
+                    return self
+                        .missing_record(e.span, "decided no implicit conversion for this value");
+                }
+            }
+        };
+        match implicit {
+            Implicit::Nothing => {}
+            Implicit::Convert(f, t) => self.convert(f, t),
+            Implicit::AddressToInteger => self.emit(|b| b.op_width(Opcode::Zext, 32)),
+        }
+    }
+
+    /// What a value of type `from` at `span` takes where `to` is wanted, or `None` when it
+    /// cannot stand there (reported).
+    fn implicit_conversion(&mut self, from: &Type, to: &Type, span: Span) -> Option<Implicit> {
+        if let Some(decided) = self.pointer_coercion(from, to, span) {
+            return decided;
         }
         let (code, msg) = match implicit_conversion(from, to) {
-            Ok(Implicit::Nothing) => return,
-            Ok(Implicit::Convert(f, t)) => return self.convert(f, t),
+            Ok(implicit) => return Some(implicit),
             // Between numbers an explicit conversion would do.
             Err(NotImplicit::MayLose(f, t)) if f.is_numeric() && t.is_numeric() => {
                 let msg = format!("cannot convert {f} to {t} implicitly (use {f}_TO_{t})");
@@ -131,6 +157,7 @@ impl Gen<'_> {
             Err(NotImplicit::Mismatch) => (codes::TYPE_MISMATCH, self.mismatch_message(from, to)),
         };
         self.error(code, span, msg);
+        None
     }
 
     fn mismatch_message(&self, from: &Type, to: &Type) -> String {

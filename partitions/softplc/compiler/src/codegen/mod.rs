@@ -40,8 +40,8 @@ use crate::ast::*;
 use crate::diagnostics::{Diagnostics, SourceMap, Span};
 use crate::sema::{ConstScope, ConstVal, Program, VarDef, const_eval};
 use crate::typed::{
-    Bare, BareNames, Bindings, Callees, CaseLabels, ConversionArguments, ExprTypes, GenericTypes,
-    Members, Operations, Properties, StdArguments, Variables,
+    Bare, BareNames, Bindings, Callees, CaseLabels, Coercions, ConversionArguments, ExprTypes,
+    GenericTypes, Members, Operations, Properties, StdArguments, Variables,
 };
 use crate::types::*;
 
@@ -165,6 +165,8 @@ pub(crate) struct Gen<'a> {
     /// The type each generic standard function is called at: decided by the checking
     /// pass, read by emission.
     pub(crate) generic_types: GenericTypes,
+    /// What each implicit conversion takes: decided by the checking pass, read by emission.
+    pub(crate) coercions: Coercions,
     /// How each conversion's argument reaches its source type: decided by the checking
     /// pass, read by emission.
     pub(crate) conversion_arguments: ConversionArguments,
@@ -232,6 +234,7 @@ impl<'a> Gen<'a> {
             bindings: Bindings::default(),
             std_arguments: StdArguments::default(),
             generic_types: GenericTypes::default(),
+            coercions: Coercions::default(),
             conversion_arguments: ConversionArguments::default(),
             operations: Operations::default(),
             properties: Properties::default(),

@@ -613,14 +613,20 @@ impl Gen<'_> {
         }
     }
 
-    /// Implicit conversions involving references; `true` when the pair is one of them
-    /// (handled, possibly with an error).
-    pub(crate) fn coerce_pointer(&mut self, from: &Type, to: &Type, span: Span) -> bool {
+    /// The implicit conversion of a pair of types involving references: `None` when the
+    /// pair is none of them, `Some(None)` when it is refused (reported).
+    pub(crate) fn pointer_coercion(
+        &mut self,
+        from: &Type,
+        to: &Type,
+        span: Span,
+    ) -> Option<Option<Implicit>> {
         let involved = |t: &Type| t.is_pointer_like() || matches!(t, Type::Reference(_));
         let instance_to_interface = matches!((from, to), (Type::Fb(_), Type::Interface(_)));
         if !(involved(from) || involved(to) || instance_to_interface) {
-            return false;
+            return None;
         }
+        let mut implicit = Implicit::Nothing;
         let ok = match (from, to) {
             (Type::Null, Type::Ref(_) | Type::Interface(_)) => true,
             (Type::Ref(a), Type::Ref(b)) => {
@@ -631,13 +637,13 @@ impl Gen<'_> {
                         span,
                         "a reference to a STRING cannot become a byte pointer; take REF()/ADR() of the STRING variable itself where the byte pointer is needed",
                     );
-                    return true;
+                    return Some(None);
                 } else if matches!(**b, Type::String(_)) && is_byte_view(a) {
                     self.error(codes::REFERENCE_CONVERSION,
                         span,
                         "a byte pointer cannot become a reference to a STRING: STRINGs here carry a length header in front of their text",
                     );
-                    return true;
+                    return Some(None);
                 } else if let (Type::Fb(c), Type::Fb(d)) = (&**a, &**b) {
                     self.derives_from(*c, *d)
                 } else {
@@ -645,11 +651,10 @@ impl Gen<'_> {
                 }
             }
             (Type::Ref(target), Type::Elem(e)) => {
-                let ok = (e.is_integral()) && e.size() >= 4;
-                if ok && !matches!(**target, Type::Fb(_)) {
-                    self.emit(|b| b.op_width(Opcode::Zext, 32));
+                if !matches!(**target, Type::Fb(_)) {
+                    implicit = Implicit::AddressToInteger;
                 }
-                ok
+                e.is_integral() && e.size() >= 4
             }
             (Type::Fb(c), Type::Interface(i)) => self.implements(*c, *i),
             (Type::Ref(target), Type::Interface(i)) => match &**target {
@@ -663,7 +668,7 @@ impl Gen<'_> {
                     self.tname(to)
                 );
                 self.error(codes::REFERENCE_CONVERSION, span, msg);
-                return true;
+                return Some(None);
             }
             _ => false,
         };
@@ -674,8 +679,9 @@ impl Gen<'_> {
                 self.tname(from)
             );
             self.error(codes::TYPE_MISMATCH, span, msg);
+            return Some(None);
         }
-        true
+        Some(Some(implicit))
     }
 
     // ----- references to temporary storage -------------------------------------------------

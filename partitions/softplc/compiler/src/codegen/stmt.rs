@@ -414,7 +414,7 @@ impl Gen<'_> {
             _ => {
                 let (id, args, _) = crate::sema::stmt::ref_call(value);
                 let rt = self.ref_function(&id, &args, Some(&Type::Ref(t.clone())), value.span);
-                self.coerce(&rt, &Type::Ref(t), value.span);
+                self.coerce(&rt, &Type::Ref(t), value);
             }
         }
         self.store_checked(&cell);

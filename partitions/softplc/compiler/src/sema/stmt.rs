@@ -355,7 +355,7 @@ impl BodyChecker<'_, '_> {
         self.g.check_escape(Some(target), &as_ref, "this variable");
         let ty = Type::Ref(t);
         let rt = self.g.ref_function(&id, &args, Some(&ty), value.span);
-        self.g.coerce(&rt, &ty, value.span);
+        self.g.coerce(&rt, &ty, value);
     }
 }
 
