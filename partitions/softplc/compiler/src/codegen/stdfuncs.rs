@@ -482,31 +482,8 @@ impl Gen<'_> {
                 if !self.arity(&c, 2) {
                     return Type::Error;
                 }
-                let erroneous: Vec<&Expr> = c
-                    .exprs
-                    .iter()
-                    .copied()
-                    .filter(|e| self.infer(e).is_error())
-                    .collect();
-                if !erroneous.is_empty() {
-                    erroneous.iter().for_each(|e| self.surface(e));
+                if self.check_only && !self.time_operands_fit(&c, [ta, tb]) {
                     return Type::Error;
-                }
-                for (e, want) in [(c.exprs[0], ta), (c.exprs[1], tb)] {
-                    let t = self.infer(e);
-                    let fits = match want {
-                        Elem::LReal => t.elem().is_some_and(|x| x.is_numeric()),
-                        w => t.elem().is_some_and(|x| x == w || implicit_ok(x, w)),
-                    } && !matches!(t, Type::Enum(_));
-                    let literal_number = Self::is_flexible(e) && want == Elem::LReal;
-                    if !(fits || t.is_error() || literal_number) {
-                        let what = if want == Elem::LReal {
-                            "a number".to_string()
-                        } else {
-                            format!("a {want}")
-                        };
-                        return self.bad_arg(e, &t, &what);
-                    }
                 }
                 self.binary(op, c.exprs[0], c.exprs[1], expected, span)
             }
@@ -561,10 +538,7 @@ impl Gen<'_> {
                     return Type::Error;
                 }
                 let t = self.infer(c.exprs[0]);
-                if !t
-                    .elem()
-                    .is_some_and(|e| e.temporal_family() == Some(Elem::Date))
-                {
+                if self.check_only && !rules::is_date(&t) {
                     return self.bad_inferred_arg(c.exprs[0], &t, "a DATE");
                 }
                 self.expr(c.exprs[0], None);
@@ -573,6 +547,35 @@ impl Gen<'_> {
             }
             TimeFunction::Split(_) => unreachable!("handled above"),
         }
+    }
+
+    /// Whether the two arguments of the date and time operator `c` fit the operands `want`
+    /// ([`rules::time_operand_fits`]); reports the first that does not (the checking pass
+    /// asks).
+    fn time_operands_fit(&mut self, c: &StdArgs, want: [Elem; 2]) -> bool {
+        let types: Vec<Type> = c.exprs.iter().map(|e| self.infer(e)).collect();
+        if types.iter().any(Type::is_error) {
+            for (e, _) in c.exprs.iter().zip(&types).filter(|(_, t)| t.is_error()) {
+                self.surface(e);
+            }
+            return false;
+        }
+        for ((e, t), want) in c.exprs.iter().zip(&types).zip(want) {
+            let operand = ops::Operand {
+                flexible: Self::is_flexible(e),
+                ..ops::Operand::plain(t)
+            };
+            if !rules::time_operand_fits(want, operand) {
+                let what = if want == Elem::LReal {
+                    "a number".to_string()
+                } else {
+                    format!("a {want}")
+                };
+                self.bad_arg(e, t, &what);
+                return false;
+            }
+        }
+        true
     }
 
     /// SIZEOF(variable or type): its size in bytes in data memory, a constant of the

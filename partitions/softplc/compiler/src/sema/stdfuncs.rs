@@ -1,7 +1,8 @@
 //! The standard functions' typing rules: the type a REAL function, ABS or a shift or
 //! rotation computes in, the kind of string a string function works on, the type a generic
-//! conversion (`TO_INT`) converts from, which conversions between elementary types exist and
-//! how a conversion's argument reaches its source type.
+//! conversion (`TO_INT`) converts from, which conversions between elementary types exist,
+//! how a conversion's argument reaches its source type and what the date and time functions
+//! take.
 //!
 //! The checker applies the rules once and records what it chose
 //! ([`crate::typed::GenericTypes`], [`crate::typed::ConversionArguments`]); emission reads
@@ -93,6 +94,29 @@ pub fn conversion_argument(from: Elem, arg: Operand) -> Option<ConversionArgumen
         Some(a) if a.is_numeric() && from.is_numeric() => Some(ConversionArgument::FromNumber),
         _ => None,
     }
+}
+
+/// Whether `arg` fits the operand `want` of a date and time operator written as a function
+/// (`ADD_TOD_TIME`, `MUL_TIME`, ...): a `want` or what converts to one implicitly; any
+/// number, or an untyped literal, where the function takes a factor (`want` LREAL).
+pub fn time_operand_fits(want: Elem, arg: Operand) -> bool {
+    match arg.ty.value_elem() {
+        Some(x) if want == Elem::LReal => x.is_numeric(),
+        Some(x) => implicit_ok(x, want),
+        None => want == Elem::LReal && arg.flexible,
+    }
+}
+
+/// Whether DAY_OF_WEEK takes a value of type `t`: a DATE or an LDATE.
+pub fn is_date(t: &Type) -> bool {
+    t.value_elem()
+        .is_some_and(|e| e.temporal_family() == Some(Elem::Date))
+}
+
+/// Whether a standard function's integer input (a string function's position or length, a
+/// CONCAT_DATE's part, a shift's count) takes a value of type `t`.
+pub fn is_integer(t: &Type) -> bool {
+    t.value_elem().is_some_and(|e| e.is_integral())
 }
 
 #[cfg(test)]
@@ -210,5 +234,23 @@ mod tests {
             ..Operand::plain(&Type::LINT)
         };
         assert_eq!(conversion_argument(Elem::Time, literal), Some(Implicit));
+    }
+
+    #[test]
+    fn date_and_time_functions_take_their_operands_dates_and_integers() {
+        let fits = |want, t: &Type| time_operand_fits(want, Operand::plain(t));
+        assert!(fits(Elem::Tod, &Type::Elem(Elem::Tod)));
+        assert!(fits(Elem::LTime, &Type::TIME), "TIME widens to LTIME");
+        assert!(!fits(Elem::Time, &Type::LTIME));
+        assert!(!fits(Elem::Time, &Type::DINT));
+        assert!(fits(Elem::LReal, &Type::DINT), "a factor may be any number");
+        assert!(!fits(Elem::LReal, &Type::TIME));
+        assert!(!fits(Elem::LReal, &Type::Exception));
+        assert!(is_date(&Type::Elem(Elem::LDate)));
+        assert!(!is_date(&Type::Elem(Elem::Dt)));
+        assert!(is_integer(&Type::Subrange(Elem::Int, 0, 9)));
+        assert!(is_integer(&Type::Elem(Elem::Word)));
+        assert!(!is_integer(&Type::Exception));
+        assert!(!is_integer(&Type::REAL));
     }
 }
