@@ -229,34 +229,42 @@ impl Gen<'_> {
 
     /// Binds call arguments to parameters: positional ones in declaration order of the
     /// inputs and in-outs, named ones by name.
-    fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg]) -> Vec<Bound<'e>> {
+    fn bind_args<'e>(&mut self, pi: usize, args: &'e [Arg], span: Span) -> Vec<Bound<'e>> {
         let pou = &self.prog.pous[pi];
         let pou_name = pou.text.clone();
         let vars = pou.vars.clone();
         // The result variable (a function's, method's or getter's) is no output.
         let result = pou.return_type.as_ref().map(|_| pou.vars[0].name.clone());
-        self.bind_to(Some(pi), &pou_name, &vars, result.as_deref(), args)
+        self.bind_to(Some(pi), &pou_name, &vars, result.as_deref(), (args, span))
     }
 
-    /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order). The
-    /// checking pass binds (reporting what is wrong) and records the binding
-    /// ([`Binding`]); emission reads the record.
+    /// [`Gen::bind_args`] for the parameters `vars` of `pou_name` (in frame order), called
+    /// at `span`. The checking pass binds (reporting what is wrong, and each VAR_IN_OUT left
+    /// unconnected) and records the binding ([`Binding`]); emission reads the record.
     pub(crate) fn bind_to<'e>(
         &mut self,
         pou: Option<usize>,
         pou_name: &str,
         vars: &[VarDef],
         result: Option<&str>,
-        args: &'e [Arg],
+        (args, span): (&'e [Arg], Span),
     ) -> Vec<Bound<'e>> {
-        let Some(first) = args.first() else {
-            return Vec::new();
-        };
         let binding = if self.check_only {
             let binding = self.resolve_binding(pou, pou_name, vars, result, args);
-            self.bindings.record(self.cur, first.span, binding.clone());
+            for (i, v) in vars.iter().enumerate() {
+                if v.kind == VarKind::InOut && !binding.iter().any(|b| b.param == i) {
+                    let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
+                    self.error(codes::MISSING_ARGUMENT, span, msg);
+                }
+            }
+            if let Some(first) = args.first() {
+                self.bindings.record(self.cur, first.span, binding.clone());
+            }
             binding
         } else {
+            let Some(first) = args.first() else {
+                return Vec::new();
+            };
             match self.bindings.of(self.cur, first.span) {
                 Some(binding) => binding.to_vec(),
                 None => {
@@ -401,7 +409,7 @@ impl Gen<'_> {
                 }
             }
         };
-        let bound = self.bind_args(pi, args);
+        let bound = self.bind_args(pi, args, span);
         for a in bound.iter().filter(|a| !a.output) {
             if a.param.kind == VarKind::InOut {
                 let loc = member(self, a.param.offset);
@@ -435,15 +443,6 @@ impl Gen<'_> {
                 }
                 crate::sema::stmt::check_store(self, &p, a.value, a.value.span);
             }
-        }
-        let missing_inout = self.prog.pous[pi]
-            .vars
-            .iter()
-            .find(|v| v.kind == VarKind::InOut && !bound.iter().any(|b| b.param.name == v.name))
-            .map(|v| v.text.clone());
-        if let Some(m) = missing_inout {
-            let msg = format!("VAR_IN_OUT parameter `{m}` must be connected");
-            self.error(codes::MISSING_ARGUMENT, span, msg);
         }
         match base {
             Ok(Loc::Abs(a)) => self.emit(|b| b.push_u32(a)),
@@ -580,7 +579,7 @@ impl Gen<'_> {
         self.calls.push((self.cur, pi, span));
         let (frame, pristine) = self.frames.get(pi).copied().unwrap_or((Some(0), Some(0)));
         let (frame, pristine) = (frame.unwrap_or(0), pristine.unwrap_or(0));
-        let bound = self.bind_args(pi, args);
+        let bound = self.bind_args(pi, args, span);
         let inputs: Vec<&Bound> = bound.iter().filter(|b| !b.output).collect();
         // Evaluate all inputs first: a nested call of the same function must not clobber
         // parameters already stored in the shared static frame.
@@ -666,23 +665,13 @@ impl Gen<'_> {
         // Unconnected inputs get their declared initial values.
         let vars = self.prog.pous[pi].vars.clone();
         for v in &vars {
-            if bound.iter().any(|b| b.param.name == v.name) {
-                continue;
-            }
-            match v.kind {
-                VarKind::Input => {
-                    let (size, _) = self.prog.size_align(&v.ty);
-                    self.emit(|b| {
-                        b.push_u32(frame + v.offset);
-                        b.push_u32(pristine + v.offset);
-                        b.copy(size);
-                    });
-                }
-                VarKind::InOut => {
-                    let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
-                    self.error(codes::MISSING_ARGUMENT, span, msg);
-                }
-                _ => {}
+            if v.kind == VarKind::Input && !bound.iter().any(|b| b.param.name == v.name) {
+                let (size, _) = self.prog.size_align(&v.ty);
+                self.emit(|b| {
+                    b.push_u32(frame + v.offset);
+                    b.push_u32(pristine + v.offset);
+                    b.copy(size);
+                });
             }
         }
         let id = self.pou_ids[pi];

@@ -490,9 +490,7 @@ impl Gen<'_> {
             }
         }
         self.emit(|b| b.st_abs(MemType::U64, instance));
-        let result_name = d.result.as_ref().map(|_| d.label.clone());
-        let _ = result_name;
-        let bound = self.bind_to(None, &d.label, &d.params, None, args);
+        let bound = self.bind_to(None, &d.label, &d.params, None, (args, span));
         let inputs: Vec<&crate::codegen::calls::Bound> =
             bound.iter().filter(|b| !b.output).collect();
         for a in &inputs {
@@ -517,16 +515,8 @@ impl Gen<'_> {
             self.store_into_frame(frame, &a.param, a.param.kind == VarKind::InOut);
         }
         for v in &d.params {
-            if bound.iter().any(|b| b.param.name == v.name) {
-                continue;
-            }
-            match v.kind {
-                VarKind::Input => self.default_into_frame(frame, v),
-                VarKind::InOut => {
-                    let msg = format!("VAR_IN_OUT parameter `{}` must be connected", v.text);
-                    self.error(codes::MISSING_ARGUMENT, span, msg);
-                }
-                _ => {}
+            if v.kind == VarKind::Input && !bound.iter().any(|b| b.param.name == v.name) {
+                self.default_into_frame(frame, v);
             }
         }
         self.emit(|b| {
