@@ -589,46 +589,7 @@ impl Gen<'_> {
                     self.record_inout(pi, &a.param.name, a.value);
                     self.inout_address(a.value, &a.param.ty)
                 }
-                _ => match &a.param.ty {
-                    Type::String(_) | Type::WString(_) => {
-                        let t = self.expr(a.value, Some(&a.param.ty));
-                        let fits = if a.param.ty.is_wstring() {
-                            t.is_wstring()
-                        } else {
-                            t.is_string()
-                        };
-                        if !fits && !t.is_error() {
-                            let msg = format!(
-                                "type mismatch: expected {}, found {}",
-                                if a.param.ty.is_wstring() {
-                                    "WSTRING"
-                                } else {
-                                    "STRING"
-                                },
-                                self.tname(&t)
-                            );
-                            self.error(codes::TYPE_MISMATCH, a.value.span, msg);
-                        }
-                    }
-                    Type::Array(_) | Type::Struct(_) => {
-                        let t = self.expr(a.value, Some(&a.param.ty));
-                        if t != a.param.ty && !t.is_error() {
-                            let msg = format!(
-                                "type mismatch: expected {}, found {}",
-                                self.tname(&a.param.ty),
-                                self.tname(&t)
-                            );
-                            self.error(codes::TYPE_MISMATCH, a.value.span, msg);
-                        }
-                    }
-                    ty => {
-                        let ty = ty.clone();
-                        self.value_to(a.value, &ty);
-                        if let Type::Subrange(_, lo, hi) = ty {
-                            self.emit(|b| b.chk_range_s(lo, hi));
-                        }
-                    }
-                },
+                _ => self.input_value(a.value, &a.param.ty, None),
             }
         }
         for a in inputs.iter().rev() {
@@ -697,6 +658,47 @@ impl Gen<'_> {
         let addr = frame + ret_off;
         self.push_result_copy(&rt, addr);
         rt
+    }
+
+    /// Pushes the value of the input argument `e` for a parameter of type `ty` (a string's
+    /// or an aggregate's address). A reference passed to a callee that may keep it (`kept_by`
+    /// says which, `None` for a FUNCTION, which only borrows it) must not be one to
+    /// temporary storage.
+    pub(crate) fn input_value(&mut self, e: &Expr, ty: &Type, kept_by: Option<&str>) {
+        match ty {
+            Type::String(_) | Type::WString(_) | Type::Array(_) | Type::Struct(_) => {
+                let t = self.expr(e, Some(ty));
+                let fits = match ty {
+                    Type::String(_) => t.is_string(),
+                    Type::WString(_) => t.is_wstring(),
+                    _ => t == *ty,
+                };
+                if self.check_only && !fits && !t.is_error() {
+                    let expected = match ty {
+                        Type::String(_) => "STRING".to_string(),
+                        Type::WString(_) => "WSTRING".to_string(),
+                        _ => self.tname(ty),
+                    };
+                    let msg = format!(
+                        "type mismatch: expected {expected}, found {}",
+                        self.tname(&t)
+                    );
+                    self.error(codes::TYPE_MISMATCH, e.span, msg);
+                }
+            }
+            ty => {
+                if let Some(keeper) = kept_by
+                    && self.check_only
+                    && ty.is_pointer_like()
+                {
+                    self.check_escape(None, e, keeper);
+                }
+                self.value_to(e, ty);
+                if let Type::Subrange(_, lo, hi) = *ty {
+                    self.emit(|b| b.chk_range_s(lo, hi));
+                }
+            }
+        }
     }
 
     /// Pushes a function's (method's) result from its static frame at `addr`: aggregates

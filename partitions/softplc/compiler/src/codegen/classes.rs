@@ -501,7 +501,7 @@ impl Gen<'_> {
                     }
                     self.inout_address(a.value, &a.param.ty)
                 }
-                _ => self.argument_value(a.value, &a.param.ty),
+                _ => self.input_value(a.value, &a.param.ty, Some("an input of a method")),
             }
         }
         let frame = self.temp_cell();
@@ -539,40 +539,6 @@ impl Gen<'_> {
                 self.emit(|b| b.ld_abs(MemType::U32, frame));
                 self.push_result_from_stack(&t, off);
                 t
-            }
-        }
-    }
-
-    /// Pushes an input argument's value (for a string or aggregate: its address).
-    fn argument_value(&mut self, e: &Expr, ty: &Type) {
-        match ty {
-            Type::String(_) => {
-                let t = self.expr(e, Some(ty));
-                if !t.is_string() && !t.is_error() {
-                    let msg = format!("type mismatch: expected STRING, found {}", self.tname(&t));
-                    self.error(codes::TYPE_MISMATCH, e.span, msg);
-                }
-            }
-            Type::Array(_) | Type::Struct(_) => {
-                let t = self.expr(e, Some(ty));
-                if t != *ty && !t.is_error() {
-                    let msg = format!(
-                        "type mismatch: expected {}, found {}",
-                        self.tname(ty),
-                        self.tname(&t)
-                    );
-                    self.error(codes::TYPE_MISMATCH, e.span, msg);
-                }
-            }
-            ty => {
-                let ty = ty.clone();
-                if ty.is_pointer_like() {
-                    self.check_escape(None, e, "an input of a method");
-                }
-                self.value_to(e, &ty);
-                if let Type::Subrange(_, lo, hi) = ty {
-                    self.emit(|b| b.chk_range_s(lo, hi));
-                }
             }
         }
     }
