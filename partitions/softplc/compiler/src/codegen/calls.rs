@@ -172,7 +172,7 @@ impl Gen<'_> {
         };
         match p.ty.clone() {
             Type::Fb(pi) => {
-                if self.unit.pous[self.prog.pous[pi].ast].is_class {
+                if self.check_only && self.unit.pous[self.prog.pous[pi].ast].is_class {
                     let msg = format!(
                         "`{}` is a CLASS: it has no body to call; call its methods",
                         self.prog.pous[pi].text
@@ -467,28 +467,31 @@ impl Gen<'_> {
     /// Pushes the address of an in-out argument (which must be a variable of the same type).
     pub(crate) fn inout_address(&mut self, e: &Expr, ty: &Type) {
         self.sync_if_byte_viewed(e);
-        match self.place(e) {
-            Some(p) if p.window.is_some() => {
-                self.error(
-                    codes::IN_OUT_ARGUMENT,
-                    e.span,
-                    "a partial access (`x.3`, `x.%B1`) cannot be passed to a VAR_IN_OUT",
-                );
-                self.drop_place(&p);
-                self.emit(|b| b.push_i32(0));
-            }
-            Some(p) => {
-                if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
-                    let msg = format!(
-                        "VAR_IN_OUT argument must be a {} variable, found {}",
-                        self.tname(ty),
-                        self.tname(&p.ty)
-                    );
-                    self.error(codes::IN_OUT_ARGUMENT, e.span, msg);
-                }
-                self.addr_of(&p);
-            }
-            None => self.emit(|b| b.push_i32(0)),
+        let Some(p) = self.place(e) else {
+            return self.emit(|b| b.push_i32(0));
+        };
+        if self.check_only {
+            self.check_in_out_argument(&p, e, ty);
+        }
+        self.addr_of(&p);
+    }
+
+    /// Reports an in-out argument `e` (the place `p`) that is no variable of the parameter's
+    /// type `ty` (the checking pass asks).
+    fn check_in_out_argument(&mut self, p: &Place, e: &Expr, ty: &Type) {
+        if p.window.is_some() {
+            self.error(
+                codes::IN_OUT_ARGUMENT,
+                e.span,
+                "a partial access (`x.3`, `x.%B1`) cannot be passed to a VAR_IN_OUT",
+            );
+        } else if p.ty != *ty && !p.ty.is_error() && !ty.is_error() {
+            let msg = format!(
+                "VAR_IN_OUT argument must be a {} variable, found {}",
+                self.tname(ty),
+                self.tname(&p.ty)
+            );
+            self.error(codes::IN_OUT_ARGUMENT, e.span, msg);
         }
     }
 
@@ -500,31 +503,11 @@ impl Gen<'_> {
             }
             return;
         };
-        // A dynamic source address was pushed before the target's; keep the order valid by
-        // loading the source first only when the target is static.
-        if let (Loc::Ind(_), Loc::Ind(_)) = (&src.loc, &dst.loc) {
-            self.error(codes::OUTPUT_TARGET, target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
-            self.op(Opcode::Drop);
-            self.op(Opcode::Drop);
+        if self.check_only && !self.check_output_target(&src, &dst, target) {
             return;
-        }
-        if !dst.writable {
-            self.error(
-                codes::ASSIGN_TO_READ_ONLY,
-                target.span,
-                "output target is not writable",
-            );
         }
         match &dst.ty {
             Type::String(_) | Type::WString(_) => {
-                if src.ty.is_wstring() != dst.ty.is_wstring() && !src.ty.is_error() {
-                    let msg = format!(
-                        "type mismatch: the output is {}, its target {}",
-                        self.tname(&src.ty),
-                        self.tname(&dst.ty)
-                    );
-                    self.error(codes::TYPE_MISMATCH, target.span, msg);
-                }
                 self.aggregate_operands(&src, &dst);
                 let assign = if dst.ty.is_wstring() {
                     Builtin::WStrAssign
@@ -552,6 +535,36 @@ impl Gen<'_> {
 
     /// Pushes `[dst_addr src_addr]` for a string assignment or block copy, whichever of the
     /// two has its base address already on the stack.
+    /// Reports what is wrong with `target` (the place `dst`) as the target of the output
+    /// `src` (the checking pass asks); `false` when the output cannot be copied there at all.
+    fn check_output_target(&mut self, src: &Place, dst: &Place, target: &Expr) -> bool {
+        // A dynamic source address is pushed before the target's; the order stays valid
+        // only when one of them is static.
+        if let (Loc::Ind(_), Loc::Ind(_)) = (&src.loc, &dst.loc) {
+            self.error(codes::OUTPUT_TARGET, target.span, "output of an FB array element into an array element with a computed index is not supported; use a temporary variable");
+            return false;
+        }
+        if !dst.writable {
+            self.error(
+                codes::ASSIGN_TO_READ_ONLY,
+                target.span,
+                "output target is not writable",
+            );
+        }
+        if matches!(dst.ty, Type::String(_) | Type::WString(_))
+            && src.ty.is_wstring() != dst.ty.is_wstring()
+            && !src.ty.is_error()
+        {
+            let msg = format!(
+                "type mismatch: the output is {}, its target {}",
+                self.tname(&src.ty),
+                self.tname(&dst.ty)
+            );
+            self.error(codes::TYPE_MISMATCH, target.span, msg);
+        }
+        true
+    }
+
     fn aggregate_operands(&mut self, src: &Place, dst: &Place) {
         if matches!(src.loc, Loc::Ind(_)) {
             self.addr_of(src);
