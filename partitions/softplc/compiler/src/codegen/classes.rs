@@ -18,7 +18,7 @@ use crate::ast::*;
 use crate::codegen::calls::CallBase;
 use crate::codegen::{Gen, Loc, Place, scalar_mem};
 use crate::diagnostics::Span;
-use crate::sema::{MemberKind, VarDef};
+use crate::sema::{Member, MemberKind, VarDef};
 use crate::typed::{Accessor, Bare, Method, PropertyAccess, Receiver};
 use crate::types::*;
 
@@ -189,11 +189,36 @@ impl Gen<'_> {
             || self.prog.global(name).is_some()
     }
 
-    /// Reports a call of a PRIVATE or PROTECTED member from where it may not be called.
-    fn check_access(&mut self, member: usize, span: Span) {
+    /// Reports what is wrong with a call of the method or action `member` at `span` (the
+    /// checking pass asks): a member the caller may not use, arguments to an action, an
+    /// ABSTRACT method called where the call is not dispatched (`undispatched`: on an
+    /// instance of exactly its block, or through SUPER).
+    fn check_member_call(&mut self, member: usize, undispatched: bool, args: &[Arg], span: Span) {
         let Some(m) = self.prog.pous[member].member.clone() else {
             return;
         };
+        self.check_access(&m, member, span);
+        if m.kind == MemberKind::Action
+            && let Some(a) = args.first()
+        {
+            self.error(
+                codes::ARGUMENT_COUNT,
+                a.span,
+                "an action takes no arguments",
+            );
+        }
+        if m.is_abstract && undispatched {
+            let msg = format!(
+                "`{}` is ABSTRACT: it has no implementation to call",
+                self.prog.pous[member].text
+            );
+            self.error(codes::ABSTRACT_INSTANCE, span, msg);
+        }
+    }
+
+    /// Reports a call of the PRIVATE or PROTECTED member `m` (the POU `member`) from where it
+    /// may not be called.
+    fn check_access(&mut self, m: &Member, member: usize, span: Span) {
         let ctx = self.context_class();
         let allowed = match m.access {
             Access::Private => ctx == Some(m.owner),
@@ -393,7 +418,6 @@ impl Gen<'_> {
         args: &[Arg],
         span: Span,
     ) -> Type {
-        self.check_access(member, span);
         let Receiver::Instance {
             class,
             exact,
@@ -402,15 +426,11 @@ impl Gen<'_> {
         else {
             unreachable!("interfaces have no static members")
         };
+        if self.check_only {
+            self.check_member_call(member, exact || superclass, args, span);
+        }
         let kind = self.prog.pous[member].member.as_ref().map(|m| m.kind);
         if kind == Some(MemberKind::Action) {
-            if let Some(a) = args.first() {
-                self.error(
-                    codes::ARGUMENT_COUNT,
-                    a.span,
-                    "an action takes no arguments",
-                );
-            }
             self.calls.push((self.cur, member, span));
             let id = self.pou_ids[member];
             match base {
@@ -424,18 +444,6 @@ impl Gen<'_> {
             }
             self.emit(|b| b.call(id));
             return Type::Void;
-        }
-        if self.prog.pous[member]
-            .member
-            .as_ref()
-            .is_some_and(|m| m.is_abstract)
-            && (exact || superclass)
-        {
-            let msg = format!(
-                "`{}` is ABSTRACT: it has no implementation to call",
-                self.prog.pous[member].text
-            );
-            self.error(codes::ABSTRACT_INSTANCE, span, msg);
         }
         let targets = self.possible_targets(class, member);
         if !exact && !superclass && targets.len() > 1 {
