@@ -309,6 +309,13 @@ impl Type {
         }
     }
 
+    /// Whether a value of this type is an integer or a bit string (a subrange's too; no
+    /// enumeration value nor exception): what an array index, a partial access's or a
+    /// string function's position and a shift's count take.
+    pub fn is_integral(&self) -> bool {
+        self.value_elem().is_some_and(Elem::is_integral)
+    }
+
     pub fn is_error(&self) -> bool {
         matches!(self, Type::Error)
     }
@@ -501,6 +508,15 @@ mod tests {
         assert!(implicit_ok(Elem::Int, Elem::DInt));
         assert!(!implicit_ok(Elem::DInt, Elem::Int));
         assert!(implicit_ok(Elem::DInt, Elem::LReal));
+    }
+
+    #[test]
+    fn integral_values_are_integers_and_bit_strings_only() {
+        assert!(Type::Subrange(Elem::Int, 0, 9).is_integral());
+        assert!(Type::Elem(Elem::Word).is_integral());
+        assert!(!Type::Exception.is_integral(), "held as DINT, no number");
+        assert!(!Type::Enum(0).is_integral());
+        assert!(!Type::REAL.is_integral());
     }
 
     #[test]

@@ -371,7 +371,7 @@ impl Gen<'_> {
             {
                 let elem = expected.and_then(|t| t.elem()).unwrap_or(Elem::Char);
                 let code = crate::sema::single_char(s).unwrap_or(0);
-                if code > elem.int_range().1 {
+                if self.check_only && code > elem.int_range().1 {
                     let msg = format!("character '{s}' does not fit type {elem}");
                     self.error(codes::VALUE_OUT_OF_RANGE, e.span, msg);
                 }
@@ -484,6 +484,9 @@ impl Gen<'_> {
         Bare::Variable
     }
 
+    /// Pushes the integer literal `v` in the type `expected` asks for (BOOL for 0 and 1, a
+    /// REAL, an integer it must fit), else in DINT, LINT or ULINT by its size; the checking
+    /// pass reports a literal that does not fit.
     pub(crate) fn int_literal(&mut self, v: i128, expected: Option<&Type>, span: Span) -> Type {
         let exp_elem = expected.and_then(|t| match t {
             Type::Enum(_) | Type::Exception => None,
@@ -505,7 +508,7 @@ impl Gen<'_> {
             }
             Some(e) if e.is_integral() => {
                 let (lo, hi) = e.int_range();
-                if v < lo || v > hi {
+                if self.check_only && (v < lo || v > hi) {
                     let msg = format!("constant {v} does not fit type {e}");
                     self.error(codes::VALUE_OUT_OF_RANGE, span, msg);
                     return Type::Error;
@@ -514,7 +517,7 @@ impl Gen<'_> {
                 Type::Elem(e)
             }
             _ => {
-                if v > u64::MAX as i128 || v < i64::MIN as i128 {
+                if self.check_only && (v > u64::MAX as i128 || v < i64::MIN as i128) {
                     self.error(codes::INTEGER_TOO_LARGE, span, "integer constant too large");
                     return Type::Error;
                 }

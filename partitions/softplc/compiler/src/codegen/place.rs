@@ -166,7 +166,7 @@ impl Gen<'_> {
             }
             return None;
         };
-        if idx.len() != arr.dims.len() {
+        if self.check_only && idx.len() != arr.dims.len() {
             let msg = format!(
                 "array has {} dimension(s) but {} index(es) given",
                 arr.dims.len(),
@@ -197,7 +197,7 @@ impl Gen<'_> {
             let (lo, hi) = arr.dims[d];
             match c {
                 Some(v) => {
-                    if *v < lo as i128 || *v > hi as i128 {
+                    if self.check_only && (*v < lo as i128 || *v > hi as i128) {
                         let msg = format!("index {v} is outside the array bounds {lo}..{hi}");
                         self.error(codes::INDEX_OUT_OF_BOUNDS, idx[d].span, msg);
                     } else {
@@ -238,9 +238,7 @@ impl Gen<'_> {
             }
             let (lo, hi) = arr.dims[d];
             let t = self.expr(&idx[d], Some(&Type::DINT));
-            if !t.is_error() && !t.elem().is_some_and(|e| e.is_integral())
-                || matches!(t, Type::Enum(_))
-            {
+            if self.check_only && !t.is_error() && !t.is_integral() {
                 let msg = format!("array index must be an integer, found {}", self.tname(&t));
                 self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
             }
@@ -286,7 +284,7 @@ impl Gen<'_> {
             }
         };
         let width = width as u32;
-        if (index as u64 + 1) * width as u64 > bits as u64 {
+        if self.check_only && (index as u64 + 1) * width as u64 > bits as u64 {
             let unit = match width {
                 1 => "bit",
                 8 => "byte",

@@ -195,7 +195,7 @@ impl Gen<'_> {
 
     pub(super) fn int_arg(&mut self, e: &Expr) {
         let t = self.infer(e);
-        if self.check_only && !crate::sema::stdfuncs::is_integer(&t) {
+        if self.check_only && !t.is_integral() {
             if !t.is_error() {
                 let msg = format!("expected an integer, found {}", self.tname(&t));
                 self.error(codes::TYPE_MISMATCH, e.span, msg);

@@ -113,12 +113,6 @@ pub fn is_date(t: &Type) -> bool {
         .is_some_and(|e| e.temporal_family() == Some(Elem::Date))
 }
 
-/// Whether a standard function's integer input (a string function's position or length, a
-/// CONCAT_DATE's part, a shift's count) takes a value of type `t`.
-pub fn is_integer(t: &Type) -> bool {
-    t.value_elem().is_some_and(|e| e.is_integral())
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -237,7 +231,7 @@ mod tests {
     }
 
     #[test]
-    fn date_and_time_functions_take_their_operands_dates_and_integers() {
+    fn date_and_time_functions_take_their_operands_and_dates() {
         let fits = |want, t: &Type| time_operand_fits(want, Operand::plain(t));
         assert!(fits(Elem::Tod, &Type::Elem(Elem::Tod)));
         assert!(fits(Elem::LTime, &Type::TIME), "TIME widens to LTIME");
@@ -248,9 +242,5 @@ mod tests {
         assert!(!fits(Elem::LReal, &Type::Exception));
         assert!(is_date(&Type::Elem(Elem::LDate)));
         assert!(!is_date(&Type::Elem(Elem::Dt)));
-        assert!(is_integer(&Type::Subrange(Elem::Int, 0, 9)));
-        assert!(is_integer(&Type::Elem(Elem::Word)));
-        assert!(!is_integer(&Type::Exception));
-        assert!(!is_integer(&Type::REAL));
     }
 }
