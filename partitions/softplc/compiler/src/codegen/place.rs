@@ -153,6 +153,15 @@ impl Gen<'_> {
     }
 
     /// `base[i, ...]`: an array element, its constant indices folded in.
+    /// Reports an array index `index` of type `t` that is no integer (the checking pass
+    /// asks).
+    pub(super) fn check_index_type(&mut self, t: &Type, index: &Expr) {
+        if self.check_only && !t.is_error() && !t.is_integral() {
+            let msg = format!("array index must be an integer, found {}", self.tname(t));
+            self.error(codes::INDEX_NOT_INTEGER, index.span, msg);
+        }
+    }
+
     fn index_place(&mut self, e: &Expr, base: &Expr, idx: &[Expr]) -> Option<Place> {
         let bp = self.place_inner(base)?;
         let Type::Array(arr) = bp.ty.clone() else {
@@ -238,10 +247,7 @@ impl Gen<'_> {
             }
             let (lo, hi) = arr.dims[d];
             let t = self.expr(&idx[d], Some(&Type::DINT));
-            if self.check_only && !t.is_error() && !t.is_integral() {
-                let msg = format!("array index must be an integer, found {}", self.tname(&t));
-                self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
-            }
+            self.check_index_type(&t, &idx[d]);
             let stride = strides[d] as u32;
             match static_base.take() {
                 Some(Loc::Abs(a)) => self.emit(|b| b.elem_abs(a, lo, hi, stride)),

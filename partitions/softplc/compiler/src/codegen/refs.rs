@@ -136,7 +136,7 @@ impl Gen<'_> {
         expected: Option<&Type>,
         span: Span,
     ) -> Type {
-        if args.len() != 1 || args[0].name.is_some() || args[0].output {
+        if self.check_only && (args.len() != 1 || args[0].name.is_some() || args[0].output) {
             self.error(
                 codes::ARGUMENT_COUNT,
                 span,
@@ -153,10 +153,12 @@ impl Gen<'_> {
                 let saved = std::mem::replace(&mut self.refs.keep_reference, true);
                 let t = self.expr(arg, None);
                 self.refs.keep_reference = saved;
-                if !matches!(
-                    t,
-                    Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Error
-                ) {
+                if self.check_only
+                    && !matches!(
+                        t,
+                        Type::Ref(_) | Type::Reference(_) | Type::Interface(_) | Type::Error
+                    )
+                {
                     let msg = format!(
                         "__ISVALIDREF needs a reference or interface, found {}",
                         self.tname(&t)
@@ -192,7 +194,7 @@ impl Gen<'_> {
                 self.addr_of(&p);
                 Type::Ref(Box::new(Type::Fb(pi)))
             }
-            Type::Array(a) if self.holds_instances(&a.elem) => {
+            Type::Array(a) if self.check_only && self.holds_instances(&a.elem) => {
                 self.error(codes::REF_OPERAND,
                     arg.span,
                     "REF()/ADR() of an array of function block instances is not supported; take the address of one element",
@@ -211,19 +213,19 @@ impl Gen<'_> {
                 match view {
                     Some(target) => {
                         match &arg.kind {
-                            ExprKind::Name(v) => {
-                                if !self.refs.byte_viewed.contains(&v.name) {
-                                    // Not found by the scan (e.g. inside an expression the
-                                    // scan does not see): still consistent from here on.
-                                    self.refs.byte_viewed.push(v.name.clone());
-                                }
+                            // Not found by the scan (e.g. inside an expression the scan
+                            // does not see): still consistent from here on.
+                            ExprKind::Name(v) if !self.refs.byte_viewed.contains(&v.name) => {
+                                self.refs.byte_viewed.push(v.name.clone());
                             }
-                            _ => {
+                            ExprKind::Name(_) => {}
+                            _ if self.check_only => {
                                 self.error(codes::REF_OPERAND,
                                     arg.span,
                                     "a byte pointer to the text of a STRING can be taken of a STRING variable or parameter only (its length is re-read from the terminator there)",
                                 );
                             }
+                            _ => {}
                         }
                         self.emit(|b| {
                             b.push_i32(4);
@@ -433,12 +435,7 @@ impl Gen<'_> {
             }
             let (lo, hi) = arr.dims[d];
             let t = self.expr(&idx[d], Some(&Type::DINT));
-            if !t.is_error() && !t.elem().is_some_and(|e| e.is_integral())
-                || matches!(t, Type::Enum(_))
-            {
-                let msg = format!("array index must be an integer, found {}", self.tname(&t));
-                self.error(codes::INDEX_NOT_INTEGER, idx[d].span, msg);
-            }
+            self.check_index_type(&t, &idx[d]);
             let stride = strides[d];
             self.emit(|b| {
                 b.chk_index(lo, hi);
@@ -561,7 +558,7 @@ impl Gen<'_> {
         }
         self.op(Opcode::RefAdd);
         match &rt {
-            Type::Ref(target) if !is_plain(self.prog, target) => {
+            Type::Ref(target) if self.check_only && !is_plain(self.prog, target) => {
                 let msg = format!(
                     "pointer arithmetic on {} is not allowed: it could reach a reference or instance stored there (only references to plain data can be moved)",
                     self.tname(&rt)
@@ -584,7 +581,7 @@ impl Gen<'_> {
     /// An integer byte offset for pointer arithmetic.
     fn offset_operand(&mut self, e: &Expr) {
         let t = self.expr(e, Some(&Type::LINT));
-        if !t.is_error() && !t.elem().is_some_and(|x| x.is_integral()) {
+        if self.check_only && !t.is_error() && !t.elem().is_some_and(|x| x.is_integral()) {
             let msg = format!(
                 "a reference moves by an integer number of bytes, not by {}",
                 self.tname(&t)
